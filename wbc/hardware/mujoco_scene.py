@@ -1,0 +1,52 @@
+"""A compiled MuJoCo scene: one robot (from its description) on flat ground or a fractal heightfield."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from wbc.hardware.terrain import TerrainConfig
+from wbc.robots.description import RobotDescription
+from wbc.robots.mujoco_model import WORLD_CONAFFINITY, robot_mujoco_spec
+
+__all__ = ["build_scene", "TERRAIN_GEOM"]
+
+TERRAIN_GEOM = "terrain"
+
+
+def build_scene(desc: RobotDescription, terrain: TerrainConfig, *, timestep: float = 0.002) -> mujoco.MjModel:
+    """Compile the robot on its ground.
+
+    Args:
+        desc: the robot.
+        terrain: ground shape; a fractal's heights are zero until `set_terrain_heights` fills them.
+        timestep: physics step [s].
+
+    Returns:
+        The compiled model; static bodies (feet, sensor stubs, fixed arm links) are fused into their parents.
+    """
+    spec = robot_mujoco_spec(desc)
+    spec.option.timestep = timestep
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.compiler.fusestatic = True
+    if terrain.kind == "flat":
+        geom = spec.worldbody.add_geom(name=TERRAIN_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05])
+    else:
+        n = terrain.samples
+        spec.add_hfield(name=TERRAIN_GEOM, nrow=n, ncol=n,
+                        size=[terrain.half_extent, terrain.half_extent, max(terrain.amplitude, 1e-4), 0.1])
+        geom = spec.worldbody.add_geom(name=TERRAIN_GEOM, type=mujoco.mjtGeom.mjGEOM_HFIELD,
+                                       hfieldname=TERRAIN_GEOM)
+    geom.contype = 0
+    geom.conaffinity = WORLD_CONAFFINITY
+    geom.friction = [1.0, 0.005, 0.0001]
+    geom.rgba = [0.45, 0.5, 0.55, 1.0]
+    model = spec.compile()
+    return model
+
+
+def set_terrain_heights(model: mujoco.MjModel, heights: np.ndarray) -> None:
+    """Write normalised heights (in [0, 1], rows along y) into the scene's heightfield."""
+    hid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_HFIELD, TERRAIN_GEOM)
+    adr, n = model.hfield_adr[hid], model.hfield_nrow[hid] * model.hfield_ncol[hid]
+    model.hfield_data[adr:adr + n] = heights.ravel()

@@ -1,0 +1,148 @@
+"""Data that crosses the robot interface: what a robot reports, what a controller asks for.
+
+All three are frozen dataclasses of numpy arrays. Joint vectors follow the house joint order: legs FR, FL, RR, RL x
+(hip, thigh, calf) = 0..11, then the arm (waist yaw, shoulder pitch, elbow pitch) = 12..14 when the arm is actuated.
+SI units; quaternions are (w, x, y, z).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbc.errors import CommandError
+
+__all__ = ["RobotState", "MotorCommand", "VelocityCommand"]
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """One frame of proprioception, as a real robot delivers it (no simulator truth in here).
+
+    Attributes:
+        tick: frame counter of the robot's own clock; it advances with every fresh frame. A frame whose tick did not
+            advance since the last read is stale (the Unitree SDK hands back its last good frame after a failed
+            receive).
+        time: timestamp of the frame [s], robot clock.
+        q: joint positions, shape (n,) [rad].
+        dq: joint velocities, shape (n,) [rad/s].
+        tau_est: estimated joint torques, shape (n,) [N m].
+        imu_quat: trunk orientation from the IMU, (w, x, y, z), body to world.
+        gyro_in_body: angular velocity of the trunk in the IMU (body) frame, shape (3,) [rad/s].
+        accel_in_body: specific force measured by the accelerometer in the body frame, shape (3,) [m/s^2]
+            (reads +9.81 on z when standing still).
+        foot_force: contact force estimates at the feet FR, FL, RR, RL, shape (4,) [N].
+    """
+
+    tick: int
+    time: float
+    q: np.ndarray
+    dq: np.ndarray
+    tau_est: np.ndarray
+    imu_quat: np.ndarray
+    gyro_in_body: np.ndarray
+    accel_in_body: np.ndarray
+    foot_force: np.ndarray
+
+    @property
+    def num_joints(self) -> int:
+        """Number of joints reported."""
+        return int(self.q.shape[0])
+
+
+_COMMAND_FIELDS = ("q", "dq", "kp", "kd", "tau")
+
+
+@dataclass(frozen=True)
+class MotorCommand:
+    """Per-joint low-level command with Unitree semantics.
+
+    Every motor applies, at its own rate, tau = kp (q - q_measured) + kd (dq - dq_measured) + tau, clamped to the
+    motor's torque limit. Construction checks the command: every field must be a finite 1-D array, all of one
+    length, with kp and kd non-negative; anything else raises `CommandError` before it can reach a motor.
+
+    Attributes:
+        q: target joint positions, shape (n,) [rad].
+        dq: target joint velocities, shape (n,) [rad/s].
+        kp: position gains, shape (n,) [N m / rad], >= 0.
+        kd: velocity gains, shape (n,) [N m s / rad], >= 0.
+        tau: feed-forward torques, shape (n,) [N m].
+    """
+
+    q: np.ndarray
+    dq: np.ndarray
+    kp: np.ndarray
+    kd: np.ndarray
+    tau: np.ndarray
+
+    def __post_init__(self) -> None:
+        n = None
+        for name in _COMMAND_FIELDS:
+            raw = getattr(self, name)
+            try:
+                a = np.array(raw, dtype=np.float64)
+            except (TypeError, ValueError) as exc:
+                raise CommandError(f"MotorCommand.{name}: not a numeric array ({exc})") from None
+            if a.ndim != 1:
+                raise CommandError(f"MotorCommand.{name}: expected a 1-D array, got shape {a.shape}")
+            if n is None:
+                n = a.shape[0]
+            elif a.shape[0] != n:
+                raise CommandError(
+                    f"MotorCommand.{name}: length {a.shape[0]} differs from MotorCommand.q length {n}"
+                )
+            bad = ~np.isfinite(a)
+            if bad.any():
+                raise CommandError(
+                    f"MotorCommand.{name}: non-finite value at joint index {int(np.flatnonzero(bad)[0])}"
+                )
+            if name in ("kp", "kd") and (a < 0).any():
+                raise CommandError(
+                    f"MotorCommand.{name}: negative gain at joint index {int(np.flatnonzero(a < 0)[0])}"
+                )
+            object.__setattr__(self, name, _readonly(a))
+
+    @property
+    def num_joints(self) -> int:
+        """Number of joints commanded."""
+        return int(self.q.shape[0])
+
+    @classmethod
+    def hold(cls, q: np.ndarray, kp: float | np.ndarray, kd: float | np.ndarray) -> MotorCommand:
+        """A PD hold of positions `q` with zero target velocity and no feed-forward torque."""
+        q = np.asarray(q, dtype=np.float64)
+        n = q.shape[0]
+        return cls(
+            q=q, dq=np.zeros(n), kp=np.broadcast_to(kp, (n,)).copy(), kd=np.broadcast_to(kd, (n,)).copy(),
+            tau=np.zeros(n),
+        )
+
+    @classmethod
+    def damping(cls, n: int, kd: float) -> MotorCommand:
+        """Pure damping (kp = 0, zero targets): the safe state a motor falls back to."""
+        return cls(q=np.zeros(n), dq=np.zeros(n), kp=np.zeros(n), kd=np.full(n, float(kd)), tau=np.zeros(n))
+
+
+@dataclass(frozen=True)
+class VelocityCommand:
+    """Desired base motion, in the yaw-aligned body frame.
+
+    Attributes:
+        vx: forward velocity [m/s].
+        vy: lateral velocity (left positive) [m/s].
+        yaw_rate: yaw rate (counter-clockwise positive) [rad/s].
+    """
+
+    vx: float = 0.0
+    vy: float = 0.0
+    yaw_rate: float = 0.0
+
+    def as_array(self) -> np.ndarray:
+        """(vx, vy, yaw_rate) as a float array."""
+        return np.array([self.vx, self.vy, self.yaw_rate], dtype=np.float64)
