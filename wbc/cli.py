@@ -1,0 +1,106 @@
+"""The ``wbc`` command line: ``wbc analyze tail``, ``wbc bench sim``, ``wbc demo``."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from wbc.errors import WbcError
+from wbc.robots.description import ARM_MODES
+from wbc.robots.registry import ROBOTS, get_robot
+
+__all__ = ["main"]
+
+
+def _analyze_tail(args: argparse.Namespace) -> int:
+    from wbc.analysis import analyze_tail
+
+    result = analyze_tail(get_robot(args.robot, "actuated"))
+    if args.json:
+        print(json.dumps(result.as_dict(), indent=2))
+        return 0
+    print(f"Arm as a tail: {result.robot}")
+    print(f"  inputs: moving arm mass M_a = {result.arm_mass_moving:.3f} kg, rest M_b = {result.body_mass:.3f} kg, "
+          f"arm length l = {result.arm_length:.3f} m, trunk h x w = {result.trunk_height:.3f} x "
+          f"{result.trunk_width:.3f} m")
+    print(f"  {'quantity':<34}{'rod model':>11}{'exact':>10}{'paper':>9}")
+    print(f"  {'CoM shift by arm rotation [m]':<34}{result.ccom_shift_m:>11.4f}{result.ccom_shift_m_exact:>10.4f}"
+          f"{result.paper_ccom_shift_m:>9.3f}")
+    print(f"  {'body/arm angular acceleration':<34}{result.alpha_ratio:>11.3f}{result.alpha_ratio_exact:>10.3f}"
+          f"{result.paper_alpha_ratio:>9.3f}")
+    return 0
+
+
+def _bench_sim(args: argparse.Namespace) -> int:
+    from wbc.bench import bench_sim
+
+    get_robot(args.robot, args.arm)  # validate names before any work
+    result = bench_sim(args.robot, args.arm, batch=args.batch, nthread=args.threads)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"Simulation speed: {result['robot']} (arm {result['arm_mode']}), standing under the motor law, "
+          f"dt {result['timestep_s'] * 1e3:.1f} ms")
+    print(f"  machine: {result['machine']}")
+    print(f"  single-threaded : {result['steps_per_s']:>10,.0f} steps/s  (real-time factor "
+          f"{result['realtime_factor']:.0f}x)")
+    print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
+          f"{result['threads']} threads)")
+    return 0
+
+
+def _demo(args: argparse.Namespace) -> int:
+    from wbc.analysis import analyze_tail
+    from wbc.demo import push_trial
+
+    print(f"Standing PD hold of {args.robot} on fractal terrain, pushed sideways at t = 1 s for 0.1 s:\n")
+    print(f"  {'arm':<10}{'push [N]':>9}{'outcome':>12}{'max tilt [deg]':>16}{'moved [m]':>11}")
+    for mode in ARM_MODES:
+        for force in args.forces:
+            out = push_trial(args.robot, mode, force, seed=args.seed)
+            outcome = f"fell {out.fall_time_s:.2f}s" if out.fell else "recovered"
+            print(f"  {mode:<10}{force:>9.0f}{outcome:>12}{out.max_tilt_deg:>16.1f}{out.displacement_m:>11.3f}")
+    print()
+    return _analyze_tail(argparse.Namespace(robot=args.robot, json=False)) or 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="wbc", description="Whole-body control of quadrupeds that carry an arm.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    analyze = sub.add_parser("analyze", help="first-principles analyses").add_subparsers(dest="what", required=True)
+    tail = analyze.add_parser("tail", help="the paper's CoM shift and body/arm acceleration ratio, from the model")
+    tail.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    tail.add_argument("--json", action="store_true", help="print JSON")
+    tail.set_defaults(func=_analyze_tail)
+
+    bench = sub.add_parser("bench", help="speed figures").add_subparsers(dest="what", required=True)
+    sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")
+    sim.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    sim.add_argument("--batch", type=int, default=64, help="environments in the batched rollout")
+    sim.add_argument("--threads", type=int, default=None, help="threads for the batched rollout (default: all)")
+    sim.add_argument("--json", action="store_true", help="print JSON")
+    sim.set_defaults(func=_bench_sim)
+
+    demo = sub.add_parser("demo", help="the main job: stand, push, recover or fall; tail analysis")
+    demo.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    demo.add_argument("--forces", type=float, nargs="+", default=[50.0, 100.0, 200.0, 300.0], help="pushes [N]")
+    demo.add_argument("--seed", type=int, default=0)
+    demo.set_defaults(func=_demo)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of the ``wbc`` console script."""
+    args = _parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except WbcError as exc:
+        print(f"wbc: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,68 @@
+"""Domain randomisation parameters applied by the MuJoCo backend at reset (training and robustness trials)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wbc.errors import ConfigError
+
+__all__ = ["DomainParams", "SensorNoise"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class DomainParams:
+    """Physical parameters that differ between the model and a real robot.
+
+    Attributes:
+        payload_mass: extra mass on the trunk [kg] (may be negative down to -1 kg: a lighter trunk).
+        payload_com: where that mass sits in the trunk frame, shape (3,) [m].
+        friction: sliding friction coefficient between feet/links and the ground.
+        motor_strength: multiplies every motor's output torque and torque limit (1.0 = nominal); a scalar or one
+            value per actuated joint.
+    """
+
+    payload_mass: float = 0.0
+    payload_com: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    friction: float = 1.0
+    motor_strength: float | np.ndarray = 1.0
+
+    def __post_init__(self) -> None:
+        if not -1.0 <= self.payload_mass <= 20.0:
+            raise ConfigError(f"DomainParams.payload_mass must be in [-1, 20] kg, got {self.payload_mass}")
+        if not 0.0 < self.friction <= 5.0:
+            raise ConfigError(f"DomainParams.friction must be in (0, 5], got {self.friction}")
+        strength = np.asarray(self.motor_strength, dtype=np.float64)
+        if np.any(strength <= 0) or np.any(strength > 2):
+            raise ConfigError(f"DomainParams.motor_strength must be in (0, 2], got {self.motor_strength}")
+        com = np.asarray(self.payload_com, dtype=np.float64)
+        if com.shape != (3,):
+            raise ConfigError(f"DomainParams.payload_com must have shape (3,), got {com.shape}")
+        object.__setattr__(self, "payload_com", com)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SensorNoise:
+    """Standard deviations of white noise added to what `read()` reports (zero: exact sensors).
+
+    Attributes:
+        q: joint positions [rad].
+        dq: joint velocities [rad/s].
+        gyro: angular velocity [rad/s].
+        accel: accelerometer [m/s^2].
+        orientation: small random rotation of the IMU quaternion [rad].
+        foot_force: foot force sensors [N].
+    """
+
+    q: float = 0.0
+    dq: float = 0.0
+    gyro: float = 0.0
+    accel: float = 0.0
+    orientation: float = 0.0
+    foot_force: float = 0.0
+
+    @property
+    def enabled(self) -> bool:
+        """True if any noise is added."""
+        return any(v > 0 for v in (self.q, self.dq, self.gyro, self.accel, self.orientation, self.foot_force))

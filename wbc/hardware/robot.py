@@ -1,0 +1,137 @@
+"""`Robot`: the one interface shared by the simulator backend and real robots.
+
+Lifecycle: ``connect()`` -> (``read()`` / ``write()`` / ``advance()``)* -> ``close()``; a robot is also a context
+manager. `write` validates and clamps every command in this base class, so no backend can skip it: a command of the
+wrong length raises `CommandError` (non-finite values cannot even be built, see `MotorCommand`), and every field is
+clamped to the motor's limits before the backend's `_send` sees it. `write` returns what was actually sent.
+
+`advance(dt)` lets ``dt`` seconds of robot time pass while the last command holds: a simulator steps its physics, a
+real robot's backend waits for its clock. The runner therefore has one loop for both.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from types import TracebackType
+
+import numpy as np
+
+from wbc.errors import CommandError, RobotNotConnectedError
+from wbc.robots.joint_table import JointTable
+from wbc.types import MotorCommand, RobotState
+
+__all__ = ["Robot", "KP_MAX", "KD_MAX", "clamp_command"]
+
+KP_MAX = 1000.0  # [N m / rad] largest position gain a Unitree driver encodes (int16 / 32)
+KD_MAX = 100.0  # [N m s / rad] largest velocity gain accepted (the driver encodes more; none is stable above)
+
+
+def clamp_command(cmd: MotorCommand, limits: JointTable) -> MotorCommand:
+    """Clamp a command to the motors' limits: position range, speed, gains and torque."""
+    return MotorCommand(
+        q=np.clip(cmd.q, limits.lower, limits.upper),
+        dq=np.clip(cmd.dq, -limits.velocity_limit, limits.velocity_limit),
+        kp=np.clip(cmd.kp, 0.0, KP_MAX),
+        kd=np.clip(cmd.kd, 0.0, KD_MAX),
+        tau=np.clip(cmd.tau, -limits.torque_limit, limits.torque_limit),
+    )
+
+
+class Robot(ABC):
+    """Abstract robot: proprioception in, low-level motor commands out."""
+
+    def __init__(self) -> None:
+        self._connected = False
+
+    # -- lifecycle ------------------------------------------------------------------------------------------------
+    @property
+    def is_connected(self) -> bool:
+        """True between `connect()` and `close()`."""
+        return self._connected
+
+    def connect(self) -> None:
+        """Open the connection (or build the simulation). Idempotent."""
+        if not self._connected:
+            self._connect()
+            self._connected = True
+
+    def close(self) -> None:
+        """Release the connection; a real robot is left in damping mode. Idempotent."""
+        if self._connected:
+            self._close()
+            self._connected = False
+
+    def __enter__(self) -> Robot:
+        self.connect()
+        return self
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        self.close()
+
+    def _require_connected(self, action: str) -> None:
+        if not self._connected:
+            raise RobotNotConnectedError(f"{type(self).__name__}.{action}: not connected; call .connect() first")
+
+    # -- data -----------------------------------------------------------------------------------------------------
+    @property
+    @abstractmethod
+    def joint_names(self) -> tuple[str, ...]:
+        """Actuated joints, house order."""
+
+    @property
+    @abstractmethod
+    def limits(self) -> JointTable:
+        """Per-joint motor limits used to clamp commands."""
+
+    @property
+    def num_joints(self) -> int:
+        """Number of actuated joints."""
+        return len(self.joint_names)
+
+    def read(self) -> RobotState:
+        """The latest proprioceptive frame (compare `tick` with the previous frame's to detect a stale one)."""
+        self._require_connected("read")
+        return self._read()
+
+    def write(self, cmd: MotorCommand) -> MotorCommand:
+        """Validate, clamp and send a command; return what was sent.
+
+        Raises:
+            CommandError: the command has the wrong number of joints.
+            RobotNotConnectedError: not connected.
+        """
+        self._require_connected("write")
+        if not isinstance(cmd, MotorCommand):
+            raise CommandError(f"{type(self).__name__}.write: expected a MotorCommand, got {type(cmd).__name__}")
+        if cmd.num_joints != self.num_joints:
+            raise CommandError(
+                f"{type(self).__name__}.write: command has {cmd.num_joints} joints, this robot has "
+                f"{self.num_joints} ({', '.join(self.joint_names)})"
+            )
+        applied = clamp_command(cmd, self.limits)
+        self._send(applied)
+        return applied
+
+    def advance(self, dt: float) -> None:
+        """Let `dt` seconds of robot time pass under the last command [s]."""
+        self._require_connected("advance")
+        if not dt > 0:
+            raise ValueError(f"advance: dt must be positive, got {dt}")
+        self._advance(dt)
+
+    # -- backend hooks --------------------------------------------------------------------------------------------
+    @abstractmethod
+    def _connect(self) -> None: ...
+
+    @abstractmethod
+    def _close(self) -> None: ...
+
+    @abstractmethod
+    def _read(self) -> RobotState: ...
+
+    @abstractmethod
+    def _send(self, cmd: MotorCommand) -> None: ...
+
+    @abstractmethod
+    def _advance(self, dt: float) -> None: ...

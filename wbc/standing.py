@@ -1,0 +1,44 @@
+"""The standing PD hold: the nominal pose held by joint PD (legs stiff, arm compliant).
+
+This is the simplest controller there is and the baseline every other controller is measured against; the arena
+registers it as ``stand``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbc.robots.description import RobotDescription
+from wbc.types import MotorCommand
+
+__all__ = ["StandGains", "stand_command"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class StandGains:
+    """Joint PD gains of the standing hold.
+
+    Attributes:
+        leg_kp: [N m / rad].
+        leg_kd: [N m s / rad].
+        arm_kp: [N m / rad].
+        arm_kd: [N m s / rad].
+    """
+
+    leg_kp: float = 60.0
+    leg_kd: float = 2.0
+    arm_kp: float = 20.0
+    arm_kd: float = 0.5
+
+
+def stand_command(desc: RobotDescription, gains: StandGains | None = None) -> MotorCommand:
+    """PD hold of `desc`'s nominal pose."""
+    g = gains if gains is not None else StandGains()
+    n = desc.num_joints
+    kp = np.full(n, g.leg_kp)
+    kd = np.full(n, g.leg_kd)
+    kp[12:] = g.arm_kp
+    kd[12:] = g.arm_kd
+    return MotorCommand.hold(desc.nominal_q, kp, kd)
