@@ -51,7 +51,6 @@ def _bench_sim(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from wbc.analysis import analyze_tail
     from wbc.demo import push_trial
 
     print(f"Standing PD hold of {args.robot} on fractal terrain, pushed sideways at t = 1 s for 0.1 s:\n")

@@ -97,11 +97,15 @@ def check_robot(make_robot: Callable[[], Robot], *, dt: float = 0.002) -> None:
                 problems.append(f"write() accepted a command for {bad_n} joints (robot has {n})")
             except CommandError:
                 pass
+            except Exception as exc:  # noqa: BLE001 - any other failure is a contract violation to report
+                problems.append(f"write() of {bad_n} joints raised {type(exc).__name__}, not CommandError")
         try:
             robot.write(None)  # type: ignore[arg-type]
             problems.append("write(None) did not raise CommandError")
         except CommandError:
             pass
+        except Exception as exc:  # noqa: BLE001
+            problems.append(f"write(None) raised {type(exc).__name__}, not CommandError")
     if robot.is_connected:
         problems.append("is_connected is True after leaving the context manager")
     try:

@@ -1,0 +1,33 @@
+# Two entry points on a fresh machine: `make demo` (the main job) and `make test` (the test suite).
+# Both create the virtual environment and install the project with its own files first.
+PYTHON ?= python3
+VENV ?= .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test test-all bench lint clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/wbc demo
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q
+
+test-all: $(STAMP)
+	$(BIN)/python -m pytest -q -m ''
+
+bench: $(STAMP)
+	$(BIN)/wbc bench sim --robot a1-wx200
+	$(BIN)/wbc bench sim --robot go1-arm
+
+lint: $(STAMP)
+	$(BIN)/ruff check wbc tests
+
+clean:
+	rm -rf $(VENV) .pytest_cache

@@ -1,0 +1,99 @@
+"""The robot interface: contract, command validation and clamping, lifecycle."""
+
+import numpy as np
+import pytest
+
+from wbc.errors import CommandError, RobotNotConnectedError
+from wbc.hardware import MujocoRobot, MujocoRobotConfig, Robot, RobotContractError, check_robot
+from wbc.robots import get_robot, joint_table
+from wbc.types import MotorCommand, RobotState
+
+
+@pytest.mark.parametrize(("robot", "arm"), [("a1-wx200", "actuated"), ("a1-wx200", "none"), ("go1-arm", "locked")])
+def test_mujoco_robot_passes_the_contract(robot, arm):
+    check_robot(lambda: MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=arm)))
+
+
+class _LeakyRobot(MujocoRobot):
+    """A broken backend: it skips clamping and never advances its tick."""
+
+    def write(self, cmd):
+        self._require_connected("write")
+        self._send(cmd)
+        return cmd
+
+    def _read(self):
+        s = super()._read()
+        return RobotState(**{**s.__dict__, "tick": 0})
+
+
+def test_contract_checker_catches_a_broken_backend():
+    with pytest.raises(RobotContractError) as err:
+        check_robot(lambda: _LeakyRobot(MujocoRobotConfig(arm_mode="none")))
+    text = str(err.value)
+    assert "tick did not advance" in text
+    assert "unclamped" in text
+    assert "joints" in text
+
+
+@pytest.mark.parametrize(
+    "fields",
+    [
+        {"q": [0.0, np.nan]},
+        {"tau": [np.inf, 0.0]},
+        {"kp": [-1.0, 0.0]},
+        {"kd": [[0.0, 0.0]]},
+        {"dq": [0.0]},
+        {"q": ["a", "b"]},
+    ],
+)
+def test_bad_motor_commands_are_rejected_at_construction(fields):
+    base = {k: [0.0, 0.0] for k in ("q", "dq", "kp", "kd", "tau")}
+    base.update(fields)
+    with pytest.raises(CommandError) as err:
+        MotorCommand(**base)
+    assert "MotorCommand." in str(err.value)
+
+
+def test_commands_are_read_only():
+    cmd = MotorCommand.hold(np.zeros(3), 1.0, 0.1)
+    with pytest.raises(ValueError):
+        cmd.q[0] = 1.0
+
+
+def test_write_clamps_to_motor_limits_and_returns_what_was_sent():
+    desc = get_robot("a1-wx200", "actuated")
+    lim = joint_table(desc)
+    with MujocoRobot(MujocoRobotConfig()) as robot:
+        n = robot.num_joints
+        cmd = MotorCommand(q=lim.lower - 1.0, dq=np.full(n, 1e3), kp=np.full(n, 5e3), kd=np.full(n, 3.0),
+                           tau=lim.torque_limit * 3)
+        sent = robot.write(cmd)
+        np.testing.assert_array_equal(sent.q, lim.lower)
+        np.testing.assert_array_equal(sent.dq, lim.velocity_limit)
+        np.testing.assert_array_equal(sent.tau, lim.torque_limit)
+        assert np.all(sent.kp <= 1000.0) and np.all(sent.kd == 3.0)
+        # the arm's limits are the servos', the legs' the A1's
+        assert lim.torque_limit[0] == 33.5 and lim.torque_limit[13] == pytest.approx(8.2)
+        robot.advance(0.01)
+        # the motors never exceed their torque limit, whatever the command asked
+        assert np.all(np.abs(robot.data.actuator_force) <= lim.torque_limit + 1e-9)
+        with pytest.raises(CommandError, match="15"):
+            robot.write(MotorCommand.hold(np.zeros(12), 1.0, 0.1))
+
+
+def test_lifecycle():
+    robot = MujocoRobot(MujocoRobotConfig(arm_mode="none"))
+    assert isinstance(robot, Robot)
+    with pytest.raises(RobotNotConnectedError, match=r"connect\(\)"):
+        robot.read()
+    robot.connect()
+    robot.connect()  # idempotent
+    a = robot.read()
+    b = robot.read()
+    assert a.tick == b.tick  # no new frame without time passing: a caller can see it is stale
+    robot.advance(0.004)
+    assert robot.read().tick == a.tick + 2
+    robot.close()
+    robot.close()
+    assert not robot.is_connected
