@@ -91,3 +91,23 @@ def test_arm_modes_change_mass_and_dofs_as_documented(name):
     # a locked arm is rigid: no joint, no actuator, and it sits at its nominal pose
     m_locked = build_scene(locked, TerrainConfig())
     assert m_locked.nu == 12 and m_locked.njnt == 13
+
+
+@pytest.mark.parametrize("name", list(ROBOTS))
+def test_locked_arm_sits_where_the_actuated_arm_is_at_its_nominal_pose(name):
+    com = {}
+    for mode in ("locked", "actuated"):
+        desc = get_robot(name, mode)
+        pr = build_pinocchio(desc)
+        qj = desc.nominal_q[pr.joints.pin_from_house]
+        q = np.r_[0.0, 0.0, 0.3, 0.0, 0.0, 0.0, 1.0, qj]
+        com[mode] = pin.centerOfMass(pr.model, pr.data, q)
+    np.testing.assert_allclose(com["locked"], com["actuated"], atol=1e-12)
+
+
+def test_pinocchio_visual_model_carries_the_urdf_meshes_and_the_arm():
+    pr = build_pinocchio(get_robot("a1-wx200"), with_visuals=True)
+    names = [g.name for g in pr.visual_model.geometryObjects]
+    meshes = [g.meshPath for g in pr.visual_model.geometryObjects if g.meshPath]
+    assert any(p.endswith("trunk.dae") for p in meshes)
+    assert any(n.startswith("arm_forearm_link") for n in names)
