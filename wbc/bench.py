@@ -38,7 +38,7 @@ def bench_sim(
     batch: int = 64,
     nthread: int | None = None,
     batch_steps: int = 500,
-    repeats: int = 3,
+    repeats: int = 5,
 ) -> dict[str, float | str | int]:
     """Physics throughput of a robot standing under the motor law.
 
