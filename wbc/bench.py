@@ -11,9 +11,10 @@ import numpy as np
 from mujoco import rollout
 
 from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.terrain import TerrainConfig
 from wbc.standing import stand_command
 
-__all__ = ["bench_sim", "machine_description"]
+__all__ = ["bench_sim", "bench_sweep", "machine_description"]
 
 
 def machine_description() -> str:
@@ -39,6 +40,7 @@ def bench_sim(
     nthread: int | None = None,
     batch_steps: int = 500,
     repeats: int = 5,
+    terrain: str = "flat",
 ) -> dict[str, float | str | int]:
     """Physics throughput of a robot standing under the motor law.
 
@@ -50,8 +52,9 @@ def bench_sim(
         ``steps_per_s``, ``batched_steps_per_s``, ``realtime_factor`` and the settings used.
     """
     nthread = nthread or os.cpu_count() or 1
-    sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=arm_mode))
+    sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=arm_mode, terrain=TerrainConfig(kind=terrain)))
     with sim:
+        sim.reset(seed=1)
         sim.write(stand_command(sim.desc))
         sim.advance(0.5)
         dt = sim.config.timestep
@@ -81,6 +84,7 @@ def bench_sim(
     return {
         "robot": robot,
         "arm_mode": arm_mode,
+        "terrain": terrain,
         "timestep_s": dt,
         "steps_per_s": best,
         "batched_steps_per_s": best_batched,
@@ -90,3 +94,48 @@ def bench_sim(
         "final_base_height_m": height,
         "machine": machine_description(),
     }
+
+
+def bench_sweep(
+    scenario: str = "scenarios/push.toml",
+    controller: str = "stand",
+    *,
+    trials: int = 10,
+    workers: int | None = None,
+    ray: bool = False,
+) -> dict[str, float | str | int]:
+    """Throughput of a whole arena sweep (runner, executor, results store included) against raw physics.
+
+    Plays `trials` trials per band of `scenario` with `controller` on the local process pool and, if `ray`, again on a
+    local Ray; compares the sweep's physics steps per second with the batched physics throughput of the same robot
+    standing on the same terrain (`bench_sim`).
+    """
+    import tempfile
+    from pathlib import Path
+
+    from wbc.arena import ArenaConfig, run_arena
+    from wbc.control import get_controller
+    from wbc.scenarios import load_scenario
+
+    sc = load_scenario(scenario)
+    arm = get_controller(controller).arm_mode
+    kind = sc.trial(sc.bands[0], 0, 0).terrain.kind
+    physics = bench_sim(sc.robot, arm, terrain=kind, nthread=workers, repeats=3)
+    out: dict[str, float | str | int] = {
+        "scenario": sc.name, "controller": controller, "terrain": kind, "trials": trials * len(sc.bands),
+        "batched_physics_steps_per_s": physics["batched_steps_per_s"], "machine": machine_description(),
+    }
+    executors = ["local"] + (["ray"] if ray else [])
+    for name in executors:
+        with tempfile.TemporaryDirectory() as tmp:
+            cfg = ArenaConfig(controllers=(controller,), scenario=Path(scenario), trials=trials,
+                              out_dir=Path(tmp) / name, executor=name, workers=workers, progress=False)
+            t0 = time.perf_counter()
+            result = run_arena(cfg)
+            wall = time.perf_counter() - t0
+        out[f"{name}_wall_s"] = wall
+        out[f"{name}_sweep_steps_per_s"] = result.physics_steps / wall
+        out[f"{name}_ratio_to_batched_physics"] = result.physics_steps / wall / physics["batched_steps_per_s"]
+    if ray:
+        out["ray_overhead_per_trial_s"] = (out["ray_wall_s"] - out["local_wall_s"]) / out["trials"]
+    return out

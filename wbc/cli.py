@@ -1,4 +1,4 @@
-"""The ``wbc`` command line: ``wbc analyze tail``, ``wbc bench sim``, ``wbc demo``."""
+"""The ``wbc`` command line: ``run``, ``compare``, ``analyze tail``, ``bench sim``, ``demo``."""
 
 from __future__ import annotations
 
@@ -36,17 +36,84 @@ def _bench_sim(args: argparse.Namespace) -> int:
     from wbc.bench import bench_sim
 
     get_robot(args.robot, args.arm)  # validate names before any work
-    result = bench_sim(args.robot, args.arm, batch=args.batch, nthread=args.threads)
+    result = bench_sim(args.robot, args.arm, batch=args.batch, nthread=args.threads, terrain=args.terrain)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
-    print(f"Simulation speed: {result['robot']} (arm {result['arm_mode']}), standing under the motor law, "
-          f"dt {result['timestep_s'] * 1e3:.1f} ms")
+    print(f"Simulation speed: {result['robot']} (arm {result['arm_mode']}), standing under the motor law on "
+          f"{result['terrain']} ground, dt {result['timestep_s'] * 1e3:.1f} ms")
     print(f"  machine: {result['machine']}")
     print(f"  single-threaded : {result['steps_per_s']:>10,.0f} steps/s  (real-time factor "
           f"{result['realtime_factor']:.0f}x)")
     print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
           f"{result['threads']} threads)")
+    return 0
+
+
+def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
+    import time
+    from pathlib import Path
+
+    from wbc.arena import ArenaConfig, run_arena
+    from wbc.report import format_table
+
+    seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
+    out = Path(args.out) if args.out else Path("runs") / (
+        f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
+    cfg = ArenaConfig(controllers=controllers, scenario=Path(args.scenario), bands=tuple(args.band or ()),
+                      seeds=seeds, trials=args.trials, out_dir=out, executor=args.executor, workers=args.workers,
+                      address=args.address, resume=args.resume, progress=not args.json and not args.quiet)
+    result = run_arena(cfg)
+    if args.json:
+        print(json.dumps(result.summary, indent=2))
+        return 0
+    print(format_table(result.summary))
+    rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
+    print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s); "
+          f"results in {result.out_dir}/ (trials.csv, summary.json, report.md)")
+    return 0
+
+
+def _run(args: argparse.Namespace) -> int:
+    return _arena(args, (args.controller,))
+
+
+def _compare(args: argparse.Namespace) -> int:
+    return _arena(args, tuple(args.controllers))
+
+
+def _add_arena_options(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--scenario", required=True, help="scenario file (e.g. scenarios/push.toml)")
+    p.add_argument("--trials", type=int, default=10, help="trials per band and seed (default 10)")
+    p.add_argument("--seeds", type=int, default=None, help="number of seeds: seeds 0 .. S-1 (default 1)")
+    p.add_argument("--band", action="append", help="band to play (repeatable; default: all)")
+    p.add_argument("--out", default=None, help="results directory (default: runs/<scenario>-<controllers>-<time>)")
+    p.add_argument("--json", action="store_true", help="print summary.json instead of the table")
+    p.add_argument("--executor", default="local", help="local (process pool, default) or ray")
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
+    p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _bench_sweep(args: argparse.Namespace) -> int:
+    from wbc.bench import bench_sweep
+
+    result = bench_sweep(args.scenario, args.controller, trials=args.trials, workers=args.workers, ray=args.ray)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"Sweep speed: {result['controller']} on {result['scenario']} ({result['trials']} trials, "
+          f"{result['terrain']} terrain)")
+    print(f"  machine: {result['machine']}")
+    print(f"  batched physics (bench sim, same terrain): {result['batched_physics_steps_per_s']:>10,.0f} steps/s")
+    for name in ("local", "ray"):
+        if f"{name}_wall_s" in result:
+            print(f"  sweep, {name:<5} executor: {result[f'{name}_sweep_steps_per_s']:>10,.0f} steps/s "
+                  f"({100 * result[f'{name}_ratio_to_batched_physics']:.0f} % of batched physics, "
+                  f"{result[f'{name}_wall_s']:.1f} s)")
+    if "ray_overhead_per_trial_s" in result:
+        print(f"  Ray overhead per trial: {1e3 * result['ray_overhead_per_trial_s']:.0f} ms")
     return 0
 
 
@@ -81,7 +148,27 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--batch", type=int, default=64, help="environments in the batched rollout")
     sim.add_argument("--threads", type=int, default=None, help="threads for the batched rollout (default: all)")
     sim.add_argument("--json", action="store_true", help="print JSON")
+    sim.add_argument("--terrain", default="flat", help="flat or fractal")
     sim.set_defaults(func=_bench_sim)
+    sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
+    sweep.add_argument("--scenario", default="scenarios/push.toml")
+    sweep.add_argument("--controller", default="stand")
+    sweep.add_argument("--trials", type=int, default=10, help="trials per band")
+    sweep.add_argument("--workers", type=int, default=None)
+    sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
+    sweep.add_argument("--json", action="store_true")
+    sweep.set_defaults(func=_bench_sweep)
+
+    from wbc.control import CONTROLLERS
+
+    run = sub.add_parser("run", help="play a scenario with one controller")
+    run.add_argument("controller", help=f"one of: {', '.join(CONTROLLERS)}")
+    _add_arena_options(run)
+    run.set_defaults(func=_run)
+    compare = sub.add_parser("compare", help="play a scenario with several controllers on the same trials")
+    compare.add_argument("controllers", nargs="+", help=f"two or more of: {', '.join(CONTROLLERS)}")
+    _add_arena_options(compare)
+    compare.set_defaults(func=_compare)
 
     demo = sub.add_parser("demo", help="the main job: stand, push, recover or fall; tail analysis")
     demo.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")

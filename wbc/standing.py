@@ -13,7 +13,7 @@ import numpy as np
 from wbc.robots.description import RobotDescription
 from wbc.types import MotorCommand
 
-__all__ = ["StandGains", "stand_command"]
+__all__ = ["StandController", "StandGains", "stand_command"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -42,3 +42,28 @@ def stand_command(desc: RobotDescription, gains: StandGains | None = None) -> Mo
     kp[12:] = g.arm_kp
     kd[12:] = g.arm_kd
     return MotorCommand.hold(desc.nominal_q, kp, kd)
+
+
+class StandController:
+    """The ``stand`` controller: the PD hold of `stand_command`, at 50 Hz (the motors' PD runs every physics step).
+
+    Args:
+        desc: the robot it drives.
+        gains: PD gains.
+    """
+
+    rate_hz = 50.0
+
+    def __init__(self, desc: RobotDescription, gains: StandGains | None = None) -> None:
+        self._command = stand_command(desc, gains)
+
+    def reset(self) -> None:
+        """Nothing to forget."""
+
+    def act(self, state: object, command: object) -> MotorCommand:
+        """Hold the nominal pose whatever the state and command."""
+        return self._command
+
+    def counters(self) -> dict[str, int]:
+        """No events."""
+        return {}

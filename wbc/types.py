@@ -114,6 +114,17 @@ class MotorCommand:
         return int(self.q.shape[0])
 
     @classmethod
+    def _trusted(cls, q: np.ndarray, dq: np.ndarray, kp: np.ndarray, kd: np.ndarray, tau: np.ndarray) -> MotorCommand:
+        """Build from arrays already known to be valid (finite, 1-D, same length, float64), skipping the checks.
+
+        Only for code that derives a command from a validated one (e.g. clamping): the hot path of every write.
+        """
+        obj = object.__new__(cls)
+        for name, a in (("q", q), ("dq", dq), ("kp", kp), ("kd", kd), ("tau", tau)):
+            object.__setattr__(obj, name, _readonly(a))
+        return obj
+
+    @classmethod
     def hold(cls, q: np.ndarray, kp: float | np.ndarray, kd: float | np.ndarray) -> MotorCommand:
         """A PD hold of positions `q` with zero target velocity and no feed-forward torque."""
         q = np.asarray(q, dtype=np.float64)

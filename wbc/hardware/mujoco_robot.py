@@ -26,7 +26,7 @@ from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["MujocoRobotConfig", "MujocoRobot", "SimTruth", "initial_qpos"]
+__all__ = ["BaseTruth", "MujocoRobotConfig", "MujocoRobot", "SimTruth", "initial_qpos"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,6 +89,23 @@ class SimTruth:
     external_point_in_world: np.ndarray
 
 
+@dataclass(frozen=True)
+class BaseTruth:
+    """The trunk's true state, the part of `SimTruth` a runner logs every tick (cheap to take).
+
+    Attributes:
+        base_position_in_world: trunk origin, shape (3,) [m].
+        base_quat: trunk orientation (w, x, y, z).
+        base_linvel_in_world: trunk origin velocity, shape (3,) [m/s].
+        base_angvel_in_body: trunk angular velocity in the trunk frame, shape (3,) [rad/s].
+    """
+
+    base_position_in_world: np.ndarray
+    base_quat: np.ndarray
+    base_linvel_in_world: np.ndarray
+    base_angvel_in_body: np.ndarray
+
+
 def initial_qpos(model: mujoco.MjModel, desc: RobotDescription, base_height: float) -> np.ndarray:
     """Standing configuration: trunk level at `base_height`, joints at the nominal pose."""
     qpos = np.zeros(model.nq)
@@ -109,6 +126,8 @@ class MujocoRobot(Robot):
         super().__init__()
         self.config = config if config is not None else MujocoRobotConfig()
         self.desc = self.config.description()
+        self._joint_names = self.desc.joint_names
+        self._num_joints = len(self._joint_names)
         self._limits = joint_table(self.desc)
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
@@ -116,8 +135,10 @@ class MujocoRobot(Robot):
         self._steps = 0
         self._rng = np.random.default_rng(0)
         self._domain = DomainParams()
-        self._kp = np.zeros(self.num_joints)
-        self._kd = np.zeros(self.num_joints)
+        self._strength = np.ones(self.num_joints)
+        self._push_windows: list[tuple[int, int, Push]] = []
+        self._contacts_at = -1
+        self._contacts = np.zeros(0, dtype=int)
         self._force_now = np.zeros(3)
         self._point_now = np.zeros(3)
 
@@ -125,7 +146,12 @@ class MujocoRobot(Robot):
     @property
     def joint_names(self) -> tuple[str, ...]:
         """Actuated joints, house order."""
-        return self.desc.joint_names
+        return self._joint_names
+
+    @property
+    def num_joints(self) -> int:
+        """Number of actuated joints."""
+        return self._num_joints
 
     @property
     def limits(self) -> JointTable:
@@ -148,8 +174,15 @@ class MujocoRobot(Robot):
             for i in range(m.nsensor)
             for name in [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SENSOR, i)]
         }
-        foot_body = {mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f): None for f in FOOT_NAMES}
-        self._foot_bodies = np.array([m.site_bodyid[s] for s in foot_body])
+        def _span(name: str) -> np.ndarray:
+            adr, dim = self._sensor[name]
+            return np.arange(adr, adr + dim)
+
+        self._quat_idx, self._gyro_idx, self._accel_idx = _span("imu_quat"), _span("imu_gyro"), _span("imu_accel")
+        self._touch_idx = np.array([self._sensor[f.replace("_foot", "_touch")][0] for f in FOOT_NAMES])
+        self._foot_geoms = np.array([self._foot_geom(f) for f in FOOT_NAMES])
+        self._is_foot_geom = np.zeros(m.ngeom, dtype=bool)
+        self._is_foot_geom[self._foot_geoms] = True
         self._nominal = {
             "body_mass": m.body_mass.copy(), "body_ipos": m.body_ipos.copy(), "body_inertia": m.body_inertia.copy(),
             "geom_friction": m.geom_friction.copy(), "forcerange": m.actuator_forcerange.copy(),
@@ -165,10 +198,9 @@ class MujocoRobot(Robot):
         n = self.num_joints
         q = d.qpos[7:].copy()
         dq = d.qvel[6:].copy()
-        quat = self._sensor_value("imu_quat")
-        gyro = self._sensor_value("imu_gyro")
-        accel = self._sensor_value("imu_accel")
-        feet = np.array([self._sensor_value(f.replace("_foot", "_touch"))[0] for f in FOOT_NAMES])
+        sd = d.sensordata.copy()
+        quat, gyro, accel = sd[self._quat_idx], sd[self._gyro_idx], sd[self._accel_idx]
+        feet = sd[self._touch_idx]
         if noise.enabled:
             rng = self._rng
             q += rng.normal(0.0, noise.q, n)
@@ -189,12 +221,10 @@ class MujocoRobot(Robot):
 
     def _send(self, cmd: MotorCommand) -> None:
         m, d = self.model, self.data
-        k = np.broadcast_to(np.asarray(self._domain.motor_strength, dtype=np.float64), (self.num_joints,))
-        m.actuator_gainprm[:, 0] = k
+        k = self._strength
         m.actuator_biasprm[:, 1] = -k * cmd.kp
         m.actuator_biasprm[:, 2] = -k * cmd.kd
         d.ctrl[:] = cmd.kp * cmd.q + cmd.kd * cmd.dq + cmd.tau
-        self._kp, self._kd = cmd.kp, cmd.kd
 
     def _advance(self, dt: float) -> None:
         n = max(1, int(round(dt / self.config.timestep)))
@@ -255,7 +285,9 @@ class MujocoRobot(Robot):
         mujoco.mj_resetData(m, d)
         d.qpos[:] = initial_qpos(m, self.desc, self.desc.stand_height + ground + 0.02) if qpos is None else qpos
         self._pushes = []
+        self._push_windows = []
         self._steps = 0
+        self._contacts_at = -1
         self._force_now = np.zeros(3)
         self._point_now = d.qpos[:3].copy()
         self._send(MotorCommand.hold(self.desc.nominal_q, 0.0, 0.0))
@@ -275,8 +307,10 @@ class MujocoRobot(Robot):
             m.body_ipos[b] = (m0 * c0 + domain.payload_mass * domain.payload_com) / m1
         m.geom_friction[:] = nom["geom_friction"]
         m.geom_friction[:, 0] = domain.friction
-        k = np.broadcast_to(np.asarray(domain.motor_strength, dtype=np.float64), (self.num_joints,))
+        k = np.broadcast_to(np.asarray(domain.motor_strength, dtype=np.float64), (self.num_joints,)).copy()
         m.actuator_forcerange[:] = nom["forcerange"] * k[:, None]
+        m.actuator_gainprm[:, 0] = k
+        self._strength = k
         self._domain = domain
         mujoco.mj_setConst(m, self.data)
 
@@ -284,26 +318,21 @@ class MujocoRobot(Robot):
         """Schedule a push; it acts from ``push.start`` (simulation time) for ``push.duration``."""
         self._require_connected("apply_push")
         self._pushes.append(push)
+        start = int(round(push.start / self.config.timestep))
+        stop = start + max(1, int(round(push.duration / self.config.timestep)))
+        self._push_windows.append((start, stop, push))
 
     def sim_truth(self) -> SimTruth:
         """Ground truth of the simulator (for metrics and debugging; never hand this to a controller)."""
         self._require_connected("sim_truth")
         m, d = self.model, self.data
         mujoco.mj_subtreeVel(m, d)
-        foot = np.zeros(4, dtype=bool)
-        others: set[str] = set()
-        for i in range(d.ncon):
-            c = d.contact[i]
-            if self._terrain_geom not in (c.geom1, c.geom2):
-                continue
-            body = m.geom_bodyid[c.geom2 if c.geom1 == self._terrain_geom else c.geom1]
-            hit = np.flatnonzero(self._foot_bodies == body)
-            is_foot_geom = m.geom_type[c.geom1 if c.geom1 != self._terrain_geom else c.geom2] == \
-                mujoco.mjtGeom.mjGEOM_SPHERE
-            if hit.size and is_foot_geom:
-                foot[hit[0]] = True
-            else:
-                others.add(mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, body))
+        touching = self._ground_contacts()
+        mask = np.zeros(m.ngeom, dtype=bool)
+        mask[touching] = True
+        foot = mask[self._foot_geoms]
+        others = sorted({mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, m.geom_bodyid[g])
+                         for g in touching if not self._is_foot_geom[g]})
         active = bool(np.any(self._force_now))
         return SimTruth(
             time=self.time,
@@ -314,27 +343,50 @@ class MujocoRobot(Robot):
             com_in_world=d.subtree_com[self._base_body].copy(),
             com_velocity_in_world=d.subtree_linvel[self._base_body].copy(),
             foot_contact=foot,
-            ground_contact_bodies=tuple(sorted(others)),
+            ground_contact_bodies=tuple(others),
             external_force_in_world=self._force_now.copy(),
             external_point_in_world=self._point_now.copy() if active else d.qpos[:3].copy(),
         )
+
+    def base_truth(self) -> BaseTruth:
+        """Truth: the trunk's pose and velocity (for metrics; never hand this to a controller)."""
+        qpos, qvel = self.data.qpos, self.data.qvel
+        return BaseTruth(qpos[:3].copy(), qpos[3:7].copy(), qvel[:3].copy(), qvel[3:6].copy())
+
+    def fallen(self) -> bool:
+        """Truth: the trunk or a non-foot link touches the ground (the paper's termination rule)."""
+        touching = self._ground_contacts()
+        return bool(touching.size and not self._is_foot_geom[touching].all())
 
     def base_rotation(self) -> np.ndarray:
         """Truth: trunk rotation matrix (body to world)."""
         return quat_to_matrix(self.data.qpos[3:7])
 
     # -- internals ------------------------------------------------------------------------------------------------
-    def _sensor_value(self, name: str) -> np.ndarray:
-        adr, dim = self._sensor[name]
-        return self.data.sensordata[adr:adr + dim].copy()
+    def _ground_contacts(self) -> np.ndarray:
+        """Robot geoms touching the ground now (robot geoms collide with nothing else)."""
+        if self._contacts_at == self._steps:
+            return self._contacts
+        d = self.data
+        if d.ncon == 0:
+            touching = np.zeros(0, dtype=int)
+        else:
+            pairs = d.contact.geom[: d.ncon]
+            touching = np.where(pairs[:, 0] == self._terrain_geom, pairs[:, 1], pairs[:, 0])
+        self._contacts, self._contacts_at = touching, self._steps
+        return touching
 
-    def _push_steps(self, p: Push) -> tuple[int, int]:
-        start = int(round(p.start / self.config.timestep))
-        return start, start + max(1, int(round(p.duration / self.config.timestep)))
+    def _foot_geom(self, foot: str) -> int:
+        """The sphere geom at a foot site (feet are fused into the calves, so find it by place and shape)."""
+        m = self.model
+        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
+        body = m.site_bodyid[site]
+        spheres = [g for g in range(m.ngeom)
+                   if m.geom_bodyid[g] == body and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE]
+        return min(spheres, key=lambda g: np.linalg.norm(m.geom_pos[g] - m.site_pos[site]))
 
     def _active_pushes(self, step: int) -> list[Push]:
-        return [p for p in self._pushes if self._push_steps(p)[0] <= step < self._push_steps(p)[1]]
+        return [p for start, stop, p in self._push_windows if start <= step < stop]
 
     def _next_push_step(self, step: int) -> int | None:
-        starts = [self._push_steps(p)[0] for p in self._pushes if self._push_steps(p)[0] > step]
-        return min(starts) if starts else None
+        return min((start for start, _, _ in self._push_windows if start > step), default=None)

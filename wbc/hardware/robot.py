@@ -28,12 +28,13 @@ KD_MAX = 100.0  # [N m s / rad] largest velocity gain accepted (the driver encod
 
 def clamp_command(cmd: MotorCommand, limits: JointTable) -> MotorCommand:
     """Clamp a command to the motors' limits: position range, speed, gains and torque."""
-    return MotorCommand(
-        q=np.clip(cmd.q, limits.lower, limits.upper),
-        dq=np.clip(cmd.dq, -limits.velocity_limit, limits.velocity_limit),
-        kp=np.clip(cmd.kp, 0.0, KP_MAX),
-        kd=np.clip(cmd.kd, 0.0, KD_MAX),
-        tau=np.clip(cmd.tau, -limits.torque_limit, limits.torque_limit),
+    # `cmd` was validated when it was built; clipping keeps it valid, so skip re-validation on this hot path.
+    return MotorCommand._trusted(
+        np.minimum(np.maximum(cmd.q, limits.lower), limits.upper),
+        np.minimum(np.maximum(cmd.dq, -limits.velocity_limit), limits.velocity_limit),
+        np.minimum(np.maximum(cmd.kp, 0.0), KP_MAX),
+        np.minimum(np.maximum(cmd.kd, 0.0), KD_MAX),
+        np.minimum(np.maximum(cmd.tau, -limits.torque_limit), limits.torque_limit),
     )
 
 
@@ -42,6 +43,7 @@ class Robot(ABC):
 
     def __init__(self) -> None:
         self._connected = False
+        self._last_written: tuple[MotorCommand, MotorCommand] | None = None
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
     @property
@@ -109,7 +111,12 @@ class Robot(ABC):
                 f"{type(self).__name__}.write: command has {cmd.num_joints} joints, this robot has "
                 f"{self.num_joints} ({', '.join(self.joint_names)})"
             )
-        applied = clamp_command(cmd, self.limits)
+        last = self._last_written
+        if last is not None and last[0] is cmd:
+            applied = last[1]  # commands are immutable: the same object clamps to the same result
+        else:
+            applied = clamp_command(cmd, self.limits)
+            self._last_written = (cmd, applied)
         self._send(applied)
         return applied
 

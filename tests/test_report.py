@@ -1,0 +1,295 @@
+"""Tests of `wbc.stats` and `wbc.report` on synthetic arena records with known statistics."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+
+import numpy as np
+import pytest
+
+from wbc.report import EXTRA_METRICS, METRICS, format_table, summarize, write_report
+from wbc.stats import RecordError, mean_std_over_seeds, paired_difference, record_float
+
+CONTROLLERS = ("mpc", "rl", "wbc")
+BANDS = ("nominal", "push")
+SEEDS = (0, 1, 2)
+N_TRIALS = 10
+SCENARIO = "flat_push"
+HASH = "abc123"
+
+
+def make_record(controller: str, band: str, seed: int, trial: int, **overrides) -> dict:
+    """One record with deterministic values; `overrides` replace fields."""
+    record = {
+        "controller": controller,
+        "scenario": SCENARIO,
+        "scenario_hash": HASH,
+        "band": band,
+        "seed": seed,
+        "trial": trial,
+        "success": True,
+        "ttf": 1.0,
+        "fall_time_s": math.nan,
+        "vlin_err": 0.1,
+        "vang_err": 0.2,
+        "max_roll_deg": 5.0,
+        "max_pitch_deg": 3.0,
+        "energy_j": 100.0,
+        "arm_travel_rad": 0.5,
+        "push_force_n": 0.0,
+        "n_pushes": 0,
+        "vx_cmd": 0.5,
+        "vy_cmd": 0.0,
+        "yaw_rate_cmd": 0.0,
+        "friction": 0.8,
+        "payload_kg": 0.0,
+        "fallbacks": 0,
+        "wall_s": 1.5,
+    }
+    record.update(overrides)
+    return record
+
+
+def arena_records(*, pushes: bool = True) -> list[dict]:
+    """3 controllers x 2 bands x 3 seeds x 10 trials with varied, reproducible values."""
+    rng = np.random.default_rng(42)
+    records = []
+    for c_index, controller in enumerate(CONTROLLERS):
+        for band in BANDS:
+            for seed in SEEDS:
+                for trial in range(N_TRIALS):
+                    push = float(rng.uniform(0.0, 120.0)) if (pushes and band == "push") else 0.0
+                    success = bool(rng.random() < 0.9 - 0.1 * c_index - push / 400.0)
+                    ttf = 1.0 if success else float(rng.uniform(0.1, 0.9))
+                    records.append(
+                        make_record(
+                            controller,
+                            band,
+                            seed,
+                            trial,
+                            success=success,
+                            ttf=ttf,
+                            fall_time_s=math.nan if success else 10.0 * ttf,
+                            vlin_err=float(rng.uniform(0.05, 0.2)) + 0.02 * c_index,
+                            vang_err=float(rng.uniform(0.1, 0.3)),
+                            push_force_n=push,
+                            n_pushes=int(push > 0.0),
+                            energy_j=float(rng.uniform(80.0, 120.0)),
+                        )
+                    )
+    return records
+
+
+def as_csv_strings(records: list[dict]) -> list[dict]:
+    """Write the records to CSV and read them back: every value becomes a string."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(records[0]))
+    writer.writeheader()
+    writer.writerows(records)
+    buffer.seek(0)
+    return list(csv.DictReader(buffer))
+
+
+def summary_of(records: list[dict], controllers=CONTROLLERS, bands=BANDS) -> dict:
+    return summarize(records, scenario_name=SCENARIO, scenario_hash=HASH, controllers=controllers, bands=bands)
+
+
+# --- wbc.stats -----------------------------------------------------------------------------------------------------
+
+
+def test_record_float_accepts_typed_and_string_values():
+    assert record_float({"x": True}, "x") == 1.0
+    assert record_float({"x": "False"}, "x") == 0.0
+    assert record_float({"x": "1"}, "x") == 1.0
+    assert record_float({"x": "0"}, "x") == 0.0
+    assert record_float({"x": " 2.5 "}, "x") == 2.5
+    assert math.isnan(record_float({"x": "nan"}, "x"))
+    assert math.isnan(record_float({"x": ""}, "x"))
+    with pytest.raises(RecordError, match="not a number"):
+        record_float({"x": "fast"}, "x")
+    with pytest.raises(RecordError, match="no field 'y'"):
+        record_float({"x": 1.0}, "y")
+
+
+def test_mean_std_over_seeds_by_hand():
+    # seed 0: vlin_err 0.1 and 0.3 -> 0.2; seed 1: 0.4 -> 0.4; seed 2: 0.5, 0.7, nan -> 0.6 (nan ignored)
+    records = [
+        make_record("mpc", "nominal", 0, 0, vlin_err=0.1, success=True),
+        make_record("mpc", "nominal", 0, 1, vlin_err=0.3, success=False),
+        make_record("mpc", "nominal", 1, 0, vlin_err=0.4, success=True),
+        make_record("mpc", "nominal", 2, 0, vlin_err=0.5, success=True),
+        make_record("mpc", "nominal", 2, 1, vlin_err=0.7, success=True),
+        make_record("mpc", "nominal", 2, 2, vlin_err=math.nan, success=False),
+    ]
+    stats = mean_std_over_seeds(records, "vlin_err")
+    seed_means = np.array([0.2, 0.4, 0.6])
+    assert stats["n_seeds"] == 3
+    assert stats["mean"] == pytest.approx(0.4)
+    assert stats["std"] == pytest.approx(math.sqrt(((seed_means - 0.4) ** 2).sum() / 2))  # = 0.2
+    success = mean_std_over_seeds(records, "success")  # per seed: 0.5, 1.0, 2/3
+    assert success["mean"] == pytest.approx((0.5 + 1.0 + 2 / 3) / 3)
+    assert success["std"] == pytest.approx(np.std([0.5, 1.0, 2 / 3], ddof=1))
+
+
+def test_mean_std_over_seeds_single_seed_and_all_nan():
+    one_seed = [make_record("mpc", "nominal", 7, t, ttf=0.1 * t) for t in range(4)]
+    assert mean_std_over_seeds(one_seed, "ttf") == {"mean": pytest.approx(0.15), "std": 0.0, "n_seeds": 1}
+    no_fall = mean_std_over_seeds(one_seed, "fall_time_s")  # every fall_time_s is nan
+    assert no_fall["n_seeds"] == 0 and math.isnan(no_fall["mean"]) and math.isnan(no_fall["std"])
+
+
+def test_paired_difference_constant_offset_has_degenerate_ci():
+    records_a = [make_record("a", "nominal", s, t, ttf=0.25 + 0.0625 * t) for s in SEEDS for t in range(N_TRIALS)]
+    records_b = [dict(r, controller="b", ttf=r["ttf"] + 0.125) for r in records_a]
+    result = paired_difference(records_a, records_b, "ttf")
+    assert result == {"diff": 0.125, "ci95": [0.125, 0.125], "n": 30}
+    reverse = paired_difference(records_b, records_a, "ttf")
+    assert reverse["diff"] == -0.125  # positive diff: B larger
+
+
+def _noisy_pair(n_pairs: int, seed: int) -> tuple[list[dict], list[dict]]:
+    rng = np.random.default_rng(seed)
+    records_a, records_b = [], []
+    for t in range(n_pairs):
+        base = float(rng.uniform(0.1, 0.3))
+        records_a.append(make_record("a", "nominal", 0, t, vlin_err=base))
+        records_b.append(make_record("b", "nominal", 0, t, vlin_err=base + 0.05 + float(rng.normal(0.0, 0.03))))
+    return records_a, records_b
+
+
+def test_paired_difference_noisy_ci_contains_diff_and_shrinks():
+    small = paired_difference(*_noisy_pair(30, seed=1), "vlin_err")
+    large = paired_difference(*_noisy_pair(300, seed=1), "vlin_err")
+    for result in (small, large):
+        lo, hi = result["ci95"]
+        assert lo < result["diff"] < hi
+        assert lo < 0.05 + 0.03 and hi > 0.05 - 0.03
+    assert small["n"] == 30 and large["n"] == 300
+    assert large["ci95"][1] - large["ci95"][0] < 0.6 * (small["ci95"][1] - small["ci95"][0])
+    # deterministic: same seed, same interval; another bootstrap seed, another one
+    assert paired_difference(*_noisy_pair(30, seed=1), "vlin_err") == small
+    assert paired_difference(*_noisy_pair(30, seed=1), "vlin_err", seed=5)["ci95"] != small["ci95"]
+
+
+def test_paired_difference_uses_only_common_keys():
+    records_a = [make_record("a", "nominal", 0, t, success=False) for t in range(5)]
+    records_a.append(make_record("a", "nominal", 1, 0, success=True))  # only A played this one
+    records_b = [make_record("b", "nominal", 0, t, success=True) for t in range(5)]
+    records_b += [make_record("b", "push", 0, 0, success=False), make_record("b", "nominal", 0, 99, success=False)]
+    result = paired_difference(records_a, records_b, "success")
+    assert result == {"diff": 1.0, "ci95": [1.0, 1.0], "n": 5}
+    empty = paired_difference(records_a, [make_record("b", "other", 0, 0)], "success")
+    assert empty["n"] == 0 and math.isnan(empty["diff"])
+
+
+def test_paired_difference_rejects_repeated_trials():
+    records = [make_record("a", "nominal", 0, 0), make_record("a", "nominal", 0, 0)]
+    with pytest.raises(RecordError, match="twice"):
+        paired_difference(records, records[:1], "ttf")
+
+
+# --- wbc.report ----------------------------------------------------------------------------------------------------
+
+
+def test_summary_has_exactly_the_required_shape():
+    records = arena_records()
+    summary = summary_of(records)
+    assert set(summary) == {"scenario", "controllers", "paired"}
+    assert summary["scenario"] == {"name": SCENARIO, "hash": HASH}
+    assert list(summary["controllers"]) == list(CONTROLLERS)
+    for entry in summary["controllers"].values():
+        assert set(entry) == {"bands"}
+        assert list(entry["bands"]) == list(BANDS)
+        for cell in entry["bands"].values():
+            assert cell["trials"] == len(SEEDS) * N_TRIALS
+            assert set(cell) >= {"trials", *METRICS, *EXTRA_METRICS}
+            for metric in (*METRICS, *EXTRA_METRICS):
+                assert set(cell[metric]) == {"mean", "std"}
+    cell = summary["controllers"]["mpc"]["bands"]["push"]
+    mine = [r for r in records if r["controller"] == "mpc" and r["band"] == "push"]
+    assert cell["success_rate"]["mean"] == pytest.approx(mean_std_over_seeds(mine, "success")["mean"])
+    assert 0.0 <= cell["success_rate"]["mean"] <= 1.0
+
+    pairs = [(p["a"], p["b"], p["band"], p["metric"]) for p in summary["paired"]]
+    expected = [(a, b, band, m) for a, b in (("mpc", "rl"), ("mpc", "wbc"), ("rl", "wbc")) for band in BANDS
+                for m in METRICS]
+    assert pairs == expected
+    for p in summary["paired"]:
+        assert set(p) == {"a", "b", "band", "metric", "diff", "ci95"}
+        assert len(p["ci95"]) == 2
+    assert json.loads(json.dumps(summary, allow_nan=False)) == summary
+
+
+def test_summary_with_missing_cells_renders_null():
+    records = [r for r in arena_records() if not (r["controller"] == "rl" and r["band"] == "push")]
+    summary = summary_of(records, controllers=(*CONTROLLERS, "ghost"), bands=(*BANDS, "ice"))
+    text = json.dumps(summary, allow_nan=False)  # no NaN may reach JSON
+    assert json.loads(text) == summary
+    assert summary["controllers"]["ghost"]["bands"]["nominal"] == {
+        "trials": 0, **{m: {"mean": None, "std": None} for m in (*METRICS, *EXTRA_METRICS)}
+    }
+    assert summary["controllers"]["rl"]["bands"]["push"]["trials"] == 0
+    assert summary["controllers"]["mpc"]["bands"]["ice"]["ttf"] == {"mean": None, "std": None}
+    missing = [p for p in summary["paired"] if p["b"] == "rl" and p["band"] == "push"]
+    assert missing and all(p["diff"] is None and p["ci95"] == [None, None] for p in missing)
+    assert "n/a" in format_table(summary)
+
+
+def test_summary_rejects_other_scenario_versions():
+    records = arena_records()
+    records[3] = dict(records[3], scenario_hash="other")
+    with pytest.raises(RecordError, match="scenario hash"):
+        summary_of(records)
+
+
+def test_string_records_give_the_same_summary():
+    records = arena_records()
+    strings = as_csv_strings(records)
+    assert isinstance(strings[0]["success"], str) and isinstance(strings[0]["seed"], str)
+    assert summary_of(strings) == summary_of(records)
+
+
+def test_format_table_lists_controllers_bands_and_pairs():
+    summary = summary_of(arena_records())
+    table = format_table(summary)
+    for name in (*CONTROLLERS, *BANDS, SCENARIO, HASH):
+        assert name in table
+    assert "±" in table
+    assert "paired differences (B - A, 95% CI)" in table
+    for header in ("Success %", "TTF", "V_lin err", "V_ang err", "trials"):
+        assert header in table
+    # success in percent with 2 decimals, as in the paper
+    rate = summary["controllers"]["mpc"]["bands"]["nominal"]["success_rate"]
+    assert f"{100 * rate['mean']:.2f} ± {100 * rate['std']:.2f}" in table
+    assert table == format_table(json.loads(json.dumps(summary)))  # deterministic, works on JSON read back
+
+
+def test_write_report_writes_markdown_and_plots(tmp_path):
+    records = arena_records()
+    summary = summary_of(records)
+    meta = {"controllers": list(CONTROLLERS), "seeds": list(SEEDS), "trials": N_TRIALS, "executor": "serial",
+            "versions": {"numpy": np.__version__}, "git": "deadbeef"}
+    paths = write_report(tmp_path / "out", summary, records, meta)
+    names = {p.name for p in paths}
+    assert names == {"report.md", "success_vs_push.png", "ttf.png", "tracking.png"}
+    for path in paths:
+        assert path.is_file() and path.parent == tmp_path / "out"
+        if path.suffix == ".png":
+            assert path.stat().st_size > 1024
+            assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    report = (tmp_path / "out" / "report.md").read_text(encoding="utf-8")
+    for text in (SCENARIO, HASH, "deadbeef", "serial", "numpy", "±", "(tracking.png)", "(ttf.png)",
+                 "(success_vs_push.png)", *CONTROLLERS, *BANDS):
+        assert text in report
+
+
+def test_write_report_skips_push_plot_without_pushes(tmp_path):
+    records = arena_records(pushes=False)
+    paths = write_report(tmp_path, summary_of(records), as_csv_strings(records), {})
+    assert {p.name for p in paths} == {"report.md", "ttf.png", "tracking.png"}
+    assert not (tmp_path / "success_vs_push.png").exists()
+    assert all(p.stat().st_size > 1024 for p in paths if p.suffix == ".png")
+    assert "(success_vs_push.png)" not in (tmp_path / "report.md").read_text(encoding="utf-8")

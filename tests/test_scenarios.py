@@ -1,0 +1,451 @@
+"""Scenario files: loading, validation messages, content hashing, the publication lock and seeded sampling."""
+
+import dataclasses
+import random
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.errors import UnknownNameError, WbcError
+from wbc.scenarios import ScenarioError, check_published, load_scenario
+
+SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
+PUSH = SCENARIOS / "push.toml"
+TURN = SCENARIOS / "turn.toml"
+
+# Line numbers matter: the broken-file cases below assert them.
+BASE = """\
+# Base scenario for the broken-file tests.
+[scenario]
+name = "base"
+version = 1
+description = "A valid scenario that the tests break one edit at a time."
+robot = "a1-wx200"
+duration_s = 10.0
+
+[terrain]
+kind = "fractal"
+amplitude_m = 0.05
+
+[domain]
+friction = [0.8, 1.0]
+
+[commands]
+ramp_s = 0.5
+
+[[commands.options]]
+vx = 0.0
+
+[[commands.options]]
+vx = 0.3
+
+[pushes]
+first_s = [2.0, 3.0]
+interval_s = [4.0, 6.0]
+duration_s = 0.05
+offset_m = 0.12
+
+[[bands]]
+name = "in"
+push_force_n = [200.0, 300.0]
+
+[[bands]]
+name = "ood"
+push_force_n = [300.0, 400.0]
+"""
+
+OPTIONS = "[[commands.options]]\nvx = 0.0\n\n[[commands.options]]\nvx = 0.3\n"
+PUSHES = "[pushes]\nfirst_s = [2.0, 3.0]\ninterval_s = [4.0, 6.0]\nduration_s = 0.05\noffset_m = 0.12\n"
+BANDS = BASE[BASE.index("[[bands]]") :]
+SCENARIO_TABLE = BASE[BASE.index("[scenario]") : BASE.index("[terrain]")]
+
+
+def write(tmp_path: Path, text: str, name: str = "case.toml") -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def edit(text: str, old: str, new: str) -> str:
+    assert text.count(old) == 1, f"the edit's target {old!r} must occur exactly once"
+    return text.replace(old, new)
+
+
+def assert_same(a, b, path="trial"):
+    """Deep equality of dataclasses / tuples / numpy arrays / scalars."""
+    if dataclasses.is_dataclass(a):
+        assert type(a) is type(b), path
+        for f in dataclasses.fields(a):
+            assert_same(getattr(a, f.name), getattr(b, f.name), f"{path}.{f.name}")
+    elif isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        assert np.array_equal(a, b), path
+    elif isinstance(a, tuple | list):
+        assert len(a) == len(b), path
+        for k, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_same(x, y, f"{path}[{k}]")
+    else:
+        assert a == b, path
+
+
+def trials_equal(a, b) -> bool:
+    try:
+        assert_same(a, b)
+    except AssertionError:
+        return False
+    return True
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# Shipped files, hashing, lock
+
+
+def test_base_file_is_valid(tmp_path):
+    s = load_scenario(write(tmp_path, BASE))
+    assert s.name == "base" and s.bands == ("in", "ood") and s.duration_s == 10.0
+
+
+def test_shipped_scenarios_load_and_are_published():
+    push, turn = load_scenario(PUSH), load_scenario(TURN)
+    assert (push.name, push.version, push.robot, push.bands) == ("push", 1, "a1-wx200", ("in", "ood"))
+    assert (turn.name, turn.version, turn.robot, turn.bands) == ("turn", 1, "go1-arm", ("1.0", "1.25", "1.5"))
+    assert push.duration_s == turn.duration_s == 20.0
+    assert "calibrat" in push.notes and "stand" in push.notes
+    for s in (push, turn):
+        assert len(s.hash) == 64 and int(s.hash, 16) >= 0
+        check_published(s)
+        check_published(s, SCENARIOS / "published.toml")
+
+
+def test_hash_ignores_comments_layout_and_key_order_but_not_values(tmp_path):
+    text = PUSH.read_text()
+    reference = load_scenario(PUSH).hash
+    relaid = "# a new comment\n\n" + text.replace("vx = 0.3", "vx=0.3   # walking, re-commented").replace(
+        'kind = "fractal"\namplitude_m = 0.05', 'amplitude_m = 0.05\n\n\nkind   =   "fractal"'
+    )
+    assert relaid != text
+    assert load_scenario(write(tmp_path, relaid)).hash == reference
+    for old, new in [("offset_m = 0.12", "offset_m = 0.13"), ("version = 1", "version = 2"),
+                     ('name = "ood"', 'name = "out"'), ("Push timing", "Push  timing")]:
+        assert load_scenario(write(tmp_path, edit(text, old, new))).hash != reference, old
+
+
+def test_changed_published_file_is_refused(tmp_path):
+    shutil.copy(SCENARIOS / "published.toml", tmp_path / "published.toml")
+    changed = load_scenario(write(tmp_path, edit(PUSH.read_text(), "offset_m = 0.12", "offset_m = 0.1"), "push.toml"))
+    with pytest.raises(ScenarioError) as err:
+        check_published(changed)
+    assert "without a version bump" in str(err.value) and "bump [scenario] version" in str(err.value)
+    assert str(tmp_path / "push.toml") in str(err.value)
+
+
+def test_unpublished_version_is_refused_with_the_fix(tmp_path):
+    lock = write(tmp_path, (SCENARIOS / "published.toml").read_text(), "lock.toml")
+    bumped = load_scenario(write(tmp_path, edit(PUSH.read_text(), "version = 1", "version = 2"), "push.toml"))
+    with pytest.raises(ScenarioError) as err:
+        check_published(bumped, lock)
+    text = str(err.value)
+    assert "unpublished" in text and bumped.hash in text and '"2"' in text and str(lock) in text
+    with pytest.raises(ScenarioError, match="does not exist"):
+        check_published(bumped)  # no published.toml next to this copy
+
+
+def test_malformed_lock_is_a_scenario_error(tmp_path):
+    s = load_scenario(PUSH)
+    with pytest.raises(ScenarioError) as err:
+        check_published(s, write(tmp_path, "[push]\n\"1\" = 5\n", "lock.toml"))
+    assert err.value.line == 2
+    with pytest.raises(ScenarioError, match="invalid TOML"):
+        check_published(s, write(tmp_path, "[push\n", "lock.toml"))
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# Sampling
+
+
+def test_trials_are_reproducible_across_loads():
+    a, b = load_scenario(PUSH), load_scenario(PUSH)
+    for band, seed, index in [("in", 0, 0), ("ood", 3, 7), ("in", 12345, 99)]:
+        assert_same(a.trial(band, seed, index), b.trial(band, seed, index))
+    t = a.trial("in", 0, 0)
+    assert (t.scenario, t.scenario_hash, t.robot, t.key, t.duration_s) == ("push", a.hash, "a1-wx200", ("in", 0, 0),
+                                                                            20.0)
+    assert t.terrain.kind == "fractal" and t.terrain.amplitude == 0.05
+    assert 0.8 <= t.domain.friction <= 1.0 and t.domain.payload_mass == 0.0 and t.domain.motor_strength == 1.0
+
+
+def test_different_index_or_seed_gives_a_different_trial():
+    s = load_scenario(PUSH)
+    t = s.trial("in", 0, 0)
+    for other in (s.trial("in", 0, 1), s.trial("in", 1, 0)):
+        assert other.terrain_seed != t.terrain_seed
+        assert not trials_equal(other, t)
+
+
+def test_bands_share_everything_but_their_own_values():
+    s = load_scenario(PUSH)
+    for seed, index in [(0, 0), (1, 5), (7, 31)]:
+        a, b = s.trial("in", seed, index), s.trial("ood", seed, index)
+        assert a.terrain_seed == b.terrain_seed
+        assert_same(a.domain, b.domain)
+        assert_same(a.command, b.command)
+        assert len(a.pushes) == len(b.pushes) > 0
+        for pa, pb in zip(a.pushes, b.pushes, strict=True):
+            assert pa.start == pb.start and pa.duration == pb.duration
+            assert np.array_equal(pa.offset_in_base, pb.offset_in_base)
+            heading_a = np.arctan2(pa.force_in_world[1], pa.force_in_world[0])
+            heading_b = np.arctan2(pb.force_in_world[1], pb.force_in_world[0])
+            assert heading_a == pytest.approx(heading_b, abs=1e-12)
+            assert 200.0 <= np.linalg.norm(pa.force_in_world) <= 300.0
+            assert 300.0 <= np.linalg.norm(pb.force_in_world) <= 400.0
+            # the same u maps into each band: F_ood - 300 == F_in - 200
+            assert np.linalg.norm(pb.force_in_world) - 300 == pytest.approx(np.linalg.norm(pa.force_in_world) - 200)
+
+
+def test_trials_order_count_and_independence_of_request_order():
+    s = load_scenario(PUSH)
+    batch = s.trials(None, [3, 1], 4)
+    assert [t.key for t in batch] == [(b, sd, i) for b in ("in", "ood") for sd in (3, 1) for i in range(4)]
+    assert len(s.trials(["ood"], [0, 1, 2], 5)) == 15
+    assert [t.key for t in s.trials("ood", [0], 2)] == [("ood", 0, 0), ("ood", 0, 1)]
+    assert s.trials(None, [0], 0) == []
+    shuffled = list(batch)
+    random.Random(0).shuffle(shuffled)
+    fresh = load_scenario(PUSH)
+    for t in shuffled:
+        assert_same(fresh.trial(t.band, t.seed, t.index), t)
+
+
+def test_push_statistics():
+    s = load_scenario(PUSH)
+    trials = s.trials(["in"], [0], 400)
+    walking = sum(t.command.vx == 0.3 for t in trials)
+    standing = sum(t.command.vx == 0.0 for t in trials)
+    assert walking + standing == 400 and 150 <= walking <= 250
+    assert all(t.command.ramp_s == 0.5 and t.command.vy == 0.0 and t.command.yaw_rate == 0.0 for t in trials)
+    axes = [0, 0]
+    for t in trials:
+        assert 3 <= len(t.pushes) <= 5
+        starts = [p.start for p in t.pushes]
+        assert 2.0 <= starts[0] <= 3.0
+        assert all(4.0 - 1e-9 <= b - a <= 6.0 + 1e-9 for a, b in zip(starts, starts[1:], strict=False))
+        assert starts[-1] < t.duration_s
+        for p in t.pushes:
+            off = p.offset_in_base
+            assert off[2] == 0.0 and np.count_nonzero(off[:2]) == 1 and np.all(np.abs(off) <= 0.12)
+            axes[int(off[1] != 0.0)] += 1
+            assert p.force_in_world[2] == 0.0 and 200.0 <= np.linalg.norm(p.force_in_world) <= 300.0
+            assert p.duration == 0.05
+    assert 0.4 < axes[0] / sum(axes) < 0.6
+    frictions = np.array([t.domain.friction for t in trials])
+    assert frictions.min() >= 0.8 and frictions.max() <= 1.0 and frictions.std() > 0.03
+
+
+def test_turn_statistics():
+    s = load_scenario(TURN)
+    trials = s.trials(None, [0], 150)
+    for t in trials:
+        assert t.pushes == () and t.terrain.kind == "flat" and t.command.ramp_s == 1.0
+        assert t.command.vx == float(t.band)
+        assert t.command.yaw_rate in (0.5, 2.0)
+    fast = sum(t.command.yaw_rate == 2.0 for t in trials)
+    assert 0.4 * len(trials) < fast < 0.6 * len(trials)
+
+
+def test_random_sign_flips_about_half(tmp_path):
+    text = edit(BASE, "[[commands.options]]\nvx = 0.3\n", "[[commands.options]]\nyaw_rate = 1.0\nrandom_sign = true\n")
+    s = load_scenario(write(tmp_path, text))
+    yaw = [t.command.yaw_rate for t in s.trials(["in"], [0], 400) if t.command.yaw_rate != 0.0]
+    assert set(yaw) == {1.0, -1.0} and 0.35 < yaw.count(-1.0) / len(yaw) < 0.65
+
+
+def test_unknown_band_lists_the_bands():
+    s = load_scenario(PUSH)
+    for call in (lambda: s.trial("mid", 0, 0), lambda: s.trials(["in", "mid"], [0], 1)):
+        with pytest.raises(UnknownNameError) as err:
+            call()
+        assert "'mid'" in str(err.value) and "in" in err.value.valid and "ood" in err.value.valid
+
+
+def test_bad_seed_is_refused():
+    s = load_scenario(PUSH)
+    for seed in (-1, 1.5, True):
+        with pytest.raises(WbcError, match="seed"):
+            s.trial("in", seed, 0)
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# Broken files: (id, edited text, field named in the message, exact line or None)
+
+BROKEN = [
+    ("toml-syntax", edit(BASE, "version = 1", "version = = 1"), None, 4),
+    ("toml-duplicate-key", edit(BASE, "kind = \"fractal\"", "kind = \"fractal\"\nkind = \"flat\""), None, 11),
+    ("missing-scenario", edit(BASE, SCENARIO_TABLE, ""), "[scenario]", None),
+    ("missing-name", edit(BASE, 'name = "base"\n', ""), "[scenario] name", 2),
+    ("bad-name", edit(BASE, 'name = "base"', 'name = "Base!"'), "[scenario] name", 3),
+    ("version-string", edit(BASE, "version = 1", 'version = "1"'), "[scenario] version", 4),
+    ("version-bool", edit(BASE, "version = 1", "version = true"), "[scenario] version", 4),
+    ("version-zero", edit(BASE, "version = 1", "version = 0"), "[scenario] version", 4),
+    ("empty-description", edit(BASE, '"A valid scenario that the tests break one edit at a time."', '"  "'),
+     "[scenario] description", 5),
+    ("unknown-robot", edit(BASE, '"a1-wx200"', '"spot"'), "[scenario] robot", 6),
+    ("duration-zero", edit(BASE, "duration_s = 10.0", "duration_s = 0"), "[scenario] duration_s", 7),
+    ("duration-too-long", edit(BASE, "duration_s = 10.0", "duration_s = 601"), "[scenario] duration_s", 7),
+    ("duration-string", edit(BASE, "duration_s = 10.0", 'duration_s = "10"'), "[scenario] duration_s", 7),
+    ("duration-nan", edit(BASE, "duration_s = 10.0", "duration_s = nan"), "[scenario] duration_s", 7),
+    ("unknown-key-scenario", edit(BASE, "version = 1\n", "version = 1\ncolour = 'red'\n"), "[scenario] colour", 5),
+    ("missing-terrain", edit(BASE, '[terrain]\nkind = "fractal"\namplitude_m = 0.05\n', ""), "[terrain]", None),
+    ("bad-kind", edit(BASE, '"fractal"', '"hilly"'), "[terrain] kind", 10),
+    ("amplitude-too-big", edit(BASE, "amplitude_m = 0.05", "amplitude_m = 0.5"), "[terrain] amplitude_m", 11),
+    ("octaves-float", edit(BASE, "amplitude_m = 0.05", "amplitude_m = 0.05\noctaves = 2.5"), "[terrain] octaves",
+     12),
+    ("unknown-key-terrain", edit(BASE, "amplitude_m = 0.05", "amplitude_m = 0.05\nroughness = 1"),
+     "[terrain] roughness", 12),
+    ("terrain-not-table", edit(edit(BASE, '[terrain]\nkind = "fractal"\namplitude_m = 0.05\n', ""),
+                               "# Base", 'terrain = "flat"\n# Base'), "[terrain]", 1),
+    ("friction-zero", edit(BASE, "friction = [0.8, 1.0]", "friction = [0.0, 1.0]"), "[domain] friction", 14),
+    ("friction-reversed", edit(BASE, "friction = [0.8, 1.0]", "friction = [1.0, 0.8]"), "[domain] friction", 14),
+    ("friction-three", edit(BASE, "friction = [0.8, 1.0]", "friction = [0.8, 0.9, 1.0]"), "[domain] friction", 14),
+    ("friction-string", edit(BASE, "friction = [0.8, 1.0]", 'friction = ["a", 1.0]'), "[domain] friction", 14),
+    ("friction-scalar", edit(BASE, "friction = [0.8, 1.0]", "friction = 0.9"), "[domain] friction", 14),
+    ("payload-too-big", edit(BASE, "friction = [0.8, 1.0]", "payload_kg = [0.0, 25.0]"), "[domain] payload_kg", 14),
+    ("unknown-key-domain", edit(BASE, "friction = [0.8, 1.0]", "gravity = [9.8, 9.8]"), "[domain] gravity", 14),
+    ("ramp-too-long", edit(BASE, "ramp_s = 0.5", "ramp_s = 11"), "[commands] ramp_s", 17),
+    ("unknown-key-commands", edit(BASE, "ramp_s = 0.5", "ramp = 0.5"), "[commands] ramp", 17),
+    ("missing-options", edit(BASE, OPTIONS, ""), "[commands] options", 16),
+    ("empty-options", edit(edit(BASE, OPTIONS, ""), "ramp_s = 0.5", "ramp_s = 0.5\noptions = []"),
+     "[commands] options", 18),
+    ("option-vx-too-big", edit(BASE, "vx = 0.0", "vx = 5.0"), "[[commands.options]] #1 vx", 20),
+    ("option-unknown-key", edit(BASE, "vx = 0.3", "vx = 0.3\nvz = 1.0"), "[[commands.options]] #2 vz", 24),
+    ("option-sign-string", edit(BASE, "vx = 0.3", 'vx = 0.3\nrandom_sign = "yes"'),
+     "[[commands.options]] #2 random_sign", 24),
+    ("push-duration-negative", edit(BASE, "duration_s = 0.05", "duration_s = -0.05"), "[pushes] duration_s", 28),
+    ("offset-too-big", edit(BASE, "offset_m = 0.12", "offset_m = 0.6"), "[pushes] offset_m", 29),
+    ("interval-reversed", edit(BASE, "interval_s = [4.0, 6.0]", "interval_s = [6.0, 4.0]"), "[pushes] interval_s",
+     27),
+    ("interval-zero", edit(BASE, "interval_s = [4.0, 6.0]", "interval_s = [0.0, 6.0]"), "[pushes] interval_s", 27),
+    ("first-negative", edit(BASE, "first_s = [2.0, 3.0]", "first_s = [-1.0, 3.0]"), "[pushes] first_s", 26),
+    ("first-after-end", edit(BASE, "first_s = [2.0, 3.0]", "first_s = [2.0, 12.0]"), "[pushes] first_s", 26),
+    ("missing-offset", edit(BASE, "offset_m = 0.12\n", ""), "[pushes] offset_m", 25),
+    ("unknown-key-pushes", edit(BASE, "offset_m = 0.12", "offset_m = 0.12\nheading = 0.0"), "[pushes] heading", 30),
+    ("unknown-table", BASE + "\n[extra]\nx = 1\n", "[extra]", 39),
+    ("missing-bands", edit(BASE, BANDS, ""), "[[bands]]", None),
+    ("empty-bands", "bands = []\n" + edit(BASE, BANDS, ""), "[[bands]]", 1),
+    ("duplicate-band", edit(BASE, 'name = "ood"', 'name = "in"'), "[[bands]] #2 name", 36),
+    ("bad-band-name", edit(BASE, 'name = "ood"', 'name = "o o d"'), "[[bands]] #2 name", 36),
+    ("band-unknown-key", edit(BASE, 'name = "ood"', 'name = "ood"\ncolour = 1'), "[[bands]] #2 colour", 37),
+    ("force-missing", edit(BASE, "push_force_n = [300.0, 400.0]\n", ""), "[[bands]] #2 push_force_n", 35),
+    ("force-without-pushes", edit(BASE, PUSHES, ""), "[[bands]] #1 push_force_n", 28),
+    ("force-too-big", edit(BASE, "[300.0, 400.0]", "[300.0, 6000.0]"), "[[bands]] #2 push_force_n", 37),
+    ("force-three", edit(BASE, "[300.0, 400.0]", "[300.0, 350.0, 400.0]"), "[[bands]] #2 push_force_n", 37),
+    ("band-vx-string", edit(BASE, 'name = "in"', 'name = "in"\nvx = "fast"'), "[[bands]] #1 vx", 33),
+]
+
+
+@pytest.mark.parametrize(("text", "field", "line"), [case[1:] for case in BROKEN], ids=[case[0] for case in BROKEN])
+def test_broken_file_names_file_line_and_field(tmp_path, text, field, line):
+    path = write(tmp_path, text)
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    message = str(err.value)
+    assert isinstance(err.value, WbcError) and isinstance(err.value, ValueError)
+    assert message.startswith(str(path)), message
+    assert err.value.path == str(path)
+    assert err.value.field == field, message
+    if field is not None:
+        assert f" {field}: " in message, message
+    assert err.value.line == line, message
+    if line is not None:
+        assert message.startswith(f"{path}:{line}: "), message
+
+
+def test_messages_say_what_and_how(tmp_path):
+    cases = {
+        "version-bool": "expected an integer, got boolean true",
+        "version-string": "expected an integer, got string '1'",
+        "unknown-robot": "valid robots: a1-wx200, go1-arm",
+        "unknown-key-terrain": "valid keys of [terrain]: kind, amplitude_m",
+        "push-duration-negative": "must be in (0, 1], got -0.05",
+        "friction-reversed": "lo <= hi",
+        "friction-three": "2 numbers",
+        "duplicate-band": "duplicate band name 'in' (also [[bands]] #1)",
+        "force-without-pushes": "add [pushes] or remove push_force_n",
+        "bad-kind": "'flat', 'fractal'",
+        "missing-scenario": "missing required table",
+    }
+    texts = {case[0]: case[1] for case in BROKEN}
+    for case, expected in cases.items():
+        with pytest.raises(ScenarioError) as err:
+            load_scenario(write(tmp_path, texts[case]))
+        assert expected in str(err.value), (case, str(err.value))
+
+
+def test_spec_example_message(tmp_path):
+    path = write(tmp_path, edit(BASE, "duration_s = 0.05", "duration_s = -0.05"))
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    assert str(err.value) == f"{path}:28: [pushes] duration_s: must be in (0, 1], got -0.05"
+
+
+def test_file_problems(tmp_path):
+    with pytest.raises(ScenarioError, match="file not found") as err:
+        load_scenario(tmp_path / "missing.toml")
+    assert str(err.value).startswith(str(tmp_path / "missing.toml"))
+    with pytest.raises(ScenarioError, match="cannot read"):
+        load_scenario(tmp_path)  # a directory
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes(BASE.replace("A valid", "A v\xe9lid").encode("latin-1"))
+    with pytest.raises(ScenarioError, match="UTF-8") as err:
+        load_scenario(bad)
+    assert err.value.line == 5
+
+
+def test_line_numbers_skip_multiline_strings(tmp_path):
+    tricky = 'notes = """\n[pushes]\nduration_s = 1\n[[bands]]\nname = "x"\n"""\n'
+    text = edit(BASE, "version = 1\n", "version = 1\n" + tricky)  # 6 lines added after line 4
+    text = edit(text, "duration_s = 0.05", "duration_s = 2.0")
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(write(tmp_path, text))
+    assert err.value.field == "[pushes] duration_s" and err.value.line == 34
+
+
+def test_dotted_and_inline_forms_are_accepted(tmp_path):
+    text = edit(BASE, '[terrain]\nkind = "fractal"\namplitude_m = 0.05\n', "")
+    text = 'terrain.kind = "flat"\n' + text
+    assert load_scenario(write(tmp_path, text)).trial("in", 0, 0).terrain.kind == "flat"
+    bad = 'terrain.kind = "hilly"\n' + edit(BASE, '[terrain]\nkind = "fractal"\namplitude_m = 0.05\n', "")
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(write(tmp_path, bad))
+    assert err.value.field == "[terrain] kind" and err.value.line == 1
+
+
+def test_random_edits_raise_only_scenario_errors(tmp_path):
+    """Whatever the edit, a file either loads and samples, or raises ScenarioError: never a traceback."""
+    rng = random.Random(0)
+    lines = BASE.splitlines()
+    values = ["1", "-1", "0", "1e9", "nan", "inf", "true", '"x"', "[]", "[1]", "[2, 1]", "[0, 0]", "{}", "{a = 1}",
+              "1979-05-27", "[[1, 2]]", '""', "0.001"]
+    loaded = 0
+    for k in range(300):
+        edited = list(lines)
+        i = rng.randrange(len(edited))
+        action = rng.random()
+        if action < 0.3:
+            del edited[i]
+        elif action < 0.4:
+            edited.insert(i, edited[rng.randrange(len(edited))])
+        elif "=" in edited[i]:
+            edited[i] = edited[i].split("=")[0] + "= " + rng.choice(values)
+        else:
+            edited[i] = edited[i][: rng.randrange(len(edited[i]) + 1)]
+        path = write(tmp_path, "\n".join(edited) + "\n", f"fuzz{k}.toml")
+        try:
+            s = load_scenario(path)
+        except ScenarioError as err:
+            assert str(err).startswith(str(path))
+            continue
+        loaded += 1
+        for band in s.bands:
+            s.trials([band], [0], 2)
+    assert 0 < loaded < 300

@@ -1,0 +1,73 @@
+"""Controllers: the protocol every controller implements, and the explicit registry of named controllers.
+
+A controller sees only what a real robot gives it (`RobotState`) and the operator's `VelocityCommand`; it never sees
+the scenario, the push schedule or simulator truth. Each registered controller names the arm mode it drives, so
+``stand-noarm`` runs on the robot without its arm while ``stand`` holds an actuated arm.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+from wbc.errors import UnknownNameError
+from wbc.robots.description import RobotDescription, check_arm_mode
+from wbc.standing import StandController
+from wbc.types import MotorCommand, RobotState, VelocityCommand
+
+__all__ = ["Controller", "ControllerSpec", "CONTROLLERS", "get_controller"]
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """What the runner drives at `rate_hz`."""
+
+    rate_hz: float
+    """Control rate [Hz]; the runner calls `act` every 1 / rate_hz seconds of robot time."""
+
+    def reset(self) -> None:
+        """Forget everything from the previous episode."""
+
+    def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """One control tick: the motor command for this state and command."""
+
+    def counters(self) -> dict[str, int]:
+        """Event counts of the episode so far (e.g. ``fallbacks``: solves that failed and fell back)."""
+
+
+@dataclass(frozen=True)
+class ControllerSpec:
+    """A registry entry.
+
+    Attributes:
+        name: registry name.
+        arm_mode: arm mode of the robot this controller drives (``none``, ``locked``, ``actuated``).
+        make: builds the controller for a robot description.
+        summary: one line for ``--help`` and reports.
+    """
+
+    name: str
+    arm_mode: str
+    make: Callable[[RobotDescription], Controller]
+    summary: str
+
+    def __post_init__(self) -> None:
+        check_arm_mode(self.arm_mode)
+
+
+CONTROLLERS: dict[str, ControllerSpec] = {
+    "stand": ControllerSpec("stand", "actuated", StandController,
+                            "PD hold of the nominal pose, arm actuated and held"),
+    "stand-locked": ControllerSpec("stand-locked", "locked", StandController,
+                                   "PD hold of the nominal pose, arm locked"),
+    "stand-noarm": ControllerSpec("stand-noarm", "none", StandController,
+                                  "PD hold of the nominal pose, robot without its arm"),
+}
+
+
+def get_controller(name: str) -> ControllerSpec:
+    """Look a controller up by name; unknown names raise an error listing the valid ones."""
+    if name not in CONTROLLERS:
+        raise UnknownNameError("controller", name, tuple(CONTROLLERS))
+    return CONTROLLERS[name]

@@ -1,0 +1,100 @@
+"""Executors: where trials run. A local process pool (default) or a Ray cluster; the results are identical.
+
+Both take (trial, controller) tasks and yield each finished results row as soon as it is done, in completion order;
+the caller stores it at once. Every trial is fully determined by its `Trial`, so neither the worker nor the order
+changes a result.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+
+from wbc.optional import require
+from wbc.trial import Trial
+
+__all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "run_task"]
+
+Task = tuple[Trial, str]
+
+
+def run_task(task: Task) -> dict[str, object]:
+    """Play one (trial, controller) task in this process and return its results row."""
+    from wbc.runner import run_trial
+
+    trial, controller = task
+    record, _ = run_trial(trial, controller)
+    return record
+
+
+class LocalExecutor:
+    """Runs tasks in a pool of local processes (``workers`` <= 1: in this process).
+
+    Args:
+        workers: number of processes (default: all cores).
+    """
+
+    name = "local"
+
+    def __init__(self, workers: int | None = None) -> None:
+        self.workers = workers or os.cpu_count() or 1
+
+    def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
+        """Yield results rows as tasks finish."""
+        tasks = list(tasks)
+        if self.workers <= 1:
+            for task in tasks:
+                yield run_task(task)
+            return
+        with ProcessPoolExecutor(max_workers=self.workers) as pool:
+            pending: set[Future] = set()
+            queue = iter(tasks)
+            for task in queue:  # keep a bounded number in flight so a kill loses little
+                pending.add(pool.submit(run_task, task))
+                if len(pending) >= 2 * self.workers:
+                    break
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    yield fut.result()
+                    nxt = next(queue, None)
+                    if nxt is not None:
+                        pending.add(pool.submit(run_task, nxt))
+
+
+class RayExecutor:
+    """Runs tasks on a Ray cluster (or a local Ray started on demand).
+
+    Args:
+        address: cluster address (``auto``, ``ray://host:10001`` ...); None starts a local Ray on this machine.
+        num_cpus: CPUs for a local Ray (default: all cores).
+    """
+
+    name = "ray"
+
+    def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
+        self.address = address
+        self.num_cpus = num_cpus
+
+    def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
+        """Yield results rows as tasks finish."""
+        ray = require("ray", "cluster")
+        started = False
+        if not ray.is_initialized():
+            kwargs = {"address": self.address} if self.address else {
+                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
+            ray.init(log_to_driver=False, configure_logging=False, **kwargs)
+            started = True
+        try:
+            remote = ray.remote(num_cpus=1)(run_task)
+            refs = [remote.remote(task) for task in tasks]
+            while refs:
+                done, refs = ray.wait(refs, num_returns=1)
+                yield ray.get(done[0])
+        finally:
+            if started:
+                ray.shutdown()
+
+
+EXECUTORS = ("local", "ray")
