@@ -60,7 +60,7 @@ class Episode:
             path, duration_s=self.duration_s, control_dt=self.control_dt, fell=self.fell,
             fall_time_s=self.fall_time_s, t=self.t, command=self.command, v_base_in_yaw=self.v_base_in_yaw,
             yaw_rate=self.yaw_rate, roll=self.roll, pitch=self.pitch, power=self.power, arm_q=self.arm_q,
-            qpos=self.qpos, events=np.array([f"{t:.6f}|{k}|{d}" for t, k, d in self.events], dtype=str),
+            qpos=self.qpos, events=np.array([f"{float(t)!r}|{k}|{d}" for t, k, d in self.events], dtype=str),
         )
 
     @classmethod

@@ -1,0 +1,220 @@
+"""The arena: runner, metrics, executors, results store, resume, CLI."""
+
+import csv
+import dataclasses
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.arena import ArenaConfig, run_arena
+from wbc.cli import main
+from wbc.control import CONTROLLERS
+from wbc.episode import Episode
+from wbc.metrics import compute_metrics
+from wbc.results import RECORD_FIELDS, read_records
+from wbc.runner import run_trial
+from wbc.scenarios import load_scenario
+
+SCENARIOS = sorted(Path(__file__).resolve().parent.parent.joinpath("scenarios").glob("*.toml"))
+SCENARIOS = [p for p in SCENARIOS if p.name != "published.toml"]
+
+SMALL = """
+[scenario]
+name = "small"
+version = 1
+description = "a short push test"
+robot = "a1-wx200"
+duration_s = 3.0
+
+[terrain]
+kind = "fractal"
+amplitude_m = 0.03
+
+[domain]
+friction = [0.7, 1.0]
+
+[commands]
+ramp_s = 0.5
+[[commands.options]]
+vx = 0.0
+[[commands.options]]
+vx = 0.3
+
+[pushes]
+first_s = [0.8, 1.2]
+interval_s = [1.0, 1.5]
+duration_s = 0.05
+offset_m = 0.12
+
+[[bands]]
+name = "soft"
+push_force_n = [50.0, 150.0]
+
+[[bands]]
+name = "hard"
+push_force_n = [600.0, 900.0]
+"""
+
+
+@pytest.fixture
+def small(tmp_path):
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL)
+    return path
+
+
+def _metrics(records):
+    keep = [k for k in RECORD_FIELDS if k != "wall_s"]
+    norm = [tuple("nan" if isinstance(r[k], float) and math.isnan(r[k]) else r[k] for k in keep) for r in records]
+    return sorted(norm, key=repr)
+
+
+def _run(small, out, **kw):
+    cfg = ArenaConfig(controllers=("stand", "stand-noarm"), scenario=small, seeds=(0, 1), trials=3, out_dir=out,
+                      progress=False, **kw)
+    return run_arena(cfg)
+
+
+def test_same_seed_same_metrics_across_runs_and_worker_counts(small, tmp_path):
+    a = _run(small, tmp_path / "a", workers=1)
+    b = _run(small, tmp_path / "b", workers=1)
+    c = _run(small, tmp_path / "c", workers=2)
+    ra, rb, rc = (read_records(r.out_dir / "trials.csv") for r in (a, b, c))
+    assert len(ra) == 2 * 2 * 2 * 3
+    assert _metrics(ra) == _metrics(rb) == _metrics(rc)
+    # the bands discriminate: the soft pushes are survived more often than the hard ones
+    soft = [r["success"] for r in ra if r["band"] == "soft"]
+    hard = [r["success"] for r in ra if r["band"] == "hard"]
+    assert sum(soft) > sum(hard)
+    summary = json.loads((a.out_dir / "summary.json").read_text())
+    assert set(summary["controllers"]) == {"stand", "stand-noarm"}
+    assert summary["scenario"]["hash"] == load_scenario(small).hash
+    assert (a.out_dir / "report.md").exists() and (a.out_dir / "run.json").exists()
+    run = json.loads((a.out_dir / "run.json").read_text())
+    assert "packages" in run["environment"] and "git_revision" in run["environment"]
+
+
+def test_local_and_ray_executors_agree(small, tmp_path):
+    pytest.importorskip("ray")
+    local = _run(small, tmp_path / "local", workers=2)
+    ray = _run(small, tmp_path / "ray", executor="ray")
+    assert _metrics(read_records(local.out_dir / "trials.csv")) == _metrics(read_records(ray.out_dir / "trials.csv"))
+
+
+def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "wbc.cli", "compare", "stand", "stand-noarm", "--scenario", str(small),
+           "--trials", "6", "--seeds", "2", "--workers", "1", "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    trials_csv = out / "trials.csv"
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        if trials_csv.exists() and trials_csv.read_text().count("\n") >= 5:  # header + 4 trials
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    before = read_records(trials_csv)
+    assert 4 <= len(before) < 2 * 2 * 2 * 6
+    # a torn line, as a kill in the middle of a write would leave
+    with trials_csv.open("a") as f:
+        f.write("stand,small,abc,soft,0")
+    cfg = ArenaConfig(controllers=("stand", "stand-noarm"), scenario=small, seeds=(0, 1), trials=6, out_dir=out,
+                      workers=1, resume=True, progress=False)
+    result = run_arena(cfg)
+    after = read_records(trials_csv)
+    keys = [(r["controller"], r["band"], r["seed"], r["trial"]) for r in after]
+    assert len(keys) == len(set(keys)) == 2 * 2 * 2 * 6
+    assert result.played == len(after) - len(before)  # nothing finished was played again
+    # finished rows kept as they were, wall times included
+    assert _metrics(after[: len(before)]) == _metrics(before)
+    assert [r["wall_s"] for r in after[: len(before)]] == [r["wall_s"] for r in before]
+    # resuming a finished run plays nothing; resuming with other options is refused
+    assert run_arena(cfg).played == 0
+    with pytest.raises(Exception, match="different configuration"):
+        run_arena(dataclasses.replace(cfg, trials=7))
+    with pytest.raises(Exception, match="--resume"):
+        run_arena(dataclasses.replace(cfg, resume=False))
+
+
+def test_fall_is_detected_and_metrics_follow(small):
+    sc = load_scenario(small)
+    falls = 0
+    for i in range(3):
+        record, episode = run_trial(sc.trial("hard", 0, i), "stand")
+        assert record["success"] == (not episode.fell)
+        if episode.fell:
+            falls += 1
+            assert 0 < record["ttf"] < 1 and record["fall_time_s"] == pytest.approx(record["ttf"] * 3.0)
+            assert episode.t[-1] == pytest.approx(episode.fall_time_s)
+        assert any(kind == "push" for _, kind, _ in episode.events)
+    assert falls >= 1
+    record, episode = run_trial(sc.trial("soft", 0, 0), "stand")
+    assert record["success"] and record["ttf"] == 1.0 and math.isnan(record["fall_time_s"])
+    assert len(episode.t) == 150  # 3 s at 50 Hz
+
+
+def test_metrics_are_pure_functions_of_the_episode():
+    k = 100
+    t = np.arange(1, k + 1) * 0.02
+    command = np.tile([0.3, 0.0, 0.5], (k, 1))
+    ep = Episode(duration_s=4.0, control_dt=0.02, fell=True, fall_time_s=2.0, t=t, command=command,
+                 v_base_in_yaw=np.tile([0.2, 0.0], (k, 1)), yaw_rate=np.full(k, 0.25), roll=np.full(k, 0.1),
+                 pitch=np.full(k, -0.2), power=np.full(k, 50.0),
+                 arm_q=np.outer(np.arange(k), [0.01, 0.0, 0.0]), qpos=np.zeros((k, 22)))
+    m = compute_metrics(ep)
+    assert m["success"] is False and m["ttf"] == 0.5
+    assert m["vlin_err"] == pytest.approx(0.1) and m["vang_err"] == pytest.approx(0.25)
+    assert m["max_roll_deg"] == pytest.approx(np.degrees(0.1)) and m["max_pitch_deg"] == pytest.approx(np.degrees(0.2))
+    assert m["energy_j"] == pytest.approx(50.0 * 0.02 * k)
+    assert m["arm_travel_rad"] == pytest.approx(0.01 * (k - 1))
+
+
+def test_episode_round_trips_through_npz(small, tmp_path):
+    _, ep = run_trial(load_scenario(small).trial("soft", 1, 0), "stand")
+    ep.save(str(tmp_path / "ep.npz"))
+    back = Episode.load(str(tmp_path / "ep.npz"))
+    assert np.array_equal(back.qpos, ep.qpos) and back.events == ep.events and back.fell == ep.fell
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS, ids=lambda p: p.stem)
+@pytest.mark.parametrize("controller", list(CONTROLLERS))
+def test_every_scenario_runs_with_every_controller(scenario, controller):
+    sc = load_scenario(scenario)
+    trial = dataclasses.replace(sc.trial(sc.bands[-1], 0, 0), duration_s=1.0)
+    record, episode = run_trial(trial, controller)
+    assert set(RECORD_FIELDS) <= set(record)
+    assert record["scenario_hash"] == sc.hash and 0 < record["ttf"] <= 1
+    assert all(np.isfinite(record[k]) for k in ("vlin_err", "vang_err", "energy_j", "max_roll_deg"))
+
+
+def test_cli_reports_broken_scenarios_without_traceback(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SMALL.replace("duration_s = 0.05", "duration_s = -0.05"))
+    assert main(["run", "stand", "--scenario", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert str(bad) in err and "duration_s" in err and "Traceback" not in err
+    assert main(["run", "walker", "--scenario", str(bad)]) == 2
+    assert "stand" in capsys.readouterr().err
+
+
+def test_cli_run_prints_the_table_and_writes_the_directory(small, tmp_path, capsys):
+    out = tmp_path / "cli"
+    assert main(["compare", "stand", "stand-locked", "--scenario", str(small), "--trials", "2", "--band", "soft",
+                 "--out", str(out), "--quiet", "--workers", "1"]) == 0
+    text = capsys.readouterr().out
+    assert "stand-locked" in text and "±" in text and "95% CI" in text
+    with (out / "trials.csv").open() as f:
+        assert len(list(csv.DictReader(f))) == 4
+    assert main(["run", "stand", "--scenario", str(small), "--trials", "1", "--band", "soft", "--json",
+                 "--out", str(tmp_path / "j"), "--workers", "1"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["controllers"]["stand"]["bands"]["soft"]["trials"] == 1
