@@ -118,17 +118,20 @@ def _bench_sweep(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from wbc.demo import push_trial
+    """A short A/B: the standing baseline with the arm actuated, locked and absent, on the push scenario."""
+    import time
 
-    print(f"Standing PD hold of {args.robot} on fractal terrain, pushed sideways at t = 1 s for 0.1 s:\n")
-    print(f"  {'arm':<10}{'push [N]':>9}{'outcome':>12}{'max tilt [deg]':>16}{'moved [m]':>11}")
-    for mode in ARM_MODES:
-        for force in args.forces:
-            out = push_trial(args.robot, mode, force, seed=args.seed)
-            outcome = f"fell {out.fall_time_s:.2f}s" if out.fell else "recovered"
-            print(f"  {mode:<10}{force:>9.0f}{outcome:>12}{out.max_tilt_deg:>16.1f}{out.displacement_m:>11.3f}")
+    controllers = ("stand", "stand-locked", "stand-noarm")
+    print(f"A/B demo: {', '.join(controllers)} on scenarios/push.toml, {args.trials} trials x {args.seeds} seeds "
+          "per band (the same trials for every controller)\n")
+    ns = argparse.Namespace(
+        scenario=args.scenario, trials=args.trials, seeds=args.seeds, band=None,
+        out=args.out or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}", json=False, executor="local",
+        workers=None, address=None, resume=False, quiet=args.quiet,
+    )
+    rc = _arena(ns, controllers)
     print()
-    return _analyze_tail(argparse.Namespace(robot=args.robot, json=False)) or 0
+    return rc or _analyze_tail(argparse.Namespace(robot="a1-wx200", json=False))
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -170,10 +173,12 @@ def _parser() -> argparse.ArgumentParser:
     _add_arena_options(compare)
     compare.set_defaults(func=_compare)
 
-    demo = sub.add_parser("demo", help="the main job: stand, push, recover or fall; tail analysis")
-    demo.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
-    demo.add_argument("--forces", type=float, nargs="+", default=[50.0, 100.0, 200.0, 300.0], help="pushes [N]")
-    demo.add_argument("--seed", type=int, default=0)
+    demo = sub.add_parser("demo", help="the main job: a short A/B comparison on the push scenario; tail analysis")
+    demo.add_argument("--scenario", default="scenarios/push.toml")
+    demo.add_argument("--trials", type=int, default=4, help="trials per band and seed")
+    demo.add_argument("--seeds", type=int, default=2)
+    demo.add_argument("--out", default=None, help="results directory (default: runs/demo-<time>)")
+    demo.add_argument("--quiet", action="store_true", help="no progress bar")
     demo.set_defaults(func=_demo)
     return p
 
