@@ -1,0 +1,179 @@
+"""The centroidal model with arm momentum and the MPC QP."""
+
+import casadi as ca
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from wbc.hardware.mujoco_scene import build_scene
+from wbc.hardware.terrain import TerrainConfig
+from wbc.mpc import CentroidalModel, CentroidalMpc, CentroidalParams, MpcConfig, SymbolicCentroidalModel
+from wbc.mpc.centroidal_model import euler_rates_matrix
+from wbc.robots import build_pinocchio, get_robot, joint_table
+
+FEET = ("FR_foot", "FL_foot", "RR_foot", "RL_foot")
+
+
+def _random_params(rng):
+    a = rng.normal(size=(3, 3))
+    return CentroidalParams(mass=15.0, inertia_world=np.diag([0.1, 0.3, 0.35]) + 0.01 * (a @ a.T),
+                            arm_momentum_matrix=0.02 * rng.normal(size=(3, 3)), feet_world=rng.normal(size=(4, 3)))
+
+
+def test_analytic_jacobians_match_autodiff_and_finite_differences():
+    model, ref = CentroidalModel(), SymbolicCentroidalModel()
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        p = _random_params(rng)
+        x = rng.normal(size=15) * 0.4
+        u = rng.normal(size=15) * 20
+        f, a, b = model.linearize(x, u, p)
+        f_ref, a_ref, b_ref = ref.linearize(x, u, p)
+        np.testing.assert_allclose(f, f_ref, atol=1e-12)
+        np.testing.assert_allclose(a, a_ref, atol=1e-10)
+        np.testing.assert_allclose(b, b_ref, atol=1e-10)
+        eps = 1e-6
+        a_fd = np.column_stack([(model.dynamics(x + eps * e, u, p) - model.dynamics(x - eps * e, u, p)) / (2 * eps)
+                                for e in np.eye(15)])
+        b_fd = np.column_stack([(model.dynamics(x, u + eps * e, p) - model.dynamics(x, u - eps * e, p)) / (2 * eps)
+                                for e in np.eye(15)])
+        np.testing.assert_allclose(a, a_fd, atol=1e-6)
+        np.testing.assert_allclose(b, b_fd, atol=1e-6)
+
+
+def test_discretization_matches_the_matrix_exponential():
+    model = CentroidalModel()
+    rng = np.random.default_rng(2)
+    p = _random_params(rng)
+    x, u = rng.normal(size=15) * 0.2, rng.normal(size=15) * 20
+    f, a, b = model.linearize(x, u, p)
+    ad, bd, dd = model.discretize(x, u, p, 0.04)
+    ae, be, de = SymbolicCentroidalModel.exact_discretization(a, b, f - a @ x - b @ u, 0.04)
+    np.testing.assert_allclose(ad, ae, atol=1e-3)
+    np.testing.assert_allclose(bd, be, atol=1e-4)
+    np.testing.assert_allclose(dd, de, atol=1e-3)
+
+
+def _arm_indices(pr):
+    return 6 + np.array([list(pr.joints.pin_from_house).index(i) for i in (12, 13, 14)])
+
+
+def test_pure_arm_swing_turns_the_body_as_the_model_predicts_and_mujoco_agrees():
+    """Free-floating robot, no gravity, zero momentum: swinging the waist turns the body the other way."""
+    desc = get_robot("a1-wx200")
+    pr = build_pinocchio(desc)
+    arm_v = _arm_indices(pr)
+    model = build_scene(desc, TerrainConfig())
+    model.opt.gravity[:] = 0
+    model.dof_damping[:] = 0
+    model.dof_frictionloss[:] = 0
+    data = mujoco.MjData(model)
+    data.qpos[:7] = [0, 0, 2.0, 1, 0, 0, 0]
+    data.qpos[7:] = desc.nominal_q
+    data.qpos[7 + 13] = 0.3  # shoulder raised so the waist swing sweeps inertia
+    data.qpos[7 + 14] = 0.0
+    # drive the waist along a smooth profile with stiff motors; hold every other joint
+    kp, kd = 400.0, 20.0
+    model.actuator_biasprm[:, 1] = -kp
+    model.actuator_biasprm[:, 2] = -kd
+    model.actuator_forcerange[:] = [-1e4, 1e4]
+    q0 = data.qpos[7:].copy()
+    dt, steps = model.opt.timestep, 400
+    theta = np.zeros(3)  # model prediction of roll, pitch, yaw
+    cmodel = CentroidalModel()
+    mujoco.mj_forward(model, data)
+    for k in range(steps):
+        t = k * dt
+        target = q0.copy()
+        target[12] = 1.2 * (1 - np.cos(np.pi * t / (steps * dt))) / 2
+        data.ctrl[:] = kp * target
+        qpos_before = data.qpos.copy()
+        mujoco.mj_step(model, data)
+        dqa = (data.qpos[7 + 12:7 + 15] - qpos_before[7 + 12:7 + 15]) / dt
+        q_pin = pr.joints.q_pin(qpos_before)
+        params = CentroidalParams.from_pinocchio(pr, q_pin, np.zeros((4, 3)), arm_v)
+        x = np.zeros(15)
+        x[6:9] = theta
+        u = np.zeros(15)
+        u[12:] = dqa
+        theta = theta + dt * cmodel.dynamics(x, u, params)[6:9]
+    quat = data.qpos[3:7]
+    yaw_mj = np.arctan2(2 * (quat[0] * quat[3] + quat[1] * quat[2]), 1 - 2 * (quat[2] ** 2 + quat[3] ** 2))
+    assert data.qpos[7 + 12] == pytest.approx(1.2, abs=0.05)  # the waist swung (PD lag aside)
+    assert yaw_mj < -0.02  # the body turned against the arm
+    assert theta[2] == pytest.approx(yaw_mj, rel=0.05)
+
+
+def _standing_problem(desc_name="a1-wx200"):
+    desc = get_robot(desc_name)
+    pr = build_pinocchio(desc)
+    table = joint_table(desc)
+    q = np.r_[0, 0, 0.28, 0, 0, 0, 1, desc.nominal_q[pr.joints.pin_from_house]]
+    pin.framesForwardKinematics(pr.model, pr.data, q)
+    feet = np.array([pr.data.oMf[pr.model.getFrameId(f)].translation for f in FEET])
+    params = CentroidalParams.from_pinocchio(pr, q, feet, _arm_indices(pr))
+    x0 = np.zeros(15)
+    x0[0:3] = pin.centerOfMass(pr.model, pr.data, q)
+    x0[12:15] = desc.arm.nominal_q
+    mpc = CentroidalMpc(MpcConfig(), table.lower[12:], table.upper[12:], table.velocity_limit[12:])
+    return mpc, x0, feet, params
+
+
+def _second_solver(problem):
+    """Solve a recorded problem with qpOASES through CasADi (box bounds as extra rows)."""
+    n = problem.H.shape[0]
+    a = np.vstack([problem.C, np.eye(n)])
+    lba = np.concatenate([np.maximum(problem.l, -1e20), problem.l_box])
+    uba = np.concatenate([np.minimum(problem.u, 1e20), problem.u_box])
+    solver = ca.conic("S", "qpoases", {"h": ca.DM(problem.H).sparsity(), "a": ca.DM(a).sparsity()},
+                      {"printLevel": "none", "error_on_fail": True})
+    sol = solver(h=ca.DM(problem.H), g=ca.DM(problem.g), a=ca.DM(a), lba=ca.DM(lba), uba=ca.DM(uba))
+    return np.asarray(sol["x"]).ravel()
+
+
+@pytest.mark.parametrize("gait", ["stand", "trot", "pushed"])
+def test_mpc_plan_is_feasible_and_agrees_with_a_second_solver(gait):
+    mpc, x0, feet, params = _standing_problem()
+    n = mpc.config.horizon
+    x_ref = np.tile(x0, (n, 1))
+    contact = np.ones((n, 4), bool)
+    if gait == "trot":
+        contact = np.array([[1, 0, 0, 1]] * 5 + [[0, 1, 1, 0]] * 5, bool)
+    x = x0.copy()
+    if gait == "pushed":
+        x[3:6] = (0.0, 0.8, 0.0)  # a sideways kick
+        x[6] = 0.15
+    sol = mpc.solve(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params)
+    f = sol.forces
+    mu = mpc.config.mu
+    assert np.all(f[..., 2] >= -1e-4) and np.all(f[..., 2] <= mpc.config.fz_max + 1e-3)
+    assert np.all(np.abs(f[..., :2]) <= mu * f[..., 2:3] + 1e-3)
+    assert np.allclose(f[~contact], 0.0, atol=1e-3)  # swing feet push nothing (solver tolerance: 1e-5 N)
+    assert np.all(np.abs(sol.arm_velocity) <= joint_table(get_robot("a1-wx200")).velocity_limit[12:] + 1e-6)
+    if gait == "stand":
+        assert f[0, :, 2].sum() == pytest.approx(params.mass * 9.81, rel=0.05)
+    z_ref = _second_solver(mpc.problem)
+    np.testing.assert_allclose(sol.z, z_ref, atol=2e-3)
+    # the previous solution, shifted, warm-starts the next solve to the same answer as a cold start
+    warm = mpc.solve(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params)
+    mpc.reset()
+    cold = mpc.solve(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params)
+    np.testing.assert_allclose(warm.z, cold.z, atol=2e-3)
+
+
+def test_the_optimiser_swings_the_arm_to_right_the_body_when_arm_terms_are_on():
+    mpc, x0, feet, params = _standing_problem()
+    n = mpc.config.horizon
+    x = x0.copy()
+    x[9:12] = (0.0, 0.0, 0.8)  # a yaw spin imparted by a push: the body must be stopped
+    args = (np.tile(x0, (n, 1)), np.ones((n, 4), bool), np.tile(feet, (n, 1, 1)))
+    with_arm = mpc.solve(x, *args, params)
+    assert np.abs(with_arm.arm_velocity).max() > 0.1
+    # with the arm momentum matrix zeroed the arm has no effect on the body and stays still
+    no_arm = CentroidalParams(mass=params.mass, inertia_world=params.inertia_world,
+                              arm_momentum_matrix=np.zeros((3, 3)), feet_world=params.feet_world)
+    mpc.reset()
+    still = mpc.solve(x, *args, no_arm)
+    assert np.abs(still.arm_velocity).max() < 1e-3
+    assert euler_rates_matrix(np.zeros(3)) == pytest.approx(np.eye(3))
