@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 from wbc.errors import UnknownNameError
+from wbc.mpc.controller import MpcController
 from wbc.robots.description import RobotDescription, check_arm_mode
 from wbc.standing import StandController
 from wbc.types import MotorCommand, RobotState, VelocityCommand
@@ -63,6 +64,10 @@ CONTROLLERS: dict[str, ControllerSpec] = {
                                    "PD hold of the nominal pose, arm locked"),
     "stand-noarm": ControllerSpec("stand-noarm", "none", StandController,
                                   "PD hold of the nominal pose, robot without its arm"),
+    "mpc": ControllerSpec("mpc", "actuated", MpcController,
+                          "centroidal MPC with arm momentum terms; the optimiser may swing the arm"),
+    "mpc-locked": ControllerSpec("mpc-locked", "locked", MpcController, "centroidal MPC, arm locked"),
+    "mpc-noarm": ControllerSpec("mpc-noarm", "none", MpcController, "centroidal MPC, robot without its arm"),
 }
 
 

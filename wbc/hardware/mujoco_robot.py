@@ -26,7 +26,9 @@ from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["BaseTruth", "MujocoRobotConfig", "MujocoRobot", "SimTruth", "initial_qpos"]
+__all__ = ["BaseTruth", "FOOT_ZONE", "MujocoRobotConfig", "MujocoRobot", "SimTruth", "initial_qpos"]
+
+FOOT_ZONE = 0.035  # [m] contacts this close to a foot centre are the foot's (foot sphere radius 0.02 + margin)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -138,7 +140,7 @@ class MujocoRobot(Robot):
         self._strength = np.ones(self.num_joints)
         self._push_windows: list[tuple[int, int, Push]] = []
         self._contacts_at = -1
-        self._contacts = np.zeros(0, dtype=int)
+        self._contacts = (np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
         self._force_now = np.zeros(3)
         self._point_now = np.zeros(3)
 
@@ -327,12 +329,12 @@ class MujocoRobot(Robot):
         self._require_connected("sim_truth")
         m, d = self.model, self.data
         mujoco.mj_subtreeVel(m, d)
-        touching = self._ground_contacts()
+        touching, at_foot = self._ground_contacts()
         mask = np.zeros(m.ngeom, dtype=bool)
         mask[touching] = True
         foot = mask[self._foot_geoms]
         others = sorted({mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, m.geom_bodyid[g])
-                         for g in touching if not self._is_foot_geom[g]})
+                         for g, ok in zip(touching, at_foot, strict=True) if not ok})
         active = bool(np.any(self._force_now))
         return SimTruth(
             time=self.time,
@@ -355,26 +357,37 @@ class MujocoRobot(Robot):
 
     def fallen(self) -> bool:
         """Truth: the trunk or a non-foot link touches the ground (the paper's termination rule)."""
-        touching = self._ground_contacts()
-        return bool(touching.size and not self._is_foot_geom[touching].all())
+        _, at_foot = self._ground_contacts()
+        return bool(at_foot.size and not at_foot.all())
 
     def base_rotation(self) -> np.ndarray:
         """Truth: trunk rotation matrix (body to world)."""
         return quat_to_matrix(self.data.qpos[3:7])
 
     # -- internals ------------------------------------------------------------------------------------------------
-    def _ground_contacts(self) -> np.ndarray:
-        """Robot geoms touching the ground now (robot geoms collide with nothing else)."""
+    def _ground_contacts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Robot geoms touching the ground now, and whether each contact is a foot's.
+
+        A contact counts as a foot's if it is the foot sphere's, or if it lies within `FOOT_ZONE` of a foot centre:
+        the URDFs' calf boxes run down to the foot centre, so a foot pressed a little into the ground also brings
+        the calf box's end into contact, which is still the foot, not a fall.
+        """
         if self._contacts_at == self._steps:
             return self._contacts
         d = self.data
         if d.ncon == 0:
-            touching = np.zeros(0, dtype=int)
+            touching, at_foot = np.zeros(0, dtype=int), np.zeros(0, dtype=bool)
         else:
             pairs = d.contact.geom[: d.ncon]
             touching = np.where(pairs[:, 0] == self._terrain_geom, pairs[:, 1], pairs[:, 0])
-        self._contacts, self._contacts_at = touching, self._steps
-        return touching
+            at_foot = self._is_foot_geom[touching].copy()
+            if not at_foot.all():
+                centres = d.geom_xpos[self._foot_geoms]
+                pos = d.contact.pos[: d.ncon]
+                near = (np.linalg.norm(pos[:, None, :] - centres[None], axis=2) < FOOT_ZONE).any(axis=1)
+                at_foot |= near
+        self._contacts, self._contacts_at = (touching, at_foot), self._steps
+        return touching, at_foot
 
     def _foot_geom(self, foot: str) -> int:
         """The sphere geom at a foot site (feet are fused into the calves, so find it by place and shape)."""

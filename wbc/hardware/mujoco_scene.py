@@ -7,7 +7,7 @@ import numpy as np
 
 from wbc.hardware.terrain import TerrainConfig
 from wbc.robots.description import RobotDescription
-from wbc.robots.mujoco_model import WORLD_CONAFFINITY, robot_mujoco_spec
+from wbc.robots.mujoco_model import CONTACT_TIMECONST, WORLD_CONAFFINITY, robot_mujoco_spec
 
 __all__ = ["build_scene", "TERRAIN_GEOM"]
 
@@ -43,6 +43,7 @@ def build_scene(desc: RobotDescription, terrain: TerrainConfig, *, timestep: flo
     geom.contype = 0
     geom.conaffinity = WORLD_CONAFFINITY
     geom.friction = [1.0, 0.005, 0.0001]
+    geom.solref = [CONTACT_TIMECONST, 1.0]
     geom.rgba = [0.45, 0.5, 0.55, 1.0]
     model = spec.compile()
     return model

@@ -6,13 +6,13 @@ state and the gravity-compensating reference input (`CentroidalModel.discretize`
 the horizon with the planned footholds and the reference CoM. States are condensed out: X = Phi x0 + Gamma U + delta,
 so the QP is dense in U only.
 
-Constraints: friction pyramids (|f_x|, |f_y| <= mu f_z) and 0 <= f_z <= f_max on stance feet; zero force on swing
-feet (box bounds, so the problem keeps one shape and is built once); arm joint velocity limits (box) and arm joint
-position limits along the horizon (rows of the condensed dynamics).
+Constraints: friction pyramids (|f_x|, |f_y| <= mu f_z) and 0 <= f_z <= f_max on stance feet; swing feet carry no
+force (their variables are dropped); arm joint velocity limits (box) and arm joint position limits along the horizon
+(rows of the condensed dynamics). A frozen arm (locked, absent, or momentum terms off) has no variables.
 
 Warm start: the previous solution shifted by one step is passed explicitly (ProxSuite's own "warm start with previous
-result" gave wrong answers when contact bounds flipped). A solve that fails or does not converge raises
-`MpcSolveError` carrying the problem, so the controller can fall back to the shifted previous plan.
+result" gave wrong answers when contact bounds flipped); if that solve fails, a cold start follows. A solve that still
+fails raises `MpcSolveError` carrying the problem, so the controller can fall back to the shifted previous plan.
 """
 
 from __future__ import annotations
@@ -68,7 +68,8 @@ class MpcConfig:
 class MpcProblem:
     """One tick's QP in ProxSuite's form (scaled variables), kept so it can be dumped and replayed.
 
-    min 1/2 z^T H z + g^T z  s.t.  l <= C z <= u,  l_box <= z <= u_box;  U = scale * z.
+    min 1/2 z^T H z + g^T z  s.t.  l <= C z <= u,  l_box <= z <= u_box;  U[index] = scale * z, other entries of
+    the full input vector U (swing forces, a frozen arm's velocities) are zero.
     """
 
     H: np.ndarray
@@ -79,6 +80,7 @@ class MpcProblem:
     l_box: np.ndarray
     u_box: np.ndarray
     scale: np.ndarray
+    index: np.ndarray
 
     def save(self, path: str) -> None:
         """Write the problem to an ``.npz`` file."""
@@ -88,7 +90,7 @@ class MpcProblem:
     def load(cls, path: str) -> MpcProblem:
         """Read a problem written by `save`."""
         with np.load(path, allow_pickle=False) as z:
-            return cls(**{k: z[k] for k in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale")})
+            return cls(**{k: z[k] for k in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index")})
 
 
 class MpcSolveError(WbcError):
@@ -137,16 +139,10 @@ class CentroidalMpc:
         self.model = CentroidalModel()
         n = config.horizon
         self.n_var = n * NU
-        self.n_in = n * (16 + 3)
         self._arm_lower = np.asarray(arm_lower, dtype=np.float64) + config.arm_margin
         self._arm_upper = np.asarray(arm_upper, dtype=np.float64) - config.arm_margin
         self._arm_vmax = np.asarray(arm_velocity_limit, dtype=np.float64)
-        self._qp = proxsuite.proxqp.dense.QP(self.n_var, 0, self.n_in, True)
-        self._qp.settings.eps_abs = 1e-6
-        self._qp.settings.eps_rel = 0.0
-        self._qp.settings.max_iter = 200
-        self._qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START
-        self._initialized = False
+        self._qps: dict[tuple[int, int], proxsuite.proxqp.dense.QP] = {}
         scale = np.ones(NU)
         scale[:12] = config.force_scale
         self._scale = np.tile(scale, n)
@@ -156,12 +152,6 @@ class CentroidalMpc:
         r = np.full(NU, config.weight_force)
         r[12:] = config.weight_arm_dq
         self._r_diag = np.tile(r, n)
-        fric = np.zeros((16, 12))
-        for i in range(4):
-            for row, (axis, sign) in enumerate(((0, 1), (0, -1), (1, 1), (1, -1))):
-                fric[4 * i + row, 3 * i + axis] = sign
-                fric[4 * i + row, 3 * i + 2] = -config.mu
-        self._fric = fric
         self._prev: np.ndarray | None = None
         self.problem: MpcProblem | None = None
 
@@ -221,59 +211,101 @@ class CentroidalMpc:
             gamma[rows, k * NU:(k + 1) * NU] = integ @ b_k
         free = phi @ x0 + delta
         err = free - x_ref.ravel()
-        qg = self._q_diag[:, None] * gamma
-        s = self._scale
-        h = (gamma.T @ qg + np.diag(self._r_diag)) * np.outer(s, s)
-        g = (qg.T @ err) * s
-        # constraints
-        c = np.zeros((self.n_in, self.n_var))
-        lo = np.full(self.n_in, -np.inf)
-        hi = np.zeros(self.n_in)
-        l_box = np.zeros(self.n_var)
-        u_box = np.zeros(self.n_var)
-        fz_max = cfg.fz_max / cfg.force_scale
+        # Only stance forces (and the arm's velocities when it may move) are decision variables: swing forces are
+        # zero and a frozen arm does not move, so their columns are dropped rather than boxed to zero. The QP keeps
+        # one shape per contact pattern count; one ProxSuite object per shape is built once and reused.
+        arm_free = bool(np.any(self._arm_vmax > 0))
+        cols = []
         for k in range(n):
-            r0 = k * 16
-            col = k * NU
-            c[r0:r0 + 16, col:col + 12] = self._fric
-            for i in range(4):
-                j = col + 3 * i
-                if contact[k, i]:
-                    l_box[j:j + 3] = (-cfg.mu * fz_max, -cfg.mu * fz_max, 0.0)
-                    u_box[j:j + 3] = (cfg.mu * fz_max, cfg.mu * fz_max, fz_max)
-            l_box[col + 12:col + 15] = -self._arm_vmax
-            u_box[col + 12:col + 15] = self._arm_vmax
-            ra = n * 16 + 3 * k
-            c[ra:ra + 3] = gamma[k * NX + 12:k * NX + 15] * s
-            lo[ra:ra + 3] = np.minimum(self._arm_lower, x0[12:15]) - free[k * NX + 12:k * NX + 15]
-            hi[ra:ra + 3] = np.maximum(self._arm_upper, x0[12:15]) - free[k * NX + 12:k * NX + 15]
-        self.problem = MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s)
+            for i in np.flatnonzero(contact[k]):
+                cols.extend(range(k * NU + 3 * i, k * NU + 3 * i + 3))
+            if arm_free:
+                cols.extend(range(k * NU + 12, k * NU + 15))
+        idx = np.array(cols, dtype=int)
+        s = self._scale[idx]
+        gam = gamma[:, idx]
+        qg = self._q_diag[:, None] * gam
+        h = (gam.T @ qg + np.diag(self._r_diag[idx])) * np.outer(s, s)
+        g = (qg.T @ err) * s
+        fz_max = cfg.fz_max / cfg.force_scale
+        l_box = np.empty(idx.size)
+        u_box = np.empty(idx.size)
+        kind = idx % NU  # 0..11 force components, 12..14 arm
+        is_force = kind < 12
+        comp = kind % 3
+        l_box[is_force] = np.where(comp[is_force] == 2, 0.0, -cfg.mu * fz_max)
+        u_box[is_force] = np.where(comp[is_force] == 2, fz_max, cfg.mu * fz_max)
+        arm_cols = ~is_force
+        l_box[arm_cols] = -self._arm_vmax[kind[arm_cols] - 12]
+        u_box[arm_cols] = self._arm_vmax[kind[arm_cols] - 12]
+        # friction pyramid rows: |f_x|, |f_y| <= mu f_z for every stance foot
+        pos = {int(j): col for col, j in enumerate(idx)}
+        rows_c, rows_lo, rows_hi = [], [], []
+        for k in range(n):
+            for i in np.flatnonzero(contact[k]):
+                base = k * NU + 3 * i
+                for axis in (0, 1):
+                    for sign in (1.0, -1.0):
+                        row = np.zeros(idx.size)
+                        row[pos[base + axis]] = sign * s[pos[base + axis]]
+                        row[pos[base + 2]] = -cfg.mu * s[pos[base + 2]]
+                        rows_c.append(row)
+                        rows_lo.append(-np.inf)
+                        rows_hi.append(0.0)
+        if arm_free:
+            for k in range(n):
+                rows_c.extend(gam[k * NX + 12:k * NX + 15] * s)
+                rows_lo.extend(np.minimum(self._arm_lower, x0[12:15]) - free[k * NX + 12:k * NX + 15])
+                rows_hi.extend(np.maximum(self._arm_upper, x0[12:15]) - free[k * NX + 12:k * NX + 15])
+        c = np.array(rows_c)
+        lo, hi = np.array(rows_lo), np.array(rows_hi)
+        self.problem = MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx)
         setup = time.perf_counter() - t0
-        z0 = np.zeros(self.n_var)
-        if self._prev is not None:
-            z0[: (n - 1) * NU] = self._prev[NU:]
-            z0[(n - 1) * NU:] = self._prev[(n - 1) * NU:]
-        z0 = np.clip(z0, l_box, u_box)
         t1 = time.perf_counter()
-        qp = self._qp
-        if not self._initialized:
+        qp = self._qp_for(idx.size, c.shape[0])
+        qp.init(h, g, None, None, c, lo, hi, l_box, u_box)
+        solved = False
+        if self._prev is not None:
+            full0 = np.zeros(self.n_var)
+            full0[: (n - 1) * NU] = self._prev[NU:]
+            full0[(n - 1) * NU:] = self._prev[(n - 1) * NU:]
+            qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START
+            qp.solve(np.clip(full0[idx], l_box, u_box), None, None)
+            solved = self._ok(qp)
+        if not solved:  # cold start: first solve, or a warm start that went astray
+            qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
             qp.init(h, g, None, None, c, lo, hi, l_box, u_box)
-            self._initialized = True
-        else:
-            qp.update(h, g, None, None, c, lo, hi, l_box, u_box)
-        qp.solve(z0, None, None)
+            qp.solve()
+            solved = self._ok(qp)
         solve = time.perf_counter() - t1
-        status = qp.results.info.status
         z = qp.results.x.copy()
-        if status != proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED or not np.all(np.isfinite(z)):
+        if not solved:
             self._prev = None
-            raise MpcSolveError(f"MPC QP not solved: {status}", self.problem)
-        self._prev = z
-        u = z * s
+            raise MpcSolveError(f"MPC QP not solved: {qp.results.info.status}", self.problem)
+        full = np.zeros(self.n_var)
+        full[idx] = z
+        self._prev = full
+        u = full * self._scale
         states = (free + gamma @ u).reshape(n, NX)
         steps = u.reshape(n, NU)
         return MpcSolution(forces=steps[:, :12].reshape(n, 4, 3), arm_velocity=steps[:, 12:].copy(), states=states,
                            iterations=int(qp.results.info.iter), solve_s=solve, setup_s=setup, z=z)
+
+    @staticmethod
+    def _ok(qp: proxsuite.proxqp.dense.QP) -> bool:
+        return (qp.results.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
+                and bool(np.all(np.isfinite(qp.results.x))))
+
+    def _qp_for(self, n_var: int, n_in: int) -> proxsuite.proxqp.dense.QP:
+        key = (n_var, n_in)
+        qp = self._qps.get(key)
+        if qp is None:
+            qp = proxsuite.proxqp.dense.QP(n_var, 0, n_in, True)
+            qp.settings.eps_abs = 1e-5
+            qp.settings.eps_rel = 0.0
+            qp.settings.max_iter = 1000
+            self._qps[key] = qp
+        return qp
 
     @staticmethod
     def _integral(a: np.ndarray, dt: float) -> np.ndarray:

@@ -26,11 +26,15 @@ from wbc.robots.description import FOOT_NAMES, RobotDescription
 from wbc.robots.joint_table import joint_table
 from wbc.robots.urdf import robot_urdf
 
-__all__ = ["robot_mujoco_spec", "ROBOT_CONTYPE", "WORLD_CONAFFINITY", "FOOT_SITE_RADIUS"]
+__all__ = ["robot_mujoco_spec", "CONTACT_TIMECONST", "ROBOT_CONTYPE", "WORLD_CONAFFINITY", "FOOT_SITE_RADIUS"]
 
 ROBOT_CONTYPE = 1
 WORLD_CONAFFINITY = 1
 FOOT_SITE_RADIUS = 0.03  # [m] touch-sensor zone around each 2 cm foot sphere
+CONTACT_TIMECONST = 0.005
+"""[s] Contact stiffness as a MuJoCo solref time constant, on robot and ground geoms alike. MuJoCo's default (20 ms)
+lets a loaded foot sink more than a centimetre, enough for the calf boxes (which run down to the foot centre) to
+touch; rubber feet sink millimetres. 5 ms is 2.5 physics steps, the stiffest MuJoCo advises at a 2 ms step."""
 
 
 def robot_mujoco_spec(desc: RobotDescription) -> mujoco.MjSpec:
@@ -51,6 +55,7 @@ def robot_mujoco_spec(desc: RobotDescription) -> mujoco.MjSpec:
         geom.conaffinity = 0
         geom.condim = 3
         geom.friction = [1.0, 0.005, 0.0001]
+        geom.solref = [CONTACT_TIMECONST, 1.0]
 
     imu = spec.body("imu_link")
     (imu if imu is not None else spec.body("trunk")).add_site(name="imu", size=[0.01, 0.01, 0.01])

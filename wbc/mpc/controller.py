@@ -1,0 +1,258 @@
+"""`MpcController`: the model-based contender, registered as ``mpc``, ``mpc-locked`` and ``mpc-noarm``.
+
+Every tick (500 Hz): the IMU and leg kinematics update the base estimator; every `replan_every` ticks the centroidal
+MPC (with arm momentum when the arm is actuated) plans contact forces and arm velocities over the horizon, with
+footholds from the Raibert + capture-point heuristic for the feet in swing. The leg-level whole-body layer maps the
+plan to motor commands: stance feet get tau = -J^T f (the planned ground reaction), swing feet a Cartesian PD along
+their swing trajectory, the arm a PD on the integrated planned velocity; joints are damped by the motor drivers.
+
+Ground truth is never used: the controller sees only `RobotState`. A failed MPC solve falls back to the previous
+plan, shifted, and is counted (``fallbacks``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wbc.estimation import BaseEstimator, EstimatorConfig
+from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
+from wbc.mpc.footholds import FootholdConfig, plan_foothold
+from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler
+from wbc.mpc.kinematics import RobotKinematics
+from wbc.mpc.swing import swing_point
+from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.description import RobotDescription
+from wbc.robots.joint_table import joint_table
+from wbc.types import MotorCommand, RobotState, VelocityCommand
+
+__all__ = ["MpcControllerConfig", "MpcController"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class MpcControllerConfig:
+    """Settings of the MPC controller.
+
+    Attributes:
+        rate_hz: control rate [Hz].
+        replan_every: ticks between MPC updates.
+        mpc: the MPC's settings.
+        gait: the gait.
+        footholds: foothold heuristic settings.
+        estimator: estimator noise settings.
+        body_height: CoM height above the ground to hold [m].
+        swing_height: swing apex [m].
+        swing_kp: Cartesian swing stiffness [N/m].
+        swing_kd: Cartesian swing damping [N s/m].
+        joint_kd: motor damping on every leg joint [N m s/rad].
+        arm_kp: arm joint stiffness [N m/rad].
+        arm_kd: arm joint damping [N m s/rad].
+        use_arm_momentum: let the MPC plan arm motion through its momentum (off: the arm is held).
+    """
+
+    rate_hz: float = 500.0
+    replan_every: int = 10
+    mpc: MpcConfig = field(default_factory=MpcConfig)
+    gait: GaitConfig = TROT
+    footholds: FootholdConfig = field(default_factory=FootholdConfig)
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    body_height: float = 0.28
+    swing_height: float = 0.07
+    swing_kp: float = 400.0
+    swing_kd: float = 12.0
+    joint_kd: float = 0.5
+    arm_kp: float = 20.0
+    arm_kd: float = 0.5
+    use_arm_momentum: bool = True
+
+
+def _yaw_of(rot: np.ndarray) -> float:
+    return math.atan2(rot[1, 0], rot[0, 0])
+
+
+def _rpy(rot: np.ndarray) -> np.ndarray:
+    return np.array([math.atan2(rot[2, 1], rot[2, 2]), -math.asin(max(-1.0, min(1.0, rot[2, 0]))), _yaw_of(rot)])
+
+
+class MpcController:
+    """Centroidal MPC + leg-level whole-body layer + estimator.
+
+    Args:
+        desc: the robot it drives.
+        config: settings.
+    """
+
+    def __init__(self, desc: RobotDescription, config: MpcControllerConfig | None = None) -> None:
+        self.desc = desc
+        self.config = config or MpcControllerConfig()
+        self.rate_hz = self.config.rate_hz
+        self.dt = 1.0 / self.rate_hz
+        self.kin = RobotKinematics(desc)
+        table = joint_table(desc.with_arm_mode("actuated"))
+        self.has_arm = desc.arm_mode == "actuated"
+        vmax = table.velocity_limit[12:] if (self.has_arm and self.config.use_arm_momentum) else np.zeros(3)
+        self.mpc = CentroidalMpc(self.config.mpc, table.lower[12:], table.upper[12:], vmax)
+        self.gait = GaitScheduler(self.config.gait)
+        self.estimator = BaseEstimator(self.dt, self.config.estimator)
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new episode."""
+        self.t = 0.0
+        self.tick = 0
+        self.plan: MpcSolution | None = None
+        self.plan_t = 0.0
+        self.fallbacks = 0
+        self.solves = 0
+        self._started = False
+        self._yaw_unwrapped = 0.0
+        self._yaw_target = 0.0
+        self._xy_target = np.zeros(2)
+        self._liftoff = np.zeros((4, 3))
+        self._footholds = np.zeros((4, 3))
+        self._was_stance = np.ones(4, dtype=bool)
+        self._arm_target = self.desc.arm.nominal_q.copy()
+        self.mpc.reset()
+
+    def counters(self) -> dict[str, int]:
+        """MPC solves and fallbacks so far."""
+        return {"fallbacks": self.fallbacks, "mpc_solves": self.solves}
+
+    # -- one tick -------------------------------------------------------------------------------------------------
+    def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """Estimate, (re)plan, and turn the plan into motor commands."""
+        cfg = self.config
+        rot = quat_to_matrix(state.imu_quat)
+        omega_world = rot @ state.gyro_in_body
+        kin = self.kin
+        if not self._started:
+            kin.update(np.zeros(3), state.imu_quat, state.q, state.dq, np.zeros(3), state.gyro_in_body,
+                       centroidal=False)
+            base0 = np.array([0.0, 0.0, -kin.feet[:, 2].mean()])
+            self.estimator.reset(base0, kin.feet + base0)
+            self._yaw_unwrapped = _yaw_of(rot)
+            self._yaw_target = self._yaw_unwrapped
+            self._started = True
+        # estimator: leg kinematics relative to the base, in world axes
+        kin.update(self.estimator.position, state.imu_quat, state.q, state.dq, self.estimator.velocity,
+                   state.gyro_in_body, centroidal=False)
+        contact = self.gait.contact(self.t)
+        rel = kin.feet - self.estimator.position
+        rel_vel = kin.feet_vel - self.estimator.velocity
+        self.estimator.update(rot, state.accel_in_body, rel, rel_vel, contact.astype(float))
+        base_p, base_v = self.estimator.position, self.estimator.velocity
+        replan = self.plan is None or self.tick % cfg.replan_every == 0
+        kin.update(base_p, state.imu_quat, state.q, state.dq, base_v, state.gyro_in_body, centroidal=replan)
+        yaw = _yaw_of(rot)
+        self._yaw_unwrapped += math.remainder(yaw - self._yaw_unwrapped, 2 * math.pi)
+        cy, sy = math.cos(self._yaw_unwrapped), math.sin(self._yaw_unwrapped)
+        v_cmd_world = np.array([cy * command.vx - sy * command.vy, sy * command.vx + cy * command.vy, 0.0])
+        self._xy_target += v_cmd_world[:2] * self.dt
+        self._yaw_target += command.yaw_rate * self.dt
+        # keep the references from running away from a robot that was pushed far
+        self._xy_target = kin.com[:2] + np.clip(self._xy_target - kin.com[:2], -0.15, 0.15)
+        self._yaw_target = self._yaw_unwrapped + float(np.clip(self._yaw_target - self._yaw_unwrapped, -0.3, 0.3))
+        self._update_footholds(contact, v_cmd_world, command.yaw_rate)
+        if replan:
+            self._replan(rot, omega_world, state, v_cmd_world, command)
+        tau = self._leg_torques(contact)
+        return self._command(state, tau)
+
+    # -- planning -------------------------------------------------------------------------------------------------
+    def _replan(self, rot: np.ndarray, omega_world: np.ndarray, state: RobotState, v_cmd_world: np.ndarray,
+                command: VelocityCommand) -> None:
+        cfg, kin = self.config, self.kin
+        mcfg = cfg.mpc
+        n, dt = mcfg.horizon, mcfg.dt
+        x0 = np.zeros(15)
+        x0[0:3] = kin.com
+        x0[3:6] = kin.com_vel
+        rpy = _rpy(rot)
+        x0[6:9] = (rpy[0], rpy[1], self._yaw_unwrapped)
+        x0[9:12] = kin.momentum
+        x0[12:15] = state.q[12:15] if self.has_arm else self.desc.arm.nominal_q
+        ground = float(np.mean(kin.feet[self.gait.contact(self.t), 2])) if self.gait.contact(self.t).any() else 0.0
+        x_ref = np.zeros((n, 15))
+        steps = np.arange(1, n + 1) * dt
+        x_ref[:, 0] = self._xy_target[0] + v_cmd_world[0] * steps
+        x_ref[:, 1] = self._xy_target[1] + v_cmd_world[1] * steps
+        x_ref[:, 2] = ground + cfg.body_height
+        x_ref[:, 3:6] = v_cmd_world
+        x_ref[:, 8] = self._yaw_target + command.yaw_rate * steps
+        x_ref[:, 9:12] = kin.params.inertia_world @ np.array([0.0, 0.0, command.yaw_rate])
+        x_ref[:, 12:15] = self.desc.arm.nominal_q
+        contact = self.gait.contact_table(self.t, dt, n)
+        feet = np.repeat(kin.feet[None], n, axis=0)
+        for i in range(4):
+            feet[~contact[:, i], i] = self._footholds[i]
+            # a foot that lands within the horizon stands on its foothold afterwards
+            landed = np.flatnonzero(contact[:, i] & (np.cumsum(~contact[:, i]) > 0))
+            feet[landed, i] = self._footholds[i]
+        params = kin.params
+        if not (self.has_arm and cfg.use_arm_momentum):
+            params = type(params)(mass=params.mass, inertia_world=params.inertia_world,
+                                  arm_momentum_matrix=np.zeros((3, 3)), feet_world=params.feet_world)
+        try:
+            self.plan = self.mpc.solve(x0, x_ref, contact, feet, params)
+            self.plan_t = self.t
+            self.solves += 1
+        except MpcSolveError:
+            self.fallbacks += 1  # keep following the previous plan, which `_plan_step` shifts by time
+
+    def _plan_step(self) -> int:
+        k = int((self.t - self.plan_t) / self.config.mpc.dt)
+        return min(k, self.config.mpc.horizon - 1)
+
+    def _update_footholds(self, contact: np.ndarray, v_cmd_world: np.ndarray, yaw_rate: float) -> None:
+        cfg, kin = self.config, self.kin
+        ttd = self.gait.time_to_touchdown(self.t)
+        ground = float(np.mean(kin.feet[contact, 2])) if contact.any() else float(np.min(kin.feet[:, 2]))
+        for i in range(4):
+            if self._was_stance[i] and not contact[i]:
+                self._liftoff[i] = kin.feet[i]
+            if not contact[i]:
+                hip = kin.hips[i].copy()
+                self._footholds[i] = plan_foothold(hip, kin.com, kin.com_vel, v_cmd_world, yaw_rate, ttd[i],
+                                                   cfg.gait.stance_s, kin.com[2] - ground, ground, cfg.footholds)
+            else:
+                self._footholds[i] = kin.feet[i]
+        self._was_stance = contact.copy()
+
+    # -- whole-body layer -----------------------------------------------------------------------------------------
+    def _leg_torques(self, contact: np.ndarray) -> np.ndarray:
+        cfg, kin = self.config, self.kin
+        tau = np.zeros(kin.n)
+        k = self._plan_step()
+        progress = self.gait.swing_progress(self.t)
+        for i in range(4):
+            jac = kin.foot_jacobians[i][:, 3 * i:3 * i + 3]
+            if contact[i]:
+                f = self.plan.forces[k, i] if self.plan is not None else np.array([0.0, 0.0, 35.0])
+                tau[3 * i:3 * i + 3] = -jac.T @ f
+            else:
+                pos, vel = swing_point(self._liftoff[i], self._footholds[i], float(progress[i]),
+                                       cfg.gait.swing_s, cfg.swing_height)
+                force = cfg.swing_kp * (pos - kin.feet[i]) + cfg.swing_kd * (vel - kin.feet_vel[i])
+                tau[3 * i:3 * i + 3] = jac.T @ force
+        return tau
+
+    def _command(self, state: RobotState, tau: np.ndarray) -> MotorCommand:
+        cfg = self.config
+        n = self.kin.n
+        q = state.q.copy()
+        dq_des = np.zeros(n)
+        kp = np.zeros(n)
+        kd = np.full(n, cfg.joint_kd)
+        if self.has_arm:
+            if self.plan is not None and cfg.use_arm_momentum:
+                v_arm = self.plan.arm_velocity[self._plan_step()]
+                self._arm_target = self._arm_target + v_arm * self.dt
+                dq_des[12:15] = v_arm
+            q[12:15] = self._arm_target
+            kp[12:15] = cfg.arm_kp
+            kd[12:15] = cfg.arm_kd
+        self.t += self.dt
+        self.tick += 1
+        return MotorCommand(q=q, dq=dq_des, kp=kp, kd=kd, tau=tau)

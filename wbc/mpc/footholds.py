@@ -1,0 +1,57 @@
+"""Foothold planning: the Raibert heuristic with a capture-point correction, so a push can be stepped out."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["FootholdConfig", "plan_foothold"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class FootholdConfig:
+    """Foothold heuristic settings.
+
+    Attributes:
+        capture_gain: multiplies the capture-point term sqrt(h / g) (v - v_cmd).
+        max_offset: largest horizontal distance from the hip's projection [m].
+    """
+
+    capture_gain: float = 1.0
+    max_offset: float = 0.22
+
+
+def plan_foothold(hip_now: np.ndarray, com_now: np.ndarray, v_com: np.ndarray, v_cmd: np.ndarray,
+                  yaw_rate_cmd: float,
+                  time_to_touchdown: float, stance_s: float, height: float, ground_z: float,
+                  config: FootholdConfig) -> np.ndarray:
+    """Where a swing foot should land.
+
+    p = hip at touchdown + v_cmd T_stance / 2 + k sqrt(h / g) (v - v_cmd) + (w_cmd x r_hip) T_stance / 2, clipped
+    around the hip, where the hip at touchdown is the hip now advanced by the CoM velocity for the remaining swing
+    time and r_hip its horizontal lever about the CoM.
+
+    Args:
+        hip_now: hip position projected to the ground, world (3,) [m].
+        com_now: CoM position, world (3,) [m].
+        v_com: CoM velocity, world (3,) [m/s].
+        v_cmd: commanded horizontal velocity, world (3,) [m/s] (z ignored).
+        yaw_rate_cmd: commanded yaw rate [rad/s].
+        time_to_touchdown: remaining swing time [s].
+        stance_s: stance duration [s].
+        height: CoM height above the ground [m].
+        ground_z: ground height at the foothold [m].
+        config: settings.
+    """
+    v = np.array([v_com[0], v_com[1], 0.0])
+    vc = np.array([v_cmd[0], v_cmd[1], 0.0])
+    hip_td = hip_now + v * time_to_touchdown
+    offset = vc * (stance_s / 2) + config.capture_gain * np.sqrt(max(height, 0.05) / 9.81) * (v - vc)
+    # turning: over half a stance the hip sweeps by yaw_rate x (hip - CoM)
+    lever = hip_td - (com_now + v * time_to_touchdown)
+    offset += np.cross([0.0, 0.0, yaw_rate_cmd], [lever[0], lever[1], 0.0]) * (stance_s / 2)
+    norm = np.linalg.norm(offset[:2])
+    if norm > config.max_offset:
+        offset[:2] *= config.max_offset / norm
+    return np.array([hip_td[0] + offset[0], hip_td[1] + offset[1], ground_z])

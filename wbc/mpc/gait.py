@@ -1,0 +1,85 @@
+"""`GaitScheduler`: which feet are on the ground, now and over the MPC horizon (stand, or a periodic trot)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbc.errors import ConfigError
+
+__all__ = ["GaitConfig", "GaitScheduler", "TROT", "STAND"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class GaitConfig:
+    """A periodic gait.
+
+    Attributes:
+        period: cycle length [s].
+        duty: fraction of the cycle each foot is on the ground (1.0: never lifts).
+        offsets: phase offset of each foot (FR, FL, RR, RL) in cycles.
+    """
+
+    period: float = 0.36
+    duty: float = 0.5
+    offsets: tuple[float, float, float, float] = (0.0, 0.5, 0.5, 0.0)
+
+    def __post_init__(self) -> None:
+        if not self.period > 0 or not 0 < self.duty <= 1:
+            raise ConfigError(f"GaitConfig: period > 0 and 0 < duty <= 1 required, got {self.period}, {self.duty}")
+
+    @property
+    def stance_s(self) -> float:
+        """Stance duration of each foot [s]."""
+        return self.duty * self.period
+
+    @property
+    def swing_s(self) -> float:
+        """Swing duration of each foot [s]."""
+        return (1.0 - self.duty) * self.period
+
+
+TROT = GaitConfig()
+"""Diagonal pairs (FR+RL, FL+RR) alternate, 0.36 s cycle, half the time on the ground."""
+
+STAND = GaitConfig(period=1.0, duty=1.0)
+"""All four feet on the ground."""
+
+
+class GaitScheduler:
+    """Phase clock of a gait.
+
+    Args:
+        config: the gait.
+    """
+
+    def __init__(self, config: GaitConfig) -> None:
+        self.config = config
+        self._offsets = np.asarray(config.offsets, dtype=np.float64)
+
+    def phase(self, t: float) -> np.ndarray:
+        """Phase of each foot in its cycle, in [0, 1): stance first (< duty), then swing."""
+        return np.mod(t / self.config.period + self._offsets, 1.0)
+
+    def contact(self, t: float) -> np.ndarray:
+        """Scheduled stance flags of the four feet at time `t` [s]."""
+        return self.phase(t) < self.config.duty - 1e-12 if self.config.duty < 1.0 else np.ones(4, dtype=bool)
+
+    def contact_table(self, t: float, dt: float, n: int) -> np.ndarray:
+        """Stance flags over a horizon: row k is the middle of step [t + k dt, t + (k + 1) dt], shape (n, 4)."""
+        return np.array([self.contact(t + (k + 0.5) * dt) for k in range(n)])
+
+    def swing_progress(self, t: float) -> np.ndarray:
+        """For each foot, progress through its swing in [0, 1] (0 for feet in stance)."""
+        c = self.config
+        if c.duty >= 1.0:
+            return np.zeros(4)
+        ph = self.phase(t)
+        return np.where(ph >= c.duty, (ph - c.duty) / (1.0 - c.duty), 0.0)
+
+    def time_to_touchdown(self, t: float) -> np.ndarray:
+        """For each foot, time until its next touchdown [s] (0 for feet in stance)."""
+        c = self.config
+        ph = self.phase(t)
+        return np.where(ph >= c.duty, (1.0 - ph) * c.period, 0.0)

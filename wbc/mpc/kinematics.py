@@ -1,0 +1,81 @@
+"""`RobotKinematics`: feet, hips, CoM, momentum and Jacobians of the robot from (estimated) base state and joints.
+
+A thin layer over the Pinocchio model that speaks the house joint order and world-frame quantities the MPC
+controller needs every tick.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from wbc.mpc.centroidal_model import CentroidalParams
+from wbc.robots.conventions import quat_to_matrix, quat_wxyz_to_xyzw
+from wbc.robots.description import FOOT_NAMES, LEG_NAMES, RobotDescription
+from wbc.robots.pinocchio_model import build_pinocchio
+
+__all__ = ["RobotKinematics"]
+
+
+class RobotKinematics:
+    """Kinematics and centroidal quantities at one state.
+
+    Args:
+        desc: the robot (its arm mode decides whether the arm's joints exist).
+    """
+
+    def __init__(self, desc: RobotDescription) -> None:
+        self.desc = desc
+        self.robot = build_pinocchio(desc)
+        model = self.robot.model
+        self._foot_frames = [model.getFrameId(f) for f in FOOT_NAMES]
+        self._hip_joints = [model.getJointId(f"{leg}_thigh_joint") for leg in LEG_NAMES]
+        self._perm = self.robot.joints.pin_from_house  # pin joint k is house joint perm[k]
+        self._house_cols = 6 + self.robot.joints.house_from_pin  # v index of each house joint
+        self.n = desc.num_joints
+        self.arm_v = self._house_cols[12:15] if self.n == 15 else None
+        self.feet = np.zeros((4, 3))
+        self.feet_vel = np.zeros((4, 3))
+        self.hips = np.zeros((4, 3))
+        self.foot_jacobians = np.zeros((4, 3, self.n))
+        self.com = np.zeros(3)
+        self.com_vel = np.zeros(3)
+        self.momentum = np.zeros(3)
+        self.params: CentroidalParams | None = None
+
+    def update(self, base_pos: np.ndarray, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray,
+               v_base_world: np.ndarray, omega_body: np.ndarray, *, centroidal: bool) -> None:
+        """Recompute everything at a state.
+
+        Args:
+            base_pos: base position, world (3,).
+            base_quat: base orientation (w, x, y, z).
+            q: joint positions, house order.
+            dq: joint velocities, house order.
+            v_base_world: base linear velocity, world (3,).
+            omega_body: base angular velocity, body frame (3,).
+            centroidal: also compute the composite inertia and arm momentum matrix (for an MPC update).
+        """
+        model, data = self.robot.model, self.robot.data
+        rot = quat_to_matrix(base_quat)
+        qp = np.concatenate([base_pos, quat_wxyz_to_xyzw(base_quat), q[self._perm]])
+        vp = np.concatenate([rot.T @ v_base_world, omega_body, dq[self._perm]])
+        pin.forwardKinematics(model, data, qp, vp)
+        pin.computeJointJacobians(model, data, qp)
+        pin.updateFramePlacements(model, data)
+        frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        for i, fid in enumerate(self._foot_frames):
+            self.feet[i] = data.oMf[fid].translation
+            self.feet_vel[i] = pin.getFrameVelocity(model, data, fid, frame).linear
+            jac = pin.getFrameJacobian(model, data, fid, frame)
+            self.foot_jacobians[i] = jac[:3, self._house_cols]
+            self.hips[i] = data.oMi[self._hip_joints[i]].translation
+        self.com = pin.centerOfMass(model, data, qp, vp).copy()
+        self.com_vel = data.vcom[0].copy()
+        if centroidal:
+            pin.ccrba(model, data, qp, vp)
+            self.momentum = data.hg.angular.copy()
+            a_g = data.Ag
+            arm = np.zeros((3, 3)) if self.arm_v is None else a_g[3:, self.arm_v].copy()
+            self.params = CentroidalParams(mass=float(data.Ig.mass), inertia_world=data.Ig.inertia.copy(),
+                                           arm_momentum_matrix=arm, feet_world=self.feet.copy())
