@@ -238,27 +238,22 @@ class CentroidalMpc:
         arm_cols = ~is_force
         l_box[arm_cols] = -self._arm_vmax[kind[arm_cols] - 12]
         u_box[arm_cols] = self._arm_vmax[kind[arm_cols] - 12]
-        # friction pyramid rows: |f_x|, |f_y| <= mu f_z for every stance foot
-        pos = {int(j): col for col, j in enumerate(idx)}
-        rows_c, rows_lo, rows_hi = [], [], []
-        for k in range(n):
-            for i in np.flatnonzero(contact[k]):
-                base = k * NU + 3 * i
-                for axis in (0, 1):
-                    for sign in (1.0, -1.0):
-                        row = np.zeros(idx.size)
-                        row[pos[base + axis]] = sign * s[pos[base + axis]]
-                        row[pos[base + 2]] = -cfg.mu * s[pos[base + 2]]
-                        rows_c.append(row)
-                        rows_lo.append(-np.inf)
-                        rows_hi.append(0.0)
+        # friction pyramid rows: +-f_x - mu f_z <= 0 and +-f_y - mu f_z <= 0 for every stance foot
+        fz_cols = np.flatnonzero(is_force & (comp == 2))  # one per stance foot and step, preceded by its x, y
+        m = fz_cols.size
+        fric = np.zeros((4 * m, idx.size))
+        rows = np.arange(4 * m).reshape(m, 4)
+        for r, (axis, sign) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
+            fric[rows[:, r], fz_cols - 2 + axis] = sign * s[fz_cols - 2 + axis]
+            fric[rows[:, r], fz_cols] = -cfg.mu * s[fz_cols]
+        blocks_c, blocks_lo, blocks_hi = [fric], [np.full(4 * m, -np.inf)], [np.zeros(4 * m)]
         if arm_free:
-            for k in range(n):
-                rows_c.extend(gam[k * NX + 12:k * NX + 15] * s)
-                rows_lo.extend(np.minimum(self._arm_lower, x0[12:15]) - free[k * NX + 12:k * NX + 15])
-                rows_hi.extend(np.maximum(self._arm_upper, x0[12:15]) - free[k * NX + 12:k * NX + 15])
-        c = np.array(rows_c)
-        lo, hi = np.array(rows_lo), np.array(rows_hi)
+            arm_rows = (np.arange(n)[:, None] * NX + np.arange(12, 15)[None]).ravel()
+            blocks_c.append(gam[arm_rows] * s)
+            blocks_lo.append((np.minimum(self._arm_lower, x0[12:15])[None] - free[arm_rows].reshape(n, 3)).ravel())
+            blocks_hi.append((np.maximum(self._arm_upper, x0[12:15])[None] - free[arm_rows].reshape(n, 3)).ravel())
+        c = np.vstack(blocks_c)
+        lo, hi = np.concatenate(blocks_lo), np.concatenate(blocks_hi)
         self.problem = MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx)
         setup = time.perf_counter() - t0
         t1 = time.perf_counter()

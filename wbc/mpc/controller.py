@@ -37,7 +37,8 @@ class MpcControllerConfig:
 
     Attributes:
         rate_hz: control rate [Hz].
-        replan_every: ticks between MPC updates.
+        replan_every: ticks between MPC updates (20 at 500 Hz: every MPC step of 40 ms).
+        foothold_every: ticks between foothold updates of the swing feet.
         mpc: the MPC's settings.
         gait: the gait.
         footholds: foothold heuristic settings.
@@ -53,7 +54,8 @@ class MpcControllerConfig:
     """
 
     rate_hz: float = 500.0
-    replan_every: int = 10
+    replan_every: int = 20
+    foothold_every: int = 5
     mpc: MpcConfig = field(default_factory=MpcConfig)
     gait: GaitConfig = TROT
     footholds: FootholdConfig = field(default_factory=FootholdConfig)
@@ -135,16 +137,14 @@ class MpcController:
             self._yaw_unwrapped = _yaw_of(rot)
             self._yaw_target = self._yaw_unwrapped
             self._started = True
-        # estimator: leg kinematics relative to the base, in world axes
-        kin.update(self.estimator.position, state.imu_quat, state.q, state.dq, self.estimator.velocity,
-                   state.gyro_in_body, centroidal=False)
-        contact = self.gait.contact(self.t)
-        rel = kin.feet - self.estimator.position
-        rel_vel = kin.feet_vel - self.estimator.velocity
-        self.estimator.update(rot, state.accel_in_body, rel, rel_vel, contact.astype(float))
-        base_p, base_v = self.estimator.position, self.estimator.velocity
+        # one kinematics pass at the predicted base state serves the estimator, then is shifted by its correction
         replan = self.plan is None or self.tick % cfg.replan_every == 0
-        kin.update(base_p, state.imu_quat, state.q, state.dq, base_v, state.gyro_in_body, centroidal=replan)
+        p_prior, v_prior = self.estimator.position, self.estimator.velocity
+        kin.update(p_prior, state.imu_quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=replan)
+        contact = self.gait.contact(self.t)
+        self.estimator.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior,
+                              contact.astype(float))
+        kin.shift(self.estimator.position - p_prior, self.estimator.velocity - v_prior)
         yaw = _yaw_of(rot)
         self._yaw_unwrapped += math.remainder(yaw - self._yaw_unwrapped, 2 * math.pi)
         cy, sy = math.cos(self._yaw_unwrapped), math.sin(self._yaw_unwrapped)
@@ -207,16 +207,18 @@ class MpcController:
 
     def _update_footholds(self, contact: np.ndarray, v_cmd_world: np.ndarray, yaw_rate: float) -> None:
         cfg, kin = self.config, self.kin
+        refresh = self.tick % cfg.foothold_every == 0
         ttd = self.gait.time_to_touchdown(self.t)
         ground = float(np.mean(kin.feet[contact, 2])) if contact.any() else float(np.min(kin.feet[:, 2]))
         for i in range(4):
-            if self._was_stance[i] and not contact[i]:
+            lifted = self._was_stance[i] and not contact[i]
+            if lifted:
                 self._liftoff[i] = kin.feet[i]
-            if not contact[i]:
+            if not contact[i] and (refresh or lifted):
                 hip = kin.hips[i].copy()
                 self._footholds[i] = plan_foothold(hip, kin.com, kin.com_vel, v_cmd_world, yaw_rate, ttd[i],
                                                    cfg.gait.stance_s, kin.com[2] - ground, ground, cfg.footholds)
-            else:
+            elif contact[i]:
                 self._footholds[i] = kin.feet[i]
         self._was_stance = contact.copy()
 

@@ -50,7 +50,8 @@ def plan_foothold(hip_now: np.ndarray, com_now: np.ndarray, v_com: np.ndarray, v
     offset = vc * (stance_s / 2) + config.capture_gain * np.sqrt(max(height, 0.05) / 9.81) * (v - vc)
     # turning: over half a stance the hip sweeps by yaw_rate x (hip - CoM)
     lever = hip_td - (com_now + v * time_to_touchdown)
-    offset += np.cross([0.0, 0.0, yaw_rate_cmd], [lever[0], lever[1], 0.0]) * (stance_s / 2)
+    offset[0] -= yaw_rate_cmd * lever[1] * (stance_s / 2)  # (0, 0, w) x (l_x, l_y, 0) = (-w l_y, w l_x, 0)
+    offset[1] += yaw_rate_cmd * lever[0] * (stance_s / 2)
     norm = np.linalg.norm(offset[:2])
     if norm > config.max_offset:
         offset[:2] *= config.max_offset / norm

@@ -43,6 +43,21 @@ class RobotKinematics:
         self.momentum = np.zeros(3)
         self.params: CentroidalParams | None = None
 
+    def shift(self, dp: np.ndarray, dv: np.ndarray) -> None:
+        """Move the whole state by a base position and velocity correction (the estimator's update).
+
+        Rigidly translating the robot moves every point by `dp` and adds `dv` to every velocity; angular momentum
+        about the CoM, Jacobians and inertia are unchanged. One Pinocchio pass per tick thus serves both the
+        estimator (before its update) and the controller (after it).
+        """
+        self.feet += dp
+        self.hips += dp
+        self.com += dp
+        self.feet_vel += dv
+        self.com_vel += dv
+        if self.params is not None:
+            self.params.feet_world[:] = self.feet
+
     def update(self, base_pos: np.ndarray, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray,
                v_base_world: np.ndarray, omega_body: np.ndarray, *, centroidal: bool) -> None:
         """Recompute everything at a state.
