@@ -54,10 +54,6 @@ class BaseEstimator:
         n = 18
         self.x = np.zeros(n)
         self.P = np.eye(n) * 1e-2
-        self.A = np.eye(n)
-        self.A[0:3, 3:6] = np.eye(3) * dt
-        self.B = np.zeros((n, 3))
-        self.B[3:6] = np.eye(3) * dt
         c = np.zeros((28, n))
         for i in range(4):
             c[3 * i:3 * i + 3, 0:3] = -np.eye(3)         # p_foot - p
@@ -65,6 +61,15 @@ class BaseEstimator:
             c[12 + 3 * i:15 + 3 * i, 3:6] = np.eye(3)   # v (from a stance foot)
             c[24 + i, 8 + 3 * i] = 1.0                   # foot height
         self.C = c
+        cfg = self.config
+        self._q_base = np.zeros(n)
+        self._q_base[0:3] = (cfg.position_noise * dt) ** 2
+        self._q_base[3:6] = (cfg.accel_noise * dt) ** 2
+        self._q_base[6:18] = (cfg.foot_process_noise * dt) ** 2 / dt
+        self._r_base = np.zeros(28)
+        self._r_base[0:12] = cfg.foot_position_noise**2
+        self._r_base[12:24] = cfg.foot_velocity_noise**2
+        self._r_base[24:28] = cfg.foot_height_noise**2
 
     def reset(self, base_pos: np.ndarray, feet_world: np.ndarray) -> None:
         """Start at a known base position with zero velocity and the feet where kinematics put them."""
@@ -94,25 +99,28 @@ class BaseEstimator:
             feet_vel_rel_world: foot velocities relative to the base (omega x r + J dq), world axes, shape (4, 3).
             trust: contact trust of each foot in [0, 1].
         """
-        cfg, dt = self.config, self.dt
+        cfg, dt, x, p = self.config, self.dt, self.x, self.P
+        # predict: x = A x + B a, P = A P A^T + Q, with A = I + dt [0 I; 0 0] on (p, v)
         a_world = rot @ accel_body + GRAVITY
-        self.x = self.A @ self.x + self.B @ a_world
-        q = np.zeros(18)
-        q[0:3] = (cfg.position_noise * dt) ** 2
-        q[3:6] = (cfg.accel_noise * dt) ** 2
-        r = np.zeros(28)
-        for i in range(4):
-            scale = 1.0 + 100.0 * (1.0 - float(trust[i]))
-            q[6 + 3 * i:9 + 3 * i] = (cfg.foot_process_noise * dt) ** 2 * scale**2 / dt
-            r[3 * i:3 * i + 3] = cfg.foot_position_noise**2
-            r[12 + 3 * i:15 + 3 * i] = (cfg.foot_velocity_noise * scale) ** 2
-            r[24 + i] = (cfg.foot_height_noise * scale) ** 2
-        self.P = self.A @ self.P @ self.A.T + np.diag(q)
+        x[0:3] += dt * x[3:6] + (0.5 * dt * dt) * a_world
+        x[3:6] += dt * a_world
+        p[0:3, :] += dt * p[3:6, :]
+        p[:, 0:3] += dt * p[:, 3:6]
+        scale = 1.0 + 100.0 * (1.0 - np.asarray(trust, dtype=np.float64))
+        q = self._q_base.copy()
+        q[6:18] *= np.repeat(scale**2, 3)
+        p[np.diag_indices(18)] += q
+        r = self._r_base.copy()
+        r[12:24] *= np.repeat(scale**2, 3)
+        r[24:28] *= scale**2
+        # correct
+        c = self.C
         y = np.concatenate([np.asarray(feet_rel_world).ravel(), -np.asarray(feet_vel_rel_world).ravel(),
                             np.zeros(4)])
-        c = self.C
-        s = c @ self.P @ c.T + np.diag(r)
-        k = np.linalg.solve(s, c @ self.P).T
-        self.x = self.x + k @ (y - c @ self.x)
-        self.P = (np.eye(18) - k @ c) @ self.P
-        self.P = 0.5 * (self.P + self.P.T)
+        pct = p @ c.T
+        s_mat = c @ pct
+        s_mat[np.diag_indices(28)] += r
+        k = np.linalg.solve(s_mat, pct.T).T
+        self.x = x + k @ (y - c @ x)
+        p = p - k @ pct.T
+        self.P = 0.5 * (p + p.T)

@@ -1,0 +1,75 @@
+"""The MPC controller in closed loop on the MuJoCo robot: estimation, walking, failure handling."""
+
+import numpy as np
+import pytest
+
+from wbc.control import get_controller
+from wbc.hardware import MujocoRobot, MujocoRobotConfig
+from wbc.mpc import MpcSolveError
+from wbc.types import VelocityCommand
+
+
+def _loop(name, seconds, command, *, hook=None):
+    spec = get_controller(name)
+    robot = MujocoRobot(MujocoRobotConfig(arm_mode=spec.arm_mode))
+    robot.connect()
+    robot.reset(seed=2)
+    ctrl = spec.make(robot.desc)
+    ctrl.reset()
+    log = []
+    for k in range(int(seconds * ctrl.rate_hz)):
+        state = robot.read()
+        out = ctrl.act(state, command)
+        assert np.all(np.isfinite(out.tau)) and out.num_joints == robot.num_joints
+        robot.write(out)
+        robot.advance(1.0 / ctrl.rate_hz)
+        truth = robot.sim_truth()
+        log.append((truth.base_position_in_world.copy(), truth.base_linvel_in_world.copy(),
+                    ctrl.estimator.position, ctrl.estimator.velocity))
+        assert not robot.fallen(), f"{name} fell at t={truth.time:.2f}"
+        if hook is not None:
+            hook(k, ctrl)
+    return robot, ctrl, log
+
+
+def test_mpc_walks_forward_and_its_estimator_follows_the_truth():
+    robot, ctrl, log = _loop("mpc", 4.0, VelocityCommand(vx=0.3))
+    pos = np.array([e[0] for e in log])
+    vel = np.array([e[1] for e in log])
+    est_pos = np.array([e[2] for e in log])
+    est_vel = np.array([e[3] for e in log])
+    last = slice(len(log) // 2, None)
+    assert vel[last, 0].mean() == pytest.approx(0.3, abs=0.1)
+    # velocity from IMU + leg kinematics, averaged over a gait cycle, matches the simulator's
+    assert np.abs(est_vel[last] - vel[last]).mean() < 0.1
+    drift = (est_pos[-1] - est_pos[0]) - (pos[-1] - pos[0])
+    assert np.linalg.norm(drift[:2]) < 0.15
+    assert ctrl.counters()["mpc_solves"] >= 4.0 * 500 / ctrl.config.replan_every - 1
+    assert ctrl.counters()["fallbacks"] == 0
+
+
+@pytest.mark.parametrize(("name", "joints"), [("mpc", 15), ("mpc-locked", 12), ("mpc-noarm", 12)])
+def test_every_variant_trots_in_place(name, joints):
+    robot, ctrl, log = _loop(name, 2.0, VelocityCommand())
+    assert robot.num_joints == joints
+    pos = np.array([e[0] for e in log])
+    assert np.linalg.norm(pos[-1, :2] - pos[0, :2]) < 0.3
+    assert pos[-1, 2] > 0.2
+
+
+def test_failed_solves_fall_back_to_the_previous_plan_and_are_counted():
+    def break_some(k, ctrl):
+        if k == 100:
+            real = ctrl.mpc.solve
+
+            def flaky(*args, **kwargs):
+                flaky.calls += 1
+                if flaky.calls % 2:
+                    raise MpcSolveError("injected failure", problem=None)
+                return real(*args, **kwargs)
+
+            flaky.calls = 0
+            ctrl.mpc.solve = flaky
+
+    robot, ctrl, log = _loop("mpc", 2.0, VelocityCommand(), hook=break_some)
+    assert ctrl.counters()["fallbacks"] >= 3
