@@ -99,7 +99,7 @@ class BaseEstimator:
             feet_vel_rel_world: foot velocities relative to the base (omega x r + J dq), world axes, shape (4, 3).
             trust: contact trust of each foot in [0, 1].
         """
-        cfg, dt, x, p = self.config, self.dt, self.x, self.P
+        dt, x, p = self.dt, self.x, self.P
         # predict: x = A x + B a, P = A P A^T + Q, with A = I + dt [0 I; 0 0] on (p, v)
         a_world = rot @ accel_body + GRAVITY
         x[0:3] += dt * x[3:6] + (0.5 * dt * dt) * a_world
