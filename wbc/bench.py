@@ -139,3 +139,55 @@ def bench_sweep(
     if ray:
         out["ray_overhead_per_trial_s"] = (out["ray_wall_s"] - out["local_wall_s"]) / out["trials"]
     return out
+
+
+def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3
+              ) -> dict[str, float | str | int]:
+    """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
+
+    The robot walks at `vx` on flat ground for `seconds`; every MPC update's QP solve time (ProxSuite) and setup
+    time (linearisation and condensing) are collected, as is the time of every control tick without an MPC update
+    (estimator, kinematics, footholds, swing and stance torques: the whole-body layer).
+    """
+    from wbc.control import get_controller
+    from wbc.types import VelocityCommand
+
+    spec = get_controller(controller)
+    sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
+    with sim:
+        sim.reset(seed=0)
+        ctrl = spec.make(sim.desc)
+        ctrl.reset()
+        dt = 1.0 / ctrl.rate_hz
+        command = VelocityCommand(vx=vx)
+        solves, setups, ticks = [], [], []
+        last = None
+        start = time.perf_counter()
+        for _ in range(int(round(seconds / dt))):
+            state = sim.read()
+            t0 = time.perf_counter()
+            out = ctrl.act(state, command)
+            elapsed = time.perf_counter() - t0
+            plan = getattr(ctrl, "plan", None)
+            if plan is not None and plan is not last:
+                solves.append(plan.solve_s)
+                setups.append(plan.setup_s)
+                last = plan
+            else:
+                ticks.append(elapsed)
+            sim.write(out)
+            sim.advance(dt)
+        wall = time.perf_counter() - start
+        fell = sim.fallen()
+    return {
+        "robot": robot,
+        "controller": controller,
+        "horizon": int(ctrl.config.mpc.horizon),
+        "mpc_solve_ms_median": 1e3 * float(np.median(solves)),
+        "mpc_solve_ms_p99": 1e3 * float(np.percentile(solves, 99)),
+        "mpc_setup_ms_median": 1e3 * float(np.median(setups)),
+        "wbc_tick_us_median": 1e6 * float(np.median(ticks)),
+        "realtime_factor": seconds / wall,
+        "fell": bool(fell),
+        "machine": machine_description(),
+    }

@@ -96,6 +96,22 @@ def _add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _bench_mpc(args: argparse.Namespace) -> int:
+    from wbc.bench import bench_mpc
+
+    result = bench_mpc(args.robot, args.controller, seconds=args.seconds)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"MPC speed: {result['controller']} on {result['robot']} walking at 0.3 m/s, N = {result['horizon']}")
+    print(f"  machine: {result['machine']}")
+    print(f"  MPC QP solve   : median {result['mpc_solve_ms_median']:.2f} ms, p99 {result['mpc_solve_ms_p99']:.2f} ms "
+          f"(setup median {result['mpc_setup_ms_median']:.2f} ms)")
+    print(f"  whole-body tick: median {result['wbc_tick_us_median']:.0f} us (ticks without an MPC update)")
+    print(f"  closed loop    : {result['realtime_factor']:.1f}x real time on one core")
+    return 0
+
+
 def _bench_sweep(args: argparse.Namespace) -> int:
     from wbc.bench import bench_sweep
 
@@ -153,6 +169,12 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--json", action="store_true", help="print JSON")
     sim.add_argument("--terrain", default="flat", help="flat or fractal")
     sim.set_defaults(func=_bench_sim)
+    mpc = bench.add_parser("mpc", help="MPC solve times, whole-body tick, closed-loop real-time factor")
+    mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    mpc.add_argument("--controller", default="mpc")
+    mpc.add_argument("--seconds", type=float, default=4.0)
+    mpc.add_argument("--json", action="store_true")
+    mpc.set_defaults(func=_bench_mpc)
     sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
     sweep.add_argument("--scenario", default="scenarios/push.toml")
     sweep.add_argument("--controller", default="stand")
