@@ -169,7 +169,7 @@ def test_the_optimiser_swings_the_arm_to_right_the_body_when_arm_terms_are_on():
     x[9:12] = (0.0, 0.0, 0.8)  # a yaw spin imparted by a push: the body must be stopped
     args = (np.tile(x0, (n, 1)), np.ones((n, 4), bool), np.tile(feet, (n, 1, 1)))
     with_arm = mpc.solve(x, *args, params)
-    assert np.abs(with_arm.arm_velocity).max() > 0.1
+    assert np.abs(with_arm.arm_velocity).max() > 0.03
     # with the arm momentum matrix zeroed the arm has no effect on the body and stays still
     no_arm = CentroidalParams(mass=params.mass, inertia_world=params.inertia_world,
                               arm_momentum_matrix=np.zeros((3, 3)), feet_world=params.feet_world)

@@ -45,7 +45,9 @@ class MpcConfig:
         weight_momentum: angular momentum error weights.
         weight_arm_q: arm position error weights (pull towards the nominal pose).
         weight_force: force effort weight [1/N^2].
-        weight_arm_dq: arm velocity effort weight.
+        weight_arm_dq: arm velocity effort weight. With 1e-3 (and arm position weight 1) the arm moved ~4 rad/s
+            all the time for small orientation corrections; 0.05 and 5 cut its travel 6-fold at the same success
+            on 10 out-of-distribution push trials.
         arm_margin: keep the planned arm this far inside its joint limits [rad].
     """
 
@@ -58,9 +60,9 @@ class MpcConfig:
     weight_vel: tuple[float, float, float] = (20.0, 20.0, 10.0)
     weight_rpy: tuple[float, float, float] = (300.0, 300.0, 100.0)
     weight_momentum: tuple[float, float, float] = (2.0, 2.0, 2.0)
-    weight_arm_q: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    weight_arm_q: tuple[float, float, float] = (5.0, 5.0, 5.0)
     weight_force: float = 1e-5
-    weight_arm_dq: float = 1e-3
+    weight_arm_dq: float = 0.05
     arm_margin: float = 0.05
 
 
@@ -299,6 +301,11 @@ class CentroidalMpc:
             qp.settings.eps_abs = 1e-5
             qp.settings.eps_rel = 0.0
             qp.settings.max_iter = 1000
+            # Every problem built here is feasible (zero forces and a still arm satisfy all constraints: the arm
+            # limits are widened to include the current position), so an "infeasible" verdict can only be false:
+            # ProxSuite's default 1e-4 threshold gave such verdicts on ill-conditioned pushed states.
+            qp.settings.eps_primal_inf = 1e-9
+            qp.settings.eps_dual_inf = 1e-9
             self._qps[key] = qp
         return qp
 
