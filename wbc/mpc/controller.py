@@ -173,7 +173,8 @@ class MpcController:
         x0[6:9] = (rpy[0], rpy[1], self._yaw_unwrapped)
         x0[9:12] = kin.momentum
         x0[12:15] = state.q[12:15] if self.has_arm else self.desc.arm.nominal_q
-        ground = float(np.mean(kin.feet[self.gait.contact(self.t), 2])) if self.gait.contact(self.t).any() else 0.0
+        stance = self.gait.contact(self.t)
+        ground = float(np.mean(kin.feet[stance, 2])) if stance.any() else float(np.min(kin.feet[:, 2]))
         x_ref = np.zeros((n, 15))
         steps = np.arange(1, n + 1) * dt
         x_ref[:, 0] = self._xy_target[0] + v_cmd_world[0] * steps
