@@ -156,13 +156,13 @@ class MpcController:
         self._yaw_target = self._yaw_unwrapped + float(np.clip(self._yaw_target - self._yaw_unwrapped, -0.3, 0.3))
         self._update_footholds(contact, v_cmd_world, command.yaw_rate)
         if replan:
-            self._replan(rot, omega_world, state, v_cmd_world, command)
+            self._replan(rot, omega_world, state, command)
         tau = self._leg_torques(contact)
         return self._command(state, tau)
 
     # -- planning -------------------------------------------------------------------------------------------------
-    def _replan(self, rot: np.ndarray, omega_world: np.ndarray, state: RobotState, v_cmd_world: np.ndarray,
-                command: VelocityCommand) -> None:
+    def _replan(self, rot: np.ndarray, omega_world: np.ndarray, state: RobotState, command: VelocityCommand
+                ) -> None:
         cfg, kin = self.config, self.kin
         mcfg = cfg.mpc
         n, dt = mcfg.horizon, mcfg.dt
@@ -177,11 +177,16 @@ class MpcController:
         ground = float(np.mean(kin.feet[stance, 2])) if stance.any() else float(np.min(kin.feet[:, 2]))
         x_ref = np.zeros((n, 15))
         steps = np.arange(1, n + 1) * dt
-        x_ref[:, 0] = self._xy_target[0] + v_cmd_world[0] * steps
-        x_ref[:, 1] = self._xy_target[1] + v_cmd_world[1] * steps
+        # while turning, the commanded body-frame velocity turns with the yaw reference along the horizon
+        yaw_k = self._yaw_target + command.yaw_rate * steps
+        vx_k = np.cos(yaw_k) * command.vx - np.sin(yaw_k) * command.vy
+        vy_k = np.sin(yaw_k) * command.vx + np.cos(yaw_k) * command.vy
+        x_ref[:, 0] = self._xy_target[0] + np.cumsum(vx_k) * dt
+        x_ref[:, 1] = self._xy_target[1] + np.cumsum(vy_k) * dt
         x_ref[:, 2] = ground + cfg.body_height
-        x_ref[:, 3:6] = v_cmd_world
-        x_ref[:, 8] = self._yaw_target + command.yaw_rate * steps
+        x_ref[:, 3] = vx_k
+        x_ref[:, 4] = vy_k
+        x_ref[:, 8] = yaw_k
         x_ref[:, 9:12] = kin.params.inertia_world @ np.array([0.0, 0.0, command.yaw_rate])
         x_ref[:, 12:15] = self.desc.arm.nominal_q
         contact = self.gait.contact_table(self.t, dt, n)
