@@ -109,7 +109,7 @@ def test_base_file_is_valid(tmp_path):
 def test_shipped_scenarios_load_and_are_published():
     push, turn = load_scenario(PUSH), load_scenario(TURN)
     assert (push.name, push.version, push.robot, push.bands) == ("push", 1, "a1-wx200", ("in", "ood"))
-    assert (turn.name, turn.version, turn.robot, turn.bands) == ("turn", 1, "go1-arm", ("1.0", "1.25", "1.5"))
+    assert (turn.name, turn.version, turn.robot, turn.bands) == ("turn", 2, "go1-arm", ("1.0", "1.25", "1.5"))
     assert push.duration_s == turn.duration_s == 20.0
     assert "calibrat" in push.notes and "stand" in push.notes
     for s in (push, turn):
@@ -251,6 +251,10 @@ def test_turn_statistics():
         assert t.command.yaw_rate in (0.5, 2.0)
     fast = sum(t.command.yaw_rate == 2.0 for t in trials)
     assert 0.4 * len(trials) < fast < 0.6 * len(trials)
+    # version 2 randomises friction, so trials of one band and yaw rate are not all the same episode
+    frictions = np.array([t.domain.friction for t in trials])
+    assert frictions.min() >= 0.8 and frictions.max() <= 1.0
+    assert len(np.unique(frictions)) == len(trials) // len(s.bands)  # bands share (seed, index) draws
 
 
 def test_random_sign_flips_about_half(tmp_path):
