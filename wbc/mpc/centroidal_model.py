@@ -33,7 +33,7 @@ import pinocchio as pin
 from wbc.robots.pinocchio_model import PinocchioRobot
 
 __all__ = ["NX", "NU", "NF", "CentroidalParams", "CentroidalModel", "SymbolicCentroidalModel", "euler_rates_matrix",
-           "expm", "skew"]
+           "expm", "skew", "zoh_integral"]
 
 NX = 15
 NU = 15
@@ -51,6 +51,11 @@ def euler_rates_matrix(theta: np.ndarray) -> np.ndarray:
 def skew(v: np.ndarray) -> np.ndarray:
     """The cross-product matrix of a 3-vector: multiplying by it is the cross product with that vector."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def zoh_integral(a: np.ndarray, dt: float) -> np.ndarray:
+    """Integral of exp(A s) ds over [0, dt], third order in dt: the zero-order-hold input factor."""
+    return np.eye(a.shape[0]) * dt + a * (dt**2 / 2) + (a @ a) * (dt**3 / 6)
 
 
 def expm(a: np.ndarray) -> np.ndarray:
@@ -165,8 +170,7 @@ class CentroidalModel:
         """
         f, a, b = self.linearize(x, u, params)
         d = f - a @ x - b @ u
-        a2 = a @ a
-        phi = np.eye(NX) * dt + a * (dt**2 / 2) + a2 * (dt**3 / 6)  # integral of exp(A s) ds
+        phi = zoh_integral(a, dt)
         return np.eye(NX) + a @ phi, phi @ b, phi @ d
 
 

@@ -24,7 +24,7 @@ import numpy as np
 import proxsuite
 
 from wbc.errors import WbcError
-from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams
+from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, skew, zoh_integral
 
 __all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "CentroidalMpc"]
 
@@ -185,7 +185,7 @@ class CentroidalMpc:
             u_bar[3 * i + 2] = params.mass * 9.81 / stance0
         f0, a_c, b_c = self.model.linearize(x0, u_bar, params)
         d_c = f0 - a_c @ x0 - b_c @ u_bar
-        integ = self._integral(a_c, cfg.dt)
+        integ = zoh_integral(a_c, cfg.dt)
         a_d = np.eye(NX) + a_c @ integ
         total_force_skew = a_c[9:12, 0:3]
         # Along the horizon the lever arms are taken about the reference CoM of each step (the current CoM for the
@@ -197,8 +197,7 @@ class CentroidalMpc:
             c_ref = x0[0:3] if k == 0 else x_ref[k - 1, 0:3]
             b_k = b_c.copy()
             for i in range(4):
-                r = feet[k, i] - c_ref
-                b_k[9:12, 3 * i:3 * i + 3] = ((0.0, -r[2], r[1]), (r[2], 0.0, -r[0]), (-r[1], r[0], 0.0))
+                b_k[9:12, 3 * i:3 * i + 3] = skew(feet[k, i] - c_ref)
             d_k = d_c.copy()
             d_k[9:12] -= total_force_skew @ (c_ref - x0[0:3])
             rows = slice(k * NX, (k + 1) * NX)
@@ -308,8 +307,3 @@ class CentroidalMpc:
             qp.settings.eps_dual_inf = 1e-9
             self._qps[key] = qp
         return qp
-
-    @staticmethod
-    def _integral(a: np.ndarray, dt: float) -> np.ndarray:
-        """Integral of exp(A s) ds over [0, dt], third order (the ZOH input matrix factor)."""
-        return np.eye(NX) * dt + a * (dt**2 / 2) + (a @ a) * (dt**3 / 6)

@@ -127,7 +127,6 @@ class MpcController:
         """Estimate, (re)plan, and turn the plan into motor commands."""
         cfg = self.config
         rot = quat_to_matrix(state.imu_quat)
-        omega_world = rot @ state.gyro_in_body
         kin = self.kin
         if not self._started:
             kin.update(np.zeros(3), state.imu_quat, state.q, state.dq, np.zeros(3), state.gyro_in_body,
@@ -156,13 +155,12 @@ class MpcController:
         self._yaw_target = self._yaw_unwrapped + float(np.clip(self._yaw_target - self._yaw_unwrapped, -0.3, 0.3))
         self._update_footholds(contact, v_cmd_world, command.yaw_rate)
         if replan:
-            self._replan(rot, omega_world, state, command)
+            self._replan(rot, state, command)
         tau = self._leg_torques(contact)
         return self._command(state, tau)
 
     # -- planning -------------------------------------------------------------------------------------------------
-    def _replan(self, rot: np.ndarray, omega_world: np.ndarray, state: RobotState, command: VelocityCommand
-                ) -> None:
+    def _replan(self, rot: np.ndarray, state: RobotState, command: VelocityCommand) -> None:
         cfg, kin = self.config, self.kin
         mcfg = cfg.mpc
         n, dt = mcfg.horizon, mcfg.dt
