@@ -122,6 +122,27 @@ class MpcController:
         """MPC solves and fallbacks so far."""
         return {"fallbacks": self.fallbacks, "mpc_solves": self.solves}
 
+    def debug_plan(self) -> dict[str, np.ndarray] | None:
+        """The current plan, for viewers and debugging (None before the first solve).
+
+        Returns:
+            ``com_path_in_world`` (N, 3) predicted CoM [m]; ``footholds_in_world`` (4, 3) planned footholds (the
+            current foot position for stance feet), Pinocchio leg order FL, FR, RL, RR [m]; ``contact_schedule``
+            (N, 4) bool; ``forces_in_world`` (N, 4, 3) planned contact forces [N]; ``arm_q_plan`` (N, 3) predicted
+            arm joint positions [rad]; ``plan_age_s`` time since the plan was made [s].
+        """
+        if self.plan is None:
+            return None
+        mcfg = self.config.mpc
+        return {
+            "com_path_in_world": self.plan.states[:, 0:3].copy(),
+            "footholds_in_world": self._footholds.copy(),
+            "contact_schedule": self.gait.contact_table(self.plan_t, mcfg.dt, mcfg.horizon),
+            "forces_in_world": self.plan.forces.copy(),
+            "arm_q_plan": self.plan.states[:, 12:15].copy(),
+            "plan_age_s": np.array(self.t - self.plan_t),
+        }
+
     # -- one tick -------------------------------------------------------------------------------------------------
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """Estimate, (re)plan, and turn the plan into motor commands."""
