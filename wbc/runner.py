@@ -24,8 +24,13 @@ from wbc.hardware.robot import Robot
 from wbc.metrics import compute_metrics
 from wbc.robots.conventions import quat_to_matrix
 from wbc.trial import CommandSchedule, Trial
+from wbc.types import VelocityCommand
 
-__all__ = ["run_episode", "run_trial", "trial_record"]
+__all__ = ["TickObserver", "run_episode", "run_trial", "trial_record"]
+
+TickObserver = Callable[[float, Robot, Controller, VelocityCommand], None]
+"""Called after every control tick with (time after the tick [s], robot, controller, command); for viewers. It may
+block (a paused viewer pauses the loop) but must not change the robot or the controller."""
 
 _ROBOTS: dict[tuple, MujocoRobot] = {}
 """Per-process cache of simulated robots: building a model costs ~50 ms, resetting one ~0.1 ms."""
@@ -40,6 +45,7 @@ def run_episode(
     truth: Callable[[], BaseTruth],
     fallen: Callable[[], bool],
     nq: int,
+    observer: TickObserver | None = None,
 ) -> Episode:
     """Play one episode.
 
@@ -51,6 +57,7 @@ def run_episode(
         truth: returns the base's true state (simulator truth or motion capture).
         fallen: returns True when the trunk or a non-foot link touches the ground.
         nq: size of the configuration logged for replay.
+        observer: called after every tick (e.g. a viewer); None costs nothing.
 
     Returns:
         The episode log.
@@ -86,6 +93,8 @@ def run_episode(
         buf.qpos[i, 3:7] = tr.base_quat
         buf.qpos[i, 7:] = state.q
         buf.rows += 1
+        if observer is not None:
+            observer((k + 1) * dt, robot, controller, cmd)
         if fallen():
             fell, fall_time = True, (k + 1) * dt
             break
@@ -116,8 +125,9 @@ def trial_record(trial: Trial, controller: str, episode: Episode, counters: dict
     }
 
 
-def run_trial(trial: Trial, controller: str) -> tuple[dict[str, object], Episode]:
-    """Play `trial` in simulation with the named controller.
+def run_trial(trial: Trial, controller: str, *, observer: TickObserver | None = None,
+              ) -> tuple[dict[str, object], Episode]:
+    """Play `trial` in simulation with the named controller (`observer`: see `run_episode`).
 
     Returns:
         The results row and the episode log.
@@ -140,7 +150,7 @@ def run_trial(trial: Trial, controller: str) -> tuple[dict[str, object], Episode
     for push in trial.pushes:
         robot.apply_push(push)
     episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_truth,
-                          fallen=robot.fallen, nq=robot.model.nq)
+                          fallen=robot.fallen, nq=robot.model.nq, observer=observer)
     events = tuple(
         (p.start, "push", f"force_in_world={p.force_in_world.tolist()} offset_in_base={p.offset_in_base.tolist()} "
                           f"duration={p.duration}")
