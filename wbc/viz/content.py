@@ -1,0 +1,87 @@
+"""`SceneContent`: everything the viewer draws for one robot and trial, and the registry of its scene paths.
+
+It builds the scene once (`setup`) on any meshcat `Visualizer` (a live server's, or a recording's) and turns a
+`VizFrame` into node poses (`poses`); the live viewer sends those poses, the recorder turns them into an animation.
+The camera follows the trunk (it orbits a point under it).
+"""
+
+from __future__ import annotations
+
+import meshcat
+import numpy as np
+
+from wbc.hardware.terrain import TerrainConfig
+from wbc.robots.description import RobotDescription
+from wbc.viz.frame import Pose, VizFrame
+from wbc.viz.geometry import translation
+from wbc.viz.overlays import CommandArrow, ContactArrows, PlanOverlay, PushArrow
+from wbc.viz.scene import RobotScene
+from wbc.viz.terrain_mesh import setup_terrain
+
+__all__ = ["CAMERA", "SceneContent"]
+
+CAMERA = "/Cameras/default"
+CAMERA_OFFSET = (0.75, 0.55, 1.05)
+"""Camera position relative to the point it orbits, in meshcat's y-up camera frame: 0.75 m along world x, 1.05 m
+along world y, 0.55 m up (a three-quarter view of the robot's left side)."""
+
+
+class SceneContent:
+    """The robot, its ground and the overlays.
+
+    Args:
+        desc: the robot.
+        terrain: the trial's ground.
+        terrain_seed: the trial's terrain seed.
+        follow: move the camera with the trunk.
+
+    Attributes:
+        paths: every scene path created by `setup`, by role (``robot``, ``arm``, ``terrain``, ``push``,
+            ``contacts``, ``command``, ``plan``), relative to the visualizer's root (``/meshcat``).
+    """
+
+    def __init__(self, desc: RobotDescription, terrain: TerrainConfig, terrain_seed: int, *,
+                 follow: bool = True) -> None:
+        self.robot = RobotScene(desc)
+        self.terrain = terrain
+        self.terrain_seed = terrain_seed
+        self.follow = follow
+        self.push = PushArrow()
+        self.contacts = ContactArrows()
+        self.command = CommandArrow()
+        self.plan = PlanOverlay()
+        self.paths: dict[str, list[str]] = {}
+
+    def setup(self, vis: meshcat.Visualizer) -> None:
+        """Create every object on `vis` and fill `paths`."""
+        self.robot.setup(vis)
+        self.paths = {
+            "robot": list(self.robot.paths["robot"]),
+            "arm": list(self.robot.paths["arm"]),
+            "terrain": [setup_terrain(vis, self.terrain, self.terrain_seed)],
+        }
+        self.push.setup(vis)
+        self.contacts.setup(vis)
+        self.command.setup(vis)
+        self.plan.setup(vis)
+        self.paths["push"] = [self.push.path]
+        self.paths["contacts"] = [a.path for a in self.contacts.arrows]
+        self.paths["command"] = [self.command.path]
+        self.paths["plan"] = [self.plan.root]
+        vis[f"{CAMERA}/rotated/<object>"].set_property("position", list(CAMERA_OFFSET))
+        vis["/Axes"].set_property("visible", False)  # its z axis would stand inside the robot at the origin
+        if self.terrain.kind != "flat":
+            vis["/Grid"].set_property("visible", False)  # the z = 0 grid would cut through the heightfield
+
+    def poses(self, frame: VizFrame) -> dict[str, Pose]:
+        """Every moving node's pose at `frame` (paths relative to the root, the camera's absolute)."""
+        data = self.robot.kinematics(frame.qpos)
+        out = self.robot.poses(data)
+        out.update(self.push.poses(frame))
+        out.update(self.contacts.poses(frame, self.robot.feet_in_world(data)))
+        out.update(self.command.poses(frame))
+        out.update(self.plan.poses(frame, self.robot))
+        if self.follow:
+            base = np.asarray(frame.qpos[:3], dtype=np.float64)
+            out[CAMERA] = Pose(translation(np.array([base[0], base[1], 0.0])))
+        return out

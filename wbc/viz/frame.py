@@ -1,0 +1,56 @@
+"""`VizFrame`: what the viewer draws at one instant, whether it comes from a live simulation or a stored episode.
+
+Live frames carry simulator truth (contact forces, the push being applied) and the controller's plan; frames
+rebuilt from an `Episode` carry the configuration, the command and the pushes found in its events.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Pose", "VizFrame"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class VizFrame:
+    """One instant of a trial.
+
+    Attributes:
+        t: time [s].
+        qpos: MuJoCo configuration [base position (3), base quaternion (w, x, y, z), joints in house order].
+        command: commanded (vx, vy, yaw_rate) in the yaw-aligned base frame [m/s, m/s, rad/s].
+        push_force_in_world: external push acting now, shape (3,) [N] (zeros when none acts).
+        push_point_in_world: where it acts, shape (3,) [m].
+        foot_force_in_world: ground reaction force on each foot, house order FR, FL, RR, RL, shape (4, 3) [N];
+            None when unknown (replays of stored episodes).
+        plan: the controller's plan (`MpcController.debug_plan()`), or None.
+    """
+
+    t: float
+    qpos: np.ndarray
+    command: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    push_force_in_world: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    push_point_in_world: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    foot_force_in_world: np.ndarray | None = None
+    plan: dict[str, np.ndarray] | None = None
+
+    @property
+    def pushed(self) -> bool:
+        """True while a push acts."""
+        return bool(np.any(self.push_force_in_world != 0.0))
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Where a scene node is and whether it shows.
+
+    Attributes:
+        matrix: homogeneous transform of the node in its parent (the world for every node here), may include
+            scale, shape (4, 4).
+        visible: whether the node (and its children) is drawn.
+    """
+
+    matrix: np.ndarray
+    visible: bool = True

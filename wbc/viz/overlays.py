@@ -1,0 +1,217 @@
+"""Overlays drawn over the robot: the push, the foot contact forces, the velocity command and the MPC's plan.
+
+Each overlay creates its meshcat objects once (`setup`) and afterwards only poses them (`poses`): a frame is a set
+of transforms and visibility flags, which a live viewer sends and a recording turns into animation tracks. Paths:
+
+- ``wbc/push`` arrow pointing at the push's application point, its length proportional to the force (shown while
+  the push acts);
+- ``wbc/contacts/<FR|FL|RR|RL>`` ground reaction force on each foot (live only: stored episodes lack them);
+- ``wbc/command`` the commanded horizontal velocity from the trunk, in the yaw-aligned frame;
+- ``wbc/plan/com/<i>`` predicted CoM path; ``wbc/plan/footholds/<leg>`` planned footholds;
+  ``wbc/plan/schedule/<leg>/<i>`` the contact schedule as a strip of cells above the robot (leg rows, horizon
+  columns, shown where the leg is in stance); ``wbc/plan/arm/<i>`` the arm tip along the arm plan;
+  ``wbc/plan/forces/<leg>`` the first planned contact force at each planned foothold.
+"""
+
+from __future__ import annotations
+
+import math
+
+import meshcat
+import meshcat.geometry as mg
+import numpy as np
+
+from wbc.robots.conventions import quat_to_matrix
+from wbc.viz.frame import Pose, VizFrame
+from wbc.viz.geometry import arrow_transforms, translation
+from wbc.viz.scene import RobotScene
+
+__all__ = ["Arrow", "CommandArrow", "ContactArrows", "PlanOverlay", "PushArrow"]
+
+HOUSE_LEGS = ("FR", "FL", "RR", "RL")
+PIN_LEGS = ("FL", "FR", "RL", "RR")
+"""Leg order of the MPC's arrays (Pinocchio's)."""
+
+_HIDDEN = Pose(np.eye(4), visible=False)
+
+
+class Arrow:
+    """An arrow (cylinder shaft + cone head) at `path`.
+
+    Args:
+        path: scene path.
+        color: 0xRRGGBB.
+        radius: shaft radius [m].
+        head_length: cone height [m].
+        on_top: drawn over everything (the push arrow ends inside the trunk, at the application point).
+    """
+
+    def __init__(self, path: str, color: int, radius: float, head_length: float, *, on_top: bool = False) -> None:
+        self.path = path
+        self.color = color
+        self.radius = radius
+        self.head_length = head_length
+        self.on_top = on_top
+
+    def setup(self, vis: meshcat.Visualizer) -> None:
+        """Create the shaft and head objects, hidden."""
+        # on top: drawn after the opaque robot, without depth test, so it shows through the trunk it pushes
+        extra = {"depthTest": False, "transparent": True, "opacity": 0.95} if self.on_top else {}
+        material = mg.MeshLambertMaterial(color=self.color, **extra)
+        vis[f"{self.path}/shaft"].set_object(mg.Cylinder(1.0, self.radius), material)
+        vis[f"{self.path}/head"].set_object(
+            mg.Cylinder(self.head_length, radiusTop=0.0, radiusBottom=2.2 * self.radius), material)
+        vis[self.path].set_property("visible", False)
+
+    def poses(self, start: np.ndarray, vector: np.ndarray, visible: bool) -> dict[str, Pose]:
+        """Poses of the arrow running from `start` to ``start + vector`` [m]."""
+        if not visible or float(np.linalg.norm(vector)) < 1e-6:
+            return {self.path: _HIDDEN}
+        shaft, head = arrow_transforms(start, vector, min(self.head_length, 0.5 * float(np.linalg.norm(vector))))
+        return {self.path: Pose(np.eye(4)), f"{self.path}/shaft": Pose(shaft), f"{self.path}/head": Pose(head)}
+
+
+class PushArrow:
+    """The push: an arrow ending at its application point, 2 mm per newton, shown while the push acts."""
+
+    path = "wbc/push"
+    m_per_n = 0.002
+
+    def __init__(self) -> None:
+        self.arrow = Arrow(self.path, 0xE0201B, radius=0.014, head_length=0.08, on_top=True)
+
+    def setup(self, vis: meshcat.Visualizer) -> None:
+        """Create the arrow."""
+        self.arrow.setup(vis)
+
+    def poses(self, frame: VizFrame) -> dict[str, Pose]:
+        """The arrow for `frame` (hidden when no push acts)."""
+        vec = self.m_per_n * frame.push_force_in_world
+        return self.arrow.poses(frame.push_point_in_world - vec, vec, frame.pushed)
+
+
+class ContactArrows:
+    """Ground reaction force on each foot, from the foot up, 2 mm per newton."""
+
+    m_per_n = 0.002
+
+    def __init__(self) -> None:
+        self.arrows = [Arrow(f"wbc/contacts/{leg}", 0x1E9E3A, radius=0.006, head_length=0.025, on_top=True)
+                       for leg in HOUSE_LEGS]
+
+    def setup(self, vis: meshcat.Visualizer) -> None:
+        """Create the four arrows."""
+        for a in self.arrows:
+            a.setup(vis)
+
+    def poses(self, frame: VizFrame, feet: np.ndarray) -> dict[str, Pose]:
+        """Arrows at the feet (`feet`: house order, shape (4, 3) [m]); hidden without force data or contact."""
+        out: dict[str, Pose] = {}
+        forces = frame.foot_force_in_world
+        for i, a in enumerate(self.arrows):
+            f = np.zeros(3) if forces is None else forces[i]
+            out.update(a.poses(feet[i], self.m_per_n * f, float(np.linalg.norm(f)) > 1.0))
+        return out
+
+
+class CommandArrow:
+    """The commanded horizontal velocity, drawn from above the trunk, 1 m per m/s, in the yaw-aligned frame."""
+
+    path = "wbc/command"
+
+    def __init__(self) -> None:
+        self.arrow = Arrow(self.path, 0x2660D9, radius=0.008, head_length=0.04)
+
+    def setup(self, vis: meshcat.Visualizer) -> None:
+        """Create the arrow."""
+        self.arrow.setup(vis)
+
+    def poses(self, frame: VizFrame) -> dict[str, Pose]:
+        """The arrow for `frame` (hidden for a zero command)."""
+        rot = quat_to_matrix(frame.qpos[3:7])
+        yaw = math.atan2(rot[1, 0], rot[0, 0])
+        c, s = math.cos(yaw), math.sin(yaw)
+        vx, vy = float(frame.command[0]), float(frame.command[1])
+        vec = np.array([c * vx - s * vy, s * vx + c * vy, 0.0])
+        start = frame.qpos[:3] + np.array([0.0, 0.0, 0.15])
+        return self.arrow.poses(start, vec, bool(np.hypot(vx, vy) > 1e-3))
+
+
+class PlanOverlay:
+    """The MPC's plan: CoM path, footholds, contact schedule, arm tip path, first planned forces.
+
+    Args:
+        horizon: the most plan steps drawn (spheres and schedule cells are created once for that many).
+    """
+
+    root = "wbc/plan"
+    cell_dx = 0.03   # [m] schedule strip: one column per plan step
+    cell_dy = 0.025  # [m] one row per leg
+    strip_height = 0.3  # [m] above the trunk
+    n_per_m = 0.001
+
+    def __init__(self, horizon: int = 16) -> None:
+        self.horizon = horizon
+        self.forces = [Arrow(f"{self.root}/forces/{leg}", 0x18B5C4, radius=0.005, head_length=0.02)
+                       for leg in PIN_LEGS]
+
+    def setup(self, vis: meshcat.Visualizer) -> None:
+        """Create the plan's objects, hidden."""
+        com = mg.MeshLambertMaterial(color=0xF2C12E)
+        arm = mg.MeshLambertMaterial(color=0xF08A24)
+        foot = mg.MeshLambertMaterial(color=0xC23BD4)
+        cell = mg.MeshLambertMaterial(color=0x303030)
+        for i in range(self.horizon):
+            vis[f"{self.root}/com/{i}"].set_object(mg.Sphere(0.012), com)
+            vis[f"{self.root}/arm/{i}"].set_object(mg.Sphere(0.01), arm)
+            for leg in PIN_LEGS:
+                vis[f"{self.root}/schedule/{leg}/{i}"].set_object(
+                    mg.Box([0.9 * self.cell_dx, 0.8 * self.cell_dy, 0.01]), cell)
+        for leg in PIN_LEGS:
+            vis[f"{self.root}/footholds/{leg}"].set_object(mg.Cylinder(0.004, 0.025), foot)
+        for a in self.forces:
+            a.setup(vis)
+        vis[self.root].set_property("visible", False)
+
+    def poses(self, frame: VizFrame, scene: RobotScene) -> dict[str, Pose]:
+        """The plan's poses for `frame` (everything hidden without a plan)."""
+        plan = frame.plan
+        if plan is None:
+            return {self.root: _HIDDEN}
+        out: dict[str, Pose] = {self.root: Pose(np.eye(4))}
+        com = np.asarray(plan["com_path_in_world"])
+        for i in range(self.horizon):
+            out[f"{self.root}/com/{i}"] = Pose(translation(com[i])) if i < len(com) else _HIDDEN
+        tips = None
+        if "arm_q_plan" in plan:
+            tips = scene.arm_tip_path(frame.qpos, np.asarray(plan["arm_q_plan"])[: self.horizon])
+        for i in range(self.horizon):
+            out[f"{self.root}/arm/{i}"] = Pose(translation(tips[i])) if tips is not None and i < len(tips) else _HIDDEN
+        rot_z = _yaw_rotation(frame.qpos)
+        holds = np.asarray(plan["footholds_in_world"])
+        upright = np.eye(4)
+        upright[:3, :3] = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # disc flat on the ground
+        for k, leg in enumerate(PIN_LEGS):
+            out[f"{self.root}/footholds/{leg}"] = Pose(translation(holds[k]) @ upright)
+        schedule = np.asarray(plan["contact_schedule"], dtype=bool)
+        origin = frame.qpos[:3] + np.array([0.0, 0.0, self.strip_height])
+        for k, leg in enumerate(PIN_LEGS):
+            for i in range(self.horizon):
+                on = i < len(schedule) and bool(schedule[i, k])
+                local = np.array([(i - 0.5 * self.horizon) * self.cell_dx, (1.5 - k) * self.cell_dy, 0.0])
+                m = np.eye(4)
+                m[:3, :3] = rot_z
+                m[:3, 3] = origin + rot_z @ local
+                out[f"{self.root}/schedule/{leg}/{i}"] = Pose(m, visible=on)
+        forces = np.asarray(plan["forces_in_world"])
+        for k, a in enumerate(self.forces):
+            f = forces[0, k] if len(forces) else np.zeros(3)
+            out.update(a.poses(holds[k], self.n_per_m * f, float(np.linalg.norm(f)) > 1.0))
+        return out
+
+
+def _yaw_rotation(qpos: np.ndarray) -> np.ndarray:
+    rot = quat_to_matrix(qpos[3:7])
+    yaw = math.atan2(rot[1, 0], rot[0, 0])
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])

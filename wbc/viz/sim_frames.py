@@ -1,0 +1,62 @@
+"""Viewer frames from a running simulation, read after each control tick through the runner's observer hook.
+
+A frame holds the configuration, the command, the push acting now, foot contact forces and the controller's plan.
+
+This reads simulator truth, which is fine for a viewer: nothing here goes back to the controller.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from wbc.hardware.mujoco_robot import FOOT_ZONE, MujocoRobot
+from wbc.robots.description import FOOT_NAMES
+from wbc.types import VelocityCommand
+from wbc.viz.frame import VizFrame
+
+__all__ = ["foot_forces_in_world", "frame_from_sim"]
+
+
+def foot_forces_in_world(robot: MujocoRobot) -> np.ndarray:
+    """Ground reaction force on each foot, house order FR, FL, RR, RL, shape (4, 3) [N].
+
+    A contact belongs to the foot whose centre is within `FOOT_ZONE` of it (the same rule as the fall check);
+    the force is the one the ground exerts on the robot.
+    """
+    m, d = robot.model, robot.data
+    sites = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f) for f in FOOT_NAMES]
+    centres = d.site_xpos[sites]
+    out = np.zeros((4, 3))
+    wrench = np.zeros(6)
+    for i in range(d.ncon):
+        c = d.contact[i]
+        near = np.linalg.norm(centres - c.pos, axis=1)
+        k = int(np.argmin(near))
+        if near[k] > FOOT_ZONE:
+            continue
+        mujoco.mj_contactForce(m, d, i, wrench)
+        frame = c.frame.reshape(3, 3)  # rows: normal, tangents (world)
+        f = frame.T @ wrench[:3]  # force of geom1 on geom2
+        robot_is_geom2 = m.geom_bodyid[c.geom[1]] != 0
+        out[k] += f if robot_is_geom2 else -f
+    return out
+
+
+def frame_from_sim(robot: MujocoRobot, controller: object, command: VelocityCommand, t: float) -> VizFrame:
+    """The frame of the simulation as it is now.
+
+    Args:
+        robot: the simulated robot.
+        controller: the controller; its plan is shown if it has a ``debug_plan()`` method.
+        command: the command of the tick just played.
+        t: time [s].
+    """
+    truth = robot.sim_truth()
+    plan_of = getattr(controller, "debug_plan", None)
+    plan = plan_of() if callable(plan_of) else None
+    return VizFrame(
+        t=t, qpos=robot.data.qpos.copy(), command=np.array([command.vx, command.vy, command.yaw_rate]),
+        push_force_in_world=truth.external_force_in_world, push_point_in_world=truth.external_point_in_world,
+        foot_force_in_world=foot_forces_in_world(robot), plan=plan,
+    )
