@@ -17,8 +17,9 @@ from wbc.errors import ConfigError, UnknownNameError, WbcError
 from wbc.executors import EXECUTORS, LocalExecutor, RayExecutor
 from wbc.hardware.mujoco_robot import MujocoRobotConfig
 from wbc.report import summarize, write_report
-from wbc.results import ResultsStore, environment_info
+from wbc.results import ResultsStore, environment_info, episode_path
 from wbc.scenarios import ScenarioError, check_published, load_scenario
+from wbc.trial import Trial
 
 __all__ = ["ArenaConfig", "ArenaResult", "run_arena"]
 
@@ -39,6 +40,8 @@ class ArenaConfig:
         address: Ray cluster address (None: a local Ray).
         resume: finish an interrupted run in `out_dir`.
         progress: show a progress bar on stderr.
+        save_episodes: also store every trial's episode log (``episodes/<controller>/<band>-s<seed>-t<i>.npz``,
+            for replay with ``wbc view --episode``).
     """
 
     controllers: tuple[str, ...]
@@ -52,6 +55,7 @@ class ArenaConfig:
     address: str | None = None
     resume: bool = False
     progress: bool = True
+    save_episodes: bool = False
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -125,7 +129,14 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     }
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume)
     done = store.done()
-    tasks = [(t, c) for c in cfg.controllers for t in trials if (c, t.band, t.seed, t.index) not in done]
+    def where(t: Trial, c: str) -> str | None:
+        if not cfg.save_episodes:
+            return None
+        path = episode_path(store.dir, c, t.band, t.seed, t.index)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return str(path)
+
+    tasks = [(t, c, where(t, c)) for c in cfg.controllers for t in trials if (c, t.band, t.seed, t.index) not in done]
     total = len(cfg.controllers) * len(trials)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers))
     bar = _progress(total, total - len(tasks), cfg.progress)

@@ -1,8 +1,8 @@
 """Executors: where trials run. A local process pool (default) or a Ray cluster; the results are identical.
 
-Both take (trial, controller) tasks and yield each finished results row as soon as it is done, in completion order;
-the caller stores it at once. Every trial is fully determined by its `Trial`, so neither the worker nor the order
-changes a result.
+Both take (trial, controller, episode path) tasks and yield each finished results row as soon as it is done, in
+completion order; the caller stores it at once. Every trial is fully determined by its `Trial`, so neither the
+worker nor the order changes a result.
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ from wbc.trial import Trial
 
 __all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "run_task"]
 
-Task = tuple[Trial, str]
+Task = tuple[Trial, str, str | None]
+"""(trial, controller, where to save the episode log as ``.npz``, or None)."""
 
 _SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """Workers run one trial each on one core: a multi-threaded BLAS in every worker oversubscribes the cores (two MPC
@@ -25,11 +26,16 @@ workers on two cores ran 2.5x slower than one)."""
 
 
 def run_task(task: Task) -> dict[str, object]:
-    """Play one (trial, controller) task in this process and return its results row."""
+    """Play one (trial, controller, episode path) task in this process and return its results row.
+
+    The episode is saved (when asked) before the row is returned, so a stored row always has its episode.
+    """
     from wbc.runner import run_trial
 
-    trial, controller = task
-    record, _ = run_trial(trial, controller)
+    trial, controller, episode_path = task
+    record, episode = run_trial(trial, controller)
+    if episode_path is not None:
+        episode.save(episode_path)
     return record
 
 

@@ -19,7 +19,7 @@ from pathlib import Path
 
 from wbc.errors import WbcError
 
-__all__ = ["RECORD_FIELDS", "ResultsStore", "environment_info", "read_records"]
+__all__ = ["RECORD_FIELDS", "ResultsStore", "environment_info", "episode_path", "read_records"]
 
 RECORD_FIELDS = (
     "controller", "scenario", "scenario_hash", "band", "seed", "trial",
@@ -29,6 +29,11 @@ RECORD_FIELDS = (
 )
 _INT_FIELDS = {"seed", "trial", "n_pushes", "fallbacks"}
 _STR_FIELDS = {"controller", "scenario", "scenario_hash", "band"}
+
+
+def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: int) -> Path:
+    """Where a results directory keeps a trial's episode log (``wbc run --save-episodes``)."""
+    return Path(out_dir) / "episodes" / controller / f"{band}-s{seed}-t{index}.npz"
 
 
 def _parse(row: dict[str, str]) -> dict[str, object]:

@@ -10,13 +10,14 @@ from __future__ import annotations
 import meshcat
 import numpy as np
 
+from wbc.hardware.mujoco_robot import MujocoRobot
 from wbc.hardware.terrain import TerrainConfig
 from wbc.robots.description import RobotDescription
 from wbc.viz.frame import Pose, VizFrame
 from wbc.viz.geometry import translation
 from wbc.viz.overlays import CommandArrow, ContactArrows, PlanOverlay, PushArrow
 from wbc.viz.scene import RobotScene
-from wbc.viz.terrain_mesh import setup_terrain
+from wbc.viz.terrain_mesh import setup_terrain, terrain_heights
 
 __all__ = ["CAMERA", "SceneContent"]
 
@@ -32,7 +33,7 @@ class SceneContent:
     Args:
         desc: the robot.
         terrain: the trial's ground.
-        terrain_seed: the trial's terrain seed.
+        heights: its normalised heights (`wbc.viz.terrain_mesh.terrain_heights`; None when flat).
         follow: move the camera with the trunk.
 
     Attributes:
@@ -40,11 +41,26 @@ class SceneContent:
             ``contacts``, ``command``, ``plan``), relative to the visualizer's root (``/meshcat``).
     """
 
-    def __init__(self, desc: RobotDescription, terrain: TerrainConfig, terrain_seed: int, *,
+    @classmethod
+    def for_trial(cls, desc: RobotDescription, terrain: TerrainConfig, terrain_seed: int) -> SceneContent:
+        """The content of a trial: its robot and its ground (from the terrain seed)."""
+        return cls(desc, terrain, terrain_heights(terrain, terrain_seed))
+
+    @classmethod
+    def for_robot(cls, robot: MujocoRobot) -> SceneContent:
+        """The content of a simulated robot as it is now (its heightfield read from the MuJoCo model)."""
+        heights = None
+        m = robot.model
+        if robot.config.terrain.kind != "flat" and m.nhfield > 0:
+            heights = m.hfield_data[m.hfield_adr[0]:m.hfield_adr[0] + m.hfield_nrow[0] * m.hfield_ncol[0]]
+            heights = heights.reshape(m.hfield_nrow[0], m.hfield_ncol[0]).copy()
+        return cls(robot.desc, robot.config.terrain, heights)
+
+    def __init__(self, desc: RobotDescription, terrain: TerrainConfig, heights: np.ndarray | None, *,
                  follow: bool = True) -> None:
         self.robot = RobotScene(desc)
         self.terrain = terrain
-        self.terrain_seed = terrain_seed
+        self.heights = heights
         self.follow = follow
         self.push = PushArrow()
         self.contacts = ContactArrows()
@@ -58,7 +74,7 @@ class SceneContent:
         self.paths = {
             "robot": list(self.robot.paths["robot"]),
             "arm": list(self.robot.paths["arm"]),
-            "terrain": [setup_terrain(vis, self.terrain, self.terrain_seed)],
+            "terrain": [setup_terrain(vis, self.terrain, self.heights)],
         }
         self.push.setup(vis)
         self.contacts.setup(vis)

@@ -162,6 +162,11 @@ class Recording:
         self.frames = 0
 
     @property
+    def last_key(self) -> int:
+        """Index of the last keyed frame (-1 before the first); a frame at t is keyed if round(t fps) exceeds it."""
+        return self._last_frame
+
+    @property
     def paths(self) -> dict[str, list[str]]:
         """Scene paths of the recorded content, by role (see `SceneContent.paths`)."""
         return self.content.paths

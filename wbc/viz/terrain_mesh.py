@@ -13,24 +13,25 @@ import numpy as np
 from wbc.hardware.terrain import TerrainConfig, fractal_heights
 from wbc.viz.geometry import translation
 
-__all__ = ["TERRAIN", "terrain_geometry", "setup_terrain"]
+__all__ = ["TERRAIN", "setup_terrain", "terrain_geometry", "terrain_heights"]
 
 TERRAIN = "wbc/terrain"
 
 
-def terrain_geometry(config: TerrainConfig, seed: int, *, half_window: float = 4.0,
+def terrain_geometry(config: TerrainConfig, heights: np.ndarray | None, *, half_window: float = 4.0,
                      step: float = 0.1) -> mg.TriangularMeshGeometry | None:
     """The heightfield as a triangle mesh, world coordinates, or None for flat ground.
 
     Args:
         config: the trial's terrain.
-        seed: the trial's terrain seed.
+        heights: its normalised heights (in [0, 1], rows along y, as `fractal_heights` gives them and the
+            simulator's heightfield holds them); None computes nothing (flat ground).
         half_window: half side of the square drawn around the origin [m].
         step: sample spacing of the drawn mesh [m] (a multiple of the terrain's cell is exact).
     """
-    if config.kind == "flat":
+    if config.kind == "flat" or heights is None:
         return None
-    heights = fractal_heights(config, seed) * max(config.amplitude, 1e-4)
+    heights = np.asarray(heights, dtype=np.float64) * max(config.amplitude, 1e-4)
     n = heights.shape[0]
     coords = np.linspace(-config.half_extent, config.half_extent, n)
     stride = max(1, int(round(step / config.cell)))
@@ -48,9 +49,14 @@ def terrain_geometry(config: TerrainConfig, seed: int, *, half_window: float = 4
     return mg.TriangularMeshGeometry(vertices, faces, color=color)
 
 
-def setup_terrain(vis: meshcat.Visualizer, config: TerrainConfig, seed: int) -> str:
-    """Draw the ground and return its scene path."""
-    geometry = terrain_geometry(config, seed)
+def terrain_heights(config: TerrainConfig, seed: int) -> np.ndarray | None:
+    """Normalised heights of a trial's ground (None when flat): the simulator's own function of the seed."""
+    return None if config.kind == "flat" else fractal_heights(config, seed)
+
+
+def setup_terrain(vis: meshcat.Visualizer, config: TerrainConfig, heights: np.ndarray | None) -> str:
+    """Draw the ground (`heights`: see `terrain_geometry`) and return its scene path."""
+    geometry = terrain_geometry(config, heights)
     if geometry is None:
         vis[TERRAIN].set_object(mg.Box([8.0, 8.0, 0.02]), mg.MeshLambertMaterial(color=0x8c969e))
         vis[TERRAIN].set_transform(translation(np.array([0.0, 0.0, -0.0101])))

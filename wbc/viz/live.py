@@ -1,0 +1,114 @@
+"""`LiveViewer`: draws frames on a running meshcat server, and `LiveObserver`, the runner hook that feeds it.
+
+Only what changed since the last frame is sent (a transform, a visibility flag). The server keeps the scene, so a
+browser opened at any time sees the current state.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+
+import meshcat
+import numpy as np
+
+from wbc.control import Controller
+from wbc.hardware.mujoco_robot import MujocoRobot
+from wbc.hardware.robot import Robot
+from wbc.types import VelocityCommand
+from wbc.viz.content import SceneContent
+from wbc.viz.frame import Pose, VizFrame
+from wbc.viz.player import Player
+from wbc.viz.record import Recording
+from wbc.viz.server import MeshcatServer
+from wbc.viz.sim_frames import frame_from_sim
+
+__all__ = ["LiveObserver", "LiveViewer"]
+
+
+class LiveViewer:
+    """A meshcat scene on a server, updated frame by frame.
+
+    Args:
+        server: a started server.
+    """
+
+    def __init__(self, server: MeshcatServer) -> None:
+        self.server = server
+        with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints the URL itself; the CLI says it better
+            self.vis = meshcat.Visualizer(zmq_url=server.zmq_url)
+        self.content: SceneContent | None = None
+        self._sent: dict[str, Pose] = {}
+
+    @property
+    def paths(self) -> dict[str, list[str]]:
+        """Scene paths of the current content, by role (see `SceneContent.paths`)."""
+        return self.content.paths if self.content is not None else {}
+
+    def load(self, content: SceneContent) -> None:
+        """Replace the scene with `content`."""
+        self.vis["wbc"].delete()
+        self._sent = {}
+        self.content = content
+        content.setup(self.vis)
+
+    def show(self, frame: VizFrame) -> None:
+        """Draw `frame` (only the changes are sent)."""
+        for path, pose in self.content.poses(frame).items():
+            old = self._sent.get(path)
+            node = self.vis[path]
+            if old is None or old.visible != pose.visible:
+                node.set_property("visible", bool(pose.visible))
+            if pose.visible and (old is None or not np.allclose(old.matrix, pose.matrix, atol=1e-6)):
+                node.set_transform(pose.matrix)
+            if pose.visible or old is None:
+                self._sent[path] = pose
+            else:
+                self._sent[path] = Pose(old.matrix, visible=False)
+
+
+class LiveObserver:
+    """The runner's observer for simulated trials: paces with a `Player`, draws on a `LiveViewer`, records.
+
+    At the first tick of every episode the scene is rebuilt from the robot (robot, arm mode, ground), so one observer
+    serves a series of trials.
+
+    Args:
+        viewer: where to draw (None: draw nowhere, e.g. when only recording).
+        player: pacing (None: no pacing, every tick as fast as possible).
+        recording_fps: when set, also record every episode (see `recordings`) at this rate [1/s].
+    """
+
+    def __init__(self, viewer: LiveViewer | None, player: Player | None = None, *,
+                 recording_fps: float | None = None) -> None:
+        self.viewer = viewer
+        self.player = player
+        self.recording_fps = recording_fps
+        self.recordings: list[Recording] = []
+        self._last_t = float("inf")
+
+    def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        """One tick (the `wbc.runner.TickObserver` signature)."""
+        if not isinstance(robot, MujocoRobot):
+            return
+        new_episode = t < self._last_t
+        self._last_t = t
+        if new_episode:
+            if self.viewer is not None:
+                self.viewer.load(SceneContent.for_robot(robot))
+            if self.recording_fps is not None:
+                self.recordings.append(Recording(SceneContent.for_robot(robot), fps=self.recording_fps))
+        rec = self.recordings[-1] if self.recording_fps is not None else None
+        draw = self.viewer is not None and (self.player is None or self.player.due(t))
+        keyed = rec is not None and int(round(t * rec.fps)) > rec.last_key
+        if not (draw or keyed):
+            return
+        frame = frame_from_sim(robot, controller, command, t)
+        if keyed:
+            rec.add(frame)
+        if draw:
+            if self.player is not None:
+                self.player.wait(t)
+                self.player.drew(t)
+            if self.player is None or not self.player.stopped:
+                self.viewer.show(frame)
