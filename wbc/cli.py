@@ -1,4 +1,4 @@
-"""The ``wbc`` command line: ``run``, ``compare``, ``analyze tail``, ``bench sim``, ``demo``."""
+"""The ``wbc`` command line: ``run``, ``compare``, ``view``, ``analyze tail``, ``bench sim``, ``demo``."""
 
 from __future__ import annotations
 
@@ -62,7 +62,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
     cfg = ArenaConfig(controllers=controllers, scenario=Path(args.scenario), bands=tuple(args.band or ()),
                       seeds=seeds, trials=args.trials, out_dir=out, executor=args.executor, workers=args.workers,
-                      address=args.address, resume=args.resume, progress=not args.json and not args.quiet)
+                      address=args.address, resume=args.resume, progress=not args.json and not args.quiet,
+                      save_episodes=getattr(args, "save_episodes", False))
     result = run_arena(cfg)
     if args.json:
         print(json.dumps(result.summary, indent=2))
@@ -94,6 +95,56 @@ def _add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
     p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--save-episodes", action="store_true",
+                   help="also store every trial's episode log under OUT/episodes/ (for `wbc view --episode`)")
+
+
+def _view(args: argparse.Namespace) -> int:
+    import dataclasses
+    from pathlib import Path
+
+    from wbc.errors import ConfigError
+    from wbc.viz.errors import ViewerError
+    from wbc.viz.player import PlayerConfig
+    from wbc.viz.view import ViewConfig, replay_episode, view_trial
+
+    record = Path(args.record) if args.record else None
+    if record is not None and (record.suffix.lower() not in (".html", ".htm") or not record.parent.is_dir()):
+        raise ViewerError(f"--record {record}: give an .html file in an existing directory")
+    cfg = ViewConfig(
+        live=record is None or args.live, host=args.host, record=record,
+        player=PlayerConfig(speed=args.speed, pause_at=tuple(args.pause_at or ()), step_s=args.step,
+                            start_paused=args.paused),
+        open_browser=args.open, wait_for_browser=args.wait,
+    )
+    if args.episode is not None:
+        from wbc.viz.replay import load_stored_episode
+
+        stored = load_stored_episode(args.episode, args.trial, controller=args.controller or args.ctrl,
+                                     band=args.band, seed=args.seed)
+        result = replay_episode(stored, cfg)
+        what = f"{stored.path}"
+    else:
+        from wbc.control import get_controller
+        from wbc.scenarios import load_scenario
+
+        if args.ctrl is None or args.scenario is None:
+            raise ConfigError("wbc view needs CTRL --scenario FILE --trial I (play a trial), or --episode "
+                              "RESULTS_DIR --trial I (replay a stored one)")
+        get_controller(args.ctrl)
+        scenario = load_scenario(args.scenario)
+        trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
+        if args.duration is not None:
+            if not 0 < args.duration <= trial.duration_s:
+                raise ConfigError(f"--duration must be in (0, {trial.duration_s}] s, got {args.duration}")
+            trial = dataclasses.replace(trial, duration_s=args.duration)
+        result = view_trial(trial, args.ctrl, cfg)
+        what = f"{args.ctrl} on {trial.scenario} band {trial.band} seed {trial.seed} trial {trial.index}"
+        row = result.row
+        print(f"{what}: " + ("survived" if row["success"] else f"fell at {float(row['fall_time_s']):.2f} s"))
+    if result.recording is not None:
+        print(f"recorded {result.frames_recorded} frames of {what} to {result.recording}")
+    return 0
 
 
 def _bench_mpc(args: argparse.Namespace) -> int:
@@ -194,6 +245,32 @@ def _parser() -> argparse.ArgumentParser:
     compare.add_argument("controllers", nargs="+", help=f"two or more of: {', '.join(CONTROLLERS)}")
     _add_arena_options(compare)
     compare.set_defaults(func=_compare)
+
+    view = sub.add_parser("view", help="watch a trial in the browser (meshcat), live or replayed; record it to HTML",
+                          description="Play CTRL on trial I of a scenario and stream it to a meshcat page (robot, "
+                          "arm, terrain, push arrow, contact forces, command, MPC plan), or replay a stored "
+                          "episode (--episode). With --record only, nothing is served: the trial is written as one "
+                          "self-contained HTML file. Keys while live (then Enter): p pause, s step, + / - speed, q.")
+    view.add_argument("ctrl", nargs="?", default=None, help=f"controller: one of {', '.join(CONTROLLERS)}")
+    view.add_argument("--scenario", default=None, help="scenario file (e.g. scenarios/push.toml)")
+    view.add_argument("--trial", type=int, required=True, help="trial index within (band, seed)")
+    view.add_argument("--seed", type=int, default=None, help="seed (default 0, or the run's first)")
+    view.add_argument("--band", default=None, help="band (default: the first)")
+    view.add_argument("--duration", type=float, default=None, help="play only the first D seconds")
+    view.add_argument("--episode", default=None, metavar="RESULTS_DIR",
+                      help="replay a stored episode from a `wbc run --save-episodes` results directory")
+    view.add_argument("--controller", default=None, help="with --episode: whose episode (default: the only one)")
+    view.add_argument("--host", default="127.0.0.1",
+                      help="address the viewer listens on (default 127.0.0.1: this machine only)")
+    view.add_argument("--speed", type=float, default=1.0, help="1 real time, 0.25 slow motion, 0 flat out")
+    view.add_argument("--pause-at", type=float, action="append", metavar="T", help="pause at trial time T (repeatable)")
+    view.add_argument("--paused", action="store_true", help="start paused (then s to step, p to play)")
+    view.add_argument("--step", type=float, default=0.02, help="trial time of one single step [s] (default 0.02)")
+    view.add_argument("--record", default=None, metavar="FILE.html", help="write a self-contained HTML replay")
+    view.add_argument("--live", action="store_true", help="with --record: also stream live")
+    view.add_argument("--open", action="store_true", help="open the page in the default browser")
+    view.add_argument("--wait", action="store_true", help="start once a browser has opened the page")
+    view.set_defaults(func=_view)
 
     demo = sub.add_parser("demo", help="the main job: a short A/B comparison on the push scenario; tail analysis")
     demo.add_argument("--scenario", default="scenarios/push.toml")

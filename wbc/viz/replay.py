@@ -1,0 +1,186 @@
+"""Replays of stored episodes: find a trial's episode log in a results directory and turn it into viewer frames.
+
+A results directory written with ``--save-episodes`` holds ``run.json`` (controllers, scenario path and hash,
+bands, seeds, trials per band and seed) and ``episodes/<controller>/<band>-s<seed>-t<index>.npz``. The episode
+gives the configuration and command of every control tick and the pushes (in its events); the scenario file gives
+the robot and the ground. Every problem names the file and the field at fault.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import zipfile
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wbc.control import get_controller
+from wbc.episode import Episode
+from wbc.errors import WbcError
+from wbc.results import episode_path
+from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.registry import get_robot
+from wbc.scenarios import load_scenario
+from wbc.trial import Trial
+from wbc.viz.content import SceneContent
+from wbc.viz.errors import ViewerError
+from wbc.viz.frame import VizFrame
+
+__all__ = ["LoggedPush", "StoredEpisode", "frames_of", "load_stored_episode", "pushes_of"]
+
+_PUSH_RE = re.compile(r"force_in_world=\[([^\]]*)\]\s+offset_in_base=\[([^\]]*)\]\s+duration=([0-9.eE+-]+)")
+
+
+@dataclass(frozen=True)
+class LoggedPush:
+    """A push as the runner logged it in an episode's events.
+
+    Attributes:
+        start: when it began [s].
+        duration: how long it acted [s].
+        force_in_world: shape (3,) [N].
+        offset_in_base: application point in the trunk frame, shape (3,) [m].
+    """
+
+    start: float
+    duration: float
+    force_in_world: np.ndarray
+    offset_in_base: np.ndarray
+
+
+def pushes_of(episode: Episode, source: str = "episode") -> list[LoggedPush]:
+    """The pushes in `episode`'s events.
+
+    Raises:
+        ViewerError: a push event cannot be read (`source` names the file in the message).
+    """
+    out = []
+    for t, kind, detail in episode.events:
+        if kind != "push":
+            continue
+        m = _PUSH_RE.search(detail)
+        if m is None:
+            raise ViewerError(f"{source}: field events: unreadable push event at t = {t} s: {detail!r}")
+        force = np.array([float(v) for v in m.group(1).split(",")])
+        offset = np.array([float(v) for v in m.group(2).split(",")])
+        out.append(LoggedPush(float(t), float(m.group(3)), force, offset))
+    return out
+
+
+def frames_of(episode: Episode, pushes: list[LoggedPush]) -> Iterator[VizFrame]:
+    """One frame per control tick of `episode`, the pushes drawn while they act."""
+    dt = episode.control_dt
+    for i in range(len(episode.t)):
+        t = float(episode.t[i])
+        qpos = episode.qpos[i]
+        force, point = np.zeros(3), np.zeros(3)
+        for p in pushes:
+            if p.start < t and t - dt < p.start + p.duration:
+                force = force + p.force_in_world
+                point = qpos[:3] + quat_to_matrix(qpos[3:7]) @ p.offset_in_base
+        yield VizFrame(t=t, qpos=qpos, command=episode.command[i], push_force_in_world=force,
+                       push_point_in_world=point)
+
+
+@dataclass(frozen=True)
+class StoredEpisode:
+    """A stored trial, ready to replay.
+
+    Attributes:
+        path: the episode file.
+        controller: who played it.
+        trial: the trial (robot, ground, pushes as sampled).
+        episode: the log.
+        pushes: the pushes as logged.
+    """
+
+    path: Path
+    controller: str
+    trial: Trial
+    episode: Episode
+    pushes: list[LoggedPush]
+
+    def content(self) -> SceneContent:
+        """What to draw: the controller's robot (arm mode) on the trial's ground."""
+        desc = get_robot(self.trial.robot, get_controller(self.controller).arm_mode)
+        return SceneContent.for_trial(desc, self.trial.terrain, self.trial.terrain_seed)
+
+    def frames(self) -> Iterator[VizFrame]:
+        """The frames of the episode."""
+        return frames_of(self.episode, self.pushes)
+
+
+def _pick(run_json: Path, field: str, value: object, valid: list, option: str) -> object:
+    if value is None:
+        if len(valid) == 1 or field != "controllers":
+            return valid[0]
+        raise ViewerError(f"{run_json}: field {field}: the run has several ({', '.join(map(str, valid))}); "
+                          f"choose one with {option}")
+    if value not in valid:
+        raise ViewerError(f"{run_json}: field {field}: {value!r} was not played; valid: "
+                          f"{', '.join(map(str, valid))}")
+    return value
+
+
+def load_stored_episode(results_dir: str | Path, index: int, *, controller: str | None = None,
+                        band: str | None = None, seed: int | None = None) -> StoredEpisode:
+    """Find and load trial `index` of a results directory.
+
+    Args:
+        results_dir: the directory ``wbc run --save-episodes --out DIR`` wrote.
+        index: trial index within (band, seed).
+        controller: which controller's episode (default: the only one).
+        band: which band (default: the first played).
+        seed: which seed (default: the first played).
+
+    Raises:
+        ViewerError: missing directory, ``run.json``, scenario or episode file; a value out of range; an unreadable
+            or mismatching file. The message names the file and the field.
+    """
+    root = Path(results_dir)
+    run_json = root / "run.json"
+    if not root.is_dir():
+        raise ViewerError(f"{root}: no such results directory (give the --out of a `wbc run --save-episodes`)")
+    try:
+        config = json.loads(run_json.read_text(encoding="utf-8"))["config"]
+        controllers, bands = list(config["controllers"]), list(config["bands"])
+        seeds, trials = [int(s) for s in config["seeds"]], int(config["trials"])
+        scenario_path, scenario_hash = Path(config["scenario"]["path"]), str(config["scenario"]["hash"])
+    except FileNotFoundError:
+        raise ViewerError(f"{run_json}: missing; {root} is not a results directory") from None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ViewerError(f"{run_json}: unreadable run configuration ({type(exc).__name__}: {exc})") from None
+    controller = _pick(run_json, "controllers", controller, controllers, "--controller")
+    band = _pick(run_json, "bands", band, bands, "--band")
+    seed = _pick(run_json, "seeds", seed, seeds, "--seed")
+    if not 0 <= index < trials:
+        raise ViewerError(f"{run_json}: field trials: --trial {index} is out of range; the run played trials "
+                          f"0..{trials - 1} per band and seed")
+    path = episode_path(root, controller, band, seed, index)
+    if not path.exists():
+        raise ViewerError(f"{path}: no episode stored for controller {controller}, band {band}, seed {seed}, "
+                          f"trial {index}; rerun `wbc run` with --save-episodes")
+    try:
+        episode = Episode.load(str(path))
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
+        raise ViewerError(f"{path}: unreadable episode ({type(exc).__name__}: {exc})") from None
+    if not scenario_path.is_file() and (root / scenario_path.name).is_file():
+        scenario_path = root / scenario_path.name
+    try:
+        scenario = load_scenario(scenario_path)
+    except WbcError as exc:
+        raise ViewerError(f"{run_json}: field scenario.path: {exc} (run from the directory the run started in)"
+                          ) from None
+    if scenario.hash != scenario_hash:
+        raise ViewerError(f"{run_json}: field scenario.hash: {scenario_path} has changed since the run "
+                          f"(hash {scenario.hash[:12]} != {scenario_hash[:12]}); restore that version to replay")
+    trial = scenario.trial(band, seed, index)
+    nq = get_robot(trial.robot, get_controller(controller).arm_mode).num_joints + 7
+    if episode.qpos.ndim != 2 or episode.qpos.shape[1] != nq:
+        raise ViewerError(f"{path}: field qpos: shape {episode.qpos.shape}, expected (ticks, {nq}) for "
+                          f"{trial.robot} driven by {controller}")
+    return StoredEpisode(path=path, controller=controller, trial=trial, episode=episode,
+                         pushes=pushes_of(episode, str(path)))
