@@ -109,6 +109,6 @@ class LiveObserver:
         if draw:
             if self.player is not None:
                 self.player.wait(t)
-                self.player.drew(t)
-            if self.player is None or not self.player.stopped:
-                self.viewer.show(frame)
+            self.viewer.show(frame)
+            if self.player is not None:
+                self.player.drew(t)  # blocks here while paused, the paused frame on screen

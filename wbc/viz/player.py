@@ -1,9 +1,9 @@
 """`Player`: paces a stream of frames for a person watching: real time, slow motion, pause and single steps.
 
 The player sits in the runner's observer hook (or in a replay loop). For each frame it decides whether to draw it
-(about `fps` frames per wall-clock second) and then blocks until the wall clock has caught up with the frame's time
-divided by `speed`, or for as long as it is paused. Blocking the hook pauses the simulation itself, so a paused
-live trial resumes exactly where it stopped.
+(`due`: about `fps` frames per wall-clock second), blocks until the wall clock has caught up with the frame's time
+divided by `speed` (`wait`), and after the frame is drawn blocks for as long as it is paused (`drew`). Blocking the
+hook pauses the simulation itself, so a paused live trial resumes exactly where it stopped.
 
 Keys (one per line on stdin, read by `KeyboardControls` when stdin is a terminal): ``p`` pause / resume, ``s``
 single step (``step_s`` of trial time, then pause again), ``+`` / ``-`` twice / half the speed, ``q`` stop pacing
@@ -164,31 +164,13 @@ class Player:
         interval = (speed if speed > 0 else 1.0) / self.config.fps
         return t - self._last_drawn >= interval - 1e-9
 
-    def drew(self, t: float) -> None:
-        """Record that the frame at `t` was drawn."""
-        self._last_drawn = t
-        self.drawn += 1
-
     def wait(self, t: float) -> None:
-        """Block until the frame at trial time `t` [s] should be shown (pacing, pauses, steps)."""
+        """Before drawing the frame at trial time `t` [s]: sleep until the wall clock catches up with it."""
         c = self.controls
-        if c.stopped:
+        if c.stopped or c.paused:
             return
-        if self._pending_pauses and t >= self._pending_pauses[0]:
-            while self._pending_pauses and t >= self._pending_pauses[0]:
-                self._pending_pauses.pop(0)
-            c.paused = True
-            print(f"paused at t = {t:.3f} s", file=sys.stderr)
-        if self._step_until is not None:
-            if t < self._step_until:
-                return  # inside a single step: run through without pacing
-            self._step_until = None
-        if c.paused:
-            if c.wait_while_paused():
-                self._step_until = t + self.config.step_s
-            self._anchor = None
-            if c.paused:
-                return
+        if self._step_until is not None and t < self._step_until:
+            return  # inside a single step: run through without pacing
         speed = self.config.speed * c.speed_factor
         if speed <= 0:
             return
@@ -202,3 +184,24 @@ class Player:
             self._sleep(ahead)
         elif ahead < -0.25:  # fell behind (a slow frame): pace from here instead of rushing to catch up
             self._anchor = (now, t, speed)
+
+    def drew(self, t: float) -> None:
+        """After drawing the frame at `t`: pause here if asked (a `pause_at` time, a finished step, a key)."""
+        self._last_drawn = t
+        self.drawn += 1
+        c = self.controls
+        if c.stopped:
+            return
+        if self._pending_pauses and t >= self._pending_pauses[0]:
+            while self._pending_pauses and t >= self._pending_pauses[0]:
+                self._pending_pauses.pop(0)
+            c.paused = True
+            print(f"paused at t = {t:.3f} s", file=sys.stderr)
+        if self._step_until is not None:
+            if t < self._step_until:
+                return
+            self._step_until = None
+        if c.paused:
+            if c.wait_while_paused():
+                self._step_until = t + self.config.step_s
+            self._anchor = None

@@ -203,8 +203,6 @@ class Recording:
         for (full, prop), track in self._tracks.items():
             if prop == "scale" and all(_same(v, [1.0, 1.0, 1.0]) for _, v in track.keys):
                 continue
-            if prop == "visible" and all(v for _, v in track.keys) and len(track.keys) == 1:
-                continue
             frame_vis = anim.at_frame(self.vis[full], 0)
             clip = frame_vis.get_clip()
             for k, value in track.keys:

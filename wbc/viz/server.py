@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import select
+import queue
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -76,17 +77,21 @@ class MeshcatServer:
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
         self._proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                                       start_new_session=True, env=env)
+        # a thread reads the child's lines: select() on a buffered pipe misses lines already buffered
+        lines: queue.Queue[str] = queue.Queue()
+        stdout = self._proc.stdout
+        threading.Thread(target=lambda: [lines.put(x) for x in iter(stdout.readline, "")], daemon=True).start()
         deadline = time.monotonic() + cfg.start_timeout_s
         urls: dict[str, str] = {}
         while len(urls) < 3:
-            ready, _, _ = select.select([self._proc.stdout], [], [], 0.1)
-            line = self._proc.stdout.readline() if ready else ""
-            if not line:
+            try:
+                line = lines.get(timeout=0.1)
+            except queue.Empty:
                 if self._proc.poll() is not None or time.monotonic() > deadline:
                     self.stop()
                     raise ViewerError(f"the meshcat server on {cfg.host} did not start within "
                                       f"{cfg.start_timeout_s:.0f} s (is the address valid on this machine? "
-                                      f"try --host {LOOPBACK})")
+                                      f"try --host {LOOPBACK})") from None
                 continue
             key, _, value = line.strip().partition("=")
             if key in ("zmq_url", "web_url", "web_port"):
@@ -106,8 +111,6 @@ class MeshcatServer:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
-        if proc.stdout:
-            proc.stdout.close()
 
     def __enter__(self) -> MeshcatServer:
         return self.start()

@@ -130,8 +130,8 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
                     break
                 if player.due(frame.t):
                     player.wait(frame.t)
-                    player.drew(frame.t)
                     viewer.show(frame)
+                    player.drew(frame.t)
             drawn, paths = player.drawn, viewer.paths
             _linger(cfg)
         finally:

@@ -1,0 +1,392 @@
+"""The browser viewer: server binding, recordings, replays from results directories, pacing, and a real browser."""
+
+import base64
+import json
+import re
+import shutil
+import socket
+import subprocess
+import threading
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import psutil
+import pytest
+import umsgpack
+
+from wbc.arena import ArenaConfig, run_arena
+from wbc.cli import main
+from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.perturbation import Push
+from wbc.hardware.terrain import TerrainConfig
+from wbc.robots.registry import get_robot
+from wbc.runner import run_trial
+from wbc.scenarios import load_scenario
+from wbc.types import MotorCommand
+from wbc.viz.content import SceneContent
+from wbc.viz.errors import ViewerError
+from wbc.viz.frame import VizFrame
+from wbc.viz.live import LiveViewer
+from wbc.viz.player import Controls, Player, PlayerConfig
+from wbc.viz.replay import load_stored_episode
+from wbc.viz.server import MeshcatServer, ServerConfig
+from wbc.viz.sim_frames import foot_forces_in_world
+from wbc.viz.view import ViewConfig, replay_episode, view_trial
+
+# One push at 1.0 s for 0.1 s; 2 s trials: short enough for a test, long enough to see the push and its aftermath.
+SHORT = """
+[scenario]
+name = "viztest"
+version = 1
+description = "a short push for the viewer tests"
+robot = "a1-wx200"
+duration_s = 2.0
+
+[terrain]
+kind = "fractal"
+amplitude_m = 0.03
+
+[commands]
+ramp_s = 0.5
+[[commands.options]]
+vx = 0.0
+
+[pushes]
+first_s = [1.0, 1.0]
+interval_s = [5.0, 5.0]
+duration_s = 0.1
+offset_m = 0.1
+
+[[bands]]
+name = "soft"
+push_force_n = [120.0, 150.0]
+"""
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scn") / "viztest.toml"
+    path.write_text(SHORT)
+    return path
+
+
+@pytest.fixture(scope="module")
+def recording(short, tmp_path_factory):
+    """A recorded trial of the standing controller: (html path, view result, trial)."""
+    trial = load_scenario(short).trial("soft", 0, 0)
+    out = tmp_path_factory.mktemp("rec") / "trial.html"
+    result = view_trial(trial, "stand", ViewConfig(live=False, record=out))
+    return out, result, trial
+
+
+def _commands(html: str) -> list[dict]:
+    """The meshcat commands embedded in a recorded page, decoded."""
+    block = re.search(r"var wbcCommands = \[(.*?)\];", html, re.S)
+    assert block, "no embedded command list"
+    return [umsgpack.unpackb(base64.b64decode(s)) for s in re.findall(r'"([A-Za-z0-9+/=]+)"', block.group(1))]
+
+
+def _listening(pid: int) -> list[tuple[str, int]]:
+    return [(c.laddr.ip, c.laddr.port) for c in psutil.Process(pid).net_connections(kind="inet")
+            if c.status == psutil.CONN_LISTEN]
+
+
+def _other_local_address() -> str | None:
+    for addrs in psutil.net_if_addrs().values():
+        for a in addrs:
+            if a.family == socket.AF_INET and not a.address.startswith("127."):
+                return a.address
+    return None
+
+
+# -- server ----------------------------------------------------------------------------------------------------------
+def test_server_listens_on_loopback_only():
+    with MeshcatServer() as server:
+        listening = _listening(server.pid)
+        assert {port for _, port in listening} >= {server.web_port}
+        assert listening and all(ip == "127.0.0.1" for ip, _ in listening), listening
+        assert server.web_url.startswith("http://127.0.0.1:")
+        page = urllib.request.urlopen(server.web_url, timeout=5).read().decode()
+        assert "main.min.js" in page
+        other = _other_local_address()
+        if other is not None:  # the same port on this machine's other interface must refuse the connection
+            with pytest.raises(OSError):
+                socket.create_connection((other, server.web_port), timeout=2).close()
+    assert server.pid is None
+
+
+def test_server_host_option_moves_only_the_web_page():
+    with MeshcatServer(ServerConfig(host="127.0.0.2")) as server:
+        listening = dict((port, ip) for ip, port in _listening(server.pid))
+        assert listening[server.web_port] == "127.0.0.2"
+        zmq_port = int(server.zmq_url.rsplit(":", 1)[1])
+        assert listening[zmq_port] == "127.0.0.1"  # scene commands never leave loopback
+
+
+def test_server_bad_host_is_a_clear_error():
+    with pytest.raises(ViewerError, match="192.0.2.123"):
+        MeshcatServer(ServerConfig(host="192.0.2.123", start_timeout_s=10)).start()
+
+
+# -- live scene ------------------------------------------------------------------------------------------------------
+def test_live_viewer_registers_robot_arm_and_push_paths():
+    desc = get_robot("a1-wx200", "actuated")
+    with MeshcatServer() as server:
+        viewer = LiveViewer(server)
+        viewer.load(SceneContent(desc, TerrainConfig(), None))
+        q = np.r_[0.0, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0, desc.nominal_q]
+        viewer.show(VizFrame(t=0.1, qpos=q, push_force_in_world=np.array([0.0, 200.0, 0.0]),
+                             push_point_in_world=q[:3]))
+        paths = viewer.paths
+        assert any(p.endswith("root_joint/trunk_0") for p in paths["robot"])
+        assert {p.split("/")[2] for p in paths["arm"]} >= {"arm_waist", "arm_shoulder", "arm_elbow"}
+        assert paths["push"] == ["wbc/push"]
+        # the server's own scene holds them: a static page asked from it lists the arm's forearm mesh
+        html = viewer.vis.static_html()
+        assert "MeshCat.Viewer" in html
+
+
+# -- recording -------------------------------------------------------------------------------------------------------
+def test_recording_is_self_contained_with_robot_arm_push_and_animation(recording):
+    path, result, trial = recording
+    html = path.read_text(encoding="utf-8")
+    assert 200_000 < len(html) < 8_000_000
+    # nothing fetched from elsewhere: no external scripts, styles, images or fetches
+    assert not re.search(r"""(src|href)\s*=\s*["']https?:""", html)
+    assert not re.search(r"""fetch\(\s*["']https?:""", html)
+    assert "<link" not in html
+    commands = _commands(html)
+    objects = {c["path"] for c in commands if c["type"] == "set_object"}
+    assert "/meshcat/wbc/robot/root_joint/trunk_0" in objects
+    assert any(p.startswith("/meshcat/wbc/arm/arm_elbow/") for p in objects)
+    assert {"/meshcat/wbc/push/shaft", "/meshcat/wbc/push/head"} <= objects
+    anims = [c for c in commands if c["type"] == "set_animation"]
+    assert len(anims) == 1
+    clips = {a["path"]: a["clip"] for a in anims[0]["animations"]}
+    # the push arrow shows exactly while the push acts (1.0 s to 1.1 s), at 50 frames per second
+    visible = next(t for t in clips["/meshcat/wbc/push"]["tracks"] if t["name"] == ".visible")
+    shown = [k["time"] / 50.0 for k in visible["keys"] if k["value"]]
+    hidden = [k["time"] / 50.0 for k in visible["keys"] if not k["value"]]
+    assert len(shown) == 1 and 1.0 <= shown[0] <= 1.04
+    assert any(1.08 <= t <= 1.14 for t in hidden)
+    # the trunk moves: its position track has many keys over the 2 s
+    trunk = clips["/meshcat/wbc/robot/root_joint"]
+    position = next(t for t in trunk["tracks"] if t["name"] == ".position")
+    assert len(position["keys"]) > 20
+    assert result.frames_recorded == pytest.approx(trial.duration_s * 50, abs=2)
+    assert set(result.paths) >= {"robot", "arm", "push", "contacts", "command", "plan", "terrain"}
+
+
+def test_recording_of_mpc_shows_its_plan(tmp_path, short):
+    trial = load_scenario(short).trial("soft", 0, 0)
+    import dataclasses
+
+    trial = dataclasses.replace(trial, duration_s=0.2)
+    out = tmp_path / "mpc.html"
+    view_trial(trial, "mpc", ViewConfig(live=False, record=out))
+    anim = next(c for c in _commands(out.read_text()) if c["type"] == "set_animation")
+    clips = {a["path"]: a["clip"] for a in anim["animations"]}
+    plan_visible = next(t for t in clips["/meshcat/wbc/plan"]["tracks"] if t["name"] == ".visible")
+    assert any(k["value"] for k in plan_visible["keys"]), "the MPC's plan never showed"
+    assert "/meshcat/wbc/plan/com/0" in clips and "/meshcat/wbc/plan/footholds/FL" in clips
+    assert "/meshcat/wbc/plan/arm/0" in clips  # the arm plan (tip path)
+
+
+# -- runner hook and truth for the overlays ---------------------------------------------------------------------------
+def test_observer_sees_every_tick_and_changes_nothing(short):
+    trial = load_scenario(short).trial("soft", 0, 0)
+    ticks = []
+    _, with_obs = run_trial(trial, "stand", observer=lambda t, robot, ctrl, cmd: ticks.append(t))
+    _, without = run_trial(trial, "stand")
+    assert len(ticks) == len(without.t)
+    np.testing.assert_allclose(ticks, without.t)
+    np.testing.assert_array_equal(with_obs.qpos, without.qpos)
+
+
+def test_foot_forces_carry_the_robot_standing():
+    robot = MujocoRobot(MujocoRobotConfig())
+    robot.connect()
+    desc = robot.desc
+    for _ in range(500):
+        robot.write(MotorCommand.hold(desc.nominal_q, 60.0, 2.0))
+        robot.advance(0.002)
+    forces = foot_forces_in_world(robot)
+    weight = robot.model.body_subtreemass[1] * 9.81
+    assert forces[:, 2].sum() == pytest.approx(weight, rel=0.05)
+    assert np.all(forces[:, 2] > 0.1 * weight)
+    robot.apply_push(Push(force_in_world=np.array([0.0, 100.0, 0.0]), offset_in_base=np.zeros(3),
+                          start=robot.time, duration=0.1))
+    robot.advance(0.01)
+    assert robot.sim_truth().external_force_in_world[1] == 100.0
+
+
+# -- replay from a results directory ---------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def results_dir(short, tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "r"
+    run_arena(ArenaConfig(controllers=("stand",), scenario=short, trials=2, out_dir=out, workers=1,
+                          progress=False, save_episodes=True))
+    return out
+
+
+def test_replay_from_results_dir(results_dir, tmp_path):
+    stored = load_stored_episode(results_dir, 1)
+    assert stored.path == results_dir / "episodes" / "stand" / "soft-s0-t1.npz"
+    assert len(stored.pushes) == 1 and stored.pushes[0].start == pytest.approx(1.0)
+    frames = list(stored.frames())
+    assert len(frames) == len(stored.episode.t)
+    pushed = [f.t for f in frames if f.pushed]
+    dt = stored.episode.control_dt
+    assert pushed and 1.0 < pushed[0] <= 1.0 + dt + 1e-9 and 1.1 <= pushed[-1] < 1.1 + dt
+    out = tmp_path / "replay.html"
+    result = replay_episode(stored, ViewConfig(live=False, record=out))
+    assert result.recording == out and result.frames_recorded > 90
+    assert "/meshcat/wbc/push/shaft" in {c["path"] for c in _commands(out.read_text())}
+
+
+def test_replay_errors_name_the_file_and_field(results_dir, tmp_path):
+    with pytest.raises(ViewerError, match=r"run\.json: field trials: --trial 5 is out of range"):
+        load_stored_episode(results_dir, 5)
+    with pytest.raises(ViewerError, match="field bands"):
+        load_stored_episode(results_dir, 0, band="hard")
+    with pytest.raises(ViewerError, match="no such results directory"):
+        load_stored_episode(tmp_path / "nowhere", 0)
+    broken = tmp_path / "broken"
+    shutil.copytree(results_dir, broken)
+    (broken / "episodes" / "stand" / "soft-s0-t0.npz").write_bytes(b"not a zip")
+    with pytest.raises(ViewerError, match=r"soft-s0-t0\.npz: unreadable episode"):
+        load_stored_episode(broken, 0)
+    (broken / "episodes" / "stand" / "soft-s0-t1.npz").unlink()
+    with pytest.raises(ViewerError, match="--save-episodes"):
+        load_stored_episode(broken, 1)
+    changed = tmp_path / "changed"
+    shutil.copytree(results_dir, changed)
+    config = json.loads((changed / "run.json").read_text())
+    config["config"]["scenario"]["hash"] = "0" * 64
+    (changed / "run.json").write_text(json.dumps(config))
+    with pytest.raises(ViewerError, match="field scenario.hash"):
+        load_stored_episode(changed, 0)
+
+
+def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys):
+    assert main(["view", "--episode", str(results_dir), "--trial", "9", "--record", str(tmp_path / "x.html")]) == 2
+    assert "field trials" in capsys.readouterr().err
+    assert main(["view", "stand", "--scenario", str(short), "--trial", "0", "--record", str(tmp_path / "x.txt")]) == 2
+    assert "--record" in capsys.readouterr().err
+    assert main(["view", "nope", "--scenario", str(short), "--trial", "0", "--record", str(tmp_path / "x.html")]) == 2
+    assert "unknown controller 'nope'" in capsys.readouterr().err
+    out = tmp_path / "cli.html"
+    assert main(["view", "stand", "--scenario", str(short), "--trial", "0", "--duration", "0.5",
+                 "--record", str(out)]) == 0
+    assert "recorded 25 frames" in capsys.readouterr().out
+    assert out.stat().st_size > 100_000
+
+
+# -- pacing ----------------------------------------------------------------------------------------------------------
+class _FakeClock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+    def sleep(self, s):
+        self.now += s
+
+
+def _play(player, clock, ticks, dt=0.002, drawn=None):
+    drawn = [] if drawn is None else drawn
+    for k in range(1, ticks + 1):
+        t = k * dt
+        if player.due(t):
+            player.wait(t)
+            drawn.append((t, clock.now))  # "show"
+            player.drew(t)
+    return drawn
+
+
+@pytest.mark.parametrize("speed", [1.0, 0.25])
+def test_player_paces_real_time_and_slow_motion(speed):
+    clock = _FakeClock()
+    player = Player(PlayerConfig(speed=speed, fps=25.0), clock=clock, sleep=clock.sleep)
+    drawn = _play(player, clock, 1000)  # 2 s of trial
+    t0, w0 = drawn[0]
+    t1, w1 = drawn[-1]
+    assert (w1 - w0) == pytest.approx((t1 - t0) / speed, abs=1e-6)
+    assert len(drawn) == pytest.approx(2.0 / speed * 25.0, rel=0.1)  # about fps frames per wall second
+
+
+def test_player_pauses_at_a_time_and_steps():
+    clock = _FakeClock()
+    controls = Controls()
+    player = Player(PlayerConfig(speed=0.0, pause_at=(0.5,), step_s=0.1), controls, clock=clock,
+                    sleep=clock.sleep)
+    drawn = []
+
+    def run():
+        _play(player, clock, 500, drawn=drawn)
+
+    def reached():
+        return max(t for t, _ in drawn)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    thread.join(0.3)
+    assert thread.is_alive() and controls.paused  # held at 0.5 s
+    assert reached() == pytest.approx(0.5)
+    controls.step()  # 0.1 s more, then paused again
+    thread.join(0.3)
+    assert thread.is_alive() and reached() == pytest.approx(0.6, abs=0.003)
+    controls.toggle_pause()  # play on to the end
+    thread.join(5)
+    assert not thread.is_alive() and reached() > 1.0 - 1.0 / 30  # frames drawn to the end
+
+
+def test_player_rejects_negative_speed():
+    with pytest.raises(Exception, match="--speed"):
+        PlayerConfig(speed=-1.0)
+
+
+# -- a real browser --------------------------------------------------------------------------------------------------
+def _screenshot(url: str, out: Path, budget_ms: int = 6000) -> np.ndarray:
+    import matplotlib.image
+
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
+           "--enable-unsafe-swiftshader", "--hide-scrollbars", "--window-size=640,480",
+           f"--virtual-time-budget={budget_ms}", f"--screenshot={out}", url]
+    subprocess.run(cmd, capture_output=True, timeout=90, check=False)
+    assert out.exists(), f"chromium wrote no screenshot of {url}"
+    return matplotlib.image.imread(str(out))[:, :, :3]
+
+
+def _red_pixels(img: np.ndarray) -> int:
+    r, g, b = img[..., 0], img[..., 1], img[..., 2]
+    return int(np.count_nonzero((r > 0.6) & (g < 0.3) & (b < 0.3)))
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_renders_live_page_and_recorded_replay(recording, tmp_path):
+    html, _, trial = recording
+    push = trial.pushes[0]
+    # the replay, paused in the middle of the push
+    at = push.start + 0.5 * push.duration
+    img = _screenshot(f"{html.resolve().as_uri()}#t={at:.3f}", tmp_path / "replay.png")
+    assert img.std() > 0.05, "blank replay screenshot"
+    assert _red_pixels(img) > 200, "the push arrow is not drawn at the push"
+    # the same replay before the push: no arrow
+    before = _screenshot(f"{html.resolve().as_uri()}#t=0.5", tmp_path / "before.png")
+    assert _red_pixels(before) < 20
+    # the live page, served by our server on 127.0.0.1
+    desc = get_robot("a1-wx200", "actuated")
+    with MeshcatServer() as server:
+        viewer = LiveViewer(server)
+        viewer.load(SceneContent(desc, TerrainConfig(), None))
+        q = np.r_[0.0, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0, desc.nominal_q]
+        viewer.show(VizFrame(t=0.1, qpos=q, push_force_in_world=np.array([0.0, 250.0, 0.0]),
+                             push_point_in_world=q[:3], foot_force_in_world=np.tile([0.0, 0.0, 40.0], (4, 1))))
+        live = _screenshot(server.web_url, tmp_path / "live.png")
+    assert live.std() > 0.05, "blank live screenshot"
+    assert _red_pixels(live) > 200, "the live page shows no push arrow"
