@@ -63,6 +63,8 @@ name = "soft"
 push_force_n = [120.0, 150.0]
 """
 
+pytestmark = pytest.mark.filterwarnings("ignore:zmq.eventloop.ioloop is deprecated:DeprecationWarning")
+
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 
 
@@ -351,15 +353,24 @@ def test_player_rejects_negative_speed():
 
 
 # -- a real browser --------------------------------------------------------------------------------------------------
-def _screenshot(url: str, out: Path, budget_ms: int = 6000) -> np.ndarray:
+def _screenshots(shots: list[tuple[str, Path]], budget_ms: int = 4000) -> list[np.ndarray]:
+    """Screenshots of several pages by headless Chromium, taken in parallel (each start costs ~5 s)."""
     import matplotlib.image
 
-    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
-           "--enable-unsafe-swiftshader", "--hide-scrollbars", "--window-size=640,480",
-           f"--virtual-time-budget={budget_ms}", f"--screenshot={out}", url]
-    subprocess.run(cmd, capture_output=True, timeout=90, check=False)
-    assert out.exists(), f"chromium wrote no screenshot of {url}"
-    return matplotlib.image.imread(str(out))[:, :, :3]
+    procs = []
+    for url, out in shots:
+        cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
+               "--enable-unsafe-swiftshader", "--hide-scrollbars", "--window-size=640,480",
+               f"--user-data-dir={out.with_suffix('.profile')}", f"--virtual-time-budget={budget_ms}",
+               f"--screenshot={out}", url]
+        procs.append(subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+    for p in procs:
+        p.wait(timeout=120)
+    images = []
+    for url, out in shots:
+        assert out.exists(), f"chromium wrote no screenshot of {url}"
+        images.append(matplotlib.image.imread(str(out))[:, :, :3])
+    return images
 
 
 def _red_pixels(img: np.ndarray) -> int:
@@ -371,22 +382,21 @@ def _red_pixels(img: np.ndarray) -> int:
 def test_browser_renders_live_page_and_recorded_replay(recording, tmp_path):
     html, _, trial = recording
     push = trial.pushes[0]
-    # the replay, paused in the middle of the push
-    at = push.start + 0.5 * push.duration
-    img = _screenshot(f"{html.resolve().as_uri()}#t={at:.3f}", tmp_path / "replay.png")
-    assert img.std() > 0.05, "blank replay screenshot"
-    assert _red_pixels(img) > 200, "the push arrow is not drawn at the push"
-    # the same replay before the push: no arrow
-    before = _screenshot(f"{html.resolve().as_uri()}#t=0.5", tmp_path / "before.png")
-    assert _red_pixels(before) < 20
-    # the live page, served by our server on 127.0.0.1
+    page = html.resolve().as_uri()
     desc = get_robot("a1-wx200", "actuated")
-    with MeshcatServer() as server:
+    with MeshcatServer() as server:  # the live page, served by our server on 127.0.0.1
         viewer = LiveViewer(server)
         viewer.load(SceneContent(desc, TerrainConfig(), None))
         q = np.r_[0.0, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0, desc.nominal_q]
         viewer.show(VizFrame(t=0.1, qpos=q, push_force_in_world=np.array([0.0, 250.0, 0.0]),
                              push_point_in_world=q[:3], foot_force_in_world=np.tile([0.0, 0.0, 40.0], (4, 1))))
-        live = _screenshot(server.web_url, tmp_path / "live.png")
+        live, during, before = _screenshots([
+            (server.web_url, tmp_path / "live.png"),
+            (f"{page}#t={push.start + 0.5 * push.duration:.3f}", tmp_path / "during.png"),  # replay, mid-push
+            (f"{page}#t=0.5", tmp_path / "before.png"),  # replay, before the push
+        ])
     assert live.std() > 0.05, "blank live screenshot"
     assert _red_pixels(live) > 200, "the live page shows no push arrow"
+    assert during.std() > 0.05, "blank replay screenshot"
+    assert _red_pixels(during) > 200, "the replay shows no push arrow during the push"
+    assert _red_pixels(before) < 20, "the replay shows a push arrow before the push"
