@@ -8,9 +8,10 @@ of transforms and visibility flags, which a live viewer sends and a recording tu
 - ``wbc/contacts/<FR|FL|RR|RL>`` ground reaction force on each foot (live only: stored episodes lack them);
 - ``wbc/command`` the commanded horizontal velocity from the trunk, in the yaw-aligned frame;
 - ``wbc/plan/com/<i>`` predicted CoM path; ``wbc/plan/footholds/<leg>`` planned footholds;
-  ``wbc/plan/schedule/<leg>/<i>`` the contact schedule as a strip of cells above the robot (leg rows, horizon
-  columns, shown where the leg is in stance); ``wbc/plan/arm/<i>`` the arm tip along the arm plan;
-  ``wbc/plan/forces/<leg>`` the first planned contact force at each planned foothold.
+  ``wbc/plan/schedule/<leg>/<i>`` the contact schedule as a gait chart standing above the robot (rows FL, FR,
+  RL, RR from the top, one column per plan step along the heading, a dark cell where the leg is in stance);
+  ``wbc/plan/arm/<i>`` the arm tip along the arm plan; ``wbc/plan/forces/<leg>`` the first planned contact force
+  at each planned foothold.
 """
 
 from __future__ import annotations
@@ -145,9 +146,9 @@ class PlanOverlay:
     """
 
     root = "wbc/plan"
-    cell_dx = 0.03   # [m] schedule strip: one column per plan step
+    cell_dx = 0.03   # [m] gait chart: one column per plan step
     cell_dy = 0.025  # [m] one row per leg
-    strip_height = 0.3  # [m] above the trunk
+    strip_height = 0.45  # [m] above the trunk
     n_per_m = 0.001
 
     def __init__(self, horizon: int = 16) -> None:
@@ -157,7 +158,8 @@ class PlanOverlay:
 
     def setup(self, vis: meshcat.Visualizer) -> None:
         """Create the plan's objects, hidden."""
-        com = mg.MeshLambertMaterial(color=0xF2C12E)
+        # the CoM path runs inside the trunk: drawn over it
+        com = mg.MeshLambertMaterial(color=0xF2C12E, depthTest=False, transparent=True, opacity=0.95)
         arm = mg.MeshLambertMaterial(color=0xF08A24)
         foot = mg.MeshLambertMaterial(color=0xC23BD4)
         cell = mg.MeshLambertMaterial(color=0x303030)
@@ -166,7 +168,7 @@ class PlanOverlay:
             vis[f"{self.root}/arm/{i}"].set_object(mg.Sphere(0.01), arm)
             for leg in PIN_LEGS:
                 vis[f"{self.root}/schedule/{leg}/{i}"].set_object(
-                    mg.Box([0.9 * self.cell_dx, 0.8 * self.cell_dy, 0.01]), cell)
+                    mg.Box([0.9 * self.cell_dx, 0.004, 0.8 * self.cell_dy]), cell)
         for leg in PIN_LEGS:
             vis[f"{self.root}/footholds/{leg}"].set_object(mg.Cylinder(0.004, 0.025), foot)
         for a in self.forces:
@@ -198,7 +200,7 @@ class PlanOverlay:
         for k, leg in enumerate(PIN_LEGS):
             for i in range(self.horizon):
                 on = i < len(schedule) and bool(schedule[i, k])
-                local = np.array([(i - 0.5 * self.horizon) * self.cell_dx, (1.5 - k) * self.cell_dy, 0.0])
+                local = np.array([(i - 0.5 * self.horizon) * self.cell_dx, 0.0, (1.5 - k) * self.cell_dy])
                 m = np.eye(4)
                 m[:3, :3] = rot_z
                 m[:3, 3] = origin + rot_z @ local
