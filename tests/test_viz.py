@@ -17,6 +17,7 @@ import umsgpack
 
 from wbc.arena import ArenaConfig, run_arena
 from wbc.cli import main
+from wbc.errors import ConfigError
 from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.perturbation import Push
 from wbc.hardware.terrain import TerrainConfig
@@ -27,7 +28,7 @@ from wbc.types import MotorCommand
 from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
 from wbc.viz.frame import VizFrame
-from wbc.viz.live import LiveViewer
+from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.player import Controls, Player, PlayerConfig
 from wbc.viz.replay import load_stored_episode
 from wbc.viz.server import MeshcatServer, ServerConfig
@@ -232,6 +233,17 @@ def results_dir(short, tmp_path_factory):
     run_arena(ArenaConfig(controllers=("stand",), scenario=short, trials=2, out_dir=out, workers=1,
                           progress=False, save_episodes=True))
     return out
+
+
+def test_run_view_watches_every_trial_in_process(short, tmp_path):
+    # what `wbc run --view` does, with a recorder in place of the browser: every trial reaches the observer
+    observer = LiveObserver(None, None, recording_fps=10.0)
+    run_arena(ArenaConfig(controllers=("stand",), scenario=short, trials=2, out_dir=tmp_path / "r", workers=2,
+                          progress=False, observer=observer))
+    assert len(observer.recordings) == 2
+    assert all(r.frames == pytest.approx(20, abs=1) for r in observer.recordings)
+    with pytest.raises(ConfigError, match="local executor"):
+        ArenaConfig(controllers=("stand",), scenario=short, executor="ray", observer=observer)
 
 
 def test_replay_from_results_dir(results_dir, tmp_path):

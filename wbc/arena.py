@@ -18,6 +18,7 @@ from wbc.executors import EXECUTORS, LocalExecutor, RayExecutor
 from wbc.hardware.mujoco_robot import MujocoRobotConfig
 from wbc.report import summarize, write_report
 from wbc.results import ResultsStore, environment_info, episode_path
+from wbc.runner import TickObserver
 from wbc.scenarios import ScenarioError, check_published, load_scenario
 from wbc.trial import Trial
 
@@ -42,6 +43,8 @@ class ArenaConfig:
         progress: show a progress bar on stderr.
         save_episodes: also store every trial's episode log (``episodes/<controller>/<band>-s<seed>-t<i>.npz``,
             for replay with ``wbc view --episode``).
+        observer: watches every tick (``wbc run --view``); trials then run one by one in this process (local
+            executor only).
     """
 
     controllers: tuple[str, ...]
@@ -56,6 +59,7 @@ class ArenaConfig:
     resume: bool = False
     progress: bool = True
     save_episodes: bool = False
+    observer: TickObserver | None = None
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -70,6 +74,8 @@ class ArenaConfig:
             raise ConfigError(f"--trials must be >= 1, got {self.trials}")
         if not self.seeds:
             raise ConfigError("at least one seed is needed")
+        if self.observer is not None and self.executor != "local":
+            raise ConfigError("a live view (--view) watches trials played in this process: use the local executor")
 
 
 @dataclass(frozen=True)
@@ -138,7 +144,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
 
     tasks = [(t, c, where(t, c)) for c in cfg.controllers for t in trials if (c, t.band, t.seed, t.index) not in done]
     total = len(cfg.controllers) * len(trials)
-    executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers))
+    executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
     bar = _progress(total, total - len(tasks), cfg.progress)
     start = time.perf_counter()
     steps = 0

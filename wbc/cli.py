@@ -60,11 +60,17 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
     seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
     out = Path(args.out) if args.out else Path("runs") / (
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
+    live = _live_observer(args) if getattr(args, "view", False) else None
     cfg = ArenaConfig(controllers=controllers, scenario=Path(args.scenario), bands=tuple(args.band or ()),
                       seeds=seeds, trials=args.trials, out_dir=out, executor=args.executor, workers=args.workers,
                       address=args.address, resume=args.resume, progress=not args.json and not args.quiet,
-                      save_episodes=getattr(args, "save_episodes", False))
-    result = run_arena(cfg)
+                      save_episodes=getattr(args, "save_episodes", False),
+                      observer=live[1] if live is not None else None)
+    try:
+        result = run_arena(cfg)
+    finally:
+        if live is not None:
+            live[0].stop()
     if args.json:
         print(json.dumps(result.summary, indent=2))
         return 0
@@ -73,6 +79,19 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
     print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s); "
           f"results in {result.out_dir}/ (trials.csv, summary.json, report.md)")
     return 0
+
+
+def _live_observer(args: argparse.Namespace):
+    """(server, observer) streaming every trial of a run to the browser (``wbc run --view``)."""
+    from wbc.viz.live import LiveObserver, LiveViewer
+    from wbc.viz.player import KeyboardControls, Player, PlayerConfig
+    from wbc.viz.server import MeshcatServer, ServerConfig
+
+    server = MeshcatServer(ServerConfig(host=args.host)).start()
+    print(f"viewer: {server.web_url}  (listening on {args.host} only; trials play one by one in this process)",
+          file=sys.stderr)
+    player = Player(PlayerConfig(speed=args.speed), KeyboardControls().start())
+    return server, LiveObserver(LiveViewer(server), player)
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -97,6 +116,10 @@ def _add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--save-episodes", action="store_true",
                    help="also store every trial's episode log under OUT/episodes/ (for `wbc view --episode`)")
+    p.add_argument("--view", action="store_true",
+                   help="watch the trials live in the browser (meshcat); they then play one by one in this process")
+    p.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
+    p.add_argument("--speed", type=float, default=1.0, help="with --view: 1 real time, 0.25 slow motion, 0 flat out")
 
 
 def _view(args: argparse.Namespace) -> int:

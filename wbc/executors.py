@@ -11,9 +11,13 @@ import multiprocessing
 import os
 from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from typing import TYPE_CHECKING
 
 from wbc.optional import require
 from wbc.trial import Trial
+
+if TYPE_CHECKING:  # the runner is imported lazily, in the worker that plays
+    from wbc.runner import TickObserver
 
 __all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "run_task"]
 
@@ -25,15 +29,16 @@ _SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_
 workers on two cores ran 2.5x slower than one)."""
 
 
-def run_task(task: Task) -> dict[str, object]:
+def run_task(task: Task, observer: TickObserver | None = None) -> dict[str, object]:
     """Play one (trial, controller, episode path) task in this process and return its results row.
 
     The episode is saved (when asked) before the row is returned, so a stored row always has its episode.
+    `observer` watches every tick (a live viewer; see `wbc.runner.run_episode`).
     """
     from wbc.runner import run_trial
 
     trial, controller, episode_path = task
-    record, episode = run_trial(trial, controller)
+    record, episode = run_trial(trial, controller, observer=observer)
     if episode_path is not None:
         episode.save(episode_path)
     return record
@@ -44,19 +49,21 @@ class LocalExecutor:
 
     Args:
         workers: number of processes (default: all cores).
+        observer: watches every tick of every trial (a live viewer); trials then run one by one in this process.
     """
 
     name = "local"
 
-    def __init__(self, workers: int | None = None) -> None:
-        self.workers = workers or os.cpu_count() or 1
+    def __init__(self, workers: int | None = None, observer: TickObserver | None = None) -> None:
+        self.workers = 1 if observer is not None else (workers or os.cpu_count() or 1)
+        self.observer = observer
 
     def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
         """Yield results rows as tasks finish."""
         tasks = list(tasks)
         if self.workers <= 1:
             for task in tasks:
-                yield run_task(task)
+                yield run_task(task, self.observer)
             return
         # Spawned (not forked) workers, so each starts its BLAS single-threaded from the environment; the pool starts
         # its processes on demand, so the environment stays set until the pool is done.
