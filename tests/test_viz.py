@@ -6,6 +6,7 @@ import re
 import shutil
 import socket
 import subprocess
+import sys
 import threading
 import urllib.request
 from pathlib import Path
@@ -127,6 +128,19 @@ def test_server_host_option_moves_only_the_web_page():
         assert listening[server.web_port] == "127.0.0.2"
         zmq_port = int(server.zmq_url.rsplit(":", 1)[1])
         assert listening[zmq_port] == "127.0.0.1"  # scene commands never leave loopback
+
+
+def test_server_exits_with_its_parent():
+    code = ("import os; from wbc.viz.server import MeshcatServer; "
+            "print(MeshcatServer().start().pid, flush=True); os._exit(0)")  # dies without stopping its server
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                         cwd=Path(__file__).resolve().parent.parent)
+    pid = int(out.stdout.strip().splitlines()[-1])
+    try:
+        psutil.Process(pid).wait(timeout=10)
+    except psutil.NoSuchProcess:
+        pass
+    assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
 
 
 def test_server_bad_host_is_a_clear_error():

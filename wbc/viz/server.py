@@ -71,7 +71,7 @@ class MeshcatServer:
             ViewerError: the server exited or did not report its URLs within ``start_timeout_s``.
         """
         cfg = self.config
-        cmd = [sys.executable, "-u", "-m", "wbc.viz.server", "--host", cfg.host]
+        cmd = [sys.executable, "-u", "-m", "wbc.viz.server", "--host", cfg.host, "--parent", str(os.getpid())]
         # the child imports this very package, wherever it was imported from
         root = str(Path(__file__).resolve().parents[2])
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
@@ -119,14 +119,16 @@ class MeshcatServer:
         self.stop()
 
 
-def serve(host: str) -> None:
+def serve(host: str, parent: int | None = None) -> None:
     """Run meshcat's bridge in this process, its web server bound to `host` only (blocks until killed).
 
     Ports are meshcat's: the first free from 7000 (web) and 6000 (ZMQ). Prints ``zmq_url=...``, ``web_url=...``
-    and ``web_port=...`` lines on stdout once listening.
+    and ``web_port=...`` lines on stdout once listening. With `parent`, exits once that process is gone (a viewer
+    killed without cleaning up leaves no server behind).
     """
     import functools
 
+    import tornado.ioloop
     from meshcat.servers.zmqserver import ZMQWebSocketBridge
 
     class _BoundBridge(ZMQWebSocketBridge):
@@ -145,15 +147,22 @@ def serve(host: str) -> None:
     print(f"zmq_url={bridge.zmq_url}")
     print(f"web_url={bridge.web_url}")
     print(f"web_port={bridge.fileserver_port}", flush=True)
+    if parent is not None:
+        def check_parent() -> None:
+            if os.getppid() != parent:
+                bridge.ioloop.stop()
+
+        tornado.ioloop.PeriodicCallback(check_parent, 1000).start()
     bridge.run()
 
 
 def main(argv: list[str] | None = None) -> None:
-    """``python -m wbc.viz.server --host H``: what `MeshcatServer` runs."""
+    """``python -m wbc.viz.server --host H [--parent PID]``: what `MeshcatServer` runs."""
     p = argparse.ArgumentParser(prog="python -m wbc.viz.server")
     p.add_argument("--host", default=LOOPBACK)
+    p.add_argument("--parent", type=int, default=None, help="exit when this process is gone")
     args = p.parse_args(argv)
-    serve(args.host)
+    serve(args.host, args.parent)
 
 
 if __name__ == "__main__":
