@@ -65,8 +65,6 @@ name = "soft"
 push_force_n = [120.0, 150.0]
 """
 
-pytestmark = pytest.mark.filterwarnings("ignore:zmq.eventloop.ioloop is deprecated:DeprecationWarning")
-
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 
 
