@@ -377,24 +377,32 @@ def test_player_rejects_negative_speed():
 
 
 # -- a real browser --------------------------------------------------------------------------------------------------
-def _screenshots(shots: list[tuple[str, Path]], budget_ms: int = 4000) -> list[np.ndarray]:
-    """Screenshots of several pages by headless Chromium, taken in parallel (each start costs ~5 s)."""
+def _chromium(jobs: list[tuple[str, Path, int]]) -> list[tuple[np.ndarray, str]]:
+    """Screenshot (``PATH.png``, as an RGB array) and DOM after the scripts ran (text) of several pages, taken by
+    headless Chromium in parallel (each start costs ~5 s), each after a budget of virtual time [ms]."""
     import matplotlib.image
 
     procs = []
-    for url, out in shots:
+    for url, png, budget_ms in jobs:
         cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
                "--enable-unsafe-swiftshader", "--hide-scrollbars", "--window-size=640,480",
-               f"--user-data-dir={out.with_suffix('.profile')}", f"--virtual-time-budget={budget_ms}",
-               f"--screenshot={out}", url]
-        procs.append(subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
-    for p in procs:
-        p.wait(timeout=120)
-    images = []
-    for url, out in shots:
-        assert out.exists(), f"chromium wrote no screenshot of {url}"
-        images.append(matplotlib.image.imread(str(out))[:, :, :3])
-    return images
+               f"--user-data-dir={png.with_suffix('.profile')}", f"--virtual-time-budget={budget_ms}",
+               f"--screenshot={png}", "--dump-dom", url]
+        procs.append(subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL))
+    doms = [p.communicate(timeout=120)[0].decode("utf-8", errors="replace") for p in procs]
+    results = []
+    for (url, png, _), dom in zip(jobs, doms, strict=True):
+        assert png.exists() and dom, f"chromium rendered nothing for {url}"
+        results.append((matplotlib.image.imread(str(png))[:, :, :3], dom))
+    return results
+
+
+_EXPECTED_TREE = {"wbc", "robot", "trunk_0", "arm", "arm_elbow", "arm_forearm_link_0", "push", "shaft", "head"}
+
+
+def _scene_tree(dom: str) -> set[str]:
+    """Names of the scene-tree entries in meshcat's control panel, as the browser built it."""
+    return set(re.findall(r'<li class="title">([^<]*)</li>', dom))
 
 
 def _red_pixels(img: np.ndarray) -> int:
@@ -414,11 +422,20 @@ def test_browser_renders_live_page_and_recorded_replay(recording, tmp_path):
         q = np.r_[0.0, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0, desc.nominal_q]
         viewer.show(VizFrame(t=0.1, qpos=q, push_force_in_world=np.array([0.0, 250.0, 0.0]),
                              push_point_in_world=q[:3], foot_force_in_world=np.tile([0.0, 0.0, 40.0], (4, 1))))
-        live, during, before = _screenshots([
-            (server.web_url, tmp_path / "live.png"),
-            (f"{page}#t={push.start + 0.5 * push.duration:.3f}", tmp_path / "during.png"),  # replay, mid-push
-            (f"{page}#t=0.5", tmp_path / "before.png"),  # replay, before the push
+        # the live page receives its scene over a websocket, which virtual time does not wait for: a longer budget
+        (live, live_dom), (during, replay_dom), (before, _) = _chromium([
+            (server.web_url, tmp_path / "live.png", 15000),
+            (f"{page}#t={push.start + 0.5 * push.duration:.3f}", tmp_path / "during.png", 4000),  # mid-push
+            (f"{page}#t=0.5", tmp_path / "before.png", 4000),  # replay, before the push
         ])
+        if not _EXPECTED_TREE <= _scene_tree(live_dom):
+            # on a loaded machine virtual time can run out before the websocket has delivered the whole scene
+            ((live, live_dom),) = _chromium([(server.web_url, tmp_path / "live2.png", 40000)])
+    # the scene tree the browser built holds the robot, the arm and the push arrow
+    for name, dom in (("live", live_dom), ("replay", replay_dom)):
+        tree = _scene_tree(dom)
+        missing = _EXPECTED_TREE - tree
+        assert not missing, f"the {name} page's scene tree lacks {sorted(missing)} ({len(tree)} entries)"
     assert live.std() > 0.05, "blank live screenshot"
     assert _red_pixels(live) > 200, "the live page shows no push arrow"
     assert during.std() > 0.05, "blank replay screenshot"
