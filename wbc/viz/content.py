@@ -86,8 +86,8 @@ class SceneContent:
         self.paths["plan"] = [self.plan.root]
         vis[f"{CAMERA}/rotated/<object>"].set_property("position", list(CAMERA_OFFSET))
         vis["/Axes"].set_property("visible", False)  # its z axis would stand inside the robot at the origin
-        if self.terrain.kind != "flat":
-            vis["/Grid"].set_property("visible", False)  # the z = 0 grid would cut through the heightfield
+        # the z = 0 grid would cut through a heightfield
+        vis["/Grid"].set_property("visible", self.terrain.kind == "flat")
 
     def poses(self, frame: VizFrame) -> dict[str, Pose]:
         """Every moving node's pose at `frame` (paths relative to the root, the camera's absolute)."""
