@@ -441,3 +441,45 @@ def test_browser_renders_live_page_and_recorded_replay(recording, tmp_path):
     assert during.std() > 0.05, "blank replay screenshot"
     assert _red_pixels(during) > 200, "the replay shows no push arrow during the push"
     assert _red_pixels(before) < 20, "the replay shows a push arrow before the push"
+
+
+def test_cli_view_live_pauses_until_a_key(short, tmp_path):
+    # a real terminal on stdin: start paused, step once, then play on with "p"; the trial waits for the keys
+    import os
+    import pty
+    import time
+
+    master, slave = pty.openpty()
+    cmd = [sys.executable, "-m", "wbc.cli", "view", "stand", "--scenario", str(short), "--trial", "0",
+           "--duration", "0.4", "--speed", "0", "--paused"]
+    proc = subprocess.Popen(cmd, stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            cwd=Path(__file__).resolve().parent.parent)
+    err: list[str] = []
+    reader = threading.Thread(target=lambda: err.extend(iter(proc.stderr.readline, "")), daemon=True)
+    reader.start()
+
+    def said(text: str, wait: float) -> bool:
+        end = time.monotonic() + wait
+        while time.monotonic() < end:
+            if any(text in line for line in err):
+                return True
+            time.sleep(0.1)
+        return False
+
+    try:
+        assert said("viewer: http://127.0.0.1:", 30), err
+        assert not said("finished", 4), "the trial ran although it was paused"
+        os.write(master, b"s\n")  # one step of 0.02 s, paused again
+        assert not said("finished", 2)
+        os.write(master, b"p\n")  # play on
+        assert said("finished", 30), err  # the page is still served until q
+        assert proc.poll() is None
+        os.write(master, b"q\n")
+        out = proc.communicate(timeout=30)[0]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        os.close(master)
+        os.close(slave)
+    assert proc.returncode == 0, err
+    assert "survived" in out

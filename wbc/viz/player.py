@@ -86,6 +86,12 @@ class Controls:
             self.paused = False
             self._lock.notify_all()
 
+    def wait_stopped(self) -> None:
+        """Block until `stop`."""
+        with self._lock:
+            while not self.stopped:
+                self._lock.wait()
+
     def wait_while_paused(self, timeout: float | None = None) -> bool:
         """Block while paused; True if a single step was granted (consumed here)."""
         with self._lock:
@@ -101,9 +107,13 @@ class Controls:
 class KeyboardControls(Controls):
     """`Controls` fed by lines typed on stdin (a daemon thread; nothing is read when stdin is not a terminal)."""
 
+    interactive = False
+    """True once `start` found a terminal to read keys from."""
+
     def start(self) -> KeyboardControls:
         """Start reading stdin if it is a terminal; print the keys."""
         if sys.stdin is not None and sys.stdin.isatty():
+            self.interactive = True
             print("keys (then Enter): p pause/resume, s single step, + faster, - slower, q stop", file=sys.stderr)
             threading.Thread(target=self._read, daemon=True).start()
         return self

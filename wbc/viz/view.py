@@ -13,6 +13,7 @@ import webbrowser
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wbc.errors import ConfigError
 from wbc.runner import run_trial
 from wbc.trial import Trial
 from wbc.viz.live import LiveObserver, LiveViewer
@@ -36,7 +37,7 @@ class ViewConfig:
         player: pacing of the live view.
         open_browser: open the page in the default browser.
         wait_for_browser: play only once a browser has connected.
-        keep_open: after the trial, keep the server up until Enter (only when stdin is a terminal).
+        keep_open: after the trial, keep the server up until q is typed (only when stdin is a terminal).
     """
 
     live: bool = True
@@ -69,6 +70,10 @@ class ViewResult:
 
 
 def _start_live(cfg: ViewConfig) -> tuple[MeshcatServer, LiveViewer, Player]:
+    controls = KeyboardControls().start()
+    if not controls.interactive and (cfg.player.pause_at or cfg.player.start_paused):
+        raise ConfigError("--pause-at and --paused need a terminal on stdin to resume (keys p and s); run "
+                          "interactively, or record with --record and pause in the page")
     server = MeshcatServer(ServerConfig(host=cfg.host)).start()
     viewer = LiveViewer(server)
     print(f"viewer: {server.web_url}  (listening on {cfg.host} only)", file=sys.stderr)
@@ -77,14 +82,17 @@ def _start_live(cfg: ViewConfig) -> tuple[MeshcatServer, LiveViewer, Player]:
     if cfg.wait_for_browser:
         print("waiting for a browser to open the page ...", file=sys.stderr)
         viewer.vis.wait()
-    return server, viewer, Player(cfg.player, KeyboardControls().start())
+    return server, viewer, Player(cfg.player, controls)
 
 
-def _linger(cfg: ViewConfig) -> None:
-    if cfg.keep_open and sys.stdin is not None and sys.stdin.isatty():
+def _linger(cfg: ViewConfig, player: Player) -> None:
+    """Keep the page served after the trial until the person types q (stdin a terminal only)."""
+    controls = player.controls
+    if cfg.keep_open and isinstance(controls, KeyboardControls) and controls.interactive and not controls.stopped:
+        print("finished; q + Enter closes the viewer", file=sys.stderr)
         try:
-            input("finished; press Enter to close the viewer ")
-        except (EOFError, KeyboardInterrupt):
+            controls.wait_stopped()
+        except KeyboardInterrupt:
             pass
 
 
@@ -101,7 +109,7 @@ def view_trial(trial: Trial, controller: str, cfg: ViewConfig) -> ViewResult:
             written = observer.recordings[-1].save(cfg.record, title=f"{controller}: {trial.scenario} "
                                                    f"{trial.band} seed {trial.seed} trial {trial.index}")
         if cfg.live:
-            _linger(cfg)
+            _linger(cfg, player)
         paths = (viewer.paths if viewer is not None else observer.recordings[-1].paths)
         return ViewResult(row=row, recording=written, frames_drawn=player.drawn if player else 0,
                           frames_recorded=observer.recordings[-1].frames if cfg.record else 0, paths=paths)
@@ -133,7 +141,7 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
                     viewer.show(frame)
                     player.drew(frame.t)
             drawn, paths = player.drawn, viewer.paths
-            _linger(cfg)
+            _linger(cfg, player)
         finally:
             server.stop()
     return ViewResult(row=None, recording=written, frames_drawn=drawn, frames_recorded=recorded, paths=paths)
