@@ -303,7 +303,9 @@ class MpcController:
         forces = plan.forces[k]
         params = kin.params
         com_acc = forces.sum(axis=0) / params.mass + np.array([0.0, 0.0, -9.81])
-        moment = np.cross(kin.feet - kin.com, forces).sum(axis=0)
+        r, f = kin.feet - kin.com, forces
+        moment = np.array([(r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1]).sum(), (r[:, 2] * f[:, 0] - r[:, 0] * f[:, 2]).sum(),
+                           (r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]).sum()])
         inertia_inv = np.linalg.inv(params.inertia_world)
         arm_v = plan.arm_velocity[k] if self.has_arm and self.config.use_arm_momentum else np.zeros(3)
         omega = inertia_inv @ (x[9:12] - params.arm_momentum_matrix @ arm_v)
@@ -321,10 +323,11 @@ class MpcController:
     def _leg_torques(self, contact: np.ndarray) -> np.ndarray:
         cfg, kin = self.config, self.kin
         tau = np.zeros(kin.n)
+        jacobians = kin.compute_jacobians()
         k = self._plan_step()
         progress = self.gait.swing_progress(self.t)
         for i in range(4):
-            jac = kin.foot_jacobians[i][:, 3 * i:3 * i + 3]
+            jac = jacobians[i][:, 3 * i:3 * i + 3]
             if contact[i]:
                 f = self.plan.forces[k, i] if self.plan is not None else np.array([0.0, 0.0, 35.0])
                 tau[3 * i:3 * i + 3] = -jac.T @ f

@@ -61,7 +61,9 @@ def plan_foothold(hip_now: np.ndarray, com_now: np.ndarray, v_com: np.ndarray, v
     hip_td[2] = hip_now[2]
     root = np.sqrt(max(height, 0.05) / 9.81)
     offset = vc * (stance_s / 2) + config.capture_gain * root * (v - vc)
-    offset += config.centripetal_gain * root * np.cross(v, np.array([0.0, 0.0, yaw_rate_cmd]))
+    # v x (0, 0, w) = (w v_y, -w v_x, 0)
+    offset[0] += config.centripetal_gain * root * yaw_rate_cmd * v[1]
+    offset[1] -= config.centripetal_gain * root * yaw_rate_cmd * v[0]
     # turning: over half a stance the hip sweeps by yaw_rate x (hip - CoM)
     offset[0] -= yaw_rate_cmd * lever[1] * (stance_s / 2)  # (0, 0, w) x (l_x, l_y, 0) = (-w l_y, w l_x, 0)
     offset[1] += yaw_rate_cmd * lever[0] * (stance_s / 2)

@@ -45,6 +45,21 @@ class RobotKinematics:
         self.q_pin = np.zeros(self.robot.model.nq)
         self.v_pin = np.zeros(self.robot.model.nv)
         self._rot = np.eye(3)
+        self._jacobians_valid = False
+
+    def compute_jacobians(self) -> np.ndarray:
+        """The feet's translation Jacobians at the last `update`, world axes, house joint columns, shape (4, 3, n).
+
+        Computed on demand: only the leg-level fallback layer needs them.
+        """
+        if not self._jacobians_valid:
+            model, data = self.robot.model, self.robot.data
+            pin.computeJointJacobians(model, data, self.q_pin)
+            frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+            for i, fid in enumerate(self._foot_frames):
+                self.foot_jacobians[i] = pin.getFrameJacobian(model, data, fid, frame)[:3, self._house_cols]
+            self._jacobians_valid = True
+        return self.foot_jacobians
 
     def shift(self, dp: np.ndarray, dv: np.ndarray) -> None:
         """Move the whole state by a base position and velocity correction (the estimator's update).
@@ -84,16 +99,14 @@ class RobotKinematics:
         vp = np.concatenate([rot.T @ v_base_world, omega_body, dq[self._perm]])
         self.q_pin, self.v_pin, self._rot = qp, vp, rot
         pin.forwardKinematics(model, data, qp, vp)
-        pin.computeJointJacobians(model, data, qp)
         pin.updateFramePlacements(model, data)
         frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         for i, fid in enumerate(self._foot_frames):
             self.feet[i] = data.oMf[fid].translation
             self.feet_vel[i] = pin.getFrameVelocity(model, data, fid, frame).linear
-            jac = pin.getFrameJacobian(model, data, fid, frame)
-            self.foot_jacobians[i] = jac[:3, self._house_cols]
             self.hips[i] = data.oMi[self._hip_joints[i]].translation
-        self.com = pin.centerOfMass(model, data, qp, vp).copy()
+        self._jacobians_valid = False
+        self.com = pin.centerOfMass(model, data, pin.KinematicLevel.VELOCITY, False).copy()
         self.com_vel = data.vcom[0].copy()
         if centroidal:
             pin.ccrba(model, data, qp, vp)
