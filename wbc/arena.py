@@ -6,6 +6,7 @@ very same trials, so differences between controllers come with paired confidence
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import time
@@ -39,6 +40,8 @@ class ArenaConfig:
         address: Ray cluster address (None: a local Ray).
         resume: finish an interrupted run in `out_dir`.
         progress: show a progress bar on stderr.
+        no_push: play the scenario's trials without their pushes (commands, terrain and domain unchanged).
+        debug_truth: throw the controllers' ground-truth debug switch (base state from the simulator).
     """
 
     controllers: tuple[str, ...]
@@ -52,6 +55,8 @@ class ArenaConfig:
     address: str | None = None
     resume: bool = False
     progress: bool = True
+    no_push: bool = False
+    debug_truth: bool = False
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -115,6 +120,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         published = False
         print(f"wbc: warning: {exc}", file=sys.stderr)
     trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
+    if cfg.no_push:
+        trials = [dataclasses.replace(t, pushes=()) for t in trials]
     identity = {
         "controllers": list(cfg.controllers),
         "scenario": {"path": str(cfg.scenario), "name": scenario.name, "version": scenario.version,
@@ -122,10 +129,13 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "bands": list(bands),
         "seeds": list(cfg.seeds),
         "trials": cfg.trials,
+        "no_push": cfg.no_push,
+        "debug_truth": cfg.debug_truth,
     }
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume)
     done = store.done()
-    tasks = [(t, c) for c in cfg.controllers for t in trials if (c, t.band, t.seed, t.index) not in done]
+    tasks = [(t, c, cfg.debug_truth) for c in cfg.controllers for t in trials
+             if (c, t.band, t.seed, t.index) not in done]
     total = len(cfg.controllers) * len(trials)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers))
     bar = _progress(total, total - len(tasks), cfg.progress)
@@ -155,6 +165,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "bands": ", ".join(bands),
         "seeds": ", ".join(str(s) for s in cfg.seeds),
         "trials per band and seed": cfg.trials,
+        "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
+        "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
         "executor": cfg.executor,
         **{k: v for k, v in environment_info().items() if k != "packages"},
         "packages": ", ".join(f"{k} {v}" for k, v in environment_info()["packages"].items()),

@@ -62,7 +62,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
     cfg = ArenaConfig(controllers=controllers, scenario=Path(args.scenario), bands=tuple(args.band or ()),
                       seeds=seeds, trials=args.trials, out_dir=out, executor=args.executor, workers=args.workers,
-                      address=args.address, resume=args.resume, progress=not args.json and not args.quiet)
+                      address=args.address, resume=args.resume, progress=not args.json and not args.quiet,
+                      no_push=args.no_push, debug_truth=args.debug_truth)
     result = run_arena(cfg)
     if args.json:
         print(json.dumps(result.summary, indent=2))
@@ -94,6 +95,9 @@ def _add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
     p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-push", action="store_true", help="play the trials without their pushes")
+    p.add_argument("--debug-truth", action="store_true",
+                   help="debug: controllers read the simulator's base state instead of estimating it (recorded)")
 
 
 def _bench_mpc(args: argparse.Namespace) -> int:

@@ -166,8 +166,8 @@ class BaseEstimator:
             gain = _steady_gain(dt, self.config, pattern)
             # innovation y - C x, written out: C's blocks are identities
             innov = y.copy()
-            innov[0:12] -= x[6:18] - np.tile(x[0:3], 4)
-            innov[12:24] -= np.tile(x[3:6], 4)
+            innov[0:12] -= (x[6:18].reshape(4, 3) - x[0:3]).ravel()
+            innov[12:24] -= (np.zeros((4, 3)) + x[3:6]).ravel()
             innov[24:28] -= x[8:18:3]
             x += gain @ innov
             return

@@ -17,7 +17,8 @@ from wbc.trial import Trial
 
 __all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "run_task"]
 
-Task = tuple[Trial, str]
+Task = tuple[Trial, str] | tuple[Trial, str, bool]
+"""(trial, controller) or (trial, controller, debug_truth)."""
 
 _SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """Workers run one trial each on one core: a multi-threaded BLAS in every worker oversubscribes the cores (two MPC
@@ -25,11 +26,11 @@ workers on two cores ran 2.5x slower than one)."""
 
 
 def run_task(task: Task) -> dict[str, object]:
-    """Play one (trial, controller) task in this process and return its results row."""
+    """Play one task in this process and return its results row."""
     from wbc.runner import run_trial
 
-    trial, controller = task
-    record, _ = run_trial(trial, controller)
+    trial, controller, *rest = task
+    record, _ = run_trial(trial, controller, debug_truth=bool(rest[0]) if rest else False)
     return record
 
 

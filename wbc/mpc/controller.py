@@ -6,14 +6,17 @@ footholds from the Raibert + capture-point heuristic for the feet in swing. The 
 plan to motor commands: stance feet get tau = -J^T f (the planned ground reaction), swing feet a Cartesian PD along
 their swing trajectory, the arm a PD on the integrated planned velocity; joints are damped by the motor drivers.
 
-Ground truth is never used: the controller sees only `RobotState`. A failed MPC solve falls back to the previous
+Ground truth is never used unless the explicit debug switch `use_ground_truth` is thrown (``wbc run --debug-truth``,
+recorded in the results): the controller sees only `RobotState`. A failed MPC solve falls back to the previous
 plan, shifted, and is counted (``fallbacks``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -28,6 +31,9 @@ from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import RobotDescription
 from wbc.robots.joint_table import joint_table
 from wbc.types import MotorCommand, RobotState, VelocityCommand
+
+if TYPE_CHECKING:
+    from wbc.hardware.mujoco_robot import BaseTruth
 
 __all__ = ["MpcControllerConfig", "MpcController"]
 
@@ -121,7 +127,15 @@ class MpcController:
         self.gait = GaitScheduler(self.config.gait)
         self.estimator = BaseEstimator(self.dt, self.config.estimator)
         self.wbc = WholeBodyQp(desc, self.config.wbc) if self.config.whole_body == "qp" else None
+        self._truth: Callable[[], BaseTruth] | None = None
         self.reset()
+
+    def use_ground_truth(self, truth: Callable[[], BaseTruth]) -> None:
+        """Debug switch: take the base position and velocity from `truth` (the simulator) instead of the estimator.
+
+        For isolating estimation errors only; the runner records it in every results row (``debug_truth``).
+        """
+        self._truth = truth
 
     def reset(self) -> None:
         """Start a new episode."""
@@ -133,6 +147,7 @@ class MpcController:
         self.solves = 0
         self.wbc_failures = 0
         self._x0 = np.zeros(15)
+        self._inertia_inv, self._inertia_of = np.eye(3), None
         self._started = False
         self._yaw_unwrapped = 0.0
         self._yaw_target = 0.0
@@ -184,14 +199,20 @@ class MpcController:
             self._started = True
         # one kinematics pass at the predicted base state serves the estimator, then is shifted by its correction
         replan = self.plan is None or self.tick % cfg.replan_every == 0
-        p_prior, v_prior = self.estimator.position, self.estimator.velocity
-        kin.update(p_prior, state.imu_quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=replan)
         contact = self.gait.contact(self.t)
-        # a foot is trusted as a stance foot when the gait says so and its force sensor agrees: a late touchdown
-        # or an early lift-off would otherwise feed a moving foot into the velocity estimate
-        trust = contact * np.clip(state.foot_force / self.config.contact_force, 0.0, 1.0)
-        self.estimator.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
-        kin.shift(self.estimator.position - p_prior, self.estimator.velocity - v_prior)
+        if self._truth is not None:
+            # debug switch: the simulator's base position and velocity replace the estimate
+            truth = self._truth()
+            kin.update(truth.base_position_in_world, state.imu_quat, state.q, state.dq, truth.base_linvel_in_world,
+                       state.gyro_in_body, centroidal=replan)
+        else:
+            p_prior, v_prior = self.estimator.position, self.estimator.velocity
+            kin.update(p_prior, state.imu_quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=replan)
+            # a foot is trusted as a stance foot when the gait says so and its force sensor agrees: a late
+            # touchdown or an early lift-off would otherwise feed a moving foot into the velocity estimate
+            trust = contact * np.clip(state.foot_force / self.config.contact_force, 0.0, 1.0)
+            self.estimator.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
+            kin.shift(self.estimator.position - p_prior, self.estimator.velocity - v_prior)
         yaw = _yaw_of(rot)
         self._yaw_unwrapped += math.remainder(yaw - self._yaw_unwrapped, 2 * math.pi)
         cy, sy = math.cos(self._yaw_unwrapped), math.sin(self._yaw_unwrapped)
@@ -306,7 +327,9 @@ class MpcController:
         r, f = kin.feet - kin.com, forces
         moment = np.array([(r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1]).sum(), (r[:, 2] * f[:, 0] - r[:, 0] * f[:, 2]).sum(),
                            (r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]).sum()])
-        inertia_inv = np.linalg.inv(params.inertia_world)
+        if self._inertia_of is not params:
+            self._inertia_inv, self._inertia_of = np.linalg.inv(params.inertia_world), params
+        inertia_inv = self._inertia_inv
         arm_v = plan.arm_velocity[k] if self.has_arm and self.config.use_arm_momentum else np.zeros(3)
         omega = inertia_inv @ (x[9:12] - params.arm_momentum_matrix @ arm_v)
         swing_pos, swing_vel = self._swing_targets(contact)

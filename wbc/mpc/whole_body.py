@@ -192,14 +192,11 @@ class WholeBodyQp:
         robot.update_kinematics()
         self._set_stance(np.asarray(stance, dtype=bool))
         for i in range(4):
-            task = self.feet_tasks[i]
-            if self._stance[i]:
-                task.target_world = robot.get_T_world_frame(FOOT_NAMES[i])[:3, 3]
-                task.dtarget_world = np.zeros(3)
-            else:
+            # a stance foot's task has no gains: its targets do not matter
+            if not self._stance[i]:
+                task = self.feet_tasks[i]
                 task.target_world = feet_pos[i]
                 task.dtarget_world = feet_vel[i]
-            task.ddtarget_world = np.zeros(3)
         self.com_task.target_world = com
         self.com_task.dtarget_world = com_vel
         self.com_task.ddtarget_world = com_acc
