@@ -32,6 +32,33 @@ def _analyze_tail(args: argparse.Namespace) -> int:
     return 0
 
 
+def _analyze_arm_momentum(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
+    import numpy as np
+
+    from wbc.arm_momentum import arm_momentum_study
+
+    rows = arm_momentum_study(args.scenario, args.controller, band=args.band, seeds=tuple(range(args.seeds)),
+                              trials=args.trials)
+    if args.json:
+        print(json.dumps([asdict(r) for r in rows], indent=2))
+        return 0
+    print(f"arm momentum during push recovery: {args.controller}, {args.scenario} band {args.band}")
+    print("  seed trial survived  arm travel [rad]  push |r x F| T [N m s]  arm |h| peak [N m s]  arm |h| mean")
+    for r in rows:
+        print(f"  {r.seed:4d} {r.trial:5d} {str(r.survived):8s}  {r.arm_travel_rad:16.1f}  "
+              f"{r.push_angular_impulse:22.3f}  {r.arm_momentum_peak:20.3f}  {r.arm_momentum_mean:12.3f}")
+    if rows:
+        mean = {k: float(np.mean([getattr(r, k) for r in rows])) for k in
+                ("arm_travel_rad", "push_angular_impulse", "arm_momentum_peak", "arm_momentum_mean")}
+        print(f"  mean: travel {mean['arm_travel_rad']:.1f} rad, push angular impulse "
+              f"{mean['push_angular_impulse']:.3f} N m s, arm momentum peak {mean['arm_momentum_peak']:.3f} N m s "
+              f"({100 * mean['arm_momentum_peak'] / max(mean['push_angular_impulse'], 1e-9):.0f} % of the impulse), "
+              f"mean {mean['arm_momentum_mean']:.3f} N m s")
+    return 0
+
+
 def _bench_sim(args: argparse.Namespace) -> int:
     from wbc.bench import bench_sim
 
@@ -165,6 +192,14 @@ def _parser() -> argparse.ArgumentParser:
     tail.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     tail.add_argument("--json", action="store_true", help="print JSON")
     tail.set_defaults(func=_analyze_tail)
+    arm = analyze.add_parser("arm-momentum", help="the arm's angular momentum against the pushes' angular impulse")
+    arm.add_argument("--scenario", default="scenarios/push.toml")
+    arm.add_argument("--band", default="ood")
+    arm.add_argument("--controller", default="mpc")
+    arm.add_argument("--trials", type=int, default=5, help="trials per seed")
+    arm.add_argument("--seeds", type=int, default=1)
+    arm.add_argument("--json", action="store_true")
+    arm.set_defaults(func=_analyze_arm_momentum)
 
     bench = sub.add_parser("bench", help="speed figures").add_subparsers(dest="what", required=True)
     sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")
