@@ -18,6 +18,7 @@ from wbc.arena import ArenaConfig, run_arena
 from wbc.cli import main
 from wbc.control import CONTROLLERS
 from wbc.episode import Episode
+from wbc.errors import WbcError
 from wbc.metrics import compute_metrics
 from wbc.results import RECORD_FIELDS, read_records
 from wbc.runner import run_trial
@@ -218,3 +219,18 @@ def test_cli_run_prints_the_table_and_writes_the_directory(small, tmp_path, caps
                  "--out", str(tmp_path / "j"), "--workers", "1"]) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["controllers"]["stand"]["bands"]["soft"]["trials"] == 1
+
+
+def test_no_push_and_debug_truth_are_recorded_with_the_run(small, tmp_path):
+    cfg = ArenaConfig(controllers=("mpc",), scenario=small, seeds=(0,), trials=1, bands=("hard",),
+                      out_dir=tmp_path / "np", progress=False, workers=1, no_push=True, debug_truth=True)
+    result = run_arena(cfg)
+    records = read_records(result.out_dir / "trials.csv")
+    assert len(records) == 1
+    # the hard band's pushes topple the robot; without them it survives, and the row says how it was run
+    assert records[0]["success"] and records[0]["n_pushes"] == 0 and records[0]["debug_truth"] is True
+    run = json.loads((result.out_dir / "run.json").read_text())
+    assert run["config"]["no_push"] is True and run["config"]["debug_truth"] is True
+    assert "GROUND TRUTH" in (result.out_dir / "report.md").read_text()
+    with pytest.raises(WbcError, match="ground-truth debug switch"):
+        run_trial(load_scenario(small).trial("soft", 0, 0), "stand", debug_truth=True)

@@ -74,3 +74,16 @@ def test_missing_extra_names_the_extra_to_install():
     with pytest.raises(MissingExtraError, match=r"wbc\[hardware\]"):
         require("dynamixel_sdk_missing_for_test", "hardware")
     assert require("json") is json
+
+
+def test_arm_momentum_study_measures_the_arm_against_the_push():
+    from wbc.arm_momentum import arm_momentum_study
+
+    actuated = arm_momentum_study("scenarios/push.toml", "mpc", band="ood", trials=1, duration_s=3.5)
+    locked = arm_momentum_study("scenarios/push.toml", "mpc-locked", band="ood", trials=1, duration_s=3.5)
+    a, b = actuated[0], locked[0]
+    # the same push (same trial) on both; 300-400 N for 0.06 s at up to 0.12 m off the trunk's centre
+    assert a.push_angular_impulse == pytest.approx(b.push_angular_impulse, rel=0.05)
+    assert 0.0 < a.push_angular_impulse < 400 * 0.06 * 0.4
+    assert b.arm_momentum_peak == 0.0 and b.arm_travel_rad == 0.0
+    assert a.arm_momentum_peak > 0.0 and a.arm_travel_rad > 0.0

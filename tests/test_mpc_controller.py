@@ -73,3 +73,48 @@ def test_failed_solves_fall_back_to_the_previous_plan_and_are_counted():
 
     robot, ctrl, log = _loop("mpc", 2.0, VelocityCommand(), hook=break_some)
     assert ctrl.counters()["fallbacks"] >= 3
+
+
+def test_walking_at_0_3_m_s_is_tracked_within_0_05_m_s():
+    """The issue's tracking target, on flat ground: the mean velocity error over the settled second half."""
+    robot, ctrl, log = _loop("mpc", 5.0, VelocityCommand(vx=0.3))
+    vel = np.array([e[1] for e in log])[len(log) // 2:]
+    assert np.linalg.norm(vel[:, :2].mean(axis=0) - [0.3, 0.0]) < 0.05
+    assert ctrl.counters()["wbc_failures"] == 0
+
+
+def test_a_failed_whole_body_qp_falls_back_to_the_leg_layer_and_is_counted():
+    def break_some(k, ctrl):
+        if k == 200:
+            real = ctrl.wbc.solve
+
+            def flaky(*args, **kwargs):
+                result = real(*args, **kwargs)
+                flaky.calls += 1
+                if flaky.calls % 3 == 0:
+                    result.success = False
+                return result
+
+            flaky.calls = 0
+            ctrl.wbc.solve = flaky
+
+    robot, ctrl, log = _loop("mpc", 1.5, VelocityCommand(vx=0.2), hook=break_some)
+    assert ctrl.counters()["wbc_failures"] >= 100
+
+
+def test_ground_truth_debug_switch_replaces_the_estimate():
+    spec = get_controller("mpc")
+    robot = MujocoRobot(MujocoRobotConfig(arm_mode=spec.arm_mode))
+    robot.connect()
+    robot.reset(seed=2)
+    ctrl = spec.make(robot.desc)
+    ctrl.use_ground_truth(robot.base_truth)
+    ctrl.reset()
+    for _ in range(100):
+        robot.write(ctrl.act(robot.read(), VelocityCommand(vx=0.3)))
+        robot.advance(1.0 / ctrl.rate_hz)
+    truth = robot.base_truth()
+    # the kinematics the controller used were built at the simulator's base position, not the estimator's
+    assert ctrl.kin.q_pin[0:3] == pytest.approx(truth.base_position_in_world, abs=0.01)
+    assert np.all(ctrl.estimator.position == 0.0) or not np.allclose(ctrl.estimator.position,
+                                                                         truth.base_position_in_world, atol=1e-3)

@@ -6,6 +6,7 @@ very same trials, so differences between controllers come with paired confidence
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import sys
 import time
@@ -41,6 +42,8 @@ class ArenaConfig:
         address: Ray cluster address (None: a local Ray).
         resume: finish an interrupted run in `out_dir`.
         progress: show a progress bar on stderr.
+        no_push: play the scenario's trials without their pushes (commands, terrain and domain unchanged).
+        debug_truth: throw the controllers' ground-truth debug switch (base state from the simulator).
         save_episodes: also store every trial's episode log (``episodes/<controller>/<band>-s<seed>-t<i>.npz``,
             for replay with ``wbc view --episode``).
         observer: watches every tick (``wbc run --view``); trials then run one by one in this process (local
@@ -58,6 +61,8 @@ class ArenaConfig:
     address: str | None = None
     resume: bool = False
     progress: bool = True
+    no_push: bool = False
+    debug_truth: bool = False
     save_episodes: bool = False
     observer: TickObserver | None = None
 
@@ -125,6 +130,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         published = False
         print(f"wbc: warning: {exc}", file=sys.stderr)
     trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
+    if cfg.no_push:
+        trials = [dataclasses.replace(t, pushes=()) for t in trials]
     identity = {
         "controllers": list(cfg.controllers),
         "scenario": {"path": str(cfg.scenario), "name": scenario.name, "version": scenario.version,
@@ -132,6 +139,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "bands": list(bands),
         "seeds": list(cfg.seeds),
         "trials": cfg.trials,
+        "no_push": cfg.no_push,
+        "debug_truth": cfg.debug_truth,
     }
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume)
     done = store.done()
@@ -142,7 +151,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         path.parent.mkdir(parents=True, exist_ok=True)
         return str(path)
 
-    tasks = [(t, c, where(t, c)) for c in cfg.controllers for t in trials if (c, t.band, t.seed, t.index) not in done]
+    tasks = [(t, c, cfg.debug_truth, where(t, c)) for c in cfg.controllers for t in trials
+             if (c, t.band, t.seed, t.index) not in done]
     total = len(cfg.controllers) * len(trials)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
     bar = _progress(total, total - len(tasks), cfg.progress)
@@ -172,6 +182,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "bands": ", ".join(bands),
         "seeds": ", ".join(str(s) for s in cfg.seeds),
         "trials per band and seed": cfg.trials,
+        "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
+        "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
         "executor": cfg.executor,
         **{k: v for k, v in environment_info().items() if k != "packages"},
         "packages": ", ".join(f"{k} {v}" for k, v in environment_info()["packages"].items()),

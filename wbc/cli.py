@@ -32,6 +32,33 @@ def _analyze_tail(args: argparse.Namespace) -> int:
     return 0
 
 
+def _analyze_arm_momentum(args: argparse.Namespace) -> int:
+    from dataclasses import asdict
+
+    import numpy as np
+
+    from wbc.arm_momentum import arm_momentum_study
+
+    rows = arm_momentum_study(args.scenario, args.controller, band=args.band, seeds=tuple(range(args.seeds)),
+                              trials=args.trials)
+    if args.json:
+        print(json.dumps([asdict(r) for r in rows], indent=2))
+        return 0
+    print(f"arm momentum during push recovery: {args.controller}, {args.scenario} band {args.band}")
+    print("  seed trial survived  arm travel [rad]  push |r x F| T [N m s]  arm |h| peak [N m s]  arm |h| mean")
+    for r in rows:
+        print(f"  {r.seed:4d} {r.trial:5d} {str(r.survived):8s}  {r.arm_travel_rad:16.1f}  "
+              f"{r.push_angular_impulse:22.3f}  {r.arm_momentum_peak:20.3f}  {r.arm_momentum_mean:12.3f}")
+    if rows:
+        mean = {k: float(np.mean([getattr(r, k) for r in rows])) for k in
+                ("arm_travel_rad", "push_angular_impulse", "arm_momentum_peak", "arm_momentum_mean")}
+        print(f"  mean: travel {mean['arm_travel_rad']:.1f} rad, push angular impulse "
+              f"{mean['push_angular_impulse']:.3f} N m s, arm momentum peak {mean['arm_momentum_peak']:.3f} N m s "
+              f"({100 * mean['arm_momentum_peak'] / max(mean['push_angular_impulse'], 1e-9):.0f} % of the impulse), "
+              f"mean {mean['arm_momentum_mean']:.3f} N m s")
+    return 0
+
+
 def _bench_sim(args: argparse.Namespace) -> int:
     from wbc.bench import bench_sim
 
@@ -64,6 +91,7 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
     cfg = ArenaConfig(controllers=controllers, scenario=Path(args.scenario), bands=tuple(args.band or ()),
                       seeds=seeds, trials=args.trials, out_dir=out, executor=args.executor, workers=args.workers,
                       address=args.address, resume=args.resume, progress=not args.json and not args.quiet,
+                      no_push=getattr(args, "no_push", False), debug_truth=getattr(args, "debug_truth", False),
                       save_episodes=getattr(args, "save_episodes", False),
                       observer=live[1] if live is not None else None)
     try:
@@ -114,6 +142,9 @@ def _add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
     p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-push", action="store_true", help="play the trials without their pushes")
+    p.add_argument("--debug-truth", action="store_true",
+                   help="debug: controllers read the simulator's base state instead of estimating it (recorded)")
     p.add_argument("--save-episodes", action="store_true",
                    help="also store every trial's episode log under OUT/episodes/ (for `wbc view --episode`)")
     p.add_argument("--view", action="store_true",
@@ -181,7 +212,9 @@ def _bench_mpc(args: argparse.Namespace) -> int:
     print(f"  machine: {result['machine']}")
     print(f"  MPC QP solve   : median {result['mpc_solve_ms_median']:.2f} ms, p99 {result['mpc_solve_ms_p99']:.2f} ms "
           f"(setup median {result['mpc_setup_ms_median']:.2f} ms)")
-    print(f"  whole-body tick: median {result['wbc_tick_us_median']:.0f} us (ticks without an MPC update)")
+    print(f"  whole-body QP tick: median {result['wbc_tick_us_median']:.0f} us (PlaCo, every tick)")
+    print(f"  control tick: median {result['control_tick_us_median']:.0f} us (estimator + footholds + QP + command, "
+          "ticks without an MPC update)")
     print(f"  closed loop    : {result['realtime_factor']:.1f}x real time on one core")
     return 0
 
@@ -233,6 +266,14 @@ def _parser() -> argparse.ArgumentParser:
     tail.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     tail.add_argument("--json", action="store_true", help="print JSON")
     tail.set_defaults(func=_analyze_tail)
+    arm = analyze.add_parser("arm-momentum", help="the arm's angular momentum against the pushes' angular impulse")
+    arm.add_argument("--scenario", default="scenarios/push.toml")
+    arm.add_argument("--band", default="ood")
+    arm.add_argument("--controller", default="mpc")
+    arm.add_argument("--trials", type=int, default=5, help="trials per seed")
+    arm.add_argument("--seeds", type=int, default=1)
+    arm.add_argument("--json", action="store_true")
+    arm.set_defaults(func=_analyze_arm_momentum)
 
     bench = sub.add_parser("bench", help="speed figures").add_subparsers(dest="what", required=True)
     sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")

@@ -21,8 +21,9 @@ if TYPE_CHECKING:  # the runner is imported lazily, in the worker that plays
 
 __all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "run_task"]
 
-Task = tuple[Trial, str, str | None]
-"""(trial, controller, where to save the episode log as ``.npz``, or None)."""
+Task = tuple[Trial, str] | tuple[Trial, str, bool] | tuple[Trial, str, bool, str | None]
+"""(trial, controller), (trial, controller, debug_truth) or (trial, controller, debug_truth, episode path): where to
+save the episode log as ``.npz``, or None."""
 
 _SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """Workers run one trial each on one core: a multi-threaded BLAS in every worker oversubscribes the cores (two MPC
@@ -30,15 +31,17 @@ workers on two cores ran 2.5x slower than one)."""
 
 
 def run_task(task: Task, observer: TickObserver | None = None) -> dict[str, object]:
-    """Play one (trial, controller, episode path) task in this process and return its results row.
+    """Play one task in this process and return its results row.
 
-    The episode is saved (when asked) before the row is returned, so a stored row always has its episode.
-    `observer` watches every tick (a live viewer; see `wbc.runner.run_episode`).
+    The episode is saved (when the task names a path) before the row is returned, so a stored row always has its
+    episode. `observer` watches every tick (a live viewer; see `wbc.runner.run_episode`).
     """
     from wbc.runner import run_trial
 
-    trial, controller, episode_path = task
-    record, episode = run_trial(trial, controller, observer=observer)
+    trial, controller, *rest = task
+    debug_truth = bool(rest[0]) if rest else False
+    episode_path = rest[1] if len(rest) > 1 else None
+    record, episode = run_trial(trial, controller, debug_truth=debug_truth, observer=observer)
     if episode_path is not None:
         episode.save(episode_path)
     return record

@@ -25,9 +25,10 @@ RECORD_FIELDS = (
     "controller", "scenario", "scenario_hash", "band", "seed", "trial",
     "success", "ttf", "fall_time_s", "vlin_err", "vang_err", "max_roll_deg", "max_pitch_deg", "energy_j",
     "arm_travel_rad", "push_force_n", "n_pushes", "vx_cmd", "vy_cmd", "yaw_rate_cmd", "friction", "payload_kg",
-    "fallbacks", "wall_s",
+    "fallbacks", "wbc_failures", "debug_truth", "wall_s",
 )
-_INT_FIELDS = {"seed", "trial", "n_pushes", "fallbacks"}
+_INT_FIELDS = {"seed", "trial", "n_pushes", "fallbacks", "wbc_failures"}
+_BOOL_FIELDS = {"success", "debug_truth"}
 _STR_FIELDS = {"controller", "scenario", "scenario_hash", "band"}
 
 
@@ -43,7 +44,7 @@ def _parse(row: dict[str, str]) -> dict[str, object]:
             out[k] = v
         elif k in _INT_FIELDS:
             out[k] = int(v)
-        elif k == "success":
+        elif k in _BOOL_FIELDS:
             out[k] = v in ("True", "true", "1")
         else:
             out[k] = float(v)

@@ -112,22 +112,27 @@ def _robot_for(trial: Trial, arm_mode: str) -> MujocoRobot:
 
 
 def trial_record(trial: Trial, controller: str, episode: Episode, counters: dict[str, int],
-                 wall_s: float) -> dict[str, object]:
+                 wall_s: float, *, debug_truth: bool = False) -> dict[str, object]:
     """The per-trial results row: identity, trial parameters, metrics, controller events, wall time."""
     return {
         "controller": controller,
+        "debug_truth": bool(debug_truth),
         "scenario": trial.scenario,
         "scenario_hash": trial.scenario_hash,
         **trial.describe(),
         **compute_metrics(episode),
         "fallbacks": int(counters.get("fallbacks", 0)),
+        "wbc_failures": int(counters.get("wbc_failures", 0)),
         "wall_s": wall_s,
     }
 
 
-def run_trial(trial: Trial, controller: str, *, observer: TickObserver | None = None,
+def run_trial(trial: Trial, controller: str, *, debug_truth: bool = False, observer: TickObserver | None = None,
               ) -> tuple[dict[str, object], Episode]:
     """Play `trial` in simulation with the named controller (`observer`: see `run_episode`).
+
+    With `debug_truth` the controller's ground-truth debug switch is thrown (it reads the simulator's base state
+    instead of estimating it) and the results row says so.
 
     Returns:
         The results row and the episode log.
@@ -146,6 +151,11 @@ def run_trial(trial: Trial, controller: str, *, observer: TickObserver | None = 
             f"controller {controller!r}: period 1/{ctrl.rate_hz} s is not a multiple of the physics step "
             f"{robot.config.timestep} s"
         )
+    if debug_truth:
+        attach = getattr(ctrl, "use_ground_truth", None)
+        if attach is None:
+            raise ConfigError(f"controller {controller!r} has no ground-truth debug switch (--debug-truth)")
+        attach(robot.base_truth)
     robot.reset(seed=trial.terrain_seed, domain=trial.domain)
     for push in trial.pushes:
         robot.apply_push(push)
@@ -157,4 +167,6 @@ def run_trial(trial: Trial, controller: str, *, observer: TickObserver | None = 
         for p in trial.pushes if p.start < episode.survived_s
     )
     episode = dataclasses.replace(episode, events=events + episode.events)
-    return trial_record(trial, controller, episode, ctrl.counters(), time.perf_counter() - start), episode
+    record = trial_record(trial, controller, episode, ctrl.counters(), time.perf_counter() - start,
+                          debug_truth=debug_truth)
+    return record, episode

@@ -82,6 +82,17 @@ class MotorCommand:
     tau: np.ndarray
 
     def __post_init__(self) -> None:
+        raw = [getattr(self, name) for name in _COMMAND_FIELDS]
+        # fast path (every control tick): five float64 vectors of one length, checked together in one pass
+        if all(type(a) is np.ndarray and a.dtype == np.float64 and a.ndim == 1 for a in raw) and (
+                raw[0].shape[0] > 0 and all(a.shape == raw[0].shape for a in raw)):
+            stacked = np.array(raw)
+            if np.isfinite(stacked).all() and stacked[2:4].min() >= 0.0:
+                stacked.setflags(write=False)
+                for name, row in zip(_COMMAND_FIELDS, stacked, strict=True):
+                    object.__setattr__(self, name, row)
+                return
+        # slow path: find the first fault and name it
         n = None
         for name in _COMMAND_FIELDS:
             raw = getattr(self, name)

@@ -6,14 +6,17 @@ footholds from the Raibert + capture-point heuristic for the feet in swing. The 
 plan to motor commands: stance feet get tau = -J^T f (the planned ground reaction), swing feet a Cartesian PD along
 their swing trajectory, the arm a PD on the integrated planned velocity; joints are damped by the motor drivers.
 
-Ground truth is never used: the controller sees only `RobotState`. A failed MPC solve falls back to the previous
+Ground truth is never used unless the explicit debug switch `use_ground_truth` is thrown (``wbc run --debug-truth``,
+recorded in the results): the controller sees only `RobotState`. A failed MPC solve falls back to the previous
 plan, shifted, and is counted (``fallbacks``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -23,10 +26,14 @@ from wbc.mpc.footholds import FootholdConfig, plan_foothold
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.swing import swing_point
+from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import RobotDescription
 from wbc.robots.joint_table import joint_table
 from wbc.types import MotorCommand, RobotState, VelocityCommand
+
+if TYPE_CHECKING:
+    from wbc.hardware.mujoco_robot import BaseTruth
 
 __all__ = ["MpcControllerConfig", "MpcController"]
 
@@ -51,6 +58,10 @@ class MpcControllerConfig:
         arm_kp: arm joint stiffness [N m/rad].
         arm_kd: arm joint damping [N m s/rad].
         use_arm_momentum: let the MPC plan arm motion through its momentum (off: the arm is held).
+        contact_force: foot sensor force at which a scheduled stance foot is fully trusted by the estimator [N].
+        whole_body: ``qp`` (PlaCo's inverse-dynamics QP, `WholeBodyQp`) or ``legs`` (the leg-level layer: stance
+            feet -J^T f, swing feet Cartesian PD; also the fallback when the QP fails).
+        wbc: the whole-body QP's gains and weights.
     """
 
     rate_hz: float = 500.0
@@ -68,10 +79,27 @@ class MpcControllerConfig:
     arm_kp: float = 20.0
     arm_kd: float = 0.5
     use_arm_momentum: bool = True
+    contact_force: float = 15.0
+    whole_body: str = "qp"
+    wbc: WholeBodyConfig = field(default_factory=WholeBodyConfig)
+
+    def __post_init__(self) -> None:
+        if self.whole_body not in ("qp", "legs"):
+            raise ValueError(f"MpcControllerConfig.whole_body must be 'qp' or 'legs', got {self.whole_body!r}")
 
 
 def _yaw_of(rot: np.ndarray) -> float:
     return math.atan2(rot[1, 0], rot[0, 0])
+
+
+def _rotation_from_rpy(rpy: np.ndarray) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll), the MPC's Euler convention."""
+    cr, sr = math.cos(rpy[0]), math.sin(rpy[0])
+    cp, sp = math.cos(rpy[1]), math.sin(rpy[1])
+    cy, sy = math.cos(rpy[2]), math.sin(rpy[2])
+    return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+                     [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+                     [-sp, cp * sr, cp * cr]])
 
 
 def _rpy(rot: np.ndarray) -> np.ndarray:
@@ -98,7 +126,16 @@ class MpcController:
         self.mpc = CentroidalMpc(self.config.mpc, table.lower[12:], table.upper[12:], vmax)
         self.gait = GaitScheduler(self.config.gait)
         self.estimator = BaseEstimator(self.dt, self.config.estimator)
+        self.wbc = WholeBodyQp(desc, self.config.wbc) if self.config.whole_body == "qp" else None
+        self._truth: Callable[[], BaseTruth] | None = None
         self.reset()
+
+    def use_ground_truth(self, truth: Callable[[], BaseTruth]) -> None:
+        """Debug switch: take the base position and velocity from `truth` (the simulator) instead of the estimator.
+
+        For isolating estimation errors only; the runner records it in every results row (``debug_truth``).
+        """
+        self._truth = truth
 
     def reset(self) -> None:
         """Start a new episode."""
@@ -108,6 +145,9 @@ class MpcController:
         self.plan_t = 0.0
         self.fallbacks = 0
         self.solves = 0
+        self.wbc_failures = 0
+        self._x0 = np.zeros(15)
+        self._inertia_inv, self._inertia_of = np.eye(3), None
         self._started = False
         self._yaw_unwrapped = 0.0
         self._yaw_target = 0.0
@@ -119,15 +159,15 @@ class MpcController:
         self.mpc.reset()
 
     def counters(self) -> dict[str, int]:
-        """MPC solves and fallbacks so far."""
-        return {"fallbacks": self.fallbacks, "mpc_solves": self.solves}
+        """MPC solves, MPC fallbacks and whole-body QP failures (which fell back to the leg-level layer) so far."""
+        return {"fallbacks": self.fallbacks, "mpc_solves": self.solves, "wbc_failures": self.wbc_failures}
 
     def debug_plan(self) -> dict[str, np.ndarray] | None:
         """The current plan, for viewers and debugging (None before the first solve).
 
         Returns:
             ``com_path_in_world`` (N, 3) predicted CoM [m]; ``footholds_in_world`` (4, 3) planned footholds (the
-            current foot position for stance feet), Pinocchio leg order FL, FR, RL, RR [m]; ``contact_schedule``
+            current foot position for stance feet), house leg order FR, FL, RR, RL [m]; ``contact_schedule``
             (N, 4) bool; ``forces_in_world`` (N, 4, 3) planned contact forces [N]; ``arm_q_plan`` (N, 3) predicted
             arm joint positions [rad]; ``plan_age_s`` time since the plan was made [s].
         """
@@ -159,12 +199,20 @@ class MpcController:
             self._started = True
         # one kinematics pass at the predicted base state serves the estimator, then is shifted by its correction
         replan = self.plan is None or self.tick % cfg.replan_every == 0
-        p_prior, v_prior = self.estimator.position, self.estimator.velocity
-        kin.update(p_prior, state.imu_quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=replan)
         contact = self.gait.contact(self.t)
-        self.estimator.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior,
-                              contact.astype(float))
-        kin.shift(self.estimator.position - p_prior, self.estimator.velocity - v_prior)
+        if self._truth is not None:
+            # debug switch: the simulator's base position and velocity replace the estimate
+            truth = self._truth()
+            kin.update(truth.base_position_in_world, state.imu_quat, state.q, state.dq, truth.base_linvel_in_world,
+                       state.gyro_in_body, centroidal=replan)
+        else:
+            p_prior, v_prior = self.estimator.position, self.estimator.velocity
+            kin.update(p_prior, state.imu_quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=replan)
+            # a foot is trusted as a stance foot when the gait says so and its force sensor agrees: a late
+            # touchdown or an early lift-off would otherwise feed a moving foot into the velocity estimate
+            trust = contact * np.clip(state.foot_force / self.config.contact_force, 0.0, 1.0)
+            self.estimator.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
+            kin.shift(self.estimator.position - p_prior, self.estimator.velocity - v_prior)
         yaw = _yaw_of(rot)
         self._yaw_unwrapped += math.remainder(yaw - self._yaw_unwrapped, 2 * math.pi)
         cy, sy = math.cos(self._yaw_unwrapped), math.sin(self._yaw_unwrapped)
@@ -177,7 +225,9 @@ class MpcController:
         self._update_footholds(contact, v_cmd_world, command.yaw_rate)
         if replan:
             self._replan(rot, state, command)
-        tau = self._leg_torques(contact)
+        tau = self._whole_body(contact) if self.wbc is not None else None
+        if tau is None:
+            tau = self._leg_torques(contact)
         return self._command(state, tau)
 
     # -- planning -------------------------------------------------------------------------------------------------
@@ -222,6 +272,7 @@ class MpcController:
         try:
             self.plan = self.mpc.solve(x0, x_ref, contact, feet, params)
             self.plan_t = self.t
+            self._x0 = x0
             self.solves += 1
         except MpcSolveError:
             self.fallbacks += 1  # keep following the previous plan, which `_plan_step` shifts by time
@@ -248,13 +299,58 @@ class MpcController:
         self._was_stance = contact.copy()
 
     # -- whole-body layer -----------------------------------------------------------------------------------------
+    def _swing_targets(self, contact: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cfg = self.config
+        progress = self.gait.swing_progress(self.t)
+        pos = np.zeros((4, 3))
+        vel = np.zeros((4, 3))
+        for i in range(4):
+            if not contact[i]:
+                pos[i], vel[i] = swing_point(self._liftoff[i], self._footholds[i], float(progress[i]),
+                                             cfg.gait.swing_s, cfg.swing_height)
+        return pos, vel
+
+    def _whole_body(self, contact: np.ndarray) -> np.ndarray | None:
+        """Torques from the whole-body QP tracking the plan; None (and counted) when it fails."""
+        plan, kin = self.plan, self.kin
+        if plan is None or kin.params is None:
+            return None
+        dt = self.config.mpc.dt
+        s = (self.t - self.plan_t) / dt
+        k = min(int(s), self.config.mpc.horizon - 1)
+        a = min(s - k, 1.0)
+        prev = self._x0 if k == 0 else plan.states[k - 1]
+        x = (1.0 - a) * prev + a * plan.states[k]
+        forces = plan.forces[k]
+        params = kin.params
+        com_acc = forces.sum(axis=0) / params.mass + np.array([0.0, 0.0, -9.81])
+        r, f = kin.feet - kin.com, forces
+        moment = np.array([(r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1]).sum(), (r[:, 2] * f[:, 0] - r[:, 0] * f[:, 2]).sum(),
+                           (r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]).sum()])
+        if self._inertia_of is not params:
+            self._inertia_inv, self._inertia_of = np.linalg.inv(params.inertia_world), params
+        inertia_inv = self._inertia_inv
+        arm_v = plan.arm_velocity[k] if self.has_arm and self.config.use_arm_momentum else np.zeros(3)
+        omega = inertia_inv @ (x[9:12] - params.arm_momentum_matrix @ arm_v)
+        swing_pos, swing_vel = self._swing_targets(contact)
+        arm_q = self._arm_target if self.has_arm else None
+        result = self.wbc.solve(kin.q_pin, kin.v_pin, contact, com=x[0:3], com_vel=x[3:6], com_acc=com_acc,
+                                rot=_rotation_from_rpy(x[6:9]), omega_world=omega,
+                                domega_world=inertia_inv @ moment, feet_pos=swing_pos, feet_vel=swing_vel,
+                                arm_q=arm_q, arm_dq=arm_v if self.has_arm else None)
+        if not result.success:
+            self.wbc_failures += 1
+            return None
+        return result.tau
+
     def _leg_torques(self, contact: np.ndarray) -> np.ndarray:
         cfg, kin = self.config, self.kin
         tau = np.zeros(kin.n)
+        jacobians = kin.compute_jacobians()
         k = self._plan_step()
         progress = self.gait.swing_progress(self.t)
         for i in range(4):
-            jac = kin.foot_jacobians[i][:, 3 * i:3 * i + 3]
+            jac = jacobians[i][:, 3 * i:3 * i + 3]
             if contact[i]:
                 f = self.plan.forces[k, i] if self.plan is not None else np.array([0.0, 0.0, 35.0])
                 tau[3 * i:3 * i + 3] = -jac.T @ f

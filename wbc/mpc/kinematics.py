@@ -42,9 +42,29 @@ class RobotKinematics:
         self.com_vel = np.zeros(3)
         self.momentum = np.zeros(3)
         self.params: CentroidalParams | None = None
+        self.q_pin = np.zeros(self.robot.model.nq)
+        self.v_pin = np.zeros(self.robot.model.nv)
+        self._rot = np.eye(3)
+        self._jacobians_valid = False
+
+    def compute_jacobians(self) -> np.ndarray:
+        """The feet's translation Jacobians at the last `update`, world axes, house joint columns, shape (4, 3, n).
+
+        Computed on demand: only the leg-level fallback layer needs them.
+        """
+        if not self._jacobians_valid:
+            model, data = self.robot.model, self.robot.data
+            pin.computeJointJacobians(model, data, self.q_pin)
+            frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+            for i, fid in enumerate(self._foot_frames):
+                self.foot_jacobians[i] = pin.getFrameJacobian(model, data, fid, frame)[:3, self._house_cols]
+            self._jacobians_valid = True
+        return self.foot_jacobians
 
     def shift(self, dp: np.ndarray, dv: np.ndarray) -> None:
         """Move the whole state by a base position and velocity correction (the estimator's update).
+
+        `q_pin` and `v_pin` (the configuration and velocity in Pinocchio's convention) move with it.
 
         Rigidly translating the robot moves every point by `dp` and adds `dv` to every velocity; angular momentum
         about the CoM, Jacobians and inertia are unchanged. One Pinocchio pass per tick thus serves both the
@@ -55,6 +75,8 @@ class RobotKinematics:
         self.com += dp
         self.feet_vel += dv
         self.com_vel += dv
+        self.q_pin[0:3] += dp
+        self.v_pin[0:3] += self._rot.T @ dv
         if self.params is not None:
             self.params.feet_world[:] = self.feet
 
@@ -75,17 +97,16 @@ class RobotKinematics:
         rot = quat_to_matrix(base_quat)
         qp = np.concatenate([base_pos, quat_wxyz_to_xyzw(base_quat), q[self._perm]])
         vp = np.concatenate([rot.T @ v_base_world, omega_body, dq[self._perm]])
+        self.q_pin, self.v_pin, self._rot = qp, vp, rot
         pin.forwardKinematics(model, data, qp, vp)
-        pin.computeJointJacobians(model, data, qp)
         pin.updateFramePlacements(model, data)
         frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         for i, fid in enumerate(self._foot_frames):
             self.feet[i] = data.oMf[fid].translation
             self.feet_vel[i] = pin.getFrameVelocity(model, data, fid, frame).linear
-            jac = pin.getFrameJacobian(model, data, fid, frame)
-            self.foot_jacobians[i] = jac[:3, self._house_cols]
             self.hips[i] = data.oMi[self._hip_joints[i]].translation
-        self.com = pin.centerOfMass(model, data, qp, vp).copy()
+        self._jacobians_valid = False
+        self.com = pin.centerOfMass(model, data, pin.KinematicLevel.VELOCITY, False).copy()
         self.com_vel = data.vcom[0].copy()
         if centroidal:
             pin.ccrba(model, data, qp, vp)

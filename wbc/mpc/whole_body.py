@@ -1,0 +1,218 @@
+"""`WholeBodyQp`: the whole-body controller, an inverse-dynamics QP solved by PlaCo's `DynamicsSolver` every tick.
+
+Decision variables (inside PlaCo): joint accelerations, contact forces of the stance feet and joint torques, subject
+to the floating-base equations of motion, unilateral friction cones (a pyramid with coefficient `friction`) and the
+motors' torque limits. Weighted tasks:
+
+- CoM: the MPC's predicted CoM position and velocity, with the acceleration the MPC's forces produce
+  (sum f / m + g) as feed-forward, so the QP reproduces the planned net force;
+- trunk orientation: the planned orientation, with the angular acceleration the MPC's moments produce as feed-forward;
+- swing feet: position, velocity of their swing trajectories (Cartesian PD at acceleration level);
+- arm joints: the arm's planned positions and velocities;
+- stance feet: zero acceleration, through the contacts.
+
+Why PlaCo rather than our own ProxSuite QP: the whole problem (kinematics, mass matrix, task Jacobians, QP) stays in
+C++, one Python call per tick; a numpy-assembled QP of the same size costs 3-5x more per tick in Python overhead.
+PlaCo reads the same URDF as the MuJoCo and Pinocchio models (visuals stripped: it only needs the dynamics).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import placo
+
+from wbc.robots.description import FOOT_NAMES, RobotDescription
+from wbc.robots.joint_table import joint_table
+from wbc.robots.urdf import robot_urdf
+
+__all__ = ["WholeBodyConfig", "WholeBodyQp", "WholeBodyResult"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class WholeBodyConfig:
+    """Gains and weights of the whole-body QP (gains at acceleration level).
+
+    Attributes:
+        friction: friction coefficient of the contact pyramids (below the scenarios' lowest, for margin).
+        com_kp: CoM stiffness [1/s^2].
+        com_kd: CoM damping [1/s].
+        trunk_kp: trunk orientation stiffness [1/s^2].
+        trunk_kd: trunk orientation damping [1/s].
+        swing_kp: swing-foot stiffness [1/s^2].
+        swing_kd: swing-foot damping [1/s].
+        arm_kp: arm joint stiffness [1/s^2].
+        arm_kd: arm joint damping [1/s].
+        com_weight: weight of the CoM task.
+        trunk_weight: weight of the trunk orientation task.
+        swing_weight: weight of each swing-foot task.
+        arm_weight: weight of the arm task.
+        force_weight: regularisation of the contact forces (spreads the load over the stance feet).
+    """
+
+    friction: float = 0.6
+    com_kp: float = 40.0
+    com_kd: float = 12.0
+    trunk_kp: float = 120.0
+    trunk_kd: float = 22.0
+    swing_kp: float = 900.0
+    swing_kd: float = 60.0
+    arm_kp: float = 300.0
+    arm_kd: float = 35.0
+    com_weight: float = 10.0
+    trunk_weight: float = 10.0
+    swing_weight: float = 1.0
+    arm_weight: float = 1.0
+    force_weight: float = 1e-4
+
+
+@dataclass
+class WholeBodyResult:
+    """One solve.
+
+    Attributes:
+        success: the QP was solved.
+        tau: joint torques, house order [N m].
+        forces: contact forces of the feet (zero in swing), house leg order, world frame, shape (4, 3) [N].
+    """
+
+    success: bool
+    tau: np.ndarray
+    forces: np.ndarray
+
+
+def _dynamics_urdf(desc: RobotDescription) -> Path:
+    """Write the robot's URDF without visual and collision geometry (PlaCo would try to load the meshes)."""
+    root = ET.fromstring(robot_urdf(desc))
+    for link in root.iter("link"):
+        for child in list(link.findall("visual")) + list(link.findall("collision")):
+            link.remove(child)
+    folder = Path(tempfile.mkdtemp(prefix="wbc-placo-"))
+    path = folder / "robot.urdf"
+    path.write_text(ET.tostring(root, encoding="unicode"))
+    return path
+
+
+class WholeBodyQp:
+    """Build once per robot; `solve` every control tick.
+
+    Args:
+        desc: the robot.
+        config: gains and weights.
+    """
+
+    def __init__(self, desc: RobotDescription, config: WholeBodyConfig | None = None) -> None:
+        self.desc = desc
+        self.config = cfg = config or WholeBodyConfig()
+        self.robot = placo.RobotWrapper(str(_dynamics_urdf(desc)), placo.Flags.ignore_collisions)
+        names = list(self.robot.joint_names())
+        house = list(desc.joint_names)
+        # the v index of each house joint in PlaCo's (= Pinocchio's) order
+        self._house_cols = 6 + np.array([names.index(n) for n in house])
+        self.mass = float(self.robot.total_mass())
+        table = joint_table(desc)
+        self.robot.update_kinematics()
+        solver = placo.DynamicsSolver(self.robot)
+        solver.mask_fbase(False)
+        solver.enable_torque_limits(True)
+        for name, limit in zip(table.names, table.torque_limit, strict=True):
+            solver.set_torque_limit(name, float(limit))
+        self.solver = solver
+        self.feet_tasks = []
+        self.contacts = []
+        for foot in FOOT_NAMES:
+            task = solver.add_position_task(foot, np.zeros(3))
+            task.configure(foot, "soft", cfg.swing_weight)
+            contact = solver.add_point_contact(task)
+            contact.mu = cfg.friction
+            contact.unilateral = True
+            contact.weight_forces = cfg.force_weight
+            self.feet_tasks.append(task)
+            self.contacts.append(contact)
+        self.com_task = solver.add_com_task(np.zeros(3))
+        self.com_task.configure("com", "soft", cfg.com_weight)
+        self.com_task.kp, self.com_task.kd = cfg.com_kp, cfg.com_kd
+        self.trunk_task = solver.add_orientation_task("trunk", np.eye(3))
+        self.trunk_task.configure("trunk", "soft", cfg.trunk_weight)
+        self.trunk_task.kp, self.trunk_task.kd = cfg.trunk_kp, cfg.trunk_kd
+        self.arm_task = None
+        if desc.arm_mode == "actuated":
+            self.arm_task = solver.add_joints_task()
+            self.arm_task.set_joints(dict(zip(desc.arm_joint_names, desc.nominal_q[12:15].tolist(), strict=True)))
+            self.arm_task.configure("arm", "soft", cfg.arm_weight)
+            self.arm_task.kp, self.arm_task.kd = cfg.arm_kp, cfg.arm_kd
+        self._stance = np.zeros(4, dtype=bool)
+        self._set_stance(np.ones(4, dtype=bool))
+
+    def _set_stance(self, stance: np.ndarray) -> None:
+        cfg = self.config
+        for i in range(4):
+            if stance[i] == self._stance[i]:
+                continue
+            task, contact = self.feet_tasks[i], self.contacts[i]
+            contact.active = bool(stance[i])
+            if stance[i]:
+                # a stance foot must not accelerate: no stiffness towards a target, no damping
+                task.kp, task.kd = 0.0, 0.0
+            else:
+                task.kp, task.kd = cfg.swing_kp, cfg.swing_kd
+        self._stance = stance.copy()
+
+    def solve(self, q_pin: np.ndarray, v_pin: np.ndarray, stance: np.ndarray, *, com: np.ndarray,
+              com_vel: np.ndarray, com_acc: np.ndarray, rot: np.ndarray, omega_world: np.ndarray,
+              domega_world: np.ndarray, feet_pos: np.ndarray, feet_vel: np.ndarray,
+              arm_q: np.ndarray | None = None, arm_dq: np.ndarray | None = None) -> WholeBodyResult:
+        """One whole-body QP.
+
+        Args:
+            q_pin: configuration in Pinocchio's convention (base position, quaternion x, y, z, w, joints).
+            v_pin: velocity in Pinocchio's convention (base linear and angular velocity in the base frame, joints).
+            stance: which feet are in contact, house leg order (4,).
+            com: CoM target, world [m].
+            com_vel: CoM velocity target, world [m/s].
+            com_acc: CoM acceleration feed-forward, world [m/s^2].
+            rot: trunk orientation target (body to world).
+            omega_world: trunk angular velocity target, world [rad/s].
+            domega_world: trunk angular acceleration feed-forward, world [rad/s^2].
+            feet_pos: swing-foot position targets, world, shape (4, 3) (rows of stance feet ignored) [m].
+            feet_vel: swing-foot velocity targets, world, shape (4, 3) [m/s].
+            arm_q: arm joint targets [rad] (actuated arm only).
+            arm_dq: arm joint velocity targets [rad/s].
+
+        Returns:
+            Torques and contact forces; ``success`` False when PlaCo's QP failed (torques are then zero).
+        """
+        robot = self.robot
+        robot.state.q = q_pin
+        robot.state.qd = v_pin
+        robot.update_kinematics()
+        self._set_stance(np.asarray(stance, dtype=bool))
+        for i in range(4):
+            # a stance foot's task has no gains: its targets do not matter
+            if not self._stance[i]:
+                task = self.feet_tasks[i]
+                task.target_world = feet_pos[i]
+                task.dtarget_world = feet_vel[i]
+        self.com_task.target_world = com
+        self.com_task.dtarget_world = com_vel
+        self.com_task.ddtarget_world = com_acc
+        self.trunk_task.R_world_frame = rot
+        self.trunk_task.omega_world = omega_world
+        self.trunk_task.domega_world = domega_world
+        if self.arm_task is not None and arm_q is not None:
+            dq = np.zeros(3) if arm_dq is None else arm_dq
+            for name, qa, va in zip(self.desc.arm_joint_names, arm_q, dq, strict=True):
+                self.arm_task.set_joint(name, float(qa), float(va))
+        result = self.solver.solve(False)
+        forces = np.zeros((4, 3))
+        if not result.success:
+            return WholeBodyResult(success=False, tau=np.zeros(len(self._house_cols)), forces=forces)
+        for i in range(4):
+            if self._stance[i]:
+                forces[i] = self.contacts[i].wrench[:3]
+        tau = np.asarray(result.tau)[self._house_cols]
+        return WholeBodyResult(success=bool(np.all(np.isfinite(tau))), tau=tau, forces=forces)
