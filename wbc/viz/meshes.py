@@ -3,8 +3,9 @@
 The A1's and Go1's URDF meshes are Collada files of 0.7-4.7 MB each (the Go1 trunk alone has 350 000 triangles);
 sent as they are, one robot makes a 27 MB page. Pinocchio has already loaded them (with their scale) into coal BVH
 models, so the triangles are read from there and merged by vertex clustering on a `cell`-sized grid: a 3 mm grid
-keeps the silhouette and cuts the A1 to a few hundred kilobytes. Primitives (boxes, spheres, cylinders: the arm,
-the feet) become meshcat primitives; coal's cylinder axis is z, meshcat's y, hence the extra rotation.
+keeps the silhouette and brings the A1's meshes (9.4 MB of Collada) to 1.1 MB of binary triangles, the Go1's to
+1.3 MB. Primitives (boxes, spheres, cylinders: the arm, the feet) become meshcat primitives; coal's cylinder axis is
+z, meshcat's y, hence the extra rotation.
 """
 
 from __future__ import annotations
