@@ -31,6 +31,7 @@ from wbc.viz.errors import ViewerError
 from wbc.viz.frame import VizFrame
 from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.player import Controls, Player, PlayerConfig
+from wbc.viz.record import Recording
 from wbc.viz.replay import load_stored_episode
 from wbc.viz.server import MeshcatServer, ServerConfig
 from wbc.viz.sim_frames import foot_forces_in_world
@@ -193,6 +194,16 @@ def test_recording_is_self_contained_with_robot_arm_push_and_animation(recording
     assert len(position["keys"]) > 20
     assert result.frames_recorded == pytest.approx(trial.duration_s * 50, abs=2)
     assert set(result.paths) >= {"robot", "arm", "push", "contacts", "command", "plan", "terrain"}
+
+
+@pytest.mark.parametrize(("robot", "arm_mode", "arm_parts"), [("a1-wx200", "locked", 4), ("a1-wx200", "none", 0)])
+def test_scene_of_every_arm_mode(robot, arm_mode, arm_parts):
+    desc = get_robot(robot, arm_mode)
+    rec = Recording(SceneContent(desc, TerrainConfig(), None), fps=10.0)
+    assert len(rec.paths["arm"]) == arm_parts and len(rec.paths["robot"]) >= 13  # trunk, 4 x (hip, thigh, calf)
+    q = np.r_[0.0, 0.0, 0.3, 1.0, 0.0, 0.0, 0.0, desc.nominal_q]
+    assert rec.add(VizFrame(t=0.0, qpos=q)) and rec.frames == 1
+    assert rec.content.robot.arm_tip_path(q, np.zeros((3, 3))) is None  # no arm plan without an actuated arm
 
 
 def test_recording_of_mpc_shows_its_plan(tmp_path, short):

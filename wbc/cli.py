@@ -166,7 +166,7 @@ def _view(args: argparse.Namespace) -> int:
     if record is not None and (record.suffix.lower() not in (".html", ".htm") or not record.parent.is_dir()):
         raise ViewerError(f"--record {record}: give an .html file in an existing directory")
     cfg = ViewConfig(
-        live=record is None or args.live, host=args.host, record=record,
+        live=record is None or args.live, host=args.host, record=record, record_fps=args.fps,
         player=PlayerConfig(speed=args.speed, pause_at=tuple(args.pause_at or ()), step_s=args.step,
                             start_paused=args.paused),
         open_browser=args.open, wait_for_browser=args.wait,
@@ -331,6 +331,7 @@ def _parser() -> argparse.ArgumentParser:
     view.add_argument("--paused", action="store_true", help="start paused (then s to step, p to play)")
     view.add_argument("--step", type=float, default=0.02, help="trial time of one single step [s] (default 0.02)")
     view.add_argument("--record", default=None, metavar="FILE.html", help="write a self-contained HTML replay")
+    view.add_argument("--fps", type=float, default=50.0, help="with --record: frames per second (default 50)")
     view.add_argument("--live", action="store_true", help="with --record: also stream live")
     view.add_argument("--open", action="store_true", help="open the page in the default browser")
     view.add_argument("--wait", action="store_true", help="start once a browser has opened the page")

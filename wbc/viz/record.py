@@ -24,6 +24,7 @@ from meshcat.animation import Animation
 from meshcat.servers.zmqserver import VIEWER_ROOT
 from meshcat.transformations import quaternion_from_matrix
 
+from wbc.errors import ConfigError
 from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
 from wbc.viz.frame import Pose, VizFrame
@@ -152,6 +153,8 @@ class Recording:
     """
 
     def __init__(self, content: SceneContent, *, fps: float = 50.0) -> None:
+        if not fps > 0:
+            raise ConfigError(f"the recording's frame rate (--fps) must be > 0, got {fps}")
         self.content = content
         self.fps = fps
         self.window = _SceneWindow()
