@@ -1,4 +1,4 @@
-"""The ``wbc`` command line: ``run``, ``compare``, ``analyze tail``, ``bench sim``, ``demo``."""
+"""The ``wbc`` command line: ``run``, ``compare``, ``analyze tail``, ``bench ...``, ``train``, ``demo``."""
 
 from __future__ import annotations
 
@@ -47,6 +47,27 @@ def _bench_sim(args: argparse.Namespace) -> int:
           f"{result['realtime_factor']:.0f}x)")
     print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
           f"{result['threads']} threads)")
+    return 0
+
+
+def _bench_train(args: argparse.Namespace) -> int:
+    from wbc.learned.env_config import EnvConfig
+    from wbc.learned.throughput import bench_train
+
+    cfg = EnvConfig(arm_mode=args.arm, num_envs=args.envs, nthread=args.threads, terrain=args.terrain)
+    result = bench_train(cfg, steps=args.steps)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"Training env speed: {result['robot']} (arm {result['arm_mode']}), {result['num_envs']} envs, "
+          f"{result['threads']} threads, policy at {1 / (result['timestep_s'] * result['decimation']):.0f} Hz, "
+          f"dt {result['timestep_s'] * 1e3:.1f} ms, random actions")
+    print(f"  machine: {result['machine']}")
+    print(f"  env            : {result['control_steps_per_s']:>10,.0f} control steps/s "
+          f"({result['physics_steps_per_s']:,.0f} physics steps/s)")
+    print(f"  rollout only   : {result['rollout_only_control_steps_per_s']:>10,.0f} control steps/s (physics limit)")
+    print(f"  env efficiency : {100 * result['env_efficiency']:>9.0f} %  "
+          f"({result['python_ms_per_step']:.1f} ms of Python per policy step)")
     return 0
 
 
@@ -183,6 +204,14 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
     sweep.add_argument("--json", action="store_true")
     sweep.set_defaults(func=_bench_sweep)
+    btrain = bench.add_parser("train", help="training env throughput: control steps per second, random actions")
+    btrain.add_argument("--envs", type=int, default=1024, help="parallel environments")
+    btrain.add_argument("--threads", type=int, default=2, help="rollout threads")
+    btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    btrain.add_argument("--terrain", default="scenario", help="scenario (the push scenario's ground) or flat")
+    btrain.add_argument("--steps", type=int, default=50, help="policy steps per measurement")
+    btrain.add_argument("--json", action="store_true")
+    btrain.set_defaults(func=_bench_train)
 
     from wbc.control import CONTROLLERS
 
