@@ -1,0 +1,198 @@
+"""Tests of wbc.learned: batched env, policy file and numpy inference, BC term, training, controllers."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.learned.env import BatchedEnv
+from wbc.learned.env_config import DomainRandomisation, EnvConfig
+from wbc.learned.numpy_policy import NumpyPolicy
+from wbc.learned.observations import ObsLayout, compatible_observation
+from wbc.learned.policy_file import PolicyFileError, load_policy, save_policy
+from wbc.robots.registry import get_robot
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIO = str(ROOT / "scenarios" / "push.toml")
+
+
+def small_config(**kw) -> EnvConfig:
+    base = dict(scenario=SCENARIO, num_envs=4, terrain="flat", nthread=1, domain=DomainRandomisation(num_variants=2))
+    base.update(kw)
+    return EnvConfig(**base)
+
+
+@pytest.fixture(scope="module")
+def env_pair():
+    a, b = BatchedEnv(small_config(seed=3)), BatchedEnv(small_config(seed=3))
+    yield a, b
+    a.close()
+
+
+# -- env ---------------------------------------------------------------------------------------------------------
+def test_env_shapes_and_seeded_determinism(env_pair):
+    a, b = env_pair
+    obs_a, priv_a, _ = a.reset()
+    obs_b, priv_b, _ = b.reset()
+    assert obs_a.shape == (4, ObsLayout(15).size) == (4, 54)
+    assert priv_a.shape == (4, 9)
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        act = 0.3 * rng.standard_normal((4, 15))
+        ra, rb = a.step(act), b.step(act)
+    np.testing.assert_array_equal(ra.obs, rb.obs)
+    np.testing.assert_array_equal(ra.reward, rb.reward)
+    assert np.isfinite(ra.obs).all() and np.isfinite(ra.reward).all()
+    # the joints moved: the physics ran
+    assert np.abs(ra.obs[:, 9:24]).max() > 1e-3
+
+
+def test_env_other_seed_differs():
+    a, b = BatchedEnv(small_config(seed=0)), BatchedEnv(small_config(seed=1))
+    assert not np.array_equal(a.reset()[0], b.reset()[0])
+
+
+def test_env_terminates_when_the_trunk_touches_the_ground():
+    env = BatchedEnv(small_config(pushes=False))
+    env.state[:, 3] = 0.08  # trunk dropped onto the floor (qpos z is state[1 + 2])
+    r = env.step(np.zeros((4, 15)))
+    assert r.terminated.all()
+    assert "episode/fall_rate" in r.log
+    # the environments were reset to standing
+    assert np.all(env.state[:, 3] > 0.25) and np.all(env.episode_step == 0)
+
+
+def test_env_pushes_come_from_the_scenario_band_in():
+    env = BatchedEnv(small_config())
+    trial = env.scenario.trial("in", env.config.train_seed_offset + env.config.seed, 0)
+    assert trial.pushes, "push.toml trials have pushes"
+    p = trial.pushes[0]
+    k = int(round(p.start / env.config.timestep))
+    i = int(np.flatnonzero(env.pushes.start[:, 0] == k)[0])
+    np.testing.assert_allclose(env.pushes.force[i, 0], p.force_in_world)
+    assert 200.0 <= np.linalg.norm(p.force_in_world) <= 300.0
+    w = env.pushes.wrench(np.full(4, k), 10, np.tile(np.eye(3), (4, 1, 1)), np.zeros((4, 3)))
+    assert w is not None and np.allclose(w[0][i, 0], p.force_in_world)
+
+
+def test_compatible_observation_keeps_the_leg_part():
+    full, legs = ObsLayout(15), ObsLayout(12)
+    obs = np.arange(full.size, dtype=np.float32)[None]
+    sub = compatible_observation(obs, full, legs)
+    assert sub.shape == (1, legs.size)
+    np.testing.assert_array_equal(sub[0, :9], obs[0, :9])  # ang_vel, gravity, command
+    np.testing.assert_array_equal(sub[0, 9:21], obs[0, 9:21])  # leg dof_pos
+    np.testing.assert_array_equal(sub[0, 21:33], obs[0, 24:36])  # leg dof_vel
+    np.testing.assert_array_equal(sub[0, 33:45], obs[0, 39:51])  # leg last_action
+
+
+# -- policy file and numpy inference -------------------------------------------------------------------------------
+def _actor(vec, extrinsics: bool, seed: int = 0):
+    torch = pytest.importorskip("torch")
+    models = pytest.importorskip("rsl_rl.models")
+    from wbc.learned.extrinsics_actor import ExtrinsicsActor
+
+    torch.manual_seed(seed)
+    obs = vec.get_observations()
+    dist = {"class_name": "GaussianDistribution", "init_std": 1.0, "std_type": "scalar"}
+    if extrinsics:
+        groups = {"actor": ["policy", "privileged"], "critic": ["policy", "privileged"]}
+        actor = ExtrinsicsActor(obs, groups, "actor", vec.num_actions, hidden_dims=[32, 16], activation="elu",
+                                obs_normalization=True, distribution_cfg=dist, extrinsics_dim=4, encoder_dims=[8])
+    else:
+        groups = {"actor": ["policy"], "critic": ["policy", "privileged"]}
+        actor = models.MLPModel(obs, groups, "actor", vec.num_actions, hidden_dims=[32, 16], activation="elu",
+                                obs_normalization=True, distribution_cfg=dist)
+    # non-trivial normaliser statistics
+    fake = obs.clone()
+    for key in fake.keys():
+        fake[key] = torch.randn_like(fake[key]) * 3.0 + 1.5
+    actor.update_normalization(fake)
+    return actor.eval()
+
+
+@pytest.fixture(scope="module")
+def vec():
+    pytest.importorskip("torch")
+    pytest.importorskip("rsl_rl")
+    from wbc.learned.vec_env import RslVecEnv
+
+    v = RslVecEnv(BatchedEnv(small_config(seed=5)))
+    yield v
+
+
+@pytest.mark.parametrize("extrinsics", [False, True])
+def test_numpy_inference_matches_torch(vec, tmp_path, extrinsics):
+    torch = pytest.importorskip("torch")
+    from wbc.learned.export import policy_file_from_actor
+
+    actor = _actor(vec, extrinsics)
+    pf = policy_file_from_actor(actor, vec.cfg, task="push", stage=3)
+    npz, _ = save_policy(tmp_path / "pi", pf)
+    policy = NumpyPolicy(load_policy(npz))
+    rng = np.random.default_rng(1)
+    obs = vec.get_observations().clone()
+    obs["policy"] = torch.from_numpy(rng.normal(0, 2, obs["policy"].shape).astype(np.float32))
+    obs["privileged"] = torch.from_numpy(rng.normal(0, 2, obs["privileged"].shape).astype(np.float32))
+    with torch.no_grad():
+        want = actor(obs).numpy()
+    z = policy.extrinsics(obs["privileged"].numpy()) if extrinsics else None
+    got = policy(obs["policy"].numpy(), z)
+    assert got.shape == want.shape == (4, 15)
+    np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)
+    assert np.abs(want).max() > 1e-2  # not a trivially zero network
+
+
+@pytest.fixture()
+def saved_policy(vec, tmp_path):
+    from wbc.learned.export import policy_file_from_actor
+
+    npz, js = save_policy(tmp_path / "pi", policy_file_from_actor(_actor(vec, False), vec.cfg, task="push", stage=3))
+    return npz, js
+
+
+def test_policy_file_missing_json_key(saved_policy):
+    npz, js = saved_policy
+    meta = json.loads(js.read_text())
+    del meta["action_scale"]
+    js.write_text(json.dumps(meta))
+    with pytest.raises(PolicyFileError, match=r"pi\.json: action_scale: missing key"):
+        load_policy(npz)
+
+
+def test_policy_file_wrong_shape(saved_policy):
+    npz, _ = saved_policy
+    with np.load(npz) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays["policy/1/weight"] = arrays["policy/1/weight"][:, :-1]
+    np.savez(npz, **arrays)
+    with pytest.raises(PolicyFileError, match=r"pi\.npz: policy/1/weight: expected shape \(16, 32\)"):
+        load_policy(npz)
+
+
+def test_policy_file_refuses_pickles_and_garbage(saved_policy):
+    npz, _ = saved_policy
+    np.savez(npz, obs_mean=np.array([{"a": 1}], dtype=object))
+    with pytest.raises(PolicyFileError, match=r"pi\.npz"):
+        load_policy(npz)
+    npz.write_bytes(b"not a zip")
+    with pytest.raises(PolicyFileError, match="not a readable .npz"):
+        load_policy(npz)
+
+
+def test_policy_file_mismatched_robot(saved_policy):
+    npz, _ = saved_policy
+    pf = load_policy(npz)
+    pf.check_robot(get_robot("a1-wx200", "actuated"))
+    with pytest.raises(PolicyFileError, match="arm_mode"):
+        pf.check_robot(get_robot("a1-wx200", "locked"), npz)
+    with pytest.raises(PolicyFileError, match="robot"):
+        pf.check_robot(get_robot("go1-arm", "actuated"), npz)
+
+
+def test_policy_file_missing(tmp_path):
+    with pytest.raises(PolicyFileError, match="file not found"):
+        load_policy(tmp_path / "nothing.npz")
