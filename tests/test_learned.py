@@ -196,3 +196,49 @@ def test_policy_file_mismatched_robot(saved_policy):
 def test_policy_file_missing(tmp_path):
     with pytest.raises(PolicyFileError, match="file not found"):
         load_policy(tmp_path / "nothing.npz")
+
+
+# -- BC term -------------------------------------------------------------------------------------------------------
+def test_bc_schedule_linear_exponential_constant():
+    from wbc.errors import ConfigError
+    from wbc.learned.bc_schedule import BCSchedule
+
+    lin = BCSchedule(initial=1.0, final=0.0, hold_iterations=10, anneal_iterations=100, kind="linear")
+    assert lin.weight(0) == lin.weight(10) == 1.0
+    assert lin.weight(60) == pytest.approx(0.5)
+    assert lin.weight(110) == lin.weight(10_000) == 0.0
+    w = [lin.weight(i) for i in range(200)]
+    assert all(a >= b for a, b in zip(w, w[1:], strict=False))
+    exp = BCSchedule(initial=1.0, final=0.01, anneal_iterations=100, kind="exponential")
+    assert exp.weight(50) == pytest.approx(0.1)
+    assert exp.weight(100) == pytest.approx(0.01) and exp.weight(500) == pytest.approx(0.01)
+    assert BCSchedule(initial=0.3, kind="constant").weight(12345) == 0.3
+    with pytest.raises(ConfigError, match="kind"):
+        BCSchedule(kind="cosine")
+    with pytest.raises(ConfigError, match="exponential"):
+        BCSchedule(initial=1.0, final=0.0, kind="exponential")
+
+
+def test_bc_loss_counts_only_the_compatible_actions():
+    torch = pytest.importorskip("torch")
+    from wbc.learned.ppo_bc import bc_loss
+
+    teacher = torch.randn(8, 12)
+    student = torch.zeros(8, 15, requires_grad=True)
+    with torch.no_grad():
+        student[:, :12] = teacher
+        student[:, 12:] = 100.0  # the arm: no teacher for it
+    mask = torch.arange(12)
+    loss = bc_loss(student, teacher, mask)
+    assert loss.item() == pytest.approx(0.0, abs=1e-12)
+    with torch.no_grad():
+        student[:, 3] += 2.0
+    loss = bc_loss(student, teacher, mask)
+    assert loss.item() == pytest.approx(4.0 / 12.0)
+    loss.backward()
+    assert torch.all(student.grad[:, 12:] == 0) and torch.all(student.grad[:, 3] != 0)
+    # a mask that permutes: teacher action k is student action mask[k]
+    perm = torch.tensor([14, 13, 12])
+    assert bc_loss(torch.arange(15.0)[None], torch.tensor([[14.0, 13.0, 12.0]]), perm).item() == 0.0
+    with pytest.raises(ValueError, match="mask"):
+        bc_loss(student, teacher, torch.arange(11))
