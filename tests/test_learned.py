@@ -242,3 +242,45 @@ def test_bc_loss_counts_only_the_compatible_actions():
     assert bc_loss(torch.arange(15.0)[None], torch.tensor([[14.0, 13.0, 12.0]]), perm).item() == 0.0
     with pytest.raises(ValueError, match="mask"):
         bc_loss(student, teacher, torch.arange(11))
+
+
+# -- training ------------------------------------------------------------------------------------------------------
+def _tiny(stage: int, root: Path, seed: int = 0, **kw):
+    from wbc.learned.stages import stage_config
+
+    return stage_config("push", stage, run_root=str(root), env_overrides=dict(
+        num_envs=8, nthread=1, scenario=SCENARIO, domain=DomainRandomisation(num_variants=2), seed=seed),
+        seed=seed, num_steps_per_env=6, save_interval=1, actor_hidden_dims=(16,), critic_hidden_dims=(16,),
+        encoder_dims=(8,), extrinsics_dim=4, **kw)
+
+
+def _arrays(run_dir) -> dict[str, np.ndarray]:
+    return load_policy(Path(run_dir) / "policy").arrays
+
+
+def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage(tmp_path):
+    pytest.importorskip("torch")
+    pytest.importorskip("rsl_rl")
+    from wbc.errors import ConfigError
+    from wbc.learned.train import latest_checkpoint, train
+
+    a = train(_tiny(1, tmp_path / "a", max_iterations=2))
+    b = train(_tiny(1, tmp_path / "b", max_iterations=2))
+    wa, wb = _arrays(a["run_dir"]), _arrays(b["run_dir"])
+    assert wa.keys() == wb.keys()
+    for k in wa:
+        np.testing.assert_array_equal(wa[k], wb[k], err_msg=k)
+    assert a["iterations"] == 2 and a["env_steps"] == 2 * 6 * 8
+    cfg = json.loads((Path(a["run_dir"]) / "config.json").read_text())
+    assert cfg["train_config"]["stage"] == 1 and cfg["seed"] == 0 and "torch" in cfg["versions"]
+    # resume: one more iteration from the newest checkpoint
+    r = train(_tiny(1, tmp_path / "a", max_iterations=3), resume=True)
+    assert r["iterations"] == 3 and latest_checkpoint(r["run_dir"]).name == "model_2.pt"
+    assert r["env_steps"] == 3 * 6 * 8
+    with pytest.raises(ConfigError, match="differs"):
+        train(_tiny(1, tmp_path / "a", max_iterations=3, init_std=0.5), resume=True)
+    # stage 2 learns from the stage-1 export with the BC term; without it, a clear error
+    with pytest.raises(ConfigError, match="previous stage"):
+        train(_tiny(2, tmp_path / "empty", max_iterations=1))
+    s2 = train(_tiny(2, tmp_path / "a", max_iterations=1))
+    assert load_policy(Path(s2["run_dir"]) / "policy").meta["arm_mode"] == "locked"

@@ -71,6 +71,27 @@ def _bench_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from wbc.learned.stages import stage_config
+
+    env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
+    overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
+    cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
+                       env_overrides=env, **overrides)
+    if args.dry_run:
+        print(json.dumps(dataclasses.asdict(cfg), indent=2, default=list))
+        return 0
+    from wbc.learned.train import train
+
+    result = train(cfg, resume=args.resume)
+    print(f"trained {args.task} stage {args.stage}{' ' + args.baseline if args.baseline else ''}: "
+          f"{result['iterations']} iterations, {result['env_steps']:,} env steps, {result['wall_s'] / 60:.1f} min; "
+          f"policy {result['policy']}")
+    return 0
+
+
 def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
     import time
     from pathlib import Path
@@ -212,6 +233,22 @@ def _parser() -> argparse.ArgumentParser:
     btrain.add_argument("--steps", type=int, default=50, help="policy steps per measurement")
     btrain.add_argument("--json", action="store_true")
     btrain.set_defaults(func=_bench_train)
+
+    from wbc.learned.stages import BASELINES, TASKS
+
+    tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
+    tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")
+    tr.add_argument("--stage", type=int, required=True, choices=(1, 2, 3), help="1: pi1, 2: pi2, 3: pi3")
+    tr.add_argument("--baseline", default=None, help=f"stage-3 baseline, one of: {', '.join(BASELINES)}")
+    tr.add_argument("--resume", action="store_true", help="continue from the newest checkpoint of the run")
+    tr.add_argument("--iterations", type=int, default=None, help="PPO iterations of the whole run (default 1500)")
+    tr.add_argument("--envs", type=int, default=None, help="parallel environments (default 1024)")
+    tr.add_argument("--threads", type=int, default=None, help="physics threads (default 2)")
+    tr.add_argument("--seed", type=int, default=None, help="seed (default 0)")
+    tr.add_argument("--teacher", default=None, help="BC teacher policy file (default: the previous stage's export)")
+    tr.add_argument("--run-root", default="runs/train", help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>]")
+    tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")
+    tr.set_defaults(func=_train)
 
     from wbc.control import CONTROLLERS
 

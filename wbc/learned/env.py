@@ -81,7 +81,8 @@ class BatchedEnv:
         config: the environment.
 
     Raises:
-        ConfigError: the scenario's robot differs from the config's, or the band does not exist.
+        ConfigError: the scenario's robot differs from the config's.
+        UnknownNameError: a band is not in the scenario (the message lists the valid ones).
     """
 
     def __init__(self, config: EnvConfig) -> None:
@@ -91,7 +92,9 @@ class BatchedEnv:
         if self.scenario.robot != config.robot:
             raise ConfigError(f"EnvConfig.robot is {config.robot!r} but scenario {config.scenario} is for "
                               f"{self.scenario.robot!r}; train on the scenario's robot")
-        first = self.scenario.trial(config.band, 0, 0)  # validates the band
+        first = self.scenario.trial(config.bands[0], 0, 0)
+        for band in config.bands[1:]:
+            self.scenario.trial(band, 0, 0)  # unknown bands fail here, listing the valid ones
         terrain = first.terrain if config.terrain == "scenario" else TerrainConfig(kind="flat")
         self.rng = np.random.default_rng(np.random.SeedSequence([config.seed, 0x7A17]))
         self.pool = ModelPool(self.desc, terrain, config, self.rng)
@@ -239,7 +242,8 @@ class BatchedEnv:
         self.variant[ids] = variants
         for i, v in zip(ids, variants, strict=True):
             self._models[i] = self.pool.models[v]
-            trial = self.scenario.trial(cfg.band, cfg.train_seed_offset + cfg.seed, self._trial_index)
+            band = cfg.bands[self._trial_index % len(cfg.bands)]
+            trial = self.scenario.trial(band, cfg.train_seed_offset + cfg.seed, self._trial_index)
             self._trial_index += 1
             c = trial.command
             self._command_target[i] = (c.vx, c.vy, c.yaw_rate)

@@ -93,8 +93,8 @@ class EnvConfig:
     Attributes:
         robot: robot registry name.
         arm_mode: ``none``, ``locked`` or ``actuated``.
-        scenario: scenario file whose band `band` supplies commands and pushes.
-        band: the scenario band to train on (``in``: the paper trains in distribution only).
+        scenario: scenario file whose bands `bands` supply commands and pushes.
+        bands: the scenario bands to train on, used in turn (push: ``in`` only, the paper trains in distribution).
         pushes: apply the scenario's pushes (stage 1 trains without them).
         terrain: ``scenario`` (the scenario's ground) or ``flat``.
         num_envs: parallel environments.
@@ -119,7 +119,7 @@ class EnvConfig:
     robot: str = "a1-wx200"
     arm_mode: str = "actuated"
     scenario: str = "scenarios/push.toml"
-    band: str = "in"
+    bands: tuple[str, ...] = ("in",)
     pushes: bool = True
     terrain: str = "scenario"
     num_envs: int = 1024
@@ -152,6 +152,8 @@ class EnvConfig:
             check_arm_mode(self.teacher_arm_mode)
         if self.terrain not in ("scenario", "flat"):
             raise ConfigError(f"EnvConfig.terrain must be 'scenario' or 'flat', got {self.terrain!r}")
+        if not self.bands:
+            raise ConfigError("EnvConfig.bands must name at least one band of the scenario")
         if self.num_envs < 1 or self.decimation < 1 or self.nthread < 1:
             raise ConfigError("EnvConfig: num_envs, decimation and nthread must be >= 1")
         if not 0 < self.timestep <= 0.01:
