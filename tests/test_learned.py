@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from wbc.learned.env import BatchedEnv
-from wbc.learned.env_config import DomainRandomisation, EnvConfig
+from wbc.learned.env_config import DomainRandomisation, EnvConfig, ObsNoise
 from wbc.learned.numpy_policy import NumpyPolicy
 from wbc.learned.observations import ObsLayout, compatible_observation
 from wbc.learned.policy_file import PolicyFileError, load_policy, save_policy
 from wbc.robots.registry import get_robot
+from wbc.types import MotorCommand
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = str(ROOT / "scenarios" / "push.toml")
@@ -284,3 +285,75 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
         train(_tiny(2, tmp_path / "empty", max_iterations=1))
     s2 = train(_tiny(2, tmp_path / "a", max_iterations=1))
     assert load_policy(Path(s2["run_dir"]) / "policy").meta["arm_mode"] == "locked"
+
+
+# -- controllers ---------------------------------------------------------------------------------------------------
+def test_controller_observation_matches_the_training_env():
+    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
+    from wbc.learned.controller import LearnedController
+    from wbc.learned.env_config import ObsScales
+    from wbc.types import VelocityCommand
+
+    # the same start, the same constant joint targets, 10 policy steps in the env and on MujocoRobot
+    env = BatchedEnv(small_config(num_envs=1, pushes=False, init_joint_noise=0.0, noise=ObsNoise(
+        dof_pos=0.0, dof_vel=0.0, ang_vel=0.0, gravity=0.0), domain=DomainRandomisation(
+        num_variants=1, payload_kg=(0.0, 0.0), payload_com_m=0.0, friction=(1.0, 1.0), motor_strength=(1.0, 1.0))))
+    robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
+    action = np.linspace(-0.5, 0.5, 15)
+    ctrl = object.__new__(LearnedController)  # observation() needs only these fields
+    ctrl.scales, ctrl.default_q = ObsScales(), robot.desc.nominal_q
+    with robot:
+        robot.reset(seed=0, qpos=env.state[0, 1:1 + env.nq].copy())
+        for _ in range(10):
+            r = env.step(action[None])
+            robot.write(MotorCommand.hold(robot.desc.nominal_q + 0.25 * action, env.pool.kp, env.pool.kd))
+            robot.advance(0.02)
+        state = robot.read()
+    ctrl.last_action = action
+    cmd = VelocityCommand(*env._commands_now()[0])  # the command at the observation's time
+    got = ctrl.observation(state, cmd)
+    assert np.abs(state.gyro_in_body).max() > 1e-3  # the trunk is moving, so the comparison means something
+    np.testing.assert_allclose(got, r.obs[0], atol=1e-5)
+
+
+def test_learned_controllers_are_registered_and_refuse_missing_or_wrong_weights(vec, tmp_path):
+    from wbc.control import get_controller
+    from wbc.learned.controller import LearnedController
+    from wbc.learned.export import policy_file_from_actor
+
+    for name, arm in (("learned", "actuated"), ("learned-locked", "locked"), ("learned-noarm", "none")):
+        assert get_controller(name).arm_mode == arm
+    desc = get_robot("a1-wx200", "actuated")
+    with pytest.raises(PolicyFileError, match="file not found"):
+        LearnedController(desc, tmp_path / "none.npz")
+    save_policy(tmp_path / "z", policy_file_from_actor(_actor(vec, True), vec.cfg, task="push", stage=3))
+    with pytest.raises(PolicyFileError, match="adaptation module"):
+        LearnedController(desc, tmp_path / "z")
+    save_policy(tmp_path / "p", policy_file_from_actor(_actor(vec, False), vec.cfg, task="push", stage=3))
+    with pytest.raises(PolicyFileError, match="arm_mode"):
+        LearnedController(get_robot("a1-wx200", "locked"), tmp_path / "p")
+
+
+def test_learned_controller_drives_the_simulated_robot(vec, tmp_path):
+    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
+    from wbc.learned.controller import LearnedController
+    from wbc.learned.export import policy_file_from_actor
+    from wbc.types import VelocityCommand
+
+    actor = _actor(vec, False)
+    save_policy(tmp_path / "p", policy_file_from_actor(actor, vec.cfg, task="push", stage=3))
+    robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
+    ctrl = LearnedController(robot.desc, tmp_path / "p")
+    assert ctrl.rate_hz == pytest.approx(50.0)
+    with robot:
+        robot.reset(seed=0)
+        ctrl.reset()
+        for _ in range(5):
+            state = robot.read()
+            obs = ctrl.observation(state, VelocityCommand(vx=0.3))
+            out = ctrl.act(state, VelocityCommand(vx=0.3))
+            want = robot.desc.nominal_q + 0.25 * np.clip(ctrl.policy(obs[None])[0], -10, 10)
+            np.testing.assert_allclose(out.q, want, atol=1e-9)
+            np.testing.assert_array_equal(out.kp[:12], 20.0)
+            robot.write(out)
+            robot.advance(1.0 / ctrl.rate_hz)

@@ -9,8 +9,10 @@ Episodes follow the scenario: each reset draws the next trial of the scenario's 
 included, and its pushes) from a training seed stream disjoint from evaluation seeds. An episode ends when a fall
 body (trunk, hips, thighs, arm links) touches the ground, or times out at the scenario's duration.
 
-The IMU site sits at the trunk origin with the trunk's axes, so the IMU quaternion and gyro that `RobotState` reports
-are the free joint's quaternion and body angular velocity; the env reads them from the state directly.
+The policy reads the IMU quaternion and gyro from the same sensors `MujocoRobot.read` reports (MuJoCo computes them
+inside the step, one physics step before the final state), so training and deployment see identical signals; after
+a reset, before any step, they are the free joint's quaternion and (zero) body angular velocity, which is what the
+IMU site at the trunk origin with the trunk's axes measures.
 """
 
 from __future__ import annotations
@@ -108,6 +110,7 @@ class BatchedEnv:
         self.default_q = self.desc.nominal_q
         limits = joint_table(self.desc)
         self.torque_limit = limits.torque_limit
+        self.q_lower, self.q_upper = limits.lower, limits.upper
         self.rewards = Rewards(config, limits.lower, limits.upper, self.default_q)
         self.episode_s = config.episode_s if config.episode_s is not None else self.scenario.duration_s
         self.max_episode_steps = int(round(self.episode_s / config.policy_dt))
@@ -137,6 +140,10 @@ class BatchedEnv:
         self.episode_step = np.zeros(n, dtype=np.int64)
         self.episode_length_buf = self.episode_step  # rsl-rl's name, same array
         self.last_action = np.zeros((n, self.num_actions))
+        self.imu_quat = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        self.gyro = np.zeros((n, 3))
+        self._quat_adr = self.pool.sensor_slices["imu_quat"]
+        self._gyro_adr = self.pool.sensor_slices["imu_gyro"]
         self.air_time = np.zeros((n, 4))
         self._episode_sums: dict[str, np.ndarray] = {k: np.zeros(n) for k in self.rewards.scales}
         self._trial_index = 0
@@ -162,7 +169,8 @@ class BatchedEnv:
         cfg = self.config
         n, dec = self.num_envs, cfg.decimation
         a = np.clip(np.asarray(actions, dtype=np.float64), -cfg.clip_actions, cfg.clip_actions)
-        target = self.default_q + cfg.action_scale * a
+        # the robot interface clamps position targets to the joint range (`clamp_command`); so does training
+        target = np.clip(self.default_q + cfg.action_scale * a, self.q_lower, self.q_upper)
         self.command = self._commands_now()
         self._control[:, :, : self.nu] = (self.pool.kp * target)[:, None, :]
         qpos0 = self.state[:, self._qpos]
@@ -179,6 +187,8 @@ class BatchedEnv:
         rollout.rollout(self._models, self._datas, self.state, self._control, control_spec=self.control_spec,
                         nstep=dec, state=self._out, sensordata=self._sens, persistent_pool=True, skip_checks=True)
         self.state[:] = self._out[:, -1]
+        self.imu_quat[:] = self._sens[:, -1, self._quat_adr]
+        self.gyro[:] = self._sens[:, -1, self._gyro_adr]
         self.total_steps += n
 
         # physics-step quantities: torques of the motor law and mechanical power, averaged over the step
@@ -258,6 +268,8 @@ class BatchedEnv:
         qpos[:, 7:] = self.default_q + noise
         state[:, self._qpos] = qpos
         self.state[ids] = state
+        self.imu_quat[ids] = qpos[:, 3:7]
+        self.gyro[ids] = 0.0
         self.episode_step[ids] = 0
         self.last_action[ids] = 0.0
         self.air_time[ids] = 0.0
@@ -269,10 +281,10 @@ class BatchedEnv:
         command = self._commands_now()
         nz = cfg.noise
         u = self.rng.uniform(-1.0, 1.0, (n, 6 + 2 * nj))
-        gyro = qvel[:, 3:6] + nz.ang_vel * u[:, :3]
+        gyro = self.gyro + nz.ang_vel * u[:, :3]
         q = qpos[:, 7:] + nz.dof_pos * u[:, 6:6 + nj]
         dq = qvel[:, 6:] + nz.dof_vel * u[:, 6 + nj:]
-        obs = policy_observation(gyro_in_body=gyro, imu_quat=qpos[:, 3:7], command=command, q=q, dq=dq,
+        obs = policy_observation(gyro_in_body=gyro, imu_quat=self.imu_quat, command=command, q=q, dq=dq,
                                  last_action=self.last_action, default_q=self.default_q, scales=cfg.obs_scales)
         obs[:, 3:6] += (nz.gravity * u[:, 3:6]).astype(np.float32)
         rot = rotation_matrices(qpos[:, 3:7])
