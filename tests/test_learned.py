@@ -357,3 +357,16 @@ def test_learned_controller_drives_the_simulated_robot(vec, tmp_path):
             np.testing.assert_array_equal(out.kp[:12], 20.0)
             robot.write(out)
             robot.advance(1.0 / ctrl.rate_hz)
+
+
+def test_reward_terms_see_real_motion():
+    env = BatchedEnv(small_config(pushes=False))
+    rng = np.random.default_rng(0)
+    sums = {}
+    for _ in range(10):
+        r = env.step(rng.standard_normal((4, 15)))
+    for name, value in env._episode_sums.items():
+        sums[name] = float(np.abs(value).sum())
+    for name in ("dof_acc", "action_rate", "work", "torques", "tracking_lin_vel", "orientation"):
+        assert sums[name] > 0.0, name
+    assert np.isfinite(r.reward).all()

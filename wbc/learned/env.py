@@ -39,6 +39,7 @@ from wbc.learned.rewards import Rewards, StepData
 from wbc.robots.joint_table import joint_table
 from wbc.robots.registry import get_robot
 from wbc.scenarios import load_scenario
+from wbc.trial import Trial
 
 __all__ = ["BatchedEnv", "StepResult", "rotation_matrices"]
 
@@ -130,6 +131,11 @@ class BatchedEnv:
         self._control = np.zeros((n, dec, self.ncontrol))
         self._out = np.empty((n, dec, self.nstate))
         self._sens = np.empty((n, dec, m.nsensordata))
+        self._tau = np.empty((n, dec, self.desc.num_joints))
+        fall = self.pool.fall_adr
+        contiguous = np.array_equal(fall, np.arange(fall[0], fall[-1] + 1))
+        self._fall = slice(int(fall[0]), int(fall[-1]) + 1) if contiguous else fall
+        self._need_torques = bool({"work", "torques"} & set(self.rewards.scales))
         self.variant = np.zeros(n, dtype=np.int64)
         self._models = [m] * n
         self.strength = np.ones((n, self.num_actions))
@@ -147,6 +153,7 @@ class BatchedEnv:
         self.air_time = np.zeros((n, 4))
         self._episode_sums: dict[str, np.ndarray] = {k: np.zeros(n) for k in self.rewards.scales}
         self._trial_index = 0
+        self._trials: dict[int, Trial] = {}
         self.total_steps = 0
         self.reset()
 
@@ -173,9 +180,8 @@ class BatchedEnv:
         target = np.clip(self.default_q + cfg.action_scale * a, self.q_lower, self.q_upper)
         self.command = self._commands_now()
         self._control[:, :, : self.nu] = (self.pool.kp * target)[:, None, :]
-        qpos0 = self.state[:, self._qpos]
-        qvel0 = self.state[:, self._qvel]
-        rot0 = rotation_matrices(qpos0[:, 3:7])
+        dq_before = self.state[:, 1 + self.nq + 6:].copy()  # a copy: the state is overwritten below
+        rot0 = rotation_matrices(self.state[:, 4:8])
         step0 = self.episode_step * dec
         wrench = self.pushes.wrench(step0, dec, rot0, self.pool.base_ipos[self.variant])
         xf = self._control[:, :, self._xfrc_base]
@@ -192,14 +198,20 @@ class BatchedEnv:
         self.total_steps += n
 
         # physics-step quantities: torques of the motor law and mechanical power, averaged over the step
-        qs = self._out[:, :, self._qpos][:, :, 7:]
-        dqs = self._out[:, :, self._qvel][:, :, 6:]
-        k = self.strength[:, None, :]
-        tau = k * (self.pool.kp * (target[:, None, :] - qs) - self.pool.kd * dqs)
-        tau = np.clip(tau, -k * self.torque_limit, k * self.torque_limit)
-        power = np.abs(tau * dqs).sum(axis=2).mean(axis=1)
-        torque_sq = (tau ** 2).sum(axis=2).mean(axis=1)
-        fell = (self._sens[:, :, self.pool.fall_adr] > 0).any(axis=(1, 2))
+        qs = self._out[:, :, 1 + 7:1 + self.nq]
+        dqs = self._out[:, :, 1 + self.nq + 6:]
+        power = torque_sq = None
+        if self._need_torques:
+            k = self.strength[:, None, :]
+            tau = np.subtract(target[:, None, :], qs, out=self._tau)
+            tau *= self.pool.kp
+            tau -= self.pool.kd * dqs
+            tau *= k
+            lim = k * self.torque_limit
+            np.clip(tau, -lim, lim, out=tau)
+            power = np.abs(tau * dqs).sum(axis=2).mean(axis=1)
+            torque_sq = np.square(tau).sum(axis=2).mean(axis=1)
+        fell = self._sens[:, :, self._fall].max(axis=(1, 2)) > 0
         contact = self._sens[:, -1, self.pool.touch_adr] > 1.0
 
         qpos, qvel = self.state[:, self._qpos], self.state[:, self._qvel]
@@ -212,7 +224,7 @@ class BatchedEnv:
         data = StepData(
             base_linvel_in_body=linvel_body, base_angvel_in_body=qvel[:, 3:6],
             gravity_in_body=projected_gravity(qpos[:, 3:7]), command=self.command, q=qpos[:, 7:], dq=qvel[:, 6:],
-            dq_before=qvel0[:, 6:], power=power, torque_sq=torque_sq, action=a, last_action=self.last_action,
+            dq_before=dq_before, power=power, torque_sq=torque_sq, action=a, last_action=self.last_action,
             first_contact=first_contact, air_time=air, terminated=fell,
         )
         reward, terms = self.rewards.compute(data)
@@ -246,14 +258,23 @@ class BatchedEnv:
         ramp = np.where(self._ramp_s > 0.0, np.minimum(1.0, t / np.maximum(self._ramp_s, 1e-9)), 1.0)
         return ramp[:, None] * self._command_target
 
+    def _trial(self, index: int) -> Trial:
+        """Training trial `index` (cached: sampling one costs about a millisecond, and resets are frequent early)."""
+        trial = self._trials.get(index)
+        if trial is None:
+            cfg = self.config
+            band = cfg.bands[index % len(cfg.bands)]
+            trial = self.scenario.trial(band, cfg.train_seed_offset + cfg.seed, index)
+            self._trials[index] = trial
+        return trial
+
     def _reset_envs(self, ids: np.ndarray) -> None:
         cfg = self.config
         variants = self.rng.integers(0, len(self.pool.models), ids.size)
         self.variant[ids] = variants
         for i, v in zip(ids, variants, strict=True):
             self._models[i] = self.pool.models[v]
-            band = cfg.bands[self._trial_index % len(cfg.bands)]
-            trial = self.scenario.trial(band, cfg.train_seed_offset + cfg.seed, self._trial_index)
+            trial = self._trial(self._trial_index % cfg.trial_pool)
             self._trial_index += 1
             c = trial.command
             self._command_target[i] = (c.vx, c.vy, c.yaw_rate)

@@ -114,6 +114,7 @@ class EnvConfig:
         teacher_arm_mode: if set, also emit the ``teacher`` observation of a policy on that arm mode.
         rewards, obs_scales, noise, domain: sub-configurations.
         train_seed_offset: the scenario's trial seeds used for training start here (evaluations use 0, 1, ...).
+        trial_pool: episodes cycle through this many distinct trials of the scenario (drawn once, then cached).
     """
 
     robot: str = "a1-wx200"
@@ -145,6 +146,7 @@ class EnvConfig:
     noise: ObsNoise = field(default_factory=ObsNoise)
     domain: DomainRandomisation = field(default_factory=DomainRandomisation)
     train_seed_offset: int = 100_000
+    trial_pool: int = 4096
 
     def __post_init__(self) -> None:
         check_arm_mode(self.arm_mode)
@@ -154,8 +156,8 @@ class EnvConfig:
             raise ConfigError(f"EnvConfig.terrain must be 'scenario' or 'flat', got {self.terrain!r}")
         if not self.bands:
             raise ConfigError("EnvConfig.bands must name at least one band of the scenario")
-        if self.num_envs < 1 or self.decimation < 1 or self.nthread < 1:
-            raise ConfigError("EnvConfig: num_envs, decimation and nthread must be >= 1")
+        if min(self.num_envs, self.decimation, self.nthread, self.trial_pool) < 1:
+            raise ConfigError("EnvConfig: num_envs, decimation, nthread and trial_pool must be >= 1")
         if not 0 < self.timestep <= 0.01:
             raise ConfigError(f"EnvConfig.timestep must be in (0, 0.01] s, got {self.timestep}")
         if self.domain.num_variants < 1:

@@ -30,8 +30,8 @@ class StepData:
         q: (N, n) joint positions at the end of the step [rad].
         dq: (N, n) joint velocities at the end of the step [rad/s].
         dq_before: (N, n) joint velocities at the start of the step [rad/s].
-        power: (N,) mean over the step's physics steps of sum |tau dq| [W].
-        torque_sq: (N,) mean over the step of sum tau^2 [N^2 m^2].
+        power: (N,) mean over the step's physics steps of sum |tau dq| [W] (None when no term needs it).
+        torque_sq: (N,) mean over the step of sum tau^2 [N^2 m^2] (None when no term needs it).
         action: (N, n) this step's actions.
         last_action: (N, n) the previous step's actions.
         first_contact: (N, 4) feet touching down this step.
@@ -46,8 +46,8 @@ class StepData:
     q: np.ndarray
     dq: np.ndarray
     dq_before: np.ndarray
-    power: np.ndarray
-    torque_sq: np.ndarray
+    power: np.ndarray | None
+    torque_sq: np.ndarray | None
     action: np.ndarray
     last_action: np.ndarray
     first_contact: np.ndarray
