@@ -247,12 +247,14 @@ def test_bc_loss_counts_only_the_compatible_actions():
 
 # -- training ------------------------------------------------------------------------------------------------------
 def _tiny(stage: int, root: Path, seed: int = 0, **kw):
+    from wbc.learned.adaptation_config import AdaptationConfig
     from wbc.learned.stages import stage_config
 
     return stage_config("push", stage, run_root=str(root), env_overrides=dict(
         num_envs=8, nthread=1, scenario=SCENARIO, domain=DomainRandomisation(num_variants=2), seed=seed),
         seed=seed, num_steps_per_env=6, save_interval=1, actor_hidden_dims=(16,), critic_hidden_dims=(16,),
-        encoder_dims=(8,), extrinsics_dim=4, **kw)
+        encoder_dims=(8,), extrinsics_dim=4, rma=AdaptationConfig(
+            iterations=1, steps_per_iteration=4, history=3, hidden_dims=(8,), minibatch=16), **kw)
 
 
 def _arrays(run_dir) -> dict[str, np.ndarray]:
@@ -285,6 +287,28 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
         train(_tiny(2, tmp_path / "empty", max_iterations=1))
     s2 = train(_tiny(2, tmp_path / "a", max_iterations=1))
     assert load_policy(Path(s2["run_dir"]) / "policy").meta["arm_mode"] == "locked"
+    # RMA phase 2 ran: the export carries an adaptation module, so a controller can run it from RobotState alone
+    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
+    from wbc.learned.controller import LearnedController
+    from wbc.types import VelocityCommand
+
+    assert load_policy(Path(a["run_dir"]) / "policy").meta["adaptation"]["history"] == 3
+    robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none"))
+    ctrl = LearnedController(robot.desc, Path(a["run_dir"]) / "policy")
+    with robot:
+        robot.reset(seed=0)
+        ctrl.reset()
+        for k in range(4):
+            state = robot.read()
+            cmd = VelocityCommand(vx=0.3)
+            expected = ctrl.policy.normalise(ctrl.observation(state, cmd)[None])[0]
+            out = ctrl.act(state, cmd)
+            assert np.isfinite(out.q).all()
+            np.testing.assert_allclose(ctrl.history.buf[0, -1], expected, atol=1e-5)
+            if k == 0:  # after a reset the window is filled with the first observation
+                np.testing.assert_allclose(ctrl.history.buf[0, 0], expected, atol=1e-5)
+            robot.write(out)
+            robot.advance(0.02)
 
 
 # -- controllers ---------------------------------------------------------------------------------------------------

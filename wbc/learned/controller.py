@@ -4,8 +4,9 @@ Every tick: the policy observation from `RobotState` (IMU quaternion and gyro, j
 command, exactly as the training env builds it (`wbc.learned.observations`); the deterministic action; the motor
 command ``q* = default_q + action_scale * action`` with the PD gains the policy was trained with (zero target
 velocity and feed-forward torque), which the motor drivers (or MuJoCo's actuators) track between ticks. Nothing from
-the simulator's truth is read. A policy that observes the RMA extrinsics z needs the adaptation module that estimates
-z from the proprioceptive history (RMA phase 2); without one in the file it is refused at construction.
+the simulator's truth is read. A policy that observes the RMA extrinsics z gets them from the file's adaptation
+module (RMA phase 2) over the last H normalised observations (`ObsHistory`, filled with the first observation after a
+reset, as in training); a file with extrinsics and no adaptation module is refused at construction.
 
 The registry's ``learned``, ``learned-locked`` and ``learned-noarm`` run the weights shipped in
 ``wbc/learned/weights/<robot>-<arm mode>.npz`` (pi3, pi2 and pi1 of the robot's task).
@@ -19,6 +20,7 @@ import numpy as np
 
 from wbc.learned.env_config import ObsScales
 from wbc.learned.numpy_policy import NumpyPolicy
+from wbc.learned.obs_history import ObsHistory
 from wbc.learned.observations import ObsLayout, policy_observation
 from wbc.learned.policy_file import PolicyFileError, load_policy
 from wbc.robots.description import RobotDescription
@@ -54,7 +56,7 @@ class LearnedController:
                                   f"and policy.json to {path.with_suffix('')}.npz/.json")
         pf = load_policy(path)
         pf.check_robot(desc, path)
-        if pf.meta.get("extrinsics") is not None:
+        if pf.meta.get("extrinsics") is not None and pf.meta.get("adaptation") is None:
             raise PolicyFileError(path, "extrinsics", "the policy observes the RMA extrinsics z, which a robot cannot "
                                   "measure, and the file has no adaptation module to estimate z (RMA phase 2)")
         meta = pf.meta
@@ -76,10 +78,13 @@ class LearnedController:
         n = pf.num_actions
         self._zeros = np.zeros(n)
         self.last_action = np.zeros(n)
+        self.history = ObsHistory(1, self.policy.history, layout.size) if self.policy.history else None
+        self._fresh = True
 
     def reset(self) -> None:
-        """Forget the previous action."""
+        """Forget the previous action and the observation history."""
         self.last_action = np.zeros_like(self.last_action)
+        self._fresh = True
 
     def observation(self, state: RobotState, command: VelocityCommand) -> np.ndarray:
         """The policy observation, shape (obs_size,)."""
@@ -91,7 +96,17 @@ class LearnedController:
 
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """One policy step."""
-        action = np.clip(self.policy(self.observation(state, command)[None])[0], -self.clip, self.clip)
+        obs = self.observation(state, command)[None]
+        z = None
+        if self.history is not None:
+            normalised = self.policy.normalise(obs).astype(np.float32)
+            if self._fresh:
+                self.history.fill(np.zeros(1, dtype=int), normalised)
+            else:
+                self.history.push(normalised)
+            z = self.policy.adaptation(self.history.flat())
+        self._fresh = False
+        action = np.clip(self.policy(obs, z)[0], -self.clip, self.clip)
         self.last_action = action
         target = self.default_q + self.action_scale * action
         return MotorCommand(q=target, dq=self._zeros, kp=self.kp, kd=self.kd, tau=self._zeros)

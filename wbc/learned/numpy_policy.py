@@ -50,6 +50,9 @@ class NumpyPolicy:
         self._obs_mean = a["obs_mean"].astype(np.float64)
         self._obs_scale = 1.0 / (a["obs_std"].astype(np.float64) + self.eps)
         self.uses_extrinsics = meta.get("extrinsics") is not None
+        adapt = meta.get("adaptation")
+        self.history = int(adapt["history"]) if adapt is not None else 0
+        self._adaptation = [(w.astype(np.float64), b.astype(np.float64)) for w, b in policy.layers("adaptation")]
         if self.uses_extrinsics:
             self._priv_mean = a["privileged_mean"].astype(np.float64)
             self._priv_scale = 1.0 / (a["privileged_std"].astype(np.float64) + self.eps)
@@ -58,6 +61,16 @@ class NumpyPolicy:
         """The extrinsics z from privileged observations, (N, P) -> (N, z_dim)."""
         x = (np.asarray(privileged, dtype=np.float64) - self._priv_mean) * self._priv_scale
         return _mlp(self._encoder, self.activation, x)
+
+    def normalise(self, obs: np.ndarray) -> np.ndarray:
+        """Observations as the networks see them, (N, obs_size)."""
+        return (np.asarray(obs, dtype=np.float64) - self._obs_mean) * self._obs_scale
+
+    def adaptation(self, history: np.ndarray) -> np.ndarray:
+        """The estimated extrinsics from (N, H * obs_size) normalised observations, oldest first (RMA phase 2)."""
+        if not self._adaptation:
+            raise ValueError("this policy file has no adaptation module (RMA phase 2 has not been run)")
+        return _mlp(self._adaptation, self.activation, np.asarray(history, dtype=np.float64))
 
     def __call__(self, obs: np.ndarray, z: np.ndarray | None = None) -> np.ndarray:
         """Deterministic actions, (N, obs_size) [+ (N, z_dim)] -> (N, num_actions).

@@ -9,6 +9,8 @@ NPZ holds float arrays only:
     obs_mean, obs_std                      observation normaliser: x_n = (x - mean) / (std + normalizer_eps)
     encoder/<i>/weight, encoder/<i>/bias   extrinsics encoder, privileged -> z (with extrinsics only)
     privileged_mean, privileged_std        its normaliser (with extrinsics only)
+    adaptation/<i>/weight, .../bias        RMA adaptation module: the last H normalised policy observations,
+                                           oldest first, flattened -> z (after RMA phase 2)
 
 `load_policy` checks everything against everything (keys, types, shapes, layer chaining, the layout's size) and every
 failure is a `PolicyFileError` naming the file and the field; `PolicyFile.check_robot` compares it with a robot.
@@ -180,6 +182,13 @@ def _check_shapes(policy: PolicyFile, npz: Path, js: Path) -> None:
         for key in ("privileged_mean", "privileged_std"):
             _check_array(a, key, (priv_size,), npz)
         _check_chain(policy, "encoder", priv_size, z_dim, list(extr["hidden_dims"]), npz)
+    adapt = m.get("adaptation")
+    if adapt is not None:
+        if extr is None:
+            raise PolicyFileError(js, "adaptation", "an adaptation module needs extrinsics to estimate")
+        if not isinstance(adapt, dict) or not {"history", "hidden_dims"} <= adapt.keys():
+            raise PolicyFileError(js, "adaptation", "expected {history, hidden_dims, ...} or null")
+        _check_chain(policy, "adaptation", int(adapt["history"]) * obs_size, z_dim, list(adapt["hidden_dims"]), npz)
     _check_chain(policy, "policy", obs_size + z_dim, n, list(m["hidden_dims"]), npz)
 
 

@@ -30,7 +30,7 @@ _runners = require("rsl_rl.runners")
 
 __all__ = ["latest_checkpoint", "rsl_rl_config", "train"]
 
-_RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads")
+_RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
 
 
@@ -188,5 +188,13 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     finally:
         vec.close()
     final = json.loads((run_dir / "progress.json").read_text())
-    return {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
-            "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz")}
+    result = {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
+              "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz")}
+    if cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0:
+        from wbc.learned.rma import train_adaptation
+
+        policy, summary = train_adaptation(load_policy(run_dir / "policy"), cfg.env, cfg.rma)
+        save_policy(run_dir / "policy", policy)
+        (run_dir / "rma.json").write_text(json.dumps(summary, indent=2) + "\n")
+        result["rma_wall_s"] = summary["wall_s"]
+    return result

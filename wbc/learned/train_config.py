@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from wbc.learned.adaptation_config import AdaptationConfig
 from wbc.learned.bc_schedule import BCSchedule
 from wbc.learned.env_config import EnvConfig
 
@@ -45,6 +46,7 @@ class TrainConfig:
         init_std: initial action noise.
         extrinsics_dim: size of the RMA extrinsics z (0: the actor sees the policy observation only).
         encoder_dims: hidden sizes of the extrinsics encoder.
+        rma: RMA phase 2, run after PPO when the policy observes extrinsics (its iterations 0: skipped).
         ppo: PPO hyper-parameters.
         bc: the BC weight schedule (None: no BC term).
         teacher: the previous stage's policy file (with `bc`).
@@ -69,6 +71,7 @@ class TrainConfig:
     init_std: float = 1.0
     extrinsics_dim: int = 8
     encoder_dims: tuple[int, ...] = (64, 32)
+    rma: AdaptationConfig = field(default_factory=AdaptationConfig)
     ppo: PPOConfig = field(default_factory=PPOConfig)
     bc: BCSchedule | None = None
     teacher: str | None = None
