@@ -394,3 +394,24 @@ def test_reward_terms_see_real_motion():
     for name in ("dof_acc", "action_rate", "work", "torques", "tracking_lin_vel", "orientation"):
         assert sums[name] > 0.0, name
     assert np.isfinite(r.reward).all()
+
+
+# -- CLI -----------------------------------------------------------------------------------------------------------
+def test_bench_train_reports_control_steps_per_second():
+    from wbc.learned.throughput import bench_train
+
+    result = bench_train(small_config(), steps=3, repeats=1)
+    assert result["control_steps_per_s"] > 0 and result["rollout_only_control_steps_per_s"] > 0
+    assert result["physics_steps_per_s"] == pytest.approx(10 * result["control_steps_per_s"])
+
+
+def test_cli_train_dry_run_and_errors(capsys):
+    from wbc.cli import main
+
+    assert main(["train", "--task", "push", "--stage", "3", "--envs", "64", "--dry-run"]) == 0
+    cfg = json.loads(capsys.readouterr().out)
+    assert cfg["env"]["arm_mode"] == "actuated" and cfg["env"]["teacher_arm_mode"] == "locked"
+    assert cfg["env"]["num_envs"] == 64 and cfg["bc"]["initial"] == 1.0
+    assert cfg["teacher"].endswith("push-stage2/policy")
+    assert main(["train", "--task", "push", "--stage", "3", "--baseline", "nope", "--dry-run"]) == 2
+    assert "valid baselines" in capsys.readouterr().err
