@@ -246,11 +246,11 @@ def test_bc_loss_counts_only_the_compatible_actions():
 
 
 # -- training ------------------------------------------------------------------------------------------------------
-def _tiny(stage: int, root: Path, seed: int = 0, **kw):
+def _tiny(stage: int, root: Path, seed: int = 0, baseline: str | None = None, **kw):
     from wbc.learned.adaptation_config import AdaptationConfig
     from wbc.learned.stages import stage_config
 
-    return stage_config("push", stage, run_root=str(root), env_overrides=dict(
+    return stage_config("push", stage, baseline, run_root=str(root), env_overrides=dict(
         num_envs=8, nthread=1, scenario=SCENARIO, domain=DomainRandomisation(num_variants=2), seed=seed),
         seed=seed, num_steps_per_env=6, save_interval=1, actor_hidden_dims=(16,), critic_hidden_dims=(16,),
         encoder_dims=(8,), extrinsics_dim=4, rma=AdaptationConfig(
@@ -287,6 +287,9 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
         train(_tiny(2, tmp_path / "empty", max_iterations=1))
     s2 = train(_tiny(2, tmp_path / "a", max_iterations=1))
     assert load_policy(Path(s2["run_dir"]) / "policy").meta["arm_mode"] == "locked"
+    # the fine-tuned pi2 baseline starts from pi2's weights
+    f3 = train(_tiny(3, tmp_path / "a", baseline="finetune-pi2", max_iterations=1))
+    assert load_policy(Path(f3["run_dir"]) / "policy").meta["arm_mode"] == "actuated"
     # RMA phase 2 ran: the export carries an adaptation module, so a controller can run it from RobotState alone
     from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
     from wbc.learned.controller import LearnedController
@@ -415,3 +418,60 @@ def test_cli_train_dry_run_and_errors(capsys):
     assert cfg["teacher"].endswith("push-stage2/policy")
     assert main(["train", "--task", "push", "--stage", "3", "--baseline", "nope", "--dry-run"]) == 2
     assert "valid baselines" in capsys.readouterr().err
+
+
+# -- warm start ----------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("extrinsics", [False, True])
+def test_warm_started_actor_reproduces_the_old_policy_on_the_legs(tmp_path, extrinsics):
+    torch = pytest.importorskip("torch")
+    pytest.importorskip("rsl_rl")
+    from wbc.learned.export import policy_file_from_actor
+    from wbc.learned.vec_env import RslVecEnv
+    from wbc.learned.warm_start import warm_start_actor
+
+    old_vec = RslVecEnv(BatchedEnv(small_config(arm_mode="locked")))
+    new_vec = RslVecEnv(BatchedEnv(small_config(arm_mode="actuated", seed=9)))
+    old = load_policy(save_policy(tmp_path / "old", policy_file_from_actor(
+        _actor(old_vec, extrinsics, seed=1), old_vec.cfg, task="push", stage=2))[0])
+    new = _actor(new_vec, extrinsics, seed=2)
+    warm_start_actor(new, old)
+    obs = new_vec.get_observations().clone()
+    rng = np.random.default_rng(3)
+    obs["policy"] = torch.from_numpy(rng.normal(0, 2, obs["policy"].shape).astype(np.float32))
+    obs["privileged"] = torch.from_numpy(rng.normal(0, 2, obs["privileged"].shape).astype(np.float32))
+    with torch.no_grad():
+        got = new(obs).numpy()
+    legs_obs = compatible_observation(obs["policy"].numpy(), ObsLayout(15), ObsLayout(12))
+    ref = NumpyPolicy(old)
+    z = ref.extrinsics(obs["privileged"].numpy()) if extrinsics else None
+    np.testing.assert_allclose(got[:, :12], ref(legs_obs, z), atol=1e-5)
+    np.testing.assert_array_equal(got[:, 12:], 0.0)
+
+
+def test_stage_and_baseline_configurations():
+    from wbc.errors import ConfigError, UnknownNameError
+    from wbc.learned.stages import stage_config
+
+    s1, s2, s3 = (stage_config("push", k) for k in (1, 2, 3))
+    assert (s1.env.arm_mode, s1.env.pushes, s1.env.terrain, s1.bc) == ("none", False, "flat", None)
+    assert (s2.env.arm_mode, s2.env.pushes, s2.env.teacher_arm_mode) == ("locked", True, "none")
+    assert s2.teacher.endswith("push-stage1/policy") and s2.action_mask == tuple(range(12))
+    assert (s3.env.arm_mode, s3.env.teacher_arm_mode) == ("actuated", "locked") and s3.bc.initial > 0
+    assert s3.env.bands == ("in",)
+    ppo = stage_config("push", 3, "ppo")
+    assert ppo.bc is None and ppo.init_from is None and ppo.env.teacher_arm_mode is None
+    demo = stage_config("push", 3, "one-stage-demo")
+    assert demo.env.teacher_arm_mode == "none" and demo.teacher.endswith("push-stage1/policy")
+    ft = stage_config("push", 3, "finetune-pi2")
+    assert ft.bc is None and ft.init_from.endswith("push-stage2/policy")
+    c1, c3 = stage_config("push", 1, "curriculum"), stage_config("push", 3, "curriculum")
+    assert (c1.env.arm_mode, c1.env.pushes, c1.init_from) == ("locked", False, None)
+    assert c3.init_from.endswith("push-stage2-curriculum/policy") and c3.run_dir.endswith("push-stage3-curriculum")
+    turn = stage_config("turn", 3)
+    assert turn.env.robot == "go1-arm" and turn.env.bands == ("1.0", "1.25", "1.5")
+    with pytest.raises(ConfigError, match="stage-3"):
+        stage_config("push", 2, "ppo")
+    with pytest.raises(UnknownNameError, match="valid baselines"):
+        stage_config("push", 3, "decoupled")
+    with pytest.raises(UnknownNameError, match="valid tasks"):
+        stage_config("walk", 1)

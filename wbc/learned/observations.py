@@ -25,8 +25,8 @@ from wbc.errors import ConfigError
 from wbc.learned.env_config import ObsScales
 
 __all__ = [
-    "ObsLayout", "PRIVILEGED_PARTS", "compatible_observation", "policy_observation", "privileged_observation",
-    "projected_gravity",
+    "ObsLayout", "PRIVILEGED_PARTS", "compatible_indices", "compatible_observation", "policy_observation",
+    "privileged_observation", "projected_gravity",
 ]
 
 PRIVILEGED_PARTS: tuple[tuple[str, int], ...] = (
@@ -119,16 +119,24 @@ def privileged_observation(
     ], axis=-1).astype(np.float32)
 
 
-def compatible_observation(obs: np.ndarray, source: ObsLayout, target: ObsLayout) -> np.ndarray:
-    """The part of `obs` (laid out as `source`) that a policy with layout `target` (fewer joints) observes.
+def compatible_indices(source: ObsLayout, target: ObsLayout) -> np.ndarray:
+    """Indices into a `source` observation of each entry of the `target` (fewer joints) observation.
 
-    Joint parts keep their first ``target.num_joints`` entries (the legs); the other parts are copied.
+    Joint parts keep their first ``target.num_joints`` entries (the legs); the other parts are taken whole.
+
+    Raises:
+        ConfigError: `target` has more joints than `source`.
     """
     if target.num_joints > source.num_joints:
         raise ConfigError(f"a {target.num_joints}-joint observation cannot be taken from a "
                           f"{source.num_joints}-joint one")
     pieces, at = [], 0
     for (_, size), (_, keep) in zip(source.parts, target.parts, strict=True):
-        pieces.append(obs[:, at:at + keep])
+        pieces.append(np.arange(at, at + keep))
         at += size
-    return np.concatenate(pieces, axis=1)
+    return np.concatenate(pieces)
+
+
+def compatible_observation(obs: np.ndarray, source: ObsLayout, target: ObsLayout) -> np.ndarray:
+    """The part of `obs` (N, source.size) that a policy with layout `target` (fewer joints) observes."""
+    return obs[:, compatible_indices(source, target)]

@@ -7,10 +7,16 @@ Stages (the paper's Method section):
        whole action (both have 12 leg actions).
     3  pi3: arm actuated; PPO + BC towards pi2 on the leg actions (the arm's 3 actions have no teacher).
 
-Baselines (stage 3 settings, paper Table III): ``ppo`` (PPO from scratch on the full task, no BC) and
-``one-stage-demo`` (pi1 as the teacher of the actuated-arm policy directly). The paper's other three (PPO
-curriculum, fine-tuned pi2, decoupled) need weight transfer between stages and a separate arm policy, which are
-not built yet; asking for them raises an error that lists the available ones.
+Baselines (paper Table III), configurations of the same code:
+
+    ppo             stage 3 from scratch (PPO on the full task, no BC, no transfer).
+    one-stage-demo  stage 3 with pi1 (no arm) as the BC teacher, skipping the locked-arm stage.
+    finetune-pi2    stage 3 started from pi2's weights (`wbc.learned.warm_start`), PPO only.
+    curriculum      PPO only, each stage started from the previous one's weights: stage 1 = locked arm without
+                    perturbations, stage 2 = locked arm with the task's conditions, stage 3 = actuated arm.
+
+The paper's fifth baseline, decoupled (pi2's legs plus a separately trained arm policy), needs a composite policy
+that is not built yet.
 
 A stage's teacher is the policy file the previous stage exported (``<run_dir>/<task>-stage<k-1>/policy``), unless
 a path is given.
@@ -48,6 +54,8 @@ TASKS: dict[str, TaskSpec] = {
 BASELINES: dict[str, str] = {
     "ppo": "PPO from scratch on the stage-3 task (arm actuated), no BC",
     "one-stage-demo": "stage-3 task with pi1 (no arm) as the BC teacher, without the locked-arm stage",
+    "finetune-pi2": "stage-3 task started from pi2's weights, PPO only",
+    "curriculum": "PPO only through locked arm (no pushes), locked arm (task), actuated arm; weights carried over",
 }
 
 _ARM = {1: "none", 2: "locked", 3: "actuated"}
@@ -68,13 +76,14 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
         stage: 1, 2 or 3 (baselines: 3).
         baseline: None, or a key of `BASELINES`.
         run_root: where runs live; the run directory is ``<run_root>/<run_name>``.
-        teacher: the teacher's policy file (default: the previous stage's export under `run_root`).
+        teacher: the teacher's (or, for weight-transfer baselines, the initial) policy file (default: the previous
+            stage's export under `run_root`).
         env_overrides: `EnvConfig` fields to change (num_envs, seed ...).
         **overrides: `TrainConfig` fields to change (max_iterations, seed ...).
 
     Raises:
         UnknownNameError: unknown task or baseline.
-        ConfigError: a stage other than 1, 2, 3, or a baseline outside stage 3.
+        ConfigError: a stage other than 1, 2, 3, or a baseline other than curriculum outside stage 3.
     """
     if task not in TASKS:
         raise UnknownNameError("task", task, tuple(TASKS))
@@ -83,25 +92,36 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
     if baseline is not None:
         if baseline not in BASELINES:
             raise UnknownNameError("baseline", baseline, tuple(BASELINES))
-        if stage != 3:
+        if stage != 3 and baseline != "curriculum":
             raise ConfigError(f"baseline {baseline!r} is a stage-3 policy; use --stage 3")
     spec = TASKS[task]
+    arm = _ARM[stage]
     teacher_stage = {2: 1, 3: 2}.get(stage)
+    init_stage = None
     if baseline == "ppo":
         teacher_stage = None
     elif baseline == "one-stage-demo":
         teacher_stage = 1
+    elif baseline == "finetune-pi2":
+        teacher_stage, init_stage = None, 2
+    elif baseline == "curriculum":
+        teacher_stage, init_stage = None, (stage - 1 if stage > 1 else None)
+        arm = "locked" if stage < 3 else "actuated"
     env = EnvConfig(
-        robot=spec.robot, arm_mode=_ARM[stage], scenario=spec.scenario, bands=spec.bands,
+        robot=spec.robot, arm_mode=arm, scenario=spec.scenario, bands=spec.bands,
         pushes=stage > 1, terrain="flat" if stage == 1 else "scenario",
         teacher_arm_mode=None if teacher_stage is None else _ARM[teacher_stage],
     )
     env = dataclasses.replace(env, **(env_overrides or {}))
-    bc, teacher_path = None, None
+    bc, teacher_path, init_path = None, None, None
     if teacher_stage is not None:
         bc = BCSchedule(initial=1.0, final=0.0, hold_iterations=100, anneal_iterations=500, kind="linear")
         teacher_path = teacher or str(Path(run_root) / run_name(task, teacher_stage) / "policy")
+    if init_stage is not None:
+        init_baseline = "curriculum" if baseline == "curriculum" else None
+        init_path = teacher or str(Path(run_root) / run_name(task, init_stage, init_baseline) / "policy")
+    transfer = teacher_stage is not None or init_stage is not None
     cfg = TrainConfig(task=task, stage=stage, baseline=baseline, env=env, bc=bc, teacher=teacher_path,
-                      action_mask=None if teacher_stage is None else tuple(range(12)),
+                      init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
                       run_dir=str(Path(run_root) / run_name(task, stage, baseline)))
     return dataclasses.replace(cfg, **overrides)

@@ -94,7 +94,16 @@ def _versions() -> dict[str, str]:
     return out
 
 
+def _load_for(path: str, role: str):
+    try:
+        return load_policy(path)
+    except PolicyFileError as exc:
+        raise ConfigError(f"{role} is not usable: {exc}. Train the previous stage first, or pass its path") from None
+
+
 def _check_teacher(cfg: TrainConfig) -> None:
+    if cfg.init_from is not None:
+        _load_for(cfg.init_from, "the policy this run starts from (init_from)")
     if cfg.bc is None:
         return
     if cfg.teacher is None:
@@ -171,6 +180,11 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     vec = RslVecEnv(env, device=cfg.device)
     runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
     done = 0
+    if checkpoint is None and cfg.init_from is not None:
+        from wbc.learned.warm_start import warm_start_actor
+
+        warm_start_actor(runner.alg.get_policy(), _load_for(cfg.init_from, "the policy this run starts from"),
+                         mask=None if cfg.action_mask is None else list(cfg.action_mask))
     if checkpoint is not None:
         runner.load(str(checkpoint))
         done = runner.current_learning_iteration + 1

@@ -52,7 +52,8 @@ class TrainConfig:
         ppo: PPO hyper-parameters.
         bc: the BC weight schedule (None: no BC term).
         teacher: the previous stage's policy file (with `bc`).
-        action_mask: student action index of each teacher action (default: the first ones, the legs).
+        action_mask: student action index of each teacher (or `init_from`) action (default: the first ones, the legs).
+        init_from: a previous policy file the actor starts from (`wbc.learned.warm_start`), or None.
         run_dir: where checkpoints, TensorBoard logs, the resolved config and the exported policy go.
         device: torch device.
         torch_threads: torch's intra-op threads. 1 by default: on a shared 2-core machine, torch's spinning worker
@@ -78,6 +79,7 @@ class TrainConfig:
     bc: BCSchedule | None = None
     teacher: str | None = None
     action_mask: tuple[int, ...] | None = None
+    init_from: str | None = None
     run_dir: str = "runs/train"
     device: str = "cpu"
     torch_threads: int = 1
