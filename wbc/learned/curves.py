@@ -1,7 +1,7 @@
 """Training curves of one or more runs, read from their TensorBoard logs and drawn with matplotlib.
 
 ``python -m wbc.learned.curves RUN_DIR [RUN_DIR ...] -o docs/training-push.png`` draws, against environment steps,
-the mean episode reward, the fall rate, the velocity-tracking reward and (for BC stages) the BC loss of every run,
+the mean episode reward, the fall rate, the velocity-tracking reward, (for BC stages) the BC loss and the value loss,
 one line per run, labelled with the run directory's name.
 """
 
@@ -18,7 +18,8 @@ from wbc.optional import require
 __all__ = ["PANELS", "plot_training_curves", "read_scalars"]
 
 PANELS = (("Train/mean_reward", "mean episode reward"), ("episode/fall_rate", "fall rate"),
-          ("rew/tracking_lin_vel", "velocity tracking reward [1/s]"), ("Loss/bc", "BC loss"))
+          ("rew/tracking_lin_vel", "velocity tracking reward [1/s]"), ("Loss/bc", "BC loss"),
+          ("Loss/value", "value loss"))
 """(TensorBoard tag, axis title) of each panel; a panel no run logs is left out."""
 
 
@@ -48,6 +49,8 @@ def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
         steps_per_it = config["num_steps_per_env"] * config["env"]["num_envs"]
         runs.append((Path(d).name, scalars, steps_per_it))
     panels = [(tag, title) for tag, title in PANELS if any(tag in s for _, s, _ in runs)]
+    if not panels:
+        raise ValueError(f"none of {[t for t, _ in PANELS]} is logged in {[str(d) for d in run_dirs]}")
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.4), squeeze=False)
     for ax, (tag, title) in zip(axes[0], panels, strict=True):
         for name, scalars, steps_per_it in runs:
