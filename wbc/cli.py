@@ -68,6 +68,9 @@ def _bench_train(args: argparse.Namespace) -> int:
     print(f"  rollout only   : {result['rollout_only_control_steps_per_s']:>10,.0f} control steps/s (physics limit)")
     print(f"  env efficiency : {100 * result['env_efficiency']:>9.0f} %  "
           f"({result['python_ms_per_step']:.1f} ms of Python per policy step)")
+    print(f"  CPU-time bound : {result['cpu_bound_control_steps_per_s']:>10,.0f} control steps/s with the cores to "
+          f"itself (physics alone {result['cpu_bound_physics_only_control_steps_per_s']:,.0f}; CPU per step: "
+          f"physics {result['physics_cpu_ms_per_step']:.0f} ms, Python {result['python_cpu_ms_per_step']:.1f} ms)")
     return 0
 
 

@@ -17,6 +17,7 @@ IMU site at the trunk origin with the trunk's axes measures.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import mujoco
@@ -155,6 +156,8 @@ class BatchedEnv:
         self._trial_index = 0
         self._trials: dict[int, Trial] = {}
         self.total_steps = 0
+        self.physics_wall_s = 0.0  # [s] spent in mujoco.rollout, wall clock
+        self.physics_cpu_s = 0.0  # [s] CPU time of this process (all threads) during mujoco.rollout
         self.reset()
 
     # -- public API -------------------------------------------------------------------------------------------------
@@ -190,8 +193,11 @@ class BatchedEnv:
         else:
             xf[:, :, :3], xf[:, :, 3:] = wrench
         self._control[:, :, self._xfrc_base] = xf
+        t0, c0 = time.perf_counter(), time.process_time()
         rollout.rollout(self._models, self._datas, self.state, self._control, control_spec=self.control_spec,
                         nstep=dec, state=self._out, sensordata=self._sens, persistent_pool=True, skip_checks=True)
+        self.physics_wall_s += time.perf_counter() - t0
+        self.physics_cpu_s += time.process_time() - c0
         self.state[:] = self._out[:, -1]
         self.imu_quat[:] = self._sens[:, -1, self._quat_adr]
         self.gyro[:] = self._sens[:, -1, self._gyro_adr]

@@ -2,7 +2,10 @@
 
 Next to it, the same call of `mujoco.rollout` on the same models and states with nothing in Python between calls:
 the physics limit of this machine, so that the env's own overhead (observations, rewards, pushes, resets) reads as
-a fraction.
+a fraction. On a machine shared with other work, wall-clock figures swing by 2x from one minute to the next; the CPU
+time this process used (``time.process_time``, all its threads) varies less, so the figures also include the
+throughput the same work would reach with the `nthread` cores to itself: ``cpu_bound_control_steps_per_s``, from the
+env's single-threaded Python CPU time per step plus its rollout CPU time spread over the rollout's threads.
 """
 
 from __future__ import annotations
@@ -33,7 +36,9 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
     Returns:
         ``control_steps_per_s`` (policy steps of all environments per second), ``physics_steps_per_s`` (the same
         figure times `decimation`), ``rollout_only_control_steps_per_s`` (the physics limit), ``env_efficiency``
-        (their ratio), ``python_ms_per_step`` and the settings.
+        (their ratio), ``python_ms_per_step``, the CPU-time figures (``python_cpu_ms_per_step``,
+        ``physics_cpu_ms_per_step``, ``cpu_bound_control_steps_per_s``,
+        ``cpu_bound_physics_only_control_steps_per_s``) and the settings.
     """
     from wbc.bench import machine_description
 
@@ -44,23 +49,27 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
     try:
         for _ in range(5):
             env.step(action_std * rng.standard_normal((n, env.num_actions)))
-        best, resets = 0.0, 0
+        best, resets, cpu_python, cpu_physics = 0.0, 0, np.inf, np.inf
         for _ in range(repeats):
             actions = [action_std * rng.standard_normal((n, env.num_actions)) for _ in range(steps)]
-            t0 = time.perf_counter()
+            t0, c0, p0 = time.perf_counter(), time.process_time(), env.physics_cpu_s
             for a in actions:
                 r = env.step(a)
                 resets += int(r.terminated.sum() + r.time_out.sum())
             best = max(best, n * steps / (time.perf_counter() - t0))
+            physics = env.physics_cpu_s - p0
+            cpu_physics = min(cpu_physics, physics / steps)
+            cpu_python = min(cpu_python, (time.process_time() - c0 - physics) / steps)
         state, control = env.state.copy(), env._control.copy()
         out = np.empty_like(env._out)
-        best_raw = 0.0
+        best_raw, cpu_raw = 0.0, np.inf
         for _ in range(repeats):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             for _ in range(steps):
                 rollout.rollout(env._models, env._datas, state, control, control_spec=env.control_spec,
                                 nstep=cfg.decimation, state=out, persistent_pool=True, skip_checks=True)
             best_raw = max(best_raw, n * steps / (time.perf_counter() - t0))
+            cpu_raw = min(cpu_raw, (time.process_time() - c0) / steps)
     finally:
         env.close()
     return {
@@ -69,6 +78,10 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
         "rollout_only_control_steps_per_s": best_raw,
         "env_efficiency": best / best_raw,
         "python_ms_per_step": 1e3 * max(0.0, n / best - n / best_raw),
+        "python_cpu_ms_per_step": 1e3 * cpu_python,
+        "physics_cpu_ms_per_step": 1e3 * cpu_physics,
+        "cpu_bound_control_steps_per_s": n / (cpu_python + cpu_physics / cfg.nthread),
+        "cpu_bound_physics_only_control_steps_per_s": n / (cpu_physics / cfg.nthread),
         "resets_per_step": resets / (repeats * steps),
         "num_envs": n,
         "threads": cfg.nthread,
