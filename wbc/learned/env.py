@@ -186,7 +186,8 @@ class BatchedEnv:
         dq_before = self.state[:, 1 + self.nq + 6:].copy()  # a copy: the state is overwritten below
         rot0 = rotation_matrices(self.state[:, 4:8])
         step0 = self.episode_step * dec
-        wrench = self.pushes.wrench(step0, dec, rot0, self.pool.base_ipos[self.variant])
+        wrench = self.pushes.wrench(step0, dec, rot0, self.pool.base_ipos[self.variant],
+                                    self.state[:, 1 + self.nq + 3:1 + self.nq + 6])
         xf = self._control[:, :, self._xfrc_base]
         if wrench is None:
             xf[:] = 0.0
