@@ -166,10 +166,6 @@ class BatchedEnv:
         self._reset_envs(np.arange(self.num_envs))
         return self._observe()
 
-    def randomise_episode_progress(self) -> None:
-        """Spread the environments over the episode (their clocks start at random steps), as rsl-rl does."""
-        self.episode_step[:] = self.rng.integers(0, self.max_episode_steps, self.num_envs)
-
     def step(self, actions: np.ndarray) -> StepResult:
         """Advance every environment by one policy step.
 
