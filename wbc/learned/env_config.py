@@ -107,8 +107,13 @@ class EnvConfig:
         clip_actions: actions are clipped to +-clip_actions.
         leg_kp, leg_kd, arm_kp, arm_kd: PD gains of the motor law [N m / rad], [N m s / rad].
         init_joint_noise: uniform half-width of the initial joint offsets [rad].
-        tracking_sigma: width of the exponential tracking rewards [(m/s)^2].
-        feet_air_time_target: air time rewarded above this [s].
+        tracking_sigma: width of the exponential tracking rewards [(m/s)^2]. 0.1, not legged_gym's 0.25: the push
+            task commands 0 or 0.3 m/s, and at 0.25 standing still earns exp(-0.09 / 0.25) = 70 % of the tracking
+            reward of a 0.3 m/s command (41 % at 0.1); legged_gym's commands span +-1 m/s.
+        feet_air_time_target: air time rewarded above this, penalised below [s]. 0.2 s, not legged_gym's 0.5 s: at
+            0.3 m/s an A1 steps with 0.2-0.25 s of air time, and a 0.5 s target charged every touchdown about
+            -0.3, which made stepping cost more than the tracking it earned; a first pi1 run (1024 envs, 100
+            iterations, sigma 0.25, target 0.5 s) stood still under the 0.3 m/s command.
         soft_dof_pos_limit: fraction of the joint range beyond which `dof_pos_limits` penalises.
         only_positive_rewards: clip each step's total reward at zero from below.
         teacher_arm_mode: if set, also emit the ``teacher`` observation of a policy on that arm mode.
@@ -136,8 +141,8 @@ class EnvConfig:
     arm_kp: float = 10.0
     arm_kd: float = 0.3
     init_joint_noise: float = 0.1
-    tracking_sigma: float = 0.25
-    feet_air_time_target: float = 0.5
+    tracking_sigma: float = 0.1
+    feet_air_time_target: float = 0.2
     soft_dof_pos_limit: float = 0.9
     only_positive_rewards: bool = True
     teacher_arm_mode: str | None = None
