@@ -509,3 +509,13 @@ def test_env_push_matches_mujoco_robot():
     # the lever arm: MujocoRobot refreshes it every physics step, the env predicts it to first order (0.1 % here;
     # holding it for the 20 ms window instead was 6 % off)
     assert np.abs(v_env[3:] - v_robot[3:]).max() < 0.01 * np.abs(v_robot[3:]).max()
+
+
+def test_probe_reports_per_command_velocities(vec, tmp_path):
+    from wbc.learned.export import policy_file_from_actor
+    from wbc.learned.probe import probe_policy
+
+    save_policy(tmp_path / "p", policy_file_from_actor(_actor(vec, True), vec.cfg, task="push", stage=3))
+    rows = probe_policy(tmp_path / "p", small_config(num_envs=8), steps=4, settle=1)
+    assert {r["vx_cmd"] for r in rows} <= {0.0, 0.3} and rows
+    assert all(np.isfinite([r["vx"], r["vy"], r["yaw_rate"], r["falls_per_env_s"]]).all() for r in rows)
