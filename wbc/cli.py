@@ -1,4 +1,4 @@
-"""The ``wbc`` command line: ``run``, ``compare``, ``view``, ``analyze tail``, ``bench sim``, ``demo``."""
+"""The ``wbc`` command line: ``run``, ``compare``, ``view``, ``analyze ...``, ``bench ...``, ``train``, ``demo``."""
 
 from __future__ import annotations
 
@@ -74,6 +74,51 @@ def _bench_sim(args: argparse.Namespace) -> int:
           f"{result['realtime_factor']:.0f}x)")
     print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
           f"{result['threads']} threads)")
+    return 0
+
+
+def _bench_train(args: argparse.Namespace) -> int:
+    from wbc.learned.env_config import EnvConfig
+    from wbc.learned.throughput import bench_train
+
+    cfg = EnvConfig(arm_mode=args.arm, num_envs=args.envs, nthread=args.threads, terrain=args.terrain)
+    result = bench_train(cfg, steps=args.steps)
+    if args.json:
+        print(json.dumps(result, indent=2))
+        return 0
+    print(f"Training env speed: {result['robot']} (arm {result['arm_mode']}), {result['num_envs']} envs, "
+          f"{result['threads']} threads, policy at {1 / (result['timestep_s'] * result['decimation']):.0f} Hz, "
+          f"dt {result['timestep_s'] * 1e3:.1f} ms, random actions")
+    print(f"  machine: {result['machine']}")
+    print(f"  env            : {result['control_steps_per_s']:>10,.0f} control steps/s "
+          f"({result['physics_steps_per_s']:,.0f} physics steps/s)")
+    print(f"  rollout only   : {result['rollout_only_control_steps_per_s']:>10,.0f} control steps/s (physics limit)")
+    print(f"  env efficiency : {100 * result['env_efficiency']:>9.0f} %  "
+          f"({result['python_ms_per_step']:.1f} ms of Python per policy step)")
+    print(f"  CPU-time bound : {result['cpu_bound_control_steps_per_s']:>10,.0f} control steps/s with the cores to "
+          f"itself (physics alone {result['cpu_bound_physics_only_control_steps_per_s']:,.0f}; CPU per step: "
+          f"physics {result['physics_cpu_ms_per_step']:.0f} ms, Python {result['python_cpu_ms_per_step']:.1f} ms)")
+    return 0
+
+
+def _train(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from wbc.learned.stages import stage_config
+
+    env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
+    overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
+    cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
+                       env_overrides=env, **overrides)
+    if args.dry_run:
+        print(json.dumps(dataclasses.asdict(cfg), indent=2, default=list))
+        return 0
+    from wbc.learned.train import train
+
+    result = train(cfg, resume=args.resume)
+    print(f"trained {args.task} stage {args.stage}{' ' + args.baseline if args.baseline else ''}: "
+          f"{result['iterations']} iterations, {result['env_steps']:,} env steps, {result['wall_s'] / 60:.1f} min; "
+          f"policy {result['policy']}")
     return 0
 
 
@@ -298,6 +343,30 @@ def _parser() -> argparse.ArgumentParser:
     sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
     sweep.add_argument("--json", action="store_true")
     sweep.set_defaults(func=_bench_sweep)
+    btrain = bench.add_parser("train", help="training env throughput: control steps per second, random actions")
+    btrain.add_argument("--envs", type=int, default=1024, help="parallel environments")
+    btrain.add_argument("--threads", type=int, default=2, help="rollout threads")
+    btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    btrain.add_argument("--terrain", default="scenario", help="scenario (the push scenario's ground) or flat")
+    btrain.add_argument("--steps", type=int, default=50, help="policy steps per measurement")
+    btrain.add_argument("--json", action="store_true")
+    btrain.set_defaults(func=_bench_train)
+
+    from wbc.learned.stages import BASELINES, TASKS
+
+    tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
+    tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")
+    tr.add_argument("--stage", type=int, required=True, choices=(1, 2, 3), help="1: pi1, 2: pi2, 3: pi3")
+    tr.add_argument("--baseline", default=None, help=f"stage-3 baseline, one of: {', '.join(BASELINES)}")
+    tr.add_argument("--resume", action="store_true", help="continue from the newest checkpoint of the run")
+    tr.add_argument("--iterations", type=int, default=None, help="PPO iterations of the whole run (default 1500)")
+    tr.add_argument("--envs", type=int, default=None, help="parallel environments (default 1024)")
+    tr.add_argument("--threads", type=int, default=None, help="physics threads (default 2)")
+    tr.add_argument("--seed", type=int, default=None, help="seed (default 0)")
+    tr.add_argument("--teacher", default=None, help="BC teacher policy file (default: the previous stage's export)")
+    tr.add_argument("--run-root", default="runs/train", help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>]")
+    tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")
+    tr.set_defaults(func=_train)
 
     from wbc.control import CONTROLLERS
 

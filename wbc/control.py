@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 from wbc.errors import UnknownNameError
+from wbc.learned.controller import LearnedController
 from wbc.mpc.controller import MpcController
 from wbc.robots.description import RobotDescription, check_arm_mode
 from wbc.standing import StandController
@@ -68,6 +69,12 @@ CONTROLLERS: dict[str, ControllerSpec] = {
                           "centroidal MPC with arm momentum terms; the optimiser may swing the arm"),
     "mpc-locked": ControllerSpec("mpc-locked", "locked", MpcController, "centroidal MPC, arm locked"),
     "mpc-noarm": ControllerSpec("mpc-noarm", "none", MpcController, "centroidal MPC, robot without its arm"),
+    "learned": ControllerSpec("learned", "actuated", LearnedController,
+                              "learned policy pi3 (PPO + BC, staged), arm actuated; shipped weights, numpy"),
+    "learned-locked": ControllerSpec("learned-locked", "locked", LearnedController,
+                                     "learned policy pi2, arm locked; shipped weights, numpy"),
+    "learned-noarm": ControllerSpec("learned-noarm", "none", LearnedController,
+                                    "learned policy pi1, robot without its arm; shipped weights, numpy"),
 }
 
 

@@ -9,7 +9,7 @@ from wbc.hardware.terrain import TerrainConfig
 from wbc.robots.description import RobotDescription
 from wbc.robots.mujoco_model import CONTACT_TIMECONST, WORLD_CONAFFINITY, robot_mujoco_spec
 
-__all__ = ["build_scene", "TERRAIN_GEOM"]
+__all__ = ["build_scene", "scene_spec", "TERRAIN_GEOM"]
 
 TERRAIN_GEOM = "terrain"
 
@@ -25,6 +25,11 @@ def build_scene(desc: RobotDescription, terrain: TerrainConfig, *, timestep: flo
     Returns:
         The compiled model; static bodies (feet, sensor stubs, fixed arm links) are fused into their parents.
     """
+    return scene_spec(desc, terrain, timestep=timestep).compile()
+
+
+def scene_spec(desc: RobotDescription, terrain: TerrainConfig, *, timestep: float = 0.002) -> mujoco.MjSpec:
+    """The scene of `build_scene` before compilation, for callers that add to it (the training env adds sensors)."""
     spec = robot_mujoco_spec(desc)
     spec.option.timestep = timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
@@ -45,8 +50,7 @@ def build_scene(desc: RobotDescription, terrain: TerrainConfig, *, timestep: flo
     geom.friction = [1.0, 0.005, 0.0001]
     geom.solref = [CONTACT_TIMECONST, 1.0]
     geom.rgba = [0.45, 0.5, 0.55, 1.0]
-    model = spec.compile()
-    return model
+    return spec
 
 
 def set_terrain_heights(model: mujoco.MjModel, heights: np.ndarray) -> None:

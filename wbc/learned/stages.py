@@ -1,0 +1,127 @@
+"""The staged procedure and its baselines as `TrainConfig`s: `stage_config(task, stage, baseline)`.
+
+Stages (the paper's Method section):
+
+    1  pi1: the quadruped without its arm learns to walk; flat ground, no perturbations, PPO only.
+    2  pi2: arm attached and locked, task conditions (the scenario's ground and pushes); PPO + BC towards pi1 on the
+       whole action (both have 12 leg actions).
+    3  pi3: arm actuated; PPO + BC towards pi2 on the leg actions (the arm's 3 actions have no teacher).
+
+Baselines (paper Table III), configurations of the same code:
+
+    ppo             stage 3 from scratch (PPO on the full task, no BC, no transfer).
+    one-stage-demo  stage 3 with pi1 (no arm) as the BC teacher, skipping the locked-arm stage.
+    finetune-pi2    stage 3 started from pi2's weights (`wbc.learned.warm_start`), PPO only.
+    curriculum      PPO only, each stage started from the previous one's weights: stage 1 = locked arm without
+                    perturbations, stage 2 = locked arm with the task's conditions, stage 3 = actuated arm.
+
+The paper's fifth baseline, decoupled (pi2's legs plus a separately trained arm policy), needs a composite policy
+that is not built yet.
+
+A stage's teacher is the policy file the previous stage exported (``<run_dir>/<task>-stage<k-1>/policy``), unless
+a path is given.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.learned.bc_schedule import BCSchedule
+from wbc.learned.env_config import EnvConfig
+from wbc.learned.train_config import TrainConfig
+
+__all__ = ["BASELINES", "TASKS", "TaskSpec", "run_name", "stage_config"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TaskSpec:
+    """A task: its robot, its scenario and the bands training draws from."""
+
+    robot: str
+    scenario: str
+    bands: tuple[str, ...]
+
+
+TASKS: dict[str, TaskSpec] = {
+    "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",)),
+    "turn": TaskSpec(robot="go1-arm", scenario="scenarios/turn.toml", bands=("1.0", "1.25", "1.5")),
+}
+
+BASELINES: dict[str, str] = {
+    "ppo": "PPO from scratch on the stage-3 task (arm actuated), no BC",
+    "one-stage-demo": "stage-3 task with pi1 (no arm) as the BC teacher, without the locked-arm stage",
+    "finetune-pi2": "stage-3 task started from pi2's weights, PPO only",
+    "curriculum": "PPO only through locked arm (no pushes), locked arm (task), actuated arm; weights carried over",
+}
+
+_ARM = {1: "none", 2: "locked", 3: "actuated"}
+
+
+def run_name(task: str, stage: int, baseline: str | None = None) -> str:
+    """Directory name of a run under the runs root: ``push-stage3`` or ``push-stage3-ppo``."""
+    return f"{task}-stage{stage}" + (f"-{baseline}" if baseline else "")
+
+
+def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root: str = "runs/train",
+                 teacher: str | None = None, env_overrides: dict[str, Any] | None = None,
+                 **overrides: Any) -> TrainConfig:
+    """The `TrainConfig` of a stage (or a baseline) of a task.
+
+    Args:
+        task: a key of `TASKS`.
+        stage: 1, 2 or 3 (baselines: 3).
+        baseline: None, or a key of `BASELINES`.
+        run_root: where runs live; the run directory is ``<run_root>/<run_name>``.
+        teacher: the teacher's (or, for weight-transfer baselines, the initial) policy file (default: the previous
+            stage's export under `run_root`).
+        env_overrides: `EnvConfig` fields to change (num_envs, seed ...).
+        **overrides: `TrainConfig` fields to change (max_iterations, seed ...).
+
+    Raises:
+        UnknownNameError: unknown task or baseline.
+        ConfigError: a stage other than 1, 2, 3, or a baseline other than curriculum outside stage 3.
+    """
+    if task not in TASKS:
+        raise UnknownNameError("task", task, tuple(TASKS))
+    if stage not in _ARM:
+        raise ConfigError(f"stage must be 1, 2 or 3, got {stage}")
+    if baseline is not None:
+        if baseline not in BASELINES:
+            raise UnknownNameError("baseline", baseline, tuple(BASELINES))
+        if stage != 3 and baseline != "curriculum":
+            raise ConfigError(f"baseline {baseline!r} is a stage-3 policy; use --stage 3")
+    spec = TASKS[task]
+    arm = _ARM[stage]
+    teacher_stage = {2: 1, 3: 2}.get(stage)
+    init_stage = None
+    if baseline == "ppo":
+        teacher_stage = None
+    elif baseline == "one-stage-demo":
+        teacher_stage = 1
+    elif baseline == "finetune-pi2":
+        teacher_stage, init_stage = None, 2
+    elif baseline == "curriculum":
+        teacher_stage, init_stage = None, (stage - 1 if stage > 1 else None)
+        arm = "locked" if stage < 3 else "actuated"
+    env = EnvConfig(
+        robot=spec.robot, arm_mode=arm, scenario=spec.scenario, bands=spec.bands,
+        pushes=stage > 1, terrain="flat" if stage == 1 else "scenario",
+        teacher_arm_mode=None if teacher_stage is None else _ARM[teacher_stage],
+    )
+    env = dataclasses.replace(env, **(env_overrides or {}))
+    bc, teacher_path, init_path = None, None, None
+    if teacher_stage is not None:
+        bc = BCSchedule(initial=1.0, final=0.0, hold_iterations=100, anneal_iterations=500, kind="linear")
+        teacher_path = teacher or str(Path(run_root) / run_name(task, teacher_stage) / "policy")
+    if init_stage is not None:
+        init_baseline = "curriculum" if baseline == "curriculum" else None
+        init_path = teacher or str(Path(run_root) / run_name(task, init_stage, init_baseline) / "policy")
+    transfer = teacher_stage is not None or init_stage is not None
+    cfg = TrainConfig(task=task, stage=stage, baseline=baseline, env=env, bc=bc, teacher=teacher_path,
+                      init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
+                      run_dir=str(Path(run_root) / run_name(task, stage, baseline)))
+    return dataclasses.replace(cfg, **overrides)
