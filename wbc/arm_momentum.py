@@ -18,7 +18,7 @@ import pinocchio as pin
 from wbc.control import get_controller
 from wbc.robots.conventions import quat_to_matrix, quat_wxyz_to_xyzw
 from wbc.robots.pinocchio_model import build_pinocchio
-from wbc.runner import _robot_for
+from wbc.runner import simulated_robot
 from wbc.scenarios import load_scenario
 
 __all__ = ["ArmMomentumTrial", "arm_momentum_study"]
@@ -66,7 +66,7 @@ def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds:
     for trial in scenario.trials([band], list(seeds), trials):
         if duration_s is not None:
             trial = dataclasses.replace(trial, duration_s=duration_s)
-        robot = _robot_for(trial, spec.arm_mode)
+        robot = simulated_robot(trial, spec.arm_mode)
         ctrl = spec.make(robot.desc)
         pinr = build_pinocchio(robot.desc)
         arm_cols = None

@@ -101,7 +101,8 @@ def run_episode(
     return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time)
 
 
-def _robot_for(trial: Trial, arm_mode: str) -> MujocoRobot:
+def simulated_robot(trial: Trial, arm_mode: str) -> MujocoRobot:
+    """The connected simulated robot for `trial`'s robot, terrain and `arm_mode`, built once per process."""
     key = (trial.robot, arm_mode, trial.terrain)
     robot = _ROBOTS.get(key)
     if robot is None:
@@ -143,7 +144,7 @@ def run_trial(trial: Trial, controller: str, *, debug_truth: bool = False, obser
     """
     start = time.perf_counter()
     spec = get_controller(controller)
-    robot = _robot_for(trial, spec.arm_mode)
+    robot = simulated_robot(trial, spec.arm_mode)
     ctrl = spec.make(robot.desc)
     ratio = (1.0 / ctrl.rate_hz) / robot.config.timestep
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:

@@ -85,16 +85,13 @@ class WholeBodyResult:
     forces: np.ndarray
 
 
-def _dynamics_urdf(desc: RobotDescription) -> Path:
-    """Write the robot's URDF without visual and collision geometry (PlaCo would try to load the meshes)."""
+def _dynamics_urdf(desc: RobotDescription) -> str:
+    """The robot's URDF without visual and collision geometry (PlaCo would try to load the meshes)."""
     root = ET.fromstring(robot_urdf(desc))
     for link in root.iter("link"):
         for child in list(link.findall("visual")) + list(link.findall("collision")):
             link.remove(child)
-    folder = Path(tempfile.mkdtemp(prefix="wbc-placo-"))
-    path = folder / "robot.urdf"
-    path.write_text(ET.tostring(root, encoding="unicode"))
-    return path
+    return ET.tostring(root, encoding="unicode")
 
 
 class WholeBodyQp:
@@ -108,7 +105,11 @@ class WholeBodyQp:
     def __init__(self, desc: RobotDescription, config: WholeBodyConfig | None = None) -> None:
         self.desc = desc
         self.config = cfg = config or WholeBodyConfig()
-        self.robot = placo.RobotWrapper(str(_dynamics_urdf(desc)), placo.Flags.ignore_collisions)
+        # PlaCo reads a URDF file once, at construction; the file is not needed afterwards
+        with tempfile.TemporaryDirectory(prefix="wbc-placo-") as folder:
+            path = Path(folder) / "robot.urdf"
+            path.write_text(_dynamics_urdf(desc))
+            self.robot = placo.RobotWrapper(str(path), placo.Flags.ignore_collisions)
         names = list(self.robot.joint_names())
         house = list(desc.joint_names)
         # the v index of each house joint in PlaCo's (= Pinocchio's) order
