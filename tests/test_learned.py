@@ -325,8 +325,10 @@ def test_controller_observation_matches_the_training_env():
     from wbc.learned.env_config import ObsScales
     from wbc.types import VelocityCommand
 
-    # the same start, the same constant joint targets, 10 policy steps in the env and on MujocoRobot
-    env = BatchedEnv(small_config(num_envs=1, pushes=False, init_joint_noise=0.0, noise=ObsNoise(
+    # the same start, the same constant joint targets, 10 policy steps in the env and on MujocoRobot (both at the
+    # evaluation's 2 ms physics step: training's default 5 ms step is a different simulation)
+    env = BatchedEnv(small_config(num_envs=1, pushes=False, init_joint_noise=0.0, timestep=0.002, decimation=10,
+                                  noise=ObsNoise(
         dof_pos=0.0, dof_vel=0.0, ang_vel=0.0, gravity=0.0), domain=DomainRandomisation(
         num_variants=1, payload_kg=(0.0, 0.0), payload_com_m=0.0, friction=(1.0, 1.0), motor_strength=(1.0, 1.0))))
     robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
@@ -407,9 +409,11 @@ def test_reward_terms_see_real_motion():
 def test_bench_train_reports_control_steps_per_second():
     from wbc.learned.throughput import bench_train
 
-    result = bench_train(small_config(), steps=3, repeats=1)
+    cfg = small_config()
+    result = bench_train(cfg, steps=3, repeats=1)
     assert result["control_steps_per_s"] > 0 and result["rollout_only_control_steps_per_s"] > 0
-    assert result["physics_steps_per_s"] == pytest.approx(10 * result["control_steps_per_s"])
+    assert result["physics_steps_per_s"] == pytest.approx(cfg.decimation * result["control_steps_per_s"])
+    assert result["timestep_s"] == cfg.timestep and result["decimation"] == cfg.decimation
 
 
 def test_cli_train_dry_run_and_errors(capsys):
@@ -486,8 +490,9 @@ def test_env_push_matches_mujoco_robot():
     from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
     from wbc.hardware.perturbation import Push
 
-    env = BatchedEnv(small_config(num_envs=1, init_joint_noise=0.0, domain=DomainRandomisation(
-        num_variants=1, payload_kg=(0.0, 0.0), payload_com_m=0.0, friction=(1.0, 1.0), motor_strength=(1.0, 1.0))))
+    env = BatchedEnv(small_config(num_envs=1, init_joint_noise=0.0, timestep=0.002, decimation=10,  # MujocoRobot's
+                                  domain=DomainRandomisation(num_variants=1, payload_kg=(0.0, 0.0), payload_com_m=0.0,
+                                                             friction=(1.0, 1.0), motor_strength=(1.0, 1.0))))
     push = Push.horizontal(magnitude=250.0, heading=0.7, offset_in_base=(0.0, 0.12, 0.0), start=0.1, duration=0.06)
     env.pushes.set(0, None)
     env.pushes.start[0, 0] = int(round(push.start / 0.002))
