@@ -424,6 +424,9 @@ def test_cli_train_dry_run_and_errors(capsys):
     assert cfg["env"]["arm_mode"] == "actuated" and cfg["env"]["teacher_arm_mode"] == "locked"
     assert cfg["env"]["num_envs"] == 64 and cfg["bc"]["initial"] == 1.0
     assert cfg["teacher"].endswith("push-stage2/policy")
+    assert cfg["rma"]["iterations"] == 200
+    assert main(["train", "--task", "push", "--stage", "1", "--rma-iterations", "40", "--dry-run"]) == 0
+    assert json.loads(capsys.readouterr().out)["rma"]["iterations"] == 40
     assert main(["train", "--task", "push", "--stage", "3", "--baseline", "nope", "--dry-run"]) == 2
     assert "valid baselines" in capsys.readouterr().err
 

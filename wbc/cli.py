@@ -108,6 +108,10 @@ def _train(args: argparse.Namespace) -> int:
 
     env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
     overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
+    if args.rma_iterations is not None:
+        from wbc.learned.adaptation_config import AdaptationConfig
+
+        overrides["rma"] = AdaptationConfig(iterations=args.rma_iterations)
     cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
                        env_overrides=env, **overrides)
     if args.dry_run:
@@ -363,6 +367,8 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument("--envs", type=int, default=None, help="parallel environments (default 1024)")
     tr.add_argument("--threads", type=int, default=None, help="physics threads (default 2)")
     tr.add_argument("--seed", type=int, default=None, help="seed (default 0)")
+    tr.add_argument("--rma-iterations", type=int, default=None,
+                    help="RMA phase-2 rounds after PPO (default 200; 0 skips phase 2)")
     tr.add_argument("--teacher", default=None, help="BC teacher policy file (default: the previous stage's export)")
     tr.add_argument("--run-root", default="runs/train", help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>]")
     tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")
