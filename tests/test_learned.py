@@ -405,6 +405,28 @@ def test_reward_terms_see_real_motion():
     assert np.isfinite(r.reward).all()
 
 
+def test_fall_penalty_survives_the_positive_clipping():
+    from wbc.learned.env_config import RewardScales
+    from wbc.learned.rewards import Rewards, StepData
+
+    n, j = 2, 12
+    off = {f: 0.0 for f in RewardScales.__dataclass_fields__}
+    scales = RewardScales(**{**off, "tracking_lin_vel": 1.0, "orientation": -5.0, "termination": -50.0})
+    cfg = small_config(rewards=scales, only_positive_rewards=True)
+    rewards = Rewards(cfg, -np.ones(j), np.ones(j), np.zeros(j))
+    z = np.zeros((n, 3))
+    tilted = np.array([[0.0, 0.0, -1.0], [0.0, 0.8, -0.6]])  # the falling robot is tilted: its step total is < 0
+    step = StepData(base_linvel_in_body=z, base_angvel_in_body=z, gravity_in_body=tilted, command=z, q=np.zeros((n, j)),
+                    dq=np.zeros((n, j)), dq_before=np.zeros((n, j)), power=None, torque_sq=None,
+                    action=np.zeros((n, j)), last_action=np.zeros((n, j)), first_contact=np.zeros((n, 4), bool),
+                    air_time=np.zeros((n, 4)), terminated=np.array([False, True]))
+    total, terms = rewards.compute(step)
+    dt = cfg.policy_dt
+    # perfect tracking; the tilted step's negative total is clipped to 0, then the fall's penalty is added
+    np.testing.assert_allclose(total, [dt, -50.0 * dt])
+    np.testing.assert_allclose(terms["termination"], [0.0, -50.0 * dt])
+
+
 # -- CLI -----------------------------------------------------------------------------------------------------------
 def test_bench_train_reports_control_steps_per_second():
     from wbc.learned.throughput import bench_train

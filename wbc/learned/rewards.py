@@ -88,9 +88,13 @@ class Rewards:
         for name, scale in self.scales.items():
             value = getattr(self, f"_reward_{name}")(s) * (scale * self.dt)
             terms[name] = value
-            total += value
+            if name != "termination":
+                total += value
         if self.config.only_positive_rewards:
             total = np.maximum(total, 0.0)
+        # the termination term is added after the clipping (legged_gym's order): clipped, a fall penalty would vanish
+        if "termination" in terms:
+            total += terms["termination"]
         return total, terms
 
     # -- terms ------------------------------------------------------------------------------------------------------
