@@ -123,6 +123,7 @@ class BaseEstimator:
         self.P = np.eye(18) * 1e-2
         self.C = _measurement_matrix()
         self._y = np.zeros(28)
+        self._steady: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # pattern -> (K, I - K C)
 
     def reset(self, base_pos: np.ndarray, feet_world: np.ndarray) -> None:
         """Start at a known base position with zero velocity and the feet where kinematics put them."""
@@ -159,17 +160,18 @@ class BaseEstimator:
         x[3:6] += dt * a_world
         y = self._y
         y[0:12] = np.ravel(feet_rel_world)
-        y[12:24] = -np.ravel(feet_vel_rel_world)
+        y[12:24] = np.ravel(feet_vel_rel_world)
+        y[12:24] *= -1.0
         if self.config.gain == "steady":
-            t = np.asarray(trust)
-            pattern = int(t[0] >= 0.5) | int(t[1] >= 0.5) << 1 | int(t[2] >= 0.5) << 2 | int(t[3] >= 0.5) << 3
-            gain = _steady_gain(dt, self.config, pattern)
-            # innovation y - C x, written out: C's blocks are identities
-            innov = y.copy()
-            innov[0:12] -= (x[6:18].reshape(4, 3) - x[0:3]).ravel()
-            innov[12:24] -= (np.zeros((4, 3)) + x[3:6]).ravel()
-            innov[24:28] -= x[8:18:3]
-            x += gain @ innov
+            t0, t1, t2, t3 = np.asarray(trust, dtype=np.float64).tolist()
+            pattern = int(t0 >= 0.5) | int(t1 >= 0.5) << 1 | int(t2 >= 0.5) << 2 | int(t3 >= 0.5) << 3
+            gains = self._steady.get(pattern)
+            if gains is None:
+                gain = _steady_gain(dt, self.config, pattern)
+                gains = self._steady[pattern] = (gain, np.eye(18) - gain @ self.C)
+            # x + K (y - C x) = (I - K C) x + K y: two products per tick
+            gain, keep = gains
+            x[:] = keep @ x + gain @ y
             return
         p = self.P
         p[0:3, :] += dt * p[3:6, :]

@@ -78,6 +78,17 @@ class GaitScheduler:
         ph = self.phase(t)
         return np.where(ph >= c.duty, (ph - c.duty) / (1.0 - c.duty), 0.0)
 
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`contact`, `swing_progress` and `time_to_touchdown` at `t` from one phase evaluation (every tick)."""
+        c = self.config
+        if c.duty >= 1.0:
+            return np.ones(4, dtype=bool), np.zeros(4), np.zeros(4)
+        ph = self.phase(t)
+        swing = ph >= c.duty
+        contact = ph < c.duty - 1e-12
+        return (contact, np.where(swing, (ph - c.duty) / (1.0 - c.duty), 0.0),
+                np.where(swing, (1.0 - ph) * c.period, 0.0))
+
     def time_to_touchdown(self, t: float) -> np.ndarray:
         """For each foot, time until its next touchdown [s] (0 for feet in stance)."""
         c = self.config

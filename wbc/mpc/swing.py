@@ -24,11 +24,13 @@ def swing_point(start: np.ndarray, end: np.ndarray, s: float, duration: float, a
     Returns:
         (position (3,), velocity (3,)) in the world frame.
     """
-    s = min(1.0, max(0.0, s))
+    s = min(1.0, max(0.0, float(s)))
     blend, dblend = 3 * s**2 - 2 * s**3, 6 * s - 6 * s**2
-    pos = start + (end - start) * blend
-    vel = (end - start) * dblend / duration
     bump, dbump = 16 * s**2 * (1 - s) ** 2, 32 * s * (1 - s) * (1 - 2 * s)
-    pos = pos + np.array([0.0, 0.0, apex * bump])
-    vel = vel + np.array([0.0, 0.0, apex * dbump / duration])
+    # runs for every swing foot every tick: scalars stay Python floats, three array operations in all
+    span = np.subtract(end, start)
+    pos = start + span * blend
+    vel = span * (dblend / duration)
+    pos[2] += apex * bump
+    vel[2] += apex * dbump / duration
     return pos, vel

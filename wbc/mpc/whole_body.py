@@ -18,6 +18,7 @@ PlaCo reads the same URDF as the MuJoCo and Pinocchio models (visuals stripped: 
 
 from __future__ import annotations
 
+import math
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -146,22 +147,23 @@ class WholeBodyQp:
             self.arm_task.set_joints(dict(zip(desc.arm_joint_names, desc.nominal_q[12:15].tolist(), strict=True)))
             self.arm_task.configure("arm", "soft", cfg.arm_weight)
             self.arm_task.kp, self.arm_task.kd = cfg.arm_kp, cfg.arm_kd
-        self._stance = np.zeros(4, dtype=bool)
-        self._set_stance(np.ones(4, dtype=bool))
+        self._arm_names = tuple(desc.arm_joint_names) if self.arm_task is not None else ()
+        self._stance = [False] * 4
+        self._set_stance([True] * 4)
 
-    def _set_stance(self, stance: np.ndarray) -> None:
+    def _set_stance(self, stance: list[bool]) -> None:
         cfg = self.config
         for i in range(4):
             if stance[i] == self._stance[i]:
                 continue
             task, contact = self.feet_tasks[i], self.contacts[i]
-            contact.active = bool(stance[i])
+            contact.active = stance[i]
             if stance[i]:
                 # a stance foot must not accelerate: no stiffness towards a target, no damping
                 task.kp, task.kd = 0.0, 0.0
             else:
                 task.kp, task.kd = cfg.swing_kp, cfg.swing_kd
-        self._stance = stance.copy()
+        self._stance = stance
 
     def solve(self, q_pin: np.ndarray, v_pin: np.ndarray, stance: np.ndarray, *, com: np.ndarray,
               com_vel: np.ndarray, com_acc: np.ndarray, rot: np.ndarray, omega_world: np.ndarray,
@@ -187,33 +189,43 @@ class WholeBodyQp:
         Returns:
             Torques and contact forces; ``success`` False when PlaCo's QP failed (torques are then zero).
         """
+        # Every line here runs at the control rate and each PlaCo property costs ~1 us from Python: only what
+        # changed is sent, as plain floats and whole arrays.
         robot = self.robot
-        robot.state.q = q_pin
-        robot.state.qd = v_pin
+        state = robot.state
+        state.q = q_pin
+        state.qd = v_pin
         robot.update_kinematics()
-        self._set_stance(np.asarray(stance, dtype=bool))
+        stance = [bool(s) for s in stance]
+        if stance != self._stance:
+            self._set_stance(stance)
         for i in range(4):
             # a stance foot's task has no gains: its targets do not matter
-            if not self._stance[i]:
+            if not stance[i]:
                 task = self.feet_tasks[i]
                 task.target_world = feet_pos[i]
                 task.dtarget_world = feet_vel[i]
-        self.com_task.target_world = com
-        self.com_task.dtarget_world = com_vel
-        self.com_task.ddtarget_world = com_acc
-        self.trunk_task.R_world_frame = rot
-        self.trunk_task.omega_world = omega_world
-        self.trunk_task.domega_world = domega_world
+        com_task, trunk_task = self.com_task, self.trunk_task
+        com_task.target_world = com
+        com_task.dtarget_world = com_vel
+        com_task.ddtarget_world = com_acc
+        trunk_task.R_world_frame = rot
+        trunk_task.omega_world = omega_world
+        trunk_task.domega_world = domega_world
         if self.arm_task is not None and arm_q is not None:
-            dq = np.zeros(3) if arm_dq is None else arm_dq
-            for name, qa, va in zip(self.desc.arm_joint_names, arm_q, dq, strict=True):
-                self.arm_task.set_joint(name, float(qa), float(va))
+            names = self._arm_names
+            qa = arm_q.tolist()
+            va = [0.0, 0.0, 0.0] if arm_dq is None else arm_dq.tolist()
+            set_joint = self.arm_task.set_joint
+            set_joint(names[0], qa[0], va[0])
+            set_joint(names[1], qa[1], va[1])
+            set_joint(names[2], qa[2], va[2])
         result = self.solver.solve(False)
         forces = np.zeros((4, 3))
         if not result.success:
             return WholeBodyResult(success=False, tau=np.zeros(len(self._house_cols)), forces=forces)
         for i in range(4):
-            if self._stance[i]:
+            if stance[i]:
                 forces[i] = self.contacts[i].wrench[:3]
-        tau = np.asarray(result.tau)[self._house_cols]
-        return WholeBodyResult(success=bool(np.all(np.isfinite(tau))), tau=tau, forces=forces)
+        tau = result.tau[self._house_cols]
+        return WholeBodyResult(success=math.isfinite(tau.dot(tau)), tau=tau, forces=forces)
