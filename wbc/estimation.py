@@ -10,7 +10,7 @@ quaternion directly.
 Because the model is linear time-invariant for a given set of trusted feet, the default filter runs with the
 steady-state Kalman gain of the current contact pattern (trust rounded to 0 or 1; the gains of the 16 patterns come
 from iterating the Riccati recursion once, then are cached): one matrix-vector product per tick instead of a 28 x 28
-solve. ``gain="full"`` runs the time-varying filter instead.
+solve; the 16 gains are built with the filter, outside the loop. ``gain="full"`` runs the time-varying filter instead.
 """
 
 from __future__ import annotations
@@ -123,7 +123,13 @@ class BaseEstimator:
         self.P = np.eye(18) * 1e-2
         self.C = _measurement_matrix()
         self._y = np.zeros(28)
-        self._steady: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # pattern -> (K, I - K C)
+        # pattern -> (K, I - K C), all 16 built here: a gain built inside the control loop would stall one tick by
+        # ~10 ms (the first time each pattern occurs in a process)
+        self._steady: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        if self.config.gain == "steady":
+            for pattern in range(16):
+                gain = _steady_gain(dt, self.config, pattern)
+                self._steady[pattern] = (gain, np.eye(18) - gain @ self.C)
 
     def reset(self, base_pos: np.ndarray, feet_world: np.ndarray) -> None:
         """Start at a known base position with zero velocity and the feet where kinematics put them."""
@@ -165,12 +171,8 @@ class BaseEstimator:
         if self.config.gain == "steady":
             t0, t1, t2, t3 = np.asarray(trust, dtype=np.float64).tolist()
             pattern = int(t0 >= 0.5) | int(t1 >= 0.5) << 1 | int(t2 >= 0.5) << 2 | int(t3 >= 0.5) << 3
-            gains = self._steady.get(pattern)
-            if gains is None:
-                gain = _steady_gain(dt, self.config, pattern)
-                gains = self._steady[pattern] = (gain, np.eye(18) - gain @ self.C)
             # x + K (y - C x) = (I - K C) x + K y: two products per tick
-            gain, keep = gains
+            gain, keep = self._steady[pattern]
             x[:] = keep @ x + gain @ y
             return
         p = self.P

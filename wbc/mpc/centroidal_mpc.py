@@ -24,7 +24,7 @@ import numpy as np
 import proxsuite
 
 from wbc.errors import WbcError
-from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, skew, zoh_integral
+from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, zoh_integral
 
 __all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "CentroidalMpc"]
 
@@ -190,39 +190,44 @@ class CentroidalMpc:
         total_force_skew = a_c[9:12, 0:3]
         # Along the horizon the lever arms are taken about the reference CoM of each step (the current CoM for the
         # first): B's torque rows change and the affine torque term -[F]x c_ref follows.
-        gamma = np.zeros((n * NX, n * NU))
-        phi = np.zeros((n * NX, NX))
-        delta = np.zeros(n * NX)
-        for k in range(n):
-            c_ref = x0[0:3] if k == 0 else x_ref[k - 1, 0:3]
-            b_k = b_c.copy()
-            for i in range(4):
-                b_k[9:12, 3 * i:3 * i + 3] = skew(feet[k, i] - c_ref)
-            d_k = d_c.copy()
-            d_k[9:12] -= total_force_skew @ (c_ref - x0[0:3])
-            rows = slice(k * NX, (k + 1) * NX)
-            if k == 0:
-                phi[rows] = a_d
-                delta[rows] = integ @ d_k
-            else:
-                prev = slice((k - 1) * NX, k * NX)
-                phi[rows] = a_d @ phi[prev]
-                delta[rows] = a_d @ delta[prev] + integ @ d_k
-                gamma[rows, : k * NU] = a_d @ gamma[prev, : k * NU]
-            gamma[rows, k * NU:(k + 1) * NU] = integ @ b_k
+        c_ref = np.empty((n, 3))
+        c_ref[0] = x0[0:3]
+        c_ref[1:] = x_ref[: n - 1, 0:3]
+        rel = feet - c_ref[:, None, :]  # (n, 4, 3)
+        levers = np.zeros((n, 3, 4, 3))  # [r_i]x of every foot and step
+        levers[:, 0, :, 1], levers[:, 0, :, 2] = -rel[..., 2], rel[..., 1]
+        levers[:, 1, :, 0], levers[:, 1, :, 2] = rel[..., 2], -rel[..., 0]
+        levers[:, 2, :, 0], levers[:, 2, :, 1] = -rel[..., 1], rel[..., 0]
+        # each step's input matrix B_k with its affine term d_k as one more column, through the zero-order hold
+        inputs = np.empty((n, NX, NU + 1))
+        inputs[:, :, :NU] = b_c
+        inputs[:, 9:12, :12] = levers.reshape(n, 3, 12)
+        inputs[:, :, NU] = d_c
+        inputs[:, 9:12, NU] -= (c_ref - x0[0:3]) @ total_force_skew.T
+        inputs = integ @ inputs
+        # Condensed: x_{k+1} = A^(k+1) x0 + sum_{j<=k} A^(k-j) (B_j u_j + d_j), all blocks in one batched product
+        # (the step-by-step recursion cost ~40 small numpy calls per step).
+        powers = np.empty((n + 1, NX, NX))
+        powers[0] = np.eye(NX)
+        for j in range(1, n + 1):
+            powers[j] = a_d @ powers[j - 1]
+        kk, jj = np.tril_indices(n)
+        blocks = powers[kk - jj] @ inputs[jj]  # block (k, j), shape (n (n + 1) / 2, NX, NU + 1)
+        blocked = np.zeros((n, NX, n, NU + 1))
+        blocked[kk, :, jj, :] = blocks
+        gamma = blocked[:, :, :, :NU].reshape(n * NX, n * NU)
+        delta = blocked[:, :, :, NU].sum(axis=2).ravel()
+        phi = powers[1:].reshape(n * NX, NX)
         free = phi @ x0 + delta
         err = free - x_ref.ravel()
         # Only stance forces (and the arm's velocities when it may move) are decision variables: swing forces are
         # zero and a frozen arm does not move, so their columns are dropped rather than boxed to zero. The QP keeps
         # one shape per contact pattern count; one ProxSuite object per shape is built once and reused.
         arm_free = bool(np.any(self._arm_vmax > 0))
-        cols = []
-        for k in range(n):
-            for i in np.flatnonzero(contact[k]):
-                cols.extend(range(k * NU + 3 * i, k * NU + 3 * i + 3))
-            if arm_free:
-                cols.extend(range(k * NU + 12, k * NU + 15))
-        idx = np.array(cols, dtype=int)
+        chosen = np.zeros((n, NU), dtype=bool)
+        chosen[:, :12] = np.repeat(contact, 3, axis=1)
+        chosen[:, 12:] = arm_free
+        idx = np.flatnonzero(chosen)
         s = self._scale[idx]
         gam = gamma[:, idx]
         qg = self._q_diag[:, None] * gam

@@ -370,7 +370,7 @@ class MpcController:
         result = self.wbc.solve(kin.q_pin, kin.v_pin, contact, com=x[0:3], com_vel=x[3:6], com_acc=com_acc,
                                 rot=_rotation_from_rpy(x[6:9]), omega_world=omega0 + a * omega1,
                                 domega_world=domega, feet_pos=swing_pos, feet_vel=swing_vel,
-                                arm_q=arm_q, arm_dq=arm_v if self.has_arm else None)
+                                arm_q=arm_q, arm_dq=arm_v if self.has_arm else None, with_forces=False)
         if not result.success:
             self.wbc_failures += 1
             return None

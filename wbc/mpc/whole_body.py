@@ -78,12 +78,13 @@ class WholeBodyResult:
     Attributes:
         success: the QP was solved.
         tau: joint torques, house order [N m].
-        forces: contact forces of the feet (zero in swing), house leg order, world frame, shape (4, 3) [N].
+        forces: contact forces of the feet (zero in swing), house leg order, world frame, shape (4, 3) [N]; None when
+            the solve was asked not to read them.
     """
 
     success: bool
     tau: np.ndarray
-    forces: np.ndarray
+    forces: np.ndarray | None
 
 
 def _dynamics_urdf(desc: RobotDescription) -> str:
@@ -124,6 +125,7 @@ class WholeBodyQp:
         for name, limit in zip(table.names, table.torque_limit, strict=True):
             solver.set_torque_limit(name, float(limit))
         self.solver = solver
+        self._state = self.robot.state  # a handle on the wrapper's state, kept: fetching it costs a call per tick
         self.feet_tasks = []
         self.contacts = []
         for foot in FOOT_NAMES:
@@ -168,7 +170,8 @@ class WholeBodyQp:
     def solve(self, q_pin: np.ndarray, v_pin: np.ndarray, stance: np.ndarray, *, com: np.ndarray,
               com_vel: np.ndarray, com_acc: np.ndarray, rot: np.ndarray, omega_world: np.ndarray,
               domega_world: np.ndarray, feet_pos: np.ndarray, feet_vel: np.ndarray,
-              arm_q: np.ndarray | None = None, arm_dq: np.ndarray | None = None) -> WholeBodyResult:
+              arm_q: np.ndarray | None = None, arm_dq: np.ndarray | None = None,
+              with_forces: bool = True) -> WholeBodyResult:
         """One whole-body QP.
 
         Args:
@@ -185,18 +188,18 @@ class WholeBodyQp:
             feet_vel: swing-foot velocity targets, world, shape (4, 3) [m/s].
             arm_q: arm joint targets [rad] (actuated arm only).
             arm_dq: arm joint velocity targets [rad/s].
+            with_forces: read the contact forces back (the controller, which needs only the torques, skips it).
 
         Returns:
             Torques and contact forces; ``success`` False when PlaCo's QP failed (torques are then zero).
         """
         # Every line here runs at the control rate and each PlaCo property costs ~1 us from Python: only what
         # changed is sent, as plain floats and whole arrays.
-        robot = self.robot
-        state = robot.state
+        state = self._state
         state.q = q_pin
         state.qd = v_pin
-        robot.update_kinematics()
-        stance = [bool(s) for s in stance]
+        self.robot.update_kinematics()
+        stance = stance.tolist()
         if stance != self._stance:
             self._set_stance(stance)
         for i in range(4):
@@ -213,19 +216,17 @@ class WholeBodyQp:
         trunk_task.omega_world = omega_world
         trunk_task.domega_world = domega_world
         if self.arm_task is not None and arm_q is not None:
-            names = self._arm_names
-            qa = arm_q.tolist()
-            va = [0.0, 0.0, 0.0] if arm_dq is None else arm_dq.tolist()
             set_joint = self.arm_task.set_joint
-            set_joint(names[0], qa[0], va[0])
-            set_joint(names[1], qa[1], va[1])
-            set_joint(names[2], qa[2], va[2])
+            velocities = (0.0,) * len(arm_q) if arm_dq is None else arm_dq.tolist()
+            for name, qa, va in zip(self._arm_names, arm_q.tolist(), velocities, strict=True):
+                set_joint(name, qa, va)
         result = self.solver.solve(False)
-        forces = np.zeros((4, 3))
+        forces = np.zeros((4, 3)) if with_forces else None
         if not result.success:
             return WholeBodyResult(success=False, tau=np.zeros(len(self._house_cols)), forces=forces)
-        for i in range(4):
-            if stance[i]:
-                forces[i] = self.contacts[i].wrench[:3]
+        if with_forces:
+            for i in range(4):
+                if stance[i]:
+                    forces[i] = self.contacts[i].wrench[:3]
         tau = result.tau[self._house_cols]
         return WholeBodyResult(success=math.isfinite(tau.dot(tau)), tau=tau, forces=forces)
