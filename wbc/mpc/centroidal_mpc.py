@@ -156,6 +156,9 @@ class CentroidalMpc:
         self._r_diag = np.tile(r, n)
         self._prev: np.ndarray | None = None
         self.problem: MpcProblem | None = None
+        self._arm_free = bool(np.any(self._arm_vmax > 0))
+        self._tril = np.tril_indices(n)
+        self._arm_rows = (np.arange(n)[:, None] * NX + np.arange(12, 15)[None]).ravel()  # arm rows of the states
 
     def reset(self) -> None:
         """Forget the previous solution (no warm start on the next solve)."""
@@ -179,10 +182,10 @@ class CentroidalMpc:
         cfg, n = self.config, self.config.horizon
         contact = np.asarray(contact, dtype=bool)
         # linearise once about x0 and the gravity-compensating input of the first step's stance set
-        stance0 = max(1, int(contact[0].sum()))
+        stance0 = contact[0].tolist()
         u_bar = np.zeros(NU)
-        for i in np.flatnonzero(contact[0]):
-            u_bar[3 * i + 2] = params.mass * 9.81 / stance0
+        u_bar[2:12:3] = stance0
+        u_bar[2:12:3] *= params.mass * 9.81 / max(1, sum(stance0))
         f0, a_c, b_c = self.model.linearize(x0, u_bar, params)
         d_c = f0 - a_c @ x0 - b_c @ u_bar
         integ = zoh_integral(a_c, cfg.dt)
@@ -211,7 +214,7 @@ class CentroidalMpc:
         powers[0] = np.eye(NX)
         for j in range(1, n + 1):
             powers[j] = a_d @ powers[j - 1]
-        kk, jj = np.tril_indices(n)
+        kk, jj = self._tril
         blocks = powers[kk - jj] @ inputs[jj]  # block (k, j), shape (n (n + 1) / 2, NX, NU + 1)
         blocked = np.zeros((n, NX, n, NU + 1))
         blocked[kk, :, jj, :] = blocks
@@ -223,16 +226,17 @@ class CentroidalMpc:
         # Only stance forces (and the arm's velocities when it may move) are decision variables: swing forces are
         # zero and a frozen arm does not move, so their columns are dropped rather than boxed to zero. The QP keeps
         # one shape per contact pattern count; one ProxSuite object per shape is built once and reused.
-        arm_free = bool(np.any(self._arm_vmax > 0))
+        arm_free = self._arm_free
         chosen = np.zeros((n, NU), dtype=bool)
         chosen[:, :12] = np.repeat(contact, 3, axis=1)
         chosen[:, 12:] = arm_free
         idx = np.flatnonzero(chosen)
         s = self._scale[idx]
-        gam = gamma[:, idx]
+        gam = gamma[:, idx] * s  # in the QP's scaled variables
         qg = self._q_diag[:, None] * gam
-        h = (gam.T @ qg + np.diag(self._r_diag[idx])) * np.outer(s, s)
-        g = (qg.T @ err) * s
+        h = gam.T @ qg
+        h.flat[:: idx.size + 1] += self._r_diag[idx] * s * s
+        g = qg.T @ err
         fz_max = cfg.fz_max / cfg.force_scale
         l_box = np.empty(idx.size)
         u_box = np.empty(idx.size)
@@ -247,19 +251,20 @@ class CentroidalMpc:
         # friction pyramid rows: +-f_x - mu f_z <= 0 and +-f_y - mu f_z <= 0 for every stance foot
         fz_cols = np.flatnonzero(is_force & (comp == 2))  # one per stance foot and step, preceded by its x, y
         m = fz_cols.size
-        fric = np.zeros((4 * m, idx.size))
-        rows = np.arange(4 * m).reshape(m, 4)
+        n_arm = 3 * n if arm_free else 0
+        c = np.zeros((4 * m + n_arm, idx.size))
+        lo = np.full(4 * m + n_arm, -np.inf)
+        hi = np.zeros(4 * m + n_arm)
+        fric = c[: 4 * m].reshape(m, 4, idx.size)
+        steps = np.arange(m)
         for r, (axis, sign) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
-            fric[rows[:, r], fz_cols - 2 + axis] = sign * s[fz_cols - 2 + axis]
-            fric[rows[:, r], fz_cols] = -cfg.mu * s[fz_cols]
-        blocks_c, blocks_lo, blocks_hi = [fric], [np.full(4 * m, -np.inf)], [np.zeros(4 * m)]
+            fric[steps, r, fz_cols - 2 + axis] = sign * s[fz_cols - 2 + axis]
+            fric[steps, r, fz_cols] = -cfg.mu * s[fz_cols]
         if arm_free:
-            arm_rows = (np.arange(n)[:, None] * NX + np.arange(12, 15)[None]).ravel()
-            blocks_c.append(gam[arm_rows] * s)
-            blocks_lo.append((np.minimum(self._arm_lower, x0[12:15])[None] - free[arm_rows].reshape(n, 3)).ravel())
-            blocks_hi.append((np.maximum(self._arm_upper, x0[12:15])[None] - free[arm_rows].reshape(n, 3)).ravel())
-        c = np.vstack(blocks_c)
-        lo, hi = np.concatenate(blocks_lo), np.concatenate(blocks_hi)
+            arm_rows = self._arm_rows
+            c[4 * m:] = gam[arm_rows]
+            lo[4 * m:] = (np.minimum(self._arm_lower, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
+            hi[4 * m:] = (np.maximum(self._arm_upper, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
         self.problem = MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx)
         setup = time.perf_counter() - t0
         t1 = time.perf_counter()

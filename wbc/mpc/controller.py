@@ -268,12 +268,10 @@ class MpcController:
         x_ref[:, 9:12] = kin.params.inertia_world @ np.array([0.0, 0.0, command.yaw_rate])
         x_ref[:, 12:15] = self.desc.arm.nominal_q
         contact = self.gait.contact_table(self.t, dt, n)
-        feet = np.repeat(kin.feet[None], n, axis=0)
-        for i in range(4):
-            feet[~contact[:, i], i] = self._footholds[i]
-            # a foot that lands within the horizon stands on its foothold afterwards
-            landed = np.flatnonzero(contact[:, i] & (np.cumsum(~contact[:, i]) > 0))
-            feet[landed, i] = self._footholds[i]
+        # a foot stands where it is until it first lifts; from then on (in swing, and after it lands within the
+        # horizon) it is at its foothold
+        lifted = np.cumsum(~contact, axis=0) > 0
+        feet = np.where(lifted[:, :, None], self._footholds[None], kin.feet[None])
         params = kin.params
         if not (self.has_arm and cfg.use_arm_momentum):
             params = type(params)(mass=params.mass, inertia_world=params.inertia_world,

@@ -68,7 +68,10 @@ class GaitScheduler:
 
     def contact_table(self, t: float, dt: float, n: int) -> np.ndarray:
         """Stance flags over a horizon: row k is the middle of step [t + k dt, t + (k + 1) dt], shape (n, 4)."""
-        return np.array([self.contact(t + (k + 0.5) * dt) for k in range(n)])
+        times = t + (np.arange(n) + 0.5) * dt
+        if self.config.duty >= 1.0:
+            return np.ones((n, 4), dtype=bool)
+        return np.mod(times[:, None] / self.config.period + self._offsets, 1.0) < self.config.duty - 1e-12
 
     def swing_progress(self, t: float) -> np.ndarray:
         """For each foot, progress through its swing in [0, 1] (0 for feet in stance)."""
