@@ -57,6 +57,7 @@ class GaitScheduler:
     def __init__(self, config: GaitConfig) -> None:
         self.config = config
         self._offsets = np.asarray(config.offsets, dtype=np.float64)
+        self._offset_list = self._offsets.tolist()
 
     def phase(self, t: float) -> np.ndarray:
         """Phase of each foot in its cycle, in [0, 1): stance first (< duty), then swing."""
@@ -86,11 +87,17 @@ class GaitScheduler:
         c = self.config
         if c.duty >= 1.0:
             return np.ones(4, dtype=bool), np.zeros(4), np.zeros(4)
-        ph = self.phase(t)
-        swing = ph >= c.duty
-        contact = ph < c.duty - 1e-12
-        return (contact, np.where(swing, (ph - c.duty) / (1.0 - c.duty), 0.0),
-                np.where(swing, (1.0 - ph) * c.period, 0.0))
+        # four feet: Python floats (the same IEEE operations as `phase`), three arrays built at the end
+        cycles = t / c.period
+        duty, swing_s = c.duty, 1.0 - c.duty
+        contact, progress, touchdown = [], [], []
+        for offset in self._offset_list:
+            ph = (cycles + offset) % 1.0
+            contact.append(ph < duty - 1e-12)
+            swing = ph >= duty
+            progress.append((ph - duty) / swing_s if swing else 0.0)
+            touchdown.append((1.0 - ph) * c.period if swing else 0.0)
+        return np.array(contact), np.array(progress), np.array(touchdown)
 
     def time_to_touchdown(self, t: float) -> np.ndarray:
         """For each foot, time until its next touchdown [s] (0 for feet in stance)."""
