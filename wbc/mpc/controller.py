@@ -103,6 +103,13 @@ def _rotation_from_rpy(rpy: np.ndarray) -> np.ndarray:
                      [-sp, cp * sr, cp * cr]])
 
 
+def _ground_height(feet: np.ndarray, stance: np.ndarray) -> float:
+    """Mean height of the stance feet (the lowest foot when none stands) [m]."""
+    heights = feet[:, 2].tolist()
+    down = [z for z, s in zip(heights, stance.tolist(), strict=True) if s]
+    return math.fsum(down) / len(down) if down else min(heights)
+
+
 def _rpy(rot: np.ndarray) -> np.ndarray:
     return np.array([math.atan2(rot[2, 1], rot[2, 2]), -math.asin(max(-1.0, min(1.0, rot[2, 0]))), _yaw_of(rot)])
 
@@ -251,8 +258,7 @@ class MpcController:
         x0[6:9] = (rpy[0], rpy[1], self._yaw_unwrapped)
         x0[9:12] = kin.momentum
         x0[12:15] = state.q[12:15] if self.has_arm else self.desc.arm.nominal_q
-        stance = self.gait.contact(self.t)
-        ground = float(np.mean(kin.feet[stance, 2])) if stance.any() else float(np.min(kin.feet[:, 2]))
+        ground = _ground_height(kin.feet, self.gait.contact(self.t))
         x_ref = np.zeros((n, 15))
         steps = np.arange(1, n + 1) * dt
         # while turning, the commanded body-frame velocity turns with the yaw reference along the horizon
@@ -304,7 +310,7 @@ class MpcController:
                 self._liftoff[i] = kin.feet[i]
             if refresh or lifted:
                 if ground is None:
-                    ground = float(np.mean(kin.feet[contact, 2])) if any(stance) else float(np.min(kin.feet[:, 2]))
+                    ground = _ground_height(kin.feet, contact)
                     v_cmd_world = np.array([v_cmd_xy[0], v_cmd_xy[1], 0.0])
                 hip = kin.hip_positions()[i].copy()
                 self._footholds[i] = plan_foothold(hip, kin.com, kin.com_vel, v_cmd_world, yaw_rate,
