@@ -363,9 +363,9 @@ class MpcController:
         s = (self.t - self.plan_t) / self.config.mpc.dt
         k = min(int(s), self.config.mpc.horizon - 1)
         a = min(s - k, 1.0)
-        key = (plan, kin.params, k)
-        if self._wbc_key is None or any(u is not v for u, v in zip(key, self._wbc_key, strict=True)):
-            self._wbc_terms, self._wbc_key = self._plan_terms(k), key
+        cached = self._wbc_key
+        if cached is None or cached[0] is not plan or cached[1] is not kin.params or cached[2] != k:
+            self._wbc_terms, self._wbc_key = self._plan_terms(k), (plan, kin.params, k)
         start, span, com_acc, w_com, w_feet, omega0, omega1, arm_v = self._wbc_terms
         x = start + a * span
         domega = w_com @ kin.com - w_feet @ kin.feet.ravel()
