@@ -29,6 +29,10 @@ class RobotKinematics:
         self.robot = build_pinocchio(desc)
         model = self.robot.model
         self._foot_frames = [model.getFrameId(f) for f in FOOT_NAMES]
+        # views of the feet's positions inside Pinocchio's data (they follow every placement update): one copy of
+        # all four per tick instead of four calls
+        data = self.robot.data
+        self._foot_views = [data.oMf[fid].translation for fid in self._foot_frames]
         self._hip_joints = [model.getJointId(f"{leg}_thigh_joint") for leg in LEG_NAMES]
         self._perm = self.robot.joints.pin_from_house  # pin joint k is house joint perm[k]
         self._house_cols = 6 + self.robot.joints.house_from_pin  # v index of each house joint
@@ -128,10 +132,11 @@ class RobotKinematics:
         self.q_pin, self.v_pin, self._rot = qp, vp, rot
         pin.forwardKinematics(model, data, qp, vp)
         frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        feet, feet_vel = self.feet, self.feet_vel
+        feet_vel = self.feet_vel
         for i, fid in enumerate(self._foot_frames):
-            feet[i] = pin.updateFramePlacement(model, data, fid).translation
+            pin.updateFramePlacement(model, data, fid)
             feet_vel[i] = pin.getFrameVelocity(model, data, fid, frame).linear
+        self.feet[:] = self._foot_views
         self._jacobians_valid = False
         self._hips_valid = False
         self._shift_since_update[:] = 0.0
