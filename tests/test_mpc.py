@@ -10,6 +10,8 @@ from wbc.hardware.mujoco_scene import build_scene
 from wbc.hardware.terrain import TerrainConfig
 from wbc.mpc import CentroidalModel, CentroidalMpc, CentroidalParams, MpcConfig, SymbolicCentroidalModel
 from wbc.mpc.centroidal_model import euler_rates_matrix
+from wbc.mpc.gait import STAND, TROT, GaitConfig, GaitScheduler
+from wbc.mpc.kinematics import RobotKinematics
 from wbc.robots import build_pinocchio, get_robot, joint_table
 
 FEET = ("FR_foot", "FL_foot", "RR_foot", "RL_foot")
@@ -177,3 +179,34 @@ def test_the_optimiser_swings_the_arm_to_right_the_body_when_arm_terms_are_on():
     still = mpc.solve(x, *args, no_arm)
     assert np.abs(still.arm_velocity).max() < 1e-3
     assert euler_rates_matrix(np.zeros(3)) == pytest.approx(np.eye(3))
+
+
+@pytest.mark.parametrize("gait", [TROT, STAND, GaitConfig(period=0.5, duty=0.7, offsets=(0.1, 0.3, 0.6, 0.9))])
+def test_gait_state_and_contact_table_agree_with_the_per_time_queries(gait):
+    # the per-tick and per-horizon fast paths must give exactly what the plain queries give, at phase boundaries too
+    sched = GaitScheduler(gait)
+    for t in np.r_[np.arange(0.0, 3.0, 0.002), np.random.default_rng(0).random(200) * 50.0]:
+        contact, progress, touchdown = sched.state(t)
+        assert contact.dtype == bool and np.array_equal(contact, sched.contact(t))
+        assert np.array_equal(progress, sched.swing_progress(t))
+        assert np.array_equal(touchdown, sched.time_to_touchdown(t))
+        table = sched.contact_table(t, 0.04, 10)
+        assert np.array_equal(table, np.array([sched.contact(t + (k + 0.5) * 0.04) for k in range(10)]))
+
+
+def test_kinematics_shift_moves_feet_hips_and_com_like_a_fresh_update():
+    desc = get_robot("a1-wx200")
+    rng = np.random.default_rng(4)
+    quat = np.array([0.98, 0.05, -0.1, 0.15])
+    quat /= np.linalg.norm(quat)
+    q, dq = desc.nominal_q + 0.1 * rng.standard_normal(15), rng.standard_normal(15)
+    p, v, w = np.array([0.1, -0.2, 0.3]), rng.standard_normal(3), rng.standard_normal(3)
+    dp, dv = np.array([0.01, -0.02, 0.005]), np.array([0.1, 0.0, -0.05])
+    shifted, fresh = RobotKinematics(desc), RobotKinematics(desc)
+    shifted.update(p, quat, q, dq, v, w, centroidal=True)
+    shifted.shift(dp, dv)
+    fresh.update(p + dp, quat, q, dq, v + dv, w, centroidal=True)
+    for name in ("feet", "feet_vel", "com", "com_vel", "momentum", "q_pin", "v_pin"):
+        np.testing.assert_allclose(getattr(shifted, name), getattr(fresh, name), atol=1e-12, err_msg=name)
+    np.testing.assert_allclose(shifted.hip_positions(), fresh.hip_positions(), atol=1e-12)
+    np.testing.assert_allclose(shifted.params.feet_world, fresh.params.feet_world, atol=1e-12)

@@ -141,9 +141,13 @@ def bench_sweep(
     return out
 
 
-def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3
-              ) -> dict[str, float | str | int]:
+def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
+              single_thread: bool = True) -> dict[str, float | str | int]:
     """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
+
+    With `single_thread` (the default) it runs in a spawned process whose BLAS is single-threaded, as every arena
+    worker is: a BLAS that spreads the MPC's condensing products over the cores is no faster on an idle machine and
+    many times slower on a busy one (14 ms instead of 1 ms per MPC setup beside a training job on 2 cores).
 
     The robot walks at `vx` on flat ground for `seconds`; every MPC update's QP solve time (ProxSuite) and setup
     time (linearisation and condensing) are collected; ``wbc_tick_us_median`` is the whole-body QP's time per tick
@@ -151,6 +155,15 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     the whole control tick without an MPC update (estimator, kinematics, footholds, swing targets, whole-body QP,
     motor command). The real-time factor covers everything: physics, controller and MPC updates.
     """
+    if single_thread:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        from wbc.executors import single_threaded_blas
+
+        with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+            result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False).result()
+        return {**result, "blas": "single-threaded"}
     from wbc.control import get_controller
     from wbc.types import VelocityCommand
 
@@ -203,5 +216,6 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         "control_tick_us_median": 1e6 * float(np.median(ticks)),
         "realtime_factor": seconds / wall,
         "fell": bool(fell),
+        "blas": "default threads",
         "machine": machine_description(),
     }

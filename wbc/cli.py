@@ -253,7 +253,7 @@ def _view(args: argparse.Namespace) -> int:
 def _bench_mpc(args: argparse.Namespace) -> int:
     from wbc.bench import bench_mpc
 
-    result = bench_mpc(args.robot, args.controller, seconds=args.seconds)
+    result = bench_mpc(args.robot, args.controller, seconds=args.seconds, single_thread=not args.threaded_blas)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -337,6 +337,8 @@ def _parser() -> argparse.ArgumentParser:
     mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     mpc.add_argument("--controller", default="mpc")
     mpc.add_argument("--seconds", type=float, default=4.0)
+    mpc.add_argument("--threaded-blas", action="store_true",
+                     help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
     mpc.add_argument("--json", action="store_true")
     mpc.set_defaults(func=_bench_mpc)
     sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")

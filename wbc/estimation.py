@@ -10,7 +10,7 @@ quaternion directly.
 Because the model is linear time-invariant for a given set of trusted feet, the default filter runs with the
 steady-state Kalman gain of the current contact pattern (trust rounded to 0 or 1; the gains of the 16 patterns come
 from iterating the Riccati recursion once, then are cached): one matrix-vector product per tick instead of a 28 x 28
-solve. ``gain="full"`` runs the time-varying filter instead.
+solve; the 16 gains are built with the filter, outside the loop. ``gain="full"`` runs the time-varying filter instead.
 """
 
 from __future__ import annotations
@@ -123,6 +123,21 @@ class BaseEstimator:
         self.P = np.eye(18) * 1e-2
         self.C = _measurement_matrix()
         self._y = np.zeros(28)
+        # pattern -> the one-step update's matrices, all 16 built here: a gain built inside the control loop would
+        # stall one tick by ~10 ms (the first time each pattern occurs in a process)
+        self._steady: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+        if self.config.gain == "steady":
+            a = np.eye(18)
+            a[0:3, 3:6] = dt * np.eye(3)
+            b = np.zeros((18, 3))
+            b[0:3] = 0.5 * dt * dt * np.eye(3)
+            b[3:6] = dt * np.eye(3)
+            for pattern in range(16):
+                gain = _steady_gain(dt, self.config, pattern)
+                keep = np.eye(18) - gain @ self.C
+                signed = gain[:, :24].copy()
+                signed[:, 12:24] *= -1.0
+                self._steady[pattern] = (keep @ a, keep @ b, keep @ b @ GRAVITY, signed)
 
     def reset(self, base_pos: np.ndarray, feet_world: np.ndarray) -> None:
         """Start at a known base position with zero velocity and the feet where kinematics put them."""
@@ -153,24 +168,25 @@ class BaseEstimator:
             trust: contact trust of each foot in [0, 1].
         """
         dt, x = self.dt, self.x
+        if self.config.gain == "steady":
+            t0, t1, t2, t3 = np.asarray(trust, dtype=np.float64).tolist()
+            pattern = int(t0 >= 0.5) | int(t1 >= 0.5) << 1 | int(t2 >= 0.5) << 2 | int(t3 >= 0.5) << 3
+            # predict and correct in one: x+ = (I - K C) (A x + B (R a + g)) + K y; the velocity rows of y are
+            # negated inside the stored gain and its foot-height rows (zeros) dropped
+            keep_a, keep_b, keep_g, gain = self._steady[pattern]
+            y = self._y
+            y[0:12] = np.ravel(feet_rel_world)
+            y[12:24] = np.ravel(feet_vel_rel_world)
+            x[:] = keep_a @ x + keep_b @ (rot @ accel_body) + gain @ y[:24] + keep_g
+            return
         # predict: x = A x + B a, with A = I + dt [0 I; 0 0] on (p, v)
         a_world = rot @ accel_body + GRAVITY
         x[0:3] += dt * x[3:6] + (0.5 * dt * dt) * a_world
         x[3:6] += dt * a_world
         y = self._y
         y[0:12] = np.ravel(feet_rel_world)
-        y[12:24] = -np.ravel(feet_vel_rel_world)
-        if self.config.gain == "steady":
-            t = np.asarray(trust)
-            pattern = int(t[0] >= 0.5) | int(t[1] >= 0.5) << 1 | int(t[2] >= 0.5) << 2 | int(t[3] >= 0.5) << 3
-            gain = _steady_gain(dt, self.config, pattern)
-            # innovation y - C x, written out: C's blocks are identities
-            innov = y.copy()
-            innov[0:12] -= (x[6:18].reshape(4, 3) - x[0:3]).ravel()
-            innov[12:24] -= (np.zeros((4, 3)) + x[3:6]).ravel()
-            innov[24:28] -= x[8:18:3]
-            x += gain @ innov
-            return
+        y[12:24] = np.ravel(feet_vel_rel_world)
+        y[12:24] *= -1.0
         p = self.P
         p[0:3, :] += dt * p[3:6, :]
         p[:, 0:3] += dt * p[:, 3:6]

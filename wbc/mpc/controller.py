@@ -89,17 +89,25 @@ class MpcControllerConfig:
 
 
 def _yaw_of(rot: np.ndarray) -> float:
-    return math.atan2(rot[1, 0], rot[0, 0])
+    return math.atan2(rot.item(1, 0), rot.item(0, 0))
 
 
 def _rotation_from_rpy(rpy: np.ndarray) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll), the MPC's Euler convention."""
-    cr, sr = math.cos(rpy[0]), math.sin(rpy[0])
-    cp, sp = math.cos(rpy[1]), math.sin(rpy[1])
-    cy, sy = math.cos(rpy[2]), math.sin(rpy[2])
+    roll, pitch, yaw = rpy.tolist()
+    cr, sr = math.cos(roll), math.sin(roll)
+    cp, sp = math.cos(pitch), math.sin(pitch)
+    cy, sy = math.cos(yaw), math.sin(yaw)
     return np.array([[cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
                      [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
                      [-sp, cp * sr, cp * cr]])
+
+
+def _ground_height(feet: np.ndarray, stance: np.ndarray) -> float:
+    """Mean height of the stance feet (the lowest foot when none stands) [m]."""
+    heights = feet[:, 2].tolist()
+    down = [z for z, s in zip(heights, stance.tolist(), strict=True) if s]
+    return math.fsum(down) / len(down) if down else min(heights)
 
 
 def _rpy(rot: np.ndarray) -> np.ndarray:
@@ -128,6 +136,7 @@ class MpcController:
         self.estimator = BaseEstimator(self.dt, self.config.estimator)
         self.wbc = WholeBodyQp(desc, self.config.wbc) if self.config.whole_body == "qp" else None
         self._truth: Callable[[], BaseTruth] | None = None
+        self._gains: tuple[np.ndarray, np.ndarray] | None = None
         self.reset()
 
     def use_ground_truth(self, truth: Callable[[], BaseTruth]) -> None:
@@ -147,15 +156,15 @@ class MpcController:
         self.solves = 0
         self.wbc_failures = 0
         self._x0 = np.zeros(15)
-        self._inertia_inv, self._inertia_of = np.eye(3), None
         self._started = False
         self._yaw_unwrapped = 0.0
         self._yaw_target = 0.0
         self._xy_target = np.zeros(2)
         self._liftoff = np.zeros((4, 3))
         self._footholds = np.zeros((4, 3))
-        self._was_stance = np.ones(4, dtype=bool)
+        self._was_stance = [True] * 4
         self._arm_target = self.desc.arm.nominal_q.copy()
+        self._wbc_key: tuple[object, ...] | None = None
         self.mpc.reset()
 
     def counters(self) -> dict[str, int]:
@@ -191,7 +200,7 @@ class MpcController:
         kin = self.kin
         if not self._started:
             kin.update(np.zeros(3), state.imu_quat, state.q, state.dq, np.zeros(3), state.gyro_in_body,
-                       centroidal=False)
+                       centroidal=False, rot=rot)
             base0 = np.array([0.0, 0.0, -kin.feet[:, 2].mean()])
             self.estimator.reset(base0, kin.feet + base0)
             self._yaw_unwrapped = _yaw_of(rot)
@@ -199,33 +208,40 @@ class MpcController:
             self._started = True
         # one kinematics pass at the predicted base state serves the estimator, then is shifted by its correction
         replan = self.plan is None or self.tick % cfg.replan_every == 0
-        contact = self.gait.contact(self.t)
+        contact, progress, touchdown = self.gait.state(self.t)
         if self._truth is not None:
             # debug switch: the simulator's base position and velocity replace the estimate
             truth = self._truth()
             kin.update(truth.base_position_in_world, state.imu_quat, state.q, state.dq, truth.base_linvel_in_world,
-                       state.gyro_in_body, centroidal=replan)
+                       state.gyro_in_body, centroidal=replan, rot=rot)
         else:
-            p_prior, v_prior = self.estimator.position, self.estimator.velocity
-            kin.update(p_prior, state.imu_quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=replan)
+            estimator = self.estimator
+            p_prior, v_prior = estimator.position, estimator.velocity
+            kin.update(p_prior, state.imu_quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=replan,
+                       rot=rot)
             # a foot is trusted as a stance foot when the gait says so and its force sensor agrees: a late
             # touchdown or an early lift-off would otherwise feed a moving foot into the velocity estimate
-            trust = contact * np.clip(state.foot_force / self.config.contact_force, 0.0, 1.0)
-            self.estimator.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
-            kin.shift(self.estimator.position - p_prior, self.estimator.velocity - v_prior)
+            trust = contact * np.minimum(np.maximum(state.foot_force * (1.0 / cfg.contact_force), 0.0), 1.0)
+            estimator.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
+            kin.shift(estimator.x[0:3] - p_prior, estimator.x[3:6] - v_prior)
+        # the references, in Python floats: a handful of scalars per tick
         yaw = _yaw_of(rot)
         self._yaw_unwrapped += math.remainder(yaw - self._yaw_unwrapped, 2 * math.pi)
         cy, sy = math.cos(self._yaw_unwrapped), math.sin(self._yaw_unwrapped)
-        v_cmd_world = np.array([cy * command.vx - sy * command.vy, sy * command.vx + cy * command.vy, 0.0])
-        self._xy_target += v_cmd_world[:2] * self.dt
-        self._yaw_target += command.yaw_rate * self.dt
+        vx_world = cy * command.vx - sy * command.vy
+        vy_world = sy * command.vx + cy * command.vy
+        com_x, com_y = kin.com[0].item(), kin.com[1].item()
         # keep the references from running away from a robot that was pushed far
-        self._xy_target = kin.com[:2] + np.clip(self._xy_target - kin.com[:2], -0.15, 0.15)
-        self._yaw_target = self._yaw_unwrapped + float(np.clip(self._yaw_target - self._yaw_unwrapped, -0.3, 0.3))
-        self._update_footholds(contact, v_cmd_world, command.yaw_rate)
+        tx = self._xy_target[0].item() + vx_world * self.dt
+        ty = self._xy_target[1].item() + vy_world * self.dt
+        self._xy_target = np.array([com_x + min(max(tx - com_x, -0.15), 0.15),
+                                    com_y + min(max(ty - com_y, -0.15), 0.15)])
+        yaw_off = self._yaw_target + command.yaw_rate * self.dt - self._yaw_unwrapped
+        self._yaw_target = self._yaw_unwrapped + min(max(yaw_off, -0.3), 0.3)
+        self._update_footholds(contact, touchdown, (vx_world, vy_world), command.yaw_rate)
         if replan:
             self._replan(rot, state, command)
-        tau = self._whole_body(contact) if self.wbc is not None else None
+        tau = self._whole_body(contact, progress) if self.wbc is not None else None
         if tau is None:
             tau = self._leg_torques(contact)
         return self._command(state, tau)
@@ -242,8 +258,7 @@ class MpcController:
         x0[6:9] = (rpy[0], rpy[1], self._yaw_unwrapped)
         x0[9:12] = kin.momentum
         x0[12:15] = state.q[12:15] if self.has_arm else self.desc.arm.nominal_q
-        stance = self.gait.contact(self.t)
-        ground = float(np.mean(kin.feet[stance, 2])) if stance.any() else float(np.min(kin.feet[:, 2]))
+        ground = _ground_height(kin.feet, self.gait.contact(self.t))
         x_ref = np.zeros((n, 15))
         steps = np.arange(1, n + 1) * dt
         # while turning, the commanded body-frame velocity turns with the yaw reference along the horizon
@@ -259,12 +274,10 @@ class MpcController:
         x_ref[:, 9:12] = kin.params.inertia_world @ np.array([0.0, 0.0, command.yaw_rate])
         x_ref[:, 12:15] = self.desc.arm.nominal_q
         contact = self.gait.contact_table(self.t, dt, n)
-        feet = np.repeat(kin.feet[None], n, axis=0)
-        for i in range(4):
-            feet[~contact[:, i], i] = self._footholds[i]
-            # a foot that lands within the horizon stands on its foothold afterwards
-            landed = np.flatnonzero(contact[:, i] & (np.cumsum(~contact[:, i]) > 0))
-            feet[landed, i] = self._footholds[i]
+        # a foot stands where it is until it first lifts; from then on (in swing, and after it lands within the
+        # horizon) it is at its foothold
+        lifted = np.cumsum(~contact, axis=0) > 0
+        feet = np.where(lifted[:, :, None], self._footholds[None], kin.feet[None])
         params = kin.params
         if not (self.has_arm and cfg.use_arm_momentum):
             params = type(params)(mass=params.mass, inertia_world=params.inertia_world,
@@ -281,63 +294,87 @@ class MpcController:
         k = int((self.t - self.plan_t) / self.config.mpc.dt)
         return min(k, self.config.mpc.horizon - 1)
 
-    def _update_footholds(self, contact: np.ndarray, v_cmd_world: np.ndarray, yaw_rate: float) -> None:
+    def _update_footholds(self, contact: np.ndarray, touchdown: np.ndarray, v_cmd_xy: tuple[float, float],
+                          yaw_rate: float) -> None:
+        """Lift-off points and footholds of the swing feet; a stance foot's foothold is where it stands."""
         cfg, kin = self.config, self.kin
         refresh = self.tick % cfg.foothold_every == 0
-        ttd = self.gait.time_to_touchdown(self.t)
-        ground = float(np.mean(kin.feet[contact, 2])) if contact.any() else float(np.min(kin.feet[:, 2]))
+        stance = contact.tolist()
+        was = self._was_stance
+        ground = None
         for i in range(4):
-            lifted = self._was_stance[i] and not contact[i]
+            if stance[i]:
+                continue
+            lifted = was[i]
             if lifted:
                 self._liftoff[i] = kin.feet[i]
-            if not contact[i] and (refresh or lifted):
-                hip = kin.hips[i].copy()
-                self._footholds[i] = plan_foothold(hip, kin.com, kin.com_vel, v_cmd_world, yaw_rate, ttd[i],
-                                                   cfg.gait.stance_s, kin.com[2] - ground, ground, cfg.footholds)
-            elif contact[i]:
-                self._footholds[i] = kin.feet[i]
-        self._was_stance = contact.copy()
+            if refresh or lifted:
+                if ground is None:
+                    ground = _ground_height(kin.feet, contact)
+                    v_cmd_world = np.array([v_cmd_xy[0], v_cmd_xy[1], 0.0])
+                hip = kin.hip_positions()[i].copy()
+                self._footholds[i] = plan_foothold(hip, kin.com, kin.com_vel, v_cmd_world, yaw_rate,
+                                                   float(touchdown[i]), cfg.gait.stance_s, kin.com[2] - ground,
+                                                   ground, cfg.footholds)
+        np.copyto(self._footholds, kin.feet, where=contact[:, None])
+        self._was_stance = stance
 
     # -- whole-body layer -----------------------------------------------------------------------------------------
-    def _swing_targets(self, contact: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _swing_targets(self, contact: np.ndarray, progress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         cfg = self.config
-        progress = self.gait.swing_progress(self.t)
         pos = np.zeros((4, 3))
         vel = np.zeros((4, 3))
-        for i in range(4):
-            if not contact[i]:
-                pos[i], vel[i] = swing_point(self._liftoff[i], self._footholds[i], float(progress[i]),
-                                             cfg.gait.swing_s, cfg.swing_height)
+        s = progress.tolist()
+        for i, stance in enumerate(contact.tolist()):
+            if not stance:
+                pos[i], vel[i] = swing_point(self._liftoff[i], self._footholds[i], s[i], cfg.gait.swing_s,
+                                             cfg.swing_height)
         return pos, vel
 
-    def _whole_body(self, contact: np.ndarray) -> np.ndarray | None:
+    def _plan_terms(self, k: int) -> tuple[np.ndarray, ...]:
+        """What the whole-body targets need from MPC step `k` of the current plan, built once per step.
+
+        The planned state is blended linearly between the step's start and end; the trunk's angular acceleration
+        is I^-1 sum_i (p_i - c) x f_i = I^-1 ([F]x c - sum_i [f_i]x p_i), linear in the CoM c and the feet p_i, so
+        its two matrices are built here and the per-tick work is two products.
+        """
+        plan, params = self.plan, self.kin.params
+        start = self._x0 if k == 0 else plan.states[k - 1]
+        span = plan.states[k] - start
+        forces = plan.forces[k]
+        inertia_inv = params.inverse_inertia
+        com_acc = forces.sum(axis=0) / params.mass + np.array([0.0, 0.0, -9.81])
+        skews = np.zeros((3, 12))  # [ [f_0]x ... [f_3]x ]
+        fx, fy, fz = forces[:, 0], forces[:, 1], forces[:, 2]
+        skews[0, 1::3], skews[0, 2::3] = -fz, fy
+        skews[1, 0::3], skews[1, 2::3] = fz, -fx
+        skews[2, 0::3], skews[2, 1::3] = -fy, fx
+        total_skew = skews.reshape(3, 4, 3).sum(axis=1)
+        arm_v = plan.arm_velocity[k] if self.has_arm and self.config.use_arm_momentum else np.zeros(3)
+        omega0 = inertia_inv @ (start[9:12] - params.arm_momentum_matrix @ arm_v)
+        omega1 = inertia_inv @ span[9:12]
+        return (start, span, com_acc, inertia_inv @ total_skew, inertia_inv @ skews, omega0, omega1, arm_v)
+
+    def _whole_body(self, contact: np.ndarray, progress: np.ndarray) -> np.ndarray | None:
         """Torques from the whole-body QP tracking the plan; None (and counted) when it fails."""
         plan, kin = self.plan, self.kin
         if plan is None or kin.params is None:
             return None
-        dt = self.config.mpc.dt
-        s = (self.t - self.plan_t) / dt
+        s = (self.t - self.plan_t) / self.config.mpc.dt
         k = min(int(s), self.config.mpc.horizon - 1)
         a = min(s - k, 1.0)
-        prev = self._x0 if k == 0 else plan.states[k - 1]
-        x = (1.0 - a) * prev + a * plan.states[k]
-        forces = plan.forces[k]
-        params = kin.params
-        com_acc = forces.sum(axis=0) / params.mass + np.array([0.0, 0.0, -9.81])
-        r, f = kin.feet - kin.com, forces
-        moment = np.array([(r[:, 1] * f[:, 2] - r[:, 2] * f[:, 1]).sum(), (r[:, 2] * f[:, 0] - r[:, 0] * f[:, 2]).sum(),
-                           (r[:, 0] * f[:, 1] - r[:, 1] * f[:, 0]).sum()])
-        if self._inertia_of is not params:
-            self._inertia_inv, self._inertia_of = np.linalg.inv(params.inertia_world), params
-        inertia_inv = self._inertia_inv
-        arm_v = plan.arm_velocity[k] if self.has_arm and self.config.use_arm_momentum else np.zeros(3)
-        omega = inertia_inv @ (x[9:12] - params.arm_momentum_matrix @ arm_v)
-        swing_pos, swing_vel = self._swing_targets(contact)
+        cached = self._wbc_key
+        if cached is None or cached[0] is not plan or cached[1] is not kin.params or cached[2] != k:
+            self._wbc_terms, self._wbc_key = self._plan_terms(k), (plan, kin.params, k)
+        start, span, com_acc, w_com, w_feet, omega0, omega1, arm_v = self._wbc_terms
+        x = start + a * span
+        domega = w_com @ kin.com - w_feet @ kin.feet.ravel()
+        swing_pos, swing_vel = self._swing_targets(contact, progress)
         arm_q = self._arm_target if self.has_arm else None
         result = self.wbc.solve(kin.q_pin, kin.v_pin, contact, com=x[0:3], com_vel=x[3:6], com_acc=com_acc,
-                                rot=_rotation_from_rpy(x[6:9]), omega_world=omega,
-                                domega_world=inertia_inv @ moment, feet_pos=swing_pos, feet_vel=swing_vel,
-                                arm_q=arm_q, arm_dq=arm_v if self.has_arm else None)
+                                rot=_rotation_from_rpy(x[6:9]), omega_world=omega0 + a * omega1,
+                                domega_world=domega, feet_pos=swing_pos, feet_vel=swing_vel,
+                                arm_q=arm_q, arm_dq=arm_v if self.has_arm else None, with_forces=False)
         if not result.success:
             self.wbc_failures += 1
             return None
@@ -363,19 +400,21 @@ class MpcController:
 
     def _command(self, state: RobotState, tau: np.ndarray) -> MotorCommand:
         cfg = self.config
-        n = self.kin.n
+        if self._gains is None:
+            n = self.kin.n
+            kp, kd = np.zeros(n), np.full(n, cfg.joint_kd)
+            if self.has_arm:
+                kp[12:15], kd[12:15] = cfg.arm_kp, cfg.arm_kd
+            self._gains = (kp, kd)  # MotorCommand copies its arrays, so these are shared safely
+        kp, kd = self._gains
         q = state.q.copy()
-        dq_des = np.zeros(n)
-        kp = np.zeros(n)
-        kd = np.full(n, cfg.joint_kd)
+        dq_des = np.zeros(self.kin.n)
         if self.has_arm:
             if self.plan is not None and cfg.use_arm_momentum:
                 v_arm = self.plan.arm_velocity[self._plan_step()]
                 self._arm_target = self._arm_target + v_arm * self.dt
                 dq_des[12:15] = v_arm
             q[12:15] = self._arm_target
-            kp[12:15] = cfg.arm_kp
-            kd[12:15] = cfg.arm_kd
         self.t += self.dt
         self.tick += 1
         return MotorCommand(q=q, dq=dq_des, kp=kp, kd=kd, tau=tau)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -50,24 +51,30 @@ def plan_foothold(hip_now: np.ndarray, com_now: np.ndarray, v_com: np.ndarray, v
         ground_z: ground height at the foothold [m].
         config: settings.
     """
-    v = np.array([v_com[0], v_com[1], 0.0])
-    vc = np.array([v_cmd[0], v_cmd[1], 0.0])
+    # a few dozen scalar operations: Python floats, not 3-vectors of numpy calls (this runs for every swing foot
+    # at every foothold refresh)
+    hx, hy, hz = np.asarray(hip_now, dtype=np.float64).tolist()
+    cx, cy, cz = np.asarray(com_now, dtype=np.float64).tolist()
+    vx, vy = float(v_com[0]), float(v_com[1])
+    vcx, vcy = float(v_cmd[0]), float(v_cmd[1])
+    w, t = float(yaw_rate_cmd), float(time_to_touchdown)
     # the hip at touchdown: carried by the CoM and turned about it by the yaw rate over the remaining swing
-    turn = yaw_rate_cmd * time_to_touchdown
-    c, s = np.cos(turn), np.sin(turn)
-    r = hip_now - com_now
-    lever = np.array([c * r[0] - s * r[1], s * r[0] + c * r[1], 0.0])
-    hip_td = com_now + v * time_to_touchdown + lever
-    hip_td[2] = hip_now[2]
-    root = np.sqrt(max(height, 0.05) / 9.81)
-    offset = vc * (stance_s / 2) + config.capture_gain * root * (v - vc)
+    c, s = math.cos(w * t), math.sin(w * t)
+    rx, ry = hx - cx, hy - cy
+    lever_x, lever_y = c * rx - s * ry, s * rx + c * ry
+    hip_x, hip_y = cx + vx * t + lever_x, cy + vy * t + lever_y
+    root = math.sqrt(max(height, 0.05) / 9.81)
+    half = stance_s / 2
+    off_x = vcx * half + config.capture_gain * root * (vx - vcx)
+    off_y = vcy * half + config.capture_gain * root * (vy - vcy)
     # v x (0, 0, w) = (w v_y, -w v_x, 0)
-    offset[0] += config.centripetal_gain * root * yaw_rate_cmd * v[1]
-    offset[1] -= config.centripetal_gain * root * yaw_rate_cmd * v[0]
+    off_x += config.centripetal_gain * root * w * vy
+    off_y -= config.centripetal_gain * root * w * vx
     # turning: over half a stance the hip sweeps by yaw_rate x (hip - CoM)
-    offset[0] -= yaw_rate_cmd * lever[1] * (stance_s / 2)  # (0, 0, w) x (l_x, l_y, 0) = (-w l_y, w l_x, 0)
-    offset[1] += yaw_rate_cmd * lever[0] * (stance_s / 2)
-    norm = np.linalg.norm(offset[:2])
+    off_x -= w * lever_y * half  # (0, 0, w) x (l_x, l_y, 0) = (-w l_y, w l_x, 0)
+    off_y += w * lever_x * half
+    norm = math.hypot(off_x, off_y)
     if norm > config.max_offset:
-        offset[:2] *= config.max_offset / norm
-    return np.array([hip_td[0] + offset[0], hip_td[1] + offset[1], ground_z])
+        off_x *= config.max_offset / norm
+        off_y *= config.max_offset / norm
+    return np.array([hip_x + off_x, hip_y + off_y, float(ground_z)])

@@ -57,6 +57,7 @@ class GaitScheduler:
     def __init__(self, config: GaitConfig) -> None:
         self.config = config
         self._offsets = np.asarray(config.offsets, dtype=np.float64)
+        self._offset_list = self._offsets.tolist()
 
     def phase(self, t: float) -> np.ndarray:
         """Phase of each foot in its cycle, in [0, 1): stance first (< duty), then swing."""
@@ -68,7 +69,10 @@ class GaitScheduler:
 
     def contact_table(self, t: float, dt: float, n: int) -> np.ndarray:
         """Stance flags over a horizon: row k is the middle of step [t + k dt, t + (k + 1) dt], shape (n, 4)."""
-        return np.array([self.contact(t + (k + 0.5) * dt) for k in range(n)])
+        times = t + (np.arange(n) + 0.5) * dt
+        if self.config.duty >= 1.0:
+            return np.ones((n, 4), dtype=bool)
+        return np.mod(times[:, None] / self.config.period + self._offsets, 1.0) < self.config.duty - 1e-12
 
     def swing_progress(self, t: float) -> np.ndarray:
         """For each foot, progress through its swing in [0, 1] (0 for feet in stance)."""
@@ -77,6 +81,23 @@ class GaitScheduler:
             return np.zeros(4)
         ph = self.phase(t)
         return np.where(ph >= c.duty, (ph - c.duty) / (1.0 - c.duty), 0.0)
+
+    def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """`contact`, `swing_progress` and `time_to_touchdown` at `t` from one phase evaluation (every tick)."""
+        c = self.config
+        if c.duty >= 1.0:
+            return np.ones(4, dtype=bool), np.zeros(4), np.zeros(4)
+        # four feet: Python floats (the same IEEE operations as `phase`), three arrays built at the end
+        cycles = t / c.period
+        duty, swing_s = c.duty, 1.0 - c.duty
+        contact, progress, touchdown = [], [], []
+        for offset in self._offset_list:
+            ph = (cycles + offset) % 1.0
+            contact.append(ph < duty - 1e-12)
+            swing = ph >= duty
+            progress.append((ph - duty) / swing_s if swing else 0.0)
+            touchdown.append((1.0 - ph) * c.period if swing else 0.0)
+        return np.array(contact), np.array(progress), np.array(touchdown)
 
     def time_to_touchdown(self, t: float) -> np.ndarray:
         """For each foot, time until its next touchdown [s] (0 for feet in stance)."""

@@ -24,11 +24,14 @@ def swing_point(start: np.ndarray, end: np.ndarray, s: float, duration: float, a
     Returns:
         (position (3,), velocity (3,)) in the world frame.
     """
-    s = min(1.0, max(0.0, s))
+    s = min(1.0, max(0.0, float(s)))
     blend, dblend = 3 * s**2 - 2 * s**3, 6 * s - 6 * s**2
-    pos = start + (end - start) * blend
-    vel = (end - start) * dblend / duration
     bump, dbump = 16 * s**2 * (1 - s) ** 2, 32 * s * (1 - s) * (1 - 2 * s)
-    pos = pos + np.array([0.0, 0.0, apex * bump])
-    vel = vel + np.array([0.0, 0.0, apex * dbump / duration])
+    # runs for every swing foot every tick: Python floats, two arrays built at the end
+    x0, y0, z0 = np.asarray(start, dtype=np.float64).tolist()
+    x1, y1, z1 = np.asarray(end, dtype=np.float64).tolist()
+    dx, dy, dz = x1 - x0, y1 - y0, z1 - z0
+    rate = dblend / duration
+    pos = np.array([x0 + dx * blend, y0 + dy * blend, z0 + dz * blend + apex * bump])
+    vel = np.array([dx * rate, dy * rate, dz * rate + apex * dbump / duration])
     return pos, vel

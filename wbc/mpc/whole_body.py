@@ -13,11 +13,18 @@ motors' torque limits. Weighted tasks:
 
 Why PlaCo rather than our own ProxSuite QP: the whole problem (kinematics, mass matrix, task Jacobians, QP) stays in
 C++, one Python call per tick; a numpy-assembled QP of the same size costs 3-5x more per tick in Python overhead.
+Measured (issue 4): PlaCo's solve of this problem (27 variables once the 6 floating-base equations are eliminated,
+40 inequalities while trotting) takes ~52 us on a core of its own and ~80 us inside the closed loop beside a training
+job; sending the targets costs ~20-30 us more, kept down by sending only what changes. A reduced ProxSuite QP (base
+acceleration and stance forces only, joint accelerations from the leg Jacobians) would still need ~15 Pinocchio calls
+and a few dozen numpy operations of ~1-2 us each to assemble before ProxSuite's own setup and solve, so it was not
+expected to beat this, and its foot and arm tasks would become hard constraints.
 PlaCo reads the same URDF as the MuJoCo and Pinocchio models (visuals stripped: it only needs the dynamics).
 """
 
 from __future__ import annotations
 
+import math
 import tempfile
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -77,12 +84,13 @@ class WholeBodyResult:
     Attributes:
         success: the QP was solved.
         tau: joint torques, house order [N m].
-        forces: contact forces of the feet (zero in swing), house leg order, world frame, shape (4, 3) [N].
+        forces: contact forces of the feet (zero in swing), house leg order, world frame, shape (4, 3) [N]; None when
+            the solve was asked not to read them.
     """
 
     success: bool
     tau: np.ndarray
-    forces: np.ndarray
+    forces: np.ndarray | None
 
 
 def _dynamics_urdf(desc: RobotDescription) -> str:
@@ -123,6 +131,7 @@ class WholeBodyQp:
         for name, limit in zip(table.names, table.torque_limit, strict=True):
             solver.set_torque_limit(name, float(limit))
         self.solver = solver
+        self._state = self.robot.state  # a handle on the wrapper's state, kept: fetching it costs a call per tick
         self.feet_tasks = []
         self.contacts = []
         for foot in FOOT_NAMES:
@@ -146,27 +155,29 @@ class WholeBodyQp:
             self.arm_task.set_joints(dict(zip(desc.arm_joint_names, desc.nominal_q[12:15].tolist(), strict=True)))
             self.arm_task.configure("arm", "soft", cfg.arm_weight)
             self.arm_task.kp, self.arm_task.kd = cfg.arm_kp, cfg.arm_kd
-        self._stance = np.zeros(4, dtype=bool)
-        self._set_stance(np.ones(4, dtype=bool))
+        self._arm_names = tuple(desc.arm_joint_names) if self.arm_task is not None else ()
+        self._stance = [False] * 4
+        self._set_stance([True] * 4)
 
-    def _set_stance(self, stance: np.ndarray) -> None:
+    def _set_stance(self, stance: list[bool]) -> None:
         cfg = self.config
         for i in range(4):
             if stance[i] == self._stance[i]:
                 continue
             task, contact = self.feet_tasks[i], self.contacts[i]
-            contact.active = bool(stance[i])
+            contact.active = stance[i]
             if stance[i]:
                 # a stance foot must not accelerate: no stiffness towards a target, no damping
                 task.kp, task.kd = 0.0, 0.0
             else:
                 task.kp, task.kd = cfg.swing_kp, cfg.swing_kd
-        self._stance = stance.copy()
+        self._stance = stance
 
     def solve(self, q_pin: np.ndarray, v_pin: np.ndarray, stance: np.ndarray, *, com: np.ndarray,
               com_vel: np.ndarray, com_acc: np.ndarray, rot: np.ndarray, omega_world: np.ndarray,
               domega_world: np.ndarray, feet_pos: np.ndarray, feet_vel: np.ndarray,
-              arm_q: np.ndarray | None = None, arm_dq: np.ndarray | None = None) -> WholeBodyResult:
+              arm_q: np.ndarray | None = None, arm_dq: np.ndarray | None = None,
+              with_forces: bool = True) -> WholeBodyResult:
         """One whole-body QP.
 
         Args:
@@ -183,37 +194,45 @@ class WholeBodyQp:
             feet_vel: swing-foot velocity targets, world, shape (4, 3) [m/s].
             arm_q: arm joint targets [rad] (actuated arm only).
             arm_dq: arm joint velocity targets [rad/s].
+            with_forces: read the contact forces back (the controller, which needs only the torques, skips it).
 
         Returns:
             Torques and contact forces; ``success`` False when PlaCo's QP failed (torques are then zero).
         """
-        robot = self.robot
-        robot.state.q = q_pin
-        robot.state.qd = v_pin
-        robot.update_kinematics()
-        self._set_stance(np.asarray(stance, dtype=bool))
+        # Every line here runs at the control rate and each PlaCo property costs ~1 us from Python: only what
+        # changed is sent, as plain floats and whole arrays.
+        state = self._state
+        state.q = q_pin
+        state.qd = v_pin
+        self.robot.update_kinematics()
+        stance = stance.tolist()
+        if stance != self._stance:
+            self._set_stance(stance)
         for i in range(4):
             # a stance foot's task has no gains: its targets do not matter
-            if not self._stance[i]:
+            if not stance[i]:
                 task = self.feet_tasks[i]
                 task.target_world = feet_pos[i]
                 task.dtarget_world = feet_vel[i]
-        self.com_task.target_world = com
-        self.com_task.dtarget_world = com_vel
-        self.com_task.ddtarget_world = com_acc
-        self.trunk_task.R_world_frame = rot
-        self.trunk_task.omega_world = omega_world
-        self.trunk_task.domega_world = domega_world
+        com_task, trunk_task = self.com_task, self.trunk_task
+        com_task.target_world = com
+        com_task.dtarget_world = com_vel
+        com_task.ddtarget_world = com_acc
+        trunk_task.R_world_frame = rot
+        trunk_task.omega_world = omega_world
+        trunk_task.domega_world = domega_world
         if self.arm_task is not None and arm_q is not None:
-            dq = np.zeros(3) if arm_dq is None else arm_dq
-            for name, qa, va in zip(self.desc.arm_joint_names, arm_q, dq, strict=True):
-                self.arm_task.set_joint(name, float(qa), float(va))
+            set_joint = self.arm_task.set_joint
+            velocities = (0.0,) * len(arm_q) if arm_dq is None else arm_dq.tolist()
+            for name, qa, va in zip(self._arm_names, arm_q.tolist(), velocities, strict=True):
+                set_joint(name, qa, va)
         result = self.solver.solve(False)
-        forces = np.zeros((4, 3))
+        forces = np.zeros((4, 3)) if with_forces else None
         if not result.success:
             return WholeBodyResult(success=False, tau=np.zeros(len(self._house_cols)), forces=forces)
-        for i in range(4):
-            if self._stance[i]:
-                forces[i] = self.contacts[i].wrench[:3]
-        tau = np.asarray(result.tau)[self._house_cols]
-        return WholeBodyResult(success=bool(np.all(np.isfinite(tau))), tau=tau, forces=forces)
+        if with_forces:
+            for i in range(4):
+                if stance[i]:
+                    forces[i] = self.contacts[i].wrench[:3]
+        tau = result.tau[self._house_cols]
+        return WholeBodyResult(success=math.isfinite(tau.dot(tau)), tau=tau, forces=forces)

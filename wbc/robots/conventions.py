@@ -33,12 +33,13 @@ def quat_xyzw_to_wxyz(q: np.ndarray) -> np.ndarray:
 
 def quat_to_matrix(q_wxyz: np.ndarray) -> np.ndarray:
     """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = (float(v) for v in q_wxyz)
+    # called every control tick: one list of floats and one array, no per-element numpy scalars
+    w, x, y, z = np.asarray(q_wxyz, dtype=np.float64).tolist()
     return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+    ]).reshape(3, 3)
 
 
 class JointIndexMap:
