@@ -405,6 +405,22 @@ def test_reward_terms_see_real_motion():
     assert np.isfinite(r.reward).all()
 
 
+def test_walking_prior_draws_its_commands_from_the_ranges():
+    from wbc.errors import ConfigError
+    from wbc.learned.stages import WALKING_PRIOR_COMMANDS, stage_config
+
+    assert stage_config("push", 1).env.command_ranges == WALKING_PRIOR_COMMANDS
+    assert stage_config("push", 2).env.command_ranges is None  # pi2 and pi3: the scenario's 0 or 0.3 m/s
+    ranges = ((0.2, 0.4), (-0.1, 0.0), (0.5, 0.5))
+    env = BatchedEnv(small_config(num_envs=16, command_ranges=ranges))
+    cmd = env._command_target
+    assert (cmd[:, 0] >= 0.2).all() and (cmd[:, 0] <= 0.4).all() and (cmd[:, 1] <= 0.0).all()
+    np.testing.assert_array_equal(cmd[:, 2], 0.5)
+    assert np.unique(cmd[:, 0]).size == 16  # drawn per episode, not one of the scenario's two options
+    with pytest.raises(ConfigError, match="command_ranges"):
+        small_config(command_ranges=((0.4, 0.2), (0.0, 0.0), (0.0, 0.0)))
+
+
 def test_fall_penalty_survives_the_positive_clipping():
     from wbc.learned.env_config import RewardScales
     from wbc.learned.rewards import Rewards, StepData

@@ -283,6 +283,9 @@ class BatchedEnv:
             self._command_target[i] = (c.vx, c.vy, c.yaw_rate)
             self._ramp_s[i] = c.ramp_s
             self.pushes.set(int(i), trial if cfg.pushes else None)
+        if cfg.command_ranges is not None:  # the walking prior's commands (stage 1), not the scenario's
+            lo, hi = np.asarray(cfg.command_ranges, dtype=np.float64).T
+            self._command_target[ids] = self.rng.uniform(lo, hi, (ids.size, 3))
         self.strength[ids] = np.array([self.pool.variants[v].motor_strength for v in variants])
         state = np.tile(self._template, (ids.size, 1))
         qpos = state[:, self._qpos]

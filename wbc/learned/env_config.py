@@ -125,6 +125,9 @@ class EnvConfig:
         soft_dof_pos_limit: fraction of the joint range beyond which `dof_pos_limits` penalises.
         only_positive_rewards: clip each step's total reward at zero from below.
         teacher_arm_mode: if set, also emit the ``teacher`` observation of a policy on that arm mode.
+        command_ranges: None (commands from the scenario's trials), or ((vx lo, hi), (vy lo, hi), (yaw rate lo, hi))
+            [m/s, m/s, rad/s]: each episode's command drawn uniformly from these instead (the scenario still gives
+            the ramp and the pushes). Used by stage 1, the walking prior, see `wbc.learned.stages`.
         rewards, obs_scales, noise, domain: sub-configurations.
         train_seed_offset: the scenario's trial seeds used for training start here (evaluations use 0, 1, ...).
         trial_pool: episodes cycle through this many distinct trials of the scenario (drawn once, then cached).
@@ -154,6 +157,7 @@ class EnvConfig:
     soft_dof_pos_limit: float = 0.9
     only_positive_rewards: bool = True
     teacher_arm_mode: str | None = None
+    command_ranges: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = None
     rewards: RewardScales = field(default_factory=RewardScales)
     obs_scales: ObsScales = field(default_factory=ObsScales)
     noise: ObsNoise = field(default_factory=ObsNoise)
@@ -173,6 +177,10 @@ class EnvConfig:
             raise ConfigError("EnvConfig: num_envs, decimation, nthread and trial_pool must be >= 1")
         if not 0 < self.timestep <= 0.01:
             raise ConfigError(f"EnvConfig.timestep must be in (0, 0.01] s, got {self.timestep}")
+        if self.command_ranges is not None and (len(self.command_ranges) != 3 or any(
+                len(r) != 2 or r[0] > r[1] for r in self.command_ranges)):
+            raise ConfigError(f"EnvConfig.command_ranges must be three (lo, hi) pairs with lo <= hi, got "
+                              f"{self.command_ranges}")
         if self.domain.num_variants < 1:
             raise ConfigError("EnvConfig.domain.num_variants must be >= 1")
 

@@ -76,7 +76,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--envs", type=int, default=64)
     p.add_argument("--steps", type=int, default=500)
     args = p.parse_args(argv)
-    env = dataclasses.replace(stage_config(args.task, args.stage).env, num_envs=args.envs)
+    # the scenario's commands, also for pi1 (trained on a range of commands: `WALKING_PRIOR_COMMANDS`)
+    env = dataclasses.replace(stage_config(args.task, args.stage).env, num_envs=args.envs, command_ranges=None)
     for row in probe_policy(args.policy, env, steps=args.steps):
         print(f"command vx {row['vx_cmd']:+.2f} vy {row['vy_cmd']:+.2f} yaw {row['yaw_rate_cmd']:+.2f}: "
               f"vx {row['vx']:+.3f} m/s, vy {row['vy']:+.3f} m/s, yaw {row['yaw_rate']:+.3f} rad/s; "

@@ -2,7 +2,8 @@
 
 Stages (the paper's Method section):
 
-    1  pi1: the quadruped without its arm learns to walk; flat ground, no perturbations, PPO only.
+    1  pi1: the quadruped without its arm learns to walk; flat ground, no perturbations, PPO only, commands drawn from
+       `WALKING_PRIOR_COMMANDS` (legged_gym's recipe; the scenario gives only 0 and 0.3 m/s).
     2  pi2: arm attached and locked, task conditions (the scenario's ground and pushes); PPO + BC towards pi1 on the
        whole action (both have 12 leg actions).
     3  pi3: arm actuated; PPO + BC towards pi2 on the leg actions (the arm's 3 actions have no teacher).
@@ -31,10 +32,11 @@ from typing import Any
 
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.bc_schedule import BCSchedule
-from wbc.learned.env_config import EnvConfig
+from wbc.learned.env_config import EnvConfig, RewardScales
 from wbc.learned.train_config import TrainConfig
 
-__all__ = ["BASELINES", "TASKS", "TaskSpec", "run_name", "stage_config"]
+__all__ = ["BASELINES", "TASKS", "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name",
+           "stage_config"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -68,6 +70,17 @@ BASELINES: dict[str, str] = {
 }
 
 _ARM = {1: "none", 2: "locked", 3: "actuated"}
+
+WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
+"""pi1's commands (vx, vy, yaw rate ranges), drawn per episode instead of the scenario's.
+
+pi1 is the walking prior the later stages imitate; the paper does not give its commands. Three pi1 runs on the push
+scenario's own commands (0 or 0.3 m/s) did not learn a stable gait in 150 iterations: at tracking width 0.1 they
+stood (0.00 m/s under 0.3 m/s), at 0.05 one walked at 0.22 m/s at iteration 50 while falling onto its front hips,
+then drifted back to standing, and with a fall penalty it never left standing. A 0.3 m/s command is worth too little
+over standing still to pay for discovering a gait. legged_gym's recipe (commands over +-1, tracking width 0.25, no
+fall penalty) is what reliably learns to walk, so pi1 uses it; pi2 and pi3 train on the scenario's commands."""
+WALKING_PRIOR_SIGMA = 0.25
 
 
 def run_name(task: str, stage: int, baseline: str | None = None) -> str:
@@ -116,10 +129,14 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
     elif baseline == "curriculum":
         teacher_stage, init_stage = None, (stage - 1 if stage > 1 else None)
         arm = "locked" if stage < 3 else "actuated"
+    walking_prior = stage == 1 and baseline is None
     env = EnvConfig(
         robot=spec.robot, arm_mode=arm, scenario=spec.scenario, bands=spec.bands,
         pushes=stage > 1, terrain="flat" if stage == 1 else "scenario",
-        teacher_arm_mode=None if teacher_stage is None else _ARM[teacher_stage], tracking_sigma=spec.tracking_sigma,
+        teacher_arm_mode=None if teacher_stage is None else _ARM[teacher_stage],
+        tracking_sigma=WALKING_PRIOR_SIGMA if walking_prior else spec.tracking_sigma,
+        command_ranges=WALKING_PRIOR_COMMANDS if walking_prior else None,
+        rewards=RewardScales(termination=0.0) if walking_prior else RewardScales(),
     )
     env = dataclasses.replace(env, **(env_overrides or {}))
     bc, teacher_path, init_path = None, None, None
