@@ -11,7 +11,7 @@ import pytest
 from wbc.learned.env import BatchedEnv
 from wbc.learned.env_config import DomainRandomisation, EnvConfig, ObsNoise
 from wbc.learned.numpy_policy import NumpyPolicy
-from wbc.learned.observations import ObsLayout, compatible_observation
+from wbc.learned.observations import ObsLayout, compatible_indices, compatible_observation
 from wbc.learned.policy_file import PolicyFileError, load_policy, save_policy
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand
@@ -199,6 +199,108 @@ def test_policy_file_missing(tmp_path):
         load_policy(tmp_path / "nothing.npz")
 
 
+# -- composite policy (the decoupled baseline) ----------------------------------------------------------------------
+@pytest.fixture()
+def decoupled(tmp_path):
+    """A pi2-like locked-arm policy with extrinsics, its decoupled env, a 3-output arm actor and their composite."""
+    pytest.importorskip("torch")
+    pytest.importorskip("rsl_rl")
+    from wbc.learned.composite_policy import save_composite
+    from wbc.learned.export import decoupled_policy, policy_file_from_actor
+    from wbc.learned.frozen_legs_vec_env import FrozenLegsVecEnv
+    from wbc.learned.vec_env import RslVecEnv
+
+    locked = RslVecEnv(BatchedEnv(small_config(arm_mode="locked")))
+    pi2 = load_policy(save_policy(tmp_path / "pi2", policy_file_from_actor(
+        _actor(locked, True, seed=1), locked.cfg, task="push", stage=2))[0])
+    vec = FrozenLegsVecEnv(BatchedEnv(small_config(teacher_arm_mode="locked", seed=7)), pi2)
+    assert vec.num_actions == 3
+    arm = _actor(vec, False, seed=2)
+    npz, js = save_composite(tmp_path / "dec", decoupled_policy(arm, pi2, vec.cfg, task="push", stage=3))
+    return vec, pi2, arm, npz, js
+
+
+def test_composite_numpy_inference_matches_the_torch_composite(decoupled):
+    torch = pytest.importorskip("torch")
+    from wbc.learned.composite_policy import load_composite
+    from wbc.learned.numpy_composite import NumpyComposite
+    from wbc.learned.torch_policy import TorchPolicy
+
+    vec, pi2, arm, npz, _ = decoupled
+    policy = NumpyComposite(load_composite(npz))
+    rng = np.random.default_rng(4)
+    obs = torch.from_numpy(rng.normal(0, 2, (4, ObsLayout(15).size)).astype(np.float32))
+    priv = torch.from_numpy(rng.normal(0, 2, (4, 9)).astype(np.float32))
+    legs_obs = obs[:, torch.from_numpy(compatible_indices(ObsLayout(15), ObsLayout(12)))]
+    td = vec.get_observations().clone()
+    td["policy"], td["privileged"] = obs, priv
+    with torch.no_grad():
+        want = torch.cat([TorchPolicy(pi2)(legs_obs, priv), arm(td)], dim=1).numpy()
+    z = {"legs": policy.parts[0].policy.extrinsics(priv.numpy())}
+    got = policy(obs.numpy(), z)
+    assert got.shape == want.shape == (4, 15)
+    np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)
+    assert np.abs(want[:, :12]).max() > 1e-2 and np.abs(want[:, 12:]).max() > 1e-2
+    with pytest.raises(ValueError, match="extrinsics"):
+        policy(obs.numpy())
+
+
+def test_frozen_legs_env_steps_the_legs_with_pi2(decoupled):
+    torch = pytest.importorskip("torch")
+    vec, pi2, _, _, _ = decoupled
+    ref = NumpyPolicy(pi2)
+    teacher, priv = vec._legs_input  # the leg policy's view of the current state
+    legs = ref(teacher, ref.extrinsics(priv))
+    arm = torch.full((4, 3), 0.5)
+    vec.step(arm)
+    np.testing.assert_allclose(vec.env.last_action[:, :12], np.clip(legs, -10, 10), atol=1e-12)
+    np.testing.assert_array_equal(vec.env.last_action[:, 12:], 0.5)
+    assert "teacher" not in vec.get_observations().keys()
+
+
+def test_composite_file_errors_name_the_file_and_field(decoupled):
+    from wbc.learned.composite_policy import load_composite
+
+    _, _, _, npz, js = decoupled
+    with pytest.raises(PolicyFileError, match=r"dec\.json: format: 'wbc-composite-policy'.*load_composite"):
+        load_policy(npz)
+    good = js.read_text()
+
+    def broken(edit) -> None:
+        meta = json.loads(good)
+        edit(meta)
+        js.write_text(json.dumps(meta))
+
+    broken(lambda m: m["parts"][1].update(joints=[11, 13, 14]))  # the arm part on a leg joint: its pose differs
+    with pytest.raises(PolicyFileError, match=r"dec\.json: arm/default_q: .* on the part's joints"):
+        load_composite(npz)
+    broken(lambda m: m["parts"][0].update(joints=[0, 1, 2, 3, 4, 5, 0, 7, 8, 9, 10, 11]))  # same pose, twice
+    with pytest.raises(PolicyFileError, match=r"dec\.json: legs/joints: joint 0 is also driven by part 'legs'"):
+        load_composite(npz)
+    broken(lambda m: m["parts"][1]["meta"].pop("hidden_dims"))
+    with pytest.raises(PolicyFileError, match=r"dec\.json: arm/hidden_dims: missing key"):
+        load_composite(npz)
+    broken(lambda m: m["parts"][0]["meta"].update(kp=[30.0] * 12))
+    with pytest.raises(PolicyFileError, match=r"legs/kp: .* differs from the composite's"):
+        load_composite(npz)
+    broken(lambda m: m["parts"].pop())
+    with pytest.raises(PolicyFileError, match=r"parts: no part drives joints \[12, 13, 14\]"):
+        load_composite(npz)
+    broken(lambda m: m.pop("default_q"))
+    with pytest.raises(PolicyFileError, match=r"dec\.json: default_q: missing key"):
+        load_composite(npz)
+    js.write_text(good)
+    with np.load(npz) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays["arm/policy/1/weight"] = arrays["arm/policy/1/weight"][:, :-1]
+    np.savez(npz, **arrays)
+    with pytest.raises(PolicyFileError, match=r"dec\.npz: arm/policy/1/weight: expected shape \(16, 32\)"):
+        load_composite(npz)
+    np.savez(npz, **{**arrays, "arm/policy/1/weight": np.array([{"a": 1}], dtype=object)})
+    with pytest.raises(PolicyFileError, match=r"dec\.npz: not a readable"):
+        load_composite(npz)
+
+
 # -- BC term -------------------------------------------------------------------------------------------------------
 def test_bc_schedule_linear_exponential_constant():
     from wbc.errors import ConfigError
@@ -250,11 +352,12 @@ def _tiny(stage: int, root: Path, seed: int = 0, baseline: str | None = None, **
     from wbc.learned.adaptation_config import AdaptationConfig
     from wbc.learned.stages import stage_config
 
+    small = dict(seed=seed, num_steps_per_env=6, save_interval=1, actor_hidden_dims=(16,), critic_hidden_dims=(16,),
+                 encoder_dims=(8,), extrinsics_dim=0 if baseline == "decoupled" else 4, rma=AdaptationConfig(
+                     iterations=1, steps_per_iteration=4, history=3, hidden_dims=(8,), minibatch=16))
     return stage_config("push", stage, baseline, run_root=str(root), env_overrides=dict(
         num_envs=8, nthread=1, scenario=SCENARIO, domain=DomainRandomisation(num_variants=2), seed=seed),
-        seed=seed, num_steps_per_env=6, save_interval=1, actor_hidden_dims=(16,), critic_hidden_dims=(16,),
-        encoder_dims=(8,), extrinsics_dim=4, rma=AdaptationConfig(
-            iterations=1, steps_per_iteration=4, history=3, hidden_dims=(8,), minibatch=16), **kw)
+        **{**small, **kw})
 
 
 def _arrays(run_dir) -> dict[str, np.ndarray]:
@@ -294,12 +397,39 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
     # the fine-tuned pi2 baseline starts from pi2's weights
     f3 = train(_tiny(3, tmp_path / "a", baseline="finetune-pi2", max_iterations=1))
     assert load_policy(Path(f3["run_dir"]) / "policy").meta["arm_mode"] == "actuated"
+    # the decoupled baseline: pi2's legs, frozen, plus an arm policy; its export embeds pi2 whole
+    from wbc.learned.composite_policy import load_composite
+
+    d3 = train(_tiny(3, tmp_path / "a", baseline="decoupled", max_iterations=2))
+    assert d3["iterations"] == 2 and d3["env_steps"] == 2 * 6 * 8
+    composite = load_composite(Path(d3["run_dir"]) / "policy")
+    legs, arm = composite.parts
+    assert (legs.joints, arm.joints) == (tuple(range(12)), (12, 13, 14)) and arm.policy.num_actions == 3
+    pi2 = load_policy(Path(s2["run_dir"]) / "policy")
+    assert legs.policy.arrays.keys() == pi2.arrays.keys()
+    for k, v in pi2.arrays.items():
+        np.testing.assert_array_equal(legs.policy.arrays[k], v, err_msg=k)
+    assert not (Path(d3["run_dir"]) / "rma.json").exists()  # the arm observes no extrinsics, pi2 keeps its module
+    with pytest.raises(ConfigError, match="frozen leg policy"):
+        train(_tiny(3, tmp_path / "empty", baseline="decoupled", max_iterations=1))
     # RMA phase 2 ran: the export carries an adaptation module, so a controller can run it from RobotState alone
     from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
     from wbc.learned.controller import LearnedController
     from wbc.types import VelocityCommand
 
     assert load_policy(Path(a["run_dir"]) / "policy").meta["adaptation"]["history"] == 3
+    # the decoupled composite runs on the actuated robot, torch-free; its legs are pi2's on the legs' observation
+    robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
+    ctrl = LearnedController(robot.desc, Path(d3["run_dir"]) / "policy")
+    assert set(ctrl.histories) == {"legs"} and ctrl.histories["legs"].buf.shape == (1, 3, ObsLayout(12).size)
+    with robot:
+        robot.reset(seed=0)
+        ctrl.reset()
+        for _ in range(3):
+            out = ctrl.act(robot.read(), VelocityCommand(vx=0.3))
+            assert np.isfinite(out.q).all()
+            robot.write(out)
+            robot.advance(0.02)
     robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none"))
     ctrl = LearnedController(robot.desc, Path(a["run_dir"]) / "policy")
     with robot:
@@ -308,12 +438,12 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
         for k in range(4):
             state = robot.read()
             cmd = VelocityCommand(vx=0.3)
-            expected = ctrl.policy.normalise(ctrl.observation(state, cmd)[None])[0]
+            expected = ctrl.policy.parts[0].policy.normalise(ctrl.observation(state, cmd)[None])[0]
             out = ctrl.act(state, cmd)
             assert np.isfinite(out.q).all()
-            np.testing.assert_allclose(ctrl.history.buf[0, -1], expected, atol=1e-5)
+            np.testing.assert_allclose(ctrl.histories["policy"].buf[0, -1], expected, atol=1e-5)
             if k == 0:  # after a reset the window is filled with the first observation
-                np.testing.assert_allclose(ctrl.history.buf[0, 0], expected, atol=1e-5)
+                np.testing.assert_allclose(ctrl.histories["policy"].buf[0, 0], expected, atol=1e-5)
             robot.write(out)
             robot.advance(0.02)
 
@@ -465,6 +595,9 @@ def test_cli_train_dry_run_and_errors(capsys):
     assert cfg["rma"]["iterations"] == 200
     assert main(["train", "--task", "push", "--stage", "1", "--rma-iterations", "40", "--dry-run"]) == 0
     assert json.loads(capsys.readouterr().out)["rma"]["iterations"] == 40
+    assert main(["train", "--task", "push", "--stage", "3", "--baseline", "decoupled", "--dry-run"]) == 0
+    cfg = json.loads(capsys.readouterr().out)
+    assert cfg["frozen_legs"].endswith("push-stage2/policy") and cfg["run_dir"].endswith("push-stage3-decoupled")
     assert main(["train", "--task", "push", "--stage", "3", "--baseline", "nope", "--dry-run"]) == 2
     assert "valid baselines" in capsys.readouterr().err
 
@@ -520,8 +653,14 @@ def test_stage_and_baseline_configurations():
     assert turn.env.robot == "go1-arm" and turn.env.bands == ("1.0", "1.25", "1.5")
     with pytest.raises(ConfigError, match="stage-3"):
         stage_config("push", 2, "ppo")
+    dec = stage_config("push", 3, "decoupled")
+    assert dec.frozen_legs.endswith("push-stage2/policy") and dec.env.teacher_arm_mode == "locked"
+    assert (dec.env.arm_mode, dec.bc, dec.init_from, dec.extrinsics_dim) == ("actuated", None, None, 0)
+    assert stage_config("push", 3, "decoupled", teacher="pi2").frozen_legs == "pi2"
+    with pytest.raises(ConfigError, match="stage-3"):
+        stage_config("push", 2, "decoupled")
     with pytest.raises(UnknownNameError, match="valid baselines"):
-        stage_config("push", 3, "decoupled")
+        stage_config("push", 3, "nope")
     with pytest.raises(UnknownNameError, match="valid tasks"):
         stage_config("walk", 1)
 

@@ -8,6 +8,10 @@ the simulator's truth is read. A policy that observes the RMA extrinsics z gets 
 module (RMA phase 2) over the last H normalised observations (`ObsHistory`, filled with the first observation after a
 reset, as in training); a file with extrinsics and no adaptation module is refused at construction.
 
+A composite policy file (`wbc.learned.composite_policy`, the decoupled baseline: pi2's legs plus an arm policy) runs
+through the same path: every part gets its own view of the observation and, if it estimates extrinsics, its own
+history; each part's actions go to its joints, and ``last_action`` holds the whole robot's, as in training.
+
 The registry's ``learned``, ``learned-locked`` and ``learned-noarm`` run the weights shipped in
 ``wbc/learned/weights/<robot>-<arm mode>.npz`` (pi3, pi2 and pi1 of the robot's task).
 """
@@ -18,11 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
+from wbc.learned.composite_policy import load_composite
 from wbc.learned.env_config import ObsScales
-from wbc.learned.numpy_policy import NumpyPolicy
+from wbc.learned.numpy_composite import NumpyComposite
 from wbc.learned.obs_history import ObsHistory
 from wbc.learned.observations import ObsLayout, policy_observation
-from wbc.learned.policy_file import PolicyFileError, load_policy
+from wbc.learned.policy_file import PolicyFileError
 from wbc.robots.description import RobotDescription
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
@@ -54,17 +59,20 @@ class LearnedController:
             raise PolicyFileError(path, None, f"no shipped weights for {desc.name} with arm {desc.arm_mode!r} yet; "
                                   "train them (wbc train --task push --stage 1|2|3) and copy the run's policy.npz "
                                   f"and policy.json to {path.with_suffix('')}.npz/.json")
-        pf = load_policy(path)
+        pf = load_composite(path)
         pf.check_robot(desc, path)
-        if pf.meta.get("extrinsics") is not None and pf.meta.get("adaptation") is None:
-            raise PolicyFileError(path, "extrinsics", "the policy observes the RMA extrinsics z, which a robot cannot "
-                                  "measure, and the file has no adaptation module to estimate z (RMA phase 2)")
+        prefix = "" if len(pf.parts) == 1 else "{}/"
+        for part in pf.parts:
+            if part.policy.meta.get("extrinsics") is not None and part.policy.meta.get("adaptation") is None:
+                raise PolicyFileError(path, prefix.format(part.name) + "extrinsics", "the policy observes the RMA "
+                                      "extrinsics z, which a robot cannot measure, and the file has no adaptation "
+                                      "module to estimate z (RMA phase 2)")
         meta = pf.meta
         layout = ObsLayout(pf.num_actions)
         if [list(p) for p in meta["obs_layout"]] != layout.as_list():
             raise PolicyFileError(path, "obs_layout", f"{meta['obs_layout']} is not this version's layout "
                                   f"{layout.as_list()}")
-        self.policy = NumpyPolicy(pf)
+        self.policy = NumpyComposite(pf)
         self.path = path
         self.rate_hz = 1.0 / float(meta["policy_dt"])
         sc = meta["obs_scales"]
@@ -78,7 +86,9 @@ class LearnedController:
         n = pf.num_actions
         self._zeros = np.zeros(n)
         self.last_action = np.zeros(n)
-        self.history = ObsHistory(1, self.policy.history, layout.size) if self.policy.history else None
+        # each adapting part's window of its own normalised observations, by part name
+        self.histories = {part.name: ObsHistory(1, part.policy.history, part.obs_index.size)
+                          for part in self.policy.parts if part.policy.history}
         self._fresh = True
 
     def reset(self) -> None:
@@ -97,14 +107,17 @@ class LearnedController:
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """One policy step."""
         obs = self.observation(state, command)[None]
-        z = None
-        if self.history is not None:
-            normalised = self.policy.normalise(obs).astype(np.float32)
+        z = {}
+        for part in self.policy.parts:
+            history = self.histories.get(part.name)
+            if history is None:
+                continue
+            normalised = part.policy.normalise(obs[:, part.obs_index]).astype(np.float32)
             if self._fresh:
-                self.history.fill(np.zeros(1, dtype=int), normalised)
+                history.fill(np.zeros(1, dtype=int), normalised)
             else:
-                self.history.push(normalised)
-            z = self.policy.adaptation(self.history.flat())
+                history.push(normalised)
+            z[part.name] = part.policy.adaptation(history.flat())
         self._fresh = False
         action = np.clip(self.policy(obs, z)[0], -self.clip, self.clip)
         self.last_action = action

@@ -2,7 +2,8 @@
 
 Reads the actor's observation normaliser and the linear layers of its MLP (and of its extrinsics encoder), and takes
 the meaning of the numbers (observation layout, scales, joint defaults, gains) from the env configuration the actor
-was trained in.
+was trained in. The decoupled baseline's arm actor commands only some joints: its export is a part (``joints``) that
+`decoupled_policy` embeds, beside the frozen leg policy, in a composite file (`wbc.learned.composite_policy`).
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from wbc.learned.composite_policy import ROBOT_KEYS, CompositePolicyFile, PolicyPart, compose
 from wbc.learned.env_config import EnvConfig
 from wbc.learned.observations import PRIVILEGED_PARTS, ObsLayout
 from wbc.learned.policy_file import ACTIVATIONS, PolicyFile
@@ -20,7 +22,7 @@ from wbc.robots.registry import get_robot
 
 torch = require("torch")
 
-__all__ = ["policy_file_from_actor"]
+__all__ = ["decoupled_policy", "policy_file_from_actor"]
 
 
 def _linear_layers(mlp: Any) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -36,8 +38,15 @@ def _activation_name(mlp: Any) -> str:
     return next(iter(found))
 
 
+def _gains(env: EnvConfig, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(kp, kd) of the n actuated joints: the legs' first, then the arm's."""
+    kp, kd = np.full(n, env.leg_kp), np.full(n, env.leg_kd)
+    kp[12:], kd[12:] = env.arm_kp, env.arm_kd
+    return kp, kd
+
+
 def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
-                           extra: dict[str, Any] | None = None) -> PolicyFile:
+                           extra: dict[str, Any] | None = None, joints: tuple[int, ...] | None = None) -> PolicyFile:
     """The `PolicyFile` of an rsl-rl `MLPModel` (or `ExtrinsicsActor`) trained in an env configured by `env`.
 
     Args:
@@ -46,6 +55,11 @@ def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
         task: ``push`` or ``turn``.
         stage: 1, 2 or 3.
         extra: more metadata (baseline, iterations, wall time, git revision ...), stored under ``training``.
+        joints: the robot joints the actor's outputs drive, in order (default: all); with a subset, the file is a
+            part of a composite (its default pose and gains are those joints').
+
+    Raises:
+        ValueError: the actor's outputs do not match `joints`, or its layers or activations cannot be exported.
     """
     desc = get_robot(env.robot, env.arm_mode)
     layout = ObsLayout(desc.num_joints)
@@ -73,16 +87,41 @@ def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
     layers = _linear_layers(actor.mlp)
     for i, (w, b) in enumerate(layers):
         arrays[f"policy/{i}/weight"], arrays[f"policy/{i}/bias"] = w, b
-    kp = np.full(desc.num_joints, env.leg_kp)
-    kd = np.full(desc.num_joints, env.leg_kd)
-    kp[12:], kd[12:] = env.arm_kp, env.arm_kd
+    idx = np.arange(desc.num_joints) if joints is None else np.asarray(joints, dtype=int)
+    if layers[-1][0].shape[0] != idx.size:
+        raise ValueError(f"the actor has {layers[-1][0].shape[0]} outputs for joints {idx.tolist()}")
+    kp, kd = _gains(env, desc.num_joints)
     meta = {
         "robot": env.robot, "arm_mode": env.arm_mode, "task": task, "stage": int(stage),
-        "num_actions": desc.num_joints, "obs_layout": layout.as_list(),
+        "num_actions": int(idx.size), "obs_layout": layout.as_list(),
         "obs_scales": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(env.obs_scales).items()},
         "action_scale": env.action_scale, "clip_actions": env.clip_actions,
-        "default_q": desc.nominal_q.tolist(), "kp": kp.tolist(), "kd": kd.tolist(), "policy_dt": env.policy_dt,
+        "default_q": desc.nominal_q[idx].tolist(), "kp": kp[idx].tolist(), "kd": kd[idx].tolist(),
+        "policy_dt": env.policy_dt,
         "activation": _activation_name(actor.mlp), "hidden_dims": [int(w.shape[0]) for w, _ in layers[:-1]],
         "normalizer_eps": eps, "extrinsics": extrinsics, "training": extra or {},
     }
     return PolicyFile(meta=meta, arrays=arrays)
+
+
+def decoupled_policy(actor: Any, legs: PolicyFile, env: EnvConfig, *, task: str, stage: int,
+                     extra: dict[str, Any] | None = None) -> CompositePolicyFile:
+    """The decoupled baseline's composite: the frozen `legs` policy on the first joints, `actor` on the others.
+
+    Args:
+        actor: the arm actor, trained in the actuated-arm env `env` (its outputs: the joints after the legs').
+        legs: the frozen leg policy (pi2), embedded whole (its extrinsics encoder and adaptation module included).
+        env: the env configuration the actor was trained with.
+        task: ``push`` or ``turn``.
+        stage: 3.
+        extra: training metadata of the composite (baseline, iterations ...), stored under ``training``.
+    """
+    desc = get_robot(env.robot, env.arm_mode)
+    n, n_legs = desc.num_joints, legs.num_actions
+    arm = policy_file_from_actor(actor, env, task=task, stage=stage, joints=tuple(range(n_legs, n)))
+    kp, kd = _gains(env, n)
+    robot = {**{k: arm.meta[k] for k in ROBOT_KEYS}, "num_actions": n, "default_q": desc.nominal_q.tolist(),
+             "kp": kp.tolist(), "kd": kd.tolist()}
+    parts = [PolicyPart(name="legs", joints=tuple(range(n_legs)), policy=legs),
+             PolicyPart(name="arm", joints=tuple(range(n_legs, n)), policy=arm)]
+    return compose(parts, training=extra, **robot)

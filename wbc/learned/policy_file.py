@@ -12,6 +12,9 @@ NPZ holds float arrays only:
     adaptation/<i>/weight, .../bias        RMA adaptation module: the last H normalised policy observations,
                                            oldest first, flattened -> z (after RMA phase 2)
 
+A network may drive some of the robot's joints only, as a part of a composite file (`wbc.learned.composite_policy`,
+the decoupled baseline): then ``num_actions``, ``default_q``, ``kp`` and ``kd`` are its outputs' joints'.
+
 `load_policy` checks everything against everything (keys, types, shapes, layer chaining, the layout's size) and every
 failure is a `PolicyFileError` naming the file and the field; `PolicyFile.check_robot` compares it with a robot.
 """
@@ -29,9 +32,12 @@ import numpy as np
 from wbc.errors import WbcError
 from wbc.robots.description import RobotDescription
 
-__all__ = ["FORMAT", "VERSION", "ACTIVATIONS", "PolicyFile", "PolicyFileError", "load_policy", "save_policy"]
+__all__ = ["ACTIVATIONS", "COMPOSITE_FORMAT", "FORMAT", "VERSION", "PolicyFile", "PolicyFileError", "check_meta",
+           "check_shapes", "load_policy", "read_arrays", "save_policy"]
 
 FORMAT = "wbc-policy"
+COMPOSITE_FORMAT = "wbc-composite-policy"
+"""The ``format`` of a composite file (`wbc.learned.composite_policy`), which `load_policy` refuses by name."""
 VERSION = 1
 ACTIVATIONS = ("elu", "relu", "tanh", "identity")
 
@@ -138,29 +144,56 @@ def load_policy(path: str | Path) -> PolicyFile:
         raise PolicyFileError(js, None, f"not readable JSON ({exc})") from None
     if not isinstance(meta, dict):
         raise PolicyFileError(js, None, "expected a JSON object at the top level")
-    for key, types in _META_TYPES.items():
-        if key not in meta:
-            raise PolicyFileError(js, key, "missing key")
-        value = meta[key]
-        if isinstance(value, bool) or not isinstance(value, types):
-            raise PolicyFileError(js, key, f"expected {types}, got {type(value).__name__}")
-    if meta["format"] != FORMAT:
-        raise PolicyFileError(js, "format", f"expected {FORMAT!r}, got {meta['format']!r}")
-    if meta["version"] != VERSION:
-        raise PolicyFileError(js, "version", f"this wbc reads version {VERSION}, the file is {meta['version']}")
-    if meta["activation"] not in ACTIVATIONS:
-        raise PolicyFileError(js, "activation", f"{meta['activation']!r} is not one of {', '.join(ACTIVATIONS)}")
-    try:
-        with np.load(npz, allow_pickle=False) as data:
-            arrays = {k: np.asarray(data[k]) for k in data.files}
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-        raise PolicyFileError(npz, None, f"not a readable .npz of plain arrays ({exc})") from None
-    policy = PolicyFile(meta=meta, arrays=arrays)
-    _check_shapes(policy, npz, js)
+    if meta.get("format") == COMPOSITE_FORMAT:
+        raise PolicyFileError(js, "format", f"{COMPOSITE_FORMAT!r}: a composite of several networks; load it with "
+                              "wbc.learned.composite_policy.load_composite")
+    check_meta(meta, js)
+    policy = PolicyFile(meta=meta, arrays=read_arrays(npz))
+    check_shapes(policy, npz, js)
     return policy
 
 
-def _check_shapes(policy: PolicyFile, npz: Path, js: Path) -> None:
+def check_meta(meta: dict[str, Any], js: Path, prefix: str = "") -> None:
+    """Check the keys and types of one network's metadata; `prefix` is prepended to the field in errors.
+
+    Raises:
+        PolicyFileError: a key is missing or mistyped, or the format, version or activation is unknown.
+    """
+    for key, types in _META_TYPES.items():
+        if key not in meta:
+            raise PolicyFileError(js, prefix + key, "missing key")
+        value = meta[key]
+        if isinstance(value, bool) or not isinstance(value, types):
+            raise PolicyFileError(js, prefix + key, f"expected {types}, got {type(value).__name__}")
+    if meta["format"] != FORMAT:
+        raise PolicyFileError(js, prefix + "format", f"expected {FORMAT!r}, got {meta['format']!r}")
+    if meta["version"] != VERSION:
+        raise PolicyFileError(js, prefix + "version", f"this wbc reads version {VERSION}, the file is "
+                              f"{meta['version']}")
+    if meta["activation"] not in ACTIVATIONS:
+        raise PolicyFileError(js, prefix + "activation", f"{meta['activation']!r} is not one of "
+                              f"{', '.join(ACTIVATIONS)}")
+
+
+def read_arrays(npz: Path) -> dict[str, np.ndarray]:
+    """The arrays of a ``.npz`` of plain arrays (pickles refused).
+
+    Raises:
+        PolicyFileError: the file is not a readable ``.npz`` of plain arrays.
+    """
+    try:
+        with np.load(npz, allow_pickle=False) as data:
+            return {k: np.asarray(data[k]) for k in data.files}
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise PolicyFileError(npz, None, f"not a readable .npz of plain arrays ({exc})") from None
+
+
+def check_shapes(policy: PolicyFile, npz: Path, js: Path) -> None:
+    """Check one network's arrays against its metadata (sizes, layer chaining, finiteness).
+
+    Raises:
+        PolicyFileError: naming the file and the field.
+    """
     m, a = policy.meta, policy.arrays
     n = m["num_actions"]
     try:

@@ -15,9 +15,13 @@ Baselines (paper Table III), configurations of the same code:
     finetune-pi2    stage 3 started from pi2's weights (`wbc.learned.warm_start`), PPO only.
     curriculum      PPO only, each stage started from the previous one's weights: stage 1 = locked arm without
                     perturbations, stage 2 = locked arm with the task's conditions, stage 3 = actuated arm.
-
-The paper's fifth baseline, decoupled (pi2's legs plus a separately trained arm policy), needs a composite policy
-that is not built yet.
+    decoupled       pi2's legs, frozen, plus an arm policy trained by PPO on the stage-3 task: the env runs with the
+                    arm actuated, pi2 (numpy, on its own locked-arm observation, extrinsics from the privileged
+                    observation as in its training) fills in the 12 leg actions, and the actor outputs only the
+                    arm's 3 (`wbc.learned.frozen_legs_vec_env`). The arm actor observes the full actuated-arm policy
+                    observation without extrinsics (nothing to estimate on the robot); pi2 keeps its own RMA
+                    adaptation module. The run exports a composite policy file embedding both networks
+                    (`wbc.learned.composite_policy`), which `LearnedController` runs like any other.
 
 A stage's teacher is the policy file the previous stage exported (``<run_dir>/<task>-stage<k-1>/policy``), unless
 a path is given.
@@ -67,6 +71,7 @@ BASELINES: dict[str, str] = {
     "one-stage-demo": "stage-3 task with pi1 (no arm) as the BC teacher, without the locked-arm stage",
     "finetune-pi2": "stage-3 task started from pi2's weights, PPO only",
     "curriculum": "PPO only through locked arm (no pushes), locked arm (task), actuated arm; weights carried over",
+    "decoupled": "pi2's legs, frozen, plus an arm policy trained by PPO on the stage-3 task (a composite policy)",
 }
 
 _ARM = {1: "none", 2: "locked", 3: "actuated"}
@@ -98,8 +103,8 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
         stage: 1, 2 or 3 (baselines: 3).
         baseline: None, or a key of `BASELINES`.
         run_root: where runs live; the run directory is ``<run_root>/<run_name>``.
-        teacher: the teacher's (or, for weight-transfer baselines, the initial) policy file (default: the previous
-            stage's export under `run_root`).
+        teacher: the teacher's (for weight-transfer baselines, the initial; for decoupled, the frozen legs') policy
+            file (default: the previous stage's export under `run_root`).
         env_overrides: `EnvConfig` fields to change (num_envs, seed ...).
         **overrides: `TrainConfig` fields to change (max_iterations, seed ...).
 
@@ -129,11 +134,14 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
     elif baseline == "curriculum":
         teacher_stage, init_stage = None, (stage - 1 if stage > 1 else None)
         arm = "locked" if stage < 3 else "actuated"
+    elif baseline == "decoupled":
+        teacher_stage = None
     walking_prior = stage == 1 and baseline is None
     env = EnvConfig(
         robot=spec.robot, arm_mode=arm, scenario=spec.scenario, bands=spec.bands,
         pushes=stage > 1, terrain="flat" if stage == 1 else "scenario",
-        teacher_arm_mode=None if teacher_stage is None else _ARM[teacher_stage],
+        teacher_arm_mode="locked" if baseline == "decoupled" else (None if teacher_stage is None else
+                                                                    _ARM[teacher_stage]),
         tracking_sigma=WALKING_PRIOR_SIGMA if walking_prior else spec.tracking_sigma,
         command_ranges=WALKING_PRIOR_COMMANDS if walking_prior else None,
         rewards=RewardScales(termination=0.0) if walking_prior else RewardScales(),
@@ -148,8 +156,11 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
     if init_stage is not None:
         init_baseline = "curriculum" if baseline == "curriculum" else None
         init_path = teacher or str(Path(run_root) / run_name(task, init_stage, init_baseline) / "policy")
+    decoupled = {}
+    if baseline == "decoupled":
+        decoupled = {"frozen_legs": teacher or str(Path(run_root) / run_name(task, 2) / "policy"), "extrinsics_dim": 0}
     transfer = teacher_stage is not None or init_stage is not None
     cfg = TrainConfig(task=task, stage=stage, baseline=baseline, env=env, bc=bc, teacher=teacher_path,
                       init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
-                      run_dir=str(Path(run_root) / run_name(task, stage, baseline)), save_interval=25)
+                      run_dir=str(Path(run_root) / run_name(task, stage, baseline)), save_interval=25, **decoupled)
     return dataclasses.replace(cfg, **overrides)

@@ -4,6 +4,9 @@ A run directory holds: ``config.json`` (the resolved `TrainConfig`, seed, packag
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
 torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
 so far, summed over resumed sessions). ``resume`` continues from the newest checkpoint up to `max_iterations`.
+
+With `TrainConfig.frozen_legs` (the decoupled baseline) the env is wrapped in `FrozenLegsVecEnv`, the actor drives
+the arm only, and ``policy.npz``/``policy.json`` is a composite file holding the frozen leg policy and the arm actor.
 """
 
 from __future__ import annotations
@@ -18,8 +21,10 @@ from pathlib import Path
 from typing import Any
 
 from wbc.errors import ConfigError
+from wbc.learned.composite_policy import save_composite
 from wbc.learned.env import BatchedEnv
-from wbc.learned.export import policy_file_from_actor
+from wbc.learned.export import decoupled_policy, policy_file_from_actor
+from wbc.learned.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.policy_file import PolicyFileError, load_policy, save_policy
 from wbc.learned.train_config import TrainConfig
 from wbc.learned.vec_env import RslVecEnv
@@ -104,6 +109,15 @@ def _load_for(path: str, role: str):
 def _check_teacher(cfg: TrainConfig) -> None:
     if cfg.init_from is not None:
         _load_for(cfg.init_from, "the policy this run starts from (init_from)")
+    if cfg.frozen_legs is not None:
+        if cfg.extrinsics_dim > 0:
+            raise ConfigError("with frozen_legs the actor observes the robot's measurements only: set "
+                              "extrinsics_dim=0 (RMA phase 2 is not built for a part of a composite policy)")
+        legs = _load_for(cfg.frozen_legs, "the frozen leg policy (frozen_legs)")
+        if legs.meta["robot"] != cfg.env.robot or legs.meta["arm_mode"] != cfg.env.teacher_arm_mode:
+            raise ConfigError(f"frozen leg policy {cfg.frozen_legs} drives {legs.meta['robot']} with arm "
+                              f"{legs.meta['arm_mode']!r}; this run needs {cfg.env.robot} with arm "
+                              f"{cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
     if cfg.bc is None:
         return
     if cfg.teacher is None:
@@ -139,9 +153,14 @@ class _Runner(_runners.OnPolicyRunner):
         progress = {"iteration": int(self.current_learning_iteration),
                     "env_steps": self._steps_before + int(self.env.env.total_steps), "wall_s": wall}
         actor = self.alg.get_policy()
-        pf = policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage,
-                                    extra={"baseline": cfg.baseline, **progress})
-        save_policy(Path(cfg.run_dir) / "policy", pf)
+        extra = {"baseline": cfg.baseline, **progress}
+        if isinstance(self.env, FrozenLegsVecEnv):
+            extra["frozen_legs"] = cfg.frozen_legs
+            save_composite(Path(cfg.run_dir) / "policy", decoupled_policy(
+                actor, self.env.legs.file, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra))
+        else:
+            pf = policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra)
+            save_policy(Path(cfg.run_dir) / "policy", pf)
         (Path(cfg.run_dir) / "progress.json").write_text(json.dumps(progress, indent=2) + "\n")
 
 
@@ -177,7 +196,10 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.torch_threads)
     env = BatchedEnv(cfg.env)
-    vec = RslVecEnv(env, device=cfg.device)
+    if cfg.frozen_legs is not None:
+        vec: RslVecEnv = FrozenLegsVecEnv(env, load_policy(cfg.frozen_legs), device=cfg.device)
+    else:
+        vec = RslVecEnv(env, device=cfg.device)
     runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
     done = 0
     if checkpoint is None and cfg.init_from is not None:

@@ -54,6 +54,9 @@ class TrainConfig:
         teacher: the previous stage's policy file (with `bc`).
         action_mask: student action index of each teacher (or `init_from`) action (default: the first ones, the legs).
         init_from: a previous policy file the actor starts from (`wbc.learned.warm_start`), or None.
+        frozen_legs: a policy file (pi2) that drives the legs, frozen, while PPO trains an actor for the remaining
+            joints only (the decoupled baseline, `wbc.learned.frozen_legs_vec_env`); the run exports a composite
+            policy (`wbc.learned.composite_policy`). None: the actor drives every joint.
         run_dir: where checkpoints, TensorBoard logs, the resolved config and the exported policy go.
         device: torch device.
         torch_threads: torch's intra-op threads. 1 by default: on a shared 2-core machine, torch's spinning worker
@@ -80,6 +83,7 @@ class TrainConfig:
     teacher: str | None = None
     action_mask: tuple[int, ...] | None = None
     init_from: str | None = None
+    frozen_legs: str | None = None
     run_dir: str = "runs/train"
     device: str = "cpu"
     torch_threads: int = 1
