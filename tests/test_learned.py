@@ -66,6 +66,44 @@ def test_env_terminates_when_the_trunk_touches_the_ground():
     assert np.all(env.state[:, 3] > 0.25) and np.all(env.episode_step == 0)
 
 
+def _poses(desc, nq: int) -> dict[str, np.ndarray]:
+    """Configurations on flat ground: standing on the feet, lying on the side, kneeling on the FR calf (thigh
+    vertical, calf 10 degrees off horizontal with the knee end down, the other legs folded: only the calf box touches,
+    0.18 m from its foot)."""
+    stand = np.zeros(nq)
+    stand[2], stand[3], stand[7:] = desc.stand_height, 1.0, desc.nominal_q
+    side = stand.copy()
+    side[2], side[3:7] = 0.1, (np.cos(np.pi / 4), np.sin(np.pi / 4), 0.0, 0.0)
+    kneel = stand.copy()
+    kneel[2] = 0.206
+    kneel[7:10] = (0.0, 0.0, -(np.pi / 2 + 0.17))
+    for leg in range(1, 4):
+        kneel[7 + 3 * leg + 1:7 + 3 * leg + 3] = (0.8, -2.7)
+    return {"standing": stand, "on its side": side, "kneeling on a calf": kneel}
+
+
+def test_env_terminates_exactly_when_evaluation_calls_the_robot_fallen():
+    """Training's termination and `MujocoRobot.fallen` apply one rule (`wbc.hardware.fall_rule`) to the same state."""
+    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
+
+    robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
+    poses = _poses(robot.desc, robot.desc.num_joints + 7)
+    env = BatchedEnv(small_config(num_envs=len(poses), pushes=False))
+    verdicts = {}
+    with robot:
+        for i, (name, qpos) in enumerate(poses.items()):
+            robot.reset(seed=0, qpos=qpos)
+            verdicts[name] = robot.fallen()
+            env.state[i, 1:1 + env.nq] = qpos
+            env.state[i, 1 + env.nq:1 + env.nq + env.nv] = 0.0
+        hold = (np.array([q[7:] for q in poses.values()]) - env.default_q) / env.config.action_scale
+        r = env.step(hold)
+        knee = robot.sim_truth()  # the last pose, kneeling: the calf is on the ground, no foot is
+        assert knee.ground_contact_bodies == ("FR_calf",) and not knee.foot_contact.any()
+    assert verdicts == {"standing": False, "on its side": True, "kneeling on a calf": True}
+    assert dict(zip(poses, r.terminated.tolist(), strict=True)) == verdicts
+
+
 def test_env_pushes_come_from_the_scenario_band_in():
     env = BatchedEnv(small_config())
     trial = env.scenario.trial("in", env.config.train_seed_offset + env.config.seed, 0)

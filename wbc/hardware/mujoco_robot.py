@@ -16,6 +16,7 @@ import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.hardware.domain import DomainParams, SensorNoise
+from wbc.hardware.fall_rule import FOOT_ZONE, foot_geoms, near_feet
 from wbc.hardware.mujoco_scene import TERRAIN_GEOM, build_scene, set_terrain_heights
 from wbc.hardware.perturbation import Push
 from wbc.hardware.robot import Robot
@@ -27,8 +28,6 @@ from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand, RobotState
 
 __all__ = ["BaseTruth", "FOOT_ZONE", "MujocoRobotConfig", "MujocoRobot", "SimTruth", "initial_qpos"]
-
-FOOT_ZONE = 0.035  # [m] contacts this close to a foot centre are the foot's (foot sphere radius 0.02 + margin)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -182,7 +181,7 @@ class MujocoRobot(Robot):
 
         self._quat_idx, self._gyro_idx, self._accel_idx = _span("imu_quat"), _span("imu_gyro"), _span("imu_accel")
         self._touch_idx = np.array([self._sensor[f.replace("_foot", "_touch")][0] for f in FOOT_NAMES])
-        self._foot_geoms = np.array([self._foot_geom(f) for f in FOOT_NAMES])
+        self._foot_geoms = foot_geoms(m)
         self._is_foot_geom = np.zeros(m.ngeom, dtype=bool)
         self._is_foot_geom[self._foot_geoms] = True
         self._nominal = {
@@ -356,7 +355,7 @@ class MujocoRobot(Robot):
         return BaseTruth(qpos[:3].copy(), qpos[3:7].copy(), qvel[:3].copy(), qvel[3:6].copy())
 
     def fallen(self) -> bool:
-        """Truth: the trunk or a non-foot link touches the ground (the paper's termination rule)."""
+        """Truth: the trunk or a non-foot link touches the ground (the paper's termination rule, `fall_rule`)."""
         _, at_foot = self._ground_contacts()
         return bool(at_foot.size and not at_foot.all())
 
@@ -368,9 +367,8 @@ class MujocoRobot(Robot):
     def _ground_contacts(self) -> tuple[np.ndarray, np.ndarray]:
         """Robot geoms touching the ground now, and whether each contact is a foot's.
 
-        A contact counts as a foot's if it is the foot sphere's, or if it lies within `FOOT_ZONE` of a foot centre:
-        the URDFs' calf boxes run down to the foot centre, so a foot pressed a little into the ground also brings
-        the calf box's end into contact, which is still the foot, not a fall.
+        A contact counts as a foot's if it is the foot sphere's, or if it lies within `FOOT_ZONE` of a foot centre
+        (`wbc.hardware.fall_rule`, the rule training's termination shares).
         """
         if self._contacts_at == self._steps:
             return self._contacts
@@ -382,21 +380,9 @@ class MujocoRobot(Robot):
             touching = np.where(pairs[:, 0] == self._terrain_geom, pairs[:, 1], pairs[:, 0])
             at_foot = self._is_foot_geom[touching].copy()
             if not at_foot.all():
-                centres = d.geom_xpos[self._foot_geoms]
-                pos = d.contact.pos[: d.ncon]
-                near = (np.linalg.norm(pos[:, None, :] - centres[None], axis=2) < FOOT_ZONE).any(axis=1)
-                at_foot |= near
+                at_foot |= near_feet(d.contact.pos[: d.ncon], d.geom_xpos[self._foot_geoms])
         self._contacts, self._contacts_at = (touching, at_foot), self._steps
         return touching, at_foot
-
-    def _foot_geom(self, foot: str) -> int:
-        """The sphere geom at a foot site (feet are fused into the calves, so find it by place and shape)."""
-        m = self.model
-        site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, foot)
-        body = m.site_bodyid[site]
-        spheres = [g for g in range(m.ngeom)
-                   if m.geom_bodyid[g] == body and m.geom_type[g] == mujoco.mjtGeom.mjGEOM_SPHERE]
-        return min(spheres, key=lambda g: np.linalg.norm(m.geom_pos[g] - m.site_pos[site]))
 
     def _active_pushes(self, step: int) -> list[Push]:
         return [p for start, stop, p in self._push_windows if start <= step < stop]

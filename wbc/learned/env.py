@@ -6,8 +6,9 @@ threads, each environment with its own model variant (`ModelPool`) and its own c
 physics step, `PushSchedule`). Everything else (observations, rewards, terminations, resets) is numpy over the batch.
 
 Episodes follow the scenario: each reset draws the next trial of the scenario's band (its command schedule, ramp
-included, and its pushes) from a training seed stream disjoint from evaluation seeds. An episode ends when a fall
-body (trunk, hips, thighs, arm links) touches the ground, or times out at the scenario's duration.
+included, and its pushes) from a training seed stream disjoint from evaluation seeds. An episode ends when the robot
+falls by evaluation's rule (`wbc.hardware.fall_rule`: a collision geom other than a foot touches the ground away from
+the feet, a calf included; checked at every physics step), or times out at the scenario's duration.
 
 The policy reads the IMU quaternion and gyro from the same sensors `MujocoRobot.read` reports (MuJoCo computes them
 inside the step, one physics step before the final state), so training and deployment see identical signals; after
@@ -25,6 +26,7 @@ import numpy as np
 from mujoco import rollout
 
 from wbc.errors import ConfigError
+from wbc.hardware.fall_rule import near_feet
 from wbc.hardware.terrain import TerrainConfig
 from wbc.learned.env_config import EnvConfig
 from wbc.learned.model_pool import ModelPool
@@ -133,9 +135,9 @@ class BatchedEnv:
         self._out = np.empty((n, dec, self.nstate))
         self._sens = np.empty((n, dec, m.nsensordata))
         self._tau = np.empty((n, dec, self.desc.num_joints))
-        fall = self.pool.fall_adr
-        contiguous = np.array_equal(fall, np.arange(fall[0], fall[-1] + 1))
-        self._fall = slice(int(fall[0]), int(fall[-1]) + 1) if contiguous else fall
+        found = self.pool.fall_found_adr  # every 4th value of one block when the sensors are consecutive: a view
+        regular = np.array_equal(found, np.arange(found[0], found[-1] + 1, 4))
+        self._found = slice(int(found[0]), int(found[-1]) + 1, 4) if regular else found
         self._need_torques = bool({"work", "torques"} & set(self.rewards.scales))
         self.variant = np.zeros(n, dtype=np.int64)
         self._models = [m] * n
@@ -214,7 +216,7 @@ class BatchedEnv:
             np.clip(tau, -lim, lim, out=tau)
             power = np.abs(tau * dqs).sum(axis=2).mean(axis=1)
             torque_sq = np.square(tau).sum(axis=2).mean(axis=1)
-        fell = self._sens[:, :, self._fall].max(axis=(1, 2)) > 0
+        fell = self._fallen()
         contact = self._sens[:, -1, self.pool.touch_adr] > 1.0
 
         qpos, qvel = self.state[:, self._qpos], self.state[:, self._qvel]
@@ -255,6 +257,23 @@ class BatchedEnv:
         rollout.shutdown_persistent_pool()
 
     # -- internals --------------------------------------------------------------------------------------------------
+    def _fallen(self) -> np.ndarray:
+        """(N,) robots that met evaluation's fall rule (`wbc.hardware.fall_rule`) at any physics step of the last step.
+
+        Only the contact slots in use (rare: a fall geom on the ground) are tested against the foot centres, and only
+        in the robots that have one, so the cost per step is one reduction over the slots' "found" values.
+        """
+        pool = self.pool
+        fell = np.zeros(self.num_envs, dtype=bool)
+        some = np.flatnonzero(self._sens[:, :, self._found].max(axis=(1, 2)) > 0)
+        if some.size:
+            sens = self._sens[some]
+            n, k, s = np.nonzero(sens[:, :, self._found])
+            pos = sens[n[:, None], k[:, None], pool.fall_pos_adr[s]]
+            feet = sens[n[:, None, None], k[:, None, None], pool.foot_centre_adr[None]]
+            fell[some[n[~near_feet(pos, feet)]]] = True
+        return fell
+
     def _commands_now(self) -> np.ndarray:
         """(N, 3) command of every environment at its current episode time (the trial's ramp included)."""
         t = self.episode_step * self.config.policy_dt

@@ -1,11 +1,12 @@
 """`ModelPool`: the compiled MuJoCo model variants the batched env steps (domain randomisation by model).
 
 Every variant is the scene of `wbc.hardware.mujoco_scene` for the same (robot, arm mode), so physics and the motor
-law are those of evaluation, plus one ``contact`` sensor per fall body (trunk, hips, thighs, arm links) that counts
-its contacts with the ground: the termination test runs inside MuJoCo's step. Each variant then gets its own payload,
-friction, motor strength and (on rough ground) terrain. `mujoco.rollout` takes one model per environment, so an
-environment draws a variant at every reset at no cost; the pool's size bounds memory (a 401 x 401 heightfield is
-1.3 MB per variant).
+law are those of evaluation, plus the sensors of evaluation's fall rule (`wbc.hardware.fall_rule`): one ``contact``
+sensor per robot collision geom other than the foot spheres, reporting up to `FALL_SLOTS` ground contacts with their
+positions, and one ``framepos`` sensor per foot sphere (the foot centres), all filled inside MuJoCo's step. Each
+variant then gets its own payload, friction, motor strength and (on rough ground) terrain. `mujoco.rollout` takes
+one model per environment, so an environment draws a variant at every reset at no cost; the pool's size bounds
+memory (a 401 x 401 heightfield is 1.3 MB per variant).
 
 Motor law, as `MujocoRobot` writes it: ``force = k (ctrl - kp q - kd dq)`` clamped to ``k`` times the torque limit,
 with ``ctrl = kp q*`` (zero target velocity and feed-forward) and ``k`` the variant's motor strength.
@@ -18,12 +19,17 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from wbc.hardware.fall_rule import fall_geoms, foot_geoms
 from wbc.hardware.mujoco_scene import TERRAIN_GEOM, scene_spec, set_terrain_heights
 from wbc.hardware.terrain import TerrainConfig, fractal_heights
 from wbc.learned.env_config import EnvConfig
 from wbc.robots.description import FOOT_NAMES, RobotDescription
 
-__all__ = ["ModelPool", "Variant"]
+__all__ = ["FALL_SLOTS", "ModelPool", "Variant"]
+
+FALL_SLOTS = 4
+"""Ground contacts reported per fall geom (a box or cylinder on a plane makes at most 4; beyond that, on rough ground,
+the extra contacts of a geom that already touches are not seen, which matters only if every seen one is a foot's)."""
 
 
 @dataclass(frozen=True)
@@ -43,11 +49,6 @@ class Variant:
     ground_height: float
 
 
-def _fall_bodies(model_names: list[str]) -> list[str]:
-    """Bodies whose contact with the ground ends an episode: everything but the world and the calves (feet)."""
-    return [b for b in model_names if b != "world" and not b.endswith("_calf")]
-
-
 class ModelPool:
     """Compiled variants of one robot scene.
 
@@ -62,13 +63,20 @@ class ModelPool:
                  rng: np.random.Generator) -> None:
         self.desc = desc
         spec = scene_spec(desc, terrain, timestep=config.timestep)
+        for i, geom in enumerate(spec.geoms):  # sensors name their geom; the scene leaves the robot's unnamed
+            if not geom.name:
+                geom.name = f"geom{i}"
         probe = spec.compile()
-        names = [probe.body(i).name for i in range(probe.nbody)]
-        self.fall_body_names = tuple(_fall_bodies(names))
-        for body in self.fall_body_names:
-            spec.add_sensor(name=f"{body}_ground", type=mujoco.mjtSensor.mjSENS_CONTACT,
-                            objtype=mujoco.mjtObj.mjOBJ_BODY, objname=body,
-                            reftype=mujoco.mjtObj.mjOBJ_GEOM, refname=TERRAIN_GEOM, intprm=[1, 0, 1])
+        fall = [probe.geom(int(g)).name for g in fall_geoms(probe)]
+        feet = [probe.geom(int(g)).name for g in foot_geoms(probe)]
+        found_pos = 1 | 1 << 4  # mjCONDATA_FOUND | mjCONDATA_POS: per slot, (found, x, y, z)
+        for name in fall:
+            spec.add_sensor(name=f"{name}_ground", type=mujoco.mjtSensor.mjSENS_CONTACT,
+                            objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=name, reftype=mujoco.mjtObj.mjOBJ_GEOM,
+                            refname=TERRAIN_GEOM, intprm=[found_pos, 0, FALL_SLOTS])
+        for name in feet:
+            spec.add_sensor(name=f"{name}_centre", type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
+                            objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=name)
         base = spec.compile()
         self.base_body = mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_BODY, "base")
         self.sensor_slices = {
@@ -76,7 +84,12 @@ class ModelPool:
             for i in range(base.nsensor)
         }
         self.touch_adr = np.array([self.sensor_slices[f.replace("_foot", "_touch")].start for f in FOOT_NAMES])
-        self.fall_adr = np.array([self.sensor_slices[f"{b}_ground"].start for b in self.fall_body_names])
+        self.fall_geom_names = tuple(fall)
+        slots = np.array([self.sensor_slices[f"{g}_ground"].start for g in fall])[:, None] + 4 * np.arange(FALL_SLOTS)
+        self.fall_found_adr = slots.reshape(-1)  # sensordata index of each contact slot's "found"
+        self.fall_pos_adr = self.fall_found_adr[:, None] + np.arange(1, 4)  # ... and of its position (x, y, z)
+        self.foot_centre_adr = np.array([np.arange(self.sensor_slices[f"{g}_centre"].start,
+                                                   self.sensor_slices[f"{g}_centre"].stop) for g in feet])
         n = desc.num_joints
         kp = np.full(n, config.leg_kp)
         kd = np.full(n, config.leg_kd)
