@@ -53,10 +53,10 @@ def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
         raise ValueError(f"none of {[t for t, _ in PANELS]} is logged in {[str(d) for d in run_dirs]}")
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.4), squeeze=False)
     for ax, (tag, title) in zip(axes[0], panels, strict=True):
-        for name, scalars, steps_per_it in runs:
-            if tag in scalars:
+        for k, (name, scalars, steps_per_it) in enumerate(runs):
+            if tag in scalars:  # one colour per run in every panel, also where an earlier run logs nothing
                 it, value = scalars[tag]
-                ax.plot((it + 1) * steps_per_it / 1e6, value, label=name)
+                ax.plot((it + 1) * steps_per_it / 1e6, value, label=name, color=f"C{k % 10}")
         ax.set_title(title)
         ax.set_xlabel("environment steps [M]")
         ax.grid(alpha=0.3)
