@@ -40,6 +40,7 @@ from wbc.learned.policy_file import (
     check_shapes,
     load_policy,
     read_arrays,
+    read_pair,
 )
 from wbc.robots.description import RobotDescription
 
@@ -138,18 +139,7 @@ def load_composite(path: str | Path) -> CompositePolicyFile:
             parts' joints do not partition the robot's, or a part disagrees with the composite on the observation
             or the motor law; the message names the file and the field (``<part>/<field>`` inside a part).
     """
-    p = Path(path)
-    stem = p.with_suffix("") if p.suffix in (".npz", ".json") else p
-    npz, js = stem.with_suffix(".npz"), stem.with_suffix(".json")
-    for f in (npz, js):
-        if not f.exists():
-            raise PolicyFileError(f, None, "file not found (a policy is a .npz + .json pair with the same stem)")
-    try:
-        meta = json.loads(js.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise PolicyFileError(js, None, f"not readable JSON ({exc})") from None
-    if not isinstance(meta, dict):
-        raise PolicyFileError(js, None, "expected a JSON object at the top level")
+    npz, js, meta = read_pair(path)
     if meta.get("format") != COMPOSITE_FORMAT:
         single = load_policy(npz)
         top = {k: single.meta[k] for k in ROBOT_KEYS}

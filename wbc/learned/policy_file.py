@@ -33,7 +33,7 @@ from wbc.errors import WbcError
 from wbc.robots.description import RobotDescription
 
 __all__ = ["ACTIVATIONS", "COMPOSITE_FORMAT", "FORMAT", "VERSION", "PolicyFile", "PolicyFileError", "check_meta",
-           "check_shapes", "load_policy", "read_arrays", "save_policy"]
+           "check_shapes", "load_policy", "read_arrays", "read_pair", "save_policy"]
 
 FORMAT = "wbc-policy"
 COMPOSITE_FORMAT = "wbc-composite-policy"
@@ -112,6 +112,25 @@ def _paths(path: str | Path) -> tuple[Path, Path]:
     return stem.with_suffix(".npz"), stem.with_suffix(".json")
 
 
+def read_pair(path: str | Path) -> tuple[Path, Path, dict]:
+    """The ``.npz`` and ``.json`` paths of a policy (`path`: either file, or their stem) and the JSON object.
+
+    Raises:
+        PolicyFileError: a file of the pair is missing, or the JSON is unreadable or not an object.
+    """
+    npz, js = _paths(path)
+    for p in (npz, js):
+        if not p.exists():
+            raise PolicyFileError(p, None, "file not found (a policy is a .npz + .json pair with the same stem)")
+    try:
+        meta = json.loads(js.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PolicyFileError(js, None, f"not readable JSON ({exc})") from None
+    if not isinstance(meta, dict):
+        raise PolicyFileError(js, None, "expected a JSON object at the top level")
+    return npz, js, meta
+
+
 def save_policy(path: str | Path, policy: PolicyFile) -> tuple[Path, Path]:
     """Write ``<path>.npz`` and ``<path>.json`` (a suffix on `path` is replaced); returns both paths.
 
@@ -134,16 +153,7 @@ def load_policy(path: str | Path) -> PolicyFile:
         PolicyFileError: a file is missing or unreadable, a key is missing or mistyped, an array is missing or has
             the wrong shape, or the layers do not chain; the message names the file and the field.
     """
-    npz, js = _paths(path)
-    for p in (npz, js):
-        if not p.exists():
-            raise PolicyFileError(p, None, "file not found (a policy is a .npz + .json pair with the same stem)")
-    try:
-        meta = json.loads(js.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise PolicyFileError(js, None, f"not readable JSON ({exc})") from None
-    if not isinstance(meta, dict):
-        raise PolicyFileError(js, None, "expected a JSON object at the top level")
+    npz, js, meta = read_pair(path)
     if meta.get("format") == COMPOSITE_FORMAT:
         raise PolicyFileError(js, "format", f"{COMPOSITE_FORMAT!r}: a composite of several networks; load it with "
                               "wbc.learned.composite_policy.load_composite")
