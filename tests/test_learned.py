@@ -20,6 +20,15 @@ ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = str(ROOT / "scenarios" / "push.toml")
 
 
+def drop_last_column(npz: Path, key: str) -> dict[str, np.ndarray]:
+    """Rewrite `npz` with array `key` one column short; returns the arrays written."""
+    with np.load(npz) as data:
+        arrays = {k: data[k] for k in data.files}
+    arrays[key] = arrays[key][:, :-1]
+    np.savez(npz, **arrays)
+    return arrays
+
+
 def small_config(**kw) -> EnvConfig:
     base = dict(scenario=SCENARIO, num_envs=4, terrain="flat", nthread=1, domain=DomainRandomisation(num_variants=2))
     base.update(kw)
@@ -204,10 +213,7 @@ def test_policy_file_missing_json_key(saved_policy):
 
 def test_policy_file_wrong_shape(saved_policy):
     npz, _ = saved_policy
-    with np.load(npz) as data:
-        arrays = {k: data[k] for k in data.files}
-    arrays["policy/1/weight"] = arrays["policy/1/weight"][:, :-1]
-    np.savez(npz, **arrays)
+    drop_last_column(npz, "policy/1/weight")
     with pytest.raises(PolicyFileError, match=r"pi\.npz: policy/1/weight: expected shape \(16, 32\)"):
         load_policy(npz)
 
@@ -328,10 +334,7 @@ def test_composite_file_errors_name_the_file_and_field(decoupled):
     with pytest.raises(PolicyFileError, match=r"dec\.json: default_q: missing key"):
         load_composite(npz)
     js.write_text(good)
-    with np.load(npz) as data:
-        arrays = {k: data[k] for k in data.files}
-    arrays["arm/policy/1/weight"] = arrays["arm/policy/1/weight"][:, :-1]
-    np.savez(npz, **arrays)
+    arrays = drop_last_column(npz, "arm/policy/1/weight")
     with pytest.raises(PolicyFileError, match=r"dec\.npz: arm/policy/1/weight: expected shape \(16, 32\)"):
         load_composite(npz)
     np.savez(npz, **{**arrays, "arm/policy/1/weight": np.array([{"a": 1}], dtype=object)})
