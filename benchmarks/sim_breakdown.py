@@ -14,9 +14,8 @@ import time
 import mujoco
 import numpy as np
 
-from wbc.bench import machine_description
+from wbc.bench import machine_description, reference_a1
 from wbc.hardware import MujocoRobot, MujocoRobotConfig
-from wbc.robots.urdf import example_robot_data_share
 from wbc.standing import stand_command
 
 
@@ -31,28 +30,7 @@ def _rate(model: mujoco.MjModel, data: mujoco.MjData) -> float:
 
 
 def bare_a1() -> float:
-    path = example_robot_data_share() / "example-robot-data/robots/a1_description/urdf/a1.urdf"
-    text = path.read_text().replace(
-        '<robot name="a1">', '<robot name="a1"><mujoco><compiler discardvisual="true" fusestatic="false"/></mujoco>'
-    )
-    spec = mujoco.MjSpec.from_string(text)
-    spec.body("base").add_freejoint()
-    spec.compiler.fusestatic = True
-    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
-    spec.option.timestep = 0.002
-    for joint in spec.joints:
-        if joint.type == mujoco.mjtJoint.mjJNT_HINGE:
-            act = spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-            act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
-            act.biastype = mujoco.mjtBias.mjBIAS_AFFINE
-            act.gainprm = [60.0] + [0.0] * 9
-            act.biasprm = [0.0, -60.0, -2.0] + [0.0] * 7
-    model = spec.compile()
-    data = mujoco.MjData(model)
-    data.qpos[2], data.qpos[3] = 0.3, 1.0
-    data.qpos[7:] = [0.0, 0.8, -1.5] * 4
-    data.ctrl[:] = data.qpos[7:]
-    return _rate(model, data)
+    return _rate(*reference_a1())
 
 
 def main() -> None:

@@ -121,7 +121,9 @@ def test_domain_randomisation_hooks():
         assert m.body_subtreemass[1] == pytest.approx(mass0 + 2.0)
         np.testing.assert_allclose(m.actuator_forcerange, 0.5 * range0)
         assert np.all(m.geom_friction[:, 0] == 0.4)
+        assert np.all(m.pair_friction[:, 0:2] == 0.4)  # the ground contact pairs decide
         robot.reset()
+        assert np.all(m.pair_friction[:, 0:2] == 1.0)
         assert m.body_subtreemass[1] == pytest.approx(mass0)
         np.testing.assert_allclose(m.actuator_forcerange, range0)
 
@@ -146,3 +148,42 @@ def test_bad_configuration_names_the_field():
         DomainParams(friction=-1.0)
     with pytest.raises(ConfigError, match="Push.duration"):
         Push(force_in_world=np.zeros(3), offset_in_base=np.zeros(3), start=0.0, duration=0.0)
+
+
+def test_explicit_ground_pairs_simulate_exactly_as_contact_filtering():
+    """The scene's explicit robot-ground contact pairs (which let MuJoCo skip its broad phase) change nothing."""
+    from wbc.hardware.mujoco_scene import TERRAIN_GEOM, scene_spec
+
+    with MujocoRobot(MujocoRobotConfig(arm_mode="actuated")) as robot:
+        robot.reset(seed=2)
+        robot.write(stand_command(robot.desc))
+        m, d = robot.model, robot.data
+        assert m.npair == 25 and not m.geom_contype.any() and not m.geom_conaffinity.any()
+        # the twin: the same scene with MuJoCo's default filtering (robot geoms contype 1, ground conaffinity 1)
+        spec = scene_spec(robot.desc, robot.config.terrain, timestep=robot.config.timestep)
+        colliders = {pair.geomname2 for pair in spec.pairs}
+        for pair in list(spec.pairs):
+            spec.delete(pair)
+        for geom in spec.geoms:
+            if geom.name == TERRAIN_GEOM:
+                geom.conaffinity = 1
+            elif geom.name in colliders:
+                geom.contype = 1
+        twin = spec.compile()
+        twin.actuator_biasprm[:] = m.actuator_biasprm
+        tdata = mujoco.MjData(twin)
+        which = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        state = np.empty(mujoco.mj_stateSize(m, which))
+        mujoco.mj_getState(m, d, state, which)
+        mujoco.mj_setState(twin, tdata, state, which)
+        tdata.ctrl[:] = d.ctrl
+        # a shove hard enough to knock the robot over, so trunk, thighs and arm meet the ground too
+        touched = set()
+        for k in range(1200):
+            push = 400.0 if 100 <= k < 160 else 0.0
+            d.xfrc_applied[1, 1] = tdata.xfrc_applied[1, 1] = push
+            mujoco.mj_step(m, d)
+            mujoco.mj_step(twin, tdata)
+            assert np.array_equal(d.qpos, tdata.qpos), f"step {k}"
+            touched |= {int(g) for g in d.contact.geom[: d.ncon, 1]}
+        assert len(touched) > 4  # not only the feet

@@ -12,9 +12,10 @@ from mujoco import rollout
 
 from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.terrain import TerrainConfig
+from wbc.robots.urdf import example_robot_data_share
 from wbc.standing import stand_command
 
-__all__ = ["bench_sim", "bench_sweep", "machine_description"]
+__all__ = ["REFERENCE_TARGETS", "bench_sim", "bench_sweep", "machine_description", "reference_a1"]
 
 
 def machine_description() -> str:
@@ -31,6 +32,62 @@ def machine_description() -> str:
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, MuJoCo {mujoco.__version__}"
 
 
+REFERENCE_TARGETS = {"steps_per_s": (80_000.0, 110_000.0), "batched_steps_per_s": (150_000.0, 218_000.0)}
+"""Issue 2's speed targets and the bare-A1 figures they were set against (steps/s): (target, reference)."""
+
+
+def reference_a1() -> tuple[mujoco.MjModel, mujoco.MjData]:
+    """The reference the simulator's speed targets were set against: the bare A1 URDF of example-robot-data.
+
+    A free joint, a floor plane, one PD actuator per joint, MuJoCo's default contact filtering (every geom against
+    every other but its parent), no sensors and no joint friction; the same 2 ms step and solver defaults. Returned
+    standing at the nominal pose, settled for 1 s.
+    """
+    path = example_robot_data_share() / "example-robot-data/robots/a1_description/urdf/a1.urdf"
+    text = path.read_text().replace(
+        '<robot name="a1">', '<robot name="a1"><mujoco><compiler discardvisual="true" fusestatic="false"/></mujoco>'
+    )
+    spec = mujoco.MjSpec.from_string(text)
+    spec.body("base").add_freejoint()
+    spec.compiler.fusestatic = True
+    spec.worldbody.add_geom(type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0, 0, 1])
+    spec.option.timestep = 0.002
+    for joint in spec.joints:
+        if joint.type == mujoco.mjtJoint.mjJNT_HINGE:
+            act = spec.add_actuator(target=joint.name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+            act.gaintype = mujoco.mjtGain.mjGAIN_FIXED
+            act.biastype = mujoco.mjtBias.mjBIAS_AFFINE
+            act.gainprm = [60.0] + [0.0] * 9
+            act.biasprm = [0.0, -60.0, -2.0] + [0.0] * 7
+    model = spec.compile()
+    data = mujoco.MjData(model)
+    data.qpos[2], data.qpos[3] = 0.3, 1.0
+    data.qpos[7:] = [0.0, 0.8, -1.5] * 4
+    data.ctrl[:] = data.qpos[7:]
+    mujoco.mj_step(model, data, nstep=500)
+    return model, data
+
+
+class _Batched:
+    """`mujoco.rollout` of `batch` copies of a model's current state over `nstep` steps, repeatable."""
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, batch: int, nthread: int, nstep: int) -> None:
+        which = mujoco.mjtState.mjSTATE_FULLPHYSICS
+        state = np.empty(mujoco.mj_stateSize(model, which))
+        mujoco.mj_getState(model, data, state, which)
+        self.model, self.nstep, self.batch = model, nstep, batch
+        self.datas = [mujoco.MjData(model) for _ in range(nthread)]
+        self.init = np.tile(state, (batch, 1))
+        self.control = np.tile(data.ctrl.copy(), (batch, 1, 1))
+        self.out = np.empty((batch, nstep, state.size))
+
+    def rate(self) -> float:
+        t0 = time.perf_counter()
+        rollout.rollout(self.model, self.datas, self.init, self.control, nstep=self.nstep, state=self.out,
+                        persistent_pool=True)
+        return self.batch * self.nstep / (time.perf_counter() - t0)
+
+
 def bench_sim(
     robot: str = "a1-wx200",
     arm_mode: str = "actuated",
@@ -41,59 +98,69 @@ def bench_sim(
     batch_steps: int = 500,
     repeats: int = 5,
     terrain: str = "flat",
+    reference: bool = True,
 ) -> dict[str, float | str | int]:
-    """Physics throughput of a robot standing under the motor law.
+    """Physics throughput of a robot standing under the motor law, beside the bare-A1 reference.
 
     Single-threaded: `MujocoRobot.advance` over `seconds` of simulated time (best of `repeats`). Batched:
     ``mujoco.rollout`` over `batch` environments from the settled standing state, `nthread` threads (default: all
-    cores), `batch_steps` steps each (best of `repeats`).
+    cores), `batch_steps` steps each (best of `repeats`). With `reference`, the bare A1 (`reference_a1`) is measured
+    the same way in the same repeats, interleaved, so both see the same machine: on a shared VM absolute figures
+    swing by 2x between sessions, the ratio much less.
 
     Returns:
-        ``steps_per_s``, ``batched_steps_per_s``, ``realtime_factor`` and the settings used.
+        ``steps_per_s``, ``batched_steps_per_s``, ``realtime_factor`` and the settings used; with `reference` also
+        ``reference_steps_per_s``, ``reference_batched_steps_per_s``, the ratios ``steps_ratio_to_reference``,
+        ``batched_ratio_to_reference`` and issue 2's targets scaled by this machine's reference
+        (``scaled_target_steps_per_s``, ``scaled_target_batched_steps_per_s``).
     """
     nthread = nthread or os.cpu_count() or 1
     sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=arm_mode, terrain=TerrainConfig(kind=terrain)))
+    ref_model, ref_data = reference_a1() if reference else (None, None)
     with sim:
         sim.reset(seed=1)
         sim.write(stand_command(sim.desc))
         sim.advance(0.5)
         dt = sim.config.timestep
         steps = int(round(seconds / dt))
-        best = 0.0
+        batched = _Batched(sim.model, sim.data, batch, nthread, batch_steps)
+        ref_batched = _Batched(ref_model, ref_data, batch, nthread, batch_steps) if reference else None
+        best = {"single": 0.0, "batched": 0.0, "ref_single": 0.0, "ref_batched": 0.0}
+        batched.rate()  # start the thread pool
         for _ in range(repeats):
             t0 = time.perf_counter()
             sim.advance(seconds)
-            best = max(best, steps / (time.perf_counter() - t0))
-        model, data = sim.model, sim.data
-        spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        state = np.empty(mujoco.mj_stateSize(model, spec))
-        mujoco.mj_getState(model, data, state, spec)
-        ctrl = data.ctrl.copy()
-        datas = [mujoco.MjData(model) for _ in range(nthread)]
-        init = np.tile(state, (batch, 1))
-        control = np.tile(ctrl, (batch, 1, 1))
-        out = np.empty((batch, batch_steps, state.size))
-        rollout.rollout(model, datas, init, control, nstep=batch_steps, state=out, persistent_pool=True)
-        best_batched = 0.0
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            rollout.rollout(model, datas, init, control, nstep=batch_steps, state=out, persistent_pool=True)
-            best_batched = max(best_batched, batch * batch_steps / (time.perf_counter() - t0))
+            best["single"] = max(best["single"], steps / (time.perf_counter() - t0))
+            best["batched"] = max(best["batched"], batched.rate())
+            if reference:
+                t0 = time.perf_counter()
+                mujoco.mj_step(ref_model, ref_data, nstep=steps)
+                best["ref_single"] = max(best["ref_single"], steps / (time.perf_counter() - t0))
+                best["ref_batched"] = max(best["ref_batched"], ref_batched.rate())
         rollout.shutdown_persistent_pool()
-        height = float(out[0, -1, 1 + 2])  # time is state[0]; qpos starts at 1
-    return {
+        height = float(batched.out[0, -1, 1 + 2])  # time is state[0]; qpos starts at 1
+    out: dict[str, float | str | int] = {
         "robot": robot,
         "arm_mode": arm_mode,
         "terrain": terrain,
         "timestep_s": dt,
-        "steps_per_s": best,
-        "batched_steps_per_s": best_batched,
-        "realtime_factor": best * dt,
+        "steps_per_s": best["single"],
+        "batched_steps_per_s": best["batched"],
+        "realtime_factor": best["single"] * dt,
         "batch": batch,
         "threads": nthread,
         "final_base_height_m": height,
         "machine": machine_description(),
     }
+    if reference:
+        out["reference_steps_per_s"] = best["ref_single"]
+        out["reference_batched_steps_per_s"] = best["ref_batched"]
+        out["steps_ratio_to_reference"] = best["single"] / best["ref_single"]
+        out["batched_ratio_to_reference"] = best["batched"] / best["ref_batched"]
+        for key, ref_key in (("steps_per_s", "ref_single"), ("batched_steps_per_s", "ref_batched")):
+            target, at = REFERENCE_TARGETS[key]
+            out[f"scaled_target_{key}"] = target / at * best[ref_key]
+    return out
 
 
 def bench_sweep(
@@ -120,7 +187,7 @@ def bench_sweep(
     sc = load_scenario(scenario)
     arm = get_controller(controller).arm_mode
     kind = sc.trial(sc.bands[0], 0, 0).terrain.kind
-    physics = bench_sim(sc.robot, arm, terrain=kind, nthread=workers, repeats=3)
+    physics = bench_sim(sc.robot, arm, terrain=kind, nthread=workers, repeats=3, reference=False)
     out: dict[str, float | str | int] = {
         "scenario": sc.name, "controller": controller, "terrain": kind, "trials": trials * len(sc.bands),
         "batched_physics_steps_per_s": physics["batched_steps_per_s"], "machine": machine_description(),

@@ -63,7 +63,8 @@ def _bench_sim(args: argparse.Namespace) -> int:
     from wbc.bench import bench_sim
 
     get_robot(args.robot, args.arm)  # validate names before any work
-    result = bench_sim(args.robot, args.arm, batch=args.batch, nthread=args.threads, terrain=args.terrain)
+    result = bench_sim(args.robot, args.arm, batch=args.batch, nthread=args.threads, terrain=args.terrain,
+                       reference=not args.no_reference)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -74,6 +75,14 @@ def _bench_sim(args: argparse.Namespace) -> int:
           f"{result['realtime_factor']:.0f}x)")
     print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
           f"{result['threads']} threads)")
+    if "reference_steps_per_s" in result:
+        print("  bare A1 URDF, same runs (the reference issue 2's targets were set against: 110k / 218k):")
+        print(f"    single-threaded : {result['reference_steps_per_s']:>10,.0f} steps/s  -> this robot runs at "
+              f"{100 * result['steps_ratio_to_reference']:.0f} % of it (the target asks 73 %: "
+              f"{result['scaled_target_steps_per_s']:,.0f} steps/s on this machine)")
+        print(f"    batched rollout : {result['reference_batched_steps_per_s']:>10,.0f} steps/s  -> "
+              f"{100 * result['batched_ratio_to_reference']:.0f} % (the target asks 69 %: "
+              f"{result['scaled_target_batched_steps_per_s']:,.0f} steps/s on this machine)")
     return 0
 
 
@@ -332,6 +341,7 @@ def _parser() -> argparse.ArgumentParser:
     sim.add_argument("--threads", type=int, default=None, help="threads for the batched rollout (default: all)")
     sim.add_argument("--json", action="store_true", help="print JSON")
     sim.add_argument("--terrain", default="flat", help="flat or fractal")
+    sim.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measured alongside")
     sim.set_defaults(func=_bench_sim)
     mpc = bench.add_parser("mpc", help="MPC solve times, whole-body tick, closed-loop real-time factor")
     mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")

@@ -41,8 +41,9 @@ def foot_geoms(model: mujoco.MjModel) -> np.ndarray:
 def fall_geoms(model: mujoco.MjModel) -> np.ndarray:
     """The robot's collision geoms other than the foot spheres (their ground contacts are falls unless `near_feet`)."""
     feet = set(foot_geoms(model).tolist())
+    can_touch = set(model.pair_geom2.tolist())  # the scene pairs each robot collision geom with the ground
     return np.array([g for g in range(model.ngeom) if model.geom_bodyid[g] != 0 and g not in feet
-                     and (model.geom_contype[g] or model.geom_conaffinity[g])])
+                     and (g in can_touch or model.geom_contype[g] or model.geom_conaffinity[g])])
 
 
 def near_feet(contact_pos: np.ndarray, foot_centres: np.ndarray) -> np.ndarray:

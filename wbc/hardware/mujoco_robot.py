@@ -17,7 +17,7 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.hardware.domain import DomainParams, SensorNoise
 from wbc.hardware.fall_rule import FOOT_ZONE, foot_geoms, near_feet
-from wbc.hardware.mujoco_scene import TERRAIN_GEOM, build_scene, set_terrain_heights
+from wbc.hardware.mujoco_scene import TERRAIN_GEOM, build_scene, set_ground_friction, set_terrain_heights
 from wbc.hardware.perturbation import Push
 from wbc.hardware.robot import Robot
 from wbc.hardware.terrain import TerrainConfig, fractal_heights
@@ -307,7 +307,7 @@ class MujocoRobot(Robot):
             m.body_mass[b] = m1
             m.body_ipos[b] = (m0 * c0 + domain.payload_mass * domain.payload_com) / m1
         m.geom_friction[:] = nom["geom_friction"]
-        m.geom_friction[:, 0] = domain.friction
+        set_ground_friction(m, domain.friction)
         k = np.broadcast_to(np.asarray(domain.motor_strength, dtype=np.float64), (self.num_joints,)).copy()
         m.actuator_forcerange[:] = nom["forcerange"] * k[:, None]
         m.actuator_gainprm[:, 0] = k

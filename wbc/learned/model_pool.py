@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from wbc.hardware.fall_rule import fall_geoms, foot_geoms
-from wbc.hardware.mujoco_scene import TERRAIN_GEOM, scene_spec, set_terrain_heights
+from wbc.hardware.mujoco_scene import TERRAIN_GEOM, scene_spec, set_ground_friction, set_terrain_heights
 from wbc.hardware.terrain import TerrainConfig, fractal_heights
 from wbc.learned.env_config import EnvConfig
 from wbc.robots.description import FOOT_NAMES, RobotDescription
@@ -108,7 +108,7 @@ class ModelPool:
             strength = rng.uniform(*dr.motor_strength, n)
             m.body_mass[self.base_body] = nominal_mass + payload
             m.body_ipos[self.base_body] = (nominal_mass * nominal_ipos + payload * com) / (nominal_mass + payload)
-            m.geom_friction[:, 0] = friction
+            set_ground_friction(m, friction)
             m.actuator_gainprm[:, 0] = strength
             m.actuator_biasprm[:, 1] = -strength * kp
             m.actuator_biasprm[:, 2] = -strength * kd
