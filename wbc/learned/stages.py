@@ -3,7 +3,8 @@
 Stages (the paper's Method section):
 
     1  pi1: the quadruped without its arm learns to walk; flat ground, no perturbations, PPO only, commands drawn from
-       `WALKING_PRIOR_COMMANDS` (legged_gym's recipe; the scenario gives only 0 and 0.3 m/s).
+       the task's `TaskSpec.walking_prior_commands` (legged_gym's recipe; the push scenario gives only 0 and 0.3
+       m/s).
     2  pi2: arm attached and locked, task conditions (the scenario's ground and pushes); PPO + BC towards pi1 on the
        whole action (both have 12 leg actions).
     3  pi3: arm actuated; PPO + BC towards pi2 on the leg actions (the arm's 3 actions have no teacher).
@@ -39,8 +40,8 @@ from wbc.learned.bc_schedule import BCSchedule
 from wbc.learned.env_config import EnvConfig, RewardScales
 from wbc.learned.train_config import TrainConfig
 
-__all__ = ["BASELINES", "TASKS", "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name",
-           "stage_config"]
+__all__ = ["BASELINES", "TASKS", "TURN_WALKING_PRIOR_COMMANDS", "TaskSpec", "WALKING_PRIOR_COMMANDS",
+           "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -58,12 +59,29 @@ class TaskSpec:
     scenario: str
     bands: tuple[str, ...]
     tracking_sigma: float
+    walking_prior_commands: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
 
+
+WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
+"""The push task's pi1 commands (vx, vy, yaw rate ranges), drawn per episode instead of the scenario's.
+
+pi1 is the walking prior the later stages imitate; the paper does not give its commands. Three pi1 runs on the push
+scenario's own commands (0 or 0.3 m/s) did not learn a stable gait in 150 iterations: at tracking width 0.1 they
+stood (0.00 m/s under 0.3 m/s), at 0.05 one walked at 0.22 m/s at iteration 50 while falling onto its front hips,
+then drifted back to standing, and with a fall penalty it never left standing. A 0.3 m/s command is worth too little
+over standing still to pay for discovering a gait. legged_gym's recipe (commands over +-1, tracking width 0.25, no
+fall penalty) is what reliably learns to walk, so pi1 uses it; pi2 and pi3 train on the scenario's commands."""
+WALKING_PRIOR_SIGMA = 0.25
+
+TURN_WALKING_PRIOR_COMMANDS = ((-0.5, 1.5), (-0.5, 0.5), (-2.0, 2.0))
+"""The turn task's pi1 commands: legged_gym's ranges widened to the scenario's 1.5 m/s and 2 rad/s, so the prior the
+later stages imitate has walked at every speed and yaw rate the task asks for."""
 
 TASKS: dict[str, TaskSpec] = {
-    "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05),
+    "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
+                     walking_prior_commands=WALKING_PRIOR_COMMANDS),
     "turn": TaskSpec(robot="go1-arm", scenario="scenarios/turn.toml", bands=("1.0", "1.25", "1.5"),
-                     tracking_sigma=0.25),
+                     tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS),
 }
 
 BASELINES: dict[str, str] = {
@@ -76,16 +94,6 @@ BASELINES: dict[str, str] = {
 
 _ARM = {1: "none", 2: "locked", 3: "actuated"}
 
-WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
-"""pi1's commands (vx, vy, yaw rate ranges), drawn per episode instead of the scenario's.
-
-pi1 is the walking prior the later stages imitate; the paper does not give its commands. Three pi1 runs on the push
-scenario's own commands (0 or 0.3 m/s) did not learn a stable gait in 150 iterations: at tracking width 0.1 they
-stood (0.00 m/s under 0.3 m/s), at 0.05 one walked at 0.22 m/s at iteration 50 while falling onto its front hips,
-then drifted back to standing, and with a fall penalty it never left standing. A 0.3 m/s command is worth too little
-over standing still to pay for discovering a gait. legged_gym's recipe (commands over +-1, tracking width 0.25, no
-fall penalty) is what reliably learns to walk, so pi1 uses it; pi2 and pi3 train on the scenario's commands."""
-WALKING_PRIOR_SIGMA = 0.25
 
 
 def run_name(task: str, stage: int, baseline: str | None = None) -> str:
@@ -143,7 +151,7 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
         teacher_arm_mode="locked" if baseline == "decoupled" else (None if teacher_stage is None else
                                                                     _ARM[teacher_stage]),
         tracking_sigma=WALKING_PRIOR_SIGMA if walking_prior else spec.tracking_sigma,
-        command_ranges=WALKING_PRIOR_COMMANDS if walking_prior else None,
+        command_ranges=spec.walking_prior_commands if walking_prior else None,
         rewards=RewardScales(termination=0.0) if walking_prior else RewardScales(),
     )
     env = dataclasses.replace(env, **(env_overrides or {}))
