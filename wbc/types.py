@@ -7,6 +7,7 @@ SI units; quaternions are (w, x, y, z).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -82,15 +83,24 @@ class MotorCommand:
     tau: np.ndarray
 
     def __post_init__(self) -> None:
-        raw = [getattr(self, name) for name in _COMMAND_FIELDS]
-        # fast path (every control tick): five float64 vectors of one length, checked together in one pass
-        if all(type(a) is np.ndarray and a.dtype == np.float64 and a.ndim == 1 for a in raw) and (
-                raw[0].shape[0] > 0 and all(a.shape == raw[0].shape for a in raw)):
-            stacked = np.array(raw)
-            if np.isfinite(stacked).all() and stacked[2:4].min() >= 0.0:
-                stacked.setflags(write=False)
-                for name, row in zip(_COMMAND_FIELDS, stacked, strict=True):
-                    object.__setattr__(self, name, row)
+        # fast path (every control tick): the five fields stack into one (5, n) float array, checked in two
+        # reductions. A non-finite value makes the sum non-finite; finite values whose sum overflows (|x| ~ 1e308)
+        # and everything malformed (ragged, not 1-D, not numeric) fall through to the slow path, which names the fault.
+        q, dq, kp, kd, tau = self.q, self.dq, self.kp, self.kd, self.tau
+        nd = np.ndarray
+        if type(q) is nd and type(dq) is nd and type(kp) is nd and type(kd) is nd and type(tau) is nd:
+            try:
+                stacked = np.array((q, dq, kp, kd, tau), dtype=np.float64)
+            except (TypeError, ValueError):
+                stacked = None
+            if (stacked is not None and stacked.ndim == 2 and stacked.shape[1] > 0
+                    and math.isfinite(stacked.sum()) and stacked[2:4].min() >= 0.0):
+                stacked.setflags(write=False)  # its rows, the fields, are read-only views
+                object.__setattr__(self, "q", stacked[0])
+                object.__setattr__(self, "dq", stacked[1])
+                object.__setattr__(self, "kp", stacked[2])
+                object.__setattr__(self, "kd", stacked[3])
+                object.__setattr__(self, "tau", stacked[4])
                 return
         # slow path: find the first fault and name it
         n = None
@@ -124,15 +134,21 @@ class MotorCommand:
         """Number of joints commanded."""
         return int(self.q.shape[0])
 
+    def stacked(self) -> np.ndarray:
+        """The five fields as rows of one (5, n) array: q, dq, kp, kd, tau (a new array)."""
+        return np.array((self.q, self.dq, self.kp, self.kd, self.tau))
+
     @classmethod
-    def _trusted(cls, q: np.ndarray, dq: np.ndarray, kp: np.ndarray, kd: np.ndarray, tau: np.ndarray) -> MotorCommand:
-        """Build from arrays already known to be valid (finite, 1-D, same length, float64), skipping the checks.
+    def _trusted(cls, rows: np.ndarray) -> MotorCommand:
+        """Build from a (5, n) array of rows q, dq, kp, kd, tau already known to be valid, skipping the checks.
 
         Only for code that derives a command from a validated one (e.g. clamping): the hot path of every write.
+        `rows` becomes read-only and is shared by the fields.
         """
         obj = object.__new__(cls)
-        for name, a in (("q", q), ("dq", dq), ("kp", kp), ("kd", kd), ("tau", tau)):
-            object.__setattr__(obj, name, _readonly(a))
+        rows.setflags(write=False)
+        for name, row in zip(_COMMAND_FIELDS, rows, strict=True):
+            object.__setattr__(obj, name, row)
         return obj
 
     @classmethod

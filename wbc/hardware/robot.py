@@ -20,22 +20,34 @@ from wbc.errors import CommandError, RobotNotConnectedError
 from wbc.robots.joint_table import JointTable
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["Robot", "KP_MAX", "KD_MAX", "clamp_command"]
+__all__ = ["Robot", "KP_MAX", "KD_MAX", "clamp_command", "command_bounds"]
 
 KP_MAX = 1000.0  # [N m / rad] largest position gain a Unitree driver encodes (int16 / 32)
 KD_MAX = 100.0  # [N m s / rad] largest velocity gain accepted (the driver encodes more; none is stable above)
 
 
-def clamp_command(cmd: MotorCommand, limits: JointTable) -> MotorCommand:
-    """Clamp a command to the motors' limits: position range, speed, gains and torque."""
+def command_bounds(limits: JointTable) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of a command's rows (q, dq, kp, kd, tau), each (5, n): what `clamp_command` clips to."""
+    zeros = np.zeros_like(limits.lower)
+    lower = np.array((limits.lower, -limits.velocity_limit, zeros, zeros, -limits.torque_limit))
+    upper = np.array((limits.upper, limits.velocity_limit, zeros + KP_MAX, zeros + KD_MAX, limits.torque_limit))
+    return lower, upper
+
+
+def clamp_command(cmd: MotorCommand, limits: JointTable,
+                  bounds: tuple[np.ndarray, np.ndarray] | None = None) -> MotorCommand:
+    """Clamp a command to the motors' limits: position range, speed, gains and torque.
+
+    Args:
+        cmd: a (validated) command.
+        limits: the motors' limits.
+        bounds: `command_bounds(limits)`, when the caller keeps them (the hot path of every write).
+    """
+    lower, upper = bounds if bounds is not None else command_bounds(limits)
+    rows = cmd.stacked()
+    np.minimum(np.maximum(rows, lower, out=rows), upper, out=rows)
     # `cmd` was validated when it was built; clipping keeps it valid, so skip re-validation on this hot path.
-    return MotorCommand._trusted(
-        np.minimum(np.maximum(cmd.q, limits.lower), limits.upper),
-        np.minimum(np.maximum(cmd.dq, -limits.velocity_limit), limits.velocity_limit),
-        np.minimum(np.maximum(cmd.kp, 0.0), KP_MAX),
-        np.minimum(np.maximum(cmd.kd, 0.0), KD_MAX),
-        np.minimum(np.maximum(cmd.tau, -limits.torque_limit), limits.torque_limit),
-    )
+    return MotorCommand._trusted(rows)
 
 
 class Robot(ABC):
@@ -44,6 +56,7 @@ class Robot(ABC):
     def __init__(self) -> None:
         self._connected = False
         self._last_written: tuple[MotorCommand, MotorCommand] | None = None
+        self._bounds: tuple[JointTable, tuple[np.ndarray, np.ndarray]] | None = None
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
     @property
@@ -115,7 +128,10 @@ class Robot(ABC):
         if last is not None and last[0] is cmd:
             applied = last[1]  # commands are immutable: the same object clamps to the same result
         else:
-            applied = clamp_command(cmd, self.limits)
+            limits = self.limits
+            if self._bounds is None or self._bounds[0] is not limits:
+                self._bounds = (limits, command_bounds(limits))
+            applied = clamp_command(cmd, limits, self._bounds[1])
             self._last_written = (cmd, applied)
         self._send(applied)
         return applied
