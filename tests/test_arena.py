@@ -239,3 +239,29 @@ def test_no_push_and_debug_truth_are_recorded_with_the_run(small, tmp_path):
     assert "GROUND TRUTH" in (result.out_dir / "report.md").read_text()
     with pytest.raises(WbcError, match="ground-truth debug switch"):
         run_trial(load_scenario(small).trial("soft", 0, 0), "stand", debug_truth=True)
+
+
+def test_a_policy_file_enters_the_arena_as_policy_path(small, tmp_path, capsys):
+    """``policy:PATH`` runs an exported policy on the same trials: the shipped pi2 file = learned-locked."""
+    from wbc.robots.registry import get_robot as robot_named
+
+    weights = shipped_weights(robot_named("a1-wx200", "locked"))
+    name = f"policy:{weights}"
+    cfg = ArenaConfig(controllers=("learned-locked", name), scenario=small, seeds=(0,), trials=1, bands=("soft",),
+                      out_dir=tmp_path / "p", workers=1, progress=False, save_episodes=True)
+    records = read_records(run_arena(cfg).out_dir / "trials.csv")
+    by_name = {r["controller"]: r for r in records}
+    assert set(by_name) == {"learned-locked", name}
+    same = [{**r, "controller": "", "wall_s": 0.0} for r in (by_name[name], by_name["learned-locked"])]
+    assert _metrics(same[:1]) == _metrics(same[1:])
+    assert len(list((tmp_path / "p" / "episodes").glob("*/*.npz"))) == 2  # one folder per controller, path-safe
+    # a policy for another robot is refused before any trial, naming both robots
+    turn = Path(__file__).resolve().parent.parent / "scenarios" / "turn.toml"
+    assert main(["run", name, "--scenario", str(turn), "--out", str(tmp_path / "t")]) == 2
+    err = capsys.readouterr().err
+    assert "a1-wx200" in err and "go1-arm" in err and "Traceback" not in err
+    # a missing file is named
+    missing = tmp_path / "nothing" / "policy"
+    assert main(["run", f"policy:{missing}", "--scenario", str(small), "--out", str(tmp_path / "m")]) == 2
+    err = capsys.readouterr().err
+    assert "nothing" in err and "not found" in err and "Traceback" not in err

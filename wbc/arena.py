@@ -119,6 +119,11 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         WbcError: bad options or a results directory that belongs to another run.
     """
     scenario = load_scenario(cfg.scenario)
+    for name in cfg.controllers:
+        robot = get_controller(name).robot
+        if robot is not None and robot != scenario.robot:
+            raise ConfigError(f"controller {name} drives {robot}, but scenario {cfg.scenario} is played by "
+                              f"{scenario.robot}")
     bands = cfg.bands or scenario.bands
     for band in bands:
         if band not in scenario.bands:

@@ -389,11 +389,12 @@ def _parser() -> argparse.ArgumentParser:
     from wbc.control import CONTROLLERS
 
     run = sub.add_parser("run", help="play a scenario with one controller")
-    run.add_argument("controller", help=f"one of: {', '.join(CONTROLLERS)}")
+    run.add_argument("controller", help=f"one of: {', '.join(CONTROLLERS)}, or policy:PATH (an exported policy file)")
     _add_arena_options(run)
     run.set_defaults(func=_run)
     compare = sub.add_parser("compare", help="play a scenario with several controllers on the same trials")
-    compare.add_argument("controllers", nargs="+", help=f"two or more of: {', '.join(CONTROLLERS)}")
+    compare.add_argument("controllers", nargs="+",
+                         help=f"two or more of: {', '.join(CONTROLLERS)}, policy:PATH (an exported policy file)")
     _add_arena_options(compare)
     compare.set_defaults(func=_compare)
 
@@ -402,7 +403,8 @@ def _parser() -> argparse.ArgumentParser:
                           "arm, terrain, push arrow, contact forces, command, MPC plan), or replay a stored "
                           "episode (--episode). With --record only, nothing is served: the trial is written as one "
                           "self-contained HTML file. Keys while live (then Enter): p pause, s step, + / - speed, q.")
-    view.add_argument("ctrl", nargs="?", default=None, help=f"controller: one of {', '.join(CONTROLLERS)}")
+    view.add_argument("ctrl", nargs="?", default=None,
+                      help=f"controller: one of {', '.join(CONTROLLERS)}, or policy:PATH")
     view.add_argument("--scenario", default=None, help="scenario file (e.g. scenarios/push.toml)")
     view.add_argument("--trial", type=int, required=True, help="trial index within (band, seed)")
     view.add_argument("--seed", type=int, default=None, help="seed (default 0, or the run's first)")

@@ -3,10 +3,15 @@
 A controller sees only what a real robot gives it (`RobotState`) and the operator's `VelocityCommand`; it never sees
 the scenario, the push schedule or simulator truth. Each registered controller names the arm mode it drives, so
 ``stand-noarm`` runs on the robot without its arm while ``stand`` holds an actuated arm.
+
+Besides the registry's names, ``policy:PATH`` runs any exported policy file (``wbc train``'s ``policy.npz``, a
+baseline's, a composite) through `LearnedController`; its robot and arm mode come from the file, so a run of your own
+meets the shipped controllers on the same trials: ``wbc compare learned policy:runs/train/push-stage3-ppo/policy``.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
@@ -18,7 +23,10 @@ from wbc.robots.description import RobotDescription, check_arm_mode
 from wbc.standing import StandController
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
-__all__ = ["Controller", "ControllerSpec", "CONTROLLERS", "get_controller"]
+__all__ = ["Controller", "ControllerSpec", "CONTROLLERS", "POLICY_PREFIX", "get_controller"]
+
+POLICY_PREFIX = "policy:"
+"""``policy:PATH`` names the exported policy at PATH (the .npz, the .json or their stem)."""
 
 
 @runtime_checkable
@@ -47,12 +55,14 @@ class ControllerSpec:
         arm_mode: arm mode of the robot this controller drives (``none``, ``locked``, ``actuated``).
         make: builds the controller for a robot description.
         summary: one line for ``--help`` and reports.
+        robot: the only robot it can drive (a policy file's), or None for any robot.
     """
 
     name: str
     arm_mode: str
     make: Callable[[RobotDescription], Controller]
     summary: str
+    robot: str | None = None
 
     def __post_init__(self) -> None:
         check_arm_mode(self.arm_mode)
@@ -79,7 +89,24 @@ CONTROLLERS: dict[str, ControllerSpec] = {
 
 
 def get_controller(name: str) -> ControllerSpec:
-    """Look a controller up by name; unknown names raise an error listing the valid ones."""
+    """Look a controller up by name, or read the policy file a ``policy:PATH`` name points to.
+
+    Raises:
+        UnknownNameError: an unknown name (the message lists the valid ones).
+        PolicyFileError: a ``policy:`` file that is missing or malformed (the message names the file and field).
+    """
+    if name.startswith(POLICY_PREFIX):
+        return _policy_spec(name)
     if name not in CONTROLLERS:
-        raise UnknownNameError("controller", name, tuple(CONTROLLERS))
+        raise UnknownNameError("controller", name, (*CONTROLLERS, f"{POLICY_PREFIX}PATH"))
     return CONTROLLERS[name]
+
+
+def _policy_spec(name: str) -> ControllerSpec:
+    from wbc.learned.composite_policy import load_composite
+
+    path = name[len(POLICY_PREFIX):]
+    policy = load_composite(path)  # the whole file is checked here, before any trial starts
+    meta = policy.meta
+    return ControllerSpec(name, meta["arm_mode"], functools.partial(LearnedController, policy_path=path),
+                          f"policy file {path} ({meta['task']} task, stage {meta['stage']})", robot=meta["robot"])

@@ -13,6 +13,7 @@ import io
 import json
 import os
 import platform
+import re
 import subprocess
 from importlib import metadata
 from pathlib import Path
@@ -33,8 +34,13 @@ _STR_FIELDS = {"controller", "scenario", "scenario_hash", "band"}
 
 
 def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: int) -> Path:
-    """Where a results directory keeps a trial's episode log (``wbc run --save-episodes``)."""
-    return Path(out_dir) / "episodes" / controller / f"{band}-s{seed}-t{index}.npz"
+    """Where a results directory keeps a trial's episode log (``wbc run --save-episodes``).
+
+    A controller name that is not a plain word (``policy:runs/x/policy``) becomes one directory, its separators
+    replaced by ``_``.
+    """
+    folder = re.sub(r"[^A-Za-z0-9._-]+", "_", controller)
+    return Path(out_dir) / "episodes" / folder / f"{band}-s{seed}-t{index}.npz"
 
 
 def _parse(row: dict[str, str]) -> dict[str, object]:
