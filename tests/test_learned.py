@@ -497,9 +497,9 @@ def test_controller_observation_matches_the_training_env():
     from wbc.types import VelocityCommand
 
     # the same start, the same constant joint targets, 10 policy steps in the env and on MujocoRobot (both at the
-    # evaluation's 2 ms physics step: training's default 5 ms step is a different simulation)
+    # evaluation's 2 ms physics step and with its CG solver: training's default 5 ms Newton step is another simulation)
     env = BatchedEnv(small_config(num_envs=1, pushes=False, init_joint_noise=0.0, timestep=0.002, decimation=10,
-                                  noise=ObsNoise(
+                                  solver="cg", noise=ObsNoise(
         dof_pos=0.0, dof_vel=0.0, ang_vel=0.0, gravity=0.0), domain=DomainRandomisation(
         num_variants=1, payload_kg=(0.0, 0.0), payload_com_m=0.0, friction=(1.0, 1.0), motor_strength=(1.0, 1.0))))
     robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
@@ -716,6 +716,7 @@ def test_env_push_matches_mujoco_robot():
     from wbc.hardware.perturbation import Push
 
     env = BatchedEnv(small_config(num_envs=1, init_joint_noise=0.0, timestep=0.002, decimation=10,  # MujocoRobot's
+                                  solver="cg",
                                   domain=DomainRandomisation(num_variants=1, payload_kg=(0.0, 0.0), payload_com_m=0.0,
                                                              friction=(1.0, 1.0), motor_strength=(1.0, 1.0))))
     push = Push.horizontal(magnitude=250.0, heading=0.7, offset_in_base=(0.0, 0.12, 0.0), start=0.1, duration=0.06)

@@ -63,6 +63,7 @@ class ModelPool:
                  rng: np.random.Generator) -> None:
         self.desc = desc
         spec = scene_spec(desc, terrain, timestep=config.timestep)
+        spec.option.solver = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}[config.solver]
         for i, geom in enumerate(spec.geoms):  # sensors name their geom; the scene leaves the robot's unnamed
             if not geom.name:
                 geom.name = f"geom{i}"
