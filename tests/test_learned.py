@@ -581,10 +581,8 @@ def test_walking_prior_draws_its_commands_from_the_ranges():
     from wbc.learned.stages import TURN_WALKING_PRIOR_COMMANDS, WALKING_PRIOR_COMMANDS, stage_config
 
     assert stage_config("push", 1).env.command_ranges == WALKING_PRIOR_COMMANDS
-    # the turn task's prior covers the scenario's 1.5 m/s and 2 rad/s
-    turn = stage_config("turn", 1).env.command_ranges
-    assert turn == TURN_WALKING_PRIOR_COMMANDS and turn[0][1] >= 1.5 and turn[2][1] >= 2.0
-    assert stage_config("turn", 3).env.command_ranges is None
+    assert stage_config("turn", 1).env.command_ranges == TURN_WALKING_PRIOR_COMMANDS
+    assert stage_config("turn", 3).env.command_ranges is None  # pi2 and pi3: the scenario's commands
     assert stage_config("push", 2).env.command_ranges is None  # pi2 and pi3: the scenario's 0 or 0.3 m/s
     ranges = ((0.2, 0.4), (-0.1, 0.0), (0.5, 0.5))
     env = BatchedEnv(small_config(num_envs=16, command_ranges=ranges))
