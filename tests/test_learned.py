@@ -748,3 +748,16 @@ def test_probe_reports_per_command_velocities(vec, tmp_path):
     rows = probe_policy(tmp_path / "p", small_config(num_envs=8), steps=4, settle=1)
     assert {r["vx_cmd"] for r in rows} <= {0.0, 0.3} and rows
     assert all(np.isfinite([r["vx"], r["vy"], r["yaw_rate"], r["falls_per_env_s"]]).all() for r in rows)
+
+
+def test_env_solver_is_configurable_and_checked():
+    import mujoco
+
+    from wbc.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="EnvConfig.solver.*newton, cg"):
+        small_config(solver="pgs")
+    for name, want in (("newton", mujoco.mjtSolver.mjSOL_NEWTON), ("cg", mujoco.mjtSolver.mjSOL_CG)):
+        env = BatchedEnv(small_config(num_envs=1, solver=name))
+        assert all(m.opt.solver == want for m in env.pool.models)
+        env.close()
