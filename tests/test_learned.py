@@ -761,3 +761,12 @@ def test_env_solver_is_configurable_and_checked():
         env = BatchedEnv(small_config(num_envs=1, solver=name))
         assert all(m.opt.solver == want for m in env.pool.models)
         env.close()
+
+
+def test_shipped_ppo_baseline_is_a_policy_controller():
+    from wbc.control import get_controller
+    from wbc.learned.controller import WEIGHTS_DIR
+
+    spec = get_controller(f"policy:{WEIGHTS_DIR / 'a1-wx200-actuated-ppo'}")
+    assert (spec.robot, spec.arm_mode) == ("a1-wx200", "actuated")
+    assert "push task, stage 3" in spec.summary
