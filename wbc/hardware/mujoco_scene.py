@@ -9,8 +9,7 @@ from wbc.hardware.terrain import TerrainConfig
 from wbc.robots.description import RobotDescription
 from wbc.robots.mujoco_model import CONTACT_TIMECONST, WORLD_CONAFFINITY, robot_mujoco_spec
 
-__all__ = ["build_scene", "ground_contact_geoms", "scene_spec", "set_ground_friction", "set_terrain_heights",
-           "TERRAIN_GEOM"]
+__all__ = ["build_scene", "scene_spec", "set_ground_friction", "set_terrain_heights", "TERRAIN_GEOM"]
 
 TERRAIN_GEOM = "terrain"
 
@@ -83,11 +82,6 @@ def _pair_with_ground(spec: mujoco.MjSpec, ground: mujoco.MjsGeom) -> None:
         geom.conaffinity = 0
     ground.contype = 0
     ground.conaffinity = 0
-
-
-def ground_contact_geoms(model: mujoco.MjModel) -> np.ndarray:
-    """The robot's geoms that can touch the ground: the second geom of each contact pair (the first is the ground)."""
-    return np.unique(model.pair_geom2)
 
 
 def set_ground_friction(model: mujoco.MjModel, friction: float) -> None:

@@ -80,7 +80,9 @@ TURN_WALKING_PRIOR_COMMANDS = WALKING_PRIOR_COMMANDS
 Ranges widened to the scenario's (vx in [-0.5, 1.5], yaw rate in [-2, 2]) were tried first on go1-arm without its arm
 (1024 environments, 180 iterations, 4.4M steps): the tracking reward stopped rising after ~60 iterations, episodes
 ended by a fall after ~5 s on average, and the exported policy moved at 0.25-0.4 m/s under 1-1.5 m/s commands,
-falling 1.2 times per environment-second (``python -m wbc.learned.probe``)."""
+falling 1.2 times per environment-second (``python -m wbc.learned.probe``). These ranges did not do better on
+go1-arm either (400 iterations, 9.8M steps: it stands, but a walking command of 0.5-1 m/s crouches the trunk to 0.14 m
+until a hip touches the ground): the turn task has no usable pi1 yet, see the README."""
 
 TASKS: dict[str, TaskSpec] = {
     "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
