@@ -47,12 +47,23 @@ def test_contract_checker_catches_a_broken_backend():
         {"q": ["a", "b"]},
     ],
 )
-def test_bad_motor_commands_are_rejected_at_construction(fields):
+@pytest.mark.parametrize("as_array", [False, True], ids=["lists", "float arrays"])
+def test_bad_motor_commands_are_rejected_at_construction(fields, as_array):
+    # float arrays take the fast path of every control tick, lists the slow one: both must refuse
     base = {k: [0.0, 0.0] for k in ("q", "dq", "kp", "kd", "tau")}
     base.update(fields)
+    if as_array:
+        base = {k: np.asarray(v) for k, v in base.items()}
     with pytest.raises(CommandError) as err:
         MotorCommand(**base)
     assert "MotorCommand." in str(err.value)
+
+
+@pytest.mark.filterwarnings("error")
+def test_huge_finite_commands_are_accepted_without_warnings():
+    huge = np.array([1e308, 1e308])
+    cmd = MotorCommand(q=huge, dq=huge, kp=np.zeros(2), kd=np.zeros(2), tau=huge)
+    assert np.array_equal(cmd.q, huge) and not cmd.q.flags.writeable
 
 
 def test_commands_are_read_only():

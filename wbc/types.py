@@ -7,7 +7,6 @@ SI units; quaternions are (w, x, y, z).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,6 +59,13 @@ class RobotState:
 _COMMAND_FIELDS = ("q", "dq", "kp", "kd", "tau")
 
 
+def _adopt_rows(cmd: MotorCommand, rows: np.ndarray) -> None:
+    """Make the rows of a (5, n) array the fields of `cmd`, as read-only views of it."""
+    rows.setflags(write=False)
+    for name, row in zip(_COMMAND_FIELDS, rows, strict=True):
+        object.__setattr__(cmd, name, row)
+
+
 @dataclass(frozen=True)
 class MotorCommand:
     """Per-joint low-level command with Unitree semantics.
@@ -84,8 +90,8 @@ class MotorCommand:
 
     def __post_init__(self) -> None:
         # fast path (every control tick): the five fields stack into one (5, n) float array, checked in two
-        # reductions. A non-finite value makes the sum non-finite; finite values whose sum overflows (|x| ~ 1e308)
-        # and everything malformed (ragged, not 1-D, not numeric) fall through to the slow path, which names the fault.
+        # reductions; anything malformed (ragged, not 1-D, not numeric) or faulty falls through to the slow path,
+        # which names the fault.
         q, dq, kp, kd, tau = self.q, self.dq, self.kp, self.kd, self.tau
         nd = np.ndarray
         if type(q) is nd and type(dq) is nd and type(kp) is nd and type(kd) is nd and type(tau) is nd:
@@ -94,13 +100,8 @@ class MotorCommand:
             except (TypeError, ValueError):
                 stacked = None
             if (stacked is not None and stacked.ndim == 2 and stacked.shape[1] > 0
-                    and math.isfinite(stacked.sum()) and stacked[2:4].min() >= 0.0):
-                stacked.setflags(write=False)  # its rows, the fields, are read-only views
-                object.__setattr__(self, "q", stacked[0])
-                object.__setattr__(self, "dq", stacked[1])
-                object.__setattr__(self, "kp", stacked[2])
-                object.__setattr__(self, "kd", stacked[3])
-                object.__setattr__(self, "tau", stacked[4])
+                    and np.isfinite(stacked).all() and stacked[2:4].min() >= 0.0):
+                _adopt_rows(self, stacked)
                 return
         # slow path: find the first fault and name it
         n = None
@@ -146,9 +147,7 @@ class MotorCommand:
         `rows` becomes read-only and is shared by the fields.
         """
         obj = object.__new__(cls)
-        rows.setflags(write=False)
-        for name, row in zip(_COMMAND_FIELDS, rows, strict=True):
-            object.__setattr__(obj, name, row)
+        _adopt_rows(obj, rows)
         return obj
 
     @classmethod
