@@ -123,3 +123,16 @@ def test_ground_truth_debug_switch_replaces_the_estimate():
     assert len(seen) == 100
     assert np.array_equal(ctrl.kin.q_pin[0:3], seen[-1].base_position_in_world)
     assert np.all(ctrl.estimator.velocity == 0.0)
+
+
+def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_references():
+    from wbc.bench import bench_mpc
+
+    result = bench_mpc(seconds=0.2, single_thread=False)
+    for key in ("mpc_solve_ms_median", "mpc_solve_ms_p99", "wbc_tick_us_median", "realtime_factor"):
+        assert result[key] > 0
+    assert not result["fell"]
+    # the targets (100 us at a 40 us reference tick; 5x at 110k reference steps/s) scaled by this machine's figures
+    assert result["scaled_target_wbc_tick_us"] == pytest.approx(2.5 * result["reference_placo_tick_us"])
+    assert result["scaled_target_realtime_factor"] == pytest.approx(5.0 * result["reference_steps_per_s"] / 110_000)
+    assert "reference_placo_tick_us" not in bench_mpc(seconds=0.1, single_thread=False, reference=False)

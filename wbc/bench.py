@@ -15,7 +15,8 @@ from wbc.hardware.terrain import TerrainConfig
 from wbc.robots.urdf import example_robot_data_share
 from wbc.standing import stand_command
 
-__all__ = ["REFERENCE_TARGETS", "bench_sim", "bench_sweep", "machine_description", "reference_a1"]
+__all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_TARGETS", "bench_mpc", "bench_sim", "bench_sweep", "machine_description",
+           "reference_a1", "reference_placo_tick_us"]
 
 
 def machine_description() -> str:
@@ -34,6 +35,11 @@ def machine_description() -> str:
 
 REFERENCE_TARGETS = {"steps_per_s": (80_000.0, 110_000.0), "batched_steps_per_s": (150_000.0, 218_000.0)}
 """Issue 2's speed targets and the bare-A1 figures they were set against (steps/s): (target, reference)."""
+
+MPC_REFERENCE_TARGETS = {"wbc_tick_us_median": (100.0, 40.0), "realtime_factor": (5.0, 110_000.0)}
+"""Issue 4's speed targets and what they were set against: (target, reference). The whole-body tick's reference is a
+bare-A1 PlaCo DynamicsSolver tick with four contacts [us] (`reference_placo_tick_us`); the closed loop's is the bare A1's
+single-threaded physics [steps/s] (`reference_a1`)."""
 
 
 def reference_a1() -> tuple[mujoco.MjModel, mujoco.MjData]:
@@ -66,6 +72,61 @@ def reference_a1() -> tuple[mujoco.MjModel, mujoco.MjData]:
     data.ctrl[:] = data.qpos[7:]
     mujoco.mj_step(model, data, nstep=500)
     return model, data
+
+
+def reference_placo_tick_us(ticks: int = 1000) -> float:
+    """Median time of a bare-A1 whole-body tick in PlaCo's DynamicsSolver [us]: the reference of the 100 us target.
+
+    The A1 URDF of example-robot-data (geometry stripped), standing at the nominal pose with four unilateral point
+    contacts (friction 0.6), a CoM task and a trunk orientation task; a tick sets the state, updates the kinematics
+    and solves, as `WholeBodyQp.solve` does.
+    """
+    import tempfile
+    import xml.etree.ElementTree as ET
+    from pathlib import Path
+
+    import placo
+
+    root = ET.parse(example_robot_data_share() / "example-robot-data/robots/a1_description/urdf/a1.urdf").getroot()
+    for link in root.iter("link"):
+        for child in list(link.findall("visual")) + list(link.findall("collision")):
+            link.remove(child)
+    with tempfile.TemporaryDirectory(prefix="wbc-bench-") as folder:
+        path = Path(folder) / "a1.urdf"
+        path.write_text(ET.tostring(root, encoding="unicode"))
+        robot = placo.RobotWrapper(str(path), placo.Flags.ignore_collisions)
+    q = robot.state.q.copy()
+    q[2], q[3:7] = 0.3, (0.0, 0.0, 0.0, 1.0)
+    for leg in ("FR", "FL", "RR", "RL"):
+        for joint, value in (("hip", 0.0), ("thigh", 0.8), ("calf", -1.5)):
+            q[robot.get_joint_offset(f"{leg}_{joint}_joint")] = value
+    robot.state.q = q
+    robot.update_kinematics()
+    solver = placo.DynamicsSolver(robot)
+    solver.mask_fbase(False)
+    solver.enable_torque_limits(True)
+    for leg in ("FR", "FL", "RR", "RL"):
+        task = solver.add_position_task(f"{leg}_foot", robot.get_T_world_frame(f"{leg}_foot")[:3, 3])
+        contact = solver.add_point_contact(task)
+        contact.mu, contact.unilateral = 0.6, True
+    com = solver.add_com_task(robot.com_world())
+    com.configure("com", "soft", 10.0)
+    trunk = solver.add_orientation_task("trunk", np.eye(3))
+    trunk.configure("trunk", "soft", 10.0)
+    state = robot.state
+    rng = np.random.default_rng(0)
+    qd = 0.05 * rng.standard_normal((ticks, robot.model.nv))
+    times = np.empty(ticks)
+    for k in range(ticks):
+        t0 = time.perf_counter()
+        state.q = q
+        state.qd = qd[k]
+        robot.update_kinematics()
+        result = solver.solve(False)
+        times[k] = time.perf_counter() - t0
+        if not result.success:
+            raise RuntimeError("the reference PlaCo tick failed to solve")
+    return 1e6 * float(np.median(times))
 
 
 class _Batched:
@@ -209,7 +270,7 @@ def bench_sweep(
 
 
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
-              single_thread: bool = True) -> dict[str, float | str | int]:
+              single_thread: bool = True, reference: bool = True) -> dict[str, float | str | int]:
     """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
 
     With `single_thread` (the default) it runs in a spawned process whose BLAS is single-threaded, as every arena
@@ -221,6 +282,13 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     (PlaCo: kinematics, dynamics, tasks, QP, plus setting its targets from Python) and ``control_tick_us_median``
     the whole control tick without an MPC update (estimator, kinematics, footholds, swing targets, whole-body QP,
     motor command). The real-time factor covers everything: physics, controller and MPC updates.
+
+    With `reference`, the references issue 4's targets were set against are measured before and after the closed loop
+    in the same process (`MPC_REFERENCE_TARGETS`): a bare-A1 PlaCo tick (`reference_placo_tick_us`; "about 40 us") and
+    the bare A1's single-threaded physics (`reference_a1`; 110k steps/s). The results then include
+    ``reference_placo_tick_us``, ``reference_steps_per_s``, and the targets scaled by them to this machine:
+    ``scaled_target_wbc_tick_us`` (100 us times the reference tick over 40 us) and ``scaled_target_realtime_factor``
+    (5x times the reference physics over 110k).
     """
     if single_thread:
         import multiprocessing
@@ -229,13 +297,25 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         from wbc.executors import single_threaded_blas
 
         with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
-            result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False).result()
+            result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
+                                 reference=reference).result()
         return {**result, "blas": "single-threaded"}
     from wbc.control import get_controller
     from wbc.types import VelocityCommand
 
     spec = get_controller(controller)
     sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
+    ref_ticks, ref_rates = [], []
+
+    def measure_references() -> None:
+        ref_ticks.append(reference_placo_tick_us(500))
+        model, data = reference_a1()
+        t0 = time.perf_counter()
+        mujoco.mj_step(model, data, nstep=1000)
+        ref_rates.append(1000 / (time.perf_counter() - t0))
+
+    if reference:
+        measure_references()
     with sim:
         sim.reset(seed=0)
         ctrl = spec.make(sim.desc)
@@ -272,6 +352,14 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
             sim.advance(dt)
         wall = time.perf_counter() - start
         fell = sim.fallen()
+    references: dict[str, float] = {}
+    if reference:
+        measure_references()
+        tick_ref, rate_ref = float(np.mean(ref_ticks)), max(ref_rates)
+        (tick_target, tick_at), (rt_target, rt_at) = MPC_REFERENCE_TARGETS.values()
+        references = {"reference_placo_tick_us": tick_ref, "reference_steps_per_s": rate_ref,
+                      "scaled_target_wbc_tick_us": tick_target * tick_ref / tick_at,
+                      "scaled_target_realtime_factor": rt_target * rate_ref / rt_at}
     return {
         "robot": robot,
         "controller": controller,
@@ -285,4 +373,5 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         "fell": bool(fell),
         "blas": "default threads",
         "machine": machine_description(),
+        **references,
     }

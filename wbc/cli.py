@@ -91,7 +91,7 @@ def _bench_train(args: argparse.Namespace) -> int:
     from wbc.learned.throughput import bench_train
 
     cfg = EnvConfig(arm_mode=args.arm, num_envs=args.envs, nthread=args.threads, terrain=args.terrain)
-    result = bench_train(cfg, steps=args.steps)
+    result = bench_train(cfg, steps=args.steps, reference=not args.no_reference)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -107,6 +107,11 @@ def _bench_train(args: argparse.Namespace) -> int:
     print(f"  CPU-time bound : {result['cpu_bound_control_steps_per_s']:>10,.0f} control steps/s with the cores to "
           f"itself (physics alone {result['cpu_bound_physics_only_control_steps_per_s']:,.0f}; CPU per step: "
           f"physics {result['physics_cpu_ms_per_step']:.0f} ms, Python {result['python_cpu_ms_per_step']:.1f} ms)")
+    if "reference_physics_limit_control_steps_per_s" in result:
+        print(f"  reference      : {result['reference_physics_limit_control_steps_per_s']:>10,.0f} control steps/s "
+              f"(bare A1, 64 envs, 2 ms steps at 50 Hz; the target's ~22k); env at "
+              f"{100 * result['control_steps_ratio_to_reference']:.0f} % of it, the target (15k of 21.8k) asks "
+              f"{100 * 15 / 21.8:.0f} %: {result['scaled_target_control_steps_per_s']:,.0f} control steps/s here")
     return 0
 
 
@@ -262,7 +267,8 @@ def _view(args: argparse.Namespace) -> int:
 def _bench_mpc(args: argparse.Namespace) -> int:
     from wbc.bench import bench_mpc
 
-    result = bench_mpc(args.robot, args.controller, seconds=args.seconds, single_thread=not args.threaded_blas)
+    result = bench_mpc(args.robot, args.controller, seconds=args.seconds, single_thread=not args.threaded_blas,
+                       reference=not args.no_reference)
     if args.json:
         print(json.dumps(result, indent=2))
         return 0
@@ -274,6 +280,11 @@ def _bench_mpc(args: argparse.Namespace) -> int:
     print(f"  control tick: median {result['control_tick_us_median']:.0f} us (estimator + footholds + QP + command, "
           "ticks without an MPC update)")
     print(f"  closed loop    : {result['realtime_factor']:.1f}x real time on one core")
+    if "reference_placo_tick_us" in result:
+        print(f"  references     : bare-A1 PlaCo tick {result['reference_placo_tick_us']:.0f} us (the targets' ~40 us), "
+              f"bare-A1 physics {result['reference_steps_per_s']:,.0f} steps/s (the targets' 110k)")
+        print(f"  targets scaled to this machine: whole-body tick <= {result['scaled_target_wbc_tick_us']:.0f} us, "
+              f"closed loop >= {result['scaled_target_realtime_factor']:.1f}x real time")
     return 0
 
 
@@ -350,6 +361,7 @@ def _parser() -> argparse.ArgumentParser:
     mpc.add_argument("--threaded-blas", action="store_true",
                      help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
     mpc.add_argument("--json", action="store_true")
+    mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
     mpc.set_defaults(func=_bench_mpc)
     sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
     sweep.add_argument("--scenario", default="scenarios/push.toml")
@@ -365,6 +377,7 @@ def _parser() -> argparse.ArgumentParser:
     btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
     btrain.add_argument("--terrain", default="scenario", help="scenario (the push scenario's ground) or flat")
     btrain.add_argument("--steps", type=int, default=50, help="policy steps per measurement")
+    btrain.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measurement")
     btrain.add_argument("--json", action="store_true")
     btrain.set_defaults(func=_bench_train)
 

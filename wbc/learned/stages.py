@@ -40,8 +40,8 @@ from wbc.learned.bc_schedule import BCSchedule
 from wbc.learned.env_config import EnvConfig, RewardScales
 from wbc.learned.train_config import TrainConfig
 
-__all__ = ["BASELINES", "TASKS", "TURN_WALKING_PRIOR_COMMANDS", "TaskSpec", "WALKING_PRIOR_COMMANDS",
-           "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
+__all__ = ["BASELINES", "TASKS", "TURN_WALKING_PRIOR_COMMANDS", "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec",
+           "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -60,6 +60,7 @@ class TaskSpec:
     bands: tuple[str, ...]
     tracking_sigma: float
     walking_prior_commands: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+    walking_prior_termination: float = 0.0
 
 
 WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
@@ -84,11 +85,21 @@ falling 1.2 times per environment-second (``python -m wbc.learned.probe``). Thes
 go1-arm either (400 iterations, 9.8M steps: it stands, but a walking command of 0.5-1 m/s crouches the trunk to 0.14 m
 until a hip touches the ground): the turn task has no usable pi1 yet, see the README."""
 
+TURN_WALKING_PRIOR_TERMINATION = -100.0
+"""The turn task's pi1 pays for falls (the push task's pi1 does not, legged_gym's recipe).
+
+Without the penalty both go1-arm pi1 runs found a dive: under a 0.8 m/s command the deterministic policy folds its
+front legs (thighs 1.45 rad against 0.8 nominal), pitches 19 degrees nose-down and lunges, and its trunk's front
+corner touches the ground 0.8 s after every reset (1.2 falls per environment-second in the training env). With
+falls free and rewards clipped at zero, a lunge that earns tracking reward for 0.8 s and restarts from a fresh stand
+was a local optimum the A1 never fell into. -100 is the later stages' weight: -2 per fall."""
+
 TASKS: dict[str, TaskSpec] = {
     "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
                      walking_prior_commands=WALKING_PRIOR_COMMANDS),
     "turn": TaskSpec(robot="go1-arm", scenario="scenarios/turn.toml", bands=("1.0", "1.25", "1.5"),
-                     tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS),
+                     tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
+                     walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION),
 }
 
 BASELINES: dict[str, str] = {
@@ -159,7 +170,7 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
                                                                     _ARM[teacher_stage]),
         tracking_sigma=WALKING_PRIOR_SIGMA if walking_prior else spec.tracking_sigma,
         command_ranges=spec.walking_prior_commands if walking_prior else None,
-        rewards=RewardScales(termination=0.0) if walking_prior else RewardScales(),
+        rewards=RewardScales(termination=spec.walking_prior_termination) if walking_prior else RewardScales(),
     )
     env = dataclasses.replace(env, **(env_overrides or {}))
     bc, teacher_path, init_path = None, None, None

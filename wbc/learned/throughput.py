@@ -6,6 +6,11 @@ a fraction. On a machine shared with other work, wall-clock figures swing by 2x 
 time this process used (``time.process_time``, all its threads) varies less, so the figures also include the
 throughput the same work would reach with the `nthread` cores to itself: ``cpu_bound_control_steps_per_s``, from the
 env's single-threaded Python CPU time per step plus its rollout CPU time spread over the rollout's threads.
+
+The 15k target was set against "the physics limit here ~22k at 50 Hz, dt 0.002": the bare A1 URDF batched over 64
+environments by `mujoco.rollout` on 2 threads (218k physics steps/s), ten physics steps per control step. The same
+reference (`wbc.bench.reference_a1`) is measured in the same repeats, interleaved with the env, so the figures include
+the target scaled to this machine's speed (``scaled_target_control_steps_per_s``).
 """
 
 from __future__ import annotations
@@ -19,11 +24,16 @@ from mujoco import rollout
 from wbc.learned.env import BatchedEnv
 from wbc.learned.env_config import EnvConfig
 
-__all__ = ["bench_train"]
+__all__ = ["TRAIN_TARGET", "bench_train"]
+
+TRAIN_TARGET = (15_000.0, 21_800.0)
+"""Issue 5's training-env target and the reference physics limit it was set against [control steps/s]."""
+REFERENCE_STEPS_PER_CONTROL_STEP = 10
+"""The reference's physics steps per control step: 2 ms steps at 50 Hz."""
 
 
 def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: int = 3,
-                action_std: float = 0.5) -> dict[str, float | int | str]:
+                action_std: float = 0.5, reference: bool = True) -> dict[str, float | int | str]:
     """Measure the batched env.
 
     Args:
@@ -32,25 +42,33 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
         steps: policy steps per measurement.
         repeats: measurements; the best is reported.
         action_std: standard deviation of the random actions.
+        reference: also measure the bare-A1 reference (64 environments, `nthread` threads), interleaved.
 
     Returns:
         ``control_steps_per_s`` (policy steps of all environments per second), ``physics_steps_per_s`` (the same
         figure times `decimation`), ``rollout_only_control_steps_per_s`` (the physics limit), ``env_efficiency``
         (their ratio), ``python_ms_per_step``, the CPU-time figures (``python_cpu_ms_per_step``,
         ``physics_cpu_ms_per_step``, ``cpu_bound_control_steps_per_s``,
-        ``cpu_bound_physics_only_control_steps_per_s``) and the settings.
+        ``cpu_bound_physics_only_control_steps_per_s``) and the settings; with `reference` also
+        ``reference_physics_limit_control_steps_per_s`` (the bare A1's batched physics steps/s over 10),
+        ``control_steps_ratio_to_reference`` and ``scaled_target_control_steps_per_s`` (15k times this machine's
+        reference over 21.8k).
     """
-    from wbc.bench import machine_description
+    from wbc.bench import _Batched, machine_description, reference_a1
 
     cfg = config if config is not None else EnvConfig()
     env = BatchedEnv(cfg)
     rng = np.random.default_rng(0)
     n = cfg.num_envs
+    ref = _Batched(*reference_a1(), batch=64, nthread=cfg.nthread, nstep=500) if reference else None
+    best_ref = 0.0
     try:
         for _ in range(5):
             env.step(action_std * rng.standard_normal((n, env.num_actions)))
         best, resets, cpu_python, cpu_physics = 0.0, 0, np.inf, np.inf
         for _ in range(repeats):
+            if ref is not None:
+                best_ref = max(best_ref, ref.rate())
             actions = [action_std * rng.standard_normal((n, env.num_actions)) for _ in range(steps)]
             t0, c0, p0 = time.perf_counter(), time.process_time(), env.physics_cpu_s
             for a in actions:
@@ -72,6 +90,13 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
             cpu_raw = min(cpu_raw, (time.process_time() - c0) / steps)
     finally:
         env.close()
+    figures: dict[str, float] = {}
+    if reference:
+        limit = best_ref / REFERENCE_STEPS_PER_CONTROL_STEP
+        target, at = TRAIN_TARGET
+        figures = {"reference_physics_limit_control_steps_per_s": limit,
+                   "control_steps_ratio_to_reference": best / limit,
+                   "scaled_target_control_steps_per_s": target / at * limit}
     return {
         "control_steps_per_s": best,
         "physics_steps_per_s": best * cfg.decimation,
@@ -92,4 +117,5 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
         "terrain": cfg.terrain,
         "mujoco": mujoco.__version__,
         "machine": machine_description(),
+        **figures,
     }
