@@ -37,9 +37,9 @@ REFERENCE_TARGETS = {"steps_per_s": (80_000.0, 110_000.0), "batched_steps_per_s"
 """Issue 2's speed targets and the bare-A1 figures they were set against (steps/s): (target, reference)."""
 
 MPC_REFERENCE_TARGETS = {"wbc_tick_us_median": (100.0, 40.0), "realtime_factor": (5.0, 110_000.0)}
-"""Issue 4's speed targets and what they were set against: (target, reference). The whole-body tick's reference is a
-bare-A1 PlaCo DynamicsSolver tick with four contacts [us] (`reference_placo_tick_us`); the closed loop's is the bare A1's
-single-threaded physics [steps/s] (`reference_a1`)."""
+"""Issue 4's speed targets and what they were set against: (target, reference). The whole-body tick's reference is
+a bare-A1 PlaCo DynamicsSolver tick with four contacts [us] (`reference_placo_tick_us`); the closed loop's is the
+bare A1's single-threaded physics [steps/s] (`reference_a1`)."""
 
 
 def reference_a1() -> tuple[mujoco.MjModel, mujoco.MjData]:

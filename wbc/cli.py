@@ -281,10 +281,10 @@ def _bench_mpc(args: argparse.Namespace) -> int:
           "ticks without an MPC update)")
     print(f"  closed loop    : {result['realtime_factor']:.1f}x real time on one core")
     if "reference_placo_tick_us" in result:
-        print(f"  references     : bare-A1 PlaCo tick {result['reference_placo_tick_us']:.0f} us (the targets' ~40 us), "
-              f"bare-A1 physics {result['reference_steps_per_s']:,.0f} steps/s (the targets' 110k)")
-        print(f"  targets scaled to this machine: whole-body tick <= {result['scaled_target_wbc_tick_us']:.0f} us, "
-              f"closed loop >= {result['scaled_target_realtime_factor']:.1f}x real time")
+        print(f"  references     : bare-A1 PlaCo tick {result['reference_placo_tick_us']:.0f} us (the targets' "
+              f"~40 us), bare-A1 physics {result['reference_steps_per_s']:,.0f} steps/s (the targets' 110k)")
+        print(f"  targets scaled to this machine: whole-body tick <= {result['scaled_target_wbc_tick_us']:.0f} "
+              f"us, closed loop >= {result['scaled_target_realtime_factor']:.1f}x real time")
     return 0
 
 
