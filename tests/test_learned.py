@@ -616,6 +616,36 @@ def test_fall_penalty_survives_the_positive_clipping():
     np.testing.assert_allclose(terms["termination"], [0.0, -50.0 * dt])
 
 
+def test_base_height_term_charges_a_robot_that_lies_down_and_the_env_measures_the_trunk_height():
+    from wbc.learned.env import BatchedEnv
+    from wbc.learned.env_config import RewardScales
+    from wbc.learned.rewards import Rewards, StepData
+
+    n, j = 2, 12
+    off = {f: 0.0 for f in RewardScales.__dataclass_fields__}
+    cfg = small_config(rewards=RewardScales(**{**off, "tracking_lin_vel": 1.0, "base_height": -30.0}),
+                       base_height_target=0.28, only_positive_rewards=False)
+    rewards = Rewards(cfg, -np.ones(j), np.ones(j), np.zeros(j))
+    z, zj = np.zeros((n, 3)), np.zeros((n, j))
+    step = StepData(base_linvel_in_body=z, base_angvel_in_body=z, gravity_in_body=z, command=z, q=zj, dq=zj,
+                    dq_before=zj, power=None, torque_sq=None, action=zj, last_action=zj,
+                    first_contact=np.zeros((n, 4), bool), air_time=np.zeros((n, 4)), terminated=np.zeros(n, bool),
+                    base_height=np.array([0.28, 0.08]))  # standing at the target; lying on folded legs
+    total, terms = rewards.compute(step)
+    dt = cfg.policy_dt
+    np.testing.assert_allclose(terms["base_height"], [0.0, -30.0 * 0.2 ** 2 * dt])
+    np.testing.assert_allclose(total, [dt, dt - 30.0 * 0.2 ** 2 * dt])
+    # in the env the term sees the trunk's height above the ground: a fresh robot is near its spawn height
+    env = BatchedEnv(cfg)
+    try:
+        env.step(np.zeros((cfg.num_envs, env.num_actions)))
+        height = env.state[:, 1 + 2]  # flat ground at z = 0
+        assert np.all(np.abs(height - env.desc.stand_height) < 0.05)
+        assert env._episode_sums["base_height"] == pytest.approx(-30.0 * (height - 0.28) ** 2 * dt)
+    finally:
+        env.close()
+
+
 # -- CLI -----------------------------------------------------------------------------------------------------------
 def test_bench_train_reports_control_steps_per_second():
     from wbc.learned.throughput import bench_train

@@ -231,6 +231,7 @@ class BatchedEnv:
             gravity_in_body=projected_gravity(qpos[:, 3:7]), command=self.command, q=qpos[:, 7:], dq=qvel[:, 6:],
             dq_before=dq_before, power=power, torque_sq=torque_sq, action=a, last_action=self.last_action,
             first_contact=first_contact, air_time=air, terminated=fell,
+            base_height=qpos[:, 2] - self.pool.ground_height[self.variant],
         )
         reward, terms = self.rewards.compute(data)
         for name, value in terms.items():

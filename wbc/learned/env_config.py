@@ -33,6 +33,9 @@ class RewardScales:
     run on the push task (tracking width 0.05) walked at 0.22 m/s after 50 iterations, then kept falling onto its
     front hips (0.05-0.09 falls per env-second) and drifted back to standing by iteration 150 (0.03 m/s under the
     0.3 m/s command): under discounting, a fall only cost the lost future of a reward clipped at zero.
+
+    `base_height` (legged_gym's term, off there and here by default) penalises (h - `EnvConfig.base_height_target`)^2,
+    h the trunk's height above the ground; the turn task's stages use it (see `wbc.learned.stages`).
     """
 
     tracking_lin_vel: float = 1.0
@@ -48,6 +51,7 @@ class RewardScales:
     feet_air_time: float = 1.0
     dof_pos_limits: float = -10.0
     arm_deviation: float = 0.0
+    base_height: float = 0.0
     termination: float = -100.0
 
     def active(self) -> dict[str, float]:
@@ -131,6 +135,7 @@ class EnvConfig:
             -0.3, which made stepping cost more than the tracking it earned; a first pi1 run (1024 envs, 100
             iterations, sigma 0.25, target 0.5 s) stood still under the 0.3 m/s command.
         soft_dof_pos_limit: fraction of the joint range beyond which `dof_pos_limits` penalises.
+        base_height_target: trunk height the `base_height` reward term asks for [m].
         only_positive_rewards: clip each step's total reward at zero from below.
         teacher_arm_mode: if set, also emit the ``teacher`` observation of a policy on that arm mode.
         command_ranges: None (commands from the scenario's trials), or ((vx lo, hi), (vy lo, hi), (yaw rate lo, hi))
@@ -164,6 +169,7 @@ class EnvConfig:
     tracking_sigma: float = 0.1
     feet_air_time_target: float = 0.2
     soft_dof_pos_limit: float = 0.9
+    base_height_target: float = 0.28
     only_positive_rewards: bool = True
     teacher_arm_mode: str | None = None
     command_ranges: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = None

@@ -37,6 +37,8 @@ class StepData:
         first_contact: (N, 4) feet touching down this step.
         air_time: (N, 4) air time of the feet touching down this step (zero elsewhere) [s].
         terminated: (N,) the episode ended by a fall this step.
+        base_height: (N,) trunk origin above the ground level of the robot's spawn point [m] (the ground itself on
+            flat terrain).
     """
 
     base_linvel_in_body: np.ndarray
@@ -53,6 +55,7 @@ class StepData:
     first_contact: np.ndarray
     air_time: np.ndarray
     terminated: np.ndarray
+    base_height: np.ndarray | None = None
 
 
 class Rewards:
@@ -144,6 +147,9 @@ class Rewards:
         if s.q.shape[1] <= self.num_legs_joints:
             return np.zeros(s.q.shape[0])
         return np.sum((s.q[:, 12:] - self.default_q[12:]) ** 2, axis=1)
+
+    def _reward_base_height(self, s: StepData) -> np.ndarray:
+        return np.square(s.base_height - self.config.base_height_target)
 
     def _reward_termination(self, s: StepData) -> np.ndarray:
         return s.terminated.astype(np.float64)

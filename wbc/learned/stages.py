@@ -40,8 +40,8 @@ from wbc.learned.bc_schedule import BCSchedule
 from wbc.learned.env_config import EnvConfig, RewardScales
 from wbc.learned.train_config import TrainConfig
 
-__all__ = ["BASELINES", "TASKS", "TURN_WALKING_PRIOR_COMMANDS", "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec",
-           "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
+__all__ = ["BASELINES", "TASKS", "TURN_BASE_HEIGHT", "TURN_WALKING_PRIOR_COMMANDS", "TURN_WALKING_PRIOR_TERMINATION",
+           "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -53,6 +53,9 @@ class TaskSpec:
     tracking reward, and two pi1 runs (1024 environments, 150 iterations, 3.7M steps each) settled on standing:
     their deterministic policy moved at 0.00 m/s under the 0.3 m/s command (``python -m wbc.learned.probe``). At
     0.05 standing earns 17 %. The turn task's 1-1.5 m/s commands keep legged_gym's 0.25.
+
+    `walking_prior_termination` is pi1's fall penalty (`RewardScales.termination`); `base_height` and
+    `base_height_target` switch on the trunk-height term in every stage of the task (`RewardScales.base_height`).
     """
 
     robot: str
@@ -61,6 +64,8 @@ class TaskSpec:
     tracking_sigma: float
     walking_prior_commands: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
     walking_prior_termination: float = 0.0
+    base_height: float = 0.0
+    base_height_target: float = 0.28
 
 
 WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
@@ -94,12 +99,22 @@ corner touches the ground 0.8 s after every reset (1.2 falls per environment-sec
 falls free and rewards clipped at zero, a lunge that earns tracking reward for 0.8 s and restarts from a fresh stand
 was a local optimum the A1 never fell into. -100 is the later stages' weight: -2 per fall."""
 
+TURN_BASE_HEIGHT = -30.0
+"""The turn task's weight on (trunk height - 0.28 m)^2, in every stage.
+
+With the fall penalty alone, a third go1-arm pi1 run (300 iterations, 7.4M steps) learned to lie down: within 0.5 s
+of any command the deterministic policy folds every leg (thighs ~2 rad, calves ~-2.5 rad) and rests its trunk 8 cm
+above the ground on its feet, where nothing counts as a fall and standing still still earns exp(-v^2 / 0.25) of the
+tracking reward. At -30 lying there costs 1.2 per second against the 1.5 that perfect tracking can earn; a walk at
+0.25 m costs 0.03."""
+
 TASKS: dict[str, TaskSpec] = {
     "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
                      walking_prior_commands=WALKING_PRIOR_COMMANDS),
     "turn": TaskSpec(robot="go1-arm", scenario="scenarios/turn.toml", bands=("1.0", "1.25", "1.5"),
                      tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
-                     walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION),
+                     walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION, base_height=TURN_BASE_HEIGHT,
+                     base_height_target=0.28),
 }
 
 BASELINES: dict[str, str] = {
@@ -170,7 +185,9 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
                                                                     _ARM[teacher_stage]),
         tracking_sigma=WALKING_PRIOR_SIGMA if walking_prior else spec.tracking_sigma,
         command_ranges=spec.walking_prior_commands if walking_prior else None,
-        rewards=RewardScales(termination=spec.walking_prior_termination) if walking_prior else RewardScales(),
+        rewards=dataclasses.replace(RewardScales(termination=spec.walking_prior_termination) if walking_prior
+                                    else RewardScales(), base_height=spec.base_height),
+        base_height_target=spec.base_height_target,
     )
     env = dataclasses.replace(env, **(env_overrides or {}))
     bc, teacher_path, init_path = None, None, None
