@@ -730,6 +730,13 @@ def test_stage_and_baseline_configurations():
     assert c3.init_from.endswith("push-stage2-curriculum/policy") and c3.run_dir.endswith("push-stage3-curriculum")
     turn = stage_config("turn", 3)
     assert turn.env.robot == "go1-arm" and turn.env.bands == ("1.0", "1.25", "1.5")
+    # the turn task's pi1 starts from the push task's shipped pi1 (the A1's walker), which the Go1 can run: same
+    # observation and action layout, loadable as a warm start
+    t1 = stage_config("turn", 1)
+    assert s1.init_from is None and t1.init_from is not None and t1.env.robot == "go1-arm"
+    prior = load_policy(t1.init_from)
+    assert (prior.meta["robot"], prior.meta["arm_mode"], prior.num_actions) == ("a1-wx200", "none", 12)
+    assert t1.action_mask == tuple(range(12)) and t1.bc is None and t1.env.rewards.termination < 0
     with pytest.raises(ConfigError, match="stage-3"):
         stage_config("push", 2, "ppo")
     dec = stage_config("push", 3, "decoupled")

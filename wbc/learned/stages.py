@@ -40,8 +40,9 @@ from wbc.learned.bc_schedule import BCSchedule
 from wbc.learned.env_config import EnvConfig, RewardScales
 from wbc.learned.train_config import TrainConfig
 
-__all__ = ["BASELINES", "TASKS", "TURN_BASE_HEIGHT", "TURN_WALKING_PRIOR_COMMANDS", "TURN_WALKING_PRIOR_TERMINATION",
-           "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
+__all__ = ["BASELINES", "TASKS", "TURN_BASE_HEIGHT", "TURN_WALKING_PRIOR_COMMANDS", "TURN_WALKING_PRIOR_INIT",
+           "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name",
+           "stage_config"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -54,7 +55,8 @@ class TaskSpec:
     their deterministic policy moved at 0.00 m/s under the 0.3 m/s command (``python -m wbc.learned.probe``). At
     0.05 standing earns 17 %. The turn task's 1-1.5 m/s commands keep legged_gym's 0.25.
 
-    `walking_prior_termination` is pi1's fall penalty (`RewardScales.termination`); `base_height` and
+    `walking_prior_termination` is pi1's fall penalty (`RewardScales.termination`); `walking_prior_init` names shipped
+    weights (``wbc/learned/weights/<name>``) pi1's actor starts from (`wbc.learned.warm_start`); `base_height` and
     `base_height_target` switch on the trunk-height term in every stage of the task (`RewardScales.base_height`).
     """
 
@@ -64,6 +66,7 @@ class TaskSpec:
     tracking_sigma: float
     walking_prior_commands: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
     walking_prior_termination: float = 0.0
+    walking_prior_init: str | None = None
     base_height: float = 0.0
     base_height_target: float = 0.28
 
@@ -79,42 +82,47 @@ over standing still to pay for discovering a gait. legged_gym's recipe (commands
 fall penalty) is what reliably learns to walk, so pi1 uses it; pi2 and pi3 train on the scenario's commands."""
 WALKING_PRIOR_SIGMA = 0.25
 
-TURN_WALKING_PRIOR_COMMANDS = WALKING_PRIOR_COMMANDS
-"""The turn task's pi1 commands: the push task's (legged_gym's) ranges; pi2 learns the scenario's 1-1.5 m/s and
-0.5-2 rad/s on top of them, with BC towards pi1 annealed away.
+TURN_WALKING_PRIOR_INIT = "a1-wx200-none"
+"""The turn task's pi1 starts from the push task's pi1 (the A1 without its arm; same observation and action layout)
+and is fine-tuned on go1-arm without its arm.
 
-Ranges widened to the scenario's (vx in [-0.5, 1.5], yaw rate in [-2, 2]) were tried first on go1-arm without its arm
-(1024 environments, 180 iterations, 4.4M steps): the tracking reward stopped rising after ~60 iterations, episodes
-ended by a fall after ~5 s on average, and the exported policy moved at 0.25-0.4 m/s under 1-1.5 m/s commands,
-falling 1.2 times per environment-second (``python -m wbc.learned.probe``). These ranges did not do better on
-go1-arm either (400 iterations, 9.8M steps: it stands, but a walking command of 0.5-1 m/s crouches the trunk to 0.14 m
-until a hip touches the ground): the turn task has no usable pi1 yet, see the README."""
+Four go1-arm pi1 runs from scratch (1024 environments, 4-10M steps each) never found a gait:
+
+- legged_gym's recipe (no fall penalty), commands widened to the scenario's (180 iterations) or the push task's
+  ranges (400 iterations): a dive. Under a 0.8 m/s command the deterministic policy folds its front legs (thighs
+  1.45 rad against 0.8 nominal), pitches 19 degrees nose-down and lunges; its trunk's front corner touches the ground
+  0.8 s after every reset (1.2 falls per environment-second). With falls free and rewards clipped at zero, a lunge
+  that earns tracking reward for 0.8 s and restarts from a fresh stand is a local optimum.
+- a fall penalty of -100 (300 iterations, 7.4M steps): it lies down. Within 0.5 s of any command it folds every
+  leg (thighs ~2 rad, calves ~-2.5 rad) and rests its trunk 8 cm above the ground on its feet, where nothing counts
+  as a fall and standing still still earns exp(-v^2 / 0.25) of the tracking reward.
+- the fall penalty plus the `base_height` term (-30 on (h - 0.28 m)^2; 125 iterations): it stands, crouched (trunk
+  0.13-0.15 m, hips splayed ~0.8 rad), at 0.00 m/s under 0.5 and 1 m/s.
+
+The two robots are alike where it matters: an open-loop trot moves them alike (same falls, similar speeds), and the
+A1's pi1, run unchanged on the Go1, walks at 0.48 m/s under 0.5 m/s and 1.01 m/s under 1 m/s without a fall in the
+training env. So the Go1's runs failed at discovering a gait, not at executing one, and the A1's gait is the
+starting point."""
+
+TURN_WALKING_PRIOR_COMMANDS = ((-0.5, 1.5), (-0.5, 0.5), (-2.0, 2.0))
+"""The turn task's pi1 commands: legged_gym's ranges widened to the scenario's speeds (1-1.5 m/s) and yaw rates
+(0.5-2 rad/s), so that pi1, the teacher of pi2, has been trained on the commands pi2 will see."""
 
 TURN_WALKING_PRIOR_TERMINATION = -100.0
-"""The turn task's pi1 pays for falls (the push task's pi1 does not, legged_gym's recipe).
+"""The turn task's pi1 pays for falls, -2 per fall (the later stages' weight): it starts from a policy that walks,
+which the penalty keeps from trading falls for speed (the dive above)."""
 
-Without the penalty both go1-arm pi1 runs found a dive: under a 0.8 m/s command the deterministic policy folds its
-front legs (thighs 1.45 rad against 0.8 nominal), pitches 19 degrees nose-down and lunges, and its trunk's front
-corner touches the ground 0.8 s after every reset (1.2 falls per environment-second in the training env). With
-falls free and rewards clipped at zero, a lunge that earns tracking reward for 0.8 s and restarts from a fresh stand
-was a local optimum the A1 never fell into. -100 is the later stages' weight: -2 per fall."""
-
-TURN_BASE_HEIGHT = -30.0
-"""The turn task's weight on (trunk height - 0.28 m)^2, in every stage.
-
-With the fall penalty alone, a third go1-arm pi1 run (300 iterations, 7.4M steps) learned to lie down: within 0.5 s
-of any command the deterministic policy folds every leg (thighs ~2 rad, calves ~-2.5 rad) and rests its trunk 8 cm
-above the ground on its feet, where nothing counts as a fall and standing still still earns exp(-v^2 / 0.25) of the
-tracking reward. At -30 lying there costs 1.2 per second against the 1.5 that perfect tracking can earn; a walk at
-0.25 m costs 0.03."""
+TURN_BASE_HEIGHT = 0.0
+"""The turn task's weight on the `base_height` term: off (it did not make a from-scratch run walk, see
+`TURN_WALKING_PRIOR_INIT`; the warm-started policy walks crouched, as the A1's policies do)."""
 
 TASKS: dict[str, TaskSpec] = {
     "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
                      walking_prior_commands=WALKING_PRIOR_COMMANDS),
     "turn": TaskSpec(robot="go1-arm", scenario="scenarios/turn.toml", bands=("1.0", "1.25", "1.5"),
                      tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
-                     walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION, base_height=TURN_BASE_HEIGHT,
-                     base_height_target=0.28),
+                     walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION,
+                     walking_prior_init=TURN_WALKING_PRIOR_INIT, base_height=TURN_BASE_HEIGHT),
 }
 
 BASELINES: dict[str, str] = {
@@ -199,10 +207,14 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
     if init_stage is not None:
         init_baseline = "curriculum" if baseline == "curriculum" else None
         init_path = teacher or str(Path(run_root) / run_name(task, init_stage, init_baseline) / "policy")
+    elif walking_prior and spec.walking_prior_init is not None:
+        from wbc.learned.controller import WEIGHTS_DIR
+
+        init_path = str(WEIGHTS_DIR / spec.walking_prior_init)
     decoupled = {}
     if baseline == "decoupled":
         decoupled = {"frozen_legs": teacher or str(Path(run_root) / run_name(task, 2) / "policy"), "extrinsics_dim": 0}
-    transfer = teacher_stage is not None or init_stage is not None
+    transfer = teacher_stage is not None or init_path is not None
     cfg = TrainConfig(task=task, stage=stage, baseline=baseline, env=env, bc=bc, teacher=teacher_path,
                       init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
                       run_dir=str(Path(run_root) / run_name(task, stage, baseline)), save_interval=25, **decoupled)
