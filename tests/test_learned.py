@@ -737,6 +737,9 @@ def test_stage_and_baseline_configurations():
     prior = load_policy(t1.init_from)
     assert (prior.meta["robot"], prior.meta["arm_mode"], prior.num_actions) == ("a1-wx200", "none", 12)
     assert t1.action_mask == tuple(range(12)) and t1.bc is None and t1.env.rewards.termination < 0
+    # the turn task's taught stages explore with less noise than the push task's (a running robot trips on it)
+    assert stage_config("turn", 2).init_std < stage_config("push", 2).init_std == 1.0
+    assert stage_config("turn", 3).init_std == stage_config("turn", 2).init_std and t1.init_std == 1.0
     with pytest.raises(ConfigError, match="stage-3"):
         stage_config("push", 2, "ppo")
     dec = stage_config("push", 3, "decoupled")
