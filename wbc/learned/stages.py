@@ -58,6 +58,8 @@ class TaskSpec:
     `walking_prior_termination` is pi1's fall penalty (`RewardScales.termination`); `walking_prior_init` names shipped
     weights (``wbc/learned/weights/<name>``) pi1's actor starts from (`wbc.learned.warm_start`); `taught_init_std` is
     the initial action noise of the stages that learn from a teacher (2 and 3, `TrainConfig.init_std`);
+    `taught_start_from_teacher` starts those stages' actors from their teacher's weights (`wbc.learned.warm_start`;
+    the BC term still pulls towards the teacher and is annealed away);
     `base_height` and `base_height_target` switch on the trunk-height term in every stage of the task
     (`RewardScales.base_height`).
     """
@@ -70,6 +72,7 @@ class TaskSpec:
     walking_prior_termination: float = 0.0
     walking_prior_init: str | None = None
     taught_init_std: float = 1.0
+    taught_start_from_teacher: bool = False
     base_height: float = 0.0
     base_height_target: float = 0.28
 
@@ -122,7 +125,13 @@ At 1.0 the turn task's pi2 fell in every training episode for 43 iterations (epi
 action had already learned pi1's (BC loss 2.3 -> 0.06) and pi1 itself, run on the locked-arm Go1 in the same env,
 falls 0.00-0.02 times per environment-second at 1-1.5 m/s: 0.25 rad of exploration noise on every joint (action scale
 0.25) trips a robot running at 1.5 m/s, which it does not a robot standing under the push task's 0-0.3 m/s. 0.5 is
-about where pi1's own noise ended (0.43)."""
+about where pi1's own noise ended (0.43).
+
+At 0.5 alone a second pi2 run still fell in every episode after 25 iterations (episodes of ~1.8 s, BC loss 2.3 ->
+0.8, its mean action 0.0-0.2 m/s under 0.5-1.5 m/s commands), although pi1, acting on the observations the same env
+gives the teacher, ran at 1.26 m/s without a fall: a student that falls within 2 s only ever sees the first steps of
+a run, so BC cannot show it the gait. The turn task's taught stages therefore also start from their teacher's weights
+(`TaskSpec.taught_start_from_teacher`): pi2 starts as pi1, pi3 as pi2 on the legs (its arm actions start at zero)."""
 
 TURN_BASE_HEIGHT = 0.0
 """The turn task's weight on the `base_height` term: off (it did not make a from-scratch run walk, see
@@ -135,7 +144,7 @@ TASKS: dict[str, TaskSpec] = {
                      tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
                      walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION,
                      walking_prior_init=TURN_WALKING_PRIOR_INIT, taught_init_std=TURN_TAUGHT_INIT_STD,
-                     base_height=TURN_BASE_HEIGHT),
+                     taught_start_from_teacher=True, base_height=TURN_BASE_HEIGHT),
 }
 
 BASELINES: dict[str, str] = {
@@ -228,6 +237,8 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
     if baseline == "decoupled":
         decoupled = {"frozen_legs": teacher or str(Path(run_root) / run_name(task, 2) / "policy"), "extrinsics_dim": 0}
     transfer = teacher_stage is not None or init_path is not None
+    if baseline is None and teacher_stage is not None and spec.taught_start_from_teacher:
+        init_path = teacher_path
     init_std = {"init_std": spec.taught_init_std} if teacher_stage is not None else {}
     cfg = TrainConfig(task=task, stage=stage, baseline=baseline, env=env, bc=bc, teacher=teacher_path,
                       init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
