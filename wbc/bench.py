@@ -81,20 +81,12 @@ def reference_placo_tick_us(ticks: int = 1000) -> float:
     contacts (friction 0.6), a CoM task and a trunk orientation task; a tick sets the state, updates the kinematics
     and solves, as `WholeBodyQp.solve` does.
     """
-    import tempfile
-    import xml.etree.ElementTree as ET
-    from pathlib import Path
-
     import placo
 
-    root = ET.parse(example_robot_data_share() / "example-robot-data/robots/a1_description/urdf/a1.urdf").getroot()
-    for link in root.iter("link"):
-        for child in list(link.findall("visual")) + list(link.findall("collision")):
-            link.remove(child)
-    with tempfile.TemporaryDirectory(prefix="wbc-bench-") as folder:
-        path = Path(folder) / "a1.urdf"
-        path.write_text(ET.tostring(root, encoding="unicode"))
-        robot = placo.RobotWrapper(str(path), placo.Flags.ignore_collisions)
+    from wbc.mpc.whole_body import placo_robot
+
+    robot = placo_robot((example_robot_data_share() / "example-robot-data/robots/a1_description/urdf/a1.urdf")
+                        .read_text())
     q = robot.state.q.copy()
     q[2], q[3:7] = 0.3, (0.0, 0.0, 0.0, 1.0)
     for leg in ("FR", "FL", "RR", "RL"):
@@ -356,7 +348,8 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     if reference:
         measure_references()
         tick_ref, rate_ref = float(np.mean(ref_ticks)), max(ref_rates)
-        (tick_target, tick_at), (rt_target, rt_at) = MPC_REFERENCE_TARGETS.values()
+        tick_target, tick_at = MPC_REFERENCE_TARGETS["wbc_tick_us_median"]
+        rt_target, rt_at = MPC_REFERENCE_TARGETS["realtime_factor"]
         references = {"reference_placo_tick_us": tick_ref, "reference_steps_per_s": rate_ref,
                       "scaled_target_wbc_tick_us": tick_target * tick_ref / tick_at,
                       "scaled_target_realtime_factor": rt_target * rate_ref / rt_at}

@@ -139,6 +139,7 @@ class BatchedEnv:
         regular = np.array_equal(found, np.arange(found[0], found[-1] + 1, 4))
         self._found = slice(int(found[0]), int(found[-1]) + 1, 4) if regular else found
         self._need_torques = bool({"work", "torques"} & set(self.rewards.scales))
+        self._need_height = "base_height" in self.rewards.scales
         self.variant = np.zeros(n, dtype=np.int64)
         self._models = [m] * n
         self.strength = np.ones((n, self.num_actions))
@@ -231,7 +232,7 @@ class BatchedEnv:
             gravity_in_body=projected_gravity(qpos[:, 3:7]), command=self.command, q=qpos[:, 7:], dq=qvel[:, 6:],
             dq_before=dq_before, power=power, torque_sq=torque_sq, action=a, last_action=self.last_action,
             first_contact=first_contact, air_time=air, terminated=fell,
-            base_height=qpos[:, 2] - self.pool.ground_height[self.variant],
+            base_height=qpos[:, 2] - self.pool.ground_height[self.variant] if self._need_height else None,
         )
         reward, terms = self.rewards.compute(data)
         for name, value in terms.items():

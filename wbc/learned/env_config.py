@@ -35,8 +35,8 @@ class RewardScales:
     0.3 m/s command): under discounting, a fall only cost the lost future of a reward clipped at zero.
 
     `base_height` (legged_gym's term, off there and here by default) penalises (h - `EnvConfig.base_height_target`)^2,
-    h the trunk's height above the ground; a task switches it on with `TaskSpec.base_height` (none does now: it did not
-    make a from-scratch Go1 walk, see `wbc.learned.stages.TURN_WALKING_PRIOR_INIT`).
+    h the trunk's height above the ground; no task uses it (it did not make a from-scratch Go1 walk, see
+    `wbc.learned.stages.TURN_WALKING_PRIOR_INIT`).
     """
 
     tracking_lin_vel: float = 1.0

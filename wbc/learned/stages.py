@@ -40,7 +40,7 @@ from wbc.learned.bc_schedule import BCSchedule
 from wbc.learned.env_config import EnvConfig, RewardScales
 from wbc.learned.train_config import TrainConfig
 
-__all__ = ["BASELINES", "TASKS", "TURN_BASE_HEIGHT", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS",
+__all__ = ["BASELINES", "TASKS", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS",
            "TURN_WALKING_PRIOR_INIT", "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS",
            "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
 
@@ -59,9 +59,7 @@ class TaskSpec:
     weights (``wbc/learned/weights/<name>``) pi1's actor starts from (`wbc.learned.warm_start`); `taught_init_std` is
     the initial action noise of the stages that learn from a teacher (2 and 3, `TrainConfig.init_std`);
     `taught_start_from_teacher` starts those stages' actors from their teacher's weights (`wbc.learned.warm_start`;
-    the BC term still pulls towards the teacher and is annealed away);
-    `base_height` and `base_height_target` switch on the trunk-height term in every stage of the task
-    (`RewardScales.base_height`).
+    the BC term still pulls towards the teacher and is annealed away).
     """
 
     robot: str
@@ -73,8 +71,6 @@ class TaskSpec:
     walking_prior_init: str | None = None
     taught_init_std: float = 1.0
     taught_start_from_teacher: bool = False
-    base_height: float = 0.0
-    base_height_target: float = 0.28
 
 
 WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
@@ -133,10 +129,6 @@ gives the teacher, ran at 1.26 m/s without a fall: a student that falls within 2
 a run, so BC cannot show it the gait. The turn task's taught stages therefore also start from their teacher's weights
 (`TaskSpec.taught_start_from_teacher`): pi2 starts as pi1, pi3 as pi2 on the legs (its arm actions start at zero)."""
 
-TURN_BASE_HEIGHT = 0.0
-"""The turn task's weight on the `base_height` term: off (it did not make a from-scratch run walk, see
-`TURN_WALKING_PRIOR_INIT`; the warm-started policy walks crouched, as the A1's policies do)."""
-
 TASKS: dict[str, TaskSpec] = {
     "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
                      walking_prior_commands=WALKING_PRIOR_COMMANDS),
@@ -144,7 +136,7 @@ TASKS: dict[str, TaskSpec] = {
                      tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
                      walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION,
                      walking_prior_init=TURN_WALKING_PRIOR_INIT, taught_init_std=TURN_TAUGHT_INIT_STD,
-                     taught_start_from_teacher=True, base_height=TURN_BASE_HEIGHT),
+                     taught_start_from_teacher=True),
 }
 
 BASELINES: dict[str, str] = {
@@ -215,9 +207,7 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
                                                                     _ARM[teacher_stage]),
         tracking_sigma=WALKING_PRIOR_SIGMA if walking_prior else spec.tracking_sigma,
         command_ranges=spec.walking_prior_commands if walking_prior else None,
-        rewards=dataclasses.replace(RewardScales(termination=spec.walking_prior_termination) if walking_prior
-                                    else RewardScales(), base_height=spec.base_height),
-        base_height_target=spec.base_height_target,
+        rewards=RewardScales(termination=spec.walking_prior_termination) if walking_prior else RewardScales(),
     )
     env = dataclasses.replace(env, **(env_overrides or {}))
     bc, teacher_path, init_path = None, None, None

@@ -37,7 +37,7 @@ from wbc.robots.description import FOOT_NAMES, RobotDescription
 from wbc.robots.joint_table import joint_table
 from wbc.robots.urdf import robot_urdf
 
-__all__ = ["WholeBodyConfig", "WholeBodyQp", "WholeBodyResult"]
+__all__ = ["WholeBodyConfig", "WholeBodyQp", "WholeBodyResult", "placo_robot"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -93,13 +93,20 @@ class WholeBodyResult:
     forces: np.ndarray | None
 
 
-def _dynamics_urdf(desc: RobotDescription) -> str:
-    """The robot's URDF without visual and collision geometry (PlaCo would try to load the meshes)."""
-    root = ET.fromstring(robot_urdf(desc))
+def placo_robot(urdf: str) -> placo.RobotWrapper:
+    """A PlaCo robot from URDF text, its visual and collision geometry removed.
+
+    PlaCo would try to load the meshes and only needs the dynamics; it reads a file once, at construction, and the
+    file is not kept.
+    """
+    root = ET.fromstring(urdf)
     for link in root.iter("link"):
         for child in list(link.findall("visual")) + list(link.findall("collision")):
             link.remove(child)
-    return ET.tostring(root, encoding="unicode")
+    with tempfile.TemporaryDirectory(prefix="wbc-placo-") as folder:
+        path = Path(folder) / "robot.urdf"
+        path.write_text(ET.tostring(root, encoding="unicode"))
+        return placo.RobotWrapper(str(path), placo.Flags.ignore_collisions)
 
 
 class WholeBodyQp:
@@ -113,11 +120,7 @@ class WholeBodyQp:
     def __init__(self, desc: RobotDescription, config: WholeBodyConfig | None = None) -> None:
         self.desc = desc
         self.config = cfg = config or WholeBodyConfig()
-        # PlaCo reads a URDF file once, at construction; the file is not needed afterwards
-        with tempfile.TemporaryDirectory(prefix="wbc-placo-") as folder:
-            path = Path(folder) / "robot.urdf"
-            path.write_text(_dynamics_urdf(desc))
-            self.robot = placo.RobotWrapper(str(path), placo.Flags.ignore_collisions)
+        self.robot = placo_robot(robot_urdf(desc))
         names = list(self.robot.joint_names())
         house = list(desc.joint_names)
         # the v index of each house joint in PlaCo's (= Pinocchio's) order
