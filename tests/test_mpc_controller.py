@@ -136,3 +136,28 @@ def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_refer
     assert result["scaled_target_wbc_tick_us"] == pytest.approx(2.5 * result["reference_placo_tick_us"])
     assert result["scaled_target_realtime_factor"] == pytest.approx(5.0 * result["reference_steps_per_s"] / 110_000)
     assert "reference_placo_tick_us" not in bench_mpc(seconds=0.1, single_thread=False, reference=False)
+
+
+_HEAP_PROBE = """
+import sys
+import numpy as np
+held = [np.ones(int(k)) for k in sys.argv[1].split(",")]  # a different heap history before the MPC runs
+import dataclasses
+from wbc.runner import run_trial
+from wbc.scenarios import load_scenario
+trial = load_scenario(sys.argv[2]).trials(["in"], [0], 1)[0]
+record, episode = run_trial(dataclasses.replace(trial, duration_s=2.5), "mpc")
+print(episode.qpos.tobytes().hex()[-4000:], record["energy_j"].hex())
+"""
+
+
+def test_an_mpc_trial_is_bit_identical_whatever_was_allocated_before_it():
+    # ProxSuite's wide (AVX) builds made the last bits depend on buffer addresses; see wbc/mpc/portable_proxsuite.py
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    scenario = str(Path(__file__).resolve().parent.parent / "scenarios/push.toml")
+    outs = {subprocess.run([sys.executable, "-c", _HEAP_PROBE, held, scenario], capture_output=True, text=True,
+                           check=True).stdout for held in ("1", "5,7")}
+    assert len(outs) == 1

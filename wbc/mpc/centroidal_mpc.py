@@ -21,10 +21,10 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import proxsuite
 
 from wbc.errors import WbcError
 from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, zoh_integral
+from wbc.mpc.portable_proxsuite import proxsuite
 
 __all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "CentroidalMpc"]
 
