@@ -15,6 +15,7 @@ import time
 from collections.abc import Callable
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from wbc.control import Controller, get_controller
 from wbc.episode import Episode, EpisodeBuffer
@@ -142,6 +143,14 @@ def run_trial(trial: Trial, controller: str, *, debug_truth: bool = False, obser
         UnknownNameError: unknown controller.
         ConfigError: the controller's period is not a whole number of physics steps.
     """
+    # one BLAS thread: a multi-threaded product splits its sums differently, and the same trial would differ in its
+    # last bits between an in-process run and a pool worker (which starts single-threaded)
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _run_trial(trial, controller, debug_truth=debug_truth, observer=observer)
+
+
+def _run_trial(trial: Trial, controller: str, *, debug_truth: bool, observer: TickObserver | None,
+               ) -> tuple[dict[str, object], Episode]:
     start = time.perf_counter()
     spec = get_controller(controller)
     robot = simulated_robot(trial, spec.arm_mode)
