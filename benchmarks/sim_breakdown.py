@@ -14,9 +14,9 @@ import time
 import mujoco
 import numpy as np
 
-from wbc.bench import machine_description, reference_a1
-from wbc.hardware import MujocoRobot, MujocoRobotConfig
-from wbc.standing import stand_command
+from wbc.control.stand import stand_command
+from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
+from wbc.tools.bench import machine_description, reference_a1
 
 
 def _rate(model: mujoco.MjModel, data: mujoco.MjData) -> float:

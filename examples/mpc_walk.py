@@ -3,8 +3,8 @@
 Run: python examples/mpc_walk.py
 """
 
-from wbc.control import get_controller
-from wbc.hardware import MujocoRobot, MujocoRobotConfig
+from wbc.control.registry import get_controller
+from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.types import VelocityCommand
 
 spec = get_controller("mpc")  # also: mpc-locked, mpc-noarm

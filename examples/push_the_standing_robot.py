@@ -5,8 +5,9 @@ Run: python examples/push_the_standing_robot.py
 
 import numpy as np
 
-from wbc.hardware import MujocoRobot, MujocoRobotConfig, Push, TerrainConfig
-from wbc.standing import stand_command
+from wbc.control.stand import stand_command
+from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
+from wbc.scenario import Push, TerrainConfig
 
 config = MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated", terrain=TerrainConfig(kind="fractal"))
 

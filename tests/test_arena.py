@@ -14,17 +14,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wbc.arena import ArenaConfig, run_arena
-from wbc.cli import main
-from wbc.control import CONTROLLERS
-from wbc.episode import Episode
+from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.episode import Episode
+from wbc.arena.metrics import compute_metrics
+from wbc.arena.results import RECORD_FIELDS, read_records
+from wbc.arena.runner import run_trial
+from wbc.cli.main import main
+from wbc.control.registry import CONTROLLERS
 from wbc.errors import WbcError
-from wbc.learned.controller import shipped_weights
-from wbc.metrics import compute_metrics
-from wbc.results import RECORD_FIELDS, read_records
+from wbc.learned.policy.controller import shipped_weights
 from wbc.robots.registry import get_robot
-from wbc.runner import run_trial
-from wbc.scenarios import load_scenario
+from wbc.scenario.scenario import load_scenario
 
 SCENARIOS = sorted(Path(__file__).resolve().parent.parent.joinpath("scenarios").glob("*.toml"))
 SCENARIOS = [p for p in SCENARIOS if p.name != "published.toml"]
@@ -114,7 +114,7 @@ def test_local_and_ray_executors_agree(small, tmp_path):
 
 def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "wbc.cli", "compare", "stand", "stand-noarm", "--scenario", str(small),
+    cmd = [sys.executable, "-m", "wbc.cli.main", "compare", "stand", "stand-noarm", "--scenario", str(small),
            "--trials", "6", "--seeds", "2", "--workers", "1", "--out", str(out), "--quiet"]
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     trials_csv = out / "trials.csv"

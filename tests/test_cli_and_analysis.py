@@ -5,11 +5,11 @@ import json
 import numpy as np
 import pytest
 
-from wbc.analysis import analyze_tail
-from wbc.cli import main
+from wbc.cli.main import main
 from wbc.errors import MissingExtraError
 from wbc.optional import require
 from wbc.robots import get_robot
+from wbc.tools.tail import analyze_tail
 
 
 def test_analyze_tail_json_has_the_documented_keys(capsys):
@@ -38,8 +38,8 @@ def test_exact_alpha_ratio_agrees_with_mujocos_mass_matrix():
     """The floating-base solve on the Pinocchio model gives the same ratio from MuJoCo's mass matrix."""
     import mujoco
 
-    from wbc.hardware.mujoco_scene import build_scene
-    from wbc.hardware.terrain import TerrainConfig
+    from wbc.hardware.mujoco.scene import build_scene
+    from wbc.scenario.terrain import TerrainConfig
 
     desc = get_robot("a1-wx200")
     res = analyze_tail(desc)
@@ -77,7 +77,7 @@ def test_missing_extra_names_the_extra_to_install():
 
 
 def test_arm_momentum_study_measures_the_arm_against_the_push():
-    from wbc.arm_momentum import arm_momentum_study
+    from wbc.tools.arm_momentum import arm_momentum_study
 
     actuated = arm_momentum_study("scenarios/push.toml", "mpc", band="ood", trials=1, duration_s=3.5)
     locked = arm_momentum_study("scenarios/push.toml", "mpc-locked", band="ood", trials=1, duration_s=3.5)

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from wbc.cli import main
+from wbc.cli.main import main
 
 ROOT = Path(__file__).resolve().parent.parent
 GOLDEN = Path(__file__).resolve().parent / "golden"

@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wbc.learned.env import BatchedEnv
-from wbc.learned.env_config import DomainRandomisation, EnvConfig, ObsNoise
-from wbc.learned.numpy_policy import NumpyPolicy
-from wbc.learned.observations import ObsLayout, compatible_indices, compatible_observation
-from wbc.learned.policy_file import PolicyFileError, load_policy, save_policy
+from wbc.learned.env.env import BatchedEnv
+from wbc.learned.env.env_config import DomainRandomisation, EnvConfig, ObsNoise
+from wbc.learned.policy.numpy_policy import NumpyPolicy
+from wbc.learned.policy.observations import ObsLayout, compatible_indices, compatible_observation
+from wbc.learned.policy.policy_file import PolicyFileError, load_policy, save_policy
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand
 
@@ -92,8 +92,8 @@ def _poses(desc, nq: int) -> dict[str, np.ndarray]:
 
 
 def test_env_terminates_exactly_when_evaluation_calls_the_robot_fallen():
-    """Training's termination and `MujocoRobot.fallen` apply one rule (`wbc.hardware.fall_rule`) to the same state."""
-    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
+    """Training's termination and `MujocoRobot.fallen` apply one rule (`wbc.hardware.mujoco.fall_rule`)."""
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 
     robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
     poses = _poses(robot.desc, robot.desc.num_joints + 7)
@@ -141,7 +141,7 @@ def test_compatible_observation_keeps_the_leg_part():
 def _actor(vec, extrinsics: bool, seed: int = 0):
     torch = pytest.importorskip("torch")
     models = pytest.importorskip("rsl_rl.models")
-    from wbc.learned.extrinsics_actor import ExtrinsicsActor
+    from wbc.learned.train.extrinsics_actor import ExtrinsicsActor
 
     torch.manual_seed(seed)
     obs = vec.get_observations()
@@ -166,7 +166,7 @@ def _actor(vec, extrinsics: bool, seed: int = 0):
 def vec():
     pytest.importorskip("torch")
     pytest.importorskip("rsl_rl")
-    from wbc.learned.vec_env import RslVecEnv
+    from wbc.learned.train.vec_env import RslVecEnv
 
     v = RslVecEnv(BatchedEnv(small_config(seed=5)))
     yield v
@@ -175,7 +175,7 @@ def vec():
 @pytest.mark.parametrize("extrinsics", [False, True])
 def test_numpy_inference_matches_torch(vec, tmp_path, extrinsics):
     torch = pytest.importorskip("torch")
-    from wbc.learned.export import policy_file_from_actor
+    from wbc.learned.train.export import policy_file_from_actor
 
     actor = _actor(vec, extrinsics)
     pf = policy_file_from_actor(actor, vec.cfg, task="push", stage=3)
@@ -196,7 +196,7 @@ def test_numpy_inference_matches_torch(vec, tmp_path, extrinsics):
 
 @pytest.fixture()
 def saved_policy(vec, tmp_path):
-    from wbc.learned.export import policy_file_from_actor
+    from wbc.learned.train.export import policy_file_from_actor
 
     npz, js = save_policy(tmp_path / "pi", policy_file_from_actor(_actor(vec, False), vec.cfg, task="push", stage=3))
     return npz, js
@@ -249,10 +249,10 @@ def decoupled(tmp_path):
     """A pi2-like locked-arm policy with extrinsics, its decoupled env, a 3-output arm actor and their composite."""
     pytest.importorskip("torch")
     pytest.importorskip("rsl_rl")
-    from wbc.learned.composite_policy import save_composite
-    from wbc.learned.export import decoupled_policy, policy_file_from_actor
-    from wbc.learned.frozen_legs_vec_env import FrozenLegsVecEnv
-    from wbc.learned.vec_env import RslVecEnv
+    from wbc.learned.policy.composite_policy import save_composite
+    from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
+    from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
+    from wbc.learned.train.vec_env import RslVecEnv
 
     locked = RslVecEnv(BatchedEnv(small_config(arm_mode="locked")))
     pi2 = load_policy(save_policy(tmp_path / "pi2", policy_file_from_actor(
@@ -266,9 +266,9 @@ def decoupled(tmp_path):
 
 def test_composite_numpy_inference_matches_the_torch_composite(decoupled):
     torch = pytest.importorskip("torch")
-    from wbc.learned.composite_policy import load_composite
-    from wbc.learned.numpy_composite import NumpyComposite
-    from wbc.learned.torch_policy import TorchPolicy
+    from wbc.learned.policy.composite_policy import load_composite
+    from wbc.learned.policy.numpy_composite import NumpyComposite
+    from wbc.learned.train.torch_policy import TorchPolicy
 
     vec, pi2, arm, npz, _ = decoupled
     policy = NumpyComposite(load_composite(npz))
@@ -303,7 +303,7 @@ def test_frozen_legs_env_steps_the_legs_with_pi2(decoupled):
 
 
 def test_composite_file_errors_name_the_file_and_field(decoupled):
-    from wbc.learned.composite_policy import load_composite
+    from wbc.learned.policy.composite_policy import load_composite
 
     _, _, _, npz, js = decoupled
     with pytest.raises(PolicyFileError, match=r"dec\.json: format: 'wbc-composite-policy'.*load_composite"):
@@ -345,7 +345,7 @@ def test_composite_file_errors_name_the_file_and_field(decoupled):
 # -- BC term -------------------------------------------------------------------------------------------------------
 def test_bc_schedule_linear_exponential_constant():
     from wbc.errors import ConfigError
-    from wbc.learned.bc_schedule import BCSchedule
+    from wbc.learned.train.bc_schedule import BCSchedule
 
     lin = BCSchedule(initial=1.0, final=0.0, hold_iterations=10, anneal_iterations=100, kind="linear")
     assert lin.weight(0) == lin.weight(10) == 1.0
@@ -365,7 +365,7 @@ def test_bc_schedule_linear_exponential_constant():
 
 def test_bc_loss_counts_only_the_compatible_actions():
     torch = pytest.importorskip("torch")
-    from wbc.learned.ppo_bc import bc_loss
+    from wbc.learned.train.ppo_bc import bc_loss
 
     teacher = torch.randn(8, 12)
     student = torch.zeros(8, 15, requires_grad=True)
@@ -390,8 +390,8 @@ def test_bc_loss_counts_only_the_compatible_actions():
 
 # -- training ------------------------------------------------------------------------------------------------------
 def _tiny(stage: int, root: Path, seed: int = 0, baseline: str | None = None, **kw):
-    from wbc.learned.adaptation_config import AdaptationConfig
-    from wbc.learned.stages import stage_config
+    from wbc.learned.train.adaptation_config import AdaptationConfig
+    from wbc.learned.train.stages import stage_config
 
     small = dict(seed=seed, num_steps_per_env=6, save_interval=1, actor_hidden_dims=(16,), critic_hidden_dims=(16,),
                  encoder_dims=(8,), extrinsics_dim=0 if baseline == "decoupled" else 4, rma=AdaptationConfig(
@@ -409,7 +409,7 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
     pytest.importorskip("torch")
     pytest.importorskip("rsl_rl")
     from wbc.errors import ConfigError
-    from wbc.learned.train import latest_checkpoint, train
+    from wbc.learned.train.train import latest_checkpoint, train
 
     a = train(_tiny(1, tmp_path / "a", max_iterations=2))
     b = train(_tiny(1, tmp_path / "b", max_iterations=2))
@@ -419,8 +419,8 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
         np.testing.assert_array_equal(wa[k], wb[k], err_msg=k)
     assert a["iterations"] == 2 and a["env_steps"] == 2 * 6 * 8
     cfg = json.loads((Path(a["run_dir"]) / "config.json").read_text())
-    assert cfg["train_config"]["stage"] == 1 and cfg["seed"] == 0 and "torch" in cfg["versions"]
-    from wbc.learned.curves import plot_training_curves, read_scalars
+    assert cfg["train_config"]["stage"] == 1 and cfg["seed"] == 0 and "torch" in cfg["provenance"]["packages"]
+    from wbc.learned.train.curves import plot_training_curves, read_scalars
 
     assert "Loss/value" in read_scalars(a["run_dir"])
     assert plot_training_curves([a["run_dir"], b["run_dir"]], tmp_path / "curves.png").stat().st_size > 1000
@@ -439,7 +439,7 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
     f3 = train(_tiny(3, tmp_path / "a", baseline="finetune-pi2", max_iterations=1))
     assert load_policy(Path(f3["run_dir"]) / "policy").meta["arm_mode"] == "actuated"
     # the decoupled baseline: pi2's legs, frozen, plus an arm policy; its export embeds pi2 whole
-    from wbc.learned.composite_policy import load_composite
+    from wbc.learned.policy.composite_policy import load_composite
 
     d3 = train(_tiny(3, tmp_path / "a", baseline="decoupled", max_iterations=2))
     assert d3["iterations"] == 2 and d3["env_steps"] == 2 * 6 * 8
@@ -454,8 +454,8 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
     with pytest.raises(ConfigError, match="frozen leg policy"):
         train(_tiny(3, tmp_path / "empty", baseline="decoupled", max_iterations=1))
     # RMA phase 2 ran: the export carries an adaptation module, so a controller can run it from RobotState alone
-    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
-    from wbc.learned.controller import LearnedController
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+    from wbc.learned.policy.controller import LearnedController
     from wbc.types import VelocityCommand
 
     assert load_policy(Path(a["run_dir"]) / "policy").meta["adaptation"]["history"] == 3
@@ -491,9 +491,9 @@ def test_tiny_seeded_training_is_reproducible_resumable_and_feeds_the_next_stage
 
 # -- controllers ---------------------------------------------------------------------------------------------------
 def test_controller_observation_matches_the_training_env():
-    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
-    from wbc.learned.controller import LearnedController
-    from wbc.learned.env_config import ObsScales
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+    from wbc.learned.policy.controller import LearnedController
+    from wbc.learned.policy.observations import ObsScales
     from wbc.types import VelocityCommand
 
     # the same start, the same constant joint targets, 10 policy steps in the env and on MujocoRobot (both at the
@@ -521,9 +521,9 @@ def test_controller_observation_matches_the_training_env():
 
 
 def test_learned_controllers_are_registered_and_refuse_missing_or_wrong_weights(vec, tmp_path):
-    from wbc.control import get_controller
-    from wbc.learned.controller import LearnedController
-    from wbc.learned.export import policy_file_from_actor
+    from wbc.control.registry import get_controller
+    from wbc.learned.policy.controller import LearnedController
+    from wbc.learned.train.export import policy_file_from_actor
 
     for name, arm in (("learned", "actuated"), ("learned-locked", "locked"), ("learned-noarm", "none")):
         assert get_controller(name).arm_mode == arm
@@ -539,9 +539,9 @@ def test_learned_controllers_are_registered_and_refuse_missing_or_wrong_weights(
 
 
 def test_learned_controller_drives_the_simulated_robot(vec, tmp_path):
-    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
-    from wbc.learned.controller import LearnedController
-    from wbc.learned.export import policy_file_from_actor
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+    from wbc.learned.policy.controller import LearnedController
+    from wbc.learned.train.export import policy_file_from_actor
     from wbc.types import VelocityCommand
 
     actor = _actor(vec, False)
@@ -578,7 +578,7 @@ def test_reward_terms_see_real_motion():
 
 def test_walking_prior_draws_its_commands_from_the_ranges():
     from wbc.errors import ConfigError
-    from wbc.learned.stages import TURN_WALKING_PRIOR_COMMANDS, WALKING_PRIOR_COMMANDS, stage_config
+    from wbc.learned.train.stages import TURN_WALKING_PRIOR_COMMANDS, WALKING_PRIOR_COMMANDS, stage_config
 
     assert stage_config("push", 1).env.command_ranges == WALKING_PRIOR_COMMANDS
     assert stage_config("turn", 1).env.command_ranges == TURN_WALKING_PRIOR_COMMANDS
@@ -595,8 +595,8 @@ def test_walking_prior_draws_its_commands_from_the_ranges():
 
 
 def test_fall_penalty_survives_the_positive_clipping():
-    from wbc.learned.env_config import RewardScales
-    from wbc.learned.rewards import Rewards, StepData
+    from wbc.learned.env.env_config import RewardScales
+    from wbc.learned.env.rewards import Rewards, StepData
 
     n, j = 2, 12
     off = {f: 0.0 for f in RewardScales.__dataclass_fields__}
@@ -617,9 +617,9 @@ def test_fall_penalty_survives_the_positive_clipping():
 
 
 def test_base_height_term_charges_a_robot_that_lies_down_and_the_env_measures_the_trunk_height():
-    from wbc.learned.env import BatchedEnv
-    from wbc.learned.env_config import RewardScales
-    from wbc.learned.rewards import Rewards, StepData
+    from wbc.learned.env.env import BatchedEnv
+    from wbc.learned.env.env_config import RewardScales
+    from wbc.learned.env.rewards import Rewards, StepData
 
     n, j = 2, 12
     off = {f: 0.0 for f in RewardScales.__dataclass_fields__}
@@ -648,7 +648,7 @@ def test_base_height_term_charges_a_robot_that_lies_down_and_the_env_measures_th
 
 # -- CLI -----------------------------------------------------------------------------------------------------------
 def test_bench_train_reports_control_steps_per_second():
-    from wbc.learned.throughput import bench_train
+    from wbc.tools.bench_train import bench_train
 
     cfg = small_config()
     result = bench_train(cfg, steps=3, repeats=1)
@@ -664,7 +664,7 @@ def test_bench_train_reports_control_steps_per_second():
 
 
 def test_cli_train_dry_run_and_errors(capsys):
-    from wbc.cli import main
+    from wbc.cli.main import main
 
     assert main(["train", "--task", "push", "--stage", "3", "--envs", "64", "--dry-run"]) == 0
     cfg = json.loads(capsys.readouterr().out)
@@ -686,9 +686,9 @@ def test_cli_train_dry_run_and_errors(capsys):
 def test_warm_started_actor_reproduces_the_old_policy_on_the_legs(tmp_path, extrinsics):
     torch = pytest.importorskip("torch")
     pytest.importorskip("rsl_rl")
-    from wbc.learned.export import policy_file_from_actor
-    from wbc.learned.vec_env import RslVecEnv
-    from wbc.learned.warm_start import warm_start_actor
+    from wbc.learned.train.export import policy_file_from_actor
+    from wbc.learned.train.vec_env import RslVecEnv
+    from wbc.learned.train.warm_start import warm_start_actor
 
     old_vec = RslVecEnv(BatchedEnv(small_config(arm_mode="locked")))
     new_vec = RslVecEnv(BatchedEnv(small_config(arm_mode="actuated", seed=9)))
@@ -711,7 +711,7 @@ def test_warm_started_actor_reproduces_the_old_policy_on_the_legs(tmp_path, extr
 
 def test_stage_and_baseline_configurations():
     from wbc.errors import ConfigError, UnknownNameError
-    from wbc.learned.stages import stage_config
+    from wbc.learned.train.stages import stage_config
 
     s1, s2, s3 = (stage_config("push", k) for k in (1, 2, 3))
     assert (s1.env.arm_mode, s1.env.pushes, s1.env.terrain, s1.bc) == ("none", False, "flat", None)
@@ -756,8 +756,8 @@ def test_stage_and_baseline_configurations():
 
 def test_env_push_matches_mujoco_robot():
     """A scenario push applied by the env moves the trunk as MujocoRobot's push does."""
-    from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
-    from wbc.hardware.perturbation import Push
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+    from wbc.scenario.push import Push
 
     env = BatchedEnv(small_config(num_envs=1, init_joint_noise=0.0, timestep=0.002, decimation=10,  # MujocoRobot's
                                   solver="cg",
@@ -787,8 +787,8 @@ def test_env_push_matches_mujoco_robot():
 
 
 def test_probe_reports_per_command_velocities(vec, tmp_path):
-    from wbc.learned.export import policy_file_from_actor
-    from wbc.learned.probe import probe_policy
+    from wbc.learned.train.export import policy_file_from_actor
+    from wbc.tools.probe import probe_policy
 
     save_policy(tmp_path / "p", policy_file_from_actor(_actor(vec, True), vec.cfg, task="push", stage=3))
     rows = probe_policy(tmp_path / "p", small_config(num_envs=8), steps=4, settle=1)
@@ -810,8 +810,8 @@ def test_env_solver_is_configurable_and_checked():
 
 
 def test_shipped_ppo_baseline_is_a_policy_controller():
-    from wbc.control import get_controller
-    from wbc.learned.controller import WEIGHTS_DIR
+    from wbc.control.registry import get_controller
+    from wbc.learned.policy.controller import WEIGHTS_DIR
 
     spec = get_controller(f"policy:{WEIGHTS_DIR / 'a1-wx200-actuated-ppo'}")
     assert (spec.robot, spec.arm_mode) == ("a1-wx200", "actuated")

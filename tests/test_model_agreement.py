@@ -5,9 +5,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from wbc.hardware.mujoco_scene import build_scene
-from wbc.hardware.terrain import TerrainConfig
+from wbc.hardware.mujoco.scene import build_scene
 from wbc.robots import ARM_MODES, ROBOTS, build_pinocchio, get_robot, joint_table
+from wbc.scenario.terrain import TerrainConfig
 
 CASES = [(name, mode) for name in ROBOTS for mode in ARM_MODES]
 

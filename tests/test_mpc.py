@@ -6,13 +6,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from wbc.hardware.mujoco_scene import build_scene
-from wbc.hardware.terrain import TerrainConfig
+from wbc.hardware.mujoco.scene import build_scene
 from wbc.mpc import CentroidalModel, CentroidalMpc, CentroidalParams, MpcConfig, SymbolicCentroidalModel
 from wbc.mpc.centroidal_model import euler_rates_matrix
 from wbc.mpc.gait import STAND, TROT, GaitConfig, GaitScheduler
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.robots import build_pinocchio, get_robot, joint_table
+from wbc.scenario.terrain import TerrainConfig
 
 FEET = ("FR_foot", "FL_foot", "RR_foot", "RL_foot")
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from wbc.control import get_controller
-from wbc.hardware import MujocoRobot, MujocoRobotConfig
+from wbc.control.registry import get_controller
+from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.mpc import MpcSolveError
 from wbc.types import VelocityCommand
 
@@ -126,7 +126,7 @@ def test_ground_truth_debug_switch_replaces_the_estimate():
 
 
 def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_references():
-    from wbc.bench import bench_mpc
+    from wbc.tools.bench import bench_mpc
 
     result = bench_mpc(seconds=0.2, single_thread=False)
     for key in ("mpc_solve_ms_median", "mpc_solve_ms_p99", "wbc_tick_us_median", "realtime_factor"):
@@ -143,8 +143,8 @@ import sys
 import numpy as np
 held = [np.ones(int(k)) for k in sys.argv[1].split(",")]  # a different heap history before the MPC runs
 import dataclasses
-from wbc.runner import run_trial
-from wbc.scenarios import load_scenario
+from wbc.arena.runner import run_trial
+from wbc.scenario.scenario import load_scenario
 trial = load_scenario(sys.argv[2]).trials(["in"], [0], 1)[0]
 record, episode = run_trial(dataclasses.replace(trial, duration_s=2.5), "mpc")
 print(episode.qpos.tobytes().hex()[-4000:], record["energy_j"].hex())

@@ -4,10 +4,11 @@ import mujoco
 import numpy as np
 import pytest
 
+from wbc.control.stand import stand_command
 from wbc.errors import ConfigError, UnknownNameError
-from wbc.hardware import DomainParams, MujocoRobot, MujocoRobotConfig, Push, SensorNoise, TerrainConfig
+from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.robots import ARM_MODES, ROBOTS
-from wbc.standing import stand_command
+from wbc.scenario import DomainParams, Push, SensorNoise, TerrainConfig
 
 
 @pytest.mark.parametrize("arm", ARM_MODES)
@@ -105,7 +106,7 @@ def test_same_seed_gives_a_bit_identical_trajectory():
 
 
 def test_fractal_terrain_is_seeded_and_bounded():
-    from wbc.hardware.terrain import fractal_heights
+    from wbc.scenario.terrain import fractal_heights
 
     cfg = TerrainConfig(kind="fractal", half_extent=2.0)
     a, b, c = fractal_heights(cfg, 1), fractal_heights(cfg, 1), fractal_heights(cfg, 2)
@@ -152,7 +153,7 @@ def test_bad_configuration_names_the_field():
 
 def test_explicit_ground_pairs_simulate_exactly_as_contact_filtering():
     """The scene's explicit robot-ground contact pairs (which let MuJoCo skip its broad phase) change nothing."""
-    from wbc.hardware.mujoco_scene import TERRAIN_GEOM, scene_spec
+    from wbc.hardware.mujoco.scene import TERRAIN_GEOM, scene_spec
 
     with MujocoRobot(MujocoRobotConfig(arm_mode="actuated")) as robot:
         robot.reset(seed=2)

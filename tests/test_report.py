@@ -1,4 +1,4 @@
-"""Tests of `wbc.stats` and `wbc.report` on synthetic arena records with known statistics."""
+"""Tests of `wbc.arena.stats` and `wbc.arena.report` on synthetic arena records with known statistics."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from wbc.report import EXTRA_METRICS, METRICS, format_table, summarize, write_report
-from wbc.stats import RecordError, mean_std_over_seeds, paired_difference, record_float
+from wbc.arena.report import EXTRA_METRICS, METRICS, format_table, summarize, write_report
+from wbc.arena.stats import RecordError, mean_std_over_seeds, paired_difference, record_float
 
 CONTROLLERS = ("mpc", "rl", "wbc")
 BANDS = ("nominal", "push")
@@ -97,7 +97,7 @@ def summary_of(records: list[dict], controllers=CONTROLLERS, bands=BANDS) -> dic
     return summarize(records, scenario_name=SCENARIO, scenario_hash=HASH, controllers=controllers, bands=bands)
 
 
-# --- wbc.stats -----------------------------------------------------------------------------------------------------
+# --- wbc.arena.stats --------------------------------------------------------------------------------------------------
 
 
 def test_record_float_accepts_typed_and_string_values():
@@ -191,7 +191,7 @@ def test_paired_difference_rejects_repeated_trials():
         paired_difference(records, records[:1], "ttf")
 
 
-# --- wbc.report ----------------------------------------------------------------------------------------------------
+# --- wbc.arena.report -------------------------------------------------------------------------------------------------
 
 
 def test_summary_has_exactly_the_required_shape():

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from wbc.errors import CommandError, RobotNotConnectedError
-from wbc.hardware import MujocoRobot, MujocoRobotConfig, Robot, RobotContractError, check_robot
+from wbc.hardware import Robot, RobotContractError, check_robot
+from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.robots import get_robot, joint_table
 from wbc.types import MotorCommand, RobotState
 

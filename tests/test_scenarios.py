@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from wbc.errors import UnknownNameError, WbcError
-from wbc.scenarios import ScenarioError, check_published, load_scenario
+from wbc.scenario.scenario import ScenarioError, check_published, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 PUSH = SCENARIOS / "push.toml"

@@ -16,15 +16,15 @@ import psutil
 import pytest
 import umsgpack
 
-from wbc.arena import ArenaConfig, run_arena
-from wbc.cli import main
+from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.runner import run_trial
+from wbc.cli.main import main
 from wbc.errors import ConfigError
-from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig
-from wbc.hardware.perturbation import Push
-from wbc.hardware.terrain import TerrainConfig
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.robots.registry import get_robot
-from wbc.runner import run_trial
-from wbc.scenarios import load_scenario
+from wbc.scenario.push import Push
+from wbc.scenario.scenario import load_scenario
+from wbc.scenario.terrain import TerrainConfig
 from wbc.types import MotorCommand
 from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
@@ -461,7 +461,7 @@ def test_cli_view_live_pauses_until_a_key(short, tmp_path):
     import time
 
     master, slave = pty.openpty()
-    cmd = [sys.executable, "-m", "wbc.cli", "view", "stand", "--scenario", str(short), "--trial", "0",
+    cmd = [sys.executable, "-m", "wbc.cli.main", "view", "stand", "--scenario", str(short), "--trial", "0",
            "--duration", "0.4", "--speed", "0", "--paused"]
     proc = subprocess.Popen(cmd, stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=Path(__file__).resolve().parent.parent)

@@ -13,7 +13,7 @@ import numpy as np
 
 from wbc.errors import CommandError
 
-__all__ = ["RobotState", "MotorCommand", "VelocityCommand"]
+__all__ = ["BaseTruth", "RobotState", "MotorCommand", "VelocityCommand"]
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -183,3 +183,20 @@ class VelocityCommand:
     def as_array(self) -> np.ndarray:
         """(vx, vy, yaw_rate) as a float array."""
         return np.array([self.vx, self.vy, self.yaw_rate], dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class BaseTruth:
+    """The trunk's true state as a runner logs it every tick: the simulator's (part of `SimTruth`) or motion capture.
+
+    Attributes:
+        base_position_in_world: trunk origin, shape (3,) [m].
+        base_quat: trunk orientation (w, x, y, z).
+        base_linvel_in_world: trunk origin velocity, shape (3,) [m/s].
+        base_angvel_in_body: trunk angular velocity in the trunk frame, shape (3,) [rad/s].
+    """
+
+    base_position_in_world: np.ndarray
+    base_quat: np.ndarray
+    base_linvel_in_world: np.ndarray
+    base_angvel_in_body: np.ndarray

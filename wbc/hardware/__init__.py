@@ -1,22 +1,9 @@
-"""The robot interface (`Robot`), its contract checker and the MuJoCo backend."""
+"""Robot backends: the `Robot` interface and its contract checker; the MuJoCo backend lives in `wbc.hardware.mujoco`.
+
+Importing this package does not import MuJoCo, so a robot computer that runs a real backend does not need it.
+"""
 
 from wbc.hardware.contract import RobotContractError, check_robot
-from wbc.hardware.domain import DomainParams, SensorNoise
-from wbc.hardware.mujoco_robot import MujocoRobot, MujocoRobotConfig, SimTruth
-from wbc.hardware.perturbation import Push
 from wbc.hardware.robot import Robot, clamp_command
-from wbc.hardware.terrain import TerrainConfig
 
-__all__ = [
-    "DomainParams",
-    "MujocoRobot",
-    "MujocoRobotConfig",
-    "Push",
-    "Robot",
-    "RobotContractError",
-    "SensorNoise",
-    "SimTruth",
-    "TerrainConfig",
-    "check_robot",
-    "clamp_command",
-]
+__all__ = ["Robot", "RobotContractError", "check_robot", "clamp_command"]

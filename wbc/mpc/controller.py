@@ -16,7 +16,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,10 +29,7 @@ from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import RobotDescription
 from wbc.robots.joint_table import joint_table
-from wbc.types import MotorCommand, RobotState, VelocityCommand
-
-if TYPE_CHECKING:
-    from wbc.hardware.mujoco_robot import BaseTruth
+from wbc.types import BaseTruth, MotorCommand, RobotState, VelocityCommand
 
 __all__ = ["MpcControllerConfig", "MpcController"]
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 import meshcat
 import numpy as np
 
-from wbc.hardware.mujoco_robot import MujocoRobot
-from wbc.hardware.terrain import TerrainConfig
+from wbc.hardware.mujoco.robot import MujocoRobot
 from wbc.robots.description import RobotDescription
+from wbc.scenario.terrain import TerrainConfig
 from wbc.viz.frame import Pose, VizFrame
 from wbc.viz.geometry import translation
 from wbc.viz.overlays import CommandArrow, ContactArrows, PlanOverlay, PushArrow

@@ -12,8 +12,8 @@ import io
 import meshcat
 import numpy as np
 
-from wbc.control import Controller
-from wbc.hardware.mujoco_robot import MujocoRobot
+from wbc.control.registry import Controller
+from wbc.hardware.mujoco.robot import MujocoRobot
 from wbc.hardware.robot import Robot
 from wbc.types import VelocityCommand
 from wbc.viz.content import SceneContent
@@ -88,7 +88,7 @@ class LiveObserver:
         self._last_t = float("inf")
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
-        """One tick (the `wbc.runner.TickObserver` signature)."""
+        """One tick (the `wbc.arena.runner.TickObserver` signature)."""
         if not isinstance(robot, MujocoRobot):
             return
         new_episode = t < self._last_t

@@ -17,14 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
-from wbc.control import get_controller
-from wbc.episode import Episode
+from wbc.arena.episode import Episode
+from wbc.arena.results import episode_path
+from wbc.control.registry import get_controller
 from wbc.errors import WbcError
-from wbc.results import episode_path
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.registry import get_robot
-from wbc.scenarios import load_scenario
-from wbc.trial import Trial
+from wbc.scenario.scenario import load_scenario
+from wbc.scenario.trial import Trial
 from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
 from wbc.viz.frame import VizFrame

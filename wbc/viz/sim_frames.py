@@ -10,8 +10,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from wbc.hardware.fall_rule import FOOT_ZONE
-from wbc.hardware.mujoco_robot import MujocoRobot
+from wbc.hardware.mujoco.fall_rule import FOOT_ZONE
+from wbc.hardware.mujoco.robot import MujocoRobot
 from wbc.robots.description import FOOT_NAMES
 from wbc.types import VelocityCommand
 from wbc.viz.frame import VizFrame

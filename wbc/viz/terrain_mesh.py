@@ -10,7 +10,7 @@ import meshcat
 import meshcat.geometry as mg
 import numpy as np
 
-from wbc.hardware.terrain import TerrainConfig, fractal_heights
+from wbc.scenario.terrain import TerrainConfig, fractal_heights
 from wbc.viz.geometry import translation
 
 __all__ = ["TERRAIN", "setup_terrain", "terrain_geometry", "terrain_heights"]

@@ -13,9 +13,9 @@ import webbrowser
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wbc.arena.runner import run_trial
 from wbc.errors import ConfigError
-from wbc.runner import run_trial
-from wbc.trial import Trial
+from wbc.scenario.trial import Trial
 from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.player import KeyboardControls, Player, PlayerConfig
 from wbc.viz.record import Recording

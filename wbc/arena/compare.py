@@ -1,0 +1,200 @@
+"""The arena: play every (controller, trial) pair of a scenario, store each result at once, summarise and report.
+
+``wbc run`` and ``wbc compare`` are thin wrappers around `run_arena`. Trials are paired: every controller plays the
+very same trials, so differences between controllers come with paired confidence intervals.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor
+from wbc.arena.report import summarize, write_report
+from wbc.arena.results import ResultsStore, episode_path
+from wbc.arena.runner import TickObserver
+from wbc.control.registry import get_controller
+from wbc.errors import ConfigError, UnknownNameError, WbcError
+from wbc.hardware.mujoco.robot import MujocoRobotConfig
+from wbc.provenance import provenance
+from wbc.scenario.scenario import ScenarioError, check_published, load_scenario
+from wbc.scenario.trial import Trial
+
+__all__ = ["ArenaConfig", "ArenaResult", "run_arena"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ArenaConfig:
+    """What to run and where.
+
+    Attributes:
+        controllers: controller registry names, in report order.
+        scenario: path of the scenario file.
+        bands: bands to play (empty: all).
+        seeds: seeds to play.
+        trials: trials per (band, seed).
+        out_dir: results directory.
+        executor: ``local`` or ``ray``.
+        workers: local worker processes (None: all cores).
+        address: Ray cluster address (None: a local Ray).
+        resume: finish an interrupted run in `out_dir`.
+        progress: show a progress bar on stderr.
+        no_push: play the scenario's trials without their pushes (commands, terrain and domain unchanged).
+        debug_truth: throw the controllers' ground-truth debug switch (base state from the simulator).
+        save_episodes: also store every trial's episode log (``episodes/<controller>/<band>-s<seed>-t<i>.npz``,
+            for replay with ``wbc view --episode``).
+        observer: watches every tick (``wbc run --view``); trials then run one by one in this process (local
+            executor only).
+    """
+
+    controllers: tuple[str, ...]
+    scenario: Path
+    bands: tuple[str, ...] = ()
+    seeds: tuple[int, ...] = (0,)
+    trials: int = 10
+    out_dir: Path = field(default_factory=lambda: Path("runs/arena"))
+    executor: str = "local"
+    workers: int | None = None
+    address: str | None = None
+    resume: bool = False
+    progress: bool = True
+    no_push: bool = False
+    debug_truth: bool = False
+    save_episodes: bool = False
+    observer: TickObserver | None = None
+
+    def __post_init__(self) -> None:
+        if not self.controllers:
+            raise ConfigError("at least one controller is needed")
+        if len(set(self.controllers)) != len(self.controllers):
+            raise ConfigError(f"controllers repeat: {', '.join(self.controllers)}")
+        for name in self.controllers:
+            get_controller(name)
+        if self.executor not in EXECUTORS:
+            raise UnknownNameError("executor", self.executor, EXECUTORS)
+        if self.trials < 1:
+            raise ConfigError(f"--trials must be >= 1, got {self.trials}")
+        if not self.seeds:
+            raise ConfigError("at least one seed is needed")
+        if self.observer is not None and self.executor != "local":
+            raise ConfigError("a live view (--view) watches trials played in this process: use the local executor")
+
+
+@dataclass(frozen=True)
+class ArenaResult:
+    """What `run_arena` produced.
+
+    Attributes:
+        summary: the ``summary.json`` content.
+        out_dir: the results directory.
+        played: trials played by this call (not counting those resumed from disk).
+        wall_s: wall time of this call [s].
+        physics_steps: physics steps simulated by this call.
+    """
+
+    summary: dict
+    out_dir: Path
+    played: int
+    wall_s: float
+    physics_steps: int
+
+
+def _progress(total: int, initial: int, enabled: bool):
+    try:
+        from tqdm import tqdm
+    except ImportError:  # tqdm is a core dependency; stay usable without it
+        return None
+    return tqdm(total=total, initial=initial, disable=not enabled, unit="trial", file=sys.stderr,
+                dynamic_ncols=True, desc="trials")
+
+
+def run_arena(cfg: ArenaConfig) -> ArenaResult:
+    """Run (or resume) a comparison and write its results directory.
+
+    Raises:
+        ScenarioError: the scenario file is invalid.
+        WbcError: bad options or a results directory that belongs to another run.
+    """
+    scenario = load_scenario(cfg.scenario)
+    for name in cfg.controllers:
+        robot = get_controller(name).robot
+        if robot is not None and robot != scenario.robot:
+            raise ConfigError(f"controller {name} drives {robot}, but scenario {cfg.scenario} is played by "
+                              f"{scenario.robot}")
+    bands = cfg.bands or scenario.bands
+    for band in bands:
+        if band not in scenario.bands:
+            raise UnknownNameError("band", band, scenario.bands)
+    try:
+        check_published(scenario)
+        published = True
+    except ScenarioError as exc:
+        published = False
+        print(f"wbc: warning: {exc}", file=sys.stderr)
+    trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
+    if cfg.no_push:
+        trials = [dataclasses.replace(t, pushes=()) for t in trials]
+    identity = {
+        "controllers": list(cfg.controllers),
+        "scenario": {"path": str(cfg.scenario), "name": scenario.name, "version": scenario.version,
+                     "hash": scenario.hash, "published": published},
+        "bands": list(bands),
+        "seeds": list(cfg.seeds),
+        "trials": cfg.trials,
+        "no_push": cfg.no_push,
+        "debug_truth": cfg.debug_truth,
+    }
+    store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume)
+    done = store.done()
+    def where(t: Trial, c: str) -> str | None:
+        if not cfg.save_episodes:
+            return None
+        path = episode_path(store.dir, c, t.band, t.seed, t.index)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return str(path)
+
+    tasks = [(t, c, cfg.debug_truth, where(t, c)) for c in cfg.controllers for t in trials
+             if (c, t.band, t.seed, t.index) not in done]
+    total = len(cfg.controllers) * len(trials)
+    executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
+    bar = _progress(total, total - len(tasks), cfg.progress)
+    start = time.perf_counter()
+    steps = 0
+    physics_dt = MujocoRobotConfig().timestep
+    try:
+        for record in executor.run(tasks):
+            store.append(record)
+            steps += int(round(float(record["ttf"]) * scenario.duration_s / physics_dt))
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+        store.close()
+    wall = time.perf_counter() - start
+    records = [r for r in store.records if r["scenario_hash"] == scenario.hash]
+    summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
+                        controllers=list(cfg.controllers), bands=list(bands))
+    (store.dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    meta = {
+        "controllers": ", ".join(cfg.controllers),
+        "scenario": f"{scenario.name} v{scenario.version} ({cfg.scenario})",
+        "scenario hash": scenario.hash,
+        "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
+        "bands": ", ".join(bands),
+        "seeds": ", ".join(str(s) for s in cfg.seeds),
+        "trials per band and seed": cfg.trials,
+        "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
+        "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
+        "executor": cfg.executor,
+        **{k: v for k, v in provenance().items() if k != "packages"},
+        "packages": ", ".join(f"{k} {v}" for k, v in provenance()["packages"].items()),
+    }
+    write_report(store.dir, summary, records, meta)
+    if len(records) != total:
+        raise WbcError(f"{store.dir}: {len(records)} of {total} trials stored; rerun with --resume")
+    return ArenaResult(summary=summary, out_dir=store.dir, played=len(tasks), wall_s=wall, physics_steps=steps)

@@ -1,0 +1,148 @@
+"""Executors: where trials run. A local process pool (default) or a Ray cluster; the results are identical.
+
+Both take (trial, controller, episode path) tasks and yield each finished results row as soon as it is done, in
+completion order; the caller stores it at once. Every trial is fully determined by its `Trial`, so neither the
+worker nor the order changes a result.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+from collections.abc import Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+from typing import TYPE_CHECKING
+
+from wbc.optional import require
+from wbc.scenario.trial import Trial
+
+if TYPE_CHECKING:  # the runner is imported lazily, in the worker that plays
+    from wbc.arena.runner import TickObserver
+
+__all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "run_task", "single_threaded_blas"]
+
+Task = tuple[Trial, str] | tuple[Trial, str, bool] | tuple[Trial, str, bool, str | None]
+"""(trial, controller), (trial, controller, debug_truth) or (trial, controller, debug_truth, episode path): where to
+save the episode log as ``.npz``, or None."""
+
+_SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+"""Workers run one trial each on one core: a multi-threaded BLAS in every worker oversubscribes the cores (two MPC
+workers on two cores ran 2.5x slower than one)."""
+
+
+@contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """Processes spawned inside this context start their BLAS single-threaded; the environment is restored after.
+
+    Only processes started inside it are affected: a BLAS already loaded keeps its thread count.
+    """
+    saved = {k: os.environ.get(k) for k in _SINGLE_THREAD_ENV}
+    os.environ.update(_SINGLE_THREAD_ENV)
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def run_task(task: Task, observer: TickObserver | None = None) -> dict[str, object]:
+    """Play one task in this process and return its results row.
+
+    The episode is saved (when the task names a path) before the row is returned, so a stored row always has its
+    episode. `observer` watches every tick (a live viewer; see `wbc.arena.runner.run_episode`).
+    """
+    from wbc.arena.runner import run_trial
+
+    trial, controller, *rest = task
+    debug_truth = bool(rest[0]) if rest else False
+    episode_path = rest[1] if len(rest) > 1 else None
+    record, episode = run_trial(trial, controller, debug_truth=debug_truth, observer=observer)
+    if episode_path is not None:
+        episode.save(episode_path)
+    return record
+
+
+class LocalExecutor:
+    """Runs tasks in a pool of local processes (``workers`` <= 1: in this process).
+
+    Args:
+        workers: number of processes (default: all cores).
+        observer: watches every tick of every trial (a live viewer); trials then run one by one in this process.
+    """
+
+    name = "local"
+
+    def __init__(self, workers: int | None = None, observer: TickObserver | None = None) -> None:
+        self.workers = 1 if observer is not None else (workers or os.cpu_count() or 1)
+        self.observer = observer
+
+    def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
+        """Yield results rows as tasks finish."""
+        tasks = list(tasks)
+        if self.workers <= 1:
+            for task in tasks:
+                yield run_task(task, self.observer)
+            return
+        # Spawned (not forked) workers, so each starts its BLAS single-threaded from the environment; the pool starts
+        # its processes on demand, so the environment stays set until the pool is done.
+        with single_threaded_blas():
+            yield from self._run_pool(tasks)
+
+    def _run_pool(self, tasks: list[Task]) -> Iterator[dict[str, object]]:
+        pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
+        with pool:
+            pending: set[Future] = set()
+            queue = iter(tasks)
+            for task in queue:  # keep a bounded number in flight so a kill loses little
+                pending.add(pool.submit(run_task, task))
+                if len(pending) >= 2 * self.workers:
+                    break
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    yield fut.result()
+                    nxt = next(queue, None)
+                    if nxt is not None:
+                        pending.add(pool.submit(run_task, nxt))
+
+
+class RayExecutor:
+    """Runs tasks on a Ray cluster (or a local Ray started on demand).
+
+    Args:
+        address: cluster address (``auto``, ``ray://host:10001`` ...); None starts a local Ray on this machine.
+        num_cpus: CPUs for a local Ray (default: all cores).
+    """
+
+    name = "ray"
+
+    def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
+        self.address = address
+        self.num_cpus = num_cpus
+
+    def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
+        """Yield results rows as tasks finish."""
+        ray = require("ray", "cluster")
+        started = False
+        if not ray.is_initialized():
+            kwargs = {"address": self.address} if self.address else {
+                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
+            ray.init(log_to_driver=False, configure_logging=False,
+                     runtime_env={"env_vars": dict(_SINGLE_THREAD_ENV)}, **kwargs)
+            started = True
+        try:
+            remote = ray.remote(num_cpus=1)(run_task)
+            refs = [remote.remote(task) for task in tasks]
+            while refs:
+                done, refs = ray.wait(refs, num_returns=1)
+                yield ray.get(done[0])
+        finally:
+            if started:
+                ray.shutdown()
+
+
+EXECUTORS = ("local", "ray")

@@ -1,0 +1,459 @@
+"""Arena report: a JSON summary of the records, the paper-style results table, and a Markdown report with plots.
+
+The runner produces one record per (controller, trial), a flat mapping with the fields
+
+    controller, scenario, scenario_hash, band, seed, trial, success, ttf, fall_time_s, vlin_err, vang_err,
+    max_roll_deg, max_pitch_deg, energy_j, arm_travel_rad, push_force_n, n_pushes, vx_cmd, vy_cmd, yaw_rate_cmd,
+    friction, payload_kg, fallbacks, wall_s
+
+(typed, or all strings when read back from CSV). This module turns them into:
+
+- `summarize`: per controller and band, mean +- std across seeds of each metric (`wbc.arena.stats.mean_std_over_seeds`),
+  and for every ordered pair of controllers the paired difference B - A with a 95 % bootstrap interval
+  (`wbc.arena.stats.paired_difference`). The result is JSON-serialisable: NaN becomes ``None``.
+- `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table.
+- `write_report`: ``report.md`` plus PNG plots in an output folder.
+
+Everything is deterministic: the same records give byte-identical summaries and tables.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wbc.arena.stats import (
+    Record,
+    RecordError,
+    mean_std_over_seeds,
+    paired_difference,
+    record_float,
+    record_str,
+)
+
+__all__ = [
+    "METRICS",
+    "METRIC_KEYS",
+    "EXTRA_METRICS",
+    "summarize",
+    "format_table",
+    "write_report",
+]
+
+METRICS = ("success_rate", "ttf", "vlin_err", "vang_err")
+"""The headline metrics: reported per band and compared pairwise between controllers."""
+
+METRIC_KEYS: Mapping[str, str] = {
+    "success_rate": "success",
+    "ttf": "ttf",
+    "vlin_err": "vlin_err",
+    "vang_err": "vang_err",
+}
+"""Summary metric name -> the record field it is computed from."""
+
+EXTRA_METRICS = ("max_roll_deg", "energy_j", "arm_travel_rad")
+"""Secondary metrics reported per band (named as their record fields), not compared pairwise."""
+
+_N_PUSH_BINS = 8
+_LABELS = {
+    "success_rate": "Success %",
+    "ttf": "TTF",
+    "vlin_err": "V_lin err [m/s]",
+    "vang_err": "V_ang err [rad/s]",
+    "max_roll_deg": "Max roll [deg]",
+    "energy_j": "Energy [J]",
+    "arm_travel_rad": "Arm travel [rad]",
+}
+_DECIMALS = {"success_rate": 2, "ttf": 3, "vlin_err": 3, "vang_err": 3, "max_roll_deg": 2, "energy_j": 1,
+             "arm_travel_rad": 3}
+_SCALE = {"success_rate": 100.0}  # success is stored as a fraction, shown in percent (paired: percentage points)
+_PLOTS = (
+    ("success_vs_push.png", "Success rate against push magnitude"),
+    ("ttf.png", "Time to fall (fraction of the episode survived)"),
+    ("tracking.png", "Velocity tracking error"),
+)
+
+
+def _json_float(value: float) -> float | None:
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def _records_by_cell(
+    records: Iterable[Record], controllers: Sequence[str], bands: Sequence[str]
+) -> dict[str, dict[str, list[Record]]]:
+    """Controller -> band -> its records; records of other controllers or bands are dropped."""
+    cells: dict[str, dict[str, list[Record]]] = {c: {b: [] for b in bands} for c in controllers}
+    for record in records:
+        controller = record_str(record, "controller")
+        band = record_str(record, "band")
+        if controller in cells and band in cells[controller]:
+            cells[controller][band].append(record)
+    return cells
+
+
+def summarize(
+    records: Iterable[Record],
+    *,
+    scenario_name: str,
+    scenario_hash: str,
+    controllers: Sequence[str],
+    bands: Sequence[str],
+) -> dict[str, Any]:
+    """Summarise arena records per controller and band, and compare controllers pairwise.
+
+    For each controller and band: the number of trials, and mean / std across seeds (`mean_std_over_seeds`) of
+    `METRICS` (success_rate from the ``success`` field, as a fraction in [0, 1]) and of `EXTRA_METRICS`. For every
+    ordered pair (a, b) with a listed before b in `controllers`, every band and every metric in `METRICS`: the
+    paired difference b - a and its 95 % bootstrap interval (`paired_difference`, seed 0).
+
+    Records of controllers or bands not listed are ignored. A listed controller or band without records gets
+    ``trials: 0`` and ``None`` statistics.
+
+    Args:
+        records: arena records (typed, or strings as read from CSV).
+        scenario_name: the scenario's name.
+        scenario_hash: the scenario file's content hash; every record's ``scenario_hash``, where set, must match.
+        controllers: controller names, in the order of the table (the order also fixes which side of each pair is A).
+        bands: band names, in the order of the table.
+
+    Returns:
+        A JSON-serialisable dict::
+
+            {"scenario": {"name", "hash"},
+             "controllers": {NAME: {"bands": {BAND: {"trials": int, METRIC: {"mean", "std"}, ...}}}},
+             "paired": [{"a", "b", "band", "metric", "diff", "ci95": [lo, hi]}, ...]}
+
+        with ``None`` wherever a statistic is undefined.
+
+    Raises:
+        RecordError: a record is malformed, repeats a trial, or comes from another version of the scenario.
+    """
+    records = list(records)
+    for record in records:
+        record_hash = record_str(record, "scenario_hash") if "scenario_hash" in record else ""
+        if record_hash and record_hash != scenario_hash:
+            raise RecordError(
+                f"a record of controller {record_str(record, 'controller')!r} was produced by scenario hash "
+                f"{record_hash!r}, not {scenario_hash!r}; summarise the records of one scenario version at a time"
+            )
+    cells = _records_by_cell(records, controllers, bands)
+    per_controller: dict[str, Any] = {}
+    for controller in controllers:
+        per_band: dict[str, Any] = {}
+        for band in bands:
+            cell = cells[controller][band]
+            entry: dict[str, Any] = {"trials": len(cell)}
+            for metric in (*METRICS, *EXTRA_METRICS):
+                stats = mean_std_over_seeds(cell, METRIC_KEYS.get(metric, metric))
+                entry[metric] = {"mean": _json_float(stats["mean"]), "std": _json_float(stats["std"])}
+            per_band[band] = entry
+        per_controller[controller] = {"bands": per_band}
+    paired = []
+    for a, b in itertools.combinations(controllers, 2):
+        for band in bands:
+            for metric in METRICS:
+                result = paired_difference(cells[a][band], cells[b][band], METRIC_KEYS[metric])
+                paired.append(
+                    {
+                        "a": a,
+                        "b": b,
+                        "band": band,
+                        "metric": metric,
+                        "diff": _json_float(result["diff"]),
+                        "ci95": [_json_float(x) for x in result["ci95"]],
+                    }
+                )
+    return {
+        "scenario": {"name": scenario_name, "hash": scenario_hash},
+        "controllers": per_controller,
+        "paired": paired,
+    }
+
+
+def _bands_of(summary: Mapping[str, Any]) -> list[str]:
+    bands: list[str] = []
+    for entry in summary["controllers"].values():
+        for band in entry["bands"]:
+            if band not in bands:
+                bands.append(band)
+    return bands
+
+
+def _number(value: float | None, metric: str) -> str:
+    if value is None:
+        return "n/a"
+    return f"{value * _SCALE.get(metric, 1.0):.{_DECIMALS[metric]}f}"
+
+
+def _mean_std(stat: Mapping[str, float | None], metric: str) -> str:
+    if stat["mean"] is None:
+        return "n/a"
+    return f"{_number(stat['mean'], metric)} ± {_number(stat['std'], metric)}"
+
+
+def _signed(value: float | None, metric: str) -> str:
+    if value is None:
+        return "n/a"
+    return f"{value * _SCALE.get(metric, 1.0):+.{_DECIMALS[metric]}f}"
+
+
+def _ci(ci95: Sequence[float | None], metric: str) -> str:
+    if ci95[0] is None or ci95[1] is None:
+        return "n/a"
+    return f"[{_signed(ci95[0], metric)}, {_signed(ci95[1], metric)}]"
+
+
+def _result_rows(summary: Mapping[str, Any], band: str, metrics: Sequence[str]) -> list[list[str]]:
+    rows = []
+    for controller, entry in summary["controllers"].items():
+        cell = entry["bands"].get(band)
+        if cell is None:
+            rows.append([controller, "0", *("n/a" for _ in metrics)])
+        else:
+            rows.append([controller, str(cell["trials"]), *(_mean_std(cell[m], m) for m in metrics)])
+    return rows
+
+
+def _paired_rows(summary: Mapping[str, Any]) -> list[list[str]]:
+    return [
+        [p["band"], p["a"], p["b"], _LABELS[p["metric"]], _signed(p["diff"], p["metric"]), _ci(p["ci95"], p["metric"])]
+        for p in summary["paired"]
+    ]
+
+
+def _aligned(header: Sequence[str], rows: Sequence[Sequence[str]], indent: str = "  ") -> list[str]:
+    widths = [max(len(row[i]) for row in (header, *rows)) for i in range(len(header))]
+    lines = [indent + "  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)).rstrip()]
+    lines.append(indent + "  ".join("-" * w for w in widths))
+    lines += [indent + "  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip() for row in rows]
+    return lines
+
+
+def format_table(summary: Mapping[str, Any]) -> str:
+    """Render a summary (from `summarize`) as plain text in the shape of the paper's results table.
+
+    One block per band, one row per controller, columns Trials, Success %, TTF, V_lin err, V_ang err as
+    "mean ± std" across seeds (success in percent with 2 decimals, e.g. ``95.02 ± 0.62``; the others with 3). Then a
+    block "paired differences (B - A, 95% CI)" with one line per pair, band and metric; success differences are in
+    percentage points. Undefined statistics show as ``n/a``.
+
+    Args:
+        summary: the output of `summarize` (or the same read back from JSON).
+
+    Returns:
+        The table, lines separated by newlines, ending with a newline.
+    """
+    scenario = summary["scenario"]
+    lines = [f"scenario {scenario['name']} ({scenario['hash']})", ""]
+    header = ["controller", "trials", *(_LABELS[m] for m in METRICS)]
+    for band in _bands_of(summary):
+        lines.append(f"band {band}")
+        lines += _aligned(header, _result_rows(summary, band, METRICS))
+        lines.append("")
+    lines.append("paired differences (B - A, 95% CI)")
+    if summary["paired"]:
+        lines += _aligned(["band", "A", "B", "metric", "B - A", "95% CI"], _paired_rows(summary))
+    else:
+        lines.append("  (fewer than two controllers)")
+    return "\n".join(lines) + "\n"
+
+
+def _md_cell(text: Any) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    lines = ["| " + " | ".join(_md_cell(h) for h in header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(_md_cell(c) for c in row) + " |" for row in rows]
+    return lines
+
+
+def _md_meta(meta: Mapping[str, Any]) -> list[str]:
+    lines = []
+    for key, value in meta.items():
+        if isinstance(value, Mapping):
+            lines.append(f"- **{key}**:")
+            lines += [f"  - {sub}: `{_md_cell(v)}`" for sub, v in value.items()]
+        elif isinstance(value, list | tuple):
+            lines.append(f"- **{key}**: {', '.join(_md_cell(v) for v in value)}")
+        else:
+            lines.append(f"- **{key}**: {_md_cell(value)}")
+    return lines
+
+
+def _cell_stat(summary: Mapping[str, Any], controller: str, band: str, metric: str, field: str) -> float:
+    cell = summary["controllers"][controller]["bands"].get(band)
+    value = None if cell is None else cell[metric][field]
+    return math.nan if value is None else float(value)
+
+
+def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[Record], controllers: Sequence[str]) -> bool:
+    """Success rate against push magnitude, one line per controller; False (nothing written) without pushes."""
+    pushes = np.array([record_float(r, "push_force_n") for r in records], dtype=float)
+    if not np.any(pushes > 0.0):
+        return False
+    success = np.array([record_float(r, "success") for r in records], dtype=float)
+    names = np.array([record_str(r, "controller") for r in records])
+    finite = np.isfinite(pushes)
+    levels = np.unique(pushes[finite])
+    if levels.size <= _N_PUSH_BINS:  # few distinct magnitudes (a push band): one point per magnitude
+        centers = levels
+        bin_of = np.searchsorted(levels, pushes)
+    else:
+        edges = np.linspace(0.0, float(levels[-1]), _N_PUSH_BINS + 1)
+        centers = 0.5 * (edges[:-1] + edges[1:])
+        bin_of = np.clip(np.searchsorted(edges, pushes, side="right") - 1, 0, _N_PUSH_BINS - 1)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    try:
+        for controller in controllers:
+            mine = (names == controller) & finite & ~np.isnan(success)
+            rates = [
+                100.0 * float(success[mine & (bin_of == i)].mean()) if np.any(mine & (bin_of == i)) else math.nan
+                for i in range(centers.size)
+            ]
+            ax.plot(centers, rates, marker="o", label=controller)
+        ax.set_xlabel("largest push in the trial [N]")
+        ax.set_ylabel("success [%]")
+        ax.set_ylim(-5.0, 105.0)
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+        ax.set_title("Success rate against push magnitude (all bands)")
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+    return True
+
+
+def _plot_ttf(plt: Any, path: Path, records: Sequence[Record], controllers: Sequence[str]) -> None:
+    """Box plot of TTF per controller, all bands pooled."""
+    names = [record_str(r, "controller") for r in records]
+    ttf = [record_float(r, "ttf") for r in records]
+    data = []
+    for controller in controllers:
+        values = np.array([t for n, t in zip(names, ttf, strict=True) if n == controller], dtype=float)
+        values = values[~np.isnan(values)]
+        data.append(values if values.size else np.array([math.nan]))
+    fig, ax = plt.subplots(figsize=(max(4.0, 1.2 * len(controllers) + 2.0), 4.0))
+    try:
+        ax.boxplot(data, tick_labels=list(controllers))
+        ax.set_ylabel("TTF (fraction of the episode survived)")
+        ax.set_ylim(-0.05, 1.05)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.set_title("Time to fall, all bands")
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+
+
+def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequence[str]) -> None:
+    """Grouped bars of V_lin and V_ang tracking error, mean with std across seeds as error bars."""
+    controllers = list(summary["controllers"])
+    x = np.arange(len(bands), dtype=float)
+    width = 0.8 / max(1, len(controllers))
+    fig, axes = plt.subplots(1, 2, figsize=(max(6.4, 1.5 * len(bands) * 2 + 2.0), 4.0))
+    try:
+        for ax, metric in zip(axes, ("vlin_err", "vang_err"), strict=True):
+            for i, controller in enumerate(controllers):
+                means = [_cell_stat(summary, controller, b, metric, "mean") for b in bands]
+                stds = [_cell_stat(summary, controller, b, metric, "std") for b in bands]
+                offset = (i - (len(controllers) - 1) / 2.0) * width
+                ax.bar(x + offset, np.nan_to_num(means), width, yerr=np.nan_to_num(stds), capsize=3,
+                       label=controller)
+            ax.set_xticks(x, list(bands))
+            ax.set_ylabel(_LABELS[metric])
+            ax.set_title(_LABELS[metric].split(" [")[0])
+            ax.grid(True, axis="y", alpha=0.3)
+        axes[0].legend()
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+
+
+def write_report(
+    out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[Record], meta: Mapping[str, Any]
+) -> list[Path]:
+    """Write ``report.md`` and its PNG plots into `out_dir` (created if missing).
+
+    Plots (matplotlib, Agg backend, figures closed after saving):
+
+    - ``success_vs_push.png``: success rate against the trial's largest push magnitude (``push_force_n``), binned,
+      one line per controller; only written when some record has a push.
+    - ``ttf.png``: box plot of TTF per controller, all bands pooled.
+    - ``tracking.png``: V_lin and V_ang tracking error per band and controller, bars of the mean across seeds with
+      the std as error bars.
+
+    ``report.md`` holds the title, the scenario name and hash, `meta` as a list (nested mappings as sub-lists), one
+    Markdown results table per band, the paired-differences table and links to the plots.
+
+    Args:
+        out_dir: output folder.
+        summary: the output of `summarize` for `records`.
+        records: the arena records summarised (used for the per-trial plots); those of controllers not in the
+            summary are ignored.
+        meta: run information to list (controllers, seeds, trials, executor, package versions, git revision ...).
+
+    Returns:
+        The paths written: ``report.md`` first, then the plots.
+
+    Raises:
+        RecordError: a record is malformed.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    controllers = list(summary["controllers"])
+    bands = _bands_of(summary)
+    records = [r for r in records if record_str(r, "controller") in summary["controllers"]]
+
+    plots: list[Path] = []
+    if _plot_success_vs_push(plt, out / "success_vs_push.png", records, controllers):
+        plots.append(out / "success_vs_push.png")
+    _plot_ttf(plt, out / "ttf.png", records, controllers)
+    plots.append(out / "ttf.png")
+    _plot_tracking(plt, out / "tracking.png", summary, bands)
+    plots.append(out / "tracking.png")
+
+    scenario = summary["scenario"]
+    lines = [f"# Arena report: {scenario['name']}", "", f"Scenario `{scenario['name']}`, hash `{scenario['hash']}`."]
+    lines += ["", "## Run", ""]
+    lines += _md_meta(meta) if meta else ["(no run information given)"]
+    lines += ["", "## Results", "", "Mean ± std across seeds (each seed's trials averaged first); success in %.", ""]
+    metrics = (*METRICS, *EXTRA_METRICS)
+    for band in bands:
+        lines += [f"### Band `{band}`", ""]
+        header = ["Controller", "Trials", *(_LABELS[m] for m in metrics)]
+        lines += _md_table(header, _result_rows(summary, band, metrics))
+        lines.append("")
+    lines += ["## Paired differences (B - A, 95% CI)", ""]
+    lines += [
+        "Same trials for both controllers; percentile bootstrap over trials. Positive: B larger (better for success "
+        "and TTF, worse for tracking errors). Success in percentage points.",
+        "",
+    ]
+    if summary["paired"]:
+        lines += _md_table(["Band", "A", "B", "Metric", "B - A", "95% CI"], _paired_rows(summary))
+    else:
+        lines.append("(fewer than two controllers)")
+    lines += ["", "## Plots", ""]
+    written = {p.name for p in plots}
+    for name, title in _PLOTS:
+        if name in written:
+            lines += [f"- [{title}]({name})", "", f"  ![{title}]({name})", ""]
+        else:
+            lines += [f"- {title}: not drawn (no trial had a push)", ""]
+    report = out / "report.md"
+    report.write_text("\n".join(lines).rstrip("\n") + "\n", encoding="utf-8")
+    return [report, *plots]

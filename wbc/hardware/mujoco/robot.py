@@ -1,0 +1,374 @@
+"""`MujocoRobot`: the simulated robot behind the `Robot` interface.
+
+The motor law runs inside MuJoCo's step (see `wbc.robots.mujoco_model`), so `advance` calls ``mj_step`` with
+``nstep`` and no Python in between, except while a push acts (its torque about the CoM is refreshed every physics
+step as the trunk moves). What `read` returns is what the real robot's sensors give (joint encoders, motor torque
+estimate, IMU, foot force sensors, optionally noisy); simulator truth (base pose and velocity, contacts, applied
+force) is only reachable through `sim_truth()`, for metrics.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+
+from wbc.errors import ConfigError
+from wbc.hardware.mujoco.fall_rule import FOOT_ZONE, foot_geoms, near_feet
+from wbc.hardware.mujoco.scene import TERRAIN_GEOM, build_scene, set_ground_friction, set_terrain_heights
+from wbc.hardware.robot import Robot
+from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.description import FOOT_NAMES, RobotDescription
+from wbc.robots.joint_table import JointTable, joint_table
+from wbc.robots.registry import get_robot
+from wbc.scenario.domain import DomainParams, SensorNoise
+from wbc.scenario.push import Push
+from wbc.scenario.terrain import TerrainConfig, fractal_heights
+from wbc.types import BaseTruth, MotorCommand, RobotState
+
+__all__ = ["FOOT_ZONE", "MujocoRobotConfig", "MujocoRobot", "SimTruth", "initial_qpos"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class MujocoRobotConfig:
+    """Configuration of the simulated robot.
+
+    Attributes:
+        robot: registry name (``a1-wx200``, ``go1-arm``).
+        arm_mode: ``none``, ``locked`` or ``actuated``.
+        arm_mass_scale: scales the arm's mass and inertia.
+        terrain: ground shape.
+        timestep: physics step [s].
+        noise: sensor noise added by `read`.
+    """
+
+    robot: str = "a1-wx200"
+    arm_mode: str = "actuated"
+    arm_mass_scale: float = 1.0
+    terrain: TerrainConfig = field(default_factory=TerrainConfig)
+    timestep: float = 0.002
+    noise: SensorNoise = field(default_factory=SensorNoise)
+
+    def __post_init__(self) -> None:
+        if not 0 < self.timestep <= 0.01:
+            raise ConfigError(f"MujocoRobotConfig.timestep must be in (0, 0.01] s, got {self.timestep}")
+
+    def description(self) -> RobotDescription:
+        """The robot description this config names."""
+        return get_robot(self.robot, self.arm_mode, arm_mass_scale=self.arm_mass_scale)
+
+
+@dataclass(frozen=True)
+class SimTruth:
+    """Simulator ground truth, for metrics and debugging only (a real robot has none of this).
+
+    Attributes:
+        time: simulation time [s].
+        base_position_in_world: trunk origin, shape (3,) [m].
+        base_quat: trunk orientation (w, x, y, z).
+        base_linvel_in_world: trunk origin velocity, shape (3,) [m/s].
+        base_angvel_in_body: trunk angular velocity in the trunk frame, shape (3,) [rad/s].
+        com_in_world: whole-robot centre of mass, shape (3,) [m].
+        com_velocity_in_world: its velocity, shape (3,) [m/s].
+        foot_contact: whether each foot (FR, FL, RR, RL) touches the ground, shape (4,).
+        ground_contact_bodies: names of non-foot bodies touching the ground.
+        external_force_in_world: push force acting now, shape (3,) [N].
+        external_point_in_world: where it acts, shape (3,) [m] (the trunk origin when no push acts).
+    """
+
+    time: float
+    base_position_in_world: np.ndarray
+    base_quat: np.ndarray
+    base_linvel_in_world: np.ndarray
+    base_angvel_in_body: np.ndarray
+    com_in_world: np.ndarray
+    com_velocity_in_world: np.ndarray
+    foot_contact: np.ndarray
+    ground_contact_bodies: tuple[str, ...]
+    external_force_in_world: np.ndarray
+    external_point_in_world: np.ndarray
+
+
+def initial_qpos(model: mujoco.MjModel, desc: RobotDescription, base_height: float) -> np.ndarray:
+    """Standing configuration: trunk level at `base_height`, joints at the nominal pose."""
+    qpos = np.zeros(model.nq)
+    qpos[2] = base_height
+    qpos[3] = 1.0
+    qpos[7:] = desc.nominal_q
+    return qpos
+
+
+class MujocoRobot(Robot):
+    """A robot simulated by MuJoCo.
+
+    Args:
+        config: what to simulate.
+    """
+
+    def __init__(self, config: MujocoRobotConfig | None = None) -> None:
+        super().__init__()
+        self.config = config if config is not None else MujocoRobotConfig()
+        self.desc = self.config.description()
+        self._joint_names = self.desc.joint_names
+        self._num_joints = len(self._joint_names)
+        self._limits = joint_table(self.desc)
+        self.model: mujoco.MjModel | None = None
+        self.data: mujoco.MjData | None = None
+        self._pushes: list[Push] = []
+        self._steps = 0
+        self._rng = np.random.default_rng(0)
+        self._domain = DomainParams()
+        self._strength = np.ones(self.num_joints)
+        self._push_windows: list[tuple[int, int, Push]] = []
+        self._contacts_at = -1
+        self._contacts = (np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
+        self._force_now = np.zeros(3)
+        self._point_now = np.zeros(3)
+
+    # -- Robot ----------------------------------------------------------------------------------------------------
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """Actuated joints, house order."""
+        return self._joint_names
+
+    @property
+    def num_joints(self) -> int:
+        """Number of actuated joints."""
+        return self._num_joints
+
+    @property
+    def limits(self) -> JointTable:
+        """Motor limits."""
+        return self._limits
+
+    @property
+    def time(self) -> float:
+        """Simulation time [s]."""
+        return self._steps * self.config.timestep
+
+    def _connect(self) -> None:
+        self.model = build_scene(self.desc, self.config.terrain, timestep=self.config.timestep)
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._base_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "base")
+        self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TERRAIN_GEOM)
+        self._sensor = {
+            name: (m.sensor_adr[i], m.sensor_dim[i])
+            for i in range(m.nsensor)
+            for name in [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SENSOR, i)]
+        }
+        def _span(name: str) -> np.ndarray:
+            adr, dim = self._sensor[name]
+            return np.arange(adr, adr + dim)
+
+        self._quat_idx, self._gyro_idx, self._accel_idx = _span("imu_quat"), _span("imu_gyro"), _span("imu_accel")
+        self._touch_idx = np.array([self._sensor[f.replace("_foot", "_touch")][0] for f in FOOT_NAMES])
+        self._foot_geoms = foot_geoms(m)
+        self._is_foot_geom = np.zeros(m.ngeom, dtype=bool)
+        self._is_foot_geom[self._foot_geoms] = True
+        self._nominal = {
+            "body_mass": m.body_mass.copy(), "body_ipos": m.body_ipos.copy(), "body_inertia": m.body_inertia.copy(),
+            "geom_friction": m.geom_friction.copy(), "forcerange": m.actuator_forcerange.copy(),
+        }
+        self._reset(0, None, None)
+
+    def _close(self) -> None:
+        self.model = None
+        self.data = None
+
+    def _read(self) -> RobotState:
+        d, noise = self.data, self.config.noise
+        n = self.num_joints
+        q = d.qpos[7:].copy()
+        dq = d.qvel[6:].copy()
+        sd = d.sensordata.copy()
+        quat, gyro, accel = sd[self._quat_idx], sd[self._gyro_idx], sd[self._accel_idx]
+        feet = sd[self._touch_idx]
+        if noise.enabled:
+            rng = self._rng
+            q += rng.normal(0.0, noise.q, n)
+            dq += rng.normal(0.0, noise.dq, n)
+            gyro += rng.normal(0.0, noise.gyro, 3)
+            accel += rng.normal(0.0, noise.accel, 3)
+            feet = np.maximum(feet + rng.normal(0.0, noise.foot_force, 4), 0.0)
+            if noise.orientation > 0:
+                half = 0.5 * rng.normal(0.0, noise.orientation, 3)
+                dqt = np.r_[1.0, half] / np.linalg.norm(np.r_[1.0, half])
+                res = np.empty(4)
+                mujoco.mju_mulQuat(res, quat, dqt)
+                quat = res
+        return RobotState(
+            tick=self._steps, time=self.time, q=q, dq=dq, tau_est=d.actuator_force.copy(), imu_quat=quat,
+            gyro_in_body=gyro, accel_in_body=accel, foot_force=feet,
+        )
+
+    def _send(self, cmd: MotorCommand) -> None:
+        m, d = self.model, self.data
+        k = self._strength
+        m.actuator_biasprm[:, 1] = -k * cmd.kp
+        m.actuator_biasprm[:, 2] = -k * cmd.kd
+        d.ctrl[:] = cmd.kp * cmd.q + cmd.kd * cmd.dq + cmd.tau
+
+    def _advance(self, dt: float) -> None:
+        n = max(1, int(round(dt / self.config.timestep)))
+        m, d = self.model, self.data
+        while n > 0:
+            active = self._active_pushes(self._steps)
+            if not active:
+                # run without Python until the next push starts
+                nxt = self._next_push_step(self._steps)
+                k = n if nxt is None else max(1, min(n, nxt - self._steps))
+                d.xfrc_applied[self._base_body] = 0.0
+                self._force_now[:] = 0.0
+                mujoco.mj_step(m, d, nstep=k)
+                self._steps += k
+                n -= k
+                continue
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            rot = d.xmat[self._base_body].reshape(3, 3)
+            force, torque = np.zeros(3), np.zeros(3)
+            for p in active:
+                point = d.xpos[self._base_body] + rot @ p.offset_in_base
+                force += p.force_in_world
+                torque += np.cross(point - d.xipos[self._base_body], p.force_in_world)
+                self._point_now = point
+            d.xfrc_applied[self._base_body, :3] = force
+            d.xfrc_applied[self._base_body, 3:] = torque
+            self._force_now = force
+            mujoco.mj_step(m, d)
+            self._steps += 1
+            n -= 1
+        if not self._active_pushes(self._steps):
+            d.xfrc_applied[self._base_body] = 0.0
+            self._force_now = np.zeros(3)
+
+    # -- simulation-only API --------------------------------------------------------------------------------------
+    def reset(self, seed: int = 0, *, domain: DomainParams | None = None, qpos: np.ndarray | None = None) -> None:
+        """Put the robot back at its standing pose, with the terrain and randomisation of `seed`.
+
+        Args:
+            seed: seeds the terrain (fractal), the sensor noise and nothing else.
+            domain: physical parameters (defaults: nominal).
+            qpos: initial configuration (defaults: standing at the nominal pose above the terrain).
+        """
+        self._require_connected("reset")
+        self._reset(seed, domain, qpos)
+
+    def _reset(self, seed: int, domain: DomainParams | None, qpos: np.ndarray | None) -> None:
+        m, d = self.model, self.data
+        self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5E45]))
+        ground = 0.0
+        if self.config.terrain.kind == "fractal":
+            heights = fractal_heights(self.config.terrain, seed)
+            set_terrain_heights(m, heights)
+            c, r = heights.shape[0] // 2, int(round(0.4 / self.config.terrain.cell))
+            ground = float(heights[c - r:c + r + 1, c - r:c + r + 1].max()) * self.config.terrain.amplitude
+        self.set_domain(domain if domain is not None else DomainParams())
+        mujoco.mj_resetData(m, d)
+        d.qpos[:] = initial_qpos(m, self.desc, self.desc.stand_height + ground + 0.02) if qpos is None else qpos
+        self._pushes = []
+        self._push_windows = []
+        self._steps = 0
+        self._contacts_at = -1
+        self._force_now = np.zeros(3)
+        self._point_now = d.qpos[:3].copy()
+        self._send(MotorCommand.hold(self.desc.nominal_q, 0.0, 0.0))
+        mujoco.mj_forward(m, d)
+
+    def set_domain(self, domain: DomainParams) -> None:
+        """Apply physical parameters (payload, friction, motor strength) on top of the nominal model."""
+        m, nom = self.model, self._nominal
+        b = self._base_body
+        m.body_mass[:] = nom["body_mass"]
+        m.body_ipos[:] = nom["body_ipos"]
+        m.body_inertia[:] = nom["body_inertia"]
+        if domain.payload_mass != 0.0:
+            m0, c0 = nom["body_mass"][b], nom["body_ipos"][b]
+            m1 = m0 + domain.payload_mass
+            m.body_mass[b] = m1
+            m.body_ipos[b] = (m0 * c0 + domain.payload_mass * domain.payload_com) / m1
+        m.geom_friction[:] = nom["geom_friction"]
+        set_ground_friction(m, domain.friction)
+        k = np.broadcast_to(np.asarray(domain.motor_strength, dtype=np.float64), (self.num_joints,)).copy()
+        m.actuator_forcerange[:] = nom["forcerange"] * k[:, None]
+        m.actuator_gainprm[:, 0] = k
+        self._strength = k
+        self._domain = domain
+        mujoco.mj_setConst(m, self.data)
+
+    def apply_push(self, push: Push) -> None:
+        """Schedule a push; it acts from ``push.start`` (simulation time) for ``push.duration``."""
+        self._require_connected("apply_push")
+        self._pushes.append(push)
+        start = int(round(push.start / self.config.timestep))
+        stop = start + max(1, int(round(push.duration / self.config.timestep)))
+        self._push_windows.append((start, stop, push))
+
+    def sim_truth(self) -> SimTruth:
+        """Ground truth of the simulator (for metrics and debugging; never hand this to a controller)."""
+        self._require_connected("sim_truth")
+        m, d = self.model, self.data
+        mujoco.mj_subtreeVel(m, d)
+        touching, at_foot = self._ground_contacts()
+        mask = np.zeros(m.ngeom, dtype=bool)
+        mask[touching] = True
+        foot = mask[self._foot_geoms]
+        others = sorted({mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, m.geom_bodyid[g])
+                         for g, ok in zip(touching, at_foot, strict=True) if not ok})
+        active = bool(np.any(self._force_now))
+        return SimTruth(
+            time=self.time,
+            base_position_in_world=d.qpos[:3].copy(),
+            base_quat=d.qpos[3:7].copy(),
+            base_linvel_in_world=d.qvel[:3].copy(),
+            base_angvel_in_body=d.qvel[3:6].copy(),
+            com_in_world=d.subtree_com[self._base_body].copy(),
+            com_velocity_in_world=d.subtree_linvel[self._base_body].copy(),
+            foot_contact=foot,
+            ground_contact_bodies=tuple(others),
+            external_force_in_world=self._force_now.copy(),
+            external_point_in_world=self._point_now.copy() if active else d.qpos[:3].copy(),
+        )
+
+    def base_truth(self) -> BaseTruth:
+        """Truth: the trunk's pose and velocity (for metrics; never hand this to a controller)."""
+        qpos, qvel = self.data.qpos, self.data.qvel
+        return BaseTruth(qpos[:3].copy(), qpos[3:7].copy(), qvel[:3].copy(), qvel[3:6].copy())
+
+    def fallen(self) -> bool:
+        """Truth: the trunk or a non-foot link touches the ground (the paper's termination rule, `fall_rule`)."""
+        _, at_foot = self._ground_contacts()
+        return bool(at_foot.size and not at_foot.all())
+
+    def base_rotation(self) -> np.ndarray:
+        """Truth: trunk rotation matrix (body to world)."""
+        return quat_to_matrix(self.data.qpos[3:7])
+
+    # -- internals ------------------------------------------------------------------------------------------------
+    def _ground_contacts(self) -> tuple[np.ndarray, np.ndarray]:
+        """Robot geoms touching the ground now, and whether each contact is a foot's.
+
+        A contact counts as a foot's if it is the foot sphere's, or if it lies within `FOOT_ZONE` of a foot centre
+        (`wbc.hardware.mujoco.fall_rule`, the rule training's termination shares).
+        """
+        if self._contacts_at == self._steps:
+            return self._contacts
+        d = self.data
+        if d.ncon == 0:
+            touching, at_foot = np.zeros(0, dtype=int), np.zeros(0, dtype=bool)
+        else:
+            pairs = d.contact.geom[: d.ncon]
+            touching = np.where(pairs[:, 0] == self._terrain_geom, pairs[:, 1], pairs[:, 0])
+            at_foot = self._is_foot_geom[touching].copy()
+            if not at_foot.all():
+                at_foot |= near_feet(d.contact.pos[: d.ncon], d.geom_xpos[self._foot_geoms])
+        self._contacts, self._contacts_at = (touching, at_foot), self._steps
+        return touching, at_foot
+
+    def _active_pushes(self, step: int) -> list[Push]:
+        return [p for start, stop, p in self._push_windows if start <= step < stop]
+
+    def _next_push_step(self, step: int) -> int | None:
+        return min((start for start, _, _ in self._push_windows if start > step), default=None)

@@ -1,0 +1,240 @@
+"""The composite policy format: several networks in one ``.npz`` + ``.json`` pair, each commanding its own joints.
+
+Built for the paper's decoupled baseline (Table III): pi2's legs (the locked-arm policy, frozen) plus a separately
+trained arm policy. The file embeds both networks instead of referencing pi2's file by path, so a shipped composite is
+self-contained, content-hashable, and cannot silently change when pi2 is retrained.
+
+The JSON holds the robot-level keys of a single policy file (robot, arm mode, task, stage, ``num_actions`` = the
+robot's actuated joints, the full observation layout and scales, action scale, clip, default pose, PD gains, policy
+period, training metadata), ``format`` = ``wbc-composite-policy`` and ``parts``, a list of::
+
+    {"name": "legs", "joints": [0, ..., 11], "meta": {<the part's own policy metadata>}}
+
+Each part is a complete single-network policy (`wbc.learned.policy.policy_file`, checked by the same code) whose outputs
+drive ``joints`` of the robot, in order, and whose ``num_actions`` is ``len(joints)``. A part observes the robot's
+observation restricted to its own layout (`compatible_indices`: a 12-joint layout sees the legs' entries, a full one
+sees everything), and its RMA adaptation module, if any, runs on its own normalised observation history. The NPZ
+holds each part's arrays under ``<name>/`` (``legs/policy/0/weight`` ...), plain float arrays only.
+
+`load_composite` also accepts a single policy file, as a composite of one part commanding every joint, so the
+controller runs both kinds through one path. Every failure is a `PolicyFileError` naming the file and the field.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wbc.learned.policy.observations import ObsLayout, compatible_indices
+from wbc.learned.policy.policy_file import (
+    COMPOSITE_FORMAT,
+    VERSION,
+    PolicyFile,
+    PolicyFileError,
+    check_meta,
+    check_shapes,
+    load_policy,
+    read_arrays,
+    read_pair,
+)
+from wbc.robots.description import RobotDescription
+
+__all__ = ["ROBOT_KEYS", "CompositePolicyFile", "PolicyPart", "compose", "load_composite", "save_composite"]
+
+ROBOT_KEYS = ("robot", "arm_mode", "task", "stage", "num_actions", "obs_layout", "obs_scales", "action_scale",
+              "clip_actions", "default_q", "kp", "kd", "policy_dt")
+"""Keys a composite's JSON shares with a single policy file (what the numbers mean on the robot)."""
+
+_SHARED = ("obs_scales", "action_scale", "clip_actions", "policy_dt", "robot")
+"""Keys every part must agree on with the composite: one observation and one motor law for the whole robot."""
+
+_NAME = re.compile(r"[a-z][a-z0-9_-]*")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PolicyPart:
+    """One network of a composite.
+
+    Attributes:
+        name: a lowercase identifier (the arrays' prefix in the NPZ).
+        joints: the robot's joint index of each of the network's outputs.
+        policy: the network, a complete single policy file (its ``num_actions`` is ``len(joints)``).
+    """
+
+    name: str
+    joints: tuple[int, ...]
+    policy: PolicyFile
+
+    def observation_index(self, num_joints: int) -> np.ndarray:
+        """Indices into the robot's (num_joints) policy observation of the entries this part observes."""
+        return compatible_indices(ObsLayout(num_joints), ObsLayout(_layout_joints(self.policy.meta["obs_layout"])))
+
+
+@dataclass(frozen=True, kw_only=True)
+class CompositePolicyFile:
+    """A loaded (or to-be-saved) composite.
+
+    Attributes:
+        meta: the robot-level metadata (`ROBOT_KEYS`, plus ``training`` and, once saved, ``format``/``version``).
+        parts: the networks, their joints partitioning ``range(num_actions)``.
+    """
+
+    meta: dict[str, Any]
+    parts: tuple[PolicyPart, ...]
+
+    @property
+    def num_actions(self) -> int:
+        """Actuated joints of the robot."""
+        return int(self.meta["num_actions"])
+
+    def check_robot(self, desc: RobotDescription, path: str | Path = "<policy>") -> None:
+        """Refuse a composite for another robot, arm mode or joint defaults (`PolicyFile.check_robot`).
+
+        Raises:
+            PolicyFileError: the mismatch, naming the field and both values.
+        """
+        PolicyFile(meta=self.meta, arrays={}).check_robot(desc, path)
+
+
+def compose(parts: list[PolicyPart], *, training: dict[str, Any] | None = None,
+            **robot_meta: Any) -> CompositePolicyFile:
+    """A composite from its parts; the robot-level keys are given (`ROBOT_KEYS`), checked when saved or loaded."""
+    missing = [k for k in ROBOT_KEYS if k not in robot_meta]
+    if missing:
+        raise ValueError(f"compose: missing robot-level keys {missing}")
+    return CompositePolicyFile(meta={**robot_meta, "training": training or {}}, parts=tuple(parts))
+
+
+def save_composite(path: str | Path, composite: CompositePolicyFile) -> tuple[Path, Path]:
+    """Write ``<path>.npz`` and ``<path>.json``; the result is loaded back and checked. Returns both paths."""
+    p = Path(path)
+    stem = p.with_suffix("") if p.suffix in (".npz", ".json") else p
+    npz, js = stem.with_suffix(".npz"), stem.with_suffix(".json")
+    npz.parent.mkdir(parents=True, exist_ok=True)
+    arrays, parts = {}, []
+    for part in composite.parts:
+        for k, v in part.policy.arrays.items():
+            arrays[f"{part.name}/{k}"] = np.asarray(v, dtype=np.float32)
+        meta = {"format": "wbc-policy", "version": VERSION,
+                **{k: v for k, v in part.policy.meta.items() if k not in ("format", "version")}}
+        parts.append({"name": part.name, "joints": [int(j) for j in part.joints], "meta": meta})
+    meta = {"format": COMPOSITE_FORMAT, "version": VERSION,
+            **{k: v for k, v in composite.meta.items() if k not in ("format", "version", "parts")}, "parts": parts}
+    np.savez(npz, **arrays)
+    js.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    load_composite(npz)
+    return npz, js
+
+
+def load_composite(path: str | Path) -> CompositePolicyFile:
+    """Load and validate a composite, or a single policy file as a composite of one part (named ``policy``).
+
+    Raises:
+        PolicyFileError: a file is missing or unreadable, a key or array is missing, mistyped or misshapen, the
+            parts' joints do not partition the robot's, or a part disagrees with the composite on the observation
+            or the motor law; the message names the file and the field (``<part>/<field>`` inside a part).
+    """
+    npz, js, meta = read_pair(path)
+    if meta.get("format") != COMPOSITE_FORMAT:
+        single = load_policy(npz)
+        top = {k: single.meta[k] for k in ROBOT_KEYS}
+        top["training"] = single.meta.get("training", {})
+        return CompositePolicyFile(meta=top, parts=(PolicyPart(name="policy", joints=tuple(range(single.num_actions)),
+                                                              policy=single),))
+    _check_top(meta, js)
+    arrays = read_arrays(npz)
+    parts, claimed = [], {}
+    for i, entry in enumerate(meta["parts"]):
+        part = _load_part(entry, i, arrays, meta, npz, js)
+        for j in part.joints:
+            if j in claimed:
+                raise PolicyFileError(js, f"{part.name}/joints", f"joint {j} is also driven by part {claimed[j]!r}")
+            claimed[j] = part.name
+        parts.append(part)
+    missing = sorted(set(range(meta["num_actions"])) - claimed.keys())
+    if missing:
+        raise PolicyFileError(js, "parts", f"no part drives joints {missing} (num_actions {meta['num_actions']})")
+    names = {part.name for part in parts}
+    stray = sorted(k for k in arrays if k.split("/", 1)[0] not in names)
+    if stray:
+        raise PolicyFileError(npz, stray[0], f"array of no part (parts: {', '.join(sorted(names))})")
+    return CompositePolicyFile(meta={k: v for k, v in meta.items() if k != "parts"}, parts=tuple(parts))
+
+
+# -- internals ------------------------------------------------------------------------------------------------------
+def _layout_joints(obs_layout: list) -> int:
+    return int(dict((str(n), s) for n, s in obs_layout)["dof_pos"])
+
+
+def _check_layout(obs_layout: Any, js: Path, field: str, most: int) -> int:
+    """The joints of an observation layout, which must be this version's `ObsLayout` of at most `most` joints."""
+    try:
+        k = _layout_joints(obs_layout)
+    except (TypeError, ValueError, KeyError):
+        raise PolicyFileError(js, field, "expected [[name, size], ...] with a dof_pos part") from None
+    if not 0 < k <= most or [list(q) for q in obs_layout] != ObsLayout(k).as_list():
+        raise PolicyFileError(js, field, f"{obs_layout} is not this version's layout of 1 to {most} joints")
+    return k
+
+
+def _check_top(meta: dict[str, Any], js: Path) -> None:
+    types: dict[str, type | tuple[type, ...]] = {
+        "version": int, "robot": str, "arm_mode": str, "task": str, "stage": int, "num_actions": int,
+        "obs_layout": list, "obs_scales": dict, "action_scale": (int, float), "clip_actions": (int, float),
+        "default_q": list, "kp": list, "kd": list, "policy_dt": (int, float), "parts": list,
+    }
+    for key, t in types.items():
+        if key not in meta:
+            raise PolicyFileError(js, key, "missing key")
+        if isinstance(meta[key], bool) or not isinstance(meta[key], t):
+            raise PolicyFileError(js, key, f"expected {t}, got {type(meta[key]).__name__}")
+    if meta["version"] != VERSION:
+        raise PolicyFileError(js, "version", f"this wbc reads version {VERSION}, the file is {meta['version']}")
+    n = meta["num_actions"]
+    for key in ("default_q", "kp", "kd"):
+        if len(meta[key]) != n:
+            raise PolicyFileError(js, key, f"expected {n} values (num_actions), got {len(meta[key])}")
+    if _check_layout(meta["obs_layout"], js, "obs_layout", n) != n:
+        raise PolicyFileError(js, "obs_layout", f"the composite's layout must cover its {n} joints")
+    if not meta["parts"]:
+        raise PolicyFileError(js, "parts", "expected at least one part")
+
+
+def _load_part(entry: Any, i: int, arrays: dict[str, np.ndarray], top: dict[str, Any], npz: Path,
+               js: Path) -> PolicyPart:
+    if not isinstance(entry, dict) or not {"name", "joints", "meta"} <= entry.keys():
+        raise PolicyFileError(js, f"parts/{i}", "expected {name, joints, meta}")
+    name = entry["name"]
+    if not isinstance(name, str) or not _NAME.fullmatch(name):
+        raise PolicyFileError(js, f"parts/{i}/name", f"expected a lowercase identifier, got {name!r}")
+    joints, meta = entry["joints"], entry["meta"]
+    n = top["num_actions"]
+    if not isinstance(joints, list) or not joints or any(
+            isinstance(j, bool) or not isinstance(j, int) or not 0 <= j < n for j in joints):
+        raise PolicyFileError(js, f"{name}/joints", f"expected a list of joint indices in [0, {n}), got {joints}")
+    if not isinstance(meta, dict):
+        raise PolicyFileError(js, f"{name}/meta", "expected a JSON object")
+    check_meta(meta, js, prefix=f"{name}/")
+    if meta["num_actions"] != len(joints):
+        raise PolicyFileError(js, f"{name}/num_actions", f"{meta['num_actions']} outputs for {len(joints)} joints")
+    _check_layout(meta["obs_layout"], js, f"{name}/obs_layout", n)
+    for key in _SHARED:
+        if meta[key] != top[key]:
+            raise PolicyFileError(js, f"{name}/{key}", f"{meta[key]!r} differs from the composite's {top[key]!r}")
+    for key in ("default_q", "kp", "kd"):
+        want = np.asarray(top[key], dtype=np.float64)[joints]
+        if len(meta[key]) != len(joints) or not np.allclose(meta[key], want, atol=1e-6):
+            raise PolicyFileError(js, f"{name}/{key}", f"{meta[key]} differs from the composite's {want.tolist()} "
+                                  "on the part's joints")
+    prefix = f"{name}/"
+    policy = PolicyFile(meta=meta, arrays={k[len(prefix):]: v for k, v in arrays.items() if k.startswith(prefix)})
+    try:
+        check_shapes(policy, npz, js)
+    except PolicyFileError as exc:
+        raise PolicyFileError(exc.path, prefix + (exc.field or ""), exc.reason) from None
+    return PolicyPart(name=name, joints=tuple(joints), policy=policy)

@@ -1,0 +1,128 @@
+"""`LearnedController`: an exported policy (`PolicyFile`) run in numpy at its policy rate (50 Hz).
+
+Every tick: the policy observation from `RobotState` (IMU quaternion and gyro, joint encoders) and the operator's
+command, exactly as the training env builds it (`wbc.learned.policy.observations`); the deterministic action; the motor
+command ``q* = default_q + action_scale * action`` with the PD gains the policy was trained with (zero target
+velocity and feed-forward torque), which the motor drivers (or MuJoCo's actuators) track between ticks. Nothing from
+the simulator's truth is read. A policy that observes the RMA extrinsics z gets them from the file's adaptation
+module (RMA phase 2) over the last H normalised observations (`ObsHistory`, filled with the first observation after a
+reset, as in training); a file with extrinsics and no adaptation module is refused at construction.
+
+A composite policy file (`wbc.learned.policy.composite_policy`, the decoupled baseline: pi2's legs plus an arm policy)
+runs through the same path: every part gets its own view of the observation and, if it estimates extrinsics, its own
+history; each part's actions go to its joints, and ``last_action`` holds the whole robot's, as in training.
+
+The registry's ``learned``, ``learned-locked`` and ``learned-noarm`` run the weights shipped in
+``wbc/learned/weights/<robot>-<arm mode>.npz`` (pi3, pi2 and pi1 of the robot's task).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from wbc.learned.policy.composite_policy import load_composite
+from wbc.learned.policy.numpy_composite import NumpyComposite
+from wbc.learned.policy.obs_history import ObsHistory
+from wbc.learned.policy.observations import ObsLayout, ObsScales, policy_observation
+from wbc.learned.policy.policy_file import PolicyFileError
+from wbc.robots.description import RobotDescription
+from wbc.types import MotorCommand, RobotState, VelocityCommand
+
+__all__ = ["LearnedController", "WEIGHTS_DIR", "shipped_weights"]
+
+WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
+
+
+def shipped_weights(desc: RobotDescription) -> Path:
+    """The shipped policy for `desc`'s robot and arm mode (``weights/<robot>-<arm mode>.npz``)."""
+    return WEIGHTS_DIR / f"{desc.name}-{desc.arm_mode}.npz"
+
+
+class LearnedController:
+    """Runs an exported policy.
+
+    Args:
+        desc: the robot it drives (checked against the policy file).
+        policy_path: the policy file (default: `shipped_weights(desc)`).
+
+    Raises:
+        PolicyFileError: the file is missing or malformed, was trained for another robot or arm mode, or needs
+            extrinsics without an adaptation module.
+    """
+
+    def __init__(self, desc: RobotDescription, policy_path: str | Path | None = None) -> None:
+        path = Path(policy_path) if policy_path is not None else shipped_weights(desc)
+        if policy_path is None and not path.exists():
+            raise PolicyFileError(path, None, f"no shipped weights for {desc.name} with arm {desc.arm_mode!r} yet; "
+                                  "train them (wbc train --task push --stage 1|2|3) and copy the run's policy.npz "
+                                  f"and policy.json to {path.with_suffix('')}.npz/.json")
+        pf = load_composite(path)
+        pf.check_robot(desc, path)
+        prefix = "" if len(pf.parts) == 1 else "{}/"
+        for part in pf.parts:
+            if part.policy.meta.get("extrinsics") is not None and part.policy.meta.get("adaptation") is None:
+                raise PolicyFileError(path, prefix.format(part.name) + "extrinsics", "the policy observes the RMA "
+                                      "extrinsics z, which a robot cannot measure, and the file has no adaptation "
+                                      "module to estimate z (RMA phase 2)")
+        meta = pf.meta
+        layout = ObsLayout(pf.num_actions)
+        if [list(p) for p in meta["obs_layout"]] != layout.as_list():
+            raise PolicyFileError(path, "obs_layout", f"{meta['obs_layout']} is not this version's layout "
+                                  f"{layout.as_list()}")
+        self.policy = NumpyComposite(pf)
+        self.path = path
+        self.rate_hz = 1.0 / float(meta["policy_dt"])
+        sc = meta["obs_scales"]
+        self.scales = ObsScales(ang_vel=sc["ang_vel"], dof_pos=sc["dof_pos"], dof_vel=sc["dof_vel"],
+                                command=tuple(sc["command"]))
+        self.default_q = np.asarray(meta["default_q"], dtype=np.float64)
+        self.action_scale = float(meta["action_scale"])
+        self.clip = float(meta["clip_actions"])
+        self.kp = np.asarray(meta["kp"], dtype=np.float64)
+        self.kd = np.asarray(meta["kd"], dtype=np.float64)
+        n = pf.num_actions
+        self._zeros = np.zeros(n)
+        self.last_action = np.zeros(n)
+        # each adapting part's window of its own normalised observations, by part name
+        self.histories = {part.name: ObsHistory(1, part.policy.history, part.obs_index.size)
+                          for part in self.policy.parts if part.policy.history}
+        self._fresh = True
+
+    def reset(self) -> None:
+        """Forget the previous action and the observation history."""
+        self.last_action = np.zeros_like(self.last_action)
+        self._fresh = True
+
+    def observation(self, state: RobotState, command: VelocityCommand) -> np.ndarray:
+        """The policy observation, shape (obs_size,)."""
+        return policy_observation(
+            gyro_in_body=state.gyro_in_body[None], imu_quat=state.imu_quat[None], command=command.as_array()[None],
+            q=state.q[None], dq=state.dq[None], last_action=self.last_action[None], default_q=self.default_q,
+            scales=self.scales,
+        )[0]
+
+    def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """One policy step."""
+        obs = self.observation(state, command)[None]
+        z = {}
+        for part in self.policy.parts:
+            history = self.histories.get(part.name)
+            if history is None:
+                continue
+            normalised = part.policy.normalise(obs[:, part.obs_index]).astype(np.float32)
+            if self._fresh:
+                history.fill(np.zeros(1, dtype=int), normalised)
+            else:
+                history.push(normalised)
+            z[part.name] = part.policy.adaptation(history.flat())
+        self._fresh = False
+        action = np.clip(self.policy(obs, z)[0], -self.clip, self.clip)
+        self.last_action = action
+        target = self.default_q + self.action_scale * action
+        return MotorCommand(q=target, dq=self._zeros, kp=self.kp, kd=self.kd, tau=self._zeros)
+
+    def counters(self) -> dict[str, int]:
+        """No events."""
+        return {}

@@ -1,0 +1,89 @@
+"""`NumpyPolicy`: inference of an exported policy (`PolicyFile`) in numpy, no torch.
+
+actions = MLP_policy([normalise(obs), z]) with z = MLP_encoder(normalise(privileged)) when the policy observes the
+RMA extrinsics; normalise(x) = (x - mean) / (std + eps), the rsl-rl empirical normaliser's formula. Computed in
+float64 from the float32 weights, so it matches torch's float32 forward pass to about 1e-6.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wbc.learned.policy.policy_file import PolicyFile
+
+__all__ = ["NumpyPolicy", "activation"]
+
+
+def activation(name: str, x: np.ndarray) -> np.ndarray:
+    """Apply the named activation (one of `wbc.learned.policy.policy_file.ACTIVATIONS`)."""
+    if name == "elu":
+        return np.where(x > 0.0, x, np.expm1(np.minimum(x, 0.0)))
+    if name == "relu":
+        return np.maximum(x, 0.0)
+    if name == "tanh":
+        return np.tanh(x)
+    return x
+
+
+def _mlp(layers: list[tuple[np.ndarray, np.ndarray]], act: str, x: np.ndarray) -> np.ndarray:
+    for i, (w, b) in enumerate(layers):
+        x = x @ w.T + b
+        if i < len(layers) - 1:
+            x = activation(act, x)
+    return x
+
+
+class NumpyPolicy:
+    """A policy evaluated in numpy.
+
+    Args:
+        policy: a loaded, validated policy file.
+    """
+
+    def __init__(self, policy: PolicyFile) -> None:
+        self.file = policy
+        meta, a = policy.meta, policy.arrays
+        self.activation = meta["activation"]
+        self.eps = float(meta["normalizer_eps"])
+        self._layers = [(w.astype(np.float64), b.astype(np.float64)) for w, b in policy.layers("policy")]
+        self._encoder = [(w.astype(np.float64), b.astype(np.float64)) for w, b in policy.layers("encoder")]
+        self._obs_mean = a["obs_mean"].astype(np.float64)
+        self._obs_scale = 1.0 / (a["obs_std"].astype(np.float64) + self.eps)
+        self.uses_extrinsics = meta.get("extrinsics") is not None
+        adapt = meta.get("adaptation")
+        self.history = int(adapt["history"]) if adapt is not None else 0
+        self._adaptation = [(w.astype(np.float64), b.astype(np.float64)) for w, b in policy.layers("adaptation")]
+        if self.uses_extrinsics:
+            self._priv_mean = a["privileged_mean"].astype(np.float64)
+            self._priv_scale = 1.0 / (a["privileged_std"].astype(np.float64) + self.eps)
+
+    def extrinsics(self, privileged: np.ndarray) -> np.ndarray:
+        """The extrinsics z from privileged observations, (N, P) -> (N, z_dim)."""
+        x = (np.asarray(privileged, dtype=np.float64) - self._priv_mean) * self._priv_scale
+        return _mlp(self._encoder, self.activation, x)
+
+    def normalise(self, obs: np.ndarray) -> np.ndarray:
+        """Observations as the networks see them, (N, obs_size)."""
+        return (np.asarray(obs, dtype=np.float64) - self._obs_mean) * self._obs_scale
+
+    def adaptation(self, history: np.ndarray) -> np.ndarray:
+        """The estimated extrinsics from (N, H * obs_size) normalised observations, oldest first (RMA phase 2)."""
+        if not self._adaptation:
+            raise ValueError("this policy file has no adaptation module (RMA phase 2 has not been run)")
+        return _mlp(self._adaptation, self.activation, np.asarray(history, dtype=np.float64))
+
+    def __call__(self, obs: np.ndarray, z: np.ndarray | None = None) -> np.ndarray:
+        """Deterministic actions, (N, obs_size) [+ (N, z_dim)] -> (N, num_actions).
+
+        Raises:
+            ValueError: `z` is missing for a policy that observes the extrinsics, or given to one that does not.
+        """
+        x = (np.asarray(obs, dtype=np.float64) - self._obs_mean) * self._obs_scale
+        if self.uses_extrinsics:
+            if z is None:
+                raise ValueError("this policy observes the extrinsics z: pass z (from `extrinsics` in simulation, "
+                                 "or from the RMA adaptation module on a robot)")
+            x = np.concatenate([x, np.asarray(z, dtype=np.float64)], axis=-1)
+        elif z is not None:
+            raise ValueError("this policy does not observe extrinsics; call it without z")
+        return _mlp(self._layers, self.activation, x)

@@ -1,0 +1,150 @@
+"""`PPOWithBC`: rsl-rl's PPO plus the paper's behaviour-cloning term towards the previous stage's policy (eq. 3).
+
+    loss = L_PPO + lambda(it) * mean over the minibatch of || mu_theta(o)[mask] - pi_prev(o_prev) ||^2 / |mask|
+
+mu_theta is the actor's mean action; pi_prev is the previous stage's exported policy (a frozen `TorchPolicy`) on the
+compatible part of the observation (the ``teacher`` group, which the env builds from the same state) and, when that
+policy observes the extrinsics, the ``privileged`` group; `mask` lists the actor's action indices that correspond,
+in order, to the teacher's actions (the legs when the arm is new). The expectation runs over on-policy states: the
+teacher labels the states the student visits, as the paper prescribes. lambda follows a `BCSchedule` over PPO
+iterations and is saved with the checkpoint, so a resumed run continues the same schedule.
+
+rsl-rl's `PPO.update` has no hook for an extra loss, so `update` is re-implemented here for the configuration this
+project uses (feed-forward models, one device, no RND, no symmetry augmentation); other configurations are refused.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from wbc.learned.policy.policy_file import load_policy
+from wbc.learned.train.bc_schedule import BCSchedule
+from wbc.learned.train.torch_policy import TorchPolicy
+from wbc.optional import require
+
+torch = require("torch")
+_ppo = require("rsl_rl.algorithms")
+
+__all__ = ["PPOWithBC", "bc_loss"]
+
+
+def bc_loss(student_mean, teacher_actions, mask):
+    """Mean squared difference on the compatible part of the action.
+
+    Args:
+        student_mean: (B, n_student) actor mean actions.
+        teacher_actions: (B, n_teacher) teacher actions.
+        mask: (n_teacher,) long tensor: student action index of each teacher action.
+
+    Returns:
+        Scalar: mean over the batch and the compatible actions of the squared difference.
+    """
+    if mask.numel() != teacher_actions.shape[-1]:
+        raise ValueError(f"BC mask has {mask.numel()} entries for a teacher with {teacher_actions.shape[-1]} actions")
+    return (student_mean.index_select(-1, mask) - teacher_actions).pow(2).mean()
+
+
+class PPOWithBC(_ppo.PPO):
+    """PPO with an annealed BC term (see the module docstring).
+
+    Args:
+        actor, critic, storage: as `rsl_rl.algorithms.PPO`.
+        teacher_path: the previous stage's policy file (.npz/.json pair).
+        bc_schedule: keyword arguments of `BCSchedule`.
+        action_mask: student action index for each teacher action (default: the first n_teacher).
+        teacher_group: observation group the teacher sees.
+        privileged_group: observation group of the teacher's extrinsics input.
+        **kwargs: `PPO` arguments.
+    """
+
+    def __init__(self, actor, critic, storage, *, teacher_path: str, bc_schedule: dict[str, Any] | None = None,
+                 action_mask: list[int] | None = None, teacher_group: str = "teacher",
+                 privileged_group: str = "privileged", **kwargs) -> None:
+        super().__init__(actor, critic, storage, **kwargs)
+        if self.rnd or self.symmetry or self.is_multi_gpu or actor.is_recurrent or critic.is_recurrent:
+            raise ValueError("PPOWithBC supports feed-forward models on one device, without RND or symmetry")
+        teacher = load_policy(teacher_path)
+        self.teacher = TorchPolicy(teacher).to(self.device)
+        n_teacher = teacher.num_actions
+        mask = list(range(n_teacher)) if action_mask is None else list(action_mask)
+        self.action_mask = torch.as_tensor(mask, dtype=torch.long, device=self.device)
+        if self.action_mask.numel() != n_teacher:
+            raise ValueError(f"action_mask has {len(mask)} entries, the teacher {teacher_path} has {n_teacher} actions")
+        self.schedule_bc = BCSchedule(**(bc_schedule or {}))
+        self.teacher_group = teacher_group
+        self.privileged_group = privileged_group
+        self.bc_iteration = 0
+
+    def teacher_actions(self, obs):
+        """The teacher's actions for an observation TensorDict."""
+        priv = obs[self.privileged_group] if self.teacher.uses_extrinsics else None
+        return self.teacher(obs[self.teacher_group], priv)
+
+    def update(self) -> dict[str, float]:
+        """PPO epochs over the rollout, with lambda * BC added to every minibatch's loss."""
+        lam = self.schedule_bc.weight(self.bc_iteration)
+        sums = {"value": 0.0, "surrogate": 0.0, "entropy": 0.0, "bc": 0.0}
+        n = 0
+        for batch in self.storage.mini_batch_generator(self.num_mini_batches, self.num_learning_epochs):
+            adv = batch.advantages
+            if self.normalize_advantage_per_mini_batch:
+                adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+            self.actor(batch.observations, stochastic_output=True)
+            log_prob = self.actor.get_output_log_prob(batch.actions)
+            values = self.critic(batch.observations)
+            params = self.actor.output_distribution_params
+            entropy = self.actor.output_entropy
+            if self.desired_kl is not None and self.schedule == "adaptive":
+                with torch.inference_mode():
+                    kl = self.actor.get_kl_divergence(batch.old_distribution_params, params).mean()
+                    if kl > self.desired_kl * 2.0:
+                        self.learning_rate = max(1e-5, self.learning_rate / 1.5)
+                    elif 0.0 < kl < self.desired_kl / 2.0:
+                        self.learning_rate = min(1e-2, self.learning_rate * 1.5)
+                    for group in self.optimizer.param_groups:
+                        group["lr"] = self.learning_rate
+            ratio = torch.exp(log_prob - torch.squeeze(batch.old_actions_log_prob))
+            a = torch.squeeze(adv)
+            surrogate = torch.max(-a * ratio, -a * torch.clamp(ratio, 1.0 - self.clip_param, 1.0 + self.clip_param))
+            surrogate_loss = surrogate.mean()
+            if self.use_clipped_value_loss:
+                clipped = batch.values + (values - batch.values).clamp(-self.clip_param, self.clip_param)
+                value_loss = torch.max((values - batch.returns).pow(2), (clipped - batch.returns).pow(2)).mean()
+            else:
+                value_loss = (batch.returns - values).pow(2).mean()
+            with torch.no_grad():
+                target = self.teacher_actions(batch.observations)
+            bc = bc_loss(self.actor.output_mean, target, self.action_mask)
+            loss = surrogate_loss + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
+            if lam > 0.0:
+                loss = loss + lam * bc
+            self.optimizer.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(self.actor.parameters(), self.max_grad_norm)
+            torch.nn.utils.clip_grad_norm_(self.critic.parameters(), self.max_grad_norm)
+            self.optimizer.step()
+            sums["value"] += value_loss.item()
+            sums["surrogate"] += surrogate_loss.item()
+            sums["entropy"] += entropy.mean().item()
+            sums["bc"] += bc.item()
+            n += 1
+        obs = self.storage.observations.flatten(0, 1)
+        self.actor.update_normalization(obs)
+        self.critic.update_normalization(obs)
+        self.storage.clear()
+        self.bc_iteration += 1
+        out = {k: v / max(n, 1) for k, v in sums.items()}
+        out["bc_weight"] = lam
+        return out
+
+    def save(self) -> dict:
+        """PPO's checkpoint dict plus the BC schedule's position."""
+        saved = super().save()
+        saved["bc_iteration"] = self.bc_iteration
+        return saved
+
+    def load(self, loaded_dict: dict, load_cfg: dict | None, strict: bool) -> bool:
+        """PPO's load, restoring the BC schedule's position."""
+        out = super().load(loaded_dict, load_cfg, strict)
+        self.bc_iteration = int(loaded_dict.get("bc_iteration", 0))
+        return out

@@ -1,0 +1,237 @@
+"""The staged procedure and its baselines as `TrainConfig`s: `stage_config(task, stage, baseline)`.
+
+Stages (the paper's Method section):
+
+    1  pi1: the quadruped without its arm learns to walk; flat ground, no perturbations, PPO only, commands drawn from
+       the task's `TaskSpec.walking_prior_commands` (legged_gym's recipe; the push scenario gives only 0 and 0.3
+       m/s).
+    2  pi2: arm attached and locked, task conditions (the scenario's ground and pushes); PPO + BC towards pi1 on the
+       whole action (both have 12 leg actions).
+    3  pi3: arm actuated; PPO + BC towards pi2 on the leg actions (the arm's 3 actions have no teacher).
+
+Baselines (paper Table III), configurations of the same code:
+
+    ppo             stage 3 from scratch (PPO on the full task, no BC, no transfer).
+    one-stage-demo  stage 3 with pi1 (no arm) as the BC teacher, skipping the locked-arm stage.
+    finetune-pi2    stage 3 started from pi2's weights (`wbc.learned.train.warm_start`), PPO only.
+    curriculum      PPO only, each stage started from the previous one's weights: stage 1 = locked arm without
+                    perturbations, stage 2 = locked arm with the task's conditions, stage 3 = actuated arm.
+    decoupled       pi2's legs, frozen, plus an arm policy trained by PPO on the stage-3 task: the env runs with the
+                    arm actuated, pi2 (numpy, on its own locked-arm observation, extrinsics from the privileged
+                    observation as in its training) fills in the 12 leg actions, and the actor outputs only the
+                    arm's 3 (`wbc.learned.train.frozen_legs_vec_env`). The arm actor observes the full actuated-arm
+                    policy observation without extrinsics (nothing to estimate on the robot); pi2 keeps its own RMA
+                    adaptation module. The run exports a composite policy file embedding both networks
+                    (`wbc.learned.policy.composite_policy`), which `LearnedController` runs like any other.
+
+A stage's teacher is the policy file the previous stage exported (``<run_dir>/<task>-stage<k-1>/policy``), unless
+a path is given.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.learned.env.env_config import EnvConfig, RewardScales
+from wbc.learned.train.bc_schedule import BCSchedule
+from wbc.learned.train.train_config import TrainConfig
+
+__all__ = ["BASELINES", "TASKS", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS",
+           "TURN_WALKING_PRIOR_INIT", "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS",
+           "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TaskSpec:
+    """A task: its robot, its scenario, the bands training draws from and the width of the tracking rewards.
+
+    The tracking width sets how much a policy earns for standing still under a walking command: exp(-v_cmd^2 /
+    sigma). The push task commands only 0 or 0.3 m/s; at sigma 0.1 standing under 0.3 m/s still earned 41 % of the
+    tracking reward, and two pi1 runs (1024 environments, 150 iterations, 3.7M steps each) settled on standing:
+    their deterministic policy moved at 0.00 m/s under the 0.3 m/s command (``python -m wbc.tools.probe``). At
+    0.05 standing earns 17 %. The turn task's 1-1.5 m/s commands keep legged_gym's 0.25.
+
+    `walking_prior_termination` is pi1's fall penalty (`RewardScales.termination`); `walking_prior_init` names shipped
+    weights (``wbc/learned/weights/<name>``) pi1's actor starts from (`wbc.learned.train.warm_start`);
+    `taught_init_std` is the initial action noise of the stages that learn from a teacher (2 and 3,
+    `TrainConfig.init_std`); `taught_start_from_teacher` starts those stages' actors from their teacher's weights
+    (`wbc.learned.train.warm_start`; the BC term still pulls towards the teacher and is annealed away).
+    """
+
+    robot: str
+    scenario: str
+    bands: tuple[str, ...]
+    tracking_sigma: float
+    walking_prior_commands: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+    walking_prior_termination: float = 0.0
+    walking_prior_init: str | None = None
+    taught_init_std: float = 1.0
+    taught_start_from_teacher: bool = False
+
+
+WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
+"""The push task's pi1 commands (vx, vy, yaw rate ranges), drawn per episode instead of the scenario's.
+
+pi1 is the walking prior the later stages imitate; the paper does not give its commands. Three pi1 runs on the push
+scenario's own commands (0 or 0.3 m/s) did not learn a stable gait in 150 iterations: at tracking width 0.1 they
+stood (0.00 m/s under 0.3 m/s), at 0.05 one walked at 0.22 m/s at iteration 50 while falling onto its front hips,
+then drifted back to standing, and with a fall penalty it never left standing. A 0.3 m/s command is worth too little
+over standing still to pay for discovering a gait. legged_gym's recipe (commands over +-1, tracking width 0.25, no
+fall penalty) is what reliably learns to walk, so pi1 uses it; pi2 and pi3 train on the scenario's commands."""
+WALKING_PRIOR_SIGMA = 0.25
+
+TURN_WALKING_PRIOR_INIT = "a1-wx200-none"
+"""The turn task's pi1 starts from the push task's pi1 (the A1 without its arm; same observation and action layout)
+and is fine-tuned on go1-arm without its arm.
+
+Four go1-arm pi1 runs from scratch (1024 environments, 4-10M steps each) never found a gait:
+
+- legged_gym's recipe (no fall penalty), commands widened to the scenario's (180 iterations) or the push task's
+  ranges (400 iterations): a dive. Under a 0.8 m/s command the deterministic policy folds its front legs (thighs
+  1.45 rad against 0.8 nominal), pitches 19 degrees nose-down and lunges; its trunk's front corner touches the ground
+  0.8 s after every reset (1.2 falls per environment-second). With falls free and rewards clipped at zero, a lunge
+  that earns tracking reward for 0.8 s and restarts from a fresh stand is a local optimum.
+- a fall penalty of -100 (300 iterations, 7.4M steps): it lies down. Within 0.5 s of any command it folds every
+  leg (thighs ~2 rad, calves ~-2.5 rad) and rests its trunk 8 cm above the ground on its feet, where nothing counts
+  as a fall and standing still still earns exp(-v^2 / 0.25) of the tracking reward.
+- the fall penalty plus the `base_height` term (-30 on (h - 0.28 m)^2; 125 iterations): it stands, crouched (trunk
+  0.13-0.15 m, hips splayed ~0.8 rad), at 0.00 m/s under 0.5 and 1 m/s.
+
+The two robots are alike where it matters: an open-loop trot moves them alike (same falls, similar speeds), and the
+A1's pi1, run unchanged on the Go1, walks at 0.48 m/s under 0.5 m/s and 1.01 m/s under 1 m/s without a fall in the
+training env. So the Go1's runs failed at discovering a gait, not at executing one, and the A1's gait is the
+starting point."""
+
+TURN_WALKING_PRIOR_COMMANDS = ((-0.5, 1.5), (-0.5, 0.5), (-2.0, 2.0))
+"""The turn task's pi1 commands: legged_gym's ranges widened to the scenario's speeds (1-1.5 m/s) and yaw rates
+(0.5-2 rad/s), so that pi1, the teacher of pi2, has been trained on the commands pi2 will see."""
+
+TURN_WALKING_PRIOR_TERMINATION = -100.0
+"""The turn task's pi1 pays for falls, -2 per fall (the later stages' weight): it starts from a policy that walks,
+which the penalty keeps from trading falls for speed (the dive above)."""
+
+TURN_TAUGHT_INIT_STD = 0.5
+"""Initial action noise of the turn task's pi2 and pi3 (rsl-rl's default, kept by the push task, is 1.0).
+
+At 1.0 the turn task's pi2 fell in every training episode for 43 iterations (episodes of 2-4 s) although its mean
+action had already learned pi1's (BC loss 2.3 -> 0.06) and pi1 itself, run on the locked-arm Go1 in the same env,
+falls 0.00-0.02 times per environment-second at 1-1.5 m/s: 0.25 rad of exploration noise on every joint (action scale
+0.25) trips a robot running at 1.5 m/s, which it does not a robot standing under the push task's 0-0.3 m/s. 0.5 is
+about where pi1's own noise ended (0.43).
+
+At 0.5 alone a second pi2 run still fell in every episode after 25 iterations (episodes of ~1.8 s, BC loss 2.3 ->
+0.8, its mean action 0.0-0.2 m/s under 0.5-1.5 m/s commands), although pi1, acting on the observations the same env
+gives the teacher, ran at 1.26 m/s without a fall: a student that falls within 2 s only ever sees the first steps of
+a run, so BC cannot show it the gait. The turn task's taught stages therefore also start from their teacher's weights
+(`TaskSpec.taught_start_from_teacher`): pi2 starts as pi1, pi3 as pi2 on the legs (its arm actions start at zero)."""
+
+TASKS: dict[str, TaskSpec] = {
+    "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
+                     walking_prior_commands=WALKING_PRIOR_COMMANDS),
+    "turn": TaskSpec(robot="go1-arm", scenario="scenarios/turn.toml", bands=("1.0", "1.25", "1.5"),
+                     tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
+                     walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION,
+                     walking_prior_init=TURN_WALKING_PRIOR_INIT, taught_init_std=TURN_TAUGHT_INIT_STD,
+                     taught_start_from_teacher=True),
+}
+
+BASELINES: dict[str, str] = {
+    "ppo": "PPO from scratch on the stage-3 task (arm actuated), no BC",
+    "one-stage-demo": "stage-3 task with pi1 (no arm) as the BC teacher, without the locked-arm stage",
+    "finetune-pi2": "stage-3 task started from pi2's weights, PPO only",
+    "curriculum": "PPO only through locked arm (no pushes), locked arm (task), actuated arm; weights carried over",
+    "decoupled": "pi2's legs, frozen, plus an arm policy trained by PPO on the stage-3 task (a composite policy)",
+}
+
+_ARM = {1: "none", 2: "locked", 3: "actuated"}
+
+
+
+def run_name(task: str, stage: int, baseline: str | None = None) -> str:
+    """Directory name of a run under the runs root: ``push-stage3`` or ``push-stage3-ppo``."""
+    return f"{task}-stage{stage}" + (f"-{baseline}" if baseline else "")
+
+
+def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root: str = "runs/train",
+                 teacher: str | None = None, env_overrides: dict[str, Any] | None = None,
+                 **overrides: Any) -> TrainConfig:
+    """The `TrainConfig` of a stage (or a baseline) of a task.
+
+    Args:
+        task: a key of `TASKS`.
+        stage: 1, 2 or 3 (baselines: 3).
+        baseline: None, or a key of `BASELINES`.
+        run_root: where runs live; the run directory is ``<run_root>/<run_name>``.
+        teacher: the teacher's (for weight-transfer baselines, the initial; for decoupled, the frozen legs') policy
+            file (default: the previous stage's export under `run_root`).
+        env_overrides: `EnvConfig` fields to change (num_envs, seed ...).
+        **overrides: `TrainConfig` fields to change (max_iterations, seed ...).
+
+    Raises:
+        UnknownNameError: unknown task or baseline.
+        ConfigError: a stage other than 1, 2, 3, or a baseline other than curriculum outside stage 3.
+    """
+    if task not in TASKS:
+        raise UnknownNameError("task", task, tuple(TASKS))
+    if stage not in _ARM:
+        raise ConfigError(f"stage must be 1, 2 or 3, got {stage}")
+    if baseline is not None:
+        if baseline not in BASELINES:
+            raise UnknownNameError("baseline", baseline, tuple(BASELINES))
+        if stage != 3 and baseline != "curriculum":
+            raise ConfigError(f"baseline {baseline!r} is a stage-3 policy; use --stage 3")
+    spec = TASKS[task]
+    arm = _ARM[stage]
+    teacher_stage = {2: 1, 3: 2}.get(stage)
+    init_stage = None
+    if baseline == "ppo":
+        teacher_stage = None
+    elif baseline == "one-stage-demo":
+        teacher_stage = 1
+    elif baseline == "finetune-pi2":
+        teacher_stage, init_stage = None, 2
+    elif baseline == "curriculum":
+        teacher_stage, init_stage = None, (stage - 1 if stage > 1 else None)
+        arm = "locked" if stage < 3 else "actuated"
+    elif baseline == "decoupled":
+        teacher_stage = None
+    walking_prior = stage == 1 and baseline is None
+    env = EnvConfig(
+        robot=spec.robot, arm_mode=arm, scenario=spec.scenario, bands=spec.bands,
+        pushes=stage > 1, terrain="flat" if stage == 1 else "scenario",
+        teacher_arm_mode="locked" if baseline == "decoupled" else (None if teacher_stage is None else
+                                                                    _ARM[teacher_stage]),
+        tracking_sigma=WALKING_PRIOR_SIGMA if walking_prior else spec.tracking_sigma,
+        command_ranges=spec.walking_prior_commands if walking_prior else None,
+        rewards=RewardScales(termination=spec.walking_prior_termination) if walking_prior else RewardScales(),
+    )
+    env = dataclasses.replace(env, **(env_overrides or {}))
+    bc, teacher_path, init_path = None, None, None
+    if teacher_stage is not None:
+        # held for 50 iterations, annealed to zero over the next 150: the paper gives the form of eq. (3), not its
+        # lengths; on 2 CPU cores an iteration of the push task takes 5-8 s, so a stage fits in about half an hour
+        bc = BCSchedule(initial=1.0, final=0.0, hold_iterations=50, anneal_iterations=150, kind="linear")
+        teacher_path = teacher or str(Path(run_root) / run_name(task, teacher_stage) / "policy")
+    if init_stage is not None:
+        init_baseline = "curriculum" if baseline == "curriculum" else None
+        init_path = teacher or str(Path(run_root) / run_name(task, init_stage, init_baseline) / "policy")
+    elif walking_prior and spec.walking_prior_init is not None:
+        from wbc.learned.policy.controller import WEIGHTS_DIR
+
+        init_path = str(WEIGHTS_DIR / spec.walking_prior_init)
+    decoupled = {}
+    if baseline == "decoupled":
+        decoupled = {"frozen_legs": teacher or str(Path(run_root) / run_name(task, 2) / "policy"), "extrinsics_dim": 0}
+    transfer = teacher_stage is not None or init_path is not None
+    if baseline is None and teacher_stage is not None and spec.taught_start_from_teacher:
+        init_path = teacher_path
+    init_std = {"init_std": spec.taught_init_std} if teacher_stage is not None else {}
+    cfg = TrainConfig(task=task, stage=stage, baseline=baseline, env=env, bc=bc, teacher=teacher_path,
+                      init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
+                      run_dir=str(Path(run_root) / run_name(task, stage, baseline)), save_interval=25, **decoupled,
+                      **init_std)
+    return dataclasses.replace(cfg, **overrides)

@@ -1,0 +1,211 @@
+"""`train`: one stage (or baseline) trained with rsl-rl-lib's `OnPolicyRunner` on the batched env.
+
+A run directory holds: ``config.json`` (the resolved `TrainConfig`, seed, package versions, git revision),
+TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
+torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
+so far, summed over resumed sessions). ``resume`` continues from the newest checkpoint up to `max_iterations`.
+
+With `TrainConfig.frozen_legs` (the decoupled baseline) the env is wrapped in `FrozenLegsVecEnv`, the actor drives
+the arm only, and ``policy.npz``/``policy.json`` is a composite file holding the frozen leg policy and the arm actor.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+from wbc.errors import ConfigError
+from wbc.learned.env.env import BatchedEnv
+from wbc.learned.policy.composite_policy import save_composite
+from wbc.learned.policy.policy_file import PolicyFileError, load_policy, save_policy
+from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
+from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
+from wbc.learned.train.train_config import TrainConfig
+from wbc.learned.train.vec_env import RslVecEnv
+from wbc.optional import require
+from wbc.provenance import provenance
+
+torch = require("torch")
+_runners = require("rsl_rl.runners")
+
+__all__ = ["latest_checkpoint", "rsl_rl_config", "train"]
+
+_RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
+"""TrainConfig fields a resumed run may change; any other difference is refused."""
+
+
+def rsl_rl_config(cfg: TrainConfig) -> dict[str, Any]:
+    """The rsl-rl-lib 5.x runner configuration of a `TrainConfig`."""
+    ppo = dataclasses.asdict(cfg.ppo)
+    dist = {"class_name": "GaussianDistribution", "init_std": cfg.init_std, "std_type": "scalar"}
+    actor: dict[str, Any] = {"class_name": "MLPModel", "hidden_dims": list(cfg.actor_hidden_dims),
+                             "activation": cfg.activation, "obs_normalization": True, "distribution_cfg": dist}
+    actor_groups = ["policy"]
+    if cfg.extrinsics_dim > 0:
+        actor.update(class_name="wbc.learned.train.extrinsics_actor:ExtrinsicsActor", extrinsics_dim=cfg.extrinsics_dim,
+                     encoder_dims=list(cfg.encoder_dims))
+        actor_groups = ["policy", "privileged"]
+    algorithm: dict[str, Any] = {"class_name": "PPO", **ppo}
+    if cfg.bc is not None:
+        algorithm.update(class_name="wbc.learned.train.ppo_bc:PPOWithBC", teacher_path=cfg.teacher,
+                         bc_schedule=dataclasses.asdict(cfg.bc),
+                         action_mask=None if cfg.action_mask is None else list(cfg.action_mask))
+    return {
+        "num_steps_per_env": cfg.num_steps_per_env,
+        "save_interval": cfg.save_interval,
+        "obs_groups": {"actor": actor_groups, "critic": ["policy", "privileged"]},
+        "algorithm": algorithm,
+        "actor": actor,
+        "critic": {"class_name": "MLPModel", "hidden_dims": list(cfg.critic_hidden_dims),
+                   "activation": cfg.activation, "obs_normalization": True},
+        "logger": "tensorboard",
+        "check_for_nan": True,
+    }
+
+
+def latest_checkpoint(run_dir: str | Path) -> Path | None:
+    """The ``model_<it>.pt`` with the highest iteration in `run_dir`, or None."""
+    found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
+             if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
+    return max(found)[1] if found else None
+
+
+def _load_for(path: str, role: str):
+    try:
+        return load_policy(path)
+    except PolicyFileError as exc:
+        raise ConfigError(f"{role} is not usable: {exc}. Train the previous stage first, or pass its path") from None
+
+
+def _check_teacher(cfg: TrainConfig) -> None:
+    if cfg.init_from is not None:
+        _load_for(cfg.init_from, "the policy this run starts from (init_from)")
+    if cfg.frozen_legs is not None:
+        if cfg.extrinsics_dim > 0:
+            raise ConfigError("with frozen_legs the actor observes the robot's measurements only: set "
+                              "extrinsics_dim=0 (RMA phase 2 is not built for a part of a composite policy)")
+        legs = _load_for(cfg.frozen_legs, "the frozen leg policy (frozen_legs)")
+        if legs.meta["robot"] != cfg.env.robot or legs.meta["arm_mode"] != cfg.env.teacher_arm_mode:
+            raise ConfigError(f"frozen leg policy {cfg.frozen_legs} drives {legs.meta['robot']} with arm "
+                              f"{legs.meta['arm_mode']!r}; this run needs {cfg.env.robot} with arm "
+                              f"{cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
+    if cfg.bc is None:
+        return
+    if cfg.teacher is None:
+        raise ConfigError("TrainConfig.bc is set but no teacher policy file is given")
+    try:
+        teacher = load_policy(cfg.teacher)
+    except PolicyFileError as exc:
+        raise ConfigError(f"stage {cfg.stage} learns from the previous stage's policy, which is not usable: {exc}. "
+                          "Train the previous stage first, or pass --teacher PATH") from None
+    if teacher.meta["robot"] != cfg.env.robot or teacher.meta["arm_mode"] != cfg.env.teacher_arm_mode:
+        raise ConfigError(f"teacher {cfg.teacher} drives {teacher.meta['robot']} with arm "
+                          f"{teacher.meta['arm_mode']!r}; stage {cfg.stage} needs {cfg.env.robot} with arm "
+                          f"{cfg.env.teacher_arm_mode!r}")
+
+
+class _Runner(_runners.OnPolicyRunner):
+    """rsl-rl's runner, also exporting the policy file and progress at every checkpoint."""
+
+    def __init__(self, vec: RslVecEnv, train_cfg: dict, cfg: TrainConfig, before: dict[str, Any]) -> None:
+        super().__init__(vec, train_cfg, log_dir=cfg.run_dir, device=cfg.device)
+        self.wbc_cfg = cfg
+        self._wall_before = float(before["wall_s"])
+        self._steps_before = int(before["env_steps"])
+        self._t0 = time.perf_counter()
+
+    def save(self, path: str, infos: dict | None = None) -> None:
+        super().save(path, infos)
+        self.export()
+
+    def export(self) -> None:
+        cfg = self.wbc_cfg
+        wall = self._wall_before + time.perf_counter() - self._t0
+        progress = {"iteration": int(self.current_learning_iteration),
+                    "env_steps": self._steps_before + int(self.env.env.total_steps), "wall_s": wall}
+        actor = self.alg.get_policy()
+        extra = {"baseline": cfg.baseline, **progress}
+        if isinstance(self.env, FrozenLegsVecEnv):
+            extra["frozen_legs"] = cfg.frozen_legs
+            save_composite(Path(cfg.run_dir) / "policy", decoupled_policy(
+                actor, self.env.legs.file, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra))
+        else:
+            pf = policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra)
+            save_policy(Path(cfg.run_dir) / "policy", pf)
+        (Path(cfg.run_dir) / "progress.json").write_text(json.dumps(progress, indent=2) + "\n")
+
+
+def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
+    """Train (or resume) one run.
+
+    Args:
+        cfg: the run.
+        resume: continue from the newest checkpoint in ``cfg.run_dir``; its saved config must match `cfg` except in
+            `_RESUMABLE` fields (train longer with a larger max_iterations).
+
+    Returns:
+        ``{"run_dir", "iterations", "env_steps", "wall_s", "policy"}``.
+
+    Raises:
+        ConfigError: no checkpoint to resume from, a resumed config differs, or the teacher is missing/mismatched.
+    """
+    _check_teacher(cfg)
+    run_dir = Path(cfg.run_dir)
+    resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
+    checkpoint, progress = None, {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
+    if resume:
+        checkpoint = latest_checkpoint(run_dir)
+        if checkpoint is None:
+            raise ConfigError(f"--resume: no model_<it>.pt checkpoint in {run_dir}; start the run without --resume")
+        saved = json.loads((run_dir / "config.json").read_text())["train_config"]
+        diff = sorted(k for k in resolved if k not in _RESUMABLE and saved.get(k) != resolved[k])
+        if diff:
+            raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
+        if (run_dir / "progress.json").exists():
+            progress = json.loads((run_dir / "progress.json").read_text())
+    run_dir.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(cfg.seed)
+    torch.set_num_threads(cfg.torch_threads)
+    env = BatchedEnv(cfg.env)
+    if cfg.frozen_legs is not None:
+        vec: RslVecEnv = FrozenLegsVecEnv(env, load_policy(cfg.frozen_legs), device=cfg.device)
+    else:
+        vec = RslVecEnv(env, device=cfg.device)
+    runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
+    done = 0
+    if checkpoint is None and cfg.init_from is not None:
+        from wbc.learned.train.warm_start import warm_start_actor
+
+        warm_start_actor(runner.alg.get_policy(), _load_for(cfg.init_from, "the policy this run starts from"),
+                         mask=None if cfg.action_mask is None else list(cfg.action_mask))
+    if checkpoint is not None:
+        runner.load(str(checkpoint))
+        done = runner.current_learning_iteration + 1
+        runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
+    else:
+        (run_dir / "config.json").write_text(json.dumps(
+            {"train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
+             "provenance": provenance(),
+             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
+    try:
+        remaining = cfg.max_iterations - done
+        if remaining > 0:
+            runner.learn(remaining, init_at_random_ep_len=checkpoint is None)
+        runner.export()
+    finally:
+        vec.close()
+    final = json.loads((run_dir / "progress.json").read_text())
+    result = {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
+              "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz")}
+    if cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0:
+        from wbc.learned.train.rma import train_adaptation
+
+        policy, summary = train_adaptation(load_policy(run_dir / "policy"), cfg.env, cfg.rma)
+        save_policy(run_dir / "policy", policy)
+        (run_dir / "rma.json").write_text(json.dumps(summary, indent=2) + "\n")
+        result["rma_wall_s"] = summary["wall_s"]
+    return result

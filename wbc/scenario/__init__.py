@@ -1,0 +1,14 @@
+"""Scenarios, the world data every controller is played against: files, sampling, the publish lock, trials.
+
+A scenario file (``scenarios/*.toml``) is validated and hashed into a `Scenario`, which samples `Trial`s: terrain,
+domain parameters, command schedule and pushes. Nothing here knows a robot backend; the backends apply these data.
+"""
+
+from wbc.scenario.domain import DomainParams, SensorNoise
+from wbc.scenario.push import Push
+from wbc.scenario.scenario import Scenario, ScenarioError, check_published, load_scenario
+from wbc.scenario.terrain import TerrainConfig
+from wbc.scenario.trial import CommandSchedule, Trial
+
+__all__ = ["CommandSchedule", "DomainParams", "Push", "Scenario", "ScenarioError", "SensorNoise", "TerrainConfig",
+           "Trial", "check_published", "load_scenario"]
