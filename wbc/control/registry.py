@@ -1,4 +1,4 @@
-"""Controllers: the protocol every controller implements, and the explicit registry of named controllers.
+"""The explicit registry of named controllers (the protocol they implement is `wbc.control.protocol.Controller`).
 
 A controller sees only what a real robot gives it (`RobotState`) and the operator's `VelocityCommand`; it never sees
 the scenario, the push schedule or simulator truth. Each registered controller names the arm mode it drives, so
@@ -14,36 +14,18 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Protocol, runtime_checkable
 
+from wbc.control.protocol import Controller
 from wbc.control.stand import StandController
 from wbc.errors import UnknownNameError
 from wbc.learned.policy.controller import LearnedController
 from wbc.mpc.controller import MpcController
 from wbc.robots.description import RobotDescription, check_arm_mode
-from wbc.types import MotorCommand, RobotState, VelocityCommand
 
-__all__ = ["Controller", "ControllerSpec", "CONTROLLERS", "POLICY_PREFIX", "get_controller"]
+__all__ = ["ControllerSpec", "CONTROLLERS", "POLICY_PREFIX", "get_controller"]
 
 POLICY_PREFIX = "policy:"
 """``policy:PATH`` names the exported policy at PATH (the .npz, the .json or their stem)."""
-
-
-@runtime_checkable
-class Controller(Protocol):
-    """What the runner drives at `rate_hz`."""
-
-    rate_hz: float
-    """Control rate [Hz]; the runner calls `act` every 1 / rate_hz seconds of robot time."""
-
-    def reset(self) -> None:
-        """Forget everything from the previous episode."""
-
-    def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
-        """One control tick: the motor command for this state and command."""
-
-    def counters(self) -> dict[str, int]:
-        """Event counts of the episode so far (e.g. ``fallbacks``: solves that failed and fell back)."""
 
 
 @dataclass(frozen=True)
