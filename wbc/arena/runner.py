@@ -19,7 +19,8 @@ from threadpoolctl import threadpool_limits
 
 from wbc.arena.episode import Episode, EpisodeBuffer
 from wbc.arena.metrics import compute_metrics
-from wbc.control.registry import Controller, get_controller
+from wbc.control.protocol import Controller
+from wbc.control.registry import get_controller
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot

@@ -12,7 +12,7 @@ import io
 import meshcat
 import numpy as np
 
-from wbc.control.registry import Controller
+from wbc.control.protocol import Controller
 from wbc.hardware.mujoco.robot import MujocoRobot
 from wbc.hardware.robot import Robot
 from wbc.types import VelocityCommand
