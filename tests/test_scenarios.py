@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from wbc.errors import UnknownNameError, WbcError
-from wbc.scenario.scenario import ScenarioError, check_published, load_scenario
+from wbc.scenario import ScenarioError, check_published, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 PUSH = SCENARIOS / "push.toml"
@@ -453,3 +453,22 @@ def test_random_edits_raise_only_scenario_errors(tmp_path):
         for band in s.bands:
             s.trials([band], [0], 2)
     assert 0 < loaded < 300
+
+
+def test_a_shipped_scenario_loads_by_its_relative_path_from_any_working_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    scenario = load_scenario("scenarios/push.toml")
+    assert scenario.name == "push"
+    check_published(scenario)  # the lock beside the resolved file is found too
+    with pytest.raises(ScenarioError, match="file not found.*working directory, then from") as err:
+        load_scenario("scenarios/no-such-scenario.toml")
+    assert err.value.path == "scenarios/no-such-scenario.toml"
+
+
+def test_a_relative_path_that_exists_from_the_working_directory_wins(tmp_path, monkeypatch):
+    (tmp_path / "scenarios").mkdir()
+    shipped = Path(__file__).resolve().parent.parent / "scenarios" / "push.toml"
+    text = shipped.read_text(encoding="utf-8").replace('name = "push"', 'name = "my-push"')
+    (tmp_path / "scenarios" / "push.toml").write_text(text, encoding="utf-8")
+    monkeypatch.chdir(tmp_path)
+    assert load_scenario("scenarios/push.toml").name == "my-push"

@@ -5,6 +5,8 @@ Messages say what was wrong and how to fix it (valid names, the field at fault, 
 
 from __future__ import annotations
 
+from os import PathLike
+
 __all__ = [
     "WbcError",
     "UnknownNameError",
@@ -12,6 +14,8 @@ __all__ = [
     "CommandError",
     "RobotNotConnectedError",
     "MissingExtraError",
+    "FileFieldError",
+    "ScenarioError",
 ]
 
 
@@ -38,6 +42,32 @@ class ConfigError(WbcError, ValueError):
 
 class CommandError(WbcError, ValueError):
     """A motor command was rejected before reaching any motor (non-finite, wrongly shaped)."""
+
+
+class FileFieldError(WbcError, ValueError):
+    """A declarative input file (TOML) is missing, unreadable or invalid at a known line and field.
+
+    ``str(err)`` reads ``path:line: [table] key: what is wrong``; the line and the field are left out when unknown.
+
+    Attributes:
+        path: the file at fault, as given.
+        line: 1-based line of the offending key or table header, or None.
+        field: ``[table] key`` (``[[bands]] #2 key`` in arrays of tables, 1-based), ``[table]``, or None.
+        reason: what is wrong and how to fix it, without the location.
+    """
+
+    def __init__(self, path: str | PathLike[str], reason: str, *, line: int | None = None,
+                 field: str | None = None) -> None:
+        self.path = str(path)
+        self.line = line
+        self.field = field
+        self.reason = reason
+        where = self.path if line is None else f"{self.path}:{line}"
+        super().__init__(f"{where}: {field}: {reason}" if field else f"{where}: {reason}")
+
+
+class ScenarioError(FileFieldError):
+    """A scenario file (or the lock of published scenarios) is missing, unreadable or invalid."""
 
 
 class RobotNotConnectedError(WbcError, RuntimeError):

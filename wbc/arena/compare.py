@@ -21,7 +21,7 @@ from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, UnknownNameError, WbcError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
 from wbc.provenance import provenance
-from wbc.scenario.scenario import ScenarioError, check_published, load_scenario
+from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.scenario.trial import Trial
 
 __all__ = ["ArenaConfig", "ArenaResult", "run_arena"]

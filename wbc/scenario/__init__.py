@@ -5,10 +5,11 @@ domain parameters, command schedule and pushes. Nothing here knows a robot backe
 """
 
 from wbc.scenario.domain import DomainParams, SensorNoise
+from wbc.scenario.lock import check_published
 from wbc.scenario.push import Push
-from wbc.scenario.scenario import Scenario, ScenarioError, check_published, load_scenario
+from wbc.scenario.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario_path
 from wbc.scenario.terrain import TerrainConfig
 from wbc.scenario.trial import CommandSchedule, Trial
 
 __all__ = ["CommandSchedule", "DomainParams", "Push", "Scenario", "ScenarioError", "SensorNoise", "TerrainConfig",
-           "Trial", "check_published", "load_scenario"]
+           "Trial", "check_published", "load_scenario", "resolve_scenario_path"]

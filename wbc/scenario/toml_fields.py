@@ -1,0 +1,314 @@
+"""Typed, located access to TOML files: every bad value is an error naming the file, the line and the field.
+
+`tomllib` parses but reports no line numbers, so `TomlLines` scans the raw text for table headers and ``key =``
+lines; `TomlTable` reads typed values (strings, booleans, bounded integers and numbers, intervals, arrays of tables)
+and raises the caller's `FileFieldError` subclass, whose text reads ``path:line: [table] key: what is wrong and how to
+fix it``. Scenario files use it (`ScenarioError`); any other declarative TOML input of the toolkit can.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, NoReturn
+
+from wbc.errors import FileFieldError
+
+__all__ = ["MISSING", "Range", "TableId", "TomlLines", "TomlTable", "is_number", "read_toml", "show", "toml_type"]
+
+_HEADER_RE = re.compile(r"^\s*(\[\[|\[)\s*([^\[\]#]+?)\s*(\]\]|\])\s*(?:#.*)?$")
+_KEY_PART = r"(?:\"[^\"]*\"|'[^']*'|[A-Za-z0-9_-]+)"
+_KEY_RE = re.compile(rf"^\s*({_KEY_PART}(?:\s*\.\s*{_KEY_PART})*)\s*=")
+
+TableId = tuple[str, int]  # (dotted table name, occurrence: 0 for [x], k >= 1 for the k-th [[x]])
+
+
+def _split_key(key: str) -> list[str]:
+    """Parts of a dotted TOML key, quotes removed (a dot inside quotes is not handled: best effort)."""
+    return [part.strip().strip("\"'") for part in key.split(".")]
+
+
+def _scan_line(line: str, state: str | None, depth: int) -> tuple[str | None, int]:
+    """Advance the string state and bracket depth of the TOML lexer over one line.
+
+    Args:
+        line: the line, without its newline.
+        state: None outside strings, else the open string's delimiter (``"``, ``'``, ``\"\"\"``, ``'''``).
+        depth: open ``[``/``{`` brackets (arrays and inline tables spanning several lines).
+
+    Returns:
+        The state and depth at the end of the line.
+    """
+    i, n = 0, len(line)
+    while i < n:
+        if state is None:
+            c = line[i]
+            if c == "#":
+                break
+            if line.startswith('"""', i) or line.startswith("'''", i):
+                state = line[i : i + 3]
+                i += 3
+                continue
+            if c in "\"'":
+                state = c
+            elif c in "[{":
+                depth += 1
+            elif c in "]}":
+                depth = max(depth - 1, 0)
+            i += 1
+        elif state in ('"', '"""') and line[i] == "\\":
+            i += 2
+        elif line.startswith(state, i):
+            i += len(state)
+            state = None
+        else:
+            i += 1
+    if state in ('"', "'"):  # single-line strings cannot span lines
+        state = None
+    return state, depth
+
+
+class TomlLines:
+    """Where table headers and keys sit in a TOML text (1-based lines)."""
+
+    def __init__(self, text: str) -> None:
+        self._headers: dict[TableId, int] = {}
+        self._keys: dict[tuple[TableId, str], int] = {}
+        counts: dict[str, int] = {}
+        table: TableId = ("", 0)
+        state: str | None = None
+        depth = 0
+        for lineno, line in enumerate(text.splitlines(), start=1):
+            if state is None and depth == 0:
+                header = _HEADER_RE.match(line)
+                if header:
+                    name = ".".join(_split_key(header.group(2)))
+                    if header.group(1) == "[[":
+                        counts[name] = counts.get(name, 0) + 1
+                        table = (name, counts[name])
+                    else:
+                        table = (name, 0)
+                    self._headers.setdefault(table, lineno)
+                    continue
+                key = _KEY_RE.match(line)
+                if key:
+                    parts = _split_key(key.group(1))
+                    self._keys.setdefault((table, ".".join(parts)), lineno)
+                    if len(parts) > 1 and table[1] == 0:  # `terrain.kind = ...` at top level, or similar
+                        prefix = ".".join(p for p in (table[0], *parts[:-1]) if p)
+                        self._keys.setdefault(((prefix, 0), parts[-1]), lineno)
+            state, depth = _scan_line(line, state, depth)
+
+    def header(self, table: TableId) -> int | None:
+        """Line of the header of `table`, or None."""
+        return self._headers.get(table)
+
+    def key(self, table: TableId, key: str) -> int | None:
+        """Line of ``key =`` in `table`, or None."""
+        return self._keys.get((table, key))
+
+
+MISSING: Any = object()
+
+
+@dataclass(frozen=True, kw_only=True)
+class Range:
+    """An allowed range of numbers, printed the way messages need it."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = False
+
+    def __contains__(self, x: float) -> bool:
+        above = x > self.lo if self.lo_open else x >= self.lo
+        below = x < self.hi if self.hi_open else x <= self.hi
+        return above and below
+
+    def __str__(self) -> str:
+        if self.hi == math.inf:
+            return f"{'>' if self.lo_open else '>='} {self.lo:g}"
+        if self.lo == -math.inf:
+            return f"{'<' if self.hi_open else '<='} {self.hi:g}"
+        return f"in {'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
+
+
+def toml_type(value: object) -> str:
+    """The TOML name of a parsed value's type."""
+    names = {bool: "boolean", int: "integer", float: "float", str: "string", list: "array", dict: "table"}
+    return names.get(type(value), "date/time" if hasattr(value, "isoformat") else type(value).__name__)
+
+
+def show(value: object) -> str:
+    """A parsed value as a message shows it: its TOML type and a short rendering."""
+    if isinstance(value, bool):
+        return f"boolean {str(value).lower()}"
+    if isinstance(value, dict):
+        return "a table"
+    text = repr(value)
+    return f"{toml_type(value)} {text if len(text) <= 40 else text[:37] + '...'}"
+
+
+def is_number(value: object) -> bool:
+    """True for an integer or float (a boolean is not a number here)."""
+    return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+class TomlTable:
+    """One parsed TOML table with the location information its error messages need."""
+
+    def __init__(self, path: str, lines: TomlLines, data: dict[str, Any], label: str, table: TableId,
+                 header_line: int | None = None, *, error: type[FileFieldError] = FileFieldError) -> None:
+        self.error = error  # the subclass raised for this file's kind (ScenarioError for scenario files)
+        self.path = path
+        self.lines = lines
+        self.data = data
+        self.label = label  # "[terrain]", "[[bands]] #2"; "" at top level
+        self.table = table
+        self.header_line = header_line if header_line is not None else lines.header(table)  # or `key = {...}` line
+
+    def fail(self, key: str | None, reason: str, *, at_header: bool = False) -> NoReturn:
+        """Raise a ScenarioError about `key` of this table (the table itself when `key` is None)."""
+        line = None if key is None or at_header else self.lines.key(self.table, key)
+        if line is None:
+            line = self.header_line
+        name = self.label if key is None else f"{self.label} {key}".strip()
+        raise self.error(self.path, reason, line=line, field=name)
+
+    def check_keys(self, valid: Sequence[str]) -> None:
+        """Refuse keys outside `valid`, listing the valid ones."""
+        for key in self.data:
+            if key not in valid:
+                kind = self.label.split(" #")[0]  # "[[bands]] #2" -> "[[bands]]"
+                self.fail(key, f"unknown key; valid keys of {kind}: {', '.join(valid)}")
+
+    def _get(self, key: str, default: Any) -> Any:
+        if key in self.data:
+            return self.data[key]
+        if default is MISSING:
+            self.fail(key, f"missing required key; add `{key} = ...` to {self.label}", at_header=True)
+        return default
+
+    def string(self, key: str, default: str = MISSING) -> str:
+        """A string value."""
+        value = self._get(key, default)
+        if not isinstance(value, str):
+            self.fail(key, f"expected a string, got {show(value)}")
+        return value
+
+    def boolean(self, key: str, default: bool = MISSING) -> bool:
+        """A boolean value (true / false)."""
+        value = self._get(key, default)
+        if not isinstance(value, bool):
+            self.fail(key, f"expected a boolean (true or false), got {show(value)}")
+        return value
+
+    def integer(self, key: str, allowed: Range, default: int = MISSING) -> int:
+        """An integer value (a boolean or a float is refused) within `allowed`."""
+        value = self._get(key, default)
+        if not isinstance(value, int) or isinstance(value, bool):
+            self.fail(key, f"expected an integer, got {show(value)}")
+        if value not in allowed:
+            self.fail(key, f"must be {allowed}, got {value}")
+        return value
+
+    def number(self, key: str, allowed: Range, default: float = MISSING) -> float:
+        """A finite number (integer or float) within `allowed`, as a float."""
+        value = self._get(key, default)
+        if not is_number(value):
+            self.fail(key, f"expected a number, got {show(value)}")
+        if not math.isfinite(value):
+            self.fail(key, f"must be a finite number, got {value}")
+        if value not in allowed:
+            self.fail(key, f"must be {allowed}, got {value}")
+        return float(value)
+
+    def optional_number(self, key: str, allowed: Range) -> float | None:
+        """Like `number`, None when the key is absent."""
+        return self.number(key, allowed) if key in self.data else None
+
+    def interval(self, key: str, allowed: Range, default: tuple[float, float] = MISSING) -> tuple[float, float]:
+        """An interval ``[lo, hi]``: two finite numbers, lo <= hi, both within `allowed`."""
+        value = self._get(key, default)
+        if isinstance(value, tuple):
+            return value
+        if not isinstance(value, list):
+            self.fail(key, f"expected an interval [lo, hi] (an array of 2 numbers), got {show(value)}")
+        if len(value) != 2:
+            self.fail(key, f"expected an interval [lo, hi] of 2 numbers, got an array of {len(value)}")
+        for position, x in enumerate(value, start=1):
+            if not is_number(x):
+                self.fail(key, f"expected an interval [lo, hi] of 2 numbers, got {show(x)} at position {position}")
+            if not math.isfinite(x):
+                self.fail(key, f"interval ends must be finite numbers, got {x} at position {position}")
+        lo, hi = float(value[0]), float(value[1])
+        if lo > hi:
+            self.fail(key, f"interval [lo, hi] needs lo <= hi, got [{value[0]}, {value[1]}]; swap the two ends")
+        if lo not in allowed or hi not in allowed:
+            self.fail(key, f"both ends must be {allowed}, got [{value[0]}, {value[1]}]")
+        return lo, hi
+
+    def table_array(self, key: str, label: str) -> list[TomlTable]:
+        """A non-empty array of tables ``[[key]]`` (key relative to this table), each labelled ``label #k``."""
+        field_name = f"{self.label} {key}" if self.label else label
+        line = self.lines.key(self.table, key) or self.header_line
+        if key not in self.data:
+            raise self.error(self.path, f"missing; add at least one {label} table", field=field_name,
+                                line=self.header_line)
+        value = self.data[key]
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.error(self.path, f"expected an array of tables ({label}), got {show(value)}",
+                                field=field_name, line=line)
+        if not value:
+            raise self.error(self.path, f"must hold at least one {label} table", field=field_name, line=line)
+        name = ".".join(p for p in (self.table[0], key) if p)
+        return [TomlTable(self.path, self.lines, v, f"{label} #{k}", (name, k), error=self.error)
+                for k, v in enumerate(value, start=1)]
+
+    def sub_table(self, key: str, valid: Sequence[str], *, required: bool) -> TomlTable:
+        """Sub-table ``[key]`` of this table, its keys checked against `valid`; empty when absent and optional."""
+        if key not in self.data:
+            if required:
+                raise self.error(self.path, f"missing required table; add a [{key}] table (keys: {', '.join(valid)})",
+                                    field=f"[{key}]")
+            return TomlTable(self.path, self.lines, {}, f"[{key}]", (key, 0), error=self.error)
+        value = self.data[key]
+        line = self.lines.header((key, 0)) or self.lines.key(("", 0), key)
+        if not isinstance(value, dict):
+            raise self.error(self.path, f"expected a table, got {show(value)}", line=line, field=f"[{key}]")
+        table = TomlTable(self.path, self.lines, value, f"[{key}]", (key, 0), line, error=self.error)
+        table.check_keys(valid)
+        return table
+
+
+def read_toml(path: Path, shown: str, error: type[FileFieldError] = FileFieldError, *,
+              missing: str = "check the path") -> tuple[dict[str, Any], TomlLines]:
+    """Read and parse a TOML file; every failure is an `error` naming `shown` (`missing`: the hint when absent)."""
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise error(shown, f"file not found; {missing}") from None
+    except OSError as exc:
+        raise error(shown, f"cannot read the file: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        raise error(shown, "the file is not valid UTF-8; save it as UTF-8", line=line) from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        message = str(exc)
+        where = re.search(r"\s*\(at line (\d+), column (\d+)\)$", message)
+        if where:
+            line: int | None = int(where.group(1))
+            message = f"{message[: where.start()]} (column {where.group(2)})"
+        else:
+            line = text.count("\n") + 1 if message.endswith("(at end of document)") else None
+            message = re.sub(r"\s*\(at end of document\)$", "", message)
+        raise error(shown, f"invalid TOML: {message}; fix the syntax (https://toml.io)", line=line) from None
+    return data, TomlLines(text)
