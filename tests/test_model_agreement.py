@@ -6,7 +6,8 @@ import pinocchio as pin
 import pytest
 
 from wbc.hardware.mujoco.scene import build_scene
-from wbc.robots import ARM_MODES, ROBOTS, build_pinocchio, get_robot, joint_table
+from wbc.robots import ARM_MODES, ROBOTS, get_robot, joint_table
+from wbc.robots.pinocchio_model import build_pinocchio
 from wbc.scenario.terrain import TerrainConfig
 
 CASES = [(name, mode) for name in ROBOTS for mode in ARM_MODES]

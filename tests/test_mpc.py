@@ -11,7 +11,8 @@ from wbc.mpc import CentroidalModel, CentroidalMpc, CentroidalParams, MpcConfig,
 from wbc.mpc.centroidal_model import euler_rates_matrix
 from wbc.mpc.gait import STAND, TROT, GaitConfig, GaitScheduler
 from wbc.mpc.kinematics import RobotKinematics
-from wbc.robots import build_pinocchio, get_robot, joint_table
+from wbc.robots import get_robot, joint_table
+from wbc.robots.pinocchio_model import build_pinocchio
 from wbc.scenario.terrain import TerrainConfig
 
 FEET = ("FR_foot", "FL_foot", "RR_foot", "RL_foot")

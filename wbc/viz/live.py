@@ -89,7 +89,7 @@ class LiveObserver:
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """One tick (the `wbc.arena.runner.TickObserver` signature)."""
-        if not isinstance(robot, MujocoRobot):
+        if not isinstance(robot, MujocoRobot):  # frames are drawn from the simulator's own state (contacts, pushes)
             return
         new_episode = t < self._last_t
         self._last_t = t

@@ -10,6 +10,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
+from wbc.control.protocol import HasDebugPlan
 from wbc.hardware.mujoco.fall_rule import FOOT_ZONE
 from wbc.hardware.mujoco.robot import MujocoRobot
 from wbc.robots.description import FOOT_NAMES
@@ -49,13 +50,12 @@ def frame_from_sim(robot: MujocoRobot, controller: object, command: VelocityComm
 
     Args:
         robot: the simulated robot.
-        controller: the controller; its plan is shown if it has a ``debug_plan()`` method.
+        controller: the controller; its plan is shown when it is a `HasDebugPlan`.
         command: the command of the tick just played.
         t: time [s].
     """
     truth = robot.sim_truth()
-    plan_of = getattr(controller, "debug_plan", None)
-    plan = plan_of() if callable(plan_of) else None
+    plan = controller.debug_plan() if isinstance(controller, HasDebugPlan) else None
     return VizFrame(
         t=t, qpos=robot.data.qpos.copy(), command=np.array([command.vx, command.vy, command.yaw_rate]),
         push_force_in_world=truth.external_force_in_world, push_point_in_world=truth.external_point_in_world,

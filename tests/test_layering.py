@@ -1,0 +1,131 @@
+"""The house's import rules: packages import only the rooms below them, and the light rooms stay light.
+
+Static: every import statement of every module, function-local ones included (a local import that hides an upward
+arrow is still that arrow), is checked against the layer table below. Dynamic: importing a room in a fresh
+interpreter pulls in only what the rules promise (no MuJoCo behind the scenario files, no torch behind the shipped
+policies).
+"""
+
+import ast
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parent.parent / "wbc"
+
+LAYERS = (
+    ("wbc.errors",),
+    ("wbc.types",),
+    ("wbc",),
+    ("wbc.optional", "wbc.provenance"),
+    ("wbc.robots",),
+    ("wbc.scenario",),
+    ("wbc.hardware",),
+    ("wbc.hardware.mujoco", "wbc.estimation"),
+    ("wbc.mpc", "wbc.learned", "wbc.learned.policy"),
+    ("wbc.learned.env",),
+    ("wbc.learned.train",),
+    ("wbc.control",),
+    ("wbc.arena",),
+    ("wbc.viz",),
+    ("wbc.tools",),
+    ("wbc.cli",),
+)
+"""Rooms from the bottom up. A module belongs to the room of its longest prefix here; it may import its own room and
+any room of a lower layer, never a room of its own layer or above (peers such as `wbc.mpc` and `wbc.learned` do not
+know each other)."""
+
+_RANK = {prefix: rank for rank, rooms in enumerate(LAYERS) for prefix in rooms}
+
+
+def _room(module: str) -> str:
+    parts = module.split(".")
+    for n in range(len(parts), 0, -1):
+        prefix = ".".join(parts[:n])
+        if prefix in _RANK:
+            return prefix
+    raise AssertionError(f"{module} is in no room of LAYERS; add its package there")
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PACKAGE.parent).with_suffix("")
+    parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
+    return ".".join(parts)
+
+
+def _imports(path: Path) -> list[tuple[int, str]]:
+    name = _module_name(path)
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "wbc"]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                up = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*up, base] if base else up)
+            if base.split(".")[0] == "wbc":
+                out.append((node.lineno, base))
+    return out
+
+
+MODULES = sorted(PACKAGE.rglob("*.py"))
+
+
+def test_every_module_is_in_a_room():
+    for path in MODULES:
+        _room(_module_name(path))
+
+
+@pytest.mark.parametrize("path", MODULES, ids=lambda p: str(p.relative_to(PACKAGE.parent)))
+def test_imports_run_downward_only(path):
+    here = _room(_module_name(path))
+    wrong = []
+    for line, target in _imports(path):
+        there = _room(target)
+        if there != here and _RANK[there] >= _RANK[here]:
+            wrong.append(f"{path.relative_to(PACKAGE.parent)}:{line}: {here} imports {target} ({there})")
+    assert not wrong, "\n".join(wrong)
+
+
+def _loaded_after(code: str) -> set[str]:
+    probe = code + "\nimport sys\nprint('\\n'.join(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True,
+                         cwd=PACKAGE.parent).stdout
+    return set(out.split())
+
+
+def test_core_types_and_errors_import_nothing_else_of_wbc():
+    loaded = {m for m in _loaded_after("import wbc.types, wbc.errors") if m.split(".")[0] == "wbc"}
+    assert loaded == {"wbc", "wbc.types", "wbc.errors"}
+
+
+def test_scenario_files_load_without_any_backend_or_mujoco():
+    loaded = _loaded_after("import wbc.scenario; wbc.scenario.load_scenario('scenarios/push.toml')")
+    assert "mujoco" not in loaded
+    assert not {m for m in loaded if m.startswith("wbc.hardware")}
+
+
+def test_the_robot_interface_imports_without_mujoco():
+    assert "mujoco" not in _loaded_after("import wbc.hardware")
+
+
+def test_shipped_policies_run_without_torch():
+    code = """
+import sys
+sys.modules["torch"] = None  # an import of torch now raises ImportError
+from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
+from wbc.learned.policy import LearnedController
+from wbc.types import VelocityCommand
+robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
+robot.connect()
+robot.reset(seed=0)
+ctrl = LearnedController(robot.desc)
+ctrl.reset()
+robot.write(ctrl.act(robot.read(), VelocityCommand(vx=0.3)))
+import wbc.learned.env
+"""
+    assert "wbc.learned.policy.controller" in _loaded_after(code)
