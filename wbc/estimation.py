@@ -20,6 +20,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from wbc.errors import ConfigError
+
 __all__ = ["EstimatorConfig", "BaseEstimator"]
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -49,7 +51,8 @@ class EstimatorConfig:
 
     def __post_init__(self) -> None:
         if self.gain not in ("steady", "full"):
-            raise ValueError(f"EstimatorConfig.gain must be 'steady' or 'full', got {self.gain!r}")
+            raise ConfigError(f"EstimatorConfig.gain must be 'steady' (the precomputed gain) or 'full' (a Kalman update"
+                              f" every tick), got {self.gain!r}")
 
 
 def _measurement_matrix() -> np.ndarray:

@@ -16,7 +16,7 @@ from types import TracebackType
 
 import numpy as np
 
-from wbc.errors import CommandError, RobotNotConnectedError
+from wbc.errors import CommandError, ConfigError, RobotNotConnectedError
 from wbc.robots.joint_table import JointTable
 from wbc.types import MotorCommand, RobotState
 
@@ -140,7 +140,7 @@ class Robot(ABC):
         """Let `dt` seconds of robot time pass under the last command [s]."""
         self._require_connected("advance")
         if not dt > 0:
-            raise ValueError(f"advance: dt must be positive, got {dt}")
+            raise ConfigError(f"advance: dt must be a positive number of seconds, got {dt}")
         self._advance(dt)
 
     # -- backend hooks --------------------------------------------------------------------------------------------

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbc.errors import ConfigError
+
 __all__ = ["ROOT_JOINT", "quat_wxyz_to_xyzw", "quat_xyzw_to_wxyz", "quat_to_matrix", "JointIndexMap"]
 
 ROOT_JOINT = "root"
@@ -52,7 +54,8 @@ class JointIndexMap:
 
     def __init__(self, house_names: tuple[str, ...], pin_names: tuple[str, ...]) -> None:
         if sorted(house_names) != sorted(pin_names):
-            raise ValueError(f"joint sets differ: {sorted(house_names)} vs {sorted(pin_names)}")
+            raise ConfigError(f"joint sets differ: {sorted(house_names)} vs {sorted(pin_names)}; build the Pinocchio "
+                              "model from the same description as the house joint order")
         self.pin_from_house = np.array([house_names.index(n) for n in pin_names])
         self.house_from_pin = np.array([pin_names.index(n) for n in house_names])
 

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wbc.errors import UnknownNameError
+from wbc.errors import ConfigError, UnknownNameError
 from wbc.robots.arm_spec import ArmSpec
 
 __all__ = ["ARM_MODES", "LEG_NAMES", "LEG_JOINT_NAMES", "FOOT_NAMES", "RobotDescription", "check_arm_mode"]
@@ -66,7 +66,8 @@ class RobotDescription:
         check_arm_mode(self.arm_mode)
         q = np.asarray(self.leg_nominal_q, dtype=np.float64)
         if q.shape != (12,):
-            raise ValueError(f"{self.name}: leg_nominal_q must have shape (12,), got {q.shape}")
+            raise ConfigError(f"{self.name}: leg_nominal_q must have shape (12,) (FR, FL, RR, RL x hip, thigh, calf), "
+                              f"got {q.shape}")
         object.__setattr__(self, "leg_nominal_q", q)
 
     @property

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from wbc.errors import ConfigError
 from wbc.robots.arm_spec import ArmJointSpec, ArmLinkSpec, ArmSpec
 from wbc.robots.inertial import Inertial, lump
 
@@ -120,7 +121,7 @@ def wx200_arm(
     )
     q0 = WX200_NOMINAL_Q if nominal_q is None else np.asarray(nominal_q, dtype=np.float64)
     if q0.shape != (3,):
-        raise ValueError(f"nominal_q must have shape (3,), got {q0.shape}")
+        raise ConfigError(f"nominal_q must have shape (3,) (waist, shoulder, elbow [rad]), got {q0.shape}")
     return ArmSpec(
         name="wx200" if s == 1.0 else f"wx200x{s:g}",
         base=ArmLinkSpec(name="base_link", inertial=base.scaled(s),
