@@ -88,7 +88,7 @@ def _bench_sim(args: argparse.Namespace) -> int:
 
 def _bench_train(args: argparse.Namespace) -> int:
     from wbc.learned.env.env_config import EnvConfig
-    from wbc.tools.bench_train import TRAIN_TARGET, bench_train
+    from wbc.tools.bench import TRAIN_TARGET, bench_train
 
     cfg = EnvConfig(arm_mode=args.arm, num_envs=args.envs, nthread=args.threads, terrain=args.terrain)
     result = bench_train(cfg, steps=args.steps, reference=not args.no_reference)
