@@ -87,3 +87,79 @@ def test_arm_momentum_study_measures_the_arm_against_the_push():
     assert 0.0 < a.push_angular_impulse < 400 * 0.06 * 0.4
     assert b.arm_momentum_peak == 0.0 and b.arm_travel_rad == 0.0
     assert a.arm_momentum_peak > 0.0 and a.arm_travel_rad > 0.0
+
+
+class _TimedStand:
+    """A stand controller that reports a tick breakdown as `HasTickTimings` asks: an MPC update every 5th tick."""
+
+    rate_hz = 50.0
+
+    def __init__(self, desc):
+        from wbc.control.stand import StandController
+
+        self._inner = StandController(desc)
+        self.resets, self.tick = 0, 0
+
+    def reset(self):
+        self.resets += 1
+        self.tick = 0
+
+    def act(self, state, command):
+        self._timings = {"whole_body_s": 50e-6}
+        if self.tick % 5 == 0:
+            self._timings.update(mpc_setup_s=2e-3, mpc_solve_s=1e-3)
+        self.tick += 1
+        return self._inner.act(state, command)
+
+    def counters(self):
+        return {"fallbacks": 0, "ticks": self.tick}
+
+    def tick_timings(self):
+        return self._timings
+
+
+def _walk_watched(inner, seconds=0.2):
+    from wbc.arena.runner import run_episode
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+    from wbc.scenario.trial import CommandSchedule
+    from wbc.tools.bench.mpc import TickTimingLog
+    from wbc.tools.watched_controller import WatchedController
+
+    watched = WatchedController(inner)
+    log = TickTimingLog(watched)
+    with MujocoRobot(MujocoRobotConfig()) as robot:
+        robot.reset(seed=0)
+        episode = run_episode(robot, watched, CommandSchedule(vx=0.3), seconds, truth=robot.base_truth,
+                              fallen=robot.fallen, nq=robot.model.nq, observer=log)
+    return watched, log, episode
+
+
+def test_bench_mpc_files_each_tick_of_the_runner_loop_by_the_controllers_breakdown():
+    from wbc.hardware.mujoco.robot import MujocoRobotConfig
+
+    inner = _TimedStand(MujocoRobotConfig().description())
+    watched, log, episode = _walk_watched(inner)
+    # the runner drove the wrapper: it reset the controller once and played every tick through it
+    assert inner.resets == 1 and len(episode.t) == 10 and watched.counters() == {"fallbacks": 0, "ticks": 10}
+    assert watched.last_state is not None and watched.last_act_s > 0
+    assert len(log.mpc_solve_s) == 2 and len(log.control_s) == 8 and len(log.whole_body_s) == 10
+    figures = log.figures()
+    assert figures["mpc_solve_ms_median"] == pytest.approx(1.0)
+    assert figures["mpc_setup_ms_median"] == pytest.approx(2.0)
+    assert figures["wbc_tick_us_median"] == pytest.approx(50.0)
+    assert 0 < figures["control_tick_us_median"] < 1e5
+
+
+def test_bench_mpc_reports_nan_for_what_a_controller_without_a_breakdown_cannot_tell():
+    from wbc.control.stand import StandController
+    from wbc.hardware.mujoco.robot import MujocoRobotConfig
+
+    watched, log, episode = _walk_watched(StandController(MujocoRobotConfig().description()))
+    assert len(episode.t) == 10 and watched.last_timings is None and watched.last_act_s > 0
+    assert all(np.isnan(v) for v in log.figures().values())
+
+
+def test_bench_mpc_refuses_a_controller_that_is_not_an_mpc(capsys):
+    argv = ["bench", "mpc", "--controller", "stand", "--seconds", "0.1", "--threaded-blas", "--no-reference"]
+    assert main(argv) == 2
+    assert "use one of: mpc, mpc-locked, mpc-noarm" in capsys.readouterr().err

@@ -1,25 +1,93 @@
-"""``wbc bench mpc``: the MPC controller's speed in closed loop on one core."""
+"""``wbc bench mpc``: the MPC controller's speed in closed loop on one core, played through the runner's one loop.
+
+The walk is an ordinary `run_episode`; the bench hands the runner a `WatchedController` in the controller's place and
+reads, after every tick, how long the tick took and the controller's own breakdown of it (`HasTickTimings`). A
+controller that reports no breakdown still walks; the figures that need one are then nan.
+"""
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import time
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from wbc.arena.executors import single_threaded_blas
-from wbc.control.registry import get_controller
+from wbc.arena.runner import run_episode
+from wbc.control.protocol import Controller
+from wbc.control.registry import CONTROLLERS, get_controller
+from wbc.errors import BenchError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.robot import Robot
+from wbc.mpc.controller import MpcController
+from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
     machine_description,
     reference_a1_steps_per_s,
     reference_placo_tick_us,
+    scaled_target,
 )
+from wbc.tools.watched_controller import WatchedController
 from wbc.types import VelocityCommand
 
-__all__ = ["bench_mpc"]
+__all__ = ["TickTimingLog", "bench_mpc"]
+
+
+def _median(values: Sequence[float], scale: float) -> float:
+    return scale * float(np.median(values)) if values else math.nan
+
+
+@dataclass
+class TickTimingLog:
+    """A runner observer that files each tick of a `WatchedController` by what ran in it [s].
+
+    Ticks with an MPC update (the breakdown has ``mpc_solve_s``) give the MPC's solve and setup times; the others
+    give the whole control tick (``control_s``: the `act` call's duration). Every tick the whole-body QP ran gives
+    ``whole_body_s``. Without a breakdown a tick cannot be filed and is left out.
+
+    Attributes:
+        watched: the controller the runner drives.
+        mpc_solve_s: QP solve time of each MPC update [s].
+        mpc_setup_s: setup time (linearisation, condensing) of each MPC update [s].
+        whole_body_s: whole-body QP time of each tick that ran it [s].
+        control_s: duration of each tick without an MPC update [s].
+    """
+
+    watched: WatchedController
+    mpc_solve_s: list[float] = field(default_factory=list)
+    mpc_setup_s: list[float] = field(default_factory=list)
+    whole_body_s: list[float] = field(default_factory=list)
+    control_s: list[float] = field(default_factory=list)
+
+    def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        """File the tick that just ended (the runner's `TickObserver` signature)."""
+        timings = self.watched.last_timings
+        if timings is None:
+            return
+        if "mpc_solve_s" in timings:
+            self.mpc_solve_s.append(timings["mpc_solve_s"])
+            if "mpc_setup_s" in timings:
+                self.mpc_setup_s.append(timings["mpc_setup_s"])
+        else:
+            self.control_s.append(self.watched.last_act_s)
+        if "whole_body_s" in timings:
+            self.whole_body_s.append(timings["whole_body_s"])
+
+    def figures(self) -> dict[str, float]:
+        """Medians (and the solve's 99th percentile) in the units of their names; nan where no tick was filed."""
+        solves = self.mpc_solve_s
+        return {
+            "mpc_solve_ms_median": _median(solves, 1e3),
+            "mpc_solve_ms_p99": 1e3 * float(np.percentile(solves, 99)) if solves else math.nan,
+            "mpc_setup_ms_median": _median(self.mpc_setup_s, 1e3),
+            "wbc_tick_us_median": _median(self.whole_body_s, 1e6),
+            "control_tick_us_median": _median(self.control_s, 1e6),
+        }
 
 
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
@@ -28,20 +96,37 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     With `single_thread` (the default) it runs in a spawned process whose BLAS is single-threaded, as every arena
     worker is: a BLAS that spreads the MPC's condensing products over the cores is no faster on an idle machine and
-    many times slower on a busy one (14 ms instead of 1 ms per MPC setup beside a training job on 2 cores).
+    many times slower on a busy one.
 
-    The robot walks at `vx` on flat ground for `seconds`; every MPC update's QP solve time (ProxSuite) and setup
-    time (linearisation and condensing) are collected; ``wbc_tick_us_median`` is the whole-body QP's time per tick
-    (PlaCo: kinematics, dynamics, tasks, QP, plus setting its targets from Python) and ``control_tick_us_median``
-    the whole control tick without an MPC update (estimator, kinematics, footholds, swing targets, whole-body QP,
-    motor command). The real-time factor covers everything: physics, controller and MPC updates.
+    The robot walks at `vx` on flat ground for `seconds` (or until it falls) through `run_episode`. From the
+    controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time (ProxSuite) and setup
+    time (linearisation and condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo:
+    kinematics, dynamics, tasks, QP, plus setting its targets from Python). ``control_tick_us_median`` is the whole
+    control tick without an MPC update (estimator, kinematics, footholds, swing targets, whole-body QP, motor
+    command). These are nan for a controller that reports no breakdown. The real-time factor covers everything:
+    physics, controller, MPC updates and the runner's episode log.
 
-    With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured before and after
-    the closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`; "about 40 us") and
-    the bare A1's single-threaded physics (`reference_a1`; 110k steps/s). The results then include
-    ``reference_placo_tick_us``, ``reference_steps_per_s``, and the targets scaled by them to this machine:
-    ``scaled_target_wbc_tick_us`` (100 us times the reference tick over 40 us) and ``scaled_target_realtime_factor``
-    (5x times the reference physics over 110k).
+    With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured before and after the
+    closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`) and the bare A1's
+    single-threaded physics (`reference_a1`). The results then include ``reference_placo_tick_us``,
+    ``reference_steps_per_s``, and the targets scaled by them to this machine: ``scaled_target_wbc_tick_us`` (100 us
+    times the reference tick over 40 us) and ``scaled_target_realtime_factor`` (5x times the reference physics over
+    110k steps/s).
+
+    Args:
+        robot: robot registry name.
+        controller: an MPC controller's registry name (``mpc``, ``mpc-locked``, ``mpc-noarm``).
+        seconds: length of the walk [s].
+        vx: forward velocity command [m/s].
+        single_thread: run in a spawned process with a single-threaded BLAS.
+        reference: also measure the references.
+
+    Returns:
+        The figures above, ``horizon``, ``fell``, ``blas`` and ``machine``.
+
+    Raises:
+        UnknownNameError: unknown robot or controller.
+        BenchError: the controller is not an MPC controller, or a reference failed.
     """
     if single_thread:
         with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
@@ -50,6 +135,11 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         return {**result, "blas": "single-threaded"}
     spec = get_controller(controller)
     sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
+    ctrl = spec.make(sim.desc)
+    if not isinstance(ctrl, MpcController):
+        valid = [name for name, s in CONTROLLERS.items() if s.make is MpcController]
+        raise BenchError(f"bench mpc times an MPC controller, and {controller!r} is not one; use one of: "
+                         f"{', '.join(valid)}")
     ref_ticks, ref_rates = [], []
 
     def measure_references() -> None:
@@ -58,62 +148,30 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     if reference:
         measure_references()
+    watched = WatchedController(ctrl)
+    log = TickTimingLog(watched)
     with sim:
         sim.reset(seed=0)
-        ctrl = spec.make(sim.desc)
-        ctrl.reset()
-        dt = 1.0 / ctrl.rate_hz
-        command = VelocityCommand(vx=vx)
-        solves, setups, ticks, wbc_ticks = [], [], [], []
-        last = None
-        wbc = getattr(ctrl, "wbc", None)
-        if wbc is not None:
-            real_solve = wbc.solve
-
-            def timed_solve(*a, **kw):
-                t0 = time.perf_counter()
-                out = real_solve(*a, **kw)
-                wbc_ticks.append(time.perf_counter() - t0)
-                return out
-
-            wbc.solve = timed_solve
         start = time.perf_counter()
-        for _ in range(int(round(seconds / dt))):
-            state = sim.read()
-            t0 = time.perf_counter()
-            out = ctrl.act(state, command)
-            elapsed = time.perf_counter() - t0
-            plan = getattr(ctrl, "plan", None)
-            if plan is not None and plan is not last:
-                solves.append(plan.solve_s)
-                setups.append(plan.setup_s)
-                last = plan
-            else:
-                ticks.append(elapsed)
-            sim.write(out)
-            sim.advance(dt)
+        episode = run_episode(sim, watched, CommandSchedule(vx=vx), seconds, truth=sim.base_truth,
+                              fallen=sim.fallen, nq=sim.model.nq, observer=log)
         wall = time.perf_counter() - start
-        fell = sim.fallen()
     references: dict[str, float] = {}
     if reference:
         measure_references()
         tick_ref, rate_ref = float(np.mean(ref_ticks)), max(ref_rates)
-        tick_target, tick_at = MPC_REFERENCE_TARGETS["wbc_tick_us_median"]
-        rt_target, rt_at = MPC_REFERENCE_TARGETS["realtime_factor"]
         references = {"reference_placo_tick_us": tick_ref, "reference_steps_per_s": rate_ref,
-                      "scaled_target_wbc_tick_us": tick_target * tick_ref / tick_at,
-                      "scaled_target_realtime_factor": rt_target * rate_ref / rt_at}
+                      "scaled_target_wbc_tick_us": scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"],
+                                                                 tick_ref),
+                      "scaled_target_realtime_factor": scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"],
+                                                                     rate_ref)}
     return {
         "robot": robot,
         "controller": controller,
         "horizon": int(ctrl.config.mpc.horizon),
-        "mpc_solve_ms_median": 1e3 * float(np.median(solves)),
-        "mpc_solve_ms_p99": 1e3 * float(np.percentile(solves, 99)),
-        "mpc_setup_ms_median": 1e3 * float(np.median(setups)),
-        "wbc_tick_us_median": 1e6 * float(np.median(wbc_ticks)) if wbc_ticks else float("nan"),
-        "control_tick_us_median": 1e6 * float(np.median(ticks)),
-        "realtime_factor": seconds / wall,
-        "fell": bool(fell),
+        **log.figures(),
+        "realtime_factor": episode.survived_s / wall,
+        "fell": bool(episode.fell),
         "blas": "default threads",
         "machine": machine_description(),
         **references,
