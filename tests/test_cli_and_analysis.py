@@ -163,3 +163,20 @@ def test_bench_mpc_refuses_a_controller_that_is_not_an_mpc(capsys):
     argv = ["bench", "mpc", "--controller", "stand", "--seconds", "0.1", "--threaded-blas", "--no-reference"]
     assert main(argv) == 2
     assert "use one of: mpc, mpc-locked, mpc-noarm" in capsys.readouterr().err
+
+
+def test_every_command_of_the_parser_has_a_handler():
+    import argparse
+
+    from wbc.cli.main import HANDLERS
+    from wbc.cli.parser import build_parser
+
+    def handlers(parser):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    yield from handlers(sub)
+        if "handler" in parser._defaults:
+            yield parser._defaults["handler"]
+
+    assert sorted(handlers(build_parser())) == sorted(HANDLERS)
