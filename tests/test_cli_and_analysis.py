@@ -1,6 +1,7 @@
-"""The command line, the tail analysis and optional-dependency messages."""
+"""The command line, the tail analysis, the arm-momentum study, the benches' loop observers, optional extras."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,13 +12,23 @@ from wbc.optional import require
 from wbc.robots import get_robot
 from wbc.tools.tail import analyze_tail
 
+PUSH = Path(__file__).resolve().parent.parent / "scenarios" / "push.toml"
 
-def test_analyze_tail_json_has_the_documented_keys(capsys):
-    assert main(["analyze", "tail", "--robot", "a1-wx200", "--json"]) == 0
-    out = json.loads(capsys.readouterr().out)
-    for key in ("ccom_shift_m", "alpha_ratio", "alpha_ratio_exact"):
-        assert isinstance(out[key], float)
-    assert out["paper_ccom_shift_m"] == 0.022 and out["paper_alpha_ratio"] == -0.378
+
+@pytest.mark.parametrize("robot", ["a1-wx200", "go1-arm"])
+def test_analyze_tail_prints_the_named_robots_figures_as_json_and_as_a_table(robot, capsys):
+    want = analyze_tail(get_robot(robot, "actuated"))
+    assert main(["analyze", "tail", "--robot", robot, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == want.as_dict()
+    assert main(["analyze", "tail", "--robot", robot]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"Arm as a tail: {robot}"
+    # each quantity's row reads: rod model, exact, paper
+    rows = {line[:36].strip(): [float(v) for v in line[36:].split()] for line in lines[3:5]}
+    assert rows["CoM shift by arm rotation [m]"] == pytest.approx(
+        [want.ccom_shift_m, want.ccom_shift_m_exact, want.paper_ccom_shift_m], abs=1e-4)
+    assert rows["body/arm angular acceleration"] == pytest.approx(
+        [want.alpha_ratio, want.alpha_ratio_exact, want.paper_alpha_ratio], abs=1e-3)
 
 
 def test_tail_rod_model_uses_the_models_numbers():
@@ -79,8 +90,8 @@ def test_missing_extra_names_the_extra_to_install():
 def test_arm_momentum_study_measures_the_arm_against_the_push():
     from wbc.tools.arm_momentum import arm_momentum_study
 
-    actuated = arm_momentum_study("scenarios/push.toml", "mpc", band="ood", trials=1, duration_s=3.5)
-    locked = arm_momentum_study("scenarios/push.toml", "mpc-locked", band="ood", trials=1, duration_s=3.5)
+    actuated = arm_momentum_study(str(PUSH), "mpc", band="ood", trials=1, duration_s=3.5)
+    locked = arm_momentum_study(str(PUSH), "mpc-locked", band="ood", trials=1, duration_s=3.5)
     a, b = actuated[0], locked[0]
     # the same push (same trial) on both; 300-400 N for 0.06 s at up to 0.12 m off the trunk's centre
     assert a.push_angular_impulse == pytest.approx(b.push_angular_impulse, rel=0.05)
