@@ -191,3 +191,11 @@ def test_every_command_of_the_parser_has_a_handler():
             yield parser._defaults["handler"]
 
     assert sorted(handlers(build_parser())) == sorted(HANDLERS)
+
+
+def test_a_trunk_without_a_collision_box_is_an_error_that_says_what_to_add(monkeypatch, capsys):
+    import wbc.tools.tail as tail
+
+    monkeypatch.setattr(tail, "robot_urdf", lambda desc: '<robot name="r"><link name="trunk"/></robot>')
+    assert main(["analyze", "tail"]) == 2
+    assert "give that link a <collision><geometry><box" in capsys.readouterr().err
