@@ -20,6 +20,7 @@ from wbc.cli.parser import build_parser
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, WbcError
 from wbc.learned.env.env_config import EnvConfig
+from wbc.learned.train.adaptation_config import AdaptationConfig
 from wbc.learned.train.stages import stage_config
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
@@ -96,8 +97,6 @@ def _train(args: argparse.Namespace) -> int:
     env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
     overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
     if args.rma_iterations is not None:
-        from wbc.learned.train.adaptation_config import AdaptationConfig
-
         overrides["rma"] = AdaptationConfig(iterations=args.rma_iterations)
     cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
                        env_overrides=env, **overrides)
