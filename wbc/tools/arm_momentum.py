@@ -1,12 +1,13 @@
 """How much angular momentum the arm actually moves during push recovery: the data behind the README's tail answer.
 
 For each trial of a scenario band, the named controller plays the trial through the runner's one loop
-(`run_episode`, set up as `wbc run` sets it up); an observer of that loop computes, every tick, the arm's
-contribution to the centroidal angular momentum, h_arm = A_arm(q) dq_arm (A_arm: the arm's columns of Pinocchio's
-centroidal momentum matrix, evaluated at the simulator's true base pose and the measured joint positions; dq_arm: the
-measured arm joint velocities, as the controller saw them), and the per-push figures compare it with the angular
-impulse each push delivers about the CoM, |r x F| T (r: from the CoM to the push's application point). A tail that
-matters must move momentum of the order of that impulse.
+(`run_episode`, set up as `run_trial` sets it up: the cached simulated robot reset with the trial's terrain seed and
+domain, its pushes scheduled). An observer of that loop computes, every tick, the arm's contribution to the centroidal
+angular momentum, h_arm = A_arm(q) dq_arm (A_arm: the arm's columns of Pinocchio's centroidal momentum matrix,
+evaluated at the simulator's true base pose and the measured joint positions; dq_arm: the measured arm joint
+velocities, as the controller saw them). The per-push figures compare it with the angular impulse each push delivers
+about the CoM, |r x F| T (r: from the CoM to the push's application point). A tail that matters must move momentum of
+the order of that impulse.
 """
 
 from __future__ import annotations
@@ -123,7 +124,7 @@ def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds:
         ScenarioError, UnknownNameError: bad scenario, band or controller.
     """
     scenario = load_scenario(scenario_path)
-    get_controller(controller)
+    get_controller(controller)  # an unknown name fails before the first trial is played
     out = []
     for trial in scenario.trials([band], list(seeds), trials):
         if duration_s is not None:
