@@ -15,6 +15,7 @@ import mujoco
 import numpy as np
 
 from wbc.control.stand import stand_command
+from wbc.errors import BenchError
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.tools.bench import machine_description, reference_a1
 
@@ -50,7 +51,10 @@ def main() -> None:
         m.dof_frictionloss[:] = friction
         m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
         print(f"{'a1-wx200 actuated, sensors off':<44}{_rate(m, robot.data):>10,.0f}")
-        assert np.isfinite(robot.data.qpos).all()
+        if not np.isfinite(robot.data.qpos).all():
+            raise BenchError("the a1-wx200 diverged standing with its sensors off, so the figures above timed a "
+                             "diverged simulation; run `pytest tests/test_mujoco_robot.py` to find what in the model "
+                             "broke")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
-"""The command line, the tail analysis and optional-dependency messages."""
+"""The command line, the tail analysis, the arm-momentum study, the benches' loop observers, optional extras."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,13 +12,23 @@ from wbc.optional import require
 from wbc.robots import get_robot
 from wbc.tools.tail import analyze_tail
 
+PUSH = Path(__file__).resolve().parent.parent / "scenarios" / "push.toml"
 
-def test_analyze_tail_json_has_the_documented_keys(capsys):
-    assert main(["analyze", "tail", "--robot", "a1-wx200", "--json"]) == 0
-    out = json.loads(capsys.readouterr().out)
-    for key in ("ccom_shift_m", "alpha_ratio", "alpha_ratio_exact"):
-        assert isinstance(out[key], float)
-    assert out["paper_ccom_shift_m"] == 0.022 and out["paper_alpha_ratio"] == -0.378
+
+@pytest.mark.parametrize("robot", ["a1-wx200", "go1-arm"])
+def test_analyze_tail_prints_the_named_robots_figures_as_json_and_as_a_table(robot, capsys):
+    want = analyze_tail(get_robot(robot, "actuated"))
+    assert main(["analyze", "tail", "--robot", robot, "--json"]) == 0
+    assert json.loads(capsys.readouterr().out) == want.as_dict()
+    assert main(["analyze", "tail", "--robot", robot]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"Arm as a tail: {robot}"
+    # each quantity's row reads: rod model, exact, paper
+    rows = {line[:36].strip(): [float(v) for v in line[36:].split()] for line in lines[3:5]}
+    assert rows["CoM shift by arm rotation [m]"] == pytest.approx(
+        [want.ccom_shift_m, want.ccom_shift_m_exact, want.paper_ccom_shift_m], abs=1e-4)
+    assert rows["body/arm angular acceleration"] == pytest.approx(
+        [want.alpha_ratio, want.alpha_ratio_exact, want.paper_alpha_ratio], abs=1e-3)
 
 
 def test_tail_rod_model_uses_the_models_numbers():
@@ -79,11 +90,112 @@ def test_missing_extra_names_the_extra_to_install():
 def test_arm_momentum_study_measures_the_arm_against_the_push():
     from wbc.tools.arm_momentum import arm_momentum_study
 
-    actuated = arm_momentum_study("scenarios/push.toml", "mpc", band="ood", trials=1, duration_s=3.5)
-    locked = arm_momentum_study("scenarios/push.toml", "mpc-locked", band="ood", trials=1, duration_s=3.5)
+    actuated = arm_momentum_study(str(PUSH), "mpc", band="ood", trials=1, duration_s=3.5)
+    locked = arm_momentum_study(str(PUSH), "mpc-locked", band="ood", trials=1, duration_s=3.5)
     a, b = actuated[0], locked[0]
     # the same push (same trial) on both; 300-400 N for 0.06 s at up to 0.12 m off the trunk's centre
     assert a.push_angular_impulse == pytest.approx(b.push_angular_impulse, rel=0.05)
     assert 0.0 < a.push_angular_impulse < 400 * 0.06 * 0.4
     assert b.arm_momentum_peak == 0.0 and b.arm_travel_rad == 0.0
     assert a.arm_momentum_peak > 0.0 and a.arm_travel_rad > 0.0
+
+
+class _TimedStand:
+    """A stand controller that reports a tick breakdown as `HasTickTimings` asks: an MPC update every 5th tick."""
+
+    rate_hz = 50.0
+
+    def __init__(self, desc):
+        from wbc.control.stand import StandController
+
+        self._inner = StandController(desc)
+        self.resets, self.tick = 0, 0
+
+    def reset(self):
+        self.resets += 1
+        self.tick = 0
+
+    def act(self, state, command):
+        self._timings = {"whole_body_s": 50e-6}
+        if self.tick % 5 == 0:
+            self._timings.update(mpc_setup_s=2e-3, mpc_solve_s=1e-3)
+        self.tick += 1
+        return self._inner.act(state, command)
+
+    def counters(self):
+        return {"fallbacks": 0, "ticks": self.tick}
+
+    def tick_timings(self):
+        return self._timings
+
+
+def _walk_watched(inner, seconds=0.2):
+    from wbc.arena.runner import run_episode
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+    from wbc.scenario.trial import CommandSchedule
+    from wbc.tools.bench.mpc import TickTimingLog
+    from wbc.tools.watched_controller import WatchedController
+
+    watched = WatchedController(inner)
+    log = TickTimingLog(watched)
+    with MujocoRobot(MujocoRobotConfig()) as robot:
+        robot.reset(seed=0)
+        episode = run_episode(robot, watched, CommandSchedule(vx=0.3), seconds, truth=robot.base_truth,
+                              fallen=robot.fallen, nq=robot.model.nq, observer=log)
+    return watched, log, episode
+
+
+def test_bench_mpc_files_each_tick_of_the_runner_loop_by_the_controllers_breakdown():
+    from wbc.hardware.mujoco.robot import MujocoRobotConfig
+
+    inner = _TimedStand(MujocoRobotConfig().description())
+    watched, log, episode = _walk_watched(inner)
+    # the runner drove the wrapper: it reset the controller once and played every tick through it
+    assert inner.resets == 1 and len(episode.t) == 10 and watched.counters() == {"fallbacks": 0, "ticks": 10}
+    assert watched.last_state is not None and watched.last_act_s > 0
+    assert len(log.mpc_solve_s) == 2 and len(log.control_s) == 8 and len(log.whole_body_s) == 10
+    figures = log.figures()
+    assert figures["mpc_solve_ms_median"] == pytest.approx(1.0)
+    assert figures["mpc_setup_ms_median"] == pytest.approx(2.0)
+    assert figures["wbc_tick_us_median"] == pytest.approx(50.0)
+    assert 0 < figures["control_tick_us_median"] < 1e5
+
+
+def test_bench_mpc_reports_nan_for_what_a_controller_without_a_breakdown_cannot_tell():
+    from wbc.control.stand import StandController
+    from wbc.hardware.mujoco.robot import MujocoRobotConfig
+
+    watched, log, episode = _walk_watched(StandController(MujocoRobotConfig().description()))
+    assert len(episode.t) == 10 and watched.last_timings is None and watched.last_act_s > 0
+    assert all(np.isnan(v) for v in log.figures().values())
+
+
+def test_bench_mpc_refuses_a_controller_that_is_not_an_mpc(capsys):
+    argv = ["bench", "mpc", "--controller", "stand", "--seconds", "0.1", "--threaded-blas", "--no-reference"]
+    assert main(argv) == 2
+    assert "use one of: mpc, mpc-locked, mpc-noarm" in capsys.readouterr().err
+
+
+def test_every_command_of_the_parser_has_a_handler():
+    import argparse
+
+    from wbc.cli.main import HANDLERS
+    from wbc.cli.parser import build_parser
+
+    def handlers(parser):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for sub in action.choices.values():
+                    yield from handlers(sub)
+        if "handler" in parser._defaults:
+            yield parser._defaults["handler"]
+
+    assert sorted(handlers(build_parser())) == sorted(HANDLERS)
+
+
+def test_a_trunk_without_a_collision_box_is_an_error_that_says_what_to_add(monkeypatch, capsys):
+    import wbc.tools.tail as tail
+
+    monkeypatch.setattr(tail, "robot_urdf", lambda desc: '<robot name="r"><link name="trunk"/></robot>')
+    assert main(["analyze", "tail"]) == 2
+    assert "give that link a <collision><geometry><box" in capsys.readouterr().err

@@ -83,3 +83,15 @@ class MissingExtraError(WbcError, ImportError):
         )
         self.module = module
         self.extra = extra
+
+
+# --- tools / cli
+__all__ += ["BenchError", "AnalysisError"]
+
+
+class BenchError(WbcError, RuntimeError):
+    """A speed bench cannot measure what it was asked to (a reference that fails, a controller it cannot time)."""
+
+
+class AnalysisError(WbcError, ValueError):
+    """An analysis cannot be computed from the robot model it was given; the message names the missing part."""

@@ -1,30 +1,39 @@
 """How much angular momentum the arm actually moves during push recovery: the data behind the README's tail answer.
 
-For each trial of a scenario band, the named controller plays the trial as `wbc run` does; every tick the arm's
-contribution to the centroidal angular momentum, h_arm = A_arm(q) dq_arm (A_arm: the arm's columns of Pinocchio's
-centroidal momentum matrix, evaluated at the simulator's true configuration), is compared with the angular impulse
-each push delivers about the CoM, |r x F| T (r: from the CoM to the push's application point). A tail that
-matters must move momentum of the order of that impulse.
+For each trial of a scenario band, the named controller plays the trial through the runner's one loop
+(`run_episode`, set up as `run_trial` sets it up: the cached simulated robot reset with the trial's terrain seed and
+domain, its pushes scheduled). An observer of that loop computes, every tick, the arm's contribution to the centroidal
+angular momentum, h_arm = A_arm(q) dq_arm (A_arm: the arm's columns of Pinocchio's centroidal momentum matrix,
+evaluated at the simulator's true base pose and the measured joint positions; dq_arm: the measured arm joint
+velocities, as the controller saw them). The per-push figures compare it with the angular impulse each push delivers
+about the CoM, |r x F| T (r: from the CoM to the push's application point). A tail that matters must move momentum of
+the order of that impulse.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 
-from wbc.arena.runner import simulated_robot
+from wbc.arena.runner import run_episode, simulated_robot
+from wbc.control.protocol import Controller
 from wbc.control.registry import get_controller
+from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix, quat_wxyz_to_xyzw
-from wbc.robots.pinocchio_model import build_pinocchio
+from wbc.robots.pinocchio_model import PinocchioRobot, build_pinocchio
 from wbc.scenario.scenario import load_scenario
+from wbc.scenario.trial import Trial
+from wbc.tools.watched_controller import WatchedController
+from wbc.types import BaseTruth, VelocityCommand
 
-__all__ = ["ArmMomentumTrial", "arm_momentum_study"]
+__all__ = ["ArmMomentumLog", "ArmMomentumTrial", "arm_momentum_study"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ArmMomentumTrial:
     """One trial's figures.
 
@@ -51,69 +60,102 @@ class ArmMomentumTrial:
     arm_momentum_mean: float
 
 
+@dataclass
+class ArmMomentumLog:
+    """A runner observer gathering, tick by tick, what the study needs (one row per tick played).
+
+    Attributes:
+        watched: the controller the runner drives (it keeps the state each tick was handed).
+        truth: the simulator's base truth, read after each tick.
+        pin_robot: the Pinocchio model of the robot played.
+        h_arm: |h_arm| of each tick [N m s] (zero without an actuated arm).
+        com_in_world: system CoM of each tick [m].
+        rotation_base_in_world: base orientation of each tick.
+        position_base_in_world: base position of each tick [m].
+        arm_travel_rad: summed absolute arm joint motion so far [rad].
+    """
+
+    watched: WatchedController
+    truth: Callable[[], BaseTruth]
+    pin_robot: PinocchioRobot
+    h_arm: list[float] = field(default_factory=list)
+    com_in_world: list[np.ndarray] = field(default_factory=list)
+    rotation_base_in_world: list[np.ndarray] = field(default_factory=list)
+    position_base_in_world: list[np.ndarray] = field(default_factory=list)
+    arm_travel_rad: float = 0.0
+    _last_arm: np.ndarray | None = field(default=None, init=False, repr=False)
+
+    def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        """Take the tick that just ended (the runner's `TickObserver` signature)."""
+        state, pinr = self.watched.last_state, self.pin_robot
+        truth = self.truth()
+        q = np.concatenate([truth.base_position_in_world, quat_wxyz_to_xyzw(truth.base_quat),
+                            state.q[pinr.joints.pin_from_house]])
+        self.com_in_world.append(pin.centerOfMass(pinr.model, pinr.data, q).copy())
+        self.rotation_base_in_world.append(quat_to_matrix(truth.base_quat))
+        self.position_base_in_world.append(truth.base_position_in_world)
+        h = 0.0
+        if robot.num_joints == 15:
+            arm_cols = 6 + pinr.joints.house_from_pin[12:15]
+            pin.computeCentroidalMap(pinr.model, pinr.data, q)
+            h = float(np.linalg.norm(pinr.data.Ag[3:, arm_cols] @ state.dq[12:15]))
+            if self._last_arm is not None:
+                self.arm_travel_rad += float(np.abs(state.q[12:15] - self._last_arm).sum())
+            self._last_arm = state.q[12:15].copy()
+        self.h_arm.append(h)
+
+
 def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds: tuple[int, ...] = (0,),
                        trials: int = 5, duration_s: float | None = None) -> list[ArmMomentumTrial]:
     """Play `trials` trials per seed of `band` with `controller` and measure the arm's momentum against the pushes.
 
-    `duration_s` shortens every trial (default: the scenario's length).
+    Args:
+        scenario_path: the scenario file (a relative path is resolved as `load_scenario` does).
+        controller: controller registry name.
+        band: scenario band.
+        seeds: seeds to play.
+        trials: trials per seed.
+        duration_s: shortens every trial (default: the scenario's length) [s].
+
+    Returns:
+        One row per trial, in the scenario's trial order.
 
     Raises:
         ScenarioError, UnknownNameError: bad scenario, band or controller.
     """
     scenario = load_scenario(scenario_path)
-    spec = get_controller(controller)
+    get_controller(controller)  # an unknown name fails before the first trial is played
     out = []
     for trial in scenario.trials([band], list(seeds), trials):
         if duration_s is not None:
             trial = dataclasses.replace(trial, duration_s=duration_s)
-        robot = simulated_robot(trial, spec.arm_mode)
-        ctrl = spec.make(robot.desc)
-        pinr = build_pinocchio(robot.desc)
-        arm_cols = None
-        if robot.num_joints == 15:
-            arm_cols = 6 + pinr.joints.house_from_pin[12:15]
-        robot.reset(seed=trial.terrain_seed, domain=trial.domain)
-        for push in trial.pushes:
-            robot.apply_push(push)
-        ctrl.reset()
-        dt = 1.0 / ctrl.rate_hz
-        n = int(round(trial.duration_s / dt))
-        h_arm = np.zeros(n)
-        com = np.zeros((n, 3))
-        rot = np.zeros((n, 3, 3))
-        pos = np.zeros((n, 3))
-        travel, last_arm, fell, played = 0.0, None, False, 0
-        for k in range(n):
-            state = robot.read()
-            robot.write(ctrl.act(state, trial.command.at(k * dt)))
-            robot.advance(dt)
-            truth = robot.base_truth()
-            q = np.concatenate([truth.base_position_in_world, quat_wxyz_to_xyzw(truth.base_quat),
-                                state.q[pinr.joints.pin_from_house]])
-            com[k] = pin.centerOfMass(pinr.model, pinr.data, q)
-            rot[k] = quat_to_matrix(truth.base_quat)
-            pos[k] = truth.base_position_in_world
-            if arm_cols is not None:
-                pin.computeCentroidalMap(pinr.model, pinr.data, q)
-                h_arm[k] = float(np.linalg.norm(pinr.data.Ag[3:, arm_cols] @ state.dq[12:15]))
-                if last_arm is not None:
-                    travel += float(np.abs(state.q[12:15] - last_arm).sum())
-                last_arm = state.q[12:15].copy()
-            played = k + 1
-            if robot.fallen():
-                fell = True
-                break
-        impulses, peaks = [], []
-        for push in trial.pushes:
-            k0 = int(push.start / dt)
-            if k0 >= played:
-                continue
-            lever = pos[k0] + rot[k0] @ push.offset_in_base - com[k0]
-            impulses.append(float(np.linalg.norm(np.cross(lever, push.force_in_world))) * push.duration)
-            peaks.append(float(h_arm[k0:min(played, k0 + int(0.5 / dt))].max()))
-        out.append(ArmMomentumTrial(
-            controller=controller, band=band, seed=trial.seed, trial=trial.index, survived=not fell,
-            arm_travel_rad=travel, push_angular_impulse=float(np.mean(impulses)) if impulses else 0.0,
-            arm_momentum_peak=float(np.mean(peaks)) if peaks else 0.0,
-            arm_momentum_mean=float(h_arm[:played].mean()) if played else 0.0))
+        out.append(_study_trial(trial, controller))
     return out
+
+
+def _study_trial(trial: Trial, controller: str) -> ArmMomentumTrial:
+    spec = get_controller(controller)
+    robot = simulated_robot(trial, spec.arm_mode)
+    watched = WatchedController(spec.make(robot.desc))
+    log = ArmMomentumLog(watched, robot.base_truth, build_pinocchio(robot.desc))
+    robot.reset(seed=trial.terrain_seed, domain=trial.domain)
+    for push in trial.pushes:
+        robot.apply_push(push)
+    episode = run_episode(robot, watched, trial.command, trial.duration_s, truth=robot.base_truth,
+                          fallen=robot.fallen, nq=robot.model.nq, observer=log)
+    dt, played = episode.control_dt, len(log.h_arm)
+    h_arm = np.asarray(log.h_arm)
+    impulses, peaks = [], []
+    for push in trial.pushes:
+        k0 = int(push.start / dt)
+        if k0 >= played:
+            continue
+        lever = (log.position_base_in_world[k0] + log.rotation_base_in_world[k0] @ push.offset_in_base
+                 - log.com_in_world[k0])
+        impulses.append(float(np.linalg.norm(np.cross(lever, push.force_in_world))) * push.duration)
+        peaks.append(float(h_arm[k0:min(played, k0 + int(0.5 / dt))].max()))
+    return ArmMomentumTrial(
+        controller=controller, band=trial.band, seed=trial.seed, trial=trial.index, survived=not episode.fell,
+        arm_travel_rad=log.arm_travel_rad, push_angular_impulse=float(np.mean(impulses)) if impulses else 0.0,
+        arm_momentum_peak=float(np.mean(peaks)) if peaks else 0.0,
+        arm_momentum_mean=float(h_arm.mean()) if played else 0.0)

@@ -18,6 +18,7 @@ from wbc.learned.env.env import BatchedEnv
 from wbc.learned.env.env_config import EnvConfig, ObsNoise
 from wbc.learned.policy.numpy_policy import NumpyPolicy
 from wbc.learned.policy.policy_file import load_policy
+from wbc.learned.train.stages import stage_config
 
 __all__ = ["probe_policy"]
 
@@ -67,8 +68,6 @@ def probe_policy(policy_path: str | Path, env: EnvConfig, *, steps: int = 500, s
 
 def main(argv: list[str] | None = None) -> int:
     """Command line."""
-    from wbc.learned.train.stages import stage_config
-
     p = argparse.ArgumentParser(prog="python -m wbc.tools.probe", description=__doc__.splitlines()[0])
     p.add_argument("policy", help="policy file (.npz/.json stem)")
     p.add_argument("--task", default="push")

@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pinocchio as pin
 
+from wbc.errors import AnalysisError
 from wbc.robots.description import RobotDescription
 from wbc.robots.joint_table import joint_table
 from wbc.robots.pinocchio_model import build_pinocchio
@@ -37,7 +38,9 @@ from wbc.robots.urdf import robot_urdf
 __all__ = ["TailAnalysis", "PAPER_CCOM_SHIFT_M", "PAPER_ALPHA_RATIO", "analyze_tail"]
 
 PAPER_CCOM_SHIFT_M = 0.022
+"""The paper's rod-model CoM shift for its robot (Section VIII) [m], printed beside ours."""
 PAPER_ALPHA_RATIO = -0.378
+"""The paper's rod-and-cuboid body/arm angular acceleration ratio for its robot (Section VIII), printed beside ours."""
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,7 @@ class TailAnalysis:
 
 
 def _trunk_box(desc: RobotDescription) -> tuple[float, float]:
+    """Height and width of the trunk's collision box [m]."""
     root = ET.fromstring(robot_urdf(desc))
     for link in root.findall("link"):
         if link.get("name") == "trunk":
@@ -70,7 +74,9 @@ def _trunk_box(desc: RobotDescription) -> tuple[float, float]:
             if box is not None:
                 sx, sy, sz = (float(v) for v in box.get("size").split())
                 return sz, sy
-    raise ValueError(f"{desc.name}: trunk has no collision box")
+    raise AnalysisError(f"{desc.name}: the tail analysis takes the trunk's height and width from the collision box of "
+                        "its 'trunk' link, and the URDF has none; give that link a "
+                        "<collision><geometry><box size=\"x y z\"/></geometry></collision>")
 
 
 def _arm_length(desc: RobotDescription) -> float:
@@ -125,6 +131,9 @@ def analyze_tail(desc: RobotDescription, *, samples: int = 13) -> TailAnalysis:
     Args:
         desc: robot with an actuated arm.
         samples: grid points per arm joint for the exact CoM sweep.
+
+    Raises:
+        AnalysisError: the robot's URDF gives its trunk no collision box.
     """
     if desc.arm_mode != "actuated":
         desc = desc.with_arm_mode("actuated")

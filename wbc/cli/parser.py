@@ -1,0 +1,160 @@
+"""The ``wbc`` argument parser: every command, its options and their defaults; nothing runs here.
+
+Each command's parser sets ``handler`` to the command's name (``"bench mpc"``); `wbc.cli.main` dispatches on it and
+`wbc.cli.printers` prints what the command returns. Scenario paths are kept as given: `load_scenario` resolves them.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from wbc.control.registry import CONTROLLERS
+from wbc.learned.train.stages import BASELINES, TASKS
+from wbc.robots.description import ARM_MODES
+from wbc.robots.registry import ROBOTS
+
+__all__ = ["add_arena_options", "build_parser"]
+
+
+def add_arena_options(p: argparse.ArgumentParser) -> None:
+    """The options ``run`` and ``compare`` share: which trials, where the results go, how they are played."""
+    p.add_argument("--scenario", required=True, help="scenario file (e.g. scenarios/push.toml)")
+    p.add_argument("--trials", type=int, default=10, help="trials per band and seed (default 10)")
+    p.add_argument("--seeds", type=int, default=None, help="number of seeds: seeds 0 .. S-1 (default 1)")
+    p.add_argument("--band", action="append", help="band to play (repeatable; default: all)")
+    p.add_argument("--out", default=None, help="results directory (default: runs/<scenario>-<controllers>-<time>)")
+    p.add_argument("--json", action="store_true", help="print summary.json instead of the table")
+    p.add_argument("--executor", default="local", help="local (process pool, default) or ray")
+    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
+    p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-push", action="store_true", help="play the trials without their pushes")
+    p.add_argument("--debug-truth", action="store_true",
+                   help="debug: controllers read the simulator's base state instead of estimating it (recorded)")
+    p.add_argument("--save-episodes", action="store_true",
+                   help="also store every trial's episode log under OUT/episodes/ (for `wbc view --episode`)")
+    p.add_argument("--view", action="store_true",
+                   help="watch the trials live in the browser (meshcat); they then play one by one in this process")
+    p.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
+    p.add_argument("--speed", type=float, default=1.0, help="with --view: 1 real time, 0.25 slow motion, 0 flat out")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``wbc`` argument parser; every command sets ``handler``, the name `wbc.cli.main` dispatches on."""
+    p = argparse.ArgumentParser(prog="wbc", description="Whole-body control of quadrupeds that carry an arm.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    analyze = sub.add_parser("analyze", help="first-principles analyses").add_subparsers(dest="what", required=True)
+    tail = analyze.add_parser("tail", help="the paper's CoM shift and body/arm acceleration ratio, from the model")
+    tail.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    tail.add_argument("--json", action="store_true", help="print JSON")
+    tail.set_defaults(handler="analyze tail")
+    arm = analyze.add_parser("arm-momentum", help="the arm's angular momentum against the pushes' angular impulse")
+    arm.add_argument("--scenario", default="scenarios/push.toml")
+    arm.add_argument("--band", default="ood")
+    arm.add_argument("--controller", default="mpc")
+    arm.add_argument("--trials", type=int, default=5, help="trials per seed")
+    arm.add_argument("--seeds", type=int, default=1)
+    arm.add_argument("--json", action="store_true")
+    arm.set_defaults(handler="analyze arm-momentum")
+
+    bench = sub.add_parser("bench", help="speed figures").add_subparsers(dest="what", required=True)
+    sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")
+    sim.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    sim.add_argument("--batch", type=int, default=64, help="environments in the batched rollout")
+    sim.add_argument("--threads", type=int, default=None, help="threads for the batched rollout (default: all)")
+    sim.add_argument("--json", action="store_true", help="print JSON")
+    sim.add_argument("--terrain", default="flat", help="flat or fractal")
+    sim.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measured alongside")
+    sim.set_defaults(handler="bench sim")
+    mpc = bench.add_parser("mpc", help="MPC solve times, whole-body tick, closed-loop real-time factor")
+    mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    mpc.add_argument("--controller", default="mpc")
+    mpc.add_argument("--seconds", type=float, default=4.0)
+    mpc.add_argument("--threaded-blas", action="store_true",
+                     help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
+    mpc.add_argument("--json", action="store_true")
+    mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
+    mpc.set_defaults(handler="bench mpc")
+    sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
+    sweep.add_argument("--scenario", default="scenarios/push.toml")
+    sweep.add_argument("--controller", default="stand")
+    sweep.add_argument("--trials", type=int, default=10, help="trials per band")
+    sweep.add_argument("--workers", type=int, default=None)
+    sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
+    sweep.add_argument("--json", action="store_true")
+    sweep.set_defaults(handler="bench sweep")
+    btrain = bench.add_parser("train", help="training env throughput: control steps per second, random actions")
+    btrain.add_argument("--envs", type=int, default=1024, help="parallel environments")
+    btrain.add_argument("--threads", type=int, default=2, help="rollout threads")
+    btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    btrain.add_argument("--terrain", default="scenario", help="scenario (the push scenario's ground) or flat")
+    btrain.add_argument("--steps", type=int, default=50, help="policy steps per measurement")
+    btrain.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measurement")
+    btrain.add_argument("--json", action="store_true")
+    btrain.set_defaults(handler="bench train")
+
+    tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
+    tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")
+    tr.add_argument("--stage", type=int, required=True, choices=(1, 2, 3), help="1: pi1, 2: pi2, 3: pi3")
+    tr.add_argument("--baseline", default=None, help=f"stage-3 baseline, one of: {', '.join(BASELINES)}")
+    tr.add_argument("--resume", action="store_true", help="continue from the newest checkpoint of the run")
+    tr.add_argument("--iterations", type=int, default=None, help="PPO iterations of the whole run (default 1500)")
+    tr.add_argument("--envs", type=int, default=None, help="parallel environments (default 1024)")
+    tr.add_argument("--threads", type=int, default=None, help="physics threads (default 2)")
+    tr.add_argument("--seed", type=int, default=None, help="seed (default 0)")
+    tr.add_argument("--rma-iterations", type=int, default=None,
+                    help="RMA phase-2 rounds after PPO (default 200; 0 skips phase 2)")
+    tr.add_argument("--teacher", default=None, help="BC teacher policy file (default: the previous stage's export)")
+    tr.add_argument("--run-root", default="runs/train", help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>]")
+    tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")
+    tr.set_defaults(handler="train")
+
+    run = sub.add_parser("run", help="play a scenario with one controller")
+    run.add_argument("controller", help=f"one of: {', '.join(CONTROLLERS)}, or policy:PATH (an exported policy file)")
+    add_arena_options(run)
+    run.set_defaults(handler="run")
+    compare = sub.add_parser("compare", help="play a scenario with several controllers on the same trials")
+    compare.add_argument("controllers", nargs="+",
+                         help=f"two or more of: {', '.join(CONTROLLERS)}, policy:PATH (an exported policy file)")
+    add_arena_options(compare)
+    compare.set_defaults(handler="compare")
+
+    view = sub.add_parser("view", help="watch a trial in the browser (meshcat), live or replayed; record it to HTML",
+                          description="Play CTRL on trial I of a scenario and stream it to a meshcat page (robot, "
+                          "arm, terrain, push arrow, contact forces, command, MPC plan), or replay a stored "
+                          "episode (--episode). With --record only, nothing is served: the trial is written as one "
+                          "self-contained HTML file. Keys while live (then Enter): p pause, s step, + / - speed, q.")
+    view.add_argument("ctrl", nargs="?", default=None,
+                      help=f"controller: one of {', '.join(CONTROLLERS)}, or policy:PATH")
+    view.add_argument("--scenario", default=None, help="scenario file (e.g. scenarios/push.toml)")
+    view.add_argument("--trial", type=int, required=True, help="trial index within (band, seed)")
+    view.add_argument("--seed", type=int, default=None, help="seed (default 0, or the run's first)")
+    view.add_argument("--band", default=None, help="band (default: the first)")
+    view.add_argument("--duration", type=float, default=None, help="play only the first D seconds")
+    view.add_argument("--episode", default=None, metavar="RESULTS_DIR",
+                      help="replay a stored episode from a `wbc run --save-episodes` results directory")
+    view.add_argument("--controller", default=None, help="with --episode: whose episode (default: the only one)")
+    view.add_argument("--host", default="127.0.0.1",
+                      help="address the viewer listens on (default 127.0.0.1: this machine only)")
+    view.add_argument("--speed", type=float, default=1.0, help="1 real time, 0.25 slow motion, 0 flat out")
+    view.add_argument("--pause-at", type=float, action="append", metavar="T", help="pause at trial time T (repeatable)")
+    view.add_argument("--paused", action="store_true", help="start paused (then s to step, p to play)")
+    view.add_argument("--step", type=float, default=0.02, help="trial time of one single step [s] (default 0.02)")
+    view.add_argument("--record", default=None, metavar="FILE.html", help="write a self-contained HTML replay")
+    view.add_argument("--fps", type=float, default=50.0, help="with --record: frames per second (default 50)")
+    view.add_argument("--live", action="store_true", help="with --record: also stream live")
+    view.add_argument("--open", action="store_true", help="open the page in the default browser")
+    view.add_argument("--wait", action="store_true", help="start once a browser has opened the page")
+    view.set_defaults(handler="view")
+
+    demo = sub.add_parser("demo", help="the main job: a short A/B comparison on the push scenario; tail analysis")
+    demo.add_argument("--scenario", default="scenarios/push.toml")
+    demo.add_argument("--trials", type=int, default=4, help="trials per band and seed")
+    demo.add_argument("--seeds", type=int, default=2)
+    demo.add_argument("--out", default=None, help="results directory (default: runs/demo-<time>)")
+    demo.add_argument("--quiet", action="store_true", help="no progress bar")
+    demo.set_defaults(handler="demo")
+    return p

@@ -1,0 +1,161 @@
+"""How the ``wbc`` command prints what its commands return: JSON, or the tables and lines a person reads.
+
+One printer per result; each takes the result as the tool returned it and writes to stdout. The texts are part of
+the command's interface: scripts parse the JSON, people read the tables.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from wbc.arena.compare import ArenaResult
+from wbc.arena.report import format_table
+from wbc.tools.arm_momentum import ArmMomentumTrial
+from wbc.tools.bench.references import TRAIN_TARGET
+from wbc.tools.tail import TailAnalysis
+
+__all__ = ["print_arena", "print_arm_momentum", "print_bench_mpc", "print_bench_sim", "print_bench_sweep",
+           "print_bench_train", "print_demo_header", "print_json", "print_recording", "print_tail",
+           "print_trained", "print_viewed_trial"]
+
+
+def print_json(value: object) -> None:
+    """`value` as indented JSON (sequences of any kind as lists; NaN as ``NaN``, as `json` writes it)."""
+    print(json.dumps(value, indent=2, default=list))
+
+
+def print_tail(result: TailAnalysis) -> None:
+    """The tail analysis: the model's inputs, then rod model, exact and paper figures side by side."""
+    print(f"Arm as a tail: {result.robot}")
+    print(f"  inputs: moving arm mass M_a = {result.arm_mass_moving:.3f} kg, rest M_b = {result.body_mass:.3f} kg, "
+          f"arm length l = {result.arm_length:.3f} m, trunk h x w = {result.trunk_height:.3f} x "
+          f"{result.trunk_width:.3f} m")
+    print(f"  {'quantity':<34}{'rod model':>11}{'exact':>10}{'paper':>9}")
+    print(f"  {'CoM shift by arm rotation [m]':<34}{result.ccom_shift_m:>11.4f}{result.ccom_shift_m_exact:>10.4f}"
+          f"{result.paper_ccom_shift_m:>9.3f}")
+    print(f"  {'body/arm angular acceleration':<34}{result.alpha_ratio:>11.3f}{result.alpha_ratio_exact:>10.3f}"
+          f"{result.paper_alpha_ratio:>9.3f}")
+
+
+def print_arm_momentum(rows: Sequence[ArmMomentumTrial], *, controller: str, scenario: str, band: str) -> None:
+    """One line per trial of the arm-momentum study, then the means."""
+    print(f"arm momentum during push recovery: {controller}, {scenario} band {band}")
+    print("  seed trial survived  arm travel [rad]  push |r x F| T [N m s]  arm |h| peak [N m s]  arm |h| mean")
+    for r in rows:
+        print(f"  {r.seed:4d} {r.trial:5d} {str(r.survived):8s}  {r.arm_travel_rad:16.1f}  "
+              f"{r.push_angular_impulse:22.3f}  {r.arm_momentum_peak:20.3f}  {r.arm_momentum_mean:12.3f}")
+    if rows:
+        mean = {k: float(np.mean([getattr(r, k) for r in rows])) for k in
+                ("arm_travel_rad", "push_angular_impulse", "arm_momentum_peak", "arm_momentum_mean")}
+        print(f"  mean: travel {mean['arm_travel_rad']:.1f} rad, push angular impulse "
+              f"{mean['push_angular_impulse']:.3f} N m s, arm momentum peak {mean['arm_momentum_peak']:.3f} N m s "
+              f"({100 * mean['arm_momentum_peak'] / max(mean['push_angular_impulse'], 1e-9):.0f} % of the impulse), "
+              f"mean {mean['arm_momentum_mean']:.3f} N m s")
+
+
+def print_bench_sim(result: Mapping[str, object]) -> None:
+    """`bench_sim`'s figures, and the reference's beside them when it was measured."""
+    print(f"Simulation speed: {result['robot']} (arm {result['arm_mode']}), standing under the motor law on "
+          f"{result['terrain']} ground, dt {result['timestep_s'] * 1e3:.1f} ms")
+    print(f"  machine: {result['machine']}")
+    print(f"  single-threaded : {result['steps_per_s']:>10,.0f} steps/s  (real-time factor "
+          f"{result['realtime_factor']:.0f}x)")
+    print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
+          f"{result['threads']} threads)")
+    if "reference_steps_per_s" in result:
+        print("  bare A1 URDF, same runs (the reference issue 2's targets were set against: 110k / 218k):")
+        print(f"    single-threaded : {result['reference_steps_per_s']:>10,.0f} steps/s  -> this robot runs at "
+              f"{100 * result['steps_ratio_to_reference']:.0f} % of it (the target asks 73 %: "
+              f"{result['scaled_target_steps_per_s']:,.0f} steps/s on this machine)")
+        print(f"    batched rollout : {result['reference_batched_steps_per_s']:>10,.0f} steps/s  -> "
+              f"{100 * result['batched_ratio_to_reference']:.0f} % (the target asks 69 %: "
+              f"{result['scaled_target_batched_steps_per_s']:,.0f} steps/s on this machine)")
+
+
+def print_bench_train(result: Mapping[str, object]) -> None:
+    """`bench_train`'s figures, and the target scaled to this machine when the reference was measured."""
+    print(f"Training env speed: {result['robot']} (arm {result['arm_mode']}), {result['num_envs']} envs, "
+          f"{result['threads']} threads, policy at {1 / (result['timestep_s'] * result['decimation']):.0f} Hz, "
+          f"dt {result['timestep_s'] * 1e3:.1f} ms, random actions")
+    print(f"  machine: {result['machine']}")
+    print(f"  env            : {result['control_steps_per_s']:>10,.0f} control steps/s "
+          f"({result['physics_steps_per_s']:,.0f} physics steps/s)")
+    print(f"  rollout only   : {result['rollout_only_control_steps_per_s']:>10,.0f} control steps/s (physics limit)")
+    print(f"  env efficiency : {100 * result['env_efficiency']:>9.0f} %  "
+          f"({result['python_ms_per_step']:.1f} ms of Python per policy step)")
+    print(f"  CPU-time bound : {result['cpu_bound_control_steps_per_s']:>10,.0f} control steps/s with the cores to "
+          f"itself (physics alone {result['cpu_bound_physics_only_control_steps_per_s']:,.0f}; CPU per step: "
+          f"physics {result['physics_cpu_ms_per_step']:.0f} ms, Python {result['python_cpu_ms_per_step']:.1f} ms)")
+    if "reference_physics_limit_control_steps_per_s" in result:
+        target, at = TRAIN_TARGET
+        print(f"  reference      : {result['reference_physics_limit_control_steps_per_s']:>10,.0f} control steps/s "
+              f"(bare A1, 64 envs, 2 ms steps at 50 Hz; the target's ~22k); env at "
+              f"{100 * result['control_steps_ratio_to_reference']:.0f} % of it, the target (15k of 21.8k) asks "
+              f"{100 * target / at:.0f} %: {result['scaled_target_control_steps_per_s']:,.0f} control steps/s here")
+
+
+def print_bench_mpc(result: Mapping[str, object]) -> None:
+    """`bench_mpc`'s figures, and the targets scaled to this machine when the references were measured."""
+    print(f"MPC speed: {result['controller']} on {result['robot']} walking at 0.3 m/s, N = {result['horizon']}")
+    print(f"  machine: {result['machine']}")
+    print(f"  MPC QP solve   : median {result['mpc_solve_ms_median']:.2f} ms, p99 {result['mpc_solve_ms_p99']:.2f} ms "
+          f"(setup median {result['mpc_setup_ms_median']:.2f} ms)")
+    print(f"  whole-body QP tick: median {result['wbc_tick_us_median']:.0f} us (PlaCo, every tick)")
+    print(f"  control tick: median {result['control_tick_us_median']:.0f} us (estimator + footholds + QP + command, "
+          "ticks without an MPC update)")
+    print(f"  closed loop    : {result['realtime_factor']:.1f}x real time on one core")
+    if "reference_placo_tick_us" in result:
+        print(f"  references     : bare-A1 PlaCo tick {result['reference_placo_tick_us']:.0f} us (the targets' "
+              f"~40 us), bare-A1 physics {result['reference_steps_per_s']:,.0f} steps/s (the targets' 110k)")
+        print(f"  targets scaled to this machine: whole-body tick <= {result['scaled_target_wbc_tick_us']:.0f} "
+              f"us, closed loop >= {result['scaled_target_realtime_factor']:.1f}x real time")
+
+
+def print_bench_sweep(result: Mapping[str, object]) -> None:
+    """`bench_sweep`'s figures, one line per executor measured."""
+    print(f"Sweep speed: {result['controller']} on {result['scenario']} ({result['trials']} trials, "
+          f"{result['terrain']} terrain)")
+    print(f"  machine: {result['machine']}")
+    print(f"  batched physics (bench sim, same terrain): {result['batched_physics_steps_per_s']:>10,.0f} steps/s")
+    for name in ("local", "ray"):
+        if f"{name}_wall_s" in result:
+            print(f"  sweep, {name:<5} executor: {result[f'{name}_sweep_steps_per_s']:>10,.0f} steps/s "
+                  f"({100 * result[f'{name}_ratio_to_batched_physics']:.0f} % of batched physics, "
+                  f"{result[f'{name}_wall_s']:.1f} s)")
+    if "ray_overhead_per_trial_s" in result:
+        print(f"  Ray overhead per trial: {1e3 * result['ray_overhead_per_trial_s']:.0f} ms")
+
+
+def print_arena(result: ArenaResult) -> None:
+    """The summary table of a run or comparison, then how long it took and where the results are."""
+    print(format_table(result.summary))
+    rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
+    print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s); "
+          f"results in {result.out_dir}/ (trials.csv, summary.json, report.md)")
+
+
+def print_demo_header(controllers: Sequence[str], *, scenario: str, trials: int, seeds: int) -> None:
+    """The line that opens ``wbc demo``: who plays which trials."""
+    print(f"A/B demo: {', '.join(controllers)} on {scenario}, {trials} trials x {seeds} seeds "
+          "per band (the same trials for every controller)\n")
+
+
+def print_trained(result: Mapping[str, object], *, task: str, stage: int, baseline: str | None) -> None:
+    """One line on a finished training run: its length and where its policy is."""
+    print(f"trained {task} stage {stage}{' ' + baseline if baseline else ''}: "
+          f"{result['iterations']} iterations, {result['env_steps']:,} env steps, {result['wall_s'] / 60:.1f} min; "
+          f"policy {result['policy']}")
+
+
+def print_viewed_trial(what: str, row: Mapping[str, object]) -> None:
+    """How a trial watched in the viewer ended."""
+    print(f"{what}: " + ("survived" if row["success"] else f"fell at {float(row['fall_time_s']):.2f} s"))
+
+
+def print_recording(what: str, frames: int, path: Path) -> None:
+    """Where a recorded replay was written."""
+    print(f"recorded {frames} frames of {what} to {path}")

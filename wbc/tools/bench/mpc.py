@@ -1,0 +1,178 @@
+"""``wbc bench mpc``: the MPC controller's speed in closed loop on one core, played through the runner's one loop.
+
+The walk is an ordinary `run_episode`; the bench hands the runner a `WatchedController` in the controller's place and
+reads, after every tick, how long the tick took and the controller's own breakdown of it (`HasTickTimings`). A
+controller that reports no breakdown still walks; the figures that need one are then nan.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wbc.arena.executors import single_threaded_blas
+from wbc.arena.runner import run_episode
+from wbc.control.protocol import Controller
+from wbc.control.registry import CONTROLLERS, get_controller
+from wbc.errors import BenchError
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.robot import Robot
+from wbc.mpc.controller import MpcController
+from wbc.scenario.trial import CommandSchedule
+from wbc.tools.bench.references import (
+    MPC_REFERENCE_TARGETS,
+    machine_description,
+    reference_a1_steps_per_s,
+    reference_placo_tick_us,
+    scaled_target,
+)
+from wbc.tools.watched_controller import WatchedController
+from wbc.types import VelocityCommand
+
+__all__ = ["TickTimingLog", "bench_mpc"]
+
+
+def _median(values: Sequence[float], scale: float) -> float:
+    return scale * float(np.median(values)) if values else math.nan
+
+
+@dataclass
+class TickTimingLog:
+    """A runner observer that files each tick of a `WatchedController` by what ran in it [s].
+
+    Ticks with an MPC update (the breakdown has ``mpc_solve_s``) give the MPC's solve and setup times; the others
+    give the whole control tick (``control_s``: the `act` call's duration). Every tick the whole-body QP ran gives
+    ``whole_body_s``. Without a breakdown a tick cannot be filed and is left out.
+
+    Attributes:
+        watched: the controller the runner drives.
+        mpc_solve_s: QP solve time of each MPC update [s].
+        mpc_setup_s: setup time (linearisation, condensing) of each MPC update [s].
+        whole_body_s: whole-body QP time of each tick that ran it [s].
+        control_s: duration of each tick without an MPC update [s].
+    """
+
+    watched: WatchedController
+    mpc_solve_s: list[float] = field(default_factory=list)
+    mpc_setup_s: list[float] = field(default_factory=list)
+    whole_body_s: list[float] = field(default_factory=list)
+    control_s: list[float] = field(default_factory=list)
+
+    def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        """File the tick that just ended (the runner's `TickObserver` signature)."""
+        timings = self.watched.last_timings
+        if timings is None:
+            return
+        if "mpc_solve_s" in timings:
+            self.mpc_solve_s.append(timings["mpc_solve_s"])
+            if "mpc_setup_s" in timings:
+                self.mpc_setup_s.append(timings["mpc_setup_s"])
+        else:
+            self.control_s.append(self.watched.last_act_s)
+        if "whole_body_s" in timings:
+            self.whole_body_s.append(timings["whole_body_s"])
+
+    def figures(self) -> dict[str, float]:
+        """Medians (and the solve's 99th percentile) in the units of their names; nan where no tick was filed."""
+        solves = self.mpc_solve_s
+        return {
+            "mpc_solve_ms_median": _median(solves, 1e3),
+            "mpc_solve_ms_p99": 1e3 * float(np.percentile(solves, 99)) if solves else math.nan,
+            "mpc_setup_ms_median": _median(self.mpc_setup_s, 1e3),
+            "wbc_tick_us_median": _median(self.whole_body_s, 1e6),
+            "control_tick_us_median": _median(self.control_s, 1e6),
+        }
+
+
+def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
+              single_thread: bool = True, reference: bool = True) -> dict[str, float | str | int]:
+    """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
+
+    With `single_thread` (the default) it runs in a spawned process whose BLAS is single-threaded, as every arena
+    worker is: a BLAS that spreads the MPC's condensing products over the cores is no faster on an idle machine and
+    many times slower on a busy one.
+
+    The robot walks at `vx` on flat ground for `seconds` (or until it falls) through `run_episode`. From the
+    controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time (ProxSuite) and setup
+    time (linearisation and condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo:
+    kinematics, dynamics, tasks, QP, plus setting its targets from Python). ``control_tick_us_median`` is the whole
+    control tick without an MPC update (estimator, kinematics, footholds, swing targets, whole-body QP, motor
+    command). These are nan for a controller that reports no breakdown. The real-time factor covers everything:
+    physics, controller, MPC updates and the runner's episode log.
+
+    With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured before and after the
+    closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`) and the bare A1's
+    single-threaded physics (`reference_a1`). The results then include ``reference_placo_tick_us``,
+    ``reference_steps_per_s``, and the targets scaled by them to this machine: ``scaled_target_wbc_tick_us`` (100 us
+    times the reference tick over 40 us) and ``scaled_target_realtime_factor`` (5x times the reference physics over
+    110k steps/s).
+
+    Args:
+        robot: robot registry name.
+        controller: an MPC controller's registry name (``mpc``, ``mpc-locked``, ``mpc-noarm``).
+        seconds: length of the walk [s].
+        vx: forward velocity command [m/s].
+        single_thread: run in a spawned process with a single-threaded BLAS.
+        reference: also measure the references.
+
+    Returns:
+        The figures above, ``horizon``, ``fell``, ``blas`` and ``machine``.
+
+    Raises:
+        UnknownNameError: unknown robot or controller.
+        BenchError: the controller is not an MPC controller, or a reference failed.
+    """
+    if single_thread:
+        with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+            result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
+                                 reference=reference).result()
+        return {**result, "blas": "single-threaded"}
+    spec = get_controller(controller)
+    sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
+    ctrl = spec.make(sim.desc)
+    if not isinstance(ctrl, MpcController):
+        valid = [name for name, s in CONTROLLERS.items() if s.make is MpcController]
+        raise BenchError(f"bench mpc times an MPC controller, and {controller!r} is not one; use one of: "
+                         f"{', '.join(valid)}")
+    ref_ticks, ref_rates = [], []
+
+    def measure_references() -> None:
+        ref_ticks.append(reference_placo_tick_us(500))
+        ref_rates.append(reference_a1_steps_per_s(1000))
+
+    if reference:
+        measure_references()
+    watched = WatchedController(ctrl)
+    log = TickTimingLog(watched)
+    with sim:
+        sim.reset(seed=0)
+        start = time.perf_counter()
+        episode = run_episode(sim, watched, CommandSchedule(vx=vx), seconds, truth=sim.base_truth,
+                              fallen=sim.fallen, nq=sim.model.nq, observer=log)
+        wall = time.perf_counter() - start
+    references: dict[str, float] = {}
+    if reference:
+        measure_references()
+        tick_ref, rate_ref = float(np.mean(ref_ticks)), max(ref_rates)
+        references = {"reference_placo_tick_us": tick_ref, "reference_steps_per_s": rate_ref,
+                      "scaled_target_wbc_tick_us": scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"],
+                                                                 tick_ref),
+                      "scaled_target_realtime_factor": scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"],
+                                                                     rate_ref)}
+    return {
+        "robot": robot,
+        "controller": controller,
+        "horizon": int(ctrl.config.mpc.horizon),
+        **log.figures(),
+        "realtime_factor": episode.survived_s / wall,
+        "fell": bool(episode.fell),
+        "blas": "default threads",
+        "machine": machine_description(),
+        **references,
+    }
