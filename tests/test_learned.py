@@ -764,7 +764,7 @@ def test_env_push_matches_mujoco_robot():
                                   domain=DomainRandomisation(num_variants=1, payload_kg=(0.0, 0.0), payload_com_m=0.0,
                                                              friction=(1.0, 1.0), motor_strength=(1.0, 1.0))))
     push = Push.horizontal(magnitude=250.0, heading=0.7, offset_in_base=(0.0, 0.12, 0.0), start=0.1, duration=0.06)
-    env.pushes.set(0, None)
+    env.pushes.set(0, ())
     env.pushes.start[0, 0] = int(round(push.start / 0.002))
     env.pushes.stop[0, 0] = env.pushes.start[0, 0] + 30
     env.pushes.force[0, 0], env.pushes.offset[0, 0] = push.force_in_world, push.offset_in_base

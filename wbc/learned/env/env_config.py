@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
 
+import numpy as np
+
 from wbc.errors import ConfigError
 from wbc.learned.policy.observations import ObsScales
 from wbc.robots.description import check_arm_mode
@@ -197,3 +199,9 @@ class EnvConfig:
     def policy_dt(self) -> float:
         """Policy period [s]."""
         return self.timestep * self.decimation
+
+    def gains(self, num_joints: int) -> tuple[np.ndarray, np.ndarray]:
+        """(kp, kd) of the motor law for `num_joints` actuated joints: the 12 legs' first, then the arm's."""
+        kp, kd = np.full(num_joints, self.leg_kp), np.full(num_joints, self.leg_kd)
+        kp[12:], kd[12:] = self.arm_kp, self.arm_kd
+        return kp, kd

@@ -38,13 +38,6 @@ def _activation_name(mlp: Any) -> str:
     return next(iter(found))
 
 
-def _gains(env: EnvConfig, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(kp, kd) of the n actuated joints: the legs' first, then the arm's."""
-    kp, kd = np.full(n, env.leg_kp), np.full(n, env.leg_kd)
-    kp[12:], kd[12:] = env.arm_kp, env.arm_kd
-    return kp, kd
-
-
 def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
                            extra: dict[str, Any] | None = None, joints: tuple[int, ...] | None = None) -> PolicyFile:
     """The `PolicyFile` of an rsl-rl `MLPModel` (or `ExtrinsicsActor`) trained in an env configured by `env`.
@@ -90,7 +83,7 @@ def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
     idx = np.arange(desc.num_joints) if joints is None else np.asarray(joints, dtype=int)
     if layers[-1][0].shape[0] != idx.size:
         raise ValueError(f"the actor has {layers[-1][0].shape[0]} outputs for joints {idx.tolist()}")
-    kp, kd = _gains(env, desc.num_joints)
+    kp, kd = env.gains(desc.num_joints)
     meta = {
         "robot": env.robot, "arm_mode": env.arm_mode, "task": task, "stage": int(stage),
         "num_actions": int(idx.size), "obs_layout": layout.as_list(),
@@ -119,7 +112,7 @@ def decoupled_policy(actor: Any, legs: PolicyFile, env: EnvConfig, *, task: str,
     desc = get_robot(env.robot, env.arm_mode)
     n, n_legs = desc.num_joints, legs.num_actions
     arm = policy_file_from_actor(actor, env, task=task, stage=stage, joints=tuple(range(n_legs, n)))
-    kp, kd = _gains(env, n)
+    kp, kd = env.gains(n)
     robot = {**{k: arm.meta[k] for k in ROBOT_KEYS}, "num_actions": n, "default_q": desc.nominal_q.tolist(),
              "kp": kp.tolist(), "kd": kd.tolist()}
     parts = [PolicyPart(name="legs", joints=tuple(range(n_legs)), policy=legs),
