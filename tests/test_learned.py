@@ -126,6 +126,43 @@ def test_env_pushes_come_from_the_scenario_band_in():
     assert w is not None and np.allclose(w[0][i, 0], p.force_in_world)
 
 
+def test_env_keeps_every_push_of_a_trial(tmp_path):
+    """A scenario may push more often than the schedule's first allocation (8 per episode): no push is dropped."""
+    from wbc.hardware.mujoco.physics import push_steps
+
+    often = tmp_path / "often.toml"
+    often.write_text(Path(SCENARIO).read_text().replace("interval_s = [4.0, 6.0]", "interval_s = [1.0, 1.2]"))
+    env = BatchedEnv(small_config(scenario=str(often)))
+    for i in range(env.num_envs):  # the first reset gives environment i trial i
+        pushes = env._trial(i).pushes
+        assert len(pushes) > 8 and env.pushes.count[i] == len(pushes)
+        want = [push_steps(p.start, p.duration, env.config.timestep) for p in pushes]
+        got = np.stack([env.pushes.start[i], env.pushes.stop[i]], axis=1)[: len(pushes)]
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(env.pushes.force[i, : len(pushes)], [p.force_in_world for p in pushes])
+    last = env.pushes.start[np.arange(env.num_envs), env.pushes.count - 1]  # each environment's last push acts
+    np.testing.assert_array_equal(env.pushes.force_at(last), [env._trial(i).pushes[-1].force_in_world
+                                                              for i in range(env.num_envs)])
+
+
+def test_env_and_mujoco_robot_write_the_same_domain_and_spawn_pose():
+    """The env's model variants and MujocoRobot apply domain parameters and spawn through one module
+    (`wbc.hardware.mujoco.physics`): same parameters, same model numbers and the same initial configuration."""
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+    from wbc.scenario.domain import DomainParams
+
+    env = BatchedEnv(small_config(num_envs=1, init_joint_noise=0.0, timestep=0.002, domain=DomainRandomisation(
+        num_variants=1, payload_kg=(0.7, 0.7), payload_com_m=0.0, friction=(0.9, 0.9), motor_strength=(1.05, 1.05))))
+    m = env.pool.models[0]
+    with MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated")) as robot:
+        robot.reset(seed=0, domain=DomainParams(payload_mass=0.7, friction=0.9, motor_strength=1.05))
+        robot.write(MotorCommand.hold(robot.desc.nominal_q, env.pool.kp, env.pool.kd))
+        for name in ("body_mass", "body_ipos", "body_inertia", "body_subtreemass", "geom_friction", "pair_friction",
+                     "actuator_gainprm", "actuator_biasprm", "actuator_forcerange"):
+            np.testing.assert_array_equal(getattr(m, name), getattr(robot.model, name), err_msg=name)
+        np.testing.assert_array_equal(env.state[0, 1:1 + env.nq], robot.data.qpos)
+
+
 def test_compatible_observation_keeps_the_leg_part():
     full, legs = ObsLayout(15), ObsLayout(12)
     obs = np.arange(full.size, dtype=np.float32)[None]
