@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import ast
 import json
+import os
+import subprocess
+import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -848,8 +853,84 @@ def test_env_solver_is_configurable_and_checked():
 
 def test_shipped_ppo_baseline_is_a_policy_controller():
     from wbc.control.registry import get_controller
-    from wbc.learned.policy.controller import WEIGHTS_DIR
+    from wbc.learned.policy.shipped import WEIGHTS_DIR
 
     spec = get_controller(f"policy:{WEIGHTS_DIR / 'a1-wx200-actuated-ppo'}")
     assert (spec.robot, spec.arm_mode) == ("a1-wx200", "actuated")
     assert "push task, stage 3" in spec.summary
+
+
+# -- package boundaries --------------------------------------------------------------------------------------------
+TORCH_SIDE = ("torch", "rsl_rl", "tensordict", "tensorboard", "wbc.learned.train")
+IMPORT_RULES = {  # package -> what none of its modules may import, anywhere in the file
+    "wbc/learned": ("wbc.tools", "wbc.arena", "wbc.control", "wbc.cli", "wbc.viz", "wbc.mpc"),
+    "wbc/learned/policy": TORCH_SIDE + ("wbc.learned.env",),
+    "wbc/learned/env": TORCH_SIDE,
+    "wbc/hardware/mujoco": ("wbc.learned", "wbc.arena", "wbc.control", "wbc.tools", "wbc.cli", "wbc.viz", "wbc.mpc"),
+}
+
+
+def _imports(path: Path) -> list[tuple[str, int, bool]]:
+    """(module, line, at module level) of every import in a file, `require("module")` calls included."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    top = set(map(id, tree.body))
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(alias.name, node.lineno, id(node) in top) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            out.append((node.module, node.lineno, id(node) in top))
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "require"
+              and node.args and isinstance(node.args[0], ast.Constant)):
+            out.append((node.args[0].value, node.lineno, True))
+    return out
+
+
+@pytest.mark.parametrize("package", sorted(IMPORT_RULES))
+def test_imports_run_downward_only(package):
+    """Inference and the env stay torch-free, nothing learned reaches up to the arena, tools or CLI, the MuJoCo backend
+    knows no controller; and no wbc module is imported inside a function, where such an arrow would hide."""
+    banned = IMPORT_RULES[package]
+    found = []
+    for path in sorted((ROOT / package).rglob("*.py")):
+        for module, line, top in _imports(path):
+            where = f"{path.relative_to(ROOT)}:{line} imports {module}"
+            if any(module == b or module.startswith(b + ".") for b in banned):
+                found.append(where)
+            elif module.startswith("wbc") and not top:
+                found.append(where + " inside a function")
+    assert not found, found
+
+
+def test_policy_and_env_import_and_run_without_torch():
+    """`wbc.learned.policy` and `wbc.learned.env` are what ships without the ``train`` extra: with torch unimportable,
+    they import, the env steps, and a `LearnedController` acts on a robot state from the shipped weights."""
+    code = textwrap.dedent(f"""
+        import sys
+        sys.modules["torch"] = None  # `import torch` now raises ImportError
+        import numpy as np
+        import wbc.learned.env
+        import wbc.learned.policy
+        from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
+        from wbc.learned.env import BatchedEnv, DomainRandomisation, EnvConfig
+        from wbc.learned.policy import LearnedController
+        from wbc.types import VelocityCommand
+
+        env = BatchedEnv(EnvConfig(scenario={SCENARIO!r}, num_envs=2, terrain="flat", nthread=1,
+                                   domain=DomainRandomisation(num_variants=1)))
+        assert np.isfinite(env.step(np.zeros((2, env.num_actions))).obs).all()
+        env.close()
+        robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
+        ctrl = LearnedController(robot.desc)
+        with robot:
+            robot.reset(seed=0)
+            out = ctrl.act(robot.read(), VelocityCommand(vx=0.3))
+        assert np.isfinite(out.q).all() and out.q.shape == (15,)
+        loaded = sorted(m for m in sys.modules if m.startswith(("rsl_rl", "tensordict", "wbc.learned.train")))
+        assert not loaded, loaded
+        print("torch-free: ok")
+    """)
+    path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": path})
+    assert run.returncode == 0 and "torch-free: ok" in run.stdout, run.stderr

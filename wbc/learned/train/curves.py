@@ -37,6 +37,7 @@ def read_scalars(run_dir: str | Path) -> dict[str, tuple[np.ndarray, np.ndarray]
 
 def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
     """Draw the `PANELS` of the runs against environment steps into `out` (a PNG); returns its path."""
+    # imported here, not at the top: the Agg backend must be chosen before pyplot is first imported
     import matplotlib
 
     matplotlib.use("Agg")

@@ -37,6 +37,7 @@ from typing import Any
 
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.env.env_config import EnvConfig, RewardScales
+from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.bc_schedule import BCSchedule
 from wbc.learned.train.train_config import TrainConfig
 
@@ -220,8 +221,6 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
         init_baseline = "curriculum" if baseline == "curriculum" else None
         init_path = teacher or str(Path(run_root) / run_name(task, init_stage, init_baseline) / "policy")
     elif walking_prior and spec.walking_prior_init is not None:
-        from wbc.learned.policy.controller import WEIGHTS_DIR
-
         init_path = str(WEIGHTS_DIR / spec.walking_prior_init)
     decoupled = {}
     if baseline == "decoupled":
