@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from wbc.errors import NetworkMismatchError, PolicyInputError
 from wbc.learned.env.env import BatchedEnv
 from wbc.learned.env.env_config import DomainRandomisation, EnvConfig, ObsNoise
 from wbc.learned.policy.numpy_policy import NumpyPolicy
@@ -280,6 +281,19 @@ def test_policy_file_mismatched_robot(saved_policy):
         pf.check_robot(get_robot("go1-arm", "actuated"), npz)
 
 
+def test_inputs_and_networks_that_do_not_fit_are_refused_with_the_fix(vec, saved_policy):
+    from wbc.learned.train.warm_start import warm_start_actor
+
+    policy = NumpyPolicy(load_policy(saved_policy[0]))  # no extrinsics, no adaptation module
+    obs = np.zeros((1, ObsLayout(15).size))
+    with pytest.raises(PolicyInputError, match="call it without z"):
+        policy(obs, np.zeros((1, 4)))
+    with pytest.raises(PolicyInputError, match="run RMA phase 2"):
+        policy.adaptation(np.zeros((1, 3 * obs.size)))
+    with pytest.raises(NetworkMismatchError, match="TrainConfig.extrinsics_dim"):
+        warm_start_actor(_actor(vec, True), load_policy(saved_policy[0]))
+
+
 def test_policy_file_missing(tmp_path):
     with pytest.raises(PolicyFileError, match="file not found"):
         load_policy(tmp_path / "nothing.npz")
@@ -327,7 +341,7 @@ def test_composite_numpy_inference_matches_the_torch_composite(decoupled):
     assert got.shape == want.shape == (4, 15)
     np.testing.assert_allclose(got, want, atol=1e-5, rtol=0)
     assert np.abs(want[:, :12]).max() > 1e-2 and np.abs(want[:, 12:]).max() > 1e-2
-    with pytest.raises(ValueError, match="extrinsics"):
+    with pytest.raises(PolicyInputError, match="extrinsics"):
         policy(obs.numpy())
 
 
@@ -426,7 +440,7 @@ def test_bc_loss_counts_only_the_compatible_actions():
     # a mask that permutes: teacher action k is student action mask[k]
     perm = torch.tensor([14, 13, 12])
     assert bc_loss(torch.arange(15.0)[None], torch.tensor([[14.0, 13.0, 12.0]]), perm).item() == 0.0
-    with pytest.raises(ValueError, match="mask"):
+    with pytest.raises(NetworkMismatchError, match="mask"):
         bc_loss(student, teacher, torch.arange(11))
 
 
