@@ -837,8 +837,7 @@ def test_env_push_matches_mujoco_robot():
     v_env = env.state[0, 1 + env.nq:1 + env.nq + 6]
     assert np.linalg.norm(v_robot[:2]) > 0.3  # the push moved the trunk
     np.testing.assert_allclose(v_env[:3], v_robot[:3], atol=2e-3)
-    # the lever arm: MujocoRobot refreshes it every physics step, the env predicts it to first order (0.1 % here;
-    # holding it for the 20 ms window instead was 6 % off)
+    # the lever arm: MujocoRobot refreshes it every physics step, the env predicts it to first order over the step
     assert np.abs(v_env[3:] - v_robot[3:]).max() < 0.01 * np.abs(v_robot[3:]).max()
 
 
