@@ -915,9 +915,10 @@ def test_imports_run_downward_only(package):
     assert not found, found
 
 
-def test_policy_and_env_import_and_run_without_torch():
+def test_policy_and_env_import_and_run_without_torch(tmp_path):
     """`wbc.learned.policy` and `wbc.learned.env` are what ships without the ``train`` extra: with torch unimportable,
-    they import, the env steps, and a `LearnedController` acts on a robot state from the shipped weights."""
+    they import, the env steps, and a `LearnedController` acts on a robot state from the shipped weights, found from
+    the package wherever the working directory is."""
     code = textwrap.dedent(f"""
         import sys
         sys.modules["torch"] = None  # `import torch` now raises ImportError
@@ -944,6 +945,6 @@ def test_policy_and_env_import_and_run_without_torch():
         print("torch-free: ok")
     """)
     path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
-    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path,
                          env={**os.environ, "PYTHONPATH": path})
     assert run.returncode == 0 and "torch-free: ok" in run.stdout, run.stderr
