@@ -116,8 +116,9 @@ def apply_domain(model: mujoco.MjModel, data: mujoco.MjData, nominal: NominalMod
 
     The payload is added to the trunk (`payload_trunk_inertial`; inertia is kept); `friction` is the sliding friction
     of every robot-ground contact (`set_ground_friction`); the motor strength scales each actuator's gain and torque
-    limit (its bias, which holds kp and kd, is scaled by `set_motor_gains` when the gains are written). Terrain
-    heights, if any, go in first (`apply_terrain`), so that the constants are computed on the finished model.
+    limit (its bias, which holds kp and kd, is scaled by `set_motor_gains` when the gains are written). Both callers
+    write the terrain first (`apply_terrain`), so that ``mj_setConst`` here is the last change to the model's
+    constants.
 
     Args:
         model: the model to change.

@@ -160,7 +160,7 @@ class MujocoRobot(Robot):
         m = self.model
         self._base_body = base_body_id(m)
         self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TERRAIN_GEOM)
-        # index arrays, not slices: `read` copies each sensor out of sensordata rather than sharing a view of it
+        # index arrays, not slices: each field `read` returns is its own array, not a view into one sensordata copy
         sensors = {name: np.arange(s.start, s.stop) for name, s in sensor_slices(m).items()}
         self._quat_idx, self._gyro_idx, self._accel_idx = sensors["imu_quat"], sensors["imu_gyro"], sensors["imu_accel"]
         self._touch_idx = foot_touch_adr(m)
