@@ -22,7 +22,7 @@ from wbc.arena.runner import run_trial
 from wbc.cli.main import main
 from wbc.control.registry import CONTROLLERS
 from wbc.errors import WbcError
-from wbc.learned.policy.controller import shipped_weights
+from wbc.learned.policy import shipped_weights
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 

@@ -81,6 +81,25 @@ def test_push_delivers_its_impulse_where_and_when_asked(arm):
         assert np.linalg.norm(h3 - h2) > 0.1
 
 
+def test_every_scheduled_push_acts():
+    """More pushes than the push table first allocates (8): each delivers its impulse, none is dropped."""
+    with MujocoRobot(MujocoRobotConfig(arm_mode="none")) as robot:
+        qpos = robot.data.qpos.copy()
+        qpos[2] = 5.0  # far above the ground: no contact
+        robot.reset(qpos=qpos)
+        robot.write(stand_command(robot.desc))
+        mass, gravity = robot.model.body_subtreemass[1], robot.model.opt.gravity
+        pushes = [Push(force_in_world=np.array([50.0, 10.0 * k, 0.0]), offset_in_base=np.zeros(3), start=0.02 * k,
+                       duration=0.01) for k in range(1, 13)]
+        for push in pushes:
+            robot.apply_push(push)
+        p0, _, _ = _momentum(robot)
+        robot.advance(0.3)
+        p1, _, _ = _momentum(robot)
+        impulse = sum(push.impulse for push in pushes)
+        np.testing.assert_allclose(p1 - p0, impulse + mass * gravity * 0.3, atol=0.02)
+
+
 def _trajectory(seed, noise):
     cfg = MujocoRobotConfig(terrain=TerrainConfig(kind="fractal"), noise=noise)
     with MujocoRobot(cfg) as robot:

@@ -95,3 +95,23 @@ class BenchError(WbcError, RuntimeError):
 
 class AnalysisError(WbcError, ValueError):
     """An analysis cannot be computed from the robot model it was given; the message names the missing part."""
+
+
+# --- learned / mujoco
+__all__ += ["NetworkMismatchError", "PolicyInputError"]
+
+
+class PolicyInputError(WbcError, ValueError):
+    """A policy network was called with inputs it does not take; the message says what to pass instead.
+
+    Extrinsics missing for a policy that observes them, or given to one that does not; no adaptation module to
+    estimate them.
+    """
+
+
+class NetworkMismatchError(WbcError, ValueError):
+    """A network does not fit what it is combined with; the message names both sides and what to change.
+
+    The policy file format it is exported to, a composite's parts, the policy a warm start copies, the teacher of
+    a BC term, or the procedure it is given to (RMA phase 2).
+    """

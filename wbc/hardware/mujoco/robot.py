@@ -2,9 +2,12 @@
 
 The motor law runs inside MuJoCo's step (see `wbc.robots.mujoco_model`), so `advance` calls ``mj_step`` with
 ``nstep`` and no Python in between, except while a push acts (its torque about the CoM is refreshed every physics
-step as the trunk moves). What `read` returns is what the real robot's sensors give (joint encoders, motor torque
-estimate, IMU, foot force sensors, optionally noisy); simulator truth (base pose and velocity, contacts, applied
-force) is only reachable through `sim_truth()`, for metrics.
+step as the trunk moves). Domain parameters, the motor law's actuator parameters, the spawn pose and the pushes'
+rounding and wrench are those of `wbc.hardware.mujoco.physics`, which the training env applies too.
+
+What `read` returns is what the real robot's sensors give (joint encoders, motor torque estimate, IMU, foot force
+sensors, optionally noisy); simulator truth (base pose and velocity, contacts, applied force) is only reachable
+through `sim_truth()`, for metrics.
 """
 
 from __future__ import annotations
@@ -16,18 +19,32 @@ import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco.fall_rule import FOOT_ZONE, foot_geoms, near_feet
-from wbc.hardware.mujoco.scene import TERRAIN_GEOM, build_scene, set_ground_friction, set_terrain_heights
+from wbc.hardware.mujoco.physics import (
+    NominalModel,
+    PushTable,
+    apply_domain,
+    apply_terrain,
+    base_body_id,
+    foot_touch_adr,
+    initial_qpos,
+    motor_ctrl,
+    push_wrench,
+    sensor_slices,
+    set_motor_gains,
+    spawn_height,
+)
+from wbc.hardware.mujoco.scene import TERRAIN_GEOM, build_scene
 from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix
-from wbc.robots.description import FOOT_NAMES, RobotDescription
+from wbc.robots.description import RobotDescription
 from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
 from wbc.scenario.domain import DomainParams, SensorNoise
 from wbc.scenario.push import Push
-from wbc.scenario.terrain import TerrainConfig, fractal_heights
+from wbc.scenario.terrain import TerrainConfig
 from wbc.types import BaseTruth, MotorCommand, RobotState
 
-__all__ = ["FOOT_ZONE", "MujocoRobotConfig", "MujocoRobot", "SimTruth", "initial_qpos"]
+__all__ = ["FOOT_ZONE", "MujocoRobotConfig", "MujocoRobot", "SimTruth"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -90,15 +107,6 @@ class SimTruth:
     external_point_in_world: np.ndarray
 
 
-def initial_qpos(model: mujoco.MjModel, desc: RobotDescription, base_height: float) -> np.ndarray:
-    """Standing configuration: trunk level at `base_height`, joints at the nominal pose."""
-    qpos = np.zeros(model.nq)
-    qpos[2] = base_height
-    qpos[3] = 1.0
-    qpos[7:] = desc.nominal_q
-    return qpos
-
-
 class MujocoRobot(Robot):
     """A robot simulated by MuJoCo.
 
@@ -115,12 +123,11 @@ class MujocoRobot(Robot):
         self._limits = joint_table(self.desc)
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
-        self._pushes: list[Push] = []
         self._steps = 0
         self._rng = np.random.default_rng(0)
         self._domain = DomainParams()
         self._strength = np.ones(self.num_joints)
-        self._push_windows: list[tuple[int, int, Push]] = []
+        self._pushes = PushTable(1, self.config.timestep)
         self._contacts_at = -1
         self._contacts = (np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
         self._force_now = np.zeros(3)
@@ -151,26 +158,16 @@ class MujocoRobot(Robot):
         self.model = build_scene(self.desc, self.config.terrain, timestep=self.config.timestep)
         self.data = mujoco.MjData(self.model)
         m = self.model
-        self._base_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "base")
+        self._base_body = base_body_id(m)
         self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TERRAIN_GEOM)
-        self._sensor = {
-            name: (m.sensor_adr[i], m.sensor_dim[i])
-            for i in range(m.nsensor)
-            for name in [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SENSOR, i)]
-        }
-        def _span(name: str) -> np.ndarray:
-            adr, dim = self._sensor[name]
-            return np.arange(adr, adr + dim)
-
-        self._quat_idx, self._gyro_idx, self._accel_idx = _span("imu_quat"), _span("imu_gyro"), _span("imu_accel")
-        self._touch_idx = np.array([self._sensor[f.replace("_foot", "_touch")][0] for f in FOOT_NAMES])
+        # index arrays, not slices: each field `read` returns is its own array, not a view into one sensordata copy
+        sensors = {name: np.arange(s.start, s.stop) for name, s in sensor_slices(m).items()}
+        self._quat_idx, self._gyro_idx, self._accel_idx = sensors["imu_quat"], sensors["imu_gyro"], sensors["imu_accel"]
+        self._touch_idx = foot_touch_adr(m)
         self._foot_geoms = foot_geoms(m)
         self._is_foot_geom = np.zeros(m.ngeom, dtype=bool)
         self._is_foot_geom[self._foot_geoms] = True
-        self._nominal = {
-            "body_mass": m.body_mass.copy(), "body_ipos": m.body_ipos.copy(), "body_inertia": m.body_inertia.copy(),
-            "geom_friction": m.geom_friction.copy(), "forcerange": m.actuator_forcerange.copy(),
-        }
+        self._nominal = NominalModel.of(m)
         self._reset(0, None, None)
 
     def _close(self) -> None:
@@ -204,20 +201,17 @@ class MujocoRobot(Robot):
         )
 
     def _send(self, cmd: MotorCommand) -> None:
-        m, d = self.model, self.data
-        k = self._strength
-        m.actuator_biasprm[:, 1] = -k * cmd.kp
-        m.actuator_biasprm[:, 2] = -k * cmd.kd
-        d.ctrl[:] = cmd.kp * cmd.q + cmd.kd * cmd.dq + cmd.tau
+        set_motor_gains(self.model, self._strength, cmd.kp, cmd.kd)
+        self.data.ctrl[:] = motor_ctrl(cmd.q, cmd.dq, cmd.tau, cmd.kp, cmd.kd)
 
     def _advance(self, dt: float) -> None:
         n = max(1, int(round(dt / self.config.timestep)))
         m, d = self.model, self.data
         while n > 0:
             active = self._active_pushes(self._steps)
-            if not active:
+            if not active.any():
                 # run without Python until the next push starts
-                nxt = self._next_push_step(self._steps)
+                nxt = self._pushes.next_start(0, self._steps)
                 k = n if nxt is None else max(1, min(n, nxt - self._steps))
                 d.xfrc_applied[self._base_body] = 0.0
                 self._force_now[:] = 0.0
@@ -228,19 +222,17 @@ class MujocoRobot(Robot):
             mujoco.mj_kinematics(m, d)
             mujoco.mj_comPos(m, d)
             rot = d.xmat[self._base_body].reshape(3, 3)
-            force, torque = np.zeros(3), np.zeros(3)
-            for p in active:
-                point = d.xpos[self._base_body] + rot @ p.offset_in_base
-                force += p.force_in_world
-                torque += np.cross(point - d.xipos[self._base_body], p.force_in_world)
-                self._point_now = point
+            points = np.array([d.xpos[self._base_body] + rot @ offset for offset in self._pushes.offset[0, active]])
+            force, torque = push_wrench(self._pushes.force[0, active], points - d.xipos[self._base_body],
+                                        np.ones(len(points)))
+            self._point_now = points[-1]
             d.xfrc_applied[self._base_body, :3] = force
             d.xfrc_applied[self._base_body, 3:] = torque
             self._force_now = force
             mujoco.mj_step(m, d)
             self._steps += 1
             n -= 1
-        if not self._active_pushes(self._steps):
+        if not self._active_pushes(self._steps).any():
             d.xfrc_applied[self._base_body] = 0.0
             self._force_now = np.zeros(3)
 
@@ -259,17 +251,12 @@ class MujocoRobot(Robot):
     def _reset(self, seed: int, domain: DomainParams | None, qpos: np.ndarray | None) -> None:
         m, d = self.model, self.data
         self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5E45]))
-        ground = 0.0
-        if self.config.terrain.kind == "fractal":
-            heights = fractal_heights(self.config.terrain, seed)
-            set_terrain_heights(m, heights)
-            c, r = heights.shape[0] // 2, int(round(0.4 / self.config.terrain.cell))
-            ground = float(heights[c - r:c + r + 1, c - r:c + r + 1].max()) * self.config.terrain.amplitude
+        ground = apply_terrain(m, self.config.terrain, seed)
         self.set_domain(domain if domain is not None else DomainParams())
         mujoco.mj_resetData(m, d)
-        d.qpos[:] = initial_qpos(m, self.desc, self.desc.stand_height + ground + 0.02) if qpos is None else qpos
-        self._pushes = []
-        self._push_windows = []
+        d.qpos[:] = (initial_qpos(m.nq, spawn_height(self.desc.stand_height, ground), self.desc.nominal_q)
+                     if qpos is None else qpos)
+        self._pushes.clear(0)
         self._steps = 0
         self._contacts_at = -1
         self._force_now = np.zeros(3)
@@ -278,33 +265,19 @@ class MujocoRobot(Robot):
         mujoco.mj_forward(m, d)
 
     def set_domain(self, domain: DomainParams) -> None:
-        """Apply physical parameters (payload, friction, motor strength) on top of the nominal model."""
-        m, nom = self.model, self._nominal
-        b = self._base_body
-        m.body_mass[:] = nom["body_mass"]
-        m.body_ipos[:] = nom["body_ipos"]
-        m.body_inertia[:] = nom["body_inertia"]
-        if domain.payload_mass != 0.0:
-            m0, c0 = nom["body_mass"][b], nom["body_ipos"][b]
-            m1 = m0 + domain.payload_mass
-            m.body_mass[b] = m1
-            m.body_ipos[b] = (m0 * c0 + domain.payload_mass * domain.payload_com) / m1
-        m.geom_friction[:] = nom["geom_friction"]
-        set_ground_friction(m, domain.friction)
-        k = np.broadcast_to(np.asarray(domain.motor_strength, dtype=np.float64), (self.num_joints,)).copy()
-        m.actuator_forcerange[:] = nom["forcerange"] * k[:, None]
-        m.actuator_gainprm[:, 0] = k
-        self._strength = k
+        """Apply physical parameters (payload, friction, motor strength) on top of the nominal model.
+
+        The same function (`wbc.hardware.mujoco.physics.apply_domain`) writes the training env's model variants.
+        """
+        self._strength = apply_domain(self.model, self.data, self._nominal, payload_kg=domain.payload_mass,
+                                      payload_com=domain.payload_com, friction=domain.friction,
+                                      motor_strength=domain.motor_strength)
         self._domain = domain
-        mujoco.mj_setConst(m, self.data)
 
     def apply_push(self, push: Push) -> None:
         """Schedule a push; it acts from ``push.start`` (simulation time) for ``push.duration``."""
         self._require_connected("apply_push")
-        self._pushes.append(push)
-        start = int(round(push.start / self.config.timestep))
-        stop = start + max(1, int(round(push.duration / self.config.timestep)))
-        self._push_windows.append((start, stop, push))
+        self._pushes.add(0, push)
 
     def sim_truth(self) -> SimTruth:
         """Ground truth of the simulator (for metrics and debugging; never hand this to a controller)."""
@@ -367,8 +340,6 @@ class MujocoRobot(Robot):
         self._contacts, self._contacts_at = (touching, at_foot), self._steps
         return touching, at_foot
 
-    def _active_pushes(self, step: int) -> list[Push]:
-        return [p for start, stop, p in self._push_windows if start <= step < stop]
-
-    def _next_push_step(self, step: int) -> int | None:
-        return min((start for start, _, _ in self._push_windows if start > step), default=None)
+    def _active_pushes(self, step: int) -> np.ndarray:
+        """(P,) which of the scheduled pushes act at physics step `step`."""
+        return self._pushes.active(np.array([step]))[0]

@@ -27,6 +27,7 @@ from mujoco import rollout
 
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco.fall_rule import near_feet
+from wbc.hardware.mujoco.physics import initial_qpos, motor_ctrl, spawn_height
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.env.model_pool import ModelPool
 from wbc.learned.env.push_schedule import PushSchedule
@@ -181,7 +182,8 @@ class BatchedEnv:
         # the robot interface clamps position targets to the joint range (`clamp_command`); so does training
         target = np.clip(self.default_q + cfg.action_scale * a, self.q_lower, self.q_upper)
         self.command = self._commands_now()
-        self._control[:, :, : self.nu] = (self.pool.kp * target)[:, None, :]
+        # the policy's motor command: zero target velocity and feed-forward torque
+        self._control[:, :, : self.nu] = motor_ctrl(target, 0.0, 0.0, self.pool.kp, self.pool.kd)[:, None, :]
         dq_before = self.state[:, 1 + self.nq + 6:].copy()  # a copy: the state is overwritten below
         rot0 = rotation_matrices(self.state[:, 4:8])
         step0 = self.episode_step * dec
@@ -303,17 +305,15 @@ class BatchedEnv:
             c = trial.command
             self._command_target[i] = (c.vx, c.vy, c.yaw_rate)
             self._ramp_s[i] = c.ramp_s
-            self.pushes.set(int(i), trial if cfg.pushes else None)
+            self.pushes.set(int(i), trial.pushes if cfg.pushes else ())
         if cfg.command_ranges is not None:  # the walking prior's commands (stage 1), not the scenario's
             lo, hi = np.asarray(cfg.command_ranges, dtype=np.float64).T
             self._command_target[ids] = self.rng.uniform(lo, hi, (ids.size, 3))
         self.strength[ids] = np.array([self.pool.variants[v].motor_strength for v in variants])
-        state = np.tile(self._template, (ids.size, 1))
-        qpos = state[:, self._qpos]
-        qpos[:, 2] = self.desc.stand_height + self.pool.ground_height[variants] + 0.02
-        qpos[:, 3] = 1.0
         noise = self.rng.uniform(-cfg.init_joint_noise, cfg.init_joint_noise, (ids.size, self.num_actions))
-        qpos[:, 7:] = self.default_q + noise
+        qpos = initial_qpos(self.nq, spawn_height(self.desc.stand_height, self.pool.ground_height[variants]),
+                            self.default_q + noise)
+        state = np.tile(self._template, (ids.size, 1))
         state[:, self._qpos] = qpos
         self.state[ids] = state
         self.imu_quat[ids] = qpos[:, 3:7]

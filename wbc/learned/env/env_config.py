@@ -1,17 +1,19 @@
 """Configuration of the batched training environment: robot, motor law, observations, rewards, randomisation.
 
-Defaults follow legged_gym's A1 setup (see /work/shared/LEARNING-NOTES.md section 1) where the paper is silent:
-PD targets ``q* = q_default + action_scale * a`` with Kp 20, Kd 0.5 on the legs, policy at 50 Hz, reward scales
-multiplied by the policy period, negative totals clipped to zero. Training steps the physics at legged_gym's 5 ms
-(`decimation` 4 per 20 ms policy step), not the evaluation's 2 ms: 2.5x fewer physics steps, measured on the quiet
-2-core machine as 11.4k instead of 5.4k control steps/s (flat, no arm) and 7.4k instead of 3.6k (the push task's rough
-ground, arm actuated); the policy only sees 50 Hz observations, and the arena evaluates it at 2 ms, so the transfer
-across the two steps is part of every reported result.
+Defaults follow legged_gym's A1 setup (``legged_gym/envs/a1/a1_config.py``) where the paper is silent: PD targets
+``q* = q_default + action_scale * a`` with Kp 20, Kd 0.5 on the legs, policy at 50 Hz, reward scales multiplied by
+the policy period, negative totals clipped to zero. Training steps the physics at legged_gym's 5 ms (`decimation` 4
+per 20 ms policy step), not the evaluation's 2 ms: 2.5x fewer physics steps, about twice the control steps per
+second. The policy only sees 50 Hz observations, and the arena evaluates it at 2 ms, so the transfer across the two
+steps is part of every reported result. The runs and measurements behind these settings are in
+``docs/learning-notes.md``.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields
+
+import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.learned.policy.observations import ObsScales
@@ -30,14 +32,12 @@ class RewardScales:
     Every weight is multiplied by the policy period (0.02 s) so that returns do not depend on the control rate.
     A zero weight switches the term off (it is not even computed).
 
-    `termination` (legged_gym's A1: 0) is -100, i.e. -2 per fall, added after the positive clipping: with 0, a pi1
-    run on the push task (tracking width 0.05) walked at 0.22 m/s after 50 iterations, then kept falling onto its
-    front hips (0.05-0.09 falls per env-second) and drifted back to standing by iteration 150 (0.03 m/s under the
-    0.3 m/s command): under discounting, a fall only cost the lost future of a reward clipped at zero.
+    `termination` (legged_gym's A1: 0) is -100, i.e. -2 per fall, added after the positive clipping: without it,
+    under discounting, a fall costs only the lost future of a reward clipped at zero, and policies traded falls for
+    speed.
 
     `base_height` (legged_gym's term, off there and here by default) penalises (h - `EnvConfig.base_height_target`)^2,
-    h the trunk's height above the ground; no task uses it (it did not make a from-scratch Go1 walk, see
-    `wbc.learned.train.stages.TURN_WALKING_PRIOR_INIT`).
+    h the trunk's height above the ground; no task uses it.
     """
 
     tracking_lin_vel: float = 1.0
@@ -109,10 +109,8 @@ class EnvConfig:
         timestep: physics step [s] (legged_gym's 5 ms; the evaluation steps at 2 ms).
         decimation: physics steps per policy step.
         solver: MuJoCo's constraint solver, ``newton`` or ``cg``. Newton, not the arena's CG: on the contact-rich
-            states of training (rough ground, random early actions, falls) CG needs ~15-20 iterations per step and
-            Newton 2-3, for the same answer within the solver tolerance; measured on a1-wx200 at 5 ms: 126 vs 83 us
-            per physics step with random actions on fractal ground (CG is ~5 % faster only for a robot standing
-            still, where both stop after one iteration).
+            states of training (rough ground, random early actions, falls) it needs a few iterations where CG needs
+            many, for the same answer within the solver tolerance, and is faster per physics step.
         nthread: threads of `mujoco.rollout`.
         episode_s: episode length [s]; None: the scenario's duration.
         action_scale: joint target offset per unit action [rad].
@@ -123,9 +121,8 @@ class EnvConfig:
             task commands 0 or 0.3 m/s, and at 0.25 standing still earns exp(-0.09 / 0.25) = 70 % of the tracking
             reward of a 0.3 m/s command (41 % at 0.1); legged_gym's commands span +-1 m/s.
         feet_air_time_target: air time rewarded above this, penalised below [s]. 0.2 s, not legged_gym's 0.5 s: at
-            0.3 m/s an A1 steps with 0.2-0.25 s of air time, and a 0.5 s target charged every touchdown about
-            -0.3, which made stepping cost more than the tracking it earned; a first pi1 run (1024 envs, 100
-            iterations, sigma 0.25, target 0.5 s) stood still under the 0.3 m/s command.
+            0.3 m/s an A1 steps with 0.2-0.25 s of air time, and a 0.5 s target charges every touchdown about -0.3,
+            which makes stepping cost more than the tracking it earns.
         soft_dof_pos_limit: fraction of the joint range beyond which `dof_pos_limits` penalises.
         base_height_target: trunk height the `base_height` reward term asks for [m].
         only_positive_rewards: clip each step's total reward at zero from below.
@@ -197,3 +194,9 @@ class EnvConfig:
     def policy_dt(self) -> float:
         """Policy period [s]."""
         return self.timestep * self.decimation
+
+    def gains(self, num_joints: int) -> tuple[np.ndarray, np.ndarray]:
+        """(kp, kd) of the motor law for `num_joints` actuated joints: the 12 legs' first, then the arm's."""
+        kp, kd = np.full(num_joints, self.leg_kp), np.full(num_joints, self.leg_kd)
+        kp[12:], kd[12:] = self.arm_kp, self.arm_kd
+        return kp, kd

@@ -4,12 +4,14 @@ Every variant is the scene of `wbc.hardware.mujoco.scene` for the same (robot, a
 law are those of evaluation, plus the sensors of evaluation's fall rule (`wbc.hardware.mujoco.fall_rule`): one
 ``contact`` sensor per robot collision geom other than the foot spheres, reporting up to `FALL_SLOTS` ground contacts
 with their positions, and one ``framepos`` sensor per foot sphere (the foot centres), all filled inside MuJoCo's step.
-Each variant then gets its own payload, friction, motor strength and (on rough ground) terrain. `mujoco.rollout` takes
-one model per environment, so an environment draws a variant at every reset at no cost; the pool's size bounds
-memory (a 401 x 401 heightfield is 1.3 MB per variant).
+Each variant then gets its own payload, friction, motor strength and (on rough ground) terrain, written by the
+functions `MujocoRobot` uses (`wbc.hardware.mujoco.physics`). `mujoco.rollout` takes one model per environment, so an
+environment draws a variant at every reset at no cost; the pool's size bounds memory (a 401 x 401 heightfield is
+1.3 MB per variant).
 
-Motor law, as `MujocoRobot` writes it: ``force = k (ctrl - kp q - kd dq)`` clamped to ``k`` times the torque limit,
-with ``ctrl = kp q*`` (zero target velocity and feed-forward) and ``k`` the variant's motor strength.
+Motor law, as `MujocoRobot` writes it (`physics.set_motor_gains`): ``force = k (ctrl - kp q - kd dq)`` clamped to
+``k`` times the torque limit, with ``ctrl = kp q*`` (zero target velocity and feed-forward) and ``k`` the variant's
+motor strength; the gains are fixed per variant, so they are written once, here.
 """
 
 from __future__ import annotations
@@ -20,10 +22,19 @@ import mujoco
 import numpy as np
 
 from wbc.hardware.mujoco.fall_rule import fall_geoms, foot_geoms
-from wbc.hardware.mujoco.scene import TERRAIN_GEOM, scene_spec, set_ground_friction, set_terrain_heights
+from wbc.hardware.mujoco.physics import (
+    NominalModel,
+    apply_domain,
+    apply_terrain,
+    base_body_id,
+    foot_touch_adr,
+    sensor_slices,
+    set_motor_gains,
+)
+from wbc.hardware.mujoco.scene import TERRAIN_GEOM, scene_spec
 from wbc.learned.env.env_config import EnvConfig
-from wbc.robots.description import FOOT_NAMES, RobotDescription
-from wbc.scenario.terrain import TerrainConfig, fractal_heights
+from wbc.robots.description import RobotDescription
+from wbc.scenario.terrain import TerrainConfig
 
 __all__ = ["FALL_SLOTS", "ModelPool", "Variant"]
 
@@ -79,12 +90,9 @@ class ModelPool:
             spec.add_sensor(name=f"{name}_centre", type=mujoco.mjtSensor.mjSENS_FRAMEPOS,
                             objtype=mujoco.mjtObj.mjOBJ_GEOM, objname=name)
         base = spec.compile()
-        self.base_body = mujoco.mj_name2id(base, mujoco.mjtObj.mjOBJ_BODY, "base")
-        self.sensor_slices = {
-            base.sensor(i).name: slice(int(base.sensor_adr[i]), int(base.sensor_adr[i] + base.sensor_dim[i]))
-            for i in range(base.nsensor)
-        }
-        self.touch_adr = np.array([self.sensor_slices[f.replace("_foot", "_touch")].start for f in FOOT_NAMES])
+        self.base_body = base_body_id(base)
+        self.sensor_slices = sensor_slices(base)
+        self.touch_adr = foot_touch_adr(base)
         self.fall_geom_names = tuple(fall)
         slots = np.array([self.sensor_slices[f"{g}_ground"].start for g in fall])[:, None] + 4 * np.arange(FALL_SLOTS)
         self.fall_found_adr = slots.reshape(-1)  # sensordata index of each contact slot's "found"
@@ -92,35 +100,22 @@ class ModelPool:
         self.foot_centre_adr = np.array([np.arange(self.sensor_slices[f"{g}_centre"].start,
                                                    self.sensor_slices[f"{g}_centre"].stop) for g in feet])
         n = desc.num_joints
-        kp = np.full(n, config.leg_kp)
-        kd = np.full(n, config.leg_kd)
-        kp[12:], kd[12:] = config.arm_kp, config.arm_kd
-        self.kp, self.kd = kp, kd
+        self.kp, self.kd = config.gains(n)
         dr = config.domain
         self.models: list[mujoco.MjModel] = []
         self.variants: list[Variant] = []
-        nominal_mass = float(base.body_mass[self.base_body])
-        nominal_ipos = base.body_ipos[self.base_body].copy()
+        nominal = NominalModel.of(base)  # before variant 0, which is `base` itself, changes it
         for _ in range(dr.num_variants):
             m = spec.compile() if self.models else base
             payload = float(rng.uniform(*dr.payload_kg))
             com = rng.uniform(-dr.payload_com_m, dr.payload_com_m, 3)
             friction = float(rng.uniform(*dr.friction))
             strength = rng.uniform(*dr.motor_strength, n)
-            m.body_mass[self.base_body] = nominal_mass + payload
-            m.body_ipos[self.base_body] = (nominal_mass * nominal_ipos + payload * com) / (nominal_mass + payload)
-            set_ground_friction(m, friction)
-            m.actuator_gainprm[:, 0] = strength
-            m.actuator_biasprm[:, 1] = -strength * kp
-            m.actuator_biasprm[:, 2] = -strength * kd
-            m.actuator_forcerange[:] *= strength[:, None]
-            ground = 0.0
-            if terrain.kind == "fractal":
-                heights = fractal_heights(terrain, int(rng.integers(2**31)))
-                set_terrain_heights(m, heights)
-                c, r = heights.shape[0] // 2, int(round(0.4 / terrain.cell))
-                ground = float(heights[c - r:c + r + 1, c - r:c + r + 1].max()) * terrain.amplitude
-            mujoco.mj_setConst(m, mujoco.MjData(m))
+            # flat ground takes no seed, and drawing one anyway would shift every later draw of the stream
+            ground = apply_terrain(m, terrain, int(rng.integers(2**31)) if terrain.kind == "fractal" else 0)
+            apply_domain(m, mujoco.MjData(m), nominal, payload_kg=payload, payload_com=com, friction=friction,
+                         motor_strength=strength)
+            set_motor_gains(m, strength, self.kp, self.kd)
             self.models.append(m)
             self.variants.append(Variant(payload_kg=payload, friction=friction, motor_strength=strength,
                                          ground_height=ground))

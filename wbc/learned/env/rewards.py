@@ -3,7 +3,7 @@
 Each term maps a `StepData` (one policy step of N environments) to (N,) values; the env sums
 ``scale * policy_dt * term`` over the active terms and logs every term's episode sum under ``rew/<name>``.
 The paper lists velocity and yaw tracking, base orientation, action rate, work and action norm; the others are
-legged_gym's A1 terms (see the notes in /work/shared/LEARNING-NOTES.md).
+legged_gym's A1 terms (``legged_gym/envs/base/legged_robot.py``, scales of ``legged_gym/envs/a1/a1_config.py``).
 """
 
 from __future__ import annotations

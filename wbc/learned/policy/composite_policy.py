@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from wbc.errors import NetworkMismatchError
 from wbc.learned.policy.observations import ObsLayout, compatible_indices
 from wbc.learned.policy.policy_file import (
     COMPOSITE_FORMAT,
@@ -103,10 +104,15 @@ class CompositePolicyFile:
 
 def compose(parts: list[PolicyPart], *, training: dict[str, Any] | None = None,
             **robot_meta: Any) -> CompositePolicyFile:
-    """A composite from its parts; the robot-level keys are given (`ROBOT_KEYS`), checked when saved or loaded."""
+    """A composite from its parts; the robot-level keys are given (`ROBOT_KEYS`), checked when saved or loaded.
+
+    Raises:
+        NetworkMismatchError: a robot-level key is missing.
+    """
     missing = [k for k in ROBOT_KEYS if k not in robot_meta]
     if missing:
-        raise ValueError(f"compose: missing robot-level keys {missing}")
+        raise NetworkMismatchError(f"compose: missing robot-level keys {missing}; pass every key of ROBOT_KEYS "
+                                   "(a part's policy file has them for its joints, see export.decoupled_policy)")
     return CompositePolicyFile(meta={**robot_meta, "training": training or {}}, parts=tuple(parts))
 
 

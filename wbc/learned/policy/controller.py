@@ -13,7 +13,7 @@ runs through the same path: every part gets its own view of the observation and,
 history; each part's actions go to its joints, and ``last_action`` holds the whole robot's, as in training.
 
 The registry's ``learned``, ``learned-locked`` and ``learned-noarm`` run the weights shipped in
-``wbc/learned/weights/<robot>-<arm mode>.npz`` (pi3, pi2 and pi1 of the robot's task).
+``wbc/learned/weights/<robot>-<arm mode>.npz`` (pi3, pi2 and pi1 of the robot's task, `shipped_weights`).
 """
 
 from __future__ import annotations
@@ -27,17 +27,11 @@ from wbc.learned.policy.numpy_composite import NumpyComposite
 from wbc.learned.policy.obs_history import ObsHistory
 from wbc.learned.policy.observations import ObsLayout, ObsScales, policy_observation
 from wbc.learned.policy.policy_file import PolicyFileError
+from wbc.learned.policy.shipped import shipped_weights
 from wbc.robots.description import RobotDescription
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
-__all__ = ["LearnedController", "WEIGHTS_DIR", "shipped_weights"]
-
-WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
-
-
-def shipped_weights(desc: RobotDescription) -> Path:
-    """The shipped policy for `desc`'s robot and arm mode (``weights/<robot>-<arm mode>.npz``)."""
-    return WEIGHTS_DIR / f"{desc.name}-{desc.arm_mode}.npz"
+__all__ = ["LearnedController"]
 
 
 class LearnedController:

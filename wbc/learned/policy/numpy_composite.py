@@ -56,7 +56,7 @@ class NumpyComposite:
             z: extrinsics of each part that observes them, by part name.
 
         Raises:
-            ValueError: a part that observes the extrinsics has none in `z` (`NumpyPolicy`).
+            PolicyInputError: a part that observes the extrinsics has none in `z` (`NumpyPolicy`).
         """
         obs = np.asarray(obs, dtype=np.float64)
         out = np.empty((obs.shape[0], self.num_actions))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbc.errors import PolicyInputError
 from wbc.learned.policy.policy_file import PolicyFile
 
 __all__ = ["NumpyPolicy", "activation"]
@@ -67,23 +68,29 @@ class NumpyPolicy:
         return (np.asarray(obs, dtype=np.float64) - self._obs_mean) * self._obs_scale
 
     def adaptation(self, history: np.ndarray) -> np.ndarray:
-        """The estimated extrinsics from (N, H * obs_size) normalised observations, oldest first (RMA phase 2)."""
+        """The estimated extrinsics from (N, H * obs_size) normalised observations, oldest first (RMA phase 2).
+
+        Raises:
+            PolicyInputError: the file has no adaptation module.
+        """
         if not self._adaptation:
-            raise ValueError("this policy file has no adaptation module (RMA phase 2 has not been run)")
+            raise PolicyInputError("this policy file has no adaptation module to estimate z: run RMA phase 2 on it "
+                                   "(wbc.learned.train.rma.train_adaptation), or pass z from `extrinsics` in "
+                                   "simulation")
         return _mlp(self._adaptation, self.activation, np.asarray(history, dtype=np.float64))
 
     def __call__(self, obs: np.ndarray, z: np.ndarray | None = None) -> np.ndarray:
         """Deterministic actions, (N, obs_size) [+ (N, z_dim)] -> (N, num_actions).
 
         Raises:
-            ValueError: `z` is missing for a policy that observes the extrinsics, or given to one that does not.
+            PolicyInputError: `z` is missing for a policy that observes the extrinsics, or given to one that does not.
         """
         x = (np.asarray(obs, dtype=np.float64) - self._obs_mean) * self._obs_scale
         if self.uses_extrinsics:
             if z is None:
-                raise ValueError("this policy observes the extrinsics z: pass z (from `extrinsics` in simulation, "
-                                 "or from the RMA adaptation module on a robot)")
+                raise PolicyInputError("this policy observes the extrinsics z: pass z (from `extrinsics` in "
+                                       "simulation, or from the RMA adaptation module on a robot)")
             x = np.concatenate([x, np.asarray(z, dtype=np.float64)], axis=-1)
         elif z is not None:
-            raise ValueError("this policy does not observe extrinsics; call it without z")
+            raise PolicyInputError("this policy does not observe extrinsics; call it without z")
         return _mlp(self._layers, self.activation, x)

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbc.errors import ConfigError
 from wbc.optional import require
 
 __all__ = ["PANELS", "plot_training_curves", "read_scalars"]
@@ -36,7 +37,12 @@ def read_scalars(run_dir: str | Path) -> dict[str, tuple[np.ndarray, np.ndarray]
 
 
 def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
-    """Draw the `PANELS` of the runs against environment steps into `out` (a PNG); returns its path."""
+    """Draw the `PANELS` of the runs against environment steps into `out` (a PNG); returns its path.
+
+    Raises:
+        ConfigError: no run logs any of the panels' tags.
+    """
+    # imported here, not at the top: the Agg backend must be chosen before pyplot is first imported
     import matplotlib
 
     matplotlib.use("Agg")
@@ -50,7 +56,8 @@ def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
         runs.append((Path(d).name, scalars, steps_per_it))
     panels = [(tag, title) for tag, title in PANELS if any(tag in s for _, s, _ in runs)]
     if not panels:
-        raise ValueError(f"none of {[t for t, _ in PANELS]} is logged in {[str(d) for d in run_dirs]}")
+        raise ConfigError(f"none of {[t for t, _ in PANELS]} is logged in {[str(d) for d in run_dirs]}; pass run "
+                          "directories written by `wbc train` (their TensorBoard event files)")
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.4), squeeze=False)
     for ax, (tag, title) in zip(axes[0], panels, strict=True):
         for k, (name, scalars, steps_per_it) in enumerate(runs):

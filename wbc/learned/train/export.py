@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from wbc.errors import NetworkMismatchError
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.composite_policy import ROBOT_KEYS, CompositePolicyFile, PolicyPart, compose
 from wbc.learned.policy.observations import PRIVILEGED_PARTS, ObsLayout
@@ -34,15 +35,9 @@ def _activation_name(mlp: Any) -> str:
     names = {torch.nn.ELU: "elu", torch.nn.ReLU: "relu", torch.nn.Tanh: "tanh"}
     found = {names.get(type(m), type(m).__name__) for m in mlp if not isinstance(m, torch.nn.Linear)}
     if len(found) != 1 or next(iter(found)) not in ACTIVATIONS:
-        raise ValueError(f"cannot export activations {sorted(found)}; supported: {', '.join(ACTIVATIONS)}")
+        raise NetworkMismatchError(f"cannot export activations {sorted(found)}; the policy file supports one of "
+                                   f"{', '.join(ACTIVATIONS)} throughout: set TrainConfig.activation to one")
     return next(iter(found))
-
-
-def _gains(env: EnvConfig, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(kp, kd) of the n actuated joints: the legs' first, then the arm's."""
-    kp, kd = np.full(n, env.leg_kp), np.full(n, env.leg_kd)
-    kp[12:], kd[12:] = env.arm_kp, env.arm_kd
-    return kp, kd
 
 
 def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
@@ -59,7 +54,8 @@ def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
             part of a composite (its default pose and gains are those joints').
 
     Raises:
-        ValueError: the actor's outputs do not match `joints`, or its layers or activations cannot be exported.
+        NetworkMismatchError: the actor's outputs do not match `joints`, or its layers or activations cannot be
+            exported.
     """
     desc = get_robot(env.robot, env.arm_mode)
     layout = ObsLayout(desc.num_joints)
@@ -82,15 +78,17 @@ def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
         extrinsics = {"dim": int(actor._z_dim), "hidden_dims": list(actor.encoder_dims),
                       "privileged_parts": [[n, s] for n, s in PRIVILEGED_PARTS]}
     elif d != n_obs:
-        raise ValueError(f"the actor observes {d} values but the policy layout has {n_obs}: export supports the "
-                         "policy observation alone, or with extrinsics through ExtrinsicsActor")
+        raise NetworkMismatchError(f"the actor observes {d} values but the policy layout has {n_obs}: export "
+                                   "supports the policy observation alone (obs group 'policy'), or with extrinsics "
+                                   "through ExtrinsicsActor (TrainConfig.extrinsics_dim > 0)")
     layers = _linear_layers(actor.mlp)
     for i, (w, b) in enumerate(layers):
         arrays[f"policy/{i}/weight"], arrays[f"policy/{i}/bias"] = w, b
     idx = np.arange(desc.num_joints) if joints is None else np.asarray(joints, dtype=int)
     if layers[-1][0].shape[0] != idx.size:
-        raise ValueError(f"the actor has {layers[-1][0].shape[0]} outputs for joints {idx.tolist()}")
-    kp, kd = _gains(env, desc.num_joints)
+        raise NetworkMismatchError(f"the actor has {layers[-1][0].shape[0]} outputs for joints {idx.tolist()}; "
+                                   "pass the joints it drives (joints=...), one per output")
+    kp, kd = env.gains(desc.num_joints)
     meta = {
         "robot": env.robot, "arm_mode": env.arm_mode, "task": task, "stage": int(stage),
         "num_actions": int(idx.size), "obs_layout": layout.as_list(),
@@ -119,7 +117,7 @@ def decoupled_policy(actor: Any, legs: PolicyFile, env: EnvConfig, *, task: str,
     desc = get_robot(env.robot, env.arm_mode)
     n, n_legs = desc.num_joints, legs.num_actions
     arm = policy_file_from_actor(actor, env, task=task, stage=stage, joints=tuple(range(n_legs, n)))
-    kp, kd = _gains(env, n)
+    kp, kd = env.gains(n)
     robot = {**{k: arm.meta[k] for k in ROBOT_KEYS}, "num_actions": n, "default_q": desc.nominal_q.tolist(),
              "kp": kp.tolist(), "kd": kd.tolist()}
     parts = [PolicyPart(name="legs", joints=tuple(range(n_legs)), policy=legs),

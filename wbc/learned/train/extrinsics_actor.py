@@ -8,6 +8,7 @@ encoder by the RMA adaptation module, which estimates z from the proprioceptive 
 
 from __future__ import annotations
 
+from wbc.errors import ConfigError
 from wbc.optional import require
 
 torch = require("torch")
@@ -29,6 +30,9 @@ class ExtrinsicsActor(_models.MLPModel):
         encoder_dims: hidden sizes of the encoder.
         privileged_group: the group that is encoded; it must be the set's last group.
         **kwargs: `MLPModel` arguments (hidden_dims, activation, obs_normalization, distribution_cfg).
+
+    Raises:
+        ConfigError: `privileged_group` is not the set's last group.
     """
 
     def __init__(self, obs, obs_groups, obs_set, output_dim, *, extrinsics_dim: int = 8,
@@ -36,8 +40,9 @@ class ExtrinsicsActor(_models.MLPModel):
                  **kwargs) -> None:
         groups = obs_groups[obs_set]
         if not groups or groups[-1] != privileged_group:
-            raise ValueError(f"ExtrinsicsActor: the last observation group of {obs_set!r} must be "
-                             f"{privileged_group!r}, got {groups}")
+            raise ConfigError(f"ExtrinsicsActor: the last observation group of {obs_set!r} must be "
+                              f"{privileged_group!r}, got {groups}; list it last in obs_groups[{obs_set!r}] "
+                              "(as train.rsl_rl_config does)")
         self._priv_dim = int(obs[privileged_group].shape[-1])
         self._z_dim = int(extrinsics_dim)
         super().__init__(obs, obs_groups, obs_set, output_dim, **kwargs)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from wbc.errors import ConfigError, NetworkMismatchError
 from wbc.learned.policy.policy_file import load_policy
 from wbc.learned.train.bc_schedule import BCSchedule
 from wbc.learned.train.torch_policy import TorchPolicy
@@ -38,9 +39,13 @@ def bc_loss(student_mean, teacher_actions, mask):
 
     Returns:
         Scalar: mean over the batch and the compatible actions of the squared difference.
+
+    Raises:
+        NetworkMismatchError: the mask does not have one entry per teacher action.
     """
     if mask.numel() != teacher_actions.shape[-1]:
-        raise ValueError(f"BC mask has {mask.numel()} entries for a teacher with {teacher_actions.shape[-1]} actions")
+        raise NetworkMismatchError(f"BC mask has {mask.numel()} entries for a teacher with "
+                                   f"{teacher_actions.shape[-1]} actions; give one student index per teacher action")
     return (student_mean.index_select(-1, mask) - teacher_actions).pow(2).mean()
 
 
@@ -55,6 +60,11 @@ class PPOWithBC(_ppo.PPO):
         teacher_group: observation group the teacher sees.
         privileged_group: observation group of the teacher's extrinsics input.
         **kwargs: `PPO` arguments.
+
+    Raises:
+        ConfigError: the rsl-rl configuration uses what `update` does not re-implement (RND, symmetry, recurrence).
+        NetworkMismatchError: `action_mask` does not have one entry per teacher action.
+        PolicyFileError: the teacher's file is missing or malformed.
     """
 
     def __init__(self, actor, critic, storage, *, teacher_path: str, bc_schedule: dict[str, Any] | None = None,
@@ -62,14 +72,17 @@ class PPOWithBC(_ppo.PPO):
                  privileged_group: str = "privileged", **kwargs) -> None:
         super().__init__(actor, critic, storage, **kwargs)
         if self.rnd or self.symmetry or self.is_multi_gpu or actor.is_recurrent or critic.is_recurrent:
-            raise ValueError("PPOWithBC supports feed-forward models on one device, without RND or symmetry")
+            raise ConfigError("PPOWithBC supports feed-forward models on one device, without RND or symmetry: "
+                              "remove rnd_cfg / symmetry_cfg and recurrent models from the rsl-rl configuration")
         teacher = load_policy(teacher_path)
         self.teacher = TorchPolicy(teacher).to(self.device)
         n_teacher = teacher.num_actions
         mask = list(range(n_teacher)) if action_mask is None else list(action_mask)
         self.action_mask = torch.as_tensor(mask, dtype=torch.long, device=self.device)
         if self.action_mask.numel() != n_teacher:
-            raise ValueError(f"action_mask has {len(mask)} entries, the teacher {teacher_path} has {n_teacher} actions")
+            raise NetworkMismatchError(f"action_mask has {len(mask)} entries, the teacher {teacher_path} has "
+                                       f"{n_teacher} actions; set TrainConfig.action_mask to one student index per "
+                                       "teacher action")
         self.schedule_bc = BCSchedule(**(bc_schedule or {}))
         self.teacher_group = teacher_group
         self.privileged_group = privileged_group

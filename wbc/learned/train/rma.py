@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from wbc.errors import NetworkMismatchError
 from wbc.learned.env.env import BatchedEnv
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.obs_history import ObsHistory
@@ -43,9 +44,13 @@ def train_adaptation(policy: PolicyFile, env_config: EnvConfig, config: Adaptati
 
     Returns:
         The policy file with the adaptation module, and a summary (losses per iteration, wall time).
+
+    Raises:
+        NetworkMismatchError: the policy does not observe the extrinsics.
     """
     if policy.meta.get("extrinsics") is None:
-        raise ValueError("RMA phase 2 needs a policy that observes the extrinsics z")
+        raise NetworkMismatchError("RMA phase 2 needs a policy that observes the extrinsics z, and this one has no "
+                                   "encoder: train phase 1 with TrainConfig.extrinsics_dim > 0")
     torch.manual_seed(config.seed)
     net = TorchPolicy(policy)
     env = BatchedEnv(replace(env_config, teacher_arm_mode=None))

@@ -37,6 +37,7 @@ from typing import Any
 
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.env.env_config import EnvConfig, RewardScales
+from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.bc_schedule import BCSchedule
 from wbc.learned.train.train_config import TrainConfig
 
@@ -50,10 +51,9 @@ class TaskSpec:
     """A task: its robot, its scenario, the bands training draws from and the width of the tracking rewards.
 
     The tracking width sets how much a policy earns for standing still under a walking command: exp(-v_cmd^2 /
-    sigma). The push task commands only 0 or 0.3 m/s; at sigma 0.1 standing under 0.3 m/s still earned 41 % of the
-    tracking reward, and two pi1 runs (1024 environments, 150 iterations, 3.7M steps each) settled on standing:
-    their deterministic policy moved at 0.00 m/s under the 0.3 m/s command (``python -m wbc.tools.probe``). At
-    0.05 standing earns 17 %. The turn task's 1-1.5 m/s commands keep legged_gym's 0.25.
+    sigma). The push task commands only 0 or 0.3 m/s: at sigma 0.1 standing under 0.3 m/s still earns 41 % of the
+    tracking reward, enough for policies to settle on standing, and at 0.05 it earns 17 %. The turn task's 1-1.5 m/s
+    commands keep legged_gym's 0.25.
 
     `walking_prior_termination` is pi1's fall penalty (`RewardScales.termination`); `walking_prior_init` names shipped
     weights (``wbc/learned/weights/<name>``) pi1's actor starts from (`wbc.learned.train.warm_start`);
@@ -76,35 +76,19 @@ class TaskSpec:
 WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
 """The push task's pi1 commands (vx, vy, yaw rate ranges), drawn per episode instead of the scenario's.
 
-pi1 is the walking prior the later stages imitate; the paper does not give its commands. Three pi1 runs on the push
-scenario's own commands (0 or 0.3 m/s) did not learn a stable gait in 150 iterations: at tracking width 0.1 they
-stood (0.00 m/s under 0.3 m/s), at 0.05 one walked at 0.22 m/s at iteration 50 while falling onto its front hips,
-then drifted back to standing, and with a fall penalty it never left standing. A 0.3 m/s command is worth too little
-over standing still to pay for discovering a gait. legged_gym's recipe (commands over +-1, tracking width 0.25, no
-fall penalty) is what reliably learns to walk, so pi1 uses it; pi2 and pi3 train on the scenario's commands."""
+pi1 is the walking prior the later stages imitate; the paper does not give its commands. The push scenario's own
+commands (0 or 0.3 m/s) are worth too little over standing still to pay for discovering a gait, so pi1 uses
+legged_gym's recipe (commands over about +-1, tracking width 0.25, no fall penalty), which reliably learns to walk;
+pi2 and pi3 train on the scenario's commands. The runs behind this: ``docs/learning-notes.md``, stage 1."""
 WALKING_PRIOR_SIGMA = 0.25
 
 TURN_WALKING_PRIOR_INIT = "a1-wx200-none"
 """The turn task's pi1 starts from the push task's pi1 (the A1 without its arm; same observation and action layout)
 and is fine-tuned on go1-arm without its arm.
 
-Four go1-arm pi1 runs from scratch (1024 environments, 4-10M steps each) never found a gait:
-
-- legged_gym's recipe (no fall penalty), commands widened to the scenario's (180 iterations) or the push task's
-  ranges (400 iterations): a dive. Under a 0.8 m/s command the deterministic policy folds its front legs (thighs
-  1.45 rad against 0.8 nominal), pitches 19 degrees nose-down and lunges; its trunk's front corner touches the ground
-  0.8 s after every reset (1.2 falls per environment-second). With falls free and rewards clipped at zero, a lunge
-  that earns tracking reward for 0.8 s and restarts from a fresh stand is a local optimum.
-- a fall penalty of -100 (300 iterations, 7.4M steps): it lies down. Within 0.5 s of any command it folds every
-  leg (thighs ~2 rad, calves ~-2.5 rad) and rests its trunk 8 cm above the ground on its feet, where nothing counts
-  as a fall and standing still still earns exp(-v^2 / 0.25) of the tracking reward.
-- the fall penalty plus the `base_height` term (-30 on (h - 0.28 m)^2; 125 iterations): it stands, crouched (trunk
-  0.13-0.15 m, hips splayed ~0.8 rad), at 0.00 m/s under 0.5 and 1 m/s.
-
-The two robots are alike where it matters: an open-loop trot moves them alike (same falls, similar speeds), and the
-A1's pi1, run unchanged on the Go1, walks at 0.48 m/s under 0.5 m/s and 1.01 m/s under 1 m/s without a fall in the
-training env. So the Go1's runs failed at discovering a gait, not at executing one, and the A1's gait is the
-starting point."""
+The two robots move alike (an open-loop trot, the A1's pi1 run unchanged on the Go1), but go1-arm runs from scratch
+found no gait under any reward tried: the problem is discovering a gait, not executing one, so the A1's gait is the
+starting point (``docs/learning-notes.md``, stage 1, turn task)."""
 
 TURN_WALKING_PRIOR_COMMANDS = ((-0.5, 1.5), (-0.5, 0.5), (-2.0, 2.0))
 """The turn task's pi1 commands: legged_gym's ranges widened to the scenario's speeds (1-1.5 m/s) and yaw rates
@@ -112,22 +96,16 @@ TURN_WALKING_PRIOR_COMMANDS = ((-0.5, 1.5), (-0.5, 0.5), (-2.0, 2.0))
 
 TURN_WALKING_PRIOR_TERMINATION = -100.0
 """The turn task's pi1 pays for falls, -2 per fall (the later stages' weight): it starts from a policy that walks,
-which the penalty keeps from trading falls for speed (the dive above)."""
+which the penalty keeps from trading falls for speed."""
 
 TURN_TAUGHT_INIT_STD = 0.5
 """Initial action noise of the turn task's pi2 and pi3 (rsl-rl's default, kept by the push task, is 1.0).
 
-At 1.0 the turn task's pi2 fell in every training episode for 43 iterations (episodes of 2-4 s) although its mean
-action had already learned pi1's (BC loss 2.3 -> 0.06) and pi1 itself, run on the locked-arm Go1 in the same env,
-falls 0.00-0.02 times per environment-second at 1-1.5 m/s: 0.25 rad of exploration noise on every joint (action scale
-0.25) trips a robot running at 1.5 m/s, which it does not a robot standing under the push task's 0-0.3 m/s. 0.5 is
-about where pi1's own noise ended (0.43).
-
-At 0.5 alone a second pi2 run still fell in every episode after 25 iterations (episodes of ~1.8 s, BC loss 2.3 ->
-0.8, its mean action 0.0-0.2 m/s under 0.5-1.5 m/s commands), although pi1, acting on the observations the same env
-gives the teacher, ran at 1.26 m/s without a fall: a student that falls within 2 s only ever sees the first steps of
-a run, so BC cannot show it the gait. The turn task's taught stages therefore also start from their teacher's weights
-(`TaskSpec.taught_start_from_teacher`): pi2 starts as pi1, pi3 as pi2 on the legs (its arm actions start at zero)."""
+0.25 rad of exploration noise on every joint (action scale 0.25, noise 1.0) trips a robot running at 1.5 m/s but not
+a robot standing under the push task's 0-0.3 m/s; 0.5 is about where pi1's own noise ended. Noise alone
+does not let a student that falls within seconds see the gait, so the turn task's taught stages also start from
+their teacher's weights (`TaskSpec.taught_start_from_teacher`): pi2 starts as pi1, pi3 as pi2 on the legs (its arm
+actions start at zero). The runs behind both: ``docs/learning-notes.md``, stages 2 and 3."""
 
 TASKS: dict[str, TaskSpec] = {
     "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
@@ -220,8 +198,6 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
         init_baseline = "curriculum" if baseline == "curriculum" else None
         init_path = teacher or str(Path(run_root) / run_name(task, init_stage, init_baseline) / "policy")
     elif walking_prior and spec.walking_prior_init is not None:
-        from wbc.learned.policy.controller import WEIGHTS_DIR
-
         init_path = str(WEIGHTS_DIR / spec.walking_prior_init)
     decoupled = {}
     if baseline == "decoupled":

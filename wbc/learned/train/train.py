@@ -24,8 +24,10 @@ from wbc.learned.policy.composite_policy import save_composite
 from wbc.learned.policy.policy_file import PolicyFileError, load_policy, save_policy
 from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
+from wbc.learned.train.rma import train_adaptation
 from wbc.learned.train.train_config import TrainConfig
 from wbc.learned.train.vec_env import RslVecEnv
+from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
 from wbc.provenance import provenance
 
@@ -178,8 +180,6 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
     done = 0
     if checkpoint is None and cfg.init_from is not None:
-        from wbc.learned.train.warm_start import warm_start_actor
-
         warm_start_actor(runner.alg.get_policy(), _load_for(cfg.init_from, "the policy this run starts from"),
                          mask=None if cfg.action_mask is None else list(cfg.action_mask))
     if checkpoint is not None:
@@ -202,8 +202,6 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     result = {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
               "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz")}
     if cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0:
-        from wbc.learned.train.rma import train_adaptation
-
         policy, summary = train_adaptation(load_policy(run_dir / "policy"), cfg.env, cfg.rma)
         save_policy(run_dir / "policy", policy)
         (run_dir / "rma.json").write_text(json.dumps(summary, indent=2) + "\n")

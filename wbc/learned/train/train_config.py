@@ -13,7 +13,7 @@ __all__ = ["PPOConfig", "TrainConfig"]
 
 @dataclass(frozen=True, kw_only=True)
 class PPOConfig:
-    """PPO hyper-parameters (legged_gym's defaults, LEARNING-NOTES section 1)."""
+    """PPO hyper-parameters (legged_gym's defaults, ``legged_gym/envs/base/legged_robot_config.py``)."""
 
     learning_rate: float = 1e-3
     schedule: str = "adaptive"
@@ -42,8 +42,7 @@ class TrainConfig:
         num_steps_per_env: policy steps per environment per iteration.
         save_interval: iterations between checkpoints (each also exports the policy file).
         actor_hidden_dims, critic_hidden_dims: MLP sizes. Half of legged_gym's (512, 256, 128): training runs on
-            CPUs here, where the PPO update's cost grows with the square of the width (measured on the shared
-            2-core machine: 22 s per 24k-sample update at legged_gym's size, single-threaded).
+            CPUs here, where the PPO update's cost grows with the square of the width.
         activation: MLP activation.
         init_std: initial action noise.
         extrinsics_dim: size of the RMA extrinsics z (0: the actor sees the policy observation only).
@@ -59,8 +58,8 @@ class TrainConfig:
             policy (`wbc.learned.policy.composite_policy`). None: the actor drives every joint.
         run_dir: where checkpoints, TensorBoard logs, the resolved config and the exported policy go.
         device: torch device.
-        torch_threads: torch's intra-op threads. 1 by default: on a shared 2-core machine, torch's spinning worker
-            threads slowed the PPO update of a small network 40-fold (6.7 s instead of 0.15 s per iteration).
+        torch_threads: torch's intra-op threads. 1 by default: on a shared machine with few cores, torch's
+            spinning worker threads slow the PPO update of a small network many times over.
     """
 
     task: str

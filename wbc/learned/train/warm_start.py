@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbc.errors import NetworkMismatchError
 from wbc.learned.policy.observations import ObsLayout, compatible_indices
 from wbc.learned.policy.policy_file import PolicyFile
 from wbc.optional import require
@@ -36,17 +37,20 @@ def warm_start_actor(actor, policy: PolicyFile, mask: list[int] | None = None, c
         count: sample count given to the normaliser's statistics.
 
     Raises:
-        ValueError: the two networks cannot be matched (hidden sizes, extrinsics, encoder sizes).
+        NetworkMismatchError: the two networks cannot be matched (hidden sizes, extrinsics, encoder sizes).
     """
     old_layers = policy.layers("policy")
     new_linear = [m for m in actor.mlp if isinstance(m, torch.nn.Linear)]
     old_hidden = [w.shape[0] for w, _ in old_layers[:-1]]
     new_hidden = [m.out_features for m in new_linear[:-1]]
     if old_hidden != new_hidden:
-        raise ValueError(f"warm start needs the same hidden sizes: {old_hidden} vs {new_hidden}")
+        raise NetworkMismatchError(f"warm start needs the same hidden sizes: the policy has {old_hidden}, the new "
+                                   f"actor {new_hidden}; set TrainConfig.actor_hidden_dims to {tuple(old_hidden)}")
     has_z = hasattr(actor, "encoder")
     if has_z != (policy.meta.get("extrinsics") is not None):
-        raise ValueError("warm start needs both policies with extrinsics, or both without")
+        raise NetworkMismatchError(f"warm start needs both networks with extrinsics or both without: the policy "
+                                   f"{'has' if not has_z else 'has none'}, the new actor "
+                                   f"{'has' if has_z else 'has none'}; set TrainConfig.extrinsics_dim to match")
     n_new = new_linear[-1].out_features
     old_layout, new_layout = ObsLayout(policy.num_actions), ObsLayout(n_new)
     idx = compatible_indices(new_layout, old_layout)
@@ -73,7 +77,10 @@ def warm_start_actor(actor, policy: PolicyFile, mask: list[int] | None = None, c
             enc_new = [m for m in actor.encoder if isinstance(m, torch.nn.Linear)]
             enc_old = policy.layers("encoder")
             if [tuple(m.weight.shape) for m in enc_new] != [tuple(wk.shape) for wk, _ in enc_old]:
-                raise ValueError("warm start needs the same extrinsics encoder sizes")
+                raise NetworkMismatchError("warm start needs the same extrinsics encoder: the policy's layers are "
+                                           f"{[tuple(wk.shape) for wk, _ in enc_old]}, the new actor's "
+                                           f"{[tuple(m.weight.shape) for m in enc_new]}; set "
+                                           "TrainConfig.encoder_dims and extrinsics_dim to the policy's")
             for lin, (wk, bk) in zip(enc_new, enc_old, strict=True):
                 _set(lin.weight, wk)
                 _set(lin.bias, bk)
