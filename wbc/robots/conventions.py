@@ -18,7 +18,7 @@ import numpy as np
 
 from wbc.errors import ConfigError
 
-__all__ = ["ROOT_JOINT", "quat_wxyz_to_xyzw", "quat_xyzw_to_wxyz", "quat_to_matrix", "JointIndexMap"]
+__all__ = ["ROOT_JOINT", "JointIndexMap", "quat_to_matrices", "quat_to_matrix", "quat_wxyz_to_xyzw", "quat_xyzw_to_wxyz"]
 
 ROOT_JOINT = "root"
 
@@ -42,6 +42,16 @@ def quat_to_matrix(q_wxyz: np.ndarray) -> np.ndarray:
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
     ]).reshape(3, 3)
+
+
+def quat_to_matrices(quat_wxyz: np.ndarray) -> np.ndarray:
+    """Rotation matrices (N, 3, 3) of unit quaternions (N, 4) (w, x, y, z): `quat_to_matrix` over a batch."""
+    w, x, y, z = (quat_wxyz[:, i] for i in range(4))
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+    ], axis=1)
 
 
 class JointIndexMap:

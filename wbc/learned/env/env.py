@@ -39,23 +39,14 @@ from wbc.learned.policy.observations import (
     privileged_observation,
     projected_gravity,
 )
+from wbc.robots.conventions import quat_to_matrices
 from wbc.robots.joint_table import joint_table
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.terrain import TerrainConfig
 from wbc.scenario.trial import Trial
 
-__all__ = ["BatchedEnv", "StepResult", "rotation_matrices"]
-
-
-def rotation_matrices(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrices (N, 3, 3) of unit quaternions (N, 4) (w, x, y, z)."""
-    w, x, y, z = (quat_wxyz[:, i] for i in range(4))
-    return np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
-        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
-        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
-    ], axis=1)
+__all__ = ["BatchedEnv", "StepResult"]
 
 
 @dataclass(frozen=True)
@@ -185,7 +176,7 @@ class BatchedEnv:
         # the policy's motor command: zero target velocity and feed-forward torque
         self._control[:, :, : self.nu] = motor_ctrl(target, 0.0, 0.0, self.pool.kp, self.pool.kd)[:, None, :]
         dq_before = self.state[:, 1 + self.nq + 6:].copy()  # a copy: the state is overwritten below
-        rot0 = rotation_matrices(self.state[:, 4:8])
+        rot0 = quat_to_matrices(self.state[:, 4:8])
         step0 = self.episode_step * dec
         wrench = self.pushes.wrench(step0, dec, rot0, self.pool.base_ipos[self.variant],
                                     self.state[:, 1 + self.nq + 3:1 + self.nq + 6])
@@ -223,7 +214,7 @@ class BatchedEnv:
         contact = self._sens[:, -1, self.pool.touch_adr] > 1.0
 
         qpos, qvel = self.state[:, self._qpos], self.state[:, self._qvel]
-        rot = rotation_matrices(qpos[:, 3:7])
+        rot = quat_to_matrices(qpos[:, 3:7])
         linvel_body = np.einsum("nji,nj->ni", rot, qvel[:, :3])
         self.air_time += cfg.policy_dt
         first_contact = contact & (self.air_time > cfg.policy_dt)
@@ -335,7 +326,7 @@ class BatchedEnv:
         obs = policy_observation(gyro_in_body=gyro, imu_quat=self.imu_quat, command=command, q=q, dq=dq,
                                  last_action=self.last_action, default_q=self.default_q, scales=cfg.obs_scales)
         obs[:, 3:6] += (nz.gravity * u[:, 3:6]).astype(np.float32)
-        rot = rotation_matrices(qpos[:, 3:7])
+        rot = quat_to_matrices(qpos[:, 3:7])
         force = self.pushes.force_at(self.episode_step * cfg.decimation)
         priv = privileged_observation(
             payload_kg=self.pool.payload_kg[self.variant], friction=self.pool.friction[self.variant],
