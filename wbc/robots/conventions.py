@@ -18,7 +18,8 @@ import numpy as np
 
 from wbc.errors import ConfigError
 
-__all__ = ["ROOT_JOINT", "JointIndexMap", "quat_to_matrices", "quat_to_matrix", "quat_wxyz_to_xyzw", "quat_xyzw_to_wxyz"]
+__all__ = ["ROOT_JOINT", "JointIndexMap", "quat_to_matrices", "quat_to_matrix", "quat_wxyz_to_xyzw",
+           "quat_xyzw_to_wxyz"]
 
 ROOT_JOINT = "root"
 
