@@ -11,8 +11,9 @@ force (their variables are dropped); arm joint velocity limits (box) and arm joi
 (rows of the condensed dynamics). A frozen arm (locked, absent, or momentum terms off) has no variables.
 
 Warm start: the previous solution shifted by one step is passed explicitly (ProxSuite's own "warm start with previous
-result" gave wrong answers when contact bounds flipped); if that solve fails, a cold start follows. A solve that still
-fails raises `MpcSolveError` carrying the problem, so the controller can fall back to the shifted previous plan.
+result" is not used: it gave wrong answers when contact bounds flipped); if that solve fails, a cold start
+follows. A solve that still fails raises `MpcSolveError` carrying the problem, so the controller can fall
+back to the shifted previous plan. Lab notes on the values chosen here: docs/mpc-notes.md.
 """
 
 from __future__ import annotations
@@ -45,9 +46,8 @@ class MpcConfig:
         weight_momentum: angular momentum error weights.
         weight_arm_q: arm position error weights (pull towards the nominal pose).
         weight_force: force effort weight [1/N^2].
-        weight_arm_dq: arm velocity effort weight. With 1e-3 (and arm position weight 1) the arm moved ~4 rad/s
-            all the time for small orientation corrections; 0.05 and 5 cut its travel 6-fold at the same success
-            on 10 out-of-distribution push trials.
+        weight_arm_dq: arm velocity effort weight; high enough that small orientation corrections do not keep the
+            arm moving fast.
         arm_margin: keep the planned arm this far inside its joint limits [rad].
     """
 
@@ -209,7 +209,7 @@ class CentroidalMpc:
         inputs[:, 9:12, NU] -= (c_ref - x0[0:3]) @ total_force_skew.T
         inputs = integ @ inputs
         # Condensed: x_{k+1} = A^(k+1) x0 + sum_{j<=k} A^(k-j) (B_j u_j + d_j), all blocks in one batched product
-        # (the step-by-step recursion cost ~40 small numpy calls per step).
+        # (a step-by-step recursion would cost dozens of small numpy calls per step).
         powers = np.empty((n + 1, NX, NX))
         powers[0] = np.eye(NX)
         for j in range(1, n + 1):
@@ -269,9 +269,8 @@ class CentroidalMpc:
         setup = time.perf_counter() - t0
         t1 = time.perf_counter()
         qp = self._qp_for(idx.size, c.shape[0])
-        # No Ruiz equilibration: the QP is scaled by construction (forces in units of `force_scale`), and the
-        # equilibration took half of every solve (0.6 of 1.0 ms); on 50 recorded walking updates the forces of the
-        # first step (the ones applied) agreed within 1 N with and without it.
+        # No Ruiz equilibration on the warm-started path: the QP is scaled by construction (forces in units of
+        # `force_scale`) and the equilibration would take about half of the solve; the cold start keeps it.
         qp.init(h, g, None, None, c, lo, hi, l_box, u_box, compute_preconditioner=False)
         solved = False
         if self._prev is not None:
@@ -314,8 +313,8 @@ class CentroidalMpc:
             qp.settings.eps_rel = 0.0
             qp.settings.max_iter = 1000
             # Every problem built here is feasible (zero forces and a still arm satisfy all constraints: the arm
-            # limits are widened to include the current position), so an "infeasible" verdict can only be false:
-            # ProxSuite's default 1e-4 threshold gave such verdicts on ill-conditioned pushed states.
+            # limits are widened to include the current position), so an "infeasible" verdict can only be false,
+            # and ProxSuite's default 1e-4 threshold is loose enough to give one on ill-conditioned states.
             qp.settings.eps_primal_inf = 1e-9
             qp.settings.eps_dual_inf = 1e-9
             self._qps[key] = qp

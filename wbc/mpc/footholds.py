@@ -17,9 +17,8 @@ class FootholdConfig:
     Attributes:
         capture_gain: multiplies the capture-point term sqrt(h / g) (v - v_cmd).
         centripetal_gain: multiplies the turning term sqrt(h / g) (v x w_cmd): while turning the feet land outside
-            the hips so the legs lean into the turn and carry the centripetal force (MIT Cheetah 3 uses 0.5;
-            on go1-arm at 1.25 m/s and 2 rad/s, 0.5 and 0.2 rolled the body into the turn,
-            0 let it tip outward, 0.1 held it level).
+            the hips so the legs lean into the turn and carry the centripetal force; too much rolls the body into
+            the turn, none lets it tip outward (tuning: docs/mpc-notes.md).
         max_offset: largest horizontal distance from the hip's projection [m].
     """
 
