@@ -161,7 +161,7 @@ class MpcController:
         self._was_stance = [True] * 4
         self._arm_target = self.desc.arm.nominal_q.copy()
         self._wbc_key: tuple[object, ...] | None = None
-        self.mpc.reset()
+        self._warm_start: np.ndarray | None = None
 
     def counters(self) -> dict[str, int]:
         """MPC solves, MPC fallbacks and whole-body QP failures (which fell back to the leg-level layer) so far."""
@@ -279,11 +279,13 @@ class MpcController:
             params = type(params)(mass=params.mass, inertia_world=params.inertia_world,
                                   arm_momentum_matrix=np.zeros((3, 3)), feet_world=params.feet_world)
         try:
-            self.plan = self.mpc.solve(x0, x_ref, contact, feet, params)
+            self.plan = self.mpc.plan(x0, x_ref, contact, feet, params, self._warm_start)
             self.plan_t = self.t
             self._x0 = x0
+            self._warm_start = self.plan.warm_start()
             self.solves += 1
         except MpcSolveError:
+            self._warm_start = None  # the next update starts cold
             self.fallbacks += 1  # keep following the previous plan, which `_plan_step` shifts by time
 
     def _plan_step(self) -> int:
