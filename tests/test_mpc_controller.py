@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from wbc.control.registry import get_controller
+from wbc.errors import ConfigError
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.mpc import MpcSolveError
+from wbc.mpc.controller import MpcControllerConfig
 from wbc.types import VelocityCommand
 
 
@@ -60,7 +62,7 @@ def test_every_variant_trots_in_place(name, joints):
 def test_failed_solves_fall_back_to_the_previous_plan_and_are_counted():
     def break_some(k, ctrl):
         if k == 100:
-            real = ctrl.mpc.solve
+            real = ctrl.mpc.plan
 
             def flaky(*args, **kwargs):
                 flaky.calls += 1
@@ -69,10 +71,38 @@ def test_failed_solves_fall_back_to_the_previous_plan_and_are_counted():
                 return real(*args, **kwargs)
 
             flaky.calls = 0
-            ctrl.mpc.solve = flaky
+            ctrl.mpc.plan = flaky
 
     robot, ctrl, log = _loop("mpc", 2.0, VelocityCommand(), hook=break_some)
     assert ctrl.counters()["fallbacks"] >= 3
+
+
+def test_unknown_whole_body_layer_is_a_config_error_naming_the_valid_ones():
+    with pytest.raises(ConfigError, match="'qp'.*'legs'.*got 'wbic'"):
+        MpcControllerConfig(whole_body="wbic")
+    with pytest.raises(ConfigError, match="at least 1"):
+        MpcControllerConfig(replan_every=0)
+
+
+_IMPORT_PROBE = """
+import sys
+import wbc.mpc.controller
+bad = sorted(m for m in sys.modules if m.startswith(("wbc.arena", "wbc.tools", "wbc.cli", "wbc.viz", "wbc.control")))
+print(",".join(bad))
+"""
+
+
+def test_the_mpc_controller_imports_nothing_above_it():
+    # wbc.mpc sits below control, arena, tools, cli and viz: importing it must not pull any of them in
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}  # this tree's wbc
+    out = subprocess.run([sys.executable, "-c", _IMPORT_PROBE], capture_output=True, text=True, check=True,
+                         env=env).stdout
+    assert out.strip() == ""
 
 
 def test_walking_at_0_3_m_s_is_tracked_within_0_05_m_s():
