@@ -3,11 +3,12 @@
 import numpy as np
 import pytest
 
+from wbc.control.protocol import HasDebugPlan, HasTickTimings, TruthSwitch
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.mpc import MpcSolveError
-from wbc.mpc.controller import MpcControllerConfig
+from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.types import VelocityCommand
 
 
@@ -75,6 +76,48 @@ def test_failed_solves_fall_back_to_the_previous_plan_and_are_counted():
 
     robot, ctrl, log = _loop("mpc", 2.0, VelocityCommand(), hook=break_some)
     assert ctrl.counters()["fallbacks"] >= 3
+
+
+def test_tick_timings_report_the_mpc_update_and_the_whole_body_qp_on_the_ticks_they_ran():
+    seen = []
+
+    def record(k, ctrl):
+        seen.append((k, dict(ctrl.tick_timings()), ctrl.counters()["mpc_solves"]))
+
+    robot, ctrl, log = _loop("mpc", 0.2, VelocityCommand(vx=0.2), hook=record)
+    assert isinstance(ctrl, HasTickTimings) and isinstance(ctrl, HasDebugPlan) and isinstance(ctrl, TruthSwitch)
+    solves_before = 0
+    for k, timings, solves in seen:
+        updated = solves > solves_before
+        solves_before = solves
+        assert updated == (k % ctrl.config.replan_every == 0)
+        assert ("mpc_setup_s" in timings) == updated and ("mpc_solve_s" in timings) == updated
+        assert "whole_body_s" in timings  # the QP runs every tick once there is a plan (from the first tick)
+        assert set(timings) <= {"mpc_setup_s", "mpc_solve_s", "whole_body_s"}
+        assert all(v > 0 for v in timings.values())
+    # the leg-level layer runs no whole-body QP
+    legs = MpcController(robot.desc, MpcControllerConfig(whole_body="legs"))
+    legs.reset()
+    legs.act(robot.read(), VelocityCommand())
+    assert set(legs.tick_timings()) == {"mpc_setup_s", "mpc_solve_s"}
+    legs.act(robot.read(), VelocityCommand())
+    assert legs.tick_timings() == {}
+
+
+def test_a_failed_mpc_update_reports_no_mpc_timings():
+    def fail_once(k, ctrl):
+        if k == 19:
+            def failing(*args, **kwargs):
+                ctrl.mpc.plan = real
+                raise MpcSolveError("injected failure", problem=None)
+
+            real = ctrl.mpc.plan
+            ctrl.mpc.plan = failing
+        if k == 20:
+            assert ctrl.counters()["fallbacks"] == 1
+            assert "mpc_solve_s" not in ctrl.tick_timings() and "whole_body_s" in ctrl.tick_timings()
+
+    _loop("mpc", 0.06, VelocityCommand(), hook=fail_once)
 
 
 def test_unknown_whole_body_layer_is_a_config_error_naming_the_valid_ones():

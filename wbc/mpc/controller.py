@@ -19,7 +19,8 @@ plan, shifted in time, and is counted (``fallbacks``); a failed whole-body QP fa
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -109,7 +110,7 @@ class MpcController:
     """Centroidal MPC + whole-body QP (or leg-level layer) + estimator.
 
     Capabilities (structural, see `wbc.control.protocol`): `debug_plan` (HasDebugPlan), `use_ground_truth`
-    (TruthSwitch).
+    (TruthSwitch), `tick_timings` (HasTickTimings).
 
     Args:
         desc: the robot it drives.
@@ -159,6 +160,7 @@ class MpcController:
         self._started = False
         self._warm_start: np.ndarray | None = None
         self._arm_target = self.desc.arm.nominal_q.copy()
+        self._timings: dict[str, float] = {}
         self.reference.reset()
         self.feet.reset()
         self.targets.reset()
@@ -166,6 +168,16 @@ class MpcController:
     def counters(self) -> dict[str, int]:
         """MPC solves, MPC fallbacks and whole-body QP failures (which fell back to the leg-level layer) so far."""
         return {"fallbacks": self.fallbacks, "mpc_solves": self.solves, "wbc_failures": self.wbc_failures}
+
+    def tick_timings(self) -> Mapping[str, float]:
+        """Where the time of the last `act` went [s].
+
+        Returns:
+            ``mpc_setup_s`` (linearise, condense, constraints) and ``mpc_solve_s`` (the QP) on a tick that made an
+            MPC update (a failed update, counted in ``fallbacks``, reports neither); ``whole_body_s`` (PlaCo's QP)
+            on a tick the whole-body QP ran. Empty before the first tick.
+        """
+        return dict(self._timings)
 
     def debug_plan(self) -> dict[str, np.ndarray] | None:
         """The current plan, for viewers and debugging (None before the first solve).
@@ -192,6 +204,7 @@ class MpcController:
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """Estimate, (re)plan, and turn the plan into motor commands."""
         cfg = self.config
+        self._timings = {}
         rot = quat_to_matrix(state.imu_quat)
         if not self._started:
             self._start(state, rot)
@@ -274,6 +287,8 @@ class MpcController:
         self._x0 = x0
         self._warm_start = plan.warm_start()
         self.solves += 1
+        self._timings["mpc_setup_s"] = plan.setup_s
+        self._timings["mpc_solve_s"] = plan.solve_s
 
     def _plan_step(self) -> int:
         k = int((self.t - self.plan_t) / self.config.mpc.dt)
@@ -288,10 +303,12 @@ class MpcController:
         target = self.targets.at(plan, self._x0, self.t - self.plan_t, kin)
         swing_pos, swing_vel = self.feet.swing_targets(contact, progress)
         arm_q = self._arm_target if self.has_arm else None
+        t0 = time.perf_counter()
         result = self.wbc.solve(kin.q_pin, kin.v_pin, contact, com=target.com, com_vel=target.com_vel,
                                 com_acc=target.com_acc, rot=target.rot, omega_world=target.omega,
                                 domega_world=target.domega, feet_pos=swing_pos, feet_vel=swing_vel,
                                 arm_q=arm_q, arm_dq=target.arm_dq if self.has_arm else None, with_forces=False)
+        self._timings["whole_body_s"] = time.perf_counter() - t0
         if not result.success:
             self.wbc_failures += 1
             return None
