@@ -30,7 +30,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from wbc.errors import MpcProblemFileError, WbcError
-from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, zoh_integral
+from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, G, zoh_integral
 from wbc.mpc.portable_proxsuite import proxsuite
 
 __all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "CentroidalMpc"]
@@ -299,7 +299,7 @@ class CentroidalMpc:
         stance0 = contact[0].tolist()
         u_bar = np.zeros(NU)
         u_bar[2:12:3] = stance0
-        u_bar[2:12:3] *= params.mass * 9.81 / max(1, sum(stance0))
+        u_bar[2:12:3] *= params.mass * G / max(1, sum(stance0))
         f0, a_c, b_c = self.model.linearize(x0, u_bar, params)
         d_c = f0 - a_c @ x0 - b_c @ u_bar
         integ = zoh_integral(a_c, cfg.dt)

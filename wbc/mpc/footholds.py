@@ -11,11 +11,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wbc.mpc.centroidal_model import G
 from wbc.mpc.gait import GaitConfig
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.swing import swing_point
 
-__all__ = ["FootholdConfig", "FootholdPlanner", "ground_height", "plan_foothold"]
+__all__ = ["MIN_CAPTURE_HEIGHT_M", "FootholdConfig", "FootholdPlanner", "ground_height", "plan_foothold"]
+
+MIN_CAPTURE_HEIGHT_M = 0.05
+"""Floor on the CoM height h in the capture-point time constant sqrt(h / g) [m].
+
+Keeps the capture and centripetal terms finite and non-zero when the height above the stance feet is estimated near
+zero or negative (a collapsing or badly estimated robot). A tuning value; no measurement behind it is recorded."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -70,7 +77,7 @@ def plan_foothold(hip_now: np.ndarray, com_now: np.ndarray, v_com: np.ndarray, v
     rx, ry = hx - cx, hy - cy
     lever_x, lever_y = c * rx - s * ry, s * rx + c * ry
     hip_x, hip_y = cx + vx * t + lever_x, cy + vy * t + lever_y
-    root = math.sqrt(max(height, 0.05) / 9.81)
+    root = math.sqrt(max(height, MIN_CAPTURE_HEIGHT_M) / G)
     half = stance_s / 2
     off_x = vcx * half + config.capture_gain * root * (vx - vcx)
     off_y = vcy * half + config.capture_gain * root * (vy - vcy)

@@ -19,9 +19,8 @@ __all__ = ["STANCE_FORCE_BEFORE_PLAN_N", "LegLayer"]
 STANCE_FORCE_BEFORE_PLAN_N = 35.0
 """Vertical force each stance foot pushes while there is no plan yet (the first MPC update failed) [N].
 
-A little under a quarter of the robots' weight (a1-wx200: 15.6 kg, 153 N on four feet), so the standing robot is
-carried rather than dropped until a plan comes. A tuning value from the controller's first version (commit cb4c167);
-no measurement behind it is recorded (docs/mpc-notes.md)."""
+About a quarter of the robots' weight (a1-wx200: 15.6 kg, 153 N over four feet). A tuning value from the
+controller's first version; no measurement behind it is recorded (docs/mpc-notes.md)."""
 
 _FORCE_BEFORE_PLAN = np.array([0.0, 0.0, STANCE_FORCE_BEFORE_PLAN_N])
 

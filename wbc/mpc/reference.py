@@ -25,14 +25,14 @@ XY_LEASH_M = 0.15
 """Largest distance, on each horizontal axis, between the CoM target and the measured CoM [m].
 
 The target is where the command says the robot should be; a pushed robot drags it along, so the MPC is never asked
-to make up more than this at once. A tuning value from the controller's first version (commit cb4c167); no
-measurement behind it is recorded (docs/mpc-notes.md)."""
+to make up more than this at once. A tuning value from the controller's first version; no measurement behind it is
+recorded (docs/mpc-notes.md)."""
 
 YAW_LEASH_RAD = 0.3
 """Largest angle between the yaw target and the measured (unwrapped) yaw [rad].
 
-A spun robot is asked to turn back at most this far at once. A tuning value from the controller's first version
-(commit cb4c167); no measurement behind it is recorded (docs/mpc-notes.md)."""
+A spun robot is asked to turn back at most this far at once. A tuning value from the controller's first
+version; no measurement behind it is recorded (docs/mpc-notes.md)."""
 
 
 class MotionReference:
