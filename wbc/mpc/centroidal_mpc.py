@@ -33,7 +33,7 @@ from wbc.errors import MpcProblemFileError, WbcError
 from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, G, zoh_integral
 from wbc.mpc.portable_proxsuite import proxsuite
 
-__all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "CentroidalMpc"]
+__all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "QpScaling", "CentroidalMpc"]
 
 
 @dataclass(frozen=True, kw_only=True)
