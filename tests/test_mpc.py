@@ -6,8 +6,9 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from wbc.errors import MpcProblemFileError
 from wbc.hardware.mujoco.scene import build_scene
-from wbc.mpc import CentroidalModel, CentroidalMpc, CentroidalParams, MpcConfig, SymbolicCentroidalModel
+from wbc.mpc import CentroidalModel, CentroidalMpc, CentroidalParams, MpcConfig, MpcProblem, SymbolicCentroidalModel
 from wbc.mpc.centroidal_model import euler_rates_matrix
 from wbc.mpc.gait import STAND, TROT, GaitConfig, GaitScheduler
 from wbc.mpc.kinematics import RobotKinematics
@@ -147,7 +148,8 @@ def test_mpc_plan_is_feasible_and_agrees_with_a_second_solver(gait):
     if gait == "pushed":
         x[3:6] = (0.0, 0.8, 0.0)  # a sideways kick
         x[6] = 0.15
-    sol = mpc.solve(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params)
+    problem = mpc.build(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params)
+    sol = mpc.solve(problem)
     f = sol.forces
     mu = mpc.config.mu
     assert np.all(f[..., 2] >= -1e-4) and np.all(f[..., 2] <= mpc.config.fz_max + 1e-3)
@@ -156,13 +158,57 @@ def test_mpc_plan_is_feasible_and_agrees_with_a_second_solver(gait):
     assert np.all(np.abs(sol.arm_velocity) <= joint_table(get_robot("a1-wx200")).velocity_limit[12:] + 1e-6)
     if gait == "stand":
         assert f[0, :, 2].sum() == pytest.approx(params.mass * 9.81, rel=0.05)
-    z_ref = _second_solver(mpc.problem)
+    z_ref = _second_solver(problem)
     np.testing.assert_allclose(sol.z, z_ref, atol=2e-3)
     # the previous solution, shifted, warm-starts the next solve to the same answer as a cold start
-    warm = mpc.solve(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params)
-    mpc.reset()
-    cold = mpc.solve(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params)
+    warm = mpc.plan(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params, sol.warm_start())
+    cold = mpc.plan(x, x_ref, contact, np.tile(feet, (n, 1, 1)), params)
     np.testing.assert_allclose(warm.z, cold.z, atol=2e-3)
+    assert warm.setup_s > 0 and warm.solve_s > 0
+
+
+def _same_plan(a, b):
+    for name in ("forces", "arm_velocity", "states", "z", "variables"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.iterations == b.iterations
+
+
+@pytest.mark.parametrize("gait", ["stand", "trot"])
+def test_a_saved_problem_loads_and_solves_to_the_live_plan_bit_for_bit(gait, tmp_path):
+    mpc, x0, feet, params = _standing_problem()
+    n = mpc.config.horizon
+    contact = np.ones((n, 4), bool)
+    if gait == "trot":
+        contact = np.array([[1, 0, 0, 1]] * 4 + [[0, 1, 1, 0]] * 5 + [[1, 0, 0, 1]], bool)
+    x = x0.copy()
+    x[3:6] = (0.1, 0.3, 0.0)
+    args = (np.tile(x0, (n, 1)), contact, np.tile(feet, (n, 1, 1)), params)
+    first_problem = mpc.build(x, *args)  # the live loop: a cold start, then warm starts from the shifted plan
+    first = mpc.solve(first_problem)
+    x[3:6] = (0.12, 0.25, 0.0)
+    problem = mpc.build(x, *args)
+    live = mpc.solve(problem, first.warm_start())
+    problem.save(tmp_path / "problem.npz")
+    loaded = MpcProblem.load(tmp_path / "problem.npz")
+    for name in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma"):
+        assert np.array_equal(getattr(loaded, name), getattr(problem, name)), name
+    # the warm start reuses the Ruiz scaling of the first (cold-started) problem, and the dump says so
+    assert problem.scaling is not None and np.array_equal(loaded.scaling.H, first_problem.H)
+    # a fresh solver (as in another process) and the live one replay it to the same bits, warm and cold
+    fresh, _, _, _ = _standing_problem()
+    _same_plan(fresh.solve(loaded, first.warm_start()), live)
+    _same_plan(mpc.solve(loaded, first.warm_start()), live)
+    _same_plan(fresh.solve(loaded), mpc.solve(problem))
+
+
+def test_a_problem_file_missing_arrays_is_refused_with_what_is_missing(tmp_path):
+    mpc, x0, feet, params = _standing_problem()
+    n = mpc.config.horizon
+    problem = mpc.build(x0, np.tile(x0, (n, 1)), np.ones((n, 4), bool), np.tile(feet, (n, 1, 1)), params)
+    old = {k: getattr(problem, k) for k in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index")}
+    np.savez(tmp_path / "old.npz", **old)  # a dump from before the problem carried its condensed dynamics
+    with pytest.raises(MpcProblemFileError, match="missing free, gamma"):
+        MpcProblem.load(tmp_path / "old.npz")
 
 
 def test_the_optimiser_swings_the_arm_to_right_the_body_when_arm_terms_are_on():
@@ -171,13 +217,12 @@ def test_the_optimiser_swings_the_arm_to_right_the_body_when_arm_terms_are_on():
     x = x0.copy()
     x[9:12] = (0.0, 0.0, 0.8)  # a yaw spin imparted by a push: the body must be stopped
     args = (np.tile(x0, (n, 1)), np.ones((n, 4), bool), np.tile(feet, (n, 1, 1)))
-    with_arm = mpc.solve(x, *args, params)
+    with_arm = mpc.plan(x, *args, params)
     assert np.abs(with_arm.arm_velocity).max() > 0.03
     # with the arm momentum matrix zeroed the arm has no effect on the body and stays still
     no_arm = CentroidalParams(mass=params.mass, inertia_world=params.inertia_world,
                               arm_momentum_matrix=np.zeros((3, 3)), feet_world=params.feet_world)
-    mpc.reset()
-    still = mpc.solve(x, *args, no_arm)
+    still = mpc.plan(x, *args, no_arm)
     assert np.abs(still.arm_velocity).max() < 1e-3
     assert euler_rates_matrix(np.zeros(3)) == pytest.approx(np.eye(3))
 

@@ -3,9 +3,12 @@
 import numpy as np
 import pytest
 
+from wbc.control.protocol import HasDebugPlan, HasTickTimings, TruthSwitch
 from wbc.control.registry import get_controller
+from wbc.errors import ConfigError
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.mpc import MpcSolveError
+from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.types import VelocityCommand
 
 
@@ -60,7 +63,7 @@ def test_every_variant_trots_in_place(name, joints):
 def test_failed_solves_fall_back_to_the_previous_plan_and_are_counted():
     def break_some(k, ctrl):
         if k == 100:
-            real = ctrl.mpc.solve
+            real = ctrl.mpc.plan
 
             def flaky(*args, **kwargs):
                 flaky.calls += 1
@@ -69,10 +72,80 @@ def test_failed_solves_fall_back_to_the_previous_plan_and_are_counted():
                 return real(*args, **kwargs)
 
             flaky.calls = 0
-            ctrl.mpc.solve = flaky
+            ctrl.mpc.plan = flaky
 
     robot, ctrl, log = _loop("mpc", 2.0, VelocityCommand(), hook=break_some)
     assert ctrl.counters()["fallbacks"] >= 3
+
+
+def test_tick_timings_report_the_mpc_update_and_the_whole_body_qp_on_the_ticks_they_ran():
+    seen = []
+
+    def record(k, ctrl):
+        seen.append((k, dict(ctrl.tick_timings()), ctrl.counters()["mpc_solves"]))
+
+    robot, ctrl, log = _loop("mpc", 0.2, VelocityCommand(vx=0.2), hook=record)
+    assert isinstance(ctrl, HasTickTimings) and isinstance(ctrl, HasDebugPlan) and isinstance(ctrl, TruthSwitch)
+    solves_before = 0
+    for k, timings, solves in seen:
+        updated = solves > solves_before
+        solves_before = solves
+        assert updated == (k % ctrl.config.replan_every == 0)
+        assert ("mpc_setup_s" in timings) == updated and ("mpc_solve_s" in timings) == updated
+        assert "whole_body_s" in timings  # the QP runs every tick once there is a plan (from the first tick)
+        assert set(timings) <= {"mpc_setup_s", "mpc_solve_s", "whole_body_s"}
+        assert all(v > 0 for v in timings.values())
+    # the leg-level layer runs no whole-body QP
+    legs = MpcController(robot.desc, MpcControllerConfig(whole_body="legs"))
+    legs.reset()
+    legs.act(robot.read(), VelocityCommand())
+    assert set(legs.tick_timings()) == {"mpc_setup_s", "mpc_solve_s"}
+    legs.act(robot.read(), VelocityCommand())
+    assert legs.tick_timings() == {}
+
+
+def test_a_failed_mpc_update_reports_no_mpc_timings():
+    def fail_once(k, ctrl):
+        if k == 19:
+            def failing(*args, **kwargs):
+                ctrl.mpc.plan = real
+                raise MpcSolveError("injected failure", problem=None)
+
+            real = ctrl.mpc.plan
+            ctrl.mpc.plan = failing
+        if k == 20:
+            assert ctrl.counters()["fallbacks"] == 1
+            assert "mpc_solve_s" not in ctrl.tick_timings() and "whole_body_s" in ctrl.tick_timings()
+
+    _loop("mpc", 0.06, VelocityCommand(), hook=fail_once)
+
+
+def test_unknown_whole_body_layer_is_a_config_error_naming_the_valid_ones():
+    with pytest.raises(ConfigError, match="'qp'.*'legs'.*got 'wbic'"):
+        MpcControllerConfig(whole_body="wbic")
+    with pytest.raises(ConfigError, match="at least 1"):
+        MpcControllerConfig(replan_every=0)
+
+
+_IMPORT_PROBE = """
+import sys
+import wbc.mpc.controller
+bad = sorted(m for m in sys.modules if m.startswith(("wbc.arena", "wbc.tools", "wbc.cli", "wbc.viz", "wbc.control")))
+print(",".join(bad))
+"""
+
+
+def test_the_mpc_controller_imports_nothing_above_it():
+    # wbc.mpc sits below control, arena, tools, cli and viz: importing it must not pull any of them in
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}  # this tree's wbc
+    out = subprocess.run([sys.executable, "-c", _IMPORT_PROBE], capture_output=True, text=True, check=True,
+                         env=env).stdout
+    assert out.strip() == ""
 
 
 def test_walking_at_0_3_m_s_is_tracked_within_0_05_m_s():

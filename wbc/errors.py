@@ -115,3 +115,18 @@ class NetworkMismatchError(WbcError, ValueError):
     The policy file format it is exported to, a composite's parts, the policy a warm start copies, the teacher of
     a BC term, or the procedure it is given to (RMA phase 2).
     """
+
+
+# --- mpc
+
+
+class MpcProblemFileError(WbcError, ValueError):
+    """A dumped MPC problem file (``MpcProblem.save``) is missing arrays or is not one; the message names the file."""
+
+    def __init__(self, path: str, missing: list[str] | tuple[str, ...]) -> None:
+        super().__init__(
+            f"{path} is not a complete MPC problem file: missing {', '.join(missing)}; dump it again with "
+            "MpcProblem.save from this version of wbc (older dumps lack what solve needs to rebuild the states)"
+        )
+        self.path = path
+        self.missing = tuple(missing)

@@ -1,7 +1,7 @@
 """The model-based contender: centroidal dynamics with arm momentum and the MPC that plans with them."""
 
 from wbc.mpc.centroidal_model import CentroidalModel, CentroidalParams, SymbolicCentroidalModel
-from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcProblem, MpcSolution, MpcSolveError
+from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcProblem, MpcSolution, MpcSolveError, QpScaling
 
 __all__ = [
     "CentroidalModel",
@@ -11,5 +11,6 @@ __all__ = [
     "MpcProblem",
     "MpcSolution",
     "MpcSolveError",
+    "QpScaling",
     "SymbolicCentroidalModel",
 ]

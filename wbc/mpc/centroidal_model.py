@@ -33,13 +33,31 @@ import pinocchio as pin
 
 from wbc.robots.pinocchio_model import PinocchioRobot
 
-__all__ = ["NX", "NU", "NF", "CentroidalParams", "CentroidalModel", "SymbolicCentroidalModel", "euler_rates_matrix",
-           "expm", "skew", "zoh_integral"]
+__all__ = ["NX", "NU", "NF", "COM", "COM_VEL", "RPY", "MOMENTUM", "ARM_Q", "FORCES", "ARM_DQ", "G", "GRAVITY",
+           "CentroidalParams", "CentroidalModel", "SymbolicCentroidalModel", "euler_rates_matrix", "expm", "skew",
+           "zoh_integral"]
 
 NX = 15
 NU = 15
 NF = 12  # force inputs
-GRAVITY = np.array([0.0, 0.0, -9.81])
+COM = slice(0, 3)
+"""CoM position c in the state x [m]."""
+COM_VEL = slice(3, 6)
+"""CoM velocity v in the state x [m/s]."""
+RPY = slice(6, 9)
+"""Base orientation Theta (roll, pitch, yaw; ZYX Euler) in the state x [rad]."""
+MOMENTUM = slice(9, 12)
+"""Centroidal angular momentum h in the state x [kg m^2/s]."""
+ARM_Q = slice(12, 15)
+"""Arm joint positions q_a in the state x [rad]."""
+FORCES = slice(0, 12)
+"""Contact forces f_FR, f_FL, f_RR, f_RL in the input u [N]."""
+ARM_DQ = slice(12, 15)
+"""Arm joint velocities dq_a in the input u [rad/s]."""
+G = 9.81
+"""Gravity's magnitude [m/s^2] (MuJoCo's default, the simulator's)."""
+GRAVITY = np.array([0.0, 0.0, -G])
+"""Gravity acceleration, world frame [m/s^2]."""
 # index pairs of the constant unit entries of the Jacobians
 _POS_ROWS, _VEL_ROWS = np.arange(0, 3), np.arange(3, 6)
 _FORCE_ROWS, _FORCE_COLS = np.tile(np.arange(3, 6), 4), np.arange(12)

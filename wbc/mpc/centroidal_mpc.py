@@ -11,22 +11,29 @@ force (their variables are dropped); arm joint velocity limits (box) and arm joi
 (rows of the condensed dynamics). A frozen arm (locked, absent, or momentum terms off) has no variables.
 
 Warm start: the previous solution shifted by one step is passed explicitly (ProxSuite's own "warm start with previous
-result" gave wrong answers when contact bounds flipped); if that solve fails, a cold start follows. A solve that still
-fails raises `MpcSolveError` carrying the problem, so the controller can fall back to the shifted previous plan.
+result" is not used: it gave wrong answers when contact bounds flipped); if that solve fails, a cold start
+follows. A solve that still fails raises `MpcSolveError` carrying the problem, so the controller can fall
+back to the shifted previous plan. Lab notes on the values chosen here: docs/mpc-notes.md.
+
+Scaling: a cold start lets ProxSuite compute its Ruiz equilibration of the QP; a warm start does not recompute it
+(about half the cost of a solve) and ProxSuite then reuses the scaling its QP object of that shape got at its last cold
+start (``compute_preconditioner=False`` keeps the current scaling, it does not reset it). That earlier QP is named in
+each problem (`MpcProblem.scaling`), so `CentroidalMpc.solve` is a function of the problem and the warm start alone:
+a saved problem replays to the same bits in a fresh solver.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from wbc.errors import WbcError
-from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, zoh_integral
+from wbc.errors import MpcProblemFileError, WbcError
+from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, G, zoh_integral
 from wbc.mpc.portable_proxsuite import proxsuite
 
-__all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "CentroidalMpc"]
+__all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "QpScaling", "CentroidalMpc"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -45,9 +52,8 @@ class MpcConfig:
         weight_momentum: angular momentum error weights.
         weight_arm_q: arm position error weights (pull towards the nominal pose).
         weight_force: force effort weight [1/N^2].
-        weight_arm_dq: arm velocity effort weight. With 1e-3 (and arm position weight 1) the arm moved ~4 rad/s
-            all the time for small orientation corrections; 0.05 and 5 cut its travel 6-fold at the same success
-            on 10 out-of-distribution push trials.
+        weight_arm_dq: arm velocity effort weight; high enough that small orientation corrections do not keep the
+            arm moving fast.
         arm_margin: keep the planned arm this far inside its joint limits [rad].
     """
 
@@ -67,11 +73,60 @@ class MpcConfig:
 
 
 @dataclass
+class QpScaling:
+    """The QP whose Ruiz equilibration a warm-started solve reuses: the last one of the same shape to start cold.
+
+    Attributes:
+        H: its Hessian.
+        g: its gradient.
+        C: its inequality rows.
+        l: its row lower bounds.
+        u: its row upper bounds.
+        l_box: its variable lower bounds.
+        u_box: its variable upper bounds.
+    """
+
+    H: np.ndarray
+    g: np.ndarray
+    C: np.ndarray
+    l: np.ndarray  # noqa: E741 - ProxSuite's name for the lower bounds
+    u: np.ndarray
+    l_box: np.ndarray
+    u_box: np.ndarray
+
+    @classmethod
+    def of(cls, problem: MpcProblem) -> QpScaling:
+        """The scaling a cold start of `problem` computes (its arrays, not copied)."""
+        return cls(H=problem.H, g=problem.g, C=problem.C, l=problem.l, u=problem.u, l_box=problem.l_box,
+                   u_box=problem.u_box)
+
+
+_SCALING_PREFIX = "scaling."  # keys of the `QpScaling` arrays in a saved problem
+
+
+@dataclass
 class MpcProblem:
-    """One tick's QP in ProxSuite's form (scaled variables), kept so it can be dumped and replayed.
+    """One update's QP in ProxSuite's form (scaled variables) and what turns its solution into a plan.
 
     min 1/2 z^T H z + g^T z  s.t.  l <= C z <= u,  l_box <= z <= u_box;  U[index] = scale * z, other entries of
-    the full input vector U (swing forces, a frozen arm's velocities) are zero.
+    the full input vector U (N NU: swing forces, a frozen arm's velocities) are zero. The predicted states are
+    X = free + gamma U (the condensed dynamics). Everything `CentroidalMpc.solve` needs is here, so a problem written
+    by `save` and read back by `load` solves on its own to the same plan.
+
+    Attributes:
+        H: Hessian, shape (n, n) for the n = index.size decision variables.
+        g: gradient (n,).
+        C: inequality rows (friction pyramids, then arm position limits along the horizon), shape (m, n).
+        l: lower bounds of the rows (m,) (-inf where one-sided).
+        u: upper bounds of the rows (m,).
+        l_box: lower bounds of the variables (n,) [force_scale N, rad/s].
+        u_box: upper bounds of the variables (n,).
+        scale: unit of each variable (n,): U[index] = scale * z [N or 1].
+        index: position of each variable in the full input vector U (n,).
+        free: predicted states with zero input, x_1 .. x_N stacked, shape (N NX,).
+        gamma: condensed input matrix, d X / d U, shape (N NX, N NU).
+        scaling: the QP whose Ruiz equilibration a warm start reuses (see the module docstring); None: no QP of
+            this shape has started cold yet, so a warm start runs unscaled.
     """
 
     H: np.ndarray
@@ -83,27 +138,53 @@ class MpcProblem:
     u_box: np.ndarray
     scale: np.ndarray
     index: np.ndarray
+    free: np.ndarray
+    gamma: np.ndarray
+    scaling: QpScaling | None = None
+
+    @property
+    def horizon(self) -> int:
+        """Number of steps N."""
+        return self.free.size // NX
 
     def save(self, path: str) -> None:
-        """Write the problem to an ``.npz`` file."""
-        np.savez_compressed(path, **self.__dict__)
+        """Write the problem to an ``.npz`` file (compressed, no pickles), its `scaling` QP included."""
+        arrays = {name: getattr(self, name) for name in _ARRAYS}
+        if self.scaling is not None:
+            arrays.update({_SCALING_PREFIX + f.name: getattr(self.scaling, f.name) for f in fields(QpScaling)})
+        np.savez_compressed(path, **arrays)
 
     @classmethod
     def load(cls, path: str) -> MpcProblem:
-        """Read a problem written by `save`."""
+        """Read a problem written by `save`.
+
+        Raises:
+            MpcProblemFileError: the file lacks some of the problem's arrays (an older dump, or not a problem).
+        """
+        scaling_keys = [_SCALING_PREFIX + f.name for f in fields(QpScaling)]
         with np.load(path, allow_pickle=False) as z:
-            return cls(**{k: z[k] for k in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index")})
+            has_scaling = any(k in z.files for k in scaling_keys)
+            missing = [k for k in (*_ARRAYS, *(scaling_keys if has_scaling else ())) if k not in z.files]
+            if missing:
+                raise MpcProblemFileError(str(path), missing)
+            scaling = None
+            if has_scaling:
+                scaling = QpScaling(**{k.removeprefix(_SCALING_PREFIX): z[k] for k in scaling_keys})
+            return cls(**{k: z[k] for k in _ARRAYS}, scaling=scaling)
+
+
+_ARRAYS = ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma")  # `MpcProblem`'s arrays
 
 
 class MpcSolveError(WbcError):
-    """The QP failed; `problem` holds it for replay."""
+    """The QP failed; `problem` holds it for replay (``error.problem.save(path)``, then `CentroidalMpc.solve`)."""
 
     def __init__(self, message: str, problem: MpcProblem) -> None:
         super().__init__(message)
         self.problem = problem
 
 
-@dataclass
+@dataclass(kw_only=True)
 class MpcSolution:
     """The plan of one update.
 
@@ -113,7 +194,9 @@ class MpcSolution:
         states: predicted states x_1 .. x_N, shape (N, 15).
         iterations: solver iterations.
         solve_s: QP solve time [s].
-        setup_s: linearisation and condensing time [s].
+        setup_s: linearisation and condensing time [s] (0 when the problem was built elsewhere, e.g. loaded).
+        z: the QP's solution, the problem's decision variables only (scaled).
+        variables: the full scaled input vector, zeros where the problem had no variable, shape (N NU,).
     """
 
     forces: np.ndarray
@@ -121,12 +204,26 @@ class MpcSolution:
     states: np.ndarray
     iterations: int
     solve_s: float
-    setup_s: float
+    setup_s: float = 0.0
     z: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+    variables: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+
+    def warm_start(self) -> np.ndarray:
+        """This plan shifted one step earlier, its last step repeated: the initial guess for the next update.
+
+        Returns:
+            The full scaled input vector (N NU,) that `CentroidalMpc.solve` takes as ``warm_start``.
+        """
+        prev = self.variables
+        n = prev.size // NU
+        full0 = np.zeros(prev.size)
+        full0[: (n - 1) * NU] = prev[NU:]
+        full0[(n - 1) * NU:] = prev[(n - 1) * NU:]
+        return full0
 
 
 class CentroidalMpc:
-    """Build once, solve every update.
+    """Constant parts built once; every update `build` makes the QP and `solve` solves it (`plan` does both).
 
     Args:
         config: settings.
@@ -145,6 +242,8 @@ class CentroidalMpc:
         self._arm_upper = np.asarray(arm_upper, dtype=np.float64) - config.arm_margin
         self._arm_vmax = np.asarray(arm_velocity_limit, dtype=np.float64)
         self._qps: dict[tuple[int, int], proxsuite.proxqp.dense.QP] = {}
+        # per QP shape: the QP whose equilibration ProxSuite's object of that shape holds (absent: none, unscaled)
+        self._scaled_by: dict[tuple[int, int], QpScaling] = {}
         scale = np.ones(NU)
         scale[:12] = config.force_scale
         self._scale = np.tile(scale, n)
@@ -154,19 +253,35 @@ class CentroidalMpc:
         r = np.full(NU, config.weight_force)
         r[12:] = config.weight_arm_dq
         self._r_diag = np.tile(r, n)
-        self._prev: np.ndarray | None = None
-        self.problem: MpcProblem | None = None
         self._arm_free = bool(np.any(self._arm_vmax > 0))
         self._tril = np.tril_indices(n)
         self._arm_rows = (np.arange(n)[:, None] * NX + np.arange(12, 15)[None]).ravel()  # arm rows of the states
 
-    def reset(self) -> None:
-        """Forget the previous solution (no warm start on the next solve)."""
-        self._prev = None
+    def plan(self, x0: np.ndarray, x_ref: np.ndarray, contact: np.ndarray, feet: np.ndarray,
+             params: CentroidalParams, warm_start: np.ndarray | None = None) -> MpcSolution:
+        """Plan N steps from `x0`: `build`, then `solve`, with the build's time in ``setup_s``.
 
-    def solve(self, x0: np.ndarray, x_ref: np.ndarray, contact: np.ndarray, feet: np.ndarray,
-              params: CentroidalParams) -> MpcSolution:
-        """Plan N steps from `x0`.
+        Args:
+            x0: current state (15,).
+            x_ref: reference states x_1 .. x_N, shape (N, 15).
+            contact: stance flags per step and foot, shape (N, 4).
+            feet: foot positions per step (planned footholds for swing feet), world, shape (N, 4, 3) [m].
+            params: mass, inertia and arm momentum matrix at the current configuration.
+            warm_start: initial guess, usually the previous plan's `MpcSolution.warm_start()`; None: cold start.
+
+        Raises:
+            MpcSolveError: the QP did not solve (the problem is attached).
+        """
+        t0 = time.perf_counter()
+        problem = self.build(x0, x_ref, contact, feet, params)
+        setup = time.perf_counter() - t0
+        solution = self.solve(problem, warm_start)
+        solution.setup_s = setup
+        return solution
+
+    def build(self, x0: np.ndarray, x_ref: np.ndarray, contact: np.ndarray, feet: np.ndarray,
+              params: CentroidalParams) -> MpcProblem:
+        """The QP of one update: linearise about `x0`, condense the states out, add the constraints.
 
         Args:
             x0: current state (15,).
@@ -175,17 +290,16 @@ class CentroidalMpc:
             feet: foot positions per step (planned footholds for swing feet), world, shape (N, 4, 3) [m].
             params: mass, inertia and arm momentum matrix at the current configuration.
 
-        Raises:
-            MpcSolveError: the QP did not solve.
+        Returns:
+            The problem, complete: `solve` needs nothing else.
         """
-        t0 = time.perf_counter()
         cfg, n = self.config, self.config.horizon
         contact = np.asarray(contact, dtype=bool)
         # linearise once about x0 and the gravity-compensating input of the first step's stance set
         stance0 = contact[0].tolist()
         u_bar = np.zeros(NU)
         u_bar[2:12:3] = stance0
-        u_bar[2:12:3] *= params.mass * 9.81 / max(1, sum(stance0))
+        u_bar[2:12:3] *= params.mass * G / max(1, sum(stance0))
         f0, a_c, b_c = self.model.linearize(x0, u_bar, params)
         d_c = f0 - a_c @ x0 - b_c @ u_bar
         integ = zoh_integral(a_c, cfg.dt)
@@ -209,7 +323,7 @@ class CentroidalMpc:
         inputs[:, 9:12, NU] -= (c_ref - x0[0:3]) @ total_force_skew.T
         inputs = integ @ inputs
         # Condensed: x_{k+1} = A^(k+1) x0 + sum_{j<=k} A^(k-j) (B_j u_j + d_j), all blocks in one batched product
-        # (the step-by-step recursion cost ~40 small numpy calls per step).
+        # (a step-by-step recursion would cost dozens of small numpy calls per step).
         powers = np.empty((n + 1, NX, NX))
         powers[0] = np.eye(NX)
         for j in range(1, n + 1):
@@ -265,45 +379,82 @@ class CentroidalMpc:
             c[4 * m:] = gam[arm_rows]
             lo[4 * m:] = (np.minimum(self._arm_lower, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
             hi[4 * m:] = (np.maximum(self._arm_upper, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
-        self.problem = MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx)
-        setup = time.perf_counter() - t0
+        return MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx, free=free,
+                          gamma=gamma, scaling=self._scaled_by.get((idx.size, c.shape[0])))
+
+    def solve(self, problem: MpcProblem, warm_start: np.ndarray | None = None) -> MpcSolution:
+        """Solve a problem from `build` (or `MpcProblem.load`) into a plan.
+
+        The warm start is tried first, scaled as `problem.scaling` says; if it fails (or there is none) a cold start
+        follows. The plan depends on the problem and the warm start only, bit for bit: a problem solved out of turn
+        (loaded, or in a fresh solver) first gets its scaling back, at the cost of one more ProxSuite setup.
+
+        Args:
+            problem: the QP and what rebuilds the states from its solution.
+            warm_start: initial guess as a full scaled input vector (N NU,), usually the previous plan's
+                `MpcSolution.warm_start()`; clipped to the variables' bounds. None: cold start only.
+
+        Returns:
+            The plan (``setup_s`` 0: the build is not timed here).
+
+        Raises:
+            MpcSolveError: the QP did not solve (the problem is attached).
+        """
         t1 = time.perf_counter()
-        qp = self._qp_for(idx.size, c.shape[0])
-        # No Ruiz equilibration: the QP is scaled by construction (forces in units of `force_scale`), and the
-        # equilibration took half of every solve (0.6 of 1.0 ms); on 50 recorded walking updates the forces of the
-        # first step (the ones applied) agreed within 1 N with and without it.
-        qp.init(h, g, None, None, c, lo, hi, l_box, u_box, compute_preconditioner=False)
+        h, g, c, lo, hi = problem.H, problem.g, problem.C, problem.l, problem.u
+        l_box, u_box = problem.l_box, problem.u_box
+        idx, n = problem.index, problem.horizon
+        key = (idx.size, c.shape[0])
         solved = False
-        if self._prev is not None:
-            full0 = np.zeros(self.n_var)
-            full0[: (n - 1) * NU] = self._prev[NU:]
-            full0[(n - 1) * NU:] = self._prev[(n - 1) * NU:]
+        if warm_start is not None:
+            qp = self._qp_scaled_by(key, problem.scaling)
+            # The equilibration is not recomputed here (it would take about half of the solve; the QP is scaled by
+            # construction, forces in units of `force_scale`): ProxSuite keeps the one of `problem.scaling`.
+            qp.init(h, g, None, None, c, lo, hi, l_box, u_box, compute_preconditioner=False)
             qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START
-            qp.solve(np.clip(full0[idx], l_box, u_box), None, None)
+            qp.solve(np.clip(warm_start[idx], l_box, u_box), None, None)
             solved = self._ok(qp)
         if not solved:  # cold start: first solve, or a warm start that went astray
+            qp = self._qp_for(*key)
             qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
             qp.init(h, g, None, None, c, lo, hi, l_box, u_box)
+            self._scaled_by[key] = QpScaling.of(problem)  # the next warm starts of this shape reuse this scaling
             qp.solve()
             solved = self._ok(qp)
         solve = time.perf_counter() - t1
         z = qp.results.x.copy()
         if not solved:
-            self._prev = None
-            raise MpcSolveError(f"MPC QP not solved: {qp.results.info.status}", self.problem)
-        full = np.zeros(self.n_var)
+            raise MpcSolveError(f"MPC QP not solved ({qp.results.info.status}) from a warm nor a cold start; to "
+                                "investigate, save it (error.problem.save(path)) and replay it with "
+                                "CentroidalMpc.solve(MpcProblem.load(path))", problem)
+        full = np.zeros(problem.gamma.shape[1])
         full[idx] = z
-        self._prev = full
-        u = full * self._scale
-        states = (free + gamma @ u).reshape(n, NX)
+        u = np.zeros(full.size)
+        u[idx] = z * problem.scale  # = full * the full scale vector: entries without a variable stay 0
+        states = (problem.free + problem.gamma @ u).reshape(n, NX)
         steps = u.reshape(n, NU)
         return MpcSolution(forces=steps[:, :12].reshape(n, 4, 3), arm_velocity=steps[:, 12:].copy(), states=states,
-                           iterations=int(qp.results.info.iter), solve_s=solve, setup_s=setup, z=z)
+                           iterations=int(qp.results.info.iter), solve_s=solve, z=z, variables=full)
 
     @staticmethod
     def _ok(qp: proxsuite.proxqp.dense.QP) -> bool:
         return (qp.results.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
                 and bool(np.all(np.isfinite(qp.results.x))))
+
+    def _qp_scaled_by(self, key: tuple[int, int], scaling: QpScaling | None) -> proxsuite.proxqp.dense.QP:
+        """ProxSuite's object for QPs of this shape, holding the equilibration of `scaling` (None: unscaled)."""
+        if self._scaled_by.get(key) is not scaling:
+            # out of turn (a loaded problem, another solver's): set the scaling up again as its cold start did
+            if scaling is None:
+                self._qps.pop(key, None)  # only a new object is unscaled
+                self._scaled_by.pop(key, None)
+            else:
+                qp = self._qp_for(*key)
+                qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
+                qp.init(scaling.H, scaling.g, None, None, scaling.C, scaling.l, scaling.u, scaling.l_box,
+                        scaling.u_box)
+                self._scaled_by[key] = scaling
+        return self._qp_for(*key)
 
     def _qp_for(self, n_var: int, n_in: int) -> proxsuite.proxqp.dense.QP:
         key = (n_var, n_in)
@@ -314,8 +465,8 @@ class CentroidalMpc:
             qp.settings.eps_rel = 0.0
             qp.settings.max_iter = 1000
             # Every problem built here is feasible (zero forces and a still arm satisfy all constraints: the arm
-            # limits are widened to include the current position), so an "infeasible" verdict can only be false:
-            # ProxSuite's default 1e-4 threshold gave such verdicts on ill-conditioned pushed states.
+            # limits are widened to include the current position), so an "infeasible" verdict can only be false,
+            # and ProxSuite's default 1e-4 threshold is loose enough to give one on ill-conditioned states.
             qp.settings.eps_primal_inf = 1e-9
             qp.settings.eps_dual_inf = 1e-9
             self._qps[key] = qp

@@ -1,4 +1,8 @@
-"""Foothold planning: the Raibert heuristic with a capture-point correction, so a push can be stepped out."""
+"""Foothold planning: the Raibert heuristic with a capture-point correction, so a push can be stepped out.
+
+`plan_foothold` places one swing foot; `FootholdPlanner` keeps, for the four feet, where each lifted off and where it
+will land (refreshed while it swings), and the swing targets between the two (`swing_point`).
+"""
 
 from __future__ import annotations
 
@@ -7,7 +11,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FootholdConfig", "plan_foothold"]
+from wbc.mpc.centroidal_model import G
+from wbc.mpc.gait import GaitConfig
+from wbc.mpc.kinematics import RobotKinematics
+from wbc.mpc.swing import swing_point
+
+__all__ = ["MIN_CAPTURE_HEIGHT_M", "FootholdConfig", "FootholdPlanner", "ground_height", "plan_foothold"]
+
+MIN_CAPTURE_HEIGHT_M = 0.05
+"""Floor on the CoM height h in the capture-point time constant sqrt(h / g) [m].
+
+Keeps the capture and centripetal terms finite and non-zero when the height above the stance feet is estimated near
+zero or negative (a collapsing or badly estimated robot). A tuning value; no measurement behind it is recorded."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -17,9 +32,8 @@ class FootholdConfig:
     Attributes:
         capture_gain: multiplies the capture-point term sqrt(h / g) (v - v_cmd).
         centripetal_gain: multiplies the turning term sqrt(h / g) (v x w_cmd): while turning the feet land outside
-            the hips so the legs lean into the turn and carry the centripetal force (MIT Cheetah 3 uses 0.5;
-            on go1-arm at 1.25 m/s and 2 rad/s, 0.5 and 0.2 rolled the body into the turn,
-            0 let it tip outward, 0.1 held it level).
+            the hips so the legs lean into the turn and carry the centripetal force; too much rolls the body into
+            the turn, none lets it tip outward (tuning: docs/mpc-notes.md).
         max_offset: largest horizontal distance from the hip's projection [m].
     """
 
@@ -63,7 +77,7 @@ def plan_foothold(hip_now: np.ndarray, com_now: np.ndarray, v_com: np.ndarray, v
     rx, ry = hx - cx, hy - cy
     lever_x, lever_y = c * rx - s * ry, s * rx + c * ry
     hip_x, hip_y = cx + vx * t + lever_x, cy + vy * t + lever_y
-    root = math.sqrt(max(height, 0.05) / 9.81)
+    root = math.sqrt(max(height, MIN_CAPTURE_HEIGHT_M) / G)
     half = stance_s / 2
     off_x = vcx * half + config.capture_gain * root * (vx - vcx)
     off_y = vcy * half + config.capture_gain * root * (vy - vcy)
@@ -78,3 +92,92 @@ def plan_foothold(hip_now: np.ndarray, com_now: np.ndarray, v_com: np.ndarray, v
         off_x *= config.max_offset / norm
         off_y *= config.max_offset / norm
     return np.array([hip_x + off_x, hip_y + off_y, float(ground_z)])
+
+
+def ground_height(feet: np.ndarray, stance: np.ndarray) -> float:
+    """Mean height of the stance feet (the lowest foot when none stands) [m].
+
+    Args:
+        feet: foot positions, world, shape (4, 3) [m].
+        stance: stance flags (4,).
+    """
+    heights = feet[:, 2].tolist()
+    down = [z for z, s in zip(heights, stance.tolist(), strict=True) if s]
+    return math.fsum(down) / len(down) if down else min(heights)
+
+
+class FootholdPlanner:
+    """Lift-off points and footholds of the four feet; a stance foot's foothold is where it stands.
+
+    Args:
+        gait: the gait (its stance and swing durations).
+        config: foothold heuristic settings.
+        swing_height: swing apex [m].
+
+    Attributes:
+        liftoff: where each foot last lifted off, world, shape (4, 3) [m].
+        footholds: where each swing foot will land (a stance foot: where it stands), world, shape (4, 3) [m].
+    """
+
+    def __init__(self, gait: GaitConfig, config: FootholdConfig, swing_height: float) -> None:
+        self.gait = gait
+        self.config = config
+        self.swing_height = swing_height
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new episode: every foot standing."""
+        self.liftoff = np.zeros((4, 3))
+        self.footholds = np.zeros((4, 3))
+        self._was_stance = [True] * 4
+
+    def update(self, kin: RobotKinematics, contact: np.ndarray, touchdown: np.ndarray,
+               v_cmd_xy: tuple[float, float], yaw_rate: float, *, refresh: bool) -> None:
+        """Record the lift-offs of this tick and place the swing feet's footholds.
+
+        Args:
+            kin: the robot's kinematics at this tick.
+            contact: scheduled stance flags (4,).
+            touchdown: time until each swing foot's touchdown (4,) [s].
+            v_cmd_xy: commanded horizontal velocity, world [m/s].
+            yaw_rate: commanded yaw rate [rad/s].
+            refresh: re-plan every swing foot's foothold (otherwise only those that lifted off at this tick).
+        """
+        stance = contact.tolist()
+        was = self._was_stance
+        ground = None
+        for i in range(4):
+            if stance[i]:
+                continue
+            lifted = was[i]
+            if lifted:
+                self.liftoff[i] = kin.feet[i]
+            if refresh or lifted:
+                if ground is None:
+                    ground = ground_height(kin.feet, contact)
+                    v_cmd_world = np.array([v_cmd_xy[0], v_cmd_xy[1], 0.0])
+                hip = kin.hip_positions()[i].copy()
+                self.footholds[i] = plan_foothold(hip, kin.com, kin.com_vel, v_cmd_world, yaw_rate,
+                                                  float(touchdown[i]), self.gait.stance_s, kin.com[2] - ground,
+                                                  ground, self.config)
+        np.copyto(self.footholds, kin.feet, where=contact[:, None])
+        self._was_stance = stance
+
+    def swing_targets(self, contact: np.ndarray, progress: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Position and velocity targets of the swing feet, from lift-off to foothold (zeros for stance feet).
+
+        Args:
+            contact: stance flags (4,).
+            progress: progress of each foot through its swing, in [0, 1] (4,).
+
+        Returns:
+            (positions, velocities), world, shape (4, 3) each [m], [m/s].
+        """
+        pos = np.zeros((4, 3))
+        vel = np.zeros((4, 3))
+        s = progress.tolist()
+        for i, stance in enumerate(contact.tolist()):
+            if not stance:
+                pos[i], vel[i] = swing_point(self.liftoff[i], self.footholds[i], s[i], self.gait.swing_s,
+                                             self.swing_height)
+        return pos, vel

@@ -8,7 +8,13 @@ import numpy as np
 
 from wbc.errors import ConfigError
 
-__all__ = ["GaitConfig", "GaitScheduler", "TROT", "STAND"]
+__all__ = ["GaitConfig", "GaitScheduler", "TROT", "STAND", "STANCE_END_MARGIN"]
+
+STANCE_END_MARGIN = 1e-12
+"""A phase this close below `GaitConfig.duty` already counts as out of contact [cycles].
+
+A round-off guard at the stance/swing boundary, where a tick's phase (t / period + offset, mod 1) can land a few ulps
+either side of duty; only its being round-off-sized matters."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -65,14 +71,16 @@ class GaitScheduler:
 
     def contact(self, t: float) -> np.ndarray:
         """Scheduled stance flags of the four feet at time `t` [s]."""
-        return self.phase(t) < self.config.duty - 1e-12 if self.config.duty < 1.0 else np.ones(4, dtype=bool)
+        if self.config.duty >= 1.0:
+            return np.ones(4, dtype=bool)
+        return self.phase(t) < self.config.duty - STANCE_END_MARGIN
 
     def contact_table(self, t: float, dt: float, n: int) -> np.ndarray:
         """Stance flags over a horizon: row k is the middle of step [t + k dt, t + (k + 1) dt], shape (n, 4)."""
         times = t + (np.arange(n) + 0.5) * dt
         if self.config.duty >= 1.0:
             return np.ones((n, 4), dtype=bool)
-        return np.mod(times[:, None] / self.config.period + self._offsets, 1.0) < self.config.duty - 1e-12
+        return np.mod(times[:, None] / self.config.period + self._offsets, 1.0) < self.config.duty - STANCE_END_MARGIN
 
     def swing_progress(self, t: float) -> np.ndarray:
         """For each foot, progress through its swing in [0, 1] (0 for feet in stance)."""
@@ -93,7 +101,7 @@ class GaitScheduler:
         contact, progress, touchdown = [], [], []
         for offset in self._offset_list:
             ph = (cycles + offset) % 1.0
-            contact.append(ph < duty - 1e-12)
+            contact.append(ph < duty - STANCE_END_MARGIN)
             swing = ph >= duty
             progress.append((ph - duty) / swing_s if swing else 0.0)
             touchdown.append((1.0 - ph) * c.period if swing else 0.0)

@@ -14,7 +14,11 @@ from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import FOOT_NAMES, LEG_NAMES, RobotDescription
 from wbc.robots.pinocchio_model import build_pinocchio
 
-__all__ = ["RobotKinematics"]
+__all__ = ["ARM_JOINTS", "RobotKinematics"]
+
+ARM_JOINTS = slice(12, 15)
+"""The arm's joints (waist yaw, shoulder pitch, elbow pitch) in the house joint order, when the arm is actuated: they
+follow the 12 leg joints (legs FR, FL, RR, RL x hip, thigh, calf)."""
 
 
 class RobotKinematics:
@@ -37,7 +41,7 @@ class RobotKinematics:
         self._perm = self.robot.joints.pin_from_house  # pin joint k is house joint perm[k]
         self._house_cols = 6 + self.robot.joints.house_from_pin  # v index of each house joint
         self.n = desc.num_joints
-        self.arm_v = self._house_cols[12:15] if self.n == 15 else None
+        self.arm_v = self._house_cols[ARM_JOINTS] if self.n == 15 else None
         self.feet = np.zeros((4, 3))
         self.feet_vel = np.zeros((4, 3))
         self.hips = np.zeros((4, 3))

@@ -3,10 +3,9 @@
 ProxSuite ships three builds of its bindings (AVX-512, AVX2, portable) and picks the widest the CPU runs. The wide
 builds' Eigen reductions start with a scalar head that depends on each buffer's address modulo the 32 or 64 byte
 vector width, while the allocator guarantees only 16 bytes; the same QP then solves to answers that differ in the
-last bits from one process to the next (measured: an MPC trial's tracking error differed at 1e-11 between two
-processes that had allocated different Python objects before it, with bit-identical QP inputs). 16-byte vectors
-always start aligned, so the portable build gives the same bits whatever the heap history, and on this project's
-problem sizes it is as fast (bench mpc: solve medians within the run-to-run spread).
+last bits from one process to the next, depending on what was allocated before it. 16-byte vectors always start
+aligned, so the portable build gives the same bits whatever the heap history, and on this project's problem sizes it
+is as fast (the measurements: docs/mpc-notes.md).
 
 ProxSuite picks its build at import, asking its ``proxsuite.instructionset`` helper what the CPU supports; this
 module answers "nothing wide" for that one question before the import. If ProxSuite was already imported by

@@ -12,13 +12,9 @@ motors' torque limits. Weighted tasks:
 - stance feet: zero acceleration, through the contacts.
 
 Why PlaCo rather than our own ProxSuite QP: the whole problem (kinematics, mass matrix, task Jacobians, QP) stays in
-C++, one Python call per tick; a numpy-assembled QP of the same size costs 3-5x more per tick in Python overhead.
-Measured (issue 4): PlaCo's solve of this problem (27 variables once the 6 floating-base equations are eliminated,
-40 inequalities while trotting) takes ~52 us on a core of its own and ~80 us inside the closed loop beside a training
-job; sending the targets costs ~20-30 us more, kept down by sending only what changes. A reduced ProxSuite QP (base
-acceleration and stance forces only, joint accelerations from the leg Jacobians) would still need ~15 Pinocchio calls
-and a few dozen numpy operations of ~1-2 us each to assemble before ProxSuite's own setup and solve, so it was not
-expected to beat this, and its foot and arm tasks would become hard constraints.
+C++, one Python call per tick, where a numpy-assembled QP of the same size pays several times more in Python
+overhead; sending the targets is kept cheap by sending only what changes (measurements and the alternatives weighed:
+docs/mpc-notes.md).
 PlaCo reads the same URDF as the MuJoCo and Pinocchio models (visuals stripped: it only needs the dynamics).
 """
 
