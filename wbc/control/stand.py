@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbc.robots.description import RobotDescription
+from wbc.robots.description import ARM_JOINTS, RobotDescription
 from wbc.types import MotorCommand
 
 __all__ = ["StandController", "StandGains", "stand_command"]
@@ -39,8 +39,8 @@ def stand_command(desc: RobotDescription, gains: StandGains | None = None) -> Mo
     n = desc.num_joints
     kp = np.full(n, g.leg_kp)
     kd = np.full(n, g.leg_kd)
-    kp[12:] = g.arm_kp
-    kd[12:] = g.arm_kd
+    kp[ARM_JOINTS] = g.arm_kp
+    kd[ARM_JOINTS] = g.arm_kd
     return MotorCommand.hold(desc.nominal_q, kp, kd)
 
 

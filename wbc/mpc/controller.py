@@ -32,13 +32,13 @@ from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSol
 from wbc.mpc.euler import rpy_of, yaw_of
 from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler
-from wbc.mpc.kinematics import ARM_JOINTS, RobotKinematics
+from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.leg_layer import LegLayer
 from wbc.mpc.plan_targets import PlanTargets
 from wbc.mpc.reference import MotionReference
 from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
 from wbc.robots.conventions import quat_to_matrix
-from wbc.robots.description import RobotDescription
+from wbc.robots.description import ARM_JOINTS, RobotDescription
 from wbc.robots.joint_table import joint_table
 from wbc.types import BaseTruth, MotorCommand, RobotState, VelocityCommand
 

@@ -11,12 +11,10 @@ import pinocchio as pin
 
 from wbc.mpc.centroidal_model import CentroidalParams
 from wbc.robots.conventions import quat_to_matrix
-from wbc.robots.description import FOOT_NAMES, LEG_NAMES, RobotDescription
+from wbc.robots.description import ARM_JOINTS, FOOT_NAMES, LEG_NAMES, RobotDescription
 from wbc.robots.pinocchio_model import build_pinocchio
 
-__all__ = ["ARM_JOINTS", "RobotKinematics"]
-
-ARM_JOINTS = slice(12, 15)
+__all__ = ["RobotKinematics"]
 """The arm's joints (waist yaw, shoulder pitch, elbow pitch) in the house joint order, when the arm is actuated: they
 follow the 12 leg joints (legs FR, FL, RR, RL x hip, thigh, calf)."""
 

@@ -14,7 +14,8 @@ import numpy as np
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.robots.arm_spec import ArmSpec
 
-__all__ = ["ARM_MODES", "LEG_NAMES", "LEG_JOINT_NAMES", "FOOT_NAMES", "RobotDescription", "check_arm_mode"]
+__all__ = ["ARM_JOINTS", "ARM_MODES", "LEG_JOINTS", "LEG_NAMES", "LEG_JOINT_NAMES", "FOOT_NAMES", "RobotDescription",
+           "check_arm_mode"]
 
 ARM_MODES = ("none", "locked", "actuated")
 """``none``: no arm on the robot; ``locked``: arm attached and rigid at its nominal pose (fixed joints);
@@ -23,6 +24,10 @@ ARM_MODES = ("none", "locked", "actuated")
 LEG_NAMES = ("FR", "FL", "RR", "RL")
 LEG_JOINT_NAMES = tuple(f"{leg}_{part}_joint" for leg in LEG_NAMES for part in ("hip", "thigh", "calf"))
 FOOT_NAMES = tuple(f"{leg}_foot" for leg in LEG_NAMES)
+LEG_JOINTS = slice(0, 12)
+"""The legs' entries of a joint vector in the house order (FR, FL, RR, RL x hip, thigh, calf)."""
+ARM_JOINTS = slice(12, 15)
+"""The arm's entries (waist, shoulder, elbow) of a joint vector in the house order, when the arm is actuated."""
 
 
 def check_arm_mode(arm_mode: str) -> str:

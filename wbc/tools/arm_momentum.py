@@ -24,6 +24,7 @@ from wbc.control.protocol import Controller
 from wbc.control.registry import get_controller
 from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix, quat_wxyz_to_xyzw
+from wbc.robots.description import ARM_JOINTS
 from wbc.robots.pinocchio_model import PinocchioRobot, build_pinocchio
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import Trial
@@ -96,12 +97,12 @@ class ArmMomentumLog:
         self.position_base_in_world.append(truth.base_position_in_world)
         h = 0.0
         if robot.num_joints == 15:
-            arm_cols = 6 + pinr.joints.house_from_pin[12:15]
+            arm_cols = 6 + pinr.joints.house_from_pin[ARM_JOINTS]
             pin.computeCentroidalMap(pinr.model, pinr.data, q)
-            h = float(np.linalg.norm(pinr.data.Ag[3:, arm_cols] @ state.dq[12:15]))
+            h = float(np.linalg.norm(pinr.data.Ag[3:, arm_cols] @ state.dq[ARM_JOINTS]))
             if self._last_arm is not None:
-                self.arm_travel_rad += float(np.abs(state.q[12:15] - self._last_arm).sum())
-            self._last_arm = state.q[12:15].copy()
+                self.arm_travel_rad += float(np.abs(state.q[ARM_JOINTS] - self._last_arm).sum())
+            self._last_arm = state.q[ARM_JOINTS].copy()
         self.h_arm.append(h)
 
 

@@ -14,6 +14,7 @@ import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.learned.env.env_config import EnvConfig
+from wbc.robots.description import ARM_JOINTS
 
 __all__ = ["Rewards", "StepData"]
 
@@ -146,7 +147,7 @@ class Rewards:
     def _reward_arm_deviation(self, s: StepData) -> np.ndarray:
         if s.q.shape[1] <= self.num_legs_joints:
             return np.zeros(s.q.shape[0])
-        return np.sum((s.q[:, 12:] - self.default_q[12:]) ** 2, axis=1)
+        return np.sum((s.q[:, ARM_JOINTS] - self.default_q[ARM_JOINTS]) ** 2, axis=1)
 
     def _reward_base_height(self, s: StepData) -> np.ndarray:
         return np.square(s.base_height - self.config.base_height_target)
