@@ -17,7 +17,7 @@ import pytest
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode
 from wbc.arena.metrics import compute_metrics
-from wbc.arena.results import RECORD_FIELDS, read_records
+from wbc.arena.record import TrialRecord
 from wbc.arena.runner import run_trial
 from wbc.cli.main import main
 from wbc.control.registry import CONTROLLERS
@@ -75,9 +75,9 @@ def small(tmp_path):
 
 
 def _metrics(records):
-    keep = [k for k in RECORD_FIELDS if k != "wall_s"]
-    norm = [tuple("nan" if isinstance(r[k], float) and math.isnan(r[k]) else r[k] for k in keep) for r in records]
-    return sorted(norm, key=repr)
+    """Every field but the wall time, as the stored text, in a stable order."""
+    wall = TrialRecord.header().index("wall_s")
+    return sorted(tuple(c for i, c in enumerate(r.to_row()) if i != wall) for r in records)
 
 
 def _run(small, out, **kw):
@@ -90,12 +90,12 @@ def test_same_seed_same_metrics_across_runs_and_worker_counts(small, tmp_path):
     a = _run(small, tmp_path / "a", workers=1)
     b = _run(small, tmp_path / "b", workers=1)
     c = _run(small, tmp_path / "c", workers=2)
-    ra, rb, rc = (read_records(r.out_dir / "trials.csv") for r in (a, b, c))
+    ra, rb, rc = (TrialRecord.read_csv(r.out_dir / "trials.csv") for r in (a, b, c))
     assert len(ra) == 2 * 2 * 2 * 3
     assert _metrics(ra) == _metrics(rb) == _metrics(rc)
     # the bands discriminate: the soft pushes are survived more often than the hard ones
-    soft = [r["success"] for r in ra if r["band"] == "soft"]
-    hard = [r["success"] for r in ra if r["band"] == "hard"]
+    soft = [r.success for r in ra if r.band == "soft"]
+    hard = [r.success for r in ra if r.band == "hard"]
     assert sum(soft) > sum(hard)
     summary = json.loads((a.out_dir / "summary.json").read_text())
     assert set(summary["controllers"]) == {"stand", "stand-noarm"}
@@ -109,7 +109,8 @@ def test_local_and_ray_executors_agree(small, tmp_path):
     pytest.importorskip("ray")
     local = _run(small, tmp_path / "local", workers=2)
     ray = _run(small, tmp_path / "ray", executor="ray")
-    assert _metrics(read_records(local.out_dir / "trials.csv")) == _metrics(read_records(ray.out_dir / "trials.csv"))
+    local_rows, ray_rows = (TrialRecord.read_csv(r.out_dir / "trials.csv") for r in (local, ray))
+    assert _metrics(local_rows) == _metrics(ray_rows)
 
 
 def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
@@ -125,7 +126,7 @@ def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    before = read_records(trials_csv)
+    before = TrialRecord.read_csv(trials_csv)
     assert 4 <= len(before) < 2 * 2 * 2 * 6
     # a torn line, as a kill in the middle of a write would leave
     with trials_csv.open("a") as f:
@@ -133,13 +134,13 @@ def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
     cfg = ArenaConfig(controllers=("stand", "stand-noarm"), scenario=small, seeds=(0, 1), trials=6, out_dir=out,
                       workers=1, resume=True, progress=False)
     result = run_arena(cfg)
-    after = read_records(trials_csv)
-    keys = [(r["controller"], r["band"], r["seed"], r["trial"]) for r in after]
+    after = TrialRecord.read_csv(trials_csv)
+    keys = [r.run_key for r in after]
     assert len(keys) == len(set(keys)) == 2 * 2 * 2 * 6
     assert result.played == len(after) - len(before)  # nothing finished was played again
     # finished rows kept as they were, wall times included
     assert _metrics(after[: len(before)]) == _metrics(before)
-    assert [r["wall_s"] for r in after[: len(before)]] == [r["wall_s"] for r in before]
+    assert [r.wall_s for r in after[: len(before)]] == [r.wall_s for r in before]
     # resuming a finished run plays nothing; resuming with other options is refused
     assert run_arena(cfg).played == 0
     with pytest.raises(Exception, match="different configuration"):
@@ -153,15 +154,15 @@ def test_fall_is_detected_and_metrics_follow(small):
     falls = 0
     for i in range(3):
         record, episode = run_trial(sc.trial("hard", 0, i), "stand")
-        assert record["success"] == (not episode.fell)
+        assert record.success == (not episode.fell)
         if episode.fell:
             falls += 1
-            assert 0 < record["ttf"] < 1 and record["fall_time_s"] == pytest.approx(record["ttf"] * 3.0)
+            assert 0 < record.ttf < 1 and record.fall_time_s == pytest.approx(record.ttf * 3.0)
             assert episode.t[-1] == pytest.approx(episode.fall_time_s)
         assert any(kind == "push" for _, kind, _ in episode.events)
     assert falls >= 1
     record, episode = run_trial(sc.trial("soft", 0, 0), "stand")
-    assert record["success"] and record["ttf"] == 1.0 and math.isnan(record["fall_time_s"])
+    assert record.success and record.ttf == 1.0 and math.isnan(record.fall_time_s)
     assert len(episode.t) == 150  # 3 s at 50 Hz
 
 
@@ -197,8 +198,8 @@ def test_every_scenario_runs_with_every_controller(scenario, controller):
         pytest.skip(f"no shipped weights {weights.name} for {sc.robot} yet")
     trial = dataclasses.replace(sc.trial(sc.bands[-1], 0, 0), duration_s=1.0)
     record, episode = run_trial(trial, controller)
-    assert set(RECORD_FIELDS) <= set(record)
-    assert record["scenario_hash"] == sc.hash and 0 < record["ttf"] <= 1
+    assert isinstance(record, TrialRecord)
+    assert record.scenario_hash == sc.hash and 0 < record.ttf <= 1
     assert all(np.isfinite(record[k]) for k in ("vlin_err", "vang_err", "energy_j", "max_roll_deg"))
 
 
@@ -230,10 +231,10 @@ def test_no_push_and_debug_truth_are_recorded_with_the_run(small, tmp_path):
     cfg = ArenaConfig(controllers=("mpc",), scenario=small, seeds=(0,), trials=1, bands=("hard",),
                       out_dir=tmp_path / "np", progress=False, workers=1, no_push=True, debug_truth=True)
     result = run_arena(cfg)
-    records = read_records(result.out_dir / "trials.csv")
+    records = TrialRecord.read_csv(result.out_dir / "trials.csv")
     assert len(records) == 1
     # the hard band's pushes topple the robot; without them it survives, and the row says how it was run
-    assert records[0]["success"] and records[0]["n_pushes"] == 0 and records[0]["debug_truth"] is True
+    assert records[0].success and records[0].n_pushes == 0 and records[0].debug_truth is True
     run = json.loads((result.out_dir / "run.json").read_text())
     assert run["config"]["no_push"] is True and run["config"]["debug_truth"] is True
     assert "GROUND TRUTH" in (result.out_dir / "report.md").read_text()
@@ -249,10 +250,10 @@ def test_a_policy_file_enters_the_arena_as_policy_path(small, tmp_path, capsys):
     name = f"policy:{weights}"
     cfg = ArenaConfig(controllers=("learned-locked", name), scenario=small, seeds=(0,), trials=1, bands=("soft",),
                       out_dir=tmp_path / "p", workers=1, progress=False, save_episodes=True)
-    records = read_records(run_arena(cfg).out_dir / "trials.csv")
-    by_name = {r["controller"]: r for r in records}
+    records = TrialRecord.read_csv(run_arena(cfg).out_dir / "trials.csv")
+    by_name = {r.controller: r for r in records}
     assert set(by_name) == {"learned-locked", name}
-    same = [{**r, "controller": "", "wall_s": 0.0} for r in (by_name[name], by_name["learned-locked"])]
+    same = [dataclasses.replace(r, controller="") for r in (by_name[name], by_name["learned-locked"])]
     assert _metrics(same[:1]) == _metrics(same[1:])
     assert len(list((tmp_path / "p" / "episodes").glob("*/*.npz"))) == 2  # one folder per controller, path-safe
     # a policy for another robot is refused before any trial, naming both robots

@@ -53,3 +53,35 @@ class MissingExtraError(WbcError, ImportError):
         )
         self.module = module
         self.extra = extra
+
+
+# --- arena
+__all__ += ["RecordError", "ResultsDirError", "EpisodeFileError", "MissingCapabilityError"]
+
+
+class RecordError(WbcError, ValueError):
+    """A trial record or a ``trials.csv`` row is malformed.
+
+    A field is missing or mistyped, a trial is repeated, or a record comes from another scenario version; the message
+    names the field (and the file and line) at fault.
+    """
+
+
+class ResultsDirError(WbcError):
+    """A results directory cannot be used as asked.
+
+    It holds another run, or results where none were expected, or fewer trials than the run needs; the message says
+    which option fixes it (``--resume``, another ``--out``).
+    """
+
+
+class EpisodeFileError(WbcError, ValueError):
+    """An episode file (``.npz``) is not an `Episode` this version can read; the message names the file and field."""
+
+
+class MissingCapabilityError(ConfigError):
+    """A robot or controller lacks a capability the run asks for.
+
+    Base truth, fall detection, a ground-truth debug switch: the message names the capability's protocol and how to
+    run without it.
+    """

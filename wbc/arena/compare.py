@@ -168,7 +168,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     try:
         for record in executor.run(tasks):
             store.append(record)
-            steps += int(round(float(record["ttf"]) * scenario.duration_s / physics_dt))
+            steps += int(round(record.ttf * scenario.duration_s / physics_dt))
             if bar is not None:
                 bar.update(1)
     finally:
@@ -176,7 +176,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
             bar.close()
         store.close()
     wall = time.perf_counter() - start
-    records = [r for r in store.records if r["scenario_hash"] == scenario.hash]
+    records = [r for r in store.records if r.scenario_hash == scenario.hash]
     summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
                         controllers=list(cfg.controllers), bands=list(bands))
     (store.dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")

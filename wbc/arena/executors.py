@@ -1,6 +1,6 @@
 """Executors: where trials run. A local process pool (default) or a Ray cluster; the results are identical.
 
-Both take (trial, controller, episode path) tasks and yield each finished results row as soon as it is done, in
+Both take (trial, controller, episode path) tasks and yield each finished trial's record as soon as it is done, in
 completion order; the caller stores it at once. Every trial is fully determined by its `Trial`, so neither the
 worker nor the order changes a result.
 """
@@ -14,6 +14,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from contextlib import contextmanager
 from typing import TYPE_CHECKING
 
+from wbc.arena.record import TrialRecord
 from wbc.optional import require
 from wbc.scenario.trial import Trial
 
@@ -49,10 +50,10 @@ def single_threaded_blas() -> Iterator[None]:
                 os.environ[k] = v
 
 
-def run_task(task: Task, observer: TickObserver | None = None) -> dict[str, object]:
-    """Play one task in this process and return its results row.
+def run_task(task: Task, observer: TickObserver | None = None) -> TrialRecord:
+    """Play one task in this process and return its record.
 
-    The episode is saved (when the task names a path) before the row is returned, so a stored row always has its
+    The episode is saved (when the task names a path) before the record is returned, so a stored record always has its
     episode. `observer` watches every tick (a live viewer; see `wbc.arena.runner.run_episode`).
     """
     from wbc.arena.runner import run_trial
@@ -80,8 +81,8 @@ class LocalExecutor:
         self.workers = 1 if observer is not None else (workers or os.cpu_count() or 1)
         self.observer = observer
 
-    def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
-        """Yield results rows as tasks finish."""
+    def run(self, tasks: Iterable[Task]) -> Iterator[TrialRecord]:
+        """Yield each task's record as it finishes."""
         tasks = list(tasks)
         if self.workers <= 1:
             for task in tasks:
@@ -92,7 +93,7 @@ class LocalExecutor:
         with single_threaded_blas():
             yield from self._run_pool(tasks)
 
-    def _run_pool(self, tasks: list[Task]) -> Iterator[dict[str, object]]:
+    def _run_pool(self, tasks: list[Task]) -> Iterator[TrialRecord]:
         pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
         with pool:
             pending: set[Future] = set()
@@ -124,8 +125,8 @@ class RayExecutor:
         self.address = address
         self.num_cpus = num_cpus
 
-    def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
-        """Yield results rows as tasks finish."""
+    def run(self, tasks: Iterable[Task]) -> Iterator[TrialRecord]:
+        """Yield each task's record as it finishes."""
         ray = require("ray", "cluster")
         started = False
         if not ray.is_initialized():

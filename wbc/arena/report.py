@@ -1,12 +1,6 @@
 """Arena report: a JSON summary of the records, the paper-style results table, and a Markdown report with plots.
 
-The runner produces one record per (controller, trial), a flat mapping with the fields
-
-    controller, scenario, scenario_hash, band, seed, trial, success, ttf, fall_time_s, vlin_err, vang_err,
-    max_roll_deg, max_pitch_deg, energy_j, arm_travel_rad, push_force_n, n_pushes, vx_cmd, vy_cmd, yaw_rate_cmd,
-    friction, payload_kg, fallbacks, wall_s
-
-(typed, or all strings when read back from CSV). This module turns them into:
+The input is one `wbc.arena.record.TrialRecord` per (controller, trial). This module turns them into:
 
 - `summarize`: per controller and band, mean +- std across seeds of each metric (`wbc.arena.stats.mean_std_over_seeds`),
   and for every ordered pair of controllers the paired difference B - A with a 95 % bootstrap interval
@@ -27,14 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.stats import (
-    Record,
-    RecordError,
-    mean_std_over_seeds,
-    paired_difference,
-    record_float,
-    record_str,
-)
+from wbc.arena.record import TrialRecord
+from wbc.arena.stats import mean_std_over_seeds, paired_difference
+from wbc.errors import RecordError
 
 __all__ = [
     "METRICS",
@@ -85,20 +74,18 @@ def _json_float(value: float) -> float | None:
 
 
 def _records_by_cell(
-    records: Iterable[Record], controllers: Sequence[str], bands: Sequence[str]
-) -> dict[str, dict[str, list[Record]]]:
+    records: Iterable[TrialRecord], controllers: Sequence[str], bands: Sequence[str]
+) -> dict[str, dict[str, list[TrialRecord]]]:
     """Controller -> band -> its records; records of other controllers or bands are dropped."""
-    cells: dict[str, dict[str, list[Record]]] = {c: {b: [] for b in bands} for c in controllers}
+    cells: dict[str, dict[str, list[TrialRecord]]] = {c: {b: [] for b in bands} for c in controllers}
     for record in records:
-        controller = record_str(record, "controller")
-        band = record_str(record, "band")
-        if controller in cells and band in cells[controller]:
-            cells[controller][band].append(record)
+        if record.controller in cells and record.band in cells[record.controller]:
+            cells[record.controller][record.band].append(record)
     return cells
 
 
 def summarize(
-    records: Iterable[Record],
+    records: Iterable[TrialRecord],
     *,
     scenario_name: str,
     scenario_hash: str,
@@ -116,7 +103,7 @@ def summarize(
     ``trials: 0`` and ``None`` statistics.
 
     Args:
-        records: arena records (typed, or strings as read from CSV).
+        records: arena records, in any order.
         scenario_name: the scenario's name.
         scenario_hash: the scenario file's content hash; every record's ``scenario_hash``, where set, must match.
         controllers: controller names, in the order of the table (the order also fixes which side of each pair is A).
@@ -132,15 +119,15 @@ def summarize(
         with ``None`` wherever a statistic is undefined.
 
     Raises:
-        RecordError: a record is malformed, repeats a trial, or comes from another version of the scenario.
+        RecordError: a record repeats a trial, or comes from another version of the scenario.
     """
     records = list(records)
     for record in records:
-        record_hash = record_str(record, "scenario_hash") if "scenario_hash" in record else ""
-        if record_hash and record_hash != scenario_hash:
+        if record.scenario_hash and record.scenario_hash != scenario_hash:
             raise RecordError(
-                f"a record of controller {record_str(record, 'controller')!r} was produced by scenario hash "
-                f"{record_hash!r}, not {scenario_hash!r}; summarise the records of one scenario version at a time"
+                f"a record of controller {record.controller!r} was produced by scenario hash "
+                f"{record.scenario_hash!r}, not {scenario_hash!r}; summarise the records of one scenario version at "
+                "a time"
             )
     cells = _records_by_cell(records, controllers, bands)
     per_controller: dict[str, Any] = {}
@@ -293,13 +280,13 @@ def _cell_stat(summary: Mapping[str, Any], controller: str, band: str, metric: s
     return math.nan if value is None else float(value)
 
 
-def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[Record], controllers: Sequence[str]) -> bool:
+def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[TrialRecord], controllers: Sequence[str]) -> bool:
     """Success rate against push magnitude, one line per controller; False (nothing written) without pushes."""
-    pushes = np.array([record_float(r, "push_force_n") for r in records], dtype=float)
+    pushes = np.array([r.push_force_n for r in records], dtype=float)
     if not np.any(pushes > 0.0):
         return False
-    success = np.array([record_float(r, "success") for r in records], dtype=float)
-    names = np.array([record_str(r, "controller") for r in records])
+    success = np.array([r.success for r in records], dtype=float)
+    names = np.array([r.controller for r in records])
     finite = np.isfinite(pushes)
     levels = np.unique(pushes[finite])
     if levels.size <= _N_PUSH_BINS:  # few distinct magnitudes (a push band): one point per magnitude
@@ -331,10 +318,10 @@ def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[Record], contr
     return True
 
 
-def _plot_ttf(plt: Any, path: Path, records: Sequence[Record], controllers: Sequence[str]) -> None:
+def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers: Sequence[str]) -> None:
     """Box plot of TTF per controller, all bands pooled."""
-    names = [record_str(r, "controller") for r in records]
-    ttf = [record_float(r, "ttf") for r in records]
+    names = [r.controller for r in records]
+    ttf = [r.ttf for r in records]
     data = []
     for controller in controllers:
         values = np.array([t for n, t in zip(names, ttf, strict=True) if n == controller], dtype=float)
@@ -379,7 +366,7 @@ def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequ
 
 
 def write_report(
-    out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[Record], meta: Mapping[str, Any]
+    out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[TrialRecord], meta: Mapping[str, Any]
 ) -> list[Path]:
     """Write ``report.md`` and its PNG plots into `out_dir` (created if missing).
 
@@ -403,9 +390,6 @@ def write_report(
 
     Returns:
         The paths written: ``report.md`` first, then the plots.
-
-    Raises:
-        RecordError: a record is malformed.
     """
     import matplotlib
 
@@ -416,7 +400,7 @@ def write_report(
     out.mkdir(parents=True, exist_ok=True)
     controllers = list(summary["controllers"])
     bands = _bands_of(summary)
-    records = [r for r in records if record_str(r, "controller") in summary["controllers"]]
+    records = [r for r in records if r.controller in summary["controllers"]]
 
     plots: list[Path] = []
     if _plot_success_vs_push(plt, out / "success_vs_push.png", records, controllers):

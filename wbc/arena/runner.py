@@ -18,7 +18,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from wbc.arena.episode import Episode, EpisodeBuffer
-from wbc.arena.metrics import compute_metrics
+from wbc.arena.record import TrialRecord
 from wbc.control.protocol import Controller
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError
@@ -28,7 +28,7 @@ from wbc.robots.conventions import quat_to_matrix
 from wbc.scenario.trial import CommandSchedule, Trial
 from wbc.types import BaseTruth, VelocityCommand
 
-__all__ = ["TickObserver", "run_episode", "run_trial", "trial_record"]
+__all__ = ["TickObserver", "run_episode", "run_trial", "simulated_robot"]
 
 TickObserver = Callable[[float, Robot, Controller, VelocityCommand], None]
 """Called after every control tick with (time after the tick [s], robot, controller, command); for viewers. It may
@@ -114,31 +114,15 @@ def simulated_robot(trial: Trial, arm_mode: str) -> MujocoRobot:
     return robot
 
 
-def trial_record(trial: Trial, controller: str, episode: Episode, counters: dict[str, int],
-                 wall_s: float, *, debug_truth: bool = False) -> dict[str, object]:
-    """The per-trial results row: identity, trial parameters, metrics, controller events, wall time."""
-    return {
-        "controller": controller,
-        "debug_truth": bool(debug_truth),
-        "scenario": trial.scenario,
-        "scenario_hash": trial.scenario_hash,
-        **trial.describe(),
-        **compute_metrics(episode),
-        "fallbacks": int(counters.get("fallbacks", 0)),
-        "wbc_failures": int(counters.get("wbc_failures", 0)),
-        "wall_s": wall_s,
-    }
-
-
 def run_trial(trial: Trial, controller: str, *, debug_truth: bool = False, observer: TickObserver | None = None,
-              ) -> tuple[dict[str, object], Episode]:
+              ) -> tuple[TrialRecord, Episode]:
     """Play `trial` in simulation with the named controller (`observer`: see `run_episode`).
 
     With `debug_truth` the controller's ground-truth debug switch is thrown (it reads the simulator's base state
-    instead of estimating it) and the results row says so.
+    instead of estimating it) and the record says so.
 
     Returns:
-        The results row and the episode log.
+        The trial's record and the episode log.
 
     Raises:
         UnknownNameError: unknown controller.
@@ -151,7 +135,7 @@ def run_trial(trial: Trial, controller: str, *, debug_truth: bool = False, obser
 
 
 def _run_trial(trial: Trial, controller: str, *, debug_truth: bool, observer: TickObserver | None,
-               ) -> tuple[dict[str, object], Episode]:
+               ) -> tuple[TrialRecord, Episode]:
     start = time.perf_counter()
     spec = get_controller(controller)
     robot = simulated_robot(trial, spec.arm_mode)
@@ -178,6 +162,6 @@ def _run_trial(trial: Trial, controller: str, *, debug_truth: bool, observer: Ti
         for p in trial.pushes if p.start < episode.survived_s
     )
     episode = dataclasses.replace(episode, events=events + episode.events)
-    record = trial_record(trial, controller, episode, ctrl.counters(), time.perf_counter() - start,
-                          debug_truth=debug_truth)
+    record = TrialRecord.of_trial(trial, controller=controller, episode=episode, counters=ctrl.counters(),
+                                  wall_s=time.perf_counter() - start, debug_truth=debug_truth)
     return record, episode
