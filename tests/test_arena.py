@@ -93,6 +93,8 @@ def test_same_seed_same_metrics_across_runs_and_worker_counts(small, tmp_path):
     ra, rb, rc = (TrialRecord.read_csv(r.out_dir / "trials.csv") for r in (a, b, c))
     assert len(ra) == 2 * 2 * 2 * 3
     assert _metrics(ra) == _metrics(rb) == _metrics(rc)
+    # the summary too, to the last bit, whatever order the two workers finished their trials in
+    assert len({(r.out_dir / "summary.json").read_bytes() for r in (a, b, c)}) == 1
     # the bands discriminate: the soft pushes are survived more often than the hard ones
     soft = [r.success for r in ra if r.band == "soft"]
     hard = [r.success for r in ra if r.band == "hard"]
@@ -111,6 +113,7 @@ def test_local_and_ray_executors_agree(small, tmp_path):
     ray = _run(small, tmp_path / "ray", executor="ray")
     local_rows, ray_rows = (TrialRecord.read_csv(r.out_dir / "trials.csv") for r in (local, ray))
     assert _metrics(local_rows) == _metrics(ray_rows)
+    assert (local.out_dir / "summary.json").read_bytes() == (ray.out_dir / "summary.json").read_bytes()
 
 
 def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):

@@ -12,7 +12,7 @@ import pytest
 
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import EXTRA_METRICS, METRICS, format_table, summarize, write_report
-from wbc.arena.stats import mean_std_over_seeds, paired_difference
+from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
 from wbc.errors import RecordError, UnknownNameError
 
 CONTROLLERS = ("mpc", "rl", "wbc")
@@ -284,6 +284,22 @@ def test_summary_rejects_other_scenario_versions():
     records[3] = dataclasses.replace(records[3], scenario_hash="other")
     with pytest.raises(RecordError, match="scenario hash"):
         summary_of(records)
+
+
+def test_summary_does_not_depend_on_the_order_trials_finished_in():
+    records = arena_records()
+    # the data is order-sensitive: summing a seed's values in another order changes some means in the last digit
+    cells = [[r for r in records if (r.controller, r.band) == (c, b)] for c in CONTROLLERS for b in BANDS]
+    assert any(mean_std_over_seeds(cell, m) != mean_std_over_seeds(cell[::-1], m) for cell in cells
+               for m in ("vlin_err", "vang_err", "energy_j"))
+    want = json.dumps(summary_of(records), indent=2)
+    for seed in range(3):
+        shuffled = list(records)
+        np.random.default_rng(seed).shuffle(shuffled)
+        assert json.dumps(summary_of(shuffled), indent=2) == want
+    assert in_canonical_order(records[::-1], CONTROLLERS, BANDS) == records  # arena_records is in canonical order
+    assert in_canonical_order(records, ("wbc", "mpc"), ("push",)) == [
+        r for c in ("wbc", "mpc") for r in records if r.controller == c and r.band == "push"]
 
 
 def test_records_read_back_from_csv_give_the_same_summary(tmp_path):

@@ -17,6 +17,7 @@ from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor
 from wbc.arena.report import summarize, write_report
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import TickObserver
+from wbc.arena.stats import in_canonical_order
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, UnknownNameError, WbcError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
@@ -176,7 +177,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
             bar.close()
         store.close()
     wall = time.perf_counter() - start
-    records = [r for r in store.records if r.scenario_hash == scenario.hash]
+    # in canonical order: the store holds them in the order they finished, which varies between runs
+    records = in_canonical_order((r for r in store.records if r.scenario_hash == scenario.hash), cfg.controllers,
+                                 scenario.bands)
     summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
                         controllers=list(cfg.controllers), bands=list(bands))
     (store.dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")

@@ -8,7 +8,8 @@ The input is one `wbc.arena.record.TrialRecord` per (controller, trial). This mo
 - `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table.
 - `write_report`: ``report.md`` plus PNG plots in an output folder.
 
-Everything is deterministic: the same records give byte-identical summaries and tables.
+Everything is deterministic: the same records, in any order, give byte-identical summaries and tables (records are
+put `in_canonical_order` before any statistic).
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from wbc.arena.record import TrialRecord
-from wbc.arena.stats import mean_std_over_seeds, paired_difference
+from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
 from wbc.errors import RecordError
 
 __all__ = [
@@ -100,7 +101,8 @@ def summarize(
     paired difference b - a and its 95 % bootstrap interval (`paired_difference`, seed 0).
 
     Records of controllers or bands not listed are ignored. A listed controller or band without records gets
-    ``trials: 0`` and ``None`` statistics.
+    ``trials: 0`` and ``None`` statistics. The records are put `in_canonical_order` first, so the summary does not
+    depend on the order they come in (the order trials finished).
 
     Args:
         records: arena records, in any order.
@@ -129,7 +131,7 @@ def summarize(
                 f"{record.scenario_hash!r}, not {scenario_hash!r}; summarise the records of one scenario version at "
                 "a time"
             )
-    cells = _records_by_cell(records, controllers, bands)
+    cells = _records_by_cell(in_canonical_order(records, controllers, bands), controllers, bands)
     per_controller: dict[str, Any] = {}
     for controller in controllers:
         per_band: dict[str, Any] = {}
@@ -384,8 +386,8 @@ def write_report(
     Args:
         out_dir: output folder.
         summary: the output of `summarize` for `records`.
-        records: the arena records summarised (used for the per-trial plots); those of controllers not in the
-            summary are ignored.
+        records: the arena records summarised (used for the per-trial plots), in any order; those of controllers or
+            bands not in the summary are ignored.
         meta: run information to list (controllers, seeds, trials, executor, package versions, git revision ...).
 
     Returns:
@@ -400,7 +402,7 @@ def write_report(
     out.mkdir(parents=True, exist_ok=True)
     controllers = list(summary["controllers"])
     bands = _bands_of(summary)
-    records = [r for r in records if r.controller in summary["controllers"]]
+    records = in_canonical_order(records, controllers, bands)
 
     plots: list[Path] = []
     if _plot_success_vs_push(plt, out / "success_vs_push.png", records, controllers):

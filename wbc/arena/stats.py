@@ -10,12 +10,16 @@ Two estimators, both pure numpy and deterministic:
   experiment), not across trials, which share a seed's scenario sample. Each seed's trials are averaged first.
 - `paired_difference`: controller B minus controller A on the same trials, with a percentile bootstrap over the
   pairs; pairing removes the trial-to-trial difficulty that both controllers share.
+
+A mean's last digit depends on the order of its terms, and records arrive in the order trials finished (which
+differs between runs with several workers, and on resume); `in_canonical_order` puts them in one order first, so the
+same trials give the same statistics to the last bit.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Hashable, Iterable
+from collections.abc import Callable, Hashable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
@@ -25,6 +29,7 @@ from wbc.errors import ConfigError, RecordError
 
 __all__ = [
     "PairKey",
+    "in_canonical_order",
     "group_by",
     "mean_std_over_seeds",
     "bootstrap_mean_ci",
@@ -39,6 +44,27 @@ _CHUNK_ELEMENTS = 1_000_000  # bootstrap resamples drawn per block, to bound mem
 
 def _metric(record: TrialRecord, metric: str) -> float:
     return float(record[metric])
+
+
+def in_canonical_order(records: Iterable[TrialRecord], controllers: Sequence[str],
+                       bands: Sequence[str]) -> list[TrialRecord]:
+    """The records of the listed controllers and bands, in canonical order.
+
+    Controllers in the order of `controllers`, then bands in the order of `bands` (the scenario's), then seed, then
+    trial; records of other controllers or bands are left out.
+
+    Args:
+        records: arena records, in any order.
+        controllers: controller names, in order.
+        bands: band names, in order.
+
+    Returns:
+        The sorted records.
+    """
+    c_rank = {c: i for i, c in enumerate(controllers)}
+    b_rank = {b: i for i, b in enumerate(bands)}
+    kept = [r for r in records if r.controller in c_rank and r.band in b_rank]
+    return sorted(kept, key=lambda r: (c_rank[r.controller], b_rank[r.band], r.seed, r.trial))
 
 
 def group_by(records: Iterable[TrialRecord],
@@ -67,7 +93,8 @@ def mean_std_over_seeds(records: Iterable[TrialRecord], metric: str) -> dict[str
         mean = (1 / S) sum_s m_s,    std = sqrt(sum_s (m_s - mean)^2 / (S - 1))   (sample std, ddof = 1),
 
     with std = 0.0 when S = 1. NaN values (e.g. ``fall_time_s`` of a trial that did not fall) are ignored; a seed
-    whose values are all NaN does not count.
+    whose values are all NaN does not count. Within a seed the values are summed in the order given: pass records
+    `in_canonical_order` for a result that does not depend on the order trials finished in.
 
     Args:
         records: the records of one controller (typically in one band).
