@@ -21,7 +21,7 @@ from wbc.arena.record import TrialRecord
 from wbc.arena.runner import run_trial
 from wbc.cli.main import main
 from wbc.control.registry import CONTROLLERS
-from wbc.errors import WbcError
+from wbc.errors import EpisodeFileError, WbcError
 from wbc.learned.policy.controller import shipped_weights
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
@@ -156,13 +156,20 @@ def test_fall_is_detected_and_metrics_follow(small):
     sc = load_scenario(small)
     falls = 0
     for i in range(3):
-        record, episode = run_trial(sc.trial("hard", 0, i), "stand")
+        trial = sc.trial("hard", 0, i)
+        record, episode = run_trial(trial, "stand")
         assert record.success == (not episode.fell)
         if episode.fell:
             falls += 1
             assert 0 < record.ttf < 1 and record.fall_time_s == pytest.approx(record.ttf * 3.0)
             assert episode.t[-1] == pytest.approx(episode.fall_time_s)
-        assert any(kind == "push" for _, kind, _ in episode.events)
+        # the episode logs, as numbers, exactly the pushes that began before it ended
+        met = [p for p in trial.pushes if p.start < episode.survived_s]
+        assert len(episode.pushes) == len(met) >= 1
+        np.testing.assert_array_equal(episode.pushes.start, [p.start for p in met])
+        np.testing.assert_array_equal(episode.pushes.duration, [p.duration for p in met])
+        np.testing.assert_array_equal(episode.pushes.force_in_world, [p.force_in_world for p in met])
+        np.testing.assert_array_equal(episode.pushes.offset_in_base, [p.offset_in_base for p in met])
     assert falls >= 1
     record, episode = run_trial(sc.trial("soft", 0, 0), "stand")
     assert record.success and record.ttf == 1.0 and math.isnan(record.fall_time_s)
@@ -187,9 +194,20 @@ def test_metrics_are_pure_functions_of_the_episode():
 
 def test_episode_round_trips_through_npz(small, tmp_path):
     _, ep = run_trial(load_scenario(small).trial("soft", 1, 0), "stand")
+    assert len(ep.pushes) >= 1
     ep.save(str(tmp_path / "ep.npz"))
     back = Episode.load(str(tmp_path / "ep.npz"))
-    assert np.array_equal(back.qpos, ep.qpos) and back.events == ep.events and back.fell == ep.fell
+    for name in ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos"):
+        assert np.array_equal(getattr(back, name), getattr(ep, name)), name
+    for name in ("start", "duration", "force_in_world", "offset_in_base"):
+        assert np.array_equal(getattr(back.pushes, name), getattr(ep.pushes, name)), name
+    assert (back.fell, back.duration_s, back.control_dt) == (ep.fell, ep.duration_s, ep.control_dt)
+    # a file without the push arrays (pushes were text before) is refused, naming the field and the fix
+    with np.load(tmp_path / "ep.npz") as z:
+        old = {k: z[k] for k in z.files if not k.startswith("push_")}
+    np.savez(tmp_path / "old.npz", **old, events=np.array(["1.0|push|force_in_world=[1.0, 0.0, 0.0]"]))
+    with pytest.raises(EpisodeFileError, match=r"old\.npz: field push_start missing.*--save-episodes"):
+        Episode.load(str(tmp_path / "old.npz"))
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS, ids=lambda p: p.stem)

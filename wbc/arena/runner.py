@@ -17,7 +17,7 @@ from collections.abc import Callable
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from wbc.arena.episode import Episode, EpisodeBuffer
+from wbc.arena.episode import Episode, EpisodeBuffer, PushLog
 from wbc.arena.record import TrialRecord
 from wbc.control.protocol import Controller
 from wbc.control.registry import get_controller
@@ -156,12 +156,8 @@ def _run_trial(trial: Trial, controller: str, *, debug_truth: bool, observer: Ti
         robot.apply_push(push)
     episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_truth,
                           fallen=robot.fallen, nq=robot.model.nq, observer=observer)
-    events = tuple(
-        (p.start, "push", f"force_in_world={p.force_in_world.tolist()} offset_in_base={p.offset_in_base.tolist()} "
-                          f"duration={p.duration}")
-        for p in trial.pushes if p.start < episode.survived_s
-    )
-    episode = dataclasses.replace(episode, events=events + episode.events)
+    met = PushLog.of(p for p in trial.pushes if p.start < episode.survived_s)
+    episode = dataclasses.replace(episode, pushes=met)
     record = TrialRecord.of_trial(trial, controller=controller, episode=episode, counters=ctrl.counters(),
                                   wall_s=time.perf_counter() - start, debug_truth=debug_truth)
     return record, episode
