@@ -5,6 +5,7 @@ import dataclasses
 import json
 import math
 import os
+import pickle
 import signal
 import subprocess
 import sys
@@ -261,6 +262,36 @@ def test_no_push_and_debug_truth_are_recorded_with_the_run(small, tmp_path):
     assert "GROUND TRUTH" in (result.out_dir / "report.md").read_text()
     with pytest.raises(WbcError, match="ground-truth debug switch"):
         run_trial(load_scenario(small).trial("soft", 0, 0), "stand", debug_truth=True)
+
+
+def test_controllers_are_resolved_once_in_the_parent(small, tmp_path, monkeypatch):
+    """run_arena resolves each name once (a policy file is read there) and the tasks carry the spec to the workers."""
+    import wbc.arena.compare as compare
+    import wbc.arena.runner as runner
+    from wbc.arena.executors import TrialTask, run_task
+    from wbc.control.registry import get_controller
+    from wbc.robots.registry import get_robot as robot_named
+
+    name = f"policy:{shipped_weights(robot_named('a1-wx200', 'locked'))}"
+    resolved = []
+
+    def counting(n):
+        resolved.append(n)
+        return get_controller(n)
+
+    def refuse(n):
+        raise AssertionError(f"a worker resolved {n!r} again")
+
+    monkeypatch.setattr(compare, "get_controller", counting)
+    monkeypatch.setattr(runner, "get_controller", refuse)
+    cfg = ArenaConfig(controllers=("stand", name), scenario=small, seeds=(0,), trials=2, out_dir=tmp_path / "r",
+                      workers=1, progress=False)
+    records = TrialRecord.read_csv(run_arena(cfg).out_dir / "trials.csv")
+    assert len(records) == 2 * 2 * 2 and sorted(resolved) == sorted(["stand", name])
+    # a task, resolved policy included, pickles for spawned processes and Ray, and plays the same there
+    task = TrialTask(trial=load_scenario(small).trial("soft", 0, 1), controller=get_controller(name))
+    played = run_task(pickle.loads(pickle.dumps(task)))
+    assert _metrics([played]) == _metrics([r for r in records if r.run_key == (name, "soft", 0, 1)])
 
 
 def test_a_policy_file_enters_the_arena_as_policy_path(small, tmp_path, capsys):

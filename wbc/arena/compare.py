@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor
+from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.report import summarize, write_report
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import TickObserver
@@ -73,8 +73,6 @@ class ArenaConfig:
             raise ConfigError("at least one controller is needed")
         if len(set(self.controllers)) != len(self.controllers):
             raise ConfigError(f"controllers repeat: {', '.join(self.controllers)}")
-        for name in self.controllers:
-            get_controller(name)
         if self.executor not in EXECUTORS:
             raise UnknownNameError("executor", self.executor, EXECUTORS)
         if self.trials < 1:
@@ -117,12 +115,16 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     """Run (or resume) a comparison and write its results directory.
 
     Raises:
+        UnknownNameError: an unknown controller name (the message lists the valid ones).
+        PolicyFileError: a ``policy:PATH`` file that is missing or malformed.
         ScenarioError: the scenario file is invalid.
         WbcError: bad options or a results directory that belongs to another run.
     """
+    # each name resolved once, here: a policy file is read in this process only, and the tasks carry the spec
+    specs = {name: get_controller(name) for name in cfg.controllers}
     scenario = load_scenario(cfg.scenario)
-    for name in cfg.controllers:
-        robot = get_controller(name).robot
+    for name, spec in specs.items():
+        robot = spec.robot
         if robot is not None and robot != scenario.robot:
             raise ConfigError(f"controller {name} drives {robot}, but scenario {cfg.scenario} is played by "
                               f"{scenario.robot}")
@@ -158,8 +160,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         path.parent.mkdir(parents=True, exist_ok=True)
         return str(path)
 
-    tasks = [(t, c, cfg.debug_truth, where(t, c)) for c in cfg.controllers for t in trials
-             if (c, t.band, t.seed, t.index) not in done]
+    tasks = [TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c))
+             for c in cfg.controllers for t in trials if (c, t.band, t.seed, t.index) not in done]
     total = len(cfg.controllers) * len(trials)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
     bar = _progress(total, total - len(tasks), cfg.progress)

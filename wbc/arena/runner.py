@@ -20,7 +20,7 @@ from threadpoolctl import threadpool_limits
 from wbc.arena.episode import Episode, EpisodeBuffer, PushLog
 from wbc.arena.record import TrialRecord
 from wbc.control.protocol import Controller
-from wbc.control.registry import get_controller
+from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
@@ -114,30 +114,37 @@ def simulated_robot(trial: Trial, arm_mode: str) -> MujocoRobot:
     return robot
 
 
-def run_trial(trial: Trial, controller: str, *, debug_truth: bool = False, observer: TickObserver | None = None,
-              ) -> tuple[TrialRecord, Episode]:
-    """Play `trial` in simulation with the named controller (`observer`: see `run_episode`).
+def run_trial(trial: Trial, controller: ControllerSpec | str, *, debug_truth: bool = False,
+              observer: TickObserver | None = None) -> tuple[TrialRecord, Episode]:
+    """Play `trial` in simulation with `controller` (`observer`: see `run_episode`).
 
     With `debug_truth` the controller's ground-truth debug switch is thrown (it reads the simulator's base state
     instead of estimating it) and the record says so.
+
+    Args:
+        trial: the trial.
+        controller: the resolved controller (`wbc.control.registry.get_controller`), or its name, resolved here.
+        debug_truth: throw the controller's ground-truth debug switch (`wbc.control.protocol.TruthSwitch`).
+        observer: called after every tick.
 
     Returns:
         The trial's record and the episode log.
 
     Raises:
-        UnknownNameError: unknown controller.
+        UnknownNameError: unknown controller name.
         ConfigError: the controller's period is not a whole number of physics steps.
     """
+    spec = get_controller(controller) if isinstance(controller, str) else controller
     # one BLAS thread: a multi-threaded product splits its sums differently, and the same trial would differ in its
     # last bits between an in-process run and a pool worker (which starts single-threaded)
     with threadpool_limits(limits=1, user_api="blas"):
-        return _run_trial(trial, controller, debug_truth=debug_truth, observer=observer)
+        return _run_trial(trial, spec, debug_truth=debug_truth, observer=observer)
 
 
-def _run_trial(trial: Trial, controller: str, *, debug_truth: bool, observer: TickObserver | None,
+def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observer: TickObserver | None,
                ) -> tuple[TrialRecord, Episode]:
     start = time.perf_counter()
-    spec = get_controller(controller)
+    controller = spec.name
     robot = simulated_robot(trial, spec.arm_mode)
     ctrl = spec.make(robot.desc)
     ratio = (1.0 / ctrl.rate_hz) / robot.config.timestep
