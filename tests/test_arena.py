@@ -19,10 +19,15 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode
 from wbc.arena.metrics import compute_metrics
 from wbc.arena.record import TrialRecord
-from wbc.arena.runner import run_trial
+from wbc.arena.runner import run_episode
+from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
 from wbc.control.registry import CONTROLLERS
-from wbc.errors import EpisodeFileError, WbcError
+from wbc.control.stand import StandController
+from wbc.errors import EpisodeFileError, MissingCapabilityError, WbcError
+from wbc.hardware.capabilities import FallDetector, TruthSource
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.robot import Robot
 from wbc.learned.policy.controller import shipped_weights
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
@@ -184,7 +189,7 @@ def test_metrics_are_pure_functions_of_the_episode():
     ep = Episode(duration_s=4.0, control_dt=0.02, fell=True, fall_time_s=2.0, t=t, command=command,
                  v_base_in_yaw=np.tile([0.2, 0.0], (k, 1)), yaw_rate=np.full(k, 0.25), roll=np.full(k, 0.1),
                  pitch=np.full(k, -0.2), power=np.full(k, 50.0),
-                 arm_q=np.outer(np.arange(k), [0.01, 0.0, 0.0]), qpos=np.zeros((k, 22)))
+                 arm_q=np.outer(np.arange(k), [0.01, 0.0, 0.0]), qpos=np.zeros((k, 22)), act_s=np.full(k, 1e-3))
     m = compute_metrics(ep)
     assert m["success"] is False and m["ttf"] == 0.5
     assert m["vlin_err"] == pytest.approx(0.1) and m["vang_err"] == pytest.approx(0.25)
@@ -193,12 +198,85 @@ def test_metrics_are_pure_functions_of_the_episode():
     assert m["arm_travel_rad"] == pytest.approx(0.01 * (k - 1))
 
 
+class _Blind(Robot):
+    """A robot that offers no capability beyond the interface (no truth, no fall detection), as hardware may not."""
+
+    def __init__(self, inner: MujocoRobot) -> None:
+        super().__init__()
+        self.inner = inner
+
+    joint_names = property(lambda self: self.inner.joint_names)
+    limits = property(lambda self: self.inner.limits)
+
+    def _connect(self):
+        self.inner.connect()
+
+    def _close(self):
+        pass
+
+    def _read(self):
+        return self.inner.read()
+
+    def _send(self, cmd):
+        self.inner.write(cmd)
+
+    def _advance(self, dt):
+        self.inner.advance(dt)
+
+
+class _SlowEveryTenth:
+    """The stand controller, taking 5 ms longer on every tenth tick."""
+
+    def __init__(self, desc) -> None:
+        self.inner = StandController(desc)
+        self.rate_hz = self.inner.rate_hz
+        self.ticks = 0
+
+    def reset(self):
+        self.inner.reset()
+        self.ticks = 0
+
+    def act(self, state, command):
+        self.ticks += 1
+        if self.ticks % 10 == 0:
+            time.sleep(0.005)
+        return self.inner.act(state, command)
+
+    def counters(self):
+        return {}
+
+
+def test_the_loop_runs_on_any_robot_and_times_every_act(small):
+    trial = load_scenario(small).trial("soft", 0, 0)
+    sim = MujocoRobot(MujocoRobotConfig(terrain=trial.terrain))
+    sim.connect()
+    blind = _Blind(sim)
+    blind.connect()
+    assert not isinstance(blind, TruthSource | FallDetector)
+    with pytest.raises(MissingCapabilityError, match="TruthSource.*truth="):
+        run_episode(blind, StandController(sim.desc), trial.command, 1.0)
+    with pytest.raises(MissingCapabilityError, match="FallDetector.*fallen="):
+        run_episode(blind, StandController(sim.desc), trial.command, 1.0, truth=sim.base_truth)
+    sim.reset(seed=trial.terrain_seed, domain=trial.domain)
+    direct = run_episode(sim, StandController(sim.desc), trial.command, 1.0)
+    sim.reset(seed=trial.terrain_seed, domain=trial.domain)
+    ticks = []
+    through = run_episode(blind, _SlowEveryTenth(sim.desc), trial.command, 1.0, truth=sim.base_truth,
+                          fallen=sim.fallen, observer=lambda t, robot, ctrl, cmd: ticks.append(t))
+    # the same loop, the same physics: only where truth and falls come from differ
+    np.testing.assert_array_equal(through.qpos, direct.qpos)
+    assert len(ticks) == len(through.t) == len(through.act_s) == 50 and not through.fell
+    # the runner timed every act call: the slow ticks show, and count as deadline misses against a 5 ms budget
+    assert np.all(through.act_s > 0) and np.all(through.act_s[9::10] >= 0.005)
+    assert through.deadline_misses(0.005) >= 5 and direct.deadline_misses() == 0
+
+
 def test_episode_round_trips_through_npz(small, tmp_path):
     _, ep = run_trial(load_scenario(small).trial("soft", 1, 0), "stand")
     assert len(ep.pushes) >= 1
     ep.save(str(tmp_path / "ep.npz"))
     back = Episode.load(str(tmp_path / "ep.npz"))
-    for name in ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos"):
+    for name in ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos", "act_s"):
         assert np.array_equal(getattr(back, name), getattr(ep, name)), name
     for name in ("start", "duration", "force_in_world", "offset_in_base"):
         assert np.array_equal(getattr(back.pushes, name), getattr(ep.pushes, name)), name
@@ -267,7 +345,7 @@ def test_no_push_and_debug_truth_are_recorded_with_the_run(small, tmp_path):
 def test_controllers_are_resolved_once_in_the_parent(small, tmp_path, monkeypatch):
     """run_arena resolves each name once (a policy file is read there) and the tasks carry the spec to the workers."""
     import wbc.arena.compare as compare
-    import wbc.arena.runner as runner
+    import wbc.arena.sim_trial as sim_trial
     from wbc.arena.executors import TrialTask, run_task
     from wbc.control.registry import get_controller
     from wbc.robots.registry import get_robot as robot_named
@@ -283,7 +361,7 @@ def test_controllers_are_resolved_once_in_the_parent(small, tmp_path, monkeypatc
         raise AssertionError(f"a worker resolved {n!r} again")
 
     monkeypatch.setattr(compare, "get_controller", counting)
-    monkeypatch.setattr(runner, "get_controller", refuse)
+    monkeypatch.setattr(sim_trial, "get_controller", refuse)
     cfg = ArenaConfig(controllers=("stand", name), scenario=small, seeds=(0,), trials=2, out_dir=tmp_path / "r",
                       workers=1, progress=False)
     records = TrialRecord.read_csv(run_arena(cfg).out_dir / "trials.csv")

@@ -1,7 +1,8 @@
 """`Episode`: the log of one played trial, at the control rate, from which every metric is computed.
 
-Per control tick it keeps the command, the measured proprioception needed for energy and arm travel, and simulator
-truth (base velocity, yaw rate, roll, pitch, configuration) for tracking metrics and replay. The pushes the robot met
+Per control tick it keeps the command, the measured proprioception needed for energy and arm travel, simulator
+truth (base velocity, yaw rate, roll, pitch, configuration) for tracking metrics and replay, and how long the
+controller took to act (the runner's timing, for deadline misses). The pushes the robot met
 are kept as arrays (`PushLog`), so a replay draws them from numbers, not from text.
 """
 
@@ -65,7 +66,7 @@ class PushLog:
 
 _PUSH_KEYS = ("start", "duration", "force_in_world", "offset_in_base")
 _SCALARS = ("duration_s", "control_dt", "fell", "fall_time_s")
-_ARRAYS = ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos")
+_ARRAYS = ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos", "act_s")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -86,6 +87,8 @@ class Episode:
         power: sum over joints of |tau_est * dq|, measured, shape (k,) [W].
         arm_q: measured arm joint positions, shape (k, 3) (zero columns without an actuated arm) [rad].
         qpos: simulator configuration for replay, shape (k, nq).
+        act_s: wall time of each tick's ``controller.act`` call, shape (k,) [s]; a tick whose value exceeds
+            `control_dt` missed its deadline on a real robot.
         pushes: the pushes that began before the episode ended.
     """
 
@@ -102,12 +105,17 @@ class Episode:
     power: np.ndarray
     arm_q: np.ndarray
     qpos: np.ndarray
+    act_s: np.ndarray
     pushes: PushLog = field(default_factory=PushLog)
 
     @property
     def survived_s(self) -> float:
         """Time survived [s]: the fall time, or the whole episode."""
         return float(self.fall_time_s) if self.fell else float(self.duration_s)
+
+    def deadline_misses(self, budget_s: float | None = None) -> int:
+        """Ticks whose ``controller.act`` took longer than `budget_s` [s] (default: the control period)."""
+        return int(np.count_nonzero(self.act_s > (self.control_dt if budget_s is None else budget_s)))
 
     def save(self, path: str) -> None:
         """Write the episode to a NumPy ``.npz`` file (no pickle); the pushes as arrays ``push_<field>``."""
@@ -156,6 +164,7 @@ class EpisodeBuffer:
     power: np.ndarray = field(init=False)
     arm_q: np.ndarray = field(init=False)
     qpos: np.ndarray = field(init=False)
+    act_s: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         n = self.capacity
@@ -168,6 +177,7 @@ class EpisodeBuffer:
         self.power = np.zeros(n)
         self.arm_q = np.zeros((n, 3))
         self.qpos = np.zeros((n, self.nq))
+        self.act_s = np.zeros(n)
 
     def finish(self, *, duration_s: float, control_dt: float, fell: bool, fall_time_s: float) -> Episode:
         """The episode made of the rows filled so far (no pushes: the trial's setup adds those it applied)."""

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wbc.arena.record import TrialRecord
-from wbc.arena.runner import run_trial
+from wbc.arena.sim_trial import run_trial
 from wbc.errors import ConfigError
 from wbc.scenario.trial import Trial
 from wbc.viz.live import LiveObserver, LiveViewer
