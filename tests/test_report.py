@@ -349,3 +349,15 @@ def test_write_report_skips_push_plot_without_pushes(tmp_path):
     assert not (tmp_path / "success_vs_push.png").exists()
     assert all(p.stat().st_size > 1024 for p in paths if p.suffix == ".png")
     assert "(success_vs_push.png)" not in (tmp_path / "report.md").read_text(encoding="utf-8")
+
+
+def test_tables_and_summaries_need_no_plotting_library():
+    # text and plots apart: summarising and printing a table never imports matplotlib (wbc.arena.plots does, lazily)
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom wbc.arena.report import format_table, summarize\n"
+            "s = summarize([], scenario_name='x', scenario_hash='h', controllers=['a'], bands=['b'])\n"
+            "format_table(s)\nprint('matplotlib' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"
