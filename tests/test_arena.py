@@ -30,9 +30,11 @@ from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
 from wbc.learned.policy.controller import shipped_weights
 from wbc.robots.registry import get_robot
+from wbc.scenario.push import Push
 from wbc.scenario.scenario import load_scenario
 
-SCENARIOS = sorted(Path(__file__).resolve().parent.parent.joinpath("scenarios").glob("*.toml"))
+SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+SCENARIOS = sorted(SCENARIOS_DIR.glob("*.toml"))
 SCENARIOS = [p for p in SCENARIOS if p.name != "published.toml"]
 
 SMALL = """
@@ -291,16 +293,46 @@ def test_episode_round_trips_through_npz(small, tmp_path):
 
 @pytest.mark.parametrize("scenario", SCENARIOS, ids=lambda p: p.stem)
 @pytest.mark.parametrize("controller", list(CONTROLLERS))
-def test_every_scenario_runs_with_every_controller(scenario, controller):
+def test_every_controller_holds_up_through_the_first_second_of_every_scenario(scenario, controller):
     sc = load_scenario(scenario)
     weights = shipped_weights(get_robot(sc.robot, CONTROLLERS[controller].arm_mode))
     if controller.startswith("learned") and not weights.exists():
         pytest.skip(f"no shipped weights {weights.name} for {sc.robot} yet")
     trial = dataclasses.replace(sc.trial(sc.bands[-1], 0, 0), duration_s=1.0)
     record, episode = run_trial(trial, controller)
-    assert isinstance(record, TrialRecord)
-    assert record.scenario_hash == sc.hash and 0 < record.ttf <= 1
+    # the record is this trial's, as played
+    assert (record.controller, record.scenario, record.scenario_hash) == (controller, sc.name, sc.hash)
+    assert (record.band, record.seed, record.trial) == trial.key
+    assert (record.n_pushes, record.push_force_n) == (len(trial.pushes), trial.push_force_n)
+    assert (record.vx_cmd, record.vy_cmd, record.yaw_rate_cmd) == (trial.command.vx, trial.command.vy,
+                                                                     trial.command.yaw_rate)
+    assert (record.friction, record.payload_kg) == (trial.domain.friction, trial.domain.payload_mass)
+    # every shipped controller keeps every scenario's robot up for its first second (no push comes that early)
+    assert record.success and record.ttf == 1.0 and math.isnan(record.fall_time_s) and not episode.fell
+    assert len(episode.t) == len(episode.act_s) == round(1.0 / episode.control_dt) and np.all(episode.act_s > 0)
     assert all(np.isfinite(record[k]) for k in ("vlin_err", "vang_err", "energy_j", "max_roll_deg"))
+    assert record.energy_j > 0 and record.max_roll_deg < 10
+    # standing still, the tracking error is the commanded speed itself; a walker follows the command
+    speed = float(np.mean(np.linalg.norm(episode.command[:, :2], axis=1)))
+    if controller.startswith("stand"):
+        assert record.vlin_err == pytest.approx(speed, abs=0.1)
+    elif speed > 0.3:
+        assert record.vlin_err < 0.5 * speed
+
+
+def test_stand_rides_out_a_gentle_push_and_falls_under_a_strong_one():
+    base = dataclasses.replace(load_scenario(SCENARIOS_DIR / "push.toml").trial("in", 0, 0), duration_s=2.0)
+    quiet, quiet_ep = run_trial(dataclasses.replace(base, pushes=()), "stand")
+    assert quiet.success and quiet.ttf == 1.0 and math.isnan(quiet.fall_time_s) and len(quiet_ep.pushes) == 0
+    sideways = [Push.horizontal(f, math.pi / 2, (0.0, 0.0, 0.0), 0.5, 0.1) for f in (100.0, 1000.0)]
+    gentle, gentle_ep = run_trial(dataclasses.replace(base, pushes=sideways[:1]), "stand")
+    assert gentle.success and gentle.ttf == 1.0 and gentle.push_force_n == 100.0 and len(gentle_ep.pushes) == 1
+    strong, strong_ep = run_trial(dataclasses.replace(base, pushes=sideways[1:]), "stand")
+    assert not strong.success and strong_ep.fell and strong.push_force_n == 1000.0
+    # it falls after the push, and the episode stops there
+    assert 0.6 < strong.fall_time_s < 2.0 and strong.ttf == pytest.approx(strong.fall_time_s / 2.0)
+    assert strong_ep.t[-1] == pytest.approx(strong.fall_time_s) and len(strong_ep.t) < len(quiet_ep.t)
+    assert strong.max_roll_deg > 45 > quiet.max_roll_deg
 
 
 def test_cli_reports_broken_scenarios_without_traceback(tmp_path, capsys):
