@@ -19,7 +19,7 @@ from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import TickObserver
 from wbc.arena.stats import in_canonical_order
 from wbc.control.registry import get_controller
-from wbc.errors import ConfigError, UnknownNameError, WbcError
+from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
 from wbc.provenance import provenance
 from wbc.scenario.scenario import ScenarioError, check_published, load_scenario
@@ -70,15 +70,16 @@ class ArenaConfig:
 
     def __post_init__(self) -> None:
         if not self.controllers:
-            raise ConfigError("at least one controller is needed")
+            raise ConfigError("at least one controller is needed: name one (wbc run stand) or several (wbc compare mpc "
+                              "learned)")
         if len(set(self.controllers)) != len(self.controllers):
-            raise ConfigError(f"controllers repeat: {', '.join(self.controllers)}")
+            raise ConfigError(f"controllers repeat: {', '.join(self.controllers)}; name each controller once")
         if self.executor not in EXECUTORS:
             raise UnknownNameError("executor", self.executor, EXECUTORS)
         if self.trials < 1:
-            raise ConfigError(f"--trials must be >= 1, got {self.trials}")
+            raise ConfigError(f"--trials must be >= 1, got {self.trials}; pass --trials 1 or more")
         if not self.seeds:
-            raise ConfigError("at least one seed is needed")
+            raise ConfigError("at least one seed is needed; pass --seeds 1 or more")
         if self.observer is not None and self.executor != "local":
             raise ConfigError("a live view (--view) watches trials played in this process: use the local executor")
 
@@ -118,7 +119,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         UnknownNameError: an unknown controller name (the message lists the valid ones).
         PolicyFileError: a ``policy:PATH`` file that is missing or malformed.
         ScenarioError: the scenario file is invalid.
-        WbcError: bad options or a results directory that belongs to another run.
+        ConfigError: bad options, or a controller for another robot than the scenario's.
+        ResultsDirError: a results directory that belongs to another run, or that misses trials at the end.
     """
     # each name resolved once, here: a policy file is read in this process only, and the tasks carry the spec
     specs = {name: get_controller(name) for name in cfg.controllers}
@@ -127,7 +129,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         robot = spec.robot
         if robot is not None and robot != scenario.robot:
             raise ConfigError(f"controller {name} drives {robot}, but scenario {cfg.scenario} is played by "
-                              f"{scenario.robot}")
+                              f"{scenario.robot}; choose a controller for {scenario.robot}, or a scenario for {robot}")
     bands = cfg.bands or scenario.bands
     for band in bands:
         if band not in scenario.bands:
@@ -201,5 +203,6 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     }
     write_report(store.dir, summary, records, meta)
     if len(records) != total:
-        raise WbcError(f"{store.dir}: {len(records)} of {total} trials stored; rerun with --resume")
+        raise ResultsDirError(f"{store.dir}: {len(records)} of {total} trials stored; rerun with --resume to play the "
+                              "rest")
     return ArenaResult(summary=summary, out_dir=store.dir, played=len(tasks), wall_s=wall, physics_steps=steps)

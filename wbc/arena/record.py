@@ -161,7 +161,8 @@ class TrialRecord:
             RecordError: the row has the wrong number of cells, or a cell does not parse as its field's type.
         """
         if len(row) != len(FIELDS):
-            raise RecordError(f"{source}: {len(row)} cells, expected {len(FIELDS)} ({', '.join(FIELDS)})")
+            raise RecordError(f"{source}: {len(row)} cells, expected {len(FIELDS)} ({', '.join(FIELDS)}); write rows "
+                              "with TrialRecord.to_row")
         return cls(**{name: _parse(source, name, _KINDS[name], text) for name, text in zip(FIELDS, row, strict=True)})
 
     @classmethod

@@ -152,5 +152,6 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     nq = get_robot(trial.robot, get_controller(controller).arm_mode).num_joints + 7
     if episode.qpos.ndim != 2 or episode.qpos.shape[1] != nq:
         raise ViewerError(f"{path}: field qpos: shape {episode.qpos.shape}, expected (ticks, {nq}) for "
-                          f"{trial.robot} driven by {controller}")
+                          f"{trial.robot} driven by {controller}; the file belongs to another run: store it again "
+                          "with `wbc run --save-episodes`")
     return StoredEpisode(path=path, controller=controller, trial=trial, episode=episode)
