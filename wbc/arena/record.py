@@ -118,6 +118,15 @@ class TrialRecord:
             wbc_failures=counters.get("wbc_failures", 0), debug_truth=debug_truth, wall_s=wall_s,
         )
 
+    def __eq__(self, other: object) -> bool:
+        """Equal when stored alike: every field's ``trials.csv`` text matches (so NaN equals NaN, bit for bit)."""
+        if not isinstance(other, TrialRecord):
+            return NotImplemented
+        return self.to_row() == other.to_row()
+
+    def __hash__(self) -> int:
+        return hash(tuple(self.to_row()))
+
     # -- access ---------------------------------------------------------------------------------------------------
     @property
     def pair_key(self) -> tuple[str, int, int]:
