@@ -117,6 +117,14 @@ def test_record_round_trips_through_csv_to_the_last_bit(tmp_path):
     assert (tmp_path / "trials.csv").read_text().splitlines()[0] == ",".join(TrialRecord.header())
 
 
+def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory():
+    # the stored format: changing it would stop older results directories from resuming
+    assert ",".join(TrialRecord.header()) == (
+        "controller,scenario,scenario_hash,band,seed,trial,success,ttf,fall_time_s,vlin_err,vang_err,max_roll_deg,"
+        "max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,payload_kg,"
+        "fallbacks,wbc_failures,debug_truth,wall_s")
+
+
 def test_read_csv_drops_a_torn_last_line_and_refuses_other_columns(tmp_path):
     records = arena_records()[:3]
     path = tmp_path / "trials.csv"
