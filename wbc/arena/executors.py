@@ -41,6 +41,7 @@ class TrialTask:
     debug_truth: bool = False
     episode_path: str | None = None
 
+
 _SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """Workers run one trial each on one core: a multi-threaded BLAS in every worker oversubscribes the cores (two MPC
 workers on two cores ran 2.5x slower than one)."""
