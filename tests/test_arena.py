@@ -5,6 +5,7 @@ import dataclasses
 import json
 import math
 import os
+import pickle
 import signal
 import subprocess
 import sys
@@ -17,16 +18,23 @@ import pytest
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode
 from wbc.arena.metrics import compute_metrics
-from wbc.arena.results import RECORD_FIELDS, read_records
-from wbc.arena.runner import run_trial
+from wbc.arena.record import TrialRecord
+from wbc.arena.runner import run_episode
+from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
 from wbc.control.registry import CONTROLLERS
-from wbc.errors import WbcError
+from wbc.control.stand import StandController
+from wbc.errors import EpisodeFileError, MissingCapabilityError, WbcError
+from wbc.hardware.capabilities import FallDetector, TruthSource
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.robot import Robot
 from wbc.learned.policy import shipped_weights
 from wbc.robots.registry import get_robot
+from wbc.scenario.push import Push
 from wbc.scenario.scenario import load_scenario
 
-SCENARIOS = sorted(Path(__file__).resolve().parent.parent.joinpath("scenarios").glob("*.toml"))
+SCENARIOS_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+SCENARIOS = sorted(SCENARIOS_DIR.glob("*.toml"))
 SCENARIOS = [p for p in SCENARIOS if p.name != "published.toml"]
 
 SMALL = """
@@ -75,9 +83,9 @@ def small(tmp_path):
 
 
 def _metrics(records):
-    keep = [k for k in RECORD_FIELDS if k != "wall_s"]
-    norm = [tuple("nan" if isinstance(r[k], float) and math.isnan(r[k]) else r[k] for k in keep) for r in records]
-    return sorted(norm, key=repr)
+    """Every field but the wall time, as the stored text, in a stable order."""
+    wall = TrialRecord.header().index("wall_s")
+    return sorted(tuple(c for i, c in enumerate(r.to_row()) if i != wall) for r in records)
 
 
 def _run(small, out, **kw):
@@ -90,12 +98,14 @@ def test_same_seed_same_metrics_across_runs_and_worker_counts(small, tmp_path):
     a = _run(small, tmp_path / "a", workers=1)
     b = _run(small, tmp_path / "b", workers=1)
     c = _run(small, tmp_path / "c", workers=2)
-    ra, rb, rc = (read_records(r.out_dir / "trials.csv") for r in (a, b, c))
+    ra, rb, rc = (TrialRecord.read_csv(r.out_dir / "trials.csv") for r in (a, b, c))
     assert len(ra) == 2 * 2 * 2 * 3
     assert _metrics(ra) == _metrics(rb) == _metrics(rc)
+    # the summary too, to the last bit, whatever order the two workers finished their trials in
+    assert len({(r.out_dir / "summary.json").read_bytes() for r in (a, b, c)}) == 1
     # the bands discriminate: the soft pushes are survived more often than the hard ones
-    soft = [r["success"] for r in ra if r["band"] == "soft"]
-    hard = [r["success"] for r in ra if r["band"] == "hard"]
+    soft = [r.success for r in ra if r.band == "soft"]
+    hard = [r.success for r in ra if r.band == "hard"]
     assert sum(soft) > sum(hard)
     summary = json.loads((a.out_dir / "summary.json").read_text())
     assert set(summary["controllers"]) == {"stand", "stand-noarm"}
@@ -109,7 +119,9 @@ def test_local_and_ray_executors_agree(small, tmp_path):
     pytest.importorskip("ray")
     local = _run(small, tmp_path / "local", workers=2)
     ray = _run(small, tmp_path / "ray", executor="ray")
-    assert _metrics(read_records(local.out_dir / "trials.csv")) == _metrics(read_records(ray.out_dir / "trials.csv"))
+    local_rows, ray_rows = (TrialRecord.read_csv(r.out_dir / "trials.csv") for r in (local, ray))
+    assert _metrics(local_rows) == _metrics(ray_rows)
+    assert (local.out_dir / "summary.json").read_bytes() == (ray.out_dir / "summary.json").read_bytes()
 
 
 def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
@@ -125,7 +137,7 @@ def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
         time.sleep(0.05)
     os.killpg(proc.pid, signal.SIGKILL)
     proc.wait()
-    before = read_records(trials_csv)
+    before = TrialRecord.read_csv(trials_csv)
     assert 4 <= len(before) < 2 * 2 * 2 * 6
     # a torn line, as a kill in the middle of a write would leave
     with trials_csv.open("a") as f:
@@ -133,13 +145,13 @@ def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
     cfg = ArenaConfig(controllers=("stand", "stand-noarm"), scenario=small, seeds=(0, 1), trials=6, out_dir=out,
                       workers=1, resume=True, progress=False)
     result = run_arena(cfg)
-    after = read_records(trials_csv)
-    keys = [(r["controller"], r["band"], r["seed"], r["trial"]) for r in after]
+    after = TrialRecord.read_csv(trials_csv)
+    keys = [r.run_key for r in after]
     assert len(keys) == len(set(keys)) == 2 * 2 * 2 * 6
     assert result.played == len(after) - len(before)  # nothing finished was played again
     # finished rows kept as they were, wall times included
     assert _metrics(after[: len(before)]) == _metrics(before)
-    assert [r["wall_s"] for r in after[: len(before)]] == [r["wall_s"] for r in before]
+    assert [r.wall_s for r in after[: len(before)]] == [r.wall_s for r in before]
     # resuming a finished run plays nothing; resuming with other options is refused
     assert run_arena(cfg).played == 0
     with pytest.raises(Exception, match="different configuration"):
@@ -152,16 +164,23 @@ def test_fall_is_detected_and_metrics_follow(small):
     sc = load_scenario(small)
     falls = 0
     for i in range(3):
-        record, episode = run_trial(sc.trial("hard", 0, i), "stand")
-        assert record["success"] == (not episode.fell)
+        trial = sc.trial("hard", 0, i)
+        record, episode = run_trial(trial, "stand")
+        assert record.success == (not episode.fell)
         if episode.fell:
             falls += 1
-            assert 0 < record["ttf"] < 1 and record["fall_time_s"] == pytest.approx(record["ttf"] * 3.0)
+            assert 0 < record.ttf < 1 and record.fall_time_s == pytest.approx(record.ttf * 3.0)
             assert episode.t[-1] == pytest.approx(episode.fall_time_s)
-        assert any(kind == "push" for _, kind, _ in episode.events)
+        # the episode logs, as numbers, exactly the pushes that began before it ended
+        met = [p for p in trial.pushes if p.start < episode.survived_s]
+        assert len(episode.pushes) == len(met) >= 1
+        np.testing.assert_array_equal(episode.pushes.start, [p.start for p in met])
+        np.testing.assert_array_equal(episode.pushes.duration, [p.duration for p in met])
+        np.testing.assert_array_equal(episode.pushes.force_in_world, [p.force_in_world for p in met])
+        np.testing.assert_array_equal(episode.pushes.offset_in_base, [p.offset_in_base for p in met])
     assert falls >= 1
     record, episode = run_trial(sc.trial("soft", 0, 0), "stand")
-    assert record["success"] and record["ttf"] == 1.0 and math.isnan(record["fall_time_s"])
+    assert record.success and record.ttf == 1.0 and math.isnan(record.fall_time_s)
     assert len(episode.t) == 150  # 3 s at 50 Hz
 
 
@@ -172,7 +191,7 @@ def test_metrics_are_pure_functions_of_the_episode():
     ep = Episode(duration_s=4.0, control_dt=0.02, fell=True, fall_time_s=2.0, t=t, command=command,
                  v_base_in_yaw=np.tile([0.2, 0.0], (k, 1)), yaw_rate=np.full(k, 0.25), roll=np.full(k, 0.1),
                  pitch=np.full(k, -0.2), power=np.full(k, 50.0),
-                 arm_q=np.outer(np.arange(k), [0.01, 0.0, 0.0]), qpos=np.zeros((k, 22)))
+                 arm_q=np.outer(np.arange(k), [0.01, 0.0, 0.0]), qpos=np.zeros((k, 22)), act_s=np.full(k, 1e-3))
     m = compute_metrics(ep)
     assert m["success"] is False and m["ttf"] == 0.5
     assert m["vlin_err"] == pytest.approx(0.1) and m["vang_err"] == pytest.approx(0.25)
@@ -181,25 +200,139 @@ def test_metrics_are_pure_functions_of_the_episode():
     assert m["arm_travel_rad"] == pytest.approx(0.01 * (k - 1))
 
 
+class _Blind(Robot):
+    """A robot that offers no capability beyond the interface (no truth, no fall detection), as hardware may not."""
+
+    def __init__(self, inner: MujocoRobot) -> None:
+        super().__init__()
+        self.inner = inner
+
+    joint_names = property(lambda self: self.inner.joint_names)
+    limits = property(lambda self: self.inner.limits)
+
+    def _connect(self):
+        self.inner.connect()
+
+    def _close(self):
+        pass
+
+    def _read(self):
+        return self.inner.read()
+
+    def _send(self, cmd):
+        self.inner.write(cmd)
+
+    def _advance(self, dt):
+        self.inner.advance(dt)
+
+
+class _SlowEveryTenth:
+    """The stand controller, taking 5 ms longer on every tenth tick."""
+
+    def __init__(self, desc) -> None:
+        self.inner = StandController(desc)
+        self.rate_hz = self.inner.rate_hz
+        self.ticks = 0
+
+    def reset(self):
+        self.inner.reset()
+        self.ticks = 0
+
+    def act(self, state, command):
+        self.ticks += 1
+        if self.ticks % 10 == 0:
+            time.sleep(0.005)
+        return self.inner.act(state, command)
+
+    def counters(self):
+        return {}
+
+
+def test_the_loop_runs_on_any_robot_and_times_every_act(small):
+    trial = load_scenario(small).trial("soft", 0, 0)
+    sim = MujocoRobot(MujocoRobotConfig(terrain=trial.terrain))
+    sim.connect()
+    blind = _Blind(sim)
+    blind.connect()
+    assert not isinstance(blind, TruthSource | FallDetector)
+    with pytest.raises(MissingCapabilityError, match="TruthSource.*truth="):
+        run_episode(blind, StandController(sim.desc), trial.command, 1.0)
+    with pytest.raises(MissingCapabilityError, match="FallDetector.*fallen="):
+        run_episode(blind, StandController(sim.desc), trial.command, 1.0, truth=sim.base_truth)
+    sim.reset(seed=trial.terrain_seed, domain=trial.domain)
+    direct = run_episode(sim, StandController(sim.desc), trial.command, 1.0)
+    sim.reset(seed=trial.terrain_seed, domain=trial.domain)
+    ticks = []
+    through = run_episode(blind, _SlowEveryTenth(sim.desc), trial.command, 1.0, truth=sim.base_truth,
+                          fallen=sim.fallen, observer=lambda t, robot, ctrl, cmd: ticks.append(t))
+    # the same loop, the same physics: only where truth and falls come from differ
+    np.testing.assert_array_equal(through.qpos, direct.qpos)
+    assert len(ticks) == len(through.t) == len(through.act_s) == 50 and not through.fell
+    # the runner timed every act call: the slow ticks show, and count as deadline misses against a 5 ms budget
+    assert np.all(through.act_s > 0) and np.all(through.act_s[9::10] >= 0.005)
+    assert through.deadline_misses(0.005) >= 5 and direct.deadline_misses() == 0
+
+
 def test_episode_round_trips_through_npz(small, tmp_path):
     _, ep = run_trial(load_scenario(small).trial("soft", 1, 0), "stand")
+    assert len(ep.pushes) >= 1
     ep.save(str(tmp_path / "ep.npz"))
     back = Episode.load(str(tmp_path / "ep.npz"))
-    assert np.array_equal(back.qpos, ep.qpos) and back.events == ep.events and back.fell == ep.fell
+    for name in ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos", "act_s"):
+        assert np.array_equal(getattr(back, name), getattr(ep, name)), name
+    for name in ("start", "duration", "force_in_world", "offset_in_base"):
+        assert np.array_equal(getattr(back.pushes, name), getattr(ep.pushes, name)), name
+    assert (back.fell, back.duration_s, back.control_dt) == (ep.fell, ep.duration_s, ep.control_dt)
+    # a file without the push arrays (pushes were text before) is refused, naming the field and the fix
+    with np.load(tmp_path / "ep.npz") as z:
+        old = {k: z[k] for k in z.files if not k.startswith("push_")}
+    np.savez(tmp_path / "old.npz", **old, events=np.array(["1.0|push|force_in_world=[1.0, 0.0, 0.0]"]))
+    with pytest.raises(EpisodeFileError, match=r"old\.npz: field push_start missing.*--save-episodes"):
+        Episode.load(str(tmp_path / "old.npz"))
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS, ids=lambda p: p.stem)
 @pytest.mark.parametrize("controller", list(CONTROLLERS))
-def test_every_scenario_runs_with_every_controller(scenario, controller):
+def test_every_controller_holds_up_through_the_first_second_of_every_scenario(scenario, controller):
     sc = load_scenario(scenario)
     weights = shipped_weights(get_robot(sc.robot, CONTROLLERS[controller].arm_mode))
     if controller.startswith("learned") and not weights.exists():
         pytest.skip(f"no shipped weights {weights.name} for {sc.robot} yet")
     trial = dataclasses.replace(sc.trial(sc.bands[-1], 0, 0), duration_s=1.0)
     record, episode = run_trial(trial, controller)
-    assert set(RECORD_FIELDS) <= set(record)
-    assert record["scenario_hash"] == sc.hash and 0 < record["ttf"] <= 1
+    # the record is this trial's, as played
+    assert (record.controller, record.scenario, record.scenario_hash) == (controller, sc.name, sc.hash)
+    assert (record.band, record.seed, record.trial) == trial.key
+    assert (record.n_pushes, record.push_force_n) == (len(trial.pushes), trial.push_force_n)
+    assert (record.vx_cmd, record.vy_cmd, record.yaw_rate_cmd) == (trial.command.vx, trial.command.vy,
+                                                                     trial.command.yaw_rate)
+    assert (record.friction, record.payload_kg) == (trial.domain.friction, trial.domain.payload_mass)
+    # every shipped controller keeps every scenario's robot up for its first second (no push comes that early)
+    assert record.success and record.ttf == 1.0 and math.isnan(record.fall_time_s) and not episode.fell
+    assert len(episode.t) == len(episode.act_s) == round(1.0 / episode.control_dt) and np.all(episode.act_s > 0)
     assert all(np.isfinite(record[k]) for k in ("vlin_err", "vang_err", "energy_j", "max_roll_deg"))
+    assert record.energy_j > 0 and record.max_roll_deg < 10
+    # standing still, the tracking error is the commanded speed itself; a walker follows the command
+    speed = float(np.mean(np.linalg.norm(episode.command[:, :2], axis=1)))
+    if controller.startswith("stand"):
+        assert record.vlin_err == pytest.approx(speed, abs=0.1)
+    elif speed > 0.3:
+        assert record.vlin_err < 0.5 * speed
+
+
+def test_stand_rides_out_a_gentle_push_and_falls_under_a_strong_one():
+    base = dataclasses.replace(load_scenario(SCENARIOS_DIR / "push.toml").trial("in", 0, 0), duration_s=2.0)
+    quiet, quiet_ep = run_trial(dataclasses.replace(base, pushes=()), "stand")
+    assert quiet.success and quiet.ttf == 1.0 and math.isnan(quiet.fall_time_s) and len(quiet_ep.pushes) == 0
+    sideways = [Push.horizontal(f, math.pi / 2, (0.0, 0.0, 0.0), 0.5, 0.1) for f in (100.0, 1000.0)]
+    gentle, gentle_ep = run_trial(dataclasses.replace(base, pushes=sideways[:1]), "stand")
+    assert gentle.success and gentle.ttf == 1.0 and gentle.push_force_n == 100.0 and len(gentle_ep.pushes) == 1
+    strong, strong_ep = run_trial(dataclasses.replace(base, pushes=sideways[1:]), "stand")
+    assert not strong.success and strong_ep.fell and strong.push_force_n == 1000.0
+    # it falls after the push, and the episode stops there
+    assert 0.6 < strong.fall_time_s < 2.0 and strong.ttf == pytest.approx(strong.fall_time_s / 2.0)
+    assert strong_ep.t[-1] == pytest.approx(strong.fall_time_s) and len(strong_ep.t) < len(quiet_ep.t)
+    assert strong.max_roll_deg > 45 > quiet.max_roll_deg
 
 
 def test_cli_reports_broken_scenarios_without_traceback(tmp_path, capsys):
@@ -230,15 +363,45 @@ def test_no_push_and_debug_truth_are_recorded_with_the_run(small, tmp_path):
     cfg = ArenaConfig(controllers=("mpc",), scenario=small, seeds=(0,), trials=1, bands=("hard",),
                       out_dir=tmp_path / "np", progress=False, workers=1, no_push=True, debug_truth=True)
     result = run_arena(cfg)
-    records = read_records(result.out_dir / "trials.csv")
+    records = TrialRecord.read_csv(result.out_dir / "trials.csv")
     assert len(records) == 1
     # the hard band's pushes topple the robot; without them it survives, and the row says how it was run
-    assert records[0]["success"] and records[0]["n_pushes"] == 0 and records[0]["debug_truth"] is True
+    assert records[0].success and records[0].n_pushes == 0 and records[0].debug_truth is True
     run = json.loads((result.out_dir / "run.json").read_text())
     assert run["config"]["no_push"] is True and run["config"]["debug_truth"] is True
     assert "GROUND TRUTH" in (result.out_dir / "report.md").read_text()
     with pytest.raises(WbcError, match="ground-truth debug switch"):
         run_trial(load_scenario(small).trial("soft", 0, 0), "stand", debug_truth=True)
+
+
+def test_controllers_are_resolved_once_in_the_parent(small, tmp_path, monkeypatch):
+    """run_arena resolves each name once (a policy file is read there) and the tasks carry the spec to the workers."""
+    import wbc.arena.compare as compare
+    import wbc.arena.sim_trial as sim_trial
+    from wbc.arena.executors import TrialTask, run_task
+    from wbc.control.registry import get_controller
+    from wbc.robots.registry import get_robot as robot_named
+
+    name = f"policy:{shipped_weights(robot_named('a1-wx200', 'locked'))}"
+    resolved = []
+
+    def counting(n):
+        resolved.append(n)
+        return get_controller(n)
+
+    def refuse(n):
+        raise AssertionError(f"a worker resolved {n!r} again")
+
+    monkeypatch.setattr(compare, "get_controller", counting)
+    monkeypatch.setattr(sim_trial, "get_controller", refuse)
+    cfg = ArenaConfig(controllers=("stand", name), scenario=small, seeds=(0,), trials=2, out_dir=tmp_path / "r",
+                      workers=1, progress=False)
+    records = TrialRecord.read_csv(run_arena(cfg).out_dir / "trials.csv")
+    assert len(records) == 2 * 2 * 2 and sorted(resolved) == sorted(["stand", name])
+    # a task, resolved policy included, pickles for spawned processes and Ray, and plays the same there
+    task = TrialTask(trial=load_scenario(small).trial("soft", 0, 1), controller=get_controller(name))
+    played = run_task(pickle.loads(pickle.dumps(task)))
+    assert _metrics([played]) == _metrics([r for r in records if r.run_key == (name, "soft", 0, 1)])
 
 
 def test_a_policy_file_enters_the_arena_as_policy_path(small, tmp_path, capsys):
@@ -249,10 +412,10 @@ def test_a_policy_file_enters_the_arena_as_policy_path(small, tmp_path, capsys):
     name = f"policy:{weights}"
     cfg = ArenaConfig(controllers=("learned-locked", name), scenario=small, seeds=(0,), trials=1, bands=("soft",),
                       out_dir=tmp_path / "p", workers=1, progress=False, save_episodes=True)
-    records = read_records(run_arena(cfg).out_dir / "trials.csv")
-    by_name = {r["controller"]: r for r in records}
+    records = TrialRecord.read_csv(run_arena(cfg).out_dir / "trials.csv")
+    by_name = {r.controller: r for r in records}
     assert set(by_name) == {"learned-locked", name}
-    same = [{**r, "controller": "", "wall_s": 0.0} for r in (by_name[name], by_name["learned-locked"])]
+    same = [dataclasses.replace(r, controller="") for r in (by_name[name], by_name["learned-locked"])]
     assert _metrics(same[:1]) == _metrics(same[1:])
     assert len(list((tmp_path / "p" / "episodes").glob("*/*.npz"))) == 2  # one folder per controller, path-safe
     # a policy for another robot is refused before any trial, naming both robots

@@ -216,7 +216,7 @@ import sys
 import numpy as np
 held = [np.ones(int(k)) for k in sys.argv[1].split(",")]  # a different heap history before the MPC runs
 import dataclasses
-from wbc.arena.runner import run_trial
+from wbc.arena.sim_trial import run_trial
 from wbc.scenario.scenario import load_scenario
 trial = load_scenario(sys.argv[2]).trials(["in"], [0], 1)[0]
 record, episode = run_trial(dataclasses.replace(trial, duration_s=2.5), "mpc")

@@ -1,17 +1,19 @@
-"""Tests of `wbc.arena.stats` and `wbc.arena.report` on synthetic arena records with known statistics."""
+"""Tests of `wbc.arena.record`, `wbc.arena.stats` and `wbc.arena.report` on synthetic records with known statistics."""
 
 from __future__ import annotations
 
 import csv
-import io
+import dataclasses
 import json
 import math
 
 import numpy as np
 import pytest
 
+from wbc.arena.record import TrialRecord
 from wbc.arena.report import EXTRA_METRICS, METRICS, format_table, summarize, write_report
-from wbc.arena.stats import RecordError, mean_std_over_seeds, paired_difference, record_float
+from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
+from wbc.errors import RecordError, UnknownNameError
 
 CONTROLLERS = ("mpc", "rl", "wbc")
 BANDS = ("nominal", "push")
@@ -21,7 +23,7 @@ SCENARIO = "flat_push"
 HASH = "abc123"
 
 
-def make_record(controller: str, band: str, seed: int, trial: int, **overrides) -> dict:
+def make_record(controller: str, band: str, seed: int, trial: int, **overrides) -> TrialRecord:
     """One record with deterministic values; `overrides` replace fields."""
     record = {
         "controller": controller,
@@ -47,13 +49,15 @@ def make_record(controller: str, band: str, seed: int, trial: int, **overrides) 
         "friction": 0.8,
         "payload_kg": 0.0,
         "fallbacks": 0,
+        "wbc_failures": 0,
+        "debug_truth": False,
         "wall_s": 1.5,
     }
     record.update(overrides)
-    return record
+    return TrialRecord(**record)
 
 
-def arena_records(*, pushes: bool = True) -> list[dict]:
+def arena_records(*, pushes: bool = True) -> list[TrialRecord]:
     """3 controllers x 2 bands x 3 seeds x 10 trials with varied, reproducible values."""
     rng = np.random.default_rng(42)
     records = []
@@ -83,35 +87,82 @@ def arena_records(*, pushes: bool = True) -> list[dict]:
     return records
 
 
-def as_csv_strings(records: list[dict]) -> list[dict]:
-    """Write the records to CSV and read them back: every value becomes a string."""
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=list(records[0]))
-    writer.writeheader()
-    writer.writerows(records)
-    buffer.seek(0)
-    return list(csv.DictReader(buffer))
+def through_csv(records: list[TrialRecord], path) -> list[TrialRecord]:
+    """Write the records to a trials.csv as the results store does, and read them back."""
+    with path.open("w", encoding="utf-8", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(TrialRecord.header())
+        writer.writerows(r.to_row() for r in records)
+    return TrialRecord.read_csv(path)
 
 
-def summary_of(records: list[dict], controllers=CONTROLLERS, bands=BANDS) -> dict:
+def summary_of(records: list[TrialRecord], controllers=CONTROLLERS, bands=BANDS) -> dict:
     return summarize(records, scenario_name=SCENARIO, scenario_hash=HASH, controllers=controllers, bands=bands)
 
 
+# --- wbc.arena.record -------------------------------------------------------------------------------------------------
+
+
+def test_record_round_trips_through_csv_to_the_last_bit(tmp_path):
+    records = arena_records()
+    records[0] = dataclasses.replace(records[0], vlin_err=0.1 + 0.2, wall_s=1e-300, debug_truth=True, wbc_failures=3)
+    back = through_csv(records, tmp_path / "trials.csv")
+    assert len(back) == len(records)
+    assert back == records  # equal as stored: floats keep every bit, NaN stays NaN
+    assert back[1] != dataclasses.replace(back[1], vlin_err=np.nextafter(back[1].vlin_err, 1.0))
+    assert len({*back, *records}) == len(records)
+    for a, b in zip(records, back, strict=True):
+        assert {k: type(a[k]) for k in TrialRecord.header()} == {k: type(b[k]) for k in TrialRecord.header()}
+    assert back[0].vlin_err == 0.1 + 0.2 and back[0].debug_truth is True and back[0].wbc_failures == 3
+    assert (tmp_path / "trials.csv").read_text().splitlines()[0] == ",".join(TrialRecord.header())
+
+
+def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory():
+    # the stored format: changing it would stop older results directories from resuming
+    assert ",".join(TrialRecord.header()) == (
+        "controller,scenario,scenario_hash,band,seed,trial,success,ttf,fall_time_s,vlin_err,vang_err,max_roll_deg,"
+        "max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,payload_kg,"
+        "fallbacks,wbc_failures,debug_truth,wall_s")
+
+
+def test_read_csv_drops_a_torn_last_line_and_refuses_other_columns(tmp_path):
+    records = arena_records()[:3]
+    path = tmp_path / "trials.csv"
+    through_csv(records, path)
+    with path.open("a", encoding="utf-8") as f:
+        f.write("mpc,flat_push,abc123,nominal,0")  # a write cut short by a kill
+    assert [r.run_key for r in TrialRecord.read_csv(path)] == [r.run_key for r in records]
+    other = tmp_path / "old.csv"
+    other.write_text("controller,band,seed\nmpc,nominal,0\n")
+    with pytest.raises(RecordError, match="another version of wbc"):
+        TrialRecord.read_csv(other)
+
+
+def test_record_fields_are_typed_and_bad_cells_are_named():
+    row = make_record("mpc", "nominal", 0, 0).to_row()
+    header = TrialRecord.header()
+    bad = list(row)
+    bad[header.index("ttf")] = "fast"
+    with pytest.raises(RecordError, match=r"trials\.csv:7: field ttf holds 'fast'"):
+        TrialRecord.from_row(bad, source="trials.csv:7")
+    bad = list(row)
+    bad[header.index("success")] = "maybe"
+    with pytest.raises(RecordError, match="field success"):
+        TrialRecord.from_row(bad)
+    with pytest.raises(RecordError, match="cells"):
+        TrialRecord.from_row(row[:-1])
+    with pytest.raises(RecordError, match=r"TrialRecord\.ttf must be of type float"):
+        make_record("mpc", "nominal", 0, 0, ttf="1.0")
+    with pytest.raises(RecordError, match=r"TrialRecord\.seed must be of type int"):
+        make_record("mpc", "nominal", True, 0)
+    typed = make_record("mpc", "nominal", np.int64(2), 0, ttf=np.float64(0.5), success=np.bool_(False))
+    assert type(typed.seed) is int and type(typed.ttf) is float and typed.success is False
+    assert typed["ttf"] == 0.5 and typed.pair_key == ("nominal", 2, 0)
+    with pytest.raises(UnknownNameError, match="valid record fields: .*vlin_err"):
+        typed["speed"]
+
+
 # --- wbc.arena.stats --------------------------------------------------------------------------------------------------
-
-
-def test_record_float_accepts_typed_and_string_values():
-    assert record_float({"x": True}, "x") == 1.0
-    assert record_float({"x": "False"}, "x") == 0.0
-    assert record_float({"x": "1"}, "x") == 1.0
-    assert record_float({"x": "0"}, "x") == 0.0
-    assert record_float({"x": " 2.5 "}, "x") == 2.5
-    assert math.isnan(record_float({"x": "nan"}, "x"))
-    assert math.isnan(record_float({"x": ""}, "x"))
-    with pytest.raises(RecordError, match="not a number"):
-        record_float({"x": "fast"}, "x")
-    with pytest.raises(RecordError, match="no field 'y'"):
-        record_float({"x": 1.0}, "y")
 
 
 def test_mean_std_over_seeds_by_hand():
@@ -143,7 +194,7 @@ def test_mean_std_over_seeds_single_seed_and_all_nan():
 
 def test_paired_difference_constant_offset_has_degenerate_ci():
     records_a = [make_record("a", "nominal", s, t, ttf=0.25 + 0.0625 * t) for s in SEEDS for t in range(N_TRIALS)]
-    records_b = [dict(r, controller="b", ttf=r["ttf"] + 0.125) for r in records_a]
+    records_b = [dataclasses.replace(r, controller="b", ttf=r.ttf + 0.125) for r in records_a]
     result = paired_difference(records_a, records_b, "ttf")
     assert result == {"diff": 0.125, "ci95": [0.125, 0.125], "n": 30}
     reverse = paired_difference(records_b, records_a, "ttf")
@@ -209,7 +260,7 @@ def test_summary_has_exactly_the_required_shape():
             for metric in (*METRICS, *EXTRA_METRICS):
                 assert set(cell[metric]) == {"mean", "std"}
     cell = summary["controllers"]["mpc"]["bands"]["push"]
-    mine = [r for r in records if r["controller"] == "mpc" and r["band"] == "push"]
+    mine = [r for r in records if r.controller == "mpc" and r.band == "push"]
     assert cell["success_rate"]["mean"] == pytest.approx(mean_std_over_seeds(mine, "success")["mean"])
     assert 0.0 <= cell["success_rate"]["mean"] <= 1.0
 
@@ -224,7 +275,7 @@ def test_summary_has_exactly_the_required_shape():
 
 
 def test_summary_with_missing_cells_renders_null():
-    records = [r for r in arena_records() if not (r["controller"] == "rl" and r["band"] == "push")]
+    records = [r for r in arena_records() if not (r.controller == "rl" and r.band == "push")]
     summary = summary_of(records, controllers=(*CONTROLLERS, "ghost"), bands=(*BANDS, "ice"))
     text = json.dumps(summary, allow_nan=False)  # no NaN may reach JSON
     assert json.loads(text) == summary
@@ -240,16 +291,31 @@ def test_summary_with_missing_cells_renders_null():
 
 def test_summary_rejects_other_scenario_versions():
     records = arena_records()
-    records[3] = dict(records[3], scenario_hash="other")
+    records[3] = dataclasses.replace(records[3], scenario_hash="other")
     with pytest.raises(RecordError, match="scenario hash"):
         summary_of(records)
 
 
-def test_string_records_give_the_same_summary():
+def test_summary_does_not_depend_on_the_order_trials_finished_in():
     records = arena_records()
-    strings = as_csv_strings(records)
-    assert isinstance(strings[0]["success"], str) and isinstance(strings[0]["seed"], str)
-    assert summary_of(strings) == summary_of(records)
+    # the data is order-sensitive: summing a seed's values in another order changes some means in the last digit
+    cells = [[r for r in records if (r.controller, r.band) == (c, b)] for c in CONTROLLERS for b in BANDS]
+    assert any(mean_std_over_seeds(cell, m) != mean_std_over_seeds(cell[::-1], m) for cell in cells
+               for m in ("vlin_err", "vang_err", "energy_j"))
+    want = json.dumps(summary_of(records), indent=2)
+    for seed in range(3):
+        shuffled = list(records)
+        np.random.default_rng(seed).shuffle(shuffled)
+        assert json.dumps(summary_of(shuffled), indent=2) == want
+    assert in_canonical_order(records[::-1], CONTROLLERS, BANDS) == records  # arena_records is in canonical order
+    assert in_canonical_order(records, ("wbc", "mpc"), ("push",)) == [
+        r for c in ("wbc", "mpc") for r in records if r.controller == c and r.band == "push"]
+
+
+def test_records_read_back_from_csv_give_the_same_summary(tmp_path):
+    records = arena_records()
+    back = through_csv(records, tmp_path / "trials.csv")
+    assert json.dumps(summary_of(back)) == json.dumps(summary_of(records))
 
 
 def test_format_table_lists_controllers_bands_and_pairs():
@@ -288,8 +354,20 @@ def test_write_report_writes_markdown_and_plots(tmp_path):
 
 def test_write_report_skips_push_plot_without_pushes(tmp_path):
     records = arena_records(pushes=False)
-    paths = write_report(tmp_path, summary_of(records), as_csv_strings(records), {})
+    paths = write_report(tmp_path, summary_of(records), through_csv(records, tmp_path / "trials.csv"), {})
     assert {p.name for p in paths} == {"report.md", "ttf.png", "tracking.png"}
     assert not (tmp_path / "success_vs_push.png").exists()
     assert all(p.stat().st_size > 1024 for p in paths if p.suffix == ".png")
     assert "(success_vs_push.png)" not in (tmp_path / "report.md").read_text(encoding="utf-8")
+
+
+def test_tables_and_summaries_need_no_plotting_library():
+    # text and plots apart: summarising and printing a table never imports matplotlib (wbc.arena.plots does, lazily)
+    import subprocess
+    import sys
+
+    code = ("import sys\nfrom wbc.arena.report import format_table, summarize\n"
+            "s = summarize([], scenario_name='x', scenario_hash='h', controllers=['a'], bands=['b'])\n"
+            "format_table(s)\nprint('matplotlib' in sys.modules)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False"

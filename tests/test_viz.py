@@ -16,7 +16,7 @@ import pytest
 import umsgpack
 
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.runner import run_trial
+from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig

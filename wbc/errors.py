@@ -12,10 +12,19 @@ __all__ = [
     "UnknownNameError",
     "ConfigError",
     "CommandError",
-    "RobotNotConnectedError",
-    "MissingExtraError",
     "FileFieldError",
     "ScenarioError",
+    "RobotNotConnectedError",
+    "MissingExtraError",
+    "BenchError",
+    "AnalysisError",
+    "PolicyInputError",
+    "NetworkMismatchError",
+    "MpcProblemFileError",
+    "RecordError",
+    "ResultsDirError",
+    "EpisodeFileError",
+    "MissingCapabilityError",
 ]
 
 
@@ -85,20 +94,12 @@ class MissingExtraError(WbcError, ImportError):
         self.extra = extra
 
 
-# --- tools / cli
-__all__ += ["BenchError", "AnalysisError"]
-
-
 class BenchError(WbcError, RuntimeError):
     """A speed bench cannot measure what it was asked to (a reference that fails, a controller it cannot time)."""
 
 
 class AnalysisError(WbcError, ValueError):
     """An analysis cannot be computed from the robot model it was given; the message names the missing part."""
-
-
-# --- learned / mujoco
-__all__ += ["NetworkMismatchError", "PolicyInputError"]
 
 
 class PolicyInputError(WbcError, ValueError):
@@ -117,9 +118,6 @@ class NetworkMismatchError(WbcError, ValueError):
     """
 
 
-# --- mpc
-
-
 class MpcProblemFileError(WbcError, ValueError):
     """A dumped MPC problem file (``MpcProblem.save``) is missing arrays or is not one; the message names the file."""
 
@@ -130,3 +128,31 @@ class MpcProblemFileError(WbcError, ValueError):
         )
         self.path = path
         self.missing = tuple(missing)
+
+
+class RecordError(WbcError, ValueError):
+    """A trial record or a ``trials.csv`` row is malformed.
+
+    A field is missing or mistyped, a trial is repeated, or a record comes from another scenario version; the message
+    names the field (and the file and line) at fault.
+    """
+
+
+class ResultsDirError(WbcError):
+    """A results directory cannot be used as asked.
+
+    It holds another run, or results where none were expected, or fewer trials than the run needs; the message says
+    which option fixes it (``--resume``, another ``--out``).
+    """
+
+
+class EpisodeFileError(WbcError, ValueError):
+    """An episode file (``.npz``) is not an `Episode` this version can read; the message names the file and field."""
+
+
+class MissingCapabilityError(ConfigError):
+    """A robot or controller lacks a capability the run asks for.
+
+    Base truth, fall detection, a ground-truth debug switch: the message names the capability's protocol and how to
+    run without it.
+    """

@@ -13,12 +13,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor
+from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.report import summarize, write_report
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import TickObserver
+from wbc.arena.stats import in_canonical_order
 from wbc.control.registry import get_controller
-from wbc.errors import ConfigError, UnknownNameError, WbcError
+from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
 from wbc.provenance import provenance
 from wbc.scenario import ScenarioError, check_published, load_scenario
@@ -69,17 +70,16 @@ class ArenaConfig:
 
     def __post_init__(self) -> None:
         if not self.controllers:
-            raise ConfigError("at least one controller is needed")
+            raise ConfigError("at least one controller is needed: name one (wbc run stand) or several (wbc compare mpc "
+                              "learned)")
         if len(set(self.controllers)) != len(self.controllers):
-            raise ConfigError(f"controllers repeat: {', '.join(self.controllers)}")
-        for name in self.controllers:
-            get_controller(name)
+            raise ConfigError(f"controllers repeat: {', '.join(self.controllers)}; name each controller once")
         if self.executor not in EXECUTORS:
             raise UnknownNameError("executor", self.executor, EXECUTORS)
         if self.trials < 1:
-            raise ConfigError(f"--trials must be >= 1, got {self.trials}")
+            raise ConfigError(f"--trials must be >= 1, got {self.trials}; pass --trials 1 or more")
         if not self.seeds:
-            raise ConfigError("at least one seed is needed")
+            raise ConfigError("at least one seed is needed; pass --seeds 1 or more")
         if self.observer is not None and self.executor != "local":
             raise ConfigError("a live view (--view) watches trials played in this process: use the local executor")
 
@@ -116,15 +116,20 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     """Run (or resume) a comparison and write its results directory.
 
     Raises:
+        UnknownNameError: an unknown controller name (the message lists the valid ones).
+        PolicyFileError: a ``policy:PATH`` file that is missing or malformed.
         ScenarioError: the scenario file is invalid.
-        WbcError: bad options or a results directory that belongs to another run.
+        ConfigError: bad options, or a controller for another robot than the scenario's.
+        ResultsDirError: a results directory that belongs to another run, or that misses trials at the end.
     """
+    # each name resolved once, here: a policy file is read in this process only, and the tasks carry the spec
+    specs = {name: get_controller(name) for name in cfg.controllers}
     scenario = load_scenario(cfg.scenario)
-    for name in cfg.controllers:
-        robot = get_controller(name).robot
+    for name, spec in specs.items():
+        robot = spec.robot
         if robot is not None and robot != scenario.robot:
             raise ConfigError(f"controller {name} drives {robot}, but scenario {cfg.scenario} is played by "
-                              f"{scenario.robot}")
+                              f"{scenario.robot}; choose a controller for {scenario.robot}, or a scenario for {robot}")
     bands = cfg.bands or scenario.bands
     for band in bands:
         if band not in scenario.bands:
@@ -157,8 +162,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         path.parent.mkdir(parents=True, exist_ok=True)
         return str(path)
 
-    tasks = [(t, c, cfg.debug_truth, where(t, c)) for c in cfg.controllers for t in trials
-             if (c, t.band, t.seed, t.index) not in done]
+    tasks = [TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c))
+             for c in cfg.controllers for t in trials if (c, t.band, t.seed, t.index) not in done]
     total = len(cfg.controllers) * len(trials)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
     bar = _progress(total, total - len(tasks), cfg.progress)
@@ -168,7 +173,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     try:
         for record in executor.run(tasks):
             store.append(record)
-            steps += int(round(float(record["ttf"]) * scenario.duration_s / physics_dt))
+            steps += int(round(record.ttf * scenario.duration_s / physics_dt))
             if bar is not None:
                 bar.update(1)
     finally:
@@ -176,7 +181,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
             bar.close()
         store.close()
     wall = time.perf_counter() - start
-    records = [r for r in store.records if r["scenario_hash"] == scenario.hash]
+    # in canonical order: the store holds them in the order they finished, which varies between runs
+    records = in_canonical_order((r for r in store.records if r.scenario_hash == scenario.hash), cfg.controllers,
+                                 scenario.bands)
     summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
                         controllers=list(cfg.controllers), bands=list(bands))
     (store.dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
@@ -196,5 +203,6 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     }
     write_report(store.dir, summary, records, meta)
     if len(records) != total:
-        raise WbcError(f"{store.dir}: {len(records)} of {total} trials stored; rerun with --resume")
+        raise ResultsDirError(f"{store.dir}: {len(records)} of {total} trials stored; rerun with --resume to play the "
+                              "rest")
     return ArenaResult(summary=summary, out_dir=store.dir, played=len(tasks), wall_s=wall, physics_steps=steps)

@@ -1,19 +1,75 @@
 """`Episode`: the log of one played trial, at the control rate, from which every metric is computed.
 
-Per control tick it keeps the command, the measured proprioception needed for energy and arm travel, and simulator
-truth (base velocity, yaw rate, roll, pitch, configuration) for tracking metrics and replay.
+Per control tick it keeps the command, the measured proprioception needed for energy and arm travel, simulator
+truth (base velocity, yaw rate, roll, pitch, configuration) for tracking metrics and replay, and how long the
+controller took to act (the runner's timing, for deadline misses). The pushes the robot met
+are kept as arrays (`PushLog`), so a replay draws them from numbers, not from text.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Episode", "EpisodeBuffer"]
+from wbc.errors import ConfigError, EpisodeFileError
+from wbc.scenario.push import Push
+
+__all__ = ["Episode", "EpisodeBuffer", "PushLog"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
+class PushLog:
+    """Pushes as arrays, one row per push, in the order they were applied.
+
+    Attributes:
+        start: when each push began, shape (n,) [s].
+        duration: how long each acted, shape (n,) [s].
+        force_in_world: force, shape (n, 3) [N].
+        offset_in_base: application point in the trunk frame, shape (n, 3) [m].
+    """
+
+    start: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    duration: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    force_in_world: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    offset_in_base: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def __post_init__(self) -> None:
+        n = len(self.start)
+        shapes = {"start": (n,), "duration": (n,), "force_in_world": (n, 3), "offset_in_base": (n, 3)}
+        for name, shape in shapes.items():
+            value = np.asarray(getattr(self, name), dtype=np.float64)
+            if value.shape != shape:
+                raise ConfigError(f"PushLog.{name}: shape {value.shape}, expected {shape} for {n} pushes; build the "
+                                  "log with PushLog.of(pushes)")
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def of(cls, pushes: Iterable[Push]) -> PushLog:
+        """The log of `pushes`."""
+        pushes = list(pushes)
+        return cls(start=np.array([p.start for p in pushes], dtype=np.float64),
+                   duration=np.array([p.duration for p in pushes], dtype=np.float64),
+                   force_in_world=np.array([p.force_in_world for p in pushes], dtype=np.float64).reshape(-1, 3),
+                   offset_in_base=np.array([p.offset_in_base for p in pushes], dtype=np.float64).reshape(-1, 3))
+
+    def __len__(self) -> int:
+        """Number of pushes."""
+        return len(self.start)
+
+    def to_pushes(self) -> tuple[Push, ...]:
+        """The pushes, one `Push` each."""
+        return tuple(Push(force_in_world=self.force_in_world[i], offset_in_base=self.offset_in_base[i],
+                          start=float(self.start[i]), duration=float(self.duration[i])) for i in range(len(self)))
+
+
+_PUSH_KEYS = ("start", "duration", "force_in_world", "offset_in_base")
+_SCALARS = ("duration_s", "control_dt", "fell", "fall_time_s")
+_ARRAYS = ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos", "act_s")
+
+
+@dataclass(frozen=True, kw_only=True)
 class Episode:
     """A finished episode; arrays have one row per control tick actually played.
 
@@ -31,7 +87,9 @@ class Episode:
         power: sum over joints of |tau_est * dq|, measured, shape (k,) [W].
         arm_q: measured arm joint positions, shape (k, 3) (zero columns without an actuated arm) [rad].
         qpos: simulator configuration for replay, shape (k, nq).
-        events: (time, kind, detail) tuples: pushes, controller fallbacks.
+        act_s: wall time of each tick's ``controller.act`` call, shape (k,) [s]; a tick whose value exceeds
+            `control_dt` missed its deadline on a real robot.
+        pushes: the pushes that began before the episode ended.
     """
 
     duration_s: float
@@ -47,31 +105,47 @@ class Episode:
     power: np.ndarray
     arm_q: np.ndarray
     qpos: np.ndarray
-    events: tuple[tuple[float, str, str], ...] = ()
+    act_s: np.ndarray
+    pushes: PushLog = field(default_factory=PushLog)
 
     @property
     def survived_s(self) -> float:
         """Time survived [s]: the fall time, or the whole episode."""
         return float(self.fall_time_s) if self.fell else float(self.duration_s)
 
+    def deadline_misses(self, budget_s: float | None = None) -> int:
+        """Ticks whose ``controller.act`` took longer than `budget_s` [s] (default: the control period)."""
+        return int(np.count_nonzero(self.act_s > (self.control_dt if budget_s is None else budget_s)))
+
     def save(self, path: str) -> None:
-        """Write the episode to a NumPy ``.npz`` file (no pickle)."""
+        """Write the episode to a NumPy ``.npz`` file (no pickle); the pushes as arrays ``push_<field>``."""
         np.savez_compressed(
-            path, duration_s=self.duration_s, control_dt=self.control_dt, fell=self.fell,
-            fall_time_s=self.fall_time_s, t=self.t, command=self.command, v_base_in_yaw=self.v_base_in_yaw,
-            yaw_rate=self.yaw_rate, roll=self.roll, pitch=self.pitch, power=self.power, arm_q=self.arm_q,
-            qpos=self.qpos, events=np.array([f"{float(t)!r}|{k}|{d}" for t, k, d in self.events], dtype=str),
+            path, **{k: getattr(self, k) for k in (*_SCALARS, *_ARRAYS)},
+            **{f"push_{k}": getattr(self.pushes, k) for k in _PUSH_KEYS},
         )
 
     @classmethod
     def load(cls, path: str) -> Episode:
-        """Read an episode written by `save`."""
+        """Read an episode written by `save`.
+
+        Raises:
+            EpisodeFileError: a field is missing (a file of another version: its pushes were text, for instance) or
+                misshapen.
+            OSError, zipfile.BadZipFile: the file cannot be read at all.
+        """
         with np.load(path, allow_pickle=False) as z:
-            events = tuple((float(t), k, d) for t, k, d in (e.split("|", 2) for e in z["events"]))
-            scalars = {k: z[k].item() for k in ("duration_s", "control_dt", "fell", "fall_time_s")}
-            arrays = {k: z[k] for k in ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power",
-                                        "arm_q", "qpos")}
-        return cls(**scalars, **arrays, events=events)
+            missing = [k for k in (*_SCALARS, *_ARRAYS, *(f"push_{k}" for k in _PUSH_KEYS)) if k not in z.files]
+            if missing:
+                raise EpisodeFileError(f"{path}: field {missing[0]} missing (fields missing: {', '.join(missing)}); "
+                                       "the file was written by another version of wbc: replay it with that "
+                                       "version, or play the trial again with `wbc run --save-episodes`")
+            scalars = {k: z[k].item() for k in _SCALARS}
+            arrays = {k: z[k] for k in _ARRAYS}
+            try:
+                pushes = PushLog(**{k: z[f"push_{k}"] for k in _PUSH_KEYS})
+            except ConfigError as exc:
+                raise EpisodeFileError(f"{path}: {exc}") from None
+        return cls(**scalars, **arrays, pushes=pushes)
 
 
 @dataclass
@@ -90,7 +164,7 @@ class EpisodeBuffer:
     power: np.ndarray = field(init=False)
     arm_q: np.ndarray = field(init=False)
     qpos: np.ndarray = field(init=False)
-    events: list[tuple[float, str, str]] = field(default_factory=list)
+    act_s: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
         n = self.capacity
@@ -103,14 +177,12 @@ class EpisodeBuffer:
         self.power = np.zeros(n)
         self.arm_q = np.zeros((n, 3))
         self.qpos = np.zeros((n, self.nq))
+        self.act_s = np.zeros(n)
 
     def finish(self, *, duration_s: float, control_dt: float, fell: bool, fall_time_s: float) -> Episode:
-        """The episode made of the rows filled so far."""
+        """The episode made of the rows filled so far (no pushes: the trial's setup adds those it applied)."""
         k = self.rows
         return Episode(
             duration_s=duration_s, control_dt=control_dt, fell=fell, fall_time_s=fall_time_s,
-            t=self.t[:k].copy(), command=self.command[:k].copy(), v_base_in_yaw=self.v_base_in_yaw[:k].copy(),
-            yaw_rate=self.yaw_rate[:k].copy(), roll=self.roll[:k].copy(), pitch=self.pitch[:k].copy(),
-            power=self.power[:k].copy(), arm_q=self.arm_q[:k].copy(), qpos=self.qpos[:k].copy(),
-            events=tuple(self.events),
+            **{name: getattr(self, name)[:k].copy() for name in _ARRAYS},
         )

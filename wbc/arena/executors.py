@@ -1,8 +1,9 @@
 """Executors: where trials run. A local process pool (default) or a Ray cluster; the results are identical.
 
-Both take (trial, controller, episode path) tasks and yield each finished results row as soon as it is done, in
-completion order; the caller stores it at once. Every trial is fully determined by its `Trial`, so neither the
-worker nor the order changes a result.
+Both take `TrialTask`s and yield each finished trial's record as soon as it is done, in completion order; the caller
+stores it at once. Every trial is fully determined by its `Trial` and its controller's resolved `ControllerSpec`, so
+neither the worker nor the order changes a result. A task carries the spec, not the name: the parent resolves each
+name once (reading a ``policy:PATH`` file there), and the spec pickles to spawned processes and Ray workers.
 """
 
 from __future__ import annotations
@@ -12,19 +13,34 @@ import os
 from collections.abc import Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from contextlib import contextmanager
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
 
+from wbc.arena.record import TrialRecord
+from wbc.arena.runner import TickObserver
+from wbc.arena.sim_trial import run_trial
+from wbc.control.registry import ControllerSpec
 from wbc.optional import require
 from wbc.scenario.trial import Trial
 
-if TYPE_CHECKING:  # the runner is imported lazily, in the worker that plays
-    from wbc.arena.runner import TickObserver
+__all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "TrialTask", "run_task", "single_threaded_blas"]
 
-__all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "run_task", "single_threaded_blas"]
 
-Task = tuple[Trial, str] | tuple[Trial, str, bool] | tuple[Trial, str, bool, str | None]
-"""(trial, controller), (trial, controller, debug_truth) or (trial, controller, debug_truth, episode path): where to
-save the episode log as ``.npz``, or None."""
+@dataclass(frozen=True, kw_only=True)
+class TrialTask:
+    """One trial for one controller, as sent to a worker.
+
+    Attributes:
+        trial: the trial to play.
+        controller: the controller, resolved (`wbc.control.registry.get_controller`) once by the parent.
+        debug_truth: throw the controller's ground-truth debug switch.
+        episode_path: where to save the episode log as ``.npz`` (None: not saved).
+    """
+
+    trial: Trial
+    controller: ControllerSpec
+    debug_truth: bool = False
+    episode_path: str | None = None
+
 
 _SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """Workers run one trial each on one core: a multi-threaded BLAS in every worker oversubscribes the cores (two MPC
@@ -49,20 +65,15 @@ def single_threaded_blas() -> Iterator[None]:
                 os.environ[k] = v
 
 
-def run_task(task: Task, observer: TickObserver | None = None) -> dict[str, object]:
-    """Play one task in this process and return its results row.
+def run_task(task: TrialTask, observer: TickObserver | None = None) -> TrialRecord:
+    """Play one task in this process and return its record.
 
-    The episode is saved (when the task names a path) before the row is returned, so a stored row always has its
+    The episode is saved (when the task names a path) before the record is returned, so a stored record always has its
     episode. `observer` watches every tick (a live viewer; see `wbc.arena.runner.run_episode`).
     """
-    from wbc.arena.runner import run_trial
-
-    trial, controller, *rest = task
-    debug_truth = bool(rest[0]) if rest else False
-    episode_path = rest[1] if len(rest) > 1 else None
-    record, episode = run_trial(trial, controller, debug_truth=debug_truth, observer=observer)
-    if episode_path is not None:
-        episode.save(episode_path)
+    record, episode = run_trial(task.trial, task.controller, debug_truth=task.debug_truth, observer=observer)
+    if task.episode_path is not None:
+        episode.save(task.episode_path)
     return record
 
 
@@ -80,8 +91,8 @@ class LocalExecutor:
         self.workers = 1 if observer is not None else (workers or os.cpu_count() or 1)
         self.observer = observer
 
-    def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
-        """Yield results rows as tasks finish."""
+    def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
+        """Yield each task's record as it finishes."""
         tasks = list(tasks)
         if self.workers <= 1:
             for task in tasks:
@@ -92,7 +103,7 @@ class LocalExecutor:
         with single_threaded_blas():
             yield from self._run_pool(tasks)
 
-    def _run_pool(self, tasks: list[Task]) -> Iterator[dict[str, object]]:
+    def _run_pool(self, tasks: list[TrialTask]) -> Iterator[TrialRecord]:
         pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
         with pool:
             pending: set[Future] = set()
@@ -124,8 +135,8 @@ class RayExecutor:
         self.address = address
         self.num_cpus = num_cpus
 
-    def run(self, tasks: Iterable[Task]) -> Iterator[dict[str, object]]:
-        """Yield results rows as tasks finish."""
+    def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
+        """Yield each task's record as it finishes."""
         ray = require("ray", "cluster")
         started = False
         if not ray.is_initialized():

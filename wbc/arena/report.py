@@ -1,20 +1,15 @@
 """Arena report: a JSON summary of the records, the paper-style results table, and a Markdown report with plots.
 
-The runner produces one record per (controller, trial), a flat mapping with the fields
-
-    controller, scenario, scenario_hash, band, seed, trial, success, ttf, fall_time_s, vlin_err, vang_err,
-    max_roll_deg, max_pitch_deg, energy_j, arm_travel_rad, push_force_n, n_pushes, vx_cmd, vy_cmd, yaw_rate_cmd,
-    friction, payload_kg, fallbacks, wall_s
-
-(typed, or all strings when read back from CSV). This module turns them into:
+The input is one `wbc.arena.record.TrialRecord` per (controller, trial). This module turns them into:
 
 - `summarize`: per controller and band, mean +- std across seeds of each metric (`wbc.arena.stats.mean_std_over_seeds`),
   and for every ordered pair of controllers the paired difference B - A with a 95 % bootstrap interval
   (`wbc.arena.stats.paired_difference`). The result is JSON-serialisable: NaN becomes ``None``.
 - `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table.
-- `write_report`: ``report.md`` plus PNG plots in an output folder.
+- `write_report`: ``report.md`` plus the PNG plots (drawn by `wbc.arena.plots`) in an output folder.
 
-Everything is deterministic: the same records give byte-identical summaries and tables.
+Everything is deterministic: the same records, in any order, give byte-identical summaries and tables (records are
+put `in_canonical_order` before any statistic).
 """
 
 from __future__ import annotations
@@ -25,21 +20,16 @@ from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from wbc.arena.stats import (
-    Record,
-    RecordError,
-    mean_std_over_seeds,
-    paired_difference,
-    record_float,
-    record_str,
-)
+from wbc.arena.plots import PLOTS, write_plots
+from wbc.arena.record import TrialRecord
+from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
+from wbc.errors import RecordError
 
 __all__ = [
     "METRICS",
     "METRIC_KEYS",
     "EXTRA_METRICS",
+    "LABELS",
     "summarize",
     "format_table",
     "write_report",
@@ -59,8 +49,7 @@ METRIC_KEYS: Mapping[str, str] = {
 EXTRA_METRICS = ("max_roll_deg", "energy_j", "arm_travel_rad")
 """Secondary metrics reported per band (named as their record fields), not compared pairwise."""
 
-_N_PUSH_BINS = 8
-_LABELS = {
+LABELS: Mapping[str, str] = {
     "success_rate": "Success %",
     "ttf": "TTF",
     "vlin_err": "V_lin err [m/s]",
@@ -69,14 +58,11 @@ _LABELS = {
     "energy_j": "Energy [J]",
     "arm_travel_rad": "Arm travel [rad]",
 }
+"""Summary metric name -> its label (with the unit) in tables and on plot axes."""
+
 _DECIMALS = {"success_rate": 2, "ttf": 3, "vlin_err": 3, "vang_err": 3, "max_roll_deg": 2, "energy_j": 1,
              "arm_travel_rad": 3}
 _SCALE = {"success_rate": 100.0}  # success is stored as a fraction, shown in percent (paired: percentage points)
-_PLOTS = (
-    ("success_vs_push.png", "Success rate against push magnitude"),
-    ("ttf.png", "Time to fall (fraction of the episode survived)"),
-    ("tracking.png", "Velocity tracking error"),
-)
 
 
 def _json_float(value: float) -> float | None:
@@ -85,20 +71,18 @@ def _json_float(value: float) -> float | None:
 
 
 def _records_by_cell(
-    records: Iterable[Record], controllers: Sequence[str], bands: Sequence[str]
-) -> dict[str, dict[str, list[Record]]]:
+    records: Iterable[TrialRecord], controllers: Sequence[str], bands: Sequence[str]
+) -> dict[str, dict[str, list[TrialRecord]]]:
     """Controller -> band -> its records; records of other controllers or bands are dropped."""
-    cells: dict[str, dict[str, list[Record]]] = {c: {b: [] for b in bands} for c in controllers}
+    cells: dict[str, dict[str, list[TrialRecord]]] = {c: {b: [] for b in bands} for c in controllers}
     for record in records:
-        controller = record_str(record, "controller")
-        band = record_str(record, "band")
-        if controller in cells and band in cells[controller]:
-            cells[controller][band].append(record)
+        if record.controller in cells and record.band in cells[record.controller]:
+            cells[record.controller][record.band].append(record)
     return cells
 
 
 def summarize(
-    records: Iterable[Record],
+    records: Iterable[TrialRecord],
     *,
     scenario_name: str,
     scenario_hash: str,
@@ -113,10 +97,11 @@ def summarize(
     paired difference b - a and its 95 % bootstrap interval (`paired_difference`, seed 0).
 
     Records of controllers or bands not listed are ignored. A listed controller or band without records gets
-    ``trials: 0`` and ``None`` statistics.
+    ``trials: 0`` and ``None`` statistics. The records are put `in_canonical_order` first, so the summary does not
+    depend on the order they come in (the order trials finished).
 
     Args:
-        records: arena records (typed, or strings as read from CSV).
+        records: arena records, in any order.
         scenario_name: the scenario's name.
         scenario_hash: the scenario file's content hash; every record's ``scenario_hash``, where set, must match.
         controllers: controller names, in the order of the table (the order also fixes which side of each pair is A).
@@ -132,17 +117,17 @@ def summarize(
         with ``None`` wherever a statistic is undefined.
 
     Raises:
-        RecordError: a record is malformed, repeats a trial, or comes from another version of the scenario.
+        RecordError: a record repeats a trial, or comes from another version of the scenario.
     """
     records = list(records)
     for record in records:
-        record_hash = record_str(record, "scenario_hash") if "scenario_hash" in record else ""
-        if record_hash and record_hash != scenario_hash:
+        if record.scenario_hash and record.scenario_hash != scenario_hash:
             raise RecordError(
-                f"a record of controller {record_str(record, 'controller')!r} was produced by scenario hash "
-                f"{record_hash!r}, not {scenario_hash!r}; summarise the records of one scenario version at a time"
+                f"a record of controller {record.controller!r} was produced by scenario hash "
+                f"{record.scenario_hash!r}, not {scenario_hash!r}; summarise the records of one scenario version at "
+                "a time"
             )
-    cells = _records_by_cell(records, controllers, bands)
+    cells = _records_by_cell(in_canonical_order(records, controllers, bands), controllers, bands)
     per_controller: dict[str, Any] = {}
     for controller in controllers:
         per_band: dict[str, Any] = {}
@@ -222,7 +207,7 @@ def _result_rows(summary: Mapping[str, Any], band: str, metrics: Sequence[str]) 
 
 def _paired_rows(summary: Mapping[str, Any]) -> list[list[str]]:
     return [
-        [p["band"], p["a"], p["b"], _LABELS[p["metric"]], _signed(p["diff"], p["metric"]), _ci(p["ci95"], p["metric"])]
+        [p["band"], p["a"], p["b"], LABELS[p["metric"]], _signed(p["diff"], p["metric"]), _ci(p["ci95"], p["metric"])]
         for p in summary["paired"]
     ]
 
@@ -251,7 +236,7 @@ def format_table(summary: Mapping[str, Any]) -> str:
     """
     scenario = summary["scenario"]
     lines = [f"scenario {scenario['name']} ({scenario['hash']})", ""]
-    header = ["controller", "trials", *(_LABELS[m] for m in METRICS)]
+    header = ["controller", "trials", *(LABELS[m] for m in METRICS)]
     for band in _bands_of(summary):
         lines.append(f"band {band}")
         lines += _aligned(header, _result_rows(summary, band, METRICS))
@@ -287,109 +272,10 @@ def _md_meta(meta: Mapping[str, Any]) -> list[str]:
     return lines
 
 
-def _cell_stat(summary: Mapping[str, Any], controller: str, band: str, metric: str, field: str) -> float:
-    cell = summary["controllers"][controller]["bands"].get(band)
-    value = None if cell is None else cell[metric][field]
-    return math.nan if value is None else float(value)
-
-
-def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[Record], controllers: Sequence[str]) -> bool:
-    """Success rate against push magnitude, one line per controller; False (nothing written) without pushes."""
-    pushes = np.array([record_float(r, "push_force_n") for r in records], dtype=float)
-    if not np.any(pushes > 0.0):
-        return False
-    success = np.array([record_float(r, "success") for r in records], dtype=float)
-    names = np.array([record_str(r, "controller") for r in records])
-    finite = np.isfinite(pushes)
-    levels = np.unique(pushes[finite])
-    if levels.size <= _N_PUSH_BINS:  # few distinct magnitudes (a push band): one point per magnitude
-        centers = levels
-        bin_of = np.searchsorted(levels, pushes)
-    else:
-        edges = np.linspace(0.0, float(levels[-1]), _N_PUSH_BINS + 1)
-        centers = 0.5 * (edges[:-1] + edges[1:])
-        bin_of = np.clip(np.searchsorted(edges, pushes, side="right") - 1, 0, _N_PUSH_BINS - 1)
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    try:
-        for controller in controllers:
-            mine = (names == controller) & finite & ~np.isnan(success)
-            rates = [
-                100.0 * float(success[mine & (bin_of == i)].mean()) if np.any(mine & (bin_of == i)) else math.nan
-                for i in range(centers.size)
-            ]
-            ax.plot(centers, rates, marker="o", label=controller)
-        ax.set_xlabel("largest push in the trial [N]")
-        ax.set_ylabel("success [%]")
-        ax.set_ylim(-5.0, 105.0)
-        ax.grid(True, alpha=0.3)
-        ax.legend()
-        ax.set_title("Success rate against push magnitude (all bands)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=100)
-    finally:
-        plt.close(fig)
-    return True
-
-
-def _plot_ttf(plt: Any, path: Path, records: Sequence[Record], controllers: Sequence[str]) -> None:
-    """Box plot of TTF per controller, all bands pooled."""
-    names = [record_str(r, "controller") for r in records]
-    ttf = [record_float(r, "ttf") for r in records]
-    data = []
-    for controller in controllers:
-        values = np.array([t for n, t in zip(names, ttf, strict=True) if n == controller], dtype=float)
-        values = values[~np.isnan(values)]
-        data.append(values if values.size else np.array([math.nan]))
-    fig, ax = plt.subplots(figsize=(max(4.0, 1.2 * len(controllers) + 2.0), 4.0))
-    try:
-        ax.boxplot(data, tick_labels=list(controllers))
-        ax.set_ylabel("TTF (fraction of the episode survived)")
-        ax.set_ylim(-0.05, 1.05)
-        ax.grid(True, axis="y", alpha=0.3)
-        ax.set_title("Time to fall, all bands")
-        fig.tight_layout()
-        fig.savefig(path, dpi=100)
-    finally:
-        plt.close(fig)
-
-
-def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequence[str]) -> None:
-    """Grouped bars of V_lin and V_ang tracking error, mean with std across seeds as error bars."""
-    controllers = list(summary["controllers"])
-    x = np.arange(len(bands), dtype=float)
-    width = 0.8 / max(1, len(controllers))
-    fig, axes = plt.subplots(1, 2, figsize=(max(6.4, 1.5 * len(bands) * 2 + 2.0), 4.0))
-    try:
-        for ax, metric in zip(axes, ("vlin_err", "vang_err"), strict=True):
-            for i, controller in enumerate(controllers):
-                means = [_cell_stat(summary, controller, b, metric, "mean") for b in bands]
-                stds = [_cell_stat(summary, controller, b, metric, "std") for b in bands]
-                offset = (i - (len(controllers) - 1) / 2.0) * width
-                ax.bar(x + offset, np.nan_to_num(means), width, yerr=np.nan_to_num(stds), capsize=3,
-                       label=controller)
-            ax.set_xticks(x, list(bands))
-            ax.set_ylabel(_LABELS[metric])
-            ax.set_title(_LABELS[metric].split(" [")[0])
-            ax.grid(True, axis="y", alpha=0.3)
-        axes[0].legend()
-        fig.tight_layout()
-        fig.savefig(path, dpi=100)
-    finally:
-        plt.close(fig)
-
-
 def write_report(
-    out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[Record], meta: Mapping[str, Any]
+    out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[TrialRecord], meta: Mapping[str, Any]
 ) -> list[Path]:
-    """Write ``report.md`` and its PNG plots into `out_dir` (created if missing).
-
-    Plots (matplotlib, Agg backend, figures closed after saving):
-
-    - ``success_vs_push.png``: success rate against the trial's largest push magnitude (``push_force_n``), binned,
-      one line per controller; only written when some record has a push.
-    - ``ttf.png``: box plot of TTF per controller, all bands pooled.
-    - ``tracking.png``: V_lin and V_ang tracking error per band and controller, bars of the mean across seeds with
-      the std as error bars.
+    """Write ``report.md`` and its PNG plots (`wbc.arena.plots.write_plots`) into `out_dir` (created if missing).
 
     ``report.md`` holds the title, the scenario name and hash, `meta` as a list (nested mappings as sub-lists), one
     Markdown results table per band, the paired-differences table and links to the plots.
@@ -397,34 +283,19 @@ def write_report(
     Args:
         out_dir: output folder.
         summary: the output of `summarize` for `records`.
-        records: the arena records summarised (used for the per-trial plots); those of controllers not in the
-            summary are ignored.
+        records: the arena records summarised (used for the per-trial plots), in any order; those of controllers or
+            bands not in the summary are ignored.
         meta: run information to list (controllers, seeds, trials, executor, package versions, git revision ...).
 
     Returns:
         The paths written: ``report.md`` first, then the plots.
-
-    Raises:
-        RecordError: a record is malformed.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     controllers = list(summary["controllers"])
     bands = _bands_of(summary)
-    records = [r for r in records if record_str(r, "controller") in summary["controllers"]]
-
-    plots: list[Path] = []
-    if _plot_success_vs_push(plt, out / "success_vs_push.png", records, controllers):
-        plots.append(out / "success_vs_push.png")
-    _plot_ttf(plt, out / "ttf.png", records, controllers)
-    plots.append(out / "ttf.png")
-    _plot_tracking(plt, out / "tracking.png", summary, bands)
-    plots.append(out / "tracking.png")
+    plots = write_plots(out, summary, in_canonical_order(records, controllers, bands), controllers=controllers,
+                        bands=bands, labels=LABELS)
 
     scenario = summary["scenario"]
     lines = [f"# Arena report: {scenario['name']}", "", f"Scenario `{scenario['name']}`, hash `{scenario['hash']}`."]
@@ -434,7 +305,7 @@ def write_report(
     metrics = (*METRICS, *EXTRA_METRICS)
     for band in bands:
         lines += [f"### Band `{band}`", ""]
-        header = ["Controller", "Trials", *(_LABELS[m] for m in metrics)]
+        header = ["Controller", "Trials", *(LABELS[m] for m in metrics)]
         lines += _md_table(header, _result_rows(summary, band, metrics))
         lines.append("")
     lines += ["## Paired differences (B - A, 95% CI)", ""]
@@ -449,7 +320,7 @@ def write_report(
         lines.append("(fewer than two controllers)")
     lines += ["", "## Plots", ""]
     written = {p.name for p in plots}
-    for name, title in _PLOTS:
+    for name, title in PLOTS:
         if name in written:
             lines += [f"- [{title}]({name})", "", f"  ![{title}]({name})", ""]
         else:

@@ -1,41 +1,39 @@
-"""The runner: one loop that plays an episode on any `Robot`, and `run_trial` for simulated trials.
+"""The runner: the one loop that plays an episode on any `Robot`, the same for simulation and hardware.
 
 Every control tick: ``state = robot.read()``, ``cmd = schedule.at(t)``, ``out = controller.act(state, cmd)``,
-``robot.write(out)``, ``robot.advance(dt)``; then the episode log takes one row and the fall check runs. The loop
-is the same for simulation and hardware: only where truth comes from (`truth`) and how a fall is detected
-(`fallen`) differ. Falls are checked at the control rate; a fall keeps the trunk on the ground for far longer than a
-control period, so none is missed.
+``robot.write(out)``, ``robot.advance(dt)``; then the episode log takes one row, the observer sees the tick and the
+fall check runs. The runner owns timing: it times every ``act`` call and logs it (`Episode.act_s`), so a bench, or a
+hardware trial, reads deadline misses from the episode instead of re-writing the loop.
+
+Where the base's true state comes from and how a fall is detected are capabilities of the robot
+(`wbc.hardware.capabilities.TruthSource`, `FallDetector`: the simulator has both, a real robot may have motion
+capture), or are handed in by the caller. Falls are checked at the control rate; a fall keeps the trunk on the ground
+for far longer than a control period, so none is missed. Setting a simulated trial up (robot, terrain, pushes) and
+turning its episode into a record is `wbc.arena.sim_trial`.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from collections.abc import Callable
 
 import numpy as np
-from threadpoolctl import threadpool_limits
 
 from wbc.arena.episode import Episode, EpisodeBuffer
-from wbc.arena.metrics import compute_metrics
 from wbc.control.protocol import Controller
-from wbc.control.registry import get_controller
-from wbc.errors import ConfigError
-from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.errors import MissingCapabilityError
+from wbc.hardware.capabilities import FallDetector, TruthSource
 from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix
-from wbc.scenario.trial import CommandSchedule, Trial
+from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, VelocityCommand
 
-__all__ = ["TickObserver", "run_episode", "run_trial", "trial_record"]
+__all__ = ["TickObserver", "run_episode"]
 
 TickObserver = Callable[[float, Robot, Controller, VelocityCommand], None]
-"""Called after every control tick with (time after the tick [s], robot, controller, command); for viewers. It may
-block (a paused viewer pauses the loop) but must not change the robot or the controller."""
-
-_ROBOTS: dict[tuple, MujocoRobot] = {}
-"""Per-process cache of simulated robots: building a model costs ~50 ms, resetting one ~0.1 ms."""
+"""Called after every control tick with (time after the tick [s], robot, controller, command); for viewers, benches
+and studies. It may block (a paused viewer pauses the loop) but must not change the robot or the controller."""
 
 
 def run_episode(
@@ -44,9 +42,8 @@ def run_episode(
     schedule: CommandSchedule,
     duration_s: float,
     *,
-    truth: Callable[[], BaseTruth],
-    fallen: Callable[[], bool],
-    nq: int,
+    truth: Callable[[], BaseTruth] | None = None,
+    fallen: Callable[[], bool] | None = None,
     observer: TickObserver | None = None,
 ) -> Episode:
     """Play one episode.
@@ -56,32 +53,42 @@ def run_episode(
         controller: the controller (reset here).
         schedule: the velocity command over time.
         duration_s: episode length [s].
-        truth: returns the base's true state (simulator truth or motion capture).
-        fallen: returns True when the trunk or a non-foot link touches the ground.
-        nq: size of the configuration logged for replay.
+        truth: returns the base's true state (motion capture, say); default: the robot's own, if it is a
+            `TruthSource`.
+        fallen: returns True when the trunk or a non-foot link touches the ground; default: the robot's own, if it
+            is a `FallDetector`.
         observer: called after every tick (e.g. a viewer); None costs nothing.
 
     Returns:
-        The episode log.
+        The episode log (no pushes: whoever applied them adds them, see `wbc.arena.sim_trial.run_trial`).
+
+    Raises:
+        MissingCapabilityError: no `truth` or `fallen` given and the robot does not offer it.
     """
+    truth = _truth_of(robot) if truth is None else truth
+    fallen = _fall_detector_of(robot) if fallen is None else fallen
     dt = 1.0 / controller.rate_hz
     n = int(round(duration_s / dt))
-    buf = EpisodeBuffer(capacity=n, nq=nq)
+    buf = EpisodeBuffer(capacity=n, nq=7 + robot.num_joints)
     controller.reset()
     arm = slice(12, 15) if robot.num_joints == 15 else None
+    clock = time.perf_counter
     fell, fall_time = False, math.nan
     for k in range(n):
         t = k * dt
+        i = buf.rows
         state = robot.read()
         cmd = schedule.at(t)
-        robot.write(controller.act(state, cmd))
+        started = clock()
+        out = controller.act(state, cmd)
+        buf.act_s[i] = clock() - started
+        robot.write(out)
         robot.advance(dt)
         tr = truth()
         rot = quat_to_matrix(tr.base_quat)
         yaw = math.atan2(rot[1, 0], rot[0, 0])
         c, s = math.cos(yaw), math.sin(yaw)
         v = tr.base_linvel_in_world
-        i = buf.rows
         buf.t[i] = (k + 1) * dt
         buf.command[i] = (cmd.vx, cmd.vy, cmd.yaw_rate)
         buf.v_base_in_yaw[i] = (c * v[0] + s * v[1], -s * v[0] + c * v[1])
@@ -103,81 +110,19 @@ def run_episode(
     return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time)
 
 
-def simulated_robot(trial: Trial, arm_mode: str) -> MujocoRobot:
-    """The connected simulated robot for `trial`'s robot, terrain and `arm_mode`, built once per process."""
-    key = (trial.robot, arm_mode, trial.terrain)
-    robot = _ROBOTS.get(key)
-    if robot is None:
-        robot = MujocoRobot(MujocoRobotConfig(robot=trial.robot, arm_mode=arm_mode, terrain=trial.terrain))
-        robot.connect()
-        _ROBOTS[key] = robot
-    return robot
+def _truth_of(robot: Robot) -> Callable[[], BaseTruth]:
+    if not isinstance(robot, TruthSource):
+        raise MissingCapabilityError(
+            f"{type(robot).__name__} does not know its base's true state (it is not a "
+            "wbc.hardware.capabilities.TruthSource), which the episode log needs; pass run_episode(truth=...), e.g. "
+            "motion capture or the state estimator's base state")
+    return robot.base_truth
 
 
-def trial_record(trial: Trial, controller: str, episode: Episode, counters: dict[str, int],
-                 wall_s: float, *, debug_truth: bool = False) -> dict[str, object]:
-    """The per-trial results row: identity, trial parameters, metrics, controller events, wall time."""
-    return {
-        "controller": controller,
-        "debug_truth": bool(debug_truth),
-        "scenario": trial.scenario,
-        "scenario_hash": trial.scenario_hash,
-        **trial.describe(),
-        **compute_metrics(episode),
-        "fallbacks": int(counters.get("fallbacks", 0)),
-        "wbc_failures": int(counters.get("wbc_failures", 0)),
-        "wall_s": wall_s,
-    }
-
-
-def run_trial(trial: Trial, controller: str, *, debug_truth: bool = False, observer: TickObserver | None = None,
-              ) -> tuple[dict[str, object], Episode]:
-    """Play `trial` in simulation with the named controller (`observer`: see `run_episode`).
-
-    With `debug_truth` the controller's ground-truth debug switch is thrown (it reads the simulator's base state
-    instead of estimating it) and the results row says so.
-
-    Returns:
-        The results row and the episode log.
-
-    Raises:
-        UnknownNameError: unknown controller.
-        ConfigError: the controller's period is not a whole number of physics steps.
-    """
-    # one BLAS thread: a multi-threaded product splits its sums differently, and the same trial would differ in its
-    # last bits between an in-process run and a pool worker (which starts single-threaded)
-    with threadpool_limits(limits=1, user_api="blas"):
-        return _run_trial(trial, controller, debug_truth=debug_truth, observer=observer)
-
-
-def _run_trial(trial: Trial, controller: str, *, debug_truth: bool, observer: TickObserver | None,
-               ) -> tuple[dict[str, object], Episode]:
-    start = time.perf_counter()
-    spec = get_controller(controller)
-    robot = simulated_robot(trial, spec.arm_mode)
-    ctrl = spec.make(robot.desc)
-    ratio = (1.0 / ctrl.rate_hz) / robot.config.timestep
-    if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-        raise ConfigError(
-            f"controller {controller!r}: period 1/{ctrl.rate_hz} s is not a multiple of the physics step "
-            f"{robot.config.timestep} s"
-        )
-    if debug_truth:
-        attach = getattr(ctrl, "use_ground_truth", None)
-        if attach is None:
-            raise ConfigError(f"controller {controller!r} has no ground-truth debug switch (--debug-truth)")
-        attach(robot.base_truth)
-    robot.reset(seed=trial.terrain_seed, domain=trial.domain)
-    for push in trial.pushes:
-        robot.apply_push(push)
-    episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_truth,
-                          fallen=robot.fallen, nq=robot.model.nq, observer=observer)
-    events = tuple(
-        (p.start, "push", f"force_in_world={p.force_in_world.tolist()} offset_in_base={p.offset_in_base.tolist()} "
-                          f"duration={p.duration}")
-        for p in trial.pushes if p.start < episode.survived_s
-    )
-    episode = dataclasses.replace(episode, events=events + episode.events)
-    record = trial_record(trial, controller, episode, ctrl.counters(), time.perf_counter() - start,
-                          debug_truth=debug_truth)
-    return record, episode
+def _fall_detector_of(robot: Robot) -> Callable[[], bool]:
+    if not isinstance(robot, FallDetector):
+        raise MissingCapabilityError(
+            f"{type(robot).__name__} cannot tell when it has fallen (it is not a "
+            "wbc.hardware.capabilities.FallDetector); pass run_episode(fallen=...), e.g. an operator's stop switch, "
+            "or fallen=lambda: False to always play the whole episode")
+    return robot.fallen

@@ -1,9 +1,8 @@
 """Statistics over arena records: per-seed means, and paired controller differences with bootstrap intervals.
 
 The arena plays paired trials: every controller meets exactly the same trials, each identified by
-``(band, seed, trial)``. One record per (controller, trial) is a flat mapping (see `wbc.arena.report` for its keys);
-records read back from CSV hold strings, so every value goes through `record_float` / `record_int` / `record_str`,
-which accept both typed and string values.
+``(band, seed, trial)`` (`TrialRecord.pair_key`). Statistics read a record's metric by its field name
+(``record["ttf"]``); booleans such as ``success`` count as 0 / 1, so the mean of ``success`` is a success rate.
 
 Two estimators, both pure numpy and deterministic:
 
@@ -11,152 +10,81 @@ Two estimators, both pure numpy and deterministic:
   experiment), not across trials, which share a seed's scenario sample. Each seed's trials are averaged first.
 - `paired_difference`: controller B minus controller A on the same trials, with a percentile bootstrap over the
   pairs; pairing removes the trial-to-trial difficulty that both controllers share.
+
+A mean's last digit depends on the order of its terms, and records arrive in the order trials finished (which
+differs between runs with several workers, and on resume); `in_canonical_order` puts them in one order first, so the
+same trials give the same statistics to the last bit.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Hashable, Iterable, Mapping
+from collections.abc import Callable, Hashable, Iterable, Sequence
 from typing import Any
 
 import numpy as np
 
-from wbc.errors import WbcError
+from wbc.arena.record import TrialRecord
+from wbc.errors import ConfigError, RecordError
 
 __all__ = [
-    "Record",
     "PairKey",
-    "RecordError",
-    "record_float",
-    "record_int",
-    "record_str",
-    "pair_key",
+    "in_canonical_order",
     "group_by",
     "mean_std_over_seeds",
     "bootstrap_mean_ci",
     "paired_difference",
 ]
 
-Record = Mapping[str, Any]
-"""One arena record: a flat mapping from field name to value (typed, or strings as read from CSV)."""
-
 PairKey = tuple[str, int, int]
 """What identifies a trial across controllers: (band, seed, trial)."""
 
-_TRUE = frozenset({"true", "t", "yes", "y"})
-_FALSE = frozenset({"false", "f", "no", "n"})
 _CHUNK_ELEMENTS = 1_000_000  # bootstrap resamples drawn per block, to bound memory on large record sets
 
 
-class RecordError(WbcError, ValueError):
-    """A record lacks a field, holds a value that is not a number, or repeats a trial key."""
+def _metric(record: TrialRecord, metric: str) -> float:
+    return float(record[metric])
 
 
-def _field(record: Record, key: str) -> Any:
-    try:
-        return record[key]
-    except KeyError:
-        raise RecordError(f"record has no field {key!r}; its fields: {', '.join(sorted(record))}") from None
+def in_canonical_order(records: Iterable[TrialRecord], controllers: Sequence[str],
+                       bands: Sequence[str]) -> list[TrialRecord]:
+    """The records of the listed controllers and bands, in canonical order.
 
-
-def record_float(record: Record, key: str) -> float:
-    """Read field `key` of `record` as a float, whatever type it arrived as.
-
-    Booleans become 1.0 / 0.0 (so a success rate is the mean of ``success``); the strings ``"True"``, ``"False"``,
-    ``"1"``, ``"0"`` (any case) likewise; ``None`` and the empty string (a blank CSV cell) become NaN; other strings
-    are parsed with `float` (``"nan"`` included).
+    Controllers in the order of `controllers`, then bands in the order of `bands` (the scenario's), then seed, then
+    trial; records of other controllers or bands are left out.
 
     Args:
-        record: one arena record.
-        key: the field to read.
+        records: arena records, in any order.
+        controllers: controller names, in order.
+        bands: band names, in order.
 
     Returns:
-        The value as a float (NaN when missing from the cell).
-
-    Raises:
-        RecordError: the field is absent or its value is not a number.
+        The sorted records.
     """
-    value = _field(record, key)
-    if value is None:
-        return math.nan
-    if isinstance(value, bool | np.bool_):
-        return 1.0 if value else 0.0
-    if isinstance(value, str):
-        text = value.strip()
-        if not text:
-            return math.nan
-        low = text.lower()
-        if low in _TRUE:
-            return 1.0
-        if low in _FALSE:
-            return 0.0
-        value = text
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        raise RecordError(f"field {key!r} holds {value!r}, which is not a number or a boolean") from None
+    c_rank = {c: i for i, c in enumerate(controllers)}
+    b_rank = {b: i for i, b in enumerate(bands)}
+    kept = [r for r in records if r.controller in c_rank and r.band in b_rank]
+    return sorted(kept, key=lambda r: (c_rank[r.controller], b_rank[r.band], r.seed, r.trial))
 
 
-def record_int(record: Record, key: str) -> int:
-    """Read field `key` of `record` as an int (accepts ``3``, ``3.0``, ``"3"`` and ``"3.0"``).
-
-    Args:
-        record: one arena record.
-        key: the field to read.
-
-    Returns:
-        The integer value.
-
-    Raises:
-        RecordError: the field is absent, or its value is not a finite whole number.
-    """
-    value = record_float(record, key)
-    if not math.isfinite(value) or value != int(value):
-        raise RecordError(f"field {key!r} holds {_field(record, key)!r}, which is not a whole number")
-    return int(value)
-
-
-def record_str(record: Record, key: str) -> str:
-    """Read field `key` of `record` as a string, stripped of surrounding white space.
-
-    Raises:
-        RecordError: the field is absent.
-    """
-    return str(_field(record, key)).strip()
-
-
-def pair_key(record: Record) -> PairKey:
-    """The key that identifies a record's trial across controllers.
-
-    Args:
-        record: one arena record with fields ``band``, ``seed`` and ``trial``.
-
-    Returns:
-        ``(band, seed, trial)``, normalised so that typed and CSV-read records give equal keys.
-
-    Raises:
-        RecordError: one of the three fields is absent or malformed.
-    """
-    return record_str(record, "band"), record_int(record, "seed"), record_int(record, "trial")
-
-
-def group_by(records: Iterable[Record], key: Callable[[Record], Hashable]) -> dict[Hashable, list[Record]]:
+def group_by(records: Iterable[TrialRecord],
+             key: Callable[[TrialRecord], Hashable]) -> dict[Hashable, list[TrialRecord]]:
     """Group records by ``key(record)``, keeping the records' order inside each group.
 
     Args:
         records: arena records.
-        key: maps a record to its group, e.g. ``lambda r: record_str(r, "controller")``.
+        key: maps a record to its group, e.g. ``lambda r: r.controller``.
 
     Returns:
         Group -> its records, groups in order of first appearance.
     """
-    groups: dict[Hashable, list[Record]] = {}
+    groups: dict[Hashable, list[TrialRecord]] = {}
     for record in records:
         groups.setdefault(key(record), []).append(record)
     return groups
 
 
-def mean_std_over_seeds(records: Iterable[Record], metric: str) -> dict[str, float | int]:
+def mean_std_over_seeds(records: Iterable[TrialRecord], metric: str) -> dict[str, float | int]:
     """Mean and spread of a metric across seeds.
 
     Records are grouped by ``seed`` and the metric averaged within each seed, m_s = mean over the seed's trials
@@ -165,7 +93,8 @@ def mean_std_over_seeds(records: Iterable[Record], metric: str) -> dict[str, flo
         mean = (1 / S) sum_s m_s,    std = sqrt(sum_s (m_s - mean)^2 / (S - 1))   (sample std, ddof = 1),
 
     with std = 0.0 when S = 1. NaN values (e.g. ``fall_time_s`` of a trial that did not fall) are ignored; a seed
-    whose values are all NaN does not count.
+    whose values are all NaN does not count. Within a seed the values are summed in the order given: pass records
+    `in_canonical_order` for a result that does not depend on the order trials finished in.
 
     Args:
         records: the records of one controller (typically in one band).
@@ -175,12 +104,12 @@ def mean_std_over_seeds(records: Iterable[Record], metric: str) -> dict[str, flo
         ``{"mean": float, "std": float, "n_seeds": int}``; mean and std are NaN when no seed has a value.
 
     Raises:
-        RecordError: a record lacks ``seed`` or `metric`, or holds a non-numeric value.
+        UnknownNameError: `metric` is not a record field.
     """
-    by_seed = group_by(records, lambda r: record_int(r, "seed"))
+    by_seed = group_by(records, lambda r: r.seed)
     seed_means = []
     for seed in sorted(by_seed):  # sorted: the result does not depend on the records' order
-        values = np.array([record_float(r, metric) for r in by_seed[seed]], dtype=float)
+        values = np.array([_metric(r, metric) for r in by_seed[seed]], dtype=float)
         values = values[~np.isnan(values)]
         if values.size:
             seed_means.append(float(values.mean()))
@@ -211,12 +140,13 @@ def bootstrap_mean_ci(
         ``(lo, hi)``; ``(nan, nan)`` when `values` is empty.
 
     Raises:
-        ValueError: `n_boot` < 1 or `level` outside (0, 1).
+        ConfigError: `n_boot` < 1 or `level` outside (0, 1).
     """
     if n_boot < 1:
-        raise ValueError(f"n_boot must be >= 1, got {n_boot}")
+        raise ConfigError(f"bootstrap_mean_ci: n_boot must be >= 1 resample, got {n_boot}; pass n_boot=2000 (the "
+                          "default) or more")
     if not 0.0 < level < 1.0:
-        raise ValueError(f"level must be in (0, 1), got {level}")
+        raise ConfigError(f"bootstrap_mean_ci: level must be in (0, 1), got {level}; pass a coverage such as 0.95")
     values = np.asarray(values, dtype=float).ravel()
     n = values.size
     if n == 0:
@@ -235,10 +165,10 @@ def bootstrap_mean_ci(
     return float(lo), float(hi)
 
 
-def _index_by_key(records: Iterable[Record], which: str) -> dict[PairKey, Record]:
-    indexed: dict[PairKey, Record] = {}
+def _index_by_key(records: Iterable[TrialRecord], which: str) -> dict[PairKey, TrialRecord]:
+    indexed: dict[PairKey, TrialRecord] = {}
     for record in records:
-        key = pair_key(record)
+        key = record.pair_key
         if key in indexed:
             raise RecordError(
                 f"records_{which} hold trial (band, seed, trial) = {key} twice; pass the records of one controller"
@@ -248,7 +178,8 @@ def _index_by_key(records: Iterable[Record], which: str) -> dict[PairKey, Record
 
 
 def paired_difference(
-    records_a: Iterable[Record], records_b: Iterable[Record], metric: str, *, n_boot: int = 2000, seed: int = 0
+    records_a: Iterable[TrialRecord], records_b: Iterable[TrialRecord], metric: str, *, n_boot: int = 2000,
+    seed: int = 0,
 ) -> dict[str, Any]:
     """Mean paired difference of a metric between two controllers, B minus A, with a 95 % bootstrap interval.
 
@@ -272,13 +203,14 @@ def paired_difference(
         when n = 0.
 
     Raises:
-        RecordError: a record is malformed, or one controller's records repeat a trial.
+        RecordError: one controller's records repeat a trial.
+        UnknownNameError: `metric` is not a record field.
     """
     by_key_a = _index_by_key(records_a, "a")
     by_key_b = _index_by_key(records_b, "b")
     diffs = []
     for key in sorted(by_key_a.keys() & by_key_b.keys()):
-        d = record_float(by_key_b[key], metric) - record_float(by_key_a[key], metric)
+        d = _metric(by_key_b[key], metric) - _metric(by_key_a[key], metric)
         if not math.isnan(d):
             diffs.append(d)
     if not diffs:

@@ -81,18 +81,3 @@ class Trial:
     def push_force_n(self) -> float:
         """Largest push magnitude in the trial [N] (0 without pushes)."""
         return max((float(np.linalg.norm(p.force_in_world)) for p in self.pushes), default=0.0)
-
-    def describe(self) -> dict[str, float | int | str]:
-        """Flat parameters of the trial, for the per-trial results table."""
-        return {
-            "band": self.band,
-            "seed": self.seed,
-            "trial": self.index,
-            "vx_cmd": self.command.vx,
-            "vy_cmd": self.command.vy,
-            "yaw_rate_cmd": self.command.yaw_rate,
-            "push_force_n": self.push_force_n,
-            "n_pushes": len(self.pushes),
-            "friction": self.domain.friction,
-            "payload_kg": self.domain.payload_mass,
-        }

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from wbc.arena.runner import run_episode, simulated_robot
+from wbc.arena.runner import run_episode
+from wbc.arena.sim_trial import simulated_robot
 from wbc.control.protocol import Controller
 from wbc.control.registry import get_controller
 from wbc.hardware.robot import Robot
@@ -142,8 +143,7 @@ def _study_trial(trial: Trial, controller: str) -> ArmMomentumTrial:
     robot.reset(seed=trial.terrain_seed, domain=trial.domain)
     for push in trial.pushes:
         robot.apply_push(push)
-    episode = run_episode(robot, watched, trial.command, trial.duration_s, truth=robot.base_truth,
-                          fallen=robot.fallen, nq=robot.model.nq, observer=log)
+    episode = run_episode(robot, watched, trial.command, trial.duration_s, observer=log)
     dt, played = episode.control_dt, len(log.h_arm)
     h_arm = np.asarray(log.h_arm)
     impulses, peaks = [], []

@@ -2,14 +2,13 @@
 
 A results directory written with ``--save-episodes`` holds ``run.json`` (controllers, scenario path and hash,
 bands, seeds, trials per band and seed) and ``episodes/<controller>/<band>-s<seed>-t<index>.npz``. The episode
-gives the configuration and command of every control tick and the pushes (in its events); the scenario file gives
-the robot and the ground. Every problem names the file and the field at fault.
+gives the configuration and command of every control tick and the pushes it met (as arrays, `PushLog`); the scenario
+file gives the robot and the ground. Every problem names the file and the field at fault.
 """
 
 from __future__ import annotations
 
 import json
-import re
 import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -23,64 +22,33 @@ from wbc.control.registry import get_controller
 from wbc.errors import WbcError
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.registry import get_robot
+from wbc.scenario.push import Push
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import Trial
 from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
 from wbc.viz.frame import VizFrame
 
-__all__ = ["LoggedPush", "StoredEpisode", "frames_of", "load_stored_episode", "pushes_of"]
-
-_PUSH_RE = re.compile(r"force_in_world=\[([^\]]*)\]\s+offset_in_base=\[([^\]]*)\]\s+duration=([0-9.eE+-]+)")
+__all__ = ["StoredEpisode", "frames_of", "load_stored_episode"]
 
 
-@dataclass(frozen=True)
-class LoggedPush:
-    """A push as the runner logged it in an episode's events.
+def frames_of(episode: Episode) -> Iterator[VizFrame]:
+    """One frame per control tick of `episode`, its pushes drawn while they act.
 
-    Attributes:
-        start: when it began [s].
-        duration: how long it acted [s].
-        force_in_world: shape (3,) [N].
-        offset_in_base: application point in the trunk frame, shape (3,) [m].
+    A push is drawn in the frame of every tick whose control period overlaps it, at its application point on the
+    trunk (the last acting push's point when several act together, their forces summed).
     """
-
-    start: float
-    duration: float
-    force_in_world: np.ndarray
-    offset_in_base: np.ndarray
-
-
-def pushes_of(episode: Episode, source: str = "episode") -> list[LoggedPush]:
-    """The pushes in `episode`'s events.
-
-    Raises:
-        ViewerError: a push event cannot be read (`source` names the file in the message).
-    """
-    out = []
-    for t, kind, detail in episode.events:
-        if kind != "push":
-            continue
-        m = _PUSH_RE.search(detail)
-        if m is None:
-            raise ViewerError(f"{source}: field events: unreadable push event at t = {t} s: {detail!r}")
-        force = np.array([float(v) for v in m.group(1).split(",")])
-        offset = np.array([float(v) for v in m.group(2).split(",")])
-        out.append(LoggedPush(float(t), float(m.group(3)), force, offset))
-    return out
-
-
-def frames_of(episode: Episode, pushes: list[LoggedPush]) -> Iterator[VizFrame]:
-    """One frame per control tick of `episode`, the pushes drawn while they act."""
     dt = episode.control_dt
+    pushes = episode.pushes
     for i in range(len(episode.t)):
         t = float(episode.t[i])
         qpos = episode.qpos[i]
         force, point = np.zeros(3), np.zeros(3)
-        for p in pushes:
-            if p.start < t and t - dt < p.start + p.duration:
-                force = force + p.force_in_world
-                point = qpos[:3] + quat_to_matrix(qpos[3:7]) @ p.offset_in_base
+        for j in range(len(pushes)):
+            start = pushes.start[j]
+            if start < t and t - dt < start + pushes.duration[j]:
+                force = force + pushes.force_in_world[j]
+                point = qpos[:3] + quat_to_matrix(qpos[3:7]) @ pushes.offset_in_base[j]
         yield VizFrame(t=t, qpos=qpos, command=episode.command[i], push_force_in_world=force,
                        push_point_in_world=point)
 
@@ -94,14 +62,17 @@ class StoredEpisode:
         controller: who played it.
         trial: the trial (robot, ground, pushes as sampled).
         episode: the log.
-        pushes: the pushes as logged.
     """
 
     path: Path
     controller: str
     trial: Trial
     episode: Episode
-    pushes: list[LoggedPush]
+
+    @property
+    def pushes(self) -> tuple[Push, ...]:
+        """The pushes the episode met, as logged."""
+        return self.episode.pushes.to_pushes()
 
     def content(self) -> SceneContent:
         """What to draw: the controller's robot (arm mode) on the trial's ground."""
@@ -110,7 +81,7 @@ class StoredEpisode:
 
     def frames(self) -> Iterator[VizFrame]:
         """The frames of the episode."""
-        return frames_of(self.episode, self.pushes)
+        return frames_of(self.episode)
 
 
 def _pick(run_json: Path, field: str, value: object, valid: list, option: str) -> object:
@@ -181,6 +152,6 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     nq = get_robot(trial.robot, get_controller(controller).arm_mode).num_joints + 7
     if episode.qpos.ndim != 2 or episode.qpos.shape[1] != nq:
         raise ViewerError(f"{path}: field qpos: shape {episode.qpos.shape}, expected (ticks, {nq}) for "
-                          f"{trial.robot} driven by {controller}")
-    return StoredEpisode(path=path, controller=controller, trial=trial, episode=episode,
-                         pushes=pushes_of(episode, str(path)))
+                          f"{trial.robot} driven by {controller}; the file belongs to another run: store it again "
+                          "with `wbc run --save-episodes`")
+    return StoredEpisode(path=path, controller=controller, trial=trial, episode=episode)

@@ -13,7 +13,8 @@ import webbrowser
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wbc.arena.runner import run_trial
+from wbc.arena.record import TrialRecord
+from wbc.arena.sim_trial import run_trial
 from wbc.errors import ConfigError
 from wbc.scenario.trial import Trial
 from wbc.viz.live import LiveObserver, LiveViewer
@@ -55,14 +56,14 @@ class ViewResult:
     """What a view produced.
 
     Attributes:
-        row: the trial's results row (None for replays).
+        row: the trial's record (None for replays).
         recording: the written HTML file, or None.
         frames_drawn: frames sent to the live viewer.
         frames_recorded: frames in the recording.
         paths: scene paths by role (robot, arm, push, ...).
     """
 
-    row: dict[str, object] | None
+    row: TrialRecord | None
     recording: Path | None
     frames_drawn: int
     frames_recorded: int

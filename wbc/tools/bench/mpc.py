@@ -153,8 +153,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     with sim:
         sim.reset(seed=0)
         start = time.perf_counter()
-        episode = run_episode(sim, watched, CommandSchedule(vx=vx), seconds, truth=sim.base_truth,
-                              fallen=sim.fallen, nq=sim.model.nq, observer=log)
+        episode = run_episode(sim, watched, CommandSchedule(vx=vx), seconds, observer=log)
         wall = time.perf_counter() - start
     references: dict[str, float] = {}
     if reference:

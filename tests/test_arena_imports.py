@@ -1,0 +1,64 @@
+"""The arena's finer import rules, beside the house-wide layer table of tests/test_layering.py.
+
+Every import statement counts, function-local and ``TYPE_CHECKING`` ones included (a local import that hides an
+upward arrow is still that arrow), and so does ``importlib.import_module`` with a literal name.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent.parent / "wbc"
+ABOVE_ARENA = ("wbc.arena", "wbc.viz", "wbc.tools", "wbc.cli")
+"""The arena and the packages allowed to import it (the viewer only in the modules that play or replay trials)."""
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(path: Path) -> set[str]:
+    """Every module `path` imports (``from a import b`` counts as both ``a`` and ``a.b``)."""
+    out: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module)
+            out |= {f"{node.module}.{alias.name}" for alias in node.names}
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "import_module"
+              and node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)):
+            out.add(node.args[0].value)
+    return out
+
+
+def _within(name: str, package: str) -> bool:
+    return name == package or name.startswith(package + ".")
+
+
+MODULES = {_module_name(p): _imports(p) for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def _offenders(modules: dict[str, set[str]], forbidden: tuple[str, ...]) -> dict[str, list[str]]:
+    found = {m: sorted(i for i in imports if any(_within(i, f) for f in forbidden)) for m, imports in modules.items()}
+    return {m: names for m, names in found.items() if names}
+
+
+def test_the_source_tree_is_found():
+    assert {"wbc.arena.runner", "wbc.arena.sim_trial", "wbc.arena.record", "wbc.viz.replay"} <= set(MODULES)
+    assert "wbc.arena.episode" in MODULES["wbc.arena.runner"] and "wbc.arena.runner" in MODULES["wbc.arena.sim_trial"]
+
+
+def test_the_viewer_imports_the_arena_only_where_it_plays_or_replays_trials():
+    viz = {m: i for m, i in MODULES.items() if _within(m, "wbc.viz")}
+    allowed = {"wbc.viz.view", "wbc.viz.replay", "wbc.viz.live"}
+    assert set(_offenders(viz, ("wbc.arena",))) <= allowed
+
+
+def test_the_runner_knows_no_simulator_no_registry_and_no_trial_setup():
+    # the one loop runs on any Robot: the simulator and the registry are the simulated trial's business
+    forbidden = ("mujoco", "wbc.hardware.mujoco", "wbc.arena.sim_trial", "wbc.control.registry", "wbc.learned",
+                 "wbc.mpc")
+    assert _offenders({"wbc.arena.runner": MODULES["wbc.arena.runner"]}, forbidden) == {}

@@ -1,0 +1,157 @@
+"""Plots of an arena run (matplotlib, Agg backend): success against push, time to fall, tracking error.
+
+`write_plots` draws them from the records and the summary (`wbc.arena.report.summarize`); the report
+(`wbc.arena.report.write_report`) writes ``report.md`` around them. This is the only arena module that imports
+matplotlib, and only when it draws.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wbc.arena.record import TrialRecord
+
+__all__ = ["PLOTS", "write_plots"]
+
+PLOTS = (
+    ("success_vs_push.png", "Success rate against push magnitude"),
+    ("ttf.png", "Time to fall (fraction of the episode survived)"),
+    ("tracking.png", "Velocity tracking error"),
+)
+"""File name and caption of every plot, in report order."""
+
+_N_PUSH_BINS = 8
+
+
+def _cell_stat(summary: Mapping[str, Any], controller: str, band: str, metric: str, field: str) -> float:
+    cell = summary["controllers"][controller]["bands"].get(band)
+    value = None if cell is None else cell[metric][field]
+    return math.nan if value is None else float(value)
+
+
+def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[TrialRecord], controllers: Sequence[str]) -> bool:
+    """Success rate against push magnitude, one line per controller; False (nothing written) without pushes."""
+    pushes = np.array([r.push_force_n for r in records], dtype=float)
+    if not np.any(pushes > 0.0):
+        return False
+    success = np.array([r.success for r in records], dtype=float)
+    names = np.array([r.controller for r in records])
+    finite = np.isfinite(pushes)
+    levels = np.unique(pushes[finite])
+    if levels.size <= _N_PUSH_BINS:  # few distinct magnitudes (a push band): one point per magnitude
+        centers = levels
+        bin_of = np.searchsorted(levels, pushes)
+    else:
+        edges = np.linspace(0.0, float(levels[-1]), _N_PUSH_BINS + 1)
+        centers = 0.5 * (edges[:-1] + edges[1:])
+        bin_of = np.clip(np.searchsorted(edges, pushes, side="right") - 1, 0, _N_PUSH_BINS - 1)
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    try:
+        for controller in controllers:
+            mine = (names == controller) & finite & ~np.isnan(success)
+            rates = [
+                100.0 * float(success[mine & (bin_of == i)].mean()) if np.any(mine & (bin_of == i)) else math.nan
+                for i in range(centers.size)
+            ]
+            ax.plot(centers, rates, marker="o", label=controller)
+        ax.set_xlabel("largest push in the trial [N]")
+        ax.set_ylabel("success [%]")
+        ax.set_ylim(-5.0, 105.0)
+        ax.grid(True, alpha=0.3)
+        ax.legend()
+        ax.set_title("Success rate against push magnitude (all bands)")
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+    return True
+
+
+def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers: Sequence[str]) -> None:
+    """Box plot of TTF per controller, all bands pooled."""
+    names = [r.controller for r in records]
+    ttf = [r.ttf for r in records]
+    data = []
+    for controller in controllers:
+        values = np.array([t for n, t in zip(names, ttf, strict=True) if n == controller], dtype=float)
+        values = values[~np.isnan(values)]
+        data.append(values if values.size else np.array([math.nan]))
+    fig, ax = plt.subplots(figsize=(max(4.0, 1.2 * len(controllers) + 2.0), 4.0))
+    try:
+        ax.boxplot(data, tick_labels=list(controllers))
+        ax.set_ylabel("TTF (fraction of the episode survived)")
+        ax.set_ylim(-0.05, 1.05)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.set_title("Time to fall, all bands")
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+
+
+def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequence[str],
+                   labels: Mapping[str, str]) -> None:
+    """Grouped bars of V_lin and V_ang tracking error, mean with std across seeds as error bars."""
+    controllers = list(summary["controllers"])
+    x = np.arange(len(bands), dtype=float)
+    width = 0.8 / max(1, len(controllers))
+    fig, axes = plt.subplots(1, 2, figsize=(max(6.4, 1.5 * len(bands) * 2 + 2.0), 4.0))
+    try:
+        for ax, metric in zip(axes, ("vlin_err", "vang_err"), strict=True):
+            for i, controller in enumerate(controllers):
+                means = [_cell_stat(summary, controller, b, metric, "mean") for b in bands]
+                stds = [_cell_stat(summary, controller, b, metric, "std") for b in bands]
+                offset = (i - (len(controllers) - 1) / 2.0) * width
+                ax.bar(x + offset, np.nan_to_num(means), width, yerr=np.nan_to_num(stds), capsize=3,
+                       label=controller)
+            ax.set_xticks(x, list(bands))
+            ax.set_ylabel(labels[metric])
+            ax.set_title(labels[metric].split(" [")[0])
+            ax.grid(True, axis="y", alpha=0.3)
+        axes[0].legend()
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+
+
+def write_plots(out_dir: Path, summary: Mapping[str, Any], records: Sequence[TrialRecord], *,
+                controllers: Sequence[str], bands: Sequence[str], labels: Mapping[str, str]) -> list[Path]:
+    """Draw the plots of `PLOTS` into `out_dir` (which must exist); figures are closed after saving.
+
+    - ``success_vs_push.png``: success rate against the trial's largest push magnitude (``push_force_n``), binned,
+      one line per controller; only written when some record has a push.
+    - ``ttf.png``: box plot of TTF per controller, all bands pooled.
+    - ``tracking.png``: V_lin and V_ang tracking error per band and controller, bars of the mean across seeds with
+      the std as error bars.
+
+    Args:
+        out_dir: output folder.
+        summary: the output of `wbc.arena.report.summarize` for `records`.
+        records: the records of `controllers` and `bands`, in canonical order (`wbc.arena.stats.in_canonical_order`).
+        controllers: the controllers, in legend order.
+        bands: the bands, in axis order.
+        labels: summary metric name -> axis label with its unit (`wbc.arena.report.LABELS`).
+
+    Returns:
+        The plots written, in `PLOTS` order.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = Path(out_dir)
+    plots: list[Path] = []
+    if _plot_success_vs_push(plt, out / "success_vs_push.png", records, controllers):
+        plots.append(out / "success_vs_push.png")
+    _plot_ttf(plt, out / "ttf.png", records, controllers)
+    plots.append(out / "ttf.png")
+    _plot_tracking(plt, out / "tracking.png", summary, bands, labels)
+    plots.append(out / "tracking.png")
+    return plots

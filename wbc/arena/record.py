@@ -1,0 +1,234 @@
+"""`TrialRecord`: the results of one played trial, the one record that crosses the arena's files.
+
+The simulated-trial runner builds it from the trial and its episode (`TrialRecord.of_trial`), the executors carry it
+back from their workers, the results store writes it to and reads it from ``trials.csv`` (`header`, `to_row`,
+`from_row`, `read_csv`), and the statistics and the report read its typed fields. The fields are defined here once,
+in the order of the ``trials.csv`` columns; the file format is the one every earlier results directory holds, so a run
+written before this record existed still resumes.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from wbc.arena.episode import Episode
+from wbc.arena.metrics import compute_metrics
+from wbc.errors import RecordError, UnknownNameError
+from wbc.scenario.trial import Trial
+
+__all__ = ["TrialRecord"]
+
+_TRUE = frozenset({"True", "true", "1"})
+_FALSE = frozenset({"False", "false", "0"})
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrialRecord:
+    """One (controller, trial) result: identity, trial parameters, metrics, controller events, wall time.
+
+    Attributes:
+        controller: controller name as given to the arena (a registry name or ``policy:PATH``).
+        scenario: scenario name.
+        scenario_hash: content hash of the scenario file (hex).
+        band: band name.
+        seed: seed index.
+        trial: trial index within (band, seed).
+        success: the episode reached its end without a fall (`wbc.arena.metrics.success`).
+        ttf: time to fall, the fraction of the episode survived, in (0, 1].
+        fall_time_s: when the robot fell, NaN if it did not [s].
+        vlin_err: mean horizontal velocity tracking error [m/s].
+        vang_err: mean yaw-rate tracking error [rad/s].
+        max_roll_deg: largest |roll| [deg].
+        max_pitch_deg: largest |pitch| [deg].
+        energy_j: mechanical work of the motors [J].
+        arm_travel_rad: total arm joint travel [rad].
+        push_force_n: largest push magnitude of the trial (0 without pushes) [N].
+        n_pushes: number of pushes in the trial (played or not, if the robot fell first).
+        vx_cmd: commanded forward velocity after the ramp [m/s].
+        vy_cmd: commanded lateral velocity after the ramp [m/s].
+        yaw_rate_cmd: commanded yaw rate after the ramp [rad/s].
+        friction: ground friction coefficient of the trial.
+        payload_kg: payload mass added to the trunk [kg].
+        fallbacks: controller solves that failed and fell back to a safe command.
+        wbc_failures: whole-body QP failures of the controller.
+        debug_truth: the controller read the simulator's base state (``--debug-truth``), not its estimate.
+        wall_s: wall time the trial took to play [s]; the only field that depends on the machine.
+    """
+
+    controller: str
+    scenario: str
+    scenario_hash: str
+    band: str
+    seed: int
+    trial: int
+    success: bool
+    ttf: float
+    fall_time_s: float
+    vlin_err: float
+    vang_err: float
+    max_roll_deg: float
+    max_pitch_deg: float
+    energy_j: float
+    arm_travel_rad: float
+    push_force_n: float
+    n_pushes: int
+    vx_cmd: float
+    vy_cmd: float
+    yaw_rate_cmd: float
+    friction: float
+    payload_kg: float
+    fallbacks: int
+    wbc_failures: int
+    debug_truth: bool
+    wall_s: float
+
+    def __post_init__(self) -> None:
+        # values arrive as numpy scalars from metrics and sampling; storing plain Python values keeps the CSV text
+        # (and equality with a record read back from it) independent of where a value came from
+        for name, kind in _KINDS.items():
+            object.__setattr__(self, name, _coerce(name, kind, getattr(self, name)))
+
+    @classmethod
+    def of_trial(cls, trial: Trial, *, controller: str, episode: Episode, counters: Mapping[str, int],
+                 wall_s: float, debug_truth: bool = False) -> TrialRecord:
+        """The record of `trial` played by `controller`.
+
+        Args:
+            trial: the trial played.
+            controller: the controller's name.
+            episode: the episode log, from which the metrics are computed (`wbc.arena.metrics.compute_metrics`).
+            counters: the controller's event counts (`Controller.counters`); absent counts are 0.
+            wall_s: wall time of the trial [s].
+            debug_truth: the controller's ground-truth debug switch was thrown.
+        """
+        return cls(
+            controller=controller, scenario=trial.scenario, scenario_hash=trial.scenario_hash, band=trial.band,
+            seed=trial.seed, trial=trial.index, **compute_metrics(episode), push_force_n=trial.push_force_n,
+            n_pushes=len(trial.pushes), vx_cmd=trial.command.vx, vy_cmd=trial.command.vy,
+            yaw_rate_cmd=trial.command.yaw_rate, friction=trial.domain.friction,
+            payload_kg=trial.domain.payload_mass, fallbacks=counters.get("fallbacks", 0),
+            wbc_failures=counters.get("wbc_failures", 0), debug_truth=debug_truth, wall_s=wall_s,
+        )
+
+    def __eq__(self, other: object) -> bool:
+        """Equal when stored alike: every field's ``trials.csv`` text matches (so NaN equals NaN, bit for bit)."""
+        if not isinstance(other, TrialRecord):
+            return NotImplemented
+        return self.to_row() == other.to_row()
+
+    def __hash__(self) -> int:
+        return hash(tuple(self.to_row()))
+
+    # -- access ---------------------------------------------------------------------------------------------------
+    @property
+    def pair_key(self) -> tuple[str, int, int]:
+        """(band, seed, trial): identifies the trial across controllers, for paired statistics."""
+        return (self.band, self.seed, self.trial)
+
+    @property
+    def run_key(self) -> tuple[str, str, int, int]:
+        """(controller, band, seed, trial): identifies the record within a run."""
+        return (self.controller, self.band, self.seed, self.trial)
+
+    def __getitem__(self, name: str) -> str | int | float | bool:
+        """The field `name`, for code that names fields in data (a metric key, a table column).
+
+        Raises:
+            UnknownNameError: no such field (the message lists them).
+        """
+        if name not in _KINDS:
+            raise UnknownNameError("record field", name, FIELDS)
+        return getattr(self, name)
+
+    # -- CSV ------------------------------------------------------------------------------------------------------
+    @staticmethod
+    def header() -> tuple[str, ...]:
+        """The ``trials.csv`` column names, in order."""
+        return FIELDS
+
+    def to_row(self) -> list[str]:
+        """The record as ``trials.csv`` cells, in `header` order (floats as their shortest round-trip text)."""
+        return [repr(v) if isinstance(v, float) else str(v) for v in (getattr(self, n) for n in FIELDS)]
+
+    @classmethod
+    def from_row(cls, row: Sequence[str], *, source: str = "row") -> TrialRecord:
+        """Parse cells in `header` order, as `to_row` writes them.
+
+        Args:
+            row: the cells.
+            source: where the row comes from, for messages (``trials.csv:12``).
+
+        Raises:
+            RecordError: the row has the wrong number of cells, or a cell does not parse as its field's type.
+        """
+        if len(row) != len(FIELDS):
+            raise RecordError(f"{source}: {len(row)} cells, expected {len(FIELDS)} ({', '.join(FIELDS)}); write rows "
+                              "with TrialRecord.to_row")
+        return cls(**{name: _parse(source, name, _KINDS[name], text) for name, text in zip(FIELDS, row, strict=True)})
+
+    @classmethod
+    def read_csv(cls, path: str | Path) -> list[TrialRecord]:
+        """The records of a ``trials.csv``, in file order.
+
+        A last line without its newline (a write cut short by a kill) is dropped, and so is any row with the wrong
+        number of cells; what remains is exactly what was stored.
+
+        Raises:
+            RecordError: the file's columns are not `header` (a results directory of another version), or a complete
+                row holds a value that does not parse (the message names the file, line and field).
+        """
+        text = Path(path).read_text(encoding="utf-8")
+        if text and not text.endswith("\n"):
+            text = text[: text.rfind("\n") + 1]
+        rows = list(csv.reader(io.StringIO(text)))
+        if not rows:
+            return []
+        if tuple(rows[0]) != FIELDS:
+            raise RecordError(f"{path}: columns {', '.join(rows[0])} are not this version's ({', '.join(FIELDS)}); "
+                              "the directory was written by another version of wbc: resume it with that version, "
+                              "or start afresh with another --out")
+        return [cls.from_row(row, source=f"{path}:{line}") for line, row in enumerate(rows[1:], start=2)
+                if len(row) == len(FIELDS)]
+
+
+_KINDS: dict[str, type] = {f.name: typing.get_type_hints(TrialRecord)[f.name] for f in dataclasses.fields(TrialRecord)}
+FIELDS: tuple[str, ...] = tuple(_KINDS)
+
+
+def _coerce(name: str, kind: type, value: object) -> object:
+    if kind is str and isinstance(value, str):
+        return value
+    if kind is bool and isinstance(value, bool | np.bool_):
+        return bool(value)
+    if kind is int and isinstance(value, int | np.integer) and not isinstance(value, bool | np.bool_):
+        return int(value)
+    if kind is float and isinstance(value, int | float | np.integer | np.floating) and not isinstance(
+            value, bool | np.bool_):
+        return float(value)
+    raise RecordError(f"TrialRecord.{name} must be of type {kind.__name__}, got {value!r} ({type(value).__name__}); "
+                      "build records with TrialRecord.of_trial, or read them with TrialRecord.from_row")
+
+
+def _parse(source: str, name: str, kind: type, text: str) -> object:
+    if kind is str:
+        return text
+    if kind is bool:
+        if text in _TRUE:
+            return True
+        if text in _FALSE:
+            return False
+    else:
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    raise RecordError(f"{source}: field {name} holds {text!r}, not a {kind.__name__}; fix or delete that line "
+                      "(the trial is played again on --resume)")
