@@ -428,3 +428,24 @@ def test_a_policy_file_enters_the_arena_as_policy_path(small, tmp_path, capsys):
     assert main(["run", f"policy:{missing}", "--scenario", str(small), "--out", str(tmp_path / "m")]) == 2
     err = capsys.readouterr().err
     assert "nothing" in err and "not found" in err and "Traceback" not in err
+
+
+def test_a_policy_file_is_read_once_per_run_not_once_per_trial(small, tmp_path, monkeypatch):
+    import wbc.learned.policy.composite_policy as composite
+    from wbc.robots.registry import get_robot as robot_named
+
+    reads = []
+    original = composite.load_composite
+
+    def counting(path, *a, **kw):
+        reads.append(str(path))
+        return original(path, *a, **kw)
+
+    monkeypatch.setattr(composite, "load_composite", counting)
+    monkeypatch.setattr("wbc.control.registry.load_composite", counting)
+    monkeypatch.setattr("wbc.learned.policy.controller.load_composite", counting)
+    weights = shipped_weights(robot_named("a1-wx200", "locked"))
+    cfg = ArenaConfig(controllers=(f"policy:{weights}",), scenario=small, seeds=(0,), trials=3, bands=("soft",),
+                      out_dir=tmp_path / "once", workers=1, progress=False)
+    assert run_arena(cfg).played == 3
+    assert reads == [str(weights)]

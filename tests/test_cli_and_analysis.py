@@ -140,8 +140,7 @@ def _walk_watched(inner, seconds=0.2):
     log = TickTimingLog(watched)
     with MujocoRobot(MujocoRobotConfig()) as robot:
         robot.reset(seed=0)
-        episode = run_episode(robot, watched, CommandSchedule(vx=0.3), seconds, truth=robot.base_truth,
-                              fallen=robot.fallen, nq=robot.model.nq, observer=log)
+        episode = run_episode(robot, watched, CommandSchedule(vx=0.3), seconds, observer=log)
     return watched, log, episode
 
 

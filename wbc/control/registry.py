@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from wbc.control.protocol import Controller
 from wbc.control.stand import StandController
 from wbc.errors import UnknownNameError
+from wbc.learned.policy.composite_policy import load_composite
 from wbc.learned.policy.controller import LearnedController
 from wbc.mpc.controller import MpcController
 from wbc.robots.description import RobotDescription, check_arm_mode
@@ -85,10 +86,8 @@ def get_controller(name: str) -> ControllerSpec:
 
 
 def _policy_spec(name: str) -> ControllerSpec:
-    from wbc.learned.policy.composite_policy import load_composite
-
     path = name[len(POLICY_PREFIX):]
-    policy = load_composite(path)  # the whole file is checked here, before any trial starts
+    policy = load_composite(path)  # the whole file is read and checked here, once, before any trial starts
     meta = policy.meta
-    return ControllerSpec(name, meta["arm_mode"], functools.partial(LearnedController, policy_path=path),
+    return ControllerSpec(name, meta["arm_mode"], functools.partial(LearnedController, policy_path=path, policy=policy),
                           f"policy file {path} ({meta['task']} task, stage {meta['stage']})", robot=meta["robot"])

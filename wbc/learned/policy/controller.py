@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbc.learned.policy.composite_policy import load_composite
+from wbc.learned.policy.composite_policy import CompositePolicyFile, load_composite
 from wbc.learned.policy.numpy_composite import NumpyComposite
 from wbc.learned.policy.obs_history import ObsHistory
 from wbc.learned.policy.observations import ObsLayout, ObsScales, policy_observation
@@ -40,19 +40,22 @@ class LearnedController:
     Args:
         desc: the robot it drives (checked against the policy file).
         policy_path: the policy file (default: `shipped_weights(desc)`).
+        policy: the file's content, already read from `policy_path` (`load_composite`), so that a run that builds
+            one controller per trial reads the file once.
 
     Raises:
         PolicyFileError: the file is missing or malformed, was trained for another robot or arm mode, or needs
             extrinsics without an adaptation module.
     """
 
-    def __init__(self, desc: RobotDescription, policy_path: str | Path | None = None) -> None:
+    def __init__(self, desc: RobotDescription, policy_path: str | Path | None = None, *,
+                 policy: CompositePolicyFile | None = None) -> None:
         path = Path(policy_path) if policy_path is not None else shipped_weights(desc)
         if policy_path is None and not path.exists():
             raise PolicyFileError(path, None, f"no shipped weights for {desc.name} with arm {desc.arm_mode!r} yet; "
                                   "train them (wbc train --task push --stage 1|2|3) and copy the run's policy.npz "
                                   f"and policy.json to {path.with_suffix('')}.npz/.json")
-        pf = load_composite(path)
+        pf = load_composite(path) if policy is None else policy
         pf.check_robot(desc, path)
         prefix = "" if len(pf.parts) == 1 else "{}/"
         for part in pf.parts:
