@@ -1,7 +1,7 @@
 """The model-based contender: centroidal dynamics with arm momentum and the MPC that plans with them."""
 
 from wbc.mpc.centroidal_model import CentroidalModel, CentroidalParams, SymbolicCentroidalModel
-from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcProblem, MpcSolution, MpcSolveError, QpScaling
+from wbc.mpc.centroidal_mpc import CentroidalMpc, DenseQp, MpcConfig, MpcProblem, MpcSolution, MpcSolveError
 
 __all__ = [
     "CentroidalModel",
@@ -11,6 +11,6 @@ __all__ = [
     "MpcProblem",
     "MpcSolution",
     "MpcSolveError",
-    "QpScaling",
+    "DenseQp",
     "SymbolicCentroidalModel",
 ]

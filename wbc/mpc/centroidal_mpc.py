@@ -33,7 +33,7 @@ from wbc.errors import MpcProblemFileError, WbcError
 from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, G, zoh_integral
 from wbc.mpc.portable_proxsuite import proxsuite
 
-__all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "QpScaling", "CentroidalMpc"]
+__all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "DenseQp", "CentroidalMpc"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -73,8 +73,11 @@ class MpcConfig:
 
 
 @dataclass
-class QpScaling:
-    """The QP whose Ruiz equilibration a warm-started solve reuses: the last one of the same shape to start cold.
+class DenseQp:
+    """A dense QP in ProxSuite's form: min 1/2 z^T H z + g^T z s.t. l <= C z <= u, l_box <= z <= u_box.
+
+    An `MpcProblem` is one, and a warm-started solve reuses the Ruiz equilibration of another (its `scaling`: the
+    last QP of the same shape that started cold).
 
     Attributes:
         H: its Hessian.
@@ -95,17 +98,16 @@ class QpScaling:
     u_box: np.ndarray
 
     @classmethod
-    def of(cls, problem: MpcProblem) -> QpScaling:
+    def of(cls, problem: MpcProblem) -> DenseQp:
         """The scaling a cold start of `problem` computes (its arrays, not copied)."""
-        return cls(H=problem.H, g=problem.g, C=problem.C, l=problem.l, u=problem.u, l_box=problem.l_box,
-                   u_box=problem.u_box)
+        return cls(**{f.name: getattr(problem, f.name) for f in fields(cls)})
 
 
-_SCALING_PREFIX = "scaling."  # keys of the `QpScaling` arrays in a saved problem
+_SCALING_PREFIX = "scaling."  # keys of the `DenseQp` arrays in a saved problem
 
 
 @dataclass
-class MpcProblem:
+class MpcProblem(DenseQp):
     """One update's QP in ProxSuite's form (scaled variables) and what turns its solution into a plan.
 
     min 1/2 z^T H z + g^T z  s.t.  l <= C z <= u,  l_box <= z <= u_box;  U[index] = scale * z, other entries of
@@ -129,18 +131,11 @@ class MpcProblem:
             this shape has started cold yet, so a warm start runs unscaled.
     """
 
-    H: np.ndarray
-    g: np.ndarray
-    C: np.ndarray
-    l: np.ndarray  # noqa: E741 - ProxSuite's name for the lower bounds
-    u: np.ndarray
-    l_box: np.ndarray
-    u_box: np.ndarray
     scale: np.ndarray
     index: np.ndarray
     free: np.ndarray
     gamma: np.ndarray
-    scaling: QpScaling | None = None
+    scaling: DenseQp | None = None
 
     @property
     def horizon(self) -> int:
@@ -151,7 +146,7 @@ class MpcProblem:
         """Write the problem to an ``.npz`` file (compressed, no pickles), its `scaling` QP included."""
         arrays = {name: getattr(self, name) for name in _ARRAYS}
         if self.scaling is not None:
-            arrays.update({_SCALING_PREFIX + f.name: getattr(self.scaling, f.name) for f in fields(QpScaling)})
+            arrays.update({_SCALING_PREFIX + f.name: getattr(self.scaling, f.name) for f in fields(DenseQp)})
         np.savez_compressed(path, **arrays)
 
     @classmethod
@@ -161,7 +156,7 @@ class MpcProblem:
         Raises:
             MpcProblemFileError: the file lacks some of the problem's arrays (an older dump, or not a problem).
         """
-        scaling_keys = [_SCALING_PREFIX + f.name for f in fields(QpScaling)]
+        scaling_keys = [_SCALING_PREFIX + f.name for f in fields(DenseQp)]
         with np.load(path, allow_pickle=False) as z:
             has_scaling = any(k in z.files for k in scaling_keys)
             missing = [k for k in (*_ARRAYS, *(scaling_keys if has_scaling else ())) if k not in z.files]
@@ -169,7 +164,7 @@ class MpcProblem:
                 raise MpcProblemFileError(str(path), missing)
             scaling = None
             if has_scaling:
-                scaling = QpScaling(**{k.removeprefix(_SCALING_PREFIX): z[k] for k in scaling_keys})
+                scaling = DenseQp(**{k.removeprefix(_SCALING_PREFIX): z[k] for k in scaling_keys})
             return cls(**{k: z[k] for k in _ARRAYS}, scaling=scaling)
 
 
@@ -243,7 +238,7 @@ class CentroidalMpc:
         self._arm_vmax = np.asarray(arm_velocity_limit, dtype=np.float64)
         self._qps: dict[tuple[int, int], proxsuite.proxqp.dense.QP] = {}
         # per QP shape: the QP whose equilibration ProxSuite's object of that shape holds (absent: none, unscaled)
-        self._scaled_by: dict[tuple[int, int], QpScaling] = {}
+        self._scaled_by: dict[tuple[int, int], DenseQp] = {}
         scale = np.ones(NU)
         scale[:12] = config.force_scale
         self._scale = np.tile(scale, n)
@@ -418,7 +413,7 @@ class CentroidalMpc:
             qp = self._qp_for(*key)
             qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
             qp.init(h, g, None, None, c, lo, hi, l_box, u_box)
-            self._scaled_by[key] = QpScaling.of(problem)  # the next warm starts of this shape reuse this scaling
+            self._scaled_by[key] = DenseQp.of(problem)  # the next warm starts of this shape reuse this scaling
             qp.solve()
             solved = self._ok(qp)
         solve = time.perf_counter() - t1
@@ -441,7 +436,7 @@ class CentroidalMpc:
         return (qp.results.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
                 and bool(np.all(np.isfinite(qp.results.x))))
 
-    def _qp_scaled_by(self, key: tuple[int, int], scaling: QpScaling | None) -> proxsuite.proxqp.dense.QP:
+    def _qp_scaled_by(self, key: tuple[int, int], scaling: DenseQp | None) -> proxsuite.proxqp.dense.QP:
         """ProxSuite's object for QPs of this shape, holding the equilibration of `scaling` (None: unscaled)."""
         if self._scaled_by.get(key) is not scaling:
             # out of turn (a loaded problem, another solver's): set the scaling up again as its cold start did
