@@ -67,7 +67,7 @@ def print_bench_sim(result: Mapping[str, object]) -> None:
     print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
           f"{result['threads']} threads)")
     if "reference_steps_per_s" in result:
-        print("  bare A1 URDF, same runs (the reference issue 2's targets were set against: 110k / 218k):")
+        print("  bare A1 URDF, same runs (the reference the simulator targets were set against: 110k / 218k):")
         print(f"    single-threaded : {result['reference_steps_per_s']:>10,.0f} steps/s  -> this robot runs at "
               f"{100 * result['steps_ratio_to_reference']:.0f} % of it (the target asks 73 %: "
               f"{result['scaled_target_steps_per_s']:,.0f} steps/s on this machine)")
