@@ -1,28 +1,27 @@
 """How much angular momentum the arm actually moves during push recovery: the data behind the README's tail answer.
 
-For each trial of a scenario band, the named controller plays the trial through the runner's one loop
-(`run_episode`, set up as `run_trial` sets it up: the cached simulated robot reset with the trial's terrain seed and
-domain, its pushes scheduled). An observer of that loop computes, every tick, the arm's contribution to the centroidal
-angular momentum, h_arm = A_arm(q) dq_arm (A_arm: the arm's columns of Pinocchio's centroidal momentum matrix,
-evaluated at the simulator's true base pose and the measured joint positions; dq_arm: the measured arm joint
-velocities, as the controller saw them). The per-push figures compare it with the angular impulse each push delivers
-about the CoM, |r x F| T (r: from the CoM to the push's application point). A tail that matters must move momentum of
-the order of that impulse.
+For each trial of a scenario band, the named controller plays the trial as `wbc run` plays it (`run_trial`), watched
+by a `WatchedController` in its place (which keeps the state each tick handed it). An observer of that loop computes,
+every tick, the arm's contribution to the centroidal angular momentum, h_arm = A_arm(q) dq_arm (A_arm: the arm's
+columns of Pinocchio's centroidal momentum matrix, evaluated at the simulator's true base pose and the measured joint
+positions; dq_arm: the measured arm joint velocities, as the controller saw them). The per-push figures compare it with
+the angular impulse each push delivers about the CoM, |r x F| T (r: from the CoM to the push's application point). A
+tail that matters must move momentum of the order of that impulse.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
 
-from wbc.arena.runner import run_episode
-from wbc.arena.sim_trial import simulated_robot
+from wbc.arena.sim_trial import run_trial
 from wbc.control.protocol import Controller
 from wbc.control.registry import get_controller
+from wbc.errors import AnalysisError
+from wbc.hardware.capabilities import TruthSource
 from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix, quat_wxyz_to_xyzw
 from wbc.robots.description import ARM_JOINTS
@@ -30,7 +29,7 @@ from wbc.robots.pinocchio_model import PinocchioRobot, build_pinocchio
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import Trial
 from wbc.tools.watched_controller import WatchedController
-from wbc.types import BaseTruth, VelocityCommand
+from wbc.types import VelocityCommand
 
 __all__ = ["ArmMomentumLog", "ArmMomentumTrial", "arm_momentum_study"]
 
@@ -66,10 +65,11 @@ class ArmMomentumTrial:
 class ArmMomentumLog:
     """A runner observer gathering, tick by tick, what the study needs (one row per tick played).
 
+    The runner hands it the robot (a `TruthSource`: the simulator's base truth is read after each tick) and the
+    controller it drives, a `WatchedController` (the state each tick was handed).
+
     Attributes:
-        watched: the controller the runner drives (it keeps the state each tick was handed).
-        truth: the simulator's base truth, read after each tick.
-        pin_robot: the Pinocchio model of the robot played.
+        pin_robot: the Pinocchio model of the robot played (built at the first tick).
         h_arm: |h_arm| of each tick [N m s] (zero without an actuated arm).
         com_in_world: system CoM of each tick [m].
         rotation_base_in_world: base orientation of each tick.
@@ -77,9 +77,7 @@ class ArmMomentumLog:
         arm_travel_rad: summed absolute arm joint motion so far [rad].
     """
 
-    watched: WatchedController
-    truth: Callable[[], BaseTruth]
-    pin_robot: PinocchioRobot
+    pin_robot: PinocchioRobot | None = None
     h_arm: list[float] = field(default_factory=list)
     com_in_world: list[np.ndarray] = field(default_factory=list)
     rotation_base_in_world: list[np.ndarray] = field(default_factory=list)
@@ -89,8 +87,13 @@ class ArmMomentumLog:
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """Take the tick that just ended (the runner's `TickObserver` signature)."""
-        state, pinr = self.watched.last_state, self.pin_robot
-        truth = self.truth()
+        if not isinstance(controller, WatchedController) or not isinstance(robot, TruthSource):
+            raise AnalysisError("the arm-momentum log observes a WatchedController on a robot that knows its base "
+                                "truth (the simulator); play the trial with `arm_momentum_study`")
+        if self.pin_robot is None:
+            self.pin_robot = build_pinocchio(robot.desc)
+        state, pinr = controller.last_state, self.pin_robot
+        truth = robot.base_truth()
         q = np.concatenate([truth.base_position_in_world, quat_wxyz_to_xyzw(truth.base_quat),
                             state.q[pinr.joints.pin_from_house]])
         self.com_in_world.append(pin.centerOfMass(pinr.model, pinr.data, q).copy())
@@ -137,13 +140,9 @@ def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds:
 
 def _study_trial(trial: Trial, controller: str) -> ArmMomentumTrial:
     spec = get_controller(controller)
-    robot = simulated_robot(trial, spec.arm_mode)
-    watched = WatchedController(spec.make(robot.desc))
-    log = ArmMomentumLog(watched, robot.base_truth, build_pinocchio(robot.desc))
-    robot.reset(seed=trial.terrain_seed, domain=trial.domain)
-    for push in trial.pushes:
-        robot.apply_push(push)
-    episode = run_episode(robot, watched, trial.command, trial.duration_s, observer=log)
+    watched = dataclasses.replace(spec, make=lambda desc: WatchedController(spec.make(desc)))
+    log = ArmMomentumLog()
+    _, episode = run_trial(trial, watched, observer=log)
     dt, played = episode.control_dt, len(log.h_arm)
     h_arm = np.asarray(log.h_arm)
     impulses, peaks = [], []
