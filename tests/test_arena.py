@@ -126,7 +126,7 @@ def test_local_and_ray_executors_agree(small, tmp_path):
 
 def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "wbc.cli.main", "compare", "stand", "stand-noarm", "--scenario", str(small),
+    cmd = [sys.executable, "-m", "wbc.cli", "compare", "stand", "stand-noarm", "--scenario", str(small),
            "--trials", "6", "--seeds", "2", "--workers", "1", "--out", str(out), "--quiet"]
     proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     trials_csv = out / "trials.csv"

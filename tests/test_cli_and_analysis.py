@@ -19,7 +19,11 @@ PUSH = Path(__file__).resolve().parent.parent / "scenarios" / "push.toml"
 def test_analyze_tail_prints_the_named_robots_figures_as_json_and_as_a_table(robot, capsys):
     want = analyze_tail(get_robot(robot, "actuated"))
     assert main(["analyze", "tail", "--robot", robot, "--json"]) == 0
-    assert json.loads(capsys.readouterr().out) == want.as_dict()
+    out = json.loads(capsys.readouterr().out)
+    assert out == want.as_dict()
+    for key in ("ccom_shift_m", "ccom_shift_m_exact", "alpha_ratio", "alpha_ratio_exact"):  # the documented keys
+        assert isinstance(out[key], float)
+    assert out["paper_ccom_shift_m"] == 0.022 and out["paper_alpha_ratio"] == -0.378  # the paper's Section VIII
     assert main(["analyze", "tail", "--robot", robot]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == f"Arm as a tail: {robot}"

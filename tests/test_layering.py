@@ -129,3 +129,10 @@ robot.write(ctrl.act(robot.read(), VelocityCommand(vx=0.3)))
 import wbc.learned.env
 """
     assert "wbc.learned.policy.controller" in _loaded_after(code)
+
+
+def test_the_loop_and_the_controller_protocol_load_no_simulator_and_no_controller():
+    loaded = _loaded_after("import wbc.arena.runner, wbc.control.protocol, wbc.hardware.capabilities")
+    heavy = {m for m in loaded if m.split(".")[0] in ("mujoco", "pinocchio", "placo", "casadi", "torch")
+             or m.startswith(("wbc.mpc", "wbc.learned", "wbc.hardware.mujoco", "wbc.control.registry"))}
+    assert not heavy, sorted(heavy)

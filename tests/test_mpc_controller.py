@@ -205,6 +205,7 @@ def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_refer
     for key in ("mpc_solve_ms_median", "mpc_solve_ms_p99", "wbc_tick_us_median", "realtime_factor"):
         assert result[key] > 0
     assert not result["fell"]
+    assert result["proxsuite_build"] == "proxsuite_pywrap"  # the portable build: results independent of addresses
     # the targets (100 us at a 40 us reference tick; 5x at 110k reference steps/s) scaled by this machine's figures
     assert result["scaled_target_wbc_tick_us"] == pytest.approx(2.5 * result["reference_placo_tick_us"])
     assert result["scaled_target_realtime_factor"] == pytest.approx(5.0 * result["reference_steps_per_s"] / 110_000)

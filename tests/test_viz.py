@@ -467,7 +467,7 @@ def test_cli_view_live_pauses_until_a_key(short, tmp_path):
     import time
 
     master, slave = pty.openpty()
-    cmd = [sys.executable, "-m", "wbc.cli.main", "view", "stand", "--scenario", str(short), "--trial", "0",
+    cmd = [sys.executable, "-m", "wbc.cli", "view", "stand", "--scenario", str(short), "--trial", "0",
            "--duration", "0.4", "--speed", "0", "--paused"]
     proc = subprocess.Popen(cmd, stdin=slave, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=Path(__file__).resolve().parent.parent)

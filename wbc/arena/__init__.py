@@ -1,13 +1,12 @@
-"""The arena: one runner loop, executors, episode logs, metrics, the results store, statistics and reports."""
+"""The arena: one runner loop, executors, episode logs, metrics, the results store, statistics and reports.
 
-from wbc.arena.compare import ArenaConfig, ArenaResult, run_arena
+The package re-exports the loop and its records only; the simulated trials (`wbc.arena.sim_trial`), the executors
+and the comparison (`wbc.arena.compare`) are imported from their modules, so a hardware trial that imports the loop
+does not load the simulator or every controller.
+"""
+
 from wbc.arena.episode import Episode, PushLog
-from wbc.arena.executors import TrialTask
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
-from wbc.arena.sim_trial import run_trial, simulated_robot
 
-__all__ = [
-    "ArenaConfig", "ArenaResult", "Episode", "PushLog", "TickObserver", "TrialRecord", "TrialTask", "run_arena",
-    "run_episode", "run_trial", "simulated_robot",
-]
+__all__ = ["Episode", "PushLog", "TickObserver", "TrialRecord", "run_episode"]

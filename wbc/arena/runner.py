@@ -26,6 +26,7 @@ from wbc.errors import MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, TruthSource
 from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, VelocityCommand
 
@@ -71,7 +72,7 @@ def run_episode(
     n = int(round(duration_s / dt))
     buf = EpisodeBuffer(capacity=n, nq=7 + robot.num_joints)
     controller.reset()
-    arm = slice(12, 15) if robot.num_joints == 15 else None
+    arm = ARM_JOINTS if robot.num_joints == 15 else None
     clock = time.perf_counter
     fell, fall_time = False, math.nan
     for k in range(n):

@@ -232,7 +232,6 @@ class CentroidalMpc:
         self.config = config
         self.model = CentroidalModel()
         n = config.horizon
-        self.n_var = n * NU
         self._arm_lower = np.asarray(arm_lower, dtype=np.float64) + config.arm_margin
         self._arm_upper = np.asarray(arm_upper, dtype=np.float64) - config.arm_margin
         self._arm_vmax = np.asarray(arm_velocity_limit, dtype=np.float64)

@@ -143,7 +143,7 @@ class MpcController:
     def use_ground_truth(self, truth: Callable[[], BaseTruth]) -> None:
         """Debug switch: take the base position and velocity from `truth` (the simulator) instead of the estimator.
 
-        For isolating estimation errors only; the runner records it in every results row (``debug_truth``).
+        For isolating estimation errors only; the simulated trial records it in its `TrialRecord` (``debug_truth``).
         """
         self._truth = truth
 
@@ -204,7 +204,7 @@ class MpcController:
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """Estimate, (re)plan, and turn the plan into motor commands."""
         cfg = self.config
-        self._timings = {}
+        self._timings.clear()
         rot = quat_to_matrix(state.imu_quat)
         if not self._started:
             self._start(state, rot)

@@ -15,8 +15,6 @@ from wbc.robots.description import ARM_JOINTS, FOOT_NAMES, LEG_NAMES, RobotDescr
 from wbc.robots.pinocchio_model import build_pinocchio
 
 __all__ = ["RobotKinematics"]
-"""The arm's joints (waist yaw, shoulder pitch, elbow pitch) in the house joint order, when the arm is actuated: they
-follow the 12 leg joints (legs FR, FL, RR, RL x hip, thigh, calf)."""
 
 
 class RobotKinematics:

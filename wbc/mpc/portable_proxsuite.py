@@ -9,8 +9,8 @@ is as fast (the measurements: docs/mpc-notes.md).
 
 ProxSuite picks its build at import, asking its ``proxsuite.instructionset`` helper what the CPU supports; this
 module answers "nothing wide" for that one question before the import. If ProxSuite was already imported by
-someone else, the build already loaded is kept (only one can live in a process) and `BUILD` names it, so the run's
-provenance says which one played.
+someone else, the build already loaded is kept (only one can live in a process) and `BUILD` names it (``wbc bench mpc
+--json`` reports it as ``proxsuite_build``).
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 A description names the quadruped's URDF inside the example-robot-data package and adds what the URDF lacks: the
 arm (`ArmSpec`), the motors' rotor inertia, damping and friction, the nominal standing pose and the arm mode. The
-MuJoCo model and the Pinocchio model are both built from it (see `wbc.robots.robot_model`).
+MuJoCo model and the Pinocchio model are both built from it (`wbc.robots.mujoco_model`, `wbc.robots.pinocchio_model`).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """`VizFrame`: what the viewer draws at one instant, whether it comes from a live simulation or a stored episode.
 
 Live frames carry simulator truth (contact forces, the push being applied) and the controller's plan; frames
-rebuilt from an `Episode` carry the configuration, the command and the pushes found in its events.
+rebuilt from an `Episode` carry the configuration, the command and the pushes of its `PushLog`.
 """
 
 from __future__ import annotations

@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 
 from wbc.errors import ConfigError
-from wbc.hardware.mujoco.fall_rule import FOOT_ZONE, foot_geoms, near_feet
+from wbc.hardware.mujoco.fall_rule import foot_geoms, near_feet
 from wbc.hardware.mujoco.physics import (
     NominalModel,
     PushTable,
@@ -44,7 +44,7 @@ from wbc.scenario.push import Push
 from wbc.scenario.terrain import TerrainConfig
 from wbc.types import BaseTruth, MotorCommand, RobotState
 
-__all__ = ["FOOT_ZONE", "MujocoRobotConfig", "MujocoRobot", "SimTruth"]
+__all__ = ["MujocoRobotConfig", "MujocoRobot", "SimTruth"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -125,7 +125,6 @@ class MujocoRobot(Robot):
         self.data: mujoco.MjData | None = None
         self._steps = 0
         self._rng = np.random.default_rng(0)
-        self._domain = DomainParams()
         self._strength = np.ones(self.num_joints)
         self._pushes = PushTable(1, self.config.timestep)
         self._contacts_at = -1
@@ -209,9 +208,9 @@ class MujocoRobot(Robot):
         m, d = self.model, self.data
         while n > 0:
             active = self._active_pushes(self._steps)
-            if not active.any():
+            if active is None:
                 # run without Python until the next push starts
-                nxt = self._pushes.next_start(0, self._steps)
+                nxt = self._pushes.next_start(0, self._steps) if self._pushes.count[0] else None
                 k = n if nxt is None else max(1, min(n, nxt - self._steps))
                 d.xfrc_applied[self._base_body] = 0.0
                 self._force_now[:] = 0.0
@@ -232,7 +231,7 @@ class MujocoRobot(Robot):
             mujoco.mj_step(m, d)
             self._steps += 1
             n -= 1
-        if not self._active_pushes(self._steps).any():
+        if self._active_pushes(self._steps) is None:
             d.xfrc_applied[self._base_body] = 0.0
             self._force_now = np.zeros(3)
 
@@ -272,7 +271,6 @@ class MujocoRobot(Robot):
         self._strength = apply_domain(self.model, self.data, self._nominal, payload_kg=domain.payload_mass,
                                       payload_com=domain.payload_com, friction=domain.friction,
                                       motor_strength=domain.motor_strength)
-        self._domain = domain
 
     def apply_push(self, push: Push) -> None:
         """Schedule a push; it acts from ``push.start`` (simulation time) for ``push.duration``."""
@@ -323,8 +321,8 @@ class MujocoRobot(Robot):
     def _ground_contacts(self) -> tuple[np.ndarray, np.ndarray]:
         """Robot geoms touching the ground now, and whether each contact is a foot's.
 
-        A contact counts as a foot's if it is the foot sphere's, or if it lies within `FOOT_ZONE` of a foot centre
-        (`wbc.hardware.mujoco.fall_rule`, the rule training's termination shares).
+        A contact counts as a foot's if it is the foot sphere's, or if it lies within `fall_rule.FOOT_ZONE` of a foot
+        centre (`wbc.hardware.mujoco.fall_rule`, the rule training's termination shares).
         """
         if self._contacts_at == self._steps:
             return self._contacts
@@ -340,6 +338,13 @@ class MujocoRobot(Robot):
         self._contacts, self._contacts_at = (touching, at_foot), self._steps
         return touching, at_foot
 
-    def _active_pushes(self, step: int) -> np.ndarray:
-        """(P,) which of the scheduled pushes act at physics step `step`."""
-        return self._pushes.active(np.array([step]))[0]
+    def _active_pushes(self, step: int) -> np.ndarray | None:
+        """(P,) which of the scheduled pushes act at physics step `step`, or None when none does.
+
+        Called once or twice per `advance`: without pushes it costs one integer test, not the table's batched form.
+        """
+        pushes = self._pushes
+        if not pushes.count[0]:
+            return None
+        active = (pushes.start[0] <= step) & (step < pushes.stop[0])
+        return active if active.any() else None

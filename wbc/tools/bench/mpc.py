@@ -24,6 +24,7 @@ from wbc.errors import BenchError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
 from wbc.mpc.controller import MpcController
+from wbc.mpc.portable_proxsuite import BUILD as PROXSUITE_BUILD
 from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
@@ -172,6 +173,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         "realtime_factor": episode.survived_s / wall,
         "fell": bool(episode.fell),
         "blas": "default threads",
+        "proxsuite_build": PROXSUITE_BUILD,
         "machine": machine_description(),
         **references,
     }
