@@ -1,7 +1,9 @@
 """`wbc`: whole-body control of quadrupeds that carry an arm.
 
-Subpackages: `wbc.robots` (robot descriptions, MuJoCo and Pinocchio models), `wbc.hardware` (the robot interface
-and its backends). See the README for the command line.
+Packages by role, from the bottom up: `wbc.scenario` (world data), `wbc.robots`, `wbc.hardware` (the robot interface
+and its backends), `wbc.mpc` and `wbc.learned` (the two contenders), `wbc.control` (the controller protocol and
+registry), `wbc.arena` (the runner loop and comparisons), `wbc.viz`, `wbc.tools`, `wbc.cli`. The README's layout
+section says what each holds.
 """
 
 from wbc.types import MotorCommand, RobotState, VelocityCommand

@@ -19,12 +19,12 @@ PACKAGES = ("wbc", "numpy", "mujoco", "pin", "placo", "casadi", "proxsuite", "me
 """Packages whose versions are recorded (those installed)."""
 
 
-def git_revision(where: Path | None = None) -> str:
-    """The git revision of the checkout holding `where` (default: this package), ``-dirty`` if tracked files changed.
+def git_revision() -> str:
+    """The git revision of the checkout holding this package, ``-dirty`` if tracked files changed.
 
     Returns ``unknown`` outside a git checkout (an installed wheel) or without git.
     """
-    cwd = Path(where) if where is not None else Path(__file__).resolve().parent
+    cwd = Path(__file__).resolve().parent
     try:
         rev = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, timeout=5)
         if rev.returncode != 0:

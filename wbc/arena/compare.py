@@ -21,7 +21,6 @@ from wbc.arena.stats import in_canonical_order
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
-from wbc.provenance import provenance
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.scenario.trial import Trial
 
@@ -198,8 +197,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
         "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
         "executor": cfg.executor,
-        **{k: v for k, v in provenance().items() if k != "packages"},
-        "packages": ", ".join(f"{k} {v}" for k, v in provenance()["packages"].items()),
+        **{k: v for k, v in store.environment.items() if k != "packages"},
+        "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
     }
     write_report(store.dir, summary, records, meta)
     if len(records) != total:

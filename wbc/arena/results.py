@@ -66,7 +66,8 @@ class ResultsStore:
         else:
             with self.trials_path.open("w", encoding="utf-8", newline="") as f:
                 csv.writer(f).writerow(TrialRecord.header())
-        self.run_path.write_text(json.dumps({"config": config, "environment": provenance()}, indent=2),
+        self.environment = provenance()  # what `run.json` records; the report shows the same, taken once
+        self.run_path.write_text(json.dumps({"config": config, "environment": self.environment}, indent=2),
                                  encoding="utf-8")
         self._file = self.trials_path.open("a", encoding="utf-8", newline="")
         self._writer = csv.writer(self._file)

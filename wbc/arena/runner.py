@@ -27,6 +27,7 @@ from wbc.hardware.capabilities import FallDetector, TruthSource
 from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import ARM_JOINTS
+from wbc.robots.euler import rpy_of
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, VelocityCommand
 
@@ -87,15 +88,15 @@ def run_episode(
         robot.advance(dt)
         tr = truth()
         rot = quat_to_matrix(tr.base_quat)
-        yaw = math.atan2(rot[1, 0], rot[0, 0])
+        roll, pitch, yaw = rpy_of(rot).tolist()
         c, s = math.cos(yaw), math.sin(yaw)
         v = tr.base_linvel_in_world
         buf.t[i] = (k + 1) * dt
         buf.command[i] = (cmd.vx, cmd.vy, cmd.yaw_rate)
         buf.v_base_in_yaw[i] = (c * v[0] + s * v[1], -s * v[0] + c * v[1])
         buf.yaw_rate[i] = rot[2] @ tr.base_angvel_in_body
-        buf.roll[i] = math.atan2(rot[2, 1], rot[2, 2])
-        buf.pitch[i] = -math.asin(max(-1.0, min(1.0, rot[2, 0])))
+        buf.roll[i] = roll
+        buf.pitch[i] = pitch
         buf.power[i] = float(np.abs(state.tau_est * state.dq).sum())
         if arm is not None:
             buf.arm_q[i] = state.q[arm]

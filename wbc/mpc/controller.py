@@ -29,7 +29,6 @@ from wbc.errors import ConfigError
 from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
-from wbc.mpc.euler import rpy_of, yaw_of
 from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler
 from wbc.mpc.kinematics import RobotKinematics
@@ -39,6 +38,7 @@ from wbc.mpc.reference import MotionReference
 from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import ARM_JOINTS, RobotDescription
+from wbc.robots.euler import rpy_of, yaw_of
 from wbc.robots.joint_table import joint_table
 from wbc.types import BaseTruth, MotorCommand, RobotState, VelocityCommand
 

@@ -19,8 +19,8 @@ import numpy as np
 
 from wbc.mpc.centroidal_model import GRAVITY, MOMENTUM, CentroidalParams
 from wbc.mpc.centroidal_mpc import MpcSolution
-from wbc.mpc.euler import rotation_from_rpy
 from wbc.mpc.kinematics import RobotKinematics
+from wbc.robots.euler import rotation_from_rpy
 
 __all__ = ["PlanTargets", "WholeBodyTargets"]
 

@@ -1,8 +1,7 @@
-"""ZYX Euler angles (roll, pitch, yaw): the orientation convention of the MPC's state, to and from rotation matrices.
+"""ZYX Euler angles (roll, pitch, yaw), to and from rotation matrices.
 
-R = Rz(yaw) Ry(pitch) Rx(roll), body to world. The controller reads the IMU's rotation as Euler angles for the MPC's
-initial state and turns the planned angles back into a rotation for the whole-body QP's trunk task. They run every
-tick on a handful of scalars, so they work in Python floats.
+R = Rz(yaw) Ry(pitch) Rx(roll), body to world: the orientation of the MPC's state and of the runner's logged roll,
+pitch and yaw. They run every tick on a handful of scalars, so they work in Python floats.
 """
 
 from __future__ import annotations
