@@ -21,10 +21,10 @@ from functools import lru_cache
 import numpy as np
 
 from wbc.errors import ConfigError
+from wbc.robots.conventions import GRAVITY
 
 __all__ = ["EstimatorConfig", "BaseEstimator"]
 
-GRAVITY = np.array([0.0, 0.0, -9.81])
 
 
 @dataclass(frozen=True, kw_only=True)

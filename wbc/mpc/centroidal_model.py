@@ -31,9 +31,10 @@ import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from wbc.robots.conventions import GRAVITY
 from wbc.robots.pinocchio_model import PinocchioRobot
 
-__all__ = ["NX", "NU", "NF", "COM", "COM_VEL", "RPY", "MOMENTUM", "ARM_Q", "FORCES", "ARM_DQ", "G", "GRAVITY",
+__all__ = ["NX", "NU", "NF", "COM", "COM_VEL", "RPY", "MOMENTUM", "ARM_Q", "FORCES", "ARM_DQ",
            "CentroidalParams", "CentroidalModel", "SymbolicCentroidalModel", "euler_rates_matrix", "expm", "skew",
            "zoh_integral"]
 
@@ -54,10 +55,6 @@ FORCES = slice(0, 12)
 """Contact forces f_FR, f_FL, f_RR, f_RL in the input u [N]."""
 ARM_DQ = slice(12, 15)
 """Arm joint velocities dq_a in the input u [rad/s]."""
-G = 9.81
-"""Gravity's magnitude [m/s^2] (MuJoCo's default, the simulator's)."""
-GRAVITY = np.array([0.0, 0.0, -G])
-"""Gravity acceleration, world frame [m/s^2]."""
 # index pairs of the constant unit entries of the Jacobians
 _POS_ROWS, _VEL_ROWS = np.arange(0, 3), np.arange(3, 6)
 _FORCE_ROWS, _FORCE_COLS = np.tile(np.arange(3, 6), 4), np.arange(12)

@@ -30,8 +30,9 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from wbc.errors import MpcProblemFileError, WbcError
-from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, G, zoh_integral
+from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, zoh_integral
 from wbc.mpc.portable_proxsuite import proxsuite
+from wbc.robots.conventions import G
 
 __all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "DenseQp", "CentroidalMpc"]
 

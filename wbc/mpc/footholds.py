@@ -11,10 +11,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbc.mpc.centroidal_model import G
 from wbc.mpc.gait import GaitConfig
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.swing import swing_point
+from wbc.robots.conventions import G
 
 __all__ = ["MIN_CAPTURE_HEIGHT_M", "FootholdConfig", "FootholdPlanner", "ground_height", "plan_foothold"]
 

@@ -18,10 +18,14 @@ import numpy as np
 
 from wbc.errors import ConfigError
 
-__all__ = ["ROOT_JOINT", "JointIndexMap", "quat_to_matrices", "quat_to_matrix", "quat_wxyz_to_xyzw",
+__all__ = ["G", "GRAVITY", "ROOT_JOINT", "JointIndexMap", "quat_to_matrices", "quat_to_matrix", "quat_wxyz_to_xyzw",
            "quat_xyzw_to_wxyz"]
 
 ROOT_JOINT = "root"
+G = 9.81
+"""Gravity's magnitude [m/s^2] (MuJoCo's default, the simulator's)."""
+GRAVITY = np.array([0.0, 0.0, -G])
+"""Gravity acceleration, world frame (z up) [m/s^2]."""
 
 
 def quat_wxyz_to_xyzw(q: np.ndarray) -> np.ndarray:
