@@ -25,6 +25,7 @@ __all__ = [
     "ResultsDirError",
     "EpisodeFileError",
     "MissingCapabilityError",
+    "FrameError",
 ]
 
 
@@ -156,3 +157,23 @@ class MissingCapabilityError(ConfigError):
     Base truth, fall detection, a ground-truth debug switch: the message names the capability's protocol and how to
     run without it.
     """
+
+
+class FrameError(WbcError, ValueError):
+    """A Unitree low-level frame from the wire was rejected by a decoder and must not be used.
+
+    The SDK accepts more than it should (a longer frame, any levelFlag); `wbc.hardware.unitree` rejects a frame of
+    the wrong length, a wrong header, a bad CRC or a non-finite value, counts it in its `DecodeStats` and raises
+    this error, which says what was wrong and where the frame most likely came from.
+
+    Attributes:
+        reason: why, one of ``length``, ``header``, ``crc``, ``non_finite`` (the `DecodeStats` counter it bumped).
+        robot: the layout the frame was decoded with (``go1``, ``a1``).
+        frame_kind: ``LowState`` or ``LowCmd``.
+    """
+
+    def __init__(self, reason: str, robot: str, frame_kind: str, detail: str) -> None:
+        self.reason = reason
+        self.robot = robot
+        self.frame_kind = frame_kind
+        super().__init__(f"{robot} {frame_kind} rejected ({reason}): {detail}")

@@ -1,0 +1,61 @@
+"""The Unitree low-level wire codec (Go1 SDK 3.8, A1 SDK 3.3.1): pure functions from records to frames and back.
+
+`encode_command` turns a `MotorCommand` into a LowCmd frame (checked, clamped, then quantised as the SDK does);
+`decode_state` turns a LowState frame into a `RobotState` and `LowStateExtras`, rejecting (and counting in a
+`DecodeStats`) any frame of the wrong length, header or CRC or with a non-finite value. `decode_command` and
+`encode_state` are the other side of the wire, for an emulator. No I/O here: the UDP backend and the emulator sit
+on top of these functions.
+"""
+
+from wbc.hardware.unitree.battery import Battery
+from wbc.hardware.unitree.command_codec import (
+    KD_WIRE_MAX,
+    KP_WIRE_MAX,
+    TAU_WIRE_MAX,
+    decode_command,
+    encode_command,
+)
+from wbc.hardware.unitree.crc import crc_words, frame_crc
+from wbc.hardware.unitree.decode_stats import REJECT_REASONS, DecodeStats
+from wbc.hardware.unitree.layout import (
+    A1_LAYOUT,
+    GO1_LAYOUT,
+    LAYOUTS,
+    MODE_SERVO,
+    POS_STOP_F,
+    VEL_STOP_F,
+    FrameLayout,
+    frame_layout,
+)
+from wbc.hardware.unitree.remote import BUTTONS, L2_B_MASK, Remote
+from wbc.hardware.unitree.state_codec import decode_state, encode_state
+from wbc.hardware.unitree.state_extras import LowStateExtras
+from wbc.hardware.unitree.wire_command import WireCommand
+
+__all__ = [
+    "A1_LAYOUT",
+    "BUTTONS",
+    "GO1_LAYOUT",
+    "KD_WIRE_MAX",
+    "KP_WIRE_MAX",
+    "L2_B_MASK",
+    "LAYOUTS",
+    "MODE_SERVO",
+    "POS_STOP_F",
+    "REJECT_REASONS",
+    "TAU_WIRE_MAX",
+    "VEL_STOP_F",
+    "Battery",
+    "DecodeStats",
+    "FrameLayout",
+    "LowStateExtras",
+    "Remote",
+    "WireCommand",
+    "crc_words",
+    "decode_command",
+    "decode_state",
+    "encode_command",
+    "encode_state",
+    "frame_crc",
+    "frame_layout",
+]
