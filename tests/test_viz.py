@@ -278,7 +278,7 @@ def test_run_view_watches_every_trial_in_process(short, tmp_path):
 def test_replay_from_results_dir(results_dir, tmp_path):
     stored = load_stored_episode(results_dir, 1)
     assert stored.path == results_dir / "episodes" / "stand" / "soft-s0-t1.npz"
-    assert len(stored.pushes) == 1 and stored.pushes[0].start == pytest.approx(1.0)
+    assert len(stored.episode.pushes) == 1 and stored.episode.pushes.start[0] == pytest.approx(1.0)
     frames = list(stored.frames())
     assert len(frames) == len(stored.episode.t)
     pushed = [f.t for f in frames if f.pushed]

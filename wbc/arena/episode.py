@@ -58,11 +58,6 @@ class PushLog:
         """Number of pushes."""
         return len(self.start)
 
-    def to_pushes(self) -> tuple[Push, ...]:
-        """The pushes, one `Push` each."""
-        return tuple(Push(force_in_world=self.force_in_world[i], offset_in_base=self.offset_in_base[i],
-                          start=float(self.start[i]), duration=float(self.duration[i])) for i in range(len(self)))
-
 
 _PUSH_KEYS = ("start", "duration", "force_in_world", "offset_in_base")
 _SCALARS = ("duration_s", "control_dt", "fell", "fall_time_s")

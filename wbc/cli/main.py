@@ -194,7 +194,7 @@ def _view(args: argparse.Namespace) -> int:
             trial = dataclasses.replace(trial, duration_s=args.duration)
         result = view_trial(trial, args.ctrl, cfg)
         what = f"{args.ctrl} on {trial.scenario} band {trial.band} seed {trial.seed} trial {trial.index}"
-        printers.print_viewed_trial(what, result.row)
+        printers.print_viewed_trial(what, result.trial_record)
     if result.recording is not None:
         printers.print_recording(what, result.frames_recorded, result.recording)
     return 0

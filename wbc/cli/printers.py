@@ -13,9 +13,10 @@ from pathlib import Path
 import numpy as np
 
 from wbc.arena.compare import ArenaResult
+from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table
 from wbc.tools.arm_momentum import ArmMomentumTrial
-from wbc.tools.bench.references import TRAIN_TARGET
+from wbc.tools.bench.references import MPC_REFERENCE_TARGETS, REFERENCE_TARGETS, TRAIN_TARGET
 from wbc.tools.tail import TailAnalysis
 
 __all__ = ["print_arena", "print_arm_momentum", "print_bench_mpc", "print_bench_sim", "print_bench_sweep",
@@ -67,12 +68,17 @@ def print_bench_sim(result: Mapping[str, object]) -> None:
     print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
           f"{result['threads']} threads)")
     if "reference_steps_per_s" in result:
-        print("  bare A1 URDF, same runs (the reference the simulator targets were set against: 110k / 218k):")
+        (single, single_at), (batched, batched_at) = (REFERENCE_TARGETS["steps_per_s"],
+                                                      REFERENCE_TARGETS["batched_steps_per_s"])
+        print(f"  bare A1 URDF, same runs (the reference the simulator targets were set against: {single_at / 1e3:.0f}k"
+              f" / {batched_at / 1e3:.0f}k):")
         print(f"    single-threaded : {result['reference_steps_per_s']:>10,.0f} steps/s  -> this robot runs at "
-              f"{100 * result['steps_ratio_to_reference']:.0f} % of it (the target asks 73 %: "
+              f"{100 * result['steps_ratio_to_reference']:.0f} % of it (the target asks "
+              f"{100 * single / single_at:.0f} %: "
               f"{result['scaled_target_steps_per_s']:,.0f} steps/s on this machine)")
         print(f"    batched rollout : {result['reference_batched_steps_per_s']:>10,.0f} steps/s  -> "
-              f"{100 * result['batched_ratio_to_reference']:.0f} % (the target asks 69 %: "
+              f"{100 * result['batched_ratio_to_reference']:.0f} % (the target asks "
+              f"{100 * batched / batched_at:.0f} %: "
               f"{result['scaled_target_batched_steps_per_s']:,.0f} steps/s on this machine)")
 
 
@@ -93,8 +99,9 @@ def print_bench_train(result: Mapping[str, object]) -> None:
     if "reference_physics_limit_control_steps_per_s" in result:
         target, at = TRAIN_TARGET
         print(f"  reference      : {result['reference_physics_limit_control_steps_per_s']:>10,.0f} control steps/s "
-              f"(bare A1, 64 envs, 2 ms steps at 50 Hz; the target's ~22k); env at "
-              f"{100 * result['control_steps_ratio_to_reference']:.0f} % of it, the target (15k of 21.8k) asks "
+              f"(bare A1, 64 envs, 2 ms steps at 50 Hz; the target's ~{at / 1e3:.0f}k); env at "
+              f"{100 * result['control_steps_ratio_to_reference']:.0f} % of it, the target ({target / 1e3:.0f}k of "
+              f"{at / 1e3:.1f}k) asks "
               f"{100 * target / at:.0f} %: {result['scaled_target_control_steps_per_s']:,.0f} control steps/s here")
 
 
@@ -109,8 +116,11 @@ def print_bench_mpc(result: Mapping[str, object]) -> None:
           "ticks without an MPC update)")
     print(f"  closed loop    : {result['realtime_factor']:.1f}x real time on one core")
     if "reference_placo_tick_us" in result:
+        tick_at = MPC_REFERENCE_TARGETS["wbc_tick_us_median"][1]
+        physics_at = MPC_REFERENCE_TARGETS["realtime_factor"][1]
         print(f"  references     : bare-A1 PlaCo tick {result['reference_placo_tick_us']:.0f} us (the targets' "
-              f"~40 us), bare-A1 physics {result['reference_steps_per_s']:,.0f} steps/s (the targets' 110k)")
+              f"~{tick_at:.0f} us), bare-A1 physics {result['reference_steps_per_s']:,.0f} steps/s (the targets' "
+              f"{physics_at / 1e3:.0f}k)")
         print(f"  targets scaled to this machine: whole-body tick <= {result['scaled_target_wbc_tick_us']:.0f} "
               f"us, closed loop >= {result['scaled_target_realtime_factor']:.1f}x real time")
 
@@ -151,9 +161,9 @@ def print_trained(result: Mapping[str, object], *, task: str, stage: int, baseli
           f"policy {result['policy']}")
 
 
-def print_viewed_trial(what: str, row: Mapping[str, object]) -> None:
+def print_viewed_trial(what: str, record: TrialRecord) -> None:
     """How a trial watched in the viewer ended."""
-    print(f"{what}: " + ("survived" if row["success"] else f"fell at {float(row['fall_time_s']):.2f} s"))
+    print(f"{what}: " + ("survived" if record.success else f"fell at {record.fall_time_s:.2f} s"))
 
 
 def print_recording(what: str, frames: int, path: Path) -> None:

@@ -22,7 +22,6 @@ from wbc.control.registry import get_controller
 from wbc.errors import WbcError
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.registry import get_robot
-from wbc.scenario.push import Push
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import Trial
 from wbc.viz.content import SceneContent
@@ -68,11 +67,6 @@ class StoredEpisode:
     controller: str
     trial: Trial
     episode: Episode
-
-    @property
-    def pushes(self) -> tuple[Push, ...]:
-        """The pushes the episode met, as logged."""
-        return self.episode.pushes.to_pushes()
 
     def content(self) -> SceneContent:
         """What to draw: the controller's robot (arm mode) on the trial's ground."""

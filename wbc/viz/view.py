@@ -56,14 +56,14 @@ class ViewResult:
     """What a view produced.
 
     Attributes:
-        row: the trial's record (None for replays).
+        trial_record: the trial's record (None for replays).
         recording: the written HTML file, or None.
         frames_drawn: frames sent to the live viewer.
         frames_recorded: frames in the recording.
         paths: scene paths by role (robot, arm, push, ...).
     """
 
-    row: TrialRecord | None
+    trial_record: TrialRecord | None
     recording: Path | None
     frames_drawn: int
     frames_recorded: int
@@ -112,7 +112,7 @@ def view_trial(trial: Trial, controller: str, cfg: ViewConfig) -> ViewResult:
         if cfg.live:
             _linger(cfg, player)
         paths = (viewer.paths if viewer is not None else observer.recordings[-1].paths)
-        return ViewResult(row=row, recording=written, frames_drawn=player.drawn if player else 0,
+        return ViewResult(trial_record=row, recording=written, frames_drawn=player.drawn if player else 0,
                           frames_recorded=observer.recordings[-1].frames if cfg.record else 0, paths=paths)
     finally:
         if server is not None:
@@ -145,4 +145,4 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
             _linger(cfg, player)
         finally:
             server.stop()
-    return ViewResult(row=None, recording=written, frames_drawn=drawn, frames_recorded=recorded, paths=paths)
+    return ViewResult(trial_record=None, recording=written, frames_drawn=drawn, frames_recorded=recorded, paths=paths)
