@@ -8,9 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
-from wbc.robots.description import ARM_JOINTS, RobotDescription
+from wbc.robots.description import RobotDescription, joint_gains
 from wbc.types import MotorCommand
 
 __all__ = ["StandController", "StandGains", "stand_command"]
@@ -36,11 +34,7 @@ class StandGains:
 def stand_command(desc: RobotDescription, gains: StandGains | None = None) -> MotorCommand:
     """PD hold of `desc`'s nominal pose."""
     g = gains if gains is not None else StandGains()
-    n = desc.num_joints
-    kp = np.full(n, g.leg_kp)
-    kd = np.full(n, g.leg_kd)
-    kp[ARM_JOINTS] = g.arm_kp
-    kd[ARM_JOINTS] = g.arm_kd
+    kp, kd = joint_gains(desc.num_joints, g.leg_kp, g.leg_kd, g.arm_kp, g.arm_kd)
     return MotorCommand.hold(desc.nominal_q, kp, kd)
 
 

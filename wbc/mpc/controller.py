@@ -37,7 +37,7 @@ from wbc.mpc.plan_targets import PlanTargets
 from wbc.mpc.reference import MotionReference
 from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
 from wbc.robots.conventions import quat_to_matrix
-from wbc.robots.description import ARM_JOINTS, RobotDescription
+from wbc.robots.description import ARM_JOINTS, RobotDescription, joint_gains
 from wbc.robots.euler import rpy_of, yaw_of
 from wbc.robots.joint_table import joint_table
 from wbc.types import BaseTruth, MotorCommand, RobotState, VelocityCommand
@@ -322,11 +322,9 @@ class MpcController:
     def _command(self, state: RobotState, tau: np.ndarray) -> MotorCommand:
         cfg = self.config
         if self._gains is None:
-            n = self.kin.n
-            kp, kd = np.zeros(n), np.full(n, cfg.joint_kd)
-            if self.has_arm:
-                kp[ARM_JOINTS], kd[ARM_JOINTS] = cfg.arm_kp, cfg.arm_kd
-            self._gains = (kp, kd)  # MotorCommand copies its arrays, so these are shared safely
+            # the legs are torque-controlled (kp 0, a little joint damping); an actuated arm is position-controlled;
+            # MotorCommand copies its arrays, so these are shared safely
+            self._gains = joint_gains(self.kin.n, 0.0, cfg.joint_kd, cfg.arm_kp, cfg.arm_kd)
         kp, kd = self._gains
         q = state.q.copy()
         dq_des = np.zeros(self.kin.n)

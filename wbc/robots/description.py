@@ -15,7 +15,7 @@ from wbc.errors import ConfigError, UnknownNameError
 from wbc.robots.arm_spec import ArmSpec
 
 __all__ = ["ARM_JOINTS", "ARM_MODES", "LEG_JOINTS", "LEG_NAMES", "LEG_JOINT_NAMES", "FOOT_NAMES", "RobotDescription",
-           "check_arm_mode"]
+           "check_arm_mode", "joint_gains"]
 
 ARM_MODES = ("none", "locked", "actuated")
 """``none``: no arm on the robot; ``locked``: arm attached and rigid at its nominal pose (fixed joints);
@@ -28,6 +28,14 @@ LEG_JOINTS = slice(0, 12)
 """The legs' entries of a joint vector in the house order (FR, FL, RR, RL x hip, thigh, calf)."""
 ARM_JOINTS = slice(12, 15)
 """The arm's entries (waist, shoulder, elbow) of a joint vector in the house order, when the arm is actuated."""
+
+
+def joint_gains(num_joints: int, leg_kp: float, leg_kd: float, arm_kp: float,
+                arm_kd: float) -> tuple[np.ndarray, np.ndarray]:
+    """(kp, kd) of the motor law for `num_joints` joints in the house order: the legs', then the arm's if it has one."""
+    kp, kd = np.full(num_joints, float(leg_kp)), np.full(num_joints, float(leg_kd))
+    kp[ARM_JOINTS], kd[ARM_JOINTS] = arm_kp, arm_kd
+    return kp, kd
 
 
 def check_arm_mode(arm_mode: str) -> str:

@@ -17,7 +17,7 @@ import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.learned.policy.observations import ObsScales
-from wbc.robots.description import ARM_JOINTS, check_arm_mode
+from wbc.robots.description import check_arm_mode, joint_gains
 
 __all__ = ["DomainRandomisation", "EnvConfig", "ObsNoise", "RewardScales", "SOLVERS"]
 
@@ -197,6 +197,4 @@ class EnvConfig:
 
     def gains(self, num_joints: int) -> tuple[np.ndarray, np.ndarray]:
         """(kp, kd) of the motor law for `num_joints` actuated joints: the 12 legs' first, then the arm's."""
-        kp, kd = np.full(num_joints, self.leg_kp), np.full(num_joints, self.leg_kd)
-        kp[ARM_JOINTS], kd[ARM_JOINTS] = self.arm_kp, self.arm_kd
-        return kp, kd
+        return joint_gains(num_joints, self.leg_kp, self.leg_kd, self.arm_kp, self.arm_kd)
