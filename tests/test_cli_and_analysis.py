@@ -138,26 +138,24 @@ def _walk_watched(inner, seconds=0.2):
     from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
     from wbc.scenario.trial import CommandSchedule
     from wbc.tools.bench.mpc import TickTimingLog
-    from wbc.tools.watched_controller import WatchedController
 
-    watched = WatchedController(inner)
-    log = TickTimingLog(watched)
+    log = TickTimingLog()
     with MujocoRobot(MujocoRobotConfig()) as robot:
         robot.reset(seed=0)
-        episode = run_episode(robot, watched, CommandSchedule(vx=0.3), seconds, observer=log)
-    return watched, log, episode
+        episode = run_episode(robot, inner, CommandSchedule(vx=0.3), seconds, observer=log)
+    return log, episode
 
 
 def test_bench_mpc_files_each_tick_of_the_runner_loop_by_the_controllers_breakdown():
     from wbc.hardware.mujoco.robot import MujocoRobotConfig
 
     inner = _TimedStand(MujocoRobotConfig().description())
-    watched, log, episode = _walk_watched(inner)
-    # the runner drove the wrapper: it reset the controller once and played every tick through it
-    assert inner.resets == 1 and len(episode.t) == 10 and watched.counters() == {"fallbacks": 0, "ticks": 10}
-    assert watched.last_state is not None and watched.last_act_s > 0
-    assert len(log.mpc_solve_s) == 2 and len(log.control_s) == 8 and len(log.whole_body_s) == 10
-    figures = log.figures()
+    log, episode = _walk_watched(inner)
+    # the runner reset the controller once and played every tick; the log filed each by the breakdown
+    assert inner.resets == 1 and len(episode.t) == 10 and inner.counters() == {"fallbacks": 0, "ticks": 10}
+    assert len(log.mpc_solve_s) == 2 and len(log.whole_body_s) == 10
+    assert log.plain_ticks == [1, 2, 3, 4, 6, 7, 8, 9] and np.all(episode.act_s > 0)
+    figures = log.figures(episode)
     assert figures["mpc_solve_ms_median"] == pytest.approx(1.0)
     assert figures["mpc_setup_ms_median"] == pytest.approx(2.0)
     assert figures["wbc_tick_us_median"] == pytest.approx(50.0)
@@ -168,9 +166,9 @@ def test_bench_mpc_reports_nan_for_what_a_controller_without_a_breakdown_cannot_
     from wbc.control.stand import StandController
     from wbc.hardware.mujoco.robot import MujocoRobotConfig
 
-    watched, log, episode = _walk_watched(StandController(MujocoRobotConfig().description()))
-    assert len(episode.t) == 10 and watched.last_timings is None and watched.last_act_s > 0
-    assert all(np.isnan(v) for v in log.figures().values())
+    log, episode = _walk_watched(StandController(MujocoRobotConfig().description()))
+    assert len(episode.t) == 10 and not log.plain_ticks and np.all(episode.act_s > 0)
+    assert all(np.isnan(v) for v in log.figures(episode).values())
 
 
 def test_bench_mpc_refuses_a_controller_that_is_not_an_mpc(capsys):

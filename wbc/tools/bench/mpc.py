@@ -1,8 +1,8 @@
 """``wbc bench mpc``: the MPC controller's speed in closed loop on one core, played through the runner's one loop.
 
-The walk is an ordinary `run_episode`; the bench hands the runner a `WatchedController` in the controller's place and
-reads, after every tick, how long the tick took and the controller's own breakdown of it (`HasTickTimings`). A
-controller that reports no breakdown still walks; the figures that need one are then nan.
+The walk is an ordinary `run_episode`: the runner times every `act` (the episode's ``act_s``), and an observer reads,
+after every tick, the controller's own breakdown of it (`HasTickTimings`), outside the timed call. A controller that
+reports no breakdown still walks; the figures that need one are then nan.
 """
 
 from __future__ import annotations
@@ -16,9 +16,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wbc.arena.episode import Episode
 from wbc.arena.executors import single_threaded_blas
 from wbc.arena.runner import run_episode
-from wbc.control.protocol import Controller
+from wbc.control.protocol import Controller, HasTickTimings
 from wbc.control.registry import CONTROLLERS, get_controller
 from wbc.errors import BenchError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -33,7 +34,6 @@ from wbc.tools.bench.references import (
     reference_placo_tick_us,
     scaled_target,
 )
-from wbc.tools.watched_controller import WatchedController
 from wbc.types import VelocityCommand
 
 __all__ = ["TickTimingLog", "bench_mpc"]
@@ -45,49 +45,54 @@ def _median(values: Sequence[float], scale: float) -> float:
 
 @dataclass
 class TickTimingLog:
-    """A runner observer that files each tick of a `WatchedController` by what ran in it [s].
+    """A runner observer that files each tick by what ran in it, from the controller's breakdown [s].
 
-    Ticks with an MPC update (the breakdown has ``mpc_solve_s``) give the MPC's solve and setup times; the others
-    give the whole control tick (``control_s``: the `act` call's duration). Every tick the whole-body QP ran gives
-    ``whole_body_s``. Without a breakdown a tick cannot be filed and is left out.
+    Ticks with an MPC update (the breakdown has ``mpc_solve_s``) give the MPC's solve and setup times; the others are
+    plain control ticks, whose durations `figures` takes from the episode (``act_s``). Every tick the whole-body QP
+    ran gives ``whole_body_s``. Without a breakdown a tick cannot be filed.
 
     Attributes:
-        watched: the controller the runner drives.
         mpc_solve_s: QP solve time of each MPC update [s].
         mpc_setup_s: setup time (linearisation, condensing) of each MPC update [s].
         whole_body_s: whole-body QP time of each tick that ran it [s].
-        control_s: duration of each tick without an MPC update [s].
+        plain_ticks: indices of the ticks filed without an MPC update.
     """
 
-    watched: WatchedController
     mpc_solve_s: list[float] = field(default_factory=list)
     mpc_setup_s: list[float] = field(default_factory=list)
     whole_body_s: list[float] = field(default_factory=list)
-    control_s: list[float] = field(default_factory=list)
+    plain_ticks: list[int] = field(default_factory=list)
+    _ticks: int = field(default=0, init=False, repr=False)
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """File the tick that just ended (the runner's `TickObserver` signature)."""
-        timings = self.watched.last_timings
-        if timings is None:
+        tick, self._ticks = self._ticks, self._ticks + 1
+        if not isinstance(controller, HasTickTimings):
             return
+        timings = controller.tick_timings()
         if "mpc_solve_s" in timings:
             self.mpc_solve_s.append(timings["mpc_solve_s"])
             if "mpc_setup_s" in timings:
                 self.mpc_setup_s.append(timings["mpc_setup_s"])
         else:
-            self.control_s.append(self.watched.last_act_s)
+            self.plain_ticks.append(tick)
         if "whole_body_s" in timings:
             self.whole_body_s.append(timings["whole_body_s"])
 
-    def figures(self) -> dict[str, float]:
-        """Medians (and the solve's 99th percentile) in the units of their names; nan where no tick was filed."""
+    def figures(self, episode: Episode) -> dict[str, float]:
+        """Medians (and the solve's 99th percentile) in the units of their names; nan where no tick was filed.
+
+        Args:
+            episode: the episode the observer watched (its per-tick ``act_s``).
+        """
         solves = self.mpc_solve_s
+        control_s = episode.act_s[self.plain_ticks].tolist()
         return {
             "mpc_solve_ms_median": _median(solves, 1e3),
             "mpc_solve_ms_p99": 1e3 * float(np.percentile(solves, 99)) if solves else math.nan,
             "mpc_setup_ms_median": _median(self.mpc_setup_s, 1e3),
             "wbc_tick_us_median": _median(self.whole_body_s, 1e6),
-            "control_tick_us_median": _median(self.control_s, 1e6),
+            "control_tick_us_median": _median(control_s, 1e6),
         }
 
 
@@ -149,12 +154,11 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     if reference:
         measure_references()
-    watched = WatchedController(ctrl)
-    log = TickTimingLog(watched)
+    log = TickTimingLog()
     with sim:
         sim.reset(seed=0)
         start = time.perf_counter()
-        episode = run_episode(sim, watched, CommandSchedule(vx=vx), seconds, observer=log)
+        episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=log)
         wall = time.perf_counter() - start
     references: dict[str, float] = {}
     if reference:
@@ -169,7 +173,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         "robot": robot,
         "controller": controller,
         "horizon": int(ctrl.config.mpc.horizon),
-        **log.figures(),
+        **log.figures(episode),
         "realtime_factor": episode.survived_s / wall,
         "fell": bool(episode.fell),
         "blas": "default threads",
