@@ -162,7 +162,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         return str(path)
 
     tasks = [TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c))
-             for c in cfg.controllers for t in trials if (c, t.band, t.seed, t.index) not in done]
+             for c in cfg.controllers for t in trials if (c, *t.key) not in done]
     total = len(cfg.controllers) * len(trials)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
     bar = _progress(total, total - len(tasks), cfg.progress)
