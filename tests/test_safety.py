@@ -211,6 +211,7 @@ def _bad_q(faulty):
 TRIPS = {
     # reason: (inject, clear, does the fault alone refuse a reset)
     "stale_state": (lambda f: setattr(f, "freeze", True), lambda f: setattr(f, "freeze", False), True),
+    "bad_state": (lambda f: setattr(f, "q", np.full(f.num_joints, np.nan)), lambda f: setattr(f, "q", None), True),
     "joint_range": (lambda f: setattr(f, "q", _bad_q(f)), lambda f: setattr(f, "q", None), True),
     "over_power": (lambda f: setattr(f, "power", (20.0, 5.0)), lambda f: setattr(f, "power", None), False),
     "motor_temperature": (lambda f: setattr(f, "temperature", 90), lambda f: setattr(f, "temperature", 35), True),
@@ -399,3 +400,25 @@ def test_unitree_tables_replace_the_leg_ranges_and_keep_the_arm_s():
     lower, upper = position_range("robot", robot.limits)
     np.testing.assert_array_equal(lower, robot.limits.lower)
     assert np.all((robot.desc.nominal_q > lower) & (robot.desc.nominal_q < upper))
+
+
+def test_close_leaves_damping_and_a_reconnection_waits_for_the_stream_again():
+    safe, faulty, events = _make("none", **FAST)
+    cmd = stand_command(faulty.inner.desc)
+    with safe:
+        _drive(safe, cmd, 100, until=SafetyState.RUN)
+    assert _is_damping(faulty.sent[-1], safe.config)
+    with safe:
+        assert safe.safety_state is SafetyState.WAITING and events[-1].reason == "connect"
+        log = _drive(safe, cmd, 100, until=SafetyState.RUN)
+        assert _is_damping(log[0][1], safe.config)
+        _check_ramp(log, safe, cmd)
+
+
+def test_a_zero_quaternion_is_a_bad_state_not_an_upright_robot():
+    safe, faulty, events = _make("none", **FAST)
+    with safe:
+        _drive(safe, stand_command(faulty.inner.desc), 100, until=SafetyState.RUN)
+        faulty.quat = np.zeros(4)
+        _drive(safe, stand_command(faulty.inner.desc), 1)
+        assert safe.safety_state is SafetyState.DAMPED and "norm 0.000" in events[-1].detail

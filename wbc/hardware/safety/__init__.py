@@ -1,6 +1,6 @@
 """The safety layer: `SafeRobot` wraps any `Robot` and decides what reaches its motors.
 
-``waiting`` -> ``ramp`` -> ``run``, and ``damped`` (latched) on any trip: stale state, joint range, over-power,
+``waiting`` -> ``ramp`` -> ``run``, and ``damped`` (latched) on any trip: stale or bad state, joint range, over-power,
 motor temperature or mode, tilt, remote L2 + B, software e-stop. Every transition is a `SafetyEvent`.
 """
 

@@ -13,6 +13,7 @@ from wbc.hardware.safety.state import SafetyState
 __all__ = ["REASONS", "TRIP_REASONS", "SafetyEvent"]
 
 TRIP_REASONS = (
+    "bad_state",  # the state holds a non-finite value or a quaternion that is not unit length
     "stale_state",  # the robot's state tick did not advance for longer than the timeout
     "joint_range",  # a measured joint beyond its range by more than the margin
     "over_power",  # measured sum |tau_est dq| above the limit for too many consecutive frames

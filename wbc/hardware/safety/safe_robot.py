@@ -5,13 +5,17 @@ the measured pose into the controller's command (`CommandRamp`); ``run``, where 
 clamped to the motor limits and the position table; ``damped``, damping only, latched until `reset`.
 
 Trips, each into ``damped`` on the spot (damping is sent to the robot at once, not only on the next write): a stale
-state stream, a measured joint beyond its range plus a margin, sustained over-power (Unitree's PowerProtect rule,
-latched), a hot motor or a motor error mode (robots that are a `MotorStatusSource`), a trunk roll or pitch beyond
-the limit (a fall, from the IMU), the remote's L2 + B (robots that are a `RemoteSource`) or `estop`. Every
-transition is a `SafetyEvent`, kept in `events` and handed to `SafetyConfig.on_event`.
+state stream, a state with non-finite values or a non-unit quaternion, a measured joint beyond its range plus a
+margin, sustained over-power (Unitree's PowerProtect rule, latched), a hot motor or a motor error mode (robots that
+are a `MotorStatusSource`), a trunk roll or pitch beyond the limit (a fall, from the IMU), the remote's L2 + B
+(robots that are a `RemoteSource`) or `estop`. Every transition is a `SafetyEvent`, kept in `events` and handed to
+`SafetyConfig.on_event`.
 
 The layer's clock is the robot time that `advance` lets pass, so a simulated run is deterministic; on hardware a
 wall clock can be handed in (``clock=time.monotonic``), which also sees a control loop that stalls between calls.
+
+The wrapped robot's own capabilities (a simulator's `TruthSource`, `FallDetector`, `Pushable`) are not forwarded: a
+runner reaches them through `SafeRobot.robot`, e.g. ``run_episode(safe, ctrl, ..., truth=safe.robot.base_truth)``.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from wbc.types import MotorCommand, RobotState
 __all__ = ["SafeRobot"]
 
 _ARM_START = 12  # joints from this index on are the arm's (house order)
+_QUAT_NORM_TOLERANCE = 0.05  # an IMU quaternion further from unit length than this is not an orientation
 
 
 class SafeRobot(Robot):
@@ -235,8 +240,14 @@ class SafeRobot(Robot):
                                       f"{self.config.stale_timeout_s} s)")
 
     def _state_fault(self, state: RobotState) -> tuple[str, str] | None:
-        """The first check that fails on `state` (motor status, joint range, tilt), as (reason, detail)."""
+        """The first check that fails on `state` (values, motor status, joint range, tilt), as (reason, detail)."""
         cfg = self.config
+        for name in ("q", "dq", "tau_est", "imu_quat"):
+            if not np.all(np.isfinite(getattr(state, name))):
+                return "bad_state", f"RobotState.{name} holds a non-finite value"
+        norm = float(np.linalg.norm(state.imu_quat))
+        if abs(norm - 1.0) > _QUAT_NORM_TOLERANCE:
+            return "bad_state", f"RobotState.imu_quat has norm {norm:.3f}, not 1"
         if isinstance(self.robot, MotorStatusSource):
             status = self.robot.motor_status()
             modes = np.asarray(status.motor_mode).astype(int)
