@@ -181,6 +181,9 @@ def test_unsafe_start_begins_at_the_measured_pose_and_ramps_without_a_jump():
         distance = np.abs(log[1][0] - cmd.q).max()
         assert len(log) * DT >= distance / safe.config.ramp_slew
         assert [e.reason for e in events] == ["fresh_state", "ramp_done"]
+        _drive(safe, cmd, 50)
+        truth = robot.sim_truth()
+        assert truth.base_position_in_world[2] > 0.2 and truth.ground_contact_bodies == ()  # it stood up
 
 
 @pytest.mark.parametrize("robot", ["a1-wx200", "go1-arm"])
