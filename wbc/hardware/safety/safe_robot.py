@@ -50,6 +50,9 @@ class SafeRobot(Robot):
     """A robot behind the safety layer; use it wherever a `Robot` is used.
 
     ``write`` returns what was actually sent to the wrapped robot (damping, a ramp step or the clamped command).
+    A frame is fresh when its tick differs from the previous read's; the first frame after `connect` alone proves
+    nothing (a backend may hand out a default frame before the first datagram), so ``waiting`` lasts at least until
+    the second read. The state checks run on fresh frames only; a repeated frame carries no news, only age.
     Not thread-safe: call `estop` from the control thread.
 
     Args:
