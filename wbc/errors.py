@@ -26,6 +26,7 @@ __all__ = [
     "EpisodeFileError",
     "MissingCapabilityError",
     "FrameError",
+    "SafetyResetError",
 ]
 
 
@@ -177,3 +178,10 @@ class FrameError(WbcError, ValueError):
         self.robot = robot
         self.frame_kind = frame_kind
         super().__init__(f"{robot} {frame_kind} rejected ({reason}): {detail}")
+
+
+class SafetyResetError(WbcError, RuntimeError):
+    """`SafeRobot.reset` was refused: the state is stale, a remote button is held, or a safety check still fails.
+
+    The message lists each reason and what to do about it.
+    """

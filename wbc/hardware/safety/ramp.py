@@ -1,0 +1,73 @@
+"""`CommandRamp`: the bounded move from the measured pose into a controller's command.
+
+The first command of a ramp holds the measured pose with the ramp's low start gains and no feed-forward. After it,
+each commanded target moves towards the controller's at no more than ``slew`` rad/s, while the gains, target
+velocities and feed-forward torques are blended linearly from the start values into the controller's over
+``duration`` seconds. The ramp is done once the blend is complete and the targets have caught up; its last command
+is then the controller's own, so handing over to it is no jump.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wbc.types import MotorCommand
+
+__all__ = ["CommandRamp"]
+
+
+class CommandRamp:
+    """A ramp from the measured pose into a (possibly moving) controller command.
+
+    Args:
+        duration_s: blend time of gains and feed-forward [s].
+        slew: largest speed of the commanded targets [rad/s].
+        kp: position gain at the start [N m / rad].
+        kd: velocity gain at the start [N m s / rad].
+    """
+
+    def __init__(self, *, duration_s: float, slew: float, kp: float, kd: float) -> None:
+        self._duration = duration_s
+        self._slew = slew
+        self._kp0 = kp
+        self._kd0 = kd
+        self._q: np.ndarray | None = None
+        self._t0 = 0.0
+        self._t_last = 0.0
+
+    @property
+    def started(self) -> bool:
+        """True once `start` was called."""
+        return self._q is not None
+
+    def start(self, q_measured: np.ndarray, time: float) -> MotorCommand:
+        """Begin at the measured pose; return the ramp's first command (hold `q_measured` with the start gains).
+
+        Args:
+            q_measured: the joints' measured positions, shape (n,) [rad] (already inside the allowed range).
+            time: now [s].
+        """
+        self._q = np.array(q_measured, dtype=np.float64)
+        self._t0 = self._t_last = time
+        return MotorCommand.hold(self._q.copy(), self._kp0, self._kd0)
+
+    def step(self, target: MotorCommand, time: float) -> tuple[MotorCommand, bool]:
+        """The ramp's command at `time` towards the controller's `target`, and whether the ramp is done.
+
+        Args:
+            target: the controller's command (already clamped).
+            time: now [s]; a step at the same time as the last one moves nothing.
+        """
+        if self._q is None:
+            raise RuntimeError("CommandRamp.step before start")  # a bug in the caller, never a runtime condition
+        max_step = self._slew * max(0.0, time - self._t_last)
+        self._t_last = max(self._t_last, time)
+        error = target.q - self._q
+        caught_up = bool(np.all(np.abs(error) <= max_step))
+        self._q = target.q.copy() if caught_up else self._q + np.clip(error, -max_step, max_step)
+        s = min(1.0, max(0.0, (time - self._t0) / self._duration))
+        if caught_up and s >= 1.0:
+            return target, True
+        cmd = MotorCommand(q=self._q.copy(), dq=s * target.dq, kp=self._kp0 + s * (target.kp - self._kp0),
+                           kd=self._kd0 + s * (target.kd - self._kd0), tau=s * target.tau)
+        return cmd, False

@@ -1,0 +1,309 @@
+"""`SafeRobot`: the safety layer, a `Robot` that wraps any other and decides what reaches its motors.
+
+States (`SafetyState`): ``waiting`` until the state stream is live (its tick advances), damping only; ``ramp`` from
+the measured pose into the controller's command (`CommandRamp`); ``run``, where the controller's commands pass,
+clamped to the motor limits and the position table; ``damped``, damping only, latched until `reset`.
+
+Trips, each into ``damped`` on the spot (damping is sent to the robot at once, not only on the next write): a stale
+state stream, a state with non-finite values or a non-unit quaternion, a measured joint beyond its range plus a
+margin, sustained over-power (Unitree's PowerProtect rule, latched), a hot motor or a motor error mode (robots that
+are a `MotorStatusSource`), a trunk roll or pitch beyond the limit (a fall, from the IMU), the remote's L2 + B
+(robots that are a `RemoteSource`) or `estop`. Every transition is a `SafetyEvent`, kept in `events` and handed to
+`SafetyConfig.on_event`.
+
+The layer's clock is the robot time that `advance` lets pass, so a simulated run is deterministic; on hardware a
+wall clock can be handed in (``clock=time.monotonic``), which also sees a control loop that stalls between calls.
+
+The wrapped robot's own capabilities (a simulator's `TruthSource`, `FallDetector`, `Pushable`) are not forwarded: a
+runner reaches them through `SafeRobot.robot`, e.g. ``run_episode(safe, ctrl, ..., truth=safe.robot.base_truth)``.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from collections.abc import Callable
+from typing import cast
+
+import numpy as np
+
+from wbc.errors import SafetyResetError
+from wbc.hardware.robot import Robot
+from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteButtons, RemoteSource
+from wbc.hardware.safety.config import SafetyConfig
+from wbc.hardware.safety.events import SafetyEvent
+from wbc.hardware.safety.limits import position_range
+from wbc.hardware.safety.ramp import CommandRamp
+from wbc.hardware.safety.state import SafetyState
+from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.euler import rpy_of
+from wbc.robots.joint_table import JointTable
+from wbc.types import MotorCommand, RobotState
+
+__all__ = ["SafeRobot"]
+
+_ARM_START = 12  # joints from this index on are the arm's (house order)
+_QUAT_NORM_TOLERANCE = 0.05  # an IMU quaternion further from unit length than this is not an orientation
+
+
+class SafeRobot(Robot):
+    """A robot behind the safety layer; use it wherever a `Robot` is used.
+
+    ``write`` returns what was actually sent to the wrapped robot (damping, a ramp step or the clamped command).
+    A frame is fresh when its tick differs from the previous read's; the first frame after `connect` alone proves
+    nothing (a backend may hand out a default frame before the first datagram), so ``waiting`` lasts at least until
+    the second read. The state checks run on fresh frames only; a repeated frame carries no news, only age.
+    Not thread-safe: call `estop` from the control thread.
+
+    Args:
+        robot: the robot to protect (it is connected and closed with this one).
+        config: thresholds, gains and timings.
+        clock: returns now [s]; default: the robot time passed through `advance`.
+    """
+
+    def __init__(self, robot: Robot, config: SafetyConfig | None = None, *,
+                 clock: Callable[[], float] | None = None) -> None:
+        super().__init__()
+        self.robot = robot
+        self.config = config if config is not None else SafetyConfig()
+        self._clock = clock
+        self._time = 0.0
+        self._state = SafetyState.WAITING
+        self._events: list[SafetyEvent] = []
+        self._latest: RobotState | None = None
+        self._last_tick: int | None = None
+        self._fresh = False
+        self._last_fresh_time = -math.inf
+        self._over_power_frames = 0
+        self._ramp: CommandRamp | None = None
+        self._sent: MotorCommand | None = None
+        self._lower = self._upper = np.zeros(0)
+        self._damping: MotorCommand | None = None
+
+    # -- what the layer reports -----------------------------------------------------------------------------------
+    @property
+    def safety_state(self) -> SafetyState:
+        """The layer's state now."""
+        return self._state
+
+    @property
+    def events(self) -> tuple[SafetyEvent, ...]:
+        """Every transition so far, oldest first."""
+        return tuple(self._events)
+
+    @property
+    def position_lower(self) -> np.ndarray:
+        """Lower end of each joint's allowed range (the position table), shape (n,) [rad]; set by `connect`."""
+        return self._lower.copy()
+
+    @property
+    def position_upper(self) -> np.ndarray:
+        """Upper end of each joint's allowed range, shape (n,) [rad]; set by `connect`."""
+        return self._upper.copy()
+
+    def now(self) -> float:
+        """The layer's clock [s]."""
+        return self._clock() if self._clock is not None else self._time
+
+    # -- operator actions -----------------------------------------------------------------------------------------
+    def estop(self) -> None:
+        """Software e-stop: go to ``damped`` (latched) and send damping now, if connected."""
+        self._trip("software_estop", "estop() called")
+
+    def reset(self) -> None:
+        """Release a latched ``damped`` state into a new ramp from the measured pose; nothing to do otherwise.
+
+        Accepted only when the latest state is fresh (its tick advanced, within the stale timeout), no remote
+        button is held, and none of the state checks (joint range, tilt, motor status) fails on it.
+
+        Raises:
+            SafetyResetError: refused; the message lists why and what to do.
+        """
+        if self._state is not SafetyState.DAMPED:
+            return
+        why = []
+        age = self.now() - self._last_fresh_time
+        if self._latest is None or not self._fresh or age > self.config.stale_timeout_s:
+            tick = None if self._latest is None else self._latest.tick
+            why.append(f"the state stream is stale (tick {tick} did not advance at the last read); read() fresh "
+                       "frames first")
+        remote = self._remote()
+        if remote is not None and remote.held:
+            why.append(f"remote buttons held ({', '.join(remote.held)}); release them")
+        if self._latest is not None:
+            fault = self._state_fault(self._latest)
+            if fault is not None:
+                why.append(f"{fault[0]}: {fault[1]}")
+        if why:
+            raise SafetyResetError("SafeRobot.reset refused: " + "; ".join(why))
+        self._over_power_frames = 0
+        self._ramp = None
+        self._transition(SafetyState.RAMP, "reset", "operator reset")
+
+    # -- Robot ----------------------------------------------------------------------------------------------------
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The wrapped robot's joints."""
+        return self.robot.joint_names
+
+    @property
+    def limits(self) -> JointTable:
+        """The wrapped robot's motor limits."""
+        return self.robot.limits
+
+    def write(self, cmd: MotorCommand) -> MotorCommand:
+        """Validate and clamp the controller's command, then send what the safety state allows; return what was sent.
+
+        Raises:
+            CommandError: the command has the wrong number of joints.
+            RobotNotConnectedError: not connected.
+        """
+        super().write(cmd)  # validates and clamps, then calls _send, which records what went out in _sent
+        return cast(MotorCommand, self._sent)
+
+    def _connect(self) -> None:
+        self.robot.connect()
+        n = self.robot.num_joints
+        self._lower, self._upper = position_range(self.config.position_table, self.robot.limits)
+        kd = np.full(n, self.config.damping_kd)
+        kd[_ARM_START:] = self.config.arm_damping_kd
+        self._damping = MotorCommand(q=np.zeros(n), dq=np.zeros(n), kp=np.zeros(n), kd=kd, tau=np.zeros(n))
+        self._latest, self._last_tick, self._fresh = None, None, False
+        self._last_fresh_time = -math.inf
+        self._over_power_frames = 0
+        self._ramp = None
+        if self._state is not SafetyState.DAMPED and self._state is not SafetyState.WAITING:
+            self._transition(SafetyState.WAITING, "connect", "connected again: waiting for a live state stream")
+
+    def _close(self) -> None:
+        if self.robot.is_connected and self._damping is not None:
+            self._sent = self.robot.write(self._damping)
+        self.robot.close()
+
+    def _read(self) -> RobotState:
+        state = self.robot.read()
+        now = self.now()
+        fresh = self._last_tick is not None and state.tick != self._last_tick
+        self._last_tick, self._latest, self._fresh = state.tick, state, fresh
+        if fresh:
+            self._last_fresh_time = now
+        if self._state is SafetyState.DAMPED:
+            return state
+        remote = self._remote()
+        if remote is not None and remote.l2_b:
+            self._trip("remote_estop", "L2 + B held on the remote")
+            return state
+        if fresh:
+            fault = self._state_fault(state) or self._power_fault(state)
+            if fault is not None:
+                self._trip(*fault)
+            elif self._state is SafetyState.WAITING:
+                self._ramp = None
+                self._transition(SafetyState.RAMP, "fresh_state", f"tick advanced to {state.tick}")
+        else:
+            self._check_stale(now)
+        return state
+
+    def _send(self, cmd: MotorCommand) -> None:
+        now = self.now()
+        self._check_stale(now)
+        if self._state is SafetyState.RAMP:
+            target = self._limit_positions(cmd)
+            if self._ramp is None:
+                cfg = self.config
+                self._ramp = CommandRamp(duration_s=cfg.ramp_time_s, slew=cfg.ramp_slew, kp=cfg.ramp_kp,
+                                         kd=cfg.ramp_kd)
+                out = self._ramp.start(np.clip(self._latest.q, self._lower, self._upper), now)
+            else:
+                out, done = self._ramp.step(target, now)
+                if done:
+                    self._ramp = None
+                    self._transition(SafetyState.RUN, "ramp_done", "the targets reached the controller's")
+        elif self._state is SafetyState.RUN:
+            out = self._limit_positions(cmd)
+        else:
+            out = self._damping
+        self._sent = self.robot.write(out)
+
+    def _advance(self, dt: float) -> None:
+        self.robot.advance(dt)
+        self._time += dt
+
+    # -- checks ---------------------------------------------------------------------------------------------------
+    def _remote(self) -> RemoteButtons | None:
+        return self.robot.remote() if isinstance(self.robot, RemoteSource) else None
+
+    def _check_stale(self, now: float) -> None:
+        if self._state not in (SafetyState.RAMP, SafetyState.RUN):
+            return
+        age = now - self._last_fresh_time
+        if age > self.config.stale_timeout_s:
+            tick = None if self._latest is None else self._latest.tick
+            self._trip("stale_state", f"tick {tick} unchanged for {age:.3f} s (limit "
+                                      f"{self.config.stale_timeout_s} s)")
+
+    def _state_fault(self, state: RobotState) -> tuple[str, str] | None:
+        """The first check that fails on `state` (values, motor status, joint range, tilt), as (reason, detail)."""
+        cfg = self.config
+        for name in ("q", "dq", "tau_est", "imu_quat"):
+            if not np.all(np.isfinite(getattr(state, name))):
+                return "bad_state", f"RobotState.{name} holds a non-finite value"
+        norm = float(np.linalg.norm(state.imu_quat))
+        if abs(norm - 1.0) > _QUAT_NORM_TOLERANCE:
+            return "bad_state", f"RobotState.imu_quat has norm {norm:.3f}, not 1"
+        if isinstance(self.robot, MotorStatusSource):
+            status = self.robot.motor_status()
+            modes = np.asarray(status.motor_mode).astype(int)
+            bad = ~np.isin(modes, cfg.ok_motor_modes)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                return "motor_mode", f"motor {i} reports mode {modes[i]:#04x} (ok: {cfg.ok_motor_modes})"
+            temps = np.asarray(status.motor_temperature, dtype=np.float64)
+            if temps.size and temps.max() > cfg.max_motor_temperature_c:
+                i = int(np.argmax(temps))
+                return "motor_temperature", (f"motor {i} at {temps[i]:.0f} degC (limit "
+                                             f"{cfg.max_motor_temperature_c} degC)")
+        q = state.q
+        outside = (q < self._lower - cfg.joint_margin) | (q > self._upper + cfg.joint_margin)
+        if outside.any():
+            i = int(np.flatnonzero(outside)[0])
+            return "joint_range", (f"{self.joint_names[i]} at {q[i]:.3f} rad, range [{self._lower[i]:.3f}, "
+                                   f"{self._upper[i]:.3f}] + {cfg.joint_margin} rad")
+        roll, pitch, _ = rpy_of(quat_to_matrix(np.asarray(state.imu_quat))).tolist()
+        if max(abs(roll), abs(pitch)) > cfg.max_tilt:
+            return "tilt", f"roll {roll:.2f} rad, pitch {pitch:.2f} rad (limit {cfg.max_tilt} rad)"
+        return None
+
+    def _power_fault(self, state: RobotState) -> tuple[str, str] | None:
+        """PowerProtect's rule on a fresh frame: above the limit on more than `power_frames` frames in a row."""
+        power = float(np.abs(state.tau_est * state.dq).sum())
+        self._over_power_frames = self._over_power_frames + 1 if power > self.config.power_limit_w else 0
+        if self._over_power_frames > self.config.power_frames:
+            return "over_power", (f"{power:.0f} W for {self._over_power_frames} frames in a row (limit "
+                                  f"{self.config.power_limit_w} W on more than {self.config.power_frames})")
+        return None
+
+    def _limit_positions(self, cmd: MotorCommand) -> MotorCommand:
+        """`cmd` with its targets clipped into the position table (Unitree's PositionLimit)."""
+        rows = cmd.stacked()
+        np.clip(rows[0], self._lower, self._upper, out=rows[0])
+        return MotorCommand._trusted(rows)
+
+    # -- transitions ----------------------------------------------------------------------------------------------
+    def _trip(self, reason: str, detail: str) -> None:
+        if self._state is SafetyState.DAMPED:
+            return
+        self._ramp = None
+        self._over_power_frames = 0
+        self._transition(SafetyState.DAMPED, reason, detail)
+        if self.is_connected and self.robot.is_connected and self._damping is not None:
+            self._sent = self.robot.write(self._damping)
+
+    def _transition(self, to: SafetyState, reason: str, detail: str) -> None:
+        event = SafetyEvent(time=self.now(), from_state=self._state, to_state=to, reason=reason, detail=detail)
+        self._state = to
+        self._events.append(event)
+        if self.config.on_event is not None:
+            self.config.on_event(event)
+        else:
+            print(event, file=sys.stderr)
