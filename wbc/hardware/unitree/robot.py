@@ -13,7 +13,7 @@ then sends one LowCmd frame:
 `read` returns the newest valid state; its `tick` counts the valid frames received (a freshness counter: the
 robot's own tick has no verified unit), so a frame whose tick did not advance is stale, and `state_age` says for
 how long. `advance(dt)` paces the caller on a monotonic clock, counts late calls, and then waits (at most two link
-periods) for a state newer than the one the previous `advance` ended on. Every value that reaches the wire was
+periods) for a state newer than the one there was when it was called. Every value that reaches the wire was
 clamped twice: by `Robot.write` to the joint table (the URDF's position range intersected with the SDK's
 PositionLimit table) and by `encode_command` while quantising.
 """
@@ -155,7 +155,6 @@ class UnitreeRobot(Robot):
         self._periods = [0.0, np.inf, 0.0, 0]  # sum, min, max, count
         self._worst_lateness = 0.0
         self._pace_deadline: float | None = None
-        self._advanced_tick = 0
         self._t0 = time.monotonic()
 
     # -- Robot ----------------------------------------------------------------------------------------------------
@@ -224,22 +223,24 @@ class UnitreeRobot(Robot):
             self._written_at = time.monotonic()
 
     def _advance(self, dt: float) -> None:
+        with self._lock:
+            start_tick = self._fresh
         now = time.monotonic()
         if self._pace_deadline is None:
             self._pace_deadline = now
         deadline = self._pace_deadline + dt
         if now > deadline:
-            self._counts["late_advances"] += 1
-            self._worst_lateness = max(self._worst_lateness, now - deadline)
+            with self._lock:
+                self._counts["late_advances"] += 1
+                self._worst_lateness = max(self._worst_lateness, now - deadline)
             deadline = now  # resynchronise: a late call does not make the next ones hurry
         else:
             time.sleep(deadline - now)
         self._pace_deadline = deadline
         grace = time.monotonic() + 2.0 * self._period
         with self._lock:
-            while self._fresh == self._advanced_tick and time.monotonic() < grace:
+            while self._fresh == start_tick and time.monotonic() < grace:
                 self._lock.wait(max(0.0, grace - time.monotonic()))
-            self._advanced_tick = self._fresh
         self._raise_failure()
 
     # -- link-only API --------------------------------------------------------------------------------------------

@@ -1,0 +1,290 @@
+"""UnitreeRobot over the UDP wire against UnitreeEmulator on 127.0.0.1: the contract, standing, and faults on the wire.
+
+Every socket here binds 127.0.0.1 on a port the kernel picks, and every frame goes to 127.0.0.1; every wait is
+bounded in time. What the backend sent is read from the emulator's log of decoded command frames.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+
+import numpy as np
+import pytest
+
+from wbc.control.stand import StandController
+from wbc.errors import CommandError, ConfigError, PortBusyError, RobotLinkError, TargetRefusedError
+from wbc.hardware.contract import check_robot
+from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.robot import KP_MAX
+from wbc.hardware.unitree import (
+    DESCRIPTIONS,
+    MODE_SERVO,
+    SDK_POSITION_LIMITS,
+    UdpTransport,
+    UnitreeRobot,
+    UnitreeRobotConfig,
+)
+from wbc.types import MotorCommand
+
+ROBOTS = ("a1", "go1")
+LOOPBACK = "127.0.0.1"
+
+
+@pytest.fixture(params=ROBOTS)
+def emulator(request: pytest.FixtureRequest) -> Iterator[UnitreeEmulator]:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot=request.param)) as emu:
+        yield emu
+        assert emu.failure is None, emu.failure
+
+
+def _config(emu: UnitreeEmulator, **kw: object) -> UnitreeRobotConfig:
+    host, port = emu.address
+    assert host == LOOPBACK
+    return UnitreeRobotConfig(robot=emu.config.robot, target_host=host, target_port=port, **kw)
+
+
+def _until(cond: Callable[[], bool], timeout: float = 1.0) -> bool:
+    """Poll `cond` every millisecond until it holds or `timeout` passes."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if cond():
+            return True
+        time.sleep(0.001)
+    return cond()
+
+
+def _hold(robot: UnitreeRobot, kp: float = 30.0) -> MotorCommand:
+    return MotorCommand.hold(robot.desc.nominal_q, kp, 1.0)
+
+
+def _keep_writing(robot: UnitreeRobot, cmd: MotorCommand, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    for _ in range(int(seconds / 0.004) + 1):
+        if time.monotonic() >= end:
+            break
+        robot.write(cmd)
+        robot.advance(0.004)
+
+
+# -- contract and standing ----------------------------------------------------------------------------------------
+def test_contract(emulator: UnitreeEmulator) -> None:
+    check_robot(lambda: UnitreeRobot(_config(emulator)))
+
+
+def test_limits_intersect_urdf_and_sdk() -> None:
+    for name in ROBOTS:
+        robot = UnitreeRobot(UnitreeRobotConfig(robot=name, target_host=LOOPBACK, target_port=9))
+        lower, upper = (np.tile(a, 4) for a in SDK_POSITION_LIMITS[name])
+        assert robot.num_joints == 12 and robot.desc.name.startswith(DESCRIPTIONS[name].split("-")[0])
+        assert np.all(robot.limits.lower >= lower) and np.all(robot.limits.upper <= upper)
+        assert np.all(robot.limits.lower < robot.limits.upper)
+
+
+def _stand_height_in_sim(robot: str, seconds: float) -> float:
+    sim = MujocoRobot(MujocoRobotConfig(robot=DESCRIPTIONS[robot], arm_mode="none"))
+    with sim:
+        ctrl = StandController(sim.desc)
+        for _ in range(int(round(seconds * ctrl.rate_hz))):
+            sim.write(ctrl.act(sim.read(), None))
+            sim.advance(1.0 / ctrl.rate_hz)
+        return float(sim.base_truth().base_position_in_world[2])
+
+
+def test_stand_over_the_wire_matches_simulation(emulator: UnitreeEmulator, record_property: Callable) -> None:
+    seconds = 2.0
+    with UnitreeRobot(_config(emulator)) as robot:
+        ctrl = StandController(robot.desc)
+        for _ in range(int(round(seconds * ctrl.rate_hz))):
+            robot.write(ctrl.act(robot.read(), None))
+            robot.advance(1.0 / ctrl.rate_hz)
+        stats = robot.link_stats()
+        wire = float(emulator.base_truth().base_position_in_world[2])  # before close() damps it down
+    sim = _stand_height_in_sim(emulator.config.robot, seconds)
+    record_property("trunk_height_difference_m", wire - sim)
+    record_property("link_period_s", (stats.period_min, stats.period_mean, stats.period_max))
+    print(f"\n{emulator.config.robot}: trunk height over the wire {wire:.4f} m, in simulation {sim:.4f} m, "
+          f"difference {wire - sim:+.4f} m; link period min/mean/max {stats.period_min * 1e3:.3f}/"
+          f"{stats.period_mean * 1e3:.3f}/{stats.period_max * 1e3:.3f} ms, overruns {stats.overruns}, "
+          f"late advances {stats.late_advances} (worst {stats.worst_lateness * 1e3:.2f} ms)")
+    assert abs(wire - sim) < 0.005
+    assert emulator.sim_time > 0.9 * seconds
+    assert stats.rejected_states == 0 and stats.deadline_trips == 0
+
+
+# -- fault 1: silence ---------------------------------------------------------------------------------------------
+def test_silence_stops_the_tick(emulator: UnitreeEmulator) -> None:
+    with UnitreeRobot(_config(emulator)) as robot:
+        _keep_writing(robot, _hold(robot), 0.05)
+        emulator.inject(Fault.SILENCE)
+        time.sleep(0.01)  # replies already in flight
+        tick = robot.read().tick
+        _keep_writing(robot, _hold(robot), 0.06)
+        assert robot.read().tick == tick
+        assert robot.state_age >= 0.05 and robot.link_stats().state_age >= 0.05
+        emulator.clear()
+        assert _until(lambda: robot.read().tick > tick)
+        assert robot.state_age < 0.05
+
+
+def test_nothing_but_damping_before_the_first_state(emulator: UnitreeEmulator) -> None:
+    emulator.inject(Fault.SILENCE)
+    robot = UnitreeRobot(_config(emulator, connect_timeout=0.1))
+    with pytest.raises(RobotLinkError, match="no valid LowState"):
+        robot.connect()
+    sent = emulator.commands()
+    assert len(sent) > 10 and all(c.damping for c in sent)
+    assert not robot.is_connected
+
+
+# -- fault 2: corrupt, short, long and foreign datagrams ----------------------------------------------------------
+@pytest.mark.parametrize(("fault", "reason"), [(Fault.CORRUPT, "crc"), (Fault.SHORT, "length"),
+                                               (Fault.LONG, "length"), (Fault.FOREIGN_PORT, None)])
+def test_bad_datagrams_are_rejected_and_counted(emulator: UnitreeEmulator, fault: Fault, reason: str | None) -> None:
+    with UnitreeRobot(_config(emulator)) as robot:
+        _keep_writing(robot, _hold(robot), 0.04)
+        emulator.inject(fault)
+        time.sleep(0.01)
+        before = robot.read()
+        stats_before = robot.link_stats()
+        _keep_writing(robot, _hold(robot), 0.05)
+        after = robot.read()
+        stats = robot.link_stats()
+        assert after is before and after.tick == before.tick
+        if reason is None:
+            assert stats.foreign > stats_before.foreign + 5
+            assert stats.rejected_states == stats_before.rejected_states
+        else:
+            assert getattr(robot.decode_stats, reason) > 5
+            assert stats.rejected_states > stats_before.rejected_states + 5
+            assert stats.foreign == 0
+        emulator.clear()
+        assert _until(lambda: robot.read().tick > before.tick)
+
+
+# -- fault 3: the control loop stalls ----------------------------------------------------------------------------
+def test_write_stall_damps_then_resumes(emulator: UnitreeEmulator) -> None:
+    config = _config(emulator, write_deadline=0.05)
+    period = 1.0 / config.rate_hz
+    with UnitreeRobot(config) as robot:
+        _keep_writing(robot, _hold(robot, 30.0), 0.05)
+        stalled_at = time.monotonic()
+        time.sleep(0.15)
+        resumed = _hold(robot, 25.0)
+        resumed_at = time.monotonic()
+        robot.write(resumed)
+        time.sleep(0.02)
+        robot.write(resumed)
+        time.sleep(0.02)
+        assert robot.link_stats().deadline_trips == 1
+    log = emulator.commands()
+    stall = [c for c in log if stalled_at < c.time < resumed_at]
+    first_damping = next(c for c in stall if c.damping)
+    assert first_damping.time - stalled_at <= config.write_deadline + 10 * period
+    assert all(c.wire.kp[0] == 30.0 for c in stall if c.time < first_damping.time)
+    assert all(c.damping for c in stall if c.time >= first_damping.time)
+    after = [c for c in log if resumed_at < c.time < resumed_at + 0.035]
+    assert after and not after[-1].damping
+    first_servo = next(c for c in after if not c.damping)
+    np.testing.assert_array_equal(first_servo.wire.kp, 25.0)
+    np.testing.assert_allclose(first_servo.wire.q, robot.desc.nominal_q.astype(np.float32))
+    assert all(not c.damping for c in after if c.time > first_servo.time)
+    assert log[-1].damping  # close() left the robot damped
+
+
+# -- fault 4: NaN and out-of-range commands -----------------------------------------------------------------------
+def test_wild_commands_reach_the_wire_clamped(emulator: UnitreeEmulator) -> None:
+    with UnitreeRobot(_config(emulator)) as robot:
+        lim = robot.limits
+        with pytest.raises(CommandError):
+            robot.write(MotorCommand.hold(np.full(12, np.nan), 20.0, 1.0))
+        wild = MotorCommand(q=lim.upper + 10.0, dq=lim.velocity_limit * 10.0, kp=np.full(12, 1e6),
+                            kd=np.full(12, 1e6), tau=-(lim.torque_limit + 100.0))
+        sent = robot.write(wild)
+        time.sleep(0.02)
+        robot.write(_hold(robot))
+        time.sleep(0.01)
+    log = emulator.commands()
+    assert emulator.stats.rejected == 0
+    servo = [c.wire for c in log if not c.damping]
+    wild_frames = [w for w in servo if w.kp[0] > 100.0]
+    assert wild_frames
+    w = wild_frames[-1]
+    assert (w.mode == MODE_SERVO).all()
+    np.testing.assert_array_equal(w.q, lim.upper.astype(np.float32))
+    np.testing.assert_allclose(w.q, sent.q, atol=1e-6)
+    assert np.all(w.kp <= KP_MAX) and np.all(w.tau >= -lim.torque_limit)
+    assert np.all(np.abs(w.dq) <= lim.velocity_limit.astype(np.float32))
+    for frame in servo:
+        assert np.all(np.isfinite(frame.q)) and np.all(frame.q >= lim.lower.astype(np.float32))
+        assert np.all(frame.q <= lim.upper.astype(np.float32))
+
+
+# -- state faults are reported, close damps -----------------------------------------------------------------------
+def test_state_faults_reach_the_backend(emulator: UnitreeEmulator) -> None:
+    with UnitreeRobot(_config(emulator)) as robot:
+        checks = [
+            (Fault.JOINT_OUT_OF_RANGE, (2, 0.5), lambda: robot.read().q[2] == 0.5),
+            (Fault.OVER_TEMPERATURE, 95, lambda: (robot.extras.motor_temperature == 95).all()),
+            (Fault.MOTOR_ERROR, 0, lambda: (robot.extras.motor_mode == 0).all()),
+            (Fault.FALL, np.pi / 2, lambda: abs(robot.extras.imu_rpy[0] - np.pi / 2) < 1e-6),
+            (Fault.REMOTE_L2_B, None, lambda: robot.extras.remote.l2_b),
+        ]
+        for fault, value, seen in checks:
+            emulator.inject(fault, value)
+            assert _until(lambda seen=seen: (robot.write(_hold(robot)), seen())[1], 0.5), fault
+            emulator.clear(fault)
+            assert _until(lambda seen=seen: (robot.write(_hold(robot)), not seen())[1], 0.5), fault
+
+
+def test_close_sends_damping(emulator: UnitreeEmulator) -> None:
+    config = _config(emulator, close_damping=0.05)
+    robot = UnitreeRobot(config)
+    with robot:
+        _keep_writing(robot, _hold(robot), 0.03)
+        closed_at = time.monotonic()
+    tail = [c for c in emulator.commands() if c.time > closed_at]
+    assert len(tail) >= 10 and all(c.damping for c in tail)
+    assert all((c.wire.kd == config.damping_kd).all() for c in tail)
+
+
+def test_realtime_emulator_streams_states() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")) as emu, \
+            UnitreeRobot(_config(emu)) as robot:
+        tick = robot.read().tick
+        _keep_writing(robot, _hold(robot), 0.2)
+        assert robot.read().tick > tick + 50
+        assert 0.1 < emu.sim_time < 0.5
+        assert emu.failure is None
+
+
+# -- sockets and addresses ----------------------------------------------------------------------------------------
+def test_busy_port_is_a_clear_error() -> None:
+    first = UdpTransport((LOOPBACK, 0), (LOOPBACK, 9))
+    port = first.local_address[1]
+    try:
+        with pytest.raises(PortBusyError, match=str(port)):
+            UdpTransport((LOOPBACK, port), (LOOPBACK, 9))
+        robot = UnitreeRobot(UnitreeRobotConfig(target_host=LOOPBACK, target_port=9, local_port=port))
+        with pytest.raises(PortBusyError, match=f"{LOOPBACK}:{port}"):
+            robot.connect()
+        assert not robot.is_connected
+    finally:
+        first.close()
+    again = UdpTransport((LOOPBACK, port), (LOOPBACK, 9))  # close() really released the port
+    again.close()
+    assert again.closed
+
+
+def test_non_loopback_target_is_refused() -> None:
+    with pytest.raises(TargetRefusedError, match="allow_hardware=True"):
+        UnitreeRobotConfig(robot="go1", target_host="192.168.123.10", target_port=8007)
+    with pytest.raises(TargetRefusedError, match="IPv4"):
+        UnitreeRobotConfig(robot="go1", target_host="localhost", target_port=8007)
+    with pytest.raises(TypeError):
+        UnitreeRobotConfig(robot="go1")  # type: ignore[call-arg]  # no default robot address
+    # allowed explicitly it is accepted (and never connected here)
+    assert UnitreeRobotConfig(robot="go1", target_host="192.168.123.10", target_port=8007, allow_hardware=True)
+    with pytest.raises(ConfigError, match="127.0.0.0/8"):
+        UnitreeEmulatorConfig(host="0.0.0.0")
