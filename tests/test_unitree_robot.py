@@ -6,6 +6,7 @@ bounded in time. What the backend sent is read from the emulator's log of decode
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Iterator
 
@@ -22,11 +23,14 @@ from wbc.hardware.unitree import (
     DESCRIPTIONS,
     MODE_SERVO,
     SDK_POSITION_LIMITS,
+    Transport,
     UdpTransport,
     UnitreeRobot,
     UnitreeRobotConfig,
+    decode_command,
+    encode_state,
 )
-from wbc.types import MotorCommand
+from wbc.types import MotorCommand, RobotState
 
 ROBOTS = ("a1", "go1")
 LOOPBACK = "127.0.0.1"
@@ -259,6 +263,73 @@ def test_realtime_emulator_streams_states() -> None:
         assert emu.failure is None
 
 
+@pytest.mark.parametrize("robot_name", ROBOTS)
+def test_delay_and_drop(robot_name: str) -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot_name)) as emu, UnitreeRobot(_config(emu)) as robot:
+        _keep_writing(robot, _hold(robot), 0.02)
+        emu.inject(Fault.DROP, 0.5)
+        tick = robot.read().tick
+        sent = robot.link_stats().frames_sent
+        _keep_writing(robot, _hold(robot), 0.1)
+        fresh, frames = robot.read().tick - tick, robot.link_stats().frames_sent - sent
+        assert 0.2 * frames < fresh < 0.8 * frames
+        emu.clear()
+        emu.inject(Fault.DELAY, 0.04)
+        time.sleep(0.01)  # replies sent before the delay are in
+        tick = robot.read().tick
+        delayed_at = time.monotonic()
+        assert _until(lambda: (robot.write(_hold(robot)), robot.read().tick > tick)[1], 0.5)
+        assert time.monotonic() - delayed_at >= 0.025
+        assert robot.state_age < 0.04
+
+
+class FakeTransport:
+    """A transport with no socket: records what is sent, hands out what a test queues."""
+
+    def __init__(self) -> None:
+        self.sent: list[bytes] = []
+        self.inbox: list[bytes] = []
+        self.lock = threading.Lock()
+
+    def send(self, frame: bytes) -> None:
+        with self.lock:
+            self.sent.append(frame)
+
+    def receive(self) -> list[bytes]:
+        with self.lock:
+            out, self.inbox = self.inbox, []
+        return out
+
+    def wait_readable(self, timeout: float) -> bool:
+        time.sleep(min(timeout, 0.002))
+        with self.lock:
+            return bool(self.inbox)
+
+    def close(self) -> None:
+        pass
+
+
+def test_transport_is_a_constructor_argument() -> None:
+    fake = FakeTransport()
+    assert isinstance(fake, Transport)
+    robot = UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9), transport=fake)
+    q = robot.desc.nominal_q
+    state = RobotState(tick=7, time=0.0, q=q, dq=np.zeros(12), tau_est=np.zeros(12),
+                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
+    threading.Timer(0.05, lambda: fake.inbox.append(encode_state(robot.layout, state))).start()
+    with robot:
+        assert robot.read().tick == 1  # the freshness counter, not the wire's tick
+        np.testing.assert_allclose(robot.read().q, q)
+        robot.write(_hold(robot))
+        time.sleep(0.01)
+    wires = [decode_command(robot.layout, f) for f in fake.sent]
+    damping = [(w.kp == 0).all() and (w.kd > 0).all() for w in wires]
+    assert damping[0] and damping[-1]
+    assert any(not d for d in damping)
+    assert sum(damping[:20]) >= 20  # before the state arrived (50 ms at 500 Hz), damping only
+
+
 # -- sockets and addresses ----------------------------------------------------------------------------------------
 def test_busy_port_is_a_clear_error() -> None:
     first = UdpTransport((LOOPBACK, 0), (LOOPBACK, 9))
@@ -288,3 +359,7 @@ def test_non_loopback_target_is_refused() -> None:
     assert UnitreeRobotConfig(robot="go1", target_host="192.168.123.10", target_port=8007, allow_hardware=True)
     with pytest.raises(ConfigError, match="127.0.0.0/8"):
         UnitreeEmulatorConfig(host="0.0.0.0")
+    with pytest.raises(TargetRefusedError, match="allow_hardware"):
+        UdpTransport((LOOPBACK, 0), ("10.0.0.1", 8007))
+    with pytest.raises(TargetRefusedError, match="allow_hardware"):
+        UdpTransport(("0.0.0.0", 0), (LOOPBACK, 9))

@@ -24,6 +24,7 @@ class LinkStats:
         foreign: datagrams dropped because they came from another address than the target.
         state_age: time since the newest valid state arrived [s] (inf before the first).
         period_mean: mean interval between two sends of the link thread [s] (0 before two sends).
+        period_std: standard deviation of that interval (the link's jitter) [s].
         period_min: shortest such interval [s].
         period_max: longest such interval [s].
         overruns: sends that came more than a period late (the thread then resynchronises).
@@ -39,6 +40,7 @@ class LinkStats:
     foreign: int = 0
     state_age: float = float("inf")
     period_mean: float = 0.0
+    period_std: float = 0.0
     period_min: float = 0.0
     period_max: float = 0.0
     overruns: int = 0

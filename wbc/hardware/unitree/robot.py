@@ -152,7 +152,7 @@ class UnitreeRobot(Robot):
         self._stop = False
         self._failure: BaseException | None = None
         self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0, overruns=0, late_advances=0)
-        self._periods = [0.0, np.inf, 0.0, 0]  # sum, min, max, count
+        self._periods = [0.0, np.inf, 0.0, 0, 0.0]  # sum, min, max, count, sum of squares
         self._worst_lateness = 0.0
         self._pace_deadline: float | None = None
         self._t0 = time.monotonic()
@@ -175,7 +175,8 @@ class UnitreeRobot(Robot):
             self._transport = self._given_transport
         else:
             announce_hardware_target(cfg.target_host, cfg.target_port, cfg.robot)
-            self._transport = UdpTransport((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port))
+            self._transport = UdpTransport((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
+                                           allow_hardware=cfg.allow_hardware)
         self._thread = threading.Thread(target=self._run, name=f"unitree-{cfg.robot}-link", daemon=True)
         self._thread.start()
         deadline = time.monotonic() + cfg.connect_timeout
@@ -259,12 +260,14 @@ class UnitreeRobot(Robot):
     def link_stats(self) -> LinkStats:
         """A snapshot of the link's counters."""
         with self._lock:
-            total, low, high, n = self._periods
+            total, low, high, n, squares = self._periods
+            mean = total / n if n else 0.0
             foreign = getattr(self._transport, "foreign", 0)
             return LinkStats(
                 **self._counts, valid_states=self._fresh, rejected_states=self.decode_stats.rejected,
                 foreign=foreign, state_age=time.monotonic() - self._state_at,
-                period_mean=total / n if n else 0.0, period_min=low if n else 0.0, period_max=high,
+                period_mean=mean, period_std=float(np.sqrt(max(0.0, squares / n - mean * mean))) if n else 0.0,
+                period_min=low if n else 0.0, period_max=high,
                 worst_lateness=self._worst_lateness,
             )
 
@@ -293,19 +296,20 @@ class UnitreeRobot(Robot):
                     if self._stop or (self._closing_until is not None and now >= self._closing_until):
                         return
                     frame = self._choose_frame(now)
+                    if last_send is not None:
+                        gap = now - last_send
+                        p = self._periods
+                        p[0] += gap
+                        p[1] = min(p[1], gap)
+                        p[2] = max(p[2], gap)
+                        p[3] += 1
+                        p[4] += gap * gap
+                    next_send += period
+                    if next_send < now:
+                        self._counts["overruns"] += 1
+                        next_send = now + period
                 transport.send(frame)
-                if last_send is not None:
-                    gap = now - last_send
-                    p = self._periods
-                    p[0] += gap
-                    p[1] = min(p[1], gap)
-                    p[2] = max(p[2], gap)
-                    p[3] += 1
                 last_send = now
-                next_send += period
-                if next_send < now:
-                    self._counts["overruns"] += 1
-                    next_send = now + period
             self._receive(transport)
             wait = next_send - time.monotonic()
             if wait > 0:

@@ -14,6 +14,7 @@ import socket
 from typing import Protocol, runtime_checkable
 
 from wbc.errors import PortBusyError, RobotLinkError
+from wbc.hardware.unitree.target import check_target
 
 __all__ = ["MAX_DATAGRAM", "Transport", "UdpTransport"]
 
@@ -43,15 +44,18 @@ class UdpTransport:
 
     Args:
         local: ``(host, port)`` to bind; port 0 picks a free one (read it back from `local_address`).
-        target: ``(host, port)`` that frames are sent to and accepted from. The address policy (loopback unless
-            hardware is allowed) is the caller's: see `wbc.hardware.unitree.target`.
+        target: ``(host, port)`` that frames are sent to and accepted from.
+        allow_hardware: allow addresses outside 127.0.0.0/8 (`wbc.hardware.unitree.target.check_target`).
 
     Raises:
+        TargetRefusedError: `local` or `target` is outside 127.0.0.0/8 and `allow_hardware` is False.
         PortBusyError: the local port is held by another socket.
         RobotLinkError: the socket could not be created or bound for another reason.
     """
 
-    def __init__(self, local: tuple[str, int], target: tuple[str, int]) -> None:
+    def __init__(self, local: tuple[str, int], target: tuple[str, int], *, allow_hardware: bool = False) -> None:
+        check_target(target[0], target[1], allow_hardware=allow_hardware, what="target")
+        check_target(local[0], 1, allow_hardware=allow_hardware, what="local address")
         self.target = (str(target[0]), int(target[1]))
         self.foreign = 0  # datagrams dropped because they came from another address than the target
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
