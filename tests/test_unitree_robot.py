@@ -6,6 +6,9 @@ bounded in time. What the backend sent is read from the emulator's log of decode
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -330,6 +333,54 @@ def test_transport_is_a_constructor_argument() -> None:
     assert damping[0] and damping[-1]
     assert any(not d for d in damping)
     assert sum(damping[:20]) >= 20  # before the state arrived (50 ms at 500 Hz), damping only
+
+
+_SDK_CLIENT = '''
+import json, socket, sys, time
+from unitree_legged_sdk import robot_interface as ri
+emu_port, nominal = int(sys.argv[1]), json.loads(sys.argv[2])
+probe = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+probe.bind(("127.0.0.1", 0))
+port = probe.getsockname()[1]
+probe.close()
+udp = ri.UDP(0xFF, port, "127.0.0.1", emu_port)
+cmd, state = ri.LowCmd(), ri.LowState()
+udp.InitCmdData(cmd)
+for i in range(12):
+    cmd.motorCmd[i].q = nominal[i]
+    cmd.motorCmd[i].dq = 0.0
+    cmd.motorCmd[i].Kp = 20.0
+    cmd.motorCmd[i].Kd = 1.0
+    cmd.motorCmd[i].tau = 0.0
+recv = []
+for _ in range(100):
+    udp.SetSend(cmd)
+    udp.Send()
+    time.sleep(0.002)
+    recv.append(udp.Recv())
+    udp.GetRecv(state)
+print("RESULT", json.dumps({"recv": recv, "tick": state.tick, "q": [state.motorState[i].q for i in range(12)],
+                            "quat": list(state.imu.quaternion)}))
+'''
+"""The vendor's Go1 SDK 3.8 as a client of the emulator (in a subprocess: the SDK prints, may exit the process, and
+never closes its socket). Its socket is connect()ed to 127.0.0.1, so it hears nothing else."""
+
+
+def test_vendor_sdk_client_talks_to_the_emulator() -> None:
+    pytest.importorskip("unitree_legged_sdk")
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
+        nominal = [float(x) for x in emu.sim.desc.nominal_q]
+        out = subprocess.run([sys.executable, "-c", _SDK_CLIENT, str(emu.address[1]), json.dumps(nominal)],
+                             capture_output=True, text=True, timeout=30, check=False)
+        line = next((x for x in out.stdout.splitlines() if x.startswith("RESULT ")), None)
+        assert line is not None, (out.returncode, out.stdout[-2000:], out.stderr[-2000:])
+        result = json.loads(line.removeprefix("RESULT "))
+        log = emu.commands()
+    assert result["recv"].count(0) >= 95  # the SDK accepted (almost) every state frame the emulator sent
+    assert result["tick"] > 90 and abs(result["q"][1] - nominal[1]) < 0.3
+    assert emu.stats.rejected == 0 and emu.stats.accepted == len(log) >= 95
+    np.testing.assert_array_equal(log[-1].wire.kp, 20.0)
+    np.testing.assert_allclose(log[-1].wire.q, np.float32(nominal))
 
 
 # -- sockets and addresses ----------------------------------------------------------------------------------------
