@@ -16,7 +16,7 @@ from __future__ import annotations
 import collections
 import math
 import random
-import selectors
+import select
 import socket
 import threading
 import time
@@ -197,29 +197,24 @@ class UnitreeEmulator:
     def _serve(self) -> None:
         sock, period = self._sock, self.config.control_period
         realtime = self.config.mode == "realtime"
-        selector = selectors.DefaultSelector()
-        selector.register(sock, selectors.EVENT_READ)
         next_step = time.monotonic() + period
-        try:
-            while not self._stop.is_set():
-                now = time.monotonic()
-                wake = [now + _POLL] + ([next_step] if realtime else []) + [p[0] for p in self._pending]
-                timeout = min(wake) - now
-                if timeout > 0:
-                    selector.select(timeout)
-                self._drain(sock, step=not realtime)
-                now = time.monotonic()
-                if realtime and now >= next_step:
-                    with self._lock:
-                        self.sim.advance(period)
-                    if self._peer is not None:
-                        self._reply(self._peer)
-                    next_step += period
-                    if next_step < now:
-                        next_step = now + period
-                self._flush(now)
-        finally:
-            selector.close()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            wake = [now + _POLL] + ([next_step] if realtime else []) + [p[0] for p in self._pending]
+            timeout = min(wake) - now
+            if timeout > 0:
+                select.select([sock], [], [], timeout)  # not epoll: its timeout is whole milliseconds
+            self._drain(sock, step=not realtime)
+            now = time.monotonic()
+            if realtime and now >= next_step:
+                with self._lock:
+                    self.sim.advance(period)
+                if self._peer is not None:
+                    self._reply(self._peer)
+                next_step += period
+                if next_step < now:
+                    next_step = now + period
+            self._flush(now)
 
     def _drain(self, sock: socket.socket, *, step: bool) -> None:
         for _ in range(256):

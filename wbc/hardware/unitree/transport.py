@@ -9,7 +9,7 @@ only the newest, so a good frame followed by a corrupt one is lost), and `close`
 from __future__ import annotations
 
 import errno
-import selectors
+import select
 import socket
 from typing import Protocol, runtime_checkable
 
@@ -68,8 +68,6 @@ class UdpTransport:
             raise RobotLinkError(f"cannot bind UDP {local[0]}:{local[1]}: {exc}") from None
         sock.setblocking(False)
         self._sock: socket.socket | None = sock
-        self._selector = selectors.DefaultSelector()
-        self._selector.register(sock, selectors.EVENT_READ)
         self.local_address: tuple[str, int] = sock.getsockname()[:2]
 
     @property
@@ -107,13 +105,16 @@ class UdpTransport:
         return out
 
     def wait_readable(self, timeout: float) -> bool:
-        """Block up to `timeout` seconds for a datagram; True if one is queued."""
-        self._socket()
-        return bool(self._selector.select(max(0.0, timeout)))
+        """Block up to `timeout` seconds for a datagram; True if one is queued.
+
+        ``select`` rather than ``selectors``' epoll: epoll's timeout is whole milliseconds, which would make a 2 ms
+        link period jitter by up to 1 ms.
+        """
+        readable, _, _ = select.select([self._socket()], [], [], max(0.0, timeout))
+        return bool(readable)
 
     def close(self) -> None:
         """Close the socket (the port is free again at once). Idempotent."""
         if self._sock is not None:
-            self._selector.close()
             self._sock.close()
             self._sock = None
