@@ -111,13 +111,15 @@ def test_stand_over_the_wire_matches_simulation(emulator: UnitreeEmulator, recor
     sim = _stand_height_in_sim(emulator.config.robot, seconds)
     record_property("trunk_height_difference_m", wire - sim)
     record_property("link_period_s", (stats.period_min, stats.period_mean, stats.period_max))
-    print(f"\n{emulator.config.robot}: trunk height over the wire {wire:.4f} m, in simulation {sim:.4f} m, "
-          f"difference {wire - sim:+.4f} m; link period min/mean/max {stats.period_min * 1e3:.3f}/"
-          f"{stats.period_mean * 1e3:.3f}/{stats.period_max * 1e3:.3f} ms, overruns {stats.overruns}, "
+    print(f"\n{emulator.config.robot}: trunk height over the wire {wire:.5f} m, in simulation {sim:.5f} m, "
+          f"difference {(wire - sim) * 1e3:+.3f} mm; link period min/mean/max/std {stats.period_min * 1e3:.3f}/"
+          f"{stats.period_mean * 1e3:.3f}/{stats.period_max * 1e3:.3f}/{stats.period_std * 1e3:.3f} ms, "
+          f"overruns {stats.overruns}, "
           f"late advances {stats.late_advances} (worst {stats.worst_lateness * 1e3:.2f} ms)")
     assert abs(wire - sim) < 0.005
     assert emulator.sim_time > 0.9 * seconds
     assert stats.rejected_states == 0 and stats.deadline_trips == 0
+    assert abs(stats.period_mean - 1.0 / 500.0) < 1e-4  # the link keeps its 500 Hz schedule
 
 
 # -- fault 1: silence ---------------------------------------------------------------------------------------------
