@@ -80,6 +80,21 @@ def test_contract(emulator: UnitreeEmulator) -> None:
     check_robot(lambda: UnitreeRobot(_config(emulator)))
 
 
+def test_contract_over_the_realtime_emulator() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")) as emu:
+        check_robot(lambda: UnitreeRobot(_config(emu)))
+
+
+def test_reconnect(emulator: UnitreeEmulator) -> None:
+    robot = UnitreeRobot(_config(emulator))
+    for _ in range(2):
+        with robot:
+            tick = robot.read().tick
+            _keep_writing(robot, _hold(robot), 0.02)
+            assert robot.read().tick > tick
+            assert robot.link_stats().frames_sent < 30  # counters start again at each connect
+
+
 def test_limits_intersect_urdf_and_sdk() -> None:
     for name in ROBOTS:
         robot = UnitreeRobot(UnitreeRobotConfig(robot=name, target_host=LOOPBACK, target_port=9))
@@ -399,7 +414,11 @@ def test_busy_port_is_a_clear_error() -> None:
     finally:
         first.close()
     again = UdpTransport((LOOPBACK, port), (LOOPBACK, 9))  # close() really released the port
-    again.close()
+    try:
+        with pytest.raises(PortBusyError, match=str(port)):
+            UnitreeEmulator(UnitreeEmulatorConfig(port=port)).start()
+    finally:
+        again.close()
     assert again.closed
 
 

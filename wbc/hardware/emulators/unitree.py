@@ -14,6 +14,7 @@ on the emulator's own thread, which sends a state every period to the latest sen
 from __future__ import annotations
 
 import collections
+import errno
 import math
 import random
 import select
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbc.errors import CommandError, ConfigError, FrameError, RobotLinkError, UnknownNameError
+from wbc.errors import CommandError, ConfigError, FrameError, PortBusyError, RobotLinkError, UnknownNameError
 from wbc.hardware.emulators.faults import Fault, FaultSet, apply_state_faults, mangle_frame
 from wbc.hardware.emulators.logged_command import LoggedCommand
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -118,7 +119,12 @@ class UnitreeEmulator:
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
     def start(self) -> UnitreeEmulator:
-        """Bind the socket, build the simulation and start the server thread. Idempotent."""
+        """Bind the socket, build the simulation and start the server thread. Idempotent.
+
+        Raises:
+            PortBusyError: the configured port is held by another socket.
+            RobotLinkError: the socket could not be bound for another reason.
+        """
         if self._thread is not None:
             return self
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
@@ -126,6 +132,8 @@ class UnitreeEmulator:
             sock.bind((self.config.host, self.config.port))
         except OSError as exc:
             sock.close()
+            if exc.errno in (errno.EADDRINUSE, errno.EACCES):
+                raise PortBusyError(self.config.host, self.config.port, exc.strerror or str(exc)) from None
             raise RobotLinkError(f"UnitreeEmulator: cannot bind {self.config.host}:{self.config.port}: {exc}; "
                                  "port 0 picks a free one") from None
         sock.setblocking(False)
