@@ -7,6 +7,8 @@ bounded in time. What the backend sent is read from the emulator's log of decode
 from __future__ import annotations
 
 import json
+import socket
+import struct
 import subprocess
 import sys
 import threading
@@ -24,6 +26,7 @@ from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import KP_MAX
 from wbc.hardware.unitree import (
     DESCRIPTIONS,
+    MAX_DATAGRAM,
     MODE_SERVO,
     SDK_POSITION_LIMITS,
     Transport,
@@ -31,7 +34,11 @@ from wbc.hardware.unitree import (
     UnitreeRobot,
     UnitreeRobotConfig,
     decode_command,
+    decode_state,
+    encode_command,
     encode_state,
+    frame_crc,
+    frame_layout,
 )
 from wbc.types import MotorCommand, RobotState
 
@@ -44,6 +51,7 @@ def emulator(request: pytest.FixtureRequest) -> Iterator[UnitreeEmulator]:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot=request.param)) as emu:
         yield emu
         assert emu.failure is None, emu.failure
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("unitree-")]  # every thread stopped
 
 
 def _config(emu: UnitreeEmulator, **kw: object) -> UnitreeRobotConfig:
@@ -309,6 +317,7 @@ class FakeTransport:
     """A transport with no socket: records what is sent, hands out what a test queues."""
 
     def __init__(self) -> None:
+        self.foreign = 0
         self.sent: list[bytes] = []
         self.inbox: list[bytes] = []
         self.lock = threading.Lock()
@@ -398,6 +407,69 @@ def test_vendor_sdk_client_talks_to_the_emulator() -> None:
     assert emu.stats.rejected == 0 and emu.stats.accepted == len(log) >= 95
     np.testing.assert_array_equal(log[-1].wire.kp, 20.0)
     np.testing.assert_allclose(log[-1].wire.q, np.float32(nominal))
+
+
+class RawClient:
+    """A bare UDP socket on 127.0.0.1 that sends hand-made LowCmd frames to an emulator and waits for each reply."""
+
+    def __init__(self, emu: UnitreeEmulator) -> None:
+        self.emu = emu
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind((LOOPBACK, 0))
+        self.sock.settimeout(1.0)
+
+    def exchange(self, frame: bytes) -> bytes:
+        self.sock.sendto(frame, self.emu.address)
+        return self.sock.recvfrom(MAX_DATAGRAM)[0]
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+def _raw_run(robot: str, steps: int) -> list[bytes]:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot)) as emu:
+        client = RawClient(emu)
+        try:
+            layout, desc = emu.layout, emu.sim.desc
+            replies = []
+            for k in range(steps):
+                q = desc.nominal_q + 0.1 * np.sin(0.05 * k)
+                replies.append(client.exchange(encode_command(layout, MotorCommand.hold(q, 40.0, 1.0))))
+            return replies
+        finally:
+            client.close()
+
+
+@pytest.mark.parametrize("robot_name", ROBOTS)
+def test_lockstep_is_deterministic(robot_name: str) -> None:
+    first, second = _raw_run(robot_name, 50), _raw_run(robot_name, 50)
+    assert first == second
+    layout = frame_layout(robot_name)
+    ticks = [decode_state(layout, r, time=0.0)[0].tick for r in first]
+    assert ticks == list(range(1, 51))  # one physics step per command
+
+
+def test_emulator_gives_no_torque_to_what_a_motor_cannot_apply() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
+        client = RawClient(emu)
+        try:
+            layout = emu.layout
+            frame = bytearray(encode_command(layout, MotorCommand.hold(emu.sim.desc.nominal_q, 40.0, 1.0)))
+            kp = layout.cmd_motor_offset + 11  # motor 0's Kp, int16 x 32: the SDK's wrap of Kp 2000 is -48
+            struct.pack_into("<h", frame, kp, -48 * 32)
+            struct.pack_into("<I", frame, layout.cmd_crc_offset, frame_crc(frame))
+            client.exchange(bytes(frame))
+            assert emu.refused == 1 and emu.commands()[-1].wire.kp[0] == -48.0
+            off = bytearray(encode_command(layout, MotorCommand.hold(emu.sim.desc.nominal_q, 40.0, 1.0)))
+            off[layout.cmd_motor_offset] = 0  # motor 0 in mode 0 (off)
+            struct.pack_into("<I", off, layout.cmd_crc_offset, frame_crc(off))
+            client.exchange(bytes(off))
+            assert emu.refused == 1 and emu.commands()[-1].wire.mode[0] == 0
+            client.sock.sendto(b"\x00" * 10, emu.address)  # rejected: no reply, no step
+            assert _until(lambda: emu.stats.length == 1) and len(emu.commands()) == 2
+            assert emu.sim_time == pytest.approx(2 * emu.config.control_period)
+        finally:
+            client.close()
 
 
 # -- sockets and addresses ----------------------------------------------------------------------------------------

@@ -262,7 +262,7 @@ class UnitreeRobot(Robot):
         with self._lock:
             total, low, high, n, squares = self._periods
             mean = total / n if n else 0.0
-            foreign = getattr(self._transport, "foreign", 0)
+            foreign = self._transport.foreign if self._transport is not None else 0
             return LinkStats(
                 **self._counts, valid_states=self._fresh, rejected_states=self.decode_stats.rejected,
                 foreign=foreign, state_age=time.monotonic() - self._state_at,

@@ -24,7 +24,13 @@ _MAX_DRAIN = 256  # datagrams taken per `receive` call, so a flood cannot hold t
 
 @runtime_checkable
 class Transport(Protocol):
-    """What a low-level link needs from its datagram channel (a UDP socket, or a test's fake)."""
+    """What a low-level link needs from its datagram channel (a UDP socket, or a test's fake).
+
+    Attributes:
+        foreign: datagrams dropped so far because they came from another address than the target.
+    """
+
+    foreign: int
 
     def send(self, frame: bytes) -> None:
         """Send one datagram to the target."""
