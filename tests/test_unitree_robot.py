@@ -472,6 +472,34 @@ def test_emulator_gives_no_torque_to_what_a_motor_cannot_apply() -> None:
             client.close()
 
 
+class BrokenTransport(FakeTransport):
+    """A fake whose send fails after a few frames, as a socket whose interface went away."""
+
+    def send(self, frame: bytes) -> None:
+        if len(self.sent) >= 40:
+            raise OSError("network is unreachable")
+        super().send(frame)
+        with self.lock:
+            self.inbox.append(self.reply)
+
+
+def test_a_dead_link_thread_is_an_error_in_the_callers_thread() -> None:
+    fake = BrokenTransport()
+    robot = UnitreeRobot(UnitreeRobotConfig(robot="a1", target_host=LOOPBACK, target_port=9), transport=fake)
+    state = RobotState(tick=0, time=0.0, q=robot.desc.nominal_q, dq=np.zeros(12), tau_est=np.zeros(12),
+                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
+    fake.reply = encode_state(robot.layout, state)
+    with robot:
+        robot.write(_hold(robot))
+        assert _until(lambda: robot.link_failure is not None)
+        with pytest.raises(RobotLinkError, match="unreachable"):
+            robot.read()
+        with pytest.raises(RobotLinkError, match="link thread died"):
+            robot.write(_hold(robot))
+    assert not robot.is_connected
+
+
 # -- sockets and addresses ----------------------------------------------------------------------------------------
 def test_busy_port_is_a_clear_error() -> None:
     first = UdpTransport((LOOPBACK, 0), (LOOPBACK, 9))

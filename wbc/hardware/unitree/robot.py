@@ -252,6 +252,12 @@ class UnitreeRobot(Robot):
             return self._extras
 
     @property
+    def link_failure(self) -> BaseException | None:
+        """The exception that stopped the link thread (nothing is sent after it), or None while it runs."""
+        with self._lock:
+            return self._failure
+
+    @property
     def state_age(self) -> float:
         """Time since the newest valid state arrived [s]; inf before the first."""
         with self._lock:
