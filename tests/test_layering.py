@@ -24,6 +24,7 @@ LAYERS = (
     ("wbc.scenario",),
     ("wbc.hardware",),
     ("wbc.hardware.mujoco", "wbc.estimation"),
+    ("wbc.hardware.emulators",),
     ("wbc.mpc", "wbc.learned", "wbc.learned.policy"),
     ("wbc.learned.env",),
     ("wbc.learned.train",),

@@ -27,6 +27,9 @@ __all__ = [
     "MissingCapabilityError",
     "FrameError",
     "SafetyResetError",
+    "PortBusyError",
+    "TargetRefusedError",
+    "RobotLinkError",
 ]
 
 
@@ -185,3 +188,32 @@ class SafetyResetError(WbcError, RuntimeError):
 
     The message lists each reason and what to do about it.
     """
+
+
+class PortBusyError(WbcError, OSError):
+    """A UDP port could not be bound because another socket holds it.
+
+    The vendor SDK then runs silently on an ephemeral port, deaf to the robot; `wbc` refuses instead. The message
+    names the address and says how to free or change it.
+
+    Attributes:
+        host: the address asked for.
+        port: the port asked for.
+    """
+
+    def __init__(self, host: str, port: int, detail: str) -> None:
+        self.host = host
+        self.port = port
+        super().__init__(f"cannot bind UDP {host}:{port}: {detail}; another process (or an unclosed robot) holds the "
+                         "port: close it, or choose another local port (port 0 picks a free one)")
+
+
+class TargetRefusedError(ConfigError):
+    """A hardware link was pointed at an address outside 127.0.0.0/8 without saying that a real robot is meant.
+
+    The message names the address and the switch (``allow_hardware=True``) that allows it.
+    """
+
+
+class RobotLinkError(WbcError, RuntimeError):
+    """The link to a robot failed: no valid state arrived in time, or the link thread died; the message says which."""

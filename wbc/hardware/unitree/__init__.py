@@ -3,8 +3,9 @@
 `encode_command` turns a `MotorCommand` into a LowCmd frame (checked, clamped, then quantised as the SDK does);
 `decode_state` turns a LowState frame into a `RobotState` and `LowStateExtras`, rejecting (and counting in a
 `DecodeStats`) any frame of the wrong length, header or CRC or with a non-finite value. `decode_command` and
-`encode_state` are the other side of the wire, for an emulator. No I/O here: the UDP backend and the emulator sit
-on top of these functions.
+`encode_state` are the other side of the wire, for an emulator. On top of
+them: `UdpTransport` (the socket), the address policy (`check_target`: loopback unless ``allow_hardware``) and
+`UnitreeRobot`, the backend with its link thread; the emulator lives in `wbc.hardware.emulators`.
 """
 
 from wbc.hardware.unitree.battery import Battery
@@ -27,30 +28,50 @@ from wbc.hardware.unitree.layout import (
     FrameLayout,
     frame_layout,
 )
+from wbc.hardware.unitree.link_stats import LinkStats
 from wbc.hardware.unitree.remote import BUTTONS, L2_B_MASK, Remote
+from wbc.hardware.unitree.robot import (
+    DESCRIPTIONS,
+    SDK_POSITION_LIMITS,
+    UnitreeRobot,
+    UnitreeRobotConfig,
+    unitree_joint_table,
+)
 from wbc.hardware.unitree.state_codec import decode_state, encode_state
 from wbc.hardware.unitree.state_extras import LowStateExtras
+from wbc.hardware.unitree.target import announce_hardware_target, check_target, is_loopback
+from wbc.hardware.unitree.transport import MAX_DATAGRAM, Transport, UdpTransport
 from wbc.hardware.unitree.wire_command import WireCommand
 
 __all__ = [
     "A1_LAYOUT",
     "BUTTONS",
+    "DESCRIPTIONS",
     "GO1_LAYOUT",
     "KD_WIRE_MAX",
     "KP_WIRE_MAX",
     "L2_B_MASK",
     "LAYOUTS",
+    "MAX_DATAGRAM",
     "MODE_SERVO",
     "POS_STOP_F",
     "REJECT_REASONS",
+    "SDK_POSITION_LIMITS",
     "TAU_WIRE_MAX",
     "VEL_STOP_F",
     "Battery",
     "DecodeStats",
     "FrameLayout",
+    "LinkStats",
     "LowStateExtras",
     "Remote",
+    "Transport",
+    "UdpTransport",
+    "UnitreeRobot",
+    "UnitreeRobotConfig",
     "WireCommand",
+    "announce_hardware_target",
+    "check_target",
     "crc_words",
     "decode_command",
     "decode_state",
@@ -58,4 +79,6 @@ __all__ = [
     "encode_state",
     "frame_crc",
     "frame_layout",
+    "is_loopback",
+    "unitree_joint_table",
 ]

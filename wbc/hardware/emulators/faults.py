@@ -1,0 +1,125 @@
+"""`Fault` and `FaultSet`: what an emulator can be told to do wrong, and how each fault bends a reply.
+
+Frame faults change what goes on the wire (nothing, a corrupt, short or long datagram, one from a foreign port, late
+or dropped replies); state faults change what the reported state says (a joint beyond its range, an overheated
+motor, a motor in an error mode, an IMU reading of a fall, the remote's L2+B). A `FaultSet` is shared by the test
+thread that injects and the emulator thread that applies, so it is locked.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+import threading
+
+import numpy as np
+
+from wbc.errors import ConfigError
+from wbc.hardware.unitree import L2_B_MASK, LowStateExtras, Remote
+from wbc.types import RobotState
+
+__all__ = ["FRAME_FAULTS", "STATE_FAULTS", "Fault", "FaultSet", "apply_state_faults", "mangle_frame"]
+
+
+class Fault(enum.Enum):
+    """A fault an emulator injects on demand; the value each takes (`FaultSet.inject`) is in brackets.
+
+    Frame faults: SILENCE (no replies); CORRUPT (a flipped bit: bad CRC); SHORT (one byte missing); LONG (four bytes
+    more); FOREIGN_PORT (replies sent from another port); DELAY [s, default 0.05] (each reply sent that much later);
+    DROP [probability, default 1.0] (each reply dropped with it).
+    State faults: JOINT_OUT_OF_RANGE [(joint, q) default (2, 0.5)] (calf 0 reports q); OVER_TEMPERATURE [deg C,
+    default 95] (every motor); MOTOR_ERROR [mode, default 0] (every motor reports that mode); FALL [roll rad,
+    default pi/2] (the IMU reads the trunk rolled); REMOTE_L2_B (the remote's L2 and B held).
+    """
+
+    SILENCE = "silence"
+    CORRUPT = "corrupt"
+    SHORT = "short"
+    LONG = "long"
+    FOREIGN_PORT = "foreign_port"
+    DELAY = "delay"
+    DROP = "drop"
+    JOINT_OUT_OF_RANGE = "joint_out_of_range"
+    OVER_TEMPERATURE = "over_temperature"
+    MOTOR_ERROR = "motor_error"
+    FALL = "fall"
+    REMOTE_L2_B = "remote_l2_b"
+
+
+FRAME_FAULTS = (Fault.SILENCE, Fault.CORRUPT, Fault.SHORT, Fault.LONG, Fault.FOREIGN_PORT, Fault.DELAY, Fault.DROP)
+STATE_FAULTS = (Fault.JOINT_OUT_OF_RANGE, Fault.OVER_TEMPERATURE, Fault.MOTOR_ERROR, Fault.FALL, Fault.REMOTE_L2_B)
+
+_DEFAULTS: dict[Fault, object] = {
+    Fault.DELAY: 0.05, Fault.DROP: 1.0, Fault.JOINT_OUT_OF_RANGE: (2, 0.5), Fault.OVER_TEMPERATURE: 95,
+    Fault.MOTOR_ERROR: 0, Fault.FALL: math.pi / 2,
+}
+
+
+class FaultSet:
+    """The faults active now, each with its value (thread-safe)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._active: dict[Fault, object] = {}
+
+    def inject(self, fault: Fault, value: object = None) -> None:
+        """Activate `fault` (with `value`, or its default) until `clear`.
+
+        Raises:
+            ConfigError: `fault` is not a `Fault`.
+        """
+        if not isinstance(fault, Fault):
+            raise ConfigError(f"inject: {fault!r} is not a Fault; valid: {', '.join(f.name for f in Fault)}")
+        with self._lock:
+            self._active[fault] = _DEFAULTS.get(fault) if value is None else value
+
+    def clear(self, fault: Fault | None = None) -> None:
+        """Deactivate `fault`, or every fault if None."""
+        with self._lock:
+            if fault is None:
+                self._active.clear()
+            else:
+                self._active.pop(fault, None)
+
+    def snapshot(self) -> dict[Fault, object]:
+        """The active faults and their values, copied."""
+        with self._lock:
+            return dict(self._active)
+
+
+def apply_state_faults(active: dict[Fault, object], state: RobotState,
+                       extras: LowStateExtras) -> tuple[RobotState, LowStateExtras]:
+    """`state` and `extras` as the active state faults make the robot report them."""
+    if Fault.JOINT_OUT_OF_RANGE in active:
+        joint, value = active[Fault.JOINT_OUT_OF_RANGE]
+        q = state.q.copy()
+        q[int(joint)] = float(value)
+        state = dataclasses.replace(state, q=q)
+    if Fault.OVER_TEMPERATURE in active:
+        extras = dataclasses.replace(extras, motor_temperature=np.full(12, int(active[Fault.OVER_TEMPERATURE]),
+                                                                        dtype=np.int8))
+    if Fault.MOTOR_ERROR in active:
+        extras = dataclasses.replace(extras, motor_mode=np.full(12, int(active[Fault.MOTOR_ERROR]), dtype=np.uint8))
+    if Fault.FALL in active:
+        roll = float(active[Fault.FALL])
+        quat = np.array([math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0])
+        gravity_in_body = 9.81 * np.array([0.0, math.sin(roll), math.cos(roll)])
+        state = dataclasses.replace(state, imu_quat=quat, accel_in_body=gravity_in_body)
+        extras = dataclasses.replace(extras, imu_rpy=np.array([roll, 0.0, 0.0]))
+    if Fault.REMOTE_L2_B in active:
+        extras = dataclasses.replace(extras, remote=Remote.build(buttons=L2_B_MASK))
+    return state, extras
+
+
+def mangle_frame(active: dict[Fault, object], frame: bytes) -> bytes:
+    """`frame` as the active corrupting faults put it on the wire."""
+    if Fault.CORRUPT in active:
+        buf = bytearray(frame)
+        buf[len(buf) // 2] ^= 0x01
+        frame = bytes(buf)
+    if Fault.SHORT in active:
+        frame = frame[:-1]
+    if Fault.LONG in active:
+        frame = frame + bytes(4)
+    return frame

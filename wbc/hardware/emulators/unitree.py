@@ -1,0 +1,298 @@
+"""`UnitreeEmulator`: an A1 or Go1 on 127.0.0.1 that speaks the exact low-level wire, backed by `MujocoRobot`.
+
+Each LowCmd datagram is decoded strictly (`decode_command`; rejects are counted in `stats`), logged, converted to
+a `MotorCommand` (a motor whose mode is not servo 0x0A gets no torque, and so does a frame with a negative gain,
+counted in `refused`) and written to a legs-only `MujocoRobot`, whose physics and motor law are the arena's. The
+reply is an `encode_state` frame of the simulated sensors, sent to the address the command came from.
+
+Two modes. ``lockstep``: each valid command advances physics by one control period and is answered by one state,
+so simulated time moves exactly with the commands a backend sends. ``realtime``: physics steps at wall-clock pace
+on the emulator's own thread, which sends a state every period to the latest sender, as the robot does. Faults
+(`Fault`) bend the replies on demand: `inject` / `clear`.
+"""
+
+from __future__ import annotations
+
+import collections
+import errno
+import math
+import random
+import select
+import socket
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbc.errors import CommandError, ConfigError, FrameError, PortBusyError, RobotLinkError, UnknownNameError
+from wbc.hardware.emulators.faults import Fault, FaultSet, apply_state_faults, mangle_frame
+from wbc.hardware.emulators.logged_command import LoggedCommand
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.unitree import (
+    MODE_SERVO,
+    DecodeStats,
+    LowStateExtras,
+    decode_command,
+    encode_state,
+    frame_layout,
+)
+from wbc.hardware.unitree.robot import DESCRIPTIONS
+from wbc.hardware.unitree.target import is_loopback
+from wbc.hardware.unitree.transport import MAX_DATAGRAM
+from wbc.types import BaseTruth, MotorCommand
+
+__all__ = ["MODES", "UnitreeEmulator", "UnitreeEmulatorConfig"]
+
+MODES = ("lockstep", "realtime")
+_POLL = 0.01  # [s] longest the emulator thread blocks, so `close` is prompt
+
+
+@dataclass(frozen=True, kw_only=True)
+class UnitreeEmulatorConfig:
+    """Configuration of an emulated robot.
+
+    Attributes:
+        robot: ``a1`` or ``go1``.
+        mode: ``lockstep`` or ``realtime``.
+        host: the loopback address to bind (127.0.0.0/8 only).
+        port: the UDP port to bind; 0 picks a free one (read it back from `UnitreeEmulator.address`).
+        control_period: physics time per command (lockstep) or per reply (realtime) [s].
+        motor_temperature: temperature every motor reports [deg C].
+        log_size: most recent decoded commands kept.
+        seed: seed of the simulation and of the DROP fault's coin.
+    """
+
+    robot: str = "go1"
+    mode: str = "lockstep"
+    host: str = "127.0.0.1"
+    port: int = 0
+    control_period: float = 0.002
+    motor_temperature: int = 35
+    log_size: int = 100_000
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.robot not in DESCRIPTIONS:
+            raise UnknownNameError("Unitree robot", self.robot, tuple(DESCRIPTIONS))
+        if self.mode not in MODES:
+            raise UnknownNameError("emulator mode", self.mode, MODES)
+        if not is_loopback(self.host):
+            raise ConfigError(f"UnitreeEmulatorConfig.host {self.host!r}: an emulator binds 127.0.0.0/8 only")
+        if not 0 < self.control_period <= 0.01:
+            raise ConfigError(f"UnitreeEmulatorConfig.control_period must be in (0, 0.01] s, got "
+                              f"{self.control_period}")
+
+
+class UnitreeEmulator:
+    """The emulated robot: a UDP server thread over a `MujocoRobot`. A context manager (`start` / `close`).
+
+    Args:
+        config: what to emulate.
+        sim: the simulated robot (legs only); None builds one of ``config.robot`` with arm mode ``none``.
+    """
+
+    def __init__(self, config: UnitreeEmulatorConfig | None = None, sim: MujocoRobot | None = None) -> None:
+        self.config = config if config is not None else UnitreeEmulatorConfig()
+        self.layout = frame_layout(self.config.robot)
+        self.sim = sim if sim is not None else MujocoRobot(MujocoRobotConfig(
+            robot=DESCRIPTIONS[self.config.robot], arm_mode="none"))
+        if self.sim.num_joints != 12:
+            raise ConfigError(f"UnitreeEmulator: the sim must drive the 12 legs only (arm_mode 'none'), it has "
+                              f"{self.sim.num_joints} joints")
+        self.stats = DecodeStats()
+        self.refused = 0  # valid frames whose gains a motor cannot apply (negative): the motors got no torque
+        self.replies = 0  # state datagrams sent
+        self.faults = FaultSet()
+        self._log: collections.deque[LoggedCommand] = collections.deque(maxlen=self.config.log_size)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._sock: socket.socket | None = None
+        self._foreign: socket.socket | None = None
+        self._peer: tuple[str, int] | None = None
+        self._pending: list[tuple[float, bytes, tuple[str, int]]] = []
+        self._coin = random.Random(self.config.seed)
+        self._off = MotorCommand.damping(12, 0.0)
+        self.failure: BaseException | None = None
+        self.address: tuple[str, int] = (self.config.host, 0)
+
+    # -- lifecycle ------------------------------------------------------------------------------------------------
+    def start(self) -> UnitreeEmulator:
+        """Bind the socket, build the simulation and start the server thread. Idempotent.
+
+        Raises:
+            PortBusyError: the configured port is held by another socket.
+            RobotLinkError: the socket could not be bound for another reason.
+        """
+        if self._thread is not None:
+            return self
+        sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            sock.bind((self.config.host, self.config.port))
+        except OSError as exc:
+            sock.close()
+            if exc.errno in (errno.EADDRINUSE, errno.EACCES):
+                raise PortBusyError(self.config.host, self.config.port, exc.strerror or str(exc)) from None
+            raise RobotLinkError(f"UnitreeEmulator: cannot bind {self.config.host}:{self.config.port}: {exc}; "
+                                 "port 0 picks a free one") from None
+        sock.setblocking(False)
+        foreign = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        foreign.bind((self.config.host, 0))
+        self._sock, self._foreign = sock, foreign
+        self.address = sock.getsockname()[:2]
+        self.sim.connect()
+        self.sim.reset(self.config.seed)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name=f"unitree-{self.config.robot}-emulator", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop the thread and close the sockets. Idempotent."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        for s in (self._sock, self._foreign):
+            if s is not None:
+                s.close()
+        self._sock = self._foreign = None
+
+    def __enter__(self) -> UnitreeEmulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- test API -------------------------------------------------------------------------------------------------
+    def inject(self, fault: Fault, value: object = None) -> None:
+        """Activate `fault` (see `Fault` for its value) until `clear`."""
+        self.faults.inject(fault, value)
+
+    def clear(self, fault: Fault | None = None) -> None:
+        """Deactivate `fault`, or every fault if None."""
+        self.faults.clear(fault)
+
+    def commands(self) -> list[LoggedCommand]:
+        """The decoded commands received so far (the latest `log_size`), oldest first."""
+        with self._lock:
+            return list(self._log)
+
+    def clear_log(self) -> None:
+        """Forget the decoded commands received so far."""
+        with self._lock:
+            self._log.clear()
+
+    def base_truth(self) -> BaseTruth:
+        """The simulated trunk's true pose and velocity now."""
+        with self._lock:
+            return self.sim.base_truth()
+
+    @property
+    def sim_time(self) -> float:
+        """Simulation time [s]."""
+        with self._lock:
+            return self.sim.time
+
+    # -- server thread --------------------------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            self._serve()
+        except BaseException as exc:  # noqa: BLE001 - kept for the test to read; the thread must not die silently
+            self.failure = exc
+
+    def _serve(self) -> None:
+        sock, period = self._sock, self.config.control_period
+        realtime = self.config.mode == "realtime"
+        next_step = time.monotonic() + period
+        while not self._stop.is_set():
+            now = time.monotonic()
+            wake = [now + _POLL] + ([next_step] if realtime else []) + [p[0] for p in self._pending]
+            timeout = min(wake) - now
+            if timeout > 0:
+                select.select([sock], [], [], timeout)  # not epoll: its timeout is whole milliseconds
+            self._drain(sock, step=not realtime)
+            now = time.monotonic()
+            if realtime and now >= next_step:
+                with self._lock:
+                    self.sim.advance(period)
+                if self._peer is not None:
+                    self._reply(self._peer)
+                next_step += period
+                if next_step < now:
+                    next_step = now + period
+            self._flush(now)
+
+    def _drain(self, sock: socket.socket, *, step: bool) -> None:
+        for _ in range(256):
+            try:
+                data, peer = sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
+                return
+            except ConnectionRefusedError:
+                continue
+            try:
+                wire = decode_command(self.layout, data, stats=self.stats)
+            except FrameError:
+                continue
+            cmd = self._off
+            if (wire.mode == MODE_SERVO).all():
+                try:
+                    cmd = wire.motor_command()
+                except CommandError:
+                    self.refused += 1
+            elif (wire.mode == MODE_SERVO).any():
+                mask = wire.mode == MODE_SERVO
+                try:
+                    on = wire.motor_command()
+                    cmd = MotorCommand(q=on.q, dq=on.dq, kp=on.kp * mask, kd=on.kd * mask, tau=on.tau * mask)
+                except CommandError:
+                    self.refused += 1
+            with self._lock:
+                self._log.append(LoggedCommand(time=time.monotonic(), sim_time=self.sim.time, wire=wire))
+                self.sim.write(cmd)
+                if step:
+                    self.sim.advance(self.config.control_period)
+            self._peer = peer[:2]
+            if step:
+                self._reply(self._peer)
+
+    def _reply(self, peer: tuple[str, int]) -> None:
+        active = self.faults.snapshot()
+        if Fault.SILENCE in active:
+            return
+        if Fault.DROP in active and self._coin.random() < float(active[Fault.DROP]):
+            return
+        with self._lock:
+            state = self.sim.read()
+        w, x, y, z = state.imu_quat
+        rpy = np.array([math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
+                        math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x)))),
+                        math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))])
+        extras = LowStateExtras(motor_mode=np.full(12, MODE_SERVO, dtype=np.uint8),
+                                motor_temperature=np.full(12, self.config.motor_temperature, dtype=np.int8),
+                                imu_rpy=rpy)
+        state, extras = apply_state_faults(active, state, extras)
+        frame = mangle_frame(active, encode_state(self.layout, state, extras))
+        delay = float(active.get(Fault.DELAY, 0.0) or 0.0)
+        if delay > 0:
+            self._pending.append((time.monotonic() + delay, frame, peer))
+            return
+        self._send(frame, peer, foreign=Fault.FOREIGN_PORT in active)
+
+    def _send(self, frame: bytes, peer: tuple[str, int], *, foreign: bool) -> None:
+        sock = self._foreign if foreign else self._sock
+        try:
+            sock.sendto(frame, peer)
+            self.replies += 1
+        except (BlockingIOError, ConnectionRefusedError):
+            pass
+
+    def _flush(self, now: float) -> None:
+        if not self._pending:
+            return
+        due = [p for p in self._pending if p[0] <= now]
+        self._pending = [p for p in self._pending if p[0] > now]
+        for _, frame, peer in due:
+            self._send(frame, peer, foreign=False)

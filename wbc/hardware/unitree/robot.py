@@ -1,0 +1,353 @@
+"""`UnitreeRobot`: an A1 or Go1 (legs only) behind the `Robot` interface, over the low-level UDP wire.
+
+A link thread runs at a fixed rate (500 Hz by default). Every period it takes every queued datagram, decodes each
+with `decode_state` (a rejected frame is counted in `decode_stats` and never used) and keeps the newest valid state,
+then sends one LowCmd frame:
+
+- damping (Kp 0, Kd `damping_kd`) until the first valid state has arrived and `write` has been called;
+- the latest frame `write` encoded, while `write` is called at least every `write_deadline` seconds;
+- damping again once that deadline passes, until the next `write` (a stalled control loop leaves the robot
+  damped, not holding a stale target: the SDK has no watchdog);
+- damping for `close_damping` seconds when the robot is closed, then nothing.
+
+`read` returns the newest valid state; its `tick` counts the valid frames received (a freshness counter: the
+robot's own tick has no verified unit), so a frame whose tick did not advance is stale, and `state_age` says for
+how long. `advance(dt)` paces the caller on a monotonic clock, counts late calls, and then waits (at most two link
+periods) for a state newer than the one there was when it was called. Every value that reaches the wire was
+clamped twice: by `Robot.write` to the joint table (the URDF's position range intersected with the SDK's
+PositionLimit table) and by `encode_command` while quantising.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbc.errors import ConfigError, FrameError, RobotLinkError, UnknownNameError
+from wbc.hardware.robot import Robot
+from wbc.hardware.unitree.command_codec import encode_command
+from wbc.hardware.unitree.decode_stats import DecodeStats
+from wbc.hardware.unitree.layout import FrameLayout, frame_layout
+from wbc.hardware.unitree.link_stats import LinkStats
+from wbc.hardware.unitree.state_codec import decode_state
+from wbc.hardware.unitree.state_extras import LowStateExtras
+from wbc.hardware.unitree.target import announce_hardware_target, check_target
+from wbc.hardware.unitree.transport import Transport, UdpTransport
+from wbc.robots.description import RobotDescription
+from wbc.robots.joint_table import JointTable, joint_table
+from wbc.robots.registry import get_robot
+from wbc.types import MotorCommand, RobotState
+
+__all__ = ["DESCRIPTIONS", "SDK_POSITION_LIMITS", "UnitreeRobot", "UnitreeRobotConfig", "unitree_joint_table"]
+
+DESCRIPTIONS = {"a1": "a1-wx200", "go1": "go1-arm"}
+"""Robot name -> registry description whose legs-only variant (arm mode ``none``) the backend drives."""
+
+SDK_POSITION_LIMITS = {
+    "go1": (np.array([-1.047, -0.663, -2.721]), np.array([1.047, 2.966, -0.837])),
+    "a1": (np.array([-0.802, -1.05, -2.7]), np.array([0.802, 4.19, -0.916])),
+}
+"""The SDK safety class's PositionLimit table (hip, thigh, calf lower and upper [rad]), from the vendors' wheel."""
+
+
+def unitree_joint_table(robot: str) -> tuple[RobotDescription, JointTable]:
+    """The legs-only description of `robot` and its joint table, positions limited to URDF and SDK ranges both.
+
+    Raises:
+        UnknownNameError: `robot` is not ``a1`` or ``go1``.
+    """
+    if robot not in DESCRIPTIONS:
+        raise UnknownNameError("Unitree robot", robot, tuple(DESCRIPTIONS))
+    desc = get_robot(DESCRIPTIONS[robot], "none")
+    table = joint_table(desc)
+    lower, upper = (np.tile(a, 4) for a in SDK_POSITION_LIMITS[robot])
+    return desc, dataclasses.replace(table, lower=np.maximum(table.lower, lower),
+                                     upper=np.minimum(table.upper, upper))
+
+
+@dataclass(frozen=True, kw_only=True)
+class UnitreeRobotConfig:
+    """Configuration of a Unitree low-level link.
+
+    Attributes:
+        robot: ``a1`` or ``go1``.
+        target_host: the robot's (or an emulator's) IPv4 address; there is no default, and an address outside
+            127.0.0.0/8 needs `allow_hardware`.
+        target_port: its UDP port.
+        local_host: the address the link binds.
+        local_port: the port it binds; 0 picks a free one.
+        allow_hardware: allow a `target_host` outside 127.0.0.0/8 (a real robot).
+        rate_hz: link thread rate, 200..1000 [Hz].
+        write_deadline: longest gap between two `write` calls before the link damps the motors [s].
+        damping_kd: velocity gain of a damping frame [N m s / rad].
+        close_damping: how long `close` keeps sending damping frames [s].
+        connect_timeout: how long `connect` waits for the first valid state [s].
+    """
+
+    robot: str = "go1"
+    target_host: str
+    target_port: int
+    local_host: str = "127.0.0.1"
+    local_port: int = 0
+    allow_hardware: bool = False
+    rate_hz: float = 500.0
+    write_deadline: float = 0.05
+    damping_kd: float = 3.0
+    close_damping: float = 0.1
+    connect_timeout: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.robot not in DESCRIPTIONS:
+            raise UnknownNameError("Unitree robot", self.robot, tuple(DESCRIPTIONS))
+        check_target(self.target_host, self.target_port, allow_hardware=self.allow_hardware, what="target_host")
+        check_target(self.local_host, 1, allow_hardware=self.allow_hardware, what="local_host")
+        if not 200.0 <= self.rate_hz <= 1000.0:
+            raise ConfigError(f"UnitreeRobotConfig.rate_hz must be in 200..1000 Hz, got {self.rate_hz}")
+        for name in ("write_deadline", "close_damping", "connect_timeout"):
+            if not getattr(self, name) > 0:
+                raise ConfigError(f"UnitreeRobotConfig.{name} must be > 0 s, got {getattr(self, name)}")
+        if not 0 < self.damping_kd <= 10:
+            raise ConfigError(f"UnitreeRobotConfig.damping_kd must be in (0, 10] N m s/rad, got {self.damping_kd}")
+        if self.write_deadline < 2.0 / self.rate_hz:
+            raise ConfigError(f"UnitreeRobotConfig.write_deadline {self.write_deadline} s is shorter than two link "
+                              f"periods ({2.0 / self.rate_hz} s)")
+
+
+class UnitreeRobot(Robot):
+    """An A1 or Go1's 12 leg motors over the low-level UDP wire.
+
+    Args:
+        config: the link.
+        transport: the datagram channel; None builds a `UdpTransport` from `config` at `connect` (and closes it at
+            `close`). A transport handed in is the caller's to close.
+    """
+
+    def __init__(self, config: UnitreeRobotConfig, transport: Transport | None = None) -> None:
+        super().__init__()
+        self.config = config
+        self.layout: FrameLayout = frame_layout(config.robot)
+        self.desc, self._limits = unitree_joint_table(config.robot)
+        self._given_transport = transport
+        self._transport: Transport | None = None
+        self._period = 1.0 / config.rate_hz
+        self._damping = encode_command(self.layout, MotorCommand.damping(12, config.damping_kd), limits=self._limits)
+        self._lock = threading.Condition()
+        self._thread: threading.Thread | None = None
+        self._reset_link()
+
+    def _reset_link(self) -> None:
+        self.decode_stats = DecodeStats()
+        self._state: RobotState | None = None
+        self._extras: LowStateExtras | None = None
+        self._fresh = 0
+        self._state_at = -np.inf
+        self._frame: bytes | None = None
+        self._written_at = -np.inf
+        self._tripped = True
+        self._closing_until: float | None = None
+        self._stop = False
+        self._failure: BaseException | None = None
+        self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0, overruns=0, late_advances=0)
+        self._periods = [0.0, np.inf, 0.0, 0, 0.0]  # sum, min, max, count, sum of squares
+        self._worst_lateness = 0.0
+        self._pace_deadline: float | None = None
+        self._t0 = time.monotonic()
+
+    # -- Robot ----------------------------------------------------------------------------------------------------
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The 12 leg joints, house order (FR, FL, RR, RL x hip, thigh, calf)."""
+        return self.desc.joint_names
+
+    @property
+    def limits(self) -> JointTable:
+        """Motor limits; positions are the intersection of the URDF's and the SDK's PositionLimit ranges."""
+        return self._limits
+
+    def _connect(self) -> None:
+        cfg = self.config
+        self._reset_link()
+        if self._given_transport is not None:
+            self._transport = self._given_transport
+        else:
+            announce_hardware_target(cfg.target_host, cfg.target_port, cfg.robot)
+            self._transport = UdpTransport((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
+                                           allow_hardware=cfg.allow_hardware)
+        self._thread = threading.Thread(target=self._run, name=f"unitree-{cfg.robot}-link", daemon=True)
+        self._thread.start()
+        deadline = time.monotonic() + cfg.connect_timeout
+        with self._lock:
+            while self._state is None and self._failure is None and time.monotonic() < deadline:
+                self._lock.wait(max(0.0, deadline - time.monotonic()))
+            ok = self._state is not None
+        if not ok:
+            self._shutdown(damp=False)
+            raise RobotLinkError(
+                f"UnitreeRobot({cfg.robot}): no valid LowState from {cfg.target_host}:{cfg.target_port} within "
+                f"{cfg.connect_timeout} s ({self.decode_stats.rejected} rejected); is the robot (or emulator) on, in "
+                "low-level mode, and is target_port right?"
+            ) from self._failure
+
+    def _close(self) -> None:
+        self._shutdown(damp=True)
+
+    def _shutdown(self, *, damp: bool) -> None:
+        with self._lock:
+            if damp and self._failure is None:
+                self._closing_until = time.monotonic() + self.config.close_damping
+            else:
+                self._stop = True
+        if self._thread is not None:
+            self._thread.join(timeout=self.config.close_damping + 1.0)
+            self._thread = None
+        if self._transport is not None and self._given_transport is None:
+            self._transport.close()
+        self._transport = None
+
+    def _read(self) -> RobotState:
+        self._raise_failure()
+        with self._lock:
+            state = self._state
+        if state is None:
+            raise RobotLinkError(f"UnitreeRobot({self.config.robot}): no valid state yet")
+        return state
+
+    def _send(self, cmd: MotorCommand) -> None:
+        self._raise_failure()
+        frame = encode_command(self.layout, cmd, limits=self._limits)
+        with self._lock:
+            self._frame = frame
+            self._written_at = time.monotonic()
+
+    def _advance(self, dt: float) -> None:
+        with self._lock:
+            start_tick = self._fresh
+        now = time.monotonic()
+        if self._pace_deadline is None:
+            self._pace_deadline = now
+        deadline = self._pace_deadline + dt
+        if now > deadline:
+            with self._lock:
+                self._counts["late_advances"] += 1
+                self._worst_lateness = max(self._worst_lateness, now - deadline)
+            deadline = now  # resynchronise: a late call does not make the next ones hurry
+        else:
+            time.sleep(deadline - now)
+        self._pace_deadline = deadline
+        grace = time.monotonic() + 2.0 * self._period
+        with self._lock:
+            while self._fresh == start_tick and time.monotonic() < grace:
+                self._lock.wait(max(0.0, grace - time.monotonic()))
+        self._raise_failure()
+
+    # -- link-only API --------------------------------------------------------------------------------------------
+    @property
+    def extras(self) -> LowStateExtras | None:
+        """The newest valid state's extras (motor modes, temperatures, remote, battery), None before the first."""
+        with self._lock:
+            return self._extras
+
+    @property
+    def link_failure(self) -> BaseException | None:
+        """The exception that stopped the link thread (nothing is sent after it), or None while it runs."""
+        with self._lock:
+            return self._failure
+
+    @property
+    def state_age(self) -> float:
+        """Time since the newest valid state arrived [s]; inf before the first."""
+        with self._lock:
+            return time.monotonic() - self._state_at
+
+    def link_stats(self) -> LinkStats:
+        """A snapshot of the link's counters."""
+        with self._lock:
+            total, low, high, n, squares = self._periods
+            mean = total / n if n else 0.0
+            foreign = self._transport.foreign if self._transport is not None else 0
+            return LinkStats(
+                **self._counts, valid_states=self._fresh, rejected_states=self.decode_stats.rejected,
+                foreign=foreign, state_age=time.monotonic() - self._state_at,
+                period_mean=mean, period_std=float(np.sqrt(max(0.0, squares / n - mean * mean))) if n else 0.0,
+                period_min=low if n else 0.0, period_max=high,
+                worst_lateness=self._worst_lateness,
+            )
+
+    def _raise_failure(self) -> None:
+        if self._failure is not None:
+            raise RobotLinkError(f"UnitreeRobot({self.config.robot}): the link thread died: "
+                                 f"{self._failure!r}") from self._failure
+
+    # -- link thread ----------------------------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's thread
+            with self._lock:
+                self._failure = exc
+                self._lock.notify_all()
+
+    def _loop(self) -> None:
+        transport, period = self._transport, self._period
+        next_send = time.monotonic()
+        last_send: float | None = None
+        while True:
+            now = time.monotonic()
+            if now >= next_send:
+                with self._lock:
+                    if self._stop or (self._closing_until is not None and now >= self._closing_until):
+                        return
+                    frame = self._choose_frame(now)
+                    if last_send is not None:
+                        gap = now - last_send
+                        p = self._periods
+                        p[0] += gap
+                        p[1] = min(p[1], gap)
+                        p[2] = max(p[2], gap)
+                        p[3] += 1
+                        p[4] += gap * gap
+                    next_send += period
+                    if next_send < now:
+                        self._counts["overruns"] += 1
+                        next_send = now + period
+                transport.send(frame)
+                last_send = now
+            self._receive(transport)
+            wait = next_send - time.monotonic()
+            if wait > 0:
+                transport.wait_readable(wait)
+
+    def _choose_frame(self, now: float) -> bytes:
+        """The frame to send now (called with the lock held)."""
+        counts = self._counts
+        counts["frames_sent"] += 1
+        quiet = now - self._written_at > self.config.write_deadline
+        if quiet and self._frame is not None and not self._tripped:
+            counts["deadline_trips"] += 1
+        self._tripped = quiet
+        if self._closing_until is not None or self._state is None or self._frame is None or quiet:
+            counts["damping_sent"] += 1
+            return self._damping
+        return self._frame
+
+    def _receive(self, transport: Transport) -> None:
+        newest = None
+        for datagram in transport.receive():
+            try:
+                newest = decode_state(self.layout, datagram, time=0.0, stats=self.decode_stats)
+            except FrameError:
+                continue  # counted in decode_stats; the last good state stays
+        if newest is None:
+            return
+        now = time.monotonic()
+        state, extras = newest
+        with self._lock:
+            self._fresh += 1
+            self._state = dataclasses.replace(state, tick=self._fresh, time=now - self._t0)
+            self._extras = extras
+            self._state_at = now
+            self._lock.notify_all()
