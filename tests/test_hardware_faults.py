@@ -94,7 +94,8 @@ def _assert_latched(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand, si
 
 
 def _reset_and_check_ramp(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand) -> np.ndarray:
-    """Reset the latch; the first servo frame on the wire holds the measured pose with the ramp's start gains.
+    """Reset the latch; the first servo frame on the wire holds the measured pose with the ramp's start gains, and
+    the targets after it move no faster than the ramp's slew over wall time.
 
     Returns the measured pose the ramp started from."""
     state = safe.read()
@@ -104,11 +105,16 @@ def _reset_and_check_ramp(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorComma
     sent = safe.write(cmd)
     safe.advance(PERIOD)
     _loop(safe, cmd, 0.05)
-    first = _first_servo(_after(emu, reset_at))
+    servo = [c for c in _after(emu, reset_at) if not c.damping]
+    first = servo[0]
     np.testing.assert_allclose(first.wire.q, state.q, atol=Q_QUANTUM)
     np.testing.assert_allclose(first.wire.q, sent.q, atol=Q_QUANTUM)
     np.testing.assert_array_equal(first.wire.kp, safe.config.ramp_kp)
     assert np.all(first.wire.tau == 0)
+    assert len(servo) > 10 and safe.safety_state is SafetyState.RAMP
+    for c in servo[1:]:  # 2 loop periods of slack: a frame leaves the link up to a link period after its write
+        travel = np.abs(c.wire.q - first.wire.q).max()
+        assert travel <= safe.config.ramp_slew * (c.time - first.time + 2 * PERIOD) + Q_QUANTUM
     return state.q
 
 
