@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from wbc.control.stand import StandController, stand_command
-from wbc.errors import SafetyResetError
+from wbc.errors import RobotLinkError, SafetyResetError
 from wbc.hardware.emulators import Fault, LoggedCommand, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import MotorStatusSource, RemoteSource, SafeRobot, SafetyConfig, SafetyEvent, SafetyState
@@ -118,6 +118,18 @@ def _reset_and_check_ramp(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorComma
     return state.q
 
 
+def test_unitree_robot_reports_remote_and_motor_status_to_the_safety_layer() -> None:
+    robot = UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9))
+    assert isinstance(robot, RemoteSource) and isinstance(robot, MotorStatusSource)
+    with pytest.raises(RobotLinkError, match="no valid state"):
+        robot.remote()  # nothing to report before a state arrived
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
+        emu.inject(Fault.OVER_TEMPERATURE, 80)
+        emu.inject(Fault.REMOTE_L2_B)
+        with UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=emu.address[1])) as robot:
+            assert robot.remote().l2_b and (robot.motor_status().motor_temperature == 80).all()
+
+
 # -- 1: the state stream stops ------------------------------------------------------------------------------------
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_silence_damps_within_the_stale_timeout_latches_and_ramps_after_reset(robot: str) -> None:
@@ -135,6 +147,9 @@ def test_silence_damps_within_the_stale_timeout_latches_and_ramps_after_reset(ro
               f"(stale timeout {safe.config.stale_timeout_s * 1e3:.0f} ms)")
         assert latency <= safe.config.stale_timeout_s + 5 * PERIOD
         assert all(c.damping for c in frames if c.time >= first.time)
+        safe.read()
+        with pytest.raises(SafetyResetError, match="stale"):
+            safe.reset()  # nothing fresh to ramp from while the stream is silent
         emu.clear()  # the stream resumes: the latch holds
         resumed = time.monotonic()
         _assert_latched(emu, safe, cmd, first.time, 0.1)

@@ -12,10 +12,11 @@ then sends one LowCmd frame:
 
 `read` returns the newest valid state; its `tick` counts the valid frames received (a freshness counter: the
 robot's own tick has no verified unit), so a frame whose tick did not advance is stale, and `state_age` says for
-how long. `advance(dt)` paces the caller on a monotonic clock, counts late calls, and then waits (at most two link
-periods) for a state newer than the one there was when it was called. Every value that reaches the wire was
-clamped twice: by `Robot.write` to the joint table (the URDF's position range intersected with the SDK's
-PositionLimit table) and by `encode_command` while quantising.
+how long; `remote()` and `motor_status()` report that state's remote and motor modes and temperatures (the safety
+layer's `RemoteSource` and `MotorStatusSource`). `advance(dt)` paces the caller on a monotonic clock, counts late
+calls, and then waits (at most two link periods) for a state newer than the one there was when it was called.
+Every value that reaches the wire was clamped twice: by `Robot.write` to the joint table (the URDF's position
+range intersected with the SDK's PositionLimit table) and by `encode_command` while quantising.
 """
 
 from __future__ import annotations
