@@ -174,6 +174,22 @@ class UnitreeEmulator:
         """Deactivate `fault`, or every fault if None."""
         self.faults.clear(fault)
 
+    def reset(self, qpos: np.ndarray | None = None) -> None:
+        """Put the emulated robot back at its standing pose, or at configuration `qpos` (e.g. lying folded).
+
+        Args:
+            qpos: the simulation's full configuration (trunk position, quaternion w x y z, 12 joints) [m, rad];
+                None stands it at the nominal pose.
+
+        Raises:
+            ConfigError: `qpos` has the wrong size.
+        """
+        with self._lock:
+            if qpos is not None and np.shape(qpos) != (self.sim.model.nq,):
+                raise ConfigError(f"UnitreeEmulator.reset: qpos must have shape ({self.sim.model.nq},), got "
+                                  f"{np.shape(qpos)}")
+            self.sim.reset(self.config.seed, qpos=None if qpos is None else np.asarray(qpos, dtype=np.float64))
+
     def commands(self) -> list[LoggedCommand]:
         """The decoded commands received so far (the latest `log_size`), oldest first."""
         with self._lock:

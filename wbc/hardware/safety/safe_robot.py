@@ -183,6 +183,10 @@ class SafeRobot(Robot):
     def _read(self) -> RobotState:
         state = self.robot.read()
         now = self.now()
+        # Before this frame counts as news: a control loop that stalled between two reads (seen with a wall clock)
+        # left the robot unwatched for that long, and the backend damped it meanwhile; passing the controller's
+        # command straight on would be a jump from wherever it sagged to.
+        self._check_stale(now)
         fresh = self._last_tick is not None and state.tick != self._last_tick
         self._last_tick, self._latest, self._fresh = state.tick, state, fresh
         if fresh:

@@ -12,10 +12,11 @@ then sends one LowCmd frame:
 
 `read` returns the newest valid state; its `tick` counts the valid frames received (a freshness counter: the
 robot's own tick has no verified unit), so a frame whose tick did not advance is stale, and `state_age` says for
-how long. `advance(dt)` paces the caller on a monotonic clock, counts late calls, and then waits (at most two link
-periods) for a state newer than the one there was when it was called. Every value that reaches the wire was
-clamped twice: by `Robot.write` to the joint table (the URDF's position range intersected with the SDK's
-PositionLimit table) and by `encode_command` while quantising.
+how long; `remote()` and `motor_status()` report that state's remote and motor modes and temperatures (the safety
+layer's `RemoteSource` and `MotorStatusSource`). `advance(dt)` paces the caller on a monotonic clock, counts late
+calls, and then waits (at most two link periods) for a state newer than the one there was when it was called.
+Every value that reaches the wire was clamped twice: by `Robot.write` to the joint table (the URDF's position
+range intersected with the SDK's PositionLimit table) and by `encode_command` while quantising.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from wbc.hardware.unitree.command_codec import encode_command
 from wbc.hardware.unitree.decode_stats import DecodeStats
 from wbc.hardware.unitree.layout import FrameLayout, frame_layout
 from wbc.hardware.unitree.link_stats import LinkStats
+from wbc.hardware.unitree.remote import Remote
 from wbc.hardware.unitree.state_codec import decode_state
 from wbc.hardware.unitree.state_extras import LowStateExtras
 from wbc.hardware.unitree.target import announce_hardware_target, check_target
@@ -250,6 +252,30 @@ class UnitreeRobot(Robot):
         """The newest valid state's extras (motor modes, temperatures, remote, battery), None before the first."""
         with self._lock:
             return self._extras
+
+    def remote(self) -> Remote:
+        """The wireless remote as of the newest valid state (a `RemoteSource` for the safety layer).
+
+        Raises:
+            RobotLinkError: no valid state yet, or the link thread died.
+        """
+        return self._latest_extras().remote
+
+    def motor_status(self) -> LowStateExtras:
+        """Motor modes and temperatures as of the newest valid state (a `MotorStatusSource` for the safety layer).
+
+        Raises:
+            RobotLinkError: no valid state yet, or the link thread died.
+        """
+        return self._latest_extras()
+
+    def _latest_extras(self) -> LowStateExtras:
+        self._raise_failure()
+        with self._lock:
+            extras = self._extras
+        if extras is None:
+            raise RobotLinkError(f"UnitreeRobot({self.config.robot}): no valid state yet; connect() first")
+        return extras
 
     @property
     def link_failure(self) -> BaseException | None:
