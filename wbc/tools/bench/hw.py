@@ -11,22 +11,27 @@ figures include that contention; a real robot's firmware would not.
 
 from __future__ import annotations
 
-import multiprocessing
+import json
+import os
+import select
+import subprocess
+import sys
 import time
 from dataclasses import asdict, dataclass
-from multiprocessing.connection import Connection
+from pathlib import Path
 
 import numpy as np
 
+import wbc
 from wbc.errors import BenchError
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.unitree import REJECT_REASONS, Transport, UdpTransport, UnitreeRobot, UnitreeRobotConfig
 from wbc.tools.bench.references import machine_description
 from wbc.types import MotorCommand
 
-__all__ = ["EmulatorCounts", "TimedTransport", "bench_hw"]
+__all__ = ["EmulatorCounts", "TimedTransport", "bench_hw", "serve_emulator_stdio"]
 
-_START_TIMEOUT = 60.0  # [s] longest wait for the emulator process to bind its port (spawn imports MuJoCo)
+_START_TIMEOUT = 60.0  # [s] longest wait for the emulator process to bind its port (it imports MuJoCo first)
 _STOP_MARGIN = 30.0  # [s] the emulator process stops by itself this long after the bench should have ended
 
 
@@ -101,15 +106,40 @@ class TimedTransport:
         self._inner.close()
 
 
-def _serve_emulator(robot: str, seconds: float, conn: Connection) -> None:
-    """The emulator process: bind, say where, serve until told to stop (or a bounded time), send the counts."""
+def serve_emulator_stdio(robot: str, seconds: float) -> None:
+    """The emulator process's body (``bench_hw`` starts it): lockstep emulator on a free loopback port.
+
+    Writes the address as a JSON line, serves until a line arrives on stdin (or `seconds` plus a margin pass:
+    never longer), then writes the counts (`EmulatorCounts`) and any failure as a JSON line.
+    """
     with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode="lockstep")) as emu:
-        conn.send(emu.address)
-        conn.poll(seconds + _STOP_MARGIN)
+        host, port = emu.address
+        print(json.dumps({"host": host, "port": port}), flush=True)
+        select.select([sys.stdin], [], [], seconds + _STOP_MARGIN)
         counts = EmulatorCounts.of(emu)
         failure = repr(emu.failure) if emu.failure is not None else None
-    conn.send((counts, failure))
-    conn.close()
+    print(json.dumps({"counts": counts.as_dict(), "failure": failure}), flush=True)
+
+
+def _start_emulator_process(robot: str, seconds: float) -> subprocess.Popen[str]:
+    # a fresh interpreter rather than multiprocessing: its spawn re-imports the parent's __main__, which for
+    # ``python -m wbc.cli`` would run the command again
+    root = str(Path(wbc.__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    code = f"from wbc.tools.bench.hw import serve_emulator_stdio; serve_emulator_stdio({robot!r}, {seconds!r})"
+    return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            env=env)
+
+
+def _read_json_line(proc: subprocess.Popen[str], timeout: float, what: str) -> dict:
+    if not select.select([proc.stdout], [], [], timeout)[0]:
+        raise BenchError(f"bench hw: the emulator process did not {what} within {timeout} s")
+    line = proc.stdout.readline()
+    try:
+        return json.loads(line)
+    except json.JSONDecodeError:
+        raise BenchError(f"bench hw: the emulator process did not {what} (it wrote {line!r}; exit status "
+                         f"{proc.poll()})") from None
 
 
 def _percentile_ms(values: np.ndarray, q: float) -> float:
@@ -139,15 +169,10 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
     UnitreeEmulatorConfig(robot=robot)  # validate the name before starting a process
     if not seconds > 0:
         raise BenchError(f"bench hw: --seconds must be > 0, got {seconds}")
-    ctx = multiprocessing.get_context("spawn")  # a fresh interpreter: nothing of this process's threads is forked
-    ours, theirs = ctx.Pipe()
-    proc = ctx.Process(target=_serve_emulator, args=(robot, seconds, theirs), name=f"unitree-{robot}-emulator",
-                       daemon=True)
-    proc.start()
+    proc = _start_emulator_process(robot, seconds)
     try:
-        if not ours.poll(_START_TIMEOUT):
-            raise BenchError(f"bench hw: the emulator process did not bind a port within {_START_TIMEOUT} s")
-        host, port = ours.recv()
+        address = _read_json_line(proc, _START_TIMEOUT, "bind a port")
+        host, port = address["host"], int(address["port"])
         cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=rate_hz)
         timed = TimedTransport(UdpTransport((cfg.local_host, 0), (host, port)))
         link = UnitreeRobot(cfg, transport=timed)
@@ -166,17 +191,18 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
                 rejects = link.decode_stats.rejected
         finally:
             timed.close()
-        ours.send("stop")
-        if not ours.poll(10.0):
-            raise BenchError("bench hw: the emulator process did not report its counts within 10 s")
-        counts, failure = ours.recv()
-        if failure is not None:
-            raise BenchError(f"bench hw: the emulator failed: {failure}")
+        proc.stdin.write("stop\n")
+        proc.stdin.flush()
+        report = _read_json_line(proc, 10.0, "report its counts")
+        if report["failure"] is not None:
+            raise BenchError(f"bench hw: the emulator failed: {report['failure']}")
+        counts = EmulatorCounts(**report["counts"])
     finally:
-        proc.join(timeout=10.0)
-        if proc.is_alive():
-            proc.terminate()
-            proc.join(timeout=5.0)
+        try:
+            proc.wait(timeout=10.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5.0)
     sends = np.asarray(timed.send_times)
     receives = np.asarray(timed.receive_times)
     periods = np.diff(sends)
@@ -188,7 +214,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         "robot": robot,
         "seconds": seconds,
         "rate_hz": rate_hz,
-        "emulator_process": "separate (multiprocessing spawn), lockstep",
+        "emulator_process": "separate process, lockstep",
         "sends": int(sends.size),
         "replies_received": int(receives.size),
         "period_ms_p50": _percentile_ms(periods, 50),
