@@ -166,15 +166,12 @@ def _confirm_hardware(robot: str, host: str, port: int, *, yes: bool) -> None:
 def _hw_check(args: argparse.Namespace) -> int:
     host, port = _address(args.target, "--target")
     # the policy is checked here, before any socket exists, so the refusal can name the command's own switch
-    try:
-        check_target(host, port, allow_hardware=args.allow_hardware, what="--target")
-    except TargetRefusedError:
-        if args.allow_hardware or is_loopback(host):
-            raise
+    check_target(host, port, allow_hardware=True, what="--target")  # an IPv4 literal and a valid port
+    if not args.allow_hardware and not is_loopback(host):
         raise TargetRefusedError(
             f"--target {host}:{port} is outside 127.0.0.0/8: refusing to send to a real network. To check a real "
             "robot, add --allow-hardware (you will be asked to type yes; --yes confirms when stdin is not a "
-            "terminal)") from None
+            "terminal)")
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     local_host, local_port = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"),
