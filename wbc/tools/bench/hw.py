@@ -166,7 +166,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         ConfigError: `rate_hz` is out of range.
         BenchError: the emulator process did not start, or failed.
     """
-    UnitreeEmulatorConfig(robot=robot)  # validate the name before starting a process
+    UnitreeRobotConfig(robot=robot, target_host="127.0.0.1", target_port=1, rate_hz=rate_hz)  # validate first
     if not seconds > 0:
         raise BenchError(f"bench hw: --seconds must be > 0, got {seconds}")
     proc = _start_emulator_process(robot, seconds)
@@ -198,6 +198,8 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
             raise BenchError(f"bench hw: the emulator failed: {report['failure']}")
         counts = EmulatorCounts(**report["counts"])
     finally:
+        if not proc.stdin.closed:
+            proc.stdin.close()  # end of input: the emulator process stops at once, whatever went wrong here
         try:
             proc.wait(timeout=10.0)
         except subprocess.TimeoutExpired:
