@@ -52,7 +52,7 @@ def no_socket(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
 def test_emulate_runs_and_prints_counts(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "emulate", "--robot", "a1", "--seconds", "0.5", "--lockstep", "--fault", "corrupt"]) == 0
     out = capsys.readouterr().out
-    assert "emulating a a1 (lockstep) on 127.0.0.1:" in out and "faults: corrupt" in out
+    assert "emulated a1 (lockstep) on 127.0.0.1:" in out and "faults: corrupt" in out
     assert "commands decoded 0; rejected 0 (length 0, header 0, crc 0, non_finite 0)" in out and "replies 0" in out
 
 
@@ -84,7 +84,7 @@ def test_emulate_counts_what_it_decoded_and_rejected(capsys: pytest.CaptureFixtu
     server.join(timeout=10.0)
     assert codes == [0] and replies, "the emulator never answered"
     out = capsys.readouterr().out
-    assert "emulating a go1 (realtime) on 127.0.0.1:" + str(port) in out
+    assert "emulated go1 (realtime) on 127.0.0.1:" + str(port) in out
     assert "rejected 1 (length 1, header 0, crc 0, non_finite 0)" in out and "replies 0" not in out
 
 
@@ -95,7 +95,7 @@ def test_unknown_fault_exits_2_with_the_valid_names() -> None:
     assert proc.returncode == 2
     assert "Traceback" not in proc.stderr and "unknown fault 'bogus'" in proc.stderr
     assert all(f.value in proc.stderr for f in Fault)
-    assert "emulating" not in proc.stdout  # refused before the emulator started
+    assert "emulated" not in proc.stdout  # refused before the emulator started
 
 
 def test_check_prints_the_state_and_sends_only_damping(emulator: UnitreeEmulator,

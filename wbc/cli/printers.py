@@ -195,7 +195,7 @@ def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faul
                            seconds: float | None) -> None:
     """``wbc hw emulate``: where the emulator listens, and how it stops."""
     host, port = address
-    print(f"emulating a {robot} ({mode}) on {host}:{port}; faults: {', '.join(faults) or 'none'}; "
+    print(f"emulated {robot} ({mode}) on {host}:{port}; faults: {', '.join(faults) or 'none'}; "
           + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
     print(f"  connect with: wbc hw check --robot {robot} --target {host}:{port}", flush=True)
 
