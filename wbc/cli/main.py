@@ -1,4 +1,4 @@
-"""The ``wbc`` command: ``run``, ``compare``, ``view``, ``analyze ...``, ``bench ...``, ``train``, ``demo``.
+"""The ``wbc`` command: ``run``, ``compare``, ``view``, ``analyze ...``, ``bench ...``, ``hw ...``, ``train``, ``demo``.
 
 `main` parses the command line (`wbc.cli.parser`), calls the tool the command names and hands its result to a
 printer (`wbc.cli.printers`). A `WbcError` ends the command with its message and exit status 2; anything else is a
@@ -18,20 +18,27 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
 from wbc.control.registry import get_controller
-from wbc.errors import ConfigError, WbcError
+from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
+from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.train.adaptation_config import AdaptationConfig
 from wbc.learned.train.stages import stage_config
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.tools.arm_momentum import arm_momentum_study
-from wbc.tools.bench import bench_mpc, bench_sim, bench_sweep, bench_train
+from wbc.tools.bench import EmulatorCounts, bench_hw, bench_mpc, bench_sim, bench_sweep, bench_train
 from wbc.tools.tail import analyze_tail
 
-__all__ = ["HANDLERS", "main"]
+__all__ = ["FAULTS", "HANDLERS", "main"]
 
 DEMO_CONTROLLERS = ("stand", "stand-locked", "stand-noarm")
 """``wbc demo``'s A/B: the standing baseline with the arm actuated, locked and absent."""
+
+FAULTS: dict[str, Fault] = {f.value: f for f in Fault}
+"""``wbc hw emulate --fault NAME``: the emulator's faults by name."""
+
+_EMULATE_POLL = 0.05  # [s] how often ``hw emulate`` looks at its clock and its emulator's health
 
 
 def _analyze_tail(args: argparse.Namespace) -> int:
@@ -90,6 +97,99 @@ def _bench_train(args: argparse.Namespace) -> int:
         printers.print_json(result)
     else:
         printers.print_bench_train(result)
+    return 0
+
+
+def _bench_hw(args: argparse.Namespace) -> int:
+    result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate)
+    if args.json:
+        printers.print_json(result)
+    else:
+        printers.print_bench_hw(result)
+    return 0
+
+
+def _address(text: str, option: str) -> tuple[str, int]:
+    """``HOST:PORT`` as (host, port); the policy (`check_target`) is the caller's."""
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise ConfigError(f"{option} {text!r}: give HOST:PORT with an IPv4 address, e.g. 127.0.0.1:9000")
+    return host, int(port)
+
+
+def _hw_emulate(args: argparse.Namespace) -> int:
+    faults = []
+    for name in args.fault or ():
+        key = name.lower().replace("-", "_")
+        if key not in FAULTS:
+            raise UnknownNameError("fault", name, tuple(FAULTS))
+        faults.append(FAULTS[key])
+    if args.seconds is not None and not args.seconds > 0:
+        raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
+    cfg = UnitreeEmulatorConfig(robot=args.robot, mode="lockstep" if args.lockstep else "realtime", port=args.port)
+    emulator = UnitreeEmulator(cfg)
+    with emulator:
+        for fault in faults:
+            emulator.inject(fault)
+        printers.print_emulator_started(cfg.robot, cfg.mode, emulator.address, [f.value for f in faults],
+                                        seconds=args.seconds)
+        end = time.monotonic() + args.seconds if args.seconds is not None else float("inf")
+        try:
+            while time.monotonic() < end and emulator.failure is None:
+                time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
+        except KeyboardInterrupt:
+            pass
+    printers.print_emulator_counts(EmulatorCounts.of(emulator))
+    if emulator.failure is not None:
+        raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
+    return 0
+
+
+def _confirm_hardware(robot: str, host: str, port: int, *, yes: bool) -> None:
+    """Show the real robot's address and have the person at the terminal type ``yes`` (or `yes` given)."""
+    print(f"wbc hw check: {robot} at {host}:{port} is a REAL ROBOT (outside 127.0.0.0/8). Only damping frames "
+          "(Kp 0) will be sent; hang the robot in its harness first.", file=sys.stderr, flush=True)
+    if yes:
+        return
+    if not sys.stdin.isatty():
+        raise TargetRefusedError(f"--target {host}:{port} is a real robot and stdin is not a terminal, so nobody can "
+                                 "confirm; run it from a terminal, or add --yes to confirm on the command line")
+    try:
+        answer = input("type yes to connect: ")
+    except EOFError:
+        answer = ""
+    if answer.strip() != "yes":
+        raise TargetRefusedError(f"not confirmed (got {answer.strip()!r}, not 'yes'): nothing was sent to "
+                                 f"{host}:{port}")
+
+
+def _hw_check(args: argparse.Namespace) -> int:
+    host, port = _address(args.target, "--target")
+    # the policy is checked here, before any socket exists, so the refusal can name the command's own switch
+    check_target(host, port, allow_hardware=True, what="--target")  # an IPv4 literal and a valid port
+    if not args.allow_hardware and not is_loopback(host):
+        raise TargetRefusedError(
+            f"--target {host}:{port} is outside 127.0.0.0/8: refusing to send to a real network. To check a real "
+            "robot, add --allow-hardware (you will be asked to type yes; --yes confirms when stdin is not a "
+            "terminal)")
+    if not args.seconds > 0:
+        raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
+    local_host, local_port = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"),
+                                      "--local")
+    cfg = UnitreeRobotConfig(robot=args.robot, target_host=host, target_port=port, local_host=local_host,
+                             local_port=local_port, allow_hardware=args.allow_hardware)
+    if not is_loopback(host):
+        _confirm_hardware(cfg.robot, host, port, yes=args.yes)
+    robot = UnitreeRobot(cfg)
+    with robot:  # never written to: the link sends damping frames only
+        end = time.monotonic() + args.seconds
+        for _ in range(int(args.seconds / 0.01) + 2):
+            if time.monotonic() >= end:
+                break
+            robot.advance(0.01)
+        state, extras = robot.read(), robot.extras
+        link, decode = robot.link_stats(), robot.decode_stats
+    printers.print_hw_check(cfg.robot, (host, port), robot.joint_names, state, extras, link, decode)
     return 0
 
 
@@ -219,6 +319,9 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "bench mpc": _bench_mpc,
     "bench sweep": _bench_sweep,
     "bench train": _bench_train,
+    "bench hw": _bench_hw,
+    "hw emulate": _hw_emulate,
+    "hw check": _hw_check,
     "train": _train,
     "run": _run,
     "compare": _compare,

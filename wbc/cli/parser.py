@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 
 from wbc.control.registry import CONTROLLERS
+from wbc.hardware.emulators import Fault
+from wbc.hardware.unitree import DESCRIPTIONS
 from wbc.learned.train.stages import BASELINES, TASKS
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import ROBOTS
@@ -95,6 +97,46 @@ def build_parser() -> argparse.ArgumentParser:
     btrain.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measurement")
     btrain.add_argument("--json", action="store_true")
     btrain.set_defaults(handler="bench train")
+    bhw = bench.add_parser("hw", help="Unitree low-level link over loopback: send-period jitter, round trip, CPU",
+                           description="Run a UnitreeRobot against a UnitreeEmulator (lockstep) in its own process "
+                           "on 127.0.0.1 and time the link: the interval between sends, a command's round trip to "
+                           "the state that answers it, the link thread's CPU time per period, rejected frames.")
+    bhw.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
+    bhw.add_argument("--seconds", type=float, default=3.0, help="how long the link is measured [s] (default 3)")
+    bhw.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
+    bhw.add_argument("--json", action="store_true", help="print JSON")
+    bhw.set_defaults(handler="bench hw")
+
+    hw = sub.add_parser("hw", help="Unitree A1 / Go1 low-level link: an emulator, a read-only check of a robot")
+    hws = hw.add_subparsers(dest="what", required=True)
+    emulate = hws.add_parser("emulate", help="serve an emulated A1 / Go1 on 127.0.0.1, backed by the simulator",
+                             description="Speak the robot's low-level UDP wire on 127.0.0.1 (never another "
+                             "address), with the MuJoCo simulator behind it; print the address, and the counts "
+                             "(commands decoded, rejects by reason, replies) when it stops (Ctrl-C or --seconds).")
+    emulate.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
+    emulate.add_argument("--port", type=int, default=0, help="UDP port on 127.0.0.1 (default 0: a free one)")
+    emulate.add_argument("--fault", action="append", default=None, metavar="NAME",
+                         help=f"inject a fault at its default value (repeatable): {', '.join(f.value for f in Fault)}")
+    emulate.add_argument("--lockstep", action="store_true",
+                         help="one physics step and one reply per command (default: real time, a reply per period)")
+    emulate.add_argument("--seconds", type=float, default=None, help="stop after S seconds (default: Ctrl-C)")
+    emulate.set_defaults(handler="hw emulate")
+    check = hws.add_parser("check", help="connect to a robot, damping only, and print its state (never moves it)",
+                           description="Connect a UnitreeRobot, read states for a while sending only damping "
+                           "frames (Kp 0: no servo command is ever sent) and print the state: joints, IMU roll and "
+                           "pitch, battery, remote buttons, link statistics, rejected frames. A target outside "
+                           "127.0.0.0/8 needs --allow-hardware and a typed confirmation (or --yes).")
+    check.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
+    check.add_argument("--target", required=True, metavar="HOST:PORT",
+                       help="the robot's (or an emulator's) IPv4 address and UDP port, e.g. 127.0.0.1:PORT")
+    check.add_argument("--local", default=None, metavar="HOST:PORT",
+                       help="address to bind (default 127.0.0.1:0 for a loopback target, else 0.0.0.0:0)")
+    check.add_argument("--seconds", type=float, default=1.0, help="how long to read states [s] (default 1)")
+    check.add_argument("--allow-hardware", action="store_true",
+                       help="allow a target outside 127.0.0.0/8: a real robot")
+    check.add_argument("--yes", action="store_true",
+                       help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
+    check.set_defaults(handler="hw check")
 
     tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
     tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")

@@ -15,12 +15,16 @@ import numpy as np
 from wbc.arena.compare import ArenaResult
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table
+from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
 from wbc.tools.arm_momentum import ArmMomentumTrial
+from wbc.tools.bench.hw import EmulatorCounts
 from wbc.tools.bench.references import MPC_REFERENCE_TARGETS, REFERENCE_TARGETS, TRAIN_TARGET
 from wbc.tools.tail import TailAnalysis
+from wbc.types import RobotState
 
-__all__ = ["print_arena", "print_arm_momentum", "print_bench_mpc", "print_bench_sim", "print_bench_sweep",
-           "print_bench_train", "print_demo_header", "print_json", "print_recording", "print_tail",
+__all__ = ["print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
+           "print_bench_sweep", "print_bench_train", "print_demo_header", "print_emulator_counts",
+           "print_emulator_started", "print_hw_check", "print_json", "print_recording", "print_tail",
            "print_trained", "print_viewed_trial"]
 
 
@@ -169,3 +173,63 @@ def print_viewed_trial(what: str, record: TrialRecord) -> None:
 def print_recording(what: str, frames: int, path: Path) -> None:
     """Where a recorded replay was written."""
     print(f"recorded {frames} frames of {what} to {path}")
+
+
+def print_bench_hw(result: Mapping[str, object]) -> None:
+    """``wbc bench hw``: the link's send period, round trip, CPU per tick and rejects."""
+    print(f"Unitree {result['robot']} low-level link over loopback, {result['rate_hz']:.0f} Hz for "
+          f"{result['seconds']} s; emulator: {result['emulator_process']}")
+    print(f"  send period     p50 {result['period_ms_p50']:.3f} ms  p99 {result['period_ms_p99']:.3f} ms  "
+          f"max {result['period_ms_max']:.3f} ms")
+    print(f"  round trip      p50 {result['round_trip_ms_p50']:.3f} ms  p99 {result['round_trip_ms_p99']:.3f} ms "
+          "(command sent -> the state answering it taken by the link thread)")
+    print(f"  link thread CPU {result['cpu_us_per_tick']:.0f} us per tick")
+    emu = result["emulator"]
+    print(f"  frames          {result['sends']} sent, {result['replies_received']} states received, "
+          f"{result['rejects']} rejected by the robot; emulator decoded {emu['accepted']}, rejected "
+          f"{sum(emu['rejected'].values())}")
+    print(f"  machine: {result['machine']}")
+
+
+def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faults: Sequence[str], *,
+                           seconds: float | None) -> None:
+    """``wbc hw emulate``: where the emulator listens, and how it stops."""
+    host, port = address
+    print(f"emulated {robot} ({mode}) on {host}:{port}; faults: {', '.join(faults) or 'none'}; "
+          + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
+    print(f"  connect with: wbc hw check --robot {robot} --target {host}:{port}", flush=True)
+
+
+def print_emulator_counts(counts: EmulatorCounts) -> None:
+    """``wbc hw emulate``'s closing line: commands decoded, rejects by reason, replies."""
+    rejects = ", ".join(f"{reason} {counts.rejected[reason]}" for reason in REJECT_REASONS)
+    print(f"commands decoded {counts.accepted}; rejected {sum(counts.rejected.values())} ({rejects}); "
+          f"refused (negative gain) {counts.refused}; replies {counts.replies}")
+
+
+def print_hw_check(robot: str, target: tuple[str, int], joint_names: Sequence[str], state: RobotState,
+                   extras: LowStateExtras | None, link: LinkStats, decode: DecodeStats) -> None:
+    """``wbc hw check``: the robot's state as read, and how the link went."""
+    host, port = target
+    print(f"{robot} at {host}:{port}: {link.valid_states} states received, newest {1e3 * link.state_age:.1f} ms old")
+    print("  joint                 q [rad]   dq [rad/s]   tau_est [N m]" + ("   mode  temp [C]" if extras else ""))
+    for i, name in enumerate(joint_names):
+        row = f"  {name:<20}{state.q[i]:>9.3f}{state.dq[i]:>13.3f}{state.tau_est[i]:>16.2f}"
+        if extras is not None:
+            row += f"   0x{int(extras.motor_mode[i]):02X}{int(extras.motor_temperature[i]):>10d}"
+        print(row)
+    if extras is not None:
+        roll, pitch, _ = np.degrees(extras.imu_rpy)
+        print(f"  IMU roll {roll:.1f} deg, pitch {pitch:.1f} deg")
+        battery = extras.battery
+        print("  battery: " + ("none in this robot's state (A1)" if battery is None else
+                               f"{battery.soc} % SOC, {battery.current:.2f} A, "
+                               f"{float(np.sum(battery.cell_voltage)):.2f} V over the cells"))
+        held = extras.remote.held
+        estop = "  (L2+B held: e-stop)" if extras.remote.l2_b else ""
+        print(f"  remote buttons: {', '.join(held) or 'none'}{estop}")
+    print(f"  link: {link.frames_sent} frames sent, {link.damping_sent} of them damping (Kp 0); period mean "
+          f"{1e3 * link.period_mean:.3f} ms, std {1e3 * link.period_std:.3f} ms, max "
+          f"{1e3 * link.period_max:.3f} ms; {link.overruns} overruns; {link.foreign} foreign datagrams")
+    print(f"  rejected states: {decode.rejected} (" + ", ".join(f"{r} {getattr(decode, r)}" for r in REJECT_REASONS)
+          + ")")

@@ -1,0 +1,174 @@
+"""The ``wbc hw`` commands and ``wbc bench hw``: emulate, a damping-only check, the address policy, the bench's keys.
+
+Every socket binds 127.0.0.1 on a port the kernel picks and every frame goes to 127.0.0.1; the non-loopback targets
+(TEST-NET-1, 192.0.2.0/24) are only ever refused, and a test checks that no socket was created for them. Every
+run is bounded by its ``--seconds``.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import socket
+import subprocess
+import sys
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from wbc.cli import main
+from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.unitree import UdpTransport, encode_command, frame_layout
+from wbc.types import MotorCommand
+
+ROOT = Path(__file__).resolve().parents[1]
+NOT_LOOPBACK = "192.0.2.1:9"  # TEST-NET-1 (documentation only), discard port: refused before anything is sent
+
+
+@pytest.fixture(params=("a1", "go1"))
+def emulator(request: pytest.FixtureRequest) -> Iterator[UnitreeEmulator]:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot=request.param, mode="realtime")) as emu:
+        yield emu
+        assert emu.failure is None, emu.failure
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("unitree-")]
+
+
+@pytest.fixture
+def no_socket(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
+    """Make creating any socket fail the test; the list holds the attempts."""
+    attempts: list[tuple] = []
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        attempts.append(args)
+        raise AssertionError("a socket was opened for a refused target")
+
+    monkeypatch.setattr(socket, "socket", refuse)
+    return attempts
+
+
+def test_emulate_runs_and_prints_counts(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "emulate", "--robot", "a1", "--seconds", "0.5", "--lockstep", "--fault", "corrupt"]) == 0
+    out = capsys.readouterr().out
+    assert "emulated a1 (lockstep) on 127.0.0.1:" in out and "faults: corrupt" in out
+    assert "commands decoded 0; rejected 0 (length 0, header 0, crc 0, non_finite 0)" in out and "replies 0" in out
+
+
+def _free_loopback_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_emulate_counts_what_it_decoded_and_rejected(capsys: pytest.CaptureFixture[str]) -> None:
+    port = _free_loopback_port()
+    codes: list[int] = []
+    server = threading.Thread(target=lambda: codes.append(main(["hw", "emulate", "--port", str(port),
+                                                                "--seconds", "1.0"])))
+    server.start()
+    layout = frame_layout("go1")
+    frame = encode_command(layout, MotorCommand.damping(12, 3.0))
+    link = UdpTransport(("127.0.0.1", 0), ("127.0.0.1", port))
+    try:
+        replies = []
+        for _ in range(200):  # bounded: 200 x 5 ms, stops once the emulator answers
+            link.send(frame)
+            if link.wait_readable(0.005):
+                replies += link.receive()
+                break
+        link.send(frame[:-1])  # one byte short: rejected as length
+    finally:
+        link.close()
+    server.join(timeout=10.0)
+    assert codes == [0] and replies, "the emulator never answered"
+    out = capsys.readouterr().out
+    assert "emulated go1 (realtime) on 127.0.0.1:" + str(port) in out
+    assert "rejected 1 (length 1, header 0, crc 0, non_finite 0)" in out and "replies 0" not in out
+
+
+def test_unknown_fault_exits_2_with_the_valid_names() -> None:
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    proc = subprocess.run([sys.executable, "-m", "wbc.cli", "hw", "emulate", "--seconds", "0.1", "--fault", "bogus"],
+                          capture_output=True, text=True, timeout=60, cwd=ROOT, env=env)
+    assert proc.returncode == 2
+    assert "Traceback" not in proc.stderr and "unknown fault 'bogus'" in proc.stderr
+    assert all(f.value in proc.stderr for f in Fault)
+    assert "emulated" not in proc.stdout  # refused before the emulator started
+
+
+def test_check_prints_the_state_and_sends_only_damping(emulator: UnitreeEmulator,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    host, port = emulator.address
+    assert host == "127.0.0.1"
+    robot = emulator.config.robot
+    assert main(["hw", "check", "--robot", robot, "--target", f"{host}:{port}", "--seconds", "0.3"]) == 0
+    out = capsys.readouterr().out
+    for text in (f"{robot} at {host}:{port}", "FR_hip_joint", "RL_calf_joint", "IMU roll", "battery",
+                 "remote buttons: none", "link:", "rejected states: 0"):
+        assert text in out, (text, out)
+    assert ("none in this robot's state" in out) == (robot == "a1")
+    log = emulator.commands()
+    assert len(log) > 50  # ~0.3 s at 500 Hz, plus the closing damping
+    assert all(c.damping and (c.wire.kp == 0).all() for c in log)
+
+
+def test_check_shows_the_estop_buttons(capsys: pytest.CaptureFixture[str]) -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
+        emu.inject(Fault.REMOTE_L2_B)
+        assert main(["hw", "check", "--target", f"127.0.0.1:{emu.address[1]}", "--seconds", "0.1"]) == 0
+        assert all(c.damping for c in emu.commands())
+    assert "remote buttons: L2, B  (L2+B held: e-stop)" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("target", [NOT_LOOPBACK, "10.0.0.2:9000"])
+def test_non_loopback_target_is_refused_before_any_socket(target: str, no_socket: list,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "check", "--target", target]) == 2
+    err = capsys.readouterr().err
+    assert "outside 127.0.0.0/8" in err and "--allow-hardware" in err
+    assert not no_socket
+
+
+def test_hostname_target_is_refused(no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "check", "--target", "localhost:9000"]) == 2
+    assert "not an IPv4 address literal" in capsys.readouterr().err and not no_socket
+
+
+def test_allow_hardware_without_a_terminal_needs_yes(no_socket: list, monkeypatch: pytest.MonkeyPatch,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(sys, "stdin", io.StringIO("yes\n"))  # a piped yes is not a person at a terminal
+    assert main(["hw", "check", "--target", NOT_LOOPBACK, "--allow-hardware"]) == 2
+    err = capsys.readouterr().err
+    assert "192.0.2.1:9 is a REAL ROBOT" in err and "stdin is not a terminal" in err and "--yes" in err
+    assert not no_socket
+
+
+def test_allow_hardware_asks_and_a_no_refuses(no_socket: list, monkeypatch: pytest.MonkeyPatch,
+                                              capsys: pytest.CaptureFixture[str]) -> None:
+    class Terminal:
+        def isatty(self) -> bool:
+            return True
+
+    prompts: list[str] = []
+    monkeypatch.setattr(sys, "stdin", Terminal())
+    monkeypatch.setattr("builtins.input", lambda prompt: prompts.append(prompt) or "no")
+    assert main(["hw", "check", "--target", NOT_LOOPBACK, "--allow-hardware"]) == 2
+    assert prompts == ["type yes to connect: "]
+    assert "not confirmed" in capsys.readouterr().err and not no_socket
+
+
+def test_bench_hw_json_has_the_keys(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "hw", "--seconds", "0.5", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    for key in ("period_ms_p50", "period_ms_p99", "period_ms_max", "round_trip_ms_p50", "round_trip_ms_p99",
+                "cpu_us_per_tick", "rejects", "machine", "emulator"):
+        assert key in result, key
+    assert result["rejects"] == 0 and result["sends"] > 100 and result["replies_received"] > 100
+    assert result["period_ms_p50"] > 0 and result["round_trip_ms_p50"] > 0  # figures are printed, not asserted
+
+
+def test_bench_hw_refuses_a_bad_rate_before_starting_the_emulator(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "hw", "--rate", "50", "--seconds", "0.1"]) == 2
+    assert "rate_hz must be in 200..1000" in capsys.readouterr().err
