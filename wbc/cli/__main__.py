@@ -4,4 +4,5 @@ import sys
 
 from wbc.cli.main import main
 
-sys.exit(main())
+if __name__ == "__main__":  # a spawned worker re-imports the main module: it must not run the command again
+    sys.exit(main())
