@@ -7,12 +7,12 @@ STAMP := $(VENV)/.installed
 
 .PHONY: demo test test-all bench lint clean
 
+# The vendor's Go1 SDK is a client of the emulator in the hardware tests; its metadata lists ~30 build tools it never
+# imports, hence --no-deps (the `hardware` extra names it for users who install by hand).
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	# the vendor's Go1 SDK, a client of the emulator in the hardware tests; its metadata lists ~30 build tools it
-	# never imports, hence --no-deps (the `hardware` extra names it for users who install by hand)
 	$(BIN)/python -m pip install --quiet --no-deps 'unitree-legged-sdk==3.8.20231105'
 	touch $(STAMP)
 
