@@ -122,7 +122,7 @@ def test_check_shows_the_estop_buttons(capsys: pytest.CaptureFixture[str]) -> No
     assert "remote buttons: L2, B  (L2+B held: e-stop)" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("target", [NOT_LOOPBACK, "10.0.0.2:9000"])
+@pytest.mark.parametrize("target", [NOT_LOOPBACK, "198.51.100.7:9000"])
 def test_non_loopback_target_is_refused_before_any_socket(target: str, no_socket: list,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "check", "--target", target]) == 2

@@ -524,16 +524,16 @@ def test_busy_port_is_a_clear_error() -> None:
 
 def test_non_loopback_target_is_refused() -> None:
     with pytest.raises(TargetRefusedError, match="allow_hardware=True"):
-        UnitreeRobotConfig(robot="go1", target_host="192.168.123.10", target_port=8007)
+        UnitreeRobotConfig(robot="go1", target_host="192.0.2.10", target_port=8007)
     with pytest.raises(TargetRefusedError, match="IPv4"):
         UnitreeRobotConfig(robot="go1", target_host="localhost", target_port=8007)
     with pytest.raises(TypeError):
         UnitreeRobotConfig(robot="go1")  # type: ignore[call-arg]  # no default robot address
     # allowed explicitly it is accepted (and never connected here)
-    assert UnitreeRobotConfig(robot="go1", target_host="192.168.123.10", target_port=8007, allow_hardware=True)
+    assert UnitreeRobotConfig(robot="go1", target_host="192.0.2.10", target_port=8007, allow_hardware=True)
     with pytest.raises(ConfigError, match="127.0.0.0/8"):
         UnitreeEmulatorConfig(host="0.0.0.0")
     with pytest.raises(TargetRefusedError, match="allow_hardware"):
-        UdpTransport((LOOPBACK, 0), ("10.0.0.1", 8007))
+        UdpTransport((LOOPBACK, 0), ("203.0.113.5", 8007))
     with pytest.raises(TargetRefusedError, match="allow_hardware"):
         UdpTransport(("0.0.0.0", 0), (LOOPBACK, 9))
