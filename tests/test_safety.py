@@ -216,7 +216,7 @@ TRIPS = {
     "stale_state": (lambda f: setattr(f, "freeze", True), lambda f: setattr(f, "freeze", False), True),
     "bad_state": (lambda f: setattr(f, "q", np.full(f.num_joints, np.nan)), lambda f: setattr(f, "q", None), True),
     "joint_range": (lambda f: setattr(f, "q", _bad_q(f)), lambda f: setattr(f, "q", None), True),
-    "over_power": (lambda f: setattr(f, "power", (20.0, 5.0)), lambda f: setattr(f, "power", None), False),
+    "over_power": (lambda f: setattr(f, "power", (20.0, 5.0)), lambda f: setattr(f, "power", None), True),
     "motor_temperature": (lambda f: setattr(f, "temperature", 90), lambda f: setattr(f, "temperature", 35), True),
     "motor_mode": (lambda f: setattr(f, "modes", 0x07), lambda f: setattr(f, "modes", 0x0A), True),
     "tilt": (lambda f: setattr(f, "quat", _tilted(1.3)), lambda f: setattr(f, "quat", None), True),

@@ -114,7 +114,8 @@ class SafeRobot(Robot):
         """Release a latched ``damped`` state into a new ramp from the measured pose; nothing to do otherwise.
 
         Accepted only when the latest state is fresh (its tick advanced, within the stale timeout), no remote
-        button is held, and none of the state checks (joint range, tilt, motor status) fails on it.
+        button is held, none of the state checks (joint range, tilt, motor status) fails on it, and its power
+        is within the limit (a reset into a ramp while the motors still report over-power would only trip again).
 
         Raises:
             SafetyResetError: refused; the message lists why and what to do.
@@ -134,6 +135,10 @@ class SafeRobot(Robot):
             fault = self._state_fault(self._latest)
             if fault is not None:
                 why.append(f"{fault[0]}: {fault[1]}")
+            power = _power(self._latest)
+            if power > self.config.power_limit_w:
+                why.append(f"over_power: {power:.0f} W measured (limit {self.config.power_limit_w} W); wait until "
+                           "the motors are quiet")
         if why:
             raise SafetyResetError("SafeRobot.reset refused: " + "; ".join(why))
         self._over_power_frames = 0
@@ -280,7 +285,7 @@ class SafeRobot(Robot):
 
     def _power_fault(self, state: RobotState) -> tuple[str, str] | None:
         """PowerProtect's rule on a fresh frame: above the limit on more than `power_frames` frames in a row."""
-        power = float(np.abs(state.tau_est * state.dq).sum())
+        power = _power(state)
         self._over_power_frames = self._over_power_frames + 1 if power > self.config.power_limit_w else 0
         if self._over_power_frames > self.config.power_frames:
             return "over_power", (f"{power:.0f} W for {self._over_power_frames} frames in a row (limit "
@@ -311,3 +316,8 @@ class SafeRobot(Robot):
             self.config.on_event(event)
         else:
             print(event, file=sys.stderr)
+
+
+def _power(state: RobotState) -> float:
+    """Measured mechanical power sum |tau_est dq| over all joints [W]."""
+    return float(np.abs(state.tau_est * state.dq).sum())
