@@ -8,8 +8,9 @@ Trips, each into ``damped`` on the spot (damping is sent to the robot at once, n
 state stream, a state with non-finite values or a non-unit quaternion, a measured joint beyond its range plus a
 margin, sustained over-power (Unitree's PowerProtect rule, latched), a hot motor or a motor error mode (robots that
 are a `MotorStatusSource`), a trunk roll or pitch beyond the limit (a fall, from the IMU), the remote's L2 + B
-(robots that are a `RemoteSource`) or `estop`. Every transition is a `SafetyEvent`, kept in `events` and handed to
-`SafetyConfig.on_event`.
+(robots that are a `RemoteSource`) or `estop`. Every transition is a `SafetyEvent`, kept in `events` (offered to a
+runner as `safety_events`, so the episode logs them) and handed to `SafetyConfig.on_event` (by default printed to
+standard error, one line per transition).
 
 The layer's clock is the robot time that `advance` lets pass, so a simulated run is deterministic; on hardware a
 wall clock can be handed in (``clock=time.monotonic``), which also sees a control loop that stalls between calls.
@@ -89,6 +90,10 @@ class SafeRobot(Robot):
     @property
     def events(self) -> tuple[SafetyEvent, ...]:
         """Every transition so far, oldest first."""
+        return tuple(self._events)
+
+    def safety_events(self) -> tuple[SafetyEvent, ...]:
+        """Every transition so far, oldest first (the `HasSafetyEvents` capability: an episode logs them)."""
         return tuple(self._events)
 
     @property
