@@ -216,6 +216,82 @@ def test_state_fault_damps_on_the_wire_and_latches(robot: str, fault: Fault, val
         _reset_and_check_ramp(emu, safe, cmd)
 
 
+def _power(state) -> float:
+    return float(np.abs(state.tau_est * state.dq).sum())
+
+
+def _over_power_frames(safe: SafeRobot, cmd: MotorCommand, count: int, last_tick: list[int]) -> int:
+    """Loop until `count` fresh frames in a row report power above the limit (as the layer counts them: a frame is
+    fresh when its tick differs from the previous read's), or the layer damps; return the run counted."""
+    run = 0
+    for _ in range(500):
+        state = safe.read()
+        if state.tick != last_tick[0]:
+            run = run + 1 if _power(state) > safe.config.power_limit_w else 0
+        last_tick[0] = state.tick
+        if run >= count or safe.safety_state is SafetyState.DAMPED:
+            return run
+        safe.write(cmd)
+        safe.advance(PERIOD)
+    return run
+
+
+def _until_quiet(safe: SafeRobot, cmd: MotorCommand, last_tick: list[int]) -> None:
+    """Loop until a fresh frame reports power within the limit (the layer's count starts again)."""
+    for _ in range(500):
+        safe.write(cmd)
+        safe.advance(PERIOD)
+        state = safe.read()
+        fresh = state.tick != last_tick[0]
+        last_tick[0] = state.tick
+        if fresh and _power(state) <= safe.config.power_limit_w:
+            return
+    raise AssertionError("the reported power never came back under the limit")
+
+
+# -- 6: over-power ------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_over_power_damps_only_after_more_than_the_configured_frames_and_latches(robot: str) -> None:
+    with _rig(robot, **FAST) as (emu, safe, events):
+        cmd = _stand(safe)
+        n = safe.config.power_frames
+        _run_to(safe, cmd, SafetyState.RUN)
+        start = time.monotonic()
+        last_tick = [safe.read().tick]
+        for _ in range(3):  # bursts of exactly n over-power frames: PowerProtect lets them pass
+            emu.inject(Fault.OVER_POWER)
+            assert _over_power_frames(safe, cmd, n, last_tick) == n
+            assert safe.safety_state is SafetyState.RUN, events[-1]
+            emu.clear(Fault.OVER_POWER)
+            time.sleep(5 * LINK_PERIOD)  # replies already on their way carry the fault; the next read is after it
+            _until_quiet(safe, cmd, last_tick)
+            assert safe.safety_state is SafetyState.RUN
+        assert not any(c.damping for c in _after(emu, start))
+        emu.inject(Fault.OVER_POWER)
+        assert _over_power_frames(safe, cmd, n, last_tick) == n
+        before_trip = time.monotonic()
+        assert safe.safety_state is SafetyState.RUN
+        safe.write(cmd)
+        safe.advance(PERIOD)
+        assert _over_power_frames(safe, cmd, 1, last_tick) == 1  # the (n + 1)-th frame in a row trips
+        tripped = time.monotonic()
+        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "over_power", events[-1]
+        assert f"for {n + 1} frames" in events[-1].detail
+        time.sleep(3 * LINK_PERIOD)  # the trip itself put damping on the link; let the link send it
+        frames = _after(emu, start)
+        first = next(c for c in frames if c.damping)
+        print(f"\n{robot}: over-power on {n + 1} frames in a row -> damping on the wire "
+              f"{(first.time - tripped) * 1e3:+.1f} ms after the tripping read (bursts of {n} passed)")
+        assert before_trip <= first.time <= tripped + 10 * LINK_PERIOD
+        assert all(c.damping for c in frames if c.time >= first.time)
+        _loop(safe, cmd, 0.02)
+        with pytest.raises(SafetyResetError, match="over_power"):
+            safe.reset()  # refused while the motors still report over-power
+        emu.clear(Fault.OVER_POWER)
+        _assert_latched(emu, safe, cmd, first.time, 0.06)  # quiet again; the latch holds
+        _reset_and_check_ramp(emu, safe, cmd)
+
+
 # -- 8: unsafe start ----------------------------------------------------------------------------------------------
 FOLDED = np.tile([0.0, 1.1, -2.2], 4)  # crouched low, legs folded (feet 1 cm above the ground at 0.26 m) [rad]
 

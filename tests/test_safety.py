@@ -11,10 +11,12 @@ import math
 import numpy as np
 import pytest
 
+from wbc.arena.episode import Episode
 from wbc.arena.runner import run_episode
 from wbc.control.stand import StandController, stand_command
 from wbc.errors import ConfigError, SafetyResetError, UnknownNameError
 from wbc.hardware import Robot, check_robot
+from wbc.hardware.capabilities import HasSafetyEvents
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import (
     REASONS,
@@ -216,7 +218,7 @@ TRIPS = {
     "stale_state": (lambda f: setattr(f, "freeze", True), lambda f: setattr(f, "freeze", False), True),
     "bad_state": (lambda f: setattr(f, "q", np.full(f.num_joints, np.nan)), lambda f: setattr(f, "q", None), True),
     "joint_range": (lambda f: setattr(f, "q", _bad_q(f)), lambda f: setattr(f, "q", None), True),
-    "over_power": (lambda f: setattr(f, "power", (20.0, 5.0)), lambda f: setattr(f, "power", None), False),
+    "over_power": (lambda f: setattr(f, "power", (20.0, 5.0)), lambda f: setattr(f, "power", None), True),
     "motor_temperature": (lambda f: setattr(f, "temperature", 90), lambda f: setattr(f, "temperature", 35), True),
     "motor_mode": (lambda f: setattr(f, "modes", 0x07), lambda f: setattr(f, "modes", 0x0A), True),
     "tilt": (lambda f: setattr(f, "quat", _tilted(1.3)), lambda f: setattr(f, "quat", None), True),
@@ -425,3 +427,53 @@ def test_a_zero_quaternion_is_a_bad_state_not_an_upright_robot():
         faulty.quat = np.zeros(4)
         _drive(safe, stand_command(faulty.inner.desc), 1)
         assert safe.safety_state is SafetyState.DAMPED and "norm 0.000" in events[-1].detail
+
+
+# -- the episode logs the layer's transitions -------------------------------------------------------------------
+def test_an_episode_through_the_safety_layer_logs_its_transitions_and_keeps_them_on_disk(tmp_path):
+    inner = MujocoRobot(MujocoRobotConfig(arm_mode="none"))
+    safe = SafeRobot(inner, SafetyConfig(on_event=lambda e: None, **FAST))
+    assert isinstance(safe, HasSafetyEvents) and not isinstance(inner, HasSafetyEvents)
+
+    def estop_after_half_a_second(t, robot, controller, command):
+        if t >= 0.5 and robot.safety_state is not SafetyState.DAMPED:
+            robot.estop()
+
+    with safe:
+        episode = run_episode(safe, StandController(inner.desc), CommandSchedule(), 1.0, truth=inner.base_truth,
+                              fallen=inner.fallen, observer=estop_after_half_a_second)
+    log = episode.safety_events
+    assert [(a, b, r) for _, a, b, r, _ in log.rows()] == [
+        ("waiting", "ramp", "fresh_state"), ("ramp", "run", "ramp_done"), ("run", "damped", "software_estop")]
+    assert [e.to_dict() for e in safe.events] == [
+        dict(time=t, from_state=a, to_state=b, reason=r, detail=d) for t, a, b, r, d in log.rows()]
+    times = log.time
+    assert times[0] == pytest.approx(DT)  # the second read is the first fresh one
+    assert times[0] < times[1] < 0.5 <= times[2] < 0.5 + DT + 1e-9  # the ramp is 0.2 s; the e-stop on its tick
+    assert log.detail[2] == "estop() called"
+    path = tmp_path / "episode.npz"
+    episode.save(str(path))
+    loaded = Episode.load(str(path))
+    assert loaded.safety_events.rows() == log.rows()
+    assert loaded.safety_events.reason.dtype.kind == "U"
+    with np.load(path, allow_pickle=False) as z:  # plain arrays, no pickles
+        assert z["safety_reason"].tolist() == ["fresh_state", "ramp_done", "software_estop"]
+        old = {k: z[k] for k in z.files if not k.startswith("safety_")}
+    np.savez_compressed(tmp_path / "old.npz", **old)  # a file written before episodes kept safety events
+    assert len(Episode.load(str(tmp_path / "old.npz")).safety_events) == 0
+
+    with MujocoRobot(MujocoRobotConfig(arm_mode="none")) as plain:
+        bare = run_episode(plain, StandController(plain.desc), CommandSchedule(), 0.2)
+    assert len(bare.safety_events) == 0 and bare.safety_events.rows() == []
+    bare.save(str(tmp_path / "bare.npz"))
+    assert len(Episode.load(str(tmp_path / "bare.npz")).safety_events) == 0
+
+
+def test_the_safety_layer_prints_each_transition_by_default(capsys):
+    safe = SafeRobot(MujocoRobot(MujocoRobotConfig(arm_mode="none")), SafetyConfig(**FAST))
+    with safe:
+        _drive(safe, stand_command(safe.robot.desc), 2)
+        safe.estop()
+    err = capsys.readouterr().err.splitlines()
+    assert [line for line in err if line.startswith("safety t=")] == [str(e) for e in safe.events]
+    assert [e.reason for e in safe.events] == ["fresh_state", "software_estop"]

@@ -5,8 +5,8 @@ and the comparison (`wbc.arena.compare`) are imported from their modules, so a h
 does not load the simulator or every controller.
 """
 
-from wbc.arena.episode import Episode, PushLog
+from wbc.arena.episode import Episode, PushLog, SafetyLog
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
 
-__all__ = ["Episode", "PushLog", "TickObserver", "TrialRecord", "run_episode"]
+__all__ = ["Episode", "PushLog", "SafetyLog", "TickObserver", "TrialRecord", "run_episode"]

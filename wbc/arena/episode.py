@@ -3,7 +3,8 @@
 Per control tick it keeps the command, the measured proprioception needed for energy and arm travel, simulator
 truth (base velocity, yaw rate, roll, pitch, configuration) for tracking metrics and replay, and how long the
 controller took to act (the runner's timing, for deadline misses). The pushes the robot met
-are kept as arrays (`PushLog`), so a replay draws them from numbers, not from text.
+are kept as arrays (`PushLog`), so a replay draws them from numbers, not from text; so are the transitions of a
+safety layer the robot ran behind (`SafetyLog`), with their times and reasons.
 """
 
 from __future__ import annotations
@@ -14,9 +15,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wbc.errors import ConfigError, EpisodeFileError
+from wbc.hardware.capabilities import SafetyEventLike
 from wbc.scenario.push import Push
 
-__all__ = ["Episode", "EpisodeBuffer", "PushLog"]
+__all__ = ["Episode", "EpisodeBuffer", "PushLog", "SafetyLog"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -59,6 +61,62 @@ class PushLog:
         return len(self.start)
 
 
+@dataclass(frozen=True, kw_only=True)
+class SafetyLog:
+    """Transitions of a safety layer as arrays, one row per transition, oldest first.
+
+    Attributes:
+        time: when each happened, on the safety layer's clock, shape (n,) [s] (the robot time since the layer was
+            made, unless it was given a wall clock).
+        from_state: the state left, shape (n,) (unicode).
+        to_state: the state entered, shape (n,) (unicode).
+        reason: why, shape (n,) (unicode; a trip's reason names the check that fired).
+        detail: what was measured against which limit, shape (n,) (unicode, may be empty).
+    """
+
+    time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    from_state: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+    to_state: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+    reason: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+    detail: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+
+    def __post_init__(self) -> None:
+        n = len(self.time)
+        for name in _SAFETY_KEYS:
+            value = np.asarray(getattr(self, name))
+            if value.shape != (n,):
+                raise ConfigError(f"SafetyLog.{name}: shape {value.shape}, expected ({n},) for {n} events; build "
+                                  "the log with SafetyLog.of(events)")
+            if name == "time":
+                value = value.astype(np.float64)
+            elif value.dtype.kind != "U":
+                if n and value.dtype.kind not in "SU":
+                    raise ConfigError(f"SafetyLog.{name}: dtype {value.dtype}, expected text")
+                value = value.astype(np.str_)
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def of(cls, events: Iterable[SafetyEventLike]) -> SafetyLog:
+        """The log of `events` (states by name)."""
+        events = list(events)
+
+        def text(name: str) -> np.ndarray:
+            return np.array([str(getattr(e, name)) for e in events], dtype=np.str_)
+
+        return cls(time=np.array([e.time for e in events], dtype=np.float64), from_state=text("from_state"),
+                   to_state=text("to_state"), reason=text("reason"), detail=text("detail"))
+
+    def __len__(self) -> int:
+        """Number of transitions."""
+        return len(self.time)
+
+    def rows(self) -> list[tuple[float, str, str, str, str]]:
+        """The transitions as (time, from_state, to_state, reason, detail), oldest first."""
+        return [(float(t), str(a), str(b), str(r), str(d)) for t, a, b, r, d in
+                zip(self.time, self.from_state, self.to_state, self.reason, self.detail, strict=True)]
+
+
+_SAFETY_KEYS = ("time", "from_state", "to_state", "reason", "detail")
 _PUSH_KEYS = ("start", "duration", "force_in_world", "offset_in_base")
 _SCALARS = ("duration_s", "control_dt", "fell", "fall_time_s")
 _ARRAYS = ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos", "act_s")
@@ -85,6 +143,8 @@ class Episode:
         act_s: wall time of each tick's ``controller.act`` call, shape (k,) [s]; a tick whose value exceeds
             `control_dt` missed its deadline on a real robot.
         pushes: the pushes that began before the episode ended.
+        safety_events: the transitions of the robot's safety layer during the episode (empty for a robot that has
+            none, `wbc.hardware.capabilities.HasSafetyEvents`).
     """
 
     duration_s: float
@@ -102,6 +162,7 @@ class Episode:
     qpos: np.ndarray
     act_s: np.ndarray
     pushes: PushLog = field(default_factory=PushLog)
+    safety_events: SafetyLog = field(default_factory=SafetyLog)
 
     @property
     def survived_s(self) -> float:
@@ -113,15 +174,19 @@ class Episode:
         return int(np.count_nonzero(self.act_s > (self.control_dt if budget_s is None else budget_s)))
 
     def save(self, path: str) -> None:
-        """Write the episode to a NumPy ``.npz`` file (no pickle); the pushes as arrays ``push_<field>``."""
+        """Write the episode to a NumPy ``.npz`` file (no pickle).
+
+        The pushes go in as arrays ``push_<field>``, the safety events as ``safety_<field>`` (text as unicode).
+        """
         np.savez_compressed(
             path, **{k: getattr(self, k) for k in (*_SCALARS, *_ARRAYS)},
             **{f"push_{k}": getattr(self.pushes, k) for k in _PUSH_KEYS},
+            **{f"safety_{k}": getattr(self.safety_events, k) for k in _SAFETY_KEYS},
         )
 
     @classmethod
     def load(cls, path: str) -> Episode:
-        """Read an episode written by `save`.
+        """Read an episode written by `save`; a file from before episodes kept safety events has none.
 
         Raises:
             EpisodeFileError: a field is missing (a file of another version: its pushes were text, for instance) or
@@ -136,11 +201,18 @@ class Episode:
                                        "version, or play the trial again with `wbc run --save-episodes`")
             scalars = {k: z[k].item() for k in _SCALARS}
             arrays = {k: z[k] for k in _ARRAYS}
+            safety_keys = [f"safety_{k}" for k in _SAFETY_KEYS]
+            present = [k for k in safety_keys if k in z.files]
+            if present and len(present) < len(safety_keys):
+                missing = [k for k in safety_keys if k not in z.files]
+                raise EpisodeFileError(f"{path}: field {missing[0]} missing while {present[0]} is there; the file "
+                                       "is damaged: play the trial again with `wbc run --save-episodes`")
             try:
                 pushes = PushLog(**{k: z[f"push_{k}"] for k in _PUSH_KEYS})
+                safety = SafetyLog(**{k: z[f"safety_{k}"] for k in _SAFETY_KEYS}) if present else SafetyLog()
             except ConfigError as exc:
                 raise EpisodeFileError(f"{path}: {exc}") from None
-        return cls(**scalars, **arrays, pushes=pushes)
+        return cls(**scalars, **arrays, pushes=pushes, safety_events=safety)
 
 
 @dataclass
@@ -174,10 +246,12 @@ class EpisodeBuffer:
         self.qpos = np.zeros((n, self.nq))
         self.act_s = np.zeros(n)
 
-    def finish(self, *, duration_s: float, control_dt: float, fell: bool, fall_time_s: float) -> Episode:
+    def finish(self, *, duration_s: float, control_dt: float, fell: bool, fall_time_s: float,
+               safety_events: SafetyLog | None = None) -> Episode:
         """The episode made of the rows filled so far (no pushes: the trial's setup adds those it applied)."""
         k = self.rows
         return Episode(
             duration_s=duration_s, control_dt=control_dt, fell=fell, fall_time_s=fall_time_s,
             **{name: getattr(self, name)[:k].copy() for name in _ARRAYS},
+            safety_events=SafetyLog() if safety_events is None else safety_events,
         )

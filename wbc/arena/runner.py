@@ -9,7 +9,8 @@ Where the base's true state comes from and how a fall is detected are capabiliti
 (`wbc.hardware.capabilities.TruthSource`, `FallDetector`: the simulator has both, a real robot may have motion
 capture), or are handed in by the caller. Falls are checked at the control rate; a fall keeps the trunk on the ground
 for far longer than a control period, so none is missed. Setting a simulated trial up (robot, terrain, pushes) and
-turning its episode into a record is `wbc.arena.sim_trial`.
+turning its episode into a record is `wbc.arena.sim_trial`. A robot behind a safety layer (`HasSafetyEvents`) has
+the layer's transitions during the episode logged in it (`Episode.safety_events`).
 """
 
 from __future__ import annotations
@@ -20,10 +21,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from wbc.arena.episode import Episode, EpisodeBuffer
+from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
 from wbc.errors import MissingCapabilityError
-from wbc.hardware.capabilities import FallDetector, TruthSource
+from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, TruthSource
 from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import ARM_JOINTS
@@ -62,7 +63,8 @@ def run_episode(
         observer: called after every tick (e.g. a viewer); None costs nothing.
 
     Returns:
-        The episode log (no pushes: whoever applied them adds them, see `wbc.arena.sim_trial.run_trial`).
+        The episode log (no pushes: whoever applied them adds them, see `wbc.arena.sim_trial.run_trial`), with the
+        safety layer's transitions during the episode if the robot is a `HasSafetyEvents`.
 
     Raises:
         MissingCapabilityError: no `truth` or `fallen` given and the robot does not offer it.
@@ -76,6 +78,8 @@ def run_episode(
     arm = ARM_JOINTS if robot.num_joints == 15 else None
     clock = time.perf_counter
     fell, fall_time = False, math.nan
+    safety = robot if isinstance(robot, HasSafetyEvents) else None
+    events_before = len(safety.safety_events()) if safety is not None else 0
     for k in range(n):
         t = k * dt
         i = buf.rows
@@ -109,7 +113,8 @@ def run_episode(
         if fallen():
             fell, fall_time = True, (k + 1) * dt
             break
-    return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time)
+    events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
+    return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time, safety_events=events)
 
 
 def _truth_of(robot: Robot) -> Callable[[], BaseTruth]:

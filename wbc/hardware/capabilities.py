@@ -1,18 +1,21 @@
 """Capabilities a `Robot` backend may offer beyond the interface, as protocols the runner asks for by name.
 
-A real robot offers none of these by default; the simulator offers all three. A runner or tool checks
+A real robot offers none of these by default; the simulator offers the first three. A runner or tool checks
 ``isinstance(robot, Pushable)`` instead of testing for a backend class, so a backend that can do the same (motion
-capture as a `TruthSource`, a push rig as `Pushable`) takes the same path.
+capture as a `TruthSource`, a push rig as `Pushable`) takes the same path. A safety layer that records its
+transitions is a `HasSafetyEvents` (`wbc.hardware.safety.SafeRobot` is one); the protocol is structural, so the
+runner logs the events without importing the safety layer.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
 from wbc.scenario.push import Push
 from wbc.types import BaseTruth
 
-__all__ = ["FallDetector", "Pushable", "TruthSource"]
+__all__ = ["FallDetector", "HasSafetyEvents", "Pushable", "SafetyEventLike", "TruthSource"]
 
 
 @runtime_checkable
@@ -37,3 +40,35 @@ class FallDetector(Protocol):
 
     def fallen(self) -> bool:
         """True when the trunk or a non-foot link touches the ground."""
+
+
+class SafetyEventLike(Protocol):
+    """One transition of a safety layer (`wbc.hardware.safety.SafetyEvent` is one)."""
+
+    @property
+    def time(self) -> float:
+        """When it happened, on the safety layer's clock [s]."""
+
+    @property
+    def from_state(self) -> str:
+        """The state left, by name."""
+
+    @property
+    def to_state(self) -> str:
+        """The state entered, by name."""
+
+    @property
+    def reason(self) -> str:
+        """Why (a trip's reason names the check that fired)."""
+
+    @property
+    def detail(self) -> str:
+        """What was measured, against which limit (may be empty)."""
+
+
+@runtime_checkable
+class HasSafetyEvents(Protocol):
+    """A robot behind a safety layer that records every transition of its state."""
+
+    def safety_events(self) -> Sequence[SafetyEventLike]:
+        """Every transition so far, oldest first (a runner logs those that happened during its episode)."""

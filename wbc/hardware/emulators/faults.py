@@ -2,8 +2,8 @@
 
 Frame faults change what goes on the wire (nothing, a corrupt, short or long datagram, one from a foreign port, late
 or dropped replies); state faults change what the reported state says (a joint beyond its range, an overheated
-motor, a motor in an error mode, an IMU reading of a fall, the remote's L2+B). A `FaultSet` is shared by the test
-thread that injects and the emulator thread that applies, so it is locked.
+motor, a motor in an error mode, sustained over-power, an IMU reading of a fall, the remote's L2+B). A `FaultSet`
+is shared by the test thread that injects and the emulator thread that applies, so it is locked.
 """
 
 from __future__ import annotations
@@ -29,8 +29,10 @@ class Fault(enum.Enum):
     more); FOREIGN_PORT (replies sent from another port); DELAY [s, default 0.05] (each reply sent that much later);
     DROP [probability, default 1.0] (each reply dropped with it).
     State faults: JOINT_OUT_OF_RANGE [(joint, q) default (2, 0.5)] (calf 0 reports q); OVER_TEMPERATURE [deg C,
-    default 95] (every motor); MOTOR_ERROR [mode, default 0] (every motor reports that mode); FALL [roll rad,
-    default pi/2] (the IMU reads the trunk rolled); REMOTE_L2_B (the remote's L2 and B held).
+    default 95] (every motor); MOTOR_ERROR [mode, default 0] (every motor reports that mode); OVER_POWER
+    [(tau_est N m, dq rad/s), default (20, 5)] (every motor reports that torque and speed: 12 x 100 W, above the
+    safety layer's 500 W, on every reply while active); FALL [roll rad, default pi/2] (the IMU reads the trunk
+    rolled); REMOTE_L2_B (the remote's L2 and B held).
     """
 
     SILENCE = "silence"
@@ -43,16 +45,18 @@ class Fault(enum.Enum):
     JOINT_OUT_OF_RANGE = "joint_out_of_range"
     OVER_TEMPERATURE = "over_temperature"
     MOTOR_ERROR = "motor_error"
+    OVER_POWER = "over_power"
     FALL = "fall"
     REMOTE_L2_B = "remote_l2_b"
 
 
 FRAME_FAULTS = (Fault.SILENCE, Fault.CORRUPT, Fault.SHORT, Fault.LONG, Fault.FOREIGN_PORT, Fault.DELAY, Fault.DROP)
-STATE_FAULTS = (Fault.JOINT_OUT_OF_RANGE, Fault.OVER_TEMPERATURE, Fault.MOTOR_ERROR, Fault.FALL, Fault.REMOTE_L2_B)
+STATE_FAULTS = (Fault.JOINT_OUT_OF_RANGE, Fault.OVER_TEMPERATURE, Fault.MOTOR_ERROR, Fault.OVER_POWER, Fault.FALL,
+                Fault.REMOTE_L2_B)
 
 _DEFAULTS: dict[Fault, object] = {
     Fault.DELAY: 0.05, Fault.DROP: 1.0, Fault.JOINT_OUT_OF_RANGE: (2, 0.5), Fault.OVER_TEMPERATURE: 95,
-    Fault.MOTOR_ERROR: 0, Fault.FALL: math.pi / 2,
+    Fault.MOTOR_ERROR: 0, Fault.OVER_POWER: (20.0, 5.0), Fault.FALL: math.pi / 2,
 }
 
 
@@ -101,6 +105,10 @@ def apply_state_faults(active: dict[Fault, object], state: RobotState,
                                                                         dtype=np.int8))
     if Fault.MOTOR_ERROR in active:
         extras = dataclasses.replace(extras, motor_mode=np.full(12, int(active[Fault.MOTOR_ERROR]), dtype=np.uint8))
+    if Fault.OVER_POWER in active:
+        tau_est, dq = active[Fault.OVER_POWER]
+        n = state.num_joints
+        state = dataclasses.replace(state, tau_est=np.full(n, float(tau_est)), dq=np.full(n, float(dq)))
     if Fault.FALL in active:
         roll = float(active[Fault.FALL])
         quat = np.array([math.cos(roll / 2), math.sin(roll / 2), 0.0, 0.0])

@@ -8,8 +8,9 @@ Trips, each into ``damped`` on the spot (damping is sent to the robot at once, n
 state stream, a state with non-finite values or a non-unit quaternion, a measured joint beyond its range plus a
 margin, sustained over-power (Unitree's PowerProtect rule, latched), a hot motor or a motor error mode (robots that
 are a `MotorStatusSource`), a trunk roll or pitch beyond the limit (a fall, from the IMU), the remote's L2 + B
-(robots that are a `RemoteSource`) or `estop`. Every transition is a `SafetyEvent`, kept in `events` and handed to
-`SafetyConfig.on_event`.
+(robots that are a `RemoteSource`) or `estop`. Every transition is a `SafetyEvent`, kept in `events` (offered to a
+runner as `safety_events`, so the episode logs them) and handed to `SafetyConfig.on_event` (by default printed to
+standard error, one line per transition).
 
 The layer's clock is the robot time that `advance` lets pass, so a simulated run is deterministic; on hardware a
 wall clock can be handed in (``clock=time.monotonic``), which also sees a control loop that stalls between calls.
@@ -91,6 +92,10 @@ class SafeRobot(Robot):
         """Every transition so far, oldest first."""
         return tuple(self._events)
 
+    def safety_events(self) -> tuple[SafetyEvent, ...]:
+        """Every transition so far, oldest first (the `HasSafetyEvents` capability: an episode logs them)."""
+        return tuple(self._events)
+
     @property
     def position_lower(self) -> np.ndarray:
         """Lower end of each joint's allowed range (the position table), shape (n,) [rad]; set by `connect`."""
@@ -114,7 +119,8 @@ class SafeRobot(Robot):
         """Release a latched ``damped`` state into a new ramp from the measured pose; nothing to do otherwise.
 
         Accepted only when the latest state is fresh (its tick advanced, within the stale timeout), no remote
-        button is held, and none of the state checks (joint range, tilt, motor status) fails on it.
+        button is held, none of the state checks (joint range, tilt, motor status) fails on it, and its power
+        is within the limit (a reset into a ramp while the motors still report over-power would only trip again).
 
         Raises:
             SafetyResetError: refused; the message lists why and what to do.
@@ -134,6 +140,10 @@ class SafeRobot(Robot):
             fault = self._state_fault(self._latest)
             if fault is not None:
                 why.append(f"{fault[0]}: {fault[1]}")
+            power = _power(self._latest)
+            if power > self.config.power_limit_w:
+                why.append(f"over_power: {power:.0f} W measured (limit {self.config.power_limit_w} W); wait until "
+                           "the motors are quiet")
         if why:
             raise SafetyResetError("SafeRobot.reset refused: " + "; ".join(why))
         self._over_power_frames = 0
@@ -280,7 +290,7 @@ class SafeRobot(Robot):
 
     def _power_fault(self, state: RobotState) -> tuple[str, str] | None:
         """PowerProtect's rule on a fresh frame: above the limit on more than `power_frames` frames in a row."""
-        power = float(np.abs(state.tau_est * state.dq).sum())
+        power = _power(state)
         self._over_power_frames = self._over_power_frames + 1 if power > self.config.power_limit_w else 0
         if self._over_power_frames > self.config.power_frames:
             return "over_power", (f"{power:.0f} W for {self._over_power_frames} frames in a row (limit "
@@ -311,3 +321,8 @@ class SafeRobot(Robot):
             self.config.on_event(event)
         else:
             print(event, file=sys.stderr)
+
+
+def _power(state: RobotState) -> float:
+    """Measured mechanical power sum |tau_est dq| over all joints [W]."""
+    return float(np.abs(state.tau_est * state.dq).sum())
