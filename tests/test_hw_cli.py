@@ -172,3 +172,17 @@ def test_bench_hw_json_has_the_keys(capsys: pytest.CaptureFixture[str]) -> None:
 def test_bench_hw_refuses_a_bad_rate_before_starting_the_emulator(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench", "hw", "--rate", "50", "--seconds", "0.1"]) == 2
     assert "rate_hz must be in 200..1000" in capsys.readouterr().err
+
+
+def test_emulate_carries_a_locked_arm_in_its_physics_and_refuses_an_actuated_one(capsys: pytest.CaptureFixture[str],
+                                                                                  ) -> None:
+    masses = {}
+    for arm in ("none", "locked"):
+        with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", arm_mode=arm)) as emu:
+            assert emu.sim.num_joints == 12  # the wire drives the same 12 legs
+            masses[arm] = float(emu.sim.model.body_mass.sum())
+    assert masses["locked"] > masses["none"] + 0.3  # the held arm's mass is on the trunk
+    assert main(["hw", "emulate", "--robot", "go1", "--arm", "locked", "--seconds", "0.2", "--lockstep"]) == 0
+    assert main(["hw", "emulate", "--robot", "go1", "--arm", "actuated", "--seconds", "0.2"]) == 2
+    err = capsys.readouterr().err
+    assert "locked" in err and "none" in err and "Traceback" not in err

@@ -126,7 +126,8 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         faults.append(FAULTS[key])
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
-    cfg = UnitreeEmulatorConfig(robot=args.robot, mode="lockstep" if args.lockstep else "realtime", port=args.port)
+    cfg = UnitreeEmulatorConfig(robot=args.robot, arm_mode=args.arm, mode="lockstep" if args.lockstep else "realtime",
+                                port=args.port)
     emulator = UnitreeEmulator(cfg)
     with emulator:
         for fault in faults:

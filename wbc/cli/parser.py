@@ -114,6 +114,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "address), with the MuJoCo simulator behind it; print the address, and the counts "
                              "(commands decoded, rejects by reason, replies) when it stops (Ctrl-C or --seconds).")
     emulate.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
+    emulate.add_argument("--arm", default="none",
+                         help="none (the bare quadruped, default) or locked (its arm on the trunk, held)")
     emulate.add_argument("--port", type=int, default=0, help="UDP port on 127.0.0.1 (default 0: a free one)")
     emulate.add_argument("--fault", action="append", default=None, metavar="NAME",
                          help=f"inject a fault at its default value (repeatable): {', '.join(f.value for f in Fault)}")

@@ -42,11 +42,14 @@ from wbc.hardware.unitree.target import is_loopback
 from wbc.hardware.unitree.transport import MAX_DATAGRAM
 from wbc.types import BaseTruth, MotorCommand
 
-__all__ = ["MODES", "UnitreeEmulator", "UnitreeEmulatorConfig"]
+__all__ = ["LEG_ONLY_ARM_MODES", "MODES", "UnitreeEmulator", "UnitreeEmulatorConfig"]
 
 MODES = ("lockstep", "realtime")
 _POLL = 0.01  # [s] longest the emulator thread blocks, so `close` is prompt
 
+
+LEG_ONLY_ARM_MODES = ("none", "locked")
+"""Arm modes whose robot the Unitree wire drives whole: the arm absent, or on the trunk and held."""
 
 @dataclass(frozen=True, kw_only=True)
 class UnitreeEmulatorConfig:
@@ -54,6 +57,8 @@ class UnitreeEmulatorConfig:
 
     Attributes:
         robot: ``a1`` or ``go1``.
+        arm_mode: ``none`` (the bare quadruped) or ``locked`` (its arm on the trunk, held: its mass and inertia
+            are in the physics; the 12 legs are what the wire drives either way).
         mode: ``lockstep`` or ``realtime``.
         host: the loopback address to bind (127.0.0.0/8 only).
         port: the UDP port to bind; 0 picks a free one (read it back from `UnitreeEmulator.address`).
@@ -64,6 +69,7 @@ class UnitreeEmulatorConfig:
     """
 
     robot: str = "go1"
+    arm_mode: str = "none"
     mode: str = "lockstep"
     host: str = "127.0.0.1"
     port: int = 0
@@ -75,6 +81,9 @@ class UnitreeEmulatorConfig:
     def __post_init__(self) -> None:
         if self.robot not in DESCRIPTIONS:
             raise UnknownNameError("Unitree robot", self.robot, tuple(DESCRIPTIONS))
+        if self.arm_mode not in LEG_ONLY_ARM_MODES:
+            raise UnknownNameError("emulated arm mode (an actuated arm is not on the Unitree wire)", self.arm_mode,
+                                   LEG_ONLY_ARM_MODES)
         if self.mode not in MODES:
             raise UnknownNameError("emulator mode", self.mode, MODES)
         if not is_loopback(self.host):
@@ -89,16 +98,16 @@ class UnitreeEmulator:
 
     Args:
         config: what to emulate.
-        sim: the simulated robot (legs only); None builds one of ``config.robot`` with arm mode ``none``.
+        sim: the simulated robot (12 legs); None builds one of ``config.robot`` with ``config.arm_mode``.
     """
 
     def __init__(self, config: UnitreeEmulatorConfig | None = None, sim: MujocoRobot | None = None) -> None:
         self.config = config if config is not None else UnitreeEmulatorConfig()
         self.layout = frame_layout(self.config.robot)
         self.sim = sim if sim is not None else MujocoRobot(MujocoRobotConfig(
-            robot=DESCRIPTIONS[self.config.robot], arm_mode="none"))
+            robot=DESCRIPTIONS[self.config.robot], arm_mode=self.config.arm_mode))
         if self.sim.num_joints != 12:
-            raise ConfigError(f"UnitreeEmulator: the sim must drive the 12 legs only (arm_mode 'none'), it has "
+            raise ConfigError(f"UnitreeEmulator: the sim must drive the 12 legs only (arm mode none or locked), it has "
                               f"{self.sim.num_joints} joints")
         self.stats = DecodeStats()
         self.refused = 0  # valid frames whose gains a motor cannot apply (negative): the motors got no torque
