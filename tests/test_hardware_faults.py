@@ -81,6 +81,20 @@ def _after(emu: UnitreeEmulator, t: float) -> list[LoggedCommand]:
     return [c for c in emu.commands() if c.time > t]
 
 
+def _inject_until_damped(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand, fault: Fault, value: object = None,
+                         *, reason: str, seconds: float = 0.3) -> tuple[float, LoggedCommand]:
+    """Inject `fault`, keep the loop going until the layer is damped for `reason`; (injection time, first damping frame
+    on the wire after it)."""
+    if value is None:
+        emu.inject(fault)
+    else:
+        emu.inject(fault, value)
+    injected = time.monotonic()
+    _loop(safe, cmd, seconds, until=lambda: safe.safety_state is SafetyState.DAMPED)
+    assert safe.safety_state is SafetyState.DAMPED and safe.events[-1].reason == reason, safe.events[-1]
+    return injected, next(c for c in _after(emu, injected) if c.damping)
+
+
 def _first_servo(frames: list[LoggedCommand]) -> LoggedCommand:
     return next(c for c in frames if not c.damping)
 
@@ -136,12 +150,8 @@ def test_silence_damps_within_the_stale_timeout_latches_and_ramps_after_reset(ro
     with _rig(robot, clock=time.monotonic, **FAST) as (emu, safe, events):
         cmd = _stand(safe)
         _run_to(safe, cmd, SafetyState.RUN)
-        emu.inject(Fault.SILENCE)
-        silenced = time.monotonic()
-        _loop(safe, cmd, 0.5, until=lambda: safe.safety_state is SafetyState.DAMPED)
-        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "stale_state"
+        silenced, first = _inject_until_damped(emu, safe, cmd, Fault.SILENCE, reason="stale_state", seconds=0.5)
         frames = _after(emu, silenced)
-        first = next(c for c in frames if c.damping)
         latency = first.time - silenced
         print(f"\n{robot}: state stream stopped -> damping on the wire after {latency * 1e3:.1f} ms "
               f"(stale timeout {safe.config.stale_timeout_s * 1e3:.0f} ms)")
@@ -201,12 +211,8 @@ def test_state_fault_damps_on_the_wire_and_latches(robot: str, fault: Fault, val
         assert isinstance(safe.robot, MotorStatusSource) and isinstance(safe.robot, RemoteSource)
         cmd = _stand(safe)
         _run_to(safe, cmd, SafetyState.RUN)
-        emu.inject(fault, value)
-        injected = time.monotonic()
-        _loop(safe, cmd, 0.3, until=lambda: safe.safety_state is SafetyState.DAMPED)
-        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == reason, events[-1]
+        injected, first = _inject_until_damped(emu, safe, cmd, fault, value, reason=reason)
         frames = _after(emu, injected)
-        first = next(c for c in frames if c.damping)
         assert first.time - injected <= 10 * LINK_PERIOD
         assert all(c.damping for c in frames if c.time >= first.time)
         with pytest.raises(SafetyResetError, match=reason):
@@ -346,12 +352,7 @@ def test_remote_l2_b_damps_and_reset_is_refused_while_held(robot: str) -> None:
     with _rig(robot, **FAST) as (emu, safe, events):
         cmd = _stand(safe)
         _run_to(safe, cmd, SafetyState.RUN)
-        emu.inject(Fault.REMOTE_L2_B)
-        pressed = time.monotonic()
-        _loop(safe, cmd, 0.3, until=lambda: safe.safety_state is SafetyState.DAMPED)
-        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "remote_estop"
-        frames = _after(emu, pressed)
-        first = next(c for c in frames if c.damping)
+        pressed, first = _inject_until_damped(emu, safe, cmd, Fault.REMOTE_L2_B, reason="remote_estop")
         assert first.time - pressed <= 10 * LINK_PERIOD
         for _ in range(3):  # held: every reset is refused, and nothing but damping goes out
             _loop(safe, cmd, 0.02)
