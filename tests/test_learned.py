@@ -948,3 +948,31 @@ def test_policy_and_env_import_and_run_without_torch(tmp_path):
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path,
                          env={**os.environ, "PYTHONPATH": path})
     assert run.returncode == 0 and "torch-free: ok" in run.stdout, run.stderr
+
+
+_FORWARD = '''
+import hashlib, sys
+import numpy as np
+from wbc.learned.policy import WEIGHTS_DIR
+from wbc.learned.policy.numpy_policy import NumpyPolicy
+from wbc.learned.policy.policy_file import load_policy
+policy = NumpyPolicy(load_policy(WEIGHTS_DIR / "a1-wx200-actuated.npz"))
+rng = np.random.default_rng(0)
+obs_size = len(policy.file.arrays["obs_mean"])
+obs = rng.standard_normal((3, obs_size))
+z = policy.extrinsics(rng.standard_normal((3, len(policy.file.arrays["privileged_mean"]))))
+out = [z, policy(obs, z), policy.adaptation(rng.standard_normal((3, policy.history * obs_size)))]
+print(hashlib.sha256(b"".join(a.tobytes() for a in out)).hexdigest())
+'''
+
+
+def test_policy_inference_gives_the_same_bits_whatever_blas_kernel_the_cpu_selects():
+    # OpenBLAS chooses its kernels by the CPU; OPENBLAS_CORETYPE makes this machine use another machine's. numpy's
+    # own SIMD loops are switched down too. A closed loop turns a last-bit difference into another trajectory.
+    digests = set()
+    for env in ({}, {"OPENBLAS_CORETYPE": "Sandybridge"}, {"OPENBLAS_CORETYPE": "Prescott",
+                                                            "NPY_DISABLE_CPU_FEATURES": "AVX2,FMA3,AVX,F16C"}):
+        out = subprocess.run([sys.executable, "-c", _FORWARD], env={**os.environ, **env}, capture_output=True,
+                             text=True, timeout=60, check=True)
+        digests.add(out.stdout.strip())
+    assert len(digests) == 1, digests
