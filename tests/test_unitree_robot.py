@@ -19,7 +19,14 @@ import numpy as np
 import pytest
 
 from wbc.control.stand import StandController
-from wbc.errors import CommandError, ConfigError, PortBusyError, RobotLinkError, TargetRefusedError
+from wbc.errors import (
+    CommandError,
+    ConfigError,
+    PortBusyError,
+    RobotLinkError,
+    TargetRefusedError,
+    UnknownNameError,
+)
 from wbc.hardware.contract import check_robot
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -29,6 +36,7 @@ from wbc.hardware.unitree import (
     MAX_DATAGRAM,
     MODE_SERVO,
     SDK_POSITION_LIMITS,
+    SdkTransport,
     Transport,
     UdpTransport,
     UnitreeRobot,
@@ -537,3 +545,112 @@ def test_non_loopback_target_is_refused() -> None:
         UdpTransport((LOOPBACK, 0), ("203.0.113.5", 8007))
     with pytest.raises(TargetRefusedError, match="allow_hardware"):
         UdpTransport(("0.0.0.0", 0), (LOOPBACK, 9))
+
+
+_SDK_TRANSPORT = '''
+import json, socket, sys, time
+import numpy as np
+from wbc.control.stand import stand_command
+from wbc.errors import PortBusyError
+from wbc.hardware.contract import check_robot
+from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
+from wbc.hardware.unitree import (GO1_LAYOUT, Battery, LowStateExtras, Remote, SdkTransport, UnitreeRobot,
+                                  UnitreeRobotConfig, encode_command, encode_state)
+from wbc.types import MotorCommand, RobotState
+out = {}
+# 1. frames both ways, against a bare socket standing in for the robot
+robot_side = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+robot_side.bind(("127.0.0.1", 0))
+robot_side.settimeout(1.0)
+sdk = SdkTransport(("127.0.0.1", 0), robot_side.getsockname())
+state = RobotState(tick=123456, time=0.0, q=np.linspace(-1, 1, 12), dq=np.linspace(-3, 3, 12),
+                   tau_est=np.linspace(-20, 20, 12), imu_quat=np.array([0.9, 0.1, -0.2, 0.3]),
+                   gyro_in_body=np.array([0.1, -0.2, 0.3]), accel_in_body=np.array([0.5, -1.0, 9.7]),
+                   foot_force=np.array([10.0, 20.0, 30.0, 40.0]))
+extras = LowStateExtras(motor_mode=np.full(12, 10, dtype=np.uint8), motor_temperature=np.arange(30, 42, dtype=np.int8),
+                        ddq_counts=np.arange(-600, 600, 100, dtype=np.int16), imu_rpy=np.array([0.01, -0.02, 0.03]),
+                        imu_temperature=41, foot_force_est=np.array([1.0, 2.0, 3.0, 4.0]),
+                        remote=Remote(raw=bytes(range(40))),
+                        battery=Battery(version=(1, 2), status=3, soc=87, current=-1.234, cycle=55, bq_ntc=(25, 26),
+                                        mcu_ntc=(27, 28), cell_voltage=np.linspace(3.6, 4.1, 10)))
+frame = encode_state(GO1_LAYOUT, state, extras)
+robot_side.sendto(frame, sdk.local_address)
+out["readable"] = sdk.wait_readable(1.0)
+out["state_equal"] = sdk.receive() == [frame]
+corrupt = bytearray(frame)
+corrupt[100] ^= 1
+robot_side.sendto(bytes(corrupt), sdk.local_address)
+time.sleep(0.05)
+out["corrupt_received"] = len(sdk.receive())
+out["rejected"] = sdk.rejected
+cmd = encode_command(GO1_LAYOUT, MotorCommand.hold(np.linspace(-0.5, 0.5, 12), 30.0, 1.5))
+sdk.send(cmd)
+out["cmd_equal"] = robot_side.recvfrom(2048)[0] == cmd
+try:
+    SdkTransport(("127.0.0.1", robot_side.getsockname()[1]), ("127.0.0.1", 9))
+    out["busy"] = "no error"
+except PortBusyError as exc:
+    out["busy"] = str(exc)
+# 2. the backend over it, against the emulator
+with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
+    host, port = emu.address
+    config = UnitreeRobotConfig(robot="go1", target_host=host, target_port=port, transport="sdk")
+    check_robot(lambda: UnitreeRobot(config))
+    events = []
+    safe = SafeRobot(UnitreeRobot(config), SafetyConfig(on_event=events.append, ramp_time_s=0.2))
+    with safe:
+        hold = stand_command(safe.robot.desc)
+        for _ in range(300):
+            safe.read()
+            sent = safe.write(hold)
+            safe.advance(0.004)
+        out["safety"] = safe.safety_state.value
+        out["link_rejected"] = safe.robot.link_stats().rejected_states
+        last = emu.commands()[-1].wire
+        out["wire_matches_sent"] = bool(np.allclose(last.q, sent.q, atol=1e-6) and np.allclose(last.kp, sent.kp))
+        out["height"] = float(emu.base_truth().base_position_in_world[2])
+print("RESULT", json.dumps(out))
+'''
+
+
+def test_the_vendor_sdk_as_the_backends_transport() -> None:
+    # In a subprocess: the SDK prints, may exit its process, and never closes its sockets.
+    pytest.importorskip("unitree_legged_sdk")
+    out = subprocess.run([sys.executable, "-c", _SDK_TRANSPORT], capture_output=True, text=True, timeout=120,
+                         check=False)
+    line = next((x for x in out.stdout.splitlines() if x.startswith("RESULT ")), None)
+    assert line is not None, (out.returncode, out.stdout[-2000:], out.stderr[-3000:])
+    result = json.loads(line.removeprefix("RESULT "))
+    print("\nvendor SDK transport:", result)
+    assert result["readable"] and result["state_equal"]  # every field the SDK exposes lands back in its place
+    assert result["corrupt_received"] == 0 and result["rejected"] == 1
+    assert result["cmd_equal"]  # our frame, byte for byte, CRC included
+    assert "the vendor SDK would silently run on another port" in result["busy"]
+    assert result["safety"] == "run" and result["link_rejected"] == 0 and result["wire_matches_sent"]
+    assert result["height"] > 0.25  # it stood
+
+
+class _DeafSdk:
+    """A stand-in for the SDK module whose UDP binds nothing, as the real one does when its port is taken."""
+
+    class UDP:
+        def __init__(self, *args: object) -> None:
+            self.args = args
+
+    class LowState:
+        pass
+
+
+def test_an_sdk_that_did_not_bind_its_port_is_a_port_busy_error() -> None:
+    with pytest.raises(PortBusyError, match="did not bind"):
+        SdkTransport((LOOPBACK, 0), (LOOPBACK, 9), sdk=_DeafSdk)  # type: ignore[arg-type]
+
+
+def test_the_sdk_transport_is_go1_only_and_loopback_only() -> None:
+    with pytest.raises(ConfigError, match="go1"):
+        UnitreeRobotConfig(robot="a1", target_host=LOOPBACK, target_port=9, transport="sdk")
+    with pytest.raises(UnknownNameError, match="udp"):
+        UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9, transport="tcp")
+    with pytest.raises(TargetRefusedError):
+        SdkTransport((LOOPBACK, 0), ("192.0.2.10", 8007), sdk=_DeafSdk)  # type: ignore[arg-type]

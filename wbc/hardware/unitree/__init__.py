@@ -3,9 +3,10 @@
 `encode_command` turns a `MotorCommand` into a LowCmd frame (checked, clamped, then quantised as the SDK does);
 `decode_state` turns a LowState frame into a `RobotState` and `LowStateExtras`, rejecting (and counting in a
 `DecodeStats`) any frame of the wrong length, header or CRC or with a non-finite value. `decode_command` and
-`encode_state` are the other side of the wire, for an emulator. On top of
-them: `UdpTransport` (the socket), the address policy (`check_target`: loopback unless ``allow_hardware``) and
-`UnitreeRobot`, the backend with its link thread; the emulator lives in `wbc.hardware.emulators`.
+`encode_state` are the other side of the wire, for an emulator. On top of them: `UdpTransport` (the socket),
+`SdkTransport` (the vendor's Go1 SDK carrying the same frames), the address policy (`check_target`: loopback unless
+``allow_hardware``) and `UnitreeRobot`, the backend with its link thread; the emulator lives in
+`wbc.hardware.emulators`.
 """
 
 from wbc.hardware.unitree.battery import Battery
@@ -33,10 +34,12 @@ from wbc.hardware.unitree.remote import BUTTONS, L2_B_MASK, Remote
 from wbc.hardware.unitree.robot import (
     DESCRIPTIONS,
     SDK_POSITION_LIMITS,
+    TRANSPORTS,
     UnitreeRobot,
     UnitreeRobotConfig,
     unitree_joint_table,
 )
+from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS, SdkTransport, sdk_state_frame
 from wbc.hardware.unitree.state_codec import decode_state, encode_state
 from wbc.hardware.unitree.state_extras import LowStateExtras
 from wbc.hardware.unitree.target import announce_hardware_target, check_target, is_loopback
@@ -57,6 +60,8 @@ __all__ = [
     "POS_STOP_F",
     "REJECT_REASONS",
     "SDK_POSITION_LIMITS",
+    "SDK_ROBOTS",
+    "TRANSPORTS",
     "TAU_WIRE_MAX",
     "VEL_STOP_F",
     "Battery",
@@ -65,6 +70,7 @@ __all__ = [
     "LinkStats",
     "LowStateExtras",
     "Remote",
+    "SdkTransport",
     "Transport",
     "UdpTransport",
     "UnitreeRobot",
@@ -80,5 +86,6 @@ __all__ = [
     "frame_crc",
     "frame_layout",
     "is_loopback",
+    "sdk_state_frame",
     "unitree_joint_table",
 ]

@@ -35,6 +35,7 @@ from wbc.hardware.unitree.decode_stats import DecodeStats
 from wbc.hardware.unitree.layout import FrameLayout, frame_layout
 from wbc.hardware.unitree.link_stats import LinkStats
 from wbc.hardware.unitree.remote import Remote
+from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS, SdkTransport
 from wbc.hardware.unitree.state_codec import decode_state
 from wbc.hardware.unitree.state_extras import LowStateExtras
 from wbc.hardware.unitree.target import announce_hardware_target, check_target
@@ -44,7 +45,11 @@ from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["DESCRIPTIONS", "SDK_POSITION_LIMITS", "UnitreeRobot", "UnitreeRobotConfig", "unitree_joint_table"]
+__all__ = ["DESCRIPTIONS", "SDK_POSITION_LIMITS", "TRANSPORTS", "UnitreeRobot", "UnitreeRobotConfig",
+           "unitree_joint_table"]
+
+TRANSPORTS = ("udp", "sdk")
+"""Datagram channels `UnitreeRobotConfig.transport` names: our socket, or the vendor's Go1 SDK."""
 
 DESCRIPTIONS = {"a1": "a1-wx200", "go1": "go1-arm"}
 """Robot name -> registry description whose legs-only variant (arm mode ``none``) the backend drives."""
@@ -88,6 +93,8 @@ class UnitreeRobotConfig:
         damping_kd: velocity gain of a damping frame [N m s / rad].
         close_damping: how long `close` keeps sending damping frames [s].
         connect_timeout: how long `connect` waits for the first valid state [s].
+        transport: the datagram channel `connect` builds when none is handed to the constructor: ``udp`` (our
+            socket, `UdpTransport`) or ``sdk`` (the vendor's Go1 SDK, `SdkTransport`; Go1 only).
     """
 
     robot: str = "go1"
@@ -101,10 +108,16 @@ class UnitreeRobotConfig:
     damping_kd: float = 3.0
     close_damping: float = 0.1
     connect_timeout: float = 1.0
+    transport: str = "udp"
 
     def __post_init__(self) -> None:
         if self.robot not in DESCRIPTIONS:
             raise UnknownNameError("Unitree robot", self.robot, tuple(DESCRIPTIONS))
+        if self.transport not in TRANSPORTS:
+            raise UnknownNameError("Unitree transport", self.transport, TRANSPORTS)
+        if self.transport == "sdk" and self.robot not in SDK_ROBOTS:
+            raise ConfigError(f"UnitreeRobotConfig.transport 'sdk': the vendor SDK speaks the wire of "
+                              f"{', '.join(SDK_ROBOTS)} only; use transport='udp' for the {self.robot}")
         check_target(self.target_host, self.target_port, allow_hardware=self.allow_hardware, what="target_host")
         check_target(self.local_host, 1, allow_hardware=self.allow_hardware, what="local_host")
         if not 200.0 <= self.rate_hz <= 1000.0:
@@ -124,8 +137,8 @@ class UnitreeRobot(Robot):
 
     Args:
         config: the link.
-        transport: the datagram channel; None builds a `UdpTransport` from `config` at `connect` (and closes it at
-            `close`). A transport handed in is the caller's to close.
+        transport: the datagram channel; None builds the one `config.transport` names at `connect` (and closes it
+            at `close`). A transport handed in is the caller's to close.
     """
 
     def __init__(self, config: UnitreeRobotConfig, transport: Transport | None = None) -> None:
@@ -177,8 +190,9 @@ class UnitreeRobot(Robot):
             self._transport = self._given_transport
         else:
             announce_hardware_target(cfg.target_host, cfg.target_port, cfg.robot)
-            self._transport = UdpTransport((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
-                                           allow_hardware=cfg.allow_hardware)
+            channel = SdkTransport if cfg.transport == "sdk" else UdpTransport
+            self._transport = channel((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
+                                      allow_hardware=cfg.allow_hardware)
         self._thread = threading.Thread(target=self._run, name=f"unitree-{cfg.robot}-link", daemon=True)
         self._thread.start()
         deadline = time.monotonic() + cfg.connect_timeout
