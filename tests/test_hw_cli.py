@@ -166,7 +166,14 @@ def test_bench_hw_json_has_the_keys(capsys: pytest.CaptureFixture[str]) -> None:
                 "cpu_us_per_tick", "rejects", "machine", "emulator"):
         assert key in result, key
     assert result["rejects"] == 0 and result["sends"] > 100 and result["replies_received"] > 100
+    assert result["transport"] == "udp"
     assert result["period_ms_p50"] > 0 and result["round_trip_ms_p50"] > 0  # figures are printed, not asserted
+
+
+def test_the_vendor_transport_is_refused_for_the_a1_before_any_socket(no_socket: list,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "check", "--robot", "a1", "--target", "127.0.0.1:9", "--transport", "sdk"]) == 2
+    assert "speaks the wire of go1 only" in capsys.readouterr().err and not no_socket
 
 
 def test_bench_hw_refuses_a_bad_rate_before_starting_the_emulator(capsys: pytest.CaptureFixture[str]) -> None:

@@ -101,7 +101,7 @@ def _bench_train(args: argparse.Namespace) -> int:
 
 
 def _bench_hw(args: argparse.Namespace) -> int:
-    result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate)
+    result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport)
     if args.json:
         printers.print_json(result)
     else:
@@ -178,7 +178,7 @@ def _hw_check(args: argparse.Namespace) -> int:
     local_host, local_port = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"),
                                       "--local")
     cfg = UnitreeRobotConfig(robot=args.robot, target_host=host, target_port=port, local_host=local_host,
-                             local_port=local_port, allow_hardware=args.allow_hardware)
+                             local_port=local_port, allow_hardware=args.allow_hardware, transport=args.transport)
     if not is_loopback(host):
         _confirm_hardware(cfg.robot, host, port, yes=args.yes)
     robot = UnitreeRobot(cfg)

@@ -10,12 +10,15 @@ import argparse
 
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import Fault
-from wbc.hardware.unitree import DESCRIPTIONS
+from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
 from wbc.learned.train.stages import BASELINES, TASKS
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import ROBOTS
 
 __all__ = ["add_arena_options", "build_parser"]
+
+_TRANSPORT_HELP = (f"the link's datagram channel, one of: {', '.join(TRANSPORTS)} (default udp: our socket; sdk: "
+                   "the vendor's Go1 SDK, installed with the hardware extra, carrying the same checked frames)")
 
 
 def add_arena_options(p: argparse.ArgumentParser) -> None:
@@ -104,6 +107,7 @@ def build_parser() -> argparse.ArgumentParser:
     bhw.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
     bhw.add_argument("--seconds", type=float, default=3.0, help="how long the link is measured [s] (default 3)")
     bhw.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
+    bhw.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
     bhw.add_argument("--json", action="store_true", help="print JSON")
     bhw.set_defaults(handler="bench hw")
 
@@ -134,6 +138,7 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--local", default=None, metavar="HOST:PORT",
                        help="address to bind (default 127.0.0.1:0 for a loopback target, else 0.0.0.0:0)")
     check.add_argument("--seconds", type=float, default=1.0, help="how long to read states [s] (default 1)")
+    check.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
     check.add_argument("--allow-hardware", action="store_true",
                        help="allow a target outside 127.0.0.0/8: a real robot")
     check.add_argument("--yes", action="store_true",

@@ -177,8 +177,8 @@ def print_recording(what: str, frames: int, path: Path) -> None:
 
 def print_bench_hw(result: Mapping[str, object]) -> None:
     """``wbc bench hw``: the link's send period, round trip, CPU per tick and rejects."""
-    print(f"Unitree {result['robot']} low-level link over loopback, {result['rate_hz']:.0f} Hz for "
-          f"{result['seconds']} s; emulator: {result['emulator_process']}")
+    print(f"Unitree {result['robot']} low-level link over loopback ({result['transport']} transport), "
+          f"{result['rate_hz']:.0f} Hz for {result['seconds']} s; emulator: {result['emulator_process']}")
     print(f"  send period     p50 {result['period_ms_p50']:.3f} ms  p99 {result['period_ms_p99']:.3f} ms  "
           f"max {result['period_ms_max']:.3f} ms")
     print(f"  round trip      p50 {result['round_trip_ms_p50']:.3f} ms  p99 {result['round_trip_ms_p99']:.3f} ms "

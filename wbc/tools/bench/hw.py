@@ -25,7 +25,14 @@ import numpy as np
 import wbc
 from wbc.errors import BenchError
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
-from wbc.hardware.unitree import REJECT_REASONS, Transport, UdpTransport, UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree import (
+    REJECT_REASONS,
+    SdkTransport,
+    Transport,
+    UdpTransport,
+    UnitreeRobot,
+    UnitreeRobotConfig,
+)
 from wbc.tools.bench.references import machine_description
 from wbc.types import MotorCommand
 
@@ -146,13 +153,15 @@ def _percentile_ms(values: np.ndarray, q: float) -> float:
     return float(1e3 * np.percentile(values, q)) if values.size else float("nan")
 
 
-def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0) -> dict[str, object]:
+def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0,
+             transport: str = "udp") -> dict[str, object]:
     """Time the low-level link over loopback against an emulator in its own process.
 
     Args:
         robot: ``a1`` or ``go1``.
         seconds: how long the link runs while measured [s].
         rate_hz: the link thread's rate, 200..1000 [Hz].
+        transport: ``udp`` (our socket) or ``sdk`` (the vendor's Go1 SDK), see `UnitreeRobotConfig.transport`.
 
     Returns:
         ``period_ms_p50`` / ``_p99`` / ``_max`` (the interval between two sends of the link thread [ms]),
@@ -162,19 +171,22 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         (``link``), the settings and ``machine``.
 
     Raises:
-        UnknownNameError: `robot` is not ``a1`` or ``go1``.
-        ConfigError: `rate_hz` is out of range.
+        UnknownNameError: `robot` is not ``a1`` or ``go1``, or `transport` is not a transport's name.
+        ConfigError: `rate_hz` is out of range, or the vendor SDK was asked for an A1 or is not installed.
         BenchError: the emulator process did not start, or failed.
     """
-    UnitreeRobotConfig(robot=robot, target_host="127.0.0.1", target_port=1, rate_hz=rate_hz)  # validate first
+    UnitreeRobotConfig(robot=robot, target_host="127.0.0.1", target_port=1, rate_hz=rate_hz,
+                       transport=transport)  # validate first
     if not seconds > 0:
         raise BenchError(f"bench hw: --seconds must be > 0, got {seconds}")
     proc = _start_emulator_process(robot, seconds)
     try:
         address = _read_json_line(proc, _START_TIMEOUT, "bind a port")
         host, port = address["host"], int(address["port"])
-        cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=rate_hz)
-        timed = TimedTransport(UdpTransport((cfg.local_host, 0), (host, port)))
+        cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=rate_hz,
+                                 transport=transport)
+        channel = SdkTransport if transport == "sdk" else UdpTransport
+        timed = TimedTransport(channel((cfg.local_host, 0), (host, port)))
         link = UnitreeRobot(cfg, transport=timed)
         try:
             with link:
@@ -216,6 +228,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         "robot": robot,
         "seconds": seconds,
         "rate_hz": rate_hz,
+        "transport": transport,
         "emulator_process": "separate process, lockstep",
         "sends": int(sends.size),
         "replies_received": int(receives.size),
