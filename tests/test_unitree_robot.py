@@ -7,6 +7,7 @@ bounded in time. What the backend sent is read from the emulator's log of decode
 from __future__ import annotations
 
 import json
+import select
 import socket
 import struct
 import subprocess
@@ -319,6 +320,44 @@ def test_delay_and_drop(robot_name: str) -> None:
         assert _until(lambda: (robot.write(_hold(robot)), robot.read().tick > tick)[1], 0.5)
         assert time.monotonic() - delayed_at >= 0.025
         assert robot.state_age < 0.04
+
+
+def test_jitter_spreads_and_reorders_the_replies_and_loses_none() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
+        emu.inject(Fault.JITTER, 0.01)
+        client = RawClient(emu)
+        try:
+            frame = encode_command(emu.layout, MotorCommand.hold(emu.sim.desc.nominal_q, 20.0, 1.0))
+            sent: dict[int, float] = {}
+            arrivals: list[tuple[int, float]] = []
+            end = time.monotonic() + 1.0
+            while len(arrivals) < 50 and time.monotonic() < end:
+                now = time.monotonic()
+                if len(sent) < 50 and now >= len(sent) * 0.002 + (min(sent.values()) if sent else now):
+                    client.sock.sendto(frame, emu.address)  # a command every 2 ms, as a 500 Hz link sends
+                    sent[len(sent) + 1] = now  # the emulator's k-th step answers with tick k
+                if select.select([client.sock], [], [], 0.0005)[0]:
+                    data = client.sock.recvfrom(MAX_DATAGRAM)[0]
+                    arrivals.append((decode_state(emu.layout, data, time=0.0)[0].tick, time.monotonic()))
+        finally:
+            client.close()
+    ticks = [t for t, _ in arrivals]
+    late = [at - sent[t] for t, at in arrivals]
+    print(f"\njitter 10 ms: replies late by {min(late) * 1e3:.1f}..{max(late) * 1e3:.1f} ms, "
+          f"{sum(b < a for a, b in zip(ticks, ticks[1:], strict=False))} of 49 arrived before an older one")
+    assert sorted(ticks) == list(range(1, 51))  # none lost
+    assert ticks != sorted(ticks)  # out of order
+    assert max(late) - min(late) > 0.004 and max(late) < 0.01 + 0.02
+
+
+def test_the_link_stays_up_under_jitter() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu, UnitreeRobot(_config(emu)) as robot:
+        emu.inject(Fault.JITTER, 0.01)
+        _keep_writing(robot, _hold(robot), 0.3)
+        stats = robot.link_stats()
+        assert stats.deadline_trips == 0 and stats.rejected_states == 0
+        assert stats.valid_states > 0.5 * stats.frames_sent and robot.state_age < 0.02
+        assert not any(c.damping for c in emu.commands()[-100:])  # the servo frames kept going out
 
 
 class FakeTransport:

@@ -27,7 +27,8 @@ class Fault(enum.Enum):
 
     Frame faults: SILENCE (no replies); CORRUPT (a flipped bit: bad CRC); SHORT (one byte missing); LONG (four bytes
     more); FOREIGN_PORT (replies sent from another port); DELAY [s, default 0.05] (each reply sent that much later);
-    DROP [probability, default 1.0] (each reply dropped with it).
+    JITTER [s, default 0.004] (each reply sent later by a time drawn uniformly in [0, value], so replies arrive
+    unevenly and out of order, as on a busy network); DROP [probability, default 1.0] (each reply dropped with it).
     State faults: JOINT_OUT_OF_RANGE [(joint, q) default (2, 0.5)] (calf 0 reports q); OVER_TEMPERATURE [deg C,
     default 95] (every motor); MOTOR_ERROR [mode, default 0] (every motor reports that mode); OVER_POWER
     [(tau_est N m, dq rad/s), default (20, 5)] (every motor reports that torque and speed: 12 x 100 W, above the
@@ -41,6 +42,7 @@ class Fault(enum.Enum):
     LONG = "long"
     FOREIGN_PORT = "foreign_port"
     DELAY = "delay"
+    JITTER = "jitter"
     DROP = "drop"
     JOINT_OUT_OF_RANGE = "joint_out_of_range"
     OVER_TEMPERATURE = "over_temperature"
@@ -50,13 +52,14 @@ class Fault(enum.Enum):
     REMOTE_L2_B = "remote_l2_b"
 
 
-FRAME_FAULTS = (Fault.SILENCE, Fault.CORRUPT, Fault.SHORT, Fault.LONG, Fault.FOREIGN_PORT, Fault.DELAY, Fault.DROP)
+FRAME_FAULTS = (Fault.SILENCE, Fault.CORRUPT, Fault.SHORT, Fault.LONG, Fault.FOREIGN_PORT, Fault.DELAY, Fault.JITTER,
+                Fault.DROP)
 STATE_FAULTS = (Fault.JOINT_OUT_OF_RANGE, Fault.OVER_TEMPERATURE, Fault.MOTOR_ERROR, Fault.OVER_POWER, Fault.FALL,
                 Fault.REMOTE_L2_B)
 
 _DEFAULTS: dict[Fault, object] = {
-    Fault.DELAY: 0.05, Fault.DROP: 1.0, Fault.JOINT_OUT_OF_RANGE: (2, 0.5), Fault.OVER_TEMPERATURE: 95,
-    Fault.MOTOR_ERROR: 0, Fault.OVER_POWER: (20.0, 5.0), Fault.FALL: math.pi / 2,
+    Fault.DELAY: 0.05, Fault.JITTER: 0.004, Fault.DROP: 1.0, Fault.JOINT_OUT_OF_RANGE: (2, 0.5),
+    Fault.OVER_TEMPERATURE: 95, Fault.MOTOR_ERROR: 0, Fault.OVER_POWER: (20.0, 5.0), Fault.FALL: math.pi / 2,
 }
 
 

@@ -301,6 +301,8 @@ class UnitreeEmulator:
         state, extras = apply_state_faults(active, state, extras)
         frame = mangle_frame(active, encode_state(self.layout, state, extras))
         delay = float(active.get(Fault.DELAY, 0.0) or 0.0)
+        if Fault.JITTER in active:
+            delay += self._coin.uniform(0.0, float(active[Fault.JITTER]))
         if delay > 0:
             self._pending.append((time.monotonic() + delay, frame, peer))
             return
