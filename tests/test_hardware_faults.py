@@ -2,9 +2,9 @@
 checked on the wire.
 
 Every case injects its fault in the emulator and reads what reached the emulated robot from the emulator's log of
-decoded command frames (`UnitreeEmulator.commands`), not from what the layers meant to send. Cases about time use a
-wall clock for the safety layer (``clock=time.monotonic``); the others run on the robot time that `advance` lets
-pass. Every socket binds 127.0.0.1 on a port the kernel picks; every loop is bounded in iterations and in time.
+decoded command frames (`UnitreeEmulator.commands`), not from what the layers meant to send. The safety layer runs on
+the link's wall clock, as on a robot (`UnitreeRobot` is a `WallClock`), with no clock handed in. Every socket binds
+127.0.0.1 on a port the kernel picks; every loop is bounded in iterations and in time.
 """
 
 from __future__ import annotations
@@ -34,9 +34,8 @@ FAST = dict(ramp_time_s=0.2)  # a short ramp, so that a case reaches ``run`` qui
 
 
 @contextmanager
-def _rig(robot: str = "go1", *, mode: str = "lockstep", clock: Callable[[], float] | None = None,
-         qpos: np.ndarray | None = None, **safety: object) -> Iterator[tuple[UnitreeEmulator, SafeRobot,
-                                                                              list[SafetyEvent]]]:
+def _rig(robot: str = "go1", *, mode: str = "lockstep", qpos: np.ndarray | None = None,
+         **safety: object) -> Iterator[tuple[UnitreeEmulator, SafeRobot, list[SafetyEvent]]]:
     """An emulator (optionally reset to `qpos` first) and a connected SafeRobot(UnitreeRobot) talking to it."""
     events: list[SafetyEvent] = []
     with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode=mode)) as emu:
@@ -45,7 +44,7 @@ def _rig(robot: str = "go1", *, mode: str = "lockstep", clock: Callable[[], floa
         host, port = emu.address
         assert host == LOOPBACK
         link = UnitreeRobot(UnitreeRobotConfig(robot=robot, target_host=host, target_port=port))
-        safe = SafeRobot(link, SafetyConfig(on_event=events.append, **safety), clock=clock)
+        safe = SafeRobot(link, SafetyConfig(on_event=events.append, **safety))
         with safe:
             yield emu, safe, events
         assert emu.failure is None, emu.failure
@@ -147,7 +146,7 @@ def test_unitree_robot_reports_remote_and_motor_status_to_the_safety_layer() -> 
 # -- 1: the state stream stops ------------------------------------------------------------------------------------
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_silence_damps_within_the_stale_timeout_latches_and_ramps_after_reset(robot: str) -> None:
-    with _rig(robot, clock=time.monotonic, **FAST) as (emu, safe, events):
+    with _rig(robot, **FAST) as (emu, safe, events):
         cmd = _stand(safe)
         _run_to(safe, cmd, SafetyState.RUN)
         silenced, first = _inject_until_damped(emu, safe, cmd, Fault.SILENCE, reason="stale_state", seconds=0.5)
@@ -171,7 +170,7 @@ def test_silence_damps_within_the_stale_timeout_latches_and_ramps_after_reset(ro
 # -- 3: the control loop stalls -----------------------------------------------------------------------------------
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_loop_stall_damps_on_the_wire_and_resumes_without_a_jump(robot: str) -> None:
-    with _rig(robot, clock=time.monotonic, **FAST) as (emu, safe, events):
+    with _rig(robot, **FAST) as (emu, safe, events):
         cmd = _stand(safe)
         _run_to(safe, cmd, SafetyState.RUN)
         deadline = safe.robot.config.write_deadline
@@ -305,27 +304,45 @@ FOLDED = np.tile([0.0, 1.1, -2.2], 4)  # crouched low, legs folded (feet 1 cm ab
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_unsafe_start_first_command_is_the_measured_pose_then_a_bounded_slew(robot: str) -> None:
     qpos = np.concatenate([[0.0, 0.0, 0.26, 1.0, 0.0, 0.0, 0.0], FOLDED])
+    writes = []  # (wall time before the write, after it, the measured q, what the layer sent)
     with _rig(robot, qpos=qpos) as (emu, safe, events):
         cmd = _stand(safe)
-        log = _loop(safe, cmd, 0.4)
+        end = time.monotonic() + 0.4
+        for _ in range(int(0.4 / PERIOD) + 2):
+            if time.monotonic() >= end:
+                break
+            q = safe.read().q.copy()
+            before = time.monotonic()
+            sent = safe.write(cmd)
+            writes.append((before, time.monotonic(), q, sent))
+            safe.advance(PERIOD)
         trips = [e for e in events if e.to_state is SafetyState.DAMPED]
         assert safe.safety_state is SafetyState.RAMP and not trips, events
     frames = emu.commands()
     start = next(i for i, c in enumerate(frames) if not c.damping)
-    measured, sent = next((q, s) for q, s in log if not (s.kp == 0).all())
+    k0 = next(k for k, w in enumerate(writes) if not (w[3].kp == 0).all())
+    measured = writes[k0][2]
     np.testing.assert_allclose(frames[start].wire.q, measured, atol=Q_QUANTUM)  # the first servo frame
     np.testing.assert_array_equal(frames[start].wire.kp, safe.config.ramp_kp)
     assert np.abs(measured - cmd.q).max() > 0.5  # the start really was far from the stand pose
-    ramp = [c for c in frames[start:] if not c.damping]
-    qs = np.array([c.wire.q for c in ramp])
-    steps = np.abs(np.diff(qs, axis=0)).max(axis=1)
+    # The layer's targets move no faster than the slew over the wall time between its writes (the layer reads its
+    # clock between the two stamps of each write, so the bound needs no slack) ...
+    ramp = writes[k0:]
+    targets = np.array([w[3].q for w in ramp])
+    steps = np.abs(np.diff(targets, axis=0)).max(axis=1)
+    bounds = safe.config.ramp_slew * np.array([b[1] - a[0] for a, b in zip(ramp, ramp[1:], strict=False)])
     print(f"\n{robot}: start {np.abs(measured - cmd.q).max():.3f} rad from the stand pose; largest step between "
-          f"two frames {steps.max() * 1e3:.2f} mrad (bound {safe.config.ramp_slew * PERIOD * 1e3:.2f})")
-    assert steps.max() <= safe.config.ramp_slew * PERIOD + Q_QUANTUM
+          f"two writes {steps.max() * 1e3:.2f} mrad, {(steps / (bounds + Q_QUANTUM)).max():.0%} of its wall-time "
+          "bound")
+    assert (steps <= bounds + Q_QUANTUM).all()
     assert steps.max() > 0  # it does move
-    # and the wire never ran ahead of the slew over wall time either
-    travel = np.abs(qs[-1] - qs[0]).max()
-    assert travel <= safe.config.ramp_slew * (ramp[-1].time - ramp[0].time + 2 * PERIOD)
+    # ... and what reached the wire is those targets, in their order: nothing in between, nothing ahead.
+    wire = [c.wire.q for c in frames[start:] if not c.damping]
+    k = 0
+    for q in wire:
+        while k < len(targets) and not np.allclose(q, targets[k], atol=Q_QUANTUM):
+            k += 1
+        assert k < len(targets), "a target reached the wire that the layer never sent"
 
 
 # -- 9: e-stop ----------------------------------------------------------------------------------------------------

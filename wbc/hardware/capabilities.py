@@ -4,7 +4,8 @@ A real robot offers none of these by default; the simulator offers the first thr
 ``isinstance(robot, Pushable)`` instead of testing for a backend class, so a backend that can do the same (motion
 capture as a `TruthSource`, a push rig as `Pushable`) takes the same path. A safety layer that records its
 transitions is a `HasSafetyEvents` (`wbc.hardware.safety.SafeRobot` is one); the protocol is structural, so the
-runner logs the events without importing the safety layer.
+runner logs the events without importing the safety layer. A robot that lives in wall-clock time (a real robot, or
+an emulator over a wire) is a `WallClock`, so a safety layer times its checks on the clock the motors live on.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from typing import Protocol, runtime_checkable
 from wbc.scenario.push import Push
 from wbc.types import BaseTruth
 
-__all__ = ["FallDetector", "HasSafetyEvents", "Pushable", "SafetyEventLike", "TruthSource"]
+__all__ = ["FallDetector", "HasSafetyEvents", "Pushable", "SafetyEventLike", "TruthSource", "WallClock"]
 
 
 @runtime_checkable
@@ -72,3 +73,15 @@ class HasSafetyEvents(Protocol):
 
     def safety_events(self) -> Sequence[SafetyEventLike]:
         """Every transition so far, oldest first (a runner logs those that happened during its episode)."""
+
+
+@runtime_checkable
+class WallClock(Protocol):
+    """A backend whose robot lives in wall-clock time, whatever its caller does (a real robot over a wire).
+
+    Its motors keep acting while the caller is late, so whoever watches over them (`wbc.hardware.safety.SafeRobot`)
+    must time stale streams, stalls and ramps on this clock, not on the time the caller says has passed.
+    """
+
+    def wall_time(self) -> float:
+        """Now, on a monotonic clock [s] (an arbitrary origin; only differences mean anything)."""

@@ -12,8 +12,10 @@ are a `MotorStatusSource`), a trunk roll or pitch beyond the limit (a fall, from
 runner as `safety_events`, so the episode logs them) and handed to `SafetyConfig.on_event` (by default printed to
 standard error, one line per transition).
 
-The layer's clock is the robot time that `advance` lets pass, so a simulated run is deterministic; on hardware a
-wall clock can be handed in (``clock=time.monotonic``), which also sees a control loop that stalls between calls.
+The layer's clock is the one the motors live on: a robot that is a `WallClock` (a real robot over its wire, or an
+emulator behind one) is timed on its monotonic clock, which also sees a control loop that stalls between calls; a
+simulator on the robot time that `advance` lets pass, so a simulated run is deterministic. A `clock` handed in
+overrides both.
 
 The wrapped robot's own capabilities (a simulator's `TruthSource`, `FallDetector`, `Pushable`) are not forwarded: a
 runner reaches them through `SafeRobot.robot`, e.g. ``run_episode(safe, ctrl, ..., truth=safe.robot.base_truth)``.
@@ -29,6 +31,7 @@ from typing import cast
 import numpy as np
 
 from wbc.errors import SafetyResetError
+from wbc.hardware.capabilities import WallClock
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.hardware.safety.config import SafetyConfig
@@ -59,7 +62,8 @@ class SafeRobot(Robot):
     Args:
         robot: the robot to protect (it is connected and closed with this one).
         config: thresholds, gains and timings.
-        clock: returns now [s]; default: the robot time passed through `advance`.
+        clock: returns now [s]; default: the robot's `wall_time` if it is a `WallClock`, else the robot time passed
+            through `advance`.
     """
 
     def __init__(self, robot: Robot, config: SafetyConfig | None = None, *,
@@ -67,7 +71,7 @@ class SafeRobot(Robot):
         super().__init__()
         self.robot = robot
         self.config = config if config is not None else SafetyConfig()
-        self._clock = clock
+        self._clock = clock if clock is not None else (robot.wall_time if isinstance(robot, WallClock) else None)
         self._time = 0.0
         self._state = SafetyState.WAITING
         self._events: list[SafetyEvent] = []

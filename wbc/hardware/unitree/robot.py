@@ -260,6 +260,10 @@ class UnitreeRobot(Robot):
                 self._lock.wait(max(0.0, grace - time.monotonic()))
         self._raise_failure()
 
+    def wall_time(self) -> float:
+        """Now on the link's monotonic clock [s] (the `WallClock` capability: the motors live in wall time)."""
+        return time.monotonic()
+
     # -- link-only API --------------------------------------------------------------------------------------------
     @property
     def extras(self) -> LowStateExtras | None:
