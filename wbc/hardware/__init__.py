@@ -4,6 +4,7 @@ Importing this package does not import MuJoCo, so a robot computer that runs a r
 """
 
 from wbc.hardware.contract import RobotContractError, check_robot
+from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
 from wbc.hardware.robot import Robot, clamp_command
 
-__all__ = ["Robot", "RobotContractError", "check_robot", "clamp_command"]
+__all__ = ["QuadrupedArmConfig", "QuadrupedArmRobot", "Robot", "RobotContractError", "check_robot", "clamp_command"]

@@ -31,8 +31,11 @@ class RemoteButtons(Protocol):
 class RemoteSource(Protocol):
     """A robot that reports its wireless remote."""
 
-    def remote(self) -> RemoteButtons:
-        """The remote's buttons as of the latest state."""
+    def remote(self) -> RemoteButtons | None:
+        """The remote's buttons as of the latest state; None if the robot has no remote after all.
+
+        (A composite robot offers the method whether or not its part that would carry a remote has one.)
+        """
 
 
 class MotorStatus(Protocol):
@@ -51,5 +54,5 @@ class MotorStatus(Protocol):
 class MotorStatusSource(Protocol):
     """A robot that reports its motors' temperatures and modes."""
 
-    def motor_status(self) -> MotorStatus:
-        """The motors' status as of the latest state."""
+    def motor_status(self) -> MotorStatus | None:
+        """The motors' status as of the latest state; None if none of its motors report one."""

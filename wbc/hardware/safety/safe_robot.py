@@ -269,8 +269,8 @@ class SafeRobot(Robot):
         norm = float(np.linalg.norm(state.imu_quat))
         if abs(norm - 1.0) > _QUAT_NORM_TOLERANCE:
             return "bad_state", f"RobotState.imu_quat has norm {norm:.3f}, not 1"
-        if isinstance(self.robot, MotorStatusSource):
-            status = self.robot.motor_status()
+        status = self.robot.motor_status() if isinstance(self.robot, MotorStatusSource) else None
+        if status is not None:
             modes = np.asarray(status.motor_mode).astype(int)
             bad = ~np.isin(modes, cfg.ok_motor_modes)
             if bad.any():

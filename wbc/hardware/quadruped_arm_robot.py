@@ -1,0 +1,209 @@
+"""`QuadrupedArmRobot`: a quadruped's legs and its arm, two devices on two links, as one robot in the house order.
+
+On a real robot the legs (a Unitree low-level link, 12 motors) and the arm (a Dynamixel bus, 3 servos the model
+moves) are separate devices, each with its own thread, rate and faults. This class makes them one `Robot`:
+
+- Joints: the 12 legs, then (arm mode ``actuated``) the arm's 3: waist, shoulder, elbow. In mode ``locked`` the arm
+  is still driven, but not by the controller: every write holds it at its stowed pose (`QuadrupedArmConfig`), as a
+  welded arm is held in simulation, and the robot has 12 joints. In mode ``none`` there is no arm device.
+- One frame: `read` joins the newest leg and arm states under the legs' timestamp. Its tick (a freshness counter)
+  advances when the legs' tick did, and only while the arm's did too within `arm_stale_s`: a stale arm makes the whole
+  frame stale, so a safety layer above (`wbc.hardware.safety.SafeRobot`) trips on a dead arm bus as on a dead leg
+  link, even in ``locked`` mode where the controller never sees the arm.
+- Time: both devices run their own threads against the wall clock; `advance` paces on the legs' link (which waits
+  for a fresh leg state) and never calls the arm's, which would wait a second time. The robot is a `WallClock`.
+- What the safety layer reads: the legs' remote (`RemoteSource`), and the motor status of both devices joined
+  (`MotorStatusSource`: legs then arm), so an arm servo's alarm or heat trips the layer like a leg motor's.
+- `close` closes both (each leaves its motors damped); `connect` connects both or neither.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.hardware.capabilities import WallClock
+from wbc.hardware.robot import Robot
+from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteButtons, RemoteSource
+from wbc.robots.description import ARM_MODES
+from wbc.robots.joint_table import JointTable
+from wbc.robots.wx200 import WX200_NOMINAL_Q
+from wbc.types import MotorCommand, RobotState
+
+__all__ = ["JointMotorStatus", "QuadrupedArmConfig", "QuadrupedArmRobot"]
+
+_LEGS = 12
+_ARM = 3
+
+
+@dataclass(frozen=True, kw_only=True)
+class QuadrupedArmConfig:
+    """How the two devices make one robot.
+
+    Attributes:
+        arm_mode: ``none`` (no arm device), ``locked`` (the arm held at `stowed_q`, 12 joints) or ``actuated``
+            (15 joints).
+        stowed_q: the arm's pose in ``locked`` mode (waist, shoulder, elbow) [rad]; the model's locked pose.
+        hold_kp: position gain of the ``locked`` hold [N m / rad].
+        hold_kd: velocity gain of the ``locked`` hold [N m s / rad].
+        arm_stale_s: longest time the arm's tick may stand still before the joined frame counts as stale [s].
+    """
+
+    arm_mode: str = "actuated"
+    stowed_q: np.ndarray = field(default_factory=lambda: WX200_NOMINAL_Q.copy())
+    hold_kp: float = 20.0
+    hold_kd: float = 0.5
+    arm_stale_s: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.arm_mode not in ARM_MODES:
+            raise UnknownNameError("arm mode", self.arm_mode, ARM_MODES)
+        stowed = np.array(self.stowed_q, dtype=np.float64)
+        if stowed.shape != (_ARM,) or not np.all(np.isfinite(stowed)):
+            raise ConfigError(f"QuadrupedArmConfig.stowed_q must be 3 finite angles [rad], got {self.stowed_q!r}")
+        stowed.setflags(write=False)
+        object.__setattr__(self, "stowed_q", stowed)
+        for name in ("hold_kp", "hold_kd", "arm_stale_s"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ConfigError(f"QuadrupedArmConfig.{name} must be a positive number, got {value!r}")
+
+
+@dataclass(frozen=True)
+class JointMotorStatus:
+    """Motor modes and temperatures of every motor the joined robot drives, legs first, then the arm's.
+
+    Attributes:
+        motor_mode: each motor's mode (0x0A servo, 0 damping/off, anything else an error code).
+        motor_temperature: each motor's temperature [degC].
+    """
+
+    motor_mode: np.ndarray
+    motor_temperature: np.ndarray
+
+
+class QuadrupedArmRobot(Robot):
+    """Legs and arm as one robot.
+
+    Args:
+        legs: the leg device, 12 joints in the house order (e.g. `wbc.hardware.unitree.UnitreeRobot`).
+        arm: the arm device, 3 joints (waist, shoulder, elbow), running its own bus thread; None in mode ``none``.
+        config: the arm mode and the locked hold.
+
+    Raises:
+        ConfigError: a device with the wrong number of joints, or an arm given (or missing) for the mode.
+    """
+
+    def __init__(self, legs: Robot, arm: Robot | None, config: QuadrupedArmConfig | None = None) -> None:
+        super().__init__()
+        self.config = config if config is not None else QuadrupedArmConfig()
+        mode = self.config.arm_mode
+        if legs.num_joints != _LEGS:
+            raise ConfigError(f"QuadrupedArmRobot: the legs device has {legs.num_joints} joints, expected {_LEGS}")
+        if (arm is None) != (mode == "none"):
+            raise ConfigError(f"QuadrupedArmRobot: arm mode {mode!r} " + ("needs an arm device" if arm is None else
+                              "has no arm device; pass arm=None or choose locked / actuated"))
+        if arm is not None and arm.num_joints != _ARM:
+            raise ConfigError(f"QuadrupedArmRobot: the arm device has {arm.num_joints} joints, expected {_ARM} "
+                              "(waist, shoulder, elbow)")
+        self.legs = legs
+        self.arm = arm
+        self._actuated = mode == "actuated"
+        parts = (legs, arm) if self._actuated else (legs,)
+        self._names = tuple(n for p in parts for n in p.joint_names)
+        tables = [p.limits for p in parts]
+        self._limits = JointTable(names=self._names, **{
+            f: np.concatenate([getattr(t, f) for t in tables])
+            for f in ("lower", "upper", "torque_limit", "velocity_limit", "armature", "damping", "frictionloss")})
+        self._hold = MotorCommand.hold(self.config.stowed_q, self.config.hold_kp, self.config.hold_kd)
+        self._reset_frames()
+
+    def _reset_frames(self) -> None:
+        self._tick = 0
+        self._legs_tick: int | None = None
+        self._arm_tick: int | None = None
+        self._arm_fresh_at = -np.inf
+        self._arm_state: RobotState | None = None
+
+    # -- Robot ----------------------------------------------------------------------------------------------------
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        """The legs' joints, then the arm's in mode ``actuated``."""
+        return self._names
+
+    @property
+    def limits(self) -> JointTable:
+        """The two devices' tables, joined."""
+        return self._limits
+
+    def _connect(self) -> None:
+        self._reset_frames()
+        self.legs.connect()
+        if self.arm is not None:
+            try:
+                self.arm.connect()
+            except BaseException:
+                self.legs.close()  # connect both or neither
+                raise
+
+    def _close(self) -> None:
+        try:
+            if self.arm is not None:
+                self.arm.close()
+        finally:
+            self.legs.close()
+
+    def _read(self) -> RobotState:
+        legs = self.legs.read()
+        fresh = self._legs_tick is not None and legs.tick != self._legs_tick
+        self._legs_tick = legs.tick
+        if self.arm is not None:
+            arm = self.arm.read()
+            now = self.wall_time()
+            if arm.tick != self._arm_tick:
+                self._arm_tick, self._arm_fresh_at = arm.tick, now
+            self._arm_state = arm
+            fresh = fresh and now - self._arm_fresh_at <= self.config.arm_stale_s
+        if fresh or self._tick == 0:
+            self._tick += 1
+        if not self._actuated:
+            return RobotState(tick=self._tick, time=legs.time, q=legs.q, dq=legs.dq, tau_est=legs.tau_est,
+                              imu_quat=legs.imu_quat, gyro_in_body=legs.gyro_in_body,
+                              accel_in_body=legs.accel_in_body, foot_force=legs.foot_force)
+        arm = self._arm_state
+        return RobotState(tick=self._tick, time=legs.time, q=np.concatenate((legs.q, arm.q)),
+                          dq=np.concatenate((legs.dq, arm.dq)), tau_est=np.concatenate((legs.tau_est, arm.tau_est)),
+                          imu_quat=legs.imu_quat, gyro_in_body=legs.gyro_in_body, accel_in_body=legs.accel_in_body,
+                          foot_force=legs.foot_force)
+
+    def _send(self, cmd: MotorCommand) -> None:
+        rows = cmd.stacked()
+        self.legs.write(MotorCommand._trusted(rows[:, :_LEGS].copy()))
+        if self.arm is not None:
+            self.arm.write(MotorCommand._trusted(rows[:, _LEGS:].copy()) if self._actuated else self._hold)
+
+    def _advance(self, dt: float) -> None:
+        self.legs.advance(dt)
+
+    # -- capabilities ---------------------------------------------------------------------------------------------
+    def wall_time(self) -> float:
+        """Now on the legs' clock if they offer one, else the monotonic clock [s] (both devices live in wall time)."""
+        return self.legs.wall_time() if isinstance(self.legs, WallClock) else time.monotonic()
+
+    def remote(self) -> RemoteButtons | None:
+        """The legs' wireless remote (the arm has none), or None when the legs device offers no remote."""
+        return self.legs.remote() if isinstance(self.legs, RemoteSource) else None
+
+    def motor_status(self) -> JointMotorStatus | None:
+        """Modes and temperatures of the legs' motors, then the arm's servos (those that report them).
+
+        None when neither device reports a status.
+        """
+        parts = [p.motor_status() for p in (self.legs, self.arm) if isinstance(p, MotorStatusSource)]
+        if not parts:
+            return None
+        return JointMotorStatus(motor_mode=np.concatenate([np.asarray(s.motor_mode) for s in parts]),
+                                motor_temperature=np.concatenate([np.asarray(s.motor_temperature) for s in parts]))
