@@ -207,6 +207,7 @@ class DynamixelEmulator:
         self._thread: threading.Thread | None = None
         self._last_rx = now
         self._bus_free_at = 0.0
+        self._outbox: list[tuple[bytes, EmulatedServo]] = []
         self._sent: tuple[np.ndarray, np.ndarray] | None = None
         self.port = ""
         self.failure: BaseException | None = None
@@ -383,6 +384,7 @@ class DynamixelEmulator:
                     servo = self._primary(raw[4], self._listeners(now))
                     if servo is not None:
                         self._answer(servo, servo.status_error(ERR_CRC))
+                    self._flush()
             return
         if not isinstance(pkt, InstructionPacket):
             self.stats.rejected["status"] = self.stats.rejected.get("status", 0) + 1
@@ -396,6 +398,8 @@ class DynamixelEmulator:
                 return
             if self._execute(pkt, listeners, now):
                 self._update_plant()
+            # the answers go out once the servos have acted: a client that reads a status sees the plant updated
+            self._flush()
 
     def _listeners(self, now: float) -> list[EmulatedServo]:
         """The servos that hear the bus now: not cut off, not rebooting, at the client's baud rate."""
@@ -550,16 +554,22 @@ class DynamixelEmulator:
         self._send(bytes(out), answers[0][0])
 
     def _send(self, raw: bytes, servo: EmulatedServo) -> None:
-        if self.config.byte_timing:
-            baud = BAUD_RATES.get(servo.get("baud_rate"), 1_000_000)
-            start = max(self._clock(), self._bus_free_at) + servo.get("return_delay_time") * RETURN_DELAY_UNIT
-            self._bus_free_at = start + len(raw) * 10 / baud
-            _sleep_until(self._bus_free_at, self._clock)
-        try:
-            os.write(self._master, raw)
-            self.stats.statuses += 1
-        except (BlockingIOError, OSError):
-            pass  # nobody reads the port (or it is gone): the answer is lost, as on an unplugged bus
+        self._outbox.append((raw, servo))
+
+    def _flush(self) -> None:
+        """Write the answers queued while the current packet ran, in order."""
+        outbox, self._outbox = self._outbox, []
+        for raw, servo in outbox:
+            if self.config.byte_timing:
+                baud = BAUD_RATES.get(servo.get("baud_rate"), 1_000_000)
+                start = max(self._clock(), self._bus_free_at) + servo.get("return_delay_time") * RETURN_DELAY_UNIT
+                self._bus_free_at = start + len(raw) * 10 / baud
+                _sleep_until(self._bus_free_at, self._clock)
+            try:
+                os.write(self._master, raw)
+                self.stats.statuses += 1
+            except OSError:
+                pass  # nobody reads the port (or it is gone): the answer is lost, as on an unplugged bus
 
     # -- registers <-> plant ----------------------------------------------------------------------------------
     def _direction(self, k: int) -> int:
