@@ -43,6 +43,7 @@ TRIES = 10
 JOINT_IDS = (1, 2, 4)
 REG = {name: XM430_W350[name].address for name in (
     "operating_mode", "drive_mode", "torque_enable", "hardware_error_status", "bus_watchdog", "goal_current",
+    "goal_velocity", "goal_pwm",
     "goal_position", "present_current", "present_position", "present_temperature", "current_limit")}
 
 
@@ -275,8 +276,12 @@ def test_a_silent_id_fails_the_whole_sync_read(bus):
     assert group.txRxPacket() == sdk.COMM_RX_TIMEOUT
     assert not any(group.isAvailable(i, 132, 4) for i in JOINT_IDS)
     assert bus.ph.ping(bus.port, 2)[1] == sdk.COMM_RX_TIMEOUT
+    # a fast sync read's chain stops at the silent servo: ID 1's block arrives, the packet never completes
+    assert group.fastSyncRead() in (sdk.COMM_RX_CORRUPT, sdk.COMM_RX_TIMEOUT)
+    assert not group.isAvailable(1, 132, 4)
     bus.emu.clear(BusFault.SILENT_ID)
     assert bus.retry(group.txRxPacket) == sdk.COMM_SUCCESS
+    assert bus.retry(group.fastSyncRead) == sdk.COMM_SUCCESS
 
 
 def test_bad_crc_replies_are_corrupt_to_the_sdk(bus):
@@ -379,3 +384,91 @@ def test_servo_rules_without_a_bus():
 def test_config_refuses_a_joint_without_its_servo():
     with pytest.raises(ConfigError, match="not on the bus"):
         DynamixelEmulatorConfig(servos=(servo_spec(1),))
+
+
+def test_bulk_read_and_write_plain_and_fast(bus):
+    writer = sdk.GroupBulkWrite(bus.port, bus.ph)
+    writer.addParam(5, REG["goal_position"], 4, list((2300).to_bytes(4, "little")))  # the wrist: no model joint
+    writer.addParam(1, REG["torque_enable"], 1, [1])
+    assert writer.txPacket() == sdk.COMM_SUCCESS
+    assert _wait_for(lambda: bus.emu.register(1, "torque_enable") == 1)
+    assert bus.write(5, "torque_enable", 1, 1) == (0, 0)
+    reader = sdk.GroupBulkRead(bus.port, bus.ph)
+    reader.addParam(5, REG["present_position"], 4)
+    reader.addParam(1, REG["torque_enable"], 1)
+    assert bus.retry(reader.txRxPacket) == sdk.COMM_SUCCESS
+    assert (reader.getData(5, REG["present_position"], 4), reader.getData(1, REG["torque_enable"], 1)) == (2300, 1)
+    assert bus.retry(reader.fastBulkRead) == sdk.COMM_SUCCESS
+    assert reader.getData(5, REG["present_position"], 4) == 2300
+    logged = [p for p in bus.emu.packets() if p.instruction == Instruction.BULK_WRITE][-1]
+    assert logged.written("goal_position", 5) == [2300] and logged.written("torque_enable", 1) == [1]
+
+
+def test_each_operating_mode_becomes_the_documented_command(bus):
+    from wbc.hardware.dynamixel.units import STALL_TORQUE, VELOCITY_UNIT, velocity_gain_to_kd
+
+    assert bus.write(1, "operating_mode", 1, OperatingMode.VELOCITY) == (0, 0)
+    assert bus.write(4, "operating_mode", 1, OperatingMode.PWM) == (0, 0)
+    for i in (1, 2, 4):
+        assert bus.write(i, "torque_enable", 1, 1) == (0, 0)
+    assert bus.write(1, "goal_velocity", 4, -50) == (0, 0)
+    assert bus.write(4, "goal_pwm", 2, 442) == (0, 0)
+    assert bus.write(2, "goal_position", 4, 1300) == (0, 0)  # ID 2 and its shadow: position mode, twice the gain
+    assert _wait_for(lambda: bus.emu.register(2, "goal_position") == 1300)
+    cmd, tau_max = bus.plant.arm_command()
+    assert cmd.kd[0] == pytest.approx(velocity_gain_to_kd(100)) and cmd.dq[0] == pytest.approx(-50 * VELOCITY_UNIT)
+    kp, _ = position_gains_to_pd(800, 0)
+    assert cmd.kp[1] == pytest.approx(2 * kp) and cmd.q[1] == pytest.approx(WX200_ARM_JOINTS[1].to_rad(1300))
+    assert cmd.tau[2] == pytest.approx(STALL_TORQUE * 442 / 885) and cmd.kp[2] == 0
+    assert tau_max[1] == pytest.approx(2 * 1193 * CURRENT_UNIT * TORQUE_CONSTANT)
+    assert bus.write(1, "torque_enable", 1, 0) == (0, 0)
+    assert _wait_for(lambda: bus.plant.arm_command()[0].kd[0] == 0)  # torque off: nothing
+
+
+def test_byte_timing_answers_after_the_return_delay_and_the_wire_time(plant, monkeypatch):
+    monkeypatch.setattr(sdk.port_handler, "LATENCY_TIMER", 16)
+    plant.reset()
+    with DynamixelEmulator(plant, DynamixelEmulatorConfig(byte_timing=True)) as emu:
+        port = sdk.PortHandler(emu.port)
+        assert port.openPort()
+        ph = sdk.PacketHandler(2.0)
+        for i in JOINT_IDS:  # 250 x 2 us = 0.5 ms before each answer
+            assert ph.write1ByteTxRx(port, i, XM430_W350["return_delay_time"].address, 250) == (0, 0)
+        group = sdk.GroupSyncRead(port, ph, 126, 10)
+        for i in JOINT_IDS:
+            group.addParam(i)
+        times = []
+        for _ in range(5):
+            t0 = time.perf_counter()
+            assert group.txRxPacket() == sdk.COMM_SUCCESS
+            times.append(time.perf_counter() - t0)
+        port.closePort()
+    # three answers of 21 bytes at 1 Mbit/s (0.21 ms each) after 0.5 ms each: at least 2.1 ms
+    assert min(times) >= 3 * (0.5e-3 + 21 * 10 / 1e6)
+
+
+def test_one_physics_legs_over_udp_and_arm_over_the_bus(bus):
+    import socket
+
+    from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
+    from wbc.hardware.unitree import decode_state, encode_command, frame_layout
+
+    bus.current_mode((4,))
+    assert bus.write(4, "goal_current", 2, -500) == (0, 0)
+    assert _wait_for(lambda: bus.emu.register(4, "goal_current") == -500)
+    layout = frame_layout("a1")
+    legs = MotorCommand.hold(bus.plant.sim.desc.leg_nominal_q, 60.0, 2.0)
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="a1", mode="lockstep"), sim=bus.plant.legs) as legs_emu, \
+            socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        sock.settimeout(2.0)
+        elbow0, t0 = bus.plant.read_arm()[0][2], bus.plant.time
+        for _ in range(100):  # 0.2 s of lockstep physics, driven by the leg wire alone
+            sock.sendto(encode_command(layout, legs), legs_emu.address)
+            frame, _ = sock.recvfrom(4096)
+        state, _ = decode_state(layout, frame, time=0.0)
+        assert legs_emu.failure is None
+    assert bus.plant.time - t0 == pytest.approx(0.2)
+    assert bus.plant.read_arm()[0][2] < elbow0 - 0.05  # the arm's command acted in the legs' steps
+    np.testing.assert_allclose(state.q, bus.plant.read_legs().q, atol=1e-5)  # float32 on the wire
+    assert bus.read(4, "present_position", 4)[0] == WX200_ARM_JOINTS[2].to_ticks(bus.plant.read_arm()[0][2])

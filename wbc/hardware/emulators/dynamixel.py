@@ -28,9 +28,9 @@ and its mounting (the shadow is mirrored) decide:
 
 The shoulder's two servos add up. The present registers come from the plant each time a packet reads them: position
 and velocity rounded as the encoder reports them; current = the joint's applied torque shared among its torque-on
-servos, over `TORQUE_CONSTANT`. Servos without a model joint (wrist angle, wrist rotate, gripper) sit at their Goal
-Position while their torque is on. The emulator never steps the plant: the leg emulator, a test, or the plant's own
-real-time thread does.
+servos, over `TORQUE_CONSTANT`. Servos without a model joint (wrist angle, wrist rotate, gripper) power up at tick
+2048 and sit at their Goal Position while their torque is on. The emulator never steps the plant: the leg emulator,
+a test, or the plant's own real-time thread does.
 
 Faults (`BusFault`) are injected on demand: `inject` / `clear`.
 """
@@ -194,6 +194,9 @@ class DynamixelEmulator:
         now = clock()
         self._servos = [EmulatedServo(spec, self.table, now=now) for spec in self.config.servos]
         self._wiring = [self._wire(spec) for spec in self.config.servos]
+        for servo, wiring in zip(self._servos, self._wiring, strict=True):
+            if wiring.joint is None:
+                servo.set("present_position", CENTER_TICKS)  # within every WX200 servo's limits
         self.faults = FaultSet(BusFault, BUS_FAULT_DEFAULTS)
         self.stats = BusStats()
         self._log: collections.deque[LoggedPacket] = collections.deque(maxlen=self.config.log_size)
