@@ -30,6 +30,7 @@ __all__ = [
     "PortBusyError",
     "TargetRefusedError",
     "RobotLinkError",
+    "PacketError",
 ]
 
 
@@ -217,3 +218,16 @@ class TargetRefusedError(ConfigError):
 
 class RobotLinkError(WbcError, RuntimeError):
     """The link to a robot failed: no valid state arrived in time, or the link thread died; the message says which."""
+
+
+class PacketError(WbcError, ValueError):
+    """A Dynamixel Protocol 2.0 packet was rejected by the codec (`wbc.hardware.dynamixel`) and must not be used.
+
+    Attributes:
+        reason: why, one of ``short``, ``header``, ``length``, ``crc``, ``params`` (parameters that do not fit
+            the instruction).
+    """
+
+    def __init__(self, reason: str, detail: str) -> None:
+        self.reason = reason
+        super().__init__(f"Dynamixel packet rejected ({reason}): {detail}")

@@ -3,7 +3,8 @@
 Frame faults change what goes on the wire (nothing, a corrupt, short or long datagram, one from a foreign port, late
 or dropped replies); state faults change what the reported state says (a joint beyond its range, an overheated
 motor, a motor in an error mode, sustained over-power, an IMU reading of a fall, the remote's L2+B). A `FaultSet`
-is shared by the test thread that injects and the emulator thread that applies, so it is locked.
+is shared by the test thread that injects and the emulator thread that applies, so it is locked; the Dynamixel
+emulator keeps one of its own faults (`BusFault`) in the same kind of set.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ import dataclasses
 import enum
 import math
 import threading
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -64,24 +66,32 @@ _DEFAULTS: dict[Fault, object] = {
 
 
 class FaultSet:
-    """The faults active now, each with its value (thread-safe)."""
+    """The faults active now, each with its value (thread-safe).
 
-    def __init__(self) -> None:
+    Args:
+        kind: the enum of faults it accepts (`Fault` for the Unitree wire, `BusFault` for the Dynamixel bus).
+        defaults: each fault's value when `inject` gets none (`Fault`'s own table when None).
+    """
+
+    def __init__(self, kind: type[enum.Enum] = Fault, defaults: Mapping[enum.Enum, object] | None = None) -> None:
+        self._kind = kind
+        self._defaults = dict(_DEFAULTS if defaults is None and kind is Fault else defaults or {})
         self._lock = threading.Lock()
-        self._active: dict[Fault, object] = {}
+        self._active: dict[enum.Enum, object] = {}
 
-    def inject(self, fault: Fault, value: object = None) -> None:
+    def inject(self, fault: enum.Enum, value: object = None) -> None:
         """Activate `fault` (with `value`, or its default) until `clear`.
 
         Raises:
-            ConfigError: `fault` is not a `Fault`.
+            ConfigError: `fault` is not one of this set's kind.
         """
-        if not isinstance(fault, Fault):
-            raise ConfigError(f"inject: {fault!r} is not a Fault; valid: {', '.join(f.name for f in Fault)}")
+        if not isinstance(fault, self._kind):
+            raise ConfigError(f"inject: {fault!r} is not a {self._kind.__name__}; valid: "
+                              f"{', '.join(f.name for f in self._kind)}")
         with self._lock:
-            self._active[fault] = _DEFAULTS.get(fault) if value is None else value
+            self._active[fault] = self._defaults.get(fault) if value is None else value
 
-    def clear(self, fault: Fault | None = None) -> None:
+    def clear(self, fault: enum.Enum | None = None) -> None:
         """Deactivate `fault`, or every fault if None."""
         with self._lock:
             if fault is None:
@@ -89,7 +99,7 @@ class FaultSet:
             else:
                 self._active.pop(fault, None)
 
-    def snapshot(self) -> dict[Fault, object]:
+    def snapshot(self) -> dict[enum.Enum, object]:
         """The active faults and their values, copied."""
         with self._lock:
             return dict(self._active)

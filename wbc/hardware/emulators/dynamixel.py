@@ -1,0 +1,727 @@
+"""`DynamixelEmulator`: the WX200's Dynamixel bus on a pseudo-terminal, its XM430 servos backed by an `ArmPlant`.
+
+A client opens `DynamixelEmulator.port` (the pty's slave, e.g. ``/dev/pts/7``) as it would open the U2D2
+(``PortHandler(port)`` of dynamixel_sdk, unmodified) and speaks Protocol 2.0. One thread reads the master side,
+decodes each instruction packet (`wbc.hardware.dynamixel`), logs it (`packets()`), hands it to the servos it
+addresses (`EmulatedServo`: the control table and its rules) and writes their status packets back, in ID-list order.
+
+Instructions: PING (one ID or broadcast), READ, WRITE, REBOOT, SYNC_READ, SYNC_WRITE, BULK_READ, BULK_WRITE,
+FAST_SYNC_READ and FAST_BULK_READ (one combined answer). Anything else gets an instruction error. A servo executes
+a packet sent to its ID, to its Secondary ID (without answering: the shoulder's shadow follows every write to ID 2),
+or broadcast. Status Return Level (68) is obeyed. A packet whose CRC is wrong gets a CRC error from the servo it
+names. With ``check_baud``, servos hear only a client whose port is set to their baud rate.
+
+The physics: whenever a servo's drive registers change (torque, mode, goals, gains, limits, a tripped watchdog, a
+shutdown), the servos of each model joint become one `MotorCommand` for the plant's three arm joints, in the joint
+convention of `WX200_ARM_JOINTS`. Each servo contributes in its own direction, which its drive mode (reverse bit)
+and its mounting (the shadow is mirrored) decide:
+
+- torque off: nothing;
+- current (0): tau = Goal Current within Current Limit, times `TORQUE_CONSTANT` (kp = kd = 0);
+- velocity (1): damping toward Goal Velocity, kd from Velocity P Gain (`velocity_gain_to_kd`; the integral part is
+  left out);
+- position (3) and extended position (4): the servo's PD, kp and kd from Position P and D Gains
+  (`position_gains_to_pd`), toward Goal Position (within the position limits in mode 3), bounded by Current Limit;
+- current-based position (5): the same PD, bounded by Goal Current. The plant applies the bound every physics
+  step (`ArmPlant.write_arm`'s ``tau_max``);
+- PWM (16): a DC motor at that duty: tau = stall torque x duty - (stall torque / no-load speed) x dq.
+
+The shoulder's two servos add up. The present registers come from the plant each time a packet reads them: position
+and velocity rounded as the encoder reports them; current = the joint's applied torque shared among its torque-on
+servos, over `TORQUE_CONSTANT`. Servos without a model joint (wrist angle, wrist rotate, gripper) power up at tick
+2048 and sit at their Goal Position while their torque is on. The emulator never steps the plant: the leg emulator,
+a test, or the plant's own real-time thread does.
+
+Faults (`BusFault`) are injected on demand: `inject` / `clear`.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+import os
+import select
+import termios
+import threading
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from wbc.errors import ConfigError, PacketError
+from wbc.hardware.dynamixel import (
+    BAUD_RATES,
+    BROADCAST_ID,
+    ERR_CRC,
+    ERR_DATA_LENGTH,
+    ERR_INSTRUCTION,
+    HW_INPUT_VOLTAGE,
+    HW_OVERHEATING,
+    HW_OVERLOAD,
+    WX200_ARM_JOINTS,
+    WX200_SERVOS,
+    XM430_W350,
+    ArmJointMap,
+    Instruction,
+    InstructionPacket,
+    OperatingMode,
+    PacketReader,
+    ServoSpec,
+    build_status,
+    parse_bulk_read_params,
+    parse_bulk_write_params,
+    parse_packet,
+    parse_read_params,
+    parse_sync_read_params,
+    parse_sync_write_params,
+    parse_write_params,
+    ping_status_params,
+)
+from wbc.hardware.dynamixel.crc import crc16
+from wbc.hardware.dynamixel.packet import HEADER
+from wbc.hardware.dynamixel.units import (
+    CENTER_TICKS,
+    CURRENT_UNIT,
+    NO_LOAD_SPEED,
+    PWM_MAX,
+    RAD_PER_TICK,
+    RETURN_DELAY_UNIT,
+    STALL_TORQUE,
+    TORQUE_CONSTANT,
+    VELOCITY_UNIT,
+    VOLTAGE_UNIT,
+    position_gains_to_pd,
+    velocity_gain_to_kd,
+)
+from wbc.hardware.emulators.arm_plant import ArmPlant
+from wbc.hardware.emulators.bus_faults import BUS_FAULT_DEFAULTS, BusFault, fault_ids
+from wbc.hardware.emulators.faults import FaultSet
+from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, decode_writes
+from wbc.hardware.emulators.servo import EmulatedServo
+from wbc.types import MotorCommand
+
+__all__ = ["BusStats", "DynamixelEmulator", "DynamixelEmulatorConfig"]
+
+_POLL = 0.01  # [s] longest the bus thread blocks, so faults and watchdogs are seen promptly
+_READS = (Instruction.READ, Instruction.SYNC_READ, Instruction.FAST_SYNC_READ, Instruction.BULK_READ,
+          Instruction.FAST_BULK_READ)
+_SPEEDS = {getattr(termios, f"B{rate}"): rate for rate in BAUD_RATES.values() if hasattr(termios, f"B{rate}")}
+
+
+@dataclass(frozen=True, kw_only=True)
+class DynamixelEmulatorConfig:
+    """Configuration of an emulated arm bus.
+
+    Attributes:
+        servos: the servos on the bus and their EEPROM (default: the WX200's, as Interbotix configures them).
+        joints: which servos drive which model joint, and the tick convention (default: `WX200_ARM_JOINTS`).
+        temperature: Present Temperature of every servo [deg C].
+        input_voltage: Present Input Voltage [V].
+        reboot_time: how long a rebooting servo hears nothing [s] (not measured on an XM430; a guess).
+        byte_timing: answer after each servo's Return Delay Time plus the packets' time on the wire at its baud
+            rate (1 start, 8 data, 1 stop bit per byte), as a real bus would; off, answers go out at once.
+        check_baud: servos hear only a client that set the port to their baud rate.
+        packet_timeout: an incomplete packet is dropped after this much silence on the bus [s].
+        log_size: most recent decoded packets kept.
+    """
+
+    servos: tuple[ServoSpec, ...] = WX200_SERVOS
+    joints: tuple[ArmJointMap, ...] = WX200_ARM_JOINTS
+    temperature: float = 40.0
+    input_voltage: float = 12.0
+    reboot_time: float = 0.05
+    byte_timing: bool = False
+    check_baud: bool = True
+    packet_timeout: float = 0.05
+    log_size: int = 100_000
+
+    def __post_init__(self) -> None:
+        ids = [s.id for s in self.servos]
+        if len(set(ids)) != len(ids):
+            raise ConfigError(f"DynamixelEmulatorConfig.servos: IDs repeat: {ids}")
+        for joint in self.joints:
+            missing = [i for i in joint.servo_ids if i not in ids]
+            if missing:
+                raise ConfigError(f"DynamixelEmulatorConfig.joints: {joint.name} names servo IDs {missing} that are "
+                                  f"not on the bus ({ids})")
+        if not 0 <= self.reboot_time <= 5:
+            raise ConfigError(f"DynamixelEmulatorConfig.reboot_time must be in [0, 5] s, got {self.reboot_time}")
+
+
+@dataclass(kw_only=True)
+class BusStats:
+    """What the bus thread has seen and done (mutable, read by tests).
+
+    Attributes:
+        packets: instruction packets decoded (and logged).
+        rejected: packets refused by the codec, by `PacketError` reason (``crc``, ``short`` ...).
+        dropped_bytes: bytes skipped while looking for a header, or left of a packet that never completed.
+        statuses: status packets written.
+        unheard: packets no servo heard (a wrong baud rate, a silent or rebooting ID, nobody with that ID).
+    """
+
+    packets: int = 0
+    rejected: dict[str, int] = field(default_factory=dict)
+    dropped_bytes: int = 0
+    statuses: int = 0
+    unheard: int = 0
+
+
+@dataclass(frozen=True)
+class _Wiring:
+    joint: int | None  # index into config.joints, None for a servo without a model joint
+    mount: int  # +1 / -1: the servo's native direction against the model joint's
+    offset: float  # [rad] the model angle at the servo's native centre
+
+
+class DynamixelEmulator:
+    """The emulated bus: a pty, a thread, the servos, the plant. A context manager (`start` / `close`).
+
+    Args:
+        plant: the physics of the three model joints (`SharedPlant`, started by the caller).
+        config: what is on the bus.
+        clock: the time source for the watchdogs, reboots and the log [s].
+    """
+
+    def __init__(self, plant: ArmPlant, config: DynamixelEmulatorConfig | None = None, *,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.plant = plant
+        self.config = config if config is not None else DynamixelEmulatorConfig()
+        self.table = XM430_W350
+        self._clock = clock
+        now = clock()
+        self._servos = [EmulatedServo(spec, self.table, now=now) for spec in self.config.servos]
+        self._wiring = [self._wire(spec) for spec in self.config.servos]
+        for servo, wiring in zip(self._servos, self._wiring, strict=True):
+            if wiring.joint is None:
+                servo.set("present_position", CENTER_TICKS)  # within every WX200 servo's limits
+        self.faults = FaultSet(BusFault, BUS_FAULT_DEFAULTS)
+        self.stats = BusStats()
+        self._log: collections.deque[LoggedPacket] = collections.deque(maxlen=self.config.log_size)
+        self._lock = threading.RLock()
+        self._reader = PacketReader()
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._wake: tuple[int, int] | None = None
+        self._stop = threading.Event()
+        self._closed = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._last_rx = now
+        self._bus_free_at = 0.0
+        self._outbox: list[tuple[bytes, EmulatedServo]] = []
+        self._sent: tuple[np.ndarray, np.ndarray] | None = None
+        self.port = ""
+        self.failure: BaseException | None = None
+
+    def _wire(self, spec: ServoSpec) -> _Wiring:
+        for k, joint in enumerate(self.config.joints):
+            if spec.id in joint.servo_ids:
+                # the arm is assembled so that the configured drive mode reads the joint in `joint.sign`
+                return _Wiring(joint=k, mount=joint.sign * (-1 if spec.reverse else 1), offset=joint.offset)
+        return _Wiring(joint=None, mount=1, offset=0.0)
+
+    # -- lifecycle ------------------------------------------------------------------------------------------------
+    def start(self) -> DynamixelEmulator:
+        """Open the pty, power the servos up at the plant's pose and start the bus thread. Idempotent."""
+        if self._thread is not None:
+            return self
+        master, slave = os.openpty()
+        tty.setraw(master)
+        os.set_blocking(master, False)
+        self._master, self._slave = master, slave
+        self._wake = os.pipe()
+        self.port = os.ttyname(slave)
+        with self._lock:
+            now = self._clock()
+            self._refresh(now)
+            for servo in self._servos:
+                servo.set("goal_position", servo.get("present_position"))
+            self._update_plant()
+        self._stop.clear()
+        self._closed.clear()
+        self._thread = threading.Thread(target=self._run, name="dynamixel-emulator", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop the thread and close the pty. Idempotent."""
+        self._stop.set()
+        self._wakeup()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        self._close_fds()
+
+    def __enter__(self) -> DynamixelEmulator:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @property
+    def port_closed(self) -> bool:
+        """True once the pty was closed (`close`, or the PORT_CLOSED fault)."""
+        return self._closed.is_set()
+
+    # -- test API -------------------------------------------------------------------------------------------------
+    def inject(self, fault: BusFault, value: object = None) -> None:
+        """Activate `fault` (see `BusFault` for its value) until `clear`; PORT_CLOSED returns once the pty is closed.
+
+        Raises:
+            ConfigError: not a `BusFault`, or a value that names no servo.
+        """
+        self.faults.inject(fault, value)
+        self._fault_ids(fault)  # a bad value is the caller's error, raised here rather than on the bus thread
+        self._wakeup()
+        if fault is BusFault.PORT_CLOSED and self._thread is not None:
+            self._closed.wait(timeout=2.0)
+
+    def clear(self, fault: BusFault | None = None) -> None:
+        """Deactivate `fault`, or every fault if None (a latched hardware error stays until a REBOOT)."""
+        self.faults.clear(fault)
+        self._wakeup()
+
+    def packets(self) -> list[LoggedPacket]:
+        """The decoded instruction packets received so far (the latest `log_size`), oldest first."""
+        with self._lock:
+            return list(self._log)
+
+    def clear_log(self) -> None:
+        """Forget the packets received so far."""
+        with self._lock:
+            self._log.clear()
+
+    def register(self, servo_id: int, name: str) -> int:
+        """A register of the servo whose ID is `servo_id`, read inside the servo (not over the bus).
+
+        Raises:
+            ConfigError: no servo has that ID.
+        """
+        with self._lock:
+            return self._by_id(servo_id).get(name)
+
+    def _by_id(self, servo_id: int) -> EmulatedServo:
+        for servo in self._servos:
+            if servo.id == servo_id:
+                return servo
+        raise ConfigError(f"DynamixelEmulator: no servo with ID {servo_id}; IDs: "
+                          f"{', '.join(str(s.id) for s in self._servos)}")
+
+    # -- bus thread -----------------------------------------------------------------------------------------------
+    def _run(self) -> None:
+        try:
+            self._serve()
+        except BaseException as exc:  # noqa: BLE001 - kept for the test to read; the thread must not die silently
+            self.failure = exc
+        finally:
+            if BusFault.PORT_CLOSED in self.faults.snapshot():
+                self._close_fds()
+
+    def _serve(self) -> None:
+        master, wake = self._master, self._wake[0]
+        while not self._stop.is_set():
+            if BusFault.PORT_CLOSED in self.faults.snapshot():
+                return
+            now = self._clock()
+            wait = _POLL
+            with self._lock:
+                for servo in self._servos:
+                    deadline = servo.watchdog_deadline()
+                    if deadline is not None:
+                        wait = min(wait, deadline - now)
+            if self._reader.pending:
+                wait = min(wait, self._last_rx + self.config.packet_timeout - now)
+            ready = select.select([master, wake], [], [], max(0.0, wait))[0]
+            if wake in ready:
+                os.read(wake, 64)
+            if master in ready:
+                try:
+                    data = os.read(master, 4096)
+                except (BlockingIOError, InterruptedError):
+                    data = b""
+                now = self._clock()
+                if data:
+                    self._last_rx = now
+                    dropped = self._reader.dropped
+                    for raw in self._reader.feed(data):
+                        self._on_packet(raw, now)
+                    self.stats.dropped_bytes += self._reader.dropped - dropped
+            elif self._reader.pending and self._clock() - self._last_rx >= self.config.packet_timeout:
+                self.stats.dropped_bytes += self._reader.discard()
+            self._tick(self._clock())
+
+    def _tick(self, now: float) -> None:
+        """What the servos do by themselves: temperatures, voltages, injected overloads, their bus watchdogs."""
+        active = self.faults.snapshot()
+        overload = self._fault_ids(BusFault.OVERLOAD, active)
+        hot_ids, hot_temp = self._hot(active)
+        changed = False
+        with self._lock:
+            volts = round(self.config.input_voltage / VOLTAGE_UNIT)
+            for servo in self._servos:
+                if now < servo.busy_until:
+                    continue
+                temp = hot_temp if servo.id in hot_ids else round(self.config.temperature)
+                servo.set("present_temperature", temp)
+                servo.set("present_input_voltage", volts)
+                bits = HW_OVERLOAD if servo.id in overload else 0
+                if temp > servo.get("temperature_limit"):
+                    bits |= HW_OVERHEATING
+                if not servo.get("min_voltage_limit") <= volts <= servo.get("max_voltage_limit"):
+                    bits |= HW_INPUT_VOLTAGE
+                if bits:
+                    changed |= servo.raise_hardware_error(bits)
+                changed |= servo.tick(now)
+            if changed:
+                self._update_plant()
+
+    def _on_packet(self, raw: bytes, now: float) -> None:
+        try:
+            pkt = parse_packet(raw)
+        except PacketError as err:
+            self.stats.rejected[err.reason] = self.stats.rejected.get(err.reason, 0) + 1
+            if err.reason == "crc":
+                with self._lock:
+                    servo = self._primary(raw[4], self._listeners(now))
+                    if servo is not None:
+                        self._answer(servo, servo.status_error(ERR_CRC))
+                    self._flush()
+            return
+        if not isinstance(pkt, InstructionPacket):
+            self.stats.rejected["status"] = self.stats.rejected.get("status", 0) + 1
+            return
+        self.stats.packets += 1
+        with self._lock:
+            self._log.append(self._logged(pkt, now))
+            listeners = self._listeners(now)
+            if not listeners:
+                self.stats.unheard += 1
+                return
+            if self._execute(pkt, listeners, now):
+                self._update_plant()
+            # the answers go out once the servos have acted: a client that reads a status sees the plant updated
+            self._flush()
+
+    def _listeners(self, now: float) -> list[EmulatedServo]:
+        """The servos that hear the bus now: not cut off, not rebooting, at the client's baud rate."""
+        silent = self._fault_ids(BusFault.SILENT_ID)
+        baud = self._client_baud() if self.config.check_baud else None
+        return [s for s in self._servos if s.id not in silent and now >= s.busy_until
+                and (baud is None or BAUD_RATES.get(s.get("baud_rate")) == baud)]
+
+    def _client_baud(self) -> int | None:
+        try:
+            return _SPEEDS.get(termios.tcgetattr(self._slave)[5])
+        except termios.error:
+            return None
+
+    @staticmethod
+    def _primary(servo_id: int, listeners: list[EmulatedServo]) -> EmulatedServo | None:
+        for servo in listeners:
+            if servo.id == servo_id:
+                return servo
+        return None
+
+    @staticmethod
+    def _addressed(servo_id: int, listeners: list[EmulatedServo]) -> list[EmulatedServo]:
+        """The servos that execute a packet for `servo_id`: its owner, those whose Secondary ID it is, or all."""
+        if servo_id == BROADCAST_ID:
+            return list(listeners)
+        return [s for s in listeners if servo_id in (s.id, s.secondary_id)]
+
+    def _execute(self, pkt: InstructionPacket, listeners: list[EmulatedServo], now: float) -> bool:
+        """Run one instruction on the servos that hear it; True if a drive register may have changed."""
+        inst, pid = pkt.instruction, pkt.id
+        if inst in (Instruction.SYNC_READ, Instruction.FAST_SYNC_READ, Instruction.BULK_READ,
+                    Instruction.FAST_BULK_READ, Instruction.SYNC_WRITE, Instruction.BULK_WRITE):
+            return self._execute_group(pkt, listeners, now)
+        targets = self._addressed(pid, listeners)
+        if not targets:
+            self.stats.unheard += 1
+            return False
+        for servo in targets:
+            servo.heard(now)
+        owner = None if pid == BROADCAST_ID else self._primary(pid, targets)
+        if inst == Instruction.PING:
+            answering = sorted(targets, key=lambda s: s.id) if pid == BROADCAST_ID else [owner] if owner else []
+            for servo in answering:
+                params = ping_status_params(self.table.model_number, servo.get("firmware_version"))
+                self._answer(servo, servo.status_error(), params)
+            return False
+        if inst == Instruction.READ:
+            if owner is None or owner.get("status_return_level") < 1:
+                return False
+            try:
+                address, length = parse_read_params(pkt.params)
+            except PacketError:
+                self._answer(owner, owner.status_error(ERR_DATA_LENGTH))
+                return False
+            self._refresh(now)
+            error, data = owner.read(address, length)
+            self._answer(owner, owner.status_error(error), data)
+            return False
+        if inst == Instruction.WRITE:
+            try:
+                address, data = parse_write_params(pkt.params)
+            except PacketError:
+                if owner is not None:
+                    self._answer_write(owner, ERR_DATA_LENGTH)
+                return False
+            for servo in targets:
+                error = servo.write(address, data)
+                if servo is owner:
+                    self._answer_write(owner, error)
+            return True
+        if inst == Instruction.REBOOT:
+            if owner is not None:
+                self._answer_write(owner, 0)
+            for servo in targets:
+                servo.reboot(now, self.config.reboot_time)
+            return True
+        if owner is not None:
+            self._answer_write(owner, ERR_INSTRUCTION)
+        return False
+
+    def _execute_group(self, pkt: InstructionPacket, listeners: list[EmulatedServo], now: float) -> bool:
+        inst = pkt.instruction
+        try:
+            if inst in (Instruction.SYNC_READ, Instruction.FAST_SYNC_READ):
+                address, length, ids = parse_sync_read_params(pkt.params)
+                items = [(i, address, length) for i in ids]
+            elif inst in (Instruction.BULK_READ, Instruction.FAST_BULK_READ):
+                items = list(parse_bulk_read_params(pkt.params))
+            elif inst == Instruction.SYNC_WRITE:
+                address, _, chunks = parse_sync_write_params(pkt.params)
+                items = [(i, address, data) for i, data in chunks]
+            else:
+                items = list(parse_bulk_write_params(pkt.params))
+        except PacketError:
+            return False  # a malformed group packet: nobody answers a broadcast
+        heard = False
+        for servo_id, *_ in items:
+            for servo in self._addressed(servo_id, listeners):
+                servo.heard(now)
+                heard = True
+        if not heard:
+            self.stats.unheard += 1
+            return False
+        if inst in (Instruction.SYNC_WRITE, Instruction.BULK_WRITE):
+            for servo_id, address, data in items:
+                for servo in self._addressed(servo_id, listeners):
+                    servo.write(address, data)
+            return True
+        self._refresh(now)
+        answers = []
+        for servo_id, address, length in items:
+            servo = self._primary(servo_id, listeners)
+            if servo is None or servo.get("status_return_level") < 1:
+                if inst in (Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ):
+                    break  # the chain of a fast read stops at the first servo that does not answer
+                continue
+            error, data = servo.read(address, length)
+            answers.append((servo, servo.status_error(error), data))
+        if inst in (Instruction.SYNC_READ, Instruction.BULK_READ):
+            for servo, error, data in answers:
+                self._answer(servo, error, data)
+        elif answers:
+            self._answer_fast(answers, items)
+        return False
+
+    # -- answers ----------------------------------------------------------------------------------------------
+    def _answer_write(self, servo: EmulatedServo, error: int) -> None:
+        if servo.get("status_return_level") >= 2:
+            self._answer(servo, servo.status_error(error))
+
+    def _answer(self, servo: EmulatedServo, error: int, params: bytes = b"") -> None:
+        raw = bytearray(build_status(servo.id, error, params))
+        if servo.id in self._fault_ids(BusFault.BAD_CRC):
+            raw[-2] ^= 0x01
+        self._send(bytes(raw), servo)
+
+    def _answer_fast(self, answers: list[tuple[EmulatedServo, int, bytes]],
+                     items: list[tuple[int, int, int]]) -> None:
+        """One packet for every answering servo.
+
+        A chain cut short keeps the LEN of the whole (the first servo announces it) and ends where the silent
+        servo's block should start.
+        """
+        bad = self._fault_ids(BusFault.BAD_CRC)
+        length = 1 + sum(4 + n for *_, n in items)
+        out = bytearray(HEADER + bytes((BROADCAST_ID, length & 0xFF, length >> 8, Instruction.STATUS)))
+        for servo, error, data in answers:
+            out += bytes((error, servo.id)) + data
+            crc = crc16(out) ^ (0x0001 if servo.id in bad else 0)
+            out += crc.to_bytes(2, "little")
+        self._send(bytes(out), answers[0][0])
+
+    def _send(self, raw: bytes, servo: EmulatedServo) -> None:
+        self._outbox.append((raw, servo))
+
+    def _flush(self) -> None:
+        """Write the answers queued while the current packet ran, in order."""
+        outbox, self._outbox = self._outbox, []
+        for raw, servo in outbox:
+            if self.config.byte_timing:
+                baud = BAUD_RATES.get(servo.get("baud_rate"), 1_000_000)
+                start = max(self._clock(), self._bus_free_at) + servo.get("return_delay_time") * RETURN_DELAY_UNIT
+                self._bus_free_at = start + len(raw) * 10 / baud
+                _sleep_until(self._bus_free_at, self._clock)
+            try:
+                os.write(self._master, raw)
+                self.stats.statuses += 1
+            except OSError:
+                pass  # nobody reads the port (or it is gone): the answer is lost, as on an unplugged bus
+
+    # -- registers <-> plant ----------------------------------------------------------------------------------
+    def _direction(self, k: int) -> int:
+        """+1 / -1: the servo's register direction against its model joint's, drive mode included."""
+        return self._wiring[k].mount * (-1 if self._servos[k].reverse else 1)
+
+    def _refresh(self, now: float) -> None:
+        """Present registers from the plant, rounded as the servo reports them."""
+        q, dq, tau = self.plant.read_arm()
+        on = [0] * len(self.config.joints)
+        for k, servo in enumerate(self._servos):
+            j = self._wiring[k].joint
+            if j is not None and servo.torque_on:
+                on[j] += 1
+        for k, servo in enumerate(self._servos):
+            wiring = self._wiring[k]
+            if wiring.joint is None:
+                if servo.torque_on and servo.mode in (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION,
+                                                       OperatingMode.CURRENT_BASED_POSITION):
+                    servo.set("present_position", servo.get("goal_position"))
+                servo.set("present_velocity", 0)
+                servo.set("present_current", 0)
+            else:
+                j, d = wiring.joint, self._direction(k)
+                ticks = CENTER_TICKS + d * (float(q[j]) - wiring.offset) / RAD_PER_TICK + servo.get("homing_offset")
+                servo.set("present_position", round(ticks))
+                velocity = round(d * float(dq[j]) / VELOCITY_UNIT)
+                servo.set("present_velocity", velocity)
+                amps = d * float(tau[j]) / on[j] / TORQUE_CONSTANT if servo.torque_on else 0.0
+                servo.set("present_current", max(-32768, min(32767, round(amps / CURRENT_UNIT))))
+            servo.set("moving", int(abs(servo.get("present_velocity")) > servo.get("moving_threshold")))
+            servo.set("realtime_tick", int((now - servo.powered_at) * 1000) % 32768)
+
+    def _update_plant(self) -> None:
+        """Turn every servo's drive registers into the plant's arm command; send it if it changed."""
+        n = len(self.config.joints)
+        kp, kd, kp_q, kd_dq, ff, bound = (np.zeros(n) for _ in range(6))
+        for k, servo in enumerate(self._servos):
+            wiring = self._wiring[k]
+            if wiring.joint is None or not servo.torque_on:
+                continue
+            j, d, mode = wiring.joint, self._direction(k), servo.mode
+            current_limit = servo.get("current_limit")
+            limit_torque = current_limit * CURRENT_UNIT * TORQUE_CONSTANT
+            if mode == OperatingMode.CURRENT:
+                goal = max(-current_limit, min(current_limit, servo.get("goal_current")))
+                ff[j] += d * goal * CURRENT_UNIT * TORQUE_CONSTANT
+                bound[j] += limit_torque
+            elif mode == OperatingMode.VELOCITY:
+                gain = velocity_gain_to_kd(servo.get("velocity_p_gain"))
+                limit = servo.get("velocity_limit")
+                kd[j] += gain
+                kd_dq[j] += gain * d * max(-limit, min(limit, servo.get("goal_velocity"))) * VELOCITY_UNIT
+                bound[j] += limit_torque
+            elif mode == OperatingMode.PWM:
+                limit = servo.get("pwm_limit")
+                ff[j] += d * STALL_TORQUE * max(-limit, min(limit, servo.get("goal_pwm"))) / PWM_MAX
+                kd[j] += STALL_TORQUE / NO_LOAD_SPEED
+                bound[j] += STALL_TORQUE
+            else:  # the position modes
+                p, dgain = position_gains_to_pd(servo.get("position_p_gain"), servo.get("position_d_gain"))
+                goal = servo.get("goal_position")
+                if mode == OperatingMode.POSITION:
+                    goal = max(servo.get("min_position_limit"), min(servo.get("max_position_limit"), goal))
+                q_goal = wiring.offset + d * (goal - servo.get("homing_offset") - CENTER_TICKS) * RAD_PER_TICK
+                kp[j] += p
+                kp_q[j] += p * q_goal
+                kd[j] += dgain
+                if mode == OperatingMode.CURRENT_BASED_POSITION:
+                    limit_torque = min(abs(servo.get("goal_current")), current_limit) * CURRENT_UNIT * TORQUE_CONSTANT
+                bound[j] += limit_torque
+        q = np.divide(kp_q, kp, out=np.zeros(n), where=kp > 0)
+        dq = np.divide(kd_dq, kd, out=np.zeros(n), where=kd > 0)
+        idle = (kp == 0) & (kd == 0) & (ff == 0)
+        bound[idle] = math.inf  # nothing to bound: keep the plant on its fast path
+        rows = np.array((q, dq, kp, kd, ff))
+        if self._sent is not None and np.array_equal(rows, self._sent[0]) and np.array_equal(bound, self._sent[1]):
+            return
+        self.plant.write_arm(MotorCommand(q=q, dq=dq, kp=kp, kd=kd, tau=ff), tau_max=bound)
+        self._sent = (rows, bound)
+
+    # -- helpers ----------------------------------------------------------------------------------------------
+    def _logged(self, pkt: InstructionPacket, now: float) -> LoggedPacket:
+        writes, reads = (), ()
+        try:
+            if pkt.instruction == Instruction.WRITE:
+                address, data = parse_write_params(pkt.params)
+                writes = decode_writes(self.table, pkt.id, address, data)
+            elif pkt.instruction == Instruction.SYNC_WRITE:
+                address, _, chunks = parse_sync_write_params(pkt.params)
+                writes = tuple(w for i, data in chunks for w in decode_writes(self.table, i, address, data))
+            elif pkt.instruction == Instruction.BULK_WRITE:
+                writes = tuple(w for i, address, data in parse_bulk_write_params(pkt.params)
+                               for w in decode_writes(self.table, i, address, data))
+            elif pkt.instruction == Instruction.READ:
+                address, length = parse_read_params(pkt.params)
+                reads = (RegisterRead(id=pkt.id, address=address, length=length),)
+            elif pkt.instruction in (Instruction.SYNC_READ, Instruction.FAST_SYNC_READ):
+                address, length, ids = parse_sync_read_params(pkt.params)
+                reads = tuple(RegisterRead(id=i, address=address, length=length) for i in ids)
+            elif pkt.instruction in (Instruction.BULK_READ, Instruction.FAST_BULK_READ):
+                reads = tuple(RegisterRead(id=i, address=a, length=n) for i, a, n in parse_bulk_read_params(pkt.params))
+        except PacketError:
+            pass  # logged with its raw parameters only
+        return LoggedPacket(time=now, id=pkt.id, instruction=pkt.instruction, params=pkt.params, writes=writes,
+                            reads=reads)
+
+    def _fault_ids(self, fault: BusFault, active: dict | None = None) -> frozenset[int]:
+        """The servo IDs an active fault names (none if it is not active)."""
+        active = self.faults.snapshot() if active is None else active
+        if fault is BusFault.OVER_TEMPERATURE:
+            return self._hot(active)[0]
+        if fault not in active or fault is BusFault.PORT_CLOSED:
+            return frozenset()
+        return fault_ids(active[fault], tuple(s.spec.id for s in self._servos))
+
+    def _hot(self, active: dict) -> tuple[frozenset[int], int]:
+        if BusFault.OVER_TEMPERATURE not in active:
+            return frozenset(), 0
+        value = active[BusFault.OVER_TEMPERATURE]
+        if not (isinstance(value, tuple) and len(value) == 2):
+            raise ConfigError(f"BusFault.OVER_TEMPERATURE value {value!r}: expected (ID or IDs, deg C)")
+        return fault_ids(value[0], tuple(s.spec.id for s in self._servos)), int(value[1])
+
+    def _wakeup(self) -> None:
+        if self._wake is not None:
+            try:
+                os.write(self._wake[1], b"\x00")
+            except OSError:
+                pass
+
+    def _close_fds(self) -> None:
+        with self._lock:
+            for fd in (self._master, self._slave, *(self._wake or ())):
+                if fd is not None:
+                    try:
+                        os.close(fd)
+                    except OSError:
+                        pass
+            self._master = self._slave = None
+            self._wake = None
+            self._closed.set()
+
+
+def _sleep_until(deadline: float, clock: Callable[[], float]) -> None:
+    """Wait until `deadline`: sleep while far, then spin (a sleep of a few tens of microseconds overshoots)."""
+    while True:
+        left = deadline - clock()
+        if left <= 0:
+            return
+        if left > 0.002:
+            time.sleep(left - 0.001)
