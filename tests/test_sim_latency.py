@@ -7,19 +7,24 @@ whatever the lengths of the `advance` calls (a delay longer or shorter than one,
 
 import copy
 import dataclasses
+from pathlib import Path
 
 import mujoco
 import numpy as np
 import pytest
 
+from wbc.arena.sim_trial import simulated_robot
 from wbc.control.stand import stand_command
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.mujoco.latency import CommandQueue
 from wbc.hardware.mujoco.physics import delay_steps
-from wbc.scenario import DomainParams, Push
+from wbc.scenario import DomainParams, Push, load_scenario
+from wbc.tools.bench.latency import delay_margin, probe_ticks, wire_probe
+from wbc.types import MotorCommand
 
 DT = 0.002  # [s] the default physics step
+SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 PUSH = Push(force_in_world=np.array([80.0, -40.0, 0.0]), offset_in_base=np.array([0.05, 0.0, 0.0]), start=0.05,
             duration=0.03)
 
@@ -158,3 +163,49 @@ def test_commands_on_the_way_keep_their_order_when_the_delay_shrinks():
     assert queue.due(9) is None
     assert queue.due(10).ctrl[0] == 2.0 and queue.next_arrival() == 12
     assert queue.due(20).ctrl[0] == 3.0 and queue.due(30) is None and len(queue) == 0
+
+
+def test_a_trials_delays_reach_the_simulated_robot(tmp_path):
+    text = (SCENARIOS / "push.toml").read_text().replace(
+        "friction = [0.8, 1.0]",
+        "friction = [0.8, 1.0]\nactuation_delay_s = [0.004, 0.02]\nsensing_delay_s = [0.002, 0.002]")
+    (tmp_path / "late.toml").write_text(text)
+    trial = load_scenario(tmp_path / "late.toml").trial("in", 0, 3)
+    robot = simulated_robot(trial, "actuated")
+    robot.reset(seed=trial.terrain_seed, domain=trial.domain)
+    assert robot.actuation_delay_steps == delay_steps(trial.domain.actuation_delay, DT) >= 2
+    assert robot.sensing_delay_steps == 1
+
+
+# -- the latency bench's pieces ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("actuation", "sensing", "steps_per_tick"), [(0, 0, 1), (3, 0, 1), (2, 4, 1), (0, 0, 5),
+                                                                      (7, 2, 5)])
+def test_the_probe_counts_one_tick_plus_the_delay(actuation, sensing, steps_per_tick):
+    with MujocoRobot(MujocoRobotConfig(robot="go1-arm", arm_mode="none")) as robot:
+        robot.reset(domain=DomainParams(actuation_delay=actuation * DT, sensing_delay=sensing * DT))
+        hold = MotorCommand.hold(robot.desc.nominal_q, 20.0, 0.5)
+        ticks = probe_ticks(robot, hold, period=steps_per_tick * DT, samples=4)
+    assert ticks == [-(-(1 + actuation + sensing) // steps_per_tick)] * 4
+
+
+def test_the_probe_sees_the_step_over_the_wire():
+    ticks = wire_probe("go1", samples=6)
+    assert len(ticks) == 6 and all(1 <= t <= 100 for t in ticks)
+
+
+def test_stand_keeps_its_margin_to_the_largest_delay():
+    """`stand`'s PD runs in the motors, which no loop delay reaches: it passes every delay of a short sweep."""
+    m = delay_margin("stand", trials=1, coarse_ms=(0.0, 200.0))
+    assert (m["still_margin_ms"], m["still_fell_at_ms"], m["push_margin_ms"], m["push_fell_at_ms"]) == \
+        (200.0, None, 200.0, None)
+    assert m["runs"] == 4 and len(m["push_force_n"]) == 1 and 200.0 <= m["push_force_n"][0] <= 300.0
+
+
+@pytest.mark.slow
+def test_mpc_margin_is_bracketed_to_the_fine_step():
+    m = delay_margin("mpc", trials=1, coarse_ms=(0.0, 40.0), fine_ms=20.0)
+    assert m["still_fell_at_ms"] is not None and m["still_fell_at_ms"] <= 40.0
+    assert m["still_margin_ms"] == m["still_fell_at_ms"] - 20.0
+    assert m["push_margin_ms"] is not None and m["push_margin_ms"] <= m["still_margin_ms"]
