@@ -16,9 +16,12 @@ import pytest
 from wbc.arena.sim_trial import simulated_robot
 from wbc.control.stand import stand_command
 from wbc.errors import ConfigError
+from wbc.hardware import check_robot
+from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.mujoco.latency import CommandQueue
 from wbc.hardware.mujoco.physics import delay_steps
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
 from wbc.scenario import DomainParams, Push, load_scenario
 from wbc.tools.bench.latency import delay_margin, probe_ticks, wire_probe
 from wbc.types import MotorCommand
@@ -209,3 +212,26 @@ def test_mpc_margin_is_bracketed_to_the_fine_step():
     assert m["still_fell_at_ms"] is not None and m["still_fell_at_ms"] <= 40.0
     assert m["still_margin_ms"] == m["still_fell_at_ms"] - 20.0
     assert m["push_margin_ms"] is not None and m["push_margin_ms"] <= m["still_margin_ms"]
+
+
+def test_a_late_robot_keeps_the_robot_contract():
+    late = DomainParams(actuation_delay=0.01, sensing_delay=0.006)
+    check_robot(lambda: MujocoRobot(MujocoRobotConfig(arm_mode="none", domain=late)))
+    with MujocoRobot(MujocoRobotConfig(arm_mode="none", domain=late)) as robot:
+        assert (robot.actuation_delay_steps, robot.sensing_delay_steps) == (5, 3)
+        robot.reset(domain=DomainParams())
+        assert (robot.actuation_delay_steps, robot.sensing_delay_steps) == (0, 0)
+        robot.reset()
+        assert (robot.actuation_delay_steps, robot.sensing_delay_steps) == (5, 3)
+
+
+def test_an_emulated_robot_made_late_is_that_much_later_over_the_wire():
+    """The wire adds its own ticks to the simulated delay, never takes any away."""
+    lag = 5
+    sim = MujocoRobot(MujocoRobotConfig(robot="go1-arm", arm_mode="none",
+                                        domain=DomainParams(actuation_delay=lag * DT)))
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep"), sim=sim) as emu:
+        host, port = emu.address
+        with UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=host, target_port=port)) as link:
+            ticks = probe_ticks(link, MotorCommand.hold(link.desc.nominal_q, 20.0, 0.5), period=DT, samples=6)
+    assert min(ticks) >= 1 + lag and max(ticks) <= 1 + lag + 50

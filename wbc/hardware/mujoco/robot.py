@@ -5,12 +5,12 @@ The motor law runs inside MuJoCo's step (see `wbc.robots.mujoco_model`), so `adv
 step as the trunk moves), where a delayed command arrives (the run is split at that step) and over the last steps of
 a run whose sensor frames a delayed `read` may still ask for.
 
-Delays (`DomainParams.actuation_delay`, ``sensing_delay``, set at `reset` or by `set_domain`), both rounded to whole
-physics steps (`wbc.hardware.mujoco.physics.delay_steps`; 2 ms at the default step): a command written at step k
-reaches the motors at step k + Na and the motor law runs at every step under the command that last arrived (before
-the first one arrives, under the one before it: at reset, the zero-gain hold); `read` at step k returns the sensors
-as measured at step k - Ns (the frame at reset until Ns steps have passed), its ``time`` the measurement's and its
-``tick`` the step it was read at. With both delays zero, nothing of this runs.
+Delays (`DomainParams.actuation_delay`, ``sensing_delay``: the config's ``domain``, or those `reset` or `set_domain`
+is given), both rounded to whole physics steps (`wbc.hardware.mujoco.physics.delay_steps`; 2 ms at the default
+step): a command written at step k reaches the motors at step k + Na and the motor law runs at every step under the
+command that last arrived (before the first one arrives, under the one before it: at reset, the zero-gain hold);
+`read` at step k returns the sensors as measured at step k - Ns (the frame at reset until Ns steps have passed), its
+``time`` the measurement's and its ``tick`` the step it was read at. With both delays zero, nothing of this runs.
 
 Domain parameters, the motor law's actuator parameters, the spawn pose and the pushes' rounding and wrench are those
 of `wbc.hardware.mujoco.physics`, which the training env applies too.
@@ -70,6 +70,8 @@ class MujocoRobotConfig:
         terrain: ground shape.
         timestep: physics step [s].
         noise: sensor noise added by `read`.
+        domain: the physical parameters (delays included) a `reset` without its own applies; nominal by default.
+            A robot built for someone else's loop (an emulator's) is made heavy, slippery or late here.
     """
 
     robot: str = "a1-wx200"
@@ -78,6 +80,7 @@ class MujocoRobotConfig:
     terrain: TerrainConfig = field(default_factory=TerrainConfig)
     timestep: float = 0.002
     noise: SensorNoise = field(default_factory=SensorNoise)
+    domain: DomainParams = field(default_factory=DomainParams)
 
     def __post_init__(self) -> None:
         if not 0 < self.timestep <= 0.01:
@@ -286,7 +289,7 @@ class MujocoRobot(Robot):
 
         Args:
             seed: seeds the terrain (fractal), the sensor noise and nothing else.
-            domain: physical parameters (defaults: nominal).
+            domain: physical parameters (default: the config's, nominal unless set there).
             qpos: initial configuration (defaults: standing at the nominal pose above the terrain).
         """
         self._require_connected("reset")
@@ -296,7 +299,7 @@ class MujocoRobot(Robot):
         m, d = self.model, self.data
         self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5E45]))
         ground = apply_terrain(m, self.config.terrain, seed)
-        self.set_domain(domain if domain is not None else DomainParams())
+        self.set_domain(domain if domain is not None else self.config.domain)
         mujoco.mj_resetData(m, d)
         d.qpos[:] = (initial_qpos(m.nq, spawn_height(self.desc.stand_height, ground), self.desc.nominal_q)
                      if qpos is None else qpos)
