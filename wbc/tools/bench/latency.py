@@ -132,6 +132,8 @@ def sim_probe(robot: str, total_delay_s: float, *, samples: int = 10, period: fl
 
 def _margin_trials(scenario: str, trials: int) -> list[Trial]:
     """The first `trials` standing trials (no velocity command) of the scenario's first band, seed 0."""
+    if trials < 1:
+        raise BenchError(f"bench latency: --trials must be >= 1, got {trials}")
     sc = load_scenario(scenario)
     found = []
     for index in range(1000):
