@@ -1,6 +1,8 @@
 """Scenario files: loading, validation messages, content hashing, the publication lock and seeded sampling."""
 
 import dataclasses
+import hashlib
+import json
 import random
 import shutil
 from pathlib import Path
@@ -257,6 +259,53 @@ def test_turn_statistics():
     assert len(np.unique(frictions)) == len(trials) // len(s.bands)  # bands share (seed, index) draws
 
 
+def _canonical_trial(t) -> list:
+    """Every value of a trial but its delays, exactly (floats as hex): what a published file's trials must keep."""
+    f = lambda x: float(x).hex()  # noqa: E731
+    d = t.domain
+    return [t.band, t.seed, t.index, t.terrain_seed, f(d.friction), f(d.payload_mass),
+            [f(x) for x in np.atleast_1d(d.motor_strength)], [f(x) for x in d.payload_com],
+            [f(t.command.vx), f(t.command.vy), f(t.command.yaw_rate), f(t.command.ramp_s)],
+            [[[f(x) for x in p.force_in_world], [f(x) for x in p.offset_in_base], f(p.start), f(p.duration)]
+             for p in t.pushes]]
+
+
+# sha256 of the canonical trials of seeds 0, 1, 7, indices 0..4, every band, recorded before the delay ranges existed
+PUBLISHED_TRIALS = {
+    "push": "e9d6c351abb779b90dad691a1fa4349620c4f98774479dcbbb13f719ba938f02",
+    "turn": "802f3fa7594dc79e08262267c35acb8b50f903dff5b0bba8d2980f1de80adf21",
+}
+
+
+@pytest.mark.parametrize("path", [PUSH, TURN], ids=["push", "turn"])
+def test_published_files_sample_the_trials_they_sampled_before_delay_ranges_existed(path):
+    s = load_scenario(path)
+    check_published(s)  # the hash is unchanged too (absent keys are not in the parsed content)
+    trials = s.trials(None, [0, 1, 7], 5)
+    digest = hashlib.sha256(json.dumps([_canonical_trial(t) for t in trials]).encode()).hexdigest()
+    assert digest == PUBLISHED_TRIALS[s.name]
+    assert all(t.domain.actuation_delay == 0.0 and t.domain.sensing_delay == 0.0 for t in trials)
+
+
+def test_delay_ranges_are_drawn_per_trial_only_when_declared(tmp_path):
+    both = load_scenario(write(tmp_path, edit(
+        BASE, "friction = [0.8, 1.0]", "friction = [0.8, 1.0]\nactuation_delay_s = [0.002, 0.02]\n"
+        "sensing_delay_s = [0.0, 0.004]"), "both.toml"))
+    trials = both.trials(None, [0, 1], 20)
+    act = np.array([t.domain.actuation_delay for t in trials])
+    sense = np.array([t.domain.sensing_delay for t in trials])
+    assert act.min() >= 0.002 and act.max() <= 0.02 and act.std() > 0.003
+    assert sense.min() >= 0.0 and sense.max() <= 0.004 and sense.std() > 0.0005
+    assert not np.array_equal(act / 0.018, sense / 0.004)  # two draws, not one mapped twice
+    assert_same(both.trial("in", 1, 3), load_scenario(tmp_path / "both.toml").trial("in", 1, 3))
+    only = load_scenario(write(tmp_path, edit(BASE, "friction = [0.8, 1.0]", "actuation_delay_s = [0.01, 0.01]"),
+                               "only.toml"))
+    for t in only.trials(None, [0], 5):
+        assert t.domain.actuation_delay == 0.01 and t.domain.sensing_delay == 0.0 and t.domain.friction == 1.0
+    # a declared range is content: it changes the hash, so such a file is a new scenario (or version)
+    assert only.hash != load_scenario(write(tmp_path, edit(BASE, "friction = [0.8, 1.0]", ""), "none.toml")).hash
+
+
 def test_random_sign_flips_about_half(tmp_path):
     text = edit(BASE, "[[commands.options]]\nvx = 0.3\n", "[[commands.options]]\nyaw_rate = 1.0\nrandom_sign = true\n")
     s = load_scenario(write(tmp_path, text))
@@ -315,6 +364,15 @@ BROKEN = [
     ("friction-scalar", edit(BASE, "friction = [0.8, 1.0]", "friction = 0.9"), "[domain] friction", 14),
     ("payload-too-big", edit(BASE, "friction = [0.8, 1.0]", "payload_kg = [0.0, 25.0]"), "[domain] payload_kg", 14),
     ("unknown-key-domain", edit(BASE, "friction = [0.8, 1.0]", "gravity = [9.8, 9.8]"), "[domain] gravity", 14),
+    ("delay-too-long", edit(BASE, "friction = [0.8, 1.0]", "friction = [0.8, 1.0]\nactuation_delay_s = [0.0, 0.5]"),
+     "[domain] actuation_delay_s", 15),
+    ("delay-negative", edit(BASE, "friction = [0.8, 1.0]", "sensing_delay_s = [-0.001, 0.01]"),
+     "[domain] sensing_delay_s", 14),
+    ("delay-scalar", edit(BASE, "friction = [0.8, 1.0]", "sensing_delay_s = 0.01"), "[domain] sensing_delay_s", 14),
+    ("delay-reversed", edit(BASE, "friction = [0.8, 1.0]", "actuation_delay_s = [0.02, 0.01]"),
+     "[domain] actuation_delay_s", 14),
+    ("delay-in-ms", edit(BASE, "friction = [0.8, 1.0]", "actuation_delay_ms = [2, 10]"),
+     "[domain] actuation_delay_ms", 14),
     ("ramp-too-long", edit(BASE, "ramp_s = 0.5", "ramp_s = 11"), "[commands] ramp_s", 17),
     ("unknown-key-commands", edit(BASE, "ramp_s = 0.5", "ramp = 0.5"), "[commands] ramp", 17),
     ("missing-options", edit(BASE, OPTIONS, ""), "[commands] options", 16),

@@ -27,7 +27,7 @@ from wbc.learned.train.stages import stage_config
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.tools.arm_momentum import arm_momentum_study
-from wbc.tools.bench import EmulatorCounts, bench_hw, bench_mpc, bench_sim, bench_sweep, bench_train
+from wbc.tools.bench import EmulatorCounts, bench_hw, bench_latency, bench_mpc, bench_sim, bench_sweep, bench_train
 from wbc.tools.tail import analyze_tail
 
 __all__ = ["FAULTS", "HANDLERS", "main"]
@@ -106,6 +106,16 @@ def _bench_hw(args: argparse.Namespace) -> int:
         printers.print_json(result)
     else:
         printers.print_bench_hw(result)
+    return 0
+
+
+def _bench_latency(args: argparse.Namespace) -> int:
+    result = bench_latency(tuple(args.controllers), wire_robot=args.robot, scenario=args.scenario,
+                           trials=args.trials, wire=not args.no_wire)
+    if args.json:
+        printers.print_json(result)
+    else:
+        printers.print_bench_latency(result)
     return 0
 
 
@@ -321,6 +331,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "bench sweep": _bench_sweep,
     "bench train": _bench_train,
     "bench hw": _bench_hw,
+    "bench latency": _bench_latency,
     "hw emulate": _hw_emulate,
     "hw check": _hw_check,
     "train": _train,

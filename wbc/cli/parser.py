@@ -110,6 +110,18 @@ def build_parser() -> argparse.ArgumentParser:
     bhw.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
     bhw.add_argument("--json", action="store_true", help="print JSON")
     bhw.set_defaults(handler="bench hw")
+    blat = bench.add_parser("latency", help="the wire's loop latency, the sim delay that plays it, controllers' margin",
+                            description="Measure the loop latency over the wire (the emulator's round trip, and a "
+                            "torque-step probe through a UnitreeRobot against an emulator on 127.0.0.1), the "
+                            "simulated actuation + sensing delay equivalent to it, and the largest actuation delay "
+                            "at which each controller stands still and survives a push.")
+    blat.add_argument("--controllers", nargs="+", default=["stand", "mpc"], help="controllers (default stand mpc)")
+    blat.add_argument("--robot", default="go1", help=f"the wire's robot, one of: {', '.join(DESCRIPTIONS)}")
+    blat.add_argument("--scenario", default="scenarios/push.toml", help="scenario of the margin trials")
+    blat.add_argument("--trials", type=int, default=2, help="standing trials per margin test (default 2)")
+    blat.add_argument("--no-wire", action="store_true", help="margins only (no emulator)")
+    blat.add_argument("--json", action="store_true", help="print JSON")
+    blat.set_defaults(handler="bench latency")
 
     hw = sub.add_parser("hw", help="Unitree A1 / Go1 low-level link: an emulator, a read-only check of a robot")
     hws = hw.add_subparsers(dest="what", required=True)

@@ -191,6 +191,36 @@ def print_bench_hw(result: Mapping[str, object]) -> None:
     print(f"  machine: {result['machine']}")
 
 
+def print_bench_latency(result: Mapping[str, object]) -> None:
+    """``wbc bench latency``: the wire's latency beside the equivalent simulated delay, and each controller's margin."""
+    if "wire_ticks" in result:
+        ticks = np.bincount(result["wire_ticks"])
+        spread = ", ".join(f"{k}: {n}" for k, n in enumerate(ticks) if n)
+        print(f"Wire ({result['wire_robot']}, loopback, {result['period_ms']:g} ms link and control period)")
+        print(f"  emulator round trip   p50 {result['round_trip_ms_p50']:.3f} ms  p99 "
+              f"{result['round_trip_ms_p99']:.3f} ms (command sent -> the state answering it, lockstep)")
+        print(f"  loop latency probe    ticks from a torque step's write to the read showing it: p50 "
+              f"{result['wire_ticks_p50']:g}, mean {result['wire_ticks_mean']:.2f}, max {result['wire_ticks_max']} "
+              f"(count by ticks: {spread}); the simulator without delay: 1")
+        print(f"  equivalent sim delay  typical {result['typical_delay_ms']:g} ms, worst {result['worst_delay_ms']:g} "
+              f"ms (actuation + sensing); the simulator's probe with them: {result['sim_ticks_typical']:g} and "
+              f"{result['sim_ticks_worst']:g} ticks")
+    print(f"Margin: the largest actuation delay passed [ms] before the first that failed (sweep: "
+          f"{', '.join(f'{x:g}' for x in result['coarse_ms'])}, then {result['fine_ms']:g} ms steps below the first "
+          f"failure); standing trials of {result['scenario']}")
+    print(f"  {'controller':<12}{'stands still':<26}{'survives a push':<26}{'push [N]':<18}wall [s]")
+    top = result["coarse_ms"][-1]
+    for m in result["margins"]:
+        cells = []
+        for test in ("still", "push"):
+            margin, fell = m[f"{test}_margin_ms"], m[f"{test}_fell_at_ms"]
+            passed = "none" if margin is None else f"{margin:g}"
+            cells.append(f"{passed}, fell at {fell:g}" if fell is not None else f"{passed} (no fall up to {top:g})")
+        forces = ", ".join(f"{f:g}" for f in m["push_force_n"])
+        print(f"  {m['controller']:<12}{cells[0]:<26}{cells[1]:<26}{forces:<18}{m['wall_s']:.0f} ({m['runs']} runs)")
+    print(f"  machine: {result['machine']}")
+
+
 def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faults: Sequence[str], *,
                            seconds: float | None) -> None:
     """``wbc hw emulate``: where the emulator listens, and how it stops."""

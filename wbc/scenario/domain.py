@@ -8,7 +8,9 @@ import numpy as np
 
 from wbc.errors import ConfigError
 
-__all__ = ["DomainParams", "SensorNoise"]
+__all__ = ["MAX_DELAY_S", "DomainParams", "SensorNoise"]
+
+MAX_DELAY_S = 0.2  # [s] longest actuation or sensing delay accepted: ten 50 Hz control periods
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -21,12 +23,19 @@ class DomainParams:
         friction: sliding friction coefficient between feet/links and the ground.
         motor_strength: multiplies every motor's output torque and torque limit (1.0 = nominal); a scalar or one
             value per actuated joint.
+        actuation_delay: a command written at time t reaches the motors at t + actuation_delay [s], in [0, 0.2]
+            (the simulator rounds it to whole physics steps); the motor law keeps running under the command that
+            last arrived.
+        sensing_delay: what the sensors report is what they measured sensing_delay earlier [s], in [0, 0.2]
+            (rounded to whole physics steps too).
     """
 
     payload_mass: float = 0.0
     payload_com: np.ndarray = field(default_factory=lambda: np.zeros(3))
     friction: float = 1.0
     motor_strength: float | np.ndarray = 1.0
+    actuation_delay: float = 0.0
+    sensing_delay: float = 0.0
 
     def __post_init__(self) -> None:
         if not -1.0 <= self.payload_mass <= 20.0:
@@ -36,6 +45,10 @@ class DomainParams:
         strength = np.asarray(self.motor_strength, dtype=np.float64)
         if np.any(strength <= 0) or np.any(strength > 2):
             raise ConfigError(f"DomainParams.motor_strength must be in (0, 2], got {self.motor_strength}")
+        for name in ("actuation_delay", "sensing_delay"):
+            value = getattr(self, name)
+            if not 0.0 <= value <= MAX_DELAY_S:  # NaN fails too
+                raise ConfigError(f"DomainParams.{name} must be in [0, {MAX_DELAY_S:g}] s, got {value}")
         com = np.asarray(self.payload_com, dtype=np.float64)
         if com.shape != (3,):
             raise ConfigError(f"DomainParams.payload_com must have shape (3,), got {com.shape}")

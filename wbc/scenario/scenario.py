@@ -14,7 +14,8 @@ Schema (every other key is an error):
 - ``[terrain]``: ``kind`` (``flat`` | ``fractal``), ``amplitude_m`` [0, 0.3], ``base_wavelength_m`` (0, 20],
   ``octaves`` [1, 8], ``half_extent_m`` (1, 50].
 - ``[domain]`` (optional), intervals ``[lo, hi]`` drawn uniformly: ``friction`` (0, 5], ``payload_kg`` [-1, 20],
-  ``motor_strength`` (0, 2].
+  ``motor_strength`` (0, 2], and the optional ``actuation_delay_s`` and ``sensing_delay_s`` [0, 0.2] (the robot's
+  loop latency, `DomainParams`; a simulator rounds them to its physics step).
 - ``[commands]``: ``ramp_s`` [0, duration_s] and ``[[commands.options]]`` (``vx`` |.| <= 3, ``vy`` |.| <= 2,
   ``yaw_rate`` |.| <= 4, ``random_sign``), one drawn uniformly per trial.
 - ``[pushes]`` (optional): ``first_s`` and ``interval_s`` intervals, ``duration_s`` (0, 1], ``offset_m`` [0, 0.5].
@@ -25,7 +26,9 @@ Sampling. Trial ``index`` under ``seed`` draws from
 ``np.random.default_rng(SeedSequence([seed, index, int(hash[:8], 16)]))`` in this fixed order:
 
 1. ``terrain_seed = rng.integers(2**31)``;
-2. friction, payload mass, motor strength: one ``rng.random()`` each, mapped into the ``[domain]`` interval;
+2. friction, payload mass, motor strength: one ``rng.random()`` each, mapped into the ``[domain]`` interval; then
+   actuation delay and sensing delay, one ``rng.random()`` each, only for those the file declares: a file without
+   them draws nothing for them, so it samples the trials it sampled before they existed;
 3. the command option: ``rng.integers(len(options))``, then one ``rng.random()`` for the yaw sign flip (drawn even
    when ``random_sign`` is false; the sign flips when it is below 1/2);
 4. with ``[pushes]``: ``start`` from ``first_s``; then, while ``start < duration_s``: the magnitude's ``u``, the
@@ -52,7 +55,7 @@ import numpy as np
 
 from wbc.errors import ConfigError, ScenarioError, UnknownNameError
 from wbc.robots.registry import ROBOTS
-from wbc.scenario.domain import DomainParams
+from wbc.scenario.domain import MAX_DELAY_S, DomainParams
 from wbc.scenario.push import Push
 from wbc.scenario.terrain import TERRAIN_KINDS, TerrainConfig
 from wbc.scenario.toml_fields import Range, TomlTable, read_toml
@@ -76,6 +79,8 @@ class _DomainRanges:
     friction: tuple[float, float]
     payload_kg: tuple[float, float]  # [kg]
     motor_strength: tuple[float, float]
+    actuation_delay_s: tuple[float, float] | None  # [s]; None: absent, nothing drawn
+    sensing_delay_s: tuple[float, float] | None  # [s]; None: absent, nothing drawn
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -180,11 +185,15 @@ class Scenario:
         rng = np.random.default_rng(np.random.SeedSequence([seed, index, int(self.hash[:8], 16)]))
 
         terrain_seed = int(rng.integers(2**31))
-        domain = DomainParams(
-            friction=_uniform(rng, self._domain.friction),
-            payload_mass=_uniform(rng, self._domain.payload_kg),
-            motor_strength=_uniform(rng, self._domain.motor_strength),
-        )
+        ranges = self._domain
+        friction = _uniform(rng, ranges.friction)
+        payload_mass = _uniform(rng, ranges.payload_kg)
+        motor_strength = _uniform(rng, ranges.motor_strength)
+        # an absent delay range must not draw: every trial of a file without one would change
+        actuation_delay = 0.0 if ranges.actuation_delay_s is None else _uniform(rng, ranges.actuation_delay_s)
+        sensing_delay = 0.0 if ranges.sensing_delay_s is None else _uniform(rng, ranges.sensing_delay_s)
+        domain = DomainParams(friction=friction, payload_mass=payload_mass, motor_strength=motor_strength,
+                              actuation_delay=actuation_delay, sensing_delay=sensing_delay)
 
         option = self._options[int(rng.integers(len(self._options)))]
         flip = bool(rng.random() < 0.5)
@@ -312,11 +321,15 @@ def load_scenario(path: str | Path) -> Scenario:
         half_extent=ter.number("half_extent_m", Range(lo=1.0, hi=50.0, lo_open=True), 10.0),
     )
 
-    dom = top.sub_table("domain", ("friction", "payload_kg", "motor_strength"), required=False)
+    dom = top.sub_table("domain", ("friction", "payload_kg", "motor_strength", "actuation_delay_s",
+                                   "sensing_delay_s"), required=False)
+    delay = Range(lo=0.0, hi=MAX_DELAY_S)
     domain = _DomainRanges(
         friction=dom.interval("friction", Range(lo=0.0, hi=5.0, lo_open=True), (1.0, 1.0)),
         payload_kg=dom.interval("payload_kg", Range(lo=-1.0, hi=20.0), (0.0, 0.0)),
         motor_strength=dom.interval("motor_strength", Range(lo=0.0, hi=2.0, lo_open=True), (1.0, 1.0)),
+        actuation_delay_s=dom.optional_interval("actuation_delay_s", delay),
+        sensing_delay_s=dom.optional_interval("sensing_delay_s", delay),
     )
 
     com = top.sub_table("commands", ("ramp_s", "options"), required=True)

@@ -252,6 +252,10 @@ class TomlTable:
             self.fail(key, f"both ends must be {allowed}, got [{value[0]}, {value[1]}]")
         return lo, hi
 
+    def optional_interval(self, key: str, allowed: Range) -> tuple[float, float] | None:
+        """Like `interval`, None when the key is absent (so that a caller can tell absent from any default)."""
+        return self.interval(key, allowed) if key in self.data else None
+
     def table_array(self, key: str, label: str) -> list[TomlTable]:
         """A non-empty array of tables ``[[key]]`` (key relative to this table), each labelled ``label #k``."""
         field_name = f"{self.label} {key}" if self.label else label

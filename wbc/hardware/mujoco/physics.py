@@ -2,11 +2,11 @@
 
 `MujocoRobot` (one robot, one model) and the batched training env (`wbc.learned.env`: N environments stepping a pool
 of model variants) must simulate the same robot. So the domain parameters they write into a model, the motor law's
-split into actuator parameters and controls, the ground under the spawn point and the spawn pose, the rounding of
-a push to physics steps and its force and torque about the trunk's centre of mass, and the lookups of the trunk
-body and the sensors all live here. The robot calls these functions for itself, the env for its batch. Functions
-over arrays take leading batch axes. Functions that write a model take one model, because MuJoCo keeps each variant
-in its own object, and the env calls them once per variant.
+split into actuator parameters and controls, the ground under the spawn point and the spawn pose, the rounding of a
+push to physics steps and its force and torque about the trunk's centre of mass, the rounding of a delay to physics
+steps, and the lookups of the trunk body and the sensors all live here. The robot calls these functions for itself,
+the env for its batch. Functions over arrays take leading batch axes. Functions that write a model take one model,
+because MuJoCo keeps each variant in its own object, and the env calls them once per variant.
 
 Motor law (Unitree low-level semantics, as an affine MuJoCo actuator, `wbc.robots.mujoco_model`):
 ``force = k (kp q* + kd dq* + tau_ff) - k kp q - k kd dq``, clamped to ``k`` times the torque limit, with ``k``
@@ -16,6 +16,7 @@ the motor strength: ``gainprm[0] = k``, ``biasprm[1:3] = (-k kp, -k kd)`` (`set_
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -29,9 +30,9 @@ from wbc.scenario.terrain import TerrainConfig, fractal_heights
 
 __all__ = [
     "BASE_BODY", "SPAWN_CLEARANCE", "SPAWN_GROUND_HALF_WIDTH", "NominalModel", "PushTable", "apply_domain",
-    "apply_terrain", "base_body_id", "foot_touch_adr", "ground_under_spawn", "initial_qpos", "motor_ctrl",
-    "motor_strengths", "payload_trunk_inertial", "push_steps", "push_wrench", "sensor_slices", "set_motor_gains",
-    "spawn_height",
+    "apply_terrain", "base_body_id", "delay_steps", "foot_touch_adr", "ground_under_spawn", "initial_qpos",
+    "motor_ctrl", "motor_strengths", "payload_trunk_inertial", "push_steps", "push_wrench", "sensor_slices",
+    "set_motor_gains", "spawn_height",
 ]
 
 BASE_BODY = "base"
@@ -219,6 +220,21 @@ def initial_qpos(nq: int, base_height: float | np.ndarray, joint_q: np.ndarray) 
     qpos[..., 3] = 1.0
     qpos[..., 7:] = joint_q
     return qpos
+
+
+# -- delays --------------------------------------------------------------------------------------------------------
+def delay_steps(delay_s: float, timestep: float) -> int:
+    """A delay in whole physics steps: the nearest number, a half rounded up (0.003 s at 2 ms: 2 steps).
+
+    A simulated robot can only hand a command to its motors, or take a sensor reading, at a physics step, so a
+    delay is a whole number of steps. A tolerance of 1e-9 step keeps a delay written in decimal (0.003 s is
+    1.4999999999999998 steps of 0.002 s in binary) on the side its decimal value lies.
+
+    Args:
+        delay_s: the delay [s], >= 0.
+        timestep: physics step [s].
+    """
+    return int(math.floor(delay_s / timestep + 0.5 + 1e-9))
 
 
 # -- pushes ---------------------------------------------------------------------------------------------------------

@@ -2,8 +2,18 @@
 
 The motor law runs inside MuJoCo's step (see `wbc.robots.mujoco_model`), so `advance` calls ``mj_step`` with
 ``nstep`` and no Python in between, except while a push acts (its torque about the CoM is refreshed every physics
-step as the trunk moves). Domain parameters, the motor law's actuator parameters, the spawn pose and the pushes'
-rounding and wrench are those of `wbc.hardware.mujoco.physics`, which the training env applies too.
+step as the trunk moves), where a delayed command arrives (the run is split at that step) and over the last steps of
+a run whose sensor frames a delayed `read` may still ask for.
+
+Delays (`DomainParams.actuation_delay`, ``sensing_delay``: the config's ``domain``, or those `reset` or `set_domain`
+is given), both rounded to whole physics steps (`wbc.hardware.mujoco.physics.delay_steps`; 2 ms at the default
+step): a command written at step k reaches the motors at step k + Na and the motor law runs at every step under the
+command that last arrived (before the first one arrives, under the one before it: at reset, the zero-gain hold);
+`read` at step k returns the sensors as measured at step k - Ns (the frame at reset until Ns steps have passed), its
+``time`` the measurement's and its ``tick`` the step it was read at. With both delays zero, nothing of this runs.
+
+Domain parameters, the motor law's actuator parameters, the spawn pose and the pushes' rounding and wrench are those
+of `wbc.hardware.mujoco.physics`, which the training env applies too.
 
 What `read` returns is what the real robot's sensors give (joint encoders, motor torque estimate, IMU, foot force
 sensors, optionally noisy); simulator truth (base pose and velocity, contacts, applied force) is only reachable
@@ -19,12 +29,14 @@ import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco.fall_rule import foot_geoms, near_feet
+from wbc.hardware.mujoco.latency import CommandQueue, SensorHistory
 from wbc.hardware.mujoco.physics import (
     NominalModel,
     PushTable,
     apply_domain,
     apply_terrain,
     base_body_id,
+    delay_steps,
     foot_touch_adr,
     initial_qpos,
     motor_ctrl,
@@ -58,6 +70,8 @@ class MujocoRobotConfig:
         terrain: ground shape.
         timestep: physics step [s].
         noise: sensor noise added by `read`.
+        domain: the physical parameters (delays included) a `reset` without its own applies; nominal by default.
+            A robot built for someone else's loop (an emulator's) is made heavy, slippery or late here.
     """
 
     robot: str = "a1-wx200"
@@ -66,6 +80,7 @@ class MujocoRobotConfig:
     terrain: TerrainConfig = field(default_factory=TerrainConfig)
     timestep: float = 0.002
     noise: SensorNoise = field(default_factory=SensorNoise)
+    domain: DomainParams = field(default_factory=DomainParams)
 
     def __post_init__(self) -> None:
         if not 0 < self.timestep <= 0.01:
@@ -131,6 +146,9 @@ class MujocoRobot(Robot):
         self._contacts = (np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
         self._force_now = np.zeros(3)
         self._point_now = np.zeros(3)
+        self._act_lag = 0  # [physics steps] actuation delay
+        self._queue = CommandQueue()
+        self._history: SensorHistory | None = None  # the sensing delay's frames; None: no sensing delay
 
     # -- Robot ----------------------------------------------------------------------------------------------------
     @property
@@ -176,9 +194,13 @@ class MujocoRobot(Robot):
     def _read(self) -> RobotState:
         d, noise = self.data, self.config.noise
         n = self.num_joints
-        q = d.qpos[7:].copy()
-        dq = d.qvel[6:].copy()
-        sd = d.sensordata.copy()
+        if self._history is None:
+            q, dq, tau, sd = d.qpos[7:].copy(), d.qvel[6:].copy(), d.actuator_force.copy(), d.sensordata.copy()
+            measured = self.time
+        else:
+            frame = self._history.frame(self._steps)
+            q, dq, tau, sd = frame.q, frame.dq, frame.tau, frame.sensordata
+            measured = frame.step * self.config.timestep
         quat, gyro, accel = sd[self._quat_idx], sd[self._gyro_idx], sd[self._accel_idx]
         feet = sd[self._touch_idx]
         if noise.enabled:
@@ -195,28 +217,53 @@ class MujocoRobot(Robot):
                 mujoco.mju_mulQuat(res, quat, dqt)
                 quat = res
         return RobotState(
-            tick=self._steps, time=self.time, q=q, dq=dq, tau_est=d.actuator_force.copy(), imu_quat=quat,
+            tick=self._steps, time=measured, q=q, dq=dq, tau_est=tau, imu_quat=quat,
             gyro_in_body=gyro, accel_in_body=accel, foot_force=feet,
         )
 
     def _send(self, cmd: MotorCommand) -> None:
-        set_motor_gains(self.model, self._strength, cmd.kp, cmd.kd)
-        self.data.ctrl[:] = motor_ctrl(cmd.q, cmd.dq, cmd.tau, cmd.kp, cmd.kd)
+        ctrl = motor_ctrl(cmd.q, cmd.dq, cmd.tau, cmd.kp, cmd.kd)
+        if self._act_lag == 0 and not self._queue:
+            self._apply(cmd.kp, cmd.kd, ctrl)
+        else:
+            self._queue.push(self._steps + self._act_lag, cmd.kp, cmd.kd, ctrl)
+
+    def _apply(self, kp: np.ndarray, kd: np.ndarray, ctrl: np.ndarray) -> None:
+        """Hand a command to the motors: from the next physics step on, the motor law runs under it."""
+        set_motor_gains(self.model, self._strength, kp, kd)
+        self.data.ctrl[:] = ctrl
 
     def _advance(self, dt: float) -> None:
         n = max(1, int(round(dt / self.config.timestep)))
         m, d = self.model, self.data
-        while n > 0:
+        end = self._steps + n
+        queue, history = self._queue, self._history
+        # steps from `keep` on have frames a later read may ask for (see `SensorHistory`)
+        keep = end - history.lag if history is not None else end + 1
+        while self._steps < end:
+            if queue:
+                arrived = queue.due(self._steps)
+                if arrived is not None:
+                    self._apply(arrived.kp, arrived.kd, arrived.ctrl)
             active = self._active_pushes(self._steps)
             if active is None:
-                # run without Python until the next push starts
-                nxt = self._pushes.next_start(0, self._steps) if self._pushes.count[0] else None
-                k = n if nxt is None else max(1, min(n, nxt - self._steps))
+                # run without Python until a push starts, a delayed command arrives or a frame must be kept
+                stop = end
+                if self._pushes.count[0]:
+                    nxt = self._pushes.next_start(0, self._steps)
+                    if nxt is not None:
+                        stop = min(stop, nxt)
+                if queue:
+                    stop = min(stop, queue.next_arrival())
+                if history is not None:
+                    stop = min(stop, max(keep, self._steps + 1))
+                k = stop - self._steps
                 d.xfrc_applied[self._base_body] = 0.0
                 self._force_now[:] = 0.0
                 mujoco.mj_step(m, d, nstep=k)
                 self._steps += k
-                n -= k
+                if self._steps >= keep:
+                    history.record(self._steps, d.qpos[7:], d.qvel[6:], d.actuator_force, d.sensordata)
                 continue
             mujoco.mj_kinematics(m, d)
             mujoco.mj_comPos(m, d)
@@ -230,7 +277,8 @@ class MujocoRobot(Robot):
             self._force_now = force
             mujoco.mj_step(m, d)
             self._steps += 1
-            n -= 1
+            if self._steps >= keep:
+                history.record(self._steps, d.qpos[7:], d.qvel[6:], d.actuator_force, d.sensordata)
         if self._active_pushes(self._steps) is None:
             d.xfrc_applied[self._base_body] = 0.0
             self._force_now = np.zeros(3)
@@ -241,7 +289,7 @@ class MujocoRobot(Robot):
 
         Args:
             seed: seeds the terrain (fractal), the sensor noise and nothing else.
-            domain: physical parameters (defaults: nominal).
+            domain: physical parameters (default: the config's, nominal unless set there).
             qpos: initial configuration (defaults: standing at the nominal pose above the terrain).
         """
         self._require_connected("reset")
@@ -251,7 +299,7 @@ class MujocoRobot(Robot):
         m, d = self.model, self.data
         self._rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x5E45]))
         ground = apply_terrain(m, self.config.terrain, seed)
-        self.set_domain(domain if domain is not None else DomainParams())
+        self.set_domain(domain if domain is not None else self.config.domain)
         mujoco.mj_resetData(m, d)
         d.qpos[:] = (initial_qpos(m.nq, spawn_height(self.desc.stand_height, ground), self.desc.nominal_q)
                      if qpos is None else qpos)
@@ -260,17 +308,38 @@ class MujocoRobot(Robot):
         self._contacts_at = -1
         self._force_now = np.zeros(3)
         self._point_now = d.qpos[:3].copy()
-        self._send(MotorCommand.hold(self.desc.nominal_q, 0.0, 0.0))
+        self._queue.clear()
+        hold = MotorCommand.hold(self.desc.nominal_q, 0.0, 0.0)
+        self._apply(hold.kp, hold.kd, motor_ctrl(hold.q, hold.dq, hold.tau, hold.kp, hold.kd))
         mujoco.mj_forward(m, d)
+        self._seed_history()
 
     def set_domain(self, domain: DomainParams) -> None:
-        """Apply physical parameters (payload, friction, motor strength) on top of the nominal model.
+        """Apply physical parameters (payload, friction, motor strength, delays) on top of the nominal model.
 
         The same function (`wbc.hardware.mujoco.physics.apply_domain`) writes the training env's model variants.
+        Delays take effect at once: commands already on their way arrive as scheduled, later ones after the new
+        actuation delay (never before an earlier one); a new sensing delay starts its history at the current frame.
         """
         self._strength = apply_domain(self.model, self.data, self._nominal, payload_kg=domain.payload_mass,
                                       payload_com=domain.payload_com, friction=domain.friction,
                                       motor_strength=domain.motor_strength)
+        dt = self.config.timestep
+        self._act_lag = delay_steps(domain.actuation_delay, dt)
+        sense = delay_steps(domain.sensing_delay, dt)
+        if sense != (0 if self._history is None else self._history.lag):
+            self._history = SensorHistory(sense, self.model.nu, self.model.nsensordata) if sense else None
+            self._seed_history()
+
+    @property
+    def actuation_delay_steps(self) -> int:
+        """The actuation delay in physics steps (`DomainParams.actuation_delay`, rounded)."""
+        return self._act_lag
+
+    @property
+    def sensing_delay_steps(self) -> int:
+        """The sensing delay in physics steps (`DomainParams.sensing_delay`, rounded)."""
+        return 0 if self._history is None else self._history.lag
 
     def apply_push(self, push: Push) -> None:
         """Schedule a push; it acts from ``push.start`` (simulation time) for ``push.duration``."""
@@ -318,6 +387,12 @@ class MujocoRobot(Robot):
         return quat_to_matrix(self.data.qpos[3:7])
 
     # -- internals ------------------------------------------------------------------------------------------------
+    def _seed_history(self) -> None:
+        """Start the sensing delay's history at the current frame (nothing without a sensing delay)."""
+        if self._history is not None:
+            d = self.data
+            self._history.seed(self._steps, d.qpos[7:], d.qvel[6:], d.actuator_force, d.sensordata)
+
     def _ground_contacts(self) -> tuple[np.ndarray, np.ndarray]:
         """Robot geoms touching the ground now, and whether each contact is a foot's.
 

@@ -1,0 +1,248 @@
+"""``wbc bench latency``: how late the loop is over the wire, the simulated delay that plays it, a controller's margin.
+
+Three figures, so that a user can check a controller against latency before the robot:
+
+1. The wire. The emulator's round trip (`bench_hw`: a command's send to the arrival of the state that answers it,
+   the emulator in its own process) and the loop latency a controller meets over the wire, measured by a probe
+   (`probe_ticks`): a feed-forward torque step on one motor, counted in control ticks from its ``write`` to the
+   first ``read`` whose torque estimate shows it, through a `UnitreeRobot` against a `UnitreeEmulator` on 127.0.0.1
+   (in this process; ``realtime`` by default: the emulated robot runs on its own clock, as a robot does, so the
+   link's period and the two clocks' phase count). A simulated robot without delay counts one tick at one physics
+   step per tick (the motors take the step at once; the read after the next step shows it); each physics step of
+   actuation or sensing delay adds one (``1 + Na + Ns``). So the simulated delay equivalent to a count is
+   ``(ticks - 1)`` control periods: the typical one from the median count, the worst from the largest; the same
+   probe on the simulated robot with each checks it.
+2. The margin: the largest actuation delay at which a controller still stands still for `STILL_S`, and still
+   survives a push trial's first push (its trial cut `AFTER_PUSH_S` after that push), over standing trials of the
+   push scenario. The sweep climbs `COARSE_MS` to the first delay that fails, then the bracket below it one physics
+   step (`FINE_MS`) at a time: the margin is the last delay passed before the first failure.
+3. What a user should set: ``actuation_delay_s`` + ``sensing_delay_s`` of a scenario's ``[domain]`` summing to the
+   equivalent delay; a controller whose margin is not well above it will not survive the robot's loop.
+
+The figures share this machine's cores with everything else it runs; the wire figures are those of loopback and an
+emulator, not of a robot's network and firmware, which add their own latency (measure it on the robot).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from wbc.arena.sim_trial import run_trial
+from wbc.control.registry import get_controller
+from wbc.errors import BenchError
+from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.mujoco.physics import delay_steps
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.robot import Robot
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree.robot import DESCRIPTIONS
+from wbc.scenario.domain import DomainParams
+from wbc.scenario.scenario import load_scenario
+from wbc.scenario.trial import Trial
+from wbc.tools.bench.hw import bench_hw
+from wbc.tools.bench.references import machine_description
+from wbc.types import MotorCommand
+
+__all__ = ["COARSE_MS", "FINE_MS", "bench_latency", "delay_margin", "probe_ticks", "wire_probe"]
+
+COARSE_MS = (0.0, 10.0, 20.0, 30.0, 40.0, 60.0, 80.0, 100.0, 150.0, 200.0)
+"""The actuation delays the margin sweep climbs first [ms]."""
+FINE_MS = 2.0  # [ms] the sweep's step within the bracket of the first failure: the default physics step
+
+STILL_S = 3.0  # [s] how long a controller must stand still
+AFTER_PUSH_S = 2.0  # [s] a push trial ends this long after its first push starts
+PROBE_JOINT = 2  # the front right calf: it carries weight, so a torque step there is plain in its estimate
+PROBE_STEP_NM = 3.0  # [N m] the feed-forward torque step
+PROBE_KP, PROBE_KD = 20.0, 0.5  # the hold the probe steps from (as `bench_hw` holds)
+
+
+def probe_ticks(robot: Robot, hold: MotorCommand, *, period: float, samples: int, joint: int = PROBE_JOINT,
+                step_nm: float = PROBE_STEP_NM, settle: int = 10, timeout_ticks: int = 100) -> list[int]:
+    """Control ticks from a torque step's ``write`` to the first ``read`` whose torque estimate shows it.
+
+    The loop is the runner's (``write``, ``advance(period)``, ``read``). `samples` steps alternate on and off (+/-
+    `step_nm` of feed-forward torque on `joint`), each after `settle` ticks of the previous command; a step shows when
+    the joint's torque estimate has moved by more than half of it from the last reading before the write.
+
+    Args:
+        robot: a connected robot, standing under `hold`.
+        hold: the command the steps are made from.
+        period: the control period [s].
+        samples: steps measured.
+        joint: the motor stepped.
+        step_nm: the step [N m].
+        settle: ticks before each step.
+        timeout_ticks: a step not seen within this many ticks is an error.
+
+    Returns:
+        The tick count of each step, in order.
+
+    Raises:
+        BenchError: a step was not seen within `timeout_ticks`.
+    """
+    bump = np.zeros(robot.num_joints)
+    bump[joint] = step_nm
+    stepped = dataclasses.replace(hold, tau=hold.tau + bump)
+    current, counts = hold, []
+    for i in range(samples):
+        for _ in range(settle):
+            robot.write(current)
+            robot.advance(period)
+        before = robot.read().tau_est[joint]
+        current, sign = (stepped, 1.0) if i % 2 == 0 else (hold, -1.0)
+        for k in range(1, timeout_ticks + 1):
+            robot.write(current)
+            robot.advance(period)
+            if sign * (robot.read().tau_est[joint] - before) > 0.5 * step_nm:
+                counts.append(k)
+                break
+        else:
+            raise BenchError(f"bench latency: a {step_nm:g} N m torque step on joint {joint} did not show in the "
+                             f"torque estimate within {timeout_ticks} ticks of {period * 1e3:g} ms")
+    return counts
+
+
+def wire_probe(robot: str = "go1", *, samples: int = 40, period: float = 0.002, mode: str = "realtime") -> list[int]:
+    """`probe_ticks` through a `UnitreeRobot` against a `UnitreeEmulator` on 127.0.0.1 (both in this process).
+
+    Args:
+        robot: ``a1`` or ``go1``.
+        samples: steps measured.
+        period: link and control period, and the emulator's period [s].
+        mode: the emulator's mode, ``realtime`` (its own clock) or ``lockstep`` (one period per command).
+    """
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode=mode, control_period=period)) as emu:
+        host, port = emu.address
+        cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=1.0 / period)
+        with UnitreeRobot(cfg) as link:
+            hold = MotorCommand.hold(link.desc.nominal_q, PROBE_KP, PROBE_KD)
+            return probe_ticks(link, hold, period=period, samples=samples)
+
+
+def sim_probe(robot: str, total_delay_s: float, *, samples: int = 10, period: float = 0.002) -> list[int]:
+    """`probe_ticks` on the simulated legs of a Unitree robot with an actuation delay of `total_delay_s` [s]."""
+    with MujocoRobot(MujocoRobotConfig(robot=DESCRIPTIONS[robot], arm_mode="none")) as sim:
+        sim.reset(domain=DomainParams(actuation_delay=total_delay_s))
+        hold = MotorCommand.hold(sim.desc.nominal_q, PROBE_KP, PROBE_KD)
+        return probe_ticks(sim, hold, period=period, samples=samples)
+
+
+def _margin_trials(scenario: str, trials: int) -> list[Trial]:
+    """The first `trials` standing trials (no velocity command) of the scenario's first band, seed 0."""
+    if trials < 1:
+        raise BenchError(f"bench latency: --trials must be >= 1, got {trials}")
+    sc = load_scenario(scenario)
+    found = []
+    for index in range(1000):
+        trial = sc.trial(sc.bands[0], 0, index)
+        if trial.command.vx == trial.command.vy == trial.command.yaw_rate == 0.0 and trial.pushes:
+            found.append(trial)
+            if len(found) == trials:
+                return found
+    raise BenchError(f"bench latency: scenario {sc.name!r} has no {trials} standing trials with pushes among its "
+                     f"first 1000 in band {sc.bands[0]!r}; give a scenario with pushes and a standing command option")
+
+
+def delay_margin(controller: str, scenario: str = "scenarios/push.toml", *, trials: int = 2,
+                 coarse_ms: tuple[float, ...] = COARSE_MS, fine_ms: float = FINE_MS) -> dict[str, object]:
+    """The largest actuation delay at which `controller` stands still, and survives a push.
+
+    Args:
+        controller: controller registry name.
+        scenario: a scenario with pushes and a standing command option (its standing trials are used).
+        trials: standing trials; each must pass at a delay.
+        coarse_ms: the delays climbed first, ascending [ms].
+        fine_ms: the step within the bracket of the first coarse failure [ms].
+
+    Returns:
+        Per test (``still``: standing `STILL_S` without pushes; ``push``: the trial's first push, cut `AFTER_PUSH_S`
+        after it): ``<test>_margin_ms`` (the last delay passed before the first failure; None if the first delay
+        failed), ``<test>_fell_at_ms`` (the first delay failed; None if none did); and ``push_force_n`` (the
+        pushes' magnitudes [N]), ``runs`` (trials played), ``wall_s``.
+    """
+    spec = get_controller(controller)
+    base = _margin_trials(scenario, trials)
+    forces = [round(float(np.linalg.norm(t.pushes[0].force_in_world)), 1) for t in base]
+    out: dict[str, object] = {"controller": controller, "trials": trials, "push_force_n": forces}
+    runs = 0
+
+    def passes(test: str, ms: float) -> bool:
+        nonlocal runs
+        for t in base:
+            domain = dataclasses.replace(t.domain, actuation_delay=ms / 1e3)
+            if test == "still":
+                trial = dataclasses.replace(t, domain=domain, pushes=(), duration_s=STILL_S)
+            else:
+                trial = dataclasses.replace(t, domain=domain, pushes=t.pushes[:1],
+                                            duration_s=t.pushes[0].start + AFTER_PUSH_S)
+            runs += 1
+            if run_trial(trial, spec)[1].fell:
+                return False
+        return True
+
+    start = time.perf_counter()
+    for test in ("still", "push"):
+        margin, fell_at = None, None
+        for ms in coarse_ms:
+            if not passes(test, ms):
+                fell_at = ms
+                break
+            margin = ms
+        if margin is not None and fell_at is not None:
+            ms = margin + fine_ms
+            while ms < fell_at - 1e-9:
+                if not passes(test, ms):
+                    fell_at = ms
+                    break
+                margin = ms
+                ms += fine_ms
+        out[f"{test}_margin_ms"], out[f"{test}_fell_at_ms"] = margin, fell_at
+    out["runs"], out["wall_s"] = runs, time.perf_counter() - start
+    return out
+
+
+def bench_latency(controllers: tuple[str, ...] = ("stand", "mpc"), *, wire_robot: str = "go1",
+                  scenario: str = "scenarios/push.toml", trials: int = 2, samples: int = 40,
+                  wire: bool = True) -> dict[str, object]:
+    """The wire's latency, the simulated delay that matches it, and each controller's delay margin.
+
+    Args:
+        controllers: controllers whose margin is measured (`delay_margin`).
+        wire_robot: the Unitree robot of the wire measurements (``a1`` or ``go1``).
+        scenario: the scenario of the margin trials.
+        trials: standing trials per margin test.
+        samples: torque steps of the wire probe.
+        wire: measure the wire (False: margins only).
+
+    Returns:
+        With `wire`: ``round_trip_ms_p50`` / ``_p99`` (`bench_hw`, lockstep), ``wire_ticks`` (the probe's counts
+        against the realtime emulator, and ``wire_ticks_p50`` / ``_mean`` / ``_max``), ``period_ms``,
+        ``typical_delay_ms`` and ``worst_delay_ms`` (``p50 - 1`` and ``max - 1`` periods, rounded to physics steps:
+        the total of actuation and sensing delay that plays the wire's loop, typically and at worst),
+        ``sim_ticks_typical`` / ``sim_ticks_worst`` (the probe's median count on the simulated robot with each);
+        ``margins`` (one `delay_margin` per controller), ``coarse_ms``, ``fine_ms`` and ``machine``.
+
+    Raises:
+        BenchError: the emulator failed, or a probe step was never seen.
+        UnknownNameError: an unknown controller or robot.
+    """
+    out: dict[str, object] = {"wire_robot": wire_robot, "scenario": scenario, "coarse_ms": list(COARSE_MS),
+                              "fine_ms": FINE_MS}
+    if wire:
+        period = 0.002
+        hw = bench_hw(wire_robot, seconds=2.0, rate_hz=1.0 / period)
+        ticks = wire_probe(wire_robot, samples=samples, period=period)
+        timestep = MujocoRobotConfig().timestep
+        out.update(round_trip_ms_p50=hw["round_trip_ms_p50"], round_trip_ms_p99=hw["round_trip_ms_p99"],
+                   period_ms=period * 1e3, wire_ticks=ticks, wire_ticks_p50=float(np.median(ticks)),
+                   wire_ticks_mean=float(np.mean(ticks)), wire_ticks_max=int(max(ticks)))
+        for name, count in (("typical", out["wire_ticks_p50"]), ("worst", out["wire_ticks_max"])):
+            delay = delay_steps(max(0.0, count - 1.0) * period, timestep) * timestep
+            out[f"{name}_delay_ms"] = delay * 1e3
+            out[f"sim_ticks_{name}"] = float(np.median(sim_probe(wire_robot, delay, period=period)))
+    out["margins"] = [delay_margin(c, scenario, trials=trials) for c in controllers]
+    out["machine"] = machine_description()
+    return out
