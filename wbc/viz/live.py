@@ -1,19 +1,23 @@
 """`LiveViewer`: draws frames on a running meshcat server, and `LiveObserver`, the runner hook that feeds it.
 
 Only what changed since the last frame is sent (a transform, a visibility flag). The server keeps the scene, so a
-browser opened at any time sees the current state.
+browser opened at any time sees the current state. The observer draws any robot by what it can offer: a simulator
+(`wbc.viz.sim_frames.SimulatedWorld`) with its ground, contacts and pushes; a robot seen through its own sensors
+(`wbc.hardware.capabilities.ConfigurationEstimate`, a hardware trial's) from its state alone, on flat ground.
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import sys
+from collections.abc import Callable
 
 import meshcat
 import numpy as np
 
 from wbc.control.protocol import Controller
-from wbc.hardware.mujoco.robot import MujocoRobot
+from wbc.hardware.capabilities import ConfigurationEstimate
 from wbc.hardware.robot import Robot
 from wbc.types import VelocityCommand
 from wbc.viz.content import SceneContent
@@ -21,9 +25,13 @@ from wbc.viz.frame import Pose, VizFrame
 from wbc.viz.player import Player
 from wbc.viz.record import Recording
 from wbc.viz.server import MeshcatServer
-from wbc.viz.sim_frames import frame_from_sim
+from wbc.viz.sim_frames import SimulatedWorld, frame_from_sim
+from wbc.viz.state_frames import frame_from_estimate
 
-__all__ = ["LiveObserver", "LiveViewer"]
+FrameMaker = Callable[[Robot, Controller, VelocityCommand, float], VizFrame]
+"""Builds the frame of a tick: (robot, controller, command, time [s]) -> frame."""
+
+__all__ = ["FrameMaker", "LiveObserver", "LiveViewer", "scene_of"]
 
 
 class LiveViewer:
@@ -67,11 +75,26 @@ class LiveViewer:
                 self._sent[path] = Pose(old.matrix, visible=False)
 
 
-class LiveObserver:
-    """The runner's observer for simulated trials: paces with a `Player`, draws on a `LiveViewer`, records.
+def scene_of(robot: Robot) -> tuple[Callable[[], SceneContent], FrameMaker] | None:
+    """How to build the scene of `robot` and its frames, by the capability it offers; None if it offers none.
 
-    At the first tick of every episode the scene is rebuilt from the robot (robot, arm mode, ground), so one observer
-    serves a series of trials.
+    A simulator (`SimulatedWorld`) is drawn with its ground, contacts and pushes; a robot that estimates its own
+    configuration (`ConfigurationEstimate`) from its state alone, on flat ground. The scene is built by calling the
+    first element (once per visualizer that shows it: building one loads the meshes).
+    """
+    if isinstance(robot, SimulatedWorld):
+        return (lambda: SceneContent.for_robot(robot)), frame_from_sim
+    if isinstance(robot, ConfigurationEstimate):
+        return (lambda: SceneContent.for_description(robot.description)), frame_from_estimate
+    return None
+
+
+class LiveObserver:
+    """The runner's observer: paces with a `Player`, draws on a `LiveViewer`, records.
+
+    At the first tick of every episode the scene is rebuilt from the robot (robot, arm mode, ground; `scene_of`), so
+    one observer serves a series of trials. A robot that offers neither a simulation nor an estimate of its own
+    configuration is not drawn (said once on standard error).
 
     Args:
         viewer: where to draw (None: draw nowhere, e.g. when only recording).
@@ -86,24 +109,35 @@ class LiveObserver:
         self.recording_fps = recording_fps
         self.recordings: list[Recording] = []
         self._last_t = float("inf")
+        self._make: FrameMaker | None = None
+        self._told = False
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """One tick (the `wbc.arena.runner.TickObserver` signature)."""
-        if not isinstance(robot, MujocoRobot):  # frames are drawn from the simulator's own state (contacts, pushes)
-            return
         new_episode = t < self._last_t
         self._last_t = t
         if new_episode:
+            scene = scene_of(robot)
+            self._make = None if scene is None else scene[1]
+            if scene is None:
+                if not self._told:
+                    print(f"viewer: {type(robot).__name__} is neither a simulation nor a robot that estimates its own "
+                          "configuration (wbc.hardware.capabilities.ConfigurationEstimate): nothing to draw",
+                          file=sys.stderr)
+                    self._told = True
+                return
             if self.viewer is not None:
-                self.viewer.load(SceneContent.for_robot(robot))
+                self.viewer.load(scene[0]())
             if self.recording_fps is not None:
-                self.recordings.append(Recording(SceneContent.for_robot(robot), fps=self.recording_fps))
+                self.recordings.append(Recording(scene[0](), fps=self.recording_fps))
+        if self._make is None:
+            return
         rec = self.recordings[-1] if self.recording_fps is not None else None
         draw = self.viewer is not None and (self.player is None or self.player.due(t))
         keyed = rec is not None and int(round(t * rec.fps)) > rec.last_key
         if not (draw or keyed):
             return
-        frame = frame_from_sim(robot, controller, command, t)
+        frame = self._make(robot, controller, command, t)
         if keyed:
             rec.add(frame)
         if draw:
