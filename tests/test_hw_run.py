@@ -17,6 +17,7 @@ import sys
 import termios
 import threading
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -51,11 +52,34 @@ LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz
 
 @pytest.fixture
 def go1() -> Iterator[UnitreeEmulator]:
-    """A real-time emulated Go1 (bare, as ``wbc hw emulate --robot go1``), standing when the test begins."""
+    """A real-time emulated Go1 (bare, as ``wbc hw emulate --robot go1``)."""
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")) as emu:
         yield emu
         assert emu.failure is None, emu.failure
     assert not [t.name for t in threading.enumerate() if t.name.startswith("unitree-")]
+
+
+@contextmanager
+def _held_until_the_link_is_up(emu: UnitreeEmulator) -> Iterator[None]:
+    """Keep the idle emulated robot standing until the first frame of a link arrives, as an operator holds a robot in
+    its harness: left alone with its motors off, it folds to its joint stops within half a second, and the stand-up
+    before the trial is then refused (a test of its own, below)."""
+    stop = threading.Event()
+
+    def hold() -> None:
+        for _ in range(3000):  # bounded: at most 60 s
+            if stop.is_set() or emu.commands():
+                return
+            emu.reset()
+            stop.wait(0.02)
+
+    holder = threading.Thread(target=hold, name="test-harness")
+    holder.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        holder.join()
 
 
 @pytest.fixture
@@ -74,9 +98,9 @@ def no_socket(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
 def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
         go1: UnitreeEmulator, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "hw"
-    go1.reset()  # standing at the start, as a simulated trial begins
-    code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
-                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out)])
+    with _held_until_the_link_is_up(go1):
+        code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                     "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out)])
     printed = capsys.readouterr()
     assert code == 0, printed.err
     (record,) = TrialRecord.read_csv(out / "trials.csv")
@@ -92,7 +116,7 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
     episode = Episode.load(str(path))
     assert episode.base_source == "estimator" and len(episode.t) == 150  # 3 s at 50 Hz
     assert 0.24 < episode.qpos[-1, 2] < 0.32
-    assert [r[3] for r in episode.safety_events.rows()] == ["fresh_state", "ramp_done"]
+    assert len(episode.safety_events) == 0  # the layer ramped the robot up before the trial, and never tripped
     # the push scenario's pushes and terrain were skipped, and both the report and the printout say so
     report = (out / "report.md").read_text()
     for text in ("SKIPPED", "4 push(es)", "fractal ground", "metrics_source = estimator", "## Safety events",
@@ -101,6 +125,9 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
     assert "SKIPPED" in printed.out and "completed" in printed.out
     hardware = json.loads((out / "hardware.json").read_text())
     assert hardware["backend"] == "unitree" and hardware["link"]["rejected_states"] == 0
+    ramp_done = [e["time"] for e in hardware["safety_events"] if e["reason"] == "ramp_done"]
+    assert [e["reason"] for e in hardware["safety_events"]] == ["fresh_state", "ramp_done"]
+    assert ramp_done[0] <= hardware["trial_started_s"]  # the trial's clock started on a standing robot
     assert json.loads((out / "run.json").read_text())["config"]["robot"] == "go1-arm"
     # the controller drove the robot: servo frames reached the wire after the ramp, not damping
     servo = [c for c in go1.commands() if not c.damping]
@@ -108,11 +135,10 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
 
 
 def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(go1: UnitreeEmulator, tmp_path: Path) -> None:
-    go1.reset()
     keys = ScriptedKeys([(0.8, "p"), (1.6, "e")])  # an operator's push by hand, then the e-stop
     cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
                               seconds=3.0, target=go1.address, out_dir=tmp_path / "hw", settle_s=0.5)
-    result = run_hardware_trial(cfg, keys=keys)
+    result = run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: go1.reset())
     record, episode = result.record, result.episode
     assert record.safety_trips == 1 and not record.success
     assert 1.6 <= record.fall_time_s <= 1.64  # ended at the tick that handled the key
@@ -129,6 +155,25 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(go1: UnitreeEm
     assert all(c.damping for c in after) and len(after) > 0.8 * (0.5 / LINK_PERIOD)
     report = (tmp_path / "hw" / "report.md").read_text()
     assert "software_estop" in report and "| push |" in report and "| estop |" in report
+
+
+def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(go1: UnitreeEmulator,
+                                                                                  tmp_path: Path,
+                                                                                  capsys: pytest.CaptureFixture[str],
+                                                                                  ) -> None:
+    # folded to its calf stops, as the real-time emulator leaves an idle robot: beyond the SDK's position table
+    qpos = go1.sim.data.qpos.copy()
+    qpos[2] = 0.06
+    qpos[7:] = np.tile([0.0, 1.35, -2.82], 4)
+    go1.reset(qpos)
+    out = tmp_path / "hw"
+    assert main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "2", "--settle", "0.2",
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "tripped while standing the robot up" in err and "joint_range" in err and "nothing was played" in err
+    assert not (out / "trials.csv").exists()
+    assert all(c.damping for c in go1.commands())  # not one servo frame reached the robot
 
 
 def test_non_loopback_target_is_refused_before_any_socket(no_socket: list, monkeypatch: pytest.MonkeyPatch,

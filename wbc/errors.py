@@ -30,6 +30,7 @@ __all__ = [
     "PortBusyError",
     "TargetRefusedError",
     "RobotLinkError",
+    "StandUpError",
 ]
 
 
@@ -217,3 +218,11 @@ class TargetRefusedError(ConfigError):
 
 class RobotLinkError(WbcError, RuntimeError):
     """The link to a robot failed: no valid state arrived in time, or the link thread died; the message says which."""
+
+
+class StandUpError(WbcError, RuntimeError):
+    """A robot could not be stood up under its safety layer before a hardware trial, so the trial was not played.
+
+    The layer tripped (the message names its reason and what it measured) or its ramp did not reach the standing
+    pose in time; the robot was left in damping.
+    """

@@ -5,7 +5,9 @@ place: `base_estimate` (the base's pose and velocity from IMU and leg kinematics
 metrics, and `estimated_configuration` (that pose with the joints as measured), which makes it a
 `wbc.hardware.capabilities.ConfigurationEstimate` a viewer can draw. The estimate is fed by the reads the runner
 makes anyway, one per control tick, so the robot is read exactly as often as without it and a safety layer beneath
-sees the same reads; the estimate is of the state the controller was handed.
+sees the same reads; the estimate is of the state the controller was handed. It is computed when the tick's command
+has gone out (at the start of `advance`, whose wait for the robot's clock absorbs it) or when it is asked for, so
+it never delays a command.
 
 Everything else passes through: `write` returns what the wrapped robot sent, `advance` is its pacing, and a safety
 layer's transitions are reported (`HasSafetyEvents`; none when the wrapped robot has no safety layer).
@@ -52,6 +54,7 @@ class EstimatedRobot(Robot):
         self.estimate = estimate
         self._description = description
         self._state: RobotState | None = None
+        self._pending = False  # a state was read and not yet folded into the estimate
         self._sent: MotorCommand | None = None
 
     # -- what it offers -------------------------------------------------------------------------------------------
@@ -66,6 +69,7 @@ class EstimatedRobot(Robot):
         Raises:
             RobotNotConnectedError: nothing was read yet.
         """
+        self._fold_in()
         latest = self.estimate.latest
         if latest is None:
             raise RobotNotConnectedError("EstimatedRobot.base_estimate: no state was read yet; call read() first")
@@ -106,19 +110,25 @@ class EstimatedRobot(Robot):
     def _connect(self) -> None:
         self.robot.connect()
         self.estimate.reset()
-        self._state = None
+        self._state, self._pending = None, False
 
     def _close(self) -> None:
         self.robot.close()
 
     def _read(self) -> RobotState:
+        self._fold_in()  # a state read without an advance since is still one tick of the filter
         state = self.robot.read()
-        self.estimate.update(state)
-        self._state = state
+        self._state, self._pending = state, True
         return state
 
     def _send(self, cmd: MotorCommand) -> None:
         self._sent = self.robot.write(cmd)
 
     def _advance(self, dt: float) -> None:
+        self._fold_in()
         self.robot.advance(dt)
+
+    def _fold_in(self) -> None:
+        if self._pending:
+            self.estimate.update(cast(RobotState, self._state))
+            self._pending = False

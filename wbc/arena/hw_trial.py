@@ -10,6 +10,10 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
   randomisation (NaN in the record); an operator can mark a push given by hand with a key (`wbc.arena.operator`);
 - the metrics come from the state estimator (IMU and leg kinematics), not from truth, and the record and the report
   say so (``metrics_source``);
+- before the trial's clock starts, the layer ramps the robot from its measured pose into the stand hold of its
+  nominal pose (`wbc.control.stand.stand_command`) and is in ``run``: the controller then starts, as in simulation,
+  from a robot standing at its nominal pose, and its commands pass without a ramp (a ramp's slew would hold back a
+  walking controller's swing legs);
 - the episode ends at the safety layer's first trip (its tilt check is the fall rule on a robot; a fault or an
   e-stop ends the trial too); the robot is then held in the layer's damping for ``settle_s`` while it comes to rest,
   before the link is closed;
@@ -42,7 +46,8 @@ from wbc.arena.report import md_table, summarize, write_report
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import TickObserver, run_episode
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
-from wbc.errors import ConfigError, ResultsDirError, ScenarioError
+from wbc.control.stand import stand_command
+from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError
 from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
@@ -51,6 +56,8 @@ from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
 
 __all__ = ["HardwareTrialConfig", "HardwareTrialResult", "run_hardware_trial"]
+
+_STAND_UP_DT = 0.02  # [s] period of the stand hold that precedes a trial (the stand controller's 50 Hz)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -118,6 +125,9 @@ class HardwareTrialResult:
         link: the robot link's counters after the episode (None for a robot without a link).
         cpu_s: CPU time of this process during the episode, every thread (the link's included) [s].
         episode_wall_s: wall time of the episode [s].
+        safety_events: every transition of the safety layer, the stand-up before the trial's included (the
+            episode holds those during the trial), on its clock: wall-clock seconds since the robot was connected.
+        trial_started_s: when the trial began on that clock (after the stand-up) [s].
     """
 
     record: TrialRecord
@@ -129,19 +139,23 @@ class HardwareTrialResult:
     link: LinkStatsLike | None
     cpu_s: float
     episode_wall_s: float
+    safety_events: tuple[SafetyEvent, ...]
+    trial_started_s: float
 
 
 def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
                        observer: TickObserver | None = None,
-                       confirm: Callable[[HardwareRobot, ControllerSpec], None] | None = None) -> HardwareTrialResult:
+                       before_connect: Callable[[HardwareRobot, ControllerSpec], None] | None = None,
+                       ) -> HardwareTrialResult:
     """Play one trial of a scenario on a real robot (or an emulator) and write its results directory.
 
     Args:
         cfg: what to play and where.
         keys: the operator's keys (`wbc.arena.operator.OPERATOR_ACTIONS`); None: nobody at the keys.
         observer: called after every tick, after the keys (a live viewer).
-        confirm: called with the robot built and the controller before anything is connected (a person confirms a
-            real robot); it raises to refuse.
+        before_connect: called with the robot built and the controller resolved, just before the robot is
+            connected (nothing was sent yet, no socket exists): a person confirms a real robot (it raises to refuse),
+            a test puts its emulated robot in place.
 
     Returns:
         The record, the episode and what the trial skipped.
@@ -152,6 +166,7 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
             variant for; a controller for another robot; a results directory that holds results.
         TargetRefusedError: a target outside 127.0.0.0/8 without `allow_hardware` (before any socket exists).
         RobotLinkError: the robot did not answer, or its link died.
+        StandUpError: the safety layer tripped while standing the robot up, before the trial (nothing was played).
     """
     scenario = load_scenario(cfg.scenario)
     band = cfg.band if cfg.band is not None else scenario.bands[0]
@@ -174,8 +189,6 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     out = Path(cfg.out_dir)
     if (out / "trials.csv").exists():
         raise ResultsDirError(f"{out}: already holds results; a hardware trial is played once: choose another --out")
-    if confirm is not None:
-        confirm(hardware, spec)
     try:
         check_published(scenario)
         published = True
@@ -184,12 +197,12 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
         print(f"wbc: warning: {exc}", file=sys.stderr)
     with threadpool_limits(limits=1, user_api="blas"):  # as in simulation: one BLAS thread, beside the link thread
         return _play(cfg, scenario_published=published, trial=trial, spec=spec, hardware=hardware, out=out,
-                     keys=keys, observer=observer)
+                     keys=keys, observer=observer, before_connect=before_connect)
 
 
 def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, spec: ControllerSpec,
-          hardware: HardwareRobot, out: Path, keys: KeySource | None,
-          observer: TickObserver | None) -> HardwareTrialResult:
+          hardware: HardwareRobot, out: Path, keys: KeySource | None, observer: TickObserver | None,
+          before_connect: Callable[[HardwareRobot, ControllerSpec], None] | None) -> HardwareTrialResult:
     start = time.perf_counter()
     desc = hardware.description
     ctrl = spec.make(desc)
@@ -202,8 +215,12 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     trial = dataclasses.replace(trial, pushes=())  # no robot here can apply them
     console = OperatorConsole(keys, safe.estop, then=observer)
     link: LinkStatsLike | None = None
+    if before_connect is not None:
+        before_connect(hardware, spec)
     connected_at[0] = time.monotonic()
     with robot:
+        _stand_up(robot, safe, cfg.settle_s)
+        started_s = safe.now()
         cpu0, wall0 = time.process_time(), time.perf_counter()
         episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
                               fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console)
@@ -217,8 +234,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                                   wall_s=time.perf_counter() - start, backend=hardware.backend,
                                   domain_applied=False, link=link)
     result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
-                                 notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s)
-    _write_results(cfg, result, trial, safe.events, published=scenario_published)
+                                 notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
+                                 safety_events=safe.events, trial_started_s=started_s)
+    _write_results(cfg, result, trial, published=scenario_published)
     return result
 
 
@@ -243,6 +261,34 @@ def _key_for(action: str) -> str:
     return next(k for k, a in OPERATOR_ACTIONS.items() if a == action and k.strip())
 
 
+def _stand_up(robot: EstimatedRobot, safe: SafeRobot, settle_s: float) -> None:
+    """Ramp the robot into the stand hold of its nominal pose until the safety layer is in ``run``.
+
+    Raises:
+        StandUpError: the layer tripped, or the ramp did not finish within its time plus the slowest joint's travel
+            at the slew rate (and a second); the robot is held damped for `settle_s` first.
+    """
+    hold = stand_command(robot.description)
+    cfg = safe.config
+    budget = cfg.ramp_time_s + math.pi / cfg.ramp_slew + 1.0  # no joint needs to travel more than pi
+    for _ in range(int(math.ceil(budget / _STAND_UP_DT))):
+        robot.read()
+        robot.write(hold)
+        robot.advance(_STAND_UP_DT)
+        if safe.safety_state in (SafetyState.RUN, SafetyState.DAMPED):
+            break
+    if safe.safety_state is SafetyState.RUN:
+        return
+    if safe.safety_state is SafetyState.DAMPED:
+        _settle(robot, _STAND_UP_DT, settle_s)
+        last = safe.events[-1]
+        raise StandUpError(f"the safety layer tripped while standing the robot up, before the trial: {last.reason} "
+                           f"({last.detail}); nothing was played. Put the robot in a pose inside its joint ranges "
+                           "(hung in its harness), check it with `wbc hw check`, and run again")
+    raise StandUpError(f"the safety layer's ramp did not reach the standing pose within {budget:.1f} s (state "
+                       f"{safe.safety_state}); nothing was played")
+
+
 def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
     """Keep reading and pacing the tripped robot for `seconds` while its safety layer sends damping."""
     damping = MotorCommand.damping(robot.num_joints, 0.0)  # replaced by the layer's own damping: it is latched
@@ -252,8 +298,7 @@ def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
         robot.advance(dt)
 
 
-def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial: Trial,
-                   events: tuple[SafetyEvent, ...], *, published: bool) -> None:
+def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial: Trial, *, published: bool) -> None:
     record, episode, hardware = result.record, result.episode, result.robot
     scenario_name, scenario_hash = trial.scenario, trial.scenario_hash
     identity = {
@@ -286,7 +331,8 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         "target": hardware.target, "control_rate_hz": 1.0 / episode.control_dt, "notes": list(result.notes),
         "episode_wall_s": result.episode_wall_s, "cpu_s": result.cpu_s,
         "link": result.link.as_dict(prefix="") if result.link is not None else None,
-        "safety_events": [e.to_dict() for e in events],
+        "trial_started_s": result.trial_started_s,
+        "safety_events": [e.to_dict() for e in result.safety_events],
         "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
     }
     (store.dir / "hardware.json").write_text(json.dumps(hardware_json, indent=2), encoding="utf-8")
@@ -304,12 +350,11 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         **{k: v for k, v in store.environment.items() if k != "packages"},
         "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
     }
-    write_report(store.dir, summary, [record], meta, sections=_hardware_sections(result, events))
+    write_report(store.dir, summary, [record], meta, sections=_hardware_sections(result))
 
 
-def _hardware_sections(result: HardwareTrialResult, events: tuple[SafetyEvent, ...]
-                       ) -> list[tuple[str, list[str]]]:
-    record, episode, link = result.record, result.episode, result.link
+def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]]]:
+    record, episode, link, events = result.record, result.episode, result.link, result.safety_events
     period_ms = episode.control_dt * 1e3
     act = episode.act_s * 1e3
     rows = [
@@ -336,8 +381,9 @@ def _hardware_sections(result: HardwareTrialResult, events: tuple[SafetyEvent, .
         trips = sum(1 for e in events if e.to_state is SafetyState.DAMPED)
         lead = (f"The safety layer tripped {trips} time(s); the episode ended at the first trip." if trips else
                 "The safety layer did not trip.")
-        sections.append(("Safety events", [lead + " Times are wall-clock seconds since the robot was connected.",
-                                           "", *body]))
+        sections.append(("Safety events", [f"{lead} Times are wall-clock seconds since the robot was connected; the "
+                                           "robot was stood up first, and the trial began at "
+                                           f"{result.trial_started_s:.3f} s.", "", *body]))
     else:
         sections.append(("Safety events", ["None recorded."]))
     actions = episode.operator_events.rows()

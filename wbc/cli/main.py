@@ -246,7 +246,8 @@ def _hw_run(args: argparse.Namespace) -> int:
     keys = TerminalKeys(announce="keys: " + ", ".join(f"{'space' if k == ' ' else k} {a}" for k, a in
                                                       OPERATOR_ACTIONS.items()) + " (no Enter needed)")
     try:
-        result = run_hardware_trial(cfg, keys=keys, observer=live[1] if live is not None else None, confirm=confirm)
+        result = run_hardware_trial(cfg, keys=keys, observer=live[1] if live is not None else None,
+                                    before_connect=confirm)
     except KeyboardInterrupt:
         print("wbc hw run: interrupted; the robot was closed into damping; no results were written", file=sys.stderr)
         return 130
