@@ -29,7 +29,7 @@ from wbc.arena.estimated_robot import EstimatedRobot
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import ScriptedKeys
 from wbc.arena.record import TrialRecord
-from wbc.arena.runner import run_episode
+from wbc.arena.runner import PreparingObserver, run_episode
 from wbc.cli import main
 from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.registry import get_controller
@@ -41,7 +41,10 @@ from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
 from wbc.scenario.scenario import load_scenario
 from wbc.types import MotorCommand, RobotState, VelocityCommand
+from wbc.viz.content import SceneContent
+from wbc.viz.frame import VizFrame
 from wbc.viz.live import LiveObserver
+from wbc.viz.replay import load_stored_episode
 
 ROOT = Path(__file__).resolve().parents[1]
 PUSH = str(ROOT / "scenarios" / "push.toml")
@@ -129,6 +132,9 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
     assert [e["reason"] for e in hardware["safety_events"]] == ["fresh_state", "ramp_done"]
     assert ramp_done[0] <= hardware["trial_started_s"]  # the trial's clock started on a standing robot
     assert json.loads((out / "run.json").read_text())["config"]["robot"] == "go1-arm"
+    stored = load_stored_episode(out, 0)  # what `wbc view --episode` replays: the robot played on, on flat ground
+    assert (stored.trial.robot, stored.trial.terrain.kind, stored.trial.pushes) == ("go1-arm", "flat", ())
+    assert len(list(stored.frames())) == 150
     # the controller drove the robot: servo frames reached the wire after the ramp, not damping
     servo = [c for c in go1.commands() if not c.damping]
     assert len(servo) > 1000 and np.allclose(servo[-200].wire.kp, 60.0)
@@ -225,19 +231,48 @@ def test_estimated_metrics_track_the_simulators_truth() -> None:
     assert abs(estimated[moving].mean() - true_speed[moving].mean()) < 0.1  # 0.94 against 1.02 when written
 
 
-def test_live_viewer_draws_a_robot_from_its_state_alone() -> None:
+class _Screen:
+    """Stands in for a `LiveViewer`: keeps what it was asked to load and show, posing every frame's nodes."""
+
+    def __init__(self) -> None:
+        self.content: SceneContent | None = None
+        self.loads = 0
+        self.shown: list[VizFrame] = []
+        self.threads: set[str] = set()
+
+    def load(self, content: SceneContent) -> None:
+        self.content, self.loads = content, self.loads + 1
+
+    def show(self, frame: VizFrame) -> None:
+        self.content.poses(frame)  # the robot's kinematics at the frame, as the live viewer computes them
+        self.shown.append(frame)
+        self.threads.add(threading.current_thread().name)
+
+
+def test_live_viewer_draws_a_robot_from_its_state_alone_without_blocking_its_loop() -> None:
     sim = MujocoRobot(MujocoRobotConfig(robot="go1-arm", arm_mode="none"))
     ctrl = get_controller("stand-noarm").make(sim.desc)
     robot = EstimatedRobot(sim, sim.desc, BaseEstimate(sim.desc, 1.0 / ctrl.rate_hz))
-    observer = LiveObserver(None, None, recording_fps=10.0)
+    screen = _Screen()
+    observer = LiveObserver(screen, background=True)
+    assert isinstance(observer, PreparingObserver)
+    observer.prepare(robot)  # before the robot is connected: the scene (its meshes) is built now, not in a tick
+    assert screen.loads == 1 and screen.content.robot.desc.arm_mode == "none" and not screen.content.robot.paths["arm"]
+    configurations = []
     with robot:
         episode = run_episode(robot, ctrl, load_scenario(TURN).trial("1.0", 0, 0).command, 1.0,
-                              truth=robot.base_estimate, fallen=lambda: False, observer=observer)
-    (recording,) = observer.recordings
-    assert recording.frames == pytest.approx(10, abs=1)
-    assert recording.paths["robot"] and not recording.paths["arm"]  # the Go1 without its arm, as described
-    np.testing.assert_allclose(robot.estimated_configuration()[:3], episode.qpos[-1, :3])
-    assert robot.estimated_configuration()[2] > 0.2  # the estimate stands it on its feet, not at the origin
+                              truth=robot.base_estimate, fallen=lambda: False,
+                              observer=lambda *tick: (observer(*tick), configurations.append(
+                                  robot.estimated_configuration())))
+    observer.close()
+    assert screen.loads == 1 and screen.threads == {"wbc-viewer"}  # drawn on the viewer's own thread
+    assert 1 <= len(screen.shown) <= 31  # at most 30 frames per second of the episode, the newest ones
+    last = screen.shown[-1]
+    assert last.foot_force_in_world is None and not last.pushed  # nobody knows a real robot's contacts or pushes
+    tick = int(round(last.t * ctrl.rate_hz)) - 1
+    np.testing.assert_allclose(last.qpos, configurations[tick])  # base pose estimated, joints measured
+    np.testing.assert_allclose(last.qpos[7:], episode.qpos[tick, 7:])
+    assert last.qpos[2] > 0.2  # the estimate stands it on its feet, not at the origin
 
 
 def test_live_viewer_says_once_that_a_robot_without_either_capability_is_not_drawn(

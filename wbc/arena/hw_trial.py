@@ -44,7 +44,7 @@ from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import md_table, summarize, write_report
 from wbc.arena.results import ResultsStore, episode_path
-from wbc.arena.runner import TickObserver, run_episode
+from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
 from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError
@@ -215,6 +215,8 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     trial = dataclasses.replace(trial, pushes=())  # no robot here can apply them
     console = OperatorConsole(keys, safe.estop, then=observer)
     link: LinkStatsLike | None = None
+    if isinstance(observer, PreparingObserver):
+        observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait for them
     if before_connect is not None:
         before_connect(hardware, spec)
     connected_at[0] = time.monotonic()

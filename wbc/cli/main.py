@@ -254,6 +254,7 @@ def _hw_run(args: argparse.Namespace) -> int:
     finally:
         keys.close()
         if live is not None:
+            live[1].close()
             live[0].stop()
     printers.print_hw_run(result)
     return 0
@@ -262,15 +263,15 @@ def _hw_run(args: argparse.Namespace) -> int:
 def _hw_live_observer(args: argparse.Namespace):
     """(server, observer) drawing a hardware trial in the browser (``wbc hw run --view``).
 
-    The robot paces the loop, so the viewer never blocks it, and it reads no keys (the operator's keys are the trial's).
+    The robot paces the loop, which must never wait for the viewer: it draws on a thread of its own, its scene built
+    before the robot is connected, and it reads no keys (the operator's keys are the trial's).
     """
     from wbc.viz.live import LiveObserver, LiveViewer
-    from wbc.viz.player import Controls, Player, PlayerConfig
     from wbc.viz.server import MeshcatServer, ServerConfig
 
     server = MeshcatServer(ServerConfig(host=args.host)).start()
     print(f"viewer: {server.web_url}  (listening on {args.host} only)", file=sys.stderr)
-    return server, LiveObserver(LiveViewer(server), Player(PlayerConfig(speed=0.0), Controls()))
+    return server, LiveObserver(LiveViewer(server), background=True)
 
 
 def _train(args: argparse.Namespace) -> int:
