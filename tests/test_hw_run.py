@@ -33,7 +33,7 @@ from wbc.arena.runner import PreparingObserver, run_episode
 from wbc.cli import main
 from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.registry import get_controller
-from wbc.errors import ConfigError
+from wbc.errors import ConfigError, StandUpError
 from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobotConfig
@@ -161,6 +161,17 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(go1: UnitreeEm
     assert all(c.damping for c in after) and len(after) > 0.8 * (0.5 / LINK_PERIOD)
     report = (tmp_path / "hw" / "report.md").read_text()
     assert "software_estop" in report and "| push |" in report and "| estop |" in report
+
+
+def test_estop_while_the_robot_is_stood_up_stops_it_and_plays_nothing(go1: UnitreeEmulator, tmp_path: Path) -> None:
+    keys = ScriptedKeys([(-math.inf, "e")])  # pressed before the trial's clock starts: at the first poll
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=2.0, target=go1.address, out_dir=tmp_path / "hw", settle_s=0.2)
+    with pytest.raises(StandUpError, match="software_estop"):
+        run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: go1.reset())
+    pressed = dict(keys.delivered)["e"]
+    assert all(c.damping for c in go1.commands() if c.time > pressed + 2 * LINK_PERIOD)
+    assert not (tmp_path / "hw" / "trials.csv").exists()
 
 
 def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(go1: UnitreeEmulator,

@@ -221,7 +221,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         before_connect(hardware, spec)
     connected_at[0] = time.monotonic()
     with robot:
-        _stand_up(robot, safe, cfg.settle_s)
+        _stand_up(robot, safe, console, cfg.settle_s)
         started_s = safe.now()
         cpu0, wall0 = time.process_time(), time.perf_counter()
         episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
@@ -263,8 +263,10 @@ def _key_for(action: str) -> str:
     return next(k for k, a in OPERATOR_ACTIONS.items() if a == action and k.strip())
 
 
-def _stand_up(robot: EstimatedRobot, safe: SafeRobot, settle_s: float) -> None:
+def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, settle_s: float) -> None:
     """Ramp the robot into the stand hold of its nominal pose until the safety layer is in ``run``.
+
+    The operator's e-stop works meanwhile (`OperatorConsole.before_trial`).
 
     Raises:
         StandUpError: the layer tripped, or the ramp did not finish within its time plus the slowest joint's travel
@@ -273,10 +275,11 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, settle_s: float) -> None:
     hold = stand_command(robot.description)
     cfg = safe.config
     budget = cfg.ramp_time_s + math.pi / cfg.ramp_slew + 1.0  # no joint needs to travel more than pi
-    for _ in range(int(math.ceil(budget / _STAND_UP_DT))):
+    for k in range(int(math.ceil(budget / _STAND_UP_DT))):
         robot.read()
         robot.write(hold)
         robot.advance(_STAND_UP_DT)
+        console.before_trial((k + 1) * _STAND_UP_DT - budget)  # negative: the trial's clock has not started
         if safe.safety_state in (SafetyState.RUN, SafetyState.DAMPED):
             break
     if safe.safety_state is SafetyState.RUN:

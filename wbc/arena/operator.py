@@ -35,7 +35,8 @@ class KeySource(Protocol):
         """The keys pressed since the last poll, oldest first (never blocks).
 
         Args:
-            t: the trial time now [s] (a scripted source presses by it; a terminal ignores it).
+            t: the trial time now [s]; negative before the trial, while the robot is stood up (a scripted source
+                presses by it; a terminal ignores it).
         """
 
 
@@ -79,6 +80,17 @@ class OperatorConsole:
         self.estop = estop
         self.then = then
         self._log: list[tuple[float, str, str]] = []
+
+    def before_trial(self, t: float) -> None:
+        """Between ticks before the trial (the robot standing up): the e-stop works, other keys are dropped.
+
+        Args:
+            t: the time on the trial's clock, negative before it starts [s] (given to the key source).
+        """
+        if self.keys is not None:
+            for key in self.keys.poll(t):
+                if OPERATOR_ACTIONS.get(key.lower()) == "estop":
+                    self.estop()
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """One tick (the `wbc.arena.runner.TickObserver` signature)."""
