@@ -256,8 +256,9 @@ def print_hw_run(result: HardwareTrialResult) -> None:
         link = result.link.as_dict(prefix="")
         print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} damping, "
               f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states")
-    print(f"  safety: {r.safety_trips} trip(s); {len(ep.safety_events)} transition(s): "
-          + ", ".join(f"{t:.2f} s {b} ({why})" for t, _, b, why, _ in ep.safety_events.rows()))
+    print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions (wall seconds since connected, the trial "
+          f"began at {result.trial_started_s:.2f} s): "
+          + ", ".join(f"{e.time:.2f} s {e.to_state} ({e.reason})" for e in result.safety_events))
     if len(ep.operator_events):
         print("  operator: " + ", ".join(f"{t:.2f} s {a}" for t, _, a in ep.operator_events.rows()))
     print(f"  results: {result.out_dir} (trials.csv, report.md, hardware.json, episodes/)")
