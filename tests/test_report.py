@@ -117,12 +117,32 @@ def test_record_round_trips_through_csv_to_the_last_bit(tmp_path):
     assert (tmp_path / "trials.csv").read_text().splitlines()[0] == ",".join(TrialRecord.header())
 
 
-def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory():
-    # the stored format: changing it would stop older results directories from resuming
+EARLIER_COLUMNS = ("controller,scenario,scenario_hash,band,seed,trial,success,ttf,fall_time_s,vlin_err,vang_err,"
+                   "max_roll_deg,max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,"
+                   "friction,payload_kg,fallbacks,wbc_failures,debug_truth,wall_s")
+"""The ``trials.csv`` columns of every results directory written before hardware trials."""
+
+
+def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory_and_the_hardware_ones(tmp_path):
+    # the stored format: changing it silently would stop older results directories from resuming
     assert ",".join(TrialRecord.header()) == (
         "controller,scenario,scenario_hash,band,seed,trial,success,ttf,fall_time_s,vlin_err,vang_err,max_roll_deg,"
         "max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,payload_kg,"
-        "fallbacks,wbc_failures,debug_truth,wall_s")
+        "fallbacks,wbc_failures,debug_truth,backend,metrics_source,safety_trips,late_advances,worst_lateness_ms,"
+        "deadline_misses,act_ms_p50,act_ms_p99,wall_s")
+    # an earlier directory's file still reads: a simulated trial, its metrics from truth, nothing timed but wall_s
+    record = make_record("mpc", "nominal", 1, 2, vlin_err=0.1 + 0.2)
+    row = dict(zip(TrialRecord.header(), record.to_row(), strict=True))
+    old = tmp_path / "trials.csv"
+    old.write_text(EARLIER_COLUMNS + "\n" + ",".join(row[c] for c in EARLIER_COLUMNS.split(",")) + "\n")
+    (back,) = TrialRecord.read_csv(old)
+    assert back == record and back.backend == "sim" and back.metrics_source == "truth"
+    assert math.isnan(back.act_ms_p99) and back.vlin_err == 0.1 + 0.2
+    # columns in another order, or a column without a default missing, are another version's
+    for header in (EARLIER_COLUMNS.replace("seed,trial", "trial,seed"), EARLIER_COLUMNS.replace(",wall_s", "")):
+        old.write_text(header + "\n")
+        with pytest.raises(RecordError, match="another version of wbc"):
+            TrialRecord.read_csv(old)
 
 
 def test_read_csv_drops_a_torn_last_line_and_refuses_other_columns(tmp_path):

@@ -31,6 +31,7 @@ __all__ = [
     "TargetRefusedError",
     "RobotLinkError",
     "PacketError",
+    "StandUpError",
 ]
 
 
@@ -231,3 +232,11 @@ class PacketError(WbcError, ValueError):
     def __init__(self, reason: str, detail: str) -> None:
         self.reason = reason
         super().__init__(f"Dynamixel packet rejected ({reason}): {detail}")
+
+
+class StandUpError(WbcError, RuntimeError):
+    """A robot could not be stood up under its safety layer before a hardware trial, so the trial was not played.
+
+    The layer tripped (the message names its reason and what it measured) or its ramp did not reach the standing
+    pose in time; the robot was left in damping.
+    """

@@ -2,9 +2,11 @@
 
 Per control tick it keeps the command, the measured proprioception needed for energy and arm travel, simulator
 truth (base velocity, yaw rate, roll, pitch, configuration) for tracking metrics and replay, and how long the
-controller took to act (the runner's timing, for deadline misses). The pushes the robot met
-are kept as arrays (`PushLog`), so a replay draws them from numbers, not from text; so are the transitions of a
-safety layer the robot ran behind (`SafetyLog`), with their times and reasons.
+controller took to act (the runner's timing, for deadline misses). On a robot without simulator truth the base
+quantities come from a state estimator instead, and the episode says so (`Episode.base_source`). The pushes the robot
+met are kept as arrays (`PushLog`), so a replay draws them from numbers, not from text; so are the transitions of a
+safety layer the robot ran behind (`SafetyLog`), with their times and reasons, and the keys an operator pressed during
+a hardware trial (`OperatorLog`).
 """
 
 from __future__ import annotations
@@ -18,7 +20,11 @@ from wbc.errors import ConfigError, EpisodeFileError
 from wbc.hardware.capabilities import SafetyEventLike
 from wbc.scenario.push import Push
 
-__all__ = ["Episode", "EpisodeBuffer", "PushLog", "SafetyLog"]
+__all__ = ["BASE_SOURCES", "Episode", "EpisodeBuffer", "OperatorLog", "PushLog", "SafetyLog"]
+
+BASE_SOURCES = ("truth", "estimator")
+"""Where an episode's base quantities come from: the simulator's (or motion capture's) truth, or the state
+estimator from the robot's own sensors (IMU and leg kinematics, `wbc.estimation`)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -116,6 +122,53 @@ class SafetyLog:
                 zip(self.time, self.from_state, self.to_state, self.reason, self.detail, strict=True)]
 
 
+@dataclass(frozen=True, kw_only=True)
+class OperatorLog:
+    """What an operator did during a trial (keys pressed at the terminal), one row per action, oldest first.
+
+    Attributes:
+        time: trial time of the control tick at which the action was taken, shape (n,) [s].
+        key: the key pressed, shape (n,) (unicode).
+        action: what it did, shape (n,) (unicode: ``estop``, ``push`` ...).
+    """
+
+    time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    key: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+    action: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
+
+    def __post_init__(self) -> None:
+        n = len(self.time)
+        for name in _OPERATOR_KEYS:
+            value = np.asarray(getattr(self, name))
+            if value.shape != (n,):
+                raise ConfigError(f"OperatorLog.{name}: shape {value.shape}, expected ({n},) for {n} actions; build "
+                                  "the log with OperatorLog.of(rows)")
+            if name == "time":
+                value = value.astype(np.float64)
+            elif value.dtype.kind != "U":
+                if n and value.dtype.kind not in "SU":
+                    raise ConfigError(f"OperatorLog.{name}: dtype {value.dtype}, expected text")
+                value = value.astype(np.str_)
+            object.__setattr__(self, name, value)
+
+    @classmethod
+    def of(cls, rows: Iterable[tuple[float, str, str]]) -> OperatorLog:
+        """The log of (time, key, action) rows."""
+        rows = list(rows)
+        return cls(time=np.array([r[0] for r in rows], dtype=np.float64),
+                   key=np.array([r[1] for r in rows], dtype=np.str_),
+                   action=np.array([r[2] for r in rows], dtype=np.str_))
+
+    def __len__(self) -> int:
+        """Number of actions."""
+        return len(self.time)
+
+    def rows(self) -> list[tuple[float, str, str]]:
+        """The actions as (time, key, action), oldest first."""
+        return [(float(t), str(k), str(a)) for t, k, a in zip(self.time, self.key, self.action, strict=True)]
+
+
+_OPERATOR_KEYS = ("time", "key", "action")
 _SAFETY_KEYS = ("time", "from_state", "to_state", "reason", "detail")
 _PUSH_KEYS = ("start", "duration", "force_in_world", "offset_in_base")
 _SCALARS = ("duration_s", "control_dt", "fell", "fall_time_s")
@@ -129,22 +182,27 @@ class Episode:
     Attributes:
         duration_s: the trial's planned length [s].
         control_dt: control period [s].
-        fell: the trunk or a non-foot link touched the ground.
+        fell: the episode ended early: the trunk or a non-foot link touched the ground (simulation), or the robot's
+            safety layer latched its damping (a real robot: the layer's tilt check is its fall rule, and a fault or
+            an e-stop ends the trial as well; `safety_events` says which).
         fall_time_s: when (nan if it did not fall) [s].
         t: time of each tick (after the tick's physics) [s].
         command: commanded (vx, vy, yaw_rate) [m/s, m/s, rad/s], shape (k, 3).
-        v_base_in_yaw: base horizontal velocity in the yaw-aligned frame, truth, shape (k, 2) [m/s].
-        yaw_rate: base yaw rate (world z), truth, shape (k,) [rad/s].
-        roll: base roll, truth, shape (k,) [rad].
-        pitch: base pitch, truth, shape (k,) [rad].
+        v_base_in_yaw: base horizontal velocity in the yaw-aligned frame (from `base_source`), shape (k, 2) [m/s].
+        yaw_rate: base yaw rate (world z), shape (k,) [rad/s].
+        roll: base roll, shape (k,) [rad].
+        pitch: base pitch, shape (k,) [rad].
         power: sum over joints of |tau_est * dq|, measured, shape (k,) [W].
         arm_q: measured arm joint positions, shape (k, 3) (zero columns without an actuated arm) [rad].
-        qpos: simulator configuration for replay, shape (k, nq).
+        qpos: configuration for replay (base pose from `base_source`, joints measured), shape (k, nq).
         act_s: wall time of each tick's ``controller.act`` call, shape (k,) [s]; a tick whose value exceeds
             `control_dt` missed its deadline on a real robot.
         pushes: the pushes that began before the episode ended.
         safety_events: the transitions of the robot's safety layer during the episode (empty for a robot that has
             none, `wbc.hardware.capabilities.HasSafetyEvents`).
+        operator_events: the keys an operator pressed during a hardware trial (a marked push, an e-stop).
+        base_source: where `v_base_in_yaw`, `yaw_rate`, `roll`, `pitch` and the base pose in `qpos` come from, one
+            of `BASE_SOURCES`: ``truth`` (the simulator) or ``estimator`` (the robot's own sensors).
     """
 
     duration_s: float
@@ -163,6 +221,13 @@ class Episode:
     act_s: np.ndarray
     pushes: PushLog = field(default_factory=PushLog)
     safety_events: SafetyLog = field(default_factory=SafetyLog)
+    operator_events: OperatorLog = field(default_factory=OperatorLog)
+    base_source: str = "truth"
+
+    def __post_init__(self) -> None:
+        if self.base_source not in BASE_SOURCES:
+            raise ConfigError(f"Episode.base_source {self.base_source!r}: valid sources are "
+                              f"{', '.join(BASE_SOURCES)}")
 
     @property
     def survived_s(self) -> float:
@@ -176,17 +241,23 @@ class Episode:
     def save(self, path: str) -> None:
         """Write the episode to a NumPy ``.npz`` file (no pickle).
 
-        The pushes go in as arrays ``push_<field>``, the safety events as ``safety_<field>`` (text as unicode).
+        The pushes go in as arrays ``push_<field>``, the safety events as ``safety_<field>``, the operator's actions
+        as ``operator_<field>`` (text as unicode), and the base quantities' source as ``base_source``.
         """
         np.savez_compressed(
             path, **{k: getattr(self, k) for k in (*_SCALARS, *_ARRAYS)},
             **{f"push_{k}": getattr(self.pushes, k) for k in _PUSH_KEYS},
             **{f"safety_{k}": getattr(self.safety_events, k) for k in _SAFETY_KEYS},
+            **{f"operator_{k}": getattr(self.operator_events, k) for k in _OPERATOR_KEYS},
+            base_source=np.str_(self.base_source),
         )
 
     @classmethod
     def load(cls, path: str) -> Episode:
-        """Read an episode written by `save`; a file from before episodes kept safety events has none.
+        """Read an episode written by `save`.
+
+        A file from before episodes kept safety events, operator actions or their base source has none of the first
+        two, and its base quantities are the simulator's.
 
         Raises:
             EpisodeFileError: a field is missing (a file of another version: its pushes were text, for instance) or
@@ -207,12 +278,27 @@ class Episode:
                 missing = [k for k in safety_keys if k not in z.files]
                 raise EpisodeFileError(f"{path}: field {missing[0]} missing while {present[0]} is there; the file "
                                        "is damaged: play the trial again with `wbc run --save-episodes`")
+            operator = _optional_group(path, z.files, "operator", _OPERATOR_KEYS)
             try:
                 pushes = PushLog(**{k: z[f"push_{k}"] for k in _PUSH_KEYS})
                 safety = SafetyLog(**{k: z[f"safety_{k}"] for k in _SAFETY_KEYS}) if present else SafetyLog()
+                actions = OperatorLog(**{k: z[f"operator_{k}"] for k in _OPERATOR_KEYS}) if operator else OperatorLog()
+                source = str(z["base_source"].item()) if "base_source" in z.files else "truth"
+                return cls(**scalars, **arrays, pushes=pushes, safety_events=safety, operator_events=actions,
+                           base_source=source)
             except ConfigError as exc:
                 raise EpisodeFileError(f"{path}: {exc}") from None
-        return cls(**scalars, **arrays, pushes=pushes, safety_events=safety)
+
+
+def _optional_group(path: str, files: list[str], prefix: str, keys: tuple[str, ...]) -> bool:
+    """True if the file holds the group ``<prefix>_<key>`` whole, False if none of it; a part of it is damage."""
+    names = [f"{prefix}_{k}" for k in keys]
+    present = [k for k in names if k in files]
+    if present and len(present) < len(names):
+        missing = [k for k in names if k not in files]
+        raise EpisodeFileError(f"{path}: field {missing[0]} missing while {present[0]} is there; the file is "
+                               "damaged: play the trial again")
+    return bool(present)
 
 
 @dataclass

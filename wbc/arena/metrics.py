@@ -8,6 +8,11 @@
 - ``max_roll_deg`` / ``max_pitch_deg``: largest |roll| / |pitch| [deg].
 - ``energy_j``: mechanical work of all motors, sum over ticks of sum_i |tau_i dq_i| dt [J].
 - ``arm_travel_rad``: total arm joint travel, sum over ticks and arm joints of |delta q| [rad].
+- ``safety_trips``: times the robot's safety layer latched its damping (0 without a safety layer).
+- ``deadline_misses``: control ticks whose ``controller.act`` took longer than the control period (wall time).
+- ``act_ms_p50`` / ``act_ms_p99``: median and 99th percentile of the ``controller.act`` wall time [ms].
+
+The last three depend on the machine that played the episode, as its wall time does.
 """
 
 from __future__ import annotations
@@ -28,6 +33,10 @@ __all__ = [
     "max_pitch_deg",
     "energy_j",
     "arm_travel_rad",
+    "safety_trips",
+    "deadline_misses",
+    "act_ms_p50",
+    "act_ms_p99",
     "compute_metrics",
 ]
 
@@ -78,7 +87,27 @@ def arm_travel_rad(ep: Episode) -> float:
     return float(np.sum(np.abs(np.diff(ep.arm_q, axis=0))))
 
 
-METRICS: dict[str, Callable[[Episode], float | bool]] = {
+def safety_trips(ep: Episode) -> int:
+    """Times the safety layer latched its damping during the episode."""
+    return int(np.count_nonzero(ep.safety_events.to_state == "damped"))
+
+
+def deadline_misses(ep: Episode) -> int:
+    """Ticks whose ``controller.act`` took longer than the control period."""
+    return ep.deadline_misses()
+
+
+def act_ms_p50(ep: Episode) -> float:
+    """Median ``controller.act`` wall time [ms]."""
+    return float(np.percentile(ep.act_s, 50) * 1e3) if len(ep.act_s) else float("nan")
+
+
+def act_ms_p99(ep: Episode) -> float:
+    """99th percentile of the ``controller.act`` wall time [ms]."""
+    return float(np.percentile(ep.act_s, 99) * 1e3) if len(ep.act_s) else float("nan")
+
+
+METRICS: dict[str, Callable[[Episode], float | bool | int]] = {
     "success": success,
     "ttf": ttf,
     "vlin_err": vlin_err,
@@ -87,10 +116,14 @@ METRICS: dict[str, Callable[[Episode], float | bool]] = {
     "max_pitch_deg": max_pitch_deg,
     "energy_j": energy_j,
     "arm_travel_rad": arm_travel_rad,
+    "safety_trips": safety_trips,
+    "deadline_misses": deadline_misses,
+    "act_ms_p50": act_ms_p50,
+    "act_ms_p99": act_ms_p99,
 }
 
 
-def compute_metrics(ep: Episode) -> dict[str, float | bool]:
+def compute_metrics(ep: Episode) -> dict[str, float | bool | int]:
     """Every metric of `METRICS` for one episode."""
     out = {name: fn(ep) for name, fn in METRICS.items()}
     out["fall_time_s"] = float(ep.fall_time_s)

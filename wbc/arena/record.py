@@ -1,10 +1,10 @@
 """`TrialRecord`: the results of one played trial, the one record that crosses the arena's files.
 
-The simulated-trial runner builds it from the trial and its episode (`TrialRecord.of_trial`), the executors carry it
-back from their workers, the results store writes it to and reads it from ``trials.csv`` (`header`, `to_row`,
-`from_row`, `read_csv`), and the statistics and the report read its typed fields. The fields are defined here once,
-in the order of the ``trials.csv`` columns; the file format is the one every earlier results directory holds, so a run
-written before this record existed still resumes.
+The simulated-trial runner and the hardware trial build it from the trial and its episode (`TrialRecord.of_trial`),
+the executors carry it back from their workers, the results store writes it to and reads it from ``trials.csv``
+(`header`, `to_row`, `from_row`, `read_csv`), and the statistics and the report read its typed fields. The fields
+are defined here once, in the order of the ``trials.csv`` columns. A results directory written by a version with
+other columns is refused on resume with a message that says so (`read_csv`).
 """
 
 from __future__ import annotations
@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import io
+import math
 import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -22,9 +23,10 @@ import numpy as np
 from wbc.arena.episode import Episode
 from wbc.arena.metrics import compute_metrics
 from wbc.errors import RecordError, UnknownNameError
+from wbc.hardware.capabilities import LinkStatsLike
 from wbc.scenario.trial import Trial
 
-__all__ = ["TrialRecord"]
+__all__ = ["MACHINE_TIMED", "TrialRecord"]
 
 _TRUE = frozenset({"True", "true", "1"})
 _FALSE = frozenset({"False", "false", "0"})
@@ -60,7 +62,18 @@ class TrialRecord:
         fallbacks: controller solves that failed and fell back to a safe command.
         wbc_failures: whole-body QP failures of the controller.
         debug_truth: the controller read the simulator's base state (``--debug-truth``), not its estimate.
-        wall_s: wall time the trial took to play [s]; the only field that depends on the machine.
+        backend: what played the trial: ``sim`` (the MuJoCo simulator), or a real robot's backend (``unitree``).
+        metrics_source: where the base quantities behind the tracking and tilt metrics come from: ``truth`` (the
+            simulator) or ``estimator`` (the robot's IMU and leg kinematics, `wbc.estimation`).
+        safety_trips: times the robot's safety layer latched its damping (0 without a safety layer).
+        late_advances: control ticks that reached the robot's wall-clock pacing after their deadline (0 in
+            simulation, whose robot does not wait for a clock).
+        worst_lateness_ms: the latest of those, by how much [ms].
+        deadline_misses: control ticks whose ``controller.act`` took longer than the control period.
+        act_ms_p50: median ``controller.act`` wall time [ms].
+        act_ms_p99: its 99th percentile [ms].
+        wall_s: wall time the trial took to play [s]. This field, `deadline_misses`, `act_ms_p50` and `act_ms_p99`
+            depend on the machine (and so, on a real robot, do `late_advances` and `worst_lateness_ms`).
     """
 
     controller: str
@@ -88,6 +101,14 @@ class TrialRecord:
     fallbacks: int
     wbc_failures: int
     debug_truth: bool
+    backend: str = "sim"
+    metrics_source: str = "truth"
+    safety_trips: int = 0
+    late_advances: int = 0
+    worst_lateness_ms: float = 0.0
+    deadline_misses: int = 0
+    act_ms_p50: float = float("nan")
+    act_ms_p99: float = float("nan")
     wall_s: float
 
     def __post_init__(self) -> None:
@@ -98,24 +119,36 @@ class TrialRecord:
 
     @classmethod
     def of_trial(cls, trial: Trial, *, controller: str, episode: Episode, counters: Mapping[str, int],
-                 wall_s: float, debug_truth: bool = False) -> TrialRecord:
+                 wall_s: float, debug_truth: bool = False, backend: str = "sim", domain_applied: bool = True,
+                 link: LinkStatsLike | None = None) -> TrialRecord:
         """The record of `trial` played by `controller`.
 
         Args:
-            trial: the trial played.
+            trial: the trial played (its pushes: those scheduled on the robot; a robot that cannot apply them plays
+                the trial without, and the record says none).
             controller: the controller's name.
-            episode: the episode log, from which the metrics are computed (`wbc.arena.metrics.compute_metrics`).
+            episode: the episode log, from which the metrics are computed (`wbc.arena.metrics.compute_metrics`);
+                its `Episode.base_source` is the record's `metrics_source`.
             counters: the controller's event counts (`Controller.counters`); absent counts are 0.
             wall_s: wall time of the trial [s].
             debug_truth: the controller's ground-truth debug switch was thrown.
+            backend: what played it (``sim``, ``unitree`` ...).
+            domain_applied: the trial's friction and payload were applied (simulation); False on a real robot,
+                whose friction and payload nobody set: the record holds NaN for both.
+            link: the robot link's counters after the episode (`wbc.hardware.capabilities.HasLinkStats`), for the
+                pacing columns; None for a robot that does not pace on a wall clock.
         """
         return cls(
             controller=controller, scenario=trial.scenario, scenario_hash=trial.scenario_hash, band=trial.band,
             seed=trial.seed, trial=trial.index, **compute_metrics(episode), push_force_n=trial.push_force_n,
             n_pushes=len(trial.pushes), vx_cmd=trial.command.vx, vy_cmd=trial.command.vy,
-            yaw_rate_cmd=trial.command.yaw_rate, friction=trial.domain.friction,
-            payload_kg=trial.domain.payload_mass, fallbacks=counters.get("fallbacks", 0),
-            wbc_failures=counters.get("wbc_failures", 0), debug_truth=debug_truth, wall_s=wall_s,
+            yaw_rate_cmd=trial.command.yaw_rate,
+            friction=trial.domain.friction if domain_applied else math.nan,
+            payload_kg=trial.domain.payload_mass if domain_applied else math.nan,
+            fallbacks=counters.get("fallbacks", 0), wbc_failures=counters.get("wbc_failures", 0),
+            debug_truth=debug_truth, backend=backend, metrics_source=episode.base_source,
+            late_advances=link.late_advances if link is not None else 0,
+            worst_lateness_ms=link.worst_lateness * 1e3 if link is not None else 0.0, wall_s=wall_s,
         )
 
     def __eq__(self, other: object) -> bool:
@@ -179,11 +212,15 @@ class TrialRecord:
         """The records of a ``trials.csv``, in file order.
 
         A last line without its newline (a write cut short by a kill) is dropped, and so is any row with the wrong
-        number of cells; what remains is exactly what was stored.
+        number of cells; what remains is exactly what was stored. A file written before some columns existed (those
+        with a default: ``backend`` and the columns after it, added with hardware trials) reads with their defaults,
+        which are what those versions did (a simulated trial, metrics from truth); a results store reopened on it
+        rewrites it with this version's columns.
 
         Raises:
-            RecordError: the file's columns are not `header` (a results directory of another version), or a complete
-                row holds a value that does not parse (the message names the file, line and field).
+            RecordError: the file's columns are neither `header` nor an earlier version's (a results directory of
+                another version), or a complete row holds a value that does not parse (the message names the file,
+                line and field).
         """
         text = Path(path).read_text(encoding="utf-8")
         if text and not text.endswith("\n"):
@@ -191,16 +228,35 @@ class TrialRecord:
         rows = list(csv.reader(io.StringIO(text)))
         if not rows:
             return []
-        if tuple(rows[0]) != FIELDS:
+        columns = tuple(rows[0])
+        absent = [name for name in FIELDS if name not in columns]
+        if tuple(name for name in FIELDS if name in columns) != columns or any(n not in _DEFAULTS for n in absent):
             raise RecordError(f"{path}: columns {', '.join(rows[0])} are not this version's ({', '.join(FIELDS)}); "
                               "the directory was written by another version of wbc: resume it with that version, "
                               "or start afresh with another --out")
-        return [cls.from_row(row, source=f"{path}:{line}") for line, row in enumerate(rows[1:], start=2)
-                if len(row) == len(FIELDS)]
+        defaults = [repr(_DEFAULTS[n]) if isinstance(_DEFAULTS[n], float) else str(_DEFAULTS[n]) for n in absent]
+        return [cls.from_row(_complete(columns, row, absent, defaults), source=f"{path}:{line}")
+                for line, row in enumerate(rows[1:], start=2) if len(row) == len(columns)]
 
 
 _KINDS: dict[str, type] = {f.name: typing.get_type_hints(TrialRecord)[f.name] for f in dataclasses.fields(TrialRecord)}
 FIELDS: tuple[str, ...] = tuple(_KINDS)
+
+_DEFAULTS: dict[str, object] = {f.name: f.default for f in dataclasses.fields(TrialRecord)
+                                if f.default is not dataclasses.MISSING}
+
+
+def _complete(columns: tuple[str, ...], row: list[str], absent: list[str], defaults: list[str]) -> list[str]:
+    """`row` (cells in `columns` order) as cells in `FIELDS` order, the `absent` columns' cells as `defaults`."""
+    if not absent:
+        return row
+    cells = dict(zip(columns, row, strict=True)) | dict(zip(absent, defaults, strict=True))
+    return [cells[name] for name in FIELDS]
+
+
+MACHINE_TIMED = ("deadline_misses", "act_ms_p50", "act_ms_p99", "wall_s")
+"""Fields timed on the machine's clock: two plays of the same simulated trial agree on every other field, to the
+last bit, and differ in these."""
 
 
 def _coerce(name: str, kind: type, value: object) -> object:

@@ -32,6 +32,7 @@ __all__ = [
     "LABELS",
     "summarize",
     "format_table",
+    "md_table",
     "write_report",
 ]
 
@@ -253,7 +254,8 @@ def _md_cell(text: Any) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+def md_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> list[str]:
+    """A Markdown table, one line per row, cells escaped (``|`` and newlines)."""
     lines = ["| " + " | ".join(_md_cell(h) for h in header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     lines += ["| " + " | ".join(_md_cell(c) for c in row) + " |" for row in rows]
     return lines
@@ -273,12 +275,13 @@ def _md_meta(meta: Mapping[str, Any]) -> list[str]:
 
 
 def write_report(
-    out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[TrialRecord], meta: Mapping[str, Any]
+    out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[TrialRecord], meta: Mapping[str, Any],
+    sections: Sequence[tuple[str, Sequence[str]]] = (),
 ) -> list[Path]:
     """Write ``report.md`` and its PNG plots (`wbc.arena.plots.write_plots`) into `out_dir` (created if missing).
 
-    ``report.md`` holds the title, the scenario name and hash, `meta` as a list (nested mappings as sub-lists), one
-    Markdown results table per band, the paired-differences table and links to the plots.
+    ``report.md`` holds the title, the scenario name and hash, `meta` as a list (nested mappings as sub-lists), the
+    extra `sections`, one Markdown results table per band, the paired-differences table and links to the plots.
 
     Args:
         out_dir: output folder.
@@ -286,6 +289,8 @@ def write_report(
         records: the arena records summarised (used for the per-trial plots), in any order; those of controllers or
             bands not in the summary are ignored.
         meta: run information to list (controllers, seeds, trials, executor, package versions, git revision ...).
+        sections: more (title, Markdown lines) sections, placed after the run information (a hardware trial's
+            timing, safety events and operator actions).
 
     Returns:
         The paths written: ``report.md`` first, then the plots.
@@ -301,12 +306,14 @@ def write_report(
     lines = [f"# Arena report: {scenario['name']}", "", f"Scenario `{scenario['name']}`, hash `{scenario['hash']}`."]
     lines += ["", "## Run", ""]
     lines += _md_meta(meta) if meta else ["(no run information given)"]
+    for title, body in sections:
+        lines += ["", f"## {title}", "", *body]
     lines += ["", "## Results", "", "Mean ± std across seeds (each seed's trials averaged first); success in %.", ""]
     metrics = (*METRICS, *EXTRA_METRICS)
     for band in bands:
         lines += [f"### Band `{band}`", ""]
         header = ["Controller", "Trials", *(LABELS[m] for m in metrics)]
-        lines += _md_table(header, _result_rows(summary, band, metrics))
+        lines += md_table(header, _result_rows(summary, band, metrics))
         lines.append("")
     lines += ["## Paired differences (B - A, 95% CI)", ""]
     lines += [
@@ -315,7 +322,7 @@ def write_report(
         "",
     ]
     if summary["paired"]:
-        lines += _md_table(["Band", "A", "B", "Metric", "B - A", "95% CI"], _paired_rows(summary))
+        lines += md_table(["Band", "A", "B", "Metric", "B - A", "95% CI"], _paired_rows(summary))
     else:
         lines.append("(fewer than two controllers)")
     lines += ["", "## Plots", ""]

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -32,11 +33,26 @@ from wbc.robots.euler import rpy_of
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, VelocityCommand
 
-__all__ = ["TickObserver", "run_episode"]
+__all__ = ["PreparingObserver", "TickObserver", "run_episode"]
 
 TickObserver = Callable[[float, Robot, Controller, VelocityCommand], None]
 """Called after every control tick with (time after the tick [s], robot, controller, command); for viewers, benches
 and studies. It may block (a paused viewer pauses the loop) but must not change the robot or the controller."""
+
+
+@runtime_checkable
+class PreparingObserver(Protocol):
+    """A tick observer whose setup for a robot is slow (a viewer loading its meshes) and can be done beforehand.
+
+    On a real robot the first ticks of an episode cannot wait for it: a hardware trial calls `prepare` before the
+    robot is connected.
+    """
+
+    def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        """One tick (the `TickObserver` signature)."""
+
+    def prepare(self, robot: Robot) -> None:
+        """Set up for the next episode, played on `robot` (not necessarily connected yet)."""
 
 
 def run_episode(

@@ -15,11 +15,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
+from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
-from wbc.control.registry import get_controller
+from wbc.cli.terminal_keys import TerminalKeys
+from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.hardware_robot import HardwareRobot
 from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.train.adaptation_config import AdaptationConfig
@@ -156,10 +160,22 @@ def _hw_emulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _confirm_hardware(robot: str, host: str, port: int, *, yes: bool) -> None:
-    """Show the real robot's address and have the person at the terminal type ``yes`` (or `yes` given)."""
-    print(f"wbc hw check: {robot} at {host}:{port} is a REAL ROBOT (outside 127.0.0.0/8). Only damping frames "
-          "(Kp 0) will be sent; hang the robot in its harness first.", file=sys.stderr, flush=True)
+def _confirm_hardware(command: str, robot: str, host: str, port: int, what: str, *, yes: bool) -> None:
+    """Show the real robot's address and what will happen to it; have the person at the terminal type ``yes``.
+
+    Args:
+        command: the command asking (``hw check``), for the message.
+        robot: the robot's name.
+        host: its address.
+        port: its port.
+        what: what the command will send it, and what to do first.
+        yes: confirmed on the command line (``--yes``): do not ask.
+
+    Raises:
+        TargetRefusedError: not confirmed, or nobody at a terminal to confirm without ``--yes``.
+    """
+    print(f"wbc {command}: {robot} at {host}:{port} is a REAL ROBOT (outside 127.0.0.0/8). {what}", file=sys.stderr,
+          flush=True)
     if yes:
         return
     if not sys.stdin.isatty():
@@ -174,15 +190,29 @@ def _confirm_hardware(robot: str, host: str, port: int, *, yes: bool) -> None:
                                  f"{host}:{port}")
 
 
-def _hw_check(args: argparse.Namespace) -> int:
+def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
+    """``--target`` as (host, port), refused unless loopback or ``--allow-hardware`` (before any socket exists).
+
+    Args:
+        args: the command's arguments (``target``, ``allow_hardware``).
+        purpose: what a real robot would be used for, for the refusal (``check a real robot``).
+
+    Raises:
+        ConfigError: not HOST:PORT.
+        TargetRefusedError: not an IPv4 literal, a bad port, or a real network without ``--allow-hardware``.
+    """
     host, port = _address(args.target, "--target")
     # the policy is checked here, before any socket exists, so the refusal can name the command's own switch
     check_target(host, port, allow_hardware=True, what="--target")  # an IPv4 literal and a valid port
     if not args.allow_hardware and not is_loopback(host):
         raise TargetRefusedError(
-            f"--target {host}:{port} is outside 127.0.0.0/8: refusing to send to a real network. To check a real "
-            "robot, add --allow-hardware (you will be asked to type yes; --yes confirms when stdin is not a "
-            "terminal)")
+            f"--target {host}:{port} is outside 127.0.0.0/8: refusing to send to a real network. To {purpose}, add "
+            "--allow-hardware (you will be asked to type yes; --yes confirms when stdin is not a terminal)")
+    return host, port
+
+
+def _hw_check(args: argparse.Namespace) -> int:
+    host, port = _hardware_target(args, "check a real robot")
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     local_host, local_port = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"),
@@ -190,7 +220,8 @@ def _hw_check(args: argparse.Namespace) -> int:
     cfg = UnitreeRobotConfig(robot=args.robot, target_host=host, target_port=port, local_host=local_host,
                              local_port=local_port, allow_hardware=args.allow_hardware, transport=args.transport)
     if not is_loopback(host):
-        _confirm_hardware(cfg.robot, host, port, yes=args.yes)
+        _confirm_hardware("hw check", cfg.robot, host, port, "Only damping frames (Kp 0) will be sent; hang the robot "
+                          "in its harness first.", yes=args.yes)
     robot = UnitreeRobot(cfg)
     with robot:  # never written to: the link sends damping frames only
         end = time.monotonic() + args.seconds
@@ -202,6 +233,55 @@ def _hw_check(args: argparse.Namespace) -> int:
         link, decode = robot.link_stats(), robot.decode_stats
     printers.print_hw_check(cfg.robot, (host, port), robot.joint_names, state, extras, link, decode)
     return 0
+
+
+def _hw_run(args: argparse.Namespace) -> int:
+    host, port = _hardware_target(args, "run a trial on a real robot")
+    local = _address(args.local, "--local") if args.local else None
+    out = Path(args.out) if args.out else Path("runs") / (
+        f"hw-{Path(args.scenario).stem}-{args.ctrl.replace(':', '_').replace('/', '_')}-"
+        f"{time.strftime('%Y%m%d-%H%M%S')}")
+    cfg = HardwareTrialConfig(controller=args.ctrl, scenario=Path(args.scenario), trial=args.trial, band=args.band,
+                              seed=args.seed, seconds=args.seconds, robot=args.robot, arm_mode=args.arm,
+                              target=(host, port), local=local, allow_hardware=args.allow_hardware,
+                              rate_hz=args.rate, out_dir=out, settle_s=args.settle)
+
+    def confirm(hardware: HardwareRobot, spec: ControllerSpec) -> None:
+        if not is_loopback(host):
+            _confirm_hardware("hw run", hardware.description.name, host, port, f"The controller {spec.name} will "
+                              "MOVE it: hang it in its harness first, keep the remote (L2+B) and the power switch "
+                              "within reach.", yes=args.yes)
+
+    live = _hw_live_observer(args) if args.view else None
+    keys = TerminalKeys(announce="keys: " + ", ".join(f"{'space' if k == ' ' else k} {a}" for k, a in
+                                                      OPERATOR_ACTIONS.items()) + " (no Enter needed)")
+    try:
+        result = run_hardware_trial(cfg, keys=keys, observer=live[1] if live is not None else None,
+                                    before_connect=confirm)
+    except KeyboardInterrupt:
+        print("wbc hw run: interrupted; the robot was closed into damping; no results were written", file=sys.stderr)
+        return 130
+    finally:
+        keys.close()
+        if live is not None:
+            live[1].close()
+            live[0].stop()
+    printers.print_hw_run(result)
+    return 0
+
+
+def _hw_live_observer(args: argparse.Namespace):
+    """(server, observer) drawing a hardware trial in the browser (``wbc hw run --view``).
+
+    The robot paces the loop, which must never wait for the viewer: it draws on a thread of its own, its scene built
+    before the robot is connected, and it reads no keys (the operator's keys are the trial's).
+    """
+    from wbc.viz.live import LiveObserver, LiveViewer
+    from wbc.viz.server import MeshcatServer, ServerConfig
+
+    server = MeshcatServer(ServerConfig(host=args.host)).start()
+    print(f"viewer: {server.web_url}  (listening on {args.host} only)", file=sys.stderr)
+    return server, LiveObserver(LiveViewer(server), background=True)
 
 
 def _train(args: argparse.Namespace) -> int:
@@ -334,6 +414,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "bench latency": _bench_latency,
     "hw emulate": _hw_emulate,
     "hw check": _hw_check,
+    "hw run": _hw_run,
     "train": _train,
     "run": _run,
     "compare": _compare,

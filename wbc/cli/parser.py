@@ -10,6 +10,7 @@ import argparse
 
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import Fault
+from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES, HARDWARE_ROBOTS
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
 from wbc.learned.train.stages import BASELINES, TASKS
 from wbc.robots.description import ARM_MODES
@@ -123,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
     blat.add_argument("--json", action="store_true", help="print JSON")
     blat.set_defaults(handler="bench latency")
 
-    hw = sub.add_parser("hw", help="Unitree A1 / Go1 low-level link: an emulator, a read-only check of a robot")
+    hw = sub.add_parser("hw", help="real robots: an emulator, a read-only check, a trial on the robot")
     hws = hw.add_subparsers(dest="what", required=True)
     emulate = hws.add_parser("emulate", help="serve an emulated A1 / Go1 on 127.0.0.1, backed by the simulator",
                              description="Speak the robot's low-level UDP wire on 127.0.0.1 (never another "
@@ -156,6 +157,42 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--yes", action="store_true",
                        help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
     check.set_defaults(handler="hw check")
+    hwrun = hws.add_parser("run", help="play a scenario's trial on a real robot (or an emulator), under SafeRobot",
+                           description="Play trial I of a scenario's band and seed with a controller on a robot over "
+                           "its wire, through the arena's runner, paced in real time, behind SafeRobot. The trial's "
+                           "pushes, terrain and friction are the simulator's and are skipped (the report says so); "
+                           "metrics come from the state estimator. Keys during the trial: e or space e-stop "
+                           "(damping, latched: the trial ends), p marks a push given by hand. Results go to a "
+                           "results directory of the arena's format. A target outside 127.0.0.0/8 needs "
+                           "--allow-hardware and a typed confirmation (or --yes).")
+    hwrun.add_argument("ctrl", help=f"controller: one of {', '.join(CONTROLLERS)} (its variant for --arm is played), "
+                       "or policy:PATH")
+    hwrun.add_argument("--robot", default=None,
+                       help=f"one of: {', '.join(HARDWARE_ROBOTS)} (default: the scenario's robot)")
+    hwrun.add_argument("--arm", default=None,
+                       help=f"arm mode on the robot: {' or '.join(HARDWARE_ARM_MODES)} (default: the controller's; "
+                       "an actuated arm needs a backend this version lacks)")
+    hwrun.add_argument("--scenario", required=True, help="scenario file (e.g. scenarios/push.toml)")
+    hwrun.add_argument("--trial", type=int, required=True, help="trial index within (band, seed)")
+    hwrun.add_argument("--band", default=None, help="band (default: the scenario's first)")
+    hwrun.add_argument("--seed", type=int, default=0, help="seed (default 0)")
+    hwrun.add_argument("--seconds", type=float, default=None, help="play only the first S seconds of the trial")
+    hwrun.add_argument("--target", required=True, metavar="HOST:PORT",
+                       help="the legs' low-level address: the robot's, or an emulator's (127.0.0.1:PORT)")
+    hwrun.add_argument("--local", default=None, metavar="HOST:PORT",
+                       help="address to bind (default 127.0.0.1:0 for a loopback target, else 0.0.0.0:0)")
+    hwrun.add_argument("--allow-hardware", action="store_true",
+                       help="allow a target outside 127.0.0.0/8: a real robot, which the controller will move")
+    hwrun.add_argument("--yes", action="store_true",
+                       help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
+    hwrun.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
+    hwrun.add_argument("--settle", type=float, default=1.0,
+                       help="after a safety trip, hold the robot damped and read for S seconds (default 1)")
+    hwrun.add_argument("--out", default=None, help="results directory (default: runs/hw-<scenario>-<ctrl>-<time>)")
+    hwrun.add_argument("--view", action="store_true",
+                       help="watch the robot live in the browser (meshcat), drawn from its own sensors")
+    hwrun.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
+    hwrun.set_defaults(handler="hw run")
 
     tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
     tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from wbc.arena.compare import ArenaResult
+from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table
 from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
@@ -24,7 +25,7 @@ from wbc.types import RobotState
 
 __all__ = ["print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
            "print_bench_sweep", "print_bench_train", "print_demo_header", "print_emulator_counts",
-           "print_emulator_started", "print_hw_check", "print_json", "print_recording", "print_tail",
+           "print_emulator_started", "print_hw_check", "print_hw_run", "print_json", "print_recording", "print_tail",
            "print_trained", "print_viewed_trial"]
 
 
@@ -263,3 +264,31 @@ def print_hw_check(robot: str, target: tuple[str, int], joint_names: Sequence[st
           f"{1e3 * link.period_max:.3f} ms; {link.overruns} overruns; {link.foreign} foreign datagrams")
     print(f"  rejected states: {decode.rejected} (" + ", ".join(f"{r} {getattr(decode, r)}" for r in REJECT_REASONS)
           + ")")
+
+
+def print_hw_run(result: HardwareTrialResult) -> None:
+    """``wbc hw run``: the trial's outcome, what it skipped, its timing and where its results are."""
+    r, ep = result.record, result.episode
+    robot = result.robot
+    outcome = ("completed" if r.success else
+               f"ENDED at {r.fall_time_s:.2f} s by the safety layer ({ep.safety_events.reason[-1]})"
+               if r.safety_trips else f"ENDED at {r.fall_time_s:.2f} s")
+    print(f"{r.controller} on {robot.description.name} (arm {robot.description.arm_mode}, {robot.backend}, "
+          f"{robot.target}): {r.scenario} band {r.band} seed {r.seed} trial {r.trial}, {ep.duration_s:g} s: {outcome}")
+    for note in result.notes:
+        print(f"  {note}")
+    print(f"  metrics ({r.metrics_source}): V_lin err {r.vlin_err:.3f} m/s, V_ang err {r.vang_err:.3f} rad/s, max "
+          f"roll {r.max_roll_deg:.2f} deg, max pitch {r.max_pitch_deg:.2f} deg, energy {r.energy_j:.1f} J")
+    print(f"  timing: act p50 {r.act_ms_p50:.3f} ms, p99 {r.act_ms_p99:.3f} ms (period {ep.control_dt * 1e3:g} ms); "
+          f"deadline misses {r.deadline_misses} of {len(ep.t)}; late advances {r.late_advances} (worst "
+          f"{r.worst_lateness_ms:.2f} ms); CPU {result.cpu_s:.2f} s over {result.episode_wall_s:.2f} s")
+    if result.link is not None:
+        link = result.link.as_dict(prefix="")
+        print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} damping, "
+              f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states")
+    print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions (wall seconds since connected, the trial "
+          f"began at {result.trial_started_s:.2f} s): "
+          + ", ".join(f"{e.time:.2f} s {e.to_state} ({e.reason})" for e in result.safety_events))
+    if len(ep.operator_events):
+        print("  operator: " + ", ".join(f"{t:.2f} s {a}" for t, _, a in ep.operator_events.rows()))
+    print(f"  results: {result.out_dir} (trials.csv, report.md, hardware.json, episodes/)")

@@ -17,13 +17,13 @@ from dataclasses import dataclass
 
 from wbc.control.protocol import Controller
 from wbc.control.stand import StandController
-from wbc.errors import UnknownNameError
+from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.composite_policy import load_composite
 from wbc.learned.policy.controller import LearnedController
 from wbc.mpc.controller import MpcController
 from wbc.robots.description import RobotDescription, check_arm_mode
 
-__all__ = ["ControllerSpec", "CONTROLLERS", "POLICY_PREFIX", "get_controller"]
+__all__ = ["ControllerSpec", "CONTROLLERS", "POLICY_PREFIX", "arm_variant", "get_controller"]
 
 POLICY_PREFIX = "policy:"
 """``policy:PATH`` names the exported policy at PATH (the .npz, the .json or their stem)."""
@@ -91,3 +91,26 @@ def _policy_spec(name: str) -> ControllerSpec:
     meta = policy.meta
     return ControllerSpec(name, meta["arm_mode"], functools.partial(LearnedController, policy_path=path, policy=policy),
                           f"policy file {path} ({meta['task']} task, stage {meta['stage']})", robot=meta["robot"])
+
+
+def arm_variant(spec: ControllerSpec, arm_mode: str) -> ControllerSpec:
+    """The registered controller that does what `spec` does on a robot with arm mode `arm_mode`.
+
+    Variants are the entries built by the same factory (``stand``, ``stand-locked`` and ``stand-noarm`` are all the
+    stand controller), so a hardware trial can name a controller as the arena does and play it on the arm the robot
+    has: ``stand`` with the arm ``none`` is ``stand-noarm``.
+
+    Raises:
+        UnknownNameError: `arm_mode` is not an arm mode.
+        ConfigError: `spec` has no variant for `arm_mode` (a policy file drives the arm mode it was trained on).
+    """
+    check_arm_mode(arm_mode)
+    if spec.arm_mode == arm_mode:
+        return spec
+    variants = [s for s in CONTROLLERS.values() if s.make is spec.make]
+    for variant in variants:
+        if variant.arm_mode == arm_mode:
+            return variant
+    have = ", ".join(f"{s.name} ({s.arm_mode})" for s in variants) or f"{spec.name} ({spec.arm_mode})"
+    raise ConfigError(f"controller {spec.name} drives the arm mode {spec.arm_mode}, and no variant of it drives "
+                      f"{arm_mode!r} (variants: {have}); choose the arm mode it was made for, or another controller")

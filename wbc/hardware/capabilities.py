@@ -4,8 +4,12 @@ A real robot offers none of these by default; the simulator offers the first thr
 ``isinstance(robot, Pushable)`` instead of testing for a backend class, so a backend that can do the same (motion
 capture as a `TruthSource`, a push rig as `Pushable`) takes the same path. A safety layer that records its
 transitions is a `HasSafetyEvents` (`wbc.hardware.safety.SafeRobot` is one); the protocol is structural, so the
-runner logs the events without importing the safety layer. A robot that lives in wall-clock time (a real robot, or
-an emulator over a wire) is a `WallClock`, so a safety layer times its checks on the clock the motors live on.
+runner logs the events without importing the safety layer. A robot that paces `advance` on a wall clock over a link
+reports its lateness as a `HasLinkStats` (`wbc.hardware.unitree.UnitreeRobot` is one). A robot that knows its own
+configuration only from its sensors (joint encoders, IMU, a base state estimator) offers it as a
+`ConfigurationEstimate`, which is what a viewer draws of a real robot. A robot that lives in wall-clock time (a real
+robot, or an emulator over a wire) is a `WallClock`, so a safety layer times its checks on the clock the motors live
+on.
 """
 
 from __future__ import annotations
@@ -13,10 +17,14 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Protocol, runtime_checkable
 
+import numpy as np
+
+from wbc.robots.description import RobotDescription
 from wbc.scenario.push import Push
 from wbc.types import BaseTruth
 
-__all__ = ["FallDetector", "HasSafetyEvents", "Pushable", "SafetyEventLike", "TruthSource", "WallClock"]
+__all__ = ["ConfigurationEstimate", "FallDetector", "HasLinkStats", "HasSafetyEvents", "LinkStatsLike", "Pushable",
+           "SafetyEventLike", "TruthSource", "WallClock"]
 
 
 @runtime_checkable
@@ -85,3 +93,42 @@ class WallClock(Protocol):
 
     def wall_time(self) -> float:
         """Now, on a monotonic clock [s] (an arbitrary origin; only differences mean anything)."""
+
+
+class LinkStatsLike(Protocol):
+    """Counters of a robot's link (`wbc.hardware.unitree.LinkStats` is one); the pacing ones are read by name."""
+
+    @property
+    def late_advances(self) -> int:
+        """`advance` calls that found their wall-clock deadline already past (the control loop was late)."""
+
+    @property
+    def worst_lateness(self) -> float:
+        """By how much the latest such call was late [s]."""
+
+    def as_dict(self, prefix: str = "link/") -> dict[str, float]:
+        """Every counter as a flat dict, keys namespaced with `prefix`."""
+
+
+@runtime_checkable
+class HasLinkStats(Protocol):
+    """A robot behind a link whose `advance` waits for the wall clock, and which counts how late its caller was."""
+
+    def link_stats(self) -> LinkStatsLike:
+        """A snapshot of the link's counters since `connect`."""
+
+
+@runtime_checkable
+class ConfigurationEstimate(Protocol):
+    """A robot that can say what it looks like now from its own sensors alone.
+
+    The joints are as measured, the base pose as a state estimator puts it (there is no simulator to ask); a viewer
+    draws a real robot from this, without contacts or pushes.
+    """
+
+    @property
+    def description(self) -> RobotDescription:
+        """The robot as built (quadruped, arm and arm mode): what to draw."""
+
+    def estimated_configuration(self) -> np.ndarray:
+        """Base position [m], base quaternion (w, x, y, z) and joints in house order [rad], shape (7 + n,)."""

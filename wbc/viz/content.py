@@ -10,13 +10,13 @@ from __future__ import annotations
 import meshcat
 import numpy as np
 
-from wbc.hardware.mujoco.robot import MujocoRobot
 from wbc.robots.description import RobotDescription
 from wbc.scenario.terrain import TerrainConfig
 from wbc.viz.frame import Pose, VizFrame
 from wbc.viz.geometry import translation
 from wbc.viz.overlays import CommandArrow, ContactArrows, PlanOverlay, PushArrow
 from wbc.viz.scene import RobotScene
+from wbc.viz.sim_frames import SimulatedWorld
 from wbc.viz.terrain_mesh import setup_terrain, terrain_heights
 
 __all__ = ["CAMERA", "SceneContent"]
@@ -47,7 +47,7 @@ class SceneContent:
         return cls(desc, terrain, terrain_heights(terrain, terrain_seed))
 
     @classmethod
-    def for_robot(cls, robot: MujocoRobot) -> SceneContent:
+    def for_robot(cls, robot: SimulatedWorld) -> SceneContent:
         """The content of a simulated robot as it is now (its heightfield read from the MuJoCo model)."""
         heights = None
         m = robot.model
@@ -55,6 +55,11 @@ class SceneContent:
             heights = m.hfield_data[m.hfield_adr[0]:m.hfield_adr[0] + m.hfield_nrow[0] * m.hfield_ncol[0]]
             heights = heights.reshape(m.hfield_nrow[0], m.hfield_ncol[0]).copy()
         return cls(robot.desc, robot.config.terrain, heights)
+
+    @classmethod
+    def for_description(cls, desc: RobotDescription) -> SceneContent:
+        """The content of a robot nothing is known of but itself: on flat ground (a real robot's own is unknown)."""
+        return cls(desc, TerrainConfig(kind="flat"), None)
 
     def __init__(self, desc: RobotDescription, terrain: TerrainConfig, heights: np.ndarray | None, *,
                  follow: bool = True) -> None:

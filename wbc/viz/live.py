@@ -1,19 +1,25 @@
 """`LiveViewer`: draws frames on a running meshcat server, and `LiveObserver`, the runner hook that feeds it.
 
 Only what changed since the last frame is sent (a transform, a visibility flag). The server keeps the scene, so a
-browser opened at any time sees the current state.
+browser opened at any time sees the current state. The observer draws any robot by what it can offer: a simulator
+(`wbc.viz.sim_frames.SimulatedWorld`) with its ground, contacts and pushes; a robot seen through its own sensors
+(`wbc.hardware.capabilities.ConfigurationEstimate`, a hardware trial's) from its state alone, on flat ground.
 """
 
 from __future__ import annotations
 
 import contextlib
 import io
+import sys
+import threading
+from collections.abc import Callable
 
 import meshcat
 import numpy as np
 
 from wbc.control.protocol import Controller
-from wbc.hardware.mujoco.robot import MujocoRobot
+from wbc.errors import ConfigError
+from wbc.hardware.capabilities import ConfigurationEstimate
 from wbc.hardware.robot import Robot
 from wbc.types import VelocityCommand
 from wbc.viz.content import SceneContent
@@ -21,9 +27,13 @@ from wbc.viz.frame import Pose, VizFrame
 from wbc.viz.player import Player
 from wbc.viz.record import Recording
 from wbc.viz.server import MeshcatServer
-from wbc.viz.sim_frames import frame_from_sim
+from wbc.viz.sim_frames import SimulatedWorld, frame_from_sim
+from wbc.viz.state_frames import frame_from_estimate
 
-__all__ = ["LiveObserver", "LiveViewer"]
+FrameMaker = Callable[[Robot, Controller, VelocityCommand, float], VizFrame]
+"""Builds the frame of a tick: (robot, controller, command, time [s]) -> frame."""
+
+__all__ = ["FrameMaker", "LiveObserver", "LiveViewer", "scene_of"]
 
 
 class LiveViewer:
@@ -67,43 +77,101 @@ class LiveViewer:
                 self._sent[path] = Pose(old.matrix, visible=False)
 
 
-class LiveObserver:
-    """The runner's observer for simulated trials: paces with a `Player`, draws on a `LiveViewer`, records.
+def scene_of(robot: Robot) -> tuple[Callable[[], SceneContent], FrameMaker] | None:
+    """How to build the scene of `robot` and its frames, by the capability it offers; None if it offers none.
 
-    At the first tick of every episode the scene is rebuilt from the robot (robot, arm mode, ground), so one observer
-    serves a series of trials.
+    A simulator (`SimulatedWorld`) is drawn with its ground, contacts and pushes; a robot that estimates its own
+    configuration (`ConfigurationEstimate`) from its state alone, on flat ground. The scene is built by calling the
+    first element (once per visualizer that shows it: building one loads the meshes).
+    """
+    if isinstance(robot, SimulatedWorld):
+        return (lambda: SceneContent.for_robot(robot)), frame_from_sim
+    if isinstance(robot, ConfigurationEstimate):
+        return (lambda: SceneContent.for_description(robot.description)), frame_from_estimate
+    return None
+
+
+class LiveObserver:
+    """The runner's observer: paces with a `Player`, draws on a `LiveViewer`, records.
+
+    At the first tick of every episode the scene is rebuilt from the robot (robot, arm mode, ground; `scene_of`), so
+    one observer serves a series of trials. A robot that offers neither a simulation nor an estimate of its own
+    configuration is not drawn (said once on standard error).
+
+    For a real robot, whose loop must never wait for the viewer, `prepare` builds the scene before the episode (a
+    `wbc.arena.runner.PreparingObserver`) and ``background=True`` draws on a thread of its own: a tick then only hands
+    over its frame, and the drawing thread shows the newest one (frames it had no time for are skipped).
 
     Args:
         viewer: where to draw (None: draw nowhere, e.g. when only recording).
-        player: pacing (None: no pacing, every tick as fast as possible).
+        player: pacing (None: no pacing, every tick as fast as possible); not with `background`.
         recording_fps: when set, also record every episode (see `recordings`) at this rate [1/s].
+        background: draw on a thread of this observer's instead of in the tick.
     """
 
     def __init__(self, viewer: LiveViewer | None, player: Player | None = None, *,
-                 recording_fps: float | None = None) -> None:
+                 recording_fps: float | None = None, background: bool = False) -> None:
+        if background and player is not None:
+            raise ConfigError("LiveObserver: a player paces the loop in the tick, a background viewer never blocks "
+                              "it; give one or the other")
         self.viewer = viewer
         self.player = player
         self.recording_fps = recording_fps
         self.recordings: list[Recording] = []
         self._last_t = float("inf")
+        self._make: FrameMaker | None = None
+        self._told = False
+        self._prepared: Robot | None = None
+        self._drawer = _Drawer(viewer) if background and viewer is not None else None
+        self._last_drawn = -float("inf")
+
+    def prepare(self, robot: Robot) -> None:
+        """Build the scene of `robot` now, for the episode it plays next (its first tick then draws at once)."""
+        self._start_episode(robot)
+        self._prepared = robot
+
+    def close(self) -> None:
+        """Stop the drawing thread, if any (the frames not drawn yet are dropped)."""
+        if self._drawer is not None:
+            self._drawer.stop()
+
+    def _start_episode(self, robot: Robot) -> None:
+        scene = scene_of(robot)
+        self._make = None if scene is None else scene[1]
+        if scene is None:
+            if not self._told:
+                print(f"viewer: {type(robot).__name__} is neither a simulation nor a robot that estimates its own "
+                      "configuration (wbc.hardware.capabilities.ConfigurationEstimate): nothing to draw",
+                      file=sys.stderr)
+                self._told = True
+            return
+        if self.viewer is not None:
+            if self._drawer is not None:
+                self._drawer.idle()
+            self.viewer.load(scene[0]())
+        if self.recording_fps is not None:
+            self.recordings.append(Recording(scene[0](), fps=self.recording_fps))
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """One tick (the `wbc.arena.runner.TickObserver` signature)."""
-        if not isinstance(robot, MujocoRobot):  # frames are drawn from the simulator's own state (contacts, pushes)
-            return
         new_episode = t < self._last_t
         self._last_t = t
         if new_episode:
-            if self.viewer is not None:
-                self.viewer.load(SceneContent.for_robot(robot))
-            if self.recording_fps is not None:
-                self.recordings.append(Recording(SceneContent.for_robot(robot), fps=self.recording_fps))
+            if self._prepared is not robot:
+                self._start_episode(robot)
+            self._prepared = None
+            self._last_drawn = -float("inf")
+        if self._make is None:
+            return
+        if self._drawer is not None:
+            self._tick_in_background(t, robot, controller, command)
+            return
         rec = self.recordings[-1] if self.recording_fps is not None else None
         draw = self.viewer is not None and (self.player is None or self.player.due(t))
         keyed = rec is not None and int(round(t * rec.fps)) > rec.last_key
         if not (draw or keyed):
             return
-        frame = frame_from_sim(robot, controller, command, t)
+        frame = self._make(robot, controller, command, t)
         if keyed:
             rec.add(frame)
         if draw:
@@ -112,3 +180,68 @@ class LiveObserver:
             self.viewer.show(frame)
             if self.player is not None:
                 self.player.drew(t)  # blocks here while paused, the paused frame on screen
+
+    def _tick_in_background(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        rec = self.recordings[-1] if self.recording_fps is not None else None
+        keyed = rec is not None and int(round(t * rec.fps)) > rec.last_key
+        draw = t - self._last_drawn >= 1.0 / _BACKGROUND_FPS - 1e-9
+        if not (draw or keyed):
+            return
+        frame = self._make(robot, controller, command, t)
+        if keyed:
+            rec.add(frame)
+        if draw:
+            self._last_drawn = t
+            self._drawer.submit(frame)
+
+
+_BACKGROUND_FPS = 30.0  # [1/s of episode time] frames handed to a background drawer
+
+
+class _Drawer:
+    """A thread that shows the newest frame handed to it on a `LiveViewer`."""
+
+    def __init__(self, viewer: LiveViewer) -> None:
+        self.viewer = viewer
+        self._frame: VizFrame | None = None
+        self._busy = False
+        self._stopped = False
+        self._lock = threading.Condition()
+        self._thread = threading.Thread(target=self._run, name="wbc-viewer", daemon=True)
+        self._thread.start()
+
+    def submit(self, frame: VizFrame) -> None:
+        """Show `frame` next, in place of any frame still waiting."""
+        with self._lock:
+            self._frame = frame
+            self._lock.notify_all()
+
+    def idle(self) -> None:
+        """Drop the waiting frame and wait until the one being shown is done (before the scene is replaced)."""
+        with self._lock:
+            self._frame = None
+            while self._busy:
+                self._lock.wait()
+
+    def stop(self) -> None:
+        """Stop the thread."""
+        with self._lock:
+            self._stopped = True
+            self._frame = None
+            self._lock.notify_all()
+        self._thread.join(timeout=5.0)
+
+    def _run(self) -> None:
+        while True:
+            with self._lock:
+                while self._frame is None and not self._stopped:
+                    self._lock.wait()
+                if self._stopped:
+                    return
+                frame, self._frame, self._busy = self._frame, None, True
+            try:
+                self.viewer.show(frame)
+            finally:
+                with self._lock:
+                    self._busy = False
+                    self._lock.notify_all()

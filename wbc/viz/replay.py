@@ -3,11 +3,13 @@
 A results directory written with ``--save-episodes`` holds ``run.json`` (controllers, scenario path and hash,
 bands, seeds, trials per band and seed) and ``episodes/<controller>/<band>-s<seed>-t<index>.npz``. The episode
 gives the configuration and command of every control tick and the pushes it met (as arrays, `PushLog`); the scenario
-file gives the robot and the ground. Every problem names the file and the field at fault.
+file gives the robot and the ground. A hardware trial's directory (``wbc hw run``) names its one trial and the robot
+it was played on, drawn on flat ground. Every problem names the file and the field at fault.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import zipfile
 from collections.abc import Iterator
@@ -23,6 +25,7 @@ from wbc.errors import WbcError
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
+from wbc.scenario.terrain import TerrainConfig
 from wbc.scenario.trial import Trial
 from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
@@ -112,7 +115,10 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     try:
         config = json.loads(run_json.read_text(encoding="utf-8"))["config"]
         controllers, bands = list(config["controllers"]), list(config["bands"])
-        seeds, trials = [int(s) for s in config["seeds"]], int(config["trials"])
+        seeds = [int(s) for s in config["seeds"]]
+        # a hardware trial (``wbc hw run``) stores one trial, played on the robot it names
+        played = [int(config["trial"])] if "trial" in config else list(range(int(config["trials"])))
+        played_on = str(config["robot"]) if "robot" in config else None
         scenario_path, scenario_hash = Path(config["scenario"]["path"]), str(config["scenario"]["hash"])
     except FileNotFoundError:
         raise ViewerError(f"{run_json}: missing; {root} is not a results directory") from None
@@ -121,9 +127,9 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     controller = _pick(run_json, "controllers", controller, controllers, "--controller")
     band = _pick(run_json, "bands", band, bands, "--band")
     seed = _pick(run_json, "seeds", seed, seeds, "--seed")
-    if not 0 <= index < trials:
+    if index not in played:
         raise ViewerError(f"{run_json}: field trials: --trial {index} is out of range; the run played trials "
-                          f"0..{trials - 1} per band and seed")
+                          f"{played[0]}..{played[-1]} per band and seed")
     path = episode_path(root, controller, band, seed, index)
     if not path.exists():
         raise ViewerError(f"{path}: no episode stored for controller {controller}, band {band}, seed {seed}, "
@@ -143,6 +149,8 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
         raise ViewerError(f"{run_json}: field scenario.hash: {scenario_path} has changed since the run "
                           f"(hash {scenario.hash[:12]} != {scenario_hash[:12]}); restore that version to replay")
     trial = scenario.trial(band, seed, index)
+    if played_on is not None:  # on a robot: its own ground (unknown, drawn flat) and none of the scenario's pushes
+        trial = dataclasses.replace(trial, robot=played_on, terrain=TerrainConfig(kind="flat"), pushes=())
     nq = get_robot(trial.robot, get_controller(controller).arm_mode).num_joints + 7
     if episode.qpos.ndim != 2 or episode.qpos.shape[1] != nq:
         raise ViewerError(f"{path}: field qpos: shape {episode.qpos.shape}, expected (ticks, {nq}) for "

@@ -1,26 +1,54 @@
 """Viewer frames from a running simulation, read after each control tick through the runner's observer hook.
 
 A frame holds the configuration, the command, the push acting now, foot contact forces and the controller's plan.
+What the viewer needs of a simulator is the capability `SimulatedWorld` (`wbc.hardware.mujoco.MujocoRobot` offers
+it); a robot without it is drawn from its state alone (`wbc.viz.state_frames`).
 
 This reads simulator truth, which is fine for a viewer: nothing here goes back to the controller.
 """
 
 from __future__ import annotations
 
+from typing import Protocol, runtime_checkable
+
 import mujoco
 import numpy as np
 
 from wbc.control.protocol import HasDebugPlan
 from wbc.hardware.mujoco.fall_rule import FOOT_ZONE
-from wbc.hardware.mujoco.robot import MujocoRobot
-from wbc.robots.description import FOOT_NAMES
+from wbc.hardware.mujoco.robot import MujocoRobotConfig, SimTruth
+from wbc.robots.description import FOOT_NAMES, RobotDescription
 from wbc.types import VelocityCommand
 from wbc.viz.frame import VizFrame
 
-__all__ = ["foot_forces_in_world", "frame_from_sim"]
+__all__ = ["SimulatedWorld", "foot_forces_in_world", "frame_from_sim"]
 
 
-def foot_forces_in_world(robot: MujocoRobot) -> np.ndarray:
+@runtime_checkable
+class SimulatedWorld(Protocol):
+    """A robot that is a MuJoCo simulation: the viewer draws its ground, contacts and pushes from the simulator."""
+
+    @property
+    def desc(self) -> RobotDescription:
+        """The robot simulated."""
+
+    @property
+    def config(self) -> MujocoRobotConfig:
+        """Its configuration (the terrain it stands on)."""
+
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The MuJoCo model (its heightfield)."""
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """The MuJoCo state (configuration, contacts)."""
+
+    def sim_truth(self) -> SimTruth:
+        """Ground truth now (the push acting)."""
+
+
+def foot_forces_in_world(robot: SimulatedWorld) -> np.ndarray:
     """Ground reaction force on each foot, house order FR, FL, RR, RL, shape (4, 3) [N].
 
     A contact belongs to the foot whose centre is within `FOOT_ZONE` of it (the same rule as the fall check);
@@ -45,7 +73,7 @@ def foot_forces_in_world(robot: MujocoRobot) -> np.ndarray:
     return out
 
 
-def frame_from_sim(robot: MujocoRobot, controller: object, command: VelocityCommand, t: float) -> VizFrame:
+def frame_from_sim(robot: SimulatedWorld, controller: object, command: VelocityCommand, t: float) -> VizFrame:
     """The frame of the simulation as it is now.
 
     Args:

@@ -1,0 +1,348 @@
+"""Hardware trials (``wbc hw run``): a scenario's trial through the runner on a robot over its wire, here an emulated
+Go1 on 127.0.0.1 in real time.
+
+Every socket binds 127.0.0.1 on a port the kernel picks and every frame goes to 127.0.0.1; the non-loopback targets
+(TEST-NET-1) are only ever refused, and a test checks that no socket was created for them. Every trial is bounded
+by its ``--seconds``. What reached the robot is read from the emulator's log of decoded frames.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import os
+import socket
+import sys
+import termios
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.arena.base_estimate import BaseEstimate
+from wbc.arena.episode import Episode
+from wbc.arena.estimated_robot import EstimatedRobot
+from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
+from wbc.arena.operator import ScriptedKeys
+from wbc.arena.record import TrialRecord
+from wbc.arena.runner import PreparingObserver, run_episode
+from wbc.cli import main
+from wbc.cli.terminal_keys import TerminalKeys
+from wbc.control.registry import get_controller
+from wbc.errors import ConfigError, StandUpError
+from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
+from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.hardware_robot import HardwareRobotConfig
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.robot import Robot
+from wbc.scenario.scenario import load_scenario
+from wbc.types import MotorCommand, RobotState, VelocityCommand
+from wbc.viz.content import SceneContent
+from wbc.viz.frame import VizFrame
+from wbc.viz.live import LiveObserver
+from wbc.viz.replay import load_stored_episode
+
+ROOT = Path(__file__).resolve().parents[1]
+PUSH = str(ROOT / "scenarios" / "push.toml")
+TURN = ROOT / "scenarios" / "turn.toml"
+NOT_LOOPBACK = "192.0.2.1:9"  # TEST-NET-1 (documentation only), discard port: refused before anything is sent
+LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz
+
+
+@pytest.fixture
+def go1() -> Iterator[UnitreeEmulator]:
+    """A real-time emulated Go1 (bare, as ``wbc hw emulate --robot go1``)."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")) as emu:
+        yield emu
+        assert emu.failure is None, emu.failure
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("unitree-")]
+
+
+@contextmanager
+def _held_until_the_link_is_up(emu: UnitreeEmulator) -> Iterator[None]:
+    """Keep the idle emulated robot standing until the first frame of a link arrives, as an operator holds a robot in
+    its harness: left alone with its motors off, it folds to its joint stops within half a second, and the stand-up
+    before the trial is then refused (a test of its own, below)."""
+    stop = threading.Event()
+
+    def hold() -> None:
+        for _ in range(3000):  # bounded: at most 60 s
+            if stop.is_set() or emu.commands():
+                return
+            emu.reset()
+            stop.wait(0.02)
+
+    holder = threading.Thread(target=hold, name="test-harness")
+    holder.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        holder.join()
+
+
+@pytest.fixture
+def no_socket(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
+    """Make creating any socket fail the test; the list holds the attempts."""
+    attempts: list[tuple] = []
+
+    def refuse(*args: object, **kwargs: object) -> None:
+        attempts.append(args)
+        raise AssertionError("a socket was opened for a refused target")
+
+    monkeypatch.setattr(socket, "socket", refuse)
+    return attempts
+
+
+def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
+        go1: UnitreeEmulator, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "hw"
+    with _held_until_the_link_is_up(go1):
+        code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                     "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out)])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.controller == "stand-noarm"  # stand, on a robot whose arm mode is none
+    assert (record.backend, record.metrics_source) == ("unitree", "estimator")
+    assert record.success and record.safety_trips == 0 and record.ttf == 1.0
+    assert record.n_pushes == 0 and record.push_force_n == 0.0  # the trial's pushes were not played
+    assert math.isnan(record.friction) and math.isnan(record.payload_kg)  # the simulator's randomisation: unknown
+    assert record.deadline_misses == 0 and record.act_ms_p99 < 20.0
+    # the estimator saw a robot standing still: its velocity near zero, its trunk at the Go1's standing height
+    assert record.vlin_err < 0.1 and record.max_roll_deg < 5.0
+    (path,) = (out / "episodes" / "stand-noarm").glob("*.npz")
+    episode = Episode.load(str(path))
+    assert episode.base_source == "estimator" and len(episode.t) == 150  # 3 s at 50 Hz
+    assert 0.24 < episode.qpos[-1, 2] < 0.32
+    assert len(episode.safety_events) == 0  # the layer ramped the robot up before the trial, and never tripped
+    # the push scenario's pushes and terrain were skipped, and both the report and the printout say so
+    report = (out / "report.md").read_text()
+    for text in ("SKIPPED", "4 push(es)", "fractal ground", "metrics_source = estimator", "## Safety events",
+                 "ramp_done", "deadline misses", "late advances", "backend unitree"):
+        assert text in report, text
+    assert "SKIPPED" in printed.out and "completed" in printed.out
+    hardware = json.loads((out / "hardware.json").read_text())
+    assert hardware["backend"] == "unitree" and hardware["link"]["rejected_states"] == 0
+    ramp_done = [e["time"] for e in hardware["safety_events"] if e["reason"] == "ramp_done"]
+    assert [e["reason"] for e in hardware["safety_events"]] == ["fresh_state", "ramp_done"]
+    assert ramp_done[0] <= hardware["trial_started_s"]  # the trial's clock started on a standing robot
+    assert json.loads((out / "run.json").read_text())["config"]["robot"] == "go1-arm"
+    stored = load_stored_episode(out, 0)  # what `wbc view --episode` replays: the robot played on, on flat ground
+    assert (stored.trial.robot, stored.trial.terrain.kind, stored.trial.pushes) == ("go1-arm", "flat", ())
+    assert len(list(stored.frames())) == 150
+    # the controller drove the robot: servo frames reached the wire after the ramp, not damping
+    servo = [c for c in go1.commands() if not c.damping]
+    assert len(servo) > 1000 and np.allclose(servo[-200].wire.kp, 60.0)
+
+
+def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(go1: UnitreeEmulator, tmp_path: Path) -> None:
+    keys = ScriptedKeys([(0.8, "p"), (1.6, "e")])  # an operator's push by hand, then the e-stop
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=3.0, target=go1.address, out_dir=tmp_path / "hw", settle_s=0.5)
+    result = run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: go1.reset())
+    record, episode = result.record, result.episode
+    assert record.safety_trips == 1 and not record.success
+    assert 1.6 <= record.fall_time_s <= 1.64  # ended at the tick that handled the key
+    assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
+    assert episode.safety_events.reason[-1] == "software_estop"
+    pressed = dict(keys.delivered)["e"]
+    frames = go1.commands()
+    before = [c for c in frames if c.time < pressed]
+    after = [c for c in frames if c.time > pressed + 2 * LINK_PERIOD]
+    assert not before[-1].damping  # the stand hold was on the wire when the key came
+    first = next(c for c in frames if c.time > pressed and c.damping)
+    assert first.time - pressed < 5 * LINK_PERIOD
+    # from then on nothing but damping, for the whole settle time the trial held the robot before closing
+    assert all(c.damping for c in after) and len(after) > 0.8 * (0.5 / LINK_PERIOD)
+    report = (tmp_path / "hw" / "report.md").read_text()
+    assert "software_estop" in report and "| push |" in report and "| estop |" in report
+
+
+def test_estop_while_the_robot_is_stood_up_stops_it_and_plays_nothing(go1: UnitreeEmulator, tmp_path: Path) -> None:
+    keys = ScriptedKeys([(-math.inf, "e")])  # pressed before the trial's clock starts: at the first poll
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=2.0, target=go1.address, out_dir=tmp_path / "hw", settle_s=0.2)
+    with pytest.raises(StandUpError, match="software_estop"):
+        run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: go1.reset())
+    pressed = dict(keys.delivered)["e"]
+    assert all(c.damping for c in go1.commands() if c.time > pressed + 2 * LINK_PERIOD)
+    assert not (tmp_path / "hw" / "trials.csv").exists()
+
+
+def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(go1: UnitreeEmulator,
+                                                                                  tmp_path: Path,
+                                                                                  capsys: pytest.CaptureFixture[str],
+                                                                                  ) -> None:
+    # folded to its calf stops, as the real-time emulator leaves an idle robot: beyond the SDK's position table
+    qpos = go1.sim.data.qpos.copy()
+    qpos[2] = 0.06
+    qpos[7:] = np.tile([0.0, 1.35, -2.82], 4)
+    go1.reset(qpos)
+    out = tmp_path / "hw"
+    assert main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "2", "--settle", "0.2",
+                 "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "tripped while standing the robot up" in err and "joint_range" in err and "nothing was played" in err
+    assert not (out / "trials.csv").exists()
+    assert all(c.damping for c in go1.commands())  # not one servo frame reached the robot
+
+
+def test_non_loopback_target_is_refused_before_any_socket(no_socket: list, monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    base = ["hw", "run", "stand", "--arm", "none", "--scenario", PUSH, "--trial", "0", "--target", NOT_LOOPBACK]
+    assert main(base) == 2
+    err = capsys.readouterr().err
+    assert "outside 127.0.0.0/8" in err and "--allow-hardware" in err
+    monkeypatch.setattr(sys, "stdin", io.StringIO("yes\n"))  # a piped yes is not a person at a terminal
+    assert main([*base, "--allow-hardware"]) == 2
+    err = capsys.readouterr().err
+    assert "is a REAL ROBOT" in err and "will MOVE it" in err and "stdin is not a terminal" in err
+    assert not no_socket
+
+
+def test_actuated_arm_is_refused_naming_what_is_missing(no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
+    # stand drives an actuated arm: its variant for go1-arm's arm on the robot would need the arm's own backend
+    assert main(["hw", "run", "stand", "--robot", "go1-arm", "--scenario", PUSH, "--trial", "0", "--target",
+                 "127.0.0.1:9"]) == 2
+    err = capsys.readouterr().err
+    assert "DynamixelArm" in err and "QuadrupedArmRobot" in err and "none, locked" in err
+    with pytest.raises(ConfigError, match="DynamixelArm"):
+        HardwareRobotConfig(robot="a1-wx200", arm_mode="actuated", legs_host="127.0.0.1", legs_port=9)
+    assert main(["hw", "run", "stand", "--robot", "spot", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                 "--target", "127.0.0.1:9"]) == 2
+    assert "a1-wx200, go1-arm" in capsys.readouterr().err
+    assert not no_socket
+
+
+def test_estimated_metrics_track_the_simulators_truth() -> None:
+    # a robot seen through its own sensors, in simulation, where the truth is known: a 1 m/s turn of the learned
+    # policy, the metrics' estimate against the simulator's base velocity
+    trial = load_scenario(TURN).trial("1.0", 0, 0)
+    sim = MujocoRobot(MujocoRobotConfig(robot="go1-arm", arm_mode="none", terrain=trial.terrain))
+    ctrl = get_controller("learned-noarm").make(sim.desc)
+    robot = EstimatedRobot(sim, sim.desc, BaseEstimate(sim.desc, 1.0 / ctrl.rate_hz))
+    truth: list[np.ndarray] = []
+    with robot:
+        sim.reset(seed=trial.terrain_seed, domain=trial.domain)
+        episode = run_episode(robot, ctrl, trial.command, 4.0, truth=robot.base_estimate, fallen=sim.fallen,
+                              observer=lambda t, r, c, cmd: truth.append(sim.base_truth().base_linvel_in_world))
+    assert not episode.fell and isinstance(robot, ConfigurationEstimate) and isinstance(robot, HasSafetyEvents)
+    # the estimate of tick k is of the state read at its start, which is the truth seen after tick k - 1
+    estimated = np.linalg.norm(episode.v_base_in_yaw[1:], axis=1)
+    true_speed = np.linalg.norm(np.array(truth)[:-1, :2], axis=1)
+    moving = true_speed > 0.5
+    assert moving.sum() > 50
+    assert np.median(np.abs(estimated - true_speed)[moving]) < 0.1  # [m/s]; 0.06 when written
+    assert abs(estimated[moving].mean() - true_speed[moving].mean()) < 0.1  # 0.94 against 1.02 when written
+
+
+class _Screen:
+    """Stands in for a `LiveViewer`: keeps what it was asked to load and show, posing every frame's nodes."""
+
+    def __init__(self) -> None:
+        self.content: SceneContent | None = None
+        self.loads = 0
+        self.shown: list[VizFrame] = []
+        self.threads: set[str] = set()
+
+    def load(self, content: SceneContent) -> None:
+        self.content, self.loads = content, self.loads + 1
+
+    def show(self, frame: VizFrame) -> None:
+        self.content.poses(frame)  # the robot's kinematics at the frame, as the live viewer computes them
+        self.shown.append(frame)
+        self.threads.add(threading.current_thread().name)
+
+
+def test_live_viewer_draws_a_robot_from_its_state_alone_without_blocking_its_loop() -> None:
+    sim = MujocoRobot(MujocoRobotConfig(robot="go1-arm", arm_mode="none"))
+    ctrl = get_controller("stand-noarm").make(sim.desc)
+    robot = EstimatedRobot(sim, sim.desc, BaseEstimate(sim.desc, 1.0 / ctrl.rate_hz))
+    screen = _Screen()
+    observer = LiveObserver(screen, background=True)
+    assert isinstance(observer, PreparingObserver)
+    observer.prepare(robot)  # before the robot is connected: the scene (its meshes) is built now, not in a tick
+    assert screen.loads == 1 and screen.content.robot.desc.arm_mode == "none" and not screen.content.robot.paths["arm"]
+    configurations = []
+    with robot:
+        episode = run_episode(robot, ctrl, load_scenario(TURN).trial("1.0", 0, 0).command, 1.0,
+                              truth=robot.base_estimate, fallen=lambda: False,
+                              observer=lambda *tick: (observer(*tick), configurations.append(
+                                  robot.estimated_configuration())))
+    observer.close()
+    assert screen.loads == 1 and screen.threads == {"wbc-viewer"}  # drawn on the viewer's own thread
+    assert 1 <= len(screen.shown) <= 31  # at most 30 frames per second of the episode, the newest ones
+    last = screen.shown[-1]
+    assert last.foot_force_in_world is None and not last.pushed  # nobody knows a real robot's contacts or pushes
+    tick = int(round(last.t * ctrl.rate_hz)) - 1
+    np.testing.assert_allclose(last.qpos, configurations[tick])  # base pose estimated, joints measured
+    np.testing.assert_allclose(last.qpos[7:], episode.qpos[tick, 7:])
+    assert last.qpos[2] > 0.2  # the estimate stands it on its feet, not at the origin
+
+
+def test_live_viewer_says_once_that_a_robot_without_either_capability_is_not_drawn(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    sim = MujocoRobot(MujocoRobotConfig(robot="go1-arm", arm_mode="none"))
+    observer = LiveObserver(None, None, recording_fps=10.0)
+    bare = _Bare(sim)
+    with bare:
+        for k in range(3):
+            observer(0.02 * (k + 1), bare, None, VelocityCommand())
+    assert observer.recordings == []
+    assert capsys.readouterr().err.count("nothing to draw") == 1
+
+
+class _Bare(Robot):
+    """A robot that offers nothing to draw: neither a simulation nor a configuration estimate."""
+
+    def __init__(self, inner: MujocoRobot) -> None:
+        super().__init__()
+        self.inner = inner
+
+    joint_names = property(lambda self: self.inner.joint_names)
+    limits = property(lambda self: self.inner.limits)
+
+    def _connect(self) -> None:
+        self.inner.connect()
+
+    def _close(self) -> None:
+        self.inner.close()
+
+    def _read(self) -> RobotState:
+        return self.inner.read()
+
+    def _send(self, cmd: MotorCommand) -> None:
+        self.inner.write(cmd)
+
+    def _advance(self, dt: float) -> None:
+        self.inner.advance(dt)
+
+
+def test_terminal_keys_read_single_keys_and_restore_the_terminal() -> None:
+    master, slave = os.openpty()
+    stream = os.fdopen(slave, "r")
+    before = termios.tcgetattr(slave)
+    keys = TerminalKeys(stream)
+    try:
+        assert keys.interactive and keys.poll(0.0) == []  # the first poll starts reading, in cbreak mode
+        assert not termios.tcgetattr(slave)[3] & termios.ICANON
+        os.write(master, b"pe")
+        got: list[str] = []
+        for _ in range(100):  # bounded: 100 x 10 ms
+            got += keys.poll(0.0)
+            if len(got) == 2:
+                break
+            threading.Event().wait(0.01)
+        assert got == ["p", "e"]
+    finally:
+        keys.close()
+        assert termios.tcgetattr(slave) == before
+        stream.close()
+        os.close(master)
+    assert TerminalKeys(io.StringIO("e")).poll(0.0) == []  # not a terminal: nothing is read

@@ -1,0 +1,95 @@
+"""`BaseEstimate`: the base's pose and velocity from what a real robot measures, for metrics and for the viewer.
+
+A simulated trial takes its tracking metrics from the simulator's truth; a robot has none, so a hardware trial takes
+them from the same estimator the MPC runs on (`wbc.estimation.BaseEstimator`: IMU and leg kinematics). Orientation
+and angular velocity are the IMU's (quaternion and gyro); the position and velocity come from the filter, fed with
+the feet's positions and velocities relative to the base from leg kinematics (`wbc.mpc.kinematics.RobotKinematics`).
+A foot is trusted as standing in proportion to its force sensor's reading, up to `contact_force`: there is no gait
+schedule here (the controller's is its own), and a standing foot presses on its sensor whatever gait the controller
+runs.
+
+On a real robot the foot sensors read raw counts that need calibrating per robot (see the hardware notes); until
+then `contact_force` is the count at which a foot is fully trusted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from wbc.errors import ConfigError
+from wbc.estimation import BaseEstimator, EstimatorConfig
+from wbc.mpc.kinematics import RobotKinematics
+from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.description import RobotDescription
+from wbc.types import BaseTruth, RobotState
+
+__all__ = ["BaseEstimate"]
+
+
+class BaseEstimate:
+    """Base state from proprioception, updated once per control tick.
+
+    The first update puts the feet on the ground at z = 0 with the base at rest above them, so positions are
+    relative to where the robot stood at the start.
+
+    Args:
+        desc: the robot (its joints, as the states number them).
+        dt: time between two updates [s] (the control period).
+        contact_force: foot sensor reading at which a foot is fully trusted as standing [N, or sensor counts].
+        config: the filter's noise settings.
+
+    Raises:
+        ConfigError: `dt` or `contact_force` is not positive.
+    """
+
+    def __init__(self, desc: RobotDescription, dt: float, *, contact_force: float = 15.0,
+                 config: EstimatorConfig | None = None) -> None:
+        if not dt > 0:
+            raise ConfigError(f"BaseEstimate: dt must be > 0 s, got {dt}")
+        if not contact_force > 0:
+            raise ConfigError(f"BaseEstimate: contact_force must be > 0, got {contact_force}")
+        self.desc = desc
+        self.dt = dt
+        self.contact_force = contact_force
+        self.kin = RobotKinematics(desc)
+        self.filter = BaseEstimator(dt, config)
+        self._started = False
+        self._latest: BaseTruth | None = None
+
+    def reset(self) -> None:
+        """Forget the previous episode: the next update starts over at the feet's positions."""
+        self._started = False
+        self._latest = None
+
+    @property
+    def latest(self) -> BaseTruth | None:
+        """The estimate after the last update, None before the first."""
+        return self._latest
+
+    def update(self, state: RobotState) -> BaseTruth:
+        """Fold one state in and return the estimate.
+
+        Args:
+            state: the robot's state this tick.
+
+        Returns:
+            Base position and linear velocity (world) from the filter; quaternion and angular velocity (body) from
+            the IMU.
+        """
+        kin, est = self.kin, self.filter
+        quat = np.asarray(state.imu_quat, dtype=np.float64)
+        rot = quat_to_matrix(quat)
+        if not self._started:
+            kin.update(np.zeros(3), quat, state.q, state.dq, np.zeros(3), state.gyro_in_body, centroidal=False,
+                       rot=rot)
+            base0 = np.array([0.0, 0.0, -kin.feet[:, 2].mean()])
+            est.reset(base0, kin.feet + base0)
+            self._started = True
+        p_prior, v_prior = est.position, est.velocity
+        kin.update(p_prior, quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=False, rot=rot)
+        trust = np.clip(np.asarray(state.foot_force, dtype=np.float64) / self.contact_force, 0.0, 1.0)
+        est.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
+        self._latest = BaseTruth(base_position_in_world=est.position, base_quat=quat.copy(),
+                                 base_linvel_in_world=est.velocity,
+                                 base_angvel_in_body=np.array(state.gyro_in_body, dtype=np.float64))
+        return self._latest

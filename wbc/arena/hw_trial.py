@@ -1,0 +1,399 @@
+"""Hardware trials: a scenario's trial played on a real robot (or a wire-exact emulator) through the one runner loop.
+
+`run_hardware_trial` is the hardware counterpart of `wbc.arena.sim_trial.run_trial`. It samples the trial exactly as
+the arena does, builds the controller by name (its variant for the robot's arm mode) and the real robot
+(`wbc.hardware.hardware_robot.build_hardware_robot`), and plays the trial's command schedule with
+`wbc.arena.runner.run_episode`, paced in real time by the robot's own `advance`. The robot runs behind the safety
+layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through its sensors (`EstimatedRobot`):
+
+- what only a simulator can do is skipped and said: the trial's pushes, its terrain and its friction and payload
+  randomisation (NaN in the record); an operator can mark a push given by hand with a key (`wbc.arena.operator`);
+- the metrics come from the state estimator (IMU and leg kinematics), not from truth, and the record and the report
+  say so (``metrics_source``);
+- before the trial's clock starts, the layer ramps the robot from its measured pose into the stand hold of its
+  nominal pose (`wbc.control.stand.stand_command`) and is in ``run``: the controller then starts, as in simulation,
+  from a robot standing at its nominal pose, and its commands pass without a ramp (a ramp's slew would hold back a
+  walking controller's swing legs);
+- the episode ends at the safety layer's first trip (its tilt check is the fall rule on a robot; a fault or an
+  e-stop ends the trial too); the robot is then held in the layer's damping for ``settle_s`` while it comes to rest,
+  before the link is closed;
+- deadline misses (``controller.act`` longer than the period), the link's late advances and the process's CPU time
+  go into the record and the report beside the safety layer's transitions and the operator's actions.
+
+The results directory has the arena's format (``trials.csv`` with ``backend``, ``run.json``, ``summary.json``,
+``report.md``), the episode under ``episodes/`` and ``hardware.json`` (link counters, events, what was skipped).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from threadpoolctl import threadpool_limits
+
+from wbc.arena.base_estimate import BaseEstimate
+from wbc.arena.episode import Episode
+from wbc.arena.estimated_robot import EstimatedRobot
+from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
+from wbc.arena.record import TrialRecord
+from wbc.arena.report import md_table, summarize, write_report
+from wbc.arena.results import ResultsStore, episode_path
+from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
+from wbc.control.registry import ControllerSpec, arm_variant, get_controller
+from wbc.control.stand import stand_command
+from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError
+from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike
+from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
+from wbc.scenario import check_published, load_scenario
+from wbc.scenario.trial import Trial
+from wbc.types import MotorCommand
+
+__all__ = ["HardwareTrialConfig", "HardwareTrialResult", "run_hardware_trial"]
+
+_STAND_UP_DT = 0.02  # [s] period of the stand hold that precedes a trial (the stand controller's 50 Hz)
+
+
+@dataclass(frozen=True, kw_only=True)
+class HardwareTrialConfig:
+    """What to play, on which robot, and where the results go.
+
+    Attributes:
+        controller: a registry name (its variant for `arm_mode` is played: ``stand`` with the arm ``none`` is
+            ``stand-noarm``) or ``policy:PATH``.
+        scenario: the scenario file.
+        trial: trial index within (band, seed).
+        band: the band (None: the scenario's first).
+        seed: the seed.
+        seconds: play only the first `seconds` of the trial (None: all of it) [s].
+        robot: robot registry name (None: the scenario's); its command schedule is played whatever robot it was
+            written for.
+        arm_mode: the robot's arm mode (None: the controller's).
+        target: the legs' low-level address (IPv4 literal, UDP port).
+        local: the address the legs' link binds (None: 127.0.0.1:0 for a loopback target, else 0.0.0.0:0).
+        allow_hardware: allow a target outside 127.0.0.0/8 (a real robot).
+        rate_hz: the link's rate [Hz].
+        out_dir: the results directory (must not hold results yet).
+        safety: the safety layer's settings (None: the defaults, with the robot's SDK position table).
+        settle_s: after a trip, how long the robot is held in damping, still read, before the link closes [s].
+        contact_force: foot sensor reading at which the metrics' estimator trusts a foot as standing.
+    """
+
+    controller: str
+    scenario: Path
+    trial: int
+    band: str | None = None
+    seed: int = 0
+    seconds: float | None = None
+    robot: str | None = None
+    arm_mode: str | None = None
+    target: tuple[str, int]
+    local: tuple[str, int] | None = None
+    allow_hardware: bool = False
+    rate_hz: float = 500.0
+    out_dir: Path = field(default_factory=lambda: Path("runs/hw"))
+    safety: SafetyConfig | None = None
+    settle_s: float = 1.0
+    contact_force: float = 15.0
+
+    def __post_init__(self) -> None:
+        if self.trial < 0 or self.seed < 0:
+            raise ConfigError(f"--trial and --seed must be >= 0, got {self.trial} and {self.seed}")
+        if self.seconds is not None and not self.seconds > 0:
+            raise ConfigError(f"--seconds must be > 0, got {self.seconds}")
+        if not self.settle_s >= 0:
+            raise ConfigError(f"HardwareTrialConfig.settle_s must be >= 0 s, got {self.settle_s}")
+
+
+@dataclass(frozen=True)
+class HardwareTrialResult:
+    """What a hardware trial produced.
+
+    Attributes:
+        record: the trial's results row (as stored in ``trials.csv``).
+        episode: the episode log (as stored under ``episodes/``).
+        out_dir: the results directory.
+        controller: the controller played (the variant for the robot's arm mode).
+        robot: the robot as built (description, backend, target).
+        notes: what was skipped or changed against the simulated trial, one line each.
+        link: the robot link's counters after the episode (None for a robot without a link).
+        cpu_s: CPU time of this process during the episode, every thread (the link's included) [s].
+        episode_wall_s: wall time of the episode [s].
+        safety_events: every transition of the safety layer, the stand-up before the trial's included (the
+            episode holds those during the trial), on its clock: wall-clock seconds since the robot was connected.
+        trial_started_s: when the trial began on that clock (after the stand-up) [s].
+    """
+
+    record: TrialRecord
+    episode: Episode
+    out_dir: Path
+    controller: ControllerSpec
+    robot: HardwareRobot
+    notes: tuple[str, ...]
+    link: LinkStatsLike | None
+    cpu_s: float
+    episode_wall_s: float
+    safety_events: tuple[SafetyEvent, ...]
+    trial_started_s: float
+
+
+def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
+                       observer: TickObserver | None = None,
+                       before_connect: Callable[[HardwareRobot, ControllerSpec], None] | None = None,
+                       ) -> HardwareTrialResult:
+    """Play one trial of a scenario on a real robot (or an emulator) and write its results directory.
+
+    Args:
+        cfg: what to play and where.
+        keys: the operator's keys (`wbc.arena.operator.OPERATOR_ACTIONS`); None: nobody at the keys.
+        observer: called after every tick, after the keys (a live viewer).
+        before_connect: called with the robot built and the controller resolved, just before the robot is
+            connected (nothing was sent yet, no socket exists): a person confirms a real robot (it raises to refuse),
+            a test puts its emulated robot in place.
+
+    Returns:
+        The record, the episode and what the trial skipped.
+
+    Raises:
+        ScenarioError, UnknownNameError, PolicyFileError: bad scenario, band, controller or robot name.
+        ConfigError: an arm mode the hardware cannot be built with (``actuated`` today) or the controller has no
+            variant for; a controller for another robot; a results directory that holds results.
+        TargetRefusedError: a target outside 127.0.0.0/8 without `allow_hardware` (before any socket exists).
+        RobotLinkError: the robot did not answer, or its link died.
+        StandUpError: the safety layer tripped while standing the robot up, before the trial (nothing was played).
+    """
+    scenario = load_scenario(cfg.scenario)
+    band = cfg.band if cfg.band is not None else scenario.bands[0]
+    trial = scenario.trial(band, cfg.seed, cfg.trial)
+    if cfg.seconds is not None:
+        if cfg.seconds > trial.duration_s:
+            raise ConfigError(f"--seconds must be in (0, {trial.duration_s}] s (the trial's length), got {cfg.seconds}")
+        trial = dataclasses.replace(trial, duration_s=cfg.seconds)
+    named = get_controller(cfg.controller)
+    spec = arm_variant(named, cfg.arm_mode if cfg.arm_mode is not None else named.arm_mode)
+    robot_name = cfg.robot if cfg.robot is not None else scenario.robot
+    if spec.robot is not None and spec.robot != robot_name:
+        raise ConfigError(f"controller {spec.name} drives {spec.robot}, not {robot_name}; choose a controller for "
+                          f"{robot_name}, or --robot {spec.robot}")
+    host, port = cfg.target
+    local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
+    hardware = build_hardware_robot(HardwareRobotConfig(
+        robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port, local_host=local_host,
+        local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz))
+    out = Path(cfg.out_dir)
+    if (out / "trials.csv").exists():
+        raise ResultsDirError(f"{out}: already holds results; a hardware trial is played once: choose another --out")
+    try:
+        check_published(scenario)
+        published = True
+    except ScenarioError as exc:
+        published = False
+        print(f"wbc: warning: {exc}", file=sys.stderr)
+    with threadpool_limits(limits=1, user_api="blas"):  # as in simulation: one BLAS thread, beside the link thread
+        return _play(cfg, scenario_published=published, trial=trial, spec=spec, hardware=hardware, out=out,
+                     keys=keys, observer=observer, before_connect=before_connect)
+
+
+def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, spec: ControllerSpec,
+          hardware: HardwareRobot, out: Path, keys: KeySource | None, observer: TickObserver | None,
+          before_connect: Callable[[HardwareRobot, ControllerSpec], None] | None) -> HardwareTrialResult:
+    start = time.perf_counter()
+    desc = hardware.description
+    ctrl = spec.make(desc)
+    dt = 1.0 / ctrl.rate_hz
+    safety = cfg.safety if cfg.safety is not None else SafetyConfig(position_table=hardware.position_table)
+    connected_at = [time.monotonic()]
+    safe = SafeRobot(hardware.robot, safety, clock=lambda: time.monotonic() - connected_at[0])
+    robot = EstimatedRobot(safe, desc, BaseEstimate(desc, dt, contact_force=cfg.contact_force))
+    notes = _skipped(trial)
+    trial = dataclasses.replace(trial, pushes=())  # no robot here can apply them
+    console = OperatorConsole(keys, safe.estop, then=observer)
+    link: LinkStatsLike | None = None
+    if isinstance(observer, PreparingObserver):
+        observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait for them
+    if before_connect is not None:
+        before_connect(hardware, spec)
+    connected_at[0] = time.monotonic()
+    with robot:
+        _stand_up(robot, safe, console, cfg.settle_s)
+        started_s = safe.now()
+        cpu0, wall0 = time.process_time(), time.perf_counter()
+        episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
+                              fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console)
+        cpu_s, episode_wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
+        if isinstance(hardware.robot, HasLinkStats):
+            link = hardware.robot.link_stats()
+        if safe.safety_state is SafetyState.DAMPED:
+            _settle(robot, dt, cfg.settle_s)
+    episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
+    record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode, counters=ctrl.counters(),
+                                  wall_s=time.perf_counter() - start, backend=hardware.backend,
+                                  domain_applied=False, link=link)
+    result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
+                                 notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
+                                 safety_events=safe.events, trial_started_s=started_s)
+    _write_results(cfg, result, trial, published=scenario_published)
+    return result
+
+
+def _skipped(trial: Trial) -> tuple[str, ...]:
+    """What of the simulated trial a robot does not play, one line each."""
+    notes = []
+    if trial.pushes:
+        notes.append(f"pushes: the trial's {len(trial.pushes)} push(es) (largest {trial.push_force_n:.0f} N) are "
+                     "the simulator's and were SKIPPED: the robot cannot apply them; an operator's push by hand is "
+                     f"marked with the key {_key_for('push')!r}")
+    if trial.terrain.kind != "flat":
+        notes.append(f"terrain: the trial's {trial.terrain.kind} ground (amplitude {trial.terrain.amplitude} m, "
+                     f"seed {trial.terrain_seed}) is the simulator's; the robot played on the ground it stood on")
+    notes.append(f"domain: friction {trial.domain.friction:.3f} and payload {trial.domain.payload_mass:.2f} kg are "
+                 "the simulator's randomisation, not applied (NaN in trials.csv)")
+    notes.append("metrics: base velocity, yaw rate, roll, pitch and the replayed base pose come from the state "
+                 "estimator (IMU and leg kinematics), not from simulator truth (metrics_source = estimator)")
+    return tuple(notes)
+
+
+def _key_for(action: str) -> str:
+    return next(k for k, a in OPERATOR_ACTIONS.items() if a == action and k.strip())
+
+
+def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, settle_s: float) -> None:
+    """Ramp the robot into the stand hold of its nominal pose until the safety layer is in ``run``.
+
+    The operator's e-stop works meanwhile (`OperatorConsole.before_trial`).
+
+    Raises:
+        StandUpError: the layer tripped, or the ramp did not finish within its time plus the slowest joint's travel
+            at the slew rate (and a second); the robot is held damped for `settle_s` first.
+    """
+    hold = stand_command(robot.description)
+    cfg = safe.config
+    budget = cfg.ramp_time_s + math.pi / cfg.ramp_slew + 1.0  # no joint needs to travel more than pi
+    for k in range(int(math.ceil(budget / _STAND_UP_DT))):
+        robot.read()
+        robot.write(hold)
+        robot.advance(_STAND_UP_DT)
+        console.before_trial((k + 1) * _STAND_UP_DT - budget)  # negative: the trial's clock has not started
+        if safe.safety_state in (SafetyState.RUN, SafetyState.DAMPED):
+            break
+    if safe.safety_state is SafetyState.RUN:
+        return
+    if safe.safety_state is SafetyState.DAMPED:
+        _settle(robot, _STAND_UP_DT, settle_s)
+        last = safe.events[-1]
+        raise StandUpError(f"the safety layer tripped while standing the robot up, before the trial: {last.reason} "
+                           f"({last.detail}); nothing was played. Put the robot in a pose inside its joint ranges "
+                           "(hung in its harness), check it with `wbc hw check`, and run again")
+    raise StandUpError(f"the safety layer's ramp did not reach the standing pose within {budget:.1f} s (state "
+                       f"{safe.safety_state}); nothing was played")
+
+
+def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
+    """Keep reading and pacing the tripped robot for `seconds` while its safety layer sends damping."""
+    damping = MotorCommand.damping(robot.num_joints, 0.0)  # replaced by the layer's own damping: it is latched
+    for _ in range(int(round(seconds / dt))):
+        robot.read()
+        robot.write(damping)
+        robot.advance(dt)
+
+
+def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial: Trial, *, published: bool) -> None:
+    record, episode, hardware = result.record, result.episode, result.robot
+    scenario_name, scenario_hash = trial.scenario, trial.scenario_hash
+    identity = {
+        "command": "hw run",
+        "controllers": [record.controller],
+        "scenario": {"path": str(cfg.scenario), "name": scenario_name, "hash": scenario_hash,
+                     "published": published},
+        "bands": [trial.band],
+        "seeds": [trial.seed],
+        "trial": trial.index,
+        "duration_s": trial.duration_s,
+        "robot": hardware.description.name,
+        "arm_mode": hardware.description.arm_mode,
+        "backend": hardware.backend,
+        "target": hardware.target,
+    }
+    store = ResultsStore(result.out_dir, identity, resume=False)
+    try:
+        store.append(record)
+    finally:
+        store.close()
+    path = episode_path(store.dir, record.controller, trial.band, trial.seed, trial.index)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    episode.save(str(path))
+    summary = summarize([record], scenario_name=scenario_name, scenario_hash=scenario_hash,
+                        controllers=[record.controller], bands=[trial.band])
+    (store.dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    hardware_json = {
+        "robot": hardware.description.name, "arm_mode": hardware.description.arm_mode, "backend": hardware.backend,
+        "target": hardware.target, "control_rate_hz": 1.0 / episode.control_dt, "notes": list(result.notes),
+        "episode_wall_s": result.episode_wall_s, "cpu_s": result.cpu_s,
+        "link": result.link.as_dict(prefix="") if result.link is not None else None,
+        "trial_started_s": result.trial_started_s,
+        "safety_events": [e.to_dict() for e in result.safety_events],
+        "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
+    }
+    (store.dir / "hardware.json").write_text(json.dumps(hardware_json, indent=2), encoding="utf-8")
+    meta = {
+        "controller": (record.controller if record.controller == cfg.controller else
+                       f"{record.controller} ({cfg.controller} on a robot with arm mode "
+                       f"{hardware.description.arm_mode})"),
+        "robot": f"{hardware.description.name}, arm {hardware.description.arm_mode}, backend {hardware.backend}, "
+                 f"{hardware.target}",
+        "scenario": f"{scenario_name} ({cfg.scenario}), written for {trial.robot}",
+        "scenario hash": scenario_hash,
+        "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
+        "trial": f"band {trial.band}, seed {trial.seed}, trial {trial.index}, {trial.duration_s:g} s",
+        "metrics source": "the state estimator (IMU and leg kinematics): a robot has no simulator truth",
+        **{k: v for k, v in store.environment.items() if k != "packages"},
+        "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
+    }
+    write_report(store.dir, summary, [record], meta, sections=_hardware_sections(result))
+
+
+def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]]]:
+    record, episode, link, events = result.record, result.episode, result.link, result.safety_events
+    period_ms = episode.control_dt * 1e3
+    act = episode.act_s * 1e3
+    rows = [
+        ("ticks played", f"{len(episode.t)} of {int(round(episode.duration_s / episode.control_dt))} at "
+                         f"{1.0 / episode.control_dt:g} Hz"),
+        ("controller act p50 / p99 / max [ms]",
+         f"{record.act_ms_p50:.3f} / {record.act_ms_p99:.3f} / {act.max() if len(act) else math.nan:.3f} "
+         f"(period {period_ms:g} ms)"),
+        ("deadline misses (act longer than the period)", f"{record.deadline_misses} of {len(episode.t)}"),
+        ("late advances (the loop reached the robot's clock after its deadline)",
+         f"{record.late_advances}, worst {record.worst_lateness_ms:.2f} ms"),
+        ("process CPU during the episode", f"{result.cpu_s:.2f} s over {result.episode_wall_s:.2f} s wall "
+                                           f"({100.0 * result.cpu_s / max(result.episode_wall_s, 1e-9):.0f} % of "
+                                           "one core, link thread included)"),
+    ]
+    if link is not None:
+        for key, value in link.as_dict(prefix="link ").items():
+            rows.append((key, f"{value:.6g}" if isinstance(value, float) else str(value)))
+    sections = [("Hardware trial", ["What the simulator does and a robot does not:", "",
+                                    *(f"- {n}" for n in result.notes), "", *md_table(["quantity", "value"], rows)])]
+    if events:
+        body = md_table(["time [s]", "from", "to", "reason", "detail"],
+                        [(f"{e.time:.3f}", str(e.from_state), str(e.to_state), e.reason, e.detail) for e in events])
+        trips = sum(1 for e in events if e.to_state is SafetyState.DAMPED)
+        lead = (f"The safety layer tripped {trips} time(s); the episode ended at the first trip." if trips else
+                "The safety layer did not trip.")
+        sections.append(("Safety events", [f"{lead} Times are wall-clock seconds since the robot was connected; the "
+                                           "robot was stood up first, and the trial began at "
+                                           f"{result.trial_started_s:.3f} s.", "", *body]))
+    else:
+        sections.append(("Safety events", ["None recorded."]))
+    actions = episode.operator_events.rows()
+    sections.append(("Operator actions", md_table(["trial time [s]", "key", "action"],
+                                                  [(f"{t:.3f}", repr(k), a) for t, k, a in actions])
+                     if actions else ["None (keys: " + ", ".join(f"{k!r} {a}" for k, a in OPERATOR_ACTIONS.items())
+                                      + ")."]))
+    return sections
