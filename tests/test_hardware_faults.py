@@ -80,6 +80,18 @@ def _after(emu: UnitreeEmulator, t: float) -> list[LoggedCommand]:
     return [c for c in emu.commands() if c.time > t]
 
 
+def _first_damping(emu: UnitreeEmulator, since: float, timeout: float = 0.2) -> LoggedCommand:
+    """The first damping frame the emulator decoded after `since`, waiting up to `timeout` for it to arrive (the trip
+    hands damping to the link thread, which sends it at its next period; a loaded machine may run that late)."""
+    end = time.monotonic() + timeout
+    while True:
+        found = next((c for c in _after(emu, since) if c.damping), None)
+        if found is not None or time.monotonic() >= end:
+            assert found is not None, f"no damping frame on the wire within {timeout} s"
+            return found
+        time.sleep(LINK_PERIOD / 2)
+
+
 def _inject_until_damped(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand, fault: Fault, value: object = None,
                          *, reason: str, seconds: float = 0.3) -> tuple[float, LoggedCommand]:
     """Inject `fault`, keep the loop going until the layer is damped for `reason`; (injection time, first damping frame
@@ -91,7 +103,7 @@ def _inject_until_damped(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorComman
     injected = time.monotonic()
     _loop(safe, cmd, seconds, until=lambda: safe.safety_state is SafetyState.DAMPED)
     assert safe.safety_state is SafetyState.DAMPED and safe.events[-1].reason == reason, safe.events[-1]
-    return injected, next(c for c in _after(emu, injected) if c.damping)
+    return injected, _first_damping(emu, injected)
 
 
 def _first_servo(frames: list[LoggedCommand]) -> LoggedCommand:
@@ -106,29 +118,58 @@ def _assert_latched(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand, si
     assert len(frames) > seconds / LINK_PERIOD / 2 and all(c.damping for c in frames)
 
 
+def _timed_writes(safe: SafeRobot, cmd: MotorCommand, seconds: float) -> list[tuple[float, float, np.ndarray,
+                                                                                       MotorCommand]]:
+    """Read, write `cmd`, advance PERIOD, for `seconds`; per write (wall time before it, after it, measured q, sent)."""
+    writes = []
+    end = time.monotonic() + seconds
+    for _ in range(int(seconds / PERIOD) + 2):
+        if time.monotonic() >= end:
+            break
+        q = safe.read().q.copy()
+        before = time.monotonic()
+        sent = safe.write(cmd)
+        writes.append((before, time.monotonic(), q, sent))
+        safe.advance(PERIOD)
+    return writes
+
+
+def _check_ramp_slew(safe: SafeRobot, writes: list, frames: list[LoggedCommand]) -> float:
+    """The layer's targets close on the controller's no faster than the slew over the wall time between its writes
+    (it reads its clock between the two stamps of a write, so the bound needs no slack), and the servo frames on the
+    wire carry exactly those targets, in their order; returns the largest step's share of its bound."""
+    targets = np.array([w[3].q for w in writes])
+    steps = np.abs(np.diff(targets, axis=0)).max(axis=1)
+    bounds = safe.config.ramp_slew * np.array([b[1] - a[0] for a, b in zip(writes, writes[1:], strict=False)])
+    assert (steps <= bounds + Q_QUANTUM).all()
+    k = 0
+    for frame in (c for c in frames if not c.damping):
+        while k < len(targets) and not np.allclose(frame.wire.q, targets[k], atol=Q_QUANTUM):
+            k += 1
+        assert k < len(targets), "a target reached the wire that the layer never sent"
+    return float((steps / (bounds + Q_QUANTUM)).max()) if steps.size else 0.0
+
+
 def _reset_and_check_ramp(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand) -> np.ndarray:
     """Reset the latch; the first servo frame on the wire holds the measured pose with the ramp's start gains, and
     the targets after it move no faster than the ramp's slew over wall time.
 
     Returns the measured pose the ramp started from."""
-    state = safe.read()
+    safe.read()
     reset_at = time.monotonic()
     safe.reset()
     assert safe.safety_state is SafetyState.RAMP
-    sent = safe.write(cmd)
-    safe.advance(PERIOD)
-    _loop(safe, cmd, 0.05)
+    writes = _timed_writes(safe, cmd, 0.05)
+    measured = writes[0][2]  # what the layer read just before the ramp's first write
     servo = [c for c in _after(emu, reset_at) if not c.damping]
     first = servo[0]
-    np.testing.assert_allclose(first.wire.q, state.q, atol=Q_QUANTUM)
-    np.testing.assert_allclose(first.wire.q, sent.q, atol=Q_QUANTUM)
+    np.testing.assert_allclose(first.wire.q, measured, atol=Q_QUANTUM)
+    np.testing.assert_allclose(first.wire.q, writes[0][3].q, atol=Q_QUANTUM)
     np.testing.assert_array_equal(first.wire.kp, safe.config.ramp_kp)
     assert np.all(first.wire.tau == 0)
     assert len(servo) > 10 and safe.safety_state is SafetyState.RAMP
-    for c in servo[1:]:  # 2 loop periods of slack: a frame leaves the link up to a link period after its write
-        travel = np.abs(c.wire.q - first.wire.q).max()
-        assert travel <= safe.config.ramp_slew * (c.time - first.time + 2 * PERIOD) + Q_QUANTUM
-    return state.q
+    _check_ramp_slew(safe, writes, servo)
+    return measured
 
 
 def test_unitree_robot_reports_remote_and_motor_status_to_the_safety_layer() -> None:
@@ -282,9 +323,9 @@ def test_over_power_damps_only_after_more_than_the_configured_frames_and_latches
         tripped = time.monotonic()
         assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "over_power", events[-1]
         assert f"for {n + 1} frames" in events[-1].detail
-        time.sleep(3 * LINK_PERIOD)  # the trip itself put damping on the link; let the link send it
+        first = _first_damping(emu, start)  # the trip itself put damping on the link
+        time.sleep(3 * LINK_PERIOD)
         frames = _after(emu, start)
-        first = next(c for c in frames if c.damping)
         print(f"\n{robot}: over-power on {n + 1} frames in a row -> damping on the wire "
               f"{(first.time - tripped) * 1e3:+.1f} ms after the tripping read (bursts of {n} passed)")
         assert before_trip <= first.time <= tripped + 10 * LINK_PERIOD
@@ -304,18 +345,9 @@ FOLDED = np.tile([0.0, 1.1, -2.2], 4)  # crouched low, legs folded (feet 1 cm ab
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_unsafe_start_first_command_is_the_measured_pose_then_a_bounded_slew(robot: str) -> None:
     qpos = np.concatenate([[0.0, 0.0, 0.26, 1.0, 0.0, 0.0, 0.0], FOLDED])
-    writes = []  # (wall time before the write, after it, the measured q, what the layer sent)
     with _rig(robot, qpos=qpos) as (emu, safe, events):
         cmd = _stand(safe)
-        end = time.monotonic() + 0.4
-        for _ in range(int(0.4 / PERIOD) + 2):
-            if time.monotonic() >= end:
-                break
-            q = safe.read().q.copy()
-            before = time.monotonic()
-            sent = safe.write(cmd)
-            writes.append((before, time.monotonic(), q, sent))
-            safe.advance(PERIOD)
+        writes = _timed_writes(safe, cmd, 0.4)
         trips = [e for e in events if e.to_state is SafetyState.DAMPED]
         assert safe.safety_state is SafetyState.RAMP and not trips, events
     frames = emu.commands()
@@ -325,24 +357,11 @@ def test_unsafe_start_first_command_is_the_measured_pose_then_a_bounded_slew(rob
     np.testing.assert_allclose(frames[start].wire.q, measured, atol=Q_QUANTUM)  # the first servo frame
     np.testing.assert_array_equal(frames[start].wire.kp, safe.config.ramp_kp)
     assert np.abs(measured - cmd.q).max() > 0.5  # the start really was far from the stand pose
-    # The layer's targets move no faster than the slew over the wall time between its writes (the layer reads its
-    # clock between the two stamps of each write, so the bound needs no slack) ...
-    ramp = writes[k0:]
-    targets = np.array([w[3].q for w in ramp])
-    steps = np.abs(np.diff(targets, axis=0)).max(axis=1)
-    bounds = safe.config.ramp_slew * np.array([b[1] - a[0] for a, b in zip(ramp, ramp[1:], strict=False)])
+    share = _check_ramp_slew(safe, writes[k0:], frames[start:])
+    steps = np.abs(np.diff([w[3].q for w in writes[k0:]], axis=0)).max()
     print(f"\n{robot}: start {np.abs(measured - cmd.q).max():.3f} rad from the stand pose; largest step between "
-          f"two writes {steps.max() * 1e3:.2f} mrad, {(steps / (bounds + Q_QUANTUM)).max():.0%} of its wall-time "
-          "bound")
-    assert (steps <= bounds + Q_QUANTUM).all()
-    assert steps.max() > 0  # it does move
-    # ... and what reached the wire is those targets, in their order: nothing in between, nothing ahead.
-    wire = [c.wire.q for c in frames[start:] if not c.damping]
-    k = 0
-    for q in wire:
-        while k < len(targets) and not np.allclose(q, targets[k], atol=Q_QUANTUM):
-            k += 1
-        assert k < len(targets), "a target reached the wire that the layer never sent"
+          f"two writes {steps * 1e3:.2f} mrad, {share:.0%} of its wall-time bound")
+    assert steps > 0  # it does move
 
 
 # -- 9: e-stop ----------------------------------------------------------------------------------------------------
@@ -354,9 +373,9 @@ def test_software_estop_damps_at_once_and_latches_until_reset(robot: str) -> Non
         stopped = time.monotonic()
         safe.estop()
         assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "software_estop"
-        time.sleep(3 * LINK_PERIOD)  # no write, no advance: estop() itself put damping on the link
+        first = _first_damping(emu, stopped)  # no write, no advance: estop() itself put damping on the link
+        time.sleep(3 * LINK_PERIOD)
         frames = _after(emu, stopped)
-        first = next(c for c in frames if c.damping)
         print(f"\n{robot}: estop() -> damping on the wire after {(first.time - stopped) * 1e3:.1f} ms")
         assert first.time - stopped <= 2 * LINK_PERIOD + 0.002
         assert all(c.damping for c in frames if c.time >= first.time)

@@ -31,6 +31,7 @@ from wbc.hardware.safety import (
 from wbc.hardware.unitree import LowStateExtras, Remote
 from wbc.scenario import Push
 from wbc.scenario.trial import CommandSchedule
+from wbc.types import MotorCommand
 
 DT = 0.02  # [s] control period (the stand controller's 50 Hz)
 FAST = dict(ramp_time_s=0.2)  # a short ramp, so the trip tests reach ``run`` quickly
@@ -186,6 +187,36 @@ def test_unsafe_start_begins_at_the_measured_pose_and_ramps_without_a_jump():
         _drive(safe, cmd, 50)
         truth = robot.sim_truth()
         assert truth.base_position_in_world[2] > 0.2 and truth.ground_contact_bodies == ()  # it stood up
+
+
+def test_the_ramp_lets_a_moving_controller_in_in_bounded_time():
+    # A gait moves its swing legs' targets faster than any safe slew; the ramp closes the gap to them instead of
+    # chasing them, so it ends (a chasing ramp never caught up and the controller ran under low gains).
+    safe, faulty, events = _make("none", ramp_time_s=0.2)
+    with safe:
+        nominal = faulty.inner.desc.nominal_q
+        hold = MotorCommand.hold(nominal, 30.0, 1.0)
+        _drive(safe, hold, 400, until=SafetyState.RUN)  # standing, in run
+        safe.estop()
+        safe.read()
+        safe.reset()  # a new ramp, from the measured pose, into a controller that swings the calves at 3 rad/s
+        log, gaps = [], []
+        for k in range(400):
+            target = nominal.copy()
+            target[2::3] += 0.3 * np.sin(10.0 * k * DT)
+            cmd = MotorCommand.hold(target, 30.0, 1.0)
+            safe.read()
+            sent = safe.write(cmd)
+            log.append(sent)
+            gaps.append(np.abs(sent.q - target).max())
+            safe.advance(DT)
+            if safe.safety_state is SafetyState.RUN:
+                break
+        assert safe.safety_state is SafetyState.RUN and events[-1].reason == "ramp_done", events
+        steps = np.diff(gaps[1:])  # from the first step on, the gap to the moving target
+        assert steps.max() <= 1e-12 and (-steps).max() <= safe.config.ramp_slew * DT + 1e-9  # closes, no faster
+        assert len(log) * DT <= 0.2 + gaps[1] / safe.config.ramp_slew + 2 * DT
+        np.testing.assert_array_equal(log[-1].q, target)  # the last command is the controller's own
 
 
 @pytest.mark.parametrize("robot", ["a1-wx200", "go1-arm"])

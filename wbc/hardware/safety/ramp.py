@@ -1,10 +1,14 @@
 """`CommandRamp`: the bounded move from the measured pose into a controller's command.
 
 The first command of a ramp holds the measured pose with the ramp's low start gains and no feed-forward. After it,
-each commanded target moves towards the controller's at no more than ``slew`` rad/s, while the gains, target
-velocities and feed-forward torques are blended linearly from the start values into the controller's over
-``duration`` seconds. The ramp is done once the blend is complete and the targets have caught up; its last command
-is then the controller's own, so handing over to it is no jump.
+each commanded target is the controller's plus a gap that closes at no more than ``slew`` rad/s, while the gains,
+target velocities and feed-forward torques are blended linearly from the start values into the controller's over
+``duration`` seconds. The ramp is done once the blend is complete and the gap is closed; its last command is then
+the controller's own, so handing over to it is no jump.
+
+Closing a gap rather than chasing the target is what lets a moving controller in: a walking gait's swing legs move
+their targets faster than any safe slew, so a ramp that chased them would never catch up (and the controller would
+run under low gains until something tripped). For a controller that holds still, the two are the same motion.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ class CommandRamp:
 
     Args:
         duration_s: blend time of gains and feed-forward [s].
-        slew: largest speed of the commanded targets [rad/s].
+        slew: largest speed at which the gap between the commanded targets and the controller's closes [rad/s].
         kp: position gain at the start [N m / rad].
         kd: velocity gain at the start [N m s / rad].
     """
@@ -32,6 +36,7 @@ class CommandRamp:
         self._kp0 = kp
         self._kd0 = kd
         self._q: np.ndarray | None = None
+        self._gap: np.ndarray | None = None
         self._t0 = 0.0
         self._t_last = 0.0
 
@@ -48,6 +53,7 @@ class CommandRamp:
             time: now [s].
         """
         self._q = np.array(q_measured, dtype=np.float64)
+        self._gap = None
         self._t0 = self._t_last = time
         return MotorCommand.hold(self._q.copy(), self._kp0, self._kd0)
 
@@ -62,11 +68,13 @@ class CommandRamp:
             raise RuntimeError("CommandRamp.step before start")  # a bug in the caller, never a runtime condition
         max_step = self._slew * max(0.0, time - self._t_last)
         self._t_last = max(self._t_last, time)
-        error = target.q - self._q
-        caught_up = bool(np.all(np.abs(error) <= max_step))
-        self._q = target.q.copy() if caught_up else self._q + np.clip(error, -max_step, max_step)
+        if self._gap is None:  # the first step: the gap is where the ramp started, seen from the controller's target
+            self._gap = self._q - target.q
+        self._gap = self._gap - np.clip(self._gap, -max_step, max_step)
+        closed = not self._gap.any()
+        self._q = target.q + self._gap
         s = min(1.0, max(0.0, (time - self._t0) / self._duration))
-        if caught_up and s >= 1.0:
+        if closed and s >= 1.0:
             return target, True
         cmd = MotorCommand(q=self._q.copy(), dq=s * target.dq, kp=self._kp0 + s * (target.kp - self._kp0),
                            kd=self._kd0 + s * (target.kd - self._kd0), tau=s * target.tau)

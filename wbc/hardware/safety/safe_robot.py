@@ -234,6 +234,7 @@ class SafeRobot(Robot):
                 out = self._ramp.start(np.clip(self._latest.q, self._lower, self._upper), now)
             else:
                 out, done = self._ramp.step(target, now)
+                out = self._limit_positions(out)  # the controller's target plus the closing gap may leave the table
                 if done:
                     self._ramp = None
                     self._transition(SafetyState.RUN, "ramp_done", "the targets reached the controller's")
