@@ -356,6 +356,7 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         sim.advance(period)
     if a.failure is not None:
         v.set("output", False, a.failure)
+        v.set("rate", True, f"{rate:g} Hz (whether it stays constant was not checked: act failed)")
         return v.outcomes("act failed in the closed loop"), None
     if ctrl.rate_hz != rate:
         v.set("rate", False, f"rate_hz changed from {rate:g} to {ctrl.rate_hz!r} while running; keep it constant")
