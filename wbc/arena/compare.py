@@ -185,8 +185,10 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         path.parent.mkdir(parents=True, exist_ok=True)
         return str(path)
 
+    # trial by trial, every controller in turn: pairs finish together and the progress estimate mixes fast and slow
+    # controllers from the start (the order does not change a result)
     tasks = [TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c))
-             for c in cfg.controllers for t in trials if (c, *t.key) not in done]
+             for t in trials for c in cfg.controllers if (c, *t.key) not in done]
     total = len(cfg.controllers) * len(trials)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
     bar = progress(total, total - len(tasks), cfg.progress)

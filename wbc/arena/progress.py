@@ -76,7 +76,9 @@ def _duration(seconds: float) -> str:
         return "?"
     if seconds < 90:
         return f"{seconds:.0f} s"
-    return f"{seconds / 60:.1f} min"
+    if seconds < 5400:
+        return f"{seconds / 60:.1f} min"
+    return f"{seconds / 3600:.1f} h"
 
 
 def progress(total: int, initial: int, enabled: bool, stream: TextIO | None = None):

@@ -76,7 +76,8 @@ class NetworkPorts:
     batched: bool
 
 
-def _size(shape: list, batched: bool) -> int | None:
+def _size(shape: list) -> int | None:
+    """The last axis' length, or None when it is symbolic (fixed only at run time)."""
     last = shape[-1] if shape else None
     return last if isinstance(last, int) else None
 
@@ -103,7 +104,7 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
     if len(shape) not in (1, 2) or (len(shape) == 2 and isinstance(shape[0], int) and shape[0] != 1):
         raise OnnxModelError(f"{model}: input {port.name!r} has shape {shape}; expected [size] or [batch, size] "
                              "with a batch of 1 or a free batch axis")
-    size = _size(shape, len(shape) == 2)
+    size = _size(shape)
     if size is not None and size != io.input_size:
         per = " + ".join(f"{t.name} {t.size}x{t.history}" for t in io.terms)
         raise OnnxModelError(f"{io.path}: [observation]: the terms make {io.input_size} inputs ({per}), but {model} "
@@ -113,7 +114,7 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
         raise OnnxModelError(f"{io.path}: [onnx] output: {model} has no output {io.output_name!r}; its outputs: "
                              f"{', '.join(out_names)}")
     out = outputs[0] if io.output_name is None else outputs[out_names.index(io.output_name)]
-    out_size = _size(list(out.shape), True)
+    out_size = _size(list(out.shape))
     if out_size is not None and out_size != io.num_joints:
         raise OnnxModelError(f"{io.path}: [policy] joints: {io.num_joints} joints listed, but {model} output "
                              f"{out.name!r} has {out_size} entries; list the network's joints in its order")

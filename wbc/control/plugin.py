@@ -153,31 +153,41 @@ def _is_the_module(missing: str | None, module: str) -> bool:
     return missing is not None and (module == missing or module.startswith(missing + "."))
 
 
+def _import_once(module: str) -> ModuleType:
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if not _is_the_module(exc.name, module):
+            raise PluginImportError(
+                f"importing {module} failed: {_describe(exc)}{_where(exc)}; the plug-in needs that module: install "
+                "it into this environment") from exc
+        raise PluginNotFoundError(
+            f"no module named {exc.name!r} (for plug-in module {module}); looked on sys.path and in the working "
+            f"directory {os.getcwd()}. Valid plug-in names: package.module:factory of a module found there (e.g. "
+            "examples.my_controller:make from a checkout's root), or an installed entry point of the "
+            f"{PLUGIN_GROUP!r} group (`wbc controllers` lists them)") from exc
+    except Exception as exc:  # noqa: BLE001 (any error of the plug-in's own code, reported with its location)
+        raise PluginImportError(f"importing {module} failed: {_describe(exc)}{_where(exc)}") from exc
+
+
 def _import(module: str, root: str | None) -> ModuleType:
     """Import `module`: from `root` (put on ``sys.path`` if missing), else from ``sys.path``, else the working dir."""
     if root is not None and root not in sys.path:
         sys.path.insert(0, root)
     importlib.invalidate_caches()  # a module written after start-up (a test's, a notebook's) is found too
-    cwd = os.getcwd()
-    for attempt in range(2):
-        try:
-            return importlib.import_module(module)
-        except ModuleNotFoundError as exc:
-            if not _is_the_module(exc.name, module):
-                raise PluginImportError(
-                    f"importing {module} failed: {_describe(exc)}{_where(exc)}; the plug-in needs that module: "
-                    "install it into this environment") from exc
-            if attempt == 0 and root is None and cwd not in sys.path and "" not in sys.path:
-                sys.path.insert(0, cwd)  # as `python -m` would: the working directory's modules are importable
-                continue
-            raise PluginNotFoundError(
-                f"no module named {exc.name!r} (for plug-in module {module}); looked in the working directory {cwd} "
-                f"and on sys.path. Valid plug-in names: package.module:factory of a module found there (e.g. "
-                "examples.my_controller:make from a checkout's root), or an installed entry point of the "
-                f"{PLUGIN_GROUP!r} group (`wbc controllers` lists them)") from exc
-        except Exception as exc:  # noqa: BLE001 (any error of the plug-in's own code, reported with its location)
-            raise PluginImportError(f"importing {module} failed: {_describe(exc)}{_where(exc)}") from exc
-    raise AssertionError("unreachable")  # pragma: no cover
+    try:
+        return _import_once(module)
+    except PluginNotFoundError:
+        cwd = os.getcwd()
+        if root is not None or cwd in sys.path or "" in sys.path:
+            raise
+    # as `python -m` would: the working directory's modules are importable (the console script's sys.path lacks it)
+    sys.path.insert(0, cwd)
+    try:
+        return _import_once(module)
+    except PluginNotFoundError:
+        sys.path.remove(cwd)
+        raise
 
 
 def _factories(module: ModuleType) -> list[str]:
