@@ -281,3 +281,10 @@ def test_an_entry_point_is_listed_with_its_summary_and_plays_by_its_name(plugins
     # an entry point that cannot be loaded fails when named, with the plug-in's own message
     assert main(["run", "test-broken", "--scenario", str(small), "--out", str(tmp_path / "b")]) == 2
     assert "the plug-in's module is broken" in capsys.readouterr().err
+
+
+def test_a_plugin_is_watched_in_the_viewer_like_any_controller(plugins, small, tmp_path, capsys):
+    out = tmp_path / "plugin.html"
+    assert main(["view", "plugpkg.good:make", "--scenario", str(small), "--trial", "0", "--duration", "0.5",
+                 "--record", str(out)]) == 0
+    assert "recorded 25 frames" in capsys.readouterr().out and out.stat().st_size > 100_000

@@ -51,6 +51,11 @@ class ControllerSpec:
         if self.robots is not None:
             object.__setattr__(self, "robots", tuple(self.robots))
 
+    @property
+    def robot(self) -> str | None:
+        """The only robot it can drive (a policy file's), or None when it drives several or every robot."""
+        return self.robots[0] if self.robots is not None and len(self.robots) == 1 else None
+
     def claims(self) -> list[tuple[str, str]]:
         """Every (robot, arm mode) this controller says it can drive, robots in registry order."""
         robots = self.robots if self.robots is not None else tuple(ROBOTS)
