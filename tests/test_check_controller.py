@@ -13,6 +13,7 @@ from wbc.control.check import CHECKS
 from wbc.control.errors import ControllerCheckError
 from wbc.control.registry import CONTROLLERS
 from wbc.control.stand import stand_command
+from wbc.control.watched_robot import WatchedRobot
 from wbc.hardware.mujoco import MujocoRobot
 from wbc.types import MotorCommand
 
@@ -80,6 +81,11 @@ class Unreset(Stand):
         return MotorCommand.hold(self.command.q + 1e-4 * self.ticks, self.command.kp, self.command.kd)
 
 
+def _the_simulator() -> MujocoRobot:
+    """What a cheating controller would do: find the simulated robot it runs on in the process's memory."""
+    return next(o for o in gc.get_objects() if isinstance(o, WatchedRobot) and o.is_connected)
+
+
 class Peeking(Stand):
     """Finds the simulator in memory and leans with the trunk's true velocity (what a robot cannot measure)."""
 
@@ -89,7 +95,7 @@ class Peeking(Stand):
 
     def act(self, state, command):
         if self.sim is None:
-            self.sim = next(o for o in gc.get_objects() if isinstance(o, MujocoRobot) and o.is_connected)
+            self.sim = _the_simulator()
         lean = 0.1 * self.sim.base_truth().base_linvel_in_world[0]
         return MotorCommand.hold(self.command.q + lean, self.command.kp, self.command.kd)
 
@@ -142,9 +148,14 @@ def test_reading_the_simulator_without_its_accessors_is_caught_by_moving_it():
     class Raw(Stand):
         """Reads MuJoCo's data directly, past the accessors the checker watches."""
 
+        def __init__(self, desc):
+            super().__init__(desc)
+            self.sim = None
+
         def act(self, state, command):
-            sim = next(o for o in gc.get_objects() if isinstance(o, MujocoRobot) and o.is_connected)
-            return MotorCommand.hold(self.command.q + 0.1 * sim.data.qpos[0], self.command.kp, self.command.kd)
+            if self.sim is None:
+                self.sim = _the_simulator()
+            return MotorCommand.hold(self.command.q + 0.1 * self.sim.data.qpos[0], self.command.kp, self.command.kd)
 
     spec = ControllerSpec("raw", "actuated", Raw, "reads MjData", robots=("a1-wx200",))
     result = check_controller(spec, CheckConfig(seconds=0.2))

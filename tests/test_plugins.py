@@ -168,10 +168,10 @@ def test_a_plugin_plays_the_same_trials_as_stand_on_the_local_pool_and_on_ray(pl
     pytest.importorskip("ray")
     name = "plugpkg.good:make"
     results = {}
-    for executor, workers in (("local", 2), ("ray", None)):
-        cfg = ArenaConfig(controllers=(name, "stand"), scenario=small, seeds=(0,), trials=2, executor=executor,
-                          workers=workers, out_dir=tmp_path / executor, progress=False)
-        results[executor] = TrialRecord.read_csv(run_arena(cfg).out_dir / "trials.csv")
+    for executor, workers in (("local", ["--workers", "2"]), ("ray", [])):
+        assert main(["compare", name, "stand", "--scenario", str(small), "--trials", "2", "--executor", executor,
+                     *workers, "--out", str(tmp_path / executor), "--quiet"]) == 0
+        results[executor] = TrialRecord.read_csv(tmp_path / executor / "trials.csv")
     for records in results.values():
         # the plug-in builds the very PD hold `stand` is, so every metric of every trial is the same
         assert len(records) == 2 * 2 * 2

@@ -117,8 +117,12 @@ class ArenaResult:
 
 def _resolve(cfg: ArenaConfig) -> dict[str, ControllerSpec]:
     """Each name resolved once, here: a policy or ONNX file is read and a plug-in imported in this process."""
-    return {name: get_controller(name, config=cfg.controller_configs.get(name), io=cfg.io_files.get(name))
-            for name in cfg.controllers}
+    specs = {}
+    for name in cfg.controllers:
+        files = {key: path for key, path in (("config", cfg.controller_configs.get(name)),
+                                             ("io", cfg.io_files.get(name))) if path is not None}
+        specs[name] = get_controller(name, **files)
+    return specs
 
 
 def _files_of(specs: Mapping[str, ControllerSpec]) -> dict[str, dict[str, str]]:
