@@ -15,6 +15,7 @@ import pytest
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.record import TrialRecord
 from wbc.cli.main import main
+from wbc.control import CheckConfig, check_controller
 from wbc.control.errors import OnnxIoError, OnnxModelError
 from wbc.control.onnx_io import load_onnx_io
 from wbc.control.registry import get_controller
@@ -248,6 +249,8 @@ def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller
             robot.advance(0.02)
         assert not robot.fallen()
     assert worst < 1e-5
+    # it meets the controller contract: deterministic after reset, blind to the simulator, fast enough
+    check_controller(spec, CheckConfig(seconds=0.3)).raise_if_failed()
     # a trial in the arena: the same outcome, the metrics equal to float32 arithmetic's reach (see the README)
     cfg = ArenaConfig(controllers=("learned", name), scenario=Path("scenarios/push.toml"), bands=("ood",), seeds=(0,),
                       trials=1, out_dir=tmp_path / "arena", progress=False, workers=1)

@@ -161,8 +161,9 @@ def _import_once(module: str) -> ModuleType:
             raise PluginImportError(
                 f"importing {module} failed: {_describe(exc)}{_where(exc)}; the plug-in needs that module: install "
                 "it into this environment") from exc
+        whose = "" if exc.name == module else f" (the package of {module})"
         raise PluginNotFoundError(
-            f"no module named {exc.name!r} (for plug-in module {module}); looked on sys.path and in the working "
+            f"no module named {exc.name!r}{whose}; looked on sys.path and in the working "
             f"directory {os.getcwd()}. Valid plug-in names: package.module:factory of a module found there (e.g. "
             "examples.my_controller:make from a checkout's root), or an installed entry point of the "
             f"{PLUGIN_GROUP!r} group (`wbc controllers` lists them)") from exc
