@@ -401,13 +401,14 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
                   "last bit")
     reads = sim.reads()
     if reads:
-        v.set("truth", False, "act() read the simulator's truth (" + ", ".join(f"MujocoRobot.{k} x{c}" for k, c in
-              reads.items()) + "); a controller gets RobotState and VelocityCommand only, as on a real robot")
+        seen = ", ".join(f"MujocoRobot.{name} x{calls}" for name, calls in reads.items())
+        v.set("truth", False, f"act() read the simulator's truth ({seen}); a controller gets RobotState and "
+              "VelocityCommand only, as on a real robot")
     elif c is not None and c.failure is None and v.ok("reset"):
-        moved = _difference(d, c)
-        if moved is not None:
+        shift = _difference(d, c)
+        if shift is not None:
             v.set("truth", False, f"the motor commands changed when only the simulator's hidden state did (same "
-                  f"states and commands, the robot moved 0.8 m away: {moved}): act() reads the simulator")
+                  f"states and commands, the robot moved 0.8 m away: {shift}): act() reads the simulator")
         else:
             v.set("truth", True, "no truth accessor called from act(); commands unchanged when the simulator's "
                   "hidden state moved")
