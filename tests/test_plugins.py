@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.record import TrialRecord
+from wbc.arena.record import MACHINE_TIMED, TrialRecord
 from wbc.cli.main import main
 from wbc.control.errors import (
     PluginAttributeError,
@@ -158,8 +158,8 @@ def small(tmp_path):
 
 
 def _metrics(records, controller):
-    """Each record's stored cells but the controller's name and the wall time, by trial."""
-    skip = {TrialRecord.header().index("controller"), TrialRecord.header().index("wall_s")}
+    """Each record's stored cells but the controller's name and those timed on the machine's clock, by trial."""
+    skip = {TrialRecord.header().index(name) for name in ("controller", *MACHINE_TIMED)}
     return {r.pair_key: [c for i, c in enumerate(r.to_row()) if i not in skip] for r in records
             if r.controller == controller}
 

@@ -245,7 +245,9 @@ def _hw_run(args: argparse.Namespace) -> int:
     cfg = HardwareTrialConfig(controller=args.ctrl, scenario=Path(args.scenario), trial=args.trial, band=args.band,
                               seed=args.seed, seconds=args.seconds, robot=args.robot, arm_mode=args.arm,
                               target=(host, port), local=local, allow_hardware=args.allow_hardware,
-                              rate_hz=args.rate, out_dir=out, settle_s=args.settle)
+                              rate_hz=args.rate, out_dir=out, settle_s=args.settle,
+                              controller_config=Path(args.controller_config) if args.controller_config else None,
+                              io_file=Path(args.io) if args.io else None)
 
     def confirm(hardware: HardwareRobot, spec: ControllerSpec) -> None:
         if not is_loopback(host):

@@ -180,8 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "(damping, latched: the trial ends), p marks a push given by hand. Results go to a "
                            "results directory of the arena's format. A target outside 127.0.0.0/8 needs "
                            "--allow-hardware and a typed confirmation (or --yes).")
-    hwrun.add_argument("ctrl", help=f"controller: one of {', '.join(CONTROLLERS)} (its variant for --arm is played), "
-                       "or policy:PATH")
+    hwrun.add_argument("ctrl", help=f"controller (its variant for --arm is played): one of {_NAMES_HELP}")
     hwrun.add_argument("--robot", default=None,
                        help=f"one of: {', '.join(HARDWARE_ROBOTS)} (default: the scenario's robot)")
     hwrun.add_argument("--arm", default=None,
@@ -207,6 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
     hwrun.add_argument("--view", action="store_true",
                        help="watch the robot live in the browser (meshcat), drawn from its own sensors")
     hwrun.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
+    add_controller_file_options(hwrun, repeatable=False)
     hwrun.set_defaults(handler="hw run")
 
     tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
