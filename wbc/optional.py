@@ -16,6 +16,8 @@ EXTRAS = {
     "robot_interface": "hardware",
     "dynamixel_sdk": "hardware",
     "ray": "cluster",
+    "onnxruntime": "onnx",
+    "onnx": "train",
 }
 """Module -> the ``pip install 'wbc[EXTRA]'`` extra that provides it."""
 

@@ -7,20 +7,24 @@ very same trials, so differences between controllers come with paired confidence
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import sys
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
+from wbc.arena.progress import progress
 from wbc.arena.report import summarize, write_report
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import TickObserver
 from wbc.arena.stats import in_canonical_order
-from wbc.control.registry import get_controller
+from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
+from wbc.robots.registry import get_robot
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.scenario.trial import Trial
 
@@ -49,6 +53,8 @@ class ArenaConfig:
             for replay with ``wbc view --episode``).
         observer: watches every tick (``wbc run --view``); trials then run one by one in this process (local
             executor only).
+        controller_configs: a ``--controller-config`` TOML file for a plug-in, by controller name.
+        io_files: an ``--io`` file for an ``onnx:PATH`` policy, by controller name.
     """
 
     controllers: tuple[str, ...]
@@ -66,6 +72,8 @@ class ArenaConfig:
     debug_truth: bool = False
     save_episodes: bool = False
     observer: TickObserver | None = None
+    controller_configs: Mapping[str, Path] = field(default_factory=dict)
+    io_files: Mapping[str, Path] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -81,6 +89,11 @@ class ArenaConfig:
             raise ConfigError("at least one seed is needed; pass --seeds 1 or more")
         if self.observer is not None and self.executor != "local":
             raise ConfigError("a live view (--view) watches trials played in this process: use the local executor")
+        for option, files in (("--controller-config", self.controller_configs), ("--io", self.io_files)):
+            for name in files:
+                if name not in self.controllers:
+                    raise ConfigError(f"{option} names {name}, which is not played; controllers: "
+                                      f"{', '.join(self.controllers)}")
 
 
 @dataclass(frozen=True)
@@ -102,13 +115,21 @@ class ArenaResult:
     physics_steps: int
 
 
-def _progress(total: int, initial: int, enabled: bool):
-    try:
-        from tqdm import tqdm
-    except ImportError:  # tqdm is a core dependency; stay usable without it
-        return None
-    return tqdm(total=total, initial=initial, disable=not enabled, unit="trial", file=sys.stderr,
-                dynamic_ncols=True, desc="trials")
+def _resolve(cfg: ArenaConfig) -> dict[str, ControllerSpec]:
+    """Each name resolved once, here: a policy or ONNX file is read and a plug-in imported in this process."""
+    specs = {}
+    for name in cfg.controllers:
+        files = {key: path for key, path in (("config", cfg.controller_configs.get(name)),
+                                             ("io", cfg.io_files.get(name))) if path is not None}
+        specs[name] = get_controller(name, **files)
+    return specs
+
+
+def _files_of(specs: Mapping[str, ControllerSpec]) -> dict[str, dict[str, str]]:
+    """The configuration files the controllers were resolved with, and their content hashes (for ``run.json``)."""
+    return {name: {"path": spec.config_file,
+                   "sha256": hashlib.sha256(Path(spec.config_file).read_bytes()).hexdigest()}
+            for name, spec in specs.items() if spec.config_file is not None}
 
 
 def run_arena(cfg: ArenaConfig) -> ArenaResult:
@@ -121,14 +142,18 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         ConfigError: bad options, or a controller for another robot than the scenario's.
         ResultsDirError: a results directory that belongs to another run, or that misses trials at the end.
     """
-    # each name resolved once, here: a policy file is read in this process only, and the tasks carry the spec
-    specs = {name: get_controller(name) for name in cfg.controllers}
+    # each name resolved once, here; the tasks carry the spec to the workers
+    specs = _resolve(cfg)
     scenario = load_scenario(cfg.scenario)
     for name, spec in specs.items():
-        robot = spec.robot
-        if robot is not None and robot != scenario.robot:
-            raise ConfigError(f"controller {name} drives {robot}, but scenario {cfg.scenario} is played by "
-                              f"{scenario.robot}; choose a controller for {scenario.robot}, or a scenario for {robot}")
+        if not spec.drives(scenario.robot):
+            robots = ", ".join(spec.robots or ())
+            raise ConfigError(f"controller {name} drives {robots}, but scenario {cfg.scenario} is played by "
+                              f"{scenario.robot}; choose a controller for {scenario.robot}, or a scenario for {robots}")
+        if spec.kind in ("plug-in", "entry point"):
+            # outside code is built once here, so a factory that raises or builds no controller fails before any
+            # trial, in this process, with its own message
+            spec.make(get_robot(scenario.robot, spec.arm_mode))
     bands = cfg.bands or scenario.bands
     for band in bands:
         if band not in scenario.bands:
@@ -152,6 +177,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "no_push": cfg.no_push,
         "debug_truth": cfg.debug_truth,
     }
+    files = _files_of(specs)
+    if files:  # only then, so that a run of registered controllers resumes a directory written before files existed
+        identity["controller_files"] = files
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume)
     done = store.done()
     def where(t: Trial, c: str) -> str | None:
@@ -161,11 +189,13 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         path.parent.mkdir(parents=True, exist_ok=True)
         return str(path)
 
+    # trial by trial, every controller in turn: pairs finish together and the progress estimate mixes fast and slow
+    # controllers from the start (the order does not change a result)
     tasks = [TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c))
-             for c in cfg.controllers for t in trials if (c, *t.key) not in done]
+             for t in trials for c in cfg.controllers if (c, *t.key) not in done]
     total = len(cfg.controllers) * len(trials)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
-    bar = _progress(total, total - len(tasks), cfg.progress)
+    bar = progress(total, total - len(tasks), cfg.progress)
     start = time.perf_counter()
     steps = 0
     physics_dt = MujocoRobotConfig().timestep

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver
 from wbc.arena.sim_trial import run_trial
-from wbc.control.registry import ControllerSpec
+from wbc.control.spec import ControllerSpec
 from wbc.optional import require
 from wbc.scenario.trial import Trial
 

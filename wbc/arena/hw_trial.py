@@ -66,7 +66,7 @@ class HardwareTrialConfig:
 
     Attributes:
         controller: a registry name (its variant for `arm_mode` is played: ``stand`` with the arm ``none`` is
-            ``stand-noarm``) or ``policy:PATH``.
+            ``stand-noarm``), ``policy:PATH``, ``onnx:PATH`` or a plug-in (``package.module:factory``, an entry point).
         scenario: the scenario file.
         trial: trial index within (band, seed).
         band: the band (None: the scenario's first).
@@ -83,6 +83,8 @@ class HardwareTrialConfig:
         safety: the safety layer's settings (None: the defaults, with the robot's SDK position table).
         settle_s: after a trip, how long the robot is held in damping, still read, before the link closes [s].
         contact_force: foot sensor reading at which the metrics' estimator trusts a foot as standing.
+        controller_config: a plug-in controller's ``--controller-config`` TOML file (None: none).
+        io_file: an ``onnx:PATH`` policy's I/O file (None: beside the model).
     """
 
     controller: str
@@ -101,6 +103,8 @@ class HardwareTrialConfig:
     safety: SafetyConfig | None = None
     settle_s: float = 1.0
     contact_force: float = 15.0
+    controller_config: Path | None = None
+    io_file: Path | None = None
 
     def __post_init__(self) -> None:
         if self.trial < 0 or self.seed < 0:
@@ -175,7 +179,7 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
         if cfg.seconds > trial.duration_s:
             raise ConfigError(f"--seconds must be in (0, {trial.duration_s}] s (the trial's length), got {cfg.seconds}")
         trial = dataclasses.replace(trial, duration_s=cfg.seconds)
-    named = get_controller(cfg.controller)
+    named = get_controller(cfg.controller, config=cfg.controller_config, io=cfg.io_file)
     spec = arm_variant(named, cfg.arm_mode if cfg.arm_mode is not None else named.arm_mode)
     robot_name = cfg.robot if cfg.robot is not None else scenario.robot
     if spec.robot is not None and spec.robot != robot_name:

@@ -17,7 +17,8 @@ from wbc.arena.episode import Episode, PushLog
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
 from wbc.control.protocol import TruthSwitch
-from wbc.control.registry import ControllerSpec, get_controller
+from wbc.control.registry import get_controller
+from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError, MissingCapabilityError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.scenario.trial import Trial

@@ -1,8 +1,8 @@
-"""The ``wbc`` command: ``run``, ``compare``, ``view``, ``analyze ...``, ``bench ...``, ``hw ...``, ``train``, ``demo``.
+"""The ``wbc`` command: ``run``, ``compare``, ``view``, ``controllers``, ``analyze ...``, ``bench ...``, ``hw ...``.
 
-`main` parses the command line (`wbc.cli.parser`), calls the tool the command names and hands its result to a
-printer (`wbc.cli.printers`). A `WbcError` ends the command with its message and exit status 2; anything else is a
-bug and keeps its traceback.
+Also ``check-controller``, ``train`` and ``demo``. `main` parses the command line (`wbc.cli.parser`), calls the tool
+the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the command with its
+message and exit status 2; anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -17,10 +17,13 @@ from pathlib import Path
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
+from wbc.arena.record import TrialRecord
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
 from wbc.cli.terminal_keys import TerminalKeys
-from wbc.control.registry import ControllerSpec, get_controller
+from wbc.control.check import CheckConfig, check_controller
+from wbc.control.onnx_policy import ONNX_PREFIX
+from wbc.control.registry import ControllerSpec, get_controller, list_controllers, takes_controller_config
 from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot
@@ -32,12 +35,10 @@ from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.tools.arm_momentum import arm_momentum_study
 from wbc.tools.bench import EmulatorCounts, bench_hw, bench_latency, bench_mpc, bench_sim, bench_sweep, bench_train
+from wbc.tools.demo import DEMO_CONTROLLERS, trial_to_watch
 from wbc.tools.tail import analyze_tail
 
 __all__ = ["FAULTS", "HANDLERS", "main"]
-
-DEMO_CONTROLLERS = ("stand", "stand-locked", "stand-noarm")
-"""``wbc demo``'s A/B: the standing baseline with the arm actuated, locked and absent."""
 
 FAULTS: dict[str, Fault] = {f.value: f for f in Fault}
 """``wbc hw emulate --fault NAME``: the emulator's faults by name."""
@@ -244,7 +245,9 @@ def _hw_run(args: argparse.Namespace) -> int:
     cfg = HardwareTrialConfig(controller=args.ctrl, scenario=Path(args.scenario), trial=args.trial, band=args.band,
                               seed=args.seed, seconds=args.seconds, robot=args.robot, arm_mode=args.arm,
                               target=(host, port), local=local, allow_hardware=args.allow_hardware,
-                              rate_hz=args.rate, out_dir=out, settle_s=args.settle)
+                              rate_hz=args.rate, out_dir=out, settle_s=args.settle,
+                              controller_config=Path(args.controller_config) if args.controller_config else None,
+                              io_file=Path(args.io) if args.io else None)
 
     def confirm(hardware: HardwareRobot, spec: ControllerSpec) -> None:
         if not is_loopback(host):
@@ -311,6 +314,27 @@ def _play_arena(cfg: ArenaConfig, *, as_json: bool) -> int:
     return 0
 
 
+def _controller_files(values: list[str] | None, controllers: tuple[str, ...], option: str,
+                      takes: Callable[[str], bool], kind: str) -> dict[str, Path]:
+    """``--controller-config`` / ``--io`` values (``[NAME=]FILE``) assigned to the controllers that take them."""
+    out: dict[str, Path] = {}
+    eligible = [c for c in controllers if takes(c)]
+    for value in values or ():
+        name, sep, file = value.partition("=")
+        if not sep or name not in controllers:  # no NAME= (a path may hold '=' too): the only one that takes it
+            if len(eligible) != 1:
+                raise ConfigError(f"{option} {value}: " + (
+                    f"no controller here is {kind}" if not eligible else
+                    f"several controllers are {kind} ({', '.join(eligible)}); write NAME=FILE"))
+            name, file = eligible[0], value
+        if not takes(name):
+            raise ConfigError(f"{option} {value}: {name} is not {kind}; those here: {', '.join(eligible) or 'none'}")
+        if name in out:
+            raise ConfigError(f"{option}: {name} is given two files ({out[name]}, {file}); give one")
+        out[name] = Path(file)
+    return out
+
+
 def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
     seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
     out = Path(args.out) if args.out else Path("runs") / (
@@ -320,12 +344,19 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
                       seeds=seeds, trials=args.trials, out_dir=out, executor=args.executor, workers=args.workers,
                       address=args.address, resume=args.resume, progress=not args.json and not args.quiet,
                       no_push=args.no_push, debug_truth=args.debug_truth, save_episodes=args.save_episodes,
-                      observer=live[1] if live is not None else None)
+                      observer=live[1] if live is not None else None,
+                      controller_configs=_controller_files(args.controller_config, controllers, "--controller-config",
+                                                           takes_controller_config, "a plug-in"),
+                      io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"))
     try:
         return _play_arena(cfg, as_json=args.json)
     finally:
         if live is not None:
             live[0].stop()
+
+
+def _is_onnx(name: str) -> bool:
+    return name.startswith(ONNX_PREFIX)
 
 
 def _live_observer(args: argparse.Namespace):
@@ -376,14 +407,14 @@ def _view(args: argparse.Namespace) -> int:
         if args.ctrl is None or args.scenario is None:
             raise ConfigError("wbc view needs CTRL --scenario FILE --trial I (play a trial), or --episode "
                               "RESULTS_DIR --trial I (replay a stored one)")
-        get_controller(args.ctrl)
+        spec = get_controller(args.ctrl, config=args.controller_config, io=args.io)
         scenario = load_scenario(args.scenario)
         trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
         if args.duration is not None:
             if not 0 < args.duration <= trial.duration_s:
                 raise ConfigError(f"--duration must be in (0, {trial.duration_s}] s, got {args.duration}")
             trial = dataclasses.replace(trial, duration_s=args.duration)
-        result = view_trial(trial, args.ctrl, cfg)
+        result = view_trial(trial, spec, cfg)
         what = f"{args.ctrl} on {trial.scenario} band {trial.band} seed {trial.seed} trial {trial.index}"
         printers.print_viewed_trial(what, result.trial_record)
     if result.recording is not None:
@@ -392,15 +423,42 @@ def _view(args: argparse.Namespace) -> int:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    """A short A/B: the standing baseline with the arm actuated, locked and absent, on the push scenario."""
+    """The A/B the arena is for: mpc against learned on the same push trials, paired; the tail analysis first."""
     printers.print_demo_header(DEMO_CONTROLLERS, scenario=args.scenario, trials=args.trials, seeds=args.seeds)
+    printers.print_tail(analyze_tail(get_robot("a1-wx200", "actuated")))
+    print(flush=True)
     cfg = ArenaConfig(controllers=DEMO_CONTROLLERS, scenario=Path(args.scenario), seeds=tuple(range(args.seeds)),
                       trials=args.trials, out_dir=Path(args.out or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}"),
-                      progress=not args.quiet)
-    _play_arena(cfg, as_json=False)
-    print()
-    printers.print_tail(analyze_tail(get_robot("a1-wx200", "actuated")))
+                      workers=args.workers, progress=not args.quiet)
+    result = run_arena(cfg)
+    printers.print_arena(result)
+    records = TrialRecord.read_csv(result.out_dir / "trials.csv")
+    printers.print_demo_end(result.out_dir, trial_to_watch(records, DEMO_CONTROLLERS), scenario=args.scenario)
     return 0
+
+
+def _controllers(args: argparse.Namespace) -> int:
+    rows = list_controllers()
+    if args.json:
+        printers.print_json([dataclasses.asdict(r) for r in rows])
+    else:
+        printers.print_controllers(rows)
+    return 0
+
+
+def _check_controller(args: argparse.Namespace) -> int:
+    if not args.seconds > 0:
+        raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
+    for robot in args.robot or ():
+        get_robot(robot)  # an unknown name fails here, listing the valid ones
+    spec = get_controller(args.name, config=args.controller_config, io=args.io)
+    result = check_controller(spec, CheckConfig(seconds=args.seconds, strict_timing=args.strict_timing,
+                                                robots=tuple(args.robot) if args.robot else None))
+    if args.json:
+        printers.print_json(result.as_dict())
+    else:
+        printers.print_controller_check(result)
+    return 0 if result.passed else 1
 
 
 HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
@@ -420,6 +478,8 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "compare": _compare,
     "view": _view,
     "demo": _demo,
+    "controllers": _controllers,
+    "check-controller": _check_controller,
 }
 """What each command does, by the ``handler`` name its parser sets."""
 

@@ -16,7 +16,7 @@ from wbc.learned.train.stages import BASELINES, TASKS
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import ROBOTS
 
-__all__ = ["add_arena_options", "build_parser"]
+__all__ = ["add_arena_options", "add_controller_file_options", "build_parser"]
 
 _TRANSPORT_HELP = (f"the link's datagram channel, one of: {', '.join(TRANSPORTS)} (default udp: our socket; sdk: "
                    "the vendor's Go1 SDK, installed with the hardware extra, carrying the same checked frames)")
@@ -44,6 +44,21 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
                    help="watch the trials live in the browser (meshcat); they then play one by one in this process")
     p.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
     p.add_argument("--speed", type=float, default=1.0, help="with --view: 1 real time, 0.25 slow motion, 0 flat out")
+    add_controller_file_options(p, repeatable=True)
+
+
+def add_controller_file_options(p: argparse.ArgumentParser, *, repeatable: bool) -> None:
+    """``--controller-config`` (a plug-in's table) and ``--io`` (an ONNX policy's I/O file)."""
+    which = " (NAME=FILE names the controller when several could take it; repeatable)" if repeatable else ""
+    kw = {"action": "append", "metavar": "[NAME=]FILE.toml"} if repeatable else {"metavar": "FILE.toml"}
+    p.add_argument("--controller-config", default=None, **kw,
+                   help=f"a TOML file whose table a plug-in's factory is called with{which}")
+    p.add_argument("--io", default=None, **kw,
+                   help=f"the I/O file of an onnx:PATH policy (default: PATH with the suffix .toml){which}")
+
+
+_NAMES_HELP = (f"{', '.join(CONTROLLERS)}; policy:PATH (an exported policy file), onnx:PATH (an ONNX policy), "
+               "package.module:factory (a plug-in), or an installed plug-in's name (`wbc controllers` lists them)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -165,8 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
                            "(damping, latched: the trial ends), p marks a push given by hand. Results go to a "
                            "results directory of the arena's format. A target outside 127.0.0.0/8 needs "
                            "--allow-hardware and a typed confirmation (or --yes).")
-    hwrun.add_argument("ctrl", help=f"controller: one of {', '.join(CONTROLLERS)} (its variant for --arm is played), "
-                       "or policy:PATH")
+    hwrun.add_argument("ctrl", help=f"controller (its variant for --arm is played): one of {_NAMES_HELP}")
     hwrun.add_argument("--robot", default=None,
                        help=f"one of: {', '.join(HARDWARE_ROBOTS)} (default: the scenario's robot)")
     hwrun.add_argument("--arm", default=None,
@@ -192,6 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
     hwrun.add_argument("--view", action="store_true",
                        help="watch the robot live in the browser (meshcat), drawn from its own sensors")
     hwrun.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
+    add_controller_file_options(hwrun, repeatable=False)
     hwrun.set_defaults(handler="hw run")
 
     tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
@@ -211,12 +226,11 @@ def build_parser() -> argparse.ArgumentParser:
     tr.set_defaults(handler="train")
 
     run = sub.add_parser("run", help="play a scenario with one controller")
-    run.add_argument("controller", help=f"one of: {', '.join(CONTROLLERS)}, or policy:PATH (an exported policy file)")
+    run.add_argument("controller", help=f"one of: {_NAMES_HELP}")
     add_arena_options(run)
     run.set_defaults(handler="run")
     compare = sub.add_parser("compare", help="play a scenario with several controllers on the same trials")
-    compare.add_argument("controllers", nargs="+",
-                         help=f"two or more of: {', '.join(CONTROLLERS)}, policy:PATH (an exported policy file)")
+    compare.add_argument("controllers", nargs="+", help=f"two or more of: {_NAMES_HELP}")
     add_arena_options(compare)
     compare.set_defaults(handler="compare")
 
@@ -225,8 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
                           "arm, terrain, push arrow, contact forces, command, MPC plan), or replay a stored "
                           "episode (--episode). With --record only, nothing is served: the trial is written as one "
                           "self-contained HTML file. Keys while live (then Enter): p pause, s step, + / - speed, q.")
-    view.add_argument("ctrl", nargs="?", default=None,
-                      help=f"controller: one of {', '.join(CONTROLLERS)}, or policy:PATH")
+    view.add_argument("ctrl", nargs="?", default=None, help=f"controller: one of {_NAMES_HELP}")
     view.add_argument("--scenario", default=None, help="scenario file (e.g. scenarios/push.toml)")
     view.add_argument("--trial", type=int, required=True, help="trial index within (band, seed)")
     view.add_argument("--seed", type=int, default=None, help="seed (default 0, or the run's first)")
@@ -246,13 +259,36 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--live", action="store_true", help="with --record: also stream live")
     view.add_argument("--open", action="store_true", help="open the page in the default browser")
     view.add_argument("--wait", action="store_true", help="start once a browser has opened the page")
+    add_controller_file_options(view, repeatable=False)
     view.set_defaults(handler="view")
 
-    demo = sub.add_parser("demo", help="the main job: a short A/B comparison on the push scenario; tail analysis")
+    demo = sub.add_parser("demo", help="the main job: mpc against learned on push trials, paired; tail analysis",
+                          description="The A/B the arena is for: the model-based controller (mpc) and the learned "
+                          "policy (learned) play the same push trials; the table, the paired differences with 95 % "
+                          "intervals, the report directory with its plots, and how to watch a trial in the browser.")
     demo.add_argument("--scenario", default="scenarios/push.toml")
-    demo.add_argument("--trials", type=int, default=4, help="trials per band and seed")
-    demo.add_argument("--seeds", type=int, default=2)
+    demo.add_argument("--trials", type=int, default=4, help="trials per band and seed (default 4)")
+    demo.add_argument("--seeds", type=int, default=2, help="seeds (default 2)")
+    demo.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     demo.add_argument("--out", default=None, help="results directory (default: runs/demo-<time>)")
-    demo.add_argument("--quiet", action="store_true", help="no progress bar")
+    demo.add_argument("--quiet", action="store_true", help="no progress output")
     demo.set_defaults(handler="demo")
+
+    ctrls = sub.add_parser("controllers", help="list the controllers: the registry's, the name forms, installed "
+                           "plug-ins (entry points of the wbc.controllers group) with their summaries")
+    ctrls.add_argument("--json", action="store_true", help="print JSON")
+    ctrls.set_defaults(handler="controllers")
+    chk = sub.add_parser("check-controller", help="check a controller against the controller contract",
+                         description="Build the controller for every robot and arm mode it claims and check its "
+                         "rate, its outputs (shape, finiteness), reset determinism, that it never reads simulator "
+                         "truth, and act()'s time against its period (p50 / p99). Exit status 1 if a check fails.")
+    chk.add_argument("name", help=f"the controller: {_NAMES_HELP}")
+    add_controller_file_options(chk, repeatable=False)
+    chk.add_argument("--robot", action="append", default=None, help=f"check on this robot only (repeatable; one of: "
+                     f"{', '.join(ROBOTS)}; default: every robot it claims)")
+    chk.add_argument("--seconds", type=float, default=0.5, help="closed-loop run per robot and arm mode [s] "
+                     "(default 0.5)")
+    chk.add_argument("--strict-timing", action="store_true", help="also fail when act's p99 exceeds the period")
+    chk.add_argument("--json", action="store_true", help="print JSON")
+    chk.set_defaults(handler="check-controller")
     return p

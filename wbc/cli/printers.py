@@ -16,17 +16,20 @@ from wbc.arena.compare import ArenaResult
 from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table
+from wbc.control.check import ControllerCheck
+from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
 from wbc.tools.arm_momentum import ArmMomentumTrial
 from wbc.tools.bench.hw import EmulatorCounts
 from wbc.tools.bench.references import MPC_REFERENCE_TARGETS, REFERENCE_TARGETS, TRAIN_TARGET
+from wbc.tools.demo import TrialToWatch
 from wbc.tools.tail import TailAnalysis
 from wbc.types import RobotState
 
 __all__ = ["print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
-           "print_bench_sweep", "print_bench_train", "print_demo_header", "print_emulator_counts",
-           "print_emulator_started", "print_hw_check", "print_hw_run", "print_json", "print_recording", "print_tail",
-           "print_trained", "print_viewed_trial"]
+           "print_bench_sweep", "print_bench_train", "print_controller_check", "print_controllers",
+           "print_demo_end", "print_demo_header", "print_emulator_counts", "print_emulator_started", "print_hw_check",
+           "print_hw_run", "print_json", "print_recording", "print_tail", "print_trained", "print_viewed_trial"]
 
 
 def print_json(value: object) -> None:
@@ -155,8 +158,61 @@ def print_arena(result: ArenaResult) -> None:
 
 def print_demo_header(controllers: Sequence[str], *, scenario: str, trials: int, seeds: int) -> None:
     """The line that opens ``wbc demo``: who plays which trials."""
-    print(f"A/B demo: {', '.join(controllers)} on {scenario}, {trials} trials x {seeds} seeds "
-          "per band (the same trials for every controller)\n")
+    print(f"A/B demo: {' against '.join(controllers)} on {scenario}, {trials} trials x {seeds} seeds "
+          "per band (the same trials for every controller)\n", flush=True)
+
+
+def print_demo_end(out_dir: Path, watch: TrialToWatch | None, *, scenario: str) -> None:
+    """How ``wbc demo`` ends, after the table: the report and its plots, then one command to watch a trial."""
+    plots = sorted(p.name for p in Path(out_dir).glob("*.png"))
+    print(f"report: {Path(out_dir) / 'report.md'}; plots: {', '.join(plots) if plots else 'none'}")
+    if watch is not None:
+        print(f"watch it: wbc view {watch.controller} --scenario {scenario} --band {watch.band} --seed {watch.seed} "
+              f"--trial {watch.trial}   ({watch.why}; opens a meshcat page on 127.0.0.1)")
+
+
+def print_controllers(rows: Sequence[ControllerListing]) -> None:
+    """``wbc controllers``: the registry's, the name forms, installed plug-ins with their summaries."""
+    def robots(r: ControllerListing) -> str:
+        return "any robot" if r.robots is None else ", ".join(r.robots)
+
+    def table(selected: Sequence[ControllerListing], with_target: bool) -> None:
+        width = max(len(r.name) for r in selected)
+        for r in selected:
+            arms = "/".join(r.arm_modes) or "-"
+            target = f"  ({r.target})" if with_target else ""
+            print(f"  {r.name:<{width}}  {arms:<9} {robots(r) if r.loaded else '':<10}  {r.summary}{target}")
+
+    print("registered controllers:")
+    table([r for r in rows if r.kind == "registry"], with_target=False)
+    print("\nnames of other forms:")
+    forms = {NAME_FORMS[0]: "an exported policy file (.npz + .json), robot and arm mode read from it",
+             NAME_FORMS[1]: "an ONNX policy; its I/O file is PATH with the suffix .toml, or --io FILE",
+             NAME_FORMS[2]: "a plug-in: the factory builds the controller from the robot description "
+                            "(and the --controller-config table)"}
+    width = max(map(len, forms))
+    for form, what in forms.items():
+        print(f"  {form:<{width}}  {what}")
+    plugins = [r for r in rows if r.kind == "entry point"]
+    print("\ninstalled plug-ins (entry points of the wbc.controllers group):")
+    if plugins:
+        table(plugins, with_target=True)
+    else:
+        print("  none installed")
+
+
+def print_controller_check(result: ControllerCheck) -> None:
+    """``wbc check-controller``: every check on every robot and arm mode, then the verdict."""
+    marks = {True: "ok  ", False: "FAIL", None: "-   "}
+    print(f"controller {result.controller}")
+    where = None
+    for o in result.outcomes:
+        if (o.robot, o.arm_mode) != where:
+            where = (o.robot, o.arm_mode)
+            print(f"\n  {o.robot}, arm {o.arm_mode}")
+        print(f"    {marks[o.passed]} {o.check:<7} {o.detail}")
+    bad = len([o for o in result.outcomes if o.passed is not True])
+    print(f"\n{'passed' if result.passed else f'FAILED: {bad} of {len(result.outcomes)} checks'}")
 
 
 def print_trained(result: Mapping[str, object], *, task: str, stage: int, baseline: str | None) -> None:

@@ -1,54 +1,43 @@
-"""The explicit registry of named controllers (the protocol they implement is `wbc.control.protocol.Controller`).
+"""The explicit registry of named controllers, and `get_controller`, which resolves every name the arena accepts.
 
 A controller sees only what a real robot gives it (`RobotState`) and the operator's `VelocityCommand`; it never sees
 the scenario, the push schedule or simulator truth. Each registered controller names the arm mode it drives, so
 ``stand-noarm`` runs on the robot without its arm while ``stand`` holds an actuated arm.
 
-Besides the registry's names, ``policy:PATH`` runs any exported policy file (``wbc train``'s ``policy.npz``, a
-baseline's, a composite) through `LearnedController`; its robot and arm mode come from the file, so a run of your own
-meets the shipped controllers on the same trials: ``wbc compare learned policy:runs/train/push-stage3-ppo/policy``.
+Besides the registry's names, `get_controller` resolves:
+
+- ``policy:PATH``: an exported policy file (``wbc train``'s ``policy.npz``, a baseline's, a composite) run by
+  `LearnedController`; its robot and arm mode come from the file, so a run of your own meets the shipped controllers
+  on the same trials: ``wbc compare learned policy:runs/train/push-stage3-ppo/policy``.
+- ``onnx:PATH``: a policy exported to ONNX by another trainer, with the I/O file beside it
+  (`wbc.control.onnx_policy`).
+- ``package.module:factory``: a plug-in, imported at the moment it is named (`wbc.control.plugin`).
+- the name of an installed ``wbc.controllers`` entry point (a plug-in a package declares).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
-from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
-from wbc.control.protocol import Controller
+from wbc.control.errors import PluginConfigError, PluginError
+from wbc.control.onnx_policy import ONNX_PREFIX, onnx_spec
+from wbc.control.plugin import entry_points, is_plugin_name, load_plugin, plugin_spec
+from wbc.control.spec import ControllerSpec
 from wbc.control.stand import StandController
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.composite_policy import load_composite
 from wbc.learned.policy.controller import LearnedController
 from wbc.mpc.controller import MpcController
-from wbc.robots.description import RobotDescription, check_arm_mode
+from wbc.robots.description import check_arm_mode
 
-__all__ = ["ControllerSpec", "CONTROLLERS", "POLICY_PREFIX", "arm_variant", "get_controller"]
+__all__ = ["CONTROLLERS", "NAME_FORMS", "ONNX_PREFIX", "POLICY_PREFIX", "ControllerListing", "ControllerSpec",
+           "arm_variant", "get_controller", "list_controllers", "takes_controller_config"]
 
 POLICY_PREFIX = "policy:"
 """``policy:PATH`` names the exported policy at PATH (the .npz, the .json or their stem)."""
-
-
-@dataclass(frozen=True)
-class ControllerSpec:
-    """A registry entry.
-
-    Attributes:
-        name: registry name.
-        arm_mode: arm mode of the robot this controller drives (``none``, ``locked``, ``actuated``).
-        make: builds the controller for a robot description.
-        summary: one line for ``--help`` and reports.
-        robot: the only robot it can drive (a policy file's), or None for any robot.
-    """
-
-    name: str
-    arm_mode: str
-    make: Callable[[RobotDescription], Controller]
-    summary: str
-    robot: str | None = None
-
-    def __post_init__(self) -> None:
-        check_arm_mode(self.arm_mode)
 
 
 CONTROLLERS: dict[str, ControllerSpec] = {
@@ -71,18 +60,45 @@ CONTROLLERS: dict[str, ControllerSpec] = {
 }
 
 
-def get_controller(name: str) -> ControllerSpec:
-    """Look a controller up by name, or read the policy file a ``policy:PATH`` name points to.
+NAME_FORMS = (f"{POLICY_PREFIX}PATH", f"{ONNX_PREFIX}PATH", "package.module:factory")
+"""The forms of controller names besides the registry's and the entry points'."""
+
+
+def get_controller(name: str, *, config: str | Path | None = None, io: str | Path | None = None) -> ControllerSpec:
+    """Resolve a controller name: the registry, ``policy:PATH``, ``onnx:PATH``, a plug-in or an entry point.
+
+    Args:
+        name: the name.
+        config: a ``--controller-config`` TOML file, whose table the plug-in's factory is called with (plug-ins
+            only).
+        io: the I/O file of an ``onnx:PATH`` policy (default: beside the model).
 
     Raises:
-        UnknownNameError: an unknown name (the message lists the valid ones).
+        UnknownNameError: an unknown name (the message lists the registry's names, the entry points and the forms).
         PolicyFileError: a ``policy:`` file that is missing or malformed (the message names the file and field).
+        OnnxIoError, OnnxModelError: an ``onnx:`` policy's I/O file or model is missing, malformed or mismatched.
+        PluginError: a plug-in that cannot be imported or whose factory does not fit (each kind its own subclass).
+        PluginConfigError: `config` for a controller that is not a plug-in.
+        ConfigError: `io` for a controller that is not an ONNX policy.
     """
+    if io is not None and not name.startswith(ONNX_PREFIX):
+        raise ConfigError(f"--io {io}: an I/O file describes an onnx:PATH policy, and {name} is not one")
+    if config is not None and not takes_controller_config(name):
+        raise PluginConfigError(f"--controller-config {config}: {name} takes no configuration table; it goes to "
+                                "plug-ins (package.module:factory, or an entry point's name)")
     if name.startswith(POLICY_PREFIX):
         return _policy_spec(name)
-    if name not in CONTROLLERS:
-        raise UnknownNameError("controller", name, (*CONTROLLERS, f"{POLICY_PREFIX}PATH"))
-    return CONTROLLERS[name]
+    if name.startswith(ONNX_PREFIX):
+        return onnx_spec(name, name[len(ONNX_PREFIX):], io)
+    if name in CONTROLLERS:
+        return CONTROLLERS[name]
+    if is_plugin_name(name):
+        return plugin_spec(name, name, config_file=config)
+    installed = entry_points()
+    if name in installed:
+        ep = installed[name]
+        return plugin_spec(name, f"{ep.module}:{ep.attr}", kind="entry point", config_file=config)
+    raise UnknownNameError("controller", name, (*CONTROLLERS, *installed, *NAME_FORMS))
 
 
 def _policy_spec(name: str) -> ControllerSpec:
@@ -90,7 +106,8 @@ def _policy_spec(name: str) -> ControllerSpec:
     policy = load_composite(path)  # the whole file is read and checked here, once, before any trial starts
     meta = policy.meta
     return ControllerSpec(name, meta["arm_mode"], functools.partial(LearnedController, policy_path=path, policy=policy),
-                          f"policy file {path} ({meta['task']} task, stage {meta['stage']})", robot=meta["robot"])
+                          f"policy file {path} ({meta['task']} task, stage {meta['stage']})", robots=(meta["robot"],),
+                          kind="policy file")
 
 
 def arm_variant(spec: ControllerSpec, arm_mode: str) -> ControllerSpec:
@@ -98,7 +115,8 @@ def arm_variant(spec: ControllerSpec, arm_mode: str) -> ControllerSpec:
 
     Variants are the entries built by the same factory (``stand``, ``stand-locked`` and ``stand-noarm`` are all the
     stand controller), so a hardware trial can name a controller as the arena does and play it on the arm the robot
-    has: ``stand`` with the arm ``none`` is ``stand-noarm``.
+    has: ``stand`` with the arm ``none`` is ``stand-noarm``. A plug-in that claims `arm_mode` among its arm modes
+    (`ControllerSpec.arm_modes`) is played in that mode.
 
     Raises:
         UnknownNameError: `arm_mode` is not an arm mode.
@@ -107,6 +125,8 @@ def arm_variant(spec: ControllerSpec, arm_mode: str) -> ControllerSpec:
     check_arm_mode(arm_mode)
     if spec.arm_mode == arm_mode:
         return spec
+    if arm_mode in spec.arm_modes:  # a plug-in that claims several arm modes is its own variant
+        return dataclasses.replace(spec, arm_mode=arm_mode)
     variants = [s for s in CONTROLLERS.values() if s.make is spec.make]
     for variant in variants:
         if variant.arm_mode == arm_mode:
@@ -114,3 +134,56 @@ def arm_variant(spec: ControllerSpec, arm_mode: str) -> ControllerSpec:
     have = ", ".join(f"{s.name} ({s.arm_mode})" for s in variants) or f"{spec.name} ({spec.arm_mode})"
     raise ConfigError(f"controller {spec.name} drives the arm mode {spec.arm_mode}, and no variant of it drives "
                       f"{arm_mode!r} (variants: {have}); choose the arm mode it was made for, or another controller")
+
+
+def takes_controller_config(name: str) -> bool:
+    """Whether `name` is a plug-in's (a ``module:factory`` or an entry point), the only kind a config table goes to."""
+    return name not in CONTROLLERS and not name.startswith((POLICY_PREFIX, ONNX_PREFIX))
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControllerListing:
+    """One row of ``wbc controllers``.
+
+    Attributes:
+        name: the controller's name.
+        kind: ``registry`` or ``entry point``.
+        arm_modes: the arm modes it drives (the first is played); empty when it could not be loaded.
+        robots: the robots it drives, or None for every robot.
+        summary: its one-line summary, or why it could not be loaded.
+        target: an entry point's ``module:factory``, else None.
+        loaded: False for an entry point whose plug-in could not be loaded.
+    """
+
+    name: str
+    kind: str
+    arm_modes: tuple[str, ...]
+    robots: tuple[str, ...] | None
+    summary: str
+    target: str | None = None
+    loaded: bool = True
+
+
+def list_controllers() -> list[ControllerListing]:
+    """The registry's controllers, then every installed ``wbc.controllers`` entry point.
+
+    Each entry point is imported to read its summary; one that fails to load is listed with its error instead of
+    stopping the listing.
+    """
+    rows = [ControllerListing(name=s.name, kind="registry", arm_modes=s.arm_modes, robots=s.robots, summary=s.summary)
+            for s in CONTROLLERS.values()]
+    for name, ep in sorted(entry_points().items()):
+        target = f"{ep.module}:{ep.attr}"
+        if name in CONTROLLERS:
+            rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=target,
+                                          summary=f"not usable: the registry's {name!r} has this name", loaded=False))
+            continue
+        try:
+            plugin, _ = load_plugin(target)
+        except PluginError as exc:
+            rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=target,
+                                          summary=f"cannot be loaded: {exc}", loaded=False))
+            continue
+        rows.append(ControllerListing(name=name, kind="entry point", arm_modes=plugin.arm_modes, robots=plugin.robots,
+                                      summary=plugin.summary, target=target))
+    return rows

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from wbc.arena.record import TrialRecord
 from wbc.arena.sim_trial import run_trial
+from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError
 from wbc.scenario.trial import Trial
 from wbc.viz.live import LiveObserver, LiveViewer
@@ -97,8 +98,9 @@ def _linger(cfg: ViewConfig, player: Player) -> None:
             pass
 
 
-def view_trial(trial: Trial, controller: str, cfg: ViewConfig) -> ViewResult:
-    """Play `trial` with `controller` in simulation, live in the browser and/or into a recording."""
+def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig) -> ViewResult:
+    """Play `trial` with `controller` (resolved, or a name) in simulation, live in the browser and/or recorded."""
+    name = controller if isinstance(controller, str) else controller.name
     server = viewer = player = None
     if cfg.live:
         server, viewer, player = _start_live(cfg)
@@ -107,7 +109,7 @@ def view_trial(trial: Trial, controller: str, cfg: ViewConfig) -> ViewResult:
         row, _ = run_trial(trial, controller, observer=observer)
         written = None
         if cfg.record is not None:
-            written = observer.recordings[-1].save(cfg.record, title=f"{controller}: {trial.scenario} "
+            written = observer.recordings[-1].save(cfg.record, title=f"{name}: {trial.scenario} "
                                                    f"{trial.band} seed {trial.seed} trial {trial.index}")
         if cfg.live:
             _linger(cfg, player)

@@ -11,12 +11,13 @@ from wbc.optional import require
 
 torch = require("torch")
 
-__all__ = ["TorchPolicy"]
+__all__ = ["TorchPolicy", "sequential"]
 
 _ACT = {"elu": torch.nn.ELU, "relu": torch.nn.ReLU, "tanh": torch.nn.Tanh, "identity": torch.nn.Identity}
 
 
-def _sequential(layers, activation: str):
+def sequential(layers, activation: str):
+    """A frozen-weight ``torch.nn.Sequential`` of the (weight, bias) `layers`, `activation` between them (float32)."""
     mods = []
     for i, (w, b) in enumerate(layers):
         lin = torch.nn.Linear(w.shape[1], w.shape[0])
@@ -41,12 +42,12 @@ class TorchPolicy(torch.nn.Module):
         eps = float(meta["normalizer_eps"])
         self.register_buffer("obs_mean", torch.as_tensor(a["obs_mean"], dtype=torch.float32))
         self.register_buffer("obs_div", torch.as_tensor(a["obs_std"], dtype=torch.float32) + eps)
-        self.mlp = _sequential(policy.layers("policy"), meta["activation"])
+        self.mlp = sequential(policy.layers("policy"), meta["activation"])
         self.uses_extrinsics = meta.get("extrinsics") is not None
         if self.uses_extrinsics:
             self.register_buffer("priv_mean", torch.as_tensor(a["privileged_mean"], dtype=torch.float32))
             self.register_buffer("priv_div", torch.as_tensor(a["privileged_std"], dtype=torch.float32) + eps)
-            self.encoder = _sequential(policy.layers("encoder"), meta["activation"])
+            self.encoder = sequential(policy.layers("encoder"), meta["activation"])
         self.requires_grad_(False)
         self.eval()
 

@@ -1,0 +1,96 @@
+"""The main job's pieces: progress that a CI log can read, the trial the demo suggests watching, and the template
+controller entering the arena from a checkout exactly as the README shows it."""
+
+import io
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from wbc.arena.progress import LineProgress, progress
+from wbc.arena.record import TrialRecord
+from wbc.tools.demo import trial_to_watch
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+class _Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_progress_in_a_log_is_whole_lines_at_each_tenth_and_after_a_silence():
+    out, clock = io.StringIO(), _Clock()
+    bar = LineProgress(20, 0, stream=out, every_s=30.0, clock=clock)
+    for _ in range(20):
+        clock.t += 1.0
+        bar.update()
+    bar.close()
+    lines = out.getvalue().splitlines()
+    assert lines[0] == "trials: 0/20 done, 20 to play"
+    assert lines[1] == "trials: 2/20 (10 %), 2 s elapsed, about 18 s left"
+    assert lines[-1] == "trials: 20/20 (100 %), 20 s elapsed"
+    assert len(lines) == 11 and "\r" not in out.getvalue()
+    # a slow run still says something at least every `every_s`, and a stop says where it stopped
+    out, clock = io.StringIO(), _Clock()
+    bar = LineProgress(1000, 10, stream=out, every_s=30.0, clock=clock)
+    clock.t = 45.0
+    bar.update()
+    bar.close()
+    lines = out.getvalue().splitlines()
+    assert lines[1] == "trials: 11/1000 (1 %), 45 s elapsed, about 12.4 h left"
+    assert lines[-1] == "trials: stopped at 11/1000 after 45 s"
+    # a stream that is not a terminal gets lines, a disabled display nothing
+    assert isinstance(progress(5, 0, True, io.StringIO()), LineProgress)
+    assert progress(5, 0, False, io.StringIO()) is None
+
+
+def _record(controller, trial, *, success=True, fall=math.nan, force=250.0, roll=5.0):
+    return TrialRecord(controller=controller, scenario="push", scenario_hash="h", band="ood", seed=0, trial=trial,
+                       success=success, ttf=1.0 if success else fall / 20.0, fall_time_s=fall, vlin_err=0.1,
+                       vang_err=0.1, max_roll_deg=roll, max_pitch_deg=3.0, energy_j=100.0, arm_travel_rad=1.0,
+                       push_force_n=force, n_pushes=4, vx_cmd=0.0, vy_cmd=0.0, yaw_rate_cmd=0.0, friction=0.9,
+                       payload_kg=0.0, fallbacks=0, wbc_failures=0, debug_truth=False, wall_s=1.0)
+
+
+def test_the_demo_suggests_the_trial_the_controllers_ended_differently():
+    records = [_record("mpc", 0), _record("learned", 0), _record("mpc", 1),
+               _record("learned", 1, success=False, fall=7.25), _record("mpc", 2, force=390.0)]
+    watch = trial_to_watch(records, ("mpc", "learned"))
+    assert (watch.controller, watch.band, watch.seed, watch.trial) == ("learned", "ood", 0, 1)
+    assert watch.why == "learned fell at 7.2 s where mpc stood"
+    # all alike: the strongest push, with whoever rolled most
+    records = [_record("mpc", 0, force=300.0, roll=4.0), _record("learned", 0, force=300.0, roll=9.0),
+               _record("mpc", 1, force=380.0, roll=6.0), _record("learned", 1, force=380.0, roll=3.0)]
+    watch = trial_to_watch(records, ("mpc", "learned"))
+    assert (watch.controller, watch.trial) == ("mpc", 1) and "380 N" in watch.why
+    assert trial_to_watch([], ("mpc", "learned")) is None
+
+
+def test_the_template_enters_the_arena_from_a_checkout_as_the_readme_shows(tmp_path):
+    """``wbc compare examples.my_controller:make stand --scenario scenarios/push.toml`` from the checkout's root.
+
+    Run as the console script runs: the working directory is not on sys.path (only the package is importable), so
+    the plug-in is found in the working directory by the loader itself; stdout is not a terminal, so the progress is
+    plain lines.
+    """
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "wbc").symlink_to(ROOT / "wbc")
+    script = tmp_path / "wbc_script.py"
+    script.write_text("import sys\nfrom wbc.cli.main import main\nsys.exit(main())\n")
+    env = {**os.environ, "PYTHONPATH": str(site)}
+    out = tmp_path / "run"
+    proc = subprocess.run([sys.executable, str(script), "compare", "examples.my_controller:make", "stand",
+                           "--scenario", "scenarios/push.toml", "--trials", "1", "--band", "in", "--workers", "1",
+                           "--out", str(out)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert "examples.my_controller:make" in proc.stdout and "paired differences" in proc.stdout
+    assert "trials: 2/2 (100 %)" in proc.stderr and "\r" not in proc.stderr
+    records = TrialRecord.read_csv(out / "trials.csv")
+    assert {r.controller for r in records} == {"examples.my_controller:make", "stand"}
+    assert all(r.success for r in records)

@@ -1,0 +1,262 @@
+"""ONNX policies (``onnx:PATH``): the I/O file's validation, the observation and joint map, the pi3 round trip.
+
+Small linear networks written with the ``onnx`` package check what the controller feeds and how it reads the output
+(terms, scales, history, the network's joint order mapped to the house order, PD gains); the shipped pi3 exported with
+torch and run by onnxruntime must act as the numpy controller does.
+"""
+
+import math
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.record import TrialRecord
+from wbc.cli.main import main
+from wbc.control import CheckConfig, check_controller
+from wbc.control.errors import OnnxIoError, OnnxModelError
+from wbc.control.onnx_io import load_onnx_io
+from wbc.control.registry import get_controller
+from wbc.learned.policy.shipped import WEIGHTS_DIR
+from wbc.robots.registry import get_robot
+from wbc.types import RobotState, VelocityCommand
+
+onnx = pytest.importorskip("onnx")
+pytest.importorskip("onnxruntime")
+
+LEGS = ("FR", "FL", "RR", "RL")
+# Isaac Lab's order for a Unitree quadruped: by joint type, then FL, FR, RL, RR
+ISAAC_ORDER = [f"{leg}_{part}_joint" for part in ("hip", "thigh", "calf") for leg in ("FL", "FR", "RL", "RR")]
+
+IO = """
+# a 12-joint policy with its joints in Isaac Lab's order
+[policy]
+robot = "a1-wx200"
+arm_mode = "none"
+rate_hz = 50.0
+joints = {joints}
+
+[observation]
+history = {history}
+
+[[observation.terms]]
+name = "base_ang_vel"
+scale = 0.25
+
+[[observation.terms]]
+name = "velocity_commands"
+scale = [2.0, 2.0, 0.25]
+
+[[observation.terms]]
+name = "joint_pos_rel"
+
+[[observation.terms]]
+name = "last_action"
+
+[action]
+kind = "joint_position"
+scale = 0.5
+clip = 100.0
+
+[pd]
+kp = [30.0, 30.0, 30.0, 30.0, 40.0, 40.0, 40.0, 40.0, 50.0, 50.0, 50.0, 50.0]
+kd = 1.5
+"""
+FRAME = 3 + 3 + 12 + 12  # the I/O file's terms
+
+
+def _io(history: int = 1) -> str:
+    joints = "[" + ", ".join(f'"{j}"' for j in ISAAC_ORDER) + "]"
+    return textwrap.dedent(IO).format(joints=joints, history=history)
+
+
+def _linear_model(path, weight: np.ndarray, bias: np.ndarray | None = None, *, input_name: str = "obs") -> None:
+    """An ONNX network ``actions = obs @ weight + bias`` (float32, batch axis of 1)."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    d, n = weight.shape
+    bias = np.zeros(n) if bias is None else bias
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", [input_name, "w"], ["y"]), helper.make_node("Add", ["y", "b"], ["actions"])],
+        "linear",
+        [helper.make_tensor_value_info(input_name, TensorProto.FLOAT, [1, d])],
+        [helper.make_tensor_value_info("actions", TensorProto.FLOAT, [1, n])],
+        [numpy_helper.from_array(weight.astype(np.float32), "w"),
+         numpy_helper.from_array(bias.astype(np.float32), "b")],
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    onnx.save(model, str(path))
+
+
+def _state(q: np.ndarray, *, gyro=(0.0, 0.0, 0.0), tick: int = 0) -> RobotState:
+    n = q.shape[0]
+    return RobotState(tick=tick, time=0.02 * tick, q=q, dq=np.zeros(n), tau_est=np.zeros(n),
+                      imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.asarray(gyro, dtype=float),
+                      accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.zeros(4))
+
+
+def _select(history: int, term_start: int) -> np.ndarray:
+    """A weight that outputs the last frame's entries term_start .. term_start + 11."""
+    w = np.zeros((history * FRAME, 12))
+    w[(history - 1) * FRAME + term_start + np.arange(12), np.arange(12)] = 1.0
+    return w
+
+
+def test_the_network_sees_its_own_joint_order_and_commands_the_house_order(tmp_path):
+    model, io = tmp_path / "p.onnx", tmp_path / "p.toml"
+    _linear_model(model, _select(1, 6))  # action = joint_pos_rel, in the network's order
+    io.write_text(_io())
+    spec = get_controller(f"onnx:{model}")
+    assert (spec.kind, spec.arm_mode, spec.robots, spec.config_file) == ("onnx", "none", ("a1-wx200",), str(io))
+    desc = get_robot("a1-wx200", "none")
+    ctrl = spec.make(desc)
+    offset = 0.01 * np.arange(1, 13)  # house order
+    out = ctrl.act(_state(desc.nominal_q + offset), VelocityCommand())
+    # each joint's target moved by half its own offset: the network's order was mapped there and back
+    np.testing.assert_allclose(out.q, desc.nominal_q + 0.5 * offset, atol=1e-7)
+    kp = {name: 30.0 + 10.0 * ("thigh" in name) + 20.0 * ("calf" in name) for name in desc.joint_names}
+    np.testing.assert_array_equal(out.kp, [kp[name] for name in desc.joint_names])
+    np.testing.assert_array_equal(out.kd, 1.5)
+    assert np.all(out.dq == 0.0) and np.all(out.tau == 0.0) and ctrl.rate_hz == 50.0
+    # the previous action is the network's output, in its own order
+    np.testing.assert_allclose(ctrl.last_action, offset[[desc.joint_names.index(j) for j in ISAAC_ORDER]], atol=1e-7)
+
+
+def test_the_history_holds_frames_oldest_first_filled_with_the_first_after_a_reset(tmp_path):
+    model, io = tmp_path / "h.onnx", tmp_path / "h.toml"
+    _linear_model(model, np.zeros((3 * FRAME, 12)))
+    io.write_text(_io(history=3))
+    ctrl = get_controller(f"onnx:{model}").make(get_robot("a1-wx200", "none"))
+    q = get_robot("a1-wx200", "none").nominal_q
+    frames = [ctrl.network_input(_state(q, gyro=(g, 0.0, 0.0)), VelocityCommand(vx=0.5))
+              for g in (4.0, 8.0)]
+    first, second = (f.reshape(3, FRAME) for f in frames)
+    assert np.all(first[:, 0] == 1.0)  # 4 rad/s x 0.25 in every frame of the filled window
+    assert second[:, 0].tolist() == [1.0, 1.0, 2.0]  # oldest first
+    assert np.all(second[:, 3] == 1.0)  # vx 0.5 x 2
+    ctrl.reset()
+    again = ctrl.network_input(_state(q, gyro=(8.0, 0.0, 0.0)), VelocityCommand()).reshape(3, FRAME)
+    assert np.all(again[:, 0] == 2.0)
+    # each term's own history (Isaac Lab), and zeros after a reset
+    text = _io().replace('name = "base_ang_vel"', 'name = "base_ang_vel"\nhistory = 2').replace(
+        "history = 1", 'history = 1\nhistory_order = "terms"\nhistory_fill = "zeros"')
+    io.write_text(text)
+    _linear_model(model, np.zeros((FRAME + 3, 12)))
+    ctrl = get_controller(f"onnx:{model}").make(get_robot("a1-wx200", "none"))
+    x = ctrl.network_input(_state(q, gyro=(4.0, 0.0, 0.0)), VelocityCommand())
+    assert x.shape == (FRAME + 3,) and x[:6].tolist() == [0.0, 0.0, 0.0, 1.0, 0.0, 0.0]
+
+
+IO_ERRORS = [
+    ('name = "last_action"', 'name = "height"', "[[observation.terms]] #4 name",
+     "unknown term 'height'; valid terms: base_ang_vel, projected_gravity, velocity_commands"),
+    ('name = "base_ang_vel"', 'name = "base_lin_vel"', "[[observation.terms]] #1 name",
+     "does not measure its base's linear velocity"),
+    ('"RR_calf_joint"]', '"RR_thigh_joint"]', "[policy] joints", "listed more than once"),
+    ('"FL_hip_joint", ', "", "[policy] joints", "missing: FL_hip_joint"),
+    ('"FL_hip_joint", ', '"arm_waist", "FL_hip_joint", ', "[policy] joints", "'arm_waist' not a joint of a1-wx200"),
+    ("scale = [2.0, 2.0, 0.25]", "scale = [2.0, 2.0]", "[[observation.terms]] #2 scale",
+     "expected one number or 1 or 3 numbers"),
+    ('kind = "joint_position"', 'kind = "torque"', "[action] kind", "must be one of 'joint_position'"),
+    ('scale = 0.25\n', 'scale = 0.25\nhistory = 3\n', "[[observation.terms]] #1 history",
+     'needs history_order = "terms"'),
+    ("kd = 1.5", "kd = -1.5", "[pd] kd", "must be in [0, 100]"),
+    ("[pd]", "[gains]", "[gains]", "unknown table; valid tables: [policy], [onnx], [observation], [action], [pd]"),
+    ('arm_mode = "none"', 'arm_mode = "folded"', "[policy] arm_mode", "must be one of 'none', 'locked', 'actuated'"),
+]
+
+
+@pytest.mark.parametrize(("old", "new", "field", "reason"), IO_ERRORS, ids=[e[2] + " " + e[1][:12] for e in IO_ERRORS])
+def test_a_bad_io_file_names_its_line_field_and_what_is_valid(tmp_path, old, new, field, reason):
+    text = _io()
+    assert old in text
+    bad = text.replace(old, new, 1)
+    path = tmp_path / "bad.toml"
+    path.write_text(bad)
+    with pytest.raises(OnnxIoError) as caught:
+        load_onnx_io(path)
+    err = caught.value
+    assert err.field == field and reason in err.reason and err.path == str(path)
+    # the line is the offending key's (or its table's header)
+    line = bad.splitlines()[err.line - 1]
+    key = field.split()[-1]
+    assert (key in line) or line.startswith("[")
+
+
+def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_path, capsys):
+    model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
+    io.write_text(_io())
+    _linear_model(model, np.zeros((FRAME + 1, 12)))
+    with pytest.raises(OnnxModelError, match=r"the terms make 30 inputs .* takes 31"):
+        get_controller(f"onnx:{model}")
+    _linear_model(model, np.zeros((FRAME, 13)))
+    with pytest.raises(OnnxModelError, match=r"12 joints listed, but .* has 13 entries"):
+        get_controller(f"onnx:{model}")
+    _linear_model(model, np.zeros((FRAME, 12)), input_name="observations")
+    io.write_text(_io().replace("[observation]", '[onnx]\ninput = "obs"\n\n[observation]'))
+    with pytest.raises(OnnxModelError, match=r"has no input 'obs'; its inputs: observations"):
+        get_controller(f"onnx:{model}")
+    # on the command line: no traceback, the file and field named; a missing I/O file says where it was looked for
+    assert main(["run", f"onnx:{model}", "--scenario", "scenarios/push.toml", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "[onnx] input" in err and "Traceback" not in err
+    io.unlink()
+    assert main(["run", f"onnx:{model}", "--scenario", "scenarios/push.toml", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{io}: file not found; an onnx:PATH policy needs its I/O file beside it" in err
+    # --io names another file; it goes only to an onnx: policy
+    other = tmp_path / "elsewhere.toml"
+    other.write_text(_io())
+    _linear_model(model, np.zeros((FRAME, 12)))
+    assert get_controller(f"onnx:{model}", io=other).config_file == str(other)
+    assert main(["run", "stand", "--scenario", "scenarios/push.toml", "--io", str(other)]) == 2
+    assert "no controller here is an onnx:PATH policy" in capsys.readouterr().err
+
+
+def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller(tmp_path):
+    pytest.importorskip("torch")
+    from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
+    from wbc.learned.policy.controller import LearnedController
+    from wbc.learned.train.onnx_export import export_onnx
+    from wbc.scenario import Push, TerrainConfig
+
+    model, io = export_onnx(WEIGHTS_DIR / "a1-wx200-actuated", tmp_path / "pi3")
+    name = f"onnx:{model}"
+    spec = get_controller(name)
+    assert (spec.arm_mode, spec.robots) == ("actuated", ("a1-wx200",)) and "stage 3" in spec.summary
+    # actions: the ONNX controller shadows the numpy one along its own closed loop, pushed, on rough ground
+    robot = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated",
+                                          terrain=TerrainConfig(kind="fractal", amplitude=0.04)))
+    with robot:
+        robot.reset(seed=3)
+        robot.apply_push(Push.horizontal(300.0, math.pi / 2, (0.05, 0.0, 0.0), start=1.0, duration=0.06))
+        numpy_ctrl, onnx_ctrl = LearnedController(robot.desc), spec.make(robot.desc)
+        numpy_ctrl.reset()
+        onnx_ctrl.reset()
+        worst = 0.0
+        for k in range(150):  # 3 s at 50 Hz
+            state, cmd = robot.read(), VelocityCommand(vx=0.3 if k > 25 else 0.0)
+            out = numpy_ctrl.act(state, cmd)
+            shadow = onnx_ctrl.act(state, cmd)
+            worst = max(worst, float(np.abs(numpy_ctrl.last_action - onnx_ctrl.last_action).max()))
+            np.testing.assert_allclose(shadow.q, out.q, atol=0.25e-5)
+            np.testing.assert_array_equal(shadow.kp, out.kp)
+            np.testing.assert_array_equal(shadow.kd, out.kd)
+            robot.write(out)
+            robot.advance(0.02)
+        assert not robot.fallen()
+    assert worst < 1e-5
+    # it meets the controller contract: deterministic after reset, blind to the simulator, fast enough
+    check_controller(spec, CheckConfig(seconds=0.3)).raise_if_failed()
+    # a trial in the arena: the same outcome, the metrics equal to float32 arithmetic's reach (see the README)
+    cfg = ArenaConfig(controllers=("learned", name), scenario=Path("scenarios/push.toml"), bands=("ood",), seeds=(0,),
+                      trials=1, out_dir=tmp_path / "arena", progress=False, workers=1)
+    records = {r.controller: r for r in TrialRecord.read_csv(run_arena(cfg).out_dir / "trials.csv")}
+    a, b = records["learned"], records[name]
+    assert (a.success, a.ttf, a.n_pushes, a.push_force_n) == (b.success, b.ttf, b.n_pushes, b.push_force_n)
+    assert math.isnan(a.fall_time_s) == math.isnan(b.fall_time_s)
+    for metric in ("vlin_err", "vang_err", "max_roll_deg", "max_pitch_deg", "energy_j", "arm_travel_rad"):
+        assert b[metric] == pytest.approx(a[metric], rel=1e-2), metric

@@ -1,0 +1,290 @@
+"""Controller plug-ins: ``package.module:factory`` names and ``wbc.controllers`` entry points, end to end.
+
+A plug-in written to a temporary package plays the same trials as the built-in ``stand`` (it builds the same PD hold)
+through the local pool and through Ray, and gives the same metrics; every way a plug-in can be broken ends the
+command with its own message and no traceback.
+"""
+
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.record import MACHINE_TIMED, TrialRecord
+from wbc.cli.main import main
+from wbc.control.errors import (
+    PluginAttributeError,
+    PluginConfigError,
+    PluginContractError,
+    PluginFactoryError,
+    PluginImportError,
+    PluginNotFoundError,
+)
+from wbc.control.plugin import PLUGIN_GROUP
+from wbc.control.registry import get_controller, list_controllers
+from wbc.errors import UnknownNameError
+from wbc.robots.registry import get_robot
+
+SMALL = """
+[scenario]
+name = "small"
+version = 1
+description = "a short push test"
+robot = "a1-wx200"
+duration_s = 2.0
+
+[terrain]
+kind = "fractal"
+amplitude_m = 0.03
+
+[commands]
+[[commands.options]]
+vx = 0.0
+
+[pushes]
+first_s = [0.5, 0.8]
+interval_s = [0.6, 0.9]
+duration_s = 0.05
+offset_m = 0.1
+
+[[bands]]
+name = "soft"
+push_force_n = [100.0, 200.0]
+
+[[bands]]
+name = "hard"
+push_force_n = [600.0, 900.0]
+"""
+
+MODULES = {
+    "__init__.py": '"""Plug-ins for the tests."""\n',
+    # the same PD hold as `stand`, built by a factory that takes an optional table
+    "good.py": '''
+        """A plug-in that holds the nominal pose."""
+        import numpy as np
+
+        from wbc.robots.description import joint_gains
+        from wbc.types import MotorCommand
+
+        GAIN = 60.0
+
+
+        class Hold:
+            rate_hz = 50.0
+
+            def __init__(self, desc, leg_kp):
+                kp, kd = joint_gains(desc.num_joints, leg_kp, 2.0, 20.0, 0.5)
+                self.command = MotorCommand.hold(desc.nominal_q, kp, kd)
+
+            def reset(self):
+                pass
+
+            def act(self, state, command):
+                return self.command
+
+            def counters(self):
+                return {}
+
+
+        def make(desc, config=None):
+            """Hold the nominal pose (a test plug-in)."""
+            config = config or {}
+            if set(config) - {"leg_kp"}:
+                raise ValueError(f"unknown keys {sorted(set(config) - {'leg_kp'})}; valid: leg_kp")
+            return Hold(desc, config.get("leg_kp", GAIN))
+
+
+        def no_config(desc):
+            return Hold(desc, GAIN)
+
+
+        def no_args():
+            return None
+    ''',
+    "boom.py": '''
+        """Raises when imported."""
+        raise RuntimeError("the plug-in's module is broken")
+    ''',
+    "needs_dep.py": '''
+        """Imports a module that is not installed."""
+        import wbc_no_such_dependency  # noqa: F401
+    ''',
+    "bad_syntax.py": "def make(desc:\n    return None\n",
+    "raises.py": '''
+        """A factory that raises."""
+
+
+        def make(desc):
+            raise ValueError("leg_kp must be positive")
+    ''',
+    "not_a_controller.py": '''
+        """A factory that returns something else."""
+
+
+        class Almost:
+            rate_hz = 50.0
+
+            def reset(self):
+                pass
+
+
+        def make(desc):
+            return Almost()
+    ''',
+}
+
+
+@pytest.fixture
+def plugins(tmp_path, monkeypatch):
+    """A package `plugpkg` on sys.path (and forgotten afterwards)."""
+    root = tmp_path / "plugroot"
+    pkg = root / "plugpkg"
+    pkg.mkdir(parents=True)
+    for name, text in MODULES.items():
+        (pkg / name).write_text(textwrap.dedent(text).lstrip(), encoding="utf-8")
+    monkeypatch.syspath_prepend(str(root))
+    yield root
+    for name in [m for m in sys.modules if m == "plugpkg" or m.startswith("plugpkg.")]:
+        del sys.modules[name]
+
+
+@pytest.fixture
+def small(tmp_path):
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL)
+    return path
+
+
+def _metrics(records, controller):
+    """Each record's stored cells but the controller's name and those timed on the machine's clock, by trial."""
+    skip = {TrialRecord.header().index(name) for name in ("controller", *MACHINE_TIMED)}
+    return {r.pair_key: [c for i, c in enumerate(r.to_row()) if i not in skip] for r in records
+            if r.controller == controller}
+
+
+def test_a_plugin_plays_the_same_trials_as_stand_on_the_local_pool_and_on_ray(plugins, small, tmp_path):
+    pytest.importorskip("ray")
+    name = "plugpkg.good:make"
+    results = {}
+    for executor, workers in (("local", ["--workers", "2"]), ("ray", [])):
+        assert main(["compare", name, "stand", "--scenario", str(small), "--trials", "2", "--executor", executor,
+                     *workers, "--out", str(tmp_path / executor), "--quiet"]) == 0
+        results[executor] = TrialRecord.read_csv(tmp_path / executor / "trials.csv")
+    for records in results.values():
+        # the plug-in builds the very PD hold `stand` is, so every metric of every trial is the same
+        assert len(records) == 2 * 2 * 2
+        assert _metrics(records, name) == _metrics(records, "stand")
+    # and the executors agree with each other: Ray's workers imported the package from where the parent found it
+    assert _metrics(results["local"], name) == _metrics(results["ray"], name)
+    assert not all(r.success for r in results["local"])  # the hard band topples it: the trials are not trivial
+
+
+def test_the_config_table_reaches_the_factory(plugins, tmp_path, small, capsys):
+    config = tmp_path / "gains.toml"
+    config.write_text("leg_kp = 80.0\n")
+    spec = get_controller("plugpkg.good:make", config=config)
+    assert spec.kind == "plug-in" and spec.config_file == str(config) and spec.arm_mode == "actuated"
+    ctrl = spec.make(get_robot("a1-wx200", "actuated"))
+    assert np.all(ctrl.command.kp[:12] == 80.0)
+    # through the command line: a key the factory refuses comes back as the factory's own message
+    config.write_text("leg_kd = 3.0\n")
+    assert main(["run", "plugpkg.good:make", "--scenario", str(small), "--trials", "1", "--band", "soft",
+                 "--controller-config", str(config), "--out", str(tmp_path / "o"), "--quiet", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "plugpkg.good:make raised" in err and "unknown keys ['leg_kd']; valid: leg_kp" in err
+    assert "Traceback" not in err
+    # a run records the file it was configured with
+    config.write_text("leg_kp = 60.0\n")
+    out = tmp_path / "c"
+    assert main(["compare", "plugpkg.good:make", "stand", "--scenario", str(small), "--trials", "1", "--band", "soft",
+                 "--controller-config", f"plugpkg.good:make={config}", "--out", str(out), "--quiet",
+                 "--workers", "1"]) == 0
+    assert str(config) in (out / "run.json").read_text()
+    # a table for a controller that takes none, or with nothing to take it, is refused by name
+    assert main(["run", "stand", "--scenario", str(small), "--controller-config", str(config)]) == 2
+    assert "no controller here is a plug-in" in capsys.readouterr().err
+    with pytest.raises(PluginConfigError, match="stand takes no configuration table"):
+        get_controller("stand", config=config)
+    with pytest.raises(PluginConfigError, match=r"takes no config argument .*no_config\(desc\)"):
+        get_controller("plugpkg.good:no_config", config=config)
+
+
+BROKEN = [
+    ("plugpkg.nowhere:make", PluginNotFoundError,
+     ["no module named 'plugpkg.nowhere'", "package.module:factory", "wbc.controllers"]),
+    ("plugpkg.boom:make", PluginImportError,
+     ["importing plugpkg.boom failed: RuntimeError: the plug-in's module is broken", "boom.py:2"]),
+    ("plugpkg.needs_dep:make", PluginImportError,
+     ["No module named 'wbc_no_such_dependency'", "needs_dep.py:2", "install it"]),
+    ("plugpkg.bad_syntax:make", PluginImportError, ["SyntaxError", "bad_syntax.py:1"]),
+    ("plugpkg.good:mak", PluginAttributeError,
+     ["has no attribute 'mak'", "did you mean 'make'?", "Factories defined there: Hold, make, no_args, no_config"]),
+    ("plugpkg.good:GAIN", PluginAttributeError, ["GAIN is a float, not a factory", "Hold, make"]),
+    ("plugpkg.good:no_args", PluginFactoryError, ["cannot be called as factory(desc)", "no_args()"]),
+    ("plugpkg.raises:make", PluginFactoryError,
+     ["plugpkg.raises:make raised while building the controller for a1-wx200", "ValueError: leg_kp must be positive",
+      "raises.py:5"]),
+    ("plugpkg.not_a_controller:make", PluginContractError,
+     ["returned a Almost, which is not a wbc.control.Controller", "it has no act", "it has no counters"]),
+]
+
+
+@pytest.mark.parametrize(("name", "error", "phrases"), BROKEN, ids=[b[0].split(".")[1] for b in BROKEN])
+def test_a_broken_plugin_says_what_is_wrong_without_a_traceback(plugins, small, tmp_path, capsys, name, error,
+                                                                phrases):
+    with pytest.raises(error) as caught:
+        spec = get_controller(name)
+        spec.make(get_robot("a1-wx200", "actuated"))  # the two last kinds fail only when the factory is called
+    for phrase in phrases:
+        assert phrase in str(caught.value)
+    # the command line says the same, before any trial is played, and exits with status 2
+    assert main(["run", name, "--scenario", str(small), "--trials", "1", "--out", str(tmp_path / "o"),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and phrases[0] in err
+    assert not (tmp_path / "o" / "trials.csv").exists() or len((tmp_path / "o" / "trials.csv").read_text()
+                                                                .splitlines()) == 1
+
+
+def test_an_unknown_name_lists_every_kind_of_valid_name(tmp_path, capsys):
+    with pytest.raises(UnknownNameError) as caught:
+        get_controller("walker")
+    text = str(caught.value)
+    for valid in ("stand", "mpc", "learned", "policy:PATH", "onnx:PATH", "package.module:factory"):
+        assert valid in text
+    assert main(["view", "no.such.module:make", "--scenario", "scenarios/push.toml", "--trial", "0",
+                 "--record", str(tmp_path / "x.html")]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_an_entry_point_is_listed_with_its_summary_and_plays_by_its_name(plugins, small, tmp_path, capsys):
+    dist = plugins / "plugdist-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: plugdist\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text(f"[{PLUGIN_GROUP}]\ntest-hold = plugpkg.good:make\n"
+                                           "test-broken = plugpkg.boom:make\n")
+    rows = {r.name: r for r in list_controllers()}
+    assert rows["test-hold"].summary == "Hold the nominal pose (a test plug-in)."
+    assert rows["test-hold"].target == "plugpkg.good:make" and rows["test-hold"].loaded
+    assert not rows["test-broken"].loaded and "RuntimeError" in rows["test-broken"].summary
+    assert main(["controllers"]) == 0
+    out = capsys.readouterr().out
+    assert "test-hold" in out and "Hold the nominal pose (a test plug-in)." in out and "cannot be loaded" in out
+    spec = get_controller("test-hold")
+    assert spec.kind == "entry point"
+    cfg = ArenaConfig(controllers=("test-hold", "stand"), scenario=small, seeds=(0,), trials=1, bands=("soft",),
+                      out_dir=tmp_path / "ep", progress=False, workers=1)
+    records = TrialRecord.read_csv(run_arena(cfg).out_dir / "trials.csv")
+    assert _metrics(records, "test-hold") == _metrics(records, "stand")
+    # an entry point that cannot be loaded fails when named, with the plug-in's own message
+    assert main(["run", "test-broken", "--scenario", str(small), "--out", str(tmp_path / "b")]) == 2
+    assert "the plug-in's module is broken" in capsys.readouterr().err
+
+
+def test_a_plugin_is_watched_in_the_viewer_like_any_controller(plugins, small, tmp_path, capsys):
+    out = tmp_path / "plugin.html"
+    assert main(["view", "plugpkg.good:make", "--scenario", str(small), "--trial", "0", "--duration", "0.5",
+                 "--record", str(out)]) == 0
+    assert "recorded 25 frames" in capsys.readouterr().out and out.stat().st_size > 100_000

@@ -1,0 +1,383 @@
+"""Controller plug-ins: a controller from outside `wbc`, named ``package.module:factory`` or by an entry point.
+
+A name of the form ``package.module:factory`` is imported at the moment it is named (explicitly, by
+`importlib.import_module`; nothing registers itself by being imported) and ``factory`` is called with the robot
+description, and with the ``--controller-config`` table when one is given, to build a `Controller`::
+
+    def make(desc: RobotDescription, config: dict | None = None) -> Controller: ...
+
+The module is looked up on ``sys.path`` first, then in the working directory (as ``python -m`` would), so
+``wbc compare examples.my_controller:make stand`` works from a checkout. ``factory`` may also be a `ControllerPlugin`,
+which adds a summary and the robots and arm modes the controller claims (a plain factory claims every robot with its
+arm actuated). Installed packages declare plug-ins as entry points of the ``wbc.controllers`` group, e.g. in their
+``pyproject.toml``::
+
+    [project.entry-points."wbc.controllers"]
+    my-mpc = "my_package.controller:make"
+
+and ``wbc controllers`` lists them with their summaries; the entry point's name is then a controller name.
+
+What travels to pool and Ray workers is a `PluginFactory`: the ``module:factory`` text, the directory its package
+was found in and the configuration table, all plain data; the worker imports the module itself (that directory put
+on its ``sys.path`` if missing). Every failure is its own `wbc.control.errors.PluginError` subclass whose message
+says what was asked for, what is wrong and what would be valid.
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib
+import importlib.metadata
+import inspect
+import os
+import re
+import sys
+import traceback
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import ModuleType
+from typing import Any
+
+from wbc.control.errors import (
+    PluginAttributeError,
+    PluginConfigError,
+    PluginContractError,
+    PluginFactoryError,
+    PluginImportError,
+    PluginNotFoundError,
+)
+from wbc.control.protocol import Controller
+from wbc.control.spec import ControllerSpec
+from wbc.errors import FileFieldError, UnknownNameError
+from wbc.robots.description import RobotDescription, check_arm_mode
+from wbc.robots.registry import ROBOTS
+from wbc.scenario.toml_fields import read_toml
+
+__all__ = [
+    "PLUGIN_GROUP",
+    "ControllerPlugin",
+    "PluginFactory",
+    "build_plugin",
+    "controller_problems",
+    "entry_points",
+    "is_plugin_name",
+    "load_plugin",
+    "plugin_spec",
+    "read_controller_config",
+]
+
+PLUGIN_GROUP = "wbc.controllers"
+"""The entry-point group installed packages declare their controllers in."""
+
+_IDENT = r"[A-Za-z_][A-Za-z0-9_]*"
+_TARGET = re.compile(rf"^({_IDENT}(?:\.{_IDENT})*):({_IDENT}(?:\.{_IDENT})*)$")
+_MEMBERS = ("rate_hz", "reset", "act", "counters")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ControllerPlugin:
+    """What a plug-in's factory name may point to, to say more than "call me".
+
+    Attributes:
+        make: ``make(desc)`` or ``make(desc, config)`` builds the controller for a robot description (`config`: the
+            ``--controller-config`` table, when one is given).
+        summary: one line for ``wbc controllers`` and reports.
+        arm_modes: the arm modes it can drive; the arena plays the first, the contract checker builds every one.
+        robots: the robots it can drive (registry names), or None for every robot.
+    """
+
+    make: Callable[..., Controller]
+    summary: str
+    arm_modes: tuple[str, ...] = ("actuated",)
+    robots: tuple[str, ...] | None = field(default=None)
+
+    def __post_init__(self) -> None:
+        if not callable(self.make):
+            raise TypeError(f"ControllerPlugin.make must be callable, got {type(self.make).__name__}")
+        modes = (self.arm_modes,) if isinstance(self.arm_modes, str) else tuple(self.arm_modes)
+        if not modes:
+            raise ValueError("ControllerPlugin.arm_modes must name at least one arm mode (none, locked, actuated)")
+        for mode in modes:
+            check_arm_mode(mode)
+        object.__setattr__(self, "arm_modes", modes)
+        if self.robots is not None:
+            robots = (self.robots,) if isinstance(self.robots, str) else tuple(self.robots)
+            for robot in robots:
+                if robot not in ROBOTS:
+                    raise UnknownNameError("robot", robot, tuple(ROBOTS))
+            object.__setattr__(self, "robots", robots)
+
+
+def is_plugin_name(name: str) -> bool:
+    """Whether `name` has the form ``package.module:factory``."""
+    return _TARGET.match(name) is not None
+
+
+def _split(target: str) -> tuple[str, str]:
+    match = _TARGET.match(target)
+    if match is None:
+        raise PluginNotFoundError(f"{target!r} is not a plug-in name: write package.module:factory (dotted module "
+                                  "path, a colon, the factory's name), e.g. examples.my_controller:make")
+    return match.group(1), match.group(2)
+
+
+def _where(exc: BaseException) -> str:
+    """``file:line`` of the innermost frame of `exc`'s traceback that is not this module's, or ''."""
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if Path(f.filename) != Path(__file__)]
+    if isinstance(exc, SyntaxError) and exc.filename:
+        return f" at {exc.filename}:{exc.lineno}"
+    return f" at {frames[-1].filename}:{frames[-1].lineno}" if frames else ""
+
+
+def _describe(exc: BaseException) -> str:
+    text = str(exc) if not isinstance(exc, SyntaxError) else (exc.msg or str(exc))
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def _root_of(module: ModuleType) -> str | None:
+    """The directory on ``sys.path`` that `module` was imported from (None for built-in or frozen modules)."""
+    spec = module.__spec__
+    if spec is None or not spec.has_location or not spec.origin:
+        if spec is not None and spec.submodule_search_locations:  # a namespace package: its first portion
+            return str(Path(list(spec.submodule_search_locations)[0]).parents[module.__name__.count(".")])
+        return None
+    path = Path(spec.origin).resolve()
+    if path.name.startswith("__init__."):
+        path = path.parent
+    return str(path.parents[module.__name__.count(".")])
+
+
+def _is_the_module(missing: str | None, module: str) -> bool:
+    """Whether a `ModuleNotFoundError` for `missing` means `module` itself (or a package above it) is absent."""
+    return missing is not None and (module == missing or module.startswith(missing + "."))
+
+
+def _import_once(module: str) -> ModuleType:
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if not _is_the_module(exc.name, module):
+            raise PluginImportError(
+                f"importing {module} failed: {_describe(exc)}{_where(exc)}; the plug-in needs that module: install "
+                "it into this environment") from exc
+        whose = "" if exc.name == module else f" (the package of {module})"
+        raise PluginNotFoundError(
+            f"no module named {exc.name!r}{whose}; looked on sys.path and in the working "
+            f"directory {os.getcwd()}. Valid plug-in names: package.module:factory of a module found there (e.g. "
+            "examples.my_controller:make from a checkout's root), or an installed entry point of the "
+            f"{PLUGIN_GROUP!r} group (`wbc controllers` lists them)") from exc
+    except Exception as exc:  # noqa: BLE001 (any error of the plug-in's own code, reported with its location)
+        raise PluginImportError(f"importing {module} failed: {_describe(exc)}{_where(exc)}") from exc
+
+
+def _import(module: str, root: str | None) -> ModuleType:
+    """Import `module`: from `root` (put on ``sys.path`` if missing), else from ``sys.path``, else the working dir."""
+    if root is not None and root not in sys.path:
+        sys.path.insert(0, root)
+    importlib.invalidate_caches()  # a module written after start-up (a test's, a notebook's) is found too
+    try:
+        return _import_once(module)
+    except PluginNotFoundError:
+        cwd = os.getcwd()
+        if root is not None or cwd in sys.path or "" in sys.path:
+            raise
+    # as `python -m` would: the working directory's modules are importable (the console script's sys.path lacks it)
+    sys.path.insert(0, cwd)
+    try:
+        return _import_once(module)
+    except PluginNotFoundError:
+        sys.path.remove(cwd)
+        raise
+
+
+def _factories(module: ModuleType) -> list[str]:
+    """Public names of `module` that could be a factory: its own functions and classes, and ControllerPlugins."""
+    out = []
+    for name, value in vars(module).items():
+        if name.startswith("_"):
+            continue
+        if isinstance(value, ControllerPlugin) or (
+                callable(value) and getattr(value, "__module__", None) == module.__name__):
+            out.append(name)
+    return sorted(out)
+
+
+def _attribute(module: ModuleType, attr: str, target: str) -> object:
+    value: object = module
+    for part in attr.split("."):
+        if not hasattr(value, part):
+            valid = _factories(module)
+            close = difflib.get_close_matches(part, valid, n=1)
+            raise PluginAttributeError(
+                f"plug-in {target}: module {module.__name__} ({module.__file__}) has no attribute {attr!r}"
+                + (f"; did you mean {close[0]!r}?" if close else "")
+                + f" Factories defined there: {', '.join(valid) if valid else 'none'}")
+        value = getattr(value, part)
+    if not isinstance(value, ControllerPlugin) and not callable(value):
+        valid = _factories(module)
+        raise PluginAttributeError(
+            f"plug-in {target}: {attr} is a {type(value).__name__}, not a factory (a callable taking the robot "
+            f"description, or a wbc.control.ControllerPlugin); factories defined in {module.__name__}: "
+            f"{', '.join(valid) if valid else 'none'}")
+    return value
+
+
+def _first_line(text: str | None) -> str:
+    lines = [line.strip() for line in (text or "").strip().splitlines()]
+    return lines[0] if lines else ""
+
+
+def load_plugin(target: str, root: str | None = None) -> tuple[ControllerPlugin, str | None]:
+    """Import a plug-in's module and find its factory.
+
+    Args:
+        target: ``package.module:factory`` (the factory may be a dotted attribute path).
+        root: the directory the module was found in by an earlier look-up (a worker passes the parent's).
+
+    Returns:
+        The plug-in (a plain factory wrapped with its docstring's first line as summary, arm actuated, every robot)
+        and the directory its top-level package was imported from.
+
+    Raises:
+        PluginNotFoundError: malformed name, or no such module.
+        PluginImportError: importing the module raised (the message gives the error and its file:line).
+        PluginAttributeError: no such attribute, or it is not callable (the message lists the module's factories).
+    """
+    module_name, attr = _split(target)
+    module = _import(module_name, root)
+    value = _attribute(module, attr, target)
+    if isinstance(value, ControllerPlugin):
+        plugin = value
+    else:
+        summary = _first_line(getattr(value, "__doc__", None)) or f"plug-in {target}"
+        plugin = ControllerPlugin(make=value, summary=summary)  # type: ignore[arg-type]
+    top = sys.modules[module_name.split(".")[0]]
+    return plugin, _root_of(top) if root is None else root
+
+
+def _accepts(make: Callable[..., Any], n: int) -> bool:
+    """Whether `make` can be called with `n` positional arguments (True when its signature is unknown)."""
+    try:
+        inspect.signature(make).bind(*([None] * n))
+    except TypeError:
+        return False
+    except ValueError:  # no signature (a builtin): find out by calling
+        return True
+    return True
+
+
+def _check_signature(plugin: ControllerPlugin, target: str, config: Mapping[str, Any] | None) -> None:
+    if config is not None and not _accepts(plugin.make, 2):
+        raise PluginConfigError(
+            f"plug-in {target} was given a --controller-config table, but its factory takes no config argument "
+            f"(signature {_signature(plugin.make)}); give it a second parameter, make(desc, config=None), or drop "
+            "--controller-config")
+    if config is None and not _accepts(plugin.make, 1):
+        raise PluginFactoryError(
+            f"plug-in {target}: its factory cannot be called as factory(desc) (signature {_signature(plugin.make)}); "
+            "a factory takes the robot description and, optionally, the --controller-config table: "
+            "make(desc, config=None)")
+
+
+def _signature(make: Callable[..., Any]) -> str:
+    try:
+        return f"{getattr(make, '__name__', 'factory')}{inspect.signature(make)}"
+    except (TypeError, ValueError):
+        return repr(make)
+
+
+def controller_problems(obj: object) -> list[str]:
+    """What keeps `obj` from being a `wbc.control.Controller` (empty when it is one)."""
+    if isinstance(obj, Controller):
+        rate = obj.rate_hz
+        if isinstance(rate, bool) or not isinstance(rate, int | float):
+            return [f"rate_hz is a {type(rate).__name__}, not a number [Hz]"]
+        return [f"{m}() is not callable" for m in _MEMBERS[1:] if not callable(getattr(obj, m))]
+    return [f"it has no {m}" for m in _MEMBERS if not hasattr(obj, m)] or ["it does not satisfy the protocol"]
+
+
+def build_plugin(plugin: ControllerPlugin, desc: RobotDescription, config: Mapping[str, Any] | None,
+                 target: str) -> Controller:
+    """Call the plug-in's factory for `desc` (with `config` if given) and check that it built a `Controller`.
+
+    Raises:
+        PluginConfigError: a table was given and the factory takes none.
+        PluginFactoryError: the factory has the wrong signature, or raised (the message gives the error and its
+            file:line).
+        PluginContractError: the result is not a `Controller` (the message lists what it lacks).
+    """
+    _check_signature(plugin, target, config)
+    try:
+        ctrl = plugin.make(desc) if config is None else plugin.make(desc, dict(config))
+    except Exception as exc:  # noqa: BLE001 (the plug-in's own failure, reported with its location)
+        raise PluginFactoryError(f"plug-in {target} raised while building the controller for {desc.name} "
+                                 f"(arm {desc.arm_mode}): {_describe(exc)}{_where(exc)}") from exc
+    problems = controller_problems(ctrl)
+    if problems:
+        raise PluginContractError(
+            f"plug-in {target} returned a {type(ctrl).__name__}, which is not a wbc.control.Controller: "
+            f"{'; '.join(problems)}. A controller has rate_hz [Hz], reset(), act(state, command) -> MotorCommand "
+            "and counters() -> dict[str, int] (see wbc/control/protocol.py and examples/my_controller.py)")
+    return ctrl
+
+
+@dataclass(frozen=True)
+class PluginFactory:
+    """A plug-in, as it travels to a worker: plain data that imports and calls the factory when called.
+
+    Attributes:
+        target: ``package.module:factory``.
+        root: the directory the parent imported the module's package from (put on a worker's ``sys.path``).
+        config: the ``--controller-config`` table, or None.
+    """
+
+    target: str
+    root: str | None
+    config: Mapping[str, Any] | None = None
+
+    def __call__(self, desc: RobotDescription) -> Controller:
+        """Build the controller for `desc` (importing the module here if this process has not yet)."""
+        plugin, _ = load_plugin(self.target, self.root)
+        return build_plugin(plugin, desc, self.config, self.target)
+
+
+def read_controller_config(path: str | Path) -> dict[str, Any]:
+    """The table of a ``--controller-config`` TOML file.
+
+    Raises:
+        FileFieldError: the file is missing, unreadable or not TOML (``path:line: reason``).
+    """
+    data, _ = read_toml(Path(path), str(path), FileFieldError,
+                        missing="check the path given to --controller-config")
+    return data
+
+
+def entry_points() -> dict[str, importlib.metadata.EntryPoint]:
+    """The installed ``wbc.controllers`` entry points by name (nothing is imported)."""
+    out: dict[str, importlib.metadata.EntryPoint] = {}
+    for ep in importlib.metadata.entry_points(group=PLUGIN_GROUP):
+        out.setdefault(ep.name, ep)
+    return out
+
+
+def plugin_spec(name: str, target: str, *, kind: str = "plug-in", config_file: str | Path | None = None,
+                ) -> ControllerSpec:
+    """Resolve a plug-in: import it, check its factory's signature, and make its spec.
+
+    Args:
+        name: the name it is known by (``module:factory``, or an entry point's name).
+        target: ``package.module:factory``.
+        kind: ``plug-in`` or ``entry point``.
+        config_file: a ``--controller-config`` TOML file, read here once.
+
+    Raises:
+        PluginError: any plug-in failure (see `load_plugin`, `build_plugin`).
+        FileFieldError: the configuration file is unreadable.
+    """
+    config = read_controller_config(config_file) if config_file is not None else None
+    plugin, root = load_plugin(target)
+    _check_signature(plugin, target, config)
+    return ControllerSpec(name, plugin.arm_modes[0], PluginFactory(target, root, config), plugin.summary,
+                          robots=plugin.robots, arm_modes=plugin.arm_modes, kind=kind,
+                          config_file=str(config_file) if config_file is not None else None)
