@@ -67,6 +67,24 @@ class PushLog:
         return len(self.start)
 
 
+def _adopt_columns(log: object, keys: tuple[str, ...], rows: str, builder: str) -> None:
+    """Check that a frozen log's columns are one per row (`time` float, the others text) and store them as such."""
+    kind = type(log).__name__
+    n = len(log.time)
+    for name in keys:
+        value = np.asarray(getattr(log, name))
+        if value.shape != (n,):
+            raise ConfigError(f"{kind}.{name}: shape {value.shape}, expected ({n},) for {n} {rows}; build the log "
+                              f"with {builder}")
+        if name == "time":
+            value = value.astype(np.float64)
+        elif value.dtype.kind != "U":
+            if n and value.dtype.kind not in "SU":
+                raise ConfigError(f"{kind}.{name}: dtype {value.dtype}, expected text")
+            value = value.astype(np.str_)
+        object.__setattr__(log, name, value)
+
+
 @dataclass(frozen=True, kw_only=True)
 class SafetyLog:
     """Transitions of a safety layer as arrays, one row per transition, oldest first.
@@ -87,19 +105,7 @@ class SafetyLog:
     detail: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
 
     def __post_init__(self) -> None:
-        n = len(self.time)
-        for name in _SAFETY_KEYS:
-            value = np.asarray(getattr(self, name))
-            if value.shape != (n,):
-                raise ConfigError(f"SafetyLog.{name}: shape {value.shape}, expected ({n},) for {n} events; build "
-                                  "the log with SafetyLog.of(events)")
-            if name == "time":
-                value = value.astype(np.float64)
-            elif value.dtype.kind != "U":
-                if n and value.dtype.kind not in "SU":
-                    raise ConfigError(f"SafetyLog.{name}: dtype {value.dtype}, expected text")
-                value = value.astype(np.str_)
-            object.__setattr__(self, name, value)
+        _adopt_columns(self, _SAFETY_KEYS, "events", "SafetyLog.of(events)")
 
     @classmethod
     def of(cls, events: Iterable[SafetyEventLike]) -> SafetyLog:
@@ -137,19 +143,7 @@ class OperatorLog:
     action: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.str_))
 
     def __post_init__(self) -> None:
-        n = len(self.time)
-        for name in _OPERATOR_KEYS:
-            value = np.asarray(getattr(self, name))
-            if value.shape != (n,):
-                raise ConfigError(f"OperatorLog.{name}: shape {value.shape}, expected ({n},) for {n} actions; build "
-                                  "the log with OperatorLog.of(rows)")
-            if name == "time":
-                value = value.astype(np.float64)
-            elif value.dtype.kind != "U":
-                if n and value.dtype.kind not in "SU":
-                    raise ConfigError(f"OperatorLog.{name}: dtype {value.dtype}, expected text")
-                value = value.astype(np.str_)
-            object.__setattr__(self, name, value)
+        _adopt_columns(self, _OPERATOR_KEYS, "actions", "OperatorLog.of(rows)")
 
     @classmethod
     def of(cls, rows: Iterable[tuple[float, str, str]]) -> OperatorLog:
