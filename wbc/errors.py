@@ -31,6 +31,7 @@ __all__ = [
     "TargetRefusedError",
     "RobotLinkError",
     "PacketError",
+    "SerialPortError",
 ]
 
 
@@ -231,3 +232,19 @@ class PacketError(WbcError, ValueError):
     def __init__(self, reason: str, detail: str) -> None:
         self.reason = reason
         super().__init__(f"Dynamixel packet rejected ({reason}): {detail}")
+
+
+class SerialPortError(RobotLinkError):
+    """A serial port (the arm's Dynamixel bus adapter) could not be opened, or failed while in use.
+
+    The serial layer raises several unrelated types for one cause (a closed or unplugged port raises
+    `termios.error`, which is neither `OSError` nor pyserial's `SerialException`); the Dynamixel backend turns each
+    into this error, naming the port and the original exception.
+
+    Attributes:
+        port: the device path.
+    """
+
+    def __init__(self, port: str, detail: str) -> None:
+        self.port = port
+        super().__init__(f"serial port {port}: {detail}")
