@@ -8,10 +8,15 @@ answers from a thread of this process (see tests/test_dynamixel_arm.py).
 
 from __future__ import annotations
 
+import re
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -31,6 +36,7 @@ from wbc.robots.registry import get_robot
 pytest.importorskip("dynamixel_sdk")
 
 ARM = dict(latency_ms=4.0)
+ROOT = Path(__file__).resolve().parents[1]
 
 
 @contextmanager
@@ -172,3 +178,27 @@ def test_locked_mode_holds_the_arm_stowed_through_the_servos() -> None:
         # the stowed pose, within the sag of the locked hold's kp 20 under gravity
         np.testing.assert_allclose(arm_q, QuadrupedArmConfig().stowed_q, atol=0.08)
 
+
+
+def test_hw_emulate_serves_one_robot_on_both_wires() -> None:
+    proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "hw", "emulate", "--robot", "go1-arm", "--arm",
+                             "actuated", "--seconds", "30"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=ROOT)
+    try:
+        line = proc.stdout.readline()  # bounded: the process stops by itself after --seconds
+        found = re.search(r"legs on 127\.0\.0\.1:(\d+) \(UDP\), arm on (\S+) \(Dynamixel", line)
+        assert found, line
+        robot = QuadrupedArmRobot(
+            UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host="127.0.0.1", target_port=int(found[1]))),
+            DynamixelArm(DynamixelArmConfig(robot="go1-arm", port=found[2], **ARM)))
+        with robot:
+            first = robot.read()
+            for _ in range(10):
+                robot.advance(0.01)
+            assert robot.read().num_joints == 15 and robot.read().tick > first.tick
+    finally:
+        proc.send_signal(signal.SIGINT)  # Ctrl-C: the emulator stops and prints its counts
+        out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    packets = re.search(r"arm bus: packets decoded (\d+)", out)
+    assert packets and int(packets[1]) > 50 and "Traceback" not in err

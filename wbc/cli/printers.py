@@ -15,6 +15,7 @@ import numpy as np
 from wbc.arena.compare import ArenaResult
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table
+from wbc.hardware.emulators import BusStats
 from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
 from wbc.tools.arm_momentum import ArmMomentumTrial
 from wbc.tools.bench.hw import EmulatorCounts
@@ -198,6 +199,24 @@ def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faul
     print(f"emulated {robot} ({mode}) on {host}:{port}; faults: {', '.join(faults) or 'none'}; "
           + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
     print(f"  connect with: wbc hw check --robot {robot} --target {host}:{port}", flush=True)
+
+
+def print_robot_emulator_started(robot: str, mode: str, address: tuple[str, int], pty: str, faults: Sequence[str], *,
+                                 seconds: float | None) -> None:
+    """``wbc hw emulate --arm actuated``: the legs' UDP address, the arm's pty, and how it stops."""
+    host, port = address
+    print(f"emulated {robot} with its arm actuated ({mode}): legs on {host}:{port} (UDP), arm on {pty} (Dynamixel "
+          f"Protocol 2.0, 1 Mbps); faults: {', '.join(faults) or 'none'}; "
+          + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
+    print(f"  legs: UnitreeRobotConfig(robot={robot.split('-')[0]!r}, target_host={host!r}, target_port={port}); "
+          f"arm: DynamixelArmConfig(robot={robot!r}, port={pty!r})", flush=True)
+
+
+def print_bus_counts(stats: BusStats) -> None:
+    """The arm emulator's closing line: instruction packets decoded, rejects by reason, status packets."""
+    rejects = ", ".join(f"{reason} {n}" for reason, n in sorted(stats.rejected.items())) or "none"
+    print(f"arm bus: packets decoded {stats.packets}; rejected {sum(stats.rejected.values())} ({rejects}); status "
+          f"packets {stats.statuses}; unheard {stats.unheard}")
 
 
 def print_emulator_counts(counts: EmulatorCounts) -> None:
