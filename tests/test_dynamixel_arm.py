@@ -324,7 +324,7 @@ def test_an_unreadable_servo_is_retried_identified_then_the_others_damped(
     failing = [p for p in before if p.instruction == Instruction.SYNC_READ and 4 in [r.id for r in p.reads]]
     assert arm.config.retries + 1 <= len(failing) <= arm.config.retries + 2  # bounded retries
     pings = [p.id for p in before if p.instruction == Instruction.PING]
-    assert pings.count(4) in (1, 2) and len(pings) <= 2 * len(failing[-1].reads)  # each ID read, pinged once or twice
+    assert pings.count(4) in (1, 2, 3) and len(pings) <= 3 * len(failing[-1].reads)  # pinged up to three times
     later = _after_latch(arm, packets)
     reads = [tuple(r.id for r in p.reads) for p in later if p.instruction == Instruction.SYNC_READ]
     assert (1, 2) in reads and not [r for r in reads if 4 in r]  # the unreadable servo is left out of the reads

@@ -35,7 +35,7 @@ from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.tools.arm_momentum import arm_momentum_study
-from wbc.tools.bench import EmulatorCounts, bench_hw, bench_mpc, bench_sim, bench_sweep, bench_train
+from wbc.tools.bench import EmulatorCounts, bench_arm, bench_hw, bench_mpc, bench_sim, bench_sweep, bench_train
 from wbc.tools.tail import analyze_tail
 
 __all__ = ["BUS_FAULTS", "FAULTS", "HANDLERS", "main"]
@@ -121,6 +121,19 @@ def _bench_hw(args: argparse.Namespace) -> int:
         printers.print_json(result)
     else:
         printers.print_bench_hw(result)
+    return 0
+
+
+def _bench_arm(args: argparse.Namespace) -> int:
+    try:
+        rates = tuple(float(r) for r in args.rates.split(","))
+    except ValueError:
+        raise ConfigError(f"--rates {args.rates!r}: give comma-separated numbers in Hz, e.g. 100,200,400") from None
+    result = bench_arm(args.robot, rates=rates, seconds=args.seconds, latency_ms=args.latency)
+    if args.json:
+        printers.print_json(result)
+    else:
+        printers.print_bench_arm(result)
     return 0
 
 
@@ -368,6 +381,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "bench sweep": _bench_sweep,
     "bench train": _bench_train,
     "bench hw": _bench_hw,
+    "bench arm": _bench_arm,
     "hw emulate": _hw_emulate,
     "hw check": _hw_check,
     "train": _train,

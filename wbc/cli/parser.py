@@ -111,6 +111,18 @@ def build_parser() -> argparse.ArgumentParser:
     bhw.add_argument("--json", action="store_true", help="print JSON")
     bhw.set_defaults(handler="bench hw")
 
+    barm = bench.add_parser("arm", help="the arm's Dynamixel bus loop against the emulated robot: rate, step response",
+                            description="Run a DynamixelArm (and the legs' UnitreeRobot holding a stand) against a "
+                            "real-time RobotEmulator in its own process: the bus loop's achieved rate at each "
+                            "requested rate, and the elbow's closed-loop step response beside the same step in pure "
+                            "simulation.")
+    barm.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(DESCRIPTIONS.values())}")
+    barm.add_argument("--seconds", type=float, default=2.0, help="how long each rate runs [s] (default 2)")
+    barm.add_argument("--rates", default="100,200,400,1000", help="bus rates to run, comma-separated [Hz]")
+    barm.add_argument("--latency", type=float, default=1.0, help="the adapter's latency timer [ms] (default 1)")
+    barm.add_argument("--json", action="store_true", help="print JSON")
+    barm.set_defaults(handler="bench arm")
+
     hw = sub.add_parser("hw", help="Unitree A1 / Go1 low-level link: an emulator, a read-only check of a robot")
     hws = hw.add_subparsers(dest="what", required=True)
     emulate = hws.add_parser("emulate", help="serve an emulated A1 / Go1 (and its arm) on 127.0.0.1, backed by the "

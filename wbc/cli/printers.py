@@ -192,6 +192,22 @@ def print_bench_hw(result: Mapping[str, object]) -> None:
     print(f"  machine: {result['machine']}")
 
 
+def print_bench_arm(result: Mapping[str, object]) -> None:
+    """``wbc bench arm``: the bus loop's rates and the elbow's step response, bus against simulation."""
+    print(f"WX200 arm bus ({result['robot']}) against the real-time emulated robot in its own process; latency timer "
+          f"{result['latency_ms']} ms, {result['seconds']} s per rate")
+    print("  requested [Hz]  achieved [Hz]  busy mean / max [ms]  longest period [ms]  failed reads  faults")
+    for r in result["rates"]:
+        print(f"  {r['rate_hz']:>14.0f}{r['achieved_hz']:>15.1f}{r['busy_ms_mean']:>12.2f} / {r['busy_ms_max']:<7.1f}"
+              f"{r['period_ms_max']:>19.1f}{r['failed_reads']:>14d}{r['faults']:>8d}")
+    print(f"  elbow step of {result['step_rad']} rad (median of 4 on the bus), from the stowed pose:")
+    print("  source       kp    kd   rate [Hz]  rise 10-90 [ms]  overshoot [%]  settle 5% [ms]  final error [rad]")
+    for s in result["steps"]:
+        print(f"  {s['source']:<11}{s['kp']:>4.0f}{s['kd']:>6.1f}{s['rate_hz']:>12.0f}{s['rise_ms']:>17.1f}"
+              f"{s['overshoot_pct']:>15.1f}{s['settle_ms']:>16.0f}{s['final_error_rad']:>19.4f}")
+    print(f"  machine: {result['machine']}")
+
+
 def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faults: Sequence[str], *,
                            seconds: float | None) -> None:
     """``wbc hw emulate``: where the emulator listens, and how it stops."""

@@ -101,6 +101,7 @@ class ArmBusStats:
         retries: reads tried again after a flush.
         unexplained: failed reads whose retries failed too but whose servos all answered a ping afterwards (no
             fault latched).
+        stale: status packets skipped because they answered an earlier request (another ID or length).
         damping_cycles: cycles that sent the host's damping instead of the written command.
         deadline_trips: times the write deadline expired.
         overruns: cycles that ended more than a period late (the thread then resynchronises).
@@ -117,6 +118,7 @@ class ArmBusStats:
     failed_transfers: int = 0
     retries: int = 0
     unexplained: int = 0
+    stale: int = 0
     damping_cycles: int = 0
     deadline_trips: int = 0
     overruns: int = 0

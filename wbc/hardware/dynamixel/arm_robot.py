@@ -22,13 +22,13 @@ The bus thread runs at `DynamixelArmConfig.rate_hz`. Each cycle:
    `write` has not been called for `write_deadline`, after a latched fault, and while closing.
 
 Faults. A read that fails (timeout, corrupt answer) is tried again up to `retries` times, after a short wait and a
-flush. Then each servo of the read is pinged, and those that stay silent or answer corrupt are named in an
-`ArmFault`, which latches. A hardware error bit latches one too, and so does any exception of the serial layer
-(the port is lost). A latched fault is printed to standard error, kept in `faults`, reported in `motor_status` as an
-error mode of the servos at fault, and freezes the freshness tick. A safety layer above therefore trips both on the
-motor mode and on the stale state. The torque policy while the host lives: the joints whose servos still answer
-are damped by the host, whatever `write` asks. A joint that cannot be read gets goal current 0 and goes limp. A
-servo with a hardware error has already switched its own torque off (Shutdown) and is limp too. A lost port can
+flush. Then each servo of the read is pinged (up to three times), and those that stay silent or answer corrupt are
+named in an `ArmFault`, which latches. A hardware error bit latches one too, and so does any exception of the serial
+layer (the port is lost). A latched fault is printed to standard error, kept in `faults`, reported in `motor_status`
+as an error mode of the servos at fault, and freezes the freshness tick. A safety layer above therefore trips both
+on the motor mode and on the stale state. The torque policy while the host lives: the joints whose servos still
+answer are damped by the host, whatever `write` asks. A joint that cannot be read gets goal current 0 and goes limp.
+A servo with a hardware error has already switched its own torque off (Shutdown) and is limp too. A lost port can
 reach nothing: the servos' bus watchdog sets their goal current to 0 after `watchdog_s`, and the arm goes limp.
 
 If the host dies, each joint servo's Bus Watchdog (armed at `watchdog_s`) sets its goal current to 0, with the
@@ -103,6 +103,7 @@ _ADDR = {name: XM430_W350[name].address for name in (
     "present_input_voltage")}
 _PRESENT = (_ADDR["present_current"], 10)  # current (2), velocity (4), position (4): one read
 _STATUS_TEMP = (_ADDR["present_input_voltage"], 3)  # input voltage (2), temperature (1)
+_PING_WAITS = (0.002, 0.01)  # [s] waits before the second and third ping of a servo whose read failed for good
 
 
 def arm_joint_table(robot: str, law: CurrentLaw | None = None) -> JointTable:
@@ -164,6 +165,7 @@ class DynamixelArm(Robot):
         self._temperature = np.zeros(n)
         self._voltage = np.zeros(n)
         self._port_lost = False
+        self._stale = 0
         self._counts = dict(cycles=0, states=0, status_reads=0, failed_transfers=0, retries=0, unexplained=0,
                             damping_cycles=0, deadline_trips=0, overruns=0, late_advances=0)
         self._timing = [0.0, 0.0, 0, 0.0, 0.0]  # period sum, period max, count, busy sum, busy max
@@ -223,6 +225,7 @@ class DynamixelArm(Robot):
             self._thread = None
         if self._bus is not None:
             self._bus.close()
+            self._stale = self._bus.stale
             self._bus = None
 
     def _read(self) -> RobotState:
@@ -313,8 +316,9 @@ class DynamixelArm(Robot):
         """A snapshot of the bus thread's counters."""
         with self._lock:
             period_sum, period_max, n, busy_sum, busy_max = self._timing
-            return ArmBusStats(**self._counts, period_mean=period_sum / n if n else 0.0, period_max=period_max,
-                               busy_mean=busy_sum / n if n else 0.0, busy_max=busy_max)
+            stale = self._bus.stale if self._bus is not None else self._stale
+            return ArmBusStats(**self._counts, stale=stale, period_mean=period_sum / n if n else 0.0,
+                               period_max=period_max, busy_mean=busy_sum / n if n else 0.0, busy_max=busy_max)
 
     def _raise_failure(self) -> None:
         if self._failure is not None:
@@ -501,8 +505,10 @@ class DynamixelArm(Robot):
         for servo_id in ids:
             bus.flush()
             _, result, _ = bus.ping(servo_id)
-            if result == COMM_RX_TIMEOUT:
-                time.sleep(self.config.retry_wait_s)  # one more try: a loaded host can miss one answer
+            for wait in _PING_WAITS:  # more tries, further apart: a loaded host can miss an answer or two
+                if result != COMM_RX_TIMEOUT:
+                    break
+                time.sleep(wait)
                 bus.flush()
                 _, result, _ = bus.ping(servo_id)
             if result == COMM_RX_TIMEOUT:
@@ -519,7 +525,7 @@ class DynamixelArm(Robot):
                 (self._silent if kind == "no_answer" else self._corrupt).update(bad)
                 self._latch(kind, tuple(bad),
                             f"{', '.join(self._name(i) for i in bad)}: {describe_result(result)} on {retries + 1} "
-                            f"reads and on a ping", self._policy())
+                            f"reads and on its pings", self._policy())
 
     def _policy(self) -> str:
         """The torque policy in words, for the servos as they are now."""

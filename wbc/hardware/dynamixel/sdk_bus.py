@@ -1,9 +1,14 @@
 """`SdkBus`: the arm's serial bus through dynamixel_sdk, and the one place in `wbc` that calls that library.
 
 The backend (`DynamixelArm`) speaks to the servos only through this class. The SDK's `PacketHandler` (Protocol 2.0)
-is used unmodified. A sync read is the SDK's own two steps, `syncReadTx` and then one `readRx` per ID, rather than
-its `GroupSyncRead`: that helper throws each status packet's error byte away, and the error byte carries the hardware
-alert, and it fails the whole read without saying which ID failed.
+is used unmodified: its transmit functions (`syncReadTx`, `readTx`, `syncWriteTxOnly`, `ping`, `writeTxRx`) and its
+receive function `rxPacket`, which returns a whole status packet, CRC checked. Two of its helpers are not used.
+`GroupSyncRead` throws each status packet's error byte away (the error byte carries the hardware alert) and fails
+the whole read without saying which ID failed. `readRx` takes the data of any status packet from the right ID,
+whatever its length. A late answer to an earlier request then passes for the answer to this one: on a loaded
+machine, a 10-byte answer of present values was read as a 1-byte Hardware Error Status, and its first byte as
+error bits. Here a status packet must come from the ID asked and carry exactly the bytes asked for; any other is a
+stale answer, counted in `stale` and skipped.
 
 Two things of the SDK's port handler are replaced, in a subclass built when the SDK is first needed
 (`sdk_handlers`):
@@ -150,6 +155,7 @@ class SdkBus:
         if named != port:
             raise SerialPortError(port, f"the port handler names {named!r}; only the port given is ever opened")
         self.is_open = False
+        self.stale = 0  # status packets skipped: another ID's, or another length than the request's
 
     def _call(self, fn: Callable[..., T], *args: object) -> T:
         try:
@@ -190,8 +196,21 @@ class SdkBus:
 
     def read(self, servo_id: int, address: int, length: int) -> ServoRead:
         """READ `length` bytes from `address` of one servo."""
-        data, result, error = self._call(self._ph.readTxRx, self._port, servo_id, address, length)
-        return ServoRead(servo_id, bytes(data) if result == COMM_SUCCESS else b"", result, error)
+        result = self._call(self._ph.readTx, self._port, servo_id, address, length)
+        if result != COMM_SUCCESS:
+            return ServoRead(servo_id, b"", result, 0)
+        return self._receive(servo_id, length)
+
+    def _receive(self, servo_id: int, length: int) -> ServoRead:
+        """The status packet of `servo_id` carrying `length` bytes, skipping stale ones, within the SDK's timeout."""
+        while True:
+            packet, result = self._call(self._ph.rxPacket, self._port, False)
+            if result != COMM_SUCCESS:
+                return ServoRead(servo_id, b"", result, 0)
+            # packet: FF FF FD 00 | ID | LEN_L LEN_H | 0x55 | ERR | params | CRC (stuffing removed; LEN = params + 4)
+            if packet[4] == servo_id and packet[5] | packet[6] << 8 == length + 4:
+                return ServoRead(servo_id, bytes(packet[9: 9 + length]), COMM_SUCCESS, packet[8])
+            self.stale += 1
 
     def write(self, servo_id: int, address: int, size: int, value: int) -> tuple[int, int]:
         """WRITE `value` (`size` bytes, little-endian, two's complement) at `address`; (result, error byte)."""
@@ -199,7 +218,7 @@ class SdkBus:
         return self._call(self._ph.writeTxRx, self._port, servo_id, address, size, data)
 
     def sync_read(self, address: int, length: int, ids: Sequence[int]) -> list[ServoRead]:
-        """SYNC_READ `length` bytes at `address` from `ids`, in that order.
+        """SYNC_READ `length` bytes at `address` from `ids`, each answer checked for its ID and length.
 
         Returns:
             One `ServoRead` per ID read, in order, stopping after the first that failed (the answers of the IDs after
@@ -210,9 +229,8 @@ class SdkBus:
             return [ServoRead(ids[0], b"", result, 0)]
         out = []
         for servo_id in ids:
-            data, result, error = self._call(self._ph.readRx, self._port, servo_id, length)
-            out.append(ServoRead(servo_id, bytes(data) if result == COMM_SUCCESS else b"", result, error))
-            if result != COMM_SUCCESS:
+            out.append(self._receive(servo_id, length))
+            if not out[-1].ok:
                 break
         return out
 

@@ -2,9 +2,11 @@
 
 ``sim`` (physics), ``mpc`` (the MPC controller in closed loop), ``sweep`` (a whole arena sweep), ``train`` (the
 training env), each beside the references its targets are stated against (``references``); ``hw`` (the Unitree
-low-level link over loopback, against an emulator in another process).
+low-level link over loopback, against an emulator in another process); ``arm`` (the arm's Dynamixel bus loop, its
+rate and step response, against the emulated robot in another process).
 """
 
+from wbc.tools.bench.arm import bench_arm
 from wbc.tools.bench.hw import EmulatorCounts, bench_hw
 from wbc.tools.bench.mpc import bench_mpc
 from wbc.tools.bench.references import (
@@ -19,5 +21,6 @@ from wbc.tools.bench.sim import bench_sim
 from wbc.tools.bench.sweep import bench_sweep
 from wbc.tools.bench.train import bench_train
 
-__all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_TARGETS", "TRAIN_TARGET", "EmulatorCounts", "bench_hw", "bench_mpc",
-           "bench_sim", "bench_sweep", "bench_train", "machine_description", "reference_a1", "reference_placo_tick_us"]
+__all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_TARGETS", "TRAIN_TARGET", "EmulatorCounts", "bench_arm", "bench_hw",
+           "bench_mpc", "bench_sim", "bench_sweep", "bench_train", "machine_description", "reference_a1",
+           "reference_placo_tick_us"]
