@@ -206,3 +206,27 @@ def test_hw_emulate_serves_one_robot_on_both_wires() -> None:
     assert proc.returncode == 0, err
     packets = re.search(r"arm bus: packets decoded (\d+)", out)
     assert packets and int(packets[1]) > 50 and "Traceback" not in err
+
+
+def test_step_metrics_of_a_known_response() -> None:
+    from wbc.tools.bench.arm import step_metrics
+
+    t = np.arange(-0.05, 1.0, 0.001)
+    tau = 0.05  # a first-order lag of 50 ms toward 0.9 (target 1.0: 0.1 of steady error)
+    y = np.where(t < 0, 0.0, 0.9 * (1 - np.exp(-np.clip(t, 0, None) / tau)))
+    rise, overshoot, settle, error = step_metrics(t, y, 1.0)
+    assert rise == pytest.approx(1e3 * tau * np.log(9), abs=1.5)  # 10 % -> 90 % of a first-order lag
+    assert overshoot < 0.01 and settle == pytest.approx(1e3 * tau * np.log(20), abs=1.5)
+    assert error == pytest.approx(0.1, abs=1e-3)
+
+
+@pytest.mark.slow
+def test_bench_arm_measures_rates_and_a_step_against_the_emulator_in_its_own_process() -> None:
+    from wbc.tools.bench import bench_arm
+
+    result = bench_arm(rates=(200.0,), seconds=0.5, gains=((20.0, 0.5),))
+    (rate,) = result["rates"]
+    assert 100.0 < rate["achieved_hz"] <= 205.0 and rate["cycles"] > 50
+    bus, sim = result["steps"]
+    assert (bus["source"], sim["source"]) == ("bus", "simulation")
+    assert 10.0 < bus["rise_ms"] < 300.0 and abs(bus["final_error_rad"] - sim["final_error_rad"]) < 0.01

@@ -201,10 +201,11 @@ def print_bench_arm(result: Mapping[str, object]) -> None:
         print(f"  {r['rate_hz']:>14.0f}{r['achieved_hz']:>15.1f}{r['busy_ms_mean']:>12.2f} / {r['busy_ms_max']:<7.1f}"
               f"{r['period_ms_max']:>19.1f}{r['failed_reads']:>14d}{r['faults']:>8d}")
     print(f"  elbow step of {result['step_rad']} rad (median of 4 on the bus), from the stowed pose:")
-    print("  source       kp    kd   rate [Hz]  rise 10-90 [ms]  overshoot [%]  settle 5% [ms]  final error [rad]")
+    print("  source       kp    kd   rate [Hz]  rise 10-90 [ms]  overshoot [%]  settle 5% [ms]  final error [rad]"
+          "  discarded")
     for s in result["steps"]:
         print(f"  {s['source']:<11}{s['kp']:>4.0f}{s['kd']:>6.1f}{s['rate_hz']:>12.0f}{s['rise_ms']:>17.1f}"
-              f"{s['overshoot_pct']:>15.1f}{s['settle_ms']:>16.0f}{s['final_error_rad']:>19.4f}")
+              f"{s['overshoot_pct']:>15.1f}{s['settle_ms']:>16.0f}{s['final_error_rad']:>19.4f}{s['discarded']:>11d}")
     print(f"  machine: {result['machine']}")
 
 
