@@ -522,7 +522,8 @@ class DynamixelArm(Robot):
         retries = self.config.retries
         for kind, bad, result in (("no_answer", silent, COMM_RX_TIMEOUT), ("corrupt", corrupt, COMM_RX_CORRUPT)):
             if bad:
-                (self._silent if kind == "no_answer" else self._corrupt).update(bad)
+                with self._lock:
+                    (self._silent if kind == "no_answer" else self._corrupt).update(bad)
                 self._latch(kind, tuple(bad),
                             f"{', '.join(self._name(i) for i in bad)}: {describe_result(result)} on {retries + 1} "
                             f"reads and on its pings", self._policy())
