@@ -181,7 +181,7 @@ def test_bench_hw_refuses_a_bad_rate_before_starting_the_emulator(capsys: pytest
     assert "rate_hz must be in 200..1000" in capsys.readouterr().err
 
 
-def test_emulate_carries_a_locked_arm_in_its_physics_and_refuses_an_actuated_one(capsys: pytest.CaptureFixture[str],
+def test_emulate_carries_a_locked_arm_in_its_physics_and_refuses_an_unknown_mode(capsys: pytest.CaptureFixture[str],
                                                                                   ) -> None:
     masses = {}
     for arm in ("none", "locked"):
@@ -190,6 +190,6 @@ def test_emulate_carries_a_locked_arm_in_its_physics_and_refuses_an_actuated_one
             masses[arm] = float(emu.sim.model.body_mass.sum())
     assert masses["locked"] > masses["none"] + 0.3  # the held arm's mass is on the trunk
     assert main(["hw", "emulate", "--robot", "go1", "--arm", "locked", "--seconds", "0.2", "--lockstep"]) == 0
-    assert main(["hw", "emulate", "--robot", "go1", "--arm", "actuated", "--seconds", "0.2"]) == 2
+    assert main(["hw", "emulate", "--robot", "go1", "--arm", "welded", "--seconds", "0.2"]) == 2
     err = capsys.readouterr().err
-    assert "locked" in err and "none" in err and "Traceback" not in err
+    assert "locked" in err and "none" in err and "actuated" in err and "Traceback" not in err

@@ -31,6 +31,7 @@ __all__ = [
     "TargetRefusedError",
     "RobotLinkError",
     "PacketError",
+    "SerialPortError",
     "StandUpError",
 ]
 
@@ -240,3 +241,19 @@ class StandUpError(WbcError, RuntimeError):
     The layer tripped (the message names its reason and what it measured) or its ramp did not reach the standing
     pose in time; the robot was left in damping.
     """
+
+
+class SerialPortError(RobotLinkError):
+    """A serial port (the arm's Dynamixel bus adapter) could not be opened, or failed while in use.
+
+    The serial layer raises several unrelated types for one cause (a closed or unplugged port raises
+    `termios.error`, which is neither `OSError` nor pyserial's `SerialException`); the Dynamixel backend turns each
+    into this error, naming the port and the original exception.
+
+    Attributes:
+        port: the device path.
+    """
+
+    def __init__(self, port: str, detail: str) -> None:
+        self.port = port
+        super().__init__(f"serial port {port}: {detail}")

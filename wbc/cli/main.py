@@ -25,23 +25,47 @@ from wbc.control.check import CheckConfig, check_controller
 from wbc.control.onnx_policy import ONNX_PREFIX
 from wbc.control.registry import ControllerSpec, get_controller, list_controllers, takes_controller_config
 from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
-from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.emulators import (
+    BusFault,
+    Fault,
+    RobotEmulator,
+    RobotEmulatorConfig,
+    UnitreeEmulator,
+    UnitreeEmulatorConfig,
+)
 from wbc.hardware.hardware_robot import HardwareRobot
-from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig, check_target, is_loopback
+from wbc.hardware.unitree import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.train.adaptation_config import AdaptationConfig
 from wbc.learned.train.stages import stage_config
+from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.tools.arm_momentum import arm_momentum_study
-from wbc.tools.bench import EmulatorCounts, bench_hw, bench_latency, bench_mpc, bench_sim, bench_sweep, bench_train
+from wbc.tools.bench import (
+    EmulatorCounts,
+    bench_arm,
+    bench_hw,
+    bench_latency,
+    bench_mpc,
+    bench_sim,
+    bench_sweep,
+    bench_train,
+)
 from wbc.tools.demo import DEMO_CONTROLLERS, trial_to_watch
 from wbc.tools.tail import analyze_tail
 
-__all__ = ["FAULTS", "HANDLERS", "main"]
+__all__ = ["BUS_FAULTS", "FAULTS", "HANDLERS", "main"]
 
 FAULTS: dict[str, Fault] = {f.value: f for f in Fault}
 """``wbc hw emulate --fault NAME``: the emulator's faults by name."""
+
+BUS_FAULTS: dict[str, BusFault] = {f"arm_{f.value}": f for f in BusFault}
+"""``wbc hw emulate --arm actuated --fault arm_NAME``: the arm bus's faults by name (``arm_`` keeps them apart from
+the legs' faults: both have an ``over_temperature``)."""
+
+_WIRE_OF = {**{wire: wire for wire in DESCRIPTIONS}, **{desc: wire for wire, desc in DESCRIPTIONS.items()}}
+"""``wbc hw emulate --robot``: a1, go1, or the name with the arm (a1-wx200, go1-arm), -> the legs' wire."""
 
 _EMULATE_POLL = 0.05  # [s] how often ``hw emulate`` looks at its clock and its emulator's health
 
@@ -124,6 +148,19 @@ def _bench_latency(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bench_arm(args: argparse.Namespace) -> int:
+    try:
+        rates = tuple(float(r) for r in args.rates.split(","))
+    except ValueError:
+        raise ConfigError(f"--rates {args.rates!r}: give comma-separated numbers in Hz, e.g. 100,200,400") from None
+    result = bench_arm(args.robot, rates=rates, seconds=args.seconds, latency_ms=args.latency)
+    if args.json:
+        printers.print_json(result)
+    else:
+        printers.print_bench_arm(result)
+    return 0
+
+
 def _address(text: str, option: str) -> tuple[str, int]:
     """``HOST:PORT`` as (host, port); the policy (`check_target`) is the caller's."""
     host, sep, port = text.rpartition(":")
@@ -133,16 +170,26 @@ def _address(text: str, option: str) -> tuple[str, int]:
 
 
 def _hw_emulate(args: argparse.Namespace) -> int:
-    faults = []
+    if args.robot not in _WIRE_OF:
+        raise UnknownNameError("robot", args.robot, tuple(_WIRE_OF))
+    if args.arm not in ARM_MODES:
+        raise UnknownNameError("arm mode", args.arm, ARM_MODES)
+    actuated = args.arm == "actuated"
+    faults: list[Fault | BusFault] = []
     for name in args.fault or ():
         key = name.lower().replace("-", "_")
-        if key not in FAULTS:
-            raise UnknownNameError("fault", name, tuple(FAULTS))
-        faults.append(FAULTS[key])
+        if key in BUS_FAULTS and not actuated:
+            raise ConfigError(f"--fault {name}: the arm's bus is emulated only with --arm actuated")
+        if key not in FAULTS and key not in BUS_FAULTS:
+            raise UnknownNameError("fault", name, tuple(FAULTS) + (tuple(BUS_FAULTS) if actuated else ()))
+        faults.append(FAULTS[key] if key in FAULTS else BUS_FAULTS[key])
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
-    cfg = UnitreeEmulatorConfig(robot=args.robot, arm_mode=args.arm, mode="lockstep" if args.lockstep else "realtime",
-                                port=args.port)
+    mode = "lockstep" if args.lockstep else "realtime"
+    wire = _WIRE_OF[args.robot]
+    if actuated:
+        return _hw_emulate_with_arm(DESCRIPTIONS[wire], mode, args.port, faults, args.seconds)
+    cfg = UnitreeEmulatorConfig(robot=wire, arm_mode=args.arm, mode=mode, port=args.port)
     emulator = UnitreeEmulator(cfg)
     with emulator:
         for fault in faults:
@@ -156,6 +203,28 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         except KeyboardInterrupt:
             pass
     printers.print_emulator_counts(EmulatorCounts.of(emulator))
+    if emulator.failure is not None:
+        raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
+    return 0
+
+
+def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | BusFault],
+                         seconds: float | None) -> int:
+    """``wbc hw emulate --arm actuated``: one `RobotEmulator`, legs over UDP and arm over a pty, one physics."""
+    emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode=mode, port=port))
+    with emulator:
+        for fault in faults:
+            emulator.inject(fault)
+        names = [f"arm_{f.value}" if isinstance(f, BusFault) else f.value for f in faults]
+        printers.print_robot_emulator_started(robot, mode, emulator.address, emulator.port, names, seconds=seconds)
+        end = time.monotonic() + seconds if seconds is not None else float("inf")
+        try:
+            while time.monotonic() < end and emulator.failure is None:
+                time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
+        except KeyboardInterrupt:
+            pass
+    printers.print_emulator_counts(EmulatorCounts.of(emulator.legs))
+    printers.print_bus_counts(emulator.arm.stats)
     if emulator.failure is not None:
         raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
     return 0
@@ -470,6 +539,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "bench train": _bench_train,
     "bench hw": _bench_hw,
     "bench latency": _bench_latency,
+    "bench arm": _bench_arm,
     "hw emulate": _hw_emulate,
     "hw check": _hw_check,
     "hw run": _hw_run,

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 
 from wbc.control.registry import CONTROLLERS
-from wbc.hardware.emulators import Fault
+from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES, HARDWARE_ROBOTS
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
 from wbc.learned.train.stages import BASELINES, TASKS
@@ -139,18 +139,37 @@ def build_parser() -> argparse.ArgumentParser:
     blat.add_argument("--json", action="store_true", help="print JSON")
     blat.set_defaults(handler="bench latency")
 
+    barm = bench.add_parser("arm", help="the arm's Dynamixel bus loop against the emulated robot: rate, step response",
+                            description="Run a DynamixelArm (and the legs' UnitreeRobot holding a stand) against a "
+                            "real-time RobotEmulator in its own process: the bus loop's achieved rate at each "
+                            "requested rate, and the elbow's closed-loop step response beside the same step in pure "
+                            "simulation.")
+    barm.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(DESCRIPTIONS.values())}")
+    barm.add_argument("--seconds", type=float, default=2.0, help="how long each rate runs [s] (default 2)")
+    barm.add_argument("--rates", default="100,200,400,1000", help="bus rates to run, comma-separated [Hz]")
+    barm.add_argument("--latency", type=float, default=1.0, help="the adapter's latency timer [ms] (default 1)")
+    barm.add_argument("--json", action="store_true", help="print JSON")
+    barm.set_defaults(handler="bench arm")
+
     hw = sub.add_parser("hw", help="real robots: an emulator, a read-only check, a trial on the robot")
     hws = hw.add_subparsers(dest="what", required=True)
-    emulate = hws.add_parser("emulate", help="serve an emulated A1 / Go1 on 127.0.0.1, backed by the simulator",
+    emulate = hws.add_parser("emulate", help="serve an emulated A1 / Go1 (and its arm) on 127.0.0.1, backed by the "
+                             "simulator",
                              description="Speak the robot's low-level UDP wire on 127.0.0.1 (never another "
-                             "address), with the MuJoCo simulator behind it; print the address, and the counts "
-                             "(commands decoded, rejects by reason, replies) when it stops (Ctrl-C or --seconds).")
-    emulate.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
+                             "address), with the MuJoCo simulator behind it; with --arm actuated, also the arm's "
+                             "Dynamixel bus on a pseudo-terminal, over the same physics. Print the UDP address (and "
+                             "the pty), and the counts (commands decoded, rejects by reason, replies; the arm's "
+                             "packets) when it stops (Ctrl-C or --seconds).")
+    emulate.add_argument("--robot", default="go1",
+                         help=f"one of: {', '.join((*DESCRIPTIONS, *DESCRIPTIONS.values()))} (default go1)")
     emulate.add_argument("--arm", default="none",
-                         help="none (the bare quadruped, default) or locked (its arm on the trunk, held)")
+                         help="none (the bare quadruped, default), locked (its arm on the trunk, held) or actuated "
+                         "(the arm on its own bus: a pty speaking Dynamixel Protocol 2.0)")
     emulate.add_argument("--port", type=int, default=0, help="UDP port on 127.0.0.1 (default 0: a free one)")
     emulate.add_argument("--fault", action="append", default=None, metavar="NAME",
-                         help=f"inject a fault at its default value (repeatable): {', '.join(f.value for f in Fault)}")
+                         help="inject a fault at its default value (repeatable): "
+                         f"{', '.join(f.value for f in Fault)}; with --arm actuated also the arm's bus faults "
+                         f"{', '.join('arm_' + f.value for f in BusFault)}")
     emulate.add_argument("--lockstep", action="store_true",
                          help="one physics step and one reply per command (default: real time, a reply per period)")
     emulate.add_argument("--seconds", type=float, default=None, help="stop after S seconds (default: Ctrl-C)")

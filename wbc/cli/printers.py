@@ -18,6 +18,7 @@ from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table
 from wbc.control.check import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
+from wbc.hardware.emulators import BusStats
 from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
 from wbc.tools.arm_momentum import ArmMomentumTrial
 from wbc.tools.bench.hw import EmulatorCounts
@@ -275,6 +276,22 @@ def print_bench_latency(result: Mapping[str, object]) -> None:
             cells.append(f"{passed}, fell at {fell:g}" if fell is not None else f"{passed} (no fall up to {top:g})")
         forces = ", ".join(f"{f:g}" for f in m["push_force_n"])
         print(f"  {m['controller']:<12}{cells[0]:<26}{cells[1]:<26}{forces:<18}{m['wall_s']:.0f} ({m['runs']} runs)")
+
+
+def print_bench_arm(result: Mapping[str, object]) -> None:
+    """``wbc bench arm``: the bus loop's rates and the elbow's step response, bus against simulation."""
+    print(f"WX200 arm bus ({result['robot']}) against the real-time emulated robot in its own process; latency timer "
+          f"{result['latency_ms']} ms, {result['seconds']} s per rate")
+    print("  requested [Hz]  achieved [Hz]  busy mean / max [ms]  longest period [ms]  failed reads  faults")
+    for r in result["rates"]:
+        print(f"  {r['rate_hz']:>14.0f}{r['achieved_hz']:>15.1f}{r['busy_ms_mean']:>12.2f} / {r['busy_ms_max']:<7.1f}"
+              f"{r['period_ms_max']:>19.1f}{r['failed_reads']:>14d}{r['faults']:>8d}")
+    print(f"  elbow step of {result['step_rad']} rad (median of 4 on the bus), from the stowed pose:")
+    print("  source       kp    kd   rate [Hz]  rise 10-90 [ms]  overshoot [%]  settle 5% [ms]  final error [rad]"
+          "  discarded")
+    for s in result["steps"]:
+        print(f"  {s['source']:<11}{s['kp']:>4.0f}{s['kd']:>6.1f}{s['rate_hz']:>12.0f}{s['rise_ms']:>17.1f}"
+              f"{s['overshoot_pct']:>15.1f}{s['settle_ms']:>16.0f}{s['final_error_rad']:>19.4f}{s['discarded']:>11d}")
     print(f"  machine: {result['machine']}")
 
 
@@ -285,6 +302,24 @@ def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faul
     print(f"emulated {robot} ({mode}) on {host}:{port}; faults: {', '.join(faults) or 'none'}; "
           + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
     print(f"  connect with: wbc hw check --robot {robot} --target {host}:{port}", flush=True)
+
+
+def print_robot_emulator_started(robot: str, mode: str, address: tuple[str, int], pty: str, faults: Sequence[str], *,
+                                 seconds: float | None) -> None:
+    """``wbc hw emulate --arm actuated``: the legs' UDP address, the arm's pty, and how it stops."""
+    host, port = address
+    print(f"emulated {robot} with its arm actuated ({mode}): legs on {host}:{port} (UDP), arm on {pty} (Dynamixel "
+          f"Protocol 2.0, 1 Mbps); faults: {', '.join(faults) or 'none'}; "
+          + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
+    print(f"  legs: UnitreeRobotConfig(robot={robot.split('-')[0]!r}, target_host={host!r}, target_port={port}); "
+          f"arm: DynamixelArmConfig(robot={robot!r}, port={pty!r})", flush=True)
+
+
+def print_bus_counts(stats: BusStats) -> None:
+    """The arm emulator's closing line: instruction packets decoded, rejects by reason, status packets."""
+    rejects = ", ".join(f"{reason} {n}" for reason, n in sorted(stats.rejected.items())) or "none"
+    print(f"arm bus: packets decoded {stats.packets}; rejected {sum(stats.rejected.values())} ({rejects}); status "
+          f"packets {stats.statuses}; unheard {stats.unheard}")
 
 
 def print_emulator_counts(counts: EmulatorCounts) -> None:

@@ -4,8 +4,25 @@
 read's combined answer); `control_table` holds the XM430-W350's registers; `units` converts their units to SI;
 `wx200_bus` says which servo has which ID and how ticks map to the model's arm joints. None of it needs the vendor
 SDK, MuJoCo or torch: an emulator (`wbc.hardware.emulators`) and a backend build on the same definitions.
+
+The backend: `DynamixelArm` (the three model joints behind the `Robot` interface, current mode with the PD law on
+the host, `CurrentLaw`) over `SdkBus` (dynamixel_sdk, imported only when a bus is opened), configured by
+`DynamixelArmConfig`; it reports `ArmFault`, `ArmMotorStatus` and `ArmBusStats`.
 """
 
+from wbc.hardware.dynamixel.arm_config import ARM_ROBOTS, DynamixelArmConfig
+from wbc.hardware.dynamixel.arm_fault import (
+    FAULT_KINDS,
+    MODE_CORRUPT,
+    MODE_HARDWARE_ERROR,
+    MODE_NO_ANSWER,
+    MODE_PORT_LOST,
+    MODE_SERVO,
+    ArmBusStats,
+    ArmFault,
+    ArmMotorStatus,
+)
+from wbc.hardware.dynamixel.arm_robot import HELD_MODEL_NUMBERS, DynamixelArm, arm_joint_table
 from wbc.hardware.dynamixel.control_table import (
     BAUD_RATES,
     DRIVE_MODE_REVERSE,
@@ -22,6 +39,7 @@ from wbc.hardware.dynamixel.control_table import (
     Register,
 )
 from wbc.hardware.dynamixel.crc import crc16
+from wbc.hardware.dynamixel.current_law import CurrentLaw
 from wbc.hardware.dynamixel.packet import (
     HEADER,
     MAX_PACKET_LENGTH,
@@ -65,6 +83,15 @@ from wbc.hardware.dynamixel.protocol import (
     Instruction,
     describe_error,
 )
+from wbc.hardware.dynamixel.sdk_bus import (
+    COMM_RX_CORRUPT,
+    COMM_RX_TIMEOUT,
+    COMM_SUCCESS,
+    SdkBus,
+    ServoRead,
+    describe_result,
+    sdk_handlers,
+)
 from wbc.hardware.dynamixel.wx200_bus import (
     WX200_ARM_JOINTS,
     WX200_BAUD_RATE,
@@ -76,6 +103,28 @@ from wbc.hardware.dynamixel.wx200_bus import (
 
 __all__ = [
     "ALERT",
+    "ARM_ROBOTS",
+    "COMM_RX_CORRUPT",
+    "COMM_RX_TIMEOUT",
+    "COMM_SUCCESS",
+    "FAULT_KINDS",
+    "HELD_MODEL_NUMBERS",
+    "MODE_CORRUPT",
+    "MODE_HARDWARE_ERROR",
+    "MODE_NO_ANSWER",
+    "MODE_PORT_LOST",
+    "MODE_SERVO",
+    "ArmBusStats",
+    "ArmFault",
+    "ArmMotorStatus",
+    "CurrentLaw",
+    "DynamixelArm",
+    "DynamixelArmConfig",
+    "SdkBus",
+    "ServoRead",
+    "arm_joint_table",
+    "describe_result",
+    "sdk_handlers",
     "BAUD_RATES",
     "BROADCAST_ID",
     "DRIVE_MODE_REVERSE",

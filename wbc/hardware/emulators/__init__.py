@@ -2,7 +2,8 @@
 
 A hardware backend's tests run against these instead of a robot: `UnitreeEmulator` (the A1 / Go1 low-level UDP
 wire) and `DynamixelEmulator` (the WX200 arm's Dynamixel bus on a pseudo-terminal). `SharedPlant` is the one
-simulated robot both can drive at once: legs over UDP, arm over the pty, one physics. This room sits above
+simulated robot both can drive at once: legs over UDP, arm over the pty, one physics; `RobotEmulator` starts the
+three as one robot. This room sits above
 `wbc.hardware.mujoco` (it drives a `MujocoRobot`) and below every controller.
 """
 
@@ -13,12 +14,14 @@ from wbc.hardware.emulators.faults import FRAME_FAULTS, STATE_FAULTS, Fault, Fau
 from wbc.hardware.emulators.logged_command import LoggedCommand
 from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, RegisterWrite
 from wbc.hardware.emulators.plant import PlantLegs, SharedPlant, SharedPlantConfig
+from wbc.hardware.emulators.robot_emulator import LEG_WIRES, RobotEmulator, RobotEmulatorConfig
 from wbc.hardware.emulators.servo import EmulatedServo
 from wbc.hardware.emulators.unitree import MODES, UnitreeEmulator, UnitreeEmulatorConfig
 
 __all__ = [
     "BUS_FAULT_DEFAULTS",
     "FRAME_FAULTS",
+    "LEG_WIRES",
     "MODES",
     "STATE_FAULTS",
     "ArmPlant",
@@ -34,6 +37,8 @@ __all__ = [
     "PlantLegs",
     "RegisterRead",
     "RegisterWrite",
+    "RobotEmulator",
+    "RobotEmulatorConfig",
     "SharedPlant",
     "SharedPlantConfig",
     "UnitreeEmulator",

@@ -27,7 +27,7 @@ class BusFault(enum.Enum):
     Limit (80 deg C) the servo sets bit 0x04 and shuts down, latched as for OVERLOAD.
     PORT_CLOSED: the emulator closes the pseudo-terminal for good, as an unplugged adapter. The client's next
     transfer fails (`termios.error` from the SDK's flush), and the emulator must be started anew. `clear` cannot
-    undo it.
+    undo it. The servos stay powered: their bus watchdogs still trip, and the plant sees it.
     """
 
     SILENT_ID = "silent_id"

@@ -313,11 +313,19 @@ class DynamixelEmulator:
     def _run(self) -> None:
         try:
             self._serve()
+            if BusFault.PORT_CLOSED in self.faults.snapshot():
+                self._close_fds()
+                self._unplugged()
         except BaseException as exc:  # noqa: BLE001 - kept for the test to read; the thread must not die silently
             self.failure = exc
         finally:
             if BusFault.PORT_CLOSED in self.faults.snapshot():
                 self._close_fds()
+
+    def _unplugged(self) -> None:
+        """The adapter is gone, the servos are still powered: their temperatures and bus watchdogs go on."""
+        while not self._stop.wait(_POLL):
+            self._tick(self._clock())
 
     def _serve(self) -> None:
         master, wake = self._master, self._wake[0]

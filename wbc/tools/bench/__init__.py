@@ -3,9 +3,11 @@
 ``sim`` (physics), ``mpc`` (the MPC controller in closed loop), ``sweep`` (a whole arena sweep), ``train`` (the
 training env), each beside the references its targets are stated against (``references``); ``hw`` (the Unitree
 low-level link over loopback, against an emulator in another process); ``latency`` (the wire's loop latency, the
-simulated delay that plays it, and how much actuation delay each controller survives).
+simulated delay that plays it, and how much actuation delay each controller survives); ``arm`` (the arm's Dynamixel
+bus loop, its rate and step response, against the emulated robot in another process).
 """
 
+from wbc.tools.bench.arm import bench_arm
 from wbc.tools.bench.hw import EmulatorCounts, bench_hw
 from wbc.tools.bench.latency import bench_latency
 from wbc.tools.bench.mpc import bench_mpc
@@ -21,6 +23,6 @@ from wbc.tools.bench.sim import bench_sim
 from wbc.tools.bench.sweep import bench_sweep
 from wbc.tools.bench.train import bench_train
 
-__all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_TARGETS", "TRAIN_TARGET", "EmulatorCounts", "bench_hw",
+__all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_TARGETS", "TRAIN_TARGET", "EmulatorCounts", "bench_arm", "bench_hw",
            "bench_latency", "bench_mpc", "bench_sim", "bench_sweep", "bench_train", "machine_description",
            "reference_a1", "reference_placo_tick_us"]

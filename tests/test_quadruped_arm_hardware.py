@@ -1,0 +1,232 @@
+"""The whole robot over both wires: `SafeRobot(QuadrupedArmRobot(UnitreeRobot, DynamixelArm))` against one
+`RobotEmulator` (legs over UDP on 127.0.0.1, arm over a pty, one physics): the contract, fault case 10 through the
+safety layer (it trips; damping on both wires), and the issue's 10 s stand beside the same 10 s in pure simulation.
+
+Every socket binds 127.0.0.1 on a port the kernel picks. The arm's latency timer is 4 ms here: the emulator
+answers from a thread of this process (see tests/test_dynamixel_arm.py).
+"""
+
+from __future__ import annotations
+
+import re
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.control.stand import StandController
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.hardware.contract import check_robot
+from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
+from wbc.hardware.emulators import BusFault, RobotEmulator, RobotEmulatorConfig
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.quadruped_arm_factory import build_quadruped_arm_robot
+from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
+from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
+from wbc.robots.registry import get_robot
+
+pytest.importorskip("dynamixel_sdk")
+
+ARM = dict(latency_ms=4.0)
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@contextmanager
+def _whole_robot(mode: str = "lockstep", **safety: object) -> Iterator[tuple[RobotEmulator, SafeRobot,
+                                                                              list[SafetyEvent]]]:
+    events: list[SafetyEvent] = []
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode=mode)) as emu:
+        safe = build_quadruped_arm_robot("a1-wx200", "actuated", target=emu.address,
+                                         arm=DynamixelArmConfig(port=emu.port, **ARM),
+                                         safety=SafetyConfig(position_table="a1", on_event=events.append, **safety))
+        with safe:
+            yield emu, safe, events
+        assert emu.failure is None, emu.failure
+    assert not [t.name for t in threading.enumerate() if t.name.startswith(("unitree-", "dynamixel-"))]
+
+
+def _stand(safe: SafeRobot, seconds: float, until: object = None) -> None:
+    ctrl = StandController(get_robot("a1-wx200", "actuated"))
+    end = time.monotonic() + seconds
+    for _ in range(int(seconds * ctrl.rate_hz) + 1):
+        if time.monotonic() >= end or (until is not None and until()):
+            return
+        safe.write(ctrl.act(safe.read(), None))
+        safe.advance(1.0 / ctrl.rate_hz)
+
+
+def test_contract_of_the_joined_robot_over_both_emulators() -> None:
+    with RobotEmulator(RobotEmulatorConfig(robot="go1-arm", mode="lockstep")) as emu:
+        host, port = emu.address
+        check_robot(lambda: QuadrupedArmRobot(
+            UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=host, target_port=port)),
+            DynamixelArm(DynamixelArmConfig(robot="go1-arm", port=emu.port, **ARM)),
+            QuadrupedArmConfig(arm_mode="actuated")))
+        assert emu.failure is None
+
+
+def test_the_factory_names_what_a_mode_needs() -> None:
+    with pytest.raises(ConfigError, match="serial port"):
+        build_quadruped_arm_robot("a1-wx200", "actuated", target=("127.0.0.1", 9))
+    with pytest.raises(ConfigError, match="drives no arm"):
+        build_quadruped_arm_robot("go1-arm", "none", target=("127.0.0.1", 9), port="/dev/ttyUSB0")
+    with pytest.raises(UnknownNameError, match="a1-wx200"):
+        build_quadruped_arm_robot("a1", "actuated", target=("127.0.0.1", 9), port="/dev/ttyUSB0")
+    safe = build_quadruped_arm_robot("go1-arm", "locked", target=("127.0.0.1", 9), port="/dev/ttyUSB0")
+    assert safe.num_joints == 12 and isinstance(safe.robot.arm, DynamixelArm)  # locked: the servos hold it stowed
+    assert build_quadruped_arm_robot("go1-arm", "actuated", target=("127.0.0.1", 9), port="/dev/ttyUSB0").num_joints \
+        == 15
+
+
+@pytest.mark.parametrize("fault,value", [(BusFault.SILENT_ID, 4), (BusFault.BAD_CRC, 2), (BusFault.OVERLOAD, 1),
+                                         (BusFault.OVER_TEMPERATURE, (4, 85)), (BusFault.PORT_CLOSED, None)])
+def test_an_arm_bus_fault_trips_the_safety_layer_and_damps_both_wires(fault: BusFault, value: object) -> None:
+    with _whole_robot(ramp_time_s=0.2) as (emu, safe, events):
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        assert safe.safety_state is SafetyState.RUN
+        t0 = time.monotonic()
+        emu.inject(fault, value)
+        _stand(safe, 1.0, until=lambda: safe.safety_state is SafetyState.DAMPED)
+        assert safe.safety_state is SafetyState.DAMPED
+        tripped = time.monotonic()
+        reason = events[-1].reason
+        assert reason in ("motor_mode", "motor_temperature", "stale_state"), events[-1]
+        arm = safe.robot.arm
+        assert arm.fault is not None and arm.fault.kind in ("no_answer", "corrupt", "hardware_error", "port_lost")
+        _stand(safe, 0.3)  # the controller goes on; the layer sends damping
+        # legs: damping frames on the UDP wire from the trip on (Kp 0, Kd 3); the log's times are when the emulator
+        # took a frame, late under load, so the check is on the order: once damping came, nothing else followed
+        frames = [c for c in emu.legs.commands() if c.time > t0]
+        first = next((k for k, c in enumerate(frames) if c.damping), None)
+        assert first is not None and all(c.damping for c in frames[first:])
+        assert len(frames) - first > 10
+        # arm: no goal to an unreadable servo, and the servos' torques only take energy out (damping)
+        packets = [p for p in emu.arm.packets() if p.time > arm.fault.time + 0.01]
+        goals = [{w.id: w.value for w in p.writes if w.name == "goal_current"} for p in packets if
+                 p.written("goal_current")]
+        if fault in (BusFault.SILENT_ID, BusFault.BAD_CRC):
+            assert goals and all(value not in g or g[value] == 0 for g in goals)
+        if fault is BusFault.PORT_CLOSED:
+            assert not packets
+        for _ in range(20):
+            cmd, _ = emu.plant.arm_command()
+            _, dq, _ = emu.plant.read_arm()
+            assert (cmd.kp == 0).all() and (cmd.tau * dq <= 0.05).all()  # [W]: at most quantisation
+            time.sleep(0.005)
+        print(f"\n{fault.value}: injected -> tripped ({reason}) in {(tripped - t0) * 1e3:.0f} ms; {arm.fault}")
+
+
+def _stand_in_simulation(seconds: float) -> tuple[float, np.ndarray]:
+    with MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated")) as sim:
+        ctrl = StandController(sim.desc)
+        for _ in range(int(round(seconds * ctrl.rate_hz))):
+            sim.write(ctrl.act(sim.read(), None))
+            sim.advance(1.0 / ctrl.rate_hz)
+        return float(sim.base_truth().base_position_in_world[2]), sim.read().q[12:].copy()
+
+
+def test_stand_ten_seconds_with_the_arm_actuated_over_both_wires_matches_simulation() -> None:
+    # the issue's acceptance run, in the default suite (about 10 s of wall time, real time by design)
+    seconds = 10.0
+    with _whole_robot(mode="realtime") as (emu, safe, events):
+        t0 = time.monotonic()
+        # the loop runs in real time; on a loaded machine the emulator's physics can fall behind the wall clock, so
+        # the stand lasts until it has simulated the 10 s (bounded), and the comparison is at equal simulated time
+        _stand(safe, 2.5 * seconds, until=lambda: emu.sim_time >= seconds)
+        wall = time.monotonic() - t0
+        height = float(emu.base_truth().base_position_in_world[2])  # before close() damps it down
+        arm_q, _, _ = emu.plant.read_arm()
+        sim_time = emu.sim_time
+        assert safe.safety_state is SafetyState.RUN, [str(e) for e in events]
+        assert [e.reason for e in events] == ["fresh_state", "ramp_done"]
+        arm = safe.robot.arm
+        stats, link = arm.bus_stats(), safe.robot.legs.link_stats()
+        assert arm.fault is None
+    sim_height, sim_q = _stand_in_simulation(seconds)
+    dq = arm_q - sim_q
+    print(f"\na1-wx200, arm actuated, {seconds:.0f} s stand through SafeRobot over both wires (emulated "
+          f"{sim_time:.2f} s): trunk height {height:.4f} m vs {sim_height:.4f} m in simulation "
+          f"({(height - sim_height) * 1e3:+.2f} mm); arm q {np.round(arm_q, 4)} vs {np.round(sim_q, 4)} "
+          f"(differences {np.round(dq * 1e3, 1)} mrad); wall time {wall:.1f} s; arm bus: {stats.cycles} cycles, "
+          f"period mean {stats.period_mean * 1e3:.2f} ms max {stats.period_max * 1e3:.1f} ms, busy mean "
+          f"{stats.busy_mean * 1e3:.2f} ms, failed reads {stats.failed_transfers}, retries {stats.retries}, overruns "
+          f"{stats.overruns}; legs' link deadline trips {link.deadline_trips}")
+    assert height > 0.2 and abs(height - sim_height) < 0.01
+    assert np.abs(dq).max() < 0.05
+    assert sim_time >= seconds
+    # the write deadlines' trips are printed, not asserted: on a loaded machine the 50 Hz loop stalls past 50 ms now
+    # and then, and each link damps its motors for that while; the layer staying in ``run`` is the claim
+
+
+def test_locked_mode_holds_the_arm_stowed_through_the_servos() -> None:
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
+        safe = build_quadruped_arm_robot("a1-wx200", "locked", target=emu.address,
+                                         arm=DynamixelArmConfig(port=emu.port, **ARM),
+                                         safety=SafetyConfig(position_table="a1", ramp_time_s=0.2,
+                                                             on_event=lambda e: None))
+        with safe:
+            ctrl = StandController(get_robot("a1-wx200", "locked"))
+            for _ in range(60):
+                safe.write(ctrl.act(safe.read(), None))
+                safe.advance(0.02)
+            assert safe.num_joints == 12 and safe.safety_state is SafetyState.RUN
+            arm_q, _, _ = emu.plant.read_arm()
+        # the stowed pose, within the sag of the locked hold's kp 20 under gravity
+        np.testing.assert_allclose(arm_q, QuadrupedArmConfig().stowed_q, atol=0.08)
+
+
+
+def test_hw_emulate_serves_one_robot_on_both_wires() -> None:
+    proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "hw", "emulate", "--robot", "go1-arm", "--arm",
+                             "actuated", "--seconds", "30"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=ROOT)
+    try:
+        line = proc.stdout.readline()  # bounded: the process stops by itself after --seconds
+        found = re.search(r"legs on 127\.0\.0\.1:(\d+) \(UDP\), arm on (\S+) \(Dynamixel", line)
+        assert found, line
+        robot = QuadrupedArmRobot(
+            UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host="127.0.0.1", target_port=int(found[1]))),
+            DynamixelArm(DynamixelArmConfig(robot="go1-arm", port=found[2], **ARM)))
+        with robot:
+            first = robot.read()
+            for _ in range(10):
+                robot.advance(0.01)
+            assert robot.read().num_joints == 15 and robot.read().tick > first.tick
+    finally:
+        proc.send_signal(signal.SIGINT)  # Ctrl-C: the emulator stops and prints its counts
+        out, err = proc.communicate(timeout=20)
+    assert proc.returncode == 0, err
+    packets = re.search(r"arm bus: packets decoded (\d+)", out)
+    assert packets and int(packets[1]) > 50 and "Traceback" not in err
+
+
+def test_step_metrics_of_a_known_response() -> None:
+    from wbc.tools.bench.arm import step_metrics
+
+    t = np.arange(-0.05, 1.0, 0.001)
+    tau = 0.05  # a first-order lag of 50 ms toward 0.9 (target 1.0: 0.1 of steady error)
+    y = np.where(t < 0, 0.0, 0.9 * (1 - np.exp(-np.clip(t, 0, None) / tau)))
+    rise, overshoot, settle, error = step_metrics(t, y, 1.0)
+    assert rise == pytest.approx(1e3 * tau * np.log(9), abs=1.5)  # 10 % -> 90 % of a first-order lag
+    assert overshoot < 0.01 and settle == pytest.approx(1e3 * tau * np.log(20), abs=1.5)
+    assert error == pytest.approx(0.1, abs=1e-3)
+
+
+@pytest.mark.slow
+def test_bench_arm_measures_rates_and_a_step_against_the_emulator_in_its_own_process() -> None:
+    from wbc.tools.bench import bench_arm
+
+    result = bench_arm(rates=(200.0,), seconds=0.5, gains=((20.0, 0.5),))
+    (rate,) = result["rates"]
+    assert 100.0 < rate["achieved_hz"] <= 205.0 and rate["cycles"] > 50
+    bus, sim = result["steps"]
+    assert (bus["source"], sim["source"]) == ("bus", "simulation")
+    assert 10.0 < bus["rise_ms"] < 300.0 and abs(bus["final_error_rad"] - sim["final_error_rad"]) < 0.01

@@ -1,0 +1,243 @@
+"""`SdkBus`: the arm's serial bus through dynamixel_sdk, and the one place in `wbc` that calls that library.
+
+The backend (`DynamixelArm`) speaks to the servos only through this class. The SDK's `PacketHandler` (Protocol 2.0)
+is used unmodified: its transmit functions (`syncReadTx`, `readTx`, `syncWriteTxOnly`, `ping`, `writeTxRx`) and its
+receive function `rxPacket`, which returns a whole status packet, CRC checked. Two of its helpers are not used.
+`GroupSyncRead` throws each status packet's error byte away (the error byte carries the hardware alert) and fails
+the whole read without saying which ID failed. `readRx` takes the data of any status packet from the right ID,
+whatever its length. A late answer to an earlier request then passes for the answer to this one: on a loaded
+machine, a 10-byte answer of present values was read as a 1-byte Hardware Error Status, and its first byte as
+error bits. Here a status packet must come from the ID asked and carry exactly the bytes asked for; any other is a
+stale answer, counted in `stale` and skipped.
+
+Two things of the SDK's port handler are replaced, in a subclass built when the SDK is first needed
+(`sdk_handlers`):
+
+- the latency timer. The SDK reads it from a module constant (16 ms) that sets every port's reply timeout. A silent
+  ID then costs about 35 ms. The U2D2's FTDI adapter is set to 1 ms by Interbotix's udev rule, so here the timer is
+  an argument of each port.
+- the wait for a reply. The SDK polls the port in a tight loop that holds a CPU core and Python's global lock while
+  it waits. Here a read that finds nothing waits on the port's file descriptor, for at most 1 ms at a time. On a
+  loopback emulator in the same process, the spinning reader starved the emulator's thread: about 15 % of the sync
+  reads timed out on a loaded 2-core machine, against under 0.5 % with the wait.
+
+Every exception the serial layer raises becomes a `SerialPortError`. A closed port raises `termios.error`, which is
+neither `OSError` nor pyserial's `SerialException`, and a port closed under the SDK can raise `TypeError` or
+`AttributeError` as well. All of them mean the port is unusable, and the caller needs one type to catch.
+"""
+
+from __future__ import annotations
+
+import functools
+import select
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+from wbc.errors import SerialPortError
+from wbc.optional import require
+
+__all__ = [
+    "COMM_RX_CORRUPT",
+    "COMM_RX_TIMEOUT",
+    "COMM_SUCCESS",
+    "SdkBus",
+    "ServoRead",
+    "describe_result",
+    "sdk_handlers",
+]
+
+COMM_SUCCESS = 0
+"""The SDK's result of a transfer that worked (`dynamixel_sdk.COMM_SUCCESS`)."""
+COMM_RX_TIMEOUT = -3001
+"""No status packet arrived in time (a silent ID, or a late answer)."""
+COMM_RX_CORRUPT = -3002
+"""A status packet arrived with a wrong CRC, or cut short."""
+_RESULT_NAMES = {COMM_SUCCESS: "success", -1000: "port busy", -1001: "tx fail", -1002: "rx fail", -2000: "tx error",
+                 -3000: "rx waiting", COMM_RX_TIMEOUT: "rx timeout", COMM_RX_CORRUPT: "rx corrupt",
+                 -9000: "not available"}
+_WAIT_SLICE = 0.001  # [s] longest single wait for the port's file descriptor
+
+T = TypeVar("T")
+
+
+def describe_result(result: int) -> str:
+    """An SDK transfer result in words, e.g. ``"rx timeout (-3001)"``."""
+    return f"{_RESULT_NAMES.get(result, 'unknown')} ({result})"
+
+
+@dataclass(frozen=True)
+class ServoRead:
+    """One servo's answer to a read.
+
+    Attributes:
+        id: the servo asked.
+        data: the bytes read (empty unless `result` is `COMM_SUCCESS`).
+        result: the SDK's transfer result (`COMM_SUCCESS`, `COMM_RX_TIMEOUT`, `COMM_RX_CORRUPT` ...).
+        error: the status packet's error byte (bit 7: hardware alert).
+    """
+
+    id: int
+    data: bytes
+    result: int
+    error: int
+
+    @property
+    def ok(self) -> bool:
+        """The transfer worked (the error byte may still carry an alert)."""
+        return self.result == COMM_SUCCESS
+
+    def value(self, offset: int, size: int, *, signed: bool = False) -> int:
+        """The little-endian integer of `size` bytes at `offset` of the data."""
+        return int.from_bytes(self.data[offset: offset + size], "little", signed=signed)
+
+
+@functools.cache
+def _low_latency_port_handler() -> type:
+    sdk = require("dynamixel_sdk")
+
+    class LowLatencyPortHandler(sdk.PortHandler):
+        """The SDK's port handler with its own latency timer, waiting on the port instead of spinning."""
+
+        def __init__(self, port_name: str, latency_ms: float) -> None:
+            super().__init__(port_name)
+            self.latency_ms = float(latency_ms)
+
+        def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 - the SDK's name
+            # the SDK's formula, with this port's latency timer instead of the module constant
+            self.packet_start_time = self.getCurrentTime()
+            self.packet_timeout = self.tx_time_per_byte * packet_length + 2.0 * self.latency_ms + 2.0
+
+        def readPort(self, length: int) -> bytes:  # noqa: N802 - the SDK's name
+            data = self.ser.read(length)
+            if data:
+                return data
+            left = (self.packet_timeout - self.getTimeSinceStart()) * 1e-3
+            if left > 0:
+                select.select([self.ser.fileno()], [], [], min(left, _WAIT_SLICE))
+                data = self.ser.read(length)
+            return data
+
+    return LowLatencyPortHandler
+
+
+def sdk_handlers(port: str, latency_ms: float = 1.0) -> tuple[Any, Any]:
+    """dynamixel_sdk's port handler for `port` (not opened) and its Protocol 2.0 packet handler.
+
+    Args:
+        port: the serial device (``/dev/ttyUSB0`` for a U2D2, or an emulator's pseudo-terminal).
+        latency_ms: the adapter's latency timer [ms], which sets the reply timeout.
+
+    Raises:
+        MissingExtraError: dynamixel_sdk is not installed (``pip install 'wbc[hardware]'``).
+    """
+    sdk = require("dynamixel_sdk")
+    return _low_latency_port_handler()(port, latency_ms), sdk.PacketHandler(2.0)
+
+
+class SdkBus:
+    """A Dynamixel bus through dynamixel_sdk's handlers.
+
+    Args:
+        port_handler: the SDK's port handler (or one built like it), not yet opened.
+        packet_handler: the SDK's Protocol 2.0 packet handler.
+        port: the device the handler must name; anything else is refused before it is opened.
+
+    Raises:
+        SerialPortError: the handler names another device than `port`.
+    """
+
+    def __init__(self, port_handler: Any, packet_handler: Any, *, port: str) -> None:
+        self.port = port
+        self._port = port_handler
+        self._ph = packet_handler
+        named = self._call(port_handler.getPortName)
+        if named != port:
+            raise SerialPortError(port, f"the port handler names {named!r}; only the port given is ever opened")
+        self.is_open = False
+        self.stale = 0  # status packets skipped: another ID's, or another length than the request's
+
+    def _call(self, fn: Callable[..., T], *args: object) -> T:
+        try:
+            return fn(*args)
+        except Exception as exc:  # noqa: BLE001 - see the module docstring: every serial-layer failure is one error
+            raise SerialPortError(self.port, f"{type(exc).__name__}: {exc}") from exc
+
+    # -- port -----------------------------------------------------------------------------------------------------
+    def open(self, baud_rate: int) -> None:
+        """Open the port at `baud_rate` [bit/s].
+
+        Raises:
+            SerialPortError: it cannot be opened (missing device, permissions, a rate the SDK does not list).
+        """
+        if not self._call(self._port.openPort):
+            raise SerialPortError(self.port, "the SDK could not open it")
+        self.is_open = True
+        if not self._call(self._port.setBaudRate, int(baud_rate)):
+            raise SerialPortError(self.port, f"the SDK refused the baud rate {baud_rate}")
+
+    def close(self) -> None:
+        """Close the port; a port that is already gone is not an error."""
+        if self.is_open:
+            self.is_open = False
+            try:
+                self._port.closePort()
+            except Exception:  # noqa: BLE001, S110 - closing a port that vanished has nothing left to report
+                pass
+
+    def flush(self) -> None:
+        """Drop whatever has arrived and not been read (a late answer must not pass for the next one's)."""
+        self._call(self._port.clearPort)
+
+    # -- transfers ------------------------------------------------------------------------------------------------
+    def ping(self, servo_id: int) -> tuple[int, int, int]:
+        """(model number, result, error byte) of a PING."""
+        return self._call(self._ph.ping, self._port, servo_id)
+
+    def read(self, servo_id: int, address: int, length: int) -> ServoRead:
+        """READ `length` bytes from `address` of one servo."""
+        result = self._call(self._ph.readTx, self._port, servo_id, address, length)
+        if result != COMM_SUCCESS:
+            return ServoRead(servo_id, b"", result, 0)
+        return self._receive(servo_id, length)
+
+    def _receive(self, servo_id: int, length: int) -> ServoRead:
+        """The status packet of `servo_id` carrying `length` bytes, skipping stale ones, within the SDK's timeout."""
+        while True:
+            packet, result = self._call(self._ph.rxPacket, self._port, False)
+            if result != COMM_SUCCESS:
+                return ServoRead(servo_id, b"", result, 0)
+            # packet: FF FF FD 00 | ID | LEN_L LEN_H | 0x55 | ERR | params | CRC (stuffing removed; LEN = params + 4)
+            if packet[4] == servo_id and packet[5] | packet[6] << 8 == length + 4:
+                return ServoRead(servo_id, bytes(packet[9: 9 + length]), COMM_SUCCESS, packet[8])
+            self.stale += 1
+
+    def write(self, servo_id: int, address: int, size: int, value: int) -> tuple[int, int]:
+        """WRITE `value` (`size` bytes, little-endian, two's complement) at `address`; (result, error byte)."""
+        data = list((int(value) & ((1 << (8 * size)) - 1)).to_bytes(size, "little"))
+        return self._call(self._ph.writeTxRx, self._port, servo_id, address, size, data)
+
+    def sync_read(self, address: int, length: int, ids: Sequence[int]) -> list[ServoRead]:
+        """SYNC_READ `length` bytes at `address` from `ids`, each answer checked for its ID and length.
+
+        Returns:
+            One `ServoRead` per ID read, in order, stopping after the first that failed (the answers of the IDs after
+            it are not waited for: their time is already spent).
+        """
+        result = self._call(self._ph.syncReadTx, self._port, address, length, list(ids), len(ids), False)
+        if result != COMM_SUCCESS:
+            return [ServoRead(ids[0], b"", result, 0)]
+        out = []
+        for servo_id in ids:
+            out.append(self._receive(servo_id, length))
+            if not out[-1].ok:
+                break
+        return out
+
+    def sync_write(self, address: int, size: int, values: Sequence[tuple[int, int]]) -> int:
+        """SYNC_WRITE (no answer): `size` bytes at `address`, one (ID, value) pair per servo; the SDK's result."""
+        param: list[int] = []
+        for servo_id, value in values:
+            param.append(servo_id)
+            param += list((int(value) & ((1 << (8 * size)) - 1)).to_bytes(size, "little"))
+        return self._call(self._ph.syncWriteTxOnly, self._port, address, size, param, len(param))

@@ -1,0 +1,325 @@
+"""``wbc bench arm``: the arm's bus loop against the emulated robot in another process: loop rate and step response.
+
+The emulated robot (`RobotEmulator`, real time) runs in a process of its own: a real bus's servos do not share
+the host's Python lock, and neither do these. This process runs the legs' `UnitreeRobot`, which holds a stand, and
+a `DynamixelArm` on the emulator's pty, with dynamixel_sdk and the robot's default latency timer (1 ms).
+
+1. Loop rate: for each requested bus rate, the arm holds its stowed pose for `seconds`. The bench reads the bus
+   thread's counters: cycles per second achieved, mean and longest time the bus was busy in a cycle, failed reads.
+   ``1 / busy_mean`` is the rate the bus could sustain.
+2. Closed-loop step response of the elbow, at the default 200 Hz, for each (kp, kd): the arm holds its stowed
+   pose, then the elbow's target steps by `step` rad, and back, twice. From the sampled elbow angle the bench
+   computes the 10-90 % rise time, the overshoot, the 5 % settling time and the steady error, and reports the
+   median of the four steps. The same step in pure simulation
+   (`MujocoRobot`, the law applied at every 2 ms physics step) is the reference. The difference is what the bus
+   loop costs: its rate, its one cycle of delay, and the quantisation of ticks, velocity units and current units.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+import wbc
+from wbc.control.stand import stand_command
+from wbc.errors import BenchError
+from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
+from wbc.hardware.emulators import LEG_WIRES, RobotEmulator, RobotEmulatorConfig
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
+from wbc.robots.registry import get_robot
+from wbc.tools.bench.references import machine_description
+from wbc.types import MotorCommand
+
+__all__ = ["ArmRateRow", "ArmStepRow", "bench_arm", "serve_robot_emulator_stdio", "step_metrics"]
+
+_START_TIMEOUT = 60.0  # [s] longest wait for the emulator process to open its port and pty
+_STOP_MARGIN = 60.0  # [s] the emulator process stops by itself this long after the bench should have ended
+_SETTLE = 1.0  # [s] hold before a step
+_RECORD = 1.0  # [s] recorded after a step
+_SAMPLE = 0.002  # [s] sampling period of the step response
+_ELBOW = 2
+_REPEATS = 4  # steps per gain on the bus (out and back, twice); the median is reported
+_DISCARDS = 2  # step series thrown away (and counted) because a bus fault latched in them, before giving up
+
+
+@dataclass(frozen=True, kw_only=True)
+class ArmRateRow:
+    """The bus loop at one requested rate.
+
+    Attributes:
+        rate_hz: requested [Hz].
+        achieved_hz: cycles per second achieved [Hz].
+        busy_ms_mean: mean time the bus was busy in a cycle (sync read, status read, sync write) [ms].
+        busy_ms_max: longest such time [ms].
+        period_ms_max: longest interval between two cycles [ms].
+        failed_reads: reads that failed (retries included).
+        cycles: cycles run.
+        faults: bus faults latched (on the loopback emulator, only when its process was starved of CPU long
+            enough for a servo to miss every retry and ping: a count above 0 says the figures are the machine's).
+    """
+
+    rate_hz: float
+    achieved_hz: float
+    busy_ms_mean: float
+    busy_ms_max: float
+    period_ms_max: float
+    failed_reads: int
+    cycles: int
+    faults: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class ArmStepRow:
+    """The elbow's response to a step of its target.
+
+    Attributes:
+        source: ``bus`` (DynamixelArm against the emulator) or ``simulation`` (the law at every physics step).
+        kp: [N m / rad].
+        kd: [N m s / rad].
+        rate_hz: the rate the law is applied at [Hz].
+        rise_ms: 10 % -> 90 % of the final change [ms].
+        overshoot_pct: beyond the final value, in % of the final change.
+        settle_ms: after the step, the last time the angle was more than 5 % of the change from its final value [ms].
+        final_error_rad: target minus final angle (gravity's sag under kp) [rad].
+        discarded: series of steps thrown away because a bus fault latched in them (on the loopback emulator: its
+            process starved of CPU long enough for a servo to miss every retry and ping).
+    """
+
+    source: str
+    kp: float
+    kd: float
+    rate_hz: float
+    rise_ms: float
+    overshoot_pct: float
+    settle_ms: float
+    final_error_rad: float
+    discarded: int = 0
+
+
+def step_metrics(t: np.ndarray, y: np.ndarray, target: float) -> tuple[float, float, float, float]:
+    """(rise [ms], overshoot [%], settling [ms], final error [rad]) of a step response.
+
+    Args:
+        t: time since the step [s], increasing; samples before the step have t < 0.
+        y: the response.
+        target: the step's target value.
+    """
+    y0 = float(np.mean(y[t < 0])) if (t < 0).any() else float(y[0])
+    after = t >= 0
+    ta, ya = t[after], y[after]
+    y_final = float(np.mean(ya[ta >= ta[-1] - 0.2]))
+    change = y_final - y0
+    if abs(change) < 1e-9:
+        return float("nan"), float("nan"), float("nan"), target - y_final
+    frac = (ya - y0) / change
+    t10 = ta[np.argmax(frac >= 0.1)]
+    t90 = ta[np.argmax(frac >= 0.9)]
+    overshoot = max(0.0, float(np.max(frac)) - 1.0) * 100.0
+    outside = np.abs(frac - 1.0) > 0.05
+    settle = float(ta[np.flatnonzero(outside)[-1]]) if outside.any() else 0.0
+    return 1e3 * float(t90 - t10), overshoot, 1e3 * settle, target - y_final
+
+
+def serve_robot_emulator_stdio(robot: str, seconds: float) -> None:
+    """The emulator process's body (``bench_arm`` starts it): a real-time `RobotEmulator`.
+
+    Writes the UDP address and the pty as a JSON line, serves until a line arrives on stdin (or `seconds` plus a
+    margin pass), then writes any failure as a JSON line.
+    """
+    with RobotEmulator(RobotEmulatorConfig(robot=robot, mode="realtime")) as emu:
+        host, port = emu.address
+        print(json.dumps({"host": host, "port": port, "pty": emu.port}), flush=True)
+        select.select([sys.stdin], [], [], seconds + _STOP_MARGIN)
+        failure = repr(emu.failure) if emu.failure is not None else None
+        stats = asdict(emu.arm.stats)
+    print(json.dumps({"failure": failure, "arm_bus": stats}), flush=True)
+
+
+def _start_emulator(robot: str, seconds: float) -> tuple[subprocess.Popen[str], dict]:
+    root = str(Path(wbc.__file__).resolve().parents[1])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    code = f"from wbc.tools.bench.arm import serve_robot_emulator_stdio; serve_robot_emulator_stdio({robot!r}, " \
+           f"{seconds!r})"
+    proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                            env=env)
+    if not select.select([proc.stdout], [], [], _START_TIMEOUT)[0]:
+        proc.kill()
+        raise BenchError(f"bench arm: the emulator process did not start within {_START_TIMEOUT} s")
+    line = proc.stdout.readline()
+    try:
+        return proc, json.loads(line)
+    except json.JSONDecodeError:
+        proc.kill()
+        raise BenchError(f"bench arm: the emulator process wrote {line!r} (exit status {proc.poll()})") from None
+
+
+class _Rig:
+    """The legs holding a stand while the arm runs: both written every `period`."""
+
+    def __init__(self, legs: UnitreeRobot, legs_hold: MotorCommand, period: float = 0.004) -> None:
+        self.legs, self.legs_hold, self.period = legs, legs_hold, period
+
+    def run(self, arm: DynamixelArm, arm_cmd: MotorCommand, seconds: float,
+            sample: list[tuple[float, float]] | None = None, t_step: float = 0.0) -> None:
+        end = time.monotonic() + seconds
+        period = _SAMPLE if sample is not None else self.period
+        for _ in range(int(seconds / period) + 2):
+            now = time.monotonic()
+            if now >= end:
+                return
+            self.legs.write(self.legs_hold)
+            arm.write(arm_cmd)
+            if sample is not None:
+                sample.append((now - t_step, float(arm.read().q[_ELBOW])))
+            arm.advance(period)
+
+
+def _step_series(rig: _Rig, arm: DynamixelArm, stowed: np.ndarray, kp: float, kd: float,
+                 step: float) -> list[tuple[float, float, float, float]]:
+    """`_REPEATS` steps of the elbow on the bus, out and back; each one's `step_metrics`."""
+    rig.run(arm, MotorCommand.hold(stowed, kp, kd), _SETTLE)
+    runs = []
+    for k in range(_REPEATS):
+        start = stowed.copy()
+        start[_ELBOW] += step * (k % 2)
+        target = stowed.copy()
+        target[_ELBOW] += step * (1 - k % 2)
+        pre: list[tuple[float, float]] = []
+        rig.run(arm, MotorCommand.hold(start, kp, kd), 0.1, sample=pre, t_step=time.monotonic() + 0.1)
+        samples: list[tuple[float, float]] = []
+        rig.run(arm, MotorCommand.hold(target, kp, kd), _RECORD, sample=samples, t_step=time.monotonic())
+        t, y = (np.array(v) for v in zip(*(pre + samples), strict=True))
+        runs.append(step_metrics(t, y, float(target[_ELBOW])))
+    return runs
+
+
+def _sim_step(robot: str, q0: np.ndarray, kp: float, kd: float, step: float) -> tuple[np.ndarray, np.ndarray]:
+    desc = get_robot(robot, "actuated")
+    legs = stand_command(desc)
+    with MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode="actuated")) as sim:
+        def hold(q_arm: np.ndarray) -> MotorCommand:
+            rows = legs.stacked()
+            rows[0, 12:], rows[1, 12:], rows[2, 12:], rows[3, 12:], rows[4, 12:] = q_arm, 0.0, kp, kd, 0.0
+            return MotorCommand(q=rows[0], dq=rows[1], kp=rows[2], kd=rows[3], tau=rows[4])
+        sim.write(hold(q0))
+        sim.advance(_SETTLE)
+        ts, ys = [], []
+        for k in range(-int(0.1 / _SAMPLE), int(_RECORD / _SAMPLE)):
+            if k == 0:
+                target = q0.copy()
+                target[_ELBOW] += step
+                sim.write(hold(target))
+            ts.append(k * _SAMPLE)
+            ys.append(float(sim.read().q[12 + _ELBOW]))
+            sim.advance(_SAMPLE)
+    return np.array(ts), np.array(ys)
+
+
+def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200.0, 400.0, 1000.0),
+              seconds: float = 2.0, latency_ms: float = 1.0, step: float = -0.05,
+              gains: tuple[tuple[float, float], ...] = ((20.0, 0.5), (60.0, 1.0))) -> dict[str, object]:
+    """Measure the arm's bus loop (rates, step response) against the emulated robot in its own process.
+
+    Args:
+        robot: ``a1-wx200`` or ``go1-arm``.
+        rates: bus rates to run [Hz], each in 10..1000.
+        seconds: how long each rate runs [s].
+        latency_ms: the arm's latency timer [ms].
+        step: the elbow target's step [rad] (negative unfolds the stowed elbow).
+        gains: (kp, kd) of each step response [N m / rad, N m s / rad].
+
+    Returns:
+        ``rates`` (`ArmRateRow` dicts), ``steps`` (`ArmStepRow` dicts, bus and simulation for each gain), the
+        settings and ``machine``.
+
+    Raises:
+        BenchError: the emulator process did not start or failed, or a setting is out of range.
+    """
+    if robot not in LEG_WIRES:
+        raise BenchError(f"bench arm: --robot must be one of {', '.join(LEG_WIRES)}, got {robot!r}")
+    if not seconds > 0 or not rates or any(not 10.0 <= r <= 1000.0 for r in rates):
+        raise BenchError(f"bench arm: --seconds must be > 0 and each rate in 10..1000 Hz, got {seconds}, {rates}")
+    total = len(rates) * (seconds + 1.0) + len(gains) * (_DISCARDS + 1) * (_SETTLE + _REPEATS * (_RECORD + 0.1) + 1.0)
+    proc, where = _start_emulator(robot, total)
+    desc = get_robot(robot, "actuated")
+    stand = stand_command(desc).stacked()
+    stowed = desc.nominal_q[12:].copy()
+    rate_rows, step_rows = [], []
+    fault = None
+    try:
+        legs = UnitreeRobot(UnitreeRobotConfig(robot=LEG_WIRES[robot], target_host=where["host"],
+                                               target_port=int(where["port"])))
+        with legs:
+            rig = _Rig(legs, MotorCommand._trusted(stand[:, :12].copy()))
+            hold = MotorCommand.hold(stowed, 20.0, 0.5)
+            for rate in rates:
+                arm = DynamixelArm(DynamixelArmConfig(robot=robot, port=where["pty"], latency_ms=latency_ms,
+                                                      rate_hz=rate, write_deadline=max(0.05, 2.0 / rate)))
+                with arm:
+                    rig.run(arm, hold, 0.3)
+                    before = arm.bus_stats()
+                    t0 = time.monotonic()
+                    rig.run(arm, hold, seconds)
+                    after = arm.bus_stats()
+                    wall = time.monotonic() - t0
+                rate_rows.append(ArmRateRow(
+                    rate_hz=rate, achieved_hz=(after.cycles - before.cycles) / wall,
+                    busy_ms_mean=1e3 * after.busy_mean, busy_ms_max=1e3 * after.busy_max,
+                    period_ms_max=1e3 * after.period_max,
+                    failed_reads=after.failed_transfers - before.failed_transfers, cycles=after.cycles,
+                    faults=len(arm.faults)))
+            for kp, kd in gains:
+                runs, discarded = [], 0
+                while not runs:
+                    arm = DynamixelArm(DynamixelArmConfig(robot=robot, port=where["pty"], latency_ms=latency_ms))
+                    with arm:
+                        series = _step_series(rig, arm, stowed, kp, kd, step)
+                    if not arm.faults:
+                        runs = series
+                    elif discarded < _DISCARDS:
+                        discarded += 1  # a servo of the emulator starved of CPU for long enough to look dead
+                    else:
+                        fault = f"a bus fault latched in {discarded + 1} step series at kp {kp}: {arm.faults[0]}"
+                        break
+                if fault is not None:
+                    break
+                median = np.median(np.array(runs), axis=0)
+                step_rows.append(ArmStepRow(source="bus", kp=kp, kd=kd, rate_hz=arm.config.rate_hz,
+                                            discarded=discarded,
+                                            **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
+                                                       (float(v) for v in median), strict=True))))
+    finally:
+        try:
+            proc.stdin.write("stop\n")
+            proc.stdin.flush()
+        except OSError:
+            pass
+        try:
+            out, _ = proc.communicate(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out = ""
+    tail = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+    if tail and tail[-1].get("failure"):
+        raise BenchError(f"bench arm: the emulator failed: {tail[-1]['failure']}")
+    bus = tail[-1].get("arm_bus", {}) if tail else {}
+    if fault is not None:
+        raise BenchError(f"bench arm: {fault} (the emulator's bus counts: {bus})")
+    # the references afterwards: simulating here while the bus runs would leave the legs' link unwritten
+    for kp, kd in gains:
+        t, y = _sim_step(robot, stowed, kp, kd, step)
+        step_rows.append(ArmStepRow(source="simulation", kp=kp, kd=kd, rate_hz=500.0,
+                                    **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
+                                               step_metrics(t, y, float(stowed[_ELBOW] + step)), strict=True))))
+    return {"robot": robot, "latency_ms": latency_ms, "seconds": seconds, "step_rad": step, "emulator_bus": bus,
+            "rates": [asdict(r) for r in rate_rows], "steps": [asdict(s) for s in step_rows],
+            "machine": machine_description()}
