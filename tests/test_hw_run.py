@@ -12,12 +12,14 @@ import io
 import json
 import math
 import os
+import re
+import signal
 import socket
+import subprocess
 import sys
 import termios
 import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -55,34 +57,12 @@ LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz
 
 @pytest.fixture
 def go1() -> Iterator[UnitreeEmulator]:
-    """A real-time emulated Go1 (bare, as ``wbc hw emulate --robot go1``)."""
-    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")) as emu:
+    """A real-time emulated Go1 (bare), held at its standing pose until a command drives a motor, as ``wbc hw emulate
+    --robot go1`` serves it: an operator holds a robot in its harness until the controller takes it."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime", held_until_driven=True)) as emu:
         yield emu
         assert emu.failure is None, emu.failure
     assert not [t.name for t in threading.enumerate() if t.name.startswith("unitree-")]
-
-
-@contextmanager
-def _held_until_the_link_is_up(emu: UnitreeEmulator) -> Iterator[None]:
-    """Keep the idle emulated robot standing until the first frame of a link arrives, as an operator holds a robot in
-    its harness: left alone with its motors off, it folds to its joint stops within half a second, and the stand-up
-    before the trial is then refused (a test of its own, below)."""
-    stop = threading.Event()
-
-    def hold() -> None:
-        for _ in range(3000):  # bounded: at most 60 s
-            if stop.is_set() or emu.commands():
-                return
-            emu.reset()
-            stop.wait(0.02)
-
-    holder = threading.Thread(target=hold, name="test-harness")
-    holder.start()
-    try:
-        yield
-    finally:
-        stop.set()
-        holder.join()
 
 
 @pytest.fixture
@@ -101,9 +81,8 @@ def no_socket(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
 def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
         go1: UnitreeEmulator, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "hw"
-    with _held_until_the_link_is_up(go1):
-        code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
-                     "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out)])
+    code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out)])
     printed = capsys.readouterr()
     assert code == 0, printed.err
     (record,) = TrialRecord.read_csv(out / "trials.csv")
@@ -206,18 +185,46 @@ def test_non_loopback_target_is_refused_before_any_socket(no_socket: list, monke
     assert not no_socket
 
 
-def test_actuated_arm_is_refused_naming_what_is_missing(no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
-    # stand drives an actuated arm: its variant for go1-arm's arm on the robot would need the arm's own backend
+def test_an_actuated_arm_needs_its_serial_port(no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
+    # stand drives an actuated arm: on the robot that is a second device, on its own bus
     assert main(["hw", "run", "stand", "--robot", "go1-arm", "--scenario", PUSH, "--trial", "0", "--target",
                  "127.0.0.1:9"]) == 2
-    err = capsys.readouterr().err
-    assert "DynamixelArm" in err and "QuadrupedArmRobot" in err and "none, locked" in err
-    with pytest.raises(ConfigError, match="DynamixelArm"):
+    assert "give its serial port" in capsys.readouterr().err
+    with pytest.raises(ConfigError, match="--arm-port"):
         HardwareRobotConfig(robot="a1-wx200", arm_mode="actuated", legs_host="127.0.0.1", legs_port=9)
     assert main(["hw", "run", "stand", "--robot", "spot", "--arm", "none", "--scenario", PUSH, "--trial", "0",
                  "--target", "127.0.0.1:9"]) == 2
     assert "a1-wx200, go1-arm" in capsys.readouterr().err
     assert not no_socket
+
+
+def test_a_trial_with_the_arm_actuated_over_both_wires(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # the emulated robot in its own process, as `wbc hw emulate` serves it (a robot is another machine)
+    pytest.importorskip("dynamixel_sdk")
+    out = tmp_path / "hw"
+    proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "hw", "emulate", "--robot", "a1-wx200", "--arm",
+                             "actuated", "--seconds", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=ROOT)
+    try:
+        line = proc.stdout.readline()  # bounded: the emulator stops by itself after --seconds
+        found = re.search(r"legs on 127\.0\.0\.1:(\d+) \(UDP\), arm on (\S+) \(Dynamixel", line)
+        assert found, (line, proc.stderr.read() if proc.poll() is not None else "")
+        code = main(["hw", "run", "stand", "--robot", "a1-wx200", "--arm", "actuated", "--scenario", PUSH, "--trial",
+                     "0", "--target", f"127.0.0.1:{found[1]}", "--arm-port", found[2], "--seconds", "3",
+                     "--out", str(out)])
+    finally:
+        proc.send_signal(signal.SIGINT)  # Ctrl-C: the emulator stops and prints its counts
+        emulated, emulator_err = proc.communicate(timeout=20)
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    assert proc.returncode == 0 and "Traceback" not in emulator_err, emulator_err
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.controller == "stand" and record.backend == "unitree+dynamixel" and record.safety_trips == 0
+    assert record.success and record.metrics_source == "estimator"
+    (path,) = (out / "episodes" / "stand").glob("*.npz")
+    assert Episode.load(str(path)).qpos.shape[1] == 7 + 15  # the arm's joints are in the episode
+    packets = re.search(r"arm bus: packets decoded (\d+)", emulated)
+    assert packets and int(packets[1]) > 3 * 150  # about 200 cycles a second went over the arm's bus
 
 
 def test_estimated_metrics_track_the_simulators_truth() -> None:

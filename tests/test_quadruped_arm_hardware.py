@@ -23,11 +23,12 @@ import pytest
 
 from wbc.control.stand import StandController
 from wbc.errors import ConfigError, UnknownNameError
+from wbc.hardware import Robot
 from wbc.hardware.contract import check_robot
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
 from wbc.hardware.emulators import BusFault, RobotEmulator, RobotEmulatorConfig
+from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
-from wbc.hardware.quadruped_arm_factory import build_quadruped_arm_robot
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
@@ -44,9 +45,8 @@ def _whole_robot(mode: str = "lockstep", **safety: object) -> Iterator[tuple[Rob
                                                                               list[SafetyEvent]]]:
     events: list[SafetyEvent] = []
     with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode=mode)) as emu:
-        safe = build_quadruped_arm_robot("a1-wx200", "actuated", target=emu.address,
-                                         arm=DynamixelArmConfig(port=emu.port, **ARM),
-                                         safety=SafetyConfig(position_table="a1", on_event=events.append, **safety))
+        safe = SafeRobot(_build("a1-wx200", "actuated", emu.address, arm=DynamixelArmConfig(port=emu.port, **ARM)),
+                         SafetyConfig(position_table="a1", on_event=events.append, **safety))
         with safe:
             yield emu, safe, events
         assert emu.failure is None, emu.failure
@@ -73,17 +73,23 @@ def test_contract_of_the_joined_robot_over_both_emulators() -> None:
         assert emu.failure is None
 
 
+def _build(robot: str, arm_mode: str, target: tuple[str, int] = ("127.0.0.1", 9), **arm: object) -> Robot:
+    return build_hardware_robot(HardwareRobotConfig(robot=robot, arm_mode=arm_mode, legs_host=target[0],
+                                                    legs_port=target[1], **arm)).robot
+
+
 def test_the_factory_names_what_a_mode_needs() -> None:
     with pytest.raises(ConfigError, match="serial port"):
-        build_quadruped_arm_robot("a1-wx200", "actuated", target=("127.0.0.1", 9))
+        _build("a1-wx200", "actuated")
     with pytest.raises(ConfigError, match="drives no arm"):
-        build_quadruped_arm_robot("go1-arm", "none", target=("127.0.0.1", 9), port="/dev/ttyUSB0")
+        _build("go1-arm", "none", arm_port="/dev/ttyUSB0")
     with pytest.raises(UnknownNameError, match="a1-wx200"):
-        build_quadruped_arm_robot("a1", "actuated", target=("127.0.0.1", 9), port="/dev/ttyUSB0")
-    safe = build_quadruped_arm_robot("go1-arm", "locked", target=("127.0.0.1", 9), port="/dev/ttyUSB0")
-    assert safe.num_joints == 12 and isinstance(safe.robot.arm, DynamixelArm)  # locked: the servos hold it stowed
-    assert build_quadruped_arm_robot("go1-arm", "actuated", target=("127.0.0.1", 9), port="/dev/ttyUSB0").num_joints \
-        == 15
+        _build("a1", "actuated", arm_port="/dev/ttyUSB0")
+    locked = _build("go1-arm", "locked", arm_port="/dev/ttyUSB0")
+    assert locked.num_joints == 12 and isinstance(locked.arm, DynamixelArm)  # locked: the servos hold it stowed
+    assert _build("go1-arm", "locked").num_joints == 12  # no port: fixed on the trunk, the legs' wire alone
+    assert isinstance(_build("go1-arm", "locked"), UnitreeRobot)
+    assert _build("go1-arm", "actuated", arm_port="/dev/ttyUSB0").num_joints == 15
 
 
 @pytest.mark.parametrize("fault,value", [(BusFault.SILENT_ID, 4), (BusFault.BAD_CRC, 2), (BusFault.OVERLOAD, 1),
@@ -168,10 +174,8 @@ def test_stand_ten_seconds_with_the_arm_actuated_over_both_wires_matches_simulat
 
 def test_locked_mode_holds_the_arm_stowed_through_the_servos() -> None:
     with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
-        safe = build_quadruped_arm_robot("a1-wx200", "locked", target=emu.address,
-                                         arm=DynamixelArmConfig(port=emu.port, **ARM),
-                                         safety=SafetyConfig(position_table="a1", ramp_time_s=0.2,
-                                                             on_event=lambda e: None))
+        safe = SafeRobot(_build("a1-wx200", "locked", emu.address, arm=DynamixelArmConfig(port=emu.port, **ARM)),
+                         SafetyConfig(position_table="a1", ramp_time_s=0.2, on_event=lambda e: None))
         with safe:
             ctrl = StandController(get_robot("a1-wx200", "locked"))
             for _ in range(60):

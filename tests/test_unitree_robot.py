@@ -693,3 +693,18 @@ def test_the_sdk_transport_is_go1_only_and_loopback_only() -> None:
         UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9, transport="tcp")
     with pytest.raises(TargetRefusedError):
         SdkTransport((LOOPBACK, 0), ("192.0.2.10", 8007), sdk=_DeafSdk)  # type: ignore[arg-type]
+
+
+def test_an_emulator_holds_its_robot_until_a_command_drives_a_motor() -> None:
+    config = UnitreeEmulatorConfig(robot="go1", mode="realtime", held_until_driven=True)
+    with UnitreeEmulator(config) as emu:
+        with UnitreeRobot(_config(emu)) as robot:
+            height = emu.base_truth().base_position_in_world[2]
+            time.sleep(0.2)  # the link sends damping frames only (nobody wrote): the robot is held, states flow
+            assert emu.held and emu.sim_time == 0.0 and robot.link_stats().valid_states > 20
+            assert emu.base_truth().base_position_in_world[2] == height
+            _keep_writing(robot, _hold(robot), 0.2)  # the first servo frame releases it
+            assert not emu.held and emu.sim_time > 0.1
+        emu.reset()  # the link closed (it ended with damping frames): held again
+        time.sleep(0.05)
+        assert emu.held

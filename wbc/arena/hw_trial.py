@@ -79,6 +79,8 @@ class HardwareTrialConfig:
         local: the address the legs' link binds (None: 127.0.0.1:0 for a loopback target, else 0.0.0.0:0).
         allow_hardware: allow a target outside 127.0.0.0/8 (a real robot).
         rate_hz: the link's rate [Hz].
+        transport: the legs' datagram channel, ``udp`` or ``sdk`` (the vendor's Go1 SDK).
+        arm_port: the arm's serial device (the U2D2, or an emulator's pty); needed for an actuated arm.
         out_dir: the results directory (must not hold results yet).
         safety: the safety layer's settings (None: the defaults, with the robot's SDK position table).
         settle_s: after a trip, how long the robot is held in damping, still read, before the link closes [s].
@@ -99,6 +101,8 @@ class HardwareTrialConfig:
     local: tuple[str, int] | None = None
     allow_hardware: bool = False
     rate_hz: float = 500.0
+    transport: str = "udp"
+    arm_port: str | None = None
     out_dir: Path = field(default_factory=lambda: Path("runs/hw"))
     safety: SafetyConfig | None = None
     settle_s: float = 1.0
@@ -189,7 +193,8 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
     hardware = build_hardware_robot(HardwareRobotConfig(
         robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port, local_host=local_host,
-        local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz))
+        local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz, transport=cfg.transport,
+        arm_port=cfg.arm_port))
     out = Path(cfg.out_dir)
     if (out / "trials.csv").exists():
         raise ResultsDirError(f"{out}: already holds results; a hardware trial is played once: choose another --out")

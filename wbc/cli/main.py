@@ -188,14 +188,15 @@ def _hw_emulate(args: argparse.Namespace) -> int:
     mode = "lockstep" if args.lockstep else "realtime"
     wire = _WIRE_OF[args.robot]
     if actuated:
-        return _hw_emulate_with_arm(DESCRIPTIONS[wire], mode, args.port, faults, args.seconds)
-    cfg = UnitreeEmulatorConfig(robot=wire, arm_mode=args.arm, mode=mode, port=args.port)
+        return _hw_emulate_with_arm(DESCRIPTIONS[wire], mode, args.port, faults, args.seconds, held=not args.drop)
+    cfg = UnitreeEmulatorConfig(robot=wire, arm_mode=args.arm, mode=mode, port=args.port,
+                                held_until_driven=not args.drop)
     emulator = UnitreeEmulator(cfg)
     with emulator:
         for fault in faults:
             emulator.inject(fault)
         printers.print_emulator_started(cfg.robot, cfg.mode, emulator.address, [f.value for f in faults],
-                                        seconds=args.seconds)
+                                        seconds=args.seconds, held=cfg.held_until_driven)
         end = time.monotonic() + args.seconds if args.seconds is not None else float("inf")
         try:
             while time.monotonic() < end and emulator.failure is None:
@@ -209,14 +210,15 @@ def _hw_emulate(args: argparse.Namespace) -> int:
 
 
 def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | BusFault],
-                         seconds: float | None) -> int:
+                         seconds: float | None, *, held: bool) -> int:
     """``wbc hw emulate --arm actuated``: one `RobotEmulator`, legs over UDP and arm over a pty, one physics."""
-    emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode=mode, port=port))
+    emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode=mode, port=port, held_until_driven=held))
     with emulator:
         for fault in faults:
             emulator.inject(fault)
         names = [f"arm_{f.value}" if isinstance(f, BusFault) else f.value for f in faults]
-        printers.print_robot_emulator_started(robot, mode, emulator.address, emulator.port, names, seconds=seconds)
+        printers.print_robot_emulator_started(robot, mode, emulator.address, emulator.port, names, seconds=seconds,
+                                              held=held)
         end = time.monotonic() + seconds if seconds is not None else float("inf")
         try:
             while time.monotonic() < end and emulator.failure is None:
@@ -314,7 +316,8 @@ def _hw_run(args: argparse.Namespace) -> int:
     cfg = HardwareTrialConfig(controller=args.ctrl, scenario=Path(args.scenario), trial=args.trial, band=args.band,
                               seed=args.seed, seconds=args.seconds, robot=args.robot, arm_mode=args.arm,
                               target=(host, port), local=local, allow_hardware=args.allow_hardware,
-                              rate_hz=args.rate, out_dir=out, settle_s=args.settle,
+                              rate_hz=args.rate, transport=args.transport, arm_port=args.arm_port, out_dir=out,
+                              settle_s=args.settle,
                               controller_config=Path(args.controller_config) if args.controller_config else None,
                               io_file=Path(args.io) if args.io else None)
 

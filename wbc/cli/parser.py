@@ -173,6 +173,9 @@ def build_parser() -> argparse.ArgumentParser:
     emulate.add_argument("--lockstep", action="store_true",
                          help="one physics step and one reply per command (default: real time, a reply per period)")
     emulate.add_argument("--seconds", type=float, default=None, help="stop after S seconds (default: Ctrl-C)")
+    emulate.add_argument("--drop", action="store_true",
+                         help="start with the robot free: left alone with its motors off it folds to its joint stops "
+                         "(default: held at its standing pose, as in a harness, until a command drives a motor)")
     emulate.set_defaults(handler="hw emulate")
     check = hws.add_parser("check", help="connect to a robot, damping only, and print its state (never moves it)",
                            description="Connect a UnitreeRobot, read states for a while sending only damping "
@@ -203,8 +206,10 @@ def build_parser() -> argparse.ArgumentParser:
     hwrun.add_argument("--robot", default=None,
                        help=f"one of: {', '.join(HARDWARE_ROBOTS)} (default: the scenario's robot)")
     hwrun.add_argument("--arm", default=None,
-                       help=f"arm mode on the robot: {' or '.join(HARDWARE_ARM_MODES)} (default: the controller's; "
-                       "an actuated arm needs a backend this version lacks)")
+                       help=f"arm mode on the robot: {', '.join(HARDWARE_ARM_MODES)} (default: the controller's; "
+                       "actuated needs --arm-port; locked with --arm-port holds the arm by its servos)")
+    hwrun.add_argument("--arm-port", default=None, metavar="DEVICE",
+                       help="the arm's serial device: the U2D2 (e.g. /dev/ttyUSB0) or `wbc hw emulate`'s pty")
     hwrun.add_argument("--scenario", required=True, help="scenario file (e.g. scenarios/push.toml)")
     hwrun.add_argument("--trial", type=int, required=True, help="trial index within (band, seed)")
     hwrun.add_argument("--band", default=None, help="band (default: the scenario's first)")
@@ -219,6 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     hwrun.add_argument("--yes", action="store_true",
                        help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
     hwrun.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
+    hwrun.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
     hwrun.add_argument("--settle", type=float, default=1.0,
                        help="after a safety trip, hold the robot damped and read for S seconds (default 1)")
     hwrun.add_argument("--out", default=None, help="results directory (default: runs/hw-<scenario>-<ctrl>-<time>)")

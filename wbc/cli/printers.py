@@ -296,16 +296,23 @@ def print_bench_arm(result: Mapping[str, object]) -> None:
 
 
 def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faults: Sequence[str], *,
-                           seconds: float | None) -> None:
+                           seconds: float | None, held: bool = False) -> None:
     """``wbc hw emulate``: where the emulator listens, and how it stops."""
     host, port = address
     print(f"emulated {robot} ({mode}) on {host}:{port}; faults: {', '.join(faults) or 'none'}; "
           + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
     print(f"  connect with: wbc hw check --robot {robot} --target {host}:{port}", flush=True)
+    _print_held(held)
+
+
+def _print_held(held: bool) -> None:
+    if held:
+        print("  the robot is held at its standing pose until a command drives a motor (--drop: free from the start)",
+              flush=True)
 
 
 def print_robot_emulator_started(robot: str, mode: str, address: tuple[str, int], pty: str, faults: Sequence[str], *,
-                                 seconds: float | None) -> None:
+                                 seconds: float | None, held: bool = False) -> None:
     """``wbc hw emulate --arm actuated``: the legs' UDP address, the arm's pty, and how it stops."""
     host, port = address
     print(f"emulated {robot} with its arm actuated ({mode}): legs on {host}:{port} (UDP), arm on {pty} (Dynamixel "
@@ -313,6 +320,9 @@ def print_robot_emulator_started(robot: str, mode: str, address: tuple[str, int]
           + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
     print(f"  legs: UnitreeRobotConfig(robot={robot.split('-')[0]!r}, target_host={host!r}, target_port={port}); "
           f"arm: DynamixelArmConfig(robot={robot!r}, port={pty!r})", flush=True)
+    print(f"  a trial: wbc hw run stand --robot {robot} --arm actuated --scenario scenarios/push.toml --trial 0 "
+          f"--target {host}:{port} --arm-port {pty}", flush=True)
+    _print_held(held)
 
 
 def print_bus_counts(stats: BusStats) -> None:

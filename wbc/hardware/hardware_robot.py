@@ -5,21 +5,26 @@ mode and where its parts are reached; `build_hardware_robot` picks the backends 
 robot with what a caller needs around it: the description to control and draw, the backend's name for the records and
 the leg position table its safety layer checks against.
 
-Today the Unitree low-level wire drives the whole robot when the arm is absent (``none``) or held on the trunk
-(``locked``: fixed mechanically or held by its own servos, commanded by nobody here): a `UnitreeRobot` for the 12 leg
-motors. An actuated arm is a second device (the WX200 on its Dynamixel bus) combined with the legs into one 15-joint
-robot; those backends are not part of this version, and ``actuated`` is refused with a message naming them.
+The legs are a `UnitreeRobot` (12 motors over the Unitree low-level wire). The arm is a second device, the WX200 on
+its Dynamixel bus (`wbc.hardware.dynamixel.DynamixelArm`), joined to the legs into one robot by `QuadrupedArmRobot`:
+in mode ``actuated`` (15 joints) the controller drives it; in mode ``locked`` its servos hold it stowed (12 joints),
+or, when no serial port is given, it is fixed on the trunk mechanically and the legs' wire alone drives the robot; in
+mode ``none`` there is no arm.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from wbc.errors import ConfigError, UnknownNameError
+from wbc.hardware.dynamixel.arm_config import DynamixelArmConfig
+from wbc.hardware.dynamixel.arm_robot import DynamixelArm
+from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
 from wbc.hardware.robot import Robot
 from wbc.hardware.unitree.robot import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig
 from wbc.hardware.unitree.target import is_loopback
-from wbc.robots.description import RobotDescription, check_arm_mode
+from wbc.robots.description import ARM_MODES, RobotDescription, check_arm_mode
 from wbc.robots.registry import get_robot
 
 __all__ = ["HARDWARE_ARM_MODES", "HARDWARE_ROBOTS", "HardwareRobot", "HardwareRobotConfig", "build_hardware_robot"]
@@ -27,8 +32,9 @@ __all__ = ["HARDWARE_ARM_MODES", "HARDWARE_ROBOTS", "HardwareRobot", "HardwareRo
 HARDWARE_ROBOTS: dict[str, str] = {description: unitree for unitree, description in DESCRIPTIONS.items()}
 """Robot registry name -> the Unitree quadruped under it (the name its wire codec and its SDK tables use)."""
 
-HARDWARE_ARM_MODES = ("none", "locked")
-"""Arm modes a real robot can be built with in this version: the legs' wire alone drives the whole robot."""
+HARDWARE_ARM_MODES = ARM_MODES
+"""Arm modes a real robot can be built with: ``none``, ``locked`` (held by its servos, or fixed mechanically when no
+serial port is given) and ``actuated`` (its serial port needed)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -37,7 +43,8 @@ class HardwareRobotConfig:
 
     Attributes:
         robot: robot registry name, one of `HARDWARE_ROBOTS` (``go1-arm``, ``a1-wx200``).
-        arm_mode: ``none`` (no arm) or ``locked`` (the arm on the trunk, held); ``actuated`` is refused today.
+        arm_mode: ``none`` (no arm), ``locked`` (the arm held stowed: by its servos when `arm_port` is given, else
+            fixed mechanically) or ``actuated`` (the controller drives it; needs `arm_port`).
         legs_host: the legs' low-level UDP address (IPv4 literal); there is no default, and an address outside
             127.0.0.0/8 needs `allow_hardware`.
         legs_port: its UDP port.
@@ -45,6 +52,10 @@ class HardwareRobotConfig:
         local_port: the port it binds; 0 picks a free one.
         allow_hardware: allow targets outside 127.0.0.0/8 (a real robot).
         rate_hz: the legs' link rate, 200..1000 [Hz].
+        transport: the legs' datagram channel, ``udp`` or ``sdk`` (`UnitreeRobotConfig.transport`).
+        arm_port: the arm's serial device (the U2D2, e.g. ``/dev/ttyUSB0``, or an emulator's pseudo-terminal).
+        arm: the arm's bus in full (`DynamixelArmConfig`: rate, latency timer, watchdog ...) instead of `arm_port`;
+            its ``robot`` is set to `robot`.
     """
 
     robot: str
@@ -55,17 +66,24 @@ class HardwareRobotConfig:
     local_port: int = 0
     allow_hardware: bool = False
     rate_hz: float = 500.0
+    transport: str = "udp"
+    arm_port: str | None = None
+    arm: DynamixelArmConfig | None = None
 
     def __post_init__(self) -> None:
         if self.robot not in HARDWARE_ROBOTS:
             raise UnknownNameError("hardware robot", self.robot, tuple(HARDWARE_ROBOTS))
         check_arm_mode(self.arm_mode)
-        if self.arm_mode not in HARDWARE_ARM_MODES:
-            raise ConfigError(
-                f"arm mode {self.arm_mode!r} on a real {self.robot}: an actuated arm needs the arm's own backend (the "
-                "WX200 on its Dynamixel bus, a DynamixelArm) and the robot that joins it to the legs (a 15-joint "
-                "QuadrupedArmRobot), which this version does not have; valid arm modes on hardware today: "
-                f"{', '.join(HARDWARE_ARM_MODES)} (the Unitree wire drives the whole robot)")
+        if self.arm_port is not None and self.arm is not None:
+            raise ConfigError("HardwareRobotConfig: give the arm's serial port (arm_port) or its whole bus config "
+                              "(arm), not both")
+        has_arm = self.arm_port is not None or self.arm is not None
+        if self.arm_mode == "none" and has_arm:
+            raise ConfigError(f"arm mode 'none' on the {self.robot} drives no arm; leave out the arm's serial port, "
+                              "or choose 'locked' or 'actuated'")
+        if self.arm_mode == "actuated" and not has_arm:
+            raise ConfigError(f"arm mode 'actuated' on the {self.robot} drives the arm's servos: give its serial port "
+                              "(the U2D2, e.g. /dev/ttyUSB0, or the emulator's pseudo-terminal; --arm-port)")
 
 
 @dataclass(frozen=True)
@@ -75,10 +93,12 @@ class HardwareRobot:
     Attributes:
         robot: the robot (connect it, or wrap it in `wbc.hardware.safety.SafeRobot` first).
         description: what it is (quadruped, arm, arm mode): what a controller drives and a viewer draws.
-        backend: the backend's name, as results record it (``unitree``).
+        backend: the backend's name, as results record it (``unitree``, or ``unitree+dynamixel`` with the arm's
+            bus).
         position_table: the leg position table its safety layer checks measured joints against (``go1``, ``a1``:
             the SDK's PositionLimit table; see `wbc.hardware.safety.SafetyConfig.position_table`).
-        target: where its parts are reached, for messages and reports (``legs udp 127.0.0.1:9000``).
+        target: where its parts are reached, for messages and reports (``legs udp 127.0.0.1:9000, arm serial
+            /dev/ttyUSB0``).
     """
 
     robot: Robot
@@ -93,7 +113,7 @@ def build_hardware_robot(config: HardwareRobotConfig) -> HardwareRobot:
 
     Raises:
         TargetRefusedError: a target outside 127.0.0.0/8 without `allow_hardware`, or not an IPv4 literal.
-        ConfigError: an invalid rate.
+        ConfigError: an invalid rate, or an arm setting out of range (the message names it).
     """
     unitree = HARDWARE_ROBOTS[config.robot]
     local_host = config.local_host
@@ -101,6 +121,17 @@ def build_hardware_robot(config: HardwareRobotConfig) -> HardwareRobot:
         local_host = "127.0.0.1" if is_loopback(config.legs_host) else "0.0.0.0"
     legs = UnitreeRobot(UnitreeRobotConfig(
         robot=unitree, target_host=config.legs_host, target_port=config.legs_port, local_host=local_host,
-        local_port=config.local_port, allow_hardware=config.allow_hardware, rate_hz=config.rate_hz))
-    return HardwareRobot(robot=legs, description=get_robot(config.robot, config.arm_mode), backend="unitree",
-                         position_table=unitree, target=f"legs udp {config.legs_host}:{config.legs_port}")
+        local_port=config.local_port, allow_hardware=config.allow_hardware, rate_hz=config.rate_hz,
+        transport=config.transport))
+    description = get_robot(config.robot, config.arm_mode)
+    target = f"legs {config.transport} {config.legs_host}:{config.legs_port}"
+    arm_config = config.arm
+    if arm_config is None and config.arm_port is not None:
+        arm_config = DynamixelArmConfig(robot=config.robot, port=config.arm_port)
+    if arm_config is None:
+        return HardwareRobot(robot=legs, description=description, backend="unitree", position_table=unitree,
+                             target=target)
+    arm = DynamixelArm(dataclasses.replace(arm_config, robot=config.robot))
+    joined = QuadrupedArmRobot(legs, arm, QuadrupedArmConfig(arm_mode=config.arm_mode))
+    return HardwareRobot(robot=joined, description=description, backend="unitree+dynamixel", position_table=unitree,
+                         target=f"{target}, arm serial {arm_config.port}")

@@ -43,6 +43,8 @@ class RobotEmulatorConfig:
         control_period: physics time per leg command (lockstep) or per leg state (realtime) [s].
         timestep: the physics step [s].
         seed: seed of the simulation.
+        held_until_driven: the robot held at its spawn pose until a leg command drives a motor
+            (`UnitreeEmulatorConfig.held_until_driven`).
         arm: the arm's bus (servos, temperatures, byte timing ...).
     """
 
@@ -52,6 +54,7 @@ class RobotEmulatorConfig:
     control_period: float = 0.002
     timestep: float = 0.002
     seed: int = 0
+    held_until_driven: bool = False
     arm: DynamixelEmulatorConfig = field(default_factory=DynamixelEmulatorConfig)
 
     def __post_init__(self) -> None:
@@ -72,7 +75,8 @@ class RobotEmulator:
         self.config = cfg = config if config is not None else RobotEmulatorConfig()
         self.plant = SharedPlant(SharedPlantConfig(robot=cfg.robot, timestep=cfg.timestep, seed=cfg.seed))
         self.legs = UnitreeEmulator(UnitreeEmulatorConfig(robot=LEG_WIRES[cfg.robot], mode=cfg.mode, port=cfg.port,
-                                                          control_period=cfg.control_period, seed=cfg.seed),
+                                                          control_period=cfg.control_period, seed=cfg.seed,
+                                                          held_until_driven=cfg.held_until_driven),
                                     sim=self.plant.legs)
         self.arm = DynamixelEmulator(self.plant, cfg.arm)
 

@@ -66,6 +66,10 @@ class UnitreeEmulatorConfig:
         motor_temperature: temperature every motor reports [deg C].
         log_size: most recent decoded commands kept.
         seed: seed of the simulation and of the DROP fault's coin.
+        held_until_driven: the robot is held at its spawn pose (the physics waits; states are still sent), as an
+            operator or a harness holds a real robot, until the first command that drives a motor (Kp > 0 or a
+            torque); `reset` holds it again. Without it, an idle robot with its motors off folds to its joint stops
+            within half a second, beyond the range a safety layer accepts for a ramp.
     """
 
     robot: str = "go1"
@@ -77,6 +81,7 @@ class UnitreeEmulatorConfig:
     motor_temperature: int = 35
     log_size: int = 100_000
     seed: int = 0
+    held_until_driven: bool = False
 
     def __post_init__(self) -> None:
         if self.robot not in DESCRIPTIONS:
@@ -125,6 +130,7 @@ class UnitreeEmulator:
         self._off = MotorCommand.damping(12, 0.0)
         self.failure: BaseException | None = None
         self.address: tuple[str, int] = (self.config.host, 0)
+        self._held = self.config.held_until_driven
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
     def start(self) -> UnitreeEmulator:
@@ -198,6 +204,12 @@ class UnitreeEmulator:
                 raise ConfigError(f"UnitreeEmulator.reset: qpos must have shape ({self.sim.model.nq},), got "
                                   f"{np.shape(qpos)}")
             self.sim.reset(self.config.seed, qpos=None if qpos is None else np.asarray(qpos, dtype=np.float64))
+            self._held = self.config.held_until_driven
+
+    @property
+    def held(self) -> bool:
+        """True while the robot is held at its spawn pose, waiting for a command that drives a motor."""
+        return self._held
 
     def commands(self) -> list[LoggedCommand]:
         """The decoded commands received so far (the latest `log_size`), oldest first."""
@@ -241,7 +253,8 @@ class UnitreeEmulator:
             now = time.monotonic()
             if realtime and now >= next_step:
                 with self._lock:
-                    self.sim.advance(period)
+                    if not self._held:
+                        self.sim.advance(period)
                 if self._peer is not None:
                     self._reply(self._peer)
                 next_step += period
@@ -277,7 +290,9 @@ class UnitreeEmulator:
             with self._lock:
                 self._log.append(LoggedCommand(time=time.monotonic(), sim_time=self.sim.time, wire=wire))
                 self.sim.write(cmd)
-                if step:
+                if self._held and (np.any(cmd.kp > 0) or np.any(cmd.tau != 0)):
+                    self._held = False
+                if step and not self._held:
                     self.sim.advance(self.config.control_period)
             self._peer = peer[:2]
             if step:
