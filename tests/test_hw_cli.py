@@ -10,6 +10,8 @@ from __future__ import annotations
 import io
 import json
 import os
+import re
+import signal
 import socket
 import subprocess
 import sys
@@ -17,6 +19,7 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from wbc.cli import main
@@ -193,3 +196,36 @@ def test_emulate_carries_a_locked_arm_in_its_physics_and_refuses_an_unknown_mode
     assert main(["hw", "emulate", "--robot", "go1", "--arm", "welded", "--seconds", "0.2"]) == 2
     err = capsys.readouterr().err
     assert "locked" in err and "none" in err and "actuated" in err and "Traceback" not in err
+
+
+def test_check_reports_the_safety_layers_refusal_of_a_folded_robot(capsys: pytest.CaptureFixture[str]) -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
+        qpos = emu.sim.data.qpos.copy()
+        qpos[7:19] = np.tile([0.0, 1.2, -2.9], 4)  # calves beyond the SDK's range and its margin: no ramp from here
+        emu.reset(qpos)
+        assert main(["hw", "check", "--target", f"127.0.0.1:{emu.address[1]}", "--seconds", "0.2"]) == 0
+        assert all(c.damping for c in emu.commands())  # still nothing but damping
+    out = capsys.readouterr().out
+    assert re.search(r"safety: WOULD REFUSE: joint_range: FR_calf_joint at -2\.\d+ rad", out)
+    assert "FR_calf_joint" in out and " OUT" in out
+
+
+def test_check_reads_the_arm_too_and_never_drives_it(capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("dynamixel_sdk")
+    proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "hw", "emulate", "--robot", "a1-wx200", "--arm",
+                             "actuated", "--seconds", "60"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=ROOT)
+    try:
+        line = proc.stdout.readline()  # bounded: the emulator stops by itself after --seconds
+        found = re.search(r"legs on 127\.0\.0\.1:(\d+) \(UDP\), arm on (\S+) \(Dynamixel", line)
+        assert found, line
+        code = main(["hw", "check", "--robot", "a1", "--target", f"127.0.0.1:{found[1]}", "--arm-port", found[2],
+                     "--seconds", "0.5"])
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=20)
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "arm on /dev/" in out and "arm_elbow" in out and "safety: ready: a ramp would start" in out
+    cycles = re.search(r"arm bus: (\d+) cycles, (\d+) of them damping", out)
+    assert cycles and int(cycles[1]) > 50 and cycles[1] == cycles[2]  # every cycle damped: no servo command

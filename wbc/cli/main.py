@@ -33,8 +33,10 @@ from wbc.hardware.emulators import (
     UnitreeEmulator,
     UnitreeEmulatorConfig,
 )
-from wbc.hardware.hardware_robot import HardwareRobot
-from wbc.hardware.unitree import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig, check_target, is_loopback
+from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
+from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
+from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.train.adaptation_config import AdaptationConfig
 from wbc.learned.train.stages import stage_config
@@ -287,23 +289,38 @@ def _hw_check(args: argparse.Namespace) -> int:
     host, port = _hardware_target(args, "check a real robot")
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
+    if args.robot not in DESCRIPTIONS:
+        raise UnknownNameError("Unitree robot", args.robot, tuple(DESCRIPTIONS))
     local_host, local_port = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"),
                                       "--local")
-    cfg = UnitreeRobotConfig(robot=args.robot, target_host=host, target_port=port, local_host=local_host,
-                             local_port=local_port, allow_hardware=args.allow_hardware, transport=args.transport)
+    hardware = build_hardware_robot(HardwareRobotConfig(
+        robot=DESCRIPTIONS[args.robot], arm_mode="actuated" if args.arm_port else "none", legs_host=host,
+        legs_port=port, local_host=local_host, local_port=local_port, allow_hardware=args.allow_hardware,
+        transport=args.transport, arm_port=args.arm_port))
     if not is_loopback(host):
-        _confirm_hardware("hw check", cfg.robot, host, port, "Only damping frames (Kp 0) will be sent; hang the robot "
-                          "in its harness first.", yes=args.yes)
-    robot = UnitreeRobot(cfg)
-    with robot:  # never written to: the link sends damping frames only
+        _confirm_hardware("hw check", args.robot, host, port, "Only damping will be sent (Kp 0, on the arm too); hang "
+                          "the robot in its harness first.", yes=args.yes)
+    events: list[SafetyEvent] = []
+    # Read through the safety layer, never written to: its checks judge each state, and a trip only sends damping.
+    safe = SafeRobot(hardware.robot, SafetyConfig(position_table=hardware.position_table, on_event=events.append))
+    legs = hardware.robot.legs if isinstance(hardware.robot, QuadrupedArmRobot) else hardware.robot
+    arm = hardware.robot.arm if isinstance(hardware.robot, QuadrupedArmRobot) else None
+    with safe:
         end = time.monotonic() + args.seconds
         for _ in range(int(args.seconds / 0.01) + 2):
             if time.monotonic() >= end:
                 break
-            robot.advance(0.01)
-        state, extras = robot.read(), robot.extras
-        link, decode = robot.link_stats(), robot.decode_stats
-    printers.print_hw_check(cfg.robot, (host, port), robot.joint_names, state, extras, link, decode)
+            safe.read()
+            safe.advance(0.01)
+        state = safe.read()
+        check = printers.HardwareCheck(
+            robot=args.robot, target=(host, port), joint_names=safe.joint_names, state=state,
+            lower=safe.position_lower, upper=safe.position_upper, margin=safe.config.joint_margin,
+            extras=legs.extras, link=legs.link_stats(), decode=legs.decode_stats, safety_state=safe.safety_state.value,
+            safety_events=tuple(events), arm_port=args.arm_port,
+            arm_status=arm.motor_status() if arm is not None else None,
+            arm_faults=arm.faults if arm is not None else (), arm_bus=arm.bus_stats() if arm is not None else None)
+    printers.print_hw_check(check)
     return 0
 
 

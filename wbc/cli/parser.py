@@ -178,10 +178,13 @@ def build_parser() -> argparse.ArgumentParser:
                          "(default: held at its standing pose, as in a harness, until a command drives a motor)")
     emulate.set_defaults(handler="hw emulate")
     check = hws.add_parser("check", help="connect to a robot, damping only, and print its state (never moves it)",
-                           description="Connect a UnitreeRobot, read states for a while sending only damping "
-                           "frames (Kp 0: no servo command is ever sent) and print the state: joints, IMU roll and "
-                           "pitch, battery, remote buttons, link statistics, rejected frames. A target outside "
-                           "127.0.0.0/8 needs --allow-hardware and a typed confirmation (or --yes).")
+                           description="Connect the robot (the legs' UnitreeRobot, and the arm's DynamixelArm with "
+                           "--arm-port), read states for a while through the safety layer, sending only damping "
+                           "(Kp 0: no servo command is ever sent), and print the state: joints with the ranges the "
+                           "layer checks, motor modes and temperatures, IMU roll and pitch, battery, remote buttons, "
+                           "the layer's verdict (would a ramp start from here, or what it refuses), link and bus "
+                           "statistics, rejected frames. A target outside 127.0.0.0/8 needs --allow-hardware and a "
+                           "typed confirmation (or --yes).")
     check.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
     check.add_argument("--target", required=True, metavar="HOST:PORT",
                        help="the robot's (or an emulator's) IPv4 address and UDP port, e.g. 127.0.0.1:PORT")
@@ -189,6 +192,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="address to bind (default 127.0.0.1:0 for a loopback target, else 0.0.0.0:0)")
     check.add_argument("--seconds", type=float, default=1.0, help="how long to read states [s] (default 1)")
     check.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
+    check.add_argument("--arm-port", default=None, metavar="DEVICE",
+                       help="also read the arm: its serial device (the U2D2, e.g. /dev/ttyUSB0, or the emulator's pty)")
     check.add_argument("--allow-hardware", action="store_true",
                        help="allow a target outside 127.0.0.0/8: a real robot")
     check.add_argument("--yes", action="store_true",

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +19,8 @@ from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table
 from wbc.control.check import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
+from wbc.hardware.capabilities import SafetyEventLike
+from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus
 from wbc.hardware.emulators import BusStats
 from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
 from wbc.tools.arm_momentum import ArmMomentumTrial
@@ -27,7 +30,7 @@ from wbc.tools.demo import TrialToWatch
 from wbc.tools.tail import TailAnalysis
 from wbc.types import RobotState
 
-__all__ = ["print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
+__all__ = ["HardwareCheck", "print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
            "print_bench_sweep", "print_bench_train", "print_controller_check", "print_controllers",
            "print_demo_end", "print_demo_header", "print_emulator_counts", "print_emulator_started", "print_hw_check",
            "print_hw_run", "print_json", "print_recording", "print_tail", "print_trained", "print_viewed_trial"]
@@ -339,16 +342,71 @@ def print_emulator_counts(counts: EmulatorCounts) -> None:
           f"refused (negative gain) {counts.refused}; replies {counts.replies}")
 
 
-def print_hw_check(robot: str, target: tuple[str, int], joint_names: Sequence[str], state: RobotState,
-                   extras: LowStateExtras | None, link: LinkStats, decode: DecodeStats) -> None:
-    """``wbc hw check``: the robot's state as read, and how the link went."""
-    host, port = target
-    print(f"{robot} at {host}:{port}: {link.valid_states} states received, newest {1e3 * link.state_age:.1f} ms old")
-    print("  joint                 q [rad]   dq [rad/s]   tau_est [N m]" + ("   mode  temp [C]" if extras else ""))
-    for i, name in enumerate(joint_names):
-        row = f"  {name:<20}{state.q[i]:>9.3f}{state.dq[i]:>13.3f}{state.tau_est[i]:>16.2f}"
-        if extras is not None:
-            row += f"   0x{int(extras.motor_mode[i]):02X}{int(extras.motor_temperature[i]):>10d}"
+@dataclass(frozen=True)
+class HardwareCheck:
+    """What ``wbc hw check`` read: the state through the safety layer, the limits it checks, the links' counters.
+
+    Attributes:
+        robot: the Unitree robot's name (``go1``, ``a1``).
+        target: the legs' address.
+        joint_names: the joints read, house order (the arm's last, when its port was given).
+        state: the newest state.
+        lower: each joint's lower limit as the safety layer checks it [rad].
+        upper: each joint's upper limit [rad].
+        margin: how far beyond a limit the layer lets a measured joint go [rad].
+        extras: the legs' newest frame's extras (motor modes, temperatures, remote, battery).
+        link: the legs' link counters.
+        decode: the legs' rejected frames by reason.
+        safety_state: the layer's state at the end (``ramp`` when a ramp would start from here).
+        safety_events: the layer's transitions during the check.
+        arm_port: the arm's serial device, or None (legs only).
+        arm_status: the arm servos' status (modes, temperatures), or None.
+        arm_faults: the arm's latched bus faults.
+        arm_bus: the arm's bus counters, or None.
+    """
+
+    robot: str
+    target: tuple[str, int]
+    joint_names: Sequence[str]
+    state: RobotState
+    lower: np.ndarray
+    upper: np.ndarray
+    margin: float
+    extras: LowStateExtras | None
+    link: LinkStats
+    decode: DecodeStats
+    safety_state: str
+    safety_events: Sequence[SafetyEventLike]
+    arm_port: str | None = None
+    arm_status: ArmMotorStatus | None = None
+    arm_faults: Sequence[object] = ()
+    arm_bus: ArmBusStats | None = None
+
+
+def print_hw_check(check: HardwareCheck) -> None:
+    """``wbc hw check``: the robot's state as read, its limits, the safety layer's verdict, and how the links went."""
+    host, port = check.target
+    state, extras, link = check.state, check.extras, check.link
+    print(f"{check.robot} at {host}:{port}" + (f", arm on {check.arm_port}" if check.arm_port else "") +
+          f": {link.valid_states} leg states received, newest {1e3 * link.state_age:.1f} ms old")
+    print("  joint                 q [rad]   dq [rad/s]   tau_est [N m]   range [rad]       mode  temp [C]")
+    modes = list(extras.motor_mode) if extras is not None else []
+    temps = list(extras.motor_temperature) if extras is not None else []
+    if check.arm_status is not None:
+        # the arm's servos in ID order; the joints read are waist (ID 1), shoulder (ID 2), elbow (ID 4)
+        by_id = dict(zip(check.arm_status.ids, zip(check.arm_status.motor_mode, check.arm_status.motor_temperature,
+                                                   strict=True), strict=True))
+        for servo in (1, 2, 4):
+            mode, temp = by_id.get(servo, (None, None))
+            modes.append(mode)
+            temps.append(temp)
+    for i, name in enumerate(check.joint_names):
+        q = state.q[i]
+        outside = q < check.lower[i] - check.margin or q > check.upper[i] + check.margin
+        row = (f"  {name:<20}{q:>9.3f}{state.dq[i]:>13.3f}{state.tau_est[i]:>16.2f}   "
+               f"[{check.lower[i]:>6.3f}, {check.upper[i]:>6.3f}]" + (" OUT" if outside else "    "))
+        if i < len(modes) and modes[i] is not None:
+            row += f"  0x{int(modes[i]):02X}{int(temps[i]):>10d}"
         print(row)
     if extras is not None:
         roll, pitch, _ = np.degrees(extras.imu_rpy)
@@ -360,11 +418,24 @@ def print_hw_check(robot: str, target: tuple[str, int], joint_names: Sequence[st
         held = extras.remote.held
         estop = "  (L2+B held: e-stop)" if extras.remote.l2_b else ""
         print(f"  remote buttons: {', '.join(held) or 'none'}{estop}")
-    print(f"  link: {link.frames_sent} frames sent, {link.damping_sent} of them damping (Kp 0); period mean "
-          f"{1e3 * link.period_mean:.3f} ms, std {1e3 * link.period_std:.3f} ms, max "
-          f"{1e3 * link.period_max:.3f} ms; {link.overruns} overruns; {link.foreign} foreign datagrams")
-    print(f"  rejected states: {decode.rejected} (" + ", ".join(f"{r} {getattr(decode, r)}" for r in REJECT_REASONS)
-          + ")")
+    trips = [e for e in check.safety_events if e.to_state == "damped"]
+    verdict = {"ramp": "ready: a ramp would start from this pose",
+               "waiting": "waiting: no live state stream"}.get(check.safety_state, check.safety_state)
+    print("  safety: " + (f"WOULD REFUSE: {trips[0].reason}: {trips[0].detail}" if trips else verdict)
+          + f" (joint margin {check.margin} rad beyond each range)")
+    print(f"  link: {link.frames_sent} frames sent, all damping (the link's own, {link.damping_sent}, and any the "
+          f"safety layer wrote on a trip); period mean {1e3 * link.period_mean:.3f} ms, std "
+          f"{1e3 * link.period_std:.3f} ms, max {1e3 * link.period_max:.3f} ms; {link.overruns} overruns; "
+          f"{link.foreign} foreign datagrams")
+    print(f"  rejected states: {check.decode.rejected} ("
+          + ", ".join(f"{r} {getattr(check.decode, r)}" for r in REJECT_REASONS) + ")")
+    if check.arm_bus is not None:
+        bus = check.arm_bus
+        print(f"  arm bus: {bus.cycles} cycles, {bus.damping_cycles} of them damping (no servo command), period mean "
+              f"{1e3 * bus.period_mean:.2f} ms, max {1e3 * bus.period_max:.2f} ms; {bus.failed_transfers} failed "
+              f"reads, {bus.retries} retries")
+        for fault in check.arm_faults:
+            print(f"  {fault}")
 
 
 def print_hw_run(result: HardwareTrialResult) -> None:
