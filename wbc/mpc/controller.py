@@ -30,7 +30,7 @@ from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
 from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
-from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler
+from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler, gait_fits_steps
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.leg_layer import LegLayer
 from wbc.mpc.plan_targets import PlanTargets
@@ -54,7 +54,7 @@ class MpcControllerConfig:
 
     Attributes:
         rate_hz: control rate [Hz].
-        replan_every: ticks between MPC updates (20 at 500 Hz: every MPC step of 40 ms).
+        replan_every: ticks between MPC updates; one MPC step (16 at 500 Hz: every MPC step of 32 ms).
         foothold_every: ticks between foothold updates of the swing feet.
         mpc: the MPC's settings.
         gait: the gait.
@@ -74,11 +74,12 @@ class MpcControllerConfig:
         wbc: the whole-body QP's gains and weights.
 
     Raises:
-        ConfigError: an unknown `whole_body`, or update intervals below one tick.
+        ConfigError: an unknown `whole_body`, update intervals below one tick, an MPC step that is not
+            `replan_every` ticks, or gait transitions that fall inside MPC steps.
     """
 
     rate_hz: float = 500.0
-    replan_every: int = 20
+    replan_every: int = 16
     foothold_every: int = 5
     mpc: MpcConfig = field(default_factory=MpcConfig)
     gait: GaitConfig = TROT
@@ -104,6 +105,14 @@ class MpcControllerConfig:
             raise ConfigError(f"MpcControllerConfig.replan_every and foothold_every count ticks between updates and "
                               f"must be at least 1, got {self.replan_every} and {self.foothold_every}; use 1 to "
                               "update every tick")
+        if abs(self.replan_every / self.rate_hz - self.mpc.dt) > 1e-9:
+            raise ConfigError(f"MpcControllerConfig: an MPC update every {self.replan_every} ticks at {self.rate_hz} Hz "
+                              f"is not one MPC step of {self.mpc.dt} s; set replan_every = mpc.dt * rate_hz")
+        if not gait_fits_steps(self.gait, self.mpc.dt):
+            raise ConfigError(f"MpcControllerConfig: the gait (period {self.gait.period} s, duty {self.gait.duty}, offsets "
+                              f"{self.gait.offsets}) lifts or lands feet inside MPC steps of {self.mpc.dt} s; make the "
+                              "stance and swing of every foot whole numbers of MPC steps (e.g. period = 10 mpc.dt, "
+                              "duty 0.5, offsets 0 and 0.5)")
 
 
 class MpcController:

@@ -7,6 +7,7 @@ reports no breakdown still walks; the figures that need one are then nan.
 
 from __future__ import annotations
 
+import importlib.metadata
 import math
 import multiprocessing
 import time
@@ -25,7 +26,6 @@ from wbc.errors import BenchError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
 from wbc.mpc.controller import MpcController
-from wbc.mpc.portable_proxsuite import BUILD as PROXSUITE_BUILD
 from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
@@ -105,7 +105,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     many times slower on a busy one.
 
     The robot walks at `vx` on flat ground for `seconds` (or until it falls) through `run_episode`. From the
-    controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time (ProxSuite) and setup
+    controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time (DAQP) and setup
     time (linearisation and condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo:
     kinematics, dynamics, tasks, QP, plus setting its targets from Python). ``control_tick_us_median`` is the whole
     control tick without an MPC update (estimator, kinematics, footholds, swing targets, whole-body QP, motor
@@ -177,7 +177,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         "realtime_factor": episode.survived_s / wall,
         "fell": bool(episode.fell),
         "blas": "default threads",
-        "proxsuite_build": PROXSUITE_BUILD,
+        "qp_solver": f"daqp {importlib.metadata.version('daqp')}",
         "machine": machine_description(),
         **references,
     }
