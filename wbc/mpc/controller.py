@@ -106,13 +106,13 @@ class MpcControllerConfig:
                               f"must be at least 1, got {self.replan_every} and {self.foothold_every}; use 1 to "
                               "update every tick")
         if abs(self.replan_every / self.rate_hz - self.mpc.dt) > 1e-9:
-            raise ConfigError(f"MpcControllerConfig: an MPC update every {self.replan_every} ticks at {self.rate_hz} Hz "
-                              f"is not one MPC step of {self.mpc.dt} s; set replan_every = mpc.dt * rate_hz")
+            raise ConfigError(f"MpcControllerConfig: an MPC update every {self.replan_every} ticks at {self.rate_hz} "
+                              f"Hz is not one MPC step of {self.mpc.dt} s; set replan_every = mpc.dt * rate_hz")
         if not gait_fits_steps(self.gait, self.mpc.dt):
-            raise ConfigError(f"MpcControllerConfig: the gait (period {self.gait.period} s, duty {self.gait.duty}, offsets "
-                              f"{self.gait.offsets}) lifts or lands feet inside MPC steps of {self.mpc.dt} s; make the "
-                              "stance and swing of every foot whole numbers of MPC steps (e.g. period = 10 mpc.dt, "
-                              "duty 0.5, offsets 0 and 0.5)")
+            raise ConfigError(f"MpcControllerConfig: the gait (period {self.gait.period} s, duty {self.gait.duty}, "
+                              f"offsets {self.gait.offsets}) lifts or lands feet inside MPC steps of {self.mpc.dt} s; "
+                              "make the stance and swing of every foot whole numbers of MPC steps (e.g. period = 10 "
+                              "mpc.dt, duty 0.5, offsets 0 and 0.5)")
 
 
 class MpcController:

@@ -47,7 +47,7 @@ class GaitConfig:
 
 
 TROT = GaitConfig()
-"""Diagonal pairs (FR+RL, FL+RR) alternate, 0.32 s cycle, half the time on the ground (stance 0.16 s: five MPC steps)."""
+"""Diagonal pairs (FR+RL, FL+RR) alternate, 0.32 s cycle, half the time on the ground (stance 0.16 s, 5 MPC steps)."""
 
 STAND = GaitConfig(period=1.0, duty=1.0)
 """All four feet on the ground."""
