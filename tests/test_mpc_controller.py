@@ -13,12 +13,12 @@ from wbc.mpc.gait import GaitConfig
 from wbc.types import VelocityCommand
 
 
-def _loop(name, seconds, command, *, hook=None):
+def _loop(name, seconds, command, *, hook=None, config=None):
     spec = get_controller(name)
     robot = MujocoRobot(MujocoRobotConfig(arm_mode=spec.arm_mode))
     robot.connect()
     robot.reset(seed=2)
-    ctrl = spec.make(robot.desc)
+    ctrl = spec.make(robot.desc) if config is None else MpcController(robot.desc, config)
     ctrl.reset()
     log = []
     for k in range(int(seconds * ctrl.rate_hz)):
@@ -93,16 +93,16 @@ def test_tick_timings_report_the_mpc_update_and_the_whole_body_qp_on_the_ticks_t
         solves_before = solves
         assert updated == (k % ctrl.config.replan_every == 0)
         assert ("mpc_setup_s" in timings) == updated and ("mpc_solve_s" in timings) == updated
-        assert "whole_body_s" in timings  # the QP runs every tick once there is a plan (from the first tick)
+        assert "whole_body_s" in timings  # the whole-body layer runs every tick once there is a plan (the first)
         assert set(timings) <= {"mpc_setup_s", "mpc_solve_s", "whole_body_s"}
         assert all(v > 0 for v in timings.values())
-    # the leg-level layer runs no whole-body QP
-    legs = MpcController(robot.desc, MpcControllerConfig(whole_body="legs"))
-    legs.reset()
-    legs.act(robot.read(), VelocityCommand())
-    assert set(legs.tick_timings()) == {"mpc_setup_s", "mpc_solve_s"}
-    legs.act(robot.read(), VelocityCommand())
-    assert legs.tick_timings() == {}
+    # PlaCo's QP, the other whole-body layer, reports its time the same way
+    placo = MpcController(robot.desc, MpcControllerConfig(whole_body="qp"))
+    placo.reset()
+    placo.act(robot.read(), VelocityCommand())
+    assert set(placo.tick_timings()) == {"mpc_setup_s", "mpc_solve_s", "whole_body_s"}
+    placo.act(robot.read(), VelocityCommand())
+    assert set(placo.tick_timings()) == {"whole_body_s"}
 
 
 def test_a_failed_mpc_update_reports_no_mpc_timings():
@@ -177,7 +177,8 @@ def test_a_failed_whole_body_qp_falls_back_to_the_leg_layer_and_is_counted():
             flaky.calls = 0
             ctrl.wbc.solve = flaky
 
-    robot, ctrl, log = _loop("mpc", 1.5, VelocityCommand(vx=0.2), hook=break_some)
+    robot, ctrl, log = _loop("mpc", 1.5, VelocityCommand(vx=0.2), hook=break_some,
+                             config=MpcControllerConfig(whole_body="qp"))
     assert ctrl.counters()["wbc_failures"] >= 100
 
 
@@ -215,6 +216,12 @@ def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_refer
     # the targets (100 us at a 40 us reference tick; 5x at 110k reference steps/s) scaled by this machine's figures
     assert result["scaled_target_wbc_tick_us"] == pytest.approx(2.5 * result["reference_placo_tick_us"])
     assert result["scaled_target_realtime_factor"] == pytest.approx(5.0 * result["reference_steps_per_s"] / 110_000)
+    # issue 16's figures: the control tick over the reference tick, the closed loop over this robot's physics alone
+    assert result["control_tick_over_reference_tick"] == pytest.approx(
+        result["control_tick_us_median"] / result["reference_placo_tick_us"])
+    assert result["closed_loop_over_physics_rtf"] == pytest.approx(
+        result["realtime_factor"] / result["physics_realtime_factor"])
+    assert 0 < result["closed_loop_over_physics_rtf"] < 1  # the controller costs something
     assert "reference_placo_tick_us" not in bench_mpc(seconds=0.1, single_thread=False, reference=False)
 
 

@@ -217,7 +217,8 @@ class CentroidalMpc:
         self._scale = np.tile(scale, n)
         w_state = np.concatenate([config.weight_com, config.weight_vel, config.weight_rpy, config.weight_momentum,
                                   config.weight_arm_q])
-        self._q_diag = np.tile(w_state, n)
+        self._q_root = np.sqrt(np.tile(w_state, n))
+        self._patterns: dict[bytes, tuple[np.ndarray, ...]] = {}
         r = np.full(NU, config.weight_force)
         r[12:] = config.weight_arm_dq
         self._r_diag = np.tile(r, n)
@@ -309,16 +310,46 @@ class CentroidalMpc:
         # zero and a frozen arm does not move, so their columns are dropped rather than boxed to zero. The QP keeps
         # one shape per contact pattern count.
         arm_free = self._arm_free
+        idx, s, l_box, u_box, friction = self._pattern(contact)
+        gam = gamma[:, idx] * s  # in the QP's scaled variables
+        # H = gam^T Q gam as (sqrt(Q) gam)^T (sqrt(Q) gam): BLAS computes one triangle of a product with itself
+        root_q = gam * self._q_root[:, None]
+        h = root_q.T @ root_q
+        h.flat[:: idx.size + 1] += self._r_diag[idx] * s * s
+        g = root_q.T @ (self._q_root * err)
+        m4 = friction.shape[0]
+        n_arm = 3 * n if arm_free else 0
+        c = np.empty((m4 + n_arm, idx.size))
+        c[:m4] = friction
+        lo = np.full(m4 + n_arm, -np.inf)
+        hi = np.zeros(m4 + n_arm)
+        if arm_free:
+            arm_rows = self._arm_rows
+            c[m4:] = gam[arm_rows]
+            lo[m4:] = (np.minimum(self._arm_lower, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
+            hi[m4:] = (np.maximum(self._arm_upper, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
+        return MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx, free=free,
+                          gamma=gamma)
+
+    def _pattern(self, contact: np.ndarray) -> tuple[np.ndarray, ...]:
+        """What depends only on the contact table: variables, their units and boxes, the friction pyramid rows.
+
+        A periodic gait has a handful of distinct tables, so each is built once and kept (read-only).
+
+        Returns:
+            idx (positions of the variables in the full input vector), s (their units), l_box, u_box, and the
+            friction rows (4 per stance foot and step, in the scaled variables).
+        """
+        key = contact.tobytes()
+        cached = self._patterns.get(key)
+        if cached is not None:
+            return cached
+        cfg, n = self.config, self.config.horizon
         chosen = np.zeros((n, NU), dtype=bool)
         chosen[:, :12] = np.repeat(contact, 3, axis=1)
-        chosen[:, 12:] = arm_free
+        chosen[:, 12:] = self._arm_free
         idx = np.flatnonzero(chosen)
         s = self._scale[idx]
-        gam = gamma[:, idx] * s  # in the QP's scaled variables
-        qg = self._q_diag[:, None] * gam
-        h = gam.T @ qg
-        h.flat[:: idx.size + 1] += self._r_diag[idx] * s * s
-        g = qg.T @ err
         fz_max = cfg.fz_max / cfg.force_scale
         l_box = np.empty(idx.size)
         u_box = np.empty(idx.size)
@@ -333,22 +364,17 @@ class CentroidalMpc:
         # friction pyramid rows: +-f_x - mu f_z <= 0 and +-f_y - mu f_z <= 0 for every stance foot
         fz_cols = np.flatnonzero(is_force & (comp == 2))  # one per stance foot and step, preceded by its x, y
         m = fz_cols.size
-        n_arm = 3 * n if arm_free else 0
-        c = np.zeros((4 * m + n_arm, idx.size))
-        lo = np.full(4 * m + n_arm, -np.inf)
-        hi = np.zeros(4 * m + n_arm)
-        fric = c[: 4 * m].reshape(m, 4, idx.size)
+        friction = np.zeros((4 * m, idx.size))
+        fric = friction.reshape(m, 4, idx.size)
         steps = np.arange(m)
         for r, (axis, sign) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
             fric[steps, r, fz_cols - 2 + axis] = sign * s[fz_cols - 2 + axis]
             fric[steps, r, fz_cols] = -cfg.mu * s[fz_cols]
-        if arm_free:
-            arm_rows = self._arm_rows
-            c[4 * m:] = gam[arm_rows]
-            lo[4 * m:] = (np.minimum(self._arm_lower, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
-            hi[4 * m:] = (np.maximum(self._arm_upper, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
-        return MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx, free=free,
-                          gamma=gamma)
+        out = (idx, s, l_box, u_box, friction)
+        for a in out:
+            a.setflags(write=False)
+        self._patterns[key] = out
+        return out
 
     def solve(self, problem: MpcProblem, warm_start: np.ndarray | None = None) -> MpcSolution:
         """Solve a problem from `build` (or `MpcProblem.load`) into a plan.
