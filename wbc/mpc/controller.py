@@ -64,6 +64,9 @@ class MpcControllerConfig:
         swing_height: swing apex [m].
         swing_kp: Cartesian swing stiffness of the leg layer [N/m].
         swing_kd: Cartesian swing damping of the leg layer [N s/m].
+        stance_kd: Cartesian damping of the stance feet's world velocity in the leg layer [N s/m].
+        touchdown_depth: the swing trajectory ends this far below the foothold, so a foot that lags its path still
+            lands on time [m].
         joint_kd: motor damping on every leg joint [N m s/rad].
         arm_kp: arm joint stiffness [N m/rad].
         arm_kd: arm joint damping [N m s/rad].
@@ -90,8 +93,10 @@ class MpcControllerConfig:
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     body_height: float = 0.28
     swing_height: float = 0.07
-    swing_kp: float = 400.0
-    swing_kd: float = 12.0
+    swing_kp: float = 700.0
+    swing_kd: float = 20.0
+    stance_kd: float = 10.0
+    touchdown_depth: float = 0.02
     joint_kd: float = 0.5
     arm_kp: float = 20.0
     arm_kd: float = 0.5
@@ -145,11 +150,11 @@ class MpcController:
         self.estimator = BaseEstimator(self.dt, cfg.estimator)
         self.reference = MotionReference(control_dt=self.dt, horizon=cfg.mpc.horizon, step_s=cfg.mpc.dt,
                                          body_height=cfg.body_height, arm_q=desc.arm.nominal_q)
-        self.feet = FootholdPlanner(cfg.gait, cfg.footholds, cfg.swing_height)
+        self.feet = FootholdPlanner(cfg.gait, cfg.footholds, cfg.swing_height, cfg.touchdown_depth)
         self.targets = PlanTargets(horizon=cfg.mpc.horizon, step_s=cfg.mpc.dt, arm_moves=arm_moves)
         self.wbc = WholeBodyQp(desc, cfg.wbc) if cfg.whole_body == "qp" else None
         self.legs = LegLayer(swing_kp=cfg.swing_kp, swing_kd=cfg.swing_kd,
-                             torque_limit=joint_table(desc).torque_limit)
+                             torque_limit=joint_table(desc).torque_limit, stance_kd=cfg.stance_kd)
         self._truth: Callable[[], BaseTruth] | None = None
         self._gains: tuple[np.ndarray, np.ndarray] | None = None
         self.reset()
@@ -261,12 +266,18 @@ class MpcController:
             kin.place(truth.base_position_in_world, truth.base_linvel_in_world)
             return
         estimator = self.estimator
-        trust = contact * np.minimum(np.maximum(state.foot_force * (1.0 / cfg.contact_force), 0.0), 1.0)
-        # a stance foot slides when its world velocity at the predicted base velocity is not about zero
-        v_pred = estimator.x[3:6]
-        speed = np.hypot(kin.feet_vel_rel[:, 0] + v_pred[0], kin.feet_vel_rel[:, 1] + v_pred[1])
-        self.slipping = (trust > 0.0) & (speed > cfg.slip_speed)
-        trust = np.where(self.slipping, 0.0, trust)
+        # four feet: Python floats (a dozen numpy calls on 4-vectors would cost more than the filter itself)
+        inv_force, slip2 = 1.0 / cfg.contact_force, cfg.slip_speed * cfg.slip_speed
+        vx, vy = estimator.x[3].item(), estimator.x[4].item()
+        trust, slipping = [], []
+        for stance, force, (fx, fy, _) in zip(contact.tolist(), state.foot_force.tolist(), kin.feet_vel_rel.tolist(),
+                                             strict=True):
+            w = min(max(force * inv_force, 0.0), 1.0) if stance else 0.0
+            # a stance foot slides when its world velocity at the predicted base velocity is not about zero
+            slides = w > 0.0 and (fx + vx) ** 2 + (fy + vy) ** 2 > slip2
+            slipping.append(slides)
+            trust.append(0.0 if slides else w)
+        self.slipping = np.array(slipping)
         estimator.update(rot, state.accel_in_body, kin.feet_rel, kin.feet_vel_rel, trust)
         kin.place(estimator.x[0:3].copy(), estimator.x[3:6].copy())
 

@@ -57,11 +57,14 @@ class LegLayer:
         swing_kp: Cartesian swing stiffness [N/m].
         swing_kd: Cartesian swing damping [N s/m].
         torque_limit: the leg motors' torque limits, house order (12,) [N m].
+        stance_kd: Cartesian damping of the stance feet's world velocity [N s/m]: a stance foot should not move; one
+            that slides or bounces is pushed against its motion.
     """
 
-    def __init__(self, *, swing_kp: float, swing_kd: float, torque_limit: np.ndarray) -> None:
+    def __init__(self, *, swing_kp: float, swing_kd: float, torque_limit: np.ndarray, stance_kd: float = 0.0) -> None:
         self.swing_kp = swing_kp
         self.swing_kd = swing_kd
+        self.stance_kd = stance_kd
         self.limit = np.asarray(torque_limit, dtype=np.float64)[:12].reshape(4, 3)
         self.scale = np.ones(4)
 
@@ -83,7 +86,8 @@ class LegLayer:
         if forces is None:
             forces = np.broadcast_to(_FORCE_BEFORE_PLAN, (4, 3))
         swing = self.swing_kp * (swing_pos - kin.feet) + self.swing_kd * (swing_vel - kin.feet_vel)
-        cartesian = np.where(stance, -forces, swing)
+        push = -forces if self.stance_kd == 0.0 else -forces - self.stance_kd * kin.feet_vel
+        cartesian = np.where(stance, push, swing)
         legs = (kin.leg_jacobians * cartesian[:, :, None]).sum(axis=1)  # J^T F per leg, (4, 3)
         hold = kin.gravity[:12].reshape(4, 3)
         tau = kin.gravity.copy()
