@@ -7,7 +7,7 @@ the horizon with the planned footholds and the reference CoM. States are condens
 so the QP is dense in U only.
 
 Constraints: friction pyramids (|f_x|, |f_y| <= mu f_z, with the controller's friction setting `MpcConfig.mu`, never
-the simulator's) and 0 <= f_z <= f_max on stance feet; swing feet carry no force (their variables are dropped); arm
+the simulator's) and f_min <= f_z <= f_max on stance feet; swing feet carry no force (their variables are dropped); arm
 joint velocity limits (box) and arm joint position limits along the horizon (rows of the condensed dynamics). A
 frozen arm (locked, absent, or momentum terms off) has no variables.
 
@@ -42,6 +42,9 @@ class MpcConfig:
         horizon: number of steps N.
         dt: step length [s].
         mu: friction coefficient of the pyramids.
+        fz_min: smallest normal force per stance foot [N]: a stance foot keeps pressing. Without it, a pushed
+            robot whose stance feet stood badly for the moments it needed was planned to fall freely until the next
+            pair landed (docs/mpc-notes.md).
         fz_max: largest normal force per foot [N].
         force_scale: force unit of the QP [N].
         weight_com: CoM position error weights (x, y, z).
@@ -58,11 +61,12 @@ class MpcConfig:
     horizon: int = 10
     dt: float = 0.032
     mu: float = 0.4
+    fz_min: float = 10.0
     fz_max: float = 250.0
     force_scale: float = 100.0
     weight_com: tuple[float, float, float] = (40.0, 40.0, 400.0)
     weight_vel: tuple[float, float, float] = (20.0, 20.0, 10.0)
-    weight_rpy: tuple[float, float, float] = (300.0, 300.0, 100.0)
+    weight_rpy: tuple[float, float, float] = (100.0, 100.0, 100.0)
     weight_momentum: tuple[float, float, float] = (2.0, 2.0, 2.0)
     weight_arm_q: tuple[float, float, float] = (5.0, 5.0, 5.0)
     weight_force: float = 1e-5
@@ -356,7 +360,7 @@ class CentroidalMpc:
         kind = idx % NU  # 0..11 force components, 12..14 arm
         is_force = kind < 12
         comp = kind % 3
-        l_box[is_force] = np.where(comp[is_force] == 2, 0.0, -cfg.mu * fz_max)
+        l_box[is_force] = np.where(comp[is_force] == 2, cfg.fz_min / cfg.force_scale, -cfg.mu * fz_max)
         u_box[is_force] = np.where(comp[is_force] == 2, fz_max, cfg.mu * fz_max)
         arm_cols = ~is_force
         l_box[arm_cols] = -self._arm_vmax[kind[arm_cols] - 12]
