@@ -357,9 +357,10 @@ class MpcController:
             # MotorCommand copies its arrays, so these are shared safely
             self._gains = joint_gains(self.kin.n, 0.0, cfg.joint_kd, cfg.arm_kp, cfg.arm_kd)
         kp, kd = self._gains
-        q = state.q.copy()
+        q = state.q  # MotorCommand copies its arrays; only an actuated arm's targets differ from the measured pose
         dq_des = np.zeros(self.kin.n)
         if self.has_arm:
+            q = q.copy()
             if self.plan is not None and cfg.use_arm_momentum:
                 v_arm = self.plan.arm_velocity[self._plan_step()]
                 self._arm_target = self._arm_target + v_arm * self.dt

@@ -27,6 +27,7 @@ from wbc.robots.pinocchio_model import build_pinocchio
 __all__ = ["RobotKinematics"]
 
 _LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_LEGS = np.arange(4)[:, None]
 
 
 class RobotKinematics:
@@ -38,6 +39,7 @@ class RobotKinematics:
     Attributes:
         feet_rel: foot positions relative to the base origin, world axes, shape (4, 3) [m].
         feet_vel_rel: foot velocities relative to the base (omega x r + J dq), world axes, shape (4, 3) [m/s].
+        hips_rel: thigh joint positions relative to the base origin, world axes, shape (4, 3) [m].
         leg_jacobians: d foot / d (hip, thigh, calf) of each leg, world axes, shape (4, 3, 3) [m/rad].
         gravity: joint torques that hold the configuration against gravity, house order (n,) [N m].
         feet: foot positions, world, shape (4, 3) [m] (after `place`).
@@ -68,13 +70,12 @@ class RobotKinematics:
         self._q_tick = pin.neutral(model)
         self._v_tick = np.zeros(model.nv)
         self.feet_rel = np.zeros((4, 3))
-        self.feet_vel_rel = np.zeros((4, 3))
         self.hips_rel = np.zeros((4, 3))
+        self.feet_vel_rel = np.zeros((4, 3))
         self.leg_jacobians = np.zeros((4, 3, 3))
         self.gravity = np.zeros(self.n)
         self.feet = np.zeros((4, 3))
         self.feet_vel = np.zeros((4, 3))
-        self.hips = np.zeros((4, 3))
         self.com = np.zeros(3)
         self.com_vel = np.zeros(3)
         self.momentum = np.zeros(3)
@@ -114,7 +115,7 @@ class RobotKinematics:
         self.feet_rel = np.array(self._foot_views)
         self.hips_rel = np.array(self._hip_views)
         self.feet_vel_rel = jac @ vp  # the base's linear velocity is zero here: omega x r + J dq
-        self.leg_jacobians = jac[np.arange(4)[:, None], :, self._leg_cols].transpose(0, 2, 1)
+        self.leg_jacobians = jac[_LEGS, :, self._leg_cols].transpose(0, 2, 1)
         self.gravity = pin.computeGeneralizedGravity(model, data, qp)[self._house_cols]
         self.omega_world = rot @ omega_body
         if not self._com_known:
@@ -127,7 +128,6 @@ class RobotKinematics:
         self.base_position, self.base_velocity = p, v
         self.feet = self.feet_rel + p
         self.feet_vel = self.feet_vel_rel + v
-        self.hips = self.hips_rel + p
         com_rel = self.rot @ self._com_in_base
         self.com = p + com_rel
         # v + omega x com_rel, in floats (numpy's cross costs more than the rest of this method)
@@ -135,8 +135,6 @@ class RobotKinematics:
         rx, ry, rz = com_rel.tolist()
         vx, vy, vz = v.tolist()
         self.com_vel = np.array([vx + wy * rz - wz * ry, vy + wz * rx - wx * rz, vz + wx * ry - wy * rx])
-        if self.params is not None:
-            self.params.feet_world[:] = self.feet
 
     def update(self, base_pos: np.ndarray, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray,
                v_base_world: np.ndarray, omega_body: np.ndarray, *, centroidal: bool,
@@ -188,8 +186,8 @@ class RobotKinematics:
         return vp
 
     def hip_positions(self) -> np.ndarray:
-        """The thigh joints' positions at the placed base, world, shape (4, 3) [m]."""
-        return self.hips
+        """The thigh joints' positions at the placed base, world, shape (4, 3) [m] (only foothold refreshes ask)."""
+        return self.hips_rel + self.base_position
 
     def compute_jacobians(self) -> np.ndarray:
         """The feet's translation Jacobians over all joints, world axes, house columns, shape (4, 3, n) [m/rad].
