@@ -13,6 +13,7 @@ from wbc.mpc.centroidal_model import euler_rates_matrix
 from wbc.mpc.gait import STAND, TROT, GaitConfig, GaitScheduler
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.robots import get_robot, joint_table
+from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.pinocchio_model import build_pinocchio
 from wbc.scenario.terrain import TerrainConfig
 
@@ -183,8 +184,7 @@ def test_a_saved_problem_loads_and_solves_to_the_live_plan_bit_for_bit(gait, tmp
     x = x0.copy()
     x[3:6] = (0.1, 0.3, 0.0)
     args = (np.tile(x0, (n, 1)), contact, np.tile(feet, (n, 1, 1)), params)
-    first_problem = mpc.build(x, *args)  # the live loop: a cold start, then warm starts from the shifted plan
-    first = mpc.solve(first_problem)
+    first = mpc.solve(mpc.build(x, *args))  # the live loop: a cold start, then warm starts from the shifted plan
     x[3:6] = (0.12, 0.25, 0.0)
     problem = mpc.build(x, *args)
     live = mpc.solve(problem, first.warm_start())
@@ -192,9 +192,8 @@ def test_a_saved_problem_loads_and_solves_to_the_live_plan_bit_for_bit(gait, tmp
     loaded = MpcProblem.load(tmp_path / "problem.npz")
     for name in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma"):
         assert np.array_equal(getattr(loaded, name), getattr(problem, name)), name
-    # the warm start reuses the Ruiz scaling of the first (cold-started) problem, and the dump says so
-    assert problem.scaling is not None and np.array_equal(loaded.scaling.H, first_problem.H)
-    # a fresh solver (as in another process) and the live one replay it to the same bits, warm and cold
+    # the solve holds no state between updates: a fresh solver (as in another process) and the live one replay it
+    # to the same bits, warm and cold
     fresh, _, _, _ = _standing_problem()
     _same_plan(fresh.solve(loaded, first.warm_start()), live)
     _same_plan(mpc.solve(loaded, first.warm_start()), live)
@@ -240,19 +239,55 @@ def test_gait_state_and_contact_table_agree_with_the_per_time_queries(gait):
         assert np.array_equal(table, np.array([sched.contact(t + (k + 0.5) * 0.04) for k in range(10)]))
 
 
-def test_kinematics_shift_moves_feet_hips_and_com_like_a_fresh_update():
+def test_the_per_tick_kinematics_placed_at_a_base_state_agree_with_pinocchio_there():
+    # one pass with the base at the origin, then placed: what the estimator and the leg layer read every tick
     desc = get_robot("a1-wx200")
     rng = np.random.default_rng(4)
     quat = np.array([0.98, 0.05, -0.1, 0.15])
     quat /= np.linalg.norm(quat)
     q, dq = desc.nominal_q + 0.1 * rng.standard_normal(15), rng.standard_normal(15)
     p, v, w = np.array([0.1, -0.2, 0.3]), rng.standard_normal(3), rng.standard_normal(3)
-    dp, dv = np.array([0.01, -0.02, 0.005]), np.array([0.1, 0.0, -0.05])
-    shifted, fresh = RobotKinematics(desc), RobotKinematics(desc)
-    shifted.update(p, quat, q, dq, v, w, centroidal=True)
-    shifted.shift(dp, dv)
-    fresh.update(p + dp, quat, q, dq, v + dv, w, centroidal=True)
-    for name in ("feet", "feet_vel", "com", "com_vel", "momentum", "q_pin", "v_pin"):
-        np.testing.assert_allclose(getattr(shifted, name), getattr(fresh, name), atol=1e-12, err_msg=name)
-    np.testing.assert_allclose(shifted.hip_positions(), fresh.hip_positions(), atol=1e-12)
-    np.testing.assert_allclose(shifted.params.feet_world, fresh.params.feet_world, atol=1e-12)
+    kin = RobotKinematics(desc)
+    kin.update(p, quat, q, dq, v, w, centroidal=True)
+    model, data = kin.robot.model, kin.robot.data
+    q_pin, v_pin = kin.q_pin, kin.v_pin
+    pin.forwardKinematics(model, data, q_pin, v_pin)
+    pin.computeJointJacobians(model, data, q_pin)
+    pin.updateFramePlacements(model, data)
+    frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    cols = kin._leg_cols
+    for i, fid in enumerate(kin._foot_frames):
+        np.testing.assert_allclose(kin.feet[i], data.oMf[fid].translation, atol=1e-12)
+        np.testing.assert_allclose(kin.feet_vel[i], pin.getFrameVelocity(model, data, fid, frame).linear, atol=1e-12)
+        jac = pin.getFrameJacobian(model, data, fid, frame)[:3]
+        np.testing.assert_allclose(kin.leg_jacobians[i], jac[:, cols[i]], atol=1e-12)
+        assert np.abs(np.delete(jac[:, 6:], cols[i] - 6, axis=1)).max() < 1e-12  # no other joint moves the foot
+    np.testing.assert_allclose(kin.gravity, pin.computeGeneralizedGravity(model, data, q_pin)[kin._house_cols],
+                               atol=1e-12)
+    pin.centerOfMass(model, data, q_pin, v_pin)
+    np.testing.assert_allclose(kin.com, data.com[0], atol=1e-12)
+    np.testing.assert_allclose(kin.com_vel, data.vcom[0], atol=1e-12)
+    # between MPC updates the CoM rides with the trunk at its last offset
+    kin.tick(quat, q, dq, w, quat_to_matrix(quat))
+    kin.place(p + 0.01, v)
+    np.testing.assert_allclose(kin.com, data.com[0] + 0.01, atol=1e-12)
+
+
+def test_leg_jacobians_match_finite_differences_of_the_feet():
+    desc = get_robot("go1-arm")
+    rng = np.random.default_rng(7)
+    quat = np.array([0.97, -0.08, 0.12, 0.2])
+    quat /= np.linalg.norm(quat)
+    rot = quat_to_matrix(quat)
+    q = desc.nominal_q + 0.2 * rng.standard_normal(15)
+    kin = RobotKinematics(desc)
+    kin.tick(quat, q, np.zeros(15), np.zeros(3), rot)
+    jac, feet = kin.leg_jacobians.copy(), kin.feet_rel.copy()
+    eps = 1e-6
+    for j in range(12):
+        dq = np.zeros(15)
+        dq[j] = eps
+        kin.tick(quat, q + dq, np.zeros(15), np.zeros(3), rot)
+        leg, col = divmod(j, 3)
+        np.testing.assert_allclose((kin.feet_rel[leg] - feet[leg]) / eps, jac[leg][:, col], atol=1e-5)
+

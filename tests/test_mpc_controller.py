@@ -9,15 +9,16 @@ from wbc.errors import ConfigError
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.mpc import MpcSolveError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
+from wbc.mpc.gait import GaitConfig
 from wbc.types import VelocityCommand
 
 
-def _loop(name, seconds, command, *, hook=None):
+def _loop(name, seconds, command, *, hook=None, config=None):
     spec = get_controller(name)
     robot = MujocoRobot(MujocoRobotConfig(arm_mode=spec.arm_mode))
     robot.connect()
     robot.reset(seed=2)
-    ctrl = spec.make(robot.desc)
+    ctrl = spec.make(robot.desc) if config is None else MpcController(robot.desc, config)
     ctrl.reset()
     log = []
     for k in range(int(seconds * ctrl.rate_hz)):
@@ -92,28 +93,29 @@ def test_tick_timings_report_the_mpc_update_and_the_whole_body_qp_on_the_ticks_t
         solves_before = solves
         assert updated == (k % ctrl.config.replan_every == 0)
         assert ("mpc_setup_s" in timings) == updated and ("mpc_solve_s" in timings) == updated
-        assert "whole_body_s" in timings  # the QP runs every tick once there is a plan (from the first tick)
+        assert "whole_body_s" in timings  # the whole-body layer runs every tick once there is a plan (the first)
         assert set(timings) <= {"mpc_setup_s", "mpc_solve_s", "whole_body_s"}
         assert all(v > 0 for v in timings.values())
-    # the leg-level layer runs no whole-body QP
-    legs = MpcController(robot.desc, MpcControllerConfig(whole_body="legs"))
-    legs.reset()
-    legs.act(robot.read(), VelocityCommand())
-    assert set(legs.tick_timings()) == {"mpc_setup_s", "mpc_solve_s"}
-    legs.act(robot.read(), VelocityCommand())
-    assert legs.tick_timings() == {}
+    # PlaCo's QP, the other whole-body layer, reports its time the same way
+    placo = MpcController(robot.desc, MpcControllerConfig(whole_body="qp"))
+    placo.reset()
+    placo.act(robot.read(), VelocityCommand())
+    assert set(placo.tick_timings()) == {"mpc_setup_s", "mpc_solve_s", "whole_body_s"}
+    placo.act(robot.read(), VelocityCommand())
+    assert set(placo.tick_timings()) == {"whole_body_s"}
 
 
 def test_a_failed_mpc_update_reports_no_mpc_timings():
     def fail_once(k, ctrl):
-        if k == 19:
+        every = ctrl.config.replan_every
+        if k == every - 1:
             def failing(*args, **kwargs):
                 ctrl.mpc.plan = real
                 raise MpcSolveError("injected failure", problem=None)
 
             real = ctrl.mpc.plan
             ctrl.mpc.plan = failing
-        if k == 20:
+        if k == every:
             assert ctrl.counters()["fallbacks"] == 1
             assert "mpc_solve_s" not in ctrl.tick_timings() and "whole_body_s" in ctrl.tick_timings()
 
@@ -125,6 +127,10 @@ def test_unknown_whole_body_layer_is_a_config_error_naming_the_valid_ones():
         MpcControllerConfig(whole_body="wbic")
     with pytest.raises(ConfigError, match="at least 1"):
         MpcControllerConfig(replan_every=0)
+    with pytest.raises(ConfigError, match="not one MPC step"):
+        MpcControllerConfig(replan_every=20)
+    with pytest.raises(ConfigError, match="inside MPC steps"):
+        MpcControllerConfig(gait=GaitConfig(period=0.36))
 
 
 _IMPORT_PROBE = """
@@ -171,7 +177,8 @@ def test_a_failed_whole_body_qp_falls_back_to_the_leg_layer_and_is_counted():
             flaky.calls = 0
             ctrl.wbc.solve = flaky
 
-    robot, ctrl, log = _loop("mpc", 1.5, VelocityCommand(vx=0.2), hook=break_some)
+    robot, ctrl, log = _loop("mpc", 1.5, VelocityCommand(vx=0.2), hook=break_some,
+                             config=MpcControllerConfig(whole_body="qp"))
     assert ctrl.counters()["wbc_failures"] >= 100
 
 
@@ -205,10 +212,16 @@ def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_refer
     for key in ("mpc_solve_ms_median", "mpc_solve_ms_p99", "wbc_tick_us_median", "realtime_factor"):
         assert result[key] > 0
     assert not result["fell"]
-    assert result["proxsuite_build"] == "proxsuite_pywrap"  # the portable build: results independent of addresses
+    assert result["qp_solver"].startswith("daqp ")
     # the targets (100 us at a 40 us reference tick; 5x at 110k reference steps/s) scaled by this machine's figures
     assert result["scaled_target_wbc_tick_us"] == pytest.approx(2.5 * result["reference_placo_tick_us"])
     assert result["scaled_target_realtime_factor"] == pytest.approx(5.0 * result["reference_steps_per_s"] / 110_000)
+    # issue 16's figures: the control tick over the reference tick, the closed loop over this robot's physics alone
+    assert result["control_tick_over_reference_tick"] == pytest.approx(
+        result["control_tick_us_median"] / result["reference_placo_tick_us"])
+    assert result["closed_loop_over_physics_rtf"] == pytest.approx(
+        result["realtime_factor"] / result["physics_realtime_factor"])
+    assert 0 < result["closed_loop_over_physics_rtf"] < 1  # the controller costs something
     assert "reference_placo_tick_us" not in bench_mpc(seconds=0.1, single_thread=False, reference=False)
 
 
@@ -226,7 +239,7 @@ print(episode.qpos.tobytes().hex()[-4000:], record["energy_j"].hex())
 
 
 def test_an_mpc_trial_is_bit_identical_whatever_was_allocated_before_it():
-    # ProxSuite's wide (AVX) builds made the last bits depend on buffer addresses; see wbc/mpc/portable_proxsuite.py
+    # ProxSuite's wide (AVX) builds made the last bits depend on buffer addresses (docs/mpc-notes.md); DAQP's must not
     import subprocess
     import sys
     from pathlib import Path

@@ -120,6 +120,20 @@ def test_shipped_scenarios_load_and_are_published():
         check_published(s, SCENARIOS / "published.toml")
 
 
+def test_every_shipped_scenario_is_published_and_the_push_variants_differ_from_push_only_where_they_say():
+    for path in sorted(SCENARIOS.glob("*.toml")):
+        if path.name != "published.toml":
+            check_published(load_scenario(path))
+    push = load_scenario(PUSH)
+    slippery = load_scenario(SCENARIOS / "push-low-friction.toml")
+    strong = load_scenario(SCENARIOS / "push-strong.toml")
+    for variant in (slippery, strong):
+        assert variant.robot == push.robot and variant.bands == push.bands and variant.duration_s == push.duration_s
+    a, b, c = push.trial("in", 0, 3), slippery.trial("in", 0, 3), strong.trial("in", 0, 3)
+    assert 0.4 <= b.domain.friction <= 0.5 and b.terrain == a.terrain
+    assert [p.duration for p in c.pushes] == [0.10] * len(c.pushes) and 0.0 <= c.domain.payload_mass <= 1.0
+
+
 def test_hash_ignores_comments_layout_and_key_order_but_not_values(tmp_path):
     text = PUSH.read_text()
     reference = load_scenario(PUSH).hash

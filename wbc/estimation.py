@@ -168,11 +168,11 @@ class BaseEstimator:
             accel_body: accelerometer reading (specific force), body frame.
             feet_rel_world: foot positions relative to the base, world axes, shape (4, 3).
             feet_vel_rel_world: foot velocities relative to the base (omega x r + J dq), world axes, shape (4, 3).
-            trust: contact trust of each foot in [0, 1].
+            trust: contact trust of each foot in [0, 1] (an array, or a list of four floats).
         """
         dt, x = self.dt, self.x
         if self.config.gain == "steady":
-            t0, t1, t2, t3 = np.asarray(trust, dtype=np.float64).tolist()
+            t0, t1, t2, t3 = trust if type(trust) is list else np.asarray(trust, dtype=np.float64).tolist()
             pattern = int(t0 >= 0.5) | int(t1 >= 0.5) << 1 | int(t2 >= 0.5) << 2 | int(t3 >= 0.5) << 3
             # predict and correct in one: x+ = (I - K C) (A x + B (R a + g)) + K y; the velocity rows of y are
             # negated inside the stored gain and its foot-height rows (zeros) dropped

@@ -14,7 +14,7 @@ from pathlib import Path
 
 __all__ = ["PACKAGES", "git_revision", "provenance"]
 
-PACKAGES = ("wbc", "numpy", "mujoco", "pin", "placo", "casadi", "proxsuite", "meshcat", "example-robot-data",
+PACKAGES = ("wbc", "numpy", "mujoco", "pin", "placo", "casadi", "daqp", "meshcat", "example-robot-data",
             "threadpoolctl", "ray", "torch", "rsl-rl-lib", "onnxruntime")
 """Packages whose versions are recorded (those installed)."""
 

@@ -1,4 +1,4 @@
-"""`CentroidalMpc`: a condensed convex MPC over the centroidal model with arm momentum, solved with ProxSuite.
+"""`CentroidalMpc`: a condensed convex MPC over the centroidal model with arm momentum, solved with DAQP.
 
 Decision variables per step: the four feet's contact forces (world frame, in units of `force_scale` newtons so the
 QP is well scaled) and the arm's joint velocities. The dynamics are linearised once per update about the current
@@ -6,32 +6,29 @@ state and the gravity-compensating reference input (`CentroidalModel.discretize`
 the horizon with the planned footholds and the reference CoM. States are condensed out: X = Phi x0 + Gamma U + delta,
 so the QP is dense in U only.
 
-Constraints: friction pyramids (|f_x|, |f_y| <= mu f_z) and 0 <= f_z <= f_max on stance feet; swing feet carry no
-force (their variables are dropped); arm joint velocity limits (box) and arm joint position limits along the horizon
-(rows of the condensed dynamics). A frozen arm (locked, absent, or momentum terms off) has no variables.
+Constraints: friction pyramids (|f_x|, |f_y| <= mu f_z, with the controller's friction setting `MpcConfig.mu`, never
+the simulator's) and f_min <= f_z <= f_max on stance feet; swing feet carry no force (their variables are dropped); arm
+joint velocity limits (box) and arm joint position limits along the horizon (rows of the condensed dynamics). A
+frozen arm (locked, absent, or momentum terms off) has no variables.
 
-Warm start: the previous solution shifted by one step is passed explicitly (ProxSuite's own "warm start with previous
-result" is not used: it gave wrong answers when contact bounds flipped); if that solve fails, a cold start
-follows. A solve that still fails raises `MpcSolveError` carrying the problem, so the controller can fall
-back to the shifted previous plan. Lab notes on the values chosen here: docs/mpc-notes.md.
-
-Scaling: a cold start lets ProxSuite compute its Ruiz equilibration of the QP; a warm start does not recompute it
-(about half the cost of a solve) and ProxSuite then reuses the scaling its QP object of that shape got at its last cold
-start (``compute_preconditioner=False`` keeps the current scaling, it does not reset it). That earlier QP is named in
-each problem (`MpcProblem.scaling`), so `CentroidalMpc.solve` is a function of the problem and the warm start alone:
-a saved problem replays to the same bits in a fresh solver.
+Solver: DAQP, a dual active-set method for small dense QPs (its Python package; a plain C library, so a solve does not
+depend on where its buffers were allocated). On this problem (80-90 variables, ~100 rows) it solves in a fifth of the
+time ProxSuite's interior-proximal method took, to a tighter optimum (measurements: docs/mpc-notes.md). The solve is
+a function of the problem and the warm start alone (the previous plan shifted by one step, which seeds DAQP's active
+set); if a warm-started solve fails a cold start follows, and a solve that still fails raises `MpcSolveError`
+carrying the problem, so the controller can fall back to the shifted previous plan and the problem can be replayed.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
+import daqp
 import numpy as np
 
 from wbc.errors import MpcProblemFileError, WbcError
 from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, zoh_integral
-from wbc.mpc.portable_proxsuite import proxsuite
 from wbc.robots.conventions import G
 
 __all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "DenseQp", "CentroidalMpc"]
@@ -45,6 +42,9 @@ class MpcConfig:
         horizon: number of steps N.
         dt: step length [s].
         mu: friction coefficient of the pyramids.
+        fz_min: smallest normal force per stance foot [N]: a stance foot keeps pressing. Without it, a pushed
+            robot whose stance feet stood badly for the moments it needed was planned to fall freely until the next
+            pair landed (docs/mpc-notes.md).
         fz_max: largest normal force per foot [N].
         force_scale: force unit of the QP [N].
         weight_com: CoM position error weights (x, y, z).
@@ -59,13 +59,14 @@ class MpcConfig:
     """
 
     horizon: int = 10
-    dt: float = 0.04
-    mu: float = 0.6
+    dt: float = 0.032
+    mu: float = 0.4
+    fz_min: float = 10.0
     fz_max: float = 250.0
     force_scale: float = 100.0
     weight_com: tuple[float, float, float] = (40.0, 40.0, 400.0)
     weight_vel: tuple[float, float, float] = (20.0, 20.0, 10.0)
-    weight_rpy: tuple[float, float, float] = (300.0, 300.0, 100.0)
+    weight_rpy: tuple[float, float, float] = (100.0, 100.0, 100.0)
     weight_momentum: tuple[float, float, float] = (2.0, 2.0, 2.0)
     weight_arm_q: tuple[float, float, float] = (5.0, 5.0, 5.0)
     weight_force: float = 1e-5
@@ -75,10 +76,9 @@ class MpcConfig:
 
 @dataclass
 class DenseQp:
-    """A dense QP in ProxSuite's form: min 1/2 z^T H z + g^T z s.t. l <= C z <= u, l_box <= z <= u_box.
+    """A dense QP: min 1/2 z^T H z + g^T z s.t. l <= C z <= u, l_box <= z <= u_box.
 
-    An `MpcProblem` is one, and a warm-started solve reuses the Ruiz equilibration of another (its `scaling`: the
-    last QP of the same shape that started cold).
+    An `MpcProblem` is one, with what turns its solution into a plan.
 
     Attributes:
         H: its Hessian.
@@ -93,23 +93,14 @@ class DenseQp:
     H: np.ndarray
     g: np.ndarray
     C: np.ndarray
-    l: np.ndarray  # noqa: E741 - ProxSuite's name for the lower bounds
+    l: np.ndarray  # noqa: E741 - the usual name for the lower bounds
     u: np.ndarray
     l_box: np.ndarray
     u_box: np.ndarray
 
-    @classmethod
-    def of(cls, problem: MpcProblem) -> DenseQp:
-        """The scaling a cold start of `problem` computes (its arrays, not copied)."""
-        return cls(**{f.name: getattr(problem, f.name) for f in fields(cls)})
-
-
-_SCALING_PREFIX = "scaling."  # keys of the `DenseQp` arrays in a saved problem
-
-
 @dataclass
 class MpcProblem(DenseQp):
-    """One update's QP in ProxSuite's form (scaled variables) and what turns its solution into a plan.
+    """One update's QP (scaled variables) and what turns its solution into a plan.
 
     min 1/2 z^T H z + g^T z  s.t.  l <= C z <= u,  l_box <= z <= u_box;  U[index] = scale * z, other entries of
     the full input vector U (N NU: swing forces, a frozen arm's velocities) are zero. The predicted states are
@@ -128,15 +119,12 @@ class MpcProblem(DenseQp):
         index: position of each variable in the full input vector U (n,).
         free: predicted states with zero input, x_1 .. x_N stacked, shape (N NX,).
         gamma: condensed input matrix, d X / d U, shape (N NX, N NU).
-        scaling: the QP whose Ruiz equilibration a warm start reuses (see the module docstring); None: no QP of
-            this shape has started cold yet, so a warm start runs unscaled.
     """
 
     scale: np.ndarray
     index: np.ndarray
     free: np.ndarray
     gamma: np.ndarray
-    scaling: DenseQp | None = None
 
     @property
     def horizon(self) -> int:
@@ -144,11 +132,8 @@ class MpcProblem(DenseQp):
         return self.free.size // NX
 
     def save(self, path: str) -> None:
-        """Write the problem to an ``.npz`` file (compressed, no pickles), its `scaling` QP included."""
-        arrays = {name: getattr(self, name) for name in _ARRAYS}
-        if self.scaling is not None:
-            arrays.update({_SCALING_PREFIX + f.name: getattr(self.scaling, f.name) for f in fields(DenseQp)})
-        np.savez_compressed(path, **arrays)
+        """Write the problem to an ``.npz`` file (compressed, no pickles)."""
+        np.savez_compressed(path, **{name: getattr(self, name) for name in _ARRAYS})
 
     @classmethod
     def load(cls, path: str) -> MpcProblem:
@@ -157,16 +142,11 @@ class MpcProblem(DenseQp):
         Raises:
             MpcProblemFileError: the file lacks some of the problem's arrays (an older dump, or not a problem).
         """
-        scaling_keys = [_SCALING_PREFIX + f.name for f in fields(DenseQp)]
         with np.load(path, allow_pickle=False) as z:
-            has_scaling = any(k in z.files for k in scaling_keys)
-            missing = [k for k in (*_ARRAYS, *(scaling_keys if has_scaling else ())) if k not in z.files]
+            missing = [k for k in _ARRAYS if k not in z.files]
             if missing:
                 raise MpcProblemFileError(str(path), missing)
-            scaling = None
-            if has_scaling:
-                scaling = DenseQp(**{k.removeprefix(_SCALING_PREFIX): z[k] for k in scaling_keys})
-            return cls(**{k: z[k] for k in _ARRAYS}, scaling=scaling)
+            return cls(**{k: z[k] for k in _ARRAYS})
 
 
 _ARRAYS = ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma")  # `MpcProblem`'s arrays
@@ -236,15 +216,13 @@ class CentroidalMpc:
         self._arm_lower = np.asarray(arm_lower, dtype=np.float64) + config.arm_margin
         self._arm_upper = np.asarray(arm_upper, dtype=np.float64) - config.arm_margin
         self._arm_vmax = np.asarray(arm_velocity_limit, dtype=np.float64)
-        self._qps: dict[tuple[int, int], proxsuite.proxqp.dense.QP] = {}
-        # per QP shape: the QP whose equilibration ProxSuite's object of that shape holds (absent: none, unscaled)
-        self._scaled_by: dict[tuple[int, int], DenseQp] = {}
         scale = np.ones(NU)
         scale[:12] = config.force_scale
         self._scale = np.tile(scale, n)
         w_state = np.concatenate([config.weight_com, config.weight_vel, config.weight_rpy, config.weight_momentum,
                                   config.weight_arm_q])
-        self._q_diag = np.tile(w_state, n)
+        self._q_root = np.sqrt(np.tile(w_state, n))
+        self._patterns: dict[bytes, tuple[np.ndarray, ...]] = {}
         r = np.full(NU, config.weight_force)
         r[12:] = config.weight_arm_dq
         self._r_diag = np.tile(r, n)
@@ -334,25 +312,55 @@ class CentroidalMpc:
         err = free - x_ref.ravel()
         # Only stance forces (and the arm's velocities when it may move) are decision variables: swing forces are
         # zero and a frozen arm does not move, so their columns are dropped rather than boxed to zero. The QP keeps
-        # one shape per contact pattern count; one ProxSuite object per shape is built once and reused.
+        # one shape per contact pattern count.
         arm_free = self._arm_free
+        idx, s, l_box, u_box, friction = self._pattern(contact)
+        gam = gamma[:, idx] * s  # in the QP's scaled variables
+        # H = gam^T Q gam as (sqrt(Q) gam)^T (sqrt(Q) gam): BLAS computes one triangle of a product with itself
+        root_q = gam * self._q_root[:, None]
+        h = root_q.T @ root_q
+        h.flat[:: idx.size + 1] += self._r_diag[idx] * s * s
+        g = root_q.T @ (self._q_root * err)
+        m4 = friction.shape[0]
+        n_arm = 3 * n if arm_free else 0
+        c = np.empty((m4 + n_arm, idx.size))
+        c[:m4] = friction
+        lo = np.full(m4 + n_arm, -np.inf)
+        hi = np.zeros(m4 + n_arm)
+        if arm_free:
+            arm_rows = self._arm_rows
+            c[m4:] = gam[arm_rows]
+            lo[m4:] = (np.minimum(self._arm_lower, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
+            hi[m4:] = (np.maximum(self._arm_upper, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
+        return MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx, free=free,
+                          gamma=gamma)
+
+    def _pattern(self, contact: np.ndarray) -> tuple[np.ndarray, ...]:
+        """What depends only on the contact table: variables, their units and boxes, the friction pyramid rows.
+
+        A periodic gait has a handful of distinct tables, so each is built once and kept (read-only).
+
+        Returns:
+            idx (positions of the variables in the full input vector), s (their units), l_box, u_box, and the
+            friction rows (4 per stance foot and step, in the scaled variables).
+        """
+        key = contact.tobytes()
+        cached = self._patterns.get(key)
+        if cached is not None:
+            return cached
+        cfg, n = self.config, self.config.horizon
         chosen = np.zeros((n, NU), dtype=bool)
         chosen[:, :12] = np.repeat(contact, 3, axis=1)
-        chosen[:, 12:] = arm_free
+        chosen[:, 12:] = self._arm_free
         idx = np.flatnonzero(chosen)
         s = self._scale[idx]
-        gam = gamma[:, idx] * s  # in the QP's scaled variables
-        qg = self._q_diag[:, None] * gam
-        h = gam.T @ qg
-        h.flat[:: idx.size + 1] += self._r_diag[idx] * s * s
-        g = qg.T @ err
         fz_max = cfg.fz_max / cfg.force_scale
         l_box = np.empty(idx.size)
         u_box = np.empty(idx.size)
         kind = idx % NU  # 0..11 force components, 12..14 arm
         is_force = kind < 12
         comp = kind % 3
-        l_box[is_force] = np.where(comp[is_force] == 2, 0.0, -cfg.mu * fz_max)
+        l_box[is_force] = np.where(comp[is_force] == 2, cfg.fz_min / cfg.force_scale, -cfg.mu * fz_max)
         u_box[is_force] = np.where(comp[is_force] == 2, fz_max, cfg.mu * fz_max)
         arm_cols = ~is_force
         l_box[arm_cols] = -self._arm_vmax[kind[arm_cols] - 12]
@@ -360,29 +368,23 @@ class CentroidalMpc:
         # friction pyramid rows: +-f_x - mu f_z <= 0 and +-f_y - mu f_z <= 0 for every stance foot
         fz_cols = np.flatnonzero(is_force & (comp == 2))  # one per stance foot and step, preceded by its x, y
         m = fz_cols.size
-        n_arm = 3 * n if arm_free else 0
-        c = np.zeros((4 * m + n_arm, idx.size))
-        lo = np.full(4 * m + n_arm, -np.inf)
-        hi = np.zeros(4 * m + n_arm)
-        fric = c[: 4 * m].reshape(m, 4, idx.size)
+        friction = np.zeros((4 * m, idx.size))
+        fric = friction.reshape(m, 4, idx.size)
         steps = np.arange(m)
         for r, (axis, sign) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
             fric[steps, r, fz_cols - 2 + axis] = sign * s[fz_cols - 2 + axis]
             fric[steps, r, fz_cols] = -cfg.mu * s[fz_cols]
-        if arm_free:
-            arm_rows = self._arm_rows
-            c[4 * m:] = gam[arm_rows]
-            lo[4 * m:] = (np.minimum(self._arm_lower, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
-            hi[4 * m:] = (np.maximum(self._arm_upper, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
-        return MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx, free=free,
-                          gamma=gamma, scaling=self._scaled_by.get((idx.size, c.shape[0])))
+        out = (idx, s, l_box, u_box, friction)
+        for a in out:
+            a.setflags(write=False)
+        self._patterns[key] = out
+        return out
 
     def solve(self, problem: MpcProblem, warm_start: np.ndarray | None = None) -> MpcSolution:
         """Solve a problem from `build` (or `MpcProblem.load`) into a plan.
 
-        The warm start is tried first, scaled as `problem.scaling` says; if it fails (or there is none) a cold start
-        follows. The plan depends on the problem and the warm start only, bit for bit: a problem solved out of turn
-        (loaded, or in a fresh solver) first gets its scaling back, at the cost of one more ProxSuite setup.
+        The warm start is tried first; if that solve fails (or there is none) a cold start follows. The plan depends
+        on the problem and the warm start only, bit for bit.
 
         Args:
             problem: the QP and what rebuilds the states from its solution.
@@ -396,30 +398,24 @@ class CentroidalMpc:
             MpcSolveError: the QP did not solve (the problem is attached).
         """
         t1 = time.perf_counter()
-        h, g, c, lo, hi = problem.H, problem.g, problem.C, problem.l, problem.u
-        l_box, u_box = problem.l_box, problem.u_box
         idx, n = problem.index, problem.horizon
-        key = (idx.size, c.shape[0])
-        solved = False
+        l_box, u_box = problem.l_box, problem.u_box
+        # DAQP's bounds: the variables' boxes first, then the rows'
+        upper = np.concatenate([u_box, problem.u])
+        lower = np.concatenate([l_box, problem.l])
+        sense = np.zeros(upper.size, dtype=np.int32)
+        z, status, iterations = None, 0, 0
         if warm_start is not None:
-            qp = self._qp_scaled_by(key, problem.scaling)
-            # The equilibration is not recomputed here (it would take about half of the solve; the QP is scaled by
-            # construction, forces in units of `force_scale`): ProxSuite keeps the one of `problem.scaling`.
-            qp.init(h, g, None, None, c, lo, hi, l_box, u_box, compute_preconditioner=False)
-            qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.WARM_START
-            qp.solve(np.clip(warm_start[idx], l_box, u_box), None, None)
-            solved = self._ok(qp)
-        if not solved:  # cold start: first solve, or a warm start that went astray
-            qp = self._qp_for(*key)
-            qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
-            qp.init(h, g, None, None, c, lo, hi, l_box, u_box)
-            self._scaled_by[key] = DenseQp.of(problem)  # the next warm starts of this shape reuse this scaling
-            qp.solve()
-            solved = self._ok(qp)
+            z, _, status, info = daqp.solve(problem.H, problem.g, problem.C, upper, lower, sense,
+                                            primal_start=np.clip(warm_start[idx], l_box, u_box))
+            iterations = int(info["iterations"])
+        if status != 1 or not np.all(np.isfinite(z)):  # cold start: no warm start, or one that went astray
+            sense[:] = 0
+            z, _, status, info = daqp.solve(problem.H, problem.g, problem.C, upper, lower, sense)
+            iterations += int(info["iterations"])
         solve = time.perf_counter() - t1
-        z = qp.results.x.copy()
-        if not solved:
-            raise MpcSolveError(f"MPC QP not solved ({qp.results.info.status}) from a warm nor a cold start; to "
+        if status != 1 or not np.all(np.isfinite(z)):
+            raise MpcSolveError(f"MPC QP not solved (DAQP exit flag {status}) from a warm nor a cold start; to "
                                 "investigate, save it (error.problem.save(path)) and replay it with "
                                 "CentroidalMpc.solve(MpcProblem.load(path))", problem)
         full = np.zeros(problem.gamma.shape[1])
@@ -429,40 +425,4 @@ class CentroidalMpc:
         states = (problem.free + problem.gamma @ u).reshape(n, NX)
         steps = u.reshape(n, NU)
         return MpcSolution(forces=steps[:, :12].reshape(n, 4, 3), arm_velocity=steps[:, 12:].copy(), states=states,
-                           iterations=int(qp.results.info.iter), solve_s=solve, z=z, variables=full)
-
-    @staticmethod
-    def _ok(qp: proxsuite.proxqp.dense.QP) -> bool:
-        return (qp.results.info.status == proxsuite.proxqp.QPSolverOutput.PROXQP_SOLVED
-                and bool(np.all(np.isfinite(qp.results.x))))
-
-    def _qp_scaled_by(self, key: tuple[int, int], scaling: DenseQp | None) -> proxsuite.proxqp.dense.QP:
-        """ProxSuite's object for QPs of this shape, holding the equilibration of `scaling` (None: unscaled)."""
-        if self._scaled_by.get(key) is not scaling:
-            # out of turn (a loaded problem, another solver's): set the scaling up again as its cold start did
-            if scaling is None:
-                self._qps.pop(key, None)  # only a new object is unscaled
-                self._scaled_by.pop(key, None)
-            else:
-                qp = self._qp_for(*key)
-                qp.settings.initial_guess = proxsuite.proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS
-                qp.init(scaling.H, scaling.g, None, None, scaling.C, scaling.l, scaling.u, scaling.l_box,
-                        scaling.u_box)
-                self._scaled_by[key] = scaling
-        return self._qp_for(*key)
-
-    def _qp_for(self, n_var: int, n_in: int) -> proxsuite.proxqp.dense.QP:
-        key = (n_var, n_in)
-        qp = self._qps.get(key)
-        if qp is None:
-            qp = proxsuite.proxqp.dense.QP(n_var, 0, n_in, True)
-            qp.settings.eps_abs = 1e-5
-            qp.settings.eps_rel = 0.0
-            qp.settings.max_iter = 1000
-            # Every problem built here is feasible (zero forces and a still arm satisfy all constraints: the arm
-            # limits are widened to include the current position), so an "infeasible" verdict can only be false,
-            # and ProxSuite's default 1e-4 threshold is loose enough to give one on ill-conditioned states.
-            qp.settings.eps_primal_inf = 1e-9
-            qp.settings.eps_dual_inf = 1e-9
-            self._qps[key] = qp
-        return qp
+                           iterations=iterations, solve_s=solve, z=z, variables=full)

@@ -30,7 +30,7 @@ from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
 from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
-from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler
+from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler, gait_fits_steps
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.leg_layer import LegLayer
 from wbc.mpc.plan_targets import PlanTargets
@@ -54,7 +54,7 @@ class MpcControllerConfig:
 
     Attributes:
         rate_hz: control rate [Hz].
-        replan_every: ticks between MPC updates (20 at 500 Hz: every MPC step of 40 ms).
+        replan_every: ticks between MPC updates; one MPC step (16 at 500 Hz: every MPC step of 32 ms).
         foothold_every: ticks between foothold updates of the swing feet.
         mpc: the MPC's settings.
         gait: the gait.
@@ -64,21 +64,28 @@ class MpcControllerConfig:
         swing_height: swing apex [m].
         swing_kp: Cartesian swing stiffness of the leg layer [N/m].
         swing_kd: Cartesian swing damping of the leg layer [N s/m].
+        stance_kd: Cartesian damping of the stance feet's world velocity in the leg layer [N s/m].
+        touchdown_depth: the swing trajectory ends this far below the foothold, so a foot that lags its path still
+            lands on time [m].
         joint_kd: motor damping on every leg joint [N m s/rad].
         arm_kp: arm joint stiffness [N m/rad].
         arm_kd: arm joint damping [N m s/rad].
         use_arm_momentum: let the MPC plan arm motion through its momentum (off: the arm is held).
         contact_force: foot sensor force at which a scheduled stance foot is fully trusted by the estimator [N].
-        whole_body: ``qp`` (PlaCo's inverse-dynamics QP, `WholeBodyQp`) or ``legs`` (the leg-level layer,
-            `LegLayer`: stance feet -J^T f, swing feet Cartesian PD; also the fallback when the QP fails).
+        slip_speed: a trusted stance foot moving faster than this over the ground is slipping: the estimator drops
+            it [m/s].
+        whole_body: ``legs`` (the leg-level layer, `LegLayer`: stance feet -J^T f, swing feet Cartesian PD,
+            gravity compensation; also the fallback when the QP fails) or ``qp`` (PlaCo's inverse-dynamics QP,
+            `WholeBodyQp`; it fell in fast turns, see docs/mpc-notes.md).
         wbc: the whole-body QP's gains and weights.
 
     Raises:
-        ConfigError: an unknown `whole_body`, or update intervals below one tick.
+        ConfigError: an unknown `whole_body`, update intervals below one tick, an MPC step that is not
+            `replan_every` ticks, or gait transitions that fall inside MPC steps.
     """
 
     rate_hz: float = 500.0
-    replan_every: int = 20
+    replan_every: int = 16
     foothold_every: int = 5
     mpc: MpcConfig = field(default_factory=MpcConfig)
     gait: GaitConfig = TROT
@@ -86,14 +93,17 @@ class MpcControllerConfig:
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     body_height: float = 0.28
     swing_height: float = 0.07
-    swing_kp: float = 400.0
-    swing_kd: float = 12.0
+    swing_kp: float = 700.0
+    swing_kd: float = 20.0
+    stance_kd: float = 10.0
+    touchdown_depth: float = 0.02
     joint_kd: float = 0.5
     arm_kp: float = 20.0
     arm_kd: float = 0.5
     use_arm_momentum: bool = True
     contact_force: float = 15.0
-    whole_body: str = "qp"
+    slip_speed: float = 0.3
+    whole_body: str = "legs"
     wbc: WholeBodyConfig = field(default_factory=WholeBodyConfig)
 
     def __post_init__(self) -> None:
@@ -104,6 +114,14 @@ class MpcControllerConfig:
             raise ConfigError(f"MpcControllerConfig.replan_every and foothold_every count ticks between updates and "
                               f"must be at least 1, got {self.replan_every} and {self.foothold_every}; use 1 to "
                               "update every tick")
+        if abs(self.replan_every / self.rate_hz - self.mpc.dt) > 1e-9:
+            raise ConfigError(f"MpcControllerConfig: an MPC update every {self.replan_every} ticks at {self.rate_hz} "
+                              f"Hz is not one MPC step of {self.mpc.dt} s; set replan_every = mpc.dt * rate_hz")
+        if not gait_fits_steps(self.gait, self.mpc.dt):
+            raise ConfigError(f"MpcControllerConfig: the gait (period {self.gait.period} s, duty {self.gait.duty}, "
+                              f"offsets {self.gait.offsets}) lifts or lands feet inside MPC steps of {self.mpc.dt} s; "
+                              "make the stance and swing of every foot whole numbers of MPC steps (e.g. period = 10 "
+                              "mpc.dt, duty 0.5, offsets 0 and 0.5)")
 
 
 class MpcController:
@@ -132,10 +150,11 @@ class MpcController:
         self.estimator = BaseEstimator(self.dt, cfg.estimator)
         self.reference = MotionReference(control_dt=self.dt, horizon=cfg.mpc.horizon, step_s=cfg.mpc.dt,
                                          body_height=cfg.body_height, arm_q=desc.arm.nominal_q)
-        self.feet = FootholdPlanner(cfg.gait, cfg.footholds, cfg.swing_height)
+        self.feet = FootholdPlanner(cfg.gait, cfg.footholds, cfg.swing_height, cfg.touchdown_depth)
         self.targets = PlanTargets(horizon=cfg.mpc.horizon, step_s=cfg.mpc.dt, arm_moves=arm_moves)
         self.wbc = WholeBodyQp(desc, cfg.wbc) if cfg.whole_body == "qp" else None
-        self.legs = LegLayer(swing_kp=cfg.swing_kp, swing_kd=cfg.swing_kd)
+        self.legs = LegLayer(swing_kp=cfg.swing_kp, swing_kd=cfg.swing_kd,
+                             torque_limit=joint_table(desc).torque_limit, stance_kd=cfg.stance_kd)
         self._truth: Callable[[], BaseTruth] | None = None
         self._gains: tuple[np.ndarray, np.ndarray] | None = None
         self.reset()
@@ -161,6 +180,7 @@ class MpcController:
         self._warm_start: np.ndarray | None = None
         self._arm_target = self.desc.arm.nominal_q.copy()
         self._timings: dict[str, float] = {}
+        self.slipping = np.zeros(4, dtype=bool)  # stance feet the estimator dropped this tick: they slide
         self.reference.reset()
         self.feet.reset()
         self.targets.reset()
@@ -174,8 +194,8 @@ class MpcController:
 
         Returns:
             ``mpc_setup_s`` (linearise, condense, constraints) and ``mpc_solve_s`` (the QP) on a tick that made an
-            MPC update (a failed update, counted in ``fallbacks``, reports neither); ``whole_body_s`` (PlaCo's QP)
-            on a tick the whole-body QP ran. Empty before the first tick.
+            MPC update (a failed update, counted in ``fallbacks``, reports neither); ``whole_body_s``, the
+            whole-body layer's time (leg layer or PlaCo's QP), every tick. Empty before the first tick.
         """
         return dict(self._timings)
 
@@ -203,15 +223,17 @@ class MpcController:
     # -- one tick -------------------------------------------------------------------------------------------------
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """Estimate, (re)plan, and turn the plan into motor commands."""
-        cfg = self.config
+        cfg, kin = self.config, self.kin
         self._timings.clear()
         rot = quat_to_matrix(state.imu_quat)
+        kin.tick(state.imu_quat, state.q, state.dq, state.gyro_in_body, rot)
         if not self._started:
-            self._start(state, rot)
+            self._start()
         replan = self.plan is None or self.tick % cfg.replan_every == 0
         contact, progress, touchdown = self.gait.state(self.t)
-        self._estimate(state, rot, contact, centroidal=replan)
-        kin = self.kin
+        self._estimate(state, rot, contact)
+        if replan:
+            kin.centroidal()
         v_cmd_xy = self.reference.update(yaw_of(rot), kin.com[0].item(), kin.com[1].item(), command)
         self.feet.update(kin, contact, touchdown, v_cmd_xy, command.yaw_rate,
                          refresh=self.tick % cfg.foothold_every == 0)
@@ -219,40 +241,45 @@ class MpcController:
             self._replan(rot, state, command)
         tau = self._whole_body(contact, progress) if self.wbc is not None else None
         if tau is None:
-            tau = self._leg_torques(contact)
+            tau = self._leg_torques(contact, progress)
         return self._command(state, tau)
 
-    def _start(self, state: RobotState, rot: np.ndarray) -> None:
+    def _start(self) -> None:
         """First tick of an episode: the estimator starts with the feet on the ground at z = 0."""
         kin = self.kin
-        kin.update(np.zeros(3), state.imu_quat, state.q, state.dq, np.zeros(3), state.gyro_in_body,
-                   centroidal=False, rot=rot)
-        base0 = np.array([0.0, 0.0, -kin.feet[:, 2].mean()])
-        self.estimator.reset(base0, kin.feet + base0)
-        self.reference.start(yaw_of(rot))
+        base0 = np.array([0.0, 0.0, -kin.feet_rel[:, 2].mean()])
+        self.estimator.reset(base0, kin.feet_rel + base0)
+        self.reference.start(yaw_of(kin.rot))
         self._started = True
 
-    def _estimate(self, state: RobotState, rot: np.ndarray, contact: np.ndarray, *, centroidal: bool) -> None:
-        """Update the kinematics (and the centroidal quantities on an MPC tick) at the estimated base state.
+    def _estimate(self, state: RobotState, rot: np.ndarray, contact: np.ndarray) -> None:
+        """Update the base estimate from the IMU and this tick's leg kinematics, and place the kinematics there.
 
-        One kinematics pass at the predicted base state serves the estimator, then is shifted by its correction.
+        A foot is trusted as a stance foot when the gait says so, its force sensor agrees, and it does not slide: a
+        late touchdown, an early lift-off or a slipping foot would otherwise feed a moving foot into the velocity
+        estimate (on ground of friction 0.4-0.5 a pushed robot's feet slide at up to 2 m/s).
         """
-        kin = self.kin
+        kin, cfg = self.kin, self.config
         if self._truth is not None:
             # debug switch: the simulator's base position and velocity replace the estimate
             truth = self._truth()
-            kin.update(truth.base_position_in_world, state.imu_quat, state.q, state.dq, truth.base_linvel_in_world,
-                       state.gyro_in_body, centroidal=centroidal, rot=rot)
+            kin.place(truth.base_position_in_world, truth.base_linvel_in_world)
             return
         estimator = self.estimator
-        p_prior, v_prior = estimator.position, estimator.velocity
-        kin.update(p_prior, state.imu_quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=centroidal,
-                   rot=rot)
-        # a foot is trusted as a stance foot when the gait says so and its force sensor agrees: a late
-        # touchdown or an early lift-off would otherwise feed a moving foot into the velocity estimate
-        trust = contact * np.minimum(np.maximum(state.foot_force * (1.0 / self.config.contact_force), 0.0), 1.0)
-        estimator.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
-        kin.shift(estimator.x[0:3] - p_prior, estimator.x[3:6] - v_prior)
+        # four feet: Python floats (a dozen numpy calls on 4-vectors would cost more than the filter itself)
+        inv_force, slip2 = 1.0 / cfg.contact_force, cfg.slip_speed * cfg.slip_speed
+        vx, vy = estimator.x[3].item(), estimator.x[4].item()
+        trust, slipping = [], []
+        for stance, force, (fx, fy, _) in zip(contact.tolist(), state.foot_force.tolist(), kin.feet_vel_rel.tolist(),
+                                             strict=True):
+            w = min(max(force * inv_force, 0.0), 1.0) if stance else 0.0
+            # a stance foot slides when its world velocity at the predicted base velocity is not about zero
+            slides = w > 0.0 and (fx + vx) ** 2 + (fy + vy) ** 2 > slip2
+            slipping.append(slides)
+            trust.append(0.0 if slides else w)
+        self.slipping = np.array(slipping)
+        estimator.update(rot, state.accel_in_body, kin.feet_rel, kin.feet_vel_rel, trust)
+        kin.place(estimator.x[0:3].copy(), estimator.x[3:6].copy())
 
     # -- planning -------------------------------------------------------------------------------------------------
     def _replan(self, rot: np.ndarray, state: RobotState, command: VelocityCommand) -> None:
@@ -314,10 +341,14 @@ class MpcController:
             return None
         return result.tau
 
-    def _leg_torques(self, contact: np.ndarray) -> np.ndarray:
+    def _leg_torques(self, contact: np.ndarray, progress: np.ndarray) -> np.ndarray:
+        """The leg-level layer's torques: the plan's forces on the scheduled stance feet, swing feet on their paths."""
         forces = self.plan.forces[self._plan_step()] if self.plan is not None else None
-        swing_pos, swing_vel = self.feet.swing_targets(contact, self.gait.swing_progress(self.t))
-        return self.legs.torques(self.kin, contact, forces, swing_pos, swing_vel)
+        pos, vel = self.feet.swing_targets(contact, progress)
+        t0 = time.perf_counter()
+        tau = self.legs.torques(self.kin, contact, forces, pos, vel)
+        self._timings["whole_body_s"] = time.perf_counter() - t0
+        return tau
 
     def _command(self, state: RobotState, tau: np.ndarray) -> MotorCommand:
         cfg = self.config
@@ -326,9 +357,10 @@ class MpcController:
             # MotorCommand copies its arrays, so these are shared safely
             self._gains = joint_gains(self.kin.n, 0.0, cfg.joint_kd, cfg.arm_kp, cfg.arm_kd)
         kp, kd = self._gains
-        q = state.q.copy()
+        q = state.q  # MotorCommand copies its arrays; only an actuated arm's targets differ from the measured pose
         dq_des = np.zeros(self.kin.n)
         if self.has_arm:
+            q = q.copy()
             if self.plan is not None and cfg.use_arm_momentum:
                 v_arm = self.plan.arm_velocity[self._plan_step()]
                 self._arm_target = self._arm_target + v_arm * self.dt

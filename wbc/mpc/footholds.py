@@ -119,10 +119,12 @@ class FootholdPlanner:
         footholds: where each swing foot will land (a stance foot: where it stands), world, shape (4, 3) [m].
     """
 
-    def __init__(self, gait: GaitConfig, config: FootholdConfig, swing_height: float) -> None:
+    def __init__(self, gait: GaitConfig, config: FootholdConfig, swing_height: float,
+                 touchdown_depth: float = 0.0) -> None:
         self.gait = gait
         self.config = config
         self.swing_height = swing_height
+        self._below = np.array([0.0, 0.0, touchdown_depth])
         self.reset()
 
     def reset(self) -> None:
@@ -178,6 +180,6 @@ class FootholdPlanner:
         s = progress.tolist()
         for i, stance in enumerate(contact.tolist()):
             if not stance:
-                pos[i], vel[i] = swing_point(self.liftoff[i], self.footholds[i], s[i], self.gait.swing_s,
-                                             self.swing_height)
+                pos[i], vel[i] = swing_point(self.liftoff[i], self.footholds[i] - self._below, s[i],
+                                             self.gait.swing_s, self.swing_height)
         return pos, vel

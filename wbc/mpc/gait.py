@@ -8,7 +8,7 @@ import numpy as np
 
 from wbc.errors import ConfigError
 
-__all__ = ["GaitConfig", "GaitScheduler", "TROT", "STAND", "STANCE_END_MARGIN"]
+__all__ = ["GaitConfig", "GaitScheduler", "TROT", "STAND", "STANCE_END_MARGIN", "gait_fits_steps"]
 
 STANCE_END_MARGIN = 1e-12
 """A phase this close below `GaitConfig.duty` already counts as out of contact [cycles].
@@ -27,7 +27,7 @@ class GaitConfig:
         offsets: phase offset of each foot (FR, FL, RR, RL) in cycles.
     """
 
-    period: float = 0.36
+    period: float = 0.32
     duty: float = 0.5
     offsets: tuple[float, float, float, float] = (0.0, 0.5, 0.5, 0.0)
 
@@ -47,10 +47,28 @@ class GaitConfig:
 
 
 TROT = GaitConfig()
-"""Diagonal pairs (FR+RL, FL+RR) alternate, 0.36 s cycle, half the time on the ground."""
+"""Diagonal pairs (FR+RL, FL+RR) alternate, 0.32 s cycle, half the time on the ground (stance 0.16 s, 5 MPC steps)."""
 
 STAND = GaitConfig(period=1.0, duty=1.0)
 """All four feet on the ground."""
+
+
+def gait_fits_steps(gait: GaitConfig, step_s: float) -> bool:
+    """Whether every lift-off and touchdown of `gait`, started at t = 0, falls on a boundary of steps of `step_s`.
+
+    The MPC plans in steps that begin at multiples of `step_s` and gives each step one contact pattern (the one at
+    its middle): a foot that lifts or lands inside a step would get the forces of the wrong pattern for part of it,
+    and the whole-body layer would be asked for the planned net force with the wrong feet.
+
+    Args:
+        gait: the gait.
+        step_s: MPC step length [s].
+    """
+    if gait.duty >= 1.0:
+        return True
+    events = [t for offset in gait.offsets for t in ((-offset) % 1.0, (gait.duty - offset) % 1.0)]
+    steps = [t * gait.period / step_s for t in [*events, 1.0]]
+    return all(abs(s - round(s)) < 1e-6 for s in steps)
 
 
 class GaitScheduler:

@@ -1,7 +1,17 @@
-"""`RobotKinematics`: feet, hips, CoM, momentum and Jacobians of the robot from (estimated) base state and joints.
+"""`RobotKinematics`: feet, hips, leg Jacobians, gravity torques, CoM and momentum from the base state and joints.
 
-A thin layer over the Pinocchio model that speaks the house joint order and world-frame quantities the MPC
-controller needs every tick.
+A thin layer over the Pinocchio model that speaks the house joint order and the world-frame quantities the MPC
+controller needs. It is split along what a tick can afford:
+
+- `tick` (every control tick, one Pinocchio pass): everything that does not depend on where the base is or how
+  fast it moves: the feet and hips relative to the base (world axes), the feet's velocities relative to the base
+  (omega x r + J dq), each leg's 3 x 3 foot Jacobian and the joints' gravity torques. The pass runs with the base at
+  the origin, at rest, so the estimator reads its leg-kinematics measurements straight from it.
+- `place` (every tick, a few products): puts that configuration at the estimated (or true) base position and
+  velocity: feet, foot velocities, hips and CoM in the world.
+- `centroidal` (every MPC update): the composite inertia, the arm's momentum matrix, the centroidal momentum and
+  the exact CoM at the placed state (Pinocchio's CCRBA), and the CoM's offset in the trunk frame that `place` uses
+  between updates.
 """
 
 from __future__ import annotations
@@ -16,136 +26,175 @@ from wbc.robots.pinocchio_model import build_pinocchio
 
 __all__ = ["RobotKinematics"]
 
+_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+_LEGS = np.arange(4)[:, None]
+
 
 class RobotKinematics:
     """Kinematics and centroidal quantities at one state.
 
     Args:
         desc: the robot (its arm mode decides whether the arm's joints exist).
+
+    Attributes:
+        feet_rel: foot positions relative to the base origin, world axes, shape (4, 3) [m].
+        feet_vel_rel: foot velocities relative to the base (omega x r + J dq), world axes, shape (4, 3) [m/s].
+        hips_rel: thigh joint positions relative to the base origin, world axes, shape (4, 3) [m].
+        leg_jacobians: d foot / d (hip, thigh, calf) of each leg, world axes, shape (4, 3, 3) [m/rad].
+        gravity: joint torques that hold the configuration against gravity, house order (n,) [N m].
+        feet: foot positions, world, shape (4, 3) [m] (after `place`).
+        feet_vel: foot velocities, world, shape (4, 3) [m/s].
+        com: CoM position, world (3,) [m].
+        com_vel: CoM velocity, world (3,) [m/s] (the trunk's motion; the joints' share is counted at `centroidal`).
+        momentum: centroidal angular momentum, world axes (3,) [kg m^2/s] (at the last `centroidal`).
+        params: mass, composite inertia, arm momentum matrix and feet of the last `centroidal`.
     """
 
     def __init__(self, desc: RobotDescription) -> None:
         self.desc = desc
         self.robot = build_pinocchio(desc)
         model = self.robot.model
-        self._foot_frames = [model.getFrameId(f) for f in FOOT_NAMES]
-        # views of the feet's positions inside Pinocchio's data (they follow every placement update): one copy of
-        # all four per tick instead of four calls
         data = self.robot.data
+        self._foot_frames = [model.getFrameId(f) for f in FOOT_NAMES]
+        # views of the feet's and hips' positions inside Pinocchio's data (they follow every placement update): one
+        # copy of all four per tick instead of four calls
         self._foot_views = [data.oMf[fid].translation for fid in self._foot_frames]
-        self._hip_joints = [model.getJointId(f"{leg}_thigh_joint") for leg in LEG_NAMES]
+        self._hip_views = [data.oMi[model.getJointId(f"{leg}_thigh_joint")].translation for leg in LEG_NAMES]
         self._perm = self.robot.joints.pin_from_house  # pin joint k is house joint perm[k]
         self._house_cols = 6 + self.robot.joints.house_from_pin  # v index of each house joint
+        self._leg_cols = self._house_cols[:12].reshape(4, 3)
         self.n = desc.num_joints
         self.arm_v = self._house_cols[ARM_JOINTS] if self.n == 15 else None
+        self.mass = float(sum(inertia.mass for inertia in model.inertias))
+        # the per-tick pass: base at the origin and at rest (only its orientation and angular velocity are set)
+        self._q_tick = pin.neutral(model)
+        self._v_tick = np.zeros(model.nv)
+        self.feet_rel = np.zeros((4, 3))
+        self.hips_rel = np.zeros((4, 3))
+        self.feet_vel_rel = np.zeros((4, 3))
+        self.leg_jacobians = np.zeros((4, 3, 3))
+        self.gravity = np.zeros(self.n)
         self.feet = np.zeros((4, 3))
         self.feet_vel = np.zeros((4, 3))
-        self.hips = np.zeros((4, 3))
-        self.foot_jacobians = np.zeros((4, 3, self.n))
         self.com = np.zeros(3)
         self.com_vel = np.zeros(3)
         self.momentum = np.zeros(3)
         self.params: CentroidalParams | None = None
-        self.q_pin = np.zeros(self.robot.model.nq)
-        self.v_pin = np.zeros(self.robot.model.nv)
-        self._rot = np.eye(3)
-        self._jacobians_valid = False
-        self._hips_valid = False
-        self._shift_since_update = np.zeros(3)
+        self.rot = np.eye(3)
+        self.omega_world = np.zeros(3)
+        self.base_position = np.zeros(3)
+        self.base_velocity = np.zeros(3)
+        self._com_in_base = np.zeros(3)  # the CoM in the trunk frame, from the last `centroidal` (or the first tick)
+        self._com_known = False
 
-    def compute_jacobians(self) -> np.ndarray:
-        """The feet's translation Jacobians at the last `update`, world axes, house joint columns, shape (4, 3, n).
+    # -- every tick -----------------------------------------------------------------------------------------------
+    def tick(self, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray, omega_body: np.ndarray,
+             rot: np.ndarray) -> None:
+        """The configuration's kinematics relative to the base (one Pinocchio pass).
 
-        Computed on demand: only the leg-level fallback layer needs them.
+        Args:
+            base_quat: base orientation (w, x, y, z).
+            q: joint positions, house order.
+            dq: joint velocities, house order.
+            omega_body: base angular velocity, body frame (3,) [rad/s].
+            rot: the rotation matrix of `base_quat` (body to world).
         """
-        if not self._jacobians_valid:
-            model, data = self.robot.model, self.robot.data
-            pin.computeJointJacobians(model, data, self.q_pin)
-            frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-            for i, fid in enumerate(self._foot_frames):
-                self.foot_jacobians[i] = pin.getFrameJacobian(model, data, fid, frame)[:3, self._house_cols]
-            self._jacobians_valid = True
-        return self.foot_jacobians
+        model, data = self.robot.model, self.robot.data
+        qp, vp = self._q_tick, self._v_tick
+        qp[3:6] = base_quat[1:4]
+        qp[6] = base_quat[0]
+        qp[7:] = q[self._perm]
+        vp[3:6] = omega_body
+        vp[6:] = dq[self._perm]
+        self.rot = rot
+        pin.computeJointJacobians(model, data, qp)  # placements of every joint and their Jacobians, one pass
+        jac = np.empty((4, 3, model.nv))
+        for i, fid in enumerate(self._foot_frames):
+            pin.updateFramePlacement(model, data, fid)
+            jac[i] = pin.getFrameJacobian(model, data, fid, _LWA)[:3]
+        self.feet_rel = np.array(self._foot_views)
+        self.hips_rel = np.array(self._hip_views)
+        self.feet_vel_rel = jac @ vp  # the base's linear velocity is zero here: omega x r + J dq
+        self.leg_jacobians = jac[_LEGS, :, self._leg_cols].transpose(0, 2, 1)
+        self.gravity = pin.computeGeneralizedGravity(model, data, qp)[self._house_cols]
+        self.omega_world = rot @ omega_body
+        if not self._com_known:
+            self._com_in_base = rot.T @ pin.centerOfMass(model, data, qp, False)
+            self._com_known = True
 
-    def hip_positions(self) -> np.ndarray:
-        """The thigh joints' positions at the last `update` (moved by any `shift` since), world, shape (4, 3) [m].
-
-        Computed on demand: only foothold refreshes need them.
-        """
-        if not self._hips_valid:
-            data = self.robot.data
-            for i, jid in enumerate(self._hip_joints):
-                self.hips[i] = data.oMi[jid].translation
-            self.hips += self._shift_since_update
-            self._hips_valid = True
-        return self.hips
-
-    def shift(self, dp: np.ndarray, dv: np.ndarray) -> None:
-        """Move the whole state by a base position and velocity correction (the estimator's update).
-
-        `q_pin` and `v_pin` (the configuration and velocity in Pinocchio's convention) move with it.
-
-        Rigidly translating the robot moves every point by `dp` and adds `dv` to every velocity; angular momentum
-        about the CoM, Jacobians and inertia are unchanged. One Pinocchio pass per tick thus serves both the
-        estimator (before its update) and the controller (after it).
-        """
-        self.feet += dp
-        self._shift_since_update += dp
-        if self._hips_valid:
-            self.hips += dp
-        self.com += dp
-        self.feet_vel += dv
-        self.com_vel += dv
-        self.q_pin[0:3] += dp
-        self.v_pin[0:3] += self._rot.T @ dv
-        if self.params is not None:
-            self.params.feet_world[:] = self.feet
+    def place(self, base_position: np.ndarray, base_velocity: np.ndarray) -> None:
+        """Put the last `tick`'s configuration at a base position and velocity (world) [m], [m/s]."""
+        p, v = base_position, base_velocity
+        self.base_position, self.base_velocity = p, v
+        self.feet = self.feet_rel + p
+        self.feet_vel = self.feet_vel_rel + v
+        com_rel = self.rot @ self._com_in_base
+        self.com = p + com_rel
+        # v + omega x com_rel, in floats (numpy's cross costs more than the rest of this method)
+        wx, wy, wz = self.omega_world.tolist()
+        rx, ry, rz = com_rel.tolist()
+        vx, vy, vz = v.tolist()
+        self.com_vel = np.array([vx + wy * rz - wz * ry, vy + wz * rx - wx * rz, vz + wx * ry - wy * rx])
 
     def update(self, base_pos: np.ndarray, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray,
                v_base_world: np.ndarray, omega_body: np.ndarray, *, centroidal: bool,
                rot: np.ndarray | None = None) -> None:
-        """Recompute everything at a state.
+        """Everything at one state: `tick`, `place`, and `centroidal` when asked.
 
         Args:
-            base_pos: base position, world (3,).
+            base_pos: base position, world (3,) [m].
             base_quat: base orientation (w, x, y, z).
-            q: joint positions, house order.
-            dq: joint velocities, house order.
-            v_base_world: base linear velocity, world (3,).
-            omega_body: base angular velocity, body frame (3,).
-            centroidal: also compute the composite inertia and arm momentum matrix (for an MPC update).
+            q: joint positions, house order [rad].
+            dq: joint velocities, house order [rad/s].
+            v_base_world: base linear velocity, world (3,) [m/s].
+            omega_body: base angular velocity, body frame (3,) [rad/s].
+            centroidal: also compute the composite inertia, arm momentum matrix and momentum.
             rot: the rotation matrix of `base_quat`, when the caller has it already.
         """
-        model, data = self.robot.model, self.robot.data
-        if rot is None:
-            rot = quat_to_matrix(base_quat)
-        # fresh arrays each tick (callers may keep the previous ones), filled without intermediate concatenations
-        qp = np.empty(model.nq)
-        qp[0:3] = base_pos
-        qp[3:6] = base_quat[1:4]
-        qp[6] = base_quat[0]
-        qp[7:] = q[self._perm]
-        vp = np.empty(model.nv)
-        vp[0:3] = rot.T @ v_base_world
-        vp[3:6] = omega_body
-        vp[6:] = dq[self._perm]
-        self.q_pin, self.v_pin, self._rot = qp, vp, rot
-        pin.forwardKinematics(model, data, qp, vp)
-        frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-        feet_vel = self.feet_vel
-        for i, fid in enumerate(self._foot_frames):
-            pin.updateFramePlacement(model, data, fid)
-            feet_vel[i] = pin.getFrameVelocity(model, data, fid, frame).linear
-        self.feet[:] = self._foot_views
-        self._jacobians_valid = False
-        self._hips_valid = False
-        self._shift_since_update[:] = 0.0
-        self.com = pin.centerOfMass(model, data, pin.KinematicLevel.VELOCITY, False).copy()
-        self.com_vel = data.vcom[0].copy()
+        self.tick(base_quat, q, dq, omega_body, quat_to_matrix(base_quat) if rot is None else rot)
+        self.place(np.asarray(base_pos, dtype=np.float64), np.asarray(v_base_world, dtype=np.float64))
         if centroidal:
-            pin.ccrba(model, data, qp, vp)
-            self.momentum = data.hg.angular.copy()
-            a_g = data.Ag
-            arm = np.zeros((3, 3)) if self.arm_v is None else a_g[3:, self.arm_v].copy()
-            self.params = CentroidalParams(mass=float(data.Ig.mass), inertia_world=data.Ig.inertia.copy(),
-                                           arm_momentum_matrix=arm, feet_world=self.feet.copy())
+            self.centroidal()
+
+    # -- every MPC update -----------------------------------------------------------------------------------------
+    def centroidal(self) -> None:
+        """Composite inertia, arm momentum matrix, momentum and exact CoM at the placed state (CCRBA)."""
+        model, data = self.robot.model, self.robot.data
+        qp, vp = self.q_pin, self.v_pin
+        pin.ccrba(model, data, qp, vp)
+        com = data.com[0]
+        self._com_in_base = self.rot.T @ (com - self.base_position)
+        self.com = com.copy()
+        self.com_vel = data.hg.linear / self.mass
+        self.momentum = data.hg.angular.copy()
+        arm = np.zeros((3, 3)) if self.arm_v is None else data.Ag[3:, self.arm_v].copy()
+        self.params = CentroidalParams(mass=float(data.Ig.mass), inertia_world=data.Ig.inertia.copy(),
+                                       arm_momentum_matrix=arm, feet_world=self.feet.copy())
+
+    @property
+    def q_pin(self) -> np.ndarray:
+        """The configuration at the placed base, Pinocchio's convention (base position, quaternion x y z w, joints)."""
+        qp = self._q_tick.copy()
+        qp[0:3] = self.base_position
+        return qp
+
+    @property
+    def v_pin(self) -> np.ndarray:
+        """The velocity at the placed base, Pinocchio's convention (base velocity and omega in the body frame)."""
+        vp = self._v_tick.copy()
+        vp[0:3] = self.rot.T @ self.base_velocity
+        return vp
+
+    def hip_positions(self) -> np.ndarray:
+        """The thigh joints' positions at the placed base, world, shape (4, 3) [m] (only foothold refreshes ask)."""
+        return self.hips_rel + self.base_position
+
+    def compute_jacobians(self) -> np.ndarray:
+        """The feet's translation Jacobians over all joints, world axes, house columns, shape (4, 3, n) [m/rad].
+
+        Only the leg blocks are non-zero (a foot does not move with another leg or the arm).
+        """
+        out = np.zeros((4, 3, self.n))
+        for i in range(4):
+            out[i][:, 3 * i:3 * i + 3] = self.leg_jacobians[i]
+        return out

@@ -7,6 +7,7 @@ reports no breakdown still walks; the figures that need one are then nan.
 
 from __future__ import annotations
 
+import importlib.metadata
 import math
 import multiprocessing
 import time
@@ -21,11 +22,11 @@ from wbc.arena.executors import single_threaded_blas
 from wbc.arena.runner import run_episode
 from wbc.control.protocol import Controller, HasTickTimings
 from wbc.control.registry import CONTROLLERS, get_controller
+from wbc.control.stand import stand_command
 from wbc.errors import BenchError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
 from wbc.mpc.controller import MpcController
-from wbc.mpc.portable_proxsuite import BUILD as PROXSUITE_BUILD
 from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
@@ -36,7 +37,7 @@ from wbc.tools.bench.references import (
 )
 from wbc.types import VelocityCommand
 
-__all__ = ["TickTimingLog", "bench_mpc"]
+__all__ = ["TickTimingLog", "bench_mpc", "physics_realtime_factor"]
 
 
 def _median(values: Sequence[float], scale: float) -> float:
@@ -96,6 +97,24 @@ class TickTimingLog:
         }
 
 
+def physics_realtime_factor(sim: MujocoRobot, seconds: float = 1.0) -> float:
+    """Real-time factor of `sim`'s physics alone: the robot standing under the motor law, no controller in the loop.
+
+    The closed loop's real-time factor is stated against this one, measured on the same robot in the same process:
+    it is what the loop would reach if the controller and the runner took no time.
+
+    Args:
+        sim: a connected simulated robot (reset here, and left standing).
+        seconds: simulated time measured [s].
+    """
+    sim.reset(seed=0)
+    sim.write(stand_command(sim.desc))
+    sim.advance(0.2)
+    t0 = time.perf_counter()
+    sim.advance(seconds)
+    return seconds / (time.perf_counter() - t0)
+
+
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
               single_thread: bool = True, reference: bool = True) -> dict[str, float | str | int]:
     """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
@@ -105,7 +124,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     many times slower on a busy one.
 
     The robot walks at `vx` on flat ground for `seconds` (or until it falls) through `run_episode`. From the
-    controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time (ProxSuite) and setup
+    controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time (DAQP) and setup
     time (linearisation and condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo:
     kinematics, dynamics, tasks, QP, plus setting its targets from Python). ``control_tick_us_median`` is the whole
     control tick without an MPC update (estimator, kinematics, footholds, swing targets, whole-body QP, motor
@@ -113,11 +132,14 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     physics, controller, MPC updates and the runner's episode log.
 
     With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured before and after the
-    closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`) and the bare A1's
-    single-threaded physics (`reference_a1`). The results then include ``reference_placo_tick_us``,
-    ``reference_steps_per_s``, and the targets scaled by them to this machine: ``scaled_target_wbc_tick_us`` (100 us
-    times the reference tick over 40 us) and ``scaled_target_realtime_factor`` (5x times the reference physics over
-    110k steps/s).
+    closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`), the bare A1's
+    single-threaded physics (`reference_a1`) and the same robot's physics alone (`physics_realtime_factor`). The
+    results then include ``reference_placo_tick_us``, ``reference_steps_per_s``, ``physics_realtime_factor``, the
+    ratios issue 16 sets its targets on, ``control_tick_over_reference_tick`` (the control tick's median over the
+    reference PlaCo tick; target <= 1.8) and ``closed_loop_over_physics_rtf`` (the closed loop's real-time factor
+    over the same robot's physics-only one; target >= 0.075), and the older targets scaled by the references to this
+    machine: ``scaled_target_wbc_tick_us`` (100 us times the reference tick over 40 us) and
+    ``scaled_target_realtime_factor`` (5x times the reference physics over 110k steps/s).
 
     Args:
         robot: robot registry name.
@@ -146,25 +168,32 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         valid = [name for name, s in CONTROLLERS.items() if s.make is MpcController]
         raise BenchError(f"bench mpc times an MPC controller, and {controller!r} is not one; use one of: "
                          f"{', '.join(valid)}")
-    ref_ticks, ref_rates = [], []
+    ref_ticks, ref_rates, physics = [], [], []
 
     def measure_references() -> None:
         ref_ticks.append(reference_placo_tick_us(500))
         ref_rates.append(reference_a1_steps_per_s(1000))
+        physics.append(physics_realtime_factor(sim))
 
-    if reference:
-        measure_references()
     log = TickTimingLog()
     with sim:
+        if reference:
+            measure_references()
         sim.reset(seed=0)
         start = time.perf_counter()
         episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=log)
         wall = time.perf_counter() - start
+        if reference:
+            measure_references()
+    figures = log.figures(episode)
+    realtime = episode.survived_s / wall
     references: dict[str, float] = {}
     if reference:
-        measure_references()
-        tick_ref, rate_ref = float(np.mean(ref_ticks)), max(ref_rates)
+        tick_ref, rate_ref, physics_rtf = float(np.mean(ref_ticks)), max(ref_rates), max(physics)
         references = {"reference_placo_tick_us": tick_ref, "reference_steps_per_s": rate_ref,
+                      "physics_realtime_factor": physics_rtf,
+                      "control_tick_over_reference_tick": figures["control_tick_us_median"] / tick_ref,
+                      "closed_loop_over_physics_rtf": realtime / physics_rtf,
                       "scaled_target_wbc_tick_us": scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"],
                                                                  tick_ref),
                       "scaled_target_realtime_factor": scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"],
@@ -173,11 +202,11 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         "robot": robot,
         "controller": controller,
         "horizon": int(ctrl.config.mpc.horizon),
-        **log.figures(episode),
-        "realtime_factor": episode.survived_s / wall,
+        **figures,
+        "realtime_factor": realtime,
         "fell": bool(episode.fell),
         "blas": "default threads",
-        "proxsuite_build": PROXSUITE_BUILD,
+        "qp_solver": f"daqp {importlib.metadata.version('daqp')}",
         "machine": machine_description(),
         **references,
     }
