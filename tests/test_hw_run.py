@@ -185,6 +185,19 @@ def test_non_loopback_target_is_refused_before_any_socket(no_socket: list, monke
     assert not no_socket
 
 
+def test_the_same_protocol_on_the_simulator(tmp_path: Path, no_socket: list,
+                                            capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "sim"
+    assert main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                 "--sim", "--seconds", "2", "--out", str(out)]) == 0
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert (record.backend, record.metrics_source, record.safety_trips, record.success) == ("sim", "estimator", 0, True)
+    assert "pushes" in capsys.readouterr().out and not no_socket  # skipped as on a robot; nothing was sent anywhere
+    assert main(["hw", "run", "stand", "--scenario", PUSH, "--trial", "0", "--sim", "--target", "127.0.0.1:9"]) == 2
+    assert main(["hw", "run", "stand", "--scenario", PUSH, "--trial", "0"]) == 2
+    assert capsys.readouterr().err.count("or --sim") == 2
+
+
 def test_an_actuated_arm_needs_its_serial_port(no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
     # stand drives an actuated arm: on the robot that is a second device, on its own bus
     assert main(["hw", "run", "stand", "--robot", "go1-arm", "--scenario", PUSH, "--trial", "0", "--target",

@@ -20,6 +20,11 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
 - deadline misses (``controller.act`` longer than the period), the link's late advances and the process's CPU time
   go into the record and the report beside the safety layer's transitions and the operator's actions.
 
+The same protocol runs on the simulator (``simulate``, ``wbc hw run --sim``): a `MujocoRobot` of the robot on flat
+ground, without domain randomisation, behind the same safety layer (on robot time) and seen through the same
+estimator. Set beside a run over a wire, it shows what the wire, the real-time loop and the second process cost; the
+robot is then neither paced nor sent anything.
+
 The results directory has the arena's format (``trials.csv`` with ``backend``, ``run.json``, ``summary.json``,
 ``report.md``), the episode under ``episodes/`` and ``hardware.json`` (link counters, events, what was skipped).
 """
@@ -47,9 +52,10 @@ from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
-from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError
-from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike
-from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError, UnknownNameError
+from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike, WallClock
+from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.scenario import check_published, load_scenario
 from wbc.scenario.trial import Trial
@@ -75,7 +81,8 @@ class HardwareTrialConfig:
         robot: robot registry name (None: the scenario's); its command schedule is played whatever robot it was
             written for.
         arm_mode: the robot's arm mode (None: the controller's).
-        target: the legs' low-level address (IPv4 literal, UDP port).
+        target: the legs' low-level address (IPv4 literal, UDP port); None only with `simulate`.
+        simulate: play on the simulator instead of a robot (the protocol's twin, for comparison); no target.
         local: the address the legs' link binds (None: 127.0.0.1:0 for a loopback target, else 0.0.0.0:0).
         allow_hardware: allow a target outside 127.0.0.0/8 (a real robot).
         rate_hz: the link's rate [Hz].
@@ -97,7 +104,8 @@ class HardwareTrialConfig:
     seconds: float | None = None
     robot: str | None = None
     arm_mode: str | None = None
-    target: tuple[str, int]
+    target: tuple[str, int] | None = None
+    simulate: bool = False
     local: tuple[str, int] | None = None
     allow_hardware: bool = False
     rate_hz: float = 500.0
@@ -117,6 +125,9 @@ class HardwareTrialConfig:
             raise ConfigError(f"--seconds must be > 0, got {self.seconds}")
         if not self.settle_s >= 0:
             raise ConfigError(f"HardwareTrialConfig.settle_s must be >= 0 s, got {self.settle_s}")
+        if (self.target is None) != self.simulate:
+            raise ConfigError("a hardware trial needs the robot's address (--target HOST:PORT), or --sim to play the "
+                              "same protocol on the simulator; not both")
 
 
 @dataclass(frozen=True)
@@ -189,12 +200,15 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     if spec.robot is not None and spec.robot != robot_name:
         raise ConfigError(f"controller {spec.name} drives {spec.robot}, not {robot_name}; choose a controller for "
                           f"{robot_name}, or --robot {spec.robot}")
-    host, port = cfg.target
-    local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
-    hardware = build_hardware_robot(HardwareRobotConfig(
-        robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port, local_host=local_host,
-        local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz, transport=cfg.transport,
-        arm_port=cfg.arm_port))
+    if cfg.simulate:
+        hardware = _simulated(robot_name, spec.arm_mode)
+    else:
+        host, port = cfg.target
+        local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
+        hardware = build_hardware_robot(HardwareRobotConfig(
+            robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port, local_host=local_host,
+            local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz, transport=cfg.transport,
+            arm_port=cfg.arm_port))
     out = Path(cfg.out_dir)
     if (out / "trials.csv").exists():
         raise ResultsDirError(f"{out}: already holds results; a hardware trial is played once: choose another --out")
@@ -218,7 +232,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     dt = 1.0 / ctrl.rate_hz
     safety = cfg.safety if cfg.safety is not None else SafetyConfig(position_table=hardware.position_table)
     connected_at = [time.monotonic()]
-    safe = SafeRobot(hardware.robot, safety, clock=lambda: time.monotonic() - connected_at[0])
+    # a robot on the wall clock: its layer's times in seconds since it was connected; the simulator: robot time
+    wall = isinstance(hardware.robot, WallClock)
+    safe = SafeRobot(hardware.robot, safety, clock=(lambda: time.monotonic() - connected_at[0]) if wall else None)
     robot = EstimatedRobot(safe, desc, BaseEstimate(desc, dt, contact_force=cfg.contact_force))
     notes = _skipped(trial)
     trial = dataclasses.replace(trial, pushes=())  # no robot here can apply them
@@ -249,6 +265,15 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                                  safety_events=safe.events, trial_started_s=started_s)
     _write_results(cfg, result, trial, published=scenario_published)
     return result
+
+
+def _simulated(robot: str, arm_mode: str) -> HardwareRobot:
+    """The hardware protocol's twin: the simulated robot on flat ground, its domain not randomised."""
+    if robot not in HARDWARE_ROBOTS:
+        raise UnknownNameError("hardware robot", robot, tuple(HARDWARE_ROBOTS))
+    sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=arm_mode))
+    return HardwareRobot(robot=sim, description=sim.desc, backend="sim", position_table=HARDWARE_ROBOTS[robot],
+                         target="simulator (flat ground, no domain randomisation, not paced)")
 
 
 def _skipped(trial: Trial) -> tuple[str, ...]:

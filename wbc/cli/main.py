@@ -325,21 +325,24 @@ def _hw_check(args: argparse.Namespace) -> int:
 
 
 def _hw_run(args: argparse.Namespace) -> int:
-    host, port = _hardware_target(args, "run a trial on a real robot")
+    if args.sim == (args.target is not None):
+        raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
+                          "protocol on the simulator; not both")
+    host, port = _hardware_target(args, "run a trial on a real robot") if not args.sim else (None, None)
     local = _address(args.local, "--local") if args.local else None
     out = Path(args.out) if args.out else Path("runs") / (
         f"hw-{Path(args.scenario).stem}-{args.ctrl.replace(':', '_').replace('/', '_')}-"
         f"{time.strftime('%Y%m%d-%H%M%S')}")
     cfg = HardwareTrialConfig(controller=args.ctrl, scenario=Path(args.scenario), trial=args.trial, band=args.band,
                               seed=args.seed, seconds=args.seconds, robot=args.robot, arm_mode=args.arm,
-                              target=(host, port), local=local, allow_hardware=args.allow_hardware,
-                              rate_hz=args.rate, transport=args.transport, arm_port=args.arm_port, out_dir=out,
-                              settle_s=args.settle,
+                              target=None if args.sim else (host, port), simulate=args.sim, local=local,
+                              allow_hardware=args.allow_hardware, rate_hz=args.rate, transport=args.transport,
+                              arm_port=args.arm_port, out_dir=out, settle_s=args.settle,
                               controller_config=Path(args.controller_config) if args.controller_config else None,
                               io_file=Path(args.io) if args.io else None)
 
     def confirm(hardware: HardwareRobot, spec: ControllerSpec) -> None:
-        if not is_loopback(host):
+        if host is not None and not is_loopback(host):
             _confirm_hardware("hw run", hardware.description.name, host, port, f"The controller {spec.name} will "
                               "MOVE it: hang it in its harness first, keep the remote (L2+B) and the power switch "
                               "within reach.", yes=args.yes)

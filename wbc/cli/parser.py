@@ -220,8 +220,11 @@ def build_parser() -> argparse.ArgumentParser:
     hwrun.add_argument("--band", default=None, help="band (default: the scenario's first)")
     hwrun.add_argument("--seed", type=int, default=0, help="seed (default 0)")
     hwrun.add_argument("--seconds", type=float, default=None, help="play only the first S seconds of the trial")
-    hwrun.add_argument("--target", required=True, metavar="HOST:PORT",
+    hwrun.add_argument("--target", default=None, metavar="HOST:PORT",
                        help="the legs' low-level address: the robot's, or an emulator's (127.0.0.1:PORT)")
+    hwrun.add_argument("--sim", action="store_true",
+                       help="instead of a robot, play the same protocol (stand-up, safety layer, estimator metrics, "
+                       "no pushes) on the simulator, to set beside a run over the wire")
     hwrun.add_argument("--local", default=None, metavar="HOST:PORT",
                        help="address to bind (default 127.0.0.1:0 for a loopback target, else 0.0.0.0:0)")
     hwrun.add_argument("--allow-hardware", action="store_true",

@@ -461,7 +461,8 @@ def print_hw_run(result: HardwareTrialResult) -> None:
         link = result.link.as_dict(prefix="")
         print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} damping, "
               f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states")
-    print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions (wall seconds since connected, the trial "
+    clock = "robot seconds" if robot.backend == "sim" else "wall seconds since connected"
+    print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions ({clock}, the trial "
           f"began at {result.trial_started_s:.2f} s): "
           + ", ".join(f"{e.time:.2f} s {e.to_state} ({e.reason})" for e in result.safety_events))
     if len(ep.operator_events):
