@@ -214,6 +214,10 @@ def test_loop_stall_damps_on_the_wire_and_resumes_without_a_jump(robot: str) -> 
     with _rig(robot, **FAST) as (emu, safe, events):
         cmd = _stand(safe)
         _run_to(safe, cmd, SafetyState.RUN)
+        # A few writes in run, so that a frame the link thread composed before the last write (and sends just after
+        # it) already carries the controller's command rather than the ramp's last step.
+        _loop(safe, cmd, 5 * PERIOD)
+        assert safe.safety_state is SafetyState.RUN, safe.events
         deadline = safe.robot.config.write_deadline
         stalled_at = time.monotonic()  # the last write was just before this
         time.sleep(3 * deadline)  # a stall longer than both the link's write deadline and the stale timeout
