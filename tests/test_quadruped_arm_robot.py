@@ -213,3 +213,29 @@ def test_connect_is_both_or_neither() -> None:
 @pytest.mark.parametrize("mode", ["actuated", "locked"])
 def test_contract(mode: str) -> None:
     check_robot(lambda: _pair(mode)[0])
+
+
+@dataclasses.dataclass
+class Counters:
+    late_advances: int
+    worst_lateness: float
+    frames_sent: int
+
+    def as_dict(self, prefix: str = "link/") -> dict[str, float]:
+        return {f"{prefix}{k}": v for k, v in dataclasses.asdict(self).items()}
+
+
+def test_link_stats_join_the_legs_pacing_and_the_arm_bus_counters() -> None:
+    """A hardware trial reads the robot's lateness and link counters through `link_stats` (`HasLinkStats`): the legs'
+    link paces the loop, so its lateness is the robot's; the arm bus's counters come beside it, under their own keys."""
+    from wbc.hardware.capabilities import HasLinkStats
+
+    robot, legs, arm, _ = _pair()
+    assert isinstance(robot, HasLinkStats)
+    assert robot.link_stats().late_advances == 0 and robot.link_stats().as_dict() == {}  # fakes without counters
+    legs.link_stats = lambda: Counters(late_advances=3, worst_lateness=0.004, frames_sent=500)  # type: ignore[attr-defined]
+    arm.bus_stats = lambda: Counters(late_advances=0, worst_lateness=0.0, frames_sent=200)  # type: ignore[attr-defined]
+    stats = robot.link_stats()
+    assert (stats.late_advances, stats.worst_lateness) == (3, 0.004)
+    flat = stats.as_dict(prefix="")
+    assert flat["frames_sent"] == 500 and flat["arm_bus/frames_sent"] == 200 and flat["late_advances"] == 3

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wbc.errors import ConfigError, UnknownNameError
-from wbc.hardware.capabilities import WallClock
+from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike, WallClock
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.robots.description import ARM_MODES
@@ -33,7 +33,7 @@ from wbc.robots.joint_table import JointTable
 from wbc.robots.wx200 import WX200_NOMINAL_Q
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["JointMotorStatus", "QuadrupedArmConfig", "QuadrupedArmRobot"]
+__all__ = ["JointMotorStatus", "JoinedLinkStats", "QuadrupedArmConfig", "QuadrupedArmRobot"]
 
 _LEGS = 12
 _ARM = 3
@@ -83,6 +83,37 @@ class JointMotorStatus:
 
     motor_mode: np.ndarray
     motor_temperature: np.ndarray
+
+
+@dataclass(frozen=True)
+class JoinedLinkStats:
+    """Both devices' counters: the legs' link (which paces the loop, so its lateness is the robot's) and the arm's bus.
+
+    Attributes:
+        legs: the leg link's counters (`wbc.hardware.unitree.LinkStats`), None when the leg device keeps none.
+        arm: the arm bus's counters (`wbc.hardware.dynamixel.ArmBusStats`), None without an arm device or counters.
+    """
+
+    legs: LinkStatsLike | None
+    arm: object | None
+
+    @property
+    def late_advances(self) -> int:
+        """`advance` calls that found the legs' deadline already past (the arm's bus is never paced on)."""
+        return self.legs.late_advances if self.legs is not None else 0
+
+    @property
+    def worst_lateness(self) -> float:
+        """By how much the latest late `advance` was late [s]."""
+        return self.legs.worst_lateness if self.legs is not None else 0.0
+
+    def as_dict(self, prefix: str = "link/") -> dict[str, float]:
+        """The legs' counters under `prefix`, the arm bus's under `prefix` + ``arm_bus/``."""
+        out = dict(self.legs.as_dict(prefix)) if self.legs is not None else {}
+        as_dict = getattr(self.arm, "as_dict", None)
+        if as_dict is not None:
+            out.update(as_dict(f"{prefix}arm_bus/"))
+        return out
 
 
 class QuadrupedArmRobot(Robot):
@@ -192,6 +223,12 @@ class QuadrupedArmRobot(Robot):
     def wall_time(self) -> float:
         """Now on the legs' clock if they offer one, else the monotonic clock [s] (both devices live in wall time)."""
         return self.legs.wall_time() if isinstance(self.legs, WallClock) else time.monotonic()
+
+    def link_stats(self) -> JoinedLinkStats:
+        """The legs' link counters (pacing, lateness) and the arm bus's (`HasLinkStats`), as one snapshot."""
+        legs = self.legs.link_stats() if isinstance(self.legs, HasLinkStats) else None
+        bus_stats = getattr(self.arm, "bus_stats", None)
+        return JoinedLinkStats(legs=legs, arm=bus_stats() if bus_stats is not None else None)
 
     def remote(self) -> RemoteButtons | None:
         """The legs' wireless remote (the arm has none), or None when the legs device offers no remote."""
