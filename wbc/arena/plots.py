@@ -1,4 +1,4 @@
-"""Plots of an arena run (matplotlib, Agg backend): success against push, time to fall, tracking error.
+"""Plots of an arena run (matplotlib, Agg backend): success against push, push recovery, time to fall, tracking error.
 
 `write_plots` draws them from the records and the summary (`wbc.arena.report.summarize`); the report
 (`wbc.arena.report.write_report`) writes ``report.md`` around them. This is the only arena module that imports
@@ -20,6 +20,7 @@ __all__ = ["PLOTS", "write_plots"]
 
 PLOTS = (
     ("success_vs_push.png", "Success rate against push magnitude"),
+    ("push_recovery.png", "Push recovery: survival of each push against its impulse, Wilson 95 % intervals"),
     ("ttf.png", "Time to fall (fraction of the episode survived)"),
     ("tracking.png", "Velocity tracking error"),
 )
@@ -65,6 +66,41 @@ def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[TrialRecord], 
         ax.grid(True, alpha=0.3)
         ax.legend()
         ax.set_title("Success rate against push magnitude (all bands)")
+        fig.tight_layout()
+        fig.savefig(path, dpi=100)
+    finally:
+        plt.close(fig)
+    return True
+
+
+def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controllers: Sequence[str]) -> bool:
+    """Survival of each push against its impulse, one line per controller with Wilson 95 % error bars."""
+    edges = np.asarray(curve.get("edges", ()), dtype=float)
+    if edges.size < 2:
+        return False
+    centers = 0.5 * (edges[:-1] + edges[1:])
+    width = float(edges[1] - edges[0])
+    n_lines = max(1, len(controllers))
+    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    try:
+        for i, controller in enumerate(controllers):
+            cells = curve["controllers"].get(controller, [])
+            if not cells:
+                continue
+            # a small sideways shift per controller keeps overlapping error bars apart
+            x = centers + (i - (n_lines - 1) / 2.0) * 0.08 * width
+            rate = np.array([np.nan if c["rate"] is None else 100.0 * c["rate"] for c in cells])
+            lo = np.array([np.nan if c["ci95"][0] is None else 100.0 * c["ci95"][0] for c in cells])
+            hi = np.array([np.nan if c["ci95"][1] is None else 100.0 * c["ci95"][1] for c in cells])
+            ax.errorbar(x, rate, yerr=np.vstack([rate - lo, hi - rate]), marker="o", capsize=3, label=controller)
+        for edge in edges:
+            ax.axvline(edge, color="0.9", linewidth=0.8, zorder=0)
+        ax.set_xlabel("push impulse |F| T [N s]")
+        ax.set_ylabel("pushes survived [%]")
+        ax.set_ylim(-5.0, 105.0)
+        ax.grid(True, axis="y", alpha=0.3)
+        ax.legend()
+        ax.set_title("Push recovery (all bands; a push is survived when no fall precedes the next)", fontsize=9)
         fig.tight_layout()
         fig.savefig(path, dpi=100)
     finally:
@@ -121,11 +157,14 @@ def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequ
 
 
 def write_plots(out_dir: Path, summary: Mapping[str, Any], records: Sequence[TrialRecord], *,
-                controllers: Sequence[str], bands: Sequence[str], labels: Mapping[str, str]) -> list[Path]:
+                controllers: Sequence[str], bands: Sequence[str], labels: Mapping[str, str],
+                curve: Mapping[str, Any] | None = None) -> list[Path]:
     """Draw the plots of `PLOTS` into `out_dir` (which must exist); figures are closed after saving.
 
     - ``success_vs_push.png``: success rate against the trial's largest push magnitude (``push_force_n``), binned,
       one line per controller; only written when some record has a push.
+    - ``push_recovery.png``: survival of each push against its impulse, binned, one line per controller with Wilson
+      95 % error bars (`curve`, from `wbc.arena.breakdown.recovery_curve`); only written when the curve has pushes.
     - ``ttf.png``: box plot of TTF per controller, all bands pooled.
     - ``tracking.png``: V_lin and V_ang tracking error per band and controller, bars of the mean across seeds with
       the std as error bars.
@@ -137,6 +176,7 @@ def write_plots(out_dir: Path, summary: Mapping[str, Any], records: Sequence[Tri
         controllers: the controllers, in legend order.
         bands: the bands, in axis order.
         labels: summary metric name -> axis label with its unit (`wbc.arena.report.LABELS`).
+        curve: the push-recovery curve (None: not drawn).
 
     Returns:
         The plots written, in `PLOTS` order.
@@ -150,6 +190,8 @@ def write_plots(out_dir: Path, summary: Mapping[str, Any], records: Sequence[Tri
     plots: list[Path] = []
     if _plot_success_vs_push(plt, out / "success_vs_push.png", records, controllers):
         plots.append(out / "success_vs_push.png")
+    if curve is not None and _plot_push_recovery(plt, out / "push_recovery.png", curve, controllers):
+        plots.append(out / "push_recovery.png")
     _plot_ttf(plt, out / "ttf.png", records, controllers)
     plots.append(out / "ttf.png")
     _plot_tracking(plt, out / "tracking.png", summary, bands, labels)

@@ -427,7 +427,8 @@ def _controller_files(values: list[str] | None, controllers: tuple[str, ...], op
     return out
 
 
-def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
+def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_significant: bool = False,
+           alpha: float = 0.05) -> int:
     seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
     out = Path(args.out) if args.out else Path("runs") / (
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -439,7 +440,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
                       observer=live[1] if live is not None else None,
                       controller_configs=_controller_files(args.controller_config, controllers, "--controller-config",
                                                            takes_controller_config, "a plug-in"),
-                      io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"))
+                      io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"),
+                      until_significant=until_significant, alpha=alpha)
     try:
         return _play_arena(cfg, as_json=args.json)
     finally:
@@ -470,7 +472,7 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    return _arena(args, tuple(args.controllers))
+    return _arena(args, tuple(args.controllers), until_significant=args.until_significant, alpha=args.alpha)
 
 
 def _view(args: argparse.Namespace) -> int:

@@ -265,6 +265,12 @@ def build_parser() -> argparse.ArgumentParser:
     compare = sub.add_parser("compare", help="play a scenario with several controllers on the same trials")
     compare.add_argument("controllers", nargs="+", help=f"two or more of: {_NAMES_HELP}")
     add_arena_options(compare)
+    compare.add_argument("--until-significant", action="store_true",
+                         help="play round by round (a trial index and seed, every band, every controller) and stop "
+                         "once an anytime-valid sequential test has settled every pair's success difference in every "
+                         "band (family-wise error <= --alpha at any stop); --trials is then the most played")
+    compare.add_argument("--alpha", type=float, default=0.05,
+                         help="with --until-significant: the family-wise significance level (default 0.05)")
     compare.set_defaults(handler="compare")
 
     view = sub.add_parser("view", help="watch a trial in the browser (meshcat), live or replayed; record it to HTML",

@@ -160,7 +160,13 @@ def print_arena(result: ArenaResult) -> None:
     print(format_table(result.summary))
     rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
     print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s); "
-          f"results in {result.out_dir}/ (trials.csv, summary.json, report.md)")
+          f"results in {result.out_dir}/ (trials.csv, summary.json, failures.json, report.md)")
+    sequential = result.summary.get("sequential")
+    if sequential is not None:
+        stored = sum(cell["trials"] for entry in result.summary["controllers"].values()
+                     for cell in entry["bands"].values())
+        print(f"sequential test: {stored} of the budget's {result.budget} trials played"
+              + (f" ({result.budget - stored} saved)" if stored < result.budget else ""))
 
 
 def print_demo_header(controllers: Sequence[str], *, scenario: str, trials: int, seeds: int) -> None:
