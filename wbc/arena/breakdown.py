@@ -38,7 +38,7 @@ from wbc.arena.stats import wilson_interval
 from wbc.errors import ConfigError, RecordError
 from wbc.scenario.trial import Trial
 
-__all__ = ["AXES", "SECTORS", "PushOutcome", "breakdown", "breakdown_table", "command_label", "heading_sector",
+__all__ = ["AXES", "SECTORS", "PushOutcome", "breakdown", "breakdown_tables", "command_label", "heading_sector",
            "push_outcomes", "recovery_curve"]
 
 SECTORS = ("forward", "left", "backward", "right")
@@ -214,32 +214,38 @@ def _rate_text(cell: Mapping[str, Any]) -> str:
     return f"{100.0 * cell['rate']:.0f}% {cell['k']}/{cell['n']}"
 
 
-def breakdown_table(result: Mapping[str, Any], band: str, *, pushes: bool) -> tuple[list[str], list[list[str]]]:
-    """One band of a `breakdown` as (header, rows): a row per controller, ``k/n`` cells with their rate.
+def breakdown_tables(result: Mapping[str, Any], band: str, *,
+                     pushes: bool) -> list[tuple[list[str], list[list[str]]]]:
+    """One band of a `breakdown` as tables (header, rows), a row per controller, cells ``rate k/n``.
+
+    The first table: success by command, and (with pushes) the falls before any push and after one with the median
+    time from that push to the fall. The second, with pushes only: each push survived by heading sector and by
+    offset axis.
 
     Args:
         result: the output of `breakdown`.
         band: the band.
-        pushes: include the push columns (sectors, axes, falls after a push).
+        pushes: the scenario has pushes (else only the first table, without the fall columns).
     """
     labels = list(result["commands"])
-    header = ["controller", *labels]
+    first_header = ["controller", *labels]
     if pushes:
-        header += [f"pushed {s}" for s in SECTORS] + [f"offset {a}" for a in AXES]
-        header += ["falls: no push / after one", "median fall delay [s]"]
-    rows = []
+        first_header += ["falls: no push / after one", "median fall delay [s]"]
+    first, second = [], []
     for controller, per_band in result["controllers"].items():
         cell = per_band[band]
         row = [controller, *(_rate_text(cell["by_command"][label]) for label in labels)]
         if pushes:
-            row += [_rate_text(cell["by_sector"][s]) for s in SECTORS]
-            row += [_rate_text(cell["by_offset_axis"][a]) for a in AXES]
             falls = cell["falls"]
-            row.append(f"{falls['before_first_push']} / {falls['after_push']}")
             delay = falls["median_s_after_push"]
-            row.append("-" if delay is None else f"{delay:.2f}")
-        rows.append(row)
-    return header, rows
+            row += [f"{falls['before_first_push']} / {falls['after_push']}", "-" if delay is None else f"{delay:.2f}"]
+            second.append([controller, *(_rate_text(cell["by_sector"][s]) for s in SECTORS),
+                           *(_rate_text(cell["by_offset_axis"][a]) for a in AXES)])
+        first.append(row)
+    tables = [(first_header, first)]
+    if pushes:
+        tables.append((["controller", *(f"pushed {s}" for s in SECTORS), *(f"offset {a}" for a in AXES)], second))
+    return tables
 
 
 def recovery_curve(outcomes: Sequence[PushOutcome], *, controllers: Sequence[str],

@@ -99,7 +99,7 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
         ax.set_ylabel("pushes survived [%]")
         ax.set_ylim(-5.0, 105.0)
         ax.grid(True, axis="y", alpha=0.3)
-        ax.legend()
+        ax.legend(loc="lower left", fontsize=8, ncol=2)
         ax.set_title("Push recovery (all bands; a push is survived when no fall precedes the next)", fontsize=9)
         fig.tight_layout()
         fig.savefig(path, dpi=100)

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.breakdown import breakdown_table
+from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.paired_tests import BINARY_FIELDS, mcnemar_exact, paired_values, wilcoxon_signed_rank
 from wbc.arena.plots import PLOTS, write_plots
 from wbc.arena.power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
@@ -53,8 +53,10 @@ __all__ = [
     "cell_text",
     "md_table",
     "n80_text",
+    "number_text",
     "p_text",
     "paired_comparison",
+    "signed_text",
     "trial_interval",
     "write_report",
 ]
@@ -306,16 +308,30 @@ def n80_text(entry: Mapping[str, Any]) -> str:
     return f">{N_MAX}"
 
 
-def _signed(value: float | None, metric: str) -> str:
+def signed_text(value: float | None, metric: str) -> str:
+    """A difference as printed, with its sign, in the metric's unit and decimals (success in points).
+
+    A nonzero difference too small for the decimals is shown in scientific notation (``-1.2e-04``), never as a
+    ``-0.000`` that a significant test would call better.
+    """
     if value is None:
         return "n/a"
-    return f"{value * _SCALE.get(metric, 1.0):+.{_DECIMALS[metric]}f}"
+    scaled = value * _SCALE.get(metric, 1.0)
+    decimals = _DECIMALS[metric]
+    if scaled != 0.0 and abs(scaled) < 0.5 * 10.0 ** -decimals:
+        return f"{scaled:+.1e}"
+    return f"{scaled:+.{decimals}f}"
+
+
+def number_text(value: float | None, metric: str) -> str:
+    """A value as printed in the metric's unit and decimals (success in percent), ``n/a`` when undefined."""
+    return _number(value, metric)
 
 
 def _ci(ci95: Sequence[float | None], metric: str) -> str:
     if ci95[0] is None or ci95[1] is None:
         return "n/a"
-    return f"[{_signed(ci95[0], metric)}, {_signed(ci95[1], metric)}]"
+    return f"[{signed_text(ci95[0], metric)}, {signed_text(ci95[1], metric)}]"
 
 
 def _result_rows(summary: Mapping[str, Any], band: str, metrics: Sequence[str]) -> list[list[str]]:
@@ -340,8 +356,8 @@ PAIRED_LEGEND = ("p: exact McNemar test for success (its discordant pairs' binom
 
 def _paired_rows(summary: Mapping[str, Any]) -> list[list[str]]:
     return [
-        [p["band"], p["a"], p["b"], LABELS[p["metric"]], _signed(p["diff"], p["metric"]), _ci(p["ci95"], p["metric"]),
-         p_text(p.get("p")), n80_text(p)]
+        [p["band"], p["a"], p["b"], LABELS[p["metric"]], signed_text(p["diff"], p["metric"]),
+         _ci(p["ci95"], p["metric"]), p_text(p.get("p")), n80_text(p)]
         for p in summary["paired"]
     ]
 
@@ -497,8 +513,9 @@ def write_report(
         lines += ["", "## Where each controller fails", "", FAILURES_NOTE, ""]
         has_pushes = curve is not None and bool(curve.get("edges"))
         for band in bands:
-            header, rows = breakdown_table(failures, band, pushes=has_pushes)
-            lines += [f"### Band `{band}`", "", *md_table(header, rows), ""]
+            lines += [f"### Band `{band}`", ""]
+            for header, rows in breakdown_tables(failures, band, pushes=has_pushes):
+                lines += [*md_table(header, rows), ""]
     lines += ["", "## Plots", ""]
     written = {p.name for p in plots}
     for name, title in PLOTS:

@@ -1,8 +1,8 @@
 """The ``wbc`` command: ``run``, ``compare``, ``view``, ``controllers``, ``analyze ...``, ``bench ...``, ``hw ...``.
 
-Also ``check-controller``, ``train`` and ``demo``. `main` parses the command line (`wbc.cli.parser`), calls the tool
-the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the command with its
-message and exit status 2; anything else is a bug and keeps its traceback.
+Also ``check-controller``, ``train``, ``demo`` and ``paper``. `main` parses the command line (`wbc.cli.parser`),
+calls the tool the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the
+command with its message and exit status 2; anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -55,6 +55,7 @@ from wbc.tools.bench import (
     bench_train,
 )
 from wbc.tools.demo import DEMO_CONTROLLERS, trial_to_watch
+from wbc.tools.paper import PaperRunConfig, run_paper_table
 from wbc.tools.tail import analyze_tail
 
 __all__ = ["BUS_FAULTS", "FAULTS", "HANDLERS", "main"]
@@ -475,6 +476,26 @@ def _compare(args: argparse.Namespace) -> int:
     return _arena(args, tuple(args.controllers), until_significant=args.until_significant, alpha=args.alpha)
 
 
+def _paper(args: argparse.Namespace) -> int:
+    overrides: dict[str, str] = {}
+    for value in args.contender or ():
+        key, sep, name = value.partition("=")
+        if not sep or not key or not name:
+            raise ConfigError(f"--contender {value}: write KEY=CONTROLLER (e.g. learned=policy:runs/x/policy)")
+        if key in overrides:
+            raise ConfigError(f"--contender: {key} is given twice ({overrides[key]}, {name}); give it once")
+        overrides[key] = name
+    result = run_paper_table(PaperRunConfig(
+        table=args.table, trials=args.trials, seeds=args.seeds,
+        scenario=Path(args.scenario) if args.scenario else None, out_dir=Path(args.out) if args.out else None,
+        workers=args.workers, resume=args.resume, progress=not (args.quiet or args.json), contenders=overrides))
+    if args.json:
+        printers.print_json(result.as_dict())
+    else:
+        printers.print_paper_table(result)
+    return 0
+
+
 def _view(args: argparse.Namespace) -> int:
     # meshcat's server loads only when something is viewed
     from wbc.viz.errors import ViewerError
@@ -571,6 +592,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "train": _train,
     "run": _run,
     "compare": _compare,
+    "paper": _paper,
     "view": _view,
     "demo": _demo,
     "controllers": _controllers,
