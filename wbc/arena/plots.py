@@ -59,7 +59,7 @@ def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[TrialRecord], 
                 100.0 * float(success[mine & (bin_of == i)].mean()) if np.any(mine & (bin_of == i)) else math.nan
                 for i in range(centers.size)
             ]
-            ax.plot(centers, rates, marker="o", label=controller)
+            ax.plot(centers, rates, marker="o", label=_short(controller))
         ax.set_xlabel("largest push in the trial [N]")
         ax.set_ylabel("success [%]")
         ax.set_ylim(-5.0, 105.0)
@@ -73,6 +73,12 @@ def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[TrialRecord], 
     return True
 
 
+def _short(controller: str) -> str:
+    """A legend label: a policy file's name without its directories (``policy:a/b/x-ppo`` -> ``x-ppo``)."""
+    kind, sep, path = controller.partition(":")
+    return Path(path).name if sep and kind in ("policy", "onnx") else controller
+
+
 def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controllers: Sequence[str]) -> bool:
     """Survival of each push against its impulse, one line per controller with Wilson 95 % error bars."""
     edges = np.asarray(curve.get("edges", ()), dtype=float)
@@ -81,7 +87,7 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
     centers = 0.5 * (edges[:-1] + edges[1:])
     width = float(edges[1] - edges[0])
     n_lines = max(1, len(controllers))
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
+    fig, ax = plt.subplots(figsize=(7.0, 4.8))
     try:
         for i, controller in enumerate(controllers):
             cells = curve["controllers"].get(controller, [])
@@ -92,14 +98,15 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
             rate = np.array([np.nan if c["rate"] is None else 100.0 * c["rate"] for c in cells])
             lo = np.array([np.nan if c["ci95"][0] is None else 100.0 * c["ci95"][0] for c in cells])
             hi = np.array([np.nan if c["ci95"][1] is None else 100.0 * c["ci95"][1] for c in cells])
-            ax.errorbar(x, rate, yerr=np.vstack([rate - lo, hi - rate]), marker="o", capsize=3, label=controller)
+            ax.errorbar(x, rate, yerr=np.vstack([rate - lo, hi - rate]), marker="o", capsize=3,
+                        label=_short(controller))
         for edge in edges:
             ax.axvline(edge, color="0.9", linewidth=0.8, zorder=0)
         ax.set_xlabel("push impulse |F| T [N s]")
         ax.set_ylabel("pushes survived [%]")
         ax.set_ylim(-5.0, 105.0)
         ax.grid(True, axis="y", alpha=0.3)
-        ax.legend(loc="lower left", fontsize=8, ncol=2)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=8, ncol=3, frameon=False)
         ax.set_title("Push recovery (all bands; a push is survived when no fall precedes the next)", fontsize=9)
         fig.tight_layout()
         fig.savefig(path, dpi=100)
@@ -119,7 +126,7 @@ def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers:
         data.append(values if values.size else np.array([math.nan]))
     fig, ax = plt.subplots(figsize=(max(4.0, 1.2 * len(controllers) + 2.0), 4.0))
     try:
-        ax.boxplot(data, tick_labels=list(controllers))
+        ax.boxplot(data, tick_labels=[_short(c) for c in controllers])
         ax.set_ylabel("TTF (fraction of the episode survived)")
         ax.set_ylim(-0.05, 1.05)
         ax.grid(True, axis="y", alpha=0.3)
@@ -144,7 +151,7 @@ def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequ
                 stds = [_cell_stat(summary, controller, b, metric, "std") for b in bands]
                 offset = (i - (len(controllers) - 1) / 2.0) * width
                 ax.bar(x + offset, np.nan_to_num(means), width, yerr=np.nan_to_num(stds), capsize=3,
-                       label=controller)
+                       label=_short(controller))
             ax.set_xticks(x, list(bands))
             ax.set_ylabel(labels[metric])
             ax.set_title(labels[metric].split(" [")[0])
