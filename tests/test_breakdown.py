@@ -170,3 +170,14 @@ def test_the_report_says_where_each_controller_fails_and_draws_the_recovery_curv
     assert "## Where each controller fails" in report and "| shaky | 0% 0/2 | 50% 1/2 | 0 / 3 | 1.50 |" in report
     assert "(push_recovery.png)" in report
     assert np.isclose(curve["edges"][0], 20.0)
+
+
+def test_a_band_shows_only_the_commands_played_in_it():
+    # the turn task's bands fix the forward speed: each band has its own commands, and its table only those
+    records = [_record("steady", 0), _record("steady", 2, band="fast", vx_cmd=1.5, yaw_rate_cmd=2.0, n_pushes=0,
+                                             push_force_n=0.0)]
+    result = breakdown(records, [], controllers=["steady"], bands=["in", "fast"])
+    assert result["commands"] == ["standing", "vx 1.5 yaw 2"]
+    assert breakdown_tables(result, "in", pushes=False)[0][0] == ["controller", "standing"]
+    assert breakdown_tables(result, "fast", pushes=False) == [
+        (["controller", "vx 1.5 yaw 2"], [["steady", "100% 1/1"]])]

@@ -218,16 +218,18 @@ def breakdown_tables(result: Mapping[str, Any], band: str, *,
                      pushes: bool) -> list[tuple[list[str], list[list[str]]]]:
     """One band of a `breakdown` as tables (header, rows), a row per controller, cells ``rate k/n``.
 
-    The first table: success by command, and (with pushes) the falls before any push and after one with the median
-    time from that push to the fall. The second, with pushes only: each push survived by heading sector and by
-    offset axis.
+    The first table: success by command (the commands played in the band), and (with pushes) the falls before any
+    push and after one, with the median time from that push to the fall. The second, with pushes only: each push
+    survived by heading sector and by offset axis.
 
     Args:
         result: the output of `breakdown`.
         band: the band.
         pushes: the scenario has pushes (else only the first table, without the fall columns).
     """
-    labels = list(result["commands"])
+    # the commands played in this band (a band may fix part of the command: the turn task's forward speed)
+    labels = [label for label in result["commands"]
+              if any(per_band[band]["by_command"][label]["n"] for per_band in result["controllers"].values())]
     first_header = ["controller", *labels]
     if pushes:
         first_header += ["falls: no push / after one", "median fall delay [s]"]

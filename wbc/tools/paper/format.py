@@ -149,7 +149,7 @@ def _failure_lines(result: PaperTableResult) -> list[str]:
     pushes = bool(result.curve.get("edges"))
     lines = _wrap("where each contender fails (success by command; each push survived by where its force points and "
                   "by its offset axis; falls before any push / after one, and the median time from that push to the "
-                  "fall)")
+                  "fall)" if pushes else "where each contender fails (success by command; the scenario has no pushes)")
     names = _names(result)
     for band in result.bands:
         lines += ["", f"band {band}"]
