@@ -276,9 +276,12 @@ def test_summary_has_exactly_the_required_shape():
         assert list(entry["bands"]) == list(BANDS)
         for cell in entry["bands"].values():
             assert cell["trials"] == len(SEEDS) * N_TRIALS
-            assert set(cell) >= {"trials", *METRICS, *EXTRA_METRICS}
+            assert cell["seeds"] == len(SEEDS)
+            assert set(cell) == {"trials", "seeds", *METRICS, *EXTRA_METRICS}
             for metric in (*METRICS, *EXTRA_METRICS):
-                assert set(cell[metric]) == {"mean", "std"}
+                assert set(cell[metric]) == {"mean", "std", "ci95"}
+                lo, hi = cell[metric]["ci95"]
+                assert lo <= cell[metric]["mean"] <= hi
     cell = summary["controllers"]["mpc"]["bands"]["push"]
     mine = [r for r in records if r.controller == "mpc" and r.band == "push"]
     assert cell["success_rate"]["mean"] == pytest.approx(mean_std_over_seeds(mine, "success")["mean"])
@@ -289,8 +292,11 @@ def test_summary_has_exactly_the_required_shape():
                 for m in METRICS]
     assert pairs == expected
     for p in summary["paired"]:
-        assert set(p) == {"a", "b", "band", "metric", "diff", "ci95"}
+        assert set(p) == {"a", "b", "band", "metric", "diff", "ci95", "n", "test", "p", "n80", "a_only", "b_only"}
         assert len(p["ci95"]) == 2
+        assert p["n"] == len(SEEDS) * N_TRIALS and 0.0 < p["p"] <= 1.0
+        assert p["test"] == ("exact McNemar" if p["metric"] == "success_rate" else "Wilcoxon signed-rank")
+        assert (p["a_only"] is None) == (p["metric"] != "success_rate")
     assert json.loads(json.dumps(summary, allow_nan=False)) == summary
 
 
@@ -300,12 +306,14 @@ def test_summary_with_missing_cells_renders_null():
     text = json.dumps(summary, allow_nan=False)  # no NaN may reach JSON
     assert json.loads(text) == summary
     assert summary["controllers"]["ghost"]["bands"]["nominal"] == {
-        "trials": 0, **{m: {"mean": None, "std": None} for m in (*METRICS, *EXTRA_METRICS)}
+        "trials": 0, "seeds": 0,
+        **{m: {"mean": None, "std": None, "ci95": [None, None]} for m in (*METRICS, *EXTRA_METRICS)}
     }
     assert summary["controllers"]["rl"]["bands"]["push"]["trials"] == 0
-    assert summary["controllers"]["mpc"]["bands"]["ice"]["ttf"] == {"mean": None, "std": None}
+    assert summary["controllers"]["mpc"]["bands"]["ice"]["ttf"] == {"mean": None, "std": None, "ci95": [None, None]}
     missing = [p for p in summary["paired"] if p["b"] == "rl" and p["band"] == "push"]
-    assert missing and all(p["diff"] is None and p["ci95"] == [None, None] for p in missing)
+    assert missing and all(p["diff"] is None and p["ci95"] == [None, None] and p["p"] is None and p["n"] == 0
+                           and p["n80"] is None for p in missing)
     assert "n/a" in format_table(summary)
 
 

@@ -1,25 +1,35 @@
 """The arena: play every (controller, trial) pair of a scenario, store each result at once, summarise and report.
 
 ``wbc run`` and ``wbc compare`` are thin wrappers around `run_arena`. Trials are paired: every controller plays the
-very same trials, so differences between controllers come with paired confidence intervals.
+very same trials, so differences between controllers come with paired confidence intervals and paired tests.
+
+With ``until_significant`` (``wbc compare --until-significant``) the trials are played round by round (a round: one
+trial index and seed, in every band, by every controller) and the run stops at the end of the first round after
+which the sequential test (`wbc.arena.sequential`) has settled every pair's success difference in every band; the
+trial budget (bands x seeds x trials) is the most it plays. The report breaks the records down by where each
+controller fails (`wbc.arena.breakdown`), with the pushes re-drawn from the scenario.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wbc.arena.breakdown import breakdown, push_outcomes, recovery_curve
 from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.progress import progress
+from wbc.arena.record import TrialRecord
 from wbc.arena.report import summarize, write_report
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import TickObserver
+from wbc.arena.sequential import SequentialComparison
 from wbc.arena.stats import in_canonical_order
 from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
@@ -55,6 +65,10 @@ class ArenaConfig:
             executor only).
         controller_configs: a ``--controller-config`` TOML file for a plug-in, by controller name.
         io_files: an ``--io`` file for an ``onnx:PATH`` policy, by controller name.
+        until_significant: play round by round and stop once the sequential test has settled every tested success
+            difference (local executor only; `trials` is then the most played per band and seed).
+        alpha: the sequential test's family-wise significance level.
+        sequential_pairs: the (A, B) controller pairs the sequential test watches (empty: every pair).
     """
 
     controllers: tuple[str, ...]
@@ -74,6 +88,9 @@ class ArenaConfig:
     observer: TickObserver | None = None
     controller_configs: Mapping[str, Path] = field(default_factory=dict)
     io_files: Mapping[str, Path] = field(default_factory=dict)
+    until_significant: bool = False
+    alpha: float = 0.05
+    sequential_pairs: tuple[tuple[str, str], ...] = ()
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -89,6 +106,18 @@ class ArenaConfig:
             raise ConfigError("at least one seed is needed; pass --seeds 1 or more")
         if self.observer is not None and self.executor != "local":
             raise ConfigError("a live view (--view) watches trials played in this process: use the local executor")
+        if self.until_significant:
+            if len(self.controllers) < 2:
+                raise ConfigError("--until-significant compares controllers: name two or more (wbc compare A B ...)")
+            if self.executor != "local":
+                raise ConfigError("--until-significant plays trials round by round as the test asks for them: use the "
+                                  "local executor")
+        if not 0.0 < self.alpha < 1.0:
+            raise ConfigError(f"alpha must be in (0, 1), got {self.alpha}; pass a significance level such as 0.05")
+        for a, b in self.sequential_pairs:
+            if a not in self.controllers or b not in self.controllers or a == b:
+                raise ConfigError(f"sequential pair ({a}, {b}) must name two different controllers played; "
+                                  f"controllers: {', '.join(self.controllers)}")
         for option, files in (("--controller-config", self.controller_configs), ("--io", self.io_files)):
             for name in files:
                 if name not in self.controllers:
@@ -106,6 +135,8 @@ class ArenaResult:
         played: trials played by this call (not counting those resumed from disk).
         wall_s: wall time of this call [s].
         physics_steps: physics steps simulated by this call.
+        budget: trials the run could have played (controllers x bands x seeds x trials); more than the trials stored
+            when the sequential test stopped it early.
     """
 
     summary: dict
@@ -113,6 +144,7 @@ class ArenaResult:
     played: int
     wall_s: float
     physics_steps: int
+    budget: int = 0
 
 
 def _resolve(cfg: ArenaConfig) -> dict[str, ControllerSpec]:
@@ -177,6 +209,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "no_push": cfg.no_push,
         "debug_truth": cfg.debug_truth,
     }
+    if cfg.until_significant:  # only then, so that a fixed-budget run resumes a directory written before the option
+        identity["until_significant"] = {"alpha": cfg.alpha,
+                                          "pairs": [list(p) for p in _tested_pairs(cfg)]}
     files = _files_of(specs)
     if files:  # only then, so that a run of registered controllers resumes a directory written before files existed
         identity["controller_files"] = files
@@ -189,20 +224,33 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         path.parent.mkdir(parents=True, exist_ok=True)
         return str(path)
 
-    # trial by trial, every controller in turn: pairs finish together and the progress estimate mixes fast and slow
-    # controllers from the start (the order does not change a result)
-    tasks = [TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c))
-             for t in trials for c in cfg.controllers if (c, *t.key) not in done]
+    def task(t: Trial, c: str) -> TrialTask:
+        return TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c))
+
     total = len(cfg.controllers) * len(trials)
+    rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None
+    if rounds is not None:
+        rounds.advance(store.records)  # a resumed run's complete rounds count before any new trial
+        tasks = rounds.tasks(task, done)
+        todo = total - len(done & {(c, *t.key) for t in trials for c in cfg.controllers})
+    else:
+        # trial by trial, every controller in turn: pairs finish together and the progress estimate mixes fast and
+        # slow controllers from the start (the order does not change a result)
+        tasks = [task(t, c) for t in trials for c in cfg.controllers if (c, *t.key) not in done]
+        todo = len(tasks)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
-    bar = progress(total, total - len(tasks), cfg.progress)
+    bar = progress(total, total - todo, cfg.progress)
     start = time.perf_counter()
     steps = 0
+    played = 0
     physics_dt = MujocoRobotConfig().timestep
     try:
         for record in executor.run(tasks):
             store.append(record)
+            played += 1
             steps += int(round(record.ttf * scenario.duration_s / physics_dt))
+            if rounds is not None:
+                rounds.advance(store.records)
             if bar is not None:
                 bar.update(1)
     finally:
@@ -215,7 +263,14 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
                                  scenario.bands)
     summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
                         controllers=list(cfg.controllers), bands=list(bands))
+    if rounds is not None:
+        summary["sequential"] = rounds.comparison.as_dict()
+    outcomes = push_outcomes(records, scenario.trial)
+    failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands)
+    curve = recovery_curve(outcomes, controllers=cfg.controllers)
     (store.dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+    (store.dir / "failures.json").write_text(json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2),
+                                             encoding="utf-8")
     meta = {
         "controllers": ", ".join(cfg.controllers),
         "scenario": f"{scenario.name} v{scenario.version} ({cfg.scenario})",
@@ -223,15 +278,84 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
         "bands": ", ".join(bands),
         "seeds": ", ".join(str(s) for s in cfg.seeds),
-        "trials per band and seed": cfg.trials,
+        "trials per band and seed": cfg.trials if rounds is None else
+        f"at most {cfg.trials}; stopped by the sequential test after {rounds.comparison.rounds} rounds"
+        if rounds.comparison.settled else f"{cfg.trials} (the sequential test did not settle every difference)",
         "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
         "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
         "executor": cfg.executor,
         **{k: v for k, v in store.environment.items() if k != "packages"},
         "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
     }
-    write_report(store.dir, summary, records, meta)
-    if len(records) != total:
-        raise ResultsDirError(f"{store.dir}: {len(records)} of {total} trials stored; rerun with --resume to play the "
-                              "rest")
-    return ArenaResult(summary=summary, out_dir=store.dir, played=len(tasks), wall_s=wall, physics_steps=steps)
+    write_report(store.dir, summary, records, meta, failures=failures, curve=curve)
+    expected = total if rounds is None else rounds.played * len(bands) * len(cfg.controllers)
+    if len(records) != expected:
+        raise ResultsDirError(f"{store.dir}: {len(records)} of {expected} trials stored; rerun with --resume to play "
+                              "the rest")
+    return ArenaResult(summary=summary, out_dir=store.dir, played=played, wall_s=wall, physics_steps=steps,
+                       budget=total)
+
+
+def _tested_pairs(cfg: ArenaConfig) -> tuple[tuple[str, str], ...]:
+    return cfg.sequential_pairs or tuple(itertools.combinations(cfg.controllers, 2))
+
+
+class _Rounds:
+    """A sequential run's rounds (trial index, then seed), fed to the sequential test in that order as they complete.
+
+    The test sees complete rounds in their fixed order, never trials in the order they finish (which depends on
+    when robots fall; `wbc.arena.sequential`). The task generator checks the test before each new round: once every
+    difference is settled it hands out no more, and the rounds already begun finish.
+    """
+
+    def __init__(self, trials: list[Trial], cfg: ArenaConfig, bands: Sequence[str]) -> None:
+        self.controllers = cfg.controllers
+        order = sorted({(t.index, t.seed) for t in trials})
+        self.trials = {key: [t for t in trials if (t.index, t.seed) == key] for key in order}
+        self.order = order
+        self.comparison = SequentialComparison(_tested_pairs(cfg), bands, alpha=cfg.alpha)
+        self.next = 0  # rounds fed to the test so far
+        self.begun: set[int] = set()  # rounds with a task handed out or a record stored
+        self._round_of = {key: i for i in range(len(order)) for key in self._keys(i)}
+        self._by_key: dict[tuple[str, str, int, int], TrialRecord] = {}
+        self._read = 0  # records of the store read so far
+
+    @property
+    def played(self) -> int:
+        """Rounds begun: the results directory holds them in full when the run ends."""
+        return len(self.begun)
+
+    def _keys(self, i: int) -> list[tuple[str, str, int, int]]:
+        return [(c, *t.key) for t in self.trials[self.order[i]] for c in self.controllers]
+
+    def advance(self, stored: Sequence[TrialRecord]) -> None:
+        """Feed the test every round, from the next one on, that `stored` now holds complete.
+
+        `stored` is the store's list of records, which only grows: each call reads the records added since the last.
+        """
+        for record in stored[self._read:]:
+            self._by_key[record.run_key] = record
+            if record.run_key in self._round_of:
+                self.begun.add(self._round_of[record.run_key])
+        self._read = len(stored)
+        while self.next < len(self.order):
+            keys = self._keys(self.next)
+            if not all(k in self._by_key for k in keys):
+                return
+            self.comparison.add_round(self._by_key[k] for k in keys)
+            self.next += 1
+
+    def tasks(self, make: Callable[[Trial, str], TrialTask], done: set) -> Iterator[TrialTask]:
+        """The tasks not yet `done`, round by round, until the test has settled every difference.
+
+        A round begun before (an interrupted run's) is finished even after the test has settled, so that the
+        directory holds whole rounds only.
+        """
+        for i in range(len(self.order)):
+            if self.comparison.settled and i not in self.begun:
+                continue
+            self.begun.add(i)
+            for t in self.trials[self.order[i]]:
+                for c in self.controllers:
+                    if (c, *t.key) not in done:
+                        yield make(t, c)

@@ -92,8 +92,11 @@ class LocalExecutor:
         self.observer = observer
 
     def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
-        """Yield each task's record as it finishes."""
-        tasks = list(tasks)
+        """Yield each task's record as it finishes.
+
+        `tasks` is read lazily, a task when a worker is free (a few ahead with a pool), so a caller that feeds a
+        generator can stop handing out tasks in the middle of a run (``--until-significant``).
+        """
         if self.workers <= 1:
             for task in tasks:
                 yield run_task(task, self.observer)
@@ -103,7 +106,7 @@ class LocalExecutor:
         with single_threaded_blas():
             yield from self._run_pool(tasks)
 
-    def _run_pool(self, tasks: list[TrialTask]) -> Iterator[TrialRecord]:
+    def _run_pool(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
         pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
         with pool:
             pending: set[Future] = set()

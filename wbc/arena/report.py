@@ -2,10 +2,14 @@
 
 The input is one `wbc.arena.record.TrialRecord` per (controller, trial). This module turns them into:
 
-- `summarize`: per controller and band, mean +- std across seeds of each metric (`wbc.arena.stats.mean_std_over_seeds`),
-  and for every ordered pair of controllers the paired difference B - A with a 95 % bootstrap interval
-  (`wbc.arena.stats.paired_difference`). The result is JSON-serialisable: NaN becomes ``None``.
-- `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table.
+- `summarize`: per controller and band, mean +- std across seeds of each metric (`wbc.arena.stats.mean_std_over_seeds`)
+  and a 95 % interval over the trials (Wilson for success, percentile bootstrap otherwise), and for every ordered
+  pair of controllers the paired difference B - A with a 95 % bootstrap interval
+  (`wbc.arena.stats.paired_difference`), its paired test's p-value (exact McNemar for success, Wilcoxon signed-rank
+  otherwise; `wbc.arena.paired_tests`) and the pairs a test needs for 80 % power at the observed difference
+  (`wbc.arena.power`). The result is JSON-serialisable: NaN becomes ``None``.
+- `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table: mean
+  ± std across seeds, or, from one seed (which has no spread across seeds), the mean and its interval over trials.
 - `write_report`: ``report.md`` plus the PNG plots (drawn by `wbc.arena.plots`) in an output folder.
 
 Everything is deterministic: the same records, in any order, give byte-identical summaries and tables (records are
@@ -16,23 +20,44 @@ from __future__ import annotations
 
 import itertools
 import math
+import textwrap
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
+from wbc.arena.breakdown import breakdown_tables
+from wbc.arena.paired_tests import BINARY_FIELDS, mcnemar_exact, paired_values, wilcoxon_signed_rank
 from wbc.arena.plots import PLOTS, write_plots
+from wbc.arena.power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
 from wbc.arena.record import TrialRecord
-from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
+from wbc.arena.stats import (
+    bootstrap_mean_ci,
+    in_canonical_order,
+    mean_std_over_seeds,
+    paired_difference,
+    wilson_interval,
+)
 from wbc.errors import RecordError
 
 __all__ = [
     "METRICS",
     "METRIC_KEYS",
     "EXTRA_METRICS",
+    "FAILURES_NOTE",
     "LABELS",
     "summarize",
     "format_table",
+    "PAIRED_LEGEND",
+    "cell_text",
     "md_table",
+    "n80_text",
+    "number_text",
+    "p_text",
+    "paired_comparison",
+    "signed_text",
+    "trial_interval",
     "write_report",
 ]
 
@@ -61,6 +86,12 @@ LABELS: Mapping[str, str] = {
 }
 """Summary metric name -> its label (with the unit) in tables and on plot axes."""
 
+FAILURES_NOTE = ("Success by command (trials), survival of each push by where its force points (world frame; the "
+                 "robot starts facing +x) and by the axis its application point is offset along (pushes met: a push "
+                 "is survived when no fall came before the next one); falls before any push and after one, and the "
+                 "median time from that push to the fall. Cells: rate and successes / trials or pushes.")
+"""The legend of the where-it-fails tables."""
+
 _DECIMALS = {"success_rate": 2, "ttf": 3, "vlin_err": 3, "vang_err": 3, "max_roll_deg": 2, "energy_j": 1,
              "arm_travel_rad": 3}
 _SCALE = {"success_rate": 100.0}  # success is stored as a fraction, shown in percent (paired: percentage points)
@@ -69,6 +100,61 @@ _SCALE = {"success_rate": 100.0}  # success is stored as a fraction, shown in pe
 def _json_float(value: float) -> float | None:
     value = float(value)
     return value if math.isfinite(value) else None
+
+
+def trial_interval(records: Sequence[TrialRecord], field: str) -> tuple[float, float]:
+    """95 % interval of a metric's mean over trials: Wilson for a binary field, percentile bootstrap otherwise.
+
+    The interval a one-seed run can quote (it has no spread across seeds): trials as independent draws of the
+    scenario. NaN values are left out; ``(nan, nan)`` without values.
+    """
+    values = np.array([float(r[field]) for r in records], dtype=float)
+    values = values[~np.isnan(values)]
+    if values.size == 0:
+        return math.nan, math.nan
+    if field in BINARY_FIELDS:
+        return wilson_interval(int(values.sum()), int(values.size))
+    return bootstrap_mean_ci(values)
+
+
+def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord], field: str,
+                      *, alpha: float = 0.05) -> dict[str, Any]:
+    """B - A on the trials both played: difference, bootstrap interval, paired test, and the pairs for 80 % power.
+
+    The test is the exact McNemar test for a binary field (``success``) and the Wilcoxon signed-rank test otherwise
+    (`wbc.arena.paired_tests`); ``n80`` is the number of pairs that test needs to detect the observed difference
+    with 80 % power at `alpha` (`wbc.arena.power`; None when the observed difference is 0 or needs more than
+    `wbc.arena.power.N_MAX` pairs).
+
+    Args:
+        records_a: A's records (one per trial).
+        records_b: B's records.
+        field: the record field compared.
+        alpha: the significance level the power is computed for.
+
+    Returns:
+        ``{"diff", "ci95", "n", "test", "p", "n80", "a_only", "b_only"}`` (``a_only`` / ``b_only``: the discordant
+        pair counts of a binary field, None otherwise); NaN where undefined.
+
+    Raises:
+        RecordError: one controller's records repeat a trial.
+    """
+    result = paired_difference(records_a, records_b, field)
+    a, b = paired_values(records_a, records_b, field)
+    out: dict[str, Any] = {"diff": result["diff"], "ci95": result["ci95"], "n": int(a.size), "test": None,
+                           "p": math.nan, "n80": None, "a_only": None, "b_only": None}
+    if a.size == 0:
+        return out
+    if field in BINARY_FIELDS:
+        test = mcnemar_exact(a, b)
+        out.update(test="exact McNemar", p=test.p_value, a_only=test.a_only, b_only=test.b_only,
+                   n80=pairs_for_mcnemar(test.a_only / a.size, test.b_only / a.size, alpha=alpha))
+    else:
+        d = b - a
+        out.update(test="Wilcoxon signed-rank", p=wilcoxon_signed_rank(d).p_value)
+        if d.size >= 2:
+            out["n80"] = pairs_for_mean_difference(float(d.mean()), float(d.std(ddof=1)), alpha=alpha)
+    return out
 
 
 def _records_by_cell(
@@ -92,10 +178,12 @@ def summarize(
 ) -> dict[str, Any]:
     """Summarise arena records per controller and band, and compare controllers pairwise.
 
-    For each controller and band: the number of trials, and mean / std across seeds (`mean_std_over_seeds`) of
-    `METRICS` (success_rate from the ``success`` field, as a fraction in [0, 1]) and of `EXTRA_METRICS`. For every
-    ordered pair (a, b) with a listed before b in `controllers`, every band and every metric in `METRICS`: the
-    paired difference b - a and its 95 % bootstrap interval (`paired_difference`, seed 0).
+    For each controller and band: the number of trials and of seeds, and mean / std across seeds
+    (`mean_std_over_seeds`) of `METRICS` (success_rate from the ``success`` field, as a fraction in [0, 1]) and of
+    `EXTRA_METRICS`, with the 95 % interval of the mean over trials (`trial_interval`). For every ordered pair
+    (a, b) with a listed before b in `controllers`, every band and every metric in `METRICS`: the paired difference
+    b - a, its 95 % bootstrap interval (`paired_difference`, seed 0), its paired test and n80
+    (`paired_comparison`).
 
     Records of controllers or bands not listed are ignored. A listed controller or band without records gets
     ``trials: 0`` and ``None`` statistics. The records are put `in_canonical_order` first, so the summary does not
@@ -112,8 +200,10 @@ def summarize(
         A JSON-serialisable dict::
 
             {"scenario": {"name", "hash"},
-             "controllers": {NAME: {"bands": {BAND: {"trials": int, METRIC: {"mean", "std"}, ...}}}},
-             "paired": [{"a", "b", "band", "metric", "diff", "ci95": [lo, hi]}, ...]}
+             "controllers": {NAME: {"bands": {BAND: {"trials": int, "seeds": int,
+                                                     METRIC: {"mean", "std", "ci95": [lo, hi]}, ...}}}},
+             "paired": [{"a", "b", "band", "metric", "diff", "ci95": [lo, hi], "n", "test", "p", "n80",
+                         "a_only", "b_only"}, ...]}
 
         with ``None`` wherever a statistic is undefined.
 
@@ -134,32 +224,34 @@ def summarize(
         per_band: dict[str, Any] = {}
         for band in bands:
             cell = cells[controller][band]
-            entry: dict[str, Any] = {"trials": len(cell)}
+            entry: dict[str, Any] = {"trials": len(cell), "seeds": len({r.seed for r in cell})}
             for metric in (*METRICS, *EXTRA_METRICS):
-                stats = mean_std_over_seeds(cell, METRIC_KEYS.get(metric, metric))
-                entry[metric] = {"mean": _json_float(stats["mean"]), "std": _json_float(stats["std"])}
+                field = METRIC_KEYS.get(metric, metric)
+                stats = mean_std_over_seeds(cell, field)
+                entry[metric] = {"mean": _json_float(stats["mean"]), "std": _json_float(stats["std"]),
+                                 "ci95": [_json_float(x) for x in trial_interval(cell, field)]}
             per_band[band] = entry
         per_controller[controller] = {"bands": per_band}
     paired = []
     for a, b in itertools.combinations(controllers, 2):
         for band in bands:
             for metric in METRICS:
-                result = paired_difference(cells[a][band], cells[b][band], METRIC_KEYS[metric])
-                paired.append(
-                    {
-                        "a": a,
-                        "b": b,
-                        "band": band,
-                        "metric": metric,
-                        "diff": _json_float(result["diff"]),
-                        "ci95": [_json_float(x) for x in result["ci95"]],
-                    }
-                )
+                result = paired_comparison(cells[a][band], cells[b][band], METRIC_KEYS[metric])
+                paired.append({"a": a, "b": b, "band": band, "metric": metric, **_json_ready(result)})
     return {
         "scenario": {"name": scenario_name, "hash": scenario_hash},
         "controllers": per_controller,
         "paired": paired,
     }
+
+
+def _json_ready(result: Mapping[str, Any]) -> dict[str, Any]:
+    """A `paired_comparison` with NaN as None (JSON has no NaN)."""
+    out = dict(result)
+    out["diff"] = _json_float(out["diff"])
+    out["ci95"] = [_json_float(x) for x in out["ci95"]]
+    out["p"] = _json_float(out["p"])
+    return out
 
 
 def _bands_of(summary: Mapping[str, Any]) -> list[str]:
@@ -183,16 +275,63 @@ def _mean_std(stat: Mapping[str, float | None], metric: str) -> str:
     return f"{_number(stat['mean'], metric)} ± {_number(stat['std'], metric)}"
 
 
-def _signed(value: float | None, metric: str) -> str:
+def cell_text(stat: Mapping[str, Any], metric: str, seeds: int | None) -> str:
+    """A table cell: "mean ± std" across seeds, or from one seed "mean [lo, hi]" (its 95 % interval over trials).
+
+    A single seed has no spread across seeds to quote (its std would print as ± 0.00); its interval over trials
+    says how far the mean could be off. A summary without the interval (written by an older version) keeps ± std.
+
+    Args:
+        stat: a summary cell's metric entry (``{"mean", "std", "ci95"}``).
+        metric: the summary metric name (for scale and decimals).
+        seeds: the seeds behind the cell (None: unknown).
+    """
+    ci = stat.get("ci95")
+    if seeds == 1 and stat["mean"] is not None and ci is not None and None not in ci:
+        return f"{_number(stat['mean'], metric)} [{_number(ci[0], metric)}, {_number(ci[1], metric)}]"
+    return _mean_std(stat, metric)
+
+
+def p_text(p: float | None) -> str:
+    """A p-value as printed: 3 significant digits, ``<1e-04`` below 1e-4, ``n/a`` when undefined."""
+    if p is None:
+        return "n/a"
+    return "<1e-04" if p < 1e-4 else f"{p:.3g}"
+
+
+def n80_text(entry: Mapping[str, Any]) -> str:
+    """A paired comparison's n80 as printed: ``-`` when no difference was observed, ``>N`` beyond the search."""
+    if entry.get("n80") is not None:
+        return str(entry["n80"])
+    if entry.get("diff") in (None, 0.0) or entry.get("test") is None:
+        return "-"
+    return f">{N_MAX}"
+
+
+def signed_text(value: float | None, metric: str) -> str:
+    """A difference as printed, with its sign, in the metric's unit and decimals (success in points).
+
+    A nonzero difference too small for the decimals is shown in scientific notation (``-1.2e-04``), never as a
+    ``-0.000`` that a significant test would call better.
+    """
     if value is None:
         return "n/a"
-    return f"{value * _SCALE.get(metric, 1.0):+.{_DECIMALS[metric]}f}"
+    scaled = value * _SCALE.get(metric, 1.0)
+    decimals = _DECIMALS[metric]
+    if scaled != 0.0 and abs(scaled) < 0.5 * 10.0 ** -decimals:
+        return f"{scaled:+.1e}"
+    return f"{scaled:+.{decimals}f}"
+
+
+def number_text(value: float | None, metric: str) -> str:
+    """A value as printed in the metric's unit and decimals (success in percent), ``n/a`` when undefined."""
+    return _number(value, metric)
 
 
 def _ci(ci95: Sequence[float | None], metric: str) -> str:
     if ci95[0] is None or ci95[1] is None:
         return "n/a"
-    return f"[{_signed(ci95[0], metric)}, {_signed(ci95[1], metric)}]"
+    return f"[{signed_text(ci95[0], metric)}, {signed_text(ci95[1], metric)}]"
 
 
 def _result_rows(summary: Mapping[str, Any], band: str, metrics: Sequence[str]) -> list[list[str]]:
@@ -202,15 +341,42 @@ def _result_rows(summary: Mapping[str, Any], band: str, metrics: Sequence[str]) 
         if cell is None:
             rows.append([controller, "0", *("n/a" for _ in metrics)])
         else:
-            rows.append([controller, str(cell["trials"]), *(_mean_std(cell[m], m) for m in metrics)])
+            rows.append([controller, str(cell["trials"]),
+                         *(cell_text(cell[m], m, cell.get("seeds")) for m in metrics)])
     return rows
+
+
+_PAIRED_HEADER = ["band", "A", "B", "metric", "B - A", "95% CI", "p", "n80"]
+
+PAIRED_LEGEND = ("p: exact McNemar test for success (its discordant pairs' binomial test), Wilcoxon signed-rank "
+                 "test otherwise, two-sided; n80: paired trials that test needs to detect the observed difference with "
+                 "80 % power at alpha = 0.05 (- when no difference was observed)")
+"""What the p and n80 columns of the paired differences mean, printed under them."""
 
 
 def _paired_rows(summary: Mapping[str, Any]) -> list[list[str]]:
     return [
-        [p["band"], p["a"], p["b"], LABELS[p["metric"]], _signed(p["diff"], p["metric"]), _ci(p["ci95"], p["metric"])]
+        [p["band"], p["a"], p["b"], LABELS[p["metric"]], signed_text(p["diff"], p["metric"]),
+         _ci(p["ci95"], p["metric"]), p_text(p.get("p")), n80_text(p)]
         for p in summary["paired"]
     ]
+
+
+def _sequential_lines(sequential: Mapping[str, Any]) -> list[str]:
+    """The sequential test's verdict per pair and band (``wbc compare --until-significant``)."""
+    state = "every tested difference settled" if sequential["settled"] else "NOT every difference settled"
+    lines = [f"sequential test (--until-significant, family-wise alpha {sequential['alpha']:g}): {state} after "
+             f"{sequential['rounds']} rounds. Its p-values are anytime-valid; the fixed-n p-values above assume a "
+             "number of trials fixed in advance, which a sequential stop breaks."]
+    lines += _aligned(*_sequential_table(sequential))
+    return lines
+
+
+def _sequential_table(sequential: Mapping[str, Any]) -> tuple[list[str], list[list[str]]]:
+    rows = [[t["band"], t["a"], t["b"], str(t["pairs"]), f"{t['a_only']} / {t['b_only']}", p_text(t["p_value"]),
+             f"{t['alpha']:.3g}", f"after {t['rejected_after_pairs']} pairs" if t["rejected"] else "no"]
+            for t in sequential["tests"]]
+    return ["band", "A", "B", "pairs", "A only / B only", "p (anytime)", "alpha each", "settled"], rows
 
 
 def _aligned(header: Sequence[str], rows: Sequence[Sequence[str]], indent: str = "  ") -> list[str]:
@@ -225,9 +391,11 @@ def format_table(summary: Mapping[str, Any]) -> str:
     """Render a summary (from `summarize`) as plain text in the shape of the paper's results table.
 
     One block per band, one row per controller, columns Trials, Success %, TTF, V_lin err, V_ang err as
-    "mean ± std" across seeds (success in percent with 2 decimals, e.g. ``95.02 ± 0.62``; the others with 3). Then a
-    block "paired differences (B - A, 95% CI)" with one line per pair, band and metric; success differences are in
-    percentage points. Undefined statistics show as ``n/a``.
+    "mean ± std" across seeds (success in percent with 2 decimals, e.g. ``95.02 ± 0.62``; the others with 3), or,
+    from a single seed, "mean [lo, hi]" with the 95 % interval over trials (`cell_text`). Then a block "paired
+    differences (B - A, 95% CI)" with one line per pair, band and metric, its test's p-value and n80; success
+    differences are in percentage points. Undefined statistics show as ``n/a``. A run stopped by the sequential test
+    ends with its verdict.
 
     Args:
         summary: the output of `summarize` (or the same read back from JSON).
@@ -244,9 +412,13 @@ def format_table(summary: Mapping[str, Any]) -> str:
         lines.append("")
     lines.append("paired differences (B - A, 95% CI)")
     if summary["paired"]:
-        lines += _aligned(["band", "A", "B", "metric", "B - A", "95% CI"], _paired_rows(summary))
+        lines += _aligned(_PAIRED_HEADER, _paired_rows(summary))
+        lines += textwrap.wrap(PAIRED_LEGEND, width=118, initial_indent="  ", subsequent_indent="  ")
     else:
         lines.append("  (fewer than two controllers)")
+    if summary.get("sequential"):
+        verdict, *table = _sequential_lines(summary["sequential"])
+        lines += ["", *textwrap.wrap(verdict, width=120), *table]
     return "\n".join(lines) + "\n"
 
 
@@ -276,12 +448,15 @@ def _md_meta(meta: Mapping[str, Any]) -> list[str]:
 
 def write_report(
     out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[TrialRecord], meta: Mapping[str, Any],
-    sections: Sequence[tuple[str, Sequence[str]]] = (),
+    sections: Sequence[tuple[str, Sequence[str]]] = (), failures: Mapping[str, Any] | None = None,
+    curve: Mapping[str, Any] | None = None,
 ) -> list[Path]:
     """Write ``report.md`` and its PNG plots (`wbc.arena.plots.write_plots`) into `out_dir` (created if missing).
 
     ``report.md`` holds the title, the scenario name and hash, `meta` as a list (nested mappings as sub-lists), the
-    extra `sections`, one Markdown results table per band, the paired-differences table and links to the plots.
+    extra `sections`, one Markdown results table per band, the paired-differences table (with each test's p-value
+    and n80, and the sequential test's verdict when the run had one), where each controller fails (`failures`) and
+    links to the plots.
 
     Args:
         out_dir: output folder.
@@ -291,6 +466,8 @@ def write_report(
         meta: run information to list (controllers, seeds, trials, executor, package versions, git revision ...).
         sections: more (title, Markdown lines) sections, placed after the run information (a hardware trial's
             timing, safety events and operator actions).
+        failures: the `wbc.arena.breakdown.breakdown` of the records (None: no such section).
+        curve: their `wbc.arena.breakdown.recovery_curve`, drawn as ``push_recovery.png`` when it has pushes.
 
     Returns:
         The paths written: ``report.md`` first, then the plots.
@@ -300,7 +477,7 @@ def write_report(
     controllers = list(summary["controllers"])
     bands = _bands_of(summary)
     plots = write_plots(out, summary, in_canonical_order(records, controllers, bands), controllers=controllers,
-                        bands=bands, labels=LABELS)
+                        bands=bands, labels=LABELS, curve=curve)
 
     scenario = summary["scenario"]
     lines = [f"# Arena report: {scenario['name']}", "", f"Scenario `{scenario['name']}`, hash `{scenario['hash']}`."]
@@ -308,7 +485,9 @@ def write_report(
     lines += _md_meta(meta) if meta else ["(no run information given)"]
     for title, body in sections:
         lines += ["", f"## {title}", "", *body]
-    lines += ["", "## Results", "", "Mean ± std across seeds (each seed's trials averaged first); success in %.", ""]
+    lines += ["", "## Results", "", "Mean ± std across seeds (each seed's trials averaged first); from a single seed, "
+              "the mean and its 95 % interval over trials (Wilson for success, bootstrap otherwise); success in %.",
+              ""]
     metrics = (*METRICS, *EXTRA_METRICS)
     for band in bands:
         lines += [f"### Band `{band}`", ""]
@@ -322,16 +501,28 @@ def write_report(
         "",
     ]
     if summary["paired"]:
-        lines += md_table(["Band", "A", "B", "Metric", "B - A", "95% CI"], _paired_rows(summary))
+        lines += md_table(_PAIRED_HEADER, _paired_rows(summary))
+        lines += ["", PAIRED_LEGEND[0].upper() + PAIRED_LEGEND[1:] + "."]
     else:
         lines.append("(fewer than two controllers)")
+    if summary.get("sequential"):
+        header, rows = _sequential_table(summary["sequential"])
+        lines += ["", "## Sequential test", "", _sequential_lines(summary["sequential"])[0]]
+        lines += ["", *md_table(header, rows)]
+    if failures is not None:
+        lines += ["", "## Where each controller fails", "", FAILURES_NOTE, ""]
+        has_pushes = curve is not None and bool(curve.get("edges"))
+        for band in bands:
+            lines += [f"### Band `{band}`", ""]
+            for header, rows in breakdown_tables(failures, band, pushes=has_pushes):
+                lines += [*md_table(header, rows), ""]
     lines += ["", "## Plots", ""]
     written = {p.name for p in plots}
     for name, title in PLOTS:
         if name in written:
             lines += [f"- [{title}]({name})", "", f"  ![{title}]({name})", ""]
         else:
-            lines += [f"- {title}: not drawn (no trial had a push)", ""]
+            lines += [f"- {title}: not drawn (no trial had a push{'' if curve else ', or no push outcomes given'})", ""]
     report = out / "report.md"
     report.write_text("\n".join(lines).rstrip("\n") + "\n", encoding="utf-8")
     return [report, *plots]

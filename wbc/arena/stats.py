@@ -4,12 +4,16 @@ The arena plays paired trials: every controller meets exactly the same trials, e
 ``(band, seed, trial)`` (`TrialRecord.pair_key`). Statistics read a record's metric by its field name
 (``record["ttf"]``); booleans such as ``success`` count as 0 / 1, so the mean of ``success`` is a success rate.
 
-Two estimators, both pure numpy and deterministic:
+Three estimators, all deterministic:
 
 - `mean_std_over_seeds`: the spread a reader should quote is across seeds (independent runs of the whole
   experiment), not across trials, which share a seed's scenario sample. Each seed's trials are averaged first.
 - `paired_difference`: controller B minus controller A on the same trials, with a percentile bootstrap over the
   pairs; pairing removes the trial-to-trial difficulty that both controllers share.
+- `wilson_interval`: the interval of a success rate over trials (one seed gives no spread over seeds to quote).
+
+The paired tests (exact McNemar, Wilcoxon signed-rank) are in `wbc.arena.paired_tests`, the trials they need in
+`wbc.arena.power`, the sequential test in `wbc.arena.sequential`.
 
 A mean's last digit depends on the order of its terms, and records arrive in the order trials finished (which
 differs between runs with several workers, and on resume); `in_canonical_order` puts them in one order first, so the
@@ -34,6 +38,7 @@ __all__ = [
     "mean_std_over_seeds",
     "bootstrap_mean_ci",
     "paired_difference",
+    "wilson_interval",
 ]
 
 PairKey = tuple[str, int, int]
@@ -222,3 +227,36 @@ def paired_difference(
     else:
         lo, hi = bootstrap_mean_ci(d_arr, n_boot=n_boot, seed=seed)
     return {"diff": diff, "ci95": [lo, hi], "n": int(d_arr.size)}
+
+
+def wilson_interval(successes: int, trials: int, *, level: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a success probability from `successes` out of `trials` independent trials.
+
+    With z the standard normal quantile at (1 + level) / 2 and p = successes / trials, the interval is
+
+        (p + z^2 / (2 n) -+ z sqrt(p (1 - p) / n + z^2 / (4 n^2))) / (1 + z^2 / n),
+
+    computed by `scipy.stats.binomtest(...).proportion_ci(method="wilson")`. Unlike the normal (Wald) interval it
+    keeps its coverage near 0 and 1 and never collapses to a point: 10 successes out of 10 give [0.72, 1.0].
+
+    Args:
+        successes: trials that succeeded, 0 <= successes <= trials.
+        trials: trials, >= 0.
+        level: coverage, in (0, 1).
+
+    Returns:
+        ``(lo, hi)`` as fractions; ``(nan, nan)`` when `trials` is 0.
+
+    Raises:
+        ConfigError: counts out of range, or `level` outside (0, 1).
+    """
+    if not 0 <= successes <= trials:
+        raise ConfigError(f"wilson_interval: need 0 <= successes <= trials, got {successes} of {trials}")
+    if not 0.0 < level < 1.0:
+        raise ConfigError(f"wilson_interval: level must be in (0, 1), got {level}; pass a coverage such as 0.95")
+    if trials == 0:
+        return math.nan, math.nan
+    from scipy.stats import binomtest  # scipy.stats takes about a second to import: only when asked for
+
+    ci = binomtest(int(successes), int(trials)).proportion_ci(confidence_level=level, method="wilson")
+    return float(ci.low), float(ci.high)

@@ -1,8 +1,8 @@
 """The ``wbc`` command: ``run``, ``compare``, ``view``, ``controllers``, ``analyze ...``, ``bench ...``, ``hw ...``.
 
-Also ``check-controller``, ``train`` and ``demo``. `main` parses the command line (`wbc.cli.parser`), calls the tool
-the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the command with its
-message and exit status 2; anything else is a bug and keeps its traceback.
+Also ``check-controller``, ``train``, ``demo`` and ``paper``. `main` parses the command line (`wbc.cli.parser`),
+calls the tool the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the
+command with its message and exit status 2; anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -55,6 +55,7 @@ from wbc.tools.bench import (
     bench_train,
 )
 from wbc.tools.demo import DEMO_CONTROLLERS, trial_to_watch
+from wbc.tools.paper import PaperRunConfig, run_paper_table
 from wbc.tools.tail import analyze_tail
 
 __all__ = ["BUS_FAULTS", "FAULTS", "HANDLERS", "main"]
@@ -427,7 +428,8 @@ def _controller_files(values: list[str] | None, controllers: tuple[str, ...], op
     return out
 
 
-def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
+def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_significant: bool = False,
+           alpha: float = 0.05) -> int:
     seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
     out = Path(args.out) if args.out else Path("runs") / (
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -439,7 +441,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...]) -> int:
                       observer=live[1] if live is not None else None,
                       controller_configs=_controller_files(args.controller_config, controllers, "--controller-config",
                                                            takes_controller_config, "a plug-in"),
-                      io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"))
+                      io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"),
+                      until_significant=until_significant, alpha=alpha)
     try:
         return _play_arena(cfg, as_json=args.json)
     finally:
@@ -470,7 +473,27 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
-    return _arena(args, tuple(args.controllers))
+    return _arena(args, tuple(args.controllers), until_significant=args.until_significant, alpha=args.alpha)
+
+
+def _paper(args: argparse.Namespace) -> int:
+    overrides: dict[str, str] = {}
+    for value in args.contender or ():
+        key, sep, name = value.partition("=")
+        if not sep or not key or not name:
+            raise ConfigError(f"--contender {value}: write KEY=CONTROLLER (e.g. learned=policy:runs/x/policy)")
+        if key in overrides:
+            raise ConfigError(f"--contender: {key} is given twice ({overrides[key]}, {name}); give it once")
+        overrides[key] = name
+    result = run_paper_table(PaperRunConfig(
+        table=args.table, trials=args.trials, seeds=args.seeds,
+        scenario=Path(args.scenario) if args.scenario else None, out_dir=Path(args.out) if args.out else None,
+        workers=args.workers, resume=args.resume, progress=not (args.quiet or args.json), contenders=overrides))
+    if args.json:
+        printers.print_json(result.as_dict())
+    else:
+        printers.print_paper_table(result)
+    return 0
 
 
 def _view(args: argparse.Namespace) -> int:
@@ -569,6 +592,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "train": _train,
     "run": _run,
     "compare": _compare,
+    "paper": _paper,
     "view": _view,
     "demo": _demo,
     "controllers": _controllers,

@@ -15,6 +15,9 @@ from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
 from wbc.learned.train.stages import BASELINES, TASKS
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import ROBOTS
+from wbc.tools.paper import DEFAULT_SEEDS as PAPER_DEFAULT_SEEDS
+from wbc.tools.paper import DEFAULT_TRIALS as PAPER_DEFAULT_TRIALS
+from wbc.tools.paper import TABLES as PAPER_TABLES
 
 __all__ = ["add_arena_options", "add_controller_file_options", "build_parser"]
 
@@ -265,7 +268,38 @@ def build_parser() -> argparse.ArgumentParser:
     compare = sub.add_parser("compare", help="play a scenario with several controllers on the same trials")
     compare.add_argument("controllers", nargs="+", help=f"two or more of: {_NAMES_HELP}")
     add_arena_options(compare)
+    compare.add_argument("--until-significant", action="store_true",
+                         help="play round by round (a trial index and seed, every band, every controller) and stop "
+                         "once an anytime-valid sequential test has settled every pair's success difference in every "
+                         "band (family-wise error <= --alpha at any stop); --trials is then the most played")
+    compare.add_argument("--alpha", type=float, default=0.05,
+                         help="with --until-significant: the family-wise significance level (default 0.05)")
     compare.set_defaults(handler="compare")
+
+    paper = sub.add_parser("paper", help="play one of the paper's results tables; print ours beside the paper's",
+                           description="Play the protocol of the paper's Table I (pushes; arm actuated, locked, "
+                           "absent), II (fast turns; the same) or III (the staged method and its baselines) for the "
+                           "learned and the model-based family on the same trials, and print our rows beside the "
+                           "paper's, the paired comparisons (bootstrap intervals, exact McNemar / Wilcoxon "
+                           "p-values, n80, verdicts), where each contender fails, and the run time. The paper played "
+                           "5 seeds x 2000 trials: --seeds 5 --trials 400.")
+    paper.add_argument("table", choices=tuple(PAPER_TABLES), help="which table")
+    paper.add_argument("--trials", type=int, default=PAPER_DEFAULT_TRIALS,
+                       help=f"trials per band and seed (default {PAPER_DEFAULT_TRIALS})")
+    paper.add_argument("--seeds", type=int, default=PAPER_DEFAULT_SEEDS,
+                       help=f"seeds 0 .. S-1 (default {PAPER_DEFAULT_SEEDS})")
+    paper.add_argument("--scenario", default=None,
+                       help="scenario file (default: the table's, scenarios/push.toml or scenarios/turn.toml); a "
+                       "later version of it plays the same protocol")
+    paper.add_argument("--out", default=None, help="results directory (default: runs/paper-<table>-<time>)")
+    paper.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    paper.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
+    paper.add_argument("--contender", action="append", default=None, metavar="KEY=CONTROLLER",
+                       help="play CONTROLLER in row KEY (repeatable): e.g. learned=policy:PATH for a retrained pi3, "
+                       "curriculum=policy:PATH for a Table III baseline without shipped weights")
+    paper.add_argument("--quiet", action="store_true", help="no progress output")
+    paper.add_argument("--json", action="store_true", help="print paper.json instead of the table")
+    paper.set_defaults(handler="paper")
 
     view = sub.add_parser("view", help="watch a trial in the browser (meshcat), live or replayed; record it to HTML",
                           description="Play CTRL on trial I of a scenario and stream it to a meshcat page (robot, "

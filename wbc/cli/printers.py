@@ -27,13 +27,15 @@ from wbc.tools.arm_momentum import ArmMomentumTrial
 from wbc.tools.bench.hw import EmulatorCounts
 from wbc.tools.bench.references import MPC_REFERENCE_TARGETS, REFERENCE_TARGETS, TRAIN_TARGET
 from wbc.tools.demo import TrialToWatch
+from wbc.tools.paper import PaperTableResult, format_paper_table
 from wbc.tools.tail import TailAnalysis
 from wbc.types import RobotState
 
 __all__ = ["HardwareCheck", "print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
            "print_bench_sweep", "print_bench_train", "print_controller_check", "print_controllers",
            "print_demo_end", "print_demo_header", "print_emulator_counts", "print_emulator_started", "print_hw_check",
-           "print_hw_run", "print_json", "print_recording", "print_tail", "print_trained", "print_viewed_trial"]
+           "print_hw_run", "print_json", "print_paper_table", "print_recording", "print_tail", "print_trained",
+           "print_viewed_trial"]
 
 
 def print_json(value: object) -> None:
@@ -160,7 +162,18 @@ def print_arena(result: ArenaResult) -> None:
     print(format_table(result.summary))
     rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
     print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s); "
-          f"results in {result.out_dir}/ (trials.csv, summary.json, report.md)")
+          f"results in {result.out_dir}/ (trials.csv, summary.json, failures.json, report.md)")
+    sequential = result.summary.get("sequential")
+    if sequential is not None:
+        stored = sum(cell["trials"] for entry in result.summary["controllers"].values()
+                     for cell in entry["bands"].values())
+        print(f"sequential test: {stored} of the budget's {result.budget} trials played"
+              + (f" ({result.budget - stored} saved)" if stored < result.budget else ""))
+
+
+def print_paper_table(result: PaperTableResult) -> None:
+    """``wbc paper TABLE``: ours beside the paper's, the comparisons, where each fails, the run time."""
+    print(format_paper_table(result), end="")
 
 
 def print_demo_header(controllers: Sequence[str], *, scenario: str, trials: int, seeds: int) -> None:

@@ -1,0 +1,164 @@
+"""``wbc paper table1|table2|table3``: the protocols, the paper's numbers beside ours, verdicts, the printed structure.
+
+End to end on a tiny run (1 trial, 1 seed, 1.5 s trials of a short push scenario for the same robot), through the
+command line: every row of the paper and of ours, the comparisons with their tests, where each contender fails and
+the run time are printed, and ``paper.txt`` holds exactly what was printed.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from wbc.cli.main import main
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.learned.policy.shipped import WEIGHTS_DIR
+from wbc.tools.paper import TABLE_I, TABLES, PaperRunConfig, resolve_contenders, run_paper_table, verdict
+from wbc.tools.paper.paper_table import PAPER_TRIALS_PER_BAND
+
+TINY_PUSH = """
+[scenario]
+name = "tinypush"
+version = 1
+description = "short push trials for the table command's test"
+robot = "a1-wx200"
+duration_s = 1.5
+
+[terrain]
+kind = "flat"
+
+[domain]
+friction = [0.8, 1.0]
+
+[commands]
+ramp_s = 0.2
+
+[[commands.options]]
+vx = 0.0
+
+[[commands.options]]
+vx = 0.3
+
+[pushes]
+first_s = [0.5, 0.6]
+interval_s = [0.5, 0.6]
+duration_s = 0.06
+offset_m = 0.12
+
+[[bands]]
+name = "in"
+push_force_n = [200.0, 300.0]
+
+[[bands]]
+name = "ood"
+push_force_n = [300.0, 400.0]
+"""
+
+
+@pytest.fixture
+def tiny(tmp_path):
+    path = tmp_path / "tinypush.toml"
+    path.write_text(TINY_PUSH)
+    return path
+
+
+def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path, capsys):
+    out = tmp_path / "t1"
+    assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
+                 "--workers", "1", "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    assert (out / "paper.txt").read_text(encoding="utf-8") == printed
+    lines = printed.splitlines()
+    assert lines[0] == "Table I: locomotion under pushes, arm actuated / locked / absent"
+    assert "scenario tinypush v1" in printed and "NOT published" in printed and "robot a1-wx200" in printed
+    assert "1 trials x 1 seed per band" in printed and "mean [95 % interval over trials" in printed
+    # one block per metric; each paper row, then our learned and model-based rows beside it
+    for label in ("Success %", "TTF", "V_lin err [m/s]"):
+        assert label in lines
+    block = lines[lines.index("Success %"):lines.index("TTF")]
+    assert "in (paper 200-300)" in block[1] and "ood (paper 300-400)" in block[1]
+    def row(*tokens):
+        return next(i for i, line in enumerate(block) if tuple(line.split()[:len(tokens)]) == tokens)
+
+    order = [row("No", "arm", "paper"), row("learned-noarm", "(pi1)"), row("mpc-noarm"), row("Locked", "paper"),
+             row("learned-locked", "(pi2)"), row("mpc-locked"), row("Actuated", "paper"), row("learned", "(pi3)"),
+             row("mpc")]
+    assert order == sorted(order)
+    assert "95.02 ± 0.62" in block[order[0]] and "68.03 ± 1.14" in block[order[0]]  # the paper's no-arm row
+    assert "96.11 ± 0.37" in block[order[6]] and "78.20 ± 1.77" in block[order[6]]
+    assert "[" in block[order[7]] and "± 0.00" not in "\n".join(block)  # one seed: an interval over trials
+    # the five comparisons, each per band and metric, with its test and a verdict per band
+    for question in ("actuated vs locked arm, learned (pi3 - pi2): B = learned (pi3), A = learned-locked (pi2)",
+                     "actuated vs locked arm, model-based: B = mpc, A = mpc-locked",
+                     "actuated arm vs no arm, model-based", "learned vs model-based, arm actuated"):
+        assert question in printed
+    assert printed.count("  band in: Success: ") == 5 and printed.count("  band ood: Success: ") == 5
+    assert "A only / B only" in printed and "n80" in printed
+    # where each contender fails, per band, and the push-recovery curve
+    assert "where each contender fails" in printed and "pushed forward" in printed and "offset y" in printed
+    assert "push_recovery.png" in printed and (out / "push_recovery.png").is_file()
+    assert "CPU hours here" in printed and "mean wall time per trial: learned" in printed
+    saved = json.loads((out / "paper.json").read_text(encoding="utf-8"))
+    assert saved["table"] == "table1" and saved["bands"] == ["in", "ood"] and saved["trials"] == 1
+    assert len(saved["comparisons"]) == 5 * 2 * 3
+    assert {c["controller"] for c in saved["contenders"]} == {"learned", "learned-locked", "learned-noarm", "mpc",
+                                                              "mpc-locked", "mpc-noarm"}
+    # resuming the finished run plays nothing and prints the same table but for the run line
+    assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
+                 "--workers", "1", "--quiet", "--resume"]) == 0
+    again = capsys.readouterr().out
+    assert again.split("\nrun: ")[0] == printed.split("\nrun: ")[0] and "run: 0 trials played" in again
+
+
+def test_table3_lists_its_baselines_and_says_which_are_missing(tiny, tmp_path):
+    result = run_paper_table(PaperRunConfig(table="table3", trials=1, seeds=1, scenario=tiny, out_dir=tmp_path / "t3",
+                                            workers=1, progress=False))
+    shipped = {p.stem.removeprefix("a1-wx200-actuated-") for p in WEIGHTS_DIR.glob("a1-wx200-actuated-*.npz")}
+    rows = {c.key: c for c in result.contenders}
+    for key in ("ppo", "curriculum", "finetune-pi2", "decoupled", "one-stage-demo"):
+        assert (rows[key].controller is not None) == (key in shipped)
+    text = (tmp_path / "t3" / "paper.txt").read_text(encoding="utf-8")
+    for key in set(rows) - shipped - {"ours"}:
+        assert f"({key}): no shipped weights (train: wbc train --task push --stage 3 --baseline {key}" in text
+        assert f"{key}: missing" in text
+    for key in shipped:
+        assert f"{key} = policy:" in text
+    assert "Ours vs PPO: B = learned" in text or "ppo" not in shipped
+    assert "95.73" in text and "84.73" in text  # the paper's "Ours"
+    assert result.paper_protocol_cpu_h == pytest.approx(
+        sum(result.trial_wall_s.values()) * PAPER_TRIALS_PER_BAND * 2 / 3600)
+
+
+def test_contenders_can_be_replaced_and_tables_check_their_robot(tiny):
+    spec = TABLES["table1"]
+    rows = resolve_contenders(spec, {"learned": "policy:runs/v2/policy"})
+    assert next(c for c in rows if c.key == "learned").controller == "policy:runs/v2/policy"
+    with pytest.raises(UnknownNameError, match="learned-locked"):
+        resolve_contenders(spec, {"pi9": "stand"})
+    with pytest.raises(ConfigError, match="same controller"):
+        resolve_contenders(spec, {"learned": "mpc"})
+    with pytest.raises(ConfigError, match="go1-arm"):
+        run_paper_table(PaperRunConfig(table="table2", scenario=tiny, progress=False))
+    with pytest.raises(UnknownNameError):
+        PaperRunConfig(table="table4")
+    assert main(["paper", "table1", "--contender", "learned"]) == 2
+
+
+def test_verdicts_name_the_better_side_only_when_the_test_says_so():
+    base = {"a": "pi2", "b": "pi3", "n80": 42, "test": "exact McNemar"}
+    assert verdict({**base, "metric": "success_rate", "diff": 0.2, "p": 0.01}) == (
+        "Success: pi3 better (+20.00 points, p = 0.01)")
+    assert verdict({**base, "metric": "vlin_err", "diff": 0.02, "p": 0.001}) == (
+        "V_lin err: pi2 better (+0.020, p = 0.001)")
+    assert verdict({**base, "metric": "success_rate", "diff": 0.05, "p": 0.5}) == (
+        "Success: no significant difference (p = 0.5; 42 pairs would detect the observed difference)")
+    assert verdict({**base, "metric": "ttf", "diff": 0.0, "p": 1.0, "n80": None}) == (
+        "TTF: no significant difference (p = 1)")
+
+
+def test_the_paper_rows_are_the_published_ones():
+    assert [row for row in TABLE_I] == ["No arm", "Locked", "Actuated"]
+    assert TABLE_I["Locked"]["success_rate"][1].mean == pytest.approx(0.4583)
+    assert TABLES["table3"].paper["Ours"]["success_rate"][1].mean == pytest.approx(0.8473)
+    assert TABLES["table2"].paper["Locked"]["vang_err"][2].mean == pytest.approx(0.226)

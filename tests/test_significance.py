@@ -1,0 +1,330 @@
+"""The arena's statistics a reviewer checks: exact McNemar, Wilcoxon, Wilson, power, and the sequential test.
+
+Known cases by hand and from the literature; cross-checks against statsmodels' independent implementations; the
+sequential test's error rate on many seeded null streams (and the naive repeated test's, which it must beat), its
+early stop on a clear difference, and ``wbc compare --until-significant`` end to end on short trials.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from scipy.stats import binom
+
+from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.paired_tests import mcnemar_exact, paired_values, wilcoxon_signed_rank
+from wbc.arena.power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
+from wbc.arena.record import TrialRecord
+from wbc.arena.report import cell_text, format_table, paired_comparison, summarize
+from wbc.arena.sequential import DiscordantPairTest, SequentialComparison, mixture_log_e
+from wbc.arena.stats import wilson_interval
+from wbc.errors import ConfigError, RecordError
+
+
+def make_record(controller: str, band: str, seed: int, trial: int, **overrides) -> TrialRecord:
+    """A record with plain values; `overrides` replace fields."""
+    fields = {"controller": controller, "scenario": "flat_push", "scenario_hash": "abc123", "band": band,
+              "seed": seed, "trial": trial, "success": True, "ttf": 1.0, "fall_time_s": math.nan, "vlin_err": 0.1,
+              "vang_err": 0.2, "max_roll_deg": 5.0, "max_pitch_deg": 3.0, "energy_j": 100.0, "arm_travel_rad": 0.5,
+              "push_force_n": 0.0, "n_pushes": 0, "vx_cmd": 0.0, "vy_cmd": 0.0, "yaw_rate_cmd": 0.0,
+              "friction": 0.8, "payload_kg": 0.0, "fallbacks": 0, "wbc_failures": 0, "debug_truth": False,
+              "wall_s": 1.0}
+    return TrialRecord(**(fields | overrides))
+
+# --- exact McNemar ------------------------------------------------------------------------------------------------
+
+
+def test_mcnemar_exact_matches_hand_computed_and_published_values():
+    # 0 against 6 discordant pairs: p = 2 / 2^6
+    assert mcnemar_exact(np.ones(6, bool), np.zeros(6, bool)).p_value == pytest.approx(2 / 64, abs=1e-15)
+    # 1 against 9: p = 2 (1 + 9) / 2^10 ... written as a 2x2 table with 7 concordant pairs
+    a = np.array([1] * 1 + [0] * 9 + [1] * 4 + [0] * 3, bool)
+    b = np.array([0] * 1 + [1] * 9 + [1] * 4 + [0] * 3, bool)
+    result = mcnemar_exact(a, b)
+    assert (result.a_only, result.b_only, result.n) == (1, 9, 17)
+    assert result.p_value == pytest.approx(22 / 1024, abs=1e-15)
+    # the worked example of Fagerland, Lydersen and Laake (BMC Med Res Methodol 2013, 13:91; airway
+    # hyper-responsiveness before and after stem cell transplantation): 1 against 7 discordant pairs, exact
+    # conditional p = 0.070 (= 18 / 256), where the asymptotic McNemar test gives 0.034
+    a = np.array([1, 1] + [0] * 7 + [0] * 12, bool)
+    b = np.array([1, 0] + [1] * 7 + [0] * 12, bool)
+    assert mcnemar_exact(a, b).p_value == pytest.approx(18 / 256, abs=1e-15)
+    assert round(mcnemar_exact(a, b).p_value, 3) == 0.070
+    # symmetric and two-sided; no discordant pair: nothing to test
+    assert mcnemar_exact(b, a).p_value == mcnemar_exact(a, b).p_value
+    none = mcnemar_exact(np.ones(5, bool), np.ones(5, bool))
+    assert (none.a_only, none.b_only, none.p_value) == (0, 0, 1.0)
+
+
+def test_mcnemar_exact_agrees_with_statsmodels():
+    contingency = pytest.importorskip("statsmodels.stats.contingency_tables")
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        n = int(rng.integers(1, 300))
+        a = rng.random(n) < rng.random()
+        b = rng.random(n) < rng.random()
+        table = [[np.sum(a & b), np.sum(a & ~b)], [np.sum(~a & b), np.sum(~a & ~b)]]
+        theirs = contingency.mcnemar(table, exact=True).pvalue
+        assert mcnemar_exact(a, b).p_value == pytest.approx(min(1.0, theirs), rel=1e-12, abs=1e-300)
+
+
+def test_mcnemar_refuses_unpaired_or_continuous_values():
+    with pytest.raises(RecordError, match="pair them first"):
+        mcnemar_exact(np.ones(3), np.ones(4))
+    with pytest.raises(RecordError, match="wilcoxon_signed_rank"):
+        mcnemar_exact(np.array([0.5, 1.0]), np.array([1.0, 0.0]))
+
+
+# --- Wilcoxon signed-rank ---------------------------------------------------------------------------------------------
+
+
+def test_wilcoxon_exact_small_samples_by_hand():
+    # six positive differences: every sign pattern equally likely under H0, p = 2 / 2^6
+    assert wilcoxon_signed_rank(np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])).p_value == pytest.approx(2 / 64)
+    # ranks 1..5 positive, rank 6 negative: T- = 6; 14 of the 64 subsets of {1..6} sum to <= 6, p = 2 * 14 / 64
+    result = wilcoxon_signed_rank(np.array([1.0, 2.0, 3.0, 4.0, 5.0, -6.0]))
+    assert result.p_value == pytest.approx(28 / 64)
+    assert result.statistic == 6.0 and result.nonzero == 6
+    # zero differences are dropped (Wilcoxon's convention): the same six and two ties at zero
+    padded = wilcoxon_signed_rank(np.array([0.0, 0.1, 0.2, 0.0, 0.3, 0.4, 0.5, 0.6]))
+    assert (padded.n, padded.nonzero) == (8, 6) and padded.p_value == pytest.approx(2 / 64)
+    # nothing differs: p = 1
+    assert wilcoxon_signed_rank(np.zeros(5)).p_value == 1.0
+    with pytest.raises(RecordError, match="finite"):
+        wilcoxon_signed_rank(np.array([1.0, math.nan]))
+
+
+# --- Wilson interval --------------------------------------------------------------------------------------------------
+
+
+def test_wilson_interval_by_its_formula():
+    for k, n in ((0, 10), (3, 10), (10, 10), (57, 80)):
+        p, z = k / n, 1.959963984540054
+        centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+        half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+        lo, hi = wilson_interval(k, n)
+        assert lo == pytest.approx(max(0.0, centre - half), abs=1e-12)
+        assert hi == pytest.approx(min(1.0, centre + half), abs=1e-12)
+    assert wilson_interval(10, 10)[0] == pytest.approx(0.7225, abs=1e-4)  # 10 of 10 does not mean 100 % +- 0
+    assert all(math.isnan(x) for x in wilson_interval(0, 0))
+    with pytest.raises(ConfigError):
+        wilson_interval(4, 3)
+
+
+# --- power ------------------------------------------------------------------------------------------------------------
+
+
+def test_exact_mcnemar_power_matches_simulation_and_bisection_is_tight():
+    rng = np.random.default_rng(11)
+    n, p_a, p_b = 40, 0.05, 0.25
+    u = rng.random((4000, n))
+    a_only, b_only = (u < p_a).sum(1), ((u >= p_a) & (u < p_a + p_b)).sum(1)
+    m = a_only + b_only
+    p = np.where(m > 0, np.minimum(1.0, 2.0 * binom.cdf(np.minimum(a_only, b_only), m, 0.5)), 1.0)
+    simulated = float(np.mean(p <= 0.05))
+    assert mcnemar_power(n, p_a, p_b) == pytest.approx(simulated, abs=0.025)  # 3.2 sigma of 4000 draws
+    n80 = pairs_for_mcnemar(p_a, p_b)
+    assert mcnemar_power(n80, p_a, p_b) >= 0.8 > mcnemar_power(n80 - 1, p_a, p_b)
+    # a larger difference needs fewer pairs; a smaller one more; none observed, nothing to detect
+    assert pairs_for_mcnemar(0.025, 0.475) < n80 < pairs_for_mcnemar(0.10, 0.20)
+    assert pairs_for_mcnemar(0.1, 0.1) is None
+    assert pairs_for_mcnemar(0.0, 1e-6) is None  # beyond the search: more than N_MAX pairs
+    assert mcnemar_power(0, p_a, p_b) == 0.0 and mcnemar_power(10, 0.0, 0.0) == 0.0
+
+
+def test_t_power_and_wilcoxon_pairs_agree_with_statsmodels():
+    power = pytest.importorskip("statsmodels.stats.power")
+    for effect in (0.2, 0.5, 1.0, 2.0):
+        assert t_test_power(25, effect) == pytest.approx(power.TTestPower().power(effect, nobs=25, alpha=0.05),
+                                                         abs=1e-9)
+        n_t = math.ceil(power.TTestPower().solve_power(effect_size=effect, alpha=0.05, power=0.8))
+        assert pairs_for_mean_difference(effect, 1.0) == max(6, math.ceil(n_t * math.pi / 3))
+    assert pairs_for_mean_difference(0.01, 0.0) == 6  # identical differences: the exact test's smallest n
+    assert pairs_for_mean_difference(0.0, 1.0) is None
+
+
+def test_paired_comparison_on_records_counts_discordant_pairs():
+    a = [make_record("a", "in", 0, i, success=i >= 2) for i in range(10)]
+    b = [make_record("b", "in", 0, i, success=i != 9, vlin_err=0.1 + 0.01 * (i + 1)) for i in range(10)]
+    success = paired_comparison(a, b, "success")
+    assert (success["a_only"], success["b_only"], success["n"]) == (1, 2, 10)
+    assert success["test"] == "exact McNemar" and success["p"] == pytest.approx(1.0)
+    assert success["diff"] == pytest.approx(0.1)
+    assert success["n80"] == pairs_for_mcnemar(0.1, 0.2)
+    err = paired_comparison(a, b, "vlin_err")
+    assert err["test"] == "Wilcoxon signed-rank" and err["p"] == pytest.approx(2 / 1024)
+    assert err["a_only"] is None and err["n80"] >= 6
+    values_a, values_b = paired_values(a, b[:5], "success")
+    assert values_a.size == values_b.size == 5
+
+
+def test_one_seed_tables_show_an_interval_over_trials_not_a_zero_spread():
+    records = [make_record(c, "in", 0, i, success=(c == "a" or i < 6)) for c in ("a", "b") for i in range(10)]
+    summary = summarize(records, scenario_name="flat_push", scenario_hash="abc123", controllers=["a", "b"],
+                        bands=["in"])
+    table = format_table(summary)
+    lo, hi = wilson_interval(6, 10)
+    assert f"60.00 [{100 * lo:.2f}, {100 * hi:.2f}]" in table
+    assert "± 0.00" not in table
+    assert "exact McNemar" in table and "n80" in table
+    # several seeds: the spread across them, as the paper prints
+    cell = {"mean": 0.9, "std": 0.05, "ci95": [0.8, 0.95]}
+    assert cell_text(cell, "success_rate", 5) == "90.00 ± 5.00"
+    assert cell_text(cell, "success_rate", 1) == "90.00 [80.00, 95.00]"
+
+
+# --- the sequential test ----------------------------------------------------------------------------------------------
+
+
+def test_mixture_e_value_by_hand():
+    # Beta(1/2, 1/2) mixture: the first discordant pair predicts 1/2 (E stays 1), then B's wins are predicted with
+    # (c + 1/2) / (n + 1): 3/4 -> E = 1.5, then 5/6 -> E = 2.5
+    assert math.exp(mixture_log_e(0, 0)) == pytest.approx(1.0)
+    assert math.exp(mixture_log_e(0, 1)) == pytest.approx(1.0)
+    assert math.exp(mixture_log_e(0, 2)) == pytest.approx(1.5)
+    assert math.exp(mixture_log_e(0, 3)) == pytest.approx(2.5)
+    assert mixture_log_e(3, 0) == pytest.approx(mixture_log_e(0, 3))
+    test = DiscordantPairTest(alpha=0.05)
+    for _ in range(6):
+        test.observe(False, True)
+        test.observe(True, True)  # concordant pairs change nothing
+    assert not test.rejected and test.b_only == 6 and test.pairs == 12
+    test.observe(False, True)  # the 7th win: E = 26.8 >= 20
+    assert test.rejected and test.rejected_after == 13 and test.p_value == pytest.approx(math.exp(-test.log_e))
+
+
+def _null_streams(rng, runs, pairs, discordance):
+    u = rng.random((runs, pairs))
+    return np.cumsum(u < discordance / 2, axis=1), np.cumsum((u >= discordance / 2) & (u < discordance), axis=1)
+
+
+def test_sequential_test_keeps_its_error_rate_on_null_streams_where_repeated_mcnemar_does_not():
+    rng = np.random.default_rng(2024)
+    runs, pairs, alpha = 2000, 300, 0.05
+    margin = 3 * math.sqrt(alpha * (1 - alpha) / runs)
+    for discordance in (0.2, 1.0):
+        a_only, b_only = _null_streams(rng, runs, pairs, discordance)
+        # the mixture test, looked at after every pair
+        sequential = np.mean((mixture_log_e(a_only, b_only) >= math.log(1 / alpha)).any(axis=1))
+        assert sequential <= alpha + margin
+        # the exact McNemar test looked at after every pair and stopped at the first p <= alpha
+        m = a_only + b_only
+        p = np.where(m > 0, np.minimum(1.0, 2.0 * binom.cdf(np.minimum(a_only, b_only), m, 0.5)), 1.0)
+        naive = np.mean((p <= alpha).any(axis=1))
+        assert naive > 3 * alpha
+
+
+def test_sequential_test_stops_early_on_a_clear_difference():
+    rng = np.random.default_rng(7)
+    runs, pairs = 2000, 200
+    # A succeeds in 50 % of the trials and B in 95 %, independently: 2.5 % "A only", 47.5 % "B only"
+    u = rng.random((runs, pairs))
+    a_only, b_only = np.cumsum(u < 0.025, axis=1), np.cumsum((u >= 0.025) & (u < 0.5), axis=1)
+    hit = mixture_log_e(a_only, b_only) >= math.log(20)
+    stop = np.where(hit.any(axis=1), hit.argmax(axis=1) + 1, pairs + 1)
+    assert np.all(stop <= pairs) and np.mean(stop <= 50) >= 0.99
+    assert np.median(stop) <= 20  # the fixed-n exact McNemar test needs 19 pairs for 80 % power here
+    assert pairs_for_mcnemar(0.025, 0.475) == 19
+
+
+def test_sequential_comparison_splits_alpha_and_refuses_incomplete_rounds():
+    comparison = SequentialComparison([("a", "b"), ("a", "c")], ["in", "ood"], alpha=0.05)
+    assert all(t.alpha == pytest.approx(0.0125) for t in comparison.tests.values())
+    with pytest.raises(RecordError, match="lacks the record of c"):
+        comparison.add_round([make_record("a", "in", 0, 0), make_record("b", "in", 0, 0)])
+    with pytest.raises(ConfigError):
+        SequentialComparison([], ["in"])
+
+
+LIMP = '''
+    """A controller that switches its motors off: the robot folds and falls within a second."""
+    import numpy as np
+
+    from wbc.types import MotorCommand
+
+
+    class Limp:
+        rate_hz = 50.0
+
+        def __init__(self, desc):
+            self.command = MotorCommand.damping(desc.num_joints, 0.0)
+
+        def reset(self):
+            pass
+
+        def act(self, state, command):
+            return self.command
+
+        def counters(self):
+            return {}
+
+
+    def make(desc):
+        return Limp(desc)
+'''
+
+SHORT = """
+[scenario]
+name = "short"
+version = 1
+description = "short pushes"
+robot = "a1-wx200"
+duration_s = 1.5
+
+[terrain]
+kind = "flat"
+
+[commands]
+[[commands.options]]
+vx = 0.0
+
+[pushes]
+first_s = [0.5, 0.6]
+interval_s = [0.5, 0.6]
+duration_s = 0.05
+offset_m = 0.1
+
+[[bands]]
+name = "soft"
+push_force_n = [50.0, 100.0]
+"""
+
+
+@pytest.fixture
+def limp(tmp_path, monkeypatch):
+    root = tmp_path / "limproot"
+    (root / "limppkg").mkdir(parents=True)
+    (root / "limppkg" / "__init__.py").write_text('"""Test plug-ins."""\n')
+    (root / "limppkg" / "limp.py").write_text(textwrap.dedent(LIMP).lstrip())
+    monkeypatch.syspath_prepend(str(root))
+    yield "limppkg.limp:make"
+    for name in [m for m in sys.modules if m.startswith("limppkg")]:
+        del sys.modules[name]
+
+
+def test_until_significant_stops_the_run_once_the_difference_is_settled(limp, tmp_path):
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SHORT)
+    cfg = ArenaConfig(controllers=("stand", limp), scenario=scenario, trials=12, out_dir=tmp_path / "run",
+                      workers=1, progress=False, until_significant=True)
+    result = run_arena(cfg)
+    records = TrialRecord.read_csv(tmp_path / "run" / "trials.csv")
+    # stand survives every soft push and the limp robot falls every time: every pair is discordant, and the mixture
+    # test reaches 1 / alpha = 20 at the 7th (E = 1, 1, 1.5, 2.5, 4.4, 7.9, 14.4, 26.8)
+    assert all(r.success for r in records if r.controller == "stand")
+    assert not any(r.success for r in records if r.controller == limp)
+    sequential = result.summary["sequential"]
+    assert sequential["settled"] and sequential["rounds"] == 7
+    assert sequential["tests"][0]["rejected_after_pairs"] == 7 and sequential["tests"][0]["b_only"] == 0
+    assert len(records) == 14 and result.played == 14 and result.budget == 24
+    assert json.loads((tmp_path / "run" / "summary.json").read_text())["sequential"] == sequential
+    # resuming the finished run plays nothing more; a fixed-budget run is another configuration
+    again = run_arena(ArenaConfig(**{**cfg.__dict__, "resume": True}))
+    assert again.played == 0 and again.summary == result.summary
+    with pytest.raises(ConfigError, match="local executor"):
+        ArenaConfig(controllers=("stand", limp), scenario=scenario, executor="ray", until_significant=True)

@@ -1,0 +1,195 @@
+"""A played paper table as text: our rows beside the paper's, the paired comparisons with verdicts, where each fails.
+
+`format_paper_table` is what ``wbc paper TABLE`` prints and writes to ``paper.txt``:
+
+1. a header: the scenario (name, version, file, hash, published or not), the size of the run and the paper's
+   protocol, and what a cell shows (ours: mean ± std over seeds, or from one seed the mean and its 95 % interval
+   over trials; the paper's: mean ± std over its 5 seeds);
+2. one block per metric of the table, a line per paper row followed by our contenders standing beside it (the
+   learned and the model-based family), a column per band (matched to the paper's columns by position);
+3. the table's paired comparisons, B - A on the same trials, with the 95 % bootstrap interval, the test's p-value
+   (exact McNemar for success, Wilcoxon signed-rank otherwise), the discordant pairs and n80, and a verdict per band;
+4. where each contender fails, per band (`wbc.arena.breakdown`), and the push-recovery curve's file;
+5. the run time, each controller's time per trial, and the paper's protocol's cost estimated from them.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
+from wbc.arena.breakdown import breakdown_tables
+from wbc.arena.report import LABELS, cell_text, n80_text, number_text, p_text, signed_text
+from wbc.tools.paper.paper_numbers import PaperValue
+from wbc.tools.paper.tables import Contender
+
+if TYPE_CHECKING:
+    from wbc.tools.paper.paper_table import PaperTableResult
+
+__all__ = ["ALPHA", "display_name", "format_paper_table", "verdict"]
+
+ALPHA = 0.05
+"""The level the verdicts are read at (two-sided)."""
+
+_LOWER_IS_BETTER = {"vlin_err", "vang_err"}
+_WIDTH = 118
+
+
+def _columns(header: Sequence[str], rows: Sequence[Sequence[str]], indent: str = "  ") -> list[str]:
+    widths = [max(len(str(row[i])) for row in (header, *rows)) for i in range(len(header))]
+    lines = [indent + "  ".join(str(h).ljust(w) for h, w in zip(header, widths, strict=True)).rstrip(),
+             indent + "  ".join("-" * w for w in widths)]
+    lines += [indent + "  ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)).rstrip() for row in rows]
+    return lines
+
+
+def _wrap(text: str, indent: str = "") -> list[str]:
+    return textwrap.wrap(text, width=_WIDTH, initial_indent=indent, subsequent_indent=indent + "  ")
+
+
+def _paper_cell(value: PaperValue | None, metric: str) -> str:
+    if value is None:
+        return "-"
+    mean = number_text(value.mean, metric)
+    return mean if value.std is None else f"{mean} ± {number_text(value.std, metric)}"
+
+
+def verdict(entry: Mapping[str, Any], *, alpha: float = ALPHA) -> str:
+    """One comparison in words: which side is better, or that the test finds no difference and what would.
+
+    Success and TTF: larger is better; tracking errors: smaller is better. "Better" only when the paired test's
+    p-value is at most `alpha`; otherwise "no significant difference", with n80 (the pairs that would detect the
+    observed difference with 80 % power).
+    """
+    metric, p, diff = entry["metric"], entry.get("p"), entry.get("diff")
+    what = LABELS[metric].split(" [")[0].removesuffix(" %")
+    if p is None or diff is None:
+        return f"{what}: no pairs"
+    if p <= alpha and diff != 0.0:
+        b_better = (diff < 0.0) if metric in _LOWER_IS_BETTER else (diff > 0.0)
+        winner = entry["b"] if b_better else entry["a"]
+        unit = " points" if metric == "success_rate" else ""
+        return f"{what}: {winner} better ({signed_text(diff, metric)}{unit}, p = {p_text(p)})"
+    n80 = n80_text(entry)
+    need = "" if n80 == "-" else f"; {n80} pairs would detect the observed difference"
+    return f"{what}: no significant difference (p = {p_text(p)}{need})"
+
+
+def _metric_block(result: PaperTableResult, metric: str) -> list[str]:
+    spec, summary = result.spec, result.summary
+    header = ["paper row", "ours", *(f"{band} (paper {col})" if col else band
+                                     for band, col in _band_columns(result))]
+    rows: list[list[str]] = []
+    for paper_row in spec.paper:
+        cells = spec.paper[paper_row].get(metric, ())
+        rows.append([paper_row, "paper", *(_paper_cell(cells[i] if i < len(cells) else None, metric)
+                                           for i in range(len(result.bands)))])
+        for contender in (c for c in result.contenders if c.row == paper_row):
+            name = display_name(contender)
+            if contender.controller is None:
+                rows.append(["", f"{contender.key}: missing", *("-" for _ in result.bands)])
+                continue
+            entry = summary["controllers"].get(contender.controller, {}).get("bands", {})
+            rows.append(["", name, *(cell_text(entry[b][metric], metric, entry[b].get("seeds")) if b in entry
+                                     else "n/a" for b in result.bands)])
+    return [LABELS[metric], *_columns(header, rows)]
+
+
+def display_name(contender: Contender) -> str:
+    """How a contender is named in the tables.
+
+    Its controller, or its key when that is a policy file (the header lists the file), with pi1 / pi2 / pi3 said for
+    the learned arm variants.
+    """
+    if contender.controller is None or contender.controller.startswith("policy:"):
+        return contender.key
+    stage = contender.note.split(" ")[0]
+    return f"{contender.controller} ({stage})" if stage in ("pi1", "pi2", "pi3") else contender.controller
+
+
+def _names(result: PaperTableResult) -> dict[str, str]:
+    """Controller name -> its `display_name` in this table."""
+    return {c.controller: display_name(c) for c in result.contenders if c.controller is not None}
+
+
+def _band_columns(result: PaperTableResult) -> list[tuple[str, str]]:
+    cols = result.spec.paper_columns
+    return [(band, cols[i] if i < len(cols) else "") for i, band in enumerate(result.bands)]
+
+
+def _comparison_lines(result: PaperTableResult) -> list[str]:
+    lines = _wrap("paired comparisons, B - A on the same trials (success and its interval in points; p: exact McNemar "
+                  "for success, Wilcoxon signed-rank otherwise, two-sided, each comparison on its own; n80: pairs for "
+                  "80 % power at the observed difference)")
+    names = {c.key: display_name(c) for c in result.contenders}
+    questions: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for entry in result.comparisons:
+        questions.setdefault((entry["a"], entry["b"]), []).append(entry)
+    if not questions:
+        return [*lines, "  (none: a contender of every comparison is missing)"]
+    for (a, b), entries in questions.items():
+        lines.append("")
+        lines.append(f"{entries[0]['question']}: B = {names[b]}, A = {names[a]}")
+        rows = []
+        for e in entries:
+            discordant = f"{e['a_only']} / {e['b_only']}" if e.get("a_only") is not None else ""
+            ci = e["ci95"]
+            ci_text = "n/a" if None in ci else f"[{signed_text(ci[0], e['metric'])}, {signed_text(ci[1], e['metric'])}]"
+            rows.append([e["band"], LABELS[e["metric"]], signed_text(e["diff"], e["metric"]), ci_text, p_text(e["p"]),
+                         discordant, n80_text(e)])
+        lines += _columns(["band", "metric", "B - A", "95% CI", "p", "A only / B only", "n80"], rows)
+        for band in result.bands:
+            said = "; ".join(verdict({**e, "a": names[a], "b": names[b]}) for e in entries if e["band"] == band)
+            lines += _wrap(f"band {band}: {said}", indent="  ")
+    return lines
+
+
+def _failure_lines(result: PaperTableResult) -> list[str]:
+    pushes = bool(result.curve.get("edges"))
+    lines = _wrap("where each contender fails (success by command; each push survived by where its force points and "
+                  "by its offset axis; falls before any push / after one, and the median time from that push to the "
+                  "fall)" if pushes else "where each contender fails (success by command; the scenario has no pushes)")
+    names = _names(result)
+    for band in result.bands:
+        lines += ["", f"band {band}"]
+        for i, (header, rows) in enumerate(breakdown_tables(result.failures, band, pushes=pushes)):
+            lines += [""] * (i > 0) + _columns(header, [[names.get(row[0], row[0]), *row[1:]] for row in rows])
+    if pushes:
+        lines += ["", f"push-recovery curve (survival of each push against its impulse, Wilson 95 % intervals): "
+                  f"{result.out_dir / 'push_recovery.png'}"]
+    return lines
+
+
+def format_paper_table(result: PaperTableResult) -> str:
+    """The whole printout of a played paper table (module docstring), ending with a newline."""
+    spec, sc = result.spec, result.scenario
+    one_seed = len(result.seeds) == 1
+    lines = [spec.title, ""]
+    lines += _wrap(f"scenario {sc['name']} v{sc['version']} ({sc['path']}), hash {sc['hash']}, "
+                   + ("published" if sc["published"] else "NOT published (not comparable with published results)")
+                   + f"; robot {spec.robot}")
+    lines += _wrap(f"ours: {result.trials} trials x {len(result.seeds)} seed{'s' if not one_seed else ''} per band "
+                   f"and controller, {sc['duration_s']:g} s each; cells: "
+                   + ("mean [95 % interval over trials: Wilson for success, bootstrap otherwise]" if one_seed else
+                      "mean ± std over seeds (each seed's trials averaged first)")
+                   + f". Paper: {spec.paper_protocol}; cells: mean ± std over seeds where it gives one.")
+    for c in result.contenders:
+        if c.controller is None:
+            lines += _wrap(f"missing: {c.row} ({c.key}): {c.note}")
+        elif c.controller.startswith("policy:"):
+            lines += _wrap(f"{c.key} = {c.controller}: {c.note}")
+    for metric in spec.metrics:
+        lines += ["", *_metric_block(result, metric)]
+    lines += ["", *_comparison_lines(result)]
+    lines += ["", *_failure_lines(result)]
+    names = _names(result)
+    per_trial = ", ".join(f"{names.get(c, c)} {s:.1f} s" for c, s in result.trial_wall_s.items())
+    lines += [""]
+    lines += _wrap(f"run: {result.played} trials played in {result.wall_s:.0f} s ({result.workers or 'all'} "
+                   f"worker{'s' if result.workers != 1 else ''}); mean wall time per trial: {per_trial}. The paper's "
+                   f"protocol (2000 trials per band and contender) would take about "
+                   f"{result.paper_protocol_cpu_h:.0f} CPU hours here.")
+    lines += [f"results: {result.out_dir}/ (paper.txt, paper.json, report.md, trials.csv, summary.json, "
+              "failures.json, plots)"]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,208 @@
+"""``wbc paper table1|table2|table3``: play a paper table's protocol in the arena and put our rows beside the paper's.
+
+`run_paper_table` resolves the table's contenders (`wbc.tools.paper.tables`), plays them on the same trials of the
+scenario (`wbc.arena.compare.run_arena`: resumable, every trial stored as it finishes, the arena's report with the
+breakdown of where each contender fails and the push-recovery curve), then computes the table's paired comparisons
+(difference, bootstrap interval, exact McNemar or Wilcoxon p-value, n80: `wbc.arena.report.paired_comparison`) and
+writes ``paper.txt`` (what the command prints, `wbc.tools.paper.format.format_paper_table`) and ``paper.json`` beside
+the arena's files.
+
+The default size, `DEFAULT_TRIALS` trials x `DEFAULT_SEEDS` seed per band, fits a 2-core machine (README, "The
+paper's tables", for measured run times); the paper's protocol is 5 seeds and 2000 trials: ``--seeds 5 --trials
+400``. With one seed the cells show the mean's 95 % interval over trials, not a spread over seeds.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.record import TrialRecord
+from wbc.arena.report import METRIC_KEYS, paired_comparison
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.scenario import ScenarioError, check_published, load_scenario
+from wbc.tools.paper.format import format_paper_table
+from wbc.tools.paper.tables import TABLES, Contender, PaperTableSpec, resolve_contenders
+
+__all__ = ["DEFAULT_SEEDS", "DEFAULT_TRIALS", "PAPER_TRIALS_PER_BAND", "PaperRunConfig", "PaperTableResult",
+           "run_paper_table"]
+
+DEFAULT_TRIALS = 10
+"""Trials per band and seed by default: the size that fits a 2-core machine in minutes, not hours."""
+
+DEFAULT_SEEDS = 1
+"""Seeds by default."""
+
+PAPER_TRIALS_PER_BAND = 2000
+"""The paper's trials per band and contender (over its 5 seeds), for the run-time estimate printed with each table."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class PaperRunConfig:
+    """What ``wbc paper TABLE`` plays.
+
+    Attributes:
+        table: ``table1``, ``table2`` or ``table3``.
+        trials: trials per band and seed.
+        seeds: seeds 0 .. seeds - 1.
+        scenario: the scenario file (None: the table's; a later version of it, or another scenario with the same
+            robot and the same number of bands, works alike).
+        out_dir: results directory (None: ``runs/paper-<table>-<time>``).
+        workers: local worker processes (None: all cores).
+        resume: finish an interrupted run in `out_dir`.
+        progress: progress on stderr.
+        contenders: ``--contender KEY=CONTROLLER`` overrides, by key.
+    """
+
+    table: str
+    trials: int = DEFAULT_TRIALS
+    seeds: int = DEFAULT_SEEDS
+    scenario: Path | None = None
+    out_dir: Path | None = None
+    workers: int | None = None
+    resume: bool = False
+    progress: bool = True
+    contenders: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.table not in TABLES:
+            raise UnknownNameError("paper table", self.table, tuple(TABLES))
+        if self.trials < 1 or self.seeds < 1:
+            raise ConfigError(f"--trials and --seeds must be >= 1, got {self.trials} and {self.seeds}")
+
+
+@dataclass(frozen=True, kw_only=True)
+class PaperTableResult:
+    """A played paper table.
+
+    Attributes:
+        spec: the table.
+        contenders: our rows as played (missing ones with controller None).
+        scenario: name, version, path, hash and whether it is published.
+        bands: the scenario's bands, in the order matched to the paper's columns.
+        trials: trials per band and seed.
+        seeds: the seeds.
+        summary: the arena's ``summary.json``.
+        comparisons: one entry per (contrast, band, metric): ``{"a", "b", "question", "band", "metric"}`` and the
+            `wbc.arena.report.paired_comparison` fields.
+        failures: the arena's breakdown of where each contender fails (`wbc.arena.breakdown.breakdown`).
+        curve: the push-recovery curve (`wbc.arena.breakdown.recovery_curve`).
+        trial_wall_s: each controller's mean wall time per trial [s].
+        out_dir: the results directory.
+        played: trials played by this call.
+        wall_s: wall time of this call [s].
+        workers: worker processes used.
+    """
+
+    spec: PaperTableSpec
+    contenders: tuple[Contender, ...]
+    scenario: dict[str, Any]
+    bands: tuple[str, ...]
+    trials: int
+    seeds: tuple[int, ...]
+    summary: dict[str, Any]
+    comparisons: list[dict[str, Any]]
+    failures: dict[str, Any]
+    curve: dict[str, Any]
+    trial_wall_s: dict[str, float]
+    out_dir: Path
+    played: int
+    wall_s: float
+    workers: int | None
+
+    @property
+    def paper_protocol_cpu_h(self) -> float:
+        """CPU hours the paper's protocol (`PAPER_TRIALS_PER_BAND` per band and contender) would take here.
+
+        Estimated from this run's mean wall time per trial of each controller (one core per trial; a trial that
+        falls ends early, so a controller that falls less costs more).
+        """
+        return sum(self.trial_wall_s.values()) * PAPER_TRIALS_PER_BAND * len(self.bands) / 3600.0
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-serialisable (``paper.json``)."""
+        return {
+            "table": self.spec.name, "title": self.spec.title,
+            "contenders": [{"key": c.key, "row": c.row, "family": c.family, "controller": c.controller,
+                            "note": c.note} for c in self.contenders],
+            "scenario": self.scenario, "bands": list(self.bands), "paper_columns": list(self.spec.paper_columns),
+            "trials": self.trials, "seeds": list(self.seeds), "comparisons": self.comparisons,
+            "trial_wall_s": self.trial_wall_s, "wall_s": self.wall_s, "played": self.played,
+            "workers": self.workers, "paper_protocol_cpu_h": self.paper_protocol_cpu_h,
+            "paper": {row: {m: [{"mean": v.mean, "std": v.std} for v in values] for m, values in cells.items()}
+                      for row, cells in self.spec.paper.items()},
+        }
+
+
+def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
+    """Play a paper table's protocol and compute its comparisons; write the arena's files, ``paper.txt/json``.
+
+    Raises:
+        UnknownNameError: an unknown table or ``--contender`` key.
+        ScenarioError: the scenario file is invalid.
+        ConfigError: the scenario is for another robot than the table's, or options out of range.
+        ResultsDirError: `out_dir` holds another run (or, without `resume`, any run).
+    """
+    spec = TABLES[cfg.table]
+    contenders = resolve_contenders(spec, cfg.contenders)
+    scenario_path = cfg.scenario or Path(spec.scenario)
+    scenario = load_scenario(scenario_path)
+    if scenario.robot != spec.robot:
+        raise ConfigError(f"{spec.name} is played by {spec.robot}, but {scenario_path} is a scenario for "
+                          f"{scenario.robot}; pass --scenario with a {spec.robot} scenario (default {spec.scenario})")
+    try:
+        check_published(scenario)
+        published = True
+    except ScenarioError:
+        published = False
+    played_rows = [c for c in contenders if c.controller is not None]
+    out = cfg.out_dir or Path("runs") / f"paper-{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    start = time.perf_counter()
+    arena = run_arena(ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
+                                  seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
+                                  resume=cfg.resume, progress=cfg.progress))
+    wall = time.perf_counter() - start
+    records = [r for r in TrialRecord.read_csv(arena.out_dir / "trials.csv") if r.scenario_hash == scenario.hash]
+    by_controller: dict[str, list[TrialRecord]] = {}
+    for record in records:
+        by_controller.setdefault(record.controller, []).append(record)
+    key_to_controller = {c.key: c.controller for c in played_rows}
+    comparisons = []
+    for contrast in spec.contrasts:
+        a, b = key_to_controller.get(contrast.a), key_to_controller.get(contrast.b)
+        if a is None or b is None:
+            continue
+        for band in scenario.bands:
+            cell_a = [r for r in by_controller.get(a, []) if r.band == band]
+            cell_b = [r for r in by_controller.get(b, []) if r.band == band]
+            for metric in spec.metrics:
+                result = paired_comparison(cell_a, cell_b, METRIC_KEYS[metric])
+                comparisons.append({"a": contrast.a, "b": contrast.b, "question": contrast.question, "band": band,
+                                    "metric": metric, **_finite(result)})
+    failures = json.loads((arena.out_dir / "failures.json").read_text(encoding="utf-8"))
+    wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}
+    result = PaperTableResult(
+        spec=spec, contenders=contenders,
+        scenario={"name": scenario.name, "version": scenario.version, "path": str(scenario_path),
+                  "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
+        bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
+        comparisons=comparisons, failures=failures["breakdown"], curve=failures["push_recovery"],
+        trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, wall_s=wall, workers=cfg.workers)
+    (arena.out_dir / "paper.txt").write_text(format_paper_table(result), encoding="utf-8")
+    (arena.out_dir / "paper.json").write_text(json.dumps(result.as_dict(), indent=2), encoding="utf-8")
+    return result
+
+
+def _finite(result: Mapping[str, Any]) -> dict[str, Any]:
+    """A paired comparison with NaN as None, for JSON."""
+    out = dict(result)
+    for key in ("diff", "p"):
+        if out[key] is not None and out[key] != out[key]:
+            out[key] = None
+    out["ci95"] = [None if x != x else x for x in out["ci95"]]
+    return out

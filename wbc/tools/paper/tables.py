@@ -1,0 +1,179 @@
+"""The paper's three tables as protocols: which contenders play which scenario, what is compared, the paper's rows.
+
+- Table I (push recovery, a1-wx200, ``scenarios/push.toml``): the arm actuated, locked and absent, for both
+  families: the learned policies (pi3, pi2, pi1: ``learned``, ``learned-locked``, ``learned-noarm``) and the
+  model-based controller (``mpc``, ``mpc-locked``, ``mpc-noarm``).
+- Table II (fast turns, go1-arm, ``scenarios/turn.toml``): the same six names, which play the go1-arm weights and
+  the MPC on the Go1.
+- Table III (the staged method against its baselines, ``scenarios/push.toml``): pi3 (``learned``, "Ours") and the
+  stage-3 baselines of `wbc.learned.train.stages.BASELINES` whose exported policy ships in
+  ``wbc/learned/weights/a1-wx200-actuated-<baseline>.npz``, played as ``policy:PATH``; a baseline without shipped
+  weights is listed as missing with the command that trains it, or given with ``--contender NAME=CONTROLLER``.
+
+Every contender has a key (the controller name it plays by default, or the baseline's name); ``--contender
+KEY=CONTROLLER`` plays another controller in its row (a policy retrained on another scenario version, say). The
+comparisons each table prints are pairs of keys, B - A on the same trials.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.learned.policy.shipped import WEIGHTS_DIR
+from wbc.learned.train.stages import BASELINES
+from wbc.tools.paper.paper_numbers import TABLE_I, TABLE_II, TABLE_III, PaperValue
+
+__all__ = ["Contender", "Contrast", "PaperTableSpec", "TABLES", "resolve_contenders"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Contender:
+    """One row of ours.
+
+    Attributes:
+        key: the name ``--contender`` refers to it by.
+        row: the paper's row it stands beside (``Actuated``, ``Ours``, ``PPO`` ...).
+        family: ``learned`` or ``model-based``.
+        controller: the arena controller name it plays; None when it is missing.
+        note: what it is (``pi3``), or why it is missing and how to get it.
+    """
+
+    key: str
+    row: str
+    family: str
+    controller: str | None
+    note: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class Contrast:
+    """A paired comparison a table prints: B - A on the same trials.
+
+    Attributes:
+        a: the key of A.
+        b: the key of B.
+        question: what it answers, in words (``actuated vs locked arm, learned``).
+    """
+
+    a: str
+    b: str
+    question: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class PaperTableSpec:
+    """A paper table as a protocol.
+
+    Attributes:
+        name: ``table1``, ``table2`` or ``table3``.
+        title: what the table shows.
+        scenario: the default scenario file.
+        robot: the robot the table's contenders drive.
+        metrics: the summary metrics of its columns, in order (`wbc.arena.report.METRICS` names).
+        paper_columns: the paper's column labels, matched to the scenario's bands by position.
+        paper: paper row -> metric -> a `PaperValue` per column.
+        contenders: our rows, in the order they are played (printed grouped by the paper's rows).
+        contrasts: the paired comparisons printed under the table.
+        paper_protocol: how the paper evaluated it (seeds, trials, episode length).
+    """
+
+    name: str
+    title: str
+    scenario: str
+    robot: str
+    metrics: tuple[str, ...]
+    paper_columns: tuple[str, ...]
+    paper: Mapping[str, Mapping[str, tuple[PaperValue, ...]]]
+    contenders: tuple[Contender, ...]
+    contrasts: tuple[Contrast, ...]
+    paper_protocol: str
+
+
+def _arm_rows() -> tuple[Contender, ...]:
+    # played in this order (the arena's, and its report's); the printed table groups them by the paper's rows
+    return (
+        Contender(key="learned", row="Actuated", family="learned", controller="learned", note="pi3"),
+        Contender(key="learned-locked", row="Locked", family="learned", controller="learned-locked", note="pi2"),
+        Contender(key="learned-noarm", row="No arm", family="learned", controller="learned-noarm", note="pi1"),
+        Contender(key="mpc", row="Actuated", family="model-based", controller="mpc", note="MPC"),
+        Contender(key="mpc-locked", row="Locked", family="model-based", controller="mpc-locked", note="MPC"),
+        Contender(key="mpc-noarm", row="No arm", family="model-based", controller="mpc-noarm", note="MPC"),
+    )
+
+
+_ARM_CONTRASTS = (
+    Contrast(a="learned-locked", b="learned", question="actuated vs locked arm, learned (pi3 - pi2)"),
+    Contrast(a="learned-noarm", b="learned", question="actuated arm vs no arm, learned (pi3 - pi1)"),
+    Contrast(a="mpc-locked", b="mpc", question="actuated vs locked arm, model-based"),
+    Contrast(a="mpc-noarm", b="mpc", question="actuated arm vs no arm, model-based"),
+    Contrast(a="mpc", b="learned", question="learned vs model-based, arm actuated"),
+)
+
+_BASELINE_ROWS = {"ppo": "PPO", "curriculum": "PPO cur", "finetune-pi2": "Fine-tuned pi2", "decoupled": "Decoupled",
+                  "one-stage-demo": "One stage demonstration"}
+"""`BASELINES` name -> its row in the paper's Table III."""
+
+
+def _policy_name(path: Path) -> str:
+    """``policy:PATH``, PATH relative to the working directory when inside it (shorter in tables and run.json)."""
+    rel = os.path.relpath(path)
+    return f"policy:{path if rel.startswith('..') else rel}"
+
+
+def _baseline_rows() -> tuple[Contender, ...]:
+    rows = [Contender(key="ours", row="Ours", family="learned", controller="learned", note="pi3 (staged: PPO + BC)")]
+    for baseline, row in _BASELINE_ROWS.items():
+        weights = WEIGHTS_DIR / f"a1-wx200-actuated-{baseline}.npz"
+        if weights.is_file():
+            rows.append(Contender(key=baseline, row=row, family="learned", controller=_policy_name(
+                weights.with_suffix("")), note=BASELINES[baseline]))
+        else:
+            rows.append(Contender(key=baseline, row=row, family="learned", controller=None,
+                                  note=f"no shipped weights (train: wbc train --task push --stage 3 --baseline "
+                                  f"{baseline}; play: --contender {baseline}=policy:PATH)"))
+    return tuple(rows)
+
+
+TABLES: dict[str, PaperTableSpec] = {
+    "table1": PaperTableSpec(
+        name="table1", title="Table I: locomotion under pushes, arm actuated / locked / absent",
+        scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
+        paper_columns=("200-300", "300-400"), paper=TABLE_I, contenders=_arm_rows(), contrasts=_ARM_CONTRASTS,
+        paper_protocol="5 seeds, 2000 trials, 20 s each"),
+    "table2": PaperTableSpec(
+        name="table2", title="Table II: high-speed turns, arm actuated / locked / absent",
+        scenario="scenarios/turn.toml", robot="go1-arm", metrics=("success_rate", "vang_err", "vlin_err"),
+        paper_columns=("1", "1.25", "1.5"), paper=TABLE_II, contenders=_arm_rows(), contrasts=_ARM_CONTRASTS,
+        paper_protocol="5 seeds, 2000 trials, 20 s each; yaw rate 0.5 rad/s in half the trials, 2 rad/s in the rest"),
+    "table3": PaperTableSpec(
+        name="table3", title="Table III: the staged method against its baselines, under pushes",
+        scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
+        paper_columns=("200-300", "300-400"), paper=TABLE_III, contenders=_baseline_rows(),
+        contrasts=tuple(Contrast(a=key, b="ours", question=f"Ours vs {row}") for key, row in _BASELINE_ROWS.items()),
+        paper_protocol="2000 trials, 20 s each; half standing, half at 0.3 m/s"),
+}
+"""The three tables, by the name ``wbc paper`` takes."""
+
+
+def resolve_contenders(spec: PaperTableSpec, overrides: Mapping[str, str]) -> tuple[Contender, ...]:
+    """The table's contenders with ``--contender KEY=CONTROLLER`` applied.
+
+    Raises:
+        UnknownNameError: a key that is not one of the table's (the message lists them).
+        ConfigError: two rows would play the same controller.
+    """
+    keys = [c.key for c in spec.contenders]
+    for key in overrides:
+        if key not in keys:
+            raise UnknownNameError(f"{spec.name} contender", key, keys)
+    rows = tuple(replace(c, controller=overrides[c.key], note=f"given by --contender {c.key}=...")
+                 if c.key in overrides else c for c in spec.contenders)
+    played = [c.controller for c in rows if c.controller is not None]
+    if len(set(played)) != len(played):
+        raise ConfigError(f"{spec.name}: two rows play the same controller ({', '.join(played)}); give each row its "
+                          "own")
+    return rows
