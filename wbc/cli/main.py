@@ -9,9 +9,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, run_arena
@@ -34,6 +37,7 @@ from wbc.hardware.emulators import (
     UnitreeEmulatorConfig,
 )
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
@@ -133,6 +137,7 @@ def _bench_train(args: argparse.Namespace) -> int:
 
 
 def _bench_hw(args: argparse.Namespace) -> int:
+    realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport)
     if args.json:
         printers.print_json(result)
@@ -142,6 +147,7 @@ def _bench_hw(args: argparse.Namespace) -> int:
 
 
 def _bench_latency(args: argparse.Namespace) -> int:
+    realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     result = bench_latency(tuple(args.controllers), wire_robot=args.robot, scenario=args.scenario,
                            trials=args.trials, wire=not args.no_wire)
     if args.json:
@@ -152,6 +158,7 @@ def _bench_latency(args: argparse.Namespace) -> int:
 
 
 def _bench_arm(args: argparse.Namespace) -> int:
+    realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     try:
         rates = tuple(float(r) for r in args.rates.split(","))
     except ValueError:
@@ -172,7 +179,35 @@ def _address(text: str, option: str) -> tuple[str, int]:
     return host, int(port)
 
 
+class _Stop(Exception):
+    """SIGINT or SIGTERM arrived while an emulator served."""
+
+
+@contextmanager
+def _stopped_by_signals() -> Iterator[None]:
+    """End the block cleanly on Ctrl-C, SIGINT or SIGTERM, so that the emulator still prints its counts.
+
+    Both are set explicitly: a shell starts a background job with SIGINT ignored, and a script stops it with ``kill``.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signals reach the main thread only; a caller on another thread stops by --seconds
+        return
+
+    def stop(signum: int, frame: object) -> None:
+        raise _Stop(signum)
+
+    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    except (_Stop, KeyboardInterrupt):
+        pass
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
 def _hw_emulate(args: argparse.Namespace) -> int:
+    realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     if args.robot not in _WIRE_OF:
         raise UnknownNameError("robot", args.robot, tuple(_WIRE_OF))
     if args.arm not in ARM_MODES:
@@ -201,11 +236,9 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         printers.print_emulator_started(cfg.robot, cfg.mode, emulator.address, [f.value for f in faults],
                                         seconds=args.seconds, held=cfg.held_until_driven)
         end = time.monotonic() + args.seconds if args.seconds is not None else float("inf")
-        try:
+        with _stopped_by_signals():
             while time.monotonic() < end and emulator.failure is None:
                 time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
-        except KeyboardInterrupt:
-            pass
     printers.print_emulator_counts(EmulatorCounts.of(emulator))
     if emulator.failure is not None:
         raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
@@ -223,11 +256,9 @@ def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | 
         printers.print_robot_emulator_started(robot, mode, emulator.address, emulator.port, names, seconds=seconds,
                                               held=held)
         end = time.monotonic() + seconds if seconds is not None else float("inf")
-        try:
+        with _stopped_by_signals():
             while time.monotonic() < end and emulator.failure is None:
                 time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
-        except KeyboardInterrupt:
-            pass
     printers.print_emulator_counts(EmulatorCounts.of(emulator.legs))
     printers.print_bus_counts(emulator.arm.stats)
     if emulator.failure is not None:
@@ -287,6 +318,7 @@ def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
 
 
 def _hw_check(args: argparse.Namespace) -> int:
+    realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     host, port = _hardware_target(args, "check a real robot")
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
@@ -326,6 +358,7 @@ def _hw_check(args: argparse.Namespace) -> int:
 
 
 def _hw_run(args: argparse.Namespace) -> int:
+    realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     if args.sim == (args.target is not None):
         raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
                           "protocol on the simulator; not both")

@@ -33,6 +33,7 @@ from wbc.control.stand import stand_command
 from wbc.errors import BenchError
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
 from wbc.hardware.emulators import LEG_WIRES, RobotEmulator, RobotEmulatorConfig
+from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
 from wbc.robots.registry import get_robot
@@ -135,6 +136,7 @@ def serve_robot_emulator_stdio(robot: str, seconds: float) -> None:
     Writes the UDP address and the pty as a JSON line, serves until a line arrives on stdin (or `seconds` plus a
     margin pass), then writes any failure as a JSON line.
     """
+    realtime_switch_interval()  # the emulated robot answers its wires promptly
     with RobotEmulator(RobotEmulatorConfig(robot=robot, mode="realtime")) as emu:
         host, port = emu.address
         print(json.dumps({"host": host, "port": port, "pty": emu.port}), flush=True)

@@ -25,6 +25,7 @@ import numpy as np
 import wbc
 from wbc.errors import BenchError
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.unitree import (
     REJECT_REASONS,
     SdkTransport,
@@ -119,6 +120,7 @@ def serve_emulator_stdio(robot: str, seconds: float) -> None:
     Writes the address as a JSON line, serves until a line arrives on stdin (or `seconds` plus a margin pass:
     never longer), then writes the counts (`EmulatorCounts`) and any failure as a JSON line.
     """
+    realtime_switch_interval()  # the emulated robot answers its wires promptly
     with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode="lockstep")) as emu:
         host, port = emu.address
         print(json.dumps({"host": host, "port": port}), flush=True)
