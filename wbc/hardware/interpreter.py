@@ -9,7 +9,7 @@ module's. `realtime_switch_interval` shortens the interval, so that a link threa
 its turn; the commands that talk to motors (`wbc hw run`, `wbc hw emulate`, `wbc hw check`, the hardware benches)
 call it once at start, and a script of your own that drives a real robot should too. It costs the computing thread
 some switching overhead and changes nothing else.
-
+"""
 
 from __future__ import annotations
 
