@@ -408,6 +408,35 @@ def test_transport_is_a_constructor_argument() -> None:
     assert sum(damping[:20]) >= 20  # before the state arrived (50 ms at 500 Hz), damping only
 
 
+
+def test_advance_waits_only_when_nothing_newer_than_the_last_read_has_arrived() -> None:
+    """A loop whose work took most of its period goes on at once with the state that arrived meanwhile; only when the
+    newest state is the one it already read does `advance` wait (at most two link periods) for another."""
+    fake = FakeTransport()
+    robot = UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9, rate_hz=200.0),
+                         transport=fake)
+    grace = 2.0 / 200.0  # [s] two link periods
+    state = RobotState(tick=7, time=0.0, q=robot.desc.nominal_q, dq=np.zeros(12), tau_est=np.zeros(12),
+                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
+    fake.inbox.append(encode_state(robot.layout, state))
+    with robot:
+        assert robot.read().tick == 1
+        fake.inbox.append(encode_state(robot.layout, state))  # a state arrives while the loop works
+        deadline = time.monotonic() + 1.0
+        while robot.link_stats().valid_states < 2 and time.monotonic() < deadline:  # until the link has taken it
+            time.sleep(0.001)
+        start = time.monotonic()
+        robot.advance(1e-6)
+        went_on = time.monotonic() - start
+        assert robot.read().tick == 2
+        start = time.monotonic()
+        robot.advance(1e-6)  # nothing newer than tick 2 comes: it waits its grace, then returns
+        waited = time.monotonic() - start
+        assert robot.read().tick == 2
+    assert went_on < 0.8 * grace <= waited
+
+
 _SDK_CLIENT = '''
 import json, socket, sys, time
 from unitree_legged_sdk import robot_interface as ri

@@ -14,7 +14,10 @@ then sends one LowCmd frame:
 robot's own tick has no verified unit), so a frame whose tick did not advance is stale, and `state_age` says for
 how long; `remote()` and `motor_status()` report that state's remote and motor modes and temperatures (the safety
 layer's `RemoteSource` and `MotorStatusSource`). `advance(dt)` paces the caller on a monotonic clock, counts late
-calls, and then waits (at most two link periods) for a state newer than the one there was when it was called.
+calls, and then, unless a state newer than the one the caller last read has already arrived, waits (at most two
+link periods) for one: a loop whose work took most of its period goes on at once with the state that came meanwhile,
+rather than waiting for yet another (which locked the loop to the state stream's phase and made it late on every
+tick over the wire).
 Every value that reaches the wire was clamped twice: by `Robot.write` to the joint table (the URDF's position
 range intersected with the SDK's PositionLimit table) and by `encode_command` while quantising.
 """
@@ -159,6 +162,7 @@ class UnitreeRobot(Robot):
         self._state: RobotState | None = None
         self._extras: LowStateExtras | None = None
         self._fresh = 0
+        self._read_fresh = 0  # `_fresh` when the caller last read
         self._state_at = -np.inf
         self._frame: bytes | None = None
         self._written_at = -np.inf
@@ -228,6 +232,7 @@ class UnitreeRobot(Robot):
         self._raise_failure()
         with self._lock:
             state = self._state
+            self._read_fresh = self._fresh
         if state is None:
             raise RobotLinkError(f"UnitreeRobot({self.config.robot}): no valid state yet")
         return state
@@ -241,7 +246,7 @@ class UnitreeRobot(Robot):
 
     def _advance(self, dt: float) -> None:
         with self._lock:
-            start_tick = self._fresh
+            start_tick = self._read_fresh
         now = time.monotonic()
         if self._pace_deadline is None:
             self._pace_deadline = now
