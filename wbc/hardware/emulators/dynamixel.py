@@ -124,7 +124,8 @@ class DynamixelEmulatorConfig:
             rate (1 start, 8 data, 1 stop bit per byte), as a real bus would; off, answers go out at once.
         check_baud: servos hear only a client that set the port to their baud rate.
         packet_timeout: an incomplete packet is dropped after this much silence on the bus [s].
-        log_size: most recent decoded packets kept.
+        log_size: most recent decoded packets kept; 0 keeps none and skips decoding them for the log (a long log
+            is thousands of objects that each full garbage collection traverses, stalling the answers).
     """
 
     servos: tuple[ServoSpec, ...] = WX200_SERVOS
@@ -402,7 +403,8 @@ class DynamixelEmulator:
             return
         self.stats.packets += 1
         with self._lock:
-            self._log.append(self._logged(pkt, now))
+            if self.config.log_size:
+                self._log.append(self._logged(pkt, now))
             listeners = self._listeners(now)
             if not listeners:
                 self.stats.unheard += 1
