@@ -159,6 +159,24 @@ def test_present_registers_read_the_plant_in_the_joint_convention(bus):
     assert [fast.getData(i, 132, 4) for i in JOINT_IDS] == [group.getData(i, 132, 4) for i in JOINT_IDS]
 
 
+
+def test_a_log_size_of_zero_keeps_no_log_and_still_serves(plant, monkeypatch):
+    """``wbc hw emulate`` runs its emulators without a log: a long one stalls the answers in garbage collections."""
+    monkeypatch.setattr(sdk.port_handler, "LATENCY_TIMER", 1)
+    with DynamixelEmulator(plant, DynamixelEmulatorConfig(log_size=0)) as emu:
+        port = sdk.PortHandler(emu.port)
+        assert port.openPort()
+        bus = Bus(emu, plant, port, sdk.PacketHandler(2.0))
+        try:
+            assert bus.ping(1) == (1020, sdk.COMM_SUCCESS, 0)
+            assert bus.sync_write("goal_current", 2, {1: 10}) == sdk.COMM_SUCCESS
+            assert _wait_for(lambda: emu.register(1, "goal_current") == 10)
+            assert emu.packets() == []
+            assert emu.stats.packets == 2  # counted all the same
+        finally:
+            port.closePort()
+    assert emu.failure is None
+
 def test_sync_write_of_goal_current_reaches_the_plant_and_the_log(bus):
     bus.current_mode()
     assert bus.sync_write("goal_current", 2, {1: 100, 2: -200, 4: 300}) == sdk.COMM_SUCCESS

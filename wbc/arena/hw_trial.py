@@ -55,6 +55,7 @@ from wbc.control.stand import stand_command
 from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError, UnknownNameError
 from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike, WallClock
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.scenario import check_published, load_scenario
@@ -244,6 +245,8 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait for them
     if before_connect is not None:
         before_connect(hardware, spec)
+    if wall:
+        freeze_heap()  # all is built: a full collection of it would stall the link and bus threads (interpreter.py)
     connected_at[0] = time.monotonic()
     with robot:
         _stand_up(robot, safe, console, cfg.settle_s)

@@ -30,6 +30,7 @@ from wbc.control.registry import ControllerSpec, get_controller, list_controller
 from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
 from wbc.hardware.emulators import (
     BusFault,
+    DynamixelEmulatorConfig,
     Fault,
     RobotEmulator,
     RobotEmulatorConfig,
@@ -37,7 +38,7 @@ from wbc.hardware.emulators import (
     UnitreeEmulatorConfig,
 )
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.interpreter import realtime_switch_interval
+from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
@@ -227,10 +228,12 @@ def _hw_emulate(args: argparse.Namespace) -> int:
     wire = _WIRE_OF[args.robot]
     if actuated:
         return _hw_emulate_with_arm(DESCRIPTIONS[wire], mode, args.port, faults, args.seconds, held=not args.drop)
+    # no log: nobody reads it here, and a long one stalls the replies in each full garbage collection
     cfg = UnitreeEmulatorConfig(robot=wire, arm_mode=args.arm, mode=mode, port=args.port,
-                                held_until_driven=not args.drop)
+                                held_until_driven=not args.drop, log_size=0)
     emulator = UnitreeEmulator(cfg)
     with emulator:
+        freeze_heap()  # built and serving: its full collections must not stall the answers
         for fault in faults:
             emulator.inject(fault)
         printers.print_emulator_started(cfg.robot, cfg.mode, emulator.address, [f.value for f in faults],
@@ -248,8 +251,11 @@ def _hw_emulate(args: argparse.Namespace) -> int:
 def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | BusFault],
                          seconds: float | None, *, held: bool) -> int:
     """``wbc hw emulate --arm actuated``: one `RobotEmulator`, legs over UDP and arm over a pty, one physics."""
-    emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode=mode, port=port, held_until_driven=held))
+    # no logs: nobody reads them here, and long ones stall the answers in each full garbage collection
+    emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode=mode, port=port, held_until_driven=held,
+                                                 legs_log_size=0, arm=DynamixelEmulatorConfig(log_size=0)))
     with emulator:
+        freeze_heap()  # built and serving: its full collections must not stall the answers
         for fault in faults:
             emulator.inject(fault)
         names = [f"arm_{f.value}" if isinstance(f, BusFault) else f.value for f in faults]

@@ -9,13 +9,23 @@ module's. `realtime_switch_interval` shortens the interval, so that a link threa
 its turn; the commands that talk to motors (`wbc hw run`, `wbc hw emulate`, `wbc hw check`, the hardware benches)
 call it once at start, and a script of your own that drives a real robot should too. It costs the computing thread
 some switching overhead and changes nothing else.
+
+The other stall is the garbage collector's. A full (generation 2) collection traverses every container object alive,
+holding the interpreter lock the whole time, and most of them were made at start-up: the imported modules, the
+models, the controller. Measured on the 2-core VM, one full collection of a freshly started emulator (47 000 tracked
+objects) took 35 ms; over the wire (learned controller, a1-wx200, arm actuated) the emulator's took up to 146 ms and
+the host's up to 165 ms, stalls during which the arm's bus answered nothing and the host read nothing, so that its
+retries and pings failed together and a no-answer fault latched. `freeze_heap`, called once everything is built and
+before the loop starts, moves the objects alive then into the collector's permanent generation: later collections
+traverse only what was made since (the same measurement: 0.003 ms). Garbage made later is still collected.
 """
 
 from __future__ import annotations
 
+import gc
 import sys
 
-__all__ = ["REALTIME_SWITCH_INTERVAL_S", "realtime_switch_interval"]
+__all__ = ["REALTIME_SWITCH_INTERVAL_S", "freeze_heap", "realtime_switch_interval"]
 
 REALTIME_SWITCH_INTERVAL_S = 0.0005  # [s] a quarter of the link's 2 ms period
 
@@ -33,3 +43,18 @@ def realtime_switch_interval(interval_s: float = REALTIME_SWITCH_INTERVAL_S) -> 
     previous = sys.getswitchinterval()
     sys.setswitchinterval(min(previous, interval_s))
     return previous
+
+
+def freeze_heap() -> int:
+    """Collect the garbage, then exempt every object alive from later collections (see the module docstring).
+
+    Call it once the process has built what it keeps (before a real-time loop starts); calling it again also
+    exempts what was built since. Reference cycles made of frozen objects are never freed: what is frozen must be
+    what the process keeps anyway.
+
+    Returns:
+        How many objects are now frozen.
+    """
+    gc.collect()
+    gc.freeze()
+    return gc.get_freeze_count()

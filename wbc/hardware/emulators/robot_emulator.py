@@ -45,6 +45,8 @@ class RobotEmulatorConfig:
         seed: seed of the simulation.
         held_until_driven: the robot held at its spawn pose until a leg command drives a motor
             (`UnitreeEmulatorConfig.held_until_driven`).
+        legs_log_size: most recent leg commands kept (`UnitreeEmulatorConfig.log_size`; the arm's is
+            ``arm.log_size``).
         arm: the arm's bus (servos, temperatures, byte timing ...).
     """
 
@@ -55,6 +57,7 @@ class RobotEmulatorConfig:
     timestep: float = 0.002
     seed: int = 0
     held_until_driven: bool = False
+    legs_log_size: int = 100_000
     arm: DynamixelEmulatorConfig = field(default_factory=DynamixelEmulatorConfig)
 
     def __post_init__(self) -> None:
@@ -76,7 +79,8 @@ class RobotEmulator:
         self.plant = SharedPlant(SharedPlantConfig(robot=cfg.robot, timestep=cfg.timestep, seed=cfg.seed))
         self.legs = UnitreeEmulator(UnitreeEmulatorConfig(robot=LEG_WIRES[cfg.robot], mode=cfg.mode, port=cfg.port,
                                                           control_period=cfg.control_period, seed=cfg.seed,
-                                                          held_until_driven=cfg.held_until_driven),
+                                                          held_until_driven=cfg.held_until_driven,
+                                                          log_size=cfg.legs_log_size),
                                     sim=self.plant.legs)
         self.arm = DynamixelEmulator(self.plant, cfg.arm)
 

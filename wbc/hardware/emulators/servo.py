@@ -25,6 +25,8 @@ e-Manual is silent, the choice is named):
 
 from __future__ import annotations
 
+import functools
+
 from wbc.hardware.dynamixel import (
     ALERT,
     ERR_ACCESS,
@@ -49,6 +51,16 @@ _POSITION_MODES = (OperatingMode.POSITION, OperatingMode.EXTENDED_POSITION, Oper
 _EEPROM_END = 64
 
 
+@functools.cache
+def _layout(table: ControlTable) -> dict[str, tuple[int, int, bool, int]]:
+    """Register name -> (address, end, signed, mask) of `table`.
+
+    `get` and `set` run about 90 times per bus cycle of the emulator (its answers wait for them), and looking each
+    register up and calling its codec was most of that time.
+    """
+    return {r.name: (r.address, r.address + r.size, r.signed, (1 << (8 * r.size)) - 1) for r in table.registers}
+
+
 class EmulatedServo:
     """One servo's registers and rules (not thread-safe: the emulator's bus thread owns it).
 
@@ -61,6 +73,7 @@ class EmulatedServo:
     def __init__(self, spec: ServoSpec, table: ControlTable = XM430_W350, *, now: float = 0.0) -> None:
         self.spec = spec
         self.table = table
+        self._layout = _layout(table)
         self._regs = table.defaults()
         for name, value in (("id", spec.id), ("baud_rate", spec.baud_rate),
                             ("return_delay_time", spec.return_delay_time), ("drive_mode", spec.drive_mode),
@@ -74,13 +87,21 @@ class EmulatedServo:
     # -- registers --------------------------------------------------------------------------------------------
     def get(self, name: str) -> int:
         """A register's value (signed where the register is)."""
-        reg = self.table[name]
-        return reg.decode(self._regs[reg.address: reg.address + reg.size])
+        try:
+            start, end, signed, _ = self._layout[name]
+        except KeyError:
+            self.table[name]  # raises UnknownNameError, naming the registers
+            raise
+        return int.from_bytes(self._regs[start:end], "little", signed=signed)
 
     def set(self, name: str, value: int) -> None:
         """Set a register as the servo itself does (present values, errors): no rule is checked."""
-        reg = self.table[name]
-        self._regs[reg.address: reg.address + reg.size] = reg.encode(value)
+        try:
+            start, end, _, mask = self._layout[name]
+        except KeyError:
+            self.table[name]  # raises UnknownNameError, naming the registers
+            raise
+        self._regs[start:end] = (int(value) & mask).to_bytes(end - start, "little")
 
     @property
     def id(self) -> int:

@@ -64,7 +64,8 @@ class UnitreeEmulatorConfig:
         port: the UDP port to bind; 0 picks a free one (read it back from `UnitreeEmulator.address`).
         control_period: physics time per command (lockstep) or per reply (realtime) [s].
         motor_temperature: temperature every motor reports [deg C].
-        log_size: most recent decoded commands kept.
+        log_size: most recent decoded commands kept; 0 keeps none (a long log is thousands of objects that each
+            full garbage collection traverses, stalling the replies).
         seed: seed of the simulation and of the DROP fault's coin.
         held_until_driven: the robot is held at its spawn pose (the physics waits; states are still sent), as an
             operator or a harness holds a real robot, until the first command that drives a motor (Kp > 0 or a
@@ -288,7 +289,8 @@ class UnitreeEmulator:
                 except CommandError:
                     self.refused += 1
             with self._lock:
-                self._log.append(LoggedCommand(time=time.monotonic(), sim_time=self.sim.time, wire=wire))
+                if self.config.log_size:
+                    self._log.append(LoggedCommand(time=time.monotonic(), sim_time=self.sim.time, wire=wire))
                 self.sim.write(cmd)
                 if self._held and (np.any(cmd.kp > 0) or np.any(cmd.tau != 0)):
                     self._held = False
