@@ -269,6 +269,29 @@ class UnitreeRobot(Robot):
         """Now on the link's monotonic clock [s] (the `WallClock` capability: the motors live in wall time)."""
         return time.monotonic()
 
+    def wait_for_state(self, newer_than: int, timeout: float) -> int:
+        """Wait until more than `newer_than` valid states have arrived, or `timeout` seconds have passed [s].
+
+        For a caller in another thread that forwards each new state as it comes (`wbc.hardware.io_serve`), without
+        polling and without `advance`'s pacing.
+
+        Returns:
+            How many valid states have arrived (the freshness tick `read` would give, `LinkStats.valid_states`).
+
+        Raises:
+            RobotLinkError: the link thread died.
+        """
+        deadline = time.monotonic() + timeout
+        with self._lock:
+            while self._fresh <= newer_than and self._failure is None:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                self._lock.wait(remaining)
+            fresh = self._fresh
+        self._raise_failure()
+        return fresh
+
     # -- link-only API --------------------------------------------------------------------------------------------
     @property
     def extras(self) -> LowStateExtras | None:
