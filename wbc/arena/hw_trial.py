@@ -57,6 +57,7 @@ from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike, WallClock
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.process_robot import build_process_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.scenario import check_published, load_scenario
 from wbc.scenario.trial import Trial
@@ -95,6 +96,9 @@ class HardwareTrialConfig:
         contact_force: foot sensor reading at which the metrics' estimator trusts a foot as standing.
         controller_config: a plug-in controller's ``--controller-config`` TOML file (None: none).
         io_file: an ``onnx:PATH`` policy's I/O file (None: beside the model).
+        io_process: run the robot's devices (legs link, arm bus) in a child process with its own interpreter lock
+            (`wbc.hardware.process_robot.ProcessRobot`), so that the controller cannot starve them and a controller
+            hung holding the lock still leaves the robot damped; False: in this process, beside the controller.
     """
 
     controller: str
@@ -118,6 +122,7 @@ class HardwareTrialConfig:
     contact_force: float = 15.0
     controller_config: Path | None = None
     io_file: Path | None = None
+    io_process: bool = True
 
     def __post_init__(self) -> None:
         if self.trial < 0 or self.seed < 0:
@@ -206,7 +211,8 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     else:
         host, port = cfg.target
         local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
-        hardware = build_hardware_robot(HardwareRobotConfig(
+        build = build_process_robot if cfg.io_process else build_hardware_robot
+        hardware = build(HardwareRobotConfig(
             robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port, local_host=local_host,
             local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz, transport=cfg.transport,
             arm_port=cfg.arm_port))
@@ -410,7 +416,8 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
          f"{record.late_advances}, worst {record.worst_lateness_ms:.2f} ms"),
         ("process CPU during the episode", f"{result.cpu_s:.2f} s over {result.episode_wall_s:.2f} s wall "
                                            f"({100.0 * result.cpu_s / max(result.episode_wall_s, 1e-9):.0f} % of "
-                                           "one core, link thread included)"),
+                                           "one core, the link thread included unless it ran in the I/O "
+                                           "process: then link io/cpu_s below)"),
     ]
     if link is not None:
         for key, value in link.as_dict(prefix="link ").items():

@@ -474,6 +474,10 @@ def print_hw_run(result: HardwareTrialResult) -> None:
         link = result.link.as_dict(prefix="")
         print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} damping, "
               f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states")
+        if "io/cpu_s" in link:
+            print(f"  I/O process: CPU {link['io/cpu_s']:.2f} s (its devices' threads), "
+                  f"{link['io/states_published']} states published, {link['io/commands_forwarded']} commands "
+                  "forwarded")
     clock = "robot seconds" if robot.backend == "sim" else "wall seconds since connected"
     print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions ({clock}, the trial "
           f"began at {result.trial_started_s:.2f} s): "

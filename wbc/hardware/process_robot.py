@@ -302,10 +302,13 @@ class ProcessRobot(Robot):
 
     def _drain_bell(self) -> None:
         try:
-            if not self._bell.recv(4096):
-                self._check(dead=True)
+            gone = not self._bell.recv(4096)
         except (BlockingIOError, InterruptedError):
-            pass
+            gone = False
+        except OSError:
+            gone = True
+        if gone:
+            self._check(dead=True)
 
     def _check(self, *, dead: bool = False) -> None:
         """Raise the I/O process's failure, or a `RobotLinkError` when it is gone; release everything then."""
