@@ -20,6 +20,10 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
 - deadline misses (``controller.act`` longer than the period), the link's late advances and the process's CPU time
   go into the record and the report beside the safety layer's transitions and the operator's actions.
 
+The robot's devices (the legs' link, the arm's bus) run in a child process by default
+(`wbc.hardware.process_robot.ProcessRobot`, ``io_process``), so that the controller's computing cannot starve them of
+the interpreter lock; its CPU time is then reported apart (``link io/cpu_s``).
+
 The same protocol runs on the simulator (``simulate``, ``wbc hw run --sim``): a `MujocoRobot` of the robot on flat
 ground, without domain randomisation, behind the same safety layer (on robot time) and seen through the same
 estimator. Set beside a run over a wire, it shows what the wire, the real-time loop and the second process cost; the
