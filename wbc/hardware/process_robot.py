@@ -228,6 +228,7 @@ class ProcessRobot(Robot):
         self._pace_deadline = deadline
         grace = time.monotonic() + 2.0 * self._period
         block = self._blocks.state
+        self._drain_bell()  # the rings of states that came meanwhile: the wait below wakes only on a new one
         while block.count == start and not block.failed:
             remaining = grace - time.monotonic()
             if remaining <= 0 or not select.select([self._bell], [], [], remaining)[0]:
