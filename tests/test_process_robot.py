@@ -25,6 +25,8 @@ from wbc.hardware.contract import check_robot
 from wbc.hardware.dynamixel import DynamixelArmConfig
 from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.io_block import IoBlocks
+from wbc.hardware.io_channel import error_report, rebuild_error
 from wbc.hardware.process_robot import ProcessLinkStats, ProcessRobot, build_process_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.robots.registry import get_robot
@@ -189,3 +191,35 @@ def test_refusals_and_connect_failures_are_the_in_process_errors() -> None:
         with pytest.raises(PortBusyError) as proc:
             ProcessRobot(busy).connect()
         assert proc.value.port == silent.getsockname()[1]
+
+
+def test_shared_blocks_publish_whole_records_and_refuse_a_torn_one() -> None:
+    blocks = IoBlocks(3)
+    try:
+        assert blocks.command.read() == (0, None)
+        for k in range(1, 4):
+            blocks.command.record()["rows"] = np.full((5, 3), float(k))
+            assert blocks.command.publish() == k
+        count, record = blocks.command.read()
+        assert count == 3 and (record["rows"] == 3.0).all()
+        blocks.command.record()["rows"] = 4.0  # begun, not published: readers still get publication 3 whole
+        assert blocks.command.read()[0] == 3
+        blocks.command.publish()
+        other = IoBlocks(3, fd=os.dup(blocks.fd))  # the other process's mapping of the same memory
+        try:
+            assert other.command.read()[0] == 4 and (other.command.read()[1]["rows"] == 4.0).all()
+            blocks.command._raws[0][0] ^= 0xFF  # slot of publication 4, behind its CRC's back
+            with pytest.raises(RobotLinkError, match="no consistent copy"):
+                other.command.read()
+        finally:
+            other.close()
+    finally:
+        blocks.close()
+
+
+def test_an_error_crosses_the_channel_as_its_own_class() -> None:
+    busy = rebuild_error(error_report(PortBusyError("127.0.0.1", 9000, "in use")), where="I/O")
+    assert type(busy) is PortBusyError and busy.port == 9000 and str(busy) == str(
+        PortBusyError("127.0.0.1", 9000, "in use"))
+    foreign = rebuild_error(error_report(OSError(5, "Input/output error")), where="I/O")
+    assert type(foreign) is RobotLinkError and "OSError" in str(foreign) and "Input/output error" in str(foreign)
