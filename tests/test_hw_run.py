@@ -110,6 +110,7 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
     assert "SKIPPED" in printed.out and "completed" in printed.out
     hardware = json.loads((out / "hardware.json").read_text())
     assert hardware["backend"] == "unitree" and hardware["link"]["rejected_states"] == 0
+    assert (hardware["io_cpu_s"] is not None) == (io_process == "--io-process")  # the I/O process's CPU, apart
     ramp_done = [e["time"] for e in hardware["safety_events"] if e["reason"] == "ramp_done"]
     assert [e["reason"] for e in hardware["safety_events"]] == ["fresh_state", "ramp_done"]
     assert ramp_done[0] <= hardware["trial_started_s"]  # the trial's clock started on a standing robot

@@ -64,12 +64,12 @@ def serve_io_process(argv: list[str] | None = None) -> None:
     control = LineChannel(socket.socket(fileno=int(args[2])))
     bell = socket.socket(fileno=int(args[3]))
     bell.setblocking(False)
-    started = time.process_time()
     try:
         robot = build_hardware_robot(config).robot
         blocks = IoBlocks(robot.num_joints, fd=int(args[1]))
         freeze_heap()
         robot.connect()
+        started = time.process_time()
     except BaseException as exc:  # noqa: BLE001 - every failure is reported to the controller's process
         _report(control, error_report(exc))
         return

@@ -68,8 +68,8 @@ class ProcessLinkStats:
         devices: the devices' counters (`LinkStats`, or `JoinedLinkStats` with the arm's bus), their
             ``late_advances`` and ``worst_lateness`` this process's (the I/O process never paces).
         io: the I/O process's counters: ``states_published``, ``commands_forwarded``, ``bells_missed`` (doorbells
-            this process's full socket refused: it was not reading) and ``cpu_s`` (its CPU time since it started,
-            every thread [s]).
+            this process's full socket refused: it was not reading) and ``cpu_s`` (its CPU time since the robot was
+            connected, every thread [s]).
     """
 
     devices: LinkStatsLike
