@@ -2,13 +2,18 @@
 
 `wbc.hardware.process_robot.ProcessRobot` starts this as a fresh interpreter (``python -c``, not multiprocessing,
 whose spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the switch interval, builds the robot
-with `build_hardware_robot`, freezes its heap, connects it and reports on the control channel, then runs:
+with `build_hardware_robot`, freezes its heap, connects it and reports on the control channel. The legs' link thread
+then does the serving itself, through its hooks (`UnitreeRobot.set_link_hooks`), so that no thread of this process
+wakes twice a period only to pass data on:
 
-- a publisher thread that blocks on the legs' link until a new leg state arrives (`UnitreeRobot.wait_for_state`),
-  reads the whole robot (`QuadrupedArmRobot.read`: legs and arm joined), its remote and its motors' status, and
-  publishes them to the shared state block, then rings the doorbell (one byte) so that a waiting `advance` wakes;
-- the main thread, which blocks on the doorbell and the control channel: a ring means a new command in the shared
-  command block, forwarded at once to the robot's `write`; a request is answered (``link_stats``, ``close``).
+- before each send it forwards the newest command of the shared command block, if a new one was posted, to the
+  robot's `write` (legs and arm), so the command goes out in that very period;
+- after each new leg state it reads the whole robot (`QuadrupedArmRobot.read`: legs and arm joined), its remote and
+  its motors' status, publishes them to the shared state block and rings the doorbell (one byte), so that a waiting
+  `advance` wakes.
+
+The main thread answers the control channel (``link_stats``, ``close``) and, every 20 ms, reads the robot, which
+raises if the link's or the bus's thread died.
 
 The devices keep their own safety: the legs' link damps once `write` has not been called for its write deadline, the
 arm's bus likewise, so a controller's process that stalls or hangs (holding its own interpreter lock forever) leaves
@@ -100,41 +105,49 @@ class _Server:
         self.send_lock = threading.Lock()
         self.stop = threading.Event()
         self.failure: dict | None = None
+        self.command_seen = 0
         self.counts = dict(states_published=0, commands_forwarded=0, bells_missed=0)
         self.started = started
-        self.thread = threading.Thread(target=self._publish_loop, name="io-publisher", daemon=True)
 
     def run(self) -> None:
         self._publish()  # the first state, before the controller's process is told
-        self.thread.start()
+        self.legs.set_link_hooks(before_send=self._forward, on_state=self._on_state)
         self._send({"connected": True, "pid": os.getpid()})
-        command_seen = 0
         while not self.stop.is_set():
-            ready = select.select([self.bell, self.control], [], [], _WAIT_S)[0]
-            if self.bell in ready:
-                try:
-                    if not self.bell.recv(4096):
-                        return  # the controller's process is gone
-                except BlockingIOError:
-                    pass
-                except OSError:
-                    return
-            count = self.blocks.command.count
-            if count != command_seen:
-                command_seen, record = self.blocks.command.read()
-                try:
-                    self.robot.write(MotorCommand._trusted(np.array(record["rows"])))
-                except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
-                    self._fail(exc)
-                    return
-                self.counts["commands_forwarded"] += 1
-            if self.control in ready or self.control.pending():
+            ready = select.select([self.control], [], [], _WAIT_S)[0]
+            if ready or self.control.pending():
                 try:
                     request = self.control.receive(0.0)
                 except ChannelClosed:
-                    return
+                    return  # the controller's process is gone
                 if request is not None and not self._answer(request):
                     return
+            try:
+                self.robot.read()  # raises if the link's or the bus's thread died
+            except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
+                self._fail(exc)
+
+    def _forward(self) -> None:
+        """The link thread, each period before it sends: the newest command, if a new one was posted, to `write`."""
+        if self.stop.is_set():
+            return
+        try:
+            block = self.blocks.command
+            if block.count != self.command_seen:
+                self.command_seen, record = block.read()
+                self.robot.write(MotorCommand._trusted(np.array(record["rows"])))
+                self.counts["commands_forwarded"] += 1
+        except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
+            self._fail(exc)
+
+    def _on_state(self) -> None:
+        """The link thread, after each new leg state: the robot's state to the shared block."""
+        if self.stop.is_set():
+            return
+        try:
+            self._publish()
+        except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
+            self._fail(exc)
 
     def _answer(self, request: dict) -> bool:
         op = request.get("op")
@@ -157,8 +170,11 @@ class _Server:
             _report(self.control, message)
 
     def _fail(self, exc: BaseException) -> None:
-        if self.failure is None:
-            self.failure = error_report(exc)
+        with self.send_lock:
+            first = self.failure is None
+            if first:
+                self.failure = error_report(exc)
+        if first:
             self._send(self.failure)
             self.blocks.state.set_failed()
             self._ring()
@@ -171,17 +187,6 @@ class _Server:
             self.counts["bells_missed"] += 1  # the controller's process is not reading: it stalled
         except OSError:
             self.stop.set()
-
-    def _publish_loop(self) -> None:
-        seen = self.legs.wait_for_state(0, 0.0)
-        try:
-            while not self.stop.is_set():
-                fresh = self.legs.wait_for_state(seen, _WAIT_S)
-                if fresh != seen:
-                    seen = fresh
-                    self._publish()
-        except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
-            self._fail(exc)
 
     def _publish(self) -> None:
         robot = self.robot
@@ -210,10 +215,9 @@ class _Server:
         self._ring()
 
     def shut_down(self) -> None:
-        """Stop the publisher, close the robot (it is left damped), tell the controller's process, release all."""
+        """Unhook, close the robot (it is left damped), tell the controller's process, release all."""
         self.stop.set()
-        if self.thread.is_alive():
-            self.thread.join(timeout=1.0)
+        self.legs.set_link_hooks()
         try:
             self.robot.close()
             self._send({"closed": True})

@@ -9,8 +9,8 @@ its own lock:
 
 - data path: shared memory (`wbc.hardware.io_block`), lock-free both ways. The I/O process publishes every new state
   (joined legs and arm, the remote, the motors' status) as the legs' link receives it; `read` returns the newest.
-  `write` clamps (as every `Robot` does), posts the command and rings a doorbell; the I/O process forwards it to the
-  devices' `write` at once;
+  `write` clamps (as every `Robot` does) and posts the command; the legs' link thread takes the newest before each
+  send and forwards it to the devices' `write`, so it goes out in the same period as a command written in-process;
 - `advance(dt)` paces on the monotonic clock as `UnitreeRobot` does: a call that finds its deadline past is counted
   late and resynchronises; then, unless a state newer than the one last read has already been published, it waits
   (at most two link periods) for one;
@@ -204,13 +204,7 @@ class ProcessRobot(Robot):
         self._check()
         block = self._blocks.command
         block.record()["rows"] = (cmd.q, cmd.dq, cmd.kp, cmd.kd, cmd.tau)
-        block.publish()
-        try:
-            self._bell.send(b"c")
-        except (BlockingIOError, InterruptedError):
-            pass  # the I/O process has not drained its doorbell; it reads the command block when it does
-        except OSError:
-            self._check(dead=True)
+        block.publish()  # the link takes it before its next send
 
     def _advance(self, dt: float) -> None:
         self._check()
