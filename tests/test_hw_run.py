@@ -78,13 +78,16 @@ def no_socket(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
     return attempts
 
 
+@pytest.mark.parametrize("io_process", ["--io-process", "--no-io-process"])
 def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
-        go1: UnitreeEmulator, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        go1: UnitreeEmulator, tmp_path: Path, capsys: pytest.CaptureFixture[str], io_process: str) -> None:
     out = tmp_path / "hw"
     code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
-                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out)])
+                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out), io_process])
     printed = capsys.readouterr()
     assert code == 0, printed.err
+    # the devices ran in the I/O process, or in this one; either way the same robot was played
+    assert ("devices in an I/O process" in printed.out) == (io_process == "--io-process")
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.controller == "stand-noarm"  # stand, on a robot whose arm mode is none
     assert (record.backend, record.metrics_source) == ("unitree", "estimator")
@@ -107,6 +110,7 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
     assert "SKIPPED" in printed.out and "completed" in printed.out
     hardware = json.loads((out / "hardware.json").read_text())
     assert hardware["backend"] == "unitree" and hardware["link"]["rejected_states"] == 0
+    assert (hardware["io_cpu_s"] is not None) == (io_process == "--io-process")  # the I/O process's CPU, apart
     ramp_done = [e["time"] for e in hardware["safety_events"] if e["reason"] == "ramp_done"]
     assert [e["reason"] for e in hardware["safety_events"]] == ["fresh_state", "ramp_done"]
     assert ramp_done[0] <= hardware["trial_started_s"]  # the trial's clock started on a standing robot

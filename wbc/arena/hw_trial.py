@@ -20,6 +20,10 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
 - deadline misses (``controller.act`` longer than the period), the link's late advances and the process's CPU time
   go into the record and the report beside the safety layer's transitions and the operator's actions.
 
+The robot's devices (the legs' link, the arm's bus) run in a child process by default
+(`wbc.hardware.process_robot.ProcessRobot`, ``io_process``), so that the controller's computing cannot starve them of
+the interpreter lock; its CPU time during the episode is then reported apart (``io_cpu_s``).
+
 The same protocol runs on the simulator (``simulate``, ``wbc hw run --sim``): a `MujocoRobot` of the robot on flat
 ground, without domain randomisation, behind the same safety layer (on robot time) and seen through the same
 estimator. Set beside a run over a wire, it shows what the wire, the real-time loop and the second process cost; the
@@ -57,6 +61,7 @@ from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike, WallClock
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.process_robot import ProcessRobot, build_process_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.scenario import check_published, load_scenario
 from wbc.scenario.trial import Trial
@@ -95,6 +100,9 @@ class HardwareTrialConfig:
         contact_force: foot sensor reading at which the metrics' estimator trusts a foot as standing.
         controller_config: a plug-in controller's ``--controller-config`` TOML file (None: none).
         io_file: an ``onnx:PATH`` policy's I/O file (None: beside the model).
+        io_process: run the robot's devices (legs link, arm bus) in a child process with its own interpreter lock
+            (`wbc.hardware.process_robot.ProcessRobot`), so that the controller cannot starve them and a controller
+            hung holding the lock still leaves the robot damped; False: in this process, beside the controller.
     """
 
     controller: str
@@ -118,6 +126,7 @@ class HardwareTrialConfig:
     contact_force: float = 15.0
     controller_config: Path | None = None
     io_file: Path | None = None
+    io_process: bool = True
 
     def __post_init__(self) -> None:
         if self.trial < 0 or self.seed < 0:
@@ -148,6 +157,8 @@ class HardwareTrialResult:
         safety_events: every transition of the safety layer, the stand-up before the trial's included (the
             episode holds those during the trial), on its clock: wall-clock seconds since the robot was connected.
         trial_started_s: when the trial began on that clock (after the stand-up) [s].
+        io_cpu_s: CPU time of the I/O process during the episode, every thread (the link's and the arm bus's) [s];
+            None when the devices ran in this process.
     """
 
     record: TrialRecord
@@ -161,6 +172,7 @@ class HardwareTrialResult:
     episode_wall_s: float
     safety_events: tuple[SafetyEvent, ...]
     trial_started_s: float
+    io_cpu_s: float | None = None
 
 
 def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
@@ -206,7 +218,8 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     else:
         host, port = cfg.target
         local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
-        hardware = build_hardware_robot(HardwareRobotConfig(
+        build = build_process_robot if cfg.io_process else build_hardware_robot
+        hardware = build(HardwareRobotConfig(
             robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port, local_host=local_host,
             local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz, transport=cfg.transport,
             arm_port=cfg.arm_port))
@@ -251,12 +264,15 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     with robot:
         _stand_up(robot, safe, console, cfg.settle_s)
         started_s = safe.now()
+        io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
+        io_cpu0 = io_robot.link_stats().io["cpu_s"] if io_robot is not None else 0.0
         cpu0, wall0 = time.process_time(), time.perf_counter()
         episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
                               fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console)
         cpu_s, episode_wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
         if isinstance(hardware.robot, HasLinkStats):
             link = hardware.robot.link_stats()
+        io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
         if safe.safety_state is SafetyState.DAMPED:
             _settle(robot, dt, cfg.settle_s)
     episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
@@ -265,7 +281,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                                   domain_applied=False, link=link)
     result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                  notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
-                                 safety_events=safe.events, trial_started_s=started_s)
+                                 safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s)
     _write_results(cfg, result, trial, published=scenario_published)
     return result
 
@@ -371,7 +387,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
     hardware_json = {
         "robot": hardware.description.name, "arm_mode": hardware.description.arm_mode, "backend": hardware.backend,
         "target": hardware.target, "control_rate_hz": 1.0 / episode.control_dt, "notes": list(result.notes),
-        "episode_wall_s": result.episode_wall_s, "cpu_s": result.cpu_s,
+        "episode_wall_s": result.episode_wall_s, "cpu_s": result.cpu_s, "io_cpu_s": result.io_cpu_s,
         "link": result.link.as_dict(prefix="") if result.link is not None else None,
         "trial_started_s": result.trial_started_s,
         "safety_events": [e.to_dict() for e in result.safety_events],
@@ -410,7 +426,8 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
          f"{record.late_advances}, worst {record.worst_lateness_ms:.2f} ms"),
         ("process CPU during the episode", f"{result.cpu_s:.2f} s over {result.episode_wall_s:.2f} s wall "
                                            f"({100.0 * result.cpu_s / max(result.episode_wall_s, 1e-9):.0f} % of "
-                                           "one core, link thread included)"),
+                                           "one core" + (", link thread included)" if result.io_cpu_s is None
+                                                         else f"; the I/O process {result.io_cpu_s:.2f} s)")),
     ]
     if link is not None:
         for key, value in link.as_dict(prefix="link ").items():

@@ -378,6 +378,7 @@ def _hw_run(args: argparse.Namespace) -> int:
                               target=None if args.sim else (host, port), simulate=args.sim, local=local,
                               allow_hardware=args.allow_hardware, rate_hz=args.rate, transport=args.transport,
                               arm_port=args.arm_port, out_dir=out, settle_s=args.settle,
+                              io_process=args.io_process,
                               controller_config=Path(args.controller_config) if args.controller_config else None,
                               io_file=Path(args.io) if args.io else None)
 

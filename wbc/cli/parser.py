@@ -236,6 +236,9 @@ def build_parser() -> argparse.ArgumentParser:
                        help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
     hwrun.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
     hwrun.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
+    hwrun.add_argument("--io-process", action=argparse.BooleanOptionalAction, default=True,
+                       help="run the robot's devices (legs link, arm bus) in a child process with its own interpreter "
+                       "lock, so that the controller cannot starve them (default; --no-io-process: in this process)")
     hwrun.add_argument("--settle", type=float, default=1.0,
                        help="after a safety trip, hold the robot damped and read for S seconds (default 1)")
     hwrun.add_argument("--out", default=None, help="results directory (default: runs/hw-<scenario>-<ctrl>-<time>)")

@@ -469,11 +469,16 @@ def print_hw_run(result: HardwareTrialResult) -> None:
           f"roll {r.max_roll_deg:.2f} deg, max pitch {r.max_pitch_deg:.2f} deg, energy {r.energy_j:.1f} J")
     print(f"  timing: act p50 {r.act_ms_p50:.3f} ms, p99 {r.act_ms_p99:.3f} ms (period {ep.control_dt * 1e3:g} ms); "
           f"deadline misses {r.deadline_misses} of {len(ep.t)}; late advances {r.late_advances} (worst "
-          f"{r.worst_lateness_ms:.2f} ms); CPU {result.cpu_s:.2f} s over {result.episode_wall_s:.2f} s")
+          f"{r.worst_lateness_ms:.2f} ms); CPU {result.cpu_s:.2f} s"
+          + (f" + I/O process {result.io_cpu_s:.2f} s" if result.io_cpu_s is not None else "")
+          + f" over {result.episode_wall_s:.2f} s")
     if result.link is not None:
         link = result.link.as_dict(prefix="")
         print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} damping, "
               f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states")
+        if "io/states_published" in link:
+            print(f"  I/O process: {link['io/states_published']} states published, "
+                  f"{link['io/commands_forwarded']} commands forwarded, {link['io/bells_missed']} doorbells missed")
     clock = "robot seconds" if robot.backend == "sim" else "wall seconds since connected"
     print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions ({clock}, the trial "
           f"began at {result.trial_started_s:.2f} s): "

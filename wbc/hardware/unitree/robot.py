@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -155,6 +156,8 @@ class UnitreeRobot(Robot):
         self._damping = encode_command(self.layout, MotorCommand.damping(12, config.damping_kd), limits=self._limits)
         self._lock = threading.Condition()
         self._thread: threading.Thread | None = None
+        self._before_send: Callable[[], None] | None = None
+        self._on_state: Callable[[], None] | None = None
         self._reset_link()
 
     def _reset_link(self) -> None:
@@ -269,6 +272,20 @@ class UnitreeRobot(Robot):
         """Now on the link's monotonic clock [s] (the `WallClock` capability: the motors live in wall time)."""
         return time.monotonic()
 
+    def set_link_hooks(self, *, before_send: Callable[[], None] | None = None,
+                       on_state: Callable[[], None] | None = None) -> None:
+        """Functions the link thread calls, for a caller that lives beside the link rather than above it.
+
+        `before_send` runs every period just before the link chooses its frame (a forwarder calls `write` there with
+        the newest command, which then goes out in this very period, as a command written in between would);
+        `on_state` runs after each new valid state (a publisher calls `read` there). The I/O process
+        (`wbc.hardware.io_serve`) serves a robot to another process this way, without a thread of its own waking
+        twice a period. Both run in the link thread with no lock held: they must be short and must not raise (an
+        exception stops the link, as any failure of its thread does). None removes a hook.
+        """
+        self._before_send = before_send
+        self._on_state = on_state
+
     # -- link-only API --------------------------------------------------------------------------------------------
     @property
     def extras(self) -> LowStateExtras | None:
@@ -347,6 +364,8 @@ class UnitreeRobot(Robot):
         while True:
             now = time.monotonic()
             if now >= next_send:
+                if self._before_send is not None:
+                    self._before_send()
                 with self._lock:
                     if self._stop or (self._closing_until is not None and now >= self._closing_until):
                         return
@@ -400,3 +419,5 @@ class UnitreeRobot(Robot):
             self._extras = extras
             self._state_at = now
             self._lock.notify_all()
+        if self._on_state is not None:
+            self._on_state()

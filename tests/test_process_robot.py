@@ -1,0 +1,225 @@
+"""`ProcessRobot`: the hardware robot with its devices in an I/O process, against the emulators on 127.0.0.1.
+
+The emulators run in this (the controller's) process; the I/O process reaches them as a robot's, over UDP and the
+pty. The cases: the `Robot` contract (legs only; legs and arm actuated), a stand through `SafeRobot(ProcessRobot)`,
+damping on the wire when this process stops writing (by holding its interpreter lock), the I/O process killed, this
+process killed (no orphan), and the refusals and connect failures raised as in-process.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.control.stand import StandController
+from wbc.errors import PortBusyError, RobotLinkError, TargetRefusedError
+from wbc.hardware.contract import check_robot
+from wbc.hardware.dynamixel import DynamixelArmConfig
+from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.io_block import IoBlocks
+from wbc.hardware.io_channel import error_report, rebuild_error
+from wbc.hardware.process_robot import ProcessLinkStats, ProcessRobot, build_process_robot
+from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
+from wbc.robots.registry import get_robot
+from wbc.types import MotorCommand
+
+ROOT = Path(__file__).resolve().parents[1]
+ARM = dict(latency_ms=4.0)  # the arm emulator answers from a thread of this process (tests/test_dynamixel_arm.py)
+
+
+def _legs(address: tuple[str, int], **extra: object) -> HardwareRobotConfig:
+    return HardwareRobotConfig(robot="go1-arm", arm_mode="none", legs_host=address[0], legs_port=address[1], **extra)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    with open(f"/proc/{pid}/stat") as f:  # a zombie (exited, not yet reaped by its parent) is gone too
+        return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def test_contract_legs_only() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        check_robot(lambda: ProcessRobot(_legs(emu.address)))
+        assert emu.failure is None
+
+
+def test_contract_legs_and_arm_actuated_and_the_same_robot_as_in_process() -> None:
+    with RobotEmulator(RobotEmulatorConfig(robot="go1-arm", mode="lockstep")) as emu:
+        cfg = HardwareRobotConfig(robot="go1-arm", arm_mode="actuated", legs_host=emu.address[0],
+                                  legs_port=emu.address[1], arm=DynamixelArmConfig(port=emu.port, **ARM))
+        check_robot(lambda: ProcessRobot(cfg))
+        in_process = build_hardware_robot(cfg).robot
+        robot = ProcessRobot(cfg)
+        assert robot.joint_names == in_process.joint_names and robot.num_joints == 15
+        np.testing.assert_array_equal(robot.limits.upper, in_process.limits.upper)
+        with robot:
+            robot.advance(0.01)
+            status = robot.motor_status()
+            assert status is not None and len(status.motor_mode) == 12 + 7  # legs, then the arm's seven servos
+            assert robot.remote() is not None and not robot.remote().l2_b
+            stats = robot.link_stats()
+            assert isinstance(stats, ProcessLinkStats) and stats.as_dict()["link/arm_bus/cycles"] > 0
+            assert stats.io["states_published"] > 0
+            pid = robot.pid
+        assert robot.pid is None and not _alive(pid)
+        assert emu.failure is None
+
+
+def test_stand_through_the_safety_layer_holds() -> None:
+    events: list[SafetyEvent] = []
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="realtime")) as emu:
+        cfg = HardwareRobotConfig(robot="a1-wx200", arm_mode="actuated", legs_host=emu.address[0],
+                                  legs_port=emu.address[1], arm=DynamixelArmConfig(port=emu.port, **ARM))
+        safe = SafeRobot(ProcessRobot(cfg), SafetyConfig(position_table="a1", ramp_time_s=0.3,
+                                                         on_event=events.append))
+        ctrl = StandController(get_robot("a1-wx200", "actuated"))
+        with safe:
+            end = time.monotonic() + 3.0
+            while time.monotonic() < end:
+                safe.write(ctrl.act(safe.read(), None))
+                safe.advance(1.0 / ctrl.rate_hz)
+            assert safe.safety_state is SafetyState.RUN, [str(e) for e in events]
+            height = float(emu.base_truth().base_position_in_world[2])
+        assert [e.reason for e in events] == ["fresh_state", "ramp_done"]
+        assert height > 0.2
+        assert emu.failure is None
+
+
+def _hold_the_interpreter_lock(seconds: float) -> None:
+    """Compute in C without releasing the interpreter lock for about `seconds` (a hung C extension)."""
+    n = 1_000_000
+    t = time.perf_counter()
+    sum(range(n))
+    per_item = max((time.perf_counter() - t) / n, 1e-9)
+    sum(range(int(seconds / per_item)))
+
+
+def test_damping_on_the_wire_when_this_process_stops_writing_even_holding_its_lock() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        robot = ProcessRobot(_legs(emu.address))
+        with robot:
+            hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+            for _ in range(100):
+                robot.write(hold)
+                robot.advance(0.004)
+            logged = len(emu.commands())
+            assert not emu.commands()[-1].damping
+            t0 = time.perf_counter()
+            _hold_the_interpreter_lock(0.5)  # this process, the emulator's threads included, is frozen meanwhile
+            frozen = time.perf_counter() - t0
+            time.sleep(0.2)  # the emulator takes the frames queued while it was frozen
+            frames = emu.commands()[logged:]
+        # the I/O process sent on: the held command until the write deadline (0.05 s = 25 frames), then damping
+        first = next((k for k, c in enumerate(frames) if c.damping), None)
+        print(f"\nlock held {frozen:.3f} s: {first} held frames, then {len(frames) - first} damping frames")
+        assert frozen > 0.25
+        assert first is not None and first <= 0.05 * 500 + 15, first
+        assert all(c.damping for c in frames[first:])
+        assert len(frames) - first > 0.5 * (frozen - 0.05) * 500
+
+
+def test_the_io_process_killed_is_a_link_error_at_the_next_call_and_all_is_released() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        robot = ProcessRobot(_legs(emu.address))
+        robot.connect()
+        hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+        pid = robot.pid
+        os.kill(pid, signal.SIGKILL)
+        with pytest.raises(RobotLinkError, match="I/O process died"):
+            for _ in range(500):
+                robot.read()
+                robot.write(hold)
+                robot.advance(0.002)
+        assert not _alive(pid) and robot.pid is None
+        with pytest.raises(RobotLinkError):
+            robot.read()  # the same failure again, until closed
+        robot.close()
+        assert not robot.is_connected
+
+
+def test_this_process_dying_ends_the_io_process() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        script = ("import os, sys\n"
+                  "from wbc.hardware.hardware_robot import HardwareRobotConfig\n"
+                  "from wbc.hardware.process_robot import ProcessRobot\n"
+                  f"r = ProcessRobot(HardwareRobotConfig(robot='go1-arm', arm_mode='none', legs_host='127.0.0.1', "
+                  f"legs_port={emu.address[1]}))\n"
+                  "r.connect(); print(r.pid, flush=True); os.kill(os.getpid(), 9)\n")
+        proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60, cwd=ROOT,
+                              env=dict(os.environ, PYTHONPATH=str(ROOT)))
+        assert proc.returncode == -signal.SIGKILL, proc.stderr
+        child = int(proc.stdout.split()[0])
+        end = time.monotonic() + 5.0
+        while _alive(child) and time.monotonic() < end:
+            time.sleep(0.05)
+        assert not _alive(child)
+        frames = emu.commands()
+        assert frames and frames[-1].damping  # it closed the robot: damping last
+
+
+def test_refusals_and_connect_failures_are_the_in_process_errors() -> None:
+    with pytest.raises(TargetRefusedError) as in_process:
+        build_hardware_robot(_legs(("10.0.0.1", 8007)))
+    with pytest.raises(TargetRefusedError) as proc:
+        build_process_robot(_legs(("10.0.0.1", 8007)))
+    assert str(proc.value) == str(in_process.value)
+    # nothing answers on this port: the I/O process's connect fails as the in-process one does
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
+        silent.bind(("127.0.0.1", 0))
+        cfg = _legs(silent.getsockname())
+        with pytest.raises(RobotLinkError) as in_process, build_hardware_robot(cfg).robot:
+            pass
+        robot = ProcessRobot(cfg)
+        with pytest.raises(RobotLinkError) as proc:
+            robot.connect()
+        assert type(proc.value) is RobotLinkError and str(proc.value) == str(in_process.value)
+        assert not robot.is_connected and robot.pid is None
+        # a local port held by another socket: PortBusyError, with its attributes
+        busy = _legs(silent.getsockname(), local_port=silent.getsockname()[1])
+        with pytest.raises(PortBusyError) as proc:
+            ProcessRobot(busy).connect()
+        assert proc.value.port == silent.getsockname()[1]
+
+
+def test_shared_blocks_publish_whole_records_and_refuse_a_torn_one() -> None:
+    blocks = IoBlocks(3)
+    try:
+        assert blocks.command.read() == (0, None)
+        for k in range(1, 4):
+            blocks.command.record()["rows"] = np.full((5, 3), float(k))
+            assert blocks.command.publish() == k
+        count, record = blocks.command.read()
+        assert count == 3 and (record["rows"] == 3.0).all()
+        blocks.command.record()["rows"] = 4.0  # begun, not published: readers still get publication 3 whole
+        assert blocks.command.read()[0] == 3
+        blocks.command.publish()
+        other = IoBlocks(3, fd=os.dup(blocks.fd))  # the other process's mapping of the same memory
+        try:
+            assert other.command.read()[0] == 4 and (other.command.read()[1]["rows"] == 4.0).all()
+            blocks.command._raws[0][0] ^= 0xFF  # slot of publication 4, behind its CRC's back
+            with pytest.raises(RobotLinkError, match="no consistent copy"):
+                other.command.read()
+        finally:
+            other.close()
+    finally:
+        blocks.close()
+
+
+def test_an_error_crosses_the_channel_as_its_own_class() -> None:
+    busy = rebuild_error(error_report(PortBusyError("127.0.0.1", 9000, "in use")), where="I/O")
+    assert type(busy) is PortBusyError and busy.port == 9000 and str(busy) == str(
+        PortBusyError("127.0.0.1", 9000, "in use"))
+    foreign = rebuild_error(error_report(OSError(5, "Input/output error")), where="I/O")
+    assert type(foreign) is RobotLinkError and "OSError" in str(foreign) and "Input/output error" in str(foreign)

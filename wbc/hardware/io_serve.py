@@ -1,0 +1,229 @@
+"""The I/O process: a hardware robot's devices (legs link, arm bus) served to a controller in another process.
+
+`wbc.hardware.process_robot.ProcessRobot` starts this as a fresh interpreter (``python -c``, not multiprocessing,
+whose spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the switch interval, builds the robot
+with `build_hardware_robot`, freezes its heap, connects it and reports on the control channel. The legs' link thread
+then does the serving itself, through its hooks (`UnitreeRobot.set_link_hooks`), so that no thread of this process
+wakes twice a period only to pass data on:
+
+- before each send it forwards the newest command of the shared command block, if a new one was posted, to the
+  robot's `write` (legs and arm), so the command goes out in that very period;
+- after each new leg state it reads the whole robot (`QuadrupedArmRobot.read`: legs and arm joined), its remote and
+  its motors' status, publishes them to the shared state block and rings the doorbell (one byte), so that a waiting
+  `advance` wakes.
+
+The main thread answers the control channel (``link_stats``, ``close``) and, every 20 ms, reads the robot, which
+raises if the link's or the bus's thread died.
+
+The devices keep their own safety: the legs' link damps once `write` has not been called for its write deadline, the
+arm's bus likewise, so a controller's process that stalls or hangs (holding its own interpreter lock forever) leaves
+the robot damped. A failure of the devices (the link thread died, the serial port is lost) is reported on the channel
+and flagged in the state block, and the process closes the robot and exits; so does it when the controller's process
+goes away (end of file on the channel: no orphan), and on ``close``. Closing the robot leaves it damped. SIGINT is
+ignored: a Ctrl-C at the terminal reaches both processes, and the controller's process closes this one in order.
+"""
+
+from __future__ import annotations
+
+import base64
+import os
+import pickle
+import select
+import signal
+import socket
+import sys
+import threading
+import time
+from dataclasses import asdict
+
+import numpy as np
+
+from wbc.errors import RobotLinkError
+from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
+from wbc.hardware.io_block import MAX_STATUS, IoBlocks
+from wbc.hardware.io_channel import ChannelClosed, LineChannel, error_report
+from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, QuadrupedArmRobot
+from wbc.hardware.robot import Robot
+from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteSource
+from wbc.hardware.unitree.remote import Remote
+from wbc.hardware.unitree.robot import UnitreeRobot
+from wbc.types import MotorCommand
+
+__all__ = ["serve_io_process"]
+
+_WAIT_S = 0.02  # [s] longest a thread blocks before it looks at its stop flag
+
+
+def serve_io_process(argv: list[str] | None = None) -> None:
+    """Serve the robot described on the command line; returns when the robot is closed (the process then exits).
+
+    Args:
+        argv: ``[config, memory fd, control fd, doorbell fd]``: the pickled `HardwareRobotConfig` (base64) and the
+            descriptors inherited from the controller's process (default: ``sys.argv[1:]``).
+    """
+    args = sys.argv[1:] if argv is None else argv
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    realtime_switch_interval()
+    config: HardwareRobotConfig = pickle.loads(base64.b64decode(args[0]))
+    control = LineChannel(socket.socket(fileno=int(args[2])))
+    bell = socket.socket(fileno=int(args[3]))
+    bell.setblocking(False)
+    try:
+        robot = build_hardware_robot(config).robot
+        blocks = IoBlocks(robot.num_joints, fd=int(args[1]))
+        freeze_heap()
+        robot.connect()
+        started = time.process_time()
+    except BaseException as exc:  # noqa: BLE001 - every failure is reported to the controller's process
+        _report(control, error_report(exc))
+        return
+    server = _Server(robot, blocks, control, bell, started)
+    try:
+        server.run()
+    finally:
+        server.shut_down()
+
+
+def _report(control: LineChannel, message: dict) -> None:
+    try:
+        control.send(message)
+    except ChannelClosed:
+        pass  # the controller's process is gone; nobody is left to tell
+
+
+class _Server:
+    def __init__(self, robot: Robot, blocks: IoBlocks, control: LineChannel, bell: socket.socket,
+                 started: float) -> None:
+        self.robot = robot
+        self.blocks = blocks
+        self.control = control
+        self.bell = bell
+        self.legs = robot.legs if isinstance(robot, QuadrupedArmRobot) else robot
+        if not isinstance(self.legs, UnitreeRobot):
+            raise RobotLinkError(f"I/O process: the legs are a {type(self.legs).__name__}, not a UnitreeRobot")
+        self.send_lock = threading.Lock()
+        self.stop = threading.Event()
+        self.failure: dict | None = None
+        self.command_seen = 0
+        self.counts = dict(states_published=0, commands_forwarded=0, bells_missed=0)
+        self.started = started
+
+    def run(self) -> None:
+        self._publish()  # the first state, before the controller's process is told
+        self.legs.set_link_hooks(before_send=self._forward, on_state=self._on_state)
+        self._send({"connected": True, "pid": os.getpid()})
+        while not self.stop.is_set():
+            ready = select.select([self.control], [], [], _WAIT_S)[0]
+            if ready or self.control.pending():
+                try:
+                    request = self.control.receive(0.0)
+                except ChannelClosed:
+                    return  # the controller's process is gone
+                if request is not None and not self._answer(request):
+                    return
+            try:
+                self.robot.read()  # raises if the link's or the bus's thread died
+            except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
+                self._fail(exc)
+
+    def _forward(self) -> None:
+        """The link thread, each period before it sends: the newest command, if a new one was posted, to `write`."""
+        if self.stop.is_set():
+            return
+        try:
+            block = self.blocks.command
+            if block.count != self.command_seen:
+                self.command_seen, record = block.read()
+                self.robot.write(MotorCommand._trusted(np.array(record["rows"])))
+                self.counts["commands_forwarded"] += 1
+        except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
+            self._fail(exc)
+
+    def _on_state(self) -> None:
+        """The link thread, after each new leg state: the robot's state to the shared block."""
+        if self.stop.is_set():
+            return
+        try:
+            self._publish()
+        except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
+            self._fail(exc)
+
+    def _answer(self, request: dict) -> bool:
+        op = request.get("op")
+        if op == "close":
+            return False
+        if op == "link_stats":
+            stats = self.robot.link_stats()
+            joined = isinstance(stats, JoinedLinkStats)
+            legs = stats.legs if joined else stats
+            arm = stats.arm if joined else None
+            self._send({"link_stats": {
+                "legs": asdict(legs) if legs is not None else None, "arm": asdict(arm) if arm is not None else None,
+                "io": dict(self.counts, cpu_s=time.process_time() - self.started)}})
+            return True
+        self._send({"error": "ConfigError", "message": f"I/O process: unknown request {op!r}", "attrs": {}})
+        return True
+
+    def _send(self, message: dict) -> None:
+        with self.send_lock:
+            _report(self.control, message)
+
+    def _fail(self, exc: BaseException) -> None:
+        with self.send_lock:
+            first = self.failure is None
+            if first:
+                self.failure = error_report(exc)
+        if first:
+            self._send(self.failure)
+            self.blocks.state.set_failed()
+            self._ring()
+        self.stop.set()
+
+    def _ring(self) -> None:
+        try:
+            self.bell.send(b"s")
+        except (BlockingIOError, InterruptedError):
+            self.counts["bells_missed"] += 1  # the controller's process is not reading: it stalled
+        except OSError:
+            self.stop.set()
+
+    def _publish(self) -> None:
+        robot = self.robot
+        state = robot.read()
+        remote = robot.remote() if isinstance(robot, RemoteSource) else None
+        status = robot.motor_status() if isinstance(robot, MotorStatusSource) else None
+        block = self.blocks.state
+        rec = block.record()
+        rec["tick"], rec["time"] = state.tick, state.time
+        for name in ("q", "dq", "tau_est", "imu_quat", "gyro_in_body", "accel_in_body", "foot_force"):
+            rec[name] = getattr(state, name)
+        if status is not None:
+            modes = np.asarray(status.motor_mode)
+            if modes.size > MAX_STATUS:
+                raise RobotLinkError(f"I/O process: {modes.size} motors report a status; at most {MAX_STATUS} fit")
+            rec["status_n"] = modes.size
+            rec["motor_mode"][:modes.size] = modes
+            rec["motor_temperature"][:modes.size] = np.asarray(status.motor_temperature)
+        else:
+            rec["status_n"] = -1
+        rec["has_remote"] = isinstance(remote, Remote)
+        if isinstance(remote, Remote):
+            rec["remote"] = np.frombuffer(remote.raw, np.uint8)
+        block.publish()
+        self.counts["states_published"] += 1
+        self._ring()
+
+    def shut_down(self) -> None:
+        """Unhook, close the robot (it is left damped), tell the controller's process, release all."""
+        self.stop.set()
+        self.legs.set_link_hooks()
+        try:
+            self.robot.close()
+            self._send({"closed": True})
+        except BaseException as exc:  # noqa: BLE001 - reported; the process exits anyway
+            self._send(error_report(exc))
+        finally:
+            self.blocks.close()
+            self.bell.close()
+            self.control.close()
