@@ -373,6 +373,12 @@ class FakeTransport:
         with self.lock:
             self.sent.append(frame)
 
+    def deliver(self, frame: bytes) -> None:
+        """Queue a datagram for the link, under the lock: `receive` swaps the list, so an unlocked append that had
+        fetched the old list (e.g. while the frame was being encoded) could land in one already handed out."""
+        with self.lock:
+            self.inbox.append(frame)
+
     def receive(self) -> list[bytes]:
         with self.lock:
             out, self.inbox = self.inbox, []
@@ -395,7 +401,8 @@ def test_transport_is_a_constructor_argument() -> None:
     state = RobotState(tick=7, time=0.0, q=q, dq=np.zeros(12), tau_est=np.zeros(12),
                        imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
                        accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
-    threading.Timer(0.05, lambda: fake.inbox.append(encode_state(robot.layout, state))).start()
+    frame = encode_state(robot.layout, state)
+    threading.Timer(0.05, lambda: fake.deliver(frame)).start()
     with robot:
         assert robot.read().tick == 1  # the freshness counter, not the wire's tick
         np.testing.assert_allclose(robot.read().q, q)
@@ -419,10 +426,10 @@ def test_advance_waits_only_when_nothing_newer_than_the_last_read_has_arrived() 
     state = RobotState(tick=7, time=0.0, q=robot.desc.nominal_q, dq=np.zeros(12), tau_est=np.zeros(12),
                        imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
                        accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
-    fake.inbox.append(encode_state(robot.layout, state))
+    fake.deliver(encode_state(robot.layout, state))
     with robot:
         assert robot.read().tick == 1
-        fake.inbox.append(encode_state(robot.layout, state))  # a state arrives while the loop works
+        fake.deliver(encode_state(robot.layout, state))  # a state arrives while the loop works
         deadline = time.monotonic() + 1.0
         while robot.link_stats().valid_states < 2 and time.monotonic() < deadline:  # until the link has taken it
             time.sleep(0.001)
