@@ -48,6 +48,7 @@ from wbc.hardware.dynamixel.arm_fault import ArmBusStats
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.io_block import IoBlocks
 from wbc.hardware.io_channel import ChannelClosed, LineChannel, rebuild_error
+from wbc.hardware.pacing import WallPacer
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, JointMotorStatus
 from wbc.hardware.robot import Robot
 from wbc.hardware.unitree.link_stats import LinkStats
@@ -123,9 +124,7 @@ class ProcessRobot(Robot):
         self._state: RobotState | None = None
         self._read_count = 0  # the publication the caller last read
         self._state_count = -1  # the publication `_state` was built from
-        self._pace_deadline: float | None = None
-        self._late_advances = 0
-        self._worst_lateness = 0.0
+        self._pacer = WallPacer()
 
     # -- Robot ----------------------------------------------------------------------------------------------------
     @property
@@ -209,17 +208,7 @@ class ProcessRobot(Robot):
     def _advance(self, dt: float) -> None:
         self._check()
         start = self._read_count
-        now = time.monotonic()
-        if self._pace_deadline is None:
-            self._pace_deadline = now
-        deadline = self._pace_deadline + dt
-        if now > deadline:
-            self._late_advances += 1
-            self._worst_lateness = max(self._worst_lateness, now - deadline)
-            deadline = now  # resynchronise: a late call does not make the next ones hurry
-        else:
-            time.sleep(deadline - now)
-        self._pace_deadline = deadline
+        self._pacer.wait(dt)
         grace = time.monotonic() + 2.0 * self._period
         block = self._blocks.state
         self._drain_bell()  # the rings of states that came meanwhile: the wait below wakes only on a new one
@@ -277,7 +266,7 @@ class ProcessRobot(Robot):
         if isinstance(reply, WbcError):
             raise reply
         reply = reply["link_stats"]
-        pacing = dict(late_advances=self._late_advances, worst_lateness=self._worst_lateness)
+        pacing = dict(late_advances=self._pacer.late_advances, worst_lateness=self._pacer.worst_lateness)
         legs = LinkStats(**{**reply["legs"], **pacing}) if reply["legs"] is not None else None
         arm = ArmBusStats(**reply["arm"]) if reply["arm"] is not None else None
         devices: LinkStatsLike = legs if arm is None and legs is not None else JoinedLinkStats(legs=legs, arm=arm)

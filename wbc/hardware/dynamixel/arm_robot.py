@@ -86,6 +86,7 @@ from wbc.hardware.dynamixel.sdk_bus import (
     sdk_handlers,
 )
 from wbc.hardware.dynamixel.units import CURRENT_UNIT, VOLTAGE_UNIT
+from wbc.hardware.pacing import WallPacer
 from wbc.hardware.robot import Robot
 from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
@@ -167,9 +168,9 @@ class DynamixelArm(Robot):
         self._port_lost = False
         self._stale = 0
         self._counts = dict(cycles=0, states=0, status_reads=0, failed_transfers=0, retries=0, unexplained=0,
-                            damping_cycles=0, deadline_trips=0, overruns=0, late_advances=0)
+                            damping_cycles=0, deadline_trips=0, overruns=0)
         self._timing = [0.0, 0.0, 0, 0.0, 0.0]  # period sum, period max, count, busy sum, busy max
-        self._pace_deadline: float | None = None
+        self._pacer = WallPacer()
         self._measured = (np.zeros(3), np.zeros(3), np.zeros(3))
         self._t0 = time.monotonic()
 
@@ -246,17 +247,7 @@ class DynamixelArm(Robot):
     def _advance(self, dt: float) -> None:
         with self._lock:
             start_tick = self._fresh
-        now = time.monotonic()
-        if self._pace_deadline is None:
-            self._pace_deadline = now
-        deadline = self._pace_deadline + dt
-        if now > deadline:
-            with self._lock:
-                self._counts["late_advances"] += 1
-            deadline = now  # resynchronise: a late call does not make the next ones hurry
-        else:
-            time.sleep(deadline - now)
-        self._pace_deadline = deadline
+        self._pacer.wait(dt)
         grace = time.monotonic() + 2.0 * self._period
         with self._lock:
             while self._fresh == start_tick and not self._faults and time.monotonic() < grace:
@@ -317,8 +308,9 @@ class DynamixelArm(Robot):
         with self._lock:
             period_sum, period_max, n, busy_sum, busy_max = self._timing
             stale = self._bus.stale if self._bus is not None else self._stale
-            return ArmBusStats(**self._counts, stale=stale, period_mean=period_sum / n if n else 0.0,
-                               period_max=period_max, busy_mean=busy_sum / n if n else 0.0, busy_max=busy_max)
+            return ArmBusStats(**self._counts, late_advances=self._pacer.late_advances, stale=stale,
+                               period_mean=period_sum / n if n else 0.0, period_max=period_max,
+                               busy_mean=busy_sum / n if n else 0.0, busy_max=busy_max)
 
     def _raise_failure(self) -> None:
         if self._failure is not None:

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wbc.errors import ConfigError, FrameError, RobotLinkError, UnknownNameError
+from wbc.hardware.pacing import WallPacer
 from wbc.hardware.robot import Robot
 from wbc.hardware.unitree.command_codec import encode_command
 from wbc.hardware.unitree.decode_stats import DecodeStats
@@ -173,10 +174,9 @@ class UnitreeRobot(Robot):
         self._closing_until: float | None = None
         self._stop = False
         self._failure: BaseException | None = None
-        self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0, overruns=0, late_advances=0)
+        self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0, overruns=0)
         self._periods = [0.0, np.inf, 0.0, 0, 0.0]  # sum, min, max, count, sum of squares
-        self._worst_lateness = 0.0
-        self._pace_deadline: float | None = None
+        self._pacer = WallPacer()
         self._t0 = time.monotonic()
 
     # -- Robot ----------------------------------------------------------------------------------------------------
@@ -250,18 +250,7 @@ class UnitreeRobot(Robot):
     def _advance(self, dt: float) -> None:
         with self._lock:
             start_tick = self._read_fresh
-        now = time.monotonic()
-        if self._pace_deadline is None:
-            self._pace_deadline = now
-        deadline = self._pace_deadline + dt
-        if now > deadline:
-            with self._lock:
-                self._counts["late_advances"] += 1
-                self._worst_lateness = max(self._worst_lateness, now - deadline)
-            deadline = now  # resynchronise: a late call does not make the next ones hurry
-        else:
-            time.sleep(deadline - now)
-        self._pace_deadline = deadline
+        self._pacer.wait(dt)
         grace = time.monotonic() + 2.0 * self._period
         with self._lock:
             while self._fresh == start_tick and time.monotonic() < grace:
@@ -340,7 +329,7 @@ class UnitreeRobot(Robot):
                 foreign=foreign, state_age=time.monotonic() - self._state_at,
                 period_mean=mean, period_std=float(np.sqrt(max(0.0, squares / n - mean * mean))) if n else 0.0,
                 period_min=low if n else 0.0, period_max=high,
-                worst_lateness=self._worst_lateness,
+                late_advances=self._pacer.late_advances, worst_lateness=self._pacer.worst_lateness,
             )
 
     def _raise_failure(self) -> None:
