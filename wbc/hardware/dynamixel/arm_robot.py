@@ -445,7 +445,7 @@ class DynamixelArm(Robot):
                     self._read_status(bus, "hardware_error")
                 elif k % every == every // 2:
                     self._read_status(bus, "temperature")
-                self._write_goals(bus, start)
+                damped = self._write_goals(bus, start)
             except SerialPortError as exc:
                 self._latch("port_lost", self._ids, f"{exc}",
                             f"Nothing reaches the servos: their bus watchdog sets the goal currents to 0 after "
@@ -453,8 +453,9 @@ class DynamixelArm(Robot):
                 return
             k += 1
             end = time.monotonic()
-            with self._lock:
+            with self._lock:  # both counts at once, so that a snapshot never sees one cycle's damping without it
                 self._counts["cycles"] += 1
+                self._counts["damping_cycles"] += damped
                 t = self._timing
                 if last_start is not None:
                     t[0] += start - last_start
@@ -619,7 +620,8 @@ class DynamixelArm(Robot):
                     self._voltage[k] = read.value(0, 2) * VOLTAGE_UNIT
                     self._temperature[k] = read.data[2]
 
-    def _write_goals(self, bus: SdkBus, now: float) -> None:
+    def _write_goals(self, bus: SdkBus, now: float) -> bool:
+        """Write this cycle's goal currents: the host's damping, or the written command's law; True if damping."""
         cfg = self.config
         with self._lock:
             quiet = now - self._written_at > cfg.write_deadline
@@ -629,8 +631,6 @@ class DynamixelArm(Robot):
             damp = (self._faults or self._closing_until is not None or self._state is None or self._rows is None
                     or quiet)
             rows = self._damping_rows if damp else self._rows
-            if damp:
-                self._counts["damping_cycles"] += 1
         q, dq, _ = self._measured
         tau = self.law.torque(rows, q, dq)
         units = self.law.goal_units(tau)
@@ -643,6 +643,7 @@ class DynamixelArm(Robot):
             values.append((servo_id, int(units[j]) if reach else 0))
         if values:
             bus.sync_write(_ADDR["goal_current"], 2, values)
+        return bool(damp)
 
     def _park(self, bus: SdkBus) -> None:
         """Hold every joint that can still be read where it is, in current-based position mode, watchdog off."""
