@@ -33,6 +33,7 @@ import numpy as np
 from wbc.arena.sim_trial import run_trial
 from wbc.control.registry import get_controller
 from wbc.errors import BenchError
+from wbc.hardware.capabilities import WallClock
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco.physics import delay_steps
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -63,6 +64,10 @@ def probe_ticks(robot: Robot, hold: MotorCommand, *, period: float, samples: int
                 step_nm: float = PROBE_STEP_NM, settle: int = 10, timeout_ticks: int = 100) -> list[int]:
     """Control ticks from a torque step's ``write`` to the first ``read`` whose torque estimate shows it.
 
+    On a robot that lives in wall time (`WallClock`: a wire) a tick is a period of that clock, counted from the
+    step's first write, so a loop that ran late (one iteration spanning two of the link's periods) does not read as
+    a shorter delay; on the simulator it is one ``advance``.
+
     The loop is the runner's (``write``, ``advance(period)``, ``read``). `samples` steps alternate on and off (+/-
     `step_nm` of feed-forward torque on `joint`), each after `settle` ticks of the previous command; a step shows when
     the joint's torque estimate has moved by more than half of it from the last reading before the write.
@@ -87,17 +92,19 @@ def probe_ticks(robot: Robot, hold: MotorCommand, *, period: float, samples: int
     bump[joint] = step_nm
     stepped = dataclasses.replace(hold, tau=hold.tau + bump)
     current, counts = hold, []
+    wall = robot.wall_time if isinstance(robot, WallClock) else None
     for i in range(samples):
         for _ in range(settle):
             robot.write(current)
             robot.advance(period)
         before = robot.read().tau_est[joint]
         current, sign = (stepped, 1.0) if i % 2 == 0 else (hold, -1.0)
+        start = wall() if wall is not None else 0.0
         for k in range(1, timeout_ticks + 1):
             robot.write(current)
             robot.advance(period)
             if sign * (robot.read().tau_est[joint] - before) > 0.5 * step_nm:
-                counts.append(k)
+                counts.append(k if wall is None else max(k, round((wall() - start) / period)))
                 break
         else:
             raise BenchError(f"bench latency: a {step_nm:g} N m torque step on joint {joint} did not show in the "
