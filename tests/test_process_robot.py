@@ -170,10 +170,11 @@ def test_this_process_dying_ends_the_io_process() -> None:
 
 
 def test_refusals_and_connect_failures_are_the_in_process_errors() -> None:
+    refused = ("192.0.2.1", 9)  # TEST-NET-1, discard port: refused before any socket is created
     with pytest.raises(TargetRefusedError) as in_process:
-        build_hardware_robot(_legs(("10.0.0.1", 8007)))
+        build_hardware_robot(_legs(refused))
     with pytest.raises(TargetRefusedError) as proc:
-        build_process_robot(_legs(("10.0.0.1", 8007)))
+        build_process_robot(_legs(refused))
     assert str(proc.value) == str(in_process.value)
     # nothing answers on this port: the I/O process's connect fails as the in-process one does
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:
