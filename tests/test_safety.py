@@ -131,6 +131,11 @@ def _check_ramp(log, safe, target):
     np.testing.assert_allclose(first.q, np.clip(measured, safe.position_lower, safe.position_upper))
     np.testing.assert_allclose(first.kp, cfg.ramp_kp)
     assert np.all(first.tau == 0)
+    held = int(np.ceil(cfg.ramp_hold_s / DT - 1e-9))  # the hold stays on for ramp_hold_s before anything moves
+    assert held >= 1
+    for _, sent in log[start:start + held]:
+        np.testing.assert_array_equal(sent.stacked(), first.stacked())
+    assert not np.array_equal(log[start + held + 1][1].q, first.q)
     qs = np.array([sent.q for _, sent in log[start:]])
     assert np.abs(np.diff(qs, axis=0)).max() <= cfg.ramp_slew * DT + 1e-9
     last = log[-1][1]

@@ -327,7 +327,7 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, 
     """
     hold = stand_command(robot.description)
     cfg = safe.config
-    budget = cfg.ramp_time_s + math.pi / cfg.ramp_slew + 1.0  # no joint needs to travel more than pi
+    budget = cfg.ramp_hold_s + cfg.ramp_time_s + math.pi / cfg.ramp_slew + 1.0  # no joint needs to travel more than pi
     for k in range(int(math.ceil(budget / _STAND_UP_DT))):
         robot.read()
         robot.write(hold)

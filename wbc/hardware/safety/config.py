@@ -41,6 +41,9 @@ class SafetyConfig:
         ramp_time_s: time over which the gains and the feed-forward are blended from the ramp's start values into
             the controller's [s]; the ramp also lasts until the slewed targets have caught up.
         ramp_slew: largest speed of the commanded joint targets during the ramp [rad/s].
+        ramp_hold_s: how long the ramp's first command (the measured pose, start gains) is held before the targets
+            move [s]; a few link periods, so that the hold reaches the motors even when a late loop writes twice
+            within one period of a link that sends only the newest command.
         ramp_kp: position gain at the start of the ramp [N m / rad] (Unitree's example: 5).
         ramp_kd: velocity gain at the start of the ramp [N m s / rad] (Unitree's example: 1).
         on_event: called with every `SafetyEvent`; None prints it to standard error.
@@ -58,13 +61,14 @@ class SafetyConfig:
     max_tilt: float = 1.0
     ramp_time_s: float = 1.0
     ramp_slew: float = 1.0
+    ramp_hold_s: float = 0.01
     ramp_kp: float = 5.0
     ramp_kd: float = 1.0
     on_event: Callable[[SafetyEvent], None] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         positive = ("stale_timeout_s", "power_limit_w", "ramp_time_s", "ramp_slew", "max_motor_temperature_c")
-        non_negative = ("damping_kd", "arm_damping_kd", "joint_margin", "ramp_kp", "ramp_kd")
+        non_negative = ("damping_kd", "arm_damping_kd", "joint_margin", "ramp_kp", "ramp_kd", "ramp_hold_s")
         for name in positive:
             value = getattr(self, name)
             if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):

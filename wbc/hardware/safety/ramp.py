@@ -1,7 +1,9 @@
 """`CommandRamp`: the bounded move from the measured pose into a controller's command.
 
-The first command of a ramp holds the measured pose with the ramp's low start gains and no feed-forward. After it,
-each commanded target is the controller's plus a gap that closes at no more than ``slew`` rad/s, while the gains,
+The first command of a ramp holds the measured pose with the ramp's low start gains and no feed-forward, for
+``hold`` seconds: a link that sends only the newest command each period (Unitree's) would otherwise replace the hold
+by the next step before it reached the motors, whenever a loop wrote twice within one period. After it, each
+commanded target is the controller's plus a gap that closes at no more than ``slew`` rad/s, while the gains,
 target velocities and feed-forward torques are blended linearly from the start values into the controller's over
 ``duration`` seconds. The ramp is done once the blend is complete and the gap is closed; its last command is then
 the controller's own, so handing over to it is no jump.
@@ -28,9 +30,11 @@ class CommandRamp:
         slew: largest speed at which the gap between the commanded targets and the controller's closes [rad/s].
         kp: position gain at the start [N m / rad].
         kd: velocity gain at the start [N m s / rad].
+        hold_s: how long the first command (the measured pose) is held before the gap starts closing [s].
     """
 
-    def __init__(self, *, duration_s: float, slew: float, kp: float, kd: float) -> None:
+    def __init__(self, *, duration_s: float, slew: float, kp: float, kd: float, hold_s: float = 0.0) -> None:
+        self._hold = hold_s
         self._duration = duration_s
         self._slew = slew
         self._kp0 = kp
@@ -54,7 +58,7 @@ class CommandRamp:
         """
         self._q = np.array(q_measured, dtype=np.float64)
         self._gap = None
-        self._t0 = self._t_last = time
+        self._t0 = self._t_last = time + self._hold  # the motion and the blend begin once the hold is over
         return MotorCommand.hold(self._q.copy(), self._kp0, self._kd0)
 
     def step(self, target: MotorCommand, time: float) -> tuple[MotorCommand, bool]:
@@ -66,6 +70,8 @@ class CommandRamp:
         """
         if self._q is None:
             raise RuntimeError("CommandRamp.step before start")  # a bug in the caller, never a runtime condition
+        if self._gap is None and time < self._t0:  # still holding the measured pose
+            return MotorCommand.hold(self._q.copy(), self._kp0, self._kd0), False
         max_step = self._slew * max(0.0, time - self._t_last)
         self._t_last = max(self._t_last, time)
         if self._gap is None:  # the first step: the gap is where the ramp started, seen from the controller's target

@@ -230,7 +230,7 @@ class SafeRobot(Robot):
             if self._ramp is None:
                 cfg = self.config
                 self._ramp = CommandRamp(duration_s=cfg.ramp_time_s, slew=cfg.ramp_slew, kp=cfg.ramp_kp,
-                                         kd=cfg.ramp_kd)
+                                         kd=cfg.ramp_kd, hold_s=cfg.ramp_hold_s)
                 out = self._ramp.start(np.clip(self._latest.q, self._lower, self._upper), now)
             else:
                 out, done = self._ramp.step(target, now)
