@@ -14,6 +14,7 @@ from wbc.mpc.gait import STAND, TROT, GaitConfig, GaitScheduler
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.robots import get_robot, joint_table
 from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.description import FOOT_NAMES, LEG_NAMES
 from wbc.robots.pinocchio_model import build_pinocchio
 from wbc.scenario.terrain import TerrainConfig
 
@@ -239,38 +240,48 @@ def test_gait_state_and_contact_table_agree_with_the_per_time_queries(gait):
         assert np.array_equal(table, np.array([sched.contact(t + (k + 0.5) * 0.04) for k in range(10)]))
 
 
-def test_the_per_tick_kinematics_placed_at_a_base_state_agree_with_pinocchio_there():
-    # one pass with the base at the origin, then placed: what the estimator and the leg layer read every tick
-    desc = get_robot("a1-wx200")
+@pytest.mark.parametrize(("robot", "arm"), [("a1-wx200", "actuated"), ("a1-wx200", "locked"), ("a1-wx200", "none"),
+                                           ("go1-arm", "actuated"), ("go1-arm", "none")])
+def test_the_per_tick_kinematics_placed_at_a_base_state_agree_with_pinocchio_there(robot, arm):
+    # one compiled pass with the base at the origin, then placed: what the estimator and the leg layer read every
+    # tick, against Pinocchio's own algorithms at the placed state, over random configurations far from the stand
+    desc = get_robot(robot).with_arm_mode(arm)
     rng = np.random.default_rng(4)
-    quat = np.array([0.98, 0.05, -0.1, 0.15])
-    quat /= np.linalg.norm(quat)
-    q, dq = desc.nominal_q + 0.1 * rng.standard_normal(15), rng.standard_normal(15)
-    p, v, w = np.array([0.1, -0.2, 0.3]), rng.standard_normal(3), rng.standard_normal(3)
     kin = RobotKinematics(desc)
-    kin.update(p, quat, q, dq, v, w, centroidal=True)
     model, data = kin.robot.model, kin.robot.data
-    q_pin, v_pin = kin.q_pin, kin.v_pin
-    pin.forwardKinematics(model, data, q_pin, v_pin)
-    pin.computeJointJacobians(model, data, q_pin)
-    pin.updateFramePlacements(model, data)
     frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-    cols = kin._leg_cols
-    for i, fid in enumerate(kin._foot_frames):
-        np.testing.assert_allclose(kin.feet[i], data.oMf[fid].translation, atol=1e-12)
-        np.testing.assert_allclose(kin.feet_vel[i], pin.getFrameVelocity(model, data, fid, frame).linear, atol=1e-12)
-        jac = pin.getFrameJacobian(model, data, fid, frame)[:3]
-        np.testing.assert_allclose(kin.leg_jacobians[i], jac[:, cols[i]], atol=1e-12)
-        assert np.abs(np.delete(jac[:, 6:], cols[i] - 6, axis=1)).max() < 1e-12  # no other joint moves the foot
-    np.testing.assert_allclose(kin.gravity, pin.computeGeneralizedGravity(model, data, q_pin)[kin._house_cols],
-                               atol=1e-12)
-    pin.centerOfMass(model, data, q_pin, v_pin)
-    np.testing.assert_allclose(kin.com, data.com[0], atol=1e-12)
-    np.testing.assert_allclose(kin.com_vel, data.vcom[0], atol=1e-12)
-    # between MPC updates the CoM rides with the trunk at its last offset
-    kin.tick(quat, q, dq, w, quat_to_matrix(quat))
-    kin.place(p + 0.01, v)
-    np.testing.assert_allclose(kin.com, data.com[0] + 0.01, atol=1e-12)
+    cols = 6 + kin.robot.joints.house_from_pin[:12].reshape(4, 3)  # each leg's columns of the velocity
+    feet = [model.getFrameId(name) for name in FOOT_NAMES]
+    n = desc.num_joints
+    for _ in range(20):
+        quat = rng.standard_normal(4)
+        quat /= np.linalg.norm(quat)
+        q, dq = desc.nominal_q + 0.5 * rng.standard_normal(n), rng.standard_normal(n)
+        p, v, w = rng.standard_normal(3), rng.standard_normal(3), rng.standard_normal(3)
+        kin.update(p, quat, q, dq, v, w, centroidal=True)
+        q_pin, v_pin = kin.q_pin, kin.v_pin
+        pin.forwardKinematics(model, data, q_pin, v_pin)
+        pin.computeJointJacobians(model, data, q_pin)
+        pin.updateFramePlacements(model, data)
+        for i, fid in enumerate(feet):
+            np.testing.assert_allclose(kin.feet[i], data.oMf[fid].translation, atol=1e-12)
+            np.testing.assert_allclose(kin.feet_vel[i], pin.getFrameVelocity(model, data, fid, frame).linear,
+                                       atol=1e-12)
+            jac = pin.getFrameJacobian(model, data, fid, frame)[:3]
+            np.testing.assert_allclose(kin.leg_jacobians[i], jac[:, cols[i]], atol=1e-12)
+            assert np.abs(np.delete(jac[:, 6:], cols[i] - 6, axis=1)).max() < 1e-12  # no other joint moves it
+        hips = [data.oMi[model.getJointId(f"{leg}_thigh_joint")].translation for leg in LEG_NAMES]
+        np.testing.assert_allclose(kin.hip_positions(), np.array(hips), atol=1e-12)
+        np.testing.assert_allclose(kin.omega_world, quat_to_matrix(quat) @ w, atol=1e-12)
+        gravity = pin.computeGeneralizedGravity(model, data, q_pin)[6 + kin.robot.joints.house_from_pin]
+        np.testing.assert_allclose(kin.gravity, gravity, atol=1e-10)
+        pin.centerOfMass(model, data, q_pin, v_pin)
+        np.testing.assert_allclose(kin.com, data.com[0], atol=1e-12)
+        np.testing.assert_allclose(kin.com_vel, data.vcom[0], atol=1e-12)
+        # between MPC updates the CoM rides with the trunk at its last offset
+        kin.tick(quat, q, dq, w, quat_to_matrix(quat))
+        kin.place(p + 0.01, v)
+        np.testing.assert_allclose(kin.com, data.com[0] + 0.01, atol=1e-12)
 
 
 def test_leg_jacobians_match_finite_differences_of_the_feet():

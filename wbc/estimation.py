@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 
+import numba
 import numpy as np
 
 from wbc.errors import ConfigError
@@ -111,6 +112,41 @@ def _steady_gain(dt: float, cfg: EstimatorConfig, pattern: int) -> np.ndarray:
     return k
 
 
+@numba.njit(cache=True, nogil=True)
+def _steady_step(x, trust, rot, accel_body, feet_rel, feet_vel_rel, keep_a, keep_b, keep_g,
+                       gain):  # pragma: no cover
+    """One predict-and-correct step of the base estimator with the steady gain of the trusted feet's pattern.
+
+    x+ = keep_a[p] x + keep_b[p] (R a) + gain[p] y + keep_g[p], with y the feet's positions and velocities relative
+    to the base (12 + 12) and p the pattern of feet trusted at least half (bit i: foot i); `x` is updated in place.
+    """
+    pattern = 0
+    for i in range(4):
+        if trust[i] >= 0.5:
+            pattern |= 1 << i
+    ka, kb, kg, k = keep_a[pattern], keep_b[pattern], keep_g[pattern], gain[pattern]
+    aw = np.empty(3)
+    for a in range(3):
+        aw[a] = rot[a, 0] * accel_body[0] + rot[a, 1] * accel_body[1] + rot[a, 2] * accel_body[2]
+    y = np.empty(24)
+    for i in range(4):
+        for a in range(3):
+            y[3 * i + a] = feet_rel[i, a]
+            y[12 + 3 * i + a] = feet_vel_rel[i, a]
+    n = x.shape[0]
+    out = np.empty(n)
+    for r in range(n):
+        acc = kg[r] + kb[r, 0] * aw[0] + kb[r, 1] * aw[1] + kb[r, 2] * aw[2]
+        for c in range(n):
+            acc += ka[r, c] * x[c]
+        for c in range(24):
+            acc += k[r, c] * y[c]
+        out[r] = acc
+    for r in range(n):
+        x[r] = out[r]
+
+
+
 class BaseEstimator:
     """Kalman filter over base position, velocity and foot positions.
 
@@ -129,6 +165,7 @@ class BaseEstimator:
         # pattern -> the one-step update's matrices, all 16 built here: a gain built inside the control loop would
         # stall one tick by ~10 ms (the first time each pattern occurs in a process)
         self._steady: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+        self._stacked: tuple[np.ndarray, ...] = ()  # the same, stacked by pattern for the compiled step
         if self.config.gain == "steady":
             a = np.eye(18)
             a[0:3, 3:6] = dt * np.eye(3)
@@ -141,6 +178,8 @@ class BaseEstimator:
                 signed = gain[:, :24].copy()
                 signed[:, 12:24] *= -1.0
                 self._steady[pattern] = (keep @ a, keep @ b, keep @ b @ GRAVITY, signed)
+            self._stacked = tuple(np.ascontiguousarray(np.stack([self._steady[p][m] for p in range(16)]))
+                                  for m in range(4))
 
     def reset(self, base_pos: np.ndarray, feet_world: np.ndarray) -> None:
         """Start at a known base position with zero velocity and the feet where kinematics put them."""
@@ -172,15 +211,11 @@ class BaseEstimator:
         """
         dt, x = self.dt, self.x
         if self.config.gain == "steady":
-            t0, t1, t2, t3 = trust if type(trust) is list else np.asarray(trust, dtype=np.float64).tolist()
-            pattern = int(t0 >= 0.5) | int(t1 >= 0.5) << 1 | int(t2 >= 0.5) << 2 | int(t3 >= 0.5) << 3
-            # predict and correct in one: x+ = (I - K C) (A x + B (R a + g)) + K y; the velocity rows of y are
-            # negated inside the stored gain and its foot-height rows (zeros) dropped
-            keep_a, keep_b, keep_g, gain = self._steady[pattern]
-            y = self._y
-            y[0:12] = np.ravel(feet_rel_world)
-            y[12:24] = np.ravel(feet_vel_rel_world)
-            x[:] = keep_a @ x + keep_b @ (rot @ accel_body) + gain @ y[:24] + keep_g
+            # predict and correct in one, compiled: x+ = (I - K C) (A x + B (R a + g)) + K y; the velocity rows of y
+            # are negated inside the stored gain and its foot-height rows (zeros) dropped
+            _steady_step(x, np.asarray(trust, dtype=np.float64), rot, np.asarray(accel_body, dtype=np.float64),
+                         np.asarray(feet_rel_world, dtype=np.float64),
+                         np.asarray(feet_vel_rel_world, dtype=np.float64), *self._stacked)
             return
         # predict: x = A x + B a, with A = I + dt [0 I; 0 0] on (p, v)
         a_world = rot @ accel_body + GRAVITY

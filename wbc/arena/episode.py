@@ -18,6 +18,7 @@ import numpy as np
 
 from wbc.errors import ConfigError, EpisodeFileError
 from wbc.hardware.capabilities import SafetyEventLike
+from wbc.robots.conventions import quat_to_matrices
 from wbc.scenario.push import Push
 
 __all__ = ["BASE_SOURCES", "Episode", "EpisodeBuffer", "OperatorLog", "PushLog", "SafetyLog"]
@@ -297,34 +298,50 @@ def _optional_group(path: str, files: list[str], prefix: str, keys: tuple[str, .
 
 @dataclass
 class EpisodeBuffer:
-    """Preallocated rows filled tick by tick by the runner; `finish` freezes them into an `Episode`."""
+    """Preallocated rows filled tick by tick by the runner; `finish` freezes them into an `Episode`.
+
+    A tick stores only what it measured: the time, the command, the act time, the trunk's true pose (in ``qpos``,
+    with the joints) and velocity, and the joints' torques and speeds. What the episode derives from them (roll,
+    pitch, the velocity in the yaw frame, the yaw rate, the power, the arm's joints) is computed once, for all rows,
+    at `finish`: per tick those few dozen scalar operations cost more than the physics step.
+    """
 
     capacity: int
     nq: int
+    arm: slice | None = None
     rows: int = 0
     t: np.ndarray = field(init=False)
     command: np.ndarray = field(init=False)
-    v_base_in_yaw: np.ndarray = field(init=False)
-    yaw_rate: np.ndarray = field(init=False)
-    roll: np.ndarray = field(init=False)
-    pitch: np.ndarray = field(init=False)
-    power: np.ndarray = field(init=False)
-    arm_q: np.ndarray = field(init=False)
     qpos: np.ndarray = field(init=False)
+    base_vel: np.ndarray = field(init=False)
+    tau_dq: np.ndarray = field(init=False)
     act_s: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
-        n = self.capacity
+        n, nj = self.capacity, self.nq - 7
         self.t = np.zeros(n)
         self.command = np.zeros((n, 3))
-        self.v_base_in_yaw = np.zeros((n, 2))
-        self.yaw_rate = np.zeros(n)
-        self.roll = np.zeros(n)
-        self.pitch = np.zeros(n)
-        self.power = np.zeros(n)
-        self.arm_q = np.zeros((n, 3))
         self.qpos = np.zeros((n, self.nq))
+        self.base_vel = np.zeros((n, 6))  # linear velocity (world), angular velocity (body)
+        self.tau_dq = np.zeros((n, 2, nj))  # estimated joint torques and joint speeds
         self.act_s = np.zeros(n)
+
+    def derived(self) -> dict[str, np.ndarray]:
+        """The per-tick metrics of the rows filled so far: roll, pitch, v_base_in_yaw, yaw_rate, power, arm_q."""
+        k = self.rows
+        quat, vel = self.qpos[:k, 3:7], self.base_vel[:k]
+        rot = quat_to_matrices(quat)
+        roll = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
+        pitch = -np.arcsin(np.clip(rot[:, 2, 0], -1.0, 1.0))
+        yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
+        c, s = np.cos(yaw), np.sin(yaw)
+        v = vel[:, 0:3]
+        v_yaw = np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1)
+        yaw_rate = np.einsum("ij,ij->i", rot[:, 2, :], vel[:, 3:6])
+        power = np.abs(self.tau_dq[:k, 0] * self.tau_dq[:k, 1]).sum(axis=1)
+        arm_q = self.qpos[:k, 7:][:, self.arm] if self.arm is not None else np.zeros((k, 3))
+        return {"roll": roll, "pitch": pitch, "v_base_in_yaw": v_yaw, "yaw_rate": yaw_rate, "power": power,
+                "arm_q": arm_q}
 
     def finish(self, *, duration_s: float, control_dt: float, fell: bool, fall_time_s: float,
                safety_events: SafetyLog | None = None) -> Episode:
@@ -332,6 +349,7 @@ class EpisodeBuffer:
         k = self.rows
         return Episode(
             duration_s=duration_s, control_dt=control_dt, fell=fell, fall_time_s=fall_time_s,
-            **{name: getattr(self, name)[:k].copy() for name in _ARRAYS},
+            t=self.t[:k].copy(), command=self.command[:k].copy(), qpos=self.qpos[:k].copy(),
+            act_s=self.act_s[:k].copy(), **self.derived(),
             safety_events=SafetyLog() if safety_events is None else safety_events,
         )

@@ -20,16 +20,12 @@ import time
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
-import numpy as np
-
 from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
 from wbc.errors import MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, TruthSource
 from wbc.hardware.robot import Robot
-from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import ARM_JOINTS
-from wbc.robots.euler import rpy_of
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, VelocityCommand
 
@@ -89,9 +85,9 @@ def run_episode(
     fallen = _fall_detector_of(robot) if fallen is None else fallen
     dt = 1.0 / controller.rate_hz
     n = int(round(duration_s / dt))
-    buf = EpisodeBuffer(capacity=n, nq=7 + robot.num_joints)
+    arm = slice(ARM_JOINTS.start, ARM_JOINTS.stop) if robot.num_joints == 15 else None
+    buf = EpisodeBuffer(capacity=n, nq=7 + robot.num_joints, arm=arm)
     controller.reset()
-    arm = ARM_JOINTS if robot.num_joints == 15 else None
     clock = time.perf_counter
     fell, fall_time = False, math.nan
     safety = robot if isinstance(robot, HasSafetyEvents) else None
@@ -107,22 +103,19 @@ def run_episode(
         robot.write(out)
         robot.advance(dt)
         tr = truth()
-        rot = quat_to_matrix(tr.base_quat)
-        roll, pitch, yaw = rpy_of(rot).tolist()
-        c, s = math.cos(yaw), math.sin(yaw)
-        v = tr.base_linvel_in_world
+        # the raw rows only: the metrics derived from them are computed for all ticks at the end (`finish`)
         buf.t[i] = (k + 1) * dt
         buf.command[i] = (cmd.vx, cmd.vy, cmd.yaw_rate)
-        buf.v_base_in_yaw[i] = (c * v[0] + s * v[1], -s * v[0] + c * v[1])
-        buf.yaw_rate[i] = rot[2] @ tr.base_angvel_in_body
-        buf.roll[i] = roll
-        buf.pitch[i] = pitch
-        buf.power[i] = float(np.abs(state.tau_est * state.dq).sum())
-        if arm is not None:
-            buf.arm_q[i] = state.q[arm]
-        buf.qpos[i, :3] = tr.base_position_in_world
-        buf.qpos[i, 3:7] = tr.base_quat
-        buf.qpos[i, 7:] = state.q
+        row = buf.qpos[i]
+        row[:3] = tr.base_position_in_world
+        row[3:7] = tr.base_quat
+        row[7:] = state.q
+        vel = buf.base_vel[i]
+        vel[:3] = tr.base_linvel_in_world
+        vel[3:] = tr.base_angvel_in_body
+        tau_dq = buf.tau_dq[i]
+        tau_dq[0] = state.tau_est
+        tau_dq[1] = state.dq
         buf.rows += 1
         if observer is not None:
             observer((k + 1) * dt, robot, controller, cmd)

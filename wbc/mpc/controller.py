@@ -29,6 +29,7 @@ from wbc.errors import ConfigError
 from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
+from wbc.mpc.compiled import contact_trust
 from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler, gait_fits_steps
 from wbc.mpc.kinematics import RobotKinematics
@@ -266,18 +267,9 @@ class MpcController:
             kin.place(truth.base_position_in_world, truth.base_linvel_in_world)
             return
         estimator = self.estimator
-        # four feet: Python floats (a dozen numpy calls on 4-vectors would cost more than the filter itself)
-        inv_force, slip2 = 1.0 / cfg.contact_force, cfg.slip_speed * cfg.slip_speed
-        vx, vy = estimator.x[3].item(), estimator.x[4].item()
-        trust, slipping = [], []
-        for stance, force, (fx, fy, _) in zip(contact.tolist(), state.foot_force.tolist(), kin.feet_vel_rel.tolist(),
-                                             strict=True):
-            w = min(max(force * inv_force, 0.0), 1.0) if stance else 0.0
-            # a stance foot slides when its world velocity at the predicted base velocity is not about zero
-            slides = w > 0.0 and (fx + vx) ** 2 + (fy + vy) ** 2 > slip2
-            slipping.append(slides)
-            trust.append(0.0 if slides else w)
-        self.slipping = np.array(slipping)
+        trust, self.slipping = np.empty(4), np.empty(4, dtype=bool)  # new arrays: a caller may keep the last ones
+        contact_trust(contact, state.foot_force, kin.feet_vel_rel, estimator.x[3].item(), estimator.x[4].item(),
+                      1.0 / cfg.contact_force, cfg.slip_speed * cfg.slip_speed, trust, self.slipping)
         estimator.update(rot, state.accel_in_body, kin.feet_rel, kin.feet_vel_rel, trust)
         kin.place(estimator.x[0:3].copy(), estimator.x[3:6].copy())
 

@@ -1,7 +1,7 @@
 """Foothold planning: the Raibert heuristic with a capture-point correction, so a push can be stepped out.
 
 `plan_foothold` places one swing foot; `FootholdPlanner` keeps, for the four feet, where each lifted off and where it
-will land (refreshed while it swings), and the swing targets between the two (`swing_point`).
+will land (refreshed while it swings), and the swing targets between the two (`wbc.mpc.compiled.swing_targets`).
 """
 
 from __future__ import annotations
@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wbc.mpc.compiled import swing_targets
 from wbc.mpc.gait import GaitConfig
 from wbc.mpc.kinematics import RobotKinematics
-from wbc.mpc.swing import swing_point
 from wbc.robots.conventions import G
 
 __all__ = ["MIN_CAPTURE_HEIGHT_M", "FootholdConfig", "FootholdPlanner", "ground_height", "plan_foothold"]
@@ -124,7 +124,7 @@ class FootholdPlanner:
         self.gait = gait
         self.config = config
         self.swing_height = swing_height
-        self._below = np.array([0.0, 0.0, touchdown_depth])
+        self._below_z = float(touchdown_depth)
         self.reset()
 
     def reset(self) -> None:
@@ -175,11 +175,7 @@ class FootholdPlanner:
         Returns:
             (positions, velocities), world, shape (4, 3) each [m], [m/s].
         """
-        pos = np.zeros((4, 3))
-        vel = np.zeros((4, 3))
-        s = progress.tolist()
-        for i, stance in enumerate(contact.tolist()):
-            if not stance:
-                pos[i], vel[i] = swing_point(self.liftoff[i], self.footholds[i] - self._below, s[i],
-                                             self.gait.swing_s, self.swing_height)
+        pos, vel = np.empty((4, 3)), np.empty((4, 3))
+        swing_targets(contact, progress, self.liftoff, self.footholds, self._below_z, self.gait.swing_s,
+                      self.swing_height, pos, vel)
         return pos, vel

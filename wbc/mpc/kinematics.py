@@ -3,10 +3,11 @@
 A thin layer over the Pinocchio model that speaks the house joint order and the world-frame quantities the MPC
 controller needs. It is split along what a tick can afford:
 
-- `tick` (every control tick, one Pinocchio pass): everything that does not depend on where the base is or how
-  fast it moves: the feet and hips relative to the base (world axes), the feet's velocities relative to the base
-  (omega x r + J dq), each leg's 3 x 3 foot Jacobian and the joints' gravity torques. The pass runs with the base at
-  the origin, at rest, so the estimator reads its leg-kinematics measurements straight from it.
+- `tick` (every control tick, one compiled pass over the model's tree, `wbc.mpc.compiled.tree_pass`, equal to
+  Pinocchio's to rounding): everything that does not depend on where the base is or how fast it moves: the feet and
+  hips relative to the base (world axes), the feet's velocities relative to the base (omega x r + J dq), each leg's
+  3 x 3 foot Jacobian and the joints' gravity torques. The pass runs with the base at the origin, at rest, so the
+  estimator reads its leg-kinematics measurements straight from it.
 - `place` (every tick, a few products): puts that configuration at the estimated (or true) base position and
   velocity: feet, foot velocities, hips and CoM in the world.
 - `centroidal` (every MPC update): the composite inertia, the arm's momentum matrix, the centroidal momentum and
@@ -20,14 +21,14 @@ import numpy as np
 import pinocchio as pin
 
 from wbc.mpc.centroidal_model import CentroidalParams
+from wbc.mpc.compiled import TreeModel, tree_pass
+from wbc.mpc.compiled import place as place_kinematics
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import ARM_JOINTS, FOOT_NAMES, LEG_NAMES, RobotDescription
 from wbc.robots.pinocchio_model import build_pinocchio
 
 __all__ = ["RobotKinematics"]
 
-_LWA = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
-_LEGS = np.arange(4)[:, None]
 
 
 class RobotKinematics:
@@ -54,15 +55,8 @@ class RobotKinematics:
         self.desc = desc
         self.robot = build_pinocchio(desc)
         model = self.robot.model
-        data = self.robot.data
-        self._foot_frames = [model.getFrameId(f) for f in FOOT_NAMES]
-        # views of the feet's and hips' positions inside Pinocchio's data (they follow every placement update): one
-        # copy of all four per tick instead of four calls
-        self._foot_views = [data.oMf[fid].translation for fid in self._foot_frames]
-        self._hip_views = [data.oMi[model.getJointId(f"{leg}_thigh_joint")].translation for leg in LEG_NAMES]
         self._perm = self.robot.joints.pin_from_house  # pin joint k is house joint perm[k]
         self._house_cols = 6 + self.robot.joints.house_from_pin  # v index of each house joint
-        self._leg_cols = self._house_cols[:12].reshape(4, 3)
         self.n = desc.num_joints
         self.arm_v = self._house_cols[ARM_JOINTS] if self.n == 15 else None
         self.mass = float(sum(inertia.mass for inertia in model.inertias))
@@ -86,11 +80,16 @@ class RobotKinematics:
         self.base_velocity = np.zeros(3)
         self._com_in_base = np.zeros(3)  # the CoM in the trunk frame, from the last `centroidal` (or the first tick)
         self._com_known = False
+        # the per-tick pass runs compiled on the model's tree (Pinocchio's joint order, from its joint 2 on)
+        pin_of_house = self.robot.joints.house_from_pin  # the Pinocchio-order index of each house joint
+        self._tree = TreeModel.of(model, list(FOOT_NAMES), [f"{leg}_thigh_joint" for leg in LEG_NAMES],
+                                  pin_of_house[:12].reshape(4, 3))
+        self._gravity_z = float(model.gravity.linear[2])
 
     # -- every tick -----------------------------------------------------------------------------------------------
     def tick(self, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray, omega_body: np.ndarray,
              rot: np.ndarray) -> None:
-        """The configuration's kinematics relative to the base (one Pinocchio pass).
+        """The configuration's kinematics relative to the base (one compiled pass).
 
         Args:
             base_quat: base orientation (w, x, y, z).
@@ -99,42 +98,27 @@ class RobotKinematics:
             omega_body: base angular velocity, body frame (3,) [rad/s].
             rot: the rotation matrix of `base_quat` (body to world).
         """
-        model, data = self.robot.model, self.robot.data
-        qp, vp = self._q_tick, self._v_tick
-        qp[3:6] = base_quat[1:4]
-        qp[6] = base_quat[0]
-        qp[7:] = q[self._perm]
-        vp[3:6] = omega_body
-        vp[6:] = dq[self._perm]
         self.rot = rot
-        pin.computeJointJacobians(model, data, qp)  # placements of every joint and their Jacobians, one pass
-        jac = np.empty((4, 3, model.nv))
-        for i, fid in enumerate(self._foot_frames):
-            pin.updateFramePlacement(model, data, fid)
-            jac[i] = pin.getFrameJacobian(model, data, fid, _LWA)[:3]
-        self.feet_rel = np.array(self._foot_views)
-        self.hips_rel = np.array(self._hip_views)
-        self.feet_vel_rel = jac @ vp  # the base's linear velocity is zero here: omega x r + J dq
-        self.leg_jacobians = jac[_LEGS, :, self._leg_cols].transpose(0, 2, 1)
-        self.gravity = pin.computeGeneralizedGravity(model, data, qp)[self._house_cols]
-        self.omega_world = rot @ omega_body
+        # fresh output arrays every tick: callers may keep last tick's
+        self.feet_rel, self.hips_rel = np.empty((4, 3)), np.empty((4, 3))
+        self.feet_vel_rel, self.leg_jacobians = np.empty((4, 3)), np.empty((4, 3, 3))
+        self.gravity, self.omega_world = np.empty(self.n), np.empty(3)
+        tree_pass(self._tree, rot, omega_body, base_quat, q, dq, self._perm, self._gravity_z, self._q_tick,
+                  self._v_tick, self.feet_rel, self.hips_rel, self.feet_vel_rel, self.leg_jacobians, self.gravity,
+                  self.omega_world)
         if not self._com_known:
-            self._com_in_base = rot.T @ pin.centerOfMass(model, data, qp, False)
+            model, data = self.robot.model, self.robot.data
+            self._com_in_base = rot.T @ pin.centerOfMass(model, data, self._q_tick, False)
             self._com_known = True
 
     def place(self, base_position: np.ndarray, base_velocity: np.ndarray) -> None:
         """Put the last `tick`'s configuration at a base position and velocity (world) [m], [m/s]."""
         p, v = base_position, base_velocity
         self.base_position, self.base_velocity = p, v
-        self.feet = self.feet_rel + p
-        self.feet_vel = self.feet_vel_rel + v
-        com_rel = self.rot @ self._com_in_base
-        self.com = p + com_rel
-        # v + omega x com_rel, in floats (numpy's cross costs more than the rest of this method)
-        wx, wy, wz = self.omega_world.tolist()
-        rx, ry, rz = com_rel.tolist()
-        vx, vy, vz = v.tolist()
-        self.com_vel = np.array([vx + wy * rz - wz * ry, vy + wz * rx - wx * rz, vz + wx * ry - wy * rx])
+        # new arrays each tick (a caller may keep the last ones), filled by one compiled call
+        self.feet, self.feet_vel, self.com, self.com_vel = np.empty((4, 3)), np.empty((4, 3)), np.empty(3), np.empty(3)
+        place_kinematics(self.feet_rel, self.feet_vel_rel, self.rot, self._com_in_base, self.omega_world, p, v,
+                         self.feet, self.feet_vel, self.com, self.com_vel)
 
     def update(self, base_pos: np.ndarray, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray,
                v_base_world: np.ndarray, omega_body: np.ndarray, *, centroidal: bool,

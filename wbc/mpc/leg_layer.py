@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbc.mpc.compiled import leg_torques
 from wbc.mpc.kinematics import RobotKinematics
 
-__all__ = ["STANCE_FORCE_BEFORE_PLAN_N", "LegLayer", "scale_to_torque_limits"]
+__all__ = ["STANCE_FORCE_BEFORE_PLAN_N", "LegLayer"]
 
 STANCE_FORCE_BEFORE_PLAN_N = 35.0
 """Vertical force each stance foot pushes while there is no plan yet (the first MPC update failed) [N].
@@ -26,28 +27,7 @@ STANCE_FORCE_BEFORE_PLAN_N = 35.0
 About a quarter of the robots' weight (a1-wx200: 15.6 kg, 153 N over four feet). A tuning value from the
 controller's first version; no measurement behind it is recorded (docs/mpc-notes.md)."""
 
-_FORCE_BEFORE_PLAN = np.array([0.0, 0.0, STANCE_FORCE_BEFORE_PLAN_N])
-_ONES = np.ones(4)
-_ONES.setflags(write=False)
-
-
-def scale_to_torque_limits(push: np.ndarray, hold: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    """The largest s in [0, 1] per leg such that |s push + hold| <= limit on each of its joints.
-
-    Args:
-        push: the torques of the full force, per leg and joint, shape (4, 3) [N m].
-        hold: torques that are not scaled (gravity), shape (4, 3) [N m].
-        limit: torque limits, shape (4, 3) [N m].
-
-    Returns:
-        s per leg (4,); 0 where even the unscaled torques exceed a limit.
-    """
-    # s push + hold <= limit and >= -limit: for push > 0, s <= (limit - hold) / push; for push < 0, s <= (-limit -
-    # hold) / push; joints that the force does not load give no bound
-    room = np.where(push > 0.0, limit - hold, -limit - hold)
-    loaded = np.abs(push) > 1e-9
-    bound = np.divide(room, push, out=np.full(push.shape, np.inf), where=loaded)
-    return np.clip(bound.min(axis=1), 0.0, 1.0)
+_FORCE_BEFORE_PLAN = np.tile([0.0, 0.0, STANCE_FORCE_BEFORE_PLAN_N], (4, 1))
 
 
 class LegLayer:
@@ -65,7 +45,7 @@ class LegLayer:
         self.swing_kp = swing_kp
         self.swing_kd = swing_kd
         self.stance_kd = stance_kd
-        self.limit = np.asarray(torque_limit, dtype=np.float64)[:12].reshape(4, 3)
+        self.limit = np.array(torque_limit[:12], dtype=np.float64)
         self.scale = np.ones(4)
 
     def torques(self, kin: RobotKinematics, contact: np.ndarray, forces: np.ndarray | None, swing_pos: np.ndarray,
@@ -82,20 +62,10 @@ class LegLayer:
         Returns:
             Torques, house order (n,) [N m]; on the arm's joints, gravity compensation.
         """
-        stance = contact[:, None]
         if forces is None:
-            forces = np.broadcast_to(_FORCE_BEFORE_PLAN, (4, 3))
-        swing = self.swing_kp * (swing_pos - kin.feet) + self.swing_kd * (swing_vel - kin.feet_vel)
-        push = -forces if self.stance_kd == 0.0 else -forces - self.stance_kd * kin.feet_vel
-        cartesian = np.where(stance, push, swing)
-        legs = (kin.leg_jacobians * cartesian[:, :, None]).sum(axis=1)  # J^T F per leg, (4, 3)
-        hold = kin.gravity[:12].reshape(4, 3)
-        tau = kin.gravity.copy()
-        # the cheap test first: most ticks no leg is near its limits
-        if np.any(np.abs(legs + hold) > self.limit):
-            self.scale = np.where(contact, scale_to_torque_limits(legs, hold, self.limit), 1.0)
-            legs = legs * self.scale[:, None]
-        else:
-            self.scale = _ONES
-        tau[:12] += legs.ravel()
+            forces = _FORCE_BEFORE_PLAN
+        tau = np.empty(kin.n)
+        self.scale = np.empty(4)  # a new array each tick: a caller may keep the last one
+        leg_torques(kin.leg_jacobians, kin.gravity, kin.feet, kin.feet_vel, contact, forces, swing_pos, swing_vel,
+                    self.swing_kp, self.swing_kd, self.stance_kd, self.limit, self.scale, tau)
         return tau

@@ -37,7 +37,11 @@ from wbc.tools.bench.references import (
 )
 from wbc.types import VelocityCommand
 
-__all__ = ["TickTimingLog", "bench_mpc", "physics_realtime_factor"]
+__all__ = ["WARMUP_S", "TickTimingLog", "bench_mpc", "physics_realtime_factor"]
+
+WARMUP_S = 0.2
+"""Length of the untimed episode played before the timed walk [s] (its wall time is reported as
+``warmup_episode_s``: it holds the compiled code's first load)."""
 
 
 def _median(values: Sequence[float], scale: float) -> float:
@@ -123,7 +127,9 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     worker is: a BLAS that spreads the MPC's condensing products over the cores is no faster on an idle machine and
     many times slower on a busy one.
 
-    The robot walks at `vx` on flat ground for `seconds` (or until it falls) through `run_episode`. From the
+    The robot walks at `vx` on flat ground for `seconds` (or until it falls) through `run_episode`, after an untimed
+    walk of `WARMUP_S` (the compiled parts of the tick load at their first call; ``warmup_episode_s`` is that walk's
+    wall time). From the
     controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time (DAQP) and setup
     time (linearisation and condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo:
     kinematics, dynamics, tasks, QP, plus setting its targets from Python). ``control_tick_us_median`` is the whole
@@ -179,6 +185,12 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     with sim:
         if reference:
             measure_references()
+        # a short episode first, untimed: the compiled parts of the tick load (or compile, on a machine's first run)
+        # at their first call, once per process; an arena worker pays that once for all its trials
+        sim.reset(seed=0)
+        warm_start = time.perf_counter()
+        run_episode(sim, ctrl, CommandSchedule(vx=vx), WARMUP_S)
+        warmup_wall = time.perf_counter() - warm_start
         sim.reset(seed=0)
         start = time.perf_counter()
         episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=log)
@@ -204,6 +216,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         "horizon": int(ctrl.config.mpc.horizon),
         **figures,
         "realtime_factor": realtime,
+        "warmup_episode_s": warmup_wall,
         "fell": bool(episode.fell),
         "blas": "default threads",
         "qp_solver": f"daqp {importlib.metadata.version('daqp')}",
