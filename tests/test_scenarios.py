@@ -14,7 +14,8 @@ from wbc.errors import UnknownNameError, WbcError
 from wbc.scenario import ScenarioError, check_published, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
-PUSH = SCENARIOS / "push.toml"
+PUSH = SCENARIOS / "push-v1.toml"  # push version 1: the tests below pin its values, hash and trials
+PUSH_CURRENT = SCENARIOS / "push.toml"  # the current version of the push task
 TURN = SCENARIOS / "turn.toml"
 
 # Line numbers matter: the broken-file cases below assert them.
