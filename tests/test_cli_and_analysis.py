@@ -12,7 +12,7 @@ from wbc.optional import require
 from wbc.robots import get_robot
 from wbc.tools.tail import analyze_tail
 
-PUSH = Path(__file__).resolve().parent.parent / "scenarios" / "push.toml"
+PUSH = Path(__file__).resolve().parent.parent / "scenarios" / "push-v1.toml"  # pushes held 0.06 s
 
 
 @pytest.mark.parametrize("robot", ["a1-wx200", "go1-arm"])

@@ -72,7 +72,10 @@ def test_the_demo_suggests_the_trial_the_controllers_ended_differently():
 
 
 def test_the_template_enters_the_arena_from_a_checkout_as_the_readme_shows(tmp_path):
-    """``wbc compare examples.my_controller:make stand --scenario scenarios/push.toml`` from the checkout's root.
+    """``wbc compare examples.my_controller:make stand --scenario scenarios/push-v1.toml`` from the checkout's root.
+
+    Push version 1, whose band in both controllers survive on this trial (its 0.06 s pushes were calibrated on the
+    PD stand), so that a fall says the plug-in broke, not the push.
 
     Run as the console script runs: the working directory is not on sys.path (only the package is importable), so
     the plug-in is found in the working directory by the loader itself; stdout is not a terminal, so the progress is
@@ -86,7 +89,7 @@ def test_the_template_enters_the_arena_from_a_checkout_as_the_readme_shows(tmp_p
     env = {**os.environ, "PYTHONPATH": str(site)}
     out = tmp_path / "run"
     proc = subprocess.run([sys.executable, str(script), "compare", "examples.my_controller:make", "stand",
-                           "--scenario", "scenarios/push.toml", "--trials", "1", "--band", "in", "--workers", "1",
+                           "--scenario", "scenarios/push-v1.toml", "--trials", "1", "--band", "in", "--workers", "1",
                            "--out", str(out)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr
     assert "examples.my_controller:make" in proc.stdout and "paired differences" in proc.stdout

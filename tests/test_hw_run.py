@@ -49,7 +49,7 @@ from wbc.viz.live import LiveObserver
 from wbc.viz.replay import load_stored_episode
 
 ROOT = Path(__file__).resolve().parents[1]
-PUSH = str(ROOT / "scenarios" / "push.toml")
+PUSH = str(ROOT / "scenarios" / "push-v1.toml")  # version 1: its trial 0 holds the 4 pushes named below
 TURN = ROOT / "scenarios" / "turn.toml"
 NOT_LOOPBACK = "192.0.2.1:9"  # TEST-NET-1 (documentation only), discard port: refused before anything is sent
 LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz

@@ -14,6 +14,7 @@ import pytest
 from wbc.cli.main import main
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
+from wbc.scenario import check_published, load_scenario
 from wbc.tools.paper import TABLE_I, TABLES, PaperRunConfig, resolve_contenders, run_paper_table, verdict
 from wbc.tools.paper.paper_table import PAPER_TRIALS_PER_BAND
 
@@ -162,3 +163,11 @@ def test_the_paper_rows_are_the_published_ones():
     assert TABLE_I["Locked"]["success_rate"][1].mean == pytest.approx(0.4583)
     assert TABLES["table3"].paper["Ours"]["success_rate"][1].mean == pytest.approx(0.8473)
     assert TABLES["table2"].paper["Locked"]["vang_err"][2].mean == pytest.approx(0.226)
+
+
+def test_the_push_tables_play_the_current_push_version_by_default():
+    # version 2, recalibrated on the locked-arm contenders; version 1 stays playable with --scenario
+    for name in ("table1", "table3"):
+        scenario = load_scenario(TABLES[name].scenario)
+        assert (scenario.name, scenario.version, scenario.robot) == ("push", 2, TABLES[name].robot)
+        check_published(scenario)

@@ -5,6 +5,7 @@ import hashlib
 import json
 import random
 import shutil
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,9 @@ from wbc.errors import UnknownNameError, WbcError
 from wbc.scenario import ScenarioError, check_published, load_scenario
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
-PUSH = SCENARIOS / "push.toml"
+PUSH = SCENARIOS / "push-v1.toml"  # push version 1: the tests below pin its values, hash and trials
+PUSH_CURRENT = SCENARIOS / "push.toml"  # the current version of the push task
+PUSH_V2_DURATION_S = 0.09  # [s] push version 2's calibrated push duration (its notes say how)
 TURN = SCENARIOS / "turn.toml"
 
 # Line numbers matter: the broken-file cases below assert them.
@@ -109,12 +112,14 @@ def test_base_file_is_valid(tmp_path):
 
 
 def test_shipped_scenarios_load_and_are_published():
-    push, turn = load_scenario(PUSH), load_scenario(TURN)
+    push, current, turn = load_scenario(PUSH), load_scenario(PUSH_CURRENT), load_scenario(TURN)
     assert (push.name, push.version, push.robot, push.bands) == ("push", 1, "a1-wx200", ("in", "ood"))
+    assert (current.name, current.version, current.robot, current.bands) == ("push", 2, "a1-wx200", ("in", "ood"))
     assert (turn.name, turn.version, turn.robot, turn.bands) == ("turn", 2, "go1-arm", ("1.0", "1.25", "1.5"))
-    assert push.duration_s == turn.duration_s == 20.0
+    assert push.duration_s == current.duration_s == turn.duration_s == 20.0
     assert "calibrat" in push.notes and "stand" in push.notes
-    for s in (push, turn):
+    assert "calibrat" in current.notes and "learned-locked" in current.notes and "mpc-locked" in current.notes
+    for s in (push, current, turn):
         assert len(s.hash) == 64 and int(s.hash, 16) >= 0
         check_published(s)
         check_published(s, SCENARIOS / "published.toml")
@@ -132,6 +137,29 @@ def test_every_shipped_scenario_is_published_and_the_push_variants_differ_from_p
     a, b, c = push.trial("in", 0, 3), slippery.trial("in", 0, 3), strong.trial("in", 0, 3)
     assert 0.4 <= b.domain.friction <= 0.5 and b.terrain == a.terrain
     assert [p.duration for p in c.pushes] == [0.10] * len(c.pushes) and 0.0 <= c.domain.payload_mass <= 1.0
+
+
+def test_push_version_2_differs_from_version_1_only_in_the_push_duration_and_both_are_published():
+    v1, v2 = tomllib.loads(PUSH.read_text()), tomllib.loads(PUSH_CURRENT.read_text())
+    assert (v1["scenario"]["name"], v1["scenario"]["version"]) == ("push", 1)
+    assert (v2["scenario"]["name"], v2["scenario"]["version"]) == ("push", 2)
+    assert v1["pushes"]["duration_s"] == 0.06
+    assert v2["pushes"]["duration_s"] == PUSH_V2_DURATION_S
+    # the notes keep version 1's reasoning word for word and add version 2's calibration
+    assert v1["scenario"]["notes"] in v2["scenario"]["notes"]
+    for data in (v1, v2):
+        for key in ("version", "notes"):
+            del data["scenario"][key]
+        del data["pushes"]["duration_s"]
+    assert v1 == v2  # robot, description, bands, offsets, commands, terrain, domain: all the same
+    lock = tomllib.loads((SCENARIOS / "published.toml").read_text())
+    first, second = load_scenario(PUSH), load_scenario(PUSH_CURRENT)
+    assert lock["push"] == {"1": first.hash, "2": second.hash}
+    check_published(first)
+    check_published(second)
+    # its trials are drawn from the same distribution (not the same draws: the content hash seeds the sampling)
+    for trial in second.trials(None, [0, 1], 20):
+        assert all(p.duration == PUSH_V2_DURATION_S for p in trial.pushes) and 3 <= len(trial.pushes) <= 5
 
 
 def test_hash_ignores_comments_layout_and_key_order_but_not_values(tmp_path):
@@ -158,11 +186,11 @@ def test_changed_published_file_is_refused(tmp_path):
 
 def test_unpublished_version_is_refused_with_the_fix(tmp_path):
     lock = write(tmp_path, (SCENARIOS / "published.toml").read_text(), "lock.toml")
-    bumped = load_scenario(write(tmp_path, edit(PUSH.read_text(), "version = 1", "version = 2"), "push.toml"))
+    bumped = load_scenario(write(tmp_path, edit(PUSH.read_text(), "version = 1", "version = 3"), "push.toml"))
     with pytest.raises(ScenarioError) as err:
         check_published(bumped, lock)
     text = str(err.value)
-    assert "unpublished" in text and bumped.hash in text and '"2"' in text and str(lock) in text
+    assert "unpublished" in text and bumped.hash in text and '"3"' in text and str(lock) in text
     with pytest.raises(ScenarioError, match="does not exist"):
         check_published(bumped)  # no published.toml next to this copy
 
