@@ -130,7 +130,7 @@ def test_the_compiled_steady_step_is_the_stored_matrices_applied():
         pattern = sum(1 << i for i in range(4) if trust[i] >= 0.5)
         rot = quat_to_matrix(np.array([0.9, 0.1, -0.2, 0.3]) / np.linalg.norm([0.9, 0.1, -0.2, 0.3]))
         accel, rel, vel = rng.standard_normal(3), rng.standard_normal((4, 3)), rng.standard_normal((4, 3))
-        keep_a, keep_b, keep_g, gain = est._steady[pattern]
+        keep_a, keep_b, keep_g, gain = (m[pattern] for m in est._steady)
         want = keep_a @ x + keep_b @ (rot @ accel) + gain @ np.concatenate([rel.ravel(), vel.ravel()]) + keep_g
         est.update(rot, accel, rel, vel, trust.tolist() if pattern % 2 else trust)
         np.testing.assert_allclose(est.x, want, atol=1e-12)

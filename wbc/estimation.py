@@ -162,24 +162,24 @@ class BaseEstimator:
         self.P = np.eye(18) * 1e-2
         self.C = _measurement_matrix()
         self._y = np.zeros(28)
-        # pattern -> the one-step update's matrices, all 16 built here: a gain built inside the control loop would
-        # stall one tick by ~10 ms (the first time each pattern occurs in a process)
-        self._steady: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
-        self._stacked: tuple[np.ndarray, ...] = ()  # the same, stacked by pattern for the compiled step
+        # the one-step update's matrices of all 16 contact patterns, built here and stacked by pattern (keep_a,
+        # keep_b, keep_g, signed gain) for the compiled step: a gain built inside the control loop would stall one
+        # tick by ~10 ms (the first time each pattern occurs in a process)
+        self._steady: tuple[np.ndarray, ...] = ()
         if self.config.gain == "steady":
             a = np.eye(18)
             a[0:3, 3:6] = dt * np.eye(3)
             b = np.zeros((18, 3))
             b[0:3] = 0.5 * dt * dt * np.eye(3)
             b[3:6] = dt * np.eye(3)
+            rows = []
             for pattern in range(16):
                 gain = _steady_gain(dt, self.config, pattern)
                 keep = np.eye(18) - gain @ self.C
                 signed = gain[:, :24].copy()
                 signed[:, 12:24] *= -1.0
-                self._steady[pattern] = (keep @ a, keep @ b, keep @ b @ GRAVITY, signed)
-            self._stacked = tuple(np.ascontiguousarray(np.stack([self._steady[p][m] for p in range(16)]))
-                                  for m in range(4))
+                rows.append((keep @ a, keep @ b, keep @ b @ GRAVITY, signed))
+            self._steady = tuple(np.ascontiguousarray(np.stack(m)) for m in zip(*rows, strict=True))
 
     def reset(self, base_pos: np.ndarray, feet_world: np.ndarray) -> None:
         """Start at a known base position with zero velocity and the feet where kinematics put them."""
@@ -215,7 +215,7 @@ class BaseEstimator:
             # are negated inside the stored gain and its foot-height rows (zeros) dropped
             _steady_step(x, np.asarray(trust, dtype=np.float64), rot, np.asarray(accel_body, dtype=np.float64),
                          np.asarray(feet_rel_world, dtype=np.float64),
-                         np.asarray(feet_vel_rel_world, dtype=np.float64), *self._stacked)
+                         np.asarray(feet_vel_rel_world, dtype=np.float64), *self._steady)
             return
         # predict: x = A x + B a, with A = I + dt [0 I; 0 0] on (p, v)
         a_world = rot @ accel_body + GRAVITY
