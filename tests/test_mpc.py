@@ -191,7 +191,7 @@ def test_a_saved_problem_loads_and_solves_to_the_live_plan_bit_for_bit(gait, tmp
     live = mpc.solve(problem, first.warm_start())
     problem.save(tmp_path / "problem.npz")
     loaded = MpcProblem.load(tmp_path / "problem.npz")
-    for name in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma"):
+    for name in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma_z"):
         assert np.array_equal(getattr(loaded, name), getattr(problem, name)), name
     # the solve holds no state between updates: a fresh solver (as in another process) and the live one replay it
     # to the same bits, warm and cold
@@ -201,13 +201,63 @@ def test_a_saved_problem_loads_and_solves_to_the_live_plan_bit_for_bit(gait, tmp
     _same_plan(fresh.solve(loaded), mpc.solve(problem))
 
 
+def test_the_condensed_prediction_equals_stepping_the_discretised_dynamics_one_step_at_a_time():
+    """X = free + gamma_z z (the compiled condensing) against the model stepped N times in plain numpy: linearised
+    about x0, each step's lever arms about that step's reference CoM (the current CoM for the first) with the matching
+    affine torque term, zero-order hold third order in dt."""
+    rng = np.random.default_rng(3)
+    mpc, x0, feet, params = _standing_problem()
+    n, dt = mpc.config.horizon, mpc.config.dt
+    x = x0.copy()
+    x[3:12] += rng.normal(scale=0.2, size=9)  # moving, tilted, spinning
+    contact = np.array([[1, 0, 0, 1]] * 4 + [[0, 1, 1, 0]] * 5 + [[1, 0, 0, 1]], bool)
+    x_ref = np.tile(x0, (n, 1)) + rng.normal(scale=0.05, size=(n, 15))
+    step_feet = np.tile(feet, (n, 1, 1)) + rng.normal(scale=0.05, size=(n, 4, 3))
+    problem = mpc.build(x, x_ref, contact, step_feet, params)
+    u = rng.normal(scale=20.0, size=(n, 15))
+    u[:, 12:] = rng.normal(scale=0.5, size=(n, 3))
+    u[:, :12] *= np.repeat(contact, 3, axis=1)  # swing feet have no force variables
+    z = u.ravel()[problem.index] / problem.scale
+    assert np.array_equal(np.flatnonzero(u.ravel()), problem.index)
+    predicted = (problem.free + problem.gamma_z @ z).reshape(n, 15)
+    # the QP's cost is the tracking error and effort of that plan: 1/2 z H z + g z = 1/2 |X - X_ref|_Q^2 + effort + c
+    cfg = mpc.config
+    q = np.tile(np.concatenate([cfg.weight_com, cfg.weight_vel, cfg.weight_rpy, cfg.weight_momentum,
+                                cfg.weight_arm_q]), n)
+    r = np.tile(np.r_[np.full(12, cfg.weight_force), np.full(3, cfg.weight_arm_dq)], n)
+    err = predicted.ravel() - x_ref.ravel()
+    err0 = problem.free - x_ref.ravel()
+    cost = 0.5 * z @ problem.H @ z + problem.g @ z
+    assert cost == pytest.approx(0.5 * (err @ (q * err) - err0 @ (q * err0)) + 0.5 * u.ravel() @ (r * u.ravel()),
+                                 rel=1e-9)
+
+    u_bar = np.zeros(15)
+    stance = contact[0]
+    u_bar[2:12:3] = stance * params.mass * 9.81 / stance.sum()
+    f0, a_c, b_c = CentroidalModel().linearize(x, u_bar, params)
+    d_c = f0 - a_c @ x - b_c @ u_bar
+    integ = np.eye(15) * dt + a_c * dt**2 / 2 + a_c @ a_c * dt**3 / 6
+    a_d = np.eye(15) + a_c @ integ
+    state = x.copy()
+    for k in range(n):
+        c_ref = x[0:3] if k == 0 else x_ref[k - 1, 0:3]
+        b_k = b_c.copy()
+        for i in range(4):
+            r = step_feet[k, i] - c_ref
+            b_k[9:12, 3 * i:3 * i + 3] = [[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]]
+        d_k = d_c.copy()
+        d_k[9:12] -= np.cross(u_bar[:12].reshape(4, 3).sum(axis=0), c_ref - x[0:3])
+        state = a_d @ state + integ @ (b_k @ u[k] + d_k)
+        np.testing.assert_allclose(predicted[k], state, rtol=1e-9, atol=1e-9, err_msg=f"step {k}")
+
+
 def test_a_problem_file_missing_arrays_is_refused_with_what_is_missing(tmp_path):
     mpc, x0, feet, params = _standing_problem()
     n = mpc.config.horizon
     problem = mpc.build(x0, np.tile(x0, (n, 1)), np.ones((n, 4), bool), np.tile(feet, (n, 1, 1)), params)
     old = {k: getattr(problem, k) for k in ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index")}
     np.savez(tmp_path / "old.npz", **old)  # a dump from before the problem carried its condensed dynamics
-    with pytest.raises(MpcProblemFileError, match="missing free, gamma"):
+    with pytest.raises(MpcProblemFileError, match="missing free, gamma_z"):
         MpcProblem.load(tmp_path / "old.npz")
 
 

@@ -16,21 +16,21 @@ current configuration (`CentroidalParams.from_pinocchio`); r_i are the foot posi
 neglected (stance legs barely move relative to the body). Because the arm's momentum appears in the orientation
 equation, an arm swing turns the body at constant h: the optimiser can use the arm like a tail.
 
-`CentroidalModel` evaluates f and its analytic Jacobians in numpy (a few microseconds; the MPC linearises along its
-whole horizon every update) and discretises them. The same dynamics are also built once as a CasADi expression from
-numeric parameters (the registry's Pinocchio wheels have no ``pinocchio.casadi``): the tests check the analytic
-Jacobians against CasADi's and against finite differences.
+`CentroidalModel` evaluates f and its analytic Jacobians, compiled (`wbc.mpc.condensing.linearize`; the MPC
+linearises once per update about the current state), and discretises them. The same dynamics are also built once as
+a CasADi expression from numeric parameters (the registry's Pinocchio wheels have no ``pinocchio.casadi``): the tests
+check the analytic Jacobians against CasADi's and against finite differences.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 import pinocchio as pin
 
+from wbc.mpc.condensing import linearize as _linearize
 from wbc.robots.conventions import GRAVITY
 from wbc.robots.pinocchio_model import PinocchioRobot
 
@@ -55,10 +55,6 @@ FORCES = slice(0, 12)
 """Contact forces f_FR, f_FL, f_RR, f_RL in the input u [N]."""
 ARM_DQ = slice(12, 15)
 """Arm joint velocities dq_a in the input u [rad/s]."""
-# index pairs of the constant unit entries of the Jacobians
-_POS_ROWS, _VEL_ROWS = np.arange(0, 3), np.arange(3, 6)
-_FORCE_ROWS, _FORCE_COLS = np.tile(np.arange(3, 6), 4), np.arange(12)
-_ARM_ROWS = np.arange(12, 15)
 
 
 def euler_rates_matrix(theta: np.ndarray) -> np.ndarray:
@@ -146,48 +142,11 @@ class CentroidalModel:
 
     def linearize(self, x: np.ndarray, u: np.ndarray, params: CentroidalParams, *, jacobians: bool = True
                   ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
-        """f(x, u), df/dx (15 x 15) and df/du (15 x 15)."""
-        # runs at every MPC update: scalars as Python floats, each block written once
-        c, v, h = x[0:3], x[3:6], x[9:12]
-        forces = u[:12].reshape(4, 3)
-        dqa = u[12:15]
-        inv_i = params.inverse_inertia
-        omega = inv_i @ (h - params.arm_momentum_matrix @ dqa)
-        pitch, yaw = x[7].item(), x[8].item()
-        cp, sp, cy, sy = math.cos(pitch), math.sin(pitch), math.cos(yaw), math.sin(yaw)
-        e_inv = np.array([cy / cp, sy / cp, 0.0, -sy, cy, 0.0, cy * sp / cp, sy * sp / cp, 1.0]).reshape(3, 3)
-        rel = params.feet_world - c
-        total = forces.sum(axis=0)
-        f = np.empty(NX)
-        f[0:3] = v
-        f[3:6] = total / params.mass + GRAVITY
-        f[6:9] = e_inv @ omega
-        f[12:15] = dqa
-        if not jacobians:
-            f[9:12] = (rel[:, [1, 2, 0]] * forces[:, [2, 0, 1]] - rel[:, [2, 0, 1]] * forces[:, [1, 2, 0]]).sum(axis=0)
-            return f, None, None
-        a = np.zeros((NX, NX))
-        b = np.zeros((NX, NU))
-        a[_POS_ROWS, _VEL_ROWS] = 1.0
-        w0, w1 = omega[0].item(), omega[1].item()
-        s_ = w0 * cy + w1 * sy
-        ds = -w0 * sy + w1 * cy
-        # d(E^-1 omega)/d(pitch, yaw); roll does not enter
-        a[6:9, 7] = (s_ * sp / cp**2, 0.0, s_ / cp**2)
-        a[6:9, 8] = (ds / cp, -s_, ds * sp / cp)
-        ei = e_inv @ inv_i
-        a[6:9, 9:12] = ei
-        a[9:12, 0:3] = skew(total)
-        inv_m = 1.0 / params.mass
-        b[_FORCE_ROWS, _FORCE_COLS] = inv_m
-        levers = b[9:12, 0:12].reshape(3, 4, 3)  # a view: [r_i]x in columns 3 i .. 3 i + 2
-        levers[0, :, 1], levers[0, :, 2] = -rel[:, 2], rel[:, 1]
-        levers[1, :, 0], levers[1, :, 2] = rel[:, 2], -rel[:, 0]
-        levers[2, :, 0], levers[2, :, 1] = -rel[:, 1], rel[:, 0]
-        b[6:9, 12:15] = -ei @ params.arm_momentum_matrix
-        b[_ARM_ROWS, _ARM_ROWS] = 1.0
-        f[9:12] = b[9:12, 0:12] @ u[:12]  # sum_i [r_i]x f_i
-        return f, a, b
+        """f(x, u), df/dx (15 x 15) and df/du (15 x 15) (compiled: `wbc.mpc.condensing.linearize`)."""
+        f, a, b = np.empty(NX), np.empty((NX, NX)), np.empty((NX, NU))
+        _linearize(np.ascontiguousarray(x, dtype=np.float64), np.ascontiguousarray(u, dtype=np.float64),
+                   params.inverse_inertia, params.arm_momentum_matrix, params.feet_world, float(params.mass), f, a, b)
+        return (f, a, b) if jacobians else (f, None, None)
 
     def discretize(self, x: np.ndarray, u: np.ndarray, params: CentroidalParams, dt: float
                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -28,7 +28,8 @@ import daqp
 import numpy as np
 
 from wbc.errors import MpcProblemFileError, WbcError
-from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams, zoh_integral
+from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams
+from wbc.mpc.condensing import condense
 from wbc.robots.conventions import G
 
 __all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "DenseQp", "CentroidalMpc"]
@@ -104,8 +105,8 @@ class MpcProblem(DenseQp):
 
     min 1/2 z^T H z + g^T z  s.t.  l <= C z <= u,  l_box <= z <= u_box;  U[index] = scale * z, other entries of
     the full input vector U (N NU: swing forces, a frozen arm's velocities) are zero. The predicted states are
-    X = free + gamma U (the condensed dynamics). Everything `CentroidalMpc.solve` needs is here, so a problem written
-    by `save` and read back by `load` solves on its own to the same plan.
+    X = free + gamma_z z (the condensed dynamics). Everything `CentroidalMpc.solve` needs is here, so a problem
+    written by `save` and read back by `load` solves on its own to the same plan.
 
     Attributes:
         H: Hessian, shape (n, n) for the n = index.size decision variables.
@@ -118,13 +119,13 @@ class MpcProblem(DenseQp):
         scale: unit of each variable (n,): U[index] = scale * z [N or 1].
         index: position of each variable in the full input vector U (n,).
         free: predicted states with zero input, x_1 .. x_N stacked, shape (N NX,).
-        gamma: condensed input matrix, d X / d U, shape (N NX, N NU).
+        gamma_z: the condensed dynamics' columns of the decision variables, d X / d z, shape (N NX, n).
     """
 
     scale: np.ndarray
     index: np.ndarray
     free: np.ndarray
-    gamma: np.ndarray
+    gamma_z: np.ndarray
 
     @property
     def horizon(self) -> int:
@@ -149,7 +150,7 @@ class MpcProblem(DenseQp):
             return cls(**{k: z[k] for k in _ARRAYS})
 
 
-_ARRAYS = ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma")  # `MpcProblem`'s arrays
+_ARRAYS = ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma_z")  # `MpcProblem`'s arrays
 
 
 class MpcSolveError(WbcError):
@@ -227,7 +228,6 @@ class CentroidalMpc:
         r[12:] = config.weight_arm_dq
         self._r_diag = np.tile(r, n)
         self._arm_free = bool(np.any(self._arm_vmax > 0))
-        self._tril = np.tril_indices(n)
         self._arm_rows = (np.arange(n)[:, None] * NX + np.arange(12, 15)[None]).ravel()  # arm rows of the states
 
     def plan(self, x0: np.ndarray, x_ref: np.ndarray, contact: np.ndarray, feet: np.ndarray,
@@ -275,52 +275,20 @@ class CentroidalMpc:
         u_bar[2:12:3] *= params.mass * G / max(1, sum(stance0))
         f0, a_c, b_c = self.model.linearize(x0, u_bar, params)
         d_c = f0 - a_c @ x0 - b_c @ u_bar
-        integ = zoh_integral(a_c, cfg.dt)
-        a_d = np.eye(NX) + a_c @ integ
-        total_force_skew = a_c[9:12, 0:3]
-        # Along the horizon the lever arms are taken about the reference CoM of each step (the current CoM for the
-        # first): B's torque rows change and the affine torque term -[F]x c_ref follows.
-        c_ref = np.empty((n, 3))
-        c_ref[0] = x0[0:3]
-        c_ref[1:] = x_ref[: n - 1, 0:3]
-        rel = feet - c_ref[:, None, :]  # (n, 4, 3)
-        levers = np.zeros((n, 3, 4, 3))  # [r_i]x of every foot and step
-        levers[:, 0, :, 1], levers[:, 0, :, 2] = -rel[..., 2], rel[..., 1]
-        levers[:, 1, :, 0], levers[:, 1, :, 2] = rel[..., 2], -rel[..., 0]
-        levers[:, 2, :, 0], levers[:, 2, :, 1] = -rel[..., 1], rel[..., 0]
-        # each step's input matrix B_k with its affine term d_k as one more column, through the zero-order hold
-        inputs = np.empty((n, NX, NU + 1))
-        inputs[:, :, :NU] = b_c
-        inputs[:, 9:12, :12] = levers.reshape(n, 3, 12)
-        inputs[:, :, NU] = d_c
-        inputs[:, 9:12, NU] -= (c_ref - x0[0:3]) @ total_force_skew.T
-        inputs = integ @ inputs
-        # Condensed: x_{k+1} = A^(k+1) x0 + sum_{j<=k} A^(k-j) (B_j u_j + d_j), all blocks in one batched product
-        # (a step-by-step recursion would cost dozens of small numpy calls per step).
-        powers = np.empty((n + 1, NX, NX))
-        powers[0] = np.eye(NX)
-        for j in range(1, n + 1):
-            powers[j] = a_d @ powers[j - 1]
-        kk, jj = self._tril
-        blocks = powers[kk - jj] @ inputs[jj]  # block (k, j), shape (n (n + 1) / 2, NX, NU + 1)
-        blocked = np.zeros((n, NX, n, NU + 1))
-        blocked[kk, :, jj, :] = blocks
-        gamma = blocked[:, :, :, :NU].reshape(n * NX, n * NU)
-        delta = blocked[:, :, :, NU].sum(axis=2).ravel()
-        phi = powers[1:].reshape(n * NX, NX)
-        free = phi @ x0 + delta
-        err = free - x_ref.ravel()
+        # Condensed, x_{k+1} = A^(k+1) x0 + sum_{j<=k} A^(k-j) (B_j u_j + d_j), with each step's lever arms taken
+        # about the reference CoM of that step (the current CoM for the first), and the QP's Hessian and gradient:
+        # one compiled call (`wbc.mpc.condensing.condense`; in numpy it was dozens of batched products and scatters).
         # Only stance forces (and the arm's velocities when it may move) are decision variables: swing forces are
-        # zero and a frozen arm does not move, so their columns are dropped rather than boxed to zero. The QP keeps
-        # one shape per contact pattern count.
+        # zero and a frozen arm does not move, so their columns are never formed rather than boxed to zero. The QP
+        # keeps one shape per contact pattern count.
         arm_free = self._arm_free
         idx, s, l_box, u_box, friction = self._pattern(contact)
-        gam = gamma[:, idx] * s  # in the QP's scaled variables
-        # H = gam^T Q gam as (sqrt(Q) gam)^T (sqrt(Q) gam): BLAS computes one triangle of a product with itself
-        root_q = gam * self._q_root[:, None]
-        h = root_q.T @ root_q
-        h.flat[:: idx.size + 1] += self._r_diag[idx] * s * s
-        g = root_q.T @ (self._q_root * err)
+        nv = idx.size
+        gamma_z, free = np.empty((n * NX, nv)), np.empty(n * NX)
+        h, g = np.empty((nv, nv)), np.empty(nv)
+        condense(a_c, b_c, d_c, cfg.dt, np.ascontiguousarray(x0, dtype=np.float64),
+                 np.ascontiguousarray(x_ref, dtype=np.float64), np.ascontiguousarray(feet, dtype=np.float64),
+                 idx, s, self._q_root, self._r_diag, gamma_z, free, h, g)
         m4 = friction.shape[0]
         n_arm = 3 * n if arm_free else 0
         c = np.empty((m4 + n_arm, idx.size))
@@ -329,11 +297,11 @@ class CentroidalMpc:
         hi = np.zeros(m4 + n_arm)
         if arm_free:
             arm_rows = self._arm_rows
-            c[m4:] = gam[arm_rows]
+            c[m4:] = gamma_z[arm_rows]
             lo[m4:] = (np.minimum(self._arm_lower, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
             hi[m4:] = (np.maximum(self._arm_upper, x0[12:15]) - free[arm_rows].reshape(n, 3)).ravel()
         return MpcProblem(H=h, g=g, C=c, l=lo, u=hi, l_box=l_box, u_box=u_box, scale=s, index=idx, free=free,
-                          gamma=gamma)
+                          gamma_z=gamma_z)
 
     def _pattern(self, contact: np.ndarray) -> tuple[np.ndarray, ...]:
         """What depends only on the contact table: variables, their units and boxes, the friction pyramid rows.
@@ -418,11 +386,11 @@ class CentroidalMpc:
             raise MpcSolveError(f"MPC QP not solved (DAQP exit flag {status}) from a warm nor a cold start; to "
                                 "investigate, save it (error.problem.save(path)) and replay it with "
                                 "CentroidalMpc.solve(MpcProblem.load(path))", problem)
-        full = np.zeros(problem.gamma.shape[1])
+        full = np.zeros(n * NU)
         full[idx] = z
         u = np.zeros(full.size)
         u[idx] = z * problem.scale  # = full * the full scale vector: entries without a variable stay 0
-        states = (problem.free + problem.gamma @ u).reshape(n, NX)
+        states = (problem.free + problem.gamma_z @ z).reshape(n, NX)
         steps = u.reshape(n, NU)
         return MpcSolution(forces=steps[:, :12].reshape(n, 4, 3), arm_velocity=steps[:, 12:].copy(), states=states,
                            iterations=iterations, solve_s=solve, z=z, variables=full)
