@@ -60,6 +60,28 @@ def test_bad_motor_commands_are_rejected_at_construction(fields, as_array):
     assert "MotorCommand." in str(err.value)
 
 
+@pytest.mark.parametrize(
+    "fields",
+    [{"q": [0.0, np.nan]}, {"tau": [np.inf, 0.0]}, {"kp": [-1.0, 0.0]}, {"kd": [0.0, -np.inf]}],
+)
+def test_commands_from_rows_are_checked_as_the_constructor_checks(fields):
+    base = {k: [0.0, 0.0] for k in ("q", "dq", "kp", "kd", "tau")}
+    base.update(fields)
+    rows = np.array([base[k] for k in ("q", "dq", "kp", "kd", "tau")])
+    with pytest.raises(CommandError, match=f"MotorCommand.{next(iter(fields))}"):
+        MotorCommand.from_rows(rows)
+    with pytest.raises(CommandError, match="expected a .5, n. array"):
+        MotorCommand.from_rows(rows[:4])
+
+
+def test_a_command_from_rows_owns_them_read_only():
+    rows = np.arange(10.0).reshape(5, 2)
+    cmd = MotorCommand.from_rows(rows)
+    assert np.array_equal(cmd.kp, [4.0, 5.0]) and np.array_equal(cmd.stacked(), rows)
+    with pytest.raises(ValueError):
+        rows[0, 0] = 1.0  # the command's storage: nobody writes it after the command is made
+
+
 @pytest.mark.filterwarnings("error")
 def test_huge_finite_commands_are_accepted_without_warnings():
     huge = np.array([1e308, 1e308])

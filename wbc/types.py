@@ -59,11 +59,29 @@ class RobotState:
 _COMMAND_FIELDS = ("q", "dq", "kp", "kd", "tau")
 
 
+
+def _rows_valid(rows: np.ndarray) -> bool:
+    """Whether a (5, n) command array has n > 0, every entry finite and both gain rows non-negative.
+
+    numpy, not compiled: this runs in the hardware I/O process too, where a compiled function's first call (loading
+    it, ~0.4 s) would stall the link.
+    """
+    return rows.shape[1] > 0 and bool(np.isfinite(rows).all()) and rows[2:4].min() >= 0.0
+
+
 def _adopt_rows(cmd: MotorCommand, rows: np.ndarray) -> None:
-    """Make the rows of a (5, n) array the fields of `cmd`, as read-only views of it."""
+    """Make the rows of a (5, n) array the fields of `cmd`, as read-only views of it.
+
+    The array is kept as ``_rows``: `MotorCommand.rows` hands it out without stacking the fields again.
+    """
     rows.setflags(write=False)
-    for name, row in zip(_COMMAND_FIELDS, rows, strict=True):
-        object.__setattr__(cmd, name, row)
+    setattr_ = object.__setattr__
+    setattr_(cmd, "q", rows[0])
+    setattr_(cmd, "dq", rows[1])
+    setattr_(cmd, "kp", rows[2])
+    setattr_(cmd, "kd", rows[3])
+    setattr_(cmd, "tau", rows[4])
+    setattr_(cmd, "_rows", rows)
 
 
 @dataclass(frozen=True)
@@ -99,8 +117,7 @@ class MotorCommand:
                 stacked = np.array((q, dq, kp, kd, tau), dtype=np.float64)
             except (TypeError, ValueError):
                 stacked = None
-            if (stacked is not None and stacked.ndim == 2 and stacked.shape[1] > 0
-                    and np.isfinite(stacked).all() and stacked[2:4].min() >= 0.0):
+            if stacked is not None and stacked.ndim == 2 and _rows_valid(stacked):
                 _adopt_rows(self, stacked)
                 return
         # slow path: find the first fault and name it
@@ -135,9 +152,41 @@ class MotorCommand:
         """Number of joints commanded."""
         return int(self.q.shape[0])
 
+    @property
+    def rows(self) -> np.ndarray:
+        """The five fields as rows of one read-only (5, n) array: q, dq, kp, kd, tau.
+
+        The fields' own storage when they are its rows, as a validated command's are (no copy).
+        """
+        rows = self.__dict__.get("_rows")
+        if rows is not None and self.q.base is rows:
+            return rows
+        out = np.array((self.q, self.dq, self.kp, self.kd, self.tau))
+        out.setflags(write=False)
+        return out
+
     def stacked(self) -> np.ndarray:
         """The five fields as rows of one (5, n) array: q, dq, kp, kd, tau (a new array)."""
-        return np.array((self.q, self.dq, self.kp, self.kd, self.tau))
+        return self.rows.copy()
+
+    @classmethod
+    def from_rows(cls, rows: np.ndarray) -> MotorCommand:
+        """A command from one (5, n) float array of rows q, dq, kp, kd, tau, checked as the constructor checks.
+
+        A controller's every tick: the array becomes the command's storage (read-only from here on), so nothing is
+        stacked or copied. Anything the fast check refuses goes through the constructor, which names the fault.
+
+        Raises:
+            CommandError: not a (5, n) array, or a field the constructor refuses.
+        """
+        if not (isinstance(rows, np.ndarray) and rows.ndim == 2 and rows.shape[0] == 5):
+            raise CommandError(f"MotorCommand.from_rows: expected a (5, n) array of rows q, dq, kp, kd, tau, got "
+                               f"{type(rows).__name__} of shape {np.shape(rows)}")
+        if rows.dtype == np.float64 and _rows_valid(rows):
+            obj = object.__new__(cls)
+            _adopt_rows(obj, rows)
+            return obj
+        return cls(*rows)
 
     @classmethod
     def _trusted(cls, rows: np.ndarray) -> MotorCommand:

@@ -159,6 +159,25 @@ class MpcController:
         self._truth: Callable[[], BaseTruth] | None = None
         self._gains: tuple[np.ndarray, np.ndarray] | None = None
         self.reset()
+        self._load_compiled()
+
+    def _load_compiled(self) -> None:
+        """Play two ticks (one with an MPC update) on a synthetic standing frame, then forget them.
+
+        The tick's compiled functions load at their first call in a process (~1 s in all; seconds more to compile on
+        a machine's first run): here, when the controller is made, not at the first tick of a robot that is waiting
+        for its commands at 500 Hz. Nothing of the two ticks survives: `reset`, and the kinematics measure the CoM
+        again at the first real tick.
+        """
+        n = self.kin.n
+        state = RobotState(tick=0, time=0.0, q=np.asarray(self.desc.nominal_q, dtype=np.float64)[:n].copy(),
+                           dq=np.zeros(n), tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]),
+                           gyro_in_body=np.zeros(3), accel_in_body=np.array([0.0, 0.0, 9.81]),
+                           foot_force=np.full(4, 40.0))
+        for _ in range(2):
+            self.act(state, VelocityCommand())
+        self.kin.forget_com()
+        self.reset()
 
     def use_ground_truth(self, truth: Callable[[], BaseTruth]) -> None:
         """Debug switch: take the base position and velocity from `truth` (the simulator) instead of the estimator.
@@ -346,18 +365,23 @@ class MpcController:
         cfg = self.config
         if self._gains is None:
             # the legs are torque-controlled (kp 0, a little joint damping); an actuated arm is position-controlled;
-            # MotorCommand copies its arrays, so these are shared safely
+            # copied into every command's rows, so these are shared safely
             self._gains = joint_gains(self.kin.n, 0.0, cfg.joint_kd, cfg.arm_kp, cfg.arm_kd)
         kp, kd = self._gains
-        q = state.q  # MotorCommand copies its arrays; only an actuated arm's targets differ from the measured pose
-        dq_des = np.zeros(self.kin.n)
+        # the command's rows, filled in place: the legs hold their measured pose under no stiffness; only an actuated
+        # arm's targets differ from the measured pose
+        rows = np.empty((5, self.kin.n))
+        rows[0] = state.q
+        rows[1] = 0.0
+        rows[2] = kp
+        rows[3] = kd
+        rows[4] = tau
         if self.has_arm:
-            q = q.copy()
             if self.plan is not None and cfg.use_arm_momentum:
                 v_arm = self.plan.arm_velocity[self._plan_step()]
                 self._arm_target = self._arm_target + v_arm * self.dt
-                dq_des[ARM_JOINTS] = v_arm
-            q[ARM_JOINTS] = self._arm_target
+                rows[1, ARM_JOINTS] = v_arm
+            rows[0, ARM_JOINTS] = self._arm_target
         self.t += self.dt
         self.tick += 1
-        return MotorCommand(q=q, dq=dq_des, kp=kp, kd=kd, tau=tau)
+        return MotorCommand.from_rows(rows)

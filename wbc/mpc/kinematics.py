@@ -86,6 +86,10 @@ class RobotKinematics:
                                   pin_of_house[:12].reshape(4, 3))
         self._gravity_z = float(model.gravity.linear[2])
 
+    def forget_com(self) -> None:
+        """Measure the CoM in the trunk frame again at the next `tick` (as at the first tick of a new controller)."""
+        self._com_known = False
+
     # -- every tick -----------------------------------------------------------------------------------------------
     def tick(self, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray, omega_body: np.ndarray,
              rot: np.ndarray) -> None:

@@ -6,18 +6,20 @@ within `FOOT_ZONE` of a foot centre: the URDFs' calf boxes run down to the foot 
 the ground also brings the calf box's end into contact, which is still the foot, not a fall. A calf touching the
 ground away from its foot (a kneeling robot) is a fall.
 
-`MujocoRobot` applies the rule to MuJoCo's contact list; the batched env applies it to contact sensors (one per
+`MujocoRobot` applies the rule to MuJoCo's contact list (`touches_off_foot`, compiled: it runs after every control
+tick); the batched env applies it to contact sensors (one per
 `fall_geoms` geom, reporting contact positions) and foot-centre sensors inside MuJoCo's step, vectorised over robots.
 """
 
 from __future__ import annotations
 
 import mujoco
+import numba
 import numpy as np
 
 from wbc.robots.description import FOOT_NAMES
 
-__all__ = ["FOOT_ZONE", "fall_geoms", "foot_geoms", "near_feet"]
+__all__ = ["FOOT_ZONE", "fall_geoms", "foot_geoms", "near_feet", "touches_off_foot"]
 
 FOOT_ZONE = 0.035  # [m] contacts this close to a foot centre are the foot's (foot sphere radius 0.02 + margin)
 
@@ -58,3 +60,36 @@ def near_feet(contact_pos: np.ndarray, foot_centres: np.ndarray) -> np.ndarray:
     """
     d2 = np.square(contact_pos[..., None, :] - foot_centres).sum(axis=-1)
     return (d2 < FOOT_ZONE * FOOT_ZONE).any(axis=-1)
+
+
+@numba.njit(cache=True, nogil=True)
+def touches_off_foot(pairs, contact_pos, terrain_geom, is_foot_geom, foot_geoms, geom_xpos):  # pragma: no cover
+    """The fall rule on one robot's contact list: whether a ground contact is neither a foot's nor near one.
+
+    True when a contact is neither a foot sphere's nor within `FOOT_ZONE` of a foot centre.
+
+    Args:
+        pairs: the contacts' geom pairs (ncon, 2), one of each the ground's (`terrain_geom`).
+        contact_pos: the contacts' positions, world (ncon, 3) [m].
+        terrain_geom: the ground's geom id.
+        is_foot_geom: (ngeom,) bool, True at the foot spheres.
+        foot_geoms: the foot spheres' geom ids (4,).
+        geom_xpos: every geom's centre, world (ngeom, 3) [m].
+    """
+    zone2 = FOOT_ZONE * FOOT_ZONE
+    for c in range(pairs.shape[0]):
+        other = pairs[c, 1] if pairs[c, 0] == terrain_geom else pairs[c, 0]
+        if is_foot_geom[other]:
+            continue
+        near = False
+        for f in range(foot_geoms.shape[0]):
+            g = foot_geoms[f]
+            dx = contact_pos[c, 0] - geom_xpos[g, 0]
+            dy = contact_pos[c, 1] - geom_xpos[g, 1]
+            dz = contact_pos[c, 2] - geom_xpos[g, 2]
+            if dx * dx + dy * dy + dz * dz < zone2:
+                near = True
+                break
+        if not near:
+            return True
+    return False

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import mujoco
+import numba
 import numpy as np
 
 from wbc.hardware.mujoco.scene import set_ground_friction, set_terrain_heights
@@ -30,8 +31,9 @@ from wbc.scenario.terrain import TerrainConfig, fractal_heights
 
 __all__ = [
     "BASE_BODY", "SPAWN_CLEARANCE", "SPAWN_GROUND_HALF_WIDTH", "NominalModel", "PushTable", "apply_domain",
-    "apply_terrain", "base_body_id", "delay_steps", "foot_touch_adr", "ground_under_spawn", "initial_qpos",
-    "motor_ctrl", "motor_strengths", "payload_trunk_inertial", "push_steps", "push_wrench", "sensor_slices",
+    "apply_motor_rows", "apply_terrain", "base_body_id", "delay_steps", "foot_touch_adr", "ground_under_spawn",
+    "initial_qpos", "motor_ctrl", "motor_strengths", "payload_trunk_inertial", "push_steps", "push_wrench",
+    "sensor_slices",
     "set_motor_gains", "spawn_height",
 ]
 
@@ -175,6 +177,24 @@ def motor_ctrl(q: np.ndarray, dq: np.ndarray | float, tau: np.ndarray | float, k
         kd: velocity gains, (..., nu) [N m s / rad].
     """
     return kp * q + kd * dq + tau
+
+
+@numba.njit(cache=True, nogil=True)
+def apply_motor_rows(rows: np.ndarray, strength: np.ndarray, biasprm: np.ndarray,
+                     ctrl: np.ndarray) -> None:  # pragma: no cover - compiled
+    """`set_motor_gains` and `motor_ctrl` of one command in one compiled call (the simulated robot's every write).
+
+    Args:
+        rows: the command's rows q, dq, kp, kd, tau, shape (5, nu) (`MotorCommand.rows`).
+        strength: (nu,) motor strength k.
+        biasprm: the model's ``actuator_biasprm`` (nu, 10), columns 1 and 2 written.
+        ctrl: the data's ``ctrl`` (nu,), written.
+    """
+    for j in range(rows.shape[1]):
+        kp, kd = rows[2, j], rows[3, j]
+        biasprm[j, 1] = -strength[j] * kp
+        biasprm[j, 2] = -strength[j] * kd
+        ctrl[j] = kp * rows[0, j] + kd * rows[1, j] + rows[4, j]
 
 
 # -- ground and spawn -----------------------------------------------------------------------------------------------

@@ -28,12 +28,13 @@ import mujoco
 import numpy as np
 
 from wbc.errors import ConfigError
-from wbc.hardware.mujoco.fall_rule import foot_geoms, near_feet
+from wbc.hardware.mujoco.fall_rule import foot_geoms, near_feet, touches_off_foot
 from wbc.hardware.mujoco.latency import CommandQueue, SensorHistory
 from wbc.hardware.mujoco.physics import (
     NominalModel,
     PushTable,
     apply_domain,
+    apply_motor_rows,
     apply_terrain,
     base_body_id,
     delay_steps,
@@ -132,6 +133,7 @@ class MujocoRobot(Robot):
     def __init__(self, config: MujocoRobotConfig | None = None) -> None:
         super().__init__()
         self.config = config if config is not None else MujocoRobotConfig()
+        self._noisy = self.config.noise.enabled  # the config is frozen: asked once, not at every read
         self.desc = self.config.description()
         self._joint_names = self.desc.joint_names
         self._num_joints = len(self._joint_names)
@@ -175,6 +177,7 @@ class MujocoRobot(Robot):
         self.model = build_scene(self.desc, self.config.terrain, timestep=self.config.timestep)
         self.data = mujoco.MjData(self.model)
         m = self.model
+        self._biasprm, self._ctrl = m.actuator_biasprm, self.data.ctrl  # views of MuJoCo's buffers, written in place
         self._base_body = base_body_id(m)
         self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TERRAIN_GEOM)
         # index arrays, not slices: each field `read` returns is its own array, not a view into one sensordata copy
@@ -186,6 +189,20 @@ class MujocoRobot(Robot):
         self._is_foot_geom[self._foot_geoms] = True
         self._nominal = NominalModel.of(m)
         self._reset(0, None, None)
+        self._load_compiled()
+
+    def _load_compiled(self) -> None:
+        """Call the compiled write and fall check once, on dummy arrays of the live ones' types and layouts.
+
+        A compiled function's first call in a process loads it (~0.4 s; compiles it, seconds, on a machine's first
+        run): here, at connect, rather than at the first write of a stream a real-time link waits on (an emulator
+        answering a robot's client over UDP).
+        """
+        nu = self.num_joints
+        apply_motor_rows(np.zeros((5, nu)), np.ones(nu), np.zeros((nu, 10)), np.zeros(nu))
+        # MuJoCo's contact fields are strided views: the same layout as these
+        touches_off_foot(np.zeros((2, 4), dtype=np.int32)[:, :2], np.zeros((2, 6))[:, :3], self._terrain_geom,
+                         self._is_foot_geom, self._foot_geoms, np.zeros((self.model.ngeom, 3)))
 
     def _close(self) -> None:
         self.model = None
@@ -203,7 +220,7 @@ class MujocoRobot(Robot):
             measured = frame.step * self.config.timestep
         quat, gyro, accel = sd[self._quat_idx], sd[self._gyro_idx], sd[self._accel_idx]
         feet = sd[self._touch_idx]
-        if noise.enabled:
+        if self._noisy:
             rng = self._rng
             q += rng.normal(0.0, noise.q, n)
             dq += rng.normal(0.0, noise.dq, n)
@@ -222,11 +239,12 @@ class MujocoRobot(Robot):
         )
 
     def _send(self, cmd: MotorCommand) -> None:
-        ctrl = motor_ctrl(cmd.q, cmd.dq, cmd.tau, cmd.kp, cmd.kd)
         if self._act_lag == 0 and not self._queue:
-            self._apply(cmd.kp, cmd.kd, ctrl)
+            # the motors take it now: gains and control written into MuJoCo's buffers by one compiled call
+            apply_motor_rows(cmd.rows, self._strength, self._biasprm, self._ctrl)
         else:
-            self._queue.push(self._steps + self._act_lag, cmd.kp, cmd.kd, ctrl)
+            self._queue.push(self._steps + self._act_lag, cmd.kp, cmd.kd, motor_ctrl(cmd.q, cmd.dq, cmd.tau, cmd.kp,
+                                                                                     cmd.kd))
 
     def _apply(self, kp: np.ndarray, kd: np.ndarray, ctrl: np.ndarray) -> None:
         """Hand a command to the motors: from the next physics step on, the motor law runs under it."""
@@ -379,8 +397,12 @@ class MujocoRobot(Robot):
 
     def fallen(self) -> bool:
         """Truth: the trunk or a non-foot link touches the ground (the paper's termination rule, `fall_rule`)."""
-        _, at_foot = self._ground_contacts()
-        return bool(at_foot.size and not at_foot.all())
+        d = self.data
+        if d.ncon == 0:
+            return False
+        contacts = d.contact
+        return bool(touches_off_foot(contacts.geom, contacts.pos, self._terrain_geom, self._is_foot_geom,
+                                     self._foot_geoms, d.geom_xpos))
 
     def base_rotation(self) -> np.ndarray:
         """Truth: trunk rotation matrix (body to world)."""
