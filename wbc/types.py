@@ -75,13 +75,8 @@ def _adopt_rows(cmd: MotorCommand, rows: np.ndarray) -> None:
     The array is kept as ``_rows``: `MotorCommand.rows` hands it out without stacking the fields again.
     """
     rows.setflags(write=False)
-    setattr_ = object.__setattr__
-    setattr_(cmd, "q", rows[0])
-    setattr_(cmd, "dq", rows[1])
-    setattr_(cmd, "kp", rows[2])
-    setattr_(cmd, "kd", rows[3])
-    setattr_(cmd, "tau", rows[4])
-    setattr_(cmd, "_rows", rows)
+    q, dq, kp, kd, tau = rows
+    cmd.__dict__.update(q=q, dq=dq, kp=kp, kd=kd, tau=tau, _rows=rows)  # one call (a frozen dataclass's fields)
 
 
 @dataclass(frozen=True)
