@@ -41,7 +41,7 @@ from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.bc_schedule import BCSchedule
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["BASELINES", "TASKS", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS",
+__all__ = ["BASELINES", "PUSH_POSTURE", "TASKS", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS",
            "TURN_WALKING_PRIOR_INIT", "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS",
            "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
 
@@ -59,7 +59,8 @@ class TaskSpec:
     weights (``wbc/learned/weights/<name>``) pi1's actor starts from (`wbc.learned.train.warm_start`);
     `taught_init_std` is the initial action noise of the stages that learn from a teacher (2 and 3,
     `TrainConfig.init_std`); `taught_start_from_teacher` starts those stages' actors from their teacher's weights
-    (`wbc.learned.train.warm_start`; the BC term still pulls towards the teacher and is annealed away).
+    (`wbc.learned.train.warm_start`; the BC term still pulls towards the teacher and is annealed away);
+    `posture` is (weight, target height [m]) of the `base_height` reward term in the stages after pi1 (None: off).
     """
 
     robot: str
@@ -71,6 +72,17 @@ class TaskSpec:
     walking_prior_init: str | None = None
     taught_init_std: float = 1.0
     taught_start_from_teacher: bool = False
+    posture: tuple[float, float] | None = None
+
+
+PUSH_POSTURE = (-50.0, 0.30)
+"""The push task's posture term (`RewardScales.base_height` weight, `EnvConfig.base_height_target` [m]) in the stages
+that train on pushes (2, 3 and the baselines).
+
+Without it the push task's policies stood and walked at 0.16-0.18 m, against the MPC's 0.30 m: a crouch that is
+part of their push robustness and not the robot's nominal posture. Their teacher, pi1, must be upright too (the
+students imitate it): the shipped ``a1-wx200-none-upright`` is pi1 fine-tuned with this term (recipe and heights:
+``docs/learning-notes.md``, stage 1, upright)."""
 
 
 WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
@@ -109,7 +121,7 @@ actions start at zero). The runs behind both: ``docs/learning-notes.md``, stages
 
 TASKS: dict[str, TaskSpec] = {
     "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
-                     walking_prior_commands=WALKING_PRIOR_COMMANDS),
+                     walking_prior_commands=WALKING_PRIOR_COMMANDS, posture=PUSH_POSTURE),
     "turn": TaskSpec(robot="go1-arm", scenario="scenarios/turn.toml", bands=("1.0", "1.25", "1.5"),
                      tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
                      walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION,
@@ -187,6 +199,9 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
         command_ranges=spec.walking_prior_commands if walking_prior else None,
         rewards=RewardScales(termination=spec.walking_prior_termination) if walking_prior else RewardScales(),
     )
+    if spec.posture is not None and not walking_prior:
+        env = dataclasses.replace(env, rewards=dataclasses.replace(env.rewards, base_height=spec.posture[0]),
+                                  base_height_target=spec.posture[1])
     env = dataclasses.replace(env, **(env_overrides or {}))
     bc, teacher_path, init_path = None, None, None
     if teacher_stage is not None:
