@@ -60,6 +60,9 @@ from wbc.types import BaseTruth, MotorCommand, RobotState
 __all__ = ["MujocoRobotConfig", "MujocoRobot", "SimTruth"]
 
 
+_NEVER = 2**62  # a physics step no episode reaches
+
+
 @dataclass(frozen=True, kw_only=True)
 class MujocoRobotConfig:
     """Configuration of the simulated robot.
@@ -148,6 +151,7 @@ class MujocoRobot(Robot):
         self._contacts = (np.zeros(0, dtype=int), np.zeros(0, dtype=bool))
         self._force_now = np.zeros(3)
         self._point_now = np.zeros(3)
+        self._quiet_until = -1  # physics steps before this one run without a push (see `_advance`)
         self._act_lag = 0  # [physics steps] actuation delay
         self._queue = CommandQueue()
         self._history: SensorHistory | None = None  # the sensing delay's frames; None: no sensing delay
@@ -177,7 +181,12 @@ class MujocoRobot(Robot):
         self.model = build_scene(self.desc, self.config.terrain, timestep=self.config.timestep)
         self.data = mujoco.MjData(self.model)
         m = self.model
-        self._biasprm, self._ctrl = m.actuator_biasprm, self.data.ctrl  # views of MuJoCo's buffers, written in place
+        # views of MuJoCo's buffers (fixed for the model's life), kept rather than fetched from the structs per tick
+        d = self.data
+        self._biasprm, self._ctrl = m.actuator_biasprm, d.ctrl
+        self._qpos, self._qvel, self._geom_xpos = d.qpos, d.qvel, d.geom_xpos
+        self._joint_q, self._joint_dq = d.qpos[7:], d.qvel[6:]
+        self._motor_force, self._sensordata = d.actuator_force, d.sensordata
         self._base_body = base_body_id(m)
         self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TERRAIN_GEOM)
         # index arrays, not slices: each field `read` returns is its own array, not a view into one sensordata copy
@@ -209,10 +218,11 @@ class MujocoRobot(Robot):
         self.data = None
 
     def _read(self) -> RobotState:
-        d, noise = self.data, self.config.noise
+        noise = self.config.noise
         n = self.num_joints
         if self._history is None:
-            q, dq, tau, sd = d.qpos[7:].copy(), d.qvel[6:].copy(), d.actuator_force.copy(), d.sensordata.copy()
+            q, dq, tau = self._joint_q.copy(), self._joint_dq.copy(), self._motor_force.copy()
+            sd = self._sensordata.copy()
             measured = self.time
         else:
             frame = self._history.frame(self._steps)
@@ -256,6 +266,12 @@ class MujocoRobot(Robot):
         m, d = self.model, self.data
         end = self._steps + n
         queue, history = self._queue, self._history
+        if end <= self._quiet_until and history is None and not queue:
+            # every step of this advance is known to be push-free (and no push force is left applied), no command
+            # is on its way and no frame must be kept: the steps alone (the closed loop's usual tick)
+            mujoco.mj_step(m, d, nstep=n)
+            self._steps = end
+            return
         # steps from `keep` on have frames a later read may ask for (see `SensorHistory`)
         keep = end - history.lag if history is not None else end + 1
         while self._steps < end:
@@ -300,6 +316,9 @@ class MujocoRobot(Robot):
         if self._active_pushes(self._steps) is None:
             d.xfrc_applied[self._base_body] = 0.0
             self._force_now = np.zeros(3)
+            # quiet (no push force) until the next scheduled push starts
+            nxt = self._pushes.next_start(0, self._steps) if self._pushes.count[0] else None
+            self._quiet_until = _NEVER if nxt is None else nxt
 
     # -- simulation-only API --------------------------------------------------------------------------------------
     def reset(self, seed: int = 0, *, domain: DomainParams | None = None, qpos: np.ndarray | None = None) -> None:
@@ -322,6 +341,7 @@ class MujocoRobot(Robot):
         d.qpos[:] = (initial_qpos(m.nq, spawn_height(self.desc.stand_height, ground), self.desc.nominal_q)
                      if qpos is None else qpos)
         self._pushes.clear(0)
+        self._quiet_until = -1  # the first advance takes the full path and finds the next push
         self._steps = 0
         self._contacts_at = -1
         self._force_now = np.zeros(3)
@@ -363,6 +383,7 @@ class MujocoRobot(Robot):
         """Schedule a push; it acts from ``push.start`` (simulation time) for ``push.duration``."""
         self._require_connected("apply_push")
         self._pushes.add(0, push)
+        self._quiet_until = -1  # the next advance takes the full path and finds the next push again
 
     def sim_truth(self) -> SimTruth:
         """Ground truth of the simulator (for metrics and debugging; never hand this to a controller)."""
@@ -392,7 +413,7 @@ class MujocoRobot(Robot):
 
     def base_truth(self) -> BaseTruth:
         """Truth: the trunk's pose and velocity (for metrics; never hand this to a controller)."""
-        qpos, qvel = self.data.qpos, self.data.qvel
+        qpos, qvel = self._qpos, self._qvel
         return BaseTruth(qpos[:3].copy(), qpos[3:7].copy(), qvel[:3].copy(), qvel[3:6].copy())
 
     def fallen(self) -> bool:
@@ -402,7 +423,7 @@ class MujocoRobot(Robot):
             return False
         contacts = d.contact
         return bool(touches_off_foot(contacts.geom, contacts.pos, self._terrain_geom, self._is_foot_geom,
-                                     self._foot_geoms, d.geom_xpos))
+                                     self._foot_geoms, self._geom_xpos))
 
     def base_rotation(self) -> np.ndarray:
         """Truth: trunk rotation matrix (body to world)."""
