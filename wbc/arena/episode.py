@@ -20,6 +20,7 @@ from wbc.errors import ConfigError, EpisodeFileError
 from wbc.hardware.capabilities import SafetyEventLike
 from wbc.robots.conventions import quat_to_matrices
 from wbc.scenario.push import Push
+from wbc.types import BaseTruth, RobotState, VelocityCommand
 
 __all__ = ["BASE_SOURCES", "Episode", "EpisodeBuffer", "OperatorLog", "PushLog", "SafetyLog"]
 
@@ -296,41 +297,54 @@ def _optional_group(path: str, files: list[str], prefix: str, keys: tuple[str, .
     return bool(present)
 
 
-@dataclass
 class EpisodeBuffer:
-    """Preallocated rows filled tick by tick by the runner; `finish` freezes them into an `Episode`.
+    """The rows the runner collects tick by tick; `finish` stacks them into an `Episode`.
 
-    A tick stores only what it measured: the time, the command, the act time, the trunk's true pose (in ``qpos``,
-    with the joints) and velocity, and the joints' torques and speeds. What the episode derives from them (roll,
-    pitch, the velocity in the yaw frame, the yaw rate, the power, the arm's joints) is computed once, for all rows,
-    at `finish`: per tick those few dozen scalar operations cost more than the physics step.
+    A tick stores only what it measured: the time, the command, the act time, the trunk's true pose and velocity, and
+    the joints' positions, torques and speeds, as one new row (one numpy call: the tick copies what it was handed,
+    so a robot may reuse its buffers). What the episode derives from them (roll, pitch, the velocity in the yaw
+    frame, the yaw rate, the power, the arm's joints) is computed once, for all rows, at `finish`: per tick those few
+    dozen scalar operations, or a dozen slice assignments into preallocated arrays, cost more than the physics step.
+
+    Args:
+        nq: 7 + the robot's joints.
+        arm: the arm's joints among the robot's (None without an actuated arm).
     """
 
-    capacity: int
-    nq: int
-    arm: slice | None = None
-    rows: int = 0
-    t: np.ndarray = field(init=False)
-    command: np.ndarray = field(init=False)
-    qpos: np.ndarray = field(init=False)
-    base_vel: np.ndarray = field(init=False)
-    tau_dq: np.ndarray = field(init=False)
-    act_s: np.ndarray = field(init=False)
+    def __init__(self, nq: int, arm: slice | None = None) -> None:
+        self.nq = nq
+        self.arm = arm
+        self._rows: list[np.ndarray] = []  # qpos (nq), base velocity (6), joint torques (nj), joint speeds (nj)
+        self._scalars: list[tuple[float, float, float, float, float]] = []  # t, vx, vy, yaw rate, act time
 
-    def __post_init__(self) -> None:
-        n, nj = self.capacity, self.nq - 7
-        self.t = np.zeros(n)
-        self.command = np.zeros((n, 3))
-        self.qpos = np.zeros((n, self.nq))
-        self.base_vel = np.zeros((n, 6))  # linear velocity (world), angular velocity (body)
-        self.tau_dq = np.zeros((n, 2, nj))  # estimated joint torques and joint speeds
-        self.act_s = np.zeros(n)
+    @property
+    def rows(self) -> int:
+        """Ticks stored."""
+        return len(self._rows)
+
+    def add(self, t: float, command: VelocityCommand, act_s: float, truth: BaseTruth, state: RobotState) -> None:
+        """Store one tick: its end time [s], command, act time [s], the trunk's truth and the robot's frame."""
+        self._rows.append(np.concatenate((truth.base_position_in_world, truth.base_quat, state.q,
+                                          truth.base_linvel_in_world, truth.base_angvel_in_body, state.tau_est,
+                                          state.dq)))
+        self._scalars.append((t, command.vx, command.vy, command.yaw_rate, act_s))
+
+    def _stacked(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """t, command, act_s, qpos, base_vel, tau_dq of the rows so far."""
+        nq, nj = self.nq, self.nq - 7
+        rows = np.array(self._rows, dtype=np.float64).reshape(len(self._rows), nq + 6 + 2 * nj)
+        scalars = np.array(self._scalars, dtype=np.float64).reshape(len(self._scalars), 5)
+        tau_dq = rows[:, nq + 6:].reshape(-1, 2, nj)
+        return scalars[:, 0], scalars[:, 1:4], scalars[:, 4], rows[:, :nq], rows[:, nq:nq + 6], tau_dq
 
     def derived(self) -> dict[str, np.ndarray]:
         """The per-tick metrics of the rows filled so far: roll, pitch, v_base_in_yaw, yaw_rate, power, arm_q."""
-        k = self.rows
-        quat, vel = self.qpos[:k, 3:7], self.base_vel[:k]
-        rot = quat_to_matrices(quat)
+        _, _, _, qpos, vel, tau_dq = self._stacked()
+        return self._derived(qpos, vel, tau_dq)
+
+    def _derived(self, qpos: np.ndarray, vel: np.ndarray, tau_dq: np.ndarray) -> dict[str, np.ndarray]:
+        k = qpos.shape[0]
+        rot = quat_to_matrices(qpos[:, 3:7])
         roll = np.arctan2(rot[:, 2, 1], rot[:, 2, 2])
         pitch = -np.arcsin(np.clip(rot[:, 2, 0], -1.0, 1.0))
         yaw = np.arctan2(rot[:, 1, 0], rot[:, 0, 0])
@@ -338,18 +352,18 @@ class EpisodeBuffer:
         v = vel[:, 0:3]
         v_yaw = np.stack([c * v[:, 0] + s * v[:, 1], -s * v[:, 0] + c * v[:, 1]], axis=1)
         yaw_rate = np.einsum("ij,ij->i", rot[:, 2, :], vel[:, 3:6])
-        power = np.abs(self.tau_dq[:k, 0] * self.tau_dq[:k, 1]).sum(axis=1)
-        arm_q = self.qpos[:k, 7:][:, self.arm] if self.arm is not None else np.zeros((k, 3))
+        power = np.abs(tau_dq[:, 0] * tau_dq[:, 1]).sum(axis=1)
+        arm_q = qpos[:, 7:][:, self.arm] if self.arm is not None else np.zeros((k, 3))
         return {"roll": roll, "pitch": pitch, "v_base_in_yaw": v_yaw, "yaw_rate": yaw_rate, "power": power,
                 "arm_q": arm_q}
 
     def finish(self, *, duration_s: float, control_dt: float, fell: bool, fall_time_s: float,
                safety_events: SafetyLog | None = None) -> Episode:
         """The episode made of the rows filled so far (no pushes: the trial's setup adds those it applied)."""
-        k = self.rows
+        t, command, act_s, qpos, vel, tau_dq = self._stacked()
         return Episode(
             duration_s=duration_s, control_dt=control_dt, fell=fell, fall_time_s=fall_time_s,
-            t=self.t[:k].copy(), command=self.command[:k].copy(), qpos=self.qpos[:k].copy(),
-            act_s=self.act_s[:k].copy(), **self.derived(),
+            t=t.copy(), command=command.copy(), qpos=qpos.copy(), act_s=act_s.copy(),
+            **self._derived(qpos, vel, tau_dq),
             safety_events=SafetyLog() if safety_events is None else safety_events,
         )

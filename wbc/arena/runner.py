@@ -86,7 +86,7 @@ def run_episode(
     dt = 1.0 / controller.rate_hz
     n = int(round(duration_s / dt))
     arm = slice(ARM_JOINTS.start, ARM_JOINTS.stop) if robot.num_joints == 15 else None
-    buf = EpisodeBuffer(capacity=n, nq=7 + robot.num_joints, arm=arm)
+    buf = EpisodeBuffer(nq=7 + robot.num_joints, arm=arm)
     controller.reset()
     clock = time.perf_counter
     fell, fall_time = False, math.nan
@@ -94,29 +94,15 @@ def run_episode(
     events_before = len(safety.safety_events()) if safety is not None else 0
     for k in range(n):
         t = k * dt
-        i = buf.rows
         state = robot.read()
         cmd = schedule.at(t)
         started = clock()
         out = controller.act(state, cmd)
-        buf.act_s[i] = clock() - started
+        act_s = clock() - started
         robot.write(out)
         robot.advance(dt)
-        tr = truth()
-        # the raw rows only: the metrics derived from them are computed for all ticks at the end (`finish`)
-        buf.t[i] = (k + 1) * dt
-        buf.command[i] = (cmd.vx, cmd.vy, cmd.yaw_rate)
-        row = buf.qpos[i]
-        row[:3] = tr.base_position_in_world
-        row[3:7] = tr.base_quat
-        row[7:] = state.q
-        vel = buf.base_vel[i]
-        vel[:3] = tr.base_linvel_in_world
-        vel[3:] = tr.base_angvel_in_body
-        tau_dq = buf.tau_dq[i]
-        tau_dq[0] = state.tau_est
-        tau_dq[1] = state.dq
-        buf.rows += 1
+        # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
+        buf.add((k + 1) * dt, cmd, act_s, truth(), state)
         if observer is not None:
             observer((k + 1) * dt, robot, controller, cmd)
         if fallen():
