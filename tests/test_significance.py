@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
-import textwrap
 
 import numpy as np
 import pytest
@@ -241,32 +239,6 @@ def test_sequential_comparison_splits_alpha_and_refuses_incomplete_rounds():
         SequentialComparison([], ["in"])
 
 
-LIMP = '''
-    """A controller that switches its motors off: the robot folds and falls within a second."""
-    import numpy as np
-
-    from wbc.types import MotorCommand
-
-
-    class Limp:
-        rate_hz = 50.0
-
-        def __init__(self, desc):
-            self.command = MotorCommand.damping(desc.num_joints, 0.0)
-
-        def reset(self):
-            pass
-
-        def act(self, state, command):
-            return self.command
-
-        def counters(self):
-            return {}
-
-
-    def make(desc):
-        return Limp(desc)
-'''
 
 SHORT = """
 [scenario]
@@ -293,18 +265,6 @@ offset_m = 0.1
 name = "soft"
 push_force_n = [50.0, 100.0]
 """
-
-
-@pytest.fixture
-def limp(tmp_path, monkeypatch):
-    root = tmp_path / "limproot"
-    (root / "limppkg").mkdir(parents=True)
-    (root / "limppkg" / "__init__.py").write_text('"""Test plug-ins."""\n')
-    (root / "limppkg" / "limp.py").write_text(textwrap.dedent(LIMP).lstrip())
-    monkeypatch.syspath_prepend(str(root))
-    yield "limppkg.limp:make"
-    for name in [m for m in sys.modules if m.startswith("limppkg")]:
-        del sys.modules[name]
 
 
 def test_until_significant_stops_the_run_once_the_difference_is_settled(limp, tmp_path):

@@ -61,6 +61,7 @@ from wbc.tools.bench import (
 )
 from wbc.tools.demo import DEMO_CONTROLLERS, trial_to_watch
 from wbc.tools.paper import PaperRunConfig, run_paper_table
+from wbc.tools.posture import posture_study
 from wbc.tools.tail import analyze_tail
 
 __all__ = ["BUS_FAULTS", "FAULTS", "HANDLERS", "main"]
@@ -94,6 +95,16 @@ def _analyze_arm_momentum(args: argparse.Namespace) -> int:
         printers.print_json([dataclasses.asdict(r) for r in rows])
     else:
         printers.print_arm_momentum(rows, controller=args.controller, scenario=args.scenario, band=args.band)
+    return 0
+
+
+def _analyze_posture(args: argparse.Namespace) -> int:
+    rows = posture_study(args.controllers, robot=args.robot, walk_vx=args.walk, duration_s=args.duration,
+                         seed=args.seed)
+    if args.json:
+        printers.print_json([dataclasses.asdict(r) for r in rows])
+    else:
+        printers.print_posture(rows, duration_s=args.duration)
     return 0
 
 
@@ -619,6 +630,7 @@ def _check_controller(args: argparse.Namespace) -> int:
 HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "analyze tail": _analyze_tail,
     "analyze arm-momentum": _analyze_arm_momentum,
+    "analyze posture": _analyze_posture,
     "bench sim": _bench_sim,
     "bench mpc": _bench_mpc,
     "bench sweep": _bench_sweep,

@@ -82,6 +82,16 @@ def build_parser() -> argparse.ArgumentParser:
     arm.add_argument("--seeds", type=int, default=1)
     arm.add_argument("--json", action="store_true")
     arm.set_defaults(handler="analyze arm-momentum")
+    posture = analyze.add_parser("posture", help="trunk height and speed of controllers standing and walking, flat "
+                                 "ground, no pushes (is the comparison at the same posture?)")
+    posture.add_argument("controllers", nargs="+", help=_NAMES_HELP)
+    posture.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    posture.add_argument("--walk", type=float, default=0.3, help="forward speed of the walking command [m/s]")
+    posture.add_argument("--duration", type=float, default=6.0,
+                         help="episode length [s]; the means cover its second half")
+    posture.add_argument("--seed", type=int, default=0)
+    posture.add_argument("--json", action="store_true", help="print JSON")
+    posture.set_defaults(handler="analyze posture")
 
     bench = sub.add_parser("bench", help="speed figures").add_subparsers(dest="what", required=True)
     sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")

@@ -7,6 +7,7 @@ the command's interface: scripts parse the JSON, people read the tables.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +29,7 @@ from wbc.tools.bench.hw import EmulatorCounts
 from wbc.tools.bench.references import MPC_REFERENCE_TARGETS, REFERENCE_TARGETS, TRAIN_TARGET
 from wbc.tools.demo import TrialToWatch
 from wbc.tools.paper import PaperTableResult, format_paper_table
+from wbc.tools.posture import PostureRow
 from wbc.tools.tail import TailAnalysis
 from wbc.types import RobotState
 
@@ -54,6 +56,28 @@ def print_tail(result: TailAnalysis) -> None:
           f"{result.paper_ccom_shift_m:>9.3f}")
     print(f"  {'body/arm angular acceleration':<34}{result.alpha_ratio:>11.3f}{result.alpha_ratio_exact:>10.3f}"
           f"{result.paper_alpha_ratio:>9.3f}")
+
+
+def print_posture(rows: Sequence[PostureRow], *, duration_s: float) -> None:
+    """One line per controller: trunk height and forward speed standing and walking, and any fall."""
+    if not rows:
+        return
+    walk = next(r.vx for r in rows if r.command == "walk")
+    print(f"posture on flat ground, no pushes: {rows[0].robot}, means over seconds {duration_s / 2:g}-{duration_s:g}")
+    by_name: dict[str, dict[str, PostureRow]] = {}
+    for r in rows:
+        by_name.setdefault(r.controller, {})[r.command] = r
+    w = max(len("controller"), *(len(name) for name in by_name)) + 2
+    print(f"  {'controller':<{w}}{'arm':<10}{'stand h [m]':>15}{f'walk {walk:g} h [m]':>17}{'walk v [m/s]':>14}  falls")
+    for name, cmds in by_name.items():
+        stand, walking = cmds["stand"], cmds["walk"]
+        falls = ", ".join(f"{c} at {r.fall_time_s:.1f} s" for c, r in cmds.items() if r.fell) or "-"
+        print(f"  {name:<{w}}{stand.arm_mode:<10}{_metres(stand):>15}{_metres(walking):>17}"
+              f"{walking.speed_m_s:>14.2f}  {falls}")
+
+
+def _metres(row: PostureRow) -> str:
+    return "fell" if math.isnan(row.height_m) else f"{row.height_m:.3f} ± {row.height_std_m:.3f}"
 
 
 def print_arm_momentum(rows: Sequence[ArmMomentumTrial], *, controller: str, scenario: str, band: str) -> None:

@@ -1,0 +1,65 @@
+"""`wbc analyze posture`: the trunk height a controller stands and walks at, so a comparison can be read at its
+posture (a crouching robot survives pushes that topple an upright one)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from wbc.cli.main import main
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.robots import get_robot
+from wbc.tools.posture import posture_study
+
+
+def test_the_study_tells_a_crouching_controller_from_an_upright_one_and_measures_the_walk():
+    rows = posture_study(["mpc-locked", "learned-locked"], duration_s=3.0)
+    by = {(r.controller, r.command): r for r in rows}
+    assert [(r.controller, r.command) for r in rows] == [("mpc-locked", "stand"), ("mpc-locked", "walk"),
+                                                         ("learned-locked", "stand"), ("learned-locked", "walk")]
+    assert not any(r.fell for r in rows)
+    nominal = get_robot("a1-wx200", "locked").stand_height
+    # the MPC holds its CoM at its set height: the trunk within 1 cm of the model's standing height, still or walking
+    for command in ("stand", "walk"):
+        assert by["mpc-locked", command].height_m == pytest.approx(nominal, abs=0.01)
+    # the shipped pi2 imitates a crouching pi1: 10 cm and more below the MPC (the README's posture table)
+    for command in ("stand", "walk"):
+        assert by["mpc-locked", command].height_m - by["learned-locked", command].height_m > 0.10
+    # standing stays put; walking walks at about the commanded 0.3 m/s, over the episode's second half
+    for name in ("mpc-locked", "learned-locked"):
+        assert abs(by[name, "stand"].speed_m_s) < 0.05
+        assert by[name, "walk"].speed_m_s == pytest.approx(0.3, abs=0.08)
+        assert by[name, "walk"].vx == 0.3 and by[name, "stand"].vx == 0.0
+
+
+def test_a_fall_gives_no_height_and_says_when(limp):
+    (stand, walk) = posture_study([limp], duration_s=2.0)
+    for row in (stand, walk):
+        assert row.fell and 0 < row.fall_time_s < 2.0
+        assert math.isnan(row.height_m) and math.isnan(row.speed_m_s)
+
+
+def test_the_command_prints_a_table_and_json(capsys, limp):
+    assert main(["analyze", "posture", "stand", limp, "--duration", "2", "--walk", "0.5"]) == 0
+    out = capsys.readouterr().out
+    assert "means over seconds 1-2" in out and "walk 0.5 h [m]" in out
+    stand_line = next(line for line in out.splitlines() if line.strip().startswith("stand "))
+    assert "0.28" in stand_line and stand_line.rstrip().endswith("-")
+    limp_line = next(line for line in out.splitlines() if limp in line)
+    assert "fell" in limp_line and "stand at" in limp_line and "walk at" in limp_line
+    assert main(["analyze", "posture", "stand", "--duration", "2", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["command"] for r in rows] == ["stand", "walk"] and rows[0]["height_m"] == pytest.approx(0.28, abs=0.01)
+
+
+def test_bad_input_names_what_is_wrong():
+    with pytest.raises(UnknownNameError, match="go2"):
+        posture_study(["mpc"], robot="go2")
+    with pytest.raises(ConfigError, match="cannot drive robot 'a1-wx200'"):
+        posture_study(["policy:wbc/learned/weights/go1-arm-none"])
+    with pytest.raises(ConfigError, match="ramp_s"):
+        posture_study(["mpc"], duration_s=0.6)
+    with pytest.raises(ConfigError, match="duration_s"):
+        posture_study(["mpc"], duration_s=0.0)
