@@ -775,10 +775,11 @@ def test_stage_and_baseline_configurations():
     assert s2.teacher.endswith("push-stage1/policy") and s2.action_mask == tuple(range(12))
     assert (s3.env.arm_mode, s3.env.teacher_arm_mode) == ("actuated", "locked") and s3.bc.initial > 0
     assert s3.env.bands == ("in",)
-    # the push task's stages on pushes hold a nominal trunk height (the posture term); pi1 keeps legged_gym's recipe
-    for cfg in (s2, s3, stage_config("push", 3, "ppo"), stage_config("push", 1, "curriculum")):
+    # the stages after pi1 hold a nominal trunk height (the posture term), on both tasks; pi1 keeps its recipe
+    for cfg in (s2, s3, stage_config("push", 3, "ppo"), stage_config("push", 1, "curriculum"),
+                stage_config("turn", 2), stage_config("turn", 3)):
         assert (cfg.env.rewards.base_height, cfg.env.base_height_target) == (-50.0, 0.30)
-    assert s1.env.rewards.base_height == 0.0 and stage_config("turn", 2).env.rewards.base_height == 0.0
+    assert s1.env.rewards.base_height == 0.0 and stage_config("turn", 1).env.rewards.base_height == 0.0
     ppo = stage_config("push", 3, "ppo")
     assert ppo.bc is None and ppo.init_from is None and ppo.env.teacher_arm_mode is None
     demo = stage_config("push", 3, "one-stage-demo")

@@ -41,7 +41,7 @@ from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.bc_schedule import BCSchedule
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["BASELINES", "PUSH_POSTURE", "TASKS", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS",
+__all__ = ["BASELINES", "PUSH_POSTURE", "TASKS", "TURN_POSTURE", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS",
            "TURN_WALKING_PRIOR_INIT", "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS",
            "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
 
@@ -83,6 +83,11 @@ Without it the push task's policies stood and walked at 0.16-0.18 m, against the
 part of their push robustness and not the robot's nominal posture. Their teacher, pi1, must be upright too (the
 students imitate it): the shipped ``a1-wx200-none-upright`` is pi1 fine-tuned with this term (recipe and heights:
 ``docs/learning-notes.md``, stage 1, upright)."""
+
+TURN_POSTURE = (-50.0, 0.30)
+"""The turn task's posture term, as the push task's (`PUSH_POSTURE`), in the stages after pi1. The shipped go1-arm
+policies ran at 0.14 m against the MPC's 0.30 m; their teacher must be upright too: pi1 fine-tuned with the term
+(``docs/learning-notes.md``, stage 1, upright, turn task)."""
 
 
 WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
@@ -126,7 +131,7 @@ TASKS: dict[str, TaskSpec] = {
                      tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
                      walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION,
                      walking_prior_init=TURN_WALKING_PRIOR_INIT, taught_init_std=TURN_TAUGHT_INIT_STD,
-                     taught_start_from_teacher=True),
+                     taught_start_from_teacher=True, posture=TURN_POSTURE),
 }
 
 BASELINES: dict[str, str] = {
