@@ -1,5 +1,7 @@
 """The centroidal model with arm momentum and the MPC QP."""
 
+import dataclasses
+
 import casadi as ca
 import mujoco
 import numpy as np
@@ -201,6 +203,33 @@ def test_a_saved_problem_loads_and_solves_to_the_live_plan_bit_for_bit(gait, tmp
     _same_plan(fresh.solve(loaded), mpc.solve(problem))
 
 
+def test_the_horizontal_velocity_weights_hold_in_full_at_speed_and_relax_towards_standstill():
+    mpc, x0, feet, params = _standing_problem()
+    cfg = mpc.config
+    x_ref = np.tile(x0, (cfg.horizon, 1))
+    table = joint_table(get_robot("a1-wx200"))
+
+    def made(**config):
+        return CentroidalMpc(dataclasses.replace(cfg, **config), table.lower[12:], table.upper[12:],
+                             table.velocity_limit[12:])
+
+    def factor(vx, vy=0.0, **config):
+        ref = x_ref.copy()
+        ref[:, 3:5] = (vx, vy)
+        return made(**config).velocity_weight_factor(ref)
+
+    assert factor(0.0) == cfg.standstill_weight_factor == 0.25
+    assert factor(0.3) == pytest.approx(0.3 / cfg.full_weight_speed) and factor(0.3, 0.4) == pytest.approx(0.5)
+    assert factor(1.0) == factor(-1.5) == factor(0.0, 1.2) == 1.0  # the turn task's speeds track in full
+    assert factor(0.0, full_weight_speed=0.0) == 1.0  # switched off
+    # the condensed problem carries the scaled weights: at standstill the velocity part of the Hessian shrinks
+    contact = np.ones((cfg.horizon, 4), bool)
+    feet = np.tile(feet, (cfg.horizon, 1, 1))
+    still = mpc.build(x0, x_ref, contact, feet, params)
+    full = made(full_weight_speed=0.0).build(x0, x_ref, contact, feet, params)
+    assert not np.allclose(still.H, full.H)
+
+
 def test_the_condensed_prediction_equals_stepping_the_discretised_dynamics_one_step_at_a_time():
     """X = free + gamma_z z (the compiled condensing) against the model stepped N times in plain numpy: linearised
     about x0, each step's lever arms about that step's reference CoM (the current CoM for the first) with the matching
@@ -222,7 +251,10 @@ def test_the_condensed_prediction_equals_stepping_the_discretised_dynamics_one_s
     predicted = (problem.free + problem.gamma_z @ z).reshape(n, 15)
     # the QP's cost is the tracking error and effort of that plan: 1/2 z H z + g z = 1/2 |X - X_ref|_Q^2 + effort + c
     cfg = mpc.config
-    q = np.tile(np.concatenate([cfg.weight_com, cfg.weight_vel, cfg.weight_rpy, cfg.weight_momentum,
+    factor = mpc.velocity_weight_factor(x_ref)  # a slow reference: the horizontal velocity weights are scaled
+    assert factor < 1
+    weight_vel = (factor * cfg.weight_vel[0], factor * cfg.weight_vel[1], cfg.weight_vel[2])
+    q = np.tile(np.concatenate([cfg.weight_com, weight_vel, cfg.weight_rpy, cfg.weight_momentum,
                                 cfg.weight_arm_q]), n)
     r = np.tile(np.r_[np.full(12, cfg.weight_force), np.full(3, cfg.weight_arm_dq)], n)
     err = predicted.ravel() - x_ref.ravel()

@@ -34,12 +34,14 @@ class FootholdConfig:
         centripetal_gain: multiplies the turning term sqrt(h / g) (v x w_cmd): while turning the feet land outside
             the hips so the legs lean into the turn and carry the centripetal force; too much rolls the body into
             the turn, none lets it tip outward (tuning: docs/mpc-notes.md).
-        max_offset: largest horizontal distance from the hip's projection [m].
+        max_offset: largest horizontal distance from the hip's projection [m]: about the leg's reach (the A1's and
+            Go1's 0.4 m legs reach 0.29 m out from a hip 0.28 m up). A 2 m/s push needs a capture step of ~0.35 m;
+            at the former 0.22 m the feet landed short and the robot fell over them (docs/mpc-notes.md).
     """
 
     capture_gain: float = 1.0
     centripetal_gain: float = 0.1
-    max_offset: float = 0.22
+    max_offset: float = 0.30
 
 
 def plan_foothold(hip_now: np.ndarray, com_now: np.ndarray, v_com: np.ndarray, v_cmd: np.ndarray,
