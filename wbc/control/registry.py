@@ -57,6 +57,17 @@ CONTROLLERS: dict[str, ControllerSpec] = {
                                      "learned policy pi2, arm locked; shipped weights, numpy"),
     "learned-noarm": ControllerSpec("learned-noarm", "none", LearnedController,
                                     "learned policy pi1, robot without its arm; shipped weights, numpy"),
+    "learned-upright": ControllerSpec("learned-upright", "actuated",
+                                      functools.partial(LearnedController, posture="upright"),
+                                      "pi3 trained to hold the nominal trunk height, arm actuated; shipped weights"),
+    "learned-locked-upright": ControllerSpec("learned-locked-upright", "locked",
+                                             functools.partial(LearnedController, posture="upright"),
+                                             "pi2 trained to hold the nominal trunk height, arm locked; shipped "
+                                             "weights"),
+    "learned-noarm-upright": ControllerSpec("learned-noarm-upright", "none",
+                                            functools.partial(LearnedController, posture="upright"),
+                                            "pi1 fine-tuned to hold the nominal trunk height, no arm; shipped "
+                                            "weights"),
 }
 
 

@@ -13,7 +13,9 @@ runs through the same path: every part gets its own view of the observation and,
 history; each part's actions go to its joints, and ``last_action`` holds the whole robot's, as in training.
 
 The registry's ``learned``, ``learned-locked`` and ``learned-noarm`` run the weights shipped in
-``wbc/learned/weights/<robot>-<arm mode>.npz`` (pi3, pi2 and pi1 of the robot's task, `shipped_weights`).
+``wbc/learned/weights/<robot>-<arm mode>.npz`` (pi3, pi2 and pi1 of the robot's task, `shipped_weights`);
+``learned-upright``, ``learned-locked-upright`` and ``learned-noarm-upright`` run ``<robot>-<arm mode>-upright.npz``,
+the same stages trained to hold the robot's nominal trunk height.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from wbc.errors import ConfigError
 from wbc.learned.policy.composite_policy import CompositePolicyFile, load_composite
 from wbc.learned.policy.numpy_composite import NumpyComposite
 from wbc.learned.policy.obs_history import ObsHistory
@@ -39,9 +42,11 @@ class LearnedController:
 
     Args:
         desc: the robot it drives (checked against the policy file).
-        policy_path: the policy file (default: `shipped_weights(desc)`).
+        policy_path: the policy file (default: `shipped_weights(desc, posture)`).
         policy: the file's content, already read from `policy_path` (`load_composite`), so that a run that builds
             one controller per trial reads the file once.
+        posture: None (the shipped weights) or a posture variant of them (`POSTURES`: ``"upright"``); only without
+            `policy_path`.
 
     Raises:
         PolicyFileError: the file is missing or malformed, was trained for another robot or arm mode, or needs
@@ -49,10 +54,14 @@ class LearnedController:
     """
 
     def __init__(self, desc: RobotDescription, policy_path: str | Path | None = None, *,
-                 policy: CompositePolicyFile | None = None) -> None:
-        path = Path(policy_path) if policy_path is not None else shipped_weights(desc)
+                 policy: CompositePolicyFile | None = None, posture: str | None = None) -> None:
+        if policy_path is not None and posture is not None:
+            raise ConfigError(f"LearnedController: a policy file ({policy_path}) or a posture of the shipped "
+                              f"weights ({posture}), not both")
+        path = Path(policy_path) if policy_path is not None else shipped_weights(desc, posture)
         if policy_path is None and not path.exists():
-            raise PolicyFileError(path, None, f"no shipped weights for {desc.name} with arm {desc.arm_mode!r} yet; "
+            raise PolicyFileError(path, None, f"no shipped weights for {desc.name} with arm {desc.arm_mode!r}"
+                                  + (f" and posture {posture!r}" if posture else "") + " yet; "
                                   "train them (wbc train --task push --stage 1|2|3) and copy the run's policy.npz "
                                   f"and policy.json to {path.with_suffix('')}.npz/.json")
         pf = load_composite(path) if policy is None else policy

@@ -3,20 +3,36 @@
 ``wbc/learned/weights/<robot>-<arm mode>.npz`` (+ ``.json``) is pi3, pi2 or pi1 of the robot's task (arm actuated,
 locked, none); other shipped files (baselines, the walking prior a task starts from) sit beside them. The directory
 is found from this file, never from the working directory.
+
+A posture variant (`POSTURES`) sits beside each: ``<robot>-<arm mode>-upright`` is the same stage trained to hold
+the robot's nominal trunk height (the shipped pi1, pi2 and pi3 crouch), run by the registry's ``*-upright`` names.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from wbc.errors import UnknownNameError
 from wbc.robots.description import RobotDescription
 
-__all__ = ["WEIGHTS_DIR", "shipped_weights"]
+__all__ = ["POSTURES", "WEIGHTS_DIR", "shipped_weights"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 """Where the package's weights are installed (``wbc/learned/weights``)."""
 
 
-def shipped_weights(desc: RobotDescription) -> Path:
-    """The shipped policy for `desc`'s robot and arm mode (``weights/<robot>-<arm mode>.npz``)."""
-    return WEIGHTS_DIR / f"{desc.name}-{desc.arm_mode}.npz"
+POSTURES = ("upright",)
+"""Posture variants of the shipped weights: a suffix of the file name (``<robot>-<arm mode>-upright.npz``)."""
+
+
+def shipped_weights(desc: RobotDescription, posture: str | None = None) -> Path:
+    """The shipped policy for `desc`'s robot and arm mode (``weights/<robot>-<arm mode>[-<posture>].npz``).
+
+    Raises:
+        UnknownNameError: a posture other than None or one of `POSTURES`.
+    """
+    if posture is None:
+        return WEIGHTS_DIR / f"{desc.name}-{desc.arm_mode}.npz"
+    if posture not in POSTURES:
+        raise UnknownNameError("posture", posture, POSTURES)
+    return WEIGHTS_DIR / f"{desc.name}-{desc.arm_mode}-{posture}.npz"

@@ -10,6 +10,10 @@
   ``wbc/learned/weights/a1-wx200-actuated-<baseline>.npz``, played as ``policy:PATH``; a baseline without shipped
   weights is listed as missing with the command that trains it, or given with ``--contender NAME=CONTROLLER``.
 
+With ``--upright`` every learned row plays its posture variant instead (the same stage trained to hold the robot's
+nominal trunk height: ``learned-upright`` ..., ``a1-wx200-actuated-<baseline>-upright.npz``;
+`wbc.learned.policy.shipped.POSTURES`), under the same keys, so the comparisons are the same pairs.
+
 Every contender has a key (the controller name it plays by default, or the baseline's name); ``--contender
 KEY=CONTROLLER`` plays another controller in its row (a policy retrained on another scenario version, say). The
 comparisons each table prints are pairs of keys, B - A on the same trials.
@@ -77,6 +81,7 @@ class PaperTableSpec:
         paper_columns: the paper's column labels, matched to the scenario's bands by position.
         paper: paper row -> metric -> a `PaperValue` per column.
         contenders: our rows, in the order they are played (printed grouped by the paper's rows).
+        upright_contenders: the same rows with the learned ones' upright posture variants (``--upright``).
         contrasts: the paired comparisons printed under the table.
         paper_protocol: how the paper evaluated it (seeds, trials, episode length).
     """
@@ -89,16 +94,20 @@ class PaperTableSpec:
     paper_columns: tuple[str, ...]
     paper: Mapping[str, Mapping[str, tuple[PaperValue, ...]]]
     contenders: tuple[Contender, ...]
+    upright_contenders: tuple[Contender, ...]
     contrasts: tuple[Contrast, ...]
     paper_protocol: str
 
 
-def _arm_rows() -> tuple[Contender, ...]:
+def _arm_rows(upright: bool = False) -> tuple[Contender, ...]:
     # played in this order (the arena's, and its report's); the printed table groups them by the paper's rows
+    suffix, note = ("-upright", " upright") if upright else ("", "")
     return (
-        Contender(key="learned", row="Actuated", family="learned", controller="learned", note="pi3"),
-        Contender(key="learned-locked", row="Locked", family="learned", controller="learned-locked", note="pi2"),
-        Contender(key="learned-noarm", row="No arm", family="learned", controller="learned-noarm", note="pi1"),
+        Contender(key="learned", row="Actuated", family="learned", controller="learned" + suffix, note="pi3" + note),
+        Contender(key="learned-locked", row="Locked", family="learned", controller="learned-locked" + suffix,
+                  note="pi2" + note),
+        Contender(key="learned-noarm", row="No arm", family="learned", controller="learned-noarm" + suffix,
+                  note="pi1" + note),
         Contender(key="mpc", row="Actuated", family="model-based", controller="mpc", note="MPC"),
         Contender(key="mpc-locked", row="Locked", family="model-based", controller="mpc-locked", note="MPC"),
         Contender(key="mpc-noarm", row="No arm", family="model-based", controller="mpc-noarm", note="MPC"),
@@ -124,17 +133,20 @@ def _policy_name(path: Path) -> str:
     return f"policy:{path if rel.startswith('..') else rel}"
 
 
-def _baseline_rows() -> tuple[Contender, ...]:
-    rows = [Contender(key="ours", row="Ours", family="learned", controller="learned", note="pi3 (staged: PPO + BC)")]
+def _baseline_rows(upright: bool = False) -> tuple[Contender, ...]:
+    suffix = "-upright" if upright else ""
+    rows = [Contender(key="ours", row="Ours", family="learned", controller="learned" + suffix,
+                      note="pi3 (staged: PPO + BC)" + (" upright" if upright else ""))]
     for baseline, row in _BASELINE_ROWS.items():
-        weights = WEIGHTS_DIR / f"a1-wx200-actuated-{baseline}.npz"
+        weights = WEIGHTS_DIR / f"a1-wx200-actuated-{baseline}{suffix}.npz"
         if weights.is_file():
             rows.append(Contender(key=baseline, row=row, family="learned", controller=_policy_name(
                 weights.with_suffix("")), note=BASELINES[baseline]))
         else:
             rows.append(Contender(key=baseline, row=row, family="learned", controller=None,
                                   note=f"no shipped weights (train: wbc train --task push --stage 3 --baseline "
-                                  f"{baseline}; play: --contender {baseline}=policy:PATH)"))
+                                  f"{baseline}; play: --contender {baseline}=policy:PATH; they would ship as "
+                                  f"{weights.name})"))
     return tuple(rows)
 
 
@@ -142,36 +154,43 @@ TABLES: dict[str, PaperTableSpec] = {
     "table1": PaperTableSpec(
         name="table1", title="Table I: locomotion under pushes, arm actuated / locked / absent",
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
-        paper_columns=("200-300", "300-400"), paper=TABLE_I, contenders=_arm_rows(), contrasts=_ARM_CONTRASTS,
+        paper_columns=("200-300", "300-400"), paper=TABLE_I, contenders=_arm_rows(),
+        upright_contenders=_arm_rows(upright=True),
+        contrasts=_ARM_CONTRASTS,
         paper_protocol="5 seeds, 2000 trials, 20 s each"),
     "table2": PaperTableSpec(
         name="table2", title="Table II: high-speed turns, arm actuated / locked / absent",
         scenario="scenarios/turn.toml", robot="go1-arm", metrics=("success_rate", "vang_err", "vlin_err"),
-        paper_columns=("1", "1.25", "1.5"), paper=TABLE_II, contenders=_arm_rows(), contrasts=_ARM_CONTRASTS,
+        paper_columns=("1", "1.25", "1.5"), paper=TABLE_II, contenders=_arm_rows(),
+        upright_contenders=_arm_rows(upright=True),
+        contrasts=_ARM_CONTRASTS,
         paper_protocol="5 seeds, 2000 trials, 20 s each; yaw rate 0.5 rad/s in half the trials, 2 rad/s in the rest"),
     "table3": PaperTableSpec(
         name="table3", title="Table III: the staged method against its baselines, under pushes",
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
         paper_columns=("200-300", "300-400"), paper=TABLE_III, contenders=_baseline_rows(),
+        upright_contenders=_baseline_rows(upright=True),
         contrasts=tuple(Contrast(a=key, b="ours", question=f"Ours vs {row}") for key, row in _BASELINE_ROWS.items()),
         paper_protocol="2000 trials, 20 s each; half standing, half at 0.3 m/s"),
 }
 """The three tables, by the name ``wbc paper`` takes."""
 
 
-def resolve_contenders(spec: PaperTableSpec, overrides: Mapping[str, str]) -> tuple[Contender, ...]:
-    """The table's contenders with ``--contender KEY=CONTROLLER`` applied.
+def resolve_contenders(spec: PaperTableSpec, overrides: Mapping[str, str], *,
+                       upright: bool = False) -> tuple[Contender, ...]:
+    """The table's contenders (their upright posture variants with `upright`) with ``--contender KEY=CONTROLLER``.
 
     Raises:
         UnknownNameError: a key that is not one of the table's (the message lists them).
         ConfigError: two rows would play the same controller.
     """
-    keys = [c.key for c in spec.contenders]
+    contenders = spec.upright_contenders if upright else spec.contenders
+    keys = [c.key for c in contenders]
     for key in overrides:
         if key not in keys:
             raise UnknownNameError(f"{spec.name} contender", key, keys)
     rows = tuple(replace(c, controller=overrides[c.key], note=f"given by --contender {c.key}=...")
-                 if c.key in overrides else c for c in spec.contenders)
+                 if c.key in overrides else c for c in contenders)
     played = [c.controller for c in rows if c.controller is not None]
     if len(set(played)) != len(played):
         raise ConfigError(f"{spec.name}: two rows play the same controller ({', '.join(played)}); give each row its "
