@@ -608,10 +608,10 @@ def test_the_upright_names_run_the_upright_weights_of_each_robot_and_arm_mode():
             desc = get_robot(robot, arm)
             path = shipped_weights(desc, "upright")
             assert path.name == f"{robot}-{arm}-upright.npz" and path != shipped_weights(desc)
-            if path.is_file():
-                ctrl = spec.make(desc)
-                assert ctrl.path == path
-                assert (ctrl.policy.file.meta["robot"], ctrl.policy.file.meta["arm_mode"]) == (robot, arm)
+            assert path.is_file(), f"{path.name} ships with the package"  # both robots have all three stages upright
+            ctrl = spec.make(desc)
+            assert ctrl.path == path
+            assert (ctrl.policy.file.meta["robot"], ctrl.policy.file.meta["arm_mode"]) == (robot, arm)
     desc = get_robot("a1-wx200", "none")
     with pytest.raises(UnknownNameError, match="upright"):
         shipped_weights(desc, "crouched")
