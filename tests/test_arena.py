@@ -298,7 +298,7 @@ def test_episode_round_trips_through_npz(small, tmp_path):
 def test_every_controller_holds_up_through_the_first_second_of_every_scenario(scenario, controller):
     sc = load_scenario(scenario)
     weights = shipped_weights(get_robot(sc.robot, CONTROLLERS[controller].arm_mode),
-                              "upright" if controller.endswith("-upright") else None)
+                              "crouched" if controller.endswith("-crouched") else None)
     if controller.startswith("learned") and not weights.exists():
         pytest.skip(f"no shipped weights {weights.name} for {sc.robot} yet")
     trial = dataclasses.replace(sc.trial(sc.bands[-1], 0, 0), duration_s=1.0)

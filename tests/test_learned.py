@@ -594,29 +594,30 @@ def test_learned_controllers_are_registered_and_refuse_missing_or_wrong_weights(
         LearnedController(get_robot("a1-wx200", "locked"), tmp_path / "p")
 
 
-def test_the_upright_names_run_the_upright_weights_of_each_robot_and_arm_mode():
+def test_the_crouched_names_run_the_crouched_weights_of_each_robot_and_arm_mode():
     from wbc.control.registry import get_controller
     from wbc.errors import ConfigError, UnknownNameError
     from wbc.learned.policy.controller import LearnedController
     from wbc.learned.policy.shipped import shipped_weights
 
-    for name, arm in (("learned-upright", "actuated"), ("learned-locked-upright", "locked"),
-                      ("learned-noarm-upright", "none")):
+    for name, arm in (("learned-crouched", "actuated"), ("learned-locked-crouched", "locked"),
+                      ("learned-noarm-crouched", "none")):
         spec = get_controller(name)
         assert spec.arm_mode == arm
         for robot in ("a1-wx200", "go1-arm"):
             desc = get_robot(robot, arm)
-            path = shipped_weights(desc, "upright")
-            assert path.name == f"{robot}-{arm}-upright.npz" and path != shipped_weights(desc)
-            assert path.is_file(), f"{path.name} ships with the package"  # both robots have all three stages upright
+            path = shipped_weights(desc, "crouched")
+            assert path.name == f"{robot}-{arm}-crouched.npz" and path != shipped_weights(desc)
+            assert path.is_file(), f"{path.name} ships with the package"  # both robots have all three stages crouched
+            assert shipped_weights(desc).is_file()
             ctrl = spec.make(desc)
             assert ctrl.path == path
             assert (ctrl.policy.file.meta["robot"], ctrl.policy.file.meta["arm_mode"]) == (robot, arm)
     desc = get_robot("a1-wx200", "none")
-    with pytest.raises(UnknownNameError, match="upright"):
-        shipped_weights(desc, "crouched")
+    with pytest.raises(UnknownNameError, match="crouched"):
+        shipped_weights(desc, "upright")
     with pytest.raises(ConfigError, match="not both"):
-        LearnedController(desc, shipped_weights(desc), posture="upright")
+        LearnedController(desc, shipped_weights(desc), posture="crouched")
 
 
 def test_learned_controller_drives_the_simulated_robot(vec, tmp_path):

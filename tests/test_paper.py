@@ -116,7 +116,7 @@ def test_table3_lists_its_baselines_and_says_which_are_missing(tiny, tmp_path):
     result = run_paper_table(PaperRunConfig(table="table3", trials=1, seeds=1, scenario=tiny, out_dir=tmp_path / "t3",
                                             workers=1, progress=False))
     shipped = {p.stem.removeprefix("a1-wx200-actuated-") for p in WEIGHTS_DIR.glob("a1-wx200-actuated-*.npz")
-               if not p.stem.endswith("upright")}  # the upright variants play with --upright
+               if not p.stem.endswith("crouched")}  # the crouched variants play with --crouched
     rows = {c.key: c for c in result.contenders}
     for key in ("ppo", "curriculum", "finetune-pi2", "decoupled", "one-stage-demo"):
         assert (rows[key].controller is not None) == (key in shipped)
@@ -174,22 +174,22 @@ def test_the_push_tables_play_the_current_push_version_by_default():
         check_published(scenario)
 
 
-def test_the_upright_option_plays_every_learned_rows_posture_variant_under_the_same_keys():
+def test_the_crouched_option_plays_every_learned_rows_posture_variant_under_the_same_keys():
     for name in ("table1", "table2"):
-        rows = {c.key: c for c in resolve_contenders(TABLES[name], {}, upright=True)}
+        rows = {c.key: c for c in resolve_contenders(TABLES[name], {}, crouched=True)}
         assert {k: c.controller for k, c in rows.items() if c.family == "learned"} == {
-            "learned": "learned-upright", "learned-locked": "learned-locked-upright",
-            "learned-noarm": "learned-noarm-upright"}
+            "learned": "learned-crouched", "learned-locked": "learned-locked-crouched",
+            "learned-noarm": "learned-noarm-crouched"}
         assert {c.controller for c in rows.values() if c.family == "model-based"} == {"mpc", "mpc-locked", "mpc-noarm"}
-    rows = {c.key: c for c in resolve_contenders(TABLES["table3"], {"ppo": "policy:runs/ppo/policy"}, upright=True)}
-    assert rows["ours"].controller == "learned-upright" and rows["ppo"].controller == "policy:runs/ppo/policy"
+    rows = {c.key: c for c in resolve_contenders(TABLES["table3"], {"ppo": "policy:runs/ppo/policy"}, crouched=True)}
+    assert rows["ours"].controller == "learned-crouched" and rows["ppo"].controller == "policy:runs/ppo/policy"
     for key in ("curriculum", "finetune-pi2", "decoupled", "one-stage-demo"):
-        weights = WEIGHTS_DIR / f"a1-wx200-actuated-{key}-upright.npz"
+        weights = WEIGHTS_DIR / f"a1-wx200-actuated-{key}-crouched.npz"
         if weights.is_file():
-            assert rows[key].controller.endswith(f"a1-wx200-actuated-{key}-upright")
+            assert rows[key].controller.endswith(f"a1-wx200-actuated-{key}-crouched")
         else:
             assert rows[key].controller is None and weights.name in rows[key].note
     # the comparisons are the same pairs of keys, so every contrast finds both sides
     for name, spec in TABLES.items():
-        keys = {c.key for c in spec.upright_contenders}
+        keys = {c.key for c in spec.crouched_contenders}
         assert all(c.a in keys and c.b in keys for c in spec.contrasts), name

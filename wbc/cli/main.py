@@ -540,7 +540,7 @@ def _paper(args: argparse.Namespace) -> int:
         table=args.table, trials=args.trials, seeds=args.seeds,
         scenario=Path(args.scenario) if args.scenario else None, out_dir=Path(args.out) if args.out else None,
         workers=args.workers, resume=args.resume, progress=not (args.quiet or args.json), contenders=overrides,
-        upright=args.upright))
+        crouched=args.crouched))
     if args.json:
         printers.print_json(result.as_dict())
     else:

@@ -309,10 +309,10 @@ def build_parser() -> argparse.ArgumentParser:
     paper.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
     paper.add_argument("--contender", action="append", default=None, metavar="KEY=CONTROLLER",
                        help="play CONTROLLER in row KEY (repeatable): e.g. learned=policy:PATH for a retrained pi3, "
-                       "curriculum=policy:PATH for a Table III baseline without shipped weights")
-    paper.add_argument("--upright", action="store_true",
-                       help="play every learned row's upright variant (the same stage trained to hold the robot's "
-                       "nominal trunk height: learned-upright ..., <baseline>-upright weights)")
+                       "ppo=policy:PATH for a Table III baseline trained anew")
+    paper.add_argument("--crouched", action="store_true",
+                       help="play every learned row's crouched variant (the same stage as first trained, without the "
+                       "posture term: learned-crouched ..., <baseline>-crouched weights)")
     paper.add_argument("--quiet", action="store_true", help="no progress output")
     paper.add_argument("--json", action="store_true", help="print paper.json instead of the table")
     paper.set_defaults(handler="paper")

@@ -57,17 +57,18 @@ CONTROLLERS: dict[str, ControllerSpec] = {
                                      "learned policy pi2, arm locked; shipped weights, numpy"),
     "learned-noarm": ControllerSpec("learned-noarm", "none", LearnedController,
                                     "learned policy pi1, robot without its arm; shipped weights, numpy"),
-    "learned-upright": ControllerSpec("learned-upright", "actuated",
-                                      functools.partial(LearnedController, posture="upright"),
-                                      "pi3 trained to hold the nominal trunk height, arm actuated; shipped weights"),
-    "learned-locked-upright": ControllerSpec("learned-locked-upright", "locked",
-                                             functools.partial(LearnedController, posture="upright"),
-                                             "pi2 trained to hold the nominal trunk height, arm locked; shipped "
+    "learned-crouched": ControllerSpec("learned-crouched", "actuated",
+                                       functools.partial(LearnedController, posture="crouched"),
+                                       "pi3 as first trained (no posture term: crouches), arm actuated; shipped "
+                                       "weights"),
+    "learned-locked-crouched": ControllerSpec("learned-locked-crouched", "locked",
+                                              functools.partial(LearnedController, posture="crouched"),
+                                              "pi2 as first trained (no posture term: crouches), arm locked; shipped "
+                                              "weights"),
+    "learned-noarm-crouched": ControllerSpec("learned-noarm-crouched", "none",
+                                             functools.partial(LearnedController, posture="crouched"),
+                                             "pi1 as first trained (no posture term: crouches), no arm; shipped "
                                              "weights"),
-    "learned-noarm-upright": ControllerSpec("learned-noarm-upright", "none",
-                                            functools.partial(LearnedController, posture="upright"),
-                                            "pi1 fine-tuned to hold the nominal trunk height, no arm; shipped "
-                                            "weights"),
 }
 
 

@@ -14,8 +14,9 @@ history; each part's actions go to its joints, and ``last_action`` holds the who
 
 The registry's ``learned``, ``learned-locked`` and ``learned-noarm`` run the weights shipped in
 ``wbc/learned/weights/<robot>-<arm mode>.npz`` (pi3, pi2 and pi1 of the robot's task, `shipped_weights`);
-``learned-upright``, ``learned-locked-upright`` and ``learned-noarm-upright`` run ``<robot>-<arm mode>-upright.npz``,
-the same stages trained to hold the robot's nominal trunk height.
+``learned-crouched``, ``learned-locked-crouched`` and ``learned-noarm-crouched`` run
+``<robot>-<arm mode>-crouched.npz``, the same stages as first trained, without the posture term (they crouch about
+12 cm below the nominal trunk height).
 """
 
 from __future__ import annotations
@@ -45,7 +46,7 @@ class LearnedController:
         policy_path: the policy file (default: `shipped_weights(desc, posture)`).
         policy: the file's content, already read from `policy_path` (`load_composite`), so that a run that builds
             one controller per trial reads the file once.
-        posture: None (the shipped weights) or a posture variant of them (`POSTURES`: ``"upright"``); only without
+        posture: None (the shipped weights) or a posture variant of them (`POSTURES`: ``"crouched"``); only without
             `policy_path`.
 
     Raises:

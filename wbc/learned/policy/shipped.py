@@ -4,8 +4,10 @@
 locked, none); other shipped files (baselines, the walking prior a task starts from) sit beside them. The directory
 is found from this file, never from the working directory.
 
-A posture variant (`POSTURES`) sits beside each: ``<robot>-<arm mode>-upright`` is the same stage trained to hold
-the robot's nominal trunk height (the shipped pi1, pi2 and pi3 crouch), run by the registry's ``*-upright`` names.
+The shipped stages hold the robot's nominal trunk height (their reward's posture term, `wbc.learned.train.stages`).
+A posture variant (`POSTURES`) sits beside each: ``<robot>-<arm mode>-crouched`` is the same stage as first trained,
+without the posture term, crouching about 12 cm below nominal; it is kept for the comparisons measured with it (push
+v2 was calibrated on the crouched pi2) and run by the registry's ``*-crouched`` names.
 """
 
 from __future__ import annotations
@@ -21,8 +23,8 @@ WEIGHTS_DIR = Path(__file__).resolve().parents[1] / "weights"
 """Where the package's weights are installed (``wbc/learned/weights``)."""
 
 
-POSTURES = ("upright",)
-"""Posture variants of the shipped weights: a suffix of the file name (``<robot>-<arm mode>-upright.npz``)."""
+POSTURES = ("crouched",)
+"""Posture variants of the shipped weights: a suffix of the file name (``<robot>-<arm mode>-crouched.npz``)."""
 
 
 def shipped_weights(desc: RobotDescription, posture: str | None = None) -> Path:

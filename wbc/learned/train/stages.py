@@ -81,13 +81,13 @@ that train on pushes (2, 3 and the baselines).
 
 Without it the push task's policies stood and walked at 0.16-0.18 m, against the MPC's 0.30 m: a crouch that is
 part of their push robustness and not the robot's nominal posture. Their teacher, pi1, must be upright too (the
-students imitate it): the shipped ``a1-wx200-none-upright`` is pi1 fine-tuned with this term (recipe and heights:
+students imitate it): the shipped ``a1-wx200-none`` is pi1 fine-tuned with this term (recipe and heights:
 ``docs/learning-notes.md``, stage 1, upright)."""
 
 TURN_POSTURE = (-50.0, 0.30)
-"""The turn task's posture term, as the push task's (`PUSH_POSTURE`), in the stages after pi1. The shipped go1-arm
-policies ran at 0.14 m against the MPC's 0.30 m; their teacher must be upright too: pi1 fine-tuned with the term
-(``docs/learning-notes.md``, stage 1, upright, turn task)."""
+"""The turn task's posture term, as the push task's (`PUSH_POSTURE`), in the stages after pi1. The go1-arm
+policies first trained (now ``go1-arm-*-crouched``) ran at 0.14 m against the MPC's 0.30 m; their teacher must be
+upright too: pi1 fine-tuned with the term (``docs/learning-notes.md``, stage 1, upright, turn task)."""
 
 
 WALKING_PRIOR_COMMANDS = ((-0.5, 1.0), (-0.5, 0.5), (-1.0, 1.0))
@@ -99,7 +99,7 @@ legged_gym's recipe (commands over about +-1, tracking width 0.25, no fall penal
 pi2 and pi3 train on the scenario's commands. The runs behind this: ``docs/learning-notes.md``, stage 1."""
 WALKING_PRIOR_SIGMA = 0.25
 
-TURN_WALKING_PRIOR_INIT = "a1-wx200-none"
+TURN_WALKING_PRIOR_INIT = "a1-wx200-none-crouched"
 """The turn task's pi1 starts from the push task's pi1 (the A1 without its arm; same observation and action layout)
 and is fine-tuned on go1-arm without its arm.
 

@@ -57,7 +57,7 @@ class PaperRunConfig:
         resume: finish an interrupted run in `out_dir`.
         progress: progress on stderr.
         contenders: ``--contender KEY=CONTROLLER`` overrides, by key.
-        upright: play the learned rows' upright posture variants (``--upright``; `wbc.tools.paper.tables`).
+        crouched: play the learned rows' crouched posture variants (``--crouched``; `wbc.tools.paper.tables`).
     """
 
     table: str
@@ -69,7 +69,7 @@ class PaperRunConfig:
     resume: bool = False
     progress: bool = True
     contenders: Mapping[str, str] = field(default_factory=dict)
-    upright: bool = False
+    crouched: bool = False
 
     def __post_init__(self) -> None:
         if self.table not in TABLES:
@@ -151,7 +151,7 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         ResultsDirError: `out_dir` holds another run (or, without `resume`, any run).
     """
     spec = TABLES[cfg.table]
-    contenders = resolve_contenders(spec, cfg.contenders, upright=cfg.upright)
+    contenders = resolve_contenders(spec, cfg.contenders, crouched=cfg.crouched)
     scenario_path = cfg.scenario or Path(spec.scenario)
     scenario = load_scenario(scenario_path)
     if scenario.robot != spec.robot:

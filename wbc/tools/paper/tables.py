@@ -10,9 +10,10 @@
   ``wbc/learned/weights/a1-wx200-actuated-<baseline>.npz``, played as ``policy:PATH``; a baseline without shipped
   weights is listed as missing with the command that trains it, or given with ``--contender NAME=CONTROLLER``.
 
-With ``--upright`` every learned row plays its posture variant instead (the same stage trained to hold the robot's
-nominal trunk height: ``learned-upright`` ..., ``a1-wx200-actuated-<baseline>-upright.npz``;
-`wbc.learned.policy.shipped.POSTURES`), under the same keys, so the comparisons are the same pairs.
+The learned rows play the shipped stages, trained to hold the robot's nominal trunk height. With ``--crouched``
+every learned row plays its posture variant instead (the same stage as first trained, without the posture term:
+``learned-crouched`` ..., ``a1-wx200-actuated-<baseline>-crouched.npz``; `wbc.learned.policy.shipped.POSTURES`),
+under the same keys, so the comparisons are the same pairs.
 
 Every contender has a key (the controller name it plays by default, or the baseline's name); ``--contender
 KEY=CONTROLLER`` plays another controller in its row (a policy retrained on another scenario version, say). The
@@ -81,7 +82,8 @@ class PaperTableSpec:
         paper_columns: the paper's column labels, matched to the scenario's bands by position.
         paper: paper row -> metric -> a `PaperValue` per column.
         contenders: our rows, in the order they are played (printed grouped by the paper's rows).
-        upright_contenders: the same rows with the learned ones' upright posture variants (``--upright``).
+        crouched_contenders: the same rows with the learned ones' crouched posture variants (``--crouched``: as first
+            trained, without the posture term).
         contrasts: the paired comparisons printed under the table.
         paper_protocol: how the paper evaluated it (seeds, trials, episode length).
     """
@@ -94,14 +96,14 @@ class PaperTableSpec:
     paper_columns: tuple[str, ...]
     paper: Mapping[str, Mapping[str, tuple[PaperValue, ...]]]
     contenders: tuple[Contender, ...]
-    upright_contenders: tuple[Contender, ...]
+    crouched_contenders: tuple[Contender, ...]
     contrasts: tuple[Contrast, ...]
     paper_protocol: str
 
 
-def _arm_rows(upright: bool = False) -> tuple[Contender, ...]:
+def _arm_rows(crouched: bool = False) -> tuple[Contender, ...]:
     # played in this order (the arena's, and its report's); the printed table groups them by the paper's rows
-    suffix, note = ("-upright", " upright") if upright else ("", "")
+    suffix, note = ("-crouched", " crouched") if crouched else ("", "")
     return (
         Contender(key="learned", row="Actuated", family="learned", controller="learned" + suffix, note="pi3" + note),
         Contender(key="learned-locked", row="Locked", family="learned", controller="learned-locked" + suffix,
@@ -133,10 +135,10 @@ def _policy_name(path: Path) -> str:
     return f"policy:{path if rel.startswith('..') else rel}"
 
 
-def _baseline_rows(upright: bool = False) -> tuple[Contender, ...]:
-    suffix = "-upright" if upright else ""
+def _baseline_rows(crouched: bool = False) -> tuple[Contender, ...]:
+    suffix = "-crouched" if crouched else ""
     rows = [Contender(key="ours", row="Ours", family="learned", controller="learned" + suffix,
-                      note="pi3 (staged: PPO + BC)" + (" upright" if upright else ""))]
+                      note="pi3 (staged: PPO + BC)" + (" crouched" if crouched else ""))]
     for baseline, row in _BASELINE_ROWS.items():
         weights = WEIGHTS_DIR / f"a1-wx200-actuated-{baseline}{suffix}.npz"
         if weights.is_file():
@@ -155,21 +157,21 @@ TABLES: dict[str, PaperTableSpec] = {
         name="table1", title="Table I: locomotion under pushes, arm actuated / locked / absent",
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
         paper_columns=("200-300", "300-400"), paper=TABLE_I, contenders=_arm_rows(),
-        upright_contenders=_arm_rows(upright=True),
+        crouched_contenders=_arm_rows(crouched=True),
         contrasts=_ARM_CONTRASTS,
         paper_protocol="5 seeds, 2000 trials, 20 s each"),
     "table2": PaperTableSpec(
         name="table2", title="Table II: high-speed turns, arm actuated / locked / absent",
         scenario="scenarios/turn.toml", robot="go1-arm", metrics=("success_rate", "vang_err", "vlin_err"),
         paper_columns=("1", "1.25", "1.5"), paper=TABLE_II, contenders=_arm_rows(),
-        upright_contenders=_arm_rows(upright=True),
+        crouched_contenders=_arm_rows(crouched=True),
         contrasts=_ARM_CONTRASTS,
         paper_protocol="5 seeds, 2000 trials, 20 s each; yaw rate 0.5 rad/s in half the trials, 2 rad/s in the rest"),
     "table3": PaperTableSpec(
         name="table3", title="Table III: the staged method against its baselines, under pushes",
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
         paper_columns=("200-300", "300-400"), paper=TABLE_III, contenders=_baseline_rows(),
-        upright_contenders=_baseline_rows(upright=True),
+        crouched_contenders=_baseline_rows(crouched=True),
         contrasts=tuple(Contrast(a=key, b="ours", question=f"Ours vs {row}") for key, row in _BASELINE_ROWS.items()),
         paper_protocol="2000 trials, 20 s each; half standing, half at 0.3 m/s"),
 }
@@ -177,14 +179,14 @@ TABLES: dict[str, PaperTableSpec] = {
 
 
 def resolve_contenders(spec: PaperTableSpec, overrides: Mapping[str, str], *,
-                       upright: bool = False) -> tuple[Contender, ...]:
-    """The table's contenders (their upright posture variants with `upright`) with ``--contender KEY=CONTROLLER``.
+                       crouched: bool = False) -> tuple[Contender, ...]:
+    """The table's contenders (their crouched posture variants with `crouched`) with ``--contender KEY=CONTROLLER``.
 
     Raises:
         UnknownNameError: a key that is not one of the table's (the message lists them).
         ConfigError: two rows would play the same controller.
     """
-    contenders = spec.upright_contenders if upright else spec.contenders
+    contenders = spec.crouched_contenders if crouched else spec.contenders
     keys = [c.key for c in contenders]
     for key in overrides:
         if key not in keys:
