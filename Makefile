@@ -1,29 +1,46 @@
 # Two entry points on a fresh machine: `make demo` (the main job) and `make test` (the test suite).
-# Both create the virtual environment and install the project with its own files first.
+# Both create the virtual environment and install exact versions from the project's lock first.
 PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+LOCK := requirements/lock.txt
+NO_DEPS_LOCK := requirements/no-deps.txt
+# The extras the lock covers and the set-up installs: the suite runs its torch tests and the ONNX round trip (pi3
+# exported with torch, run with onnxruntime) instead of skipping them. The hardware extra's vendor SDK is locked apart,
+# in no-deps.txt, and installed without its dependencies (see requirements/no-deps.in); its other package,
+# dynamixel-sdk, is in dev.
+LOCKED_EXTRAS := dev,train,onnx
+comma := ,
+# uv resolves the lock (for this Python and platform), keeping every pin that still fits unless told --upgrade. Where
+# pip is configured with find-links (PIP_FIND_LINKS), uv looks there too, as pip would: that is where a machine may
+# keep torch's CPU build; elsewhere give uv PyTorch's CPU index (UV_INDEX=https://download.pytorch.org/whl/cpu
+# UV_INDEX_STRATEGY=unsafe-best-match make lock).
+UV_COMPILE = $(BIN)/uv pip compile --quiet --generate-hashes --python $(BIN)/python --no-emit-find-links \
+	--custom-compile-command "make lock" $(if $(PIP_FIND_LINKS),--find-links $(PIP_FIND_LINKS))
 
-.PHONY: demo test test-all bench lint clean
+.PHONY: demo test test-realtime test-all bench lint lock lock-upgrade clean
 
-# The vendor's Go1 SDK is a client of the emulator in the hardware tests; its metadata lists ~30 build tools it never
-# imports, hence --no-deps (the `hardware` extra names it for users who install by hand). The train and onnx extras
-# are installed so that the suite runs its torch tests and the ONNX round trip (pi3 exported with torch, run with
-# onnxruntime) instead of skipping them; torch is pinned to the release they were tested with, whose CPU build is
-# all they need.
-$(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[dev,train,onnx]' 'torch==2.13.0'
-	$(BIN)/python -m pip install --quiet --no-deps 'unitree-legged-sdk==3.8.20231105'
+# Every package at the version the lock names, each file checked against the lock's hashes (pip refuses any other);
+# the venv is cleared first, so nothing outside the lock stays. The project itself is installed last, editable,
+# without resolving anything and with the locked setuptools as its build backend.
+$(STAMP): $(LOCK) $(NO_DEPS_LOCK) pyproject.toml
+	$(PYTHON) -m venv --clear $(VENV)
+	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r $(LOCK)
+	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r $(NO_DEPS_LOCK)
+	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)
+	@echo "installed the locked environment in $(VENV); to have \`wbc\` on your PATH: . $(VENV)/bin/activate"
 
 demo: $(STAMP)
 	$(BIN)/wbc demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
+
+# What a real loop achieves against the wall clock (a busy machine can fail these; the default suite does not time).
+test-realtime: $(STAMP)
+	$(BIN)/python -m pytest -q -m realtime
 
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m ''
@@ -34,6 +51,17 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check wbc tests
+
+# Re-resolve the lock after a change of pyproject.toml or requirements/*.in, keeping every pin that still fits;
+# `make lock-upgrade` takes the newest versions the ranges allow. Re-record the goldens after either
+# (WBC_RECORD_GOLDEN=1 make test): results reproduce to the bit only under the versions they were recorded with.
+lock: $(STAMP)
+	$(UV_COMPILE) $(foreach e,$(subst $(comma), ,$(LOCKED_EXTRAS)),--extra $(e)) \
+		--output-file $(LOCK) pyproject.toml requirements/lock.in $(UPGRADE)
+	$(UV_COMPILE) --no-deps --output-file $(NO_DEPS_LOCK) requirements/no-deps.in $(UPGRADE)
+
+lock-upgrade:
+	$(MAKE) lock UPGRADE=--upgrade
 
 clean:
 	rm -rf $(VENV) .pytest_cache
