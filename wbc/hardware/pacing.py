@@ -3,20 +3,26 @@
 Each call sleeps until the previous deadline plus `dt` on the monotonic clock. A call that finds that deadline already
 past is counted as late, with by how much, and resynchronises: a late call does not make the next ones hurry, since a
 loop that fell behind would otherwise run its ticks back to back on states that did not change. Every wire backend
-(`UnitreeRobot`, `DynamixelArm`, `ProcessRobot`) paces with one.
+(`UnitreeRobot`, `DynamixelArm`, `ProcessRobot`) paces with one, on the backend's clock (`wbc.hardware.clock`): the
+monotonic clock on a robot, a `ManualClock` in a deterministic test, where the sleep moves the clock.
 """
 
 from __future__ import annotations
 
-import time
+from wbc.hardware.clock import MONOTONIC, Clock
 
 __all__ = ["WallPacer"]
 
 
 class WallPacer:
-    """The deadline of the next `wait`, and the late calls so far."""
+    """The deadline of the next `wait`, and the late calls so far.
 
-    def __init__(self) -> None:
+    Args:
+        clock: where the time is read and the sleep happens.
+    """
+
+    def __init__(self, clock: Clock = MONOTONIC) -> None:
+        self.clock = clock
         self.reset()
 
     def reset(self) -> None:
@@ -26,8 +32,8 @@ class WallPacer:
         self.worst_lateness = 0.0  # [s]
 
     def wait(self, dt: float) -> None:
-        """Sleep until `dt` [s] after the previous deadline (the first call: return at once); count a late call."""
-        now = time.monotonic()
+        """Sleep until `dt` [s] after the previous deadline (the first call: `dt` from now); count a late call."""
+        now = self.clock.now()
         if self._deadline is None:
             self._deadline = now
         deadline = self._deadline + dt
@@ -36,5 +42,5 @@ class WallPacer:
             self.worst_lateness = max(self.worst_lateness, now - deadline)
             deadline = now
         else:
-            time.sleep(deadline - now)
+            self.clock.sleep(deadline - now)
         self._deadline = deadline
