@@ -97,3 +97,39 @@ def test_the_template_enters_the_arena_from_a_checkout_as_the_readme_shows(tmp_p
     records = TrialRecord.read_csv(out / "trials.csv")
     assert {r.controller for r in records} == {"examples.my_controller:make", "stand"}
     assert all(r.success for r in records)
+
+
+def test_the_command_the_demo_prints_runs_as_printed(tmp_path, capsys):
+    """Pasted whole into the shell that ran the demo, the watch line is a command the shell finds and wbc parses."""
+    import shlex
+
+    from wbc.cli.parser import build_parser
+    from wbc.cli.printers import demo_watch_command, print_demo_end, wbc_command
+    from wbc.tools.demo import TrialToWatch
+
+    bin_dir = tmp_path / "venv" / "bin"
+    bin_dir.mkdir(parents=True)
+    script = bin_dir / "wbc"
+    script.write_text("#!/bin/sh\n", encoding="utf-8")
+    script.chmod(0o755)
+    # not on the PATH (the environment is not activated): the script's path, relative to where the demo ran
+    assert wbc_command(str(script), path="/usr/bin", cwd=str(tmp_path)) == "venv/bin/wbc"
+    (tmp_path / "elsewhere").mkdir()
+    assert wbc_command(str(script), path="/usr/bin", cwd=str(tmp_path / "elsewhere")) == str(script)
+    # on the PATH: plain wbc
+    assert wbc_command(str(script), path=f"{bin_dir}:/usr/bin", cwd=str(tmp_path)) == "wbc"
+    # run another way (python -m wbc.cli): this interpreter
+    assert wbc_command(str(ROOT / "wbc" / "cli" / "__main__.py")).endswith(" -m wbc.cli")
+
+    watch = TrialToWatch(controller="learned", band="ood", seed=1, trial=3, why="learned fell at 2.0 s where mpc stood")
+    line = demo_watch_command(watch, scenario="scenarios/push.toml", wbc="venv/bin/wbc")
+    words = shlex.split(line)
+    assert (tmp_path / words[0]).is_file()
+    args = build_parser().parse_args(words[1:])
+    assert (args.handler, args.scenario, args.band, args.seed, args.trial) == (
+        "view", "scenarios/push.toml", "ood", 1, 3)
+
+    print_demo_end(tmp_path, watch, scenario="scenarios/push.toml")
+    out = capsys.readouterr().out.splitlines()
+    command = next(x.strip() for x in out if " view learned " in x)
+    assert command == demo_watch_command(watch, scenario="scenarios/push.toml")  # alone on its line, nothing after

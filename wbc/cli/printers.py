@@ -8,6 +8,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import shlex
+import shutil
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -206,13 +210,57 @@ def print_demo_header(controllers: Sequence[str], *, scenario: str, trials: int,
           "per band (the same trials for every controller)\n", flush=True)
 
 
+def wbc_command(script: str | None = None, *, path: str | None = None, cwd: str | None = None) -> str:
+    """How to type ``wbc`` so that this shell runs this installation: what a printed command starts with.
+
+    ``wbc`` when the shell's PATH finds the running script; else the script's path (relative to the working directory
+    when it lies below it, e.g. ``.venv/bin/wbc`` after `make demo`, whose virtual environment is not activated); else
+    ``python -m wbc.cli`` with this interpreter.
+
+    Args:
+        script: the running program (default ``sys.argv[0]``).
+        path: the PATH to search (default the environment's).
+        cwd: the working directory (default the current one).
+    """
+    script = sys.argv[0] if script is None else script
+    cwd = os.getcwd() if cwd is None else cwd
+    if Path(script).name == "wbc" and Path(script).is_file():
+        found = shutil.which("wbc", path=path)
+        if found is not None and Path(found).resolve() == Path(script).resolve():
+            return "wbc"
+        where = Path(script).resolve()
+        try:
+            return shlex.quote(str(where.relative_to(Path(cwd).resolve())))
+        except ValueError:
+            return shlex.quote(str(where))
+    return f"{shlex.quote(sys.executable)} -m wbc.cli"
+
+
 def print_demo_end(out_dir: Path, watch: TrialToWatch | None, *, scenario: str) -> None:
-    """How ``wbc demo`` ends, after the table: the report and its plots, then one command to watch a trial."""
+    """How ``wbc demo`` ends, after the table: the report and its plots, then one command to watch a trial.
+
+    The command stands alone on its line, spelled so that it runs as printed in the shell that ran the demo
+    (`wbc_command`): pasted whole, it opens the trial.
+    """
     plots = sorted(p.name for p in Path(out_dir).glob("*.png"))
     print(f"report: {Path(out_dir) / 'report.md'}; plots: {', '.join(plots) if plots else 'none'}")
     if watch is not None:
-        print(f"watch it: wbc view {watch.controller} --scenario {scenario} --band {watch.band} --seed {watch.seed} "
-              f"--trial {watch.trial}   ({watch.why}; opens a meshcat page on 127.0.0.1)")
+        print(f"watch it ({watch.why}; the command opens a meshcat page on 127.0.0.1):")
+        print(f"  {demo_watch_command(watch, scenario=scenario)}")
+        activate = Path(sys.argv[0]).resolve().parent / "activate"
+        if wbc_command() != "wbc" and activate.is_file():
+            try:
+                activate = activate.relative_to(Path.cwd().resolve())
+            except ValueError:
+                pass
+            print(f"  (to type `wbc` alone, activate the project's environment first: . {shlex.quote(str(activate))})")
+
+
+def demo_watch_command(watch: TrialToWatch, *, scenario: str, wbc: str | None = None) -> str:
+    """The shell command that opens `watch` in the viewer."""
+    wbc = wbc_command() if wbc is None else wbc
+    return (f"{wbc} view {shlex.quote(watch.controller)} --scenario {shlex.quote(str(scenario))} "
+            f"--band {shlex.quote(watch.band)} --seed {watch.seed} --trial {watch.trial}")
 
 
 def print_controllers(rows: Sequence[ControllerListing]) -> None:
