@@ -1,5 +1,9 @@
 """The ``wbc hw`` commands and ``wbc bench hw``: emulate, a damping-only check, the address policy, the bench's keys.
 
+``wbc hw check`` reads the robot for ``--seconds`` of its own clock: the deterministic case hands the procedure
+(`hw_check`) a robot builder that puts the legs' link on a `ManualClock` over the emulator's in-process channel, so
+what it sent in those seconds is exact; the others run it over the UDP wire and assert nothing of its timing.
+
 Every socket binds 127.0.0.1 on a port the kernel picks and every frame goes to 127.0.0.1; the non-loopback targets
 (TEST-NET-1, 192.0.2.0/24) are only ever refused, and a test checks that no socket was created for them. Every
 run is bounded by its ``--seconds``.
@@ -17,18 +21,44 @@ import subprocess
 import sys
 import threading
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from wbc.cli import main
-from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.cli.main import hw_check
+from wbc.cli.parser import build_parser
+from wbc.hardware.clock import ManualClock
+from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.unitree import UdpTransport, encode_command, frame_layout
 from wbc.types import MotorCommand
 
 ROOT = Path(__file__).resolve().parents[1]
 NOT_LOOPBACK = "192.0.2.1:9"  # TEST-NET-1 (documentation only), discard port: refused before anything is sent
+LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz
+
+
+@dataclass
+class Stepped:
+    """An emulated robot in process, the clock it runs on, and the builder that puts a command's robot on both."""
+
+    clock: ManualClock
+    emu: UnitreeEmulator
+
+    def build(self, config: HardwareRobotConfig) -> HardwareRobot:
+        """The robot `config` names, its legs on the clock over the emulator's in-process channel."""
+        return build_hardware_robot(config, clock=self.clock, legs_transport=self.emu.transport(self.clock))
+
+
+@pytest.fixture(params=("a1", "go1"))
+def stepped(request: pytest.FixtureRequest) -> Iterator[Stepped]:
+    rig = Stepped(ManualClock(), UnitreeEmulator(UnitreeEmulatorConfig(robot=request.param, mode="realtime")))
+    yield rig
+    rig.emu.close()
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("unitree-")]  # no thread ever started
 
 
 @pytest.fixture(params=("a1", "go1"))
@@ -76,7 +106,7 @@ def test_emulate_counts_what_it_decoded_and_rejected(capsys: pytest.CaptureFixtu
     link = UdpTransport(("127.0.0.1", 0), ("127.0.0.1", port))
     try:
         replies = []
-        for _ in range(200):  # bounded: 200 x 5 ms, stops once the emulator answers
+        for _ in range(2000):  # bounded: 2000 x 5 ms (the emulator builds its simulation first), stops once it answers
             link.send(frame)
             if link.wait_readable(0.005):
                 replies += link.receive()
@@ -101,20 +131,31 @@ def test_unknown_fault_exits_2_with_the_valid_names() -> None:
     assert "emulated" not in proc.stdout  # refused before the emulator started
 
 
-def test_check_prints_the_state_and_sends_only_damping(emulator: UnitreeEmulator,
-                                                      capsys: pytest.CaptureFixture[str]) -> None:
+def test_check_prints_the_state_and_sends_only_damping(stepped: Stepped, capsys: pytest.CaptureFixture[str]) -> None:
+    robot = stepped.emu.config.robot
+    args = build_parser().parse_args(["hw", "check", "--robot", robot, "--target", "127.0.0.1:9", "--seconds", "0.3"])
+    assert hw_check(args, build=stepped.build) == 0
+    out = capsys.readouterr().out
+    for text in (f"{robot} at 127.0.0.1:9", "FR_hip_joint", "RL_calf_joint", "IMU roll", "battery",
+                 "remote buttons: none", "link:", "rejected states: 0"):
+        assert text in out, (text, out)
+    assert ("none in this robot's state" in out) == (robot == "a1")
+    log = stepped.emu.commands()
+    assert len(log) >= 0.3 / LINK_PERIOD  # a frame every link period of the 0.3 s, plus the closing damping
+    assert stepped.clock.now() >= 0.3  # it read for its --seconds, on the robot's clock
+    assert all(c.damping and (c.wire.kp == 0).all() for c in log)
+
+
+def test_check_over_the_wire_sends_only_damping(emulator: UnitreeEmulator,
+                                                capsys: pytest.CaptureFixture[str]) -> None:
     host, port = emulator.address
     assert host == "127.0.0.1"
     robot = emulator.config.robot
     assert main(["hw", "check", "--robot", robot, "--target", f"{host}:{port}", "--seconds", "0.3"]) == 0
     out = capsys.readouterr().out
-    for text in (f"{robot} at {host}:{port}", "FR_hip_joint", "RL_calf_joint", "IMU roll", "battery",
-                 "remote buttons: none", "link:", "rejected states: 0"):
-        assert text in out, (text, out)
-    assert ("none in this robot's state" in out) == (robot == "a1")
+    assert f"{robot} at {host}:{port}" in out and "rejected states: 0" in out
     log = emulator.commands()
-    assert len(log) > 50  # ~0.3 s at 500 Hz, plus the closing damping
-    assert all(c.damping and (c.wire.kp == 0).all() for c in log)
+    assert log and all(c.damping and (c.wire.kp == 0).all() for c in log)
 
 
 def test_check_shows_the_estop_buttons(capsys: pytest.CaptureFixture[str]) -> None:
@@ -163,14 +204,36 @@ def test_allow_hardware_asks_and_a_no_refuses(no_socket: list, monkeypatch: pyte
 
 
 def test_bench_hw_json_has_the_keys(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["bench", "hw", "--seconds", "0.5", "--json"]) == 0
+    assert main(["bench", "hw", "--seconds", "0.5", "--stand", "0.5", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
     for key in ("period_ms_p50", "period_ms_p99", "period_ms_max", "round_trip_ms_p50", "round_trip_ms_p99",
-                "cpu_us_per_tick", "rejects", "machine", "emulator"):
+                "cpu_us_per_tick", "advance_ms_p50", "advance_ms_p99", "late_advances", "worst_lateness_ms", "rejects",
+                "machine", "emulator", "safety"):
         assert key in result, key
-    assert result["rejects"] == 0 and result["sends"] > 100 and result["replies_received"] > 100
+    # the counts agree between the two ends (the figures are printed, not asserted: they are this machine's)
+    assert result["rejects"] == 0 and result["sends"] > 0 and result["replies_received"] > 0
+    assert result["emulator"]["accepted"] >= result["sends"] - 1 and sum(result["emulator"]["rejected"].values()) == 0
+    assert result["replies_received"] <= result["emulator"]["replies"]
     assert result["transport"] == "udp"
-    assert result["period_ms_p50"] > 0 and result["round_trip_ms_p50"] > 0  # figures are printed, not asserted
+    assert result["period_ms_p50"] > 0 and result["round_trip_ms_p50"] > 0
+    safety = result["safety"]
+    for key in ("estop_to_damping_ms", "silence_to_damping_ms", "stall_to_damping_ms", "state_fault_to_damping_ms"):
+        assert safety[key] > 0, key  # each reaction's damping reached the wire, after its cause
+    # a silent stream and a stalled loop are judged by their timeouts: their damping cannot come before them
+    assert safety["silence_to_damping_ms"] > safety["stale_timeout_ms"]
+    assert safety["stall_to_damping_ms"] > safety["write_deadline_ms"]
+    assert safety["stand_seconds"] == 0.5 and safety["stand_wall_s"] > 0 and safety["stand_sim_s"] > 0
+    assert safety["stand_realtime_factor"] == pytest.approx(safety["stand_sim_s"] / safety["stand_wall_s"])
+
+
+def test_bench_hw_prints_the_safety_figures(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "hw", "--seconds", "0.2", "--stand", "0.2"]) == 0
+    out = capsys.readouterr().out
+    for text in ("send period", "round trip", "advance(period)", "late advances", "e-stop", "silent stream",
+                 "stalled loop", "hot motor", "real-time factor"):
+        assert text in out, text
+    assert main(["bench", "hw", "--seconds", "0.2", "--no-safety", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["safety"] is None
 
 
 def test_the_vendor_transport_is_refused_for_the_a1_before_any_socket(no_socket: list,
@@ -210,6 +273,25 @@ def test_check_reports_the_safety_layers_refusal_of_a_folded_robot(capsys: pytes
     assert "FR_calf_joint" in out and " OUT" in out
 
 
+def test_check_reads_the_arm_too_and_never_drives_it_in_lockstep(capsys: pytest.CaptureFixture[str]) -> None:
+    pytest.importorskip("dynamixel_sdk")
+    clock = ManualClock()
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="realtime"), clock=clock) as emu:
+        def build(config: HardwareRobotConfig) -> HardwareRobot:
+            return build_hardware_robot(config, clock=clock, legs_transport=emu.legs_transport,
+                                        arm_handlers=emu.arm_handlers())
+
+        args = build_parser().parse_args(["hw", "check", "--robot", "a1", "--target", "127.0.0.1:9", "--arm-port",
+                                          emu.port, "--seconds", "0.5"])
+        assert hw_check(args, build=build) == 0
+        legs = emu.legs.commands()
+    out = capsys.readouterr().out
+    assert "arm on " in out and "arm_elbow" in out and "safety: ready: a ramp would start" in out
+    cycles = re.search(r"arm bus: (\d+) cycles, (\d+) of them damping", out)
+    assert cycles and int(cycles[1]) >= 0.5 * 100 and cycles[1] == cycles[2]  # every cycle damped: no servo command
+    assert len(legs) >= 0.5 / LINK_PERIOD and all(c.damping for c in legs)
+
+
 def test_check_reads_the_arm_too_and_never_drives_it(capsys: pytest.CaptureFixture[str]) -> None:
     pytest.importorskip("dynamixel_sdk")
     proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "hw", "emulate", "--robot", "a1-wx200", "--arm",
@@ -228,4 +310,5 @@ def test_check_reads_the_arm_too_and_never_drives_it(capsys: pytest.CaptureFixtu
     assert code == 0, out
     assert "arm on /dev/" in out and "arm_elbow" in out and "safety: ready: a ramp would start" in out
     cycles = re.search(r"arm bus: (\d+) cycles, (\d+) of them damping", out)
-    assert cycles and int(cycles[1]) > 50 and cycles[1] == cycles[2]  # every cycle damped: no servo command
+    # every cycle damped: no servo command (how many cycles real time allowed: the lockstep twin counts them)
+    assert cycles and int(cycles[1]) > 0 and cycles[1] == cycles[2]

@@ -1,5 +1,11 @@
 """Hardware trials (``wbc hw run``): a scenario's trial through the runner on a robot over its wire, here an emulated
-Go1 on 127.0.0.1 in real time.
+Go1.
+
+The trials of the default suite run the whole procedure (``wbc hw run``'s `hw_run`, `run_hardware_trial`) on a
+`ManualClock`: the procedure is handed a robot builder (`build`) that gives the legs' link that clock and the
+emulator's in-process channel, so the emulated robot's physics, the 500 Hz link and the 50 Hz controller all move
+with the clock, in lockstep, and what reached the wire in which link period is the same at any load. The same
+trials in real time, with the devices in their I/O process, are ``realtime`` tests.
 
 Every socket binds 127.0.0.1 on a port the kernel picks and every frame goes to 127.0.0.1; the non-loopback targets
 (TEST-NET-1) are only ever refused, and a test checks that no socket was created for them. Every trial is bounded
@@ -20,6 +26,7 @@ import sys
 import termios
 import threading
 from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -33,12 +40,15 @@ from wbc.arena.operator import ScriptedKeys
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import PreparingObserver, run_episode
 from wbc.cli import main
+from wbc.cli.main import hw_run
+from wbc.cli.parser import build_parser
 from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, StandUpError
 from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
-from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
-from wbc.hardware.hardware_robot import HardwareRobotConfig
+from wbc.hardware.clock import ManualClock
+from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
 from wbc.scenario.scenario import load_scenario
@@ -53,6 +63,32 @@ PUSH = str(ROOT / "scenarios" / "push-v1.toml")  # version 1: its trial 0 holds 
 TURN = ROOT / "scenarios" / "turn.toml"
 NOT_LOOPBACK = "192.0.2.1:9"  # TEST-NET-1 (documentation only), discard port: refused before anything is sent
 LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz
+TIME_EPS = 1e-9  # [s] float rounding of the clock's sums of periods
+TICK = 0.02  # [s] the stand controller's period (50 Hz)
+
+
+@dataclass
+class Stepped:
+    """An emulated robot in process, the clock it runs on, and the builder that puts a trial's robot on both."""
+
+    clock: ManualClock
+    emu: UnitreeEmulator
+
+    def build(self, config: HardwareRobotConfig) -> HardwareRobot:
+        """The robot `config` names, its legs on the clock over the emulator's in-process channel."""
+        return build_hardware_robot(config, clock=self.clock, legs_transport=self.emu.transport(self.clock))
+
+
+@pytest.fixture
+def stepped_go1() -> Iterator[Stepped]:
+    """An emulated Go1 (bare) in real-time mode on a manual clock, held at its standing pose until a command drives a
+    motor, as ``wbc hw emulate --robot go1`` serves it: an operator holds a robot in its harness until the controller
+    takes it."""
+    rig = Stepped(ManualClock(), UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime",
+                                                                       held_until_driven=True)))
+    yield rig
+    rig.emu.close()
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("unitree-")]  # no thread ever started
 
 
 @pytest.fixture
@@ -78,23 +114,17 @@ def no_socket(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
     return attempts
 
 
-@pytest.mark.parametrize("io_process", ["--io-process", "--no-io-process"])
-def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
-        go1: UnitreeEmulator, tmp_path: Path, capsys: pytest.CaptureFixture[str], io_process: str) -> None:
-    out = tmp_path / "hw"
-    code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
-                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out), io_process])
-    printed = capsys.readouterr()
-    assert code == 0, printed.err
+def _check_stand_trial(out: Path, printed: pytest.CaptureFixture, io_process: bool,
+                       frames: list) -> TrialRecord:
+    """What a 3 s stand trial over the wire must have left: its record, episode, report and the frames on the wire."""
     # the devices ran in the I/O process, or in this one; either way the same robot was played
-    assert ("devices in an I/O process" in printed.out) == (io_process == "--io-process")
+    assert ("devices in an I/O process" in printed.out) == io_process
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.controller == "stand-noarm"  # stand, on a robot whose arm mode is none
     assert (record.backend, record.metrics_source) == ("unitree", "estimator")
     assert record.success and record.safety_trips == 0 and record.ttf == 1.0
     assert record.n_pushes == 0 and record.push_force_n == 0.0  # the trial's pushes were not played
     assert math.isnan(record.friction) and math.isnan(record.payload_kg)  # the simulator's randomisation: unknown
-    assert record.deadline_misses == 0 and record.act_ms_p99 < 20.0
     # the estimator saw a robot standing still: its velocity near zero, its trunk at the Go1's standing height
     assert record.vlin_err < 0.1 and record.max_roll_deg < 5.0
     (path,) = (out / "episodes" / "stand-noarm").glob("*.npz")
@@ -110,7 +140,7 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
     assert "SKIPPED" in printed.out and "completed" in printed.out
     hardware = json.loads((out / "hardware.json").read_text())
     assert hardware["backend"] == "unitree" and hardware["link"]["rejected_states"] == 0
-    assert (hardware["io_cpu_s"] is not None) == (io_process == "--io-process")  # the I/O process's CPU, apart
+    assert (hardware["io_cpu_s"] is not None) == io_process  # the I/O process's CPU, apart
     ramp_done = [e["time"] for e in hardware["safety_events"] if e["reason"] == "ramp_done"]
     assert [e["reason"] for e in hardware["safety_events"]] == ["fresh_state", "ramp_done"]
     assert ramp_done[0] <= hardware["trial_started_s"]  # the trial's clock started on a standing robot
@@ -119,49 +149,122 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
     assert (stored.trial.robot, stored.trial.terrain.kind, stored.trial.pushes) == ("go1-arm", "flat", ())
     assert len(list(stored.frames())) == 150
     # the controller drove the robot: servo frames reached the wire after the ramp, not damping
-    servo = [c for c in go1.commands() if not c.damping]
+    servo = [c for c in frames if not c.damping]
     assert len(servo) > 1000 and np.allclose(servo[-200].wire.kp, 60.0)
+    return record
 
 
-def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(go1: UnitreeEmulator, tmp_path: Path) -> None:
-    keys = ScriptedKeys([(0.8, "p"), (1.6, "e")])  # an operator's push by hand, then the e-stop
+def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--out", str(out),
+                                      "--no-io-process"])
+    assert hw_run(args, build=stepped_go1.build) == 0
+    _check_stand_trial(out, capsys.readouterr(), False, stepped_go1.emu.commands())
+    hardware = json.loads((out / "hardware.json").read_text())
+    link = hardware["link"]
+    # on the trial's clock, the link sent a frame every period and was answered every period, and the controller's
+    # advance never found its deadline past
+    assert link["deadline_trips"] == 0 and link["overruns"] == 0 and link["late_advances"] == 0
+    assert link["valid_states"] >= link["frames_sent"] - 1
+
+
+@pytest.mark.realtime
+@pytest.mark.parametrize("io_process", ["--io-process", "--no-io-process"])
+def test_realtime_stand_trial_over_the_wire(go1: UnitreeEmulator, tmp_path: Path,
+                                            capsys: pytest.CaptureFixture[str], io_process: str) -> None:
+    out = tmp_path / "hw"
+    code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "3", "--out", str(out), io_process])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    record = _check_stand_trial(out, printed, io_process == "--io-process", go1.commands())
+    assert record.deadline_misses == 0 and record.act_ms_p99 < 20.0
+
+
+def test_a_stand_trial_with_the_devices_in_their_io_process(go1: UnitreeEmulator, tmp_path: Path,
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """The I/O process's path through `wbc hw run`, over real time: a short trial that must complete and report the
+    I/O process apart (what it achieves in real time is the realtime twin's to judge)."""
+    out = tmp_path / "hw"
+    code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                 "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "0.5", "--out", str(out), "--io-process"])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    assert "devices in an I/O process" in printed.out
+    hardware = json.loads((out / "hardware.json").read_text())
+    assert hardware["backend"] == "unitree" and hardware["io_cpu_s"] is not None
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.backend == "unitree" and record.controller == "stand-noarm"
+    assert any(not c.damping for c in go1.commands())  # the I/O process drove the motors
+
+
+def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: Stepped, tmp_path: Path) -> None:
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    keys = ScriptedKeys([(0.8, "p"), (1.6, "e")], clock=clock.now)  # an operator's push by hand, then the e-stop
     cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
-                              seconds=3.0, target=go1.address, out_dir=tmp_path / "hw", settle_s=0.5)
-    result = run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: go1.reset())
+                              seconds=3.0, target=("127.0.0.1", 9), out_dir=tmp_path / "hw", settle_s=0.5,
+                              io_process=False)
+    result = run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: emu.reset(),
+                                build=stepped_go1.build)
     record, episode = result.record, result.episode
     assert record.safety_trips == 1 and not record.success
-    assert 1.6 <= record.fall_time_s <= 1.64  # ended at the tick that handled the key
+    assert 1.6 <= record.fall_time_s <= 1.6 + TICK + TIME_EPS  # ended at the tick that handled the key
     assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
     assert episode.safety_events.reason[-1] == "software_estop"
     pressed = dict(keys.delivered)["e"]
-    frames = go1.commands()
-    before = [c for c in frames if c.time < pressed]
-    after = [c for c in frames if c.time > pressed + 2 * LINK_PERIOD]
+    frames = emu.commands()
+    before = [c for c in frames if c.time <= pressed + TIME_EPS]
+    after = [c for c in frames if c.time > pressed + TIME_EPS]
     assert not before[-1].damping  # the stand hold was on the wire when the key came
-    first = next(c for c in frames if c.time > pressed and c.damping)
-    assert first.time - pressed < 5 * LINK_PERIOD
+    # the e-stop reached the wire in the next link period: its first frame is damping
+    assert after[0].damping and after[0].time <= pressed + LINK_PERIOD + TIME_EPS
     # from then on nothing but damping, for the whole settle time the trial held the robot before closing
-    assert all(c.damping for c in after) and len(after) > 0.8 * (0.5 / LINK_PERIOD)
+    assert all(c.damping for c in after) and len(after) >= 0.5 / LINK_PERIOD
     report = (tmp_path / "hw" / "report.md").read_text()
     assert "software_estop" in report and "| push |" in report and "| estop |" in report
 
 
-def test_estop_while_the_robot_is_stood_up_stops_it_and_plays_nothing(go1: UnitreeEmulator, tmp_path: Path) -> None:
-    keys = ScriptedKeys([(-math.inf, "e")])  # pressed before the trial's clock starts: at the first poll
+def test_estop_while_the_robot_is_stood_up_stops_it_and_plays_nothing(stepped_go1: Stepped, tmp_path: Path) -> None:
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    keys = ScriptedKeys([(-math.inf, "e")], clock=clock.now)  # pressed before the trial's clock starts: first poll
     cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
-                              seconds=2.0, target=go1.address, out_dir=tmp_path / "hw", settle_s=0.2)
+                              seconds=2.0, target=("127.0.0.1", 9), out_dir=tmp_path / "hw", settle_s=0.2,
+                              io_process=False)
     with pytest.raises(StandUpError, match="software_estop"):
-        run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: go1.reset())
+        run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: emu.reset(),
+                           build=stepped_go1.build)
     pressed = dict(keys.delivered)["e"]
-    assert all(c.damping for c in go1.commands() if c.time > pressed + 2 * LINK_PERIOD)
+    after = [c for c in emu.commands() if c.time > pressed + TIME_EPS]
+    assert after and all(c.damping for c in after)  # from the next link period on
     assert not (tmp_path / "hw" / "trials.csv").exists()
 
 
-def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(go1: UnitreeEmulator,
-                                                                                  tmp_path: Path,
-                                                                                  capsys: pytest.CaptureFixture[str],
-                                                                                  ) -> None:
+def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(stepped_go1: Stepped,
+                                                                                  tmp_path: Path) -> None:
     # folded to its calf stops, as the real-time emulator leaves an idle robot: beyond the SDK's position table
+    emu = stepped_go1.emu
+    emu.transport(stepped_go1.clock)  # the simulation is built (the trial's builder hands out another channel)
+    qpos = emu.sim.data.qpos.copy()
+    qpos[2] = 0.06
+    qpos[7:] = np.tile([0.0, 1.35, -2.82], 4)
+    emu.reset(qpos)
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "2", "--settle", "0.2",
+                                      "--out", str(out), "--no-io-process"])
+    with pytest.raises(StandUpError) as refused:
+        hw_run(args, build=stepped_go1.build)
+    err = str(refused.value)
+    assert "tripped while standing the robot up" in err and "joint_range" in err and "nothing was played" in err
+    assert not (out / "trials.csv").exists()
+    assert emu.commands() and all(c.damping for c in emu.commands())  # not one servo frame reached the robot
+
+
+def test_a_robot_outside_its_joint_ranges_is_refused_by_the_command(go1: UnitreeEmulator, tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """The same refusal through ``wbc hw run`` over the UDP wire: the exit status and the message."""
     qpos = go1.sim.data.qpos.copy()
     qpos[2] = 0.06
     qpos[7:] = np.tile([0.0, 1.35, -2.82], 4)
@@ -174,6 +277,18 @@ def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(
     assert "tripped while standing the robot up" in err and "joint_range" in err and "nothing was played" in err
     assert not (out / "trials.csv").exists()
     assert all(c.damping for c in go1.commands())  # not one servo frame reached the robot
+
+
+@pytest.mark.realtime
+def test_realtime_estop_key_latency(go1: UnitreeEmulator, tmp_path: Path) -> None:
+    keys = ScriptedKeys([(0.8, "p"), (1.6, "e")])
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=3.0, target=go1.address, out_dir=tmp_path / "hw", settle_s=0.5)
+    result = run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: go1.reset())
+    assert 1.6 <= result.record.fall_time_s <= 1.64
+    pressed = dict(keys.delivered)["e"]
+    first = next(c for c in go1.commands() if c.time > pressed and c.damping)
+    assert first.time - pressed < 5 * LINK_PERIOD
 
 
 def test_non_loopback_target_is_refused_before_any_socket(no_socket: list, monkeypatch: pytest.MonkeyPatch,
@@ -215,6 +330,33 @@ def test_an_actuated_arm_needs_its_serial_port(no_socket: list, capsys: pytest.C
     assert not no_socket
 
 
+def test_a_trial_with_the_arm_actuated_over_both_wires_in_lockstep(tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot with its arm actuated: legs and arm emulated in process on one manual clock, the trial's devices
+    (the legs' link and the arm's bus) on that clock too."""
+    pytest.importorskip("dynamixel_sdk")
+    out = tmp_path / "hw"
+    clock = ManualClock()
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="realtime"), clock=clock) as emu:
+        def build(config: HardwareRobotConfig) -> HardwareRobot:
+            return build_hardware_robot(config, clock=clock, legs_transport=emu.legs_transport,
+                                        arm_handlers=emu.arm_handlers())
+
+        args = build_parser().parse_args(["hw", "run", "stand", "--robot", "a1-wx200", "--arm", "actuated",
+                                          "--scenario", PUSH, "--trial", "0", "--target", "127.0.0.1:9",
+                                          "--arm-port", emu.port, "--seconds", "3", "--out", str(out),
+                                          "--no-io-process"])
+        assert hw_run(args, build=build) == 0, capsys.readouterr().err
+        packets = emu.arm.stats.packets
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.controller == "stand" and record.backend == "unitree+dynamixel" and record.safety_trips == 0
+    assert record.success and record.metrics_source == "estimator"
+    (path,) = (out / "episodes" / "stand").glob("*.npz")
+    assert Episode.load(str(path)).qpos.shape[1] == 7 + 15  # the arm's joints are in the episode
+    assert packets > 3 * 150  # the arm's bus cycled all through the trial (about 200 cycles a second)
+
+
+@pytest.mark.realtime
 def test_a_trial_with_the_arm_actuated_over_both_wires(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     # the emulated robot in its own process, as `wbc hw emulate` serves it (a robot is another machine)
     pytest.importorskip("dynamixel_sdk")

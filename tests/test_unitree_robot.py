@@ -1,13 +1,19 @@
-"""UnitreeRobot over the UDP wire against UnitreeEmulator on 127.0.0.1: the contract, standing, and faults on the wire.
+"""UnitreeRobot against UnitreeEmulator: the contract, standing, and faults on the wire.
 
-Every socket here binds 127.0.0.1 on a port the kernel picks, and every frame goes to 127.0.0.1; every wait is
-bounded in time. What the backend sent is read from the emulator's log of decoded command frames.
+Most tests run the link and the emulator on a `ManualClock` the test moves, over the emulator's in-process
+transport (`UnitreeEmulator.transport`): each link period sends one frame, which the emulator handles and answers
+within the same call, so what the link does in which period is the same on any machine at any load. The UDP wire
+itself (sockets, the vendor SDK, the link thread) is tested with bounded waits and no timing figure; a transport
+wrapper (`AwaitReply`) makes a socket lockstep too, waiting for the reply of each frame it sends. The wall-clock
+figures (the link's period, round trips) are printed by ``wbc bench hw`` and checked by the ``realtime`` tests.
+
+Every socket binds 127.0.0.1 on a port the kernel picks, and every frame goes to 127.0.0.1; every wait is
+bounded. What the backend sent is read from the emulator's log of decoded command frames.
 """
 
 from __future__ import annotations
 
 import json
-import select
 import socket
 import struct
 import subprocess
@@ -15,6 +21,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -28,6 +35,7 @@ from wbc.errors import (
     TargetRefusedError,
     UnknownNameError,
 )
+from wbc.hardware.clock import ManualClock
 from wbc.hardware.contract import check_robot
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -53,6 +61,35 @@ from wbc.types import MotorCommand, RobotState
 
 ROBOTS = ("a1", "go1")
 LOOPBACK = "127.0.0.1"
+LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz
+LOOP = 0.004  # [s] the control loop's period in these tests
+TIME_EPS = 1e-9  # [s] float rounding of the clock's sums of periods
+
+
+@dataclass
+class Stepped:
+    """An emulated robot in process and the clock it and its links run on."""
+
+    clock: ManualClock
+    emu: UnitreeEmulator
+
+    def robot(self, **config: object) -> UnitreeRobot:
+        """A link to the emulator over a fresh in-process transport, on the clock."""
+        cfg = UnitreeRobotConfig(robot=self.emu.config.robot, target_host=LOOPBACK, target_port=9, **config)
+        return UnitreeRobot(cfg, self.emu.transport(self.clock), clock=self.clock)
+
+
+def _stepped(robot: str = "go1", **emulator: object) -> Stepped:
+    return Stepped(ManualClock(), UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, **emulator)))
+
+
+@pytest.fixture(params=ROBOTS)
+def stepped(request: pytest.FixtureRequest) -> Iterator[Stepped]:
+    rig = _stepped(request.param)
+    yield rig
+    rig.emu.close()
+    assert rig.clock.pending == 0  # every link's task ended with its close
+    assert not [t.name for t in threading.enumerate() if t.name.startswith("unitree-")]  # no thread ever started
 
 
 @pytest.fixture(params=ROBOTS)
@@ -69,8 +106,8 @@ def _config(emu: UnitreeEmulator, **kw: object) -> UnitreeRobotConfig:
     return UnitreeRobotConfig(robot=emu.config.robot, target_host=host, target_port=port, **kw)
 
 
-def _until(cond: Callable[[], bool], timeout: float = 1.0) -> bool:
-    """Poll `cond` every millisecond until it holds or `timeout` passes."""
+def _until(cond: Callable[[], bool], timeout: float = 5.0) -> bool:
+    """Poll `cond` every millisecond until it holds or `timeout` passes (a bound, not a figure under test)."""
     end = time.monotonic() + timeout
     while time.monotonic() < end:
         if cond():
@@ -84,32 +121,117 @@ def _hold(robot: UnitreeRobot, kp: float = 30.0) -> MotorCommand:
 
 
 def _keep_writing(robot: UnitreeRobot, cmd: MotorCommand, seconds: float) -> None:
-    end = time.monotonic() + seconds
-    for _ in range(int(seconds / 0.004) + 1):
-        if time.monotonic() >= end:
-            break
+    """Write `cmd` and advance LOOP, for `seconds` of the robot's clock."""
+    for _ in range(int(round(seconds / LOOP))):
         robot.write(cmd)
-        robot.advance(0.004)
+        robot.advance(LOOP)
+
+
+class AwaitReply:
+    """A socket transport made lockstep: each `send` waits (up to a bound) until the reply is readable.
+
+    A link on a `ManualClock` over it then receives, in the very period it sent a frame, the state a lockstep
+    emulator answered it with, however slow the machine: the sockets are real, the timing is the test's.
+    """
+
+    def __init__(self, inner: Transport, timeout: float = 5.0) -> None:
+        self.inner, self.timeout = inner, timeout
+
+    @property
+    def foreign(self) -> int:
+        return self.inner.foreign
+
+    def send(self, frame: bytes) -> None:
+        self.inner.send(frame)
+        self.inner.wait_readable(self.timeout)
+
+    def receive(self) -> list[bytes]:
+        return self.inner.receive()
+
+    def wait_readable(self, timeout: float) -> bool:
+        return self.inner.wait_readable(timeout)
+
+    def close(self) -> None:
+        self.inner.close()
 
 
 # -- contract and standing ----------------------------------------------------------------------------------------
-def test_contract(emulator: UnitreeEmulator) -> None:
-    check_robot(lambda: UnitreeRobot(_config(emulator)))
+def test_contract(stepped: Stepped) -> None:
+    check_robot(stepped.robot)
+
+
+def test_contract_over_udp_on_a_manual_clock(emulator: UnitreeEmulator) -> None:
+    """The real sockets (`UdpTransport`) to the emulator's UDP server, the link stepped by the test's clock."""
+    clock = ManualClock()
+    cfg = _config(emulator)
+
+    def make() -> UnitreeRobot:
+        return UnitreeRobot(cfg, AwaitReply(UdpTransport((LOOPBACK, 0), emulator.address)), clock=clock)
+
+    check_robot(make)
+    assert emulator.stats.accepted > 0 and emulator.stats.rejected == 0
 
 
 def test_contract_over_the_realtime_emulator() -> None:
+    rig = _stepped("go1", mode="realtime")
+    check_robot(rig.robot)
+    rig.emu.close()
+
+
+@pytest.mark.realtime
+def test_realtime_contract_over_udp(emulator: UnitreeEmulator) -> None:
+    check_robot(lambda: UnitreeRobot(_config(emulator)))
+
+
+@pytest.mark.realtime
+def test_realtime_contract_over_the_realtime_emulator() -> None:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")) as emu:
         check_robot(lambda: UnitreeRobot(_config(emu)))
 
 
-def test_reconnect(emulator: UnitreeEmulator) -> None:
+def test_the_link_thread_over_udp_connects_streams_and_closes(emulator: UnitreeEmulator) -> None:
+    """The default clock: a link thread over a real socket (waits bounded, no figure asserted)."""
     robot = UnitreeRobot(_config(emulator))
     for _ in range(2):
         with robot:
             tick = robot.read().tick
+            assert _until(lambda tick=tick: (robot.write(_hold(robot)), robot.advance(LOOP),
+                                             robot.read().tick > tick + 2)[2])
+            assert robot.link_stats().valid_states > 2
+        assert not [t.name for t in threading.enumerate() if t.name.endswith("-link")]  # the link thread ended
+    log = emulator.commands()
+    assert any(not c.damping for c in log) and log[-1].damping  # it drove the motors, and closed damped
+
+
+def test_the_in_process_transport_serves_a_link_thread_too() -> None:
+    """The emulator's in-process channel on the monotonic clock: the link's own thread sends, each frame is answered
+    within its send (no figure asserted; waits bounded)."""
+    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot="go1"))
+    transport = emu.transport()
+    with UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9), transport) as robot:
+        tick = robot.read().tick
+        assert _until(lambda: (robot.write(_hold(robot)), robot.advance(LOOP), robot.read().tick > tick + 2)[2])
+        stats = robot.link_stats()
+    assert stats.rejected_states == 0 and stats.valid_states > 2
+    assert any(not c.damping for c in emu.commands()) and emu.commands()[-1].damping
+    with pytest.raises(ConfigError, match="in process"):
+        emu.start()  # one server or the other
+    with pytest.raises(ConfigError, match="ManualClock"):
+        UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")).transport()
+    emu.close()
+
+
+def test_reconnect(stepped: Stepped) -> None:
+    robot = stepped.robot()
+    for _ in range(2):
+        with robot:
+            tick = robot.read().tick
+            sent = robot.link_stats().frames_sent
             _keep_writing(robot, _hold(robot), 0.02)
             assert robot.read().tick > tick
-            assert robot.link_stats().frames_sent < 30  # counters start again at each connect
+            stats = robot.link_stats()
+            assert stats.frames_sent - sent == round(0.02 / LINK_PERIOD)  # a frame per link period
+            assert stats.frames_sent < 30  # counters start again at each connect
 
 
 def test_limits_intersect_urdf_and_sdk() -> None:
@@ -131,9 +253,10 @@ def _stand_height_in_sim(robot: str, seconds: float) -> float:
         return float(sim.base_truth().base_position_in_world[2])
 
 
-def test_stand_over_the_wire_matches_simulation(emulator: UnitreeEmulator, record_property: Callable) -> None:
+def test_stand_over_the_wire_matches_simulation(stepped: Stepped, record_property: Callable) -> None:
     seconds = 2.0
-    with UnitreeRobot(_config(emulator)) as robot:
+    emulator = stepped.emu
+    with stepped.robot() as robot:
         ctrl = StandController(robot.desc)
         for _ in range(int(round(seconds * ctrl.rate_hz))):
             robot.write(ctrl.act(robot.read(), None))
@@ -142,92 +265,131 @@ def test_stand_over_the_wire_matches_simulation(emulator: UnitreeEmulator, recor
         wire = float(emulator.base_truth().base_position_in_world[2])  # before close() damps it down
     sim = _stand_height_in_sim(emulator.config.robot, seconds)
     record_property("trunk_height_difference_m", wire - sim)
-    record_property("link_period_s", (stats.period_min, stats.period_mean, stats.period_max))
     print(f"\n{emulator.config.robot}: trunk height over the wire {wire:.5f} m, in simulation {sim:.5f} m, "
-          f"difference {(wire - sim) * 1e3:+.3f} mm; link period min/mean/max/std {stats.period_min * 1e3:.3f}/"
-          f"{stats.period_mean * 1e3:.3f}/{stats.period_max * 1e3:.3f}/{stats.period_std * 1e3:.3f} ms, "
-          f"overruns {stats.overruns}, "
-          f"late advances {stats.late_advances} (worst {stats.worst_lateness * 1e3:.2f} ms)")
+          f"difference {(wire - sim) * 1e3:+.3f} mm")
     assert abs(wire - sim) < 0.005
-    assert emulator.sim_time > 0.9 * seconds
-    assert stats.rejected_states == 0 and stats.deadline_trips == 0
-    assert abs(stats.period_mean - 1.0 / 500.0) < 1e-4  # the link keeps its 500 Hz schedule
+    assert emulator.sim_time >= seconds
+    assert stats.rejected_states == 0 and stats.deadline_trips == 0 and stats.overruns == 0
+    # the link keeps its 500 Hz schedule: one frame every period, not one early or late (on its clock)
+    assert stats.period_min == pytest.approx(LINK_PERIOD, abs=1e-12)
+    assert stats.period_max == pytest.approx(LINK_PERIOD, abs=1e-12)
+    assert stats.frames_sent >= seconds / LINK_PERIOD and stats.valid_states == stats.frames_sent
+
+
+@pytest.mark.realtime
+def test_realtime_stand_keeps_the_link_period(emulator: UnitreeEmulator) -> None:
+    seconds = 2.0
+    with UnitreeRobot(_config(emulator)) as robot:
+        ctrl = StandController(robot.desc)
+        for _ in range(int(round(seconds * ctrl.rate_hz))):
+            robot.write(ctrl.act(robot.read(), None))
+            robot.advance(1.0 / ctrl.rate_hz)
+        stats = robot.link_stats()
+    print(f"\nlink period min/mean/max/std {stats.period_min * 1e3:.3f}/{stats.period_mean * 1e3:.3f}/"
+          f"{stats.period_max * 1e3:.3f}/{stats.period_std * 1e3:.3f} ms, overruns {stats.overruns}")
+    assert abs(stats.period_mean - LINK_PERIOD) < 1e-4
 
 
 # -- fault 1: silence ---------------------------------------------------------------------------------------------
-def test_silence_stops_the_tick(emulator: UnitreeEmulator) -> None:
-    with UnitreeRobot(_config(emulator)) as robot:
+def test_silence_stops_the_tick(stepped: Stepped) -> None:
+    emulator = stepped.emu
+    with stepped.robot() as robot:
         _keep_writing(robot, _hold(robot), 0.05)
         emulator.inject(Fault.SILENCE)
-        time.sleep(0.01)  # replies already in flight
         tick = robot.read().tick
         _keep_writing(robot, _hold(robot), 0.06)
         assert robot.read().tick == tick
-        assert robot.state_age >= 0.05 and robot.link_stats().state_age >= 0.05
+        assert robot.state_age >= 0.06 - TIME_EPS and robot.link_stats().state_age >= 0.06 - TIME_EPS
         emulator.clear()
-        assert _until(lambda: robot.read().tick > tick)
-        assert robot.state_age < 0.05
+        stepped.clock.advance(LINK_PERIOD)  # the next period's frame is answered
+        assert robot.read().tick == tick + 1
+        assert robot.state_age < LINK_PERIOD
 
 
-def test_nothing_but_damping_before_the_first_state(emulator: UnitreeEmulator) -> None:
-    emulator.inject(Fault.SILENCE)
-    robot = UnitreeRobot(_config(emulator, connect_timeout=0.1))
+def test_nothing_but_damping_before_the_first_state(stepped: Stepped) -> None:
+    stepped.emu.inject(Fault.SILENCE)
+    robot = stepped.robot(connect_timeout=0.1)
     with pytest.raises(RobotLinkError, match="no valid LowState"):
         robot.connect()
-    sent = emulator.commands()
-    assert len(sent) > 10 and all(c.damping for c in sent)
+    sent = stepped.emu.commands()
+    assert len(sent) >= 0.1 / LINK_PERIOD and all(c.damping for c in sent)  # a frame every period of the wait
+    assert stepped.clock.now() == pytest.approx(0.1)  # it waited its timeout, on its clock
     assert not robot.is_connected
 
 
 # -- fault 2: corrupt, short, long and foreign datagrams ----------------------------------------------------------
 @pytest.mark.parametrize(("fault", "reason"), [(Fault.CORRUPT, "crc"), (Fault.SHORT, "length"),
                                                (Fault.LONG, "length"), (Fault.FOREIGN_PORT, None)])
-def test_bad_datagrams_are_rejected_and_counted(emulator: UnitreeEmulator, fault: Fault, reason: str | None) -> None:
-    with UnitreeRobot(_config(emulator)) as robot:
+def test_bad_datagrams_are_rejected_and_counted(stepped: Stepped, fault: Fault, reason: str | None) -> None:
+    emulator = stepped.emu
+    with stepped.robot() as robot:
         _keep_writing(robot, _hold(robot), 0.04)
         emulator.inject(fault)
-        time.sleep(0.01)
         before = robot.read()
         stats_before = robot.link_stats()
         _keep_writing(robot, _hold(robot), 0.05)
         after = robot.read()
         stats = robot.link_stats()
+        periods = stats.frames_sent - stats_before.frames_sent
+        assert periods >= 0.05 / LINK_PERIOD - 1
         assert after is before and after.tick == before.tick
         if reason is None:
-            assert stats.foreign > stats_before.foreign + 5
+            assert stats.foreign - stats_before.foreign == periods  # every reply came from the wrong port
             assert stats.rejected_states == stats_before.rejected_states
         else:
-            assert getattr(robot.decode_stats, reason) > 5
-            assert stats.rejected_states > stats_before.rejected_states + 5
+            assert getattr(robot.decode_stats, reason) == periods  # every reply was rejected, for its reason
+            assert stats.rejected_states - stats_before.rejected_states == periods
             assert stats.foreign == 0
         emulator.clear()
-        assert _until(lambda: robot.read().tick > before.tick)
+        stepped.clock.advance(LINK_PERIOD)
+        assert robot.read().tick == before.tick + 1
+
+
+def test_bad_datagrams_over_udp_are_rejected_and_counted(emulator: UnitreeEmulator) -> None:
+    """The socket's own filter: a reply from the emulator's other port is foreign, a corrupt one rejected."""
+    clock = ManualClock()
+    robot = UnitreeRobot(_config(emulator), AwaitReply(UdpTransport((LOOPBACK, 0), emulator.address)),
+                         clock=clock)
+    with robot:
+        for fault in (Fault.FOREIGN_PORT, Fault.CORRUPT):
+            emulator.inject(fault)
+            before = robot.link_stats()
+            _keep_writing(robot, _hold(robot), 0.02)
+            emulator.clear()
+            after = robot.link_stats()
+            grown = after.foreign - before.foreign if fault is Fault.FOREIGN_PORT else \
+                after.rejected_states - before.rejected_states
+            assert grown >= 5 and after.valid_states == before.valid_states, fault
+        assert _until(lambda: (clock.advance(LINK_PERIOD), robot.read().tick > after.valid_states)[1])
 
 
 # -- fault 3: the control loop stalls ----------------------------------------------------------------------------
-def test_write_stall_damps_then_resumes(emulator: UnitreeEmulator) -> None:
-    config = _config(emulator, write_deadline=0.05)
-    period = 1.0 / config.rate_hz
-    with UnitreeRobot(config) as robot:
+def test_write_stall_damps_then_resumes(stepped: Stepped) -> None:
+    emulator, clock = stepped.emu, stepped.clock
+    config_deadline = 0.05
+    with stepped.robot(write_deadline=config_deadline) as robot:
         _keep_writing(robot, _hold(robot, 30.0), 0.05)
-        stalled_at = time.monotonic()
-        time.sleep(0.15)
+        robot.write(_hold(robot, 30.0))
+        stalled_at = clock.now()
+        clock.advance(0.15)  # the loop stalls: the link runs on, nobody writes
         resumed = _hold(robot, 25.0)
-        resumed_at = time.monotonic()
+        resumed_at = clock.now()
         robot.write(resumed)
-        time.sleep(0.02)
+        clock.advance(0.02)
         robot.write(resumed)
-        time.sleep(0.02)
+        clock.advance(0.02)
         assert robot.link_stats().deadline_trips == 1
     log = emulator.commands()
-    stall = [c for c in log if stalled_at < c.time < resumed_at]
+    stall = [c for c in log if stalled_at < c.time <= resumed_at + TIME_EPS]
     first_damping = next(c for c in stall if c.damping)
-    assert first_damping.time - stalled_at <= config.write_deadline + 10 * period
+    # damping in the first link period past the deadline, the hold in every one before it
+    assert config_deadline < first_damping.time - stalled_at <= config_deadline + LINK_PERIOD + TIME_EPS
     assert all(c.wire.kp[0] == 30.0 for c in stall if c.time < first_damping.time)
     assert all(c.damping for c in stall if c.time >= first_damping.time)
-    after = [c for c in log if resumed_at < c.time < resumed_at + 0.035]
+    after = [c for c in log if resumed_at + TIME_EPS < c.time < resumed_at + 0.035]
     assert after and not after[-1].damping
-    first_servo = next(c for c in after if not c.damping)
+    first_servo = after[0]  # the next frame after the write carries it
+    assert not first_servo.damping and first_servo.time <= resumed_at + LINK_PERIOD + TIME_EPS
     np.testing.assert_array_equal(first_servo.wire.kp, 25.0)
     np.testing.assert_allclose(first_servo.wire.q, robot.desc.nominal_q.astype(np.float32))
     assert all(not c.damping for c in after if c.time > first_servo.time)
@@ -235,22 +397,23 @@ def test_write_stall_damps_then_resumes(emulator: UnitreeEmulator) -> None:
 
 
 # -- fault 4: NaN and out-of-range commands -----------------------------------------------------------------------
-def test_wild_commands_reach_the_wire_clamped(emulator: UnitreeEmulator) -> None:
-    with UnitreeRobot(_config(emulator)) as robot:
+def test_wild_commands_reach_the_wire_clamped(stepped: Stepped) -> None:
+    emulator = stepped.emu
+    with stepped.robot() as robot:
         lim = robot.limits
         with pytest.raises(CommandError):
             robot.write(MotorCommand.hold(np.full(12, np.nan), 20.0, 1.0))
         wild = MotorCommand(q=lim.upper + 10.0, dq=lim.velocity_limit * 10.0, kp=np.full(12, 1e6),
                             kd=np.full(12, 1e6), tau=-(lim.torque_limit + 100.0))
         sent = robot.write(wild)
-        time.sleep(0.02)
+        stepped.clock.advance(0.02)
         robot.write(_hold(robot))
-        time.sleep(0.01)
+        stepped.clock.advance(0.01)
     log = emulator.commands()
     assert emulator.stats.rejected == 0
     servo = [c.wire for c in log if not c.damping]
     wild_frames = [w for w in servo if w.kp[0] > 100.0]
-    assert wild_frames
+    assert len(wild_frames) >= 0.02 / LINK_PERIOD - 1
     w = wild_frames[-1]
     assert (w.mode == MODE_SERVO).all()
     np.testing.assert_array_equal(w.q, lim.upper.astype(np.float32))
@@ -263,8 +426,9 @@ def test_wild_commands_reach_the_wire_clamped(emulator: UnitreeEmulator) -> None
 
 
 # -- state faults are reported, close damps -----------------------------------------------------------------------
-def test_state_faults_reach_the_backend(emulator: UnitreeEmulator) -> None:
-    with UnitreeRobot(_config(emulator)) as robot:
+def test_state_faults_reach_the_backend(stepped: Stepped) -> None:
+    emulator = stepped.emu
+    with stepped.robot() as robot:
         checks = [
             (Fault.JOINT_OUT_OF_RANGE, (2, 0.5), lambda: robot.read().q[2] == 0.5),
             (Fault.OVER_TEMPERATURE, 95, lambda: (robot.extras.motor_temperature == 95).all()),
@@ -274,25 +438,43 @@ def test_state_faults_reach_the_backend(emulator: UnitreeEmulator) -> None:
         ]
         for fault, value, seen in checks:
             emulator.inject(fault, value)
-            assert _until(lambda seen=seen: (robot.write(_hold(robot)), seen())[1], 0.5), fault
+            assert not seen(), fault
+            robot.write(_hold(robot))
+            robot.advance(LOOP)  # the next state reports it
+            assert seen(), fault
             emulator.clear(fault)
-            assert _until(lambda seen=seen: (robot.write(_hold(robot)), not seen())[1], 0.5), fault
+            robot.write(_hold(robot))
+            robot.advance(LOOP)
+            assert not seen(), fault
 
 
-def test_close_sends_damping(emulator: UnitreeEmulator) -> None:
-    config = _config(emulator, close_damping=0.05)
-    robot = UnitreeRobot(config)
+def test_close_sends_damping(stepped: Stepped) -> None:
+    robot = stepped.robot(close_damping=0.05)
     with robot:
         _keep_writing(robot, _hold(robot), 0.03)
-        closed_at = time.monotonic()
-    tail = [c for c in emulator.commands() if c.time > closed_at]
-    first = next(i for i, c in enumerate(tail) if c.damping)
-    assert first <= 2  # at most the frames already in flight when close() was called
-    assert len(tail) - first >= 10 and all(c.damping for c in tail[first:])
-    assert all((c.wire.kd == config.damping_kd).all() for c in tail[first:])
+        robot.write(_hold(robot))
+        closed_at = stepped.clock.now()
+    tail = [c for c in stepped.emu.commands() if c.time > closed_at + TIME_EPS]
+    assert tail and all(c.damping for c in tail)  # from the very next frame on
+    assert tail[0].time <= closed_at + LINK_PERIOD + TIME_EPS
+    assert len(tail) >= 0.05 / LINK_PERIOD - 1  # for the whole close_damping
+    assert tail[-1].time < closed_at + 0.05 + TIME_EPS  # and then nothing
+    assert all((c.wire.kd == robot.config.damping_kd).all() for c in tail)
 
 
 def test_realtime_emulator_streams_states() -> None:
+    rig = _stepped("go1", mode="realtime")
+    with rig.robot() as robot:
+        tick, t0 = robot.read().tick, rig.clock.now()
+        _keep_writing(robot, _hold(robot), 0.2)
+        # a state every emulator period, its physics on the clock: 0.2 s in 0.2 s
+        assert robot.read().tick >= tick + 0.2 / LINK_PERIOD - 1
+        assert abs(rig.emu.sim_time - rig.clock.now()) <= LINK_PERIOD + TIME_EPS and rig.clock.now() - t0 >= 0.2
+    rig.emu.close()
+
+
+@pytest.mark.realtime
+def test_realtime_emulator_streams_states_in_real_time() -> None:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")) as emu, \
             UnitreeRobot(_config(emu)) as robot:
         tick = robot.read().tick
@@ -304,7 +486,9 @@ def test_realtime_emulator_streams_states() -> None:
 
 @pytest.mark.parametrize("robot_name", ROBOTS)
 def test_delay_and_drop(robot_name: str) -> None:
-    with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot_name)) as emu, UnitreeRobot(_config(emu)) as robot:
+    rig = _stepped(robot_name)
+    emu, clock = rig.emu, rig.clock
+    with rig.robot() as robot:
         _keep_writing(robot, _hold(robot), 0.02)
         emu.inject(Fault.DROP, 0.5)
         tick = robot.read().tick
@@ -314,50 +498,61 @@ def test_delay_and_drop(robot_name: str) -> None:
         assert 0.2 * frames < fresh < 0.8 * frames
         emu.clear()
         emu.inject(Fault.DELAY, 0.04)
-        time.sleep(0.01)  # replies sent before the delay are in
         tick = robot.read().tick
-        delayed_at = time.monotonic()
-        assert _until(lambda: (robot.write(_hold(robot)), robot.read().tick > tick)[1], 0.5)
-        assert time.monotonic() - delayed_at >= 0.025
+        delayed_at = clock.now()
+        for _ in range(100):
+            robot.write(_hold(robot))
+            robot.advance(LOOP)
+            if robot.read().tick > tick:
+                break
+        # the first reply to a frame sent after the injection arrives 0.04 s after that frame
+        assert clock.now() - delayed_at >= 0.04 + LINK_PERIOD - TIME_EPS
         assert robot.state_age < 0.04
+        assert robot.read().tick > tick
+    emu.close()
 
 
 def test_jitter_spreads_and_reorders_the_replies_and_loses_none() -> None:
-    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
-        emu.inject(Fault.JITTER, 0.01)
-        client = RawClient(emu)
-        try:
-            frame = encode_command(emu.layout, MotorCommand.hold(emu.sim.desc.nominal_q, 20.0, 1.0))
-            sent: dict[int, float] = {}
-            arrivals: list[tuple[int, float]] = []
-            end = time.monotonic() + 1.0
-            while len(arrivals) < 50 and time.monotonic() < end:
-                now = time.monotonic()
-                if len(sent) < 50 and now >= len(sent) * 0.002 + (min(sent.values()) if sent else now):
-                    client.sock.sendto(frame, emu.address)  # a command every 2 ms, as a 500 Hz link sends
-                    sent[len(sent) + 1] = now  # the emulator's k-th step answers with tick k
-                if select.select([client.sock], [], [], 0.0005)[0]:
-                    data = client.sock.recvfrom(MAX_DATAGRAM)[0]
-                    arrivals.append((decode_state(emu.layout, data, time=0.0)[0].tick, time.monotonic()))
-        finally:
-            client.close()
+    clock = ManualClock()
+    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot="go1"))
+    transport = emu.transport(clock)
+    emu.inject(Fault.JITTER, 0.01)
+    frame = encode_command(emu.layout, MotorCommand.hold(emu.sim.desc.nominal_q, 20.0, 1.0))
+    sent: dict[int, float] = {}
+    arrivals: list[tuple[int, float]] = []
+    poll = 0.0005  # [s] how often the test looks for replies
+
+    def send() -> None:
+        if len(sent) < 50:
+            transport.send(frame)  # a command every 2 ms, as a 500 Hz link sends
+            sent[len(sent) + 1] = clock.now()  # the emulator's k-th step answers with tick k
+
+    def look() -> None:
+        arrivals.extend((decode_state(emu.layout, d, time=0.0)[0].tick, clock.now()) for d in transport.receive())
+
+    clock.call_every(LINK_PERIOD, send)
+    clock.call_every(poll, look)
+    clock.advance(0.2)
     ticks = [t for t, _ in arrivals]
     late = [at - sent[t] for t, at in arrivals]
     print(f"\njitter 10 ms: replies late by {min(late) * 1e3:.1f}..{max(late) * 1e3:.1f} ms, "
           f"{sum(b < a for a, b in zip(ticks, ticks[1:], strict=False))} of 49 arrived before an older one")
     assert sorted(ticks) == list(range(1, 51))  # none lost
     assert ticks != sorted(ticks)  # out of order
-    assert max(late) - min(late) > 0.004 and max(late) < 0.01 + 0.02
+    assert max(late) - min(late) > 0.004 and max(late) <= 0.01 + poll + TIME_EPS
+    assert emu.replies == 50
 
 
 def test_the_link_stays_up_under_jitter() -> None:
-    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu, UnitreeRobot(_config(emu)) as robot:
-        emu.inject(Fault.JITTER, 0.01)
+    rig = _stepped("go1")
+    with rig.robot() as robot:
+        rig.emu.inject(Fault.JITTER, 0.01)
         _keep_writing(robot, _hold(robot), 0.3)
         stats = robot.link_stats()
         assert stats.deadline_trips == 0 and stats.rejected_states == 0
         assert stats.valid_states > 0.5 * stats.frames_sent and robot.state_age < 0.02
-        assert not any(c.damping for c in emu.commands()[-100:])  # the servo frames kept going out
+        assert not any(c.damping for c in rig.emu.commands()[-100:])  # the servo frames kept going out
+    rig.emu.close()
 
 
 class FakeTransport:
@@ -393,55 +588,59 @@ class FakeTransport:
         pass
 
 
+def _still_state(robot: UnitreeRobot, tick: int = 7) -> bytes:
+    state = RobotState(tick=tick, time=0.0, q=robot.desc.nominal_q, dq=np.zeros(12), tau_est=np.zeros(12),
+                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
+    return encode_state(robot.layout, state)
+
+
 def test_transport_is_a_constructor_argument() -> None:
     fake = FakeTransport()
     assert isinstance(fake, Transport)
-    robot = UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9), transport=fake)
-    q = robot.desc.nominal_q
-    state = RobotState(tick=7, time=0.0, q=q, dq=np.zeros(12), tau_est=np.zeros(12),
-                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
-                       accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
-    frame = encode_state(robot.layout, state)
-    threading.Timer(0.05, lambda: fake.deliver(frame)).start()
+    clock = ManualClock()
+    robot = UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9), transport=fake,
+                         clock=clock)
+    frame = _still_state(robot)
+    clock.call_at(0.05, lambda: fake.deliver(frame))  # the first state arrives 50 ms after the link starts
     with robot:
+        assert clock.now() == pytest.approx(0.05)  # connect waited for it, on its clock
         assert robot.read().tick == 1  # the freshness counter, not the wire's tick
-        np.testing.assert_allclose(robot.read().q, q)
+        np.testing.assert_allclose(robot.read().q, robot.desc.nominal_q)
         robot.write(_hold(robot))
-        time.sleep(0.01)
+        clock.advance(0.01)
     wires = [decode_command(robot.layout, f) for f in fake.sent]
     damping = [(w.kp == 0).all() and (w.kd > 0).all() for w in wires]
     assert damping[0] and damping[-1]
     assert any(not d for d in damping)
-    assert sum(damping[:20]) >= 20  # before the state arrived (50 ms at 500 Hz), damping only
-
+    before = round(0.05 / LINK_PERIOD) + 1  # the periods at 0, 2 ms, ... 50 ms: the state came in the last
+    assert all(damping[:before])  # before the state arrived, and before the first write: damping only
+    assert not damping[before]  # the frame after the write carries it
 
 
 def test_advance_waits_only_when_nothing_newer_than_the_last_read_has_arrived() -> None:
     """A loop whose work took most of its period goes on at once with the state that arrived meanwhile; only when the
     newest state is the one it already read does `advance` wait (at most two link periods) for another."""
     fake = FakeTransport()
+    clock = ManualClock()
     robot = UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9, rate_hz=200.0),
-                         transport=fake)
+                         transport=fake, clock=clock)
     grace = 2.0 / 200.0  # [s] two link periods
-    state = RobotState(tick=7, time=0.0, q=robot.desc.nominal_q, dq=np.zeros(12), tau_est=np.zeros(12),
-                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
-                       accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
-    fake.deliver(encode_state(robot.layout, state))
+    fake.deliver(_still_state(robot))
     with robot:
         assert robot.read().tick == 1
-        fake.deliver(encode_state(robot.layout, state))  # a state arrives while the loop works
-        deadline = time.monotonic() + 1.0
-        while robot.link_stats().valid_states < 2 and time.monotonic() < deadline:  # until the link has taken it
-            time.sleep(0.001)
-        start = time.monotonic()
+        fake.deliver(_still_state(robot))  # a state arrives while the loop works
+        clock.advance(1.0 / 200.0)  # the link takes it
+        assert robot.link_stats().valid_states == 2
+        start = clock.now()
         robot.advance(1e-6)
-        went_on = time.monotonic() - start
+        went_on = clock.now() - start
         assert robot.read().tick == 2
-        start = time.monotonic()
+        start = clock.now()
         robot.advance(1e-6)  # nothing newer than tick 2 comes: it waits its grace, then returns
-        waited = time.monotonic() - start
+        waited = clock.now() - start
         assert robot.read().tick == 2
-    assert went_on < 0.8 * grace <= waited
+    assert went_on <= 1e-6 + TIME_EPS and grace <= waited <= grace + 1e-6 + TIME_EPS  # its dt alone, or dt + grace
 
 
 _SDK_CLIENT = '''
@@ -465,8 +664,12 @@ recv = []
 for _ in range(100):
     udp.SetSend(cmd)
     udp.Send()
-    time.sleep(0.002)
-    recv.append(udp.Recv())
+    for _ in range(2500):  # wait for this command's reply (bounded: 5 s), however busy the machine
+        time.sleep(0.002)
+        result = udp.Recv()
+        if result == 0:
+            break
+    recv.append(result)
     udp.GetRecv(state)
 print("RESULT", json.dumps({"recv": recv, "tick": state.tick, "q": [state.motorState[i].q for i in range(12)],
                             "quat": list(state.imu.quaternion)}))
@@ -485,9 +688,9 @@ def test_vendor_sdk_client_talks_to_the_emulator() -> None:
         assert line is not None, (out.returncode, out.stdout[-2000:], out.stderr[-2000:])
         result = json.loads(line.removeprefix("RESULT "))
         log = emu.commands()
-    assert result["recv"].count(0) >= 95  # the SDK accepted (almost) every state frame the emulator sent
-    assert result["tick"] > 90 and abs(result["q"][1] - nominal[1]) < 0.3
-    assert emu.stats.rejected == 0 and emu.stats.accepted == len(log) >= 95
+    assert result["recv"] == [0] * 100  # the SDK accepted every state frame the emulator sent
+    assert result["tick"] == 100 and abs(result["q"][1] - nominal[1]) < 0.3
+    assert emu.stats.rejected == 0 and emu.stats.accepted == len(log) == 100
     np.testing.assert_array_equal(log[-1].wire.kp, 20.0)
     np.testing.assert_allclose(log[-1].wire.q, np.float32(nominal))
 
@@ -532,31 +735,39 @@ def test_lockstep_is_deterministic(robot_name: str) -> None:
     assert ticks == list(range(1, 51))  # one physics step per command
 
 
+
+
 def test_emulator_gives_no_torque_to_what_a_motor_cannot_apply() -> None:
-    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
-        client = RawClient(emu)
-        try:
-            layout = emu.layout
-            frame = bytearray(encode_command(layout, MotorCommand.hold(emu.sim.desc.nominal_q, 40.0, 1.0)))
-            kp = layout.cmd_motor_offset + 11  # motor 0's Kp, int16 x 32: the SDK's wrap of Kp 2000 is -48
-            struct.pack_into("<h", frame, kp, -48 * 32)
-            struct.pack_into("<I", frame, layout.cmd_crc_offset, frame_crc(frame))
-            client.exchange(bytes(frame))
-            assert emu.refused == 1 and emu.commands()[-1].wire.kp[0] == -48.0
-            off = bytearray(encode_command(layout, MotorCommand.hold(emu.sim.desc.nominal_q, 40.0, 1.0)))
-            off[layout.cmd_motor_offset] = 0  # motor 0 in mode 0 (off)
-            struct.pack_into("<I", off, layout.cmd_crc_offset, frame_crc(off))
-            client.exchange(bytes(off))
-            assert emu.refused == 1 and emu.commands()[-1].wire.mode[0] == 0
-            client.sock.sendto(b"\x00" * 10, emu.address)  # rejected: no reply, no step
-            assert _until(lambda: emu.stats.length == 1) and len(emu.commands()) == 2
-            assert emu.sim_time == pytest.approx(2 * emu.config.control_period)
-        finally:
-            client.close()
+    clock = ManualClock()
+    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot="go1"))
+    transport = emu.transport(clock)
+    layout = emu.layout
+    frame = bytearray(encode_command(layout, MotorCommand.hold(emu.sim.desc.nominal_q, 40.0, 1.0)))
+    kp = layout.cmd_motor_offset + 11  # motor 0's Kp, int16 x 32: the SDK's wrap of Kp 2000 is -48
+    struct.pack_into("<h", frame, kp, -48 * 32)
+    struct.pack_into("<I", frame, layout.cmd_crc_offset, frame_crc(frame))
+    transport.send(bytes(frame))
+    assert len(transport.receive()) == 1
+    assert emu.refused == 1 and emu.commands()[-1].wire.kp[0] == -48.0
+    off = bytearray(encode_command(layout, MotorCommand.hold(emu.sim.desc.nominal_q, 40.0, 1.0)))
+    off[layout.cmd_motor_offset] = 0  # motor 0 in mode 0 (off)
+    struct.pack_into("<I", off, layout.cmd_crc_offset, frame_crc(off))
+    transport.send(bytes(off))
+    assert len(transport.receive()) == 1
+    assert emu.refused == 1 and emu.commands()[-1].wire.mode[0] == 0
+    transport.send(b"\x00" * 10)  # rejected: no reply, no step
+    assert transport.receive() == []
+    assert emu.stats.length == 1 and len(emu.commands()) == 2
+    assert emu.sim_time == pytest.approx(2 * emu.config.control_period)
+    emu.close()
 
 
 class BrokenTransport(FakeTransport):
     """A fake whose send fails after a few frames, as a socket whose interface went away."""
+
+    def __init__(self, reply: bytes = b"") -> None:
+        super().__init__()
+        self.reply = reply
 
     def send(self, frame: bytes) -> None:
         if len(self.sent) >= 40:
@@ -566,16 +777,21 @@ class BrokenTransport(FakeTransport):
             self.inbox.append(self.reply)
 
 
-def test_a_dead_link_thread_is_an_error_in_the_callers_thread() -> None:
+@pytest.mark.parametrize("clocked", [False, True], ids=["thread", "manual-clock"])
+def test_a_dead_link_is_an_error_in_the_callers_thread(clocked: bool) -> None:
     fake = BrokenTransport()
-    robot = UnitreeRobot(UnitreeRobotConfig(robot="a1", target_host=LOOPBACK, target_port=9), transport=fake)
-    state = RobotState(tick=0, time=0.0, q=robot.desc.nominal_q, dq=np.zeros(12), tau_est=np.zeros(12),
-                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
-                       accel_in_body=np.array([0, 0, 9.81]), foot_force=np.zeros(4))
-    fake.reply = encode_state(robot.layout, state)
+    clock = ManualClock() if clocked else None
+    robot = UnitreeRobot(UnitreeRobotConfig(robot="a1", target_host=LOOPBACK, target_port=9), transport=fake,
+                         **({"clock": clock} if clocked else {}))
+    fake.reply = _still_state(robot)
     with robot:
         robot.write(_hold(robot))
-        assert _until(lambda: robot.link_failure is not None)
+        if clock is not None:
+            clock.advance(1.0)
+            assert robot.link_failure is not None and len(fake.sent) == 40  # it died at the 41st send
+            assert clock.pending == 0  # the task ended with it
+        else:
+            assert _until(lambda: robot.link_failure is not None)
         with pytest.raises(RobotLinkError, match="unreachable"):
             robot.read()
         with pytest.raises(RobotLinkError, match="link thread died"):
@@ -629,6 +845,7 @@ from wbc.control.stand import stand_command
 from wbc.errors import PortBusyError
 from wbc.hardware.contract import check_robot
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.clock import ManualClock
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
 from wbc.hardware.unitree import (GO1_LAYOUT, Battery, LowStateExtras, Remote, SdkTransport, UnitreeRobot,
                                   UnitreeRobotConfig, encode_command, encode_state)
@@ -651,13 +868,18 @@ extras = LowStateExtras(motor_mode=np.full(12, 10, dtype=np.uint8), motor_temper
                                         mcu_ntc=(27, 28), cell_voltage=np.linspace(3.6, 4.1, 10)))
 frame = encode_state(GO1_LAYOUT, state, extras)
 robot_side.sendto(frame, sdk.local_address)
-out["readable"] = sdk.wait_readable(1.0)
+out["readable"] = sdk.wait_readable(5.0)
 out["state_equal"] = sdk.receive() == [frame]
 corrupt = bytearray(frame)
 corrupt[100] ^= 1
 robot_side.sendto(bytes(corrupt), sdk.local_address)
-time.sleep(0.05)
-out["corrupt_received"] = len(sdk.receive())
+received = []
+for _ in range(500):  # until the SDK has taken the datagram (bounded: 5 s), however busy the machine
+    time.sleep(0.01)
+    received += sdk.receive()
+    if sdk.rejected:
+        break
+out["corrupt_received"] = len(received)
 out["rejected"] = sdk.rejected
 cmd = encode_command(GO1_LAYOUT, MotorCommand.hold(np.linspace(-0.5, 0.5, 12), 30.0, 1.5))
 sdk.send(cmd)
@@ -667,13 +889,27 @@ try:
     out["busy"] = "no error"
 except PortBusyError as exc:
     out["busy"] = str(exc)
-# 2. the backend over it, against the emulator
+# 2. the backend over it, against the emulator: on a manual clock, each frame's reply awaited (lockstep over the
+# vendor's sockets, however busy the machine)
+class AwaitReply:
+    def __init__(self, inner):
+        self.inner = inner
+    foreign = property(lambda self: self.inner.foreign)
+    def send(self, frame):
+        self.inner.send(frame)
+        self.inner.wait_readable(5.0)
+    receive = property(lambda self: self.inner.receive)
+    wait_readable = property(lambda self: self.inner.wait_readable)
+    close = property(lambda self: self.inner.close)
 with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
     host, port = emu.address
     config = UnitreeRobotConfig(robot="go1", target_host=host, target_port=port, transport="sdk")
-    check_robot(lambda: UnitreeRobot(config))
+    clock = ManualClock()
+    def make():
+        return UnitreeRobot(config, AwaitReply(SdkTransport(("127.0.0.1", 0), (host, port))), clock=clock)
+    check_robot(make)
     events = []
-    safe = SafeRobot(UnitreeRobot(config), SafetyConfig(on_event=events.append, ramp_time_s=0.2))
+    safe = SafeRobot(make(), SafetyConfig(on_event=events.append, ramp_time_s=0.2))
     with safe:
         hold = stand_command(safe.robot.desc)
         for _ in range(300):
@@ -731,16 +967,19 @@ def test_the_sdk_transport_is_go1_only_and_loopback_only() -> None:
         SdkTransport((LOOPBACK, 0), ("192.0.2.10", 8007), sdk=_DeafSdk)  # type: ignore[arg-type]
 
 
+
+
 def test_an_emulator_holds_its_robot_until_a_command_drives_a_motor() -> None:
-    config = UnitreeEmulatorConfig(robot="go1", mode="realtime", held_until_driven=True)
-    with UnitreeEmulator(config) as emu:
-        with UnitreeRobot(_config(emu)) as robot:
-            height = emu.base_truth().base_position_in_world[2]
-            time.sleep(0.2)  # the link sends damping frames only (nobody wrote): the robot is held, states flow
-            assert emu.held and emu.sim_time == 0.0 and robot.link_stats().valid_states > 20
-            assert emu.base_truth().base_position_in_world[2] == height
-            _keep_writing(robot, _hold(robot), 0.2)  # the first servo frame releases it
-            assert not emu.held and emu.sim_time > 0.1
-        emu.reset()  # the link closed (it ended with damping frames): held again
-        time.sleep(0.05)
-        assert emu.held
+    rig = _stepped("go1", mode="realtime", held_until_driven=True)
+    emu = rig.emu
+    with rig.robot() as robot:
+        height = emu.base_truth().base_position_in_world[2]
+        rig.clock.advance(0.2)  # the link sends damping frames only (nobody wrote): the robot is held, states flow
+        assert emu.held and emu.sim_time == 0.0 and robot.link_stats().valid_states >= 0.2 / LINK_PERIOD
+        assert emu.base_truth().base_position_in_world[2] == height
+        _keep_writing(robot, _hold(robot), 0.2)  # the first servo frame releases it
+        assert not emu.held and emu.sim_time >= 0.2 - LINK_PERIOD - TIME_EPS
+    emu.reset()  # the link closed (it ended with damping frames): held again
+    rig.clock.advance(0.05)
+    assert emu.held and emu.sim_time == 0.0
+    emu.close()

@@ -155,7 +155,7 @@ class HardwareTrialResult:
         cpu_s: CPU time of this process during the episode, every thread (the link's included) [s].
         episode_wall_s: wall time of the episode [s].
         safety_events: every transition of the safety layer, the stand-up before the trial's included (the
-            episode holds those during the trial), on its clock: wall-clock seconds since the robot was connected.
+            episode holds those during the trial), on its clock: the robot's seconds since it was connected.
         trial_started_s: when the trial began on that clock (after the stand-up) [s].
         io_cpu_s: CPU time of the I/O process during the episode, every thread (the link's and the arm bus's) [s];
             None when the devices ran in this process.
@@ -178,6 +178,7 @@ class HardwareTrialResult:
 def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
                        observer: TickObserver | None = None,
                        before_connect: Callable[[HardwareRobot, ControllerSpec], None] | None = None,
+                       build: Callable[[HardwareRobotConfig], HardwareRobot] | None = None,
                        ) -> HardwareTrialResult:
     """Play one trial of a scenario on a real robot (or an emulator) and write its results directory.
 
@@ -188,6 +189,9 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
         before_connect: called with the robot built and the controller resolved, just before the robot is
             connected (nothing was sent yet, no socket exists): a person confirms a real robot (it raises to refuse),
             a test puts its emulated robot in place.
+        build: builds the robot from its config instead of `build_hardware_robot` (or `build_process_robot` with
+            `io_process`): a test hands the devices a clock it moves and an emulator's in-process channel, so the
+            whole trial runs in lockstep on that clock.
 
     Returns:
         The record, the episode and what the trial skipped.
@@ -218,7 +222,8 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     else:
         host, port = cfg.target
         local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
-        build = build_process_robot if cfg.io_process else build_hardware_robot
+        if build is None:
+            build = build_process_robot if cfg.io_process else build_hardware_robot
         hardware = build(HardwareRobotConfig(
             robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port, local_host=local_host,
             local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz, transport=cfg.transport,
@@ -245,10 +250,12 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     ctrl = spec.make(desc)
     dt = 1.0 / ctrl.rate_hz
     safety = cfg.safety if cfg.safety is not None else SafetyConfig(position_table=hardware.position_table)
-    connected_at = [time.monotonic()]
-    # a robot on the wall clock: its layer's times in seconds since it was connected; the simulator: robot time
+    # a robot on the wall clock (its own: the monotonic clock, or a test's): its layer's times in seconds since it was
+    # connected; the simulator: robot time
     wall = isinstance(hardware.robot, WallClock)
-    safe = SafeRobot(hardware.robot, safety, clock=(lambda: time.monotonic() - connected_at[0]) if wall else None)
+    wall_time = hardware.robot.wall_time if wall else time.monotonic
+    connected_at = [wall_time()]
+    safe = SafeRobot(hardware.robot, safety, clock=(lambda: wall_time() - connected_at[0]) if wall else None)
     robot = EstimatedRobot(safe, desc, BaseEstimate(desc, dt, contact_force=cfg.contact_force))
     notes = _skipped(trial)
     trial = dataclasses.replace(trial, pushes=())  # no robot here can apply them
@@ -260,7 +267,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         before_connect(hardware, spec)
     if wall:
         freeze_heap()  # all is built: a full collection of it would stall the link and bus threads (interpreter.py)
-    connected_at[0] = time.monotonic()
+    connected_at[0] = wall_time()
     with robot:
         _stand_up(robot, safe, console, cfg.settle_s)
         started_s = safe.now()

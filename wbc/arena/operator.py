@@ -45,12 +45,15 @@ class ScriptedKeys:
 
     Args:
         presses: (trial time [s], key) pairs; each is delivered by the first poll at or after its time.
+        clock: what `delivered` stamps each key with (default `time.monotonic`; a test's clock, e.g. the robot's
+            `wall_time`, to compare with what its emulator logged).
 
     Attributes:
-        delivered: (key, `time.monotonic()` when the poll delivered it), in order.
+        delivered: (key, the clock's time when the poll delivered it), in order.
     """
 
-    def __init__(self, presses: Iterable[tuple[float, str]]) -> None:
+    def __init__(self, presses: Iterable[tuple[float, str]], *, clock: Callable[[], float] = time.monotonic) -> None:
+        self._clock = clock
         self._pending = sorted((float(t), str(k)) for t, k in presses)
         for t, key in self._pending:
             if len(key) != 1:
@@ -61,7 +64,7 @@ class ScriptedKeys:
         """The scripted keys due by trial time `t` [s]."""
         due = [k for at, k in self._pending if at <= t]
         self._pending = [(at, k) for at, k in self._pending if at > t]
-        now = time.monotonic()
+        now = self._clock()
         self.delivered += [(k, now) for k in due]
         return due
 

@@ -28,6 +28,7 @@ from wbc.control.check import CheckConfig, check_controller
 from wbc.control.onnx_policy import ONNX_PREFIX
 from wbc.control.registry import ControllerSpec, get_controller, list_controllers, takes_controller_config
 from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
+from wbc.hardware.capabilities import WallClock
 from wbc.hardware.emulators import (
     BusFault,
     DynamixelEmulatorConfig,
@@ -64,7 +65,7 @@ from wbc.tools.paper import PaperRunConfig, run_paper_table
 from wbc.tools.posture import posture_study
 from wbc.tools.tail import analyze_tail
 
-__all__ = ["BUS_FAULTS", "FAULTS", "HANDLERS", "main"]
+__all__ = ["BUS_FAULTS", "FAULTS", "HANDLERS", "hw_check", "hw_run", "main"]
 
 FAULTS: dict[str, Fault] = {f.value: f for f in Fault}
 """``wbc hw emulate --fault NAME``: the emulator's faults by name."""
@@ -150,7 +151,10 @@ def _bench_train(args: argparse.Namespace) -> int:
 
 def _bench_hw(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
-    result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport)
+    if not args.stand > 0:
+        raise ConfigError(f"--stand must be > 0 s, got {args.stand}")
+    result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport,
+                      stand_seconds=None if args.no_safety else args.stand)
     if args.json:
         printers.print_json(result)
     else:
@@ -336,6 +340,21 @@ def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
 
 def _hw_check(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
+    return hw_check(args)
+
+
+def hw_check(args: argparse.Namespace, *,
+             build: Callable[[HardwareRobotConfig], HardwareRobot] = build_hardware_robot) -> int:
+    """``wbc hw check``: read the robot through the safety layer for ``--seconds`` of its clock, sending only damping.
+
+    Args:
+        args: the parsed command line.
+        build: builds the robot from its config (a test hands its devices a clock it moves and an emulator's
+            in-process channel; the seconds are then the robot's clock's).
+
+    Returns:
+        0, after printing the state, the link's counters and the safety layer's verdict.
+    """
     host, port = _hardware_target(args, "check a real robot")
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
@@ -343,7 +362,7 @@ def _hw_check(args: argparse.Namespace) -> int:
         raise UnknownNameError("Unitree robot", args.robot, tuple(DESCRIPTIONS))
     local_host, local_port = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"),
                                       "--local")
-    hardware = build_hardware_robot(HardwareRobotConfig(
+    hardware = build(HardwareRobotConfig(
         robot=DESCRIPTIONS[args.robot], arm_mode="actuated" if args.arm_port else "none", legs_host=host,
         legs_port=port, local_host=local_host, local_port=local_port, allow_hardware=args.allow_hardware,
         transport=args.transport, arm_port=args.arm_port))
@@ -355,10 +374,11 @@ def _hw_check(args: argparse.Namespace) -> int:
     safe = SafeRobot(hardware.robot, SafetyConfig(position_table=hardware.position_table, on_event=events.append))
     legs = hardware.robot.legs if isinstance(hardware.robot, QuadrupedArmRobot) else hardware.robot
     arm = hardware.robot.arm if isinstance(hardware.robot, QuadrupedArmRobot) else None
+    clock = hardware.robot.wall_time if isinstance(hardware.robot, WallClock) else time.monotonic
     with safe:
-        end = time.monotonic() + args.seconds
+        end = clock() + args.seconds
         for _ in range(int(args.seconds / 0.01) + 2):
-            if time.monotonic() >= end:
+            if clock() >= end:
                 break
             safe.read()
             safe.advance(0.01)
@@ -376,6 +396,20 @@ def _hw_check(args: argparse.Namespace) -> int:
 
 def _hw_run(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
+    return hw_run(args)
+
+
+def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], HardwareRobot] | None = None) -> int:
+    """``wbc hw run``: play a scenario's trial on a robot (`run_hardware_trial`) and print what it did.
+
+    Args:
+        args: the parsed command line.
+        build: builds the robot from its config instead of the default (`run_hardware_trial`'s `build`: a test's
+            clock and an emulator's in-process channel).
+
+    Returns:
+        0 once the trial's results are written; 130 when interrupted.
+    """
     if args.sim == (args.target is not None):
         raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
                           "protocol on the simulator; not both")
@@ -404,7 +438,7 @@ def _hw_run(args: argparse.Namespace) -> int:
                                                       OPERATOR_ACTIONS.items()) + " (no Enter needed)")
     try:
         result = run_hardware_trial(cfg, keys=keys, observer=live[1] if live is not None else None,
-                                    before_connect=confirm)
+                                    before_connect=confirm, build=build)
     except KeyboardInterrupt:
         print("wbc hw run: interrupted; the robot was closed into damping; no results were written", file=sys.stderr)
         return 130

@@ -137,6 +137,10 @@ def build_parser() -> argparse.ArgumentParser:
     bhw.add_argument("--seconds", type=float, default=3.0, help="how long the link is measured [s] (default 3)")
     bhw.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
     bhw.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
+    bhw.add_argument("--stand", type=float, default=10.0,
+                     help="then time the safety layer's reactions (e-stop, silence, stall, hot motor -> damping on "
+                     "the wire) and a stand of this many seconds through it, in real time [s] (default 10)")
+    bhw.add_argument("--no-safety", action="store_true", help="the link's timing only (no safety reactions, no stand)")
     bhw.add_argument("--json", action="store_true", help="print JSON")
     bhw.set_defaults(handler="bench hw")
     blat = bench.add_parser("latency", help="the wire's loop latency, the sim delay that plays it, controllers' margin",

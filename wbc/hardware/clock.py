@@ -128,7 +128,11 @@ class ManualClock:
         summed otherwise by rounding alone.
         """
         while self._queue and self._queue[0][0] <= target + _TOLERANCE:
-            when, _, call = heapq.heappop(self._queue)
+            when, order, call = heapq.heappop(self._queue)
+            # tasks due within the tolerance of each other are due together: the first registered runs first (two
+            # schedules of the same period from different origins differ by rounding alone)
+            while self._queue and self._queue[0][0] <= when + _TOLERANCE and self._queue[0][1] < order:
+                when, order, call = heapq.heapreplace(self._queue, (when, order, call))
             if call.cancelled:
                 continue
             self._now = max(self._now, when)

@@ -10,20 +10,27 @@ its Dynamixel bus (`wbc.hardware.dynamixel.DynamixelArm`), joined to the legs in
 in mode ``actuated`` (15 joints) the controller drives it; in mode ``locked`` its servos hold it stowed (12 joints),
 or, when no serial port is given, it is fixed on the trunk mechanically and the legs' wire alone drives the robot; in
 mode ``none`` there is no arm.
+
+Both devices read the time from one `Clock` (`wbc.hardware.clock`): the monotonic clock on a robot, a `ManualClock`
+in a deterministic test, which also hands in the legs' datagram channel (an emulator's in-process transport).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 from wbc.errors import ConfigError, UnknownNameError
+from wbc.hardware.clock import MONOTONIC, Clock
 from wbc.hardware.dynamixel.arm_config import DynamixelArmConfig
 from wbc.hardware.dynamixel.arm_robot import DynamixelArm
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
 from wbc.hardware.robot import Robot
 from wbc.hardware.unitree.robot import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig
 from wbc.hardware.unitree.target import is_loopback
+from wbc.hardware.unitree.transport import Transport
 from wbc.robots.description import ARM_MODES, RobotDescription, check_arm_mode
 from wbc.robots.registry import get_robot
 
@@ -108,8 +115,19 @@ class HardwareRobot:
     target: str
 
 
-def build_hardware_robot(config: HardwareRobotConfig) -> HardwareRobot:
+def build_hardware_robot(config: HardwareRobotConfig, *, clock: Clock = MONOTONIC,
+                         legs_transport: Transport | None = None,
+                         arm_handlers: Callable[[str], tuple[Any, Any]] | None = None) -> HardwareRobot:
     """Build the real robot `config` names; nothing is connected and no socket exists yet.
+
+    Args:
+        config: which robot, and where its parts are reached.
+        clock: the clock both devices run on (`UnitreeRobot`, `DynamixelArm`): the monotonic clock on a robot, a
+            `ManualClock` in a deterministic test.
+        legs_transport: the legs' datagram channel (e.g. `UnitreeEmulator.transport`); None: the one
+            `config.transport` names, built at connect.
+        arm_handlers: the arm's port and packet handlers (`DynamixelArm`'s `handlers`, e.g.
+            `RobotEmulator.arm_handlers`); None: the serial port's.
 
     Raises:
         TargetRefusedError: a target outside 127.0.0.0/8 without `allow_hardware`, or not an IPv4 literal.
@@ -122,7 +140,7 @@ def build_hardware_robot(config: HardwareRobotConfig) -> HardwareRobot:
     legs = UnitreeRobot(UnitreeRobotConfig(
         robot=unitree, target_host=config.legs_host, target_port=config.legs_port, local_host=local_host,
         local_port=config.local_port, allow_hardware=config.allow_hardware, rate_hz=config.rate_hz,
-        transport=config.transport))
+        transport=config.transport), legs_transport, clock=clock)
     description = get_robot(config.robot, config.arm_mode)
     target = f"legs {config.transport} {config.legs_host}:{config.legs_port}"
     arm_config = config.arm
@@ -131,7 +149,7 @@ def build_hardware_robot(config: HardwareRobotConfig) -> HardwareRobot:
     if arm_config is None:
         return HardwareRobot(robot=legs, description=description, backend="unitree", position_table=unitree,
                              target=target)
-    arm = DynamixelArm(dataclasses.replace(arm_config, robot=config.robot))
+    arm = DynamixelArm(dataclasses.replace(arm_config, robot=config.robot), arm_handlers, clock=clock)
     joined = QuadrupedArmRobot(legs, arm, QuadrupedArmConfig(arm_mode=config.arm_mode))
     return HardwareRobot(robot=joined, description=description, backend="unitree+dynamixel", position_table=unitree,
                          target=f"{target}, arm serial {arm_config.port}")

@@ -17,7 +17,8 @@ class LoggedCommand:
     """A decoded command frame.
 
     Attributes:
-        time: arrival time on the emulator's monotonic clock (`time.monotonic`) [s].
+        time: arrival time on the emulator's clock (`UnitreeEmulator.clock`: the monotonic clock behind its UDP
+            server, the test's clock behind an in-process `EmulatorTransport`) [s].
         sim_time: the emulated robot's simulation time when it arrived [s].
         wire: the frame's leg-motor block, dequantised.
     """

@@ -9,6 +9,14 @@ Two modes. ``lockstep``: each valid command advances physics by one control peri
 so simulated time moves exactly with the commands a backend sends. ``realtime``: physics steps at wall-clock pace
 on the emulator's own thread, which sends a state every period to the latest sender, as the robot does. Faults
 (`Fault`) bend the replies on demand: `inject` / `clear`.
+
+The handling of a command (`handle_command`: decode, log, write the simulation, the lockstep step) and the making
+of a reply (`compose_reply`: the state with the faults applied, and when it leaves) know no socket. Two servers
+use them: the UDP server on 127.0.0.1 (`start`), and the in-process `EmulatorTransport` (`transport`), a
+`wbc.hardware.unitree.Transport` a backend is handed instead of a socket, on a `Clock` a test controls: each command
+it sends is handled within the same call and its reply queued for `receive`, a delayed reply is queued when the
+clock reaches its time, and in ``realtime`` mode the physics steps as the clock moves (`ManualClock.call_every`).
+The log then stamps each command with that clock's time, so a test can say in which link period a frame went out.
 """
 
 from __future__ import annotations
@@ -20,12 +28,12 @@ import random
 import select
 import socket
 import threading
-import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from wbc.errors import CommandError, ConfigError, FrameError, PortBusyError, RobotLinkError, UnknownNameError
+from wbc.hardware.clock import MONOTONIC, Clock, ManualClock, ScheduledCall
 from wbc.hardware.emulators.faults import Fault, FaultSet, apply_state_faults, mangle_frame
 from wbc.hardware.emulators.logged_command import LoggedCommand
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -42,7 +50,7 @@ from wbc.hardware.unitree.target import is_loopback
 from wbc.hardware.unitree.transport import MAX_DATAGRAM
 from wbc.types import BaseTruth, MotorCommand
 
-__all__ = ["LEG_ONLY_ARM_MODES", "MODES", "UnitreeEmulator", "UnitreeEmulatorConfig"]
+__all__ = ["LEG_ONLY_ARM_MODES", "MODES", "EmulatorTransport", "Reply", "UnitreeEmulator", "UnitreeEmulatorConfig"]
 
 MODES = ("lockstep", "realtime")
 _POLL = 0.01  # [s] longest the emulator thread blocks, so `close` is prompt
@@ -50,6 +58,22 @@ _POLL = 0.01  # [s] longest the emulator thread blocks, so `close` is prompt
 
 LEG_ONLY_ARM_MODES = ("none", "locked")
 """Arm modes whose robot the Unitree wire drives whole: the arm absent, or on the trunk and held."""
+
+
+@dataclass(frozen=True)
+class Reply:
+    """One state datagram the emulator puts on the wire, as the active faults make it.
+
+    Attributes:
+        frame: the bytes (possibly corrupt, short or long).
+        delay: how long after now it leaves [s] (DELAY and JITTER; 0 for at once).
+        foreign: sent from another port than the one commands go to (FOREIGN_PORT).
+    """
+
+    frame: bytes
+    delay: float
+    foreign: bool
+
 
 @dataclass(frozen=True, kw_only=True)
 class UnitreeEmulatorConfig:
@@ -132,6 +156,9 @@ class UnitreeEmulator:
         self.failure: BaseException | None = None
         self.address: tuple[str, int] = (self.config.host, 0)
         self._held = self.config.held_until_driven
+        self.clock: Clock = MONOTONIC  # what the log's times are read from
+        self._in_process: EmulatorTransport | None = None
+        self._realtime_task: ScheduledCall | None = None
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
     def start(self) -> UnitreeEmulator:
@@ -140,9 +167,12 @@ class UnitreeEmulator:
         Raises:
             PortBusyError: the configured port is held by another socket.
             RobotLinkError: the socket could not be bound for another reason.
+            ConfigError: it serves in process already (`transport`).
         """
         if self._thread is not None:
             return self
+        if self._in_process is not None:
+            raise ConfigError("UnitreeEmulator.start: it serves in process already (transport); use one or the other")
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.bind((self.config.host, self.config.port))
@@ -164,8 +194,40 @@ class UnitreeEmulator:
         self._thread.start()
         return self
 
+    def transport(self, clock: Clock = MONOTONIC) -> EmulatorTransport:
+        """An in-process `Transport` to this robot, on `clock`; no socket, no thread (see the module's docstring).
+
+        Builds the simulation at its standing pose (as `start` does) on the first call. A second call hands out a
+        new transport, to which the replies then go (the one peer, as the robot answers the latest sender).
+
+        Args:
+            clock: the time the log, the delayed replies and (``realtime``) the physics run on; a ``realtime``
+                emulator needs a `ManualClock` (its physics is a task of that clock).
+
+        Raises:
+            ConfigError: the socket server runs already, or ``realtime`` without a `ManualClock`.
+        """
+        if self._thread is not None:
+            raise ConfigError("UnitreeEmulator.transport: the UDP server runs already (start); use one or the other")
+        realtime = self.config.mode == "realtime"
+        if realtime and not isinstance(clock, ManualClock):
+            raise ConfigError("UnitreeEmulator.transport: a realtime emulator in process steps its physics on a "
+                              "ManualClock; hand one in, or use mode='lockstep'")
+        if self._in_process is None:
+            self.sim.connect()
+            self.sim.reset(self.config.seed)
+        self.clock = clock
+        self._in_process = EmulatorTransport(self, clock)
+        if realtime and self._realtime_task is None:
+            self._realtime_task = clock.call_every(self.config.control_period, self._realtime_period,
+                                                   first=clock.now() + self.config.control_period)
+        return self._in_process
+
     def close(self) -> None:
-        """Stop the thread and close the sockets. Idempotent."""
+        """Stop the thread (or the in-process physics task) and close the sockets. Idempotent."""
+        if self._realtime_task is not None:
+            self._realtime_task.cancel()
+            self._realtime_task = None
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
@@ -233,6 +295,76 @@ class UnitreeEmulator:
         with self._lock:
             return self.sim.time
 
+    # -- what a command does, and what the robot answers (no socket) -----------------------------------------------
+    def handle_command(self, data: bytes, *, step: bool) -> bool:
+        """Take one LowCmd datagram: decode, log, write the simulation, and with `step` advance it one period.
+
+        Returns:
+            True if it was a valid command (a reject is counted in `stats` and changes nothing else).
+        """
+        try:
+            wire = decode_command(self.layout, data, stats=self.stats)
+        except FrameError:
+            return False
+        cmd = self._off
+        if (wire.mode == MODE_SERVO).all():
+            try:
+                cmd = wire.motor_command()
+            except CommandError:
+                self.refused += 1
+        elif (wire.mode == MODE_SERVO).any():
+            mask = wire.mode == MODE_SERVO
+            try:
+                on = wire.motor_command()
+                cmd = MotorCommand(q=on.q, dq=on.dq, kp=on.kp * mask, kd=on.kd * mask, tau=on.tau * mask)
+            except CommandError:
+                self.refused += 1
+        with self._lock:
+            if self.config.log_size:
+                self._log.append(LoggedCommand(time=self.clock.now(), sim_time=self.sim.time, wire=wire))
+            self.sim.write(cmd)
+            if self._held and (np.any(cmd.kp > 0) or np.any(cmd.tau != 0)):
+                self._held = False
+            if step and not self._held:
+                self.sim.advance(self.config.control_period)
+        return True
+
+    def step_realtime(self) -> None:
+        """One period of the realtime mode's physics (nothing while the robot is held)."""
+        with self._lock:
+            if not self._held:
+                self.sim.advance(self.config.control_period)
+
+    def compose_reply(self) -> Reply | None:
+        """The state datagram the robot sends now, bent by the active faults; None if none goes out (SILENCE, DROP)."""
+        active = self.faults.snapshot()
+        if Fault.SILENCE in active:
+            return None
+        if Fault.DROP in active and self._coin.random() < float(active[Fault.DROP]):
+            return None
+        with self._lock:
+            state = self.sim.read()
+        w, x, y, z = state.imu_quat
+        rpy = np.array([math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
+                        math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x)))),
+                        math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))])
+        extras = LowStateExtras(motor_mode=np.full(12, MODE_SERVO, dtype=np.uint8),
+                                motor_temperature=np.full(12, self.config.motor_temperature, dtype=np.int8),
+                                imu_rpy=rpy)
+        state, extras = apply_state_faults(active, state, extras)
+        frame = mangle_frame(active, encode_state(self.layout, state, extras))
+        delay = float(active.get(Fault.DELAY, 0.0) or 0.0)
+        if Fault.JITTER in active:
+            delay += self._coin.uniform(0.0, float(active[Fault.JITTER]))
+        # a delayed reply leaves from the robot's own port (the foreign port is a separate fault's)
+        return Reply(frame=frame, delay=delay, foreign=delay <= 0 and Fault.FOREIGN_PORT in active)
+
+    def _realtime_period(self) -> None:
+        """The in-process realtime mode: physics steps one period, and the robot answers its peer."""
+        self.step_realtime()
+        if self._in_process is not None and self._in_process.spoken:
+            self._in_process.deliver(self.compose_reply())
+
     # -- server thread --------------------------------------------------------------------------------------------
     def _run(self) -> None:
         try:
@@ -241,21 +373,19 @@ class UnitreeEmulator:
             self.failure = exc
 
     def _serve(self) -> None:
-        sock, period = self._sock, self.config.control_period
+        sock, period, clock = self._sock, self.config.control_period, self.clock
         realtime = self.config.mode == "realtime"
-        next_step = time.monotonic() + period
+        next_step = clock.now() + period
         while not self._stop.is_set():
-            now = time.monotonic()
+            now = clock.now()
             wake = [now + _POLL] + ([next_step] if realtime else []) + [p[0] for p in self._pending]
             timeout = min(wake) - now
             if timeout > 0:
                 select.select([sock], [], [], timeout)  # not epoll: its timeout is whole milliseconds
             self._drain(sock, step=not realtime)
-            now = time.monotonic()
+            now = clock.now()
             if realtime and now >= next_step:
-                with self._lock:
-                    if not self._held:
-                        self.sim.advance(period)
+                self.step_realtime()
                 if self._peer is not None:
                     self._reply(self._peer)
                 next_step += period
@@ -271,59 +401,20 @@ class UnitreeEmulator:
                 return
             except ConnectionRefusedError:
                 continue
-            try:
-                wire = decode_command(self.layout, data, stats=self.stats)
-            except FrameError:
+            if not self.handle_command(data, step=step):
                 continue
-            cmd = self._off
-            if (wire.mode == MODE_SERVO).all():
-                try:
-                    cmd = wire.motor_command()
-                except CommandError:
-                    self.refused += 1
-            elif (wire.mode == MODE_SERVO).any():
-                mask = wire.mode == MODE_SERVO
-                try:
-                    on = wire.motor_command()
-                    cmd = MotorCommand(q=on.q, dq=on.dq, kp=on.kp * mask, kd=on.kd * mask, tau=on.tau * mask)
-                except CommandError:
-                    self.refused += 1
-            with self._lock:
-                if self.config.log_size:
-                    self._log.append(LoggedCommand(time=time.monotonic(), sim_time=self.sim.time, wire=wire))
-                self.sim.write(cmd)
-                if self._held and (np.any(cmd.kp > 0) or np.any(cmd.tau != 0)):
-                    self._held = False
-                if step and not self._held:
-                    self.sim.advance(self.config.control_period)
             self._peer = peer[:2]
             if step:
                 self._reply(self._peer)
 
     def _reply(self, peer: tuple[str, int]) -> None:
-        active = self.faults.snapshot()
-        if Fault.SILENCE in active:
+        reply = self.compose_reply()
+        if reply is None:
             return
-        if Fault.DROP in active and self._coin.random() < float(active[Fault.DROP]):
+        if reply.delay > 0:
+            self._pending.append((self.clock.now() + reply.delay, reply.frame, peer))
             return
-        with self._lock:
-            state = self.sim.read()
-        w, x, y, z = state.imu_quat
-        rpy = np.array([math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
-                        math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x)))),
-                        math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))])
-        extras = LowStateExtras(motor_mode=np.full(12, MODE_SERVO, dtype=np.uint8),
-                                motor_temperature=np.full(12, self.config.motor_temperature, dtype=np.int8),
-                                imu_rpy=rpy)
-        state, extras = apply_state_faults(active, state, extras)
-        frame = mangle_frame(active, encode_state(self.layout, state, extras))
-        delay = float(active.get(Fault.DELAY, 0.0) or 0.0)
-        if Fault.JITTER in active:
-            delay += self._coin.uniform(0.0, float(active[Fault.JITTER]))
-        if delay > 0:
-            self._pending.append((time.monotonic() + delay, frame, peer))
-            return
-        self._send(frame, peer, foreign=Fault.FOREIGN_PORT in active)
+        self._send(reply.frame, peer, foreign=reply.foreign)
 
     def _send(self, frame: bytes, peer: tuple[str, int], *, foreign: bool) -> None:
         sock = self._foreign if foreign else self._sock
@@ -340,3 +431,114 @@ class UnitreeEmulator:
         self._pending = [p for p in self._pending if p[0] > now]
         for _, frame, peer in due:
             self._send(frame, peer, foreign=False)
+
+
+class EmulatorTransport:
+    """A `wbc.hardware.unitree.Transport` straight into a `UnitreeEmulator` in this process (its `transport`).
+
+    `send` hands the datagram to the emulator, which handles it within the call (lockstep: one physics step) and
+    whose reply is queued at once, or, delayed, when the clock reaches its time (`ManualClock.call_at`; on another
+    clock, at the first `receive` after it). A reply from the foreign port is counted in `foreign` and never
+    queued, as `UdpTransport` drops it; corrupt, short and long frames are queued as they are, for the backend's
+    decoder to reject.
+
+    Args:
+        emulator: the robot.
+        clock: the time delayed replies are due on.
+
+    Attributes:
+        foreign: replies dropped because they came from another port than the robot's.
+    """
+
+    def __init__(self, emulator: UnitreeEmulator, clock: Clock = MONOTONIC) -> None:
+        self.emulator = emulator
+        self.clock = clock
+        self.foreign = 0
+        self.spoken = False  # a command was sent: the robot knows where to answer (realtime mode)
+        self._inbox: list[bytes] = []
+        self._pending: list[tuple[float, bytes]] = []
+        self._ready = threading.Condition()
+        self._closed = False
+
+    @property
+    def closed(self) -> bool:
+        """True once `close` ran."""
+        return self._closed
+
+    def send(self, frame: bytes) -> None:
+        """Hand `frame` to the emulator; in lockstep its reply (if any) is queued before this returns.
+
+        Raises:
+            RobotLinkError: the transport is closed.
+        """
+        if self._closed:
+            raise RobotLinkError("EmulatorTransport: closed")
+        emu = self.emulator
+        lockstep = emu.config.mode == "lockstep"
+        if emu.handle_command(frame, step=lockstep):
+            self.spoken = True
+            if lockstep:
+                self.deliver(emu.compose_reply())
+
+    def deliver(self, reply: Reply | None) -> None:
+        """Put a reply on its way to `receive`: now, or when the clock reaches its delay."""
+        if reply is None or self._closed:
+            return
+        if reply.delay > 0:
+            due = self.clock.now() + reply.delay
+            if isinstance(self.clock, ManualClock):
+                self.clock.call_at(due, lambda: self._arrive(reply.frame, foreign=False))
+            else:
+                with self._ready:
+                    self._pending.append((due, reply.frame))
+            return
+        self._arrive(reply.frame, foreign=reply.foreign)
+
+    def _arrive(self, frame: bytes, *, foreign: bool) -> None:
+        if self._closed:
+            return
+        self.emulator.replies += 1
+        with self._ready:
+            if foreign:
+                self.foreign += 1
+                return
+            self._inbox.append(frame)
+            self._ready.notify_all()
+
+    def _due(self) -> None:
+        """Move the delayed replies whose time has come into the inbox (a clock without a scheduler)."""
+        if not self._pending:
+            return
+        now = self.clock.now()
+        due = sorted((p for p in self._pending if p[0] <= now), key=lambda p: p[0])
+        self._pending = [p for p in self._pending if p[0] > now]
+        for _, frame in due:
+            self.emulator.replies += 1
+            self._inbox.append(frame)
+
+    def receive(self) -> list[bytes]:
+        """Every reply queued so far, oldest first (empty if none)."""
+        with self._ready:
+            self._due()
+            out, self._inbox = self._inbox, []
+        return out
+
+    def wait_readable(self, timeout: float) -> bool:
+        """True if a reply is queued; on a `ManualClock` at once, otherwise after waiting up to `timeout` [s] for one.
+
+        On a `ManualClock` time moves only when the clock is moved, so there is nothing to wait for.
+        """
+        with self._ready:
+            self._due()
+            if self._inbox or isinstance(self.clock, ManualClock):
+                return bool(self._inbox)
+            self._ready.wait(max(0.0, timeout))
+            self._due()
+            return bool(self._inbox)
+
+    def close(self) -> None:
+        """Stop taking commands; replies still due are dropped. Idempotent."""
+        self._closed = True
+        with self._ready:
+            self._inbox.clear()
+            self._pending.clear()

@@ -13,26 +13,33 @@ then sends one LowCmd frame:
 `read` returns the newest valid state; its `tick` counts the valid frames received (a freshness counter: the
 robot's own tick has no verified unit), so a frame whose tick did not advance is stale, and `state_age` says for
 how long; `remote()` and `motor_status()` report that state's remote and motor modes and temperatures (the safety
-layer's `RemoteSource` and `MotorStatusSource`). `advance(dt)` paces the caller on a monotonic clock, counts late
+layer's `RemoteSource` and `MotorStatusSource`). `advance(dt)` paces the caller on the link's clock, counts late
 calls, and then, unless a state newer than the one the caller last read has already arrived, waits (at most two
 link periods) for one: a loop whose work took most of its period goes on at once with the state that came meanwhile,
 rather than waiting for yet another (which locked the loop to the state stream's phase and made it late on every
 tick over the wire).
 Every value that reaches the wire was clamped twice: by `Robot.write` to the joint table (the URDF's position
 range intersected with the SDK's PositionLimit table) and by `encode_command` while quantising.
+
+Every time the link reads (the send schedule, the write deadline, a state's age, `wall_time`) comes from its
+`Clock` (`wbc.hardware.clock`). On the monotonic clock (the default) the link runs on a thread of its own. Handed a
+`ManualClock`, it starts no thread: `connect` registers one link period (the before-send hook, the frame chosen
+and sent, the datagrams received) with `ManualClock.call_every`, and whoever moves the clock runs the link:
+`advance`, `connect`'s wait for the first state and `close`'s damping all move it period by period. The thread's
+loop runs the very same period body, so both modes send the same frames for the same times.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from wbc.errors import ConfigError, FrameError, RobotLinkError, UnknownNameError
+from wbc.hardware.clock import MONOTONIC, Clock, ManualClock, ScheduledCall
 from wbc.hardware.pacing import WallPacer
 from wbc.hardware.robot import Robot
 from wbc.hardware.unitree.command_codec import encode_command
@@ -144,11 +151,17 @@ class UnitreeRobot(Robot):
         config: the link.
         transport: the datagram channel; None builds the one `config.transport` names at `connect` (and closes it
             at `close`). A transport handed in is the caller's to close.
+        clock: where the link reads the time; the monotonic clock runs the link on a thread, a `ManualClock` runs
+            it as a task on that clock (no thread: the link moves when the clock is moved).
     """
 
-    def __init__(self, config: UnitreeRobotConfig, transport: Transport | None = None) -> None:
+    def __init__(self, config: UnitreeRobotConfig, transport: Transport | None = None, *,
+                 clock: Clock = MONOTONIC) -> None:
         super().__init__()
         self.config = config
+        self.clock = clock
+        self._stepped = isinstance(clock, ManualClock)
+        self._task: ScheduledCall | None = None
         self.layout: FrameLayout = frame_layout(config.robot)
         self.desc, self._limits = unitree_joint_table(config.robot)
         self._given_transport = transport
@@ -176,8 +189,10 @@ class UnitreeRobot(Robot):
         self._failure: BaseException | None = None
         self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0, overruns=0)
         self._periods = [0.0, np.inf, 0.0, 0, 0.0]  # sum, min, max, count, sum of squares
-        self._pacer = WallPacer()
-        self._t0 = time.monotonic()
+        self._next_send: float | None = None  # when the next period is due
+        self._last_send: float | None = None
+        self._pacer = WallPacer(self.clock)
+        self._t0 = self.clock.now()
 
     # -- Robot ----------------------------------------------------------------------------------------------------
     @property
@@ -200,13 +215,19 @@ class UnitreeRobot(Robot):
             channel = SdkTransport if cfg.transport == "sdk" else UdpTransport
             self._transport = channel((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
                                       allow_hardware=cfg.allow_hardware)
-        self._thread = threading.Thread(target=self._run, name=f"unitree-{cfg.robot}-link", daemon=True)
-        self._thread.start()
-        deadline = time.monotonic() + cfg.connect_timeout
-        with self._lock:
-            while self._state is None and self._failure is None and time.monotonic() < deadline:
-                self._lock.wait(max(0.0, deadline - time.monotonic()))
-            ok = self._state is not None
+        if self._stepped:
+            self._task = self.clock.call_every(self._period, self._stepped_period)
+            deadline = self.clock.now() + cfg.connect_timeout
+            while self._state is None and self._failure is None and self.clock.now() < deadline:
+                self.clock.advance(min(self._period, deadline - self.clock.now()))
+        else:
+            self._thread = threading.Thread(target=self._run, name=f"unitree-{cfg.robot}-link", daemon=True)
+            self._thread.start()
+            deadline = self.clock.now() + cfg.connect_timeout
+            with self._lock:
+                while self._state is None and self._failure is None and self.clock.now() < deadline:
+                    self._lock.wait(max(0.0, deadline - self.clock.now()))
+        ok = self._state is not None
         if not ok:
             self._shutdown(damp=False)
             raise RobotLinkError(
@@ -221,9 +242,16 @@ class UnitreeRobot(Robot):
     def _shutdown(self, *, damp: bool) -> None:
         with self._lock:
             if damp and self._failure is None:
-                self._closing_until = time.monotonic() + self.config.close_damping
+                self._closing_until = self.clock.now() + self.config.close_damping
             else:
                 self._stop = True
+        if self._task is not None:
+            # the close damping goes out as the clock moves through it; the period after it ends the task
+            while (not self._task.cancelled and self._closing_until is not None and not self._stop
+                   and self.clock.now() <= self._closing_until + self._period):
+                self.clock.advance(self._period)
+            self._task.cancel()
+            self._task = None
         if self._thread is not None:
             self._thread.join(timeout=self.config.close_damping + 1.0)
             self._thread = None
@@ -245,25 +273,30 @@ class UnitreeRobot(Robot):
         frame = encode_command(self.layout, cmd, limits=self._limits)
         with self._lock:
             self._frame = frame
-            self._written_at = time.monotonic()
+            self._written_at = self.clock.now()
 
     def _advance(self, dt: float) -> None:
         with self._lock:
             start_tick = self._read_fresh
         self._pacer.wait(dt)
-        grace = time.monotonic() + 2.0 * self._period
-        with self._lock:
-            while self._fresh == start_tick and time.monotonic() < grace:
-                self._lock.wait(max(0.0, grace - time.monotonic()))
+        clock = self.clock
+        grace = clock.now() + 2.0 * self._period
+        if self._stepped:
+            while self._fresh == start_tick and self._failure is None and clock.now() < grace:
+                clock.advance(min(self._period, grace - clock.now()))
+        else:
+            with self._lock:
+                while self._fresh == start_tick and clock.now() < grace:
+                    self._lock.wait(max(0.0, grace - clock.now()))
         self._raise_failure()
 
     def wall_time(self) -> float:
-        """Now on the link's monotonic clock [s] (the `WallClock` capability: the motors live in wall time)."""
-        return time.monotonic()
+        """Now on the link's clock [s] (the `WallClock` capability: the motors live in wall time)."""
+        return self.clock.now()
 
     def set_link_hooks(self, *, before_send: Callable[[], None] | None = None,
                        on_state: Callable[[], None] | None = None) -> None:
-        """Functions the link thread calls, for a caller that lives beside the link rather than above it.
+        """Functions the link calls every period, for a caller that lives beside the link rather than above it.
 
         `before_send` runs every period just before the link chooses its frame (a forwarder calls `write` there with
         the newest command, which then goes out in this very period, as a command written in between would);
@@ -316,7 +349,7 @@ class UnitreeRobot(Robot):
     def state_age(self) -> float:
         """Time since the newest valid state arrived [s]; inf before the first."""
         with self._lock:
-            return time.monotonic() - self._state_at
+            return self.clock.now() - self._state_at
 
     def link_stats(self) -> LinkStats:
         """A snapshot of the link's counters."""
@@ -326,7 +359,7 @@ class UnitreeRobot(Robot):
             foreign = self._transport.foreign if self._transport is not None else 0
             return LinkStats(
                 **self._counts, valid_states=self._fresh, rejected_states=self.decode_stats.rejected,
-                foreign=foreign, state_age=time.monotonic() - self._state_at,
+                foreign=foreign, state_age=self.clock.now() - self._state_at,
                 period_mean=mean, period_std=float(np.sqrt(max(0.0, squares / n - mean * mean))) if n else 0.0,
                 period_min=low if n else 0.0, period_max=high,
                 late_advances=self._pacer.late_advances, worst_lateness=self._pacer.worst_lateness,
@@ -337,46 +370,68 @@ class UnitreeRobot(Robot):
             raise RobotLinkError(f"UnitreeRobot({self.config.robot}): the link thread died: "
                                  f"{self._failure!r}") from self._failure
 
-    # -- link thread ----------------------------------------------------------------------------------------------
+    # -- the link: one period's body, run by the thread or by the clock ------------------------------------------
     def _run(self) -> None:
         try:
             self._loop()
         except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's thread
-            with self._lock:
-                self._failure = exc
-                self._lock.notify_all()
+            self._record_failure(exc)
+
+    def _record_failure(self, exc: BaseException) -> None:
+        with self._lock:
+            self._failure = exc
+            self._lock.notify_all()
 
     def _loop(self) -> None:
-        transport, period = self._transport, self._period
-        next_send = time.monotonic()
-        last_send: float | None = None
+        """The link thread: a period whenever one is due; in between, every datagram as it arrives."""
+        transport, clock = self._transport, self.clock
+        self._next_send = clock.now()
         while True:
-            now = time.monotonic()
-            if now >= next_send:
-                if self._before_send is not None:
-                    self._before_send()
-                with self._lock:
-                    if self._stop or (self._closing_until is not None and now >= self._closing_until):
-                        return
-                    frame = self._choose_frame(now)
-                    if last_send is not None:
-                        gap = now - last_send
-                        p = self._periods
-                        p[0] += gap
-                        p[1] = min(p[1], gap)
-                        p[2] = max(p[2], gap)
-                        p[3] += 1
-                        p[4] += gap * gap
-                    next_send += period
-                    if next_send < now:
-                        self._counts["overruns"] += 1
-                        next_send = now + period
-                transport.send(frame)
-                last_send = now
+            if clock.now() >= self._next_send and not self._send_period(transport):
+                return
             self._receive(transport)
-            wait = next_send - time.monotonic()
+            wait = self._next_send - clock.now()
             if wait > 0:
                 transport.wait_readable(wait)
+
+    def _stepped_period(self) -> None:
+        """One link period as a task of a `ManualClock` (the same body as the thread's; it ends the task at close)."""
+        transport = self._transport
+        try:
+            if not self._send_period(transport):
+                self._task.cancel()
+                return
+            self._receive(transport)
+        except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's code, as the thread's
+            self._record_failure(exc)
+            self._task.cancel()
+
+    def _send_period(self, transport: Transport) -> bool:
+        """The sending half of a period: the before-send hook, the frame chosen and sent; False: the link is done."""
+        if self._before_send is not None:
+            self._before_send()
+        now = self.clock.now()
+        with self._lock:
+            if self._stop or (self._closing_until is not None and now >= self._closing_until):
+                return False
+            frame = self._choose_frame(now)
+            if self._last_send is not None:
+                gap = now - self._last_send
+                p = self._periods
+                p[0] += gap
+                p[1] = min(p[1], gap)
+                p[2] = max(p[2], gap)
+                p[3] += 1
+                p[4] += gap * gap
+            if self._next_send is None:
+                self._next_send = now
+            self._next_send += self._period
+            if self._next_send < now:
+                self._counts["overruns"] += 1
+                self._next_send = now + self._period
+        transport.send(frame)
+        self._last_send = now
+        return True
 
     def _choose_frame(self, now: float) -> bytes:
         """The frame to send now (called with the lock held)."""
@@ -400,7 +455,7 @@ class UnitreeRobot(Robot):
                 continue  # counted in decode_stats; the last good state stays
         if newest is None:
             return
-        now = time.monotonic()
+        now = self.clock.now()
         state, extras = newest
         with self._lock:
             self._fresh += 1

@@ -7,10 +7,19 @@ the link thread itself, and to read that thread's CPU clock at each send: `LinkS
 min and max of the send period, and neither percentiles nor round trips. While the link runs, the bench writes a
 standing hold every link period, as a control loop would. Both processes share this machine's cores, so the
 figures include that contention; a real robot's firmware would not.
+
+`bench_safety` times what the test suite checks in link periods on a clock it moves (`tests/test_hardware_faults.py`,
+`tests/test_unitree_robot.py`, `tests/test_hw_run.py`), here in real time: SafeRobot(UnitreeRobot) against a
+real-time `UnitreeEmulator` on 127.0.0.1 (its UDP server thread, in this process, as those tests' realtime twins
+run it). Each reaction is timed from its cause to the first damping frame the emulator decoded off the wire: a
+software e-stop, a silent state stream (the layer's stale timeout), a stalled control loop (the link's write
+deadline), a state fault (a hot motor); and a stand through the whole stack, with the real-time factor it achieved
+(simulated seconds per wall-clock second) and the link's period over it.
 """
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import select
@@ -23,9 +32,11 @@ from pathlib import Path
 import numpy as np
 
 import wbc
+from wbc.control.stand import StandController, stand_command
 from wbc.errors import BenchError
-from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
-from wbc.hardware.interpreter import realtime_switch_interval
+from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
+from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
 from wbc.hardware.unitree import (
     REJECT_REASONS,
     SdkTransport,
@@ -37,10 +48,12 @@ from wbc.hardware.unitree import (
 from wbc.tools.bench.references import machine_description
 from wbc.types import MotorCommand
 
-__all__ = ["EmulatorCounts", "TimedTransport", "bench_hw", "serve_emulator_stdio"]
+__all__ = ["EmulatorCounts", "TimedTransport", "bench_hw", "bench_safety", "serve_emulator_stdio"]
 
 _START_TIMEOUT = 60.0  # [s] longest wait for the emulator process to bind its port (it imports MuJoCo first)
 _STOP_MARGIN = 30.0  # [s] the emulator process stops by itself this long after the bench should have ended
+_SAFETY_LOOP = 0.004  # [s] the control loop's period while a safety reaction is timed (the tests' PERIOD)
+_REACTION_TIMEOUT = 2.0  # [s] longest wait for a reaction's damping frame on the wire
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -156,7 +169,7 @@ def _percentile_ms(values: np.ndarray, q: float) -> float:
 
 
 def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0,
-             transport: str = "udp") -> dict[str, object]:
+             transport: str = "udp", stand_seconds: float | None = 10.0) -> dict[str, object]:
     """Time the low-level link over loopback against an emulator in its own process.
 
     Args:
@@ -164,13 +177,17 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         seconds: how long the link runs while measured [s].
         rate_hz: the link thread's rate, 200..1000 [Hz].
         transport: ``udp`` (our socket) or ``sdk`` (the vendor's Go1 SDK), see `UnitreeRobotConfig.transport`.
+        stand_seconds: the stand of `bench_safety`, whose figures go under ``safety`` [s]; None: none of them.
 
     Returns:
         ``period_ms_p50`` / ``_p99`` / ``_max`` (the interval between two sends of the link thread [ms]),
         ``round_trip_ms_p50`` / ``_p99`` (a command's send to the arrival of the state the emulator answered it
-        with, paired in order [ms]), ``cpu_us_per_tick`` (the link thread's CPU time per period [us]), ``rejects``
+        with, paired in order [ms]), ``cpu_us_per_tick`` (the link thread's CPU time per period [us]),
+        ``advance_ms_p50`` / ``_p99`` (how long the control loop's ``advance(period)`` took: its pacing plus the wait
+        for a fresh state), ``late_advances`` and ``worst_lateness_ms`` (advance calls that found their deadline
+        past, and by how much), ``rejects``
         (state frames the robot rejected), ``emulator`` (the emulator's counts), the link's own counters
-        (``link``), the settings and ``machine``.
+        (``link``), ``safety`` (`bench_safety`, with `stand_seconds`), the settings and ``machine``.
 
     Raises:
         UnknownNameError: `robot` is not ``a1`` or ``go1``, or `transport` is not a transport's name.
@@ -195,11 +212,14 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
                 hold = MotorCommand.hold(link.desc.nominal_q, 20.0, 0.5)
                 period = 1.0 / rate_hz
                 end = time.monotonic() + seconds
+                advances = []
                 for _ in range(int(seconds * rate_hz) + 2):
                     if time.monotonic() >= end:
                         break
                     link.write(hold)
+                    before = time.perf_counter()
                     link.advance(period)
+                    advances.append(time.perf_counter() - before)
                 timed.recording = False
                 stats = link.link_stats()
                 rejects = link.decode_stats.rejected
@@ -226,6 +246,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
     round_trips = receives[:n] - sends[:n]
     cpu = np.asarray(timed.send_cpu)
     cpu_per_tick = float(1e6 * (cpu[-1] - cpu[0]) / (cpu.size - 1)) if cpu.size > 1 else float("nan")
+    safety = bench_safety(robot, stand_seconds=stand_seconds) if stand_seconds is not None else None
     return {
         "robot": robot,
         "seconds": seconds,
@@ -240,8 +261,147 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         "round_trip_ms_p50": _percentile_ms(round_trips, 50),
         "round_trip_ms_p99": _percentile_ms(round_trips, 99),
         "cpu_us_per_tick": cpu_per_tick,
+        "advance_ms_p50": _percentile_ms(np.asarray(advances), 50),
+        "advance_ms_p99": _percentile_ms(np.asarray(advances), 99),
+        "late_advances": stats.late_advances,
+        "worst_lateness_ms": stats.worst_lateness * 1e3,
         "rejects": int(rejects),
         "emulator": counts.as_dict(),
         "link": asdict(stats),
+        "safety": safety,
         "machine": machine_description(),
     }
+
+
+def _drive_to_run(safe: SafeRobot, cmd: MotorCommand) -> None:
+    for _ in range(int(5.0 / _SAFETY_LOOP)):
+        safe.read()
+        safe.write(cmd)
+        safe.advance(_SAFETY_LOOP)
+        if safe.safety_state is SafetyState.RUN:
+            return
+    raise BenchError(f"bench hw: the safety layer did not reach run ({[str(e) for e in safe.events]})")
+
+
+def _first_damping_after(emu: UnitreeEmulator, since: float) -> float:
+    """When the first damping frame after `since` arrived at the emulator (its monotonic clock) [s]."""
+    end = time.monotonic() + _REACTION_TIMEOUT
+    while True:
+        found = next((c.time for c in emu.commands() if c.time > since and c.damping), None)
+        if found is not None:
+            return found
+        if time.monotonic() > end:
+            raise BenchError(f"bench hw: no damping frame on the wire within {_REACTION_TIMEOUT} s")
+        time.sleep(0.0005)
+
+
+def _estop(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand) -> float:
+    started = time.monotonic()
+    safe.estop()
+    return started
+
+
+def _silence(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand) -> float:
+    emu.inject(Fault.SILENCE)
+    started = time.monotonic()
+    _loop_until_damped(safe, cmd)
+    return started
+
+
+def _stall(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand) -> float:
+    safe.read()
+    safe.write(cmd)
+    started = time.monotonic()  # the last write: nothing is written after it
+    time.sleep(3 * safe.robot.config.write_deadline)
+    return started
+
+
+def _hot_motor(emu: UnitreeEmulator, safe: SafeRobot, cmd: MotorCommand) -> float:
+    emu.inject(Fault.OVER_TEMPERATURE)
+    started = time.monotonic()
+    _loop_until_damped(safe, cmd)
+    return started
+
+
+def _loop_until_damped(safe: SafeRobot, cmd: MotorCommand) -> None:
+    for _ in range(int(_REACTION_TIMEOUT / _SAFETY_LOOP)):
+        safe.read()
+        safe.write(cmd)
+        safe.advance(_SAFETY_LOOP)
+        if safe.safety_state is SafetyState.DAMPED:
+            return
+
+
+_REACTIONS = {"estop_to_damping_ms": _estop, "silence_to_damping_ms": _silence, "stall_to_damping_ms": _stall,
+              "state_fault_to_damping_ms": _hot_motor}
+"""What each timed reaction does to the running stack, returning when its cause began."""
+
+
+def bench_safety(robot: str = "go1", *, stand_seconds: float = 10.0, rate_hz: float = 500.0) -> dict[str, object]:
+    """Time the safety reactions and a stand of SafeRobot(UnitreeRobot) against a real-time emulator, in real time.
+
+    Args:
+        robot: ``a1`` or ``go1``.
+        stand_seconds: how long the stand runs [s] (the suite's acceptance stand is 10 s of robot time).
+        rate_hz: the link's rate [Hz].
+
+    Returns:
+        ``estop_to_damping_ms`` (a software e-stop to the first damping frame on the wire), ``silence_to_damping_ms``
+        (the state stream stopped -> damping; the layer's ``stale_timeout_ms`` is beside it),
+        ``stall_to_damping_ms`` (the control loop's last write -> the link's damping; ``write_deadline_ms`` beside
+        it), ``state_fault_to_damping_ms`` (a motor reported hot -> damping), ``link_period_ms``, and the stand:
+        ``stand_seconds``, ``stand_wall_s`` (what it took), ``stand_sim_s`` (the emulated robot's time meanwhile),
+        ``stand_realtime_factor`` (sim over wall), ``stand_safety_state`` (``run`` unless it tripped),
+        ``stand_trips`` (the layer's trips, with their detail), ``stand_link_period_ms_mean`` / ``_max``,
+        ``stand_deadline_trips`` (the link's write deadline), ``stand_act_ms_p99`` (the stand controller's ``act``)
+        and ``stand_deadline_misses`` (``act`` calls longer than the controller's period).
+
+    Raises:
+        BenchError: the layer never reached ``run`` for a reaction, or a reaction's damping never reached the wire.
+    """
+    out: dict[str, object] = {"robot": robot}
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode="realtime")) as emu:
+        host, port = emu.address
+        cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=rate_hz)
+        out["write_deadline_ms"] = cfg.write_deadline * 1e3
+        out["link_period_ms"] = 1e3 / rate_hz
+        for key, cause in _REACTIONS.items():
+            emu.clear()
+            emu.reset()
+            safety = SafetyConfig(on_event=lambda event: None, ramp_time_s=0.2)
+            out["stale_timeout_ms"] = safety.stale_timeout_s * 1e3
+            with SafeRobot(UnitreeRobot(cfg), safety) as safe:
+                cmd = stand_command(safe.robot.desc)
+                _drive_to_run(safe, cmd)
+                started = cause(emu, safe, cmd)
+                out[key] = 1e3 * (_first_damping_after(emu, started) - started)
+        emu.clear()
+        emu.reset()
+        trips: list[str] = []
+        safety = SafetyConfig(on_event=lambda e: trips.append(str(e)) if e.to_state is SafetyState.DAMPED else None)
+        freeze_heap()  # as `wbc hw run` does once all is built: a full collection would stall the threads
+        try:
+            with SafeRobot(UnitreeRobot(cfg), safety) as safe:
+                ctrl = StandController(safe.robot.desc)
+                sim0, wall0 = emu.sim_time, time.monotonic()
+                acts = []
+                for _ in range(int(round(stand_seconds * ctrl.rate_hz))):
+                    state = safe.read()
+                    before = time.perf_counter()
+                    cmd = ctrl.act(state, None)
+                    acts.append(time.perf_counter() - before)
+                    safe.write(cmd)
+                    safe.advance(1.0 / ctrl.rate_hz)
+                wall, sim = time.monotonic() - wall0, emu.sim_time - sim0
+                state, stats = safe.safety_state.value, safe.robot.link_stats()
+        finally:
+            gc.unfreeze()
+        if emu.failure is not None:
+            raise BenchError(f"bench hw: the emulator failed: {emu.failure!r}")
+    out.update(stand_seconds=stand_seconds, stand_wall_s=wall, stand_sim_s=sim,
+               stand_realtime_factor=sim / wall if wall > 0 else float("nan"), stand_safety_state=state,
+               stand_trips=trips, stand_link_period_ms_mean=stats.period_mean * 1e3,
+               stand_link_period_ms_max=stats.period_max * 1e3, stand_deadline_trips=stats.deadline_trips,
+               stand_act_ms_p99=_percentile_ms(np.asarray(acts), 99),
+               stand_deadline_misses=int(sum(a > 1.0 / ctrl.rate_hz for a in acts)))
+    return out

@@ -34,6 +34,7 @@ from wbc.arena.sim_trial import run_trial
 from wbc.control.registry import get_controller
 from wbc.errors import BenchError
 from wbc.hardware.capabilities import WallClock
+from wbc.hardware.clock import Clock
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco.physics import delay_steps
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -112,21 +113,35 @@ def probe_ticks(robot: Robot, hold: MotorCommand, *, period: float, samples: int
     return counts
 
 
-def wire_probe(robot: str = "go1", *, samples: int = 40, period: float = 0.002, mode: str = "realtime") -> list[int]:
-    """`probe_ticks` through a `UnitreeRobot` against a `UnitreeEmulator` on 127.0.0.1 (both in this process).
+def wire_probe(robot: str = "go1", *, samples: int = 40, period: float = 0.002, mode: str = "realtime",
+               clock: Clock | None = None, sim: MujocoRobot | None = None) -> list[int]:
+    """`probe_ticks` through a `UnitreeRobot` against a `UnitreeEmulator` (both in this process).
 
     Args:
         robot: ``a1`` or ``go1``.
         samples: steps measured.
         period: link and control period, and the emulator's period [s].
         mode: the emulator's mode, ``realtime`` (its own clock) or ``lockstep`` (one period per command).
+        clock: None: the emulator serves UDP on 127.0.0.1 and the link runs its thread, in real time (what the
+            bench measures); a `ManualClock`: both run on it, over the emulator's in-process channel, so the count
+            is the wire's logic alone, the same on any machine.
+        sim: the emulator's simulated robot (e.g. one with an actuation delay); None: the emulator builds its own.
     """
-    with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode=mode, control_period=period)) as emu:
-        host, port = emu.address
-        cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=1.0 / period)
-        with UnitreeRobot(cfg) as link:
+    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode=mode, control_period=period), sim=sim)
+    if clock is None:
+        with emu:
+            host, port = emu.address
+            cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=1.0 / period)
+            with UnitreeRobot(cfg) as link:
+                hold = MotorCommand.hold(link.desc.nominal_q, PROBE_KP, PROBE_KD)
+                return probe_ticks(link, hold, period=period, samples=samples)
+    cfg = UnitreeRobotConfig(robot=robot, target_host="127.0.0.1", target_port=9, rate_hz=1.0 / period)
+    try:
+        with UnitreeRobot(cfg, emu.transport(clock), clock=clock) as link:
             hold = MotorCommand.hold(link.desc.nominal_q, PROBE_KP, PROBE_KD)
             return probe_ticks(link, hold, period=period, samples=samples)
+    finally:
+        emu.close()
 
 
 def sim_probe(robot: str, total_delay_s: float, *, samples: int = 10, period: float = 0.002) -> list[int]:
@@ -240,7 +255,7 @@ def bench_latency(controllers: tuple[str, ...] = ("stand", "mpc"), *, wire_robot
                               "fine_ms": FINE_MS}
     if wire:
         period = 0.002
-        hw = bench_hw(wire_robot, seconds=2.0, rate_hz=1.0 / period)
+        hw = bench_hw(wire_robot, seconds=2.0, rate_hz=1.0 / period, stand_seconds=None)
         ticks = wire_probe(wire_robot, samples=samples, period=period)
         timestep = MujocoRobotConfig().timestep
         out.update(round_trip_ms_p50=hw["round_trip_ms_p50"], round_trip_ms_p99=hw["round_trip_ms_p99"],
