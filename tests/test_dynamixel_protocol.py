@@ -232,11 +232,15 @@ sdk = pytest.importorskip("dynamixel_sdk")
 
 
 @pytest.fixture
-def sdk_port():
-    """A PortHandler (SDK) on the slave side of a pty, and the master fd the test reads and writes."""
+def sdk_port(monkeypatch):
+    """A PortHandler (SDK) on the slave side of a pty, and the master fd the test reads and writes.
+
+    Nothing here waits for an answer within the SDK's timeout: the tests read what the SDK wrote (within a second).
+    """
     master, slave = os.openpty()
     tty.setraw(master)
-    sdk.port_handler.LATENCY_TIMER = 1  # as Interbotix's udev rule sets the U2D2's FTDI latency timer: 1 ms
+    # as Interbotix's udev rule sets the U2D2's FTDI latency timer (1 ms), for this test only
+    monkeypatch.setattr(sdk.port_handler, "LATENCY_TIMER", 1)
     port = sdk.PortHandler(os.ttyname(slave))
     assert port.openPort()
     yield port, master

@@ -333,10 +333,29 @@ def print_bench_hw(result: Mapping[str, object]) -> None:
     print(f"  round trip      p50 {result['round_trip_ms_p50']:.3f} ms  p99 {result['round_trip_ms_p99']:.3f} ms "
           "(command sent -> the state answering it taken by the link thread)")
     print(f"  link thread CPU {result['cpu_us_per_tick']:.0f} us per tick")
+    print(f"  advance(period) p50 {result['advance_ms_p50']:.3f} ms  p99 {result['advance_ms_p99']:.3f} ms; late "
+          f"advances {result['late_advances']} (worst {result['worst_lateness_ms']:.2f} ms)")
     emu = result["emulator"]
     print(f"  frames          {result['sends']} sent, {result['replies_received']} states received, "
           f"{result['rejects']} rejected by the robot; emulator decoded {emu['accepted']}, rejected "
           f"{sum(emu['rejected'].values())}")
+    safety = result.get("safety")
+    if safety:
+        print(f"Safety layer over the wire, real-time emulator (first damping frame on the wire after the cause; link "
+              f"period {safety['link_period_ms']:g} ms)")
+        print(f"  e-stop          {safety['estop_to_damping_ms']:.2f} ms")
+        print(f"  silent stream   {safety['silence_to_damping_ms']:.2f} ms (stale timeout "
+              f"{safety['stale_timeout_ms']:g} ms)")
+        print(f"  stalled loop    {safety['stall_to_damping_ms']:.2f} ms (write deadline "
+              f"{safety['write_deadline_ms']:g} ms)")
+        print(f"  hot motor       {safety['state_fault_to_damping_ms']:.2f} ms")
+        print(f"  stand           {safety['stand_seconds']:g} s: took {safety['stand_wall_s']:.2f} s of wall time, "
+              f"emulated {safety['stand_sim_s']:.2f} s (real-time factor {safety['stand_realtime_factor']:.3f}); "
+              f"safety {safety['stand_safety_state']}, link period mean {safety['stand_link_period_ms_mean']:.3f} ms "
+              f"max {safety['stand_link_period_ms_max']:.3f} ms, deadline trips {safety['stand_deadline_trips']}; "
+              f"act p99 {safety['stand_act_ms_p99']:.3f} ms, deadline misses {safety['stand_deadline_misses']}")
+        for trip in safety["stand_trips"]:
+            print(f"    trip: {trip}")
     print(f"  machine: {result['machine']}")
 
 
@@ -383,6 +402,18 @@ def print_bench_arm(result: Mapping[str, object]) -> None:
     for s in result["steps"]:
         print(f"  {s['source']:<11}{s['kp']:>4.0f}{s['kd']:>6.1f}{s['rate_hz']:>12.0f}{s['rise_ms']:>17.1f}"
               f"{s['overshoot_pct']:>15.1f}{s['settle_ms']:>16.0f}{s['final_error_rad']:>19.4f}{s['discarded']:>11d}")
+    print("  reactions at 200 Hz, wall time (the tests check them exactly on a clock they move):")
+    print("  event            reaction    took [ms]  expected [ms]  watchdog after last packet [ms]")
+    for r in result.get("reactions", []):
+        watchdog = f"{r['watchdog_ms']:.1f}" if r["watchdog_ms"] is not None else "-"
+        print(f"  {r['event']:<17}{r['reaction']:<12}{r['ms']:>9.1f}{r['expected_ms']:>15.1f}  {watchdog:>10}")
+    for e in result.get("emulator", []):
+        if e["what"] == "plant_realtime_factor":
+            print(f"  shared plant on its own thread: real-time factor {e['value']:.3f} (overruns {e['worst']:.0f})")
+        else:
+            label = "with byte timing" if e["what"].endswith("byte_timing") else "no byte timing  "
+            print(f"  sync read of 3 joints over a pty, {label}: p50 {e['value']:.3f} ms, p99 {e['worst']:.3f} ms "
+                  f"(wire model {e['model']:.2f} ms)")
     print(f"  machine: {result['machine']}")
 
 

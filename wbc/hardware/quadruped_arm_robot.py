@@ -10,8 +10,11 @@ moves) are separate devices, each with its own thread, rate and faults. This cla
   advances when the legs' tick did, and only while the arm's did too within `arm_stale_s`: a stale arm makes the whole
   frame stale, so a safety layer above (`wbc.hardware.safety.SafeRobot`) trips on a dead arm bus as on a dead leg
   link, even in ``locked`` mode where the controller never sees the arm.
-- Time: both devices run their own threads against the wall clock; `advance` paces on the legs' link (which waits
-  for a fresh leg state) and never calls the arm's, which would wait a second time. The robot is a `WallClock`.
+- Time: both devices run their own loops on one clock, the wall clock on a robot (each device on a thread of its
+  own), or a `ManualClock` in a deterministic test (each device's loop a task of that clock, moved by whoever
+  advances it); `advance` paces on the legs' link (which waits for a fresh leg state) and never calls the arm's,
+  which would wait a second time: on a shared `ManualClock` the legs' advance moves the arm's bus cycles too. The
+  robot is a `WallClock` on the legs' clock.
 - What the safety layer reads: the legs' remote (`RemoteSource`), and the motor status of both devices joined
   (`MotorStatusSource`: legs then arm), so an arm servo's alarm or heat trips the layer like a leg motor's.
 - `close` closes both (each leaves its motors damped); `connect` connects both or neither.

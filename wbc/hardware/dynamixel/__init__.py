@@ -7,7 +7,8 @@ SDK, MuJoCo or torch: an emulator (`wbc.hardware.emulators`) and a backend build
 
 The backend: `DynamixelArm` (the three model joints behind the `Robot` interface, current mode with the PD law on
 the host, `CurrentLaw`) over `SdkBus` (dynamixel_sdk, imported only when a bus is opened), configured by
-`DynamixelArmConfig`; it reports `ArmFault`, `ArmMotorStatus` and `ArmBusStats`.
+`DynamixelArmConfig`; it reports `ArmFault`, `ArmMotorStatus` and `ArmBusStats`. Its port is the SDK's
+(`sdk_handlers`), or a bus in the same process (`in_process_handlers`), timed by a `wbc.hardware.clock.Clock`.
 """
 
 from wbc.hardware.dynamixel.arm_config import ARM_ROBOTS, DynamixelArmConfig
@@ -87,9 +88,11 @@ from wbc.hardware.dynamixel.sdk_bus import (
     COMM_RX_CORRUPT,
     COMM_RX_TIMEOUT,
     COMM_SUCCESS,
+    InProcessDevice,
     SdkBus,
     ServoRead,
     describe_result,
+    in_process_handlers,
     sdk_handlers,
 )
 from wbc.hardware.dynamixel.wx200_bus import (
@@ -120,10 +123,12 @@ __all__ = [
     "CurrentLaw",
     "DynamixelArm",
     "DynamixelArmConfig",
+    "InProcessDevice",
     "SdkBus",
     "ServoRead",
     "arm_joint_table",
     "describe_result",
+    "in_process_handlers",
     "sdk_handlers",
     "BAUD_RATES",
     "BROADCAST_ID",

@@ -12,7 +12,8 @@ one entry per servo, in ID order, whose mode is `MODE_SERVO` while the servo is 
 | 0x42 `MODE_CORRUPT` | its answers arrive corrupt (bad CRC) |
 | 0x43 `MODE_PORT_LOST` | the serial port failed: no servo can be reached |
 
-`ArmBusStats` counts the bus thread's cycles, retries and timing since `connect`.
+`ArmBusStats` counts the bus loop's cycles, retries and timing since `connect`, timed on the backend's clock (on a
+`ManualClock` the busy time is the clock time the cycle's reply timeouts and pauses took).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ class ArmFault:
     """A bus fault the backend latched (until `close`; a new `connect` starts afresh).
 
     Attributes:
-        time: when it was latched, on the monotonic clock [s].
+        time: when it was latched, on the backend's clock (the monotonic clock on a robot) [s].
         kind: one of `FAULT_KINDS`.
         ids: the servos at fault (every servo for ``port_lost``).
         detail: what was seen (the SDK's result, the hardware error bits, the exception).

@@ -44,19 +44,27 @@ otherwise, and says which servo is wrong and why. EEPROM is written only where i
 The backend prints a line each time it does. The held servos (wrist angle, wrist rotate, gripper) go to
 `held_ticks` in position mode, at `held_profile_velocity`. The joint servos get goal current 0, torque on, and the
 watchdog armed.
+
+Time. Every time the backend reads or waits (the cycle's start, the write deadline, a retry's pause, a fault's
+time, `wall_time`) comes from its `Clock` (`wbc.hardware.clock`). On the monotonic clock (the default) the bus loop
+runs on a thread of its own. Handed a `ManualClock`, the backend starts no thread: `connect` registers one bus cycle
+(`_cycle`, the very body the thread runs) with `ManualClock.call_every`, and whoever moves the clock runs the bus:
+`advance`, `connect`'s wait for the first state and `close`'s damping all move it. With a port on the same clock
+(`in_process_handlers`), a reply timeout, a retry and a watchdog take the same clock time on any machine at any load.
 """
 
 from __future__ import annotations
 
+import enum
 import sys
 import threading
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from wbc.errors import RobotLinkError, SerialPortError
+from wbc.hardware.clock import MONOTONIC, Clock, ManualClock, ScheduledCall
 from wbc.hardware.dynamixel.arm_config import DynamixelArmConfig
 from wbc.hardware.dynamixel.arm_fault import (
     MODE_CORRUPT,
@@ -107,6 +115,14 @@ _STATUS_TEMP = (_ADDR["present_input_voltage"], 3)  # input voltage (2), tempera
 _PING_WAITS = (0.002, 0.01)  # [s] waits before the second and third ping of a servo whose read failed for good
 
 
+class _Next(enum.Enum):
+    """What the bus loop does after a cycle."""
+
+    GO_ON = "go_on"
+    STOP = "stop"  # end without parking (stopped, the port lost)
+    PARK = "park"  # the close damping is over: park the arm, then end
+
+
 def arm_joint_table(robot: str, law: CurrentLaw | None = None) -> JointTable:
     """The arm's three joints of `robot` (arm actuated), torque limits lowered to what `law` can ask if given."""
     table = joint_table(get_robot(robot, "actuated"))
@@ -128,12 +144,17 @@ class DynamixelArm(Robot):
         handlers: builds dynamixel_sdk's (port handler, packet handler) for a port name at `connect`; the default
             (`sdk_handlers`) builds the SDK's, with the config's latency timer. A handler that names another port
             than `config.port` is refused before anything is opened.
+        clock: where the backend reads the time and waits; the monotonic clock runs the bus loop on a thread, a
+            `ManualClock` runs it as a task on that clock (no thread: the bus moves when the clock is moved).
     """
 
     def __init__(self, config: DynamixelArmConfig,
-                 handlers: Callable[[str], tuple[Any, Any]] | None = None) -> None:
+                 handlers: Callable[[str], tuple[Any, Any]] | None = None, *, clock: Clock = MONOTONIC) -> None:
         super().__init__()
         self.config = config
+        self.clock = clock
+        self._stepped = isinstance(clock, ManualClock)
+        self._task: ScheduledCall | None = None
         self._handlers = handlers if handlers is not None else (lambda port: sdk_handlers(port, config.latency_ms))
         torque_limit = arm_joint_table(config.robot).torque_limit
         self.law = CurrentLaw(config.joints, torque_limit, config.max_current_a)
@@ -170,9 +191,12 @@ class DynamixelArm(Robot):
         self._counts = dict(cycles=0, states=0, status_reads=0, failed_transfers=0, retries=0, unexplained=0,
                             damping_cycles=0, deadline_trips=0, overruns=0)
         self._timing = [0.0, 0.0, 0, 0.0, 0.0]  # period sum, period max, count, busy sum, busy max
-        self._pacer = WallPacer()
+        self._pacer = WallPacer(self.clock)
         self._measured = (np.zeros(3), np.zeros(3), np.zeros(3))
-        self._t0 = time.monotonic()
+        self._t0 = self.clock.now()
+        self._cycle_k = 0
+        self._last_start: float | None = None
+        self._next_cycle = 0.0
 
     # -- Robot ----------------------------------------------------------------------------------------------------
     @property
@@ -197,13 +221,20 @@ class DynamixelArm(Robot):
             bus.close()
             raise
         self._bus = bus
-        self._thread = threading.Thread(target=self._run, name="dynamixel-arm-bus", daemon=True)
-        self._thread.start()
-        deadline = time.monotonic() + cfg.connect_timeout
+        clock = self.clock
+        deadline = clock.now() + cfg.connect_timeout
+        if self._stepped:
+            self._task = clock.call_every(self._period, self._stepped_cycle)
+            clock.advance(0.0)  # the first cycle is due now
+            while self._state is None and self._failure is None and not self._faults and clock.now() < deadline:
+                clock.advance(min(self._period, deadline - clock.now()))
+        else:
+            self._thread = threading.Thread(target=self._run, name="dynamixel-arm-bus", daemon=True)
+            self._thread.start()
+            with self._lock:
+                while self._state is None and self._failure is None and not self._faults and clock.now() < deadline:
+                    self._lock.wait(max(0.0, deadline - clock.now()))
         with self._lock:
-            while self._state is None and self._failure is None and not self._faults and \
-                    time.monotonic() < deadline:
-                self._lock.wait(max(0.0, deadline - time.monotonic()))
             ok = self._state is not None
             why = self._failure or (self._faults[0] if self._faults else None)
         if not ok:
@@ -217,10 +248,17 @@ class DynamixelArm(Robot):
     def _shutdown(self, *, park: bool) -> None:
         with self._lock:
             if park and self._failure is None and not self._port_lost:
-                self._closing_until = time.monotonic() + self.config.close_damping
+                self._closing_until = self.clock.now() + self.config.close_damping
             else:
                 self._stop = True
             self._lock.notify_all()
+        if self._task is not None:
+            # the close damping goes out as the clock moves through it; the cycle after it parks and ends the task
+            end = self.clock.now() + self.config.close_damping + 5.0
+            while not self._task.cancelled and self.clock.now() < end:
+                self.clock.advance(self._period)
+            self._task.cancel()
+            self._task = None
         if self._thread is not None:
             self._thread.join(timeout=self.config.close_damping + 5.0)
             self._thread = None
@@ -242,22 +280,27 @@ class DynamixelArm(Robot):
         rows = cmd.stacked()
         with self._lock:
             self._rows = rows
-            self._written_at = time.monotonic()
+            self._written_at = self.clock.now()
 
     def _advance(self, dt: float) -> None:
         with self._lock:
             start_tick = self._fresh
         self._pacer.wait(dt)
-        grace = time.monotonic() + 2.0 * self._period
-        with self._lock:
-            while self._fresh == start_tick and not self._faults and time.monotonic() < grace:
-                self._lock.wait(max(0.0, grace - time.monotonic()))
+        clock = self.clock
+        grace = clock.now() + 2.0 * self._period
+        if self._stepped:
+            while self._fresh == start_tick and not self._faults and self._failure is None and clock.now() < grace:
+                clock.advance(min(self._period, grace - clock.now()))
+        else:
+            with self._lock:
+                while self._fresh == start_tick and not self._faults and clock.now() < grace:
+                    self._lock.wait(max(0.0, grace - clock.now()))
         self._raise_failure()
 
     # -- capabilities ---------------------------------------------------------------------------------------------
     def wall_time(self) -> float:
-        """Now on the bus thread's monotonic clock [s] (the `WallClock` capability: the servos live in wall time)."""
-        return time.monotonic()
+        """Now on the backend's clock [s] (the `WallClock` capability: the servos live in wall time)."""
+        return self.clock.now()
 
     def motor_status(self) -> ArmMotorStatus:
         """Every servo's mode code and temperature as of the latest reads (a `MotorStatusSource`).
@@ -331,7 +374,7 @@ class DynamixelArm(Robot):
         for _ in range(self.config.connect_retries):
             if result_of(out) != COMM_RX_TIMEOUT:
                 break
-            time.sleep(max(self.config.retry_wait_s, 0.01))
+            self.clock.sleep(max(self.config.retry_wait_s, 0.01))
             bus.flush()
             out = call()
         return out
@@ -416,56 +459,27 @@ class DynamixelArm(Robot):
         for servo_id in self._primaries:
             self._write_at_start(bus, servo_id, "bus_watchdog", cfg.watchdog_units)
 
-    # -- bus thread -----------------------------------------------------------------------------------------------
+    # -- the bus loop: one cycle's body, run by the thread or by the clock --------------------------------------------
     def _run(self) -> None:
         try:
             self._loop()
         except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's thread
-            with self._lock:
-                self._failure = exc
-                self._lock.notify_all()
-            self._say(f"the bus thread died ({exc!r}): nothing reaches the servos any more; their watchdog sets "
-                      f"the goal currents to 0 after {self.config.watchdog_s} s and the arm goes limp")
+            self._record_failure(exc)
+
+    def _record_failure(self, exc: BaseException) -> None:
+        with self._lock:
+            self._failure = exc
+            self._lock.notify_all()
+        self._say(f"the bus loop died ({exc!r}): nothing reaches the servos any more; their watchdog sets "
+                  f"the goal currents to 0 after {self.config.watchdog_s} s and the arm goes limp")
 
     def _loop(self) -> None:
-        bus, period, every = self._bus, self._period, self.config.status_every
-        next_cycle = time.monotonic()
-        last_start: float | None = None
-        k = 0
-        while True:
-            start = time.monotonic()
-            with self._lock:
-                if self._stop:
-                    return
-                if self._closing_until is not None and start >= self._closing_until:
-                    break
-            try:
-                self._read_joints(bus)
-                if k % every == 0:
-                    self._read_status(bus, "hardware_error")
-                elif k % every == every // 2:
-                    self._read_status(bus, "temperature")
-                damped = self._write_goals(bus, start)
-            except SerialPortError as exc:
-                self._latch("port_lost", self._ids, f"{exc}",
-                            f"Nothing reaches the servos: their bus watchdog sets the goal currents to 0 after "
-                            f"{self.config.watchdog_s} s, and the arm goes LIMP (it sags under gravity)")
-                return
-            k += 1
-            end = time.monotonic()
-            with self._lock:  # both counts at once, so that a snapshot never sees one cycle's damping without it
-                self._counts["cycles"] += 1
-                self._counts["damping_cycles"] += damped
-                t = self._timing
-                if last_start is not None:
-                    t[0] += start - last_start
-                    t[1] = max(t[1], start - last_start)
-                    t[2] += 1
-                    t[3] += end - start
-                    t[4] = max(t[4], end - start)
-            last_start = start
-            next_cycle += period
-            wait = next_cycle - time.monotonic()
+        """The bus thread: a cycle every period, resynchronised after an overrun; then the park, if closing."""
+        bus, period, clock = self._bus, self._period, self.clock
+        self._next_cycle = clock.now()
+        while (step := self._cycle(bus)) is _Next.GO_ON:
+            self._next_cycle += period
+            wait = self._next_cycle - clock.now()
             if wait > 0:
                 with self._lock:
                     if not self._stop:
@@ -473,8 +487,64 @@ class DynamixelArm(Robot):
             elif wait < -period:
                 with self._lock:
                     self._counts["overruns"] += 1
-                next_cycle = time.monotonic()
-        self._park(bus)
+                self._next_cycle = clock.now()
+        if step is _Next.PARK:
+            self._park(bus)
+
+    def _stepped_cycle(self) -> None:
+        """One bus cycle as a task of a `ManualClock` (the thread's body; the clock keeps the period)."""
+        bus = self._bus
+        try:
+            start = self.clock.now()
+            if self._last_start is not None and start - self._last_start > 2.0 * self._period:
+                with self._lock:
+                    self._counts["overruns"] += 1  # the clock ran this cycle more than a period late
+            step = self._cycle(bus)
+            if step is not _Next.GO_ON:
+                self._task.cancel()
+            if step is _Next.PARK:
+                self._park(bus)
+        except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's code, as the thread's
+            self._task.cancel()
+            self._record_failure(exc)
+
+    def _cycle(self, bus: SdkBus) -> _Next:
+        """One bus cycle: the joints' sync read, every so often a status read, the goals' sync write."""
+        every = self.config.status_every
+        start = self.clock.now()
+        with self._lock:
+            if self._stop:
+                return _Next.STOP
+            if self._closing_until is not None and start >= self._closing_until:
+                return _Next.PARK
+        k = self._cycle_k
+        try:
+            self._read_joints(bus)
+            if k % every == 0:
+                self._read_status(bus, "hardware_error")
+            elif k % every == every // 2:
+                self._read_status(bus, "temperature")
+            damped = self._write_goals(bus, start)
+        except SerialPortError as exc:
+            self._latch("port_lost", self._ids, f"{exc}",
+                        f"Nothing reaches the servos: their bus watchdog sets the goal currents to 0 after "
+                        f"{self.config.watchdog_s} s, and the arm goes LIMP (it sags under gravity)")
+            return _Next.STOP
+        self._cycle_k = k + 1
+        end = self.clock.now()
+        last_start = self._last_start
+        with self._lock:  # both counts at once, so that a snapshot never sees one cycle's damping without it
+            self._counts["cycles"] += 1
+            self._counts["damping_cycles"] += damped
+            t = self._timing
+            if last_start is not None:
+                t[0] += start - last_start
+                t[1] = max(t[1], start - last_start)
+                t[2] += 1
+                t[3] += end - start
+                t[4] = max(t[4], end - start)
+        self._last_start = start
+        return _Next.GO_ON
 
     def _transfer(self, bus: SdkBus, call: Callable[[], list[ServoRead]]) -> list[ServoRead] | None:
         """`call()` (a read), tried again after a flush up to `retries` times; None once every try failed."""
@@ -488,7 +558,7 @@ class DynamixelArm(Robot):
                 if attempt < cfg.retries:
                     self._counts["retries"] += 1
             if attempt < cfg.retries:
-                time.sleep(cfg.retry_wait_s)
+                self.clock.sleep(cfg.retry_wait_s)
                 bus.flush()
         return None
 
@@ -501,7 +571,7 @@ class DynamixelArm(Robot):
             for wait in _PING_WAITS:  # more tries, further apart: a loaded host can miss an answer or two
                 if result != COMM_RX_TIMEOUT:
                     break
-                time.sleep(wait)
+                self.clock.sleep(wait)
                 bus.flush()
                 _, result, _ = bus.ping(servo_id)
             if result == COMM_RX_TIMEOUT:
@@ -538,7 +608,7 @@ class DynamixelArm(Robot):
         return any(self._hw_error[self._ids.index(i)] for i in ids)
 
     def _latch(self, kind: str, ids: tuple[int, ...], detail: str, policy: str) -> None:
-        fault = ArmFault(time=time.monotonic(), kind=kind, ids=tuple(ids), detail=detail, policy=policy)
+        fault = ArmFault(time=self.clock.now(), kind=kind, ids=tuple(ids), detail=detail, policy=policy)
         with self._lock:
             if kind == "port_lost":
                 self._port_lost = True
@@ -571,7 +641,7 @@ class DynamixelArm(Robot):
         with self._lock:
             if self._faults:
                 return  # the tick stays frozen: a latched fault makes every later frame stale
-            now = time.monotonic()
+            now = self.clock.now()
             self._fresh += 1
             self._counts["states"] = self._fresh
             self._state_at = now
@@ -679,7 +749,7 @@ class DynamixelArm(Robot):
         reg = XM430_W350[name]
         result, error = bus.write(servo_id, reg.address, reg.size, value)
         if result == COMM_RX_TIMEOUT:
-            time.sleep(self.config.retry_wait_s)
+            self.clock.sleep(self.config.retry_wait_s)
             bus.flush()
             result, error = bus.write(servo_id, reg.address, reg.size, value)
         return result == COMM_SUCCESS and not error & ~ALERT

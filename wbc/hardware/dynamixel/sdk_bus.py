@@ -21,6 +21,13 @@ Two things of the SDK's port handler are replaced, in a subclass built when the 
   loopback emulator in the same process, the spinning reader starved the emulator's thread: about 15 % of the sync
   reads timed out on a loaded 2-core machine, against under 0.5 % with the wait.
 
+`in_process_handlers` builds a third port handler, for tests and benches: no serial device, but a bus in the same
+process (`InProcessDevice`: the Dynamixel emulator built in process). The bytes the SDK writes are handed to the
+device within the same call, and its answers are queued for the SDK to read, each once its delay has passed. Every
+time the SDK reads (the reply timeout's start and expiry, the wait for a reply) comes from a `Clock`: on a
+`ManualClock` a wait moves the clock, so a silent ID times out after exactly its timeout of clock time, on any
+machine at any load.
+
 Every exception the serial layer raises becomes a `SerialPortError`. A closed port raises `termios.error`, which is
 neither `OSError` nor pyserial's `SerialException`, and a port closed under the SDK can raise `TypeError` or
 `AttributeError` as well. All of them mean the port is unusable, and the caller needs one type to catch.
@@ -29,21 +36,27 @@ neither `OSError` nor pyserial's `SerialException`, and a port closed under the 
 from __future__ import annotations
 
 import functools
+import heapq
+import itertools
 import select
+import termios
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Any, Protocol, TypeVar, runtime_checkable
 
 from wbc.errors import SerialPortError
+from wbc.hardware.clock import Clock, ManualClock
 from wbc.optional import require
 
 __all__ = [
     "COMM_RX_CORRUPT",
     "COMM_RX_TIMEOUT",
     "COMM_SUCCESS",
+    "InProcessDevice",
     "SdkBus",
     "ServoRead",
     "describe_result",
+    "in_process_handlers",
     "sdk_handlers",
 ]
 
@@ -57,6 +70,7 @@ _RESULT_NAMES = {COMM_SUCCESS: "success", -1000: "port busy", -1001: "tx fail", 
                  -3000: "rx waiting", COMM_RX_TIMEOUT: "rx timeout", COMM_RX_CORRUPT: "rx corrupt",
                  -9000: "not available"}
 _WAIT_SLICE = 0.001  # [s] longest single wait for the port's file descriptor
+_MIN_WAIT = 1e-6  # [s] the least an in-process wait moves the clock, so that a timeout always comes
 
 T = TypeVar("T")
 
@@ -119,6 +133,137 @@ def _low_latency_port_handler() -> type:
             return data
 
     return LowLatencyPortHandler
+
+
+@runtime_checkable
+class InProcessDevice(Protocol):
+    """A Dynamixel bus in this process, as `in_process_handlers` talks to it."""
+
+    @property
+    def port_closed(self) -> bool:
+        """True once the device is gone (an unplugged adapter): every port operation then fails."""
+        ...
+
+    def receive(self, data: bytes, *, baud: int, reply: Callable[[bytes, float], None]) -> None:
+        """Bytes the host wrote at `baud` [bit/s]; each answer goes to ``reply(raw, delay [s])`` before returning."""
+        ...
+
+
+@functools.cache
+def _in_process_port_handler() -> type:
+    sdk = require("dynamixel_sdk")
+
+    class InProcessPortHandler(sdk.PortHandler):
+        """The SDK's port handler on a bus in this process, its time read from a `Clock` (see the module docstring).
+
+        An answer with a delay is queued when it falls due: when the port looks at its input (a read, a flush, a
+        count of the bytes waiting) at or after that time, or, on a `ManualClock`, when the clock runs a task it
+        registered for that time. A read that finds nothing waits on the clock until the next answer is due, the
+        reply timeout expires, or a wait slice (1 ms) has passed, whichever comes first.
+        """
+
+        def __init__(self, port_name: str, device: InProcessDevice, clock: Clock, latency_ms: float) -> None:
+            super().__init__(port_name)
+            self.device = device
+            self.clock = clock
+            self.latency_ms = float(latency_ms)
+            self._input = bytearray()
+            self._due: list[tuple[float, int, bytes]] = []  # (when [s], order, answer) not yet arrived
+            self._order = itertools.count()
+
+        def _alive(self) -> None:
+            if self.device.port_closed:
+                # what dynamixel_sdk raises on a pty whose other side is gone
+                raise termios.error(5, "Input/output error")
+
+        def _arrive(self) -> None:
+            now = self.clock.now()
+            while self._due and self._due[0][0] <= now:
+                self._input += heapq.heappop(self._due)[2]
+
+        def _answer(self, raw: bytes, delay: float) -> None:
+            if delay <= 0:
+                self._input += raw
+                return
+            when = self.clock.now() + delay
+            heapq.heappush(self._due, (when, next(self._order), bytes(raw)))
+            if isinstance(self.clock, ManualClock):
+                self.clock.call_at(when, self._arrive)
+
+        def setupPort(self, cflag_baud: int) -> bool:  # noqa: N802 - the SDK's name
+            self._alive()
+            self.is_open = True
+            self._input.clear()
+            self.tx_time_per_byte = (1000.0 / self.baudrate) * 10.0
+            return True
+
+        def closePort(self) -> None:  # noqa: N802
+            self.is_open = False
+            self._input.clear()
+            self._due.clear()
+
+        def clearPort(self) -> None:  # noqa: N802
+            self._alive()
+            self._arrive()
+            self._input.clear()
+
+        def getBytesAvailable(self) -> int:  # noqa: N802
+            self._alive()
+            self._arrive()
+            return len(self._input)
+
+        def writePort(self, packet: Sequence[int]) -> int:  # noqa: N802
+            self._alive()
+            self.device.receive(bytes(packet), baud=self.baudrate, reply=self._answer)
+            return len(packet)
+
+        def readPort(self, length: int) -> bytes:  # noqa: N802
+            self._alive()
+            self._arrive()
+            if not self._input:
+                left = (self.packet_timeout - self.getTimeSinceStart()) * 1e-3
+                wait = min(max(left, 0.0), _WAIT_SLICE)
+                if self._due:
+                    wait = min(wait, self._due[0][0] - self.clock.now())
+                self.clock.sleep(max(wait, _MIN_WAIT))
+                self._arrive()
+            data = bytes(self._input[:length])
+            del self._input[:length]
+            return data
+
+        def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802
+            # the SDK's formula, with this port's latency timer instead of the module constant
+            self.packet_start_time = self.getCurrentTime()
+            self.packet_timeout = self.tx_time_per_byte * packet_length + 2.0 * self.latency_ms + 2.0
+
+        def isPacketTimeout(self) -> bool:  # noqa: N802
+            # at the timeout, not a float's width after it: a wait that ends on the timeout ends the read
+            if self.getTimeSinceStart() >= self.packet_timeout:
+                self.packet_timeout = 0
+                return True
+            return False
+
+        def getCurrentTime(self) -> float:  # noqa: N802
+            return self.clock.now() * 1e3  # [ms], as the SDK's
+
+    return InProcessPortHandler
+
+
+def in_process_handlers(port: str, device: InProcessDevice, clock: Clock,
+                        latency_ms: float = 1.0) -> tuple[Any, Any]:
+    """A port handler named `port` on the in-process bus `device`, timed by `clock`, and the Protocol 2.0 handler.
+
+    Args:
+        port: the name the port goes by (what `DynamixelArmConfig.port` must name).
+        device: the bus (e.g. ``DynamixelEmulator(..., in_process=True)``).
+        clock: where the reply timeout is measured and the waits happen.
+        latency_ms: the adapter's latency timer [ms], which sets the reply timeout.
+
+    Raises:
+        MissingExtraError: dynamixel_sdk is not installed (``pip install 'wbc[hardware]'``).
+    """
+    sdk = require("dynamixel_sdk")
+    return _in_process_port_handler()(port, device, clock, latency_ms), sdk.PacketHandler(2.0)
 
 
 def sdk_handlers(port: str, latency_ms: float = 1.0) -> tuple[Any, Any]:

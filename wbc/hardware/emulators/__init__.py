@@ -16,7 +16,7 @@ from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, Reg
 from wbc.hardware.emulators.plant import PlantLegs, SharedPlant, SharedPlantConfig
 from wbc.hardware.emulators.robot_emulator import LEG_WIRES, RobotEmulator, RobotEmulatorConfig
 from wbc.hardware.emulators.servo import EmulatedServo
-from wbc.hardware.emulators.unitree import MODES, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.emulators.unitree import MODES, EmulatorTransport, Reply, UnitreeEmulator, UnitreeEmulatorConfig
 
 __all__ = [
     "BUS_FAULT_DEFAULTS",
@@ -30,6 +30,7 @@ __all__ = [
     "DynamixelEmulator",
     "DynamixelEmulatorConfig",
     "EmulatedServo",
+    "EmulatorTransport",
     "Fault",
     "FaultSet",
     "LoggedCommand",
@@ -37,6 +38,7 @@ __all__ = [
     "PlantLegs",
     "RegisterRead",
     "RegisterWrite",
+    "Reply",
     "RobotEmulator",
     "RobotEmulatorConfig",
     "SharedPlant",

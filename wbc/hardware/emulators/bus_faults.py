@@ -1,7 +1,7 @@
 """`BusFault`: what the Dynamixel emulator can be told to do wrong on the arm's bus, and each fault's value.
 
 The emulator keeps them in a `FaultSet` (`FaultSet(BusFault, BUS_FAULT_DEFAULTS)`), shared by the test thread that
-injects and the bus thread that applies them.
+injects and the bus thread that applies them (or, in process, the client's call that the answers go back in).
 """
 
 from __future__ import annotations
@@ -28,6 +28,10 @@ class BusFault(enum.Enum):
     PORT_CLOSED: the emulator closes the pseudo-terminal for good, as an unplugged adapter. The client's next
     transfer fails (`termios.error` from the SDK's flush), and the emulator must be started anew. `clear` cannot
     undo it. The servos stay powered: their bus watchdogs still trip, and the plant sees it.
+    LATE_ANSWER [(ID or tuple of IDs, delay [s] in (0, 1]), default (4, 0.01)]: those servos hear and execute as
+    usual, but each status packet of theirs reaches the host `delay` later than it would (a servo whose Return
+    Delay Time was set too long, a host that read too early). Beyond the host's reply timeout the transfer times
+    out, and the answer arrives later, where it may pass for the answer to a later request.
     """
 
     SILENT_ID = "silent_id"
@@ -35,6 +39,7 @@ class BusFault(enum.Enum):
     OVERLOAD = "overload"
     OVER_TEMPERATURE = "over_temperature"
     PORT_CLOSED = "port_closed"
+    LATE_ANSWER = "late_answer"
 
 
 BUS_FAULT_DEFAULTS: dict[BusFault, object] = {
@@ -43,6 +48,7 @@ BUS_FAULT_DEFAULTS: dict[BusFault, object] = {
     BusFault.OVERLOAD: 4,
     BusFault.OVER_TEMPERATURE: (4, 85),
     BusFault.PORT_CLOSED: True,
+    BusFault.LATE_ANSWER: (4, 0.01),
 }
 
 

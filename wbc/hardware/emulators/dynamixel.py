@@ -5,6 +5,15 @@ A client opens `DynamixelEmulator.port` (the pty's slave, e.g. ``/dev/pts/7``) a
 decodes each instruction packet (`wbc.hardware.dynamixel`), logs it (`packets()`), hands it to the servos it
 addresses (`EmulatedServo`: the control table and its rules) and writes their status packets back, in ID-list order.
 
+The packet handling does not depend on that thread. Built with ``in_process=True`` the emulator opens no pty and
+starts no thread: `receive` takes the bytes a client wrote and hands every answer, with when it reaches the client,
+to that client's callback, within the same call. `port_handlers` builds dynamixel_sdk handlers around it
+(`wbc.hardware.dynamixel.in_process_handlers`): the SDK writes, and its answers wait for it when it reads.
+On a `ManualClock` (`wbc.hardware.clock`), the servos' own time (bus watchdogs, injected overloads and heat, reboots)
+is a task of the clock every `TICK_PERIOD`, and a late answer (`BusFault.LATE_ANSWER`, or the wire time of
+``byte_timing``) reaches the client that much later on the clock. What a test then sees is the same on every machine
+at any load.
+
 Instructions: PING (one ID or broadcast), READ, WRITE, REBOOT, SYNC_READ, SYNC_WRITE, BULK_READ, BULK_WRITE,
 FAST_SYNC_READ and FAST_BULK_READ (one combined answer). Anything else gets an instruction error. A servo executes
 a packet sent to its ID, to its Secondary ID (without answering: the shoulder's shadow follows every write to ID 2),
@@ -32,12 +41,14 @@ servos, over `TORQUE_CONSTANT`. Servos without a model joint (wrist angle, wrist
 2048 and sit at their Goal Position while their torque is on. The emulator never steps the plant: the leg emulator,
 a test, or the plant's own real-time thread does.
 
-Faults (`BusFault`) are injected on demand: `inject` / `clear`.
+Faults (`BusFault`) are injected on demand: `inject` / `clear`. They act the same through the pty and in process.
 """
 
 from __future__ import annotations
 
 import collections
+import heapq
+import itertools
 import math
 import os
 import select
@@ -47,10 +58,12 @@ import time
 import tty
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from wbc.errors import ConfigError, PacketError
+from wbc.hardware.clock import MONOTONIC, Clock, ManualClock, ScheduledCall
 from wbc.hardware.dynamixel import (
     BAUD_RATES,
     BROADCAST_ID,
@@ -81,6 +94,7 @@ from wbc.hardware.dynamixel import (
 )
 from wbc.hardware.dynamixel.crc import crc16
 from wbc.hardware.dynamixel.packet import HEADER
+from wbc.hardware.dynamixel.sdk_bus import in_process_handlers
 from wbc.hardware.dynamixel.units import (
     CENTER_TICKS,
     CURRENT_UNIT,
@@ -102,9 +116,12 @@ from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, dec
 from wbc.hardware.emulators.servo import EmulatedServo
 from wbc.types import MotorCommand
 
-__all__ = ["BusStats", "DynamixelEmulator", "DynamixelEmulatorConfig"]
+__all__ = ["TICK_PERIOD", "BusStats", "DynamixelEmulator", "DynamixelEmulatorConfig"]
 
 _POLL = 0.01  # [s] longest the bus thread blocks, so faults and watchdogs are seen promptly
+TICK_PERIOD = 0.002
+"""[s] How often the servos' own time runs (watchdogs, injected overloads) as a task of a `ManualClock`; on any
+clock it also runs before every packet, so a watchdog is never seen late by a packet."""
 _READS = (Instruction.READ, Instruction.SYNC_READ, Instruction.FAST_SYNC_READ, Instruction.BULK_READ,
           Instruction.FAST_BULK_READ)
 _SPEEDS = {getattr(termios, f"B{rate}"): rate for rate in BAUD_RATES.values() if hasattr(termios, f"B{rate}")}
@@ -183,16 +200,21 @@ class DynamixelEmulator:
     Args:
         plant: the physics of the three model joints (`SharedPlant`, started by the caller).
         config: what is on the bus.
-        clock: the time source for the watchdogs, reboots and the log [s].
+        clock: the time of the watchdogs, reboots, late answers and the log: a `Clock` (whose `sleep` an in-process
+            client's port waits on), or a function giving the time [s].
+        in_process: open no pty and start no thread: clients reach the bus through `port_handlers` (see the module
+            docstring).
     """
 
     def __init__(self, plant: ArmPlant, config: DynamixelEmulatorConfig | None = None, *,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Clock | Callable[[], float] = time.monotonic, in_process: bool = False) -> None:
         self.plant = plant
         self.config = config if config is not None else DynamixelEmulatorConfig()
         self.table = XM430_W350
-        self._clock = clock
-        now = clock()
+        self.clock: Clock = clock if isinstance(clock, Clock) else _FunctionClock(clock)
+        self._clock = self.clock.now
+        self.in_process = in_process
+        now = self._clock()
         self._servos = [EmulatedServo(spec, self.table, now=now) for spec in self.config.servos]
         self._wiring = [self._wire(spec) for spec in self.config.servos]
         for servo, wiring in zip(self._servos, self._wiring, strict=True):
@@ -212,6 +234,11 @@ class DynamixelEmulator:
         self._last_rx = now
         self._bus_free_at = 0.0
         self._outbox: list[tuple[bytes, EmulatedServo]] = []
+        self._late: list[tuple[float, int, bytes]] = []  # (due, order, answer): late answers the pty still owes
+        self._order = itertools.count()
+        self._reply: Callable[[bytes, float], None] | None = None  # the in-process client being answered
+        self._ticker: ScheduledCall | None = None
+        self._started = False
         self._sent: tuple[np.ndarray, np.ndarray] | None = None
         self.port = ""
         self.failure: BaseException | None = None
@@ -225,7 +252,19 @@ class DynamixelEmulator:
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
     def start(self) -> DynamixelEmulator:
-        """Open the pty, power the servos up at the plant's pose and start the bus thread. Idempotent."""
+        """Power the servos up at the plant's pose; open the pty and start the bus thread (unless in process).
+
+        Idempotent. In process, the servos' own time becomes a task of the clock if it is a `ManualClock`.
+        """
+        if self.in_process:
+            if not self._started:
+                self._started = True
+                self._closed.clear()
+                self.port = f"in-process:dynamixel-{id(self):x}"
+                self._power_up()
+                if isinstance(self.clock, ManualClock):
+                    self._ticker = self.clock.call_every(TICK_PERIOD, lambda: self._tick(self._clock()))
+            return self
         if self._thread is not None:
             return self
         master, slave = os.openpty()
@@ -234,20 +273,30 @@ class DynamixelEmulator:
         self._master, self._slave = master, slave
         self._wake = os.pipe()
         self.port = os.ttyname(slave)
-        with self._lock:
-            now = self._clock()
-            self._refresh(now)
-            for servo in self._servos:
-                servo.set("goal_position", servo.get("present_position"))
-            self._update_plant()
+        self._power_up()
         self._stop.clear()
         self._closed.clear()
         self._thread = threading.Thread(target=self._run, name="dynamixel-emulator", daemon=True)
         self._thread.start()
         return self
 
+    def _power_up(self) -> None:
+        """The servos come up where the plant's arm is, holding that position as their goal."""
+        with self._lock:
+            now = self._clock()
+            self._refresh(now)
+            for servo in self._servos:
+                servo.set("goal_position", servo.get("present_position"))
+            self._update_plant()
+
     def close(self) -> None:
-        """Stop the thread and close the pty. Idempotent."""
+        """Stop the thread and close the pty (in process: stop the servos' task). Idempotent."""
+        if self._ticker is not None:
+            self._ticker.cancel()
+            self._ticker = None
+        if self.in_process:
+            self._closed.set()
+            return
         self._stop.set()
         self._wakeup()
         if self._thread is not None:
@@ -263,8 +312,51 @@ class DynamixelEmulator:
 
     @property
     def port_closed(self) -> bool:
-        """True once the pty was closed (`close`, or the PORT_CLOSED fault)."""
+        """True once the pty was closed (`close`, or the PORT_CLOSED fault); in process, once closed or unplugged."""
         return self._closed.is_set()
+
+    # -- in process -----------------------------------------------------------------------------------------------
+    def port_handlers(self, latency_ms: float = 1.0) -> Callable[[str], tuple[Any, Any]]:
+        """What `DynamixelArm(handlers=...)` takes: dynamixel_sdk handlers wired to this bus in process.
+
+        The port's reply timeout and its waits run on this emulator's clock (`in_process_handlers`).
+
+        Args:
+            latency_ms: the adapter's latency timer [ms], which sets the reply timeout.
+
+        Raises:
+            ConfigError: the emulator was not built with ``in_process=True``.
+        """
+        if not self.in_process:
+            raise ConfigError("DynamixelEmulator.port_handlers: this emulator serves a pty; build it with "
+                              "in_process=True to reach it in process, or open its `port` with the SDK")
+        return lambda port: in_process_handlers(port, self, self.clock, latency_ms)
+
+    def receive(self, data: bytes, *, baud: int, reply: Callable[[bytes, float], None]) -> None:
+        """Bytes a client wrote at `baud` [bit/s]; each answer goes to ``reply(raw, delay)`` before this returns.
+
+        `delay` [s] is how long after now the answer reaches the client: 0, or the wire time with ``byte_timing``,
+        plus the delay of `BusFault.LATE_ANSWER`.
+
+        Raises:
+            ConfigError: the emulator is not in process, or not started.
+        """
+        if not (self.in_process and self._started):
+            raise ConfigError("DynamixelEmulator.receive: only an in-process emulator, once started, takes bytes")
+        now = self._clock()
+        self._tick(now)  # what the servos did by themselves since the last packet comes first
+        with self._lock:
+            self._reply = reply
+            try:
+                if self._reader.pending and now - self._last_rx >= self.config.packet_timeout:
+                    self.stats.dropped_bytes += self._reader.discard()
+                self._last_rx = now
+                dropped = self._reader.dropped
+                for raw in self._reader.feed(bytes(data)):
+                    self._on_packet(raw, now, baud)
+                self.stats.dropped_bytes += self._reader.dropped - dropped
+            finally:
+                self._reply = None
 
     # -- test API -------------------------------------------------------------------------------------------------
     def inject(self, fault: BusFault, value: object = None) -> None:
@@ -276,6 +368,8 @@ class DynamixelEmulator:
         self.faults.inject(fault, value)
         self._fault_ids(fault)  # a bad value is the caller's error, raised here rather than on the bus thread
         self._wakeup()
+        if fault is BusFault.PORT_CLOSED and self.in_process:
+            self._closed.set()  # unplugged: the servos' task goes on, their watchdogs still trip
         if fault is BusFault.PORT_CLOSED and self._thread is not None:
             self._closed.wait(timeout=2.0)
 
@@ -342,6 +436,8 @@ class DynamixelEmulator:
                         wait = min(wait, deadline - now)
             if self._reader.pending:
                 wait = min(wait, self._last_rx + self.config.packet_timeout - now)
+            if self._late:
+                wait = min(wait, self._late[0][0] - now)
             ready = select.select([master, wake], [], [], max(0.0, wait))[0]
             if wake in ready:
                 os.read(wake, 64)
@@ -354,12 +450,20 @@ class DynamixelEmulator:
                 if data:
                     self._last_rx = now
                     dropped = self._reader.dropped
+                    baud = self._client_baud()
                     for raw in self._reader.feed(data):
-                        self._on_packet(raw, now)
+                        self._on_packet(raw, now, baud)
                     self.stats.dropped_bytes += self._reader.dropped - dropped
             elif self._reader.pending and self._clock() - self._last_rx >= self.config.packet_timeout:
                 self.stats.dropped_bytes += self._reader.discard()
+            self._write_late(self._clock())
             self._tick(self._clock())
+
+    def _write_late(self, now: float) -> None:
+        """Write the late answers now due, in the order they fall due."""
+        while self._late and self._late[0][0] <= now:
+            _, _, raw = heapq.heappop(self._late)
+            self._write(raw)
 
     def _tick(self, now: float) -> None:
         """What the servos do by themselves: temperatures, voltages, injected overloads, their bus watchdogs."""
@@ -386,14 +490,14 @@ class DynamixelEmulator:
             if changed:
                 self._update_plant()
 
-    def _on_packet(self, raw: bytes, now: float) -> None:
+    def _on_packet(self, raw: bytes, now: float, baud: int | None) -> None:
         try:
             pkt = parse_packet(raw)
         except PacketError as err:
             self.stats.rejected[err.reason] = self.stats.rejected.get(err.reason, 0) + 1
             if err.reason == "crc":
                 with self._lock:
-                    servo = self._primary(raw[4], self._listeners(now))
+                    servo = self._primary(raw[4], self._listeners(now, baud))
                     if servo is not None:
                         self._answer(servo, servo.status_error(ERR_CRC))
                     self._flush()
@@ -405,7 +509,7 @@ class DynamixelEmulator:
         with self._lock:
             if self.config.log_size:
                 self._log.append(self._logged(pkt, now))
-            listeners = self._listeners(now)
+            listeners = self._listeners(now, baud)
             if not listeners:
                 self.stats.unheard += 1
                 return
@@ -414,14 +518,15 @@ class DynamixelEmulator:
             # the answers go out once the servos have acted: a client that reads a status sees the plant updated
             self._flush()
 
-    def _listeners(self, now: float) -> list[EmulatedServo]:
-        """The servos that hear the bus now: not cut off, not rebooting, at the client's baud rate."""
+    def _listeners(self, now: float, baud: int | None) -> list[EmulatedServo]:
+        """The servos that hear the bus now: not cut off, not rebooting, at the client's baud rate (if checked)."""
         silent = self._fault_ids(BusFault.SILENT_ID)
-        baud = self._client_baud() if self.config.check_baud else None
+        baud = baud if self.config.check_baud else None
         return [s for s in self._servos if s.id not in silent and now >= s.busy_until
                 and (baud is None or BAUD_RATES.get(s.get("baud_rate")) == baud)]
 
     def _client_baud(self) -> int | None:
+        """The rate the client set on the pty (None if it cannot be read)."""
         try:
             return _SPEEDS.get(termios.tcgetattr(self._slave)[5])
         except termios.error:
@@ -570,19 +675,41 @@ class DynamixelEmulator:
         self._outbox.append((raw, servo))
 
     def _flush(self) -> None:
-        """Write the answers queued while the current packet ran, in order."""
+        """Send the answers queued while the current packet ran, in order.
+
+        With ``byte_timing`` an answer reaches the client after its servo's Return Delay Time and its bytes' time
+        on the wire, behind the answers before it; a servo with `BusFault.LATE_ANSWER` answers that much later.
+        Through the pty the bus thread waits for the wire time (a late answer is written by the thread when due,
+        without holding up the others); in process the client is told each answer's delay.
+        """
         outbox, self._outbox = self._outbox, []
+        late_ids, late_by = self._late_answers()
         for raw, servo in outbox:
+            now = self._clock()
+            at = now
             if self.config.byte_timing:
                 baud = BAUD_RATES.get(servo.get("baud_rate"), 1_000_000)
-                start = max(self._clock(), self._bus_free_at) + servo.get("return_delay_time") * RETURN_DELAY_UNIT
-                self._bus_free_at = start + len(raw) * 10 / baud
-                _sleep_until(self._bus_free_at, self._clock)
-            try:
-                os.write(self._master, raw)
+                start = max(now, self._bus_free_at) + servo.get("return_delay_time") * RETURN_DELAY_UNIT
+                self._bus_free_at = at = start + len(raw) * 10 / baud
+            if servo.id in late_ids:
+                at += late_by
+            if self._reply is not None:
+                self._reply(raw, at - now)
                 self.stats.statuses += 1
-            except OSError:
-                pass  # nobody reads the port (or it is gone): the answer is lost, as on an unplugged bus
+            elif servo.id in late_ids:
+                heapq.heappush(self._late, (at, next(self._order), raw))
+            else:
+                if self.config.byte_timing:
+                    _sleep_until(at, self._clock)
+                self._write(raw)
+
+    def _write(self, raw: bytes) -> None:
+        """Write an answer to the pty."""
+        try:
+            os.write(self._master, raw)
+            self.stats.statuses += 1
+        except (OSError, TypeError):
+            pass  # nobody reads the port (or it is gone): the answer is lost, as on an unplugged bus
 
     # -- registers <-> plant ----------------------------------------------------------------------------------
     def _direction(self, k: int) -> int:
@@ -702,6 +829,8 @@ class DynamixelEmulator:
         active = self.faults.snapshot() if active is None else active
         if fault is BusFault.OVER_TEMPERATURE:
             return self._hot(active)[0]
+        if fault is BusFault.LATE_ANSWER:
+            return self._late_answers(active)[0]
         if fault not in active or fault is BusFault.PORT_CLOSED:
             return frozenset()
         return fault_ids(active[fault], tuple(s.spec.id for s in self._servos))
@@ -713,6 +842,17 @@ class DynamixelEmulator:
         if not (isinstance(value, tuple) and len(value) == 2):
             raise ConfigError(f"BusFault.OVER_TEMPERATURE value {value!r}: expected (ID or IDs, deg C)")
         return fault_ids(value[0], tuple(s.spec.id for s in self._servos)), int(value[1])
+
+    def _late_answers(self, active: dict | None = None) -> tuple[frozenset[int], float]:
+        """The servos whose answers come late, and by how much [s] (none, 0 if the fault is not active)."""
+        active = self.faults.snapshot() if active is None else active
+        if BusFault.LATE_ANSWER not in active:
+            return frozenset(), 0.0
+        value = active[BusFault.LATE_ANSWER]
+        if not (isinstance(value, tuple) and len(value) == 2 and isinstance(value[1], int | float)
+                and math.isfinite(value[1]) and 0 < value[1] <= 1.0):
+            raise ConfigError(f"BusFault.LATE_ANSWER value {value!r}: expected (ID or IDs, delay in (0, 1] s)")
+        return fault_ids(value[0], tuple(s.spec.id for s in self._servos)), float(value[1])
 
     def _wakeup(self) -> None:
         if self._wake is not None:
@@ -732,6 +872,18 @@ class DynamixelEmulator:
             self._master = self._slave = None
             self._wake = None
             self._closed.set()
+
+
+class _FunctionClock:
+    """A `Clock` around a function that gives the time; it sleeps on the monotonic clock."""
+
+    def __init__(self, now: Callable[[], float]) -> None:
+        self.now = now
+
+    @staticmethod
+    def sleep(seconds: float) -> None:
+        """`MONOTONIC.sleep`."""
+        MONOTONIC.sleep(seconds)
 
 
 def _sleep_until(deadline: float, clock: Callable[[], float]) -> None:

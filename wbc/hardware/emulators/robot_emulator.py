@@ -9,20 +9,29 @@ The physics is stepped by the legs' emulator, as when it runs alone. In ``realti
 wall-clock pace and answers every period. In ``lockstep`` mode each leg command steps it by one control period, so
 the legs' commands set the pace, and the arm's commands act in those steps. Faults go to the emulator whose wire
 they bend: a `Fault` to the legs, a `BusFault` to the arm.
+
+Built with a `ManualClock`, the robot opens no socket and no pty and starts no thread: it hands out its two wires in
+process instead, `legs_transport` (a `wbc.hardware.unitree.Transport` for `UnitreeRobot`) and `arm_handlers` (the
+port handlers for `DynamixelArm`). Backends on the same clock then run in lockstep with it: the legs' link period and
+the arm's bus cycle are tasks of the clock, each command is answered within the call that sends it, and the servos'
+own time (watchdogs, faults) is a task of the clock too. What a test sees is the same on any machine at any load.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from wbc.errors import UnknownNameError
+from wbc.errors import ConfigError, UnknownNameError
+from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators.bus_faults import BusFault
 from wbc.hardware.emulators.dynamixel import DynamixelEmulator, DynamixelEmulatorConfig
 from wbc.hardware.emulators.faults import Fault
 from wbc.hardware.emulators.plant import SharedPlant, SharedPlantConfig
-from wbc.hardware.emulators.unitree import MODES, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.emulators.unitree import MODES, EmulatorTransport, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.unitree.robot import DESCRIPTIONS
 from wbc.types import BaseTruth
 
@@ -72,17 +81,27 @@ class RobotEmulator:
 
     Args:
         config: what to emulate.
+        clock: None serves the wires on 127.0.0.1 and a pty, each from a thread; a `ManualClock` serves them in
+            process on that clock (`legs_transport`, `arm_handlers`; see the module docstring).
     """
 
-    def __init__(self, config: RobotEmulatorConfig | None = None) -> None:
+    def __init__(self, config: RobotEmulatorConfig | None = None, *, clock: ManualClock | None = None) -> None:
         self.config = cfg = config if config is not None else RobotEmulatorConfig()
+        if clock is not None and not isinstance(clock, ManualClock):
+            raise ConfigError(f"RobotEmulator: clock must be a ManualClock (in process) or None (UDP and pty), got "
+                              f"{type(clock).__name__}")
+        self.clock = clock
         self.plant = SharedPlant(SharedPlantConfig(robot=cfg.robot, timestep=cfg.timestep, seed=cfg.seed))
         self.legs = UnitreeEmulator(UnitreeEmulatorConfig(robot=LEG_WIRES[cfg.robot], mode=cfg.mode, port=cfg.port,
                                                           control_period=cfg.control_period, seed=cfg.seed,
                                                           held_until_driven=cfg.held_until_driven,
                                                           log_size=cfg.legs_log_size),
                                     sim=self.plant.legs)
-        self.arm = DynamixelEmulator(self.plant, cfg.arm)
+        if clock is None:
+            self.arm = DynamixelEmulator(self.plant, cfg.arm)
+        else:
+            self.arm = DynamixelEmulator(self.plant, cfg.arm, clock=clock, in_process=True)
+        self._legs_transport: EmulatorTransport | None = None
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
     def start(self) -> RobotEmulator:
@@ -93,7 +112,10 @@ class RobotEmulator:
         """
         self.plant.start()
         try:
-            self.legs.start()  # resets the plant to its standing pose (seeded)
+            if self.clock is None:
+                self.legs.start()  # resets the plant to its standing pose (seeded)
+            elif self._legs_transport is None:
+                self._legs_transport = self.legs.transport(self.clock)  # the same, in process
             self.arm.start()  # the servos power up where the plant's arm is
         except BaseException:
             self.close()
@@ -103,6 +125,8 @@ class RobotEmulator:
     def close(self) -> None:
         """Stop both emulators and release the physics. Idempotent."""
         self.arm.close()
+        if self._legs_transport is not None:
+            self._legs_transport.close()
         self.legs.close()
         self.plant.close()
 
@@ -120,8 +144,31 @@ class RobotEmulator:
 
     @property
     def port(self) -> str:
-        """The arm's serial device (the pty's slave side)."""
+        """The arm's serial device (the pty's slave side; in process, the name its port handlers go by)."""
         return self.arm.port
+
+    @property
+    def legs_transport(self) -> EmulatorTransport:
+        """The legs' wire in process, for `UnitreeRobot(config, transport, clock=...)` (once started).
+
+        Raises:
+            ConfigError: the robot serves UDP (built without a clock), or is not started.
+        """
+        if self._legs_transport is None:
+            raise ConfigError("RobotEmulator.legs_transport: only a robot built with a ManualClock, once started, "
+                              "has its wires in process; otherwise connect to `address`")
+        return self._legs_transport
+
+    def arm_handlers(self, latency_ms: float = 1.0) -> Callable[[str], tuple[Any, Any]]:
+        """The arm's bus in process, for `DynamixelArm(config, handlers, clock=...)` (`config.port` = `port`).
+
+        Args:
+            latency_ms: the adapter's latency timer [ms], which sets the reply timeout.
+
+        Raises:
+            ConfigError: the robot serves a pty (built without a clock).
+        """
+        return self.arm.port_handlers(latency_ms)
 
     @property
     def failure(self) -> BaseException | None:

@@ -13,6 +13,14 @@ a `DynamixelArm` on the emulator's pty, with dynamixel_sdk and the robot's defau
    median of the four steps. The same step in pure simulation
    (`MujocoRobot`, the law applied at every 2 ms physics step) is the reference. The difference is what the bus
    loop costs: its rate, its one cycle of delay, and the quantisation of ticks, velocity units and current units.
+3. Reactions, in wall time, at the default 200 Hz: how long after the controller's last write the bus thread
+   damps (the write deadline); for each injected bus fault (a silent servo, corrupt answers, late answers, the
+   port closed), how long until the backend latches it; and, once the port is closed, how long after the last
+   packet the servos' bus watchdog zeroes their goals. The test suite checks these reactions on a `ManualClock`
+   (exact, in clock time); these are the figures the real loop reaches on this machine.
+4. The emulators' own real time, in this process once the robot's is stopped: the shared plant's real-time factor
+   on its own thread, and a sync read's round trip over a pty, with and without ``byte_timing`` (the Return Delay
+   Time and the wire time at 1 Mbit/s), against what the wire model says.
 """
 
 from __future__ import annotations
@@ -23,6 +31,7 @@ import select
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -31,16 +40,27 @@ import numpy as np
 import wbc
 from wbc.control.stand import stand_command
 from wbc.errors import BenchError
-from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
-from wbc.hardware.emulators import LEG_WIRES, RobotEmulator, RobotEmulatorConfig
+from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
+from wbc.hardware.emulators import (
+    LEG_WIRES,
+    BusFault,
+    DynamixelEmulator,
+    DynamixelEmulatorConfig,
+    RobotEmulator,
+    RobotEmulatorConfig,
+    SharedPlant,
+    SharedPlantConfig,
+)
 from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
+from wbc.optional import require
 from wbc.robots.registry import get_robot
 from wbc.tools.bench.references import machine_description
 from wbc.types import MotorCommand
 
-__all__ = ["ArmRateRow", "ArmStepRow", "bench_arm", "serve_robot_emulator_stdio", "step_metrics"]
+__all__ = ["ArmReactionRow", "ArmRateRow", "ArmStepRow", "EmulatorTimingRow", "bench_arm",
+           "serve_robot_emulator_stdio", "step_metrics"]
 
 _START_TIMEOUT = 60.0  # [s] longest wait for the emulator process to open its port and pty
 _STOP_MARGIN = 60.0  # [s] the emulator process stops by itself this long after the bench should have ended
@@ -50,6 +70,10 @@ _SAMPLE = 0.002  # [s] sampling period of the step response
 _ELBOW = 2
 _REPEATS = 4  # steps per gain on the bus (out and back, twice); the median is reported
 _DISCARDS = 2  # step series thrown away (and counted) because a bus fault latched in them, before giving up
+_REACTION_TIMEOUT = 2.0  # [s] longest wait for a reaction before it is reported as none
+_FAULTS = (("silent_id", 4), ("bad_crc", 4), ("late_answer", [4, 0.05]), ("port_closed", None))  # port closed last
+_ROUND_TRIPS = 200  # sync reads timed over the pty
+_COMMAND_TIMEOUT = 10.0  # [s] longest wait for the emulator process to answer a command
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -76,6 +100,49 @@ class ArmRateRow:
     failed_reads: int
     cycles: int
     faults: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class ArmReactionRow:
+    """How long the real loop took to react to one event, in wall time.
+
+    Attributes:
+        event: ``write_deadline`` (the controller stopped writing), or the injected `BusFault`'s value.
+        reaction: what was waited for: ``damping`` (the bus thread's first damping cycle), or the fault kind latched
+            (``no_answer``, ``corrupt``, ``port_lost``; ``none`` if nothing latched within the bench's timeout).
+        ms: from the event (the last write; the fault active in the emulator) to the reaction [ms].
+        expected_ms: what the configuration implies, for comparison: the write deadline; for a fault, the sum of the
+            reply timeouts and pauses of the retries and pings (what the tests check exactly on a `ManualClock`),
+            plus up to one bus period [ms].
+        watchdog_ms: port closed only: from the last packet to the servos' bus watchdog zeroing their goals, seen
+            by the emulator (to within its 10 ms tick) [ms]; the watchdog is set to `DynamixelArmConfig.watchdog_s`.
+    """
+
+    event: str
+    reaction: str
+    ms: float
+    expected_ms: float
+    watchdog_ms: float | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class EmulatorTimingRow:
+    """One real-time figure of the emulators themselves.
+
+    Attributes:
+        what: ``plant_realtime_factor`` (simulated over wall time of `SharedPlant`'s own thread), or
+            ``sync_read_round_trip`` / ``sync_read_round_trip_byte_timing`` (three joints over a pty, the SDK's
+            port handler as the robot's).
+        value: the factor, or the median round trip [ms].
+        worst: the factor's overruns (real-time ticks late by a period or more), or the 99th percentile [ms].
+        model: what the model says: 1 for the factor; for the round trip the wire time of the answers (plus their
+            Return Delay Time) at 1 Mbit/s, 0 without byte timing [ms].
+    """
+
+    what: str
+    value: float
+    worst: float
+    model: float
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -140,10 +207,49 @@ def serve_robot_emulator_stdio(robot: str, seconds: float) -> None:
     with RobotEmulator(RobotEmulatorConfig(robot=robot, mode="realtime")) as emu:
         host, port = emu.address
         print(json.dumps({"host": host, "port": port, "pty": emu.port}), flush=True)
-        select.select([sys.stdin], [], [], seconds + _STOP_MARGIN)
+        end = time.monotonic() + seconds + _STOP_MARGIN
+        while select.select([sys.stdin], [], [], max(0.0, end - time.monotonic()))[0]:
+            line = sys.stdin.readline()
+            if not line or line.strip() == "stop":
+                break
+            print(json.dumps(_emulator_command(emu, json.loads(line))), flush=True)
         failure = repr(emu.failure) if emu.failure is not None else None
         stats = asdict(emu.arm.stats)
     print(json.dumps({"failure": failure, "arm_bus": stats}), flush=True)
+
+
+def _emulator_command(emu: RobotEmulator, command: dict) -> dict:
+    """One command of the bench to the emulator process: inject or clear an arm bus fault, or time a watchdog."""
+    if "inject" in command:
+        value = command.get("value")
+        emu.inject(BusFault(command["inject"]), tuple(value) if isinstance(value, list) else value)
+        return {"ok": True}
+    if "clear" in command:
+        emu.clear(BusFault(command["clear"]) if command["clear"] else None)
+        return {"ok": True}
+    if "watchdog" in command:  # how long after the last packet the servo's bus watchdog tripped
+        servo_id = int(command["watchdog"])
+        end = time.monotonic() + _REACTION_TIMEOUT
+        while emu.arm.register(servo_id, "bus_watchdog") != -1 and time.monotonic() < end:
+            time.sleep(0.0005)
+        tripped = time.monotonic()
+        packets = emu.arm.packets()
+        if emu.arm.register(servo_id, "bus_watchdog") != -1 or not packets:
+            return {"after_s": None}
+        return {"after_s": tripped - packets[-1].time}
+    return {"error": f"unknown command {command!r}"}
+
+
+def _command(proc: subprocess.Popen[str], command: dict) -> dict:
+    """Send the emulator process one command and read its answer."""
+    proc.stdin.write(json.dumps(command) + "\n")
+    proc.stdin.flush()
+    if not select.select([proc.stdout], [], [], _COMMAND_TIMEOUT)[0]:
+        raise BenchError(f"bench arm: the emulator process did not answer {command} within {_COMMAND_TIMEOUT} s")
+    answer = json.loads(proc.stdout.readline())
+    if "error" in answer:
+        raise BenchError(f"bench arm: the emulator process: {answer['error']}")
+    return answer
 
 
 def _start_emulator(robot: str, seconds: float) -> tuple[subprocess.Popen[str], dict]:
@@ -170,16 +276,19 @@ class _Rig:
     def __init__(self, legs: UnitreeRobot, legs_hold: MotorCommand, period: float = 0.004) -> None:
         self.legs, self.legs_hold, self.period = legs, legs_hold, period
 
-    def run(self, arm: DynamixelArm, arm_cmd: MotorCommand, seconds: float,
-            sample: list[tuple[float, float]] | None = None, t_step: float = 0.0) -> None:
+    def run(self, arm: DynamixelArm, arm_cmd: MotorCommand | None, seconds: float,
+            sample: list[tuple[float, float]] | None = None, t_step: float = 0.0,
+            until: Callable[[], bool] | None = None) -> None:
+        """Write the legs' stand and `arm_cmd` (None: nothing to the arm) for `seconds`, or until `until()`."""
         end = time.monotonic() + seconds
         period = _SAMPLE if sample is not None else self.period
         for _ in range(int(seconds / period) + 2):
             now = time.monotonic()
-            if now >= end:
+            if now >= end or (until is not None and until()):
                 return
             self.legs.write(self.legs_hold)
-            arm.write(arm_cmd)
+            if arm_cmd is not None:
+                arm.write(arm_cmd)
             if sample is not None:
                 sample.append((now - t_step, float(arm.read().q[_ELBOW])))
             arm.advance(period)
@@ -202,6 +311,81 @@ def _step_series(rig: _Rig, arm: DynamixelArm, stowed: np.ndarray, kp: float, kd
         t, y = (np.array(v) for v in zip(*(pre + samples), strict=True))
         runs.append(step_metrics(t, y, float(target[_ELBOW])))
     return runs
+
+
+def _reactions(rig: _Rig, proc: subprocess.Popen[str], config: DynamixelArmConfig,
+               hold: MotorCommand) -> list[ArmReactionRow]:
+    """The write deadline's damping and each fault's latch, in wall time (the port closed last: it ends the pty)."""
+    rows = []
+    with DynamixelArm(config) as arm:
+        rig.run(arm, hold, 0.3)
+        before = arm.bus_stats().damping_cycles
+        arm.write(hold)
+        written = time.monotonic()
+        rig.run(arm, None, _REACTION_TIMEOUT, until=lambda: arm.bus_stats().damping_cycles > before)
+        damped = arm.bus_stats().damping_cycles > before
+        rows.append(ArmReactionRow(event="write_deadline", reaction="damping" if damped else "none",
+                                   ms=1e3 * (time.monotonic() - written) if damped else float("nan"),
+                                   expected_ms=1e3 * config.write_deadline))
+    period = 1.0 / config.rate_hz
+    timeout = {n: (n * 10 / 1e3 + 2 * config.latency_ms + 2) * 1e-3 for n in (11, 3 * 21)}  # the SDK's formula
+    silent = ((config.retries + 1) * timeout[63] + config.retries * config.retry_wait_s + 3 * timeout[11]
+              + 0.012)
+    expected = {"silent_id": silent, "late_answer": silent, "bad_crc": config.retries * config.retry_wait_s,
+                "port_closed": 0.0}
+    for name, value in _FAULTS:
+        with DynamixelArm(config) as arm:
+            rig.run(arm, hold, 0.3)
+            _command(proc, {"inject": name, "value": value})
+            t0 = time.monotonic()
+            rig.run(arm, hold, _REACTION_TIMEOUT, until=lambda a=arm: a.fault is not None)
+            latched = time.monotonic() - t0
+            fault = arm.fault
+            watchdog = _command(proc, {"watchdog": 4})["after_s"] if name == "port_closed" else None
+            if name != "port_closed":
+                _command(proc, {"clear": name})
+        rows.append(ArmReactionRow(event=name, reaction=fault.kind if fault is not None else "none",
+                                   ms=1e3 * latched if fault is not None else float("nan"),
+                                   expected_ms=1e3 * (expected[name] + period),
+                                   watchdog_ms=None if watchdog is None else 1e3 * watchdog))
+    return rows
+
+
+def _emulator_timing(robot: str, seconds: float, latency_ms: float) -> list[EmulatorTimingRow]:
+    """The plant's real-time factor on its own thread, and a sync read's round trip over a pty (this process)."""
+    sdk = require("dynamixel_sdk")
+    rows = []
+    with SharedPlant(SharedPlantConfig(robot=robot)) as plant:
+        plant.start_realtime()
+        t0, w0 = plant.time, time.monotonic()
+        time.sleep(seconds)
+        simulated, wall = plant.time - t0, time.monotonic() - w0
+        plant.stop_realtime()
+        rows.append(EmulatorTimingRow(what="plant_realtime_factor", value=simulated / wall, worst=plant.overruns,
+                                      model=1.0))
+        for byte_timing in (False, True):
+            with DynamixelEmulator(plant, DynamixelEmulatorConfig(byte_timing=byte_timing, log_size=0)) as emu:
+                port, packet = sdk_handlers(emu.port, latency_ms)
+                if not port.openPort():
+                    raise BenchError(f"bench arm: could not open the emulator's pty {emu.port}")
+                group = sdk.GroupSyncRead(port, packet, 126, 10)
+                for servo_id in (1, 2, 4):
+                    group.addParam(servo_id)
+                times = []
+                for _ in range(_ROUND_TRIPS):
+                    start = time.perf_counter()
+                    ok = group.txRxPacket() == sdk.COMM_SUCCESS
+                    if ok:
+                        times.append(time.perf_counter() - start)
+                    else:
+                        port.clearPort()
+                port.closePort()
+            wire = 3 * 21 * 10 / 1e6 if byte_timing else 0.0  # three answers of 21 bytes, Return Delay Time 0
+            rows.append(EmulatorTimingRow(
+                what="sync_read_round_trip" + ("_byte_timing" if byte_timing else ""),
+                value=1e3 * float(np.median(times)) if times else float("nan"),
+                worst=1e3 * float(np.percentile(times, 99)) if times else float("nan"), model=1e3 * wire))
+    return rows
 
 
 def _sim_step(robot: str, q0: np.ndarray, kp: float, kd: float, step: float) -> tuple[np.ndarray, np.ndarray]:
@@ -240,8 +424,10 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         gains: (kp, kd) of each step response [N m / rad, N m s / rad].
 
     Returns:
-        ``rates`` (`ArmRateRow` dicts), ``steps`` (`ArmStepRow` dicts, bus and simulation for each gain), the
-        settings and ``machine``.
+        ``rates`` (`ArmRateRow` dicts), ``steps`` (`ArmStepRow` dicts, bus and simulation for each gain),
+        ``reactions`` (`ArmReactionRow` dicts: the write deadline and each bus fault, in wall time), ``emulator``
+        (`EmulatorTimingRow` dicts: the plant's real-time factor, the pty's round trips), the settings and
+        ``machine``.
 
     Raises:
         BenchError: the emulator process did not start or failed, or a setting is out of range.
@@ -250,12 +436,13 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         raise BenchError(f"bench arm: --robot must be one of {', '.join(LEG_WIRES)}, got {robot!r}")
     if not seconds > 0 or not rates or any(not 10.0 <= r <= 1000.0 for r in rates):
         raise BenchError(f"bench arm: --seconds must be > 0 and each rate in 10..1000 Hz, got {seconds}, {rates}")
-    total = len(rates) * (seconds + 1.0) + len(gains) * (_DISCARDS + 1) * (_SETTLE + _REPEATS * (_RECORD + 0.1) + 1.0)
+    total = len(rates) * (seconds + 1.0) + len(gains) * (_DISCARDS + 1) * (_SETTLE + _REPEATS * (_RECORD + 0.1) + 1.0) \
+        + (len(_FAULTS) + 1) * (2 * _REACTION_TIMEOUT + 2.0)
     proc, where = _start_emulator(robot, total)
     desc = get_robot(robot, "actuated")
     stand = stand_command(desc).stacked()
     stowed = desc.nominal_q[12:].copy()
-    rate_rows, step_rows = [], []
+    rate_rows, step_rows, reaction_rows = [], [], []
     fault = None
     try:
         legs = UnitreeRobot(UnitreeRobotConfig(robot=LEG_WIRES[robot], target_host=where["host"],
@@ -299,6 +486,9 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
                                             discarded=discarded,
                                             **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
                                                        (float(v) for v in median), strict=True))))
+            if fault is None:
+                reaction_rows = _reactions(rig, proc, DynamixelArmConfig(robot=robot, port=where["pty"],
+                                                                         latency_ms=latency_ms), hold)
     finally:
         try:
             proc.stdin.write("stop\n")
@@ -322,6 +512,8 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         step_rows.append(ArmStepRow(source="simulation", kp=kp, kd=kd, rate_hz=500.0,
                                     **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
                                                step_metrics(t, y, float(stowed[_ELBOW] + step)), strict=True))))
+    emulator = _emulator_timing(robot, seconds, latency_ms)
     return {"robot": robot, "latency_ms": latency_ms, "seconds": seconds, "step_rad": step, "emulator_bus": bus,
             "rates": [asdict(r) for r in rate_rows], "steps": [asdict(s) for s in step_rows],
+            "reactions": [asdict(r) for r in reaction_rows], "emulator": [asdict(r) for r in emulator],
             "machine": machine_description()}
