@@ -21,11 +21,11 @@ import subprocess
 import sys
 import threading
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import Stepped
 
 from wbc.cli import main
 from wbc.cli.main import hw_check
@@ -39,18 +39,6 @@ from wbc.types import MotorCommand
 ROOT = Path(__file__).resolve().parents[1]
 NOT_LOOPBACK = "192.0.2.1:9"  # TEST-NET-1 (documentation only), discard port: refused before anything is sent
 LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz
-
-
-@dataclass
-class Stepped:
-    """An emulated robot in process, the clock it runs on, and the builder that puts a command's robot on both."""
-
-    clock: ManualClock
-    emu: UnitreeEmulator
-
-    def build(self, config: HardwareRobotConfig) -> HardwareRobot:
-        """The robot `config` names, its legs on the clock over the emulator's in-process channel."""
-        return build_hardware_robot(config, clock=self.clock, legs_transport=self.emu.transport(self.clock))
 
 
 @pytest.fixture(params=("a1", "go1"))

@@ -26,11 +26,11 @@ import sys
 import termios
 import threading
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import Stepped
 
 from wbc.arena.base_estimate import BaseEstimate
 from wbc.arena.episode import Episode
@@ -65,18 +65,6 @@ NOT_LOOPBACK = "192.0.2.1:9"  # TEST-NET-1 (documentation only), discard port: r
 LINK_PERIOD = 0.002  # [s] the link's default rate, 500 Hz
 TIME_EPS = 1e-9  # [s] float rounding of the clock's sums of periods
 TICK = 0.02  # [s] the stand controller's period (50 Hz)
-
-
-@dataclass
-class Stepped:
-    """An emulated robot in process, the clock it runs on, and the builder that puts a trial's robot on both."""
-
-    clock: ManualClock
-    emu: UnitreeEmulator
-
-    def build(self, config: HardwareRobotConfig) -> HardwareRobot:
-        """The robot `config` names, its legs on the clock over the emulator's in-process channel."""
-        return build_hardware_robot(config, clock=self.clock, legs_transport=self.emu.transport(self.clock))
 
 
 @pytest.fixture
