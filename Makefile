@@ -4,11 +4,11 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-LOCK := requirements/lock.txt
-NO_DEPS_LOCK := requirements/no-deps.txt
+LOCK := requirements/wbc.lock
+NO_DEPS_LOCK := requirements/no-deps.lock
 # The extras the lock covers and the set-up installs: the suite runs its torch tests and the ONNX round trip (pi3
 # exported with torch, run with onnxruntime) instead of skipping them. The hardware extra's vendor SDK is locked apart,
-# in no-deps.txt, and installed without its dependencies (see requirements/no-deps.in); its other package,
+# in no-deps.lock, and installed without its dependencies (see requirements/no-deps.in); its other package,
 # dynamixel-sdk, is in dev.
 LOCKED_EXTRAS := dev,train,onnx
 comma := ,

@@ -7,7 +7,7 @@ digit: a refactor that changes a result, however slightly, fails here. Set ``WBC
 (only for a deliberate change of behaviour, said in the commit message).
 
 Results reproduce to the bit only under the same versions of the numerical packages (MuJoCo, numba, NumPy ...), so
-the goldens are recorded in the environment `make test` installs from the lock (requirements/lock.txt), and
+the goldens are recorded in the environment `make test` installs from the lock (requirements/wbc.lock), and
 tests/golden/versions.json records every installed distribution's version beside them. When a row differs, the
 failure names the installed versions that are not the recording's: a changed dependency, not a changed controller.
 """

@@ -1,7 +1,7 @@
-"""The lock matches pyproject.toml: `make test` and `make demo` install exactly requirements/lock.txt and no-deps.txt.
+"""The lock matches pyproject.toml: `make test` and `make demo` install exactly requirements/wbc.lock and no-deps.lock.
 
 pyproject.toml keeps compatible ranges for people who install `wbc` as a library; the lock, resolved from those ranges
-and requirements/lock.in by uv (`make lock`), pins one version of every package with its hashes; no-deps.txt pins the
+and requirements/lock.in by uv (`make lock`), pins one version of every package with its hashes; no-deps.lock pins the
 packages installed without their dependencies (no-deps.in). Three ways the lock can fall out of step, each a failure
 here: a requirement it does not satisfy (a range moved, a dependency was added), a package it holds for a requirement
 that is gone (a dependency was removed), and a package pinned without hashes (a hand edit).
@@ -17,9 +17,9 @@ from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
 
 ROOT = Path(__file__).resolve().parent.parent
-LOCK = ROOT / "requirements" / "lock.txt"
+LOCK = ROOT / "requirements" / "wbc.lock"
 LOCK_IN = ROOT / "requirements" / "lock.in"
-NO_DEPS = ROOT / "requirements" / "no-deps.txt"
+NO_DEPS = ROOT / "requirements" / "no-deps.lock"
 NO_DEPS_IN = ROOT / "requirements" / "no-deps.in"
 MAKEFILE = ROOT / "Makefile"
 PIN = re.compile(r"^([A-Za-z0-9][A-Za-z0-9._-]*)==([^\s\\]+)")
@@ -71,7 +71,7 @@ def _in_file(path: Path) -> list[tuple[Requirement, str]]:
 
 
 def _requirements() -> list[tuple[Requirement, str]]:
-    """Every requirement lock.txt must satisfy, with where it comes from."""
+    """Every requirement wbc.lock must satisfy, with where it comes from."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     out = [(Requirement(r), "pyproject.toml [project] dependencies") for r in project["dependencies"]]
     for extra in _locked_extras():
@@ -99,7 +99,7 @@ def test_every_requirement_is_satisfied_by_the_lock():
     no_deps, _, _ = _lock(NO_DEPS)
     problems += _unsatisfied(_in_file(NO_DEPS_IN), no_deps)
     assert set(no_deps) == {canonicalize_name(r.name) for r, _ in _in_file(NO_DEPS_IN)}, \
-        "requirements/no-deps.txt pins something no-deps.in does not name"
+        "requirements/no-deps.lock pins something no-deps.in does not name"
     # the hardware extra, which users install by hand, is covered by the two together
     project = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))["project"]
     hardware = [(Requirement(r), "pyproject.toml extra 'hardware'")
@@ -115,9 +115,9 @@ def test_the_lock_holds_nothing_for_a_requirement_that_is_gone():
     stale = [name for name, why in via.items()
              if (any(w.startswith("wbc") and "pyproject.toml" in w for w in why) and name not in direct)
              or ("-r requirements/lock.in" in why and name not in pinned_in)]
-    assert not stale, f"requirements/lock.txt pins {stale} for requirements that are gone; run `make lock`"
+    assert not stale, f"requirements/wbc.lock pins {stale} for requirements that are gone; run `make lock`"
     orphans = [name for name, why in via.items() if not why and name not in direct | pinned_in]
-    assert not orphans, f"requirements/lock.txt pins {orphans} with no reason (# via); run `make lock`"
+    assert not orphans, f"requirements/wbc.lock pins {orphans} with no reason (# via); run `make lock`"
 
 
 def test_every_pin_carries_hashes():
@@ -125,4 +125,4 @@ def test_every_pin_carries_hashes():
     assert len(pins) > 50  # the whole tree, not just the direct requirements
     no_deps, _, no_deps_hashes = _lock(NO_DEPS)
     unhashed = [name for name in pins if hashes[name] == 0] + [n for n in no_deps if no_deps_hashes[n] == 0]
-    assert not unhashed, f"requirements/lock.txt pins {unhashed} without a hash: the lock is written by `make lock`"
+    assert not unhashed, f"requirements/wbc.lock pins {unhashed} without a hash: the lock is written by `make lock`"
