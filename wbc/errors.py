@@ -5,6 +5,7 @@ Messages say what was wrong and how to fix it (valid names, the field at fault, 
 
 from __future__ import annotations
 
+import difflib
 from os import PathLike
 
 __all__ = [
@@ -41,13 +42,26 @@ class WbcError(Exception):
 
 
 class UnknownNameError(WbcError, KeyError):
-    """A name (robot, arm mode, controller ...) is not in its registry; the message lists the valid ones."""
+    """A name (robot, arm mode, controller ...) is not in its registry; the message lists the valid ones.
+
+    When a valid name is close to the one given (`difflib.get_close_matches`, a typo such as ``mcp`` for ``mpc``),
+    the message suggests it first.
+
+    Attributes:
+        kind: what the name names (``controller``, ``robot`` ...).
+        name: the name given.
+        valid: the valid names, sorted.
+        suggestion: the valid name closest to `name`, or None when none is close.
+    """
 
     def __init__(self, kind: str, name: str, valid: list[str] | tuple[str, ...]) -> None:
         self.kind = kind
         self.name = name
         self.valid = tuple(sorted(valid))
-        super().__init__(f"unknown {kind} {name!r}; valid {kind}s: {', '.join(self.valid)}")
+        close = difflib.get_close_matches(str(name), self.valid, n=1)
+        self.suggestion = close[0] if close else None
+        hint = f"; did you mean {self.suggestion!r}?" if self.suggestion is not None else ""
+        super().__init__(f"unknown {kind} {name!r}{hint}; valid {kind}s: {', '.join(self.valid)}")
 
     def __str__(self) -> str:  # KeyError would repr() the message
         return str(self.args[0])

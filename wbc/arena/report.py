@@ -392,10 +392,10 @@ def format_table(summary: Mapping[str, Any]) -> str:
 
     One block per band, one row per controller, columns Trials, Success %, TTF, V_lin err, V_ang err as
     "mean ± std" across seeds (success in percent with 2 decimals, e.g. ``95.02 ± 0.62``; the others with 3), or,
-    from a single seed, "mean [lo, hi]" with the 95 % interval over trials (`cell_text`). Then a block "paired
-    differences (B - A, 95% CI)" with one line per pair, band and metric, its test's p-value and n80; success
-    differences are in percentage points. Undefined statistics show as ``n/a``. A run stopped by the sequential test
-    ends with its verdict.
+    from a single seed, "mean [lo, hi]" with the 95 % interval over trials (`cell_text`). Then, when two controllers
+    or more played, a block "paired differences (B - A, 95% CI)" with one line per pair, band and metric, its test's
+    p-value and n80; success differences are in percentage points. Undefined statistics show as ``n/a``. A run
+    stopped by the sequential test ends with its verdict.
 
     Args:
         summary: the output of `summarize` (or the same read back from JSON).
@@ -410,16 +410,14 @@ def format_table(summary: Mapping[str, Any]) -> str:
         lines.append(f"band {band}")
         lines += _aligned(header, _result_rows(summary, band, METRICS))
         lines.append("")
-    lines.append("paired differences (B - A, 95% CI)")
-    if summary["paired"]:
+    if summary["paired"]:  # a run of one controller has no pairs, and no block for them
+        lines.append("paired differences (B - A, 95% CI)")
         lines += _aligned(_PAIRED_HEADER, _paired_rows(summary))
         lines += textwrap.wrap(PAIRED_LEGEND, width=118, initial_indent="  ", subsequent_indent="  ")
-    else:
-        lines.append("  (fewer than two controllers)")
     if summary.get("sequential"):
         verdict, *table = _sequential_lines(summary["sequential"])
         lines += ["", *textwrap.wrap(verdict, width=120), *table]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines).rstrip("\n") + "\n"
 
 
 def _md_cell(text: Any) -> str:
@@ -454,9 +452,9 @@ def write_report(
     """Write ``report.md`` and its PNG plots (`wbc.arena.plots.write_plots`) into `out_dir` (created if missing).
 
     ``report.md`` holds the title, the scenario name and hash, `meta` as a list (nested mappings as sub-lists), the
-    extra `sections`, one Markdown results table per band, the paired-differences table (with each test's p-value
-    and n80, and the sequential test's verdict when the run had one), where each controller fails (`failures`) and
-    links to the plots.
+    extra `sections`, one Markdown results table per band, the paired-differences table when two controllers or more
+    played (with each test's p-value and n80, and the sequential test's verdict when the run had one), where each
+    controller fails (`failures`) and links to the plots.
 
     Args:
         out_dir: output folder.
@@ -486,25 +484,21 @@ def write_report(
     for title, body in sections:
         lines += ["", f"## {title}", "", *body]
     lines += ["", "## Results", "", "Mean ± std across seeds (each seed's trials averaged first); from a single seed, "
-              "the mean and its 95 % interval over trials (Wilson for success, bootstrap otherwise); success in %.",
-              ""]
+              "the mean and its 95 % interval over trials (Wilson for success, bootstrap otherwise); success in %."]
     metrics = (*METRICS, *EXTRA_METRICS)
     for band in bands:
-        lines += [f"### Band `{band}`", ""]
+        lines += ["", f"### Band `{band}`", ""]
         header = ["Controller", "Trials", *(LABELS[m] for m in metrics)]
         lines += md_table(header, _result_rows(summary, band, metrics))
-        lines.append("")
-    lines += ["## Paired differences (B - A, 95% CI)", ""]
-    lines += [
-        "Same trials for both controllers; percentile bootstrap over trials. Positive: B larger (better for success "
-        "and TTF, worse for tracking errors). Success in percentage points.",
-        "",
-    ]
-    if summary["paired"]:
+    if summary["paired"]:  # a run of one controller has no pairs, and no section for them
+        lines += ["", "## Paired differences (B - A, 95% CI)", ""]
+        lines += [
+            "Same trials for both controllers; percentile bootstrap over trials. Positive: B larger (better for "
+            "success and TTF, worse for tracking errors). Success in percentage points.",
+            "",
+        ]
         lines += md_table(_PAIRED_HEADER, _paired_rows(summary))
         lines += ["", PAIRED_LEGEND[0].upper() + PAIRED_LEGEND[1:] + "."]
-    else:
-        lines.append("(fewer than two controllers)")
     if summary.get("sequential"):
         header, rows = _sequential_table(summary["sequential"])
         lines += ["", "## Sequential test", "", _sequential_lines(summary["sequential"])[0]]

@@ -266,14 +266,17 @@ def demo_watch_command(watch: TrialToWatch, *, scenario: str, wbc: str | None = 
 def print_controllers(rows: Sequence[ControllerListing]) -> None:
     """``wbc controllers``: the registry's, the name forms, installed plug-ins with their summaries."""
     def robots(r: ControllerListing) -> str:
-        return "any robot" if r.robots is None else ", ".join(r.robots)
+        if not r.loaded:
+            return ""
+        return "any robot" if r.robots is None else ", ".join(r.robots) or "no robot"
 
     def table(selected: Sequence[ControllerListing], with_target: bool) -> None:
         width = max(len(r.name) for r in selected)
+        robots_width = max(10, *(len(robots(r)) for r in selected))
         for r in selected:
             arms = "/".join(r.arm_modes) or "-"
             target = f"  ({r.target})" if with_target else ""
-            print(f"  {r.name:<{width}}  {arms:<9} {robots(r) if r.loaded else '':<10}  {r.summary}{target}")
+            print(f"  {r.name:<{width}}  {arms:<9} {robots(r):<{robots_width}}  {r.summary}{target}")
 
     print("registered controllers:")
     table([r for r in rows if r.kind == "registry"], with_target=False)

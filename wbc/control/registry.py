@@ -30,14 +30,25 @@ from wbc.control.stand import StandController
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.composite_policy import load_composite
 from wbc.learned.policy.controller import LearnedController
+from wbc.learned.policy.shipped import shipped_weights
 from wbc.mpc.controller import MpcController
 from wbc.robots.description import check_arm_mode
+from wbc.robots.registry import ROBOTS, get_robot
 
 __all__ = ["CONTROLLERS", "NAME_FORMS", "ONNX_PREFIX", "POLICY_PREFIX", "ControllerListing", "ControllerSpec",
            "arm_variant", "get_controller", "list_controllers", "takes_controller_config"]
 
 POLICY_PREFIX = "policy:"
 """``policy:PATH`` names the exported policy at PATH (the .npz, the .json or their stem)."""
+
+
+def _robots_with_weights(arm_mode: str, posture: str | None = None) -> tuple[str, ...]:
+    """The robots, in registry order, whose shipped weights for `arm_mode` (and `posture`) are installed.
+
+    A registry entry that runs shipped weights claims these robots and no others, so ``wbc controllers`` lists them
+    and the arena refuses a scenario for another robot before any trial is played.
+    """
+    return tuple(robot for robot in ROBOTS if shipped_weights(get_robot(robot, arm_mode), posture).is_file())
 
 
 CONTROLLERS: dict[str, ControllerSpec] = {
@@ -52,23 +63,26 @@ CONTROLLERS: dict[str, ControllerSpec] = {
     "mpc-locked": ControllerSpec("mpc-locked", "locked", MpcController, "centroidal MPC, arm locked"),
     "mpc-noarm": ControllerSpec("mpc-noarm", "none", MpcController, "centroidal MPC, robot without its arm"),
     "learned": ControllerSpec("learned", "actuated", LearnedController,
-                              "learned policy pi3 (PPO + BC, staged), arm actuated; shipped weights, numpy"),
+                              "learned policy pi3 (PPO + BC, staged), arm actuated; shipped weights, numpy",
+                              robots=_robots_with_weights("actuated")),
     "learned-locked": ControllerSpec("learned-locked", "locked", LearnedController,
-                                     "learned policy pi2, arm locked; shipped weights, numpy"),
+                                     "learned policy pi2, arm locked; shipped weights, numpy",
+                                     robots=_robots_with_weights("locked")),
     "learned-noarm": ControllerSpec("learned-noarm", "none", LearnedController,
-                                    "learned policy pi1, robot without its arm; shipped weights, numpy"),
+                                    "learned policy pi1, robot without its arm; shipped weights, numpy",
+                                    robots=_robots_with_weights("none")),
     "learned-crouched": ControllerSpec("learned-crouched", "actuated",
                                        functools.partial(LearnedController, posture="crouched"),
                                        "pi3 as first trained (no posture term: crouches), arm actuated; shipped "
-                                       "weights"),
+                                       "weights", robots=_robots_with_weights("actuated", "crouched")),
     "learned-locked-crouched": ControllerSpec("learned-locked-crouched", "locked",
                                               functools.partial(LearnedController, posture="crouched"),
                                               "pi2 as first trained (no posture term: crouches), arm locked; shipped "
-                                              "weights"),
+                                              "weights", robots=_robots_with_weights("locked", "crouched")),
     "learned-noarm-crouched": ControllerSpec("learned-noarm-crouched", "none",
                                              functools.partial(LearnedController, posture="crouched"),
                                              "pi1 as first trained (no posture term: crouches), no arm; shipped "
-                                             "weights"),
+                                             "weights", robots=_robots_with_weights("none", "crouched")),
 }
 
 
