@@ -111,12 +111,12 @@ def test_breakdown_counts_by_command_sector_axis_and_falls():
     steady, shaky = result["controllers"]["steady"]["in"], result["controllers"]["shaky"]["in"]
     # steady: both standing trials survived, one of two walking ones fell
     assert {k: (c["k"], c["n"]) for k, c in steady["by_command"].items()} == {"standing": (2, 2), "vx 0.3": (1, 2)}
-    assert steady["falls"] == {"trials": 4, "falls": 1, "before_first_push": 1, "after_push": 0,
-                               "median_s_after_push": None}
+    assert steady["falls"] == {"trials": 4, "falls": 1, "controller_errors": 0, "before_first_push": 1,
+                               "after_push": 0, "median_s_after_push": None}
     # shaky: both standing trials fell, one walking trial of two
     assert {k: (c["k"], c["n"]) for k, c in shaky["by_command"].items()} == {"standing": (0, 2), "vx 0.3": (1, 2)}
-    assert shaky["falls"] == {"trials": 4, "falls": 3, "before_first_push": 0, "after_push": 3,
-                              "median_s_after_push": pytest.approx(1.5)}
+    assert shaky["falls"] == {"trials": 4, "falls": 3, "controller_errors": 0, "before_first_push": 0,
+                              "after_push": 3, "median_s_after_push": pytest.approx(1.5)}
     # shaky's pushes met: trial 0 pushes 0 (forward, x) and 1 (left, y; fell), trial 1 push 0 (right, x; fell),
     # trial 2 pushes 0 (left at 46 deg, x) and 1 (left at 135 deg, y; fell), trial 3 push 0 (backward, y)
     sectors = {s: (c["k"], c["n"]) for s, c in shaky["by_sector"].items()}
@@ -133,6 +133,18 @@ def test_breakdown_counts_by_command_sector_axis_and_falls():
                                "offset y"]
     assert push_rows[1] == ["shaky", "100% 1/1", "33% 1/3", "100% 1/1", "0% 0/1", "67% 2/3", "33% 1/3"]
     assert len(breakdown_tables(result, "in", pushes=False)) == 1
+
+
+def test_a_controller_error_is_neither_a_fall_nor_a_push_failed():
+    # steady's trial 0 ended by its controller's error at 3 s, after its first push: no push is charged with it
+    errored = _record("steady", 0, success=False, outcome="controller_error", ttf=0.15, error="act raised")
+    records = [errored, *RECORDS[1:4]]
+    outcomes = push_outcomes(records, _trial)
+    assert not [o for o in outcomes if o.trial == 0] and len(outcomes) == len(push_outcomes(RECORDS[1:4], _trial))
+    cell = breakdown(records, outcomes, controllers=("steady",), bands=["in"])["controllers"]["steady"]["in"]
+    assert cell["falls"] == {"trials": 4, "falls": 1, "controller_errors": 1, "before_first_push": 1,
+                             "after_push": 0, "median_s_after_push": None}
+    assert cell["by_command"]["standing"]["k"] == 1  # it counts against success
 
 
 def test_recovery_curve_bins_every_push_met():

@@ -197,7 +197,7 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     result = run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: emu.reset(),
                                 build=stepped_go1.build)
     record, episode = result.record, result.episode
-    assert record.safety_trips == 1 and not record.success
+    assert record.safety_trips == 1 and not record.success and record.outcome == "operator_stop"
     assert 1.6 <= record.fall_time_s <= 1.6 + TICK + TIME_EPS  # ended at the tick that handled the key
     assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
     assert episode.safety_events.reason[-1] == "software_estop"
@@ -212,6 +212,71 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert all(c.damping for c in after) and len(after) >= 0.5 / LINK_PERIOD
     report = (tmp_path / "hw" / "report.md").read_text()
     assert "software_estop" in report and "| push |" in report and "| estop |" in report
+
+
+BROKEN_ON_HARDWARE = '''
+    """The stand hold on a robot without its arm, until it raises after half a second."""
+    from wbc.control.plugin import ControllerPlugin
+    from wbc.control.stand import StandController
+
+
+    class Late:
+        def __init__(self, desc):
+            self.inner = StandController(desc)
+            self.rate_hz = self.inner.rate_hz
+            self.ticks = 0
+
+        def reset(self):
+            self.inner.reset()
+
+        def act(self, state, command):
+            self.ticks += 1
+            if self.ticks > 25:
+                raise RuntimeError("lost track of the ground")  # MARK
+            return self.inner.act(state, command)
+
+        def counters(self):
+            return {}
+
+
+    plugin = ControllerPlugin(make=Late, summary="raises after half a second", arm_modes=("none",))
+'''
+
+
+def test_a_controller_error_on_the_wire_damps_the_robot_and_is_recorded(stepped_go1: Stepped, tmp_path: Path,
+                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    import textwrap
+
+    (tmp_path / "plug" / "hwbroken").mkdir(parents=True)
+    (tmp_path / "plug" / "hwbroken" / "__init__.py").write_text('"""Broken plug-ins."""\n')
+    source = tmp_path / "plug" / "hwbroken" / "late.py"
+    source.write_text(textwrap.dedent(BROKEN_ON_HARDWARE).lstrip())
+    monkeypatch.syspath_prepend(str(tmp_path / "plug"))
+    monkeypatch.delitem(sys.modules, "hwbroken", raising=False)
+    monkeypatch.delitem(sys.modules, "hwbroken.late", raising=False)
+    emu = stepped_go1.emu
+    cfg = HardwareTrialConfig(controller="hwbroken.late:plugin", scenario=Path(PUSH), trial=0, robot="go1-arm",
+                              arm_mode="none", seconds=2.0, target=("127.0.0.1", 9), out_dir=tmp_path / "hw",
+                              settle_s=0.5, io_process=False)
+    try:
+        result = run_hardware_trial(cfg, before_connect=lambda hardware, spec: emu.reset(), build=stepped_go1.build)
+    finally:
+        for name in [m for m in sys.modules if m.startswith("hwbroken")]:
+            del sys.modules[name]
+    record = result.record
+    # an error, not a fall nor a trip: recorded with what failed, when, and where in the plug-in
+    assert record.outcome == "controller_error" and not record.success and math.isnan(record.fall_time_s)
+    line = next(i for i, text in enumerate(source.read_text().splitlines(), start=1) if "# MARK" in text)
+    assert record.error == (f"controller hwbroken.late:plugin, band {record.band}, seed 0, trial 0: act raised "
+                            f"RuntimeError at tick 25 (t = 0.500 s): lost track of the ground [{source}:{line}]")
+    assert len(result.episode.t) == 25 and record.ttf == pytest.approx(0.25)
+    assert TrialRecord.read_csv(tmp_path / "hw" / "trials.csv") == [record]
+    # the robot did not keep the broken controller's last command: the layer damped it, for the whole settle time
+    assert result.safety_events[-1].reason == "software_estop"
+    frames = emu.commands()
+    last_driven = max(i for i, c in enumerate(frames) if not c.damping)
+    assert frames[last_driven].time > frames[0].time + 0.5  # the stand hold drove it, trial included
+    assert len(frames) - last_driven - 1 >= 0.5 / LINK_PERIOD  # then damping only, to the end
 
 
 def test_estop_while_the_robot_is_stood_up_stops_it_and_plays_nothing(stepped_go1: Stepped, tmp_path: Path) -> None:

@@ -126,18 +126,33 @@ EARLIER_COLUMNS = ("controller,scenario,scenario_hash,band,seed,trial,success,tt
 def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory_and_the_hardware_ones(tmp_path):
     # the stored format: changing it silently would stop older results directories from resuming
     assert ",".join(TrialRecord.header()) == (
-        "controller,scenario,scenario_hash,band,seed,trial,success,ttf,fall_time_s,vlin_err,vang_err,max_roll_deg,"
-        "max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,payload_kg,"
-        "fallbacks,wbc_failures,debug_truth,backend,metrics_source,safety_trips,late_advances,worst_lateness_ms,"
-        "deadline_misses,act_ms_p50,act_ms_p99,wall_s")
-    # an earlier directory's file still reads: a simulated trial, its metrics from truth, nothing timed but wall_s
-    record = make_record("mpc", "nominal", 1, 2, vlin_err=0.1 + 0.2)
-    row = dict(zip(TrialRecord.header(), record.to_row(), strict=True))
-    old = tmp_path / "trials.csv"
-    old.write_text(EARLIER_COLUMNS + "\n" + ",".join(row[c] for c in EARLIER_COLUMNS.split(",")) + "\n")
-    (back,) = TrialRecord.read_csv(old)
-    assert back == record and back.backend == "sim" and back.metrics_source == "truth"
-    assert math.isnan(back.act_ms_p99) and back.vlin_err == 0.1 + 0.2
+        "controller,scenario,scenario_hash,band,seed,trial,success,outcome,ttf,fall_time_s,vlin_err,vang_err,"
+        "max_roll_deg,max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,"
+        "payload_kg,fallbacks,wbc_failures,debug_truth,backend,metrics_source,safety_trips,late_advances,"
+        "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,wall_s,error")
+    # an earlier directory's file still reads: a simulated trial, its metrics from truth, nothing timed but wall_s,
+    # its outcome derived as those versions scored it (a success, or a fall; no controller errors then)
+    for success in (True, False):
+        record = make_record("mpc", "nominal", 1, 2, vlin_err=0.1 + 0.2, success=success)
+        row = dict(zip(TrialRecord.header(), record.to_row(), strict=True))
+        old = tmp_path / "trials.csv"
+        old.write_text(EARLIER_COLUMNS + "\n" + ",".join(row[c] for c in EARLIER_COLUMNS.split(",")) + "\n")
+        (back,) = TrialRecord.read_csv(old)
+        assert back == record and back.backend == "sim" and back.metrics_source == "truth"
+        assert math.isnan(back.act_ms_p99) and back.vlin_err == 0.1 + 0.2
+        assert back.outcome == ("success" if success else "fall") and back.error == ""
+    # a hardware trial of the version before outcomes: a trip was scored a fall; it reads as the safety trip it was
+    tripped = make_record("mpc", "nominal", 0, 0, success=False, safety_trips=1)
+    assert tripped.outcome == "safety_trip"
+    columns = [c for c in TrialRecord.header() if c not in ("outcome", "error")]
+    row = dict(zip(TrialRecord.header(), tripped.to_row(), strict=True))
+    old.write_text(",".join(columns) + "\n" + ",".join(row[c] for c in columns) + "\n")
+    assert TrialRecord.read_csv(old) == [tripped]
+    # an outcome must be one of the five, and agree with success
+    with pytest.raises(RecordError, match="outcome must be one of"):
+        make_record("mpc", "nominal", 0, 0, outcome="crash")
+    with pytest.raises(RecordError, match="contradicts outcome 'controller_error'"):
+        make_record("mpc", "nominal", 0, 0, success=True, outcome="controller_error")
     # columns in another order, or a column without a default missing, are another version's
     for header in (EARLIER_COLUMNS.replace("seed,trial", "trial,seed"), EARLIER_COLUMNS.replace(",wall_s", "")):
         old.write_text(header + "\n")

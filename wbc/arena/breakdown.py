@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.record import TrialRecord
+from wbc.arena.record import CONTROLLER_ERROR, TrialRecord
 from wbc.arena.stats import wilson_interval
 from wbc.errors import ConfigError, RecordError
 from wbc.scenario.trial import Trial
@@ -121,7 +121,8 @@ def push_outcomes(records: Iterable[TrialRecord], trial_of: Callable[[str, int, 
 
     Returns:
         The outcomes, record by record in the order given, pushes in time order. A record played without its
-        pushes (``--no-push``: ``n_pushes`` 0 where the trial has some) contributes none.
+        pushes (``--no-push``: ``n_pushes`` 0 where the trial has some) contributes none, nor does a trial ended by
+        its controller's error (the robot did not fall: no push is charged with it).
 
     Raises:
         RecordError: a record's scenario hash, push count or largest push differ from the trial re-drawn.
@@ -132,7 +133,7 @@ def push_outcomes(records: Iterable[TrialRecord], trial_of: Callable[[str, int, 
         if record.scenario_hash and trial.scenario_hash and record.scenario_hash != trial.scenario_hash:
             raise RecordError(f"record {record.run_key} was played on scenario hash {record.scenario_hash}, not "
                               f"{trial.scenario_hash}; break down records with the scenario they were played on")
-        if record.n_pushes == 0:
+        if record.n_pushes == 0 or record.outcome == CONTROLLER_ERROR:
             continue
         if record.n_pushes != len(trial.pushes) or not math.isclose(record.push_force_n, trial.push_force_n,
                                                                     rel_tol=1e-9, abs_tol=1e-9):
@@ -175,8 +176,10 @@ def breakdown(records: Sequence[TrialRecord], outcomes: Sequence[PushOutcome], *
     Returns:
         A JSON-serialisable dict: ``{"commands": [labels], "controllers": {NAME: {BAND: {"by_command": {label:
         cell}, "by_sector": {sector: cell}, "by_offset_axis": {axis: cell}, "falls": {"trials", "falls",
-        "before_first_push", "after_push", "median_s_after_push"}}}}}``, a cell being ``{"k", "n", "rate",
-        "ci95"}`` (successes or pushes survived out of n, with a Wilson interval; rate and interval None when n is 0).
+        "controller_errors", "before_first_push", "after_push", "median_s_after_push"}}}}}``, a cell being ``{"k",
+        "n", "rate", "ci95"}`` (successes or pushes survived out of n, with a Wilson interval; rate and interval None
+        when n is 0). ``falls`` counts the trials that ended without success and not by a controller error (those
+        are ``controller_errors``).
     """
     labels = sorted({command_label(r) for r in records if r.controller in controllers and r.band in bands},
                     key=lambda s: (s != "standing", s))
@@ -195,10 +198,11 @@ def breakdown(records: Sequence[TrialRecord], outcomes: Sequence[PushOutcome], *
             by_axis = {a: _cell(sum(o.survived for o in pushes if o.offset_axis == a),
                                 sum(1 for o in pushes if o.offset_axis == a)) for a in AXES}
             charged = [o for o in pushes if not o.survived]
-            falls = sum(not r.success for r in mine)
+            errors = sum(r.outcome == CONTROLLER_ERROR for r in mine)
+            falls = sum(not r.success for r in mine) - errors
             per_band[band] = {
                 "by_command": by_command, "by_sector": by_sector, "by_offset_axis": by_axis,
-                "falls": {"trials": len(mine), "falls": falls,
+                "falls": {"trials": len(mine), "falls": falls, "controller_errors": errors,
                           "before_first_push": falls - len(charged),  # one charged push per fall after a push
                           "after_push": len(charged),
                           "median_s_after_push": statistics.median(o.fall_after_s for o in charged)

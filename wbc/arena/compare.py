@@ -8,6 +8,11 @@ trial index and seed, in every band, by every controller) and the run stops at t
 which the sequential test (`wbc.arena.sequential`) has settled every pair's success difference in every band; the
 trial budget (bands x seeds x trials) is the most it plays. The report breaks the records down by where each
 controller fails (`wbc.arena.breakdown`), with the pushes re-drawn from the scenario.
+
+A controller that fails on a trial (raises, or returns a command the robot refuses) has that trial recorded with the
+outcome ``controller_error`` and the run goes on; one that fails on ``max_consecutive_errors`` trials in a row is
+stopped while the others finish (`wbc.arena.error_guard`). The result lists each failing controller
+(`ArenaResult.controller_errors`), and ``summary.json`` counts every outcome per controller and band.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wbc.arena.breakdown import breakdown, push_outcomes, recovery_curve
+from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErrors, ErrorGuard, outcome_counts
 from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.progress import progress
 from wbc.arena.record import TrialRecord
@@ -69,6 +75,8 @@ class ArenaConfig:
             difference (local executor only; `trials` is then the most played per band and seed).
         alpha: the sequential test's family-wise significance level.
         sequential_pairs: the (A, B) controller pairs the sequential test watches (empty: every pair).
+        max_consecutive_errors: a controller that fails (raises, or returns an invalid command) on this many trials
+            in a row is stopped, its remaining trials not played; 0: never stopped.
     """
 
     controllers: tuple[str, ...]
@@ -91,6 +99,7 @@ class ArenaConfig:
     until_significant: bool = False
     alpha: float = 0.05
     sequential_pairs: tuple[tuple[str, str], ...] = ()
+    max_consecutive_errors: int = DEFAULT_MAX_CONSECUTIVE_ERRORS
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -114,6 +123,9 @@ class ArenaConfig:
                                   "local executor")
         if not 0.0 < self.alpha < 1.0:
             raise ConfigError(f"alpha must be in (0, 1), got {self.alpha}; pass a significance level such as 0.05")
+        if self.max_consecutive_errors < 0:
+            raise ConfigError(f"--max-consecutive-errors must be >= 0 (0: never stop a controller), got "
+                              f"{self.max_consecutive_errors}")
         for a, b in self.sequential_pairs:
             if a not in self.controllers or b not in self.controllers or a == b:
                 raise ConfigError(f"sequential pair ({a}, {b}) must name two different controllers played; "
@@ -136,7 +148,9 @@ class ArenaResult:
         wall_s: wall time of this call [s].
         physics_steps: physics steps simulated by this call.
         budget: trials the run could have played (controllers x bands x seeds x trials); more than the trials stored
-            when the sequential test stopped it early.
+            when the sequential test stopped it early, or a controller was stopped for its errors.
+        controller_errors: each controller that failed on at least one trial (stored ones included, on resume), in
+            the order the controllers were named; empty when none did.
     """
 
     summary: dict
@@ -145,6 +159,7 @@ class ArenaResult:
     wall_s: float
     physics_steps: int
     budget: int = 0
+    controller_errors: tuple[ControllerErrors, ...] = ()
 
 
 def _resolve(cfg: ArenaConfig) -> dict[str, ControllerSpec]:
@@ -172,7 +187,11 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         PolicyFileError: a ``policy:PATH`` file that is missing or malformed.
         ScenarioError: the scenario file is invalid.
         ConfigError: bad options, or a controller for another robot than the scenario's.
-        ResultsDirError: a results directory that belongs to another run, or that misses trials at the end.
+        ResultsDirError: a results directory that belongs to another run, or that misses trials at the end (other
+            than those of a controller stopped for its errors).
+
+    A controller's failure on a trial is not raised: it is recorded (outcome ``controller_error``) and reported in
+    `ArenaResult.controller_errors`.
     """
     # each name resolved once, here; the tasks carry the spec to the workers
     specs = _resolve(cfg)
@@ -215,8 +234,13 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     files = _files_of(specs)
     if files:  # only then, so that a run of registered controllers resumes a directory written before files existed
         identity["controller_files"] = files
+    if cfg.max_consecutive_errors != DEFAULT_MAX_CONSECUTIVE_ERRORS:  # only then, as above
+        identity["max_consecutive_errors"] = cfg.max_consecutive_errors
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume)
     done = store.done()
+    guard = ErrorGuard(cfg.controllers, cfg.max_consecutive_errors)
+    guard.observe_all(store.records)  # a controller stopped before stays stopped
+
     def where(t: Trial, c: str) -> str | None:
         if not cfg.save_episodes:
             return None
@@ -231,13 +255,15 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None
     if rounds is not None:
         rounds.advance(store.records)  # a resumed run's complete rounds count before any new trial
-        tasks = rounds.tasks(task, done)
+        tasks = rounds.tasks(task, done, guard.stopped)
         todo = total - len(done & {(c, *t.key) for t in trials for c in cfg.controllers})
     else:
         # trial by trial, every controller in turn: pairs finish together and the progress estimate mixes fast and
-        # slow controllers from the start (the order does not change a result)
-        tasks = [task(t, c) for t in trials for c in cfg.controllers if (c, *t.key) not in done]
-        todo = len(tasks)
+        # slow controllers from the start (the order does not change a result); handed out lazily, so that a
+        # controller stopped for its errors gets no more
+        keys = [(t, c) for t in trials for c in cfg.controllers if (c, *t.key) not in done]
+        tasks = (task(t, c) for t, c in keys if not guard.stopped(c))
+        todo = len(keys)
     executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
     bar = progress(total, total - todo, cfg.progress)
     start = time.perf_counter()
@@ -247,6 +273,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     try:
         for record in executor.run(tasks):
             store.append(record)
+            guard.observe(record)
             played += 1
             steps += int(round(record.ttf * scenario.duration_s / physics_dt))
             if rounds is not None:
@@ -263,6 +290,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
                                  scenario.bands)
     summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
                         controllers=list(cfg.controllers), bands=list(bands))
+    per_controller = len(trials) if rounds is None else rounds.played * len(bands)
+    errors = guard.report([r for r in store.records if r.scenario_hash == scenario.hash], per_controller)
+    _add_outcomes(summary, records, errors)
     if rounds is not None:
         summary["sequential"] = rounds.comparison.as_dict()
     outcomes = push_outcomes(records, scenario.trial)
@@ -288,12 +318,26 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
     }
     write_report(store.dir, summary, records, meta, failures=failures, curve=curve)
-    expected = total if rounds is None else rounds.played * len(bands) * len(cfg.controllers)
-    if len(records) != expected:
-        raise ResultsDirError(f"{store.dir}: {len(records)} of {expected} trials stored; rerun with --resume to play "
-                              "the rest")
+    expected = ({(c, *t.key) for t in trials for c in cfg.controllers} if rounds is None else
+                {key for i in rounds.begun for key in rounds.keys(i)})
+    missing = expected - {r.run_key for r in records}
+    if any(not guard.stopped(key[0]) for key in missing):
+        raise ResultsDirError(f"{store.dir}: {len(expected) - len(missing)} of {len(expected)} trials stored; rerun "
+                              "with --resume to play the rest")
     return ArenaResult(summary=summary, out_dir=store.dir, played=played, wall_s=wall, physics_steps=steps,
-                       budget=total)
+                       budget=total, controller_errors=tuple(errors))
+
+
+def _add_outcomes(summary: dict, records: Sequence[TrialRecord], errors: Sequence[ControllerErrors]) -> None:
+    """Count every outcome per controller and band into `summary`, and add the failing controllers' errors.
+
+    Each band's entry gets ``outcomes`` ({outcome: trials}, every outcome listed); ``controller_errors`` maps each
+    controller that failed to `ControllerErrors.as_dict` (empty when none did).
+    """
+    for controller, entry in summary["controllers"].items():
+        for band, cell in entry["bands"].items():
+            cell["outcomes"] = outcome_counts(r for r in records if r.controller == controller and r.band == band)
+    summary["controller_errors"] = {e.controller: e.as_dict() for e in errors}
 
 
 def _tested_pairs(cfg: ArenaConfig) -> tuple[tuple[str, str], ...]:
@@ -316,7 +360,7 @@ class _Rounds:
         self.comparison = SequentialComparison(_tested_pairs(cfg), bands, alpha=cfg.alpha)
         self.next = 0  # rounds fed to the test so far
         self.begun: set[int] = set()  # rounds with a task handed out or a record stored
-        self._round_of = {key: i for i in range(len(order)) for key in self._keys(i)}
+        self._round_of = {key: i for i in range(len(order)) for key in self.keys(i)}
         self._by_key: dict[tuple[str, str, int, int], TrialRecord] = {}
         self._read = 0  # records of the store read so far
 
@@ -325,7 +369,8 @@ class _Rounds:
         """Rounds begun: the results directory holds them in full when the run ends."""
         return len(self.begun)
 
-    def _keys(self, i: int) -> list[tuple[str, str, int, int]]:
+    def keys(self, i: int) -> list[tuple[str, str, int, int]]:
+        """The run keys (controller, band, seed, trial) of round `i`."""
         return [(c, *t.key) for t in self.trials[self.order[i]] for c in self.controllers]
 
     def advance(self, stored: Sequence[TrialRecord]) -> None:
@@ -339,17 +384,19 @@ class _Rounds:
                 self.begun.add(self._round_of[record.run_key])
         self._read = len(stored)
         while self.next < len(self.order):
-            keys = self._keys(self.next)
+            keys = self.keys(self.next)
             if not all(k in self._by_key for k in keys):
                 return
             self.comparison.add_round(self._by_key[k] for k in keys)
             self.next += 1
 
-    def tasks(self, make: Callable[[Trial, str], TrialTask], done: set) -> Iterator[TrialTask]:
+    def tasks(self, make: Callable[[Trial, str], TrialTask], done: set,
+              stopped: Callable[[str], bool]) -> Iterator[TrialTask]:
         """The tasks not yet `done`, round by round, until the test has settled every difference.
 
         A round begun before (an interrupted run's) is finished even after the test has settled, so that the
-        directory holds whole rounds only.
+        directory holds whole rounds only. A controller `stopped` for its errors gets no more tasks (its rounds then
+        stay incomplete, and the test is not fed them).
         """
         for i in range(len(self.order)):
             if self.comparison.settled and i not in self.begun:
@@ -357,5 +404,5 @@ class _Rounds:
             self.begun.add(i)
             for t in self.trials[self.order[i]]:
                 for c in self.controllers:
-                    if (c, *t.key) not in done:
+                    if (c, *t.key) not in done and not stopped(c):
                         yield make(t, c)

@@ -1,13 +1,19 @@
 """Executors: where trials run. A local process pool (default) or a Ray cluster; the results are identical.
 
 Both take `TrialTask`s and yield each finished trial's record as soon as it is done, in completion order; the caller
-stores it at once. Every trial is fully determined by its `Trial` and its controller's resolved `ControllerSpec`, so
-neither the worker nor the order changes a result. A task carries the spec, not the name: the parent resolves each
+stores it at once. Both read the tasks lazily, a bounded number ahead of the finished ones, so that a caller feeding
+a generator can stop handing out tasks during the run (a settled sequential test, a controller stopped for its
+errors). A controller's failure in a trial comes back as that trial's record (`wbc.arena.sim_trial.run_trial`), not
+as an exception that would end the run.
+
+Every trial is fully determined by its `Trial` and its controller's resolved `ControllerSpec`, so neither the worker
+nor the order changes a result. A task carries the spec, not the name: the parent resolves each
 name once (reading a ``policy:PATH`` file there), and the spec pickles to spawned processes and Ray workers.
 """
 
 from __future__ import annotations
 
+import itertools
 import multiprocessing
 import os
 from collections.abc import Iterable, Iterator
@@ -139,7 +145,10 @@ class RayExecutor:
         self.num_cpus = num_cpus
 
     def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
-        """Yield each task's record as it finishes."""
+        """Yield each task's record as it finishes.
+
+        `tasks` is read lazily: twice as many in flight as the cluster has CPUs, a new one when one finishes.
+        """
         ray = require("ray", "cluster")
         started = False
         if not ray.is_initialized():
@@ -150,10 +159,15 @@ class RayExecutor:
             started = True
         try:
             remote = ray.remote(num_cpus=1)(run_task)
-            refs = [remote.remote(task) for task in tasks]
+            ahead = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
+            queue = iter(tasks)
+            refs = [remote.remote(task) for task in itertools.islice(queue, ahead)]
             while refs:
                 done, refs = ray.wait(refs, num_returns=1)
                 yield ray.get(done[0])
+                nxt = next(queue, None)
+                if nxt is not None:
+                    refs.append(remote.remote(nxt))
         finally:
             if started:
                 ray.shutdown()

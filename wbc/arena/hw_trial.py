@@ -16,7 +16,10 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
   walking controller's swing legs);
 - the episode ends at the safety layer's first trip (its tilt check is the fall rule on a robot; a fault or an
   e-stop ends the trial too); the robot is then held in the layer's damping for ``settle_s`` while it comes to rest,
-  before the link is closed;
+  before the link is closed. The record's outcome tells them apart: ``safety_trip`` for the layer's own checks,
+  ``operator_stop`` for an e-stop (the console's key, the remote);
+- a controller that raises, or returns a command the robot refuses, ends the episode too: the layer is tripped into
+  damping (a software e-stop), and the trial is recorded with the outcome ``controller_error`` and what failed;
 - deadline misses (``controller.act`` longer than the period), the link's late advances and the process's CPU time
   go into the record and the report beside the safety layer's transitions and the operator's actions.
 
@@ -47,6 +50,7 @@ from pathlib import Path
 from threadpoolctl import threadpool_limits
 
 from wbc.arena.base_estimate import BaseEstimate
+from wbc.arena.controller_failure import ControllerFailure
 from wbc.arena.episode import Episode
 from wbc.arena.estimated_robot import EstimatedRobot
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
@@ -274,8 +278,14 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
         io_cpu0 = io_robot.link_stats().io["cpu_s"] if io_robot is not None else 0.0
         cpu0, wall0 = time.process_time(), time.perf_counter()
-        episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
-                              fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console)
+        error = ""
+        try:
+            episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
+                                  fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console)
+        except ControllerFailure as failure:
+            episode, error = failure.episode, failure.record_error(spec.name, trial)
+            if safe.safety_state is not SafetyState.DAMPED:
+                safe.estop()  # the robot must not keep the broken controller's last command
         cpu_s, episode_wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
         if isinstance(hardware.robot, HasLinkStats):
             link = hardware.robot.link_stats()
@@ -283,9 +293,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         if safe.safety_state is SafetyState.DAMPED:
             _settle(robot, dt, cfg.settle_s)
     episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
-    record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode, counters=ctrl.counters(),
-                                  wall_s=time.perf_counter() - start, backend=hardware.backend,
-                                  domain_applied=False, link=link)
+    record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
+                                  counters=ctrl.counters() if not error else {}, wall_s=time.perf_counter() - start,
+                                  backend=hardware.backend, domain_applied=False, link=link, error=error)
     result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                  notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
                                  safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s)

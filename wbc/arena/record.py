@@ -26,7 +26,24 @@ from wbc.errors import RecordError, UnknownNameError
 from wbc.hardware.capabilities import LinkStatsLike
 from wbc.scenario.trial import Trial
 
-__all__ = ["MACHINE_TIMED", "TrialRecord"]
+__all__ = ["CONTROLLER_ERROR", "FALL", "MACHINE_TIMED", "OPERATOR_STOP", "OUTCOMES", "SAFETY_TRIP", "SUCCESS",
+           "TrialRecord"]
+
+SUCCESS = "success"
+"""The episode reached its end."""
+FALL = "fall"
+"""The trunk or a non-foot link touched the ground (the simulator's fall rule)."""
+SAFETY_TRIP = "safety_trip"
+"""A robot's safety layer latched its damping on a check of its own (tilt, joint range, link fault ...)."""
+CONTROLLER_ERROR = "controller_error"
+"""The controller raised in ``reset`` or ``act``, or returned a command the robot refused (``error`` says which)."""
+OPERATOR_STOP = "operator_stop"
+"""An operator stopped the robot (the console's e-stop key, the remote's e-stop)."""
+OUTCOMES = (SUCCESS, FALL, SAFETY_TRIP, CONTROLLER_ERROR, OPERATOR_STOP)
+"""How a trial can end, one of these each; every trial is recorded with its outcome."""
+
+_OPERATOR_REASONS = frozenset({"software_estop", "remote_estop"})
+"""Safety-layer trip reasons that are an operator's stop (`wbc.hardware.safety.events`)."""
 
 _TRUE = frozenset({"True", "true", "1"})
 _FALSE = frozenset({"False", "false", "0"})
@@ -43,9 +60,13 @@ class TrialRecord:
         band: band name.
         seed: seed index.
         trial: trial index within (band, seed).
-        success: the episode reached its end without a fall (`wbc.arena.metrics.success`).
-        ttf: time to fall, the fraction of the episode survived, in (0, 1].
-        fall_time_s: when the robot fell, NaN if it did not [s].
+        success: the episode reached its end without a fall (`wbc.arena.metrics.success`), a trip or an error.
+        outcome: how the trial ended, one of `OUTCOMES`: ``success``, ``fall``, ``safety_trip``,
+            ``controller_error`` or ``operator_stop``. Built without one (a ``trials.csv`` written before the
+            column), it is derived from `success` and `safety_trips` as those versions scored them.
+        ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error, the fraction
+            played before it, in [0, 1).
+        fall_time_s: when the robot fell, NaN if it did not (after a controller error too) [s].
         vlin_err: mean horizontal velocity tracking error [m/s].
         vang_err: mean yaw-rate tracking error [rad/s].
         max_roll_deg: largest |roll| [deg].
@@ -74,6 +95,8 @@ class TrialRecord:
         act_ms_p99: its 99th percentile [ms].
         wall_s: wall time the trial took to play [s]. This field, `deadline_misses`, `act_ms_p50` and `act_ms_p99`
             depend on the machine (and so, on a real robot, do `late_advances` and `worst_lateness_ms`).
+        error: for a ``controller_error``, what failed: the controller, band, seed, trial, tick and time, the
+            exception's type and message, and the controller's own ``file:line``; empty otherwise.
     """
 
     controller: str
@@ -83,6 +106,7 @@ class TrialRecord:
     seed: int
     trial: int
     success: bool
+    outcome: str = ""
     ttf: float
     fall_time_s: float
     vlin_err: float
@@ -110,17 +134,26 @@ class TrialRecord:
     act_ms_p50: float = float("nan")
     act_ms_p99: float = float("nan")
     wall_s: float
+    error: str = ""
 
     def __post_init__(self) -> None:
         # values arrive as numpy scalars from metrics and sampling; storing plain Python values keeps the CSV text
         # (and equality with a record read back from it) independent of where a value came from
         for name, kind in _KINDS.items():
             object.__setattr__(self, name, _coerce(name, kind, getattr(self, name)))
+        if not self.outcome:
+            derived = SUCCESS if self.success else SAFETY_TRIP if self.safety_trips else FALL
+            object.__setattr__(self, "outcome", derived)
+        if self.outcome not in OUTCOMES:
+            raise RecordError(f"TrialRecord.outcome must be one of {', '.join(OUTCOMES)}, got {self.outcome!r}")
+        if self.success != (self.outcome == SUCCESS):
+            raise RecordError(f"TrialRecord: success {self.success} contradicts outcome {self.outcome!r}; a trial "
+                              "succeeds exactly when its outcome is success")
 
     @classmethod
     def of_trial(cls, trial: Trial, *, controller: str, episode: Episode, counters: Mapping[str, int],
                  wall_s: float, debug_truth: bool = False, backend: str = "sim", domain_applied: bool = True,
-                 link: LinkStatsLike | None = None) -> TrialRecord:
+                 link: LinkStatsLike | None = None, error: str = "") -> TrialRecord:
         """The record of `trial` played by `controller`.
 
         Args:
@@ -137,10 +170,20 @@ class TrialRecord:
                 whose friction and payload nobody set: the record holds NaN for both.
             link: the robot link's counters after the episode (`wbc.hardware.capabilities.HasLinkStats`), for the
                 pacing columns; None for a robot that does not pace on a wall clock.
+            error: the controller failed (`wbc.arena.controller_failure.ControllerFailure`): what it did, for the
+                record's `error`; the outcome is then ``controller_error`` and `episode` the part played before it.
         """
+        metrics = compute_metrics(episode)
+        if error:
+            played = float(episode.t[-1]) if len(episode.t) else 0.0
+            metrics.update(success=False, ttf=min(1.0, played / episode.duration_s), fall_time_s=math.nan)
+            outcome = CONTROLLER_ERROR
+        else:
+            outcome = _outcome(episode)
         return cls(
             controller=controller, scenario=trial.scenario, scenario_hash=trial.scenario_hash, band=trial.band,
-            seed=trial.seed, trial=trial.index, **compute_metrics(episode), push_force_n=trial.push_force_n,
+            seed=trial.seed, trial=trial.index, **metrics, outcome=outcome, error=error,
+            push_force_n=trial.push_force_n,
             n_pushes=len(trial.pushes), vx_cmd=trial.command.vx, vy_cmd=trial.command.vy,
             yaw_rate_cmd=trial.command.yaw_rate,
             friction=trial.domain.friction if domain_applied else math.nan,
@@ -237,6 +280,16 @@ class TrialRecord:
         defaults = [repr(_DEFAULTS[n]) if isinstance(_DEFAULTS[n], float) else str(_DEFAULTS[n]) for n in absent]
         return [cls.from_row(_complete(columns, row, absent, defaults), source=f"{path}:{line}")
                 for line, row in enumerate(rows[1:], start=2) if len(row) == len(columns)]
+
+
+def _outcome(episode: Episode) -> str:
+    """How a played episode ended: success, a fall, or the safety layer's trip (an operator's, or its own)."""
+    if not episode.fell:
+        return SUCCESS
+    tripped = episode.safety_events.reason[episode.safety_events.to_state == "damped"]
+    if len(tripped):
+        return OPERATOR_STOP if str(tripped[0]) in _OPERATOR_REASONS else SAFETY_TRIP
+    return FALL
 
 
 _KINDS: dict[str, type] = {f.name: typing.get_type_hints(TrialRecord)[f.name] for f in dataclasses.fields(TrialRecord)}

@@ -28,10 +28,11 @@ from typing import Any
 import numpy as np
 
 from wbc.arena.breakdown import breakdown_tables
+from wbc.arena.error_guard import ControllerErrors
 from wbc.arena.paired_tests import BINARY_FIELDS, mcnemar_exact, paired_values, wilcoxon_signed_rank
 from wbc.arena.plots import PLOTS, write_plots
 from wbc.arena.power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
-from wbc.arena.record import TrialRecord
+from wbc.arena.record import CONTROLLER_ERROR, TrialRecord
 from wbc.arena.stats import (
     bootstrap_mean_ci,
     in_canonical_order,
@@ -346,6 +347,28 @@ def _result_rows(summary: Mapping[str, Any], band: str, metrics: Sequence[str]) 
     return rows
 
 
+def _error_column(summary: Mapping[str, Any], band: str, header: list[str],
+                  rows: list[list[str]]) -> tuple[list[str], list[list[str]]]:
+    """`header` and `rows` with an ``errors`` column after the trials when a controller failed in the run.
+
+    Each row's count is its controller's trials in `band` that ended in a controller error (``summary.json``'s
+    ``outcomes``, added by `wbc.arena.compare`); a run without errors keeps its table as it was.
+    """
+    if not summary.get("controller_errors"):
+        return header, rows
+    counts = [str(summary["controllers"][row[0]]["bands"].get(band, {}).get("outcomes", {}).get(CONTROLLER_ERROR, 0))
+              for row in rows]
+    return [*header[:2], "errors", *header[2:]], [[*row[:2], n, *row[2:]] for row, n in zip(rows, counts,
+                                                                                           strict=True)]
+
+
+def _error_lines(summary: Mapping[str, Any]) -> list[str]:
+    """What failed, one line per controller that failed on a trial (`ControllerErrors.line`)."""
+    return ["controller errors (each such trial counts as a failure, not as a fall):",
+            *(f"  {ControllerErrors.from_dict(name, data).line()}"
+              for name, data in summary["controller_errors"].items())]
+
+
 _PAIRED_HEADER = ["band", "A", "B", "metric", "B - A", "95% CI", "p", "n80"]
 
 PAIRED_LEGEND = ("p: exact McNemar test for success (its discordant pairs' binomial test), Wilcoxon signed-rank "
@@ -408,8 +431,10 @@ def format_table(summary: Mapping[str, Any]) -> str:
     header = ["controller", "trials", *(LABELS[m] for m in METRICS)]
     for band in _bands_of(summary):
         lines.append(f"band {band}")
-        lines += _aligned(header, _result_rows(summary, band, METRICS))
+        lines += _aligned(*_error_column(summary, band, header, _result_rows(summary, band, METRICS)))
         lines.append("")
+    if summary.get("controller_errors"):
+        lines += [*_error_lines(summary), ""]
     if summary["paired"]:  # a run of one controller has no pairs, and no block for them
         lines.append("paired differences (B - A, 95% CI)")
         lines += _aligned(_PAIRED_HEADER, _paired_rows(summary))
@@ -489,7 +514,10 @@ def write_report(
     for band in bands:
         lines += ["", f"### Band `{band}`", ""]
         header = ["Controller", "Trials", *(LABELS[m] for m in metrics)]
-        lines += md_table(header, _result_rows(summary, band, metrics))
+        lines += md_table(*_error_column(summary, band, header, _result_rows(summary, band, metrics)))
+    if summary.get("controller_errors"):
+        lead, *each = _error_lines(summary)
+        lines += ["", "## Controller errors", "", lead[0].upper() + lead[1:], "", *(f"- {e.strip()}" for e in each)]
     if summary["paired"]:  # a run of one controller has no pairs, and no section for them
         lines += ["", "## Paired differences (B - A, 95% CI)", ""]
         lines += [

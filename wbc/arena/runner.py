@@ -10,7 +10,9 @@ Where the base's true state comes from and how a fall is detected are capabiliti
 capture), or are handed in by the caller. Falls are checked at the control rate; a fall keeps the trunk on the ground
 for far longer than a control period, so none is missed. Setting a simulated trial up (robot, terrain, pushes) and
 turning its episode into a record is `wbc.arena.sim_trial`. A robot behind a safety layer (`HasSafetyEvents`) has
-the layer's transitions during the episode logged in it (`Episode.safety_events`).
+the layer's transitions during the episode logged in it (`Episode.safety_events`). A controller that raises, or
+returns a command the robot refuses, ends the episode with a `ControllerFailure` that says where and carries the
+episode so far.
 """
 
 from __future__ import annotations
@@ -20,9 +22,10 @@ import time
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
+from wbc.arena.controller_failure import ControllerFailure
 from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
-from wbc.errors import MissingCapabilityError
+from wbc.errors import CommandError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, TruthSource
 from wbc.hardware.robot import Robot
 from wbc.robots.description import ARM_JOINTS
@@ -80,6 +83,9 @@ def run_episode(
 
     Raises:
         MissingCapabilityError: no `truth` or `fallen` given and the robot does not offer it.
+        ControllerFailure: the controller's ``reset`` or ``act`` raised, or ``act`` returned a command the robot
+            refused (`wbc.errors.CommandError`); it carries the episode played up to that tick. The robot keeps the
+            last command it accepted.
     """
     truth = _truth_of(robot) if truth is None else truth
     fallen = _fall_detector_of(robot) if fallen is None else fallen
@@ -87,19 +93,35 @@ def run_episode(
     n = int(round(duration_s / dt))
     arm = slice(ARM_JOINTS.start, ARM_JOINTS.stop) if robot.num_joints == 15 else None
     buf = EpisodeBuffer(nq=7 + robot.num_joints, arm=arm)
-    controller.reset()
-    clock = time.perf_counter
-    fell, fall_time = False, math.nan
     safety = robot if isinstance(robot, HasSafetyEvents) else None
     events_before = len(safety.safety_events()) if safety is not None else 0
+
+    def failure(phase: str, tick: int, exc: Exception) -> ControllerFailure:
+        events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
+        played = buf.finish(duration_s=duration_s, control_dt=dt, fell=False, fall_time_s=math.nan,
+                            safety_events=events)
+        return ControllerFailure(controller, phase=phase, tick=tick, time_s=tick * dt, exc=exc, episode=played)
+
+    try:
+        controller.reset()
+    except Exception as exc:  # any: the controller's code is not ours, and the trial must still be recorded
+        raise failure("reset", 0, exc) from exc
+    clock = time.perf_counter
+    fell, fall_time = False, math.nan
     for k in range(n):
         t = k * dt
         state = robot.read()
         cmd = schedule.at(t)
         started = clock()
-        out = controller.act(state, cmd)
+        try:
+            out = controller.act(state, cmd)
+        except Exception as exc:
+            raise failure("act", k, exc) from exc
         act_s = clock() - started
-        robot.write(out)
+        try:
+            robot.write(out)
+        except CommandError as exc:  # refused before reaching a motor: NaN, wrong length, not a MotorCommand
+            raise failure("command", k, exc) from exc
         robot.advance(dt)
         # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
         buf.add((k + 1) * dt, cmd, act_s, truth(), state)

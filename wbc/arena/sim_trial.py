@@ -4,19 +4,24 @@
 pushes through the robot's perturbation hook, throws the controller's ground-truth debug switch when asked
 (`wbc.control.protocol.TruthSwitch`), plays the episode with the runner's one loop (`wbc.arena.runner.run_episode`,
 truth and falls from the simulator's capabilities), logs the pushes the robot met, and makes the `TrialRecord`.
+A controller that fails during the trial (`wbc.arena.controller_failure.ControllerFailure`: it raised in ``reset`` or
+``act``, or returned a command the robot refused) does not end the run: the trial is recorded with the outcome
+``controller_error`` and a message naming the controller, the trial, the tick and the controller's own file:line.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Mapping
 
 from threadpoolctl import threadpool_limits
 
+from wbc.arena.controller_failure import ControllerFailure
 from wbc.arena.episode import Episode, PushLog
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
-from wbc.control.protocol import TruthSwitch
+from wbc.control.protocol import Controller, TruthSwitch
 from wbc.control.registry import get_controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError, MissingCapabilityError
@@ -41,7 +46,7 @@ def simulated_robot(trial: Trial, arm_mode: str) -> MujocoRobot:
 
 
 def run_trial(trial: Trial, controller: ControllerSpec | str, *, debug_truth: bool = False,
-              observer: TickObserver | None = None) -> tuple[TrialRecord, Episode]:
+              observer: TickObserver | None = None, record_errors: bool = True) -> tuple[TrialRecord, Episode]:
     """Play `trial` in simulation with `controller`.
 
     With `debug_truth` the controller's ground-truth debug switch is thrown (it reads the simulator's base state
@@ -52,27 +57,32 @@ def run_trial(trial: Trial, controller: ControllerSpec | str, *, debug_truth: bo
         controller: the resolved controller (`wbc.control.registry.get_controller`), or its name, resolved here.
         debug_truth: throw the controller's ground-truth debug switch (`wbc.control.protocol.TruthSwitch`).
         observer: called after every tick (see `wbc.arena.runner.run_episode`).
+        record_errors: record a controller's failure as the trial's outcome (the arena); False: raise it (a study
+            or a bench, for which a broken controller is the end of the measurement).
 
     Returns:
-        The trial's record and the episode log, with the pushes that began before it ended.
+        The trial's record and the episode log, with the pushes that began before it ended. A controller that
+        failed (raised, or returned a command the robot refused) gives a record with the outcome
+        ``controller_error`` and the episode played before the failure.
 
     Raises:
         UnknownNameError: unknown controller name.
         ConfigError: the controller's period is not a whole number of physics steps.
         MissingCapabilityError: `debug_truth` for a controller without a ground-truth debug switch.
+        ControllerFailure: the controller failed, and `record_errors` is False.
     """
     spec = get_controller(controller) if isinstance(controller, str) else controller
     # one BLAS thread: a multi-threaded product splits its sums differently, and the same trial would differ in its
     # last bits between an in-process run and a pool worker (which starts single-threaded)
     with threadpool_limits(limits=1, user_api="blas"):
-        return _run_trial(trial, spec, debug_truth=debug_truth, observer=observer)
+        return _run_trial(trial, spec, debug_truth=debug_truth, observer=observer, record_errors=record_errors)
 
 
 def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observer: TickObserver | None,
-               ) -> tuple[TrialRecord, Episode]:
+               record_errors: bool) -> tuple[TrialRecord, Episode]:
     start = time.perf_counter()
     robot = simulated_robot(trial, spec.arm_mode)
-    ctrl = spec.make(robot.desc)
+    ctrl = spec.make(robot.desc)  # a factory that raises is refused before any trial (`wbc.arena.compare`)
     ratio = (1.0 / ctrl.rate_hz) / robot.config.timestep
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         raise ConfigError(
@@ -89,9 +99,26 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
     robot.reset(seed=trial.terrain_seed, domain=trial.domain)
     for push in trial.pushes:
         robot.apply_push(push)
-    episode = run_episode(robot, ctrl, trial.command, trial.duration_s, observer=observer)
-    met = PushLog.of(p for p in trial.pushes if p.start < episode.survived_s)
+    error = ""
+    try:
+        episode = run_episode(robot, ctrl, trial.command, trial.duration_s, observer=observer)
+        played_s = episode.survived_s
+    except ControllerFailure as failure:
+        if not record_errors:
+            raise
+        episode, error, played_s = failure.episode, failure.record_error(spec.name, trial), failure.time_s
+    met = PushLog.of(p for p in trial.pushes if p.start < played_s)
     episode = dataclasses.replace(episode, pushes=met)
-    record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode, counters=ctrl.counters(),
-                                  wall_s=time.perf_counter() - start, debug_truth=debug_truth)
+    record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode, counters=_counters(ctrl, error),
+                                  wall_s=time.perf_counter() - start, debug_truth=debug_truth, error=error)
     return record, episode
+
+
+def _counters(ctrl: Controller, error: str) -> Mapping[str, int]:
+    """The controller's event counts; none from a controller that failed and whose ``counters`` fails too."""
+    if not error:
+        return ctrl.counters()
+    try:
+        return ctrl.counters()
+    except Exception:  # it is broken already: its error is recorded, a second one would only hide it
+        return {}

@@ -2,7 +2,9 @@
 
 Also ``check-controller``, ``train``, ``demo`` and ``paper``. `main` parses the command line (`wbc.cli.parser`),
 calls the tool the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the
-command with its message and exit status 2; anything else is a bug and keeps its traceback.
+command with its message and exit status 2; anything else is a bug and keeps its traceback. A ``run`` or
+``compare`` in which a controller failed on some trials (`wbc.arena.error_guard`) finishes, then exits with status 1
+after one line per failing controller.
 """
 
 from __future__ import annotations
@@ -408,7 +410,8 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
             clock and an emulator's in-process channel).
 
     Returns:
-        0 once the trial's results are written; 130 when interrupted.
+        0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
+        the outcome ``controller_error``); 130 when interrupted.
     """
     if args.sim == (args.target is not None):
         raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
@@ -448,6 +451,9 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
             live[1].close()
             live[0].stop()
     printers.print_hw_run(result)
+    if result.record.error:  # played and stored, but its controller broke in it
+        print(f"wbc: {result.record.error}", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -489,7 +495,10 @@ def _play_arena(cfg: ArenaConfig, *, as_json: bool) -> int:
         printers.print_json(result.summary)
     else:
         printers.print_arena(result)
-    return 0
+    # a controller's errors cost its own trials only, but the command says so and fails: one line per controller
+    for errors in result.controller_errors:
+        print(f"wbc: {errors.line()}", file=sys.stderr)
+    return 1 if result.controller_errors else 0
 
 
 def _controller_files(values: list[str] | None, controllers: tuple[str, ...], option: str,
@@ -527,7 +536,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
                       controller_configs=_controller_files(args.controller_config, controllers, "--controller-config",
                                                            takes_controller_config, "a plug-in"),
                       io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"),
-                      until_significant=until_significant, alpha=alpha)
+                      until_significant=until_significant, alpha=alpha,
+                      max_consecutive_errors=args.max_consecutive_errors)
     try:
         return _play_arena(cfg, as_json=args.json)
     finally:
@@ -695,7 +705,8 @@ def main(argv: list[str] | None = None) -> int:
         argv: the arguments after the program name (default: ``sys.argv[1:]``).
 
     Returns:
-        The exit status: 0 on success, 2 for a `WbcError` (its message printed to stderr). A usage error exits
+        The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
+        each on stderr), 2 for a `WbcError` (its message printed to stderr). A usage error exits
         with status 2 from the parser, after its usage message.
     """
     args = build_parser().parse_args(argv)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 
+from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES, HARDWARE_ROBOTS
@@ -37,6 +38,9 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
     p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
+    p.add_argument("--max-consecutive-errors", type=int, default=DEFAULT_MAX_CONSECUTIVE_ERRORS, metavar="K",
+                   help="stop a controller that fails (raises, or returns an invalid command) on K trials in a row; "
+                        f"the others finish (default {DEFAULT_MAX_CONSECUTIVE_ERRORS}; 0: never stop one)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-push", action="store_true", help="play the trials without their pushes")
     p.add_argument("--debug-truth", action="store_true",

@@ -319,7 +319,8 @@ def print_trained(result: Mapping[str, object], *, task: str, stage: int, baseli
 
 def print_viewed_trial(what: str, record: TrialRecord) -> None:
     """How a trial watched in the viewer ended."""
-    print(f"{what}: " + ("survived" if record.success else f"fell at {record.fall_time_s:.2f} s"))
+    print(f"{what}: " + ("survived" if record.success else f"ENDED by a controller error: {record.error}"
+                         if record.error else f"fell at {record.fall_time_s:.2f} s"))
 
 
 def print_recording(what: str, frames: int, path: Path) -> None:
@@ -564,7 +565,7 @@ def print_hw_run(result: HardwareTrialResult) -> None:
     """``wbc hw run``: the trial's outcome, what it skipped, its timing and where its results are."""
     r, ep = result.record, result.episode
     robot = result.robot
-    outcome = ("completed" if r.success else
+    outcome = ("completed" if r.success else f"ENDED by a controller error: {r.error}" if r.error else
                f"ENDED at {r.fall_time_s:.2f} s by the safety layer ({ep.safety_events.reason[-1]})"
                if r.safety_trips else f"ENDED at {r.fall_time_s:.2f} s")
     print(f"{r.controller} on {robot.description.name} (arm {robot.description.arm_mode}, {robot.backend}, "

@@ -142,7 +142,7 @@ def _study_trial(trial: Trial, controller: str) -> ArmMomentumTrial:
     spec = get_controller(controller)
     watched = dataclasses.replace(spec, make=lambda desc: WatchedController(spec.make(desc)))
     log = ArmMomentumLog()
-    _, episode = run_trial(trial, watched, observer=log)
+    _, episode = run_trial(trial, watched, observer=log, record_errors=False)
     dt, played = episode.control_dt, len(log.h_arm)
     h_arm = np.asarray(log.h_arm)
     impulses, peaks = [], []

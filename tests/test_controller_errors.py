@@ -1,0 +1,320 @@
+"""A broken controller costs its own trials, never the comparison.
+
+Plug-ins broken in each way a controller can break (it raises late in a trial, returns NaN, returns the wrong number
+of joints, raises in ``reset``) are compared with ``stand``: every ``stand`` trial is recorded exactly as when
+``stand`` plays alone, every broken trial is recorded with the outcome ``controller_error`` and a message naming the
+controller, the trial and the plug-in's own file and line, and the command ends with status 1 and one line per failing
+controller. A controller failing on K trials in a row is stopped while the others finish, on the local pool and on
+Ray, and a resumed run plays none of the recorded failures again.
+"""
+
+import dataclasses
+import json
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.episode import Episode, SafetyLog
+from wbc.arena.record import MACHINE_TIMED, TrialRecord
+from wbc.cli.main import main
+from wbc.scenario.scenario import load_scenario
+
+SCENARIO = """
+[scenario]
+name = "short"
+version = 1
+description = "one second of standing, a gentle push"
+robot = "a1-wx200"
+duration_s = 1.0
+
+[terrain]
+kind = "fractal"
+amplitude_m = 0.02
+
+[commands]
+[[commands.options]]
+vx = 0.0
+
+[pushes]
+first_s = [0.3, 0.5]
+interval_s = [0.6, 0.9]
+duration_s = 0.05
+offset_m = 0.1
+
+[[bands]]
+name = "soft"
+push_force_n = [50.0, 100.0]
+"""
+
+STAND_LIKE = '''
+    """{doc}"""
+    import numpy as np
+
+    from wbc.control.stand import StandController
+    from wbc.types import MotorCommand
+
+
+    class Broken:
+        def __init__(self, desc):
+            self.inner = StandController(desc)
+            self.rate_hz = self.inner.rate_hz
+            self.ticks = 0
+
+        def reset(self):
+            self.inner.reset()
+            self.ticks = 0
+            {reset}
+
+        def act(self, state, command):
+            self.ticks += 1
+            out = self.inner.act(state, command)
+            {act}
+            return out
+
+        def counters(self):
+            return {{}}
+
+
+    def make(desc):
+        return Broken(desc)
+'''
+
+BROKEN = {
+    # after 0.5 s of the trial (the 26th tick at 50 Hz)
+    "late": ("raises after half a second", "pass",
+             'if self.ticks > 25: raise RuntimeError("lost track of the ground")  # MARK'),
+    "nan": ("returns NaN", "pass",
+            "out = MotorCommand(q=np.full(15, np.nan), dq=out.dq, kp=out.kp, kd=out.kd, tau=out.tau)  # MARK"),
+    "short": ("returns 12 of 15 joints", "pass",
+              "out = MotorCommand(q=out.q[:12], dq=out.dq[:12], kp=out.kp[:12], kd=out.kd[:12], tau=out.tau[:12])"),
+    "reset": ("raises in reset", 'raise KeyError("no calibration")  # MARK', "pass"),
+    # fails every other trial this process plays (a counter kept across the controllers it builds)
+    "flaky": ("fails every other trial", "pass",
+              "if self.ticks == 1 and next(COUNT) % 2: raise ValueError(\"odd trial\")  # MARK"),
+}
+"""Plug-in module name -> (docstring, body of reset, body of act); MARK tags the line the error must name."""
+
+
+@pytest.fixture
+def broken(tmp_path, monkeypatch):
+    """A package `brokenpkg` of broken plug-ins on sys.path (and forgotten afterwards); its root directory."""
+    root = tmp_path / "brokenroot"
+    pkg = root / "brokenpkg"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text('"""Broken plug-ins."""\n')
+    for name, (doc, reset, act) in BROKEN.items():
+        text = textwrap.dedent(STAND_LIKE.format(doc=doc, reset=reset, act=act)).lstrip()
+        if name == "flaky":
+            text = text.replace("import numpy as np\n", "import itertools\n\nimport numpy as np\n\nCOUNT = "
+                                "itertools.count()\n")
+        (pkg / f"{name}.py").write_text(text, encoding="utf-8")
+    monkeypatch.syspath_prepend(str(root))
+    yield root
+    for name in [m for m in sys.modules if m == "brokenpkg" or m.startswith("brokenpkg.")]:
+        del sys.modules[name]
+
+
+@pytest.fixture
+def scenario(tmp_path):
+    path = tmp_path / "short.toml"
+    path.write_text(SCENARIO)
+    return path
+
+
+@pytest.fixture(scope="module")
+def stand_alone(tmp_path_factory):
+    """The records of `stand` playing the scenario alone (2 trials, in this process)."""
+    tmp = tmp_path_factory.mktemp("alone")
+    path = tmp / "short.toml"
+    path.write_text(SCENARIO)
+    run_arena(ArenaConfig(controllers=("stand",), scenario=path, seeds=(0,), trials=2, out_dir=tmp / "o",
+                          workers=1, progress=False))
+    return TrialRecord.read_csv(tmp / "o" / "trials.csv")
+
+
+def _metrics(records, controller):
+    """Each record's stored cells but those timed on the machine's clock, by trial."""
+    skip = {TrialRecord.header().index(name) for name in MACHINE_TIMED}
+    return {r.pair_key: [c for i, c in enumerate(r.to_row()) if i not in skip] for r in records
+            if r.controller == controller}
+
+
+def _marked_line(root, module, marker="# MARK"):
+    """``file:line`` of the line of `module` holding `marker`."""
+    path = root / "brokenpkg" / f"{module}.py"
+    (line,) = [i for i, text in enumerate(path.read_text().splitlines(), start=1) if marker in text]
+    return f"{path}:{line}"
+
+
+EXPECTED = {
+    "late": ("act raised RuntimeError at tick 25 (t = 0.500 s): lost track of the ground", "# MARK"),
+    "nan": ("act raised CommandError at tick 0 (t = 0.000 s): MotorCommand.q: non-finite value at joint index 0",
+            "# MARK"),
+    "short": ("act returned a command the robot refused: CommandError at tick 0 (t = 0.000 s): MujocoRobot.write: "
+              "command has 12 joints, this robot has 15", "def act"),
+    "reset": ("reset raised KeyError before the first tick: 'no calibration'", "# MARK"),
+}
+"""What each broken plug-in's error says, and the marker of the line it names."""
+
+
+@pytest.mark.parametrize("kind", sorted(EXPECTED))
+def test_a_broken_plugin_costs_its_own_trials_only(kind, broken, scenario, stand_alone, tmp_path, capsys):
+    name = f"brokenpkg.{kind}:make"
+    out = tmp_path / "o"
+    assert main(["compare", name, "stand", "--scenario", str(scenario), "--trials", "2", "--workers", "1",
+                 "--out", str(out), "--quiet"]) == 1
+    records = TrialRecord.read_csv(out / "trials.csv")
+    # stand's trials are recorded exactly as when it plays alone
+    assert _metrics(records, "stand") == _metrics(stand_alone, "stand") and len(_metrics(records, "stand")) == 2
+    mine = [r for r in records if r.controller == name]
+    assert len(mine) == 2
+    what, marker = EXPECTED[kind]
+    where = _marked_line(broken, kind, marker)
+    for r in mine:
+        # an error, not a fall: it counts against success, and says who, which trial, what, and where
+        assert r.outcome == "controller_error" and r.success is False and math.isnan(r.fall_time_s)
+        assert r.error.startswith(f"controller {name}, band soft, seed {r.seed}, trial {r.trial}: {what}")
+        assert r.error.endswith(f" [{where}]")
+        assert r.ttf == (0.5 if kind == "late" else 0.0)
+    # the command ends with status 1 and one line for the failing controller; no traceback
+    captured = capsys.readouterr()
+    # the table counts the errors in a column of their own: 2 trials, 2 errors; stand 2 trials, none
+    header = next(line for line in captured.out.splitlines() if line.strip().startswith("controller"))
+    assert header.split()[:3] == ["controller", "trials", "errors"]
+    assert re.search(rf"^  {re.escape(name)}\s+2\s+2\s", captured.out, re.M)
+    assert re.search(r"^  stand\s+2\s+0\s", captured.out, re.M)
+    err = captured.err
+    lines = [line for line in err.splitlines() if line.startswith("wbc: controller ")]
+    assert lines == [f"wbc: controller {name}: 2 of 2 trial(s) failed with a controller error; first: {mine[0].error}"]
+    assert "Traceback" not in err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["controllers"][name]["bands"]["soft"]["outcomes"]["controller_error"] == 2
+    assert summary["controllers"]["stand"]["bands"]["soft"]["outcomes"]["controller_error"] == 0
+    assert summary["controller_errors"][name]["errored"] == 2 and not summary["controller_errors"][name]["stopped"]
+    assert "stand" not in summary["controller_errors"]
+
+
+def test_a_controller_failing_k_trials_in_a_row_is_stopped_and_resume_replays_nothing(broken, scenario, tmp_path,
+                                                                                        capsys):
+    out = tmp_path / "o"
+    cfg = ArenaConfig(controllers=("brokenpkg.late:make", "brokenpkg.flaky:make", "stand"), scenario=scenario,
+                      seeds=(0,), trials=5, out_dir=out, workers=1, progress=False, max_consecutive_errors=2)
+    result = run_arena(cfg)
+    records = TrialRecord.read_csv(out / "trials.csv")
+    by = {c: [r for r in records if r.controller == c] for c in cfg.controllers}
+    # late fails every trial: stopped after two, its three others not played; the others play all five
+    assert [r.trial for r in by["brokenpkg.late:make"]] == [0, 1]
+    assert len(by["stand"]) == 5 and all(r.outcome != "controller_error" for r in by["stand"])
+    # flaky fails every other trial: never two in a row, so it plays on
+    assert [r.outcome == "controller_error" for r in by["brokenpkg.flaky:make"]] == [False, True, False, True, False]
+    errors = {e.controller: e for e in result.controller_errors}
+    assert list(errors) == ["brokenpkg.late:make", "brokenpkg.flaky:make"]
+    late, flaky = errors["brokenpkg.late:make"], errors["brokenpkg.flaky:make"]
+    assert (late.errored, late.recorded, late.stopped, late.not_played) == (2, 2, True, 3)
+    assert (flaky.errored, flaky.recorded, flaky.stopped, flaky.not_played) == (2, 5, False, 0)
+    assert "STOPPED after 2 consecutive errors, 3 trial(s) not played" in late.line()
+    assert flaky.first.startswith("controller brokenpkg.flaky:make, band soft, seed 0, trial 1: act raised "
+                                  "ValueError at tick 0")
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["controller_errors"]["brokenpkg.late:make"]["not_played"] == 3
+    # resumed, it plays nothing: the failures are finished trials, and late stays stopped
+    again = run_arena(dataclasses.replace(cfg, resume=True))
+    assert again.played == 0 and TrialRecord.read_csv(out / "trials.csv") == records
+    assert again.controller_errors == result.controller_errors
+    # through the command line: status 1 and one line per failing controller
+    assert main(["compare", *cfg.controllers, "--scenario", str(scenario), "--trials", "5", "--workers", "1",
+                 "--max-consecutive-errors", "2", "--out", str(out), "--resume", "--quiet"]) == 1
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("wbc: controller ")]
+    assert lines == [f"wbc: {late.line()}", f"wbc: {flaky.line()}"]
+
+
+def test_errors_are_recorded_alike_on_the_local_pool_and_on_ray(broken, scenario, stand_alone, tmp_path):
+    pytest.importorskip("ray")
+    names = ("brokenpkg.late:make", "brokenpkg.short:make", "stand")
+    results = {}
+    for executor, workers in (("local", 2), ("ray", None)):
+        cfg = ArenaConfig(controllers=names, scenario=scenario, seeds=(0,), trials=2, out_dir=tmp_path / executor,
+                          executor=executor, workers=workers, progress=False, max_consecutive_errors=0)
+        result = run_arena(cfg)
+        assert [(e.controller, e.errored, e.stopped) for e in result.controller_errors] == [
+            ("brokenpkg.late:make", 2, False), ("brokenpkg.short:make", 2, False)]
+        results[executor] = TrialRecord.read_csv(tmp_path / executor / "trials.csv")
+    for name in names:
+        assert _metrics(results["local"], name) == _metrics(results["ray"], name)
+    assert _metrics(results["ray"], "stand") == _metrics(stand_alone, "stand")
+    assert all(re.search(r"brokenpkg.late:make, band soft, seed \d, trial \d: act raised RuntimeError", r.error)
+               for r in results["ray"] if r.controller == "brokenpkg.late:make")
+
+
+def _episode(fell, reasons=()):
+    """A 10-tick episode of 1 s, fallen (at 0.2 s) or not, its safety layer tripped for each of `reasons`."""
+    k = 10
+    trips = [SimpleNamespace(time=0.1 * i, from_state="run", to_state="damped", reason=r, detail="")
+             for i, r in enumerate(reasons)]
+    return Episode(duration_s=1.0, control_dt=0.02, fell=fell, fall_time_s=0.2 if fell else math.nan,
+                   t=np.arange(1, k + 1) * 0.02, command=np.zeros((k, 3)), v_base_in_yaw=np.zeros((k, 2)),
+                   yaw_rate=np.zeros(k), roll=np.zeros(k), pitch=np.zeros(k), power=np.ones(k),
+                   arm_q=np.zeros((k, 3)), qpos=np.zeros((k, 22)), act_s=np.full(k, 1e-3),
+                   safety_events=SafetyLog.of(trips))
+
+
+@pytest.mark.parametrize(("fell", "reasons", "outcome"), [
+    (False, (), "success"),
+    (True, (), "fall"),  # the simulator's fall rule
+    (True, ("tilt",), "safety_trip"),  # a robot's safety layer, on a check of its own
+    (True, ("over_power", "software_estop"), "safety_trip"),  # the first trip ended the episode
+    (True, ("software_estop",), "operator_stop"),  # the console's e-stop key
+    (True, ("remote_estop",), "operator_stop"),  # the remote's
+])
+def test_a_trials_outcome_tells_falls_trips_and_operator_stops_apart(scenario, fell, reasons, outcome):
+    trial = load_scenario(scenario).trial("soft", 0, 0)
+    record = TrialRecord.of_trial(trial, controller="x", episode=_episode(fell, reasons), counters={}, wall_s=0.0)
+    assert record.outcome == outcome and record.success == (outcome == "success") and record.error == ""
+    # a controller error is its own outcome: not a success, not a fall, played up to the error
+    failed = TrialRecord.of_trial(trial, controller="x", episode=_episode(False), counters={}, wall_s=0.0,
+                                  error="controller x, band soft, seed 0, trial 0: act raised ValueError")
+    assert (failed.outcome, failed.success, failed.ttf) == ("controller_error", False, 0.2)
+    assert math.isnan(failed.fall_time_s) and failed.error.endswith("ValueError")
+
+
+def test_a_run_with_a_broken_controller_killed_mid_run_resumes_losing_nothing(broken, scenario, tmp_path):
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "wbc.cli", "compare", "brokenpkg.late:make", "stand", "--scenario", str(scenario),
+           "--trials", "6", "--workers", "1", "--out", str(out), "--quiet"]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(broken), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            env=env)
+    trials_csv = out / "trials.csv"
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if trials_csv.exists() and trials_csv.read_text().count("\n") >= 4:  # header + 3 trials
+            break
+        time.sleep(0.02)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    before = TrialRecord.read_csv(trials_csv)
+    assert 3 <= len(before) < 6 + 3
+    cfg = ArenaConfig(controllers=("brokenpkg.late:make", "stand"), scenario=scenario, trials=6, out_dir=out,
+                      workers=1, resume=True, progress=False)
+    result = run_arena(cfg)
+    after = TrialRecord.read_csv(trials_csv)
+    assert after[: len(before)] == before  # every finished trial kept as it was, its error included
+    assert result.played == len(after) - len(before)  # none played again
+    keys = [r.run_key for r in after]
+    assert len(keys) == len(set(keys))
+    # stand played all six; late, failing every trial, was stopped after three in a row, across the kill
+    assert sorted(r.trial for r in after if r.controller == "stand") == list(range(6))
+    late = [r for r in after if r.controller == "brokenpkg.late:make"]
+    assert [r.trial for r in late] == [0, 1, 2] and all(r.outcome == "controller_error" for r in late)
+    (errors,) = result.controller_errors
+    assert (errors.errored, errors.stopped, errors.not_played) == (3, True, 3)

@@ -1,0 +1,128 @@
+"""`ControllerFailure`: a controller broke during an episode, and where (phase, tick, time, its own source line).
+
+The runner (`wbc.arena.runner.run_episode`) raises it when the controller's ``reset`` or ``act`` raises, or when
+``act`` returns a command the robot refuses (`wbc.errors.CommandError`: a NaN, the wrong number of joints, not a
+`MotorCommand`). It carries the episode played up to that tick, so that whoever plays the trial records the failure
+as the trial's outcome (``controller_error`` in `wbc.arena.record.TrialRecord`) instead of losing the whole run.
+
+The place named is the controller's own: the innermost frame of the exception's traceback that is not inside the
+`wbc` package nor generated code (a dataclass's ``__init__``), preferring one inside the controller's own package
+over a library it called (NumPy raising in a plug-in names the plug-in's line); for a command refused after ``act``
+returned (no frame of the controller is left on the traceback), where the controller's ``act`` is defined.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+import sys
+import traceback
+from pathlib import Path
+
+from wbc.arena.episode import Episode
+from wbc.errors import WbcError
+from wbc.scenario.trial import Trial
+
+__all__ = ["ControllerFailure", "own_frame"]
+
+_WBC_DIR = Path(__file__).resolve().parent.parent
+"""The `wbc` package's directory: frames inside it are the house's, not the controller's."""
+
+
+def own_frame(exc: BaseException, owner: object = None) -> str | None:
+    """``file:line`` of the innermost traceback frame of `exc` that is the controller's (module docstring).
+
+    Args:
+        exc: a raised exception (with its traceback).
+        owner: the controller; frames inside its top-level package are preferred (None: no preference).
+
+    Returns:
+        The innermost frame inside `owner`'s package, else the innermost outside `wbc` and not generated code, else
+        None.
+    """
+    home = _package_dir(owner)
+    fallback = None
+    for frame in reversed(traceback.extract_tb(exc.__traceback__)):
+        if frame.filename.startswith("<"):
+            continue
+        path = Path(frame.filename).resolve()
+        if path.is_relative_to(_WBC_DIR):
+            continue
+        if home is None or path.is_relative_to(home):
+            return f"{frame.filename}:{frame.lineno}"
+        fallback = fallback or f"{frame.filename}:{frame.lineno}"
+    return fallback
+
+
+def _package_dir(owner: object) -> Path | None:
+    """The directory of `owner`'s class's top-level package (its file for a lone module); None if unknown or wbc."""
+    if owner is None:
+        return None
+    top = sys.modules.get(type(owner).__module__.partition(".")[0])
+    file = getattr(top, "__file__", None)
+    if not file:
+        return None
+    path = Path(file).resolve()
+    home = path.parent if path.name == "__init__.py" else path
+    return None if home.is_relative_to(_WBC_DIR) else home
+
+
+def _defined_at(controller: object, method: str) -> str | None:
+    """``file:line`` where `controller`'s `method` is defined, or None (a builtin, a C extension)."""
+    fn = getattr(type(controller), method, None)
+    try:
+        return f"{inspect.getsourcefile(fn)}:{inspect.getsourcelines(fn)[1]}"
+    except (TypeError, OSError):
+        return None
+
+
+class ControllerFailure(WbcError, RuntimeError):
+    """A controller raised, or returned a command the robot refused, during an episode.
+
+    Args:
+        controller: the controller that failed.
+        phase: ``reset`` (it raised in ``reset``), ``act`` (it raised in ``act``) or ``command`` (``act`` returned a
+            command the robot refused).
+        tick: the control tick it failed at (0-based; 0 for ``reset``).
+        time_s: the episode time of that tick [s].
+        exc: the exception.
+        episode: the episode up to the tick before the failure (not a fall: ``fell`` False).
+
+    Attributes:
+        phase, tick, time_s, episode: as given.
+        error_type: the exception's type name.
+        error_message: the exception's message.
+        where: ``file:line`` of the controller's own code (module docstring), or None if unknown.
+    """
+
+    def __init__(self, controller: object, *, phase: str, tick: int, time_s: float, exc: BaseException,
+                 episode: Episode) -> None:
+        self.phase = phase
+        self.tick = tick
+        self.time_s = time_s
+        self.episode = episode
+        self.error_type = type(exc).__name__
+        self.error_message = str(exc)
+        where = own_frame(exc, controller)
+        self.where = where if where is not None else _defined_at(controller, "act" if phase == "command" else phase)
+        super().__init__(self.describe())
+
+    def describe(self) -> str:
+        """One line: what failed, at which tick and time, the exception, and the controller's own file:line."""
+        what = {"reset": "reset raised", "act": "act raised",
+                "command": "act returned a command the robot refused:"}[self.phase]
+        when = "before the first tick" if self.phase == "reset" else (
+            f"at tick {self.tick} (t = {self.time_s:.3f} s)" if math.isfinite(self.time_s) else f"at tick {self.tick}")
+        at = f" [{self.where}]" if self.where else ""
+        return f"{what} {self.error_type} {when}: {self.error_message}{at}"
+
+    def record_error(self, controller: str, trial: Trial) -> str:
+        """The trial record's ``error``, on one line: the controller, the trial (band, seed, index) and `describe`.
+
+        Args:
+            controller: the controller's name as the arena knows it.
+            trial: the trial it failed in.
+        """
+        text = (f"controller {controller}, band {trial.band}, seed {trial.seed}, trial {trial.index}: "
+                f"{self.describe()}")
+        return " / ".join(line.strip() for line in text.splitlines() if line.strip())
