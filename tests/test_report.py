@@ -11,7 +11,15 @@ import numpy as np
 import pytest
 
 from wbc.arena.record import TrialRecord
-from wbc.arena.report import EXTRA_METRICS, METRICS, format_table, summarize, write_report
+from wbc.arena.report import (
+    COMMON_METRICS,
+    EXTRA_METRICS,
+    METRICS,
+    PAIRED_METRICS,
+    format_table,
+    summarize,
+    write_report,
+)
 from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
 from wbc.errors import RecordError, UnknownNameError
 
@@ -52,6 +60,7 @@ def make_record(controller: str, band: str, seed: int, trial: int, **overrides) 
         "wbc_failures": 0,
         "debug_truth": False,
         "wall_s": 1.5,
+        "power_w": 40.0,
     }
     record.update(overrides)
     return TrialRecord(**record)
@@ -129,11 +138,12 @@ def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory_and
         "controller,scenario,scenario_hash,band,seed,trial,success,outcome,ttf,fall_time_s,vlin_err,vang_err,"
         "max_roll_deg,max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,"
         "payload_kg,fallbacks,wbc_failures,debug_truth,backend,metrics_source,safety_trips,late_advances,"
-        "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,wall_s,error")
+        "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,wall_s,error,ticks,clamped_ticks,power_w,"
+        "vlin_err_by_s,vang_err_by_s,counters")
     # an earlier directory's file still reads: a simulated trial, its metrics from truth, nothing timed but wall_s,
     # its outcome derived as those versions scored it (a success, or a fall; no controller errors then)
     for success in (True, False):
-        record = make_record("mpc", "nominal", 1, 2, vlin_err=0.1 + 0.2, success=success)
+        record = make_record("mpc", "nominal", 1, 2, vlin_err=0.1 + 0.2, success=success, power_w=math.nan)
         row = dict(zip(TrialRecord.header(), record.to_row(), strict=True))
         old = tmp_path / "trials.csv"
         old.write_text(EARLIER_COLUMNS + "\n" + ",".join(row[c] for c in EARLIER_COLUMNS.split(",")) + "\n")
@@ -142,12 +152,19 @@ def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory_and
         assert math.isnan(back.act_ms_p99) and back.vlin_err == 0.1 + 0.2
         assert back.outcome == ("success" if success else "fall") and back.error == ""
     # a hardware trial of the version before outcomes: a trip was scored a fall; it reads as the safety trip it was
-    tripped = make_record("mpc", "nominal", 0, 0, success=False, safety_trips=1)
+    tripped = make_record("mpc", "nominal", 0, 0, success=False, safety_trips=1, power_w=math.nan)
     assert tripped.outcome == "safety_trip"
     columns = [c for c in TrialRecord.header() if c not in ("outcome", "error")]
     row = dict(zip(TrialRecord.header(), tripped.to_row(), strict=True))
     old.write_text(",".join(columns) + "\n" + ",".join(row[c] for c in columns) + "\n")
     assert TrialRecord.read_csv(old) == [tripped]
+    # the version before ticks, clamps, power, profiles and counters: its rows read with nothing measured for them
+    counted = make_record("mpc", "nominal", 0, 1, success=True, power_w=math.nan)
+    columns = TrialRecord.header()[:TrialRecord.header().index("error") + 1]
+    row = dict(zip(TrialRecord.header(), counted.to_row(), strict=True))
+    old.write_text(",".join(columns) + "\n" + ",".join(row[c] for c in columns) + "\n")
+    (back,) = TrialRecord.read_csv(old)
+    assert back == counted and back.ticks == 0 and back.counters == "" and math.isnan(back.power_w)
     # an outcome must be one of the five, and agree with success
     with pytest.raises(RecordError, match="outcome must be one of"):
         make_record("mpc", "nominal", 0, 0, outcome="crash")
@@ -283,7 +300,8 @@ def test_paired_difference_rejects_repeated_trials():
 def test_summary_has_exactly_the_required_shape():
     records = arena_records()
     summary = summary_of(records)
-    assert set(summary) == {"scenario", "controllers", "paired"}
+    assert set(summary) == {"scenario", "controllers", "paired", "warnings"}
+    assert summary["warnings"] == []
     assert summary["scenario"] == {"name": SCENARIO, "hash": HASH}
     assert list(summary["controllers"]) == list(CONTROLLERS)
     for entry in summary["controllers"].values():
@@ -292,7 +310,10 @@ def test_summary_has_exactly_the_required_shape():
         for cell in entry["bands"].values():
             assert cell["trials"] == len(SEEDS) * N_TRIALS
             assert cell["seeds"] == len(SEEDS)
-            assert set(cell) == {"trials", "seeds", *METRICS, *EXTRA_METRICS}
+            assert set(cell) == {"trials", "seeds", *METRICS, *EXTRA_METRICS, *COMMON_METRICS, "ticks",
+                                 "deadline_misses", "clamped_ticks", "counters"}
+            for metric in COMMON_METRICS:  # these records keep no per-second profile: no common window
+                assert cell[metric] == {"mean": None, "std": None, "ci95": [None, None], "trials": 0}
             for metric in (*METRICS, *EXTRA_METRICS):
                 assert set(cell[metric]) == {"mean", "std", "ci95"}
                 lo, hi = cell[metric]["ci95"]
@@ -304,12 +325,17 @@ def test_summary_has_exactly_the_required_shape():
 
     pairs = [(p["a"], p["b"], p["band"], p["metric"]) for p in summary["paired"]]
     expected = [(a, b, band, m) for a, b in (("mpc", "rl"), ("mpc", "wbc"), ("rl", "wbc")) for band in BANDS
-                for m in METRICS]
+                for m in PAIRED_METRICS]
     assert pairs == expected
     for p in summary["paired"]:
-        assert set(p) == {"a", "b", "band", "metric", "diff", "ci95", "n", "test", "p", "n80", "a_only", "b_only"}
+        assert set(p) == {"a", "b", "band", "metric", "diff", "ci95", "interval", "n", "mean_a", "mean_b", "test",
+                          "p", "n80", "a_only", "b_only"}
         assert len(p["ci95"]) == 2
+        if p["metric"] in COMMON_METRICS:
+            assert p["n"] == 0 and p["test"] is None
+            continue
         assert p["n"] == len(SEEDS) * N_TRIALS and 0.0 < p["p"] <= 1.0
+        assert p["interval"] == ("exact" if p["metric"] == "success_rate" else "bootstrap")
         assert p["test"] == ("exact McNemar" if p["metric"] == "success_rate" else "Wilcoxon signed-rank")
         assert (p["a_only"] is None) == (p["metric"] != "success_rate")
     assert json.loads(json.dumps(summary, allow_nan=False)) == summary
@@ -322,7 +348,9 @@ def test_summary_with_missing_cells_renders_null():
     assert json.loads(text) == summary
     assert summary["controllers"]["ghost"]["bands"]["nominal"] == {
         "trials": 0, "seeds": 0,
-        **{m: {"mean": None, "std": None, "ci95": [None, None]} for m in (*METRICS, *EXTRA_METRICS)}
+        **{m: {"mean": None, "std": None, "ci95": [None, None]} for m in (*METRICS, *EXTRA_METRICS)},
+        **{m: {"mean": None, "std": None, "ci95": [None, None], "trials": 0} for m in COMMON_METRICS},
+        "ticks": 0, "deadline_misses": 0, "clamped_ticks": 0, "counters": {},
     }
     assert summary["controllers"]["rl"]["bands"]["push"]["trials"] == 0
     assert summary["controllers"]["mpc"]["bands"]["ice"]["ttf"] == {"mean": None, "std": None, "ci95": [None, None]}
@@ -383,15 +411,15 @@ def test_write_report_writes_markdown_and_plots(tmp_path):
             "versions": {"numpy": np.__version__}, "git": "deadbeef"}
     paths = write_report(tmp_path / "out", summary, records, meta)
     names = {p.name for p in paths}
-    assert names == {"report.md", "success_vs_push.png", "ttf.png", "tracking.png"}
+    assert names == {"report.md", "ttf.png", "tracking.png"}  # push survival needs the push outcomes (curve)
     for path in paths:
         assert path.is_file() and path.parent == tmp_path / "out"
         if path.suffix == ".png":
             assert path.stat().st_size > 1024
             assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     report = (tmp_path / "out" / "report.md").read_text(encoding="utf-8")
-    for text in (SCENARIO, HASH, "deadbeef", "serial", "numpy", "±", "(tracking.png)", "(ttf.png)",
-                 "(success_vs_push.png)", *CONTROLLERS, *BANDS):
+    for text in (SCENARIO, HASH, "deadbeef", "serial", "numpy", "±", "(tracking.png)", "(ttf.png)", "## Verdict",
+                 "## Controller counters", "## Timing and commands", *CONTROLLERS, *BANDS):
         assert text in report
 
 
@@ -399,9 +427,9 @@ def test_write_report_skips_push_plot_without_pushes(tmp_path):
     records = arena_records(pushes=False)
     paths = write_report(tmp_path, summary_of(records), through_csv(records, tmp_path / "trials.csv"), {})
     assert {p.name for p in paths} == {"report.md", "ttf.png", "tracking.png"}
-    assert not (tmp_path / "success_vs_push.png").exists()
+    assert not (tmp_path / "push_recovery.png").exists()
     assert all(p.stat().st_size > 1024 for p in paths if p.suffix == ".png")
-    assert "(success_vs_push.png)" not in (tmp_path / "report.md").read_text(encoding="utf-8")
+    assert "(push_recovery.png)" not in (tmp_path / "report.md").read_text(encoding="utf-8")
 
 
 def test_tables_and_summaries_need_no_plotting_library():

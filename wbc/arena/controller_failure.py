@@ -23,7 +23,7 @@ from wbc.arena.episode import Episode
 from wbc.errors import WbcError
 from wbc.scenario.trial import Trial
 
-__all__ = ["ControllerFailure", "own_frame"]
+__all__ = ["ControllerFailure", "own_frame", "read_counters"]
 
 _WBC_DIR = Path(__file__).resolve().parent.parent
 """The `wbc` package's directory: frames inside it are the house's, not the controller's."""
@@ -81,8 +81,9 @@ class ControllerFailure(WbcError, RuntimeError):
 
     Args:
         controller: the controller that failed.
-        phase: ``reset`` (it raised in ``reset``), ``act`` (it raised in ``act``) or ``command`` (``act`` returned a
-            command the robot refused).
+        phase: ``reset`` (it raised in ``reset``), ``act`` (it raised in ``act``), ``command`` (``act`` returned a
+            command the robot refused) or ``counters`` (``counters`` raised or returned something that is not a dict
+            of counts, after the episode).
         tick: the control tick it failed at (0-based; 0 for ``reset``).
         time_s: the episode time of that tick [s].
         exc: the exception.
@@ -110,9 +111,13 @@ class ControllerFailure(WbcError, RuntimeError):
     def describe(self) -> str:
         """One line: what failed, at which tick and time, the exception, and the controller's own file:line."""
         what = {"reset": "reset raised", "act": "act raised",
-                "command": "act returned a command the robot refused:"}[self.phase]
-        when = "before the first tick" if self.phase == "reset" else (
-            f"at tick {self.tick} (t = {self.time_s:.3f} s)" if math.isfinite(self.time_s) else f"at tick {self.tick}")
+                "command": "act returned a command the robot refused:",
+                "counters": "counters() failed:"}[self.phase]
+        if self.phase in ("reset", "counters"):
+            when = "before the first tick" if self.phase == "reset" else "after the episode"
+        else:
+            when = (f"at tick {self.tick} (t = {self.time_s:.3f} s)" if math.isfinite(self.time_s)
+                    else f"at tick {self.tick}")
         at = f" [{self.where}]" if self.where else ""
         return f"{what} {self.error_type} {when}: {self.error_message}{at}"
 
@@ -126,3 +131,34 @@ class ControllerFailure(WbcError, RuntimeError):
         text = (f"controller {controller}, band {trial.band}, seed {trial.seed}, trial {trial.index}: "
                 f"{self.describe()}")
         return " / ".join(line.strip() for line in text.splitlines() if line.strip())
+
+
+def read_counters(controller: object, name: str, trial: Trial, episode: Episode,
+                  error: str) -> tuple[dict[str, int], str]:
+    """The controller's event counts after a trial, checked, and the trial's error.
+
+    A controller whose ``counters`` raises, or returns what is not a dict of whole counts
+    (`wbc.arena.record.check_counters`), has failed: the trial's error says so (phase ``counters``), unless it had
+    failed already, whose error is kept (a second one would only hide the first).
+
+    Args:
+        controller: the controller, after its episode.
+        name: its name as the arena knows it.
+        trial: the trial played.
+        episode: the episode played.
+        error: the trial's error so far (empty when the controller has not failed).
+
+    Returns:
+        (counts, error): the counts (empty when they could not be read) and the trial's error.
+    """
+    from wbc.arena.record import check_counters  # record imports this module's neighbours; import when used
+
+    try:
+        return check_counters(controller.counters()), error
+    except Exception as exc:  # any: the controller's code is not ours
+        if error:
+            return {}, error
+        played = float(episode.t[-1]) if len(episode.t) else 0.0
+        failure = ControllerFailure(controller, phase="counters", tick=len(episode.t), time_s=played, exc=exc,
+                                    episode=episode)
+        return {}, failure.record_error(name, trial)

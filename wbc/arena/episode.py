@@ -199,6 +199,8 @@ class Episode:
         operator_events: the keys an operator pressed during a hardware trial (a marked push, an e-stop).
         base_source: where `v_base_in_yaw`, `yaw_rate`, `roll`, `pitch` and the base pose in `qpos` come from, one
             of `BASE_SOURCES`: ``truth`` (the simulator) or ``estimator`` (the robot's own sensors).
+        clamped_ticks: ticks whose command lay outside the motors' limits (position range, speed, gains, torque),
+            so that the robot clamped it before sending (`wbc.hardware.robot.clamp_command`).
     """
 
     duration_s: float
@@ -219,6 +221,7 @@ class Episode:
     safety_events: SafetyLog = field(default_factory=SafetyLog)
     operator_events: OperatorLog = field(default_factory=OperatorLog)
     base_source: str = "truth"
+    clamped_ticks: int = 0
 
     def __post_init__(self) -> None:
         if self.base_source not in BASE_SOURCES:
@@ -245,15 +248,15 @@ class Episode:
             **{f"push_{k}": getattr(self.pushes, k) for k in _PUSH_KEYS},
             **{f"safety_{k}": getattr(self.safety_events, k) for k in _SAFETY_KEYS},
             **{f"operator_{k}": getattr(self.operator_events, k) for k in _OPERATOR_KEYS},
-            base_source=np.str_(self.base_source),
+            base_source=np.str_(self.base_source), clamped_ticks=np.int64(self.clamped_ticks),
         )
 
     @classmethod
     def load(cls, path: str) -> Episode:
         """Read an episode written by `save`.
 
-        A file from before episodes kept safety events, operator actions or their base source has none of the first
-        two, and its base quantities are the simulator's.
+        A file from before episodes kept safety events, operator actions, their base source or the clamped ticks has
+        none of the first two, its base quantities are the simulator's and its clamped ticks 0 (not counted then).
 
         Raises:
             EpisodeFileError: a field is missing (a file of another version: its pushes were text, for instance) or
@@ -280,8 +283,9 @@ class Episode:
                 safety = SafetyLog(**{k: z[f"safety_{k}"] for k in _SAFETY_KEYS}) if present else SafetyLog()
                 actions = OperatorLog(**{k: z[f"operator_{k}"] for k in _OPERATOR_KEYS}) if operator else OperatorLog()
                 source = str(z["base_source"].item()) if "base_source" in z.files else "truth"
+                clamped = int(z["clamped_ticks"].item()) if "clamped_ticks" in z.files else 0
                 return cls(**scalars, **arrays, pushes=pushes, safety_events=safety, operator_events=actions,
-                           base_source=source)
+                           base_source=source, clamped_ticks=clamped)
             except ConfigError as exc:
                 raise EpisodeFileError(f"{path}: {exc}") from None
 
@@ -358,12 +362,12 @@ class EpisodeBuffer:
                 "arm_q": arm_q}
 
     def finish(self, *, duration_s: float, control_dt: float, fell: bool, fall_time_s: float,
-               safety_events: SafetyLog | None = None) -> Episode:
+               safety_events: SafetyLog | None = None, clamped_ticks: int = 0) -> Episode:
         """The episode made of the rows filled so far (no pushes: the trial's setup adds those it applied)."""
         t, command, act_s, qpos, vel, tau_dq = self._stacked()
         return Episode(
             duration_s=duration_s, control_dt=control_dt, fell=fell, fall_time_s=fall_time_s,
             t=t.copy(), command=command.copy(), qpos=qpos.copy(), act_s=act_s.copy(),
             **self._derived(qpos, vel, tau_dq),
-            safety_events=SafetyLog() if safety_events is None else safety_events,
+            safety_events=SafetyLog() if safety_events is None else safety_events, clamped_ticks=clamped_ticks,
         )

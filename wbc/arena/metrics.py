@@ -7,6 +7,14 @@
 - ``vang_err``: mean over the survived ticks of |base yaw rate - commanded yaw rate| [rad/s].
 - ``max_roll_deg`` / ``max_pitch_deg``: largest |roll| / |pitch| [deg].
 - ``energy_j``: mechanical work of all motors, sum over ticks of sum_i |tau_i dq_i| dt [J].
+- ``power_w``: mean mechanical power over the time played, energy_j / (ticks dt) [W]: the per-second form of
+  ``energy_j``, which grows with the time survived (a controller that falls early spends less energy).
+- ``vlin_err_by_s`` / ``vang_err_by_s``: the tracking errors' means over each whole second played, as text
+  (`profile_text`); the arena averages them over a window every compared controller survived
+  (`wbc.arena.windows`), since ``vlin_err`` and ``vang_err``, averaged over each trial's own survived time, favour a
+  controller that falls before the hard part.
+- ``ticks``: control ticks played.
+- ``clamped_ticks``: ticks whose command lay outside the motors' limits and was clamped before it was sent.
 - ``arm_travel_rad``: total arm joint travel, sum over ticks and arm joints of |delta q| [rad].
 - ``safety_trips``: times the robot's safety layer latched its damping (0 without a safety layer).
 - ``deadline_misses``: control ticks whose ``controller.act`` took longer than the control period (wall time).
@@ -37,6 +45,13 @@ __all__ = [
     "deadline_misses",
     "act_ms_p50",
     "act_ms_p99",
+    "power_w",
+    "vlin_err_by_s",
+    "vang_err_by_s",
+    "ticks",
+    "clamped_ticks",
+    "per_second",
+    "profile_text",
     "compute_metrics",
 ]
 
@@ -107,7 +122,51 @@ def act_ms_p99(ep: Episode) -> float:
     return float(np.percentile(ep.act_s, 99) * 1e3) if len(ep.act_s) else float("nan")
 
 
-METRICS: dict[str, Callable[[Episode], float | bool | int]] = {
+def power_w(ep: Episode) -> float:
+    """Mean mechanical power of the motors over the time played [W]; NaN when nothing was played."""
+    return float(np.mean(ep.power)) if len(ep.t) else float("nan")
+
+
+def per_second(values: np.ndarray, control_dt: float) -> np.ndarray:
+    """The mean of `values` (one per control tick) over each whole second, the last partial second left out.
+
+    A second holds ``round(1 / control_dt)`` ticks.
+    """
+    per = max(1, int(round(1.0 / control_dt)))
+    whole = len(values) // per
+    return np.asarray(values[: whole * per], dtype=float).reshape(whole, per).mean(axis=1)
+
+
+def profile_text(values: np.ndarray) -> str:
+    """Per-second means as a record stores them: space-separated, 6 significant digits each."""
+    return " ".join(f"{float(v):.6g}" for v in values)
+
+
+def vlin_err_by_s(ep: Episode) -> str:
+    """The horizontal velocity tracking error's mean over each whole second played, as text [m/s]."""
+    if not len(ep.t):
+        return ""
+    return profile_text(per_second(np.linalg.norm(ep.v_base_in_yaw - ep.command[:, :2], axis=1), ep.control_dt))
+
+
+def vang_err_by_s(ep: Episode) -> str:
+    """The yaw-rate tracking error's mean over each whole second played, as text [rad/s]."""
+    if not len(ep.t):
+        return ""
+    return profile_text(per_second(np.abs(ep.yaw_rate - ep.command[:, 2]), ep.control_dt))
+
+
+def ticks(ep: Episode) -> int:
+    """Control ticks played."""
+    return len(ep.t)
+
+
+def clamped_ticks(ep: Episode) -> int:
+    """Ticks whose command the robot clamped to its motors' limits."""
+    return int(ep.clamped_ticks)
+
+
+METRICS: dict[str, Callable[[Episode], float | bool | int | str]] = {
     "success": success,
     "ttf": ttf,
     "vlin_err": vlin_err,
@@ -120,10 +179,15 @@ METRICS: dict[str, Callable[[Episode], float | bool | int]] = {
     "deadline_misses": deadline_misses,
     "act_ms_p50": act_ms_p50,
     "act_ms_p99": act_ms_p99,
+    "power_w": power_w,
+    "vlin_err_by_s": vlin_err_by_s,
+    "vang_err_by_s": vang_err_by_s,
+    "ticks": ticks,
+    "clamped_ticks": clamped_ticks,
 }
 
 
-def compute_metrics(ep: Episode) -> dict[str, float | bool | int]:
+def compute_metrics(ep: Episode) -> dict[str, float | bool | int | str]:
     """Every metric of `METRICS` for one episode."""
     out = {name: fn(ep) for name, fn in METRICS.items()}
     out["fall_time_s"] = float(ep.fall_time_s)

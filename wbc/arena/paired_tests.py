@@ -14,8 +14,20 @@ The arena plays paired trials (`wbc.arena.stats`), so the right tests are paired
   differences are symmetric about 0. It assumes no normality, which TTF (most trials at 1.0) and error
   distributions with long tails do not have.
 
-Both return p = 1 when nothing differs (no discordant pair, every difference zero). A fixed-n p-value is valid only
-when the number of trials was fixed in advance; a run stopped by `wbc.arena.sequential` reports that test's
+The interval quoted for a paired success difference, `paired_success_interval`, is built from the same discordant
+pairs, so that it excludes 0 exactly when the exact McNemar test rejects at its level: of n pairs, m = b + c are
+discordant, and the difference is p_B - p_A = r (2 theta - 1), with r the probability that a pair is discordant and
+theta the probability that a discordant pair is B's. The interval is the range of r (2 theta - 1) over the exact
+(Clopper-Pearson) intervals of theta (c of m) and of r (m of n), both at the quoted level. The McNemar test rejects
+exactly when theta's interval excludes 1/2 (its p-value doubles the smaller binomial tail, as the interval's bounds
+put half of 1 - level in each), and r > 0 on its interval when m > 0, so the sign of the difference is settled exactly
+when the test rejects. Without discordant pairs the interval is [-r_hi, r_hi], r_hi the upper bound of the
+discordance rate from n concordant pairs: it does not collapse to a point. Its coverage, checked by simulation over
+3 to 80 pairs and a grid of success probabilities and correlations, is at least 95 % at level 0.95 (it is
+conservative, as Clopper-Pearson intervals are).
+
+Both tests return p = 1 when nothing differs (no discordant pair, every difference zero). A fixed-n p-value is valid
+only when the number of trials was fixed in advance; a run stopped by `wbc.arena.sequential` reports that test's
 anytime-valid p-value instead.
 """
 
@@ -31,7 +43,8 @@ from wbc.arena.record import TrialRecord
 from wbc.arena.stats import PairKey
 from wbc.errors import RecordError
 
-__all__ = ["BINARY_FIELDS", "McNemarResult", "WilcoxonResult", "mcnemar_exact", "paired_values", "wilcoxon_signed_rank"]
+__all__ = ["BINARY_FIELDS", "McNemarResult", "WilcoxonResult", "clopper_pearson", "mcnemar_exact",
+           "paired_success_interval", "paired_values", "wilcoxon_signed_rank"]
 
 BINARY_FIELDS = ("success",)
 """Record fields that are binary outcomes (compared by McNemar); every other metric is compared by Wilcoxon."""
@@ -101,6 +114,53 @@ def mcnemar_exact(a: np.ndarray, b: np.ndarray) -> McNemarResult:
 
     p = float(binomtest(b_only, m, 0.5, alternative="two-sided").pvalue)
     return McNemarResult(a_only=a_only, b_only=b_only, n=int(a_arr.size), p_value=min(1.0, p))
+
+
+def clopper_pearson(k: int, n: int, *, level: float = 0.95) -> tuple[float, float]:
+    """The exact (Clopper-Pearson) interval of a binomial probability from `k` successes of `n` trials.
+
+    Each bound leaves (1 - level) / 2 in its tail: lo is the beta quantile B((1 - level) / 2; k, n - k + 1) (0 when
+    k = 0), hi is B((1 + level) / 2; k + 1, n - k) (1 when k = n).
+
+    Raises:
+        RecordError: counts out of range (n >= 1, 0 <= k <= n), or `level` outside (0, 1).
+    """
+    if not (n >= 1 and 0 <= k <= n) or not 0.0 < level < 1.0:
+        raise RecordError(f"clopper_pearson: need n >= 1, 0 <= k <= n and level in (0, 1); got k {k}, n {n}, level "
+                          f"{level}")
+    from scipy.stats import beta
+
+    tail = (1.0 - level) / 2.0
+    lo = 0.0 if k == 0 else float(beta.ppf(tail, k, n - k + 1))
+    hi = 1.0 if k == n else float(beta.ppf(1.0 - tail, k + 1, n - k))
+    return lo, hi
+
+
+def paired_success_interval(a_only: int, b_only: int, n: int, *, level: float = 0.95) -> tuple[float, float]:
+    """The interval of a paired success difference p_B - p_A that agrees with the exact McNemar test.
+
+    From the discordant pairs: `a_only` (A succeeded, B failed) and `b_only` (B succeeded, A failed) of `n` pairs
+    (module docstring: the range of r (2 theta - 1) over the exact intervals of r and theta).
+
+    Returns:
+        (lo, hi) as fractions (multiply by 100 for points); (nan, nan) when `n` is 0.
+
+    Raises:
+        RecordError: counts out of range.
+    """
+    if n == 0:
+        return math.nan, math.nan
+    m = a_only + b_only
+    if min(a_only, b_only) < 0 or m > n:
+        raise RecordError(f"paired_success_interval: {a_only} + {b_only} discordant pairs of {n}; counts must be >= 0 "
+                          "and discordant pairs at most n")
+    r_lo, r_hi = clopper_pearson(m, n, level=level)
+    if m == 0:
+        return -r_hi, r_hi
+    t_lo, t_hi = clopper_pearson(b_only, m, level=level)
+    lows = [r * (2.0 * t_lo - 1.0) for r in (r_lo, r_hi)]
+    highs = [r * (2.0 * t_hi - 1.0) for r in (r_lo, r_hi)]
+    return float(min(lows)), float(max(highs))
 
 
 def wilcoxon_signed_rank(differences: np.ndarray) -> WilcoxonResult:

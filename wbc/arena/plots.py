@@ -1,8 +1,9 @@
-"""Plots of an arena run (matplotlib, Agg backend): success against push, push recovery, time to fall, tracking error.
+"""Plots of an arena run (matplotlib, Agg backend): push survival, time to fall per band, tracking error.
 
-`write_plots` draws them from the records and the summary (`wbc.arena.report.summarize`); the report
-(`wbc.arena.report.write_report`) writes ``report.md`` around them. This is the only arena module that imports
-matplotlib, and only when it draws.
+`write_plots` draws them from the records, the summary (`wbc.arena.report.summarize`) and the push-recovery curve
+(`wbc.arena.breakdown.recovery_curve`); the report (`wbc.arena.report.write_report`) writes ``report.md`` around
+them. Every error bar and band says what it is, in its axis label or title, and every point carries the number of
+trials or pushes behind it. This is the only arena module that imports matplotlib, and only when it draws.
 """
 
 from __future__ import annotations
@@ -19,58 +20,19 @@ from wbc.arena.record import TrialRecord
 __all__ = ["PLOTS", "write_plots"]
 
 PLOTS = (
-    ("success_vs_push.png", "Success rate against push magnitude"),
-    ("push_recovery.png", "Push recovery: survival of each push against its impulse, Wilson 95 % intervals"),
-    ("ttf.png", "Time to fall (fraction of the episode survived)"),
-    ("tracking.png", "Velocity tracking error"),
+    ("push_recovery.png", "Push survival against push impulse: share of pushes survived per impulse bin, with its "
+     "Wilson 95 % interval and the pushes (n) behind it"),
+    ("ttf.png", "Time to fall per band: share of trials still standing against time, with the trials (n) per "
+     "controller"),
+    ("tracking.png", "Velocity tracking error over the common window (the seconds every controller survived): mean "
+     "over trials with its 95 % bootstrap interval"),
 )
 """File name and caption of every plot, in report order."""
-
-_N_PUSH_BINS = 8
-
 
 def _cell_stat(summary: Mapping[str, Any], controller: str, band: str, metric: str, field: str) -> float:
     cell = summary["controllers"][controller]["bands"].get(band)
     value = None if cell is None else cell[metric][field]
     return math.nan if value is None else float(value)
-
-
-def _plot_success_vs_push(plt: Any, path: Path, records: Sequence[TrialRecord], controllers: Sequence[str]) -> bool:
-    """Success rate against push magnitude, one line per controller; False (nothing written) without pushes."""
-    pushes = np.array([r.push_force_n for r in records], dtype=float)
-    if not np.any(pushes > 0.0):
-        return False
-    success = np.array([r.success for r in records], dtype=float)
-    names = np.array([r.controller for r in records])
-    finite = np.isfinite(pushes)
-    levels = np.unique(pushes[finite])
-    if levels.size <= _N_PUSH_BINS:  # few distinct magnitudes (a push band): one point per magnitude
-        centers = levels
-        bin_of = np.searchsorted(levels, pushes)
-    else:
-        edges = np.linspace(0.0, float(levels[-1]), _N_PUSH_BINS + 1)
-        centers = 0.5 * (edges[:-1] + edges[1:])
-        bin_of = np.clip(np.searchsorted(edges, pushes, side="right") - 1, 0, _N_PUSH_BINS - 1)
-    fig, ax = plt.subplots(figsize=(6.4, 4.0))
-    try:
-        for controller in controllers:
-            mine = (names == controller) & finite & ~np.isnan(success)
-            rates = [
-                100.0 * float(success[mine & (bin_of == i)].mean()) if np.any(mine & (bin_of == i)) else math.nan
-                for i in range(centers.size)
-            ]
-            ax.plot(centers, rates, marker="o", label=_short(controller))
-        ax.set_xlabel("largest push in the trial [N]")
-        ax.set_ylabel("success [%]")
-        ax.set_ylim(-5.0, 105.0)
-        ax.grid(True, alpha=0.3)
-        ax.legend()
-        ax.set_title("Success rate against push magnitude (all bands)")
-        fig.tight_layout()
-        fig.savefig(path, dpi=100)
-    finally:
-        plt.close(fig)
-    return True
 
 
 def _short(controller: str) -> str:
@@ -98,12 +60,16 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
             rate = np.array([np.nan if c["rate"] is None else 100.0 * c["rate"] for c in cells])
             lo = np.array([np.nan if c["ci95"][0] is None else 100.0 * c["ci95"][0] for c in cells])
             hi = np.array([np.nan if c["ci95"][1] is None else 100.0 * c["ci95"][1] for c in cells])
-            ax.errorbar(x, rate, yerr=np.vstack([rate - lo, hi - rate]), marker="o", capsize=3,
-                        label=_short(controller))
+            line = ax.errorbar(x, rate, yerr=np.vstack([rate - lo, hi - rate]), marker="o", capsize=3,
+                               label=_short(controller))
+            for xi, yi, cell in zip(x, rate, cells, strict=True):
+                if cell["n"] and math.isfinite(yi):
+                    ax.annotate(f"n={cell['n']}", (xi, yi), textcoords="offset points", xytext=(3, 4), fontsize=6,
+                                color=line[0].get_color())
         for edge in edges:
             ax.axvline(edge, color="0.9", linewidth=0.8, zorder=0)
         ax.set_xlabel("push impulse |F| T [N s]")
-        ax.set_ylabel("pushes survived [%]")
+        ax.set_ylabel("pushes survived [%] (bars: Wilson 95 % interval)")
         ax.set_ylim(-5.0, 105.0)
         ax.grid(True, axis="y", alpha=0.3)
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=8, ncol=3, frameon=False)
@@ -115,22 +81,36 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
     return True
 
 
-def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers: Sequence[str]) -> None:
-    """Box plot of TTF per controller, all bands pooled."""
-    names = [r.controller for r in records]
-    ttf = [r.ttf for r in records]
-    data = []
-    for controller in controllers:
-        values = np.array([t for n, t in zip(names, ttf, strict=True) if n == controller], dtype=float)
-        values = values[~np.isnan(values)]
-        data.append(values if values.size else np.array([math.nan]))
-    fig, ax = plt.subplots(figsize=(max(4.0, 1.2 * len(controllers) + 2.0), 4.0))
+def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers: Sequence[str],
+              bands: Sequence[str]) -> None:
+    """Per band, the share of each controller's trials still standing against the fraction of the episode played.
+
+    A step curve per controller (an empirical survival curve: a trial leaves it when it falls, trips, is stopped or
+    its controller fails), the number of trials in the legend.
+    """
+    fig, axes = plt.subplots(1, max(1, len(bands)), figsize=(max(5.0, 3.6 * len(bands)), 3.8), squeeze=False,
+                             sharey=True)
     try:
-        ax.boxplot(data, tick_labels=[_short(c) for c in controllers])
-        ax.set_ylabel("TTF (fraction of the episode survived)")
-        ax.set_ylim(-0.05, 1.05)
-        ax.grid(True, axis="y", alpha=0.3)
-        ax.set_title("Time to fall, all bands")
+        for ax, band in zip(axes[0], bands, strict=False):
+            for controller in controllers:
+                ttf = np.sort(np.array([r.ttf for r in records if r.controller == controller and r.band == band],
+                                       dtype=float))
+                ttf = ttf[~np.isnan(ttf)]
+                if not ttf.size:
+                    continue
+                ended = ttf[ttf < 1.0]
+                x = np.concatenate(([0.0], ended, [1.0]))
+                standing = 100.0 * np.concatenate(([1.0], 1.0 - np.arange(1, ended.size + 1) / ttf.size,
+                                                   [1.0 - ended.size / ttf.size]))
+                ax.step(x, standing, where="post", label=f"{_short(controller)} (n={ttf.size})")
+            ax.set_title(f"band {band}", fontsize=9)
+            ax.set_xlabel("fraction of the episode played")
+            ax.set_xlim(0.0, 1.0)
+            ax.set_ylim(-5.0, 105.0)
+            ax.grid(True, alpha=0.3)
+            ax.legend(fontsize=7, loc="lower left")
+        axes[0][0].set_ylabel("trials still standing [%]")
+        fig.suptitle("Time to fall, per band", fontsize=10)
         fig.tight_layout()
         fig.savefig(path, dpi=100)
     finally:
@@ -139,24 +119,46 @@ def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers:
 
 def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequence[str],
                    labels: Mapping[str, str]) -> None:
-    """Grouped bars of V_lin and V_ang tracking error, mean with std across seeds as error bars."""
+    """Grouped bars of the V_lin and V_ang tracking errors over the common window, per band and controller.
+
+    Each bar is the mean over trials, its error bar the 95 % bootstrap interval over trials, and the number of trials
+    with a window is written on it. A summary written before common windows draws the errors over each trial's own
+    survived time instead, and says so.
+    """
     controllers = list(summary["controllers"])
+    cells = [c for e in summary["controllers"].values() for c in e["bands"].values()]
+    common = bool(cells) and all("vlin_err_common" in c for c in cells)
+    metrics = ("vlin_err_common", "vang_err_common") if common else ("vlin_err", "vang_err")
     x = np.arange(len(bands), dtype=float)
     width = 0.8 / max(1, len(controllers))
-    fig, axes = plt.subplots(1, 2, figsize=(max(6.4, 1.5 * len(bands) * 2 + 2.0), 4.0))
+    fig, axes = plt.subplots(1, 2, figsize=(max(6.4, 1.5 * len(bands) * 2 + 2.0), 4.2))
     try:
-        for ax, metric in zip(axes, ("vlin_err", "vang_err"), strict=True):
+        for ax, metric in zip(axes, metrics, strict=True):
             for i, controller in enumerate(controllers):
-                means = [_cell_stat(summary, controller, b, metric, "mean") for b in bands]
-                stds = [_cell_stat(summary, controller, b, metric, "std") for b in bands]
+                means = np.array([_cell_stat(summary, controller, b, metric, "mean") for b in bands])
+                ci = [summary["controllers"][controller]["bands"].get(b, {}).get(metric, {}).get("ci95")
+                      or [None, None] for b in bands]
+                lo = np.array([math.nan if c[0] is None else c[0] for c in ci], dtype=float)
+                hi = np.array([math.nan if c[1] is None else c[1] for c in ci], dtype=float)
                 offset = (i - (len(controllers) - 1) / 2.0) * width
-                ax.bar(x + offset, np.nan_to_num(means), width, yerr=np.nan_to_num(stds), capsize=3,
-                       label=_short(controller))
+                yerr = np.nan_to_num(np.vstack([means - lo, hi - means]))
+                bars = ax.bar(x + offset, np.nan_to_num(means), width, label=_short(controller))
+                # drawn apart from the bars: bar(yerr=) of one band warns in NumPy 1.25+
+                ax.errorbar(x + offset, np.nan_to_num(means), yerr=np.clip(yerr, 0.0, None), fmt="none", capsize=3,
+                            ecolor="black")
+                for bar, band in zip(bars, bands, strict=True):
+                    cell = summary["controllers"][controller]["bands"].get(band, {})
+                    n = cell.get(metric, {}).get("trials", cell.get("trials", 0)) if cell else 0
+                    ax.annotate(f"n={n}", (bar.get_x() + bar.get_width() / 2.0, 0.0), textcoords="offset points",
+                                xytext=(0, 2), ha="center", fontsize=6)
             ax.set_xticks(x, list(bands))
-            ax.set_ylabel(labels[metric])
-            ax.set_title(labels[metric].split(" [")[0])
+            ax.set_xlabel("band")
+            ax.set_ylabel(labels[metric] + " (bars: 95 % interval over trials)", fontsize=8)
+            ax.set_title(labels[metric].split(" [")[0], fontsize=9)
             ax.grid(True, axis="y", alpha=0.3)
-        axes[0].legend()
+        axes[0].legend(fontsize=7)
+        fig.suptitle("Tracking error over the seconds every controller survived" if common else
+                     "Tracking error over each trial's own survived time", fontsize=10)
         fig.tight_layout()
         fig.savefig(path, dpi=100)
     finally:
@@ -168,13 +170,12 @@ def write_plots(out_dir: Path, summary: Mapping[str, Any], records: Sequence[Tri
                 curve: Mapping[str, Any] | None = None) -> list[Path]:
     """Draw the plots of `PLOTS` into `out_dir` (which must exist); figures are closed after saving.
 
-    - ``success_vs_push.png``: success rate against the trial's largest push magnitude (``push_force_n``), binned,
-      one line per controller; only written when some record has a push.
     - ``push_recovery.png``: survival of each push against its impulse, binned, one line per controller with Wilson
-      95 % error bars (`curve`, from `wbc.arena.breakdown.recovery_curve`); only written when the curve has pushes.
-    - ``ttf.png``: box plot of TTF per controller, all bands pooled.
-    - ``tracking.png``: V_lin and V_ang tracking error per band and controller, bars of the mean across seeds with
-      the std as error bars.
+      95 % error bars and the pushes per point (`curve`, from `wbc.arena.breakdown.recovery_curve`); only written
+      when the curve has pushes.
+    - ``ttf.png``: per band, the share of trials still standing against the fraction of the episode played.
+    - ``tracking.png``: V_lin and V_ang tracking error over the common window per band and controller, the mean over
+      trials with its 95 % bootstrap interval and the trials behind it.
 
     Args:
         out_dir: output folder.
@@ -195,11 +196,9 @@ def write_plots(out_dir: Path, summary: Mapping[str, Any], records: Sequence[Tri
 
     out = Path(out_dir)
     plots: list[Path] = []
-    if _plot_success_vs_push(plt, out / "success_vs_push.png", records, controllers):
-        plots.append(out / "success_vs_push.png")
     if curve is not None and _plot_push_recovery(plt, out / "push_recovery.png", curve, controllers):
         plots.append(out / "push_recovery.png")
-    _plot_ttf(plt, out / "ttf.png", records, controllers)
+    _plot_ttf(plt, out / "ttf.png", records, controllers, bands)
     plots.append(out / "ttf.png")
     _plot_tracking(plt, out / "tracking.png", summary, bands, labels)
     plots.append(out / "tracking.png")

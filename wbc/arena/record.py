@@ -13,6 +13,8 @@ import csv
 import dataclasses
 import io
 import math
+import numbers
+import re
 import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -27,7 +29,7 @@ from wbc.hardware.capabilities import LinkStatsLike
 from wbc.scenario.trial import Trial
 
 __all__ = ["CONTROLLER_ERROR", "FALL", "MACHINE_TIMED", "OPERATOR_STOP", "OUTCOMES", "SAFETY_TRIP", "SUCCESS",
-           "TrialRecord"]
+           "TrialRecord", "check_counters", "decode_counters", "encode_counters"]
 
 SUCCESS = "success"
 """The episode reached its end."""
@@ -65,7 +67,7 @@ class TrialRecord:
             ``controller_error`` or ``operator_stop``. Built without one (a ``trials.csv`` written before the
             column), it is derived from `success` and `safety_trips` as those versions scored them.
         ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error, the fraction
-            played before it, in [0, 1).
+            played before it, in [0, 1].
         fall_time_s: when the robot fell, NaN if it did not (after a controller error too) [s].
         vlin_err: mean horizontal velocity tracking error [m/s].
         vang_err: mean yaw-rate tracking error [rad/s].
@@ -97,6 +99,19 @@ class TrialRecord:
             depend on the machine (and so, on a real robot, do `late_advances` and `worst_lateness_ms`).
         error: for a ``controller_error``, what failed: the controller, band, seed, trial, tick and time, the
             exception's type and message, and the controller's own ``file:line``; empty otherwise.
+        ticks: control ticks played.
+        clamped_ticks: ticks whose command lay outside the motors' limits (position range, speed, gains, torque)
+            and was clamped by the robot before it was sent.
+        power_w: mean mechanical power over the time played [W] (`energy_j` per second).
+        vlin_err_by_s: `vlin_err` second by second: the mean over each whole second played, space-separated
+            (`wbc.arena.windows` averages it over a window every compared controller survived).
+        vang_err_by_s: the same for `vang_err`.
+        counters: every event count the controller reported at the end of the trial (`Controller.counters`), as
+            ``name=value`` pairs separated by ``;``, names sorted (`encode_counters`, `decode_counters`);
+            `fallbacks` and `wbc_failures` are two of them, kept in their own columns as well.
+
+    A ``trials.csv`` written before a column with a default existed reads with that default (`read_csv`): 0 ticks
+    and clamped ticks, NaN power and empty profiles and counters (not measured then).
     """
 
     controller: str
@@ -135,6 +150,12 @@ class TrialRecord:
     act_ms_p99: float = float("nan")
     wall_s: float
     error: str = ""
+    ticks: int = 0
+    clamped_ticks: int = 0
+    power_w: float = float("nan")
+    vlin_err_by_s: str = ""
+    vang_err_by_s: str = ""
+    counters: str = ""
 
     def __post_init__(self) -> None:
         # values arrive as numpy scalars from metrics and sampling; storing plain Python values keeps the CSV text
@@ -162,7 +183,8 @@ class TrialRecord:
             controller: the controller's name.
             episode: the episode log, from which the metrics are computed (`wbc.arena.metrics.compute_metrics`);
                 its `Episode.base_source` is the record's `metrics_source`.
-            counters: the controller's event counts (`Controller.counters`); absent counts are 0.
+            counters: the controller's event counts (`Controller.counters`), every one kept (`check_counters`);
+                absent `fallbacks` and `wbc_failures` are 0.
             wall_s: wall time of the trial [s].
             debug_truth: the controller's ground-truth debug switch was thrown.
             backend: what played it (``sim``, ``unitree`` ...).
@@ -174,6 +196,7 @@ class TrialRecord:
                 record's `error`; the outcome is then ``controller_error`` and `episode` the part played before it.
         """
         metrics = compute_metrics(episode)
+        counts = check_counters(counters)
         if error:
             played = float(episode.t[-1]) if len(episode.t) else 0.0
             metrics.update(success=False, ttf=min(1.0, played / episode.duration_s), fall_time_s=math.nan)
@@ -188,7 +211,8 @@ class TrialRecord:
             yaw_rate_cmd=trial.command.yaw_rate,
             friction=trial.domain.friction if domain_applied else math.nan,
             payload_kg=trial.domain.payload_mass if domain_applied else math.nan,
-            fallbacks=counters.get("fallbacks", 0), wbc_failures=counters.get("wbc_failures", 0),
+            fallbacks=counts.get("fallbacks", 0), wbc_failures=counts.get("wbc_failures", 0),
+            counters=encode_counters(counts),
             debug_truth=debug_truth, backend=backend, metrics_source=episode.base_source,
             late_advances=link.late_advances if link is not None else 0,
             worst_lateness_ms=link.worst_lateness * 1e3 if link is not None else 0.0, wall_s=wall_s,
@@ -204,6 +228,11 @@ class TrialRecord:
         return hash(tuple(self.to_row()))
 
     # -- access ---------------------------------------------------------------------------------------------------
+    @property
+    def counter_values(self) -> dict[str, int]:
+        """The controller's event counts (`counters` decoded), names sorted."""
+        return decode_counters(self.counters)
+
     @property
     def pair_key(self) -> tuple[str, int, int]:
         """(band, seed, trial): identifies the trial across controllers, for paired statistics."""
@@ -280,6 +309,57 @@ class TrialRecord:
         defaults = [repr(_DEFAULTS[n]) if isinstance(_DEFAULTS[n], float) else str(_DEFAULTS[n]) for n in absent]
         return [cls.from_row(_complete(columns, row, absent, defaults), source=f"{path}:{line}")
                 for line, row in enumerate(rows[1:], start=2) if len(row) == len(columns)]
+
+
+_COUNTER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.-]*")
+
+
+def check_counters(counts: object) -> dict[str, int]:
+    """A controller's `counters()` checked and made plain: names sorted, counts as Python ints.
+
+    A count may be any integer (NumPy's included) or a float holding a whole number.
+
+    Raises:
+        RecordError: not a mapping, a name that is not a word (letters, digits, ``_``, ``.``, ``-``; it must not
+            start with a digit), or a count that is not a whole number; the message names the entry.
+    """
+    if not isinstance(counts, Mapping):
+        raise RecordError(f"counters() returned {type(counts).__name__} {counts!r}; return a dict of event name -> "
+                          "count (int)")
+    out: dict[str, int] = {}
+    for name, value in counts.items():
+        if not isinstance(name, str) or not _COUNTER_NAME.fullmatch(name):
+            raise RecordError(f"counters() holds the name {name!r}; name each count with a word (letters, digits, "
+                              "'_', '.', '-'), such as 'fallbacks'")
+        if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real) or not (
+                math.isfinite(value) and float(value) == int(value)):
+            raise RecordError(f"counters() gives {name} = {value!r}; a count is a whole number (int)")
+        out[name] = int(value)
+    return dict(sorted(out.items()))
+
+
+def encode_counters(counts: Mapping[str, int]) -> str:
+    """Counts as the ``counters`` column stores them: ``name=value`` pairs joined by ``;``, in the given order."""
+    return ";".join(f"{name}={value}" for name, value in counts.items())
+
+
+def decode_counters(text: str) -> dict[str, int]:
+    """The counts of a ``counters`` cell (`encode_counters`).
+
+    Raises:
+        RecordError: a pair is not ``name=integer``.
+    """
+    out: dict[str, int] = {}
+    for pair in filter(None, text.split(";")):
+        name, sep, value = pair.partition("=")
+        try:
+            if not sep or not _COUNTER_NAME.fullmatch(name):
+                raise ValueError
+            out[name] = int(value)
+        except ValueError:
+            raise RecordError(f"counters cell {text!r}: {pair!r} is not name=count; fix or delete that line of "
+                              "trials.csv") from None
+    return out
 
 
 def _outcome(episode: Episode) -> str:

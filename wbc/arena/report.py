@@ -29,17 +29,25 @@ import numpy as np
 
 from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.error_guard import ControllerErrors
-from wbc.arena.paired_tests import BINARY_FIELDS, mcnemar_exact, paired_values, wilcoxon_signed_rank
+from wbc.arena.paired_tests import (
+    BINARY_FIELDS,
+    mcnemar_exact,
+    paired_success_interval,
+    paired_values,
+    wilcoxon_signed_rank,
+)
 from wbc.arena.plots import PLOTS, write_plots
 from wbc.arena.power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
-from wbc.arena.record import CONTROLLER_ERROR, TrialRecord
+from wbc.arena.record import CONTROLLER_ERROR, OPERATOR_STOP, SAFETY_TRIP, TrialRecord
 from wbc.arena.stats import (
     bootstrap_mean_ci,
     in_canonical_order,
+    mean_std_of_seed_values,
     mean_std_over_seeds,
-    paired_difference,
     wilson_interval,
 )
+from wbc.arena.verdict import verdicts
+from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
 
 __all__ = [
@@ -50,6 +58,9 @@ __all__ = [
     "LABELS",
     "summarize",
     "format_table",
+    "format_verdict",
+    "cell_legend",
+    "counter_totals",
     "PAIRED_LEGEND",
     "cell_text",
     "md_table",
@@ -63,29 +74,67 @@ __all__ = [
 ]
 
 METRICS = ("success_rate", "ttf", "vlin_err", "vang_err")
-"""The headline metrics: reported per band and compared pairwise between controllers."""
+"""The headline metrics, reported per band as the paper reports them (tracking errors over each trial's own survived
+time)."""
+
+COMMON_METRICS = ("vlin_err_common", "vang_err_common")
+"""The tracking errors over each trial's common window: the leading whole seconds every controller of the run survived
+on that trial (`wbc.arena.windows`); reported per band beside `METRICS`."""
+
+PAIRED_METRICS = ("success_rate", "ttf", "vlin_err_common", "vang_err_common")
+"""The metrics compared pairwise between controllers: tracking over the common window of the two compared, so that
+a controller is not judged smoother for having fallen before the hard seconds."""
 
 METRIC_KEYS: Mapping[str, str] = {
     "success_rate": "success",
     "ttf": "ttf",
     "vlin_err": "vlin_err",
     "vang_err": "vang_err",
+    "vlin_err_common": "vlin_err_common",
+    "vang_err_common": "vang_err_common",
 }
-"""Summary metric name -> the record field it is computed from."""
+"""Summary metric name -> the record field it is computed from (a common-window name: the windowed profile,
+`wbc.arena.windows.COMMON_WINDOW`)."""
 
-EXTRA_METRICS = ("max_roll_deg", "energy_j", "arm_travel_rad")
-"""Secondary metrics reported per band (named as their record fields), not compared pairwise."""
+EXTRA_METRICS = ("max_roll_deg", "energy_j", "power_w", "arm_travel_rad")
+"""Secondary metrics reported per band (named as their record fields), not compared pairwise. ``energy_j`` grows with
+the time survived; ``power_w`` is its per-second form."""
 
 LABELS: Mapping[str, str] = {
     "success_rate": "Success %",
     "ttf": "TTF",
     "vlin_err": "V_lin err [m/s]",
     "vang_err": "V_ang err [rad/s]",
+    "vlin_err_common": "V_lin err, common [m/s]",
+    "vang_err_common": "V_ang err, common [rad/s]",
     "max_roll_deg": "Max roll [deg]",
     "energy_j": "Energy [J]",
+    "power_w": "Power [W]",
     "arm_travel_rad": "Arm travel [rad]",
 }
 """Summary metric name -> its label (with the unit) in tables and on plot axes."""
+
+WARN_FRACTION = 0.01
+"""A controller whose ``act`` misses its deadline, or whose commands are clamped, on more than this fraction of its
+ticks in a band gets a warning in the table and the report."""
+
+_SPREAD_LEGEND = {
+    "seeds": "cells: mean ± std across seeds (each seed's trials averaged first).",
+    "trials": "cells: from one seed, the mean and its 95 % interval over trials [lo, hi] (Wilson for success, "
+              "percentile bootstrap otherwise).",
+}
+_TRACKING_LEGEND = ("V_lin / V_ang err: over each trial's own survived time, as the paper reports them (a controller "
+                    "that falls early is judged on fewer, often calmer, seconds); 'common': over the leading whole "
+                    "seconds that every controller survived on that trial.")
+
+
+def cell_legend(summary: Mapping[str, Any]) -> str:
+    """What a results table's cells mean, printed under the tables: the spread each cell quotes, and the windows."""
+    seeds = {cell.get("seeds") for entry in summary["controllers"].values() for cell in entry["bands"].values()
+             if cell.get("trials")}
+    spread = [_SPREAD_LEGEND["seeds"]] if seeds and 1 not in seeds else [_SPREAD_LEGEND["trials"]] if seeds == {1} \
+        else [_SPREAD_LEGEND["seeds"], "From one seed: " + _SPREAD_LEGEND["trials"][len("cells: from one seed, "):]]
+    return " ".join([*spread, _TRACKING_LEGEND])
 
 FAILURES_NOTE = ("Success by command (trials), survival of each push by where its force points (world frame; the "
                  "robot starts facing +x) and by the axis its application point is offset along (pushes met: a push "
@@ -93,8 +142,8 @@ FAILURES_NOTE = ("Success by command (trials), survival of each push by where it
                  "median time from that push to the fall. Cells: rate and successes / trials or pushes.")
 """The legend of the where-it-fails tables."""
 
-_DECIMALS = {"success_rate": 2, "ttf": 3, "vlin_err": 3, "vang_err": 3, "max_roll_deg": 2, "energy_j": 1,
-             "arm_travel_rad": 3}
+_DECIMALS = {"success_rate": 2, "ttf": 3, "vlin_err": 3, "vang_err": 3, "vlin_err_common": 3, "vang_err_common": 3,
+             "max_roll_deg": 2, "energy_j": 1, "power_w": 1, "arm_travel_rad": 3}
 _SCALE = {"success_rate": 100.0}  # success is stored as a fraction, shown in percent (paired: percentage points)
 
 
@@ -120,42 +169,66 @@ def trial_interval(records: Sequence[TrialRecord], field: str) -> tuple[float, f
 
 def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord], field: str,
                       *, alpha: float = 0.05) -> dict[str, Any]:
-    """B - A on the trials both played: difference, bootstrap interval, paired test, and the pairs for 80 % power.
+    """B - A on the trials both played: difference, its 95 % interval, paired test, and the pairs for 80 % power.
 
     The test is the exact McNemar test for a binary field (``success``) and the Wilcoxon signed-rank test otherwise
-    (`wbc.arena.paired_tests`); ``n80`` is the number of pairs that test needs to detect the observed difference
-    with 80 % power at `alpha` (`wbc.arena.power`; None when the observed difference is 0 or needs more than
+    (`wbc.arena.paired_tests`). The interval of a success difference is the exact one that agrees with McNemar's
+    test (`wbc.arena.paired_tests.paired_success_interval`: it excludes 0 exactly when p < 0.05); that of any other
+    metric is the percentile bootstrap over the pairs. A common-window field (``vlin_err_common``,
+    ``vang_err_common``) compares the two controllers' tracking errors over the seconds both survived on each trial
+    (`wbc.arena.windows`). ``n80`` is the number of pairs the test needs to detect the observed difference with 80 %
+    power at `alpha` (`wbc.arena.power`; None when the observed difference is 0 or needs more than
     `wbc.arena.power.N_MAX` pairs).
 
     Args:
         records_a: A's records (one per trial).
         records_b: B's records.
-        field: the record field compared.
+        field: the record field compared, or a common-window name.
         alpha: the significance level the power is computed for.
 
     Returns:
-        ``{"diff", "ci95", "n", "test", "p", "n80", "a_only", "b_only"}`` (``a_only`` / ``b_only``: the discordant
-        pair counts of a binary field, None otherwise); NaN where undefined.
+        ``{"diff", "ci95", "interval", "n", "mean_a", "mean_b", "test", "p", "n80", "a_only", "b_only"}``:
+        ``interval`` names how ``ci95`` was made (``exact`` or ``bootstrap``), ``mean_a`` / ``mean_b`` are each
+        controller's mean over the pairs used, ``a_only`` / ``b_only`` the discordant pair counts of a binary field
+        (None otherwise); NaN where undefined.
 
     Raises:
         RecordError: one controller's records repeat a trial.
     """
-    result = paired_difference(records_a, records_b, field)
-    a, b = paired_values(records_a, records_b, field)
-    out: dict[str, Any] = {"diff": result["diff"], "ci95": result["ci95"], "n": int(a.size), "test": None,
-                           "p": math.nan, "n80": None, "a_only": None, "b_only": None}
+    if field in COMMON_WINDOW:
+        a, b = _common_pairs(records_a, records_b, field)
+    else:
+        a, b = paired_values(records_a, records_b, field)
+    out: dict[str, Any] = {"diff": math.nan, "ci95": [math.nan, math.nan], "interval": None, "n": int(a.size),
+                           "mean_a": math.nan, "mean_b": math.nan, "test": None, "p": math.nan, "n80": None,
+                           "a_only": None, "b_only": None}
     if a.size == 0:
         return out
+    d = b - a
+    out.update(diff=float(d.mean()), mean_a=float(a.mean()), mean_b=float(b.mean()))
     if field in BINARY_FIELDS:
         test = mcnemar_exact(a, b)
         out.update(test="exact McNemar", p=test.p_value, a_only=test.a_only, b_only=test.b_only,
+                   ci95=list(paired_success_interval(test.a_only, test.b_only, int(a.size))), interval="exact",
                    n80=pairs_for_mcnemar(test.a_only / a.size, test.b_only / a.size, alpha=alpha))
     else:
-        d = b - a
-        out.update(test="Wilcoxon signed-rank", p=wilcoxon_signed_rank(d).p_value)
+        out.update(test="Wilcoxon signed-rank", p=wilcoxon_signed_rank(d).p_value,
+                   ci95=list(bootstrap_mean_ci(d)), interval="bootstrap")
         if d.size >= 2:
             out["n80"] = pairs_for_mean_difference(float(d.mean()), float(d.std(ddof=1)), alpha=alpha)
     return out
+
+
+def _common_pairs(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord],
+                  metric: str) -> tuple[np.ndarray, np.ndarray]:
+    """A's and B's tracking errors over each trial's window of both (`common_window_values`), NaN pairs left out."""
+    paired_values(records_a, records_b, "ttf")  # refuses records that repeat a trial, with its message
+    values = common_window_values({"a": records_a, "b": records_b}, metric)
+    keys = sorted(values["a"])
+    a = np.array([values["a"][k] for k in keys], dtype=float)
+    b = np.array([values["b"][k] for k in keys], dtype=float)
+    keep = ~(np.isnan(a) | np.isnan(b))
+    return a[keep], b[keep]
 
 
 def _records_by_cell(
@@ -220,10 +293,12 @@ def summarize(
                 "a time"
             )
     cells = _records_by_cell(in_canonical_order(records, controllers, bands), controllers, bands)
-    per_controller: dict[str, Any] = {}
-    for controller in controllers:
-        per_band: dict[str, Any] = {}
-        for band in bands:
+    per_controller: dict[str, Any] = {c: {"bands": {}} for c in controllers}
+    warnings: list[dict[str, Any]] = []
+    for band in bands:
+        played = {c: cells[c][band] for c in controllers if cells[c][band]}
+        common = {m: common_window_values(played, m) for m in COMMON_METRICS} if played else {}
+        for controller in controllers:
             cell = cells[controller][band]
             entry: dict[str, Any] = {"trials": len(cell), "seeds": len({r.seed for r in cell})}
             for metric in (*METRICS, *EXTRA_METRICS):
@@ -231,25 +306,84 @@ def summarize(
                 stats = mean_std_over_seeds(cell, field)
                 entry[metric] = {"mean": _json_float(stats["mean"]), "std": _json_float(stats["std"]),
                                  "ci95": [_json_float(x) for x in trial_interval(cell, field)]}
-            per_band[band] = entry
-        per_controller[controller] = {"bands": per_band}
+            for metric in COMMON_METRICS:
+                entry[metric] = _common_stat(cell, common.get(metric, {}).get(controller, {}))
+            entry.update(_tick_counts(cell))
+            entry["counters"] = counter_totals(cell)
+            per_controller[controller]["bands"][band] = entry
+            warnings += _warnings(controller, band, entry)
     paired = []
     for a, b in itertools.combinations(controllers, 2):
         for band in bands:
-            for metric in METRICS:
+            for metric in PAIRED_METRICS:
                 result = paired_comparison(cells[a][band], cells[b][band], METRIC_KEYS[metric])
                 paired.append({"a": a, "b": b, "band": band, "metric": metric, **_json_ready(result)})
     return {
         "scenario": {"name": scenario_name, "hash": scenario_hash},
         "controllers": per_controller,
         "paired": paired,
+        "warnings": warnings,
     }
+
+
+def _common_stat(cell: Sequence[TrialRecord], values: Mapping[tuple, float]) -> dict[str, Any]:
+    """Mean ± std across seeds and the 95 % bootstrap interval over trials of a common-window tracking error."""
+    pairs = [(r.seed, values.get(r.pair_key, math.nan)) for r in cell]
+    stats = mean_std_of_seed_values(pairs)
+    finite = np.array([v for _, v in pairs if not math.isnan(v)], dtype=float)
+    ci = bootstrap_mean_ci(finite) if finite.size else (math.nan, math.nan)
+    return {"mean": _json_float(stats["mean"]), "std": _json_float(stats["std"]),
+            "ci95": [_json_float(x) for x in ci], "trials": int(finite.size)}
+
+
+def _tick_counts(cell: Sequence[TrialRecord]) -> dict[str, int]:
+    """Ticks played, deadline misses and clamped-command ticks, summed over a cell's trials."""
+    return {"ticks": sum(r.ticks for r in cell), "deadline_misses": sum(r.deadline_misses for r in cell),
+            "clamped_ticks": sum(r.clamped_ticks for r in cell)}
+
+
+def counter_totals(records: Iterable[TrialRecord]) -> dict[str, dict[str, Any]]:
+    """Every event count the controller reported (`TrialRecord.counter_values`), over `records`.
+
+    Returns:
+        ``{name: {"total": sum over trials, "trials": trials where it was > 0, "per_trial": mean per trial}}``,
+        names sorted; a trial that did not report a name counts 0 for it.
+    """
+    records = list(records)
+    values = [r.counter_values for r in records]
+    names = sorted({name for v in values for name in v})
+    out = {}
+    for name in names:
+        counts = [v.get(name, 0) for v in values]
+        out[name] = {"total": int(sum(counts)), "trials": sum(1 for c in counts if c),
+                     "per_trial": float(sum(counts)) / len(records)}
+    return out
+
+
+def _warnings(controller: str, band: str, entry: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """A warning for a controller whose deadline misses or clamped ticks pass `WARN_FRACTION` of its ticks."""
+    ticks = entry["ticks"]
+    if not ticks:
+        return []
+    out = []
+    for kind, what in (("deadline_misses", "controller.act took longer than its control period (wall time on this "
+                        "machine): on a real robot those commands would come late"),
+                       ("clamped_ticks", "the command lay outside the motors' limits (position, speed, gain or "
+                        "torque) and was clamped before it was sent")):
+        count = entry[kind]
+        if count > WARN_FRACTION * ticks:
+            text = (f"{controller} in band {band}: on {count} of {ticks} ticks ({100.0 * count / ticks:.1f} %) "
+                    f"{what}")
+            out.append({"controller": controller, "band": band, "kind": kind, "count": count, "ticks": ticks,
+                        "text": text})
+    return out
 
 
 def _json_ready(result: Mapping[str, Any]) -> dict[str, Any]:
     """A `paired_comparison` with NaN as None (JSON has no NaN)."""
     out = dict(result)
-    out["diff"] = _json_float(out["diff"])
+    for key in ("diff", "mean_a", "mean_b"):
+        out[key] = _json_float(out[key])
     out["ci95"] = [_json_float(x) for x in out["ci95"]]
     out["p"] = _json_float(out["p"])
     return out
@@ -347,19 +481,30 @@ def _result_rows(summary: Mapping[str, Any], band: str, metrics: Sequence[str]) 
     return rows
 
 
-def _error_column(summary: Mapping[str, Any], band: str, header: list[str],
-                  rows: list[list[str]]) -> tuple[list[str], list[list[str]]]:
-    """`header` and `rows` with an ``errors`` column after the trials when a controller failed in the run.
+_OUTCOME_COLUMNS = ((CONTROLLER_ERROR, "errors"), (SAFETY_TRIP, "trips"), (OPERATOR_STOP, "stops"))
+"""Outcomes other than success and fall that get a column of their own when a trial of the run ended so."""
 
-    Each row's count is its controller's trials in `band` that ended in a controller error (``summary.json``'s
-    ``outcomes``, added by `wbc.arena.compare`); a run without errors keeps its table as it was.
+
+def _outcome_columns(summary: Mapping[str, Any], band: str, header: list[str],
+                     rows: list[list[str]]) -> tuple[list[str], list[list[str]]]:
+    """`header` and `rows` with a column after the trials for each outcome in `_OUTCOME_COLUMNS` the run had.
+
+    Each row's count is its controller's trials in `band` that ended so (``summary.json``'s ``outcomes``, added by
+    `wbc.arena.compare`): controller errors, safety trips and operator stops, told apart from falls. A run without
+    any keeps its table as it was.
     """
-    if not summary.get("controller_errors"):
+    def count(controller: str, outcome: str, where: str = band) -> int:
+        return summary["controllers"][controller]["bands"].get(where, {}).get("outcomes", {}).get(outcome, 0)
+
+    present = [(outcome, title) for outcome, title in _OUTCOME_COLUMNS
+               if any(count(c, outcome, b) for c in summary["controllers"] for b in _bands_of(summary))]
+    if CONTROLLER_ERROR not in {o for o, _ in present} and summary.get("controller_errors"):
+        present.insert(0, (CONTROLLER_ERROR, "errors"))
+    if not present:
         return header, rows
-    counts = [str(summary["controllers"][row[0]]["bands"].get(band, {}).get("outcomes", {}).get(CONTROLLER_ERROR, 0))
-              for row in rows]
-    return [*header[:2], "errors", *header[2:]], [[*row[:2], n, *row[2:]] for row, n in zip(rows, counts,
-                                                                                           strict=True)]
+    extra = [[str(count(row[0], outcome)) for outcome, _ in present] for row in rows]
+    return ([*header[:2], *(title for _, title in present), *header[2:]],
+            [[*row[:2], *cells, *row[2:]] for row, cells in zip(rows, extra, strict=True)])
 
 
 def _error_lines(summary: Mapping[str, Any]) -> list[str]:
@@ -371,9 +516,14 @@ def _error_lines(summary: Mapping[str, Any]) -> list[str]:
 
 _PAIRED_HEADER = ["band", "A", "B", "metric", "B - A", "95% CI", "p", "n80"]
 
-PAIRED_LEGEND = ("p: exact McNemar test for success (its discordant pairs' binomial test), Wilcoxon signed-rank "
-                 "test otherwise, two-sided; n80: paired trials that test needs to detect the observed difference with "
-                 "80 % power at alpha = 0.05 (- when no difference was observed)")
+PAIRED_LEGEND = ("95% CI: for success the exact interval built from the discordant pairs, which excludes 0 exactly "
+                 "when the McNemar test has p < 0.05; otherwise the percentile bootstrap over the pairs. Tracking "
+                 "errors compare the seconds both controllers survived on each trial (common window). p: exact "
+                 "McNemar test for success (its discordant pairs' binomial test), Wilcoxon signed-rank test "
+                 "otherwise, two-sided; n80: paired trials that test needs to detect the observed difference with "
+                 "80 % power at alpha = 0.05 (- when no difference was observed). On a few pairs a bootstrap "
+                 "interval is narrower than the test allows (it may exclude 0 where no test could reject on so few "
+                 "pairs): the verdict follows the test.")
 """What the p and n80 columns of the paired differences mean, printed under them."""
 
 
@@ -410,7 +560,7 @@ def _aligned(header: Sequence[str], rows: Sequence[Sequence[str]], indent: str =
     return lines
 
 
-def format_table(summary: Mapping[str, Any]) -> str:
+def format_table(summary: Mapping[str, Any], *, verdict: bool = True) -> str:
     """Render a summary (from `summarize`) as plain text in the shape of the paper's results table.
 
     One block per band, one row per controller, columns Trials, Success %, TTF, V_lin err, V_ang err as
@@ -422,17 +572,29 @@ def format_table(summary: Mapping[str, Any]) -> str:
 
     Args:
         summary: the output of `summarize` (or the same read back from JSON).
+        verdict: end with the verdict sentences (`format_verdict`).
 
     Returns:
         The table, lines separated by newlines, ending with a newline.
     """
     scenario = summary["scenario"]
     lines = [f"scenario {scenario['name']} ({scenario['hash']})", ""]
-    header = ["controller", "trials", *(LABELS[m] for m in METRICS)]
+    metrics = (*METRICS, *_common_of(summary))
+    header = ["controller", "trials", *(LABELS[m] for m in metrics)]
     for band in _bands_of(summary):
         lines.append(f"band {band}")
-        lines += _aligned(*_error_column(summary, band, header, _result_rows(summary, band, METRICS)))
+        lines += _aligned(*_outcome_columns(summary, band, header, _result_rows(summary, band, metrics)))
         lines.append("")
+    lines += [*textwrap.wrap(cell_legend(summary), width=118, initial_indent="  ", subsequent_indent="  "), ""]
+    if summary.get("warnings"):
+        lines += ["warnings (past 1 % of a controller's ticks in a band):"]
+        for w in summary["warnings"]:
+            lines += textwrap.wrap(w["text"], width=118, initial_indent="  ", subsequent_indent="    ")
+        lines.append("")
+    counters = _counter_lines(summary)
+    if counters:
+        lines += ["controller counters (totals over the trials; all of them in trials.csv, summary.json and the "
+                  "report):", *(f"  {line}" for line in counters), ""]
     if summary.get("controller_errors"):
         lines += [*_error_lines(summary), ""]
     if summary["paired"]:  # a run of one controller has no pairs, and no block for them
@@ -442,7 +604,43 @@ def format_table(summary: Mapping[str, Any]) -> str:
     if summary.get("sequential"):
         verdict, *table = _sequential_lines(summary["sequential"])
         lines += ["", *textwrap.wrap(verdict, width=120), *table]
+    if verdict and verdicts(summary):
+        lines += ["", *format_verdict(summary).splitlines()]
     return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def format_verdict(summary: Mapping[str, Any]) -> str:
+    """The verdict sentences of a summary (`wbc.arena.verdict.verdicts`) under a heading, wrapped; empty without."""
+    sentences = verdicts(summary)
+    if not sentences:
+        return ""
+    lines = ["verdict (paired trials; significant: p < 0.05):"]
+    for sentence in sentences:
+        lines += textwrap.wrap(sentence, width=118, initial_indent="  ", subsequent_indent="    ")
+    return "\n".join(lines) + "\n"
+
+
+def _count_text(cell: Mapping[str, Any], key: str) -> str:
+    """A summed count of a summary cell, ``n/a`` for a summary written before it was counted."""
+    return str(cell[key]) if key in cell else "n/a"
+
+
+def _common_of(summary: Mapping[str, Any]) -> tuple[str, ...]:
+    """The common-window metrics a summary holds (none in one written before they existed)."""
+    cells = [cell for entry in summary["controllers"].values() for cell in entry["bands"].values()]
+    return tuple(m for m in COMMON_METRICS if cells and all(m in cell for cell in cells))
+
+
+def _counter_lines(summary: Mapping[str, Any]) -> list[str]:
+    """One line per controller and band whose counters are not all zero: ``mpc in: fallbacks 3, my_count 12``."""
+    lines = []
+    for controller, entry in summary["controllers"].items():
+        for band, cell in entry["bands"].items():
+            counts = cell.get("counters") or {}
+            if any(c["total"] for c in counts.values()):
+                lines.append(f"{controller} in band {band}: " +
+                             ", ".join(f"{name} {c['total']}" for name, c in counts.items()))
+    return lines
 
 
 def _md_cell(text: Any) -> str:
@@ -508,21 +706,46 @@ def write_report(
     lines += _md_meta(meta) if meta else ["(no run information given)"]
     for title, body in sections:
         lines += ["", f"## {title}", "", *body]
-    lines += ["", "## Results", "", "Mean ± std across seeds (each seed's trials averaged first); from a single seed, "
-              "the mean and its 95 % interval over trials (Wilson for success, bootstrap otherwise); success in %."]
-    metrics = (*METRICS, *EXTRA_METRICS)
+    sentences = verdicts(summary)
+    if sentences:
+        lines += ["", "## Verdict", "", "Per band and pair of controllers, on the same trials (significant: p < 0.05).",
+                  "", *(f"- {sentence}" for sentence in sentences)]
+    legend = cell_legend(summary)
+    lines += ["", "## Results", "", legend[0].upper() + legend[1:] + " Success in %."]
+    metrics = (*METRICS, *_common_of(summary), *EXTRA_METRICS)
     for band in bands:
         lines += ["", f"### Band `{band}`", ""]
         header = ["Controller", "Trials", *(LABELS[m] for m in metrics)]
-        lines += md_table(*_error_column(summary, band, header, _result_rows(summary, band, metrics)))
+        lines += md_table(*_outcome_columns(summary, band, header, _result_rows(summary, band, metrics)))
+    if summary.get("warnings"):
+        lines += ["", "## Warnings", "", "Past 1 % of a controller's ticks in a band:", "",
+                  *(f"- {w['text']}" for w in summary["warnings"])]
+    lines += ["", "## Timing and commands", "", "Per controller and band, summed over its trials: control ticks "
+              "played, ticks whose `act` took longer than the control period (wall time on the machine that played "
+              "them), and ticks whose command the robot clamped to its motors' limits.", ""]
+    lines += md_table(["Band", "Controller", "Ticks", "Deadline misses", "Clamped ticks"],
+                      [[band, c, *(_count_text(cell, k) for k in ("ticks", "deadline_misses", "clamped_ticks"))]
+                       for band in bands for c, entry in summary["controllers"].items()
+                       if (cell := entry["bands"].get(band)) is not None])
+    counter_rows = [[band, c, name, count["total"], count["trials"], f"{count['per_trial']:.3g}"]
+                    for band in bands for c, entry in summary["controllers"].items()
+                    for name, count in (entry["bands"].get(band, {}).get("counters") or {}).items()]
+    lines += ["", "## Controller counters", ""]
+    if counter_rows:
+        lines += ["Every event count the controllers reported (`counters()`), over the band's trials: the total, the "
+                  "trials where it was above 0, and the mean per trial. Each trial's counts are in the `counters` "
+                  "column of `trials.csv`.", "",
+                  *md_table(["Band", "Controller", "Counter", "Total", "Trials > 0", "Per trial"], counter_rows)]
+    else:
+        lines += ["No controller reported a counter."]
     if summary.get("controller_errors"):
         lead, *each = _error_lines(summary)
         lines += ["", "## Controller errors", "", lead[0].upper() + lead[1:], "", *(f"- {e.strip()}" for e in each)]
     if summary["paired"]:  # a run of one controller has no pairs, and no section for them
         lines += ["", "## Paired differences (B - A, 95% CI)", ""]
         lines += [
-            "Same trials for both controllers; percentile bootstrap over trials. Positive: B larger (better for "
-            "success and TTF, worse for tracking errors). Success in percentage points.",
+            "Same trials for both controllers. Positive: B larger (better for success and TTF, worse for tracking "
+            "errors). Success in percentage points.",
             "",
         ]
         lines += md_table(_PAIRED_HEADER, _paired_rows(summary))

@@ -3,7 +3,9 @@
 Every control tick: ``state = robot.read()``, ``cmd = schedule.at(t)``, ``out = controller.act(state, cmd)``,
 ``robot.write(out)``, ``robot.advance(dt)``; then the episode log takes one row, the observer sees the tick and the
 fall check runs. The runner owns timing: it times every ``act`` call and logs it (`Episode.act_s`), so a bench, or a
-hardware trial, reads deadline misses from the episode instead of re-writing the loop.
+hardware trial, reads deadline misses from the episode instead of re-writing the loop. It also counts the ticks whose
+command lay outside the robot's motor limits, which the robot clamped before sending (`Episode.clamped_ticks`): a
+controller that asks for 1e5 N m is told so in the results, not silently saturated.
 
 Where the base's true state comes from and how a fall is detected are capabilities of the robot
 (`wbc.hardware.capabilities.TruthSource`, `FallDetector`: the simulator has both, a real robot may have motion
@@ -27,7 +29,7 @@ from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
 from wbc.errors import CommandError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, TruthSource
-from wbc.hardware.robot import Robot
+from wbc.hardware.robot import Robot, command_bounds, exceeds_bounds
 from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, VelocityCommand
@@ -95,11 +97,13 @@ def run_episode(
     buf = EpisodeBuffer(nq=7 + robot.num_joints, arm=arm)
     safety = robot if isinstance(robot, HasSafetyEvents) else None
     events_before = len(safety.safety_events()) if safety is not None else 0
+    bounds = command_bounds(robot.limits)
+    clamped = 0
 
     def failure(phase: str, tick: int, exc: Exception) -> ControllerFailure:
         events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
         played = buf.finish(duration_s=duration_s, control_dt=dt, fell=False, fall_time_s=math.nan,
-                            safety_events=events)
+                            safety_events=events, clamped_ticks=clamped)
         return ControllerFailure(controller, phase=phase, tick=tick, time_s=tick * dt, exc=exc, episode=played)
 
     try:
@@ -122,6 +126,7 @@ def run_episode(
             robot.write(out)
         except CommandError as exc:  # refused before reaching a motor: NaN, wrong length, not a MotorCommand
             raise failure("command", k, exc) from exc
+        clamped += exceeds_bounds(out, bounds)
         robot.advance(dt)
         # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
         buf.add((k + 1) * dt, cmd, act_s, truth(), state)
@@ -131,7 +136,8 @@ def run_episode(
             fell, fall_time = True, (k + 1) * dt
             break
     events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
-    return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time, safety_events=events)
+    return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time, safety_events=events,
+                      clamped_ticks=clamped)
 
 
 def _truth_of(robot: Robot) -> Callable[[], BaseTruth]:

@@ -13,15 +13,14 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Mapping
 
 from threadpoolctl import threadpool_limits
 
-from wbc.arena.controller_failure import ControllerFailure
+from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.episode import Episode, PushLog
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
-from wbc.control.protocol import Controller, TruthSwitch
+from wbc.control.protocol import TruthSwitch
 from wbc.control.registry import get_controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError, MissingCapabilityError
@@ -109,16 +108,10 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
         episode, error, played_s = failure.episode, failure.record_error(spec.name, trial), failure.time_s
     met = PushLog.of(p for p in trial.pushes if p.start < played_s)
     episode = dataclasses.replace(episode, pushes=met)
-    record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode, counters=_counters(ctrl, error),
+    counters, error = read_counters(ctrl, spec.name, trial, episode, error)
+    if error and not record_errors:
+        raise ControllerFailure(ctrl, phase="counters", tick=len(episode.t), time_s=played_s,
+                                exc=RuntimeError(error), episode=episode)
+    record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode, counters=counters,
                                   wall_s=time.perf_counter() - start, debug_truth=debug_truth, error=error)
     return record, episode
-
-
-def _counters(ctrl: Controller, error: str) -> Mapping[str, int]:
-    """The controller's event counts; none from a controller that failed and whose ``counters`` fails too."""
-    if not error:
-        return ctrl.counters()
-    try:
-        return ctrl.counters()
-    except Exception:  # it is broken already: its error is recorded, a second one would only hide it
-        return {}

@@ -36,6 +36,7 @@ __all__ = [
     "in_canonical_order",
     "group_by",
     "mean_std_over_seeds",
+    "mean_std_of_seed_values",
     "bootstrap_mean_ci",
     "paired_difference",
     "wilson_interval",
@@ -111,13 +112,24 @@ def mean_std_over_seeds(records: Iterable[TrialRecord], metric: str) -> dict[str
     Raises:
         UnknownNameError: `metric` is not a record field.
     """
-    by_seed = group_by(records, lambda r: r.seed)
+    return mean_std_of_seed_values((r.seed, _metric(r, metric)) for r in records)
+
+
+def mean_std_of_seed_values(values: Iterable[tuple[int, float]]) -> dict[str, float | int]:
+    """`mean_std_over_seeds` of (seed, value) pairs: each seed's values averaged, then mean and std across seeds.
+
+    For values that are no record field (a tracking error over a common window, `wbc.arena.windows`). NaN values
+    are ignored; within a seed values are summed in the order given.
+    """
+    by_seed: dict[int, list[float]] = {}
+    for seed, value in values:
+        by_seed.setdefault(seed, []).append(value)
     seed_means = []
     for seed in sorted(by_seed):  # sorted: the result does not depend on the records' order
-        values = np.array([_metric(r, metric) for r in by_seed[seed]], dtype=float)
-        values = values[~np.isnan(values)]
-        if values.size:
-            seed_means.append(float(values.mean()))
+        arr = np.array(by_seed[seed], dtype=float)
+        arr = arr[~np.isnan(arr)]
+        if arr.size:
+            seed_means.append(float(arr.mean()))
     n_seeds = len(seed_means)
     if n_seeds == 0:
         return {"mean": math.nan, "std": math.nan, "n_seeds": 0}

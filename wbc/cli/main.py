@@ -642,10 +642,13 @@ def _demo(args: argparse.Namespace) -> int:
                       trials=args.trials, out_dir=Path(args.out or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}"),
                       workers=args.workers, progress=not args.quiet)
     result = run_arena(cfg)
-    printers.print_arena(result)
+    printers.print_arena(result, verdict=False)
     records = TrialRecord.read_csv(result.out_dir / "trials.csv")
-    printers.print_demo_end(result.out_dir, trial_to_watch(records, DEMO_CONTROLLERS), scenario=args.scenario)
-    return 0
+    printers.print_demo_end(result.out_dir, trial_to_watch(records, DEMO_CONTROLLERS), scenario=args.scenario,
+                            summary=result.summary)
+    for errors in result.controller_errors:
+        print(f"wbc: {errors.line()}", file=sys.stderr)
+    return 1 if result.controller_errors else 0
 
 
 def _controllers(args: argparse.Namespace) -> int:

@@ -15,13 +15,14 @@ import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from wbc.arena.compare import ArenaResult
 from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.record import TrialRecord
-from wbc.arena.report import format_table
+from wbc.arena.report import format_table, format_verdict
 from wbc.control.check import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.capabilities import SafetyEventLike
@@ -185,9 +186,14 @@ def print_bench_sweep(result: Mapping[str, object]) -> None:
         print(f"  Ray overhead per trial: {1e3 * result['ray_overhead_per_trial_s']:.0f} ms")
 
 
-def print_arena(result: ArenaResult) -> None:
-    """The summary table of a run or comparison, then how long it took and where the results are."""
-    print(format_table(result.summary))
+def print_arena(result: ArenaResult, *, verdict: bool = True) -> None:
+    """The summary table of a run or comparison, then how long it took and where the results are.
+
+    Args:
+        result: the run's result.
+        verdict: end the table with the verdict sentences (``wbc demo`` prints them last, after the report's path).
+    """
+    print(format_table(result.summary, verdict=verdict))
     rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
     print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s); "
           f"results in {result.out_dir}/ (trials.csv, summary.json, failures.json, report.md)")
@@ -236,11 +242,13 @@ def wbc_command(script: str | None = None, *, path: str | None = None, cwd: str 
     return f"{shlex.quote(sys.executable)} -m wbc.cli"
 
 
-def print_demo_end(out_dir: Path, watch: TrialToWatch | None, *, scenario: str) -> None:
-    """How ``wbc demo`` ends, after the table: the report and its plots, then one command to watch a trial.
+def print_demo_end(out_dir: Path, watch: TrialToWatch | None, *, scenario: str,
+                   summary: Mapping[str, Any] | None = None) -> None:
+    """How ``wbc demo`` ends, after the table: the report and its plots, one command to watch a trial, the verdict.
 
     The command stands alone on its line, spelled so that it runs as printed in the shell that ran the demo
-    (`wbc_command`): pasted whole, it opens the trial.
+    (`wbc_command`): pasted whole, it opens the trial. The verdict sentences of `summary` close the demo: who
+    survives more, who tracks better, and whether the trials played settle it.
     """
     plots = sorted(p.name for p in Path(out_dir).glob("*.png"))
     print(f"report: {Path(out_dir) / 'report.md'}; plots: {', '.join(plots) if plots else 'none'}")
@@ -254,6 +262,9 @@ def print_demo_end(out_dir: Path, watch: TrialToWatch | None, *, scenario: str) 
             except ValueError:
                 pass
             print(f"  (to type `wbc` alone, activate the project's environment first: . {shlex.quote(str(activate))})")
+    if summary is not None and format_verdict(summary):
+        print()
+        print(format_verdict(summary), end="")
 
 
 def demo_watch_command(watch: TrialToWatch, *, scenario: str, wbc: str | None = None) -> str:
@@ -305,7 +316,7 @@ def print_controller_check(result: ControllerCheck) -> None:
         if (o.robot, o.arm_mode) != where:
             where = (o.robot, o.arm_mode)
             print(f"\n  {o.robot}, arm {o.arm_mode}")
-        print(f"    {marks[o.passed]} {o.check:<7} {o.detail}")
+        print(f"    {marks[o.passed]} {o.check:<8} {o.detail}")
     bad = len([o for o in result.outcomes if o.passed is not True])
     print(f"\n{'passed' if result.passed else f'FAILED: {bad} of {len(result.outcomes)} checks'}")
 

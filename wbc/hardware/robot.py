@@ -20,7 +20,7 @@ from wbc.errors import CommandError, ConfigError, RobotNotConnectedError
 from wbc.robots.joint_table import JointTable
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["Robot", "KP_MAX", "KD_MAX", "clamp_command", "command_bounds"]
+__all__ = ["Robot", "KP_MAX", "KD_MAX", "clamp_command", "command_bounds", "exceeds_bounds"]
 
 KP_MAX = 1000.0  # [N m / rad] largest position gain a Unitree driver encodes (int16 / 32)
 KD_MAX = 100.0  # [N m s / rad] largest velocity gain accepted (the driver encodes more; none is stable above)
@@ -32,6 +32,12 @@ def command_bounds(limits: JointTable) -> tuple[np.ndarray, np.ndarray]:
     lower = np.array((limits.lower, -limits.velocity_limit, zeros, zeros, -limits.torque_limit))
     upper = np.array((limits.upper, limits.velocity_limit, zeros + KP_MAX, zeros + KD_MAX, limits.torque_limit))
     return lower, upper
+
+
+def exceeds_bounds(cmd: MotorCommand, bounds: tuple[np.ndarray, np.ndarray]) -> bool:
+    """Whether `clamp_command` would change `cmd`: some value lies outside `bounds` (`command_bounds`)."""
+    rows = cmd.rows
+    return bool((rows < bounds[0]).any() or (rows > bounds[1]).any())
 
 
 def clamp_command(cmd: MotorCommand, limits: JointTable,
