@@ -14,6 +14,7 @@ from wbc.control.errors import ControllerCheckError
 from wbc.control.registry import CONTROLLERS
 from wbc.control.stand import stand_command
 from wbc.control.watched_robot import WatchedRobot
+from wbc.errors import ConfigError
 from wbc.hardware.mujoco import MujocoRobot
 from wbc.types import MotorCommand
 
@@ -171,3 +172,82 @@ def test_check_controller_on_the_command_line(capsys):
     assert '"passed": true' in capsys.readouterr().out
     assert main(["check-controller", "no_such_pkg.x:make"]) == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+# -- --seconds, --scenario -------------------------------------------------------------------------------------------
+TOPPLE = """
+[scenario]
+name = "topple"
+version = 1
+description = "one push no PD stand survives"
+robot = "a1-wx200"
+duration_s = 1.5
+
+[terrain]
+kind = "flat"
+
+[commands]
+[[commands.options]]
+vx = 0.0
+
+[pushes]
+first_s = [0.3, 0.4]
+interval_s = [5.0, 6.0]
+duration_s = 0.15
+offset_m = 0.0
+
+[[bands]]
+name = "hard"
+push_force_n = [900.0, 950.0]
+"""
+
+
+def test_seconds_sets_the_closed_loop_and_a_scenario_plays_its_first_trial():
+    spec = ControllerSpec("hold", "actuated", Stand, "a PD hold", robots=("a1-wx200",))
+    short = check_controller(spec, CheckConfig(seconds=0.3))
+    assert next(o for o in short.outcomes if o.check == "output").detail.startswith("15 ticks x 5 passes")
+    assert next(o for o in check_controller(spec).outcomes if o.check == "output").detail.startswith("25 ticks")
+    # the shipped scenario's first trial: its command and pushes, the robot up at the end
+    result = check_controller("learned", CheckConfig(seconds=3.0, scenario="scenarios/push.toml"))
+    result.raise_if_failed()
+    assert {o.robot for o in result.outcomes} == {"a1-wx200"}  # the scenario's robot only
+    (outcome,) = [o for o in result.outcomes if o.check == "scenario"]
+    assert outcome.detail.startswith("push trial (band in, seed 0, #0) for 3 s, fractal ground")
+    assert re.search(r"survived; 1 of 4 pushes met \(2\d\d N at 2\.\d\d s\)", outcome.detail)  # band in: 200-300 N
+    assert next(o for o in result.outcomes if o.check == "output").detail.startswith("150 ticks")
+
+
+def test_a_scenario_that_topples_the_controller_fails_that_check_only(tmp_path, capsys):
+    path = tmp_path / "topple.toml"
+    path.write_text(TOPPLE)
+    spec = ControllerSpec("hold", "actuated", Stand, "a PD hold", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(scenario=path))
+    assert {o.check for o in result.failed()} == {"scenario"}
+    detail = result.failed("scenario")[0].detail
+    assert "topple trial (band hard, seed 0, #0) for 1.5 s, flat ground, command stand still: FELL at" in detail
+    assert "1 of 1 pushes met (9" in detail
+    fell_at = float(re.search(r"FELL at ([0-9.]+) s", detail).group(1))
+    assert 0.3 < fell_at < 1.5
+    # the command line: the failed check, exit status 1; the default duration is the trial's
+    assert main(["check-controller", "stand", "--scenario", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL scenario topple trial" in out and "go1-arm" not in out
+
+
+def test_a_scenario_for_a_robot_the_controller_does_not_drive_is_refused_naming_the_file(tmp_path, capsys):
+    path = tmp_path / "go1.toml"
+    path.write_text(TOPPLE.replace('robot = "a1-wx200"', 'robot = "go1-arm"'))
+    spec = ControllerSpec("hold", "actuated", Stand, "a PD hold", robots=("a1-wx200",))
+    with pytest.raises(ConfigError, match=rf"--scenario {re.escape(str(path))}: the scenario is for go1-arm .* "
+                                          "drives a1-wx200"):
+        check_controller(spec, CheckConfig(scenario=path))
+    with pytest.raises(ConfigError, match=r"checked here: a1-wx200, as --robot asks"):
+        check_controller("stand", CheckConfig(scenario=path, robots=("a1-wx200",)))
+    with pytest.raises(ConfigError, match="seconds must be a positive number"):
+        check_controller(spec, CheckConfig(seconds=0.0))
+    for argv, says in ((["--scenario", str(path), "--robot", "a1-wx200"], f"--scenario {path}"),
+                       (["--scenario", str(tmp_path / "none.toml")], f"{tmp_path / 'none.toml'}: file not found"),
+                       (["--seconds", "-1"], "--seconds must be > 0")):
+        assert main(["check-controller", "stand", *argv]) == 2
+        err = capsys.readouterr().err
+        assert says in err and "Traceback" not in err

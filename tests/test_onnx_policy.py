@@ -249,8 +249,13 @@ def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller
             robot.advance(0.02)
         assert not robot.fallen()
     assert worst < 1e-5
-    # it meets the controller contract: deterministic after reset, blind to the simulator, fast enough
-    check_controller(spec, CheckConfig(seconds=0.3)).raise_if_failed()
+    # it meets the controller contract: deterministic after reset, blind to the simulator, fast enough; and it
+    # observes and acts as the policy it was exported from did in the rollout the export recorded beside it
+    replay = model.with_name("pi3.replay.npz")
+    assert replay.is_file()
+    result = check_controller(spec, CheckConfig(seconds=0.3, replay=replay))
+    result.raise_if_failed()
+    assert [o.check for o in result.outcomes][-1] == "replay"
     # a trial in the arena: the same outcome, the metrics equal to float32 arithmetic's reach (see the README; push
     # version 1's trial, on which that reach was measured)
     cfg = ArenaConfig(controllers=("learned", name), scenario=Path("scenarios/push-v1.toml"), bands=("ood",),
@@ -261,3 +266,111 @@ def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller
     assert math.isnan(a.fall_time_s) == math.isnan(b.fall_time_s)
     for metric in ("vlin_err", "vang_err", "max_roll_deg", "max_pitch_deg", "energy_j", "arm_travel_rad"):
         assert b[metric] == pytest.approx(a[metric], rel=1e-2), metric
+
+
+# -- weights in an external data file (torch's default exporter writes model.onnx + model.onnx.data) ------------------
+def _external(path: Path, weight: np.ndarray) -> Path:
+    """`_linear_model`, its weights saved to ``<path>.data`` beside it; returns the data file."""
+    _linear_model(path, weight)
+    model = onnx.load(str(path))
+    data = path.with_name(path.name + ".data")
+    onnx.save_model(model, str(path), save_as_external_data=True, all_tensors_to_one_file=True, location=data.name,
+                    size_threshold=0)
+    return data
+
+
+def test_a_model_with_external_data_runs_records_both_hashes_and_refuses_a_missing_data_file(tmp_path, capsys):
+    import hashlib
+
+    from wbc.control.onnx_policy import external_data_files
+
+    model, io = tmp_path / "ext.onnx", tmp_path / "ext.toml"
+    data = _external(model, _select(1, 6))  # action = joint_pos_rel, as in the first test
+    io.write_text(_io())
+    assert data.is_file() and external_data_files(model) == [data.name]
+    assert model.stat().st_size < data.stat().st_size  # the weights are in the data file, not in the model
+    spec = get_controller(f"onnx:{model}")
+    desc = get_robot("a1-wx200", "none")
+    offset = 0.01 * np.arange(1, 13)
+    out = spec.make(desc).act(_state(desc.nominal_q + offset), VelocityCommand())
+    np.testing.assert_allclose(out.q, desc.nominal_q + 0.5 * offset, atol=1e-7)  # the weights were read
+    # provenance: the model, its external data and the I/O file, each with its sha256
+    files = {f["role"]: f for f in spec.provenance()["files"]}
+    assert set(files) == {"model", "external data", "io"}
+    for role, path in (("model", model), ("external data", data), ("io", io)):
+        assert files[role]["path"] == str(path.resolve())
+        assert files[role]["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+    # one byte of the data file changed: its hash changes, the model's does not
+    raw = bytearray(data.read_bytes())
+    raw[-1] ^= 0x01
+    data.write_bytes(bytes(raw))
+    again = {f["role"]: f["sha256"] for f in get_controller(f"onnx:{model}").provenance()["files"]}
+    assert again["external data"] != files["external data"]["sha256"]
+    assert again["model"] == files["model"]["sha256"] and again["io"] == files["io"]["sha256"]
+    # named through a symbolic link elsewhere, the data is still found beside the real model
+    elsewhere = tmp_path / "links"
+    elsewhere.mkdir()
+    (elsewhere / "linked.onnx").symlink_to(model)
+    (elsewhere / "linked.toml").write_text(_io())
+    get_controller(f"onnx:{elsewhere / 'linked.onnx'}").make(desc)
+    # a model whose data file lies outside its directory (onnxruntime refuses it): said in those words
+    outside = onnx.load(str(model), load_external_data=False)
+    for tensor in outside.graph.initializer:
+        next(e for e in tensor.external_data if e.key == "location").value = "../ext.onnx.data"
+    (tmp_path / "sub").mkdir()
+    onnx.save(outside, str(tmp_path / "sub" / "ext.onnx"))
+    (tmp_path / "sub" / "ext.toml").write_text(_io())
+    with pytest.raises(OnnxModelError, match=r"'../ext.onnx.data', outside its directory"):
+        get_controller(f"onnx:{tmp_path / 'sub' / 'ext.onnx'}")
+    # the data file gone: refused before onnxruntime is asked, naming the model, the file and the two fixes
+    data.unlink()
+    with pytest.raises(OnnxModelError) as caught:
+        get_controller(f"onnx:{model}")
+    text = str(caught.value)
+    assert str(model) in text and "ext.onnx.data" in text and "does not exist" in text
+    assert "beside ext.onnx" in text and "external_data=False" in text
+    assert main(["check-controller", f"onnx:{model}"]) == 2
+    err = capsys.readouterr().err
+    assert "ext.onnx.data" in err and "Traceback" not in err
+
+
+def test_the_external_data_reader_agrees_with_the_onnx_package(tmp_path):
+    from onnx.external_data_helper import _get_all_tensors, uses_external_data
+
+    from wbc.control.onnx_policy import external_data_files
+
+    inline, split = tmp_path / "inline.onnx", tmp_path / "split.onnx"
+    _linear_model(inline, np.ones((FRAME, 12)))
+    assert external_data_files(inline) == []
+    _linear_model(split, np.ones((FRAME, 12)))
+    model = onnx.load(str(split))
+    # one tensor per file: every file is listed, once, in the order the tensors come
+    onnx.save_model(model, str(split), save_as_external_data=True, all_tensors_to_one_file=False, size_threshold=0)
+    loaded = onnx.load(str(split), load_external_data=False)
+    expected = [next(e.value for e in t.external_data if e.key == "location") for t in _get_all_tensors(loaded)
+                if uses_external_data(t)]
+    assert len(expected) == 2 and external_data_files(split) == expected
+    garbage = tmp_path / "garbage.onnx"
+    garbage.write_bytes(b"\xff" * 64)
+    with pytest.raises(OnnxModelError, match="not an ONNX model"):
+        external_data_files(garbage)
+
+
+def test_torchs_default_exporter_output_runs_as_onnx(tmp_path):
+    torch = pytest.importorskip("torch")
+    torch.manual_seed(0)
+    net = torch.nn.Sequential(torch.nn.Linear(FRAME, 16), torch.nn.ELU(), torch.nn.Linear(16, 12)).eval()
+    model = tmp_path / "torch.onnx"
+    # torch >= 2.9's default (dynamo) exporter, external data as it writes it by default
+    torch.onnx.export(net, (torch.zeros(1, FRAME),), str(model), input_names=["obs"], output_names=["actions"],
+                      external_data=True, verbose=False)
+    (tmp_path / "torch.toml").write_text(_io())
+    assert (tmp_path / "torch.onnx.data").is_file()  # what failed before: the weights beside the model
+    desc = get_robot("a1-wx200", "none")
+    ctrl = get_controller(f"onnx:{model}").make(desc)
+    x = ctrl.network_input(_state(desc.nominal_q + 0.01), VelocityCommand(vx=0.4))
+    with torch.no_grad():
+        expected = net(torch.as_tensor(x, dtype=torch.float32)[None]).numpy()[0]
+    ctrl.reset()
+    ctrl.act(_state(desc.nominal_q + 0.01), VelocityCommand(vx=0.4))
+    np.testing.assert_allclose(ctrl.last_action, expected, atol=1e-5)

@@ -288,3 +288,40 @@ def test_a_plugin_is_watched_in_the_viewer_like_any_controller(plugins, small, t
     assert main(["view", "plugpkg.good:make", "--scenario", str(small), "--trial", "0", "--duration", "0.5",
                  "--record", str(out)]) == 0
     assert "recorded 25 frames" in capsys.readouterr().out and out.stat().st_size > 100_000
+
+
+# -- provenance: what a run records of a plug-in -------------------------------------------------------------------
+def test_a_plugin_records_its_target_module_file_and_that_no_distribution_installed_it(plugins):
+    prov = get_controller("plugpkg.good:make").provenance()
+    assert (prov["name"], prov["kind"], prov["arm_mode"], prov["files"]) == ("plugpkg.good:make", "plug-in",
+                                                                           "actuated", [])
+    assert prov["plugin"] == {"target": "plugpkg.good:make", "module_file": str(plugins / "plugpkg" / "good.py"),
+                              "entry_point": None, "distribution": None,
+                              "distribution_note": "not installed as a distribution"}
+    # a module an installed distribution provides names it (wbc's own classes, as a plug-in)
+    own = get_controller("wbc.control.stand:StandController").provenance()["plugin"]
+    assert own["distribution"] == {"name": "wbc", "version": own["distribution"]["version"]}
+    assert own["distribution"]["version"] == get_controller("stand").provenance()["wbc_version"]
+
+
+def test_an_entry_point_records_the_distribution_that_declares_it(plugins, tmp_path):
+    import hashlib
+    import json
+
+    dist = plugins / "plugdist-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: plugdist\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text(f"[{PLUGIN_GROUP}]\ntest-hold = plugpkg.good:make\n")
+    (dist / "RECORD").write_text("plugpkg/__init__.py,,\nplugpkg/good.py,,\nplugdist-1.0.dist-info/METADATA,,\n")
+    config = tmp_path / "gains.toml"
+    config.write_text("leg_kp = 80.0\n")
+    prov = get_controller("test-hold", config=config).provenance()
+    assert prov["kind"] == "entry point"
+    assert prov["plugin"] == {"target": "plugpkg.good:make", "module_file": str(plugins / "plugpkg" / "good.py"),
+                              "entry_point": "test-hold", "distribution": {"name": "plugdist", "version": "1.0"}}
+    assert prov["files"] == [{"role": "config", "path": str(config.resolve()),
+                              "sha256": hashlib.sha256(config.read_bytes()).hexdigest()}]
+    json.dumps(prov)  # JSON-ready, for run.json
+    # the same module named as module:factory is credited to the distribution whose RECORD lists its file
+    assert get_controller("plugpkg.good:make").provenance()["plugin"]["distribution"] == {"name": "plugdist",
+                                                                                         "version": "1.0"}

@@ -236,7 +236,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         identity["controller_files"] = files
     if cfg.max_consecutive_errors != DEFAULT_MAX_CONSECUTIVE_ERRORS:  # only then, as above
         identity["max_consecutive_errors"] = cfg.max_consecutive_errors
-    store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume)
+    store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume,
+                         controllers={name: spec.provenance() for name, spec in specs.items()})
     done = store.done()
     guard = ErrorGuard(cfg.controllers, cfg.max_consecutive_errors)
     guard.observe_all(store.records)  # a controller stopped before stays stopped

@@ -50,7 +50,7 @@ from pathlib import Path
 from threadpoolctl import threadpool_limits
 
 from wbc.arena.base_estimate import BaseEstimate
-from wbc.arena.controller_failure import ControllerFailure
+from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.episode import Episode
 from wbc.arena.estimated_robot import EstimatedRobot
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
@@ -293,8 +293,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         if safe.safety_state is SafetyState.DAMPED:
             _settle(robot, dt, cfg.settle_s)
     episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
+    counters, error = read_counters(ctrl, spec.name, trial, episode, error)
     record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
-                                  counters=ctrl.counters() if not error else {}, wall_s=time.perf_counter() - start,
+                                  counters=counters, wall_s=time.perf_counter() - start,
                                   backend=hardware.backend, domain_applied=False, link=link, error=error)
     result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                  notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
@@ -390,7 +391,8 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         "backend": hardware.backend,
         "target": hardware.target,
     }
-    store = ResultsStore(result.out_dir, identity, resume=False)
+    store = ResultsStore(result.out_dir, identity, resume=False,
+                         controllers={result.controller.name: result.controller.provenance()})
     try:
         store.append(record)
     finally:

@@ -2,8 +2,10 @@
 
 Each finished trial is appended to ``trials.csv`` as one line and flushed to disk (fsync) before the next is
 accepted, so a run killed at any moment keeps everything it finished; a line cut short by the kill is dropped when
-the store is reopened. ``run.json`` holds the resolved configuration, scenario hash, package versions and git
-revision; reopening a directory for another configuration is refused.
+the store is reopened. ``run.json`` holds the resolved configuration, scenario hash, package versions, git revision
+and what each controller is (its kind, a plug-in's target and distribution version, the sha256 of every file it was
+built from: weights, an ONNX model and its external data, an I/O or configuration file); reopening a directory for
+another configuration is refused.
 """
 
 from __future__ import annotations
@@ -38,13 +40,17 @@ class ResultsStore:
         out_dir: the directory (created if missing).
         config: the resolved run configuration; must equal the stored one when resuming.
         resume: continue a run already in `out_dir`; without it, a directory holding trials is refused.
+        controllers: what each controller is, by name (`wbc.control.spec.ControllerSpec.provenance`: its kind, a
+            plug-in's target and distribution version, the sha256 of every file it was built from), recorded in
+            ``run.json`` beside the configuration.
 
     Raises:
         ResultsDirError: `out_dir` holds results and `resume` is off, or holds another configuration's run.
         RecordError: its ``trials.csv`` has other columns or an unreadable row.
     """
 
-    def __init__(self, out_dir: Path, config: dict[str, object], *, resume: bool) -> None:
+    def __init__(self, out_dir: Path, config: dict[str, object], *, resume: bool,
+                 controllers: dict[str, object] | None = None) -> None:
         self.dir = Path(out_dir)
         self.trials_path = self.dir / "trials.csv"
         self.run_path = self.dir / "run.json"
@@ -67,8 +73,10 @@ class ResultsStore:
             with self.trials_path.open("w", encoding="utf-8", newline="") as f:
                 csv.writer(f).writerow(TrialRecord.header())
         self.environment = provenance()  # what `run.json` records; the report shows the same, taken once
-        self.run_path.write_text(json.dumps({"config": config, "environment": self.environment}, indent=2),
-                                 encoding="utf-8")
+        run = {"config": config, "environment": self.environment}
+        if controllers:
+            run["controllers"] = controllers
+        self.run_path.write_text(json.dumps(run, indent=2), encoding="utf-8")
         self._file = self.trials_path.open("a", encoding="utf-8", newline="")
         self._writer = csv.writer(self._file)
 

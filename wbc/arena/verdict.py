@@ -24,6 +24,9 @@ __all__ = ["ALPHA", "verdicts"]
 ALPHA = 0.05
 """The level a difference is called significant at."""
 
+_PRACTICAL = 1000
+"""Beyond this many paired trials to settle it, a difference is called too small to matter in practice."""
+
 _TRACKING = (("vlin_err_common", "linear velocity", "m/s", 3), ("vang_err_common", "yaw rate", "rad/s", 3))
 
 
@@ -35,6 +38,9 @@ def _p(p: float | None) -> str:
 
 def _settle(entry: Mapping[str, Any], what: str) -> str:
     """What would settle a difference the test did not: the paired trials for 80 % power."""
+    if entry.get("n80") and entry["n80"] > _PRACTICAL:
+        return (f"a {what} this small would take about {entry['n80']} paired trials to settle (80 % power): for "
+                "practical purposes there is none")
     if entry.get("n80"):
         return f"about {entry['n80']} paired trials would settle a {what} this large (80 % power)"
     return f"no number of paired trials up to the search's limit would settle a {what} this small"

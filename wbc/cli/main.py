@@ -661,13 +661,14 @@ def _controllers(args: argparse.Namespace) -> int:
 
 
 def _check_controller(args: argparse.Namespace) -> int:
-    if not args.seconds > 0:
+    if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     for robot in args.robot or ():
         get_robot(robot)  # an unknown name fails here, listing the valid ones
     spec = get_controller(args.name, config=args.controller_config, io=args.io)
     result = check_controller(spec, CheckConfig(seconds=args.seconds, strict_timing=args.strict_timing,
-                                                robots=tuple(args.robot) if args.robot else None))
+                                                robots=tuple(args.robot) if args.robot else None,
+                                                scenario=args.scenario, replay=args.replay))
     if args.json:
         printers.print_json(result.as_dict())
     else:

@@ -372,13 +372,22 @@ def build_parser() -> argparse.ArgumentParser:
     chk = sub.add_parser("check-controller", help="check a controller against the controller contract",
                          description="Build the controller for every robot and arm mode it claims and check its "
                          "rate, its outputs (shape, finiteness), reset determinism, that it never reads simulator "
-                         "truth, and act()'s time against its period (p50 / p99). Exit status 1 if a check fails.")
+                         "truth, and act()'s time against its period (p50 / p99). With --scenario the closed loop "
+                         "plays that scenario's first trial (its terrain, command and pushes) and must stay up; with "
+                         "--replay the recorded robot states are fed to the controller and its observation (term by "
+                         "term) and actions compared with the recorded ones. Exit status 1 if a check fails.")
     chk.add_argument("name", help=f"the controller: {_NAMES_HELP}")
     add_controller_file_options(chk, repeatable=False)
     chk.add_argument("--robot", action="append", default=None, help=f"check on this robot only (repeatable; one of: "
                      f"{', '.join(ROBOTS)}; default: every robot it claims)")
-    chk.add_argument("--seconds", type=float, default=0.5, help="closed-loop run per robot and arm mode [s] "
-                     "(default 0.5)")
+    chk.add_argument("--seconds", type=float, default=None, help="closed-loop run per robot and arm mode [s] "
+                     "(default 0.5; with --scenario the trial's duration)")
+    chk.add_argument("--scenario", default=None, metavar="FILE", help="play this scenario's first trial (first band, "
+                     "seed 0) in the closed loop, on the scenario's robot, with its command and pushes; the "
+                     "'scenario' check passes if the robot is still up at the end")
+    chk.add_argument("--replay", default=None, metavar="FILE.npz", help="a replay file (observation / action pairs "
+                     "and robot states recorded by the trainer: wbc train writes policy.replay.npz); the 'replay' "
+                     "check compares the controller's observation, term by term, and actions with the recording")
     chk.add_argument("--strict-timing", action="store_true", help="also fail when act's p99 exceeds the period")
     chk.add_argument("--json", action="store_true", help="print JSON")
     chk.set_defaults(handler="check-controller")

@@ -18,6 +18,23 @@ For every robot and arm mode the controller claims (`ControllerSpec.claims`), on
 A check that cannot be judged because an earlier one failed is reported as not run. The result is a
 `ControllerCheck`; ``wbc check-controller NAME`` prints it, and the test suite runs it on every registered controller.
 The simulator and the registry are imported when a check runs, so ``import wbc.control`` stays light.
+
+Two more checks run when asked for (`EXTRA_CHECKS`), because a controller can meet the contract and still mean
+something else than its author thinks:
+
+- ``scenario`` (`CheckConfig.scenario`, ``--scenario FILE``): the closed loop plays the scenario's first trial (first
+  band, seed 0, trial 0) instead of the default command on flat ground: its terrain, physical randomisation, command
+  and pushes, for the trial's duration (or `CheckConfig.seconds`), on the scenario's robot only, ending at a fall as
+  in the arena. It passes when the robot is still up at the end; the outcome says how long it stood, the pushes it met
+  and any error of the controller.
+- ``replay`` (`CheckConfig.replay`, ``--replay FILE.npz``): the robot states and commands of a replay file
+  (`wbc.learned.policy.replay_file`, observation / action pairs recorded by the trainer) are fed, in order after a
+  reset, to a freshly built controller. A controller that says what it observes (`ObservesTerms`: the learned
+  policies and ONNX policies do) has its observation frame compared with the recorded one, entry by entry, and every
+  term whose entries differ is named, with the term the controller puts there (two terms swapped in an I/O file show
+  as each in the other's place). Its actions, read from the motor targets through the recording's motor law
+  (``action = (q* - default_q) / action_scale``), are compared with the recorded actions. Within
+  `CheckConfig.replay_atol` it passes.
 """
 
 from __future__ import annotations
@@ -27,6 +44,8 @@ import time
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -34,14 +53,39 @@ from wbc.control.errors import ControllerCheckError
 from wbc.control.plugin import controller_problems
 from wbc.control.protocol import Controller
 from wbc.control.spec import ControllerSpec
+from wbc.errors import ConfigError
 from wbc.robots.registry import get_robot
-from wbc.scenario.trial import CommandSchedule
+from wbc.scenario.scenario import load_scenario
+from wbc.scenario.trial import CommandSchedule, Trial
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
-__all__ = ["CHECKS", "ActTiming", "CheckConfig", "CheckOutcome", "ControllerCheck", "check_controller"]
+if TYPE_CHECKING:
+    from wbc.learned.policy.replay_file import Replay
+
+__all__ = ["CHECKS", "DEFAULT_SECONDS", "EXTRA_CHECKS", "ActTiming", "CheckConfig", "CheckOutcome", "ControllerCheck",
+           "ObservesTerms", "check_controller"]
 
 CHECKS = ("build", "rate", "output", "reset", "truth", "timing")
 """The checks, in the order they are run and reported."""
+
+EXTRA_CHECKS = ("scenario", "replay")
+"""Checks run when their input is given (`CheckConfig.scenario`, `CheckConfig.replay`), reported after `CHECKS`."""
+
+DEFAULT_SECONDS = 0.5
+"""The closed loop's length without a scenario [s]."""
+
+
+@runtime_checkable
+class ObservesTerms(Protocol):
+    """A policy controller that says what it observes, so a recording can be compared with it term by term."""
+
+    def observation_terms(self, state: RobotState, command: VelocityCommand) -> list[tuple[str, np.ndarray]]:
+        """This tick's observation frame as (term name, values) in the order the network sees them.
+
+        Term names are those of `wbc.control.onnx_io.TERMS`; calling it changes nothing (`act` then feeds the
+        network the same frame).
+        """
+
 
 @dataclass(frozen=True, kw_only=True)
 class CheckConfig:
@@ -49,15 +93,26 @@ class CheckConfig:
 
     Attributes:
         seconds: length of the closed-loop run on each (robot, arm mode) [s]; the replays feed the same states.
-        command: the velocity command over the run (default: from standing to 0.3 m/s forward).
+            None: `DEFAULT_SECONDS`, or with a scenario its trial's duration.
+        command: the velocity command over the run (default: from standing to 0.3 m/s forward); a scenario's trial
+            brings its own.
         strict_timing: also fail when act's p99 exceeds the period.
         robots: check only these robots (None: every robot it claims).
+        scenario: a scenario file whose first trial the closed loop plays (the ``scenario`` check), or None.
+        replay: a replay file (`wbc.learned.policy.replay_file`) to feed the controller (the ``replay`` check), or
+            None.
+        replay_atol: largest absolute difference of an observation entry or an action from the recording that
+            passes. The same network run in float32 (onnxruntime) and in float64 (numpy) differs by up to about
+            3e-4 in pi3's actions (magnitude 5); a term out of place differs by ~1.
     """
 
-    seconds: float = 0.5
+    seconds: float | None = None
     command: CommandSchedule = field(default_factory=lambda: CommandSchedule(vx=0.3, ramp_s=0.4))
     strict_timing: bool = False
     robots: tuple[str, ...] | None = None
+    scenario: str | Path | None = None
+    replay: str | Path | None = None
+    replay_atol: float = 1e-3
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -144,44 +199,88 @@ class ControllerCheck:
 def check_controller(controller: ControllerSpec | str, config: CheckConfig | None = None) -> ControllerCheck:
     """Check `controller` against the controller contract on every robot and arm mode it claims.
 
+    With a scenario the checks run on the scenario's robot only, its closed loop playing the scenario's first
+    trial; with a replay file the ``replay`` check runs on the recording's robot and arm mode.
+
     Args:
         controller: a resolved controller, or a name (`wbc.control.registry.get_controller` resolves it).
-        config: how long to run and what to command.
+        config: how long to run and what to command; a scenario, a replay file.
 
     Returns:
         The outcomes; ``result.raise_if_failed()`` turns failures into a `ControllerCheckError`.
 
     Raises:
         WbcError: the name cannot be resolved (unknown name, unreadable file, plug-in that cannot be imported).
+        ScenarioError: the scenario file is missing or invalid (the message names the file and field).
+        ReplayFileError: the replay file is missing or invalid (the message names the file and field).
+        ConfigError: `seconds` is not positive, or the scenario or the replay is for a robot or arm mode the
+            controller does not claim or `robots` leaves out (the message names the file).
     """
     from threadpoolctl import threadpool_limits  # single-threaded BLAS, as in the arena's workers
 
     cfg = config if config is not None else CheckConfig()
+    if cfg.seconds is not None and not (math.isfinite(cfg.seconds) and cfg.seconds > 0):
+        raise ConfigError(f"CheckConfig.seconds must be a positive number of seconds, got {cfg.seconds}")
     if isinstance(controller, str):
         from wbc.control.registry import get_controller  # every controller's code loads only when a name is checked
 
         spec = get_controller(controller)
     else:
         spec = controller
+    claims = [(robot, mode) for robot, mode in spec.claims() if cfg.robots is None or robot in cfg.robots]
+    trial = _first_trial(cfg.scenario, spec, claims, cfg.robots) if cfg.scenario is not None else None
+    if trial is not None:
+        claims = [(robot, mode) for robot, mode in claims if robot == trial.robot]
+    replay = _replay_for(cfg.replay, spec, claims) if cfg.replay is not None else None
     outcomes: list[CheckOutcome] = []
     timings: list[ActTiming] = []
     with threadpool_limits(limits=1, user_api="blas"):
-        for robot, arm_mode in spec.claims():
-            if cfg.robots is not None and robot not in cfg.robots:
-                continue
-            found, timing = _check_one(spec, robot, arm_mode, cfg)
+        for robot, arm_mode in claims:
+            recorded = replay if replay is not None and (replay.robot, replay.arm_mode) == (robot, arm_mode) else None
+            found, timing = _check_one(spec, robot, arm_mode, cfg, trial, recorded)
             outcomes += found
             if timing is not None:
                 timings.append(timing)
     return ControllerCheck(controller=spec.name, outcomes=tuple(outcomes), timings=tuple(timings))
 
 
+def _claimed(spec: ControllerSpec, robots: tuple[str, ...] | None) -> str:
+    have = sorted({robot for robot, _ in spec.claims()})
+    text = f"controller {spec.name} drives {', '.join(have)}"
+    return text + (f" (checked here: {', '.join(robots)}, as --robot asks)" if robots is not None else "")
+
+
+def _first_trial(path: str | Path, spec: ControllerSpec, claims: list[tuple[str, str]],
+                 robots: tuple[str, ...] | None) -> Trial:
+    """The scenario's first trial (first band, seed 0, trial 0), for a robot the check covers."""
+    scenario = load_scenario(path)
+    trial = scenario.trials(None, (0,), 1)[0]
+    if not any(robot == trial.robot for robot, _ in claims):
+        raise ConfigError(f"--scenario {path}: the scenario is for {trial.robot} ([scenario] robot), and "
+                          f"{_claimed(spec, robots)}; check it with a scenario for a robot it drives")
+    return trial
+
+
+def _replay_for(path: str | Path, spec: ControllerSpec, claims: list[tuple[str, str]]) -> Replay:
+    """The replay file, for a robot and arm mode the check covers."""
+    from wbc.learned.policy.replay_file import load_replay  # the policies' package loads only when a replay is asked
+
+    replay = load_replay(path)
+    if (replay.robot, replay.arm_mode) not in claims:
+        covered = ", ".join(f"{robot} (arm {mode})" for robot, mode in claims) or "nothing"
+        raise ConfigError(f"--replay {path}: robot, arm_mode: recorded on {replay.robot} with arm {replay.arm_mode}; "
+                          f"controller {spec.name} is checked here on {covered}; replay a recording made for a "
+                          "robot and arm mode it drives (and that --scenario and --robot leave in)")
+    return replay
+
+
 # -- one (robot, arm mode) -------------------------------------------------------------------------------------------
 class _Verdicts:
-    """The outcomes of one (robot, arm mode), filled check by check."""
+    """The outcomes of one (robot, arm mode), filled check by check (`extras`: the extra checks asked for)."""
 
-    def __init__(self, robot: str, arm_mode: str) -> None:
+    def __init__(self, robot: str, arm_mode: str, extras: tuple[str, ...] = ()) -> None:
         self.robot, self.arm_mode = robot, arm_mode
+        self.extras = extras
         self.found: dict[str, CheckOutcome] = {}
 
     def set(self, check: str, passed: bool | None, detail: str) -> None:
@@ -193,9 +292,10 @@ class _Verdicts:
         return check not in self.found or self.found[check].passed is True
 
     def outcomes(self, reason: str) -> list[CheckOutcome]:
-        for check in CHECKS:
+        checks = (*CHECKS, *self.extras)
+        for check in checks:
             self.set(check, None, f"not run: {reason}")
-        return [self.found[c] for c in CHECKS]
+        return [self.found[c] for c in checks]
 
 
 def _describe(exc: BaseException) -> str:
@@ -311,42 +411,58 @@ def _difference(a: _Pass, b: _Pass) -> str | None:
     return None
 
 
-def _check_one(spec: ControllerSpec, robot: str, arm_mode: str, cfg: CheckConfig,
-               ) -> tuple[list[CheckOutcome], ActTiming | None]:
+def _check_one(spec: ControllerSpec, robot: str, arm_mode: str, cfg: CheckConfig, trial: Trial | None,
+               replay: Replay | None) -> tuple[list[CheckOutcome], ActTiming | None]:
     # the simulator loads only when a check runs
     from wbc.control.watched_robot import WatchedRobot
     from wbc.hardware.mujoco.robot import MujocoRobotConfig
 
-    v = _Verdicts(robot, arm_mode)
+    extras = tuple(c for c, given in zip(EXTRA_CHECKS, (trial, replay), strict=True) if given is not None)
+    v = _Verdicts(robot, arm_mode, extras)
     desc = get_robot(robot, arm_mode)
     ctrl, error = _build(spec, desc)
     if ctrl is None:
         v.set("build", False, error)
         return v.outcomes("the controller was not built"), None
     v.set("build", True, f"{type(ctrl).__name__}")
-    sim = WatchedRobot(MujocoRobotConfig(robot=robot, arm_mode=arm_mode))
+    if replay is not None:  # a controller of its own, fed the recording: independent of the closed loop's checks
+        passed, detail = _check_replay(spec, desc, replay, cfg.replay_atol)
+        v.set("replay", passed, detail)
+    config = MujocoRobotConfig(robot=robot, arm_mode=arm_mode)
+    if trial is not None:
+        config = MujocoRobotConfig(robot=robot, arm_mode=arm_mode, terrain=trial.terrain)
+    sim = WatchedRobot(config)
     sim.connect()
     try:
-        return _exercise(spec, ctrl, desc, sim, cfg, v)
+        return _exercise(spec, ctrl, desc, sim, cfg, v, trial)
     finally:
         sim.close()
 
 
 def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfig, v: _Verdicts,
-              ) -> tuple[list[CheckOutcome], ActTiming | None]:
+              trial: Trial | None) -> tuple[list[CheckOutcome], ActTiming | None]:
     n = desc.num_joints
     rate = _rate(ctrl, sim.config.timestep, v)
     if rate is None:
         return v.outcomes("no usable control rate"), None
     period = 1.0 / rate
-    ticks = max(2, int(round(cfg.seconds * rate)))
+    seconds = cfg.seconds if cfg.seconds is not None else trial.duration_s if trial is not None else DEFAULT_SECONDS
+    ticks = max(2, int(round(seconds * rate)))
     # A: the closed loop, whose states and commands the replays feed again
-    sim.reset(seed=0)
+    if trial is not None:
+        sim.reset(seed=trial.terrain_seed, domain=trial.domain)
+        for push in trial.pushes:
+            sim.apply_push(push)
+        schedule = trial.command
+    else:
+        sim.reset(seed=0)
+        schedule = cfg.command
     a, states, cmds = _Pass(), [], []
+    fell_at: float | None = None
     ctrl.reset()
     for k in range(ticks):
         state = _copy(sim.read())
-        cmd = cfg.command.at(k * period)
+        cmd = schedule.at(k * period)
         out = _act(ctrl, state, cmd, n, a, k, sim.watch)
         if out is None:
             break
@@ -354,6 +470,11 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         cmds.append(cmd)
         sim.write(out)
         sim.advance(period)
+        if trial is not None and sim.fallen():  # as in the arena, the trial ends at a fall
+            fell_at = (k + 1) * period
+            break
+    if trial is not None:
+        v.set("scenario", *_scenario_verdict(trial, seconds, len(states) * period, fell_at, a.failure, period))
     if a.failure is not None:
         v.set("output", False, a.failure)
         v.set("rate", True, f"{rate:g} Hz (whether it stays constant was not checked: act failed)")
@@ -429,3 +550,159 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
     else:
         v.set("timing", True, text)
     return v.outcomes("an earlier check failed"), timing
+
+
+# -- the extra checks ------------------------------------------------------------------------------------------------
+def _scenario_verdict(trial: Trial, seconds: float, played_s: float, fell_at: float | None, failure: str | None,
+                      period: float) -> tuple[bool, str]:
+    """The ``scenario`` outcome: whether the robot was still up at the end, the pushes it met, any error."""
+    cmd = trial.command
+    moves = ", ".join(f"{label} {value:g} {unit}" for label, value, unit in
+                      (("vx", cmd.vx, "m/s"), ("vy", cmd.vy, "m/s"), ("yaw rate", cmd.yaw_rate, "rad/s")) if value)
+    what = (f"{trial.scenario} trial (band {trial.band}, seed {trial.seed}, #{trial.index}) for {seconds:g} s, "
+            f"{trial.terrain.kind} ground, command {moves or 'stand still'}")
+    met = [p for p in trial.pushes if p.start < played_s]
+    pushes = f"{len(met)} of {len(trial.pushes)} pushes met"
+    if met:
+        pushes += " (" + ", ".join(f"{np.linalg.norm(p.force_in_world):.0f} N at {p.start:.2f} s" for p in met) + ")"
+    if failure is not None:
+        return False, f"{what}: the controller failed at {played_s:.2f} s: {failure}; {pushes}"
+    if fell_at is not None:
+        return False, f"{what}: FELL at {fell_at:.2f} s; {pushes}"
+    return True, f"{what}: survived; {pushes}"
+
+
+def _spans(names_sizes: tuple[tuple[str, int], ...]) -> list[tuple[str, int, int]]:
+    out, at = [], 0
+    for name, size in names_sizes:
+        out.append((name, at, at + size))
+        at += size
+    return out
+
+
+def _layout_text(spans: list[tuple[str, int, int]]) -> str:
+    return ", ".join(f"{name} {stop - start}" for name, start, stop in spans)
+
+
+def _entries(start: int, stop: int) -> str:
+    return f"entry {start}" if stop - start == 1 else f"entries {start}-{stop - 1}"
+
+
+@dataclass(frozen=True)
+class _TermFinding:
+    """A recorded term whose entries the controller's frame does not reproduce."""
+
+    first: int
+    text: str
+    name: str
+
+
+def _observation_findings(frames: np.ndarray, layout: tuple[tuple[str, int], ...], replay: Replay,
+                          atol: float) -> tuple[list[_TermFinding], str | None, float]:
+    """The terms that differ (earliest first), a layout-size problem, and the largest difference."""
+    mine = _spans(layout)
+    recorded = [(name, a, b) for name, (a, b) in zip(replay.obs_terms, replay.obs_slices, strict=True)]
+    width = replay.obs.shape[1]
+    if frames.shape[1] != width:
+        missing = [n for n, _, _ in recorded if n not in {name for name, _ in layout}]
+        extra = [n for n, _ in layout if n not in replay.obs_terms]
+        also = (f"; the recording has {', '.join(missing)} and the controller does not" if missing else "") + \
+               (f"; the controller has {', '.join(extra)} and the recording does not" if extra else "")
+        return [], (f"the controller's observation frame has {frames.shape[1]} entries ({_layout_text(mine)}), the "
+                    f"recording's {width} ({_layout_text(recorded)}){also}"), math.inf
+    diff = np.abs(frames - replay.obs)
+    bad = diff > atol
+    found = []
+    for name, a, b in recorded:
+        rows = bad[:, a:b].any(axis=1)
+        if not rows.any():
+            continue
+        first = int(np.argmax(rows))
+        block = diff[:, a:b]
+        worst = float(block.max())
+        theirs = [m for m, c, d in mine if c < b and d > a]
+        where = ""
+        if b - a == len(replay.action_joints) and name.startswith(("joint_", "last_action")):
+            where = f" at {replay.action_joints[int(np.argmax(block.max(axis=0)))]}"
+        if theirs == [name] and (name, a, b) in mine:
+            text = (f"{name} ({_entries(a, b)}) differs from tick {first}, max |difference| {worst:.3g}{where}: the "
+                    "same place, other values (its scale, clip, joint order or source differ)")
+        else:
+            text = (f"{_entries(a, b)} hold {name} in the recording but {' + '.join(theirs)} in the controller's "
+                    f"frame (from tick {first}, max |difference| {worst:.3g})")
+        found.append(_TermFinding(first=first, text=text, name=name))
+    found.sort(key=lambda f: f.first)
+    return found, None, float(diff.max())
+
+
+def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tuple[bool, str]:
+    """The ``replay`` outcome: a fresh controller fed the recorded states; its observation and actions compared."""
+    label = f"{len(replay)} recorded ticks of {replay.path}"
+    ctrl, error = _build(spec, desc)
+    if ctrl is None:
+        return False, f"building a second controller to replay {replay.path} failed: {error}"
+    rate = ctrl.rate_hz
+    if not isinstance(rate, int | float) or not math.isclose(float(rate), replay.rate_hz, rel_tol=1e-9):
+        return False, (f"{replay.path}: rate_hz: recorded at {replay.rate_hz:g} Hz, the controller runs at "
+                       f"{rate!r} Hz; replay a recording of this controller's policy")
+    observes = isinstance(ctrl, ObservesTerms)
+    index = replay.action_index()
+    frames: list[np.ndarray] = []
+    layout: tuple[tuple[str, int], ...] | None = None
+    implied = np.empty_like(replay.actions)
+    try:
+        ctrl.reset()
+    except Exception as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
+        return False, f"reset() raised {_describe(exc)} before the replay"
+    for k in range(len(replay)):
+        state, cmd = replay.state(k), replay.velocity_command(k)
+        step = "observation_terms"
+        try:
+            if observes:
+                terms = ctrl.observation_terms(state, cmd)  # type: ignore[attr-defined]
+                here = tuple((str(name), int(np.size(values))) for name, values in terms)
+                if layout is not None and here != layout:
+                    return False, (f"observation_terms changed its layout at recorded tick {k}: "
+                                   f"{_layout_text(_spans(here))} after {_layout_text(_spans(layout))}")
+                layout = here
+                frames.append(np.concatenate([np.asarray(v, dtype=np.float64).reshape(-1) for _, v in terms]))
+            step = "act"
+            out = ctrl.act(state, cmd)
+        except Exception as exc:  # noqa: BLE001
+            return False, f"{step} raised {_describe(exc)} at recorded tick {k} of {replay.path}"
+        problem = _output_problem(out, desc.num_joints)
+        if problem is not None:
+            return False, f"{problem} (recorded tick {k} of {replay.path})"
+        implied[k] = (out.q[index] - replay.default_q) / replay.action_scale
+    adiff = np.abs(implied - replay.actions)
+    action_bad = (adiff > atol).any(axis=1)
+    act_first = int(np.argmax(action_bad)) if action_bad.any() else None
+    act_text = (f"the actions differ from tick {act_first}, max |difference| {adiff.max():.3g} at "
+                f"{replay.action_joints[int(np.argmax(adiff.max(axis=0)))]}" if act_first is not None else
+                f"the actions within {atol:g} (max |difference| {adiff.max():.2g})")
+    if not observes:
+        if act_first is None:
+            return True, (f"{label}: {act_text}; the observation was not compared: {type(ctrl).__name__} does not "
+                          "say what it observes (observation_terms)")
+        return False, (f"{label}: {act_text}; {type(ctrl).__name__} does not say what it observes "
+                       "(observation_terms), so the difference cannot be traced to an observation term")
+    found, size_problem, worst = _observation_findings(np.asarray(frames), layout or (), replay, atol)
+    if size_problem is not None:
+        return False, f"{label}: {size_problem}; {act_text}"
+    if not found:
+        if act_first is None:
+            return True, (f"{label}: the observation equals the recording term by term "
+                          f"({', '.join(replay.obs_terms)}; max |difference| {worst:.2g}), {act_text}")
+        return False, (f"{label}: the observation equals the recording term by term, but {act_text}: the network, "
+                       "its action scale or its default pose are not the recorded policy's")
+    # the previous action is the controller's own: once its actions differ, so does that term, as a consequence
+    causes = [f for f in found if not (f.name == "last_action" and act_first is not None and f.first > act_first)]
+    follows = "" if len(causes) == len(found) else " (last_action differs too, after the actions did)"
+    if not causes:
+        return False, (f"{label}: the observation equals the recording term by term up to the first action that "
+                       f"differs{follows}, but {act_text}: the network, its action scale or its default pose are "
+                       "not the recorded policy's")
+    text = "; ".join(f.text for f in causes) + follows
+    names = sorted({f.name for f in causes})
+    return False, (f"{label}: the observation differs from the recording: {text}; {act_text}. Check the order, "
+                   f"scales and sources of {', '.join(names)} (an ONNX policy's I/O file: [[observation.terms]])")

@@ -10,11 +10,19 @@ velocity and feed-forward torque. Nothing from the simulator's truth is read.
 onnxruntime is an optional dependency (``pip install 'wbc[onnx]'``); the session runs on one thread, as every arena
 worker runs on one core. ``onnx:PATH`` names are resolved by `onnx_spec`, which reads the I/O file and checks the
 model against it once, in the parent process, before any trial starts.
+
+A model may keep its weights in external data files beside it: torch's default exporter (torch >= 2.9, ``dynamo``)
+writes ``model.onnx`` and ``model.onnx.data``. `open_session` reads the file names the model refers to
+(`external_data_files`, the ``location`` of every tensor stored outside the model, read from the protobuf without the
+``onnx`` package), refuses a missing one before onnxruntime is asked, naming the model and the file, and builds the
+session from the model's real path (symbolic links resolved), from which onnxruntime finds those files. The spec's
+provenance (`ControllerSpec.provenance`) holds the sha256 of the model, of each external data file and of the I/O file.
 """
 
 from __future__ import annotations
 
 import functools
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -23,14 +31,15 @@ import numpy as np
 
 from wbc.control.errors import OnnxModelError
 from wbc.control.onnx_io import OnnxIo, io_path_for, load_onnx_io
-from wbc.control.spec import ControllerSpec
+from wbc.control.spec import ControllerSpec, SourceFile
 from wbc.errors import ConfigError
 from wbc.learned.policy.observations import projected_gravity
 from wbc.optional import require
 from wbc.robots.description import RobotDescription
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
-__all__ = ["ONNX_PREFIX", "NetworkPorts", "OnnxController", "check_model", "onnx_spec", "open_session"]
+__all__ = ["ONNX_PREFIX", "NetworkPorts", "OnnxController", "check_model", "external_data_files", "onnx_spec",
+           "open_session", "resolve_model"]
 
 ONNX_PREFIX = "onnx:"
 """``onnx:PATH`` names the ONNX model at PATH (its I/O file: PATH with the suffix .toml, or ``--io FILE``)."""
@@ -38,16 +47,140 @@ ONNX_PREFIX = "onnx:"
 _DTYPES = {"tensor(float)": np.float32, "tensor(double)": np.float64}
 
 
+# -- external data: the few protobuf fields of onnx.proto that lead to a tensor's external_data ----------------------
+_GRAPH_FIELDS = {1: "node", 5: "tensor", 15: "sparse"}  # GraphProto: node, initializer, sparse_initializer
+_NODE_FIELDS = {5: "attribute"}  # NodeProto.attribute
+_ATTRIBUTE_FIELDS = {5: "tensor", 6: "graph", 10: "tensor", 11: "graph", 22: "sparse", 23: "sparse"}
+_SPARSE_FIELDS = {1: "tensor", 2: "tensor"}  # SparseTensorProto: values, indices
+_MODEL_FIELDS = {7: "graph", 20: "training", 25: "function"}  # ModelProto: graph, training_info, functions
+_TRAINING_FIELDS = {1: "graph", 2: "graph"}  # TrainingInfoProto: initialization, algorithm
+_FUNCTION_FIELDS = {7: "node", 11: "attribute"}  # FunctionProto: node, attribute_proto
+_TENSOR_EXTERNAL_DATA = 13  # TensorProto.external_data: repeated StringStringEntryProto (key = 1, value = 2)
+
+
+class _NotProtobuf(ValueError):
+    """The bytes are not the protobuf message they were read as."""
+
+
+def _varint(buf: memoryview, at: int) -> tuple[int, int]:
+    value, shift = 0, 0
+    while True:
+        if at >= len(buf) or shift > 63:
+            raise _NotProtobuf("truncated varint")
+        byte = buf[at]
+        at += 1
+        value |= (byte & 0x7F) << shift
+        if byte < 0x80:
+            return value, at
+        shift += 7
+
+
+def _fields(buf: memoryview):
+    """(field number, wire type, value) of every field of one message; a length-delimited value is its bytes."""
+    at = 0
+    while at < len(buf):
+        key, at = _varint(buf, at)
+        number, wire = key >> 3, key & 7
+        if wire == 0:
+            value, at = _varint(buf, at)
+        elif wire == 1:
+            value, at = buf[at:at + 8], at + 8
+        elif wire == 2:
+            size, at = _varint(buf, at)
+            value, at = buf[at:at + size], at + size
+        elif wire == 5:
+            value, at = buf[at:at + 4], at + 4
+        else:  # groups (3, 4) are not used by onnx.proto
+            raise _NotProtobuf(f"wire type {wire}")
+        if at > len(buf) or number == 0:
+            raise _NotProtobuf("truncated field")
+        yield number, wire, value
+
+
+_KINDS: dict[str, dict[int, str]] = {"model": _MODEL_FIELDS, "graph": _GRAPH_FIELDS, "node": _NODE_FIELDS,
+                                     "attribute": _ATTRIBUTE_FIELDS, "sparse": _SPARSE_FIELDS,
+                                     "training": _TRAINING_FIELDS, "function": _FUNCTION_FIELDS}
+
+
+def _locations(buf: memoryview, kind: str, out: list[str]) -> None:
+    """Append the external data ``location`` of every tensor inside `buf`, a message of `kind`."""
+    if kind == "tensor":
+        for number, wire, value in _fields(buf):
+            if number == _TENSOR_EXTERNAL_DATA and wire == 2:
+                entry = {n: v for n, w, v in _fields(value) if w == 2}
+                if entry.get(1) == b"location" and 2 in entry:
+                    out.append(bytes(entry[2]).decode("utf-8"))
+        return
+    inner = _KINDS[kind]
+    for number, wire, value in _fields(buf):
+        if wire == 2 and number in inner:
+            _locations(value, inner[number], out)
+
+
+def external_data_files(model: str | Path) -> list[str]:
+    """The external data files a model refers to: each tensor's ``location``, once each, in order of appearance.
+
+    The locations are as the model writes them, relative to the model's directory (torch's exporter writes
+    ``model.onnx.data``). The model's protobuf is walked along the fields that can hold a tensor (initializers,
+    sparse initializers, node attributes and subgraphs, training graphs, functions); the ``onnx`` package is not
+    needed.
+
+    Raises:
+        OSError: the model cannot be read.
+        OnnxModelError: the file is not an ONNX model (not a protobuf ModelProto).
+    """
+    buf = memoryview(Path(model).read_bytes())  # fields are views into it: a large inline tensor is not copied
+    found: list[str] = []
+    try:
+        _locations(buf, "model", found)
+    except (_NotProtobuf, UnicodeDecodeError) as exc:
+        raise OnnxModelError(f"{model}: not an ONNX model (its protobuf cannot be read: {exc}); onnx:PATH names an "
+                             "exported .onnx model") from None
+    return list(dict.fromkeys(found))
+
+
+def resolve_model(model: str | Path) -> tuple[Path, list[Path]]:
+    """The model's real path (symbolic links resolved) and its external data files, each checked to exist.
+
+    onnxruntime finds external data relative to the directory of the model file it opens, and refuses a file outside
+    that directory; a model named through a symbolic link is therefore opened at its real path.
+
+    Raises:
+        OnnxModelError: the model is missing or not an ONNX model, or an external data file it names is missing or
+            lies outside the model's directory; the message names the model and the file and says how to fix it.
+    """
+    given = Path(model)
+    if not given.is_file():
+        raise OnnxModelError(f"{given}: file not found; onnx:PATH names an exported .onnx model")
+    path = given.resolve()
+    data: list[Path] = []
+    for location in external_data_files(path):
+        where = Path(os.path.normpath(path.parent / location))  # lexically: the data file may be a link itself
+        if not where.is_relative_to(path.parent):
+            raise OnnxModelError(
+                f"{given}: the model keeps weights in the external data file {location!r}, outside its directory "
+                f"{path.parent}; onnxruntime reads external data only from the model's own directory: re-export "
+                "with the data beside the model, or with external_data=False (torch.onnx.export) to keep the "
+                "weights inside it")
+        if not where.is_file():
+            raise OnnxModelError(
+                f"{given}: the model keeps its weights in the external data file {location!r}, and {where} does not "
+                f"exist; keep {location} beside {path.name} (copy or move the two together), or re-export with "
+                "external_data=False (torch.onnx.export(..., external_data=False)) to keep the weights inside the "
+                "model")
+        data.append(where)
+    return path, data
+
+
 def open_session(model: str | Path) -> Any:
-    """An onnxruntime session on one CPU thread.
+    """An onnxruntime session on one CPU thread, of the model and its external data files (`resolve_model`).
 
     Raises:
         MissingExtraError: onnxruntime is not installed (the message names the ``onnx`` extra).
-        OnnxModelError: the file is missing or not a model onnxruntime can run.
+        OnnxModelError: the file is missing or not a model onnxruntime can run, or an external data file it names is
+            missing.
     """
-    path = Path(model)
-    if not path.is_file():
-        raise OnnxModelError(f"{path}: file not found; onnx:PATH names an exported .onnx model")
+    path, _ = resolve_model(model)
     ort = require("onnxruntime", "onnx")
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = 1
@@ -56,7 +189,7 @@ def open_session(model: str | Path) -> Any:
     try:
         return ort.InferenceSession(str(path), sess_options=opts, providers=["CPUExecutionProvider"])
     except Exception as exc:  # noqa: BLE001 (onnxruntime raises its own types; all mean "cannot run this file")
-        raise OnnxModelError(f"{path}: not an ONNX model onnxruntime can run ({type(exc).__name__}: {exc})") from None
+        raise OnnxModelError(f"{model}: not an ONNX model onnxruntime can run ({type(exc).__name__}: {exc})") from None
 
 
 @dataclass(frozen=True)
@@ -195,6 +328,13 @@ class OnnxController:
             parts = [np.clip(p, -self.io.obs_clip, self.io.obs_clip) for p in parts]
         return parts
 
+    def observation_terms(self, state: RobotState, command: VelocityCommand) -> list[tuple[str, np.ndarray]]:
+        """This tick's observation frame as (term name, values), in the I/O file's order; nothing changes.
+
+        ``wbc check-controller --replay`` compares it with a recording, term by term.
+        """
+        return [(term.name, part) for term, part in zip(self.io.terms, self.observation(state, command), strict=True)]
+
     def network_input(self, state: RobotState, command: VelocityCommand) -> np.ndarray:
         """Push this tick's observation into the history and return the network's input, (input_size,)."""
         parts = self.observation(state, command)
@@ -247,7 +387,10 @@ def onnx_spec(name: str, model: str | Path, io_file: str | Path | None = None) -
         raise OnnxModelError(f"{path}: file not found; onnx:PATH names an exported .onnx model")
     io_path = Path(io_file) if io_file is not None else io_path_for(path)
     io = load_onnx_io(io_path)
+    real, data = resolve_model(path)
     check_model(open_session(path), io, path)  # once here, so a mismatch fails before any trial
-    make = functools.partial(OnnxController, model_path=str(path.resolve()), io=io)
+    make = functools.partial(OnnxController, model_path=str(real), io=io)
+    files = (SourceFile.hashed("model", real), *(SourceFile.hashed("external data", f) for f in data),
+             SourceFile.hashed("io", io_path))
     return ControllerSpec(name, io.arm_mode, make, io.summary, robots=(io.robot,), kind="onnx",
-                          config_file=str(io_path))
+                          config_file=str(io_path), files=files)

@@ -48,7 +48,7 @@ from wbc.control.errors import (
     PluginNotFoundError,
 )
 from wbc.control.protocol import Controller
-from wbc.control.spec import ControllerSpec
+from wbc.control.spec import ControllerSpec, PluginSource, SourceFile
 from wbc.errors import FileFieldError, UnknownNameError
 from wbc.robots.description import RobotDescription, check_arm_mode
 from wbc.robots.registry import ROBOTS
@@ -361,15 +361,28 @@ def entry_points() -> dict[str, importlib.metadata.EntryPoint]:
     return out
 
 
+def _entry_point_distribution(ep: importlib.metadata.EntryPoint) -> tuple[str, str] | None:
+    """(name, version) of the distribution that declares `ep`, or None when Python does not say."""
+    dist = getattr(ep, "dist", None)
+    if dist is None:
+        return None
+    return dist.metadata["Name"] or dist.name, dist.version
+
+
 def plugin_spec(name: str, target: str, *, kind: str = "plug-in", config_file: str | Path | None = None,
-                ) -> ControllerSpec:
+                entry_point: importlib.metadata.EntryPoint | None = None) -> ControllerSpec:
     """Resolve a plug-in: import it, check its factory's signature, and make its spec.
+
+    The spec's provenance (`ControllerSpec.provenance`) names the target, the module's file, the entry point and the
+    distribution that provides the code (the entry point's own, else looked up from the module when asked), and
+    the configuration file with its sha256 (hashed here, as it is read).
 
     Args:
         name: the name it is known by (``module:factory``, or an entry point's name).
         target: ``package.module:factory``.
         kind: ``plug-in`` or ``entry point``.
         config_file: a ``--controller-config`` TOML file, read here once.
+        entry_point: the entry point `name` resolved to (None for a ``module:factory`` name).
 
     Raises:
         PluginError: any plug-in failure (see `load_plugin`, `build_plugin`).
@@ -378,6 +391,12 @@ def plugin_spec(name: str, target: str, *, kind: str = "plug-in", config_file: s
     config = read_controller_config(config_file) if config_file is not None else None
     plugin, root = load_plugin(target)
     _check_signature(plugin, target, config)
+    module = sys.modules.get(_split(target)[0])
+    source = PluginSource(target=target, module_file=getattr(module, "__file__", None),
+                          entry_point=entry_point.name if entry_point is not None else None,
+                          distribution=_entry_point_distribution(entry_point) if entry_point is not None else None)
+    files = (SourceFile.hashed("config", config_file),) if config_file is not None else ()
     return ControllerSpec(name, plugin.arm_modes[0], PluginFactory(target, root, config), plugin.summary,
                           robots=plugin.robots, arm_modes=plugin.arm_modes, kind=kind,
-                          config_file=str(config_file) if config_file is not None else None)
+                          config_file=str(config_file) if config_file is not None else None, files=files,
+                          plugin=source)

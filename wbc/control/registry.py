@@ -25,11 +25,12 @@ from pathlib import Path
 from wbc.control.errors import PluginConfigError, PluginError
 from wbc.control.onnx_policy import ONNX_PREFIX, onnx_spec
 from wbc.control.plugin import entry_points, is_plugin_name, load_plugin, plugin_spec
-from wbc.control.spec import ControllerSpec
+from wbc.control.spec import ControllerSpec, SourceFile
 from wbc.control.stand import StandController
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.composite_policy import load_composite
 from wbc.learned.policy.controller import LearnedController
+from wbc.learned.policy.policy_file import read_pair
 from wbc.learned.policy.shipped import shipped_weights
 from wbc.mpc.controller import MpcController
 from wbc.robots.description import check_arm_mode
@@ -51,6 +52,19 @@ def _robots_with_weights(arm_mode: str, posture: str | None = None) -> tuple[str
     return tuple(robot for robot in ROBOTS if shipped_weights(get_robot(robot, arm_mode), posture).is_file())
 
 
+def _shipped_files(arm_mode: str, posture: str | None = None) -> tuple[SourceFile, ...]:
+    """The shipped weights (``.npz``) and their metadata (``.json``) a registry entry runs, for its provenance.
+
+    Paths only: `ControllerSpec.provenance` hashes them when a run asks, so importing the registry reads no weights.
+    """
+    out = []
+    for robot in _robots_with_weights(arm_mode, posture):
+        npz = shipped_weights(get_robot(robot, arm_mode), posture)
+        out += [SourceFile(role="weights", path=str(npz)),
+                SourceFile(role="policy metadata", path=str(npz.with_suffix(".json")))]
+    return tuple(out)
+
+
 CONTROLLERS: dict[str, ControllerSpec] = {
     "stand": ControllerSpec("stand", "actuated", StandController,
                             "PD hold of the nominal pose, arm actuated and held"),
@@ -64,25 +78,28 @@ CONTROLLERS: dict[str, ControllerSpec] = {
     "mpc-noarm": ControllerSpec("mpc-noarm", "none", MpcController, "centroidal MPC, robot without its arm"),
     "learned": ControllerSpec("learned", "actuated", LearnedController,
                               "learned policy pi3 (PPO + BC, staged), arm actuated; shipped weights, numpy",
-                              robots=_robots_with_weights("actuated")),
+                              robots=_robots_with_weights("actuated"), files=_shipped_files("actuated")),
     "learned-locked": ControllerSpec("learned-locked", "locked", LearnedController,
                                      "learned policy pi2, arm locked; shipped weights, numpy",
-                                     robots=_robots_with_weights("locked")),
+                                     robots=_robots_with_weights("locked"), files=_shipped_files("locked")),
     "learned-noarm": ControllerSpec("learned-noarm", "none", LearnedController,
                                     "learned policy pi1, robot without its arm; shipped weights, numpy",
-                                    robots=_robots_with_weights("none")),
+                                    robots=_robots_with_weights("none"), files=_shipped_files("none")),
     "learned-crouched": ControllerSpec("learned-crouched", "actuated",
                                        functools.partial(LearnedController, posture="crouched"),
                                        "pi3 as first trained (no posture term: crouches), arm actuated; shipped "
-                                       "weights", robots=_robots_with_weights("actuated", "crouched")),
+                                       "weights", robots=_robots_with_weights("actuated", "crouched"),
+                                       files=_shipped_files("actuated", "crouched")),
     "learned-locked-crouched": ControllerSpec("learned-locked-crouched", "locked",
                                               functools.partial(LearnedController, posture="crouched"),
                                               "pi2 as first trained (no posture term: crouches), arm locked; shipped "
-                                              "weights", robots=_robots_with_weights("locked", "crouched")),
+                                              "weights", robots=_robots_with_weights("locked", "crouched"),
+                                              files=_shipped_files("locked", "crouched")),
     "learned-noarm-crouched": ControllerSpec("learned-noarm-crouched", "none",
                                              functools.partial(LearnedController, posture="crouched"),
                                              "pi1 as first trained (no posture term: crouches), no arm; shipped "
-                                             "weights", robots=_robots_with_weights("none", "crouched")),
+                                             "weights", robots=_robots_with_weights("none", "crouched"),
+                                             files=_shipped_files("none", "crouched")),
 }
 
 
@@ -123,17 +140,19 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
     installed = entry_points()
     if name in installed:
         ep = installed[name]
-        return plugin_spec(name, f"{ep.module}:{ep.attr}", kind="entry point", config_file=config)
+        return plugin_spec(name, f"{ep.module}:{ep.attr}", kind="entry point", config_file=config, entry_point=ep)
     raise UnknownNameError("controller", name, (*CONTROLLERS, *installed, *NAME_FORMS))
 
 
 def _policy_spec(name: str) -> ControllerSpec:
     path = name[len(POLICY_PREFIX):]
     policy = load_composite(path)  # the whole file is read and checked here, once, before any trial starts
+    npz, js, _ = read_pair(path)
     meta = policy.meta
     return ControllerSpec(name, meta["arm_mode"], functools.partial(LearnedController, policy_path=path, policy=policy),
                           f"policy file {path} ({meta['task']} task, stage {meta['stage']})", robots=(meta["robot"],),
-                          kind="policy file")
+                          kind="policy file",
+                          files=(SourceFile.hashed("weights", npz), SourceFile.hashed("policy metadata", js)))
 
 
 def arm_variant(spec: ControllerSpec, arm_mode: str) -> ControllerSpec:

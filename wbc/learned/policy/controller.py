@@ -110,6 +110,15 @@ class LearnedController:
             scales=self.scales,
         )[0]
 
+    def observation_terms(self, state: RobotState, command: VelocityCommand) -> list[tuple[str, np.ndarray]]:
+        """This tick's observation frame as (term name, values) in the network's order (`ObsLayout.term_slices`).
+
+        What `act` would feed the network for this state and command, split into its terms; nothing changes (the
+        previous action is read, not replaced). ``wbc check-controller --replay`` compares it with a recording.
+        """
+        obs = self.observation(state, command)
+        return [(name, obs[start:stop]) for name, start, stop in ObsLayout(self.last_action.size).term_slices()]
+
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """One policy step."""
         obs = self.observation(state, command)[None]

@@ -24,6 +24,7 @@ import numpy as np
 from wbc.errors import ConfigError
 
 __all__ = [
+    "OBS_TERM_NAMES",
     "ObsLayout", "ObsScales", "PRIVILEGED_PARTS", "compatible_indices", "compatible_observation", "policy_observation",
     "privileged_observation", "projected_gravity",
 ]
@@ -43,6 +44,14 @@ PRIVILEGED_PARTS: tuple[tuple[str, int], ...] = (
     ("payload_kg", 1), ("friction", 1), ("motor_strength", 1), ("base_linvel_in_body", 3), ("push_force_in_body", 3),
 )
 """Parts of the privileged observation, in order; the push force is in units of 100 N."""
+
+
+OBS_TERM_NAMES: dict[str, str] = {
+    "ang_vel": "base_ang_vel", "gravity": "projected_gravity", "command": "velocity_commands",
+    "dof_pos": "joint_pos_rel", "dof_vel": "joint_vel", "last_action": "last_action",
+}
+"""Each part of `ObsLayout` by the name trainers give that observation term (Isaac Lab's, as ONNX I/O files and replay
+files name them, `wbc.control.onnx_io.TERMS`)."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +74,14 @@ class ObsLayout:
     def size(self) -> int:
         """Length of the observation vector."""
         return sum(s for _, s in self.parts)
+
+    def term_slices(self) -> tuple[tuple[str, int, int], ...]:
+        """(term name, start, stop) of each part, named as `OBS_TERM_NAMES` says, in order."""
+        out, at = [], 0
+        for name, size in self.parts:
+            out.append((OBS_TERM_NAMES[name], at, at + size))
+            at += size
+        return tuple(out)
 
     def as_list(self) -> list[list[str | int]]:
         """JSON-friendly form: ``[[name, size], ...]``."""

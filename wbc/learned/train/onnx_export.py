@@ -23,6 +23,8 @@ import numpy as np
 
 from wbc.learned.policy.composite_policy import CompositePolicyFile, PolicyPart, load_composite
 from wbc.learned.policy.observations import ObsLayout
+from wbc.learned.policy.replay_file import replay_path_for
+from wbc.learned.policy.replay_recorder import record_replay
 from wbc.learned.train.torch_policy import sequential
 from wbc.optional import require
 from wbc.robots.registry import get_robot
@@ -136,12 +138,17 @@ def io_text(policy: CompositePolicyFile, frames: int, *, source: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def export_onnx(policy: str | Path, out: str | Path) -> tuple[Path, Path]:
+def export_onnx(policy: str | Path, out: str | Path, *, replay: bool = True) -> tuple[Path, Path]:
     """Write ``<out>.onnx`` and its I/O file ``<out>.toml`` for a policy file (single or composite).
+
+    The weights are inside the model (no external data file). With `replay`, ``<out>.replay.npz`` records a short
+    rollout of the policy (`wbc.learned.policy.replay_recorder.record_replay`), against which
+    ``wbc check-controller onnx:<out>.onnx --replay <out>.replay.npz`` checks the export and its I/O file.
 
     Args:
         policy: the policy file (``.npz``, ``.json`` or their stem).
         out: the output path; its suffix is replaced.
+        replay: also write the replay file.
 
     Returns:
         The model's path and the I/O file's.
@@ -163,4 +170,6 @@ def export_onnx(policy: str | Path, out: str | Path) -> tuple[Path, Path]:
         warnings.simplefilter("ignore", DeprecationWarning)
         torch.onnx.export(graph, (example,), str(model), input_names=["obs"], output_names=["actions"], dynamo=False)
     io.write_text(io_text(composite, graph.frames, source=str(policy)), encoding="utf-8")
+    if replay:
+        record_replay(policy, replay_path_for(model))
     return model, io

@@ -4,6 +4,10 @@ A run directory holds: ``config.json`` (the resolved `TrainConfig`, seed, packag
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
 torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
 so far, summed over resumed sessions). ``resume`` continues from the newest checkpoint up to `max_iterations`.
+When the run ends, ``policy.replay.npz`` records a short rollout of the exported policy (robot states, commands,
+observation frames and actions, `wbc.learned.policy.replay_recorder`): ``wbc check-controller NAME --replay
+policy.replay.npz`` then checks that a controller built from these weights (an ONNX export, an I/O file written by
+hand) observes and acts as the trainer's policy did.
 
 With `TrainConfig.frozen_legs` (the decoupled baseline) the env is wrapped in `FrozenLegsVecEnv`, the actor drives
 the arm only, and ``policy.npz``/``policy.json`` is a composite file holding the frozen leg policy and the arm actor.
@@ -22,6 +26,8 @@ from wbc.errors import ConfigError
 from wbc.learned.env.env import BatchedEnv
 from wbc.learned.policy.composite_policy import save_composite
 from wbc.learned.policy.policy_file import PolicyFileError, load_policy, save_policy
+from wbc.learned.policy.replay_file import replay_path_for
+from wbc.learned.policy.replay_recorder import record_replay
 from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.rma import train_adaptation
@@ -150,7 +156,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
             `_RESUMABLE` fields (train longer with a larger max_iterations).
 
     Returns:
-        ``{"run_dir", "iterations", "env_steps", "wall_s", "policy"}``.
+        ``{"run_dir", "iterations", "env_steps", "wall_s", "policy"}``, and ``"replay"`` (the replay file of the
+        exported policy) unless the policy observes RMA extrinsics without an adaptation module to estimate them.
 
     Raises:
         ConfigError: no checkpoint to resume from, a resumed config differs, or the teacher is missing/mismatched.
@@ -206,4 +213,6 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         save_policy(run_dir / "policy", policy)
         (run_dir / "rma.json").write_text(json.dumps(summary, indent=2) + "\n")
         result["rma_wall_s"] = summary["wall_s"]
+    if cfg.extrinsics_dim == 0 or cfg.rma.iterations > 0:  # else it observes extrinsics a robot cannot give it
+        result["replay"] = str(record_replay(run_dir / "policy", replay_path_for(run_dir / "policy")))
     return result
