@@ -138,8 +138,8 @@ def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory_and
         "controller,scenario,scenario_hash,band,seed,trial,success,outcome,ttf,fall_time_s,vlin_err,vang_err,"
         "max_roll_deg,max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,"
         "payload_kg,fallbacks,wbc_failures,debug_truth,backend,metrics_source,safety_trips,late_advances,"
-        "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,wall_s,error,ticks,clamped_ticks,power_w,"
-        "vlin_err_by_s,vang_err_by_s,counters")
+        "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,wall_s,error,ticks,clamped_ticks,clamped_rows,"
+        "power_w,vlin_err_by_s,vang_err_by_s,counters")
     # an earlier directory's file still reads: a simulated trial, its metrics from truth, nothing timed but wall_s,
     # its outcome derived as those versions scored it (a success, or a fall; no controller errors then)
     for success in (True, False):
@@ -311,7 +311,7 @@ def test_summary_has_exactly_the_required_shape():
             assert cell["trials"] == len(SEEDS) * N_TRIALS
             assert cell["seeds"] == len(SEEDS)
             assert set(cell) == {"trials", "seeds", *METRICS, *EXTRA_METRICS, *COMMON_METRICS, "ticks",
-                                 "deadline_misses", "clamped_ticks", "counters"}
+                                 "deadline_misses", "clamped_ticks", "clamped_rows", "counters"}
             for metric in COMMON_METRICS:  # these records keep no per-second profile: no common window
                 assert cell[metric] == {"mean": None, "std": None, "ci95": [None, None], "trials": 0}
             for metric in (*METRICS, *EXTRA_METRICS):
@@ -350,7 +350,7 @@ def test_summary_with_missing_cells_renders_null():
         "trials": 0, "seeds": 0,
         **{m: {"mean": None, "std": None, "ci95": [None, None]} for m in (*METRICS, *EXTRA_METRICS)},
         **{m: {"mean": None, "std": None, "ci95": [None, None], "trials": 0} for m in COMMON_METRICS},
-        "ticks": 0, "deadline_misses": 0, "clamped_ticks": 0, "counters": {},
+        "ticks": 0, "deadline_misses": 0, "clamped_ticks": 0, "clamped_rows": {}, "counters": {},
     }
     assert summary["controllers"]["rl"]["bands"]["push"]["trials"] == 0
     assert summary["controllers"]["mpc"]["bands"]["ice"]["ttf"] == {"mean": None, "std": None, "ci95": [None, None]}

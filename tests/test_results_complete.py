@@ -136,6 +136,7 @@ def test_clamped_and_late_ticks_are_counted_and_warned_about(plugins, tmp_path):
                                                               "countpkg.slow:make"))
         assert stand.clamped_ticks == 0 and slow.clamped_ticks == 0
         assert saturating.clamped_ticks == saturating.ticks > 0
+        assert saturating.clamped_rows == f"tau={saturating.ticks}" and stand.clamped_rows == ""
         assert slow.deadline_misses == slow.ticks == 50
         assert slow.act_ms_p50 >= 21.0
     summary = result.summary
@@ -147,7 +148,7 @@ def test_clamped_and_late_ticks_are_counted_and_warned_about(plugins, tmp_path):
     assert "warnings (past 1 % of a controller's ticks in a band):" in table
     assert "countpkg.slow:make in band still: on 100 of 100 ticks (100.0 %) controller.act took longer" in table
     report = (result.out_dir / "report.md").read_text()
-    assert "## Warnings" in report and "was clamped before it was sent" in report
+    assert "## Warnings" in report and "was clamped before it was sent (feed-forward torques on " in report
     ticks = sum(r.ticks for r in rows.values() if r.controller == "countpkg.saturating:make")
     assert f"| still | countpkg.saturating:make | {ticks} | 0 | {ticks} |" in report  # timing and commands table
 

@@ -201,6 +201,8 @@ class Episode:
             of `BASE_SOURCES`: ``truth`` (the simulator) or ``estimator`` (the robot's own sensors).
         clamped_ticks: ticks whose command lay outside the motors' limits (position range, speed, gains, torque),
             so that the robot clamped it before sending (`wbc.hardware.robot.clamp_command`).
+        clamped_rows: of those, the ticks each command row was clamped on, in the order q, dq, kp, kd, tau
+            (`wbc.hardware.robot.COMMAND_ROWS`).
     """
 
     duration_s: float
@@ -222,6 +224,7 @@ class Episode:
     operator_events: OperatorLog = field(default_factory=OperatorLog)
     base_source: str = "truth"
     clamped_ticks: int = 0
+    clamped_rows: tuple[int, int, int, int, int] = (0, 0, 0, 0, 0)
 
     def __post_init__(self) -> None:
         if self.base_source not in BASE_SOURCES:
@@ -249,6 +252,7 @@ class Episode:
             **{f"safety_{k}": getattr(self.safety_events, k) for k in _SAFETY_KEYS},
             **{f"operator_{k}": getattr(self.operator_events, k) for k in _OPERATOR_KEYS},
             base_source=np.str_(self.base_source), clamped_ticks=np.int64(self.clamped_ticks),
+            clamped_rows=np.array(self.clamped_rows, dtype=np.int64),
         )
 
     @classmethod
@@ -284,8 +288,9 @@ class Episode:
                 actions = OperatorLog(**{k: z[f"operator_{k}"] for k in _OPERATOR_KEYS}) if operator else OperatorLog()
                 source = str(z["base_source"].item()) if "base_source" in z.files else "truth"
                 clamped = int(z["clamped_ticks"].item()) if "clamped_ticks" in z.files else 0
+                rows = tuple(int(v) for v in z["clamped_rows"]) if "clamped_rows" in z.files else (0,) * 5
                 return cls(**scalars, **arrays, pushes=pushes, safety_events=safety, operator_events=actions,
-                           base_source=source, clamped_ticks=clamped)
+                           base_source=source, clamped_ticks=clamped, clamped_rows=rows)
             except ConfigError as exc:
                 raise EpisodeFileError(f"{path}: {exc}") from None
 
@@ -362,7 +367,8 @@ class EpisodeBuffer:
                 "arm_q": arm_q}
 
     def finish(self, *, duration_s: float, control_dt: float, fell: bool, fall_time_s: float,
-               safety_events: SafetyLog | None = None, clamped_ticks: int = 0) -> Episode:
+               safety_events: SafetyLog | None = None, clamped_ticks: int = 0,
+               clamped_rows: tuple[int, ...] = (0, 0, 0, 0, 0)) -> Episode:
         """The episode made of the rows filled so far (no pushes: the trial's setup adds those it applied)."""
         t, command, act_s, qpos, vel, tau_dq = self._stacked()
         return Episode(
@@ -370,4 +376,5 @@ class EpisodeBuffer:
             t=t.copy(), command=command.copy(), qpos=qpos.copy(), act_s=act_s.copy(),
             **self._derived(qpos, vel, tau_dq),
             safety_events=SafetyLog() if safety_events is None else safety_events, clamped_ticks=clamped_ticks,
+            clamped_rows=tuple(int(v) for v in clamped_rows),
         )

@@ -15,6 +15,8 @@
   controller that falls before the hard part.
 - ``ticks``: control ticks played.
 - ``clamped_ticks``: ticks whose command lay outside the motors' limits and was clamped before it was sent.
+- ``clamped_rows``: the ticks each command row (q, dq, kp, kd, tau) was clamped on, as ``row=ticks`` pairs joined by
+  ``;`` (rows never clamped left out).
 - ``arm_travel_rad``: total arm joint travel, sum over ticks and arm joints of |delta q| [rad].
 - ``safety_trips``: times the robot's safety layer latched its damping (0 without a safety layer).
 - ``deadline_misses``: control ticks whose ``controller.act`` took longer than the control period (wall time).
@@ -50,6 +52,7 @@ __all__ = [
     "vang_err_by_s",
     "ticks",
     "clamped_ticks",
+    "clamped_rows",
     "per_second",
     "profile_text",
     "compute_metrics",
@@ -166,6 +169,12 @@ def clamped_ticks(ep: Episode) -> int:
     return int(ep.clamped_ticks)
 
 
+def clamped_rows(ep: Episode) -> str:
+    """Ticks each command row was clamped on, as text: ``q=53;tau=2`` (rows never clamped left out)."""
+    names = ("q", "dq", "kp", "kd", "tau")
+    return ";".join(f"{n}={int(c)}" for n, c in zip(names, ep.clamped_rows, strict=True) if c)
+
+
 METRICS: dict[str, Callable[[Episode], float | bool | int | str]] = {
     "success": success,
     "ttf": ttf,
@@ -184,6 +193,7 @@ METRICS: dict[str, Callable[[Episode], float | bool | int | str]] = {
     "vang_err_by_s": vang_err_by_s,
     "ticks": ticks,
     "clamped_ticks": clamped_ticks,
+    "clamped_rows": clamped_rows,
 }
 
 

@@ -102,6 +102,9 @@ class TrialRecord:
         ticks: control ticks played.
         clamped_ticks: ticks whose command lay outside the motors' limits (position range, speed, gains, torque)
             and was clamped by the robot before it was sent.
+        clamped_rows: which parts of the command were clamped, as ``row=ticks`` pairs joined by ``;`` (rows q, dq,
+            kp, kd, tau; a row never clamped left out): ``q=53`` is a position target beyond the joint's range on 53
+            ticks.
         power_w: mean mechanical power over the time played [W] (`energy_j` per second).
         vlin_err_by_s: `vlin_err` second by second: the mean over each whole second played, space-separated
             (`wbc.arena.windows` averages it over a window every compared controller survived).
@@ -152,6 +155,7 @@ class TrialRecord:
     error: str = ""
     ticks: int = 0
     clamped_ticks: int = 0
+    clamped_rows: str = ""
     power_w: float = float("nan")
     vlin_err_by_s: str = ""
     vang_err_by_s: str = ""

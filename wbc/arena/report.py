@@ -38,7 +38,7 @@ from wbc.arena.paired_tests import (
 )
 from wbc.arena.plots import PLOTS, write_plots
 from wbc.arena.power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
-from wbc.arena.record import CONTROLLER_ERROR, OPERATOR_STOP, SAFETY_TRIP, TrialRecord
+from wbc.arena.record import CONTROLLER_ERROR, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
 from wbc.arena.stats import (
     bootstrap_mean_ci,
     in_canonical_order,
@@ -336,10 +336,20 @@ def _common_stat(cell: Sequence[TrialRecord], values: Mapping[tuple, float]) -> 
             "ci95": [_json_float(x) for x in ci], "trials": int(finite.size)}
 
 
-def _tick_counts(cell: Sequence[TrialRecord]) -> dict[str, int]:
-    """Ticks played, deadline misses and clamped-command ticks, summed over a cell's trials."""
+def _tick_counts(cell: Sequence[TrialRecord]) -> dict[str, Any]:
+    """Ticks played, deadline misses and clamped-command ticks (in all, and per command row), over a cell's trials."""
+    rows: dict[str, int] = {}
+    for record in cell:
+        for row, ticks in decode_counters(record.clamped_rows).items():
+            rows[row] = rows.get(row, 0) + ticks
     return {"ticks": sum(r.ticks for r in cell), "deadline_misses": sum(r.deadline_misses for r in cell),
-            "clamped_ticks": sum(r.clamped_ticks for r in cell)}
+            "clamped_ticks": sum(r.clamped_ticks for r in cell),
+            "clamped_rows": {row: rows[row] for row in _ROW_NAMES if row in rows}}
+
+
+_ROW_NAMES = {"q": "position targets", "dq": "velocity targets", "kp": "position gains", "kd": "velocity gains",
+              "tau": "feed-forward torques"}
+"""A command row -> what it is, in words (the clamped-commands warning)."""
 
 
 def counter_totals(records: Iterable[TrialRecord]) -> dict[str, dict[str, Any]]:
@@ -368,12 +378,15 @@ def _warnings(controller: str, band: str, entry: Mapping[str, Any]) -> list[dict
     out = []
     for kind, what in (("deadline_misses", "controller.act took longer than its control period (wall time on this "
                         "machine): on a real robot those commands would come late"),
-                       ("clamped_ticks", "the command lay outside the motors' limits (position, speed, gain or "
-                        "torque) and was clamped before it was sent")):
+                       ("clamped_ticks", "the command lay outside the motors' limits and was clamped before it was "
+                        "sent")):
         count = entry[kind]
         if count > WARN_FRACTION * ticks:
             text = (f"{controller} in band {band}: on {count} of {ticks} ticks ({100.0 * count / ticks:.1f} %) "
                     f"{what}")
+            rows = entry.get("clamped_rows") or {}
+            if kind == "clamped_ticks" and rows:
+                text += " (" + ", ".join(f"{_ROW_NAMES[r]} on {n} ticks" for r, n in rows.items()) + ")"
             out.append({"controller": controller, "band": band, "kind": kind, "count": count, "ticks": ticks,
                         "text": text})
     return out

@@ -24,12 +24,14 @@ import time
 from collections.abc import Callable
 from typing import Protocol, runtime_checkable
 
+import numpy as np
+
 from wbc.arena.controller_failure import ControllerFailure
 from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
 from wbc.errors import CommandError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, TruthSource
-from wbc.hardware.robot import Robot, command_bounds, exceeds_bounds
+from wbc.hardware.robot import Robot, command_bounds, exceeded_rows
 from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, VelocityCommand
@@ -99,11 +101,12 @@ def run_episode(
     events_before = len(safety.safety_events()) if safety is not None else 0
     bounds = command_bounds(robot.limits)
     clamped = 0
+    clamped_rows = np.zeros(5, dtype=np.int64)  # per command row (q, dq, kp, kd, tau): ticks it was clamped
 
     def failure(phase: str, tick: int, exc: Exception) -> ControllerFailure:
         events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
         played = buf.finish(duration_s=duration_s, control_dt=dt, fell=False, fall_time_s=math.nan,
-                            safety_events=events, clamped_ticks=clamped)
+                            safety_events=events, clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
         return ControllerFailure(controller, phase=phase, tick=tick, time_s=tick * dt, exc=exc, episode=played)
 
     try:
@@ -126,7 +129,10 @@ def run_episode(
             robot.write(out)
         except CommandError as exc:  # refused before reaching a motor: NaN, wrong length, not a MotorCommand
             raise failure("command", k, exc) from exc
-        clamped += exceeds_bounds(out, bounds)
+        over = exceeded_rows(out, bounds)
+        if over.any():
+            clamped += 1
+            clamped_rows += over
         robot.advance(dt)
         # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
         buf.add((k + 1) * dt, cmd, act_s, truth(), state)
@@ -137,7 +143,7 @@ def run_episode(
             break
     events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
     return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time, safety_events=events,
-                      clamped_ticks=clamped)
+                      clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
 
 
 def _truth_of(robot: Robot) -> Callable[[], BaseTruth]:

@@ -20,7 +20,11 @@ from wbc.errors import CommandError, ConfigError, RobotNotConnectedError
 from wbc.robots.joint_table import JointTable
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["Robot", "KP_MAX", "KD_MAX", "clamp_command", "command_bounds", "exceeds_bounds"]
+__all__ = ["Robot", "KP_MAX", "KD_MAX", "COMMAND_ROWS", "clamp_command", "command_bounds", "exceeds_bounds",
+           "exceeded_rows"]
+
+COMMAND_ROWS = ("q", "dq", "kp", "kd", "tau")
+"""A command's rows, in the order of `MotorCommand.rows` and `command_bounds`."""
 
 KP_MAX = 1000.0  # [N m / rad] largest position gain a Unitree driver encodes (int16 / 32)
 KD_MAX = 100.0  # [N m s / rad] largest velocity gain accepted (the driver encodes more; none is stable above)
@@ -32,6 +36,12 @@ def command_bounds(limits: JointTable) -> tuple[np.ndarray, np.ndarray]:
     lower = np.array((limits.lower, -limits.velocity_limit, zeros, zeros, -limits.torque_limit))
     upper = np.array((limits.upper, limits.velocity_limit, zeros + KP_MAX, zeros + KD_MAX, limits.torque_limit))
     return lower, upper
+
+
+def exceeded_rows(cmd: MotorCommand, bounds: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """Which of the command's rows (`COMMAND_ROWS`) hold a value outside `bounds`: five booleans."""
+    rows = cmd.rows
+    return ((rows < bounds[0]) | (rows > bounds[1])).any(axis=1)
 
 
 def exceeds_bounds(cmd: MotorCommand, bounds: tuple[np.ndarray, np.ndarray]) -> bool:
