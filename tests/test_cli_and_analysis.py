@@ -156,10 +156,10 @@ def test_bench_mpc_files_each_tick_of_the_runner_loop_by_the_controllers_breakdo
     assert len(log.mpc_solve_s) == 2 and len(log.whole_body_s) == 10
     assert log.plain_ticks == [1, 2, 3, 4, 6, 7, 8, 9] and np.all(episode.act_s > 0)
     figures = log.figures(episode)
-    assert figures["mpc_solve_ms_median"] == pytest.approx(1.0)
-    assert figures["mpc_setup_ms_median"] == pytest.approx(2.0)
-    assert figures["wbc_tick_us_median"] == pytest.approx(50.0)
-    assert 0 < figures["control_tick_us_median"] < 1e5
+    assert figures.mpc_solve_ms_median == pytest.approx(1.0)
+    assert figures.mpc_setup_ms_median == pytest.approx(2.0)
+    assert figures.wbc_tick_us_median == pytest.approx(50.0)
+    assert 0 < figures.control_tick_us_median < 1e5
 
 
 def test_bench_mpc_reports_nan_for_what_a_controller_without_a_breakdown_cannot_tell():
@@ -168,7 +168,7 @@ def test_bench_mpc_reports_nan_for_what_a_controller_without_a_breakdown_cannot_
 
     log, episode = _walk_watched(StandController(MujocoRobotConfig().description()))
     assert len(episode.t) == 10 and not log.plain_ticks and np.all(episode.act_s > 0)
-    assert all(np.isnan(v) for v in log.figures(episode).values())
+    assert all(np.isnan(v) for v in log.figures(episode).as_dict().values())
 
 
 def test_bench_mpc_refuses_a_controller_that_is_not_an_mpc(capsys):

@@ -194,10 +194,16 @@ def test_allow_hardware_asks_and_a_no_refuses(no_socket: list, monkeypatch: pyte
 def test_bench_hw_json_has_the_keys(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["bench", "hw", "--seconds", "0.5", "--stand", "0.5", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
-    for key in ("period_ms_p50", "period_ms_p99", "period_ms_max", "round_trip_ms_p50", "round_trip_ms_p99",
-                "cpu_us_per_tick", "advance_ms_p50", "advance_ms_p99", "late_advances", "worst_lateness_ms", "rejects",
-                "machine", "emulator", "safety"):
-        assert key in result, key
+    # the keys and their order are the JSON's contract (tests/test_bench_types.py checks every bench's)
+    assert list(result) == ["robot", "seconds", "rate_hz", "transport", "emulator_process", "sends",
+                            "replies_received", "period_ms_p50", "period_ms_p99", "period_ms_max", "round_trip_ms_p50",
+                            "round_trip_ms_p99", "cpu_us_per_tick", "advance_ms_p50", "advance_ms_p99",
+                            "late_advances", "worst_lateness_ms", "rejects", "emulator", "link", "safety", "machine"]
+    assert list(result["safety"]) == [
+        "robot", "write_deadline_ms", "link_period_ms", "stale_timeout_ms", "estop_to_damping_ms",
+        "silence_to_damping_ms", "stall_to_damping_ms", "state_fault_to_damping_ms", "stand_seconds", "stand_wall_s",
+        "stand_sim_s", "stand_realtime_factor", "stand_safety_state", "stand_trips", "stand_link_period_ms_mean",
+        "stand_link_period_ms_max", "stand_deadline_trips", "stand_act_ms_p99", "stand_deadline_misses"]
     # the counts agree between the two ends (the figures are printed, not asserted: they are this machine's)
     assert result["rejects"] == 0 and result["sends"] > 0 and result["replies_received"] > 0
     assert result["emulator"]["accepted"] >= result["sends"] - 1 and sum(result["emulator"]["rejected"].values()) == 0

@@ -734,15 +734,16 @@ def test_bench_train_reports_control_steps_per_second():
 
     cfg = small_config()
     result = bench_train(cfg, steps=3, repeats=1)
-    assert result["control_steps_per_s"] > 0 and result["rollout_only_control_steps_per_s"] > 0
-    assert result["physics_steps_per_s"] == pytest.approx(cfg.decimation * result["control_steps_per_s"])
-    assert result["timestep_s"] == cfg.timestep and result["decimation"] == cfg.decimation
+    assert result.control_steps_per_s > 0 and result.rollout_only_control_steps_per_s > 0
+    assert result.physics_steps_per_s == pytest.approx(cfg.decimation * result.control_steps_per_s)
+    assert result.timestep_s == cfg.timestep and result.decimation == cfg.decimation
     # the target scaled by this machine's bare-A1 reference: 15k at a 21.8k physics limit
-    limit = result["reference_physics_limit_control_steps_per_s"]
+    limit = result.reference.physics_limit_control_steps_per_s
     assert limit > 0
-    assert result["scaled_target_control_steps_per_s"] == pytest.approx(15_000 / 21_800 * limit)
-    assert result["control_steps_ratio_to_reference"] == pytest.approx(result["control_steps_per_s"] / limit)
-    assert "reference_physics_limit_control_steps_per_s" not in bench_train(cfg, steps=1, repeats=1, reference=False)
+    assert result.reference.scaled_target_control_steps_per_s == pytest.approx(15_000 / 21_800 * limit)
+    assert result.reference.control_steps_ratio_to_reference == pytest.approx(result.control_steps_per_s / limit)
+    without = bench_train(cfg, steps=1, repeats=1, reference=False)
+    assert without.reference is None and "reference_physics_limit_control_steps_per_s" not in without.as_dict()
 
 
 def test_cli_train_dry_run_and_errors(capsys):

@@ -209,20 +209,21 @@ def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_refer
     from wbc.tools.bench import bench_mpc
 
     result = bench_mpc(seconds=0.2, single_thread=False)
-    for key in ("mpc_solve_ms_median", "mpc_solve_ms_p99", "wbc_tick_us_median", "realtime_factor"):
-        assert result[key] > 0
-    assert not result["fell"]
-    assert result["qp_solver"].startswith("daqp ")
+    ticks, ref = result.ticks, result.reference
+    for value in (ticks.mpc_solve_ms_median, ticks.mpc_solve_ms_p99, ticks.wbc_tick_us_median, result.realtime_factor):
+        assert value > 0
+    assert not result.fell
+    assert result.qp_solver.startswith("daqp ")
     # the targets (100 us at a 40 us reference tick; 5x at 110k reference steps/s) scaled by this machine's figures
-    assert result["scaled_target_wbc_tick_us"] == pytest.approx(2.5 * result["reference_placo_tick_us"])
-    assert result["scaled_target_realtime_factor"] == pytest.approx(5.0 * result["reference_steps_per_s"] / 110_000)
+    assert ref.scaled_target_wbc_tick_us == pytest.approx(2.5 * ref.reference_placo_tick_us)
+    assert ref.scaled_target_realtime_factor == pytest.approx(5.0 * ref.reference_steps_per_s / 110_000)
     # issue 16's figures: the control tick over the reference tick, the closed loop over this robot's physics alone
-    assert result["control_tick_over_reference_tick"] == pytest.approx(
-        result["control_tick_us_median"] / result["reference_placo_tick_us"])
-    assert result["closed_loop_over_physics_rtf"] == pytest.approx(
-        result["realtime_factor"] / result["physics_realtime_factor"])
-    assert 0 < result["closed_loop_over_physics_rtf"] < 1  # the controller costs something
-    assert "reference_placo_tick_us" not in bench_mpc(seconds=0.1, single_thread=False, reference=False)
+    assert ref.control_tick_over_reference_tick == pytest.approx(
+        ticks.control_tick_us_median / ref.reference_placo_tick_us)
+    assert ref.closed_loop_over_physics_rtf == pytest.approx(result.realtime_factor / ref.physics_realtime_factor)
+    assert 0 < ref.closed_loop_over_physics_rtf < 1  # the controller costs something
+    without = bench_mpc(seconds=0.1, single_thread=False, reference=False)
+    assert without.reference is None and "reference_placo_tick_us" not in without.as_dict()
 
 
 _HEAP_PROBE = """

@@ -260,11 +260,11 @@ def test_bench_arm_measures_rates_and_a_step_against_the_emulator_in_its_own_pro
     from wbc.tools.bench import bench_arm
 
     result = bench_arm(rates=(200.0,), seconds=0.5, gains=((20.0, 0.5),))
-    (rate,) = result["rates"]
-    assert 100.0 < rate["achieved_hz"] <= 205.0 and rate["cycles"] > 50
-    bus, sim = result["steps"]
-    assert (bus["source"], sim["source"]) == ("bus", "simulation")
-    assert 10.0 < bus["rise_ms"] < 300.0 and abs(bus["final_error_rad"] - sim["final_error_rad"]) < 0.01
+    (rate,) = result.rates
+    assert 100.0 < rate.achieved_hz <= 205.0 and rate.cycles > 50
+    bus, sim = result.steps
+    assert (bus.source, sim.source) == ("bus", "simulation")
+    assert 10.0 < bus.rise_ms < 300.0 and abs(bus.final_error_rad - sim.final_error_rad) < 0.01
 
 
 # -- the same robot over UDP and a pty against the wall clock (``make test-realtime``) -----------------------------

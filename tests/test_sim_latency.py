@@ -212,17 +212,16 @@ def test_stand_keeps_its_margin_to_the_largest_delay():
     On push version 1, whose push duration was calibrated so that `stand` survives band in without stepping (version
     2's longer pushes fell it with no delay at all: they need steps)."""
     m = delay_margin("stand", str(SCENARIOS / "push-v1.toml"), trials=1, coarse_ms=(0.0, 200.0))
-    assert (m["still_margin_ms"], m["still_fell_at_ms"], m["push_margin_ms"], m["push_fell_at_ms"]) == \
-        (200.0, None, 200.0, None)
-    assert m["runs"] == 4 and len(m["push_force_n"]) == 1 and 200.0 <= m["push_force_n"][0] <= 300.0
+    assert (m.still_margin_ms, m.still_fell_at_ms, m.push_margin_ms, m.push_fell_at_ms) == (200.0, None, 200.0, None)
+    assert m.runs == 4 and len(m.push_force_n) == 1 and 200.0 <= m.push_force_n[0] <= 300.0
 
 
 @pytest.mark.slow
 def test_mpc_margin_is_bracketed_to_the_fine_step():
     m = delay_margin("mpc", str(SCENARIOS / "push-v1.toml"), trials=1, coarse_ms=(0.0, 40.0), fine_ms=20.0)
-    assert m["still_fell_at_ms"] is not None and m["still_fell_at_ms"] <= 40.0
-    assert m["still_margin_ms"] == m["still_fell_at_ms"] - 20.0
-    assert m["push_margin_ms"] is not None and m["push_margin_ms"] <= m["still_margin_ms"]
+    assert m.still_fell_at_ms is not None and m.still_fell_at_ms <= 40.0
+    assert m.still_margin_ms == m.still_fell_at_ms - 20.0
+    assert m.push_margin_ms is not None and m.push_margin_ms <= m.still_margin_ms
 
 
 def test_a_late_robot_keeps_the_robot_contract():

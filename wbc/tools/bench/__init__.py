@@ -7,10 +7,10 @@ simulated delay that plays it, and how much actuation delay each controller surv
 bus loop, its rate and step response, against the emulated robot in another process).
 """
 
-from wbc.tools.bench.arm import bench_arm
-from wbc.tools.bench.hw import EmulatorCounts, bench_hw
-from wbc.tools.bench.latency import bench_latency
-from wbc.tools.bench.mpc import bench_mpc
+from wbc.tools.bench.arm import ArmBenchResult, ArmRateRow, ArmReactionRow, ArmStepRow, EmulatorTimingRow, bench_arm
+from wbc.tools.bench.hw import EmulatorCounts, HwBenchResult, SafetyBenchResult, bench_hw
+from wbc.tools.bench.latency import DelayMargin, LatencyBenchResult, WireLatency, bench_latency
+from wbc.tools.bench.mpc import MpcBenchResult, MpcReference, MpcTickFigures, bench_mpc
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
     REFERENCE_TARGETS,
@@ -19,10 +19,13 @@ from wbc.tools.bench.references import (
     reference_a1,
     reference_placo_tick_us,
 )
-from wbc.tools.bench.sim import bench_sim
-from wbc.tools.bench.sweep import bench_sweep
-from wbc.tools.bench.train import bench_train
+from wbc.tools.bench.sim import SimBenchResult, SimReference, bench_sim
+from wbc.tools.bench.sweep import SweepBenchResult, SweepExecutorRow, bench_sweep
+from wbc.tools.bench.train import TrainBenchResult, TrainReference, bench_train
 
-__all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_TARGETS", "TRAIN_TARGET", "EmulatorCounts", "bench_arm", "bench_hw",
-           "bench_latency", "bench_mpc", "bench_sim", "bench_sweep", "bench_train", "machine_description",
-           "reference_a1", "reference_placo_tick_us"]
+__all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_TARGETS", "TRAIN_TARGET", "ArmBenchResult", "ArmRateRow",
+           "ArmReactionRow", "ArmStepRow", "DelayMargin", "EmulatorCounts", "EmulatorTimingRow", "HwBenchResult",
+           "LatencyBenchResult", "MpcBenchResult", "MpcReference", "MpcTickFigures", "SafetyBenchResult",
+           "SimBenchResult", "SimReference", "SweepBenchResult", "SweepExecutorRow", "TrainBenchResult",
+           "TrainReference", "WireLatency", "bench_arm", "bench_hw", "bench_latency", "bench_mpc", "bench_sim",
+           "bench_sweep", "bench_train", "machine_description", "reference_a1", "reference_placo_tick_us"]

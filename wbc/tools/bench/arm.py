@@ -31,7 +31,7 @@ import select
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -59,7 +59,7 @@ from wbc.robots.registry import get_robot
 from wbc.tools.bench.references import machine_description
 from wbc.types import MotorCommand
 
-__all__ = ["ArmReactionRow", "ArmRateRow", "ArmStepRow", "EmulatorTimingRow", "bench_arm",
+__all__ = ["ArmBenchResult", "ArmReactionRow", "ArmRateRow", "ArmStepRow", "EmulatorTimingRow", "bench_arm",
            "serve_robot_emulator_stdio", "step_metrics"]
 
 _START_TIMEOUT = 60.0  # [s] longest wait for the emulator process to open its port and pty
@@ -171,6 +171,44 @@ class ArmStepRow:
     settle_ms: float
     final_error_rad: float
     discarded: int = 0
+
+
+@dataclass(frozen=True, kw_only=True)
+class ArmBenchResult:
+    """What `bench_arm` measured: the arm's bus loop at each rate, the elbow's step response, the reactions.
+
+    Attributes:
+        robot: ``a1-wx200`` or ``go1-arm``.
+        latency_ms: the arm's latency timer [ms].
+        seconds: how long each rate ran [s].
+        step_rad: the elbow target's step [rad].
+        emulator_bus: the emulator process's bus counters (`BusStats` fields, as it reported them; empty if it
+            reported none).
+        rates: one row per requested rate, in the order asked.
+        steps: the step responses: on the bus for each gain, then in simulation for each gain.
+        reactions: the write deadline and each bus fault, in wall time.
+        emulator: the emulators' own real-time figures.
+        machine: `machine_description`.
+    """
+
+    robot: str
+    latency_ms: float
+    seconds: float
+    step_rad: float
+    emulator_bus: Mapping[str, object]
+    rates: tuple[ArmRateRow, ...]
+    steps: tuple[ArmStepRow, ...]
+    reactions: tuple[ArmReactionRow, ...]
+    emulator: tuple[EmulatorTimingRow, ...]
+    machine: str
+
+    def as_dict(self) -> dict[str, object]:
+        """Plain dict (the JSON output of ``wbc bench arm``): each row as a dict of its attributes."""
+        return {"robot": self.robot, "latency_ms": self.latency_ms, "seconds": self.seconds,
+                "step_rad": self.step_rad, "emulator_bus": dict(self.emulator_bus),
+                "rates": [asdict(r) for r in self.rates], "steps": [asdict(s) for s in self.steps],
+                "reactions": [asdict(r) for r in self.reactions], "emulator": [asdict(r) for r in self.emulator],
+                "machine": self.machine}
 
 
 def step_metrics(t: np.ndarray, y: np.ndarray, target: float) -> tuple[float, float, float, float]:
@@ -412,7 +450,7 @@ def _sim_step(robot: str, q0: np.ndarray, kp: float, kd: float, step: float) -> 
 
 def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200.0, 400.0, 1000.0),
               seconds: float = 2.0, latency_ms: float = 1.0, step: float = -0.05,
-              gains: tuple[tuple[float, float], ...] = ((20.0, 0.5), (60.0, 1.0))) -> dict[str, object]:
+              gains: tuple[tuple[float, float], ...] = ((20.0, 0.5), (60.0, 1.0))) -> ArmBenchResult:
     """Measure the arm's bus loop (rates, step response) against the emulated robot in its own process.
 
     Args:
@@ -424,10 +462,8 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         gains: (kp, kd) of each step response [N m / rad, N m s / rad].
 
     Returns:
-        ``rates`` (`ArmRateRow` dicts), ``steps`` (`ArmStepRow` dicts, bus and simulation for each gain),
-        ``reactions`` (`ArmReactionRow` dicts: the write deadline and each bus fault, in wall time), ``emulator``
-        (`EmulatorTimingRow` dicts: the plant's real-time factor, the pty's round trips), the settings and
-        ``machine``.
+        The rows of each part (rates, steps on the bus and in simulation for each gain, reactions, the emulators'
+        real-time figures), the emulator's bus counters, the settings and the machine.
 
     Raises:
         BenchError: the emulator process did not start or failed, or a setting is out of range.
@@ -513,7 +549,6 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
                                     **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
                                                step_metrics(t, y, float(stowed[_ELBOW] + step)), strict=True))))
     emulator = _emulator_timing(robot, seconds, latency_ms)
-    return {"robot": robot, "latency_ms": latency_ms, "seconds": seconds, "step_rad": step, "emulator_bus": bus,
-            "rates": [asdict(r) for r in rate_rows], "steps": [asdict(s) for s in step_rows],
-            "reactions": [asdict(r) for r in reaction_rows], "emulator": [asdict(r) for r in emulator],
-            "machine": machine_description()}
+    return ArmBenchResult(robot=robot, latency_ms=latency_ms, seconds=seconds, step_rad=step, emulator_bus=bus,
+                          rates=tuple(rate_rows), steps=tuple(step_rows), reactions=tuple(reaction_rows),
+                          emulator=tuple(emulator), machine=machine_description())

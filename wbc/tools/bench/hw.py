@@ -26,7 +26,7 @@ import select
 import subprocess
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -39,6 +39,7 @@ from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
 from wbc.hardware.unitree import (
     REJECT_REASONS,
+    LinkStats,
     SdkTransport,
     Transport,
     UdpTransport,
@@ -48,7 +49,8 @@ from wbc.hardware.unitree import (
 from wbc.tools.bench.references import machine_description
 from wbc.types import MotorCommand
 
-__all__ = ["EmulatorCounts", "TimedTransport", "bench_hw", "bench_safety", "serve_emulator_stdio"]
+__all__ = ["EmulatorCounts", "HwBenchResult", "SafetyBenchResult", "TimedTransport", "bench_hw", "bench_safety",
+           "serve_emulator_stdio"]
 
 _START_TIMEOUT = 60.0  # [s] longest wait for the emulator process to bind its port (it imports MuJoCo first)
 _STOP_MARGIN = 30.0  # [s] the emulator process stops by itself this long after the bench should have ended
@@ -82,6 +84,119 @@ class EmulatorCounts:
     def as_dict(self) -> dict[str, object]:
         """The counts as a plain dict (for JSON)."""
         return asdict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SafetyBenchResult:
+    """What `bench_safety` timed: SafeRobot(UnitreeRobot)'s reactions on the wire, and a stand, in real time.
+
+    Attributes:
+        robot: ``a1`` or ``go1``.
+        write_deadline_ms: the link's write deadline [ms].
+        link_period_ms: the link's period [ms].
+        stale_timeout_ms: the safety layer's stale-state timeout [ms].
+        estop_to_damping_ms: a software e-stop to the first damping frame on the wire [ms].
+        silence_to_damping_ms: the state stream stopped -> damping [ms] (judged by `stale_timeout_ms`).
+        stall_to_damping_ms: the control loop's last write -> the link's damping [ms] (by `write_deadline_ms`).
+        state_fault_to_damping_ms: a motor reported hot -> damping [ms].
+        stand_seconds: how long the stand was asked to run [s].
+        stand_wall_s: the wall time it took [s].
+        stand_sim_s: the emulated robot's time meanwhile [s].
+        stand_realtime_factor: `stand_sim_s` over `stand_wall_s` (nan if no wall time passed).
+        stand_safety_state: the layer's state at the end (``run`` unless it tripped).
+        stand_trips: the layer's trips during the stand, with their detail.
+        stand_link_period_ms_mean: the link's mean send period over the stand [ms].
+        stand_link_period_ms_max: its longest send period [ms].
+        stand_deadline_trips: times the link's write deadline expired.
+        stand_act_ms_p99: 99th percentile of the stand controller's ``act`` [ms].
+        stand_deadline_misses: ``act`` calls longer than the controller's period.
+    """
+
+    robot: str
+    write_deadline_ms: float
+    link_period_ms: float
+    stale_timeout_ms: float
+    estop_to_damping_ms: float
+    silence_to_damping_ms: float
+    stall_to_damping_ms: float
+    state_fault_to_damping_ms: float
+    stand_seconds: float
+    stand_wall_s: float
+    stand_sim_s: float
+    stand_realtime_factor: float
+    stand_safety_state: str
+    stand_trips: tuple[str, ...]
+    stand_link_period_ms_mean: float
+    stand_link_period_ms_max: float
+    stand_deadline_trips: int
+    stand_act_ms_p99: float
+    stand_deadline_misses: int
+
+    def as_dict(self) -> dict[str, object]:
+        """Plain dict, keys as the attributes' names (``safety`` in ``wbc bench hw``'s JSON)."""
+        return {**asdict(self), "stand_trips": list(self.stand_trips)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class HwBenchResult:
+    """What `bench_hw` measured: the Unitree link's timing over loopback, against an emulator in its own process.
+
+    Attributes:
+        robot: ``a1`` or ``go1``.
+        seconds: how long the link ran while measured [s].
+        rate_hz: the link thread's rate [Hz].
+        transport: ``udp`` or ``sdk``.
+        emulator_process: how the emulator ran.
+        sends: command frames the link thread sent while measured.
+        replies_received: state datagrams it took meanwhile.
+        period_ms_p50: median interval between two sends of the link thread [ms].
+        period_ms_p99: its 99th percentile [ms].
+        period_ms_max: the longest such interval [ms].
+        round_trip_ms_p50: median time from a command's send to the arrival of the state the emulator answered it
+            with, paired in order [ms].
+        round_trip_ms_p99: its 99th percentile [ms].
+        cpu_us_per_tick: the link thread's CPU time per period [us].
+        advance_ms_p50: median time the control loop's ``advance(period)`` took (pacing plus the wait for a fresh
+            state) [ms].
+        advance_ms_p99: its 99th percentile [ms].
+        late_advances: advance calls that found their deadline past.
+        worst_lateness_ms: by how much the latest of them was late [ms].
+        rejects: state frames the robot rejected.
+        emulator: the emulator's counts.
+        link: the link's own counters.
+        safety: `bench_safety`'s figures, or None when they were not measured.
+        machine: `machine_description`.
+    """
+
+    robot: str
+    seconds: float
+    rate_hz: float
+    transport: str
+    emulator_process: str
+    sends: int
+    replies_received: int
+    period_ms_p50: float
+    period_ms_p99: float
+    period_ms_max: float
+    round_trip_ms_p50: float
+    round_trip_ms_p99: float
+    cpu_us_per_tick: float
+    advance_ms_p50: float
+    advance_ms_p99: float
+    late_advances: int
+    worst_lateness_ms: float
+    rejects: int
+    emulator: EmulatorCounts
+    link: LinkStats
+    safety: SafetyBenchResult | None
+    machine: str
+
+    def as_dict(self) -> dict[str, object]:
+        """Plain dict (the JSON output of ``wbc bench hw``): ``emulator``, ``link`` and ``safety`` nested."""
+        out = {f.name: getattr(self, f.name) for f in fields(self)}
+        out.update(emulator=self.emulator.as_dict(), link=asdict(self.link),
+                   safety=self.safety.as_dict() if self.safety is not None else None)
+        return out
 
 
 class TimedTransport:
@@ -169,7 +284,7 @@ def _percentile_ms(values: np.ndarray, q: float) -> float:
 
 
 def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0,
-             transport: str = "udp", stand_seconds: float | None = 10.0) -> dict[str, object]:
+             transport: str = "udp", stand_seconds: float | None = 10.0) -> HwBenchResult:
     """Time the low-level link over loopback against an emulator in its own process.
 
     Args:
@@ -180,14 +295,9 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         stand_seconds: the stand of `bench_safety`, whose figures go under ``safety`` [s]; None: none of them.
 
     Returns:
-        ``period_ms_p50`` / ``_p99`` / ``_max`` (the interval between two sends of the link thread [ms]),
-        ``round_trip_ms_p50`` / ``_p99`` (a command's send to the arrival of the state the emulator answered it
-        with, paired in order [ms]), ``cpu_us_per_tick`` (the link thread's CPU time per period [us]),
-        ``advance_ms_p50`` / ``_p99`` (how long the control loop's ``advance(period)`` took: its pacing plus the wait
-        for a fresh state), ``late_advances`` and ``worst_lateness_ms`` (advance calls that found their deadline
-        past, and by how much), ``rejects``
-        (state frames the robot rejected), ``emulator`` (the emulator's counts), the link's own counters
-        (``link``), ``safety`` (`bench_safety`, with `stand_seconds`), the settings and ``machine``.
+        The send period's and round trip's percentiles, the link thread's CPU per tick, the control loop's advance
+        times and lateness, the rejects, the emulator's counts and the link's own counters, `bench_safety`'s figures
+        (with `stand_seconds`), the settings and the machine.
 
     Raises:
         UnknownNameError: `robot` is not ``a1`` or ``go1``, or `transport` is not a transport's name.
@@ -247,30 +357,30 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
     cpu = np.asarray(timed.send_cpu)
     cpu_per_tick = float(1e6 * (cpu[-1] - cpu[0]) / (cpu.size - 1)) if cpu.size > 1 else float("nan")
     safety = bench_safety(robot, stand_seconds=stand_seconds) if stand_seconds is not None else None
-    return {
-        "robot": robot,
-        "seconds": seconds,
-        "rate_hz": rate_hz,
-        "transport": transport,
-        "emulator_process": "separate process, lockstep",
-        "sends": int(sends.size),
-        "replies_received": int(receives.size),
-        "period_ms_p50": _percentile_ms(periods, 50),
-        "period_ms_p99": _percentile_ms(periods, 99),
-        "period_ms_max": float(1e3 * periods.max()) if periods.size else float("nan"),
-        "round_trip_ms_p50": _percentile_ms(round_trips, 50),
-        "round_trip_ms_p99": _percentile_ms(round_trips, 99),
-        "cpu_us_per_tick": cpu_per_tick,
-        "advance_ms_p50": _percentile_ms(np.asarray(advances), 50),
-        "advance_ms_p99": _percentile_ms(np.asarray(advances), 99),
-        "late_advances": stats.late_advances,
-        "worst_lateness_ms": stats.worst_lateness * 1e3,
-        "rejects": int(rejects),
-        "emulator": counts.as_dict(),
-        "link": asdict(stats),
-        "safety": safety,
-        "machine": machine_description(),
-    }
+    return HwBenchResult(
+        robot=robot,
+        seconds=seconds,
+        rate_hz=rate_hz,
+        transport=transport,
+        emulator_process="separate process, lockstep",
+        sends=int(sends.size),
+        replies_received=int(receives.size),
+        period_ms_p50=_percentile_ms(periods, 50),
+        period_ms_p99=_percentile_ms(periods, 99),
+        period_ms_max=float(1e3 * periods.max()) if periods.size else float("nan"),
+        round_trip_ms_p50=_percentile_ms(round_trips, 50),
+        round_trip_ms_p99=_percentile_ms(round_trips, 99),
+        cpu_us_per_tick=cpu_per_tick,
+        advance_ms_p50=_percentile_ms(np.asarray(advances), 50),
+        advance_ms_p99=_percentile_ms(np.asarray(advances), 99),
+        late_advances=stats.late_advances,
+        worst_lateness_ms=stats.worst_lateness * 1e3,
+        rejects=int(rejects),
+        emulator=counts,
+        link=stats,
+        safety=safety,
+        machine=machine_description(),
+    )
 
 
 def _drive_to_run(safe: SafeRobot, cmd: MotorCommand) -> None:
@@ -337,7 +447,7 @@ _REACTIONS = {"estop_to_damping_ms": _estop, "silence_to_damping_ms": _silence, 
 """What each timed reaction does to the running stack, returning when its cause began."""
 
 
-def bench_safety(robot: str = "go1", *, stand_seconds: float = 10.0, rate_hz: float = 500.0) -> dict[str, object]:
+def bench_safety(robot: str = "go1", *, stand_seconds: float = 10.0, rate_hz: float = 500.0) -> SafetyBenchResult:
     """Time the safety reactions and a stand of SafeRobot(UnitreeRobot) against a real-time emulator, in real time.
 
     Args:
@@ -346,35 +456,26 @@ def bench_safety(robot: str = "go1", *, stand_seconds: float = 10.0, rate_hz: fl
         rate_hz: the link's rate [Hz].
 
     Returns:
-        ``estop_to_damping_ms`` (a software e-stop to the first damping frame on the wire), ``silence_to_damping_ms``
-        (the state stream stopped -> damping; the layer's ``stale_timeout_ms`` is beside it),
-        ``stall_to_damping_ms`` (the control loop's last write -> the link's damping; ``write_deadline_ms`` beside
-        it), ``state_fault_to_damping_ms`` (a motor reported hot -> damping), ``link_period_ms``, and the stand:
-        ``stand_seconds``, ``stand_wall_s`` (what it took), ``stand_sim_s`` (the emulated robot's time meanwhile),
-        ``stand_realtime_factor`` (sim over wall), ``stand_safety_state`` (``run`` unless it tripped),
-        ``stand_trips`` (the layer's trips, with their detail), ``stand_link_period_ms_mean`` / ``_max``,
-        ``stand_deadline_trips`` (the link's write deadline), ``stand_act_ms_p99`` (the stand controller's ``act``)
-        and ``stand_deadline_misses`` (``act`` calls longer than the controller's period).
+        Each reaction's time from its cause to the first damping frame on the wire, beside the timeouts that judge
+        it, and the stand's wall and emulated time, trips, link period and ``act`` times.
 
     Raises:
         BenchError: the layer never reached ``run`` for a reaction, or a reaction's damping never reached the wire.
     """
-    out: dict[str, object] = {"robot": robot}
+    reactions: dict[str, float] = {}
     with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode="realtime")) as emu:
         host, port = emu.address
         cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=rate_hz)
-        out["write_deadline_ms"] = cfg.write_deadline * 1e3
-        out["link_period_ms"] = 1e3 / rate_hz
         for key, cause in _REACTIONS.items():
             emu.clear()
             emu.reset()
             safety = SafetyConfig(on_event=lambda event: None, ramp_time_s=0.2)
-            out["stale_timeout_ms"] = safety.stale_timeout_s * 1e3
+            stale_timeout_ms = safety.stale_timeout_s * 1e3
             with SafeRobot(UnitreeRobot(cfg), safety) as safe:
                 cmd = stand_command(safe.robot.desc)
                 _drive_to_run(safe, cmd)
                 started = cause(emu, safe, cmd)
-                out[key] = 1e3 * (_first_damping_after(emu, started) - started)
+                reactions[key] = 1e3 * (_first_damping_after(emu, started) - started)
         emu.clear()
         emu.reset()
         trips: list[str] = []
@@ -398,10 +499,11 @@ def bench_safety(robot: str = "go1", *, stand_seconds: float = 10.0, rate_hz: fl
             gc.unfreeze()
         if emu.failure is not None:
             raise BenchError(f"bench hw: the emulator failed: {emu.failure!r}")
-    out.update(stand_seconds=stand_seconds, stand_wall_s=wall, stand_sim_s=sim,
-               stand_realtime_factor=sim / wall if wall > 0 else float("nan"), stand_safety_state=state,
-               stand_trips=trips, stand_link_period_ms_mean=stats.period_mean * 1e3,
-               stand_link_period_ms_max=stats.period_max * 1e3, stand_deadline_trips=stats.deadline_trips,
-               stand_act_ms_p99=_percentile_ms(np.asarray(acts), 99),
-               stand_deadline_misses=int(sum(a > 1.0 / ctrl.rate_hz for a in acts)))
-    return out
+    return SafetyBenchResult(
+        robot=robot, write_deadline_ms=cfg.write_deadline * 1e3, link_period_ms=1e3 / rate_hz,
+        stale_timeout_ms=stale_timeout_ms, **reactions, stand_seconds=stand_seconds,
+        stand_wall_s=wall, stand_sim_s=sim, stand_realtime_factor=sim / wall if wall > 0 else float("nan"),
+        stand_safety_state=state, stand_trips=tuple(trips), stand_link_period_ms_mean=stats.period_mean * 1e3,
+        stand_link_period_ms_max=stats.period_max * 1e3, stand_deadline_trips=stats.deadline_trips,
+        stand_act_ms_p99=_percentile_ms(np.asarray(acts), 99),
+        stand_deadline_misses=int(sum(a > 1.0 / ctrl.rate_hz for a in acts)))

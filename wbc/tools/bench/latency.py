@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,7 +49,8 @@ from wbc.tools.bench.hw import bench_hw
 from wbc.tools.bench.references import machine_description
 from wbc.types import MotorCommand
 
-__all__ = ["COARSE_MS", "FINE_MS", "bench_latency", "delay_margin", "probe_ticks", "wire_probe"]
+__all__ = ["COARSE_MS", "FINE_MS", "DelayMargin", "LatencyBenchResult", "WireLatency", "bench_latency", "delay_margin",
+           "probe_ticks", "wire_probe"]
 
 COARSE_MS = (0.0, 10.0, 20.0, 30.0, 40.0, 60.0, 80.0, 100.0, 150.0, 200.0)
 """The actuation delays the margin sweep climbs first [ms]."""
@@ -59,6 +61,108 @@ AFTER_PUSH_S = 2.0  # [s] a push trial ends this long after its first push start
 PROBE_JOINT = 2  # the front right calf: it carries weight, so a torque step there is plain in its estimate
 PROBE_STEP_NM = 3.0  # [N m] the feed-forward torque step
 PROBE_KP, PROBE_KD = 20.0, 0.5  # the hold the probe steps from (as `bench_hw` holds)
+
+
+@dataclass(frozen=True, kw_only=True)
+class DelayMargin:
+    """A controller's delay margin (`delay_margin`): per test, the last actuation delay passed and the first failed.
+
+    Attributes:
+        controller: controller registry name.
+        trials: standing trials; each had to pass at a delay.
+        push_force_n: the magnitude of each trial's first push [N].
+        still_margin_ms: standing still: the last delay passed before the first failure [ms]; None if the first
+            delay failed.
+        still_fell_at_ms: standing still: the first delay that failed [ms]; None if none did.
+        push_margin_ms: surviving the first push: the last delay passed before the first failure [ms]; None if the
+            first delay failed.
+        push_fell_at_ms: surviving the first push: the first delay that failed [ms]; None if none did.
+        runs: trials played.
+        wall_s: the wall time of the sweep [s].
+    """
+
+    controller: str
+    trials: int
+    push_force_n: tuple[float, ...]
+    still_margin_ms: float | None
+    still_fell_at_ms: float | None
+    push_margin_ms: float | None
+    push_fell_at_ms: float | None
+    runs: int
+    wall_s: float
+
+    def as_dict(self) -> dict[str, object]:
+        """Plain dict, keys as the attributes' names (one of ``margins`` in ``wbc bench latency``'s JSON)."""
+        return {**dataclasses.asdict(self), "push_force_n": list(self.push_force_n)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class WireLatency:
+    """The wire's latency over loopback, and the simulated delay that plays it (`bench_latency` with ``wire``).
+
+    Attributes:
+        round_trip_ms_p50: median emulator round trip (`bench_hw`, lockstep) [ms].
+        round_trip_ms_p99: its 99th percentile [ms].
+        period_ms: the link and control period [ms].
+        wire_ticks: the probe's count of each torque step against the realtime emulator [ticks].
+        wire_ticks_p50: their median [ticks].
+        wire_ticks_mean: their mean [ticks].
+        wire_ticks_max: the largest [ticks].
+        typical_delay_ms: ``p50 - 1`` periods rounded to physics steps: the total of actuation and sensing delay
+            that typically plays the wire's loop [ms].
+        sim_ticks_typical: the probe's median count on the simulated robot with that delay [ticks].
+        worst_delay_ms: the same from ``max - 1`` periods: the loop at worst [ms].
+        sim_ticks_worst: the probe's median count on the simulated robot with it [ticks].
+    """
+
+    round_trip_ms_p50: float
+    round_trip_ms_p99: float
+    period_ms: float
+    wire_ticks: tuple[int, ...]
+    wire_ticks_p50: float
+    wire_ticks_mean: float
+    wire_ticks_max: int
+    typical_delay_ms: float
+    sim_ticks_typical: float
+    worst_delay_ms: float
+    sim_ticks_worst: float
+
+    def as_dict(self) -> dict[str, object]:
+        """Plain dict, keys as the attributes' names (as they sit in ``wbc bench latency``'s JSON)."""
+        return {**dataclasses.asdict(self), "wire_ticks": list(self.wire_ticks)}
+
+
+@dataclass(frozen=True, kw_only=True)
+class LatencyBenchResult:
+    """What `bench_latency` measured: the wire's latency (when measured) and each controller's delay margin.
+
+    Attributes:
+        wire_robot: the Unitree robot of the wire measurements.
+        scenario: the scenario of the margin trials.
+        coarse_ms: the delays the margin sweep climbed first [ms].
+        fine_ms: the sweep's step within the bracket of the first failure [ms].
+        wire: the wire's figures, or None when the wire was not measured.
+        margins: one per controller, in the order asked.
+        machine: `machine_description`.
+    """
+
+    wire_robot: str
+    scenario: str
+    coarse_ms: tuple[float, ...]
+    fine_ms: float
+    wire: WireLatency | None
+    margins: tuple[DelayMargin, ...]
+    machine: str
+
+    def as_dict(self) -> dict[str, object]:
+        """Plain flat dict (the JSON output of ``wbc bench latency``): the wire's keys after ``fine_ms``."""
+        out: dict[str, object] = {"wire_robot": self.wire_robot, "scenario": self.scenario,
+                                  "coarse_ms": list(self.coarse_ms), "fine_ms": self.fine_ms}
+        if self.wire is not None:
+            out.update(self.wire.as_dict())
+        out["margins"] = [m.as_dict() for m in self.margins]
+        out["machine"] = self.machine
+        return out
 
 
 def probe_ticks(robot: Robot, hold: MotorCommand, *, period: float, samples: int, joint: int = PROBE_JOINT,
@@ -169,7 +273,7 @@ def _margin_trials(scenario: str, trials: int) -> list[Trial]:
 
 
 def delay_margin(controller: str, scenario: str = "scenarios/push.toml", *, trials: int = 2,
-                 coarse_ms: tuple[float, ...] = COARSE_MS, fine_ms: float = FINE_MS) -> dict[str, object]:
+                 coarse_ms: tuple[float, ...] = COARSE_MS, fine_ms: float = FINE_MS) -> DelayMargin:
     """The largest actuation delay at which `controller` stands still, and survives a push.
 
     Args:
@@ -181,14 +285,13 @@ def delay_margin(controller: str, scenario: str = "scenarios/push.toml", *, tria
 
     Returns:
         Per test (``still``: standing `STILL_S` without pushes; ``push``: the trial's first push, cut `AFTER_PUSH_S`
-        after it): ``<test>_margin_ms`` (the last delay passed before the first failure; None if the first delay
-        failed), ``<test>_fell_at_ms`` (the first delay failed; None if none did); and ``push_force_n`` (the
-        pushes' magnitudes [N]), ``runs`` (trials played), ``wall_s``.
+        after it) the last delay passed before the first failure and the first delay failed; the pushes'
+        magnitudes, the trials played and the wall time.
     """
     spec = get_controller(controller)
     base = _margin_trials(scenario, trials)
     forces = [round(float(np.linalg.norm(t.pushes[0].force_in_world)), 1) for t in base]
-    out: dict[str, object] = {"controller": controller, "trials": trials, "push_force_n": forces}
+    found: dict[str, float | None] = {}
     runs = 0
 
     def passes(test: str, ms: float) -> bool:
@@ -221,14 +324,14 @@ def delay_margin(controller: str, scenario: str = "scenarios/push.toml", *, tria
                     break
                 margin = ms
                 ms += fine_ms
-        out[f"{test}_margin_ms"], out[f"{test}_fell_at_ms"] = margin, fell_at
-    out["runs"], out["wall_s"] = runs, time.perf_counter() - start
-    return out
+        found[f"{test}_margin_ms"], found[f"{test}_fell_at_ms"] = margin, fell_at
+    return DelayMargin(controller=controller, trials=trials, push_force_n=tuple(forces), **found, runs=runs,
+                       wall_s=time.perf_counter() - start)
 
 
 def bench_latency(controllers: tuple[str, ...] = ("stand", "mpc"), *, wire_robot: str = "go1",
                   scenario: str = "scenarios/push.toml", trials: int = 2, samples: int = 40,
-                  wire: bool = True) -> dict[str, object]:
+                  wire: bool = True) -> LatencyBenchResult:
     """The wire's latency, the simulated delay that matches it, and each controller's delay margin.
 
     Args:
@@ -240,31 +343,30 @@ def bench_latency(controllers: tuple[str, ...] = ("stand", "mpc"), *, wire_robot
         wire: measure the wire (False: margins only).
 
     Returns:
-        With `wire`: ``round_trip_ms_p50`` / ``_p99`` (`bench_hw`, lockstep), ``wire_ticks`` (the probe's counts
-        against the realtime emulator, and ``wire_ticks_p50`` / ``_mean`` / ``_max``), ``period_ms``,
-        ``typical_delay_ms`` and ``worst_delay_ms`` (``p50 - 1`` and ``max - 1`` periods, rounded to physics steps:
-        the total of actuation and sensing delay that plays the wire's loop, typically and at worst),
-        ``sim_ticks_typical`` / ``sim_ticks_worst`` (the probe's median count on the simulated robot with each);
-        ``margins`` (one `delay_margin` per controller), ``coarse_ms``, ``fine_ms`` and ``machine``.
+        With `wire` the wire's figures (`WireLatency`); one `delay_margin` per controller, the sweep's delays and
+        the machine.
 
     Raises:
         BenchError: the emulator failed, or a probe step was never seen.
         UnknownNameError: an unknown controller or robot.
     """
-    out: dict[str, object] = {"wire_robot": wire_robot, "scenario": scenario, "coarse_ms": list(COARSE_MS),
-                              "fine_ms": FINE_MS}
+    figures = None
     if wire:
         period = 0.002
         hw = bench_hw(wire_robot, seconds=2.0, rate_hz=1.0 / period, stand_seconds=None)
         ticks = wire_probe(wire_robot, samples=samples, period=period)
         timestep = MujocoRobotConfig().timestep
-        out.update(round_trip_ms_p50=hw["round_trip_ms_p50"], round_trip_ms_p99=hw["round_trip_ms_p99"],
-                   period_ms=period * 1e3, wire_ticks=ticks, wire_ticks_p50=float(np.median(ticks)),
-                   wire_ticks_mean=float(np.mean(ticks)), wire_ticks_max=int(max(ticks)))
-        for name, count in (("typical", out["wire_ticks_p50"]), ("worst", out["wire_ticks_max"])):
+        p50, worst = float(np.median(ticks)), int(max(ticks))
+        delays, sim_ticks = {}, {}
+        for name, count in (("typical", p50), ("worst", worst)):
             delay = delay_steps(max(0.0, count - 1.0) * period, timestep) * timestep
-            out[f"{name}_delay_ms"] = delay * 1e3
-            out[f"sim_ticks_{name}"] = float(np.median(sim_probe(wire_robot, delay, period=period)))
-    out["margins"] = [delay_margin(c, scenario, trials=trials) for c in controllers]
-    out["machine"] = machine_description()
-    return out
+            delays[name] = delay * 1e3
+            sim_ticks[name] = float(np.median(sim_probe(wire_robot, delay, period=period)))
+        figures = WireLatency(round_trip_ms_p50=hw.round_trip_ms_p50, round_trip_ms_p99=hw.round_trip_ms_p99,
+                              period_ms=period * 1e3, wire_ticks=tuple(ticks), wire_ticks_p50=p50,
+                              wire_ticks_mean=float(np.mean(ticks)), wire_ticks_max=worst,
+                              typical_delay_ms=delays["typical"], sim_ticks_typical=sim_ticks["typical"],
+                              worst_delay_ms=delays["worst"], sim_ticks_worst=sim_ticks["worst"])
+    margins = tuple(delay_margin(c, scenario, trials=trials) for c in controllers)
+    return LatencyBenchResult(wire_robot=wire_robot, scenario=scenario, coarse_ms=COARSE_MS, fine_ms=FINE_MS,
+                              wire=figures, margins=margins, machine=machine_description())

@@ -13,7 +13,7 @@ import multiprocessing
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -37,7 +37,8 @@ from wbc.tools.bench.references import (
 )
 from wbc.types import VelocityCommand
 
-__all__ = ["WARMUP_S", "TickTimingLog", "bench_mpc", "physics_realtime_factor"]
+__all__ = ["WARMUP_S", "MpcBenchResult", "MpcReference", "MpcTickFigures", "TickTimingLog", "bench_mpc",
+           "physics_realtime_factor"]
 
 WARMUP_S = 0.2
 """Length of the untimed episode played before the timed walk [s] (its wall time is reported as
@@ -46,6 +47,99 @@ WARMUP_S = 0.2
 
 def _median(values: Sequence[float], scale: float) -> float:
     return scale * float(np.median(values)) if values else math.nan
+
+
+@dataclass(frozen=True, kw_only=True)
+class MpcTickFigures:
+    """The controller's tick, by what ran in it (`TickTimingLog.figures`); nan where no tick was filed.
+
+    Attributes:
+        mpc_solve_ms_median: median QP solve time of the MPC updates [ms].
+        mpc_solve_ms_p99: 99th percentile of that time [ms].
+        mpc_setup_ms_median: median setup time (linearisation, condensing) of the MPC updates [ms].
+        wbc_tick_us_median: median whole-body QP time per tick [us].
+        control_tick_us_median: median whole control tick without an MPC update [us].
+    """
+
+    mpc_solve_ms_median: float
+    mpc_solve_ms_p99: float
+    mpc_setup_ms_median: float
+    wbc_tick_us_median: float
+    control_tick_us_median: float
+
+    def as_dict(self) -> dict[str, float]:
+        """Plain dict, keys as the attributes' names."""
+        return asdict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MpcReference:
+    """The references of the MPC targets (`MPC_REFERENCE_TARGETS`), measured beside the closed loop.
+
+    Attributes:
+        reference_placo_tick_us: a bare-A1 PlaCo whole-body tick, mean of the measurements [us].
+        reference_steps_per_s: the bare A1's single-threaded physics, best of the measurements [steps/s].
+        physics_realtime_factor: the same robot's physics alone (`physics_realtime_factor`), best.
+        control_tick_over_reference_tick: the control tick's median over the reference PlaCo tick (target <= 1.8).
+        closed_loop_over_physics_rtf: the closed loop's real-time factor over the physics-only one (target >= 0.075).
+        scaled_target_wbc_tick_us: 100 us times the reference tick over 40 us [us].
+        scaled_target_realtime_factor: 5x times the reference physics over 110k steps/s.
+    """
+
+    reference_placo_tick_us: float
+    reference_steps_per_s: float
+    physics_realtime_factor: float
+    control_tick_over_reference_tick: float
+    closed_loop_over_physics_rtf: float
+    scaled_target_wbc_tick_us: float
+    scaled_target_realtime_factor: float
+
+    def as_dict(self) -> dict[str, float]:
+        """Plain dict, keys as the attributes' names."""
+        return asdict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MpcBenchResult:
+    """What `bench_mpc` measured: the MPC controller's tick and closed loop, and the references when measured.
+
+    Attributes:
+        robot: robot registry name.
+        controller: the MPC controller's registry name.
+        horizon: the MPC's horizon N [steps].
+        ticks: the tick's breakdown (nan for a controller that reports none).
+        realtime_factor: simulated seconds per wall-clock second of the whole closed loop.
+        warmup_episode_s: wall time of the untimed warm-up walk [s].
+        fell: whether the robot fell during the timed walk.
+        blas: ``single-threaded`` (run in a spawned process with one BLAS thread) or ``default threads``.
+        qp_solver: the QP solver and its version.
+        machine: `machine_description`.
+        reference: the references' figures, or None when they were not measured.
+    """
+
+    robot: str
+    controller: str
+    horizon: int
+    ticks: MpcTickFigures
+    realtime_factor: float
+    warmup_episode_s: float
+    fell: bool
+    blas: str
+    qp_solver: str
+    machine: str
+    reference: MpcReference | None = None
+
+    def as_dict(self) -> dict[str, float | str | int | bool]:
+        """Plain flat dict (the JSON output of ``wbc bench mpc``), the references' figures last when measured."""
+        out: dict[str, float | str | int | bool] = {"robot": self.robot, "controller": self.controller,
+                                                    "horizon": self.horizon, **self.ticks.as_dict(),
+                                                    "realtime_factor": self.realtime_factor,
+                                                    "warmup_episode_s": self.warmup_episode_s, "fell": self.fell,
+                                                    "blas": self.blas, "qp_solver": self.qp_solver,
+                                                    "machine": self.machine}
+        if self.reference is not None:
+            out.update(self.reference.as_dict())
+        return out
 
 
 @dataclass
@@ -84,7 +178,7 @@ class TickTimingLog:
         if "whole_body_s" in timings:
             self.whole_body_s.append(timings["whole_body_s"])
 
-    def figures(self, episode: Episode) -> dict[str, float]:
+    def figures(self, episode: Episode) -> MpcTickFigures:
         """Medians (and the solve's 99th percentile) in the units of their names; nan where no tick was filed.
 
         Args:
@@ -92,13 +186,13 @@ class TickTimingLog:
         """
         solves = self.mpc_solve_s
         control_s = episode.act_s[self.plain_ticks].tolist()
-        return {
-            "mpc_solve_ms_median": _median(solves, 1e3),
-            "mpc_solve_ms_p99": 1e3 * float(np.percentile(solves, 99)) if solves else math.nan,
-            "mpc_setup_ms_median": _median(self.mpc_setup_s, 1e3),
-            "wbc_tick_us_median": _median(self.whole_body_s, 1e6),
-            "control_tick_us_median": _median(control_s, 1e6),
-        }
+        return MpcTickFigures(
+            mpc_solve_ms_median=_median(solves, 1e3),
+            mpc_solve_ms_p99=1e3 * float(np.percentile(solves, 99)) if solves else math.nan,
+            mpc_setup_ms_median=_median(self.mpc_setup_s, 1e3),
+            wbc_tick_us_median=_median(self.whole_body_s, 1e6),
+            control_tick_us_median=_median(control_s, 1e6),
+        )
 
 
 def physics_realtime_factor(sim: MujocoRobot, seconds: float = 1.0) -> float:
@@ -120,7 +214,7 @@ def physics_realtime_factor(sim: MujocoRobot, seconds: float = 1.0) -> float:
 
 
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
-              single_thread: bool = True, reference: bool = True) -> dict[str, float | str | int]:
+              single_thread: bool = True, reference: bool = True) -> MpcBenchResult:
     """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
 
     With `single_thread` (the default) it runs in a spawned process whose BLAS is single-threaded, as every arena
@@ -140,12 +234,11 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured before and after the
     closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`), the bare A1's
     single-threaded physics (`reference_a1`) and the same robot's physics alone (`physics_realtime_factor`). The
-    results then include ``reference_placo_tick_us``, ``reference_steps_per_s``, ``physics_realtime_factor``, the
-    ratios issue 16 sets its targets on, ``control_tick_over_reference_tick`` (the control tick's median over the
-    reference PlaCo tick; target <= 1.8) and ``closed_loop_over_physics_rtf`` (the closed loop's real-time factor
-    over the same robot's physics-only one; target >= 0.075), and the older targets scaled by the references to this
-    machine: ``scaled_target_wbc_tick_us`` (100 us times the reference tick over 40 us) and
-    ``scaled_target_realtime_factor`` (5x times the reference physics over 110k steps/s).
+    result then holds them (`MpcReference`) with the ratios the targets are set on, ``control_tick_over_reference_tick``
+    (the control tick's median over the reference PlaCo tick; target <= 1.8) and ``closed_loop_over_physics_rtf``
+    (the closed loop's real-time factor over the same robot's physics-only one; target >= 0.075), and the older
+    targets scaled by the references to this machine: ``scaled_target_wbc_tick_us`` (100 us times the reference tick
+    over 40 us) and ``scaled_target_realtime_factor`` (5x times the reference physics over 110k steps/s).
 
     Args:
         robot: robot registry name.
@@ -156,7 +249,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         reference: also measure the references.
 
     Returns:
-        The figures above, ``horizon``, ``fell``, ``blas`` and ``machine``.
+        The figures above with the horizon, whether the robot fell, the BLAS threading and the machine.
 
     Raises:
         UnknownNameError: unknown robot or controller.
@@ -166,7 +259,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
                                  reference=reference).result()
-        return {**result, "blas": "single-threaded"}
+        return replace(result, blas="single-threaded")
     spec = get_controller(controller)
     sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
     ctrl = spec.make(sim.desc)
@@ -199,27 +292,16 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
             measure_references()
     figures = log.figures(episode)
     realtime = episode.survived_s / wall
-    references: dict[str, float] = {}
+    refs = None
     if reference:
         tick_ref, rate_ref, physics_rtf = float(np.mean(ref_ticks)), max(ref_rates), max(physics)
-        references = {"reference_placo_tick_us": tick_ref, "reference_steps_per_s": rate_ref,
-                      "physics_realtime_factor": physics_rtf,
-                      "control_tick_over_reference_tick": figures["control_tick_us_median"] / tick_ref,
-                      "closed_loop_over_physics_rtf": realtime / physics_rtf,
-                      "scaled_target_wbc_tick_us": scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"],
-                                                                 tick_ref),
-                      "scaled_target_realtime_factor": scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"],
-                                                                     rate_ref)}
-    return {
-        "robot": robot,
-        "controller": controller,
-        "horizon": int(ctrl.config.mpc.horizon),
-        **figures,
-        "realtime_factor": realtime,
-        "warmup_episode_s": warmup_wall,
-        "fell": bool(episode.fell),
-        "blas": "default threads",
-        "qp_solver": f"daqp {importlib.metadata.version('daqp')}",
-        "machine": machine_description(),
-        **references,
-    }
+        refs = MpcReference(
+            reference_placo_tick_us=tick_ref, reference_steps_per_s=rate_ref, physics_realtime_factor=physics_rtf,
+            control_tick_over_reference_tick=figures.control_tick_us_median / tick_ref,
+            closed_loop_over_physics_rtf=realtime / physics_rtf,
+            scaled_target_wbc_tick_us=scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"], tick_ref),
+            scaled_target_realtime_factor=scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"], rate_ref))
+    return MpcBenchResult(robot=robot, controller=controller, horizon=int(ctrl.config.mpc.horizon), ticks=figures,
+                          realtime_factor=realtime, warmup_episode_s=warmup_wall, fell=bool(episode.fell),
+                          blas="default threads", qp_solver=f"daqp {importlib.metadata.version('daqp')}",
+                          machine=machine_description(), reference=refs)

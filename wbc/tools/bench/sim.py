@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 
 import mujoco
 from mujoco import rollout
@@ -14,7 +15,82 @@ from wbc.scenario.terrain import TerrainConfig
 from wbc.tools.bench.batched_rollout import BatchedRollout
 from wbc.tools.bench.references import REFERENCE_TARGETS, machine_description, reference_a1, scaled_target
 
-__all__ = ["bench_sim"]
+__all__ = ["SimBenchResult", "SimReference", "bench_sim"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimReference:
+    """The bare A1 (`reference_a1`) measured beside the robot, and the simulator's targets scaled by it.
+
+    Attributes:
+        steps_per_s: the bare A1 stepped single-threaded [steps/s].
+        batched_steps_per_s: the bare A1 through the same batched rollout [steps/s].
+        steps_ratio_to_reference: the robot's single-threaded rate over the bare A1's.
+        batched_ratio_to_reference: the robot's batched rate over the bare A1's.
+        scaled_target_steps_per_s: the single-threaded target (`REFERENCE_TARGETS`) scaled to this machine [steps/s].
+        scaled_target_batched_steps_per_s: the batched target scaled to this machine [steps/s].
+    """
+
+    steps_per_s: float
+    batched_steps_per_s: float
+    steps_ratio_to_reference: float
+    batched_ratio_to_reference: float
+    scaled_target_steps_per_s: float
+    scaled_target_batched_steps_per_s: float
+
+    def as_dict(self) -> dict[str, float]:
+        """The figures under their keys in `SimBenchResult.as_dict` (the bare A1's rates prefixed ``reference_``)."""
+        return {"reference_steps_per_s": self.steps_per_s,
+                "reference_batched_steps_per_s": self.batched_steps_per_s,
+                "steps_ratio_to_reference": self.steps_ratio_to_reference,
+                "batched_ratio_to_reference": self.batched_ratio_to_reference,
+                "scaled_target_steps_per_s": self.scaled_target_steps_per_s,
+                "scaled_target_batched_steps_per_s": self.scaled_target_batched_steps_per_s}
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimBenchResult:
+    """What `bench_sim` measured: a robot's physics throughput, and the bare-A1 reference's when it was measured.
+
+    Attributes:
+        robot: robot registry name.
+        arm_mode: ``actuated``, ``locked`` or ``none``.
+        terrain: ``flat`` or ``fractal``.
+        timestep_s: the physics step [s].
+        steps_per_s: single-threaded physics rate, best of the repeats [steps/s].
+        batched_steps_per_s: batched rollout rate over all environments, best of the repeats [steps/s].
+        realtime_factor: simulated seconds per wall-clock second, single-threaded.
+        batch: environments in the batched rollout.
+        threads: rollout threads.
+        final_base_height_m: the base's height at the end of the first environment's rollout [m] (it stood).
+        machine: `machine_description`.
+        reference: the bare A1's figures, or None when they were not measured.
+    """
+
+    robot: str
+    arm_mode: str
+    terrain: str
+    timestep_s: float
+    steps_per_s: float
+    batched_steps_per_s: float
+    realtime_factor: float
+    batch: int
+    threads: int
+    final_base_height_m: float
+    machine: str
+    reference: SimReference | None = None
+
+    def as_dict(self) -> dict[str, float | str | int]:
+        """Plain flat dict (the JSON output of ``wbc bench sim``): the reference's keys follow when measured."""
+        out: dict[str, float | str | int] = {
+            "robot": self.robot, "arm_mode": self.arm_mode, "terrain": self.terrain, "timestep_s": self.timestep_s,
+            "steps_per_s": self.steps_per_s, "batched_steps_per_s": self.batched_steps_per_s,
+            "realtime_factor": self.realtime_factor, "batch": self.batch, "threads": self.threads,
+            "final_base_height_m": self.final_base_height_m, "machine": self.machine,
+        }
+        if self.reference is not None:
+            out.update(self.reference.as_dict())
+        return out
 
 
 def bench_sim(
@@ -28,7 +104,7 @@ def bench_sim(
     repeats: int = 5,
     terrain: str = "flat",
     reference: bool = True,
-) -> dict[str, float | str | int]:
+) -> SimBenchResult:
     """Physics throughput of a robot standing under the motor law, beside the bare-A1 reference.
 
     Single-threaded: `MujocoRobot.advance` over `seconds` of simulated time (best of `repeats`). Batched:
@@ -49,11 +125,9 @@ def bench_sim(
         reference: also measure the bare A1.
 
     Returns:
-        ``steps_per_s``, ``batched_steps_per_s`` [steps/s], ``realtime_factor`` and the settings used; with
-        `reference` also ``reference_steps_per_s``, ``reference_batched_steps_per_s``, the ratios
-        ``steps_ratio_to_reference``, ``batched_ratio_to_reference`` and the simulator's targets
-        (`REFERENCE_TARGETS`) scaled by this machine's reference (``scaled_target_steps_per_s``,
-        ``scaled_target_batched_steps_per_s``).
+        The single-threaded and batched rates, the real-time factor and the settings used; with `reference` also the
+        bare A1's rates, the ratios to them and the simulator's targets (`REFERENCE_TARGETS`) scaled by this
+        machine's reference (`SimReference`).
 
     Raises:
         UnknownNameError: unknown robot or arm mode.
@@ -83,24 +157,16 @@ def bench_sim(
                 best["ref_batched"] = max(best["ref_batched"], ref_batched.rate())
         rollout.shutdown_persistent_pool()
         height = float(batched.out[0, -1, 1 + 2])  # time is state[0]; qpos starts at 1
-    out: dict[str, float | str | int] = {
-        "robot": robot,
-        "arm_mode": arm_mode,
-        "terrain": terrain,
-        "timestep_s": dt,
-        "steps_per_s": best["single"],
-        "batched_steps_per_s": best["batched"],
-        "realtime_factor": best["single"] * dt,
-        "batch": batch,
-        "threads": nthread,
-        "final_base_height_m": height,
-        "machine": machine_description(),
-    }
+    figures = None
     if reference:
-        out["reference_steps_per_s"] = best["ref_single"]
-        out["reference_batched_steps_per_s"] = best["ref_batched"]
-        out["steps_ratio_to_reference"] = best["single"] / best["ref_single"]
-        out["batched_ratio_to_reference"] = best["batched"] / best["ref_batched"]
-        for key, ref_key in (("steps_per_s", "ref_single"), ("batched_steps_per_s", "ref_batched")):
-            out[f"scaled_target_{key}"] = scaled_target(REFERENCE_TARGETS[key], best[ref_key])
-    return out
+        figures = SimReference(
+            steps_per_s=best["ref_single"], batched_steps_per_s=best["ref_batched"],
+            steps_ratio_to_reference=best["single"] / best["ref_single"],
+            batched_ratio_to_reference=best["batched"] / best["ref_batched"],
+            scaled_target_steps_per_s=scaled_target(REFERENCE_TARGETS["steps_per_s"], best["ref_single"]),
+            scaled_target_batched_steps_per_s=scaled_target(REFERENCE_TARGETS["batched_steps_per_s"],
+                                                            best["ref_batched"]))
+    return SimBenchResult(robot=robot, arm_mode=arm_mode, terrain=terrain, timestep_s=dt, steps_per_s=best["single"],
+                          batched_steps_per_s=best["batched"], realtime_factor=best["single"] * dt, batch=batch,
+                          threads=nthread, final_base_height_m=height, machine=machine_description(),
+                          reference=figures)

@@ -16,6 +16,7 @@ scaled to this machine's speed (``scaled_target_control_steps_per_s``).
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -32,11 +33,112 @@ from wbc.tools.bench.references import (
     scaled_target,
 )
 
-__all__ = ["bench_train"]
+__all__ = ["TrainBenchResult", "TrainReference", "bench_train"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainReference:
+    """The bare-A1 physics limit measured beside the env, and the target (`TRAIN_TARGET`) scaled by it.
+
+    Attributes:
+        physics_limit_control_steps_per_s: the bare A1's batched physics rate over
+            `REFERENCE_STEPS_PER_CONTROL_STEP` [control steps/s].
+        control_steps_ratio_to_reference: the env's control steps per second over that limit.
+        scaled_target_control_steps_per_s: 15k control steps/s times this machine's limit over 21.8k
+            [control steps/s].
+    """
+
+    physics_limit_control_steps_per_s: float
+    control_steps_ratio_to_reference: float
+    scaled_target_control_steps_per_s: float
+
+    def as_dict(self) -> dict[str, float]:
+        """The figures under their keys in `TrainBenchResult.as_dict` (the limit prefixed ``reference_``)."""
+        return {"reference_physics_limit_control_steps_per_s": self.physics_limit_control_steps_per_s,
+                "control_steps_ratio_to_reference": self.control_steps_ratio_to_reference,
+                "scaled_target_control_steps_per_s": self.scaled_target_control_steps_per_s}
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainBenchResult:
+    """What `bench_train` measured: the batched env's throughput, its physics limit and its CPU time.
+
+    Attributes:
+        control_steps_per_s: policy steps of all environments per second, best of the repeats [steps/s].
+        physics_steps_per_s: the same times `decimation` [steps/s].
+        rollout_only_control_steps_per_s: the same `mujoco.rollout` calls with nothing in Python between them: the
+            physics limit [control steps/s].
+        env_efficiency: `control_steps_per_s` over that limit.
+        python_ms_per_step: wall time of the env's Python per policy step (all environments) [ms].
+        python_cpu_ms_per_step: CPU time of the env's Python per policy step, best of the repeats [ms].
+        physics_cpu_ms_per_step: CPU time of the rollout per policy step, all its threads [ms].
+        cpu_bound_control_steps_per_s: the rate with the `threads` cores to itself, from the CPU times
+            [control steps/s].
+        cpu_bound_physics_only_control_steps_per_s: the same for the physics alone [control steps/s].
+        resets_per_step: environments reset (terminated or timed out) per policy step.
+        num_envs: environments.
+        threads: rollout threads.
+        decimation: physics steps per policy step.
+        timestep_s: the physics step [s].
+        robot: robot registry name.
+        arm_mode: the env's arm mode.
+        terrain: the env's terrain.
+        mujoco: MuJoCo's version.
+        machine: `machine_description`.
+        reference: the bare-A1 reference, or None when it was not measured.
+    """
+
+    control_steps_per_s: float
+    physics_steps_per_s: float
+    rollout_only_control_steps_per_s: float
+    env_efficiency: float
+    python_ms_per_step: float
+    python_cpu_ms_per_step: float
+    physics_cpu_ms_per_step: float
+    cpu_bound_control_steps_per_s: float
+    cpu_bound_physics_only_control_steps_per_s: float
+    resets_per_step: float
+    num_envs: int
+    threads: int
+    decimation: int
+    timestep_s: float
+    robot: str
+    arm_mode: str
+    terrain: str
+    mujoco: str
+    machine: str
+    reference: TrainReference | None = None
+
+    def as_dict(self) -> dict[str, float | int | str]:
+        """Plain flat dict (the JSON output of ``wbc bench train``): the reference's keys follow when measured."""
+        out: dict[str, float | int | str] = {
+            "control_steps_per_s": self.control_steps_per_s,
+            "physics_steps_per_s": self.physics_steps_per_s,
+            "rollout_only_control_steps_per_s": self.rollout_only_control_steps_per_s,
+            "env_efficiency": self.env_efficiency,
+            "python_ms_per_step": self.python_ms_per_step,
+            "python_cpu_ms_per_step": self.python_cpu_ms_per_step,
+            "physics_cpu_ms_per_step": self.physics_cpu_ms_per_step,
+            "cpu_bound_control_steps_per_s": self.cpu_bound_control_steps_per_s,
+            "cpu_bound_physics_only_control_steps_per_s": self.cpu_bound_physics_only_control_steps_per_s,
+            "resets_per_step": self.resets_per_step,
+            "num_envs": self.num_envs,
+            "threads": self.threads,
+            "decimation": self.decimation,
+            "timestep_s": self.timestep_s,
+            "robot": self.robot,
+            "arm_mode": self.arm_mode,
+            "terrain": self.terrain,
+            "mujoco": self.mujoco,
+            "machine": self.machine,
+        }
+        if self.reference is not None:
+            out.update(self.reference.as_dict())
+        return out
 
 
 def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: int = 3,
-                action_std: float = 0.5, reference: bool = True) -> dict[str, float | int | str]:
+                action_std: float = 0.5, reference: bool = True) -> TrainBenchResult:
     """Measure the batched env.
 
     Args:
@@ -48,14 +150,8 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
         reference: also measure the bare-A1 reference (64 environments, `nthread` threads), interleaved.
 
     Returns:
-        ``control_steps_per_s`` (policy steps of all environments per second), ``physics_steps_per_s`` (the same
-        figure times `decimation`), ``rollout_only_control_steps_per_s`` (the physics limit), ``env_efficiency``
-        (their ratio), ``python_ms_per_step``, the CPU-time figures (``python_cpu_ms_per_step``,
-        ``physics_cpu_ms_per_step``, ``cpu_bound_control_steps_per_s``,
-        ``cpu_bound_physics_only_control_steps_per_s``) and the settings; with `reference` also
-        ``reference_physics_limit_control_steps_per_s`` (the bare A1's batched physics steps/s over 10),
-        ``control_steps_ratio_to_reference`` and ``scaled_target_control_steps_per_s`` (`TRAIN_TARGET` scaled:
-        15k times this machine's reference over 21.8k).
+        The env's control steps per second beside the physics limit, its CPU-time figures and the settings; with
+        `reference` also the bare-A1 limit and `TRAIN_TARGET` scaled by it (`TrainReference`).
     """
     cfg = config if config is not None else EnvConfig()
     env = BatchedEnv(cfg)
@@ -91,31 +187,30 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
             cpu_raw = min(cpu_raw, (time.process_time() - c0) / steps)
     finally:
         env.close()
-    figures: dict[str, float] = {}
+    figures = None
     if reference:
         limit = best_ref / REFERENCE_STEPS_PER_CONTROL_STEP
-        figures = {"reference_physics_limit_control_steps_per_s": limit,
-                   "control_steps_ratio_to_reference": best / limit,
-                   "scaled_target_control_steps_per_s": scaled_target(TRAIN_TARGET, limit)}
-    return {
-        "control_steps_per_s": best,
-        "physics_steps_per_s": best * cfg.decimation,
-        "rollout_only_control_steps_per_s": best_raw,
-        "env_efficiency": best / best_raw,
-        "python_ms_per_step": 1e3 * max(0.0, n / best - n / best_raw),
-        "python_cpu_ms_per_step": 1e3 * cpu_python,
-        "physics_cpu_ms_per_step": 1e3 * cpu_physics,
-        "cpu_bound_control_steps_per_s": n / (cpu_python + cpu_physics / cfg.nthread),
-        "cpu_bound_physics_only_control_steps_per_s": n / (cpu_physics / cfg.nthread),
-        "resets_per_step": resets / (repeats * steps),
-        "num_envs": n,
-        "threads": cfg.nthread,
-        "decimation": cfg.decimation,
-        "timestep_s": cfg.timestep,
-        "robot": cfg.robot,
-        "arm_mode": cfg.arm_mode,
-        "terrain": cfg.terrain,
-        "mujoco": mujoco.__version__,
-        "machine": machine_description(),
-        **figures,
-    }
+        figures = TrainReference(physics_limit_control_steps_per_s=limit, control_steps_ratio_to_reference=best / limit,
+                                 scaled_target_control_steps_per_s=scaled_target(TRAIN_TARGET, limit))
+    return TrainBenchResult(
+        control_steps_per_s=best,
+        physics_steps_per_s=best * cfg.decimation,
+        rollout_only_control_steps_per_s=best_raw,
+        env_efficiency=best / best_raw,
+        python_ms_per_step=1e3 * max(0.0, n / best - n / best_raw),
+        python_cpu_ms_per_step=1e3 * cpu_python,
+        physics_cpu_ms_per_step=1e3 * cpu_physics,
+        cpu_bound_control_steps_per_s=n / (cpu_python + cpu_physics / cfg.nthread),
+        cpu_bound_physics_only_control_steps_per_s=n / (cpu_physics / cfg.nthread),
+        resets_per_step=resets / (repeats * steps),
+        num_envs=n,
+        threads=cfg.nthread,
+        decimation=cfg.decimation,
+        timestep_s=cfg.timestep,
+        robot=cfg.robot,
+        arm_mode=cfg.arm_mode,
+        terrain=cfg.terrain,
+        mujoco=mujoco.__version__,
+        machine=machine_description(),
+        reference=figures,
+    )
