@@ -1,11 +1,13 @@
 """A broken controller costs its own trials, never the comparison.
 
 Plug-ins broken in each way a controller can break (it raises late in a trial, returns NaN, returns the wrong number
-of joints, raises in ``reset``) are compared with ``stand``: every ``stand`` trial is recorded exactly as when
+of joints, raises in ``reset``), and two that are only slow (late on every tick) or saturating (a torque the motors
+cannot give), are compared with ``stand``: every ``stand`` trial is recorded exactly as when
 ``stand`` plays alone, every broken trial is recorded with the outcome ``controller_error`` and a message naming the
 controller, the trial and the plug-in's own file and line, and the command ends with status 1 and one line per failing
 controller. A controller failing on K trials in a row is stopped while the others finish, on the local pool and on
-Ray, and a resumed run plays none of the recorded failures again.
+Ray, and a resumed run plays none of the recorded failures again. The slow and the saturating plug-ins fail nothing:
+their late and clamped ticks are counted in every row and warned about, alike on both executors.
 """
 
 import dataclasses
@@ -98,6 +100,10 @@ BROKEN = {
     "short": ("returns 12 of 15 joints", "pass",
               "out = MotorCommand(q=out.q[:12], dq=out.dq[:12], kp=out.kp[:12], kd=out.kd[:12], tau=out.tau[:12])"),
     "reset": ("raises in reset", 'raise KeyError("no calibration")  # MARK', "pass"),
+    # not errors: late on every tick (21 ms at a 20 ms period), and a torque the motors cannot give on every tick
+    "slow": ("acts in 21 ms", "pass", '__import__("time").sleep(0.021)'),
+    "saturating": ("asks for 1e5 N m", "pass",
+                   "out = MotorCommand(q=out.q, dq=out.dq, kp=out.kp, kd=out.kd, tau=np.full(15, 1e5))"),
     # fails every other trial this process plays (a counter kept across the controllers it builds)
     "flaky": ("fails every other trial", "pass",
               "if self.ticks == 1 and next(COUNT) % 2: raise ValueError(\"odd trial\")  # MARK"),
@@ -240,20 +246,41 @@ def test_a_controller_failing_k_trials_in_a_row_is_stopped_and_resume_replays_no
 
 def test_errors_are_recorded_alike_on_the_local_pool_and_on_ray(broken, scenario, stand_alone, tmp_path):
     pytest.importorskip("ray")
-    names = ("brokenpkg.late:make", "brokenpkg.short:make", "stand")
+    names = ("brokenpkg.late:make", "brokenpkg.nan:make", "brokenpkg.short:make", "stand")
     results = {}
     for executor, workers in (("local", 2), ("ray", None)):
         cfg = ArenaConfig(controllers=names, scenario=scenario, seeds=(0,), trials=2, out_dir=tmp_path / executor,
                           executor=executor, workers=workers, progress=False, max_consecutive_errors=0)
         result = run_arena(cfg)
         assert [(e.controller, e.errored, e.stopped) for e in result.controller_errors] == [
-            ("brokenpkg.late:make", 2, False), ("brokenpkg.short:make", 2, False)]
+            ("brokenpkg.late:make", 2, False), ("brokenpkg.nan:make", 2, False), ("brokenpkg.short:make", 2, False)]
         results[executor] = TrialRecord.read_csv(tmp_path / executor / "trials.csv")
     for name in names:
         assert _metrics(results["local"], name) == _metrics(results["ray"], name)
     assert _metrics(results["ray"], "stand") == _metrics(stand_alone, "stand")
     assert all(re.search(r"brokenpkg.late:make, band soft, seed \d, trial \d: act raised RuntimeError", r.error)
                for r in results["ray"] if r.controller == "brokenpkg.late:make")
+
+
+def test_slow_and_saturating_plugins_are_counted_not_failed_on_the_local_pool_and_on_ray(broken, scenario,
+                                                                                          stand_alone, tmp_path):
+    pytest.importorskip("ray")
+    names = ("brokenpkg.slow:make", "brokenpkg.saturating:make", "stand")
+    results = {}
+    for executor, workers in (("local", 2), ("ray", None)):
+        cfg = ArenaConfig(controllers=names, scenario=scenario, seeds=(0,), trials=2, out_dir=tmp_path / executor,
+                          executor=executor, workers=workers, progress=False)
+        result = run_arena(cfg)
+        assert result.controller_errors == ()  # late and saturated commands are reported, not failures
+        kinds = {(w.controller, w.kind) for w in result.summary.warnings}
+        assert kinds == {("brokenpkg.slow:make", "deadline_misses"), ("brokenpkg.saturating:make", "clamped_ticks")}
+        results[executor] = TrialRecord.read_csv(tmp_path / executor / "trials.csv")
+        by = {c: [r for r in results[executor] if r.controller == c] for c in names}
+        assert all(r.deadline_misses == r.ticks > 0 and r.outcome != "controller_error" for r in by[names[0]])
+        assert all(r.clamped_ticks == r.ticks > 0 and r.clamped_rows == f"tau={r.ticks}" for r in by[names[1]])
+    for name in names:
+        assert _metrics(results["local"], name) == _metrics(results["ray"], name)
+    assert _metrics(results["ray"], "stand") == _metrics(stand_alone, "stand")
 
 
 def _episode(fell, reasons=()):

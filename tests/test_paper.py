@@ -11,6 +11,7 @@ import json
 
 import pytest
 
+from wbc.arena.summary import PairSummary
 from wbc.cli.main import main
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
@@ -148,15 +149,16 @@ def test_contenders_can_be_replaced_and_tables_check_their_robot(tiny):
 
 
 def test_verdicts_name_the_better_side_only_when_the_test_says_so():
-    base = {"a": "pi2", "b": "pi3", "n80": 42, "test": "exact McNemar"}
-    assert verdict({**base, "metric": "success_rate", "diff": 0.2, "p": 0.01}) == (
-        "Success: pi3 better (+20.00 points, p = 0.01)")
-    assert verdict({**base, "metric": "vlin_err", "diff": 0.02, "p": 0.001}) == (
-        "V_lin err: pi2 better (+0.020, p = 0.001)")
-    assert verdict({**base, "metric": "success_rate", "diff": 0.05, "p": 0.5}) == (
+    def pair(metric, diff, p, n80=42):
+        return PairSummary(a="pi2", b="pi3", band="in", metric=metric, diff=diff, ci95=(None, None), interval=None,
+                           n=10, mean_a=None, mean_b=None, test="exact McNemar", p=p, n80=n80, a_only=None,
+                           b_only=None)
+
+    assert verdict(pair("success_rate", 0.2, 0.01)) == "Success: pi3 better (+20.00 points, p = 0.01)"
+    assert verdict(pair("vlin_err", 0.02, 0.001)) == "V_lin err: pi2 better (+0.020, p = 0.001)"
+    assert verdict(pair("success_rate", 0.05, 0.5)) == (
         "Success: no significant difference (p = 0.5; 42 pairs would detect the observed difference)")
-    assert verdict({**base, "metric": "ttf", "diff": 0.0, "p": 1.0, "n80": None}) == (
-        "TTF: no significant difference (p = 1)")
+    assert verdict(pair("ttf", 0.0, 1.0, n80=None)) == "TTF: no significant difference (p = 1)"
 
 
 def test_the_paper_rows_are_the_published_ones():

@@ -21,6 +21,7 @@ from wbc.arena.report import (
     write_report,
 )
 from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
+from wbc.arena.summary import Summary
 from wbc.errors import RecordError, UnknownNameError
 
 CONTROLLERS = ("mpc", "rl", "wbc")
@@ -105,8 +106,13 @@ def through_csv(records: list[TrialRecord], path) -> list[TrialRecord]:
     return TrialRecord.read_csv(path)
 
 
-def summary_of(records: list[TrialRecord], controllers=CONTROLLERS, bands=BANDS) -> dict:
+def summary_of(records: list[TrialRecord], controllers=CONTROLLERS, bands=BANDS) -> Summary:
     return summarize(records, scenario_name=SCENARIO, scenario_hash=HASH, controllers=controllers, bands=bands)
+
+
+def json_of(records: list[TrialRecord], controllers=CONTROLLERS, bands=BANDS) -> dict:
+    """The summary's JSON form (``summary.json``)."""
+    return summary_of(records, controllers, bands).to_json()
 
 
 # --- wbc.arena.record -------------------------------------------------------------------------------------------------
@@ -299,7 +305,7 @@ def test_paired_difference_rejects_repeated_trials():
 
 def test_summary_has_exactly_the_required_shape():
     records = arena_records()
-    summary = summary_of(records)
+    summary = json_of(records)
     assert set(summary) == {"scenario", "controllers", "paired", "warnings"}
     assert summary["warnings"] == []
     assert summary["scenario"] == {"name": SCENARIO, "hash": HASH}
@@ -343,7 +349,8 @@ def test_summary_has_exactly_the_required_shape():
 
 def test_summary_with_missing_cells_renders_null():
     records = [r for r in arena_records() if not (r.controller == "rl" and r.band == "push")]
-    summary = summary_of(records, controllers=(*CONTROLLERS, "ghost"), bands=(*BANDS, "ice"))
+    typed = summary_of(records, controllers=(*CONTROLLERS, "ghost"), bands=(*BANDS, "ice"))
+    summary = typed.to_json()
     text = json.dumps(summary, allow_nan=False)  # no NaN may reach JSON
     assert json.loads(text) == summary
     assert summary["controllers"]["ghost"]["bands"]["nominal"] == {
@@ -357,7 +364,8 @@ def test_summary_with_missing_cells_renders_null():
     missing = [p for p in summary["paired"] if p["b"] == "rl" and p["band"] == "push"]
     assert missing and all(p["diff"] is None and p["ci95"] == [None, None] and p["p"] is None and p["n"] == 0
                            and p["n80"] is None for p in missing)
-    assert "n/a" in format_table(summary)
+    assert "n/a" in format_table(typed)
+    assert Summary.from_json(json.loads(text)) == typed  # the one JSON form reads back to the same summary
 
 
 def test_summary_rejects_other_scenario_versions():
@@ -373,11 +381,11 @@ def test_summary_does_not_depend_on_the_order_trials_finished_in():
     cells = [[r for r in records if (r.controller, r.band) == (c, b)] for c in CONTROLLERS for b in BANDS]
     assert any(mean_std_over_seeds(cell, m) != mean_std_over_seeds(cell[::-1], m) for cell in cells
                for m in ("vlin_err", "vang_err", "energy_j"))
-    want = json.dumps(summary_of(records), indent=2)
+    want = json.dumps(json_of(records), indent=2)
     for seed in range(3):
         shuffled = list(records)
         np.random.default_rng(seed).shuffle(shuffled)
-        assert json.dumps(summary_of(shuffled), indent=2) == want
+        assert json.dumps(json_of(shuffled), indent=2) == want
     assert in_canonical_order(records[::-1], CONTROLLERS, BANDS) == records  # arena_records is in canonical order
     assert in_canonical_order(records, ("wbc", "mpc"), ("push",)) == [
         r for c in ("wbc", "mpc") for r in records if r.controller == c and r.band == "push"]
@@ -386,7 +394,7 @@ def test_summary_does_not_depend_on_the_order_trials_finished_in():
 def test_records_read_back_from_csv_give_the_same_summary(tmp_path):
     records = arena_records()
     back = through_csv(records, tmp_path / "trials.csv")
-    assert json.dumps(summary_of(back)) == json.dumps(summary_of(records))
+    assert json.dumps(json_of(back)) == json.dumps(json_of(records))
 
 
 def test_format_table_lists_controllers_bands_and_pairs():
@@ -399,9 +407,10 @@ def test_format_table_lists_controllers_bands_and_pairs():
     for header in ("Success %", "TTF", "V_lin err", "V_ang err", "trials"):
         assert header in table
     # success in percent with 2 decimals, as in the paper
-    rate = summary["controllers"]["mpc"]["bands"]["nominal"]["success_rate"]
-    assert f"{100 * rate['mean']:.2f} ± {100 * rate['std']:.2f}" in table
-    assert table == format_table(json.loads(json.dumps(summary)))  # deterministic, works on JSON read back
+    rate = summary.cell("mpc", "nominal")["success_rate"]
+    assert f"{100 * rate.mean:.2f} ± {100 * rate.std:.2f}" in table
+    # deterministic, and the same on the summary read back from its JSON
+    assert table == format_table(Summary.from_json(json.loads(json.dumps(summary.to_json()))))
 
 
 def test_write_report_writes_markdown_and_plots(tmp_path):

@@ -18,6 +18,7 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.paired_tests import mcnemar_exact, paired_success_interval
 from wbc.arena.record import TrialRecord, check_counters, decode_counters
 from wbc.arena.report import format_table, paired_comparison, summarize
+from wbc.arena.summary import Summary
 from wbc.arena.verdict import verdicts
 from wbc.arena.windows import common_window_values
 from wbc.errors import RecordError
@@ -125,7 +126,9 @@ def test_a_custom_counter_reaches_trials_csv_summary_and_report(plugins, tmp_pat
     assert summary["controllers"]["stand"]["bands"]["still"]["counters"] == {}
     report = (result.out_dir / "report.md").read_text()
     assert f"| still | {name} | ticks_seen | 100 | 2 | 50 |" in report
-    assert f"{name} in band still: fallbacks 0, ticks_seen 100" in format_table(summary)
+    assert f"{name} in band still: fallbacks 0, ticks_seen 100" in format_table(result.summary)
+    assert result.summary.to_json() == summary  # summary.json is the typed summary's one JSON form
+    assert len(result.records) == len(rows) and set(result.records) == set(rows)  # the result carries its records
 
 
 def test_clamped_and_late_ticks_are_counted_and_warned_about(plugins, tmp_path):
@@ -140,7 +143,7 @@ def test_clamped_and_late_ticks_are_counted_and_warned_about(plugins, tmp_path):
         assert slow.deadline_misses == slow.ticks == 50
         assert slow.act_ms_p50 >= 21.0
     summary = result.summary
-    kinds = {(w["controller"], w["kind"]) for w in summary["warnings"]}
+    kinds = {(w.controller, w.kind) for w in summary.warnings}
     assert ("countpkg.saturating:make", "clamped_ticks") in kinds
     assert ("countpkg.slow:make", "deadline_misses") in kinds
     assert not any(c == "stand" and k == "clamped_ticks" for c, k in kinds)
@@ -242,8 +245,8 @@ def test_the_verdict_says_who_survives_more_on_how_many_pairs_and_what_would_set
     tracking = next(line for line in lines if "linear velocity" in line)
     assert tracking.startswith("band b: mpc tracks the linear velocity better than learned over the seconds both "
                                "survived: mean error 0.100 against 0.200 m/s on 8 trials")
-    entry = next(p for p in summary["paired"] if p["metric"] == "success_rate")
-    assert entry["interval"] == "exact" and entry["ci95"][0] < 0 < entry["ci95"][1]  # agrees with p = 0.125
+    entry = next(p for p in summary.paired if p.metric == "success_rate")
+    assert entry.interval == "exact" and entry.ci95[0] < 0 < entry.ci95[1]  # agrees with p = 0.125
     assert format_table(summary).rstrip().splitlines()[-1].strip().endswith(")")
     assert "verdict (paired trials; significant: p < 0.05):" in format_table(summary)
     assert "verdict (paired" not in format_table(summary, verdict=False)
@@ -252,3 +255,27 @@ def test_the_verdict_says_who_survives_more_on_how_many_pairs_and_what_would_set
                      scenario_name="s", scenario_hash="h", controllers=["mpc", "twin"], bands=["b"])
     assert any("mpc and twin survive alike: 3 of 8 paired trials each, with no discordant pair" in line
                for line in verdicts(same))
+
+
+# --- the typed summary ---------------------------------------------------------------------------------------------
+
+
+def test_a_summary_reads_back_from_its_json_and_from_an_older_versions():
+    a = [_record("mpc", i, vlin=(0.1, 0.2)) for i in range(3)]
+    b = [_record("learned", i, success=i > 0, ttf=1.0 if i else 0.5, vlin=(0.3, 0.1)) for i in range(3)]
+    summary = summarize([*a, *b], scenario_name="s", scenario_hash="h", controllers=["mpc", "learned"], bands=["b"])
+    data = json.loads(json.dumps(summary.to_json(), allow_nan=False))
+    assert Summary.from_json(data) == summary
+    assert summary.cell("learned", "b")["success_rate"].mean == pytest.approx(2 / 3)
+    assert summary.cell("ghost", "b") is None and summary.bands == ["b"] and summary.stored == 6
+    # a summary.json of the version before ticks, counters and common windows: those read as none
+    old = {"scenario": {"name": "s", "hash": "h"},
+           "controllers": {"mpc": {"bands": {"b": {"trials": 3, "seeds": 1,
+                                                   "success_rate": {"mean": 1.0, "std": 0.0, "ci95": [0.4, 1.0]}}}}},
+           "paired": []}
+    read = Summary.from_json(old)
+    cell = read.cell("mpc", "b")
+    assert cell.ticks == 0 and cell.counters == {} and "vlin_err_common" not in cell and read.warnings == ()
+    assert "100.00 [40.00, 100.00]  n/a" in format_table(read)  # what it has prints; what it lacks is n/a
+    with pytest.raises(RecordError, match="summary.json: not a summary"):
+        Summary.from_json({"controllers": {}}, source="summary.json")

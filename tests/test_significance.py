@@ -21,6 +21,7 @@ from wbc.arena.record import TrialRecord
 from wbc.arena.report import cell_text, format_table, paired_comparison, summarize
 from wbc.arena.sequential import DiscordantPairTest, SequentialComparison, mixture_log_e
 from wbc.arena.stats import wilson_interval
+from wbc.arena.summary import MetricSummary
 from wbc.errors import ConfigError, RecordError
 
 
@@ -171,7 +172,7 @@ def test_one_seed_tables_show_an_interval_over_trials_not_a_zero_spread():
     assert "± 0.00" not in table
     assert "exact McNemar" in table and "n80" in table
     # several seeds: the spread across them, as the paper prints
-    cell = {"mean": 0.9, "std": 0.05, "ci95": [0.8, 0.95]}
+    cell = MetricSummary(mean=0.9, std=0.05, ci95=(0.8, 0.95))
     assert cell_text(cell, "success_rate", 5) == "90.00 ± 5.00"
     assert cell_text(cell, "success_rate", 1) == "90.00 [80.00, 95.00]"
 
@@ -278,7 +279,7 @@ def test_until_significant_stops_the_run_once_the_difference_is_settled(limp, tm
     # test reaches 1 / alpha = 20 at the 7th (E = 1, 1, 1.5, 2.5, 4.4, 7.9, 14.4, 26.8)
     assert all(r.success for r in records if r.controller == "stand")
     assert not any(r.success for r in records if r.controller == limp)
-    sequential = result.summary["sequential"]
+    sequential = result.summary.sequential
     assert sequential["settled"] and sequential["rounds"] == 7
     assert sequential["tests"][0]["rejected_after_pairs"] == 7 and sequential["tests"][0]["b_only"] == 0
     assert len(records) == 14 and result.played == 14 and result.budget == 24

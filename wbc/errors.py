@@ -153,7 +153,7 @@ class MpcProblemFileError(WbcError, ValueError):
 
 
 class RecordError(WbcError, ValueError):
-    """A trial record or a ``trials.csv`` row is malformed.
+    """A trial record, a ``trials.csv`` row or a run's identity (``run.json``) is malformed.
 
     A field is missing or mistyped, a trial is repeated, or a record comes from another scenario version; the message
     names the field (and the file and line) at fault.

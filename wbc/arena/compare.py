@@ -20,23 +20,26 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import itertools
-import json
 import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from wbc.arena.breakdown import breakdown, push_outcomes, recovery_curve
-from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErrors, ErrorGuard, outcome_counts
+from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErrors, ErrorGuard
 from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
+from wbc.arena.finish import finish_results
+from wbc.arena.identity import ControllerFile, ScenarioRef, SequentialStop, SimulatedRunIdentity
 from wbc.arena.progress import progress
 from wbc.arena.record import TrialRecord
-from wbc.arena.report import summarize, write_report
+from wbc.arena.report import summarize
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import TickObserver
 from wbc.arena.sequential import SequentialComparison
 from wbc.arena.stats import in_canonical_order
+from wbc.arena.summary import Summary
 from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
@@ -142,7 +145,12 @@ class ArenaResult:
     """What `run_arena` produced.
 
     Attributes:
-        summary: the ``summary.json`` content.
+        summary: the run's summary (``summary.json`` is its `Summary.to_json`).
+        records: every record of the run, this call's and those resumed from disk, in canonical order (controllers
+            as named, bands, seeds, trials): what the summary was computed from, so that nothing re-reads
+            ``trials.csv``.
+        failures: where each controller fails (``failures.json``'s ``breakdown``, `wbc.arena.breakdown.breakdown`).
+        curve: the push-recovery curve (``failures.json``'s ``push_recovery``).
         out_dir: the results directory.
         played: trials played by this call (not counting those resumed from disk).
         wall_s: wall time of this call [s].
@@ -153,7 +161,10 @@ class ArenaResult:
             the order the controllers were named; empty when none did.
     """
 
-    summary: dict
+    summary: Summary
+    records: tuple[TrialRecord, ...]
+    failures: dict[str, Any]
+    curve: dict[str, Any]
     out_dir: Path
     played: int
     wall_s: float
@@ -218,24 +229,19 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
     if cfg.no_push:
         trials = [dataclasses.replace(t, pushes=()) for t in trials]
-    identity = {
-        "controllers": list(cfg.controllers),
-        "scenario": {"path": str(cfg.scenario), "name": scenario.name, "version": scenario.version,
-                     "hash": scenario.hash, "published": published},
-        "bands": list(bands),
-        "seeds": list(cfg.seeds),
-        "trials": cfg.trials,
-        "no_push": cfg.no_push,
-        "debug_truth": cfg.debug_truth,
-    }
-    if cfg.until_significant:  # only then, so that a fixed-budget run resumes a directory written before the option
-        identity["until_significant"] = {"alpha": cfg.alpha,
-                                          "pairs": [list(p) for p in _tested_pairs(cfg)]}
-    files = _files_of(specs)
-    if files:  # only then, so that a run of registered controllers resumes a directory written before files existed
-        identity["controller_files"] = files
-    if cfg.max_consecutive_errors != DEFAULT_MAX_CONSECUTIVE_ERRORS:  # only then, as above
-        identity["max_consecutive_errors"] = cfg.max_consecutive_errors
+    # the options left unset are absent from run.json, so that a run resumes a directory written before they existed
+    identity = SimulatedRunIdentity(
+        controllers=tuple(cfg.controllers),
+        scenario=ScenarioRef(path=str(cfg.scenario), name=scenario.name, version=scenario.version,
+                             hash=scenario.hash, published=published),
+        bands=tuple(bands), seeds=tuple(cfg.seeds), trials=cfg.trials, no_push=cfg.no_push,
+        debug_truth=cfg.debug_truth,
+        until_significant=(SequentialStop(alpha=cfg.alpha, pairs=_tested_pairs(cfg)) if cfg.until_significant
+                           else None),
+        controller_files=tuple(ControllerFile(controller=name, path=f["path"], sha256=f["sha256"])
+                               for name, f in _files_of(specs).items()),
+        max_consecutive_errors=cfg.max_consecutive_errors,
+    )
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume,
                          controllers={name: spec.provenance() for name, spec in specs.items()})
     done = store.done()
@@ -289,19 +295,14 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     # in canonical order: the store holds them in the order they finished, which varies between runs
     records = in_canonical_order((r for r in store.records if r.scenario_hash == scenario.hash), cfg.controllers,
                                  scenario.bands)
-    summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
-                        controllers=list(cfg.controllers), bands=list(bands))
     per_controller = len(trials) if rounds is None else rounds.played * len(bands)
     errors = guard.report([r for r in store.records if r.scenario_hash == scenario.hash], per_controller)
-    _add_outcomes(summary, records, errors)
-    if rounds is not None:
-        summary["sequential"] = rounds.comparison.as_dict()
+    summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
+                        controllers=list(cfg.controllers), bands=list(bands), errors=errors,
+                        sequential=rounds.comparison.as_dict() if rounds is not None else None)
     outcomes = push_outcomes(records, scenario.trial)
     failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands)
     curve = recovery_curve(outcomes, controllers=cfg.controllers)
-    (store.dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
-    (store.dir / "failures.json").write_text(json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2),
-                                             encoding="utf-8")
     meta = {
         "controllers": ", ".join(cfg.controllers),
         "scenario": f"{scenario.name} v{scenario.version} ({cfg.scenario})",
@@ -318,27 +319,16 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         **{k: v for k, v in store.environment.items() if k != "packages"},
         "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
     }
-    write_report(store.dir, summary, records, meta, failures=failures, curve=curve)
+    finish_results(store.dir, summary, records, meta, failures=failures, curve=curve)
     expected = ({(c, *t.key) for t in trials for c in cfg.controllers} if rounds is None else
                 {key for i in rounds.begun for key in rounds.keys(i)})
     missing = expected - {r.run_key for r in records}
     if any(not guard.stopped(key[0]) for key in missing):
         raise ResultsDirError(f"{store.dir}: {len(expected) - len(missing)} of {len(expected)} trials stored; rerun "
                               "with --resume to play the rest")
-    return ArenaResult(summary=summary, out_dir=store.dir, played=played, wall_s=wall, physics_steps=steps,
-                       budget=total, controller_errors=tuple(errors))
-
-
-def _add_outcomes(summary: dict, records: Sequence[TrialRecord], errors: Sequence[ControllerErrors]) -> None:
-    """Count every outcome per controller and band into `summary`, and add the failing controllers' errors.
-
-    Each band's entry gets ``outcomes`` ({outcome: trials}, every outcome listed); ``controller_errors`` maps each
-    controller that failed to `ControllerErrors.as_dict` (empty when none did).
-    """
-    for controller, entry in summary["controllers"].items():
-        for band, cell in entry["bands"].items():
-            cell["outcomes"] = outcome_counts(r for r in records if r.controller == controller and r.band == band)
-    summary["controller_errors"] = {e.controller: e.as_dict() for e in errors}
+    return ArenaResult(summary=summary, records=tuple(records), failures=failures, curve=curve, out_dir=store.dir,
+                       played=played, wall_s=wall, physics_steps=steps, budget=total,
+                       controller_errors=tuple(errors))
 
 
 def _tested_pairs(cfg: ArenaConfig) -> tuple[tuple[str, str], ...]:

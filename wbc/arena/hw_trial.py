@@ -52,10 +52,13 @@ from threadpoolctl import threadpool_limits
 from wbc.arena.base_estimate import BaseEstimate
 from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.episode import Episode
+from wbc.arena.error_guard import ErrorGuard
 from wbc.arena.estimated_robot import EstimatedRobot
+from wbc.arena.finish import finish_results
+from wbc.arena.identity import HardwareRunIdentity, ScenarioRef
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
 from wbc.arena.record import TrialRecord
-from wbc.arena.report import md_table, summarize, write_report
+from wbc.arena.report import md_table, summarize
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
@@ -377,20 +380,13 @@ def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
 def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial: Trial, *, published: bool) -> None:
     record, episode, hardware = result.record, result.episode, result.robot
     scenario_name, scenario_hash = trial.scenario, trial.scenario_hash
-    identity = {
-        "command": "hw run",
-        "controllers": [record.controller],
-        "scenario": {"path": str(cfg.scenario), "name": scenario_name, "hash": scenario_hash,
-                     "published": published},
-        "bands": [trial.band],
-        "seeds": [trial.seed],
-        "trial": trial.index,
-        "duration_s": trial.duration_s,
-        "robot": hardware.description.name,
-        "arm_mode": hardware.description.arm_mode,
-        "backend": hardware.backend,
-        "target": hardware.target,
-    }
+    identity = HardwareRunIdentity(
+        controllers=(record.controller,),
+        scenario=ScenarioRef(path=str(cfg.scenario), name=scenario_name, hash=scenario_hash, published=published),
+        bands=(trial.band,), seeds=(trial.seed,), trial=trial.index, duration_s=trial.duration_s,
+        robot=hardware.description.name, arm_mode=hardware.description.arm_mode, backend=hardware.backend,
+        target=hardware.target,
+    )
     store = ResultsStore(result.out_dir, identity, resume=False,
                          controllers={result.controller.name: result.controller.provenance()})
     try:
@@ -400,9 +396,10 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
     path = episode_path(store.dir, record.controller, trial.band, trial.seed, trial.index)
     path.parent.mkdir(parents=True, exist_ok=True)
     episode.save(str(path))
+    guard = ErrorGuard([record.controller], 0)
+    guard.observe(record)
     summary = summarize([record], scenario_name=scenario_name, scenario_hash=scenario_hash,
-                        controllers=[record.controller], bands=[trial.band])
-    (store.dir / "summary.json").write_text(json.dumps(summary, indent=2), encoding="utf-8")
+                        controllers=[record.controller], bands=[trial.band], errors=guard.report([record], 1))
     hardware_json = {
         "robot": hardware.description.name, "arm_mode": hardware.description.arm_mode, "backend": hardware.backend,
         "target": hardware.target, "control_rate_hz": 1.0 / episode.control_dt, "notes": list(result.notes),
@@ -427,7 +424,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         **{k: v for k, v in store.environment.items() if k != "packages"},
         "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
     }
-    write_report(store.dir, summary, [record], meta, sections=_hardware_sections(result))
+    finish_results(store.dir, summary, [record], meta, sections=_hardware_sections(result))
 
 
 def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]]]:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from wbc.arena.record import TrialRecord
+from wbc.arena.summary import MetricSummary, Summary
 
 __all__ = ["PLOTS", "write_plots"]
 
@@ -29,10 +30,9 @@ PLOTS = (
 )
 """File name and caption of every plot, in report order."""
 
-def _cell_stat(summary: Mapping[str, Any], controller: str, band: str, metric: str, field: str) -> float:
-    cell = summary["controllers"][controller]["bands"].get(band)
-    value = None if cell is None else cell[metric][field]
-    return math.nan if value is None else float(value)
+def _stat(summary: Summary, controller: str, band: str, metric: str) -> MetricSummary | None:
+    cell = summary.cell(controller, band)
+    return None if cell is None or metric not in cell else cell[metric]
 
 
 def _short(controller: str) -> str:
@@ -64,8 +64,9 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
                                label=_short(controller))
             for xi, yi, cell in zip(x, rate, cells, strict=True):
                 if cell["n"] and math.isfinite(yi):
-                    ax.annotate(f"n={cell['n']}", (xi, yi), textcoords="offset points", xytext=(3, 4), fontsize=6,
-                                color=line[0].get_color())
+                    # alternate controllers above and below their points, so that equal rates stay legible
+                    ax.annotate(f"n={cell['n']}", (xi, yi), textcoords="offset points",
+                                xytext=(3, 4 if i % 2 == 0 else -10), fontsize=6, color=line[0].get_color())
         for edge in edges:
             ax.axvline(edge, color="0.9", linewidth=0.8, zorder=0)
         ax.set_xlabel("push impulse |F| T [N s]")
@@ -117,7 +118,7 @@ def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers:
         plt.close(fig)
 
 
-def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequence[str],
+def _plot_tracking(plt: Any, path: Path, summary: Summary, bands: Sequence[str],
                    labels: Mapping[str, str]) -> None:
     """Grouped bars of the V_lin and V_ang tracking errors over the common window, per band and controller.
 
@@ -125,8 +126,8 @@ def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequ
     with a window is written on it. A summary written before common windows draws the errors over each trial's own
     survived time instead, and says so.
     """
-    controllers = list(summary["controllers"])
-    cells = [c for e in summary["controllers"].values() for c in e["bands"].values()]
+    controllers = summary.controllers
+    cells = [cell for _, _, cell in summary.iter_cells()]
     common = bool(cells) and all("vlin_err_common" in c for c in cells)
     metrics = ("vlin_err_common", "vang_err_common") if common else ("vlin_err", "vang_err")
     x = np.arange(len(bands), dtype=float)
@@ -135,20 +136,19 @@ def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequ
     try:
         for ax, metric in zip(axes, metrics, strict=True):
             for i, controller in enumerate(controllers):
-                means = np.array([_cell_stat(summary, controller, b, metric, "mean") for b in bands])
-                ci = [summary["controllers"][controller]["bands"].get(b, {}).get(metric, {}).get("ci95")
-                      or [None, None] for b in bands]
-                lo = np.array([math.nan if c[0] is None else c[0] for c in ci], dtype=float)
-                hi = np.array([math.nan if c[1] is None else c[1] for c in ci], dtype=float)
+                stats = [_stat(summary, controller, b, metric) for b in bands]
+                means = np.array([math.nan if st is None or st.mean is None else st.mean for st in stats])
+                lo = np.array([math.nan if st is None or st.ci95[0] is None else st.ci95[0] for st in stats])
+                hi = np.array([math.nan if st is None or st.ci95[1] is None else st.ci95[1] for st in stats])
                 offset = (i - (len(controllers) - 1) / 2.0) * width
                 yerr = np.nan_to_num(np.vstack([means - lo, hi - means]))
                 bars = ax.bar(x + offset, np.nan_to_num(means), width, label=_short(controller))
                 # drawn apart from the bars: bar(yerr=) of one band warns in NumPy 1.25+
                 ax.errorbar(x + offset, np.nan_to_num(means), yerr=np.clip(yerr, 0.0, None), fmt="none", capsize=3,
                             ecolor="black")
-                for bar, band in zip(bars, bands, strict=True):
-                    cell = summary["controllers"][controller]["bands"].get(band, {})
-                    n = cell.get(metric, {}).get("trials", cell.get("trials", 0)) if cell else 0
+                for bar, band, st in zip(bars, bands, stats, strict=True):
+                    cell = summary.cell(controller, band)
+                    n = 0 if cell is None else st.trials if st is not None and st.trials is not None else cell.trials
                     ax.annotate(f"n={n}", (bar.get_x() + bar.get_width() / 2.0, 0.0), textcoords="offset points",
                                 xytext=(0, 2), ha="center", fontsize=6)
             ax.set_xticks(x, list(bands))
@@ -165,7 +165,7 @@ def _plot_tracking(plt: Any, path: Path, summary: Mapping[str, Any], bands: Sequ
         plt.close(fig)
 
 
-def write_plots(out_dir: Path, summary: Mapping[str, Any], records: Sequence[TrialRecord], *,
+def write_plots(out_dir: Path, summary: Summary, records: Sequence[TrialRecord], *,
                 controllers: Sequence[str], bands: Sequence[str], labels: Mapping[str, str],
                 curve: Mapping[str, Any] | None = None) -> list[Path]:
     """Draw the plots of `PLOTS` into `out_dir` (which must exist); figures are closed after saving.

@@ -1,13 +1,15 @@
-"""Arena report: a JSON summary of the records, the paper-style results table, and a Markdown report with plots.
+"""Arena report: the typed summary of the records, the paper-style results table, and a Markdown report with plots.
 
 The input is one `wbc.arena.record.TrialRecord` per (controller, trial). This module turns them into:
 
-- `summarize`: per controller and band, mean +- std across seeds of each metric (`wbc.arena.stats.mean_std_over_seeds`)
-  and a 95 % interval over the trials (Wilson for success, percentile bootstrap otherwise), and for every ordered
-  pair of controllers the paired difference B - A with a 95 % bootstrap interval
-  (`wbc.arena.stats.paired_difference`), its paired test's p-value (exact McNemar for success, Wilcoxon signed-rank
-  otherwise; `wbc.arena.paired_tests`) and the pairs a test needs for 80 % power at the observed difference
-  (`wbc.arena.power`). The result is JSON-serialisable: NaN becomes ``None``.
+- `summarize`: a `wbc.arena.summary.Summary`: per controller and band, mean +- std across seeds of each metric
+  (`wbc.arena.stats.mean_std_over_seeds`) and a 95 % interval over the trials (Wilson for success, percentile
+  bootstrap otherwise), tracking over the common window (`wbc.arena.windows`), ticks, clamps and counters; for every
+  ordered pair of controllers the paired difference B - A with its 95 % interval (exact for success,
+  `wbc.arena.paired_tests.paired_success_interval`; bootstrap otherwise), its paired test's p-value (exact McNemar for
+  success, Wilcoxon signed-rank otherwise; `wbc.arena.paired_tests`) and the pairs a test needs for 80 % power at the
+  observed difference (`wbc.arena.power`). Its JSON form (``summary.json``) is `Summary.to_json`: NaN becomes
+  ``None``.
 - `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table: mean
   ± std across seeds, or, from one seed (which has no spread across seeds), the mean and its interval over trials.
 - `write_report`: ``report.md`` plus the PNG plots (drawn by `wbc.arena.plots`) in an output folder.
@@ -28,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from wbc.arena.breakdown import breakdown_tables
-from wbc.arena.error_guard import ControllerErrors
+from wbc.arena.error_guard import ControllerErrors, outcome_counts
 from wbc.arena.paired_tests import (
     BINARY_FIELDS,
     mcnemar_exact,
@@ -46,6 +48,7 @@ from wbc.arena.stats import (
     mean_std_over_seeds,
     wilson_interval,
 )
+from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning
 from wbc.arena.verdict import verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
@@ -68,6 +71,7 @@ __all__ = [
     "number_text",
     "p_text",
     "paired_comparison",
+    "compare_pair",
     "signed_text",
     "trial_interval",
     "write_report",
@@ -128,10 +132,9 @@ _TRACKING_LEGEND = ("V_lin / V_ang err: over each trial's own survived time, as 
                     "seconds that every controller survived on that trial.")
 
 
-def cell_legend(summary: Mapping[str, Any]) -> str:
+def cell_legend(summary: Summary) -> str:
     """What a results table's cells mean, printed under the tables: the spread each cell quotes, and the windows."""
-    seeds = {cell.get("seeds") for entry in summary["controllers"].values() for cell in entry["bands"].values()
-             if cell.get("trials")}
+    seeds = {cell.seeds for _, _, cell in summary.iter_cells() if cell.trials}
     spread = [_SPREAD_LEGEND["seeds"]] if seeds and 1 not in seeds else [_SPREAD_LEGEND["trials"]] if seeds == {1} \
         else [_SPREAD_LEGEND["seeds"], "From one seed: " + _SPREAD_LEGEND["trials"][len("cells: from one seed, "):]]
     return " ".join([*spread, _TRACKING_LEGEND])
@@ -145,11 +148,6 @@ FAILURES_NOTE = ("Success by command (trials), survival of each push by where it
 _DECIMALS = {"success_rate": 2, "ttf": 3, "vlin_err": 3, "vang_err": 3, "vlin_err_common": 3, "vang_err_common": 3,
              "max_roll_deg": 2, "energy_j": 1, "power_w": 1, "arm_travel_rad": 3}
 _SCALE = {"success_rate": 100.0}  # success is stored as a fraction, shown in percent (paired: percentage points)
-
-
-def _json_float(value: float) -> float | None:
-    value = float(value)
-    return value if math.isfinite(value) else None
 
 
 def trial_interval(records: Sequence[TrialRecord], field: str) -> tuple[float, float]:
@@ -219,6 +217,14 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
     return out
 
 
+def compare_pair(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord], *, a: str, b: str, band: str,
+                 metric: str) -> PairSummary:
+    """`paired_comparison` of a summary metric (`METRIC_KEYS`) as a `PairSummary` named by `a`, `b` and `band`."""
+    result = paired_comparison(records_a, records_b, METRIC_KEYS[metric])
+    result["ci95"] = tuple(result["ci95"])
+    return PairSummary(a=a, b=b, band=band, metric=metric, **result)
+
+
 def _common_pairs(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord],
                   metric: str) -> tuple[np.ndarray, np.ndarray]:
     """A's and B's tracking errors over each trial's window of both (`common_window_values`), NaN pairs left out."""
@@ -249,18 +255,22 @@ def summarize(
     scenario_hash: str,
     controllers: Sequence[str],
     bands: Sequence[str],
-) -> dict[str, Any]:
+    errors: Sequence[ControllerErrors] | None = None,
+    sequential: Mapping[str, Any] | None = None,
+) -> Summary:
     """Summarise arena records per controller and band, and compare controllers pairwise.
 
-    For each controller and band: the number of trials and of seeds, and mean / std across seeds
+    For each controller and band (`CellSummary`): the number of trials and of seeds; mean / std across seeds
     (`mean_std_over_seeds`) of `METRICS` (success_rate from the ``success`` field, as a fraction in [0, 1]) and of
-    `EXTRA_METRICS`, with the 95 % interval of the mean over trials (`trial_interval`). For every ordered pair
-    (a, b) with a listed before b in `controllers`, every band and every metric in `METRICS`: the paired difference
-    b - a, its 95 % bootstrap interval (`paired_difference`, seed 0), its paired test and n80
-    (`paired_comparison`).
+    `EXTRA_METRICS`, with the 95 % interval of the mean over trials (`trial_interval`); the `COMMON_METRICS` over each
+    trial's common window (`wbc.arena.windows`); ticks, deadline misses and clamped ticks; every counter; and, with
+    `errors` given (the arena), the trials per outcome. For every ordered pair (a, b) with a listed before b in
+    `controllers`, every band and every metric in `PAIRED_METRICS` (`PairSummary`): the paired difference b - a, its
+    95 % interval, its paired test and n80 (`paired_comparison`). Warnings for deadline misses or clamped ticks past
+    `WARN_FRACTION` of a cell's ticks.
 
     Records of controllers or bands not listed are ignored. A listed controller or band without records gets
-    ``trials: 0`` and ``None`` statistics. The records are put `in_canonical_order` first, so the summary does not
+    0 trials and ``None`` statistics. The records are put `in_canonical_order` first, so the summary does not
     depend on the order they come in (the order trials finished).
 
     Args:
@@ -269,17 +279,12 @@ def summarize(
         scenario_hash: the scenario file's content hash; every record's ``scenario_hash``, where set, must match.
         controllers: controller names, in the order of the table (the order also fixes which side of each pair is A).
         bands: band names, in the order of the table.
+        errors: the controllers that failed on a trial (`wbc.arena.error_guard.ErrorGuard.report`); given, the
+            summary counts outcomes and lists them; None: a summary of records alone.
+        sequential: the sequential test's verdict, when the run had one.
 
     Returns:
-        A JSON-serialisable dict::
-
-            {"scenario": {"name", "hash"},
-             "controllers": {NAME: {"bands": {BAND: {"trials": int, "seeds": int,
-                                                     METRIC: {"mean", "std", "ci95": [lo, hi]}, ...}}}},
-             "paired": [{"a", "b", "band", "metric", "diff", "ci95": [lo, hi], "n", "test", "p", "n80",
-                         "a_only", "b_only"}, ...]}
-
-        with ``None`` wherever a statistic is undefined.
+        The summary; ``summary.json`` is its `Summary.to_json`.
 
     Raises:
         RecordError: a record repeats a trial, or comes from another version of the scenario.
@@ -293,47 +298,43 @@ def summarize(
                 "a time"
             )
     cells = _records_by_cell(in_canonical_order(records, controllers, bands), controllers, bands)
-    per_controller: dict[str, Any] = {c: {"bands": {}} for c in controllers}
-    warnings: list[dict[str, Any]] = []
+    per_controller: dict[str, dict[str, CellSummary]] = {c: {} for c in controllers}
+    warnings: list[TickWarning] = []
     for band in bands:
         played = {c: cells[c][band] for c in controllers if cells[c][band]}
         common = {m: common_window_values(played, m) for m in COMMON_METRICS} if played else {}
         for controller in controllers:
             cell = cells[controller][band]
-            entry: dict[str, Any] = {"trials": len(cell), "seeds": len({r.seed for r in cell})}
+            metrics: dict[str, MetricSummary] = {}
             for metric in (*METRICS, *EXTRA_METRICS):
                 field = METRIC_KEYS.get(metric, metric)
                 stats = mean_std_over_seeds(cell, field)
-                entry[metric] = {"mean": _json_float(stats["mean"]), "std": _json_float(stats["std"]),
-                                 "ci95": [_json_float(x) for x in trial_interval(cell, field)]}
+                metrics[metric] = MetricSummary(stats["mean"], stats["std"], trial_interval(cell, field))
             for metric in COMMON_METRICS:
-                entry[metric] = _common_stat(cell, common.get(metric, {}).get(controller, {}))
-            entry.update(_tick_counts(cell))
-            entry["counters"] = counter_totals(cell)
-            per_controller[controller]["bands"][band] = entry
-            warnings += _warnings(controller, band, entry)
+                metrics[metric] = _common_stat(cell, common.get(metric, {}).get(controller, {}))
+            summary_cell = CellSummary(trials=len(cell), seeds=len({r.seed for r in cell}), metrics=metrics,
+                                       **_tick_counts(cell), counters=counter_totals(cell),
+                                       outcomes=outcome_counts(cell) if errors is not None else None)
+            per_controller[controller][band] = summary_cell
+            warnings += _warnings(controller, band, summary_cell)
     paired = []
     for a, b in itertools.combinations(controllers, 2):
         for band in bands:
             for metric in PAIRED_METRICS:
-                result = paired_comparison(cells[a][band], cells[b][band], METRIC_KEYS[metric])
-                paired.append({"a": a, "b": b, "band": band, "metric": metric, **_json_ready(result)})
-    return {
-        "scenario": {"name": scenario_name, "hash": scenario_hash},
-        "controllers": per_controller,
-        "paired": paired,
-        "warnings": warnings,
-    }
+                paired.append(compare_pair(cells[a][band], cells[b][band], a=a, b=b, band=band, metric=metric))
+    return Summary(scenario_name=scenario_name, scenario_hash=scenario_hash, cells=per_controller,
+                   paired=tuple(paired), warnings=tuple(warnings),
+                   controller_errors=None if errors is None else {e.controller: e for e in errors},
+                   sequential=sequential)
 
 
-def _common_stat(cell: Sequence[TrialRecord], values: Mapping[tuple, float]) -> dict[str, Any]:
+def _common_stat(cell: Sequence[TrialRecord], values: Mapping[tuple, float]) -> MetricSummary:
     """Mean ± std across seeds and the 95 % bootstrap interval over trials of a common-window tracking error."""
     pairs = [(r.seed, values.get(r.pair_key, math.nan)) for r in cell]
     stats = mean_std_of_seed_values(pairs)
     finite = np.array([v for _, v in pairs if not math.isnan(v)], dtype=float)
     ci = bootstrap_mean_ci(finite) if finite.size else (math.nan, math.nan)
-    return {"mean": _json_float(stats["mean"]), "std": _json_float(stats["std"]),
-            "ci95": [_json_float(x) for x in ci], "trials": int(finite.size)}
+    return MetricSummary(stats["mean"], stats["std"], ci, trials=int(finite.size))
 
 
 def _tick_counts(cell: Sequence[TrialRecord]) -> dict[str, Any]:
@@ -352,12 +353,12 @@ _ROW_NAMES = {"q": "position targets", "dq": "velocity targets", "kp": "position
 """A command row -> what it is, in words (the clamped-commands warning)."""
 
 
-def counter_totals(records: Iterable[TrialRecord]) -> dict[str, dict[str, Any]]:
+def counter_totals(records: Iterable[TrialRecord]) -> dict[str, CounterTotal]:
     """Every event count the controller reported (`TrialRecord.counter_values`), over `records`.
 
     Returns:
-        ``{name: {"total": sum over trials, "trials": trials where it was > 0, "per_trial": mean per trial}}``,
-        names sorted; a trial that did not report a name counts 0 for it.
+        Name -> its total over the trials, the trials where it was above 0 and the mean per trial (a trial that did
+        not report a name counts 0 for it), names sorted.
     """
     records = list(records)
     values = [r.counter_values for r in records]
@@ -365,14 +366,14 @@ def counter_totals(records: Iterable[TrialRecord]) -> dict[str, dict[str, Any]]:
     out = {}
     for name in names:
         counts = [v.get(name, 0) for v in values]
-        out[name] = {"total": int(sum(counts)), "trials": sum(1 for c in counts if c),
-                     "per_trial": float(sum(counts)) / len(records)}
+        out[name] = CounterTotal(total=int(sum(counts)), trials=sum(1 for c in counts if c),
+                                 per_trial=float(sum(counts)) / len(records))
     return out
 
 
-def _warnings(controller: str, band: str, entry: Mapping[str, Any]) -> list[dict[str, Any]]:
+def _warnings(controller: str, band: str, cell: CellSummary) -> list[TickWarning]:
     """A warning for a controller whose deadline misses or clamped ticks pass `WARN_FRACTION` of its ticks."""
-    ticks = entry["ticks"]
+    ticks = cell.ticks
     if not ticks:
         return []
     out = []
@@ -380,35 +381,14 @@ def _warnings(controller: str, band: str, entry: Mapping[str, Any]) -> list[dict
                         "machine): on a real robot those commands would come late"),
                        ("clamped_ticks", "the command lay outside the motors' limits and was clamped before it was "
                         "sent")):
-        count = entry[kind]
+        count = getattr(cell, kind)
         if count > WARN_FRACTION * ticks:
             text = (f"{controller} in band {band}: on {count} of {ticks} ticks ({100.0 * count / ticks:.1f} %) "
                     f"{what}")
-            rows = entry.get("clamped_rows") or {}
-            if kind == "clamped_ticks" and rows:
-                text += " (" + ", ".join(f"{_ROW_NAMES[r]} on {n} ticks" for r, n in rows.items()) + ")"
-            out.append({"controller": controller, "band": band, "kind": kind, "count": count, "ticks": ticks,
-                        "text": text})
+            if kind == "clamped_ticks" and cell.clamped_rows:
+                text += " (" + ", ".join(f"{_ROW_NAMES[r]} on {n} ticks" for r, n in cell.clamped_rows.items()) + ")"
+            out.append(TickWarning(controller=controller, band=band, kind=kind, count=count, ticks=ticks, text=text))
     return out
-
-
-def _json_ready(result: Mapping[str, Any]) -> dict[str, Any]:
-    """A `paired_comparison` with NaN as None (JSON has no NaN)."""
-    out = dict(result)
-    for key in ("diff", "mean_a", "mean_b"):
-        out[key] = _json_float(out[key])
-    out["ci95"] = [_json_float(x) for x in out["ci95"]]
-    out["p"] = _json_float(out["p"])
-    return out
-
-
-def _bands_of(summary: Mapping[str, Any]) -> list[str]:
-    bands: list[str] = []
-    for entry in summary["controllers"].values():
-        for band in entry["bands"]:
-            if band not in bands:
-                bands.append(band)
-    return bands
 
 
 def _number(value: float | None, metric: str) -> str:
@@ -417,26 +397,26 @@ def _number(value: float | None, metric: str) -> str:
     return f"{value * _SCALE.get(metric, 1.0):.{_DECIMALS[metric]}f}"
 
 
-def _mean_std(stat: Mapping[str, float | None], metric: str) -> str:
-    if stat["mean"] is None:
+def _mean_std(stat: MetricSummary, metric: str) -> str:
+    if stat.mean is None:
         return "n/a"
-    return f"{_number(stat['mean'], metric)} ± {_number(stat['std'], metric)}"
+    return f"{_number(stat.mean, metric)} ± {_number(stat.std, metric)}"
 
 
-def cell_text(stat: Mapping[str, Any], metric: str, seeds: int | None) -> str:
+def cell_text(stat: MetricSummary, metric: str, seeds: int | None) -> str:
     """A table cell: "mean ± std" across seeds, or from one seed "mean [lo, hi]" (its 95 % interval over trials).
 
     A single seed has no spread across seeds to quote (its std would print as ± 0.00); its interval over trials
     says how far the mean could be off. A summary without the interval (written by an older version) keeps ± std.
 
     Args:
-        stat: a summary cell's metric entry (``{"mean", "std", "ci95"}``).
+        stat: a summary cell's metric.
         metric: the summary metric name (for scale and decimals).
         seeds: the seeds behind the cell (None: unknown).
     """
-    ci = stat.get("ci95")
-    if seeds == 1 and stat["mean"] is not None and ci is not None and None not in ci:
-        return f"{_number(stat['mean'], metric)} [{_number(ci[0], metric)}, {_number(ci[1], metric)}]"
+    ci = stat.ci95
+    if seeds == 1 and stat.mean is not None and None not in ci:
+        return f"{_number(stat.mean, metric)} [{_number(ci[0], metric)}, {_number(ci[1], metric)}]"
     return _mean_std(stat, metric)
 
 
@@ -447,11 +427,11 @@ def p_text(p: float | None) -> str:
     return "<1e-04" if p < 1e-4 else f"{p:.3g}"
 
 
-def n80_text(entry: Mapping[str, Any]) -> str:
+def n80_text(pair: PairSummary) -> str:
     """A paired comparison's n80 as printed: ``-`` when no difference was observed, ``>N`` beyond the search."""
-    if entry.get("n80") is not None:
-        return str(entry["n80"])
-    if entry.get("diff") in (None, 0.0) or entry.get("test") is None:
+    if pair.n80 is not None:
+        return str(pair.n80)
+    if pair.diff in (None, 0.0) or pair.test is None:
         return "-"
     return f">{N_MAX}"
 
@@ -482,15 +462,15 @@ def _ci(ci95: Sequence[float | None], metric: str) -> str:
     return f"[{signed_text(ci95[0], metric)}, {signed_text(ci95[1], metric)}]"
 
 
-def _result_rows(summary: Mapping[str, Any], band: str, metrics: Sequence[str]) -> list[list[str]]:
+def _result_rows(summary: Summary, band: str, metrics: Sequence[str]) -> list[list[str]]:
     rows = []
-    for controller, entry in summary["controllers"].items():
-        cell = entry["bands"].get(band)
+    for controller in summary.controllers:
+        cell = summary.cell(controller, band)
         if cell is None:
             rows.append([controller, "0", *("n/a" for _ in metrics)])
         else:
-            rows.append([controller, str(cell["trials"]),
-                         *(cell_text(cell[m], m, cell.get("seeds")) for m in metrics)])
+            rows.append([controller, str(cell.trials), *(cell_text(cell[m], m, cell.seeds) if m in cell else "n/a"
+                                                         for m in metrics)])
     return rows
 
 
@@ -498,7 +478,7 @@ _OUTCOME_COLUMNS = ((CONTROLLER_ERROR, "errors"), (SAFETY_TRIP, "trips"), (OPERA
 """Outcomes other than success and fall that get a column of their own when a trial of the run ended so."""
 
 
-def _outcome_columns(summary: Mapping[str, Any], band: str, header: list[str],
+def _outcome_columns(summary: Summary, band: str, header: list[str],
                      rows: list[list[str]]) -> tuple[list[str], list[list[str]]]:
     """`header` and `rows` with a column after the trials for each outcome in `_OUTCOME_COLUMNS` the run had.
 
@@ -507,11 +487,12 @@ def _outcome_columns(summary: Mapping[str, Any], band: str, header: list[str],
     any keeps its table as it was.
     """
     def count(controller: str, outcome: str, where: str = band) -> int:
-        return summary["controllers"][controller]["bands"].get(where, {}).get("outcomes", {}).get(outcome, 0)
+        cell = summary.cell(controller, where)
+        return 0 if cell is None else cell.outcome(outcome)
 
     present = [(outcome, title) for outcome, title in _OUTCOME_COLUMNS
-               if any(count(c, outcome, b) for c in summary["controllers"] for b in _bands_of(summary))]
-    if CONTROLLER_ERROR not in {o for o, _ in present} and summary.get("controller_errors"):
+               if any(count(c, outcome, b) for c in summary.controllers for b in summary.bands)]
+    if CONTROLLER_ERROR not in {o for o, _ in present} and summary.controller_errors:
         present.insert(0, (CONTROLLER_ERROR, "errors"))
     if not present:
         return header, rows
@@ -520,11 +501,10 @@ def _outcome_columns(summary: Mapping[str, Any], band: str, header: list[str],
             [[*row[:2], *cells, *row[2:]] for row, cells in zip(rows, extra, strict=True)])
 
 
-def _error_lines(summary: Mapping[str, Any]) -> list[str]:
+def _error_lines(summary: Summary) -> list[str]:
     """What failed, one line per controller that failed on a trial (`ControllerErrors.line`)."""
     return ["controller errors (each such trial counts as a failure, not as a fall):",
-            *(f"  {ControllerErrors.from_dict(name, data).line()}"
-              for name, data in summary["controller_errors"].items())]
+            *(f"  {errors.line()}" for errors in (summary.controller_errors or {}).values())]
 
 
 _PAIRED_HEADER = ["band", "A", "B", "metric", "B - A", "95% CI", "p", "n80"]
@@ -540,11 +520,11 @@ PAIRED_LEGEND = ("95% CI: for success the exact interval built from the discorda
 """What the p and n80 columns of the paired differences mean, printed under them."""
 
 
-def _paired_rows(summary: Mapping[str, Any]) -> list[list[str]]:
+def _paired_rows(summary: Summary) -> list[list[str]]:
     return [
-        [p["band"], p["a"], p["b"], LABELS[p["metric"]], signed_text(p["diff"], p["metric"]),
-         _ci(p["ci95"], p["metric"]), p_text(p.get("p")), n80_text(p)]
-        for p in summary["paired"]
+        [p.band, p.a, p.b, LABELS[p.metric], signed_text(p.diff, p.metric), _ci(p.ci95, p.metric), p_text(p.p),
+         n80_text(p)]
+        for p in summary.paired
     ]
 
 
@@ -573,7 +553,7 @@ def _aligned(header: Sequence[str], rows: Sequence[Sequence[str]], indent: str =
     return lines
 
 
-def format_table(summary: Mapping[str, Any], *, verdict: bool = True) -> str:
+def format_table(summary: Summary, *, verdict: bool = True) -> str:
     """Render a summary (from `summarize`) as plain text in the shape of the paper's results table.
 
     One block per band, one row per controller, columns Trials, Success %, TTF, V_lin err, V_ang err as
@@ -590,39 +570,38 @@ def format_table(summary: Mapping[str, Any], *, verdict: bool = True) -> str:
     Returns:
         The table, lines separated by newlines, ending with a newline.
     """
-    scenario = summary["scenario"]
-    lines = [f"scenario {scenario['name']} ({scenario['hash']})", ""]
+    lines = [f"scenario {summary.scenario_name} ({summary.scenario_hash})", ""]
     metrics = (*METRICS, *_common_of(summary))
     header = ["controller", "trials", *(LABELS[m] for m in metrics)]
-    for band in _bands_of(summary):
+    for band in summary.bands:
         lines.append(f"band {band}")
         lines += _aligned(*_outcome_columns(summary, band, header, _result_rows(summary, band, metrics)))
         lines.append("")
     lines += [*textwrap.wrap(cell_legend(summary), width=118, initial_indent="  ", subsequent_indent="  "), ""]
-    if summary.get("warnings"):
+    if summary.warnings:
         lines += ["warnings (past 1 % of a controller's ticks in a band):"]
-        for w in summary["warnings"]:
-            lines += textwrap.wrap(w["text"], width=118, initial_indent="  ", subsequent_indent="    ")
+        for w in summary.warnings:
+            lines += textwrap.wrap(w.text, width=118, initial_indent="  ", subsequent_indent="    ")
         lines.append("")
     counters = _counter_lines(summary)
     if counters:
         lines += ["controller counters (totals over the trials; all of them in trials.csv, summary.json and the "
                   "report):", *(f"  {line}" for line in counters), ""]
-    if summary.get("controller_errors"):
+    if summary.controller_errors:
         lines += [*_error_lines(summary), ""]
-    if summary["paired"]:  # a run of one controller has no pairs, and no block for them
+    if summary.paired:  # a run of one controller has no pairs, and no block for them
         lines.append("paired differences (B - A, 95% CI)")
         lines += _aligned(_PAIRED_HEADER, _paired_rows(summary))
         lines += textwrap.wrap(PAIRED_LEGEND, width=118, initial_indent="  ", subsequent_indent="  ")
-    if summary.get("sequential"):
-        verdict, *table = _sequential_lines(summary["sequential"])
-        lines += ["", *textwrap.wrap(verdict, width=120), *table]
+    if summary.sequential:
+        said, *table = _sequential_lines(summary.sequential)
+        lines += ["", *textwrap.wrap(said, width=120), *table]
     if verdict and verdicts(summary):
         lines += ["", *format_verdict(summary).splitlines()]
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
-def format_verdict(summary: Mapping[str, Any]) -> str:
+def format_verdict(summary: Summary) -> str:
     """The verdict sentences of a summary (`wbc.arena.verdict.verdicts`) under a heading, wrapped; empty without."""
     sentences = verdicts(summary)
     if not sentences:
@@ -633,27 +612,16 @@ def format_verdict(summary: Mapping[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _count_text(cell: Mapping[str, Any], key: str) -> str:
-    """A summed count of a summary cell, ``n/a`` for a summary written before it was counted."""
-    return str(cell[key]) if key in cell else "n/a"
-
-
-def _common_of(summary: Mapping[str, Any]) -> tuple[str, ...]:
+def _common_of(summary: Summary) -> tuple[str, ...]:
     """The common-window metrics a summary holds (none in one written before they existed)."""
-    cells = [cell for entry in summary["controllers"].values() for cell in entry["bands"].values()]
+    cells = [cell for _, _, cell in summary.iter_cells()]
     return tuple(m for m in COMMON_METRICS if cells and all(m in cell for cell in cells))
 
 
-def _counter_lines(summary: Mapping[str, Any]) -> list[str]:
+def _counter_lines(summary: Summary) -> list[str]:
     """One line per controller and band whose counters are not all zero: ``mpc in: fallbacks 3, my_count 12``."""
-    lines = []
-    for controller, entry in summary["controllers"].items():
-        for band, cell in entry["bands"].items():
-            counts = cell.get("counters") or {}
-            if any(c["total"] for c in counts.values()):
-                lines.append(f"{controller} in band {band}: " +
-                             ", ".join(f"{name} {c['total']}" for name, c in counts.items()))
-    return lines
+    return [f"{controller} in band {band}: " + ", ".join(f"{name} {c.total}" for name, c in cell.counters.items())
+            for controller, band, cell in summary.iter_cells() if any(c.total for c in cell.counters.values())]
 
 
 def _md_cell(text: Any) -> str:
@@ -681,7 +649,7 @@ def _md_meta(meta: Mapping[str, Any]) -> list[str]:
 
 
 def write_report(
-    out_dir: str | Path, summary: Mapping[str, Any], records: Iterable[TrialRecord], meta: Mapping[str, Any],
+    out_dir: str | Path, summary: Summary, records: Iterable[TrialRecord], meta: Mapping[str, Any],
     sections: Sequence[tuple[str, Sequence[str]]] = (), failures: Mapping[str, Any] | None = None,
     curve: Mapping[str, Any] | None = None,
 ) -> list[Path]:
@@ -708,13 +676,12 @@ def write_report(
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    controllers = list(summary["controllers"])
-    bands = _bands_of(summary)
+    controllers, bands = summary.controllers, summary.bands
     plots = write_plots(out, summary, in_canonical_order(records, controllers, bands), controllers=controllers,
                         bands=bands, labels=LABELS, curve=curve)
 
-    scenario = summary["scenario"]
-    lines = [f"# Arena report: {scenario['name']}", "", f"Scenario `{scenario['name']}`, hash `{scenario['hash']}`."]
+    name = summary.scenario_name
+    lines = [f"# Arena report: {name}", "", f"Scenario `{name}`, hash `{summary.scenario_hash}`."]
     lines += ["", "## Run", ""]
     lines += _md_meta(meta) if meta else ["(no run information given)"]
     for title, body in sections:
@@ -730,19 +697,18 @@ def write_report(
         lines += ["", f"### Band `{band}`", ""]
         header = ["Controller", "Trials", *(LABELS[m] for m in metrics)]
         lines += md_table(*_outcome_columns(summary, band, header, _result_rows(summary, band, metrics)))
-    if summary.get("warnings"):
+    if summary.warnings:
         lines += ["", "## Warnings", "", "Past 1 % of a controller's ticks in a band:", "",
-                  *(f"- {w['text']}" for w in summary["warnings"])]
+                  *(f"- {w.text}" for w in summary.warnings)]
     lines += ["", "## Timing and commands", "", "Per controller and band, summed over its trials: control ticks "
               "played, ticks whose `act` took longer than the control period (wall time on the machine that played "
               "them), and ticks whose command the robot clamped to its motors' limits.", ""]
     lines += md_table(["Band", "Controller", "Ticks", "Deadline misses", "Clamped ticks"],
-                      [[band, c, *(_count_text(cell, k) for k in ("ticks", "deadline_misses", "clamped_ticks"))]
-                       for band in bands for c, entry in summary["controllers"].items()
-                       if (cell := entry["bands"].get(band)) is not None])
-    counter_rows = [[band, c, name, count["total"], count["trials"], f"{count['per_trial']:.3g}"]
-                    for band in bands for c, entry in summary["controllers"].items()
-                    for name, count in (entry["bands"].get(band, {}).get("counters") or {}).items()]
+                      [[band, c, cell.ticks, cell.deadline_misses, cell.clamped_ticks]
+                       for band in bands for c in controllers if (cell := summary.cell(c, band)) is not None])
+    counter_rows = [[band, c, counter, count.total, count.trials, f"{count.per_trial:.3g}"]
+                    for band in bands for c in controllers if (cell := summary.cell(c, band)) is not None
+                    for counter, count in cell.counters.items()]
     lines += ["", "## Controller counters", ""]
     if counter_rows:
         lines += ["Every event count the controllers reported (`counters()`), over the band's trials: the total, the "
@@ -751,10 +717,10 @@ def write_report(
                   *md_table(["Band", "Controller", "Counter", "Total", "Trials > 0", "Per trial"], counter_rows)]
     else:
         lines += ["No controller reported a counter."]
-    if summary.get("controller_errors"):
+    if summary.controller_errors:
         lead, *each = _error_lines(summary)
         lines += ["", "## Controller errors", "", lead[0].upper() + lead[1:], "", *(f"- {e.strip()}" for e in each)]
-    if summary["paired"]:  # a run of one controller has no pairs, and no section for them
+    if summary.paired:  # a run of one controller has no pairs, and no section for them
         lines += ["", "## Paired differences (B - A, 95% CI)", ""]
         lines += [
             "Same trials for both controllers. Positive: B larger (better for success and TTF, worse for tracking "
@@ -763,9 +729,9 @@ def write_report(
         ]
         lines += md_table(_PAIRED_HEADER, _paired_rows(summary))
         lines += ["", PAIRED_LEGEND[0].upper() + PAIRED_LEGEND[1:] + "."]
-    if summary.get("sequential"):
-        header, rows = _sequential_table(summary["sequential"])
-        lines += ["", "## Sequential test", "", _sequential_lines(summary["sequential"])[0]]
+    if summary.sequential:
+        header, rows = _sequential_table(summary.sequential)
+        lines += ["", "## Sequential test", "", _sequential_lines(summary.sequential)[0]]
         lines += ["", *md_table(header, rows)]
     if failures is not None:
         lines += ["", "## Where each controller fails", "", FAILURES_NOTE, ""]

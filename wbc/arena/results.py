@@ -2,10 +2,10 @@
 
 Each finished trial is appended to ``trials.csv`` as one line and flushed to disk (fsync) before the next is
 accepted, so a run killed at any moment keeps everything it finished; a line cut short by the kill is dropped when
-the store is reopened. ``run.json`` holds the resolved configuration, scenario hash, package versions, git revision
-and what each controller is (its kind, a plug-in's target and distribution version, the sha256 of every file it was
-built from: weights, an ONNX model and its external data, an I/O or configuration file); reopening a directory for
-another configuration is refused.
+the store is reopened. ``run.json`` holds the run's identity (`wbc.arena.identity.RunIdentity`: the resolved
+configuration and scenario hash), package versions, git revision and what each controller is (its kind, a plug-in's
+target and distribution version, the sha256 of every file it was built from: weights, an ONNX model and its external
+data, an I/O or configuration file); reopening a directory for another run is refused, naming the fields that differ.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ import os
 import re
 from pathlib import Path
 
+from wbc.arena.identity import RunIdentity
 from wbc.arena.record import TrialRecord
 from wbc.errors import ResultsDirError
 from wbc.provenance import provenance
@@ -38,20 +39,30 @@ class ResultsStore:
 
     Args:
         out_dir: the directory (created if missing).
-        config: the resolved run configuration; must equal the stored one when resuming.
+        identity: what the run is; when resuming, its JSON form must equal the stored one (``run.json``'s
+            ``config``), which an earlier version may have written: unset options are absent from both.
         resume: continue a run already in `out_dir`; without it, a directory holding trials is refused.
         controllers: what each controller is, by name (`wbc.control.spec.ControllerSpec.provenance`: its kind, a
             plug-in's target and distribution version, the sha256 of every file it was built from), recorded in
             ``run.json`` beside the configuration.
 
     Raises:
-        ResultsDirError: `out_dir` holds results and `resume` is off, or holds another configuration's run.
+        ResultsDirError: `out_dir` holds results and `resume` is off, or holds another run (the message names the
+            fields that differ), or its ``run.json`` is unreadable.
         RecordError: its ``trials.csv`` has other columns or an unreadable row.
+
+    Attributes:
+        dir: the directory.
+        identity: the run's identity, as given.
+        environment: the package versions and git revision ``run.json`` records (`wbc.provenance.provenance`).
+        records: the trials stored, in the order they finished.
     """
 
-    def __init__(self, out_dir: Path, config: dict[str, object], *, resume: bool,
+    def __init__(self, out_dir: Path, identity: RunIdentity, *, resume: bool,
                  controllers: dict[str, object] | None = None) -> None:
         self.dir = Path(out_dir)
+        self.identity = identity
+        config = identity.as_json()
         self.trials_path = self.dir / "trials.csv"
         self.run_path = self.dir / "run.json"
         self.dir.mkdir(parents=True, exist_ok=True)
@@ -59,7 +70,16 @@ class ResultsStore:
             raise ResultsDirError(f"{self.dir}: already holds results; pass --resume to finish that run, or choose "
                                   "another --out")
         if resume and self.run_path.exists():
-            stored = json.loads(self.run_path.read_text(encoding="utf-8"))["config"]
+            # compared as JSON, not read back as a RunIdentity: a stored run of another kind or version is named
+            # field by field as differing, not refused as malformed
+            try:
+                stored = json.loads(self.run_path.read_text(encoding="utf-8")).get("config")
+            except (OSError, ValueError, AttributeError) as exc:
+                raise ResultsDirError(f"{self.run_path}: unreadable run configuration ({type(exc).__name__}: {exc}); "
+                                      "restore the file, or start afresh with another --out") from None
+            if not isinstance(stored, dict):
+                raise ResultsDirError(f"{self.run_path}: field config: missing or not an object; restore the file, "
+                                      "or start afresh with another --out")
             if stored != config:
                 diff = sorted(k for k in set(stored) | set(config) if stored.get(k) != config.get(k))
                 raise ResultsDirError(f"{self.dir}: --resume with a different configuration (differs in: "

@@ -16,8 +16,7 @@ beside them does not show.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from typing import Any
+from wbc.arena.summary import PairSummary, Summary
 
 __all__ = ["ALPHA", "verdicts"]
 
@@ -36,29 +35,29 @@ def _p(p: float | None) -> str:
     return "< 1e-4" if p < 1e-4 else f"{p:.3g}"
 
 
-def _settle(entry: Mapping[str, Any], what: str) -> str:
+def _settle(entry: PairSummary, what: str) -> str:
     """What would settle a difference the test did not: the paired trials for 80 % power."""
-    if entry.get("n80") and entry["n80"] > _PRACTICAL:
-        return (f"a {what} this small would take about {entry['n80']} paired trials to settle (80 % power): for "
+    if entry.n80 and entry.n80 > _PRACTICAL:
+        return (f"a {what} this small would take about {entry.n80} paired trials to settle (80 % power): for "
                 "practical purposes there is none")
-    if entry.get("n80"):
-        return f"about {entry['n80']} paired trials would settle a {what} this large (80 % power)"
+    if entry.n80:
+        return f"about {entry.n80} paired trials would settle a {what} this large (80 % power)"
     return f"no number of paired trials up to the search's limit would settle a {what} this small"
 
 
-def _significance(entry: Mapping[str, Any], test: str) -> str:
-    p = entry.get("p")
+def _significance(entry: PairSummary, test: str) -> str:
+    p = entry.p
     if p is not None and p < ALPHA:
         return f"significant ({test} p = {_p(p)})"
     return f"not significant ({test} p = {_p(p)})"
 
 
-def _survival(entry: Mapping[str, Any]) -> str:
-    a, b, n = entry["a"], entry["b"], entry["n"]
-    sa, sb = round(entry["mean_a"] * n), round(entry["mean_b"] * n)
-    a_only, b_only = entry["a_only"], entry["b_only"]
+def _survival(entry: PairSummary) -> str:
+    a, b, n = entry.a, entry.b, entry.n
+    sa, sb = round(entry.mean_a * n), round(entry.mean_b * n)
+    a_only, b_only = entry.a_only, entry.b_only
     discordant = a_only + b_only
-    lo, hi = entry["ci95"]
+    lo, hi = entry.ci95
     if a_only == b_only:
         head = f"{a} and {b} survive alike: {sa} of {n} paired trials each"
         if discordant == 0:
@@ -69,25 +68,25 @@ def _survival(entry: Mapping[str, Any]) -> str:
     winner, loser = (b, a) if b_only > a_only else (a, b)
     won, lost = max(a_only, b_only), min(a_only, b_only)
     s_win, s_lose = (sb, sa) if winner == b else (sa, sb)
-    diff = abs(entry["diff"]) * 100.0
+    diff = abs(entry.diff) * 100.0
     lo_w, hi_w = (lo, hi) if winner == b else (-hi, -lo)
     text = (f"{winner} survives more than {loser}: {s_win} against {s_lose} of {n} paired trials ({diff:+.1f} points, "
             f"95 % interval [{100 * lo_w:+.1f}, {100 * hi_w:+.1f}]); of {discordant} discordant pairs {winner} alone "
             f"survived {won} and {loser} alone {lost}; {_significance(entry, 'exact McNemar')}")
-    if not (entry.get("p") is not None and entry["p"] < ALPHA):
+    if not (entry.p is not None and entry.p < ALPHA):
         text += f"; {_settle(entry, 'difference')}"
     return text
 
 
-def _tracking(entry: Mapping[str, Any], what: str, unit: str, decimals: int) -> str | None:
-    a, b, n = entry["a"], entry["b"], entry["n"]
-    if not n or entry.get("diff") is None:
+def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
+    a, b, n = entry.a, entry.b, entry.n
+    if not n or entry.diff is None:
         return None
-    ma, mb = entry["mean_a"], entry["mean_b"]
-    lo, hi = entry["ci95"]
-    if entry["diff"] == 0.0:
+    ma, mb = entry.mean_a, entry.mean_b
+    lo, hi = entry.ci95
+    if entry.diff == 0.0:
         return f"{a} and {b} track the {what} alike over the seconds both survived ({n} trials)"
-    better, worse = (b, a) if entry["diff"] < 0 else (a, b)
+    better, worse = (b, a) if entry.diff < 0 else (a, b)
     m_better, m_worse = (mb, ma) if better == b else (ma, mb)
     lo_b, hi_b = (lo, hi) if better == b else (-hi, -lo)
     text = (f"{better} tracks the {what} better than {worse} over the seconds both survived: mean error "
@@ -95,30 +94,29 @@ def _tracking(entry: Mapping[str, Any], what: str, unit: str, decimals: int) -> 
             f"{m_better - m_worse:+.{decimals}f}, 95 % bootstrap interval [{lo_b:+.{decimals}f}, "
             f"{hi_b:+.{decimals}f}]); "
             f"{_significance(entry, 'Wilcoxon signed-rank')}")
-    if not (entry.get("p") is not None and entry["p"] < ALPHA):
+    if not (entry.p is not None and entry.p < ALPHA):
         text += f"; {_settle(entry, 'difference')}"
     return text
 
 
-def verdicts(summary: Mapping[str, Any]) -> list[str]:
+def verdicts(summary: Summary) -> list[str]:
     """The verdict sentences of a summary, band by band, pair by pair (none for a run of one controller).
 
     Args:
-        summary: the output of `wbc.arena.report.summarize` (or the same read back from ``summary.json``).
+        summary: the output of `wbc.arena.report.summarize` (or `Summary.from_json` of a ``summary.json``).
 
     Returns:
         One line per sentence, each starting with its band: ``band in: mpc survives more than stand: ...``.
     """
     lines: list[str] = []
-    paired: Sequence[Mapping[str, Any]] = summary.get("paired", ())
-    for entry in paired:
-        if entry.get("n", 0) == 0 or entry.get("mean_a") is None:
+    for entry in summary.paired:
+        if entry.n == 0 or entry.mean_a is None:
             continue
-        prefix = f"band {entry['band']}: "
-        if entry["metric"] == "success_rate":
+        prefix = f"band {entry.band}: "
+        if entry.metric == "success_rate":
             lines.append(prefix + _survival(entry))
         for metric, what, unit, decimals in _TRACKING:
-            if entry["metric"] == metric:
+            if entry.metric == metric:
                 sentence = _tracking(entry, what, unit, decimals)
                 if sentence is not None:
                     lines.append(prefix + sentence)

@@ -22,7 +22,6 @@ from pathlib import Path
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
-from wbc.arena.record import TrialRecord
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
 from wbc.cli.terminal_keys import TerminalKeys
@@ -116,7 +115,7 @@ def _bench_sim(args: argparse.Namespace) -> int:
     result = bench_sim(args.robot, args.arm, batch=args.batch, nthread=args.threads, terrain=args.terrain,
                        reference=not args.no_reference)
     if args.json:
-        printers.print_json(result)
+        printers.print_json(result.as_dict())
     else:
         printers.print_bench_sim(result)
     return 0
@@ -126,7 +125,7 @@ def _bench_mpc(args: argparse.Namespace) -> int:
     result = bench_mpc(args.robot, args.controller, seconds=args.seconds, single_thread=not args.threaded_blas,
                        reference=not args.no_reference)
     if args.json:
-        printers.print_json(result)
+        printers.print_json(result.as_dict())
     else:
         printers.print_bench_mpc(result)
     return 0
@@ -135,7 +134,7 @@ def _bench_mpc(args: argparse.Namespace) -> int:
 def _bench_sweep(args: argparse.Namespace) -> int:
     result = bench_sweep(args.scenario, args.controller, trials=args.trials, workers=args.workers, ray=args.ray)
     if args.json:
-        printers.print_json(result)
+        printers.print_json(result.as_dict())
     else:
         printers.print_bench_sweep(result)
     return 0
@@ -145,7 +144,7 @@ def _bench_train(args: argparse.Namespace) -> int:
     cfg = EnvConfig(arm_mode=args.arm, num_envs=args.envs, nthread=args.threads, terrain=args.terrain)
     result = bench_train(cfg, steps=args.steps, reference=not args.no_reference)
     if args.json:
-        printers.print_json(result)
+        printers.print_json(result.as_dict())
     else:
         printers.print_bench_train(result)
     return 0
@@ -158,7 +157,7 @@ def _bench_hw(args: argparse.Namespace) -> int:
     result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport,
                       stand_seconds=None if args.no_safety else args.stand)
     if args.json:
-        printers.print_json(result)
+        printers.print_json(result.as_dict())
     else:
         printers.print_bench_hw(result)
     return 0
@@ -169,7 +168,7 @@ def _bench_latency(args: argparse.Namespace) -> int:
     result = bench_latency(tuple(args.controllers), wire_robot=args.robot, scenario=args.scenario,
                            trials=args.trials, wire=not args.no_wire)
     if args.json:
-        printers.print_json(result)
+        printers.print_json(result.as_dict())
     else:
         printers.print_bench_latency(result)
     return 0
@@ -183,7 +182,7 @@ def _bench_arm(args: argparse.Namespace) -> int:
         raise ConfigError(f"--rates {args.rates!r}: give comma-separated numbers in Hz, e.g. 100,200,400") from None
     result = bench_arm(args.robot, rates=rates, seconds=args.seconds, latency_ms=args.latency)
     if args.json:
-        printers.print_json(result)
+        printers.print_json(result.as_dict())
     else:
         printers.print_bench_arm(result)
     return 0
@@ -492,7 +491,7 @@ def _train(args: argparse.Namespace) -> int:
 def _play_arena(cfg: ArenaConfig, *, as_json: bool) -> int:
     result = run_arena(cfg)
     if as_json:
-        printers.print_json(result.summary)
+        printers.print_json(result.summary.to_json())
     else:
         printers.print_arena(result)
     # a controller's errors cost its own trials only, but the command says so and fails: one line per controller
@@ -643,8 +642,7 @@ def _demo(args: argparse.Namespace) -> int:
                       workers=args.workers, progress=not args.quiet)
     result = run_arena(cfg)
     printers.print_arena(result, verdict=False)
-    records = TrialRecord.read_csv(result.out_dir / "trials.csv")
-    printers.print_demo_end(result.out_dir, trial_to_watch(records, DEMO_CONTROLLERS), scenario=args.scenario,
+    printers.print_demo_end(result.out_dir, trial_to_watch(result.records, DEMO_CONTROLLERS), scenario=args.scenario,
                             summary=result.summary)
     for errors in result.controller_errors:
         print(f"wbc: {errors.line()}", file=sys.stderr)

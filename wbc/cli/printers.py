@@ -15,7 +15,6 @@ import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -23,6 +22,7 @@ from wbc.arena.compare import ArenaResult
 from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table, format_verdict
+from wbc.arena.summary import Summary
 from wbc.control.check import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.capabilities import SafetyEventLike
@@ -30,8 +30,19 @@ from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus
 from wbc.hardware.emulators import BusStats
 from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
 from wbc.tools.arm_momentum import ArmMomentumTrial
-from wbc.tools.bench.hw import EmulatorCounts
-from wbc.tools.bench.references import MPC_REFERENCE_TARGETS, REFERENCE_TARGETS, TRAIN_TARGET
+from wbc.tools.bench import (
+    MPC_REFERENCE_TARGETS,
+    REFERENCE_TARGETS,
+    TRAIN_TARGET,
+    ArmBenchResult,
+    EmulatorCounts,
+    HwBenchResult,
+    LatencyBenchResult,
+    MpcBenchResult,
+    SimBenchResult,
+    SweepBenchResult,
+    TrainBenchResult,
+)
 from wbc.tools.demo import TrialToWatch
 from wbc.tools.paper import PaperTableResult, format_paper_table
 from wbc.tools.posture import PostureRow
@@ -101,89 +112,92 @@ def print_arm_momentum(rows: Sequence[ArmMomentumTrial], *, controller: str, sce
               f"mean {mean['arm_momentum_mean']:.3f} N m s")
 
 
-def print_bench_sim(result: Mapping[str, object]) -> None:
+def print_bench_sim(result: SimBenchResult) -> None:
     """`bench_sim`'s figures, and the reference's beside them when it was measured."""
-    print(f"Simulation speed: {result['robot']} (arm {result['arm_mode']}), standing under the motor law on "
-          f"{result['terrain']} ground, dt {result['timestep_s'] * 1e3:.1f} ms")
-    print(f"  machine: {result['machine']}")
-    print(f"  single-threaded : {result['steps_per_s']:>10,.0f} steps/s  (real-time factor "
-          f"{result['realtime_factor']:.0f}x)")
-    print(f"  batched rollout : {result['batched_steps_per_s']:>10,.0f} steps/s  ({result['batch']} envs, "
-          f"{result['threads']} threads)")
-    if "reference_steps_per_s" in result:
+    print(f"Simulation speed: {result.robot} (arm {result.arm_mode}), standing under the motor law on "
+          f"{result.terrain} ground, dt {result.timestep_s * 1e3:.1f} ms")
+    print(f"  machine: {result.machine}")
+    print(f"  single-threaded : {result.steps_per_s:>10,.0f} steps/s  (real-time factor "
+          f"{result.realtime_factor:.0f}x)")
+    print(f"  batched rollout : {result.batched_steps_per_s:>10,.0f} steps/s  ({result.batch} envs, "
+          f"{result.threads} threads)")
+    ref = result.reference
+    if ref is not None:
         (single, single_at), (batched, batched_at) = (REFERENCE_TARGETS["steps_per_s"],
                                                       REFERENCE_TARGETS["batched_steps_per_s"])
         print(f"  bare A1 URDF, same runs (the reference the simulator targets were set against: {single_at / 1e3:.0f}k"
               f" / {batched_at / 1e3:.0f}k):")
-        print(f"    single-threaded : {result['reference_steps_per_s']:>10,.0f} steps/s  -> this robot runs at "
-              f"{100 * result['steps_ratio_to_reference']:.0f} % of it (the target asks "
+        print(f"    single-threaded : {ref.steps_per_s:>10,.0f} steps/s  -> this robot runs at "
+              f"{100 * ref.steps_ratio_to_reference:.0f} % of it (the target asks "
               f"{100 * single / single_at:.0f} %: "
-              f"{result['scaled_target_steps_per_s']:,.0f} steps/s on this machine)")
-        print(f"    batched rollout : {result['reference_batched_steps_per_s']:>10,.0f} steps/s  -> "
-              f"{100 * result['batched_ratio_to_reference']:.0f} % (the target asks "
+              f"{ref.scaled_target_steps_per_s:,.0f} steps/s on this machine)")
+        print(f"    batched rollout : {ref.batched_steps_per_s:>10,.0f} steps/s  -> "
+              f"{100 * ref.batched_ratio_to_reference:.0f} % (the target asks "
               f"{100 * batched / batched_at:.0f} %: "
-              f"{result['scaled_target_batched_steps_per_s']:,.0f} steps/s on this machine)")
+              f"{ref.scaled_target_batched_steps_per_s:,.0f} steps/s on this machine)")
 
 
-def print_bench_train(result: Mapping[str, object]) -> None:
+def print_bench_train(result: TrainBenchResult) -> None:
     """`bench_train`'s figures, and the target scaled to this machine when the reference was measured."""
-    print(f"Training env speed: {result['robot']} (arm {result['arm_mode']}), {result['num_envs']} envs, "
-          f"{result['threads']} threads, policy at {1 / (result['timestep_s'] * result['decimation']):.0f} Hz, "
-          f"dt {result['timestep_s'] * 1e3:.1f} ms, random actions")
-    print(f"  machine: {result['machine']}")
-    print(f"  env            : {result['control_steps_per_s']:>10,.0f} control steps/s "
-          f"({result['physics_steps_per_s']:,.0f} physics steps/s)")
-    print(f"  rollout only   : {result['rollout_only_control_steps_per_s']:>10,.0f} control steps/s (physics limit)")
-    print(f"  env efficiency : {100 * result['env_efficiency']:>9.0f} %  "
-          f"({result['python_ms_per_step']:.1f} ms of Python per policy step)")
-    print(f"  CPU-time bound : {result['cpu_bound_control_steps_per_s']:>10,.0f} control steps/s with the cores to "
-          f"itself (physics alone {result['cpu_bound_physics_only_control_steps_per_s']:,.0f}; CPU per step: "
-          f"physics {result['physics_cpu_ms_per_step']:.0f} ms, Python {result['python_cpu_ms_per_step']:.1f} ms)")
-    if "reference_physics_limit_control_steps_per_s" in result:
+    print(f"Training env speed: {result.robot} (arm {result.arm_mode}), {result.num_envs} envs, "
+          f"{result.threads} threads, policy at {1 / (result.timestep_s * result.decimation):.0f} Hz, "
+          f"dt {result.timestep_s * 1e3:.1f} ms, random actions")
+    print(f"  machine: {result.machine}")
+    print(f"  env            : {result.control_steps_per_s:>10,.0f} control steps/s "
+          f"({result.physics_steps_per_s:,.0f} physics steps/s)")
+    print(f"  rollout only   : {result.rollout_only_control_steps_per_s:>10,.0f} control steps/s (physics limit)")
+    print(f"  env efficiency : {100 * result.env_efficiency:>9.0f} %  "
+          f"({result.python_ms_per_step:.1f} ms of Python per policy step)")
+    print(f"  CPU-time bound : {result.cpu_bound_control_steps_per_s:>10,.0f} control steps/s with the cores to "
+          f"itself (physics alone {result.cpu_bound_physics_only_control_steps_per_s:,.0f}; CPU per step: "
+          f"physics {result.physics_cpu_ms_per_step:.0f} ms, Python {result.python_cpu_ms_per_step:.1f} ms)")
+    ref = result.reference
+    if ref is not None:
         target, at = TRAIN_TARGET
-        print(f"  reference      : {result['reference_physics_limit_control_steps_per_s']:>10,.0f} control steps/s "
+        print(f"  reference      : {ref.physics_limit_control_steps_per_s:>10,.0f} control steps/s "
               f"(bare A1, 64 envs, 2 ms steps at 50 Hz; the target's ~{at / 1e3:.0f}k); env at "
-              f"{100 * result['control_steps_ratio_to_reference']:.0f} % of it, the target ({target / 1e3:.0f}k of "
+              f"{100 * ref.control_steps_ratio_to_reference:.0f} % of it, the target ({target / 1e3:.0f}k of "
               f"{at / 1e3:.1f}k) asks "
-              f"{100 * target / at:.0f} %: {result['scaled_target_control_steps_per_s']:,.0f} control steps/s here")
+              f"{100 * target / at:.0f} %: {ref.scaled_target_control_steps_per_s:,.0f} control steps/s here")
 
 
-def print_bench_mpc(result: Mapping[str, object]) -> None:
+def print_bench_mpc(result: MpcBenchResult) -> None:
     """`bench_mpc`'s figures, and the targets scaled to this machine when the references were measured."""
-    print(f"MPC speed: {result['controller']} on {result['robot']} walking at 0.3 m/s, N = {result['horizon']}")
-    print(f"  machine: {result['machine']}")
-    print(f"  MPC QP solve   : median {result['mpc_solve_ms_median']:.2f} ms, p99 {result['mpc_solve_ms_p99']:.2f} ms "
-          f"(setup median {result['mpc_setup_ms_median']:.2f} ms)")
-    print(f"  whole-body layer: median {result['wbc_tick_us_median']:.0f} us per tick")
-    print(f"  control tick: median {result['control_tick_us_median']:.0f} us (kinematics, estimator, footholds, "
+    ticks = result.ticks
+    print(f"MPC speed: {result.controller} on {result.robot} walking at 0.3 m/s, N = {result.horizon}")
+    print(f"  machine: {result.machine}")
+    print(f"  MPC QP solve   : median {ticks.mpc_solve_ms_median:.2f} ms, p99 {ticks.mpc_solve_ms_p99:.2f} ms "
+          f"(setup median {ticks.mpc_setup_ms_median:.2f} ms)")
+    print(f"  whole-body layer: median {ticks.wbc_tick_us_median:.0f} us per tick")
+    print(f"  control tick: median {ticks.control_tick_us_median:.0f} us (kinematics, estimator, footholds, "
           "whole-body layer, command; ticks without an MPC update)")
-    print(f"  closed loop    : {result['realtime_factor']:.1f}x real time on one core")
-    if "reference_placo_tick_us" in result:
+    print(f"  closed loop    : {result.realtime_factor:.1f}x real time on one core")
+    ref = result.reference
+    if ref is not None:
         tick_at = MPC_REFERENCE_TARGETS["wbc_tick_us_median"][1]
         physics_at = MPC_REFERENCE_TARGETS["realtime_factor"][1]
-        print(f"  references     : bare-A1 PlaCo tick {result['reference_placo_tick_us']:.0f} us (the targets' "
-              f"~{tick_at:.0f} us), bare-A1 physics {result['reference_steps_per_s']:,.0f} steps/s (the targets' "
+        print(f"  references     : bare-A1 PlaCo tick {ref.reference_placo_tick_us:.0f} us (the targets' "
+              f"~{tick_at:.0f} us), bare-A1 physics {ref.reference_steps_per_s:,.0f} steps/s (the targets' "
               f"{physics_at / 1e3:.0f}k)")
-        print(f"  targets scaled to this machine: whole-body tick <= {result['scaled_target_wbc_tick_us']:.0f} "
-              f"us, closed loop >= {result['scaled_target_realtime_factor']:.1f}x real time")
-        print(f"  against the references: control tick {result['control_tick_over_reference_tick']:.2f}x the "
-              f"reference PlaCo tick (target <= 1.8); closed loop {result['closed_loop_over_physics_rtf']:.3f} of "
-              f"this robot's physics alone ({result['physics_realtime_factor']:.0f}x real time; target >= 0.075)")
+        print(f"  targets scaled to this machine: whole-body tick <= {ref.scaled_target_wbc_tick_us:.0f} "
+              f"us, closed loop >= {ref.scaled_target_realtime_factor:.1f}x real time")
+        print(f"  against the references: control tick {ref.control_tick_over_reference_tick:.2f}x the "
+              f"reference PlaCo tick (target <= 1.8); closed loop {ref.closed_loop_over_physics_rtf:.3f} of "
+              f"this robot's physics alone ({ref.physics_realtime_factor:.0f}x real time; target >= 0.075)")
 
 
-def print_bench_sweep(result: Mapping[str, object]) -> None:
+def print_bench_sweep(result: SweepBenchResult) -> None:
     """`bench_sweep`'s figures, one line per executor measured."""
-    print(f"Sweep speed: {result['controller']} on {result['scenario']} ({result['trials']} trials, "
-          f"{result['terrain']} terrain)")
-    print(f"  machine: {result['machine']}")
-    print(f"  batched physics (bench sim, same terrain): {result['batched_physics_steps_per_s']:>10,.0f} steps/s")
-    for name in ("local", "ray"):
-        if f"{name}_wall_s" in result:
-            print(f"  sweep, {name:<5} executor: {result[f'{name}_sweep_steps_per_s']:>10,.0f} steps/s "
-                  f"({100 * result[f'{name}_ratio_to_batched_physics']:.0f} % of batched physics, "
-                  f"{result[f'{name}_wall_s']:.1f} s)")
-    if "ray_overhead_per_trial_s" in result:
-        print(f"  Ray overhead per trial: {1e3 * result['ray_overhead_per_trial_s']:.0f} ms")
+    print(f"Sweep speed: {result.controller} on {result.scenario} ({result.trials} trials, "
+          f"{result.terrain} terrain)")
+    print(f"  machine: {result.machine}")
+    print(f"  batched physics (bench sim, same terrain): {result.batched_physics_steps_per_s:>10,.0f} steps/s")
+    for row in result.executors:
+        print(f"  sweep, {row.executor:<5} executor: {row.sweep_steps_per_s:>10,.0f} steps/s "
+              f"({100 * row.ratio_to_batched_physics:.0f} % of batched physics, {row.wall_s:.1f} s)")
+    overhead = result.ray_overhead_per_trial_s
+    if overhead is not None:
+        print(f"  Ray overhead per trial: {1e3 * overhead:.0f} ms")
 
 
 def print_arena(result: ArenaResult, *, verdict: bool = True) -> None:
@@ -197,10 +211,8 @@ def print_arena(result: ArenaResult, *, verdict: bool = True) -> None:
     rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
     print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s); "
           f"results in {result.out_dir}/ (trials.csv, summary.json, failures.json, report.md)")
-    sequential = result.summary.get("sequential")
-    if sequential is not None:
-        stored = sum(cell["trials"] for entry in result.summary["controllers"].values()
-                     for cell in entry["bands"].values())
+    if result.summary.sequential is not None:
+        stored = result.summary.stored
         print(f"sequential test: {stored} of the budget's {result.budget} trials played"
               + (f" ({result.budget - stored} saved)" if stored < result.budget else ""))
 
@@ -243,7 +255,7 @@ def wbc_command(script: str | None = None, *, path: str | None = None, cwd: str 
 
 
 def print_demo_end(out_dir: Path, watch: TrialToWatch | None, *, scenario: str,
-                   summary: Mapping[str, Any] | None = None) -> None:
+                   summary: Summary | None = None) -> None:
     """How ``wbc demo`` ends, after the table: the report and its plots, one command to watch a trial, the verdict.
 
     The command stands alone on its line, spelled so that it runs as printed in the shell that ran the demo
@@ -339,97 +351,97 @@ def print_recording(what: str, frames: int, path: Path) -> None:
     print(f"recorded {frames} frames of {what} to {path}")
 
 
-def print_bench_hw(result: Mapping[str, object]) -> None:
+def print_bench_hw(result: HwBenchResult) -> None:
     """``wbc bench hw``: the link's send period, round trip, CPU per tick and rejects."""
-    print(f"Unitree {result['robot']} low-level link over loopback ({result['transport']} transport), "
-          f"{result['rate_hz']:.0f} Hz for {result['seconds']} s; emulator: {result['emulator_process']}")
-    print(f"  send period     p50 {result['period_ms_p50']:.3f} ms  p99 {result['period_ms_p99']:.3f} ms  "
-          f"max {result['period_ms_max']:.3f} ms")
-    print(f"  round trip      p50 {result['round_trip_ms_p50']:.3f} ms  p99 {result['round_trip_ms_p99']:.3f} ms "
+    print(f"Unitree {result.robot} low-level link over loopback ({result.transport} transport), "
+          f"{result.rate_hz:.0f} Hz for {result.seconds} s; emulator: {result.emulator_process}")
+    print(f"  send period     p50 {result.period_ms_p50:.3f} ms  p99 {result.period_ms_p99:.3f} ms  "
+          f"max {result.period_ms_max:.3f} ms")
+    print(f"  round trip      p50 {result.round_trip_ms_p50:.3f} ms  p99 {result.round_trip_ms_p99:.3f} ms "
           "(command sent -> the state answering it taken by the link thread)")
-    print(f"  link thread CPU {result['cpu_us_per_tick']:.0f} us per tick")
-    print(f"  advance(period) p50 {result['advance_ms_p50']:.3f} ms  p99 {result['advance_ms_p99']:.3f} ms; late "
-          f"advances {result['late_advances']} (worst {result['worst_lateness_ms']:.2f} ms)")
-    emu = result["emulator"]
-    print(f"  frames          {result['sends']} sent, {result['replies_received']} states received, "
-          f"{result['rejects']} rejected by the robot; emulator decoded {emu['accepted']}, rejected "
-          f"{sum(emu['rejected'].values())}")
-    safety = result.get("safety")
-    if safety:
+    print(f"  link thread CPU {result.cpu_us_per_tick:.0f} us per tick")
+    print(f"  advance(period) p50 {result.advance_ms_p50:.3f} ms  p99 {result.advance_ms_p99:.3f} ms; late "
+          f"advances {result.late_advances} (worst {result.worst_lateness_ms:.2f} ms)")
+    emu = result.emulator
+    print(f"  frames          {result.sends} sent, {result.replies_received} states received, "
+          f"{result.rejects} rejected by the robot; emulator decoded {emu.accepted}, rejected "
+          f"{sum(emu.rejected.values())}")
+    safety = result.safety
+    if safety is not None:
         print(f"Safety layer over the wire, real-time emulator (first damping frame on the wire after the cause; link "
-              f"period {safety['link_period_ms']:g} ms)")
-        print(f"  e-stop          {safety['estop_to_damping_ms']:.2f} ms")
-        print(f"  silent stream   {safety['silence_to_damping_ms']:.2f} ms (stale timeout "
-              f"{safety['stale_timeout_ms']:g} ms)")
-        print(f"  stalled loop    {safety['stall_to_damping_ms']:.2f} ms (write deadline "
-              f"{safety['write_deadline_ms']:g} ms)")
-        print(f"  hot motor       {safety['state_fault_to_damping_ms']:.2f} ms")
-        print(f"  stand           {safety['stand_seconds']:g} s: took {safety['stand_wall_s']:.2f} s of wall time, "
-              f"emulated {safety['stand_sim_s']:.2f} s (real-time factor {safety['stand_realtime_factor']:.3f}); "
-              f"safety {safety['stand_safety_state']}, link period mean {safety['stand_link_period_ms_mean']:.3f} ms "
-              f"max {safety['stand_link_period_ms_max']:.3f} ms, deadline trips {safety['stand_deadline_trips']}; "
-              f"act p99 {safety['stand_act_ms_p99']:.3f} ms, deadline misses {safety['stand_deadline_misses']}")
-        for trip in safety["stand_trips"]:
+              f"period {safety.link_period_ms:g} ms)")
+        print(f"  e-stop          {safety.estop_to_damping_ms:.2f} ms")
+        print(f"  silent stream   {safety.silence_to_damping_ms:.2f} ms (stale timeout "
+              f"{safety.stale_timeout_ms:g} ms)")
+        print(f"  stalled loop    {safety.stall_to_damping_ms:.2f} ms (write deadline "
+              f"{safety.write_deadline_ms:g} ms)")
+        print(f"  hot motor       {safety.state_fault_to_damping_ms:.2f} ms")
+        print(f"  stand           {safety.stand_seconds:g} s: took {safety.stand_wall_s:.2f} s of wall time, "
+              f"emulated {safety.stand_sim_s:.2f} s (real-time factor {safety.stand_realtime_factor:.3f}); "
+              f"safety {safety.stand_safety_state}, link period mean {safety.stand_link_period_ms_mean:.3f} ms "
+              f"max {safety.stand_link_period_ms_max:.3f} ms, deadline trips {safety.stand_deadline_trips}; "
+              f"act p99 {safety.stand_act_ms_p99:.3f} ms, deadline misses {safety.stand_deadline_misses}")
+        for trip in safety.stand_trips:
             print(f"    trip: {trip}")
-    print(f"  machine: {result['machine']}")
+    print(f"  machine: {result.machine}")
 
 
-def print_bench_latency(result: Mapping[str, object]) -> None:
+def print_bench_latency(result: LatencyBenchResult) -> None:
     """``wbc bench latency``: the wire's latency beside the equivalent simulated delay, and each controller's margin."""
-    if "wire_ticks" in result:
-        ticks = np.bincount(result["wire_ticks"])
+    wire = result.wire
+    if wire is not None:
+        ticks = np.bincount(wire.wire_ticks)
         spread = ", ".join(f"{k}: {n}" for k, n in enumerate(ticks) if n)
-        print(f"Wire ({result['wire_robot']}, loopback, {result['period_ms']:g} ms link and control period)")
-        print(f"  emulator round trip   p50 {result['round_trip_ms_p50']:.3f} ms  p99 "
-              f"{result['round_trip_ms_p99']:.3f} ms (command sent -> the state answering it, lockstep)")
+        print(f"Wire ({result.wire_robot}, loopback, {wire.period_ms:g} ms link and control period)")
+        print(f"  emulator round trip   p50 {wire.round_trip_ms_p50:.3f} ms  p99 "
+              f"{wire.round_trip_ms_p99:.3f} ms (command sent -> the state answering it, lockstep)")
         print(f"  loop latency probe    ticks from a torque step's write to the read showing it: p50 "
-              f"{result['wire_ticks_p50']:g}, mean {result['wire_ticks_mean']:.2f}, max {result['wire_ticks_max']} "
+              f"{wire.wire_ticks_p50:g}, mean {wire.wire_ticks_mean:.2f}, max {wire.wire_ticks_max} "
               f"(count by ticks: {spread}); the simulator without delay: 1")
-        print(f"  equivalent sim delay  typical {result['typical_delay_ms']:g} ms, worst {result['worst_delay_ms']:g} "
-              f"ms (actuation + sensing); the simulator's probe with them: {result['sim_ticks_typical']:g} and "
-              f"{result['sim_ticks_worst']:g} ticks")
+        print(f"  equivalent sim delay  typical {wire.typical_delay_ms:g} ms, worst {wire.worst_delay_ms:g} "
+              f"ms (actuation + sensing); the simulator's probe with them: {wire.sim_ticks_typical:g} and "
+              f"{wire.sim_ticks_worst:g} ticks")
     print(f"Margin: the largest actuation delay passed [ms] before the first that failed (sweep: "
-          f"{', '.join(f'{x:g}' for x in result['coarse_ms'])}, then {result['fine_ms']:g} ms steps below the first "
-          f"failure); standing trials of {result['scenario']}")
+          f"{', '.join(f'{x:g}' for x in result.coarse_ms)}, then {result.fine_ms:g} ms steps below the first "
+          f"failure); standing trials of {result.scenario}")
     print(f"  {'controller':<12}{'stands still':<26}{'survives a push':<26}{'push [N]':<18}wall [s]")
-    top = result["coarse_ms"][-1]
-    for m in result["margins"]:
+    top = result.coarse_ms[-1]
+    for m in result.margins:
         cells = []
-        for test in ("still", "push"):
-            margin, fell = m[f"{test}_margin_ms"], m[f"{test}_fell_at_ms"]
+        for margin, fell in ((m.still_margin_ms, m.still_fell_at_ms), (m.push_margin_ms, m.push_fell_at_ms)):
             passed = "none" if margin is None else f"{margin:g}"
             cells.append(f"{passed}, fell at {fell:g}" if fell is not None else f"{passed} (no fall up to {top:g})")
-        forces = ", ".join(f"{f:g}" for f in m["push_force_n"])
-        print(f"  {m['controller']:<12}{cells[0]:<26}{cells[1]:<26}{forces:<18}{m['wall_s']:.0f} ({m['runs']} runs)")
+        forces = ", ".join(f"{f:g}" for f in m.push_force_n)
+        print(f"  {m.controller:<12}{cells[0]:<26}{cells[1]:<26}{forces:<18}{m.wall_s:.0f} ({m.runs} runs)")
 
 
-def print_bench_arm(result: Mapping[str, object]) -> None:
+def print_bench_arm(result: ArmBenchResult) -> None:
     """``wbc bench arm``: the bus loop's rates and the elbow's step response, bus against simulation."""
-    print(f"WX200 arm bus ({result['robot']}) against the real-time emulated robot in its own process; latency timer "
-          f"{result['latency_ms']} ms, {result['seconds']} s per rate")
+    print(f"WX200 arm bus ({result.robot}) against the real-time emulated robot in its own process; latency timer "
+          f"{result.latency_ms} ms, {result.seconds} s per rate")
     print("  requested [Hz]  achieved [Hz]  busy mean / max [ms]  longest period [ms]  failed reads  faults")
-    for r in result["rates"]:
-        print(f"  {r['rate_hz']:>14.0f}{r['achieved_hz']:>15.1f}{r['busy_ms_mean']:>12.2f} / {r['busy_ms_max']:<7.1f}"
-              f"{r['period_ms_max']:>19.1f}{r['failed_reads']:>14d}{r['faults']:>8d}")
-    print(f"  elbow step of {result['step_rad']} rad (median of 4 on the bus), from the stowed pose:")
+    for r in result.rates:
+        print(f"  {r.rate_hz:>14.0f}{r.achieved_hz:>15.1f}{r.busy_ms_mean:>12.2f} / {r.busy_ms_max:<7.1f}"
+              f"{r.period_ms_max:>19.1f}{r.failed_reads:>14d}{r.faults:>8d}")
+    print(f"  elbow step of {result.step_rad} rad (median of 4 on the bus), from the stowed pose:")
     print("  source       kp    kd   rate [Hz]  rise 10-90 [ms]  overshoot [%]  settle 5% [ms]  final error [rad]"
           "  discarded")
-    for s in result["steps"]:
-        print(f"  {s['source']:<11}{s['kp']:>4.0f}{s['kd']:>6.1f}{s['rate_hz']:>12.0f}{s['rise_ms']:>17.1f}"
-              f"{s['overshoot_pct']:>15.1f}{s['settle_ms']:>16.0f}{s['final_error_rad']:>19.4f}{s['discarded']:>11d}")
+    for s in result.steps:
+        print(f"  {s.source:<11}{s.kp:>4.0f}{s.kd:>6.1f}{s.rate_hz:>12.0f}{s.rise_ms:>17.1f}"
+              f"{s.overshoot_pct:>15.1f}{s.settle_ms:>16.0f}{s.final_error_rad:>19.4f}{s.discarded:>11d}")
     print("  reactions at 200 Hz, wall time (the tests check them exactly on a clock they move):")
     print("  event            reaction    took [ms]  expected [ms]  watchdog after last packet [ms]")
-    for r in result.get("reactions", []):
-        watchdog = f"{r['watchdog_ms']:.1f}" if r["watchdog_ms"] is not None else "-"
-        print(f"  {r['event']:<17}{r['reaction']:<12}{r['ms']:>9.1f}{r['expected_ms']:>15.1f}  {watchdog:>10}")
-    for e in result.get("emulator", []):
-        if e["what"] == "plant_realtime_factor":
-            print(f"  shared plant on its own thread: real-time factor {e['value']:.3f} (overruns {e['worst']:.0f})")
+    for r in result.reactions:
+        watchdog = f"{r.watchdog_ms:.1f}" if r.watchdog_ms is not None else "-"
+        print(f"  {r.event:<17}{r.reaction:<12}{r.ms:>9.1f}{r.expected_ms:>15.1f}  {watchdog:>10}")
+    for e in result.emulator:
+        if e.what == "plant_realtime_factor":
+            print(f"  shared plant on its own thread: real-time factor {e.value:.3f} (overruns {e.worst:.0f})")
         else:
-            label = "with byte timing" if e["what"].endswith("byte_timing") else "no byte timing  "
-            print(f"  sync read of 3 joints over a pty, {label}: p50 {e['value']:.3f} ms, p99 {e['worst']:.3f} ms "
-                  f"(wire model {e['model']:.2f} ms)")
-    print(f"  machine: {result['machine']}")
+            label = "with byte timing" if e.what.endswith("byte_timing") else "no byte timing  "
+            print(f"  sync read of 3 joints over a pty, {label}: p50 {e.value:.3f} ms, p99 {e.worst:.3f} ms "
+                  f"(wire model {e.model:.2f} ms)")
+    print(f"  machine: {result.machine}")
 
 
 def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faults: Sequence[str], *,

@@ -1,16 +1,16 @@
 """Replays of stored episodes: find a trial's episode log in a results directory and turn it into viewer frames.
 
-A results directory written with ``--save-episodes`` holds ``run.json`` (controllers, scenario path and hash,
-bands, seeds, trials per band and seed) and ``episodes/<controller>/<band>-s<seed>-t<index>.npz``. The episode
-gives the configuration and command of every control tick and the pushes it met (as arrays, `PushLog`); the scenario
-file gives the robot and the ground. A hardware trial's directory (``wbc hw run``) names its one trial and the robot
-it was played on, drawn on flat ground. Every problem names the file and the field at fault.
+A results directory written with ``--save-episodes`` holds ``run.json`` (its `wbc.arena.identity.RunIdentity`:
+controllers, scenario path and hash, bands, seeds, trials per band and seed) and
+``episodes/<controller>/<band>-s<seed>-t<index>.npz``. The episode gives the configuration and command of every
+control tick and the pushes it met (as arrays, `PushLog`); the scenario file gives the robot and the ground. A
+hardware trial's directory (``wbc hw run``) names its one trial and the robot it was played on, drawn on flat ground.
+Every problem names the file and the field at fault.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
 import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -19,9 +19,10 @@ from pathlib import Path
 import numpy as np
 
 from wbc.arena.episode import Episode
+from wbc.arena.identity import RunIdentity
 from wbc.arena.results import episode_path
 from wbc.control.registry import get_controller
-from wbc.errors import WbcError
+from wbc.errors import RecordError, WbcError
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
@@ -112,18 +113,16 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     run_json = root / "run.json"
     if not root.is_dir():
         raise ViewerError(f"{root}: no such results directory (give the --out of a `wbc run --save-episodes`)")
+    if not run_json.exists():
+        raise ViewerError(f"{run_json}: missing; {root} is not a results directory")
     try:
-        config = json.loads(run_json.read_text(encoding="utf-8"))["config"]
-        controllers, bands = list(config["controllers"]), list(config["bands"])
-        seeds = [int(s) for s in config["seeds"]]
-        # a hardware trial (``wbc hw run``) stores one trial, played on the robot it names
-        played = [int(config["trial"])] if "trial" in config else list(range(int(config["trials"])))
-        played_on = str(config["robot"]) if "robot" in config else None
-        scenario_path, scenario_hash = Path(config["scenario"]["path"]), str(config["scenario"]["hash"])
-    except FileNotFoundError:
-        raise ViewerError(f"{run_json}: missing; {root} is not a results directory") from None
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ViewerError(f"{run_json}: unreadable run configuration ({type(exc).__name__}: {exc})") from None
+        identity = RunIdentity.load(run_json)
+    except RecordError as exc:  # names the file and the field
+        raise ViewerError(str(exc)) from None
+    controllers, bands, seeds = list(identity.controllers), list(identity.bands), list(identity.seeds)
+    played = list(identity.trials_played)  # a hardware trial (``wbc hw run``) stores its one trial
+    played_on = identity.played_on  # and the robot it was played on
+    scenario_path, scenario_hash = identity.scenario_path, identity.scenario_hash
     controller = _pick(run_json, "controllers", controller, controllers, "--controller")
     band = _pick(run_json, "bands", band, bands, "--band")
     seed = _pick(run_json, "seeds", seed, seeds, "--seed")

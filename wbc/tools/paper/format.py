@@ -15,17 +15,19 @@
 
 from __future__ import annotations
 
+import dataclasses
 import textwrap
-from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.report import LABELS, cell_text, n80_text, number_text, p_text, signed_text
+from wbc.arena.summary import PairSummary
 from wbc.tools.paper.paper_numbers import PaperValue
 from wbc.tools.paper.tables import Contender
 
 if TYPE_CHECKING:
-    from wbc.tools.paper.paper_table import PaperTableResult
+    from wbc.tools.paper.paper_table import PaperComparison, PaperTableResult
 
 __all__ = ["ALPHA", "display_name", "format_paper_table", "verdict"]
 
@@ -55,20 +57,20 @@ def _paper_cell(value: PaperValue | None, metric: str) -> str:
     return mean if value.std is None else f"{mean} ± {number_text(value.std, metric)}"
 
 
-def verdict(entry: Mapping[str, Any], *, alpha: float = ALPHA) -> str:
+def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
     """One comparison in words: which side is better, or that the test finds no difference and what would.
 
     Success and TTF: larger is better; tracking errors: smaller is better. "Better" only when the paired test's
     p-value is at most `alpha`; otherwise "no significant difference", with n80 (the pairs that would detect the
     observed difference with 80 % power).
     """
-    metric, p, diff = entry["metric"], entry.get("p"), entry.get("diff")
+    metric, p, diff = entry.metric, entry.p, entry.diff
     what = LABELS[metric].split(" [")[0].removesuffix(" %")
     if p is None or diff is None:
         return f"{what}: no pairs"
     if p <= alpha and diff != 0.0:
         b_better = (diff < 0.0) if metric in _LOWER_IS_BETTER else (diff > 0.0)
-        winner = entry["b"] if b_better else entry["a"]
+        winner = entry.b if b_better else entry.a
         unit = " points" if metric == "success_rate" else ""
         return f"{what}: {winner} better ({signed_text(diff, metric)}{unit}, p = {p_text(p)})"
     n80 = n80_text(entry)
@@ -90,9 +92,9 @@ def _metric_block(result: PaperTableResult, metric: str) -> list[str]:
             if contender.controller is None:
                 rows.append(["", f"{contender.key}: missing", *("-" for _ in result.bands)])
                 continue
-            entry = summary["controllers"].get(contender.controller, {}).get("bands", {})
-            rows.append(["", name, *(cell_text(entry[b][metric], metric, entry[b].get("seeds")) if b in entry
-                                     else "n/a" for b in result.bands)])
+            cells = [summary.cell(contender.controller, b) for b in result.bands]
+            rows.append(["", name, *(cell_text(c[metric], metric, c.seeds) if c is not None and metric in c
+                                     else "n/a" for c in cells)])
     return [LABELS[metric], *_columns(header, rows)]
 
 
@@ -123,24 +125,26 @@ def _comparison_lines(result: PaperTableResult) -> list[str]:
                   "for success, Wilcoxon signed-rank otherwise, two-sided, each comparison on its own; n80: pairs for "
                   "80 % power at the observed difference)")
     names = {c.key: display_name(c) for c in result.contenders}
-    questions: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
-    for entry in result.comparisons:
-        questions.setdefault((entry["a"], entry["b"]), []).append(entry)
+    questions: dict[tuple[str, str], list[PaperComparison]] = {}
+    for comparison in result.comparisons:
+        questions.setdefault((comparison.pair.a, comparison.pair.b), []).append(comparison)
     if not questions:
         return [*lines, "  (none: a contender of every comparison is missing)"]
     for (a, b), entries in questions.items():
         lines.append("")
-        lines.append(f"{entries[0]['question']}: B = {names[b]}, A = {names[a]}")
+        lines.append(f"{entries[0].question}: B = {names[b]}, A = {names[a]}")
         rows = []
-        for e in entries:
-            discordant = f"{e['a_only']} / {e['b_only']}" if e.get("a_only") is not None else ""
-            ci = e["ci95"]
-            ci_text = "n/a" if None in ci else f"[{signed_text(ci[0], e['metric'])}, {signed_text(ci[1], e['metric'])}]"
-            rows.append([e["band"], LABELS[e["metric"]], signed_text(e["diff"], e["metric"]), ci_text, p_text(e["p"]),
-                         discordant, n80_text(e)])
+        for e in (c.pair for c in entries):
+            discordant = f"{e.a_only} / {e.b_only}" if e.a_only is not None else ""
+            lo, hi = e.ci95
+            ci_text = ("n/a" if lo is None or hi is None else
+                       f"[{signed_text(lo, e.metric)}, {signed_text(hi, e.metric)}]")
+            rows.append([e.band, LABELS[e.metric], signed_text(e.diff, e.metric), ci_text, p_text(e.p), discordant,
+                         n80_text(e)])
         lines += _columns(["band", "metric", "B - A", "95% CI", "p", "A only / B only", "n80"], rows)
         for band in result.bands:
-            said = "; ".join(verdict({**e, "a": names[a], "b": names[b]}) for e in entries if e["band"] == band)
+            said = "; ".join(verdict(dataclasses.replace(c.pair, a=names[a], b=names[b])) for c in entries
+                             if c.pair.band == band)
             lines += _wrap(f"band {band}: {said}", indent="  ")
     return lines
 

@@ -3,7 +3,7 @@
 `run_paper_table` resolves the table's contenders (`wbc.tools.paper.tables`), plays them on the same trials of the
 scenario (`wbc.arena.compare.run_arena`: resumable, every trial stored as it finishes, the arena's report with the
 breakdown of where each contender fails and the push-recovery curve), then computes the table's paired comparisons
-(difference, bootstrap interval, exact McNemar or Wilcoxon p-value, n80: `wbc.arena.report.paired_comparison`) and
+(difference, its 95 % interval, exact McNemar or Wilcoxon p-value, n80: `wbc.arena.report.compare_pair`) and
 writes ``paper.txt`` (what the command prints, `wbc.tools.paper.format.format_paper_table`) and ``paper.json`` beside
 the arena's files.
 
@@ -23,7 +23,8 @@ from typing import Any
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.record import TrialRecord
-from wbc.arena.report import METRIC_KEYS, paired_comparison
+from wbc.arena.report import compare_pair
+from wbc.arena.summary import PairSummary, Summary
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.tools.paper.format import format_paper_table
@@ -78,6 +79,24 @@ class PaperRunConfig:
             raise ConfigError(f"--trials and --seeds must be >= 1, got {self.trials} and {self.seeds}")
 
 
+@dataclass(frozen=True)
+class PaperComparison:
+    """One of a paper table's comparisons in one band and metric.
+
+    Attributes:
+        question: what the comparison asks (the contrast's question).
+        pair: B - A on the same trials, A and B named by the contenders' keys.
+    """
+
+    question: str
+    pair: PairSummary
+
+    def to_json(self) -> dict[str, Any]:
+        """``paper.json``'s form: ``{"a", "b", "question", "band", "metric", ...}`` with the pair's fields."""
+        pair = self.pair.to_json()
+        return {"a": pair.pop("a"), "b": pair.pop("b"), "question": self.question, **pair}
+
+
 @dataclass(frozen=True, kw_only=True)
 class PaperTableResult:
     """A played paper table.
@@ -89,9 +108,8 @@ class PaperTableResult:
         bands: the scenario's bands, in the order matched to the paper's columns.
         trials: trials per band and seed.
         seeds: the seeds.
-        summary: the arena's ``summary.json``.
-        comparisons: one entry per (contrast, band, metric): ``{"a", "b", "question", "band", "metric"}`` and the
-            `wbc.arena.report.paired_comparison` fields.
+        summary: the arena's summary.
+        comparisons: one per (contrast, band, metric), its pair named by the contenders' keys.
         failures: the arena's breakdown of where each contender fails (`wbc.arena.breakdown.breakdown`).
         curve: the push-recovery curve (`wbc.arena.breakdown.recovery_curve`).
         trial_wall_s: each controller's mean wall time per trial [s].
@@ -107,8 +125,8 @@ class PaperTableResult:
     bands: tuple[str, ...]
     trials: int
     seeds: tuple[int, ...]
-    summary: dict[str, Any]
-    comparisons: list[dict[str, Any]]
+    summary: Summary
+    comparisons: tuple[PaperComparison, ...]
     failures: dict[str, Any]
     curve: dict[str, Any]
     trial_wall_s: dict[str, float]
@@ -133,7 +151,8 @@ class PaperTableResult:
             "contenders": [{"key": c.key, "row": c.row, "family": c.family, "controller": c.controller,
                             "note": c.note} for c in self.contenders],
             "scenario": self.scenario, "bands": list(self.bands), "paper_columns": list(self.spec.paper_columns),
-            "trials": self.trials, "seeds": list(self.seeds), "comparisons": self.comparisons,
+            "trials": self.trials, "seeds": list(self.seeds),
+            "comparisons": [c.to_json() for c in self.comparisons],
             "trial_wall_s": self.trial_wall_s, "wall_s": self.wall_s, "played": self.played,
             "workers": self.workers, "paper_protocol_cpu_h": self.paper_protocol_cpu_h,
             "paper": {row: {m: [{"mean": v.mean, "std": v.std} for v in values] for m, values in cells.items()}
@@ -169,7 +188,7 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
                                   seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
                                   resume=cfg.resume, progress=cfg.progress))
     wall = time.perf_counter() - start
-    records = [r for r in TrialRecord.read_csv(arena.out_dir / "trials.csv") if r.scenario_hash == scenario.hash]
+    records = arena.records
     by_controller: dict[str, list[TrialRecord]] = {}
     for record in records:
         by_controller.setdefault(record.controller, []).append(record)
@@ -183,28 +202,16 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
             cell_a = [r for r in by_controller.get(a, []) if r.band == band]
             cell_b = [r for r in by_controller.get(b, []) if r.band == band]
             for metric in spec.metrics:
-                result = paired_comparison(cell_a, cell_b, METRIC_KEYS[metric])
-                comparisons.append({"a": contrast.a, "b": contrast.b, "question": contrast.question, "band": band,
-                                    "metric": metric, **_finite(result)})
-    failures = json.loads((arena.out_dir / "failures.json").read_text(encoding="utf-8"))
+                pair = compare_pair(cell_a, cell_b, a=contrast.a, b=contrast.b, band=band, metric=metric)
+                comparisons.append(PaperComparison(question=contrast.question, pair=pair))
     wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}
     result = PaperTableResult(
         spec=spec, contenders=contenders,
         scenario={"name": scenario.name, "version": scenario.version, "path": str(scenario_path),
                   "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
         bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
-        comparisons=comparisons, failures=failures["breakdown"], curve=failures["push_recovery"],
+        comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
         trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, wall_s=wall, workers=cfg.workers)
     (arena.out_dir / "paper.txt").write_text(format_paper_table(result), encoding="utf-8")
     (arena.out_dir / "paper.json").write_text(json.dumps(result.as_dict(), indent=2), encoding="utf-8")
     return result
-
-
-def _finite(result: Mapping[str, Any]) -> dict[str, Any]:
-    """A paired comparison with NaN as None, for JSON."""
-    out = dict(result)
-    for key in ("diff", "p"):
-        if out[key] is not None and out[key] != out[key]:
-            out[key] = None
-    out["ci95"] = [None if x != x else x for x in out["ci95"]]
-    return out

@@ -1,0 +1,48 @@
+"""`finish_results`: the one function that completes a results directory, for simulated runs and hardware trials.
+
+A results directory is written in two parts. While trials play, the results store (`wbc.arena.results.ResultsStore`)
+appends each record to ``trials.csv`` and keeps ``run.json``. When they are done, `finish_results` writes what is
+derived from the records: ``summary.json`` (`wbc.arena.summary.Summary.to_json`), ``failures.json`` (where each
+controller fails, when given) and ``report.md`` with its plots. ``wbc compare`` and ``wbc hw run`` both end here, so
+the two kinds of directory hold the same files in the same form.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from wbc.arena.record import TrialRecord
+from wbc.arena.report import write_report
+from wbc.arena.summary import Summary
+
+__all__ = ["finish_results"]
+
+
+def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[TrialRecord], meta: Mapping[str, Any],
+                   *, sections: Sequence[tuple[str, Sequence[str]]] = (), failures: Mapping[str, Any] | None = None,
+                   curve: Mapping[str, Any] | None = None) -> list[Path]:
+    """Write ``summary.json``, ``failures.json`` (when `failures` is given) and the report into `out_dir`.
+
+    Args:
+        out_dir: the results directory (it exists: the results store made it).
+        summary: the records' summary (`wbc.arena.report.summarize`).
+        records: the records summarised (for the report's per-trial plots).
+        meta: the run information the report lists.
+        sections: more report sections (a hardware trial's timing, safety events and operator actions).
+        failures: where each controller fails (`wbc.arena.breakdown.breakdown`), None for none.
+        curve: the push-recovery curve (`wbc.arena.breakdown.recovery_curve`), None for none.
+
+    Returns:
+        The files written: ``summary.json``, ``failures.json`` (if any), ``report.md``, then the plots.
+    """
+    out = Path(out_dir)
+    written = [out / "summary.json"]
+    written[0].write_text(json.dumps(summary.to_json(), indent=2), encoding="utf-8")
+    if failures is not None:
+        written.append(out / "failures.json")
+        written[-1].write_text(json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2),
+                               encoding="utf-8")
+    return [*written, *write_report(out, summary, records, meta, sections=sections, failures=failures, curve=curve)]
