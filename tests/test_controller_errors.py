@@ -28,6 +28,7 @@ import pytest
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode, SafetyLog
 from wbc.arena.record import MACHINE_TIMED, TrialRecord
+from wbc.arena.report import format_table
 from wbc.cli.main import main
 from wbc.scenario.scenario import load_scenario
 
@@ -345,3 +346,58 @@ def test_a_run_with_a_broken_controller_killed_mid_run_resumes_losing_nothing(br
     assert [r.trial for r in late] == [0, 1, 2] and all(r.outcome == "controller_error" for r in late)
     (errors,) = result.controller_errors
     assert (errors.errored, errors.stopped, errors.not_played) == (3, True, 3)
+
+
+def test_a_factory_that_fails_while_the_trials_play_costs_its_trials(tmp_path, scenario, monkeypatch):
+    # builds once (the arena's check before any trial), then raises: a factory that depends on something that went
+    # away (a file, a device) fails where the trials are played, and those trials are recorded, not the run lost
+    pkg = tmp_path / "fragile"
+    pkg.mkdir()
+    (pkg / "fragilepkg.py").write_text(textwrap.dedent('''
+        """Builds once."""
+        from wbc.control.stand import StandController
+
+        BUILT = []
+
+
+        def make(desc):
+            if BUILT:
+                raise FileNotFoundError("calibration.yaml went away")  # MARK
+            BUILT.append(desc)
+            return StandController(desc)
+    ''').lstrip(), encoding="utf-8")
+    monkeypatch.syspath_prepend(str(pkg))
+    try:
+        result = run_arena(ArenaConfig(controllers=("fragilepkg:make", "stand"), scenario=scenario, seeds=(0,),
+                                       trials=2, out_dir=tmp_path / "o", workers=1, progress=False))
+    finally:
+        sys.modules.pop("fragilepkg", None)
+    mine = [r for r in result.records if r.controller == "fragilepkg:make"]
+    assert [r.outcome for r in mine] == ["controller_error"] * 2
+    source = pkg / "fragilepkg.py"
+    (line,) = [i for i, text in enumerate(source.read_text().splitlines(), start=1) if "# MARK" in text]
+    for r in mine:
+        assert r.error.startswith(f"controller fragilepkg:make, band soft, seed 0, trial {r.trial}: building it "
+                                  "raised PluginFactoryError before the first tick: plug-in fragilepkg:make raised ")
+        assert r.error.endswith(f"FileNotFoundError: calibration.yaml went away at {source}:{line}")
+        assert r.ticks == 0 and r.ttf == 0.0
+    assert len([r for r in result.records if r.controller == "stand"]) == 2
+    assert [e.controller for e in result.controller_errors] == ["fragilepkg:make"]
+
+
+def test_until_significant_with_a_controller_stopped_for_its_errors(broken, scenario, tmp_path):
+    # late fails every trial and is stopped after two: those two rounds are whole and fed to the sequential test (two
+    # discordant pairs settle nothing); the later rounds stay incomplete, so the test is fed no more, stand plays the
+    # whole budget, and the run ends and says so
+    cfg = ArenaConfig(controllers=("brokenpkg.late:make", "stand"), scenario=scenario, seeds=(0,), trials=4,
+                      out_dir=tmp_path / "o", workers=1, progress=False, until_significant=True,
+                      max_consecutive_errors=2)
+    result = run_arena(cfg)
+    by = {c: [r for r in result.records if r.controller == c] for c in cfg.controllers}
+    assert [r.trial for r in by["brokenpkg.late:make"]] == [0, 1]
+    assert [r.trial for r in by["stand"]] == [0, 1, 2, 3]
+    (errors,) = result.controller_errors
+    assert errors.stopped and errors.not_played == 2
+    assert result.summary.sequential["rounds"] == 2 and not result.summary.sequential["settled"]
+    table = format_table(result.summary)
+    assert "NOT every difference settled after 2 rounds" in table and "STOPPED after 2 consecutive errors" in table

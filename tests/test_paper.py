@@ -8,6 +8,7 @@ the run time are printed, and ``paper.txt`` holds exactly what was printed.
 from __future__ import annotations
 
 import json
+import sys
 
 import pytest
 
@@ -195,3 +196,29 @@ def test_the_crouched_option_plays_every_learned_rows_posture_variant_under_the_
     for name, spec in TABLES.items():
         keys = {c.key for c in spec.crouched_contenders}
         assert all(c.a in keys and c.b in keys for c in spec.contrasts), name
+
+
+def test_a_contender_that_fails_costs_its_trials_and_the_command_exits_1(tiny, tmp_path, capsys, monkeypatch):
+    root = tmp_path / "pkgroot"
+    root.mkdir()
+    (root / "paperbroken.py").write_text(
+        '"""Raises on its first tick."""\n'
+        "from wbc.control.stand import StandController\n\n\n"
+        "class Broken(StandController):\n"
+        "    def act(self, state, command):\n"
+        '        raise RuntimeError("no estimate")\n\n\n'
+        "def make(desc):\n"
+        "    return Broken(desc)\n", encoding="utf-8")
+    monkeypatch.syspath_prepend(str(root))
+    out = tmp_path / "t2"
+    try:
+        code = main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
+                     "--workers", "1", "--quiet", "--contender", "mpc=paperbroken:make"])
+    finally:
+        sys.modules.pop("paperbroken", None)
+    captured = capsys.readouterr()
+    assert code == 1
+    lines = [line for line in captured.err.splitlines() if line.startswith("wbc: controller ")]
+    assert len(lines) == 1 and lines[0].startswith("wbc: controller paperbroken:make: 2 of 2 trial(s) failed with a "
+                                                   "controller error; first: ")
+    assert "Table I" in captured.out  # the table is printed all the same, the other contenders' rows included

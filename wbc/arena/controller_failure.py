@@ -81,7 +81,8 @@ class ControllerFailure(WbcError, RuntimeError):
 
     Args:
         controller: the controller that failed.
-        phase: ``reset`` (it raised in ``reset``), ``act`` (it raised in ``act``), ``command`` (``act`` returned a
+        phase: ``build`` (its factory raised, in the process playing the trial), ``reset`` (it raised in
+            ``reset``), ``act`` (it raised in ``act``), ``command`` (``act`` returned a
             command the robot refused) or ``counters`` (``counters`` raised or returned something that is not a dict
             of counts, after the episode).
         tick: the control tick it failed at (0-based; 0 for ``reset``).
@@ -105,16 +106,17 @@ class ControllerFailure(WbcError, RuntimeError):
         self.error_type = type(exc).__name__
         self.error_message = str(exc)
         where = own_frame(exc, controller)
-        self.where = where if where is not None else _defined_at(controller, "act" if phase == "command" else phase)
+        self.where = where if where is not None or phase == "build" else _defined_at(
+            controller, "act" if phase == "command" else phase)
         super().__init__(self.describe())
 
     def describe(self) -> str:
         """One line: what failed, at which tick and time, the exception, and the controller's own file:line."""
-        what = {"reset": "reset raised", "act": "act raised",
+        what = {"build": "building it raised", "reset": "reset raised", "act": "act raised",
                 "command": "act returned a command the robot refused:",
                 "counters": "counters() failed:"}[self.phase]
-        if self.phase in ("reset", "counters"):
-            when = "before the first tick" if self.phase == "reset" else "after the episode"
+        if self.phase in ("build", "reset", "counters"):
+            when = "after the episode" if self.phase == "counters" else "before the first tick"
         else:
             when = (f"at tick {self.tick} (t = {self.time_s:.3f} s)" if math.isfinite(self.time_s)
                     else f"at tick {self.tick}")

@@ -12,12 +12,13 @@ A controller that fails during the trial (`wbc.arena.controller_failure.Controll
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 
 from threadpoolctl import threadpool_limits
 
 from wbc.arena.controller_failure import ControllerFailure, read_counters
-from wbc.arena.episode import Episode, PushLog
+from wbc.arena.episode import Episode, EpisodeBuffer, PushLog
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
 from wbc.control.protocol import TruthSwitch
@@ -81,7 +82,22 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
                record_errors: bool) -> tuple[TrialRecord, Episode]:
     start = time.perf_counter()
     robot = simulated_robot(trial, spec.arm_mode)
-    ctrl = spec.make(robot.desc)  # a factory that raises is refused before any trial (`wbc.arena.compare`)
+    try:
+        # a plug-in's factory that raises is refused before any trial (`wbc.arena.compare`); one that raises only
+        # here (in a worker, for this trial) costs this trial
+        ctrl = spec.make(robot.desc)
+    except Exception as exc:  # any: the factory's code may not be ours
+        # no controller, so no control period: the physics step stands in for the episode that never began
+        empty = EpisodeBuffer(nq=7 + robot.num_joints).finish(duration_s=trial.duration_s,
+                                                               control_dt=robot.config.timestep, fell=False,
+                                                               fall_time_s=math.nan)
+        failure = ControllerFailure(None, phase="build", tick=0, time_s=0.0, exc=exc, episode=empty)
+        if not record_errors:
+            raise failure from exc
+        record = TrialRecord.of_trial(trial, controller=spec.name, episode=empty, counters={},
+                                      wall_s=time.perf_counter() - start, debug_truth=debug_truth,
+                                      error=failure.record_error(spec.name, trial))
+        return record, empty
     ratio = (1.0 / ctrl.rate_hz) / robot.config.timestep
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         raise ConfigError(

@@ -588,7 +588,10 @@ def _paper(args: argparse.Namespace) -> int:
         printers.print_json(result.as_dict())
     else:
         printers.print_paper_table(result)
-    return 0
+    # a contender's errors cost its own trials, but the command says so and fails, as wbc compare does
+    for errors in result.controller_errors:
+        print(f"wbc: {errors.line()}", file=sys.stderr)
+    return 1 if result.controller_errors else 0
 
 
 def _view(args: argparse.Namespace) -> int:

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.error_guard import ControllerErrors
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import compare_pair
 from wbc.arena.summary import PairSummary, Summary
@@ -117,6 +118,8 @@ class PaperTableResult:
         played: trials played by this call.
         wall_s: wall time of this call [s].
         workers: worker processes used.
+        controller_errors: each contender that failed on a trial (`wbc.arena.compare.ArenaResult.controller_errors`);
+            its failed trials count against its success, and the command exits 1 naming it.
     """
 
     spec: PaperTableSpec
@@ -134,6 +137,7 @@ class PaperTableResult:
     played: int
     wall_s: float
     workers: int | None
+    controller_errors: tuple[ControllerErrors, ...] = ()
 
     @property
     def paper_protocol_cpu_h(self) -> float:
@@ -211,7 +215,8 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
                   "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
         bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
         comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
-        trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, wall_s=wall, workers=cfg.workers)
+        trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, wall_s=wall, workers=cfg.workers,
+        controller_errors=arena.controller_errors)
     (arena.out_dir / "paper.txt").write_text(format_paper_table(result), encoding="utf-8")
     (arena.out_dir / "paper.json").write_text(json.dumps(result.as_dict(), indent=2), encoding="utf-8")
     return result
