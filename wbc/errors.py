@@ -14,6 +14,7 @@ __all__ = [
     "ConfigError",
     "CommandError",
     "FileFieldError",
+    "InputFileError",
     "ScenarioError",
     "RobotNotConnectedError",
     "MissingExtraError",
@@ -73,6 +74,14 @@ class ConfigError(WbcError, ValueError):
 
 class CommandError(WbcError, ValueError):
     """A motor command was rejected before reaching any motor (non-finite, wrongly shaped)."""
+
+
+class InputFileError(WbcError, ValueError):
+    """A file handed to `wbc` cannot be read safely (`wbc.input_files`).
+
+    It is missing, not a regular file, too large, not UTF-8, nested too deep, or not parseable; the message names the
+    file (and line) and the limit it broke.
+    """
 
 
 class FileFieldError(WbcError, ValueError):
