@@ -40,16 +40,98 @@ LIMP = '''
 '''
 
 
+SHORT_SCENARIO = """
+[scenario]
+name = "short"
+version = 1
+description = "one second of standing, a gentle push"
+robot = "a1-wx200"
+duration_s = 1.0
+
+[terrain]
+kind = "fractal"
+amplitude_m = 0.02
+
+[commands]
+[[commands.options]]
+vx = 0.0
+
+[pushes]
+first_s = [0.3, 0.5]
+interval_s = [0.6, 0.9]
+duration_s = 0.05
+offset_m = 0.1
+
+[[bands]]
+name = "soft"
+push_force_n = [50.0, 100.0]
+"""
+"""A one-second scenario of the a1-wx200 standing through gentle pushes (``stand`` survives every trial): the arena
+tests' smallest real run (`from conftest import SHORT_SCENARIO`)."""
+
+STAND_PLUGIN = '''
+    """{doc}"""
+    import numpy as np
+
+    from wbc.control.stand import StandController
+    from wbc.types import MotorCommand
+
+
+    class Wrapped:
+        def __init__(self, desc):
+            self.inner = StandController(desc)
+            self.rate_hz = self.inner.rate_hz
+            self.ticks = 0
+
+        def reset(self):
+            self.inner.reset()
+            self.ticks = 0
+            {reset}
+
+        def act(self, state, command):
+            self.ticks += 1
+            out = self.inner.act(state, command)
+            {act}
+            return out
+
+        def counters(self):
+            {counters}
+
+
+    def make(desc):
+        return Wrapped(desc)
+'''
+"""A plug-in module's source: the stand controller with a body added to its ``reset`` and ``act`` and its own
+``counters``; fill with ``STAND_PLUGIN.format(doc=..., reset="pass", act="pass", counters="return {{}}")``."""
+
+
 @pytest.fixture
-def limp(tmp_path, monkeypatch):
-    root = tmp_path / "limproot"
-    (root / "limppkg").mkdir(parents=True)
-    (root / "limppkg" / "__init__.py").write_text('"""Test plug-ins."""\n')
-    (root / "limppkg" / "limp.py").write_text(textwrap.dedent(LIMP).lstrip())
-    monkeypatch.syspath_prepend(str(root))
-    yield "limppkg.limp:make"
-    for name in [m for m in sys.modules if m.startswith("limppkg")]:
+def plugin_package(tmp_path, monkeypatch):
+    """Writes a package of plug-in modules on sys.path, forgotten afterwards: ``plugin_package("pkg", {"mod": src})``.
+
+    Returns the function; each call returns the package's root directory (its modules are ``root/pkg/mod.py``).
+    """
+    packages = []
+
+    def write(package: str, modules: dict[str, str]):
+        root = tmp_path / f"{package}root"
+        (root / package).mkdir(parents=True)
+        (root / package / "__init__.py").write_text(f'"""Test plug-ins: {package}."""\n')
+        for name, source in modules.items():
+            (root / package / f"{name}.py").write_text(textwrap.dedent(source).lstrip(), encoding="utf-8")
+        monkeypatch.syspath_prepend(str(root))
+        packages.append(package)
+        return root
+
+    yield write
+    for name in [m for m in sys.modules if m.split(".")[0] in packages]:
         del sys.modules[name]
+
+
+@pytest.fixture
+def limp(plugin_package):
+    plugin_package("limppkg", {"limp": LIMP})
+    return "limppkg.limp:make"
 
 
 @dataclass

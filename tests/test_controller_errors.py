@@ -24,6 +24,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode, SafetyLog
@@ -32,65 +33,7 @@ from wbc.arena.report import format_table
 from wbc.cli.main import main
 from wbc.scenario.scenario import load_scenario
 
-SCENARIO = """
-[scenario]
-name = "short"
-version = 1
-description = "one second of standing, a gentle push"
-robot = "a1-wx200"
-duration_s = 1.0
-
-[terrain]
-kind = "fractal"
-amplitude_m = 0.02
-
-[commands]
-[[commands.options]]
-vx = 0.0
-
-[pushes]
-first_s = [0.3, 0.5]
-interval_s = [0.6, 0.9]
-duration_s = 0.05
-offset_m = 0.1
-
-[[bands]]
-name = "soft"
-push_force_n = [50.0, 100.0]
-"""
-
-STAND_LIKE = '''
-    """{doc}"""
-    import numpy as np
-
-    from wbc.control.stand import StandController
-    from wbc.types import MotorCommand
-
-
-    class Broken:
-        def __init__(self, desc):
-            self.inner = StandController(desc)
-            self.rate_hz = self.inner.rate_hz
-            self.ticks = 0
-
-        def reset(self):
-            self.inner.reset()
-            self.ticks = 0
-            {reset}
-
-        def act(self, state, command):
-            self.ticks += 1
-            out = self.inner.act(state, command)
-            {act}
-            return out
-
-        def counters(self):
-            return {{}}
-
-
-    def make(desc):
-        return Broken(desc)
-'''
+SCENARIO = SHORT_SCENARIO
 
 BROKEN = {
     # after 0.5 s of the trial (the 26th tick at 50 Hz)
@@ -113,22 +56,16 @@ BROKEN = {
 
 
 @pytest.fixture
-def broken(tmp_path, monkeypatch):
+def broken(plugin_package):
     """A package `brokenpkg` of broken plug-ins on sys.path (and forgotten afterwards); its root directory."""
-    root = tmp_path / "brokenroot"
-    pkg = root / "brokenpkg"
-    pkg.mkdir(parents=True)
-    (pkg / "__init__.py").write_text('"""Broken plug-ins."""\n')
+    modules = {}
     for name, (doc, reset, act) in BROKEN.items():
-        text = textwrap.dedent(STAND_LIKE.format(doc=doc, reset=reset, act=act)).lstrip()
+        text = textwrap.dedent(STAND_PLUGIN.format(doc=doc, reset=reset, act=act, counters="return {}")).lstrip()
         if name == "flaky":
             text = text.replace("import numpy as np\n", "import itertools\n\nimport numpy as np\n\nCOUNT = "
                                 "itertools.count()\n")
-        (pkg / f"{name}.py").write_text(text, encoding="utf-8")
-    monkeypatch.syspath_prepend(str(root))
-    yield root
-    for name in [m for m in sys.modules if m == "brokenpkg" or m.startswith("brokenpkg.")]:
-        del sys.modules[name]
+        modules[name] = text
+    return plugin_package("brokenpkg", modules)
 
 
 @pytest.fixture

@@ -9,10 +9,10 @@ and counts built by hand.
 
 import json
 import math
-import textwrap
 
 import numpy as np
 import pytest
+from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.paired_tests import mcnemar_exact, paired_success_interval
@@ -23,86 +23,24 @@ from wbc.arena.verdict import verdicts
 from wbc.arena.windows import common_window_values
 from wbc.errors import RecordError
 
-SCENARIO = """
-[scenario]
-name = "second"
-version = 1
-description = "one second of standing"
-robot = "a1-wx200"
-duration_s = 1.0
-
-[terrain]
-kind = "flat"
-
-[commands]
-[[commands.options]]
-vx = 0.0
-
-[[bands]]
-name = "still"
-"""
-
-PLUGIN = '''
-    """{doc}"""
-    import time
-
-    import numpy as np
-
-    from wbc.control.stand import StandController
-    from wbc.types import MotorCommand
-
-
-    class Plugin:
-        def __init__(self, desc):
-            self.inner = StandController(desc)
-            self.rate_hz = self.inner.rate_hz
-            self.ticks = 0
-
-        def reset(self):
-            self.inner.reset()
-            self.ticks = 0
-
-        def act(self, state, command):
-            self.ticks += 1
-            out = self.inner.act(state, command)
-            {act}
-            return out
-
-        def counters(self):
-            {counters}
-
-
-    def make(desc):
-        return Plugin(desc)
-'''
-
 PLUGINS = {
     "counting": ("counts its ticks", "pass", 'return {"fallbacks": 0, "ticks_seen": self.ticks}'),
     "saturating": ("asks for 1e5 N m", "out = MotorCommand(q=out.q, dq=out.dq, kp=out.kp, kd=out.kd, "
                    "tau=np.full(15, 1e5))", "return {}"),
     # 21 ms at a 20 ms period: late on every tick, on any machine (a sleep lasts at least what it is asked for)
-    "slow": ("acts in 21 ms", "time.sleep(0.021)", "return {}"),
+    "slow": ("acts in 21 ms", '__import__("time").sleep(0.021)', "return {}"),
     "badcount": ("counts in halves", "pass", 'return {"half": 0.5}'),
 }
 
 
 @pytest.fixture
-def plugins(tmp_path, monkeypatch):
+def plugins(tmp_path, plugin_package):
     """A package `countpkg` of the plug-ins above on sys.path; the scenario file."""
-    pkg = tmp_path / "root" / "countpkg"
-    pkg.mkdir(parents=True)
-    (pkg / "__init__.py").write_text('"""Plug-ins for the results tests."""\n')
-    for name, (doc, act, counters) in PLUGINS.items():
-        text = textwrap.dedent(PLUGIN.format(doc=doc, act=act, counters=counters)).lstrip()
-        (pkg / f"{name}.py").write_text(text, encoding="utf-8")
-    monkeypatch.syspath_prepend(str(tmp_path / "root"))
-    scenario = tmp_path / "second.toml"
-    scenario.write_text(SCENARIO, encoding="utf-8")
-    yield scenario
-    import sys
-
-    for name in [m for m in sys.modules if m == "countpkg" or m.startswith("countpkg.")]:
-        del sys.modules[name]
+    plugin_package("countpkg", {name: STAND_PLUGIN.format(doc=doc, reset="pass", act=act, counters=counters)
+                                for name, (doc, act, counters) in PLUGINS.items()})
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SHORT_SCENARIO, encoding="utf-8")
+    return scenario
 
 
 def _compare(scenario, out, *controllers, trials=2):
@@ -120,13 +58,13 @@ def test_a_custom_counter_reaches_trials_csv_summary_and_report(plugins, tmp_pat
     assert {r.counters for r in mine} == {"fallbacks=0;ticks_seen=50"}
     assert all(r.ticks == 50 for r in rows)
     summary = json.loads((result.out_dir / "summary.json").read_text())
-    assert summary["controllers"][name]["bands"]["still"]["counters"] == {
+    assert summary["controllers"][name]["bands"]["soft"]["counters"] == {
         "fallbacks": {"total": 0, "trials": 0, "per_trial": 0.0},
         "ticks_seen": {"total": 100, "trials": 2, "per_trial": 50.0}}
-    assert summary["controllers"]["stand"]["bands"]["still"]["counters"] == {}
+    assert summary["controllers"]["stand"]["bands"]["soft"]["counters"] == {}
     report = (result.out_dir / "report.md").read_text()
-    assert f"| still | {name} | ticks_seen | 100 | 2 | 50 |" in report
-    assert f"{name} in band still: fallbacks 0, ticks_seen 100" in format_table(result.summary)
+    assert f"| soft | {name} | ticks_seen | 100 | 2 | 50 |" in report
+    assert f"{name} in band soft: fallbacks 0, ticks_seen 100" in format_table(result.summary)
     assert result.summary.to_json() == summary  # summary.json is the typed summary's one JSON form
     assert len(result.records) == len(rows) and set(result.records) == set(rows)  # the result carries its records
 
@@ -149,11 +87,11 @@ def test_clamped_and_late_ticks_are_counted_and_warned_about(plugins, tmp_path):
     assert not any(c == "stand" and k == "clamped_ticks" for c, k in kinds)
     table = format_table(summary)
     assert "warnings (past 1 % of a controller's ticks in a band):" in table
-    assert "countpkg.slow:make in band still: on 100 of 100 ticks (100.0 %) controller.act took longer" in table
+    assert "countpkg.slow:make in band soft: on 100 of 100 ticks (100.0 %) controller.act took longer" in table
     report = (result.out_dir / "report.md").read_text()
     assert "## Warnings" in report and "was clamped before it was sent (feed-forward torques on " in report
     ticks = sum(r.ticks for r in rows.values() if r.controller == "countpkg.saturating:make")
-    assert f"| still | countpkg.saturating:make | {ticks} | 0 | {ticks} |" in report  # timing and commands table
+    assert f"| soft | countpkg.saturating:make | {ticks} | 0 | {ticks} |" in report  # timing and commands table
 
 
 def test_a_controller_whose_counters_are_not_counts_fails_its_trials(plugins, tmp_path):
