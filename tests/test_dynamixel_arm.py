@@ -171,7 +171,7 @@ def test_a_port_name_other_than_the_one_given_is_never_opened(emu: DynamixelEmul
     opened = []
 
     def elsewhere(port: str) -> tuple[object, object]:
-        handler, packet = sdk_handlers(port + "-other", 4.0)
+        handler, packet = sdk_handlers("/dev/ttyUSB9", 4.0)  # built, not opened (an in-process name is refused)
         handler.openPort = lambda: opened.append(True) or True  # would record an open
         return handler, packet
 

@@ -29,7 +29,7 @@ from wbc.hardware.emulators import Fault, LoggedCommand, UnitreeEmulator, Unitre
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import MotorStatusSource, RemoteSource, SafeRobot, SafetyConfig, SafetyEvent, SafetyState
-from wbc.hardware.unitree import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree import DESCRIPTIONS, MODE_OVERHEAT, MOTOR_STATE_MODES, UnitreeRobot, UnitreeRobotConfig
 from wbc.types import MotorCommand
 
 ROBOTS = ("go1", "a1")
@@ -286,13 +286,16 @@ def test_loop_stall_damps_on_the_wire_and_resumes_without_a_jump(robot: str) -> 
 STATE_CASES = [
     (Fault.JOINT_OUT_OF_RANGE, (2, 0.5), "joint_range"),  # calf 0 reports +0.5 rad (its range ends below -0.8)
     (Fault.OVER_TEMPERATURE, 95, "motor_temperature"),
-    (Fault.MOTOR_ERROR, 0x05, "motor_mode"),  # neither servo 0x0A nor off 0x00: a motor error code
+    (Fault.MOTOR_ERROR, None, "motor_mode"),  # the emulator's default: 0x08, overheat, the vendor's fault code
+    (Fault.MOTOR_ERROR, 0x05, "motor_mode"),  # the A1 motor's open-loop calibration mode: never right here
     (Fault.FALL, np.pi / 2, "tilt"),  # the IMU reads the trunk rolled onto its side
 ]
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-@pytest.mark.parametrize(("fault", "value", "reason"), STATE_CASES, ids=[c[0].value for c in STATE_CASES])
+@pytest.mark.parametrize(("fault", "value", "reason"), STATE_CASES,
+                         ids=[c[0].value + ("" if c[1] is None or c[0] is not Fault.MOTOR_ERROR else f"_{c[1]:#04x}")
+                              for c in STATE_CASES])
 def test_state_fault_damps_on_the_wire_and_latches(robot: str, fault: Fault, value: object, reason: str) -> None:
     with _rig(robot, **FAST) as rig:
         emu, safe = rig.emu, rig.safe
@@ -310,6 +313,34 @@ def test_state_fault_damps_on_the_wire_and_latches(robot: str, fault: Fault, val
         emu.clear(fault)
         _assert_latched(rig, cmd, first.time, 0.06)  # the fault has gone; the latch holds
         _reset_and_check_ramp(rig, cmd)
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_the_default_motor_error_is_the_vendors_overheat_code_and_damps_on_the_wire(robot: str) -> None:
+    """``--fault motor_error`` with no value: every motor reports 0x08 (the SDK's documented overheat), which trips."""
+    with _rig(robot, **FAST) as rig:
+        cmd = _stand(rig.safe)
+        _run_to(rig.safe, cmd, SafetyState.RUN)
+        injected, tripped, first = _inject_until_damped(rig, cmd, Fault.MOTOR_ERROR, reason="motor_mode")
+        assert (rig.safe.robot.extras.motor_mode == MODE_OVERHEAT).all()
+        event = rig.events[-1]
+        assert event.detail.startswith("FR_hip_joint (motor 0) reports mode 0x08"), event.detail
+        assert "0x08 is overheat" in event.remedy
+        _assert_damping_in_the_next_frame(rig.emu, tripped, first)
+        assert all(c.damping for c in _after(rig.emu, injected) if c.time >= first.time)
+
+
+@pytest.mark.parametrize("mode", sorted(MOTOR_STATE_MODES))
+def test_the_layer_trips_on_the_documented_fault_modes_only(mode: int) -> None:
+    """Servo 0x0A and damping 0x00 are normal; overheat 0x08 is the fault; each reported by the emulated robot."""
+    with _rig("go1", **FAST) as rig:
+        cmd = _stand(rig.safe)
+        _run_to(rig.safe, cmd, SafetyState.RUN)
+        rig.emu.inject(Fault.MOTOR_ERROR, mode)
+        _loop(rig.safe, cmd, 0.05, until=lambda: rig.safe.safety_state is SafetyState.DAMPED)
+        assert (rig.safe.robot.extras.motor_mode == mode).all()
+        fault = MOTOR_STATE_MODES[mode] not in ("servo", "damping")
+        assert (rig.safe.safety_state is SafetyState.DAMPED) == fault, (mode, rig.events[-1])
 
 
 def _power(state) -> float:

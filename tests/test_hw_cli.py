@@ -306,3 +306,14 @@ def test_check_reads_the_arm_too_and_never_drives_it(capsys: pytest.CaptureFixtu
     cycles = re.search(r"arm bus: (\d+) cycles, (\d+) of them damping", out)
     # every cycle damped: no servo command (how many cycles real time allowed: the lockstep twin counts them)
     assert cycles and int(cycles[1]) > 0 and cycles[1] == cycles[2]
+
+
+def test_check_takes_the_robot_by_either_name(stepped: Stepped, capsys: pytest.CaptureFixture[str]) -> None:
+    """``hw check --robot go1-arm`` is ``--robot go1``: one naming across ``hw check`` and ``hw run``."""
+    wire = stepped.emu.config.robot
+    name = {"go1": "go1-arm", "a1": "a1-wx200"}[wire]
+    args = build_parser().parse_args(["hw", "check", "--robot", name, "--target", "127.0.0.1:9", "--seconds", "0.1"])
+    assert hw_check(args, build=stepped.build) == 0
+    out = capsys.readouterr().out
+    assert f"{name} at 127.0.0.1:9" in out and "rejected states: 0" in out
+    assert main(["hw", "check", "--robot", "b1", "--target", "127.0.0.1:9"]) == 2

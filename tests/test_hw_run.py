@@ -51,6 +51,7 @@ from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEm
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
+from wbc.hardware.safety.events import REMEDIES
 from wbc.scenario.scenario import load_scenario
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 from wbc.viz.content import SceneContent
@@ -285,9 +286,11 @@ def test_estop_while_the_robot_is_stood_up_stops_it_and_plays_nothing(stepped_go
     cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
                               seconds=2.0, target=("127.0.0.1", 9), out_dir=tmp_path / "hw", settle_s=0.2,
                               io_process=False)
-    with pytest.raises(StandUpError, match="software_estop"):
+    with pytest.raises(StandUpError, match="software_estop") as stopped:
         run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: emu.reset(),
                            build=stepped_go1.build)
+    # the e-stop's own remedy, not the joint-range one every trip used to end with
+    assert REMEDIES["software_estop"] in str(stopped.value) and "joint ranges" not in str(stopped.value)
     pressed = dict(keys.delivered)["e"]
     after = [c for c in emu.commands() if c.time > pressed + TIME_EPS]
     assert after and all(c.damping for c in after)  # from the next link period on
@@ -311,6 +314,7 @@ def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(
         hw_run(args, build=stepped_go1.build)
     err = str(refused.value)
     assert "tripped while standing the robot up" in err and "joint_range" in err and "nothing was played" in err
+    assert REMEDIES["joint_range"] in err
     assert not (out / "trials.csv").exists()
     assert emu.commands() and all(c.damping for c in emu.commands())  # not one servo frame reached the robot
 

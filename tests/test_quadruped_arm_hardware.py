@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 
 from wbc.control.stand import StandController
-from wbc.errors import ConfigError, UnknownNameError
+from wbc.errors import ConfigError, TargetRefusedError, UnknownNameError
 from wbc.hardware import Robot
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.contract import check_robot
@@ -105,11 +105,13 @@ def test_the_factory_names_what_a_mode_needs() -> None:
         _build("go1-arm", "none", arm_port="/dev/ttyUSB0")
     with pytest.raises(UnknownNameError, match="a1-wx200"):
         _build("a1", "actuated", arm_port="/dev/ttyUSB0")
-    locked = _build("go1-arm", "locked", arm_port="/dev/ttyUSB0")
+    with pytest.raises(TargetRefusedError, match="not a pseudo-terminal"):
+        _build("go1-arm", "locked", arm_port="/dev/ttyUSB0")  # a real adapter needs the consent
+    locked = _build("go1-arm", "locked", arm_port="/dev/ttyUSB0", allow_hardware=True)  # built, never opened
     assert locked.num_joints == 12 and isinstance(locked.arm, DynamixelArm)  # locked: the servos hold it stowed
     assert _build("go1-arm", "locked").num_joints == 12  # no port: fixed on the trunk, the legs' wire alone
     assert isinstance(_build("go1-arm", "locked"), UnitreeRobot)
-    assert _build("go1-arm", "actuated", arm_port="/dev/ttyUSB0").num_joints == 15
+    assert _build("go1-arm", "actuated", arm_port="/dev/ttyUSB0", allow_hardware=True).num_joints == 15
 
 
 @pytest.mark.parametrize("fault,value", [(BusFault.SILENT_ID, 4), (BusFault.BAD_CRC, 2), (BusFault.OVERLOAD, 1),
@@ -127,6 +129,8 @@ def test_an_arm_bus_fault_trips_the_safety_layer_and_damps_both_wires(fault: Bus
         tripped = events[-1].time  # on the layer's clock: the robot's, i.e. the test's
         reason = events[-1].reason
         assert reason in ("motor_mode", "motor_temperature", "stale_state"), events[-1]
+        if fault in (BusFault.SILENT_ID, BusFault.OVER_TEMPERATURE) and reason != "stale_state":
+            assert events[-1].detail.startswith("elbow (ID 4) "), events[-1]  # the servo by name, not "motor 15"
         assert arm.fault is not None and arm.fault.kind in ("no_answer", "corrupt", "hardware_error", "port_lost")
         # the fault latches within the arm's next bus cycle (a silent servo's retries and pings take ~42 ms of
         # it), and the layer trips at its next control tick

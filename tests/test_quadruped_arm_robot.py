@@ -198,7 +198,8 @@ def test_an_arm_servo_alarm_trips_the_layer_by_motor_status() -> None:
             safe.read()
             safe.write(hold)
             safe.advance(0.002)
-    assert events[-1].reason == "motor_mode" and "motor 13" in events[-1].detail
+    assert events[-1].reason == "motor_mode" and "(motor 13) reports mode 0x20" in events[-1].detail
+    assert events[-1].detail.startswith(robot.joint_names[13])  # the arm's joint by name: its device names none
 
 
 def test_connect_is_both_or_neither() -> None:

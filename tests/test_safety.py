@@ -20,11 +20,14 @@ from wbc.hardware.capabilities import HasSafetyEvents
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import (
     REASONS,
+    REMEDIES,
+    TRIP_REASONS,
     UNITREE_POSITION_LIMITS,
     MotorStatusSource,
     RemoteSource,
     SafeRobot,
     SafetyConfig,
+    SafetyEvent,
     SafetyState,
     position_range,
 )
@@ -261,6 +264,33 @@ TRIPS = {
     "remote_estop": (lambda f: setattr(f, "buttons", ("L2", "B")), lambda f: setattr(f, "buttons", ()), True),
     "software_estop": (lambda f: None, lambda f: None, False),
 }
+
+
+def test_each_trip_reason_has_a_remedy_of_its_own() -> None:
+    assert set(REMEDIES) == set(TRIP_REASONS)
+    assert len(set(REMEDIES.values())) == len(REMEDIES)  # no reason borrows another's words
+    joint_pose = "pose inside its joint ranges"
+    assert [r for r, text in REMEDIES.items() if joint_pose in text] == ["joint_range"]
+    for reason, words in (("remote_estop", "L2 + B"), ("motor_temperature", "cool"), ("over_power", "power"),
+                          ("stale_state", "stopped answering"), ("tilt", "upright"), ("motor_mode", "0x08")):
+        assert words in SafetyEvent(time=0.0, from_state=SafetyState.RUN, to_state=SafetyState.DAMPED,
+                                    reason=reason).remedy
+    assert SafetyEvent(time=0.0, from_state=SafetyState.WAITING, to_state=SafetyState.RAMP,
+                       reason="fresh_state").remedy == ""
+
+
+@pytest.mark.parametrize(("mode", "trips"), [(0x0A, False), (0x00, False), (0x08, True), (0x05, True)])
+def test_motor_modes_the_vendor_documents(mode, trips):
+    """Servo and damping are normal; overheat (0x08, Go1 SDK 3.8) and any other code trip, naming the joint."""
+    safe, faulty, events = _make("actuated", **FAST)
+    with safe:
+        cmd = stand_command(faulty.inner.desc)
+        _drive(safe, cmd, 100, until=SafetyState.RUN)
+        faulty.modes = mode
+        _drive(safe, cmd, 10, until=SafetyState.DAMPED)
+        assert (safe.safety_state is SafetyState.DAMPED) == trips
+        if trips:
+            assert events[-1].detail == f"FR_hip_joint (motor 0) reports mode {mode:#04x} (ok: 0x00, 0x0a)"
 
 
 @pytest.mark.parametrize("reason", list(TRIPS))

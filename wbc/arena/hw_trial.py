@@ -361,9 +361,9 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, 
     if safe.safety_state is SafetyState.DAMPED:
         _settle(robot, _STAND_UP_DT, settle_s)
         last = safe.events[-1]
+        # each reason its own remedy: a remote e-stop or a hot motor is not a pose out of range
         raise StandUpError(f"the safety layer tripped while standing the robot up, before the trial: {last.reason} "
-                           f"({last.detail}); nothing was played. Put the robot in a pose inside its joint ranges "
-                           "(hung in its harness), check it with `wbc hw check`, and run again")
+                           f"({last.detail}); nothing was played. {last.remedy} Then run again")
     raise StandUpError(f"the safety layer's ramp did not reach the standing pose within {budget:.1f} s (state "
                        f"{safe.safety_state}); nothing was played")
 

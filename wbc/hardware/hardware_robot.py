@@ -28,6 +28,7 @@ from wbc.hardware.dynamixel.arm_config import DynamixelArmConfig
 from wbc.hardware.dynamixel.arm_robot import DynamixelArm
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
 from wbc.hardware.robot import Robot
+from wbc.hardware.serial_port_policy import check_serial_port
 from wbc.hardware.unitree.robot import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig
 from wbc.hardware.unitree.target import is_loopback
 from wbc.hardware.unitree.transport import Transport
@@ -57,7 +58,8 @@ class HardwareRobotConfig:
         legs_port: its UDP port.
         local_host: the address the legs' link binds (None: 127.0.0.1 for a loopback target, else 0.0.0.0).
         local_port: the port it binds; 0 picks a free one.
-        allow_hardware: allow targets outside 127.0.0.0/8 (a real robot).
+        allow_hardware: allow targets outside 127.0.0.0/8 and an arm port that is not a pseudo-terminal (a real
+            robot, a real arm): one consent for every device (`check_target`, `check_serial_port`).
         rate_hz: the legs' link rate, 200..1000 [Hz].
         transport: the legs' datagram channel, ``udp`` or ``sdk`` (`UnitreeRobotConfig.transport`).
         arm_port: the arm's serial device (the U2D2, e.g. ``/dev/ttyUSB0``, or an emulator's pseudo-terminal).
@@ -91,6 +93,11 @@ class HardwareRobotConfig:
         if self.arm_mode == "actuated" and not has_arm:
             raise ConfigError(f"arm mode 'actuated' on the {self.robot} drives the arm's servos: give its serial port "
                               "(the U2D2, e.g. /dev/ttyUSB0, or the emulator's pseudo-terminal; --arm-port)")
+        # the robot's consent covers its arm: a whole bus config does not bring its own
+        if self.arm_port is not None:
+            check_serial_port(self.arm_port, allow_hardware=self.allow_hardware, what="HardwareRobotConfig.arm_port")
+        if self.arm is not None:
+            check_serial_port(self.arm.port, allow_hardware=self.allow_hardware, what="HardwareRobotConfig.arm.port")
 
 
 @dataclass(frozen=True)
@@ -130,7 +137,8 @@ def build_hardware_robot(config: HardwareRobotConfig, *, clock: Clock = MONOTONI
             `RobotEmulator.arm_handlers`); None: the serial port's.
 
     Raises:
-        TargetRefusedError: a target outside 127.0.0.0/8 without `allow_hardware`, or not an IPv4 literal.
+        TargetRefusedError: a target outside 127.0.0.0/8 without `allow_hardware`, or not an IPv4 literal (the arm's
+            port is checked when the config is built).
         ConfigError: an invalid rate, or an arm setting out of range (the message names it).
     """
     unitree = HARDWARE_ROBOTS[config.robot]
@@ -145,7 +153,7 @@ def build_hardware_robot(config: HardwareRobotConfig, *, clock: Clock = MONOTONI
     target = f"legs {config.transport} {config.legs_host}:{config.legs_port}"
     arm_config = config.arm
     if arm_config is None and config.arm_port is not None:
-        arm_config = DynamixelArmConfig(robot=config.robot, port=config.arm_port)
+        arm_config = DynamixelArmConfig(robot=config.robot, port=config.arm_port, allow_hardware=config.allow_hardware)
     if arm_config is None:
         return HardwareRobot(robot=legs, description=description, backend="unitree", position_table=unitree,
                              target=target)

@@ -51,6 +51,7 @@ from wbc.hardware.io_channel import ChannelClosed, LineChannel, rebuild_error
 from wbc.hardware.pacing import WallPacer
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, JointMotorStatus
 from wbc.hardware.robot import Robot
+from wbc.hardware.safety.capabilities import MotorNames
 from wbc.hardware.unitree.link_stats import LinkStats
 from wbc.hardware.unitree.remote import Remote
 from wbc.robots.joint_table import JointTable
@@ -109,6 +110,7 @@ class ProcessRobot(Robot):
         built = build_hardware_robot(config)  # refusals here, before any process or socket exists
         self.config = config
         self._names = built.robot.joint_names
+        self._motor_names = built.robot.motor_names if isinstance(built.robot, MotorNames) else ()
         self._limits = built.robot.limits
         self._period = 1.0 / config.rate_hz
         self._start_timeout = start_timeout
@@ -235,6 +237,11 @@ class ProcessRobot(Robot):
         if record is None or not record["has_remote"]:
             return None
         return Remote(raw=record["remote"].tobytes())
+
+    @property
+    def motor_names(self) -> tuple[str, ...]:
+        """One name per entry of `motor_status`, as the robot built in the I/O process names them (`MotorNames`)."""
+        return self._motor_names
 
     def motor_status(self) -> JointMotorStatus | None:
         """Modes and temperatures of the legs' motors, then the arm's servos, as of the newest published state.

@@ -30,7 +30,7 @@ import numpy as np
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike, WallClock
 from wbc.hardware.robot import Robot
-from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteButtons, RemoteSource
+from wbc.hardware.safety.capabilities import MotorNames, MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.robots.description import ARM_MODES
 from wbc.robots.joint_table import JointTable
 from wbc.robots.wx200 import WX200_NOMINAL_Q
@@ -236,6 +236,24 @@ class QuadrupedArmRobot(Robot):
     def remote(self) -> RemoteButtons | None:
         """The legs' wireless remote (the arm has none), or None when the legs device offers no remote."""
         return self.legs.remote() if isinstance(self.legs, RemoteSource) else None
+
+    @property
+    def motor_names(self) -> tuple[str, ...]:
+        """One name per entry of `motor_status` (`MotorNames`): the legs' joints, then the arm's servos.
+
+        A device that names its motors (the arm: ``elbow (ID 4)``) gives its names; one that does not is taken to
+        drive one motor per joint, named after the joint and the motor's index in the status (``FR_hip_joint (motor
+        0)``).
+        """
+        names: list[str] = []
+        for part in (self.legs, self.arm):
+            if not isinstance(part, MotorStatusSource):
+                continue
+            if isinstance(part, MotorNames):
+                names += part.motor_names
+            else:
+                names += [f"{joint} (motor {len(names) + k})" for k, joint in enumerate(part.joint_names)]
+        return tuple(names)
 
     def motor_status(self) -> JointMotorStatus | None:
         """Modes and temperatures of the legs' motors, then the arm's servos (those that report them).

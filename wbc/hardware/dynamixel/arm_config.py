@@ -1,6 +1,8 @@
 """`DynamixelArmConfig`: the serial port, the bus rate, the fault handling and the torque policies of `DynamixelArm`.
 
-Every value is checked when the config is built, and a wrong one names its field and its valid range.
+Every value is checked when the config is built, and a wrong one names its field and its valid range. A port that is
+not an emulator's (a real adapter such as ``/dev/ttyUSB0``) is refused unless ``allow_hardware=True``
+(`wbc.hardware.serial_port_policy.check_serial_port`), before anything could open it.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from wbc.errors import ConfigError, UnknownNameError
 from wbc.hardware.dynamixel.control_table import BAUD_RATES
 from wbc.hardware.dynamixel.units import CURRENT_UNIT, STALL_CURRENT, WATCHDOG_UNIT
 from wbc.hardware.dynamixel.wx200_bus import WX200_ARM_JOINTS, WX200_BAUD_RATE, WX200_SERVOS, ArmJointMap, ServoSpec
+from wbc.hardware.serial_port_policy import check_serial_port
 
 __all__ = ["ARM_ROBOTS", "DynamixelArmConfig"]
 
@@ -25,7 +28,9 @@ class DynamixelArmConfig:
 
     Attributes:
         port: the serial device of the U2D2 (``/dev/ttyUSB0``, or the udev name ``/dev/ttyDXL``), or an emulator's
-            pseudo-terminal. There is no default, and no other device is ever opened.
+            pseudo-terminal. There is no default, and no other device is ever opened. A device that is not a
+            pseudo-terminal needs `allow_hardware`.
+        allow_hardware: allow a `port` that is not an emulator's pseudo-terminal (a real adapter and a real arm).
         robot: the description whose arm joints (names, ranges, torque limits) the backend reports.
         baud_rate: the bus's rate [bit/s]; the WX200's servos run at 1 Mbps.
         latency_ms: the adapter's latency timer [ms]; it sets the reply timeout (about 2 x latency + 2 ms).
@@ -55,6 +60,7 @@ class DynamixelArmConfig:
 
     port: str
     robot: str = "a1-wx200"
+    allow_hardware: bool = False
     baud_rate: int = WX200_BAUD_RATE
     latency_ms: float = 1.0
     rate_hz: float = 200.0
@@ -124,6 +130,7 @@ class DynamixelArmConfig:
             if ticks is not None and not (isinstance(ticks, int) and spec.min_position <= ticks <= spec.max_position):
                 raise ConfigError(f"DynamixelArmConfig.held_ticks: {spec.name} goal {ticks!r} outside its position "
                                   f"limits [{spec.min_position}, {spec.max_position}] ticks (or None: where it is)")
+        check_serial_port(self.port, allow_hardware=self.allow_hardware, what="DynamixelArmConfig.port")
 
     @property
     def joint_servo_ids(self) -> tuple[int, ...]:

@@ -96,6 +96,7 @@ from wbc.hardware.dynamixel.sdk_bus import (
 from wbc.hardware.dynamixel.units import CURRENT_UNIT, VOLTAGE_UNIT
 from wbc.hardware.pacing import WallPacer
 from wbc.hardware.robot import Robot
+from wbc.hardware.serial_port_policy import announce_hardware_port, check_serial_port
 from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand, RobotState
@@ -212,6 +213,9 @@ class DynamixelArm(Robot):
     def _connect(self) -> None:
         cfg = self.config
         self._reset()
+        # the config refused a real device without consent; checked again here, the last step before a port is opened
+        check_serial_port(cfg.port, allow_hardware=cfg.allow_hardware, what="DynamixelArmConfig.port")
+        announce_hardware_port(cfg.port, f"{cfg.robot} arm bus")
         port_handler, packet_handler = self._handlers(cfg.port)
         bus = SdkBus(port_handler, packet_handler, port=cfg.port)
         try:
@@ -301,6 +305,11 @@ class DynamixelArm(Robot):
     def wall_time(self) -> float:
         """Now on the backend's clock [s] (the `WallClock` capability: the servos live in wall time)."""
         return self.clock.now()
+
+    @property
+    def motor_names(self) -> tuple[str, ...]:
+        """Each servo of `motor_status` by name and ID, e.g. ``elbow (ID 4)`` (`MotorNames`)."""
+        return tuple(f"{self._names[i]} (ID {i})" for i in self._ids)
 
     def motor_status(self) -> ArmMotorStatus:
         """Every servo's mode code and temperature as of the latest reads (a `MotorStatusSource`).

@@ -46,6 +46,7 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 
 from wbc.errors import SerialPortError
 from wbc.hardware.clock import Clock, ManualClock
+from wbc.hardware.serial_port_policy import IN_PROCESS_PREFIX
 from wbc.optional import require
 
 __all__ = [
@@ -275,7 +276,12 @@ def sdk_handlers(port: str, latency_ms: float = 1.0) -> tuple[Any, Any]:
 
     Raises:
         MissingExtraError: dynamixel_sdk is not installed (``pip install 'wbc[hardware]'``).
+        SerialPortError: `port` names an in-process bus, which only `in_process_handlers` reaches (the SDK would open
+            a file of that name).
     """
+    if port.startswith(IN_PROCESS_PREFIX):
+        raise SerialPortError(port, "an in-process bus is reached through in_process_handlers (the emulator's "
+                                    "arm_handlers / port_handlers), never opened as a file")
     sdk = require("dynamixel_sdk")
     return _low_latency_port_handler()(port, latency_ms), sdk.PacketHandler(2.0)
 

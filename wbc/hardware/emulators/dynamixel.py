@@ -114,6 +114,7 @@ from wbc.hardware.emulators.bus_faults import BUS_FAULT_DEFAULTS, BusFault, faul
 from wbc.hardware.emulators.faults import FaultSet
 from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, decode_writes
 from wbc.hardware.emulators.servo import EmulatedServo
+from wbc.hardware.serial_port_policy import IN_PROCESS_PREFIX
 from wbc.types import MotorCommand
 
 __all__ = ["TICK_PERIOD", "BusStats", "DynamixelEmulator", "DynamixelEmulatorConfig"]
@@ -260,7 +261,7 @@ class DynamixelEmulator:
             if not self._started:
                 self._started = True
                 self._closed.clear()
-                self.port = f"in-process:dynamixel-{id(self):x}"
+                self.port = f"{IN_PROCESS_PREFIX}dynamixel-{id(self):x}"
                 self._power_up()
                 if isinstance(self.clock, ManualClock):
                     self._ticker = self.clock.call_every(TICK_PERIOD, lambda: self._tick(self._clock()))

@@ -18,7 +18,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from wbc.errors import ConfigError
-from wbc.hardware.unitree import L2_B_MASK, LowStateExtras, Remote
+from wbc.hardware.unitree import L2_B_MASK, MODE_OVERHEAT, LowStateExtras, Remote
 from wbc.types import RobotState
 
 __all__ = ["FRAME_FAULTS", "STATE_FAULTS", "Fault", "FaultSet", "apply_state_faults", "mangle_frame"]
@@ -32,9 +32,10 @@ class Fault(enum.Enum):
     JITTER [s, default 0.004] (each reply sent later by a time drawn uniformly in [0, value], so replies arrive
     unevenly and out of order, as on a busy network); DROP [probability, default 1.0] (each reply dropped with it).
     State faults: JOINT_OUT_OF_RANGE [(joint, q) default (2, 0.5)] (calf 0 reports q); OVER_TEMPERATURE [deg C,
-    default 95] (every motor); MOTOR_ERROR [mode, default 0] (every motor reports that mode); OVER_POWER
-    [(tau_est N m, dq rad/s), default (20, 5)] (every motor reports that torque and speed: 12 x 100 W, above the
-    safety layer's 500 W, on every reply while active); FALL [roll rad, default pi/2] (the IMU reads the trunk
+    default 95] (every motor); MOTOR_ERROR [mode, default 0x08: overheat, the fault code the vendor documents,
+    `wbc.hardware.unitree.MOTOR_STATE_MODES`] (every motor reports that mode); OVER_POWER [(tau_est N m, dq rad/s),
+    default (20, 5)] (every motor reports that torque and speed: 12 x 100 W, above the safety layer's 500 W, on every
+    reply while active); FALL [roll rad, default pi/2] (the IMU reads the trunk
     rolled); REMOTE_L2_B (the remote's L2 and B held).
     """
 
@@ -61,7 +62,8 @@ STATE_FAULTS = (Fault.JOINT_OUT_OF_RANGE, Fault.OVER_TEMPERATURE, Fault.MOTOR_ER
 
 _DEFAULTS: dict[Fault, object] = {
     Fault.DELAY: 0.05, Fault.JITTER: 0.004, Fault.DROP: 1.0, Fault.JOINT_OUT_OF_RANGE: (2, 0.5),
-    Fault.OVER_TEMPERATURE: 95, Fault.MOTOR_ERROR: 0, Fault.OVER_POWER: (20.0, 5.0), Fault.FALL: math.pi / 2,
+    Fault.OVER_TEMPERATURE: 95, Fault.MOTOR_ERROR: MODE_OVERHEAT, Fault.OVER_POWER: (20.0, 5.0),
+    Fault.FALL: math.pi / 2,
 }
 
 

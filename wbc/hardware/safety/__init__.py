@@ -4,9 +4,9 @@
 motor temperature or mode, tilt, remote L2 + B, software e-stop. Every transition is a `SafetyEvent`.
 """
 
-from wbc.hardware.safety.capabilities import MotorStatus, MotorStatusSource, RemoteButtons, RemoteSource
+from wbc.hardware.safety.capabilities import MotorNames, MotorStatus, MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.hardware.safety.config import SafetyConfig
-from wbc.hardware.safety.events import REASONS, TRIP_REASONS, SafetyEvent
+from wbc.hardware.safety.events import REASONS, REMEDIES, TRIP_REASONS, SafetyEvent
 from wbc.hardware.safety.limits import POSITION_TABLES, UNITREE_POSITION_LIMITS, position_range
 from wbc.hardware.safety.ramp import CommandRamp
 from wbc.hardware.safety.safe_robot import SafeRobot
@@ -17,7 +17,9 @@ __all__ = [
     "REASONS",
     "TRIP_REASONS",
     "UNITREE_POSITION_LIMITS",
+    "REMEDIES",
     "CommandRamp",
+    "MotorNames",
     "MotorStatus",
     "MotorStatusSource",
     "RemoteButtons",

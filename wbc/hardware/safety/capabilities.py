@@ -12,7 +12,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["MotorStatus", "MotorStatusSource", "RemoteButtons", "RemoteSource"]
+__all__ = ["MotorNames", "MotorStatus", "MotorStatusSource", "RemoteButtons", "RemoteSource"]
 
 
 class RemoteButtons(Protocol):
@@ -48,6 +48,15 @@ class MotorStatus(Protocol):
     @property
     def motor_temperature(self) -> np.ndarray:
         """Each motor's temperature [degC]."""
+
+
+@runtime_checkable
+class MotorNames(Protocol):
+    """A robot that names the motors of its `MotorStatus`, so that a trip names the motor (``elbow (ID 4)``)."""
+
+    @property
+    def motor_names(self) -> tuple[str, ...]:
+        """One name per entry of `MotorStatusSource.motor_status`, in its order."""
 
 
 @runtime_checkable

@@ -1,7 +1,8 @@
 """`SafetyEvent`: one transition of the safety layer, the record a runner writes into an episode.
 
 Every change of `SafetyState` is one event with its time, both states and a reason from `REASONS`; a trip's reason
-names the check that fired (`TRIP_REASONS`), and ``detail`` says what was measured against which limit.
+names the check that fired (`TRIP_REASONS`), ``detail`` says what was measured against which limit, and ``remedy``
+what the operator does about that reason (`REMEDIES`).
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from dataclasses import dataclass
 
 from wbc.hardware.safety.state import SafetyState
 
-__all__ = ["REASONS", "TRIP_REASONS", "SafetyEvent"]
+__all__ = ["REASONS", "REMEDIES", "TRIP_REASONS", "SafetyEvent"]
 
 TRIP_REASONS = (
     "bad_state",  # the state holds a non-finite value or a quaternion that is not unit length
@@ -24,6 +25,31 @@ TRIP_REASONS = (
     "software_estop",  # `SafeRobot.estop()` was called
 )
 """Why the layer went to ``damped``; each is latched until `SafeRobot.reset`."""
+
+REMEDIES: dict[str, str] = {
+    "bad_state": "The robot reported a state that is not a state (NaN, or an IMU quaternion off unit length): check "
+                 "that --robot names this robot and that the link's rejected-frame counts are 0 (`wbc hw check`), "
+                 "then power-cycle the robot's low-level board if it persists.",
+    "stale_state": "The robot stopped answering, or the control loop stalled: check the cable or network and the "
+                   "link's counters (`wbc hw check`), close other programs on this computer, and keep the I/O process "
+                   "on (the default).",
+    "joint_range": "Put the robot in a pose inside its joint ranges (hung in its harness) and check it with "
+                   "`wbc hw check`.",
+    "over_power": "The motors drew more power than the limit: let the robot come to rest, look for a joint that "
+                  "fights the controller or a leg caught on something, and lower the gains before trying again.",
+    "motor_temperature": "A motor is too hot: power the robot off and let its motors cool (`wbc hw check` shows each "
+                         "motor's temperature) before running again.",
+    "motor_mode": "A motor reported a fault code (a Unitree motor's 0x08 is overheat; an arm servo's 0x80 + bits is "
+                  "its Hardware Error Status, 0x41 no answer, 0x42 corrupt answers, 0x43 the serial port lost): "
+                  "power-cycle the robot (a servo's hardware error clears only by a reboot), let it cool, check its "
+                  "cables, and read the motor's status with `wbc hw check`.",
+    "tilt": "The trunk rolled or pitched beyond the limit (a fall): set the robot upright in its harness and check "
+            "it with `wbc hw check`.",
+    "remote_estop": "The remote's L2 + B (passive) was pressed: release the buttons, make sure the robot is safe, "
+                    "and start again.",
+    "software_estop": "The e-stop was pressed on this computer: make sure the robot is safe, and start again.",
+}
+"""What the operator does about each trip reason, in words (a trip's `SafetyEvent.remedy`)."""
 
 REASONS = ("fresh_state", "ramp_done", "reset", "connect", *TRIP_REASONS)
 """Every reason an event can carry: a live stream started the ramp, the ramp finished, an explicit reset, a
@@ -47,6 +73,11 @@ class SafetyEvent:
     to_state: SafetyState
     reason: str
     detail: str = ""
+
+    @property
+    def remedy(self) -> str:
+        """What to do about this event's reason (`REMEDIES`); empty for a transition that is not a trip."""
+        return REMEDIES.get(self.reason, "")
 
     def to_dict(self) -> dict[str, float | str]:
         """The event as plain JSON-ready values (states by name)."""

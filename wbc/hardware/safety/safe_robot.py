@@ -33,7 +33,7 @@ import numpy as np
 from wbc.errors import SafetyResetError
 from wbc.hardware.capabilities import WallClock
 from wbc.hardware.robot import Robot
-from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteButtons, RemoteSource
+from wbc.hardware.safety.capabilities import MotorNames, MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.hardware.safety.config import SafetyConfig
 from wbc.hardware.safety.events import SafetyEvent
 from wbc.hardware.safety.limits import position_range
@@ -276,11 +276,12 @@ class SafeRobot(Robot):
             bad = ~np.isin(modes, cfg.ok_motor_modes)
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
-                return "motor_mode", f"motor {i} reports mode {modes[i]:#04x} (ok: {cfg.ok_motor_modes})"
+                ok = ", ".join(f"{m:#04x}" for m in cfg.ok_motor_modes)
+                return "motor_mode", f"{self._motor_label(i)} reports mode {modes[i]:#04x} (ok: {ok})"
             temps = np.asarray(status.motor_temperature, dtype=np.float64)
             if temps.size and temps.max() > cfg.max_motor_temperature_c:
                 i = int(np.argmax(temps))
-                return "motor_temperature", (f"motor {i} at {temps[i]:.0f} degC (limit "
+                return "motor_temperature", (f"{self._motor_label(i)} at {temps[i]:.0f} degC (limit "
                                              f"{cfg.max_motor_temperature_c} degC)")
         q = state.q
         outside = (q < self._lower - cfg.joint_margin) | (q > self._upper + cfg.joint_margin)
@@ -292,6 +293,15 @@ class SafeRobot(Robot):
         if max(abs(roll), abs(pitch)) > cfg.max_tilt:
             return "tilt", f"roll {roll:.2f} rad, pitch {pitch:.2f} rad (limit {cfg.max_tilt} rad)"
         return None
+
+    def _motor_label(self, i: int) -> str:
+        """Entry `i` of the motor status by name: the robot's (`MotorNames`), else a leg joint's, else its index."""
+        names = self.robot.motor_names if isinstance(self.robot, MotorNames) else ()
+        if i < len(names):
+            return names[i]
+        if i < min(_ARM_START, self.robot.num_joints):  # legs come first, one motor per joint
+            return f"{self.joint_names[i]} (motor {i})"
+        return f"motor {i}"
 
     def _power_fault(self, state: RobotState) -> tuple[str, str] | None:
         """PowerProtect's rule on a fresh frame: above the limit on more than `power_frames` frames in a row."""

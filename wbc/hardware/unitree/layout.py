@@ -28,6 +28,9 @@ __all__ = [
     "KD_SCALE",
     "KP_SCALE",
     "LAYOUTS",
+    "MODE_DAMPING",
+    "MODE_OVERHEAT",
+    "MOTOR_STATE_MODES",
     "LEVEL_LOWLEVEL",
     "MODE_SERVO",
     "NUM_LEG_MOTORS",
@@ -48,6 +51,17 @@ LEVEL_LOWLEVEL = 0xFF
 """levelFlag of a low-level frame (both SDKs' LOWLEVEL); the A1 codec writes it too."""
 MODE_SERVO = 0x0A
 """Motor mode ``servo``: the driver runs tau = Kp (q - q_m) + Kd (dq - dq_m) + tau. Mode 0 is damping/off."""
+MODE_DAMPING = 0x00
+"""Motor mode ``damping``: the driver is off (a command's mode 0; a motor that reports it is idle, not at fault)."""
+MODE_OVERHEAT = 0x08
+"""Motor mode a LowState reports for an overheated motor: the one fault code the vendor documents on this wire."""
+MOTOR_STATE_MODES: dict[int, str] = {MODE_SERVO: "servo", MODE_DAMPING: "damping", MODE_OVERHEAT: "overheat"}
+"""The modes a motor reports in a LowState, as the vendor documents them: the Go1 SDK 3.8's ``comm.h``
+(``MotorState.mode``: "Servo : 0x0A, Damping : 0x00, Overheat : 0x08") and its Python bindings' stub say the same.
+The A1 SDK 3.3.1's ``comm.h`` documents no values ("motor working mode"); the A1 motor's own serial protocol
+(Unitree's actuator SDK) lists 0 idle, 5 open-loop slow rotation (calibration), 10 closed-loop FOC. Servo and
+damping are the normal modes; overheat is a fault, and so is any other code (0x05 is never right under low-level
+control). `wbc.hardware.safety.SafetyConfig.ok_motor_modes` holds the normal ones."""
 POS_STOP_F = 2.146e9
 """The SDK's PosStopF: the q an unused slot carries (InitCmdData); ``float32(POS_STOP_F)`` is ``B9 D2 FF 4E``."""
 VEL_STOP_F = 16000.0

@@ -1,0 +1,171 @@
+"""Consent for every real device: a serial port that is not an emulator's is refused before anything opens it.
+
+The address policy (`check_target`) keeps a test's datagrams on 127.0.0.1; the serial-port policy
+(`check_serial_port`) keeps its serial traffic on the pseudo-terminals our emulators hand out. Opening a real U2D2
+would be enough for the arm's start-up to write EEPROM and torque, so every refusal here is checked with every way of
+opening a file or a serial port made to fail the test: ``os.open`` (pyserial's), ``builtins.open``, pyserial's
+``Serial`` and dynamixel_sdk's ``PortHandler.openPort``; and with sockets made to fail too, the legs' link is never
+built either. ``/dev/ttyUSB0`` need not exist: the refusal reads the name, resolves it (``lstat``/``readlink``) and
+at most ``stat``s the result.
+"""
+
+from __future__ import annotations
+
+import builtins
+import dataclasses
+import io
+import os
+import socket
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from wbc.cli import main
+from wbc.errors import SerialPortError, TargetRefusedError
+from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
+from wbc.hardware.hardware_robot import HardwareRobotConfig
+from wbc.hardware.serial_port_policy import check_serial_port, is_emulated_port, is_pseudo_terminal
+
+REAL_PORTS = ("/dev/ttyUSB0", "/dev/ttyACM0", "/dev/ttyDXL", "/dev/serial/by-id/usb-FTDI_USB__-__Serial_Converter",
+              "/dev/ttyS0", "/dev/pts/ptmx", "/dev/pts", "COM3", "relative-name")
+"""Adapters, a udev name, a by-id link, a UART, the pty multiplexer, a Windows name, a relative path: never a pty."""
+
+
+@pytest.fixture
+def pty_slave() -> Iterator[str]:
+    """A pseudo-terminal's slave, as the Dynamixel emulator hands one out (``os.openpty``, ``os.ttyname``)."""
+    master, slave = os.openpty()
+    try:
+        yield os.ttyname(slave)
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+@pytest.fixture
+def nothing_opened(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
+    """Make every way of opening a device (and creating a socket) fail the test; the list holds the attempts.
+
+    Files the code reads (a robot's model) still open: only a path under /dev, or one of `REAL_PORTS`, fails.
+    """
+    attempts: list[tuple] = []
+
+    def refuse(what: str, original=None):
+        def opened(*args: object, **kwargs: object) -> object:
+            path = str(args[0]) if args else ""
+            if original is not None and not path.startswith("/dev") and path not in REAL_PORTS:
+                return original(*args, **kwargs)
+            attempts.append((what, args))
+            raise AssertionError(f"{what} was called for a refused device: {args}")
+        return opened
+
+    monkeypatch.setattr(os, "open", refuse("os.open", os.open))
+    monkeypatch.setattr(builtins, "open", refuse("open", builtins.open))
+    monkeypatch.setattr(io, "open", refuse("io.open", io.open))
+    monkeypatch.setattr(socket, "socket", refuse("socket.socket"))
+    serial = pytest.importorskip("serial")
+    monkeypatch.setattr(serial, "Serial", refuse("serial.Serial"))
+    sdk = pytest.importorskip("dynamixel_sdk")
+    monkeypatch.setattr(sdk.PortHandler, "openPort", refuse("PortHandler.openPort"))
+    return attempts
+
+
+# -- the policy ---------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("port", REAL_PORTS)
+def test_a_port_that_is_not_a_pty_is_refused_and_names_the_switch(port: str) -> None:
+    assert not is_pseudo_terminal(port) and not is_emulated_port(port)
+    with pytest.raises(TargetRefusedError, match=r"not a pseudo-terminal.*allow_hardware=True"):
+        check_serial_port(port, allow_hardware=False)
+    check_serial_port(port, allow_hardware=True)  # the consent allows it
+
+
+def test_an_emulators_ports_need_no_consent(pty_slave: str, tmp_path: Path) -> None:
+    assert pty_slave.startswith("/dev/pts/") and is_pseudo_terminal(pty_slave)
+    check_serial_port(pty_slave, allow_hardware=False)
+    link = tmp_path / "ttyARM"
+    link.symlink_to(pty_slave)
+    check_serial_port(str(link), allow_hardware=False)  # a udev-style name for a pty: resolved, still a pty
+    check_serial_port("in-process:dynamixel-1", allow_hardware=False)  # an in-process bus: no device at all
+
+
+def test_a_link_to_a_real_device_is_refused(tmp_path: Path) -> None:
+    link = tmp_path / "ttyARM"
+    link.symlink_to("/dev/ttyUSB0")  # need not exist: the link is resolved, never opened
+    with pytest.raises(TargetRefusedError, match="ttyARM is not a pseudo-terminal"):
+        check_serial_port(str(link), allow_hardware=False)
+
+
+def test_the_consent_touches_no_file(monkeypatch: pytest.MonkeyPatch) -> None:
+    def touched(*args: object) -> None:
+        raise AssertionError(f"the filesystem was read: {args}")
+
+    for name in ("stat", "lstat", "readlink"):
+        monkeypatch.setattr(os, name, touched)
+    check_serial_port("/dev/ttyUSB0", allow_hardware=True)
+
+
+def test_the_sdk_never_opens_an_in_process_name() -> None:
+    pytest.importorskip("dynamixel_sdk")
+    with pytest.raises(SerialPortError, match="in_process_handlers"):
+        sdk_handlers("in-process:dynamixel-1")  # the SDK would open a file of that name
+
+
+# -- the backend's config and constructor --------------------------------------------------------------------------
+def test_the_arm_config_refuses_a_real_port_and_nothing_is_opened(nothing_opened: list) -> None:
+    with pytest.raises(TargetRefusedError, match=r"DynamixelArmConfig\.port /dev/ttyUSB0 is not a pseudo-terminal"):
+        DynamixelArmConfig(port="/dev/ttyUSB0")
+    with pytest.raises(TargetRefusedError, match="not a pseudo-terminal"):
+        HardwareRobotConfig(robot="go1-arm", arm_mode="actuated", legs_host="127.0.0.1", legs_port=9,
+                            arm_port="/dev/ttyUSB0")
+    consented = DynamixelArmConfig(port="/dev/ttyUSB0", allow_hardware=True)  # built, not opened
+    with pytest.raises(TargetRefusedError, match=r"arm\.port /dev/ttyUSB0"):
+        # the robot's consent covers its arm: a bus config that brings its own is not enough
+        HardwareRobotConfig(robot="go1-arm", arm_mode="actuated", legs_host="127.0.0.1", legs_port=9, arm=consented)
+    assert nothing_opened == []
+
+
+def test_the_backend_checks_again_before_it_opens(nothing_opened: list, pty_slave: str) -> None:
+    config = DynamixelArmConfig(port=pty_slave)
+    object.__setattr__(config, "port", "/dev/ttyUSB0")  # a config changed behind its checks
+    asked = []
+    arm = DynamixelArm(config, handlers=lambda port: asked.append(port) or (None, None))
+    with pytest.raises(TargetRefusedError, match="not a pseudo-terminal"):
+        arm.connect()
+    assert asked == [] and nothing_opened == []  # no port handler was even built
+
+
+# -- the command line ---------------------------------------------------------------------------------------------
+def test_check_refuses_a_real_arm_port_before_anything(nothing_opened: list,
+                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "check", "--target", "127.0.0.1:9", "--arm-port", "/dev/ttyUSB0"]) == 2
+    err = capsys.readouterr().err
+    assert "--arm-port /dev/ttyUSB0 is not a pseudo-terminal" in err and "add --allow-hardware" in err, err
+    assert "Traceback" not in err and nothing_opened == []
+
+
+def test_run_refuses_a_real_arm_port_before_anything(nothing_opened: list,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "run", "stand", "--scenario", "scenarios/push.toml", "--trial", "0", "--target",
+                 "127.0.0.1:9", "--arm", "locked", "--arm-port", "/dev/ttyACM0"]) == 2
+    err = capsys.readouterr().err
+    assert "--arm-port /dev/ttyACM0 is not a pseudo-terminal" in err and "run a trial on a real arm" in err, err
+    assert nothing_opened == []
+
+
+def test_the_consent_asks_for_a_real_arm_too(nothing_opened: list, monkeypatch: pytest.MonkeyPatch,
+                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """One flag, one consent: --allow-hardware on loopback legs with a real arm still asks the person at a terminal."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))  # nobody at a terminal, and no --yes
+    assert main(["hw", "check", "--robot", "a1-wx200", "--target", "127.0.0.1:9", "--arm-port", "/dev/ttyUSB0",
+                 "--allow-hardware"]) == 2
+    err = capsys.readouterr().err
+    assert "at /dev/ttyUSB0 is a REAL ROBOT (the arm's serial device, not a pseudo-terminal)" in err, err
+    assert "nobody can confirm" in err and nothing_opened == []
+
+
+def test_a_pty_arm_port_needs_no_flag(pty_slave: str) -> None:
+    config = HardwareRobotConfig(robot="a1-wx200", arm_mode="actuated", legs_host="127.0.0.1", legs_port=9,
+                                 arm_port=pty_slave)
+    assert dataclasses.replace(config, arm_mode="locked").arm_port == pty_slave

@@ -1,0 +1,81 @@
+"""The serial-port policy of a hardware bus: an emulator's port unless a real device is asked for in so many words.
+
+The serial counterpart of the address policy (`wbc.hardware.unitree.check_target`). A test, an emulator run or a
+benchmark must never open a real adapter by accident: opening the arm's U2D2 is enough for the start-up to write
+EEPROM and torque to the servos. So a port is opened without consent only if it is what an emulator hands out:
+
+- a pseudo-terminal's slave: the path resolves (symlinks followed) to ``/dev/pts/N`` and is a character device
+  there (`wbc.hardware.emulators.DynamixelEmulator` opens one with ``os.openpty`` and names it ``os.ttyname``);
+- an in-process bus (a name starting with `IN_PROCESS_PREFIX`), which no serial device is ever opened for.
+
+Anything else (``/dev/ttyUSB0``, ``/dev/ttyACM0``, ``/dev/serial/by-id/...``, the udev name ``/dev/ttyDXL``, a path
+that does not exist) is refused unless the config says ``allow_hardware=True``. The decision reads the name, then at
+most resolves its symlinks (``lstat`` / ``readlink``) and calls ``stat`` on the result; it never opens the path. A
+refusal with ``allow_hardware=False`` therefore happens before any ``open``, and with ``allow_hardware=True`` the
+filesystem is not touched at all by the check. (On macOS, where ptys are ``/dev/ttysNNN``, an emulator's port needs
+``allow_hardware`` too: the policy errs on the side of refusing.)
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import sys
+
+from wbc.errors import TargetRefusedError
+
+__all__ = ["IN_PROCESS_PREFIX", "announce_hardware_port", "check_serial_port", "is_emulated_port",
+           "is_pseudo_terminal"]
+
+IN_PROCESS_PREFIX = "in-process:"
+"""How an in-process bus names its port (`wbc.hardware.dynamixel.in_process_handlers`): never a file."""
+
+_PTY_DIR = "/dev/pts"
+
+
+def is_pseudo_terminal(path: str) -> bool:
+    """True if `path` resolves to a pseudo-terminal's slave, ``/dev/pts/N`` (decided without opening it).
+
+    Args:
+        path: a serial device path.
+    """
+    real = os.path.realpath(path)
+    head, _, tail = real.rpartition("/")
+    if head != _PTY_DIR or not tail.isdigit():
+        return False
+    try:
+        return stat.S_ISCHR(os.stat(real).st_mode)
+    except OSError:
+        return False
+
+
+def is_emulated_port(port: str) -> bool:
+    """True for what an emulator hands out: an in-process bus's name or a pseudo-terminal (nothing is opened)."""
+    return port.startswith(IN_PROCESS_PREFIX) or is_pseudo_terminal(port)
+
+
+def check_serial_port(port: str, *, allow_hardware: bool, what: str = "port") -> None:
+    """Refuse a serial device the policy does not allow, before anything opens it.
+
+    Args:
+        port: the serial device (or an in-process bus's name).
+        allow_hardware: whether a device that is not an emulator's (a real adapter) is allowed.
+        what: the config field or option, for the message.
+
+    Raises:
+        TargetRefusedError: `port` is not a pseudo-terminal nor an in-process bus, and hardware is not allowed.
+    """
+    if allow_hardware or is_emulated_port(port):
+        return
+    raise TargetRefusedError(
+        f"{what} {port} is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; opening "
+        "it writes the servos' settings and torque). To drive a real arm, set allow_hardware=True in the config "
+        "(for instance DynamixelArmConfig(..., allow_hardware=True))"
+    )
+
+
+def announce_hardware_port(port: str, device: str) -> None:
+    """Print, once per connection, the real serial device a bus is about to open (to stderr)."""
+    if not is_emulated_port(port):
+        print(f"wbc: {device} opening HARDWARE serial device {port} (allow_hardware=True)", file=sys.stderr,
+              flush=True)
