@@ -246,8 +246,11 @@ def test_a_scenario_for_a_robot_the_controller_does_not_drive_is_refused_naming_
     with pytest.raises(ConfigError, match="seconds must be a positive number"):
         check_controller(spec, CheckConfig(seconds=0.0))
     for argv, says in ((["--scenario", str(path), "--robot", "a1-wx200"], f"--scenario {path}"),
-                       (["--scenario", str(tmp_path / "none.toml")], f"{tmp_path / 'none.toml'}: file not found"),
-                       (["--seconds", "-1"], "--seconds must be > 0")):
+                       (["--scenario", str(tmp_path / "none.toml")], f"{tmp_path / 'none.toml'}: file not found")):
         assert main(["check-controller", "stand", *argv]) == 2
         err = capsys.readouterr().err
         assert says in err and "Traceback" not in err
+    with pytest.raises(SystemExit) as exit_:  # a usage error: the parser states the range
+        main(["check-controller", "stand", "--seconds", "-1"])
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "--seconds: must be a finite number in (0, 600] s, got '-1'" in err

@@ -1,7 +1,7 @@
 """Golden comparison: a fixed small `wbc compare` whose per-trial metrics were recorded and committed.
 
 The committed CSVs (tests/golden/) hold every column of ``trials.csv`` but those timed on the machine (the wall time,
-the controller's act times and deadline misses), one row per trial in
+the controller's act times and deadline misses) and the row's checksum, which covers them, one row per trial in
 canonical order (controller as named, band, seed, trial). The same command must reproduce them exactly, to the last
 digit: a refactor that changes a result, however slightly, fails here. Set ``WBC_RECORD_GOLDEN=1`` to re-record
 (only for a deliberate change of behaviour, said in the commit message).
@@ -33,7 +33,8 @@ CASES = {
     "push": ["--scenario", str(ROOT / "scenarios/push-v1.toml"), "--trials", "3", "--seeds", "2"],
     "turn": ["--scenario", str(ROOT / "scenarios/turn.toml"), "--band", "1.5", "--trials", "2", "--seeds", "1"],
 }
-UNSTABLE = MACHINE_TIMED  # the columns timed on the machine's clock (wall time, act times, deadline misses)
+UNSTABLE = MACHINE_TIMED  # the columns timed on the machine's clock (wall time, act times, deadline misses) and the
+# checksum of the row's cells, which covers them
 VERSIONS = GOLDEN / "versions.json"
 
 

@@ -5,6 +5,7 @@ Small linear networks written with the ``onnx`` package check what the controlle
 torch and run by onnxruntime must act as the numpy controller does.
 """
 
+import hashlib
 import math
 import textwrap
 from pathlib import Path
@@ -224,6 +225,8 @@ def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller
     from wbc.scenario import Push, TerrainConfig
 
     model, io = export_onnx(WEIGHTS_DIR / "a1-wx200-actuated", tmp_path / "pi3")
+    # the I/O file records the model's sha256, which onnx:PATH verifies (tests/test_policy_files.py)
+    assert f'sha256 = "{hashlib.sha256(model.read_bytes()).hexdigest()}"' in io.read_text()
     name = f"onnx:{model}"
     spec = get_controller(name)
     assert (spec.arm_mode, spec.robots) == ("actuated", ("a1-wx200",)) and "stage 3" in spec.summary
@@ -280,8 +283,6 @@ def _external(path: Path, weight: np.ndarray) -> Path:
 
 
 def test_a_model_with_external_data_runs_records_both_hashes_and_refuses_a_missing_data_file(tmp_path, capsys):
-    import hashlib
-
     from wbc.control.onnx_policy import external_data_files
 
     model, io = tmp_path / "ext.onnx", tmp_path / "ext.toml"

@@ -145,7 +145,7 @@ def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory_and
         "max_roll_deg,max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,"
         "payload_kg,fallbacks,wbc_failures,debug_truth,backend,metrics_source,safety_trips,late_advances,"
         "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,wall_s,error,ticks,clamped_ticks,clamped_rows,"
-        "power_w,vlin_err_by_s,vang_err_by_s,counters")
+        "power_w,vlin_err_by_s,vang_err_by_s,counters,checksum")
     # an earlier directory's file still reads: a simulated trial, its metrics from truth, nothing timed but wall_s,
     # its outcome derived as those versions scored it (a success, or a fall; no controller errors then)
     for success in (True, False):
@@ -160,10 +160,15 @@ def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory_and
     # a hardware trial of the version before outcomes: a trip was scored a fall; it reads as the safety trip it was
     tripped = make_record("mpc", "nominal", 0, 0, success=False, safety_trips=1, power_w=math.nan)
     assert tripped.outcome == "safety_trip"
-    columns = [c for c in TrialRecord.header() if c not in ("outcome", "error")]
+    columns = [c for c in TrialRecord.header() if c not in ("outcome", "error", "checksum")]
     row = dict(zip(TrialRecord.header(), tripped.to_row(), strict=True))
     old.write_text(",".join(columns) + "\n" + ",".join(row[c] for c in columns) + "\n")
     assert TrialRecord.read_csv(old) == [tripped]
+    # the version before the checksum: its rows read, unverified (they have none)
+    unsummed = make_record("mpc", "nominal", 0, 2, success=True)
+    columns = TrialRecord.header()[:-1]
+    old.write_text(",".join(columns) + "\n" + ",".join(unsummed.to_row()[:-1]) + "\n")
+    assert TrialRecord.read_csv(old) == [unsummed]
     # the version before ticks, clamps, power, profiles and counters: its rows read with nothing measured for them
     counted = make_record("mpc", "nominal", 0, 1, success=True, power_w=math.nan)
     columns = TrialRecord.header()[:TrialRecord.header().index("error") + 1]

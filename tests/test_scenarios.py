@@ -470,7 +470,7 @@ def test_messages_say_what_and_how(tmp_path):
         "version-string": "expected an integer, got string '1'",
         "unknown-robot": "valid robots: a1-wx200, go1-arm",
         "unknown-key-terrain": "valid keys of [terrain]: kind, amplitude_m",
-        "push-duration-negative": "must be in (0, 1], got -0.05",
+        "push-duration-negative": "must be in [0.01, 1], got -0.05",
         "friction-reversed": "lo <= hi",
         "friction-three": "2 numbers",
         "duplicate-band": "duplicate band name 'in' (also [[bands]] #1)",
@@ -489,7 +489,7 @@ def test_spec_example_message(tmp_path):
     path = write(tmp_path, edit(BASE, "duration_s = 0.05", "duration_s = -0.05"))
     with pytest.raises(ScenarioError) as err:
         load_scenario(path)
-    assert str(err.value) == f"{path}:28: [pushes] duration_s: must be in (0, 1], got -0.05"
+    assert str(err.value) == f"{path}:28: [pushes] duration_s: must be in [0.01, 1], got -0.05"
 
 
 def test_file_problems(tmp_path):

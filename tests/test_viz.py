@@ -300,7 +300,7 @@ def test_replay_errors_name_the_file_and_field(results_dir, tmp_path):
     broken = tmp_path / "broken"
     shutil.copytree(results_dir, broken)
     (broken / "episodes" / "stand" / "soft-s0-t0.npz").write_bytes(b"not a zip")
-    with pytest.raises(ViewerError, match=r"soft-s0-t0\.npz: unreadable episode"):
+    with pytest.raises(ViewerError, match=r"soft-s0-t0\.npz: not a readable \.npz archive"):
         load_stored_episode(broken, 0)
     (broken / "episodes" / "stand" / "soft-s0-t1.npz").unlink()
     with pytest.raises(ViewerError, match="--save-episodes"):

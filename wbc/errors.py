@@ -235,9 +235,11 @@ class PortBusyError(WbcError, OSError):
 
 
 class TargetRefusedError(ConfigError):
-    """A hardware link was pointed at an address outside 127.0.0.0/8 without saying that a real robot is meant.
+    """A hardware link was pointed at a real robot without saying that a real robot is meant.
 
-    The message names the address and the switch (``allow_hardware=True``) that allows it.
+    A real robot is an address outside 127.0.0.0/8 (`wbc.hardware.unitree.check_target`) or a serial device that is
+    not a pseudo-terminal (`wbc.hardware.serial_port_policy.check_serial_port`). The message names the address or
+    the device and the switch (``allow_hardware=True``, ``--allow-hardware``) that allows it.
     """
 
 

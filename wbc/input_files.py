@@ -22,6 +22,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+import sys
 import tomllib
 import zipfile
 from collections.abc import Mapping
@@ -172,6 +173,9 @@ def read_toml(path: str | os.PathLike[str], *, limit: int | None = None, max_dep
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputFileError(f"{path}: not valid TOML: {exc}") from None
+    except ValueError:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+        raise InputFileError(f"{path}: holds an integer of more than {sys.get_int_max_str_digits()} digits; no value "
+                             "wbc reads is so long") from None
     except RecursionError:
         raise InputFileError(f"{path}: nested too deep to parse; no valid file nests so deep") from None
     _depth(data, max_depth, str(path))
@@ -191,6 +195,9 @@ def read_json(path: str | os.PathLike[str], *, limit: int | None = None, max_dep
         data = json.loads(text)
     except json.JSONDecodeError as exc:
         raise InputFileError(f"{path}:{exc.lineno}:{exc.colno}: not valid JSON: {exc.msg}") from None
+    except ValueError:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+        raise InputFileError(f"{path}: holds an integer of more than {sys.get_int_max_str_digits()} digits; no value "
+                             "wbc reads is so long") from None
     except RecursionError:
         raise InputFileError(f"{path}: nested too deep to parse; no valid file nests so deep") from None
     _depth(data, max_depth, str(path))

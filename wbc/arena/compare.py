@@ -35,7 +35,7 @@ from wbc.arena.identity import ControllerFile, ScenarioRef, SequentialStop, Simu
 from wbc.arena.progress import progress
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import summarize
-from wbc.arena.results import ResultsStore, episode_path
+from wbc.arena.results import ResultsStore, check_out_dir, episode_path
 from wbc.arena.runner import TickObserver
 from wbc.arena.sequential import SequentialComparison
 from wbc.arena.stats import in_canonical_order
@@ -65,6 +65,9 @@ class ArenaConfig:
         workers: local worker processes (None: all cores).
         address: Ray cluster address (None: a local Ray).
         resume: finish an interrupted run in `out_dir`.
+        drop_bad_rows: with `resume`, drop the rows of ``trials.csv`` the results store refuses (edited, corrupted,
+            repeated, of another scenario file; `wbc.arena.record.scan_csv`) and play their trials again; off: such
+            a row stops the run with its file and line.
         progress: show a progress bar on stderr.
         no_push: play the scenario's trials without their pushes (commands, terrain and domain unchanged).
         debug_truth: throw the controllers' ground-truth debug switch (base state from the simulator).
@@ -92,6 +95,7 @@ class ArenaConfig:
     workers: int | None = None
     address: str | None = None
     resume: bool = False
+    drop_bad_rows: bool = False
     progress: bool = True
     no_push: bool = False
     debug_truth: bool = False
@@ -124,6 +128,9 @@ class ArenaConfig:
             if self.executor != "local":
                 raise ConfigError("--until-significant plays trials round by round as the test asks for them: use the "
                                   "local executor")
+        if self.drop_bad_rows and not self.resume:
+            raise ConfigError("--drop-bad-rows drops refused rows of a results directory being resumed: pass it with "
+                              "--resume")
         if not 0.0 < self.alpha < 1.0:
             raise ConfigError(f"alpha must be in (0, 1), got {self.alpha}; pass a significance level such as 0.05")
         if self.max_consecutive_errors < 0:
@@ -195,15 +202,20 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
 
     Raises:
         UnknownNameError: an unknown controller name (the message lists the valid ones).
+        ResultsDirError: `ArenaConfig.out_dir` is a file, or a file the run writes there is a directory (checked
+            before anything else), or see below.
         PolicyFileError: a ``policy:PATH`` file that is missing or malformed.
         ScenarioError: the scenario file is invalid.
         ConfigError: bad options, or a controller for another robot than the scenario's.
         ResultsDirError: a results directory that belongs to another run, or that misses trials at the end (other
             than those of a controller stopped for its errors).
+        RecordError: a ``trials.csv`` row refused on `ArenaConfig.resume` without `ArenaConfig.drop_bad_rows`, or
+            a malformed ``run.json``.
 
     A controller's failure on a trial is not raised: it is recorded (outcome ``controller_error``) and reported in
     `ArenaResult.controller_errors`.
     """
+    check_out_dir(cfg.out_dir)  # before any controller is built or trial played: the run could not store its results
     # each name resolved once, here; the tasks carry the spec to the workers
     specs = _resolve(cfg)
     scenario = load_scenario(cfg.scenario)
@@ -243,7 +255,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         max_consecutive_errors=cfg.max_consecutive_errors,
     )
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume,
-                         controllers={name: spec.provenance() for name, spec in specs.items()})
+                         controllers={name: spec.provenance() for name, spec in specs.items()},
+                         drop_bad_rows=cfg.drop_bad_rows)
     done = store.done()
     guard = ErrorGuard(cfg.controllers, cfg.max_consecutive_errors)
     guard.observe_all(store.records)  # a controller stopped before stays stopped

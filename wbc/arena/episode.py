@@ -11,15 +11,21 @@ a hardware trial (`OperatorLog`).
 
 from __future__ import annotations
 
+import math
+import zipfile
+import zlib
 from collections.abc import Iterable
 from dataclasses import dataclass, field
+from typing import NoReturn
 
 import numpy as np
 
-from wbc.errors import ConfigError, EpisodeFileError
+from wbc.errors import ConfigError, EpisodeFileError, InputFileError
 from wbc.hardware.capabilities import SafetyEventLike
+from wbc.input_files import open_npz, short
 from wbc.robots.conventions import quat_to_matrices
 from wbc.scenario.push import Push
+from wbc.scenario.scenario import MAX_DURATION_S
 from wbc.types import BaseTruth, RobotState, VelocityCommand
 
 __all__ = ["BASE_SOURCES", "Episode", "EpisodeBuffer", "OperatorLog", "PushLog", "SafetyLog"]
@@ -257,42 +263,159 @@ class Episode:
 
     @classmethod
     def load(cls, path: str) -> Episode:
-        """Read an episode written by `save`.
+        """Read an episode written by `save`, every field checked before the episode is made.
 
         A file from before episodes kept safety events, operator actions, their base source or the clamped ticks has
         none of the first two, its base quantities are the simulator's and its clamped ticks 0 (not counted then).
 
+        The archive is opened through `wbc.input_files.open_npz` (a regular file, at most 1 GiB uncompressed, plain
+        arrays, no pickles), then checked in depth: the scalars are single numbers (``duration_s`` in
+        (0, 600] s, ``control_dt`` in (0, 1] s, ``fall_time_s`` NaN or >= 0); ``t`` is one-dimensional, finite and
+        strictly increasing; every per-tick array has one row per entry of ``t``, the column count its field needs,
+        and finite numbers; ``qpos`` rows hold a base position and a quaternion of norm 1 (to 1e-3) and at least one
+        joint; pushes, safety events and operator actions have finite times.
+
         Raises:
-            EpisodeFileError: a field is missing (a file of another version: its pushes were text, for instance) or
-                misshapen.
-            OSError, zipfile.BadZipFile: the file cannot be read at all.
+            EpisodeFileError: the file cannot be read (missing, not a regular file, too large, not an ``.npz``, a
+                damaged member), or a field is missing (a file of another version: its pushes were text, for
+                instance), misshapen, of the wrong type, not finite or out of range; the message names the file and
+                the field.
         """
-        with np.load(path, allow_pickle=False) as z:
-            missing = [k for k in (*_SCALARS, *_ARRAYS, *(f"push_{k}" for k in _PUSH_KEYS)) if k not in z.files]
-            if missing:
-                raise EpisodeFileError(f"{path}: field {missing[0]} missing (fields missing: {', '.join(missing)}); "
-                                       "the file was written by another version of wbc: replay it with that "
-                                       "version, or play the trial again with `wbc run --save-episodes`")
-            scalars = {k: z[k].item() for k in _SCALARS}
-            arrays = {k: z[k] for k in _ARRAYS}
-            safety_keys = [f"safety_{k}" for k in _SAFETY_KEYS]
-            present = [k for k in safety_keys if k in z.files]
-            if present and len(present) < len(safety_keys):
-                missing = [k for k in safety_keys if k not in z.files]
-                raise EpisodeFileError(f"{path}: field {missing[0]} missing while {present[0]} is there; the file "
-                                       "is damaged: play the trial again with `wbc run --save-episodes`")
-            operator = _optional_group(path, z.files, "operator", _OPERATOR_KEYS)
-            try:
-                pushes = PushLog(**{k: z[f"push_{k}"] for k in _PUSH_KEYS})
-                safety = SafetyLog(**{k: z[f"safety_{k}"] for k in _SAFETY_KEYS}) if present else SafetyLog()
-                actions = OperatorLog(**{k: z[f"operator_{k}"] for k in _OPERATOR_KEYS}) if operator else OperatorLog()
-                source = str(z["base_source"].item()) if "base_source" in z.files else "truth"
-                clamped = int(z["clamped_ticks"].item()) if "clamped_ticks" in z.files else 0
-                rows = tuple(int(v) for v in z["clamped_rows"]) if "clamped_rows" in z.files else (0,) * 5
-                return cls(**scalars, **arrays, pushes=pushes, safety_events=safety, operator_events=actions,
-                           base_source=source, clamped_ticks=clamped, clamped_rows=rows)
-            except ConfigError as exc:
-                raise EpisodeFileError(f"{path}: {exc}") from None
+        try:
+            archive = open_npz(path)
+        except InputFileError as exc:
+            raise EpisodeFileError(f"{exc}; play the trial again with `wbc run --save-episodes`") from None
+        try:
+            with archive as z:
+                return cls._read(path, z)
+        except (OSError, EOFError, zipfile.BadZipFile, zlib.error) as exc:  # a member damaged past its header
+            raise EpisodeFileError(f"{path}: a damaged member ({type(exc).__name__}: {short(str(exc))}); play the "
+                                   "trial again with `wbc run --save-episodes`") from None
+
+    @classmethod
+    def _read(cls, path: str, z: np.lib.npyio.NpzFile) -> Episode:
+        """The episode in an open archive, checked field by field (see `load`)."""
+        missing = [k for k in (*_SCALARS, *_ARRAYS, *(f"push_{k}" for k in _PUSH_KEYS)) if k not in z.files]
+        if missing:
+            raise EpisodeFileError(f"{path}: field {missing[0]} missing (fields missing: {', '.join(missing)}); "
+                                   "the file was written by another version of wbc: replay it with that "
+                                   "version, or play the trial again with `wbc run --save-episodes`")
+        fields = _EpisodeFields(path, z)
+        scalars = {"duration_s": fields.scalar("duration_s", lo=0.0, hi=MAX_DURATION_S, lo_open=True),
+                   "control_dt": fields.scalar("control_dt", lo=0.0, hi=1.0, lo_open=True),
+                   "fell": bool(fields.scalar("fell", lo=0.0, hi=1.0)),
+                   "fall_time_s": fields.scalar("fall_time_s", lo=0.0, hi=math.inf, nan=True)}
+        t = fields.numbers("t", ndim=1)
+        if t.size > 1 and not np.all(np.diff(t) > 0):
+            i = int(np.argmin(np.diff(t) > 0))
+            raise EpisodeFileError(f"{path}: field t: not strictly increasing (t[{i}] = {t[i]:g}, t[{i + 1}] = "
+                                   f"{t[i + 1]:g}); the file is damaged: play the trial again")
+        k = len(t)
+        arrays = {"t": t, "command": fields.numbers("command", rows=k, cols=3),
+                  "v_base_in_yaw": fields.numbers("v_base_in_yaw", rows=k, cols=2),
+                  "yaw_rate": fields.numbers("yaw_rate", rows=k), "roll": fields.numbers("roll", rows=k),
+                  "pitch": fields.numbers("pitch", rows=k), "power": fields.numbers("power", rows=k),
+                  "arm_q": fields.numbers("arm_q", rows=k, ndim=2), "qpos": fields.numbers("qpos", rows=k, ndim=2),
+                  "act_s": fields.numbers("act_s", rows=k)}
+        qpos = arrays["qpos"]
+        if qpos.shape[1] < 8:
+            raise EpisodeFileError(f"{path}: field qpos: shape {qpos.shape}, expected (ticks, 7 + joints): a base "
+                                   "position, a quaternion and the joints; the file is damaged: play the trial again")
+        norms = np.linalg.norm(qpos[:, 3:7], axis=1)
+        bad = np.flatnonzero(np.abs(norms - 1.0) > _QUAT_TOLERANCE)
+        if bad.size:
+            raise EpisodeFileError(f"{path}: field qpos: the base quaternion qpos[{bad[0]}, 3:7] has norm "
+                                   f"{norms[bad[0]]:.6g}, not 1 (to {_QUAT_TOLERANCE:g}; {bad.size} such ticks); the "
+                                   "file is damaged: play the trial again")
+        for name in ("power", "act_s"):
+            if np.any(arrays[name] < 0):
+                raise EpisodeFileError(f"{path}: field {name}: negative values, expected >= 0; the file is damaged: "
+                                       "play the trial again")
+        safety_keys = [f"safety_{k}" for k in _SAFETY_KEYS]
+        present = [k for k in safety_keys if k in z.files]
+        if present and len(present) < len(safety_keys):
+            missing = [k for k in safety_keys if k not in z.files]
+            raise EpisodeFileError(f"{path}: field {missing[0]} missing while {present[0]} is there; the file "
+                                   "is damaged: play the trial again with `wbc run --save-episodes`")
+        operator = _optional_group(path, z.files, "operator", _OPERATOR_KEYS)
+        for name in (*(f"push_{k}" for k in _PUSH_KEYS), *(("safety_time",) if present else ()),
+                     *(("operator_time",) if operator else ())):
+            fields.numbers(name, ndim=None)
+        source = str(fields.scalar_text("base_source")) if "base_source" in z.files else "truth"
+        # the tick a controller failed on may be counted before its row was stored: k + 1 at most
+        clamped = int(fields.scalar("clamped_ticks", lo=0, hi=k + 1)) if "clamped_ticks" in z.files else 0
+        rows = (tuple(int(v) for v in fields.numbers("clamped_rows", rows=5)) if "clamped_rows" in z.files
+                else (0,) * 5)
+        try:
+            pushes = PushLog(**{k: z[f"push_{k}"] for k in _PUSH_KEYS})
+            safety = SafetyLog(**{k: z[f"safety_{k}"] for k in _SAFETY_KEYS}) if present else SafetyLog()
+            actions = OperatorLog(**{k: z[f"operator_{k}"] for k in _OPERATOR_KEYS}) if operator else OperatorLog()
+            return cls(**scalars, **arrays, pushes=pushes, safety_events=safety, operator_events=actions,
+                       base_source=source, clamped_ticks=clamped, clamped_rows=rows)
+        except (ConfigError, ValueError, TypeError) as exc:
+            raise EpisodeFileError(f"{path}: {short(str(exc), 300)}") from None
+
+
+_QUAT_TOLERANCE = 1e-3
+"""How far a stored base quaternion's norm may be from 1: a simulator's and an estimator's are unit to ~1e-9."""
+
+
+class _EpisodeFields:
+    """The arrays of an open episode archive, read with their shapes, types and values checked.
+
+    Every failure is an `EpisodeFileError` naming the file and the field.
+    """
+
+    def __init__(self, path: str, z: np.lib.npyio.NpzFile) -> None:
+        self.path, self.z = path, z
+
+    def _fail(self, name: str, reason: str) -> NoReturn:
+        raise EpisodeFileError(f"{self.path}: field {name}: {reason}; the file is damaged or was not written by "
+                               "`Episode.save`: play the trial again with `wbc run --save-episodes`")
+
+    def _array(self, name: str) -> np.ndarray:
+        value = self.z[name]
+        if value.dtype.kind not in "biuf":
+            self._fail(name, f"dtype {value.dtype}, expected numbers")
+        return value
+
+    def scalar(self, name: str, *, lo: float, hi: float, lo_open: bool = False, nan: bool = False) -> float:
+        """A single number in [lo, hi] (lo excluded when `lo_open`; NaN accepted when `nan`)."""
+        value = self._array(name)
+        if value.size != 1:
+            self._fail(name, f"shape {value.shape}, expected a single number")
+        x = float(value.reshape(()))
+        if nan and math.isnan(x):
+            return x
+        if not (math.isfinite(x) and (x > lo if lo_open else x >= lo) and x <= hi):
+            self._fail(name, f"{x!r}, expected a finite number in {'(' if lo_open else '['}{lo:g}, {hi:g}]")
+        return x
+
+    def scalar_text(self, name: str) -> str:
+        """A single string."""
+        value = self.z[name]
+        if value.dtype.kind not in "SU" or value.size != 1:
+            self._fail(name, f"dtype {value.dtype}, shape {value.shape}, expected one string")
+        return str(value.reshape(()))
+
+    def numbers(self, name: str, *, rows: int | None = None, cols: int | None = None,
+                ndim: int | None = 1) -> np.ndarray:
+        """A finite float64 array of `rows` rows and `cols` columns (then 2-D) or `ndim` dimensions; None: any."""
+        value = self._array(name)
+        ndim = 2 if cols is not None else ndim
+        if ndim is not None and value.ndim != ndim:
+            expected = "(ticks,)" if ndim == 1 else f"(ticks, {cols if cols is not None else 'n'})"
+            self._fail(name, f"shape {value.shape}, expected {expected}")
+        if rows is not None and value.shape[0] != rows:
+            self._fail(name, f"{value.shape[0]} rows, expected {rows} (one per entry of t)"
+                       if name != "clamped_rows" else f"shape {value.shape}, expected (5,)")
+        if cols is not None and value.shape[1] != cols:
+            self._fail(name, f"shape {value.shape}, expected (ticks, {cols})")
+        value = value.astype(np.float64)
+        if not np.all(np.isfinite(value)):
+            where = np.argwhere(~np.isfinite(value))[0]
+            self._fail(name, f"{value[tuple(where)]} at index {tuple(int(i) for i in where)}, expected finite numbers")
+        return value
 
 
 def _optional_group(path: str, files: list[str], prefix: str, keys: tuple[str, ...]) -> bool:

@@ -17,7 +17,6 @@ file and the field. The results store writes the identity and compares it with t
 
 from __future__ import annotations
 
-import json
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
@@ -26,10 +25,21 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
-from wbc.errors import RecordError
+from wbc.errors import InputFileError, RecordError
+from wbc.input_files import read_json, short
+from wbc.scenario.scenario import MAX_DURATION_S
 
-__all__ = ["ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef", "SequentialStop",
-           "SimulatedRunIdentity"]
+__all__ = ["MAX_SEED", "MAX_TRIALS", "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef",
+           "SequentialStop", "SimulatedRunIdentity"]
+
+MAX_TRIALS = 100_000
+"""Most trials per band and seed a run plays (``wbc run --trials``)."""
+
+MAX_SEED = 2**32 - 1
+"""Largest seed (the scenario's `numpy.random.SeedSequence` takes any, the command line up to this)."""
+
+MAX_COUNT = 1_000_000
+"""Largest value of a count no run comes near (a scenario's version, a consecutive-error limit)."""
 
 _FIX = ("run.json is written by `wbc run`, `wbc compare` and `wbc hw run`: restore the file as written, or play the "
         "run again with another --out")
@@ -73,7 +83,7 @@ class ScenarioRef:
         table = _Table(data, source, "scenario", required=keys)
         return cls(path=table.text("path"), name=table.text("name"), hash=table.text("hash"),
                    published=table.flag("published"),
-                   version=table.whole("version", lo=1) if with_version else None)
+                   version=table.whole("version", lo=1, hi=MAX_COUNT) if with_version else None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -199,17 +209,23 @@ class RunIdentity(ABC):
     def load(cls, run_json: str | Path) -> RunIdentity:
         """Read the identity of a results directory's run from its ``run.json``.
 
+        The file is read through `wbc.input_files.read_json`: a regular file of at most 64 MiB, UTF-8, JSON nested at
+        most 32 levels deep.
+
         Raises:
-            RecordError: the file is missing or unreadable, or its ``config`` is malformed; the message names the file
-                and the field.
+            RecordError: the file is missing, not a regular file, too large, not UTF-8 or not JSON, or its ``config``
+                is malformed (a field missing, unknown, of the wrong type, out of range, or NaN or infinite); the
+                message names the file and the field.
         """
         path = Path(run_json)
+        if not path.exists():
+            raise RecordError(f"{path}: missing; give the directory a `wbc run` or `wbc hw run` wrote")
         try:
-            run = json.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise RecordError(f"{path}: missing; give the directory a `wbc run` or `wbc hw run` wrote") from None
-        except (OSError, ValueError) as exc:
-            raise RecordError(f"{path}: unreadable run configuration ({type(exc).__name__}: {exc})") from None
+            run = read_json(path)
+        except InputFileError as exc:  # names the file, and the line where there is one
+            raise RecordError(f"{exc}; {_FIX}") from None
+        except ValueError as exc:  # an integer of more than 4300 digits: Python refuses to convert it
+            raise RecordError(f"{path}: not valid JSON ({exc}); {_FIX}") from None
         if not isinstance(run, dict) or "config" not in run:
             raise _error(str(path), "config", "missing: the file holds no run identity")
         return cls.from_json(run["config"], source=path)
@@ -283,10 +299,11 @@ class SimulatedRunIdentity(RunIdentity):
         files = table.get("controller_files")
         if files is not None and not isinstance(files, dict):
             raise _error(source, "controller_files", f"expected an object of controller -> {{path, sha256}}, got "
-                                                     f"{files!r}")
-        limit = table.whole("max_consecutive_errors", lo=0) if "max_consecutive_errors" in table else (
+                                                     f"{short(files)}")
+        limit = table.whole("max_consecutive_errors", lo=0, hi=MAX_COUNT) if "max_consecutive_errors" in table else (
             DEFAULT_MAX_CONSECUTIVE_ERRORS)
-        return cls(**_common_fields(table, source, with_version=True), trials=table.whole("trials", lo=1),
+        return cls(**_common_fields(table, source, with_version=True),
+                   trials=table.whole("trials", lo=1, hi=MAX_TRIALS),
                    no_push=table.flag("no_push"), debug_truth=table.flag("debug_truth"),
                    until_significant=None if until is None else SequentialStop.from_json(until, source=source),
                    controller_files=tuple(_controller_file(name, entry, source)
@@ -343,9 +360,11 @@ class HardwareRunIdentity(RunIdentity):
     def _read(cls, data: object, source: str) -> HardwareRunIdentity:
         table = _Table(data, source, "", required=cls._REQUIRED)
         duration = table.number("duration_s")
-        if duration <= 0.0:
-            raise _error(source, "duration_s", f"{duration!r} is not a positive duration [s]")
-        return cls(**_common_fields(table, source, with_version=False), trial=table.whole("trial", lo=0),
+        if not 0.0 < duration <= MAX_DURATION_S:
+            raise _error(source, "duration_s", f"{duration!r} is not a duration in (0, {MAX_DURATION_S:g}] s (a "
+                                               "scenario's longest)")
+        return cls(**_common_fields(table, source, with_version=False), trial=table.whole("trial", lo=0,
+                                                                                           hi=MAX_TRIALS - 1),
                    duration_s=duration, robot=table.text("robot"), arm_mode=table.text("arm_mode"),
                    backend=table.text("backend"), target=table.text("target"), command=table.text("command"))
 
@@ -368,7 +387,7 @@ class _Table:
                  optional: tuple[str, ...] = ()) -> None:
         self.source, self.prefix = source, prefix
         if not isinstance(data, dict):
-            raise _error(source, prefix or "config", f"expected an object, got {data!r}")
+            raise _error(source, prefix or "config", f"expected an object, got {short(data)}")
         for key in required:
             if key not in data:
                 raise _error(source, self._name(key), "missing")
@@ -393,7 +412,7 @@ class _Table:
         """The value of `key`, refused unless `accept` holds; `expected` says what it should be."""
         value = self.data[key]
         if not accept(value):
-            raise _error(self.source, self._name(key), f"expected {expected}, got {value!r}")
+            raise _error(self.source, self._name(key), f"expected {expected}, got {short(value)}")
         return value
 
     def text(self, key: str) -> str:
@@ -402,8 +421,8 @@ class _Table:
     def flag(self, key: str) -> bool:
         return self.read(key, lambda v: isinstance(v, bool), "true or false")
 
-    def whole(self, key: str, *, lo: int) -> int:
-        return self.read(key, lambda v: _is_int(v) and v >= lo, f"a whole number >= {lo}")
+    def whole(self, key: str, *, lo: int, hi: int) -> int:
+        return self.read(key, lambda v: _is_int(v) and lo <= v <= hi, f"a whole number in [{lo}, {hi}]")
 
     def number(self, key: str) -> float:
         return self.read(key, lambda v: (_is_int(v) or isinstance(v, float)) and math.isfinite(v), "a finite number")
@@ -412,9 +431,9 @@ class _Table:
         return tuple(self.read(key, lambda v: isinstance(v, list) and bool(v) and all(isinstance(x, str) for x in v),
                                "a non-empty list of strings"))
 
-    def wholes(self, key: str) -> tuple[int, ...]:
-        return tuple(self.read(key, lambda v: isinstance(v, list) and bool(v) and all(_is_int(x) for x in v),
-                               "a non-empty list of whole numbers"))
+    def wholes(self, key: str, *, lo: int, hi: int) -> tuple[int, ...]:
+        return tuple(self.read(key, lambda v: isinstance(v, list) and bool(v) and all(
+            _is_int(x) and lo <= x <= hi for x in v), f"a non-empty list of whole numbers in [{lo}, {hi}]"))
 
 
 def _is_int(value: object) -> bool:
@@ -424,7 +443,7 @@ def _is_int(value: object) -> bool:
 def _common_fields(table: _Table, source: str, *, with_version: bool) -> dict[str, Any]:
     return {"controllers": table.texts("controllers"),
             "scenario": ScenarioRef.from_json(table.get("scenario"), source=source, with_version=with_version),
-            "bands": table.texts("bands"), "seeds": table.wholes("seeds")}
+            "bands": table.texts("bands"), "seeds": table.wholes("seeds", lo=0, hi=MAX_SEED)}
 
 
 def _controller_file(name: str, entry: object, source: str) -> ControllerFile:

@@ -2,16 +2,25 @@
 
 The simulated-trial runner and the hardware trial build it from the trial and its episode (`TrialRecord.of_trial`),
 the executors carry it back from their workers, the results store writes it to and reads it from ``trials.csv``
-(`header`, `to_row`, `from_row`, `read_csv`), and the statistics and the report read its typed fields. The fields
-are defined here once, in the order of the ``trials.csv`` columns. A results directory written by a version with
-other columns is refused on resume with a message that says so (`read_csv`).
+(`header`, `to_row`, `from_row`, `read_csv`, `scan_csv`), and the statistics and the report read its typed fields.
+The fields are defined here once, in the order of the ``trials.csv`` columns. A results directory written by a
+version with other columns is refused on resume with a message that says so (`read_csv`).
+
+Every row written carries a last ``checksum`` cell (`checksum_of`): the first 16 hex digits of the SHA-256 of the
+other cells. A row read back is trusted only if its checksum matches, its cells parse, and its values are possible
+(`TrialRecord` checks them on construction: a time to fall in [0, 1], no infinite number, no negative count);
+otherwise it is refused with its file and line (`scan_csv`). The checksum finds a hand edit or a corrupted byte; it is
+no signature (anyone can recompute it). Rows of the versions before the column have no checksum to verify: they are
+read, checked for plausibility only, and rewritten with one when a results store reopens them.
 """
 
 from __future__ import annotations
 
 import csv
 import dataclasses
+import hashlib
 import io
+import json
 import math
 import numbers
 import re
@@ -26,10 +35,12 @@ from wbc.arena.episode import Episode
 from wbc.arena.metrics import compute_metrics
 from wbc.errors import RecordError, UnknownNameError
 from wbc.hardware.capabilities import LinkStatsLike
+from wbc.input_files import read_bytes
 from wbc.scenario.trial import Trial
 
-__all__ = ["CONTROLLER_ERROR", "FALL", "MACHINE_TIMED", "OPERATOR_STOP", "OUTCOMES", "SAFETY_TRIP", "SUCCESS",
-           "TrialRecord", "check_counters", "decode_counters", "encode_counters"]
+__all__ = ["CHECKSUM", "CONTROLLER_ERROR", "DIVERGED", "FALL", "MACHINE_TIMED", "OPERATOR_STOP", "OUTCOMES",
+           "SAFETY_TRIP", "SUCCESS", "RefusedRow", "StoredRows", "TrialRecord", "check_counters", "checksum_of",
+           "decode_counters", "encode_counters", "scan_csv"]
 
 SUCCESS = "success"
 """The episode reached its end."""
@@ -41,7 +52,10 @@ CONTROLLER_ERROR = "controller_error"
 """The controller raised in ``reset`` or ``act``, or returned a command the robot refused (``error`` says which)."""
 OPERATOR_STOP = "operator_stop"
 """An operator stopped the robot (the console's e-stop key, the remote's e-stop)."""
-OUTCOMES = (SUCCESS, FALL, SAFETY_TRIP, CONTROLLER_ERROR, OPERATOR_STOP)
+DIVERGED = "diverged"
+"""The simulation blew up (a non-finite state, an impossible speed, the trunk far below the ground;
+`wbc.arena.divergence`): no controller's result, so the metrics that would be absurd are NaN."""
+OUTCOMES = (SUCCESS, FALL, SAFETY_TRIP, CONTROLLER_ERROR, OPERATOR_STOP, DIVERGED)
 """How a trial can end, one of these each; every trial is recorded with its outcome."""
 
 _OPERATOR_REASONS = frozenset({"software_estop", "remote_estop"})
@@ -64,12 +78,13 @@ class TrialRecord:
         trial: trial index within (band, seed).
         success: the episode reached its end without a fall (`wbc.arena.metrics.success`), a trip or an error.
         outcome: how the trial ended, one of `OUTCOMES`: ``success``, ``fall``, ``safety_trip``,
-            ``controller_error`` or ``operator_stop``. Built without one (a ``trials.csv`` written before the
-            column), it is derived from `success` and `safety_trips` as those versions scored them.
-        ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error, the fraction
-            played before it, in [0, 1].
+            ``controller_error``, ``operator_stop`` or ``diverged``. Built without one (a ``trials.csv`` written
+            before the column), it is derived from `success` and `safety_trips` as those versions scored them.
+        ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error or a
+            divergence, the fraction played before it, in [0, 1].
         fall_time_s: when the robot fell, NaN if it did not (after a controller error too) [s].
-        vlin_err: mean horizontal velocity tracking error [m/s].
+        vlin_err: mean horizontal velocity tracking error [m/s]; this and the other episode metrics down to
+            `arm_travel_rad`, `power_w` and the per-second profiles are NaN (empty) for a diverged trial.
         vang_err: mean yaw-rate tracking error [rad/s].
         max_roll_deg: largest |roll| [deg].
         max_pitch_deg: largest |pitch| [deg].
@@ -98,7 +113,8 @@ class TrialRecord:
         wall_s: wall time the trial took to play [s]. This field, `deadline_misses`, `act_ms_p50` and `act_ms_p99`
             depend on the machine (and so, on a real robot, do `late_advances` and `worst_lateness_ms`).
         error: for a ``controller_error``, what failed: the controller, band, seed, trial, tick and time, the
-            exception's type and message, and the controller's own ``file:line``; empty otherwise.
+            exception's type and message, and the controller's own ``file:line``; for a ``diverged`` trial, what
+            diverged, at which tick; empty otherwise.
         ticks: control ticks played.
         clamped_ticks: ticks whose command lay outside the motors' limits (position range, speed, gains, torque)
             and was clamped by the robot before it was sent.
@@ -115,6 +131,10 @@ class TrialRecord:
 
     A ``trials.csv`` written before a column with a default existed reads with that default (`read_csv`): 0 ticks
     and clamped ticks, NaN power and empty profiles and counters (not measured then).
+
+    Raises:
+        RecordError: a field of the wrong type, an unknown outcome, one that contradicts `success`, or an impossible
+            value: `ttf` outside [0, 1], an infinite number, a negative count or index.
     """
 
     controller: str
@@ -174,11 +194,19 @@ class TrialRecord:
         if self.success != (self.outcome == SUCCESS):
             raise RecordError(f"TrialRecord: success {self.success} contradicts outcome {self.outcome!r}; a trial "
                               "succeeds exactly when its outcome is success")
+        if not 0.0 <= self.ttf <= 1.0:
+            raise RecordError(f"TrialRecord.ttf must be a fraction of the episode in [0, 1], got {self.ttf!r}")
+        for name, kind in _KINDS.items():
+            value = getattr(self, name)
+            if kind is float and math.isinf(value):
+                raise RecordError(f"TrialRecord.{name} is {value!r}; a measured value is finite (NaN: not measured)")
+            if kind is int and value < 0 and name not in _REPORTED:
+                raise RecordError(f"TrialRecord.{name} is {value!r}; a count or an index is >= 0")
 
     @classmethod
     def of_trial(cls, trial: Trial, *, controller: str, episode: Episode, counters: Mapping[str, int],
                  wall_s: float, debug_truth: bool = False, backend: str = "sim", domain_applied: bool = True,
-                 link: LinkStatsLike | None = None, error: str = "") -> TrialRecord:
+                 link: LinkStatsLike | None = None, error: str = "", diverged: str = "") -> TrialRecord:
         """The record of `trial` played by `controller`.
 
         Args:
@@ -198,13 +226,20 @@ class TrialRecord:
                 pacing columns; None for a robot that does not pace on a wall clock.
             error: the controller failed (`wbc.arena.controller_failure.ControllerFailure`): what it did, for the
                 record's `error`; the outcome is then ``controller_error`` and `episode` the part played before it.
+            diverged: the simulation diverged (`wbc.arena.divergence.SimulationDiverged`): what diverged and when,
+                for the record's `error`; the outcome is then ``diverged``, `episode` the part played up to the tick
+                that diverged, and the metrics computed from the robot's motion are NaN, so that no absurd number
+                reaches a mean. A controller error found first wins.
         """
         metrics = compute_metrics(episode)
         counts = check_counters(counters)
-        if error:
+        if error or diverged:
             played = float(episode.t[-1]) if len(episode.t) else 0.0
             metrics.update(success=False, ttf=min(1.0, played / episode.duration_s), fall_time_s=math.nan)
-            outcome = CONTROLLER_ERROR
+            outcome = CONTROLLER_ERROR if error else DIVERGED
+            if not error:
+                metrics.update({name: math.nan for name in _MOTION_METRICS}, vlin_err_by_s="", vang_err_by_s="")
+                error = diverged
         else:
             outcome = _outcome(episode)
         return cls(
@@ -226,10 +261,10 @@ class TrialRecord:
         """Equal when stored alike: every field's ``trials.csv`` text matches (so NaN equals NaN, bit for bit)."""
         if not isinstance(other, TrialRecord):
             return NotImplemented
-        return self.to_row() == other.to_row()
+        return self._cells() == other._cells()
 
     def __hash__(self) -> int:
-        return hash(tuple(self.to_row()))
+        return hash(tuple(self._cells()))
 
     # -- access ---------------------------------------------------------------------------------------------------
     @property
@@ -247,12 +282,19 @@ class TrialRecord:
         """(controller, band, seed, trial): identifies the record within a run."""
         return (self.controller, self.band, self.seed, self.trial)
 
+    @property
+    def checksum(self) -> str:
+        """The row's ``checksum`` cell: `checksum_of` its other cells."""
+        return checksum_of(self._cells())
+
     def __getitem__(self, name: str) -> str | int | float | bool:
-        """The field `name`, for code that names fields in data (a metric key, a table column).
+        """The field `name` (or the ``checksum`` column), for code that names fields in data (a metric key, a column).
 
         Raises:
             UnknownNameError: no such field (the message lists them).
         """
+        if name == CHECKSUM:
+            return self.checksum
         if name not in _KINDS:
             raise UnknownNameError("record field", name, FIELDS)
         return getattr(self, name)
@@ -260,59 +302,207 @@ class TrialRecord:
     # -- CSV ------------------------------------------------------------------------------------------------------
     @staticmethod
     def header() -> tuple[str, ...]:
-        """The ``trials.csv`` column names, in order."""
-        return FIELDS
+        """The ``trials.csv`` column names, in order: the fields, then ``checksum``."""
+        return COLUMNS
+
+    def _cells(self) -> list[str]:
+        """The fields as ``trials.csv`` cells, in `FIELDS` order (floats as their shortest round-trip text)."""
+        return [repr(v) if isinstance(v, float) else str(v) for v in (getattr(self, n) for n in FIELDS)]
 
     def to_row(self) -> list[str]:
-        """The record as ``trials.csv`` cells, in `header` order (floats as their shortest round-trip text)."""
-        return [repr(v) if isinstance(v, float) else str(v) for v in (getattr(self, n) for n in FIELDS)]
+        """The record as ``trials.csv`` cells, in `header` order: its fields, then their checksum."""
+        cells = self._cells()
+        return [*cells, checksum_of(cells)]
 
     @classmethod
     def from_row(cls, row: Sequence[str], *, source: str = "row") -> TrialRecord:
-        """Parse cells in `header` order, as `to_row` writes them.
+        """Parse cells in `header` order, as `to_row` writes them, the checksum verified.
 
         Args:
             row: the cells.
             source: where the row comes from, for messages (``trials.csv:12``).
 
         Raises:
-            RecordError: the row has the wrong number of cells, or a cell does not parse as its field's type.
+            RecordError: the row has the wrong number of cells, a cell does not parse as its field's type, a value is
+                impossible (`TrialRecord`), or the checksum does not match the other cells (an edited or corrupted
+                row).
         """
-        if len(row) != len(FIELDS):
-            raise RecordError(f"{source}: {len(row)} cells, expected {len(FIELDS)} ({', '.join(FIELDS)}); write rows "
-                              "with TrialRecord.to_row")
-        return cls(**{name: _parse(source, name, _KINDS[name], text) for name, text in zip(FIELDS, row, strict=True)})
+        if len(row) != len(COLUMNS):
+            raise RecordError(f"{source}: {len(row)} cells, expected {len(COLUMNS)} ({', '.join(COLUMNS)}); write "
+                              "rows with TrialRecord.to_row")
+        record = cls._parsed(row[:-1], source)
+        if checksum_of(row[:-1]) != row[-1]:
+            raise RecordError(f"{source}: checksum {row[-1]!r} does not match the row's cells (expected "
+                              f"{checksum_of(row[:-1])!r}): the row was edited or corrupted after wbc wrote it")
+        return record
+
+    @classmethod
+    def _parsed(cls, cells: Sequence[str], source: str) -> TrialRecord:
+        """The record of `cells` in `FIELDS` order, its values checked (no checksum)."""
+        values = {name: _parse(source, name, _KINDS[name], text) for name, text in zip(FIELDS, cells, strict=True)}
+        try:
+            return cls(**values)
+        except RecordError as exc:
+            raise RecordError(f"{source}: {exc}") from None
 
     @classmethod
     def read_csv(cls, path: str | Path) -> list[TrialRecord]:
-        """The records of a ``trials.csv``, in file order.
+        """The records of a ``trials.csv``, in file order, every row trusted or the file refused.
 
-        A last line without its newline (a write cut short by a kill) is dropped, and so is any row with the wrong
-        number of cells; what remains is exactly what was stored. A file written before some columns existed (those
-        with a default: ``backend`` and the columns after it, added with hardware trials) reads with their defaults,
-        which are what those versions did (a simulated trial, metrics from truth); a results store reopened on it
-        rewrites it with this version's columns.
+        A last line without its newline (a write cut short by a kill) is dropped: what remains is exactly what was
+        stored. A file written before some columns existed (those with a default: ``backend`` and the columns after
+        it, added with hardware trials; ``checksum``, which such rows then lack and are not verified by) reads with
+        their defaults, which are what those versions did (a simulated trial, metrics from truth); a results store
+        reopened on it rewrites it with this version's columns.
 
         Raises:
+            InputFileError: the file is missing, not a regular file, or too large.
             RecordError: the file's columns are neither `header` nor an earlier version's (a results directory of
-                another version), or a complete row holds a value that does not parse (the message names the file,
-                line and field).
+                another version), or a complete row is refused (`scan_csv`: the message names the file, line and
+                what is wrong).
         """
-        text = Path(path).read_text(encoding="utf-8")
-        if text and not text.endswith("\n"):
-            text = text[: text.rfind("\n") + 1]
-        rows = list(csv.reader(io.StringIO(text)))
-        if not rows:
-            return []
-        columns = tuple(rows[0])
-        absent = [name for name in FIELDS if name not in columns]
-        if tuple(name for name in FIELDS if name in columns) != columns or any(n not in _DEFAULTS for n in absent):
-            raise RecordError(f"{path}: columns {', '.join(rows[0])} are not this version's ({', '.join(FIELDS)}); "
-                              "the directory was written by another version of wbc: resume it with that version, "
-                              "or start afresh with another --out")
-        defaults = [repr(_DEFAULTS[n]) if isinstance(_DEFAULTS[n], float) else str(_DEFAULTS[n]) for n in absent]
-        return [cls.from_row(_complete(columns, row, absent, defaults), source=f"{path}:{line}")
-                for line, row in enumerate(rows[1:], start=2) if len(row) == len(columns)]
+        stored = scan_csv(path)
+        if stored.refused:
+            raise RecordError(stored.refusal(path, "fix or delete those lines"))
+        return list(stored.records)
+
+
+@dataclass(frozen=True)
+class RefusedRow:
+    """A ``trials.csv`` row that is not trusted.
+
+    Attributes:
+        line: its first line in the file (the header is line 1).
+        reason: what is wrong with it, in words.
+    """
+
+    line: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class StoredRows:
+    """What `scan_csv` found in a ``trials.csv``.
+
+    Attributes:
+        records: the trusted rows' records, in file order.
+        lines: the line of each of `records`.
+        refused: the rows refused, in file order.
+        checksummed: the file has the ``checksum`` column (False: an earlier version's, whose rows are not verified).
+    """
+
+    records: tuple[TrialRecord, ...]
+    lines: tuple[int, ...]
+    refused: tuple[RefusedRow, ...]
+    checksummed: bool
+
+    def refusal(self, path: str | Path, way_out: str) -> str:
+        """One message for the refused rows: the first one's file, line and reason, the other lines, `way_out`."""
+        first, rest = self.refused[0], self.refused[1:]
+        more = (f" (and {len(rest)} more refused row(s), line(s) {', '.join(str(r.line) for r in rest[:10])}"
+                f"{' ...' if len(rest) > 10 else ''})") if rest else ""
+        return f"{path}:{first.line}: {first.reason}{more}; {way_out}"
+
+
+_NOT_UTF8 = re.compile("[\udc80-\udcff]")
+"""A byte that is not UTF-8, as ``surrogateescape`` decoding leaves it."""
+
+
+def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRows:
+    """Read a ``trials.csv`` and sort its rows into trusted and refused ones.
+
+    A last line without its newline (a write cut short by a kill) is dropped silently: that is how a killed run
+    leaves the file. Every other row is refused, with its line and the reason, when it
+
+    - holds a byte that is not UTF-8;
+    - has another number of cells than the header;
+    - has a cell that does not parse, or an impossible value (`TrialRecord`);
+    - fails its checksum (`checksum_of`; rows of a file without the column have none to fail);
+    - was played on another scenario file than `scenario_hash` (when given);
+    - repeats the run key (controller, band, seed, trial) of another row: every copy is refused, since which one
+      to trust cannot be told.
+
+    Args:
+        path: the ``trials.csv``.
+        scenario_hash: the run's scenario hash; None: not checked.
+
+    Raises:
+        InputFileError: the file is missing, not a regular file, or too large (`wbc.input_files.read_bytes`).
+        RecordError: the header is neither `header` nor an earlier version's, or is not UTF-8.
+    """
+    data = read_bytes(path, kind="csv")
+    if data and not data.endswith(b"\n"):
+        data = data[: data.rfind(b"\n") + 1]
+    reader = csv.reader(io.StringIO(data.decode("utf-8", errors="surrogateescape"), newline=""))
+    rows: list[tuple[int, list[str]]] = []
+    start = 1
+    for row in reader:
+        rows.append((start, row))
+        start = reader.line_num + 1
+    if not rows:
+        return StoredRows(records=(), lines=(), refused=(), checksummed=True)
+    columns = tuple(rows[0][1])
+    checksummed = bool(columns) and columns[-1] == CHECKSUM
+    names = columns[:-1] if checksummed else columns
+    absent = [name for name in FIELDS if name not in names]
+    if (any(_NOT_UTF8.search(c) for c in columns) or tuple(name for name in FIELDS if name in names) != names
+            or any(n not in _DEFAULTS for n in absent) or (checksummed and absent)):
+        raise RecordError(f"{path}: columns {', '.join(columns)} are not this version's ({', '.join(COLUMNS)}); "
+                          "the directory was written by another version of wbc: resume it with that version, "
+                          "or start afresh with another --out")
+    defaults = [repr(_DEFAULTS[n]) if isinstance(_DEFAULTS[n], float) else str(_DEFAULTS[n]) for n in absent]
+    good: list[tuple[int, TrialRecord]] = []
+    refused: list[RefusedRow] = []
+    for line, row in rows[1:]:
+        bad = next((m for c in row for m in [_NOT_UTF8.search(c)] if m), None)
+        if bad is not None:
+            byte = ord(bad.group()) - 0xDC00
+            refused.append(RefusedRow(line, f"byte {byte:#04x} is not UTF-8 (a corrupted row)"))
+            continue
+        if len(row) != len(columns):
+            refused.append(RefusedRow(line, f"{len(row)} cells, expected {len(columns)} (a damaged row)"))
+            continue
+        try:
+            if checksummed:
+                record = TrialRecord.from_row(row, source="row")
+            else:
+                record = TrialRecord._parsed(_complete(names, row, absent, defaults), "row")
+        except RecordError as exc:
+            refused.append(RefusedRow(line, str(exc).removeprefix("row: ")))
+            continue
+        if scenario_hash is not None and record.scenario_hash != scenario_hash:
+            refused.append(RefusedRow(line, f"played on scenario hash {record.scenario_hash!r}, not this run's "
+                                            f"{scenario_hash!r}"))
+            continue
+        good.append((line, record))
+    first: dict[tuple[str, str, int, int], int] = {}
+    repeated: set[tuple[str, str, int, int]] = set()
+    for line, record in good:
+        if record.run_key in first:
+            repeated.add(record.run_key)
+        first.setdefault(record.run_key, line)
+    for line, record in good:
+        if record.run_key in repeated:
+            others = [str(n) for n, r in good if r.run_key == record.run_key and n != line]
+            refused.append(RefusedRow(line, f"repeats the trial {_key_text(record)} of line(s) {', '.join(others)}"))
+    refused.sort(key=lambda r: r.line)
+    kept = [(line, r) for line, r in good if r.run_key not in repeated]
+    return StoredRows(records=tuple(r for _, r in kept), lines=tuple(line for line, _ in kept), refused=tuple(refused),
+                      checksummed=checksummed)
+
+
+def checksum_of(cells: Sequence[str]) -> str:
+    """The ``checksum`` cell of a row's other cells: the first 16 hex digits of the SHA-256 of their JSON list.
+
+    JSON keeps the cells apart whatever they hold (a comma, a quote, a newline), so two rows that differ in any
+    cell, or split the same text into other cells, differ in checksum.
+    """
+    text = json.dumps(list(cells), ensure_ascii=False)
+    return hashlib.sha256(text.encode("utf-8", errors="surrogatepass")).hexdigest()[:16]
+
+
+def _key_text(record: TrialRecord) -> str:
+    return f"(controller {record.controller}, band {record.band}, seed {record.seed}, trial {record.trial})"
 
 
 _COUNTER_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.-]*")
@@ -378,22 +568,33 @@ def _outcome(episode: Episode) -> str:
 
 _KINDS: dict[str, type] = {f.name: typing.get_type_hints(TrialRecord)[f.name] for f in dataclasses.fields(TrialRecord)}
 FIELDS: tuple[str, ...] = tuple(_KINDS)
+"""The record's fields, in the order of their ``trials.csv`` columns."""
+CHECKSUM = "checksum"
+"""The last ``trials.csv`` column: `checksum_of` the row's other cells."""
+COLUMNS: tuple[str, ...] = (*FIELDS, CHECKSUM)
+"""The ``trials.csv`` columns."""
+
+_REPORTED = ("fallbacks", "wbc_failures")
+"""Integer fields whose values the controller reports (`Controller.counters`): any whole number, not checked here."""
+
+_MOTION_METRICS = ("vlin_err", "vang_err", "max_roll_deg", "max_pitch_deg", "energy_j", "arm_travel_rad", "power_w")
+"""The metrics computed from the robot's motion: NaN for a diverged trial, whose motion is the simulator's blow-up."""
 
 _DEFAULTS: dict[str, object] = {f.name: f.default for f in dataclasses.fields(TrialRecord)
                                 if f.default is not dataclasses.MISSING}
 
 
-def _complete(columns: tuple[str, ...], row: list[str], absent: list[str], defaults: list[str]) -> list[str]:
+def _complete(columns: tuple[str, ...], row: Sequence[str], absent: list[str], defaults: list[str]) -> list[str]:
     """`row` (cells in `columns` order) as cells in `FIELDS` order, the `absent` columns' cells as `defaults`."""
     if not absent:
-        return row
+        return list(row)
     cells = dict(zip(columns, row, strict=True)) | dict(zip(absent, defaults, strict=True))
     return [cells[name] for name in FIELDS]
 
 
-MACHINE_TIMED = ("deadline_misses", "act_ms_p50", "act_ms_p99", "wall_s")
-"""Fields timed on the machine's clock: two plays of the same simulated trial agree on every other field, to the
-last bit, and differ in these."""
+MACHINE_TIMED = ("deadline_misses", "act_ms_p50", "act_ms_p99", "wall_s", CHECKSUM)
+"""The ``trials.csv`` columns that depend on the machine's clock: two plays of the same simulated trial agree on every
+other column, to the last bit, and differ in these (the checksum covers the timed fields, so it differs with them)."""
 
 
 def _coerce(name: str, kind: type, value: object) -> object:
@@ -423,5 +624,4 @@ def _parse(source: str, name: str, kind: type, text: str) -> object:
             return kind(text)
         except ValueError:
             pass
-    raise RecordError(f"{source}: field {name} holds {text!r}, not a {kind.__name__}; fix or delete that line "
-                      "(the trial is played again on --resume)")
+    raise RecordError(f"{source}: field {name} holds {text!r}, not a {kind.__name__}")

@@ -40,7 +40,7 @@ from wbc.arena.paired_tests import (
 )
 from wbc.arena.plots import PLOTS, write_plots
 from wbc.arena.power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
-from wbc.arena.record import CONTROLLER_ERROR, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
+from wbc.arena.record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
 from wbc.arena.stats import (
     bootstrap_mean_ci,
     in_canonical_order,
@@ -474,7 +474,8 @@ def _result_rows(summary: Summary, band: str, metrics: Sequence[str]) -> list[li
     return rows
 
 
-_OUTCOME_COLUMNS = ((CONTROLLER_ERROR, "errors"), (SAFETY_TRIP, "trips"), (OPERATOR_STOP, "stops"))
+_OUTCOME_COLUMNS = ((CONTROLLER_ERROR, "errors"), (SAFETY_TRIP, "trips"), (OPERATOR_STOP, "stops"),
+                    (DIVERGED, "diverged"))
 """Outcomes other than success and fall that get a column of their own when a trial of the run ended so."""
 
 
@@ -483,8 +484,8 @@ def _outcome_columns(summary: Summary, band: str, header: list[str],
     """`header` and `rows` with a column after the trials for each outcome in `_OUTCOME_COLUMNS` the run had.
 
     Each row's count is its controller's trials in `band` that ended so (``summary.json``'s ``outcomes``, added by
-    `wbc.arena.compare`): controller errors, safety trips and operator stops, told apart from falls. A run without
-    any keeps its table as it was.
+    `wbc.arena.compare`): controller errors, safety trips, operator stops and diverged simulations, told apart from
+    falls. A run without any keeps its table as it was.
     """
     def count(controller: str, outcome: str, where: str = band) -> int:
         cell = summary.cell(controller, where)

@@ -1,11 +1,16 @@
-"""`ResultsStore`: a results directory that never loses a finished trial.
+"""`ResultsStore`: a results directory that never loses a finished trial, and trusts nothing it did not write.
 
 Each finished trial is appended to ``trials.csv`` as one line and flushed to disk (fsync) before the next is
 accepted, so a run killed at any moment keeps everything it finished; a line cut short by the kill is dropped when
-the store is reopened. ``run.json`` holds the run's identity (`wbc.arena.identity.RunIdentity`: the resolved
+the store is reopened. Every row carries a checksum of its cells, and a row that fails it, does not parse, holds an
+impossible value, belongs to another scenario file or repeats a trial is refused on reopening with its file and line
+(`wbc.arena.record.scan_csv`), unless the run asks for such rows to be dropped and played again
+(``--drop-bad-rows``). ``run.json`` holds the run's identity (`wbc.arena.identity.RunIdentity`: the resolved
 configuration and scenario hash), package versions, git revision and what each controller is (its kind, a plug-in's
 target and distribution version, the sha256 of every file it was built from: weights, an ONNX model and its external
-data, an I/O or configuration file); reopening a directory for another run is refused, naming the fields that differ.
+data, an I/O or configuration file); it is read back as strictly as a scenario (`RunIdentity.from_json`: every
+field known and of its type), and reopening a directory for another run is refused, naming the fields that differ.
+The paths the run will write are checked before any trial is played (`check_out_dir`).
 """
 
 from __future__ import annotations
@@ -14,14 +19,41 @@ import csv
 import json
 import os
 import re
+import sys
 from pathlib import Path
 
 from wbc.arena.identity import RunIdentity
-from wbc.arena.record import TrialRecord
-from wbc.errors import ResultsDirError
+from wbc.arena.record import RefusedRow, TrialRecord, scan_csv
+from wbc.errors import InputFileError, RecordError, ResultsDirError
+from wbc.input_files import read_json
 from wbc.provenance import provenance
 
-__all__ = ["ResultsStore", "episode_path"]
+__all__ = ["OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path"]
+
+OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "report.md", "push_recovery.png",
+                "ttf.png", "tracking.png")
+"""The files a results directory holds (`ResultsStore`, `wbc.arena.finish.finish_results`)."""
+
+_RUN_KEYS = ("config", "environment", "controllers")
+"""The top-level fields of ``run.json``."""
+
+
+def check_out_dir(out_dir: Path) -> None:
+    """Refuse an output directory the run could not complete, before any trial is played.
+
+    Raises:
+        ResultsDirError: `out_dir` exists and is not a directory (a file), or one of the files it will write
+            (`OUTPUT_FILES`) exists as something else than a file (a directory); the message says what to move.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ResultsDirError(f"{out}: --out is an existing file, not a directory; choose another --out, or move the "
+                              "file away")
+    for name in OUTPUT_FILES:
+        path = out / name
+        if path.exists() and not path.is_file():
+            raise ResultsDirError(f"{path}: the run writes this file, but it is a directory (or not a regular file); "
+                                  "move it away, or choose another --out")
 
 
 def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: int) -> Path:
@@ -45,49 +77,61 @@ class ResultsStore:
         controllers: what each controller is, by name (`wbc.control.spec.ControllerSpec.provenance`: its kind, a
             plug-in's target and distribution version, the sha256 of every file it was built from), recorded in
             ``run.json`` beside the configuration.
+        drop_bad_rows: drop the rows of ``trials.csv`` that are refused (`wbc.arena.record.scan_csv`), with one
+            warning line each on stderr, so that their trials are played again; off: such rows are refused.
 
     Raises:
-        ResultsDirError: `out_dir` holds results and `resume` is off, or holds another run (the message names the
-            fields that differ), or its ``run.json`` is unreadable.
-        RecordError: its ``trials.csv`` has other columns or an unreadable row.
+        ResultsDirError: `out_dir` is a file, or a file the run writes is a directory (`check_out_dir`); it holds
+            results and `resume` is off, or holds another run (the message names the fields that differ), or its
+            ``run.json`` is unreadable or missing beside stored trials.
+        RecordError: its ``run.json`` is malformed (the message names the field), its ``trials.csv`` has other
+            columns, or holds a refused row and `drop_bad_rows` is off (the message names the file and line).
 
     Attributes:
         dir: the directory.
         identity: the run's identity, as given.
         environment: the package versions and git revision ``run.json`` records (`wbc.provenance.provenance`).
         records: the trials stored, in the order they finished.
+        dropped: the rows of ``trials.csv`` dropped on opening (with `drop_bad_rows`), in file order.
     """
 
     def __init__(self, out_dir: Path, identity: RunIdentity, *, resume: bool,
-                 controllers: dict[str, object] | None = None) -> None:
+                 controllers: dict[str, object] | None = None, drop_bad_rows: bool = False) -> None:
         self.dir = Path(out_dir)
         self.identity = identity
         config = identity.as_json()
         self.trials_path = self.dir / "trials.csv"
         self.run_path = self.dir / "run.json"
+        check_out_dir(self.dir)
         self.dir.mkdir(parents=True, exist_ok=True)
         if self.trials_path.exists() and not resume:
             raise ResultsDirError(f"{self.dir}: already holds results; pass --resume to finish that run, or choose "
                                   "another --out")
         if resume and self.run_path.exists():
-            # compared as JSON, not read back as a RunIdentity: a stored run of another kind or version is named
-            # field by field as differing, not refused as malformed
-            try:
-                stored = json.loads(self.run_path.read_text(encoding="utf-8")).get("config")
-            except (OSError, ValueError, AttributeError) as exc:
-                raise ResultsDirError(f"{self.run_path}: unreadable run configuration ({type(exc).__name__}: {exc}); "
-                                      "restore the file, or start afresh with another --out") from None
-            if not isinstance(stored, dict):
-                raise ResultsDirError(f"{self.run_path}: field config: missing or not an object; restore the file, "
-                                      "or start afresh with another --out")
+            # validated as a RunIdentity (every field known and typed), then compared as JSON: a stored run of
+            # another kind or with other options is named field by field as differing
+            stored = self._stored_config()
             if stored != config:
                 diff = sorted(k for k in set(stored) | set(config) if stored.get(k) != config.get(k))
                 raise ResultsDirError(f"{self.dir}: --resume with a different configuration (differs in: "
                                       f"{', '.join(diff)}); rerun with the original options or another --out")
         self.records: list[TrialRecord] = []
+        self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
-            self.records = TrialRecord.read_csv(self.trials_path)
-            # rewrite without a torn last line so appends start on a fresh line
+            rows = scan_csv(self.trials_path, scenario_hash=identity.scenario_hash)
+            if rows.records and not self.run_path.exists():
+                raise ResultsDirError(f"{self.run_path}: missing, so the run the {len(rows.records)} stored trial(s) "
+                                      "of trials.csv belong to is unknown; restore run.json, or start afresh with "
+                                      "another --out")
+            if rows.refused and not drop_bad_rows:
+                raise RecordError(rows.refusal(self.trials_path, "pass --drop-bad-rows to play those trials again, "
+                                                                 "or restore the file"))
+            for bad in rows.refused:
+                print(f"wbc: warning: {self.trials_path}:{bad.line}: {bad.reason}; row dropped (--drop-bad-rows), "
+                      "its trial is played again", file=sys.stderr)
+            self.records, self.dropped = list(rows.records), rows.refused
+            # rewrite without a torn last line (so appends start on a fresh line) and without the rows dropped, with
+            # this version's columns
             self._rewrite()
         else:
             with self.trials_path.open("w", encoding="utf-8", newline="") as f:
@@ -99,6 +143,33 @@ class ResultsStore:
         self.run_path.write_text(json.dumps(run, indent=2), encoding="utf-8")
         self._file = self.trials_path.open("a", encoding="utf-8", newline="")
         self._writer = csv.writer(self._file)
+
+    def _stored_config(self) -> dict:
+        """The ``config`` of the stored ``run.json``, checked to be a run identity this version reads.
+
+        Raises:
+            ResultsDirError: not a regular file, not UTF-8, not JSON.
+            RecordError: not an object of `_RUN_KEYS`, or its ``config`` is malformed (`RunIdentity.from_json`).
+        """
+        try:
+            run = read_json(self.run_path)
+        except InputFileError as exc:
+            where = str(exc).removeprefix(str(self.run_path)).lstrip(":").strip()
+            raise ResultsDirError(f"{self.run_path}: unreadable run configuration (at {where}); restore the file, or "
+                                  "start afresh with another --out") from None
+        if not isinstance(run, dict) or "config" not in run:
+            raise RecordError(f"{self.run_path}: field config: missing (the file holds no run identity); restore the "
+                              "file, or start afresh with another --out")
+        unknown = [key for key in run if key not in _RUN_KEYS]
+        if unknown:
+            raise RecordError(f"{self.run_path}: field {unknown[0]}: not a field of run.json ({', '.join(_RUN_KEYS)}); "
+                              "restore the file, or start afresh with another --out")
+        for key in ("environment", "controllers"):
+            if key in run and not isinstance(run[key], dict):
+                raise RecordError(f"{self.run_path}: field {key}: expected an object, got {run[key]!r}; restore the "
+                                  "file, or start afresh with another --out")
+        RunIdentity.from_json(run["config"], source=self.run_path)
+        return run["config"]
 
     def _rewrite(self) -> None:
         tmp = self.trials_path.with_suffix(".tmp")

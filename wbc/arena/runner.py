@@ -14,7 +14,10 @@ for far longer than a control period, so none is missed. Setting a simulated tri
 turning its episode into a record is `wbc.arena.sim_trial`. A robot behind a safety layer (`HasSafetyEvents`) has
 the layer's transitions during the episode logged in it (`Episode.safety_events`). A controller that raises, or
 returns a command the robot refuses, ends the episode with a `ControllerFailure` that says where and carries the
-episode so far.
+episode so far. Given a `DivergenceCheck` (a simulated trial's), the loop checks the joints the robot reports before
+each ``act`` and the trunk's truth after each step, and ends an episode whose simulation blew up with
+`SimulationDiverged` (its own outcome, never numbers in the means). A controller whose period is longer than the
+episode would never be asked to act: that is refused before the episode starts.
 """
 
 from __future__ import annotations
@@ -27,9 +30,10 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from wbc.arena.controller_failure import ControllerFailure
+from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
-from wbc.errors import CommandError, MissingCapabilityError
+from wbc.errors import CommandError, ConfigError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, TruthSource
 from wbc.hardware.robot import Robot, command_bounds, exceeded_rows
 from wbc.robots.description import ARM_JOINTS
@@ -67,6 +71,7 @@ def run_episode(
     truth: Callable[[], BaseTruth] | None = None,
     fallen: Callable[[], bool] | None = None,
     observer: TickObserver | None = None,
+    divergence: DivergenceCheck | None = None,
 ) -> Episode:
     """Play one episode.
 
@@ -80,6 +85,8 @@ def run_episode(
         fallen: returns True when the trunk or a non-foot link touches the ground; default: the robot's own, if it
             is a `FallDetector`.
         observer: called after every tick (e.g. a viewer); None costs nothing.
+        divergence: check every tick that the simulation has not blown up (a few NumPy reductions per tick);
+            None: no check (a real robot, whose safety layer watches it).
 
     Returns:
         The episode log (no pushes: whoever applied them adds them, see `wbc.arena.sim_trial.run_trial`), with the
@@ -87,14 +94,21 @@ def run_episode(
 
     Raises:
         MissingCapabilityError: no `truth` or `fallen` given and the robot does not offer it.
+        ConfigError: the controller's period is longer than the episode: it would never be asked to act.
         ControllerFailure: the controller's ``reset`` or ``act`` raised, or ``act`` returned a command the robot
             refused (`wbc.errors.CommandError`); it carries the episode played up to that tick. The robot keeps the
             last command it accepted.
+        SimulationDiverged: `divergence` found an impossible state; it carries the episode played up to that tick
+            (the tick that stepped into it included).
     """
     truth = _truth_of(robot) if truth is None else truth
     fallen = _fall_detector_of(robot) if fallen is None else fallen
     dt = 1.0 / controller.rate_hz
     n = int(round(duration_s / dt))
+    if n < 1:
+        raise ConfigError(f"controller {type(controller).__name__}: its period 1/{controller.rate_hz} Hz = {dt:g} s is "
+                          f"longer than the {duration_s:g} s episode, so it would never be asked to act; give it a "
+                          f"rate of at least {1.0 / duration_s:g} Hz")
     arm = slice(ARM_JOINTS.start, ARM_JOINTS.stop) if robot.num_joints == 15 else None
     buf = EpisodeBuffer(nq=7 + robot.num_joints, arm=arm)
     safety = robot if isinstance(robot, HasSafetyEvents) else None
@@ -109,6 +123,12 @@ def run_episode(
                             safety_events=events, clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
         return ControllerFailure(controller, phase=phase, tick=tick, time_s=tick * dt, exc=exc, episode=played)
 
+    def diverged(reason: str, tick: int) -> SimulationDiverged:
+        events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
+        played = buf.finish(duration_s=duration_s, control_dt=dt, fell=False, fall_time_s=math.nan,
+                            safety_events=events, clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
+        return SimulationDiverged(reason, tick=tick, time_s=buf.rows * dt, episode=played)
+
     try:
         controller.reset()
     except Exception as exc:  # any: the controller's code is not ours, and the trial must still be recorded
@@ -118,6 +138,8 @@ def run_episode(
     for k in range(n):
         t = k * dt
         state = robot.read()
+        if divergence is not None and (reason := divergence.state(state)) is not None:
+            raise diverged(reason, k)
         cmd = schedule.at(t)
         started = clock()
         try:
@@ -135,7 +157,10 @@ def run_episode(
             clamped_rows += over
         robot.advance(dt)
         # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
-        buf.add((k + 1) * dt, cmd, act_s, truth(), state)
+        now = truth()
+        buf.add((k + 1) * dt, cmd, act_s, now, state)
+        if divergence is not None and (reason := divergence.truth(now)) is not None:
+            raise diverged(reason, k)
         if observer is not None:
             observer((k + 1) * dt, robot, controller, cmd)
         if fallen():

@@ -6,7 +6,10 @@ pushes through the robot's perturbation hook, throws the controller's ground-tru
 truth and falls from the simulator's capabilities), logs the pushes the robot met, and makes the `TrialRecord`.
 A controller that fails during the trial (`wbc.arena.controller_failure.ControllerFailure`: it raised in ``reset`` or
 ``act``, or returned a command the robot refused) does not end the run: the trial is recorded with the outcome
-``controller_error`` and a message naming the controller, the trial, the tick and the controller's own file:line.
+``controller_error`` and a message naming the controller, the trial, the tick and the controller's own file:line;
+so is a controller whose period is longer than the trial, which would never be asked to act. The loop checks every
+tick that the simulation has not blown up (`wbc.arena.divergence.DivergenceCheck`): a trial that diverges is
+recorded with the outcome ``diverged`` and NaN for the metrics of its motion.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import time
 from threadpoolctl import threadpool_limits
 
 from wbc.arena.controller_failure import ControllerFailure, read_counters
+from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.episode import Episode, EpisodeBuffer, PushLog
 from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
@@ -62,14 +66,16 @@ def run_trial(trial: Trial, controller: ControllerSpec | str, *, debug_truth: bo
 
     Returns:
         The trial's record and the episode log, with the pushes that began before it ended. A controller that
-        failed (raised, or returned a command the robot refused) gives a record with the outcome
-        ``controller_error`` and the episode played before the failure.
+        failed (raised, or returned a command the robot refused, or has a period longer than the trial) gives a
+        record with the outcome ``controller_error`` and the episode played before the failure; a simulation that
+        diverged, one with the outcome ``diverged`` and the episode up to the tick that diverged.
 
     Raises:
         UnknownNameError: unknown controller name.
         ConfigError: the controller's period is not a whole number of physics steps.
         MissingCapabilityError: `debug_truth` for a controller without a ground-truth debug switch.
         ControllerFailure: the controller failed, and `record_errors` is False.
+        ConfigError: the controller's period is longer than the trial, and `record_errors` is False.
     """
     spec = get_controller(controller) if isinstance(controller, str) else controller
     # one BLAS thread: a multi-threaded product splits its sums differently, and the same trial would differ in its
@@ -114,14 +120,32 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
     robot.reset(seed=trial.terrain_seed, domain=trial.domain)
     for push in trial.pushes:
         robot.apply_push(push)
-    error = ""
+    error = diverged = ""
+    if int(round(trial.duration_s * ctrl.rate_hz)) < 1:
+        # the runner refuses such an episode; the arena records it against the controller, as any failure of its own
+        never = (f"controller {spec.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}: never asked to "
+                 f"act: its period 1/{ctrl.rate_hz} Hz is longer than the {trial.duration_s:g} s trial, so no control "
+                 f"tick was played; give it a rate of at least {1.0 / trial.duration_s:g} Hz")
+        if not record_errors:
+            raise ConfigError(never)
+        empty = EpisodeBuffer(nq=7 + robot.num_joints).finish(duration_s=trial.duration_s,
+                                                               control_dt=1.0 / ctrl.rate_hz, fell=False,
+                                                               fall_time_s=math.nan)
+        record = TrialRecord.of_trial(trial, controller=spec.name, episode=empty, counters={},
+                                      wall_s=time.perf_counter() - start, debug_truth=debug_truth, error=never)
+        return record, empty
     try:
-        episode = run_episode(robot, ctrl, trial.command, trial.duration_s, observer=observer)
+        episode = run_episode(robot, ctrl, trial.command, trial.duration_s, observer=observer,
+                              divergence=DivergenceCheck())
         played_s = episode.survived_s
     except ControllerFailure as failure:
         if not record_errors:
             raise
         episode, error, played_s = failure.episode, failure.record_error(spec.name, trial), failure.time_s
+    except SimulationDiverged as blown:
+        episode, played_s = blown.episode, blown.time_s
+        diverged = (f"controller {spec.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}: "
+                    f"{blown.describe()}")
     met = PushLog.of(p for p in trial.pushes if p.start < played_s)
     episode = dataclasses.replace(episode, pushes=met)
     counters, error = read_counters(ctrl, spec.name, trial, episode, error)
@@ -129,5 +153,6 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
         raise ControllerFailure(ctrl, phase="counters", tick=len(episode.t), time_s=played_s,
                                 exc=RuntimeError(error), episode=episode)
     record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode, counters=counters,
-                                  wall_s=time.perf_counter() - start, debug_truth=debug_truth, error=error)
+                                  wall_s=time.perf_counter() - start, debug_truth=debug_truth, error=error,
+                                  diverged=diverged)
     return record, episode

@@ -43,6 +43,7 @@ from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, buil
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
+from wbc.hardware.serial_port_policy import is_emulated_port
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.train.adaptation_config import AdaptationConfig
@@ -76,7 +77,7 @@ BUS_FAULTS: dict[str, BusFault] = {f"arm_{f.value}": f for f in BusFault}
 the legs' faults: both have an ``over_temperature``)."""
 
 _WIRE_OF = {**{wire: wire for wire in DESCRIPTIONS}, **{desc: wire for wire, desc in DESCRIPTIONS.items()}}
-"""``wbc hw emulate --robot``: a1, go1, or the name with the arm (a1-wx200, go1-arm), -> the legs' wire."""
+"""``wbc hw emulate|check|run --robot``: a1, go1, or the name with the arm (a1-wx200, go1-arm), -> the legs' wire."""
 
 _EMULATE_POLL = 0.05  # [s] how often ``hw emulate`` looks at its clock and its emulator's health
 
@@ -288,34 +289,41 @@ def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | 
     return 0
 
 
-def _confirm_hardware(command: str, robot: str, host: str, port: int, what: str, *, yes: bool) -> None:
-    """Show the real robot's address and what will happen to it; have the person at the terminal type ``yes``.
+def _real_devices(host: str, port: int, arm_port: str | None) -> list[tuple[str, str]]:
+    """The devices of a command that are real hardware: the legs' address outside 127.0.0.0/8, a real serial port."""
+    real = [] if is_loopback(host) else [(f"{host}:{port}", "outside 127.0.0.0/8")]
+    if arm_port is not None and not is_emulated_port(arm_port):
+        real.append((arm_port, "the arm's serial device, not a pseudo-terminal"))
+    return real
+
+
+def _confirm_hardware(command: str, robot: str, devices: list[tuple[str, str]], what: str, *, yes: bool) -> None:
+    """Show the real robot's devices and what will happen to it; have the person at the terminal type ``yes``.
 
     Args:
         command: the command asking (``hw check``), for the message.
         robot: the robot's name.
-        host: its address.
-        port: its port.
+        devices: its real devices, each with why it is real (`_real_devices`).
         what: what the command will send it, and what to do first.
         yes: confirmed on the command line (``--yes``): do not ask.
 
     Raises:
         TargetRefusedError: not confirmed, or nobody at a terminal to confirm without ``--yes``.
     """
-    print(f"wbc {command}: {robot} at {host}:{port} is a REAL ROBOT (outside 127.0.0.0/8). {what}", file=sys.stderr,
-          flush=True)
+    where = " and ".join(device for device, _ in devices)
+    why = "; ".join(reason for _, reason in devices)
+    print(f"wbc {command}: {robot} at {where} is a REAL ROBOT ({why}). {what}", file=sys.stderr, flush=True)
     if yes:
         return
     if not sys.stdin.isatty():
-        raise TargetRefusedError(f"--target {host}:{port} is a real robot and stdin is not a terminal, so nobody can "
-                                 "confirm; run it from a terminal, or add --yes to confirm on the command line")
+        raise TargetRefusedError(f"{where}: a real robot, and stdin is not a terminal, so nobody can confirm; run it "
+                                 "from a terminal, or add --yes to confirm on the command line")
     try:
         answer = input("type yes to connect: ")
     except EOFError:
         answer = ""
     if answer.strip() != "yes":
-        raise TargetRefusedError(f"not confirmed (got {answer.strip()!r}, not 'yes'): nothing was sent to "
-                                 f"{host}:{port}")
+        raise TargetRefusedError(f"not confirmed (got {answer.strip()!r}, not 'yes'): nothing was sent to {where}")
 
 
 def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
@@ -339,6 +347,35 @@ def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
     return host, port
 
 
+def _hardware_arm_port(args: argparse.Namespace, purpose: str) -> str | None:
+    """``--arm-port``, refused unless an emulator's (a pty) or ``--allow-hardware`` (before anything opens it).
+
+    The device is not opened here: the decision reads its name and at most resolves and stats it
+    (`wbc.hardware.serial_port_policy.is_pseudo_terminal`).
+
+    Args:
+        args: the command's arguments (``arm_port``, ``allow_hardware``).
+        purpose: what a real arm would be used for, for the refusal (``check a real robot``).
+
+    Raises:
+        TargetRefusedError: a device that is not a pseudo-terminal without ``--allow-hardware``.
+    """
+    port = args.arm_port
+    if port is not None and not args.allow_hardware and not is_emulated_port(port):
+        raise TargetRefusedError(
+            f"--arm-port {port} is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; "
+            f"opening it writes the servos' settings and torque). To {purpose}, add --allow-hardware (you will be "
+            "asked to type yes; --yes confirms when stdin is not a terminal)")
+    return port
+
+
+def _robot_name(name: str) -> str:
+    """``--robot`` of ``hw check`` / ``hw run``: go1 or go1-arm, a1 or a1-wx200 -> the robot registry's name."""
+    if name not in _WIRE_OF:  # the registry's names are listed; their legs' names (go1, a1) are accepted too
+        raise UnknownNameError("hardware robot", name, tuple(DESCRIPTIONS.values()))
+    return DESCRIPTIONS[_WIRE_OF[name]]
+
+
 def _hw_check(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     return hw_check(args)
@@ -357,19 +394,20 @@ def hw_check(args: argparse.Namespace, *,
         0, after printing the state, the link's counters and the safety layer's verdict.
     """
     host, port = _hardware_target(args, "check a real robot")
+    arm_port = _hardware_arm_port(args, "check a real arm")
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
-    if args.robot not in DESCRIPTIONS:
-        raise UnknownNameError("Unitree robot", args.robot, tuple(DESCRIPTIONS))
+    robot = _robot_name(args.robot)
     local_host, local_port = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"),
                                       "--local")
     hardware = build(HardwareRobotConfig(
-        robot=DESCRIPTIONS[args.robot], arm_mode="actuated" if args.arm_port else "none", legs_host=host,
+        robot=robot, arm_mode="actuated" if arm_port else "none", legs_host=host,
         legs_port=port, local_host=local_host, local_port=local_port, allow_hardware=args.allow_hardware,
-        transport=args.transport, arm_port=args.arm_port))
-    if not is_loopback(host):
-        _confirm_hardware("hw check", args.robot, host, port, "Only damping will be sent (Kp 0, on the arm too); hang "
-                          "the robot in its harness first.", yes=args.yes)
+        transport=args.transport, arm_port=arm_port))
+    real = _real_devices(host, port, arm_port)
+    if real:
+        _confirm_hardware("hw check", robot, real, "Only damping will be sent (Kp 0, on the arm too); hang the "
+                          "robot in its harness first.", yes=args.yes)
     events: list[SafetyEvent] = []
     # Read through the safety layer, never written to: its checks judge each state, and a trip only sends damping.
     safe = SafeRobot(hardware.robot, SafetyConfig(position_table=hardware.position_table, on_event=events.append))
@@ -416,24 +454,27 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
                           "protocol on the simulator; not both")
     host, port = _hardware_target(args, "run a trial on a real robot") if not args.sim else (None, None)
+    arm_port = _hardware_arm_port(args, "run a trial on a real arm")
+    robot = _robot_name(args.robot) if args.robot is not None else None
     local = _address(args.local, "--local") if args.local else None
     out = Path(args.out) if args.out else Path("runs") / (
         f"hw-{Path(args.scenario).stem}-{args.ctrl.replace(':', '_').replace('/', '_')}-"
         f"{time.strftime('%Y%m%d-%H%M%S')}")
     cfg = HardwareTrialConfig(controller=args.ctrl, scenario=Path(args.scenario), trial=args.trial, band=args.band,
-                              seed=args.seed, seconds=args.seconds, robot=args.robot, arm_mode=args.arm,
+                              seed=args.seed, seconds=args.seconds, robot=robot, arm_mode=args.arm,
                               target=None if args.sim else (host, port), simulate=args.sim, local=local,
                               allow_hardware=args.allow_hardware, rate_hz=args.rate, transport=args.transport,
-                              arm_port=args.arm_port, out_dir=out, settle_s=args.settle,
+                              arm_port=arm_port, out_dir=out, settle_s=args.settle,
                               io_process=args.io_process,
                               controller_config=Path(args.controller_config) if args.controller_config else None,
                               io_file=Path(args.io) if args.io else None)
 
     def confirm(hardware: HardwareRobot, spec: ControllerSpec) -> None:
-        if host is not None and not is_loopback(host):
-            _confirm_hardware("hw run", hardware.description.name, host, port, f"The controller {spec.name} will "
-                              "MOVE it: hang it in its harness first, keep the remote (L2+B) and the power switch "
-                              "within reach.", yes=args.yes)
+        real = _real_devices(host, port, arm_port) if host is not None else []
+        if real:
+            _confirm_hardware("hw run", hardware.description.name, real, f"The controller {spec.name} will MOVE it: "
+                              "hang it in its harness first, keep the remote (L2+B) and the power switch within "
+                              "reach.", yes=args.yes)
 
     live = _hw_live_observer(args) if args.view else None
     keys = TerminalKeys(announce="keys: " + ", ".join(f"{'space' if k == ' ' else k} {a}" for k, a in
@@ -529,7 +570,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
     live = _live_observer(args) if args.view else None
     cfg = ArenaConfig(controllers=controllers, scenario=Path(args.scenario), bands=tuple(args.band or ()),
                       seeds=seeds, trials=args.trials, out_dir=out, executor=args.executor, workers=args.workers,
-                      address=args.address, resume=args.resume, progress=not args.json and not args.quiet,
+                      address=args.address, resume=args.resume, drop_bad_rows=args.drop_bad_rows,
+                      progress=not args.json and not args.quiet,
                       no_push=args.no_push, debug_truth=args.debug_truth, save_episodes=args.save_episodes,
                       observer=live[1] if live is not None else None,
                       controller_configs=_controller_files(args.controller_config, controllers, "--controller-config",

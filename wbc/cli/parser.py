@@ -7,38 +7,163 @@ Each command's parser sets ``handler`` to the command's name (``"bench mpc"``); 
 from __future__ import annotations
 
 import argparse
+import math
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
 
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
+from wbc.arena.identity import MAX_SEED, MAX_TRIALS
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import BusFault, Fault
-from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES, HARDWARE_ROBOTS
+from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
+from wbc.input_files import short
 from wbc.learned.train.stages import BASELINES, TASKS
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import ROBOTS
+from wbc.scenario.scenario import MAX_DURATION_S
 from wbc.tools.paper import DEFAULT_SEEDS as PAPER_DEFAULT_SEEDS
 from wbc.tools.paper import DEFAULT_TRIALS as PAPER_DEFAULT_TRIALS
 from wbc.tools.paper import TABLES as PAPER_TABLES
 
-__all__ = ["add_arena_options", "add_controller_file_options", "build_parser"]
+__all__ = ["MAX_SEEDS", "MAX_THREADS", "MAX_WORKERS", "add_arena_options", "add_controller_file_options",
+           "build_parser", "bounded_float", "bounded_int", "results_dir"]
 
+MAX_WORKERS = 256
+"""Most worker processes (``--workers``): each holds a simulator and a controller; more than any one machine runs."""
+
+MAX_THREADS = 256
+"""Most threads of a batched rollout (``--threads``)."""
+
+MAX_SEEDS = 10_000
+"""Most seeds (``--seeds``): seeds 0 .. S-1, each a full set of trials per band."""
+
+MAX_HOURS_S = 4 * 3600.0
+"""Longest a measurement or an emulator may be asked to run (``--seconds``) [s]: four hours."""
+
+_ROBOT_NAMES_HELP = ", ".join(f"{arm} (or {wire})" for wire, arm in DESCRIPTIONS.items())
+"""``hw check`` and ``hw run`` take a robot by either name: its own (go1-arm) or its legs' wire (go1)."""
 _TRANSPORT_HELP = (f"the link's datagram channel, one of: {', '.join(TRANSPORTS)} (default udp: our socket; sdk: "
                    "the vendor's Go1 SDK, installed with the hardware extra, carrying the same checked frames)")
+
+
+def bounded_int(lo: int, hi: int) -> Callable[[str], int]:
+    """An argparse ``type=``: a whole number in [lo, hi]; anything else is a usage error that states the range.
+
+    Args:
+        lo: smallest value accepted.
+        hi: largest value accepted.
+
+    Returns:
+        The parser of one option value.
+    """
+    def whole(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:  # also an integer of more than 4300 digits
+            raise argparse.ArgumentTypeError(f"expected a whole number in [{lo}, {hi}], got {short(text)}") from None
+        if not lo <= value <= hi:
+            raise argparse.ArgumentTypeError(f"must be in [{lo}, {hi}], got {short(text)}")
+        return value
+
+    return whole
+
+
+def bounded_float(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False,
+                  unit: str = "") -> Callable[[str], float]:
+    """An argparse ``type=``: a finite number in [lo, hi] (an end excluded when open); the error states the range.
+
+    Args:
+        lo: lower end.
+        hi: upper end.
+        lo_open: exclude `lo`.
+        hi_open: exclude `hi`.
+        unit: the unit, for messages (``s``, ``Hz``).
+
+    Returns:
+        The parser of one option value.
+    """
+    span = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}{' ' + unit if unit else ''}"
+
+    def number(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number in {span}, got {short(text)}") from None
+        inside = (value > lo if lo_open else value >= lo) and (value < hi if hi_open else value <= hi)
+        if not (math.isfinite(value) and inside):
+            raise argparse.ArgumentTypeError(f"must be a finite number in {span}, got {short(text)}")
+        return value
+
+    return number
+
+
+def results_dir(text: str) -> str:
+    """An argparse ``type=`` for ``--out``: a results directory, new or existing, never an existing file.
+
+    Refused here, before any trial is played, rather than after the first trial's results cannot be written.
+    """
+    if not text:
+        raise argparse.ArgumentTypeError("expected a directory, got an empty path")
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{short(text)} exists and is not a directory; give a new directory, or the "
+                                         "results directory of a run to --resume")
+    return text
+
+
+class _AppendOnce(argparse.Action):
+    """``action="append"`` that keeps each value once and warns about a repeat.
+
+    A band named twice (``--band in --band in``) would otherwise play, and count, its trials twice: the repeat is
+    dropped with a warning rather than refused, since what was meant is clear.
+    """
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: str | Sequence[Any] | None, option_string: str | None = None) -> None:
+        items = list(getattr(namespace, self.dest) or [])
+        if values in items:
+            print(f"wbc: warning: {option_string} {short(values)} given more than once; using it once",
+                  file=sys.stderr)
+        else:
+            items.append(values)
+        setattr(namespace, self.dest, items)
+
+
+_TRIALS = bounded_int(1, MAX_TRIALS)
+_TRIAL = bounded_int(0, MAX_TRIALS - 1)
+_SEEDS = bounded_int(1, MAX_SEEDS)
+_SEED = bounded_int(0, MAX_SEED)
+_WORKERS = bounded_int(1, MAX_WORKERS)
+_THREADS = bounded_int(1, MAX_THREADS)
+_SPEED = bounded_float(0.0, 100.0)  # 0: as fast as possible; 100 times real time is already a blur
+_EPISODE_S = bounded_float(0.0, MAX_DURATION_S, lo_open=True, unit="s")
+_MEASURE_S = bounded_float(0.0, MAX_HOURS_S, lo_open=True, unit="s")
 
 
 def add_arena_options(p: argparse.ArgumentParser) -> None:
     """The options ``run`` and ``compare`` share: which trials, where the results go, how they are played."""
     p.add_argument("--scenario", required=True, help="scenario file (e.g. scenarios/push.toml)")
-    p.add_argument("--trials", type=int, default=10, help="trials per band and seed (default 10)")
-    p.add_argument("--seeds", type=int, default=None, help="number of seeds: seeds 0 .. S-1 (default 1)")
-    p.add_argument("--band", action="append", help="band to play (repeatable; default: all)")
-    p.add_argument("--out", default=None, help="results directory (default: runs/<scenario>-<controllers>-<time>)")
+    p.add_argument("--trials", type=_TRIALS, default=10,
+                   help=f"trials per band and seed, 1..{MAX_TRIALS} (default 10)")
+    p.add_argument("--seeds", type=_SEEDS, default=None,
+                   help=f"number of seeds: seeds 0 .. S-1, S in 1..{MAX_SEEDS} (default 1)")
+    p.add_argument("--band", action=_AppendOnce, help="band to play (repeatable, each once; default: all)")
+    p.add_argument("--out", type=results_dir, default=None,
+                   help="results directory (default: runs/<scenario>-<controllers>-<time>)")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the table")
     p.add_argument("--executor", default="local", help="local (process pool, default) or ray")
-    p.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    p.add_argument("--workers", type=_WORKERS, default=None,
+                   help=f"local worker processes, 1..{MAX_WORKERS} (default: all cores)")
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
     p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
-    p.add_argument("--max-consecutive-errors", type=int, default=DEFAULT_MAX_CONSECUTIVE_ERRORS, metavar="K",
+    p.add_argument("--drop-bad-rows", action="store_true",
+                   help="with --resume: drop the rows of trials.csv that are refused (edited, corrupted, repeated, of "
+                        "another scenario file), one warning each, and play their trials again")
+    p.add_argument("--max-consecutive-errors", type=bounded_int(0, MAX_TRIALS), default=DEFAULT_MAX_CONSECUTIVE_ERRORS,
+                   metavar="K",
                    help="stop a controller that fails (raises, or returns an invalid command) on K trials in a row; "
                         f"the others finish (default {DEFAULT_MAX_CONSECUTIVE_ERRORS}; 0: never stop one)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -50,7 +175,8 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--view", action="store_true",
                    help="watch the trials live in the browser (meshcat); they then play one by one in this process")
     p.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
-    p.add_argument("--speed", type=float, default=1.0, help="with --view: 1 real time, 0.25 slow motion, 0 flat out")
+    p.add_argument("--speed", type=_SPEED, default=1.0,
+                   help="with --view: 1 real time, 0.25 slow motion, 0 flat out (0..100)")
     add_controller_file_options(p, repeatable=True)
 
 
@@ -82,18 +208,19 @@ def build_parser() -> argparse.ArgumentParser:
     arm.add_argument("--scenario", default="scenarios/push.toml")
     arm.add_argument("--band", default="ood")
     arm.add_argument("--controller", default="mpc")
-    arm.add_argument("--trials", type=int, default=5, help="trials per seed")
-    arm.add_argument("--seeds", type=int, default=1)
+    arm.add_argument("--trials", type=_TRIALS, default=5, help=f"trials per seed, 1..{MAX_TRIALS}")
+    arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS}")
     arm.add_argument("--json", action="store_true")
     arm.set_defaults(handler="analyze arm-momentum")
     posture = analyze.add_parser("posture", help="trunk height and speed of controllers standing and walking, flat "
                                  "ground, no pushes (is the comparison at the same posture?)")
     posture.add_argument("controllers", nargs="+", help=_NAMES_HELP)
     posture.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
-    posture.add_argument("--walk", type=float, default=0.3, help="forward speed of the walking command [m/s]")
-    posture.add_argument("--duration", type=float, default=6.0,
-                         help="episode length [s]; the means cover its second half")
-    posture.add_argument("--seed", type=int, default=0)
+    posture.add_argument("--walk", type=bounded_float(-3.0, 3.0, unit="m/s"), default=0.3,
+                         help="forward speed of the walking command, -3..3 [m/s] (a scenario's vx range)")
+    posture.add_argument("--duration", type=_EPISODE_S, default=6.0,
+                         help=f"episode length, up to {MAX_DURATION_S:g} [s]; the means cover its second half")
+    posture.add_argument("--seed", type=_SEED, default=0)
     posture.add_argument("--json", action="store_true", help="print JSON")
     posture.set_defaults(handler="analyze posture")
 
@@ -101,8 +228,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")
     sim.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
-    sim.add_argument("--batch", type=int, default=64, help="environments in the batched rollout")
-    sim.add_argument("--threads", type=int, default=None, help="threads for the batched rollout (default: all)")
+    sim.add_argument("--batch", type=bounded_int(1, 65_536), default=64,
+                     help="environments in the batched rollout, 1..65536")
+    sim.add_argument("--threads", type=_THREADS, default=None,
+                     help=f"threads for the batched rollout, 1..{MAX_THREADS} (default: all)")
     sim.add_argument("--json", action="store_true", help="print JSON")
     sim.add_argument("--terrain", default="flat", help="flat or fractal")
     sim.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measured alongside")
@@ -110,7 +239,7 @@ def build_parser() -> argparse.ArgumentParser:
     mpc = bench.add_parser("mpc", help="MPC solve times, whole-body tick, closed-loop real-time factor")
     mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     mpc.add_argument("--controller", default="mpc")
-    mpc.add_argument("--seconds", type=float, default=4.0)
+    mpc.add_argument("--seconds", type=_MEASURE_S, default=4.0, help="closed-loop time measured [s] (up to 4 h)")
     mpc.add_argument("--threaded-blas", action="store_true",
                      help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
     mpc.add_argument("--json", action="store_true")
@@ -119,17 +248,18 @@ def build_parser() -> argparse.ArgumentParser:
     sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
     sweep.add_argument("--scenario", default="scenarios/push.toml")
     sweep.add_argument("--controller", default="stand")
-    sweep.add_argument("--trials", type=int, default=10, help="trials per band")
-    sweep.add_argument("--workers", type=int, default=None)
+    sweep.add_argument("--trials", type=_TRIALS, default=10, help=f"trials per band, 1..{MAX_TRIALS}")
+    sweep.add_argument("--workers", type=_WORKERS, default=None, help=f"worker processes, 1..{MAX_WORKERS}")
     sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
     sweep.add_argument("--json", action="store_true")
     sweep.set_defaults(handler="bench sweep")
     btrain = bench.add_parser("train", help="training env throughput: control steps per second, random actions")
-    btrain.add_argument("--envs", type=int, default=1024, help="parallel environments")
-    btrain.add_argument("--threads", type=int, default=2, help="rollout threads")
+    btrain.add_argument("--envs", type=bounded_int(1, 65_536), default=1024, help="parallel environments, 1..65536")
+    btrain.add_argument("--threads", type=_THREADS, default=2, help=f"rollout threads, 1..{MAX_THREADS}")
     btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
     btrain.add_argument("--terrain", default="scenario", help="scenario (the push scenario's ground) or flat")
-    btrain.add_argument("--steps", type=int, default=50, help="policy steps per measurement")
+    btrain.add_argument("--steps", type=bounded_int(1, 1_000_000), default=50,
+                        help="policy steps per measurement, 1..1000000")
     btrain.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measurement")
     btrain.add_argument("--json", action="store_true")
     btrain.set_defaults(handler="bench train")
@@ -138,10 +268,11 @@ def build_parser() -> argparse.ArgumentParser:
                            "on 127.0.0.1 and time the link: the interval between sends, a command's round trip to "
                            "the state that answers it, the link thread's CPU time per period, rejected frames.")
     bhw.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
-    bhw.add_argument("--seconds", type=float, default=3.0, help="how long the link is measured [s] (default 3)")
+    bhw.add_argument("--seconds", type=_MEASURE_S, default=3.0,
+                     help="how long the link is measured [s] (default 3, at most 4 h)")
     bhw.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
     bhw.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
-    bhw.add_argument("--stand", type=float, default=10.0,
+    bhw.add_argument("--stand", type=bounded_float(0.0, MAX_HOURS_S, unit="s"), default=10.0,
                      help="then time the safety layer's reactions (e-stop, silence, stall, hot motor -> damping on "
                      "the wire) and a stand of this many seconds through it, in real time [s] (default 10)")
     bhw.add_argument("--no-safety", action="store_true", help="the link's timing only (no safety reactions, no stand)")
@@ -155,7 +286,8 @@ def build_parser() -> argparse.ArgumentParser:
     blat.add_argument("--controllers", nargs="+", default=["stand", "mpc"], help="controllers (default stand mpc)")
     blat.add_argument("--robot", default="go1", help=f"the wire's robot, one of: {', '.join(DESCRIPTIONS)}")
     blat.add_argument("--scenario", default="scenarios/push.toml", help="scenario of the margin trials")
-    blat.add_argument("--trials", type=int, default=2, help="standing trials per margin test (default 2)")
+    blat.add_argument("--trials", type=bounded_int(1, 1000), default=2,
+                      help="standing trials per margin test, 1..1000 (default 2)")
     blat.add_argument("--no-wire", action="store_true", help="margins only (no emulator)")
     blat.add_argument("--json", action="store_true", help="print JSON")
     blat.set_defaults(handler="bench latency")
@@ -166,9 +298,11 @@ def build_parser() -> argparse.ArgumentParser:
                             "requested rate, and the elbow's closed-loop step response beside the same step in pure "
                             "simulation.")
     barm.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(DESCRIPTIONS.values())}")
-    barm.add_argument("--seconds", type=float, default=2.0, help="how long each rate runs [s] (default 2)")
+    barm.add_argument("--seconds", type=_MEASURE_S, default=2.0,
+                      help="how long each rate runs [s] (default 2, at most 4 h)")
     barm.add_argument("--rates", default="100,200,400,1000", help="bus rates to run, comma-separated [Hz]")
-    barm.add_argument("--latency", type=float, default=1.0, help="the adapter's latency timer [ms] (default 1)")
+    barm.add_argument("--latency", type=bounded_float(0.0, 255.0, lo_open=True, unit="ms"), default=1.0,
+                      help="the adapter's latency timer, up to 255 [ms] (the FTDI chip's largest; default 1)")
     barm.add_argument("--json", action="store_true", help="print JSON")
     barm.set_defaults(handler="bench arm")
 
@@ -186,14 +320,16 @@ def build_parser() -> argparse.ArgumentParser:
     emulate.add_argument("--arm", default="none",
                          help="none (the bare quadruped, default), locked (its arm on the trunk, held) or actuated "
                          "(the arm on its own bus: a pty speaking Dynamixel Protocol 2.0)")
-    emulate.add_argument("--port", type=int, default=0, help="UDP port on 127.0.0.1 (default 0: a free one)")
+    emulate.add_argument("--port", type=bounded_int(0, 65_535), default=0,
+                         help="UDP port on 127.0.0.1, 0..65535 (default 0: a free one)")
     emulate.add_argument("--fault", action="append", default=None, metavar="NAME",
                          help="inject a fault at its default value (repeatable): "
                          f"{', '.join(f.value for f in Fault)}; with --arm actuated also the arm's bus faults "
                          f"{', '.join('arm_' + f.value for f in BusFault)}")
     emulate.add_argument("--lockstep", action="store_true",
                          help="one physics step and one reply per command (default: real time, a reply per period)")
-    emulate.add_argument("--seconds", type=float, default=None, help="stop after S seconds (default: Ctrl-C)")
+    emulate.add_argument("--seconds", type=_MEASURE_S, default=None,
+                         help="stop after S seconds, at most 4 h (default: Ctrl-C)")
     emulate.add_argument("--drop", action="store_true",
                          help="start with the robot free: left alone with its motors off it folds to its joint stops "
                          "(default: held at its standing pose, as in a harness, until a command drives a motor)")
@@ -204,19 +340,20 @@ def build_parser() -> argparse.ArgumentParser:
                            "(Kp 0: no servo command is ever sent), and print the state: joints with the ranges the "
                            "layer checks, motor modes and temperatures, IMU roll and pitch, battery, remote buttons, "
                            "the layer's verdict (would a ramp start from here, or what it refuses), link and bus "
-                           "statistics, rejected frames. A target outside 127.0.0.0/8 needs --allow-hardware and a "
-                           "typed confirmation (or --yes).")
-    check.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
+                           "statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port that is not "
+                           "a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
+    check.add_argument("--robot", default="go1", help=f"one of: {_ROBOT_NAMES_HELP} (default go1)")
     check.add_argument("--target", required=True, metavar="HOST:PORT",
                        help="the robot's (or an emulator's) IPv4 address and UDP port, e.g. 127.0.0.1:PORT")
     check.add_argument("--local", default=None, metavar="HOST:PORT",
                        help="address to bind (default 127.0.0.1:0 for a loopback target, else 0.0.0.0:0)")
-    check.add_argument("--seconds", type=float, default=1.0, help="how long to read states [s] (default 1)")
+    check.add_argument("--seconds", type=_MEASURE_S, default=1.0,
+                       help="how long to read states [s] (default 1, at most 4 h)")
     check.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
     check.add_argument("--arm-port", default=None, metavar="DEVICE",
                        help="also read the arm: its serial device (the U2D2, e.g. /dev/ttyUSB0, or the emulator's pty)")
     check.add_argument("--allow-hardware", action="store_true",
-                       help="allow a target outside 127.0.0.0/8: a real robot")
+                       help="allow a real robot: a target outside 127.0.0.0/8, an --arm-port that is not a pty")
     check.add_argument("--yes", action="store_true",
                        help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
     check.set_defaults(handler="hw check")
@@ -226,21 +363,23 @@ def build_parser() -> argparse.ArgumentParser:
                            "pushes, terrain and friction are the simulator's and are skipped (the report says so); "
                            "metrics come from the state estimator. Keys during the trial: e or space e-stop "
                            "(damping, latched: the trial ends), p marks a push given by hand. Results go to a "
-                           "results directory of the arena's format. A target outside 127.0.0.0/8 needs "
-                           "--allow-hardware and a typed confirmation (or --yes).")
+                           "results directory of the arena's format. A target outside 127.0.0.0/8, or an --arm-port "
+                           "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
     hwrun.add_argument("ctrl", help=f"controller (its variant for --arm is played): one of {_NAMES_HELP}")
     hwrun.add_argument("--robot", default=None,
-                       help=f"one of: {', '.join(HARDWARE_ROBOTS)} (default: the scenario's robot)")
+                       help=f"one of: {_ROBOT_NAMES_HELP} (default: the scenario's robot)")
     hwrun.add_argument("--arm", default=None,
                        help=f"arm mode on the robot: {', '.join(HARDWARE_ARM_MODES)} (default: the controller's; "
                        "actuated needs --arm-port; locked with --arm-port holds the arm by its servos)")
     hwrun.add_argument("--arm-port", default=None, metavar="DEVICE",
                        help="the arm's serial device: the U2D2 (e.g. /dev/ttyUSB0) or `wbc hw emulate`'s pty")
     hwrun.add_argument("--scenario", required=True, help="scenario file (e.g. scenarios/push.toml)")
-    hwrun.add_argument("--trial", type=int, required=True, help="trial index within (band, seed)")
+    hwrun.add_argument("--trial", type=_TRIAL, required=True,
+                       help=f"trial index within (band, seed), 0..{MAX_TRIALS - 1}")
     hwrun.add_argument("--band", default=None, help="band (default: the scenario's first)")
-    hwrun.add_argument("--seed", type=int, default=0, help="seed (default 0)")
-    hwrun.add_argument("--seconds", type=float, default=None, help="play only the first S seconds of the trial")
+    hwrun.add_argument("--seed", type=_SEED, default=0, help=f"seed, 0..{MAX_SEED} (default 0)")
+    hwrun.add_argument("--seconds", type=_EPISODE_S, default=None,
+                       help=f"play only the first S seconds of the trial (S up to {MAX_DURATION_S:g})")
     hwrun.add_argument("--target", default=None, metavar="HOST:PORT",
                        help="the legs' low-level address: the robot's, or an emulator's (127.0.0.1:PORT)")
     hwrun.add_argument("--sim", action="store_true",
@@ -249,7 +388,8 @@ def build_parser() -> argparse.ArgumentParser:
     hwrun.add_argument("--local", default=None, metavar="HOST:PORT",
                        help="address to bind (default 127.0.0.1:0 for a loopback target, else 0.0.0.0:0)")
     hwrun.add_argument("--allow-hardware", action="store_true",
-                       help="allow a target outside 127.0.0.0/8: a real robot, which the controller will move")
+                       help="allow a real robot, which the controller will move: a target outside 127.0.0.0/8, an "
+                       "--arm-port that is not a pty")
     hwrun.add_argument("--yes", action="store_true",
                        help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
     hwrun.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
@@ -257,9 +397,10 @@ def build_parser() -> argparse.ArgumentParser:
     hwrun.add_argument("--io-process", action=argparse.BooleanOptionalAction, default=True,
                        help="run the robot's devices (legs link, arm bus) in a child process with its own interpreter "
                        "lock, so that the controller cannot starve them (default; --no-io-process: in this process)")
-    hwrun.add_argument("--settle", type=float, default=1.0,
-                       help="after a safety trip, hold the robot damped and read for S seconds (default 1)")
-    hwrun.add_argument("--out", default=None, help="results directory (default: runs/hw-<scenario>-<ctrl>-<time>)")
+    hwrun.add_argument("--settle", type=bounded_float(0.0, 60.0, unit="s"), default=1.0,
+                       help="after a safety trip, hold the robot damped and read for S seconds, 0..60 (default 1)")
+    hwrun.add_argument("--out", type=results_dir, default=None,
+                       help="results directory (default: runs/hw-<scenario>-<ctrl>-<time>)")
     hwrun.add_argument("--view", action="store_true",
                        help="watch the robot live in the browser (meshcat), drawn from its own sensors")
     hwrun.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
@@ -271,11 +412,13 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--stage", type=int, required=True, choices=(1, 2, 3), help="1: pi1, 2: pi2, 3: pi3")
     tr.add_argument("--baseline", default=None, help=f"stage-3 baseline, one of: {', '.join(BASELINES)}")
     tr.add_argument("--resume", action="store_true", help="continue from the newest checkpoint of the run")
-    tr.add_argument("--iterations", type=int, default=None, help="PPO iterations of the whole run (default 1500)")
-    tr.add_argument("--envs", type=int, default=None, help="parallel environments (default 1024)")
-    tr.add_argument("--threads", type=int, default=None, help="physics threads (default 2)")
-    tr.add_argument("--seed", type=int, default=None, help="seed (default 0)")
-    tr.add_argument("--rma-iterations", type=int, default=None,
+    tr.add_argument("--iterations", type=bounded_int(1, 1_000_000), default=None,
+                    help="PPO iterations of the whole run, 1..1000000 (default 1500)")
+    tr.add_argument("--envs", type=bounded_int(1, 65_536), default=None,
+                    help="parallel environments, 1..65536 (default 1024)")
+    tr.add_argument("--threads", type=_THREADS, default=None, help=f"physics threads, 1..{MAX_THREADS} (default 2)")
+    tr.add_argument("--seed", type=_SEED, default=None, help=f"seed, 0..{MAX_SEED} (default 0)")
+    tr.add_argument("--rma-iterations", type=bounded_int(0, 1_000_000), default=None,
                     help="RMA phase-2 rounds after PPO (default 200; 0 skips phase 2)")
     tr.add_argument("--teacher", default=None, help="BC teacher policy file (default: the previous stage's export)")
     tr.add_argument("--run-root", default="runs/train", help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>]")
@@ -293,7 +436,7 @@ def build_parser() -> argparse.ArgumentParser:
                          help="play round by round (a trial index and seed, every band, every controller) and stop "
                          "once an anytime-valid sequential test has settled every pair's success difference in every "
                          "band (family-wise error <= --alpha at any stop); --trials is then the most played")
-    compare.add_argument("--alpha", type=float, default=0.05,
+    compare.add_argument("--alpha", type=bounded_float(0.0, 1.0, lo_open=True, hi_open=True), default=0.05,
                          help="with --until-significant: the family-wise significance level (default 0.05)")
     compare.set_defaults(handler="compare")
 
@@ -305,15 +448,17 @@ def build_parser() -> argparse.ArgumentParser:
                            "p-values, n80, verdicts), where each contender fails, and the run time. The paper played "
                            "5 seeds x 2000 trials: --seeds 5 --trials 400.")
     paper.add_argument("table", choices=tuple(PAPER_TABLES), help="which table")
-    paper.add_argument("--trials", type=int, default=PAPER_DEFAULT_TRIALS,
+    paper.add_argument("--trials", type=_TRIALS, default=PAPER_DEFAULT_TRIALS,
                        help=f"trials per band and seed (default {PAPER_DEFAULT_TRIALS})")
-    paper.add_argument("--seeds", type=int, default=PAPER_DEFAULT_SEEDS,
+    paper.add_argument("--seeds", type=_SEEDS, default=PAPER_DEFAULT_SEEDS,
                        help=f"seeds 0 .. S-1 (default {PAPER_DEFAULT_SEEDS})")
     paper.add_argument("--scenario", default=None,
                        help="scenario file (default: the table's, scenarios/push.toml or scenarios/turn.toml); a "
                        "later version of it plays the same protocol")
-    paper.add_argument("--out", default=None, help="results directory (default: runs/paper-<table>-<time>)")
-    paper.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
+    paper.add_argument("--out", type=results_dir, default=None,
+                       help="results directory (default: runs/paper-<table>-<time>)")
+    paper.add_argument("--workers", type=_WORKERS, default=None,
+                       help=f"local worker processes, 1..{MAX_WORKERS} (default: all cores)")
     paper.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
     paper.add_argument("--contender", action="append", default=None, metavar="KEY=CONTROLLER",
                        help="play CONTROLLER in row KEY (repeatable): e.g. learned=policy:PATH for a retrained pi3, "
@@ -332,21 +477,26 @@ def build_parser() -> argparse.ArgumentParser:
                           "self-contained HTML file. Keys while live (then Enter): p pause, s step, + / - speed, q.")
     view.add_argument("ctrl", nargs="?", default=None, help=f"controller: one of {_NAMES_HELP}")
     view.add_argument("--scenario", default=None, help="scenario file (e.g. scenarios/push.toml)")
-    view.add_argument("--trial", type=int, required=True, help="trial index within (band, seed)")
-    view.add_argument("--seed", type=int, default=None, help="seed (default 0, or the run's first)")
+    view.add_argument("--trial", type=_TRIAL, required=True,
+                      help=f"trial index within (band, seed), 0..{MAX_TRIALS - 1}")
+    view.add_argument("--seed", type=_SEED, default=None, help="seed (default 0, or the run's first)")
     view.add_argument("--band", default=None, help="band (default: the first)")
-    view.add_argument("--duration", type=float, default=None, help="play only the first D seconds")
+    view.add_argument("--duration", type=_EPISODE_S, default=None,
+                      help=f"play only the first D seconds (D up to {MAX_DURATION_S:g})")
     view.add_argument("--episode", default=None, metavar="RESULTS_DIR",
                       help="replay a stored episode from a `wbc run --save-episodes` results directory")
     view.add_argument("--controller", default=None, help="with --episode: whose episode (default: the only one)")
     view.add_argument("--host", default="127.0.0.1",
                       help="address the viewer listens on (default 127.0.0.1: this machine only)")
-    view.add_argument("--speed", type=float, default=1.0, help="1 real time, 0.25 slow motion, 0 flat out")
-    view.add_argument("--pause-at", type=float, action="append", metavar="T", help="pause at trial time T (repeatable)")
+    view.add_argument("--speed", type=_SPEED, default=1.0, help="1 real time, 0.25 slow motion, 0 flat out (0..100)")
+    view.add_argument("--pause-at", type=bounded_float(0.0, MAX_DURATION_S, unit="s"), action="append", metavar="T",
+                      help="pause at trial time T (repeatable)")
     view.add_argument("--paused", action="store_true", help="start paused (then s to step, p to play)")
-    view.add_argument("--step", type=float, default=0.02, help="trial time of one single step [s] (default 0.02)")
+    view.add_argument("--step", type=bounded_float(0.0, 10.0, lo_open=True, unit="s"), default=0.02,
+                      help="trial time of one single step, up to 10 [s] (default 0.02)")
     view.add_argument("--record", default=None, metavar="FILE.html", help="write a self-contained HTML replay")
-    view.add_argument("--fps", type=float, default=50.0, help="with --record: frames per second (default 50)")
+    view.add_argument("--fps", type=bounded_float(0.0, 240.0, lo_open=True), default=50.0,
+                      help="with --record: frames per second, up to 240 (default 50)")
     view.add_argument("--live", action="store_true", help="with --record: also stream live")
     view.add_argument("--open", action="store_true", help="open the page in the default browser")
     view.add_argument("--wait", action="store_true", help="start once a browser has opened the page")
@@ -358,10 +508,12 @@ def build_parser() -> argparse.ArgumentParser:
                           "policy (learned) play the same push trials; the table, the paired differences with 95 % "
                           "intervals, the report directory with its plots, and how to watch a trial in the browser.")
     demo.add_argument("--scenario", default="scenarios/push.toml")
-    demo.add_argument("--trials", type=int, default=4, help="trials per band and seed (default 4)")
-    demo.add_argument("--seeds", type=int, default=2, help="seeds (default 2)")
-    demo.add_argument("--workers", type=int, default=None, help="local worker processes (default: all cores)")
-    demo.add_argument("--out", default=None, help="results directory (default: runs/demo-<time>)")
+    demo.add_argument("--trials", type=_TRIALS, default=4,
+                      help=f"trials per band and seed, 1..{MAX_TRIALS} (default 4)")
+    demo.add_argument("--seeds", type=_SEEDS, default=2, help=f"seeds, 1..{MAX_SEEDS} (default 2)")
+    demo.add_argument("--workers", type=_WORKERS, default=None,
+                      help=f"local worker processes, 1..{MAX_WORKERS} (default: all cores)")
+    demo.add_argument("--out", type=results_dir, default=None, help="results directory (default: runs/demo-<time>)")
     demo.add_argument("--quiet", action="store_true", help="no progress output")
     demo.set_defaults(handler="demo")
 
@@ -378,10 +530,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "term) and actions compared with the recorded ones. Exit status 1 if a check fails.")
     chk.add_argument("name", help=f"the controller: {_NAMES_HELP}")
     add_controller_file_options(chk, repeatable=False)
-    chk.add_argument("--robot", action="append", default=None, help=f"check on this robot only (repeatable; one of: "
+    chk.add_argument("--robot", action=_AppendOnce, default=None, help=f"check on this robot only (repeatable; one of: "
                      f"{', '.join(ROBOTS)}; default: every robot it claims)")
-    chk.add_argument("--seconds", type=float, default=None, help="closed-loop run per robot and arm mode [s] "
-                     "(default 0.5; with --scenario the trial's duration)")
+    chk.add_argument("--seconds", type=_EPISODE_S, default=None, help="closed-loop run per robot and arm mode [s], "
+                     f"up to {MAX_DURATION_S:g} (default 0.5; with --scenario the trial's duration)")
     chk.add_argument("--scenario", default=None, metavar="FILE", help="play this scenario's first trial (first band, "
                      "seed 0) in the closed loop, on the scenario's robot, with its command and pushes; the "
                      "'scenario' check passes if the robot is still up at the end")

@@ -3,12 +3,16 @@
 A policy trained elsewhere (legged_gym, Isaac Lab, mjlab, MuJoCo Playground ...) and exported to ONNX runs in the
 arena as ``onnx:PATH``; the TOML file beside it (``PATH`` with the suffix ``.toml``, or ``--io FILE``) declares:
 
-- ``[policy]``: ``robot`` (a registry name) and ``arm_mode`` it drives; ``rate_hz`` (its control rate [Hz]);
+- ``[policy]``: ``robot`` (a registry name) and ``arm_mode`` it drives; ``rate_hz`` (its control rate [Hz]: 1 to 500
+  Hz, its period a whole number of the arena's 2 ms physics steps, `wbc.learned.policy.control_rate`);
   ``joints``, the network's joint order as the robot's joint names (every joint of the robot once: this is the map
   from the network's order to the house order); ``default_q`` (optional, [rad], the network's order; default: the
   robot's nominal pose); ``summary`` (optional, one line).
 - ``[onnx]`` (optional): ``input`` and ``output``, the names of the network's input and output (default: its only
-  input, its first output).
+  input, its first output); ``sha256``, the sha256 of the ``.onnx`` file (64 lowercase hex digits, what ``sha256sum``
+  prints), which `wbc.control.onnx_policy.onnx_spec` verifies before any trial. ``wbc``'s own export
+  (`wbc.learned.train.onnx_export`) writes it; an I/O file without it (a policy exported elsewhere) runs its model
+  unchecked. It covers the model file only, not external data files beside it.
 - ``[observation]``: ``history`` (frames of each term the network sees, default 1), ``history_order`` (``frames``:
   whole observation frames stacked oldest first, legged_gym style; ``terms``: each term's own history, oldest first,
   then the next term, Isaac Lab style), ``history_fill`` (after a reset the history holds the first observation,
@@ -17,25 +21,32 @@ arena as ``onnx:PATH``; the TOML file beside it (``PATH`` with the suffix ``.tom
   default 1), ``clip`` (optional, a bound c for [-c, c] or an interval, applied after the scale), ``history``
   (optional, with ``history_order = "terms"`` only).
 - ``[action]``: ``kind = "joint_position"`` (targets = default_q + scale * action), ``scale`` (a number or one per
-  joint), ``clip`` (optional: the raw action is clipped to [-clip, clip] first; ``last_action`` sees the clipped one).
+  joint, in [-10, 10] rad per unit action), ``clip`` (optional: the raw action is clipped to [-clip, clip] first;
+  ``last_action`` sees the clipped one).
 - ``[pd]``: ``kp`` [N m / rad] and ``kd`` [N m s / rad], a number or one per joint (network order), the gains the
   motors track the targets with.
 
-Every bad value is an `OnnxIoError` that reads ``path:line: [table] key: what is wrong``, like a scenario file's.
+The file is read through `wbc.input_files.read_toml` (a regular file of at most 1 MiB, UTF-8, nesting bounded, valid
+TOML: an `InputFileError` otherwise, naming the file and line). Every bad value is an `OnnxIoError` that reads
+``path:line: [table] key: what is wrong``, like a scenario file's.
 """
 
 from __future__ import annotations
 
 import math
+import re
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from wbc.control.errors import OnnxIoError
 from wbc.errors import UnknownNameError
+from wbc.input_files import read_text, read_toml
+from wbc.learned.policy.control_rate import rate_problem
 from wbc.robots.description import ARM_MODES, RobotDescription
 from wbc.robots.registry import ROBOTS, get_robot
-from wbc.scenario.toml_fields import Range, TomlTable, read_toml, show
+from wbc.scenario.toml_fields import Range, TomlLines, TomlTable, show
 
 __all__ = ["ACTION_KINDS", "HISTORY_FILLS", "HISTORY_ORDERS", "NOT_MEASURED", "TERMS", "ObsTerm", "OnnxIo",
            "io_path_for", "load_onnx_io"]
@@ -63,6 +74,7 @@ HISTORY_ORDERS = ("frames", "terms")
 HISTORY_FILLS = ("first", "zeros")
 ACTION_KINDS = ("joint_position",)
 _TABLES = ("policy", "onnx", "observation", "action", "pd")
+_SHA256 = re.compile(r"[0-9a-f]{64}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -99,6 +111,7 @@ class OnnxIo:
         default_q: (network order) [rad].
         input_name: the network input's name, or None for its only input.
         output_name: the network output's name, or None for its first output.
+        model_sha256: the model file's sha256 (hex) to verify, or None: no check.
         terms: the observation terms, in order.
         history_order: ``frames`` or ``terms``.
         history_fill: ``first`` or ``zeros``.
@@ -129,6 +142,7 @@ class OnnxIo:
     action_clip: float | None
     kp: tuple[float, ...]
     kd: tuple[float, ...]
+    model_sha256: str | None = None
 
     @property
     def num_joints(self) -> int:
@@ -205,10 +219,11 @@ def _joints(table: TomlTable, desc: RobotDescription) -> tuple[tuple[str, ...], 
     if unknown:
         table.fail("joints", f"{', '.join(map(repr, unknown))} not a joint of {desc.name} (arm {desc.arm_mode}); "
                    f"its joints: {', '.join(valid)}")
-    repeated = sorted({j for j in value if value.count(j) > 1})
+    repeated = sorted(j for j, n in Counter(value).items() if n > 1)  # linear: a joint list may be long
     if repeated:
         table.fail("joints", f"{', '.join(map(repr, repeated))} listed more than once; list every joint once")
-    missing = [j for j in valid if j not in value]
+    listed = set(value)
+    missing = [j for j in valid if j not in listed]
     if missing:
         table.fail("joints", f"the network must command every joint of {desc.name} (arm {desc.arm_mode}); missing: "
                    f"{', '.join(missing)} (with the arm locked or absent the robot has its 12 leg joints)")
@@ -219,13 +234,17 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
     """Read and validate an ONNX policy's I/O file (schema in the module docstring).
 
     Raises:
-        OnnxIoError: the file is missing, unreadable, not TOML or breaks the schema; ``path:line: [table] key:
-            reason``, listing the valid values.
+        OnnxIoError: the file is missing or breaks the schema (a value mistyped or out of its range); ``path:line:
+            [table] key: reason``, listing the valid values.
+        InputFileError: the file is not a regular file, larger than 1 MiB, not UTF-8, nested too deep or not TOML
+            (`wbc.input_files.read_toml`; the message names the file and the line).
     """
     shown = str(path)
-    data, lines = read_toml(Path(path), shown, OnnxIoError, missing=(
-        "an onnx:PATH policy needs its I/O file beside it (PATH with the suffix .toml) or named with --io FILE; "
-        "see the README's recipe"))
+    if not Path(path).exists():
+        raise OnnxIoError(shown, "file not found; an onnx:PATH policy needs its I/O file beside it (PATH with the "
+                          "suffix .toml) or named with --io FILE; see the README's recipe")
+    data = read_toml(path)
+    lines = TomlLines(read_text(path, kind="toml"))
     top = TomlTable(shown, lines, data, "", ("", 0), error=OnnxIoError)
     for key in data:
         if key not in _TABLES:
@@ -243,7 +262,10 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
         desc = get_robot(robot, arm_mode)
     except UnknownNameError as exc:  # pragma: no cover (both names were checked above)
         pol.fail("robot", str(exc))
-    rate_hz = pol.number("rate_hz", Range(lo=0.0, hi=1000.0, lo_open=True))
+    rate_hz = pol.number("rate_hz", Range())
+    problem = rate_problem(rate_hz)
+    if problem is not None:
+        pol.fail("rate_hz", problem)
     joints, house_index = _joints(pol, desc)
     n = len(joints)
     nominal = desc.nominal_q
@@ -256,9 +278,13 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
         default_q = tuple(float(nominal[i]) for i in house_index)
     summary = pol.string("summary", f"ONNX policy for {robot} (arm {arm_mode}) at {rate_hz:g} Hz")
 
-    net = top.sub_table("onnx", ("input", "output"), required=False)
+    net = top.sub_table("onnx", ("input", "output", "sha256"), required=False)
     input_name = net.string("input") if "input" in net.data else None
     output_name = net.string("output") if "output" in net.data else None
+    model_sha256 = net.string("sha256") if "sha256" in net.data else None
+    if model_sha256 is not None and not _SHA256.fullmatch(model_sha256):
+        net.fail("sha256", f"expected 64 lowercase hex digits (the .onnx file's sha256, as sha256sum prints it), got "
+                 f"{show(model_sha256)}; remove the key to run the model unchecked")
 
     obs = top.sub_table("observation", ("history", "history_order", "history_fill", "clip", "terms"), required=True)
     history = obs.integer("history", Range(lo=1, hi=1000), 1)
@@ -287,7 +313,7 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
 
     act = top.sub_table("action", ("kind", "scale", "clip"), required=True)
     kind = _choice(act, "kind", ACTION_KINDS, "joint_position")
-    action_scale = _numbers(act, "scale", (1, n), f"1 or {n} multipliers [rad]", Range())
+    action_scale = _numbers(act, "scale", (1, n), f"1 or {n} multipliers [rad]", Range(lo=-10.0, hi=10.0))
     action_clip = act.optional_number("clip", Range(lo=0.0, lo_open=True))
 
     pd = top.sub_table("pd", ("kp", "kd"), required=True)
@@ -296,5 +322,6 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
 
     return OnnxIo(path=shown, robot=robot, arm_mode=arm_mode, rate_hz=rate_hz, summary=summary, joints=joints,
                   house_index=house_index, default_q=default_q, input_name=input_name, output_name=output_name,
-                  terms=tuple(terms), history_order=order, history_fill=fill, obs_clip=obs_clip, action_kind=kind,
-                  action_scale=action_scale, action_clip=action_clip, kp=kp, kd=kd)
+                  model_sha256=model_sha256, terms=tuple(terms), history_order=order, history_fill=fill,
+                  obs_clip=obs_clip, action_kind=kind, action_scale=action_scale, action_clip=action_clip, kp=kp,
+                  kd=kd)

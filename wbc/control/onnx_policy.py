@@ -17,11 +17,19 @@ writes ``model.onnx`` and ``model.onnx.data``. `open_session` reads the file nam
 ``onnx`` package), refuses a missing one before onnxruntime is asked, naming the model and the file, and builds the
 session from the model's real path (symbolic links resolved), from which onnxruntime finds those files. The spec's
 provenance (`ControllerSpec.provenance`) holds the sha256 of the model, of each external data file and of the I/O file.
+
+Before any trial `onnx_spec` refuses, with one line naming the file: a model (or external data file) that is not a
+regular file or is larger than `wbc.input_files.LIMITS` allows; a model whose sha256 differs from the one its I/O
+file records (``[onnx] sha256``, written by ``wbc``'s export; without it the model runs unchecked); a model
+onnxruntime cannot load (a damaged file); a graph whose inputs are not exactly the one observation the controller
+feeds, or whose output is not the joints' actions (`check_model`); and a graph that fails, or answers with the wrong
+size or a non-finite action, on the observation of a robot at rest.
 """
 
 from __future__ import annotations
 
 import functools
+import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +41,7 @@ from wbc.control.errors import OnnxModelError
 from wbc.control.onnx_io import OnnxIo, io_path_for, load_onnx_io
 from wbc.control.spec import ControllerSpec, SourceFile
 from wbc.errors import ConfigError
+from wbc.input_files import LIMITS, read_bytes
 from wbc.learned.policy.observations import projected_gravity
 from wbc.optional import require
 from wbc.robots.description import RobotDescription
@@ -126,13 +135,16 @@ def external_data_files(model: str | Path) -> list[str]:
     needed.
 
     Raises:
-        OSError: the model cannot be read.
+        InputFileError: the model is missing, not a regular file or larger than ``LIMITS["onnx"]``.
         OnnxModelError: the file is not an ONNX model (not a protobuf ModelProto).
     """
-    buf = memoryview(Path(model).read_bytes())  # fields are views into it: a large inline tensor is not copied
+    buf = memoryview(read_bytes(model, kind="onnx"))  # fields are views into it: a large inline tensor is not copied
     found: list[str] = []
     try:
         _locations(buf, "model", found)
+    except RecursionError:
+        raise OnnxModelError(f"{model}: not an ONNX model onnx:PATH can run (its graphs nest too deep to read); "
+                             "onnx:PATH names an exported .onnx model") from None
     except (_NotProtobuf, UnicodeDecodeError) as exc:
         raise OnnxModelError(f"{model}: not an ONNX model (its protobuf cannot be read: {exc}); onnx:PATH names an "
                              "exported .onnx model") from None
@@ -146,11 +158,13 @@ def resolve_model(model: str | Path) -> tuple[Path, list[Path]]:
     that directory; a model named through a symbolic link is therefore opened at its real path.
 
     Raises:
-        OnnxModelError: the model is missing or not an ONNX model, or an external data file it names is missing or
-            lies outside the model's directory; the message names the model and the file and says how to fix it.
+        OnnxModelError: the model is missing or not an ONNX model, or an external data file it names is missing,
+            too large or lies outside the model's directory; the message names the model and the file and says how
+            to fix it.
+        InputFileError: the model is not a regular file or is too large (`external_data_files`).
     """
     given = Path(model)
-    if not given.is_file():
+    if not given.exists():
         raise OnnxModelError(f"{given}: file not found; onnx:PATH names an exported .onnx model")
     path = given.resolve()
     data: list[Path] = []
@@ -168,6 +182,10 @@ def resolve_model(model: str | Path) -> tuple[Path, list[Path]]:
                 f"exist; keep {location} beside {path.name} (copy or move the two together), or re-export with "
                 "external_data=False (torch.onnx.export(..., external_data=False)) to keep the weights inside the "
                 "model")
+        size = where.stat().st_size
+        if size > LIMITS["onnx"]:
+            raise OnnxModelError(f"{given}: its external data file {location!r} holds {size >> 20} MiB, more than "
+                                 f"the {LIMITS['onnx'] >> 20} MiB an ONNX file may have")
         data.append(where)
     return path, data
 
@@ -189,7 +207,14 @@ def open_session(model: str | Path) -> Any:
     try:
         return ort.InferenceSession(str(path), sess_options=opts, providers=["CPUExecutionProvider"])
     except Exception as exc:  # noqa: BLE001 (onnxruntime raises its own types; all mean "cannot run this file")
-        raise OnnxModelError(f"{model}: not an ONNX model onnxruntime can run ({type(exc).__name__}: {exc})") from None
+        raise OnnxModelError(f"{model}: not an ONNX model onnxruntime can run, or a damaged one "
+                             f"({type(exc).__name__}: {_one_line(exc)}); export it again") from None
+
+
+def _one_line(exc: BaseException) -> str:
+    """An exception's text on one line, cut to a length a message can hold (onnxruntime's span several lines)."""
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 300 else f"{text[:270]}... ({len(text)} characters)"
 
 
 @dataclass(frozen=True)
@@ -216,20 +241,33 @@ def _size(shape: list) -> int | None:
 
 
 def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
-    """Check the network against its I/O file: names, input size and element type, output size.
+    """Check the network against its I/O file and against what the controller feeds it, then run it once.
+
+    The graph must take exactly one input, the observation the controller feeds (named by ``[onnx] input``, or the
+    only one): an input beyond it would be left unfed and fail in the first `OnnxController.act`. Its element type
+    is float or double, its shape ``[size]`` or ``[batch, size]`` with a batch of 1 (or free) and the I/O file's
+    input size; the output read (``[onnx] output``, or the first) is float or double with one entry per joint. The
+    graph is then run once on the zero observation: it must answer with one finite action per joint.
 
     Raises:
-        OnnxModelError: a mismatch; the message names the model, the I/O file's field and both values.
+        OnnxModelError: a mismatch, or a graph that fails or answers wrongly on the zero observation; the message
+            names the model, the I/O file's field and both values.
     """
     inputs, outputs = session.get_inputs(), session.get_outputs()
     names = [i.name for i in inputs]
-    if io.input_name is None and len(inputs) != 1:
-        raise OnnxModelError(f"{model}: the network has {len(inputs)} inputs ({', '.join(names)}); name the "
-                             f"observation's in {io.path} [onnx] input")
     if io.input_name is not None and io.input_name not in names:
         raise OnnxModelError(f"{io.path}: [onnx] input: {model} has no input {io.input_name!r}; its inputs: "
                              f"{', '.join(names)}")
+    if io.input_name is None and len(inputs) != 1:
+        raise OnnxModelError(f"{model}: the network has {len(inputs)} inputs ({', '.join(names) or 'none'}); the "
+                             "controller feeds one, the observation: export the network with the observation as its "
+                             f"only input (and name it in {io.path} [onnx] input)")
     port = inputs[0] if io.input_name is None else inputs[names.index(io.input_name)]
+    extra = [name for name in names if name != port.name]
+    if extra:
+        raise OnnxModelError(f"{model}: input {extra[0]!r} ({len(extra)} besides the observation {port.name!r}: "
+                             f"{', '.join(extra)}) would be left unfed; the controller feeds the observation only: "
+                             "export the network with the observation as its only input")
     if port.type not in _DTYPES:
         raise OnnxModelError(f"{model}: input {port.name!r} is a {port.type}; the controller feeds tensor(float) "
                              "or tensor(double)")
@@ -246,12 +284,38 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
     if io.output_name is not None and io.output_name not in out_names:
         raise OnnxModelError(f"{io.path}: [onnx] output: {model} has no output {io.output_name!r}; its outputs: "
                              f"{', '.join(out_names)}")
+    if not outputs:
+        raise OnnxModelError(f"{model}: the network has no output; it must output the joints' actions")
     out = outputs[0] if io.output_name is None else outputs[out_names.index(io.output_name)]
+    if out.type not in _DTYPES:
+        raise OnnxModelError(f"{model}: output {out.name!r} is a {out.type}; the actions must be tensor(float) or "
+                             "tensor(double)")
     out_size = _size(list(out.shape))
     if out_size is not None and out_size != io.num_joints:
         raise OnnxModelError(f"{io.path}: [policy] joints: {io.num_joints} joints listed, but {model} output "
                              f"{out.name!r} has {out_size} entries; list the network's joints in its order")
-    return NetworkPorts(input_name=port.name, output_name=out.name, dtype=_DTYPES[port.type], batched=len(shape) == 2)
+    ports = NetworkPorts(input_name=port.name, output_name=out.name, dtype=_DTYPES[port.type],
+                         batched=len(shape) == 2)
+    _dry_run(session, ports, io, model)
+    return ports
+
+
+def _dry_run(session: Any, ports: NetworkPorts, io: OnnxIo, model: str | Path) -> None:
+    """Run the network once on the zero observation: it must answer with one finite action per joint."""
+    x = np.zeros(io.input_size, dtype=ports.dtype)
+    try:
+        out = session.run([ports.output_name], {ports.input_name: x[None] if ports.batched else x})[0]
+    except Exception as exc:  # noqa: BLE001 (onnxruntime raises its own types; all mean "this graph cannot run")
+        raise OnnxModelError(f"{model}: the network fails on the observation the controller feeds ({io.input_size} "
+                             f"zeros): {type(exc).__name__}: {_one_line(exc)}; export it again") from None
+    action = np.asarray(out, dtype=np.float64)
+    if action.size != io.num_joints:
+        raise OnnxModelError(f"{io.path}: [policy] joints: {io.num_joints} joints listed, but {model} answers with "
+                             f"{action.size} actions (shape {list(action.shape)}); list the network's joints in its "
+                             "order")
+    if not np.all(np.isfinite(action)):
+        raise OnnxModelError(f"{model}: the network answers the zero observation with non-finite actions "
+                             f"({action.reshape(-1).tolist()}); its weights are damaged: export it again")
 
 
 class OnnxController:
@@ -379,18 +443,26 @@ def onnx_spec(name: str, model: str | Path, io_file: str | Path | None = None) -
 
     Raises:
         OnnxIoError: the I/O file is missing or invalid (``path:line: [table] key: reason``).
-        OnnxModelError: the model is missing, unreadable or does not fit the I/O file.
+        OnnxModelError: the model is missing, unreadable, damaged (its sha256 differs from the I/O file's
+            ``[onnx] sha256``, or onnxruntime cannot load it) or does not fit the I/O file (`check_model`).
+        InputFileError: the model or the I/O file is not a regular file or is too large (`wbc.input_files`).
         MissingExtraError: onnxruntime is not installed.
     """
     path = Path(model)
-    if not path.is_file():
+    if not path.exists():
         raise OnnxModelError(f"{path}: file not found; onnx:PATH names an exported .onnx model")
     io_path = Path(io_file) if io_file is not None else io_path_for(path)
     io = load_onnx_io(io_path)
+    # the checksum first: a damaged model is named as what it is before any parser reads it
+    digest = hashlib.sha256(read_bytes(path, kind="onnx")).hexdigest()
+    if io.model_sha256 is not None and digest != io.model_sha256:
+        raise OnnxModelError(f"{path}: sha256 {digest} differs from {io.model_sha256}, recorded at export in "
+                             f"{io_path} [onnx] sha256: the model changed since it was exported (a damaged copy, or "
+                             "another export's model beside this I/O file); copy the pair again, or export again")
     real, data = resolve_model(path)
     check_model(open_session(path), io, path)  # once here, so a mismatch fails before any trial
     make = functools.partial(OnnxController, model_path=str(real), io=io)
-    files = (SourceFile.hashed("model", real), *(SourceFile.hashed("external data", f) for f in data),
-             SourceFile.hashed("io", io_path))
+    files = (SourceFile(role="model", path=str(real), sha256=digest),
+             *(SourceFile.hashed("external data", f) for f in data), SourceFile.hashed("io", io_path))
     return ControllerSpec(name, io.arm_mode, make, io.summary, robots=(io.robot,), kind="onnx",
                           config_file=str(io_path), files=files)

@@ -8,9 +8,22 @@ import numpy as np
 
 from wbc.errors import ConfigError
 
-__all__ = ["MAX_DELAY_S", "DomainParams", "SensorNoise"]
+__all__ = ["FRICTION_RANGE", "MAX_DELAY_S", "MOTOR_STRENGTH_RANGE", "PAYLOAD_KG_RANGE", "DomainParams", "SensorNoise"]
 
 MAX_DELAY_S = 0.2  # [s] longest actuation or sensing delay accepted: ten 50 Hz control periods
+
+FRICTION_RANGE = (0.05, 2.0)
+"""Sliding friction coefficients accepted, both ends included. Ice on rubber is about 0.05 and nothing a quadruped
+walks on exceeds 2 (MuJoCo's default is 1, the shipped scenarios draw 0.4-1.0); below 0.05 no controller can stand and
+MuJoCo's contact solver meets forces it cannot resolve (a run of ``friction = [1e-10, 1e-10]`` blew up)."""
+
+PAYLOAD_KG_RANGE = (-1.0, 10.0)
+"""Extra trunk mass accepted [kg]: from 1 kg lighter to 10 kg heavier, the robots' own payload ratings (A1 5 kg,
+Go1 3-5 kg) with margin; more than the robot's ~12 kg trunk would crush it at the first tick, not test it."""
+
+MOTOR_STRENGTH_RANGE = (0.1, 2.0)
+"""Motor strength factors accepted: below 0.1 the motors cannot carry the robot's weight at all, above 2 they
+exceed any motor the robots have."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -18,11 +31,11 @@ class DomainParams:
     """Physical parameters that differ between the model and a real robot.
 
     Attributes:
-        payload_mass: extra mass on the trunk [kg] (may be negative down to -1 kg: a lighter trunk).
+        payload_mass: extra mass on the trunk [kg], in `PAYLOAD_KG_RANGE` (negative: a lighter trunk).
         payload_com: where that mass sits in the trunk frame, shape (3,) [m].
-        friction: sliding friction coefficient between feet/links and the ground.
+        friction: sliding friction coefficient between feet/links and the ground, in `FRICTION_RANGE`.
         motor_strength: multiplies every motor's output torque and torque limit (1.0 = nominal); a scalar or one
-            value per actuated joint.
+            value per actuated joint, each in `MOTOR_STRENGTH_RANGE`.
         actuation_delay: a command written at time t reaches the motors at t + actuation_delay [s], in [0, 0.2]
             (the simulator rounds it to whole physics steps); the motor law keeps running under the command that
             last arrived.
@@ -38,13 +51,16 @@ class DomainParams:
     sensing_delay: float = 0.0
 
     def __post_init__(self) -> None:
-        if not -1.0 <= self.payload_mass <= 20.0:
-            raise ConfigError(f"DomainParams.payload_mass must be in [-1, 20] kg, got {self.payload_mass}")
-        if not 0.0 < self.friction <= 5.0:
-            raise ConfigError(f"DomainParams.friction must be in (0, 5], got {self.friction}")
+        lo, hi = PAYLOAD_KG_RANGE
+        if not lo <= self.payload_mass <= hi:  # NaN fails too
+            raise ConfigError(f"DomainParams.payload_mass must be in [{lo:g}, {hi:g}] kg, got {self.payload_mass}")
+        lo, hi = FRICTION_RANGE
+        if not lo <= self.friction <= hi:
+            raise ConfigError(f"DomainParams.friction must be in [{lo:g}, {hi:g}], got {self.friction}")
+        lo, hi = MOTOR_STRENGTH_RANGE
         strength = np.asarray(self.motor_strength, dtype=np.float64)
-        if np.any(strength <= 0) or np.any(strength > 2):
-            raise ConfigError(f"DomainParams.motor_strength must be in (0, 2], got {self.motor_strength}")
+        if not np.all((strength >= lo) & (strength <= hi)):
+            raise ConfigError(f"DomainParams.motor_strength must be in [{lo:g}, {hi:g}], got {self.motor_strength}")
         for name in ("actuation_delay", "sensing_delay"):
             value = getattr(self, name)
             if not 0.0 <= value <= MAX_DELAY_S:  # NaN fails too

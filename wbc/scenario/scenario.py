@@ -10,17 +10,21 @@ second table of an array). `Scenario.trial` turns (band, seed, index) into a ful
 Schema (every other key is an error):
 
 - ``[scenario]``: ``name`` (``^[a-z0-9][a-z0-9_-]*$``), ``version`` (int >= 1), ``description``, ``notes``
-  (optional), ``robot`` (a key of `wbc.robots.registry.ROBOTS`), ``duration_s`` (in (0, 600]).
-- ``[terrain]``: ``kind`` (``flat`` | ``fractal``), ``amplitude_m`` [0, 0.3], ``base_wavelength_m`` (0, 20],
-  ``octaves`` [1, 8], ``half_extent_m`` (1, 50].
-- ``[domain]`` (optional), intervals ``[lo, hi]`` drawn uniformly: ``friction`` (0, 5], ``payload_kg`` [-1, 20],
-  ``motor_strength`` (0, 2], and the optional ``actuation_delay_s`` and ``sensing_delay_s`` [0, 0.2] (the robot's
-  loop latency, `DomainParams`; a simulator rounds them to its physics step).
+  (optional), ``robot`` (a key of `wbc.robots.registry.ROBOTS`), ``duration_s`` ([0.1, 600]).
+- ``[terrain]``: ``kind`` (``flat`` | ``fractal``), ``amplitude_m`` [0, 0.3], ``octaves`` [1, 8], ``half_extent_m``
+  (1, 50] (at most 2001 heightfield samples of 5 cm per axis), ``base_wavelength_m`` [0.05 * 2^(octaves - 1), 20]
+  (the finest octave spans at least one heightfield cell: a finer one is invisible on the grid and its noise
+  lattice outgrows memory).
+- ``[domain]`` (optional), intervals ``[lo, hi]`` drawn uniformly: ``friction`` [0.05, 2], ``payload_kg`` [-1, 10],
+  ``motor_strength`` [0.1, 2] (`wbc.scenario.domain` says why), and the optional ``actuation_delay_s`` and
+  ``sensing_delay_s`` [0, 0.2] (the robot's loop latency, `DomainParams`; a simulator rounds them to its physics step).
 - ``[commands]``: ``ramp_s`` [0, duration_s] and ``[[commands.options]]`` (``vx`` |.| <= 3, ``vy`` |.| <= 2,
   ``yaw_rate`` |.| <= 4, ``random_sign``), one drawn uniformly per trial.
-- ``[pushes]`` (optional): ``first_s`` and ``interval_s`` intervals, ``duration_s`` (0, 1], ``offset_m`` [0, 0.5].
-- ``[[bands]]``: ``name``, ``push_force_n`` (an interval in [0, 5000]; required with ``[pushes]``, forbidden
-  without), ``vx`` (optional override of the drawn option's vx).
+- ``[pushes]`` (optional): ``first_s`` (an interval ending before ``duration_s``) and ``interval_s`` (an interval in
+  (0, 600], its lower end >= the push duration, at most 1000 pushes per trial), ``duration_s`` [0.01, 1],
+  ``offset_m`` [0, 0.5].
+- ``[[bands]]``: ``name``, ``push_force_n`` (an interval in [0, 2000], its upper end times ``[pushes] duration_s`` at
+  most 200 N s; required with ``[pushes]``, forbidden without), ``vx`` (optional override of the drawn option's vx).
 
 Sampling. Trial ``index`` under ``seed`` draws from
 ``np.random.default_rng(SeedSequence([seed, index, int(hash[:8], 16)]))`` in this fixed order:
@@ -45,6 +49,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -55,9 +60,15 @@ import numpy as np
 
 from wbc.errors import ConfigError, ScenarioError, UnknownNameError
 from wbc.robots.registry import ROBOTS
-from wbc.scenario.domain import MAX_DELAY_S, DomainParams
+from wbc.scenario.domain import (
+    FRICTION_RANGE,
+    MAX_DELAY_S,
+    MOTOR_STRENGTH_RANGE,
+    PAYLOAD_KG_RANGE,
+    DomainParams,
+)
 from wbc.scenario.push import Push
-from wbc.scenario.terrain import TERRAIN_KINDS, TerrainConfig
+from wbc.scenario.terrain import MAX_OCTAVES, MAX_SAMPLES, TERRAIN_KINDS, TerrainConfig
 from wbc.scenario.toml_fields import Range, TomlTable, read_toml
 from wbc.scenario.trial import CommandSchedule, Trial
 
@@ -66,6 +77,23 @@ __all__ = ["Scenario", "ScenarioError", "load_scenario", "resolve_scenario_path"
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 _BAND_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _MAX_PUSHES = 1000  # per trial: bounds the sampling loop whatever interval_s says
+
+MIN_DURATION_S = 0.1
+"""Shortest episode [s]: five 50 Hz control ticks, the fewest from which the metrics mean anything."""
+
+MAX_DURATION_S = 600.0
+"""Longest episode [s]: ten minutes, thirty times the shipped scenarios' 20 s."""
+
+MIN_PUSH_S = 0.01
+"""Shortest push [s]: half a 50 Hz control tick and five 2 ms physics steps; a shorter one is not resolved."""
+
+MAX_PUSH_FORCE_N = 2000.0
+"""Strongest push [N]: about 14 times the robots' weight (~140 N); the shipped bands reach 400 N."""
+
+MAX_PUSH_IMPULSE_NS = 200.0
+"""Largest push impulse, force x duration [N s]: it changes a ~14 kg robot's speed by ~14 m/s, far past any fall
+(the shipped scenarios deliver at most 40 N s, a test that topples a controller 143 N s). More only flings the robot,
+and the simulator with it."""
 
 
 # --------------------------------------------------------------------------------------------------------------------
@@ -306,28 +334,36 @@ def load_scenario(path: str | Path) -> Scenario:
     robot = head.string("robot")
     if robot not in ROBOTS:
         head.fail("robot", f"unknown robot {robot!r}; valid robots: {', '.join(sorted(ROBOTS))}")
-    duration_s = head.number("duration_s", Range(lo=0.0, hi=600.0, lo_open=True))
+    duration_s = head.number("duration_s", Range(lo=MIN_DURATION_S, hi=MAX_DURATION_S))
 
     ter = top.sub_table("terrain", ("kind", "amplitude_m", "base_wavelength_m", "octaves", "half_extent_m"),
                      required=True)
     kind = ter.string("kind")
     if kind not in TERRAIN_KINDS:
         ter.fail("kind", f"must be one of {', '.join(map(repr, TERRAIN_KINDS))}, got {kind!r}")
-    terrain = TerrainConfig(
-        kind=kind,
-        amplitude=ter.number("amplitude_m", Range(lo=0.0, hi=0.3), 0.05),
-        base_cell=ter.number("base_wavelength_m", Range(lo=0.0, hi=20.0, lo_open=True), 1.6),
-        octaves=ter.integer("octaves", Range(lo=1, hi=8), 4),
-        half_extent=ter.number("half_extent_m", Range(lo=1.0, hi=50.0, lo_open=True), 10.0),
-    )
+    cell = TerrainConfig.cell  # the heightfield's resolution [m]: not a scenario key
+    amplitude = ter.number("amplitude_m", Range(lo=0.0, hi=0.3), 0.05)
+    octaves = ter.integer("octaves", Range(lo=1, hi=MAX_OCTAVES), 4)
+    half_extent = ter.number("half_extent_m", Range(lo=1.0, hi=(MAX_SAMPLES - 1) * cell / 2, lo_open=True), 10.0)
+    wavelength = ter.number("base_wavelength_m", Range(lo=0.0, hi=20.0, lo_open=True), 1.6)
+    shortest = cell * 2 ** (octaves - 1)  # the finest octave, wavelength / 2^(octaves - 1), must span one cell
+    if wavelength < shortest:
+        lattice = math.ceil(2 * half_extent * 2 ** (octaves - 1) / wavelength) + 2
+        ter.fail("base_wavelength_m", f"must be in [{shortest:g}, 20] m with octaves = {octaves}, got "
+                 f"{wavelength:g}: the finest octave (base_wavelength_m / 2^(octaves - 1)) must span at least one "
+                 f"{cell:g} m heightfield cell, and this one's noise lattice would be {lattice} x {lattice} floats "
+                 f"({lattice * lattice * 8 / 2**30:.3g} GiB); raise base_wavelength_m or lower octaves")
+    terrain = TerrainConfig(kind=kind, amplitude=amplitude, base_cell=wavelength, octaves=octaves,
+                            half_extent=half_extent)
 
     dom = top.sub_table("domain", ("friction", "payload_kg", "motor_strength", "actuation_delay_s",
                                    "sensing_delay_s"), required=False)
     delay = Range(lo=0.0, hi=MAX_DELAY_S)
     domain = _DomainRanges(
-        friction=dom.interval("friction", Range(lo=0.0, hi=5.0, lo_open=True), (1.0, 1.0)),
-        payload_kg=dom.interval("payload_kg", Range(lo=-1.0, hi=20.0), (0.0, 0.0)),
-        motor_strength=dom.interval("motor_strength", Range(lo=0.0, hi=2.0, lo_open=True), (1.0, 1.0)),
+        friction=dom.interval("friction", Range(lo=FRICTION_RANGE[0], hi=FRICTION_RANGE[1]), (1.0, 1.0)),
+        payload_kg=dom.interval("payload_kg", Range(lo=PAYLOAD_KG_RANGE[0], hi=PAYLOAD_KG_RANGE[1]), (0.0, 0.0)),
+        motor_strength=dom.interval("motor_strength", Range(lo=MOTOR_STRENGTH_RANGE[0], hi=MOTOR_STRENGTH_RANGE[1]),
+                                    (1.0, 1.0)),
         actuation_delay_s=dom.optional_interval("actuation_delay_s", delay),
         sensing_delay_s=dom.optional_interval("sensing_delay_s", delay),
     )
@@ -353,8 +389,8 @@ def load_scenario(path: str | Path) -> Scenario:
         if first_s[1] >= duration_s:
             psh.fail("first_s", f"must end before [scenario] duration_s ({duration_s:g}) so that every trial is "
                      f"pushed, got [{first_s[0]:g}, {first_s[1]:g}]")
-        push_duration = psh.number("duration_s", Range(lo=0.0, hi=1.0, lo_open=True))
-        interval_s = psh.interval("interval_s", Range(lo=0.0, lo_open=True))
+        push_duration = psh.number("duration_s", Range(lo=MIN_PUSH_S, hi=1.0))
+        interval_s = psh.interval("interval_s", Range(lo=0.0, hi=MAX_DURATION_S, lo_open=True))
         if interval_s[0] < push_duration:
             psh.fail("interval_s", f"lower end must be >= [pushes] duration_s ({push_duration:g}) so that pushes "
                      f"do not overlap, got [{interval_s[0]:g}, {interval_s[1]:g}]")
@@ -378,7 +414,11 @@ def load_scenario(path: str | Path) -> Scenario:
         if pushes is not None and "push_force_n" not in bnd.data:
             bnd.fail("push_force_n", "missing required key (the scenario has a [pushes] table); add "
                      "`push_force_n = [lo, hi]` [N]", at_header=True)
-        force = bnd.interval("push_force_n", Range(lo=0.0, hi=5000.0)) if pushes is not None else None
+        force = bnd.interval("push_force_n", Range(lo=0.0, hi=MAX_PUSH_FORCE_N)) if pushes is not None else None
+        if force is not None and pushes is not None and force[1] * pushes.duration_s > MAX_PUSH_IMPULSE_NS:
+            bnd.fail("push_force_n", f"a push of {force[1]:g} N for [pushes] duration_s {pushes.duration_s:g} s "
+                     f"delivers {force[1] * pushes.duration_s:g} N s, more than {MAX_PUSH_IMPULSE_NS:g} N s (it "
+                     "would throw the robot at over 14 m/s); lower the force or the push duration")
         bands.append(_Band(name=band_name, push_force_n=force, vx=bnd.optional_number("vx", Range(lo=-3.0, hi=3.0))))
 
     return Scenario(

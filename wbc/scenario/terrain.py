@@ -6,15 +6,23 @@ The fractal is a sum of octaves of bilinearly interpolated value noise (each oct
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from wbc.errors import ConfigError, UnknownNameError
 
-__all__ = ["TERRAIN_KINDS", "TerrainConfig", "fractal_heights"]
+__all__ = ["MAX_OCTAVES", "MAX_SAMPLES", "TERRAIN_KINDS", "TerrainConfig", "fractal_heights"]
 
 TERRAIN_KINDS = ("flat", "fractal")
+
+MAX_SAMPLES = 2001
+"""Most heightfield samples along each axis: a 100 m square at the default 5 cm cell. `fractal_heights` holds about
+eight (samples x samples) float64 arrays at once, ~300 MB at this size, and MuJoCo one more."""
+
+MAX_OCTAVES = 8
+"""Most noise octaves: the eighth is already 128 times finer than the first."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -43,10 +51,27 @@ class TerrainConfig:
         if self.kind not in TERRAIN_KINDS:
             raise UnknownNameError("terrain kind", self.kind, TERRAIN_KINDS)
         for name in ("half_extent", "cell", "base_cell"):
-            if not getattr(self, name) > 0:
-                raise ConfigError(f"TerrainConfig.{name} must be positive, got {getattr(self, name)}")
-        if self.amplitude < 0 or not 0 < self.persistence <= 1 or self.octaves < 1:
-            raise ConfigError("TerrainConfig: amplitude >= 0, 0 < persistence <= 1 and octaves >= 1 are required")
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ConfigError(f"TerrainConfig.{name} must be a finite positive length [m], got {value}")
+        if not (self.amplitude >= 0 and 0 < self.persistence <= 1 and 1 <= self.octaves <= MAX_OCTAVES):
+            raise ConfigError(f"TerrainConfig: amplitude >= 0, 0 < persistence <= 1 and 1 <= octaves <= {MAX_OCTAVES} "
+                              f"are required, got amplitude {self.amplitude}, persistence {self.persistence}, octaves "
+                              f"{self.octaves}")
+        if self.samples > MAX_SAMPLES:
+            raise ConfigError(f"TerrainConfig: {self.samples} heightfield samples per axis (2 half_extent / cell + 1 "
+                              f"with half_extent {self.half_extent:g} m, cell {self.cell:g} m), more than "
+                              f"{MAX_SAMPLES}; shrink half_extent or coarsen cell")
+        if self.finest_wavelength < self.cell:
+            raise ConfigError(f"TerrainConfig: the finest octave's wavelength base_cell / 2^(octaves - 1) = "
+                              f"{self.finest_wavelength:g} m is shorter than the heightfield cell {self.cell:g} m: "
+                              "the grid cannot show it, and its noise lattice would outgrow the heightfield; raise "
+                              f"base_cell to >= {self.cell * 2 ** (self.octaves - 1):g} m or use fewer octaves")
+
+    @property
+    def finest_wavelength(self) -> float:
+        """Wavelength of the finest noise octave, ``base_cell / 2^(octaves - 1)`` [m]."""
+        return self.base_cell / 2 ** (self.octaves - 1)
 
     @property
     def samples(self) -> int:

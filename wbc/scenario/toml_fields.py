@@ -16,7 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
-from wbc.errors import FileFieldError
+from wbc.errors import FileFieldError, InputFileError
+from wbc.input_files import MAX_DEPTH, read_bytes
 
 __all__ = ["MISSING", "Range", "TableId", "TomlLines", "TomlTable", "is_number", "read_toml", "show", "toml_type"]
 
@@ -289,15 +290,48 @@ class TomlTable:
         return table
 
 
+def _nesting(value: Any) -> int:
+    """How deep tables and arrays nest in parsed TOML (iteratively: a deep file cannot exhaust the stack)."""
+    deepest = 0
+    stack = [(value, 1)]
+    while stack:
+        item, depth = stack.pop()
+        children = item.values() if isinstance(item, dict) else item if isinstance(item, list) else None
+        if children is None:
+            continue
+        deepest = max(deepest, depth)
+        if deepest > MAX_DEPTH:
+            break
+        stack.extend((child, depth + 1) for child in children)
+    return deepest
+
+
 def read_toml(path: Path, shown: str, error: type[FileFieldError] = FileFieldError, *,
               missing: str = "check the path") -> tuple[dict[str, Any], TomlLines]:
-    """Read and parse a TOML file; every failure is an `error` naming `shown` (`missing`: the hint when absent)."""
+    """Read and parse a TOML file through `wbc.input_files.read_bytes`; every failure is an `error` naming `shown`.
+
+    The file must be a regular file of at most ``LIMITS["toml"]`` bytes (1 MiB), UTF-8, valid TOML, and nest at
+    most `wbc.input_files.MAX_DEPTH` levels deep.
+
+    Args:
+        path: the file.
+        shown: the file as messages name it.
+        error: the `FileFieldError` subclass raised.
+        missing: the hint given when the file does not exist.
+
+    Returns:
+        The parsed table and the lines of its keys and headers.
+
+    Raises:
+        FileFieldError: (`error`) missing, not a regular file, too large, not UTF-8 (the line named), not TOML (the
+            line and column named), or nested too deep.
+    """
     try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise error(shown, f"file not found; {missing}") from None
-    except OSError as exc:
-        raise error(shown, f"cannot read the file: {exc.strerror or exc}") from None
+        raw = read_bytes(path, kind="toml")
+    except InputFileError as exc:
+        if not path.exists():
+            raise error(shown, f"file not found; {missing}") from None
+        raise error(shown, f"cannot read the file: {str(exc).removeprefix(f'{path}: ')}") from None
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -315,4 +349,11 @@ def read_toml(path: Path, shown: str, error: type[FileFieldError] = FileFieldErr
             line = text.count("\n") + 1 if message.endswith("(at end of document)") else None
             message = re.sub(r"\s*\(at end of document\)$", "", message)
         raise error(shown, f"invalid TOML: {message}; fix the syntax (https://toml.io)", line=line) from None
+    except RecursionError:
+        raise error(shown, f"arrays or inline tables nested too deep to parse; no valid file nests more than "
+                    f"{MAX_DEPTH} levels") from None
+    except ValueError as exc:  # an integer of more than 4300 digits: Python refuses to convert it
+        raise error(shown, f"invalid TOML value: {exc}") from None
+    if _nesting(data) > MAX_DEPTH:
+        raise error(shown, f"tables and arrays nested more than {MAX_DEPTH} levels deep; no valid file nests so deep")
     return data, TomlLines(text)

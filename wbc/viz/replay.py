@@ -11,7 +11,6 @@ Every problem names the file and the field at fault.
 from __future__ import annotations
 
 import dataclasses
-import zipfile
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,7 +21,7 @@ from wbc.arena.episode import Episode
 from wbc.arena.identity import RunIdentity
 from wbc.arena.results import episode_path
 from wbc.control.registry import get_controller
-from wbc.errors import RecordError, WbcError
+from wbc.errors import EpisodeFileError, RecordError, WbcError
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
@@ -134,9 +133,9 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
         raise ViewerError(f"{path}: no episode stored for controller {controller}, band {band}, seed {seed}, "
                           f"trial {index}; rerun `wbc run` with --save-episodes")
     try:
-        episode = Episode.load(str(path))
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile) as exc:
-        raise ViewerError(f"{path}: unreadable episode ({type(exc).__name__}: {exc})") from None
+        episode = Episode.load(str(path))  # checked in depth: a malformed episode is refused, never drawn
+    except EpisodeFileError as exc:  # names the file and the field
+        raise ViewerError(str(exc)) from None
     if not scenario_path.is_file() and (root / scenario_path.name).is_file():
         scenario_path = root / scenario_path.name
     try:

@@ -17,12 +17,14 @@ sees everything), and its RMA adaptation module, if any, runs on its own normali
 holds each part's arrays under ``<name>/`` (``legs/policy/0/weight`` ...), plain float arrays only.
 
 `load_composite` also accepts a single policy file, as a composite of one part commanding every joint, so the
-controller runs both kinds through one path. Every failure is a `PolicyFileError` naming the file and the field.
+controller runs both kinds through one path. Every field is typed and ranged as in a single policy file
+(`wbc.learned.policy.policy_file.check_robot_keys`, `check_meta`), and the composite's ``weights_sha256`` (the sha256
+of its whole ``.npz``, written by `save_composite`) is verified when present; a part has no checksum of its own. Every
+failure is a `PolicyFileError` naming the file and the field.
 """
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,15 +35,21 @@ import numpy as np
 from wbc.errors import NetworkMismatchError
 from wbc.learned.policy.observations import ObsLayout, compatible_indices
 from wbc.learned.policy.policy_file import (
+    CHECKSUM_KEY,
     COMPOSITE_FORMAT,
     VERSION,
     PolicyFile,
     PolicyFileError,
+    check_checksum_field,
     check_meta,
+    check_robot_keys,
     check_shapes,
+    json_text,
+    layout_joints,
     load_policy,
     read_arrays,
     read_pair,
+    weights_sha256,
 )
 from wbc.robots.description import RobotDescription
 
@@ -117,7 +125,14 @@ def compose(parts: list[PolicyPart], *, training: dict[str, Any] | None = None,
 
 
 def save_composite(path: str | Path, composite: CompositePolicyFile) -> tuple[Path, Path]:
-    """Write ``<path>.npz`` and ``<path>.json``; the result is loaded back and checked. Returns both paths."""
+    """Write ``<path>.npz`` and ``<path>.json``; the result is loaded back and checked. Returns both paths.
+
+    The JSON records the ``.npz`` file's sha256 (``weights_sha256``), which `load_composite` verifies; a part's own
+    checksum (a part made from a loaded policy file carries one) is dropped, since the composite's covers it.
+
+    Raises:
+        PolicyFileError: the composite does not pass `load_composite`'s checks (the message names the field).
+    """
     p = Path(path)
     stem = p.with_suffix("") if p.suffix in (".npz", ".json") else p
     npz, js = stem.with_suffix(".npz"), stem.with_suffix(".json")
@@ -127,12 +142,14 @@ def save_composite(path: str | Path, composite: CompositePolicyFile) -> tuple[Pa
         for k, v in part.policy.arrays.items():
             arrays[f"{part.name}/{k}"] = np.asarray(v, dtype=np.float32)
         meta = {"format": "wbc-policy", "version": VERSION,
-                **{k: v for k, v in part.policy.meta.items() if k not in ("format", "version")}}
+                **{k: v for k, v in part.policy.meta.items() if k not in ("format", "version", CHECKSUM_KEY)}}
         parts.append({"name": part.name, "joints": [int(j) for j in part.joints], "meta": meta})
     meta = {"format": COMPOSITE_FORMAT, "version": VERSION,
-            **{k: v for k, v in composite.meta.items() if k not in ("format", "version", "parts")}, "parts": parts}
+            **{k: v for k, v in composite.meta.items() if k not in ("format", "version", "parts", CHECKSUM_KEY)},
+            "parts": parts}
     np.savez(npz, **arrays)
-    js.write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n", encoding="utf-8")
+    meta[CHECKSUM_KEY] = weights_sha256(npz)
+    js.write_text(json_text(meta), encoding="utf-8")
     load_composite(npz)
     return npz, js
 
@@ -141,19 +158,22 @@ def load_composite(path: str | Path) -> CompositePolicyFile:
     """Load and validate a composite, or a single policy file as a composite of one part (named ``policy``).
 
     Raises:
-        PolicyFileError: a file is missing or unreadable, a key or array is missing, mistyped or misshapen, the
-            parts' joints do not partition the robot's, or a part disagrees with the composite on the observation
-            or the motor law; the message names the file and the field (``<part>/<field>`` inside a part).
+        PolicyFileError: a file is missing or unreadable, a key or array is missing, mistyped, out of range or
+            misshapen, the parts' joints do not partition the robot's, a part disagrees with the composite on the
+            observation or the motor law, or the weights' sha256 differs from the recorded one; the message names
+            the file and the field (``<part>/<field>`` inside a part).
     """
     npz, js, meta = read_pair(path)
     if meta.get("format") != COMPOSITE_FORMAT:
         single = load_policy(npz)
         top = {k: single.meta[k] for k in ROBOT_KEYS}
         top["training"] = single.meta.get("training", {})
+        if CHECKSUM_KEY in single.meta:
+            top[CHECKSUM_KEY] = single.meta[CHECKSUM_KEY]
         return CompositePolicyFile(meta=top, parts=(PolicyPart(name="policy", joints=tuple(range(single.num_actions)),
                                                               policy=single),))
     _check_top(meta, js)
-    arrays = read_arrays(npz)
+    arrays = read_arrays(npz, sha256=meta.get(CHECKSUM_KEY), json_path=js)
     parts, claimed = [], {}
     for i, entry in enumerate(meta["parts"]):
         part = _load_part(entry, i, arrays, meta, npz, js)
@@ -177,38 +197,20 @@ def _layout_joints(obs_layout: list) -> int:
     return int(dict((str(n), s) for n, s in obs_layout)["dof_pos"])
 
 
-def _check_layout(obs_layout: Any, js: Path, field: str, most: int) -> int:
-    """The joints of an observation layout, which must be this version's `ObsLayout` of at most `most` joints."""
-    try:
-        k = _layout_joints(obs_layout)
-    except (TypeError, ValueError, KeyError):
-        raise PolicyFileError(js, field, "expected [[name, size], ...] with a dof_pos part") from None
-    if not 0 < k <= most or [list(q) for q in obs_layout] != ObsLayout(k).as_list():
-        raise PolicyFileError(js, field, f"{obs_layout} is not this version's layout of 1 to {most} joints")
-    return k
-
-
 def _check_top(meta: dict[str, Any], js: Path) -> None:
-    types: dict[str, type | tuple[type, ...]] = {
-        "version": int, "robot": str, "arm_mode": str, "task": str, "stage": int, "num_actions": int,
-        "obs_layout": list, "obs_scales": dict, "action_scale": (int, float), "clip_actions": (int, float),
-        "default_q": list, "kp": list, "kd": list, "policy_dt": (int, float), "parts": list,
-    }
-    for key, t in types.items():
-        if key not in meta:
-            raise PolicyFileError(js, key, "missing key")
-        if isinstance(meta[key], bool) or not isinstance(meta[key], t):
-            raise PolicyFileError(js, key, f"expected {t}, got {type(meta[key]).__name__}")
-    if meta["version"] != VERSION:
-        raise PolicyFileError(js, "version", f"this wbc reads version {VERSION}, the file is {meta['version']}")
+    if isinstance(meta.get("version"), bool) or meta.get("version") != VERSION:
+        raise PolicyFileError(js, "version", f"this wbc reads version {VERSION}, the file is "
+                              f"{meta.get('version', 'missing')!r}")
+    check_robot_keys(meta, js)
     n = meta["num_actions"]
-    for key in ("default_q", "kp", "kd"):
-        if len(meta[key]) != n:
-            raise PolicyFileError(js, key, f"expected {n} values (num_actions), got {len(meta[key])}")
-    if _check_layout(meta["obs_layout"], js, "obs_layout", n) != n:
+    if layout_joints(meta["obs_layout"], js, "obs_layout") != n:
         raise PolicyFileError(js, "obs_layout", f"the composite's layout must cover its {n} joints")
-    if not meta["parts"]:
-        raise PolicyFileError(js, "parts", "expected at least one part")
+    if not isinstance(meta.get("training", {}), dict):
+        raise PolicyFileError(js, "training", "expected an object (training metadata)")
+    check_checksum_field(meta, js)
+    parts = meta.get("parts")
+    if not isinstance(parts, list) or not parts:
+        raise PolicyFileError(js, "parts", "expected a non-empty array of parts {name, joints, meta}")
 
 
 def _load_part(entry: Any, i: int, arrays: dict[str, np.ndarray], top: dict[str, Any], npz: Path,
@@ -228,7 +230,7 @@ def _load_part(entry: Any, i: int, arrays: dict[str, np.ndarray], top: dict[str,
     check_meta(meta, js, prefix=f"{name}/")
     if meta["num_actions"] != len(joints):
         raise PolicyFileError(js, f"{name}/num_actions", f"{meta['num_actions']} outputs for {len(joints)} joints")
-    _check_layout(meta["obs_layout"], js, f"{name}/obs_layout", n)
+    layout_joints(meta["obs_layout"], js, f"{name}/obs_layout", n)
     for key in _SHARED:
         if meta[key] != top[key]:
             raise PolicyFileError(js, f"{name}/{key}", f"{meta[key]!r} differs from the composite's {top[key]!r}")

@@ -7,7 +7,8 @@ as `LearnedController` computes it: each part normalises its own view of the obs
 module from the last H of its normalised observations when it has one, and runs its MLP; the parts' outputs are put
 in joint order. Everything else the controller does around the network (observation terms and scales, the action
 clip and scale, the PD gains, the rate) is written to the I/O file (`wbc.control.onnx_io` reads it), in the
-observation terms Isaac Lab names.
+observation terms Isaac Lab names, with the model file's sha256 (``[onnx] sha256``), which ``onnx:PATH`` verifies
+before any trial: the I/O file sits beside the model and travels with it, so the pair needs no third file.
 
 The round trip is the test of both sides: the shipped pi3 exported here and run as ``onnx:PATH`` gives the numpy
 controller's actions within 1e-5. This is also what a policy trained elsewhere looks like to the arena: an ONNX file
@@ -23,6 +24,7 @@ import numpy as np
 
 from wbc.learned.policy.composite_policy import CompositePolicyFile, PolicyPart, load_composite
 from wbc.learned.policy.observations import ObsLayout
+from wbc.learned.policy.policy_file import weights_sha256
 from wbc.learned.policy.replay_file import replay_path_for
 from wbc.learned.policy.replay_recorder import record_replay
 from wbc.learned.train.torch_policy import sequential
@@ -92,8 +94,15 @@ def _toml_list(values) -> str:
     return "[" + ", ".join(repr(float(v)) if not isinstance(v, str) else f'"{v}"' for v in values) + "]"
 
 
-def io_text(policy: CompositePolicyFile, frames: int, *, source: str) -> str:
-    """The I/O file (``wbc.control.onnx_io`` schema) of a policy file exported with `frames` observation frames."""
+def io_text(policy: CompositePolicyFile, frames: int, *, source: str, sha256: str | None = None) -> str:
+    """The I/O file (``wbc.control.onnx_io`` schema) of a policy file exported with `frames` observation frames.
+
+    Args:
+        policy: the policy file exported.
+        frames: observation frames the model's input holds.
+        source: the policy file's path, named in the comment and the summary.
+        sha256: the model file's sha256 (hex), written as ``[onnx] sha256``; None: none written.
+    """
     meta = policy.meta
     desc = get_robot(meta["robot"], meta["arm_mode"])
     scales = meta["obs_scales"]
@@ -114,6 +123,7 @@ def io_text(policy: CompositePolicyFile, frames: int, *, source: str) -> str:
         "[onnx]",
         'input = "obs"',
         'output = "actions"',
+        *([f'sha256 = "{sha256}"'] if sha256 is not None else []),
         "",
         "[observation]",
         f"history = {frames}",
@@ -141,7 +151,8 @@ def io_text(policy: CompositePolicyFile, frames: int, *, source: str) -> str:
 def export_onnx(policy: str | Path, out: str | Path, *, replay: bool = True) -> tuple[Path, Path]:
     """Write ``<out>.onnx`` and its I/O file ``<out>.toml`` for a policy file (single or composite).
 
-    The weights are inside the model (no external data file). With `replay`, ``<out>.replay.npz`` records a short
+    The weights are inside the model (no external data file), and the I/O file records the model's sha256. With
+    `replay`, ``<out>.replay.npz`` records a short
     rollout of the policy (`wbc.learned.policy.replay_recorder.record_replay`), against which
     ``wbc check-controller onnx:<out>.onnx --replay <out>.replay.npz`` checks the export and its I/O file.
 
@@ -169,7 +180,8 @@ def export_onnx(policy: str | Path, out: str | Path, *, replay: bool = True) -> 
         # torch still has it
         warnings.simplefilter("ignore", DeprecationWarning)
         torch.onnx.export(graph, (example,), str(model), input_names=["obs"], output_names=["actions"], dynamo=False)
-    io.write_text(io_text(composite, graph.frames, source=str(policy)), encoding="utf-8")
+    io.write_text(io_text(composite, graph.frames, source=str(policy), sha256=weights_sha256(model)),
+                  encoding="utf-8")
     if replay:
         record_replay(policy, replay_path_for(model))
     return model, io

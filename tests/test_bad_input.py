@@ -1,0 +1,248 @@
+"""Bad input on every surface is a clear one-line error (exit status 2 from the CLI), never a traceback or a result.
+
+One test per surface: scenario files, a plug-in's ``--controller-config``, a results directory's ``run.json``, a
+stored episode, and the command line's flags. Everything here is built in the test (no trial is played): fast.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.arena.episode import Episode
+from wbc.arena.identity import RunIdentity, ScenarioRef, SimulatedRunIdentity
+from wbc.arena.results import episode_path
+from wbc.cli.main import main
+from wbc.cli.parser import build_parser
+from wbc.control.plugin import read_controller_config
+from wbc.errors import EpisodeFileError, FileFieldError, RecordError, ScenarioError
+from wbc.scenario.domain import DomainParams
+from wbc.scenario.scenario import load_scenario
+from wbc.scenario.terrain import TerrainConfig
+
+ROOT = Path(__file__).resolve().parent.parent
+PUSH = (ROOT / "scenarios" / "push.toml").read_text()
+
+
+def _cli_error(capsys: pytest.CaptureFixture[str], argv: list[str]) -> str:
+    """Run the CLI on `argv`; it must end with status 2 (returned, or a usage error's exit) and no traceback."""
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse: a usage error
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err
+    return err
+
+
+def _scenario(tmp_path: Path, old: str, new: str, name: str = "bad.toml") -> Path:
+    assert old in PUSH
+    path = tmp_path / name
+    path.write_text(PUSH.replace(old, new, 1))
+    return path
+
+
+def test_scenario_values_that_would_be_fatal_or_absurd_are_refused_with_their_range(tmp_path, capsys):
+    wavelength = _scenario(tmp_path, "amplitude_m = 0.05", "amplitude_m = 0.05\nbase_wavelength_m = 0.001")
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(wavelength)
+    message = str(err.value)
+    assert message.startswith(f"{wavelength}:") and err.value.field == "[terrain] base_wavelength_m"
+    assert "must be in [0.4, 20] m with octaves = 4, got 0.001" in message and "GiB" in message
+    err = _cli_error(capsys, ["run", "stand", "--scenario", str(wavelength), "--out", str(tmp_path / "o")])
+    assert "[terrain] base_wavelength_m: must be in [0.4, 20] m" in err
+    assert not (tmp_path / "o").exists()  # refused before any trial
+    # the same check guards a TerrainConfig built in code
+    with pytest.raises(ValueError, match="finest octave"):
+        TerrainConfig(kind="fractal", base_cell=0.001)
+    cases = {
+        ("friction = [0.8, 1.0]", "friction = [1e-10, 1e-10]"): "[domain] friction: both ends must be in [0.05, 2]",
+        ("friction = [0.8, 1.0]", "friction = [0.8, 1.0]\npayload_kg = [0.0, 15.0]"):
+            "[domain] payload_kg: both ends must be in [-1, 10]",
+        ("friction = [0.8, 1.0]", "friction = [0.8, 1.0]\nmotor_strength = [0.0001, 1.0]"):
+            "[domain] motor_strength: both ends must be in [0.1, 2]",
+        ("duration_s = 20.0", "duration_s = 0.001"): "[scenario] duration_s: must be in [0.1, 600], got 0.001",
+        ("duration_s = 0.09", "duration_s = 1e-6"): "[pushes] duration_s: must be in [0.01, 1]",
+        ("interval_s = [4.0, 6.0]", "interval_s = [4.0, 1e300]"): "[pushes] interval_s: both ends must be in (0, 600]",
+        ("duration_s = 0.09", "duration_s = 0.6"): "#2 push_force_n: a push of 400 N for [pushes] duration_s 0.6 s "
+                                                   "delivers 240 N s, more than 200 N s",
+        ("amplitude_m = 0.05", "amplitude_m = 0.05\nhalf_extent_m = 1e6"):
+            "[terrain] half_extent_m: must be in (1, 50]",
+    }
+    for (old, new), says in cases.items():
+        with pytest.raises(ScenarioError) as err:
+            load_scenario(_scenario(tmp_path, old, new))
+        assert says in str(err.value), (new, str(err.value))
+    with pytest.raises(ValueError, match=r"friction must be in \[0.05, 2\]"):
+        DomainParams(friction=1e-10)
+    # files that are not scenario files: a directory, a device, nesting a parser cannot follow, a 5000-digit number
+    deep = tmp_path / "deep.toml"
+    deep.write_text("a = " + "[" * 5000 + "]" * 5000 + "\n")
+    huge = tmp_path / "huge.toml"
+    huge.write_text("a = " + "1" * 5000 + "\n")
+    for path, says in ((tmp_path, "cannot read the file: is a directory"),
+                       (Path("/dev/zero"), "cannot read the file: not a regular file"),
+                       (deep, "nested too deep"), (huge, "invalid TOML value: Exceeds the limit")):
+        with pytest.raises(ScenarioError, match=says):
+            load_scenario(path)
+    # every shipped scenario still loads
+    for shipped in sorted((ROOT / "scenarios").glob("*.toml")):
+        if shipped.name != "published.toml":
+            load_scenario(shipped)
+
+
+def test_a_controller_config_that_cannot_be_read_is_a_clear_error(tmp_path, capsys):
+    deep = tmp_path / "deep.toml"
+    deep.write_text("".join(f"[{'t.' * 40}x]\n"))  # 41 tables deep
+    big = tmp_path / "big.toml"
+    big.write_bytes(b"# " + b"x" * (2 << 20) + b"\n")
+    for path, says in ((deep, "nested more than 32 levels deep"), (big, "more than the 1 MiB a toml file may have"),
+                       (Path("/dev/zero"), "not a regular file")):
+        with pytest.raises(FileFieldError, match=says):
+            read_controller_config(path)
+        # read before the plug-in is imported: the missing module is never reached
+        err = _cli_error(capsys, ["check-controller", "no_such_pkg.mod:make", "--controller-config", str(path)])
+        assert says in err and str(path) in err and "no_such_pkg" not in err
+
+
+def _identity() -> SimulatedRunIdentity:
+    ref = ScenarioRef(path="scenarios/push.toml", name="push", hash="0" * 64, published=False, version=1)
+    return SimulatedRunIdentity(controllers=("stand",), scenario=ref, bands=("in",), seeds=(0,), trials=1,
+                                no_push=False, debug_truth=False)
+
+
+def _write_run(root: Path, config: dict) -> Path:
+    root.mkdir(parents=True, exist_ok=True)
+    path = root / "run.json"
+    path.write_text(json.dumps({"config": config}))
+    return path
+
+
+def test_a_run_json_with_impossible_values_names_the_file_and_field(tmp_path, capsys):
+    good = _identity().as_json()
+    cases = {"trials": (0, "field trials: expected a whole number in [1, 100000], got 0"),
+             "seeds": ([-1], "field seeds: expected a non-empty list of whole numbers in [0, 4294967295]")}
+    for key, (value, says) in cases.items():
+        path = _write_run(tmp_path / key, {**good, key: value})
+        with pytest.raises(RecordError, match=rf"^{path}: {says}".replace("[", r"\[").replace("]", r"\]")):
+            RunIdentity.load(path)
+    # NaN and infinity are JSON to Python, not to us
+    nan = tmp_path / "nan"
+    nan.mkdir()
+    (nan / "run.json").write_text(json.dumps({"config": {**good, "until_significant": {
+        "alpha": math.nan, "pairs": []}}}))
+    with pytest.raises(RecordError, match="until_significant.alpha: expected a finite number, got nan"):
+        RunIdentity.load(nan / "run.json")
+    # a long value is echoed shortened
+    long = _write_run(tmp_path / "long", {**good, "bands": "x" * 10_000})
+    with pytest.raises(RecordError, match=r"\(10002 characters\)") as err:
+        RunIdentity.load(long)
+    assert len(str(err.value)) < 600
+    huge = tmp_path / "huge"
+    huge.mkdir()
+    (huge / "run.json").write_text('{"config": {"trials": ' + "1" * 5000 + "}}")
+    with pytest.raises(RecordError, match="holds an integer of more than 4300 digits"):
+        RunIdentity.load(huge / "run.json")
+    err = _cli_error(capsys, ["view", "--episode", str(tmp_path / "trials"), "--trial", "0",
+                              "--record", str(tmp_path / "x.html")])
+    assert "run.json: field trials: expected a whole number in [1, 100000], got 0" in err
+
+
+def _episode(k: int = 20) -> Episode:
+    t = 0.02 * np.arange(1, k + 1)
+    qpos = np.zeros((k, 7 + 15))
+    qpos[:, 2], qpos[:, 3] = 0.3, 1.0
+    zeros = np.zeros(k)
+    return Episode(duration_s=1.0, control_dt=0.02, fell=False, fall_time_s=math.nan, t=t,
+                   command=np.zeros((k, 3)), v_base_in_yaw=np.zeros((k, 2)), yaw_rate=zeros, roll=zeros,
+                   pitch=zeros, power=zeros, arm_q=np.zeros((k, 3)), qpos=qpos, act_s=np.full(k, 1e-4))
+
+
+def test_a_malformed_episode_is_refused_naming_the_field_and_never_drawn(tmp_path, capsys):
+    good = tmp_path / "good.npz"
+    _episode().save(str(good))
+    assert len(Episode.load(str(good)).t) == 20
+    with np.load(good) as z:
+        fields = {k: z[k] for k in z.files}
+
+    def broken(**changes: np.ndarray) -> Path:
+        path = tmp_path / "broken.npz"
+        np.savez(path, **{**fields, **changes})
+        return path
+
+    t = fields["t"].copy()
+    t[5] = t[4]
+    qpos_nan = fields["qpos"].copy()
+    qpos_nan[3, 0] = np.nan
+    qpos_zero_quat = fields["qpos"].copy()
+    qpos_zero_quat[7, 3] = 0.0
+    cases = [
+        (dict(t=t), r"field t: not strictly increasing \(t\[4\] = 0.1, t\[5\] = 0.1\)"),
+        (dict(t=np.array([0.0, np.inf])), "field t: inf at index"),
+        (dict(command=fields["command"][:-1]), "field command: 19 rows, expected 20 \\(one per entry of t\\)"),
+        (dict(qpos=qpos_nan), r"field qpos: nan at index \(3, 0\)"),
+        (dict(qpos=qpos_zero_quat), r"field qpos: the base quaternion qpos\[7, 3:7\] has norm 0"),
+        (dict(qpos=fields["qpos"][:, :5]), r"field qpos: shape \(20, 5\)"),
+        (dict(duration_s=np.array([1.0, 2.0])), "field duration_s: shape \\(2,\\), expected a single number"),
+        (dict(control_dt=np.array(-0.02)), "field control_dt: -0.02, expected a finite number in \\(0, 1\\]"),
+        (dict(roll=np.array(["a"] * 20)), "field roll: dtype <U1, expected numbers"),
+        (dict(push_start=np.array([np.nan])), "field push_start: nan"),
+    ]
+    for changes, says in cases:
+        with pytest.raises(EpisodeFileError, match=says):
+            Episode.load(str(broken(**changes)))
+    with pytest.raises(EpisodeFileError, match="not a readable .npz archive"):
+        (tmp_path / "junk.npz").write_bytes(b"not a zip")
+        Episode.load(str(tmp_path / "junk.npz"))
+    # through the viewer: the malformed episode of a results directory is an error, not a replay
+    root = tmp_path / "run"
+    _write_run(root, _identity().as_json())
+    stored = episode_path(root, "stand", "in", 0, 0)
+    stored.parent.mkdir(parents=True)
+    stored.write_bytes(broken(t=t).read_bytes())
+    record = tmp_path / "replay.html"
+    err = _cli_error(capsys, ["view", "--episode", str(root), "--trial", "0", "--record", str(record)])
+    assert f"{stored}: field t: not strictly increasing" in err and not record.exists()
+
+
+@pytest.mark.parametrize(("argv", "says"), [
+    (["--workers", "0"], "argument --workers: must be in [1, 256], got '0'"),
+    (["--workers", "-3"], "argument --workers: must be in [1, 256], got '-3'"),
+    (["--seeds", "0"], "argument --seeds: must be in [1, 10000], got '0'"),
+    (["--seeds", "1" * 5000], "argument --seeds: expected a whole number in [1, 10000], got '1111"),
+    (["--trials", "0"], "argument --trials: must be in [1, 100000], got '0'"),
+    (["--trials", "2.5"], "argument --trials: expected a whole number in [1, 100000], got '2.5'"),
+    (["--speed", "nan"], "argument --speed: must be a finite number in [0, 100], got 'nan'"),
+    (["--max-consecutive-errors", "-1"], "argument --max-consecutive-errors: must be in [0, 100000]"),
+])
+def test_run_flags_out_of_range_are_usage_errors_that_state_the_range(argv, says, tmp_path, capsys):
+    err = _cli_error(capsys, ["run", "stand", "--scenario", "scenarios/push.toml", *argv])
+    assert says in err and len(err.splitlines()[-1]) < 300  # a long value is echoed shortened
+
+
+def test_other_flags_state_their_range_and_out_may_not_be_a_file(tmp_path, capsys):
+    for argv, says in (
+        (["view", "stand", "--trial", "0", "--fps", "0"], "argument --fps: must be a finite number in (0, 240]"),
+        (["view", "stand", "--trial", "0", "--fps", "1000"], "argument --fps: must be a finite number in (0, 240]"),
+        (["view", "stand", "--trial", "-1"], "argument --trial: must be in [0, 99999]"),
+        (["view", "stand", "--trial", "0", "--speed", "inf"], "argument --speed: must be a finite number in [0, 100]"),
+        (["bench", "mpc", "--seconds", "inf"], "argument --seconds: must be a finite number in (0, 14400] s"),
+        (["hw", "emulate", "--seconds", "0"], "argument --seconds: must be a finite number in (0, 14400] s"),
+        (["compare", "stand", "mpc", "--scenario", "x.toml", "--until-significant", "--alpha", "1"],
+         "argument --alpha: must be a finite number in (0, 1)"),
+    ):
+        assert says in _cli_error(capsys, argv)
+    a_file = tmp_path / "results.txt"
+    a_file.write_text("not a directory")
+    err = _cli_error(capsys, ["run", "stand", "--scenario", "scenarios/push.toml", "--out", str(a_file)])
+    assert f"argument --out: '{a_file}' exists and is not a directory" in err
+    assert a_file.read_text() == "not a directory"
+    args = build_parser().parse_args(["run", "stand", "--scenario", "x.toml", "--band", "in", "--band", "ood",
+                                      "--band", "in"])
+    assert args.band == ["in", "ood"]
+    assert "wbc: warning: --band 'in' given more than once; using it once" in capsys.readouterr().err
