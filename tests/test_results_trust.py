@@ -208,7 +208,8 @@ def test_the_divergence_check_finds_impossible_states_only():
     assert "through the floor" in check.truth(dataclasses.replace(ok, base_position_in_world=np.array([0, 0, -2.])))
 
 
-def test_a_diverging_simulation_ends_as_diverged_with_no_absurd_number_in_the_summary(stored):
+def test_a_diverging_simulation_ends_as_diverged_with_no_absurd_number_in_the_summary(stored, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its instability warning to MUJOCO_LOG.TXT in the working directory
     scenario, out = stored
     loaded = load_scenario(scenario)
     (trial,) = loaded.trials(loaded.bands, [0], 1)
