@@ -298,7 +298,7 @@ def test_estop_while_the_robot_is_stood_up_stops_it_and_plays_nothing(stepped_go
 
 
 def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(stepped_go1: Stepped,
-                                                                                  tmp_path: Path) -> None:
+                                                                                  tmp_path: Path, capsys) -> None:
     # folded to its calf stops, as the real-time emulator leaves an idle robot: beyond the SDK's position table
     emu = stepped_go1.emu
     emu.transport(stepped_go1.clock)  # the simulation is built (the trial's builder hands out another channel)
@@ -315,6 +315,9 @@ def test_a_robot_outside_its_joint_ranges_is_not_stood_up_and_nothing_is_played(
     err = str(refused.value)
     assert "tripped while standing the robot up" in err and "joint_range" in err and "nothing was played" in err
     assert REMEDIES["joint_range"] in err
+    # in-process devices, said as the run starts: nothing damps the legs if this process dies
+    assert "--no-io-process: the robot's devices run in this process; if it dies, nothing damps" in (
+        capsys.readouterr().err)
     assert not (out / "trials.csv").exists()
     assert emu.commands() and all(c.damping for c in emu.commands())  # not one servo frame reached the robot
 

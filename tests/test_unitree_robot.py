@@ -983,3 +983,16 @@ def test_an_emulator_holds_its_robot_until_a_command_drives_a_motor() -> None:
     rig.clock.advance(0.05)
     assert emu.held and emu.sim_time == 0.0
     emu.close()
+
+
+def test_a_client_of_another_model_is_told_to_check_the_robot_on_both_sides() -> None:
+    # an a1 client against a go1 emulator: the emulator drops every LowCmd by its length and says whose it is; the
+    # client, hearing nothing, says a robot of another model ignores its commands
+    rig = _stepped("go1")
+    cfg = UnitreeRobotConfig(robot="a1", target_host=LOOPBACK, target_port=9, connect_timeout=0.05)
+    robot = UnitreeRobot(cfg, rig.emu.transport(rig.clock), clock=rig.clock)
+    with pytest.raises(RobotLinkError, match=r"nothing came back at all.*go1\) ignores an a1's LowCmd.*--robot"):
+        robot.connect()
+    assert rig.emu.stats.length >= 0.05 / LINK_PERIOD and rig.emu.stats.accepted == 0
+    assert "610 bytes is an a1 LowCmd, and this side speaks go1; check --robot on both sides" in rig.emu.last_reject
+    rig.emu.close()

@@ -259,7 +259,7 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         with _stopped_by_signals():
             while time.monotonic() < end and emulator.failure is None:
                 time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
-    printers.print_emulator_counts(EmulatorCounts.of(emulator))
+    printers.print_emulator_counts(EmulatorCounts.of(emulator), last_reject=emulator.last_reject)
     if emulator.failure is not None:
         raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
     return 0
@@ -282,7 +282,7 @@ def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | 
         with _stopped_by_signals():
             while time.monotonic() < end and emulator.failure is None:
                 time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
-    printers.print_emulator_counts(EmulatorCounts.of(emulator.legs))
+    printers.print_emulator_counts(EmulatorCounts.of(emulator.legs), last_reject=emulator.legs.last_reject)
     printers.print_bus_counts(emulator.arm.stats)
     if emulator.failure is not None:
         raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
@@ -455,6 +455,10 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                           "protocol on the simulator; not both")
     host, port = _hardware_target(args, "run a trial on a real robot") if not args.sim else (None, None)
     arm_port = _hardware_arm_port(args, "run a trial on a real arm")
+    if not args.sim and not args.io_process:
+        print("wbc: warning: --no-io-process: the robot's devices run in this process; if it dies, nothing damps the "
+              "legs, whose motors keep the last command they got (the robot has no watchdog). For debugging only",
+              file=sys.stderr)
     robot = _robot_name(args.robot) if args.robot is not None else None
     local = _address(args.local, "--local") if args.local else None
     out = Path(args.out) if args.out else Path("runs") / (

@@ -396,7 +396,9 @@ def build_parser() -> argparse.ArgumentParser:
     hwrun.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
     hwrun.add_argument("--io-process", action=argparse.BooleanOptionalAction, default=True,
                        help="run the robot's devices (legs link, arm bus) in a child process with its own interpreter "
-                       "lock, so that the controller cannot starve them (default; --no-io-process: in this process)")
+                       "lock, so that the controller cannot starve them, and that damps the legs when this process "
+                       "dies (default; --no-io-process: in this process, for debugging: if it dies, the legs' motors "
+                       "keep the last command they got, as the robot has no watchdog)")
     hwrun.add_argument("--settle", type=bounded_float(0.0, 60.0, unit="s"), default=1.0,
                        help="after a safety trip, hold the robot damped and read for S seconds, 0..60 (default 1)")
     hwrun.add_argument("--out", type=results_dir, default=None,

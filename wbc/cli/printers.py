@@ -481,11 +481,16 @@ def print_bus_counts(stats: BusStats) -> None:
           f"packets {stats.statuses}; unheard {stats.unheard}")
 
 
-def print_emulator_counts(counts: EmulatorCounts) -> None:
-    """``wbc hw emulate``'s closing line: commands decoded, rejects by reason, replies."""
+def print_emulator_counts(counts: EmulatorCounts, *, last_reject: str = "") -> None:
+    """``wbc hw emulate``'s closing line: commands decoded, rejects by reason, replies.
+
+    Then why the last reject was, when there was one: a client of another model is named there.
+    """
     rejects = ", ".join(f"{reason} {counts.rejected[reason]}" for reason in REJECT_REASONS)
     print(f"commands decoded {counts.accepted}; rejected {sum(counts.rejected.values())} ({rejects}); "
           f"refused (negative gain) {counts.refused}; replies {counts.replies}")
+    if last_reject:
+        print(f"  the last rejected: {last_reject}")
 
 
 @dataclass(frozen=True)

@@ -140,6 +140,7 @@ class UnitreeEmulator:
             raise ConfigError(f"UnitreeEmulator: the sim must drive the 12 legs only (arm mode none or locked), it has "
                               f"{self.sim.num_joints} joints")
         self.stats = DecodeStats()
+        self.last_reject = ""  # the latest rejected LowCmd's reason, empty until one is rejected
         self.refused = 0  # valid frames whose gains a motor cannot apply (negative): the motors got no torque
         self.replies = 0  # state datagrams sent
         self.faults = FaultSet()
@@ -304,7 +305,8 @@ class UnitreeEmulator:
         """
         try:
             wire = decode_command(self.layout, data, stats=self.stats)
-        except FrameError:
+        except FrameError as exc:
+            self.last_reject = str(exc)  # why, for the operator: a client of another model says so here
             return False
         cmd = self._off
         if (wire.mode == MODE_SERVO).all():

@@ -19,7 +19,7 @@ from __future__ import annotations
 from wbc.errors import FrameError
 from wbc.hardware.unitree.crc import frame_crc
 from wbc.hardware.unitree.decode_stats import DecodeStats
-from wbc.hardware.unitree.layout import LEVEL_LOWLEVEL, FrameLayout
+from wbc.hardware.unitree.layout import LAYOUTS, LEVEL_LOWLEVEL, FrameLayout, with_article
 
 __all__ = ["check_frame", "reject"]
 
@@ -29,6 +29,14 @@ def reject(stats: DecodeStats | None, reason: str, layout: FrameLayout, frame_ki
     if stats is not None:
         stats.count_reject(reason)
     return FrameError(reason, layout.robot, frame_kind, detail)
+
+
+def _robot_of_size(length: int, frame_kind: str, layout: FrameLayout) -> str | None:
+    """The other robot whose `frame_kind` is exactly `length` bytes, or None."""
+    for name, other in LAYOUTS.items():
+        if name != layout.robot and length == (other.state_size if frame_kind == "LowState" else other.cmd_size):
+            return name
+    return None
 
 
 def check_frame(layout: FrameLayout, frame: bytes, size: int, frame_kind: str, stats: DecodeStats | None) -> None:
@@ -45,6 +53,12 @@ def check_frame(layout: FrameLayout, frame: bytes, size: int, frame_kind: str, s
         FrameError: with reason ``length``, ``header`` or ``crc``; counted in `stats`.
     """
     if len(frame) != size:
+        other = _robot_of_size(len(frame), frame_kind, layout)
+        if other is not None:  # the exact size of another robot's frame: a client and a robot of different models
+            raise reject(stats, "length", layout, frame_kind,
+                         f"{len(frame)} bytes, expected exactly {size}: {len(frame)} bytes is {with_article(other)} "
+                         f"{frame_kind}, and this side speaks {layout.robot}; check --robot on both sides "
+                         f"({with_article(other)} client against {with_article(layout.robot)} robot, or the reverse)")
         raise reject(stats, "length", layout, frame_kind,
                      f"{len(frame)} bytes, expected exactly {size} (a truncated or padded datagram, or a frame of "
                      f"another robot or SDK version; check that the codec's layout is the robot's)")

@@ -20,6 +20,7 @@ import numpy as np
 from wbc.errors import UnknownNameError
 
 __all__ = [
+    "with_article",
     "A1_LAYOUT",
     "CMD_MOTOR_DTYPE",
     "FrameLayout",
@@ -174,6 +175,11 @@ A1_LAYOUT = FrameLayout(
 
 LAYOUTS = {"go1": GO1_LAYOUT, "a1": A1_LAYOUT}
 """The layouts by robot name."""
+
+
+def with_article(robot: str) -> str:
+    """A robot's name with its article, for messages: ``an a1``, ``a go1``."""
+    return f"{'an' if robot[:1] in 'aeiou' else 'a'} {robot}"
 
 
 def frame_layout(robot: str) -> FrameLayout:

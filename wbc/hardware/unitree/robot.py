@@ -44,7 +44,7 @@ from wbc.hardware.pacing import WallPacer
 from wbc.hardware.robot import Robot
 from wbc.hardware.unitree.command_codec import encode_command
 from wbc.hardware.unitree.decode_stats import DecodeStats
-from wbc.hardware.unitree.layout import FrameLayout, frame_layout
+from wbc.hardware.unitree.layout import LAYOUTS, FrameLayout, frame_layout, with_article
 from wbc.hardware.unitree.link_stats import LinkStats
 from wbc.hardware.unitree.remote import Remote
 from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS, SdkTransport
@@ -144,6 +144,20 @@ class UnitreeRobotConfig:
                               f"periods ({2.0 / self.rate_hz} s)")
 
 
+def _no_state_hint(robot: str, stats: DecodeStats) -> str:
+    """What to check when no valid LowState came: the frames that did come say which mistake it is."""
+    others = " or ".join(name for name in LAYOUTS if name != robot)
+    if stats.length:
+        return (f"{stats.length} frame(s) had the wrong length for {with_article(robot)}: a robot of another model "
+                f"({others}) answers with frames of its own size; check that --robot names this robot (on the emulator "
+                "too)")
+    if stats.rejected:
+        return "frames came but none was a valid low-level LowState (see the rejects); is the robot in low-level mode?"
+    return ("nothing came back at all: is the robot (or emulator) on, in low-level mode, and is target_port right? A "
+            f"robot of another model ({others}) ignores {with_article(robot)}'s LowCmd, whose length it does not "
+            "expect: check that --robot names this robot (on the emulator too)")
+
+
 class UnitreeRobot(Robot):
     """An A1 or Go1's 12 leg motors over the low-level UDP wire.
 
@@ -230,10 +244,10 @@ class UnitreeRobot(Robot):
         ok = self._state is not None
         if not ok:
             self._shutdown(damp=False)
+            stats = self.decode_stats
             raise RobotLinkError(
                 f"UnitreeRobot({cfg.robot}): no valid LowState from {cfg.target_host}:{cfg.target_port} within "
-                f"{cfg.connect_timeout} s ({self.decode_stats.rejected} rejected); is the robot (or emulator) on, in "
-                "low-level mode, and is target_port right?"
+                f"{cfg.connect_timeout} s ({self.decode_stats.rejected} rejected); {_no_state_hint(cfg.robot, stats)}"
             ) from self._failure
 
     def _close(self) -> None:
