@@ -34,6 +34,7 @@ from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robo
 from wbc.hardware.io_block import IoBlocks
 from wbc.hardware.io_channel import error_report, rebuild_error
 from wbc.hardware.process_robot import ProcessLinkStats, ProcessRobot, build_process_robot
+from wbc.hardware.realtime import NO_REALTIME
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand
@@ -79,7 +80,19 @@ def test_contract_legs_and_arm_actuated_and_the_same_robot_as_in_process() -> No
             assert isinstance(stats, ProcessLinkStats) and stats.as_dict()["link/arm_bus/cycles"] > 0
             assert stats.io["states_published"] > 0
             pid = robot.pid
+            grant = robot.realtime_grant  # asked by default; granted, or refused with its reason
+            assert grant is not None and grant.pid == pid and grant.asked.startswith("SCHED_FIFO 50")
+            assert grant.realtime or any(r.startswith("SCHED_FIFO 50: ") for r in grant.refused)
         assert robot.pid is None and not _alive(pid)
+        assert emu.failure is None
+
+
+def test_the_io_process_asks_nothing_when_told_so() -> None:
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        with ProcessRobot(_legs(emu.address, realtime=NO_REALTIME)) as robot:
+            robot.advance(0.01)
+            grant = robot.realtime_grant
+            assert grant is not None and not grant.realtime and grant.refused == () and not grant.memory_locked
         assert emu.failure is None
 
 

@@ -64,7 +64,7 @@ from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
 from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError, UnknownNameError
-from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike, WallClock
+from wbc.hardware.capabilities import HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -379,6 +379,7 @@ def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
 
 def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial: Trial, *, published: bool) -> None:
     record, episode, hardware = result.record, result.episode, result.robot
+    grant = hardware.robot.realtime_grant if isinstance(hardware.robot, HasRealtimeGrant) else None
     scenario_name, scenario_hash = trial.scenario, trial.scenario_hash
     identity = HardwareRunIdentity(
         controllers=(record.controller,),
@@ -406,6 +407,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         "episode_wall_s": result.episode_wall_s, "cpu_s": result.cpu_s, "io_cpu_s": result.io_cpu_s,
         "link": result.link.as_dict(prefix="") if result.link is not None else None,
         "trial_started_s": result.trial_started_s,
+        "realtime": grant.to_dict() if grant is not None else None,  # the devices' process: asked, granted, refused
         "safety_events": [e.to_dict() for e in result.safety_events],
         "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
     }
@@ -431,7 +433,11 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
     record, episode, link, events = result.record, result.episode, result.link, result.safety_events
     period_ms = episode.control_dt * 1e3
     act = episode.act_s * 1e3
+    grant = result.robot.robot.realtime_grant if isinstance(result.robot.robot, HasRealtimeGrant) else None
     rows = [
+        ("devices' scheduling (I/O process)",
+         grant.describe() if grant is not None else "not requested: the devices ran in the controller's process, "
+                                                    "with ordinary scheduling"),
         ("ticks played", f"{len(episode.t)} of {int(round(episode.duration_s / episode.control_dt))} at "
                          f"{1.0 / episode.control_dt:g} Hz"),
         ("controller act p50 / p99 / max [ms]",

@@ -41,7 +41,9 @@ from wbc.hardware.emulators import (
 )
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
+from wbc.hardware.process_robot import build_process_robot
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
+from wbc.hardware.realtime import AUTO_CPU, NO_REALTIME, RealtimeGrant, RealtimeRequest, request_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
 from wbc.hardware.serial_port_policy import is_emulated_port
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
@@ -181,7 +183,8 @@ def _bench_arm(args: argparse.Namespace) -> int:
         rates = tuple(float(r) for r in args.rates.split(","))
     except ValueError:
         raise ConfigError(f"--rates {args.rates!r}: give comma-separated numbers in Hz, e.g. 100,200,400") from None
-    result = bench_arm(args.robot, rates=rates, seconds=args.seconds, latency_ms=args.latency)
+    result = bench_arm(args.robot, rates=rates, seconds=args.seconds, latency_ms=args.latency,
+                       realtime=realtime_request(args, place="first"))
     if args.json:
         printers.print_json(result.as_dict())
     else:
@@ -243,8 +246,11 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     mode = "lockstep" if args.lockstep else "realtime"
     wire = _WIRE_OF[args.robot]
+    # it stands in for the robot's own processors: asked before its threads start, as they inherit the scheduling
+    grant = request_realtime(realtime_request(args, place="first"))
     if actuated:
-        return _hw_emulate_with_arm(DESCRIPTIONS[wire], mode, args.port, faults, args.seconds, held=not args.drop)
+        return _hw_emulate_with_arm(DESCRIPTIONS[wire], mode, args.port, faults, args.seconds, held=not args.drop,
+                                    grant=grant)
     # no log: nobody reads it here, and a long one stalls the replies in each full garbage collection
     cfg = UnitreeEmulatorConfig(robot=wire, arm_mode=args.arm, mode=mode, port=args.port,
                                 held_until_driven=not args.drop, log_size=0)
@@ -255,6 +261,7 @@ def _hw_emulate(args: argparse.Namespace) -> int:
             emulator.inject(fault)
         printers.print_emulator_started(cfg.robot, cfg.mode, emulator.address, [f.value for f in faults],
                                         seconds=args.seconds, held=cfg.held_until_driven)
+        printers.print_realtime_grant("emulator", grant)
         end = time.monotonic() + args.seconds if args.seconds is not None else float("inf")
         with _stopped_by_signals():
             while time.monotonic() < end and emulator.failure is None:
@@ -266,7 +273,7 @@ def _hw_emulate(args: argparse.Namespace) -> int:
 
 
 def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | BusFault],
-                         seconds: float | None, *, held: bool) -> int:
+                         seconds: float | None, *, held: bool, grant: RealtimeGrant) -> int:
     """``wbc hw emulate --arm actuated``: one `RobotEmulator`, legs over UDP and arm over a pty, one physics."""
     # no logs: nobody reads them here, and long ones stall the answers in each full garbage collection
     emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode=mode, port=port, held_until_driven=held,
@@ -278,6 +285,7 @@ def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | 
         names = [f"arm_{f.value}" if isinstance(f, BusFault) else f.value for f in faults]
         printers.print_robot_emulator_started(robot, mode, emulator.address, emulator.port, names, seconds=seconds,
                                               held=held)
+        printers.print_realtime_grant("emulator", grant)
         end = time.monotonic() + seconds if seconds is not None else float("inf")
         with _stopped_by_signals():
             while time.monotonic() < end and emulator.failure is None:
@@ -433,6 +441,14 @@ def hw_check(args: argparse.Namespace, *,
     return 0
 
 
+def realtime_request(args: argparse.Namespace, *, place: str) -> RealtimeRequest:
+    """The `RealtimeRequest` of ``--rt-priority``, ``--rt-cpu`` and ``--no-realtime`` (`place`: the default CPU)."""
+    if args.no_realtime:
+        return NO_REALTIME
+    return RealtimeRequest(priority=args.rt_priority, cpu=AUTO_CPU if args.rt_cpu is None else args.rt_cpu,
+                           place=place)
+
+
 def _hw_run(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     return hw_run(args)
@@ -472,6 +488,13 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                               io_process=args.io_process,
                               controller_config=Path(args.controller_config) if args.controller_config else None,
                               io_file=Path(args.io) if args.io else None)
+
+    if build is None:
+        request = realtime_request(args, place="last")
+        make = build_process_robot if args.io_process else build_hardware_robot
+
+        def build(config: HardwareRobotConfig) -> HardwareRobot:
+            return make(dataclasses.replace(config, realtime=request))
 
     def confirm(hardware: HardwareRobot, spec: ControllerSpec) -> None:
         real = _real_devices(host, port, arm_port) if host is not None else []

@@ -18,6 +18,7 @@ from wbc.arena.identity import MAX_SEED, MAX_TRIALS
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES
+from wbc.hardware.realtime import DEFAULT_RT_PRIORITY
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
 from wbc.input_files import short
 from wbc.learned.train.stages import BASELINES, TASKS
@@ -194,6 +195,17 @@ _NAMES_HELP = (f"{', '.join(CONTROLLERS)}; policy:PATH (an exported policy file)
                "package.module:factory (a plug-in), or an installed plug-in's name (`wbc controllers` lists them)")
 
 
+def add_realtime_options(p: argparse.ArgumentParser, *, who: str, cpu: str) -> None:
+    """``--rt-priority``, ``--rt-cpu``, ``--no-realtime``: what `who` asks the OS for (`wbc.hardware.realtime`)."""
+    p.add_argument("--rt-priority", type=bounded_int(1, 99), default=DEFAULT_RT_PRIORITY, metavar="N",
+                   help=f"real-time priority (SCHED_FIFO) of {who}, 1..99 (default {DEFAULT_RT_PRIORITY}); refused "
+                   "without CAP_SYS_NICE or an rtprio limit, and then it runs with ordinary scheduling and says so")
+    p.add_argument("--rt-cpu", type=bounded_int(0, 4095), default=None, metavar="CPU",
+                   help=f"the CPU {who} runs on (default: the {cpu} CPU where there are several)")
+    p.add_argument("--no-realtime", action="store_true",
+                   help=f"run {who} with ordinary scheduling, on any CPU, memory not locked")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``wbc`` argument parser; every command sets ``handler``, the name `wbc.cli.main` dispatches on."""
     p = argparse.ArgumentParser(prog="wbc", description="Whole-body control of quadrupeds that carry an arm.")
@@ -304,6 +316,7 @@ def build_parser() -> argparse.ArgumentParser:
     barm.add_argument("--latency", type=bounded_float(0.0, 255.0, lo_open=True, unit="ms"), default=1.0,
                       help="the adapter's latency timer, up to 255 [ms] (the FTDI chip's largest; default 1)")
     barm.add_argument("--json", action="store_true", help="print JSON")
+    add_realtime_options(barm, who="the emulator's process", cpu="first")
     barm.set_defaults(handler="bench arm")
 
     hw = sub.add_parser("hw", help="real robots: an emulator, a read-only check, a trial on the robot")
@@ -333,6 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
     emulate.add_argument("--drop", action="store_true",
                          help="start with the robot free: left alone with its motors off it folds to its joint stops "
                          "(default: held at its standing pose, as in a harness, until a command drives a motor)")
+    add_realtime_options(emulate, who="the emulator (it stands in for the robot's own processors)", cpu="first")
     emulate.set_defaults(handler="hw emulate")
     check = hws.add_parser("check", help="connect to a robot, damping only, and print its state (never moves it)",
                            description="Connect the robot (the legs' UnitreeRobot, and the arm's DynamixelArm with "
@@ -399,6 +413,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "lock, so that the controller cannot starve them, and that damps the legs when this process "
                        "dies (default; --no-io-process: in this process, for debugging: if it dies, the legs' motors "
                        "keep the last command they got, as the robot has no watchdog)")
+    add_realtime_options(hwrun, who="the I/O process (the devices' threads)", cpu="last")
     hwrun.add_argument("--settle", type=bounded_float(0.0, 60.0, unit="s"), default=1.0,
                        help="after a safety trip, hold the robot damped and read for S seconds, 0..60 (default 1)")
     hwrun.add_argument("--out", type=results_dir, default=None,

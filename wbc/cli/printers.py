@@ -25,9 +25,10 @@ from wbc.arena.report import format_table, format_verdict
 from wbc.arena.summary import Summary
 from wbc.control.check import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
-from wbc.hardware.capabilities import SafetyEventLike
+from wbc.hardware.capabilities import HasRealtimeGrant, SafetyEventLike
 from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus
 from wbc.hardware.emulators import BusStats
+from wbc.hardware.realtime import RealtimeGrant
 from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
 from wbc.tools.arm_momentum import ArmMomentumTrial
 from wbc.tools.bench import (
@@ -444,6 +445,15 @@ def print_bench_arm(result: ArmBenchResult) -> None:
     print(f"  machine: {result.machine}")
 
 
+def print_realtime_grant(who: str, grant: RealtimeGrant | None) -> None:
+    """What `who` asked the OS for (real-time scheduling, a CPU, locked memory) and what it got."""
+    if grant is None:
+        print(f"  {who}: real-time scheduling not requested (the devices run in this process)", flush=True)
+        return
+    state = "REAL-TIME" if grant.realtime else "ORDINARY scheduling"
+    print(f"  {who} (pid {grant.pid}): {state}: {grant.describe()}", flush=True)
+
+
 def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faults: Sequence[str], *,
                            seconds: float | None, held: bool = False) -> None:
     """``wbc hw emulate``: where the emulator listens, and how it stops."""
@@ -600,6 +610,8 @@ def print_hw_run(result: HardwareTrialResult) -> None:
           f"{robot.target}): {r.scenario} band {r.band} seed {r.seed} trial {r.trial}, {ep.duration_s:g} s: {outcome}")
     for note in result.notes:
         print(f"  {note}")
+    if isinstance(robot.robot, HasRealtimeGrant):
+        print_realtime_grant("I/O process", robot.robot.realtime_grant)
     print(f"  metrics ({r.metrics_source}): V_lin err {r.vlin_err:.3f} m/s, V_ang err {r.vang_err:.3f} rad/s, max "
           f"roll {r.max_roll_deg:.2f} deg, max pitch {r.max_pitch_deg:.2f} deg, energy {r.energy_j:.1f} J")
     print(f"  timing: act p50 {r.act_ms_p50:.3f} ms, p99 {r.act_ms_p99:.3f} ms (period {ep.control_dt * 1e3:g} ms); "

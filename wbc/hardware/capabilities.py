@@ -5,8 +5,9 @@ A real robot offers none of these by default; the simulator offers the first thr
 capture as a `TruthSource`, a push rig as `Pushable`) takes the same path. A safety layer that records its
 transitions is a `HasSafetyEvents` (`wbc.hardware.safety.SafeRobot` is one); the protocol is structural, so the
 runner logs the events without importing the safety layer. A robot that paces `advance` on a wall clock over a link
-reports its lateness as a `HasLinkStats` (`wbc.hardware.unitree.UnitreeRobot` is one). A robot that knows its own
-configuration only from its sensors (joint encoders, IMU, a base state estimator) offers it as a
+reports its lateness as a `HasLinkStats` (`wbc.hardware.unitree.UnitreeRobot` is one); one whose devices run in a
+process that asked for real-time scheduling says what it got as a `HasRealtimeGrant` (`ProcessRobot`). A robot that
+knows its own configuration only from its sensors (joint encoders, IMU, a base state estimator) offers it as a
 `ConfigurationEstimate`, which is what a viewer draws of a real robot. A robot that lives in wall-clock time (a real
 robot, or an emulator over a wire) is a `WallClock`, so a safety layer times its checks on the clock the motors live
 on.
@@ -19,12 +20,13 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from wbc.hardware.realtime import RealtimeGrant
 from wbc.robots.description import RobotDescription
 from wbc.scenario.push import Push
 from wbc.types import BaseTruth
 
-__all__ = ["ConfigurationEstimate", "FallDetector", "HasLinkStats", "HasSafetyEvents", "LinkStatsLike", "Pushable",
-           "SafetyEventLike", "TruthSource", "WallClock"]
+__all__ = ["ConfigurationEstimate", "FallDetector", "HasLinkStats", "HasRealtimeGrant", "HasSafetyEvents",
+           "LinkStatsLike", "Pushable", "SafetyEventLike", "TruthSource", "WallClock"]
 
 
 @runtime_checkable
@@ -116,6 +118,15 @@ class HasLinkStats(Protocol):
 
     def link_stats(self) -> LinkStatsLike:
         """A snapshot of the link's counters since `connect`."""
+
+
+@runtime_checkable
+class HasRealtimeGrant(Protocol):
+    """A robot whose devices run in a process that asked the OS for real-time scheduling (the I/O process)."""
+
+    @property
+    def realtime_grant(self) -> RealtimeGrant | None:
+        """What that process asked for and was granted (`wbc.hardware.realtime`); None before `connect`."""
 
 
 @runtime_checkable

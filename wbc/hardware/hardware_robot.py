@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from wbc.errors import ConfigError, UnknownNameError
@@ -27,6 +27,7 @@ from wbc.hardware.clock import MONOTONIC, Clock
 from wbc.hardware.dynamixel.arm_config import DynamixelArmConfig
 from wbc.hardware.dynamixel.arm_robot import DynamixelArm
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
+from wbc.hardware.realtime import RealtimeRequest
 from wbc.hardware.robot import Robot
 from wbc.hardware.serial_port_policy import check_serial_port
 from wbc.hardware.unitree.robot import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig
@@ -65,6 +66,10 @@ class HardwareRobotConfig:
         arm_port: the arm's serial device (the U2D2, e.g. ``/dev/ttyUSB0``, or an emulator's pseudo-terminal).
         arm: the arm's bus in full (`DynamixelArmConfig`: rate, latency timer, watchdog ...) instead of `arm_port`;
             its ``robot`` is set to `robot`.
+        realtime: what the I/O process asks the OS for before it starts the devices' threads (`RealtimeRequest`:
+            real-time scheduling, a CPU of its own, locked memory; `NO_REALTIME`: nothing). Only the I/O process
+            (`wbc.hardware.process_robot.ProcessRobot`) applies it: a robot built in the controller's process never
+            changes that process's scheduling.
     """
 
     robot: str
@@ -78,6 +83,7 @@ class HardwareRobotConfig:
     transport: str = "udp"
     arm_port: str | None = None
     arm: DynamixelArmConfig | None = None
+    realtime: RealtimeRequest = field(default_factory=RealtimeRequest)
 
     def __post_init__(self) -> None:
         if self.robot not in HARDWARE_ROBOTS:

@@ -1,8 +1,10 @@
 """The I/O process: a hardware robot's devices (legs link, arm bus) served to a controller in another process.
 
 `wbc.hardware.process_robot.ProcessRobot` starts this as a fresh interpreter (``python -c``, not multiprocessing,
-whose spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the switch interval, builds the robot
-with `build_hardware_robot`, freezes its heap, connects it and reports on the control channel. The legs' link thread
+whose spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the switch interval, asks the OS
+for real-time scheduling, a CPU of its own and locked memory (`HardwareRobotConfig.realtime`,
+`wbc.hardware.realtime`), builds the robot with `build_hardware_robot`, freezes its heap, connects it and reports on
+the control channel, with what the OS granted. The legs' link thread
 then does the serving itself, through its hooks (`UnitreeRobot.set_link_hooks`), so that no thread of this process
 wakes twice a period only to pass data on:
 
@@ -44,6 +46,7 @@ from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.io_block import MAX_STATUS, IoBlocks
 from wbc.hardware.io_channel import ChannelClosed, LineChannel, error_report
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, QuadrupedArmRobot
+from wbc.hardware.realtime import RealtimeGrant, request_realtime
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteSource
 from wbc.hardware.unitree.remote import Remote
@@ -70,6 +73,8 @@ def serve_io_process(argv: list[str] | None = None) -> None:
     bell = socket.socket(fileno=int(args[3]))
     bell.setblocking(False)
     try:
+        # before any thread exists: the link's and the bus's threads inherit the policy and the CPU
+        grant = request_realtime(config.realtime)
         robot = build_hardware_robot(config).robot
         blocks = IoBlocks(robot.num_joints, fd=int(args[1]))
         freeze_heap()
@@ -78,7 +83,7 @@ def serve_io_process(argv: list[str] | None = None) -> None:
     except BaseException as exc:  # noqa: BLE001 - every failure is reported to the controller's process
         _report(control, error_report(exc))
         return
-    server = _Server(robot, blocks, control, bell, started)
+    server = _Server(robot, blocks, control, bell, started, grant)
     try:
         server.run()
     finally:
@@ -94,8 +99,9 @@ def _report(control: LineChannel, message: dict) -> None:
 
 class _Server:
     def __init__(self, robot: Robot, blocks: IoBlocks, control: LineChannel, bell: socket.socket,
-                 started: float) -> None:
+                 started: float, grant: RealtimeGrant) -> None:
         self.robot = robot
+        self.grant = grant
         self.blocks = blocks
         self.control = control
         self.bell = bell
@@ -112,7 +118,7 @@ class _Server:
     def run(self) -> None:
         self._publish()  # the first state, before the controller's process is told
         self.legs.set_link_hooks(before_send=self._forward, on_state=self._on_state)
-        self._send({"connected": True, "pid": os.getpid()})
+        self._send({"connected": True, "pid": os.getpid(), "realtime": self.grant.to_dict()})
         while not self.stop.is_set():
             ready = select.select([self.control], [], [], _WAIT_S)[0]
             if ready or self.control.pending():

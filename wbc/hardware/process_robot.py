@@ -15,7 +15,8 @@ its own lock:
   late and resynchronises; then, unless a state newer than the one last read has already been published, it waits
   (at most two link periods) for one;
 - control channel (`wbc.hardware.io_channel`): `connect` starts the I/O process, which builds, connects and reports;
-  `close` asks it to close the robot (which leaves it damped) and exit; `link_stats` fetches the devices' counters.
+  `close` asks it to close the robot (which leaves it damped) and exit; `link_stats` fetches the devices' counters;
+  `realtime_grant` says what scheduling the I/O process asked the OS for and got (`HardwareRobotConfig.realtime`).
   An exception there (a refused connect, `PortBusyError`, `RobotLinkError`, a lost serial port) is raised here as the
   same `wbc` error class with the same message; the I/O process dying is a `RobotLinkError` at the next `read`,
   `write` or `advance`. Either way the process, the sockets and the shared memory are released at once;
@@ -50,6 +51,7 @@ from wbc.hardware.io_block import IoBlocks
 from wbc.hardware.io_channel import ChannelClosed, LineChannel, rebuild_error
 from wbc.hardware.pacing import WallPacer
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, JointMotorStatus
+from wbc.hardware.realtime import RealtimeGrant
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.capabilities import MotorNames
 from wbc.hardware.unitree.link_stats import LinkStats
@@ -127,6 +129,7 @@ class ProcessRobot(Robot):
         self._read_count = 0  # the publication the caller last read
         self._state_count = -1  # the publication `_state` was built from
         self._pacer = WallPacer()
+        self._grant: RealtimeGrant | None = None
 
     # -- Robot ----------------------------------------------------------------------------------------------------
     @property
@@ -163,6 +166,7 @@ class ProcessRobot(Robot):
                 raise rebuild_error(reply, where="ProcessRobot I/O process")
             if not reply.get("connected"):
                 raise RobotLinkError(f"ProcessRobot: the I/O process answered {reply!r} instead of connecting")
+            self._grant = RealtimeGrant.from_dict(reply["realtime"])
         except ChannelClosed:
             self._release()
             raise RobotLinkError(f"ProcessRobot: the I/O process exited while connecting (status "
@@ -278,6 +282,11 @@ class ProcessRobot(Robot):
         arm = ArmBusStats(**reply["arm"]) if reply["arm"] is not None else None
         devices: LinkStatsLike = legs if arm is None and legs is not None else JoinedLinkStats(legs=legs, arm=arm)
         return ProcessLinkStats(devices=devices, io=dict(reply["io"]))
+
+    @property
+    def realtime_grant(self) -> RealtimeGrant | None:
+        """What the I/O process asked the OS for and got (`HasRealtimeGrant`); None before the first `connect`."""
+        return self._grant
 
     @property
     def pid(self) -> int | None:

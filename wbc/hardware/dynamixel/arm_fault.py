@@ -102,7 +102,9 @@ class ArmBusStats:
         retries: reads tried again after a flush.
         unexplained: failed reads whose retries failed too but whose servos all answered a ping afterwards (no
             fault latched).
-        stale: status packets skipped because they answered an earlier request (another ID or length).
+        missed_reads: reads whose tries all failed while every servo of the read had answered within the watchdog's
+            time (a late host or a late answer, not a dead servo): no fresh state that cycle, no fault.
+        late: status packets discarded because they answered an earlier request (another ID or length).
         damping_cycles: cycles that sent the host's damping instead of the written command.
         deadline_trips: times the write deadline expired.
         overruns: cycles that ended more than a period late (the thread then resynchronises).
@@ -119,7 +121,8 @@ class ArmBusStats:
     failed_transfers: int = 0
     retries: int = 0
     unexplained: int = 0
-    stale: int = 0
+    missed_reads: int = 0
+    late: int = 0
     damping_cycles: int = 0
     deadline_trips: int = 0
     overruns: int = 0

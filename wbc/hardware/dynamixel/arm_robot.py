@@ -21,15 +21,22 @@ The bus thread runs at `DynamixelArmConfig.rate_hz`. Each cycle:
    command is the one `write` gave. Damping (kp 0, kd `damping_kd`) replaces it before the first write, once
    `write` has not been called for `write_deadline`, after a latched fault, and while closing.
 
-Faults. A read that fails (timeout, corrupt answer) is tried again up to `retries` times, after a short wait and a
-flush. Then each servo of the read is pinged (up to three times), and those that stay silent or answer corrupt are
-named in an `ArmFault`, which latches. A hardware error bit latches one too, and so does any exception of the serial
-layer (the port is lost). A latched fault is printed to standard error, kept in `faults`, reported in `motor_status`
-as an error mode of the servos at fault, and freezes the freshness tick. A safety layer above therefore trips both
-on the motor mode and on the stale state. The torque policy while the host lives: the joints whose servos still
-answer are damped by the host, whatever `write` asks. A joint that cannot be read gets goal current 0 and goes limp.
-A servo with a hardware error has already switched its own torque off (Shutdown) and is limp too. A lost port can
-reach nothing: the servos' bus watchdog sets their goal current to 0 after `watchdog_s`, and the arm goes limp.
+Faults: late is not dead. A read that fails (timeout, corrupt answer) is tried again up to `retries` times, after a
+short wait and a flush. A status packet that answers an earlier request (late) is discarded by the bus, never taken for
+this one's (`SdkBus`, `ArmBusStats.late`). A read whose tries all failed is only a missed cycle
+(`ArmBusStats.missed_reads`: no fresh state, no fault) while every servo of it gave a valid answer within the last
+`watchdog_s`: a loaded host that ran a cycle late, or a servo that answered late, is not a dead servo, and the servos
+themselves tolerate that much silence before their own watchdog acts. Once a servo of the read has given no valid answer
+for `watchdog_s`, each servo of the read is pinged (up to three times), and those that stay silent or answer corrupt are
+named in an `ArmFault`, which latches. Meanwhile the law is closed only on a joint state at most `write_deadline` old; a
+joint whose last state is older gets goal current 0 (what its own watchdog would do), and the frozen tick lets a safety
+layer above trip on the stale state within its own deadline. A hardware error bit latches a fault at once, and so does
+any exception of the serial layer (the port is lost). A latched fault is printed to standard error, kept in `faults`,
+reported in `motor_status` as an error mode of the servos at fault, and freezes the freshness tick. A safety layer above
+therefore trips both on the motor mode and on the stale state. The torque policy while the host lives: the joints whose
+servos still answer are damped by the host, whatever `write` asks. A joint that cannot be read gets goal current 0 and
+goes limp. A servo with a hardware error has already switched its own torque off (Shutdown) and is limp too. A lost port
+can reach nothing: the servos' bus watchdog sets their goal current to 0 after `watchdog_s`, and the arm goes limp.
 
 If the host dies, each joint servo's Bus Watchdog (armed at `watchdog_s`) sets its goal current to 0, with the
 torque still on. The arm is then limp: only the gearbox's friction holds it, and it sags under gravity. `close`
@@ -58,7 +65,7 @@ from __future__ import annotations
 import enum
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
@@ -188,9 +195,11 @@ class DynamixelArm(Robot):
         self._temperature = np.zeros(n)
         self._voltage = np.zeros(n)
         self._port_lost = False
-        self._stale = 0
+        self._late = 0
         self._counts = dict(cycles=0, states=0, status_reads=0, failed_transfers=0, retries=0, unexplained=0,
-                            damping_cycles=0, deadline_trips=0, overruns=0)
+                            missed_reads=0, damping_cycles=0, deadline_trips=0, overruns=0)
+        self._heard_at = dict.fromkeys(self._ids, -np.inf)  # [s] each servo's latest valid answer
+        self._measured_at = np.full(3, -np.inf)  # [s] when each joint's state was last read
         self._timing = [0.0, 0.0, 0, 0.0, 0.0]  # period sum, period max, count, busy sum, busy max
         self._pacer = WallPacer(self.clock)
         self._measured = (np.zeros(3), np.zeros(3), np.zeros(3))
@@ -224,6 +233,7 @@ class DynamixelArm(Robot):
         except BaseException:
             bus.close()
             raise
+        self._heard_at = dict.fromkeys(self._ids, self.clock.now())  # every servo answered its start-up transfers
         self._bus = bus
         clock = self.clock
         deadline = clock.now() + cfg.connect_timeout
@@ -268,7 +278,7 @@ class DynamixelArm(Robot):
             self._thread = None
         if self._bus is not None:
             self._bus.close()
-            self._stale = self._bus.stale
+            self._late = self._bus.late
             self._bus = None
 
     def _read(self) -> RobotState:
@@ -359,8 +369,8 @@ class DynamixelArm(Robot):
         """A snapshot of the bus thread's counters."""
         with self._lock:
             period_sum, period_max, n, busy_sum, busy_max = self._timing
-            stale = self._bus.stale if self._bus is not None else self._stale
-            return ArmBusStats(**self._counts, late_advances=self._pacer.late_advances, stale=stale,
+            late = self._bus.late if self._bus is not None else self._late
+            return ArmBusStats(**self._counts, late_advances=self._pacer.late_advances, late=late,
                                period_mean=period_sum / n if n else 0.0, period_max=period_max,
                                busy_mean=busy_sum / n if n else 0.0, busy_max=busy_max)
 
@@ -560,6 +570,7 @@ class DynamixelArm(Robot):
         cfg = self.config
         for attempt in range(cfg.retries + 1):
             reads = call()
+            self._heard(r.id for r in reads if r.ok)
             if reads and all(r.ok for r in reads):
                 return reads
             with self._lock:
@@ -571,8 +582,22 @@ class DynamixelArm(Robot):
                 bus.flush()
         return None
 
+    def _heard(self, ids: Iterable[int]) -> None:
+        now = self.clock.now()
+        for servo_id in ids:
+            self._heard_at[servo_id] = now
+
+    def _unanswered(self, bus: SdkBus, ids: tuple[int, ...]) -> None:
+        """A read of `ids` failed for good: a missed cycle while each answered within `watchdog_s`, else identify."""
+        now = self.clock.now()
+        if all(now - self._heard_at[i] < self.config.watchdog_s for i in ids):
+            with self._lock:
+                self._counts["missed_reads"] += 1
+            return
+        self._identify(bus, ids)
+
     def _identify(self, bus: SdkBus, ids: tuple[int, ...]) -> None:
-        """Ping each of `ids` after a read failed for good; latch those that are silent or answer corrupt."""
+        """Ping each of `ids` after their silence reached `watchdog_s`; latch those silent or answering corrupt."""
         silent, corrupt = [], []
         for servo_id in ids:
             bus.flush()
@@ -587,6 +612,8 @@ class DynamixelArm(Robot):
                 silent.append(servo_id)
             elif result != COMM_SUCCESS:
                 corrupt.append(servo_id)
+            else:
+                self._heard((servo_id,))
         if not silent and not corrupt:
             with self._lock:
                 self._counts["unexplained"] += 1
@@ -597,8 +624,10 @@ class DynamixelArm(Robot):
                 with self._lock:
                     (self._silent if kind == "no_answer" else self._corrupt).update(bad)
                 self._latch(kind, tuple(bad),
-                            f"{', '.join(self._name(i) for i in bad)}: {describe_result(result)} on {retries + 1} "
-                            f"reads and on its pings", self._policy())
+                            f"{', '.join(self._name(i) for i in bad)}: no valid answer for "
+                            f"{self.clock.now() - min(self._heard_at[i] for i in bad):.3f} s (the watchdog's "
+                            f"{self.config.watchdog_s} s), {describe_result(result)} on {retries + 1} reads and on its "
+                            f"pings", self._policy())
 
     def _policy(self) -> str:
         """The torque policy in words, for the servos as they are now."""
@@ -631,7 +660,7 @@ class DynamixelArm(Robot):
             return
         reads = self._transfer(bus, lambda: bus.sync_read(*_PRESENT, ids))
         if reads is None:
-            self._identify(bus, ids)
+            self._unanswered(bus, ids)
             return
         current, velocity, ticks = (np.zeros(3) for _ in range(3))
         q0, dq0, tau0 = self._measured
@@ -644,6 +673,7 @@ class DynamixelArm(Robot):
             known[j] = True
         q, dq, tau = self.law.state(ticks, velocity, current)
         self._measured = (np.where(known, q, q0), np.where(known, dq, dq0), np.where(known, tau, tau0))
+        self._measured_at[known] = self.clock.now()
         for read in reads:
             if read.error & ALERT and not self._has_error((read.id,)):
                 self._check_hardware_error(bus, read.id)
@@ -688,7 +718,7 @@ class DynamixelArm(Robot):
                 self._counts["status_reads"] += 1
             reads = self._transfer(bus, lambda: bus.sync_read(address, length, ids))
             if reads is None:
-                self._identify(bus, ids)
+                self._unanswered(bus, ids)
                 return
         for read in reads:
             k = self._ids.index(read.id)
@@ -713,12 +743,13 @@ class DynamixelArm(Robot):
         q, dq, _ = self._measured
         tau = self.law.torque(rows, q, dq)
         units = self.law.goal_units(tau)
+        current = now - self._measured_at <= cfg.write_deadline  # a law closed on an older state is open-loop
         values = []
         for j, joint in enumerate(cfg.joints):
             servo_id = joint.servo_id
             if servo_id in self._silent:
                 continue  # it hears nothing; its watchdog stops it
-            reach = self._readable(servo_id) and not self._has_error((servo_id,))
+            reach = self._readable(servo_id) and not self._has_error((servo_id,)) and bool(current[j])
             values.append((servo_id, int(units[j]) if reach else 0))
         if values:
             bus.sync_write(_ADDR["goal_current"], 2, values)

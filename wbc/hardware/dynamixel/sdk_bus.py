@@ -1,14 +1,19 @@
 """`SdkBus`: the arm's serial bus through dynamixel_sdk, and the one place in `wbc` that calls that library.
 
 The backend (`DynamixelArm`) speaks to the servos only through this class. The SDK's `PacketHandler` (Protocol 2.0)
-is used unmodified: its transmit functions (`syncReadTx`, `readTx`, `syncWriteTxOnly`, `ping`, `writeTxRx`) and its
-receive function `rxPacket`, which returns a whole status packet, CRC checked. Two of its helpers are not used.
+is used unmodified: its transmit functions (`txPacket`, `syncReadTx`, `syncWriteTxOnly`) and its receive function
+`rxPacket`, which returns a whole status packet, CRC checked. Its helpers that wait for an answer are not used.
 `GroupSyncRead` throws each status packet's error byte away (the error byte carries the hardware alert) and fails
-the whole read without saying which ID failed. `readRx` takes the data of any status packet from the right ID,
-whatever its length. A late answer to an earlier request then passes for the answer to this one: on a loaded
-machine, a 10-byte answer of present values was read as a 1-byte Hardware Error Status, and its first byte as
-error bits. Here a status packet must come from the ID asked and carry exactly the bytes asked for; any other is a
-stale answer, counted in `stale` and skipped.
+the whole read without saying which ID failed. `readRx` and `txRxPacket` (behind `ping` and `writeTxRx`) take any
+status packet from the right ID as the answer, whatever its length. A late answer to an earlier request then passes
+for the answer to this one: on a loaded machine, a 10-byte answer of present values was read as a 1-byte Hardware
+Error Status, and its first byte as error bits, and a ping took a read's answer for its model number (the SDK's own
+``read4ByteTxRx`` raised `IndexError` on a 1-byte answer it took for a 4-byte one). Here every request says what it
+expects (`Expected`: the ID, the instruction, and so the exact length of the answer: a READ's bytes, a PING's three,
+a WRITE's none), and a status packet that does not match the outstanding request is an answer to an earlier one:
+it is counted in `late` and discarded, and the wait for the right one goes on within the request's reply timeout.
+Protocol 2.0 has no sequence number, so an answer of the same ID and length to the same request repeated (a retry)
+cannot be told apart: it carries the same registers, read a few milliseconds earlier.
 
 Two things of the SDK's port handler are replaced, in a subclass built when the SDK is first needed
 (`sdk_handlers`):
@@ -46,6 +51,7 @@ from typing import Any, Protocol, TypeVar, runtime_checkable
 
 from wbc.errors import SerialPortError
 from wbc.hardware.clock import Clock, ManualClock
+from wbc.hardware.dynamixel.protocol import Instruction
 from wbc.hardware.serial_port_policy import IN_PROCESS_PREFIX
 from wbc.optional import require
 
@@ -53,6 +59,7 @@ __all__ = [
     "COMM_RX_CORRUPT",
     "COMM_RX_TIMEOUT",
     "COMM_SUCCESS",
+    "Expected",
     "InProcessDevice",
     "SdkBus",
     "ServoRead",
@@ -70,6 +77,8 @@ COMM_RX_CORRUPT = -3002
 _RESULT_NAMES = {COMM_SUCCESS: "success", -1000: "port busy", -1001: "tx fail", -1002: "rx fail", -2000: "tx error",
                  -3000: "rx waiting", COMM_RX_TIMEOUT: "rx timeout", COMM_RX_CORRUPT: "rx corrupt",
                  -9000: "not available"}
+_PING_PARAMS = 3  # a ping's answer: model number (2 bytes), firmware version (1)
+_STATUS_OVERHEAD = 11  # header (4), ID, length (2), instruction, error, CRC (2): the bytes a status adds to its data
 _WAIT_SLICE = 0.001  # [s] longest single wait for the port's file descriptor
 _MIN_WAIT = 1e-6  # [s] the least an in-process wait moves the clock, so that a timeout always comes
 
@@ -105,6 +114,24 @@ class ServoRead:
     def value(self, offset: int, size: int, *, signed: bool = False) -> int:
         """The little-endian integer of `size` bytes at `offset` of the data."""
         return int.from_bytes(self.data[offset: offset + size], "little", signed=signed)
+
+
+@dataclass(frozen=True)
+class Expected:
+    """What the outstanding request expects back: an answer from `id` to `instruction`, carrying `length` bytes.
+
+    A status packet carries no instruction and no sequence number: the request's ID and the length its
+    instruction implies (a READ's bytes, a PING's 3, a WRITE's 0) are what an answer is matched on.
+    """
+
+    id: int
+    instruction: Instruction
+    length: int
+
+    def matches(self, packet: Sequence[int]) -> bool:
+        """True if `packet` (a whole status packet, stuffing removed) answers this request."""
+        # FF FF FD 00 | ID | LEN_L LEN_H | 0x55 | ERR | params | CRC, LEN = params + 4
+        return packet[4] == self.id and packet[5] | packet[6] << 8 == self.length + 4
 
 
 @functools.cache
@@ -306,7 +333,7 @@ class SdkBus:
         if named != port:
             raise SerialPortError(port, f"the port handler names {named!r}; only the port given is ever opened")
         self.is_open = False
-        self.stale = 0  # status packets skipped: another ID's, or another length than the request's
+        self.late = 0  # status packets discarded: they answered an earlier request (another ID or length)
 
     def _call(self, fn: Callable[..., T], *args: object) -> T:
         try:
@@ -342,31 +369,45 @@ class SdkBus:
 
     # -- transfers ------------------------------------------------------------------------------------------------
     def ping(self, servo_id: int) -> tuple[int, int, int]:
-        """(model number, result, error byte) of a PING."""
-        return self._call(self._ph.ping, self._port, servo_id)
+        """(model number, result, error byte) of a PING; only a 3-byte answer from `servo_id` is its answer."""
+        read = self._request(servo_id, Instruction.PING, [], _PING_PARAMS)
+        return (read.value(0, 2) if read.ok else 0), read.result, read.error
 
     def read(self, servo_id: int, address: int, length: int) -> ServoRead:
         """READ `length` bytes from `address` of one servo."""
-        result = self._call(self._ph.readTx, self._port, servo_id, address, length)
-        if result != COMM_SUCCESS:
-            return ServoRead(servo_id, b"", result, 0)
-        return self._receive(servo_id, length)
-
-    def _receive(self, servo_id: int, length: int) -> ServoRead:
-        """The status packet of `servo_id` carrying `length` bytes, skipping stale ones, within the SDK's timeout."""
-        while True:
-            packet, result = self._call(self._ph.rxPacket, self._port, False)
-            if result != COMM_SUCCESS:
-                return ServoRead(servo_id, b"", result, 0)
-            # packet: FF FF FD 00 | ID | LEN_L LEN_H | 0x55 | ERR | params | CRC (stuffing removed; LEN = params + 4)
-            if packet[4] == servo_id and packet[5] | packet[6] << 8 == length + 4:
-                return ServoRead(servo_id, bytes(packet[9: 9 + length]), COMM_SUCCESS, packet[8])
-            self.stale += 1
+        params = [*address.to_bytes(2, "little"), *length.to_bytes(2, "little")]
+        return self._request(servo_id, Instruction.READ, params, length)
 
     def write(self, servo_id: int, address: int, size: int, value: int) -> tuple[int, int]:
         """WRITE `value` (`size` bytes, little-endian, two's complement) at `address`; (result, error byte)."""
         data = list((int(value) & ((1 << (8 * size)) - 1)).to_bytes(size, "little"))
-        return self._call(self._ph.writeTxRx, self._port, servo_id, address, size, data)
+        read = self._request(servo_id, Instruction.WRITE, [*address.to_bytes(2, "little"), *data], 0)
+        return read.result, read.error
+
+    def _request(self, servo_id: int, instruction: Instruction, params: list[int], answer: int) -> ServoRead:
+        """Send one instruction to one servo and wait for its answer of `answer` bytes (see `Expected`)."""
+        # the SDK's packet layout: header (4), ID, LEN (2), INST, params, CRC (2), LEN = params + 3
+        packet = [0] * (len(params) + 10)
+        packet[4], packet[5], packet[6], packet[7] = servo_id, (len(params) + 3) & 0xFF, (len(params) + 3) >> 8, \
+            int(instruction)
+        packet[8: 8 + len(params)] = params
+        result = self._call(self._ph.txPacket, self._port, packet)
+        if result != COMM_SUCCESS:
+            return ServoRead(servo_id, b"", result, 0)
+        # the SDK's reply timeout: the answer's bytes for a READ, 11 for any other (as its txRxPacket)
+        self._call(self._port.setPacketTimeout, answer + _STATUS_OVERHEAD if instruction == Instruction.READ
+                   else _STATUS_OVERHEAD)
+        return self._receive(Expected(servo_id, instruction, answer))
+
+    def _receive(self, expected: Expected) -> ServoRead:
+        """The status packet that answers `expected`, discarding late ones, within the SDK's reply timeout."""
+        while True:
+            packet, result = self._call(self._ph.rxPacket, self._port, False)
+            if result != COMM_SUCCESS:
+                return ServoRead(expected.id, b"", result, 0)
+            if expected.matches(packet):
+                return ServoRead(expected.id, bytes(packet[9: 9 + expected.length]), COMM_SUCCESS, packet[8])
+            self.late += 1
 
     def sync_read(self, address: int, length: int, ids: Sequence[int]) -> list[ServoRead]:
         """SYNC_READ `length` bytes at `address` from `ids`, each answer checked for its ID and length.
@@ -380,7 +421,7 @@ class SdkBus:
             return [ServoRead(ids[0], b"", result, 0)]
         out = []
         for servo_id in ids:
-            out.append(self._receive(servo_id, length))
+            out.append(self._receive(Expected(servo_id, Instruction.SYNC_READ, length)))
             if not out[-1].ok:
                 break
         return out

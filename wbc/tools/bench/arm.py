@@ -53,6 +53,7 @@ from wbc.hardware.emulators import (
 )
 from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
 from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
 from wbc.optional import require
 from wbc.robots.registry import get_robot
@@ -235,16 +236,18 @@ def step_metrics(t: np.ndarray, y: np.ndarray, target: float) -> tuple[float, fl
     return 1e3 * float(t90 - t10), overshoot, 1e3 * settle, target - y_final
 
 
-def serve_robot_emulator_stdio(robot: str, seconds: float) -> None:
+def serve_robot_emulator_stdio(robot: str, seconds: float, realtime: dict | None = None) -> None:
     """The emulator process's body (``bench_arm`` starts it): a real-time `RobotEmulator`.
 
-    Writes the UDP address and the pty as a JSON line, serves until a line arrives on stdin (or `seconds` plus a
-    margin pass), then writes any failure as a JSON line.
+    It first asks the OS for what `realtime` names (`RealtimeRequest`'s fields; None: nothing), as ``wbc hw emulate``
+    does. Writes the UDP address, the pty and what the OS granted as a JSON line, serves until a line arrives on
+    stdin (or `seconds` plus a margin pass), then writes any failure as a JSON line.
     """
     realtime_switch_interval()  # the emulated robot answers its wires promptly
+    grant = request_realtime(RealtimeRequest(**realtime) if realtime is not None else NO_REALTIME)
     with RobotEmulator(RobotEmulatorConfig(robot=robot, mode="realtime")) as emu:
         host, port = emu.address
-        print(json.dumps({"host": host, "port": port, "pty": emu.port}), flush=True)
+        print(json.dumps({"host": host, "port": port, "pty": emu.port, "realtime": grant.describe()}), flush=True)
         end = time.monotonic() + seconds + _STOP_MARGIN
         while select.select([sys.stdin], [], [], max(0.0, end - time.monotonic()))[0]:
             line = sys.stdin.readline()
@@ -290,11 +293,12 @@ def _command(proc: subprocess.Popen[str], command: dict) -> dict:
     return answer
 
 
-def _start_emulator(robot: str, seconds: float) -> tuple[subprocess.Popen[str], dict]:
+def _start_emulator(robot: str, seconds: float,
+                    realtime: RealtimeRequest) -> tuple[subprocess.Popen[str], dict]:
     root = str(Path(wbc.__file__).resolve().parents[1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
     code = f"from wbc.tools.bench.arm import serve_robot_emulator_stdio; serve_robot_emulator_stdio({robot!r}, " \
-           f"{seconds!r})"
+           f"{seconds!r}, {asdict(realtime)!r})"
     proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                             env=env)
     if not select.select([proc.stdout], [], [], _START_TIMEOUT)[0]:
@@ -450,7 +454,8 @@ def _sim_step(robot: str, q0: np.ndarray, kp: float, kd: float, step: float) -> 
 
 def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200.0, 400.0, 1000.0),
               seconds: float = 2.0, latency_ms: float = 1.0, step: float = -0.05,
-              gains: tuple[tuple[float, float], ...] = ((20.0, 0.5), (60.0, 1.0))) -> ArmBenchResult:
+              gains: tuple[tuple[float, float], ...] = ((20.0, 0.5), (60.0, 1.0)),
+              realtime: RealtimeRequest = NO_REALTIME) -> ArmBenchResult:
     """Measure the arm's bus loop (rates, step response) against the emulated robot in its own process.
 
     Args:
@@ -460,6 +465,7 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         latency_ms: the arm's latency timer [ms].
         step: the elbow target's step [rad] (negative unfolds the stowed elbow).
         gains: (kp, kd) of each step response [N m / rad, N m s / rad].
+        realtime: what the emulator's process asks the OS for (it stands in for the robot's processors).
 
     Returns:
         The rows of each part (rates, steps on the bus and in simulation for each gain, reactions, the emulators'
@@ -474,7 +480,8 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         raise BenchError(f"bench arm: --seconds must be > 0 and each rate in 10..1000 Hz, got {seconds}, {rates}")
     total = len(rates) * (seconds + 1.0) + len(gains) * (_DISCARDS + 1) * (_SETTLE + _REPEATS * (_RECORD + 0.1) + 1.0) \
         + (len(_FAULTS) + 1) * (2 * _REACTION_TIMEOUT + 2.0)
-    proc, where = _start_emulator(robot, total)
+    proc, where = _start_emulator(robot, total, realtime)
+    print(f"bench arm: the emulator's process: {where.get('realtime')}", file=sys.stderr, flush=True)
     desc = get_robot(robot, "actuated")
     stand = stand_command(desc).stacked()
     stowed = desc.nominal_q[12:].copy()
