@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import sys
 import textwrap
 from dataclasses import dataclass
@@ -126,6 +127,34 @@ def plugin_package(tmp_path, monkeypatch):
     yield write
     for name in [m for m in sys.modules if m.split(".")[0] in packages]:
         del sys.modules[name]
+
+
+def _scheduling() -> tuple[object, ...]:
+    """This process's scheduling policy, its CPU set, and whether its memory is locked (VmLck in /proc)."""
+    locked = 0
+    try:
+        with open("/proc/self/status", encoding="ascii") as f:
+            locked = next((line.split()[1] for line in f if line.startswith("VmLck:")), "0")
+    except OSError:
+        pass
+    policy = os.sched_getscheduler(0) if hasattr(os, "sched_getscheduler") else None
+    cpus = frozenset(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
+    return policy, cpus, int(locked) > 0
+
+
+@pytest.fixture(autouse=True)
+def _keeps_ordinary_scheduling():
+    """Every test leaves the test process as it found it: no real-time policy, no CPU pinning, no locked memory.
+
+    The commands that stand in for a robot's processors (`wbc hw emulate`) ask for real-time scheduling for their
+    process; called in this process (``main([...])``), they must be told ``--no-realtime``, or every later test would
+    run pinned to one CPU under SCHED_FIFO with its memory locked.
+    """
+    before = _scheduling()
+    yield
+    after = _scheduling()
+    assert after == before, (f"this test changed the test process's scheduling (policy, CPUs, memory locked) from "
+                             f"{before} to {after}; pass --no-realtime to commands run in this process")
 
 
 @pytest.fixture

@@ -71,7 +71,8 @@ def no_socket(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
 
 
 def test_emulate_runs_and_prints_counts(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["hw", "emulate", "--robot", "a1", "--seconds", "0.5", "--lockstep", "--fault", "corrupt"]) == 0
+    assert main(["hw", "emulate", "--robot", "a1", "--seconds", "0.5", "--lockstep", "--fault", "corrupt",
+                 "--no-realtime"]) == 0
     out = capsys.readouterr().out
     assert "emulated a1 (lockstep) on 127.0.0.1:" in out and "faults: corrupt" in out
     assert "commands decoded 0; rejected 0 (length 0, header 0, crc 0, non_finite 0)" in out and "replies 0" in out
@@ -87,7 +88,7 @@ def test_emulate_counts_what_it_decoded_and_rejected(capsys: pytest.CaptureFixtu
     port = _free_loopback_port()
     codes: list[int] = []
     server = threading.Thread(target=lambda: codes.append(main(["hw", "emulate", "--port", str(port),
-                                                                "--seconds", "1.0"])))
+                                                                "--seconds", "1.0", "--no-realtime"])))
     server.start()
     layout = frame_layout("go1")
     frame = encode_command(layout, MotorCommand.damping(12, 3.0))
@@ -249,8 +250,9 @@ def test_emulate_carries_a_locked_arm_in_its_physics_and_refuses_an_unknown_mode
             assert emu.sim.num_joints == 12  # the wire drives the same 12 legs
             masses[arm] = float(emu.sim.model.body_mass.sum())
     assert masses["locked"] > masses["none"] + 0.3  # the held arm's mass is on the trunk
-    assert main(["hw", "emulate", "--robot", "go1", "--arm", "locked", "--seconds", "0.2", "--lockstep"]) == 0
-    assert main(["hw", "emulate", "--robot", "go1", "--arm", "welded", "--seconds", "0.2"]) == 2
+    assert main(["hw", "emulate", "--robot", "go1", "--arm", "locked", "--seconds", "0.2", "--lockstep",
+                 "--no-realtime"]) == 0
+    assert main(["hw", "emulate", "--robot", "go1", "--arm", "welded", "--seconds", "0.2", "--no-realtime"]) == 2
     err = capsys.readouterr().err
     assert "locked" in err and "none" in err and "actuated" in err and "Traceback" not in err
 

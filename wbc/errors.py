@@ -59,10 +59,11 @@ class UnknownNameError(WbcError, KeyError):
         self.kind = kind
         self.name = name
         self.valid = tuple(sorted(valid))
-        close = difflib.get_close_matches(str(name), self.valid, n=1)
+        close = difflib.get_close_matches(str(name), self.valid, n=1) if len(str(name)) <= 200 else []
         self.suggestion = close[0] if close else None
         hint = f"; did you mean {self.suggestion!r}?" if self.suggestion is not None else ""
-        super().__init__(f"unknown {kind} {name!r}{hint}; valid {kind}s: {', '.join(self.valid)}")
+        shown = repr(name) if len(repr(name)) <= 120 else f"{repr(name)[:90]}... ({len(str(name))} characters)"
+        super().__init__(f"unknown {kind} {shown}{hint}; valid {kind}s: {', '.join(self.valid)}")
 
     def __str__(self) -> str:  # KeyError would repr() the message
         return str(self.args[0])

@@ -25,6 +25,7 @@ import stat
 import sys
 import tomllib
 import zipfile
+import zlib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -228,6 +229,8 @@ def open_npz(path: str | os.PathLike[str], *, limit: int | None = None) -> np.li
                     _check_member(p, info, member)
     except zipfile.BadZipFile as exc:
         raise InputFileError(f"{p}: not a readable .npz archive ({exc})") from None
+    except zlib.error as exc:  # a damaged compressed member
+        raise InputFileError(f"{p}: a member does not decompress ({exc}); the file is damaged") from None
     except (OSError, EOFError) as exc:
         raise InputFileError(f"{p}: cannot be read ({type(exc).__name__}: {exc})") from None
     try:

@@ -38,6 +38,7 @@ from wbc.arena.report import summarize
 from wbc.arena.results import ResultsStore, check_out_dir, episode_path
 from wbc.arena.runner import TickObserver
 from wbc.arena.sequential import SequentialComparison
+from wbc.arena.sim_trial import check_rate
 from wbc.arena.stats import in_canonical_order
 from wbc.arena.summary import Summary
 from wbc.control.registry import ControllerSpec, get_controller
@@ -227,7 +228,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         if spec.kind in ("plug-in", "entry point"):
             # outside code is built once here, so a factory that raises or builds no controller fails before any
             # trial, in this process, with its own message
-            spec.make(get_robot(scenario.robot, spec.arm_mode))
+            # and its rate is checked there too: a rate of 0 or a period that is no whole number of physics steps is
+            # refused before any trial, not in each one
+            check_rate(spec.make(get_robot(scenario.robot, spec.arm_mode)), name, MujocoRobotConfig().timestep)
     bands = cfg.bands or scenario.bands
     for band in bands:
         if band not in scenario.bands:

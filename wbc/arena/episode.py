@@ -321,7 +321,8 @@ class Episode:
         if qpos.shape[1] < 8:
             raise EpisodeFileError(f"{path}: field qpos: shape {qpos.shape}, expected (ticks, 7 + joints): a base "
                                    "position, a quaternion and the joints; the file is damaged: play the trial again")
-        norms = np.linalg.norm(qpos[:, 3:7], axis=1)
+        with np.errstate(over="ignore"):  # a damaged file's huge values give an infinite norm, refused below
+            norms = np.linalg.norm(qpos[:, 3:7], axis=1)
         bad = np.flatnonzero(np.abs(norms - 1.0) > _QUAT_TOLERANCE)
         if bad.size:
             raise EpisodeFileError(f"{path}: field qpos: the base quaternion qpos[{bad[0]}, 3:7] has norm "

@@ -30,9 +30,10 @@ from wbc.control.registry import get_controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError, MissingCapabilityError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.input_files import short
 from wbc.scenario.trial import Trial
 
-__all__ = ["run_trial", "simulated_robot"]
+__all__ = ["check_rate", "run_trial", "simulated_robot"]
 
 _ROBOTS: dict[tuple, MujocoRobot] = {}
 """Per-process cache of simulated robots: building a model costs ~50 ms, resetting one ~0.1 ms."""
@@ -47,6 +48,22 @@ def simulated_robot(trial: Trial, arm_mode: str) -> MujocoRobot:
         robot.connect()
         _ROBOTS[key] = robot
     return robot
+
+
+def check_rate(ctrl: object, name: str, timestep: float) -> None:
+    """Refuse a controller whose ``rate_hz`` is not a positive number whose period is a whole number of steps.
+
+    Raises:
+        ConfigError: the rate is not a finite positive number, or its period is not a multiple of `timestep`.
+    """
+    rate = getattr(ctrl, "rate_hz", None)
+    if isinstance(rate, bool) or not isinstance(rate, int | float) or not math.isfinite(rate) or rate <= 0:
+        raise ConfigError(f"controller {short(name)}: rate_hz must be a positive number of Hz, got {short(rate)}; "
+                          f"give it a rate that divides 1/{timestep} Hz, such as 50")
+    ratio = (1.0 / rate) / timestep
+    if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+        raise ConfigError(f"controller {short(name)}: period 1/{rate} s is not a multiple of the physics step "
+                          f"{timestep} s; give the controller a rate that divides 1/{timestep} Hz")
 
 
 def run_trial(trial: Trial, controller: ControllerSpec | str, *, debug_truth: bool = False,
@@ -104,12 +121,7 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
                                       wall_s=time.perf_counter() - start, debug_truth=debug_truth,
                                       error=failure.record_error(spec.name, trial))
         return record, empty
-    ratio = (1.0 / ctrl.rate_hz) / robot.config.timestep
-    if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-        raise ConfigError(
-            f"controller {spec.name!r}: period 1/{ctrl.rate_hz} s is not a multiple of the physics step "
-            f"{robot.config.timestep} s; give the controller a rate that divides 1/{robot.config.timestep} Hz"
-        )
+    check_rate(ctrl, spec.name, robot.config.timestep)
     if debug_truth:
         if not isinstance(ctrl, TruthSwitch):
             raise MissingCapabilityError(
