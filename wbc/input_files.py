@@ -26,7 +26,7 @@ import sys
 import tomllib
 import zipfile
 import zlib
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -160,6 +160,40 @@ def _bracket_depth(text: str) -> int:
     return deepest
 
 
+def _parse(path: str | os.PathLike[str], text: str, *, slack: int, max_depth: int,
+           parse: Callable[[str], Any], decode_error: Callable[[Exception], str | None]) -> Any:
+    """`text` parsed by `parse`, every way parsing a hostile file fails turned into one `InputFileError`.
+
+    `slack` is how many bracket levels the syntax itself adds (a TOML table header's brackets); `decode_error` turns
+    the parser's own error into the message's tail (with line and column where the parser gives them), or None for
+    an error that is not the parser's.
+    """
+    if _bracket_depth(text) > max_depth + slack:
+        raise InputFileError(f"{path}: nested more than {max_depth} levels deep; no valid file nests so deep")
+    try:
+        data = parse(text)
+    except RecursionError:
+        raise InputFileError(f"{path}: nested too deep to parse; no valid file nests so deep") from None
+    except ValueError as exc:
+        message = decode_error(exc)
+        if message is None:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
+            raise InputFileError(f"{path}: holds an integer of more than {sys.get_int_max_str_digits()} digits; no "
+                                 "value wbc reads is so long") from None
+        raise InputFileError(f"{path}{message}") from None
+    _depth(data, max_depth, str(path))
+    return data
+
+
+def _toml_error(exc: Exception) -> str | None:
+    return f": not valid TOML: {exc}" if isinstance(exc, tomllib.TOMLDecodeError) else None
+
+
+def _json_error(exc: Exception) -> str | None:
+    if isinstance(exc, json.JSONDecodeError):
+        return f":{exc.lineno}:{exc.colno}: not valid JSON: {exc.msg}"
+    return None
+
+
 def read_toml(path: str | os.PathLike[str], *, limit: int | None = None, max_depth: int = MAX_DEPTH) -> dict[str, Any]:
     """A TOML file parsed, its size and nesting bounded.
 
@@ -168,19 +202,9 @@ def read_toml(path: str | os.PathLike[str], *, limit: int | None = None, max_dep
             line and column as the parser does).
     """
     text = read_text(path, kind="toml", limit=limit)
-    if _bracket_depth(text) > max_depth + 2:  # a table header's brackets count too: leave them room
-        raise InputFileError(f"{path}: nested more than {max_depth} levels deep; no valid file nests so deep")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputFileError(f"{path}: not valid TOML: {exc}") from None
-    except ValueError:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
-        raise InputFileError(f"{path}: holds an integer of more than {sys.get_int_max_str_digits()} digits; no value "
-                             "wbc reads is so long") from None
-    except RecursionError:
-        raise InputFileError(f"{path}: nested too deep to parse; no valid file nests so deep") from None
-    _depth(data, max_depth, str(path))
-    return data
+    # a table header's brackets count too: leave them room
+    return _parse(path, text, slack=2, max_depth=max_depth, parse=tomllib.loads,
+                  decode_error=_toml_error)
 
 
 def read_json(path: str | os.PathLike[str], *, limit: int | None = None, max_depth: int = MAX_DEPTH) -> Any:
@@ -190,19 +214,8 @@ def read_json(path: str | os.PathLike[str], *, limit: int | None = None, max_dep
         InputFileError: as `read_text`, nested deeper than `max_depth`, or not valid JSON (line and column named).
     """
     text = read_text(path, kind="json", limit=limit)
-    if _bracket_depth(text) > max_depth + 1:
-        raise InputFileError(f"{path}: nested more than {max_depth} levels deep; no valid file nests so deep")
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise InputFileError(f"{path}:{exc.lineno}:{exc.colno}: not valid JSON: {exc.msg}") from None
-    except ValueError:  # an integer of more digits than Python converts (sys.get_int_max_str_digits)
-        raise InputFileError(f"{path}: holds an integer of more than {sys.get_int_max_str_digits()} digits; no value "
-                             "wbc reads is so long") from None
-    except RecursionError:
-        raise InputFileError(f"{path}: nested too deep to parse; no valid file nests so deep") from None
-    _depth(data, max_depth, str(path))
-    return data
+    return _parse(path, text, slack=1, max_depth=max_depth, parse=json.loads,
+                  decode_error=_json_error)
 
 
 def open_npz(path: str | os.PathLike[str], *, limit: int | None = None) -> np.lib.npyio.NpzFile:
