@@ -41,6 +41,52 @@ LIMP = '''
 '''
 
 
+HOLD_PLUGIN = '''"""A plug-in that holds the nominal pose."""
+import numpy as np
+
+from wbc.robots.description import joint_gains
+from wbc.types import MotorCommand
+
+GAIN = 60.0
+
+
+class Hold:
+    rate_hz = 50.0
+
+    def __init__(self, desc, leg_kp):
+        kp, kd = joint_gains(desc.num_joints, leg_kp, 2.0, 20.0, 0.5)
+        self.command = MotorCommand.hold(desc.nominal_q, kp, kd)
+
+    def reset(self):
+        pass
+
+    def act(self, state, command):
+        return self.command
+
+    def counters(self):
+        return {}
+
+
+def make(desc, config=None):
+    """Hold the nominal pose (a test plug-in)."""
+    config = config or {}
+    if set(config) - {"leg_kp"}:
+        raise ValueError(f"unknown keys {sorted(set(config) - {'leg_kp'})}; valid: leg_kp")
+    return Hold(desc, config.get("leg_kp", GAIN))
+
+
+def no_config(desc):
+    return Hold(desc, GAIN)
+
+
+def no_args():
+    return None
+'''
+"""A plug-in module's source: the PD hold of the nominal pose, its leg gain from an optional table
+(``make(desc, config)``; ``no_config`` takes none); an unknown key in the table raises; ``no_args`` is no
+factory."""
+
+
 SHORT_SCENARIO = """
 [scenario]
 name = "short"

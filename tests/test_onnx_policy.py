@@ -6,12 +6,13 @@ torch and run by onnxruntime must act as the numpy controller does.
 """
 
 import hashlib
+import json
 import math
-import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
+from fuzz.cases import ONNX_FRAME, ONNX_IO_TEMPLATE, ONNX_JOINTS, onnx_linear_model
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.record import TrialRecord
@@ -28,68 +29,15 @@ onnx = pytest.importorskip("onnx")
 pytest.importorskip("onnxruntime")
 
 LEGS = ("FR", "FL", "RR", "RL")
-# Isaac Lab's order for a Unitree quadruped: by joint type, then FL, FR, RL, RR
-ISAAC_ORDER = [f"{leg}_{part}_joint" for part in ("hip", "thigh", "calf") for leg in ("FL", "FR", "RL", "RR")]
-
-IO = """
-# a 12-joint policy with its joints in Isaac Lab's order
-[policy]
-robot = "a1-wx200"
-arm_mode = "none"
-rate_hz = 50.0
-joints = {joints}
-
-[observation]
-history = {history}
-
-[[observation.terms]]
-name = "base_ang_vel"
-scale = 0.25
-
-[[observation.terms]]
-name = "velocity_commands"
-scale = [2.0, 2.0, 0.25]
-
-[[observation.terms]]
-name = "joint_pos_rel"
-
-[[observation.terms]]
-name = "last_action"
-
-[action]
-kind = "joint_position"
-scale = 0.5
-clip = 100.0
-
-[pd]
-kp = [30.0, 30.0, 30.0, 30.0, 40.0, 40.0, 40.0, 40.0, 50.0, 50.0, 50.0, 50.0]
-kd = 1.5
-"""
-FRAME = 3 + 3 + 12 + 12  # the I/O file's terms
 
 
 def _io(history: int = 1) -> str:
-    joints = "[" + ", ".join(f'"{j}"' for j in ISAAC_ORDER) + "]"
-    return textwrap.dedent(IO).format(joints=joints, history=history)
+    return ONNX_IO_TEMPLATE.format(joints=json.dumps(ONNX_JOINTS), history=history)
 
 
 def _linear_model(path, weight: np.ndarray, bias: np.ndarray | None = None, *, input_name: str = "obs") -> None:
-    """An ONNX network ``actions = obs @ weight + bias`` (float32, batch axis of 1)."""
-    from onnx import TensorProto, helper, numpy_helper
-
-    d, n = weight.shape
-    bias = np.zeros(n) if bias is None else bias
-    graph = helper.make_graph(
-        [helper.make_node("MatMul", [input_name, "w"], ["y"]), helper.make_node("Add", ["y", "b"], ["actions"])],
-        "linear",
-        [helper.make_tensor_value_info(input_name, TensorProto.FLOAT, [1, d])],
-        [helper.make_tensor_value_info("actions", TensorProto.FLOAT, [1, n])],
-        [numpy_helper.from_array(weight.astype(np.float32), "w"),
-         numpy_helper.from_array(bias.astype(np.float32), "b")],
-    )
-    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
-    model.ir_version = 8
-    onnx.save(model, str(path))
+    """An ONNX network ``actions = obs @ weight + bias`` (float32, batch axis of 1) written to `path`."""
+    Path(path).write_bytes(onnx_linear_model(weight, bias, input_name=input_name))
 
 
 def _state(q: np.ndarray, *, gyro=(0.0, 0.0, 0.0), tick: int = 0) -> RobotState:
@@ -101,8 +49,8 @@ def _state(q: np.ndarray, *, gyro=(0.0, 0.0, 0.0), tick: int = 0) -> RobotState:
 
 def _select(history: int, term_start: int) -> np.ndarray:
     """A weight that outputs the last frame's entries term_start .. term_start + 11."""
-    w = np.zeros((history * FRAME, 12))
-    w[(history - 1) * FRAME + term_start + np.arange(12), np.arange(12)] = 1.0
+    w = np.zeros((history * ONNX_FRAME, 12))
+    w[(history - 1) * ONNX_FRAME + term_start + np.arange(12), np.arange(12)] = 1.0
     return w
 
 
@@ -123,32 +71,32 @@ def test_the_network_sees_its_own_joint_order_and_commands_the_house_order(tmp_p
     np.testing.assert_array_equal(out.kd, 1.5)
     assert np.all(out.dq == 0.0) and np.all(out.tau == 0.0) and ctrl.rate_hz == 50.0
     # the previous action is the network's output, in its own order
-    np.testing.assert_allclose(ctrl.last_action, offset[[desc.joint_names.index(j) for j in ISAAC_ORDER]], atol=1e-7)
+    np.testing.assert_allclose(ctrl.last_action, offset[[desc.joint_names.index(j) for j in ONNX_JOINTS]], atol=1e-7)
 
 
 def test_the_history_holds_frames_oldest_first_filled_with_the_first_after_a_reset(tmp_path):
     model, io = tmp_path / "h.onnx", tmp_path / "h.toml"
-    _linear_model(model, np.zeros((3 * FRAME, 12)))
+    _linear_model(model, np.zeros((3 * ONNX_FRAME, 12)))
     io.write_text(_io(history=3))
     ctrl = get_controller(f"onnx:{model}").make(get_robot("a1-wx200", "none"))
     q = get_robot("a1-wx200", "none").nominal_q
     frames = [ctrl.network_input(_state(q, gyro=(g, 0.0, 0.0)), VelocityCommand(vx=0.5))
               for g in (4.0, 8.0)]
-    first, second = (f.reshape(3, FRAME) for f in frames)
+    first, second = (f.reshape(3, ONNX_FRAME) for f in frames)
     assert np.all(first[:, 0] == 1.0)  # 4 rad/s x 0.25 in every frame of the filled window
     assert second[:, 0].tolist() == [1.0, 1.0, 2.0]  # oldest first
     assert np.all(second[:, 3] == 1.0)  # vx 0.5 x 2
     ctrl.reset()
-    again = ctrl.network_input(_state(q, gyro=(8.0, 0.0, 0.0)), VelocityCommand()).reshape(3, FRAME)
+    again = ctrl.network_input(_state(q, gyro=(8.0, 0.0, 0.0)), VelocityCommand()).reshape(3, ONNX_FRAME)
     assert np.all(again[:, 0] == 2.0)
     # each term's own history (Isaac Lab), and zeros after a reset
     text = _io().replace('name = "base_ang_vel"', 'name = "base_ang_vel"\nhistory = 2').replace(
         "history = 1", 'history = 1\nhistory_order = "terms"\nhistory_fill = "zeros"')
     io.write_text(text)
-    _linear_model(model, np.zeros((FRAME + 3, 12)))
+    _linear_model(model, np.zeros((ONNX_FRAME + 3, 12)))
     ctrl = get_controller(f"onnx:{model}").make(get_robot("a1-wx200", "none"))
     x = ctrl.network_input(_state(q, gyro=(4.0, 0.0, 0.0)), VelocityCommand())
-    assert x.shape == (FRAME + 3,) and x[:6].tolist() == [0.0, 0.0, 0.0, 1.0, 0.0, 0.0]
+    assert x.shape == (ONNX_FRAME + 3,) and x[:6].tolist() == [0.0, 0.0, 0.0, 1.0, 0.0, 0.0]
 
 
 IO_ERRORS = [
@@ -190,13 +138,13 @@ def test_a_bad_io_file_names_its_line_field_and_what_is_valid(tmp_path, old, new
 def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_path, capsys):
     model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
     io.write_text(_io())
-    _linear_model(model, np.zeros((FRAME + 1, 12)))
+    _linear_model(model, np.zeros((ONNX_FRAME + 1, 12)))
     with pytest.raises(OnnxModelError, match=r"the terms make 30 inputs .* takes 31"):
         get_controller(f"onnx:{model}")
-    _linear_model(model, np.zeros((FRAME, 13)))
+    _linear_model(model, np.zeros((ONNX_FRAME, 13)))
     with pytest.raises(OnnxModelError, match=r"12 joints listed, but .* has 13 entries"):
         get_controller(f"onnx:{model}")
-    _linear_model(model, np.zeros((FRAME, 12)), input_name="observations")
+    _linear_model(model, np.zeros((ONNX_FRAME, 12)), input_name="observations")
     io.write_text(_io().replace("[observation]", '[onnx]\ninput = "obs"\n\n[observation]'))
     with pytest.raises(OnnxModelError, match=r"has no input 'obs'; its inputs: observations"):
         get_controller(f"onnx:{model}")
@@ -211,7 +159,7 @@ def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_p
     # --io names another file; it goes only to an onnx: policy
     other = tmp_path / "elsewhere.toml"
     other.write_text(_io())
-    _linear_model(model, np.zeros((FRAME, 12)))
+    _linear_model(model, np.zeros((ONNX_FRAME, 12)))
     assert get_controller(f"onnx:{model}", io=other).config_file == str(other)
     assert main(["run", "stand", "--scenario", "scenarios/push.toml", "--io", str(other)]) == 2
     assert "no controller here is an onnx:PATH policy" in capsys.readouterr().err
@@ -341,9 +289,9 @@ def test_the_external_data_reader_agrees_with_the_onnx_package(tmp_path):
     from wbc.control.onnx_policy import external_data_files
 
     inline, split = tmp_path / "inline.onnx", tmp_path / "split.onnx"
-    _linear_model(inline, np.ones((FRAME, 12)))
+    _linear_model(inline, np.ones((ONNX_FRAME, 12)))
     assert external_data_files(inline) == []
-    _linear_model(split, np.ones((FRAME, 12)))
+    _linear_model(split, np.ones((ONNX_FRAME, 12)))
     model = onnx.load(str(split))
     # one tensor per file: every file is listed, once, in the order the tensors come
     onnx.save_model(model, str(split), save_as_external_data=True, all_tensors_to_one_file=False, size_threshold=0)
@@ -360,10 +308,10 @@ def test_the_external_data_reader_agrees_with_the_onnx_package(tmp_path):
 def test_torchs_default_exporter_output_runs_as_onnx(tmp_path):
     torch = pytest.importorskip("torch")
     torch.manual_seed(0)
-    net = torch.nn.Sequential(torch.nn.Linear(FRAME, 16), torch.nn.ELU(), torch.nn.Linear(16, 12)).eval()
+    net = torch.nn.Sequential(torch.nn.Linear(ONNX_FRAME, 16), torch.nn.ELU(), torch.nn.Linear(16, 12)).eval()
     model = tmp_path / "torch.onnx"
     # torch >= 2.9's default (dynamo) exporter, external data as it writes it by default
-    torch.onnx.export(net, (torch.zeros(1, FRAME),), str(model), input_names=["obs"], output_names=["actions"],
+    torch.onnx.export(net, (torch.zeros(1, ONNX_FRAME),), str(model), input_names=["obs"], output_names=["actions"],
                       external_data=True, verbose=False)
     (tmp_path / "torch.toml").write_text(_io())
     assert (tmp_path / "torch.onnx.data").is_file()  # what failed before: the weights beside the model

@@ -10,6 +10,7 @@ import textwrap
 
 import numpy as np
 import pytest
+from conftest import HOLD_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.record import MACHINE_TIMED, TrialRecord
@@ -61,48 +62,7 @@ push_force_n = [600.0, 900.0]
 MODULES = {
     "__init__.py": '"""Plug-ins for the tests."""\n',
     # the same PD hold as `stand`, built by a factory that takes an optional table
-    "good.py": '''
-        """A plug-in that holds the nominal pose."""
-        import numpy as np
-
-        from wbc.robots.description import joint_gains
-        from wbc.types import MotorCommand
-
-        GAIN = 60.0
-
-
-        class Hold:
-            rate_hz = 50.0
-
-            def __init__(self, desc, leg_kp):
-                kp, kd = joint_gains(desc.num_joints, leg_kp, 2.0, 20.0, 0.5)
-                self.command = MotorCommand.hold(desc.nominal_q, kp, kd)
-
-            def reset(self):
-                pass
-
-            def act(self, state, command):
-                return self.command
-
-            def counters(self):
-                return {}
-
-
-        def make(desc, config=None):
-            """Hold the nominal pose (a test plug-in)."""
-            config = config or {}
-            if set(config) - {"leg_kp"}:
-                raise ValueError(f"unknown keys {sorted(set(config) - {'leg_kp'})}; valid: leg_kp")
-            return Hold(desc, config.get("leg_kp", GAIN))
-
-
-        def no_config(desc):
-            return Hold(desc, GAIN)
-
-
-        def no_args():
-            return None
-    ''',
+    "good.py": HOLD_PLUGIN,
     "boom.py": '''
         """Raises when imported."""
         raise RuntimeError("the plug-in's module is broken")

@@ -10,11 +10,10 @@ import dataclasses
 import hashlib
 import json
 import re
-import sys
-import textwrap
 from pathlib import Path
 
 import pytest
+from conftest import HOLD_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
@@ -61,34 +60,6 @@ name = "soft"
 push_force_n = [100.0, 120.0]
 """
 
-# A plug-in whose factory takes a configuration table: a run of it records the file in run.json (controller_files).
-HOLD = '''
-    """A plug-in that holds the nominal pose, its leg gain from a table."""
-    from wbc.robots.description import joint_gains
-    from wbc.types import MotorCommand
-
-
-    class Hold:
-        rate_hz = 50.0
-
-        def __init__(self, desc, leg_kp):
-            kp, kd = joint_gains(desc.num_joints, leg_kp, 2.0, 20.0, 0.5)
-            self.command = MotorCommand.hold(desc.nominal_q, kp, kd)
-
-        def reset(self):
-            pass
-
-        def act(self, state, command):
-            return self.command
-
-        def counters(self):
-            return {}
-
-
-    def make(desc, config=None):
-        return Hold(desc, (config or {}).get("leg_kp", 60.0))
-'''
-
 SCENARIO = ScenarioRef(path="scenarios/push-v1.toml", name="push", version=1, hash="ab" * 32, published=True)
 SIMULATED = SimulatedRunIdentity(
     controllers=("mpc", "learned"), scenario=SCENARIO, bands=("soft", "hard"), seeds=(0, 1), trials=4, no_push=False,
@@ -110,16 +81,11 @@ def short(tmp_path: Path) -> Path:
 
 
 @pytest.fixture
-def hold(tmp_path: Path, monkeypatch: pytest.MonkeyPatch):
-    """The `HOLD` plug-in as ``holdpkg.hold:make`` on sys.path (and forgotten afterwards)."""
-    root = tmp_path / "holdroot"
-    (root / "holdpkg").mkdir(parents=True)
-    (root / "holdpkg" / "__init__.py").write_text('"""Test plug-ins."""\n')
-    (root / "holdpkg" / "hold.py").write_text(textwrap.dedent(HOLD).lstrip())
-    monkeypatch.syspath_prepend(str(root))
-    yield "holdpkg.hold:make"
-    for name in [m for m in sys.modules if m == "holdpkg" or m.startswith("holdpkg.")]:
-        del sys.modules[name]
+def hold(plugin_package):
+    """`HOLD_PLUGIN` as ``holdpkg.hold:make``: its factory takes a configuration table, so a run of it records the
+    file in run.json (controller_files)."""
+    plugin_package("holdpkg", {"hold": HOLD_PLUGIN})
+    return "holdpkg.hold:make"
 
 
 def _old_simulated(cfg: ArenaConfig, *, published: bool, files: dict | None = None) -> dict:

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from conftest import SHORT_SCENARIO
 from scipy.stats import binom
 
 from wbc.arena.compare import ArenaConfig, run_arena
@@ -241,36 +242,9 @@ def test_sequential_comparison_splits_alpha_and_refuses_incomplete_rounds():
 
 
 
-SHORT = """
-[scenario]
-name = "short"
-version = 1
-description = "short pushes"
-robot = "a1-wx200"
-duration_s = 1.5
-
-[terrain]
-kind = "flat"
-
-[commands]
-[[commands.options]]
-vx = 0.0
-
-[pushes]
-first_s = [0.5, 0.6]
-interval_s = [0.5, 0.6]
-duration_s = 0.05
-offset_m = 0.1
-
-[[bands]]
-name = "soft"
-push_force_n = [50.0, 100.0]
-"""
-
-
 def test_until_significant_stops_the_run_once_the_difference_is_settled(limp, tmp_path):
     scenario = tmp_path / "short.toml"
-    scenario.write_text(SHORT)
+    scenario.write_text(SHORT_SCENARIO)
     cfg = ArenaConfig(controllers=("stand", limp), scenario=scenario, trials=12, out_dir=tmp_path / "run",
                       workers=1, progress=False, until_significant=True)
     result = run_arena(cfg)

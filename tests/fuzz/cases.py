@@ -27,7 +27,6 @@ import csv
 import io
 import json
 import math
-import textwrap
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,40 +71,44 @@ push_force_n = [50.0, 80.0]
 """A 1-second scenario: a trial of ``stand`` on it takes about a second to play."""
 
 ONNX_JOINTS = [f"{leg}_{part}_joint" for part in ("hip", "thigh", "calf") for leg in ("FL", "FR", "RL", "RR")]
-ONNX_IO = textwrap.dedent('''\
-    [policy]
-    robot = "a1-wx200"
-    arm_mode = "none"
-    rate_hz = 50.0
-    joints = {joints}
+"""Isaac Lab's joint order for a Unitree quadruped: by joint type, then FL, FR, RL, RR."""
+ONNX_IO_TEMPLATE = '''\
+[policy]
+robot = "a1-wx200"
+arm_mode = "none"
+rate_hz = 50.0
+joints = {joints}
 
-    [observation]
-    history = 1
+[observation]
+history = {history}
 
-    [[observation.terms]]
-    name = "base_ang_vel"
-    scale = 0.25
+[[observation.terms]]
+name = "base_ang_vel"
+scale = 0.25
 
-    [[observation.terms]]
-    name = "velocity_commands"
-    scale = [2.0, 2.0, 0.25]
+[[observation.terms]]
+name = "velocity_commands"
+scale = [2.0, 2.0, 0.25]
 
-    [[observation.terms]]
-    name = "joint_pos_rel"
+[[observation.terms]]
+name = "joint_pos_rel"
 
-    [[observation.terms]]
-    name = "last_action"
+[[observation.terms]]
+name = "last_action"
 
-    [action]
-    kind = "joint_position"
-    scale = 0.5
-    clip = 100.0
+[action]
+kind = "joint_position"
+scale = 0.5
+clip = 100.0
 
-    [pd]
-    kp = [30.0, 30.0, 30.0, 30.0, 40.0, 40.0, 40.0, 40.0, 50.0, 50.0, 50.0, 50.0]
-    kd = 1.5
-    ''').format(joints=json.dumps(ONNX_JOINTS))
-"""The I/O file of a 12-joint ONNX policy (Isaac Lab's joint order), as tests/test_onnx_policy.py writes it."""
+[pd]
+kp = [30.0, 30.0, 30.0, 30.0, 40.0, 40.0, 40.0, 40.0, 50.0, 50.0, 50.0, 50.0]
+kd = 1.5
+'''
+"""The I/O file of a 12-joint ONNX policy, its joints (``{joints}``, a TOML list) and history (``{history}``) left
+to fill (tests/test_onnx_policy.py fills them too)."""
+ONNX_IO = ONNX_IO_TEMPLATE.format(joints=json.dumps(ONNX_JOINTS), history=1)
+"""`ONNX_IO_TEMPLATE` in Isaac Lab's joint order, one frame of history."""
 ONNX_FRAME = 3 + 3 + 12 + 12
 
 PLUGIN_CONFIG = 'gain = 1.0\nname = "hold"\n\n[limits]\nmax_torque = [20.0, 20.0]\n'
@@ -211,17 +214,22 @@ class Materials:
         return self.dir / "tiny.toml"
 
 
-def onnx_linear_model(weight: np.ndarray, *, extra_input: bool = False) -> bytes:
-    """An ONNX network ``actions = obs @ weight`` (float32, batch of 1), optionally with a second, unused input."""
+def onnx_linear_model(weight: np.ndarray, bias: np.ndarray | None = None, *, input_name: str = "obs",
+                      extra_input: bool = False) -> bytes:
+    """An ONNX network ``actions = obs @ weight + bias`` (float32, batch of 1), optionally with a second, unused
+    input (tests/test_onnx_policy.py builds its networks with it too)."""
     from onnx import TensorProto, helper, numpy_helper
 
     d, n = weight.shape
-    inputs = [helper.make_tensor_value_info("obs", TensorProto.FLOAT, [1, d])]
+    bias = np.zeros(n) if bias is None else bias
+    inputs = [helper.make_tensor_value_info(input_name, TensorProto.FLOAT, [1, d])]
     if extra_input:
         inputs.append(helper.make_tensor_value_info("hidden", TensorProto.FLOAT, [1, 8]))
-    graph = helper.make_graph([helper.make_node("MatMul", ["obs", "w"], ["actions"])], "linear", inputs,
-                              [helper.make_tensor_value_info("actions", TensorProto.FLOAT, [1, n])],
-                              [numpy_helper.from_array(weight.astype(np.float32), "w")])
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", [input_name, "w"], ["y"]), helper.make_node("Add", ["y", "b"], ["actions"])],
+        "linear", inputs, [helper.make_tensor_value_info("actions", TensorProto.FLOAT, [1, n])],
+        [numpy_helper.from_array(weight.astype(np.float32), "w"),
+         numpy_helper.from_array(bias.astype(np.float32), "b")])
     model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
     model.ir_version = 8
     return model.SerializeToString()
