@@ -8,6 +8,7 @@ import math
 
 import pytest
 
+from wbc.arena.divergence import DivergenceCheck
 from wbc.cli.main import main
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.robots import get_robot
@@ -45,6 +46,22 @@ def test_a_fall_gives_no_height_and_says_when(limp):
     for row in (stand, walk):
         assert row.fell and 0 < row.fall_time_s < 2.0
         assert math.isnan(row.height_m) and math.isnan(row.speed_m_s)
+
+
+def test_a_diverged_simulation_costs_only_its_rows_and_says_what_blew_up(capsys, monkeypatch, limp):
+    import wbc.tools.posture as posture
+
+    # a check that takes a trunk below 0.2 m for a blow-up: the limp robot's fall diverges, the stand hold does not
+    monkeypatch.setattr(posture, "DivergenceCheck", lambda: DivergenceCheck(min_base_height=0.2))
+    assert main(["analyze", "posture", "stand", limp, "--duration", "2"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    stand_line = next(line for line in lines if line.strip().startswith("stand "))
+    limp_line = next(line for line in lines if limp in line)
+    assert "0.28" in stand_line and "diverged" not in stand_line
+    assert limp_line.count("diverged") == 4 and "stand: simulation diverged at tick" in limp_line
+    rows = posture_study(["stand", limp], duration_s=2.0)
+    assert [row.diverged is None for row in rows] == [True, True, False, False]
+    assert all("through the floor" in row.diverged and not row.fell and math.isnan(row.height_m) for row in rows[2:])
 
 
 def test_the_command_prints_a_table_and_json(capsys, limp):

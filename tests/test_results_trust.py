@@ -21,13 +21,17 @@ import pytest
 from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.divergence import DivergenceCheck
+from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.record import MACHINE_TIMED, TrialRecord, checksum_of, scan_csv
 from wbc.arena.report import format_table, summarize
+from wbc.arena.runner import run_episode
 from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
+from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, RecordError, ResultsDirError
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.scenario.scenario import load_scenario
+from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth
 
 
@@ -233,6 +237,34 @@ def test_a_diverging_simulation_ends_as_diverged_with_no_absurd_number_in_the_su
     assert max(abs(v) for v in numbers) < 1e4  # no 1e6 m/s tracking error anywhere
     header = next(line for line in format_table(summary).splitlines() if line.strip().startswith("controller"))
     assert "diverged" in header.split()
+
+
+def test_a_simulator_that_resets_itself_after_a_failed_step_ends_the_episode_as_diverged(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo writes its instability warning to MUJOCO_LOG.TXT in the working directory
+    sim = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none"))
+    spec = get_controller("stand-noarm")
+
+    def kick(t, robot, controller, command):
+        if math.isclose(t, 0.2):  # a force MuJoCo cannot integrate in the next step: it warns, resets, carries on
+            robot.data.qfrc_applied[8] = 1e15
+
+    with sim:
+        sim.reset(seed=0)
+        calm = run_episode(sim, spec.make(sim.desc), CommandSchedule(), 0.3, divergence=DivergenceCheck())
+        sim.reset(seed=0)
+        # without the check, the reset robot stands at its initial pose again, and the episode looks like a success
+        unchecked = run_episode(sim, spec.make(sim.desc), CommandSchedule(), 0.5, observer=kick)
+        assert not unchecked.fell and sim.instability() is not None
+        sim.reset(seed=0)
+        assert sim.instability() is None  # a reset clears what the simulator reported
+        with pytest.raises(SimulationDiverged) as diverged:
+            run_episode(sim, spec.make(sim.desc), CommandSchedule(), 0.5, observer=kick, divergence=DivergenceCheck())
+    assert not calm.fell
+    message = str(diverged.value)
+    assert message.startswith("simulation diverged at tick 10 (t = 0.220 s): MuJoCo could not integrate an "
+                              "acceleration")
+    assert "reset its own state" in message
+    assert len(diverged.value.episode.t) == 11  # the tick that stepped into it included
 
 
 def scan_csv_roundtrip(record, where):

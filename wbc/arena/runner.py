@@ -15,9 +15,10 @@ turning its episode into a record is `wbc.arena.sim_trial`. A robot behind a saf
 the layer's transitions during the episode logged in it (`Episode.safety_events`). A controller that raises, or
 returns a command the robot refuses, ends the episode with a `ControllerFailure` that says where and carries the
 episode so far. Given a `DivergenceCheck` (a simulated trial's), the loop checks the joints the robot reports before
-each ``act`` and the trunk's truth after each step, and ends an episode whose simulation blew up with
-`SimulationDiverged` (its own outcome, never numbers in the means). A controller whose period is longer than the
-episode would never be asked to act: that is refused before the episode starts.
+each ``act``, the trunk's truth and the simulator's own warnings (`SimulatorHealth`) after each step, and ends an
+episode whose simulation blew up with `SimulationDiverged` (its own outcome, never numbers in the means). A
+controller whose period is longer than the episode would never be asked to act: that is refused before the episode
+starts.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
 from wbc.errors import CommandError, ConfigError, MissingCapabilityError
-from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, TruthSource
+from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, SimulatorHealth, TruthSource
 from wbc.hardware.robot import Robot, command_bounds, exceeded_rows
 from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
@@ -85,7 +86,8 @@ def run_episode(
         fallen: returns True when the trunk or a non-foot link touches the ground; default: the robot's own, if it
             is a `FallDetector`.
         observer: called after every tick (e.g. a viewer); None costs nothing.
-        divergence: check every tick that the simulation has not blown up (a few NumPy reductions per tick);
+        divergence: check every tick that the simulation has not blown up (a few NumPy reductions per tick), and,
+            if the robot is a `SimulatorHealth`, that the simulator did not reset itself after a failed step;
             None: no check (a real robot, whose safety layer watches it).
 
     Returns:
@@ -103,6 +105,7 @@ def run_episode(
     """
     truth = _truth_of(robot) if truth is None else truth
     fallen = _fall_detector_of(robot) if fallen is None else fallen
+    health = robot if divergence is not None and isinstance(robot, SimulatorHealth) else None
     dt = 1.0 / controller.rate_hz
     n = int(round(duration_s / dt))
     if n < 1:
@@ -159,6 +162,8 @@ def run_episode(
         # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
         now = truth()
         buf.add((k + 1) * dt, cmd, act_s, now, state)
+        if health is not None and (reason := health.instability()) is not None:
+            raise diverged(reason, k)
         if divergence is not None and (reason := divergence.truth(now)) is not None:
             raise diverged(reason, k)
         if observer is not None:

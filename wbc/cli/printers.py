@@ -89,11 +89,14 @@ def print_posture(rows: Sequence[PostureRow], *, duration_s: float) -> None:
     for name, cmds in by_name.items():
         stand, walking = cmds["stand"], cmds["walk"]
         falls = ", ".join(f"{c} at {r.fall_time_s:.1f} s" for c, r in cmds.items() if r.fell) or "-"
+        falls += "".join(f"; {c}: {r.diverged}" for c, r in cmds.items() if r.diverged)
         print(f"  {name:<{w}}{stand.arm_mode:<10}{_metres(stand):>15}{_metres(walking):>17}"
               f"{walking.speed_m_s:>14.2f}  {falls}")
 
 
 def _metres(row: PostureRow) -> str:
+    if row.diverged:
+        return "diverged"
     return "fell" if math.isnan(row.height_m) else f"{row.height_m:.3f} ± {row.height_std_m:.3f}"
 
 

@@ -1,16 +1,16 @@
 """Capabilities a `Robot` backend may offer beyond the interface, as protocols the runner asks for by name.
 
-A real robot offers none of these by default; the simulator offers the first three. A runner or tool checks
-``isinstance(robot, Pushable)`` instead of testing for a backend class, so a backend that can do the same (motion
-capture as a `TruthSource`, a push rig as `Pushable`) takes the same path. A safety layer that records its
+A real robot offers none of these by default; the simulator offers the first three and `SimulatorHealth`. A runner
+or tool checks ``isinstance(robot, Pushable)`` instead of testing for a backend class, so a backend that can do the
+same (motion capture as a `TruthSource`, a push rig as `Pushable`) takes the same path. A safety layer that records its
 transitions is a `HasSafetyEvents` (`wbc.hardware.safety.SafeRobot` is one); the protocol is structural, so the
 runner logs the events without importing the safety layer. A robot that paces `advance` on a wall clock over a link
 reports its lateness as a `HasLinkStats` (`wbc.hardware.unitree.UnitreeRobot` is one); one whose devices run in a
 process that asked for real-time scheduling says what it got as a `HasRealtimeGrant` (`ProcessRobot`). A robot that
 knows its own configuration only from its sensors (joint encoders, IMU, a base state estimator) offers it as a
-`ConfigurationEstimate`, which is what a viewer draws of a real robot. A robot that lives in wall-clock time (a real
-robot, or an emulator over a wire) is a `WallClock`, so a safety layer times its checks on the clock the motors live
-on.
+`ConfigurationEstimate`, which is what a viewer draws of a real robot. A simulator that reports its own integration
+failures is a `SimulatorHealth`. A robot that lives in wall-clock time (a real robot, or an emulator over a wire) is
+a `WallClock`, so a safety layer times its checks on the clock the motors live on.
 """
 
 from __future__ import annotations
@@ -26,7 +26,7 @@ from wbc.scenario.push import Push
 from wbc.types import BaseTruth
 
 __all__ = ["ConfigurationEstimate", "FallDetector", "HasLinkStats", "HasRealtimeGrant", "HasSafetyEvents",
-           "LinkStatsLike", "Pushable", "SafetyEventLike", "TruthSource", "WallClock"]
+           "LinkStatsLike", "Pushable", "SafetyEventLike", "SimulatorHealth", "TruthSource", "WallClock"]
 
 
 @runtime_checkable
@@ -35,6 +35,18 @@ class TruthSource(Protocol):
 
     def base_truth(self) -> BaseTruth:
         """The trunk's true pose and velocity now."""
+
+
+@runtime_checkable
+class SimulatorHealth(Protocol):
+    """A simulator that reports when its own integration failed.
+
+    MuJoCo resets its state after a bad position, velocity or acceleration and carries on: the state after such a
+    reset looks like a robot standing still.
+    """
+
+    def instability(self) -> str | None:
+        """What the simulator reported as unstable since the last reset, or None."""
 
 
 @runtime_checkable

@@ -6,6 +6,7 @@ one episode per command (the arena's physics: `MujocoRobot`, nominal domain, no 
 runner's loop), and the study reports the mean trunk height above the ground and the mean forward speed over the
 episode's second half (after the command's ramp and the start transient), so "stands at 0.28 m and walks at 0.3 m/s"
 is a measured statement. Trunk height is the base frame's origin above the flat ground, from the simulator's truth.
+An episode whose simulation blows up costs only its own row (nan, and what diverged).
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.runner import run_episode
 from wbc.control.registry import get_controller
 from wbc.control.spec import ControllerSpec
@@ -44,6 +46,8 @@ class PostureRow:
         speed_m_s: mean forward speed (yaw frame) over the window [m/s] (nan likewise).
         fell: the episode ended with a fall.
         fall_time_s: when (nan if it did not fall) [s].
+        diverged: what blew up if the simulation diverged (`wbc.arena.divergence.SimulationDiverged`; the
+            measurements are nan), else None.
     """
 
     controller: str
@@ -56,6 +60,7 @@ class PostureRow:
     speed_m_s: float
     fell: bool
     fall_time_s: float
+    diverged: str | None = None
 
 
 def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_vx: float = 0.3,
@@ -107,7 +112,12 @@ def _play(sim: MujocoRobot, spec: ControllerSpec, name: str, schedule: CommandSc
           seed: int) -> PostureRow:
     controller = spec.make(sim.desc)
     sim.reset(seed=seed)
-    episode = run_episode(sim, controller, schedule, duration_s)
+    try:
+        episode = run_episode(sim, controller, schedule, duration_s, divergence=DivergenceCheck())
+    except SimulationDiverged as exc:  # only this row's numbers are lost: nan, and what diverged
+        return PostureRow(controller=spec.name, robot=sim.config.robot, arm_mode=spec.arm_mode, command=name,
+                          vx=schedule.vx, height_m=math.nan, height_std_m=math.nan, speed_m_s=math.nan, fell=False,
+                          fall_time_s=math.nan, diverged=exc.describe())
     window = episode.t > duration_s / 2
     if not episode.fell:
         z = episode.qpos[window, 2]

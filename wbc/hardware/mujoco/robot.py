@@ -126,6 +126,11 @@ class SimTruth:
     external_point_in_world: np.ndarray
 
 
+_BAD_QPOS, _BAD_QVEL, _BAD_QACC = (int(mujoco.mjtWarning.mjWARN_BADQPOS), int(mujoco.mjtWarning.mjWARN_BADQVEL),
+                                   int(mujoco.mjtWarning.mjWARN_BADQACC))
+"""MuJoCo's warnings of a state it could not integrate (and reset after)."""
+
+
 class MujocoRobot(Robot):
     """A robot simulated by MuJoCo.
 
@@ -424,6 +429,22 @@ class MujocoRobot(Robot):
         contacts = d.contact
         return bool(touches_off_foot(contacts.geom, contacts.pos, self._terrain_geom, self._is_foot_geom,
                                      self._foot_geoms, self._geom_xpos))
+
+    def instability(self) -> str | None:
+        """What MuJoCo reported as unstable since the last reset (`SimulatorHealth`), or None.
+
+        MuJoCo answers a position, velocity or acceleration it cannot integrate (NaN, inf or beyond 1e10) with a
+        warning, resets its state to the model's initial one and carries on; the warning's count, which the reset
+        keeps, is all that shows it happened. Three integer reads: cheap enough for every tick.
+        """
+        warning = self.data.warning
+        if not (warning[_BAD_QPOS].number or warning[_BAD_QVEL].number or warning[_BAD_QACC].number):
+            return None
+        what = ", ".join(f"{name} ({warning[i].number} time{'s' if warning[i].number > 1 else ''}, last at DOF "
+                         f"{warning[i].lastinfo})" for name, i in (("a position", _BAD_QPOS), ("a velocity", _BAD_QVEL),
+                                                                  ("an acceleration", _BAD_QACC))
+                         if warning[i].number)
+        return f"MuJoCo could not integrate {what}: NaN, inf or huge, and reset its own state"
 
     def base_rotation(self) -> np.ndarray:
         """Truth: trunk rotation matrix (body to world)."""

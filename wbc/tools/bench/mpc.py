@@ -17,6 +17,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from wbc.arena.divergence import DivergenceCheck
 from wbc.arena.episode import Episode
 from wbc.arena.executors import single_threaded_blas
 from wbc.arena.runner import run_episode
@@ -253,6 +254,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     Raises:
         UnknownNameError: unknown robot or controller.
+        SimulationDiverged: the simulation blew up during the walk (no figure of a blown-up walk is reported).
         BenchError: the controller is not an MPC controller, or a reference failed.
     """
     if single_thread:
@@ -282,11 +284,11 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         # at their first call, once per process; an arena worker pays that once for all its trials
         sim.reset(seed=0)
         warm_start = time.perf_counter()
-        run_episode(sim, ctrl, CommandSchedule(vx=vx), WARMUP_S)
+        run_episode(sim, ctrl, CommandSchedule(vx=vx), WARMUP_S, divergence=DivergenceCheck())
         warmup_wall = time.perf_counter() - warm_start
         sim.reset(seed=0)
         start = time.perf_counter()
-        episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=log)
+        episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=log, divergence=DivergenceCheck())
         wall = time.perf_counter() - start
         if reference:
             measure_references()
