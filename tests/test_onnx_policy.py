@@ -283,6 +283,40 @@ def test_a_model_with_external_data_runs_records_both_hashes_and_refuses_a_missi
     assert "ext.onnx.data" in err and "Traceback" not in err
 
 
+def test_recorded_checksums_cover_the_weights_in_external_data(tmp_path):
+    model, io = tmp_path / "ext.onnx", tmp_path / "ext.toml"
+    data = _external(model, _select(1, 6))
+    model_sha, data_sha = (hashlib.sha256(p.read_bytes()).hexdigest() for p in (model, data))
+    signed = _io().replace("[observation]", f'[onnx]\nsha256 = "{model_sha}"\n'
+                                            f'external_data_sha256 = {{ "ext.onnx.data" = "{data_sha}" }}\n\n'
+                                            "[observation]")
+    io.write_text(signed)
+    get_controller(f"onnx:{model}").make(get_robot("a1-wx200", "none"))
+    # the model's own sha256 alone: its weights would run unchecked; the message gives the line to record
+    io.write_text(signed.replace(f'external_data_sha256 = {{ "ext.onnx.data" = "{data_sha}" }}\n', ""))
+    with pytest.raises(OnnxModelError, match="whose sha256 is not recorded") as caught:
+        get_controller(f"onnx:{model}")
+    assert f'external_data_sha256 = {{ "ext.onnx.data" = "{data_sha}" }}' in str(caught.value)
+    # a file the model does not use: another export's I/O file
+    io.write_text(signed.replace('"ext.onnx.data" =', f'"ext.onnx.data" = "{data_sha}", "old.data" ='))
+    with pytest.raises(OnnxModelError, match=r"names old.data, which .* does not use \(it uses ext.onnx.data\)"):
+        get_controller(f"onnx:{model}")
+    # the checksums without the model's own, or not a table of digests: the I/O file is refused, naming the key
+    io.write_text(signed.replace(f'sha256 = "{model_sha}"\n', "", 1))
+    with pytest.raises(OnnxIoError, match=r"\[onnx\] external_data_sha256: .*add \[onnx\] sha256"):
+        get_controller(f"onnx:{model}")
+    io.write_text(signed.replace(f'"{data_sha}" }}', '"abc" }'))
+    with pytest.raises(OnnxIoError, match=r"'ext.onnx.data': expected 64 lowercase hex digits"):
+        get_controller(f"onnx:{model}")
+    # one bit of the weights flipped: refused before onnxruntime reads them
+    io.write_text(signed)
+    raw = bytearray(data.read_bytes())
+    raw[-1] ^= 0x01
+    data.write_bytes(bytes(raw))
+    with pytest.raises(OnnxModelError, match=f"its external data file ext.onnx.data has sha256 .*, not {data_sha}"):
+        get_controller(f"onnx:{model}")
+
+
 def test_the_external_data_reader_agrees_with_the_onnx_package(tmp_path):
     from onnx.external_data_helper import _get_all_tensors, uses_external_data
 

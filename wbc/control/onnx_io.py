@@ -12,7 +12,9 @@ arena as ``onnx:PATH``; the TOML file beside it (``PATH`` with the suffix ``.tom
   input, its first output); ``sha256``, the sha256 of the ``.onnx`` file (64 lowercase hex digits, what ``sha256sum``
   prints), which `wbc.control.onnx_policy.onnx_spec` verifies before any trial. ``wbc``'s own export
   (`wbc.learned.train.onnx_export`) writes it; an I/O file without it (a policy exported elsewhere) runs its model
-  unchecked. It covers the model file only, not external data files beside it.
+  unchecked. A model that keeps its weights in external data files has those checked too:
+  ``external_data_sha256`` is a table of each file's ``location`` (as the model names it) and its sha256, required
+  with ``sha256`` for such a model (the weights are what a checksum is for), every file named once.
 - ``[observation]``: ``history`` (frames of each term the network sees, default 1), ``history_order`` (``frames``:
   whole observation frames stacked oldest first, legged_gym style; ``terms``: each term's own history, oldest first,
   then the next term, Isaac Lab style), ``history_fill`` (after a reset the history holds the first observation,
@@ -75,6 +77,7 @@ HISTORY_FILLS = ("first", "zeros")
 ACTION_KINDS = ("joint_position",)
 _TABLES = ("policy", "onnx", "observation", "action", "pd")
 _SHA256 = re.compile(r"[0-9a-f]{64}")
+_MAX_EXTERNAL_FILES = 1000  # torch writes one data file, onnx's save one per tensor at most
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -112,6 +115,8 @@ class OnnxIo:
         input_name: the network input's name, or None for its only input.
         output_name: the network output's name, or None for its first output.
         model_sha256: the model file's sha256 (hex) to verify, or None: no check.
+        external_data_sha256: each external data file's location and sha256 (hex) to verify, in file order (empty:
+            none recorded).
         terms: the observation terms, in order.
         history_order: ``frames`` or ``terms``.
         history_fill: ``first`` or ``zeros``.
@@ -143,6 +148,7 @@ class OnnxIo:
     kp: tuple[float, ...]
     kd: tuple[float, ...]
     model_sha256: str | None = None
+    external_data_sha256: tuple[tuple[str, str], ...] = ()
 
     @property
     def num_joints(self) -> int:
@@ -198,6 +204,31 @@ def _clip(table: TomlTable, key: str) -> tuple[float, float] | None:
         return table.interval(key, Range())
     bound = table.number(key, Range(lo=0.0, lo_open=True))
     return (-bound, bound)
+
+
+def _external_data_sha256(net: TomlTable, model_sha256: str | None) -> tuple[tuple[str, str], ...]:
+    """``[onnx] external_data_sha256``: each external data file's location and sha256.
+
+    Checked for form only here; the model's own list of files is compared in `wbc.control.onnx_policy.onnx_spec`.
+    """
+    key = "external_data_sha256"
+    if key not in net.data:
+        return ()
+    table = net.data[key]
+    if model_sha256 is None:
+        net.fail(key, "records the weights' checksums of a model whose own sha256 is not recorded: add [onnx] sha256 "
+                      "(the .onnx file's, as sha256sum prints it), or remove both to run the model unchecked")
+    if not isinstance(table, dict) or not table:
+        net.fail(key, f"expected a table of each external data file's location and its sha256, e.g. "
+                      f'{{ "policy.onnx.data" = "<64 hex digits>" }}, got {show(table)}')
+    if len(table) > _MAX_EXTERNAL_FILES:
+        net.fail(key, f"names {len(table)} files; a model of wbc's size keeps its weights in at most "
+                      f"{_MAX_EXTERNAL_FILES}")
+    for location, digest in table.items():
+        if not (isinstance(digest, str) and _SHA256.fullmatch(digest)):
+            net.fail(key, f"{show(location)}: expected 64 lowercase hex digits (the file's sha256, as sha256sum "
+                          f"prints it), got {show(digest)}")
+    return tuple(table.items())
 
 
 def _choice(table: TomlTable, key: str, valid: tuple[str, ...], default: str) -> str:
@@ -278,13 +309,14 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
         default_q = tuple(float(nominal[i]) for i in house_index)
     summary = pol.string("summary", f"ONNX policy for {robot} (arm {arm_mode}) at {rate_hz:g} Hz")
 
-    net = top.sub_table("onnx", ("input", "output", "sha256"), required=False)
+    net = top.sub_table("onnx", ("input", "output", "sha256", "external_data_sha256"), required=False)
     input_name = net.string("input") if "input" in net.data else None
     output_name = net.string("output") if "output" in net.data else None
     model_sha256 = net.string("sha256") if "sha256" in net.data else None
     if model_sha256 is not None and not _SHA256.fullmatch(model_sha256):
         net.fail("sha256", f"expected 64 lowercase hex digits (the .onnx file's sha256, as sha256sum prints it), got "
                  f"{show(model_sha256)}; remove the key to run the model unchecked")
+    external = _external_data_sha256(net, model_sha256)
 
     obs = top.sub_table("observation", ("history", "history_order", "history_fill", "clip", "terms"), required=True)
     history = obs.integer("history", Range(lo=1, hi=1000), 1)
@@ -322,6 +354,6 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
 
     return OnnxIo(path=shown, robot=robot, arm_mode=arm_mode, rate_hz=rate_hz, summary=summary, joints=joints,
                   house_index=house_index, default_q=default_q, input_name=input_name, output_name=output_name,
-                  model_sha256=model_sha256, terms=tuple(terms), history_order=order, history_fill=fill,
-                  obs_clip=obs_clip, action_kind=kind, action_scale=action_scale, action_clip=action_clip, kp=kp,
-                  kd=kd)
+                  model_sha256=model_sha256, external_data_sha256=external, terms=tuple(terms), history_order=order,
+                  history_fill=fill, obs_clip=obs_clip, action_kind=kind, action_scale=action_scale,
+                  action_clip=action_clip, kp=kp, kd=kd)

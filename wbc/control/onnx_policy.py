@@ -433,6 +433,38 @@ class OnnxController:
         return {}
 
 
+def _verify_external_data(model: Path, io: OnnxIo, io_path: Path, data: list[Path],
+                          hashed: tuple[SourceFile, ...]) -> None:
+    """The external data files against ``[onnx] external_data_sha256``.
+
+    With ``[onnx] sha256`` recorded, every file the model names is listed there, nothing else is, and each one's
+    sha256 matches.
+    """
+    if io.model_sha256 is None:
+        return
+    # the model names its files relative to its own directory; resolve_model returns them resolved the same way
+    found = {os.path.relpath(path, model.resolve().parent): f.sha256 for path, f in zip(data, hashed, strict=True)}
+    recorded = dict(io.external_data_sha256)
+    if set(found) - set(recorded):
+        listing = ", ".join(f'"{location}" = "{digest}"' for location, digest in found.items())
+        raise OnnxModelError(f"{io_path}: [onnx] external_data_sha256: {model} keeps its weights in "
+                             f"{', '.join(sorted(set(found) - set(recorded)))}, whose sha256 is not recorded, while "
+                             "the model's is: the weights would run unchecked. If these files are the ones exported, "
+                             f"record them: external_data_sha256 = {{ {listing} }}")
+    if set(recorded) - set(found):
+        unused = ", ".join(sorted(set(recorded) - set(found)))
+        used = ", ".join(found) or "none"
+        raise OnnxModelError(f"{io_path}: [onnx] external_data_sha256 names {unused}, which {model} does not use "
+                             f"(it uses {used}): the I/O file "
+                             "belongs to another export; copy the pair again, or export again")
+    for location, digest in found.items():
+        if digest != recorded[location]:
+            raise OnnxModelError(f"{model}: its external data file {location} has sha256 {digest}, not "
+                                 f"{recorded[location]} as {io_path} [onnx] external_data_sha256 records: the "
+                                 "weights changed since the export (a damaged copy, or another export's data "
+                                 "file); copy the files again, or export again")
+
+
 def onnx_spec(name: str, model: str | Path, io_file: str | Path | None = None) -> ControllerSpec:
     """Resolve ``onnx:PATH``: read the I/O file, check the model against it, and make the spec.
 
@@ -460,9 +492,11 @@ def onnx_spec(name: str, model: str | Path, io_file: str | Path | None = None) -
                              f"{io_path} [onnx] sha256: the model changed since it was exported (a damaged copy, or "
                              "another export's model beside this I/O file); copy the pair again, or export again")
     real, data = resolve_model(path)
+    data_files = tuple(SourceFile.hashed("external data", f) for f in data)
+    _verify_external_data(path, io, io_path, data, data_files)
     check_model(open_session(path), io, path)  # once here, so a mismatch fails before any trial
     make = functools.partial(OnnxController, model_path=str(real), io=io)
     files = (SourceFile(role="model", path=str(real), sha256=digest),
-             *(SourceFile.hashed("external data", f) for f in data), SourceFile.hashed("io", io_path))
+             *data_files, SourceFile.hashed("io", io_path))
     return ControllerSpec(name, io.arm_mode, make, io.summary, robots=(io.robot,), kind="onnx",
                           config_file=str(io_path), files=files)
