@@ -246,3 +246,13 @@ def test_other_flags_state_their_range_and_out_may_not_be_a_file(tmp_path, capsy
                                       "--band", "in"])
     assert args.band == ["in", "ood"]
     assert "wbc: warning: --band 'in' given more than once; using it once" in capsys.readouterr().err
+
+
+def test_a_run_of_more_trials_than_one_run_plays_is_refused_before_any_is_listed(tmp_path, capsys):
+    # 2 controllers x 2 bands x 10,000 seeds x 100,000 trials: each flag in range, the product 4e9 trials (listing
+    # them alone would fill the memory)
+    err = _cli_error(capsys, ["compare", "stand", "mpc", "--scenario", "scenarios/push.toml", "--seeds", "10000",
+                              "--trials", "100000", "--out", str(tmp_path / "run")])
+    assert ("this run would play 4,000,000,000 trials (2 controllers x 2 bands x 10000 seeds x 100000 trials), more "
+            "than the 1,000,000 one run plays") in err
+    assert not (tmp_path / "run").exists()

@@ -31,7 +31,7 @@ from wbc.arena.breakdown import breakdown, push_outcomes, recovery_curve
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErrors, ErrorGuard
 from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.finish import finish_results
-from wbc.arena.identity import ControllerFile, ScenarioRef, SequentialStop, SimulatedRunIdentity
+from wbc.arena.identity import MAX_RUN_TRIALS, ControllerFile, ScenarioRef, SequentialStop, SimulatedRunIdentity
 from wbc.arena.progress import progress
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import summarize
@@ -235,6 +235,11 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     for band in bands:
         if band not in scenario.bands:
             raise UnknownNameError("band", band, scenario.bands)
+    budget = len(cfg.controllers) * len(bands) * len(cfg.seeds) * cfg.trials
+    if budget > MAX_RUN_TRIALS:  # before the trials are listed: a list of billions would fill the memory first
+        raise ConfigError(f"this run would play {budget:,} trials ({len(cfg.controllers)} controllers x "
+                          f"{len(bands)} bands x {len(cfg.seeds)} seeds x {cfg.trials} trials), more than the "
+                          f"{MAX_RUN_TRIALS:,} one run plays; pass fewer --seeds or --trials, or split the study")
     try:
         check_published(scenario)
         published = True

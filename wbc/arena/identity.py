@@ -29,11 +29,15 @@ from wbc.errors import InputFileError, RecordError
 from wbc.input_files import read_json, short
 from wbc.scenario.scenario import MAX_DURATION_S
 
-__all__ = ["MAX_SEED", "MAX_TRIALS", "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef",
-           "SequentialStop", "SimulatedRunIdentity"]
+__all__ = ["MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "ControllerFile", "HardwareRunIdentity", "RunIdentity",
+           "ScenarioRef", "SequentialStop", "SimulatedRunIdentity"]
 
 MAX_TRIALS = 100_000
 """Most trials per band and seed a run plays (``wbc run --trials``)."""
+
+MAX_RUN_TRIALS = 1_000_000
+"""Most trials a run plays in all (controllers x bands x seeds x trials): a million trials of a second each keep two
+cores busy for eleven days; a larger study is several runs."""
 
 MAX_SEED = 2**32 - 1
 """Largest seed (the scenario's `numpy.random.SeedSequence` takes any, the command line up to this)."""
