@@ -112,6 +112,19 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
                  "--workers", "1", "--quiet", "--resume"]) == 0
     again = capsys.readouterr().out
     assert again.split("\nrun: ")[0] == printed.split("\nrun: ")[0] and "run: 0 trials played" in again
+    # a row edited by hand is refused on --resume, naming its line; --drop-bad-rows drops it and plays it again
+    lines = (out / "trials.csv").read_text(encoding="utf-8").splitlines(keepends=True)
+    row = lines[3].rstrip("\n")
+    lines[3] = row[:-1] + ("0" if row[-1] != "0" else "1") + "\n"  # its checksum no longer matches its cells
+    (out / "trials.csv").write_text("".join(lines), encoding="utf-8")
+    again_argv = ["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
+                  "--workers", "1", "--quiet", "--resume"]
+    assert main(again_argv) == 2
+    assert f"{out / 'trials.csv'}:4:" in capsys.readouterr().err
+    assert main([*again_argv, "--drop-bad-rows"]) == 0
+    captured = capsys.readouterr()
+    assert f"{out / 'trials.csv'}:4:" in captured.err and "row dropped (--drop-bad-rows)" in captured.err
+    assert "run: 1 trials played" in captured.out
 
 
 def test_table3_lists_its_baselines_and_says_which_are_missing(tiny, tmp_path):

@@ -651,7 +651,8 @@ def _paper(args: argparse.Namespace) -> int:
     result = run_paper_table(PaperRunConfig(
         table=args.table, trials=args.trials, seeds=args.seeds,
         scenario=Path(args.scenario) if args.scenario else None, out_dir=Path(args.out) if args.out else None,
-        workers=args.workers, resume=args.resume, progress=not (args.quiet or args.json), contenders=overrides,
+        workers=args.workers, resume=args.resume, drop_bad_rows=args.drop_bad_rows,
+        progress=not (args.quiet or args.json), contenders=overrides,
         crouched=args.crouched))
     if args.json:
         printers.print_json(result.as_dict())

@@ -144,6 +144,14 @@ _EPISODE_S = bounded_float(0.0, MAX_DURATION_S, lo_open=True, unit="s")
 _MEASURE_S = bounded_float(0.0, MAX_HOURS_S, lo_open=True, unit="s")
 
 
+def _add_resume_options(p: argparse.ArgumentParser) -> None:
+    """``--resume`` and ``--drop-bad-rows``: finishing a run stored in --out (``wbc run``, ``compare``, ``paper``)."""
+    p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
+    p.add_argument("--drop-bad-rows", action="store_true",
+                   help="with --resume: drop the rows of trials.csv that are refused (edited, corrupted, repeated, of "
+                        "another scenario file), one warning each, and play their trials again")
+
+
 def add_arena_options(p: argparse.ArgumentParser) -> None:
     """The options ``run`` and ``compare`` share: which trials, where the results go, how they are played."""
     p.add_argument("--scenario", required=True, help="scenario file (e.g. scenarios/push.toml)")
@@ -159,10 +167,7 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--workers", type=_WORKERS, default=None,
                    help=f"local worker processes, 1..{MAX_WORKERS} (default: all cores)")
     p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
-    p.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
-    p.add_argument("--drop-bad-rows", action="store_true",
-                   help="with --resume: drop the rows of trials.csv that are refused (edited, corrupted, repeated, of "
-                        "another scenario file), one warning each, and play their trials again")
+    _add_resume_options(p)
     p.add_argument("--max-consecutive-errors", type=bounded_int(0, MAX_TRIALS), default=DEFAULT_MAX_CONSECUTIVE_ERRORS,
                    metavar="K",
                    help="stop a controller that fails (raises, or returns an invalid command) on K trials in a row; "
@@ -476,7 +481,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="results directory (default: runs/paper-<table>-<time>)")
     paper.add_argument("--workers", type=_WORKERS, default=None,
                        help=f"local worker processes, 1..{MAX_WORKERS} (default: all cores)")
-    paper.add_argument("--resume", action="store_true", help="finish an interrupted run in --out")
+    _add_resume_options(paper)
     paper.add_argument("--contender", action="append", default=None, metavar="KEY=CONTROLLER",
                        help="play CONTROLLER in row KEY (repeatable): e.g. learned=policy:PATH for a retrained pi3, "
                        "ppo=policy:PATH for a Table III baseline trained anew")

@@ -57,6 +57,8 @@ class PaperRunConfig:
         out_dir: results directory (None: ``runs/paper-<table>-<time>``).
         workers: local worker processes (None: all cores).
         resume: finish an interrupted run in `out_dir`.
+        drop_bad_rows: with `resume`, drop the rows of ``trials.csv`` the results store refuses and play their
+            trials again (`wbc.arena.compare.ArenaConfig.drop_bad_rows`).
         progress: progress on stderr.
         contenders: ``--contender KEY=CONTROLLER`` overrides, by key.
         crouched: play the learned rows' crouched posture variants (``--crouched``; `wbc.tools.paper.tables`).
@@ -69,6 +71,7 @@ class PaperRunConfig:
     out_dir: Path | None = None
     workers: int | None = None
     resume: bool = False
+    drop_bad_rows: bool = False
     progress: bool = True
     contenders: Mapping[str, str] = field(default_factory=dict)
     crouched: bool = False
@@ -190,7 +193,7 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
     start = time.perf_counter()
     arena = run_arena(ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
                                   seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
-                                  resume=cfg.resume, progress=cfg.progress))
+                                  resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows, progress=cfg.progress))
     wall = time.perf_counter() - start
     records = arena.records
     by_controller: dict[str, list[TrialRecord]] = {}
