@@ -6,6 +6,7 @@ stored episode, and the command line's flags. Everything here is built in the te
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -13,16 +14,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wbc.arena.episode import Episode
+from wbc.arena.episode import Episode, PushLog
 from wbc.arena.identity import RunIdentity, ScenarioRef, SimulatedRunIdentity
 from wbc.arena.results import episode_path
 from wbc.cli.main import main
 from wbc.cli.parser import build_parser
 from wbc.control.plugin import read_controller_config
-from wbc.errors import EpisodeFileError, FileFieldError, RecordError, ScenarioError
+from wbc.errors import EpisodeError, EpisodeFileError, FileFieldError, RecordError, ScenarioError
 from wbc.scenario.domain import DomainParams
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.terrain import TerrainConfig
+from wbc.viz.replay import frames_of
 
 ROOT = Path(__file__).resolve().parent.parent
 PUSH = (ROOT / "scenarios" / "push.toml").read_text()
@@ -196,6 +198,20 @@ def test_a_malformed_episode_is_refused_naming_the_field_and_never_drawn(tmp_pat
     for changes, says in cases:
         with pytest.raises(EpisodeFileError, match=says):
             Episode.load(str(broken(**changes)))
+    # the same checks on an episode built in memory, before any frame of it is drawn
+    made = _episode()
+    assert len(list(frames_of(made))) == 20
+    for changes, says in cases:
+        if "dtype" in says or "push_start" in says:  # the dataclass holds no text arrays; pushes are a PushLog
+            continue
+        bad = dataclasses.replace(made, **changes)
+        with pytest.raises(EpisodeError, match=says) as caught:
+            next(frames_of(bad))
+        assert str(caught.value).startswith("episode: field ") and not isinstance(caught.value, EpisodeFileError)
+    with pytest.raises(EpisodeError, match="field push_start: nan"):
+        next(frames_of(dataclasses.replace(made, pushes=PushLog(start=np.array([np.nan]), duration=np.array([0.1]),
+                                                                force_in_world=np.zeros((1, 3)),
+                                                                offset_in_base=np.zeros((1, 3))))))
     with pytest.raises(EpisodeFileError, match="not a readable .npz archive"):
         (tmp_path / "junk.npz").write_bytes(b"not a zip")
         Episode.load(str(tmp_path / "junk.npz"))

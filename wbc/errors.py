@@ -25,6 +25,7 @@ __all__ = [
     "MpcProblemFileError",
     "RecordError",
     "ResultsDirError",
+    "EpisodeError",
     "EpisodeFileError",
     "MissingCapabilityError",
     "FrameError",
@@ -178,7 +179,14 @@ class ResultsDirError(WbcError):
     """
 
 
-class EpisodeFileError(WbcError, ValueError):
+class EpisodeError(WbcError, ValueError):
+    """An `Episode` holds a value no episode can; the message names the episode and the field.
+
+    A time that runs backwards, a NaN pose, a row count that is not the ticks'.
+    """
+
+
+class EpisodeFileError(EpisodeError):
     """An episode file (``.npz``) is not an `Episode` this version can read; the message names the file and field."""
 
 

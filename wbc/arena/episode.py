@@ -14,13 +14,13 @@ from __future__ import annotations
 import math
 import zipfile
 import zlib
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import NoReturn
 
 import numpy as np
 
-from wbc.errors import ConfigError, EpisodeFileError, InputFileError
+from wbc.errors import ConfigError, EpisodeError, EpisodeFileError, InputFileError
 from wbc.hardware.capabilities import SafetyEventLike
 from wbc.input_files import open_npz, short
 from wbc.robots.conventions import quat_to_matrices
@@ -246,6 +246,28 @@ class Episode:
         """Ticks whose ``controller.act`` took longer than `budget_s` [s] (default: the control period)."""
         return int(np.count_nonzero(self.act_s > (self.control_dt if budget_s is None else budget_s)))
 
+    def validate(self, where: str = "episode") -> None:
+        """Check this episode as `load` checks a file.
+
+        Every scalar in range, ``t`` finite and strictly increasing, one row per tick in every per-tick array with
+        the columns its field needs, finite numbers, unit base quaternions, no negative power or act time, finite
+        push, safety and operator times. An episode built in memory (by a tool of one's own, or edited) is checked
+        before it is drawn (`wbc.viz.replay.frames_of`); the runner's own pass, but for a diverged one's last tick.
+
+        Raises:
+            EpisodeError: naming `where` and the field at fault.
+        """
+        get = {**{k: getattr(self, k) for k in (*_SCALARS, *_ARRAYS)},
+               **{f"push_{k}": getattr(self.pushes, k) for k in _PUSH_KEYS},
+               "safety_time": self.safety_events.time, "operator_time": self.operator_events.time,
+               "clamped_ticks": self.clamped_ticks, "clamped_rows": self.clamped_rows}
+        fields = _EpisodeFields(where, lambda name: np.asarray(get[name]), _MEMORY_ADVICE)
+        _, arrays = _checked_core(fields)
+        for name in (*(f"push_{k}" for k in _PUSH_KEYS), "safety_time", "operator_time"):
+            fields.numbers(name, ndim=None)
+        fields.scalar("clamped_ticks", lo=0, hi=len(arrays["t"]) + 1)
+        fields.numbers("clamped_rows", rows=5)
+
     def save(self, path: str) -> None:
         """Write the episode to a NumPy ``.npz`` file (no pickle).
 
@@ -300,38 +322,9 @@ class Episode:
             raise EpisodeFileError(f"{path}: field {missing[0]} missing (fields missing: {', '.join(missing)}); "
                                    "the file was written by another version of wbc: replay it with that "
                                    "version, or play the trial again with `wbc run --save-episodes`")
-        fields = _EpisodeFields(path, z)
-        scalars = {"duration_s": fields.scalar("duration_s", lo=0.0, hi=MAX_DURATION_S, lo_open=True),
-                   "control_dt": fields.scalar("control_dt", lo=0.0, hi=1.0, lo_open=True),
-                   "fell": bool(fields.scalar("fell", lo=0.0, hi=1.0)),
-                   "fall_time_s": fields.scalar("fall_time_s", lo=0.0, hi=math.inf, nan=True)}
-        t = fields.numbers("t", ndim=1)
-        if t.size > 1 and not np.all(np.diff(t) > 0):
-            i = int(np.argmin(np.diff(t) > 0))
-            raise EpisodeFileError(f"{path}: field t: not strictly increasing (t[{i}] = {t[i]:g}, t[{i + 1}] = "
-                                   f"{t[i + 1]:g}); the file is damaged: play the trial again")
-        k = len(t)
-        arrays = {"t": t, "command": fields.numbers("command", rows=k, cols=3),
-                  "v_base_in_yaw": fields.numbers("v_base_in_yaw", rows=k, cols=2),
-                  "yaw_rate": fields.numbers("yaw_rate", rows=k), "roll": fields.numbers("roll", rows=k),
-                  "pitch": fields.numbers("pitch", rows=k), "power": fields.numbers("power", rows=k),
-                  "arm_q": fields.numbers("arm_q", rows=k, ndim=2), "qpos": fields.numbers("qpos", rows=k, ndim=2),
-                  "act_s": fields.numbers("act_s", rows=k)}
-        qpos = arrays["qpos"]
-        if qpos.shape[1] < 8:
-            raise EpisodeFileError(f"{path}: field qpos: shape {qpos.shape}, expected (ticks, 7 + joints): a base "
-                                   "position, a quaternion and the joints; the file is damaged: play the trial again")
-        with np.errstate(over="ignore"):  # a damaged file's huge values give an infinite norm, refused below
-            norms = np.linalg.norm(qpos[:, 3:7], axis=1)
-        bad = np.flatnonzero(np.abs(norms - 1.0) > _QUAT_TOLERANCE)
-        if bad.size:
-            raise EpisodeFileError(f"{path}: field qpos: the base quaternion qpos[{bad[0]}, 3:7] has norm "
-                                   f"{norms[bad[0]]:.6g}, not 1 (to {_QUAT_TOLERANCE:g}; {bad.size} such ticks); the "
-                                   "file is damaged: play the trial again")
-        for name in ("power", "act_s"):
-            if np.any(arrays[name] < 0):
-                raise EpisodeFileError(f"{path}: field {name}: negative values, expected >= 0; the file is damaged: "
-                                       "play the trial again")
+        fields = _EpisodeFields(path, z.__getitem__, _FILE_ADVICE)
+        scalars, arrays = _checked_core(fields)
+        k = len(arrays["t"])
         safety_keys = [f"safety_{k}" for k in _SAFETY_KEYS]
         present = [k for k in safety_keys if k in z.files]
         if present and len(present) < len(safety_keys):
@@ -357,6 +350,44 @@ class Episode:
             raise EpisodeFileError(f"{path}: {short(str(exc), 300)}") from None
 
 
+def _checked_core(fields: _EpisodeFields) -> tuple[dict[str, float | bool], dict[str, np.ndarray]]:
+    """The scalars and per-tick arrays every episode has, checked (see `Episode.load`), as `Episode` takes them."""
+    scalars = {"duration_s": fields.scalar("duration_s", lo=0.0, hi=MAX_DURATION_S, lo_open=True),
+               "control_dt": fields.scalar("control_dt", lo=0.0, hi=1.0, lo_open=True),
+               "fell": bool(fields.scalar("fell", lo=0.0, hi=1.0)),
+               "fall_time_s": fields.scalar("fall_time_s", lo=0.0, hi=math.inf, nan=True)}
+    t = fields.numbers("t", ndim=1)
+    if t.size > 1 and not np.all(np.diff(t) > 0):
+        i = int(np.argmin(np.diff(t) > 0))
+        fields.fail("t", f"not strictly increasing (t[{i}] = {t[i]:g}, t[{i + 1}] = {t[i + 1]:g})")
+    k = len(t)
+    arrays = {"t": t, "command": fields.numbers("command", rows=k, cols=3),
+              "v_base_in_yaw": fields.numbers("v_base_in_yaw", rows=k, cols=2),
+              "yaw_rate": fields.numbers("yaw_rate", rows=k), "roll": fields.numbers("roll", rows=k),
+              "pitch": fields.numbers("pitch", rows=k), "power": fields.numbers("power", rows=k),
+              "arm_q": fields.numbers("arm_q", rows=k, ndim=2), "qpos": fields.numbers("qpos", rows=k, ndim=2),
+              "act_s": fields.numbers("act_s", rows=k)}
+    qpos = arrays["qpos"]
+    if qpos.shape[1] < 8:
+        fields.fail("qpos", f"shape {qpos.shape}, expected (ticks, 7 + joints): a base position, a quaternion and the "
+                            "joints")
+    with np.errstate(over="ignore"):  # huge values give an infinite norm, refused below
+        norms = np.linalg.norm(qpos[:, 3:7], axis=1)
+    bad = np.flatnonzero(np.abs(norms - 1.0) > _QUAT_TOLERANCE)
+    if bad.size:
+        fields.fail("qpos", f"the base quaternion qpos[{bad[0]}, 3:7] has norm {norms[bad[0]]:.6g}, not 1 (to "
+                            f"{_QUAT_TOLERANCE:g}; {bad.size} such ticks)")
+    for name in ("power", "act_s"):
+        if np.any(arrays[name] < 0):
+            fields.fail(name, "negative values, expected >= 0")
+    return scalars, arrays
+
+
+_FILE_ADVICE = ("the file is damaged or was not written by `Episode.save`: play the trial again with `wbc run "
+                "--save-episodes`")
+_MEMORY_ADVICE = "the episode was not made by the runner (`wbc.arena.runner.run_episode`) or was changed since"
+
+
 _QUAT_TOLERANCE = 1e-3
 """How far a stored base quaternion's norm may be from 1: a simulator's and an estimator's are unit to ~1e-9."""
 
@@ -364,39 +395,46 @@ _QUAT_TOLERANCE = 1e-3
 class _EpisodeFields:
     """The arrays of an open episode archive, read with their shapes, types and values checked.
 
-    Every failure is an `EpisodeFileError` naming the file and the field.
+    Every failure is an `EpisodeFileError` naming the file and the field (an `EpisodeError` naming `where` for an
+    episode in memory: `advice` is not the file one).
+
+    Args:
+        where: the file, or what the episode is.
+        get: returns a field's array by name.
+        advice: what to do, after the reason.
     """
 
-    def __init__(self, path: str, z: np.lib.npyio.NpzFile) -> None:
-        self.path, self.z = path, z
+    def __init__(self, where: str, get: Callable[[str], np.ndarray], advice: str) -> None:
+        self.where, self.get, self.advice = where, get, advice
 
-    def _fail(self, name: str, reason: str) -> NoReturn:
-        raise EpisodeFileError(f"{self.path}: field {name}: {reason}; the file is damaged or was not written by "
-                               "`Episode.save`: play the trial again with `wbc run --save-episodes`")
+    def fail(self, name: str, reason: str) -> NoReturn:
+        """Raise the error of field `name`."""
+        error = EpisodeFileError if self.advice is _FILE_ADVICE else EpisodeError
+        raise error(f"{self.where}: field {name}: {reason}; {self.advice}")
 
     def _array(self, name: str) -> np.ndarray:
-        value = self.z[name]
+        value = self.get(name)
         if value.dtype.kind not in "biuf":
-            self._fail(name, f"dtype {value.dtype}, expected numbers")
+            self.fail(name, f"dtype {value.dtype}, expected numbers")
         return value
 
     def scalar(self, name: str, *, lo: float, hi: float, lo_open: bool = False, nan: bool = False) -> float:
         """A single number in [lo, hi] (lo excluded when `lo_open`; NaN accepted when `nan`)."""
         value = self._array(name)
         if value.size != 1:
-            self._fail(name, f"shape {value.shape}, expected a single number")
+            self.fail(name, f"shape {value.shape}, expected a single number")
         x = float(value.reshape(()))
         if nan and math.isnan(x):
             return x
         if not (math.isfinite(x) and (x > lo if lo_open else x >= lo) and x <= hi):
-            self._fail(name, f"{x!r}, expected a finite number in {'(' if lo_open else '['}{lo:g}, {hi:g}]")
+            self.fail(name, f"{x!r}, expected a finite number in {'(' if lo_open else '['}{lo:g}, {hi:g}]")
         return x
 
     def scalar_text(self, name: str) -> str:
         """A single string."""
-        value = self.z[name]
+        value = self.get(name)
         if value.dtype.kind not in "SU" or value.size != 1:
-            self._fail(name, f"dtype {value.dtype}, shape {value.shape}, expected one string")
+            self.fail(name, f"dtype {value.dtype}, shape {value.shape}, expected one string")
         return str(value.reshape(()))
 
     def numbers(self, name: str, *, rows: int | None = None, cols: int | None = None,
@@ -406,16 +444,16 @@ class _EpisodeFields:
         ndim = 2 if cols is not None else ndim
         if ndim is not None and value.ndim != ndim:
             expected = "(ticks,)" if ndim == 1 else f"(ticks, {cols if cols is not None else 'n'})"
-            self._fail(name, f"shape {value.shape}, expected {expected}")
+            self.fail(name, f"shape {value.shape}, expected {expected}")
         if rows is not None and value.shape[0] != rows:
-            self._fail(name, f"{value.shape[0]} rows, expected {rows} (one per entry of t)"
+            self.fail(name, f"{value.shape[0]} rows, expected {rows} (one per entry of t)"
                        if name != "clamped_rows" else f"shape {value.shape}, expected (5,)")
         if cols is not None and value.shape[1] != cols:
-            self._fail(name, f"shape {value.shape}, expected (ticks, {cols})")
+            self.fail(name, f"shape {value.shape}, expected (ticks, {cols})")
         value = value.astype(np.float64)
         if not np.all(np.isfinite(value)):
             where = np.argwhere(~np.isfinite(value))[0]
-            self._fail(name, f"{value[tuple(where)]} at index {tuple(int(i) for i in where)}, expected finite numbers")
+            self.fail(name, f"{value[tuple(where)]} at index {tuple(int(i) for i in where)}, expected finite numbers")
         return value
 
 

@@ -39,7 +39,11 @@ def frames_of(episode: Episode) -> Iterator[VizFrame]:
 
     A push is drawn in the frame of every tick whose control period overlaps it, at its application point on the
     trunk (the last acting push's point when several act together, their forces summed).
+
+    Raises:
+        EpisodeError: the episode holds a value no episode can (`Episode.validate`), checked before any frame.
     """
+    episode.validate()
     dt = episode.control_dt
     pushes = episode.pushes
     for i in range(len(episode.t)):
