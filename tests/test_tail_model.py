@@ -101,3 +101,29 @@ def test_an_arm_swing_turns_the_floating_trunk_as_the_model_predicts(kin, tmp_pa
     assert swinging.sum() > 50 and np.all(predicted[swinging, 2] < 0)  # the trunk turns against the arm
     error = np.linalg.norm(measured[swinging] - predicted[swinging], axis=1)
     assert np.all(error <= 0.02 * np.linalg.norm(predicted[swinging], axis=1))  # measured: 0.4 %
+
+
+def test_the_ready_pose_raises_the_arm_like_a_tail_and_holds_five_times_the_stowed_leverage(kin):
+    from wbc.mpc.tail_model import arm_leverage, choose_ready_pose
+    from wbc.robots.joint_table import joint_table
+
+    desc = get_robot("a1-wx200", "actuated")
+    table = joint_table(desc)
+    lo, hi = table.lower[ARM_JOINTS] + 0.05, table.upper[ARM_JOINTS] - 0.05
+    q = pin.neutral(kin.robot.model)
+    q[2] = 0.3
+    q[7:] = desc.nominal_q[kin.robot.joints.pin_from_house]
+    grid = [desc.arm.nominal_q, *(np.array([0.0, s, e]) for s in np.arange(lo[1], hi[1], 0.05)
+                                  for e in np.arange(lo[2], hi[2], 0.05))]
+    poses = arm_leverage(kin.robot, q, kin.arm_v, np.array(grid), table.velocity_limit[ARM_JOINTS],
+                         table.torque_limit[ARM_JOINTS])
+    stowed, ready = poses[0], choose_ready_pose(poses)
+    # stowed, the arm holds 0.04 / 0.14 / 0.05 N m s about roll / pitch / yaw at its speed limits
+    np.testing.assert_allclose(stowed.momentum_capacity, [0.041, 0.139, 0.048], atol=0.002)
+    # ready: upper arm leaning back, forearm raised behind the trunk; 9x the roll and 5x the pitch leverage, held
+    # with under a quarter of each servo's stall torque, the CoM 1 cm back
+    np.testing.assert_allclose(ready.arm_q, [0.0, -1.15, -1.25], atol=0.06)
+    assert np.all(ready.momentum_capacity[:2] >= 5 * stowed.momentum_capacity[:2])
+    assert np.all(ready.holding <= 0.25) and np.linalg.norm(ready.com_shift) < 0.015
+    with pytest.raises(ValueError, match="no arm pose of 1 holds with at most 10% of stall torque"):
+        choose_ready_pose([stowed], max_holding=0.1)  # its elbow needs 23 %

@@ -31,7 +31,8 @@ import pinocchio as pin
 
 from wbc.robots.pinocchio_model import PinocchioRobot
 
-__all__ = ["ArmTail", "arm_tail", "servo_torque_bounds", "trunk_rate_change"]
+__all__ = ["ArmPoseLeverage", "ArmTail", "arm_leverage", "arm_tail", "choose_ready_pose", "servo_torque_bounds",
+           "trunk_rate_change"]
 
 
 @dataclass(frozen=True)
@@ -111,3 +112,58 @@ def trunk_rate_change(tail: ArmTail, arm_dq_before: np.ndarray, arm_dq_after: np
     """The change of the trunk's angular velocity when the arm's speed changes at constant total momentum [rad/s]."""
     change = np.asarray(arm_dq_after, dtype=np.float64) - np.asarray(arm_dq_before, dtype=np.float64)
     return -np.linalg.solve(tail.inertia_world, tail.momentum_matrix @ change)
+
+
+@dataclass(frozen=True)
+class ArmPoseLeverage:
+    """What an arm pose offers as a tail, standing at the nominal leg pose.
+
+    Attributes:
+        arm_q: the pose (waist, shoulder, elbow) [rad].
+        momentum_capacity: the most angular momentum the arm holds about each world axis (roll, pitch, yaw) with
+            every joint at its speed limit, sum_j |A_arm[axis, j]| v_max,j [N m s].
+        holding: the static torque each joint needs to hold the pose, as a fraction of its stall torque.
+        com_shift: the robot's CoM, horizontal, relative to its place with the arm stowed [m].
+    """
+
+    arm_q: np.ndarray
+    momentum_capacity: np.ndarray
+    holding: np.ndarray
+    com_shift: np.ndarray
+
+
+def arm_leverage(robot: PinocchioRobot, q: np.ndarray, arm_v_idx: np.ndarray, poses: np.ndarray,
+                 velocity_limit: np.ndarray, stall_torque: np.ndarray) -> list[ArmPoseLeverage]:
+    """The `ArmPoseLeverage` of each arm pose in `poses` (rows: waist, shoulder, elbow).
+
+    The rest of `q` (Pinocchio order) is as given; the first pose is the reference of `com_shift`.
+    """
+    model, data = robot.model, robot.data
+    arm = np.asarray(arm_v_idx)
+    arm_q_idx = arm + 1  # a free flyer's configuration has one entry more than its velocity
+    out, reference = [], None
+    for pose in np.asarray(poses, dtype=np.float64):
+        qp = np.asarray(q, dtype=np.float64).copy()
+        qp[arm_q_idx] = pose
+        tail = arm_tail(robot, qp, np.zeros(model.nv), arm)
+        com = pin.centerOfMass(model, data, qp)[:2].copy()
+        reference = com if reference is None else reference
+        out.append(ArmPoseLeverage(arm_q=pose, momentum_capacity=np.abs(tail.momentum_matrix) @ velocity_limit,
+                                   holding=np.abs(tail.bias) / stall_torque, com_shift=com - reference))
+    return out
+
+
+def choose_ready_pose(candidates: list[ArmPoseLeverage], *, max_holding: float = 0.5) -> ArmPoseLeverage:
+    """The pose with the most leverage about the weaker of roll and pitch.
+
+    Among the poses whose joints hold them with at most `max_holding` of their stall torque (the rest is the servos'
+    to swing with); leverage is rounded to 1 mN m s, and ties go to the smaller CoM shift.
+
+    Raises:
+        ValueError: no candidate holds with that torque.
+    """
+    held = [c for c in candidates if np.all(c.holding <= max_holding)]
+    if not held:
+        raise ValueError(f"no arm pose of {len(candidates)} holds with at most {max_holding:.0%} of stall torque")
+    return max(held, key=lambda c: (round(float(min(c.momentum_capacity[0], c.momentum_capacity[1])), 3),
+                                    -float(np.linalg.norm(c.com_shift))))
