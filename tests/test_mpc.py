@@ -341,6 +341,7 @@ def test_the_per_tick_kinematics_placed_at_a_base_state_agree_with_pinocchio_the
         q, dq = desc.nominal_q + 0.5 * rng.standard_normal(n), rng.standard_normal(n)
         p, v, w = rng.standard_normal(3), rng.standard_normal(3), rng.standard_normal(3)
         kin.update(p, quat, q, dq, v, w, centroidal=True)
+        assert np.array_equal(kin.rot, quat_to_matrix(quat))  # the pass's rotation is the conversion's, to the bit
         q_pin, v_pin = kin.q_pin, kin.v_pin
         pin.forwardKinematics(model, data, q_pin, v_pin)
         pin.computeJointJacobians(model, data, q_pin)
@@ -361,7 +362,7 @@ def test_the_per_tick_kinematics_placed_at_a_base_state_agree_with_pinocchio_the
         np.testing.assert_allclose(kin.com, data.com[0], atol=1e-12)
         np.testing.assert_allclose(kin.com_vel, data.vcom[0], atol=1e-12)
         # between MPC updates the CoM rides with the trunk at its last offset
-        kin.tick(quat, q, dq, w, quat_to_matrix(quat))
+        kin.tick(quat, q, dq, w)
         kin.place(p + 0.01, v)
         np.testing.assert_allclose(kin.com, data.com[0] + 0.01, atol=1e-12)
 
@@ -371,16 +372,15 @@ def test_leg_jacobians_match_finite_differences_of_the_feet():
     rng = np.random.default_rng(7)
     quat = np.array([0.97, -0.08, 0.12, 0.2])
     quat /= np.linalg.norm(quat)
-    rot = quat_to_matrix(quat)
     q = desc.nominal_q + 0.2 * rng.standard_normal(15)
     kin = RobotKinematics(desc)
-    kin.tick(quat, q, np.zeros(15), np.zeros(3), rot)
+    kin.tick(quat, q, np.zeros(15), np.zeros(3))
     jac, feet = kin.leg_jacobians.copy(), kin.feet_rel.copy()
     eps = 1e-6
     for j in range(12):
         dq = np.zeros(15)
         dq[j] = eps
-        kin.tick(quat, q + dq, np.zeros(15), np.zeros(3), rot)
+        kin.tick(quat, q + dq, np.zeros(15), np.zeros(3))
         leg, col = divmod(j, 3)
         np.testing.assert_allclose((kin.feet_rel[leg] - feet[leg]) / eps, jac[leg][:, col], atol=1e-5)
 

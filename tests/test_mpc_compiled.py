@@ -1,15 +1,23 @@
 """The control tick's compiled pieces against plain NumPy statements of the same laws (the kinematics pass is checked
 against Pinocchio in test_mpc.py)."""
 
+import math
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
+from wbc.errors import CommandError
 from wbc.estimation import BaseEstimator, EstimatorConfig
-from wbc.mpc.compiled import contact_trust, swing_targets
+from wbc.mpc.compiled import command_rows, contact_trust, liftoffs, swing_targets
+from wbc.mpc.controller import MpcController
+from wbc.mpc.footholds import MIN_CAPTURE_HEIGHT_M, FootholdConfig, FootholdPlanner, ground_height
+from wbc.mpc.gait import TROT
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.leg_layer import LegLayer
 from wbc.robots import get_robot, joint_table
-from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.conventions import G, quat_to_matrix
+from wbc.types import MotorCommand, RobotState, VelocityCommand
 
 
 def _leg_torques_numpy(kin, contact, forces, pos, vel, kp, kd, stance_kd, limit):
@@ -48,8 +56,7 @@ def test_the_leg_layer_applies_its_law_and_scales_only_stance_legs_past_their_li
         quat = np.array([1.0, 0.0, 0.0, 0.0]) + 0.1 * rng.standard_normal(4)
         quat /= np.linalg.norm(quat)
         kin.update(rng.standard_normal(3), quat, desc.nominal_q + 0.2 * rng.standard_normal(15),
-                   rng.standard_normal(15), rng.standard_normal(3), rng.standard_normal(3), centroidal=False,
-                   rot=quat_to_matrix(quat))
+                   rng.standard_normal(15), rng.standard_normal(3), rng.standard_normal(3), centroidal=False)
         contact = rng.random(4) < 0.6
         forces = rng.normal([0, 0, 60], [30, 30, 60], (4, 3)) * (4.0 if k % 3 == 0 else 1.0)
         pos, vel = kin.feet + 0.05 * rng.standard_normal((4, 3)), rng.standard_normal((4, 3))
@@ -134,3 +141,107 @@ def test_the_compiled_steady_step_is_the_stored_matrices_applied():
         want = keep_a @ x + keep_b @ (rot @ accel) + gain @ np.concatenate([rel.ravel(), vel.ravel()]) + keep_g
         est.update(rot, accel, rel, vel, trust.tolist() if pattern % 2 else trust)
         np.testing.assert_allclose(est.x, want, atol=1e-12)
+
+
+def test_lift_offs_are_recorded_once_and_stance_feet_stand_where_they_are():
+    feet = np.arange(12.0).reshape(4, 3)
+    liftoff, footholds = np.zeros((4, 3)), np.full((4, 3), -1.0)
+    was_stance, lifted = np.array([True, True, False, True]), np.empty(4, dtype=bool)
+    contact = np.array([False, True, False, True])  # foot 0 lifts now, foot 2 was already up
+    assert liftoffs(contact, was_stance, feet, liftoff, footholds, lifted) == 1
+    assert lifted.tolist() == [True, False, False, False] and was_stance.tolist() == contact.tolist()
+    np.testing.assert_array_equal(liftoff, [feet[0], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
+    np.testing.assert_array_equal(footholds, [[-1, -1, -1], feet[1], [-1, -1, -1], feet[3]])  # swing feet untouched
+    assert liftoffs(contact, was_stance, feet + 1.0, liftoff, footholds, lifted) == 0  # nothing lifts twice
+    np.testing.assert_array_equal(liftoff[0], feet[0])
+
+
+@pytest.mark.parametrize("arm_first", [-1, 12])
+def test_the_command_rows_hold_the_legs_and_move_the_arm_along_its_velocity(arm_first):
+    n = 15
+    rng = np.random.default_rng(5)
+    q, tau = rng.standard_normal(n), rng.standard_normal(n)
+    kp, kd = np.where(np.arange(n) >= 12, 20.0, 0.0), np.full(n, 0.5)
+    target, velocity, dt = np.array([0.1, -1.2, 1.4]), np.array([0.5, -0.25, 1.0]), 0.002
+    rows = np.empty((5, n))
+    assert command_rows(q, tau, kp, kd, arm_first, target, velocity, dt, rows)
+    want = np.array([q, np.zeros(n), kp, kd, tau])
+    if arm_first >= 0:
+        moved = np.array([0.1, -1.2, 1.4]) + velocity * dt
+        np.testing.assert_array_equal(target, moved)  # advanced in place
+        want[0, 12:], want[1, 12:] = moved, velocity
+    np.testing.assert_array_equal(rows, want)
+
+
+@pytest.mark.parametrize(("row", "value"), [(4, np.nan), (0, np.inf), (3, -0.1), (2, -1e-300)])
+def test_the_command_rows_are_refused_as_the_command_refuses_them(row, value):
+    n = 12
+    rows = np.empty((5, n))
+    fields = [np.zeros(n), np.zeros(n), np.zeros(n), np.full(n, 0.5), np.zeros(n)]
+    fields[row][7] = value
+    q, _, kp, kd, tau = fields
+    assert not command_rows(q, tau, kp, kd, -1, np.zeros(3), np.zeros(3), 0.002, rows)
+    with pytest.raises(CommandError):
+        MotorCommand.from_rows(rows)
+
+
+def test_the_mpc_refuses_a_command_it_cannot_vouch_for():
+    """A non-finite measurement reaches the torques; the controller's command is refused as a constructed one is
+    (CommandError naming the field), never handed to a robot unchecked."""
+    desc = get_robot("a1-wx200")
+    ctrl = MpcController(desc)
+    n = desc.num_joints
+    dq = np.zeros(n)
+    dq[4] = np.nan
+    state = RobotState(tick=0, time=0.0, q=np.asarray(desc.nominal_q, dtype=np.float64)[:n].copy(), dq=dq,
+                       tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
+    with pytest.raises(CommandError, match="non-finite"):
+        ctrl.act(state, VelocityCommand())
+
+
+def _foothold_python(hip, com, v_com, v_cmd, w, t, stance_s, ground, cfg):
+    """The foothold law in Python floats, statement by statement (`wbc.mpc.footholds`)."""
+    hx, hy, _ = hip.tolist()
+    cx, cy, cz = com.tolist()
+    vx, vy = float(v_com[0]), float(v_com[1])
+    vcx, vcy = v_cmd
+    c, s = math.cos(w * t), math.sin(w * t)
+    rx, ry = hx - cx, hy - cy
+    lever_x, lever_y = c * rx - s * ry, s * rx + c * ry
+    hip_x, hip_y = cx + vx * t + lever_x, cy + vy * t + lever_y
+    root = math.sqrt(max(cz - ground, MIN_CAPTURE_HEIGHT_M) / G)
+    half = stance_s / 2
+    off_x = vcx * half + cfg.capture_gain * root * (vx - vcx)
+    off_y = vcy * half + cfg.capture_gain * root * (vy - vcy)
+    off_x += cfg.centripetal_gain * root * w * vy
+    off_y -= cfg.centripetal_gain * root * w * vx
+    off_x -= w * lever_y * half
+    off_y += w * lever_x * half
+    norm = math.hypot(off_x, off_y)
+    if norm > cfg.max_offset:
+        off_x *= cfg.max_offset / norm
+        off_y *= cfg.max_offset / norm
+    return [hip_x + off_x, hip_y + off_y, ground]
+
+
+def test_footholds_are_the_law_in_python_floats_to_the_bit_clipped_or_not():
+    cfg = FootholdConfig()
+    planner = FootholdPlanner(TROT, cfg, 0.07)
+    rng = np.random.default_rng(11)
+    clipped = 0
+    for _ in range(400):
+        feet = rng.normal(0.0, 0.2, (4, 3))
+        kin = SimpleNamespace(feet=feet, hips_rel=rng.normal(0.0, 0.2, (4, 3)), base_position=rng.normal(0.0, 1.0, 3),
+                              com=rng.normal(0.0, 1.0, 3), com_vel=rng.normal(0.0, 1.0, 3))
+        contact = rng.random(4) < 0.5
+        touchdown, v_cmd, w = rng.random(4) * 0.16, tuple(rng.normal(0.0, 1.0, 2).tolist()), float(rng.normal())
+        planner.update(kin, contact, touchdown, v_cmd, w, refresh=True)
+        ground = ground_height(feet, contact)
+        for i in np.flatnonzero(~contact):
+            want = _foothold_python(kin.hips_rel[i] + kin.base_position, kin.com, kin.com_vel, v_cmd, w,
+                                    float(touchdown[i]), TROT.stance_s, ground, cfg)
+            assert planner.footholds[i].tolist() == want
+            clipped += bool(planner._clip[i])  # left to Python's hypot: near or past the reach
+        np.testing.assert_array_equal(planner.footholds[contact], feet[contact])
+    assert 100 < clipped < 700  # both branches ran, each many times (of ~800 swing feet)

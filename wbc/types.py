@@ -57,7 +57,7 @@ class RobotState:
 
 
 _COMMAND_FIELDS = ("q", "dq", "kp", "kd", "tau")
-
+_FIELD_ROW = {name: row for row, name in enumerate(_COMMAND_FIELDS)}
 
 
 def _rows_valid(rows: np.ndarray) -> bool:
@@ -70,13 +70,16 @@ def _rows_valid(rows: np.ndarray) -> bool:
 
 
 def _adopt_rows(cmd: MotorCommand, rows: np.ndarray) -> None:
-    """Make the rows of a (5, n) array the fields of `cmd`, as read-only views of it.
+    """Make a (5, n) array, read-only from here on, the storage of `cmd`'s fields.
 
-    The array is kept as ``_rows``: `MotorCommand.rows` hands it out without stacking the fields again.
+    The array is kept as ``_rows``: `MotorCommand.rows` hands it out without stacking the fields again, and each field
+    is a view of its row, made when first read (`MotorCommand.__getattr__`): a command that goes from a controller to
+    a robot's clamp and motors is read as rows, so most fields are never made.
     """
     rows.setflags(write=False)
-    q, dq, kp, kd, tau = rows
-    cmd.__dict__.update(q=q, dq=dq, kp=kp, kd=kd, tau=tau, _rows=rows)  # one call (a frozen dataclass's fields)
+    state = cmd.__dict__
+    state.clear()  # the arrays given to the constructor, if any, give way to the rows' views
+    state["_rows"] = rows
 
 
 @dataclass(frozen=True)
@@ -142,10 +145,20 @@ class MotorCommand:
                 )
             object.__setattr__(self, name, _readonly(a))
 
+    def __getattr__(self, name: str) -> np.ndarray:
+        """A field of a command stored as rows (see `_adopt_rows`), made when first read: a view of its row."""
+        row, rows = _FIELD_ROW.get(name), self.__dict__.get("_rows")
+        if row is None or rows is None:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        view = rows[row]
+        self.__dict__[name] = view
+        return view
+
     @property
     def num_joints(self) -> int:
         """Number of joints commanded."""
-        return int(self.q.shape[0])
+        rows = self.__dict__.get("_rows")  # read off the rows where they are the storage: no field is made
+        return int(self.q.shape[0] if rows is None else rows.shape[1])
 
     @property
     def rows(self) -> np.ndarray:
@@ -154,7 +167,7 @@ class MotorCommand:
         The fields' own storage when they are its rows, as a validated command's are (no copy).
         """
         rows = self.__dict__.get("_rows")
-        if rows is not None and self.q.base is rows:
+        if rows is not None:
             return rows
         out = np.array((self.q, self.dq, self.kp, self.kd, self.tau))
         out.setflags(write=False)
@@ -168,8 +181,8 @@ class MotorCommand:
     def from_rows(cls, rows: np.ndarray) -> MotorCommand:
         """A command from one (5, n) float array of rows q, dq, kp, kd, tau, checked as the constructor checks.
 
-        A controller's every tick: the array becomes the command's storage (read-only from here on), so nothing is
-        stacked or copied. Anything the fast check refuses goes through the constructor, which names the fault.
+        The array becomes the command's storage (read-only from here on), so nothing is stacked or copied. Anything the
+        fast check refuses goes through the constructor, which names the fault.
 
         Raises:
             CommandError: not a (5, n) array, or a field the constructor refuses.
@@ -184,15 +197,20 @@ class MotorCommand:
         return cls(*rows)
 
     @classmethod
-    def _trusted(cls, rows: np.ndarray) -> MotorCommand:
-        """Build from a (5, n) array of rows q, dq, kp, kd, tau already known to be valid, skipping the checks.
+    def trusted(cls, rows: np.ndarray) -> MotorCommand:
+        """A command from a (5, n) float array of rows q, dq, kp, kd, tau, unchecked: its caller guarantees them.
 
-        Only for code that derives a command from a validated one (e.g. clamping): the hot path of every write.
-        `rows` becomes read-only and is shared by the fields.
+        For code that itself guarantees what the constructor checks (every entry finite, both gain rows non-negative):
+        a controller whose compiled tick checks the rows it fills (the MPC's, `wbc.mpc.compiled.command_rows`), or
+        code that derives a command from a validated one (clamping it). Nothing is checked here. Every robot still
+        clamps a command to its motors' limits before it reaches a wire or a simulator (`wbc.hardware.robot.Robot`'s
+        ``write``), whoever built it. `rows` becomes read-only and is shared by the fields.
         """
         obj = object.__new__(cls)
         _adopt_rows(obj, rows)
         return obj
+
+    _trusted = trusted  # the name the robots' clamping and the hardware layer call it by
 
     @classmethod
     def hold(cls, q: np.ndarray, kp: float | np.ndarray, kd: float | np.ndarray) -> MotorCommand:

@@ -80,13 +80,12 @@ class BaseEstimate:
         quat = np.asarray(state.imu_quat, dtype=np.float64)
         rot = quat_to_matrix(quat)
         if not self._started:
-            kin.update(np.zeros(3), quat, state.q, state.dq, np.zeros(3), state.gyro_in_body, centroidal=False,
-                       rot=rot)
+            kin.update(np.zeros(3), quat, state.q, state.dq, np.zeros(3), state.gyro_in_body, centroidal=False)
             base0 = np.array([0.0, 0.0, -kin.feet[:, 2].mean()])
             est.reset(base0, kin.feet + base0)
             self._started = True
         p_prior, v_prior = est.position, est.velocity
-        kin.update(p_prior, quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=False, rot=rot)
+        kin.update(p_prior, quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=False)
         trust = np.clip(np.asarray(state.foot_force, dtype=np.float64) / self.contact_force, 0.0, 1.0)
         est.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
         self._latest = BaseTruth(base_position_in_world=est.position, base_quat=quat.copy(),

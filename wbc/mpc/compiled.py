@@ -1,15 +1,17 @@
-"""The control tick's arithmetic, compiled (numba): the leg kinematics pass and the leg-level layer's torques.
+"""The control tick's arithmetic, compiled (numba): kinematics, gait clock, trust, footholds, legs, command rows.
 
 At 500 Hz the tick is a few hundred small operations on 3-vectors and 3 x 3 matrices; as numpy calls each costs a
 microsecond or more of Python and numpy dispatch, which is most of the tick. Compiled, the same arithmetic is a few
-microseconds in all. Each function here is one call from Python per tick.
+microseconds in all. Each function here is one call from Python per tick, writing into arrays its caller allocated
+once. Where a law is also written in Python (`wbc.robots.conventions.quat_to_matrix`, the gait's per-time queries),
+the kernel performs the same floating-point operations in the same order, so the two agree to the bit.
 
 `TreeModel` is the kinematic tree of a Pinocchio model with revolute joints on a free-flying base, as flat arrays the
 compiled code reads (built once per controller); `tree_pass` computes, with the base at the origin and at rest
-(only its orientation and angular velocity set), what `wbc.mpc.kinematics.RobotKinematics.tick` needs: feet and hips
-relative to the base, the feet's velocities relative to the base, the leg Jacobians and the joints' gravity torques.
-Its results equal Pinocchio's (`computeJointJacobians`, frame Jacobians in LOCAL_WORLD_ALIGNED,
-`computeGeneralizedGravity`) to rounding; the tests check that on every robot.
+(only its orientation and angular velocity set), what `wbc.mpc.kinematics.RobotKinematics.tick` needs: the base's
+rotation matrix, feet and hips relative to the base, the feet's velocities relative to the base, the leg Jacobians
+and the joints' gravity torques. Its results equal Pinocchio's (`computeJointJacobians`, frame Jacobians in
+LOCAL_WORLD_ALIGNED, `computeGeneralizedGravity`) to rounding; the tests check that on every robot.
 
 Compiled functions are cached on disk beside this module (numba's ``cache=True``): a process compiles them once per
 machine, later processes load them.
@@ -25,8 +27,17 @@ import numpy as np
 import pinocchio as pin
 
 from wbc.errors import ConfigError
+from wbc.robots.conventions import G
 
-__all__ = ["TreeModel", "contact_trust", "leg_torques", "place", "swing_targets", "tree_pass"]
+__all__ = ["FOOTHOLD_CLIP_MARGIN", "TreeModel", "command_rows", "contact_trust", "gait_state", "leg_torques",
+           "liftoffs", "place", "plan_footholds", "rotation_of", "swing_targets", "tree_pass"]
+
+FOOTHOLD_CLIP_MARGIN = 1e-9
+"""Relative margin below the largest foothold offset inside which `plan_footholds` needs no norm [1].
+
+Far above the rounding of a squared norm (~1e-16), so an offset inside it is inside the limit whatever the norm's
+last bit: only offsets near or past the limit are left for Python's `math.hypot` (the clip's norm; the compiled
+libm ``hypot`` differs from it in the last bit on ~0.6 % of inputs)."""
 
 _AXES = {"JointModelRX": (1.0, 0.0, 0.0), "JointModelRY": (0.0, 1.0, 0.0), "JointModelRZ": (0.0, 0.0, 1.0)}
 
@@ -100,11 +111,64 @@ class TreeModel:
                    hip_joint=np.array([model.getJointId(n) - 2 for n in thigh_joints], dtype=np.int64),
                    leg_joints=np.ascontiguousarray(leg_joints, dtype=np.int64))
 
+    def arrays(self) -> tuple[np.ndarray, ...]:
+        """The model's arrays in the order `tree_pass` takes them (parent to leg_joints, as the attributes)."""
+        return (self.parent, self.rot, self.pos, self.axis, self.mass, self.com, self.foot_joint, self.foot_pos,
+                self.hip_joint, self.leg_joints)
+
+
+@numba.njit(cache=True, nogil=True)
+def rotation_of(quat, rot):  # pragma: no cover
+    """The rotation matrix (body to world) of a unit quaternion (w, x, y, z) into `rot` (3, 3).
+
+    The formula and operation order of `wbc.robots.conventions.quat_to_matrix`, so the same bits.
+    """
+    w, x, y, z = quat[0], quat[1], quat[2], quat[3]
+    rot[0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    rot[0, 1] = 2.0 * (x * y - w * z)
+    rot[0, 2] = 2.0 * (x * z + w * y)
+    rot[1, 0] = 2.0 * (x * y + w * z)
+    rot[1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    rot[1, 2] = 2.0 * (y * z - w * x)
+    rot[2, 0] = 2.0 * (x * z - w * y)
+    rot[2, 1] = 2.0 * (y * z + w * x)
+    rot[2, 2] = 1.0 - 2.0 * (x * x + y * y)
+
 
 @numba.njit(cache=True, fastmath=False, nogil=True)
-def _tree_pass(rot_base, omega_body, base_quat, q_house, dq_house, perm, gravity_z, parent, rot, pos, axis, mass, com,
-               foot_joint, foot_pos, hip_joint, leg_joints, q_pin, v_pin, feet_rel, hips_rel, feet_vel_rel, leg_jac,
-               gravity_house, omega_world):  # pragma: no cover
+def tree_pass(base_quat, omega_body, q_house, dq_house, perm, gravity_z, parent, rot, pos, axis, mass, com,
+              foot_joint, foot_pos, hip_joint, leg_joints, rot_base, q_pin, v_pin, feet_rel, hips_rel, feet_vel_rel,
+              leg_jac, gravity_house, omega_world):  # pragma: no cover
+    """One kinematics pass with the base at the origin and at rest, into the output arrays.
+
+    Args:
+        base_quat: base orientation (w, x, y, z).
+        omega_body: base angular velocity, body frame (3,) [rad/s].
+        q_house: joint positions, house order (n,) [rad].
+        dq_house: joint velocities, house order (n,) [rad/s].
+        perm: the house index of each tree joint (n,).
+        gravity_z: the gravity's z component [m/s^2] (negative).
+        parent: the model (`TreeModel`, in the order of `TreeModel.arrays`): each joint's parent.
+        rot: each joint's placement rotation.
+        pos: each joint's placement translation.
+        axis: each joint's axis.
+        mass: the mass each joint moves alone.
+        com: that mass's centre.
+        foot_joint: each foot's joint.
+        foot_pos: each foot in its joint's frame.
+        hip_joint: each leg's thigh joint.
+        leg_joints: each leg's three joints.
+        rot_base: out, the rotation matrix of `base_quat` (3, 3).
+        q_pin: out, Pinocchio's configuration: its rows from 3 on are written (the base position is left alone).
+        v_pin: out, Pinocchio's velocity: its rows from 3 on are written.
+        feet_rel: out, feet relative to the base, world axes (4, 3) [m].
+        hips_rel: out, thigh joints relative to the base, world axes (4, 3) [m].
+        feet_vel_rel: out, feet velocities relative to the base, omega x r + J dq (4, 3) [m/s].
+        leg_jac: out, d foot / d (hip, thigh, calf) per leg, world axes (4, 3, 3) [m/rad].
+        gravity_house: out, each joint's generalized gravity, house order (n,) [N m].
+        omega_world: out, the base's angular velocity in the world (3,) [rad/s].
+    """
+    rotation_of(base_quat, rot_base)
     nj = q_house.shape[0]
     # Pinocchio's configuration and velocity (base at the origin, at rest but for its rotation), tree order
     q = np.empty(nj)
@@ -121,11 +185,12 @@ def _tree_pass(rot_base, omega_body, base_quat, q_house, dq_house, perm, gravity
     wp = np.empty((nj, 3))
     wa = np.empty((nj, 3))  # joint axes in the world
     wc = np.empty((nj, 3))  # the joints' own mass centres in the world
+    pre = np.empty((3, 3))
+    jr = np.empty((3, 3))
     for k in range(nj):
         par = parent[k]
         # frame of the joint before its rotation: the parent's frame times the placement
         pr = rot_base if par < 0 else wr[par]
-        pre = np.empty((3, 3))
         for a in range(3):
             origin = 0.0 if par < 0 else wp[par, a]
             wp[k, a] = origin + pr[a, 0] * pos[k, 0] + pr[a, 1] * pos[k, 1] + pr[a, 2] * pos[k, 2]
@@ -135,7 +200,6 @@ def _tree_pass(rot_base, omega_body, base_quat, q_house, dq_house, perm, gravity
         ux, uy, uz = axis[k, 0], axis[k, 1], axis[k, 2]
         c, s = math.cos(q[k]), math.sin(q[k])
         t = 1.0 - c
-        jr = np.empty((3, 3))
         jr[0, 0] = c + ux * ux * t
         jr[0, 1] = ux * uy * t - uz * s
         jr[0, 2] = ux * uz * t + uy * s
@@ -201,35 +265,6 @@ def _tree_pass(rot_base, omega_body, base_quat, q_house, dq_house, perm, gravity
         feet_vel_rel[i, 0] = vx
         feet_vel_rel[i, 1] = vy
         feet_vel_rel[i, 2] = vz
-
-
-def tree_pass(tree: TreeModel, rot_base: np.ndarray, omega_body: np.ndarray, base_quat: np.ndarray, q: np.ndarray,
-              dq: np.ndarray, perm: np.ndarray, gravity_z: float, q_pin: np.ndarray, v_pin: np.ndarray,
-              feet_rel: np.ndarray, hips_rel: np.ndarray, feet_vel_rel: np.ndarray, leg_jac: np.ndarray,
-              gravity: np.ndarray, omega_world: np.ndarray) -> None:
-    """One kinematics pass with the base at the origin and at rest, into the output arrays.
-
-    Args:
-        tree: the model.
-        rot_base: base orientation, body to world (3, 3).
-        omega_body: base angular velocity, body frame (3,) [rad/s].
-        base_quat: the same orientation as a quaternion (w, x, y, z).
-        q: joint positions, house order (n,) [rad].
-        dq: joint velocities, house order (n,) [rad/s].
-        perm: the house index of each tree joint (n,).
-        gravity_z: the gravity's z component [m/s^2] (negative).
-        q_pin: out, Pinocchio's configuration: its rows from 3 on are written (the base position is left alone).
-        v_pin: out, Pinocchio's velocity: its rows from 3 on are written.
-        feet_rel: out, feet relative to the base, world axes (4, 3) [m].
-        hips_rel: out, thigh joints relative to the base, world axes (4, 3) [m].
-        feet_vel_rel: out, feet velocities relative to the base, omega x r + J dq (4, 3) [m/s].
-        leg_jac: out, d foot / d (hip, thigh, calf) per leg, world axes (4, 3, 3) [m/rad].
-        gravity: out, each joint's generalized gravity, house order (n,) [N m].
-        omega_world: out, the base's angular velocity in the world (3,) [rad/s].
-    """
-    _tree_pass(rot_base, omega_body, base_quat, q, dq, perm, gravity_z, tree.parent, tree.rot, tree.pos, tree.axis,
-               tree.mass, tree.com, tree.foot_joint, tree.foot_pos, tree.hip_joint, tree.leg_joints, q_pin, v_pin,
-               feet_rel, hips_rel, feet_vel_rel, leg_jac, gravity, omega_world)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -312,12 +347,16 @@ def swing_targets(contact, progress, liftoff, footholds, below_z, duration, apex
 
 
 @numba.njit(cache=True, nogil=True)
-def place(feet_rel, feet_vel_rel, rot_base, com_in_base, omega_world, position, velocity, feet, feet_vel, com,
-          com_vel):  # pragma: no cover
-    """Put a tick's base-relative kinematics at a base position and velocity (world), into the four outputs.
+def place(feet_rel, feet_vel_rel, rot_base, com_in_base, omega_world, position, velocity, base_position, base_velocity,
+          feet, feet_vel, com, com_vel):  # pragma: no cover
+    """Put a tick's base-relative kinematics at a base position and velocity (world), into the six outputs.
 
-    feet = r + p, feet_vel = v_rel + v, com = p + R c, com_vel = v + omega x (R c), with c the CoM in the trunk frame.
+    base_position = p, base_velocity = v, feet = r + p, feet_vel = v_rel + v, com = p + R c, com_vel = v + omega x
+    (R c), with c the CoM in the trunk frame.
     """
+    for a in range(3):
+        base_position[a] = position[a]
+        base_velocity[a] = velocity[a]
     for i in range(4):
         for a in range(3):
             feet[i, a] = feet_rel[i, a] + position[a]
@@ -330,3 +369,155 @@ def place(feet_rel, feet_vel_rel, rot_base, com_in_base, omega_world, position, 
     com_vel[0] = velocity[0] + wy * r[2] - wz * r[1]
     com_vel[1] = velocity[1] + wz * r[0] - wx * r[2]
     com_vel[2] = velocity[2] + wx * r[1] - wy * r[0]
+
+
+@numba.njit(cache=True, nogil=True)
+def gait_state(t, period, duty, margin, offsets, contact, progress, touchdown):  # pragma: no cover
+    """A periodic gait's state at time `t` [s] into `contact`, `progress` and `touchdown` (one entry per foot).
+
+    Foot i's phase is (t / period + offsets[i]) mod 1, stance first: it is in contact while the phase is below
+    duty - margin; in swing (phase >= duty) its progress is (phase - duty) / (1 - duty) and its time to touchdown
+    (1 - phase) period [s], both 0 in stance. A duty of 1 never lifts a foot.
+    """
+    if duty >= 1.0:
+        for i in range(offsets.shape[0]):
+            contact[i] = True
+            progress[i] = 0.0
+            touchdown[i] = 0.0
+        return
+    cycles = t / period
+    swing_s = 1.0 - duty
+    for i in range(offsets.shape[0]):
+        ph = (cycles + offsets[i]) % 1.0
+        contact[i] = ph < duty - margin
+        if ph >= duty:
+            progress[i] = (ph - duty) / swing_s
+            touchdown[i] = (1.0 - ph) * period
+        else:
+            progress[i] = 0.0
+            touchdown[i] = 0.0
+
+
+@numba.njit(cache=True, nogil=True)
+def liftoffs(contact, was_stance, feet, liftoff, footholds, lifted):  # pragma: no cover
+    """The footholds' bookkeeping of one tick; returns how many feet lifted off at it.
+
+    A swing foot that stood at the last tick lifted off now: its lift-off point is where it is (`lifted` marks it);
+    a stance foot's foothold is where it stands. `was_stance` becomes this tick's contact.
+    """
+    count = 0
+    for i in range(4):
+        up = not contact[i] and was_stance[i]
+        lifted[i] = up
+        if up:
+            count += 1
+            for a in range(3):
+                liftoff[i, a] = feet[i, a]
+        if contact[i]:
+            for a in range(3):
+                footholds[i, a] = feet[i, a]
+        was_stance[i] = contact[i]
+    return count
+
+
+@numba.njit(cache=True, nogil=True)
+def plan_footholds(contact, lifted, refresh, hips_rel, base_position, com, com_vel, v_cmd_x, v_cmd_y, yaw_rate,
+                   touchdown, stance_s, ground, capture_gain, centripetal_gain, max_offset, min_height, footholds,
+                   parts, clip):  # pragma: no cover
+    """The footholds of the swing feet to place at this tick, into `footholds` (4, 3); returns how many are left.
+
+    The feet placed: every swing foot when `refresh`, else those that lifted off at this tick (`lifted`). The law is
+    `wbc.mpc.footholds`': p = hip at touchdown + v_cmd T_st / 2 + k sqrt(h / g) (v - v_cmd) + (w x r_hip) T_st / 2
+    + k_c sqrt(h / g) (v x w), the offset from the hip clipped to `max_offset`, on the ground at `ground`. A foot
+    whose offset may reach the limit (within `FOOTHOLD_CLIP_MARGIN`) is left: its hip at touchdown and unclipped
+    offset go to `parts[i]` (hip x, hip y, offset x, offset y) and ``clip[i]`` is set, for the caller to clip with
+    Python's ``math.hypot`` (`wbc.mpc.footholds.FootholdPlanner`).
+
+    Args:
+        contact: scheduled stance flags (4,).
+        lifted: the feet that lifted off at this tick (4,).
+        refresh: place every swing foot.
+        hips_rel: thigh joints relative to the base, world axes (4, 3) [m].
+        base_position: the base, world (3,) [m].
+        com: CoM position, world (3,) [m].
+        com_vel: CoM velocity, world (3,) [m/s].
+        v_cmd_x: commanded velocity, world x [m/s].
+        v_cmd_y: commanded velocity, world y [m/s].
+        yaw_rate: commanded yaw rate [rad/s].
+        touchdown: time to each foot's touchdown (4,) [s].
+        stance_s: stance duration [s].
+        ground: ground height [m].
+        capture_gain: k.
+        centripetal_gain: k_c.
+        max_offset: largest offset from the hip [m].
+        min_height: floor on the CoM height h above the ground [m].
+        footholds: out, the placed feet's rows (4, 3) [m].
+        parts: out, the left feet's rows (4, 4) [m].
+        clip: out, the left feet (4,).
+    """
+    height = com[2] - ground
+    root = math.sqrt((min_height if min_height > height else height) / G)
+    half = stance_s / 2.0
+    cx, cy = com[0], com[1]
+    vx, vy = com_vel[0], com_vel[1]
+    w = yaw_rate
+    limit2 = max_offset * max_offset * (1.0 - FOOTHOLD_CLIP_MARGIN)
+    left = 0
+    for i in range(4):
+        clip[i] = False
+        if contact[i] or not (refresh or lifted[i]):
+            continue
+        t = touchdown[i]
+        # the hip at touchdown: carried by the CoM and turned about it by the yaw rate over the remaining swing
+        c, s = math.cos(w * t), math.sin(w * t)
+        rx = hips_rel[i, 0] + base_position[0] - cx
+        ry = hips_rel[i, 1] + base_position[1] - cy
+        lever_x, lever_y = c * rx - s * ry, s * rx + c * ry
+        hip_x, hip_y = cx + vx * t + lever_x, cy + vy * t + lever_y
+        off_x = v_cmd_x * half + capture_gain * root * (vx - v_cmd_x)
+        off_y = v_cmd_y * half + capture_gain * root * (vy - v_cmd_y)
+        # v x (0, 0, w) = (w v_y, -w v_x, 0)
+        off_x += centripetal_gain * root * w * vy
+        off_y -= centripetal_gain * root * w * vx
+        # turning: over half a stance the hip sweeps by yaw_rate x (hip - CoM); (0, 0, w) x (l_x, l_y, 0)
+        off_x -= w * lever_y * half
+        off_y += w * lever_x * half
+        if off_x * off_x + off_y * off_y < limit2:
+            footholds[i, 0] = hip_x + off_x
+            footholds[i, 1] = hip_y + off_y
+            footholds[i, 2] = ground
+        else:
+            parts[i, 0], parts[i, 1], parts[i, 2], parts[i, 3] = hip_x, hip_y, off_x, off_y
+            clip[i] = True
+            left += 1
+    return left
+
+
+@numba.njit(cache=True, nogil=True)
+def command_rows(q, tau, kp, kd, arm_first, arm_target, arm_velocity, dt, rows):  # pragma: no cover
+    """A motor command's rows q, dq, kp, kd, tau into `rows` (5, n); returns whether the command is valid.
+
+    Every joint holds its measured position `q` under gains `kp`, `kd` at zero target velocity, with feed-forward
+    `tau`. With `arm_first` >= 0 the three joints from it are the arm: its target advances by `arm_velocity` dt (in
+    place; pass zeros to hold it) and the arm tracks it at that velocity. Valid: every entry finite and both gain rows
+    non-negative, what `wbc.types.MotorCommand` checks.
+    """
+    n = rows.shape[1]
+    for j in range(n):
+        rows[0, j] = q[j]
+        rows[1, j] = 0.0
+        rows[2, j] = kp[j]
+        rows[3, j] = kd[j]
+        rows[4, j] = tau[j]
+    if arm_first >= 0:
+        for m in range(3):
+            arm_target[m] = arm_target[m] + arm_velocity[m] * dt
+            rows[0, arm_first + m] = arm_target[m]
+            rows[1, arm_first + m] = arm_velocity[m]
+    valid = n > 0
+    for r in range(5):
+        for j in range(n):
+            v = rows[r, j]
+            if not math.isfinite(v) or (r == 2 or r == 3) and v < 0.0:
+                valid = False
+    return valid

@@ -29,7 +29,7 @@ from wbc.errors import ConfigError
 from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
-from wbc.mpc.compiled import contact_trust
+from wbc.mpc.compiled import command_rows, contact_trust
 from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler, gait_fits_steps
 from wbc.mpc.kinematics import RobotKinematics
@@ -37,7 +37,6 @@ from wbc.mpc.leg_layer import LegLayer
 from wbc.mpc.plan_targets import PlanTargets
 from wbc.mpc.reference import MotionReference
 from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
-from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import ARM_JOINTS, RobotDescription, joint_gains
 from wbc.robots.euler import rpy_of, yaw_of
 from wbc.robots.joint_table import joint_table
@@ -157,7 +156,16 @@ class MpcController:
         self.legs = LegLayer(swing_kp=cfg.swing_kp, swing_kd=cfg.swing_kd,
                              torque_limit=joint_table(desc).torque_limit, stance_kd=cfg.stance_kd)
         self._truth: Callable[[], BaseTruth] | None = None
-        self._gains: tuple[np.ndarray, np.ndarray] | None = None
+        # the legs are torque-controlled (kp 0, a little joint damping); an actuated arm is position-controlled
+        self._gains = joint_gains(self.kin.n, 0.0, cfg.joint_kd, cfg.arm_kp, cfg.arm_kd)
+        self._arm_first = ARM_JOINTS.start if self.has_arm else -1  # `command_rows`: where the arm's joints start
+        self._arm_moves = arm_moves
+        self._arm_hold = np.zeros(3)  # the arm's velocity while no plan moves it
+        self._inv_contact_force = 1.0 / cfg.contact_force
+        self._slip2 = cfg.slip_speed * cfg.slip_speed
+        # the gait's state at this tick, and the estimator's trust in each foot (overwritten every tick)
+        self._contact, self._progress, self._touchdown = np.ones(4, dtype=bool), np.zeros(4), np.zeros(4)
+        self._trust = np.zeros(4)
         self.reset()
         self._load_compiled()
 
@@ -200,7 +208,7 @@ class MpcController:
         self._warm_start: np.ndarray | None = None
         self._arm_target = self.desc.arm.nominal_q.copy()
         self._timings: dict[str, float] = {}
-        self.slipping = np.zeros(4, dtype=bool)  # stance feet the estimator dropped this tick: they slide
+        self.slipping = np.zeros(4, dtype=bool)  # stance feet the estimator dropped at the last tick: they slide
         self.reference.reset()
         self.feet.reset()
         self.targets.reset()
@@ -245,24 +253,25 @@ class MpcController:
         """Estimate, (re)plan, and turn the plan into motor commands."""
         cfg, kin = self.config, self.kin
         self._timings.clear()
-        rot = quat_to_matrix(state.imu_quat)
-        kin.tick(state.imu_quat, state.q, state.dq, state.gyro_in_body, rot)
+        kin.tick(state.imu_quat, state.q, state.dq, state.gyro_in_body)
         if not self._started:
             self._start()
-        replan = self.plan is None or self.tick % cfg.replan_every == 0
-        contact, progress, touchdown = self.gait.state(self.t)
-        self._estimate(state, rot, contact)
+        replan = self._replan_due()
+        contact, progress = self._contact, self._progress
+        self.gait.state_into(self.t, contact, progress, self._touchdown)
+        self._estimate(state, contact)
         if replan:
             kin.centroidal()
-        v_cmd_xy = self.reference.update(yaw_of(rot), kin.com[0].item(), kin.com[1].item(), command)
-        self.feet.update(kin, contact, touchdown, v_cmd_xy, command.yaw_rate,
+        v_cmd_xy = self.reference.update(yaw_of(kin.rot), kin.com.item(0), kin.com.item(1), command)
+        self.feet.update(kin, contact, self._touchdown, v_cmd_xy, command.yaw_rate,
                          refresh=self.tick % cfg.foothold_every == 0)
         if replan:
-            self._replan(rot, state, command)
+            self._replan(state, command)
+        step = self._plan_step() if self.plan is not None else 0
         tau = self._whole_body(contact, progress) if self.wbc is not None else None
         if tau is None:
-            tau = self._leg_torques(contact, progress)
-        return self._command(state, tau)
+            tau = self._leg_torques(contact, progress, step)
+        return self._command(state, tau, step)
 
     def _start(self) -> None:
         """First tick of an episode: the estimator starts with the feet on the ground at z = 0."""
@@ -272,34 +281,39 @@ class MpcController:
         self.reference.start(yaw_of(kin.rot))
         self._started = True
 
-    def _estimate(self, state: RobotState, rot: np.ndarray, contact: np.ndarray) -> None:
+    def _estimate(self, state: RobotState, contact: np.ndarray) -> None:
         """Update the base estimate from the IMU and this tick's leg kinematics, and place the kinematics there.
 
         A foot is trusted as a stance foot when the gait says so, its force sensor agrees, and it does not slide: a
         late touchdown, an early lift-off or a slipping foot would otherwise feed a moving foot into the velocity
         estimate (on ground of friction 0.4-0.5 a pushed robot's feet slide at up to 2 m/s).
         """
-        kin, cfg = self.kin, self.config
+        kin = self.kin
         if self._truth is not None:
             # debug switch: the simulator's base position and velocity replace the estimate
             truth = self._truth()
             kin.place(truth.base_position_in_world, truth.base_linvel_in_world)
             return
         estimator = self.estimator
-        trust, self.slipping = np.empty(4), np.empty(4, dtype=bool)  # new arrays: a caller may keep the last ones
-        contact_trust(contact, state.foot_force, kin.feet_vel_rel, estimator.x[3].item(), estimator.x[4].item(),
-                      1.0 / cfg.contact_force, cfg.slip_speed * cfg.slip_speed, trust, self.slipping)
-        estimator.update(rot, state.accel_in_body, kin.feet_rel, kin.feet_vel_rel, trust)
-        kin.place(estimator.x[0:3].copy(), estimator.x[3:6].copy())
+        x = estimator.x
+        contact_trust(contact, state.foot_force, kin.feet_vel_rel, x.item(3), x.item(4), self._inv_contact_force,
+                      self._slip2, self._trust, self.slipping)
+        estimator.update(kin.rot, state.accel_in_body, kin.feet_rel, kin.feet_vel_rel, self._trust)
+        x = estimator.x
+        kin.place(x[0:3], x[3:6])
 
     # -- planning -------------------------------------------------------------------------------------------------
-    def _replan(self, rot: np.ndarray, state: RobotState, command: VelocityCommand) -> None:
+    def _replan_due(self) -> bool:
+        """Whether this tick makes an MPC update: the first tick, then every `replan_every` ticks."""
+        return self.plan is None or self.tick % self.config.replan_every == 0
+
+    def _replan(self, state: RobotState, command: VelocityCommand) -> None:
         cfg, kin = self.config, self.kin
         n, dt = cfg.mpc.horizon, cfg.mpc.dt
         x0 = np.zeros(NX)
         x0[COM] = kin.com
         x0[COM_VEL] = kin.com_vel
-        rpy = rpy_of(rot)
+        rpy = rpy_of(kin.rot)
         x0[RPY] = (rpy[0], rpy[1], self.reference.yaw)
         x0[MOMENTUM] = kin.momentum
         x0[ARM_Q] = state.q[ARM_JOINTS] if self.has_arm else self.desc.arm.nominal_q
@@ -352,36 +366,36 @@ class MpcController:
             return None
         return result.tau
 
-    def _leg_torques(self, contact: np.ndarray, progress: np.ndarray) -> np.ndarray:
+    def _leg_torques(self, contact: np.ndarray, progress: np.ndarray, step: int) -> np.ndarray:
         """The leg-level layer's torques: the plan's forces on the scheduled stance feet, swing feet on their paths."""
-        forces = self.plan.forces[self._plan_step()] if self.plan is not None else None
+        forces = self.plan.forces[step] if self.plan is not None else None
         pos, vel = self.feet.swing_targets(contact, progress)
         t0 = time.perf_counter()
         tau = self.legs.torques(self.kin, contact, forces, pos, vel)
         self._timings["whole_body_s"] = time.perf_counter() - t0
         return tau
 
-    def _command(self, state: RobotState, tau: np.ndarray) -> MotorCommand:
-        cfg = self.config
-        if self._gains is None:
-            # the legs are torque-controlled (kp 0, a little joint damping); an actuated arm is position-controlled;
-            # copied into every command's rows, so these are shared safely
-            self._gains = joint_gains(self.kin.n, 0.0, cfg.joint_kd, cfg.arm_kp, cfg.arm_kd)
+    def _arm_rows(self, rows: np.ndarray, step: int) -> bool:
+        """A subclass's own arm rows, written over those `_command` filled; whether what it wrote is finite.
+
+        Here: nothing (the arm follows the plan's velocity, as `_command` wrote it).
+        """
+        return True
+
+    def _command(self, state: RobotState, tau: np.ndarray, step: int) -> MotorCommand:
+        """The motor command: the legs push `tau`, an actuated arm follows its target along the plan.
+
+        The legs hold their measured pose under no stiffness; the arm's target advances along the plan's arm velocity
+        of this tick's step when the plan moves it. One compiled call fills the rows and checks them (finite, gains
+        non-negative): a command that passes is built without checking it again (`MotorCommand.trusted`; the robot
+        still clamps it to the motors' limits), one that fails is refused by the constructor, which names the fault.
+        """
         kp, kd = self._gains
-        # the command's rows, filled in place: the legs hold their measured pose under no stiffness; only an actuated
-        # arm's targets differ from the measured pose
-        rows = np.empty((5, self.kin.n))
-        rows[0] = state.q
-        rows[1] = 0.0
-        rows[2] = kp
-        rows[3] = kd
-        rows[4] = tau
-        if self.has_arm:
-            if self.plan is not None and cfg.use_arm_momentum:
-                v_arm = self.plan.arm_velocity[self._plan_step()]
-                self._arm_target = self._arm_target + v_arm * self.dt
-                rows[1, ARM_JOINTS] = v_arm
-            rows[0, ARM_JOINTS] = self._arm_target
+        moves = self._arm_moves and self.plan is not None
+        v_arm = self.plan.arm_velocity[step] if moves else self._arm_hold
+        rows = np.empty((5, self.kin.n))  # a new array each tick: it becomes the command's (immutable) storage
+        valid = command_rows(state.q, tau, kp, kd, self._arm_first, self._arm_target, v_arm, self.dt, rows)
+        valid = self._arm_rows(rows, step) and valid
         self.t += self.dt
         self.tick += 1
-        return MotorCommand.from_rows(rows)
+        return MotorCommand.trusted(rows) if valid else MotorCommand.from_rows(rows)

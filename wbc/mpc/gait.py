@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from wbc.errors import ConfigError
+from wbc.mpc.compiled import gait_state
 
 __all__ = ["GaitConfig", "GaitScheduler", "TROT", "STAND", "STANCE_END_MARGIN", "gait_fits_steps"]
 
@@ -81,7 +82,7 @@ class GaitScheduler:
     def __init__(self, config: GaitConfig) -> None:
         self.config = config
         self._offsets = np.asarray(config.offsets, dtype=np.float64)
-        self._offset_list = self._offsets.tolist()
+        self._clock = (config.period, config.duty, STANCE_END_MARGIN, self._offsets)  # `gait_state`'s constants
 
     def phase(self, t: float) -> np.ndarray:
         """Phase of each foot in its cycle, in [0, 1): stance first (< duty), then swing."""
@@ -109,21 +110,14 @@ class GaitScheduler:
         return np.where(ph >= c.duty, (ph - c.duty) / (1.0 - c.duty), 0.0)
 
     def state(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """`contact`, `swing_progress` and `time_to_touchdown` at `t` from one phase evaluation (every tick)."""
-        c = self.config
-        if c.duty >= 1.0:
-            return np.ones(4, dtype=bool), np.zeros(4), np.zeros(4)
-        # four feet: Python floats (the same IEEE operations as `phase`), three arrays built at the end
-        cycles = t / c.period
-        duty, swing_s = c.duty, 1.0 - c.duty
-        contact, progress, touchdown = [], [], []
-        for offset in self._offset_list:
-            ph = (cycles + offset) % 1.0
-            contact.append(ph < duty - STANCE_END_MARGIN)
-            swing = ph >= duty
-            progress.append((ph - duty) / swing_s if swing else 0.0)
-            touchdown.append((1.0 - ph) * c.period if swing else 0.0)
-        return np.array(contact), np.array(progress), np.array(touchdown)
+        """`contact`, `swing_progress` and `time_to_touchdown` at `t` from one phase evaluation (new arrays)."""
+        contact, progress, touchdown = np.empty(4, dtype=bool), np.empty(4), np.empty(4)
+        self.state_into(t, contact, progress, touchdown)
+        return contact, progress, touchdown
+
+    def state_into(self, t: float, contact: np.ndarray, progress: np.ndarray, touchdown: np.ndarray) -> None:
+        """`state` at `t` [s] into the caller's arrays (4,) (every control tick: one compiled call, no allocation)."""
+        gait_state(t, *self._clock, contact, progress, touchdown)
 
     def time_to_touchdown(self, t: float) -> np.ndarray:
         """For each foot, time until its next touchdown [s] (0 for feet in stance)."""

@@ -4,15 +4,18 @@ A thin layer over the Pinocchio model that speaks the house joint order and the 
 controller needs. It is split along what a tick can afford:
 
 - `tick` (every control tick, one compiled pass over the model's tree, `wbc.mpc.compiled.tree_pass`, equal to
-  Pinocchio's to rounding): everything that does not depend on where the base is or how fast it moves: the feet and
-  hips relative to the base (world axes), the feet's velocities relative to the base (omega x r + J dq), each leg's
-  3 x 3 foot Jacobian and the joints' gravity torques. The pass runs with the base at the origin, at rest, so the
-  estimator reads its leg-kinematics measurements straight from it.
+  Pinocchio's to rounding): everything that does not depend on where the base is or how fast it moves: the base's
+  rotation matrix, the feet and hips relative to the base (world axes), the feet's velocities relative to the base
+  (omega x r + J dq), each leg's 3 x 3 foot Jacobian and the joints' gravity torques. The pass runs with the base at
+  the origin, at rest, so the estimator reads its leg-kinematics measurements straight from it.
 - `place` (every tick, a few products): puts that configuration at the estimated (or true) base position and
   velocity: feet, foot velocities, hips and CoM in the world.
 - `centroidal` (every MPC update): the composite inertia, the arm's momentum matrix, the centroidal momentum and
   the exact CoM at the placed state (Pinocchio's CCRBA), and the CoM's offset in the trunk frame that `place` uses
   between updates.
+
+The per-tick arrays are allocated once and overwritten in place by `tick` and `place` (no allocation at a tick): a
+caller that keeps one past the tick copies it.
 """
 
 from __future__ import annotations
@@ -23,12 +26,10 @@ import pinocchio as pin
 from wbc.mpc.centroidal_model import CentroidalParams
 from wbc.mpc.compiled import TreeModel, tree_pass
 from wbc.mpc.compiled import place as place_kinematics
-from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import ARM_JOINTS, FOOT_NAMES, LEG_NAMES, RobotDescription
 from wbc.robots.pinocchio_model import build_pinocchio
 
 __all__ = ["RobotKinematics"]
-
 
 
 class RobotKinematics:
@@ -38,6 +39,7 @@ class RobotKinematics:
         desc: the robot (its arm mode decides whether the arm's joints exist).
 
     Attributes:
+        rot: base orientation, body to world (3, 3).
         feet_rel: foot positions relative to the base origin, world axes, shape (4, 3) [m].
         feet_vel_rel: foot velocities relative to the base (omega x r + J dq), world axes, shape (4, 3) [m/s].
         hips_rel: thigh joint positions relative to the base origin, world axes, shape (4, 3) [m].
@@ -47,6 +49,9 @@ class RobotKinematics:
         feet_vel: foot velocities, world, shape (4, 3) [m/s].
         com: CoM position, world (3,) [m].
         com_vel: CoM velocity, world (3,) [m/s] (the trunk's motion; the joints' share is counted at `centroidal`).
+        omega_world: base angular velocity, world (3,) [rad/s].
+        base_position: the placed base position, world (3,) [m].
+        base_velocity: the placed base velocity, world (3,) [m/s].
         momentum: centroidal angular momentum, world axes (3,) [kg m^2/s] (at the last `centroidal`).
         params: mass, composite inertia, arm momentum matrix and feet of the last `centroidal`.
     """
@@ -80,53 +85,44 @@ class RobotKinematics:
         self.base_velocity = np.zeros(3)
         self._com_in_base = np.zeros(3)  # the CoM in the trunk frame, from the last `centroidal` (or the first tick)
         self._com_known = False
-        # the per-tick pass runs compiled on the model's tree (Pinocchio's joint order, from its joint 2 on)
+        # the per-tick pass runs compiled on the model's tree (Pinocchio's joint order, from its joint 2 on); its
+        # constant arguments and outputs, gathered once
         pin_of_house = self.robot.joints.house_from_pin  # the Pinocchio-order index of each house joint
-        self._tree = TreeModel.of(model, list(FOOT_NAMES), [f"{leg}_thigh_joint" for leg in LEG_NAMES],
-                                  pin_of_house[:12].reshape(4, 3))
-        self._gravity_z = float(model.gravity.linear[2])
+        tree = TreeModel.of(model, list(FOOT_NAMES), [f"{leg}_thigh_joint" for leg in LEG_NAMES],
+                            pin_of_house[:12].reshape(4, 3))
+        self._pass_args = (self._perm, float(model.gravity.linear[2]), *tree.arrays(), self.rot, self._q_tick,
+                           self._v_tick, self.feet_rel, self.hips_rel, self.feet_vel_rel, self.leg_jacobians,
+                           self.gravity, self.omega_world)
+        self._place_args = (self.feet_rel, self.feet_vel_rel, self.rot, self._com_in_base, self.omega_world)
+        self._place_outputs = (self.base_position, self.base_velocity, self.feet, self.feet_vel, self.com,
+                               self.com_vel)
 
     def forget_com(self) -> None:
         """Measure the CoM in the trunk frame again at the next `tick` (as at the first tick of a new controller)."""
         self._com_known = False
 
     # -- every tick -----------------------------------------------------------------------------------------------
-    def tick(self, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray, omega_body: np.ndarray,
-             rot: np.ndarray) -> None:
-        """The configuration's kinematics relative to the base (one compiled pass).
+    def tick(self, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray, omega_body: np.ndarray) -> None:
+        """The configuration's kinematics relative to the base, and the base's rotation (one compiled pass).
 
         Args:
             base_quat: base orientation (w, x, y, z).
             q: joint positions, house order.
             dq: joint velocities, house order.
             omega_body: base angular velocity, body frame (3,) [rad/s].
-            rot: the rotation matrix of `base_quat` (body to world).
         """
-        self.rot = rot
-        # fresh output arrays every tick: callers may keep last tick's
-        self.feet_rel, self.hips_rel = np.empty((4, 3)), np.empty((4, 3))
-        self.feet_vel_rel, self.leg_jacobians = np.empty((4, 3)), np.empty((4, 3, 3))
-        self.gravity, self.omega_world = np.empty(self.n), np.empty(3)
-        tree_pass(self._tree, rot, omega_body, base_quat, q, dq, self._perm, self._gravity_z, self._q_tick,
-                  self._v_tick, self.feet_rel, self.hips_rel, self.feet_vel_rel, self.leg_jacobians, self.gravity,
-                  self.omega_world)
+        tree_pass(base_quat, omega_body, q, dq, *self._pass_args)
         if not self._com_known:
             model, data = self.robot.model, self.robot.data
-            self._com_in_base = rot.T @ pin.centerOfMass(model, data, self._q_tick, False)
+            self._com_in_base[:] = self.rot.T @ pin.centerOfMass(model, data, self._q_tick, False)
             self._com_known = True
 
     def place(self, base_position: np.ndarray, base_velocity: np.ndarray) -> None:
-        """Put the last `tick`'s configuration at a base position and velocity (world) [m], [m/s]."""
-        p, v = base_position, base_velocity
-        self.base_position, self.base_velocity = p, v
-        # new arrays each tick (a caller may keep the last ones), filled by one compiled call
-        self.feet, self.feet_vel, self.com, self.com_vel = np.empty((4, 3)), np.empty((4, 3)), np.empty(3), np.empty(3)
-        place_kinematics(self.feet_rel, self.feet_vel_rel, self.rot, self._com_in_base, self.omega_world, p, v,
-                         self.feet, self.feet_vel, self.com, self.com_vel)
+        """Put the last `tick`'s configuration at a base position and velocity (world) [m], [m/s] (copied)."""
+        place_kinematics(*self._place_args, base_position, base_velocity, *self._place_outputs)
 
     def update(self, base_pos: np.ndarray, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray,
-               v_base_world: np.ndarray, omega_body: np.ndarray, *, centroidal: bool,
-               rot: np.ndarray | None = None) -> None:
+               v_base_world: np.ndarray, omega_body: np.ndarray, *, centroidal: bool) -> None:
         """Everything at one state: `tick`, `place`, and `centroidal` when asked.
 
         Args:
@@ -137,9 +133,8 @@ class RobotKinematics:
             v_base_world: base linear velocity, world (3,) [m/s].
             omega_body: base angular velocity, body frame (3,) [rad/s].
             centroidal: also compute the composite inertia, arm momentum matrix and momentum.
-            rot: the rotation matrix of `base_quat`, when the caller has it already.
         """
-        self.tick(base_quat, q, dq, omega_body, quat_to_matrix(base_quat) if rot is None else rot)
+        self.tick(base_quat, q, dq, omega_body)
         self.place(np.asarray(base_pos, dtype=np.float64), np.asarray(v_base_world, dtype=np.float64))
         if centroidal:
             self.centroidal()
@@ -151,9 +146,9 @@ class RobotKinematics:
         qp, vp = self.q_pin, self.v_pin
         pin.ccrba(model, data, qp, vp)
         com = data.com[0]
-        self._com_in_base = self.rot.T @ (com - self.base_position)
-        self.com = com.copy()
-        self.com_vel = data.hg.linear / self.mass
+        self._com_in_base[:] = self.rot.T @ (com - self.base_position)
+        self.com[:] = com
+        self.com_vel[:] = data.hg.linear / self.mass
         self.momentum = data.hg.angular.copy()
         arm = np.zeros((3, 3)) if self.arm_v is None else data.Ag[3:, self.arm_v].copy()
         self.params = CentroidalParams(mass=float(data.Ig.mass), inertia_world=data.Ig.inertia.copy(),

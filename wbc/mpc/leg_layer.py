@@ -46,7 +46,7 @@ class LegLayer:
         self.swing_kd = swing_kd
         self.stance_kd = stance_kd
         self.limit = np.array(torque_limit[:12], dtype=np.float64)
-        self.scale = np.ones(4)
+        self.scale = np.ones(4)  # each stance leg's push scale at the last call, overwritten by the next
 
     def torques(self, kin: RobotKinematics, contact: np.ndarray, forces: np.ndarray | None, swing_pos: np.ndarray,
                 swing_vel: np.ndarray) -> np.ndarray:
@@ -65,7 +65,6 @@ class LegLayer:
         if forces is None:
             forces = _FORCE_BEFORE_PLAN
         tau = np.empty(kin.n)
-        self.scale = np.empty(4)  # a new array each tick: a caller may keep the last one
         leg_torques(kin.leg_jacobians, kin.gravity, kin.feet, kin.feet_vel, contact, forces, swing_pos, swing_vel,
                     self.swing_kp, self.swing_kd, self.stance_kd, self.limit, self.scale, tau)
         return tau

@@ -35,6 +35,11 @@ A spun robot is asked to turn back at most this far at once. A tuning value from
 version; no measurement behind it is recorded (docs/mpc-notes.md)."""
 
 
+def _leash(offset: float, length: float) -> float:
+    """`offset` clipped to [-length, length] (``min(max(offset, -length), length)``, in two comparisons)."""
+    return -length if offset < -length else length if offset > length else offset
+
+
 class MotionReference:
     """The leashed xy and yaw targets, and the reference trajectory x_ref the MPC tracks over its horizon.
 
@@ -58,13 +63,19 @@ class MotionReference:
         self.step_s = step_s
         self.body_height = body_height
         self.arm_q = arm_q
+        self._step_times = np.arange(1, horizon + 1) * step_s  # the ends of the horizon's steps from now [s]
         self.reset()
 
     def reset(self) -> None:
         """Forget the episode's targets (`start` sets the yaw at the first tick)."""
         self.yaw = 0.0
         self.yaw_target = 0.0
-        self.xy_target = np.zeros(2)
+        self._target_x, self._target_y = 0.0, 0.0
+
+    @property
+    def xy_target(self) -> np.ndarray:
+        """The horizontal CoM target, world (2,) [m] (a new array)."""
+        return np.array([self._target_x, self._target_y])
 
     def start(self, yaw: float) -> None:
         """Aim at the robot's heading at the first tick of an episode.
@@ -88,16 +99,14 @@ class MotionReference:
             The commanded horizontal velocity in the world frame (vx, vy) [m/s], turned by the unwrapped yaw.
         """
         dt = self.control_dt
-        self.yaw += math.remainder(yaw - self.yaw, 2 * math.pi)
-        cy, sy = math.cos(self.yaw), math.sin(self.yaw)
-        vx_world = cy * command.vx - sy * command.vy
-        vy_world = sy * command.vx + cy * command.vy
-        tx = self.xy_target[0].item() + vx_world * dt
-        ty = self.xy_target[1].item() + vy_world * dt
-        self.xy_target = np.array([com_x + min(max(tx - com_x, -XY_LEASH_M), XY_LEASH_M),
-                                   com_y + min(max(ty - com_y, -XY_LEASH_M), XY_LEASH_M)])
-        yaw_off = self.yaw_target + command.yaw_rate * dt - self.yaw
-        self.yaw_target = self.yaw + min(max(yaw_off, -YAW_LEASH_RAD), YAW_LEASH_RAD)
+        self.yaw = unwrapped = self.yaw + math.remainder(yaw - self.yaw, 2 * math.pi)
+        cy, sy = math.cos(unwrapped), math.sin(unwrapped)
+        vx, vy = command.vx, command.vy
+        vx_world = cy * vx - sy * vy
+        vy_world = sy * vx + cy * vy
+        self._target_x = com_x + _leash(self._target_x + vx_world * dt - com_x, XY_LEASH_M)
+        self._target_y = com_y + _leash(self._target_y + vy_world * dt - com_y, XY_LEASH_M)
+        self.yaw_target = unwrapped + _leash(self.yaw_target + command.yaw_rate * dt - unwrapped, YAW_LEASH_RAD)
         return vx_world, vy_world
 
     def trajectory(self, command: VelocityCommand, ground_z: float, inertia_world: np.ndarray) -> np.ndarray:
@@ -116,15 +125,15 @@ class MotionReference:
         Returns:
             x_ref, shape (N, 15).
         """
-        n, dt = self.horizon, self.step_s
-        x_ref = np.zeros((n, NX))
-        steps = np.arange(1, n + 1) * dt
+        dt = self.step_s
+        x_ref = np.zeros((self.horizon, NX))
         # while turning, the commanded body-frame velocity turns with the yaw reference along the horizon
-        yaw_k = self.yaw_target + command.yaw_rate * steps
-        vx_k = np.cos(yaw_k) * command.vx - np.sin(yaw_k) * command.vy
-        vy_k = np.sin(yaw_k) * command.vx + np.cos(yaw_k) * command.vy
-        x_ref[:, 0] = self.xy_target[0] + np.cumsum(vx_k) * dt
-        x_ref[:, 1] = self.xy_target[1] + np.cumsum(vy_k) * dt
+        yaw_k = self.yaw_target + command.yaw_rate * self._step_times
+        cos_k, sin_k = np.cos(yaw_k), np.sin(yaw_k)
+        vx_k = cos_k * command.vx - sin_k * command.vy
+        vy_k = sin_k * command.vx + cos_k * command.vy
+        x_ref[:, 0] = self._target_x + np.cumsum(vx_k) * dt
+        x_ref[:, 1] = self._target_y + np.cumsum(vy_k) * dt
         x_ref[:, 2] = ground_z + self.body_height
         x_ref[:, 3] = vx_k
         x_ref[:, 4] = vy_k
