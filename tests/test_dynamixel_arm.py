@@ -490,6 +490,23 @@ def test_a_closed_port_latches_and_the_servos_watchdog_leaves_the_arm_limp(emu: 
     assert emu.register(4, "torque_enable") == 1  # stopped by the watchdog, not switched off
 
 
+@pytest.mark.parametrize("name,fault,value", [("silent_id", BusFault.SILENT_ID, 4), ("bad_crc", BusFault.BAD_CRC, 4),
+                                              ("late_answer", BusFault.LATE_ANSWER, (4, 0.05)),
+                                              ("port_closed", BusFault.PORT_CLOSED, None)])
+def test_each_fault_latches_by_the_time_the_arm_bench_expects(emu: DynamixelEmulator, name: str, fault: BusFault,
+                                                              value: object) -> None:
+    """``wbc bench arm`` sets each latch it measures beside `expected_latch_s`: a bound the bus loop keeps."""
+    from wbc.tools.bench.arm import expected_latch_s
+
+    with _arm(emu) as arm:
+        t0, _ = _fault_rig(emu, arm, fault, value)
+        latched = arm.fault.time - t0
+    period, watchdog = 1.0 / arm.config.rate_hz, arm.config.watchdog_s
+    assert latched <= expected_latch_s(arm.config)[name] + 1e-9
+    if name != "port_closed":  # not before the servo's silence reached the watchdog's time
+        assert latched >= watchdog - period
+
+
 # -- the bus thread on the wall clock, against the pty (``make test-realtime``) -----------------------------------
 @pytest.fixture
 def pty_emu(plant: SharedPlant) -> Iterator[DynamixelEmulator]:

@@ -31,9 +31,14 @@ from wbc.hardware.contract import check_robot
 from wbc.hardware.dynamixel import DynamixelArmConfig
 from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.io_block import IoBlocks
-from wbc.hardware.io_channel import error_report, rebuild_error
-from wbc.hardware.process_robot import ProcessLinkStats, ProcessRobot, build_process_robot
+from wbc.hardware.io_process import (
+    IoBlocks,
+    ProcessLinkStats,
+    ProcessRobot,
+    build_process_robot,
+    error_report,
+    rebuild_error,
+)
 from wbc.hardware.realtime import NO_REALTIME
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.robots.registry import get_robot
@@ -78,6 +83,8 @@ def test_contract_legs_and_arm_actuated_and_the_same_robot_as_in_process() -> No
             assert robot.remote() is not None and not robot.remote().l2_b
             stats = robot.link_stats()
             assert isinstance(stats, ProcessLinkStats) and stats.as_dict()["link/arm_bus/cycles"] > 0
+            # both devices' loop statistics come across from the I/O process
+            assert stats.as_dict()["link/legs_thread/cycles"] > 0 and stats.as_dict()["link/arm_thread/cycles"] > 0
             assert stats.io["states_published"] > 0
             pid = robot.pid
             grant = robot.realtime_grant  # asked by default; granted, or refused with its reason
@@ -93,6 +100,8 @@ def test_the_io_process_asks_nothing_when_told_so() -> None:
             robot.advance(0.01)
             grant = robot.realtime_grant
             assert grant is not None and not grant.realtime and grant.refused == () and not grant.memory_locked
+            counters = robot.link_stats().as_dict()  # the legs alone: their link's counters and its thread's
+            assert counters["link/legs_thread/cycles"] > 0 and "link/arm_bus/cycles" not in counters
         assert emu.failure is None
 
 
@@ -191,7 +200,7 @@ def test_this_process_dying_ends_the_io_process() -> None:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
         script = ("import os, sys\n"
                   "from wbc.hardware.hardware_robot import HardwareRobotConfig\n"
-                  "from wbc.hardware.process_robot import ProcessRobot\n"
+                  "from wbc.hardware.io_process import ProcessRobot\n"
                   f"r = ProcessRobot(HardwareRobotConfig(robot='go1-arm', arm_mode='none', legs_host='127.0.0.1', "
                   f"legs_port={emu.address[1]}))\n"
                   "r.connect(); print(r.pid, flush=True); os.kill(os.getpid(), 9)\n")

@@ -261,7 +261,7 @@ def test_stand_over_the_wire_matches_simulation(stepped: Stepped, record_propert
         for _ in range(int(round(seconds * ctrl.rate_hz))):
             robot.write(ctrl.act(robot.read(), None))
             robot.advance(1.0 / ctrl.rate_hz)
-        stats = robot.link_stats()
+        stats, thread = robot.link_stats(), robot.thread_stats()
         wire = float(emulator.base_truth().base_position_in_world[2])  # before close() damps it down
     sim = _stand_height_in_sim(emulator.config.robot, seconds)
     record_property("trunk_height_difference_m", wire - sim)
@@ -274,6 +274,10 @@ def test_stand_over_the_wire_matches_simulation(stepped: Stepped, record_propert
     assert stats.period_min == pytest.approx(LINK_PERIOD, abs=1e-12)
     assert stats.period_max == pytest.approx(LINK_PERIOD, abs=1e-12)
     assert stats.frames_sent >= seconds / LINK_PERIOD and stats.valid_states == stats.frames_sent
+    # the link thread's statistics, which the link's period figures are: every send within its period
+    assert thread.cycles == stats.frames_sent and thread.late == thread.overruns == 0
+    assert thread.period_p50 == thread.period_p99 == pytest.approx(LINK_PERIOD, abs=1e-12)
+    assert (thread.period_mean, thread.period_max) == (stats.period_mean, stats.period_max)
 
 
 @pytest.mark.realtime

@@ -24,7 +24,7 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
   go into the record and the report beside the safety layer's transitions and the operator's actions.
 
 The robot's devices (the legs' link, the arm's bus) run in a child process by default
-(`wbc.hardware.process_robot.ProcessRobot`, ``io_process``), so that the controller's computing cannot starve them of
+(`wbc.hardware.io_process.ProcessRobot`, ``io_process``), so that the controller's computing cannot starve them of
 the interpreter lock; its CPU time during the episode is then reported apart (``io_cpu_s``).
 
 The same protocol runs on the simulator (``simulate``, ``wbc hw run --sim``): a `MujocoRobot` of the robot on flat
@@ -68,7 +68,7 @@ from wbc.hardware.capabilities import HasLinkStats, HasRealtimeGrant, LinkStatsL
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
-from wbc.hardware.process_robot import ProcessRobot, build_process_robot
+from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.scenario import check_published, load_scenario
 from wbc.scenario.trial import Trial
@@ -108,7 +108,7 @@ class HardwareTrialConfig:
         controller_config: a plug-in controller's ``--controller-config`` TOML file (None: none).
         io_file: an ``onnx:PATH`` policy's I/O file (None: beside the model).
         io_process: run the robot's devices (legs link, arm bus) in a child process with its own interpreter lock
-            (`wbc.hardware.process_robot.ProcessRobot`), so that the controller cannot starve them and a controller
+            (`wbc.hardware.io_process.ProcessRobot`), so that the controller cannot starve them and a controller
             hung holding the lock still leaves the robot damped; False: in this process, beside the controller.
     """
 

@@ -41,7 +41,7 @@ from wbc.hardware.emulators import (
 )
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
-from wbc.hardware.process_robot import build_process_robot
+from wbc.hardware.io_process import build_process_robot
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
 from wbc.hardware.realtime import AUTO_CPU, NO_REALTIME, RealtimeGrant, RealtimeRequest, request_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
@@ -126,7 +126,7 @@ def _bench_sim(args: argparse.Namespace) -> int:
 
 def _bench_mpc(args: argparse.Namespace) -> int:
     result = bench_mpc(args.robot, args.controller, seconds=args.seconds, single_thread=not args.threaded_blas,
-                       reference=not args.no_reference)
+                       reference=not args.no_reference, qp_solver=args.qp_solver)
     if args.json:
         printers.print_json(result.as_dict())
     else:
@@ -292,6 +292,7 @@ def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | 
                 time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
     printers.print_emulator_counts(EmulatorCounts.of(emulator.legs), last_reject=emulator.legs.last_reject)
     printers.print_bus_counts(emulator.arm.stats)
+    printers.print_thread_stats("arm bus thread", emulator.arm.thread_stats())
     if emulator.failure is not None:
         raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
     return 0
@@ -433,10 +434,11 @@ def hw_check(args: argparse.Namespace, *,
         check = printers.HardwareCheck(
             robot=args.robot, target=(host, port), joint_names=safe.joint_names, state=state,
             lower=safe.position_lower, upper=safe.position_upper, margin=safe.config.joint_margin,
-            extras=legs.extras, link=legs.link_stats(), decode=legs.decode_stats, safety_state=safe.safety_state.value,
-            safety_events=tuple(events), arm_port=args.arm_port,
+            extras=legs.extras, link=legs.link_stats(), link_thread=legs.thread_stats(), decode=legs.decode_stats,
+            safety_state=safe.safety_state.value, safety_events=tuple(events), arm_port=args.arm_port,
             arm_status=arm.motor_status() if arm is not None else None,
-            arm_faults=arm.faults if arm is not None else (), arm_bus=arm.bus_stats() if arm is not None else None)
+            arm_faults=arm.faults if arm is not None else (), arm_bus=arm.bus_stats() if arm is not None else None,
+            arm_thread=arm.thread_stats() if arm is not None else None)
     printers.print_hw_check(check)
     return 0
 

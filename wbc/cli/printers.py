@@ -26,6 +26,7 @@ from wbc.arena.summary import Summary
 from wbc.control.check import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.capabilities import HasRealtimeGrant, SafetyEventLike
+from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus
 from wbc.hardware.emulators import BusStats
 from wbc.hardware.realtime import RealtimeGrant
@@ -53,8 +54,8 @@ from wbc.types import RobotState
 __all__ = ["HardwareCheck", "print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
            "print_bench_sweep", "print_bench_train", "print_controller_check", "print_controllers",
            "print_demo_end", "print_demo_header", "print_emulator_counts", "print_emulator_started", "print_hw_check",
-           "print_hw_run", "print_json", "print_paper_table", "print_recording", "print_tail", "print_trained",
-           "print_viewed_trial"]
+           "print_hw_run", "print_json", "print_paper_table", "print_recording", "print_tail", "print_thread_stats",
+           "print_trained", "print_viewed_trial"]
 
 
 def print_json(value: object) -> None:
@@ -168,8 +169,9 @@ def print_bench_train(result: TrainBenchResult) -> None:
 def print_bench_mpc(result: MpcBenchResult) -> None:
     """`bench_mpc`'s figures, and the targets scaled to this machine when the references were measured."""
     ticks = result.ticks
-    print(f"MPC speed: {result.controller} on {result.robot} walking at 0.3 m/s, N = {result.horizon}")
-    print(f"  machine: {result.machine}")
+    print(f"MPC speed: {result.controller} on {result.robot} walking at 0.3 m/s, N = {result.horizon}, QP solver "
+          f"{result.qp_solver}")
+    print(f"  machine: {result.machine}, load {result.load_1min:.2f} (1 min)")
     print(f"  MPC QP solve   : median {ticks.mpc_solve_ms_median:.2f} ms, p99 {ticks.mpc_solve_ms_p99:.2f} ms "
           f"(setup median {ticks.mpc_setup_ms_median:.2f} ms)")
     print(f"  whole-body layer: median {ticks.wbc_tick_us_median:.0f} us per tick")
@@ -188,6 +190,23 @@ def print_bench_mpc(result: MpcBenchResult) -> None:
         print(f"  against the references: control tick {ref.control_tick_over_reference_tick:.2f}x the "
               f"reference PlaCo tick (target <= 1.8); closed loop {ref.closed_loop_over_physics_rtf:.3f} of "
               f"this robot's physics alone ({ref.physics_realtime_factor:.0f}x real time; target >= 0.075)")
+    if result.qp_solvers:
+        _print_qp_solvers(result)
+
+
+def _print_qp_solvers(result: MpcBenchResult) -> None:
+    """The QP backends on the walk's QPs, one row each (`QpSolverFigures`)."""
+    rows = result.qp_solvers
+    print(f"  QP backends on the same {rows[0].qps} QPs of the walk (each from the loop's warm start; the loop ran "
+          f"{result.qp_solver}):")
+    print(f"    {'solver':<18} {'solve ms p50':>12} {'p99':>7} {'iters p50':>9} {'max':>5} {'unsolved':>8} "
+          f"{'max |dF| N':>10} {'max dJ':>9}")
+    for r in rows:
+        print(f"    {r.solver + ' ' + r.version:<18} {r.solve_ms_median:>12.3f} {r.solve_ms_p99:>7.3f} "
+              f"{r.iterations_median:>9.0f} {r.iterations_max:>5d} {r.unsolved:>8d} {r.force_max_diff_n:>10.2g} "
+              f"{r.objective_max_diff:>9.2g}")
+    print("    dF: a planned force component's largest difference from DAQP's solution; dJ: the cost's largest "
+          "difference from its value there")
 
 
 def print_bench_sweep(result: SweepBenchResult) -> None:
@@ -487,6 +506,16 @@ def print_robot_emulator_started(robot: str, mode: str, address: tuple[str, int]
     _print_held(held)
 
 
+def print_thread_stats(name: str, stats: DeviceThreadStats) -> None:
+    """One line of a device loop's statistics: cycles, period percentiles, busy time, late cycles, overruns."""
+    ms = {k: 1e3 * getattr(stats, k) for k in ("period_mean", "period_p50", "period_p99", "period_max", "busy_mean",
+                                               "busy_max")}
+    print(f"  {name}: {stats.cycles} cycles, period mean {ms['period_mean']:.3f} ms, p50 {ms['period_p50']:.3f}, "
+          f"p99 {ms['period_p99']:.3f}, max {ms['period_max']:.3f}; busy mean {ms['busy_mean']:.3f} ms, max "
+          f"{ms['busy_max']:.3f}; {stats.late} late (started a period after they were due), {stats.overruns} "
+          "overruns (took longer than the period)")
+
+
 def print_bus_counts(stats: BusStats) -> None:
     """The arm emulator's closing line: instruction packets decoded, rejects by reason, status packets."""
     rejects = ", ".join(f"{reason} {n}" for reason, n in sorted(stats.rejected.items())) or "none"
@@ -520,6 +549,7 @@ class HardwareCheck:
         margin: how far beyond a limit the layer lets a measured joint go [rad].
         extras: the legs' newest frame's extras (motor modes, temperatures, remote, battery).
         link: the legs' link counters.
+        link_thread: the legs' link thread's statistics (period, late sends, overruns).
         decode: the legs' rejected frames by reason.
         safety_state: the layer's state at the end (``ramp`` when a ramp would start from here).
         safety_events: the layer's transitions during the check.
@@ -527,6 +557,7 @@ class HardwareCheck:
         arm_status: the arm servos' status (modes, temperatures), or None.
         arm_faults: the arm's latched bus faults.
         arm_bus: the arm's bus counters, or None.
+        arm_thread: the arm's bus loop's statistics, or None.
     """
 
     robot: str
@@ -538,6 +569,7 @@ class HardwareCheck:
     margin: float
     extras: LowStateExtras | None
     link: LinkStats
+    link_thread: DeviceThreadStats
     decode: DecodeStats
     safety_state: str
     safety_events: Sequence[SafetyEventLike]
@@ -545,6 +577,7 @@ class HardwareCheck:
     arm_status: ArmMotorStatus | None = None
     arm_faults: Sequence[object] = ()
     arm_bus: ArmBusStats | None = None
+    arm_thread: DeviceThreadStats | None = None
 
 
 def print_hw_check(check: HardwareCheck) -> None:
@@ -588,16 +621,16 @@ def print_hw_check(check: HardwareCheck) -> None:
     print("  safety: " + (f"WOULD REFUSE: {trips[0].reason}: {trips[0].detail}" if trips else verdict)
           + f" (joint margin {check.margin} rad beyond each range)")
     print(f"  link: {link.frames_sent} frames sent, all damping (the link's own, {link.damping_sent}, and any the "
-          f"safety layer wrote on a trip); period mean {1e3 * link.period_mean:.3f} ms, std "
-          f"{1e3 * link.period_std:.3f} ms, max {1e3 * link.period_max:.3f} ms; {link.overruns} overruns; "
-          f"{link.foreign} foreign datagrams")
+          f"safety layer wrote on a trip); {link.foreign} foreign datagrams")
+    print_thread_stats("link thread", check.link_thread)
     print(f"  rejected states: {check.decode.rejected} ("
           + ", ".join(f"{r} {getattr(check.decode, r)}" for r in REJECT_REASONS) + ")")
     if check.arm_bus is not None:
         bus = check.arm_bus
-        print(f"  arm bus: {bus.cycles} cycles, {bus.damping_cycles} of them damping (no servo command), period mean "
-              f"{1e3 * bus.period_mean:.2f} ms, max {1e3 * bus.period_max:.2f} ms; {bus.failed_transfers} failed "
-              f"reads, {bus.retries} retries")
+        print(f"  arm bus: {bus.cycles} cycles, {bus.damping_cycles} of them damping (no servo command); "
+              f"{bus.failed_transfers} failed reads, {bus.retries} retries")
+        if check.arm_thread is not None:
+            print_thread_stats("arm bus loop", check.arm_thread)
         for fault in check.arm_faults:
             print(f"  {fault}")
 

@@ -5,8 +5,10 @@ or tool checks ``isinstance(robot, Pushable)`` instead of testing for a backend 
 same (motion capture as a `TruthSource`, a push rig as `Pushable`) takes the same path. A safety layer that records its
 transitions is a `HasSafetyEvents` (`wbc.hardware.safety.SafeRobot` is one); the protocol is structural, so the
 runner logs the events without importing the safety layer. A robot that paces `advance` on a wall clock over a link
-reports its lateness as a `HasLinkStats` (`wbc.hardware.unitree.UnitreeRobot` is one); one whose devices run in a
-process that asked for real-time scheduling says what it got as a `HasRealtimeGrant` (`ProcessRobot`). A robot that
+reports its lateness as a `HasLinkStats` (`wbc.hardware.unitree.UnitreeRobot` is one); a device whose link or bus
+runs as a `wbc.hardware.device_thread.DeviceThread` reports that loop's period, late cycles and overruns as a
+`HasThreadStats`. A robot whose devices run in a process that asked for real-time scheduling says what it got as a
+`HasRealtimeGrant` (`ProcessRobot`). A robot that
 knows its own configuration only from its sensors (joint encoders, IMU, a base state estimator) offers it as a
 `ConfigurationEstimate`, which is what a viewer draws of a real robot. A simulator that reports its own integration
 failures is a `SimulatorHealth`. A robot that lives in wall-clock time (a real robot, or an emulator over a wire) is
@@ -20,13 +22,15 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.realtime import RealtimeGrant
 from wbc.robots.description import RobotDescription
 from wbc.scenario.push import Push
 from wbc.types import BaseTruth
 
 __all__ = ["ConfigurationEstimate", "FallDetector", "HasLinkStats", "HasRealtimeGrant", "HasSafetyEvents",
-           "LinkStatsLike", "Pushable", "SafetyEventLike", "SimulatorHealth", "TruthSource", "WallClock"]
+           "HasThreadStats", "LinkStatsLike", "Pushable", "SafetyEventLike", "SimulatorHealth", "TruthSource",
+           "WallClock"]
 
 
 @runtime_checkable
@@ -130,6 +134,14 @@ class HasLinkStats(Protocol):
 
     def link_stats(self) -> LinkStatsLike:
         """A snapshot of the link's counters since `connect`."""
+
+
+@runtime_checkable
+class HasThreadStats(Protocol):
+    """A device whose link or bus runs as a `DeviceThread` (`UnitreeRobot`, `DynamixelArm`)."""
+
+    def thread_stats(self) -> DeviceThreadStats:
+        """The loop's statistics since `connect`: cycles, period, busy time, late cycles, overruns."""
 
 
 @runtime_checkable

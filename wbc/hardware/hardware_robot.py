@@ -68,7 +68,7 @@ class HardwareRobotConfig:
             its ``robot`` is set to `robot`.
         realtime: what the I/O process asks the OS for before it starts the devices' threads (`RealtimeRequest`:
             real-time scheduling, a CPU of its own, locked memory; `NO_REALTIME`: nothing). Only the I/O process
-            (`wbc.hardware.process_robot.ProcessRobot`) applies it: a robot built in the controller's process never
+            (`wbc.hardware.io_process.ProcessRobot`) applies it: a robot built in the controller's process never
             changes that process's scheduling.
     """
 

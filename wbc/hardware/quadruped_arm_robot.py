@@ -23,12 +23,14 @@ moves) are separate devices, each with its own thread, rate and faults. This cla
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from wbc.errors import ConfigError, UnknownNameError
-from wbc.hardware.capabilities import HasLinkStats, LinkStatsLike, WallClock
+from wbc.hardware.capabilities import HasLinkStats, HasThreadStats, LinkStatsLike, WallClock
+from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.capabilities import MotorNames, MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.robots.description import ARM_MODES
@@ -95,10 +97,13 @@ class JoinedLinkStats:
     Attributes:
         legs: the leg link's counters (`wbc.hardware.unitree.LinkStats`), None when the leg device keeps none.
         arm: the arm bus's counters (`wbc.hardware.dynamixel.ArmBusStats`), None without an arm device or counters.
+        threads: each device's loop statistics (`DeviceThreadStats`) by device, ``legs`` and ``arm``; a device that
+            runs no `DeviceThread` has none.
     """
 
     legs: LinkStatsLike | None
     arm: object | None
+    threads: Mapping[str, DeviceThreadStats] = field(default_factory=dict)
 
     @property
     def late_advances(self) -> int:
@@ -111,11 +116,17 @@ class JoinedLinkStats:
         return self.legs.worst_lateness if self.legs is not None else 0.0
 
     def as_dict(self, prefix: str = "link/") -> dict[str, float]:
-        """The legs' counters under `prefix`, the arm bus's under `prefix` + ``arm_bus/``."""
+        """Every counter as a flat dict, keys namespaced with `prefix`.
+
+        The legs' counters directly under `prefix`, the arm bus's under ``arm_bus/``, each device's loop statistics
+        under ``legs_thread/`` and ``arm_thread/``.
+        """
         out = dict(self.legs.as_dict(prefix)) if self.legs is not None else {}
         as_dict = getattr(self.arm, "as_dict", None)
         if as_dict is not None:
             out.update(as_dict(f"{prefix}arm_bus/"))
+        for device, stats in self.threads.items():
+            out.update(stats.as_dict(f"{prefix}{device}_thread/"))
         return out
 
 
@@ -228,10 +239,12 @@ class QuadrupedArmRobot(Robot):
         return self.legs.wall_time() if isinstance(self.legs, WallClock) else time.monotonic()
 
     def link_stats(self) -> JoinedLinkStats:
-        """The legs' link counters (pacing, lateness) and the arm bus's (`HasLinkStats`), as one snapshot."""
+        """The legs' link counters (pacing, lateness), the arm bus's and both loops' (`HasLinkStats`): one snapshot."""
         legs = self.legs.link_stats() if isinstance(self.legs, HasLinkStats) else None
         bus_stats = getattr(self.arm, "bus_stats", None)
-        return JoinedLinkStats(legs=legs, arm=bus_stats() if bus_stats is not None else None)
+        threads = {device: robot.thread_stats() for device, robot in (("legs", self.legs), ("arm", self.arm))
+                   if isinstance(robot, HasThreadStats)}
+        return JoinedLinkStats(legs=legs, arm=bus_stats() if bus_stats is not None else None, threads=threads)
 
     def remote(self) -> RemoteButtons | None:
         """The legs' wireless remote (the arm has none), or None when the legs device offers no remote."""

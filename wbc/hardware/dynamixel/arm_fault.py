@@ -13,7 +13,8 @@ one entry per servo, in ID order, whose mode is `MODE_SERVO` while the servo is 
 | 0x43 `MODE_PORT_LOST` | the serial port failed: no servo can be reached |
 
 `ArmBusStats` counts the bus loop's cycles, retries and timing since `connect`, timed on the backend's clock (on a
-`ManualClock` the busy time is the clock time the cycle's reply timeouts and pauses took).
+`ManualClock` the busy time is the clock time the cycle's reply timeouts and pauses took). Its timing is the bus
+loop's own statistics (`wbc.hardware.device_thread.DeviceThreadStats`, from `DynamixelArm.thread_stats()`).
 """
 
 from __future__ import annotations
@@ -107,10 +108,11 @@ class ArmBusStats:
         late: status packets discarded because they answered an earlier request (another ID or length).
         damping_cycles: cycles that sent the host's damping instead of the written command.
         deadline_trips: times the write deadline expired.
-        overruns: cycles that ended more than a period late (the thread then resynchronises).
+        overruns: cycles that started more than a period after they were due (the bus loop's late cycles,
+            `DeviceThreadStats.late`; the loop then starts its schedule afresh).
         period_mean: mean interval between two cycle starts [s].
         period_max: longest such interval [s].
-        busy_mean: mean time the bus was busy in a cycle (read, status, write) [s].
+        busy_mean: mean time a cycle of the loop took (read, status, write; the park when closing) [s].
         busy_max: longest such time [s].
         late_advances: `advance` calls that found their deadline already past.
     """

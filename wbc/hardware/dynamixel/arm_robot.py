@@ -52,12 +52,14 @@ The backend prints a line each time it does. The held servos (wrist angle, wrist
 `held_ticks` in position mode, at `held_profile_velocity`. The joint servos get goal current 0, torque on, and the
 watchdog armed.
 
-Time. Every time the backend reads or waits (the cycle's start, the write deadline, a retry's pause, a fault's
-time, `wall_time`) comes from its `Clock` (`wbc.hardware.clock`). On the monotonic clock (the default) the bus loop
-runs on a thread of its own. Handed a `ManualClock`, the backend starts no thread: `connect` registers one bus cycle
-(`_cycle`, the very body the thread runs) with `ManualClock.call_every`, and whoever moves the clock runs the bus:
-`advance`, `connect`'s wait for the first state and `close`'s damping all move it. With a port on the same clock
-(`in_process_handlers`), a reply timeout, a retry and a watchdog take the same clock time on any machine at any load.
+Time. The bus loop is a `DeviceThread` (`wbc.hardware.device_thread`) whose cycle is one bus cycle. Every time the
+backend reads or waits (the cycle's start, the write deadline, a retry's pause, a fault's time, `wall_time`) comes
+from its `Clock` (`wbc.hardware.clock`). On the monotonic clock (the default) the bus loop runs on a thread of its
+own. Handed a `ManualClock`, the backend starts no thread: each bus cycle (the very body the thread runs) is a task of
+that clock, and whoever moves the clock runs the bus: `advance`, `connect`'s wait for the first state and `close`'s
+damping all move it. With a port on the same clock (`in_process_handlers`), a reply timeout, a retry and a watchdog
+take the same clock time on any machine at any load. `thread_stats()` gives the bus loop's period, busy time, late
+cycles and overruns; `bus_stats()` carries its period and busy figures too.
 """
 
 from __future__ import annotations
@@ -71,7 +73,8 @@ from typing import Any
 import numpy as np
 
 from wbc.errors import RobotLinkError, SerialPortError
-from wbc.hardware.clock import MONOTONIC, Clock, ManualClock, ScheduledCall
+from wbc.hardware.clock import MONOTONIC, Clock
+from wbc.hardware.device_thread import DeviceThread, DeviceThreadStats
 from wbc.hardware.dynamixel.arm_config import DynamixelArmConfig
 from wbc.hardware.dynamixel.arm_fault import (
     MODE_CORRUPT,
@@ -108,7 +111,7 @@ from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["HELD_MODEL_NUMBERS", "DynamixelArm", "arm_joint_table"]
+__all__ = ["HELD_MODEL_NUMBERS", "PING_WAITS", "DynamixelArm", "arm_joint_table"]
 
 HELD_MODEL_NUMBERS = (XM430_W350_MODEL_NUMBER, 1060)
 """Models a held servo may be: the XM430-W350, or the XL430-W250 (1060) that some WX200s carry at the wrist rotate
@@ -120,14 +123,15 @@ _ADDR = {name: XM430_W350[name].address for name in (
     "present_input_voltage")}
 _PRESENT = (_ADDR["present_current"], 10)  # current (2), velocity (4), position (4): one read
 _STATUS_TEMP = (_ADDR["present_input_voltage"], 3)  # input voltage (2), temperature (1)
-_PING_WAITS = (0.002, 0.01)  # [s] waits before the second and third ping of a servo whose read failed for good
+PING_WAITS = (0.002, 0.01)
+"""[s] The waits before the second and third ping of a servo whose read failed for good."""
 
 
 class _Next(enum.Enum):
     """What the bus loop does after a cycle."""
 
     GO_ON = "go_on"
-    STOP = "stop"  # end without parking (stopped, the port lost)
+    STOP = "stop"  # end without parking (the port is lost)
     PARK = "park"  # the close damping is over: park the arm, then end
 
 
@@ -161,8 +165,6 @@ class DynamixelArm(Robot):
         super().__init__()
         self.config = config
         self.clock = clock
-        self._stepped = isinstance(clock, ManualClock)
-        self._task: ScheduledCall | None = None
         self._handlers = handlers if handlers is not None else (lambda port: sdk_handlers(port, config.latency_ms))
         torque_limit = arm_joint_table(config.robot).torque_limit
         self.law = CurrentLaw(config.joints, torque_limit, config.max_current_a)
@@ -173,7 +175,6 @@ class DynamixelArm(Robot):
         self._period = 1.0 / config.rate_hz
         self._damping_rows = MotorCommand.damping(3, config.damping_kd).stacked()
         self._lock = threading.Condition()
-        self._thread: threading.Thread | None = None
         self._bus: SdkBus | None = None
         self._reset()
 
@@ -186,8 +187,6 @@ class DynamixelArm(Robot):
         self._written_at = -np.inf
         self._tripped = True
         self._closing_until: float | None = None
-        self._stop = False
-        self._failure: BaseException | None = None
         self._faults: list[ArmFault] = []
         self._silent: set[int] = set()
         self._corrupt: set[int] = set()
@@ -197,16 +196,15 @@ class DynamixelArm(Robot):
         self._port_lost = False
         self._late = 0
         self._counts = dict(cycles=0, states=0, status_reads=0, failed_transfers=0, retries=0, unexplained=0,
-                            missed_reads=0, damping_cycles=0, deadline_trips=0, overruns=0)
+                            missed_reads=0, damping_cycles=0, deadline_trips=0)
         self._heard_at = dict.fromkeys(self._ids, -np.inf)  # [s] each servo's latest valid answer
         self._measured_at = np.full(3, -np.inf)  # [s] when each joint's state was last read
-        self._timing = [0.0, 0.0, 0, 0.0, 0.0]  # period sum, period max, count, busy sum, busy max
+        self._loop = DeviceThread("dynamixel-arm-bus", self._period, self._bus_cycle, clock=self.clock,
+                                  condition=self._lock, on_failure=self._loop_died)
         self._pacer = WallPacer(self.clock)
         self._measured = (np.zeros(3), np.zeros(3), np.zeros(3))
         self._t0 = self.clock.now()
         self._cycle_k = 0
-        self._last_start: float | None = None
-        self._next_cycle = 0.0
 
     # -- Robot ----------------------------------------------------------------------------------------------------
     @property
@@ -235,22 +233,11 @@ class DynamixelArm(Robot):
             raise
         self._heard_at = dict.fromkeys(self._ids, self.clock.now())  # every servo answered its start-up transfers
         self._bus = bus
-        clock = self.clock
-        deadline = clock.now() + cfg.connect_timeout
-        if self._stepped:
-            self._task = clock.call_every(self._period, self._stepped_cycle)
-            clock.advance(0.0)  # the first cycle is due now
-            while self._state is None and self._failure is None and not self._faults and clock.now() < deadline:
-                clock.advance(min(self._period, deadline - clock.now()))
-        else:
-            self._thread = threading.Thread(target=self._run, name="dynamixel-arm-bus", daemon=True)
-            self._thread.start()
-            with self._lock:
-                while self._state is None and self._failure is None and not self._faults and clock.now() < deadline:
-                    self._lock.wait(max(0.0, deadline - clock.now()))
+        self._loop.start(run_first=True)
+        self._loop.wait_until(lambda: self._state is not None or bool(self._faults), cfg.connect_timeout)
         with self._lock:
             ok = self._state is not None
-            why = self._failure or (self._faults[0] if self._faults else None)
+            why = self._loop.failure or (self._faults[0] if self._faults else None)
         if not ok:
             self._shutdown(park=True)
             raise RobotLinkError(f"DynamixelArm({cfg.port}): no state within {cfg.connect_timeout} s after start-up"
@@ -260,22 +247,12 @@ class DynamixelArm(Robot):
         self._shutdown(park=True)
 
     def _shutdown(self, *, park: bool) -> None:
-        with self._lock:
-            if park and self._failure is None and not self._port_lost:
+        if park and self._loop.failure is None and not self._port_lost:
+            with self._lock:
                 self._closing_until = self.clock.now() + self.config.close_damping
-            else:
-                self._stop = True
-            self._lock.notify_all()
-        if self._task is not None:
-            # the close damping goes out as the clock moves through it; the cycle after it parks and ends the task
-            end = self.clock.now() + self.config.close_damping + 5.0
-            while not self._task.cancelled and self.clock.now() < end:
-                self.clock.advance(self._period)
-            self._task.cancel()
-            self._task = None
-        if self._thread is not None:
-            self._thread.join(timeout=self.config.close_damping + 5.0)
-            self._thread = None
+            # the close damping goes out as the loop runs through it; the cycle after it parks and ends the loop
+            self._loop.join(timeout=self.config.close_damping + 5.0)
+        self._loop.stop()
         if self._bus is not None:
             self._bus.close()
             self._late = self._bus.late
@@ -300,15 +277,7 @@ class DynamixelArm(Robot):
         with self._lock:
             start_tick = self._fresh
         self._pacer.wait(dt)
-        clock = self.clock
-        grace = clock.now() + 2.0 * self._period
-        if self._stepped:
-            while self._fresh == start_tick and not self._faults and self._failure is None and clock.now() < grace:
-                clock.advance(min(self._period, grace - clock.now()))
-        else:
-            with self._lock:
-                while self._fresh == start_tick and not self._faults and clock.now() < grace:
-                    self._lock.wait(max(0.0, grace - clock.now()))
+        self._loop.wait_until(lambda: self._fresh != start_tick or bool(self._faults), 2.0 * self._period)
         self._raise_failure()
 
     # -- capabilities ---------------------------------------------------------------------------------------------
@@ -362,23 +331,27 @@ class DynamixelArm(Robot):
     @property
     def bus_failure(self) -> BaseException | None:
         """The exception that stopped the bus thread unexpectedly (not a bus fault), or None."""
-        with self._lock:
-            return self._failure
+        return self._loop.failure
 
     def bus_stats(self) -> ArmBusStats:
-        """A snapshot of the bus thread's counters."""
+        """A snapshot of the bus thread's counters; its period and busy figures are the bus loop's (`thread_stats`)."""
+        thread = self._loop.stats()
         with self._lock:
-            period_sum, period_max, n, busy_sum, busy_max = self._timing
             late = self._bus.late if self._bus is not None else self._late
             return ArmBusStats(**self._counts, late_advances=self._pacer.late_advances, late=late,
-                               period_mean=period_sum / n if n else 0.0, period_max=period_max,
-                               busy_mean=busy_sum / n if n else 0.0, busy_max=busy_max)
+                               overruns=thread.late, period_mean=thread.period_mean, period_max=thread.period_max,
+                               busy_mean=thread.busy_mean, busy_max=thread.busy_max)
+
+    def thread_stats(self) -> DeviceThreadStats:
+        """The bus loop's statistics since `connect`: cycles, their period, busy time, late cycles, overruns."""
+        return self._loop.stats()
 
     def _raise_failure(self) -> None:
-        if self._failure is not None:
-            raise RobotLinkError(f"DynamixelArm({self.config.port}): the bus thread died: {self._failure!r}; the "
-                                 f"servos' watchdog stops them {self.config.watchdog_s} s later and the arm goes "
-                                 "limp") from self._failure
+        failure = self._loop.failure
+        if failure is not None:
+            raise RobotLinkError(f"DynamixelArm({self.config.port}): the bus thread died: {failure!r}; the servos' "
+                                 f"watchdog stops them {self.config.watchdog_s} s later and the arm goes "
+                                 "limp") from failure
 
     # -- start-up -------------------------------------------------------------------------------------------------
     def _say(self, text: str) -> None:
@@ -479,61 +452,23 @@ class DynamixelArm(Robot):
             self._write_at_start(bus, servo_id, "bus_watchdog", cfg.watchdog_units)
 
     # -- the bus loop: one cycle's body, run by the thread or by the clock --------------------------------------------
-    def _run(self) -> None:
-        try:
-            self._loop()
-        except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's thread
-            self._record_failure(exc)
-
-    def _record_failure(self, exc: BaseException) -> None:
-        with self._lock:
-            self._failure = exc
-            self._lock.notify_all()
+    def _loop_died(self, exc: BaseException) -> None:
         self._say(f"the bus loop died ({exc!r}): nothing reaches the servos any more; their watchdog sets "
                   f"the goal currents to 0 after {self.config.watchdog_s} s and the arm goes limp")
 
-    def _loop(self) -> None:
-        """The bus thread: a cycle every period, resynchronised after an overrun; then the park, if closing."""
-        bus, period, clock = self._bus, self._period, self.clock
-        self._next_cycle = clock.now()
-        while (step := self._cycle(bus)) is _Next.GO_ON:
-            self._next_cycle += period
-            wait = self._next_cycle - clock.now()
-            if wait > 0:
-                with self._lock:
-                    if not self._stop:
-                        self._lock.wait(wait)
-            elif wait < -period:
-                with self._lock:
-                    self._counts["overruns"] += 1
-                self._next_cycle = clock.now()
+    def _bus_cycle(self) -> bool:
+        """The loop's cycle: one bus cycle; after the close damping, the park. False: the loop is done."""
+        bus = self._bus
+        step = self._cycle(bus)
         if step is _Next.PARK:
             self._park(bus)
-
-    def _stepped_cycle(self) -> None:
-        """One bus cycle as a task of a `ManualClock` (the thread's body; the clock keeps the period)."""
-        bus = self._bus
-        try:
-            start = self.clock.now()
-            if self._last_start is not None and start - self._last_start > 2.0 * self._period:
-                with self._lock:
-                    self._counts["overruns"] += 1  # the clock ran this cycle more than a period late
-            step = self._cycle(bus)
-            if step is not _Next.GO_ON:
-                self._task.cancel()
-            if step is _Next.PARK:
-                self._park(bus)
-        except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's code, as the thread's
-            self._task.cancel()
-            self._record_failure(exc)
+        return step is _Next.GO_ON
 
     def _cycle(self, bus: SdkBus) -> _Next:
         """One bus cycle: the joints' sync read, every so often a status read, the goals' sync write."""
         every = self.config.status_every
         start = self.clock.now()
         with self._lock:
-            if self._stop:
-                return _Next.STOP
             if self._closing_until is not None and start >= self._closing_until:
                 return _Next.PARK
         k = self._cycle_k
@@ -550,19 +485,9 @@ class DynamixelArm(Robot):
                         f"{self.config.watchdog_s} s, and the arm goes LIMP (it sags under gravity)")
             return _Next.STOP
         self._cycle_k = k + 1
-        end = self.clock.now()
-        last_start = self._last_start
         with self._lock:  # both counts at once, so that a snapshot never sees one cycle's damping without it
             self._counts["cycles"] += 1
             self._counts["damping_cycles"] += damped
-            t = self._timing
-            if last_start is not None:
-                t[0] += start - last_start
-                t[1] = max(t[1], start - last_start)
-                t[2] += 1
-                t[3] += end - start
-                t[4] = max(t[4], end - start)
-        self._last_start = start
         return _Next.GO_ON
 
     def _transfer(self, bus: SdkBus, call: Callable[[], list[ServoRead]]) -> list[ServoRead] | None:
@@ -602,7 +527,7 @@ class DynamixelArm(Robot):
         for servo_id in ids:
             bus.flush()
             _, result, _ = bus.ping(servo_id)
-            for wait in _PING_WAITS:  # more tries, further apart: a loaded host can miss an answer or two
+            for wait in PING_WAITS:  # more tries, further apart: a loaded host can miss an answer or two
                 if result != COMM_RX_TIMEOUT:
                     break
                 self.clock.sleep(wait)

@@ -1,18 +1,20 @@
 """`DynamixelEmulator`: the WX200's Dynamixel bus on a pseudo-terminal, its XM430 servos backed by an `ArmPlant`.
 
 A client opens `DynamixelEmulator.port` (the pty's slave, e.g. ``/dev/pts/7``) as it would open the U2D2
-(``PortHandler(port)`` of dynamixel_sdk, unmodified) and speaks Protocol 2.0. One thread reads the master side,
-decodes each instruction packet (`wbc.hardware.dynamixel`), logs it (`packets()`), hands it to the servos it
-addresses (`EmulatedServo`: the control table and its rules) and writes their status packets back, in ID-list order.
+(``PortHandler(port)`` of dynamixel_sdk, unmodified) and speaks Protocol 2.0. One thread (a `DeviceThread`,
+`wbc.hardware.device_thread`) reads the master side, decodes each instruction packet (`wbc.hardware.dynamixel`), logs
+it (`packets()`), hands it to the servos it addresses (`EmulatedServo`: the control table and its rules) and writes
+their status packets back, in ID-list order. Its cycle is the servos' own time, every `THREAD_PERIOD` and after every
+packet; `thread_stats()` gives its period, late cycles and overruns.
 
 The packet handling does not depend on that thread. Built with ``in_process=True`` the emulator opens no pty and
 starts no thread: `receive` takes the bytes a client wrote and hands every answer, with when it reaches the client,
 to that client's callback, within the same call. `port_handlers` builds dynamixel_sdk handlers around it
 (`wbc.hardware.dynamixel.in_process_handlers`): the SDK writes, and its answers wait for it when it reads.
 On a `ManualClock` (`wbc.hardware.clock`), the servos' own time (bus watchdogs, injected overloads and heat, reboots)
-is a task of the clock every `TICK_PERIOD`, and a late answer (`BusFault.LATE_ANSWER`, or the wire time of
-``byte_timing``) reaches the client that much later on the clock. What a test then sees is the same on every machine
-at any load.
+is a task of the clock every `TICK_PERIOD` (the same `DeviceThread`, run by the clock), and a late answer
+(`BusFault.LATE_ANSWER`, or the wire time of ``byte_timing``) reaches the client that much later on the clock. What a
+test then sees is the same on every machine at any load.
 
 Instructions: PING (one ID or broadcast), READ, WRITE, REBOOT, SYNC_READ, SYNC_WRITE, BULK_READ, BULK_WRITE,
 FAST_SYNC_READ and FAST_BULK_READ (one combined answer). Anything else gets an instruction error. A servo executes
@@ -63,7 +65,8 @@ from typing import Any
 import numpy as np
 
 from wbc.errors import ConfigError, PacketError
-from wbc.hardware.clock import MONOTONIC, Clock, ManualClock, ScheduledCall
+from wbc.hardware.clock import MONOTONIC, Clock, ManualClock
+from wbc.hardware.device_thread import DeviceThread, DeviceThreadStats
 from wbc.hardware.dynamixel import (
     BAUD_RATES,
     BROADCAST_ID,
@@ -117,9 +120,11 @@ from wbc.hardware.emulators.servo import EmulatedServo
 from wbc.hardware.serial_port_policy import IN_PROCESS_PREFIX
 from wbc.types import MotorCommand
 
-__all__ = ["TICK_PERIOD", "BusStats", "DynamixelEmulator", "DynamixelEmulatorConfig"]
+__all__ = ["THREAD_PERIOD", "TICK_PERIOD", "BusStats", "DynamixelEmulator", "DynamixelEmulatorConfig"]
 
-_POLL = 0.01  # [s] longest the bus thread blocks, so faults and watchdogs are seen promptly
+THREAD_PERIOD = 0.01
+"""[s] How often the pty's thread runs the servos' own time when no packet comes: the longest it blocks, so that
+faults and watchdogs are seen promptly."""
 TICK_PERIOD = 0.002
 """[s] How often the servos' own time runs (watchdogs, injected overloads) as a task of a `ManualClock`; on any
 clock it also runs before every packet, so a watchdog is never seen late by a packet."""
@@ -205,6 +210,9 @@ class DynamixelEmulator:
             client's port waits on), or a function giving the time [s].
         in_process: open no pty and start no thread: clients reach the bus through `port_handlers` (see the module
             docstring).
+
+    Raises:
+        ConfigError: a `ManualClock` for a pty (its thread lives in wall time; build it with ``in_process=True``).
     """
 
     def __init__(self, plant: ArmPlant, config: DynamixelEmulatorConfig | None = None, *,
@@ -213,6 +221,9 @@ class DynamixelEmulator:
         self.config = config if config is not None else DynamixelEmulatorConfig()
         self.table = XM430_W350
         self.clock: Clock = clock if isinstance(clock, Clock) else _FunctionClock(clock)
+        if isinstance(self.clock, ManualClock) and not in_process:
+            raise ConfigError("DynamixelEmulator: a pty is served by a thread in wall time; on a ManualClock build the "
+                              "emulator with in_process=True")
         self._clock = self.clock.now
         self.in_process = in_process
         now = self._clock()
@@ -229,20 +240,17 @@ class DynamixelEmulator:
         self._master: int | None = None
         self._slave: int | None = None
         self._wake: tuple[int, int] | None = None
-        self._stop = threading.Event()
         self._closed = threading.Event()
-        self._thread: threading.Thread | None = None
+        self._device: DeviceThread | None = None  # the pty's thread, or the servos' time as a task of a ManualClock
         self._last_rx = now
         self._bus_free_at = 0.0
         self._outbox: list[tuple[bytes, EmulatedServo]] = []
         self._late: list[tuple[float, int, bytes]] = []  # (due, order, answer): late answers the pty still owes
         self._order = itertools.count()
         self._reply: Callable[[bytes, float], None] | None = None  # the in-process client being answered
-        self._ticker: ScheduledCall | None = None
         self._started = False
         self._sent: tuple[np.ndarray, np.ndarray] | None = None
         self.port = ""
-        self.failure: BaseException | None = None
 
     def _wire(self, spec: ServoSpec) -> _Wiring:
         for k, joint in enumerate(self.config.joints):
@@ -264,9 +272,10 @@ class DynamixelEmulator:
                 self.port = f"{IN_PROCESS_PREFIX}dynamixel-{id(self):x}"
                 self._power_up()
                 if isinstance(self.clock, ManualClock):
-                    self._ticker = self.clock.call_every(TICK_PERIOD, lambda: self._tick(self._clock()))
+                    self._device = DeviceThread("dynamixel-emulator", TICK_PERIOD, self._servo_time, clock=self.clock)
+                    self._device.start()
             return self
-        if self._thread is not None:
+        if self._master is not None or (self._device is not None and self._device.running):
             return self
         master, slave = os.openpty()
         tty.setraw(master)
@@ -275,10 +284,10 @@ class DynamixelEmulator:
         self._wake = os.pipe()
         self.port = os.ttyname(slave)
         self._power_up()
-        self._stop.clear()
         self._closed.clear()
-        self._thread = threading.Thread(target=self._run, name="dynamixel-emulator", daemon=True)
-        self._thread.start()
+        self._device = DeviceThread("dynamixel-emulator", THREAD_PERIOD, self._servo_time, clock=self.clock,
+                                    idle=self._serve, wake=self._wakeup, on_failure=self._died)
+        self._device.start()
         return self
 
     def _power_up(self) -> None:
@@ -292,18 +301,21 @@ class DynamixelEmulator:
 
     def close(self) -> None:
         """Stop the thread and close the pty (in process: stop the servos' task). Idempotent."""
-        if self._ticker is not None:
-            self._ticker.cancel()
-            self._ticker = None
+        if self._device is not None:
+            self._device.stop()
         if self.in_process:
             self._closed.set()
             return
-        self._stop.set()
-        self._wakeup()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
         self._close_fds()
+
+    @property
+    def failure(self) -> BaseException | None:
+        """The exception that stopped the bus thread (or the servos' task), or None while it runs."""
+        return self._device.failure if self._device is not None else None
+
+    def thread_stats(self) -> DeviceThreadStats:
+        """The bus thread's (or the servos' task's) statistics: cycles of the servos' time, their period, lateness."""
+        return self._device.stats() if self._device is not None else DeviceThreadStats()
 
     def __enter__(self) -> DynamixelEmulator:
         return self.start()
@@ -371,7 +383,7 @@ class DynamixelEmulator:
         self._wakeup()
         if fault is BusFault.PORT_CLOSED and self.in_process:
             self._closed.set()  # unplugged: the servos' task goes on, their watchdogs still trip
-        if fault is BusFault.PORT_CLOSED and self._thread is not None:
+        if fault is BusFault.PORT_CLOSED and not self.in_process and self._device is not None:
             self._closed.wait(timeout=2.0)
 
     def clear(self, fault: BusFault | None = None) -> None:
@@ -406,59 +418,61 @@ class DynamixelEmulator:
                           f"{', '.join(str(s.id) for s in self._servos)}")
 
     # -- bus thread -----------------------------------------------------------------------------------------------
-    def _run(self) -> None:
-        try:
-            self._serve()
-            if BusFault.PORT_CLOSED in self.faults.snapshot():
-                self._close_fds()
-                self._unplugged()
-        except BaseException as exc:  # noqa: BLE001 - kept for the test to read; the thread must not die silently
-            self.failure = exc
-        finally:
-            if BusFault.PORT_CLOSED in self.faults.snapshot():
-                self._close_fds()
+    def _servo_time(self) -> bool:
+        """The device thread's cycle: the servos' own time (their watchdogs go on when the port is unplugged)."""
+        self._tick(self._clock())
+        return True
 
-    def _unplugged(self) -> None:
-        """The adapter is gone, the servos are still powered: their temperatures and bus watchdogs go on."""
-        while not self._stop.wait(_POLL):
-            self._tick(self._clock())
+    def _died(self, exc: BaseException) -> None:
+        """The thread failed: a port closed by a fault stays closed (its `inject` is waiting for that)."""
+        if BusFault.PORT_CLOSED in self.faults.snapshot():
+            self._close_fds()
 
-    def _serve(self) -> None:
+    def _serve(self, until: float) -> None:
+        """Between two cycles of the thread: every packet as it arrives and the late answers when due, until `until`.
+
+        Once the port is unplugged (`BusFault.PORT_CLOSED`) the pty is closed and nothing arrives any more: the
+        thread only runs the servos' time.
+        """
+        if BusFault.PORT_CLOSED in self.faults.snapshot():
+            if self._master is not None:
+                self._close_fds()
+            self._device.sleep_until(until)
+            return
         master, wake = self._master, self._wake[0]
-        while not self._stop.is_set():
-            if BusFault.PORT_CLOSED in self.faults.snapshot():
-                return
+        now = self._clock()
+        wait = until - now
+        with self._lock:
+            for servo in self._servos:
+                deadline = servo.watchdog_deadline()
+                if deadline is not None:
+                    wait = min(wait, deadline - now)
+        if self._reader.pending:
+            wait = min(wait, self._last_rx + self.config.packet_timeout - now)
+        if self._late:
+            wait = min(wait, self._late[0][0] - now)
+        ready = select.select([master, wake], [], [], max(0.0, wait))[0]
+        if wake in ready:
+            os.read(wake, 64)
+        if master in ready:
+            try:
+                data = os.read(master, 4096)
+            except (BlockingIOError, InterruptedError):
+                data = b""
             now = self._clock()
-            wait = _POLL
-            with self._lock:
-                for servo in self._servos:
-                    deadline = servo.watchdog_deadline()
-                    if deadline is not None:
-                        wait = min(wait, deadline - now)
-            if self._reader.pending:
-                wait = min(wait, self._last_rx + self.config.packet_timeout - now)
-            if self._late:
-                wait = min(wait, self._late[0][0] - now)
-            ready = select.select([master, wake], [], [], max(0.0, wait))[0]
-            if wake in ready:
-                os.read(wake, 64)
-            if master in ready:
-                try:
-                    data = os.read(master, 4096)
-                except (BlockingIOError, InterruptedError):
-                    data = b""
-                now = self._clock()
-                if data:
-                    self._last_rx = now
-                    dropped = self._reader.dropped
-                    baud = self._client_baud()
-                    for raw in self._reader.feed(data):
-                        self._on_packet(raw, now, baud)
-                    self.stats.dropped_bytes += self._reader.dropped - dropped
-            elif self._reader.pending and self._clock() - self._last_rx >= self.config.packet_timeout:
-                self.stats.dropped_bytes += self._reader.discard()
-            self._write_late(self._clock())
-            self._tick(self._clock())
+            if data:
+                self._last_rx = now
+                dropped = self._reader.dropped
+                baud = self._client_baud()
+                for raw in self._reader.feed(data):
+                    self._on_packet(raw, now, baud)
+                self.stats.dropped_bytes += self._reader.dropped - dropped
+        elif self._reader.pending and self._clock() - self._last_rx >= self.config.packet_timeout:
+            self.stats.dropped_bytes += self._reader.discard()
+        now = self._clock()
+        self._write_late(now)
+        if now < until:
+            self._tick(now)  # woken early (a packet, a watchdog's deadline): the servos' time now, not at the cycle
 
     def _write_late(self, now: float) -> None:
         """Write the late answers now due, in the order they fall due."""

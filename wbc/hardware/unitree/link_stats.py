@@ -1,7 +1,9 @@
 """`LinkStats`: a snapshot of a Unitree low-level link's counters, for a log or a fault-injection test.
 
 The link thread keeps the counts; `UnitreeRobot.link_stats()` copies them into this frozen record, so a reader
-never sees a half-updated set. Keys for a log come from `as_dict`, namespaced with ``link/``.
+never sees a half-updated set. The period figures and the overruns are the link thread's own statistics
+(`wbc.hardware.device_thread.DeviceThreadStats`, from `UnitreeRobot.thread_stats()`, which has the period's
+percentiles too). Keys for a log come from `as_dict`, namespaced with ``link/``.
 """
 
 from __future__ import annotations
@@ -23,11 +25,12 @@ class LinkStats:
         rejected_states: LowState frames rejected by the decoder (`decode_stats` says why).
         foreign: datagrams dropped because they came from another address than the target.
         state_age: time since the newest valid state arrived [s] (inf before the first).
-        period_mean: mean interval between two sends of the link thread [s] (0 before two sends).
+        period_mean: mean interval between two periods of the link thread [s] (0 before two).
         period_std: standard deviation of that interval (the link's jitter) [s].
         period_min: shortest such interval [s].
         period_max: longest such interval [s].
-        overruns: sends that came more than a period late (the thread then resynchronises).
+        overruns: periods that started more than a period after they were due (the link thread's late cycles,
+            `DeviceThreadStats.late`; the thread then starts its schedule afresh).
         late_advances: `advance` calls that found their deadline already past.
         worst_lateness: the latest such call, by how much [s].
     """

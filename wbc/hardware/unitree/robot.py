@@ -21,12 +21,14 @@ tick over the wire).
 Every value that reaches the wire was clamped twice: by `Robot.write` to the joint table (the URDF's position
 range intersected with the SDK's PositionLimit table) and by `encode_command` while quantising.
 
-Every time the link reads (the send schedule, the write deadline, a state's age, `wall_time`) comes from its
-`Clock` (`wbc.hardware.clock`). On the monotonic clock (the default) the link runs on a thread of its own. Handed a
-`ManualClock`, it starts no thread: `connect` registers one link period (the before-send hook, the frame chosen
-and sent, the datagrams received) with `ManualClock.call_every`, and whoever moves the clock runs the link:
-`advance`, `connect`'s wait for the first state and `close`'s damping all move it period by period. The thread's
-loop runs the very same period body, so both modes send the same frames for the same times.
+The link is a `DeviceThread` (`wbc.hardware.device_thread`): its cycle is one period's send (the before-send hook,
+the frame chosen and sent), and between two sends it takes every datagram as it arrives. Every time the link reads
+(the send schedule, the write deadline, a state's age, `wall_time`) comes from its `Clock` (`wbc.hardware.clock`). On
+the monotonic clock (the default) the link runs on a thread of its own. Handed a `ManualClock`, it starts no thread:
+each link period (the send, then the datagrams received) is a task of that clock, and whoever moves the clock runs
+the link: `advance`, `connect`'s wait for the first state and `close`'s damping all move it period by period. Both
+modes run the very same period body, so they send the same frames for the same times. `thread_stats()` gives the
+link thread's period, busy time, late sends and overruns; `link_stats()` carries its period figures too.
 """
 
 from __future__ import annotations
@@ -39,7 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from wbc.errors import ConfigError, FrameError, RobotLinkError, UnknownNameError
-from wbc.hardware.clock import MONOTONIC, Clock, ManualClock, ScheduledCall
+from wbc.hardware.clock import MONOTONIC, Clock
+from wbc.hardware.device_thread import DeviceThread, DeviceThreadStats
 from wbc.hardware.pacing import WallPacer
 from wbc.hardware.robot import Robot
 from wbc.hardware.unitree.command_codec import encode_command
@@ -174,8 +177,6 @@ class UnitreeRobot(Robot):
         super().__init__()
         self.config = config
         self.clock = clock
-        self._stepped = isinstance(clock, ManualClock)
-        self._task: ScheduledCall | None = None
         self.layout: FrameLayout = frame_layout(config.robot)
         self.desc, self._limits = unitree_joint_table(config.robot)
         self._given_transport = transport
@@ -183,7 +184,6 @@ class UnitreeRobot(Robot):
         self._period = 1.0 / config.rate_hz
         self._damping = encode_command(self.layout, MotorCommand.damping(12, config.damping_kd), limits=self._limits)
         self._lock = threading.Condition()
-        self._thread: threading.Thread | None = None
         self._before_send: Callable[[], None] | None = None
         self._on_state: Callable[[], None] | None = None
         self._reset_link()
@@ -199,12 +199,9 @@ class UnitreeRobot(Robot):
         self._written_at = -np.inf
         self._tripped = True
         self._closing_until: float | None = None
-        self._stop = False
-        self._failure: BaseException | None = None
-        self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0, overruns=0)
-        self._periods = [0.0, np.inf, 0.0, 0, 0.0]  # sum, min, max, count, sum of squares
-        self._next_send: float | None = None  # when the next period is due
-        self._last_send: float | None = None
+        self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0)
+        self._link = DeviceThread(f"unitree-{self.config.robot}-link", self._period, self._link_cycle, clock=self.clock,
+                                  idle=self._link_idle, condition=self._lock)
         self._pacer = WallPacer(self.clock)
         self._t0 = self.clock.now()
 
@@ -229,18 +226,8 @@ class UnitreeRobot(Robot):
             channel = SdkTransport if cfg.transport == "sdk" else UdpTransport
             self._transport = channel((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
                                       allow_hardware=cfg.allow_hardware)
-        if self._stepped:
-            self._task = self.clock.call_every(self._period, self._stepped_period)
-            deadline = self.clock.now() + cfg.connect_timeout
-            while self._state is None and self._failure is None and self.clock.now() < deadline:
-                self.clock.advance(min(self._period, deadline - self.clock.now()))
-        else:
-            self._thread = threading.Thread(target=self._run, name=f"unitree-{cfg.robot}-link", daemon=True)
-            self._thread.start()
-            deadline = self.clock.now() + cfg.connect_timeout
-            with self._lock:
-                while self._state is None and self._failure is None and self.clock.now() < deadline:
-                    self._lock.wait(max(0.0, deadline - self.clock.now()))
+        self._link.start()
+        self._link.wait_until(lambda: self._state is not None, cfg.connect_timeout)
         ok = self._state is not None
         if not ok:
             self._shutdown(damp=False)
@@ -248,27 +235,18 @@ class UnitreeRobot(Robot):
             raise RobotLinkError(
                 f"UnitreeRobot({cfg.robot}): no valid LowState from {cfg.target_host}:{cfg.target_port} within "
                 f"{cfg.connect_timeout} s ({self.decode_stats.rejected} rejected); {_no_state_hint(cfg.robot, stats)}"
-            ) from self._failure
+            ) from self._link.failure
 
     def _close(self) -> None:
         self._shutdown(damp=True)
 
     def _shutdown(self, *, damp: bool) -> None:
-        with self._lock:
-            if damp and self._failure is None:
+        if damp and self._link.failure is None:
+            with self._lock:
                 self._closing_until = self.clock.now() + self.config.close_damping
-            else:
-                self._stop = True
-        if self._task is not None:
-            # the close damping goes out as the clock moves through it; the period after it ends the task
-            while (not self._task.cancelled and self._closing_until is not None and not self._stop
-                   and self.clock.now() <= self._closing_until + self._period):
-                self.clock.advance(self._period)
-            self._task.cancel()
-            self._task = None
-        if self._thread is not None:
-            self._thread.join(timeout=self.config.close_damping + 1.0)
-            self._thread = None
+            # the close damping goes out as the link runs through it; the period after it ends the link
+            self._link.join(timeout=self.config.close_damping + 1.0)
+        self._link.stop()
         if self._transport is not None and self._given_transport is None:
             self._transport.close()
         self._transport = None
@@ -293,15 +271,7 @@ class UnitreeRobot(Robot):
         with self._lock:
             start_tick = self._read_fresh
         self._pacer.wait(dt)
-        clock = self.clock
-        grace = clock.now() + 2.0 * self._period
-        if self._stepped:
-            while self._fresh == start_tick and self._failure is None and clock.now() < grace:
-                clock.advance(min(self._period, grace - clock.now()))
-        else:
-            with self._lock:
-                while self._fresh == start_tick and clock.now() < grace:
-                    self._lock.wait(max(0.0, grace - clock.now()))
+        self._link.wait_until(lambda: self._fresh != start_tick, 2.0 * self._period)
         self._raise_failure()
 
     def wall_time(self) -> float:
@@ -315,7 +285,7 @@ class UnitreeRobot(Robot):
         `before_send` runs every period just before the link chooses its frame (a forwarder calls `write` there with
         the newest command, which then goes out in this very period, as a command written in between would);
         `on_state` runs after each new valid state (a publisher calls `read` there). The I/O process
-        (`wbc.hardware.io_serve`) serves a robot to another process this way, without a thread of its own waking
+        (`wbc.hardware.io_process`) serves a robot to another process this way, without a thread of its own waking
         twice a period. Both run in the link thread with no lock held: they must be short and must not raise (an
         exception stops the link, as any failure of its thread does). None removes a hook.
         """
@@ -356,8 +326,7 @@ class UnitreeRobot(Robot):
     @property
     def link_failure(self) -> BaseException | None:
         """The exception that stopped the link thread (nothing is sent after it), or None while it runs."""
-        with self._lock:
-            return self._failure
+        return self._link.failure
 
     @property
     def state_age(self) -> float:
@@ -366,86 +335,47 @@ class UnitreeRobot(Robot):
             return self.clock.now() - self._state_at
 
     def link_stats(self) -> LinkStats:
-        """A snapshot of the link's counters."""
+        """A snapshot of the link's counters; its period figures are the link thread's (`thread_stats`)."""
+        thread = self._link.stats()
         with self._lock:
-            total, low, high, n, squares = self._periods
-            mean = total / n if n else 0.0
             foreign = self._transport.foreign if self._transport is not None else 0
             return LinkStats(
                 **self._counts, valid_states=self._fresh, rejected_states=self.decode_stats.rejected,
                 foreign=foreign, state_age=self.clock.now() - self._state_at,
-                period_mean=mean, period_std=float(np.sqrt(max(0.0, squares / n - mean * mean))) if n else 0.0,
-                period_min=low if n else 0.0, period_max=high,
+                period_mean=thread.period_mean, period_std=thread.period_std, period_min=thread.period_min,
+                period_max=thread.period_max, overruns=thread.late,
                 late_advances=self._pacer.late_advances, worst_lateness=self._pacer.worst_lateness,
             )
 
+    def thread_stats(self) -> DeviceThreadStats:
+        """The link thread's statistics since `connect`: sends, their period, busy time, late sends, overruns."""
+        return self._link.stats()
+
     def _raise_failure(self) -> None:
-        if self._failure is not None:
-            raise RobotLinkError(f"UnitreeRobot({self.config.robot}): the link thread died: "
-                                 f"{self._failure!r}") from self._failure
+        failure = self._link.failure
+        if failure is not None:
+            raise RobotLinkError(f"UnitreeRobot({self.config.robot}): the link thread died: {failure!r}") from failure
 
     # -- the link: one period's body, run by the thread or by the clock ------------------------------------------
-    def _run(self) -> None:
-        try:
-            self._loop()
-        except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's thread
-            self._record_failure(exc)
-
-    def _record_failure(self, exc: BaseException) -> None:
-        with self._lock:
-            self._failure = exc
-            self._lock.notify_all()
-
-    def _loop(self) -> None:
-        """The link thread: a period whenever one is due; in between, every datagram as it arrives."""
-        transport, clock = self._transport, self.clock
-        self._next_send = clock.now()
-        while True:
-            if clock.now() >= self._next_send and not self._send_period(transport):
-                return
-            self._receive(transport)
-            wait = self._next_send - clock.now()
-            if wait > 0:
-                transport.wait_readable(wait)
-
-    def _stepped_period(self) -> None:
-        """One link period as a task of a `ManualClock` (the same body as the thread's; it ends the task at close)."""
-        transport = self._transport
-        try:
-            if not self._send_period(transport):
-                self._task.cancel()
-                return
-            self._receive(transport)
-        except BaseException as exc:  # noqa: BLE001 - recorded and re-raised in the caller's code, as the thread's
-            self._record_failure(exc)
-            self._task.cancel()
-
-    def _send_period(self, transport: Transport) -> bool:
+    def _link_cycle(self) -> bool:
         """The sending half of a period: the before-send hook, the frame chosen and sent; False: the link is done."""
         if self._before_send is not None:
             self._before_send()
         now = self.clock.now()
         with self._lock:
-            if self._stop or (self._closing_until is not None and now >= self._closing_until):
+            if self._closing_until is not None and now >= self._closing_until:
                 return False
             frame = self._choose_frame(now)
-            if self._last_send is not None:
-                gap = now - self._last_send
-                p = self._periods
-                p[0] += gap
-                p[1] = min(p[1], gap)
-                p[2] = max(p[2], gap)
-                p[3] += 1
-                p[4] += gap * gap
-            if self._next_send is None:
-                self._next_send = now
-            self._next_send += self._period
-            if self._next_send < now:
-                self._counts["overruns"] += 1
-                self._next_send = now + self._period
-        transport.send(frame)
-        self._last_send = now
+        self._transport.send(frame)
         return True
+
+    def _link_idle(self, until: float) -> None:
+        """Between two sends: every datagram as it arrives, until `until` on the link's clock."""
+        transport = self._transport
+        self._receive(transport)
+        wait = until - self.clock.now()
+        if wait > 0:
+            transport.wait_readable(wait)
 
     def _choose_frame(self, now: float) -> bytes:
         """The frame to send now (called with the lock held)."""

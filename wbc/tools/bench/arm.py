@@ -41,6 +41,7 @@ import wbc
 from wbc.control.stand import stand_command
 from wbc.errors import BenchError
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
+from wbc.hardware.dynamixel.arm_robot import PING_WAITS
 from wbc.hardware.emulators import (
     LEG_WIRES,
     BusFault,
@@ -61,7 +62,7 @@ from wbc.tools.bench.references import machine_description
 from wbc.types import MotorCommand
 
 __all__ = ["ArmBenchResult", "ArmReactionRow", "ArmRateRow", "ArmStepRow", "EmulatorTimingRow", "bench_arm",
-           "serve_robot_emulator_stdio", "step_metrics"]
+           "expected_latch_s", "serve_robot_emulator_stdio", "step_metrics"]
 
 _START_TIMEOUT = 60.0  # [s] longest wait for the emulator process to open its port and pty
 _STOP_MARGIN = 60.0  # [s] the emulator process stops by itself this long after the bench should have ended
@@ -74,6 +75,8 @@ _DISCARDS = 2  # step series thrown away (and counted) because a bus fault latch
 _REACTION_TIMEOUT = 2.0  # [s] longest wait for a reaction before it is reported as none
 _FAULTS = (("silent_id", 4), ("bad_crc", 4), ("late_answer", [4, 0.05]), ("port_closed", None))  # port closed last
 _ROUND_TRIPS = 200  # sync reads timed over the pty
+_STATUS_BYTES = 11  # what a status packet adds to its data: the SDK's reply timeout of a ping counts only these
+_PRESENT_BYTES = 10  # the joints' read: present current, velocity and position
 _COMMAND_TIMEOUT = 10.0  # [s] longest wait for the emulator process to answer a command
 
 
@@ -112,9 +115,9 @@ class ArmReactionRow:
         reaction: what was waited for: ``damping`` (the bus thread's first damping cycle), or the fault kind latched
             (``no_answer``, ``corrupt``, ``port_lost``; ``none`` if nothing latched within the bench's timeout).
         ms: from the event (the last write; the fault active in the emulator) to the reaction [ms].
-        expected_ms: what the configuration implies, for comparison: the write deadline; for a fault, the sum of the
-            reply timeouts and pauses of the retries and pings (what the tests check exactly on a `ManualClock`),
-            plus up to one bus period [ms].
+        expected_ms: what the configuration implies, for comparison: the write deadline; for a fault, the latest
+            the bus loop latches it (`expected_latch_s`: the servos' silence for the watchdog's time, then the
+            failed read and the pings; what the tests check exactly on a `ManualClock`) [ms].
         watchdog_ms: port closed only: from the last packet to the servos' bus watchdog zeroing their goals, seen
             by the emulator (to within its 10 ms tick) [ms]; the watchdog is set to `DynamixelArmConfig.watchdog_s`.
     """
@@ -355,6 +358,42 @@ def _step_series(rig: _Rig, arm: DynamixelArm, stowed: np.ndarray, kp: float, kd
     return runs
 
 
+def _reply_timeout_s(answer_bytes: int, config: DynamixelArmConfig) -> float:
+    """How long the SDK waits for an answer of `answer_bytes` on `config`'s bus [s] (its ``setPacketTimeout``).
+
+    The bytes' time at the baud rate (10 bits each), twice the adapter's latency timer, and 2 ms.
+    """
+    return answer_bytes * 10.0 / config.baud_rate + (2.0 * config.latency_ms + 2.0) * 1e-3
+
+
+def expected_latch_s(config: DynamixelArmConfig) -> dict[str, float]:
+    """The latest each fault `wbc bench arm` injects latches after the injection, as `DynamixelArm` behaves [s].
+
+    A read whose tries all fail is a missed cycle, not a fault, while every servo of it gave a valid answer within
+    the servos' watchdog time (`DynamixelArmConfig.watchdog_s`). The first failed read that ends after a servo's
+    silence reached that time pings the servos of the read and latches the silent or corrupt ones. The silence
+    starts at the servo's last valid answer, up to a bus period before the injection, so these are upper bounds:
+
+    - ``silent_id`` and ``late_answer`` (an answer later than the reply timeout is no answer): the watchdog's time;
+      then one more failed read of the joints, which may have begun just before the silence reached it: its
+      ``retries + 1`` tries each wait for the sync read's whole reply timeout, with `retry_wait_s` before each retry;
+      then the silent servo's three pings, each waiting for its reply timeout, with `PING_WAITS` between them. A late
+      answer that arrives while a later read of the same servo and length waits passes for that read's answer
+      (Protocol 2.0 has no sequence number) and postpones the latch;
+    - ``bad_crc``: the watchdog's time too (a corrupt answer is no valid answer); the corrupt answers come at once,
+      so the failed reads end within their cycle and the check comes every bus period: one period more, and the
+      retries' pauses; the corrupt answer to the ping latches at once;
+    - ``port_closed``: the next bus cycle, whose transfer raises: one bus period.
+    """
+    period = 1.0 / config.rate_hz
+    joints_read = _reply_timeout_s(len(config.joints) * (_STATUS_BYTES + _PRESENT_BYTES), config)
+    failed_read = (config.retries + 1) * joints_read + config.retries * config.retry_wait_s
+    pings = len(PING_WAITS) + 1
+    silent = config.watchdog_s + failed_read + pings * _reply_timeout_s(_STATUS_BYTES, config) + sum(PING_WAITS)
+    return {"silent_id": silent, "late_answer": silent,
+            "bad_crc": config.watchdog_s + period + config.retries * config.retry_wait_s, "port_closed": period}
+
+
 def _reactions(rig: _Rig, proc: subprocess.Popen[str], config: DynamixelArmConfig,
                hold: MotorCommand) -> list[ArmReactionRow]:
     """The write deadline's damping and each fault's latch, in wall time (the port closed last: it ends the pty)."""
@@ -369,12 +408,7 @@ def _reactions(rig: _Rig, proc: subprocess.Popen[str], config: DynamixelArmConfi
         rows.append(ArmReactionRow(event="write_deadline", reaction="damping" if damped else "none",
                                    ms=1e3 * (time.monotonic() - written) if damped else float("nan"),
                                    expected_ms=1e3 * config.write_deadline))
-    period = 1.0 / config.rate_hz
-    timeout = {n: (n * 10 / 1e3 + 2 * config.latency_ms + 2) * 1e-3 for n in (11, 3 * 21)}  # the SDK's formula
-    silent = ((config.retries + 1) * timeout[63] + config.retries * config.retry_wait_s + 3 * timeout[11]
-              + 0.012)
-    expected = {"silent_id": silent, "late_answer": silent, "bad_crc": config.retries * config.retry_wait_s,
-                "port_closed": 0.0}
+    expected = expected_latch_s(config)
     for name, value in _FAULTS:
         with DynamixelArm(config) as arm:
             rig.run(arm, hold, 0.3)
@@ -388,7 +422,7 @@ def _reactions(rig: _Rig, proc: subprocess.Popen[str], config: DynamixelArmConfi
                 _command(proc, {"clear": name})
         rows.append(ArmReactionRow(event=name, reaction=fault.kind if fault is not None else "none",
                                    ms=1e3 * latched if fault is not None else float("nan"),
-                                   expected_ms=1e3 * (expected[name] + period),
+                                   expected_ms=1e3 * expected[name],
                                    watchdog_ms=None if watchdog is None else 1e3 * watchdog))
     return rows
 

@@ -3,10 +3,11 @@
 A `UnitreeRobot` talks to a `UnitreeEmulator` (lockstep: one state answers each command, so a reply can be paired
 with the command that caused it) that runs in a process of its own, as the robot is another machine on a real
 link. The robot's transport is wrapped (`TimedTransport`) to timestamp every send and every received datagram in
-the link thread itself, and to read that thread's CPU clock at each send: `LinkStats` keeps only the mean, std,
-min and max of the send period, and neither percentiles nor round trips. While the link runs, the bench writes a
-standing hold every link period, as a control loop would. Both processes share this machine's cores, so the
-figures include that contention; a real robot's firmware would not.
+the link thread itself, and to read that thread's CPU clock at each send: the link thread's own statistics
+(`UnitreeRobot.thread_stats`) cover the whole connection, start-up included, and keep no round trips, so the bench
+times the measured seconds itself. While the link runs, the bench writes a standing hold every link period, as a
+control loop would. Both processes share this machine's cores, so the figures include that contention; a real
+robot's firmware would not.
 
 `bench_safety` times what the test suite checks in link periods on a clock it moves (`tests/test_hardware_faults.py`,
 `tests/test_unitree_robot.py`, `tests/test_hw_run.py`), here in real time: SafeRobot(UnitreeRobot) against a

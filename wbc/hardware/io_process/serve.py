@@ -1,12 +1,11 @@
 """The I/O process: a hardware robot's devices (legs link, arm bus) served to a controller in another process.
 
-`wbc.hardware.process_robot.ProcessRobot` starts this as a fresh interpreter (``python -c``, not multiprocessing,
-whose spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the switch interval, asks the OS
-for real-time scheduling, a CPU of its own and locked memory (`HardwareRobotConfig.realtime`,
-`wbc.hardware.realtime`), builds the robot with `build_hardware_robot`, freezes its heap, connects it and reports on
-the control channel, with what the OS granted. The legs' link thread
-then does the serving itself, through its hooks (`UnitreeRobot.set_link_hooks`), so that no thread of this process
-wakes twice a period only to pass data on:
+`ProcessRobot` (`process_robot.py`) starts this as a fresh interpreter (``python -c``, not multiprocessing, whose
+spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the switch interval, asks the OS for
+real-time scheduling, a CPU of its own and locked memory (`HardwareRobotConfig.realtime`, `wbc.hardware.realtime`),
+builds the robot with `build_hardware_robot`, freezes its heap, connects it and reports on the control channel, with
+what the OS granted. The legs' link thread then does the serving itself, through its hooks
+(`UnitreeRobot.set_link_hooks`), so that no thread of this process wakes twice a period only to pass data on:
 
 - before each send it forwards the newest command of the shared command block, if a new one was posted, to the
   robot's `write` (legs and arm), so the command goes out in that very period;
@@ -14,8 +13,8 @@ wakes twice a period only to pass data on:
   its motors' status, publishes them to the shared state block and rings the doorbell (one byte), so that a waiting
   `advance` wakes.
 
-The main thread answers the control channel (``link_stats``, ``close``) and, every 20 ms, reads the robot, which
-raises if the link's or the bus's thread died.
+The main thread answers the control channel (``link_stats``: the devices' counters and their loops' statistics;
+``close``) and, every 20 ms, reads the robot, which raises if the link's or the bus's thread died.
 
 The devices keep their own safety: the legs' link damps once `write` has not been called for its write deadline, the
 arm's bus likewise, so a controller's process that stalls or hangs (holding its own interpreter lock forever) leaves
@@ -43,8 +42,8 @@ import numpy as np
 from wbc.errors import RobotLinkError
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
-from wbc.hardware.io_block import MAX_STATUS, IoBlocks
-from wbc.hardware.io_channel import ChannelClosed, LineChannel, error_report
+from wbc.hardware.io_process.blocks import MAX_STATUS, IoBlocks
+from wbc.hardware.io_process.channel import ChannelClosed, LineChannel, error_report
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, QuadrupedArmRobot
 from wbc.hardware.realtime import RealtimeGrant, request_realtime
 from wbc.hardware.robot import Robot
@@ -161,11 +160,12 @@ class _Server:
             return False
         if op == "link_stats":
             stats = self.robot.link_stats()
-            joined = isinstance(stats, JoinedLinkStats)
-            legs = stats.legs if joined else stats
-            arm = stats.arm if joined else None
+            if not isinstance(stats, JoinedLinkStats):  # the legs alone
+                stats = JoinedLinkStats(legs=stats, arm=None, threads={"legs": self.legs.thread_stats()})
+            legs, arm = stats.legs, stats.arm
             self._send({"link_stats": {
                 "legs": asdict(legs) if legs is not None else None, "arm": asdict(arm) if arm is not None else None,
+                "threads": {device: asdict(thread) for device, thread in stats.threads.items()},
                 "io": dict(self.counts, cpu_s=time.process_time() - self.started)}})
             return True
         self._send({"error": "ConfigError", "message": f"I/O process: unknown request {op!r}", "attrs": {}})
