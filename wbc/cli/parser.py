@@ -22,6 +22,7 @@ from wbc.hardware.realtime import DEFAULT_RT_PRIORITY
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
 from wbc.input_files import short
 from wbc.learned.train.stages import BASELINES, TASKS
+from wbc.mpc.qp_solvers import QP_SOLVERS
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import ROBOTS
 from wbc.scenario.scenario import MAX_DURATION_S
@@ -261,6 +262,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
     mpc.add_argument("--json", action="store_true")
     mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
+    mpc.add_argument("--qp-solver", default="daqp", choices=tuple(QP_SOLVERS),
+                     help="the closed loop's QP backend (default daqp); the walk's QPs are then solved by every "
+                          "backend and compared")
     mpc.set_defaults(handler="bench mpc")
     sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
     sweep.add_argument("--scenario", default="scenarios/push.toml")

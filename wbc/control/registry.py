@@ -32,7 +32,7 @@ from wbc.learned.policy.composite_policy import load_composite
 from wbc.learned.policy.controller import LearnedController
 from wbc.learned.policy.policy_file import read_pair
 from wbc.learned.policy.shipped import shipped_weights
-from wbc.mpc.controller import MpcController
+from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.robots.description import check_arm_mode
 from wbc.robots.registry import ROBOTS, get_robot
 
@@ -76,6 +76,10 @@ CONTROLLERS: dict[str, ControllerSpec] = {
                           "centroidal MPC with arm momentum terms; the optimiser may swing the arm"),
     "mpc-locked": ControllerSpec("mpc-locked", "locked", MpcController, "centroidal MPC, arm locked"),
     "mpc-noarm": ControllerSpec("mpc-noarm", "none", MpcController, "centroidal MPC, robot without its arm"),
+    "mpc-wbqp": ControllerSpec("mpc-wbqp", "actuated",
+                               functools.partial(MpcController, config=MpcControllerConfig(whole_body="qp")),
+                               "centroidal MPC with arm momentum terms, PlaCo's whole-body QP in place of the leg "
+                               "layer"),
     "learned": ControllerSpec("learned", "actuated", LearnedController,
                               "learned policy pi3 (PPO + BC, staged), arm actuated; shipped weights, numpy",
                               robots=_robots_with_weights("actuated"), files=_shipped_files("actuated")),

@@ -1,4 +1,4 @@
-"""`CentroidalMpc`: a condensed convex MPC over the centroidal model with arm momentum, solved with DAQP.
+"""`CentroidalMpc`: a condensed convex MPC over the centroidal model with arm momentum, solved with DAQP or ProxSuite.
 
 Decision variables per step: the four feet's contact forces (world frame, in units of `force_scale` newtons so the
 QP is well scaled) and the arm's joint velocities. The dynamics are linearised once per update about the current
@@ -11,12 +11,14 @@ the simulator's) and f_min <= f_z <= f_max on stance feet; swing feet carry no f
 joint velocity limits (box) and arm joint position limits along the horizon (rows of the condensed dynamics). A
 frozen arm (locked, absent, or momentum terms off) has no variables.
 
-Solver: DAQP, a dual active-set method for small dense QPs (its Python package; a plain C library, so a solve does not
-depend on where its buffers were allocated). On this problem (80-90 variables, ~100 rows) it solves in a fifth of the
-time ProxSuite's interior-proximal method took, to a tighter optimum (measurements: docs/mpc-notes.md). The solve is
-a function of the problem and the warm start alone (the previous plan shifted by one step, which seeds DAQP's active
-set); if a warm-started solve fails a cold start follows, and a solve that still fails raises `MpcSolveError`
-carrying the problem, so the controller can fall back to the shifted previous plan and the problem can be replayed.
+Solver: the backend `MpcConfig.qp_solver` names (`wbc.mpc.qp_solvers`): DAQP by default, a dual active-set method
+for small dense QPs (its Python package; a plain C library, so a solve does not depend on where its buffers were
+allocated), or ProxSuite's ProxQP. On this problem (80-90 variables, ~100 rows) DAQP solves in a fifth of the time
+ProxSuite takes, to the same optimum (``wbc bench mpc`` solves the closed loop's QPs with both; docs/mpc-notes.md).
+The solve is a function of the problem and the warm start alone (the previous plan shifted by one step, which seeds
+DAQP's active set or starts ProxQP's iterations); if a warm-started solve fails a cold start follows, and a solve that
+still fails raises `MpcSolveError` naming the backend and its status and carrying the problem, so the controller can
+fall back to the shifted previous plan and the problem can be replayed.
 """
 
 from __future__ import annotations
@@ -25,15 +27,16 @@ import math
 import time
 from dataclasses import dataclass, field
 
-import daqp
 import numpy as np
 
 from wbc.errors import MpcProblemFileError, WbcError
 from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams
 from wbc.mpc.condensing import condense
+from wbc.mpc.dense_qp import DenseQp
+from wbc.mpc.qp_solvers import check_qp_solver, make_qp_solver
 from wbc.robots.conventions import G
 
-__all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "DenseQp", "CentroidalMpc"]
+__all__ = ["MpcConfig", "MpcProblem", "MpcSolution", "MpcSolveError", "CentroidalMpc"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -67,6 +70,11 @@ class MpcConfig:
             position leash brings it back. At speed the weights track the command (turns unchanged).
             Measured: docs/mpc-notes.md, strong pushes.
         standstill_weight_factor: the factor on those weights at a zero command.
+        qp_solver: the QP backend, a name of `wbc.mpc.qp_solvers.QP_SOLVERS`: ``daqp`` (the default: the faster
+            on these QPs, and the same bits whatever the heap held before) or ``proxsuite``.
+
+    Raises:
+        ConfigError: an unknown `qp_solver` (the message lists the valid names).
     """
 
     horizon: int = 10
@@ -85,31 +93,11 @@ class MpcConfig:
     arm_margin: float = 0.05
     full_weight_speed: float = 1.0
     standstill_weight_factor: float = 0.25
+    qp_solver: str = "daqp"
 
+    def __post_init__(self) -> None:
+        check_qp_solver(self.qp_solver, "MpcConfig.qp_solver")
 
-@dataclass
-class DenseQp:
-    """A dense QP: min 1/2 z^T H z + g^T z s.t. l <= C z <= u, l_box <= z <= u_box.
-
-    An `MpcProblem` is one, with what turns its solution into a plan.
-
-    Attributes:
-        H: its Hessian.
-        g: its gradient.
-        C: its inequality rows.
-        l: its row lower bounds.
-        u: its row upper bounds.
-        l_box: its variable lower bounds.
-        u_box: its variable upper bounds.
-    """
-
-    H: np.ndarray
-    g: np.ndarray
-    C: np.ndarray
-    l: np.ndarray  # noqa: E741 - the usual name for the lower bounds
-    u: np.ndarray
-    l_box: np.ndarray
-    u_box: np.ndarray
 
 @dataclass
 class MpcProblem(DenseQp):
@@ -219,12 +207,22 @@ class CentroidalMpc:
         arm_lower: arm joint lower limits (3,) [rad].
         arm_upper: arm joint upper limits (3,) [rad].
         arm_velocity_limit: arm joint speed limits (3,) [rad/s]; zeros freeze the arm (no arm, or a locked one).
+
+    Attributes:
+        qp_solver: the QP backend (`MpcConfig.qp_solver`).
+        last_problem: the problem the last `solve` was given (None before the first), solved or not.
+        last_warm_start: the warm start it was given (None: none).
     """
 
     def __init__(self, config: MpcConfig, arm_lower: np.ndarray, arm_upper: np.ndarray,
                  arm_velocity_limit: np.ndarray) -> None:
         self.config = config
         self.model = CentroidalModel()
+        self.qp_solver = make_qp_solver(config.qp_solver)
+        # what the last `solve` was given, for observers (``wbc bench mpc`` re-solves it with every backend); the
+        # solve itself never reads them
+        self.last_problem: MpcProblem | None = None
+        self.last_warm_start: np.ndarray | None = None
         n = config.horizon
         self._arm_lower = np.asarray(arm_lower, dtype=np.float64) + config.arm_margin
         self._arm_upper = np.asarray(arm_upper, dtype=np.float64) - config.arm_margin
@@ -401,27 +399,17 @@ class CentroidalMpc:
         Raises:
             MpcSolveError: the QP did not solve (the problem is attached).
         """
-        t1 = time.perf_counter()
+        self.last_problem, self.last_warm_start = problem, warm_start
         idx, n = problem.index, problem.horizon
-        l_box, u_box = problem.l_box, problem.u_box
-        # DAQP's bounds: the variables' boxes first, then the rows'
-        upper = np.concatenate([u_box, problem.u])
-        lower = np.concatenate([l_box, problem.l])
-        sense = np.zeros(upper.size, dtype=np.int32)
-        z, status, iterations = None, 0, 0
-        if warm_start is not None:
-            z, _, status, info = daqp.solve(problem.H, problem.g, problem.C, upper, lower, sense,
-                                            primal_start=np.clip(warm_start[idx], l_box, u_box))
-            iterations = int(info["iterations"])
-        if status != 1 or not np.all(np.isfinite(z)):  # cold start: no warm start, or one that went astray
-            sense[:] = 0
-            z, _, status, info = daqp.solve(problem.H, problem.g, problem.C, upper, lower, sense)
-            iterations += int(info["iterations"])
-        solve = time.perf_counter() - t1
-        if status != 1 or not np.all(np.isfinite(z)):
-            raise MpcSolveError(f"MPC QP not solved (DAQP exit flag {status}) from a warm nor a cold start; to "
-                                "investigate, save it (error.problem.save(path)) and replay it with "
-                                "CentroidalMpc.solve(MpcProblem.load(path))", problem)
+        z0 = None if warm_start is None else np.clip(warm_start[idx], problem.l_box, problem.u_box)
+        result = self.qp_solver.solve(problem, z0)
+        if not result.solved:
+            solver = self.qp_solver
+            raise MpcSolveError(f"MPC QP not solved ({solver.label} {result.status}) from a warm nor a cold start; "
+                                "to investigate, save it (error.problem.save(path)) and replay it with "
+                                "CentroidalMpc.solve(MpcProblem.load(path)) under "
+                                f"MpcConfig(qp_solver={solver.name!r})", problem)
+        z = result.z
         full = np.zeros(n * NU)
         full[idx] = z
         u = np.zeros(full.size)
@@ -429,4 +417,4 @@ class CentroidalMpc:
         states = (problem.free + problem.gamma_z @ z).reshape(n, NX)
         steps = u.reshape(n, NU)
         return MpcSolution(forces=steps[:, :12].reshape(n, 4, 3), arm_velocity=steps[:, 12:].copy(), states=states,
-                           iterations=iterations, solve_s=solve, z=z, variables=full)
+                           iterations=result.iterations, solve_s=result.solve_s, z=z, variables=full)

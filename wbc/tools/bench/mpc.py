@@ -2,14 +2,16 @@
 
 The walk is an ordinary `run_episode`: the runner times every `act` (the episode's ``act_s``), and an observer reads,
 after every tick, the controller's own breakdown of it (`HasTickTimings`), outside the timed call. A controller that
-reports no breakdown still walks; the figures that need one are then nan.
+reports no breakdown still walks; the figures that need one are then nan. Another observer keeps the QP of every MPC
+update of the walk (`QpLog`); after the walk each is solved again by every QP backend (`wbc.mpc.qp_solvers`), from
+the warm start the loop gave it, and the backends are compared on the same QPs (`QpSolverFigures`).
 """
 
 from __future__ import annotations
 
-import importlib.metadata
 import math
 import multiprocessing
+import os
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -27,7 +29,10 @@ from wbc.control.stand import stand_command
 from wbc.errors import BenchError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
+from wbc.mpc.centroidal_model import NU
+from wbc.mpc.centroidal_mpc import MpcProblem
 from wbc.mpc.controller import MpcController
+from wbc.mpc.qp_solvers import QP_SOLVERS, QpResult, check_qp_solver
 from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
@@ -38,12 +43,16 @@ from wbc.tools.bench.references import (
 )
 from wbc.types import VelocityCommand
 
-__all__ = ["WARMUP_S", "MpcBenchResult", "MpcReference", "MpcTickFigures", "TickTimingLog", "bench_mpc",
-           "physics_realtime_factor"]
+__all__ = ["MAX_RECORDED_QPS", "WARMUP_S", "MpcBenchResult", "MpcReference", "MpcTickFigures", "QpLog",
+           "QpSolverFigures", "TickTimingLog", "bench_mpc", "compare_qp_solvers", "physics_realtime_factor"]
 
 WARMUP_S = 0.2
 """Length of the untimed episode played before the timed walk [s] (its wall time is reported as
 ``warmup_episode_s``: it holds the compiled code's first load)."""
+
+
+MAX_RECORDED_QPS = 1000
+"""The most MPC updates of the timed walk kept for the backends' comparison (a 32 s walk at one update per 32 ms)."""
 
 
 def _median(values: Sequence[float], scale: float) -> float:
@@ -101,6 +110,41 @@ class MpcReference:
 
 
 @dataclass(frozen=True, kw_only=True)
+class QpSolverFigures:
+    """One QP backend on the QPs of the walk (`compare_qp_solvers`), against DAQP's solutions of the same QPs.
+
+    Attributes:
+        solver: the backend's registry name (`wbc.mpc.qp_solvers.QP_SOLVERS`).
+        version: its package's version.
+        qps: how many QPs it was given.
+        unsolved: how many of them it did not solve (left out of the differences).
+        solve_ms_median: median solve time [ms].
+        solve_ms_p99: 99th percentile of the solve time [ms].
+        iterations_median: median iterations.
+        iterations_max: most iterations.
+        force_max_diff_n: largest difference of a planned contact force component from DAQP's, over every step of
+            every QP both solved [N]; 0 for DAQP itself.
+        objective_max_diff: largest difference of the QP's cost at its solution from the cost at DAQP's (the
+            cost's own units; positive: above DAQP's optimum).
+    """
+
+    solver: str
+    version: str
+    qps: int
+    unsolved: int
+    solve_ms_median: float
+    solve_ms_p99: float
+    iterations_median: float
+    iterations_max: int
+    force_max_diff_n: float
+    objective_max_diff: float
+
+    def as_dict(self) -> dict[str, float | int | str]:
+        """The figures under their keys in `MpcBenchResult.as_dict` (``qp_<solver>_solve_ms_median`` ...)."""
+        return {f"qp_{self.solver}_{key}": value for key, value in asdict(self).items() if key != "solver"}
+
+
+@dataclass(frozen=True, kw_only=True)
 class MpcBenchResult:
     """What `bench_mpc` measured: the MPC controller's tick and closed loop, and the references when measured.
 
@@ -113,9 +157,13 @@ class MpcBenchResult:
         warmup_episode_s: wall time of the untimed warm-up walk [s].
         fell: whether the robot fell during the timed walk.
         blas: ``single-threaded`` (run in a spawned process with one BLAS thread) or ``default threads``.
-        qp_solver: the QP solver and its version.
+        qp_solver: the closed loop's QP backend and its version.
         machine: `machine_description`.
+        load_1min: the machine's load average over the minute before the walk ended (nan where the system does not
+            tell): what else ran beside the bench.
         reference: the references' figures, or None when they were not measured.
+        qp_solvers: every QP backend on the QPs of the timed walk, DAQP first (`compare_qp_solvers`); empty when
+            none was recorded.
     """
 
     robot: str
@@ -128,18 +176,25 @@ class MpcBenchResult:
     blas: str
     qp_solver: str
     machine: str
+    load_1min: float = math.nan
     reference: MpcReference | None = None
+    qp_solvers: tuple[QpSolverFigures, ...] = ()
 
     def as_dict(self) -> dict[str, float | str | int | bool]:
-        """Plain flat dict (the JSON output of ``wbc bench mpc``), the references' figures last when measured."""
+        """Plain flat dict (the JSON output of ``wbc bench mpc``).
+
+        The references' figures follow when measured, then each QP backend's (``qp_<solver>_...``).
+        """
         out: dict[str, float | str | int | bool] = {"robot": self.robot, "controller": self.controller,
                                                     "horizon": self.horizon, **self.ticks.as_dict(),
                                                     "realtime_factor": self.realtime_factor,
                                                     "warmup_episode_s": self.warmup_episode_s, "fell": self.fell,
                                                     "blas": self.blas, "qp_solver": self.qp_solver,
-                                                    "machine": self.machine}
+                                                    "machine": self.machine, "load_1min": self.load_1min}
         if self.reference is not None:
             out.update(self.reference.as_dict())
+        for figures in self.qp_solvers:
+            out.update(figures.as_dict())
         return out
 
 
@@ -196,6 +251,71 @@ class TickTimingLog:
         )
 
 
+@dataclass
+class QpLog:
+    """A runner observer that keeps the QP of each MPC update (and the warm start it was given), up to `limit`.
+
+    Only an `MpcController` has one: after a tick that made an MPC update (its breakdown has ``mpc_solve_s``) the
+    problem its MPC last solved is kept by reference (each update builds a new one).
+
+    Attributes:
+        limit: the most QPs kept.
+        qps: (problem, warm start as the full scaled input vector or None) of each update, in order.
+    """
+
+    limit: int = MAX_RECORDED_QPS
+    qps: list[tuple[MpcProblem, np.ndarray | None]] = field(default_factory=list)
+
+    def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        """Keep the tick's QP, if it made one (the runner's `TickObserver` signature)."""
+        if len(self.qps) >= self.limit or not isinstance(controller, MpcController):
+            return
+        if "mpc_solve_s" in controller.tick_timings() and controller.mpc.last_problem is not None:
+            self.qps.append((controller.mpc.last_problem, controller.mpc.last_warm_start))
+
+
+def compare_qp_solvers(qps: Sequence[tuple[MpcProblem, np.ndarray | None]]) -> tuple[QpSolverFigures, ...]:
+    """Solve every QP with every backend of `QP_SOLVERS`, from the warm start the loop gave it, and compare.
+
+    The backends take turns on each QP (all of them on the first, then on the second ...), so a change of the
+    machine's load between the start and the end of the run falls on all of them alike. Differences are taken
+    against DAQP's solution of the same QP.
+
+    Args:
+        qps: (problem, warm start as the full scaled input vector or None) pairs, as `QpLog` keeps them.
+
+    Returns:
+        One `QpSolverFigures` per backend, in `QP_SOLVERS` order (DAQP first); empty when `qps` is.
+    """
+    if not qps:
+        return ()
+    solvers = [make() for make in QP_SOLVERS.values()]
+    results: list[list[QpResult]] = [[] for _ in solvers]
+    for problem, warm in qps:
+        z0 = None if warm is None else np.clip(warm[problem.index], problem.l_box, problem.u_box)
+        for solver, out in zip(solvers, results, strict=True):
+            out.append(solver.solve(problem, z0))
+    reference = results[list(QP_SOLVERS).index("daqp")]
+    figures = []
+    for solver, out in zip(solvers, results, strict=True):
+        force_diff, cost_diff = [], []
+        for (problem, _), mine, ref in zip(qps, out, reference, strict=True):
+            if not (mine.solved and ref.solved):
+                continue
+            forces = problem.index % NU < 12
+            force_diff.append(float(np.max(np.abs((mine.z - ref.z) * problem.scale)[forces], initial=0.0)))
+            cost_diff.append(problem.objective(mine.z) - problem.objective(ref.z))
+        times = [r.solve_s for r in out]
+        iterations = [r.iterations for r in out]
+        figures.append(QpSolverFigures(
+            solver=solver.name, version=solver.version(), qps=len(out), unsolved=sum(not r.solved for r in out),
+            solve_ms_median=_median(times, 1e3), solve_ms_p99=1e3 * float(np.percentile(times, 99)),
+            iterations_median=float(np.median(iterations)), iterations_max=int(max(iterations)),
+            force_max_diff_n=max(force_diff) if force_diff else math.nan,
+            objective_max_diff=max(cost_diff, key=abs) if cost_diff else math.nan))
+    return tuple(figures)
+
+
 def physics_realtime_factor(sim: MujocoRobot, seconds: float = 1.0) -> float:
     """Real-time factor of `sim`'s physics alone: the robot standing under the motor law, no controller in the loop.
 
@@ -215,7 +335,7 @@ def physics_realtime_factor(sim: MujocoRobot, seconds: float = 1.0) -> float:
 
 
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
-              single_thread: bool = True, reference: bool = True) -> MpcBenchResult:
+              single_thread: bool = True, reference: bool = True, qp_solver: str = "daqp") -> MpcBenchResult:
     """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
 
     With `single_thread` (the default) it runs in a spawned process whose BLAS is single-threaded, as every arena
@@ -224,13 +344,16 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     The robot walks at `vx` on flat ground for `seconds` (or until it falls) through `run_episode`, after an untimed
     walk of `WARMUP_S` (the compiled parts of the tick load at their first call; ``warmup_episode_s`` is that walk's
-    wall time). From the
-    controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time (DAQP) and setup
-    time (linearisation and condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo:
-    kinematics, dynamics, tasks, QP, plus setting its targets from Python). ``control_tick_us_median`` is the whole
-    control tick without an MPC update (estimator, kinematics, footholds, swing targets, whole-body QP, motor
-    command). These are nan for a controller that reports no breakdown. The real-time factor covers everything:
-    physics, controller, MPC updates and the runner's episode log.
+    wall time). From the controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time
+    (the `qp_solver` backend's) and setup time (linearisation and condensing), and ``wbc_tick_us_median``, the
+    whole-body QP's time per tick (PlaCo: kinematics, dynamics, tasks, QP, plus setting its targets from Python).
+    ``control_tick_us_median`` is the whole control tick without an MPC update (estimator, kinematics, footholds,
+    swing targets, whole-body QP, motor command). These are nan for a controller that reports no breakdown. The
+    real-time factor covers everything: physics, controller, MPC updates and the runner's episode log.
+
+    The QPs of the walk's MPC updates (up to `MAX_RECORDED_QPS`) are then solved again by every QP backend, from the
+    warm starts the loop gave them (`compare_qp_solvers`): ``qp_solvers`` holds their solve times, iterations and
+    distance from DAQP's solutions.
 
     With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured before and after the
     closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`), the bare A1's
@@ -248,6 +371,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         vx: forward velocity command [m/s].
         single_thread: run in a spawned process with a single-threaded BLAS.
         reference: also measure the references.
+        qp_solver: the closed loop's QP backend (`wbc.mpc.qp_solvers.QP_SOLVERS`); the comparison runs them all.
 
     Returns:
         The figures above with the horizon, whether the robot fell, the BLAS threading and the machine.
@@ -256,19 +380,24 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         UnknownNameError: unknown robot or controller.
         SimulationDiverged: the simulation blew up during the walk (no figure of a blown-up walk is reported).
         BenchError: the controller is not an MPC controller, or a reference failed.
+        ConfigError: `qp_solver` is not a QP backend (the message lists them).
     """
+    check_qp_solver(qp_solver, "--qp-solver")
     if single_thread:
         with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
-                                 reference=reference).result()
+                                 reference=reference, qp_solver=qp_solver).result()
         return replace(result, blas="single-threaded")
     spec = get_controller(controller)
     sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
     ctrl = spec.make(sim.desc)
     if not isinstance(ctrl, MpcController):
-        valid = [name for name, s in CONTROLLERS.items() if s.make is MpcController]
+        valid = [name for name, s in CONTROLLERS.items() if getattr(s.make, "func", s.make) is MpcController]
         raise BenchError(f"bench mpc times an MPC controller, and {controller!r} is not one; use one of: "
                          f"{', '.join(valid)}")
+    if ctrl.config.mpc.qp_solver != qp_solver:
+        config = replace(ctrl.config, mpc=replace(ctrl.config.mpc, qp_solver=qp_solver))
+        ctrl = type(ctrl)(sim.desc, config)
     ref_ticks, ref_rates, physics = [], [], []
 
     def measure_references() -> None:
@@ -276,7 +405,12 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         ref_rates.append(reference_a1_steps_per_s(1000))
         physics.append(physics_realtime_factor(sim))
 
-    log = TickTimingLog()
+    log, qps = TickTimingLog(), QpLog()
+
+    def observe(t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        log(t, robot, controller, command)
+        qps(t, robot, controller, command)
+
     with sim:
         if reference:
             measure_references()
@@ -288,8 +422,10 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         warmup_wall = time.perf_counter() - warm_start
         sim.reset(seed=0)
         start = time.perf_counter()
-        episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=log, divergence=DivergenceCheck())
+        episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=observe,
+                              divergence=DivergenceCheck())
         wall = time.perf_counter() - start
+        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
         if reference:
             measure_references()
     figures = log.figures(episode)
@@ -303,7 +439,9 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
             closed_loop_over_physics_rtf=realtime / physics_rtf,
             scaled_target_wbc_tick_us=scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"], tick_ref),
             scaled_target_realtime_factor=scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"], rate_ref))
+    solver = ctrl.mpc.qp_solver
     return MpcBenchResult(robot=robot, controller=controller, horizon=int(ctrl.config.mpc.horizon), ticks=figures,
                           realtime_factor=realtime, warmup_episode_s=warmup_wall, fell=bool(episode.fell),
-                          blas="default threads", qp_solver=f"daqp {importlib.metadata.version('daqp')}",
-                          machine=machine_description(), reference=refs)
+                          blas="default threads", qp_solver=f"{solver.name} {solver.version()}",
+                          machine=machine_description(), load_1min=load, reference=refs,
+                          qp_solvers=compare_qp_solvers(qps.qps))

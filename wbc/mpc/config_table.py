@@ -1,0 +1,86 @@
+"""The MPC controller built from a settings table: a ``--controller-config`` file for `MpcController`.
+
+The registered ``mpc`` runs the defaults; to run other settings from a file, name this module's factory as a
+plug-in and hand it the file::
+
+    wbc compare mpc wbc.mpc.config_table:make --controller-config proxsuite.toml --scenario scenarios/push.toml
+
+with ``proxsuite.toml``::
+
+    [mpc]
+    qp_solver = "proxsuite"   # the MPC's QP backend (wbc.mpc.qp_solvers.QP_SOLVERS)
+
+The table's keys are the fields of `MpcControllerConfig`; a field that is itself a settings dataclass (``mpc``,
+``gait``, ``footholds``, ``estimator``, ``wbc``) takes a sub-table of its own fields, and a tuple a TOML array. Fields
+left out keep their defaults. An unknown key, or a value of the wrong kind, is a `ConfigError` that names the key and
+lists the valid ones; ranges are checked by the settings' own validation. The plug-in drives the robot with its arm
+actuated (``use_arm_momentum = false`` holds the arm still).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any, TypeVar
+
+from wbc.errors import ConfigError
+from wbc.mpc.controller import MpcController, MpcControllerConfig
+from wbc.robots.description import RobotDescription
+
+__all__ = ["make", "mpc_config_from_table"]
+
+_Settings = TypeVar("_Settings")
+
+
+def mpc_config_from_table(table: Mapping[str, Any]) -> MpcControllerConfig:
+    """The MPC controller's settings: the defaults, with the table's values in place of theirs.
+
+    Args:
+        table: keys of `MpcControllerConfig`, sub-tables for its nested settings (see the module's docstring).
+
+    Raises:
+        ConfigError: an unknown key, a value of the wrong kind, or settings their own validation refuses.
+    """
+    return _replaced(MpcControllerConfig(), table, "MpcControllerConfig")
+
+
+def make(desc: RobotDescription, config: Mapping[str, Any] | None = None) -> MpcController:
+    """The centroidal MPC controller with the settings of a ``--controller-config`` table (defaults without one)."""
+    return MpcController(desc, mpc_config_from_table(config or {}))
+
+
+def _replaced(default: _Settings, table: Mapping[str, Any], where: str) -> _Settings:
+    """`default` with the table's values in place of its own, sub-tables into nested settings."""
+    fields = {f.name: getattr(default, f.name) for f in dataclasses.fields(default) if f.init}  # type: ignore[arg-type]
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{where} must be a table of settings, got {table!r}; valid keys: {', '.join(fields)}")
+    changes: dict[str, Any] = {}
+    for key, value in table.items():
+        if key not in fields:
+            raise ConfigError(f"{where}: unknown key {key!r}; valid keys: {', '.join(fields)}")
+        changes[key] = _value(fields[key], value, f"{where}.{key}")
+    return dataclasses.replace(default, **changes)  # type: ignore[type-var]
+
+
+def _value(default: Any, value: Any, where: str) -> Any:
+    """`value` as the kind of `default` (a table into settings, an array into a tuple, an integer into a float)."""
+    if dataclasses.is_dataclass(default):
+        return _replaced(default, value, where)
+    if isinstance(default, tuple):
+        if not isinstance(value, list | tuple) or len(value) != len(default):
+            raise ConfigError(f"{where} must be an array of {len(default)} values like {list(default)}, got {value!r}")
+        return tuple(_value(d, v, f"{where}[{i}]") for i, (d, v) in enumerate(zip(default, value, strict=True)))
+    if isinstance(default, bool) or isinstance(value, bool):
+        if not (isinstance(default, bool) and isinstance(value, bool)):
+            raise ConfigError(f"{where} must be {_kind(default)}, got {value!r}")
+        return value
+    if isinstance(default, float) and isinstance(value, int | float):
+        return float(value)
+    if type(value) is not type(default):
+        raise ConfigError(f"{where} must be {_kind(default)}, got {value!r}")
+    return value
+
+
+def _kind(default: Any) -> str:
+    kinds = {bool: "true or false", int: "an integer", float: "a number", str: "a string"}
+    return kinds.get(type(default), type(default).__name__)

@@ -1,0 +1,217 @@
+"""The MPC's QP backends: one protocol (`QpSolver`), DAQP and ProxSuite behind it, and their registry `QP_SOLVERS`.
+
+`wbc.mpc.centroidal_mpc.CentroidalMpc` solves each update's `DenseQp` with the backend its configuration names
+(`MpcConfig.qp_solver`); ``wbc bench mpc`` solves the QPs a closed loop made with every backend, side by side.
+Both backends take the problem as built: its force variables are already in units of `MpcConfig.force_scale`
+(100 N), so its Hessian is well conditioned in forces and arm velocities alike and a solution is scaled back by the
+problem's own ``scale``. Each solve is a function of the problem and the warm start alone: no solver object outlives
+a call, so no scaling, factorisation or active set of an earlier QP leaks into a later one.
+
+- ``daqp`` (`DaqpSolver`, the default): a dual active-set method for small dense QPs; the warm start seeds its active
+  set. On the MPC's QPs (80-90 variables, ~100 rows) most solves take one or two iterations, and the C library gives
+  the same bits whatever its buffers' addresses (the arena's reproducibility rests on that).
+- ``proxsuite`` (`ProxsuiteSolver`): ProxQP's dense proximal augmented Lagrangian method (the solver the design
+  card names). The warm start is handed in explicitly (``InitialGuess.WARM_START``), never taken from the solver's
+  previous result, which was wrong when the contact set changed between updates. No Ruiz equilibration: the problem
+  is already scaled, and equilibrating took about two thirds of each solve. Its tolerance is absolute, 1e-9 on the
+  primal and dual residuals (relative 0), near DAQP's exact active-set optimum: the cost is flat along some force
+  directions, and at 1e-7 one QP of a push recovery stopped 25 N from that optimum with its dual residual within
+  tolerance. Its iterations are capped at 200 (the MPC's QPs take at most ~50): ProxQP did not report infeasible QPs
+  as such (its infeasibility thresholds are 1e-9 here, so a feasible QP is never called infeasible) and ran to the
+  cap, which bounds what a failure costs. The registry's wheel runs an AVX build whose last bits can depend on its
+  buffers' addresses, so the arena's bit-for-bit reproducibility holds with DAQP only.
+
+A warm-started solve that fails is followed by a cold start; the iterations of both are counted and the time covers
+both.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Protocol, runtime_checkable
+
+import daqp
+import numpy as np
+from proxsuite import proxqp
+
+from wbc.errors import ConfigError
+from wbc.mpc.dense_qp import DenseQp
+
+__all__ = ["QP_SOLVERS", "DaqpSolver", "ProxsuiteSolver", "QpResult", "QpSolver", "check_qp_solver", "make_qp_solver"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class QpResult:
+    """One solve of a `DenseQp`.
+
+    Attributes:
+        z: the solution (n,), in the problem's own (scaled) variables; meaningful only when `solved`.
+        solved: whether the backend reports an optimum and every entry of `z` is finite.
+        status: the backend's own verdict, as it spells it (``exit flag 1``, ``PROXQP_SOLVED`` ...).
+        iterations: the backend's iterations, warm and cold attempt together.
+        solve_s: wall time of the call, warm and cold attempt together [s].
+        warm: whether the returned solution came from the warm-started attempt.
+    """
+
+    z: np.ndarray
+    solved: bool
+    status: str
+    iterations: int
+    solve_s: float
+    warm: bool
+
+
+@runtime_checkable
+class QpSolver(Protocol):
+    """A QP backend: solves a `DenseQp` from an optional warm start, keeping no state between calls.
+
+    Attributes:
+        name: its registry name (`QP_SOLVERS`).
+        label: its name in messages (``DAQP``, ``ProxSuite``).
+    """
+
+    name: str
+    label: str
+
+    def version(self) -> str:
+        """The installed version of the backend's package."""
+        ...
+
+    def solve(self, qp: DenseQp, warm_start: np.ndarray | None = None) -> QpResult:
+        """Solve `qp`, from `warm_start` (n,) when given (within the boxes), then cold if that failed."""
+        ...
+
+
+_DAQP_FLAGS = {1: "optimal", 2: "soft optimal", -1: "infeasible", -2: "cycling", -3: "unbounded",
+               -4: "iteration limit", -5: "nonconvex", -6: "overdetermined initial active set"}
+
+
+class DaqpSolver:
+    """DAQP (dual active set), with its default tolerances (primal 1e-6, dual 1e-12)."""
+
+    name = "daqp"
+    label = "DAQP"
+
+    def version(self) -> str:
+        """DAQP's installed version."""
+        return importlib.metadata.version("daqp")
+
+    def solve(self, qp: DenseQp, warm_start: np.ndarray | None = None) -> QpResult:
+        """Solve `qp` (see `QpSolver.solve`); only DAQP's exit flag 1 (optimal) counts as solved.
+
+        Args:
+            qp: the problem.
+            warm_start: initial primal point (n,), within the boxes; it seeds the active set. None: cold start.
+        """
+        t0 = time.perf_counter()
+        # DAQP's bounds: the variables' boxes first, then the rows'
+        upper = np.concatenate([qp.u_box, qp.u])
+        lower = np.concatenate([qp.l_box, qp.l])
+        sense = np.zeros(upper.size, dtype=np.int32)
+        z, flag, iterations, warm = None, 0, 0, warm_start is not None
+        if warm_start is not None:
+            z, _, flag, info = daqp.solve(qp.H, qp.g, qp.C, upper, lower, sense, primal_start=warm_start)
+            iterations = int(info["iterations"])
+        if flag != 1 or not np.all(np.isfinite(z)):  # no warm start, or one that went astray: a cold start
+            warm = False
+            sense[:] = 0
+            z, _, flag, info = daqp.solve(qp.H, qp.g, qp.C, upper, lower, sense)
+            iterations += int(info["iterations"])
+        solved = flag == 1 and bool(np.all(np.isfinite(z)))
+        return QpResult(z=np.asarray(z, dtype=np.float64), solved=solved,
+                        status=f"exit flag {flag} ({_DAQP_FLAGS.get(flag, 'unknown')})", iterations=iterations,
+                        solve_s=time.perf_counter() - t0, warm=warm)
+
+
+class ProxsuiteSolver:
+    """ProxSuite's dense ProxQP, a new solver object per attempt (no state kept), without equilibration.
+
+    Args:
+        eps_abs: absolute tolerance on the primal and dual residuals (the relative one is 0).
+        eps_infeasible: ProxQP's primal and dual infeasibility thresholds.
+        max_iter: ProxQP's iteration limit of one attempt (its outer iterations).
+    """
+
+    name = "proxsuite"
+    label = "ProxSuite"
+
+    def __init__(self, *, eps_abs: float = 1e-9, eps_infeasible: float = 1e-9, max_iter: int = 200) -> None:
+        self.eps_abs = eps_abs
+        self.eps_infeasible = eps_infeasible
+        self.max_iter = max_iter
+
+    def version(self) -> str:
+        """ProxSuite's installed version."""
+        return importlib.metadata.version("proxsuite")
+
+    def solve(self, qp: DenseQp, warm_start: np.ndarray | None = None) -> QpResult:
+        """Solve `qp` (see `QpSolver.solve`); only ``PROXQP_SOLVED`` counts as solved.
+
+        Args:
+            qp: the problem.
+            warm_start: initial primal point (n,), handed to ProxQP as its warm start (the dual starts at zero).
+                None: cold start (ProxQP's default initial guess, the box- and row-free optimum).
+        """
+        t0 = time.perf_counter()
+        iterations, warm = 0, warm_start is not None
+        x, status = None, None
+        if warm_start is not None:
+            x, status, its = self._attempt(qp, warm_start)
+            iterations += its
+        if status != proxqp.PROXQP_SOLVED or not np.all(np.isfinite(x)):
+            warm = False
+            x, status, its = self._attempt(qp, None)
+            iterations += its
+        solved = status == proxqp.PROXQP_SOLVED and bool(np.all(np.isfinite(x)))
+        return QpResult(z=x, solved=solved, status=status.name, iterations=iterations,
+                        solve_s=time.perf_counter() - t0, warm=warm)
+
+    def _attempt(self, qp: DenseQp, x0: np.ndarray | None) -> tuple[np.ndarray, proxqp.QPSolverOutput, int]:
+        n, m = qp.H.shape[0], qp.C.shape[0]
+        solver = proxqp.dense.QP(n, 0, m, True)  # True: box constraints on the variables, apart from the rows
+        settings = solver.settings
+        settings.eps_abs = self.eps_abs
+        settings.eps_rel = 0.0
+        settings.eps_primal_inf = self.eps_infeasible
+        settings.eps_dual_inf = self.eps_infeasible
+        settings.max_iter = self.max_iter
+        settings.initial_guess = (proxqp.InitialGuess.WARM_START if x0 is not None
+                                  else proxqp.InitialGuess.EQUALITY_CONSTRAINED_INITIAL_GUESS)
+        solver.init(qp.H, qp.g, None, None, qp.C, qp.l, qp.u, qp.l_box, qp.u_box, compute_preconditioner=False)
+        if x0 is not None:
+            solver.solve(np.asarray(x0, dtype=np.float64), None, None)
+        else:
+            solver.solve()
+        results = solver.results
+        return results.x.copy(), results.info.status, int(results.info.iter)
+
+
+QP_SOLVERS: dict[str, Callable[[], QpSolver]] = {"daqp": DaqpSolver, "proxsuite": ProxsuiteSolver}
+"""The QP backends by name (`MpcConfig.qp_solver`, ``wbc bench mpc --qp-solver``), the default first."""
+
+
+def make_qp_solver(name: str) -> QpSolver:
+    """The backend registered as `name`.
+
+    Raises:
+        ConfigError: `name` is not registered (the message lists the valid names).
+    """
+    check_qp_solver(name)
+    return QP_SOLVERS[name]()
+
+
+def check_qp_solver(name: str, what: str = "qp_solver") -> None:
+    """Refuse a name that is not in `QP_SOLVERS`.
+
+    Args:
+        name: the name.
+        what: what the name was given as, for the message (``MpcConfig.qp_solver``, ``--qp-solver``).
+
+    Raises:
+        ConfigError: `name` is not registered (the message lists the valid names).
+    """
+    if name not in QP_SOLVERS:
+        raise ConfigError(f"{what} {name!r} is not a QP solver; valid QP solvers: {', '.join(QP_SOLVERS)}")
