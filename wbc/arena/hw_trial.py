@@ -67,8 +67,8 @@ from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError
 from wbc.hardware.capabilities import HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
-from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.io_process import ProcessRobot, build_process_robot
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.scenario import check_published, load_scenario
 from wbc.scenario.trial import Trial

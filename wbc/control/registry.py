@@ -33,6 +33,7 @@ from wbc.learned.policy.controller import LearnedController
 from wbc.learned.policy.policy_file import read_pair
 from wbc.learned.policy.shipped import shipped_weights
 from wbc.mpc.controller import MpcController, MpcControllerConfig
+from wbc.mpc.tail_controller import TailMpcController
 from wbc.robots.description import check_arm_mode
 from wbc.robots.registry import ROBOTS, get_robot
 
@@ -74,6 +75,9 @@ CONTROLLERS: dict[str, ControllerSpec] = {
                                   "PD hold of the nominal pose, robot without its arm"),
     "mpc": ControllerSpec("mpc", "actuated", MpcController,
                           "centroidal MPC with arm momentum terms; the optimiser may swing the arm"),
+    "mpc-tail": ControllerSpec("mpc-tail", "actuated", TailMpcController,
+                               "centroidal MPC that swings the arm as a tail: arm accelerations planned within the "
+                               "servos' torque-speed limits, raised ready pose, re-plans when it detects a push"),
     "mpc-locked": ControllerSpec("mpc-locked", "locked", MpcController, "centroidal MPC, arm locked"),
     "mpc-noarm": ControllerSpec("mpc-noarm", "none", MpcController, "centroidal MPC, robot without its arm"),
     "mpc-wbqp": ControllerSpec("mpc-wbqp", "actuated",

@@ -70,6 +70,8 @@ class TailMpcConfig:
         arm_margin: keep the planned arm this far inside its joint limits [rad].
         full_weight_speed: commanded speed from which the horizontal velocity weights hold in full [m/s].
         standstill_weight_factor: their factor at a zero command.
+        arm_moves: plan the arm's accelerations (off: the arm is held where it is, its accelerations fixed at zero,
+            an ablation that keeps everything else of the tail MPC).
     """
 
     horizon: int = 10
@@ -89,6 +91,7 @@ class TailMpcConfig:
     arm_margin: float = 0.05
     full_weight_speed: float = 1.0
     standstill_weight_factor: float = 0.25
+    arm_moves: bool = True
 
     def __post_init__(self) -> None:
         if self.horizon < 1 or not self.dt > 0:
@@ -303,7 +306,8 @@ class TailMpc:
         is_force = kind < 12
         l_box = np.where(comp == 2, cfg.fz_min / cfg.force_scale, -cfg.mu * fz_max)
         u_box = np.where(comp == 2, fz_max, cfg.mu * fz_max)
-        l_box[~is_force], u_box[~is_force] = -1e3, 1e3
+        arm_limit = 1e3 if cfg.arm_moves else 0.0
+        l_box[~is_force], u_box[~is_force] = -arm_limit, arm_limit
         rows, lo, hi = [], [], []
         # friction pyramids: +-f_x - mu f_z <= 0, +-f_y - mu f_z <= 0 per stance foot and step
         for col in np.flatnonzero(is_force & (comp == 2)):
@@ -317,7 +321,7 @@ class TailMpc:
                     hi.append(0.0)
         # the servos: M_aa ddq_a + b_a within the torque-speed line at the step's planned speed
         acc_cols = np.flatnonzero(~is_force).reshape(n, 3)
-        for k in range(n):
+        for k in range(n if cfg.arm_moves else 0):  # a held arm: no torque to bound, and its path is fixed
             tail = steps[k].tail
             lower, upper = servo_torque_bounds(steps[k].arm_dq, self._stall, self._vmax)
             block = np.zeros((3, idx.size))
@@ -327,9 +331,9 @@ class TailMpc:
             hi.extend(upper - tail.bias)
         # the arm's positions and speeds along the horizon
         states = np.arange(n)[:, None] * TNX
-        for part, low, high in ((ARM_Q, np.minimum(self._arm_lower, x0[ARM_Q]),
-                                 np.maximum(self._arm_upper, x0[ARM_Q])),
-                                (ARM_DQ, np.minimum(-self._vmax, x0[ARM_DQ]), np.maximum(self._vmax, x0[ARM_DQ]))):
+        limits = ((ARM_Q, np.minimum(self._arm_lower, x0[ARM_Q]), np.maximum(self._arm_upper, x0[ARM_Q])),
+                  (ARM_DQ, np.minimum(-self._vmax, x0[ARM_DQ]), np.maximum(self._vmax, x0[ARM_DQ])))
+        for part, low, high in limits if cfg.arm_moves else ():
             sel = (states + np.arange(part.start, part.stop)[None]).ravel()
             rows.extend(gamma_z[sel])
             lo.extend((np.tile(low, n) - free[sel]).tolist())

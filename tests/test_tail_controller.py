@@ -1,0 +1,94 @@
+"""`mpc-tail`: the MPC that swings its arm as a tail, re-plans when it detects a push, and feeds the arm's planned
+torque forward."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from wbc.arena.runner import run_episode
+from wbc.control.registry import get_controller
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.mpc.tail_controller import TailControllerConfig, TailMpcController, ready_pose
+from wbc.mpc.tail_mpc import TailMpcConfig, TailPlan
+from wbc.robots.description import ARM_JOINTS
+from wbc.scenario.push import Push
+from wbc.scenario.trial import CommandSchedule
+
+PUSH_START, PUSH_S = 1.5, 0.09
+
+
+def _pushed(arm_moves: bool, force=(0.0, 350.0, 0.0), seconds=2.3):
+    """mpc-tail standing on a1-wx200, pushed sideways at `PUSH_START`: the episode, the controller, and per tick
+    (time, the arm's planned accelerations at that tick, push re-plans so far)."""
+    sim = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
+    ctrl = TailMpcController(sim.desc, TailControllerConfig(tail=TailMpcConfig(arm_moves=arm_moves)))
+    log = []
+
+    def watch(t, robot, c, command):
+        plan = c.plan
+        acc = plan.arm_acceleration[c._plan_step()].copy() if isinstance(plan, TailPlan) else np.zeros(3)
+        log.append((t, acc, c.push_replans))
+
+    with sim:
+        sim.reset(seed=0)
+        sim.apply_push(Push(force_in_world=np.array(force), offset_in_base=np.zeros(3), start=PUSH_START,
+                            duration=PUSH_S))
+        episode = run_episode(sim, ctrl, CommandSchedule(), seconds, observer=watch)
+    return episode, ctrl, log
+
+
+def test_mpc_tail_is_registered_with_its_arm_actuated_and_a_ready_pose_from_its_leverage():
+    spec = get_controller("mpc-tail")
+    assert spec.arm_mode == "actuated"
+    # the raised tail of the leverage analysis (tests/test_tail_model.py, on a grid 0.05 rad apart from this one's):
+    # shoulder back, elbow up, waist centred
+    waist, shoulder, elbow = ready_pose("a1-wx200")
+    assert waist == 0.0 and shoulder == pytest.approx(-1.15, abs=0.05) and elbow == pytest.approx(-1.25, abs=0.05)
+
+
+def test_a_push_is_re_planned_for_at_once_and_the_arm_swings_against_it():
+    episode, ctrl, log = _pushed(arm_moves=True)
+    assert not episode.fell
+    assert ctrl.pushes_detected == 1 and ctrl.push_replans == 1
+    # the push's re-plan comes within 20 ms of its start (the MPC's own clock re-plans every 32 ms)
+    replanned_at = next(t for t, _, n in log if n == 1)
+    assert 0.0 < replanned_at - PUSH_START <= 0.020
+    # before the push the plan keeps the arm near its ready pose; from the push on it swings it hard
+    quiet = max(np.abs(a).max() for t, a, _ in log if 1.0 < t < PUSH_START)
+    swing = max(np.abs(a).max() for t, a, _ in log if PUSH_START < t < PUSH_START + 0.4)
+    assert swing > 50.0 and swing > 5 * quiet
+
+
+def test_the_ablation_that_holds_the_arm_plans_no_arm_motion_under_the_same_push():
+    episode, ctrl, log = _pushed(arm_moves=False)
+    assert ctrl.pushes_detected == 1 and ctrl.push_replans == 1
+    # the arm stays under its PD hold at the ready pose: its accelerations are boxed to zero
+    assert max(np.abs(a).max() for _, a, _ in log) < 1e-9
+    np.testing.assert_array_equal(ctrl._arm_target, ctrl.ready_q)
+
+
+def test_the_arms_command_follows_the_plan_with_its_inverse_dynamics_torque_fed_forward():
+    sim = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated"))
+    ctrl = TailMpcController(sim.desc)
+    with sim:
+        sim.reset(seed=0)
+        for _ in range(40):  # past a few updates: the arm moves from its stowed pose towards the ready pose
+            state = sim.read()
+            command = ctrl.act(state, CommandSchedule().at(ctrl.t))
+            sim.write(command)
+            sim.advance(ctrl.dt)
+    plan = ctrl.plan
+    assert isinstance(plan, TailPlan)
+    k = ctrl._plan_step()
+    acc = plan.arm_acceleration[k]
+    assert np.abs(acc).max() > 0.1  # the plan is moving the arm
+    tail = ctrl._tail_now
+    np.testing.assert_allclose(command.tau[ARM_JOINTS], tail.mass_matrix @ acc + tail.bias, rtol=1e-12,
+                               atol=1e-12)
+    # position and speed on the planned path at the end of this command's period
+    into = ctrl.t - ctrl.plan_t - k * ctrl.tail_config.tail.dt
+    start = ctrl._x0[12:] if k == 0 else plan.states[k - 1, 12:]
+    np.testing.assert_allclose(command.dq[ARM_JOINTS], start[3:] + acc * into, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(command.q[ARM_JOINTS], start[:3] + start[3:] * into + 0.5 * acc * into**2,
+                               rtol=1e-12, atol=1e-12)
