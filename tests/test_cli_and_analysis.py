@@ -102,6 +102,32 @@ def test_arm_momentum_study_measures_the_arm_against_the_push():
     assert 0.0 < a.push_angular_impulse < 400 * 0.06 * 0.4
     assert b.arm_momentum_peak == 0.0 and b.arm_travel_rad == 0.0
     assert a.arm_momentum_peak > 0.0 and a.arm_travel_rad > 0.0
+    # a locked arm has no bound and no alignment; an actuated one holds at most what its servos' speeds allow
+    assert b.arm_momentum_bound == 0.0 and np.isnan(b.bound_fraction) and np.isnan(b.alignment)
+    assert 0.05 < a.arm_momentum_bound < 1.0 and 0.0 < a.bound_fraction < 1.0 and -1.0 <= a.alignment <= 1.0
+
+
+def test_the_arms_momentum_bound_is_the_largest_over_its_speed_box():
+    """The bound from the corners of the speed box is the maximum over the whole box, on a grid of it."""
+    import pinocchio as pin
+
+    from wbc.robots.description import ARM_JOINTS
+    from wbc.robots.joint_table import joint_table
+    from wbc.robots.pinocchio_model import build_pinocchio
+    from wbc.tools.arm_momentum import arm_momentum_bound
+
+    desc = get_robot("a1-wx200", "actuated")
+    pinr = build_pinocchio(desc)
+    vmax = joint_table(desc).velocity_limit[ARM_JOINTS]
+    grid = np.stack(np.meshgrid(*[np.linspace(-v, v, 21) for v in vmax]), axis=-1).reshape(-1, 3)
+    for arm_q in (desc.arm.nominal_q, np.array([0.0, -1.15, -1.25]), np.array([1.2, 0.3, 0.5])):
+        q = pin.neutral(pinr.model)
+        q[7:] = np.asarray(desc.nominal_q)[pinr.joints.pin_from_house]
+        q[7 + pinr.joints.house_from_pin[ARM_JOINTS]] = arm_q
+        pin.computeCentroidalMap(pinr.model, pinr.data, q)
+        a_arm = pinr.data.Ag[3:, 6 + pinr.joints.house_from_pin[ARM_JOINTS]]
+        brute = np.linalg.norm(grid @ a_arm.T, axis=1).max()  # the grid holds the corners too
+        assert arm_momentum_bound(a_arm, vmax) == pytest.approx(brute, rel=1e-12)
 
 
 class _TimedStand:

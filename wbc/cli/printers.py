@@ -104,17 +104,24 @@ def _metres(row: PostureRow) -> str:
 def print_arm_momentum(rows: Sequence[ArmMomentumTrial], *, controller: str, scenario: str, band: str) -> None:
     """One line per trial of the arm-momentum study, then the means."""
     print(f"arm momentum during push recovery: {controller}, {scenario} band {band}")
-    print("  seed trial survived  arm travel [rad]  push |r x F| T [N m s]  arm |h| peak [N m s]  arm |h| mean")
+    print("  seed trial survived  arm travel [rad]  push |r x F| T [N m s]  arm |h| peak [N m s]  arm |h| mean  "
+          "bound [N m s]  peak/bound  cos(h, r x F)")
     for r in rows:
         print(f"  {r.seed:4d} {r.trial:5d} {str(r.survived):8s}  {r.arm_travel_rad:16.1f}  "
-              f"{r.push_angular_impulse:22.3f}  {r.arm_momentum_peak:20.3f}  {r.arm_momentum_mean:12.3f}")
+              f"{r.push_angular_impulse:22.3f}  {r.arm_momentum_peak:20.3f}  {r.arm_momentum_mean:12.3f}  "
+              f"{r.arm_momentum_bound:13.3f}  {r.bound_fraction:10.2f}  {r.alignment:+13.2f}")
     if rows:
-        mean = {k: float(np.mean([getattr(r, k) for r in rows])) for k in
-                ("arm_travel_rad", "push_angular_impulse", "arm_momentum_peak", "arm_momentum_mean")}
+        mean = {k: float(np.nanmean([getattr(r, k) for r in rows])) if any(
+                    np.isfinite(getattr(r, k)) for r in rows) else math.nan
+                for k in ("arm_travel_rad", "push_angular_impulse", "arm_momentum_peak", "arm_momentum_mean",
+                          "arm_momentum_bound", "bound_fraction", "alignment")}
         print(f"  mean: travel {mean['arm_travel_rad']:.1f} rad, push angular impulse "
               f"{mean['push_angular_impulse']:.3f} N m s, arm momentum peak {mean['arm_momentum_peak']:.3f} N m s "
               f"({100 * mean['arm_momentum_peak'] / max(mean['push_angular_impulse'], 1e-9):.0f} % of the impulse), "
               f"mean {mean['arm_momentum_mean']:.3f} N m s")
+        print(f"  the arm's bound from its pose at each push: {mean['arm_momentum_bound']:.3f} N m s; its peak reached "
+              f"{100 * mean['bound_fraction']:.0f} % of it; alignment with the push's r x F: cos "
+              f"{mean['alignment']:+.2f} (+1: the arm takes up the push's angular momentum)")
 
 
 def print_bench_sim(result: SimBenchResult) -> None:
