@@ -86,17 +86,18 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
 
     order = [row("No", "arm", "paper"), row("learned-noarm", "(pi1)"), row("mpc-noarm"), row("Locked", "paper"),
              row("learned-locked", "(pi2)"), row("mpc-locked"), row("Actuated", "paper"), row("learned", "(pi3)"),
-             row("mpc")]
+             row("mpc"), row("mpc-tail")]
     assert order == sorted(order)
     assert "95.02 ± 0.62" in block[order[0]] and "68.03 ± 1.14" in block[order[0]]  # the paper's no-arm row
     assert "96.11 ± 0.37" in block[order[6]] and "78.20 ± 1.77" in block[order[6]]
     assert "[" in block[order[7]] and "± 0.00" not in "\n".join(block)  # one seed: an interval over trials
-    # the five comparisons, each per band and metric, with its test and a verdict per band
+    # the six comparisons, each per band and metric, with its test and a verdict per band
     for question in ("actuated vs locked arm, learned (pi3 - pi2): B = learned (pi3), A = learned-locked (pi2)",
                      "actuated vs locked arm, model-based: B = mpc, A = mpc-locked",
                      "actuated arm vs no arm, model-based", "learned vs model-based, arm actuated"):
         assert question in printed
-    assert printed.count("  band in: Success: ") == 5 and printed.count("  band ood: Success: ") == 5
+    assert "arm as a tail vs locked arm, model-based: B = mpc-tail, A = mpc-locked" in printed
+    assert printed.count("  band in: Success: ") == 6 and printed.count("  band ood: Success: ") == 6
     assert "A only / B only" in printed and "n80" in printed
     # where each contender fails, per band, and the push-recovery curve
     assert "where each contender fails" in printed and "pushed forward" in printed and "offset y" in printed
@@ -104,9 +105,9 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
     assert "CPU hours here" in printed and "mean wall time per trial: learned" in printed
     saved = json.loads((out / "paper.json").read_text(encoding="utf-8"))
     assert saved["table"] == "table1" and saved["bands"] == ["in", "ood"] and saved["trials"] == 1
-    assert len(saved["comparisons"]) == 5 * 2 * 3
+    assert len(saved["comparisons"]) == 6 * 2 * 3
     assert {c["controller"] for c in saved["contenders"]} == {"learned", "learned-locked", "learned-noarm", "mpc",
-                                                              "mpc-locked", "mpc-noarm"}
+                                                              "mpc-tail", "mpc-locked", "mpc-noarm"}
     # resuming the finished run plays nothing and prints the same table but for the run line
     assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
                  "--workers", "1", "--quiet", "--resume"]) == 0
@@ -196,7 +197,8 @@ def test_the_crouched_option_plays_every_learned_rows_posture_variant_under_the_
         assert {k: c.controller for k, c in rows.items() if c.family == "learned"} == {
             "learned": "learned-crouched", "learned-locked": "learned-locked-crouched",
             "learned-noarm": "learned-noarm-crouched"}
-        assert {c.controller for c in rows.values() if c.family == "model-based"} == {"mpc", "mpc-locked", "mpc-noarm"}
+        assert {c.controller for c in rows.values() if c.family == "model-based"} == {"mpc", "mpc-tail", "mpc-locked",
+                                                                                       "mpc-noarm"}
     rows = {c.key: c for c in resolve_contenders(TABLES["table3"], {"ppo": "policy:runs/ppo/policy"}, crouched=True)}
     assert rows["ours"].controller == "learned-crouched" and rows["ppo"].controller == "policy:runs/ppo/policy"
     for key in ("curriculum", "finetune-pi2", "decoupled", "one-stage-demo"):

@@ -2,8 +2,8 @@
 
 - Table I (push recovery, a1-wx200, ``scenarios/push.toml``): the arm actuated, locked and absent, for both
   families: the learned policies (pi3, pi2, pi1: ``learned``, ``learned-locked``, ``learned-noarm``) and the
-  model-based controller (``mpc``, ``mpc-locked``, ``mpc-noarm``).
-- Table II (fast turns, go1-arm, ``scenarios/turn.toml``): the same six names, which play the go1-arm weights and
+  model-based controller (``mpc``, ``mpc-tail``, ``mpc-locked``, ``mpc-noarm``).
+- Table II (fast turns, go1-arm, ``scenarios/turn.toml``): the same seven names, which play the go1-arm weights and
   the MPC on the Go1.
 - Table III (the staged method against its baselines, ``scenarios/push.toml``): pi3 (``learned``, "Ours") and the
   stage-3 baselines of `wbc.learned.train.stages.BASELINES` whose exported policy ships in
@@ -111,6 +111,8 @@ def _arm_rows(crouched: bool = False) -> tuple[Contender, ...]:
         Contender(key="learned-noarm", row="No arm", family="learned", controller="learned-noarm" + suffix,
                   note="pi1" + note),
         Contender(key="mpc", row="Actuated", family="model-based", controller="mpc", note="MPC"),
+        Contender(key="mpc-tail", row="Actuated", family="model-based", controller="mpc-tail",
+                  note="MPC, arm as a tail"),
         Contender(key="mpc-locked", row="Locked", family="model-based", controller="mpc-locked", note="MPC"),
         Contender(key="mpc-noarm", row="No arm", family="model-based", controller="mpc-noarm", note="MPC"),
     )
@@ -121,6 +123,7 @@ _ARM_CONTRASTS = (
     Contrast(a="learned-noarm", b="learned", question="actuated arm vs no arm, learned (pi3 - pi1)"),
     Contrast(a="mpc-locked", b="mpc", question="actuated vs locked arm, model-based"),
     Contrast(a="mpc-noarm", b="mpc", question="actuated arm vs no arm, model-based"),
+    Contrast(a="mpc-locked", b="mpc-tail", question="arm as a tail vs locked arm, model-based"),
     Contrast(a="mpc", b="learned", question="learned vs model-based, arm actuated"),
 )
 
