@@ -83,7 +83,7 @@ LATENCY_WIRE_KEYS = ["round_trip_ms_p50", "round_trip_ms_p99", "period_ms", "wir
 LATENCY_MARGIN_KEYS = ["controller", "trials", "push_force_n", "still_margin_ms", "still_fell_at_ms", "push_margin_ms",
                        "push_fell_at_ms", "runs", "wall_s"]
 ARM_KEYS = ["robot", "latency_ms", "seconds", "step_rad", "emulator_bus", "rates", "steps", "reactions", "emulator",
-            "machine"]
+            "machine", "host_realtime"]
 ARM_RATE_KEYS = ["rate_hz", "achieved_hz", "busy_ms_mean", "busy_ms_max", "period_ms_max", "failed_reads", "cycles",
                  "faults"]
 ARM_STEP_KEYS = ["source", "kp", "kd", "rate_hz", "rise_ms", "overshoot_pct", "settle_ms", "final_error_rad",

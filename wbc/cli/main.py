@@ -184,7 +184,8 @@ def _bench_arm(args: argparse.Namespace) -> int:
     except ValueError:
         raise ConfigError(f"--rates {args.rates!r}: give comma-separated numbers in Hz, e.g. 100,200,400") from None
     result = bench_arm(args.robot, rates=rates, seconds=args.seconds, latency_ms=args.latency,
-                       realtime=realtime_request(args, place="first"))
+                       realtime=realtime_request(args, place="first"),
+                       host_realtime=realtime_request(args, place="last"))
     if args.json:
         printers.print_json(result.as_dict())
     else:

@@ -325,7 +325,8 @@ def build_parser() -> argparse.ArgumentParser:
     barm.add_argument("--latency", type=bounded_float(0.0, 255.0, lo_open=True, unit="ms"), default=1.0,
                       help="the adapter's latency timer, up to 255 [ms] (the FTDI chip's largest; default 1)")
     barm.add_argument("--json", action="store_true", help="print JSON")
-    add_realtime_options(barm, who="the emulator's process", cpu="first")
+    add_realtime_options(barm, who="the emulator's process (on the first CPU) and the bench's own, which holds the "
+                         "bus as the I/O process would (on the last)", cpu="first")
     barm.set_defaults(handler="bench arm")
 
     hw = sub.add_parser("hw", help="real robots: an emulator, a read-only check, a trial on the robot")

@@ -449,6 +449,7 @@ def print_bench_arm(result: ArmBenchResult) -> None:
     """``wbc bench arm``: the bus loop's rates and the elbow's step response, bus against simulation."""
     print(f"WX200 arm bus ({result.robot}) against the real-time emulated robot in its own process; latency timer "
           f"{result.latency_ms} ms, {result.seconds} s per rate")
+    print(f"  this process (the bus's host side): {result.host_realtime}")
     print("  requested [Hz]  achieved [Hz]  busy mean / max [ms]  longest period [ms]  failed reads  faults")
     for r in result.rates:
         print(f"  {r.rate_hz:>14.0f}{r.achieved_hz:>15.1f}{r.busy_ms_mean:>12.2f} / {r.busy_ms_max:<7.1f}"

@@ -193,6 +193,8 @@ class ArmBenchResult:
         reactions: the write deadline and each bus fault, in wall time.
         emulator: the emulators' own real-time figures.
         machine: `machine_description`.
+        host_realtime: what the bench's own process (the bus's host side) asked the OS for and got
+            (`RealtimeGrant.describe`).
     """
 
     robot: str
@@ -205,6 +207,7 @@ class ArmBenchResult:
     reactions: tuple[ArmReactionRow, ...]
     emulator: tuple[EmulatorTimingRow, ...]
     machine: str
+    host_realtime: str = "nothing asked"
 
     def as_dict(self) -> dict[str, object]:
         """Plain dict (the JSON output of ``wbc bench arm``): each row as a dict of its attributes."""
@@ -212,7 +215,7 @@ class ArmBenchResult:
                 "step_rad": self.step_rad, "emulator_bus": dict(self.emulator_bus),
                 "rates": [asdict(r) for r in self.rates], "steps": [asdict(s) for s in self.steps],
                 "reactions": [asdict(r) for r in self.reactions], "emulator": [asdict(r) for r in self.emulator],
-                "machine": self.machine}
+                "machine": self.machine, "host_realtime": self.host_realtime}
 
 
 def step_metrics(t: np.ndarray, y: np.ndarray, target: float) -> tuple[float, float, float, float]:
@@ -489,7 +492,7 @@ def _sim_step(robot: str, q0: np.ndarray, kp: float, kd: float, step: float) -> 
 def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200.0, 400.0, 1000.0),
               seconds: float = 2.0, latency_ms: float = 1.0, step: float = -0.05,
               gains: tuple[tuple[float, float], ...] = ((20.0, 0.5), (60.0, 1.0)),
-              realtime: RealtimeRequest = NO_REALTIME) -> ArmBenchResult:
+              realtime: RealtimeRequest = NO_REALTIME, host_realtime: RealtimeRequest = NO_REALTIME) -> ArmBenchResult:
     """Measure the arm's bus loop (rates, step response) against the emulated robot in its own process.
 
     Args:
@@ -500,6 +503,9 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         step: the elbow target's step [rad] (negative unfolds the stowed elbow).
         gains: (kp, kd) of each step response [N m / rad, N m s / rad].
         realtime: what the emulator's process asks the OS for (it stands in for the robot's processors).
+        host_realtime: what this process asks the OS for before it starts the bus and the legs' link: on a robot
+            they run in the I/O process, which asks for real-time scheduling (`wbc.hardware.io_process`). Asked for
+            the rest of the process's life.
 
     Returns:
         The rows of each part (rates, steps on the bus and in simulation for each gain, reactions, the emulators'
@@ -516,6 +522,8 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         + (len(_FAULTS) + 1) * (2 * _REACTION_TIMEOUT + 2.0)
     proc, where = _start_emulator(robot, total, realtime)
     print(f"bench arm: the emulator's process: {where.get('realtime')}", file=sys.stderr, flush=True)
+    host = request_realtime(host_realtime).describe() if host_realtime != NO_REALTIME else "nothing asked"
+    print(f"bench arm: this process (the bus's host side): {host}", file=sys.stderr, flush=True)
     desc = get_robot(robot, "actuated")
     stand = stand_command(desc).stacked()
     stowed = desc.nominal_q[12:].copy()
@@ -592,4 +600,4 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
     emulator = _emulator_timing(robot, seconds, latency_ms)
     return ArmBenchResult(robot=robot, latency_ms=latency_ms, seconds=seconds, step_rad=step, emulator_bus=bus,
                           rates=tuple(rate_rows), steps=tuple(step_rows), reactions=tuple(reaction_rows),
-                          emulator=tuple(emulator), machine=machine_description())
+                          emulator=tuple(emulator), machine=machine_description(), host_realtime=host)
