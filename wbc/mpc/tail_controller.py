@@ -14,6 +14,7 @@ It is `wbc.mpc.controller.MpcController` (estimator, gait, footholds, leg layer)
 from __future__ import annotations
 
 import functools
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -24,8 +25,8 @@ from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.mpc.footholds import ground_height
 from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.observer import MomentumObserver, ObserverConfig
-from wbc.mpc.tail_model import ArmTail, arm_leverage, arm_tail, choose_ready_pose
-from wbc.mpc.tail_mpc import ARM_DQ, ARM_Q, TNX, TailMpc, TailMpcConfig, TailPlan, TailStep
+from wbc.mpc.tail_model import ArmTail, ArmTailPath, arm_leverage, arm_tail_path, choose_ready_pose
+from wbc.mpc.tail_mpc import ARM_DQ, ARM_Q, TNX, TailMpc, TailMpcConfig, TailPlan
 from wbc.robots.description import ARM_JOINTS, RobotDescription
 from wbc.robots.euler import rpy_of
 from wbc.robots.joint_table import joint_table
@@ -157,9 +158,11 @@ class TailMpcController(MpcController):
         contact = self.gait.contact_table(self.t, cfg.dt, n)
         lifted = np.cumsum(~contact, axis=0) > 0
         feet = np.where(lifted[:, :, None], self.feet.footholds[None], kin.feet[None])
-        steps = self._steps(x0)
+        t0 = time.perf_counter()
+        path = self._steps(x0)
+        path_s = time.perf_counter() - t0
         try:
-            plan = self.tail_mpc.plan(x0, x_ref, contact, feet, steps, self._warm_start)
+            plan = self.tail_mpc.plan(x0, x_ref, contact, feet, path, self._warm_start)
         except MpcSolveError:
             self._warm_start = None
             self.fallbacks += 1
@@ -167,13 +170,14 @@ class TailMpcController(MpcController):
         self.plan = plan
         self.plan_t = self.t
         self._x0 = x0
-        self._tail_now = steps[0].tail
+        self._tail_now = path.tail(0)
         self._warm_start = plan.warm_start()
         self.solves += 1
-        self._timings["mpc_setup_s"] = plan.setup_s
+        # the setup is the arm's model along the horizon (Pinocchio, `_steps`) and the QP's build
+        self._timings["mpc_setup_s"] = path_s + plan.setup_s
         self._timings["mpc_solve_s"] = plan.solve_s
 
-    def _steps(self, x0: np.ndarray) -> list[TailStep]:
+    def _steps(self, x0: np.ndarray) -> ArmTailPath:
         """Each step's arm pose and speed (the previous plan's, from where it now is; held at first) and its tail."""
         n, kin = self.tail_config.tail.horizon, self.kin
         plan = self.plan if isinstance(self.plan, TailPlan) else None
@@ -183,14 +187,7 @@ class TailMpcController(MpcController):
             shift = min(self._plan_step() + 1, n - 1)
             ahead = plan.states[shift:, 12:]
             arm = np.vstack([x0[12:], ahead, np.repeat(ahead[-1:], n - 1 - len(ahead), axis=0)])[:n]
-        q, v = kin.q_pin, kin.v_pin
-        arm_q_idx = kin.arm_v + 1  # a free flyer's configuration has one entry more than its velocity
-        steps = []
-        for k in range(n):
-            q[arm_q_idx], v[kin.arm_v] = arm[k, :3], arm[k, 3:]
-            steps.append(TailStep(tail=arm_tail(kin.robot, q, v, kin.arm_v), arm_q=arm[k, :3].copy(),
-                                  arm_dq=arm[k, 3:].copy()))
-        return steps
+        return arm_tail_path(kin.robot, kin.q_pin, kin.v_pin, kin.arm_v, arm[:, :3], arm[:, 3:])
 
     # -- the arm's command ----------------------------------------------------------------------------------------
     def _arm_rows(self, rows: np.ndarray, step: int) -> bool:

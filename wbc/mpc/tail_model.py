@@ -24,6 +24,7 @@ neglected in the coupling).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,8 +32,8 @@ import pinocchio as pin
 
 from wbc.robots.pinocchio_model import PinocchioRobot
 
-__all__ = ["ArmPoseLeverage", "ArmTail", "arm_leverage", "arm_tail", "choose_ready_pose", "servo_torque_bounds",
-           "trunk_rate_change"]
+__all__ = ["ArmPoseLeverage", "ArmTail", "ArmTailPath", "arm_leverage", "arm_tail", "arm_tail_path",
+           "choose_ready_pose", "servo_torque_bounds", "trunk_rate_change"]
 
 
 @dataclass(frozen=True)
@@ -67,27 +68,132 @@ class ArmTail:
 def arm_tail(robot: PinocchioRobot, q: np.ndarray, v: np.ndarray, arm_v_idx: np.ndarray) -> ArmTail:
     """The `ArmTail` of `robot` at configuration `q` and velocity `v` (Pinocchio order).
 
+    One pass of Pinocchio's `computeCentroidalDynamicsDerivatives` at the arm's velocity alone gives the momentum
+    Jacobian and, on its way, A_G and the composite inertia (which depend on q only: the same as `ccrba`'s); `crba`
+    gives the mass matrix and `nonLinearEffects` the bias, at the full velocity.
+
     Args:
         robot: the Pinocchio model (its data buffer is overwritten).
         q: configuration (free flyer first).
         v: velocity; its arm entries are the dq_bar of `ArmTail.momentum_jacobian`.
         arm_v_idx: velocity indices of the arm joints (waist, shoulder, elbow).
     """
-    model, data = robot.model, robot.data
-    q = np.asarray(q, dtype=np.float64)
-    v = np.asarray(v, dtype=np.float64)
-    arm = np.asarray(arm_v_idx)
-    arm_only = np.zeros(model.nv)
-    arm_only[arm] = v[arm]
-    dh_dq = pin.computeCentroidalDynamicsDerivatives(model, data, q, arm_only, np.zeros(model.nv))[0]
-    jacobian = dh_dq[3:, arm].copy()
-    pin.ccrba(model, data, q, v)
-    momentum_matrix = data.Ag[3:, arm].copy()
-    inertia, mass = data.Ig.inertia.copy(), float(data.Ig.mass)
-    mass_matrix = pin.crba(model, data, q)
-    bias = pin.nonLinearEffects(model, data, q, v)[arm].copy()
-    return ArmTail(mass=mass, inertia_world=inertia, momentum_matrix=momentum_matrix, momentum_jacobian=jacobian,
-                   mass_matrix=mass_matrix[np.ix_(arm, arm)].copy(), bias=bias)
+    tails = _TailEvaluator(robot, arm_v_idx, 1)
+    tails.fill(0, np.asarray(q, dtype=np.float64), np.asarray(v, dtype=np.float64))
+    return ArmTail(mass=float(tails.mass[0]), inertia_world=tails.inertia_world[0],
+                   momentum_matrix=tails.momentum_matrix[0], momentum_jacobian=tails.momentum_jacobian[0],
+                   mass_matrix=tails.mass_matrix[0], bias=tails.bias[0])
+
+
+class _TailEvaluator:
+    """Evaluates `arm_tail` step by step into stacked arrays (those of an `ArmTailPath` of `n` steps)."""
+
+    def __init__(self, robot: PinocchioRobot, arm_v_idx: np.ndarray, n: int) -> None:
+        self.model, self.data = robot.model, robot.data
+        arm = np.asarray(arm_v_idx)
+        contiguous = arm.size > 0 and np.array_equal(arm, np.arange(arm[0], arm[0] + arm.size))
+        self.arm = arm
+        self._cols = slice(int(arm[0]), int(arm[0]) + arm.size) if contiguous else arm  # a slice reads faster
+        self._block = (self._cols, self._cols) if contiguous else np.ix_(arm, arm)
+        self._arm_only = np.zeros(self.model.nv)
+        self._zero = np.zeros(self.model.nv)
+        self.mass = np.empty(n)
+        self.inertia_world = np.empty((n, 3, 3))
+        self.momentum_matrix = np.empty((n, 3, 3))
+        self.momentum_jacobian = np.empty((n, 3, 3))
+        self.mass_matrix = np.empty((n, 3, 3))
+        self.bias = np.empty((n, 3))
+
+    def fill(self, k: int, q: np.ndarray, v: np.ndarray) -> None:
+        """Step k: the arm's tail at `q`, `v` (float arrays)."""
+        model, data, cols = self.model, self.data, self._cols
+        self._arm_only[cols] = v[cols]
+        dh_dq = pin.computeCentroidalDynamicsDerivatives(model, data, q, self._arm_only, self._zero)[0]
+        self.momentum_jacobian[k] = dh_dq[3:, cols]
+        self.momentum_matrix[k] = data.Ag[3:, cols]
+        composite = data.Ig
+        self.inertia_world[k] = composite.inertia
+        self.mass[k] = composite.mass
+        self.mass_matrix[k] = pin.crba(model, data, q)[self._block]
+        self.bias[k] = pin.nonLinearEffects(model, data, q, v)[cols]
+
+
+@dataclass(frozen=True)
+class ArmTailPath:
+    """The arm's `ArmTail` at each step of a path of arm poses and speeds, stacked step by step.
+
+    What `wbc.mpc.tail_mpc.TailMpc` plans along: step k's model is linearised about the arm at `arm_q[k]`,
+    `arm_dq[k]`, with the rest of the robot where it is now.
+
+    Attributes:
+        arm_q: the arm's pose at each step, shape (n, 3) [rad].
+        arm_dq: its speed at each step, shape (n, 3) [rad/s].
+        mass: `ArmTail.mass` at each step, shape (n,) [kg].
+        inertia_world: `ArmTail.inertia_world` at each step, shape (n, 3, 3) [kg m^2].
+        momentum_matrix: `ArmTail.momentum_matrix` at each step, shape (n, 3, 3) [kg m^2].
+        momentum_jacobian: `ArmTail.momentum_jacobian` at each step, shape (n, 3, 3) [kg m^2/s].
+        mass_matrix: `ArmTail.mass_matrix` at each step, shape (n, 3, 3) [kg m^2].
+        bias: `ArmTail.bias` at each step, shape (n, 3) [N m].
+    """
+
+    arm_q: np.ndarray
+    arm_dq: np.ndarray
+    mass: np.ndarray
+    inertia_world: np.ndarray
+    momentum_matrix: np.ndarray
+    momentum_jacobian: np.ndarray
+    mass_matrix: np.ndarray
+    bias: np.ndarray
+
+    def __len__(self) -> int:
+        return self.arm_q.shape[0]
+
+    def tail(self, k: int) -> ArmTail:
+        """Step k's `ArmTail` (copies)."""
+        return ArmTail(mass=float(self.mass[k]), inertia_world=self.inertia_world[k].copy(),
+                       momentum_matrix=self.momentum_matrix[k].copy(),
+                       momentum_jacobian=self.momentum_jacobian[k].copy(), mass_matrix=self.mass_matrix[k].copy(),
+                       bias=self.bias[k].copy())
+
+    @classmethod
+    def stack(cls, tails: Sequence[ArmTail], arm_q: np.ndarray, arm_dq: np.ndarray) -> ArmTailPath:
+        """The path of `tails`, one per step, at the arm poses `arm_q` and speeds `arm_dq` (n, 3) they were taken at."""
+        return cls(arm_q=np.array(arm_q, dtype=np.float64).reshape(-1, 3),
+                   arm_dq=np.array(arm_dq, dtype=np.float64).reshape(-1, 3),
+                   mass=np.array([t.mass for t in tails], dtype=np.float64),
+                   inertia_world=np.array([t.inertia_world for t in tails], dtype=np.float64).reshape(-1, 3, 3),
+                   momentum_matrix=np.array([t.momentum_matrix for t in tails], dtype=np.float64).reshape(-1, 3, 3),
+                   momentum_jacobian=np.array([t.momentum_jacobian for t in tails],
+                                              dtype=np.float64).reshape(-1, 3, 3),
+                   mass_matrix=np.array([t.mass_matrix for t in tails], dtype=np.float64).reshape(-1, 3, 3),
+                   bias=np.array([t.bias for t in tails], dtype=np.float64).reshape(-1, 3))
+
+
+def arm_tail_path(robot: PinocchioRobot, q: np.ndarray, v: np.ndarray, arm_v_idx: np.ndarray, arm_q: np.ndarray,
+                  arm_dq: np.ndarray) -> ArmTailPath:
+    """The `ArmTail` at each arm pose `arm_q[k]` and speed `arm_dq[k]`, the rest of the robot at `q`, `v`.
+
+    Each step's `ArmTail` is the one `arm_tail` gives at `q`, `v` with their arm entries replaced by that step's.
+
+    Args:
+        robot: the Pinocchio model (its data buffer is overwritten).
+        q: configuration (free flyer first; the arm's revolute joints' entries are their velocity indices plus one).
+        v: velocity.
+        arm_v_idx: velocity indices of the arm joints (waist, shoulder, elbow).
+        arm_q: the arm's pose at each step, shape (n, 3) [rad].
+        arm_dq: the arm's speed at each step, shape (n, 3) [rad/s].
+    """
+    arm_q = np.array(arm_q, dtype=np.float64).reshape(-1, 3)
+    arm_dq = np.array(arm_dq, dtype=np.float64).reshape(-1, 3)
+    q, v = np.array(q, dtype=np.float64), np.array(v, dtype=np.float64)  # copies: their arm entries change
+    tails = _TailEvaluator(robot, arm_v_idx, arm_q.shape[0])
+    arm_q_idx = tails.arm + 1
+    for k in range(arm_q.shape[0]):
+        q[arm_q_idx], v[tails.arm] = arm_q[k], arm_dq[k]
+        tails.fill(k, q, v)
+    return ArmTailPath(arm_q=arm_q, arm_dq=arm_dq, mass=tails.mass, inertia_world=tails.inertia_world,
+                       momentum_matrix=tails.momentum_matrix, momentum_jacobian=tails.momentum_jacobian,
+                       mass_matrix=tails.mass_matrix, bias=tails.bias)
 
 
 def servo_torque_bounds(dq: np.ndarray, stall_torque: np.ndarray, no_load_speed: np.ndarray

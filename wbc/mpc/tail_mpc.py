@@ -27,17 +27,19 @@ the arm's accelerations are variables. The QP is dense and solved by DAQP, warm-
 
 from __future__ import annotations
 
+import functools
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import daqp
 import numpy as np
 
 from wbc.errors import ConfigError
-from wbc.mpc.centroidal_model import zoh_integral
 from wbc.mpc.centroidal_mpc import MpcSolveError
-from wbc.mpc.tail_model import ArmTail, servo_torque_bounds
+from wbc.mpc.tail_compiled import tail_qp
+from wbc.mpc.tail_model import ArmTail, ArmTailPath
 from wbc.robots.conventions import GRAVITY
 
 __all__ = ["TNX", "TNU", "TailMpc", "TailMpcConfig", "TailPlan", "TailStep"]
@@ -49,6 +51,7 @@ TNU = 15
 ARM_Q = slice(12, 15)
 ARM_DQ = slice(15, 18)
 ARM_ACC = slice(12, 15)
+_GRAVITY = np.ascontiguousarray(GRAVITY, dtype=np.float64)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -237,7 +240,7 @@ class TailMpc:
         self._weights = config.state_weights()
 
     def plan(self, x0: np.ndarray, x_ref: np.ndarray, contact: np.ndarray, feet: np.ndarray,
-             steps: list[TailStep], warm_start: np.ndarray | None = None) -> TailPlan:
+             steps: ArmTailPath | Sequence[TailStep], warm_start: np.ndarray | None = None) -> TailPlan:
         """Plan N steps from `x0`.
 
         Args:
@@ -245,101 +248,45 @@ class TailMpc:
             x_ref: reference states x_1 .. x_N, shape (N, 18).
             contact: stance flags per step and foot, shape (N, 4).
             feet: foot positions per step, world, shape (N, 4, 3) [m].
-            steps: the arm's pose, speed and `ArmTail` per step (N), the first the current ones.
+            steps: the arm's pose, speed and `ArmTail` per step (N), the first the current ones: an `ArmTailPath`
+                (`wbc.mpc.tail_model.arm_tail_path`), or a `TailStep` per step.
             warm_start: the previous plan's `TailPlan.warm_start()`, or None.
 
         Raises:
             MpcSolveError: the QP did not solve.
         """
         t0 = time.perf_counter()
-        qp = self._build(x0, x_ref, contact, feet, steps)
+        qp = self.build(x0, x_ref, contact, feet, steps)
         setup = time.perf_counter() - t0
         plan = self._solve(qp, warm_start)
         plan.setup_s = setup
         return plan
 
-    def _build(self, x0: np.ndarray, x_ref: np.ndarray, contact: np.ndarray, feet: np.ndarray,
-               steps: list[TailStep]) -> dict[str, np.ndarray]:
-        cfg, n = self.config, self.config.horizon
-        contact = np.asarray(contact, dtype=bool)
-        # the variables: stance forces and every step's arm accelerations, in the QP's units
-        chosen = np.zeros((n, TNU), dtype=bool)
-        chosen[:, :12] = np.repeat(contact, 3, axis=1)
-        chosen[:, 12:] = True
-        idx = np.flatnonzero(chosen)
-        kind = idx % TNU
-        scale = np.where(kind < 12, cfg.force_scale, 1.0)
-        # condensed dynamics, X = free + gamma U, each step linearised about x0 with its own arm pose and speed
-        free = np.empty((n, TNX))
-        gamma = np.zeros((n, TNX, n * TNU))
-        x = np.asarray(x0, dtype=np.float64)
-        for k in range(n):
-            stance = contact[k]
-            u_bar = np.zeros(TNU)
-            u_bar[2:12:3] = stance * (steps[k].tail.mass * -GRAVITY[2] / max(1, int(stance.sum())))
-            x_bar = np.asarray(x0, dtype=np.float64).copy()
-            x_bar[ARM_Q], x_bar[ARM_DQ] = steps[k].arm_q, steps[k].arm_dq
-            f, a, b = tail_dynamics(x_bar, u_bar, steps[k], feet[k])
-            d = f - a @ x_bar - b @ u_bar
-            phi = zoh_integral(a, cfg.dt)
-            a_d, b_d, d_d = np.eye(TNX) + a @ phi, phi @ b, phi @ d
-            previous = x if k == 0 else free[k - 1]
-            free[k] = a_d @ previous + d_d
-            if k > 0:
-                gamma[k] = a_d @ gamma[k - 1]
-            gamma[k][:, k * TNU:(k + 1) * TNU] += b_d
-        gamma_z = gamma.reshape(n * TNX, n * TNU)[:, idx] * scale
-        free = free.ravel()
-        # cost: sum ||x_k - x_ref_k||_Q^2 + ||u||_R^2, the horizontal velocity weights scaled by the speed
-        w = np.tile(self._weights, n).reshape(n, TNX)
+    def build(self, x0: np.ndarray, x_ref: np.ndarray, contact: np.ndarray, feet: np.ndarray,
+              steps: ArmTailPath | Sequence[TailStep]) -> dict[str, np.ndarray]:
+        """The update's QP (`plan`'s arguments), compiled (`wbc.mpc.tail_compiled.tail_qp`).
+
+        Returns:
+            ``H``, ``g``, ``C``, ``l``, ``u``, ``l_box``, ``u_box``, ``scale``, ``index``, ``free``, ``gamma_z``: min
+            1/2 z^T H z + g^T z s.t. l <= C z <= u, l_box <= z <= u_box; the full scaled input vector is z at
+            ``index`` (zero elsewhere), U[index] = scale z, and the predicted states X = free + gamma_z z.
+        """
+        cfg = self.config
+        path = steps if isinstance(steps, ArmTailPath) else ArmTailPath.stack(
+            [s.tail for s in steps], [s.arm_q for s in steps], [s.arm_dq for s in steps])
+        x_ref = np.ascontiguousarray(x_ref, dtype=np.float64)
         speed = math.hypot(float(x_ref[0, 3]), float(x_ref[0, 4]))
-        if cfg.full_weight_speed > 0:
-            w[:, 3:5] *= min(1.0, max(cfg.standstill_weight_factor, speed / cfg.full_weight_speed))
-        w = w.ravel()
-        r = np.where(kind < 12, cfg.weight_force, cfg.weight_arm_acc) * scale**2
-        weighted = gamma_z * w[:, None]
-        h = gamma_z.T @ weighted + np.diag(r)
-        g = weighted.T @ (free - np.asarray(x_ref, dtype=np.float64).ravel())
-        # boxes: forces within their friction box, the arm's accelerations within what any torque allows
-        fz_max = cfg.fz_max / cfg.force_scale
-        comp = kind % 3
-        is_force = kind < 12
-        l_box = np.where(comp == 2, cfg.fz_min / cfg.force_scale, -cfg.mu * fz_max)
-        u_box = np.where(comp == 2, fz_max, cfg.mu * fz_max)
-        arm_limit = 1e3 if cfg.arm_moves else 0.0
-        l_box[~is_force], u_box[~is_force] = -arm_limit, arm_limit
-        rows, lo, hi = [], [], []
-        # friction pyramids: +-f_x - mu f_z <= 0, +-f_y - mu f_z <= 0 per stance foot and step
-        for col in np.flatnonzero(is_force & (comp == 2)):
-            for axis in (0, 1):
-                for sign in (1.0, -1.0):
-                    row = np.zeros(idx.size)
-                    row[col - 2 + axis] = sign * scale[col - 2 + axis]
-                    row[col] = -cfg.mu * scale[col]
-                    rows.append(row)
-                    lo.append(-np.inf)
-                    hi.append(0.0)
-        # the servos: M_aa ddq_a + b_a within the torque-speed line at the step's planned speed
-        acc_cols = np.flatnonzero(~is_force).reshape(n, 3)
-        for k in range(n if cfg.arm_moves else 0):  # a held arm: no torque to bound, and its path is fixed
-            tail = steps[k].tail
-            lower, upper = servo_torque_bounds(steps[k].arm_dq, self._stall, self._vmax)
-            block = np.zeros((3, idx.size))
-            block[:, acc_cols[k]] = tail.mass_matrix
-            rows.extend(block)
-            lo.extend(lower - tail.bias)
-            hi.extend(upper - tail.bias)
-        # the arm's positions and speeds along the horizon
-        states = np.arange(n)[:, None] * TNX
-        limits = ((ARM_Q, np.minimum(self._arm_lower, x0[ARM_Q]), np.maximum(self._arm_upper, x0[ARM_Q])),
-                  (ARM_DQ, np.minimum(-self._vmax, x0[ARM_DQ]), np.maximum(self._vmax, x0[ARM_DQ])))
-        for part, low, high in limits if cfg.arm_moves else ():
-            sel = (states + np.arange(part.start, part.stop)[None]).ravel()
-            rows.extend(gamma_z[sel])
-            lo.extend((np.tile(low, n) - free[sel]).tolist())
-            hi.extend((np.tile(high, n) - free[sel]).tolist())
-        return {"H": h, "g": g, "C": np.array(rows), "l": np.array(lo), "u": np.array(hi), "l_box": l_box,
-                "u_box": u_box, "scale": scale, "index": idx, "free": free, "gamma_z": gamma_z}
+        factor = min(1.0, max(cfg.standstill_weight_factor, speed / cfg.full_weight_speed)) \
+            if cfg.full_weight_speed > 0 else 1.0
+        f64 = functools.partial(np.ascontiguousarray, dtype=np.float64)
+        names = ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma_z")
+        arrays = tail_qp(f64(x0), x_ref, np.ascontiguousarray(contact, dtype=np.bool_), f64(feet), f64(path.mass),
+                         f64(path.inertia_world), f64(path.momentum_matrix), f64(path.momentum_jacobian),
+                         f64(path.mass_matrix), f64(path.bias), f64(path.arm_q), f64(path.arm_dq), self._weights,
+                         factor, self._arm_lower, self._arm_upper, self._vmax, self._stall, _GRAVITY, cfg.dt, cfg.mu,
+                         cfg.fz_min, cfg.fz_max, cfg.force_scale, cfg.weight_force, cfg.weight_arm_acc,
+                         cfg.arm_moves)
+        return dict(zip(names, arrays, strict=True))
 
     def _solve(self, qp: dict[str, np.ndarray], warm_start: np.ndarray | None) -> TailPlan:
         t1 = time.perf_counter()
