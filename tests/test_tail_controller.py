@@ -8,10 +8,13 @@ import pytest
 
 from wbc.arena.runner import run_episode
 from wbc.control.registry import get_controller
+from wbc.errors import ConfigError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.mpc.config_table import tail_config_from_table
 from wbc.mpc.tail_controller import TailControllerConfig, TailMpcController, ready_pose
 from wbc.mpc.tail_mpc import TailMpcConfig, TailPlan
 from wbc.robots.description import ARM_JOINTS
+from wbc.robots.registry import get_robot
 from wbc.scenario.push import Push
 from wbc.scenario.trial import CommandSchedule
 
@@ -92,3 +95,19 @@ def test_the_arms_command_follows_the_plan_with_its_inverse_dynamics_torque_fed_
     np.testing.assert_allclose(command.dq[ARM_JOINTS], start[3:] + acc * into, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(command.q[ARM_JOINTS], start[:3] + start[3:] * into + 0.5 * acc * into**2,
                                rtol=1e-12, atol=1e-12)
+
+
+def test_a_settings_file_runs_the_tail_mpc_with_the_arm_held_and_refuses_a_bad_pose(tmp_path):
+    path = tmp_path / "held.toml"
+    path.write_text("ready_q = [0.0, -1.1, -1.2]\n[tail]\narm_moves = false\n[observer]\n")
+    spec = get_controller("wbc.mpc.config_table:make_tail", config=path)
+    ctrl = spec.make(get_robot("a1-wx200", "actuated"))
+    assert isinstance(ctrl, TailMpcController)
+    assert ctrl.tail_config.tail.arm_moves is False and ctrl.tail_mpc.config.arm_moves is False
+    np.testing.assert_array_equal(ctrl.ready_q, [0.0, -1.1, -1.2])
+    with pytest.raises(ConfigError, match=r"TailControllerConfig.ready_q must be 3 finite angles"):
+        tail_config_from_table({"ready_q": [0.0, 1.0]})
+    with pytest.raises(ConfigError, match=r"TailControllerConfig.ready_q must be a number or an array of numbers"):
+        tail_config_from_table({"ready_q": "up"})
+    with pytest.raises(ConfigError, match=r"TailControllerConfig.tail: unknown key 'arm_move'; valid keys: .*"):
+        tail_config_from_table({"tail": {"arm_move": False}})

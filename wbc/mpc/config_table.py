@@ -10,11 +10,22 @@ with ``proxsuite.toml``::
     [mpc]
     qp_solver = "proxsuite"   # the MPC's QP backend (wbc.mpc.qp_solvers.QP_SOLVERS)
 
-The table's keys are the fields of `MpcControllerConfig`; a field that is itself a settings dataclass (``mpc``,
-``gait``, ``footholds``, ``estimator``, ``wbc``) takes a sub-table of its own fields, and a tuple a TOML array. Fields
-left out keep their defaults. An unknown key, or a value of the wrong kind, is a `ConfigError` that names the key and
-lists the valid ones; ranges are checked by the settings' own validation. The plug-in drives the robot with its arm
-actuated (``use_arm_momentum = false`` holds the arm still).
+The tail MPC (``mpc-tail``) takes its settings the same way through `make_tail`, the table's keys being the fields of
+`wbc.mpc.tail_controller.TailControllerConfig` (``base`` the MPC controller's, ``tail`` the tail MPC's)::
+
+    wbc compare mpc-tail wbc.mpc.config_table:make_tail --controller-config held.toml --scenario scenarios/push.toml
+
+with ``held.toml`` the ablation that keeps all of it but the arm's motion::
+
+    [tail]
+    arm_moves = false
+
+The table's keys are the fields of `MpcControllerConfig` (or `TailControllerConfig`); a field that is itself a
+settings dataclass (``mpc``, ``gait``, ``footholds``, ``estimator``, ``wbc``, ``base``, ``tail``, ``observer``) takes
+a sub-table of its own fields, a tuple a TOML array, an optional pose (``ready_q``) an array of numbers. Fields left
+out keep their defaults. An unknown key, or a value of the wrong kind, is a `ConfigError` that names the key and lists
+the valid ones; ranges are checked by the settings' own validation. The plug-ins drive the robot with its arm
+actuated (``use_arm_momentum = false`` holds the MPC's arm still, ``tail.arm_moves = false`` the tail MPC's).
 """
 
 from __future__ import annotations
@@ -25,9 +36,10 @@ from typing import Any, TypeVar
 
 from wbc.errors import ConfigError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
+from wbc.mpc.tail_controller import TailControllerConfig, TailMpcController
 from wbc.robots.description import RobotDescription
 
-__all__ = ["make", "mpc_config_from_table"]
+__all__ = ["make", "make_tail", "mpc_config_from_table", "tail_config_from_table"]
 
 _Settings = TypeVar("_Settings")
 
@@ -47,6 +59,20 @@ def mpc_config_from_table(table: Mapping[str, Any]) -> MpcControllerConfig:
 def make(desc: RobotDescription, config: Mapping[str, Any] | None = None) -> MpcController:
     """The centroidal MPC controller with the settings of a ``--controller-config`` table (defaults without one)."""
     return MpcController(desc, mpc_config_from_table(config or {}))
+
+
+def tail_config_from_table(table: Mapping[str, Any]) -> TailControllerConfig:
+    """The tail MPC controller's settings: the defaults, with the table's values in place of theirs.
+
+    Raises:
+        ConfigError: an unknown key, a value of the wrong kind, or settings their own validation refuses.
+    """
+    return _replaced(TailControllerConfig(), table, "TailControllerConfig")
+
+
+def make_tail(desc: RobotDescription, config: Mapping[str, Any] | None = None) -> TailMpcController:
+    """The tail MPC controller (``mpc-tail``) with the settings of a ``--controller-config`` table."""
+    return TailMpcController(desc, tail_config_from_table(config or {}))
 
 
 def _replaced(default: _Settings, table: Mapping[str, Any], where: str) -> _Settings:
@@ -70,6 +96,12 @@ def _value(default: Any, value: Any, where: str) -> Any:
         if not isinstance(value, list | tuple) or len(value) != len(default):
             raise ConfigError(f"{where} must be an array of {len(default)} values like {list(default)}, got {value!r}")
         return tuple(_value(d, v, f"{where}[{i}]") for i, (d, v) in enumerate(zip(default, value, strict=True)))
+    if default is None:  # an optional setting (e.g. `TailControllerConfig.ready_q`): numbers, or an array of them
+        if isinstance(value, list | tuple) and value and all(_is_number(v) for v in value):
+            return tuple(float(v) for v in value)
+        if _is_number(value):
+            return float(value)
+        raise ConfigError(f"{where} must be a number or an array of numbers, got {value!r}")
     if isinstance(default, bool) or isinstance(value, bool):
         if not (isinstance(default, bool) and isinstance(value, bool)):
             raise ConfigError(f"{where} must be {_kind(default)}, got {value!r}")
@@ -79,6 +111,10 @@ def _value(default: Any, value: Any, where: str) -> Any:
     if type(value) is not type(default):
         raise ConfigError(f"{where} must be {_kind(default)}, got {value!r}")
     return value
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def _kind(default: Any) -> str:

@@ -14,12 +14,14 @@ It is `wbc.mpc.controller.MpcController` (estimator, gait, footholds, leg layer)
 from __future__ import annotations
 
 import functools
+import math
 import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
 
+from wbc.errors import ConfigError
 from wbc.mpc.centroidal_mpc import MpcSolveError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.mpc.footholds import ground_height
@@ -57,6 +59,14 @@ class TailControllerConfig:
     replan_on_push: bool = True
     arm_kp: float = 20.0
     arm_kd: float = 0.5
+
+    def __post_init__(self) -> None:
+        if self.ready_q is not None and (len(self.ready_q) != 3 or not np.all(np.isfinite(self.ready_q))):
+            raise ConfigError(f"TailControllerConfig.ready_q must be 3 finite angles (waist, shoulder, elbow) [rad], "
+                              f"got {self.ready_q!r}")
+        if not (math.isfinite(self.arm_kp) and self.arm_kp >= 0 and math.isfinite(self.arm_kd) and self.arm_kd >= 0):
+            raise ConfigError(f"TailControllerConfig.arm_kp and arm_kd must be finite and >= 0, got {self.arm_kp!r}, "
+                              f"{self.arm_kd!r}")
 
 
 @functools.lru_cache(maxsize=4)
