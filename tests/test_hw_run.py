@@ -184,6 +184,13 @@ def test_a_stand_trial_with_the_devices_in_their_io_process(go1: UnitreeEmulator
     assert "devices in an I/O process" in printed.out
     hardware = json.loads((out / "hardware.json").read_text())
     assert hardware["backend"] == "unitree" and hardware["io_cpu_s"] is not None
+    # the controller's loop asked for real-time scheduling 10 below the devices' (granted or refused, said), on any
+    # CPU, and this thread has its own scheduling back
+    loop = hardware["controller_realtime"]
+    assert loop["asked"] == "SCHED_FIFO 40" and (loop["realtime"] or loop["refused"])
+    assert "controller loop" in printed.out and "controller loop's scheduling" in (out / "report.md").read_text()
+    if hasattr(os, "sched_getscheduler"):
+        assert os.sched_getscheduler(0) == os.SCHED_OTHER
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.backend == "unitree" and record.controller == "stand-noarm"
     assert any(not c.damping for c in go1.commands())  # the I/O process drove the motors

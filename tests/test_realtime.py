@@ -67,3 +67,26 @@ def test_the_grant_is_what_the_os_reports_in_a_child_process() -> None:
         assert grant.scheduling == "SCHED_FIFO 1" and grant.refused == ()
     else:  # refused: said, with the reason, and the process ran on
         assert grant.scheduling == "SCHED_OTHER" and grant.refused[0].startswith("SCHED_FIFO 1: ")
+
+
+@linux
+def test_a_controllers_loop_asks_for_its_thread_only_and_gets_its_scheduling_back() -> None:
+    code = ("import json, os, threading; from wbc.hardware.realtime import RealtimeRequest, controller_realtime; "
+            "seen = {}; "
+            "other = lambda: seen.setdefault('other', os.sched_getscheduler(0)); "
+            "before = os.sched_getscheduler(0); "
+            "ctx = controller_realtime(RealtimeRequest(priority=1, cpu=None, lock_memory=False)); "
+            "g = ctx.__enter__(); inside = os.sched_getscheduler(0); "
+            "t = threading.Thread(target=other); t.start(); t.join(); "
+            "ctx.__exit__(None, None, None); after = os.sched_getscheduler(0); "
+            "print(json.dumps(dict(grant=g.to_dict(), before=before, inside=inside, after=after, "
+            "started=seen['other'], fifo=os.SCHED_FIFO, other_policy=os.SCHED_OTHER)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=60)
+    seen = json.loads(out.stdout)
+    grant = RealtimeGrant.from_dict(seen["grant"])
+    assert grant.asked == "SCHED_FIFO 1" and seen["before"] == seen["other_policy"]
+    if grant.realtime:  # granted: the loop's thread and the threads it starts run real-time
+        assert seen["inside"] == seen["fifo"] and seen["started"] == seen["fifo"]
+    else:  # refused: said, and the loop runs on as before
+        assert seen["inside"] == seen["other_policy"] and grant.refused[0].startswith("SCHED_FIFO 1: ")
+    assert seen["after"] == seen["before"]  # restored when the trial ends

@@ -38,6 +38,7 @@ The results directory has the arena's format (``trials.csv`` with ``backend``, `
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -69,6 +70,7 @@ from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, Hardware
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.realtime import RealtimeGrant, RealtimeRequest, controller_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.scenario import check_published, load_scenario
 from wbc.scenario.trial import Trial
@@ -110,6 +112,8 @@ class HardwareTrialConfig:
         io_process: run the robot's devices (legs link, arm bus) in a child process with its own interpreter lock
             (`wbc.hardware.io_process.ProcessRobot`), so that the controller cannot starve them and a controller
             hung holding the lock still leaves the robot damped; False: in this process, beside the controller.
+        controller_realtime: the scheduling the controller's loop (this thread) asks for from the stand-up to the
+            end of the trial (`wbc.hardware.realtime.controller_realtime`), restored afterwards; None: none asked.
     """
 
     controller: str
@@ -134,6 +138,7 @@ class HardwareTrialConfig:
     controller_config: Path | None = None
     io_file: Path | None = None
     io_process: bool = True
+    controller_realtime: RealtimeRequest | None = None
 
     def __post_init__(self) -> None:
         if self.trial < 0 or self.seed < 0:
@@ -166,6 +171,8 @@ class HardwareTrialResult:
         trial_started_s: when the trial began on that clock (after the stand-up) [s].
         io_cpu_s: CPU time of the I/O process during the episode, every thread (the link's and the arm bus's) [s];
             None when the devices ran in this process.
+        controller_realtime: what the controller's loop asked for and got (`HardwareTrialConfig.controller_realtime`),
+            or None when it asked for nothing.
     """
 
     record: TrialRecord
@@ -180,6 +187,7 @@ class HardwareTrialResult:
     safety_events: tuple[SafetyEvent, ...]
     trial_started_s: float
     io_cpu_s: float | None = None
+    controller_realtime: RealtimeGrant | None = None
 
 
 def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
@@ -275,7 +283,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     if wall:
         freeze_heap()  # all is built: a full collection of it would stall the link and bus threads (interpreter.py)
     connected_at[0] = wall_time()
-    with robot:
+    scheduling = (controller_realtime(cfg.controller_realtime) if cfg.controller_realtime is not None
+                  else contextlib.nullcontext(None))
+    with scheduling as grant, robot:
         _stand_up(robot, safe, console, cfg.settle_s)
         started_s = safe.now()
         io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
@@ -302,7 +312,8 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                                   backend=hardware.backend, domain_applied=False, link=link, error=error)
     result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                  notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
-                                 safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s)
+                                 safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
+                                 controller_realtime=grant)
     _write_results(cfg, result, trial, published=scenario_published)
     return result
 
@@ -408,6 +419,8 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         "link": result.link.as_dict(prefix="") if result.link is not None else None,
         "trial_started_s": result.trial_started_s,
         "realtime": grant.to_dict() if grant is not None else None,  # the devices' process: asked, granted, refused
+        "controller_realtime": (result.controller_realtime.to_dict() if result.controller_realtime is not None
+                                else None),  # the controller's loop
         "safety_events": [e.to_dict() for e in result.safety_events],
         "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
     }
@@ -438,6 +451,8 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
         ("devices' scheduling (I/O process)",
          grant.describe() if grant is not None else "not requested: the devices ran in the controller's process, "
                                                     "with ordinary scheduling"),
+        ("controller loop's scheduling", result.controller_realtime.describe()
+         if result.controller_realtime is not None else "not requested: ordinary scheduling"),
         ("ticks played", f"{len(episode.t)} of {int(round(episode.duration_s / episode.control_dt))} at "
                          f"{1.0 / episode.control_dt:g} Hz"),
         ("controller act p50 / p99 / max [ms]",

@@ -43,7 +43,14 @@ from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, buil
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.io_process import build_process_robot
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
-from wbc.hardware.realtime import AUTO_CPU, NO_REALTIME, RealtimeGrant, RealtimeRequest, request_realtime
+from wbc.hardware.realtime import (
+    AUTO_CPU,
+    CONTROLLER_PRIORITY_BELOW,
+    NO_REALTIME,
+    RealtimeGrant,
+    RealtimeRequest,
+    request_realtime,
+)
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
 from wbc.hardware.serial_port_policy import is_emulated_port
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
@@ -495,6 +502,11 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
     if build is None:
         request = realtime_request(args, place="last")
         make = build_process_robot if args.io_process else build_hardware_robot
+        if not args.sim and not args.no_realtime:
+            # the controller's loop below the devices, on any CPU: it must write before their deadline, never
+            # pre-empt them (`controller_realtime`)
+            cfg = dataclasses.replace(cfg, controller_realtime=RealtimeRequest(
+                priority=max(1, args.rt_priority - CONTROLLER_PRIORITY_BELOW), cpu=None, lock_memory=False))
 
         def build(config: HardwareRobotConfig) -> HardwareRobot:
             return make(dataclasses.replace(config, realtime=request))

@@ -423,7 +423,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "lock, so that the controller cannot starve them, and that damps the legs when this process "
                        "dies (default; --no-io-process: in this process, for debugging: if it dies, the legs' motors "
                        "keep the last command they got, as the robot has no watchdog)")
-    add_realtime_options(hwrun, who="the I/O process (the devices' threads)", cpu="last")
+    add_realtime_options(hwrun, who="the I/O process (the devices' threads; the controller's loop asks for 10 below "
+                         "it, on any CPU, from the stand-up to the trial's end)", cpu="last")
     hwrun.add_argument("--settle", type=bounded_float(0.0, 60.0, unit="s"), default=1.0,
                        help="after a safety trip, hold the robot damped and read for S seconds, 0..60 (default 1)")
     hwrun.add_argument("--out", type=results_dir, default=None,

@@ -656,6 +656,8 @@ def print_hw_run(result: HardwareTrialResult) -> None:
         print(f"  {note}")
     if isinstance(robot.robot, HasRealtimeGrant):
         print_realtime_grant("I/O process", robot.robot.realtime_grant)
+    if result.controller_realtime is not None:
+        print_realtime_grant("controller loop", result.controller_realtime)
     print(f"  metrics ({r.metrics_source}): V_lin err {r.vlin_err:.3f} m/s, V_ang err {r.vang_err:.3f} rad/s, max "
           f"roll {r.max_roll_deg:.2f} deg, max pitch {r.max_pitch_deg:.2f} deg, energy {r.energy_j:.1f} J")
     print(f"  timing: act p50 {r.act_ms_p50:.3f} ms, p99 {r.act_ms_p99:.3f} ms (period {ep.control_dt * 1e3:g} ms); "

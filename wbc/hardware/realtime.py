@@ -23,27 +23,33 @@ the README (real robot): ``CAP_SYS_NICE`` and ``CAP_IPC_LOCK``, or ``rtprio`` an
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import os
 import resource
 import sys
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 
 from wbc.errors import ConfigError
 
 __all__ = [
     "AUTO_CPU",
+    "CONTROLLER_PRIORITY_BELOW",
     "DEFAULT_RT_PRIORITY",
     "NO_REALTIME",
     "RealtimeGrant",
     "RealtimeRequest",
+    "controller_realtime",
     "request_realtime",
 ]
 
 DEFAULT_RT_PRIORITY = 50
 """The default real-time priority (1..99): above every ordinary process, below the kernel's own interrupt threads on
 a PREEMPT_RT kernel (which also run at 50: a tie goes to whoever runs first)."""
+CONTROLLER_PRIORITY_BELOW = 10
+"""How far below the devices' priority the controller's loop asks for (`controller_realtime`)."""
 AUTO_CPU = -1
 """`RealtimeRequest.cpu`: choose a CPU (`RealtimeRequest.place`: the last, or the first, of the allowed set)."""
 _MCL_CURRENT, _MCL_FUTURE = 1, 2
@@ -251,3 +257,42 @@ def request_realtime(request: RealtimeRequest) -> RealtimeGrant:
     return RealtimeGrant(pid=os.getpid(), asked=", ".join(asked) or "nothing (ordinary scheduling)",
                          scheduling=_scheduling_now() if linux else "unknown (not Linux)", cpus=_allowed_cpus(),
                          memory_locked=locked, refused=tuple(refused))
+
+
+@contextlib.contextmanager
+def controller_realtime(request: RealtimeRequest) -> Iterator[RealtimeGrant]:
+    """Ask for `request` for the calling thread (a controller's loop) while the block runs; restore it afterwards.
+
+    The devices' process (`request_realtime`) sleeps most of each period; a controller's loop computes for most of
+    it and writes its command before the devices' write deadline. Under ordinary scheduling, on a busy computer, the
+    fair scheduler can hold such a thread off the CPU for longer than that deadline, and the robot is damped for a
+    pause that was not the controller's. Asked at a priority below the devices' (`CONTROLLER_PRIORITY_BELOW`), the
+    loop pre-empts every ordinary process and never the devices: a controller's loop in ros2_control is run the same
+    way. A loop that cannot keep its period still runs late, not starved; the kernel's real-time throttling (95 % of
+    each second by default) leaves the rest of the machine a share.
+
+    Only this thread's policy and CPU set change, and threads it starts meanwhile inherit them; both are restored
+    when the block ends. Memory is locked only if `request` asks (the whole process's, and unlocked afterwards).
+
+    Args:
+        request: what to ask for (`NO_REALTIME`: nothing; the block runs as it would without this).
+
+    Yields:
+        What was asked and granted.
+    """
+    linux = sys.platform.startswith("linux") and hasattr(os, "sched_setscheduler")
+    before = (os.sched_getscheduler(0), os.sched_getparam(0), _allowed_cpus()) if linux else None
+    grant = request_realtime(request)
+    try:
+        yield grant
+    finally:
+        if before is not None:
+            policy, param, cpus = before
+            with contextlib.suppress(OSError):
+                os.sched_setscheduler(0, policy, param)
+            if cpus:
+                with contextlib.suppress(OSError):
+                    os.sched_setaffinity(0, set(cpus))
+        if grant.memory_locked:
+            libc = ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)
+            libc.munlockall()
