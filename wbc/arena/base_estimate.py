@@ -55,6 +55,24 @@ class BaseEstimate:
         self.filter = BaseEstimator(dt, config)
         self._started = False
         self._latest: BaseTruth | None = None
+        self._load_compiled()
+
+    def _load_compiled(self) -> None:
+        """Fold two synthetic standing states in, then forget them: the filter's compiled step loads now.
+
+        It loads at its first call in a process (~0.25 s): on a robot, that was the stand-up's second tick, and the
+        link damped the motors for it (a write more than its 50 ms deadline after the first). Nothing of the two
+        updates survives (`reset`; the kinematics measure the CoM again at their next centroidal update).
+        """
+        n = len(self.desc.nominal_q)
+        state = RobotState(tick=0, time=0.0, q=np.asarray(self.desc.nominal_q, dtype=np.float64).copy(),
+                           dq=np.zeros(n), tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]),
+                           gyro_in_body=np.zeros(3), accel_in_body=np.array([0.0, 0.0, 9.81]),
+                           foot_force=np.full(4, 2.0 * self.contact_force))
+        for _ in range(2):
+            self.update(state)
+        self.kin.forget_com()
+        self.reset()
 
     def reset(self) -> None:
         """Forget the previous episode: the next update starts over at the feet's positions."""
