@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import pytest
 
+import wbc  # noqa: F401  (first: it pins the numeric kernels before numpy loads, wbc/_kernels.py)
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators import UnitreeEmulator
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
