@@ -66,7 +66,7 @@ SWEEP_EXECUTOR_KEYS = ["{}_wall_s", "{}_sweep_steps_per_s", "{}_ratio_to_batched
 HW_KEYS = ["robot", "seconds", "rate_hz", "transport", "emulator_process", "sends", "replies_received",
            "period_ms_p50", "period_ms_p99", "period_ms_max", "round_trip_ms_p50", "round_trip_ms_p99",
            "cpu_us_per_tick", "advance_ms_p50", "advance_ms_p99", "late_advances", "worst_lateness_ms", "rejects",
-           "emulator", "link", "safety", "machine"]
+           "emulator", "link", "safety", "machine", "load_1min", "realtime", "emulator_realtime"]
 HW_EMULATOR_KEYS = ["accepted", "rejected", "refused", "replies"]
 HW_LINK_KEYS = ["frames_sent", "damping_sent", "deadline_trips", "valid_states", "rejected_states", "foreign",
                 "state_age", "period_mean", "period_std", "period_min", "period_max", "overruns", "late_advances",
@@ -154,7 +154,8 @@ def _hw(safety: bool = True) -> HwBenchResult:
         advance_ms_p99=2.2, late_advances=1, worst_lateness_ms=0.25, rejects=0,
         emulator=EmulatorCounts(accepted=300, rejected={"length": 0, "header": 0, "crc": 1, "non_finite": 0},
                                 refused=0, replies=300),
-        link=LinkStats(frames_sent=250, damping_sent=3), safety=figures if safety else None, machine=MACHINE)
+        link=LinkStats(frames_sent=250, damping_sent=3), safety=figures if safety else None, machine=MACHINE,
+        load_1min=2.5, realtime="asked SCHED_FIFO 50; got SCHED_FIFO 50", emulator_realtime="nothing asked")
 
 
 def _latency(wire: bool = True) -> LatencyBenchResult:
@@ -314,6 +315,8 @@ def test_print_bench_hw_shows_the_counts_and_the_safety_figures(capsys):
     assert "250 sent, 249 states received, 0 rejected by the robot; emulator decoded 300, rejected 1" in text
     assert "e-stop          1.75 ms" in text and "stale timeout 100 ms" in text and "deadline misses 1" in text
     assert "    trip: 0.40 s run -> damped (stale): no state for 0.12 s" in text
+    assert ("scheduling      link side: asked SCHED_FIFO 50; got SCHED_FIFO 50; emulator: nothing asked; load "
+            "2.50") in text
     assert "Safety layer" not in _printed(printers.print_bench_hw, _hw(safety=False), capsys)
 
 

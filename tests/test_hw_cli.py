@@ -199,7 +199,13 @@ def test_bench_hw_json_has_the_keys(capsys: pytest.CaptureFixture[str]) -> None:
     assert list(result) == ["robot", "seconds", "rate_hz", "transport", "emulator_process", "sends",
                             "replies_received", "period_ms_p50", "period_ms_p99", "period_ms_max", "round_trip_ms_p50",
                             "round_trip_ms_p99", "cpu_us_per_tick", "advance_ms_p50", "advance_ms_p99",
-                            "late_advances", "worst_lateness_ms", "rejects", "emulator", "link", "safety", "machine"]
+                            "late_advances", "worst_lateness_ms", "rejects", "emulator", "link", "safety", "machine",
+                            "load_1min", "realtime", "emulator_realtime"]
+    # both ends asked for real-time scheduling (granted or refused, said), and this thread has its own back
+    assert result["realtime"].startswith("asked SCHED_FIFO 50, CPU")
+    assert result["emulator_realtime"].startswith("asked SCHED_FIFO 50, CPU")
+    if hasattr(os, "sched_getscheduler"):
+        assert os.sched_getscheduler(0) == os.SCHED_OTHER
     assert list(result["safety"]) == [
         "robot", "write_deadline_ms", "link_period_ms", "stale_timeout_ms", "estop_to_damping_ms",
         "silence_to_damping_ms", "stall_to_damping_ms", "state_fault_to_damping_ms", "stand_seconds", "stand_wall_s",

@@ -165,7 +165,9 @@ def _bench_hw(args: argparse.Namespace) -> int:
     if not args.stand > 0:
         raise ConfigError(f"--stand must be > 0 s, got {args.stand}")
     result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport,
-                      stand_seconds=None if args.no_safety else args.stand)
+                      stand_seconds=None if args.no_safety else args.stand,
+                      realtime=realtime_request(args, place="last"),
+                      emulator_realtime=realtime_request(args, place="first"))
     if args.json:
         printers.print_json(result.as_dict())
     else:

@@ -298,6 +298,8 @@ def build_parser() -> argparse.ArgumentParser:
                      "the wire) and a stand of this many seconds through it, in real time [s] (default 10)")
     bhw.add_argument("--no-safety", action="store_true", help="the link's timing only (no safety reactions, no stand)")
     bhw.add_argument("--json", action="store_true", help="print JSON")
+    add_realtime_options(bhw, who="the emulator's process (on the first CPU) and the link's side in the bench's own "
+                         "(on the last, as the I/O process on a robot)", cpu="first")
     bhw.set_defaults(handler="bench hw")
     blat = bench.add_parser("latency", help="the wire's loop latency, the sim delay that plays it, controllers' margin",
                             description="Measure the loop latency over the wire (the emulator's round trip, and a "

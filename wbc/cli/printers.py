@@ -390,6 +390,8 @@ def print_bench_hw(result: HwBenchResult) -> None:
     print(f"  round trip      p50 {result.round_trip_ms_p50:.3f} ms  p99 {result.round_trip_ms_p99:.3f} ms "
           "(command sent -> the state answering it taken by the link thread)")
     print(f"  link thread CPU {result.cpu_us_per_tick:.0f} us per tick")
+    print(f"  scheduling      link side: {result.realtime}; emulator: {result.emulator_realtime}; load "
+          f"{result.load_1min:.2f} (1 min)")
     print(f"  advance(period) p50 {result.advance_ms_p50:.3f} ms  p99 {result.advance_ms_p99:.3f} ms; late "
           f"advances {result.late_advances} (worst {result.worst_lateness_ms:.2f} ms)")
     emu = result.emulator

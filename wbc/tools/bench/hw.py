@@ -37,6 +37,7 @@ from wbc.control.stand import StandController, stand_command
 from wbc.errors import BenchError
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
+from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, controller_realtime, request_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
 from wbc.hardware.unitree import (
     REJECT_REASONS,
@@ -167,6 +168,10 @@ class HwBenchResult:
         link: the link's own counters.
         safety: `bench_safety`'s figures, or None when they were not measured.
         machine: `machine_description`.
+        load_1min: the 1-minute load average at the end of the measurement (nan where the OS has none).
+        realtime: what the bench's own process (the link's side, as the I/O process on a robot) asked the OS for
+            and got, in words (`wbc.hardware.realtime`).
+        emulator_realtime: the same for the emulator's process (it stands in for the robot's own processors).
     """
 
     robot: str
@@ -191,6 +196,9 @@ class HwBenchResult:
     link: LinkStats
     safety: SafetyBenchResult | None
     machine: str
+    load_1min: float = float("nan")
+    realtime: str = "nothing asked"
+    emulator_realtime: str = "nothing asked"
 
     def as_dict(self) -> dict[str, object]:
         """Plain dict (the JSON output of ``wbc bench hw``): ``emulator``, ``link`` and ``safety`` nested."""
@@ -243,28 +251,31 @@ class TimedTransport:
         self._inner.close()
 
 
-def serve_emulator_stdio(robot: str, seconds: float) -> None:
+def serve_emulator_stdio(robot: str, seconds: float, realtime: dict | None = None) -> None:
     """The emulator process's body (``bench_hw`` starts it): lockstep emulator on a free loopback port.
 
-    Writes the address as a JSON line, serves until a line arrives on stdin (or `seconds` plus a margin pass:
-    never longer), then writes the counts (`EmulatorCounts`) and any failure as a JSON line.
+    First asks the OS for what `realtime` names (`RealtimeRequest`'s fields; None: nothing), as ``wbc hw emulate``
+    does. Writes the address and that grant as a JSON line, serves until a line arrives on stdin (or `seconds` plus a
+    margin pass: never longer), then writes the counts (`EmulatorCounts`) and any failure as a JSON line.
     """
     realtime_switch_interval()  # the emulated robot answers its wires promptly
+    grant = request_realtime(RealtimeRequest(**realtime) if realtime is not None else NO_REALTIME)
     with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode="lockstep")) as emu:
         host, port = emu.address
-        print(json.dumps({"host": host, "port": port}), flush=True)
+        print(json.dumps({"host": host, "port": port, "realtime": grant.describe()}), flush=True)
         select.select([sys.stdin], [], [], seconds + _STOP_MARGIN)
         counts = EmulatorCounts.of(emu)
         failure = repr(emu.failure) if emu.failure is not None else None
     print(json.dumps({"counts": counts.as_dict(), "failure": failure}), flush=True)
 
 
-def _start_emulator_process(robot: str, seconds: float) -> subprocess.Popen[str]:
+def _start_emulator_process(robot: str, seconds: float, realtime: RealtimeRequest) -> subprocess.Popen[str]:
     # a fresh interpreter rather than multiprocessing: its spawn re-imports the parent's __main__, which for
     # ``python -m wbc.cli`` would run the command again
     root = str(Path(wbc.__file__).resolve().parents[1])
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
-    code = f"from wbc.tools.bench.hw import serve_emulator_stdio; serve_emulator_stdio({robot!r}, {seconds!r})"
+    code = (f"from wbc.tools.bench.hw import serve_emulator_stdio; serve_emulator_stdio({robot!r}, {seconds!r}, "
+            f"{asdict(realtime)!r})")
     return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                             env=env)
 
@@ -285,7 +296,8 @@ def _percentile_ms(values: np.ndarray, q: float) -> float:
 
 
 def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0,
-             transport: str = "udp", stand_seconds: float | None = 10.0) -> HwBenchResult:
+             transport: str = "udp", stand_seconds: float | None = 10.0, realtime: RealtimeRequest = NO_REALTIME,
+             emulator_realtime: RealtimeRequest = NO_REALTIME) -> HwBenchResult:
     """Time the low-level link over loopback against an emulator in its own process.
 
     Args:
@@ -294,6 +306,9 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         rate_hz: the link thread's rate, 200..1000 [Hz].
         transport: ``udp`` (our socket) or ``sdk`` (the vendor's Go1 SDK), see `UnitreeRobotConfig.transport`.
         stand_seconds: the stand of `bench_safety`, whose figures go under ``safety`` [s]; None: none of them.
+        realtime: what this thread asks the OS for while the link is measured (restored afterwards; the link thread
+            it starts inherits it), as the I/O process does on a robot.
+        emulator_realtime: what the emulator's process asks for.
 
     Returns:
         The send period's and round trip's percentiles, the link thread's CPU per tick, the control loop's advance
@@ -309,9 +324,10 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
                        transport=transport)  # validate first
     if not seconds > 0:
         raise BenchError(f"bench hw: --seconds must be > 0, got {seconds}")
-    proc = _start_emulator_process(robot, seconds)
+    proc = _start_emulator_process(robot, seconds, emulator_realtime)
     try:
         address = _read_json_line(proc, _START_TIMEOUT, "bind a port")
+        emulator_grant = str(address.get("realtime", "nothing asked"))
         host, port = address["host"], int(address["port"])
         cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=rate_hz,
                                  transport=transport)
@@ -319,7 +335,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         timed = TimedTransport(channel((cfg.local_host, 0), (host, port)))
         link = UnitreeRobot(cfg, transport=timed)
         try:
-            with link:
+            with controller_realtime(realtime) as grant, link:
                 hold = MotorCommand.hold(link.desc.nominal_q, 20.0, 0.5)
                 period = 1.0 / rate_hz
                 end = time.monotonic() + seconds
@@ -334,6 +350,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
                 timed.recording = False
                 stats = link.link_stats()
                 rejects = link.decode_stats.rejected
+                load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
         finally:
             timed.close()
         proc.stdin.write("stop\n")
@@ -381,6 +398,9 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         link=stats,
         safety=safety,
         machine=machine_description(),
+        load_1min=load,
+        realtime=grant.describe() if realtime != NO_REALTIME else "nothing asked",
+        emulator_realtime=emulator_grant,
     )
 
 
