@@ -9,8 +9,8 @@ NO_DEPS_LOCK := requirements/no-deps.lock
 # The extras the lock covers and the set-up installs: the suite runs its torch tests and the ONNX round trip (pi3
 # exported with torch, run with onnxruntime) instead of skipping them. The hardware extra's vendor SDK is locked apart,
 # in no-deps.lock, and installed without its dependencies (see requirements/no-deps.in); its other package,
-# dynamixel-sdk, is in dev.
-LOCKED_EXTRAS := dev,train,onnx
+# dynamixel-sdk, is in dev. The docs extra builds the documentation site (`make docs`).
+LOCKED_EXTRAS := dev,train,onnx,docs
 comma := ,
 # uv resolves the lock (for this Python and platform), keeping every pin that still fits unless told --upgrade. Where
 # pip is configured with find-links (PIP_FIND_LINKS), uv looks there too, as pip would: that is where a machine may
@@ -19,7 +19,7 @@ comma := ,
 UV_COMPILE = $(BIN)/uv pip compile --quiet --generate-hashes --python $(BIN)/python --no-emit-find-links \
 	--custom-compile-command "make lock" $(if $(PIP_FIND_LINKS),--find-links $(PIP_FIND_LINKS))
 
-.PHONY: demo test test-realtime test-all bench lint lock lock-upgrade clean
+.PHONY: demo test test-realtime test-all bench lint docs lock lock-upgrade clean
 
 # Every package at the version the lock names, each file checked against the lock's hashes (pip refuses any other);
 # the venv is cleared first, so nothing outside the lock stays. The project itself is installed last, editable,
@@ -51,6 +51,12 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(BIN)/ruff check wbc tests
+
+# The documentation site (mkdocs.yml, docs/) with its API reference generated from the docstrings, into build/site/.
+# --strict turns every warning into an error: a broken link or anchor, a page left out of the nav, a docstring that
+# cannot be read.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir build/site
 
 # Re-resolve the lock after a change of pyproject.toml or requirements/*.in, keeping every pin that still fits;
 # `make lock-upgrade` takes the newest versions the ranges allow. Re-record the goldens after either

@@ -18,7 +18,7 @@ Each is tried on its own; a refusal (no ``CAP_SYS_NICE`` and ``RLIMIT_RTPRIO`` 0
 ``RLIMIT_MEMLOCK``, a CPU not in the allowed set, not Linux) is recorded with its reason, and the process runs on as
 before with ordinary scheduling. The `RealtimeGrant` says what was asked, what was granted, and why not: ``wbc hw run``
 writes it to ``hardware.json`` and its report, ``wbc hw emulate`` prints it. What a team must grant a user for it is in
-the README (real robot): ``CAP_SYS_NICE`` and ``CAP_IPC_LOCK``, or ``rtprio`` and ``memlock`` limits.
+the docs (real-time scheduling): ``CAP_SYS_NICE`` and ``CAP_IPC_LOCK``, or ``rtprio`` and ``memlock`` limits.
 """
 
 from __future__ import annotations

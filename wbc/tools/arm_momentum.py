@@ -1,4 +1,4 @@
-"""How much angular momentum the arm actually moves during push recovery: the data behind the README's tail answer.
+"""How much angular momentum the arm actually moves during push recovery: the data behind the docs' tail answer.
 
 For each trial of a scenario band, the named controller plays the trial as `wbc run` plays it (`run_trial`), watched
 by a `WatchedController` in its place (which keeps the state each tick handed it). An observer of that loop computes,

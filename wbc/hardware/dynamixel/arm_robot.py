@@ -8,7 +8,7 @@ closes its own position loop at a higher rate. But its gains are registers of un
 no feed-forward torque and no pure damping (kp 0), and every change of kp or kd costs more register writes. With
 current mode, every command a controller or the safety layer sends means what it means on a Unitree motor: the
 stand hold, the ramp's soft gains, damping, a feed-forward torque. The cost is bandwidth: the loop closes over the
-bus, once per cycle, with one cycle of delay. The README gives the figures, measured with ``wbc bench arm``.
+bus, once per cycle, with one cycle of delay. The docs' benchmarks page gives the figures (``wbc bench arm``).
 
 The bus thread runs at `DynamixelArmConfig.rate_hz`. Each cycle:
 

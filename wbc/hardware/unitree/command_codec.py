@@ -120,7 +120,7 @@ def encode_command(layout: FrameLayout, cmd: MotorCommand, *, limits: JointTable
         layout: the robot's frame layout (`GO1_LAYOUT`, `A1_LAYOUT`).
         cmd: the legs' command, 12 joints in house order (FR, FL, RR, RL x hip, thigh, calf).
         limits: the robot's joint table (house order, legs first; arm rows are ignored). When given, q is clamped
-            to [lower, upper] [rad], dq to +-velocity_limit [rad/s] and tau to +-torque_limit [N m].
+            to the range from lower to upper [rad], dq to +-velocity_limit [rad/s] and tau to +-torque_limit [N m].
         remote: the remote block to send (LowCmd offset: Go1 566, A1 562); zeros if None, as InitCmdData leaves it.
 
     Returns:

@@ -7,8 +7,8 @@ breakdown of where each contender fails and the push-recovery curve), then compu
 writes ``paper.txt`` (what the command prints, `wbc.tools.paper.format.format_paper_table`) and ``paper.json`` beside
 the arena's files.
 
-The default size, `DEFAULT_TRIALS` trials x `DEFAULT_SEEDS` seed per band, fits a 2-core machine (README, "The
-paper's tables", for measured run times); the paper's protocol is 5 seeds and 2000 trials: ``--seeds 5 --trials
+The default size, `DEFAULT_TRIALS` trials x `DEFAULT_SEEDS` seed per band, fits a 2-core machine (the documentation's
+results pages give measured run times); the paper's protocol is 5 seeds and 2000 trials: ``--seeds 5 --trials
 400``. With one seed the cells show the mean's 95 % interval over trials, not a spread over seeds.
 """
 
