@@ -32,9 +32,7 @@ import numpy as np
 import pytest
 from conftest import Stepped
 
-from wbc.arena.base_estimate import BaseEstimate
 from wbc.arena.episode import Episode
-from wbc.arena.estimated_robot import EstimatedRobot
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import ScriptedKeys
 from wbc.arena.record import TrialRecord
@@ -45,6 +43,8 @@ from wbc.cli.parser import build_parser
 from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, StandUpError
+from wbc.estimation.base_estimate import BaseEstimate
+from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig

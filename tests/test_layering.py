@@ -101,7 +101,7 @@ def _loaded_after(code: str) -> set[str]:
 
 def test_core_types_and_errors_import_nothing_else_of_wbc():
     loaded = {m for m in _loaded_after("import wbc.types, wbc.errors") if m.split(".")[0] == "wbc"}
-    assert loaded == {"wbc", "wbc.types", "wbc.errors"}
+    assert loaded == {"wbc", "wbc._kernels", "wbc.types", "wbc.errors"}  # _kernels: numpy's, pinned before it loads
 
 
 def test_scenario_files_load_without_any_backend_or_mujoco():
@@ -137,3 +137,23 @@ def test_the_loop_and_the_controller_protocol_load_no_simulator_and_no_controlle
     heavy = {m for m in loaded if m.split(".")[0] in ("mujoco", "pinocchio", "placo", "casadi", "torch")
              or m.startswith(("wbc.mpc", "wbc.learned", "wbc.hardware.mujoco", "wbc.control.registry"))}
     assert not heavy, sorted(heavy)
+
+
+REFEREE = "wbc.arena"
+CONTENDERS = ("wbc.mpc", "wbc.learned")
+
+
+@pytest.mark.parametrize("path", [p for p in MODULES if _module_name(p).startswith(REFEREE + ".")
+                                  or _module_name(p) == REFEREE], ids=lambda p: str(p.relative_to(PACKAGE.parent)))
+def test_the_referee_imports_no_contender(path):
+    """The arena judges the controllers; it must not depend on one of them. What both need (kinematics, the base
+    estimate) lives below both, in `wbc.estimation`; the arena reaches controllers only by name, through the
+    registry of `wbc.control`."""
+    wrong = [f"{path.relative_to(PACKAGE.parent)}:{line}: imports {target}" for line, target in _imports(path)
+             if target == CONTENDERS or target.startswith(tuple(c + "." for c in CONTENDERS)) or target in CONTENDERS]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_estimation_package_loads_no_contender_and_no_simulator():
+    loaded = _loaded_after("import wbc.estimation.base_estimate, wbc.estimation.estimated_robot")
+    assert not {m for m in loaded if m.startswith(("wbc.mpc", "wbc.learned", "wbc.arena", "wbc.hardware.mujoco"))}

@@ -9,11 +9,11 @@ import pinocchio as pin
 import pytest
 
 from wbc.errors import MpcProblemFileError
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.hardware.mujoco.scene import build_scene
 from wbc.mpc import CentroidalModel, CentroidalMpc, CentroidalParams, MpcConfig, MpcProblem, SymbolicCentroidalModel
 from wbc.mpc.centroidal_model import euler_rates_matrix
 from wbc.mpc.gait import STAND, TROT, GaitConfig, GaitScheduler
-from wbc.mpc.kinematics import RobotKinematics
 from wbc.robots import get_robot, joint_table
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import FOOT_NAMES, LEG_NAMES

@@ -9,11 +9,11 @@ import pytest
 
 from wbc.errors import CommandError
 from wbc.estimation import BaseEstimator, EstimatorConfig
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.compiled import command_rows, contact_trust, liftoffs, swing_targets
 from wbc.mpc.controller import MpcController
 from wbc.mpc.footholds import MIN_CAPTURE_HEIGHT_M, FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT
-from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.leg_layer import LegLayer
 from wbc.robots import get_robot, joint_table
 from wbc.robots.conventions import G, quat_to_matrix

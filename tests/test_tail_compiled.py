@@ -8,8 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.centroidal_model import zoh_integral
-from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.tail_model import ArmTailPath, arm_tail, arm_tail_path, servo_torque_bounds
 from wbc.mpc.tail_mpc import ARM_DQ, ARM_Q, TNU, TNX, TailMpc, TailMpcConfig, TailStep, tail_dynamics
 from wbc.robots.conventions import GRAVITY

@@ -7,8 +7,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
-from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.tail_model import arm_tail, servo_torque_bounds, trunk_rate_change
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import ARM_JOINTS

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
-from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.tail_model import arm_tail, servo_torque_bounds
 from wbc.mpc.tail_mpc import TNU, TNX, TailMpc, TailMpcConfig, TailStep, tail_dynamics
 from wbc.robots.conventions import quat_to_matrix

@@ -4,8 +4,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from wbc.estimation import BaseEstimator, EstimatorConfig, _measurement_matrix, _noise, _steady_gain
-from wbc.mpc.kinematics import RobotKinematics
+from wbc.estimation.filter import BaseEstimator, EstimatorConfig, _measurement_matrix, _noise, _steady_gain
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
 from wbc.robots.joint_table import joint_table
 from wbc.robots.registry import get_robot

@@ -50,11 +50,9 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from wbc.arena.base_estimate import BaseEstimate
 from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.episode import Episode
 from wbc.arena.error_guard import ErrorGuard
-from wbc.arena.estimated_robot import EstimatedRobot
 from wbc.arena.finish import finish_results
 from wbc.arena.identity import HardwareRunIdentity, ScenarioRef
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
@@ -65,6 +63,8 @@ from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
 from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError, UnknownNameError
+from wbc.estimation.base_estimate import BaseEstimate
+from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.hardware.capabilities import HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap

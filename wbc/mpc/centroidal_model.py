@@ -24,15 +24,12 @@ check the analytic Jacobians against CasADi's and against finite differences.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import casadi as ca
 import numpy as np
-import pinocchio as pin
 
+from wbc.estimation.kinematics import CentroidalParams
 from wbc.mpc.condensing import linearize as _linearize
 from wbc.robots.conventions import GRAVITY
-from wbc.robots.pinocchio_model import PinocchioRobot
 
 __all__ = ["NX", "NU", "NF", "COM", "COM_VEL", "RPY", "MOMENTUM", "ARM_Q", "FORCES", "ARM_DQ",
            "CentroidalParams", "CentroidalModel", "SymbolicCentroidalModel", "euler_rates_matrix", "expm", "skew",
@@ -87,50 +84,6 @@ def expm(a: np.ndarray) -> np.ndarray:
     for _ in range(s):
         out = out @ out
     return out
-
-
-@dataclass(frozen=True)
-class CentroidalParams:
-    """Numeric quantities the model is evaluated with (frozen over one MPC horizon).
-
-    Attributes:
-        mass: total mass [kg].
-        inertia_world: composite centroidal inertia I_c, world axes, shape (3, 3) [kg m^2].
-        arm_momentum_matrix: A_arm, shape (3, 3) [kg m^2] (zeros without an actuated arm).
-        feet_world: foot positions r_i, shape (4, 3) [m].
-    """
-
-    mass: float
-    inertia_world: np.ndarray
-    arm_momentum_matrix: np.ndarray
-    feet_world: np.ndarray
-    inverse_inertia: np.ndarray = field(init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "inverse_inertia", np.linalg.inv(self.inertia_world))
-
-    def vector(self) -> np.ndarray:
-        """Flattened as the CasADi parameter vector: mass, I_c^-1 (9), A_arm (9), feet (12)."""
-        return np.concatenate([[self.mass], np.linalg.inv(self.inertia_world).ravel(),
-                               self.arm_momentum_matrix.ravel(), self.feet_world.ravel()])
-
-    @classmethod
-    def from_pinocchio(cls, robot: PinocchioRobot, q: np.ndarray, feet_world: np.ndarray,
-                       arm_v_idx: np.ndarray | None) -> CentroidalParams:
-        """Composite inertia and arm momentum matrix at configuration `q` (Pinocchio order).
-
-        Args:
-            robot: the Pinocchio model.
-            q: configuration.
-            feet_world: foot positions, shape (4, 3).
-            arm_v_idx: velocity indices of the arm joints (waist, shoulder, elbow), None without an actuated arm.
-        """
-        model, data = robot.model, robot.data
-        a_g = pin.computeCentroidalMap(model, data, q)
-        pin.ccrba(model, data, q, np.zeros(model.nv))
-        arm = np.zeros((3, 3)) if arm_v_idx is None else a_g[3:, arm_v_idx].copy()
-        return cls(mass=float(data.Ig.mass), inertia_world=data.Ig.inertia.copy(), arm_momentum_matrix=arm,
-                   feet_world=np.asarray(feet_world, dtype=np.float64).reshape(4, 3))
 
 
 class CentroidalModel:

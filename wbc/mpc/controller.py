@@ -27,12 +27,12 @@ import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.estimation import BaseEstimator, EstimatorConfig
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
 from wbc.mpc.compiled import command_rows, contact_trust
 from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler, gait_fits_steps
-from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.leg_layer import LegLayer
 from wbc.mpc.plan_targets import PlanTargets
 from wbc.mpc.reference import MotionReference

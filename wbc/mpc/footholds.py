@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.compiled import liftoffs, plan_footholds, swing_targets
 from wbc.mpc.gait import GaitConfig
-from wbc.mpc.kinematics import RobotKinematics
 
 __all__ = ["MIN_CAPTURE_HEIGHT_M", "FootholdConfig", "FootholdPlanner", "ground_height"]
 

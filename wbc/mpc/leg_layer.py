@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.compiled import leg_torques
-from wbc.mpc.kinematics import RobotKinematics
 
 __all__ = ["STANCE_FORCE_BEFORE_PLAN_N", "LegLayer"]
 

@@ -17,9 +17,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.centroidal_model import MOMENTUM, CentroidalParams
 from wbc.mpc.centroidal_mpc import MpcSolution
-from wbc.mpc.kinematics import RobotKinematics
 from wbc.robots.conventions import GRAVITY
 from wbc.robots.euler import rotation_from_rpy
 

@@ -22,10 +22,10 @@ import numpy as np
 import pinocchio as pin
 
 from wbc.errors import ConfigError
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.centroidal_mpc import MpcSolveError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.mpc.footholds import ground_height
-from wbc.mpc.kinematics import RobotKinematics
 from wbc.mpc.observer import MomentumObserver, ObserverConfig
 from wbc.mpc.tail_model import ArmTail, ArmTailPath, arm_leverage, arm_tail_path, choose_ready_pose
 from wbc.mpc.tail_mpc import ARM_DQ, ARM_Q, TNX, TailMpc, TailMpcConfig, TailPlan

@@ -3,7 +3,7 @@
 A thin layer over the Pinocchio model that speaks the house joint order and the world-frame quantities the MPC
 controller needs. It is split along what a tick can afford:
 
-- `tick` (every control tick, one compiled pass over the model's tree, `wbc.mpc.compiled.tree_pass`, equal to
+- `tick` (every control tick, one compiled pass over the model's tree, `wbc.estimation.tree.tree_pass`, equal to
   Pinocchio's to rounding): everything that does not depend on where the base is or how fast it moves: the base's
   rotation matrix, the feet and hips relative to the base (world axes), the feet's velocities relative to the base
   (omega x r + J dq), each leg's 3 x 3 foot Jacobian and the joints' gravity torques. The pass runs with the base at
@@ -20,16 +20,61 @@ caller that keeps one past the tick copies it.
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import pinocchio as pin
 
-from wbc.mpc.centroidal_model import CentroidalParams
-from wbc.mpc.compiled import TreeModel, tree_pass
-from wbc.mpc.compiled import place as place_kinematics
+from wbc.estimation.tree import TreeModel, tree_pass
+from wbc.estimation.tree import place as place_kinematics
 from wbc.robots.description import ARM_JOINTS, FOOT_NAMES, LEG_NAMES, RobotDescription
-from wbc.robots.pinocchio_model import build_pinocchio
+from wbc.robots.pinocchio_model import PinocchioRobot, build_pinocchio
 
-__all__ = ["RobotKinematics"]
+__all__ = ["CentroidalParams", "RobotKinematics"]
+
+
+@dataclass(frozen=True)
+class CentroidalParams:
+    """Numeric quantities the model is evaluated with (frozen over one MPC horizon).
+
+    Attributes:
+        mass: total mass [kg].
+        inertia_world: composite centroidal inertia I_c, world axes, shape (3, 3) [kg m^2].
+        arm_momentum_matrix: A_arm, shape (3, 3) [kg m^2] (zeros without an actuated arm).
+        feet_world: foot positions r_i, shape (4, 3) [m].
+    """
+
+    mass: float
+    inertia_world: np.ndarray
+    arm_momentum_matrix: np.ndarray
+    feet_world: np.ndarray
+    inverse_inertia: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "inverse_inertia", np.linalg.inv(self.inertia_world))
+
+    def vector(self) -> np.ndarray:
+        """Flattened as the CasADi parameter vector: mass, I_c^-1 (9), A_arm (9), feet (12)."""
+        return np.concatenate([[self.mass], np.linalg.inv(self.inertia_world).ravel(),
+                               self.arm_momentum_matrix.ravel(), self.feet_world.ravel()])
+
+    @classmethod
+    def from_pinocchio(cls, robot: PinocchioRobot, q: np.ndarray, feet_world: np.ndarray,
+                       arm_v_idx: np.ndarray | None) -> CentroidalParams:
+        """Composite inertia and arm momentum matrix at configuration `q` (Pinocchio order).
+
+        Args:
+            robot: the Pinocchio model.
+            q: configuration.
+            feet_world: foot positions, shape (4, 3).
+            arm_v_idx: velocity indices of the arm joints (waist, shoulder, elbow), None without an actuated arm.
+        """
+        model, data = robot.model, robot.data
+        a_g = pin.computeCentroidalMap(model, data, q)
+        pin.ccrba(model, data, q, np.zeros(model.nv))
+        arm = np.zeros((3, 3)) if arm_v_idx is None else a_g[3:, arm_v_idx].copy()
+        return cls(mass=float(data.Ig.mass), inertia_world=data.Ig.inertia.copy(), arm_momentum_matrix=arm,
+                   feet_world=np.asarray(feet_world, dtype=np.float64).reshape(4, 3))
 
 
 class RobotKinematics:

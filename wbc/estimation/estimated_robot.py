@@ -20,8 +20,8 @@ from typing import cast
 
 import numpy as np
 
-from wbc.arena.base_estimate import BaseEstimate
 from wbc.errors import ConfigError, RobotNotConnectedError
+from wbc.estimation.base_estimate import BaseEstimate
 from wbc.hardware.capabilities import HasSafetyEvents, SafetyEventLike
 from wbc.hardware.robot import Robot
 from wbc.robots.description import RobotDescription

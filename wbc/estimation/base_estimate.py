@@ -1,12 +1,12 @@
 """`BaseEstimate`: the base's pose and velocity from what a real robot measures, for metrics and for the viewer.
 
 A simulated trial takes its tracking metrics from the simulator's truth; a robot has none, so a hardware trial takes
-them from the same estimator the MPC runs on (`wbc.estimation.BaseEstimator`: IMU and leg kinematics). Orientation
-and angular velocity are the IMU's (quaternion and gyro); the position and velocity come from the filter, fed with
-the feet's positions and velocities relative to the base from leg kinematics (`wbc.mpc.kinematics.RobotKinematics`).
-A foot is trusted as standing in proportion to its force sensor's reading, up to `contact_force`: there is no gait
-schedule here (the controller's is its own), and a standing foot presses on its sensor whatever gait the controller
-runs.
+them from the same estimator the MPC runs on (`wbc.estimation.BaseEstimator`: IMU and leg kinematics).
+Orientation and angular velocity are the IMU's (quaternion and gyro); the position and velocity come from the
+filter, fed with the feet's positions and velocities relative to the base from leg kinematics
+(`wbc.estimation.kinematics.RobotKinematics`). A foot is trusted as standing in proportion to its force sensor's
+reading, up to `contact_force`: there is no gait schedule here (the controller's is its own), and a standing foot
+presses on its sensor whatever gait the controller runs.
 
 On a real robot the foot sensors read raw counts that need calibrating per robot (see the hardware notes); until
 then `contact_force` is the count at which a foot is fully trusted.
@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from wbc.errors import ConfigError
-from wbc.estimation import BaseEstimator, EstimatorConfig
-from wbc.mpc.kinematics import RobotKinematics
+from wbc.estimation.filter import BaseEstimator, EstimatorConfig
+from wbc.estimation.kinematics import RobotKinematics
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import RobotDescription
 from wbc.types import BaseTruth, RobotState
