@@ -6,39 +6,25 @@ upward arrow is still that arrow), and so does ``importlib.import_module`` with 
 
 from __future__ import annotations
 
-import ast
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parent.parent / "wbc"
+from import_graph import MODULE_FILES, imports
+from import_graph import module_name as _module_name
+
 ABOVE_ARENA = ("wbc.arena", "wbc.viz", "wbc.tools", "wbc.cli")
 """The arena and the packages allowed to import it (the viewer only in the modules that play or replay trials)."""
 
 
-def _module_name(path: Path) -> str:
-    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-
-
 def _imports(path: Path) -> set[str]:
     """Every module `path` imports (``from a import b`` counts as both ``a`` and ``a.b``)."""
-    out: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Import):
-            out |= {alias.name for alias in node.names}
-        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
-            out.add(node.module)
-            out |= {f"{node.module}.{alias.name}" for alias in node.names}
-        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "import_module"
-              and node.args and isinstance(node.args[0], ast.Constant) and isinstance(node.args[0].value, str)):
-            out.add(node.args[0].value)
-    return out
+    return {m for i in imports(path) for m in i.modules()}
 
 
 def _within(name: str, package: str) -> bool:
     return name == package or name.startswith(package + ".")
 
 
-MODULES = {_module_name(p): _imports(p) for p in sorted(PACKAGE.rglob("*.py"))}
+MODULES = {_module_name(p): _imports(p) for p in MODULE_FILES}
 
 
 def _offenders(modules: dict[str, set[str]], forbidden: tuple[str, ...]) -> dict[str, list[str]]:

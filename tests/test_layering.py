@@ -6,14 +6,13 @@ interpreter pulls in only what the rules promise (no MuJoCo behind the scenario 
 policies).
 """
 
-import ast
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
-
-PACKAGE = Path(__file__).resolve().parent.parent / "wbc"
+from import_graph import MODULE_FILES, PACKAGE, cycles, graph, imports
+from import_graph import module_name as _module_name
 
 LAYERS = (
     ("wbc.errors",),
@@ -50,30 +49,11 @@ def _room(module: str) -> str:
     raise AssertionError(f"{module} is in no room of LAYERS; add its package there")
 
 
-def _module_name(path: Path) -> str:
-    rel = path.relative_to(PACKAGE.parent).with_suffix("")
-    parts = rel.parts[:-1] if rel.name == "__init__" else rel.parts
-    return ".".join(parts)
-
-
 def _imports(path: Path) -> list[tuple[int, str]]:
-    name = _module_name(path)
-    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    out = []
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.Import):
-            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "wbc"]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                up = package.split(".")[: len(package.split(".")) - node.level + 1]
-                base = ".".join([*up, base] if base else up)
-            if base.split(".")[0] == "wbc":
-                out.append((node.lineno, base))
-    return out
+    return [(i.line, i.module) for i in imports(path) if i.module.split(".")[0] == "wbc"]
 
 
-MODULES = sorted(PACKAGE.rglob("*.py"))
+MODULES = MODULE_FILES
 
 
 def test_every_module_is_in_a_room():
@@ -157,3 +137,8 @@ def test_the_referee_imports_no_contender(path):
 def test_the_estimation_package_loads_no_contender_and_no_simulator():
     loaded = _loaded_after("import wbc.estimation.base_estimate, wbc.estimation.estimated_robot")
     assert not {m for m in loaded if m.startswith(("wbc.mpc", "wbc.learned", "wbc.arena", "wbc.hardware.mujoco"))}
+
+
+def test_no_module_is_in_an_import_cycle():
+    """Modules that import each other (even for type hints only) cannot be understood, tested or moved apart."""
+    assert cycles(graph()) == []

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import ast
 import json
 import os
 import subprocess
@@ -12,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from import_graph import imports
 
 from wbc.errors import NetworkMismatchError, PolicyInputError
 from wbc.learned.env.env import BatchedEnv
@@ -932,18 +932,7 @@ IMPORT_RULES = {  # package -> what none of its modules may import, anywhere in 
 
 def _imports(path: Path) -> list[tuple[str, int, bool]]:
     """(module, line, at module level) of every import in a file, `require("module")` calls included."""
-    tree = ast.parse(path.read_text(encoding="utf-8"))
-    top = set(map(id, tree.body))
-    out = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            out += [(alias.name, node.lineno, id(node) in top) for alias in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module:
-            out.append((node.module, node.lineno, id(node) in top))
-        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "require"
-              and node.args and isinstance(node.args[0], ast.Constant)):
-            out.append((node.args[0].value, node.lineno, True))
-    return out
+    return [(i.module, i.line, i.top_level) for i in imports(path)]
 
 
 @pytest.mark.parametrize("package", sorted(IMPORT_RULES))

@@ -18,16 +18,13 @@ from __future__ import annotations
 import dataclasses
 import textwrap
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
 
 from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.report import LABELS, cell_text, n80_text, number_text, p_text, signed_text
 from wbc.arena.summary import PairSummary
 from wbc.tools.paper.paper_numbers import PaperValue
+from wbc.tools.paper.result import PaperComparison, PaperTableResult
 from wbc.tools.paper.tables import Contender
-
-if TYPE_CHECKING:
-    from wbc.tools.paper.paper_table import PaperComparison, PaperTableResult
 
 __all__ = ["ALPHA", "display_name", "format_paper_table", "verdict"]
 

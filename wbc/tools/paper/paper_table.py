@@ -19,17 +19,15 @@ import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.error_guard import ControllerErrors
 from wbc.arena.record import TrialRecord
 from wbc.arena.report import compare_pair
-from wbc.arena.summary import PairSummary, Summary
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.tools.paper.format import format_paper_table
-from wbc.tools.paper.tables import TABLES, Contender, PaperTableSpec, resolve_contenders
+from wbc.tools.paper.result import PAPER_TRIALS_PER_BAND, PaperComparison, PaperTableResult
+from wbc.tools.paper.tables import TABLES, resolve_contenders
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TRIALS", "PAPER_TRIALS_PER_BAND", "PaperRunConfig", "PaperTableResult",
            "run_paper_table"]
@@ -39,10 +37,6 @@ DEFAULT_TRIALS = 10
 
 DEFAULT_SEEDS = 1
 """Seeds by default."""
-
-PAPER_TRIALS_PER_BAND = 2000
-"""The paper's trials per band and contender (over its 5 seeds), for the run-time estimate printed with each table."""
-
 
 @dataclass(frozen=True, kw_only=True)
 class PaperRunConfig:
@@ -81,90 +75,6 @@ class PaperRunConfig:
             raise UnknownNameError("paper table", self.table, tuple(TABLES))
         if self.trials < 1 or self.seeds < 1:
             raise ConfigError(f"--trials and --seeds must be >= 1, got {self.trials} and {self.seeds}")
-
-
-@dataclass(frozen=True)
-class PaperComparison:
-    """One of a paper table's comparisons in one band and metric.
-
-    Attributes:
-        question: what the comparison asks (the contrast's question).
-        pair: B - A on the same trials, A and B named by the contenders' keys.
-    """
-
-    question: str
-    pair: PairSummary
-
-    def to_json(self) -> dict[str, Any]:
-        """``paper.json``'s form: ``{"a", "b", "question", "band", "metric", ...}`` with the pair's fields."""
-        pair = self.pair.to_json()
-        return {"a": pair.pop("a"), "b": pair.pop("b"), "question": self.question, **pair}
-
-
-@dataclass(frozen=True, kw_only=True)
-class PaperTableResult:
-    """A played paper table.
-
-    Attributes:
-        spec: the table.
-        contenders: our rows as played (missing ones with controller None).
-        scenario: name, version, path, hash and whether it is published.
-        bands: the scenario's bands, in the order matched to the paper's columns.
-        trials: trials per band and seed.
-        seeds: the seeds.
-        summary: the arena's summary.
-        comparisons: one per (contrast, band, metric), its pair named by the contenders' keys.
-        failures: the arena's breakdown of where each contender fails (`wbc.arena.breakdown.breakdown`).
-        curve: the push-recovery curve (`wbc.arena.breakdown.recovery_curve`).
-        trial_wall_s: each controller's mean wall time per trial [s].
-        out_dir: the results directory.
-        played: trials played by this call.
-        wall_s: wall time of this call [s].
-        workers: worker processes used.
-        controller_errors: each contender that failed on a trial (`wbc.arena.compare.ArenaResult.controller_errors`);
-            its failed trials count against its success, and the command exits 1 naming it.
-    """
-
-    spec: PaperTableSpec
-    contenders: tuple[Contender, ...]
-    scenario: dict[str, Any]
-    bands: tuple[str, ...]
-    trials: int
-    seeds: tuple[int, ...]
-    summary: Summary
-    comparisons: tuple[PaperComparison, ...]
-    failures: dict[str, Any]
-    curve: dict[str, Any]
-    trial_wall_s: dict[str, float]
-    out_dir: Path
-    played: int
-    wall_s: float
-    workers: int | None
-    controller_errors: tuple[ControllerErrors, ...] = ()
-
-    @property
-    def paper_protocol_cpu_h(self) -> float:
-        """CPU hours the paper's protocol (`PAPER_TRIALS_PER_BAND` per band and contender) would take here.
-
-        Estimated from this run's mean wall time per trial of each controller (one core per trial; a trial that
-        falls ends early, so a controller that falls less costs more).
-        """
-        return sum(self.trial_wall_s.values()) * PAPER_TRIALS_PER_BAND * len(self.bands) / 3600.0
-
-    def as_dict(self) -> dict[str, Any]:
-        """JSON-serialisable (``paper.json``)."""
-        return {
-            "table": self.spec.name, "title": self.spec.title,
-            "contenders": [{"key": c.key, "row": c.row, "family": c.family, "controller": c.controller,
-                            "note": c.note} for c in self.contenders],
-            "scenario": self.scenario, "bands": list(self.bands), "paper_columns": list(self.spec.paper_columns),
-            "trials": self.trials, "seeds": list(self.seeds),
-            "comparisons": [c.to_json() for c in self.comparisons],
-            "trial_wall_s": self.trial_wall_s, "wall_s": self.wall_s, "played": self.played,
-            "workers": self.workers, "paper_protocol_cpu_h": self.paper_protocol_cpu_h,
-            "paper": {row: {m: [{"mean": v.mean, "std": v.std} for v in values] for m, values in cells.items()}
-                      for row, cells in self.spec.paper.items()},
-        }
 
 
 def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
