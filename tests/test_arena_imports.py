@@ -39,7 +39,8 @@ def test_the_source_tree_is_found():
 
 def test_the_viewer_imports_the_arena_only_where_it_plays_or_replays_trials():
     viz = {m: i for m, i in MODULES.items() if _within(m, "wbc.viz")}
-    allowed = {"wbc.viz.view", "wbc.viz.replay", "wbc.viz.live"}
+    # ab plays both runs of an A / B trial; signals reads a played or stored episode into the page's plots
+    allowed = {"wbc.viz.view", "wbc.viz.replay", "wbc.viz.live", "wbc.viz.ab", "wbc.viz.signals"}
     assert set(_offenders(viz, ("wbc.arena",))) <= allowed
 
 

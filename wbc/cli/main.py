@@ -695,7 +695,15 @@ def _view(args: argparse.Namespace) -> int:
         player=PlayerConfig(speed=args.speed, pause_at=tuple(args.pause_at or ()), step_s=args.step,
                             start_paused=args.paused),
         open_browser=args.open, wait_for_browser=args.wait,
+        save_episode=Path(args.save_episode) if args.save_episode else None,
     )
+    ctrls = list(args.ctrl or [])
+    if len(ctrls) > 2:
+        raise ConfigError(f"wbc view takes one controller, or two for an A / B view; got {len(ctrls)}: "
+                          f"{' '.join(ctrls)}")
+    if len(ctrls) == 2:
+        return _view_ab(args, ctrls, cfg)
+    args.ctrl = ctrls[0] if ctrls else None
     if args.episode is not None:
         from wbc.viz.replay import load_stored_episode
 
@@ -719,6 +727,42 @@ def _view(args: argparse.Namespace) -> int:
         printers.print_viewed_trial(what, result.trial_record)
     if result.recording is not None:
         printers.print_recording(what, result.frames_recorded, result.recording)
+        if args.at is not None:
+            print(f"open: {result.recording.resolve().as_uri()}#t={args.at:g}")
+    return 0
+
+
+def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
+    """``wbc view A B``: both controllers' runs of one trial in one recorded page, B as a ghost."""
+    from wbc.viz.view import replay_ab, view_ab
+
+    path = Path(args.record) if args.record else Path(f"ab-{ctrls[0]}-{ctrls[1]}-trial{args.trial}.html")
+    if args.episode is not None:
+        from wbc.viz.replay import load_stored_episode
+
+        first, second = (load_stored_episode(args.episode, args.trial, controller=c, band=args.band, seed=args.seed)
+                         for c in ctrls)
+        result = replay_ab(first, second, cfg, path)
+    else:
+        if args.scenario is None:
+            raise ConfigError("wbc view A B needs --scenario FILE --trial I (play the trial with both), or "
+                              "--episode RESULTS_DIR --trial I (their stored runs)")
+        scenario = load_scenario(args.scenario)
+        trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
+        if args.duration is not None:
+            if not 0 < args.duration <= trial.duration_s:
+                raise ConfigError(f"--duration must be in (0, {trial.duration_s}] s, got {args.duration}")
+            trial = dataclasses.replace(trial, duration_s=args.duration)
+        specs = tuple(get_controller(c, config=args.controller_config, io=args.io) for c in ctrls)
+        result = view_ab(trial, specs, cfg, path)
+    for name, fall in zip(result.names, result.fall_s, strict=True):
+        print(f"{name}: " + ("survived" if fall is None else f"fell at {fall:.2f} s"))
+    if result.divergence_s is not None:
+        print(f"first divergence at {result.divergence_s:.2f} s")
+    at = args.at if args.at is not None else result.divergence_s
+    print(f"recorded {result.frames[0]} + {result.frames[1]} frames of {result.names[0]} vs {result.names[1]} "
+          f"(ghost) to {result.recording}")
+    print(f"open: {result.recording.resolve().as_uri()}" + (f"#t={at:g}" if at is not None else ""))
     return 0
 
 

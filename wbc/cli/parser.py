@@ -505,7 +505,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "arm, terrain, push arrow, contact forces, command, MPC plan), or replay a stored "
                           "episode (--episode). With --record only, nothing is served: the trial is written as one "
                           "self-contained HTML file. Keys while live (then Enter): p pause, s step, + / - speed, q.")
-    view.add_argument("ctrl", nargs="?", default=None, help=f"controller: one of {_NAMES_HELP}")
+    view.add_argument("ctrl", nargs="*", default=[], metavar="CTRL",
+                      help=f"controller: one of {_NAMES_HELP}; two (A B) for an A / B view of the same trial, B "
+                      "drawn as a ghost (with --episode: two of the run's controllers)")
     view.add_argument("--scenario", default=None, help="scenario file (e.g. scenarios/push.toml)")
     view.add_argument("--trial", type=_TRIAL, required=True,
                       help=f"trial index within (band, seed), 0..{MAX_TRIALS - 1}")
@@ -528,6 +530,10 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--fps", type=bounded_float(0.0, 240.0, lo_open=True), default=50.0,
                       help="with --record: frames per second, up to 240 (default 50)")
     view.add_argument("--live", action="store_true", help="with --record: also stream live")
+    view.add_argument("--save-episode", default=None, metavar="FILE.npz",
+                      help="write the episode played, with the pushes and commands set from the live page")
+    view.add_argument("--at", type=bounded_float(0.0, MAX_DURATION_S, unit="s"), default=None, metavar="T",
+                      help="open the recorded page at trial time T (its URL ends #t=T)")
     view.add_argument("--open", action="store_true", help="open the page in the default browser")
     view.add_argument("--wait", action="store_true", help="start once a browser has opened the page")
     add_controller_file_options(view, repeatable=False)

@@ -47,8 +47,8 @@ class Pose:
     """Where a scene node is and whether it shows.
 
     Attributes:
-        matrix: homogeneous transform of the node in its parent (the world for every node here), may include
-            scale, shape (4, 4).
+        matrix: homogeneous transform of the node in its parent (the world, except for the cells of the MPC's
+            gait chart, posed in the chart's frame), may include scale, shape (4, 4).
         visible: whether the node (and its children) is drawn.
     """
 

@@ -9,9 +9,7 @@ __all__ = ["arrow_transforms", "rotation_y_to", "translation"]
 
 def translation(p: np.ndarray) -> np.ndarray:
     """Homogeneous translation by `p` [m], shape (4, 4)."""
-    m = np.eye(4)
-    m[:3, 3] = p
-    return m
+    return np.array([[1.0, 0.0, 0.0, p[0]], [0.0, 1.0, 0.0, p[1]], [0.0, 0.0, 1.0, p[2]], [0.0, 0.0, 0.0, 1.0]])
 
 
 def rotation_y_to(direction: np.ndarray) -> np.ndarray:

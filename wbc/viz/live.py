@@ -27,6 +27,7 @@ from wbc.viz.frame import Pose, VizFrame
 from wbc.viz.player import Player
 from wbc.viz.record import Recording
 from wbc.viz.server import MeshcatServer
+from wbc.viz.signals import TrialSignals
 from wbc.viz.sim_frames import SimulatedWorld, frame_from_sim
 from wbc.viz.state_frames import frame_from_estimate
 
@@ -105,7 +106,8 @@ class LiveObserver:
     Args:
         viewer: where to draw (None: draw nowhere, e.g. when only recording).
         player: pacing (None: no pacing, every tick as fast as possible); not with `background`.
-        recording_fps: when set, also record every episode (see `recordings`) at this rate [1/s].
+        recording_fps: when set, also record every episode (see `recordings`) at this rate [1/s], with its time
+            plots (see `signals`, one per recording).
         background: draw on a thread of this observer's instead of in the tick.
     """
 
@@ -118,6 +120,9 @@ class LiveObserver:
         self.player = player
         self.recording_fps = recording_fps
         self.recordings: list[Recording] = []
+        self.signals: list[TrialSignals] = []
+        self.name = ""
+        self.last_frame: VizFrame | None = None
         self._last_t = float("inf")
         self._make: FrameMaker | None = None
         self._told = False
@@ -151,6 +156,7 @@ class LiveObserver:
             self.viewer.load(scene[0]())
         if self.recording_fps is not None:
             self.recordings.append(Recording(scene[0](), fps=self.recording_fps))
+            self.signals.append(TrialSignals(self.name))
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """One tick (the `wbc.arena.runner.TickObserver` signature)."""
@@ -171,15 +177,24 @@ class LiveObserver:
         keyed = rec is not None and int(round(t * rec.fps)) > rec.last_key
         if not (draw or keyed):
             return
-        frame = self._make(robot, controller, command, t)
+        frame = self.last_frame = self._make(robot, controller, command, t)
         if keyed:
             rec.add(frame)
+            self._sample(frame, robot)
         if draw:
             if self.player is not None:
                 self.player.wait(t)
             self.viewer.show(frame)
             if self.player is not None:
                 self.player.drew(t)  # blocks here while paused, the paused frame on screen
+
+    def _sample(self, frame: VizFrame, robot: Robot) -> None:
+        """Sample the time plots of the episode being recorded with the frame just keyed."""
+        plan_com = None
+        if frame.plan is not None and len(frame.plan.get("com_path_in_world", ())):
+            path = np.asarray(frame.plan["com_path_in_world"])
+            plan_com = path[min(1, len(path) - 1)]
+        self.signals[-1].add_frame(frame, robot if isinstance(robot, SimulatedWorld) else None, plan_com)
 
     def _tick_in_background(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         rec = self.recordings[-1] if self.recording_fps is not None else None
@@ -190,6 +205,7 @@ class LiveObserver:
         frame = self._make(robot, controller, command, t)
         if keyed:
             rec.add(frame)
+            self._sample(frame, robot)
         if draw:
             self._last_drawn = t
             self._drawer.submit(frame)

@@ -9,7 +9,8 @@ of transforms and visibility flags, which a live viewer sends and a recording tu
 - ``wbc/command`` the commanded horizontal velocity from the trunk, in the yaw-aligned frame;
 - ``wbc/plan/com/<i>`` predicted CoM path; ``wbc/plan/footholds/<leg>`` planned footholds;
   ``wbc/plan/schedule/<leg>/<i>`` the contact schedule as a gait chart standing above the robot (rows FL, FR,
-  RL, RR from the top, one column per plan step along the heading, a dark cell where the leg is in stance);
+  RL, RR from the top, one column per plan step along the heading, a dark cell where the leg is in stance; the
+  cells are posed in the chart's frame, ``wbc/plan/schedule``, which follows the trunk);
   ``wbc/plan/arm/<i>`` the arm tip along the arm plan; ``wbc/plan/forces/<leg>`` the first planned contact force
   at each planned foothold.
 """
@@ -155,6 +156,10 @@ class PlanOverlay:
         self.horizon = horizon
         self.forces = [Arrow(f"{self.root}/forces/{leg}", 0x18B5C4, radius=0.005, head_length=0.02)
                        for leg in PIN_LEGS]
+        # the chart's cells at their fixed places in the chart, (hidden, shown), by leg and plan step
+        self._cells = [[(Pose(m, visible=False), Pose(m)) for m in (
+            translation(np.array([(i - 0.5 * horizon) * self.cell_dx, 0.0, (1.5 - k) * self.cell_dy]))
+            for i in range(horizon))] for k in range(len(PIN_LEGS))]
 
     def setup(self, vis: meshcat.Visualizer) -> None:
         """Create the plan's objects, hidden."""
@@ -196,15 +201,15 @@ class PlanOverlay:
         for k, leg in enumerate(PIN_LEGS):
             out[f"{self.root}/footholds/{leg}"] = Pose(translation(holds[k]) @ upright)
         schedule = np.asarray(plan["contact_schedule"], dtype=bool)
-        origin = frame.qpos[:3] + np.array([0.0, 0.0, self.strip_height])
+        # the chart moves as one (its group's transform); its cells only show or hide, at fixed places in it
+        strip = np.eye(4)
+        strip[:3, :3] = rot_z
+        strip[:3, 3] = frame.qpos[:3] + np.array([0.0, 0.0, self.strip_height])
+        out[f"{self.root}/schedule"] = Pose(strip)
         for k, leg in enumerate(PIN_LEGS):
             for i in range(self.horizon):
                 on = i < len(schedule) and bool(schedule[i, k])
-                local = np.array([(i - 0.5 * self.horizon) * self.cell_dx, 0.0, (1.5 - k) * self.cell_dy])
-                m = np.eye(4)
-                m[:3, :3] = rot_z
-                m[:3, 3] = origin + rot_z @ local
-                out[f"{self.root}/schedule/{leg}/{i}"] = Pose(m, visible=on)
+                out[f"{self.root}/schedule/{leg}/{i}"] = self._cells[k][i][on]
         forces = np.asarray(plan["forces_in_world"])
         for k, a in enumerate(self.forces):
             f = forces[0, k] if len(forces) else np.zeros(3)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import base64
 import html as html_lib
+import math
 from pathlib import Path
 
 import meshcat
@@ -22,14 +23,17 @@ import numpy as np
 import umsgpack
 from meshcat.animation import Animation
 from meshcat.servers.zmqserver import VIEWER_ROOT
-from meshcat.transformations import quaternion_from_matrix
 
 from wbc.errors import ConfigError
 from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
 from wbc.viz.frame import Pose, VizFrame
 
-__all__ = ["Recording"]
+__all__ = ["GHOST_COLOR", "Recording", "viewer_script"]
+
+GHOST_COLOR = (0.35, 0.55, 1.0, 0.35)
+"""RGB and opacity of a ghost robot (the second run of an A / B view)."""
+_GHOST_SKIP = ("wbc/contacts", "wbc/command", "wbc/plan", "/")
 
 _APPLY_SCRIPT = """
 // In order and synchronously: later commands (the animation) must win over earlier ones (initial visibility).
@@ -60,6 +64,11 @@ _SEEK_SCRIPT = """
 """
 
 
+def viewer_script() -> str:
+    """The viewer script of meshcat (three.js and the viewer), as shipped by the meshcat package."""
+    return (Path(VIEWER_ROOT) / "main.min.js").read_text(encoding="utf-8")
+
+
 class _SceneWindow:
     """A meshcat "window" that stores the scene tree (objects, transforms, properties, animation) in memory."""
 
@@ -77,7 +86,8 @@ class _SceneWindow:
         """Store one meshcat command, as the meshcat server's tree would."""
         data = command.lower()
         node = self._node(data["path"])
-        packed = umsgpack.packb(data)
+        # single precision: 4 bytes a number instead of 8 (a micrometre at 10 m); the browser holds float32 anyway
+        packed = umsgpack.packb(data, force_float_precision="single")
         kind = data["type"]
         if kind == "set_object":
             node["object"] = packed
@@ -125,20 +135,72 @@ class _Track:
             self.keys.append((frame, value))
         self._last = (frame, value)
 
+    def hold(self, frame: int) -> None:
+        """The value last added holds at `frame` too."""
+        self._last = (frame, self._last[1])
+
 
 def _same(a: object, b: object) -> bool:
     if isinstance(a, list):
-        return bool(np.allclose(a, b, atol=1e-5))
+        for x, y in zip(a, b, strict=True):
+            if abs(x - y) > 1e-5:
+                return False
+        return True
     return a == b
 
 
 def _decompose(m: np.ndarray) -> tuple[list[float], list[float], list[float]]:
     """(position, quaternion x y z w, scale) of a transform with positive scale along its axes."""
-    scale = np.linalg.norm(m[:3, :3], axis=0)
-    rot = np.eye(4)
-    rot[:3, :3] = m[:3, :3] / np.where(scale > 0, scale, 1.0)
-    w, x, y, z = quaternion_from_matrix(rot)
-    return m[:3, 3].tolist(), [float(x), float(y), float(z), float(w)], scale.tolist()
+    rows = m.tolist()
+    cols = [[rows[0][j], rows[1][j], rows[2][j]] for j in range(3)]
+    scale = [math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) for c in cols]
+    r = [[cols[j][i] / scale[j] if scale[j] > 0 else cols[j][i] for j in range(3)] for i in range(3)]
+    return [rows[0][3], rows[1][3], rows[2][3]], _quaternion(r), scale
+
+
+def _quaternion(r: list[list[float]]) -> list[float]:
+    """Unit quaternion (x, y, z, w) of the rotation matrix `r` (rows), by the largest of its four forms."""
+    trace = r[0][0] + r[1][1] + r[2][2]
+    if trace > 0.0:
+        s = 0.5 / math.sqrt(trace + 1.0)
+        q = [(r[2][1] - r[1][2]) * s, (r[0][2] - r[2][0]) * s, (r[1][0] - r[0][1]) * s, 0.25 / s]
+    elif r[0][0] > r[1][1] and r[0][0] > r[2][2]:
+        s = 2.0 * math.sqrt(max(1.0 + r[0][0] - r[1][1] - r[2][2], 1e-12))
+        q = [0.25 * s, (r[0][1] + r[1][0]) / s, (r[0][2] + r[2][0]) / s, (r[2][1] - r[1][2]) / s]
+    elif r[1][1] > r[2][2]:
+        s = 2.0 * math.sqrt(max(1.0 + r[1][1] - r[0][0] - r[2][2], 1e-12))
+        q = [(r[0][1] + r[1][0]) / s, 0.25 * s, (r[1][2] + r[2][1]) / s, (r[0][2] - r[2][0]) / s]
+    else:
+        s = 2.0 * math.sqrt(max(1.0 + r[2][2] - r[0][0] - r[1][1], 1e-12))
+        q = [(r[0][2] + r[2][0]) / s, (r[1][2] + r[2][1]) / s, 0.25 * s, (r[1][0] - r[0][1]) / s]
+    if q[3] < 0.0:  # one sign for the same rotation: keys compare equal when the pose holds
+        q = [-x for x in q]
+    n = math.sqrt(sum(x * x for x in q))
+    return [x / n for x in q]
+
+
+class _AnimationCommand:
+    """meshcat's ``set_animation`` with each numeric track as two float32 arrays (frame times, values).
+
+    three.js reads a track either as a list of {time, value} keys (what meshcat's Python writes) or as ``times``
+    and ``values`` arrays; the arrays are a quarter of the size and cost nothing to pack. Boolean tracks (few keys:
+    only where visibility flips) keep the key list.
+    """
+
+    def __init__(self, clips: list[tuple[str, list[dict[str, object]]]], fps: float, play: bool) -> None:
+        self.clips, self.fps, self.play = clips, fps, play
+
+    def lower(self) -> dict[str, object]:
+        return {"type": "set_animation", "path": "", "options": {"play": self.play, "repetitions": 1},
+                "animations": [{"path": path, "clip": {"fps": self.fps, "name": "default", "tracks": tracks}}
+                               for path, tracks in self.clips]}
+
+
+def _floats(values: list) -> umsgpack.Ext:
+    return umsgpack.Ext(_FLOAT32_EXT, np.asarray(values, dtype="<f4").tobytes())
+
+
+_FLOAT32_EXT = 0x17  # meshcat's msgpack extension code for a Float32Array
 
 
 class Recording:
@@ -161,8 +223,12 @@ class Recording:
         self.vis = meshcat.Visualizer(window=self.window)
         content.setup(self.vis)
         self._tracks: dict[tuple[str, str], _Track] = {}
+        self._full: dict[str, str] = {}  # scene path -> full path
+        self._last_matrix: dict[str, bytes] = {}  # full path -> its last keyed transform
         self._last_frame = -1
         self.frames = 0
+        self._ghosts: list[tuple[SceneContent, meshcat.Visualizer]] = []
+        self._ghost_last: list[int] = []
 
     @property
     def last_key(self) -> int:
@@ -189,19 +255,64 @@ class Recording:
             self._key(k, path, pose)
         return True
 
+    def add_ghost(self, content: SceneContent, *, color: tuple[float, float, float, float] = GHOST_COLOR) -> int:
+        """Add a second robot to the scene, drawn translucent (a ghost), under ``ghost<i>/``; its index.
+
+        The ghost's ground, contact arrows, command arrow and plan are not drawn (the first robot's are); its push
+        arrow is. Its camera does not move (the first robot's follows the trunk).
+        """
+        i = len(self._ghosts)
+        content.follow = False
+        vis = self.vis[f"ghost{i}"]
+        content.setup(vis)
+        for path in content.paths["robot"] + content.paths["arm"]:
+            vis[path].set_property("color", list(color))
+        for path in content.paths["terrain"]:
+            vis[path].set_property("visible", False)
+        self._ghosts.append((content, vis))
+        self._ghost_last.append(-1)
+        return i
+
+    def add_to_ghost(self, i: int, frame: VizFrame) -> bool:
+        """Add `frame` of ghost `i` (see `add_ghost`) at its time; True if keyed."""
+        content, vis = self._ghosts[i]
+        k = int(round(frame.t * self.fps))
+        if k <= self._ghost_last[i]:
+            return False
+        self._ghost_last[i] = k
+        for path, pose in content.poses(frame).items():
+            if not path.startswith(_GHOST_SKIP):
+                self._key(k, vis[path].path.lower(), pose)
+        return True
+
     def _key(self, k: int, path: str, pose: Pose) -> None:
-        full = path if path.startswith("/") else self.vis[path].path.lower()
-        vis_track = self._tracks.setdefault((full, "visible"), _Track("boolean", discrete=True))
+        full = self._full.get(path)
+        if full is None:
+            full = self._full[path] = path if path.startswith("/") else self.vis[path].path.lower()
+        tracks = self._tracks
+        vis_track = tracks.get((full, "visible"))
+        if vis_track is None:
+            vis_track = tracks[(full, "visible")] = _Track("boolean", discrete=True)
         vis_track.add(k, bool(pose.visible))
         if not pose.visible:
             return
+        raw = pose.matrix.tobytes()
+        if self._last_matrix.get(full) == raw:  # unchanged: the held keys just run on to this frame
+            for prop in ("position", "quaternion", "scale"):
+                track = tracks[(full, prop)]
+                track.hold(k)
+            return
+        self._last_matrix[full] = raw
         pos, quat, scale = _decompose(pose.matrix)
         for prop, jstype, value in (("position", "vector3", pos), ("quaternion", "quaternion", quat),
                                     ("scale", "vector3", scale)):
-            self._tracks.setdefault((full, prop), _Track(jstype, discrete=False)).add(k, value)
+            track = tracks.get((full, prop))
+            if track is None:
+                track = tracks[(full, prop)] = _Track(jstype, discrete=False)
+            track.add(k, value)
 
     def animation(self) -> Animation:
-        """The meshcat animation of the frames added so far."""
+        """The meshcat animation of the frames added so far (as meshcat's Python builds it: keys, not arrays)."""
         anim = Animation(default_framerate=self.fps)
         for (full, prop), track in self._tracks.items():
             if prop == "scale" and all(_same(v, [1.0, 1.0, 1.0]) for _, v in track.keys):
@@ -212,11 +323,29 @@ class Recording:
                 clip.set_property(k, prop, track.jstype, value)
         return anim
 
+    def _animation_command(self, play: bool) -> _AnimationCommand:
+        clips: dict[str, list[dict[str, object]]] = {}
+        for (full, prop), track in self._tracks.items():
+            if prop == "scale" and all(_same(v, [1.0, 1.0, 1.0]) for _, v in track.keys):
+                continue
+            if track.jstype == "boolean":
+                entry = {"name": f".{prop}", "type": "boolean",
+                         "keys": [{"time": k, "value": v} for k, v in track.keys]}
+            else:
+                entry = {"name": f".{prop}", "type": track.jstype, "times": _floats([k for k, _ in track.keys]),
+                         "values": _floats([x for _, v in track.keys for x in v])}
+            clips.setdefault(full, []).append(entry)
+        return _AnimationCommand(list(clips.items()), self.fps, play)
+
+    def scene_commands(self, *, play: bool = True) -> list[str]:
+        """Every meshcat command of the scene and its animation, base64, in the order to apply them."""
+        self.window.send(self._animation_command(play))
+        return [base64.b64encode(c).decode() for c in self.window.commands()]
+
     def html(self, title: str = "wbc replay") -> str:
         """The self-contained replay page (the animation is set on the scene first)."""
-        self.vis.set_animation(self.animation(), play=True, repetitions=1)
-        script = (Path(VIEWER_ROOT) / "main.min.js").read_text(encoding="utf-8")
-        commands = ",\n".join(f'"{base64.b64encode(c).decode()}"' for c in self.window.commands())
+        script = viewer_script()
+        commands = ",\n".join(f'"{c}"' for c in self.scene_commands())
         return (
             "<!DOCTYPE html>\n<html>\n<head><meta charset=\"utf-8\"><title>" + html_lib.escape(title) + "</title>\n"
             "<style>body { margin: 0; } #meshcat-pane { width: 100vw; height: 100vh; overflow: hidden; }</style>\n"

@@ -2,29 +2,43 @@
 
 - live: a meshcat server bound to ``ViewConfig.host`` (127.0.0.1 by default), the trial played through the
   runner with the viewer as its observer, paced by a `Player` (speed, pauses, single steps);
-- record: the same frames keyed into a `Recording` and written as one self-contained HTML file; with a recording
-  and no live viewer the trial runs at full speed and no server is started.
+- record: the same frames keyed into a `Recording` and written as one self-contained HTML file, the trial page
+  (`wbc.viz.page`: the scene beside its time plots); with a recording and no live viewer the trial runs at full
+  speed and no server is started;
+- A / B: two controllers' runs of one trial in one page, the second as a ghost (`view_ab`, `replay_ab`).
 """
 
 from __future__ import annotations
 
+import base64
+import dataclasses
 import sys
 import webbrowser
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wbc.arena.episode import Episode, OperatorLog, PushLog
 from wbc.arena.record import TrialRecord
 from wbc.arena.sim_trial import run_trial
+from wbc.control.protocol import Controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError
+from wbc.hardware.robot import Robot
+from wbc.scenario.push import Push
 from wbc.scenario.trial import Trial
+from wbc.types import VelocityCommand
+from wbc.viz.ab import CapturedRun, ab_recording, capture_trial
 from wbc.viz.live import LiveObserver, LiveViewer
+from wbc.viz.live_page import LivePage, SteeredCommand
+from wbc.viz.page import save_trial_page, trial_page
 from wbc.viz.player import KeyboardControls, Player, PlayerConfig
 from wbc.viz.record import Recording
 from wbc.viz.replay import StoredEpisode
 from wbc.viz.server import MeshcatServer, ServerConfig
+from wbc.viz.signals import TrialSignals
 
-__all__ = ["ViewConfig", "ViewResult", "replay_episode", "view_trial"]
+__all__ = ["ABResult", "ViewConfig", "ViewResult", "replay_ab", "replay_episode", "view_ab", "view_trial"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -40,6 +54,7 @@ class ViewConfig:
         open_browser: open the page in the default browser.
         wait_for_browser: play only once a browser has connected.
         keep_open: after the trial, keep the server up until q is typed (only when stdin is a terminal).
+        save_episode: write the episode (with the pushes and commands set from the page) to this ``.npz``.
     """
 
     live: bool = True
@@ -50,6 +65,7 @@ class ViewConfig:
     open_browser: bool = False
     wait_for_browser: bool = False
     keep_open: bool = True
+    save_episode: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -62,6 +78,7 @@ class ViewResult:
         frames_drawn: frames sent to the live viewer.
         frames_recorded: frames in the recording.
         paths: scene paths by role (robot, arm, push, ...).
+        episode: the episode played (None for replays), with the pushes and commands set from the page.
     """
 
     trial_record: TrialRecord | None
@@ -69,6 +86,11 @@ class ViewResult:
     frames_drawn: int
     frames_recorded: int
     paths: dict[str, list[str]]
+    episode: Episode | None = None
+
+
+def _trial_name(trial: Trial) -> str:
+    return f"{trial.scenario} {trial.band} seed {trial.seed} trial {trial.index}"
 
 
 def _start_live(cfg: ViewConfig) -> tuple[MeshcatServer, LiveViewer, Player]:
@@ -98,27 +120,102 @@ def _linger(cfg: ViewConfig, player: Player) -> None:
             pass
 
 
-def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig) -> ViewResult:
-    """Play `trial` with `controller` (resolved, or a name) in simulation, live in the browser and/or recorded."""
+def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, page: LivePage | None = None
+               ) -> ViewResult:
+    """Play `trial` with `controller` (resolved, or a name) in simulation, live in the browser and/or recorded.
+
+    Live, the trial page is served too (`LivePage`, on 127.0.0.1: `page`, or one started here): the scene beside its
+    plots, with pushes and velocity commands from the page. They are applied through the scenario's `Push` and the
+    robot's push hook, and logged in the returned episode: pushes in its `PushLog`, both as operator actions.
+    """
     name = controller if isinstance(controller, str) else controller.name
     server = viewer = player = None
+    own_page = False
     if cfg.live:
         server, viewer, player = _start_live(cfg)
+        if page is None:
+            page, own_page = LivePage().start(), True
+        print(f"trial page: {page.url}  (plots; pushes and commands from the page; 127.0.0.1 only)",
+              file=sys.stderr)
     try:
-        observer = LiveObserver(viewer, player, recording_fps=cfg.record_fps if cfg.record else None)
-        row, _ = run_trial(trial, controller, observer=observer)
+        recording_fps = cfg.record_fps if (cfg.record is not None or page is not None) else None
+        observer = LiveObserver(viewer, player, recording_fps=recording_fps)
+        observer.name = name
+        played = trial
+        if page is not None:
+            page.command = SteeredCommand(trial.command)
+            page.controls = player.controls if player is not None else None
+            played = dataclasses.replace(trial, command=page.command)
+        row, episode = run_trial(played, controller, observer=_with_page(observer, page, trial, name, cfg))
+        signals = observer.signals[-1] if observer.signals else None
+        if signals is not None:
+            signals.mark_episode(episode)
+        if page is not None:
+            episode = _log_page_actions(episode, page)
+            if signals is not None:
+                signals.marks = sorted(signals.marks + page.marks, key=lambda m: m.t)
         written = None
+        title = f"{name}: {_trial_name(trial)}"
         if cfg.record is not None:
-            written = observer.recordings[-1].save(cfg.record, title=f"{name}: {trial.scenario} "
-                                                   f"{trial.band} seed {trial.seed} trial {trial.index}")
+            written = save_trial_page(cfg.record, observer.recordings[-1], [signals], title=title,
+                                      duration=trial.duration_s)
+        if page is not None and signals is not None:
+            page.finish(trial_page(observer.recordings[-1], [signals], title=title, duration=trial.duration_s))
+        if cfg.save_episode is not None:
+            episode.save(str(cfg.save_episode))
         if cfg.live:
             _linger(cfg, player)
         paths = (viewer.paths if viewer is not None else observer.recordings[-1].paths)
         return ViewResult(trial_record=row, recording=written, frames_drawn=player.drawn if player else 0,
-                          frames_recorded=observer.recordings[-1].frames if cfg.record else 0, paths=paths)
+                          frames_recorded=observer.recordings[-1].frames if cfg.record else 0, paths=paths,
+                          episode=episode)
     finally:
         if server is not None:
             server.stop()
+        if own_page:
+            page.stop()
+
+
+_PAGE_FPS = 30.0  # [1/s of trial time] poses handed to a live page
+
+
+def _with_page(observer: LiveObserver, page: LivePage | None, trial: Trial, name: str, cfg: ViewConfig
+               ) -> LiveObserver | Callable[..., None]:
+    """The observer, and around it the live page's share of each tick: pushes due, the newest poses."""
+    if page is None:
+        return observer
+    shown = [-float("inf"), False]
+
+    def tick(t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        page.tick(t, robot)
+        observer(t, robot, controller, command)
+        if not observer.recordings:
+            return
+        if not shown[1]:
+            rec = observer.recordings[-1]
+            page.begin([base64.b64encode(c).decode() for c in rec.window.commands()], rec.content,
+                       observer.signals[-1], title=f"{name}: {_trial_name(trial)} (live)",
+                       duration=trial.duration_s, fps=cfg.record_fps)
+            shown[1] = True
+        frame = observer.last_frame
+        if frame is not None and frame.t - shown[0] >= 1.0 / _PAGE_FPS - 1e-9:
+            shown[0] = frame.t
+            page.show(frame)
+
+    return tick
+
+
+def _log_page_actions(episode: Episode, page: LivePage) -> Episode:
+    """The episode with the pushes and commands set from the page: pushes in its log, both as operator actions."""
+    pushes = [p for p in page.pushes if p.start < episode.survived_s]
+    if not pushes and not page.operator_rows:
+        return episode
+    log = episode.pushes
+    merged = [Push(force_in_world=log.force_in_world[j], offset_in_base=log.offset_in_base[j],
+                   start=float(log.start[j]), duration=float(log.duration[j])) for j in range(len(log))]
+    merged = sorted(merged + pushes, key=lambda p: p.start)
+    rows = sorted(episode.operator_events.rows() + page.operator_rows, key=lambda r: r[0])
+    return dataclasses.replace(episode, pushes=PushLog.of(merged), operator_events=OperatorLog.of(rows))
 
 
 def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
@@ -128,9 +225,9 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
         rec = Recording(stored.content(), fps=cfg.record_fps)
         for frame in stored.frames():
             rec.add(frame)
-        t = stored.trial
-        written = rec.save(cfg.record, title=f"{stored.controller}: {t.scenario} {t.band} seed {t.seed} "
-                                             f"trial {t.index} (replay)")
+        signals = TrialSignals.of_episode(stored.controller, stored.episode).thinned(cfg.record_fps)
+        written = save_trial_page(cfg.record, rec, [signals], duration=stored.trial.duration_s,
+                                  title=f"{stored.controller}: {_trial_name(stored.trial)} (replay)")
         recorded, paths = rec.frames, rec.paths
     if cfg.live:
         server, viewer, player = _start_live(cfg)
@@ -148,3 +245,62 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
         finally:
             server.stop()
     return ViewResult(trial_record=None, recording=written, frames_drawn=drawn, frames_recorded=recorded, paths=paths)
+
+
+@dataclass(frozen=True)
+class ABResult:
+    """What an A / B view produced.
+
+    Attributes:
+        recording: the written page.
+        names: the two controllers, the first drawn opaque, the second as the ghost.
+        trial_records: each run's record (None for stored episodes).
+        divergence_s: when the runs first part [s] (None if they never do).
+        fall_s: when each fell [s] (None if it did not).
+        frames: frames recorded of each run.
+    """
+
+    recording: Path
+    names: tuple[str, str]
+    trial_records: tuple[TrialRecord | None, TrialRecord | None]
+    divergence_s: float | None
+    fall_s: tuple[float | None, float | None]
+    frames: tuple[int, int]
+
+
+def _write_ab(a: CapturedRun, b: CapturedRun, trial: Trial, cfg: ViewConfig, path: Path, suffix: str) -> ABResult:
+    rec, marks = ab_recording(a, b, cfg.record_fps)
+    written = save_trial_page(path, rec, [a.signals, b.signals], marks=marks, duration=trial.duration_s,
+                              title=f"{a.name} vs {b.name} (ghost): {_trial_name(trial)}{suffix}")
+    if cfg.open_browser:
+        webbrowser.open(written.resolve().as_uri(), new=2)
+
+    def fall(run: CapturedRun) -> float | None:
+        return next((m.t for m in run.signals.marks if m.kind == "fall"), None)
+
+    return ABResult(recording=written, names=(a.name, b.name), trial_records=(a.record, b.record),
+                    divergence_s=marks[0].t if marks else None, fall_s=(fall(a), fall(b)),
+                    frames=(len(a.frames), len(b.frames)))
+
+
+def view_ab(trial: Trial, controllers: tuple[ControllerSpec | str, ControllerSpec | str], cfg: ViewConfig,
+            path: Path) -> ABResult:
+    """Play `trial` with both controllers in simulation and write one page of both runs to `path`."""
+    a, b = (capture_trial(trial, c, cfg.record_fps) for c in controllers)
+    return _write_ab(a, b, trial, cfg, path, "")
+
+
+def replay_ab(first: StoredEpisode, second: StoredEpisode, cfg: ViewConfig, path: Path) -> ABResult:
+    """Write one page of two stored runs of the same trial (`second` the ghost) to `path`."""
+    runs = []
+    for stored in (first, second):
+        run = CapturedRun(stored.controller, stored.content(),
+                          signals=TrialSignals.of_episode(stored.controller, stored.episode).thinned(cfg.record_fps))
+        last = -1
+        for frame in stored.frames():
+            k = int(round(frame.t * cfg.record_fps))
+            if k > last:
+                run.frames.append(frame)
+                last = k
+        runs.append(run)
+    return _write_ab(runs[0], runs[1], first.trial, cfg, path, " (replay)")

@@ -1,0 +1,357 @@
+"""The trial page: time plots and event marks beside the scene, A / B on one trial, and (with Chromium) the page."""
+
+import base64
+import dataclasses
+import json
+import re
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+import umsgpack
+
+from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.cli.main import main
+from wbc.scenario.scenario import load_scenario
+from wbc.viz.page import read_page_data
+from wbc.viz.record import GHOST_COLOR
+from wbc.viz.replay import load_stored_episode
+from wbc.viz.signals import PLOTS, TrialSignals
+from wbc.viz.view import ViewConfig, replay_ab, replay_episode, view_ab, view_trial
+
+# One push at 0.5 s for 0.1 s in a 1.5 s trial; the "hard" band's push topples a robot that only stands.
+PAGE = """
+[scenario]
+name = "pagetest"
+version = 1
+description = "a short push for the trial page tests"
+robot = "a1-wx200"
+duration_s = 1.5
+
+[terrain]
+kind = "flat"
+
+[commands]
+ramp_s = 0.3
+[[commands.options]]
+vx = 0.0
+
+[pushes]
+first_s = [0.5, 0.5]
+interval_s = [5.0, 5.0]
+duration_s = 0.1
+offset_m = 0.1
+
+[[bands]]
+name = "soft"
+push_force_n = [150.0, 150.0]
+
+[[bands]]
+name = "hard"
+push_force_n = [400.0, 400.0]
+"""
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+
+
+@pytest.fixture(scope="module")
+def scenario(tmp_path_factory):
+    path = tmp_path_factory.mktemp("scn") / "pagetest.toml"
+    path.write_text(PAGE)
+    return path
+
+
+@pytest.fixture(scope="module")
+def page(scenario, tmp_path_factory):
+    """A recorded trial page of the standing controller: (html path, page data, trial)."""
+    trial = load_scenario(scenario).trial("soft", 0, 0)
+    out = tmp_path_factory.mktemp("page") / "trial.html"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(out.parent)  # MuJoCo may write its log here
+        view_trial(trial, "stand", ViewConfig(live=False, record=out))
+    return out, read_page_data(out.read_text()), trial
+
+
+@pytest.fixture(scope="module")
+def ab_page(scenario, tmp_path_factory):
+    """An A / B page of mpc against stand on the hard band (stand falls): (html path, result)."""
+    trial = load_scenario(scenario).trial("hard", 0, 0)
+    out = tmp_path_factory.mktemp("ab") / "ab.html"
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(out.parent)  # MuJoCo may write its log here
+        return out, view_ab(trial, ("mpc", "stand"), ViewConfig(live=False), out)
+
+
+def _commands(html: str) -> list[dict]:
+    block = re.search(r"var wbcCommands = \[(.*?)\];", html, re.S)
+    assert block, "no embedded command list"
+    return [umsgpack.unpackb(base64.b64decode(s)) for s in re.findall(r'"([A-Za-z0-9+/=]+)"', block.group(1))]
+
+
+def _values(plot: dict, line: str) -> np.ndarray:
+    return np.array([np.nan if v is None else v for v in plot["lines"][line]], dtype=float)
+
+
+def test_trial_page_holds_plots_with_data_and_event_marks(page):
+    path, data, trial = page
+    html = path.read_text()
+    assert not re.search(r"""(src|href)\s*=\s*["']https?:""", html)  # one file, nothing fetched
+    assert "window.wbcPage" in html and "wbc-plots" in html
+    assert data["order"] == list(PLOTS) and data["duration"] == pytest.approx(trial.duration_s)
+    (run,) = data["runs"]
+    assert run["name"] == "stand"
+    t = np.array(run["t"])
+    assert len(t) > 50 and np.all(np.diff(t) > 0)
+    plots = run["plots"]
+    for key in ("attitude", "height", "velocity", "yaw_rate", "foot_forces", "torques", "arm_momentum"):
+        assert key in plots, f"no {key} plot"
+        for name, values in plots[key]["lines"].items():
+            assert len(values) == len(t), f"{key}/{name}: {len(values)} values for {len(t)} samples"
+        assert any(v is not None for vs in plots[key]["lines"].values() for v in vs), f"{key} holds no data"
+    assert "mpc_com" not in plots  # a standing controller has no plan
+    # the robot stands: height about its nominal, the feet carry its weight, the torques stay under their limits
+    height = _values(plots["height"], "height")
+    assert 0.2 < np.nanmedian(height) < 0.45
+    weight = sum(_values(plots["foot_forces"], leg) for leg in ("FR", "FL", "RR", "RL"))
+    assert 80.0 < np.nanmedian(weight) < 250.0
+    torques = np.array([_values(plots["torques"], n) for n in plots["torques"]["lines"]])
+    assert np.nanmax(np.abs(torques)) <= 1.0 + 1e-3 and torques.shape[0] == 15
+    # the push: marked at its start for its duration, its angular impulse about the CoM grows only while it acts
+    (push,) = [m for m in run["marks"] if m["kind"] == "push"]
+    assert push["t"] == pytest.approx(trial.pushes[0].start, abs=1e-3)
+    assert push["d"] == pytest.approx(trial.pushes[0].duration)
+    impulse = np.linalg.norm([_values(plots["arm_momentum"], f"push H{a}") for a in "xyz"], axis=0)
+    before, after = impulse[t < push["t"]], impulse[t > push["t"] + push["d"] + 0.05]
+    assert np.all(before == 0.0) and np.all(after > 0.0)
+
+
+def test_mpc_page_plots_its_prediction_against_what_happened(scenario, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
+    trial = dataclasses.replace(load_scenario(scenario).trial("soft", 0, 0), duration_s=0.3)
+    out = tmp_path / "mpc.html"
+    view_trial(trial, "mpc", ViewConfig(live=False, record=out))
+    plot = read_page_data(out.read_text())["runs"][0]["plots"]["mpc_com"]
+    plan, com = _values(plot, "plan z"), _values(plot, "CoM z")
+    assert np.count_nonzero(np.isfinite(plan)) > 5
+    both = np.isfinite(plan) & np.isfinite(com)
+    assert np.all(np.abs(plan[both] - com[both]) < 0.1)  # a prediction of the same CoM, not another quantity
+
+
+def test_fall_and_safety_events_are_marked(scenario, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
+    # a stored-episode run: its fall (and any safety transition) becomes a mark on the timeline
+    trial = load_scenario(scenario).trial("hard", 0, 0)
+    from wbc.arena.sim_trial import run_trial
+
+    record, episode = run_trial(trial, "stand")
+    assert not record.success, "the hard band's push no longer topples a standing robot: pick a stronger one"
+    signals = TrialSignals.of_episode("stand", episode)
+    kinds = [m.kind for m in signals.marks]
+    assert kinds.count("fall") == 1 and kinds.count("push") == 1
+    fall = next(m for m in signals.marks if m.kind == "fall")
+    assert fall.t == pytest.approx(episode.fall_time_s)
+    data = signals.thinned(25.0).to_json()
+    assert len(data["t"]) <= 25.0 * trial.duration_s + 2
+    assert {m["kind"] for m in data["marks"]} == {"push", "fall"}
+
+
+def test_ab_page_holds_two_robots_and_marks_falls_and_divergence(ab_page):
+    out, result = ab_page
+    html = out.read_text()
+    assert result.names == ("mpc", "stand")
+    assert result.fall_s[0] is None and result.fall_s[1] is not None, "expected mpc to stand and stand to fall"
+    assert result.divergence_s is not None and result.divergence_s <= result.fall_s[1]
+    commands = _commands(html)
+    (anim,) = [c for c in commands if c["type"] == "set_animation"]
+    clips = {a["path"]: a["clip"] for a in anim["animations"]}
+    for root in ("/meshcat/wbc/robot/root_joint", "/meshcat/ghost0/wbc/robot/root_joint"):
+        pos = next(t for t in clips[root]["tracks"] if t["name"] == ".position")
+        assert len(np.frombuffer(pos["times"].data, dtype="<f4")) > 20, f"{root} does not move"
+    # the ghost is translucent, and its ground is not drawn twice
+    colors = [c for c in commands if c["type"] == "set_property" and c["property"] == "color"]
+    assert colors and all(c["path"].startswith("/meshcat/ghost0/wbc/") for c in colors)
+    assert all(c["value"][3] == pytest.approx(GHOST_COLOR[3]) for c in colors)
+    data = read_page_data(html)
+    assert [r["name"] for r in data["runs"]] == ["mpc", "stand"]
+    assert any(m["kind"] == "fall" for m in data["runs"][1]["marks"])
+    assert not any(m["kind"] == "fall" for m in data["runs"][0]["marks"])
+    assert [m["kind"] for m in data["marks"]] == ["divergence"]
+    for run in data["runs"]:
+        assert run["plots"]["attitude"]["lines"]["roll"], f"{run['name']} has no attitude"
+
+
+def test_cli_view_ab_and_stored_episodes(scenario, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
+    out = tmp_path / "ab.html"
+    assert main(["view", "stand", "stand-locked", "--scenario", str(scenario), "--trial", "0", "--duration", "0.6",
+                 "--record", str(out), "--at", "0.4"]) == 0
+    said = capsys.readouterr().out
+    assert "stand: survived" in said and f"{out.resolve().as_uri()}#t=0.4" in said
+    assert [r["name"] for r in read_page_data(out.read_text())["runs"]] == ["stand", "stand-locked"]
+    # the same from stored episodes (`wbc run --save-episodes`)
+    results = tmp_path / "r"
+    run_arena(ArenaConfig(controllers=("stand", "stand-locked"), scenario=scenario, trials=1, out_dir=results,
+                          workers=1, progress=False, save_episodes=True))
+    first, second = (load_stored_episode(results, 0, controller=c) for c in ("stand", "stand-locked"))
+    ab = replay_ab(first, second, ViewConfig(live=False), tmp_path / "replay-ab.html")
+    data = read_page_data(ab.recording.read_text())
+    assert [r["name"] for r in data["runs"]] == ["stand", "stand-locked"]
+    assert all(len(r["t"]) > 20 and any(m["kind"] == "push" for m in r["marks"]) for r in data["runs"])
+    # a stored single run gets the trial page too, with what an episode holds
+    single = replay_episode(first, ViewConfig(live=False, record=tmp_path / "one.html"))
+    plots = read_page_data(single.recording.read_text())["runs"][0]["plots"]
+    assert {"attitude", "height", "velocity", "yaw_rate"} <= set(plots)
+
+
+def test_cli_view_refuses_three_controllers(scenario, capsys):
+    assert main(["view", "stand", "mpc", "stand", "--scenario", str(scenario), "--trial", "0"]) != 0
+    assert "two for an A / B view" in capsys.readouterr().err
+
+
+# -- a real browser --------------------------------------------------------------------------------------------------
+def _dump(url: str, tmp_path, budget_ms: int = 6000) -> dict:
+    """The page's state (``<pre id="wbc-state">``) after headless Chromium ran its scripts for `budget_ms`."""
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
+           "--enable-unsafe-swiftshader", "--hide-scrollbars", "--window-size=1000,700",
+           f"--user-data-dir={tmp_path / 'profile'}", f"--virtual-time-budget={budget_ms}", "--dump-dom", url]
+    dom = subprocess.run(cmd, capture_output=True, timeout=120).stdout.decode("utf-8", errors="replace")
+    m = re.search(r'<pre id="wbc-state"[^>]*>(.*?)</pre>', dom, re.S)
+    assert m, "the page wrote no state"
+    import html as html_lib
+
+    return json.loads(html_lib.unescape(m.group(1))) | {"_dom": dom}
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_trial_page_plots_and_a_scrub_moves_scene_and_cursor_together(page, tmp_path):
+    path, data, _ = page
+    state = _dump(f"{path.resolve().as_uri()}#t=0.55", tmp_path)
+    assert state["ready"] and not state["playing"]
+    for key in ("attitude", "height", "velocity", "foot_forces", "torques", "arm_momentum"):
+        assert state["plots"][key]["n"] > 50, f"the {key} plot drew no data"
+    # the scrub to 0.55 s moved both: the cursor on every plot and meshcat's animation
+    assert state["t"] == pytest.approx(0.55) and state["cursorT"] == pytest.approx(0.55)
+    assert state["sceneT"] == pytest.approx(0.55, abs=1e-3)
+    assert any(m["kind"] == "push" for m in state["marks"])
+    assert "push 150 N" in state["_dom"]  # the push acting at 0.55 s is named in the bar
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_ab_page_draws_two_robots(ab_page, tmp_path):
+    out, result = ab_page
+    state = _dump(f"{out.resolve().as_uri()}#t=0.8", tmp_path)
+    assert state["robots"] == 2 and state["runs"] == ["mpc", "stand"]
+    assert state["sceneT"] == pytest.approx(0.8, abs=1e-3)
+    tree = set(re.findall(r'<li class="title">([^<]*)</li>', state["_dom"]))
+    assert {"ghost0", "wbc", "robot", "trunk_0"} <= tree
+    assert {m["kind"] for m in state["marks"]} >= {"fall", "divergence", "push"}
+
+
+# -- the live page: pushes and commands from the browser ------------------------------------------------------------
+def _http(url: str, body: dict | None = None, kind: str = "application/json") -> tuple[int, bytes]:
+    import urllib.error
+    import urllib.request
+
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(url, data=data, headers={"Content-Type": kind} if data is not None else {})
+    try:
+        with urllib.request.urlopen(req, timeout=30) as r:
+            return r.status, r.read()
+    except urllib.error.HTTPError as exc:
+        return exc.code, exc.read()
+
+
+def test_live_page_push_and_command_land_in_the_episode(scenario, tmp_path, monkeypatch):
+    import threading
+    import time
+
+    from wbc.arena.episode import Episode
+    from wbc.viz.live_page import LivePage
+    from wbc.viz.player import PlayerConfig
+    from wbc.viz.replay import frames_of
+
+    monkeypatch.chdir(tmp_path)
+    trial = load_scenario(scenario).trial("soft", 0, 0)
+    saved = tmp_path / "episode.npz"
+    with LivePage() as page:
+        assert page.url.startswith("http://127.0.0.1:")
+        # refused: a bad push, a push that is not JSON (another site's form), a command before any trial plays
+        assert _http(page.url + "push", {"force_n": -5})[0] == 400
+        assert _http(page.url + "push", {"force_n": 100}, kind="text/plain")[0] == 415
+        assert _http(page.url + "command", {"vx": 0.2})[0] == 400
+        # a push for 0.9 s into the trial, posted before it starts: 120 N towards +y for 0.1 s at the trunk's front
+        push = {"force_n": 120.0, "heading_deg": 90.0, "duration_s": 0.1, "point_in_base": [0.1, 0.0, 0.0], "t": 0.9}
+        assert _http(page.url + "push", push) == (200, b'{"queued": true}')
+        result: list = []
+        cfg = ViewConfig(live=True, player=PlayerConfig(speed=0.5), save_episode=saved, keep_open=False)
+        thread = threading.Thread(target=lambda: result.append(view_trial(trial, "stand", cfg, page=page)))
+        thread.start()
+        state: dict = {}
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:  # wait until the trial plays, then steer it from the "page"
+            state = json.loads(_http(page.url + "state")[1])
+            if state["t"] > 0.3:
+                break
+            time.sleep(0.02)
+        # pause it from the page (a loaded machine must not finish the trial under the test's feet)
+        assert json.loads(_http(page.url + "control", {"pause": True})[1])["paused"]
+        state = json.loads(_http(page.url + "state")[1])
+        assert state["t"] > 0.3 and not state["done"]
+        assert any(m is not None for m in state["poses"].values()), "the live page receives no poses"
+        assert "/meshcat/wbc/robot/root_joint" in state["poses"]
+        assert state["data"]["runs"][0]["t"], "the live page receives no plots"
+        live_html = _http(page.url)[1].decode()
+        assert '"live":true' in live_html and "wbc-plots" in live_html
+        assert _http(page.url + "command", {"vx": 0.25, "vy": 0.0, "yaw_rate": 0.1})[0] == 200
+        assert not json.loads(_http(page.url + "control", {"pause": False, "speed": 4.0})[1])["paused"]
+        thread.join(timeout=120)
+        assert result, "the trial did not finish"
+        # the finished trial: the page becomes the recorded page, its timeline marks the browser's push and command
+        assert json.loads(_http(page.url + "state")[1])["done"]
+        data = read_page_data(_http(page.url)[1].decode())
+    marks = data["runs"][0]["marks"]
+    kinds = [m["kind"] for m in marks]
+    assert kinds.count("push") == 1 and kinds.count("browser_push") == 1 and kinds.count("command") == 1
+    episode = result[0].episode
+    for ep in (episode, Episode.load(str(saved))):
+        assert len(ep.pushes) == 2  # the scenario's at 0.5 s and the browser's at 0.9 s
+        j = int(np.argmax(ep.pushes.start))
+        assert ep.pushes.start[j] == pytest.approx(0.9, abs=0.01)
+        assert ep.pushes.force_in_world[j] == pytest.approx([0.0, 120.0, 0.0], abs=1e-9)
+        assert ep.pushes.offset_in_base[j] == pytest.approx([0.1, 0.0, 0.0])
+        actions = [a for _, k, a in ep.operator_events.rows() if k == "browser"]
+        assert len(actions) == 2 and actions[0].startswith("browser ")
+        assert ep.command[-1] == pytest.approx([0.25, 0.0, 0.1])  # the page's command held to the end
+    # a replay draws the browser's push while it acts
+    pushed = [f for f in frames_of(Episode.load(str(saved))) if f.pushed and f.t > 0.8]
+    assert pushed and pushed[0].push_force_in_world == pytest.approx([0.0, 120.0, 0.0])
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_live_page_shows_the_push(scenario, tmp_path, monkeypatch):
+    import threading
+    import time
+
+    from wbc.viz.live_page import LivePage
+    from wbc.viz.player import PlayerConfig
+
+    monkeypatch.chdir(tmp_path)
+    trial = load_scenario(scenario).trial("soft", 0, 0)
+    with LivePage() as page:
+        push = {"force_n": 120.0, "heading_deg": 90.0, "duration_s": 0.1, "point_in_base": [0.0, 0.0, 0.0], "t": 0.6}
+        assert _http(page.url + "push", push)[0] == 200
+        cfg = ViewConfig(live=True, player=PlayerConfig(speed=0.1), keep_open=False)
+        thread = threading.Thread(target=lambda: view_trial(trial, "stand", cfg, page=page), daemon=True)
+        thread.start()
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and json.loads(_http(page.url + "state")[1])["t"] < 0.75:
+            time.sleep(0.05)
+        _http(page.url + "control", {"pause": True})  # held mid-trial while the browser looks
+        state = _dump(page.url, tmp_path, budget_ms=3000)
+        _http(page.url + "control", {"pause": False, "speed": 10.0})
+        thread.join(timeout=120)
+    assert state["live"] and state["ready"]
+    assert any(m["kind"] == "browser_push" for m in state["marks"]), state["marks"]
+    assert state["plots"]["attitude"]["n"] > 10 and state["t"] >= 0.6
+    assert 'id="wbc-push"' in state["_dom"]  # the page's own push control
