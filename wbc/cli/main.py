@@ -60,6 +60,7 @@ from wbc.learned.train.stages import stage_config
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
+from wbc.scenario.trial import Trial
 from wbc.tools.arm_momentum import arm_momentum_study
 from wbc.tools.bench import (
     EmulatorCounts,
@@ -716,12 +717,7 @@ def _view(args: argparse.Namespace) -> int:
             raise ConfigError("wbc view needs CTRL --scenario FILE --trial I (play a trial), or --episode "
                               "RESULTS_DIR --trial I (replay a stored one)")
         spec = get_controller(args.ctrl, config=args.controller_config, io=args.io)
-        scenario = load_scenario(args.scenario)
-        trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
-        if args.duration is not None:
-            if not 0 < args.duration <= trial.duration_s:
-                raise ConfigError(f"--duration must be in (0, {trial.duration_s}] s, got {args.duration}")
-            trial = dataclasses.replace(trial, duration_s=args.duration)
+        trial = _view_trial(args)
         result = view_trial(trial, spec, cfg)
         what = f"{args.ctrl} on {trial.scenario} band {trial.band} seed {trial.seed} trial {trial.index}"
         printers.print_viewed_trial(what, result.trial_record)
@@ -730,6 +726,18 @@ def _view(args: argparse.Namespace) -> int:
         if args.at is not None:
             print(f"open: {result.recording.resolve().as_uri()}#t={args.at:g}")
     return 0
+
+
+def _view_trial(args: argparse.Namespace) -> Trial:
+    """The trial ``wbc view`` plays: ``--scenario``'s band (its first by default), seed and trial, cut to
+    ``--duration``."""
+    scenario = load_scenario(args.scenario)
+    trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
+    if args.duration is not None:
+        if not 0 < args.duration <= trial.duration_s:
+            raise ConfigError(f"--duration must be in (0, {trial.duration_s}] s, got {args.duration}")
+        trial = dataclasses.replace(trial, duration_s=args.duration)
+    return trial
 
 
 def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
@@ -747,12 +755,7 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
         if args.scenario is None:
             raise ConfigError("wbc view A B needs --scenario FILE --trial I (play the trial with both), or "
                               "--episode RESULTS_DIR --trial I (their stored runs)")
-        scenario = load_scenario(args.scenario)
-        trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
-        if args.duration is not None:
-            if not 0 < args.duration <= trial.duration_s:
-                raise ConfigError(f"--duration must be in (0, {trial.duration_s}] s, got {args.duration}")
-            trial = dataclasses.replace(trial, duration_s=args.duration)
+        trial = _view_trial(args)
         specs = tuple(get_controller(c, config=args.controller_config, io=args.io) for c in ctrls)
         result = view_ab(trial, specs, cfg, path)
     for name, fall in zip(result.names, result.fall_s, strict=True):
