@@ -729,8 +729,7 @@ def _view(args: argparse.Namespace) -> int:
 
 
 def _view_trial(args: argparse.Namespace) -> Trial:
-    """The trial ``wbc view`` plays: ``--scenario``'s band (its first by default), seed and trial, cut to
-    ``--duration``."""
+    """The trial ``wbc view`` plays: ``--scenario``'s band (its first by default), seed and trial, cut short."""
     scenario = load_scenario(args.scenario)
     trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
     if args.duration is not None:
