@@ -211,7 +211,11 @@ def test_slow_and_saturating_plugins_are_counted_not_failed_on_the_local_pool_an
         result = run_arena(cfg)
         assert result.controller_errors == ()  # late and saturated commands are reported, not failures
         kinds = {(w.controller, w.kind) for w in result.summary.warnings}
-        assert kinds == {("brokenpkg.slow:make", "deadline_misses"), ("brokenpkg.saturating:make", "clamped_ticks")}
+        expected = {("brokenpkg.slow:make", "deadline_misses"), ("brokenpkg.saturating:make", "clamped_ticks")}
+        assert expected <= kinds
+        # a busy machine may make any controller late now and then (a wall-clock figure): only lateness may add to
+        # what the two plug-ins cause on their own
+        assert all(kind == "deadline_misses" for _, kind in kinds - expected), kinds
         results[executor] = TrialRecord.read_csv(tmp_path / executor / "trials.csv")
         by = {c: [r for r in results[executor] if r.controller == c] for c in names}
         assert all(r.deadline_misses == r.ticks > 0 and r.outcome != "controller_error" for r in by[names[0]])
