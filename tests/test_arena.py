@@ -368,6 +368,10 @@ def test_cli_run_prints_the_table_and_writes_the_directory(small, tmp_path, caps
     assert "stand-locked" in text and "95% CI" in text
     # one seed: each cell is the mean and its interval over trials, never a spread of ± 0.00 over one seed
     assert "±" not in text and re.search(r"\d+\.\d\d \[\d+\.\d\d, \d+\.\d\d\]", text)
+    # it ends with the most telling trial and the command that shows both controllers' runs of it on one page
+    watch = re.search(r"^  .*wbc(?:\.cli)? view (stand|stand-locked) (stand|stand-locked) --scenario (\S+) "
+                      r"--band soft --seed 0 --trial [01]( --at [0-9.]+)?$", text, re.MULTILINE)
+    assert watch and watch[1] != watch[2] and watch[3] == str(small), text[-600:]
     with (out / "trials.csv").open() as f:
         assert len(list(csv.DictReader(f))) == 4
     assert main(["run", "stand", "--scenario", str(small), "--trials", "1", "--band", "soft", "--json",

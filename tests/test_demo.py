@@ -10,6 +10,7 @@ from pathlib import Path
 
 from wbc.arena.progress import LineProgress, progress
 from wbc.arena.record import TrialRecord
+from wbc.cli import printers
 from wbc.tools.demo import trial_to_watch
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -63,11 +64,15 @@ def test_the_demo_suggests_the_trial_the_controllers_ended_differently():
     watch = trial_to_watch(records, ("mpc", "learned"))
     assert (watch.controller, watch.band, watch.seed, watch.trial) == ("learned", "ood", 0, 1)
     assert watch.why == "learned fell at 7.2 s where mpc stood"
+    assert (watch.other, watch.at_s) == ("mpc", 6.2)  # beside the one that stood, a second before the fall
+    assert printers.ab_watch_command(watch, scenario="scenarios/push.toml", wbc="wbc") == (
+        "wbc view learned mpc --scenario scenarios/push.toml --band ood --seed 0 --trial 1 --at 6.2")
     # all alike: the strongest push, with whoever rolled most
     records = [_record("mpc", 0, force=300.0, roll=4.0), _record("learned", 0, force=300.0, roll=9.0),
                _record("mpc", 1, force=380.0, roll=6.0), _record("learned", 1, force=380.0, roll=3.0)]
     watch = trial_to_watch(records, ("mpc", "learned"))
     assert (watch.controller, watch.trial) == ("mpc", 1) and "380 N" in watch.why
+    assert (watch.other, watch.at_s) == ("learned", None)
     assert trial_to_watch([], ("mpc", "learned")) is None
 
 

@@ -580,6 +580,9 @@ def _play_arena(cfg: ArenaConfig, *, as_json: bool) -> int:
         printers.print_json(result.summary.to_json())
     else:
         printers.print_arena(result)
+        if len(set(cfg.controllers)) > 1:
+            printers.print_compare_watch(trial_to_watch(result.records, list(cfg.controllers)),
+                                         scenario=str(cfg.scenario))
     # a controller's errors cost its own trials only, but the command says so and fails: one line per controller
     for errors in result.controller_errors:
         print(f"wbc: {errors.line()}", file=sys.stderr)

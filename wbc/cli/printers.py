@@ -316,6 +316,23 @@ def demo_watch_command(watch: TrialToWatch, *, scenario: str, wbc: str | None = 
             f"--band {shlex.quote(watch.band)} --seed {watch.seed} --trial {watch.trial}")
 
 
+def ab_watch_command(watch: TrialToWatch, *, scenario: str, wbc: str | None = None) -> str:
+    """The shell command that shows `watch`'s two controllers on one page (`wbc view A B`), opened at its moment."""
+    wbc = wbc_command() if wbc is None else wbc
+    at = f" --at {watch.at_s:g}" if watch.at_s is not None else ""
+    return (f"{wbc} view {shlex.quote(watch.controller)} {shlex.quote(str(watch.other))} --scenario "
+            f"{shlex.quote(str(scenario))} --band {shlex.quote(watch.band)} --seed {watch.seed} --trial "
+            f"{watch.trial}{at}")
+
+
+def print_compare_watch(watch: TrialToWatch | None, *, scenario: str) -> None:
+    """``wbc compare``'s last lines: the most telling trial, with the command that shows both runs of it."""
+    if watch is None or watch.other is None:
+        return
+    print(f"watch it ({watch.why}; both runs on one page, {watch.other} as the ghost):")
+    print(f"  {ab_watch_command(watch, scenario=scenario)}")
+
+
 def print_controllers(rows: Sequence[ControllerListing]) -> None:
     """``wbc controllers``: the registry's, the name forms, installed plug-ins with their summaries."""
     def robots(r: ControllerListing) -> str:

@@ -28,6 +28,9 @@ class TrialToWatch:
         seed: the seed.
         trial: the trial index within (band, seed).
         why: one phrase on why this one.
+        other: the controller to watch it beside (`wbc view A B`): the one that stood where `controller` fell, else
+            another of the comparison; None in a run of one controller.
+        at_s: where in the trial to open it [s]: a second before the fall, or None (the start).
     """
 
     controller: str
@@ -35,6 +38,8 @@ class TrialToWatch:
     seed: int
     trial: int
     why: str
+    other: str | None = None
+    at_s: float | None = None
 
 
 def trial_to_watch(records: Sequence[TrialRecord], controllers: Sequence[str]) -> TrialToWatch | None:
@@ -55,12 +60,15 @@ def trial_to_watch(records: Sequence[TrialRecord], controllers: Sequence[str]) -
         if fell and len(fell) < len(played):
             band, seed, index = key
             stood = next(c for c in controllers if c in played and played[c].success)
-            return TrialToWatch(controller=fell[0], band=band, seed=seed, trial=index,
-                                why=f"{fell[0]} fell at {played[fell[0]].fall_time_s:.1f} s where {stood} stood")
+            fall = played[fell[0]].fall_time_s
+            return TrialToWatch(controller=fell[0], band=band, seed=seed, trial=index, other=stood,
+                                at_s=max(0.0, round(fall - 1.0, 1)),
+                                why=f"{fell[0]} fell at {fall:.1f} s where {stood} stood")
     key = max(by_trial, key=lambda k: (max(r.push_force_n for r in by_trial[k].values()), k))
     played = by_trial[key]
     worst = max(played.values(), key=lambda r: (r.max_roll_deg, r.controller))
     band, seed, index = key
-    return TrialToWatch(controller=worst.controller, band=band, seed=seed, trial=index,
+    other = next((c for c in controllers if c in played and c != worst.controller), None)
+    return TrialToWatch(controller=worst.controller, band=band, seed=seed, trial=index, other=other,
                         why=f"the strongest push, {worst.push_force_n:.0f} N; {worst.controller} rolled "
                         f"{worst.max_roll_deg:.0f} deg")
