@@ -3,6 +3,7 @@
 import dataclasses
 import hashlib
 import json
+import math
 import random
 import shutil
 import tomllib
@@ -19,6 +20,7 @@ PUSH = SCENARIOS / "push-v1.toml"  # push version 1: the tests below pin its val
 PUSH_CURRENT = SCENARIOS / "push.toml"  # the current version of the push task
 PUSH_V2_DURATION_S = 0.09  # [s] push version 2's calibrated push duration (its notes say how)
 TURN = SCENARIOS / "turn.toml"
+TURN_BOTH_WAYS = SCENARIOS / "turn-both-ways.toml"
 
 # Line numbers matter: the broken-file cases below assert them.
 BASE = """\
@@ -301,6 +303,34 @@ def test_turn_statistics():
     assert len(np.unique(frictions)) == len(trials) // len(s.bands)  # bands share (seed, index) draws
 
 
+def test_turn_both_ways_statistics():
+    s = load_scenario(TURN_BOTH_WAYS)
+    assert s.robot == "go1-arm" and s.bands == ("stand", "1.0", "1.5", "2.0")
+    trials = s.trials(None, [0], 200)
+    for t in trials:
+        assert t.pushes == () and t.terrain.kind == "flat" and t.command.ramp_s == 1.0 and t.command.vy == 0.0
+        if t.band == "stand":
+            assert t.command.vx == 0.0 and t.command.yaw_rate == 0.0 and math.copysign(1.0, t.command.yaw_rate) > 0
+        else:
+            assert t.command.vx == float(t.band) and t.command.yaw_rate in (0.0, 0.5, -0.5, 2.0, -2.0)
+    moving = [t.command.yaw_rate for t in trials if t.band == "2.0"]
+    for yaw in (0.0, 0.5, -0.5, 2.0, -2.0):  # five options drawn uniformly
+        assert 0.12 < moving.count(yaw) / len(moving) < 0.28
+
+
+def test_band_yaw_rate_overrides_the_option_and_keeps_its_sign_flip(tmp_path):
+    text = edit(BASE, "[[commands.options]]\nvx = 0.3\n", "[[commands.options]]\nyaw_rate = 1.0\nrandom_sign = true\n")
+    text = edit(text, 'name = "ood"', 'name = "ood"\nyaw_rate = 2.5')
+    s = load_scenario(write(tmp_path, text))
+    for i in range(200):
+        a, b = s.trial("in", 0, i), s.trial("ood", 0, i)
+        if a.command.yaw_rate == 0.0:  # the first option: no yaw of its own, but band ood turns at 2.5
+            assert b.command.yaw_rate == 2.5
+        else:
+            assert b.command.yaw_rate == 2.5 * a.command.yaw_rate  # the same option, the same sign flip
+    assert {s.trial("ood", 0, i).command.yaw_rate for i in range(200)} == {2.5, -2.5}
+
+
 def _canonical_trial(t) -> list:
     """Every value of a trial but its delays, exactly (floats as hex): what a published file's trials must keep."""
     f = lambda x: float(x).hex()  # noqa: E731
@@ -444,6 +474,7 @@ BROKEN = [
     ("force-too-big", edit(BASE, "[300.0, 400.0]", "[300.0, 6000.0]"), "[[bands]] #2 push_force_n", 37),
     ("force-three", edit(BASE, "[300.0, 400.0]", "[300.0, 350.0, 400.0]"), "[[bands]] #2 push_force_n", 37),
     ("band-vx-string", edit(BASE, 'name = "in"', 'name = "in"\nvx = "fast"'), "[[bands]] #1 vx", 33),
+    ("band-yaw-too-big", edit(BASE, 'name = "in"', 'name = "in"\nyaw_rate = 9.0'), "[[bands]] #1 yaw_rate", 33),
 ]
 
 

@@ -24,7 +24,9 @@ Schema (every other key is an error):
   (0, 600], its lower end >= the push duration, at most 1000 pushes per trial), ``duration_s`` [0.01, 1],
   ``offset_m`` [0, 0.5].
 - ``[[bands]]``: ``name``, ``push_force_n`` (an interval in [0, 2000], its upper end times ``[pushes] duration_s`` at
-  most 200 N s; required with ``[pushes]``, forbidden without), ``vx`` (optional override of the drawn option's vx).
+  most 200 N s; required with ``[pushes]``, forbidden without), ``vx`` and ``yaw_rate`` (optional overrides of the
+  drawn option's vx and yaw rate; the option's sign flip applies to an overridden yaw rate too, so a band of
+  ``vx = 0``, ``yaw_rate = 0`` stands whatever option is drawn).
 
 Sampling. Trial ``index`` under ``seed`` draws from
 ``np.random.default_rng(SeedSequence([seed, index, int(hash[:8], 16)]))`` in this fixed order:
@@ -42,7 +44,7 @@ Sampling. Trial ``index`` under ``seed`` draws from
 
 The band never enters the seed and every band draws the same numbers, so trials with the same (seed, index) in two
 bands share terrain, domain, command and push times, headings and offsets; only the band's values differ (the push
-magnitude is ``lo + u (hi - lo)`` of the band's ``push_force_n``, and the band's ``vx`` override).
+magnitude is ``lo + u (hi - lo)`` of the band's ``push_force_n``, and the band's ``vx`` and ``yaw_rate`` overrides).
 """
 
 from __future__ import annotations
@@ -138,6 +140,7 @@ class _Band:
     name: str
     push_force_n: tuple[float, float] | None  # [N]
     vx: float | None  # [m/s]
+    yaw_rate: float | None = None  # [rad/s]
 
 
 def _uniform(rng: np.random.Generator, interval: tuple[float, float]) -> float:
@@ -225,7 +228,8 @@ class Scenario:
 
         option = self._options[int(rng.integers(len(self._options)))]
         flip = bool(rng.random() < 0.5)
-        yaw_rate = -option.yaw_rate if option.random_sign and flip else option.yaw_rate
+        yaw_rate = option.yaw_rate if spec.yaw_rate is None else spec.yaw_rate
+        yaw_rate = -yaw_rate if option.random_sign and flip and yaw_rate != 0.0 else yaw_rate
         command = CommandSchedule(vx=option.vx if spec.vx is None else spec.vx, vy=option.vy, yaw_rate=yaw_rate,
                                   ramp_s=self._ramp_s)
 
@@ -402,7 +406,7 @@ def load_scenario(path: str | Path) -> Scenario:
     bands: list[_Band] = []
     seen: dict[str, str] = {}
     for bnd in top.table_array("bands", "[[bands]]"):
-        bnd.check_keys(("name", "push_force_n", "vx"))
+        bnd.check_keys(("name", "push_force_n", "vx", "yaw_rate"))
         band_name = bnd.string("name")
         if not _BAND_RE.match(band_name):
             bnd.fail("name", f"must match {_BAND_RE.pattern} (letters, digits, '_', '.', '-'), got {band_name!r}")
@@ -419,7 +423,8 @@ def load_scenario(path: str | Path) -> Scenario:
             bnd.fail("push_force_n", f"a push of {force[1]:g} N for [pushes] duration_s {pushes.duration_s:g} s "
                      f"delivers {force[1] * pushes.duration_s:g} N s, more than {MAX_PUSH_IMPULSE_NS:g} N s (it "
                      "would throw the robot at over 14 m/s); lower the force or the push duration")
-        bands.append(_Band(name=band_name, push_force_n=force, vx=bnd.optional_number("vx", Range(lo=-3.0, hi=3.0))))
+        bands.append(_Band(name=band_name, push_force_n=force, vx=bnd.optional_number("vx", Range(lo=-3.0, hi=3.0)),
+                           yaw_rate=bnd.optional_number("yaw_rate", Range(lo=-4.0, hi=4.0))))
 
     return Scenario(
         name=name, version=version, description=description, notes=notes, robot=robot, duration_s=duration_s,
