@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -821,7 +822,10 @@ def test_stage_and_baseline_configurations():
     for cfg in (s2, s3, stage_config("push", 3, "ppo"), stage_config("push", 1, "curriculum"),
                 stage_config("turn", 2), stage_config("turn", 3)):
         assert (cfg.env.rewards.base_height, cfg.env.base_height_target) == (-50.0, 0.30)
-    assert s1.env.rewards.base_height == 0.0 and stage_config("turn", 1).env.rewards.base_height == 0.0
+    assert s1.env.rewards.base_height == 0.0
+    # the turn task's pi1 is fine-tuned from an upright policy and keeps its posture term
+    assert (stage_config("turn", 1).env.rewards.base_height, stage_config("turn", 1).env.base_height_target) == (
+        -50.0, 0.30)
     ppo = stage_config("push", 3, "ppo")
     assert ppo.bc is None and ppo.init_from is None and ppo.env.teacher_arm_mode is None
     demo = stage_config("push", 3, "one-stage-demo")
@@ -832,19 +836,38 @@ def test_stage_and_baseline_configurations():
     assert (c1.env.arm_mode, c1.env.pushes, c1.init_from) == ("locked", False, None)
     assert c3.init_from.endswith("push-stage2-curriculum/policy") and c3.run_dir.endswith("push-stage3-curriculum")
     turn = stage_config("turn", 3)
-    assert turn.env.robot == "go1-arm" and turn.env.bands == ("1.0", "1.25", "1.5")
-    # the turn task's pi1 starts from the push task's shipped pi1 (the A1's walker), which the Go1 can run: same
-    # observation and action layout, loadable as a warm start
+    # the turn task trains on both turn directions, standing and up to 2 m/s
+    assert turn.env.robot == "go1-arm" and turn.env.scenario.endswith("turn-both-ways.toml")
+    assert turn.env.bands == ("stand", "1.0", "1.5", "2.0")
+    # the turn task's pi1 starts from the shipped Go1 pi1, fine-tuned over commands up to 2 m/s and +-2 rad/s
     t1 = stage_config("turn", 1)
     assert s1.init_from is None and t1.init_from is not None and t1.env.robot == "go1-arm"
     prior = load_policy(t1.init_from)
-    assert (prior.meta["robot"], prior.meta["arm_mode"], prior.num_actions) == ("a1-wx200", "none", 12)
+    assert (prior.meta["robot"], prior.meta["arm_mode"], prior.num_actions) == ("go1-arm", "none", 12)
     assert t1.action_mask == tuple(range(12)) and t1.bc is None and t1.env.rewards.termination < 0
-    # the turn task's taught stages explore with less noise than the push task's (a running robot trips on it)
+    assert t1.env.command_ranges[0][1] >= 2.0 and t1.env.command_ranges[2] == (-2.0, 2.0)
+    # the turn task's stages that start from weights explore with less noise than the push task's (a running robot
+    # trips on it)
     assert stage_config("turn", 2).init_std < stage_config("push", 2).init_std == 1.0
-    assert stage_config("turn", 3).init_std == stage_config("turn", 2).init_std and t1.init_std == 1.0
+    assert stage_config("turn", 3).init_std == stage_config("turn", 2).init_std == t1.init_std
     with pytest.raises(ConfigError, match="stage-3"):
         stage_config("push", 2, "ppo")
+    # recipe variants change one thing in the method's stage 3 and run in a directory of their own
+    held, still, warm = (stage_config("push", 3, variant=v) for v in ("bc-held", "arm-still", "from-pi2"))
+    assert held.bc.weight(0) == held.bc.weight(10_000) == 1.0 and s3.bc.weight(10_000) == 0.0
+    assert still.env.rewards.arm_deviation < 0.0 == s3.env.rewards.arm_deviation
+    assert warm.init_from == warm.teacher == s3.teacher and s3.init_from is None and warm.init_std < s3.init_std
+    for v in (held, still, warm):
+        assert v.run_dir == s3.run_dir + "-" + v.variant and v.max_iterations == s3.max_iterations
+        same = dataclasses.replace(v, variant=None, run_dir=s3.run_dir, bc=s3.bc, init_from=None, init_std=s3.init_std,
+                                   env=dataclasses.replace(v.env, rewards=s3.env.rewards))
+        assert same == s3  # nothing else differs
+    with pytest.raises(ConfigError, match="stage 3"):
+        stage_config("push", 2, variant="bc-held")
+    with pytest.raises(ConfigError, match="stage 3"):
+        stage_config("push", 3, "ppo", variant="bc-held")
+    with pytest.raises(UnknownNameError):
+        stage_config("push", 3, variant="longer")
     dec = stage_config("push", 3, "decoupled")
     assert dec.frozen_legs.endswith("push-stage2/policy") and dec.env.teacher_arm_mode == "locked"
     assert (dec.env.arm_mode, dec.bc, dec.init_from, dec.extrinsics_dim) == ("actuated", None, None, 0)

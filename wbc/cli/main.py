@@ -562,7 +562,7 @@ def _train(args: argparse.Namespace) -> int:
     if args.rma_iterations is not None:
         overrides["rma"] = AdaptationConfig(iterations=args.rma_iterations)
     cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
-                       env_overrides=env, **overrides)
+                       env_overrides=env, variant=args.variant, **overrides)
     if args.dry_run:
         printers.print_json(dataclasses.asdict(cfg))
         return 0
@@ -570,7 +570,7 @@ def _train(args: argparse.Namespace) -> int:
     from wbc.learned.train.train import train
 
     result = train(cfg, resume=args.resume)
-    printers.print_trained(result, task=args.task, stage=args.stage, baseline=args.baseline)
+    printers.print_trained(result, task=args.task, stage=args.stage, baseline=args.variant or args.baseline)
     return 0
 
 

@@ -21,7 +21,7 @@ from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES
 from wbc.hardware.realtime import DEFAULT_RT_PRIORITY
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
 from wbc.input_files import short
-from wbc.learned.train.stages import BASELINES, TASKS
+from wbc.learned.train.stages import BASELINES, RECIPE_VARIANTS, TASKS
 from wbc.mpc.qp_solvers import QP_SOLVERS
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import ROBOTS
@@ -441,6 +441,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")
     tr.add_argument("--stage", type=int, required=True, choices=(1, 2, 3), help="1: pi1, 2: pi2, 3: pi3")
     tr.add_argument("--baseline", default=None, help=f"stage-3 baseline, one of: {', '.join(BASELINES)}")
+    tr.add_argument("--variant", default=None,
+                    help=f"a one-change variant of the method's stage 3, one of: {', '.join(RECIPE_VARIANTS)}")
     tr.add_argument("--resume", action="store_true", help="continue from the newest checkpoint of the run")
     tr.add_argument("--iterations", type=bounded_int(1, 1_000_000), default=None,
                     help="PPO iterations of the whole run, 1..1000000 (default 1500)")
@@ -451,7 +453,8 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--rma-iterations", type=bounded_int(0, 1_000_000), default=None,
                     help="RMA phase-2 rounds after PPO (default 200; 0 skips phase 2)")
     tr.add_argument("--teacher", default=None, help="BC teacher policy file (default: the previous stage's export)")
-    tr.add_argument("--run-root", default="runs/train", help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>]")
+    tr.add_argument("--run-root", default="runs/train",
+                    help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>]")
     tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")
     tr.set_defaults(handler="train")
 

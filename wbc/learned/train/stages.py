@@ -24,6 +24,10 @@ Baselines (paper Table III), configurations of the same code:
                     adaptation module. The run exports a composite policy file embedding both networks
                     (`wbc.learned.policy.composite_policy`), which `LearnedController` runs like any other.
 
+Recipe variants (`RECIPE_VARIANTS`) change one thing in the stage-3 recipe, at the same budget, to find out what the
+actuated arm's stage gains or loses: ``bc-held`` (the BC weight towards pi2 never annealed), ``arm-still`` (a penalty on
+the arm's distance from its stowed pose), ``from-pi2`` (the actor starts from pi2's weights, as the turn task's does).
+
 A stage's teacher is the policy file the previous stage exported (``<run_dir>/<task>-stage<k-1>/policy``), unless
 a path is given.
 """
@@ -41,9 +45,9 @@ from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.bc_schedule import BCSchedule
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["BASELINES", "PUSH_POSTURE", "TASKS", "TURN_POSTURE", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS",
-           "TURN_WALKING_PRIOR_INIT", "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS",
-           "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
+__all__ = ["BASELINES", "PUSH_POSTURE", "RECIPE_VARIANTS", "TASKS", "TURN_POSTURE", "TURN_TAUGHT_INIT_STD",
+           "TURN_WALKING_PRIOR_COMMANDS", "TURN_SCENARIO", "TURN_WALKING_PRIOR_INIT", "TURN_WALKING_PRIOR_TERMINATION",
+           "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -60,7 +64,9 @@ class TaskSpec:
     `taught_init_std` is the initial action noise of the stages that learn from a teacher (2 and 3,
     `TrainConfig.init_std`); `taught_start_from_teacher` starts those stages' actors from their teacher's weights
     (`wbc.learned.train.warm_start`; the BC term still pulls towards the teacher and is annealed away);
-    `posture` is (weight, target height [m]) of the `base_height` reward term in the stages after pi1 (None: off).
+    `posture` is (weight, target height [m]) of the `base_height` reward term in the stages after pi1 (None: off);
+    `walking_prior_posture` holds it in pi1 too (a pi1 fine-tuned from an upright policy must stay upright), and
+    `walking_prior_init_std` is pi1's initial action noise when it starts from `walking_prior_init`.
     """
 
     robot: str
@@ -73,6 +79,8 @@ class TaskSpec:
     taught_init_std: float = 1.0
     taught_start_from_teacher: bool = False
     posture: tuple[float, float] | None = None
+    walking_prior_posture: bool = False
+    walking_prior_init_std: float = 1.0
 
 
 PUSH_POSTURE = (-50.0, 0.30)
@@ -99,17 +107,22 @@ legged_gym's recipe (commands over about +-1, tracking width 0.25, no fall penal
 pi2 and pi3 train on the scenario's commands. The runs behind this: ``docs/learning-notes.md``, stage 1."""
 WALKING_PRIOR_SIGMA = 0.25
 
-TURN_WALKING_PRIOR_INIT = "a1-wx200-none-crouched"
-"""The turn task's pi1 starts from the push task's pi1 (the A1 without its arm; same observation and action layout)
-and is fine-tuned on go1-arm without its arm.
+TURN_WALKING_PRIOR_INIT = "go1-arm-none"
+"""The turn task's pi1 starts from the shipped Go1 pi1 (``wbc/learned/weights/go1-arm-none``) and is fine-tuned on
+go1-arm without its arm over `TURN_WALKING_PRIOR_COMMANDS`, upright (`TaskSpec.walking_prior_posture`).
 
-The two robots move alike (an open-loop trot, the A1's pi1 run unchanged on the Go1), but go1-arm runs from scratch
-found no gait under any reward tried: the problem is discovering a gait, not executing one, so the A1's gait is the
-starting point (``docs/learning-notes.md``, stage 1, turn task)."""
+Its lineage: go1-arm runs from scratch found no gait under any reward tried (the problem is discovering a gait, not
+executing one), so the first Go1 pi1 was the A1's pi1 (``a1-wx200-none-crouched``) fine-tuned on the Go1; it was then
+fine-tuned upright, and then to 2 m/s and both turn directions (``docs/learning-notes.md``, stage 1, turn task). Each
+fine-tune started from the weights shipped before it."""
 
-TURN_WALKING_PRIOR_COMMANDS = ((-0.5, 1.5), (-0.5, 0.5), (-2.0, 2.0))
-"""The turn task's pi1 commands: legged_gym's ranges widened to the scenario's speeds (1-1.5 m/s) and yaw rates
-(0.5-2 rad/s), so that pi1, the teacher of pi2, has been trained on the commands pi2 will see."""
+TURN_SCENARIO = "scenarios/turn-both-ways.toml"
+"""The turn task's training scenario: both yaw directions, standing and 1-2 m/s (``turn.toml``, the paper's protocol,
+turns left only, and policies trained on it alone fell in right turns at 1.75-2 m/s and when told to stand)."""
+
+TURN_WALKING_PRIOR_COMMANDS = ((-0.5, 2.0), (-0.5, 0.5), (-2.0, 2.0))
+"""The turn task's pi1 commands: legged_gym's ranges widened to the scenario's speeds (up to 2 m/s) and yaw rates
+(both directions up to 2 rad/s), so that pi1, the teacher of pi2, has been trained on the commands pi2 will see."""
 
 TURN_WALKING_PRIOR_TERMINATION = -100.0
 """The turn task's pi1 pays for falls, -2 per fall (the later stages' weight): it starts from a policy that walks,
@@ -127,11 +140,12 @@ actions start at zero). The runs behind both: ``docs/learning-notes.md``, stages
 TASKS: dict[str, TaskSpec] = {
     "push": TaskSpec(robot="a1-wx200", scenario="scenarios/push.toml", bands=("in",), tracking_sigma=0.05,
                      walking_prior_commands=WALKING_PRIOR_COMMANDS, posture=PUSH_POSTURE),
-    "turn": TaskSpec(robot="go1-arm", scenario="scenarios/turn.toml", bands=("1.0", "1.25", "1.5"),
+    "turn": TaskSpec(robot="go1-arm", scenario=TURN_SCENARIO, bands=("stand", "1.0", "1.5", "2.0"),
                      tracking_sigma=0.25, walking_prior_commands=TURN_WALKING_PRIOR_COMMANDS,
                      walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION,
                      walking_prior_init=TURN_WALKING_PRIOR_INIT, taught_init_std=TURN_TAUGHT_INIT_STD,
-                     taught_start_from_teacher=True, posture=TURN_POSTURE),
+                     taught_start_from_teacher=True, posture=TURN_POSTURE, walking_prior_posture=True,
+                     walking_prior_init_std=TURN_TAUGHT_INIT_STD),
 }
 
 BASELINES: dict[str, str] = {
@@ -142,18 +156,29 @@ BASELINES: dict[str, str] = {
     "decoupled": "pi2's legs, frozen, plus an arm policy trained by PPO on the stage-3 task (a composite policy)",
 }
 
+RECIPE_VARIANTS: dict[str, str] = {
+    "bc-held": "stage 3 with the BC weight towards pi2 held at 1 for the whole run (the recipe anneals it to 0)",
+    "arm-still": "stage 3 with a penalty on the arm's squared distance from its stowed pose (arm_deviation -0.5)",
+    "from-pi2": "stage 3 started from pi2's weights on the legs (arm actions from zero, action noise 0.5)",
+}
+"""One-change variants of the stage-3 recipe (the paper's method, no baseline), trained at the recipe's budget."""
+
+ARM_STILL_WEIGHT = -0.5
+"""`RewardScales.arm_deviation` of the ``arm-still`` variant: the arm 0.5 rad from its stowed pose on each of its three
+joints costs 0.375 per second, a third of what tracking the commanded speed perfectly earns (1.0 + 0.5)."""
+
 _ARM = {1: "none", 2: "locked", 3: "actuated"}
 
 
 
-def run_name(task: str, stage: int, baseline: str | None = None) -> str:
-    """Directory name of a run under the runs root: ``push-stage3`` or ``push-stage3-ppo``."""
-    return f"{task}-stage{stage}" + (f"-{baseline}" if baseline else "")
+def run_name(task: str, stage: int, baseline: str | None = None, variant: str | None = None) -> str:
+    """Directory name of a run under the runs root: ``push-stage3``, ``push-stage3-ppo`` or ``push-stage3-bc-held``."""
+    return f"{task}-stage{stage}" + (f"-{baseline}" if baseline else "") + (f"-{variant}" if variant else "")
 
 
 def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root: str = "runs/train",
                  teacher: str | None = None, env_overrides: dict[str, Any] | None = None,
-                 **overrides: Any) -> TrainConfig:
+                 variant: str | None = None, **overrides: Any) -> TrainConfig:
     """The `TrainConfig` of a stage (or a baseline) of a task.
 
     Args:
@@ -164,11 +189,13 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
         teacher: the teacher's (for weight-transfer baselines, the initial; for decoupled, the frozen legs') policy
             file (default: the previous stage's export under `run_root`).
         env_overrides: `EnvConfig` fields to change (num_envs, seed ...).
+        variant: None, or a key of `RECIPE_VARIANTS` (stage 3 of the method, no baseline).
         **overrides: `TrainConfig` fields to change (max_iterations, seed ...).
 
     Raises:
         UnknownNameError: unknown task or baseline.
-        ConfigError: a stage other than 1, 2, 3, or a baseline other than curriculum outside stage 3.
+        ConfigError: a stage other than 1, 2, 3, a baseline other than curriculum outside stage 3, or a variant
+            outside stage 3 or with a baseline.
     """
     if task not in TASKS:
         raise UnknownNameError("task", task, tuple(TASKS))
@@ -179,6 +206,12 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
             raise UnknownNameError("baseline", baseline, tuple(BASELINES))
         if stage != 3 and baseline != "curriculum":
             raise ConfigError(f"baseline {baseline!r} is a stage-3 policy; use --stage 3")
+    if variant is not None:
+        if variant not in RECIPE_VARIANTS:
+            raise UnknownNameError("recipe variant", variant, tuple(RECIPE_VARIANTS))
+        if stage != 3 or baseline is not None:
+            raise ConfigError(f"recipe variant {variant!r} changes the method's stage 3; use --stage 3 without "
+                              "--baseline")
     spec = TASKS[task]
     arm = _ARM[stage]
     teacher_stage = {2: 1, 3: 2}.get(stage)
@@ -204,7 +237,7 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
         command_ranges=spec.walking_prior_commands if walking_prior else None,
         rewards=RewardScales(termination=spec.walking_prior_termination) if walking_prior else RewardScales(),
     )
-    if spec.posture is not None and not walking_prior:
+    if spec.posture is not None and (not walking_prior or spec.walking_prior_posture):
         env = dataclasses.replace(env, rewards=dataclasses.replace(env.rewards, base_height=spec.posture[0]),
                                   base_height_target=spec.posture[1])
     env = dataclasses.replace(env, **(env_overrides or {}))
@@ -226,8 +259,16 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
     if baseline is None and teacher_stage is not None and spec.taught_start_from_teacher:
         init_path = teacher_path
     init_std = {"init_std": spec.taught_init_std} if teacher_stage is not None else {}
-    cfg = TrainConfig(task=task, stage=stage, baseline=baseline, env=env, bc=bc, teacher=teacher_path,
-                      init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
-                      run_dir=str(Path(run_root) / run_name(task, stage, baseline)), save_interval=25, **decoupled,
-                      **init_std)
+    if walking_prior and spec.walking_prior_init is not None:
+        init_std = {"init_std": spec.walking_prior_init_std}
+    if variant == "bc-held":
+        bc = BCSchedule(initial=1.0, final=1.0, hold_iterations=0, anneal_iterations=1, kind="constant")
+    elif variant == "arm-still":
+        env = dataclasses.replace(env, rewards=dataclasses.replace(env.rewards, arm_deviation=ARM_STILL_WEIGHT))
+    elif variant == "from-pi2":
+        init_path, init_std = teacher_path, {"init_std": TURN_TAUGHT_INIT_STD}
+    cfg = TrainConfig(task=task, stage=stage, baseline=baseline, variant=variant, env=env, bc=bc,
+                      teacher=teacher_path, init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
+                      run_dir=str(Path(run_root) / run_name(task, stage, baseline, variant)), save_interval=25,
+                      **decoupled, **init_std)
     return dataclasses.replace(cfg, **overrides)

@@ -136,7 +136,7 @@ class _Runner(_runners.OnPolicyRunner):
         progress = {"iteration": int(self.current_learning_iteration),
                     "env_steps": self._steps_before + int(self.env.env.total_steps), "wall_s": wall}
         actor = self.alg.get_policy()
-        extra = {"baseline": cfg.baseline, **progress}
+        extra = {"baseline": cfg.baseline, **({"variant": cfg.variant} if cfg.variant else {}), **progress}
         if isinstance(self.env, FrozenLegsVecEnv):
             extra["frozen_legs"] = cfg.frozen_legs
             save_composite(Path(cfg.run_dir) / "policy", decoupled_policy(

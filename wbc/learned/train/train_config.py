@@ -36,6 +36,7 @@ class TrainConfig:
         task: ``push`` or ``turn``.
         stage: 1, 2 or 3.
         baseline: None for the paper's method, else a baseline name (`wbc.learned.train.stages.BASELINES`).
+        variant: None, or a one-change variant of the method's stage 3 (`wbc.learned.train.stages.RECIPE_VARIANTS`).
         env: the environment.
         seed: seeds torch (the env has its own seed in `env`).
         max_iterations: PPO iterations of the whole run (a resumed run trains up to this count).
@@ -65,6 +66,7 @@ class TrainConfig:
     task: str
     stage: int
     baseline: str | None = None
+    variant: str | None = None
     env: EnvConfig = field(default_factory=EnvConfig)
     seed: int = 0
     max_iterations: int = 1500
