@@ -190,7 +190,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         warm_start_actor(runner.alg.get_policy(), _load_for(cfg.init_from, "the policy this run starts from"),
                          mask=None if cfg.action_mask is None else list(cfg.action_mask))
     if checkpoint is not None:
-        runner.load(str(checkpoint))
+        runner.load(str(checkpoint), map_location=cfg.device)  # a run may resume on another device
         done = runner.current_learning_iteration + 1
         runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
     else:
