@@ -27,7 +27,13 @@ from wbc.cli.parser import build_parser
 from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.check import CheckConfig, check_controller
 from wbc.control.onnx_policy import ONNX_PREFIX
-from wbc.control.registry import ControllerSpec, get_controller, list_controllers, takes_controller_config
+from wbc.control.registry import (
+    CONTROLLERS,
+    ControllerSpec,
+    get_controller,
+    list_controllers,
+    takes_controller_config,
+)
 from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
 from wbc.hardware.capabilities import WallClock
 from wbc.hardware.emulators import (
@@ -557,6 +563,15 @@ def _hw_live_observer(args: argparse.Namespace):
 
 
 def _train(args: argparse.Namespace) -> int:
+    if args.teacher is not None and args.teacher in CONTROLLERS:
+        return _distil(args)
+    dagger_only = [f"--{n.replace('_', '-')}" for n in ("rounds", "episodes", "episode_s")
+                   if getattr(args, n) is not None]
+    if dagger_only:
+        raise ConfigError(f"{', '.join(dagger_only)}: only with a controller as --teacher (DAgger), e.g. "
+                          "--teacher mpc")
+    if args.stage is None:
+        raise ConfigError("wbc train: --stage 1|2|3 is required (or --teacher CONTROLLER to distil a controller)")
     env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
     overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
     if args.rma_iterations is not None:
@@ -571,6 +586,30 @@ def _train(args: argparse.Namespace) -> int:
 
     result = train(cfg, resume=args.resume)
     printers.print_trained(result, task=args.task, stage=args.stage, baseline=args.variant or args.baseline)
+    return 0
+
+
+def _distil(args: argparse.Namespace) -> int:
+    """``wbc train --teacher CONTROLLER``: DAgger with that controller as the expert."""
+    for flag, value in (("--stage", args.stage), ("--baseline", args.baseline), ("--variant", args.variant),
+                        ("--rma-iterations", args.rma_iterations), ("--iterations", args.iterations),
+                        ("--envs", args.envs), ("--threads", args.threads)):
+        if value is not None:
+            raise ConfigError(f"{flag} does not apply to DAgger (--teacher {args.teacher}); its options are --rounds, "
+                              "--episodes, --episode-s, --seed, --run-root and --resume")
+    # torch loads only when a run really trains
+    from wbc.tools.dagger import DaggerConfig, run_dagger
+
+    fields = {k: v for k, v in (("rounds", args.rounds), ("episodes", args.episodes),
+                                ("episode_s", args.episode_s), ("seed", args.seed)) if v is not None}
+    cfg = DaggerConfig(task=args.task, expert=args.teacher,
+                       run_dir=str(Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"), **fields)
+    if args.dry_run:
+        printers.print_json(dataclasses.asdict(cfg))
+        return 0
+    result = run_dagger(cfg, resume=args.resume, log=print)
+    print(f"distilled {args.teacher} into a policy by DAgger: {result['rounds']} rounds, {result['samples']:,} "
+          f"samples, {result['wall_s'] / 60:.1f} min; policy {result['policy']}")
     return 0
 
 

@@ -439,7 +439,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
     tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")
-    tr.add_argument("--stage", type=int, required=True, choices=(1, 2, 3), help="1: pi1, 2: pi2, 3: pi3")
+    tr.add_argument("--stage", type=int, default=None, choices=(1, 2, 3),
+                    help="1: pi1, 2: pi2, 3: pi3 (required unless --teacher names a controller)")
     tr.add_argument("--baseline", default=None, help=f"stage-3 baseline, one of: {', '.join(BASELINES)}")
     tr.add_argument("--variant", default=None,
                     help=f"a one-change variant of the method's stage 3, one of: {', '.join(RECIPE_VARIANTS)}")
@@ -452,7 +453,16 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--seed", type=_SEED, default=None, help=f"seed, 0..{MAX_SEED} (default 0)")
     tr.add_argument("--rma-iterations", type=bounded_int(0, 1_000_000), default=None,
                     help="RMA phase-2 rounds after PPO (default 200; 0 skips phase 2)")
-    tr.add_argument("--teacher", default=None, help="BC teacher policy file (default: the previous stage's export)")
+    tr.add_argument("--teacher", default=None,
+                    help="BC teacher policy file (default: the previous stage's export); or a controller of the "
+                         "arena (e.g. mpc): distil it into a policy by DAgger (--rounds, --episodes)")
+    tr.add_argument("--rounds", type=bounded_int(1, 10_000), default=None,
+                    help="with a controller as --teacher: DAgger rounds, the expert-driven first one included "
+                         "(default 8)")
+    tr.add_argument("--episodes", type=bounded_int(1, 1_000_000), default=None,
+                    help="with a controller as --teacher: episodes per DAgger round (default 20)")
+    tr.add_argument("--episode-s", type=float, default=None,
+                    help="with a controller as --teacher: play only the first seconds of each episode")
     tr.add_argument("--run-root", default="runs/train",
                     help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>]")
     tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")

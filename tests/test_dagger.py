@@ -1,0 +1,162 @@
+"""DAgger: distilling a controller of the arena into a policy of our form (`wbc train --teacher mpc`)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from wbc.errors import ConfigError
+from wbc.types import MotorCommand
+
+torch = pytest.importorskip("torch")
+
+
+def test_the_expert_action_asks_for_the_expert_torque_at_that_state():
+    from wbc.learned.train.distill import expert_action
+
+    rng = np.random.default_rng(3)
+    n = 15
+    kp, kd = rng.uniform(5.0, 30.0, n), rng.uniform(0.1, 1.0, n)
+    default_q, scale = rng.normal(size=n), 0.25
+    for _ in range(20):
+        cmd = MotorCommand(q=rng.normal(size=n), dq=rng.normal(size=n), kp=rng.uniform(0.0, 40.0, n),
+                           kd=rng.uniform(0.0, 2.0, n), tau=rng.normal(scale=5.0, size=n))
+        q, dq = rng.normal(size=n), rng.normal(scale=3.0, size=n)
+        a = expert_action(cmd, q, dq, default_q=default_q, action_scale=scale, kp=kp, kd=kd)
+        expert_torque = cmd.kp * (cmd.q - q) + cmd.kd * (cmd.dq - dq) + cmd.tau
+        policy_torque = kp * (default_q + scale * a - q) - kd * dq  # the policy's motor law
+        np.testing.assert_allclose(policy_torque, expert_torque, rtol=0, atol=1e-9)
+    with pytest.raises(ConfigError, match="kp"):
+        expert_action(cmd, q, dq, default_q=default_q, action_scale=scale, kp=np.zeros(n), kd=kd)
+
+
+def test_the_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
+    from wbc.learned.env.env_config import EnvConfig
+    from wbc.learned.policy.numpy_policy import NumpyPolicy
+    from wbc.learned.policy.observations import ObsLayout
+    from wbc.learned.policy.policy_file import load_policy, save_policy
+    from wbc.learned.train.distill import FitConfig, fit_student, load_student, save_student, student_policy_file
+
+    rng = np.random.default_rng(0)
+    env = EnvConfig(robot="a1-wx200", arm_mode="actuated")
+    obs = rng.normal(size=(2000, ObsLayout(15).size)).astype(np.float32) * 3.0 + 1.0
+    w = rng.normal(size=(obs.shape[1], 15)) * 0.03
+    actions = np.tanh(obs @ w)
+    net, losses = fit_student(obs, actions, FitConfig(epochs=60, hidden_dims=(64, 64)))
+    assert losses[-1] < 0.1 * losses[0]
+    save_policy(tmp_path / "student", student_policy_file(net, env, task="push", extra={"method": "dagger"}))
+    pf = load_policy(tmp_path / "student")
+    assert (pf.meta["robot"], pf.meta["arm_mode"], pf.meta["stage"], pf.meta["extrinsics"]) == (
+        "a1-wx200", "actuated", 3, None)
+    with torch.no_grad():
+        want = net(torch.from_numpy(obs[:50])).double().numpy()
+    np.testing.assert_allclose(NumpyPolicy(pf)(obs[:50].astype(np.float64)), want, atol=1e-4)
+    save_student(net, tmp_path / "student.pt")
+    again = load_student(tmp_path / "student.pt")
+    with torch.no_grad():
+        np.testing.assert_array_equal(again(torch.from_numpy(obs[:5])).numpy(), net(torch.from_numpy(obs[:5])).numpy())
+    with pytest.raises(ConfigError):
+        fit_student(obs[:0], actions[:0], FitConfig())
+
+
+def test_who_drives_is_the_expert_first_then_less_and_less_often():
+    from wbc.tools.dagger import DaggerConfig
+
+    cfg = DaggerConfig(rounds=6, episodes=200, beta=0.5)
+    assert all(cfg.expert_drives(0, e) for e in range(200))
+    shares = [np.mean([cfg.expert_drives(k, e) for e in range(200)]) for k in range(1, 5)]
+    for k, share in enumerate(shares, start=1):
+        assert abs(share - 0.5**k) < 0.1
+    assert [cfg.expert_drives(3, e) for e in range(50)] == [cfg.expert_drives(3, e) for e in range(50)]
+    for bad in ({"rounds": 0}, {"beta": 1.5}, {"episode_s": 0.0}, {"task": "walk"}):
+        with pytest.raises(ConfigError):
+            DaggerConfig(**bad)
+
+
+def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_arena_plays(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log file here
+    from wbc.arena.sim_trial import run_trial
+    from wbc.cli.main import main
+    from wbc.scenario import load_scenario
+
+    args = ["train", "--task", "push", "--teacher", "mpc", "--episodes", "2", "--episode-s", "0.6",
+            "--run-root", str(tmp_path / "runs")]
+    assert main([*args, "--rounds", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "round 0: 2 episodes (0 driven by the student" in out and "round 1:" in out and "distilled mpc" in out
+    run = tmp_path / "runs" / "push-dagger-mpc"
+    progress = json.loads((run / "progress.json").read_text())
+    assert [r["round"] for r in progress["rounds"]] == [0, 1]
+    first, second = progress["rounds"]
+    # 0.6 s at the student's 50 Hz: 30 labelled ticks per expert-driven episode (a student may fall sooner)
+    assert first["samples_total"] == 60 and first["student_episodes"] == 0
+    assert second["samples_total"] > 60
+    with np.load(run / "data.npz") as data:
+        assert data["obs"].shape[0] == data["actions"].shape[0] == second["samples_total"]
+        assert np.all(np.abs(data["actions"]) <= 10.0)  # clipped to the policy's action range
+    meta = json.loads((run / "policy.json").read_text())
+    assert meta["training"]["method"] == "dagger" and meta["training"]["expert"] == "mpc"
+    # the arena plays the export as it plays any policy file
+    trial = load_scenario("scenarios/push.toml").trial("in", 0, 0)
+    import dataclasses
+
+    record, episode = run_trial(dataclasses.replace(trial, duration_s=0.2, pushes=()), f"policy:{run / 'policy'}")
+    assert not record.error and episode.t.size == 10  # 0.2 s at 50 Hz
+    # a finished run is not overwritten; --resume adds rounds after the last finished one
+    assert main([*args, "--rounds", "3"]) == 2
+    assert "already holds a DAgger run; pass --resume" in capsys.readouterr().err
+    assert main([*args, "--rounds", "3", "--resume"]) == 0
+    progress = json.loads((run / "progress.json").read_text())
+    assert [r["round"] for r in progress["rounds"]] == [0, 1, 2]
+    assert progress["rounds"][2]["samples_total"] > second["samples_total"]
+    # DAgger's options need a controller as teacher, and the stage options do not apply to DAgger
+    for wrong, said in ((["train", "--task", "push", "--stage", "3", "--rounds", "2", "--dry-run"], "--rounds"),
+                        ([*args, "--stage", "3", "--dry-run"], "--stage does not apply to DAgger"),
+                        (["train", "--task", "push", "--dry-run"], "--stage 1|2|3 is required")):
+        capsys.readouterr()
+        assert main(wrong) == 2
+        assert said in capsys.readouterr().err
+
+def test_a_failing_expert_costs_only_its_episode(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    import wbc.tools.dagger as dagger
+    from wbc.control.registry import get_controller
+
+    real = get_controller("mpc")
+    calls = {"n": 0}
+
+    class Breaks:
+        """The real expert, raising at its 30th tick of the first episode."""
+
+        def __init__(self, inner):
+            self.inner, self.rate_hz, self.ticks = inner, inner.rate_hz, 0
+
+        def reset(self):
+            self.inner.reset()
+
+        def act(self, state, command):
+            self.ticks += 1
+            if calls["n"] == 1 and self.ticks == 30:
+                raise RuntimeError("expert broke")
+            return self.inner.act(state, command)
+
+        def counters(self):
+            return self.inner.counters()
+
+    def make(desc):
+        calls["n"] += 1
+        return Breaks(real.make(desc))
+
+    import dataclasses
+
+    spec = dataclasses.replace(real, make=make)
+    monkeypatch.setattr(dagger, "get_controller", lambda name: spec)
+    result = dagger.run_dagger(dagger.DaggerConfig(rounds=1, episodes=2, episode_s=0.4, run_dir=str(tmp_path / "r")))
+    rounds = json.loads((Path(result["run_dir"]) / "progress.json").read_text())["rounds"]
+    eps = rounds[0]["episodes"]
+    assert rounds[0]["errors"] == 1 and "expert broke" in eps[0]["error"] and eps[1]["error"] is None
+    # the broken episode keeps its samples up to the failure (ticks 0, 10, 20 of the expert's 500 Hz), the other all 20
+    assert [e["samples"] for e in eps] == [3, 20] and result["samples"] == 23

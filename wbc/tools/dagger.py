@@ -1,0 +1,290 @@
+"""DAgger: a policy of our observation and action form distilled from a controller of the arena (``mpc`` by default).
+
+Each round plays episodes of the task's scenario (its training bands, on the training seed stream, apart from
+evaluation's) in the arena's own simulation (`wbc.arena.sim_trial.run_trial`). The expert runs at its own rate in
+every episode, whoever drives, so its internal state (estimator, gait clock, plan) follows the robot. At each policy
+tick (50 Hz) the student's observation is recorded with the expert's command turned into a policy action
+(`wbc.learned.train.distill.expert_action`). Round 0 is driven by the expert; in round k an episode is driven by the
+expert with probability beta^k and otherwise by the current student, whose mistakes then show the expert states it
+never visits under the expert (Ross et al., 2011). After each round the student is fitted to everything collected so far
+(`fit_student`) and exported (``<run_dir>/policy.npz/.json``), with the data (``data.npz``) and the round's figures
+(``progress.json``): a run that stops loses at most the round in progress, and ``resume`` continues after the last
+finished round.
+
+While the expert drives, the student's previous-action input is the expert's action as a policy would have sent it,
+so the observation means the same thing under both drivers.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from wbc.arena.sim_trial import run_trial
+from wbc.control.protocol import Controller
+from wbc.control.registry import get_controller
+from wbc.control.spec import ControllerSpec
+from wbc.errors import ConfigError
+from wbc.learned.env.env_config import EnvConfig
+from wbc.learned.policy.controller import LearnedController
+from wbc.learned.policy.observations import policy_observation
+from wbc.learned.policy.policy_file import load_policy, save_policy
+from wbc.learned.train.distill import (
+    FitConfig,
+    StudentNet,
+    expert_action,
+    fit_student,
+    load_student,
+    save_student,
+    student_policy_file,
+)
+from wbc.learned.train.stages import TASKS
+from wbc.provenance import provenance
+from wbc.robots.description import RobotDescription
+from wbc.scenario import load_scenario
+from wbc.types import MotorCommand, RobotState, VelocityCommand
+
+__all__ = ["DaggerConfig", "DaggerController", "run_dagger"]
+
+TRAIN_SEED_OFFSET = 100_000
+"""Training episodes use seeds from here on, as the training env's (`EnvConfig.train_seed_offset`): never an
+evaluation trial."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class DaggerConfig:
+    """A DAgger run.
+
+    Attributes:
+        task: a key of `wbc.learned.train.stages.TASKS` (its robot, scenario and training bands).
+        expert: the expert, a controller name of the arena (``mpc``).
+        rounds: rounds, the expert-driven round 0 included.
+        episodes: episodes per round.
+        episode_s: play only the first seconds of each episode (None: the scenario's whole duration).
+        beta: in round k an episode is driven by the expert with probability beta^k.
+        seed: training seed (episodes use scenario seed `TRAIN_SEED_OFFSET` + seed).
+        fit: the student's supervised fit.
+        run_dir: where the data, the policy and the progress go.
+    """
+
+    task: str = "push"
+    expert: str = "mpc"
+    rounds: int = 8
+    episodes: int = 20
+    episode_s: float | None = None
+    beta: float = 0.5
+    seed: int = 0
+    fit: FitConfig = field(default_factory=FitConfig)
+    run_dir: str = "runs/train/push-dagger-mpc"
+
+    def __post_init__(self) -> None:
+        if self.task not in TASKS:
+            raise ConfigError(f"DaggerConfig: task must be one of {', '.join(TASKS)}, got {self.task!r}")
+        if min(self.rounds, self.episodes) < 1:
+            raise ConfigError("DaggerConfig: rounds and episodes must be >= 1")
+        if self.episode_s is not None and not (math.isfinite(self.episode_s) and self.episode_s > 0.0):
+            raise ConfigError(f"DaggerConfig: episode_s must be a positive number of seconds, got {self.episode_s}")
+        if not 0.0 <= self.beta <= 1.0:
+            raise ConfigError(f"DaggerConfig: beta must be in [0, 1], got {self.beta}")
+
+    def expert_drives(self, round_index: int, episode: int) -> bool:
+        """Whether the expert drives `episode` of round `round_index` (a pure function of the seed)."""
+        if round_index == 0:
+            return True
+        draw = np.random.default_rng([self.seed, round_index, episode]).random()
+        return bool(draw < self.beta**round_index)
+
+
+class DaggerController:
+    """The expert and the student in one controller: the expert acts every tick, one of them drives.
+
+    The student's observation is recorded with the expert's label at every policy tick.
+
+    Args:
+        expert: the expert controller, built for the robot.
+        desc: the robot.
+        env: the student's env configuration (observation scales, action scale, gains, policy rate).
+        student: the student's controller (its policy file), or None while there is none (the expert must drive).
+        expert_drives: who drives this episode.
+
+    Raises:
+        ConfigError: the student must drive but there is none, or the expert's period does not divide the
+            student's.
+    """
+
+    def __init__(self, expert: Controller, desc: RobotDescription, env: EnvConfig, student: LearnedController | None,
+                 *, expert_drives: bool) -> None:
+        if student is None and not expert_drives:
+            raise ConfigError("DaggerController: no student yet; the expert must drive")
+        ratio = expert.rate_hz * env.policy_dt
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ConfigError(f"DaggerController: the expert's rate {expert.rate_hz} Hz is not a whole multiple of "
+                              f"the student's {1.0 / env.policy_dt:g} Hz")
+        self.expert, self.student, self.expert_drives = expert, student, expert_drives
+        self.rate_hz = expert.rate_hz
+        self.every = int(round(ratio))
+        self.default_q = desc.nominal_q.copy()
+        self.kp, self.kd = env.gains(desc.num_joints)
+        self.scale, self.clip, self.scales = env.action_scale, env.clip_actions, env.obs_scales
+        self.obs: list[np.ndarray] = []
+        self.labels: list[np.ndarray] = []
+        self.reset()
+
+    def reset(self) -> None:
+        """Reset the expert and the student's inputs; the collected samples stay."""
+        self.expert.reset()
+        self.tick = 0
+        self.last_action = np.zeros(self.default_q.size)
+        self.held: MotorCommand | None = None
+
+    def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """One expert tick; on policy ticks also a labelled sample and, when it drives, the student's command."""
+        expert_cmd = self.expert.act(state, command)
+        if self.tick % self.every == 0:
+            obs = policy_observation(
+                gyro_in_body=state.gyro_in_body[None], imu_quat=state.imu_quat[None],
+                command=command.as_array()[None], q=state.q[None], dq=state.dq[None],
+                last_action=self.last_action[None], default_q=self.default_q, scales=self.scales)[0]
+            label = np.clip(expert_action(expert_cmd, state.q, state.dq, default_q=self.default_q,
+                                          action_scale=self.scale, kp=self.kp, kd=self.kd), -self.clip, self.clip)
+            self.obs.append(obs)
+            self.labels.append(label)
+            if self.expert_drives:
+                self.last_action = label
+            else:
+                assert self.student is not None
+                action = np.clip(self.student.policy(obs[None], {})[0], -self.clip, self.clip)
+                self.last_action = action
+                self.held = MotorCommand(q=self.default_q + self.scale * action, dq=np.zeros_like(action),
+                                         kp=self.kp, kd=self.kd, tau=np.zeros_like(action))
+        self.tick += 1
+        if self.expert_drives:
+            return expert_cmd
+        assert self.held is not None
+        return self.held
+
+    def counters(self) -> dict[str, int]:
+        """The expert's event counters."""
+        return self.expert.counters()
+
+
+def _student_env(cfg: DaggerConfig, arm_mode: str) -> EnvConfig:
+    spec = TASKS[cfg.task]
+    return EnvConfig(robot=spec.robot, arm_mode=arm_mode, scenario=spec.scenario, bands=spec.bands)
+
+
+def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> dict[str, Any]:
+    """Run DAgger rounds and export the student after each.
+
+    Args:
+        cfg: the run.
+        resume: continue after the last finished round in ``cfg.run_dir`` (its config must be the same but for
+            ``rounds``).
+        log: called with one line of progress per round (e.g. `print`), or None.
+
+    Returns:
+        The run's summary: rounds, samples, the policy file, wall time and each round's figures.
+
+    Raises:
+        ConfigError: the expert is not a controller of the arena, ``resume`` without a finished round or with another
+            configuration, or a run directory that already holds a run (without ``resume``).
+    """
+    expert_spec = get_controller(cfg.expert)
+    spec = TASKS[cfg.task]
+    scenario = load_scenario(spec.scenario)
+    env = _student_env(cfg, expert_spec.arm_mode)
+    run_dir = Path(cfg.run_dir)
+    resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
+    progress: dict[str, Any] = {"rounds": []}
+    obs_all: list[np.ndarray] = []
+    act_all: list[np.ndarray] = []
+    if resume:
+        if not (run_dir / "progress.json").exists():
+            raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
+        saved = json.loads((run_dir / "config.json").read_text())["dagger_config"]
+        diff = sorted(k for k in resolved if k != "rounds" and saved.get(k) != resolved[k])
+        if diff:
+            raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
+        progress = json.loads((run_dir / "progress.json").read_text())
+        with np.load(run_dir / "data.npz") as data:
+            obs_all, act_all = [data["obs"]], [data["actions"]]
+    elif (run_dir / "progress.json").exists():
+        raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
+                          "--run-root")
+    else:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        (run_dir / "config.json").write_text(json.dumps(
+            {"dagger_config": resolved, "provenance": provenance(),
+             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
+    net: StudentNet | None = None
+    student_path = run_dir / "policy"
+    start_round = len(progress["rounds"])
+    if start_round:
+        net = load_student(run_dir / "student.pt")
+    wall_before = sum(r["wall_s"] for r in progress["rounds"])
+    for k in range(start_round, cfg.rounds):
+        t0 = time.perf_counter()
+        built: dict[str, DaggerController] = {}
+        episodes = []
+        for e in range(cfg.episodes):
+            index = k * cfg.episodes + e
+            band = spec.bands[index % len(spec.bands)]
+            trial = scenario.trial(band, TRAIN_SEED_OFFSET + cfg.seed, index)
+            if cfg.episode_s is not None and cfg.episode_s < trial.duration_s:
+                trial = dataclasses.replace(trial, duration_s=cfg.episode_s,
+                                            pushes=tuple(p for p in trial.pushes if p.start < cfg.episode_s))
+            drives = cfg.expert_drives(k, e) or net is None
+
+            def make(desc: RobotDescription, drives: bool = drives,
+                     built: dict[str, DaggerController] = built) -> DaggerController:
+                student = LearnedController(desc, student_path) if not drives else None
+                ctrl = DaggerController(expert_spec.make(desc), desc, env, student, expert_drives=drives)
+                built["ctrl"] = ctrl
+                return ctrl
+
+            dagger_spec = ControllerSpec(name=f"dagger:{cfg.expert}", arm_mode=expert_spec.arm_mode, make=make,
+                                         summary="DAgger collection")
+            # a controller failure costs this episode's remaining ticks only: the samples before it are kept
+            record, _ = run_trial(trial, dagger_spec)
+            ctrl = built.pop("ctrl", None)
+            if ctrl is not None and ctrl.obs:
+                obs_all.append(np.asarray(ctrl.obs))
+                act_all.append(np.asarray(ctrl.labels))
+            fell = bool(math.isfinite(record.fall_time_s))
+            episodes.append({"index": index, "band": band, "expert_drives": drives,
+                             "samples": 0 if ctrl is None else len(ctrl.obs), "fell": fell,
+                             "fall_time_s": record.fall_time_s if fell else None, "error": record.error or None})
+        obs, actions = np.concatenate(obs_all), np.concatenate(act_all)
+        obs_all, act_all = [obs], [actions]
+        net, losses = fit_student(obs, actions, dataclasses.replace(cfg.fit, seed=cfg.fit.seed + k), start=net)
+        wall = time.perf_counter() - t0
+        student_rounds = [ep for ep in episodes if not ep["expert_drives"]]
+        summary = {"round": k, "episodes": episodes, "samples_total": int(obs.shape[0]),
+                   "student_episodes": len(student_rounds),
+                   "student_falls": sum(ep["fell"] for ep in student_rounds),
+                   "errors": sum(ep["error"] is not None for ep in episodes),
+                   "fit_loss_first": losses[0] if losses else math.nan, "fit_loss_last": losses[-1] if losses
+                   else math.nan, "wall_s": wall}
+        progress["rounds"].append(summary)
+        extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
+                 "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
+                     start_round:])}
+        np.savez(run_dir / "data.npz", obs=obs, actions=actions)
+        save_student(net, run_dir / "student.pt")
+        save_policy(student_path, student_policy_file(net, env, task=cfg.task, extra=extra))
+        (run_dir / "progress.json").write_text(json.dumps(progress, indent=2, default=float) + "\n")
+        if log is not None:
+            log(f"round {k}: {len(episodes)} episodes ({len(student_rounds)} driven by the student, "
+                f"{summary['student_falls']} of them fell), {obs.shape[0]} samples, fit loss "
+                f"{summary['fit_loss_first']:.4f} -> {summary['fit_loss_last']:.4f}, {wall:.1f} s")
+    load_policy(student_path)  # the export reads back
+    return {"run_dir": str(run_dir), "rounds": len(progress["rounds"]),
+            "samples": int(sum(len(a) for a in act_all)), "policy": str(student_path.with_suffix(".npz")),
+            "wall_s": sum(r["wall_s"] for r in progress["rounds"])}
