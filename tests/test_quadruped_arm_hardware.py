@@ -41,7 +41,10 @@ from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
-from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig, decode_state, encode_command, frame_layout
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree.command_codec import encode_command
+from wbc.hardware.unitree.layout import frame_layout
+from wbc.hardware.unitree.state_codec import decode_state
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand
 
