@@ -20,8 +20,8 @@ from wbc.arena.breakdown import (
     push_outcomes,
     recovery_curve,
 )
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import summarize, write_report
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import RecordError
 from wbc.scenario.domain import DomainParams
 from wbc.scenario.push import Push

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from wbc.arena.progress import LineProgress, progress
-from wbc.arena.record import TrialRecord
+from wbc.arena.trial_record import TrialRecord
 from wbc.cli import printers
 from wbc.tools.demo import trial_to_watch
 

@@ -29,7 +29,6 @@ import pytest
 
 from wbc.errors import ConfigError, MissingExtraError, RobotLinkError, SerialPortError, UnknownNameError
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.contract import check_robot
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
 from wbc.hardware.dynamixel.arm_fault import (
     MODE_CORRUPT,
@@ -46,6 +45,7 @@ from wbc.hardware.dynamixel.units import CURRENT_UNIT, TORQUE_CONSTANT
 from wbc.hardware.dynamixel.wx200_bus import WX200_SERVOS
 from wbc.hardware.emulators import BusFault, DynamixelEmulator, DynamixelEmulatorConfig, LoggedPacket, SharedPlant
 from wbc.hardware.emulators.dynamixel import TICK_PERIOD
+from wbc.hardware.robot_contract import check_robot
 from wbc.types import MotorCommand
 
 sdk = pytest.importorskip("dynamixel_sdk")

@@ -1,4 +1,4 @@
-"""Tests of `wbc.arena.record`, `wbc.arena.stats` and `wbc.arena.report` on synthetic records with known statistics."""
+"""Tests of `wbc.arena.trial_record`, `wbc.arena.stats` and `wbc.arena.report` on synthetic records."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import (
     COMMON_METRICS,
     EXTRA_METRICS,
@@ -22,6 +21,7 @@ from wbc.arena.report import (
 )
 from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
 from wbc.arena.summary import Summary
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import RecordError, UnknownNameError
 
 CONTROLLERS = ("mpc", "rl", "wbc")
@@ -115,7 +115,7 @@ def json_of(records: list[TrialRecord], controllers=CONTROLLERS, bands=BANDS) ->
     return summary_of(records, controllers, bands).to_json()
 
 
-# --- wbc.arena.record -------------------------------------------------------------------------------------------------
+# --- wbc.arena.trial_record -------------------------------------------------------------------------------------------
 
 
 def test_record_round_trips_through_csv_to_the_last_bit(tmp_path):

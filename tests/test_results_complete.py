@@ -16,9 +16,9 @@ from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.paired_tests import mcnemar_exact, paired_success_interval
-from wbc.arena.record import TrialRecord, check_counters, decode_counters
 from wbc.arena.report import format_table, paired_comparison, summarize
 from wbc.arena.summary import Summary
+from wbc.arena.trial_record import TrialRecord, check_counters, decode_counters
 from wbc.arena.verdict import verdicts
 from wbc.arena.windows import common_window_values
 from wbc.errors import RecordError

@@ -22,10 +22,10 @@ from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
-from wbc.arena.record import MACHINE_TIMED, TrialRecord, checksum_of, scan_csv
 from wbc.arena.report import format_table, summarize
 from wbc.arena.runner import run_episode
 from wbc.arena.sim_trial import run_trial
+from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord, checksum_of, scan_csv
 from wbc.cli.main import main
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, RecordError, ResultsDirError

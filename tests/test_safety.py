@@ -16,15 +16,13 @@ from wbc.arena.runner import run_episode
 from wbc.control.stand import StandController, stand_command
 from wbc.errors import ConfigError, SafetyResetError, UnknownNameError
 from wbc.hardware import Robot, check_robot
-from wbc.hardware.capabilities import HasSafetyEvents
+from wbc.hardware.capabilities import HasSafetyEvents, MotorStatusSource, RemoteSource
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import (
     REASONS,
     REMEDIES,
     TRIP_REASONS,
     UNITREE_POSITION_LIMITS,
-    MotorStatusSource,
-    RemoteSource,
     SafeRobot,
     SafetyConfig,
     SafetyEvent,

@@ -17,12 +17,12 @@ from scipy.stats import binom
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.paired_tests import mcnemar_exact, paired_values, wilcoxon_signed_rank
-from wbc.arena.power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import cell_text, format_table, paired_comparison, summarize
 from wbc.arena.sequential import DiscordantPairTest, SequentialComparison, mixture_log_e
+from wbc.arena.statistical_power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
 from wbc.arena.stats import wilson_interval
 from wbc.arena.summary import MetricSummary
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, RecordError
 
 

@@ -36,10 +36,10 @@ from wbc.errors import (
     UnknownNameError,
 )
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.contract import check_robot
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import KP_MAX
+from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.unitree import DESCRIPTIONS, SdkTransport, Transport, UdpTransport, UnitreeRobot, UnitreeRobotConfig
 from wbc.hardware.unitree.command_codec import decode_command, encode_command
 from wbc.hardware.unitree.crc import frame_crc
@@ -837,7 +837,7 @@ import json, socket, sys, time
 import numpy as np
 from wbc.control.stand import stand_command
 from wbc.errors import PortBusyError
-from wbc.hardware.contract import check_robot
+from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState

@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.record import TrialRecord
 from wbc.arena.summary import MetricSummary, Summary
+from wbc.arena.trial_record import TrialRecord
 
 __all__ = ["PLOTS", "write_plots"]
 

@@ -97,7 +97,7 @@ class CellSummary:
         clamped_rows: of those, ticks per command row (``q``, ``dq``, ``kp``, ``kd``, ``tau``), rows never clamped
             left out.
         counters: every event count the controller reported, by name (sorted).
-        outcomes: trials per outcome (`wbc.arena.record.OUTCOMES`, every one listed); None when not counted (a
+        outcomes: trials per outcome (`wbc.arena.trial_record.OUTCOMES`, every one listed); None when not counted (a
             summary of records alone, before the arena adds them).
     """
 

@@ -22,7 +22,7 @@ from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
 from wbc.cli.terminal_keys import TerminalKeys
-from wbc.control.check import CheckConfig, check_controller
+from wbc.control.controller_contract import CheckConfig, check_controller
 from wbc.control.onnx_policy import ONNX_PREFIX
 from wbc.control.registry import ControllerSpec, get_controller, list_controllers, takes_controller_config
 from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError

@@ -19,10 +19,10 @@ import numpy as np
 
 from wbc.arena.compare import ArenaResult
 from wbc.arena.hw_trial import HardwareTrialResult
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table, format_verdict
 from wbc.arena.summary import Summary
-from wbc.control.check import ControllerCheck
+from wbc.arena.trial_record import TrialRecord
+from wbc.control.controller_contract import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.capabilities import HasRealtimeGrant
 from wbc.hardware.device_thread import DeviceThreadStats
