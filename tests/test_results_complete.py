@@ -119,6 +119,7 @@ def test_counters_are_checked_and_stored_as_text():
 def _record(controller, trial, *, success=True, ttf=1.0, vlin=(), vang=(), seed=0):
     return TrialRecord(
         controller=controller, scenario="s", scenario_hash="h", band="b", seed=seed, trial=trial, success=success,
+        outcome="success" if success else "fall",
         ttf=ttf, fall_time_s=math.nan if success else ttf * 4.0, vlin_err=float(np.mean(vlin)) if vlin else 0.0,
         vang_err=float(np.mean(vang)) if vang else 0.0, max_roll_deg=1.0, max_pitch_deg=1.0, energy_j=1.0,
         arm_travel_rad=0.0, push_force_n=0.0, n_pushes=0, vx_cmd=0.5, vy_cmd=0.0, yaw_rate_cmd=0.0, friction=1.0,

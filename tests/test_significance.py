@@ -34,7 +34,9 @@ def make_record(controller: str, band: str, seed: int, trial: int, **overrides) 
               "push_force_n": 0.0, "n_pushes": 0, "vx_cmd": 0.0, "vy_cmd": 0.0, "yaw_rate_cmd": 0.0,
               "friction": 0.8, "payload_kg": 0.0, "fallbacks": 0, "wbc_failures": 0, "debug_truth": False,
               "wall_s": 1.0}
-    return TrialRecord(**(fields | overrides))
+    fields |= overrides
+    fields.setdefault("outcome", "success" if fields["success"] else "fall")
+    return TrialRecord(**fields)
 
 # --- exact McNemar ------------------------------------------------------------------------------------------------
 
