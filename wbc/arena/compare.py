@@ -249,7 +249,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
     if cfg.no_push:
         trials = [dataclasses.replace(t, pushes=()) for t in trials]
-    # the options left unset are absent from run.json, so that a run resumes a directory written before they existed
+    # the options left unset are absent from run.json: a run naming one at its default resumes a run that did not
     identity = SimulatedRunIdentity(
         controllers=tuple(cfg.controllers),
         scenario=ScenarioRef(path=str(cfg.scenario), name=scenario.name, version=scenario.version,

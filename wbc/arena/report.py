@@ -407,7 +407,7 @@ def cell_text(stat: MetricSummary, metric: str, seeds: int | None) -> str:
     """A table cell: "mean ± std" across seeds, or from one seed "mean [lo, hi]" (its 95 % interval over trials).
 
     A single seed has no spread across seeds to quote (its std would print as ± 0.00); its interval over trials
-    says how far the mean could be off. A summary without the interval (written by an older version) keeps ± std.
+    says how far the mean could be off. A cell without an interval (no value to draw it from) keeps ± std.
 
     Args:
         stat: a summary cell's metric.
@@ -614,9 +614,8 @@ def format_verdict(summary: Summary) -> str:
 
 
 def _common_of(summary: Summary) -> tuple[str, ...]:
-    """The common-window metrics a summary holds (none in one written before they existed)."""
-    cells = [cell for _, _, cell in summary.iter_cells()]
-    return tuple(m for m in COMMON_METRICS if cells and all(m in cell for cell in cells))
+    """The common-window metrics, which every cell of a summary holds (none in a summary without cells)."""
+    return COMMON_METRICS if any(True for _ in summary.iter_cells()) else ()
 
 
 def _counter_lines(summary: Summary) -> list[str]:

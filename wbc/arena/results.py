@@ -72,7 +72,7 @@ class ResultsStore:
     Args:
         out_dir: the directory (created if missing).
         identity: what the run is; when resuming, its JSON form must equal the stored one (``run.json``'s
-            ``config``), which an earlier version may have written: unset options are absent from both.
+            ``config``); unset options are absent from both.
         resume: continue a run already in `out_dir`; without it, a directory holding trials is refused.
         controllers: what each controller is, by name (`wbc.control.spec.ControllerSpec.provenance`: its kind, a
             plug-in's target and distribution version, the sha256 of every file it was built from), recorded in
