@@ -19,9 +19,9 @@ import pytest
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode
 from wbc.arena.metrics import compute_metrics
-from wbc.arena.record import MACHINE_TIMED, TrialRecord
 from wbc.arena.runner import run_episode
 from wbc.arena.sim_trial import run_trial
+from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord
 from wbc.cli.main import main
 from wbc.control.registry import CONTROLLERS
 from wbc.control.stand import StandController

@@ -33,7 +33,7 @@ def _offenders(modules: dict[str, set[str]], forbidden: tuple[str, ...]) -> dict
 
 
 def test_the_source_tree_is_found():
-    assert {"wbc.arena.runner", "wbc.arena.sim_trial", "wbc.arena.record", "wbc.viz.replay"} <= set(MODULES)
+    assert {"wbc.arena.runner", "wbc.arena.sim_trial", "wbc.arena.trial_record", "wbc.viz.replay"} <= set(MODULES)
     assert "wbc.arena.episode" in MODULES["wbc.arena.runner"] and "wbc.arena.runner" in MODULES["wbc.arena.sim_trial"]
 
 

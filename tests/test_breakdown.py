@@ -20,8 +20,8 @@ from wbc.arena.breakdown import (
     push_outcomes,
     recovery_curve,
 )
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import summarize, write_report
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import RecordError
 from wbc.scenario.domain import DomainParams
 from wbc.scenario.push import Push
@@ -69,7 +69,9 @@ def _record(controller: str, index: int, **overrides) -> TrialRecord:
               "push_force_n": trial.push_force_n, "n_pushes": len(trial.pushes), "vx_cmd": trial.command.vx,
               "vy_cmd": 0.0, "yaw_rate_cmd": 0.0, "friction": 1.0, "payload_kg": 0.0, "fallbacks": 0,
               "wbc_failures": 0, "debug_truth": False, "wall_s": 1.0}
-    return TrialRecord(**(fields | overrides))
+    fields |= overrides
+    fields.setdefault("outcome", "success" if fields["success"] else "fall")
+    return TrialRecord(**fields)
 
 
 RECORDS = [_record(c, i) for c in FALLS for i in range(4)]

@@ -9,7 +9,7 @@ import pytest
 
 from wbc.cli.main import main
 from wbc.control import CheckConfig, ControllerSpec, check_controller
-from wbc.control.check import CHECKS
+from wbc.control.controller_contract import CHECKS
 from wbc.control.errors import ControllerCheckError
 from wbc.control.registry import CONTROLLERS
 from wbc.control.stand import stand_command

@@ -28,8 +28,8 @@ from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode, SafetyLog
-from wbc.arena.record import MACHINE_TIMED, TrialRecord
 from wbc.arena.report import format_table
+from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord
 from wbc.cli.main import main
 from wbc.scenario.scenario import load_scenario
 

@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from wbc.arena.progress import LineProgress, progress
-from wbc.arena.record import TrialRecord
+from wbc.arena.trial_record import TrialRecord
 from wbc.cli import printers
 from wbc.tools.demo import trial_to_watch
 
@@ -55,7 +55,8 @@ def _record(controller, trial, *, success=True, fall=math.nan, force=250.0, roll
                        success=success, ttf=1.0 if success else fall / 20.0, fall_time_s=fall, vlin_err=0.1,
                        vang_err=0.1, max_roll_deg=roll, max_pitch_deg=3.0, energy_j=100.0, arm_travel_rad=1.0,
                        push_force_n=force, n_pushes=4, vx_cmd=0.0, vy_cmd=0.0, yaw_rate_cmd=0.0, friction=0.9,
-                       payload_kg=0.0, fallbacks=0, wbc_failures=0, debug_truth=False, wall_s=1.0)
+                       payload_kg=0.0, fallbacks=0, wbc_failures=0, debug_truth=False, wall_s=1.0,
+                       outcome="success" if success else "fall")
 
 
 def test_the_demo_suggests_the_trial_the_controllers_ended_differently():

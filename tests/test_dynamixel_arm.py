@@ -29,29 +29,23 @@ import pytest
 
 from wbc.errors import ConfigError, MissingExtraError, RobotLinkError, SerialPortError, UnknownNameError
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.contract import check_robot
-from wbc.hardware.dynamixel import (
-    HW_OVERHEATING,
-    HW_OVERLOAD,
+from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
+from wbc.hardware.dynamixel.arm_fault import (
     MODE_CORRUPT,
     MODE_HARDWARE_ERROR,
     MODE_NO_ANSWER,
     MODE_PORT_LOST,
     MODE_SERVO,
-    WX200_SERVOS,
-    CurrentLaw,
-    DynamixelArm,
-    DynamixelArmConfig,
-    Instruction,
-    OperatingMode,
-    SdkBus,
-    ServoRead,
-    sdk_handlers,
 )
-from wbc.hardware.dynamixel.sdk_bus import COMM_RX_TIMEOUT, COMM_SUCCESS
+from wbc.hardware.dynamixel.control_table import HW_OVERHEATING, HW_OVERLOAD, OperatingMode
+from wbc.hardware.dynamixel.current_law import CurrentLaw
+from wbc.hardware.dynamixel.protocol import Instruction
+from wbc.hardware.dynamixel.sdk_bus import COMM_RX_TIMEOUT, COMM_SUCCESS, SdkBus, ServoRead
 from wbc.hardware.dynamixel.units import CURRENT_UNIT, TORQUE_CONSTANT
+from wbc.hardware.dynamixel.wx200_bus import WX200_SERVOS
 from wbc.hardware.emulators import BusFault, DynamixelEmulator, DynamixelEmulatorConfig, LoggedPacket, SharedPlant
 from wbc.hardware.emulators.dynamixel import TICK_PERIOD
+from wbc.hardware.robot_contract import check_robot
 from wbc.types import MotorCommand
 
 sdk = pytest.importorskip("dynamixel_sdk")
@@ -228,7 +222,7 @@ def test_config_names_what_is_wrong() -> None:
 
 # -- the law on the wire -----------------------------------------------------------------------------------------
 def test_current_law_units_and_clamps() -> None:
-    from wbc.hardware.dynamixel import WX200_ARM_JOINTS
+    from wbc.hardware.dynamixel.wx200_bus import WX200_ARM_JOINTS
 
     law = CurrentLaw(WX200_ARM_JOINTS, np.array([4.1, 8.2, 4.1]), 2.3)
     assert law.limit_units == 855

@@ -19,23 +19,19 @@ import pytest
 
 from wbc.errors import ConfigError
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.dynamixel import (
+from wbc.hardware.dynamixel import in_process_handlers
+from wbc.hardware.dynamixel.control_table import HW_OVERHEATING, HW_OVERLOAD, XM430_W350, OperatingMode
+from wbc.hardware.dynamixel.protocol import (
     ALERT,
     ERR_ACCESS,
     ERR_DATA_LENGTH,
     ERR_DATA_LIMIT,
     ERR_DATA_RANGE,
     ERR_RESULT_FAIL,
-    HW_OVERHEATING,
-    HW_OVERLOAD,
-    WX200_ARM_JOINTS,
-    XM430_W350,
     Instruction,
-    OperatingMode,
-    in_process_handlers,
-    servo_spec,
 )
 from wbc.hardware.dynamixel.units import CURRENT_UNIT, TORQUE_CONSTANT, position_gains_to_pd
+from wbc.hardware.dynamixel.wx200_bus import WX200_ARM_JOINTS, servo_spec
 from wbc.hardware.emulators import BusFault, DynamixelEmulator, DynamixelEmulatorConfig, SharedPlant
 from wbc.hardware.emulators.dynamixel import TICK_PERIOD
 from wbc.hardware.emulators.servo import EmulatedServo
@@ -574,7 +570,9 @@ def test_one_physics_legs_over_udp_and_arm_over_the_bus(bus):
     import socket
 
     from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
-    from wbc.hardware.unitree import decode_state, encode_command, frame_layout
+    from wbc.hardware.unitree.command_codec import encode_command
+    from wbc.hardware.unitree.layout import frame_layout
+    from wbc.hardware.unitree.state_codec import decode_state
 
     bus.current_mode((4,))
     assert bus.write(4, "goal_current", 2, -500) == (0, 0)

@@ -16,14 +16,10 @@ import numpy as np
 import pytest
 
 from wbc.errors import PacketError, UnknownNameError
-from wbc.hardware.dynamixel import (
-    ALERT,
-    BROADCAST_ID,
+from wbc.hardware.dynamixel.control_table import XM430_W350
+from wbc.hardware.dynamixel.crc import crc16
+from wbc.hardware.dynamixel.packet import (
     HEADER,
-    WX200_ARM_JOINTS,
-    WX200_SERVOS,
-    XM430_W350,
-    Instruction,
     InstructionPacket,
     PacketReader,
     StatusPacket,
@@ -32,8 +28,6 @@ from wbc.hardware.dynamixel import (
     build_status,
     bulk_read_params,
     bulk_write_params,
-    crc16,
-    describe_error,
     parse_bulk_read_params,
     parse_bulk_write_params,
     parse_fast_read_status,
@@ -43,13 +37,13 @@ from wbc.hardware.dynamixel import (
     parse_write_params,
     ping_status_params,
     read_params,
-    servo_spec,
     stuff,
     sync_read_params,
     sync_write_params,
     unstuff,
     write_params,
 )
+from wbc.hardware.dynamixel.protocol import ALERT, BROADCAST_ID, Instruction, describe_error
 from wbc.hardware.dynamixel.units import (
     TORQUE_CONSTANT,
     current_to_units,
@@ -59,6 +53,7 @@ from wbc.hardware.dynamixel.units import (
     units_to_velocity,
     velocity_to_units,
 )
+from wbc.hardware.dynamixel.wx200_bus import WX200_ARM_JOINTS, WX200_SERVOS, servo_spec
 
 # -- pure codec ----------------------------------------------------------------------------------------------------
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from wbc.arena.record import MACHINE_TIMED
+from wbc.arena.trial_record import MACHINE_TIMED
 from wbc.cli.main import main
 
 ROOT = Path(__file__).resolve().parent.parent

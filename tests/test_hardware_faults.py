@@ -24,12 +24,14 @@ import pytest
 
 from wbc.control.stand import StandController, stand_command
 from wbc.errors import RobotLinkError, SafetyResetError
+from wbc.hardware.capabilities import MotorStatusSource, RemoteSource
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators import Fault, LoggedCommand, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
-from wbc.hardware.safety import MotorStatusSource, RemoteSource, SafeRobot, SafetyConfig, SafetyEvent, SafetyState
-from wbc.hardware.unitree import DESCRIPTIONS, MODE_OVERHEAT, MOTOR_STATE_MODES, UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
+from wbc.hardware.unitree import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree.layout import MODE_OVERHEAT, MOTOR_STATE_MODES
 from wbc.types import MotorCommand
 
 ROBOTS = ("go1", "a1")

@@ -33,7 +33,9 @@ from wbc.cli.parser import build_parser
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.unitree import UdpTransport, encode_command, frame_layout
+from wbc.hardware.unitree import UdpTransport
+from wbc.hardware.unitree.command_codec import encode_command
+from wbc.hardware.unitree.layout import frame_layout
 from wbc.types import MotorCommand
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -35,8 +35,8 @@ from conftest import Stepped
 from wbc.arena.episode import Episode
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import ScriptedKeys
-from wbc.arena.record import TrialRecord
 from wbc.arena.runner import PreparingObserver, run_episode
+from wbc.arena.trial_record import TrialRecord
 from wbc.cli import main
 from wbc.cli.main import hw_run
 from wbc.cli.parser import build_parser

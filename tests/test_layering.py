@@ -142,3 +142,13 @@ def test_the_estimation_package_loads_no_contender_and_no_simulator():
 def test_no_module_is_in_an_import_cycle():
     """Modules that import each other (even for type hints only) cannot be understood, tested or moved apart."""
     assert cycles(graph()) == []
+
+
+@pytest.mark.parametrize("path", [p for p in MODULES if not _module_name(p).startswith("wbc.cli")],
+                         ids=lambda p: str(p.relative_to(PACKAGE.parent)))
+def test_the_cli_is_on_top_and_nothing_imports_it(path):
+    """The `wbc` command parses and prints; what its commands do lives in `wbc.tools` and below, which never reach back
+    into the command (its parser, printers or terminal keys)."""
+    wrong = [f"{path.relative_to(PACKAGE.parent)}:{line}: imports {target}" for line, target in _imports(path)
+             if target == "wbc.cli" or target.startswith("wbc.cli.")]
+    assert not wrong, "\n".join(wrong)

@@ -15,7 +15,7 @@ import pytest
 from fuzz.cases import ONNX_FRAME, ONNX_IO_TEMPLATE, ONNX_JOINTS, onnx_linear_model
 
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.record import TrialRecord
+from wbc.arena.trial_record import TrialRecord
 from wbc.cli.main import main
 from wbc.control import CheckConfig, check_controller
 from wbc.control.errors import OnnxIoError, OnnxModelError

@@ -13,7 +13,7 @@ import pytest
 from conftest import HOLD_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.record import MACHINE_TIMED, TrialRecord
+from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord
 from wbc.cli.main import main
 from wbc.control.errors import (
     PluginAttributeError,

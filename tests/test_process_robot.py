@@ -27,7 +27,6 @@ import pytest
 
 from wbc.control.stand import StandController
 from wbc.errors import PortBusyError, RobotLinkError, TargetRefusedError
-from wbc.hardware.contract import check_robot
 from wbc.hardware.dynamixel import DynamixelArmConfig
 from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
@@ -40,6 +39,7 @@ from wbc.hardware.io_process import (
     rebuild_error,
 )
 from wbc.hardware.realtime import NO_REALTIME
+from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand

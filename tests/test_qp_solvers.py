@@ -11,7 +11,7 @@ from conftest import SHORT_SCENARIO
 from test_mpc import _standing_problem
 
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.record import TrialRecord
+from wbc.arena.trial_record import TrialRecord
 from wbc.cli.main import main
 from wbc.control.registry import CONTROLLERS, get_controller
 from wbc.errors import ConfigError

@@ -33,15 +33,18 @@ from wbc.control.stand import StandController
 from wbc.errors import ConfigError, TargetRefusedError, UnknownNameError
 from wbc.hardware import Robot
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.contract import check_robot
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
 from wbc.hardware.emulators import BusFault, RobotEmulator, RobotEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
+from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
-from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig, decode_state, encode_command, frame_layout
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree.command_codec import encode_command
+from wbc.hardware.unitree.layout import frame_layout
+from wbc.hardware.unitree.state_codec import decode_state
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand
 

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from wbc.errors import ConfigError, RobotLinkError
-from wbc.hardware.contract import check_robot
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
 from wbc.hardware.robot import Robot
+from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
 from wbc.robots.joint_table import JointTable
 from wbc.robots.wx200 import WX200_NOMINAL_Q

@@ -1,4 +1,4 @@
-"""Tests of `wbc.arena.record`, `wbc.arena.stats` and `wbc.arena.report` on synthetic records with known statistics."""
+"""Tests of `wbc.arena.trial_record`, `wbc.arena.stats` and `wbc.arena.report` on synthetic records."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import math
 import numpy as np
 import pytest
 
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import (
     COMMON_METRICS,
     EXTRA_METRICS,
@@ -22,6 +21,7 @@ from wbc.arena.report import (
 )
 from wbc.arena.stats import in_canonical_order, mean_std_over_seeds, paired_difference
 from wbc.arena.summary import Summary
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import RecordError, UnknownNameError
 
 CONTROLLERS = ("mpc", "rl", "wbc")
@@ -64,6 +64,7 @@ def make_record(controller: str, band: str, seed: int, trial: int, **overrides) 
         "power_w": 40.0,
     }
     record.update(overrides)
+    record.setdefault("outcome", "success" if record["success"] else "fall")
     return TrialRecord(**record)
 
 
@@ -115,7 +116,7 @@ def json_of(records: list[TrialRecord], controllers=CONTROLLERS, bands=BANDS) ->
     return summary_of(records, controllers, bands).to_json()
 
 
-# --- wbc.arena.record -------------------------------------------------------------------------------------------------
+# --- wbc.arena.trial_record -------------------------------------------------------------------------------------------
 
 
 def test_record_round_trips_through_csv_to_the_last_bit(tmp_path):
@@ -135,57 +136,34 @@ def test_record_round_trips_through_csv_to_the_last_bit(tmp_path):
 EARLIER_COLUMNS = ("controller,scenario,scenario_hash,band,seed,trial,success,ttf,fall_time_s,vlin_err,vang_err,"
                    "max_roll_deg,max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,"
                    "friction,payload_kg,fallbacks,wbc_failures,debug_truth,wall_s")
-"""The ``trials.csv`` columns of every results directory written before hardware trials."""
+"""The ``trials.csv`` columns of a results directory written before hardware trials."""
 
 
-def test_the_trials_csv_columns_are_those_of_every_earlier_results_directory_and_the_hardware_ones(tmp_path):
-    # the stored format: changing it silently would stop older results directories from resuming
+def test_the_trials_csv_columns_are_the_stored_format_and_any_other_is_another_versions(tmp_path):
+    # the stored format: changing it silently would stop results directories from resuming
     assert ",".join(TrialRecord.header()) == (
         "controller,scenario,scenario_hash,band,seed,trial,success,outcome,ttf,fall_time_s,vlin_err,vang_err,"
         "max_roll_deg,max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,"
         "payload_kg,fallbacks,wbc_failures,debug_truth,backend,metrics_source,safety_trips,late_advances,"
         "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,wall_s,error,ticks,clamped_ticks,clamped_rows,"
         "power_w,vlin_err_by_s,vang_err_by_s,counters,checksum")
-    # an earlier directory's file still reads: a simulated trial, its metrics from truth, nothing timed but wall_s,
-    # its outcome derived as those versions scored it (a success, or a fall; no controller errors then)
-    for success in (True, False):
-        record = make_record("mpc", "nominal", 1, 2, vlin_err=0.1 + 0.2, success=success, power_w=math.nan)
-        row = dict(zip(TrialRecord.header(), record.to_row(), strict=True))
-        old = tmp_path / "trials.csv"
-        old.write_text(EARLIER_COLUMNS + "\n" + ",".join(row[c] for c in EARLIER_COLUMNS.split(",")) + "\n")
-        (back,) = TrialRecord.read_csv(old)
-        assert back == record and back.backend == "sim" and back.metrics_source == "truth"
-        assert math.isnan(back.act_ms_p99) and back.vlin_err == 0.1 + 0.2
-        assert back.outcome == ("success" if success else "fall") and back.error == ""
-    # a hardware trial of the version before outcomes: a trip was scored a fall; it reads as the safety trip it was
-    tripped = make_record("mpc", "nominal", 0, 0, success=False, safety_trips=1, power_w=math.nan)
-    assert tripped.outcome == "safety_trip"
-    columns = [c for c in TrialRecord.header() if c not in ("outcome", "error", "checksum")]
-    row = dict(zip(TrialRecord.header(), tripped.to_row(), strict=True))
-    old.write_text(",".join(columns) + "\n" + ",".join(row[c] for c in columns) + "\n")
-    assert TrialRecord.read_csv(old) == [tripped]
-    # the version before the checksum: its rows read, unverified (they have none)
-    unsummed = make_record("mpc", "nominal", 0, 2, success=True)
-    columns = TrialRecord.header()[:-1]
-    old.write_text(",".join(columns) + "\n" + ",".join(unsummed.to_row()[:-1]) + "\n")
-    assert TrialRecord.read_csv(old) == [unsummed]
-    # the version before ticks, clamps, power, profiles and counters: its rows read with nothing measured for them
-    counted = make_record("mpc", "nominal", 0, 1, success=True, power_w=math.nan)
-    columns = TrialRecord.header()[:TrialRecord.header().index("error") + 1]
-    row = dict(zip(TrialRecord.header(), counted.to_row(), strict=True))
-    old.write_text(",".join(columns) + "\n" + ",".join(row[c] for c in columns) + "\n")
-    (back,) = TrialRecord.read_csv(old)
-    assert back == counted and back.ticks == 0 and back.counters == "" and math.isnan(back.power_w)
-    # an outcome must be one of the five, and agree with success
+    # a file of any other columns is another version's, refused with what to do: fewer columns (before hardware
+    # trials, before outcomes, before the checksum, before ticks and counters), or the same in another order
+    record = make_record("mpc", "nominal", 0, 1, success=True, power_w=math.nan)
+    row = dict(zip(TrialRecord.header(), record.to_row(), strict=True))
+    header = TrialRecord.header()
+    old = tmp_path / "trials.csv"
+    for columns in (EARLIER_COLUMNS.split(","), [c for c in header if c not in ("outcome", "error", "checksum")],
+                    header[:-1], header[:header.index("error") + 1], EARLIER_COLUMNS.replace(",wall_s", "").split(","),
+                    EARLIER_COLUMNS.replace("seed,trial", "trial,seed").split(",")):
+        old.write_text(",".join(columns) + "\n" + ",".join(row.get(c, "") for c in columns) + "\n")
+        with pytest.raises(RecordError, match="another version of wbc: resume it with that version"):
+            TrialRecord.read_csv(old)
+    # an outcome must be one of the six, and agree with success
     with pytest.raises(RecordError, match="outcome must be one of"):
         make_record("mpc", "nominal", 0, 0, outcome="crash")
     with pytest.raises(RecordError, match="contradicts outcome 'controller_error'"):
         make_record("mpc", "nominal", 0, 0, success=True, outcome="controller_error")
-    # columns in another order, or a column without a default missing, are another version's
-    for header in (EARLIER_COLUMNS.replace("seed,trial", "trial,seed"), EARLIER_COLUMNS.replace(",wall_s", "")):
-        old.write_text(header + "\n")
-        with pytest.raises(RecordError, match="another version of wbc"):
-            TrialRecord.read_csv(old)
 
 
 def test_read_csv_drops_a_torn_last_line_and_refuses_other_columns(tmp_path):

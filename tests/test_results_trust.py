@@ -22,10 +22,10 @@ from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
-from wbc.arena.record import MACHINE_TIMED, TrialRecord, checksum_of, scan_csv
 from wbc.arena.report import format_table, summarize
 from wbc.arena.runner import run_episode
 from wbc.arena.sim_trial import run_trial
+from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord, checksum_of, scan_csv
 from wbc.cli.main import main
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError, RecordError, ResultsDirError
@@ -146,19 +146,18 @@ def test_drop_bad_rows_drops_each_with_a_warning_and_plays_the_trials_again(copy
         run_arena(_config(scenario, out, drop_bad_rows=True))
 
 
-def test_a_torn_last_line_is_still_dropped_silently_and_old_rows_without_a_checksum_still_read(copy):
+def test_a_torn_last_line_is_still_dropped_silently_and_rows_without_a_checksum_are_another_versions(copy):
     scenario, out = copy
     lines = _lines(out)
     (out / "trials.csv").write_text("\r\n".join(lines) + "\r\nstand,short,ab", encoding="utf-8", newline="")
     assert run_arena(_config(scenario, out, resume=True)).played == 0
+    # a file without the checksum column: another version's, refused before any row is trusted
     header = lines[0].rsplit(",", 1)[0]
     _write(out, [header, *(line.rsplit(",", 1)[0] for line in lines[1:])])
-    stored_rows = scan_csv(out / "trials.csv")
-    assert not stored_rows.checksummed and len(stored_rows.records) == 2 and not stored_rows.refused
-    # an old row is checked for plausibility all the same
-    _write(out, [header, _edit(lines[1].rsplit(",", 1)[0], "ttf", "-5.0")])
-    with pytest.raises(RecordError, match=r"trials\.csv:2: TrialRecord\.ttf must be a fraction"):
-        TrialRecord.read_csv(out / "trials.csv")
+    with pytest.raises(RecordError, match=r"trials\.csv: columns .* another version of wbc"):
+        scan_csv(out / "trials.csv")
+    with pytest.raises(RecordError, match="another version of wbc: resume it with that version"):
+        run_arena(_config(scenario, out, resume=True))
 
 
 def test_a_corrupt_or_unknown_run_json_is_a_clean_error(copy):

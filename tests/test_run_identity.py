@@ -25,8 +25,8 @@ from wbc.arena.identity import (
     SequentialStop,
     SimulatedRunIdentity,
 )
-from wbc.arena.record import TrialRecord
 from wbc.arena.results import ResultsStore
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import RecordError, ResultsDirError
 from wbc.scenario.scenario import load_scenario
 from wbc.viz.errors import ViewerError

@@ -14,17 +14,15 @@ import pytest
 from wbc.arena.episode import Episode
 from wbc.arena.runner import run_episode
 from wbc.control.stand import StandController, stand_command
-from wbc.errors import ConfigError, SafetyResetError, UnknownNameError
+from wbc.errors import ConfigError, EpisodeFileError, SafetyResetError, UnknownNameError
 from wbc.hardware import Robot, check_robot
-from wbc.hardware.capabilities import HasSafetyEvents
+from wbc.hardware.capabilities import HasSafetyEvents, MotorStatusSource, RemoteSource
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import (
     REASONS,
     REMEDIES,
     TRIP_REASONS,
     UNITREE_POSITION_LIMITS,
-    MotorStatusSource,
-    RemoteSource,
     SafeRobot,
     SafetyConfig,
     SafetyEvent,
@@ -526,7 +524,8 @@ def test_an_episode_through_the_safety_layer_logs_its_transitions_and_keeps_them
         assert z["safety_reason"].tolist() == ["fresh_state", "ramp_done", "software_estop"]
         old = {k: z[k] for k in z.files if not k.startswith("safety_")}
     np.savez_compressed(tmp_path / "old.npz", **old)  # a file written before episodes kept safety events
-    assert len(Episode.load(str(tmp_path / "old.npz")).safety_events) == 0
+    with pytest.raises(EpisodeFileError, match="field safety_time missing .* another version of wbc"):
+        Episode.load(str(tmp_path / "old.npz"))
 
     with MujocoRobot(MujocoRobotConfig(arm_mode="none")) as plain:
         bare = run_episode(plain, StandController(plain.desc), CommandSchedule(), 0.2)

@@ -17,12 +17,12 @@ from scipy.stats import binom
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.paired_tests import mcnemar_exact, paired_values, wilcoxon_signed_rank
-from wbc.arena.power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import cell_text, format_table, paired_comparison, summarize
 from wbc.arena.sequential import DiscordantPairTest, SequentialComparison, mixture_log_e
+from wbc.arena.statistical_power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
 from wbc.arena.stats import wilson_interval
 from wbc.arena.summary import MetricSummary
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, RecordError
 
 
@@ -34,7 +34,9 @@ def make_record(controller: str, band: str, seed: int, trial: int, **overrides) 
               "push_force_n": 0.0, "n_pushes": 0, "vx_cmd": 0.0, "vy_cmd": 0.0, "yaw_rate_cmd": 0.0,
               "friction": 0.8, "payload_kg": 0.0, "fallbacks": 0, "wbc_failures": 0, "debug_truth": False,
               "wall_s": 1.0}
-    return TrialRecord(**(fields | overrides))
+    fields |= overrides
+    fields.setdefault("outcome", "success" if fields["success"] else "fall")
+    return TrialRecord(**fields)
 
 # --- exact McNemar ------------------------------------------------------------------------------------------------
 

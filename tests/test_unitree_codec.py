@@ -14,27 +14,11 @@ import numpy as np
 import pytest
 
 from wbc.errors import CommandError, ConfigError, FrameError, UnknownNameError
-from wbc.hardware.unitree import (
-    A1_LAYOUT,
-    GO1_LAYOUT,
-    KD_WIRE_MAX,
-    KP_WIRE_MAX,
-    MODE_SERVO,
-    POS_STOP_F,
-    REJECT_REASONS,
-    TAU_WIRE_MAX,
-    VEL_STOP_F,
-    Battery,
-    DecodeStats,
-    LowStateExtras,
-    Remote,
-    decode_command,
-    decode_state,
-    encode_command,
-    encode_state,
-    frame_crc,
-    frame_layout,
-)
+from wbc.hardware.unitree import REJECT_REASONS, Battery, DecodeStats, LowStateExtras, Remote
+from wbc.hardware.unitree.command_codec import KD_WIRE_MAX, KP_WIRE_MAX, TAU_WIRE_MAX, decode_command, encode_command
+from wbc.hardware.unitree.crc import frame_crc
+from wbc.hardware.unitree.layout import A1_LAYOUT, GO1_LAYOUT, MODE_SERVO, POS_STOP_F, VEL_STOP_F, frame_layout
+from wbc.hardware.unitree.state_codec import decode_state, encode_state
 from wbc.robots import get_robot, joint_table
 from wbc.types import MotorCommand, RobotState
 

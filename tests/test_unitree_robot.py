@@ -36,27 +36,17 @@ from wbc.errors import (
     UnknownNameError,
 )
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.contract import check_robot
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import KP_MAX
-from wbc.hardware.unitree import (
-    DESCRIPTIONS,
-    MAX_DATAGRAM,
-    MODE_SERVO,
-    SDK_POSITION_LIMITS,
-    SdkTransport,
-    Transport,
-    UdpTransport,
-    UnitreeRobot,
-    UnitreeRobotConfig,
-    decode_command,
-    decode_state,
-    encode_command,
-    encode_state,
-    frame_crc,
-    frame_layout,
-)
+from wbc.hardware.robot_contract import check_robot
+from wbc.hardware.unitree import DESCRIPTIONS, SdkTransport, Transport, UdpTransport, UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree.command_codec import decode_command, encode_command
+from wbc.hardware.unitree.crc import frame_crc
+from wbc.hardware.unitree.layout import MODE_SERVO, frame_layout
+from wbc.hardware.unitree.robot import SDK_POSITION_LIMITS
+from wbc.hardware.unitree.state_codec import decode_state, encode_state
+from wbc.hardware.unitree.transport import MAX_DATAGRAM
 from wbc.types import MotorCommand, RobotState
 
 ROBOTS = ("a1", "go1")
@@ -847,12 +837,15 @@ import json, socket, sys, time
 import numpy as np
 from wbc.control.stand import stand_command
 from wbc.errors import PortBusyError
-from wbc.hardware.contract import check_robot
+from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
-from wbc.hardware.unitree import (GO1_LAYOUT, Battery, LowStateExtras, Remote, SdkTransport, UnitreeRobot,
-                                  UnitreeRobotConfig, encode_command, encode_state)
+from wbc.hardware.unitree import (Battery, LowStateExtras, Remote, SdkTransport, UnitreeRobot,
+                                  UnitreeRobotConfig)
+from wbc.hardware.unitree.command_codec import encode_command
+from wbc.hardware.unitree.layout import GO1_LAYOUT
+from wbc.hardware.unitree.state_codec import encode_state
 from wbc.types import MotorCommand, RobotState
 out = {}
 # 1. frames both ways, against a bare socket standing in for the robot

@@ -30,7 +30,7 @@ from wbc.viz.errors import ViewerError
 from wbc.viz.frame import VizFrame
 from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.player import Controls, Player, PlayerConfig
-from wbc.viz.record import Recording
+from wbc.viz.recording import Recording
 from wbc.viz.replay import load_stored_episode
 from wbc.viz.server import MeshcatServer, ServerConfig
 from wbc.viz.sim_frames import foot_forces_in_world

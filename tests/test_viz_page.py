@@ -15,7 +15,7 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.cli.main import main
 from wbc.scenario.scenario import load_scenario
 from wbc.viz.page import read_page_data
-from wbc.viz.record import GHOST_COLOR
+from wbc.viz.recording import GHOST_COLOR
 from wbc.viz.replay import load_stored_episode
 from wbc.viz.signals import PLOTS, TrialSignals
 from wbc.viz.view import ViewConfig, replay_ab, replay_episode, view_ab, view_trial

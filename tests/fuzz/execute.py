@@ -68,7 +68,7 @@ class _ReachedWork(BaseException):
 
 
 STUBBED = (("wbc.arena.compare", "LocalExecutor"), ("wbc.arena.compare", "RayExecutor"),
-           ("wbc.control.check", "_check_one"), ("wbc.viz.view", "view_trial"))
+           ("wbc.control.controller_contract", "_check_one"), ("wbc.viz.view", "view_trial"))
 """What the in-process suite replaces with a stub that raises `_ReachedWork`: the calls that play trials (everything
 before them, the checks of the options, the scenario, the results directory, runs for real)."""
 

@@ -6,7 +6,7 @@ does not load the simulator or every controller.
 """
 
 from wbc.arena.episode import Episode, PushLog, SafetyLog
-from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
+from wbc.arena.trial_record import TrialRecord
 
 __all__ = ["Episode", "PushLog", "SafetyLog", "TickObserver", "TrialRecord", "run_episode"]

@@ -33,8 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.record import CONTROLLER_ERROR, TrialRecord
 from wbc.arena.stats import wilson_interval
+from wbc.arena.trial_record import CONTROLLER_ERROR, TrialRecord
 from wbc.errors import ConfigError, RecordError
 from wbc.scenario.trial import Trial
 

@@ -33,7 +33,6 @@ from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.finish import finish_results
 from wbc.arena.identity import MAX_RUN_TRIALS, ControllerFile, ScenarioRef, SequentialStop, SimulatedRunIdentity
 from wbc.arena.progress import progress
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import summarize
 from wbc.arena.results import ResultsStore, check_out_dir, episode_path
 from wbc.arena.runner import TickObserver
@@ -41,6 +40,7 @@ from wbc.arena.sequential import SequentialComparison
 from wbc.arena.sim_trial import check_rate
 from wbc.arena.stats import in_canonical_order
 from wbc.arena.summary import Summary
+from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
@@ -67,8 +67,8 @@ class ArenaConfig:
         address: Ray cluster address (None: a local Ray).
         resume: finish an interrupted run in `out_dir`.
         drop_bad_rows: with `resume`, drop the rows of ``trials.csv`` the results store refuses (edited, corrupted,
-            repeated, of another scenario file; `wbc.arena.record.scan_csv`) and play their trials again; off: such
-            a row stops the run with its file and line.
+            repeated, of another scenario file; `wbc.arena.trial_record.scan_csv`) and play their trials again;
+            off: such a row stops the run with its file and line.
         progress: show a progress bar on stderr.
         no_push: play the scenario's trials without their pushes (commands, terrain and domain unchanged).
         debug_truth: throw the controllers' ground-truth debug switch (base state from the simulator).
@@ -249,7 +249,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
     if cfg.no_push:
         trials = [dataclasses.replace(t, pushes=()) for t in trials]
-    # the options left unset are absent from run.json, so that a run resumes a directory written before they existed
+    # the options left unset are absent from run.json: a run naming one at its default resumes a run that did not
     identity = SimulatedRunIdentity(
         controllers=tuple(cfg.controllers),
         scenario=ScenarioRef(path=str(cfg.scenario), name=scenario.name, version=scenario.version,

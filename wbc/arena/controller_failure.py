@@ -3,7 +3,7 @@
 The runner (`wbc.arena.runner.run_episode`) raises it when the controller's ``reset`` or ``act`` raises, or when
 ``act`` returns a command the robot refuses (`wbc.errors.CommandError`: a NaN, the wrong number of joints, not a
 `MotorCommand`). It carries the episode played up to that tick, so that whoever plays the trial records the failure
-as the trial's outcome (``controller_error`` in `wbc.arena.record.TrialRecord`) instead of losing the whole run.
+as the trial's outcome (``controller_error`` in `wbc.arena.trial_record.TrialRecord`) instead of losing the whole run.
 
 The place named is the controller's own: the innermost frame of the exception's traceback that is not inside the
 `wbc` package nor generated code (a dataclass's ``__init__``), preferring one inside the controller's own package
@@ -140,7 +140,7 @@ def read_counters(controller: object, name: str, trial: Trial, episode: Episode,
     """The controller's event counts after a trial, checked, and the trial's error.
 
     A controller whose ``counters`` raises, or returns what is not a dict of whole counts
-    (`wbc.arena.record.check_counters`), has failed: the trial's error says so (phase ``counters``), unless it had
+    (`wbc.arena.trial_record.check_counters`), has failed: the trial's error says so (phase ``counters``), unless it had
     failed already, whose error is kept (a second one would only hide the first).
 
     Args:
@@ -153,7 +153,7 @@ def read_counters(controller: object, name: str, trial: Trial, episode: Episode,
     Returns:
         (counts, error): the counts (empty when they could not be read) and the trial's error.
     """
-    from wbc.arena.record import check_counters  # record imports this module's neighbours; import when used
+    from wbc.arena.trial_record import check_counters  # record imports this module's neighbours; import when used
 
     try:
         return check_counters(controller.counters()), error

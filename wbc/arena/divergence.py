@@ -5,7 +5,7 @@ not stop: its state grows to 1e6 m/s, turns NaN, or the trunk falls through the 
 itself and carry on. Such a trial measures the simulator, not the controller, so the runner
 (`wbc.arena.runner.run_episode`) checks the robot's state every tick and ends the episode with
 `SimulationDiverged` at the first tick that is impossible; the trial is recorded with the outcome ``diverged``
-(`wbc.arena.record.DIVERGED`) and NaN for the metrics of its motion, so that no absurd number reaches a mean.
+(`wbc.arena.trial_record.DIVERGED`) and NaN for the metrics of its motion, so that no absurd number reaches a mean.
 
 The limits are far beyond anything a legged robot of this size does, so a real fall or push never trips them: the
 fastest quadrupeds run at about 4 m/s, a trunk dropped from 1 m lands at 4.5 m/s, a 300 N push of 0.1 s moves a

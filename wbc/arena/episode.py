@@ -175,6 +175,9 @@ _SAFETY_KEYS = ("time", "from_state", "to_state", "reason", "detail")
 _PUSH_KEYS = ("start", "duration", "force_in_world", "offset_in_base")
 _SCALARS = ("duration_s", "control_dt", "fell", "fall_time_s")
 _ARRAYS = ("t", "command", "v_base_in_yaw", "yaw_rate", "roll", "pitch", "power", "arm_q", "qpos", "act_s")
+_FILE_FIELDS = (*_SCALARS, *_ARRAYS, *(f"push_{k}" for k in _PUSH_KEYS), *(f"safety_{k}" for k in _SAFETY_KEYS),
+                *(f"operator_{k}" for k in _OPERATOR_KEYS), "base_source", "clamped_ticks", "clamped_rows")
+"""Every member of an episode file (`Episode.save`); a file without one of them is another version's, or damaged."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -287,9 +290,6 @@ class Episode:
     def load(cls, path: str) -> Episode:
         """Read an episode written by `save`, every field checked before the episode is made.
 
-        A file from before episodes kept safety events, operator actions, their base source or the clamped ticks has
-        none of the first two, its base quantities are the simulator's and its clamped ticks 0 (not counted then).
-
         The archive is opened through `wbc.input_files.open_npz` (a regular file, at most 1 GiB uncompressed, plain
         arrays, no pickles), then checked in depth: the scalars are single numbers (``duration_s`` in
         (0, 600] s, ``control_dt`` in (0, 1] s, ``fall_time_s`` NaN or >= 0); ``t`` is one-dimensional, finite and
@@ -317,7 +317,7 @@ class Episode:
     @classmethod
     def _read(cls, path: str, z: np.lib.npyio.NpzFile) -> Episode:
         """The episode in an open archive, checked field by field (see `load`)."""
-        missing = [k for k in (*_SCALARS, *_ARRAYS, *(f"push_{k}" for k in _PUSH_KEYS)) if k not in z.files]
+        missing = [k for k in _FILE_FIELDS if k not in z.files]
         if missing:
             raise EpisodeFileError(f"{path}: field {missing[0]} missing (fields missing: {', '.join(missing)}); "
                                    "the file was written by another version of wbc: replay it with that "
@@ -325,25 +325,16 @@ class Episode:
         fields = _EpisodeFields(path, z.__getitem__, _FILE_ADVICE)
         scalars, arrays = _checked_core(fields)
         k = len(arrays["t"])
-        safety_keys = [f"safety_{k}" for k in _SAFETY_KEYS]
-        present = [k for k in safety_keys if k in z.files]
-        if present and len(present) < len(safety_keys):
-            missing = [k for k in safety_keys if k not in z.files]
-            raise EpisodeFileError(f"{path}: field {missing[0]} missing while {present[0]} is there; the file "
-                                   "is damaged: play the trial again with `wbc run --save-episodes`")
-        operator = _optional_group(path, z.files, "operator", _OPERATOR_KEYS)
-        for name in (*(f"push_{k}" for k in _PUSH_KEYS), *(("safety_time",) if present else ()),
-                     *(("operator_time",) if operator else ())):
+        for name in (*(f"push_{k}" for k in _PUSH_KEYS), "safety_time", "operator_time"):
             fields.numbers(name, ndim=None)
-        source = str(fields.scalar_text("base_source")) if "base_source" in z.files else "truth"
+        source = str(fields.scalar_text("base_source"))
         # the tick a controller failed on may be counted before its row was stored: k + 1 at most
-        clamped = int(fields.scalar("clamped_ticks", lo=0, hi=k + 1)) if "clamped_ticks" in z.files else 0
-        rows = (tuple(int(v) for v in fields.numbers("clamped_rows", rows=5)) if "clamped_rows" in z.files
-                else (0,) * 5)
+        clamped = int(fields.scalar("clamped_ticks", lo=0, hi=k + 1))
+        rows = tuple(int(v) for v in fields.numbers("clamped_rows", rows=5))
         try:
             pushes = PushLog(**{k: z[f"push_{k}"] for k in _PUSH_KEYS})
-            safety = SafetyLog(**{k: z[f"safety_{k}"] for k in _SAFETY_KEYS}) if present else SafetyLog()
-            actions = OperatorLog(**{k: z[f"operator_{k}"] for k in _OPERATOR_KEYS}) if operator else OperatorLog()
+            safety = SafetyLog(**{k: z[f"safety_{k}"] for k in _SAFETY_KEYS})
+            actions = OperatorLog(**{k: z[f"operator_{k}"] for k in _OPERATOR_KEYS})
             return cls(**scalars, **arrays, pushes=pushes, safety_events=safety, operator_events=actions,
                        base_source=source, clamped_ticks=clamped, clamped_rows=rows)
         except (ConfigError, ValueError, TypeError) as exc:
@@ -455,17 +446,6 @@ class _EpisodeFields:
             where = np.argwhere(~np.isfinite(value))[0]
             self.fail(name, f"{value[tuple(where)]} at index {tuple(int(i) for i in where)}, expected finite numbers")
         return value
-
-
-def _optional_group(path: str, files: list[str], prefix: str, keys: tuple[str, ...]) -> bool:
-    """True if the file holds the group ``<prefix>_<key>`` whole, False if none of it; a part of it is damage."""
-    names = [f"{prefix}_{k}" for k in keys]
-    present = [k for k in names if k in files]
-    if present and len(present) < len(names):
-        missing = [k for k in names if k not in files]
-        raise EpisodeFileError(f"{path}: field {missing[0]} missing while {present[0]} is there; the file is "
-                               "damaged: play the trial again")
-    return bool(present)
 
 
 class EpisodeBuffer:

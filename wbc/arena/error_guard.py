@@ -17,7 +17,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from wbc.arena.record import CONTROLLER_ERROR, OUTCOMES, TrialRecord
+from wbc.arena.trial_record import CONTROLLER_ERROR, OUTCOMES, TrialRecord
 from wbc.errors import ConfigError
 
 __all__ = ["DEFAULT_MAX_CONSECUTIVE_ERRORS", "ControllerErrors", "ErrorGuard", "outcome_counts"]

@@ -21,9 +21,9 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from contextlib import contextmanager
 from dataclasses import dataclass
 
-from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver
 from wbc.arena.sim_trial import run_trial
+from wbc.arena.trial_record import TrialRecord
 from wbc.control.spec import ControllerSpec
 from wbc.optional import require
 from wbc.scenario.trial import Trial

@@ -14,9 +14,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import write_report
 from wbc.arena.summary import Summary
+from wbc.arena.trial_record import TrialRecord
 
 __all__ = ["finish_results"]
 

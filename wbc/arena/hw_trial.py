@@ -56,10 +56,10 @@ from wbc.arena.error_guard import ErrorGuard
 from wbc.arena.finish import finish_results
 from wbc.arena.identity import HardwareRunIdentity, ScenarioRef
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import md_table, summarize
 from wbc.arena.results import ResultsStore, episode_path
 from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
+from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
 from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError, UnknownNameError

@@ -4,14 +4,14 @@ A run is one of two kinds, each its own frozen type behind the one base:
 
 - `SimulatedRunIdentity` (``wbc run`` / ``wbc compare``): controllers, scenario, bands, seeds and trials per band and
   seed, the no-push and ground-truth switches, and the options that change what is played (the sequential stop, the
-  controllers' configuration files, the consecutive-error limit), each written only when set, so that a directory
-  written before the option existed is still resumed by a run without it;
+  controllers' configuration files, the consecutive-error limit), each written only when set (absent: its default),
+  so that a run that names an option at its default and one that leaves it out are the same run;
 - `HardwareRunIdentity` (``wbc hw run``): one trial of a scenario, played on the robot, arm mode and backend it names.
 
 `as_json` gives the ``config`` object exactly as it is written (keys in their order, unset options absent);
-`RunIdentity.from_json` and `RunIdentity.load` read any ``run.json`` this or an earlier version wrote (a hardware run
-names its ``trial``, a simulated one its ``trials``), and refuse a malformed one with a `RecordError` that names the
-file and the field. The results store writes the identity and compares it with the stored one on resume
+`RunIdentity.from_json` and `RunIdentity.load` read a ``run.json`` as it is written (a hardware run names its
+``trial``, a simulated one its ``trials``), and refuse a malformed one with a `RecordError` that names the file and
+the field. The results store writes the identity and compares it with the stored one on resume
 (`wbc.arena.results.ResultsStore`); the viewer reads it back to find a stored trial (`wbc.viz.replay`).
 """
 
@@ -180,10 +180,10 @@ class RunIdentity(ABC):
 
     @classmethod
     def from_json(cls, data: object, *, source: str | Path) -> RunIdentity:
-        """Read a ``config`` object written by this or an earlier version, of either kind.
+        """Read a ``config`` object as `as_json` writes it, of either kind.
 
-        A hardware run's names its one ``trial``, a simulated run's its ``trials`` per band and seed; the options a
-        version did not write take their defaults. Called on a subclass, only that kind is accepted.
+        A hardware run's names its one ``trial``, a simulated run's its ``trials`` per band and seed; the options
+        absent take their defaults. Called on a subclass, only that kind is accepted.
 
         Args:
             data: the parsed ``config`` object.

@@ -39,8 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbc.arena.record import TrialRecord
 from wbc.arena.stats import PairKey
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import RecordError
 
 __all__ = ["BINARY_FIELDS", "McNemarResult", "WilcoxonResult", "clopper_pearson", "mcnemar_exact",

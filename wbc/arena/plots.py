@@ -15,8 +15,8 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.record import TrialRecord
 from wbc.arena.summary import MetricSummary, Summary
+from wbc.arena.trial_record import TrialRecord
 
 __all__ = ["PLOTS", "write_plots"]
 
@@ -123,13 +123,10 @@ def _plot_tracking(plt: Any, path: Path, summary: Summary, bands: Sequence[str],
     """Grouped bars of the V_lin and V_ang tracking errors over the common window, per band and controller.
 
     Each bar is the mean over trials, its error bar the 95 % bootstrap interval over trials, and the number of trials
-    with a window is written on it. A summary written before common windows draws the errors over each trial's own
-    survived time instead, and says so.
+    with a window is written on it.
     """
     controllers = summary.controllers
-    cells = [cell for _, _, cell in summary.iter_cells()]
-    common = bool(cells) and all("vlin_err_common" in c for c in cells)
-    metrics = ("vlin_err_common", "vang_err_common") if common else ("vlin_err", "vang_err")
+    metrics = ("vlin_err_common", "vang_err_common")
     x = np.arange(len(bands), dtype=float)
     width = 0.8 / max(1, len(controllers))
     fig, axes = plt.subplots(1, 2, figsize=(max(6.4, 1.5 * len(bands) * 2 + 2.0), 4.2))
@@ -157,8 +154,7 @@ def _plot_tracking(plt: Any, path: Path, summary: Summary, bands: Sequence[str],
             ax.set_title(labels[metric].split(" [")[0], fontsize=9)
             ax.grid(True, axis="y", alpha=0.3)
         axes[0].legend(fontsize=7)
-        fig.suptitle("Tracking error over the seconds every controller survived" if common else
-                     "Tracking error over each trial's own survived time", fontsize=10)
+        fig.suptitle("Tracking error over the seconds every controller survived", fontsize=10)
         fig.tight_layout()
         fig.savefig(path, dpi=100)
     finally:

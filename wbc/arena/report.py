@@ -1,6 +1,6 @@
 """Arena report: the typed summary of the records, the paper-style results table, and a Markdown report with plots.
 
-The input is one `wbc.arena.record.TrialRecord` per (controller, trial). This module turns them into:
+The input is one `wbc.arena.trial_record.TrialRecord` per (controller, trial). This module turns them into:
 
 - `summarize`: a `wbc.arena.summary.Summary`: per controller and band, mean +- std across seeds of each metric
   (`wbc.arena.stats.mean_std_over_seeds`) and a 95 % interval over the trials (Wilson for success, percentile
@@ -8,8 +8,8 @@ The input is one `wbc.arena.record.TrialRecord` per (controller, trial). This mo
   ordered pair of controllers the paired difference B - A with its 95 % interval (exact for success,
   `wbc.arena.paired_tests.paired_success_interval`; bootstrap otherwise), its paired test's p-value (exact McNemar for
   success, Wilcoxon signed-rank otherwise; `wbc.arena.paired_tests`) and the pairs a test needs for 80 % power at the
-  observed difference (`wbc.arena.power`). Its JSON form (``summary.json``) is `Summary.to_json`: NaN becomes
-  ``None``.
+  observed difference (`wbc.arena.statistical_power`). Its JSON form (``summary.json``) is `Summary.to_json`: NaN
+  becomes ``None``.
 - `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table: mean
   ± std across seeds, or, from one seed (which has no spread across seeds), the mean and its interval over trials.
 - `write_report`: ``report.md`` plus the PNG plots (drawn by `wbc.arena.plots`) in an output folder.
@@ -39,8 +39,7 @@ from wbc.arena.paired_tests import (
     wilcoxon_signed_rank,
 )
 from wbc.arena.plots import PLOTS, write_plots
-from wbc.arena.power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
-from wbc.arena.record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
+from wbc.arena.statistical_power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
 from wbc.arena.stats import (
     bootstrap_mean_ci,
     in_canonical_order,
@@ -49,6 +48,7 @@ from wbc.arena.stats import (
     wilson_interval,
 )
 from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning
+from wbc.arena.trial_record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
 from wbc.arena.verdict import verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
@@ -175,8 +175,8 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
     metric is the percentile bootstrap over the pairs. A common-window field (``vlin_err_common``,
     ``vang_err_common``) compares the two controllers' tracking errors over the seconds both survived on each trial
     (`wbc.arena.windows`). ``n80`` is the number of pairs the test needs to detect the observed difference with 80 %
-    power at `alpha` (`wbc.arena.power`; None when the observed difference is 0 or needs more than
-    `wbc.arena.power.N_MAX` pairs).
+    power at `alpha` (`wbc.arena.statistical_power`; None when the observed difference is 0 or needs more than
+    `wbc.arena.statistical_power.N_MAX` pairs).
 
     Args:
         records_a: A's records (one per trial).
@@ -407,7 +407,7 @@ def cell_text(stat: MetricSummary, metric: str, seeds: int | None) -> str:
     """A table cell: "mean ± std" across seeds, or from one seed "mean [lo, hi]" (its 95 % interval over trials).
 
     A single seed has no spread across seeds to quote (its std would print as ± 0.00); its interval over trials
-    says how far the mean could be off. A summary without the interval (written by an older version) keeps ± std.
+    says how far the mean could be off. A cell without an interval (no value to draw it from) keeps ± std.
 
     Args:
         stat: a summary cell's metric.
@@ -614,9 +614,8 @@ def format_verdict(summary: Summary) -> str:
 
 
 def _common_of(summary: Summary) -> tuple[str, ...]:
-    """The common-window metrics a summary holds (none in one written before they existed)."""
-    cells = [cell for _, _, cell in summary.iter_cells()]
-    return tuple(m for m in COMMON_METRICS if cells and all(m in cell for cell in cells))
+    """The common-window metrics, which every cell of a summary holds (none in a summary without cells)."""
+    return COMMON_METRICS if any(True for _ in summary.iter_cells()) else ()
 
 
 def _counter_lines(summary: Summary) -> list[str]:

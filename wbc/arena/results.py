@@ -4,7 +4,7 @@ Each finished trial is appended to ``trials.csv`` as one line and flushed to dis
 accepted, so a run killed at any moment keeps everything it finished; a line cut short by the kill is dropped when
 the store is reopened. Every row carries a checksum of its cells, and a row that fails it, does not parse, holds an
 impossible value, belongs to another scenario file or repeats a trial is refused on reopening with its file and line
-(`wbc.arena.record.scan_csv`), unless the run asks for such rows to be dropped and played again
+(`wbc.arena.trial_record.scan_csv`), unless the run asks for such rows to be dropped and played again
 (``--drop-bad-rows``). ``run.json`` holds the run's identity (`wbc.arena.identity.RunIdentity`: the resolved
 configuration and scenario hash), package versions, git revision and what each controller is (its kind, a plug-in's
 target and distribution version, the sha256 of every file it was built from: weights, an ONNX model and its external
@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 from wbc.arena.identity import RunIdentity
-from wbc.arena.record import RefusedRow, TrialRecord, scan_csv
+from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
 from wbc.provenance import provenance
@@ -72,12 +72,12 @@ class ResultsStore:
     Args:
         out_dir: the directory (created if missing).
         identity: what the run is; when resuming, its JSON form must equal the stored one (``run.json``'s
-            ``config``), which an earlier version may have written: unset options are absent from both.
+            ``config``); unset options are absent from both.
         resume: continue a run already in `out_dir`; without it, a directory holding trials is refused.
         controllers: what each controller is, by name (`wbc.control.spec.ControllerSpec.provenance`: its kind, a
             plug-in's target and distribution version, the sha256 of every file it was built from), recorded in
             ``run.json`` beside the configuration.
-        drop_bad_rows: drop the rows of ``trials.csv`` that are refused (`wbc.arena.record.scan_csv`), with one
+        drop_bad_rows: drop the rows of ``trials.csv`` that are refused (`wbc.arena.trial_record.scan_csv`), with one
             warning line each on stderr, so that their trials are played again; off: such rows are refused.
 
     Raises:

@@ -24,7 +24,7 @@ alpha / m, so the chance that any true H0 is rejected stays <= alpha.
 
 What it saves: the mixture test needs no effect size in advance, and it stops about where a fixed-n McNemar test
 planned with the true effect would have ended. Simulated: success 50 % against 95 % stops after a median of 16 pairs
-(90 % of runs within 31), where the exact McNemar test needs 19 pairs for 80 % power (`wbc.arena.power`); a
+(90 % of runs within 31), where the exact McNemar test needs 19 pairs for 80 % power (`wbc.arena.statistical_power`); a
 10-point difference with 20 % of the pairs discordant (5 % "A only", 15 % "B only"): a median of about 150 pairs
 against 168 (15 % of runs not settled within 300). A run whose budget was sized for the smallest difference worth
 finding (hundreds of pairs) ends after a few dozen when the difference is large.
@@ -42,7 +42,7 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.record import TrialRecord
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, RecordError
 
 __all__ = ["PRIOR", "DiscordantPairTest", "SequentialComparison", "mixture_log_e"]

@@ -23,8 +23,8 @@ from threadpoolctl import threadpool_limits
 from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.episode import Episode, EpisodeBuffer, PushLog
-from wbc.arena.record import TrialRecord
 from wbc.arena.runner import TickObserver, run_episode
+from wbc.arena.trial_record import TrialRecord
 from wbc.control.protocol import TruthSwitch
 from wbc.control.registry import get_controller
 from wbc.control.spec import ControllerSpec

@@ -13,7 +13,7 @@ Three estimators, all deterministic:
 - `wilson_interval`: the interval of a success rate over trials (one seed gives no spread over seeds to quote).
 
 The paired tests (exact McNemar, Wilcoxon signed-rank) are in `wbc.arena.paired_tests`, the trials they need in
-`wbc.arena.power`, the sequential test in `wbc.arena.sequential`.
+`wbc.arena.statistical_power`, the sequential test in `wbc.arena.sequential`.
 
 A mean's last digit depends on the order of its terms, and records arrive in the order trials finished (which
 differs between runs with several workers, and on resume); `in_canonical_order` puts them in one order first, so the
@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.record import TrialRecord
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, RecordError
 
 __all__ = [

@@ -1,9 +1,8 @@
 """The typed summary of an arena run: per metric, per controller and band, per pair of controllers, with one JSON form.
 
 `wbc.arena.report.summarize` builds a `Summary` from the records; the table, the report, the plots, the verdict and
-the CLI read its typed fields; ``summary.json`` is `Summary.to_json`, and `Summary.from_json` reads it back (a
-summary written by an earlier version, without the fields added since, reads with those fields empty). NaN never
-reaches JSON: an undefined statistic is ``None`` in both forms.
+the CLI read its typed fields; ``summary.json`` is `Summary.to_json`, and `Summary.from_json` reads it back. NaN
+never reaches JSON: an undefined statistic is ``None`` in both forms.
 """
 
 from __future__ import annotations
@@ -58,8 +57,8 @@ class MetricSummary:
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> MetricSummary:
-        """Read back `to_json` (an entry without ``ci95``, from an older version, has none)."""
-        ci = data.get("ci95") or (None, None)
+        """Read back `to_json` (``trials`` absent: not counted)."""
+        ci = data["ci95"]
         return cls(mean=data["mean"], std=data["std"], ci95=(ci[0], ci[1]), trials=data.get("trials"))
 
 
@@ -97,7 +96,7 @@ class CellSummary:
         clamped_rows: of those, ticks per command row (``q``, ``dq``, ``kp``, ``kd``, ``tau``), rows never clamped
             left out.
         counters: every event count the controller reported, by name (sorted).
-        outcomes: trials per outcome (`wbc.arena.record.OUTCOMES`, every one listed); None when not counted (a
+        outcomes: trials per outcome (`wbc.arena.trial_record.OUTCOMES`, every one listed); None when not counted (a
             summary of records alone, before the arena adds them).
     """
 
@@ -143,14 +142,14 @@ class CellSummary:
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> CellSummary:
-        """Read back `to_json`; fields an older version did not write read as 0 or empty."""
+        """Read back `to_json` (``outcomes`` absent: not counted)."""
         scalar = {"trials", "seeds", "ticks", "deadline_misses", "clamped_ticks", "clamped_rows", "counters",
                   "outcomes"}
         metrics = {name: MetricSummary.from_json(value) for name, value in data.items() if name not in scalar}
-        return cls(trials=data["trials"], seeds=data["seeds"], metrics=metrics, ticks=data.get("ticks", 0),
-                   deadline_misses=data.get("deadline_misses", 0), clamped_ticks=data.get("clamped_ticks", 0),
-                   clamped_rows=dict(data.get("clamped_rows", {})),
-                   counters={name: CounterTotal(**c) for name, c in data.get("counters", {}).items()},
+        return cls(trials=data["trials"], seeds=data["seeds"], metrics=metrics, ticks=data["ticks"],
+                   deadline_misses=data["deadline_misses"], clamped_ticks=data["clamped_ticks"],
+                   clamped_rows=dict(data["clamped_rows"]),
+                   counters={name: CounterTotal(**c) for name, c in data["counters"].items()},
                    outcomes=dict(data["outcomes"]) if "outcomes" in data else None)
 
 
@@ -212,12 +211,12 @@ class PairSummary:
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PairSummary:
-        """Read back `to_json` (an entry of an older version lacks interval and the means: None)."""
-        ci = data.get("ci95") or (None, None)
-        return cls(a=data["a"], b=data["b"], band=data["band"], metric=data["metric"], diff=data.get("diff"),
-                   ci95=(ci[0], ci[1]), interval=data.get("interval"), n=data.get("n", 0),
-                   mean_a=data.get("mean_a"), mean_b=data.get("mean_b"), test=data.get("test"), p=data.get("p"),
-                   n80=data.get("n80"), a_only=data.get("a_only"), b_only=data.get("b_only"))
+        """Read back `to_json`."""
+        ci = data["ci95"]
+        return cls(a=data["a"], b=data["b"], band=data["band"], metric=data["metric"], diff=data["diff"],
+                   ci95=(ci[0], ci[1]), interval=data["interval"], n=data["n"], mean_a=data["mean_a"],
+                   mean_b=data["mean_b"], test=data["test"], p=data["p"], n80=data["n80"], a_only=data["a_only"],
+                   b_only=data["b_only"])
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -315,7 +314,7 @@ class Summary:
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any], *, source: str = "summary") -> Summary:
-        """Read back `to_json` (``summary.json``, of this version or an earlier one).
+        """Read back `to_json` (``summary.json``; ``controller_errors`` and ``sequential`` absent: none).
 
         Raises:
             RecordError: a field is missing or malformed (the message names `source` and the field).
@@ -325,8 +324,8 @@ class Summary:
                      for c, entry in data["controllers"].items()}
             errors = data.get("controller_errors")
             return cls(scenario_name=data["scenario"]["name"], scenario_hash=data["scenario"]["hash"], cells=cells,
-                       paired=tuple(PairSummary.from_json(p) for p in data.get("paired", ())),
-                       warnings=tuple(TickWarning(**w) for w in data.get("warnings", ())),
+                       paired=tuple(PairSummary.from_json(p) for p in data["paired"]),
+                       warnings=tuple(TickWarning(**w) for w in data["warnings"]),
                        controller_errors=None if errors is None else
                        {name: ControllerErrors.from_dict(name, e) for name, e in errors.items()},
                        sequential=data.get("sequential"))

@@ -20,7 +20,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from wbc.arena.metrics import per_second, profile_text
-from wbc.arena.record import TrialRecord
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import RecordError
 
 __all__ = ["COMMON_WINDOW", "common_window_values", "parse_profile", "per_second", "profile_text", "window_mean"]

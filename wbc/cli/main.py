@@ -11,12 +11,9 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import signal
 import sys
-import threading
 import time
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, run_arena
@@ -25,7 +22,7 @@ from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
 from wbc.cli.terminal_keys import TerminalKeys
-from wbc.control.check import CheckConfig, check_controller
+from wbc.control.controller_contract import CheckConfig, check_controller
 from wbc.control.onnx_policy import ONNX_PREFIX
 from wbc.control.registry import (
     CONTROLLERS,
@@ -35,29 +32,11 @@ from wbc.control.registry import (
     takes_controller_config,
 )
 from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
-from wbc.hardware.capabilities import WallClock
-from wbc.hardware.emulators import (
-    BusFault,
-    DynamixelEmulatorConfig,
-    Fault,
-    RobotEmulator,
-    RobotEmulatorConfig,
-    UnitreeEmulator,
-    UnitreeEmulatorConfig,
-)
+from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
+from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.io_process import build_process_robot
-from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
-from wbc.hardware.realtime import (
-    AUTO_CPU,
-    CONTROLLER_PRIORITY_BELOW,
-    NO_REALTIME,
-    RealtimeGrant,
-    RealtimeRequest,
-    request_realtime,
-)
-from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
+from wbc.hardware.realtime import AUTO_CPU, CONTROLLER_PRIORITY_BELOW, NO_REALTIME, RealtimeRequest
 from wbc.hardware.serial_port_policy import is_emulated_port
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
@@ -69,7 +48,6 @@ from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import Trial
 from wbc.tools.arm_momentum import arm_momentum_study
 from wbc.tools.bench import (
-    EmulatorCounts,
     bench_arm,
     bench_hw,
     bench_latency,
@@ -79,23 +57,16 @@ from wbc.tools.bench import (
     bench_train,
 )
 from wbc.tools.demo import DEMO_CONTROLLERS, trial_to_watch
+from wbc.tools.emulate import BUS_FAULTS, FAULTS, EmulateConfig, emulate
+from wbc.tools.hardware_check import HardwareCheckConfig, check_hardware
 from wbc.tools.paper import PaperRunConfig, run_paper_table
 from wbc.tools.posture import posture_study
 from wbc.tools.tail import analyze_tail
 
-__all__ = ["BUS_FAULTS", "FAULTS", "HANDLERS", "hw_check", "hw_run", "main"]
-
-FAULTS: dict[str, Fault] = {f.value: f for f in Fault}
-"""``wbc hw emulate --fault NAME``: the emulator's faults by name."""
-
-BUS_FAULTS: dict[str, BusFault] = {f"arm_{f.value}": f for f in BusFault}
-"""``wbc hw emulate --arm actuated --fault arm_NAME``: the arm bus's faults by name (``arm_`` keeps them apart from
-the legs' faults: both have an ``over_temperature``)."""
+__all__ = ["HANDLERS", "hw_check", "hw_run", "main"]
 
 _WIRE_OF = {**{wire: wire for wire in DESCRIPTIONS}, **{desc: wire for wire, desc in DESCRIPTIONS.items()}}
 """``wbc hw emulate|check|run --robot``: a1, go1, or the name with the arm (a1-wx200, go1-arm), -> the legs' wire."""
-
-_EMULATE_POLL = 0.05  # [s] how often ``hw emulate`` looks at its clock and its emulator's health
 
 
 def _analyze_tail(args: argparse.Namespace) -> int:
@@ -217,33 +188,6 @@ def _address(text: str, option: str) -> tuple[str, int]:
     return host, int(port)
 
 
-class _Stop(Exception):
-    """SIGINT or SIGTERM arrived while an emulator served."""
-
-
-@contextmanager
-def _stopped_by_signals() -> Iterator[None]:
-    """End the block cleanly on Ctrl-C, SIGINT or SIGTERM, so that the emulator still prints its counts.
-
-    Both are set explicitly: a shell starts a background job with SIGINT ignored, and a script stops it with ``kill``.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        yield  # signals reach the main thread only; a caller on another thread stops by --seconds
-        return
-
-    def stop(signum: int, frame: object) -> None:
-        raise _Stop(signum)
-
-    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    except (_Stop, KeyboardInterrupt):
-        pass
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
-
-
 def _hw_emulate(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     if args.robot not in _WIRE_OF:
@@ -261,57 +205,14 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         faults.append(FAULTS[key] if key in FAULTS else BUS_FAULTS[key])
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
-    mode = "lockstep" if args.lockstep else "realtime"
-    wire = _WIRE_OF[args.robot]
-    # it stands in for the robot's own processors: asked before its threads start, as they inherit the scheduling
-    grant = request_realtime(realtime_request(args, place="first"))
-    if actuated:
-        return _hw_emulate_with_arm(DESCRIPTIONS[wire], mode, args.port, faults, args.seconds, held=not args.drop,
-                                    grant=grant)
-    # no log: nobody reads it here, and a long one stalls the replies in each full garbage collection
-    cfg = UnitreeEmulatorConfig(robot=wire, arm_mode=args.arm, mode=mode, port=args.port,
-                                held_until_driven=not args.drop, log_size=0)
-    emulator = UnitreeEmulator(cfg)
-    with emulator:
-        freeze_heap()  # built and serving: its full collections must not stall the answers
-        for fault in faults:
-            emulator.inject(fault)
-        printers.print_emulator_started(cfg.robot, cfg.mode, emulator.address, [f.value for f in faults],
-                                        seconds=args.seconds, held=cfg.held_until_driven)
-        printers.print_realtime_grant("emulator", grant)
-        end = time.monotonic() + args.seconds if args.seconds is not None else float("inf")
-        with _stopped_by_signals():
-            while time.monotonic() < end and emulator.failure is None:
-                time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
-    printers.print_emulator_counts(EmulatorCounts.of(emulator), last_reject=emulator.last_reject)
-    if emulator.failure is not None:
-        raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
-    return 0
-
-
-def _hw_emulate_with_arm(robot: str, mode: str, port: int, faults: list[Fault | BusFault],
-                         seconds: float | None, *, held: bool, grant: RealtimeGrant) -> int:
-    """``wbc hw emulate --arm actuated``: one `RobotEmulator`, legs over UDP and arm over a pty, one physics."""
-    # no logs: nobody reads them here, and long ones stall the answers in each full garbage collection
-    emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode=mode, port=port, held_until_driven=held,
-                                                 legs_log_size=0, arm=DynamixelEmulatorConfig(log_size=0)))
-    with emulator:
-        freeze_heap()  # built and serving: its full collections must not stall the answers
-        for fault in faults:
-            emulator.inject(fault)
-        names = [f"arm_{f.value}" if isinstance(f, BusFault) else f.value for f in faults]
-        printers.print_robot_emulator_started(robot, mode, emulator.address, emulator.port, names, seconds=seconds,
-                                              held=held)
-        printers.print_realtime_grant("emulator", grant)
-        end = time.monotonic() + seconds if seconds is not None else float("inf")
-        with _stopped_by_signals():
-            while time.monotonic() < end and emulator.failure is None:
-                time.sleep(min(_EMULATE_POLL, max(0.0, end - time.monotonic())))
-    printers.print_emulator_counts(EmulatorCounts.of(emulator.legs), last_reject=emulator.legs.last_reject)
-    printers.print_bus_counts(emulator.arm.stats)
-    printers.print_thread_stats("arm bus thread", emulator.arm.thread_stats())
-    if emulator.failure is not None:
-        raise RobotLinkError(f"the emulator's thread failed: {emulator.failure!r}") from emulator.failure
+    served = emulate(EmulateConfig(robot=_WIRE_OF[args.robot], arm_mode=args.arm,
+                                   mode="lockstep" if args.lockstep else "realtime", port=args.port,
+                                   faults=tuple(faults), seconds=args.seconds, held=not args.drop,
+                                   realtime=realtime_request(args, place="first")),
+                     serving=printers.print_emulator_serving)
+    printers.print_emulator_served(served)
+    if served.failure is not None:
+        raise RobotLinkError(f"the emulator's thread failed: {served.failure!r}") from served.failure
     return 0
 
 
@@ -411,6 +312,9 @@ def hw_check(args: argparse.Namespace, *,
              build: Callable[[HardwareRobotConfig], HardwareRobot] = build_hardware_robot) -> int:
     """``wbc hw check``: read the robot through the safety layer for ``--seconds`` of its clock, sending only damping.
 
+    The addresses and the arm's port are checked here, and a real robot confirmed, before anything connects; the
+    reading is `wbc.tools.hardware_check.check_hardware`'s.
+
     Args:
         args: the parsed command line.
         build: builds the robot from its config (a test hands its devices a clock it moves and an emulator's
@@ -424,38 +328,17 @@ def hw_check(args: argparse.Namespace, *,
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     robot = _robot_name(args.robot)
-    local_host, local_port = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"),
-                                      "--local")
-    hardware = build(HardwareRobotConfig(
-        robot=robot, arm_mode="actuated" if arm_port else "none", legs_host=host,
-        legs_port=port, local_host=local_host, local_port=local_port, allow_hardware=args.allow_hardware,
-        transport=args.transport, arm_port=arm_port))
-    real = _real_devices(host, port, arm_port)
-    if real:
-        _confirm_hardware("hw check", robot, real, "Only damping will be sent (Kp 0, on the arm too); hang the "
-                          "robot in its harness first.", yes=args.yes)
-    events: list[SafetyEvent] = []
-    # Read through the safety layer, never written to: its checks judge each state, and a trip only sends damping.
-    safe = SafeRobot(hardware.robot, SafetyConfig(position_table=hardware.position_table, on_event=events.append))
-    legs = hardware.robot.legs if isinstance(hardware.robot, QuadrupedArmRobot) else hardware.robot
-    arm = hardware.robot.arm if isinstance(hardware.robot, QuadrupedArmRobot) else None
-    clock = hardware.robot.wall_time if isinstance(hardware.robot, WallClock) else time.monotonic
-    with safe:
-        end = clock() + args.seconds
-        for _ in range(int(args.seconds / 0.01) + 2):
-            if clock() >= end:
-                break
-            safe.read()
-            safe.advance(0.01)
-        state = safe.read()
-        check = printers.HardwareCheck(
-            robot=args.robot, target=(host, port), joint_names=safe.joint_names, state=state,
-            lower=safe.position_lower, upper=safe.position_upper, margin=safe.config.joint_margin,
-            extras=legs.extras, link=legs.link_stats(), link_thread=legs.thread_stats(), decode=legs.decode_stats,
-            safety_state=safe.safety_state.value, safety_events=tuple(events), arm_port=args.arm_port,
-            arm_status=arm.motor_status() if arm is not None else None,
-            arm_faults=arm.faults if arm is not None else (), arm_bus=arm.bus_stats() if arm is not None else None,
-            arm_thread=arm.thread_stats() if arm is not None else None)
+    local = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"), "--local")
+
+    def confirm(hardware: HardwareRobot) -> None:
+        real = _real_devices(host, port, arm_port)
+        if real:
+            _confirm_hardware("hw check", robot, real, "Only damping will be sent (Kp 0, on the arm too); hang the "
+                              "robot in its harness first.", yes=args.yes)
+
+    check = check_hardware(HardwareCheckConfig(robot=robot, label=args.robot, target=(host, port), local=local,
+                                               seconds=args.seconds, transport=args.transport, arm_port=arm_port,
+                                               allow_hardware=args.allow_hardware), build=build, confirm=confirm)
     printers.print_hw_check(check)
     return 0
 

@@ -1,7 +1,9 @@
 """The ``wbc`` argument parser: every command, its options and their defaults; nothing runs here.
 
-Each command's parser sets ``handler`` to the command's name (``"bench mpc"``); `wbc.cli.main` dispatches on it and
-`wbc.cli.printers` prints what the command returns. Scenario paths are kept as given: `load_scenario` resolves them.
+One builder per command (``_add_run_parser``, ``_add_hw_check_parser`` ...) adds its parser and options;
+`build_parser` calls them in the order of the help's list. Each command's parser sets ``handler`` to the command's
+name (``"bench mpc"``); `wbc.cli.main` dispatches on it and `wbc.cli.printers` prints what the command returns.
+Scenario paths are kept as given: `load_scenario` resolves them.
 """
 
 from __future__ import annotations
@@ -197,6 +199,10 @@ def add_controller_file_options(p: argparse.ArgumentParser, *, repeatable: bool)
                    help=f"the I/O file of an onnx:PATH policy (default: PATH with the suffix .toml){which}")
 
 
+_Commands = argparse._SubParsersAction
+"""The subparsers of `build_parser` or of a command group (``analyze``, ``bench``, ``hw``): each command's builder adds
+its parser to one."""
+
 _NAMES_HELP = (f"{', '.join(CONTROLLERS)}; policy:PATH (an exported policy file), onnx:PATH (an ONNX policy), "
                "package.module:factory (a plug-in), or an installed plug-in's name (`wbc controllers` lists them)")
 
@@ -216,12 +222,45 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``wbc`` argument parser; every command sets ``handler``, the name `wbc.cli.main` dispatches on."""
     p = argparse.ArgumentParser(prog="wbc", description="Whole-body control of quadrupeds that carry an arm.")
     sub = p.add_subparsers(dest="command", required=True)
-
+    # one builder per command, in the order of the help's list
     analyze = sub.add_parser("analyze", help="first-principles analyses").add_subparsers(dest="what", required=True)
+    _add_analyze_tail_parser(analyze)
+    _add_analyze_arm_momentum_parser(analyze)
+    _add_analyze_posture_parser(analyze)
+    bench = sub.add_parser("bench", help="speed figures").add_subparsers(dest="what", required=True)
+    _add_bench_sim_parser(bench)
+    _add_bench_mpc_parser(bench)
+    _add_bench_sweep_parser(bench)
+    _add_bench_train_parser(bench)
+    _add_bench_hw_parser(bench)
+    _add_bench_latency_parser(bench)
+    _add_bench_arm_parser(bench)
+    hw = sub.add_parser("hw", help="real robots: an emulator, a read-only check, a trial on the robot")
+    hws = hw.add_subparsers(dest="what", required=True)
+    _add_hw_emulate_parser(hws)
+    _add_hw_check_parser(hws)
+    _add_hw_run_parser(hws)
+    _add_train_parser(sub)
+    _add_run_parser(sub)
+    _add_compare_parser(sub)
+    _add_paper_parser(sub)
+    _add_view_parser(sub)
+    _add_demo_parser(sub)
+    _add_controllers_parser(sub)
+    _add_check_controller_parser(sub)
+    return p
+
+
+def _add_analyze_tail_parser(analyze: _Commands) -> None:
+    """``wbc analyze tail``: the tail analysis of the model."""
     tail = analyze.add_parser("tail", help="the paper's CoM shift and body/arm acceleration ratio, from the model")
     tail.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     tail.add_argument("--json", action="store_true", help="print JSON")
     tail.set_defaults(handler="analyze tail")
+
+
+def _add_analyze_arm_momentum_parser(analyze: _Commands) -> None:
+    """``wbc analyze arm-momentum``: the arm's momentum against the pushes'."""
     arm = analyze.add_parser("arm-momentum", help="the arm's angular momentum against the pushes' angular impulse")
     arm.add_argument("--scenario", default="scenarios/push.toml")
     arm.add_argument("--band", default="ood")
@@ -230,6 +269,10 @@ def build_parser() -> argparse.ArgumentParser:
     arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS}")
     arm.add_argument("--json", action="store_true")
     arm.set_defaults(handler="analyze arm-momentum")
+
+
+def _add_analyze_posture_parser(analyze: _Commands) -> None:
+    """``wbc analyze posture``: the controllers' trunk height and speed."""
     posture = analyze.add_parser("posture", help="trunk height and speed of controllers standing and walking, flat "
                                  "ground, no pushes (is the comparison at the same posture?)")
     posture.add_argument("controllers", nargs="+", help=_NAMES_HELP)
@@ -242,7 +285,9 @@ def build_parser() -> argparse.ArgumentParser:
     posture.add_argument("--json", action="store_true", help="print JSON")
     posture.set_defaults(handler="analyze posture")
 
-    bench = sub.add_parser("bench", help="speed figures").add_subparsers(dest="what", required=True)
+
+def _add_bench_sim_parser(bench: _Commands) -> None:
+    """``wbc bench sim``: physics steps per second."""
     sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")
     sim.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
@@ -254,6 +299,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--terrain", default="flat", help="flat or fractal")
     sim.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measured alongside")
     sim.set_defaults(handler="bench sim")
+
+
+def _add_bench_mpc_parser(bench: _Commands) -> None:
+    """``wbc bench mpc``: the MPC's solve times and closed-loop speed."""
     mpc = bench.add_parser("mpc", help="MPC solve times, whole-body tick, closed-loop real-time factor")
     mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     mpc.add_argument("--controller", default="mpc")
@@ -266,6 +315,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="the closed loop's QP backend (default daqp); the walk's QPs are then solved by every "
                           "backend and compared")
     mpc.set_defaults(handler="bench mpc")
+
+
+def _add_bench_sweep_parser(bench: _Commands) -> None:
+    """``wbc bench sweep``: an arena sweep's throughput."""
     sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
     sweep.add_argument("--scenario", default="scenarios/push.toml")
     sweep.add_argument("--controller", default="stand")
@@ -274,6 +327,10 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
     sweep.add_argument("--json", action="store_true")
     sweep.set_defaults(handler="bench sweep")
+
+
+def _add_bench_train_parser(bench: _Commands) -> None:
+    """``wbc bench train``: the training env's throughput."""
     btrain = bench.add_parser("train", help="training env throughput: control steps per second, random actions")
     btrain.add_argument("--envs", type=bounded_int(1, 65_536), default=1024, help="parallel environments, 1..65536")
     btrain.add_argument("--threads", type=_THREADS, default=2, help=f"rollout threads, 1..{MAX_THREADS}")
@@ -284,6 +341,10 @@ def build_parser() -> argparse.ArgumentParser:
     btrain.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measurement")
     btrain.add_argument("--json", action="store_true")
     btrain.set_defaults(handler="bench train")
+
+
+def _add_bench_hw_parser(bench: _Commands) -> None:
+    """``wbc bench hw``: the Unitree link's timing over loopback."""
     bhw = bench.add_parser("hw", help="Unitree low-level link over loopback: send-period jitter, round trip, CPU",
                            description="Run a UnitreeRobot against a UnitreeEmulator (lockstep) in its own process "
                            "on 127.0.0.1 and time the link: the interval between sends, a command's round trip to "
@@ -301,6 +362,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_realtime_options(bhw, who="the emulator's process (on the first CPU) and the link's side in the bench's own "
                          "(on the last, as the I/O process on a robot)", cpu="first")
     bhw.set_defaults(handler="bench hw")
+
+
+def _add_bench_latency_parser(bench: _Commands) -> None:
+    """``wbc bench latency``: the wire's loop latency and the controllers' margin."""
     blat = bench.add_parser("latency", help="the wire's loop latency, the sim delay that plays it, controllers' margin",
                             description="Measure the loop latency over the wire (the emulator's round trip, and a "
                             "torque-step probe through a UnitreeRobot against an emulator on 127.0.0.1), the "
@@ -315,6 +380,9 @@ def build_parser() -> argparse.ArgumentParser:
     blat.add_argument("--json", action="store_true", help="print JSON")
     blat.set_defaults(handler="bench latency")
 
+
+def _add_bench_arm_parser(bench: _Commands) -> None:
+    """``wbc bench arm``: the arm's bus loop against the emulated robot."""
     barm = bench.add_parser("arm", help="the arm's Dynamixel bus loop against the emulated robot: rate, step response",
                             description="Run a DynamixelArm (and the legs' UnitreeRobot holding a stand) against a "
                             "real-time RobotEmulator in its own process: the bus loop's achieved rate at each "
@@ -331,8 +399,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "bus as the I/O process would (on the last)", cpu="first")
     barm.set_defaults(handler="bench arm")
 
-    hw = sub.add_parser("hw", help="real robots: an emulator, a read-only check, a trial on the robot")
-    hws = hw.add_subparsers(dest="what", required=True)
+
+def _add_hw_emulate_parser(hws: _Commands) -> None:
+    """``wbc hw emulate``: serve an emulated robot on 127.0.0.1."""
     emulate = hws.add_parser("emulate", help="serve an emulated A1 / Go1 (and its arm) on 127.0.0.1, backed by the "
                              "simulator",
                              description="Speak the robot's low-level UDP wire on 127.0.0.1 (never another "
@@ -360,6 +429,10 @@ def build_parser() -> argparse.ArgumentParser:
                          "(default: held at its standing pose, as in a harness, until a command drives a motor)")
     add_realtime_options(emulate, who="the emulator (it stands in for the robot's own processors)", cpu="first")
     emulate.set_defaults(handler="hw emulate")
+
+
+def _add_hw_check_parser(hws: _Commands) -> None:
+    """``wbc hw check``: read a robot, sending only damping."""
     check = hws.add_parser("check", help="connect to a robot, damping only, and print its state (never moves it)",
                            description="Connect the robot (the legs' UnitreeRobot, and the arm's DynamixelArm with "
                            "--arm-port), read states for a while through the safety layer, sending only damping "
@@ -383,6 +456,10 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--yes", action="store_true",
                        help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
     check.set_defaults(handler="hw check")
+
+
+def _add_hw_run_parser(hws: _Commands) -> None:
+    """``wbc hw run``: play a scenario's trial on a robot."""
     hwrun = hws.add_parser("run", help="play a scenario's trial on a real robot (or an emulator), under SafeRobot",
                            description="Play trial I of a scenario's band and seed with a controller on a robot over "
                            "its wire, through the arena's runner, paced in real time, behind SafeRobot. The trial's "
@@ -437,6 +514,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_controller_file_options(hwrun, repeatable=False)
     hwrun.set_defaults(handler="hw run")
 
+
+def _add_train_parser(sub: _Commands) -> None:
+    """``wbc train``: train a stage of the learned policy."""
     tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
     tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")
     tr.add_argument("--stage", type=int, default=None, choices=(1, 2, 3),
@@ -468,10 +548,17 @@ def build_parser() -> argparse.ArgumentParser:
     tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")
     tr.set_defaults(handler="train")
 
+
+def _add_run_parser(sub: _Commands) -> None:
+    """``wbc run``: play a scenario with one controller."""
     run = sub.add_parser("run", help="play a scenario with one controller")
     run.add_argument("controller", help=f"one of: {_NAMES_HELP}")
     add_arena_options(run)
     run.set_defaults(handler="run")
+
+
+def _add_compare_parser(sub: _Commands) -> None:
+    """``wbc compare``: play a scenario with several controllers on the same trials."""
     compare = sub.add_parser("compare", help="play a scenario with several controllers on the same trials")
     compare.add_argument("controllers", nargs="+", help=f"two or more of: {_NAMES_HELP}")
     add_arena_options(compare)
@@ -483,6 +570,9 @@ def build_parser() -> argparse.ArgumentParser:
                          help="with --until-significant: the family-wise significance level (default 0.05)")
     compare.set_defaults(handler="compare")
 
+
+def _add_paper_parser(sub: _Commands) -> None:
+    """``wbc paper``: play one of the paper's tables."""
     paper = sub.add_parser("paper", help="play one of the paper's results tables; print ours beside the paper's",
                            description="Play the protocol of the paper's Table I (pushes; arm actuated, locked, "
                            "absent), II (fast turns; the same) or III (the staged method and its baselines) for the "
@@ -513,6 +603,9 @@ def build_parser() -> argparse.ArgumentParser:
     paper.add_argument("--json", action="store_true", help="print paper.json instead of the table")
     paper.set_defaults(handler="paper")
 
+
+def _add_view_parser(sub: _Commands) -> None:
+    """``wbc view``: watch a trial in the browser, live or replayed."""
     view = sub.add_parser("view", help="watch a trial in the browser (meshcat), live or replayed; record it to HTML",
                           description="Play CTRL on trial I of a scenario and stream it to a meshcat page (robot, "
                           "arm, terrain, push arrow, contact forces, command, MPC plan), or replay a stored "
@@ -552,6 +645,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_controller_file_options(view, repeatable=False)
     view.set_defaults(handler="view")
 
+
+def _add_demo_parser(sub: _Commands) -> None:
+    """``wbc demo``: mpc against learned on push trials."""
     demo = sub.add_parser("demo", help="the main job: mpc against learned on push trials, paired; tail analysis",
                           description="The A/B the arena is for: the model-based controller (mpc) and the learned "
                           "policy (learned) play the same push trials; the table, the paired differences with 95 % "
@@ -566,10 +662,17 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--quiet", action="store_true", help="no progress output")
     demo.set_defaults(handler="demo")
 
+
+def _add_controllers_parser(sub: _Commands) -> None:
+    """``wbc controllers``: list the controllers."""
     ctrls = sub.add_parser("controllers", help="list the controllers: the registry's, the name forms, installed "
                            "plug-ins (entry points of the wbc.controllers group) with their summaries")
     ctrls.add_argument("--json", action="store_true", help="print JSON")
     ctrls.set_defaults(handler="controllers")
+
+
+def _add_check_controller_parser(sub: _Commands) -> None:
+    """``wbc check-controller``: check a controller against the contract."""
     chk = sub.add_parser("check-controller", help="check a controller against the controller contract",
                          description="Build the controller for every robot and arm mode it claims and check its "
                          "rate, its outputs (shape, finiteness), reset determinism, that it never reads simulator "
@@ -592,4 +695,3 @@ def build_parser() -> argparse.ArgumentParser:
     chk.add_argument("--strict-timing", action="store_true", help="also fail when act's p99 exceeds the period")
     chk.add_argument("--json", action="store_true", help="print JSON")
     chk.set_defaults(handler="check-controller")
-    return p

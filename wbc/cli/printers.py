@@ -13,24 +13,22 @@ import shlex
 import shutil
 import sys
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from wbc.arena.compare import ArenaResult
 from wbc.arena.hw_trial import HardwareTrialResult
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import format_table, format_verdict
 from wbc.arena.summary import Summary
-from wbc.control.check import ControllerCheck
+from wbc.arena.trial_record import TrialRecord
+from wbc.control.controller_contract import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
-from wbc.hardware.capabilities import HasRealtimeGrant, SafetyEventLike
+from wbc.hardware.capabilities import HasRealtimeGrant
 from wbc.hardware.device_thread import DeviceThreadStats
-from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus
 from wbc.hardware.emulators import BusStats
 from wbc.hardware.realtime import RealtimeGrant
-from wbc.hardware.unitree import REJECT_REASONS, DecodeStats, LinkStats, LowStateExtras
+from wbc.hardware.unitree import REJECT_REASONS
 from wbc.tools.arm_momentum import ArmMomentumTrial
 from wbc.tools.bench import (
     MPC_REFERENCE_TARGETS,
@@ -46,16 +44,18 @@ from wbc.tools.bench import (
     TrainBenchResult,
 )
 from wbc.tools.demo import TrialToWatch
+from wbc.tools.emulate import EmulatorServed, EmulatorServing
+from wbc.tools.hardware_check import HardwareCheck
 from wbc.tools.paper import PaperTableResult, format_paper_table
 from wbc.tools.posture import PostureRow
 from wbc.tools.tail import TailAnalysis
-from wbc.types import RobotState
 
-__all__ = ["HardwareCheck", "print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
+__all__ = ["print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_mpc", "print_bench_sim",
            "print_bench_sweep", "print_bench_train", "print_controller_check", "print_controllers",
-           "print_demo_end", "print_demo_header", "print_emulator_counts", "print_emulator_started", "print_hw_check",
-           "print_hw_run", "print_json", "print_paper_table", "print_recording", "print_tail", "print_thread_stats",
-           "print_trained", "print_viewed_trial"]
+           "print_demo_end", "print_demo_header", "print_emulator_counts", "print_emulator_served",
+           "print_emulator_serving", "print_emulator_started", "print_hw_check", "print_hw_run", "print_json",
+           "print_paper_table", "print_recording", "print_tail", "print_thread_stats", "print_trained",
+           "print_viewed_trial"]
 
 
 def print_json(value: object) -> None:
@@ -550,6 +550,27 @@ def print_bus_counts(stats: BusStats) -> None:
           f"packets {stats.statuses}; unheard {stats.unheard}")
 
 
+def print_emulator_serving(serving: EmulatorServing) -> None:
+    """``wbc hw emulate``'s first lines: where the emulator serves, how to connect and stop it, its grant."""
+    faults = list(serving.faults)
+    if serving.arm_port is None:
+        print_emulator_started(serving.robot, serving.mode, serving.address, faults, seconds=serving.seconds,
+                               held=serving.held)
+    else:
+        print_robot_emulator_started(serving.robot, serving.mode, serving.address, serving.arm_port, faults,
+                                     seconds=serving.seconds, held=serving.held)
+    print_realtime_grant("emulator", serving.grant)
+
+
+def print_emulator_served(served: EmulatorServed) -> None:
+    """``wbc hw emulate``'s closing lines: the legs' wire counts, then the arm bus's when it was emulated."""
+    print_emulator_counts(served.counts, last_reject=served.last_reject)
+    if served.arm_bus is not None:
+        print_bus_counts(served.arm_bus)
+    if served.arm_thread is not None:
+        print_thread_stats("arm bus thread", served.arm_thread)
+
+
 def print_emulator_counts(counts: EmulatorCounts, *, last_reject: str = "") -> None:
     """``wbc hw emulate``'s closing line: commands decoded, rejects by reason, replies.
 
@@ -560,51 +581,6 @@ def print_emulator_counts(counts: EmulatorCounts, *, last_reject: str = "") -> N
           f"refused (negative gain) {counts.refused}; replies {counts.replies}")
     if last_reject:
         print(f"  the last rejected: {last_reject}")
-
-
-@dataclass(frozen=True)
-class HardwareCheck:
-    """What ``wbc hw check`` read: the state through the safety layer, the limits it checks, the links' counters.
-
-    Attributes:
-        robot: the Unitree robot's name (``go1``, ``a1``).
-        target: the legs' address.
-        joint_names: the joints read, house order (the arm's last, when its port was given).
-        state: the newest state.
-        lower: each joint's lower limit as the safety layer checks it [rad].
-        upper: each joint's upper limit [rad].
-        margin: how far beyond a limit the layer lets a measured joint go [rad].
-        extras: the legs' newest frame's extras (motor modes, temperatures, remote, battery).
-        link: the legs' link counters.
-        link_thread: the legs' link thread's statistics (period, late sends, overruns).
-        decode: the legs' rejected frames by reason.
-        safety_state: the layer's state at the end (``ramp`` when a ramp would start from here).
-        safety_events: the layer's transitions during the check.
-        arm_port: the arm's serial device, or None (legs only).
-        arm_status: the arm servos' status (modes, temperatures), or None.
-        arm_faults: the arm's latched bus faults.
-        arm_bus: the arm's bus counters, or None.
-        arm_thread: the arm's bus loop's statistics, or None.
-    """
-
-    robot: str
-    target: tuple[str, int]
-    joint_names: Sequence[str]
-    state: RobotState
-    lower: np.ndarray
-    upper: np.ndarray
-    margin: float
-    extras: LowStateExtras | None
-    link: LinkStats
-    link_thread: DeviceThreadStats
-    decode: DecodeStats
-    safety_state: str
-    safety_events: Sequence[SafetyEventLike]
-    arm_port: str | None = None
-    arm_status: ArmMotorStatus | None = None
-    arm_faults: Sequence[object] = ()
-    arm_bus: ArmBusStats | None = None
-    arm_thread: DeviceThreadStats | None = None
 
 
 def print_hw_check(check: HardwareCheck) -> None:

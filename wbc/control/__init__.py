@@ -6,7 +6,7 @@ and resolves every controller name, is imported by name, so code that only speak
 and the policies.
 """
 
-from wbc.control.check import CheckConfig, ControllerCheck, check_controller
+from wbc.control.controller_contract import CheckConfig, ControllerCheck, check_controller
 from wbc.control.plugin import ControllerPlugin
 from wbc.control.protocol import Controller, HasDebugPlan, HasTickTimings, TruthSwitch
 from wbc.control.spec import ControllerSpec

@@ -1,7 +1,7 @@
 """`WatchedRobot`: the simulated robot of the contract checker, which notes every truth read made from inside `act`.
 
-The checker (`wbc.control.check`) says when `act` runs (`watch`); a call of any of the simulator's truth accessors
-in that window is counted by name, and a controller that made one fails the ``truth`` check.
+The checker (`wbc.control.controller_contract`) says when `act` runs (`watch`); a call of any of the simulator's truth
+accessors in that window is counted by name, and a controller that made one fails the ``truth`` check.
 """
 
 from __future__ import annotations

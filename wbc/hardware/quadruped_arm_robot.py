@@ -29,10 +29,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wbc.errors import ConfigError, UnknownNameError
-from wbc.hardware.capabilities import HasLinkStats, HasThreadStats, LinkStatsLike, WallClock
+from wbc.hardware.capabilities import (
+    HasLinkStats,
+    HasThreadStats,
+    LinkStatsLike,
+    MotorNames,
+    MotorStatusSource,
+    RemoteButtons,
+    RemoteSource,
+    WallClock,
+)
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.robot import Robot
-from wbc.hardware.safety.capabilities import MotorNames, MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.robots.description import ARM_MODES
 from wbc.robots.joint_table import JointTable
 from wbc.robots.wx200 import WX200_NOMINAL_Q

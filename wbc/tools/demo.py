@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from wbc.arena.record import TrialRecord
+from wbc.arena.trial_record import TrialRecord
 
 __all__ = ["DEMO_CONTROLLERS", "TrialToWatch", "trial_to_watch"]
 

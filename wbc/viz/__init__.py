@@ -8,7 +8,7 @@ from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.live_page import LivePage, PushRequest, SteeredCommand
 from wbc.viz.page import live_page_html, read_page_data, save_trial_page, trial_page
 from wbc.viz.player import Controls, KeyboardControls, Player, PlayerConfig
-from wbc.viz.record import Recording
+from wbc.viz.recording import Recording
 from wbc.viz.replay import StoredEpisode, load_stored_episode
 from wbc.viz.server import MeshcatServer, ServerConfig
 from wbc.viz.signals import PLOTS, Mark, TrialSignals

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from wbc.arena.episode import Episode
-from wbc.arena.record import TrialRecord
 from wbc.arena.sim_trial import run_trial
+from wbc.arena.trial_record import TrialRecord
 from wbc.control.protocol import Controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError
@@ -30,7 +30,7 @@ from wbc.types import VelocityCommand
 from wbc.viz.content import SceneContent
 from wbc.viz.frame import VizFrame
 from wbc.viz.live import FrameMaker, scene_of
-from wbc.viz.record import Recording
+from wbc.viz.recording import Recording
 from wbc.viz.signals import Mark, TrialSignals
 from wbc.viz.sim_frames import SimulatedWorld
 

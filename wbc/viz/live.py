@@ -25,7 +25,7 @@ from wbc.types import VelocityCommand
 from wbc.viz.content import SceneContent
 from wbc.viz.frame import Pose, VizFrame
 from wbc.viz.player import Player
-from wbc.viz.record import Recording
+from wbc.viz.recording import Recording
 from wbc.viz.server import MeshcatServer
 from wbc.viz.signals import TrialSignals
 from wbc.viz.sim_frames import SimulatedWorld, frame_from_sim

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from wbc.viz.errors import ViewerError
 from wbc.viz.page_script import PAGE_SCRIPT, PAGE_STYLE
-from wbc.viz.record import Recording, viewer_script
+from wbc.viz.recording import Recording, viewer_script
 from wbc.viz.signals import PLOTS, Mark, TrialSignals
 
 __all__ = ["DATA_START", "live_page_html", "page_data", "read_page_data", "save_trial_page", "trial_page"]

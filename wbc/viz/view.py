@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wbc.arena.episode import Episode, OperatorLog, PushLog
-from wbc.arena.record import TrialRecord
 from wbc.arena.sim_trial import run_trial
+from wbc.arena.trial_record import TrialRecord
 from wbc.control.protocol import Controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError
@@ -33,7 +33,7 @@ from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.live_page import LivePage, SteeredCommand
 from wbc.viz.page import save_trial_page, trial_page
 from wbc.viz.player import KeyboardControls, Player, PlayerConfig
-from wbc.viz.record import Recording
+from wbc.viz.recording import Recording
 from wbc.viz.replay import StoredEpisode
 from wbc.viz.server import MeshcatServer, ServerConfig
 from wbc.viz.signals import TrialSignals

@@ -1,191 +1,31 @@
-"""The WidowX 200's Dynamixel bus as data and pure functions: Protocol 2.0, the XM430-W350 control table, the bus map.
+"""The WidowX 200 arm's backend on its Dynamixel bus: `DynamixelArm`, its configuration and what it reports.
 
-`packet` builds and parses Protocol 2.0 packets (CRC-16, byte stuffing, every instruction's parameters, the fast
-read's combined answer); `control_table` holds the XM430-W350's registers; `units` converts their units to SI;
-`wx200_bus` says which servo has which ID and how ticks map to the model's arm joints. None of it needs the vendor
-SDK, MuJoCo or torch: an emulator (`wbc.hardware.emulators`) and a backend build on the same definitions.
+`DynamixelArm` drives the three model joints behind the `Robot` interface (current mode, with the PD law on the
+host), configured by `DynamixelArmConfig` for one of `ARM_ROBOTS`; it reports `ArmFault` (one of `FAULT_KINDS`),
+`ArmMotorStatus` and `ArmBusStats`. Its port is the vendor SDK's (`sdk_handlers`, imported only when a bus is
+opened), or a bus in the same process (`in_process_handlers`, e.g. an emulator's), timed by a
+`wbc.hardware.clock.Clock`.
 
-The backend: `DynamixelArm` (the three model joints behind the `Robot` interface, current mode with the PD law on
-the host, `CurrentLaw`) over `SdkBus` (dynamixel_sdk, imported only when a bus is opened), configured by
-`DynamixelArmConfig`; it reports `ArmFault`, `ArmMotorStatus` and `ArmBusStats`. Its port is the SDK's
-(`sdk_handlers`), or a bus in the same process (`in_process_handlers`), timed by a `wbc.hardware.clock.Clock`.
+Below it, data and pure functions that need neither the vendor SDK, MuJoCo nor torch, imported from their modules:
+`packet` (Protocol 2.0 packets: CRC-16, byte stuffing, every instruction's parameters), `protocol` (instructions and
+error codes), `control_table` (the XM430-W350's registers), `units` (their units in SI), `wx200_bus` (which servo
+has which ID, and how ticks map to the model's joints), `current_law` and `sdk_bus`. An emulator
+(`wbc.hardware.emulators`) and the backend build on the same definitions.
 """
 
 from wbc.hardware.dynamixel.arm_config import ARM_ROBOTS, DynamixelArmConfig
-from wbc.hardware.dynamixel.arm_fault import (
-    FAULT_KINDS,
-    MODE_CORRUPT,
-    MODE_HARDWARE_ERROR,
-    MODE_NO_ANSWER,
-    MODE_PORT_LOST,
-    MODE_SERVO,
-    ArmBusStats,
-    ArmFault,
-    ArmMotorStatus,
-)
-from wbc.hardware.dynamixel.arm_robot import HELD_MODEL_NUMBERS, DynamixelArm, arm_joint_table
-from wbc.hardware.dynamixel.control_table import (
-    BAUD_RATES,
-    DRIVE_MODE_REVERSE,
-    HARDWARE_ERROR_BITS,
-    HW_ELECTRICAL_SHOCK,
-    HW_ENCODER,
-    HW_INPUT_VOLTAGE,
-    HW_OVERHEATING,
-    HW_OVERLOAD,
-    XM430_W350,
-    XM430_W350_MODEL_NUMBER,
-    ControlTable,
-    OperatingMode,
-    Register,
-)
-from wbc.hardware.dynamixel.crc import crc16
-from wbc.hardware.dynamixel.current_law import CurrentLaw
-from wbc.hardware.dynamixel.packet import (
-    HEADER,
-    MAX_PACKET_LENGTH,
-    InstructionPacket,
-    PacketReader,
-    StatusPacket,
-    build_fast_read_status,
-    build_instruction,
-    build_status,
-    bulk_read_params,
-    bulk_write_params,
-    parse_bulk_read_params,
-    parse_bulk_write_params,
-    parse_fast_read_status,
-    parse_packet,
-    parse_ping_status,
-    parse_read_params,
-    parse_sync_read_params,
-    parse_sync_write_params,
-    parse_write_params,
-    ping_status_params,
-    read_params,
-    stuff,
-    sync_read_params,
-    sync_write_params,
-    unstuff,
-    write_params,
-)
-from wbc.hardware.dynamixel.protocol import (
-    ALERT,
-    BROADCAST_ID,
-    ERR_ACCESS,
-    ERR_CRC,
-    ERR_DATA_LENGTH,
-    ERR_DATA_LIMIT,
-    ERR_DATA_RANGE,
-    ERR_INSTRUCTION,
-    ERR_RESULT_FAIL,
-    ERROR_NAMES,
-    MAX_ID,
-    Instruction,
-    describe_error,
-)
-from wbc.hardware.dynamixel.sdk_bus import (
-    COMM_RX_CORRUPT,
-    COMM_RX_TIMEOUT,
-    COMM_SUCCESS,
-    InProcessDevice,
-    SdkBus,
-    ServoRead,
-    describe_result,
-    in_process_handlers,
-    sdk_handlers,
-)
-from wbc.hardware.dynamixel.wx200_bus import (
-    WX200_ARM_JOINTS,
-    WX200_BAUD_RATE,
-    WX200_SERVOS,
-    ArmJointMap,
-    ServoSpec,
-    servo_spec,
-)
+from wbc.hardware.dynamixel.arm_fault import FAULT_KINDS, ArmBusStats, ArmFault, ArmMotorStatus
+from wbc.hardware.dynamixel.arm_robot import DynamixelArm
+from wbc.hardware.dynamixel.sdk_bus import in_process_handlers, sdk_handlers
 
 __all__ = [
-    "ALERT",
     "ARM_ROBOTS",
-    "COMM_RX_CORRUPT",
-    "COMM_RX_TIMEOUT",
-    "COMM_SUCCESS",
     "FAULT_KINDS",
-    "HELD_MODEL_NUMBERS",
-    "MODE_CORRUPT",
-    "MODE_HARDWARE_ERROR",
-    "MODE_NO_ANSWER",
-    "MODE_PORT_LOST",
-    "MODE_SERVO",
     "ArmBusStats",
     "ArmFault",
     "ArmMotorStatus",
-    "CurrentLaw",
     "DynamixelArm",
     "DynamixelArmConfig",
-    "InProcessDevice",
-    "SdkBus",
-    "ServoRead",
-    "arm_joint_table",
-    "describe_result",
     "in_process_handlers",
     "sdk_handlers",
-    "BAUD_RATES",
-    "BROADCAST_ID",
-    "DRIVE_MODE_REVERSE",
-    "ERROR_NAMES",
-    "ERR_ACCESS",
-    "ERR_CRC",
-    "ERR_DATA_LENGTH",
-    "ERR_DATA_LIMIT",
-    "ERR_DATA_RANGE",
-    "ERR_INSTRUCTION",
-    "ERR_RESULT_FAIL",
-    "HARDWARE_ERROR_BITS",
-    "HEADER",
-    "HW_ELECTRICAL_SHOCK",
-    "HW_ENCODER",
-    "HW_INPUT_VOLTAGE",
-    "HW_OVERHEATING",
-    "HW_OVERLOAD",
-    "MAX_ID",
-    "MAX_PACKET_LENGTH",
-    "WX200_ARM_JOINTS",
-    "WX200_BAUD_RATE",
-    "WX200_SERVOS",
-    "XM430_W350",
-    "XM430_W350_MODEL_NUMBER",
-    "ArmJointMap",
-    "ControlTable",
-    "Instruction",
-    "InstructionPacket",
-    "OperatingMode",
-    "PacketReader",
-    "Register",
-    "ServoSpec",
-    "StatusPacket",
-    "build_fast_read_status",
-    "build_instruction",
-    "build_status",
-    "bulk_read_params",
-    "bulk_write_params",
-    "crc16",
-    "describe_error",
-    "parse_bulk_read_params",
-    "parse_bulk_write_params",
-    "parse_fast_read_status",
-    "parse_packet",
-    "parse_ping_status",
-    "parse_read_params",
-    "parse_sync_read_params",
-    "parse_sync_write_params",
-    "parse_write_params",
-    "ping_status_params",
-    "read_params",
-    "servo_spec",
-    "stuff",
-    "sync_read_params",
-    "sync_write_params",
-    "unstuff",
-    "write_params",
 ]

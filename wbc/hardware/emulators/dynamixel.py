@@ -67,24 +67,19 @@ import numpy as np
 from wbc.errors import ConfigError, PacketError
 from wbc.hardware.clock import MONOTONIC, Clock, ManualClock
 from wbc.hardware.device_thread import DeviceThread, DeviceThreadStats
-from wbc.hardware.dynamixel import (
+from wbc.hardware.dynamixel.control_table import (
     BAUD_RATES,
-    BROADCAST_ID,
-    ERR_CRC,
-    ERR_DATA_LENGTH,
-    ERR_INSTRUCTION,
     HW_INPUT_VOLTAGE,
     HW_OVERHEATING,
     HW_OVERLOAD,
-    WX200_ARM_JOINTS,
-    WX200_SERVOS,
     XM430_W350,
-    ArmJointMap,
-    Instruction,
-    InstructionPacket,
     OperatingMode,
+)
+from wbc.hardware.dynamixel.crc import crc16
+from wbc.hardware.dynamixel.packet import (
+    HEADER,
+    InstructionPacket,
     PacketReader,
-    ServoSpec,
     build_status,
     parse_bulk_read_params,
     parse_bulk_write_params,
@@ -95,8 +90,7 @@ from wbc.hardware.dynamixel import (
     parse_write_params,
     ping_status_params,
 )
-from wbc.hardware.dynamixel.crc import crc16
-from wbc.hardware.dynamixel.packet import HEADER
+from wbc.hardware.dynamixel.protocol import BROADCAST_ID, ERR_CRC, ERR_DATA_LENGTH, ERR_INSTRUCTION, Instruction
 from wbc.hardware.dynamixel.sdk_bus import in_process_handlers
 from wbc.hardware.dynamixel.units import (
     CENTER_TICKS,
@@ -112,6 +106,7 @@ from wbc.hardware.dynamixel.units import (
     position_gains_to_pd,
     velocity_gain_to_kd,
 )
+from wbc.hardware.dynamixel.wx200_bus import WX200_ARM_JOINTS, WX200_SERVOS, ArmJointMap, ServoSpec
 from wbc.hardware.emulators.arm_plant import ArmPlant
 from wbc.hardware.emulators.bus_faults import BUS_FAULT_DEFAULTS, BusFault, fault_ids
 from wbc.hardware.emulators.faults import FaultSet

@@ -18,7 +18,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from wbc.errors import ConfigError
-from wbc.hardware.unitree import L2_B_MASK, MODE_OVERHEAT, LowStateExtras, Remote
+from wbc.hardware.unitree import LowStateExtras, Remote
+from wbc.hardware.unitree.layout import MODE_OVERHEAT
+from wbc.hardware.unitree.remote import L2_B_MASK
 from wbc.types import RobotState
 
 __all__ = ["FRAME_FAULTS", "STATE_FAULTS", "Fault", "FaultSet", "apply_state_faults", "mangle_frame"]
@@ -33,7 +35,7 @@ class Fault(enum.Enum):
     unevenly and out of order, as on a busy network); DROP [probability, default 1.0] (each reply dropped with it).
     State faults: JOINT_OUT_OF_RANGE [(joint, q) default (2, 0.5)] (calf 0 reports q); OVER_TEMPERATURE [deg C,
     default 95] (every motor); MOTOR_ERROR [mode, default 0x08: overheat, the fault code the vendor documents,
-    `wbc.hardware.unitree.MOTOR_STATE_MODES`] (every motor reports that mode); OVER_POWER [(tau_est N m, dq rad/s),
+    `unitree.layout.MOTOR_STATE_MODES`] (every motor reports that mode); OVER_POWER [(tau_est N m, dq rad/s),
     default (20, 5)] (every motor reports that torque and speed: 12 x 100 W, above the safety layer's 500 W, on every
     reply while active); FALL [roll rad, default pi/2] (the IMU reads the trunk
     rolled); REMOTE_L2_B (the remote's L2 and B held).

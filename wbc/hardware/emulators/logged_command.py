@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from wbc.hardware.unitree import WireCommand
+from wbc.hardware.unitree.wire_command import WireCommand
 
 __all__ = ["LoggedCommand"]
 

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from wbc.hardware.dynamixel import ControlTable, Instruction
+from wbc.hardware.dynamixel.control_table import ControlTable
+from wbc.hardware.dynamixel.protocol import Instruction
 
 __all__ = ["LoggedPacket", "RegisterRead", "RegisterWrite", "decode_writes"]
 

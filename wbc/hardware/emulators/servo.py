@@ -27,20 +27,17 @@ from __future__ import annotations
 
 import functools
 
-from wbc.hardware.dynamixel import (
+from wbc.hardware.dynamixel.control_table import DRIVE_MODE_REVERSE, XM430_W350, ControlTable, OperatingMode
+from wbc.hardware.dynamixel.protocol import (
     ALERT,
     ERR_ACCESS,
     ERR_DATA_LENGTH,
     ERR_DATA_LIMIT,
     ERR_DATA_RANGE,
     ERR_RESULT_FAIL,
-    XM430_W350,
-    ControlTable,
-    OperatingMode,
-    ServoSpec,
 )
-from wbc.hardware.dynamixel.control_table import DRIVE_MODE_REVERSE
 from wbc.hardware.dynamixel.units import WATCHDOG_UNIT
+from wbc.hardware.dynamixel.wx200_bus import ServoSpec
 
 __all__ = ["EmulatedServo", "GOAL_REGISTERS"]
 

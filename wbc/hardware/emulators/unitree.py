@@ -37,15 +37,11 @@ from wbc.hardware.clock import MONOTONIC, Clock, ManualClock, ScheduledCall
 from wbc.hardware.emulators.faults import Fault, FaultSet, apply_state_faults, mangle_frame
 from wbc.hardware.emulators.logged_command import LoggedCommand
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
-from wbc.hardware.unitree import (
-    MODE_SERVO,
-    DecodeStats,
-    LowStateExtras,
-    decode_command,
-    encode_state,
-    frame_layout,
-)
+from wbc.hardware.unitree import DecodeStats, LowStateExtras
+from wbc.hardware.unitree.command_codec import decode_command
+from wbc.hardware.unitree.layout import MODE_SERVO, frame_layout
 from wbc.hardware.unitree.robot import DESCRIPTIONS
+from wbc.hardware.unitree.state_codec import encode_state
 from wbc.hardware.unitree.target import is_loopback
 from wbc.hardware.unitree.transport import MAX_DATAGRAM
 from wbc.types import BaseTruth, MotorCommand

@@ -44,6 +44,7 @@ import numpy as np
 
 import wbc
 from wbc.errors import RobotLinkError, WbcError
+from wbc.hardware.capabilities import MotorNames
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel.arm_fault import ArmBusStats
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
@@ -53,7 +54,6 @@ from wbc.hardware.pacing import WallPacer
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, JointMotorStatus
 from wbc.hardware.realtime import RealtimeGrant
 from wbc.hardware.robot import Robot
-from wbc.hardware.safety.capabilities import MotorNames
 from wbc.hardware.unitree.link_stats import LinkStats
 from wbc.hardware.unitree.remote import Remote
 from wbc.robots.joint_table import JointTable

@@ -40,6 +40,7 @@ from dataclasses import asdict
 import numpy as np
 
 from wbc.errors import RobotLinkError
+from wbc.hardware.capabilities import MotorStatusSource, RemoteSource
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.io_process.blocks import MAX_STATUS, IoBlocks
@@ -47,7 +48,6 @@ from wbc.hardware.io_process.channel import ChannelClosed, LineChannel, error_re
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, QuadrupedArmRobot
 from wbc.hardware.realtime import RealtimeGrant, request_realtime
 from wbc.hardware.robot import Robot
-from wbc.hardware.safety.capabilities import MotorStatusSource, RemoteSource
 from wbc.hardware.unitree.remote import Remote
 from wbc.hardware.unitree.robot import UnitreeRobot
 from wbc.types import MotorCommand

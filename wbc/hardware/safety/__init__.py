@@ -4,7 +4,6 @@
 motor temperature or mode, tilt, remote L2 + B, software e-stop. Every transition is a `SafetyEvent`.
 """
 
-from wbc.hardware.safety.capabilities import MotorNames, MotorStatus, MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.hardware.safety.config import SafetyConfig
 from wbc.hardware.safety.events import REASONS, REMEDIES, TRIP_REASONS, SafetyEvent
 from wbc.hardware.safety.limits import POSITION_TABLES, UNITREE_POSITION_LIMITS, position_range
@@ -19,11 +18,6 @@ __all__ = [
     "UNITREE_POSITION_LIMITS",
     "REMEDIES",
     "CommandRamp",
-    "MotorNames",
-    "MotorStatus",
-    "MotorStatusSource",
-    "RemoteButtons",
-    "RemoteSource",
     "SafeRobot",
     "SafetyConfig",
     "SafetyEvent",

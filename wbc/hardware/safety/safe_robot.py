@@ -31,9 +31,8 @@ from typing import cast
 import numpy as np
 
 from wbc.errors import SafetyResetError
-from wbc.hardware.capabilities import WallClock
+from wbc.hardware.capabilities import MotorNames, MotorStatusSource, RemoteButtons, RemoteSource, WallClock
 from wbc.hardware.robot import Robot
-from wbc.hardware.safety.capabilities import MotorNames, MotorStatusSource, RemoteButtons, RemoteSource
 from wbc.hardware.safety.config import SafetyConfig
 from wbc.hardware.safety.events import SafetyEvent
 from wbc.hardware.safety.limits import position_range

@@ -21,8 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.record import TrialRecord
 from wbc.arena.report import compare_pair
+from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.tools.paper.format import format_paper_table

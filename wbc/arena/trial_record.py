@@ -10,8 +10,7 @@ Every row written carries a last ``checksum`` cell (`checksum_of`): the first 16
 other cells. A row read back is trusted only if its checksum matches, its cells parse, and its values are possible
 (`TrialRecord` checks them on construction: a time to fall in [0, 1], no infinite number, no negative count);
 otherwise it is refused with its file and line (`scan_csv`). The checksum finds a hand edit or a corrupted byte; it is
-no signature (anyone can recompute it). Rows of the versions before the column have no checksum to verify: they are
-read, checked for plausibility only, and rewritten with one when a results store reopens them.
+no signature (anyone can recompute it).
 """
 
 from __future__ import annotations
@@ -78,8 +77,7 @@ class TrialRecord:
         trial: trial index within (band, seed).
         success: the episode reached its end without a fall (`wbc.arena.metrics.success`), a trip or an error.
         outcome: how the trial ended, one of `OUTCOMES`: ``success``, ``fall``, ``safety_trip``,
-            ``controller_error``, ``operator_stop`` or ``diverged``. Built without one (a ``trials.csv`` written
-            before the column), it is derived from `success` and `safety_trips` as those versions scored them.
+            ``controller_error``, ``operator_stop`` or ``diverged``.
         ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error or a
             divergence, the fraction played before it, in [0, 1].
         fall_time_s: when the robot fell, NaN if it did not (after a controller error too) [s].
@@ -129,9 +127,6 @@ class TrialRecord:
             ``name=value`` pairs separated by ``;``, names sorted (`encode_counters`, `decode_counters`);
             `fallbacks` and `wbc_failures` are two of them, kept in their own columns as well.
 
-    A ``trials.csv`` written before a column with a default existed reads with that default (`read_csv`): 0 ticks
-    and clamped ticks, NaN power and empty profiles and counters (not measured then).
-
     Raises:
         RecordError: a field of the wrong type, an unknown outcome, one that contradicts `success`, or an impossible
             value: `ttf` outside [0, 1], an infinite number, a negative count or index.
@@ -144,7 +139,7 @@ class TrialRecord:
     seed: int
     trial: int
     success: bool
-    outcome: str = ""
+    outcome: str
     ttf: float
     fall_time_s: float
     vlin_err: float
@@ -186,9 +181,6 @@ class TrialRecord:
         # (and equality with a record read back from it) independent of where a value came from
         for name, kind in _KINDS.items():
             object.__setattr__(self, name, _coerce(name, kind, getattr(self, name)))
-        if not self.outcome:
-            derived = SUCCESS if self.success else SAFETY_TRIP if self.safety_trips else FALL
-            object.__setattr__(self, "outcome", derived)
         if self.outcome not in OUTCOMES:
             raise RecordError(f"TrialRecord.outcome must be one of {', '.join(OUTCOMES)}, got {self.outcome!r}")
         if self.success != (self.outcome == SUCCESS):
@@ -350,16 +342,12 @@ class TrialRecord:
         """The records of a ``trials.csv``, in file order, every row trusted or the file refused.
 
         A last line without its newline (a write cut short by a kill) is dropped: what remains is exactly what was
-        stored. A file written before some columns existed (those with a default: ``backend`` and the columns after
-        it, added with hardware trials; ``checksum``, which such rows then lack and are not verified by) reads with
-        their defaults, which are what those versions did (a simulated trial, metrics from truth); a results store
-        reopened on it rewrites it with this version's columns.
+        stored.
 
         Raises:
             InputFileError: the file is missing, not a regular file, or too large.
-            RecordError: the file's columns are neither `header` nor an earlier version's (a results directory of
-                another version), or a complete row is refused (`scan_csv`: the message names the file, line and
-                what is wrong).
+            RecordError: the file's columns are not `header` (a results directory of another version), or a
+                complete row is refused (`scan_csv`: the message names the file, line and what is wrong).
         """
         stored = scan_csv(path)
         if stored.refused:
@@ -388,13 +376,11 @@ class StoredRows:
         records: the trusted rows' records, in file order.
         lines: the line of each of `records`.
         refused: the rows refused, in file order.
-        checksummed: the file has the ``checksum`` column (False: an earlier version's, whose rows are not verified).
     """
 
     records: tuple[TrialRecord, ...]
     lines: tuple[int, ...]
     refused: tuple[RefusedRow, ...]
-    checksummed: bool
 
     def refusal(self, path: str | Path, way_out: str) -> str:
         """One message for the refused rows: the first one's file, line and reason, the other lines, `way_out`."""
@@ -417,7 +403,7 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRow
     - holds a byte that is not UTF-8;
     - has another number of cells than the header;
     - has a cell that does not parse, or an impossible value (`TrialRecord`);
-    - fails its checksum (`checksum_of`; rows of a file without the column have none to fail);
+    - fails its checksum (`checksum_of`);
     - was played on another scenario file than `scenario_hash` (when given);
     - repeats the run key (controller, band, seed, trial) of another row: every copy is refused, since which one
       to trust cannot be told.
@@ -428,7 +414,7 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRow
 
     Raises:
         InputFileError: the file is missing, not a regular file, or too large (`wbc.input_files.read_bytes`).
-        RecordError: the header is neither `header` nor an earlier version's, or is not UTF-8.
+        RecordError: the header is not `header` (a file of another version), or is not UTF-8.
     """
     data = read_bytes(path, kind="csv")
     if data and not data.endswith(b"\n"):
@@ -440,17 +426,12 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRow
         rows.append((start, row))
         start = reader.line_num + 1
     if not rows:
-        return StoredRows(records=(), lines=(), refused=(), checksummed=True)
+        return StoredRows(records=(), lines=(), refused=())
     columns = tuple(rows[0][1])
-    checksummed = bool(columns) and columns[-1] == CHECKSUM
-    names = columns[:-1] if checksummed else columns
-    absent = [name for name in FIELDS if name not in names]
-    if (any(_NOT_UTF8.search(c) for c in columns) or tuple(name for name in FIELDS if name in names) != names
-            or any(n not in _DEFAULTS for n in absent) or (checksummed and absent)):
+    if columns != COLUMNS:
         raise RecordError(f"{path}: columns {', '.join(columns)} are not this version's ({', '.join(COLUMNS)}); "
                           "the directory was written by another version of wbc: resume it with that version, "
                           "or start afresh with another --out")
-    defaults = [repr(_DEFAULTS[n]) if isinstance(_DEFAULTS[n], float) else str(_DEFAULTS[n]) for n in absent]
     good: list[tuple[int, TrialRecord]] = []
     refused: list[RefusedRow] = []
     for line, row in rows[1:]:
@@ -463,10 +444,7 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRow
             refused.append(RefusedRow(line, f"{len(row)} cells, expected {len(columns)} (a damaged row)"))
             continue
         try:
-            if checksummed:
-                record = TrialRecord.from_row(row, source="row")
-            else:
-                record = TrialRecord._parsed(_complete(names, row, absent, defaults), "row")
+            record = TrialRecord.from_row(row, source="row")
         except RecordError as exc:
             refused.append(RefusedRow(line, str(exc).removeprefix("row: ")))
             continue
@@ -487,8 +465,7 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRow
             refused.append(RefusedRow(line, f"repeats the trial {_key_text(record)} of line(s) {', '.join(others)}"))
     refused.sort(key=lambda r: r.line)
     kept = [(line, r) for line, r in good if r.run_key not in repeated]
-    return StoredRows(records=tuple(r for _, r in kept), lines=tuple(line for line, _ in kept), refused=tuple(refused),
-                      checksummed=checksummed)
+    return StoredRows(records=tuple(r for _, r in kept), lines=tuple(line for line, _ in kept), refused=tuple(refused))
 
 
 def checksum_of(cells: Sequence[str]) -> str:
@@ -579,18 +556,6 @@ _REPORTED = ("fallbacks", "wbc_failures")
 
 _MOTION_METRICS = ("vlin_err", "vang_err", "max_roll_deg", "max_pitch_deg", "energy_j", "arm_travel_rad", "power_w")
 """The metrics computed from the robot's motion: NaN for a diverged trial, whose motion is the simulator's blow-up."""
-
-_DEFAULTS: dict[str, object] = {f.name: f.default for f in dataclasses.fields(TrialRecord)
-                                if f.default is not dataclasses.MISSING}
-
-
-def _complete(columns: tuple[str, ...], row: Sequence[str], absent: list[str], defaults: list[str]) -> list[str]:
-    """`row` (cells in `columns` order) as cells in `FIELDS` order, the `absent` columns' cells as `defaults`."""
-    if not absent:
-        return list(row)
-    cells = dict(zip(columns, row, strict=True)) | dict(zip(absent, defaults, strict=True))
-    return [cells[name] for name in FIELDS]
-
 
 MACHINE_TIMED = ("deadline_misses", "act_ms_p50", "act_ms_p99", "wall_s", CHECKSUM)
 """The ``trials.csv`` columns that depend on the machine's clock: two plays of the same simulated trial agree on every

@@ -1,0 +1,150 @@
+"""`check_hardware`: read a robot through the safety layer for a while, sending only damping; say what was read.
+
+The procedure behind ``wbc hw check``. It builds the robot (the legs' `UnitreeRobot`, and the arm's `DynamixelArm`
+when its serial port is given), lets the caller confirm a real robot before anything connects, then reads states
+through `SafeRobot` without ever writing to it: the layer's checks judge each state, and a trip only sends damping.
+The result, a `HardwareCheck`, holds the newest state, the limits the layer checks, its verdict and the links'
+counters; the command prints it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from wbc.hardware.capabilities import SafetyEventLike, WallClock
+from wbc.hardware.device_thread import DeviceThreadStats
+from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus
+from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
+from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
+from wbc.hardware.unitree import DecodeStats, LinkStats, LowStateExtras
+from wbc.types import RobotState
+
+__all__ = ["CHECK_STEP_S", "HardwareCheck", "HardwareCheckConfig", "check_hardware"]
+
+CHECK_STEP_S = 0.01
+"""How far the robot's clock advances between two reads of a check [s]."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class HardwareCheckConfig:
+    """Which robot to check, where it is, and for how long.
+
+    The addresses and the serial port are taken as given: the policy (loopback, a pseudo-terminal, or
+    ``allow_hardware`` and a confirmation) is the caller's, before this runs.
+
+    Attributes:
+        robot: the robot registry's name (``go1-arm``, ``a1-wx200``).
+        label: the robot's name as the person gave it (``go1`` or ``go1-arm``), for the printout.
+        target: the legs' address (host, port).
+        local: the address to bind (host, port).
+        seconds: how long to read states, on the robot's clock [s].
+        transport: the legs' datagram channel (`wbc.hardware.unitree.TRANSPORTS`).
+        arm_port: the arm's serial device, or None (legs only).
+        allow_hardware: a real robot may be reached (an address outside 127.0.0.0/8, a real serial device).
+    """
+
+    robot: str
+    label: str
+    target: tuple[str, int]
+    local: tuple[str, int]
+    seconds: float
+    transport: str = "udp"
+    arm_port: str | None = None
+    allow_hardware: bool = False
+
+
+@dataclass(frozen=True)
+class HardwareCheck:
+    """What ``wbc hw check`` read: the state through the safety layer, the limits it checks, the links' counters.
+
+    Attributes:
+        robot: the robot's name as given (``go1``, ``go1-arm``).
+        target: the legs' address.
+        joint_names: the joints read, house order (the arm's last, when its port was given).
+        state: the newest state.
+        lower: each joint's lower limit as the safety layer checks it [rad].
+        upper: each joint's upper limit [rad].
+        margin: how far beyond a limit the layer lets a measured joint go [rad].
+        extras: the legs' newest frame's extras (motor modes, temperatures, remote, battery).
+        link: the legs' link counters.
+        link_thread: the legs' link thread's statistics (period, late sends, overruns).
+        decode: the legs' rejected frames by reason.
+        safety_state: the layer's state at the end (``ramp`` when a ramp would start from here).
+        safety_events: the layer's transitions during the check.
+        arm_port: the arm's serial device, or None (legs only).
+        arm_status: the arm servos' status (modes, temperatures), or None.
+        arm_faults: the arm's latched bus faults.
+        arm_bus: the arm's bus counters, or None.
+        arm_thread: the arm's bus loop's statistics, or None.
+    """
+
+    robot: str
+    target: tuple[str, int]
+    joint_names: Sequence[str]
+    state: RobotState
+    lower: np.ndarray
+    upper: np.ndarray
+    margin: float
+    extras: LowStateExtras | None
+    link: LinkStats
+    link_thread: DeviceThreadStats
+    decode: DecodeStats
+    safety_state: str
+    safety_events: Sequence[SafetyEventLike]
+    arm_port: str | None = None
+    arm_status: ArmMotorStatus | None = None
+    arm_faults: Sequence[object] = ()
+    arm_bus: ArmBusStats | None = None
+    arm_thread: DeviceThreadStats | None = None
+
+
+def check_hardware(cfg: HardwareCheckConfig, *,
+                   build: Callable[[HardwareRobotConfig], HardwareRobot] = build_hardware_robot,
+                   confirm: Callable[[HardwareRobot], None] | None = None) -> HardwareCheck:
+    """Read the robot through the safety layer for `cfg.seconds` of its clock, sending only damping.
+
+    Args:
+        cfg: which robot, where, and for how long.
+        build: builds the robot from its config (a test hands its devices a clock it moves and an emulator's
+            in-process channel; the seconds are then the robot's clock's).
+        confirm: called with the built robot before anything connects; it raises to refuse (the command asks the
+            person at the terminal about a real robot here).
+
+    Returns:
+        What was read: the newest state, the layer's verdict, the links' counters.
+    """
+    host, port = cfg.target
+    local_host, local_port = cfg.local
+    hardware = build(HardwareRobotConfig(
+        robot=cfg.robot, arm_mode="actuated" if cfg.arm_port else "none", legs_host=host,
+        legs_port=port, local_host=local_host, local_port=local_port, allow_hardware=cfg.allow_hardware,
+        transport=cfg.transport, arm_port=cfg.arm_port))
+    if confirm is not None:
+        confirm(hardware)
+    events: list[SafetyEvent] = []
+    # Read through the safety layer, never written to: its checks judge each state, and a trip only sends damping.
+    safe = SafeRobot(hardware.robot, SafetyConfig(position_table=hardware.position_table, on_event=events.append))
+    legs = hardware.robot.legs if isinstance(hardware.robot, QuadrupedArmRobot) else hardware.robot
+    arm = hardware.robot.arm if isinstance(hardware.robot, QuadrupedArmRobot) else None
+    clock = hardware.robot.wall_time if isinstance(hardware.robot, WallClock) else time.monotonic
+    with safe:
+        end = clock() + cfg.seconds
+        for _ in range(int(cfg.seconds / CHECK_STEP_S) + 2):
+            if clock() >= end:
+                break
+            safe.read()
+            safe.advance(CHECK_STEP_S)
+        state = safe.read()
+        return HardwareCheck(
+            robot=cfg.label, target=cfg.target, joint_names=safe.joint_names, state=state,
+            lower=safe.position_lower, upper=safe.position_upper, margin=safe.config.joint_margin,
+            extras=legs.extras, link=legs.link_stats(), link_thread=legs.thread_stats(), decode=legs.decode_stats,
+            safety_state=safe.safety_state.value, safety_events=tuple(events), arm_port=cfg.arm_port,
+            arm_status=arm.motor_status() if arm is not None else None,
+            arm_faults=arm.faults if arm is not None else (), arm_bus=arm.bus_stats() if arm is not None else None,
+            arm_thread=arm.thread_stats() if arm is not None else None)
