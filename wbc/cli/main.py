@@ -726,6 +726,8 @@ def _view(args: argparse.Namespace) -> int:
         printers.print_viewed_trial(what, result.trial_record)
     if result.recording is not None:
         printers.print_recording(what, result.frames_recorded, result.recording)
+        if result.timing is not None:
+            print(result.timing.line())
         if args.at is not None:
             print(f"open: {result.recording.resolve().as_uri()}#t={args.at:g}")
     return 0

@@ -13,6 +13,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import sys
+import time
 import webbrowser
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -38,7 +39,8 @@ from wbc.viz.replay import StoredEpisode
 from wbc.viz.server import MeshcatServer, ServerConfig
 from wbc.viz.signals import TrialSignals
 
-__all__ = ["ABResult", "ViewConfig", "ViewResult", "replay_ab", "replay_episode", "view_ab", "view_trial"]
+__all__ = ["ABResult", "RecordingTime", "ViewConfig", "ViewResult", "replay_ab", "replay_episode", "view_ab",
+           "view_trial"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -68,6 +70,54 @@ class ViewConfig:
     save_episode: Path | None = None
 
 
+@dataclass(frozen=True, kw_only=True)
+class RecordingTime:
+    """Where the wall time of a recorded trial went, measured in the run itself.
+
+    The viewer's share is the time spent in its per-tick observer (building the scene, making, keying and sampling
+    frames) and in writing the page; the rest of the run is the trial's simulation (robot, controller, physics), as
+    it would run without a viewer.
+
+    Attributes:
+        total_s: the whole run, from the trial's start to the page written [s].
+        viewer_s: the viewer's share of it [s].
+    """
+
+    total_s: float
+    viewer_s: float
+
+    @property
+    def simulation_s(self) -> float:
+        """The trial's simulation without the viewer [s]."""
+        return self.total_s - self.viewer_s
+
+    @property
+    def ratio(self) -> float:
+        """The recorded run's time over the simulation's alone (1: recording costs nothing)."""
+        return self.total_s / self.simulation_s if self.simulation_s > 0 else float("inf")
+
+    def line(self) -> str:
+        """One line for a person."""
+        return (f"recording took {self.total_s:.2f} s: the trial's simulation {self.simulation_s:.2f} s + the viewer "
+                f"{self.viewer_s:.2f} s ({self.ratio:.2f}x the simulation alone)")
+
+
+class _Stopwatch:
+    """A runner observer around another that adds up the wall time spent in it [s]."""
+
+    def __init__(self, observer: Callable[..., None]) -> None:
+        self.observer = observer
+        self.seconds = 0.0
+
+    def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        """One tick (the `wbc.arena.runner.TickObserver` signature)."""
+        start = time.perf_counter()
+        try:
+            self.observer(t, robot, controller, command)
+        finally:
+            self.seconds += time.perf_counter() - start
+
+
 @dataclass(frozen=True)
 class ViewResult:
     """What a view produced.
@@ -79,6 +129,7 @@ class ViewResult:
         frames_recorded: frames in the recording.
         paths: scene paths by role (robot, arm, push, ...).
         episode: the episode played (None for replays), with the pushes and commands set from the page.
+        timing: where the time of a recorded trial played at full speed went (None when live or not recorded).
     """
 
     trial_record: TrialRecord | None
@@ -87,6 +138,7 @@ class ViewResult:
     frames_recorded: int
     paths: dict[str, list[str]]
     episode: Episode | None = None
+    timing: RecordingTime | None = None
 
 
 def _trial_name(trial: Trial) -> str:
@@ -138,6 +190,7 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
         print(f"trial page: {page.url}  (plots; pushes and commands from the page; 127.0.0.1 only)",
               file=sys.stderr)
     try:
+        started = time.perf_counter()
         recording_fps = cfg.record_fps if (cfg.record is not None or page is not None) else None
         observer = LiveObserver(viewer, player, recording_fps=recording_fps)
         observer.name = name
@@ -146,7 +199,9 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
             page.command = SteeredCommand(trial.command)
             page.controls = player.controls if player is not None else None
             played = dataclasses.replace(trial, command=page.command)
-        row, episode = run_trial(played, controller, observer=_with_page(observer, page, trial, name, cfg))
+        watch = _Stopwatch(_with_page(observer, page, trial, name, cfg))
+        row, episode = run_trial(played, controller, observer=watch)
+        ran = time.perf_counter()  # from here on, everything is the viewer's: marks, the page
         signals = observer.signals[-1] if observer.signals else None
         if signals is not None:
             signals.mark_episode(episode)
@@ -154,11 +209,14 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
             episode = _log_page_actions(episode, page)
             if signals is not None:
                 signals.marks = sorted(signals.marks + page.marks, key=lambda m: m.t)
-        written = None
+        written = timing = None
         title = f"{name}: {_trial_name(trial)}"
         if cfg.record is not None:
             written = save_trial_page(cfg.record, observer.recordings[-1], [signals], title=title,
                                       duration=trial.duration_s)
+            done = time.perf_counter()
+            if not cfg.live:
+                timing = RecordingTime(total_s=done - started, viewer_s=watch.seconds + done - ran)
         if page is not None and signals is not None:
             page.finish(trial_page(observer.recordings[-1], [signals], title=title, duration=trial.duration_s))
         if cfg.save_episode is not None:
@@ -168,7 +226,7 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
         paths = (viewer.paths if viewer is not None else observer.recordings[-1].paths)
         return ViewResult(trial_record=row, recording=written, frames_drawn=player.drawn if player else 0,
                           frames_recorded=observer.recordings[-1].frames if cfg.record else 0, paths=paths,
-                          episode=episode)
+                          episode=episode, timing=timing)
     finally:
         if server is not None:
             server.stop()
