@@ -5,7 +5,9 @@
 - record: the same frames keyed into a `Recording` and written as one self-contained HTML file, the trial page
   (`wbc.viz.page`: the scene beside its time plots); with a recording and no live viewer the trial runs at full
   speed and no server is started;
-- A / B: two controllers' runs of one trial in one page, the second as a ghost (`view_ab`, `replay_ab`).
+- A / B: two controllers' runs of one trial in one page, the second as a ghost (`view_ab`, `replay_ab`);
+- export: the trial as played, pushes and commands from the live page included, written as a scenario that replays
+  it for every controller (`wbc.viz.trial_export`).
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from wbc.scenario.push import Push
 from wbc.scenario.trial import Trial
 from wbc.types import VelocityCommand
 from wbc.viz.ab import CapturedRun, ab_recording, capture_trial
+from wbc.viz.errors import ViewerError
 from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.live_page import LivePage, SteeredCommand
 from wbc.viz.page import save_trial_page, trial_page
@@ -38,6 +41,7 @@ from wbc.viz.record import Recording
 from wbc.viz.replay import StoredEpisode
 from wbc.viz.server import MeshcatServer, ServerConfig
 from wbc.viz.signals import TrialSignals
+from wbc.viz.trial_export import ExportedScenario, export_trial
 
 __all__ = ["ABResult", "RecordingTime", "ViewConfig", "ViewResult", "replay_ab", "replay_episode", "view_ab",
            "view_trial"]
@@ -57,6 +61,8 @@ class ViewConfig:
         wait_for_browser: play only once a browser has connected.
         keep_open: after the trial, keep the server up until q is typed (only when stdin is a terminal).
         save_episode: write the episode (with the pushes and commands set from the page) to this ``.npz``.
+        export_scenario: write a scenario that replays the trial as played (with the pushes and commands set from
+            the page) to this ``.toml`` (`wbc.viz.trial_export`).
     """
 
     live: bool = True
@@ -68,6 +74,7 @@ class ViewConfig:
     wait_for_browser: bool = False
     keep_open: bool = True
     save_episode: Path | None = None
+    export_scenario: Path | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -130,6 +137,7 @@ class ViewResult:
         paths: scene paths by role (robot, arm, push, ...).
         episode: the episode played (None for replays), with the pushes and commands set from the page.
         timing: where the time of a recorded trial played at full speed went (None when live or not recorded).
+        exported: the scenario written with ``export_scenario`` (None without).
     """
 
     trial_record: TrialRecord | None
@@ -139,6 +147,7 @@ class ViewResult:
     paths: dict[str, list[str]]
     episode: Episode | None = None
     timing: RecordingTime | None = None
+    exported: ExportedScenario | None = None
 
 
 def _trial_name(trial: Trial) -> str:
@@ -181,6 +190,9 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
     robot's push hook, and logged in the returned episode: pushes in its `PushLog`, both as operator actions.
     """
     name = controller if isinstance(controller, str) else controller.name
+    export = cfg.export_scenario
+    if export is not None and (export.suffix.lower() != ".toml" or not export.resolve().parent.is_dir()):
+        raise ViewerError(f"--export-scenario {export}: give a .toml file in an existing directory")
     server = viewer = player = None
     own_page = False
     if cfg.live:
@@ -221,12 +233,17 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
             page.finish(trial_page(observer.recordings[-1], [signals], title=title, duration=trial.duration_s))
         if cfg.save_episode is not None:
             episode.save(str(cfg.save_episode))
+        exported = None
+        if export is not None:
+            exported = export_trial(export, trial, controller=name, played_s=episode.survived_s,
+                                    browser_pushes=page.pushes if page is not None else (),
+                                    browser_commands=page.command.changes if page is not None else ())
         if cfg.live:
             _linger(cfg, player)
         paths = (viewer.paths if viewer is not None else observer.recordings[-1].paths)
         return ViewResult(trial_record=row, recording=written, frames_drawn=player.drawn if player else 0,
                           frames_recorded=observer.recordings[-1].frames if cfg.record else 0, paths=paths,
-                          episode=episode, timing=timing)
+                          episode=episode, timing=timing, exported=exported)
     finally:
         if server is not None:
             server.stop()
@@ -276,8 +293,15 @@ def _log_page_actions(episode: Episode, page: LivePage) -> Episode:
     return dataclasses.replace(episode, pushes=PushLog.of(merged), operator_events=OperatorLog.of(rows))
 
 
+def _no_export(cfg: ViewConfig, what: str) -> None:
+    if cfg.export_scenario is not None:
+        raise ViewerError(f"--export-scenario writes the trial one controller plays (wbc view CTRL --scenario FILE "
+                          f"--trial I), not {what}")
+
+
 def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
     """Replay a stored episode, live in the browser and/or into a recording."""
+    _no_export(cfg, "a stored episode")
     written, recorded, drawn, paths = None, 0, 0, {}
     if cfg.record is not None:
         rec = Recording(stored.content(), fps=cfg.record_fps)
@@ -344,12 +368,14 @@ def _write_ab(a: CapturedRun, b: CapturedRun, trial: Trial, cfg: ViewConfig, pat
 def view_ab(trial: Trial, controllers: tuple[ControllerSpec | str, ControllerSpec | str], cfg: ViewConfig,
             path: Path) -> ABResult:
     """Play `trial` with both controllers in simulation and write one page of both runs to `path`."""
+    _no_export(cfg, "an A / B view")
     a, b = (capture_trial(trial, c, cfg.record_fps) for c in controllers)
     return _write_ab(a, b, trial, cfg, path, "")
 
 
 def replay_ab(first: StoredEpisode, second: StoredEpisode, cfg: ViewConfig, path: Path) -> ABResult:
     """Write one page of two stored runs of the same trial (`second` the ghost) to `path`."""
+    _no_export(cfg, "an A / B view")
     runs = []
     for stored in (first, second):
         run = CapturedRun(stored.controller, stored.content(),
