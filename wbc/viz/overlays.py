@@ -35,6 +35,7 @@ PIN_LEGS = ("FL", "FR", "RL", "RR")
 """Leg order of the MPC's arrays (Pinocchio's)."""
 
 _HIDDEN = Pose(np.eye(4), visible=False)
+_SHOWN = Pose(np.eye(4))  # a group shown where its parent is
 
 
 class Arrow:
@@ -70,7 +71,7 @@ class Arrow:
         if not visible or float(np.linalg.norm(vector)) < 1e-6:
             return {self.path: _HIDDEN}
         shaft, head = arrow_transforms(start, vector, min(self.head_length, 0.5 * float(np.linalg.norm(vector))))
-        return {self.path: Pose(np.eye(4)), f"{self.path}/shaft": Pose(shaft), f"{self.path}/head": Pose(head)}
+        return {self.path: _SHOWN, f"{self.path}/shaft": Pose(shaft), f"{self.path}/head": Pose(head)}
 
 
 class PushArrow:
@@ -190,7 +191,7 @@ class PlanOverlay:
         plan = frame.plan
         if plan is None:
             return {self.root: _HIDDEN}
-        out: dict[str, Pose] = {self.root: Pose(np.eye(4))}
+        out: dict[str, Pose] = {self.root: _SHOWN}
         com = _translations(np.asarray(plan["com_path_in_world"])[: self.horizon])
         for i, path in enumerate(self._com_paths):
             out[path] = Pose(com[i]) if i < len(com) else _HIDDEN

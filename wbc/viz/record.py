@@ -131,7 +131,9 @@ class _NodeKeys:
 
     A transform is keyed where any component of its position, quaternion or scale differs from the frame before by
     more than `_TOL`; the frame before is keyed too when it was not (the value held up to there is not
-    interpolated). Transforms are buffered and decomposed `_CHUNK` at a time.
+    interpolated). Transforms are buffered and decomposed `_CHUNK` at a time. A run of frames that hand over the very
+    same matrix (a gait chart cell, an overlay's group) is buffered as its first and last frame only: the frames
+    between can be no key.
     """
 
     def __init__(self) -> None:
@@ -139,6 +141,7 @@ class _NodeKeys:
         self.frames: dict[str, list[np.ndarray]] = {prop: [] for prop, _ in _PROPS}
         self.values: dict[str, list[np.ndarray]] = {prop: [] for prop, _ in _PROPS}
         self._buffer: list[tuple[int, np.ndarray]] = []
+        self._run_end: int | None = None  # newest frame repeating the last buffered matrix object, not buffered yet
         self._last: dict[str, tuple[int, np.ndarray, bool]] = {}  # prop -> last frame, its value, whether keyed
 
     def add(self, k: int, pose: Pose) -> None:
@@ -147,12 +150,22 @@ class _NodeKeys:
         if not self.visible or self.visible[-1][1] != visible:
             self.visible.append((k, visible))
         if visible:
-            self._buffer.append((k, pose.matrix))
-            if len(self._buffer) >= _CHUNK:
+            buffer, matrix = self._buffer, pose.matrix
+            if buffer and buffer[-1][1] is matrix:
+                self._run_end = k
+                return
+            if self._run_end is not None:
+                buffer.append((self._run_end, buffer[-1][1]))
+                self._run_end = None
+            buffer.append((k, matrix))
+            if len(buffer) >= _CHUNK:
                 self.flush()
 
     def flush(self) -> None:
         """Turn the buffered transforms into keys."""
+        if self._run_end is not None:
+            self._buffer.append((self._run_end, self._buffer[-1][1]))
+            self._run_end = None
         if not self._buffer:
             return
         frames = np.fromiter((k for k, _ in self._buffer), dtype=np.int64, count=len(self._buffer))
