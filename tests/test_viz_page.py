@@ -456,3 +456,22 @@ def test_browser_push_from_the_page_is_stored_exported_and_replayed(scenario, tm
     assert np.array_equal(replay.pushes.start, stored.pushes.start)
     assert np.array_equal(replay.pushes.force_in_world, stored.pushes.force_in_world)
     assert np.array_equal(replay.qpos, stored.qpos)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_screenshot_of_a_trial_page_is_a_small_picture_of_the_page(page, tmp_path):
+    # the docs' screenshots are taken this way (`python -m wbc.tools.screenshots`); here, of the test's own page
+    from PIL import Image
+
+    from wbc.tools.screenshots import COLORS, SIZE, screenshot
+
+    path, _, _ = page
+    png = screenshot(f"{path.resolve().as_uri()}#t=0.55", tmp_path / "page.png", budget_ms=6000)
+    assert png.stat().st_size < 300_000
+    with Image.open(png) as image:
+        assert image.size == SIZE and image.mode == "P"
+        used = image.getcolors(maxcolors=COLORS)
+        assert used is not None and len(used) > 16  # not blank: sky, ground, robot, plots and bar
+        rgb = image.convert("RGB")
+        scene = rgb.crop((0, 0, SIZE[0] // 2, SIZE[1] - 100))  # the 3D view: drawn, not left white
+        assert len(scene.getcolors(maxcolors=COLORS) or ()) > 8
