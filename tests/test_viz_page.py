@@ -205,6 +205,33 @@ def test_cli_view_ab_and_stored_episodes(scenario, tmp_path, capsys, monkeypatch
     assert {"attitude", "height", "velocity", "yaw_rate"} <= set(plots)
 
 
+def test_cli_view_exports_the_trial_and_says_where_the_recording_time_went(scenario, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
+    out, toml = tmp_path / "t.html", tmp_path / "t.toml"
+    assert main(["view", "stand", "--scenario", str(scenario), "--band", "hard", "--trial", "0", "--duration", "0.8",
+                 "--record", str(out), "--export-scenario", str(toml)]) == 0
+    said = capsys.readouterr().out
+    exported = load_scenario(toml)
+    assert f"exported scenario {exported.name!r} (unpublished, hash {exported.hash[:12]})" in said
+    assert f"wbc run stand --scenario {toml} --trials 1" in said
+    timing = re.search(r"recording took ([0-9.]+) s: the trial's simulation ([0-9.]+) s \+ the viewer ([0-9.]+) s "
+                       r"\(([0-9.]+)x the simulation alone\)", said)
+    assert timing, said
+    total, sim, viewer, ratio = map(float, timing.groups())
+    assert total == pytest.approx(sim + viewer, abs=0.016) and ratio >= 1.0  # the parts add up; no speed asserted
+    # the trial as played: its one push (at 0.5 s, before the 0.8 s end), the rest of it fixed
+    trial = load_scenario(scenario).trial("hard", 0, 0)
+    (push,) = exported.trial("hard", 9, 9).pushes
+    assert push.start == trial.pushes[0].start and np.array_equal(push.force_in_world, trial.pushes[0].force_in_world)
+    # an export needs one controller's trial; a bad file name is refused before anything plays
+    assert main(["view", "stand", "stand-locked", "--scenario", str(scenario), "--trial", "0", "--duration", "0.3",
+                 "--export-scenario", str(toml)]) != 0
+    assert "not an A / B view" in capsys.readouterr().err
+    assert main(["view", "stand", "--scenario", str(scenario), "--trial", "0", "--record", str(out),
+                 "--export-scenario", str(tmp_path / "t.json")]) != 0
+    assert "give a .toml file" in capsys.readouterr().err
+
+
 def test_cli_view_refuses_three_controllers(scenario, capsys):
     assert main(["view", "stand", "mpc", "stand", "--scenario", str(scenario), "--trial", "0"]) != 0
     assert "two for an A / B view" in capsys.readouterr().err
