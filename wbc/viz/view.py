@@ -187,7 +187,11 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
 
     Live, the trial page is served too (`LivePage`, on 127.0.0.1: `page`, or one started here): the scene beside its
     plots, with pushes and velocity commands from the page. They are applied through the scenario's `Push` and the
-    robot's push hook, and logged in the returned episode: pushes in its `PushLog`, both as operator actions.
+    robot's push hook, and logged in the returned episode: pushes in its `PushLog`, both as operator actions. With
+    ``cfg.export_scenario`` the trial as played is then written as a scenario that replays it (`export_trial`).
+
+    Raises:
+        ViewerError: ``cfg.export_scenario`` is not a ``.toml`` file in an existing directory (before anything plays).
     """
     name = controller if isinstance(controller, str) else controller.name
     export = cfg.export_scenario
