@@ -12,8 +12,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from wbc.errors import UnknownNameError, WbcError
-from wbc.scenario import ScenarioError, check_published, load_scenario
+from wbc.errors import ConfigError, UnknownNameError, WbcError
+from wbc.scenario import (
+    CommandChange,
+    ScenarioError,
+    check_published,
+    load_scenario,
+    trial_scenario_text,
+    write_trial_scenario,
+)
+from wbc.types import VelocityCommand
 
 SCENARIOS = Path(__file__).resolve().parent.parent / "scenarios"
 PUSH = SCENARIOS / "push-v1.toml"  # push version 1: the tests below pin its values, hash and trials
@@ -64,6 +72,11 @@ push_force_n = [300.0, 400.0]
 """
 
 OPTIONS = "[[commands.options]]\nvx = 0.0\n\n[[commands.options]]\nvx = 0.3\n"
+# Appended to BASE: its header on line 39, start_s 40, duration_s 41, force_n 42, offset_m 43.
+FIXED = ("\n[[fixed_pushes]]\nstart_s = 3.0\nduration_s = 0.05\nforce_n = [100.0, 0.0, 0.0]\n"
+         "offset_m = [0.0, 0.1, 0.0]\n")
+# Inserted after the second option: its header on line 25, at_s 26, vx 27.
+CHANGE = "vx = 0.3\n\n[[commands.changes]]\nat_s = 4.0\nvx = 0.5\n"
 PUSHES = "[pushes]\nfirst_s = [2.0, 3.0]\ninterval_s = [4.0, 6.0]\nduration_s = 0.05\noffset_m = 0.12\n"
 BANDS = BASE[BASE.index("[[bands]]") :]
 SCENARIO_TABLE = BASE[BASE.index("[scenario]") : BASE.index("[terrain]")]
@@ -378,6 +391,50 @@ def test_delay_ranges_are_drawn_per_trial_only_when_declared(tmp_path):
     assert only.hash != load_scenario(write(tmp_path, edit(BASE, "friction = [0.8, 1.0]", ""), "none.toml")).hash
 
 
+def test_fixed_pushes_command_changes_and_terrain_seed_reach_every_trial(tmp_path):
+    text = edit(edit(BASE, "vx = 0.3\n", CHANGE), "amplitude_m = 0.05", "amplitude_m = 0.05\nseed = 12345")
+    text += FIXED + FIXED.replace("start_s = 3.0", "start_s = 0.25").replace("[100.0, 0.0, 0.0]", "[0.0, -80.5, 10.0]")
+    s = load_scenario(write(tmp_path, text))
+    assert s.hash != load_scenario(write(tmp_path, BASE, "base.toml")).hash
+    for t in s.trials(None, [0, 1], 4):
+        assert t.terrain_seed == 12345
+        starts = [p.start for p in t.pushes]
+        assert starts == sorted(starts)
+        first = [p for p in t.pushes if np.array_equal(p.force_in_world, [0.0, -80.5, 10.0])]
+        second = [p for p in t.pushes if np.array_equal(p.force_in_world, [100.0, 0.0, 0.0])]
+        assert len(first) == len(second) == 1
+        assert (first[0].start, first[0].duration, list(first[0].offset_in_base)) == (0.25, 0.05, [0.0, 0.1, 0.0])
+        assert (second[0].start, second[0].duration) == (3.0, 0.05)
+        lo, hi = (200.0, 300.0) if t.band == "in" else (300.0, 400.0)
+        drawn = [p for p in t.pushes if p is not first[0] and p is not second[0]]
+        assert drawn and all(lo <= np.linalg.norm(p.force_in_world) <= hi for p in drawn)  # [pushes] still draws
+        # the command: the drawn option up to the change, the change's command from then on, held
+        assert t.command.at(3.999) == VelocityCommand(vx=t.command.vx)
+        assert t.command.at(4.0) == t.command.at(9.9) == VelocityCommand(vx=0.5)
+    # without a [pushes] table, the fixed pushes are a trial's only pushes
+    only = load_scenario(write(tmp_path, edit(edit(BASE, PUSHES, ""), "push_force_n = [200.0, 300.0]\n", "")
+                               .replace("push_force_n = [300.0, 400.0]\n", "") + FIXED, "only.toml"))
+    assert [(p.start, list(p.force_in_world)) for p in only.trial("ood", 2, 1).pushes] == [(3.0, [100.0, 0.0, 0.0])]
+
+
+def test_a_trial_written_as_a_scenario_file_is_every_trial_of_it(tmp_path):
+    trial = load_scenario(PUSH_CURRENT).trial("ood", 1, 3)
+    change = CommandChange(at_s=5.0, command=VelocityCommand(vx=0.2, yaw_rate=-0.5))
+    played = dataclasses.replace(trial, command=dataclasses.replace(trial.command, changes=(change,)),
+                                 domain=dataclasses.replace(trial.domain, actuation_delay=0.013))
+    path = tmp_path / "frozen.toml"
+    written = write_trial_scenario(path, played, name="frozen", description="one trial, frozen", header="kept")
+    text = path.read_text()
+    assert text.startswith("# kept\n") and written.hash in text and written.bands == ("ood",)
+    for seed, index in ((0, 0), (4, 9)):
+        assert_same(written.trial("ood", seed, index), dataclasses.replace(
+            played, scenario="frozen", scenario_hash=written.hash, seed=seed, index=index))
+    # what a scenario file cannot say is refused, not approximated
+    off_centre = dataclasses.replace(trial, domain=dataclasses.replace(trial.domain, payload_com=np.ones(3) * 0.01))
+    with pytest.raises(ConfigError, match="payload"):
+        trial_scenario_text(off_centre, name="x", description="x")
+
+
 def test_random_sign_flips_about_half(tmp_path):
     text = edit(BASE, "[[commands.options]]\nvx = 0.3\n", "[[commands.options]]\nyaw_rate = 1.0\nrandom_sign = true\n")
     s = load_scenario(write(tmp_path, text))
@@ -475,6 +532,45 @@ BROKEN = [
     ("force-three", edit(BASE, "[300.0, 400.0]", "[300.0, 350.0, 400.0]"), "[[bands]] #2 push_force_n", 37),
     ("band-vx-string", edit(BASE, 'name = "in"', 'name = "in"\nvx = "fast"'), "[[bands]] #1 vx", 33),
     ("band-yaw-too-big", edit(BASE, 'name = "in"', 'name = "in"\nyaw_rate = 9.0'), "[[bands]] #1 yaw_rate", 33),
+    ("terrain-seed-negative", edit(BASE, "amplitude_m = 0.05", "amplitude_m = 0.05\nseed = -1"), "[terrain] seed", 12),
+    ("terrain-seed-float", edit(BASE, "amplitude_m = 0.05", "amplitude_m = 0.05\nseed = 1.5"), "[terrain] seed", 12),
+    ("terrain-seed-too-big", edit(BASE, "amplitude_m = 0.05", "amplitude_m = 0.05\nseed = 2147483648"),
+     "[terrain] seed", 12),
+    ("change-after-end", edit(edit(BASE, "vx = 0.3\n", CHANGE), "at_s = 4.0", "at_s = 10.0"),
+     "[[commands.changes]] #1 at_s", 26),
+    ("change-missing-at", edit(edit(BASE, "vx = 0.3\n", CHANGE), "at_s = 4.0\n", ""),
+     "[[commands.changes]] #1 at_s", 25),
+    ("change-vx-too-big", edit(edit(BASE, "vx = 0.3\n", CHANGE), "vx = 0.5", "vx = 5.0"),
+     "[[commands.changes]] #1 vx", 27),
+    ("change-unknown-key", edit(edit(BASE, "vx = 0.3\n", CHANGE), "vx = 0.5", "vx = 0.5\nvz = 1.0"),
+     "[[commands.changes]] #1 vz", 28),
+    ("changes-out-of-order", edit(BASE, "vx = 0.3\n", CHANGE + "\n[[commands.changes]]\nat_s = 4.0\n"),
+     "[[commands.changes]] #2 at_s", 30),
+    ("changes-not-tables", edit(BASE, "ramp_s = 0.5", "ramp_s = 0.5\nchanges = 4.0"), "[commands] changes", 18),
+    ("fixed-start-after-end", edit(BASE + FIXED, "start_s = 3.0", "start_s = 10.0"), "[[fixed_pushes]] #1 start_s",
+     40),
+    ("fixed-start-missing", edit(BASE + FIXED, "start_s = 3.0\n", ""), "[[fixed_pushes]] #1 start_s", 39),
+    ("fixed-too-short", edit(BASE + FIXED, "duration_s = 0.05\nforce", "duration_s = 0.001\nforce"),
+     "[[fixed_pushes]] #1 duration_s", 41),
+    ("fixed-force-two", edit(BASE + FIXED, "[100.0, 0.0, 0.0]", "[100.0, 0.0]"), "[[fixed_pushes]] #1 force_n", 42),
+    ("fixed-force-string", edit(BASE + FIXED, "[100.0, 0.0, 0.0]", '["east", 0.0, 0.0]'),
+     "[[fixed_pushes]] #1 force_n", 42),
+    ("fixed-force-scalar", edit(BASE + FIXED, "[100.0, 0.0, 0.0]", "100.0"), "[[fixed_pushes]] #1 force_n", 42),
+    ("fixed-force-nan", edit(BASE + FIXED, "[100.0, 0.0, 0.0]", "[nan, 0.0, 0.0]"), "[[fixed_pushes]] #1 force_n",
+     42),
+    ("fixed-force-zero", edit(BASE + FIXED, "[100.0, 0.0, 0.0]", "[0.0, 0.0, 0.0]"), "[[fixed_pushes]] #1 force_n",
+     42),
+    ("fixed-force-too-big", edit(BASE + FIXED, "[100.0, 0.0, 0.0]", "[1500.0, 1500.0, 0.0]"),
+     "[[fixed_pushes]] #1 force_n", 42),
+    ("fixed-impulse-too-big", edit(edit(BASE + FIXED, "[100.0, 0.0, 0.0]", "[1000.0, 0.0, 0.0]"),
+                                   "duration_s = 0.05\nforce", "duration_s = 0.5\nforce"),
+     "[[fixed_pushes]] #1 force_n", 42),
+    ("fixed-offset-too-far", edit(BASE + FIXED, "[0.0, 0.1, 0.0]", "[0.6, 0.0, 0.0]"), "[[fixed_pushes]] #1 offset_m",
+     43),
+    ("fixed-unknown-key", BASE + FIXED + "heading = 1.0\n", "[[fixed_pushes]] #1 heading", 44),
+    ("fixed-second-bad", BASE + FIXED + FIXED.replace("start_s = 3.0", "start_s = -1.0"),
+     "[[fixed_pushes]] #2 start_s", 46),
+    ("fixed-empty", "fixed_pushes = []\n" + BASE, "[[fixed_pushes]]", 1),
 ]
 
 
@@ -508,6 +604,12 @@ def test_messages_say_what_and_how(tmp_path):
         "force-without-pushes": "add [pushes] or remove push_force_n",
         "bad-kind": "'flat', 'fractal'",
         "missing-scenario": "missing required table",
+        "changes-out-of-order": "must be later than the change before it (4 s), got 4",
+        "fixed-force-zero": "its magnitude must be in (0, 2000] N, got 0",
+        "fixed-impulse-too-big": "delivers 500 N s, more than 200 N s",
+        "fixed-force-two": "expected an array of 3 numbers, got an array of 2",
+        "fixed-offset-too-far": "each number must be in [-0.5, 0.5], got 0.6 at position 1",
+        "unknown-table": "[[fixed_pushes]]",
     }
     texts = {case[0]: case[1] for case in BROKEN}
     for case, expected in cases.items():

@@ -12,8 +12,11 @@ import pytest
 import umsgpack
 
 from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
+from wbc.scenario import ScenarioError, check_published
 from wbc.scenario.scenario import load_scenario
+from wbc.types import VelocityCommand
 from wbc.viz.page import read_page_data
 from wbc.viz.recording import GHOST_COLOR
 from wbc.viz.replay import load_stored_episode
@@ -142,8 +145,6 @@ def test_fall_and_safety_events_are_marked(scenario, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
     # a stored-episode run: its fall (and any safety transition) becomes a mark on the timeline
     trial = load_scenario(scenario).trial("hard", 0, 0)
-    from wbc.arena.sim_trial import run_trial
-
     record, episode = run_trial(trial, "stand")
     assert not record.success, "the hard band's push no longer topples a standing robot: pick a stronger one"
     signals = TrialSignals.of_episode("stand", episode)
@@ -202,6 +203,33 @@ def test_cli_view_ab_and_stored_episodes(scenario, tmp_path, capsys, monkeypatch
     single = replay_episode(first, ViewConfig(live=False, record=tmp_path / "one.html"))
     plots = read_page_data(single.recording.read_text())["runs"][0]["plots"]
     assert {"attitude", "height", "velocity", "yaw_rate"} <= set(plots)
+
+
+def test_cli_view_exports_the_trial_and_says_where_the_recording_time_went(scenario, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
+    out, toml = tmp_path / "t.html", tmp_path / "t.toml"
+    assert main(["view", "stand", "--scenario", str(scenario), "--band", "hard", "--trial", "0", "--duration", "0.8",
+                 "--record", str(out), "--export-scenario", str(toml)]) == 0
+    said = capsys.readouterr().out
+    exported = load_scenario(toml)
+    assert f"exported scenario {exported.name!r} (unpublished, hash {exported.hash[:12]})" in said
+    assert f"wbc run stand --scenario {toml} --trials 1" in said
+    timing = re.search(r"recording took ([0-9.]+) s: the trial's simulation ([0-9.]+) s \+ the viewer ([0-9.]+) s "
+                       r"\(([0-9.]+)x the simulation alone\)", said)
+    assert timing, said
+    total, sim, viewer, ratio = map(float, timing.groups())
+    assert total == pytest.approx(sim + viewer, abs=0.016) and ratio >= 1.0  # the parts add up; no speed asserted
+    # the trial as played: its one push (at 0.5 s, before the 0.8 s end), the rest of it fixed
+    trial = load_scenario(scenario).trial("hard", 0, 0)
+    (push,) = exported.trial("hard", 9, 9).pushes
+    assert push.start == trial.pushes[0].start and np.array_equal(push.force_in_world, trial.pushes[0].force_in_world)
+    # an export needs one controller's trial; a bad file name is refused before anything plays
+    assert main(["view", "stand", "stand-locked", "--scenario", str(scenario), "--trial", "0", "--duration", "0.3",
+                 "--export-scenario", str(toml)]) != 0
+    assert "not an A / B view" in capsys.readouterr().err
+    assert main(["view", "stand", "--scenario", str(scenario), "--trial", "0", "--record", str(out),
+                 "--export-scenario", str(tmp_path / "t.json")]) != 0
+    assert "give a .toml file" in capsys.readouterr().err
 
 
 def test_cli_view_refuses_three_controllers(scenario, capsys):
@@ -274,6 +302,7 @@ def test_live_page_push_and_command_land_in_the_episode(scenario, tmp_path, monk
     monkeypatch.chdir(tmp_path)
     trial = load_scenario(scenario).trial("soft", 0, 0)
     saved = tmp_path / "episode.npz"
+    exported = tmp_path / "live.toml"
     with LivePage() as page:
         assert page.url.startswith("http://127.0.0.1:")
         # refused: a bad push, a push that is not JSON (another site's form), a command before any trial plays
@@ -284,7 +313,8 @@ def test_live_page_push_and_command_land_in_the_episode(scenario, tmp_path, monk
         push = {"force_n": 120.0, "heading_deg": 90.0, "duration_s": 0.1, "point_in_base": [0.1, 0.0, 0.0], "t": 0.9}
         assert _http(page.url + "push", push) == (200, b'{"queued": true}')
         result: list = []
-        cfg = ViewConfig(live=True, player=PlayerConfig(speed=0.5), save_episode=saved, keep_open=False)
+        cfg = ViewConfig(live=True, player=PlayerConfig(speed=0.5), save_episode=saved, keep_open=False,
+                         export_scenario=exported)
         thread = threading.Thread(target=lambda: result.append(view_trial(trial, "stand", cfg, page=page)))
         thread.start()
         state: dict = {}
@@ -326,6 +356,21 @@ def test_live_page_push_and_command_land_in_the_episode(scenario, tmp_path, monk
     # a replay draws the browser's push while it acts
     pushed = [f for f in frames_of(Episode.load(str(saved))) if f.pushed and f.t > 0.8]
     assert pushed and pushed[0].push_force_in_world == pytest.approx([0.0, 120.0, 0.0])
+    # the exported scenario: unpublished, its hash in its comments, and its trial is this one as played, the
+    # browser's push and command included; any of its trials replays the live episode to the bit
+    assert result[0].exported.path == exported and result[0].exported.browser_pushes == 1
+    replayed = load_scenario(exported)
+    assert replayed.hash in exported.read_text() and replayed.bands == ("soft",)
+    with pytest.raises(ScenarioError, match="unpublished"):
+        check_published(replayed)
+    again = replayed.trial("soft", 3, 5)
+    (change,) = again.command.changes
+    assert change.command == VelocityCommand(vx=0.25, vy=0.0, yaw_rate=0.1)
+    assert change.at_s == next(t for t, k, a in episode.operator_events.rows() if "command" in a)
+    _, replay = run_trial(again, "stand")
+    assert np.array_equal(replay.pushes.start, episode.pushes.start)
+    assert np.array_equal(replay.pushes.force_in_world, episode.pushes.force_in_world)
+    assert np.array_equal(replay.command, episode.command) and np.array_equal(replay.qpos, episode.qpos)
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
@@ -355,3 +400,105 @@ def test_browser_live_page_shows_the_push(scenario, tmp_path, monkeypatch):
     assert any(m["kind"] == "browser_push" for m in state["marks"]), state["marks"]
     assert state["plots"]["attitude"]["n"] > 10 and state["t"] >= 0.6
     assert 'id="wbc-push"' in state["_dom"]  # the page's own push control
+
+
+_CLICK_PUSH = """<script>
+// what a person does: fill in the page's push control and press its button, once the live panel is built
+var wbcClick = setInterval(function () {
+  var button = document.getElementById("wbc-push");
+  if (!button) { return; }
+  clearInterval(wbcClick);
+  document.getElementById("wbc-push-force").value = "140";
+  document.getElementById("wbc-push-heading").value = "0";
+  document.getElementById("wbc-push-duration").value = "0.1";
+  document.getElementById("wbc-push-point").value = "0.05 0 0";
+  button.click();
+  var wait = setInterval(function () {
+    if (window.wbcPage && window.wbcPage.lastReply) {
+      clearInterval(wait);
+      var out = document.createElement("pre");
+      out.id = "wbc-test-reply";
+      out.textContent = JSON.stringify(window.wbcPage.lastReply);
+      document.body.appendChild(out);
+    }
+  }, 20);
+}, 50);
+</script>
+</body>"""
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_push_from_the_page_is_stored_exported_and_replayed(scenario, tmp_path, monkeypatch):
+    import threading
+    import time
+
+    import wbc.viz.live_page as live_page
+    from wbc.arena.episode import Episode
+    from wbc.viz.live_page import LivePage
+    from wbc.viz.player import PlayerConfig
+
+    monkeypatch.chdir(tmp_path)
+    page_html = live_page.live_page_html
+    # the live page as served, with a script that uses its push control as a person would
+    monkeypatch.setattr(live_page, "live_page_html",
+                        lambda *a, **k: page_html(*a, **k).replace("</body>", _CLICK_PUSH, 1))
+    trial = load_scenario(scenario).trial("soft", 0, 0)
+    saved, exported = tmp_path / "live.npz", tmp_path / "live.toml"
+    result: list = []
+    with LivePage() as page:
+        cfg = ViewConfig(live=True, player=PlayerConfig(speed=0.2), keep_open=False, save_episode=saved,
+                         export_scenario=exported)
+        thread = threading.Thread(target=lambda: result.append(view_trial(trial, "stand", cfg, page=page)),
+                                  daemon=True)
+        thread.start()
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and json.loads(_http(page.url + "state")[1])["t"] < 0.7:
+            time.sleep(0.05)
+        _http(page.url + "control", {"pause": True})  # held after the scenario's own push while the browser acts
+        paused_at = json.loads(_http(page.url + "state")[1])["t"]
+        state = _dump(page.url, tmp_path, budget_ms=4000)
+        _http(page.url + "control", {"pause": False, "speed": 10.0})
+        thread.join(timeout=120)
+    assert state["live"] and '<pre id="wbc-test-reply">{"queued":true}</pre>' in state["_dom"], "no push was sent"
+    assert result, "the trial did not finish"
+    # in the stored episode: the scenario's push at 0.5 s, and the page's, applied at the tick after the pause
+    stored = Episode.load(str(saved))
+    assert len(stored.pushes) == 2 and stored.pushes.start[0] == pytest.approx(0.5)
+    start, force = float(stored.pushes.start[1]), stored.pushes.force_in_world[1]
+    assert paused_at <= start <= paused_at + 0.1
+    assert force == pytest.approx([140.0, 0.0, 0.0]) and stored.pushes.offset_in_base[1] == pytest.approx([0.05, 0, 0])
+    assert stored.pushes.duration[1] == pytest.approx(0.1)
+    # in the exported scenario, exactly: the same start, force, point and duration, to the bit
+    scenario_file = load_scenario(exported)
+    fixed = scenario_file.trial("soft", 0, 0).pushes
+    assert [p.start for p in fixed] == stored.pushes.start.tolist()
+    assert np.array_equal([p.force_in_world for p in fixed], stored.pushes.force_in_world)
+    assert np.array_equal([p.offset_in_base for p in fixed], stored.pushes.offset_in_base)
+    # and the arena replays it: a run of the exported scenario meets the push at the same time with the same force,
+    # and its episode is the live one
+    results = tmp_path / "replay"
+    run_arena(ArenaConfig(controllers=("stand",), scenario=exported, trials=1, out_dir=results, workers=1,
+                          progress=False, save_episodes=True))
+    replay = load_stored_episode(results, 0).episode
+    assert np.array_equal(replay.pushes.start, stored.pushes.start)
+    assert np.array_equal(replay.pushes.force_in_world, stored.pushes.force_in_world)
+    assert np.array_equal(replay.qpos, stored.qpos)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_screenshot_of_a_trial_page_is_a_small_picture_of_the_page(page, tmp_path):
+    # the docs' screenshots are taken this way (`python -m wbc.tools.screenshots`); here, of the test's own page
+    from PIL import Image
+
+    from wbc.tools.screenshots import COLORS, SIZE, screenshot
+
+    path, _, _ = page
+    png = screenshot(f"{path.resolve().as_uri()}#t=0.55", tmp_path / "page.png", budget_ms=6000)
+    assert png.stat().st_size < 300_000
+    with Image.open(png) as image:
+        assert image.size == SIZE and image.mode == "P"
+        used = image.getcolors(maxcolors=COLORS)
+        assert used is not None and len(used) > 16  # not blank: sky, ground, robot, plots and bar
+        rgb = image.convert("RGB")
+        scene = rgb.crop((0, 0, SIZE[0] // 2, SIZE[1] - 100))  # the 3D view: drawn, not left white
+        assert len(scene.getcolors(maxcolors=COLORS) or ()) > 8

@@ -622,6 +622,7 @@ def _view(args: argparse.Namespace) -> int:
                             start_paused=args.paused),
         open_browser=args.open, wait_for_browser=args.wait,
         save_episode=Path(args.save_episode) if args.save_episode else None,
+        export_scenario=Path(args.export_scenario) if args.export_scenario else None,
     )
     ctrls = list(args.ctrl or [])
     if len(ctrls) > 2:
@@ -646,8 +647,12 @@ def _view(args: argparse.Namespace) -> int:
         result = view_trial(trial, spec, cfg)
         what = f"{args.ctrl} on {trial.scenario} band {trial.band} seed {trial.seed} trial {trial.index}"
         printers.print_viewed_trial(what, result.trial_record)
+        if result.exported is not None:
+            print(result.exported.line(args.ctrl))
     if result.recording is not None:
         printers.print_recording(what, result.frames_recorded, result.recording)
+        if result.timing is not None:
+            print(result.timing.line())
         if args.at is not None:
             print(f"open: {result.recording.resolve().as_uri()}#t={args.at:g}")
     return 0

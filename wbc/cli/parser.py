@@ -638,6 +638,9 @@ def _add_view_parser(sub: _Commands) -> None:
     view.add_argument("--live", action="store_true", help="with --record: also stream live")
     view.add_argument("--save-episode", default=None, metavar="FILE.npz",
                       help="write the episode played, with the pushes and commands set from the live page")
+    view.add_argument("--export-scenario", default=None, metavar="FILE.toml",
+                      help="write a scenario (unpublished) whose trials replay this one as played, with the pushes "
+                      "and commands set from the live page, for every controller")
     view.add_argument("--at", type=bounded_float(0.0, MAX_DURATION_S, unit="s"), default=None, metavar="T",
                       help="open the recorded page at trial time T (its URL ends #t=T)")
     view.add_argument("--open", action="store_true", help="open the page in the default browser")

@@ -9,7 +9,9 @@ from wbc.scenario.lock import check_published
 from wbc.scenario.push import Push
 from wbc.scenario.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario_path
 from wbc.scenario.terrain import TerrainConfig
-from wbc.scenario.trial import CommandSchedule, Trial
+from wbc.scenario.trial import CommandChange, CommandSchedule, Trial
+from wbc.scenario.trial_file import trial_scenario_text, write_trial_scenario
 
-__all__ = ["CommandSchedule", "DomainParams", "Push", "Scenario", "ScenarioError", "SensorNoise", "TerrainConfig",
-           "Trial", "check_published", "load_scenario", "resolve_scenario_path"]
+__all__ = ["CommandChange", "CommandSchedule", "DomainParams", "Push", "Scenario", "ScenarioError", "SensorNoise",
+           "TerrainConfig", "Trial", "check_published", "load_scenario", "resolve_scenario_path", "trial_scenario_text",
+           "write_trial_scenario"]

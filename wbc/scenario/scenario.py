@@ -14,15 +14,25 @@ Schema (every other key is an error):
 - ``[terrain]``: ``kind`` (``flat`` | ``fractal``), ``amplitude_m`` [0, 0.3], ``octaves`` [1, 8], ``half_extent_m``
   (1, 50] (at most 2001 heightfield samples of 5 cm per axis), ``base_wavelength_m`` [0.05 * 2^(octaves - 1), 20]
   (the finest octave spans at least one heightfield cell: a finer one is invisible on the grid and its noise
-  lattice outgrows memory).
+  lattice outgrows memory), ``seed`` (optional, an integer in [0, 2^31 - 1]: every trial's terrain seed, where
+  without it each trial draws its own).
 - ``[domain]`` (optional), intervals ``[lo, hi]`` drawn uniformly: ``friction`` [0.05, 2], ``payload_kg`` [-1, 10],
   ``motor_strength`` [0.1, 2] (`wbc.scenario.domain` says why), and the optional ``actuation_delay_s`` and
   ``sensing_delay_s`` [0, 0.2] (the robot's loop latency, `DomainParams`; a simulator rounds them to its physics step).
 - ``[commands]``: ``ramp_s`` [0, duration_s] and ``[[commands.options]]`` (``vx`` |.| <= 3, ``vy`` |.| <= 2,
-  ``yaw_rate`` |.| <= 4, ``random_sign``), one drawn uniformly per trial.
+  ``yaw_rate`` |.| <= 4, ``random_sign``), one drawn uniformly per trial; optionally ``[[commands.changes]]``
+  (``at_s`` in [0, duration_s), each later than the one before; ``vx``, ``vy``, ``yaw_rate`` bounded as an
+  option's): from ``at_s`` on, every trial's command is that one, held without a ramp until the next change
+  (`wbc.scenario.trial.CommandChange`; the commands a person set while a trial played live, replayed).
 - ``[pushes]`` (optional): ``first_s`` (an interval ending before ``duration_s``) and ``interval_s`` (an interval in
   (0, 600], its lower end >= the push duration, at most 1000 pushes per trial), ``duration_s`` [0.01, 1],
   ``offset_m`` [0, 0.5].
+- ``[[fixed_pushes]]`` (optional): pushes that every trial of every band meets, besides those ``[pushes]`` draws,
+  each exactly a `wbc.scenario.push.Push`: ``start_s`` [0, duration_s), ``duration_s`` [0.01, 1], ``force_n``
+  (3 numbers: the force in the world frame [N], its magnitude in (0, 2000] and times ``duration_s`` at most
+  200 N s), ``offset_m`` (3 numbers: the application point in the base frame [m], each in [-0.5, 0.5]; default
+  the base origin). A trial played live with pushes from the browser is exported as such a file
+  (``wbc view --export-scenario``).
 - ``[[bands]]``: ``name``, ``push_force_n`` (an interval in [0, 2000], its upper end times ``[pushes] duration_s`` at
   most 200 N s; required with ``[pushes]``, forbidden without), ``vx`` and ``yaw_rate`` (optional overrides of the
   drawn option's vx and yaw rate; the option's sign flip applies to an overridden yaw rate too, so a band of
@@ -31,7 +41,7 @@ Schema (every other key is an error):
 Sampling. Trial ``index`` under ``seed`` draws from
 ``np.random.default_rng(SeedSequence([seed, index, int(hash[:8], 16)]))`` in this fixed order:
 
-1. ``terrain_seed = rng.integers(2**31)``;
+1. ``terrain_seed = rng.integers(2**31)`` (drawn with a ``[terrain] seed`` too, which then replaces it);
 2. friction, payload mass, motor strength: one ``rng.random()`` each, mapped into the ``[domain]`` interval; then
    actuation delay and sensing delay, one ``rng.random()`` each, only for those the file declares: a file without
    them draws nothing for them, so it samples the trials it sampled before they existed;
@@ -40,7 +50,12 @@ Sampling. Trial ``index`` under ``seed`` draws from
 4. with ``[pushes]``: ``start`` from ``first_s``; then, while ``start < duration_s``: the magnitude's ``u``, the
    heading (``2 pi rng.random()``), the offset axis (``rng.integers(2)``: 0 = base x, 1 = base y), the offset
    (``rng.random()`` mapped into [-offset_m, offset_m]), then the next start (``start += `` a draw from
-   ``interval_s``).
+   ``interval_s``);
+5. with ``[[fixed_pushes]]``: nothing drawn; they join the trial's pushes, which are then ordered by start time
+   (a stable sort: pushes of equal start keep drawn-then-file order).
+
+A file without ``seed``, ``[[commands.changes]]`` and ``[[fixed_pushes]]`` hashes and samples exactly as it did
+before they existed (absent keys are not in the parsed content, and nothing is drawn for them).
 
 The band never enters the seed and every band draws the same numbers, so trials with the same (seed, index) in two
 bands share terrain, domain, command and push times, headings and offsets; only the band's values differ (the push
@@ -72,13 +87,19 @@ from wbc.scenario.domain import (
 from wbc.scenario.push import Push
 from wbc.scenario.terrain import MAX_OCTAVES, MAX_SAMPLES, TERRAIN_KINDS, TerrainConfig
 from wbc.scenario.toml_fields import Range, TomlTable, read_toml
-from wbc.scenario.trial import CommandSchedule, Trial
+from wbc.scenario.trial import CommandChange, CommandSchedule, Trial
+from wbc.types import VelocityCommand
 
 __all__ = ["Scenario", "ScenarioError", "load_scenario", "resolve_scenario_path"]
 
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 _BAND_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _MAX_PUSHES = 1000  # per trial: bounds the sampling loop whatever interval_s says
+_MAX_CHANGES = 1000  # command changes per file
+MAX_TERRAIN_SEED = 2**31 - 1
+"""Largest ``[terrain] seed``: the range the trials' own terrain seeds are drawn from."""
+MAX_PUSH_OFFSET_M = 0.5
+"""Farthest application point of a fixed push from the base origin, per axis [m] (``[pushes] offset_m``'s bound)."""
 
 MIN_DURATION_S = 0.1
 """Shortest episode [s]: five 50 Hz control ticks, the fewest from which the metrics mean anything."""
@@ -188,6 +209,9 @@ class Scenario:
     _options: tuple[_CommandOption, ...] = field(repr=False)
     _pushes: _Pushes | None = field(repr=False)
     _bands: tuple[_Band, ...] = field(repr=False)
+    _terrain_seed: int | None = field(default=None, repr=False)
+    _changes: tuple[CommandChange, ...] = field(default=(), repr=False)
+    _fixed_pushes: tuple[Push, ...] = field(default=(), repr=False)
 
     def _band(self, band: str) -> _Band:
         for spec in self._bands:
@@ -215,7 +239,9 @@ class Scenario:
         index = _check_count("index", index)
         rng = np.random.default_rng(np.random.SeedSequence([seed, index, int(self.hash[:8], 16)]))
 
-        terrain_seed = int(rng.integers(2**31))
+        terrain_seed = int(rng.integers(2**31))  # drawn even when the file fixes it: the draws after keep their order
+        if self._terrain_seed is not None:
+            terrain_seed = self._terrain_seed
         ranges = self._domain
         friction = _uniform(rng, ranges.friction)
         payload_mass = _uniform(rng, ranges.payload_kg)
@@ -231,7 +257,7 @@ class Scenario:
         yaw_rate = option.yaw_rate if spec.yaw_rate is None else spec.yaw_rate
         yaw_rate = -yaw_rate if option.random_sign and flip and yaw_rate != 0.0 else yaw_rate
         command = CommandSchedule(vx=option.vx if spec.vx is None else spec.vx, vy=option.vy, yaw_rate=yaw_rate,
-                                  ramp_s=self._ramp_s)
+                                  ramp_s=self._ramp_s, changes=self._changes)
 
         pushes: list[Push] = []
         if self._pushes is not None:
@@ -247,6 +273,8 @@ class Scenario:
                 pushes.append(Push.horizontal(magnitude=force_lo + u * (force_hi - force_lo), heading=heading,
                                               offset_in_base=offset, start=start, duration=p.duration_s))
                 start += _uniform(rng, p.interval_s)
+        if self._fixed_pushes:
+            pushes = sorted(pushes + list(self._fixed_pushes), key=lambda push: push.start)
 
         return Trial(scenario=self.name, scenario_hash=self.hash, robot=self.robot, band=spec.name, seed=seed,
                      index=index, duration_s=self.duration_s, terrain=self._terrain, terrain_seed=terrain_seed,
@@ -318,12 +346,12 @@ def load_scenario(path: str | Path) -> Scenario:
     data, lines = read_toml(resolved, shown, ScenarioError, missing=(
         f"check the path (a relative path is looked up from the working directory, then from {SOURCE_ROOT})"))
     top = TomlTable(shown, lines, data, "", ("", 0), error=ScenarioError)
-    valid_tables = ("scenario", "terrain", "domain", "commands", "pushes", "bands")
+    valid_tables = ("scenario", "terrain", "domain", "commands", "pushes", "fixed_pushes", "bands")
     for key in data:
         if key not in valid_tables:
             raise ScenarioError(shown, "unknown table; valid tables: [scenario], [terrain], [domain], [commands], "
-                                "[pushes], [[bands]]", line=lines.header((key, 0)) or lines.key(("", 0), key),
-                                field=f"[{key}]")
+                                "[pushes], [[fixed_pushes]], [[bands]]",
+                                line=lines.header((key, 0)) or lines.key(("", 0), key), field=f"[{key}]")
 
     head = top.sub_table("scenario", ("name", "version", "description", "notes", "robot", "duration_s"),
                       required=True)
@@ -340,8 +368,9 @@ def load_scenario(path: str | Path) -> Scenario:
         head.fail("robot", f"unknown robot {robot!r}; valid robots: {', '.join(sorted(ROBOTS))}")
     duration_s = head.number("duration_s", Range(lo=MIN_DURATION_S, hi=MAX_DURATION_S))
 
-    ter = top.sub_table("terrain", ("kind", "amplitude_m", "base_wavelength_m", "octaves", "half_extent_m"),
+    ter = top.sub_table("terrain", ("kind", "amplitude_m", "base_wavelength_m", "octaves", "half_extent_m", "seed"),
                      required=True)
+    terrain_seed = ter.integer("seed", Range(lo=0, hi=MAX_TERRAIN_SEED)) if "seed" in ter.data else None
     kind = ter.string("kind")
     if kind not in TERRAIN_KINDS:
         ter.fail("kind", f"must be one of {', '.join(map(repr, TERRAIN_KINDS))}, got {kind!r}")
@@ -372,7 +401,7 @@ def load_scenario(path: str | Path) -> Scenario:
         sensing_delay_s=dom.optional_interval("sensing_delay_s", delay),
     )
 
-    com = top.sub_table("commands", ("ramp_s", "options"), required=True)
+    com = top.sub_table("commands", ("ramp_s", "options", "changes"), required=True)
     ramp_s = com.number("ramp_s", Range(lo=0.0), 0.0)
     if ramp_s > duration_s:
         com.fail("ramp_s", f"must be <= [scenario] duration_s ({duration_s:g}), got {ramp_s:g}")
@@ -385,6 +414,19 @@ def load_scenario(path: str | Path) -> Scenario:
             yaw_rate=opt.number("yaw_rate", Range(lo=-4.0, hi=4.0), 0.0),
             random_sign=opt.boolean("random_sign", False),
         ))
+    changes: list[CommandChange] = []
+    if "changes" in com.data:
+        for chg in com.table_array("changes", "[[commands.changes]]"):
+            chg.check_keys(("at_s", "vx", "vy", "yaw_rate"))
+            at_s = chg.number("at_s", Range(lo=0.0, hi=duration_s, hi_open=True))
+            if changes and at_s <= changes[-1].at_s:
+                chg.fail("at_s", f"must be later than the change before it ({changes[-1].at_s:g} s), got {at_s:g}; "
+                         "list the changes in time order")
+            if len(changes) == _MAX_CHANGES:
+                chg.fail(None, f"more than {_MAX_CHANGES} command changes; keep at most {_MAX_CHANGES}")
+            changes.append(CommandChange(at_s=at_s, command=VelocityCommand(
+                vx=chg.number("vx", Range(lo=-3.0, hi=3.0), 0.0), vy=chg.number("vy", Range(lo=-2.0, hi=2.0), 0.0),
+                yaw_rate=chg.number("yaw_rate", Range(lo=-4.0, hi=4.0), 0.0))))
 
     pushes = None
     psh = top.sub_table("pushes", ("first_s", "interval_s", "duration_s", "offset_m"), required=False)
@@ -402,6 +444,26 @@ def load_scenario(path: str | Path) -> Scenario:
             psh.fail("interval_s", f"allows more than {_MAX_PUSHES} pushes per trial; raise its lower end")
         pushes = _Pushes(first_s=first_s, interval_s=interval_s, duration_s=push_duration,
                          offset_m=psh.number("offset_m", Range(lo=0.0, hi=0.5)))
+
+    fixed: list[Push] = []
+    if "fixed_pushes" in data:
+        for fix in top.table_array("fixed_pushes", "[[fixed_pushes]]"):
+            fix.check_keys(("start_s", "duration_s", "force_n", "offset_m"))
+            if len(fixed) == _MAX_PUSHES:
+                fix.fail(None, f"more than {_MAX_PUSHES} fixed pushes; keep at most {_MAX_PUSHES}")
+            start = fix.number("start_s", Range(lo=0.0, hi=duration_s, hi_open=True))
+            held = fix.number("duration_s", Range(lo=MIN_PUSH_S, hi=1.0))
+            force = fix.vector("force_n", 3, Range(lo=-MAX_PUSH_FORCE_N, hi=MAX_PUSH_FORCE_N))
+            magnitude = math.sqrt(sum(f * f for f in force))
+            if not 0.0 < magnitude <= MAX_PUSH_FORCE_N:
+                fix.fail("force_n", f"its magnitude must be in (0, {MAX_PUSH_FORCE_N:g}] N, got {magnitude:g}")
+            if magnitude * held > MAX_PUSH_IMPULSE_NS:
+                fix.fail("force_n", f"a push of {magnitude:g} N for {held:g} s delivers {magnitude * held:g} N s, more "
+                         f"than {MAX_PUSH_IMPULSE_NS:g} N s (it would throw the robot at over 14 m/s); lower the "
+                         "force or the duration")
+            offset = fix.vector("offset_m", 3, Range(lo=-MAX_PUSH_OFFSET_M, hi=MAX_PUSH_OFFSET_M), (0.0, 0.0, 0.0))
+            fixed.append(Push(force_in_world=np.array(force), offset_in_base=np.array(offset), start=start,
+                              duration=held))
 
     bands: list[_Band] = []
     seen: dict[str, str] = {}
@@ -429,5 +491,6 @@ def load_scenario(path: str | Path) -> Scenario:
     return Scenario(
         name=name, version=version, description=description, notes=notes, robot=robot, duration_s=duration_s,
         hash=_content_hash(data), path=shown, bands=tuple(b.name for b in bands), _terrain=terrain, _domain=domain,
-        _ramp_s=ramp_s, _options=tuple(options), _pushes=pushes, _bands=tuple(bands),
+        _ramp_s=ramp_s, _options=tuple(options), _pushes=pushes, _bands=tuple(bands), _terrain_seed=terrain_seed,
+        _changes=tuple(changes), _fixed_pushes=tuple(fixed),
     )

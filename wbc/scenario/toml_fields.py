@@ -1,7 +1,8 @@
 """Typed, located access to TOML files: every bad value is an error naming the file, the line and the field.
 
 `tomllib` parses but reports no line numbers, so `TomlLines` scans the raw text for table headers and ``key =``
-lines; `TomlTable` reads typed values (strings, booleans, bounded integers and numbers, intervals, arrays of tables)
+lines; `TomlTable` reads typed values (strings, booleans, bounded integers and numbers, intervals, vectors, arrays of
+tables)
 and raises the caller's `FileFieldError` subclass, whose text reads ``path:line: [table] key: what is wrong and how to
 fix it``. Scenario files use it (`ScenarioError`); any other declarative TOML input of the toolkit can.
 """
@@ -252,6 +253,24 @@ class TomlTable:
         if lo not in allowed or hi not in allowed:
             self.fail(key, f"both ends must be {allowed}, got [{value[0]}, {value[1]}]")
         return lo, hi
+
+    def vector(self, key: str, size: int, allowed: Range, default: tuple[float, ...] = MISSING) -> tuple[float, ...]:
+        """A vector ``[x, y, ...]``: `size` finite numbers, each within `allowed`."""
+        value = self._get(key, default)
+        if isinstance(value, tuple):
+            return value
+        if not isinstance(value, list):
+            self.fail(key, f"expected an array of {size} numbers, got {show(value)}")
+        if len(value) != size:
+            self.fail(key, f"expected an array of {size} numbers, got an array of {len(value)}")
+        for position, x in enumerate(value, start=1):
+            if not is_number(x):
+                self.fail(key, f"expected an array of {size} numbers, got {show(x)} at position {position}")
+            if not math.isfinite(x):
+                self.fail(key, f"must hold finite numbers, got {x} at position {position}")
+            if x not in allowed:
+                self.fail(key, f"each number must be {allowed}, got {x} at position {position}")
+        return tuple(float(x) for x in value)
 
     def optional_interval(self, key: str, allowed: Range) -> tuple[float, float] | None:
         """Like `interval`, None when the key is absent (so that a caller can tell absent from any default)."""

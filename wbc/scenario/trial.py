@@ -15,27 +15,46 @@ from wbc.scenario.push import Push
 from wbc.scenario.terrain import TerrainConfig
 from wbc.types import VelocityCommand
 
-__all__ = ["CommandSchedule", "Trial"]
+__all__ = ["CommandChange", "CommandSchedule", "Trial"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class CommandChange:
+    """From `at_s` on, the command is `command`, held (no ramp) until the next change.
+
+    Attributes:
+        at_s: when it takes effect [s]: the first control tick at or after it plays it.
+        command: the velocity command from then on.
+    """
+
+    at_s: float
+    command: VelocityCommand
 
 
 @dataclass(frozen=True, kw_only=True)
 class CommandSchedule:
-    """A constant velocity command reached by a linear ramp.
+    """A constant velocity command reached by a linear ramp, then changed at fixed times (if any).
 
     Attributes:
         vx: forward velocity [m/s].
         vy: lateral velocity [m/s].
         yaw_rate: yaw rate [rad/s].
         ramp_s: the command rises linearly from zero over this time from t = 0 [s] (0: a step).
+        changes: later commands, in increasing time order, each held from its time on (none: the constant command
+            throughout).
     """
 
     vx: float = 0.0
     vy: float = 0.0
     yaw_rate: float = 0.0
     ramp_s: float = 0.0
+    changes: tuple[CommandChange, ...] = ()
 
     def at(self, t: float) -> VelocityCommand:
         """The command at time `t` [s]."""
+        for change in reversed(self.changes):
+            if t >= change.at_s:
+                return change.command
         s = 1.0 if self.ramp_s <= 0.0 else min(1.0, max(0.0, t / self.ramp_s))
         return VelocityCommand(vx=s * self.vx, vy=s * self.vy, yaw_rate=s * self.yaw_rate)
 

@@ -48,7 +48,8 @@ class Pose:
 
     Attributes:
         matrix: homogeneous transform of the node in its parent (the world, except for the cells of the MPC's
-            gait chart, posed in the chart's frame), may include scale, shape (4, 4).
+            gait chart, posed in the chart's frame), may include scale, shape (4, 4); never changed once handed out
+            (a recording takes the same array again as the same value).
         visible: whether the node (and its children) is drawn.
     """
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = ["arrow_transforms", "rotation_y_to", "translation"]
@@ -14,13 +16,16 @@ def translation(p: np.ndarray) -> np.ndarray:
 
 def rotation_y_to(direction: np.ndarray) -> np.ndarray:
     """A rotation matrix whose y axis is `direction` (normalised; any unit vector if it is zero), shape (3, 3)."""
-    n = float(np.linalg.norm(direction))
-    y = np.asarray(direction, dtype=np.float64) / n if n > 1e-12 else np.array([0.0, 1.0, 0.0])
-    helper = np.array([0.0, 0.0, 1.0]) if abs(y[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    x = np.cross(y, helper)
-    x /= np.linalg.norm(x)
-    z = np.cross(x, y)
-    return np.column_stack([x, y, z])
+    # in scalars: the viewer poses a dozen arrows a frame, and numpy's cross of two 3-vectors costs ~30 us
+    dx, dy, dz = (float(v) for v in direction)
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    y = (dx / n, dy / n, dz / n) if n > 1e-12 else (0.0, 1.0, 0.0)
+    # x = y cross helper, the helper z (or x when y is near z), normalised; z = x cross y
+    x = (y[1], -y[0], 0.0) if abs(y[2]) < 0.9 else (0.0, y[2], -y[1])
+    nx = math.sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2])
+    x = (x[0] / nx, x[1] / nx, x[2] / nx)
+    z = (x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0])
+    return np.array([[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]])
 
 
 def arrow_transforms(start: np.ndarray, vector: np.ndarray, head_length: float) -> tuple[np.ndarray, np.ndarray]:
@@ -32,12 +37,13 @@ def arrow_transforms(start: np.ndarray, vector: np.ndarray, head_length: float) 
     Returns:
         (shaft, head) homogeneous transforms, the shaft's scaled along its axis, shape (4, 4) each.
     """
-    length = float(np.linalg.norm(vector))
+    vx, vy, vz = (float(v) for v in vector)
+    length = math.sqrt(vx * vx + vy * vy + vz * vz)
     rot = rotation_y_to(vector)
     axis = rot[:, 1]
     shaft_len = max(length - head_length, 1e-4)
     shaft = np.eye(4)
-    shaft[:3, :3] = rot @ np.diag([1.0, shaft_len, 1.0])
+    shaft[:3, :3] = rot * np.array([1.0, shaft_len, 1.0])  # rot @ diag(1, shaft_len, 1)
     shaft[:3, 3] = start + 0.5 * shaft_len * axis
     head = np.eye(4)
     head[:3, :3] = rot

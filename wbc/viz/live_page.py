@@ -10,11 +10,14 @@ robot; nobody else may), serves:
 - ``POST /push``: ``{"force_n", "heading_deg", "duration_s", "point_in_base": [x, y, z], "t"}`` a horizontal push
   towards world heading ``heading_deg`` (0 along world x, 90 along world y), applied at trial time ``t`` (default:
   now) through the same `wbc.scenario.push.Push` the scenarios use and the robot's `Pushable` hook;
-- ``POST /command``: ``{"vx", "vy", "yaw_rate"}`` the velocity command from now on;
+- ``POST /command``: ``{"vx", "vy", "yaw_rate"}`` the velocity command from the next control tick on (a
+  `wbc.scenario.trial.CommandChange` of the trial's schedule, at the time of the tick that first plays it);
 - ``POST /control``: ``{"pause": true|false}`` or ``{"speed": s}`` the pacing of the live trial.
 
-Every push and command change is kept (`pushes`, `operator_rows`) so the viewer logs them in the episode: pushes in
-its `PushLog` (replays draw them), both as operator actions (``browser`` key), and as marks on the page.
+Every push and command change is kept (`pushes`, the command's `SteeredCommand.changes`, `operator_rows`) so the
+viewer logs them in the episode: pushes in its `PushLog` (replays draw them), both as operator actions (``browser``
+key), and as marks on the page. Both take effect at a control tick and are kept with that tick's time, so a scenario
+written from them (`wbc.viz.trial_export`) plays them again exactly.
 """
 
 from __future__ import annotations
@@ -31,7 +34,7 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.hardware.capabilities import Pushable
 from wbc.scenario.push import Push
-from wbc.scenario.trial import CommandSchedule
+from wbc.scenario.trial import CommandChange, CommandSchedule
 from wbc.types import VelocityCommand
 from wbc.viz.content import SceneContent
 from wbc.viz.frame import VizFrame
@@ -99,15 +102,33 @@ class PushRequest:
 
 
 class SteeredCommand:
-    """The trial's command schedule until the page sets a command; that command from then on (`at` as a schedule)."""
+    """The trial's command schedule until the page sets a command; the page's latest command from then on.
+
+    Attributes:
+        schedule: the trial's own schedule.
+        changes: the commands set from the page, each from the control tick that first played it, in time order.
+    """
 
     def __init__(self, schedule: CommandSchedule) -> None:
         self.schedule = schedule
-        self.override: VelocityCommand | None = None
+        self.changes: list[CommandChange] = []
 
     def at(self, t: float) -> VelocityCommand:
-        """The command at time `t` [s]."""
-        return self.override if self.override is not None else self.schedule.at(t)
+        """The command at time `t` [s].
+
+        The page's latest command set by then; before the page's first, the schedule's (its own changes included).
+        """
+        for change in reversed(self.changes):
+            if t >= change.at_s:
+                return change.command
+        return self.schedule.at(t)
+
+    def change(self, t: float, command: VelocityCommand) -> None:
+        """From time `t` [s] on (no earlier than the last change), play `command`."""
+        if self.changes and t <= self.changes[-1].at_s:
+            self.changes[-1] = CommandChange(at_s=self.changes[-1].at_s, command=command)
+        else:
+            self.changes.append(CommandChange(at_s=t, command=command))
 
     # the trial's record keeps the schedule's own values: the page's commands are logged as operator actions
     @property
@@ -154,6 +175,7 @@ class LivePage:
         self.controls: Controls | None = None
         self.command: SteeredCommand | None = None
         self._queued: list[PushRequest] = []
+        self._commands: list[VelocityCommand] = []
         self._t = 0.0
         self._poses: dict[str, list[float] | None] = {}
         self._signals: TrialSignals | None = None
@@ -194,11 +216,19 @@ class LivePage:
             self._title, self._duration, self._fps, self._final = title, duration, fps, None
 
     def tick(self, t: float, robot: object) -> None:
-        """Before the observer draws tick `t`: apply the pushes due (on a `Pushable` robot)."""
+        """Before the observer draws tick `t`: apply the pushes due (on a `Pushable` robot) and the command set."""
         with self._lock:
             self._t = t
             due = [r for r in self._queued if r.t is None or r.t <= t + 1e-9]
             self._queued = [r for r in self._queued if r not in due]
+            commands, self._commands = self._commands, []
+        if commands and self.command is not None:
+            cmd = commands[-1]  # set since the last tick: the ones before it never played
+            self.command.change(t, cmd)
+            label = f"browser command vx {cmd.vx:g} vy {cmd.vy:g} yaw rate {cmd.yaw_rate:g}"
+            with self._lock:
+                self.operator_rows.append((t, "browser", label))
+                self._marks.append(Mark(t, "command", label))
         for req in due:
             if not isinstance(robot, Pushable):
                 continue
@@ -265,11 +295,8 @@ class LivePage:
                 raise ConfigError("command: |vx| <= 3 m/s, |vy| <= 2 m/s, |yaw_rate| <= 3 rad/s, as in a scenario")
             if self.command is None:
                 raise ConfigError("command: no trial is playing")
-            self.command.override = cmd
-            label = f"browser command vx {cmd.vx:g} vy {cmd.vy:g} yaw rate {cmd.yaw_rate:g}"
             with self._lock:
-                self.operator_rows.append((self._t, "browser", label))
-                self._marks.append(Mark(self._t, "command", label))
+                self._commands.append(cmd)
             return {"set": True}
         if route == "/control":
             if self.controls is None:

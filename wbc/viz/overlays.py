@@ -35,6 +35,7 @@ PIN_LEGS = ("FL", "FR", "RL", "RR")
 """Leg order of the MPC's arrays (Pinocchio's)."""
 
 _HIDDEN = Pose(np.eye(4), visible=False)
+_SHOWN = Pose(np.eye(4))  # a group shown where its parent is
 
 
 class Arrow:
@@ -70,7 +71,7 @@ class Arrow:
         if not visible or float(np.linalg.norm(vector)) < 1e-6:
             return {self.path: _HIDDEN}
         shaft, head = arrow_transforms(start, vector, min(self.head_length, 0.5 * float(np.linalg.norm(vector))))
-        return {self.path: Pose(np.eye(4)), f"{self.path}/shaft": Pose(shaft), f"{self.path}/head": Pose(head)}
+        return {self.path: _SHOWN, f"{self.path}/shaft": Pose(shaft), f"{self.path}/head": Pose(head)}
 
 
 class PushArrow:
@@ -156,6 +157,11 @@ class PlanOverlay:
         self.horizon = horizon
         self.forces = [Arrow(f"{self.root}/forces/{leg}", 0x18B5C4, radius=0.005, head_length=0.02)
                        for leg in PIN_LEGS]
+        # the paths, named once: a recording poses them at every frame
+        self._com_paths = [f"{self.root}/com/{i}" for i in range(horizon)]
+        self._arm_paths = [f"{self.root}/arm/{i}" for i in range(horizon)]
+        self._hold_paths = [f"{self.root}/footholds/{leg}" for leg in PIN_LEGS]
+        self._cell_paths = [[f"{self.root}/schedule/{leg}/{i}" for i in range(horizon)] for leg in PIN_LEGS]
         # the chart's cells at their fixed places in the chart, (hidden, shown), by leg and plan step
         self._cells = [[(Pose(m, visible=False), Pose(m)) for m in (
             translation(np.array([(i - 0.5 * horizon) * self.cell_dx, 0.0, (1.5 - k) * self.cell_dy]))
@@ -185,36 +191,51 @@ class PlanOverlay:
         plan = frame.plan
         if plan is None:
             return {self.root: _HIDDEN}
-        out: dict[str, Pose] = {self.root: Pose(np.eye(4))}
-        com = np.asarray(plan["com_path_in_world"])
-        for i in range(self.horizon):
-            out[f"{self.root}/com/{i}"] = Pose(translation(com[i])) if i < len(com) else _HIDDEN
+        out: dict[str, Pose] = {self.root: _SHOWN}
+        com = _translations(np.asarray(plan["com_path_in_world"])[: self.horizon])
+        for i, path in enumerate(self._com_paths):
+            out[path] = Pose(com[i]) if i < len(com) else _HIDDEN
         tips = None
         if "arm_q_plan" in plan:
             tips = scene.arm_tip_path(frame.qpos, np.asarray(plan["arm_q_plan"])[: self.horizon])
-        for i in range(self.horizon):
-            out[f"{self.root}/arm/{i}"] = Pose(translation(tips[i])) if tips is not None and i < len(tips) else _HIDDEN
+        tips = _translations(tips) if tips is not None else ()
+        for i, path in enumerate(self._arm_paths):
+            out[path] = Pose(tips[i]) if i < len(tips) else _HIDDEN
         rot_z = _yaw_rotation(frame.qpos)
         holds = np.asarray(plan["footholds_in_world"])
-        upright = np.eye(4)
-        upright[:3, :3] = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # disc flat on the ground
-        for k, leg in enumerate(PIN_LEGS):
-            out[f"{self.root}/footholds/{leg}"] = Pose(translation(holds[k]) @ upright)
+        discs = _translations(holds[: len(PIN_LEGS)])
+        discs[:, :3, :3] = _UPRIGHT  # a disc flat on the ground
+        for k, path in enumerate(self._hold_paths):
+            out[path] = Pose(discs[k])
         schedule = np.asarray(plan["contact_schedule"], dtype=bool)
         # the chart moves as one (its group's transform); its cells only show or hide, at fixed places in it
         strip = np.eye(4)
         strip[:3, :3] = rot_z
         strip[:3, 3] = frame.qpos[:3] + np.array([0.0, 0.0, self.strip_height])
         out[f"{self.root}/schedule"] = Pose(strip)
-        for k, leg in enumerate(PIN_LEGS):
-            for i in range(self.horizon):
-                on = i < len(schedule) and bool(schedule[i, k])
-                out[f"{self.root}/schedule/{leg}/{i}"] = self._cells[k][i][on]
+        steps = min(len(schedule), self.horizon)
+        for k, paths in enumerate(self._cell_paths):
+            cells = self._cells[k]
+            stance = schedule[:steps, k].tolist()
+            for i, path in enumerate(paths):
+                out[path] = cells[i][i < steps and stance[i]]
         forces = np.asarray(plan["forces_in_world"])
         for k, a in enumerate(self.forces):
             f = forces[0, k] if len(forces) else np.zeros(3)
             out.update(a.poses(holds[k], self.n_per_m * f, float(np.linalg.norm(f)) > 1.0))
         return out
+
+
+_UPRIGHT = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
+"""Rotation laying meshcat's cylinder (axis y) flat on the ground (axis z)."""
+
+
+def _translations(points: np.ndarray) -> np.ndarray:
+    """Homogeneous translations to each row of `points`, shape (n, 4, 4)."""
+    out = np.zeros((len(points), 4, 4))
+    out[:, 0, 0] = out[:, 1, 1] = out[:, 2, 2] = out[:, 3, 3] = 1.0
+    out[:, :3, 3] = points
+    return out
 
 
 def _yaw_rotation(qpos: np.ndarray) -> np.ndarray:

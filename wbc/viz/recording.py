@@ -8,14 +8,15 @@ server. The page plays the animation once; meshcat's panel (Animations) has play
 plays on from there).
 
 Keys are thinned: a track gets a key only where its value changes (and just before, so a held value is not
-interpolated), and visibility only where it flips.
+interpolated), and visibility only where it flips. A frame only appends each node's transform to a buffer; the
+buffers are turned into keys a chunk at a time, with numpy over the chunk (`_NodeKeys`), which keeps recording
+cheap beside the simulation and its memory bounded whatever the trial's length.
 """
 
 from __future__ import annotations
 
 import base64
 import html as html_lib
-import math
 from pathlib import Path
 
 import meshcat
@@ -118,65 +119,131 @@ class _SceneWindow:
         return out
 
 
-class _Track:
-    """Keys of one property of one node, added only where the value changes."""
-
-    def __init__(self, jstype: str, discrete: bool) -> None:
-        self.jstype = jstype
-        self.discrete = discrete
-        self.keys: list[tuple[int, object]] = []
-        self._last: tuple[int, object] | None = None
-
-    def add(self, frame: int, value: object) -> None:
-        last = self._last
-        if last is None or not _same(last[1], value):
-            if last is not None and not self.discrete and self.keys and self.keys[-1][0] != last[0]:
-                self.keys.append(last)  # hold the previous value up to here
-            self.keys.append((frame, value))
-        self._last = (frame, value)
-
-    def hold(self, frame: int) -> None:
-        """The value last added holds at `frame` too."""
-        self._last = (frame, self._last[1])
+_TOL = 1e-5
+"""A transform component moving less than this between two frames is held, not keyed."""
+_CHUNK = 256
+"""Frames of a node buffered before they are turned into keys (bounds the buffer of a long trial)."""
+_PROPS = (("position", "vector3"), ("quaternion", "quaternion"), ("scale", "vector3"))
 
 
-def _same(a: object, b: object) -> bool:
-    if isinstance(a, list):
-        for x, y in zip(a, b, strict=True):
-            if abs(x - y) > 1e-5:
-                return False
-        return True
-    return a == b
+class _NodeKeys:
+    """The animation keys of one node: its visibility where it flips, its transform where it moves.
+
+    A transform is keyed where any component of its position, quaternion or scale differs from the frame before by
+    more than `_TOL`; the frame before is keyed too when it was not (the value held up to there is not
+    interpolated). Transforms are buffered and decomposed `_CHUNK` at a time. A run of frames that hand over the very
+    same matrix (a gait chart cell, an overlay's group) is buffered as its first and last frame only: the frames
+    between can be no key.
+    """
+
+    def __init__(self) -> None:
+        self.visible: list[tuple[int, bool]] = []
+        self.frames: dict[str, list[np.ndarray]] = {prop: [] for prop, _ in _PROPS}
+        self.values: dict[str, list[np.ndarray]] = {prop: [] for prop, _ in _PROPS}
+        self._buffer: list[tuple[int, np.ndarray]] = []
+        self._run_end: int | None = None  # newest frame repeating the last buffered matrix object, not buffered yet
+        self._last: dict[str, tuple[int, np.ndarray, bool]] = {}  # prop -> last frame, its value, whether keyed
+
+    def add(self, k: int, pose: Pose) -> None:
+        """The node's pose at frame `k`."""
+        visible = bool(pose.visible)
+        if not self.visible or self.visible[-1][1] != visible:
+            self.visible.append((k, visible))
+        if visible:
+            buffer, matrix = self._buffer, pose.matrix
+            if buffer and buffer[-1][1] is matrix:
+                self._run_end = k
+                return
+            if self._run_end is not None:
+                buffer.append((self._run_end, buffer[-1][1]))
+                self._run_end = None
+            buffer.append((k, matrix))
+            if len(buffer) >= _CHUNK:
+                self.flush()
+
+    def flush(self) -> None:
+        """Turn the buffered transforms into keys."""
+        if self._run_end is not None:
+            self._buffer.append((self._run_end, self._buffer[-1][1]))
+            self._run_end = None
+        if not self._buffer:
+            return
+        frames = np.fromiter((k for k, _ in self._buffer), dtype=np.int64, count=len(self._buffer))
+        matrices = np.array([m for _, m in self._buffer], dtype=np.float64)
+        self._buffer = []
+        for (prop, _), values in zip(_PROPS, _decompose(matrices), strict=True):
+            self._key(prop, frames, values)
+
+    def _key(self, prop: str, frames: np.ndarray, values: np.ndarray) -> None:
+        last = self._last.get(prop)
+        if last is not None:  # the chunk continues from the last frame of the one before
+            frames = np.concatenate([[last[0]], frames])
+            values = np.concatenate([last[1][None, :], values])
+        moved = np.abs(np.diff(values, axis=0)).max(axis=1) > _TOL
+        changed = np.concatenate([[True if last is None else last[2]], moved])
+        held = np.zeros_like(changed)
+        held[:-1] = changed[1:] & ~changed[:-1]
+        keep = changed | held
+        if last is not None:
+            keep[0] = held[0]  # keyed already, unless it is the held value before a change
+        idx = np.flatnonzero(keep)
+        if len(idx):
+            self.frames[prop].append(frames[idx])
+            self.values[prop].append(values[idx])
+        self._last[prop] = (int(frames[-1]), values[-1].copy(), bool(changed[-1]))
+
+    def keys(self, prop: str) -> tuple[np.ndarray, np.ndarray]:
+        """(frames, values) of the keys of `prop` (call `flush` first)."""
+        if not self.frames[prop]:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 4 if prop == "quaternion" else 3))
+        return np.concatenate(self.frames[prop]), np.concatenate(self.values[prop])
 
 
-def _decompose(m: np.ndarray) -> tuple[list[float], list[float], list[float]]:
-    """(position, quaternion x y z w, scale) of a transform with positive scale along its axes."""
-    rows = m.tolist()
-    cols = [[rows[0][j], rows[1][j], rows[2][j]] for j in range(3)]
-    scale = [math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2]) for c in cols]
-    r = [[cols[j][i] / scale[j] if scale[j] > 0 else cols[j][i] for j in range(3)] for i in range(3)]
-    return [rows[0][3], rows[1][3], rows[2][3]], _quaternion(r), scale
+def _decompose(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(positions, quaternions x y z w, scales) of transforms with positive scale along their axes, shape (n, 4, 4).
+
+    Returns:
+        Shapes (n, 3), (n, 4) and (n, 3).
+    """
+    rot = m[:, :3, :3]
+    scale = np.sqrt(np.einsum("nij,nij->nj", rot, rot))  # the columns' lengths
+    r = rot / np.where(scale > 0.0, scale, 1.0)[:, None, :]
+    return m[:, :3, 3].copy(), _quaternions(r), scale
 
 
-def _quaternion(r: list[list[float]]) -> list[float]:
-    """Unit quaternion (x, y, z, w) of the rotation matrix `r` (rows), by the largest of its four forms."""
-    trace = r[0][0] + r[1][1] + r[2][2]
-    if trace > 0.0:
-        s = 0.5 / math.sqrt(trace + 1.0)
-        q = [(r[2][1] - r[1][2]) * s, (r[0][2] - r[2][0]) * s, (r[1][0] - r[0][1]) * s, 0.25 / s]
-    elif r[0][0] > r[1][1] and r[0][0] > r[2][2]:
-        s = 2.0 * math.sqrt(max(1.0 + r[0][0] - r[1][1] - r[2][2], 1e-12))
-        q = [0.25 * s, (r[0][1] + r[1][0]) / s, (r[0][2] + r[2][0]) / s, (r[2][1] - r[1][2]) / s]
-    elif r[1][1] > r[2][2]:
-        s = 2.0 * math.sqrt(max(1.0 + r[1][1] - r[0][0] - r[2][2], 1e-12))
-        q = [(r[0][1] + r[1][0]) / s, 0.25 * s, (r[1][2] + r[2][1]) / s, (r[0][2] - r[2][0]) / s]
-    else:
-        s = 2.0 * math.sqrt(max(1.0 + r[2][2] - r[0][0] - r[1][1], 1e-12))
-        q = [(r[0][2] + r[2][0]) / s, (r[1][2] + r[2][1]) / s, 0.25 * s, (r[1][0] - r[0][1]) / s]
-    if q[3] < 0.0:  # one sign for the same rotation: keys compare equal when the pose holds
-        q = [-x for x in q]
-    n = math.sqrt(sum(x * x for x in q))
-    return [x / n for x in q]
+def _quaternions(r: np.ndarray) -> np.ndarray:
+    """Unit quaternions (x, y, z, w) of rotation matrices `r`, shape (n, 3, 3), each by the largest of its four forms.
+
+    The sign is the one with w >= 0, so that keys compare equal when a pose holds.
+    """
+    q = np.empty((len(r), 4))
+    r00, r11, r22 = r[:, 0, 0], r[:, 1, 1], r[:, 2, 2]
+    trace = r00 + r11 + r22
+    a = trace > 0.0
+    b = ~a & (r00 > r11) & (r00 > r22)
+    c = ~a & ~b & (r11 > r22)
+    d = ~(a | b | c)
+    if a.any():
+        x, s = r[a], 0.5 / np.sqrt(trace[a] + 1.0)
+        q[a] = np.stack([(x[:, 2, 1] - x[:, 1, 2]) * s, (x[:, 0, 2] - x[:, 2, 0]) * s, (x[:, 1, 0] - x[:, 0, 1]) * s,
+                         0.25 / s], axis=1)
+    if b.any():
+        x = r[b]
+        s = 2.0 * np.sqrt(np.maximum(1.0 + x[:, 0, 0] - x[:, 1, 1] - x[:, 2, 2], 1e-12))
+        q[b] = np.stack([0.25 * s, (x[:, 0, 1] + x[:, 1, 0]) / s, (x[:, 0, 2] + x[:, 2, 0]) / s,
+                         (x[:, 2, 1] - x[:, 1, 2]) / s], axis=1)
+    if c.any():
+        x = r[c]
+        s = 2.0 * np.sqrt(np.maximum(1.0 + x[:, 1, 1] - x[:, 0, 0] - x[:, 2, 2], 1e-12))
+        q[c] = np.stack([(x[:, 0, 1] + x[:, 1, 0]) / s, 0.25 * s, (x[:, 1, 2] + x[:, 2, 1]) / s,
+                         (x[:, 0, 2] - x[:, 2, 0]) / s], axis=1)
+    if d.any():
+        x = r[d]
+        s = 2.0 * np.sqrt(np.maximum(1.0 + x[:, 2, 2] - x[:, 0, 0] - x[:, 1, 1], 1e-12))
+        q[d] = np.stack([(x[:, 0, 2] + x[:, 2, 0]) / s, (x[:, 1, 2] + x[:, 2, 1]) / s, 0.25 * s,
+                         (x[:, 1, 0] - x[:, 0, 1]) / s], axis=1)
+    q[q[:, 3] < 0.0] *= -1.0
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 class _AnimationCommand:
@@ -196,7 +263,7 @@ class _AnimationCommand:
                                for path, tracks in self.clips]}
 
 
-def _floats(values: list) -> umsgpack.Ext:
+def _floats(values: np.ndarray) -> umsgpack.Ext:
     return umsgpack.Ext(_FLOAT32_EXT, np.asarray(values, dtype="<f4").tobytes())
 
 
@@ -222,9 +289,8 @@ class Recording:
         self.window = _SceneWindow()
         self.vis = meshcat.Visualizer(window=self.window)
         content.setup(self.vis)
-        self._tracks: dict[tuple[str, str], _Track] = {}
-        self._full: dict[str, str] = {}  # scene path -> full path
-        self._last_matrix: dict[str, bytes] = {}  # full path -> its last keyed transform
+        self._nodes: dict[str, _NodeKeys] = {}  # full path -> its keys, in the order first keyed
+        self._full: dict[tuple[int, str], _NodeKeys] = {}  # (-1 or ghost index, scene path) -> its node's keys
         self._last_frame = -1
         self.frames = 0
         self._ghosts: list[tuple[SceneContent, meshcat.Visualizer]] = []
@@ -251,8 +317,12 @@ class Recording:
             return False
         self._last_frame = k
         self.frames += 1
+        full = self._full
         for path, pose in self.content.poses(frame).items():
-            self._key(k, path, pose)
+            node = full.get((-1, path))
+            if node is None:
+                node = self._node(-1, path, path if path.startswith("/") else self.vis[path].path.lower())
+            node.add(k, pose)
         return True
 
     def add_ghost(self, content: SceneContent, *, color: tuple[float, float, float, float] = GHOST_COLOR) -> int:
@@ -280,60 +350,57 @@ class Recording:
         if k <= self._ghost_last[i]:
             return False
         self._ghost_last[i] = k
+        full = self._full
         for path, pose in content.poses(frame).items():
-            if not path.startswith(_GHOST_SKIP):
-                self._key(k, vis[path].path.lower(), pose)
+            node = full.get((i, path))
+            if node is None:
+                if path.startswith(_GHOST_SKIP):
+                    continue
+                node = self._node(i, path, vis[path].path.lower())
+            node.add(k, pose)
         return True
 
-    def _key(self, k: int, path: str, pose: Pose) -> None:
-        full = self._full.get(path)
-        if full is None:
-            full = self._full[path] = path if path.startswith("/") else self.vis[path].path.lower()
-        tracks = self._tracks
-        vis_track = tracks.get((full, "visible"))
-        if vis_track is None:
-            vis_track = tracks[(full, "visible")] = _Track("boolean", discrete=True)
-        vis_track.add(k, bool(pose.visible))
-        if not pose.visible:
-            return
-        raw = pose.matrix.tobytes()
-        if self._last_matrix.get(full) == raw:  # unchanged: the held keys just run on to this frame
-            for prop in ("position", "quaternion", "scale"):
-                track = tracks[(full, prop)]
-                track.hold(k)
-            return
-        self._last_matrix[full] = raw
-        pos, quat, scale = _decompose(pose.matrix)
-        for prop, jstype, value in (("position", "vector3", pos), ("quaternion", "quaternion", quat),
-                                    ("scale", "vector3", scale)):
-            track = tracks.get((full, prop))
-            if track is None:
-                track = tracks[(full, prop)] = _Track(jstype, discrete=False)
-            track.add(k, value)
+    def _node(self, owner: int, path: str, full: str) -> _NodeKeys:
+        node = self._nodes.get(full)
+        if node is None:
+            node = self._nodes[full] = _NodeKeys()
+        self._full[(owner, path)] = node
+        return node
+
+    def _tracks(self) -> list[tuple[str, str, str, np.ndarray, list]]:
+        """(full path, property, three.js type, key frames, key values) of every track, in the order first keyed."""
+        out = []
+        for full, node in self._nodes.items():
+            node.flush()
+            out.append((full, "visible", "boolean", np.array([k for k, _ in node.visible], dtype=np.int64),
+                        [v for _, v in node.visible]))
+            for prop, jstype in _PROPS:
+                frames, values = node.keys(prop)
+                if not len(frames):
+                    continue
+                if prop == "scale" and np.all(np.abs(values - 1.0) <= _TOL):
+                    continue  # unscaled throughout: no track
+                out.append((full, prop, jstype, frames, values))
+        return out
 
     def animation(self) -> Animation:
         """The meshcat animation of the frames added so far (as meshcat's Python builds it: keys, not arrays)."""
         anim = Animation(default_framerate=self.fps)
-        for (full, prop), track in self._tracks.items():
-            if prop == "scale" and all(_same(v, [1.0, 1.0, 1.0]) for _, v in track.keys):
-                continue
-            frame_vis = anim.at_frame(self.vis[full], 0)
-            clip = frame_vis.get_clip()
-            for k, value in track.keys:
-                clip.set_property(k, prop, track.jstype, value)
+        for full, prop, jstype, frames, values in self._tracks():
+            clip = anim.at_frame(self.vis[full], 0).get_clip()
+            for k, value in zip(frames.tolist(), values if prop == "visible" else values.tolist(), strict=True):
+                clip.set_property(k, prop, jstype, value)
         return anim
 
     def _animation_command(self, play: bool) -> _AnimationCommand:
         clips: dict[str, list[dict[str, object]]] = {}
-        for (full, prop), track in self._tracks.items():
-            if prop == "scale" and all(_same(v, [1.0, 1.0, 1.0]) for _, v in track.keys):
-                continue
-            if track.jstype == "boolean":
+        for full, prop, jstype, frames, values in self._tracks():
+            if jstype == "boolean":
                 entry = {"name": f".{prop}", "type": "boolean",
-                         "keys": [{"time": k, "value": v} for k, v in track.keys]}
+                         "keys": [{"time": k, "value": v} for k, v in zip(frames.tolist(), values, strict=True)]}
             else:
-                entry = {"name": f".{prop}", "type": track.jstype, "times": _floats([k for k, _ in track.keys]),
-                         "values": _floats([x for _, v in track.keys for x in v])}
+                entry = {"name": f".{prop}", "type": jstype, "times": _floats(frames),
+                         "values": _floats(values.reshape(-1))}
             clips.setdefault(full, []).append(entry)
         return _AnimationCommand(list(clips.items()), self.fps, play)
 

@@ -94,6 +94,14 @@ class TrialSignals:
     _push_impulse: np.ndarray = field(default_factory=lambda: np.zeros(3))
     _push_was_on: bool = False
     _last_t: float = 0.0
+    _model: tuple[mujoco.MjModel, list[str], np.ndarray, int | None] | None = field(default=None, repr=False)
+
+    def _model_info(self, m: mujoco.MjModel) -> tuple[list[str], np.ndarray, int | None]:
+        """(actuator names, torque limits, the arm's root body) of `m`, looked up once per model."""
+        if self._model is None or self._model[0] is not m:
+            names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or f"joint {i}" for i in range(m.nu)]
+            self._model = (m, names, m.actuator_forcerange[:, 1].copy(), _arm_root(m))
+        return self._model[1], self._model[2], self._model[3]
 
     def _put(self, plot: str, line: str, value: float | None) -> None:
         column = self.lines.setdefault(plot, {}).setdefault(line, [])
@@ -136,10 +144,10 @@ class TrialSignals:
             for leg, f in zip(_LEGS, frame.foot_force_in_world, strict=True):
                 self._put("foot_forces", leg, float(f[2]))
         m, d = robot.model, robot.data
-        limit = m.actuator_forcerange[:, 1]
-        for i in range(m.nu):
-            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or f"joint {i}"
-            self._put("torques", name, float(d.actuator_force[i] / limit[i]) if limit[i] > 0 else None)
+        names, limit, arm = self._model_info(m)
+        force = d.actuator_force
+        for i, name in enumerate(names):
+            self._put("torques", name, float(force[i] / limit[i]) if limit[i] > 0 else None)
         com = truth.com_in_world
         if frame.pushed:
             r = frame.push_point_in_world - com
@@ -147,7 +155,6 @@ class TrialSignals:
                 self._push_impulse = np.zeros(3)
             self._push_impulse = self._push_impulse + np.cross(r, frame.push_force_in_world) * dt
         self._push_was_on = frame.pushed
-        arm = _arm_root(m)
         if arm is not None:
             mass = float(m.body_subtreemass[arm])
             c_arm, v_arm = d.subtree_com[arm], d.subtree_linvel[arm]

@@ -5,7 +5,9 @@
 - record: the same frames keyed into a `Recording` and written as one self-contained HTML file, the trial page
   (`wbc.viz.page`: the scene beside its time plots); with a recording and no live viewer the trial runs at full
   speed and no server is started;
-- A / B: two controllers' runs of one trial in one page, the second as a ghost (`view_ab`, `replay_ab`).
+- A / B: two controllers' runs of one trial in one page, the second as a ghost (`view_ab`, `replay_ab`);
+- export: the trial as played, pushes and commands from the live page included, written as a scenario that replays
+  it for every controller (`wbc.viz.trial_export`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import base64
 import dataclasses
 import sys
+import time
 import webbrowser
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -29,6 +32,7 @@ from wbc.scenario.push import Push
 from wbc.scenario.trial import Trial
 from wbc.types import VelocityCommand
 from wbc.viz.ab import CapturedRun, ab_recording, capture_trial
+from wbc.viz.errors import ViewerError
 from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.live_page import LivePage, SteeredCommand
 from wbc.viz.page import save_trial_page, trial_page
@@ -37,8 +41,10 @@ from wbc.viz.recording import Recording
 from wbc.viz.replay import StoredEpisode
 from wbc.viz.server import MeshcatServer, ServerConfig
 from wbc.viz.signals import TrialSignals
+from wbc.viz.trial_export import ExportedScenario, export_trial
 
-__all__ = ["ABResult", "ViewConfig", "ViewResult", "replay_ab", "replay_episode", "view_ab", "view_trial"]
+__all__ = ["ABResult", "RecordingTime", "ViewConfig", "ViewResult", "replay_ab", "replay_episode", "view_ab",
+           "view_trial"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -55,6 +61,8 @@ class ViewConfig:
         wait_for_browser: play only once a browser has connected.
         keep_open: after the trial, keep the server up until q is typed (only when stdin is a terminal).
         save_episode: write the episode (with the pushes and commands set from the page) to this ``.npz``.
+        export_scenario: write a scenario that replays the trial as played (with the pushes and commands set from
+            the page) to this ``.toml`` (`wbc.viz.trial_export`).
     """
 
     live: bool = True
@@ -66,6 +74,55 @@ class ViewConfig:
     wait_for_browser: bool = False
     keep_open: bool = True
     save_episode: Path | None = None
+    export_scenario: Path | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class RecordingTime:
+    """Where the wall time of a recorded trial went, measured in the run itself.
+
+    The viewer's share is the time spent in its per-tick observer (building the scene, making, keying and sampling
+    frames) and in writing the page; the rest of the run is the trial's simulation (robot, controller, physics), as
+    it would run without a viewer.
+
+    Attributes:
+        total_s: the whole run, from the trial's start to the page written [s].
+        viewer_s: the viewer's share of it [s].
+    """
+
+    total_s: float
+    viewer_s: float
+
+    @property
+    def simulation_s(self) -> float:
+        """The trial's simulation without the viewer [s]."""
+        return self.total_s - self.viewer_s
+
+    @property
+    def ratio(self) -> float:
+        """The recorded run's time over the simulation's alone (1: recording costs nothing)."""
+        return self.total_s / self.simulation_s if self.simulation_s > 0 else float("inf")
+
+    def line(self) -> str:
+        """One line for a person."""
+        return (f"recording took {self.total_s:.2f} s: the trial's simulation {self.simulation_s:.2f} s + the viewer "
+                f"{self.viewer_s:.2f} s ({self.ratio:.2f}x the simulation alone)")
+
+
+class _Stopwatch:
+    """A runner observer around another that adds up the wall time spent in it [s]."""
+
+    def __init__(self, observer: Callable[..., None]) -> None:
+        self.observer = observer
+        self.seconds = 0.0
+
+    def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
+        """One tick (the `wbc.arena.runner.TickObserver` signature)."""
+        start = time.perf_counter()
+        try:
+            self.observer(t, robot, controller, command)
+        finally:
+            self.seconds += time.perf_counter() - start
 
 
 @dataclass(frozen=True)
@@ -79,6 +136,8 @@ class ViewResult:
         frames_recorded: frames in the recording.
         paths: scene paths by role (robot, arm, push, ...).
         episode: the episode played (None for replays), with the pushes and commands set from the page.
+        timing: where the time of a recorded trial played at full speed went (None when live or not recorded).
+        exported: the scenario written with ``export_scenario`` (None without).
     """
 
     trial_record: TrialRecord | None
@@ -87,6 +146,8 @@ class ViewResult:
     frames_recorded: int
     paths: dict[str, list[str]]
     episode: Episode | None = None
+    timing: RecordingTime | None = None
+    exported: ExportedScenario | None = None
 
 
 def _trial_name(trial: Trial) -> str:
@@ -126,9 +187,16 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
 
     Live, the trial page is served too (`LivePage`, on 127.0.0.1: `page`, or one started here): the scene beside its
     plots, with pushes and velocity commands from the page. They are applied through the scenario's `Push` and the
-    robot's push hook, and logged in the returned episode: pushes in its `PushLog`, both as operator actions.
+    robot's push hook, and logged in the returned episode: pushes in its `PushLog`, both as operator actions. With
+    ``cfg.export_scenario`` the trial as played is then written as a scenario that replays it (`export_trial`).
+
+    Raises:
+        ViewerError: ``cfg.export_scenario`` is not a ``.toml`` file in an existing directory (before anything plays).
     """
     name = controller if isinstance(controller, str) else controller.name
+    export = cfg.export_scenario
+    if export is not None and (export.suffix.lower() != ".toml" or not export.resolve().parent.is_dir()):
+        raise ViewerError(f"--export-scenario {export}: give a .toml file in an existing directory")
     server = viewer = player = None
     own_page = False
     if cfg.live:
@@ -138,6 +206,7 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
         print(f"trial page: {page.url}  (plots; pushes and commands from the page; 127.0.0.1 only)",
               file=sys.stderr)
     try:
+        started = time.perf_counter()
         recording_fps = cfg.record_fps if (cfg.record is not None or page is not None) else None
         observer = LiveObserver(viewer, player, recording_fps=recording_fps)
         observer.name = name
@@ -146,7 +215,9 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
             page.command = SteeredCommand(trial.command)
             page.controls = player.controls if player is not None else None
             played = dataclasses.replace(trial, command=page.command)
-        row, episode = run_trial(played, controller, observer=_with_page(observer, page, trial, name, cfg))
+        watch = _Stopwatch(_with_page(observer, page, trial, name, cfg))
+        row, episode = run_trial(played, controller, observer=watch)
+        ran = time.perf_counter()  # from here on, everything is the viewer's: marks, the page
         signals = observer.signals[-1] if observer.signals else None
         if signals is not None:
             signals.mark_episode(episode)
@@ -154,21 +225,29 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
             episode = _log_page_actions(episode, page)
             if signals is not None:
                 signals.marks = sorted(signals.marks + page.marks, key=lambda m: m.t)
-        written = None
+        written = timing = None
         title = f"{name}: {_trial_name(trial)}"
         if cfg.record is not None:
             written = save_trial_page(cfg.record, observer.recordings[-1], [signals], title=title,
                                       duration=trial.duration_s)
+            done = time.perf_counter()
+            if not cfg.live:
+                timing = RecordingTime(total_s=done - started, viewer_s=watch.seconds + done - ran)
         if page is not None and signals is not None:
             page.finish(trial_page(observer.recordings[-1], [signals], title=title, duration=trial.duration_s))
         if cfg.save_episode is not None:
             episode.save(str(cfg.save_episode))
+        exported = None
+        if export is not None:
+            exported = export_trial(export, trial, controller=name, played_s=episode.survived_s,
+                                    browser_pushes=page.pushes if page is not None else (),
+                                    browser_commands=page.command.changes if page is not None else ())
         if cfg.live:
             _linger(cfg, player)
         paths = (viewer.paths if viewer is not None else observer.recordings[-1].paths)
         return ViewResult(trial_record=row, recording=written, frames_drawn=player.drawn if player else 0,
                           frames_recorded=observer.recordings[-1].frames if cfg.record else 0, paths=paths,
-                          episode=episode)
+                          episode=episode, timing=timing, exported=exported)
     finally:
         if server is not None:
             server.stop()
@@ -218,8 +297,15 @@ def _log_page_actions(episode: Episode, page: LivePage) -> Episode:
     return dataclasses.replace(episode, pushes=PushLog.of(merged), operator_events=OperatorLog.of(rows))
 
 
+def _no_export(cfg: ViewConfig, what: str) -> None:
+    if cfg.export_scenario is not None:
+        raise ViewerError(f"--export-scenario writes the trial one controller plays (wbc view CTRL --scenario FILE "
+                          f"--trial I), not {what}")
+
+
 def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
     """Replay a stored episode, live in the browser and/or into a recording."""
+    _no_export(cfg, "a stored episode")
     written, recorded, drawn, paths = None, 0, 0, {}
     if cfg.record is not None:
         rec = Recording(stored.content(), fps=cfg.record_fps)
@@ -286,12 +372,14 @@ def _write_ab(a: CapturedRun, b: CapturedRun, trial: Trial, cfg: ViewConfig, pat
 def view_ab(trial: Trial, controllers: tuple[ControllerSpec | str, ControllerSpec | str], cfg: ViewConfig,
             path: Path) -> ABResult:
     """Play `trial` with both controllers in simulation and write one page of both runs to `path`."""
+    _no_export(cfg, "an A / B view")
     a, b = (capture_trial(trial, c, cfg.record_fps) for c in controllers)
     return _write_ab(a, b, trial, cfg, path, "")
 
 
 def replay_ab(first: StoredEpisode, second: StoredEpisode, cfg: ViewConfig, path: Path) -> ABResult:
     """Write one page of two stored runs of the same trial (`second` the ghost) to `path`."""
+    _no_export(cfg, "an A / B view")
     runs = []
     for stored in (first, second):
         run = CapturedRun(stored.controller, stored.content(),
