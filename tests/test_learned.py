@@ -690,6 +690,14 @@ def test_walking_prior_draws_its_commands_from_the_ranges():
     assert np.unique(cmd[:, 0]).size == 16  # drawn per episode, not one of the scenario's two options
     with pytest.raises(ConfigError, match="command_ranges"):
         small_config(command_ranges=((0.4, 0.2), (0.0, 0.0), (0.0, 0.0)))
+    # a share of the episodes is told to stand; without it the draws are those above, unchanged
+    standing = BatchedEnv(small_config(num_envs=64, command_ranges=ranges, standing_share=0.5))._command_target
+    still = np.all(standing == 0.0, axis=1)
+    assert 16 <= still.sum() <= 48 and np.all(standing[~still, 2] == 0.5)
+    np.testing.assert_array_equal(BatchedEnv(small_config(num_envs=16, command_ranges=ranges))._command_target, cmd)
+    assert stage_config("turn", 1).env.standing_share == 0.25 and stage_config("push", 1).env.standing_share == 0.0
+    with pytest.raises(ConfigError, match="standing_share"):
+        small_config(standing_share=1.5)
 
 
 def test_fall_penalty_survives_the_positive_clipping():

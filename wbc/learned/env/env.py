@@ -300,6 +300,9 @@ class BatchedEnv:
         if cfg.command_ranges is not None:  # the walking prior's commands (stage 1), not the scenario's
             lo, hi = np.asarray(cfg.command_ranges, dtype=np.float64).T
             self._command_target[ids] = self.rng.uniform(lo, hi, (ids.size, 3))
+            if cfg.standing_share > 0.0:  # drawn only then: a run without standing commands draws as before
+                standing = ids[self.rng.random(ids.size) < cfg.standing_share]
+                self._command_target[standing] = 0.0
         self.strength[ids] = np.array([self.pool.variants[v].motor_strength for v in variants])
         noise = self.rng.uniform(-cfg.init_joint_noise, cfg.init_joint_noise, (ids.size, self.num_actions))
         qpos = initial_qpos(self.nq, spawn_height(self.desc.stand_height, self.pool.ground_height[variants]),

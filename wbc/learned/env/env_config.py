@@ -130,6 +130,8 @@ class EnvConfig:
         command_ranges: None (commands from the scenario's trials), or ((vx lo, hi), (vy lo, hi), (yaw rate lo, hi))
             [m/s, m/s, rad/s]: each episode's command drawn uniformly from these instead (the scenario still gives
             the ramp and the pushes). Used by stage 1, the walking prior, see `wbc.learned.train.stages`.
+        standing_share: with `command_ranges`, the share of episodes commanded to stand (all three zero): a uniform
+            draw almost never asks for standing, and a walking prior that never stood walks on when told to stop.
         rewards, obs_scales, noise, domain: sub-configurations.
         train_seed_offset: the scenario's trial seeds used for training start here (evaluations use 0, 1, ...).
         trial_pool: episodes cycle through this many distinct trials of the scenario (drawn once, then cached).
@@ -162,6 +164,7 @@ class EnvConfig:
     only_positive_rewards: bool = True
     teacher_arm_mode: str | None = None
     command_ranges: tuple[tuple[float, float], tuple[float, float], tuple[float, float]] | None = None
+    standing_share: float = 0.0
     rewards: RewardScales = field(default_factory=RewardScales)
     obs_scales: ObsScales = field(default_factory=ObsScales)
     noise: ObsNoise = field(default_factory=ObsNoise)
@@ -187,6 +190,8 @@ class EnvConfig:
                 len(r) != 2 or r[0] > r[1] for r in self.command_ranges)):
             raise ConfigError(f"EnvConfig.command_ranges must be three (lo, hi) pairs with lo <= hi, got "
                               f"{self.command_ranges}")
+        if not 0.0 <= self.standing_share <= 1.0:
+            raise ConfigError(f"EnvConfig.standing_share must be in [0, 1], got {self.standing_share}")
         if self.domain.num_variants < 1:
             raise ConfigError("EnvConfig.domain.num_variants must be >= 1")
 

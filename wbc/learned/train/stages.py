@@ -45,9 +45,10 @@ from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.bc_schedule import BCSchedule
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["BASELINES", "PUSH_POSTURE", "RECIPE_VARIANTS", "TASKS", "TURN_POSTURE", "TURN_TAUGHT_INIT_STD",
-           "TURN_WALKING_PRIOR_COMMANDS", "TURN_SCENARIO", "TURN_WALKING_PRIOR_INIT", "TURN_WALKING_PRIOR_TERMINATION",
-           "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name", "stage_config"]
+__all__ = ["BASELINES", "PUSH_POSTURE", "RECIPE_VARIANTS", "TASKS", "TURN_POSTURE", "TURN_SCENARIO",
+           "TURN_STANDING_SHARE", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS", "TURN_WALKING_PRIOR_INIT",
+           "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name",
+           "stage_config"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,7 +67,8 @@ class TaskSpec:
     (`wbc.learned.train.warm_start`; the BC term still pulls towards the teacher and is annealed away);
     `posture` is (weight, target height [m]) of the `base_height` reward term in the stages after pi1 (None: off);
     `walking_prior_posture` holds it in pi1 too (a pi1 fine-tuned from an upright policy must stay upright), and
-    `walking_prior_init_std` is pi1's initial action noise when it starts from `walking_prior_init`.
+    `walking_prior_init_std` is pi1's initial action noise when it starts from `walking_prior_init`;
+    `walking_prior_standing` is the share of pi1's episodes commanded to stand (`EnvConfig.standing_share`).
     """
 
     robot: str
@@ -81,6 +83,7 @@ class TaskSpec:
     posture: tuple[float, float] | None = None
     walking_prior_posture: bool = False
     walking_prior_init_std: float = 1.0
+    walking_prior_standing: float = 0.0
 
 
 PUSH_POSTURE = (-50.0, 0.30)
@@ -124,6 +127,11 @@ TURN_WALKING_PRIOR_COMMANDS = ((-0.5, 2.0), (-0.5, 0.5), (-2.0, 2.0))
 """The turn task's pi1 commands: legged_gym's ranges widened to the scenario's speeds (up to 2 m/s) and yaw rates
 (both directions up to 2 rad/s), so that pi1, the teacher of pi2, has been trained on the commands pi2 will see."""
 
+TURN_STANDING_SHARE = 0.25
+"""The share of the turn task's pi1 episodes commanded to stand, the share of the scenario's stand band. Drawn
+uniformly over its ranges, pi1 never met a standing command: told to stand, it walked on at 0.22 m/s, and pi2 and pi3,
+taught by it, at 0.36-0.40 m/s (turn-both-ways band stand, seeds 0-2)."""
+
 TURN_WALKING_PRIOR_TERMINATION = -100.0
 """The turn task's pi1 pays for falls, -2 per fall (the later stages' weight): it starts from a policy that walks,
 which the penalty keeps from trading falls for speed."""
@@ -145,7 +153,7 @@ TASKS: dict[str, TaskSpec] = {
                      walking_prior_termination=TURN_WALKING_PRIOR_TERMINATION,
                      walking_prior_init=TURN_WALKING_PRIOR_INIT, taught_init_std=TURN_TAUGHT_INIT_STD,
                      taught_start_from_teacher=True, posture=TURN_POSTURE, walking_prior_posture=True,
-                     walking_prior_init_std=TURN_TAUGHT_INIT_STD),
+                     walking_prior_init_std=TURN_TAUGHT_INIT_STD, walking_prior_standing=TURN_STANDING_SHARE),
 }
 
 BASELINES: dict[str, str] = {
@@ -235,6 +243,7 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
                                                                     _ARM[teacher_stage]),
         tracking_sigma=WALKING_PRIOR_SIGMA if walking_prior else spec.tracking_sigma,
         command_ranges=spec.walking_prior_commands if walking_prior else None,
+        standing_share=spec.walking_prior_standing if walking_prior else 0.0,
         rewards=RewardScales(termination=spec.walking_prior_termination) if walking_prior else RewardScales(),
     )
     if spec.posture is not None and (not walking_prior or spec.walking_prior_posture):
