@@ -60,6 +60,11 @@ def test_the_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
         np.testing.assert_array_equal(again(torch.from_numpy(obs[:5])).numpy(), net(torch.from_numpy(obs[:5])).numpy())
     with pytest.raises(ConfigError):
         fit_student(obs[:0], actions[:0], FitConfig())
+    # an input the data barely moves is not blown up by the normaliser
+    flat = obs.copy()
+    flat[:, 0] = 0.5 + 1e-4 * rng.normal(size=flat.shape[0])
+    net, _ = fit_student(flat, actions, FitConfig(epochs=1, std_floor=0.1))
+    assert float(net.obs_normalizer._std[0]) == pytest.approx(0.1)
 
 
 def test_who_drives_is_the_expert_first_then_less_and_less_often():

@@ -111,6 +111,10 @@ class FitConfig:
         batch_size: samples per gradient step.
         learning_rate: Adam's step size.
         seed: seeds the weights' initialisation and the batch order.
+        std_floor: the least standard deviation the observation normaliser divides by. An expert's own episodes
+            barely move some inputs (its arm joints by 0.01 rad, gravity's z by 0.004): divided by that spread, the
+            student's first deviation from the expert's states became an input of 25-70, and the student, never
+            having seen one, fell within 0.6 s of every episode it drove.
     """
 
     hidden_dims: tuple[int, ...] = (256, 128, 64)
@@ -118,10 +122,13 @@ class FitConfig:
     batch_size: int = 512
     learning_rate: float = 1e-3
     seed: int = 0
+    std_floor: float = 0.1
 
     def __post_init__(self) -> None:
         if min(self.epochs, self.batch_size) < 1 or not self.hidden_dims or min(self.hidden_dims) < 1:
             raise ConfigError("FitConfig: epochs, batch_size and every hidden size must be >= 1")
+        if not self.std_floor >= 0.0:
+            raise ConfigError(f"FitConfig: std_floor must be >= 0, got {self.std_floor}")
         if not self.learning_rate > 0.0:
             raise ConfigError(f"FitConfig: learning_rate must be > 0, got {self.learning_rate}")
 
@@ -135,7 +142,7 @@ def fit_student(obs: np.ndarray, actions: np.ndarray, cfg: FitConfig,
         actions: (N, num_actions) target actions (clipped to the policy's range by the caller).
         cfg: the fit.
         start: a student to continue from (its normaliser is kept), or None for a fresh one whose normaliser is the
-            data's mean and standard deviation.
+            data's mean and standard deviation (at least `FitConfig.std_floor`).
 
     Returns:
         The fitted student and its mean loss per epoch.
@@ -151,7 +158,8 @@ def fit_student(obs: np.ndarray, actions: np.ndarray, cfg: FitConfig,
     gen = torch.Generator().manual_seed(cfg.seed)
     torch.manual_seed(cfg.seed)
     if start is None:
-        net = StudentNet(obs.shape[1], actions.shape[1], cfg.hidden_dims, obs.mean(axis=0), obs.std(axis=0))
+        net = StudentNet(obs.shape[1], actions.shape[1], cfg.hidden_dims, obs.mean(axis=0),
+                         np.maximum(obs.std(axis=0), cfg.std_floor))
     else:
         net = start
     x, y = torch.from_numpy(obs), torch.from_numpy(actions)
