@@ -1,12 +1,17 @@
-"""The control tick's arithmetic, compiled (numba): gait clock, trust, footholds, legs, command rows.
+"""The control tick's arithmetic, compiled (numba): gait clock, trust, footholds, reference, legs, command rows.
 
 At 500 Hz the tick is a few hundred small operations on 3-vectors and 3 x 3 matrices; as numpy calls each costs a
 microsecond or more of Python and numpy dispatch, which is most of the tick. Compiled, the same arithmetic is a few
-microseconds in all. Each function here is one call from Python per tick, writing into arrays its caller allocated
-once. Where a law is also written in Python (`wbc.robots.conventions.quat_to_matrix`, the gait's per-time queries),
-the kernel performs the same floating-point operations in the same order, so the two agree to the bit.
+microseconds in all. Each stage here is a function writing into arrays its caller allocated once. Where a law is also
+written in Python (`wbc.robots.conventions.quat_to_matrix`, the gait's per-time queries, the reference's targets, the
+ground height's ``math.fsum``), the kernel performs the same floating-point operations in the same order, so the two
+agree to the bit.
 
-The kinematics' own pass over the model's tree is `wbc.estimation.tree` (the MPC and the arena's estimate share it).
+`control_tick` runs the stages of a whole tick (the kinematics' pass over the model's tree, `wbc.estimation.tree`,
+and the estimator's steady step, `wbc.estimation.filter.steady_step`, included) in one call: a compiled call costs
+~0.15 us for each array it is handed and a few tenths more of Python around it, so a dozen calls a tick cost more
+than their arithmetic. The controller calls the stages one by one where the tick needs Python between them (the
+first tick of an episode, PlaCo's whole-body QP, the debug truth).
 
 Compiled functions are cached on disk beside this module (numba's ``cache=True``): a process compiles them once per
 machine, later processes load them.
@@ -14,15 +19,23 @@ machine, later processes load them.
 
 from __future__ import annotations
 
+import hashlib
 import math
+from pathlib import Path
 
 import numba
 import numpy as np
 
+from wbc.estimation import filter as filter_module
+from wbc.estimation import tree
+from wbc.estimation.filter import steady_step
+from wbc.estimation.tree import packed_pass, packed_place, tick_arrays
 from wbc.robots.conventions import G
 
-__all__ = ["FOOTHOLD_CLIP_MARGIN", "command_rows", "contact_trust", "gait_state", "leg_torques", "liftoffs",
-           "plan_footholds", "swing_targets"]
+__all__ = ["FEET_HEIGHT_BOUND", "FOOTHOLD_CLIP_MARGIN", "STAGE_CLIP", "STAGE_COMMAND", "STAGE_DONE", "STAGE_FOOTHOLDS",
+           "STAGE_FRONT", "STAGE_LEGS", "STAGE_REFERENCE", "TICK_CONSTANTS", "command_rows", "contact_trust",
+           "control_tick", "feet_heights_in_bound", "gait_state", "ground_height", "leg_torques", "liftoffs",
+           "plan_footholds", "reference_update", "swing_targets"]
 
 FOOTHOLD_CLIP_MARGIN = 1e-9
 """Relative margin below the largest foothold offset inside which `plan_footholds` needs no norm [1].
@@ -260,3 +273,304 @@ def command_rows(q, tau, kp, kd, arm_first, arm_target, arm_velocity, dt, rows):
             if not math.isfinite(v) or (r == 2 or r == 3) and v < 0.0:
                 valid = False
     return valid
+
+
+@numba.njit(cache=True, nogil=True)
+def _remainder(x, y):  # pragma: no cover
+    """IEEE remainder of finite `x` by finite, non-zero `y`: CPython's ``math.remainder``, step for step (exact)."""
+    absx, absy = abs(x), abs(y)
+    m = absx % absy  # positive operands: C's fmod, exact
+    c = absy - m
+    if m < c:
+        r = m
+    elif m > c:
+        r = -c
+    else:  # half-way: the even multiple
+        r = m - 2.0 * ((0.5 * (absx - m)) % absy)
+    return math.copysign(1.0, x) * r
+
+
+@numba.njit(cache=True, nogil=True)
+def _leash(offset, length):  # pragma: no cover
+    """`offset` clipped to [-length, length], as `wbc.mpc.reference`'s leash."""
+    return -length if offset < -length else length if offset > length else offset
+
+
+_TWO_PI = 2 * math.pi
+
+
+@numba.njit(cache=True, nogil=True)
+def reference_update(rot, com_x, com_y, vx, vy, yaw_rate, dt, xy_leash, yaw_leash, state, v_cmd):  # pragma: no cover
+    """One tick of `wbc.mpc.reference.MotionReference.update`: the targets in `state`, the command into `v_cmd`.
+
+    `state` holds (yaw, yaw target, target x, target y), advanced in place; `v_cmd` (2,) gets the commanded horizontal
+    velocity in the world. The measured yaw is that of `rot` (`wbc.robots.euler.yaw_of`). The same operations in the
+    same order as the Python law (the tests keep it), so the same bits. Returns False, having changed nothing, where
+    Python's ``math.remainder`` would raise (an infinite yaw difference): the caller then runs the Python law.
+    """
+    yaw = state[0]
+    turn = math.atan2(rot[1, 0], rot[0, 0]) - yaw
+    if math.isinf(turn):
+        return False
+    if math.isnan(turn):
+        unwrapped = yaw + turn  # Python's remainder hands a NaN back
+    else:
+        unwrapped = yaw + _remainder(turn, _TWO_PI)
+    state[0] = unwrapped
+    cy, sy = math.cos(unwrapped), math.sin(unwrapped)
+    vx_world = cy * vx - sy * vy
+    vy_world = sy * vx + cy * vy
+    state[2] = com_x + _leash(state[2] + vx_world * dt - com_x, xy_leash)
+    state[3] = com_y + _leash(state[3] + vy_world * dt - com_y, xy_leash)
+    state[1] = unwrapped + _leash(state[1] + yaw_rate * dt - unwrapped, yaw_leash)
+    v_cmd[0] = vx_world
+    v_cmd[1] = vy_world
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def _exact_sum(values, count):  # pragma: no cover
+    """The correctly rounded sum of the first `count` (<= 4) of `values`: CPython's ``math.fsum``, step for step.
+
+    Its partials, then their sum rounded once, half-way cases included; for finite values whose sum does not
+    overflow (where ``math.fsum`` would raise, or hand back a NaN, the callers run the Python law).
+    """
+    partials = np.empty(4)
+    n = 0
+    for k in range(count):
+        x = values[k]
+        i = 0
+        for j in range(n):
+            y = partials[j]
+            if abs(x) < abs(y):
+                x, y = y, x
+            hi = x + y
+            lo = y - (hi - x)
+            if lo != 0.0:
+                partials[i] = lo
+                i += 1
+            x = hi
+        n = i
+        if x != 0.0:
+            partials[n] = x
+            n += 1
+    hi = 0.0
+    if n > 0:
+        n -= 1
+        hi = partials[n]
+        lo = 0.0
+        while n > 0:
+            x = hi
+            n -= 1
+            y = partials[n]
+            hi = x + y
+            yr = hi - x
+            lo = y - yr
+            if lo != 0.0:
+                break
+        if n > 0 and ((lo < 0.0 and partials[n - 1] < 0.0) or (lo > 0.0 and partials[n - 1] > 0.0)):
+            y = lo * 2.0
+            x = hi + y
+            yr = x - hi
+            if y == yr:
+                hi = x
+    return hi
+
+
+FEET_HEIGHT_BOUND = 1e300
+"""Largest foot height [m] the compiled ground height takes: four of them sum without overflow, where Python's
+``math.fsum`` would raise (a tick whose feet lie outside is handed to the Python law)."""
+
+
+@numba.njit(cache=True, nogil=True)
+def feet_heights_in_bound(feet):  # pragma: no cover
+    """Whether every foot's height is finite and within `FEET_HEIGHT_BOUND` (`ground_height` takes them)."""
+    for i in range(4):
+        if not abs(feet[i, 2]) <= FEET_HEIGHT_BOUND:
+            return False
+    return True
+
+
+@numba.njit(cache=True, nogil=True)
+def ground_height(feet, stance):  # pragma: no cover
+    """`wbc.mpc.footholds.ground_height` to the bit, for heights `feet_heights_in_bound` takes.
+
+    The mean height of the stance feet (their correctly rounded sum over their count), or the lowest foot when none
+    stands.
+    """
+    heights = np.empty(4)
+    count = 0
+    for i in range(4):
+        if stance[i]:
+            heights[count] = feet[i, 2]
+            count += 1
+    if count == 0:
+        low = feet[0, 2]
+        for i in range(1, 4):
+            if feet[i, 2] < low:
+                low = feet[i, 2]
+        return low
+    return _exact_sum(heights, count) / count
+
+
+STAGE_FRONT = 0
+"""`control_tick`'s first stage: the kinematics pass, the gait's state, the estimator (trust, steady-gain step) and the
+kinematics placed at its estimate."""
+STAGE_REFERENCE = 1
+"""The leashed targets advanced by the command (`reference_update`)."""
+STAGE_FOOTHOLDS = 2
+"""The lift-offs recorded and the swing feet's footholds placed (`liftoffs`, `plan_footholds`)."""
+STAGE_CLIP = 3
+"""The footholds `plan_footholds` left for Python's ``math.hypot`` clipped: never run by `control_tick`."""
+STAGE_LEGS = 4
+"""The swing paths and the leg layer (`swing_targets`, `leg_torques`)."""
+STAGE_COMMAND = 5
+"""The motor command's rows, checked (`command_rows`)."""
+STAGE_DONE = 6
+"""Past the last stage."""
+
+C_PERIOD, C_DUTY, C_MARGIN, C_INV_FORCE, C_SLIP2, C_DT, C_XY_LEASH, C_YAW_LEASH = range(8)
+C_STANCE_S, C_CAPTURE, C_CENTRIPETAL, C_MAX_OFFSET, C_MIN_HEIGHT, C_BELOW_Z, C_SWING_S, C_APEX = range(8, 16)
+C_SWING_KP, C_SWING_KD, C_STANCE_KD = range(16, 19)
+TICK_CONSTANTS = 19
+"""Length of `control_tick`'s constants array; the ``C_*`` names index it."""
+
+OUT_V_CMD_X, OUT_V_CMD_Y, OUT_GROUND, OUT_VALID = range(4)
+"""Indices of `control_tick`'s results array: the commanded velocity in the world (its reference stage), the ground
+height of a placement left to clip, and whether the command's rows passed the check (1.0) or not (0.0)."""
+
+
+def _sources_digest(*modules: object) -> str:
+    """SHA-256 of the modules' source files, for the compiled tick's key in numba's disk cache.
+
+    numba keys a cached function by its own file only, so a function it compiled in from another module could change
+    without the cache noticing, and the old machine code would run (numba's documented limitation). numba's key does
+    hash a function's closure variables: `control_tick` closes over this digest of the modules it calls into, and a
+    change to them compiles it afresh.
+    """
+    digest = hashlib.sha256()
+    for module in modules:
+        digest.update(Path(module.__file__).read_bytes())
+    return digest.hexdigest()
+
+
+def _make_control_tick(sources: str):  # noqa: ANN202 (returns a numba dispatcher)
+    """`control_tick`, compiled with `sources` (`_sources_digest` of the modules it calls into) in its cache key."""
+
+    @numba.njit(cache=True, nogil=True)
+    def control_tick(first, last, base_quat, omega_body, q, dq, accel_body, foot_force, t, vx, vy, yaw_rate, refresh,
+                     forces, arm_velocity, model_f, model_i, kin, offsets, contact, progress, touchdown, trust,
+                     slipping, x, keep_a, keep_b, keep_g, gain, reference, was_stance, liftoff, footholds, lifted,
+                     parts, clip, swing_pos, swing_vel, limit, scale, kp, kd, arm_first, arm_target, tau, rows, consts,
+                     out):  # pragma: no cover
+        """The MPC controller's control tick, from stage `first` to before stage `last` (``STAGE_*``), in one call.
+
+        Each stage is the compiled function the controller otherwise calls on its own, with the same arguments, so
+        the tick gives the same bits either way; here it is one call from Python instead of a dozen
+        (`wbc.mpc.controller.MpcController`'s staged path; the tests compare the two). A stage stops early, having
+        changed nothing of its own, where the Python law must take over: the reference when Python's remainder would
+        raise (returns `STAGE_REFERENCE`), the footholds when a foot's height is outside `FEET_HEIGHT_BOUND`
+        (`STAGE_FOOTHOLDS`); after the footholds' placement, when some are left to clip (`STAGE_CLIP`, the ground in
+        ``out[OUT_GROUND]``).
+
+        Args:
+            first: the first stage to run.
+            last: the stage to stop before.
+            base_quat: the IMU's orientation (w, x, y, z).
+            omega_body: the trunk's angular velocity, body frame (3,) [rad/s].
+            q: joint positions (n,) [rad].
+            dq: joint velocities (n,) [rad/s].
+            accel_body: the accelerometer's specific force, body frame (3,) [m/s^2].
+            foot_force: the foot sensors (4,) [N].
+            t: the gait's time [s].
+            vx: the commanded forward velocity [m/s] (a float).
+            vy: the commanded lateral velocity [m/s] (a float).
+            yaw_rate: the commanded yaw rate [rad/s] (a float).
+            refresh: place every swing foot's foothold (not only those lifting off).
+            forces: the plan's contact forces at this tick, world (4, 3) [N].
+            arm_velocity: the arm's velocity at this tick (3,) [rad/s].
+            model_f: the kinematics' packed model, floats (`wbc.estimation.tree.TreeModel.packed`).
+            model_i: the same, integers.
+            kin: the kinematics' tick buffer (`wbc.estimation.tree.tick_arrays`).
+            offsets: the gait's phase offsets (4,).
+            contact: out, the gait's stance flags at `t` (4,).
+            progress: out, each swing foot's progress (4,).
+            touchdown: out, each swing foot's time to touchdown (4,) [s].
+            trust: out, the estimator's trust in each foot (4,).
+            slipping: out, the stance feet the estimator dropped (4,).
+            x: the estimator's state (18,), in place.
+            keep_a: the steady-gain step's matrices (`wbc.estimation.filter.steady_step`).
+            keep_b: the same.
+            keep_g: the same.
+            gain: the same.
+            reference: the targets (yaw, yaw target, target x, target y), in place (`reference_update`).
+            was_stance: the stance flags of the last tick (`liftoffs`), in place.
+            liftoff: the lift-off points (4, 3), in place.
+            footholds: the footholds (4, 3), in place.
+            lifted: out, the feet that lifted off at this tick (4,).
+            parts: out, the feet left to clip (`plan_footholds`) (4, 4).
+            clip: out, their flags (4,).
+            swing_pos: out, the swing paths' positions (4, 3) [m].
+            swing_vel: out, their velocities (4, 3) [m/s].
+            limit: the legs' torque limits (12,) [N m].
+            scale: out, each stance leg's push scale (4,).
+            kp: the joints' position gains (n,).
+            kd: the joints' velocity gains (n,).
+            arm_first: where the arm's joints start (-1: no arm).
+            arm_target: the arm's target (3,), advanced in place.
+            tau: out, the joint torques (n,) [N m].
+            rows: out, the command's rows (5, n).
+            consts: the constants (``C_*``, `TICK_CONSTANTS`).
+            out: the results (``OUT_*``).
+
+        Returns:
+            The stage to run next: `last` when every stage ran.
+        """
+        sources  # noqa: B018 - in numba's cache key (`_sources_digest`)
+        (rot, _, _, feet_rel, hips_rel, feet_vel_rel, leg_jac, gravity, _, _, base_position, _, feet, feet_vel, com,
+         com_vel) = tick_arrays(kin)
+        stage = first
+        if stage == STAGE_FRONT and stage < last:
+            packed_pass(base_quat, omega_body, q, dq, model_f, model_i, kin)
+            gait_state(t, consts[C_PERIOD], consts[C_DUTY], consts[C_MARGIN], offsets, contact, progress, touchdown)
+            contact_trust(contact, foot_force, feet_vel_rel, x[3], x[4], consts[C_INV_FORCE], consts[C_SLIP2], trust,
+                          slipping)
+            steady_step(x, trust, rot, accel_body, feet_rel, feet_vel_rel, keep_a, keep_b, keep_g, gain)
+            packed_place(kin, x[0:3], x[3:6])
+            stage = STAGE_REFERENCE
+        if stage == STAGE_REFERENCE and stage < last:
+            if not reference_update(rot, com[0], com[1], vx, vy, yaw_rate, consts[C_DT], consts[C_XY_LEASH],
+                                    consts[C_YAW_LEASH], reference, out[0:2]):
+                return STAGE_REFERENCE
+            stage = STAGE_FOOTHOLDS
+        if stage == STAGE_FOOTHOLDS and stage < last:
+            if not feet_heights_in_bound(feet):
+                return STAGE_FOOTHOLDS
+            count = liftoffs(contact, was_stance, feet, liftoff, footholds, lifted)
+            stage = STAGE_LEGS
+            if refresh or count:
+                ground = ground_height(feet, contact)
+                if plan_footholds(contact, lifted, refresh, hips_rel, base_position, com, com_vel, out[OUT_V_CMD_X],
+                                  out[OUT_V_CMD_Y], yaw_rate, touchdown, consts[C_STANCE_S], ground,
+                                  consts[C_CAPTURE], consts[C_CENTRIPETAL], consts[C_MAX_OFFSET], consts[C_MIN_HEIGHT],
+                                  footholds, parts, clip):
+                    out[OUT_GROUND] = ground
+                    return STAGE_CLIP
+        if stage == STAGE_CLIP and stage < last:
+            return STAGE_CLIP
+        if stage == STAGE_LEGS and stage < last:
+            swing_targets(contact, progress, liftoff, footholds, consts[C_BELOW_Z], consts[C_SWING_S], consts[C_APEX],
+                          swing_pos, swing_vel)
+            leg_torques(leg_jac, gravity, feet, feet_vel, contact, forces, swing_pos, swing_vel, consts[C_SWING_KP],
+                        consts[C_SWING_KD], consts[C_STANCE_KD], limit, scale, tau)
+            stage = STAGE_COMMAND
+        if stage == STAGE_COMMAND and stage < last:
+            valid = command_rows(q, tau, kp, kd, arm_first, arm_target, arm_velocity, consts[C_DT], rows)
+            out[OUT_VALID] = 1.0 if valid else 0.0
+            stage = STAGE_DONE
+        return stage
+
+    return control_tick
+
+
+control_tick = _make_control_tick(_sources_digest(tree, filter_module))

@@ -28,14 +28,15 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.estimation.kinematics import RobotKinematics
+from wbc.mpc import compiled as tick_stages
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
-from wbc.mpc.compiled import command_rows, contact_trust
-from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
+from wbc.mpc.compiled import command_rows, contact_trust, control_tick
+from wbc.mpc.footholds import MIN_CAPTURE_HEIGHT_M, FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler, gait_fits_steps
-from wbc.mpc.leg_layer import LegLayer
+from wbc.mpc.leg_layer import FORCE_BEFORE_PLAN, LegLayer
 from wbc.mpc.plan_targets import PlanTargets
-from wbc.mpc.reference import MotionReference
+from wbc.mpc.reference import XY_LEASH_M, YAW_LEASH_RAD, MotionReference
 from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
 from wbc.robots.description import ARM_JOINTS, RobotDescription, joint_gains
 from wbc.robots.euler import rpy_of, yaw_of
@@ -166,8 +167,30 @@ class MpcController:
         # the gait's state at this tick, and the estimator's trust in each foot (overwritten every tick)
         self._contact, self._progress, self._touchdown = np.ones(4, dtype=bool), np.zeros(4), np.zeros(4)
         self._trust = np.zeros(4)
+        self.slipping = np.zeros(4, dtype=bool)  # stance feet the estimator dropped at the last tick: they slide
+        self._arm_target = np.array(desc.arm.nominal_q, dtype=np.float64)  # reset in place: the compiled tick holds it
+        # the compiled tick (`control_tick`): its constants, its results, the legs' torques; the arrays it works on
+        # are gathered at the first tick of an episode (`_tick_arrays`), once every reset has run
+        self._tick_constants = self._make_tick_constants()
+        self._tick_out = np.zeros(4)
+        self._tau = np.zeros(self.kin.n)
         self.reset()
         self._load_compiled()
+
+    def _make_tick_constants(self) -> np.ndarray:
+        """`control_tick`'s constants (``wbc.mpc.compiled.C_*``), from the settings and the parts made from them."""
+        cfg, ts = self.config, tick_stages
+        out = np.zeros(ts.TICK_CONSTANTS)
+        out[ts.C_PERIOD], out[ts.C_DUTY], out[ts.C_MARGIN] = self.gait.clock[:3]
+        out[ts.C_INV_FORCE], out[ts.C_SLIP2], out[ts.C_DT] = self._inv_contact_force, self._slip2, self.dt
+        out[ts.C_XY_LEASH], out[ts.C_YAW_LEASH] = XY_LEASH_M, YAW_LEASH_RAD
+        out[ts.C_STANCE_S], out[ts.C_CAPTURE] = cfg.gait.stance_s, cfg.footholds.capture_gain
+        out[ts.C_CENTRIPETAL], out[ts.C_MAX_OFFSET] = cfg.footholds.centripetal_gain, cfg.footholds.max_offset
+        out[ts.C_MIN_HEIGHT], out[ts.C_BELOW_Z] = MIN_CAPTURE_HEIGHT_M, float(cfg.touchdown_depth)
+        out[ts.C_SWING_S], out[ts.C_APEX] = cfg.gait.swing_s, cfg.swing_height
+        out[ts.C_SWING_KP], out[ts.C_SWING_KD], out[ts.C_STANCE_KD] = self.legs.swing_kp, self.legs.swing_kd, \
+            self.legs.stance_kd
+        return out
 
     def _load_compiled(self) -> None:
         """Play two ticks (one with an MPC update) on a synthetic standing frame, then forget them.
@@ -206,9 +229,10 @@ class MpcController:
         self._x0 = np.zeros(NX)
         self._started = False
         self._warm_start: np.ndarray | None = None
-        self._arm_target = self.desc.arm.nominal_q.copy()
+        self._arm_target[:] = self.desc.arm.nominal_q
         self._timings: dict[str, float] = {}
-        self.slipping = np.zeros(4, dtype=bool)  # stance feet the estimator dropped at the last tick: they slide
+        self.slipping[:] = False
+        self._tick_args: tuple | None = None  # `_tick_arrays`, gathered at the first compiled tick of the episode
         self.reference.reset()
         self.feet.reset()
         self.targets.reset()
@@ -223,7 +247,10 @@ class MpcController:
         Returns:
             ``mpc_setup_s`` (linearise, condense, constraints) and ``mpc_solve_s`` (the QP) on a tick that made an
             MPC update (a failed update, counted in ``fallbacks``, reports neither); ``whole_body_s``, the
-            whole-body layer's time (leg layer or PlaCo's QP), every tick. Empty before the first tick.
+            whole-body layer's time: PlaCo's QP every tick; the leg layer (its compiled call, with the swing paths
+            and the command's rows) on the ticks due for an MPC update and the first of an episode, where it runs
+            apart (on the others it runs inside the tick's one compiled call, `_compiled_act`, and is not timed
+            apart). Empty before the first tick.
         """
         return dict(self._timings)
 
@@ -251,8 +278,20 @@ class MpcController:
     # -- one tick -------------------------------------------------------------------------------------------------
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """Estimate, (re)plan, and turn the plan into motor commands."""
-        cfg, kin = self.config, self.kin
         self._timings.clear()
+        if self._started and self.wbc is None and self._truth is None and self.kin.com_known and \
+                self.estimator.config.gain == "steady":
+            return self._compiled_act(state, command)
+        return self._staged_act(state, command)
+
+    def _staged_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """The tick stage by stage: each stage one call (most of them compiled, `wbc.mpc.compiled`).
+
+        Every tick of a controller on PlaCo's whole-body QP, with the debug truth or the full-gain estimator, and
+        the first tick of an episode (which measures the CoM and starts the estimator) run this way; the others run
+        `_compiled_act`, the same stages in one compiled call, to the same bits.
+        """
+        cfg, kin = self.config, self.kin
         kin.tick(state.imu_quat, state.q, state.dq, state.gyro_in_body)
         if not self._started:
             self._start()
@@ -272,6 +311,75 @@ class MpcController:
         if tau is None:
             tau = self._leg_torques(contact, progress, step)
         return self._command(state, tau, step)
+
+    def _tick_arrays(self) -> tuple:
+        """The arrays `control_tick` works on, in its order from the packed model to the legs' torques."""
+        kp, kd = self._gains
+        return (*self.kin.compiled_arrays(), self.gait.clock[3], self._contact, self._progress, self._touchdown,
+                self._trust, self.slipping, *self.estimator.steady_arrays(), self.reference.targets,
+                *self.feet.tick_arrays(), self.legs.limit, self.legs.scale, kp, kd, self._arm_first, self._arm_target,
+                self._tau)
+
+    def _compiled_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """The tick as `_staged_act` plays it, its stages in `control_tick`: one compiled call on most ticks.
+
+        A tick that makes an MPC update calls it three times, around the update's own steps (the centroidal
+        quantities between the estimate and the reference; the plan between the footholds and the legs). Where a
+        stage stops for the Python law (`control_tick`), the Python stage runs and the call resumes after it.
+        """
+        ts, kin, out = tick_stages, self.kin, self._tick_out
+        if self._tick_args is None:
+            self._tick_args = self._tick_arrays()
+        replan = self._replan_due()
+        refresh = self.tick % self.config.foothold_every == 0
+        vx, vy, yaw_rate = float(command.vx), float(command.vy), float(command.yaw_rate)
+        rows = np.empty((5, kin.n))  # a new array each tick: it becomes the command's (immutable) storage
+        head = (state.imu_quat, state.gyro_in_body, state.q, state.dq, state.accel_in_body, state.foot_force, self.t,
+                vx, vy, yaw_rate, refresh)
+        tail = (*self._tick_args, rows, self._tick_constants, out)
+        step, forces, v_arm = self._step_inputs()
+        if replan:
+            control_tick(ts.STAGE_FRONT, ts.STAGE_REFERENCE, *head, forces, v_arm, *tail)
+            kin.centroidal()
+            stage = control_tick(ts.STAGE_REFERENCE, ts.STAGE_LEGS, *head, forces, v_arm, *tail)
+        else:
+            stage = control_tick(ts.STAGE_FRONT, ts.STAGE_DONE, *head, forces, v_arm, *tail)
+        if stage < ts.STAGE_LEGS:  # a stage handed to the Python law
+            self._python_stages(stage, command, refresh)
+            stage = ts.STAGE_LEGS
+        if replan:
+            self._replan(state, command)
+            step, forces, v_arm = self._step_inputs()
+            t0 = time.perf_counter()
+            stage = control_tick(ts.STAGE_LEGS, ts.STAGE_DONE, *head, forces, v_arm, *tail)
+            self._timings["whole_body_s"] = time.perf_counter() - t0
+        elif stage < ts.STAGE_DONE:
+            stage = control_tick(stage, ts.STAGE_DONE, *head, forces, v_arm, *tail)
+        valid = self._arm_rows(rows, step) and out[ts.OUT_VALID] == 1.0
+        self.t += self.dt
+        self.tick += 1
+        return MotorCommand.trusted(rows) if valid else MotorCommand.from_rows(rows)
+
+    def _step_inputs(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """The plan's step at this tick, its contact forces (4, 3) [N] and the arm's velocity (3,) [rad/s]."""
+        plan = self.plan
+        if plan is None:
+            return 0, FORCE_BEFORE_PLAN, self._arm_hold
+        step = self._plan_step()
+        return step, plan.forces[step], plan.arm_velocity[step] if self._arm_moves else self._arm_hold
+
+    def _python_stages(self, stage: int, command: VelocityCommand, refresh: bool) -> None:
+        """The stages from `stage` (where `control_tick` stopped) to the legs, by the Python law."""
+        ts, kin, out = tick_stages, self.kin, self._tick_out
+        if stage == ts.STAGE_REFERENCE:
+            out[ts.OUT_V_CMD_X], out[ts.OUT_V_CMD_Y] = self.reference.update(
+                yaw_of(kin.rot), kin.com.item(0), kin.com.item(1), command)
+            stage = ts.STAGE_FOOTHOLDS
+        if stage == ts.STAGE_FOOTHOLDS:
+            self.feet.update(kin, self._contact, self._touchdown, (out.item(0), out.item(1)), command.yaw_rate,
+                             refresh=refresh)
+        elif stage == ts.STAGE_CLIP:
+            self.feet.clip_left(out.item(ts.OUT_GROUND))
 
     def _start(self) -> None:
         """First tick of an episode: the estimator starts with the feet on the ground at z = 0."""
