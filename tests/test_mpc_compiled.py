@@ -424,3 +424,35 @@ def test_the_compiled_tick_is_compiled_again_when_a_module_it_calls_into_changes
 
     cells = [cell.cell_contents for cell in control_tick.py_func.__closure__]
     assert _sources_digest(tree, filter_module) in cells
+
+
+@pytest.mark.parametrize(("name", "robot_name"), [("mpc", "a1-wx200"), ("mpc-locked", "a1-wx200"),
+                                                  ("mpc-noarm", "go1-arm")])
+def test_an_updates_inputs_are_the_python_statements_to_the_bit(monkeypatch, name, robot_name):
+    """x0, the reference, the contact table and the feet of an MPC update from the one compiled call equal, to the
+    bit, those of the Python statements it replaces (the fallback), at every tick of a walk that turns."""
+    import wbc.mpc.controller as controller_module
+    from wbc.control.registry import get_controller
+    from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
+
+    spec = get_controller(name)
+    robot = MujocoRobot(MujocoRobotConfig(robot=robot_name, arm_mode=spec.arm_mode))
+    ctrl = spec.make(robot.desc)
+    compiled = controller_module.update_inputs
+    with robot:
+        robot.reset(seed=1)
+        ctrl.reset()
+        for k in range(300):
+            command = VelocityCommand(vx=0.6, vy=-0.1 * (k > 150), yaw_rate=1.0 if k > 100 else 0)
+            state = robot.read()
+            robot.write(ctrl.act(state, command))
+            robot.advance(ctrl.dt)
+            if k % 7:
+                continue
+            got = ctrl._update_inputs(state, command)
+            monkeypatch.setattr(controller_module, "update_inputs", lambda *args: False)
+            want = ctrl._update_inputs(state, command)
+            monkeypatch.setattr(controller_module, "update_inputs", compiled)
+            for a, b in zip(got, want, strict=True):
+                assert a.shape == b.shape and a.dtype == b.dtype
+                assert a.tobytes() == b.tobytes()

@@ -35,7 +35,7 @@ from wbc.robots.conventions import G
 __all__ = ["FEET_HEIGHT_BOUND", "FOOTHOLD_CLIP_MARGIN", "STAGE_CLIP", "STAGE_COMMAND", "STAGE_DONE", "STAGE_FOOTHOLDS",
            "STAGE_FRONT", "STAGE_LEGS", "STAGE_REFERENCE", "TICK_CONSTANTS", "command_rows", "contact_trust",
            "control_tick", "feet_heights_in_bound", "gait_state", "ground_height", "leg_torques", "liftoffs",
-           "plan_footholds", "reference_update", "swing_targets"]
+           "plan_footholds", "reference_update", "swing_targets", "update_inputs"]
 
 FOOTHOLD_CLIP_MARGIN = 1e-9
 """Relative margin below the largest foothold offset inside which `plan_footholds` needs no norm [1].
@@ -411,6 +411,103 @@ def ground_height(feet, stance):  # pragma: no cover
                 low = feet[i, 2]
         return low
     return _exact_sum(heights, count) / count
+
+
+
+@numba.njit(cache=True, nogil=True)
+def _in_stance(t, step, period, duty, margin, offset):  # pragma: no cover
+    """Whether a foot of phase `offset` stands at `t` + `step` [s] (`wbc.mpc.gait.GaitScheduler`'s law)."""
+    if duty >= 1.0:
+        return True
+    return ((t + step) / period + offset) % 1.0 < duty - margin
+
+
+@numba.njit(cache=True, nogil=True)
+def update_inputs(t, step_s, vx, vy, yaw_rate, body_height, step_times, period, duty, margin, offsets, kin, footholds,
+                  targets, arm_reference, momentum, arm_q, x0, x_ref, contact, feet):  # pragma: no cover
+    """An MPC update's inputs from the tick's state, as `wbc.mpc.controller.MpcController` states them in Python.
+
+    Into `x0` (15,) the current state; into `contact` (N, 4) the gait's stance flags at the middle of each step;
+    into `feet` (N, 4, 3) each foot where it stands until it first lifts within the horizon, at its foothold from
+    then on; into `x_ref` (N, 15) the reference trajectory (`wbc.mpc.reference.MotionReference.trajectory`) but
+    for its momentum rows, a product the caller leaves to numpy as the Python law does. The same operations in
+    the same order as the Python statements (the tests keep them), so the same bits. Returns False, having
+    written nothing, where a foot's height is outside `FEET_HEIGHT_BOUND` (the ground's exact sum): the caller
+    then runs the Python statements.
+
+    Args:
+        t: the tick's time [s].
+        step_s: the MPC step [s].
+        vx: the commanded forward velocity [m/s] (a float).
+        vy: the commanded lateral velocity [m/s] (a float).
+        yaw_rate: the commanded yaw rate [rad/s] (a float).
+        body_height: the CoM height to hold above the stance feet [m].
+        step_times: the ends of the horizon's steps from now (N,) [s].
+        period: the gait's period [s].
+        duty: its duty factor.
+        margin: its stance-end margin (`wbc.mpc.gait.STANCE_END_MARGIN`).
+        offsets: its phase offsets (4,).
+        kin: the kinematics' tick buffer, placed (`wbc.estimation.tree.tick_arrays`).
+        footholds: the footholds (4, 3) [m].
+        targets: the reference's targets (yaw, yaw target, target x, target y).
+        arm_reference: the arm's reference pose (3,) [rad].
+        momentum: the centroidal angular momentum (3,).
+        arm_q: the arm's current joint positions (3,) [rad].
+        x0: out.
+        x_ref: out, rows 9-11 left alone.
+        contact: out.
+        feet: out.
+    """
+    (rot, _, _, _, _, _, _, _, _, _, _, _, feet_now, _, com, com_vel) = tick_arrays(kin)
+    if not feet_heights_in_bound(feet_now):
+        return False
+    n = x_ref.shape[0]
+    for k in range(n):
+        for i in range(4):
+            contact[k, i] = _in_stance(t, (k + 0.5) * step_s, period, duty, margin, offsets[i])
+    for i in range(4):
+        lifted = False
+        for k in range(n):
+            lifted = lifted or not contact[k, i]
+            for a in range(3):
+                feet[k, i, a] = footholds[i, a] if lifted else feet_now[i, a]
+    stance = np.empty(4, dtype=np.bool_)
+    for i in range(4):
+        stance[i] = _in_stance(t, 0.0, period, duty, margin, offsets[i])
+    ground = ground_height(feet_now, stance)
+    # roll and pitch as `wbc.robots.euler.rpy_of` (Python's min and max: the second argument only if it is
+    # strictly smaller / larger)
+    sin_pitch = rot[2, 0]
+    clamped = sin_pitch if sin_pitch < 1.0 else 1.0
+    clamped = clamped if clamped > -1.0 else -1.0
+    for a in range(3):
+        x0[a] = com[a]
+        x0[3 + a] = com_vel[a]
+        x0[9 + a] = momentum[a]
+        x0[12 + a] = arm_q[a]
+    x0[6] = math.atan2(rot[2, 1], rot[2, 2])
+    x0[7] = -math.asin(clamped)
+    x0[8] = targets[0]
+    total_x, total_y = 0.0, 0.0
+    for k in range(n):
+        yaw_k = targets[1] + yaw_rate * step_times[k]
+        cos_k, sin_k = math.cos(yaw_k), math.sin(yaw_k)
+        vx_k = cos_k * vx - sin_k * vy
+        vy_k = sin_k * vx + cos_k * vy
+        total_x += vx_k
+        total_y += vy_k
+        x_ref[k, 0] = targets[2] + total_x * step_s
+        x_ref[k, 1] = targets[3] + total_y * step_s
+        x_ref[k, 2] = ground + body_height
+        x_ref[k, 3] = vx_k
+        x_ref[k, 4] = vy_k
+        x_ref[k, 5] = 0.0
+        x_ref[k, 6] = 0.0
+        x_ref[k, 7] = 0.0
+        x_ref[k, 8] = yaw_k
+        for a in range(3):
+            x_ref[k, 12 + a] = arm_reference[a]
+    return True
 
 
 STAGE_FRONT = 0

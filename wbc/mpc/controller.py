@@ -31,7 +31,7 @@ from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc import compiled as tick_stages
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
-from wbc.mpc.compiled import command_rows, contact_trust, control_tick
+from wbc.mpc.compiled import command_rows, contact_trust, control_tick, update_inputs
 from wbc.mpc.footholds import MIN_CAPTURE_HEIGHT_M, FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler, gait_fits_steps
 from wbc.mpc.leg_layer import FORCE_BEFORE_PLAN, LegLayer
@@ -415,23 +415,42 @@ class MpcController:
         """Whether this tick makes an MPC update: the first tick, then every `replan_every` ticks."""
         return self.plan is None or self.tick % self.config.replan_every == 0
 
-    def _replan(self, state: RobotState, command: VelocityCommand) -> None:
-        cfg, kin = self.config, self.kin
+    def _update_inputs(self, state: RobotState, command: VelocityCommand) -> tuple[np.ndarray, ...]:
+        """An MPC update's current state x0 (15,), reference x_ref (N, 15), contact table (N, 4) and feet (N, 4, 3).
+
+        One compiled call (`wbc.mpc.compiled.update_inputs`) but for the reference's momentum rows; the statements
+        below it where that call leaves the inputs to Python (a foot's height past what its exact sum takes).
+        """
+        cfg, kin, reference = self.config, self.kin, self.reference
         n, dt = cfg.mpc.horizon, cfg.mpc.dt
+        arm_q = state.q[ARM_JOINTS] if self.has_arm else self.desc.arm.nominal_q
+        x0, x_ref = np.empty(NX), np.zeros((n, NX))
+        contact, feet = np.empty((n, 4), dtype=bool), np.empty((n, 4, 3))
+        if update_inputs(self.t, dt, float(command.vx), float(command.vy), float(command.yaw_rate),
+                         reference.body_height, reference.step_times, *self.gait.clock, kin.compiled_arrays()[2],
+                         self.feet.footholds, reference.targets, reference.arm_q, kin.momentum, arm_q, x0, x_ref,
+                         contact, feet):
+            x_ref[:, MOMENTUM] = kin.params.inertia_world @ np.array([0.0, 0.0, command.yaw_rate])
+            return x0, x_ref, contact, feet
         x0 = np.zeros(NX)
         x0[COM] = kin.com
         x0[COM_VEL] = kin.com_vel
         rpy = rpy_of(kin.rot)
-        x0[RPY] = (rpy[0], rpy[1], self.reference.yaw)
+        x0[RPY] = (rpy[0], rpy[1], reference.yaw)
         x0[MOMENTUM] = kin.momentum
-        x0[ARM_Q] = state.q[ARM_JOINTS] if self.has_arm else self.desc.arm.nominal_q
+        x0[ARM_Q] = arm_q
         ground = ground_height(kin.feet, self.gait.contact(self.t))
-        x_ref = self.reference.trajectory(command, ground, kin.params.inertia_world)
+        x_ref = reference.trajectory(command, ground, kin.params.inertia_world)
         contact = self.gait.contact_table(self.t, dt, n)
         # a foot stands where it is until it first lifts; from then on (in swing, and after it lands within the
         # horizon) it is at its foothold
         lifted = np.cumsum(~contact, axis=0) > 0
         feet = np.where(lifted[:, :, None], self.feet.footholds[None], kin.feet[None])
+        return x0, x_ref, contact, feet
+
+    def _replan(self, state: RobotState, command: VelocityCommand) -> None:
+        cfg, kin = self.config, self.kin
+        x0, x_ref, contact, feet = self._update_inputs(state, command)
         params = kin.params
         if not (self.has_arm and cfg.use_arm_momentum):
             params = type(params)(mass=params.mass, inertia_world=params.inertia_world,

@@ -65,7 +65,8 @@ class MotionReference:
         self.step_s = step_s
         self.body_height = body_height
         self.arm_q = arm_q
-        self._step_times = np.arange(1, horizon + 1) * step_s  # the ends of the horizon's steps from now [s]
+        self.step_times = np.arange(1, horizon + 1) * step_s
+        """The ends of the horizon's steps from now (N,) [s]."""
         self.targets = np.zeros(4)
         self.reset()
 
@@ -140,7 +141,7 @@ class MotionReference:
         dt = self.step_s
         x_ref = np.zeros((self.horizon, NX))
         # while turning, the commanded body-frame velocity turns with the yaw reference along the horizon
-        yaw_k = self.yaw_target + command.yaw_rate * self._step_times
+        yaw_k = self.yaw_target + command.yaw_rate * self.step_times
         cos_k, sin_k = np.cos(yaw_k), np.sin(yaw_k)
         vx_k = cos_k * command.vx - sin_k * command.vy
         vy_k = sin_k * command.vx + cos_k * command.vy
