@@ -397,14 +397,11 @@ def test_a_stage_leaves_to_python_what_python_must_do():
                        accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
     ctrl.act(state, VelocityCommand())  # the first tick, staged
     feet_before = ctrl.feet.footholds.copy()
-    out = np.zeros(4)
-    args = ctrl._tick_arrays()
-    rows = np.empty((5, n))
-    kin_buffer = args[2]
-    kin_buffer[93 + 2] = np.inf  # foot FR's height (`tick_arrays`: feet from entry 93)
+    model_f, model_i, kin_buffer, floats, flags, constants = ctrl._tick_arrays()
+    kin_buffer[93 + 2] = np.inf  # foot FR's height (`wbc.estimation.tree.tick_arrays`: the feet from entry 93)
     stage = control_tick(STAGE_FOOTHOLDS, STAGE_DONE, state.imu_quat, state.gyro_in_body, state.q, state.dq,
                          state.accel_in_body, state.foot_force, ctrl.t, 0.0, 0.0, 0.0, True, ctrl.plan.forces[0],
-                         np.zeros(3), *args, rows, ctrl._tick_constants, out)
+                         np.zeros(3), model_f, model_i, kin_buffer, floats, flags, constants, np.empty((5, n)))
     assert stage == STAGE_FOOTHOLDS
     np.testing.assert_array_equal(ctrl.feet.footholds, feet_before)
     # a non-finite measurement on a compiled tick: the command is refused as a constructed one is

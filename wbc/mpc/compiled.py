@@ -32,10 +32,11 @@ from wbc.estimation.filter import steady_step
 from wbc.estimation.tree import packed_pass, packed_place, tick_arrays
 from wbc.robots.conventions import G
 
-__all__ = ["FEET_HEIGHT_BOUND", "FOOTHOLD_CLIP_MARGIN", "STAGE_CLIP", "STAGE_COMMAND", "STAGE_DONE", "STAGE_FOOTHOLDS",
-           "STAGE_FRONT", "STAGE_LEGS", "STAGE_REFERENCE", "TICK_CONSTANTS", "command_rows", "contact_trust",
-           "control_tick", "feet_heights_in_bound", "gait_state", "ground_height", "leg_torques", "liftoffs",
-           "plan_footholds", "reference_update", "swing_targets", "update_inputs"]
+__all__ = ["FEET_HEIGHT_BOUND", "FOOTHOLD_CLIP_MARGIN", "STAGE_CLIP", "STAGE_COMMAND", "STAGE_DONE",
+           "STAGE_FOOTHOLDS", "STAGE_FRONT", "STAGE_LEGS", "STAGE_REFERENCE", "TICK_CONSTANTS", "TICK_FLAGS",
+           "TICK_FLOATS", "command_rows", "contact_trust", "control_tick", "feet_heights_in_bound", "gait_state",
+           "ground_height", "leg_torques", "liftoffs", "plan_footholds", "reference_update", "swing_targets",
+           "tick_constant_arrays", "tick_constants_size", "tick_flags", "tick_floats", "update_inputs"]
 
 FOOTHOLD_CLIP_MARGIN = 1e-9
 """Relative margin below the largest foothold offset inside which `plan_footholds` needs no norm [1].
@@ -528,13 +529,74 @@ STAGE_DONE = 6
 
 C_PERIOD, C_DUTY, C_MARGIN, C_INV_FORCE, C_SLIP2, C_DT, C_XY_LEASH, C_YAW_LEASH = range(8)
 C_STANCE_S, C_CAPTURE, C_CENTRIPETAL, C_MAX_OFFSET, C_MIN_HEIGHT, C_BELOW_Z, C_SWING_S, C_APEX = range(8, 16)
-C_SWING_KP, C_SWING_KD, C_STANCE_KD = range(16, 19)
-TICK_CONSTANTS = 19
-"""Length of `control_tick`'s constants array; the ``C_*`` names index it."""
+C_SWING_KP, C_SWING_KD, C_STANCE_KD, C_ARM_FIRST = range(16, 20)
+TICK_CONSTANTS = 20
+"""Length of `control_tick`'s scalar constants (the first entries of its constants buffer); the ``C_*`` names index
+them."""
 
 OUT_V_CMD_X, OUT_V_CMD_Y, OUT_GROUND, OUT_VALID = range(4)
 """Indices of `control_tick`'s results array: the commanded velocity in the world (its reference stage), the ground
 height of a placement left to clip, and whether the command's rows passed the check (1.0) or not (0.0)."""
+
+TICK_FLOATS = 109
+"""Entries of the tick's float buffer before the joint torques (`tick_floats`)."""
+TICK_FLAGS = 20
+"""Entries of the tick's flag buffer (`tick_flags`)."""
+_PATTERNS, _NX_EST = 16, 18  # the estimator's contact patterns and state size (`wbc.estimation.filter`)
+
+
+def tick_constants_size(n: int) -> int:
+    """Length of the tick's constants buffer (`tick_constant_arrays`) for a robot of `n` joints."""
+    return TICK_CONSTANTS + 4 + 12 + 2 * n + _PATTERNS * _NX_EST * (_NX_EST + 3 + 1 + 24)
+
+
+@numba.njit(cache=True, nogil=True)
+def tick_floats(buf):  # pragma: no cover
+    """The tick's per-tick float arrays as views of one buffer of `TICK_FLOATS` + n entries.
+
+    In order: the gait's progress and time to touchdown (4,), the estimator's trust (4,), the reference's targets
+    (4,), the lift-off points and footholds (4, 3), the feet left to clip (4, 4), the swing targets' positions and
+    velocities (4, 3), the legs' push scales (4,), the arm's target (3,), the results (``OUT_*``, 4), the estimator's
+    state (18,), the joint torques (n,). The controller's parts hold these views as their arrays, so one compiled
+    call is handed one array for all of them (numba wraps every array handed to it, ~0.15 us each).
+    """
+    return (buf[0:4], buf[4:8], buf[8:12], buf[12:16], buf[16:28].reshape((4, 3)), buf[28:40].reshape((4, 3)),
+            buf[40:56].reshape((4, 4)), buf[56:68].reshape((4, 3)), buf[68:80].reshape((4, 3)), buf[80:84],
+            buf[84:87], buf[87:91], buf[91:109], buf[109:])
+
+
+@numba.njit(cache=True, nogil=True)
+def tick_flags(buf):  # pragma: no cover
+    """The tick's flags as views of one boolean buffer of `TICK_FLAGS` entries (4 each).
+
+    In order: the gait's stance flags, the feet the estimator dropped, the last tick's stance flags, this tick's
+    lift-offs, the feet left to clip.
+    """
+    return buf[0:4], buf[4:8], buf[8:12], buf[12:16], buf[16:20]
+
+
+@numba.njit(cache=True, nogil=True)
+def tick_constant_arrays(buf, n):  # pragma: no cover
+    """The tick's constants as views of one buffer of `tick_constants_size` (n joints) entries.
+
+    In order: the scalars (``C_*``, `TICK_CONSTANTS`), the gait's phase offsets (4,), the legs' torque limits (12,),
+    the joints' gains kp and kd (n,), the estimator's steady-step matrices keep_a (16, 18, 18), keep_b (16, 18, 3),
+    keep_g (16, 18), gain (16, 18, 24) (`wbc.estimation.filter.steady_step`).
+    """
+    o = TICK_CONSTANTS
+    consts, offsets, limit = buf[0:o], buf[o:o + 4], buf[o + 4:o + 16]
+    o += 16
+    kp, kd = buf[o:o + n], buf[o + n:o + 2 * n]
+    o += 2 * n
+    size = _PATTERNS * _NX_EST
+    keep_a = buf[o:o + size * _NX_EST].reshape((_PATTERNS, _NX_EST, _NX_EST))
+    o += size * _NX_EST
+    keep_b = buf[o:o + size * 3].reshape((_PATTERNS, _NX_EST, 3))
+    o += size * 3
+    keep_g = buf[o:o + size].reshape((_PATTERNS, _NX_EST))
+    o += size
+    gain = buf[o:o + size * 24].reshape((_PATTERNS, _NX_EST, 24))
+    return consts, offsets, limit, kp, kd, keep_a, keep_b, keep_g, gain
 
 
 def _sources_digest(*modules: object) -> str:
@@ -556,10 +618,7 @@ def _make_control_tick(sources: str):  # noqa: ANN202 (returns a numba dispatche
 
     @numba.njit(cache=True, nogil=True)
     def control_tick(first, last, base_quat, omega_body, q, dq, accel_body, foot_force, t, vx, vy, yaw_rate, refresh,
-                     forces, arm_velocity, model_f, model_i, kin, offsets, contact, progress, touchdown, trust,
-                     slipping, x, keep_a, keep_b, keep_g, gain, reference, was_stance, liftoff, footholds, lifted,
-                     parts, clip, swing_pos, swing_vel, limit, scale, kp, kd, arm_first, arm_target, tau, rows, consts,
-                     out):  # pragma: no cover
+                     forces, arm_velocity, model_f, model_i, kin, floats, flags, constants, rows):  # pragma: no cover
         """The MPC controller's control tick, from stage `first` to before stage `last` (``STAGE_*``), in one call.
 
         Each stage is the compiled function the controller otherwise calls on its own, with the same arguments, so
@@ -589,36 +648,12 @@ def _make_control_tick(sources: str):  # noqa: ANN202 (returns a numba dispatche
             model_f: the kinematics' packed model, floats (`wbc.estimation.tree.TreeModel.packed`).
             model_i: the same, integers.
             kin: the kinematics' tick buffer (`wbc.estimation.tree.tick_arrays`).
-            offsets: the gait's phase offsets (4,).
-            contact: out, the gait's stance flags at `t` (4,).
-            progress: out, each swing foot's progress (4,).
-            touchdown: out, each swing foot's time to touchdown (4,) [s].
-            trust: out, the estimator's trust in each foot (4,).
-            slipping: out, the stance feet the estimator dropped (4,).
-            x: the estimator's state (18,), in place.
-            keep_a: the steady-gain step's matrices (`wbc.estimation.filter.steady_step`).
-            keep_b: the same.
-            keep_g: the same.
-            gain: the same.
-            reference: the targets (yaw, yaw target, target x, target y), in place (`reference_update`).
-            was_stance: the stance flags of the last tick (`liftoffs`), in place.
-            liftoff: the lift-off points (4, 3), in place.
-            footholds: the footholds (4, 3), in place.
-            lifted: out, the feet that lifted off at this tick (4,).
-            parts: out, the feet left to clip (`plan_footholds`) (4, 4).
-            clip: out, their flags (4,).
-            swing_pos: out, the swing paths' positions (4, 3) [m].
-            swing_vel: out, their velocities (4, 3) [m/s].
-            limit: the legs' torque limits (12,) [N m].
-            scale: out, each stance leg's push scale (4,).
-            kp: the joints' position gains (n,).
-            kd: the joints' velocity gains (n,).
-            arm_first: where the arm's joints start (-1: no arm).
-            arm_target: the arm's target (3,), advanced in place.
-            tau: out, the joint torques (n,) [N m].
+            floats: the tick's float arrays (`tick_floats`): the gait's state, the estimator's trust and state, the
+                reference's targets, the footholds' bookkeeping, the swing paths' targets, the legs' push scales, the
+                arm's target, the results (``OUT_*``), the torques; updated in place.
+            flags: the tick's flags (`tick_flags`), updated in place.
+            constants: the tick's constants (`tick_constant_arrays`).
             rows: out, the command's rows (5, n).
-            consts: the constants (``C_*``, `TICK_CONSTANTS`).
-            out: the results (``OUT_*``).
 
         Returns:
             The stage to run next: `last` when every stage ran.
@@ -626,6 +661,11 @@ def _make_control_tick(sources: str):  # noqa: ANN202 (returns a numba dispatche
         sources  # noqa: B018 - in numba's cache key (`_sources_digest`)
         (rot, _, _, feet_rel, hips_rel, feet_vel_rel, leg_jac, gravity, _, _, base_position, _, feet, feet_vel, com,
          com_vel) = tick_arrays(kin)
+        (progress, touchdown, trust, reference, liftoff, footholds, parts, swing_pos, swing_vel, scale, arm_target,
+         out, x, tau) = tick_floats(floats)
+        contact, slipping, was_stance, lifted, clip = tick_flags(flags)
+        consts, offsets, limit, kp, kd, keep_a, keep_b, keep_g, gain = tick_constant_arrays(constants, tau.shape[0])
+        arm_first = int(consts[C_ARM_FIRST])
         stage = first
         if stage == STAGE_FRONT and stage < last:
             packed_pass(base_quat, omega_body, q, dq, model_f, model_i, kin)

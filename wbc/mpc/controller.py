@@ -164,23 +164,56 @@ class MpcController:
         self._arm_hold = np.zeros(3)  # the arm's velocity while no plan moves it
         self._inv_contact_force = 1.0 / cfg.contact_force
         self._slip2 = cfg.slip_speed * cfg.slip_speed
-        # the gait's state at this tick, and the estimator's trust in each foot (overwritten every tick)
-        self._contact, self._progress, self._touchdown = np.ones(4, dtype=bool), np.zeros(4), np.zeros(4)
-        self._trust = np.zeros(4)
-        self.slipping = np.zeros(4, dtype=bool)  # stance feet the estimator dropped at the last tick: they slide
-        self._arm_target = np.array(desc.arm.nominal_q, dtype=np.float64)  # reset in place: the compiled tick holds it
-        # the compiled tick (`control_tick`): its constants, its results, the legs' torques; the arrays it works on
-        # are gathered at the first tick of an episode (`_tick_arrays`), once every reset has run
+        # the arrays of a tick live in three buffers that `control_tick` is handed whole (`wbc.mpc.compiled`'s
+        # `tick_floats`, `tick_flags`, `tick_constant_arrays`); this controller's own are views of them from here on,
+        # those of its parts are moved into them (`_hold_tick_arrays`)
+        ts, n = tick_stages, self.kin.n
+        self._tick_floats, self._tick_flags = np.zeros(ts.TICK_FLOATS + n), np.zeros(ts.TICK_FLAGS, dtype=bool)
+        self._float_views, self._flag_views = ts.tick_floats(self._tick_floats), ts.tick_flags(self._tick_flags)
+        # the gait's state at this tick, the estimator's trust in each foot and the feet it dropped at the last tick
+        # (they slide), the arm's target, the compiled tick's results and torques
+        (self._progress, self._touchdown, self._trust, _, _, _, _, _, _, _, self._arm_target, self._tick_out, _,
+         self._tau) = self._float_views
+        self._contact, self.slipping = self._flag_views[0:2]
+        self._contact[:] = True
+        self._arm_target[:] = desc.arm.nominal_q
+        self._hold_tick_arrays()
         self._tick_constants = self._make_tick_constants()
-        self._tick_out = np.zeros(4)
-        self._tau = np.zeros(self.kin.n)
         self.reset()
         self._load_compiled()
 
+    def _tick_owners(self) -> tuple[tuple[object, str], ...]:
+        """Who holds each of `tick_floats`' and then `tick_flags`' arrays, under which attribute."""
+        feet = self.feet
+        return ((self, "_progress"), (self, "_touchdown"), (self, "_trust"), (self.reference, "targets"),
+                (feet, "liftoff"), (feet, "footholds"), (feet, "_parts"), (feet, "_swing_pos"), (feet, "_swing_vel"),
+                (self.legs, "scale"), (self, "_arm_target"), (self, "_tick_out"), (self.estimator, "x"),
+                (self, "_tau"), (self, "_contact"), (self, "slipping"), (feet, "_was_stance"), (feet, "_lifted"),
+                (feet, "_clip"))
+
+    def _hold_tick_arrays(self) -> None:
+        """Make every array `control_tick` works on a view of its buffers (their values copied in), where it is not.
+
+        Run when the controller is made and at the first compiled tick of every episode, so that an array a reset
+        replaced (a subclass's, say) is moved back in before the tick writes the buffers.
+        """
+        for view, (owner, name) in zip((*self._float_views, *self._flag_views), self._tick_owners(), strict=True):
+            held = getattr(owner, name)
+            if held is not view:
+                view[...] = held
+                setattr(owner, name, view)
+
     def _make_tick_constants(self) -> np.ndarray:
-        """`control_tick`'s constants (``wbc.mpc.compiled.C_*``), from the settings and the parts made from them."""
-        cfg, ts = self.config, tick_stages
-        out = np.zeros(ts.TICK_CONSTANTS)
+        """`control_tick`'s constants buffer (`wbc.mpc.compiled.tick_constant_arrays`), from the settings and parts."""
+        cfg, ts, n = self.config, tick_stages, self.kin.n
+        buffer = np.zeros(ts.tick_constants_size(n))
+        out, offsets, limit, kp, kd, *steady = ts.tick_constant_arrays(buffer, n)
+        offsets[:], limit[:] = self.gait.clock[3], self.legs.limit
+        kp[:], kd[:] = self._gains
+        if self.estimator.config.gain == "steady":  # the full gain has no steady step (no compiled tick either)
+            for view, matrices in zip(steady, self.estimator.steady_arrays()[1:], strict=True):
+                view[...] = matrices
+        out[ts.C_ARM_FIRST] = self._arm_first
         out[ts.C_PERIOD], out[ts.C_DUTY], out[ts.C_MARGIN] = self.gait.clock[:3]
         out[ts.C_INV_FORCE], out[ts.C_SLIP2], out[ts.C_DT] = self._inv_contact_force, self._slip2, self.dt
         out[ts.C_XY_LEASH], out[ts.C_YAW_LEASH] = XY_LEASH_M, YAW_LEASH_RAD
@@ -190,7 +223,7 @@ class MpcController:
         out[ts.C_SWING_S], out[ts.C_APEX] = cfg.gait.swing_s, cfg.swing_height
         out[ts.C_SWING_KP], out[ts.C_SWING_KD], out[ts.C_STANCE_KD] = self.legs.swing_kp, self.legs.swing_kd, \
             self.legs.stance_kd
-        return out
+        return buffer
 
     def _load_compiled(self) -> None:
         """Play two ticks (one with an MPC update) on a synthetic standing frame, then forget them.
@@ -312,13 +345,10 @@ class MpcController:
             tau = self._leg_torques(contact, progress, step)
         return self._command(state, tau, step)
 
-    def _tick_arrays(self) -> tuple:
-        """The arrays `control_tick` works on, in its order from the packed model to the legs' torques."""
-        kp, kd = self._gains
-        return (*self.kin.compiled_arrays(), self.gait.clock[3], self._contact, self._progress, self._touchdown,
-                self._trust, self.slipping, *self.estimator.steady_arrays(), self.reference.targets,
-                *self.feet.tick_arrays(), self.legs.limit, self.legs.scale, kp, kd, self._arm_first, self._arm_target,
-                self._tau)
+    def _tick_arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays `control_tick` takes after the plan's forces and arm velocity, up to the command's rows."""
+        self._hold_tick_arrays()
+        return (*self.kin.compiled_arrays(), self._tick_floats, self._tick_flags, self._tick_constants)
 
     def _compiled_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """The tick as `_staged_act` plays it, its stages in `control_tick`: one compiled call on most ticks.
@@ -336,7 +366,7 @@ class MpcController:
         rows = np.empty((5, kin.n))  # a new array each tick: it becomes the command's (immutable) storage
         head = (state.imu_quat, state.gyro_in_body, state.q, state.dq, state.accel_in_body, state.foot_force, self.t,
                 vx, vy, yaw_rate, refresh)
-        tail = (*self._tick_args, rows, self._tick_constants, out)
+        tail = (*self._tick_args, rows)
         step, forces, v_arm = self._step_inputs()
         if replan:
             control_tick(ts.STAGE_FRONT, ts.STAGE_REFERENCE, *head, forces, v_arm, *tail)

@@ -86,7 +86,7 @@ class FootholdPlanner:
         self._below_z = float(touchdown_depth)
         self._stance_s = gait.stance_s
         self._clip, self._parts = np.zeros(4, dtype=bool), np.zeros((4, 4))  # `plan_footholds`' feet left to clip
-        # allocated once and reset in place: a compiled tick holds them (`tick_arrays`)
+        # allocated once and reset in place: the MPC controller's compiled tick moves them into its buffers
         self.liftoff = np.zeros((4, 3))
         self.footholds = np.zeros((4, 3))
         self._was_stance = np.ones(4, dtype=bool)
@@ -101,16 +101,6 @@ class FootholdPlanner:
         self._lifted[:] = False
         self._swing_pos[:] = 0.0
         self._swing_vel[:] = 0.0
-
-    def tick_arrays(self) -> tuple[np.ndarray, ...]:
-        """The arrays a compiled tick updates in place, as `wbc.mpc.compiled.control_tick` takes them.
-
-        Returns:
-            The stance flags of the last tick, the lift-off points, the footholds, this tick's lift-offs, the feet
-            left to clip (their parts and flags), the swing targets' positions and velocities.
-        """
-        return (self._was_stance, self.liftoff, self.footholds, self._lifted, self._parts, self._clip,
-                self._swing_pos, self._swing_vel)
 
     def update(self, kin: RobotKinematics, contact: np.ndarray, touchdown: np.ndarray,
                v_cmd_xy: tuple[float, float], yaw_rate: float, *, refresh: bool) -> None:
