@@ -453,3 +453,23 @@ def test_an_updates_inputs_are_the_python_statements_to_the_bit(monkeypatch, nam
             for a, b in zip(got, want, strict=True):
                 assert a.shape == b.shape and a.dtype == b.dtype
                 assert a.tobytes() == b.tobytes()
+
+
+def test_an_array_a_reset_replaced_is_moved_back_into_the_compiled_ticks_buffers():
+    """The compiled tick writes its buffers; a part whose reset replaced one of its arrays (as a subclass may) gets
+    the buffer's view back, with its values, before the first compiled tick of the episode reads it."""
+    desc = get_robot("a1-wx200")
+    ctrl = MpcController(desc)
+    n = desc.num_joints
+    state = RobotState(tick=0, time=0.0, q=np.asarray(desc.nominal_q, dtype=np.float64)[:n].copy(), dq=np.zeros(n),
+                       tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
+    ctrl.reset()
+    ctrl._arm_target = np.array([0.1, -0.2, 0.3])
+    ctrl.feet.footholds = np.full((4, 3), 7.0)
+    ctrl.act(state, VelocityCommand())  # the first tick of the episode, staged
+    ctrl.act(state, VelocityCommand())  # compiled
+    assert np.shares_memory(ctrl._arm_target, ctrl._tick_floats)
+    assert np.shares_memory(ctrl.feet.footholds, ctrl._tick_floats)
+    # the arm's target moved on from the value the reset left, not from the buffer's old one
+    assert np.abs(ctrl._arm_target - [0.1, -0.2, 0.3]).max() < 0.01

@@ -14,8 +14,9 @@ controller needs. It is split along what a tick can afford:
   the exact CoM at the placed state (Pinocchio's CCRBA), and the CoM's offset in the trunk frame that `place` uses
   between updates.
 
-The per-tick arrays are allocated once and overwritten in place by `tick` and `place` (no allocation at a tick): a
-caller that keeps one past the tick copies it.
+The per-tick arrays are allocated once, as views of one buffer (`wbc.estimation.tree.tick_arrays`), and overwritten
+in place by `tick` and `place` (no allocation at a tick): a caller that keeps one past the tick copies it. A compiled
+caller runs the pass and the placement itself on that buffer (`compiled_arrays`).
 """
 
 from __future__ import annotations

@@ -11,6 +11,12 @@ Every tick (500 Hz) it orchestrates the pieces of this package:
    layer (`LegLayer`) does when it is chosen or the QP fails;
 6. the motor command: those torques, joint damping, and the arm held by PD on its planned path.
 
+With the leg layer, most ticks run steps 1-3, 5 and 6 as one compiled call (`wbc.mpc.compiled.control_tick`, the
+stages the other ticks call one by one, to the same bits); a tick that makes an MPC update calls it around the
+update, whose inputs are one compiled call too (`wbc.mpc.compiled.update_inputs`). The command's rows are checked
+(finite, gains non-negative) in the call that fills them, so the command is built without a second check; the robot
+clamps it to its motors' limits before anything reaches a motor.
+
 Ground truth is never used unless the explicit debug switch `use_ground_truth` is thrown (``wbc run --debug-truth``,
 recorded in the results): the controller sees only `RobotState`. A failed MPC solve falls back to the previous
 plan, shifted in time, and is counted (``fallbacks``); a failed whole-body QP falls back to the leg layer
