@@ -286,10 +286,9 @@ class MpcController:
         Returns:
             ``mpc_setup_s`` (linearise, condense, constraints) and ``mpc_solve_s`` (the QP) on a tick that made an
             MPC update (a failed update, counted in ``fallbacks``, reports neither); ``whole_body_s``, the
-            whole-body layer's time: PlaCo's QP every tick; the leg layer (its compiled call, with the swing paths
-            and the command's rows) on the ticks due for an MPC update and the first of an episode, where it runs
-            apart (on the others it runs inside the tick's one compiled call, `_compiled_act`, and is not timed
-            apart). Empty before the first tick.
+            whole-body layer's time: PlaCo's QP every tick; the leg layer on the ticks due for an MPC update and
+            the first of an episode, where it runs apart (on the others it runs inside the tick's one compiled call,
+            `_compiled_act`, and is not timed apart). Empty before the first tick.
         """
         return dict(self._timings)
 
@@ -359,8 +358,8 @@ class MpcController:
     def _compiled_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """The tick as `_staged_act` plays it, its stages in `control_tick`: one compiled call on most ticks.
 
-        A tick that makes an MPC update calls it three times, around the update's own steps (the centroidal
-        quantities between the estimate and the reference; the plan between the footholds and the legs). Where a
+        A tick that makes an MPC update calls it twice, around the centroidal quantities (between the estimate and
+        the reference), then makes the update and ends as the staged tick does (the leg layer timed apart). Where a
         stage stops for the Python law (`control_tick`), the Python stage runs and the call resumes after it.
         """
         ts, kin, out = tick_stages, self.kin, self._tick_out
@@ -385,11 +384,9 @@ class MpcController:
             stage = ts.STAGE_LEGS
         if replan:
             self._replan(state, command)
-            step, forces, v_arm = self._step_inputs()
-            t0 = time.perf_counter()
-            stage = control_tick(ts.STAGE_LEGS, ts.STAGE_DONE, *head, forces, v_arm, *tail)
-            self._timings["whole_body_s"] = time.perf_counter() - t0
-        elif stage < ts.STAGE_DONE:
+            step = self._plan_step() if self.plan is not None else 0
+            return self._command(state, self._leg_torques(self._contact, self._progress, step), step)
+        if stage < ts.STAGE_DONE:
             stage = control_tick(stage, ts.STAGE_DONE, *head, forces, v_arm, *tail)
         valid = self._arm_rows(rows, step) and out[ts.OUT_VALID] == 1.0
         self.t += self.dt
