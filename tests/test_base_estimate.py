@@ -53,8 +53,8 @@ def test_the_filters_compiled_step_loads_when_it_is_made_and_the_estimate_starts
 def test_a_new_process_has_the_filters_step_loaded_once_the_estimate_is_made():
     """Loaded before any robot is connected: a robot's first ticks do not wait for it (it cost 0.25 s at the
     stand-up's second tick, and the link damped the motors for it)."""
-    code = ("from wbc.estimation.filter import _steady_step; from wbc.estimation.base_estimate import BaseEstimate; "
-            "from wbc.robots.registry import get_robot; before = len(_steady_step.signatures); "
-            "BaseEstimate(get_robot('go1-arm', 'actuated'), 0.02); print(before, len(_steady_step.signatures))")
+    code = ("from wbc.estimation.filter import steady_step; from wbc.estimation.base_estimate import BaseEstimate; "
+            "from wbc.robots.registry import get_robot; before = len(steady_step.signatures); "
+            "BaseEstimate(get_robot('go1-arm', 'actuated'), 0.02); print(before, len(steady_step.signatures))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, timeout=120)
     assert out.stdout.split() == ["0", "1"]

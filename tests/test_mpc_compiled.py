@@ -10,13 +10,30 @@ import pytest
 from wbc.errors import CommandError
 from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.estimation.kinematics import RobotKinematics
-from wbc.mpc.compiled import command_rows, contact_trust, liftoffs, swing_targets
+from wbc.mpc.compiled import (
+    FEET_HEIGHT_BOUND,
+    STAGE_CLIP,
+    STAGE_DONE,
+    STAGE_FOOTHOLDS,
+    STAGE_FRONT,
+    STAGE_REFERENCE,
+    command_rows,
+    contact_trust,
+    control_tick,
+    feet_heights_in_bound,
+    liftoffs,
+    reference_update,
+    swing_targets,
+)
+from wbc.mpc.compiled import ground_height as compiled_ground_height
 from wbc.mpc.controller import MpcController
 from wbc.mpc.footholds import MIN_CAPTURE_HEIGHT_M, FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT
 from wbc.mpc.leg_layer import LegLayer
+from wbc.mpc.reference import XY_LEASH_M, YAW_LEASH_RAD, MotionReference
 from wbc.robots import get_robot, joint_table
 from wbc.robots.conventions import G, quat_to_matrix
+from wbc.robots.euler import yaw_of
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
 
@@ -245,3 +262,214 @@ def test_footholds_are_the_law_in_python_floats_to_the_bit_clipped_or_not():
             clipped += bool(planner._clip[i])  # left to Python's hypot: near or past the reach
         np.testing.assert_array_equal(planner.footholds[contact], feet[contact])
     assert 100 < clipped < 700  # both branches ran, each many times (of ~800 swing feet)
+
+
+# -- the whole tick in one call (`control_tick`) ---------------------------------------------------------------------
+
+def _reference_python(targets, yaw, com_x, com_y, vx, vy, yaw_rate, dt):
+    """The reference's law in Python floats, statement by statement (`wbc.mpc.reference.MotionReference.update`)."""
+    before = targets[0]
+    unwrapped = before + math.remainder(yaw - before, 2 * math.pi)
+    cy, sy = math.cos(unwrapped), math.sin(unwrapped)
+    vxw, vyw = cy * vx - sy * vy, sy * vx + cy * vy
+
+    def leash(offset, length):
+        return min(max(offset, -length), length)
+
+    return ([unwrapped, unwrapped + leash(targets[1] + yaw_rate * dt - unwrapped, YAW_LEASH_RAD),
+             com_x + leash(targets[2] + vxw * dt - com_x, XY_LEASH_M),
+             com_y + leash(targets[3] + vyw * dt - com_y, XY_LEASH_M)], [vxw, vyw])
+
+
+def test_the_compiled_reference_is_the_python_law_to_the_bit():
+    rng = np.random.default_rng(5)
+    reference = MotionReference(control_dt=0.002, horizon=10, step_s=0.032, body_height=0.28, arm_q=np.zeros(3))
+    v_cmd = np.empty(2)
+    for k in range(3000):
+        targets = (rng.normal(0.0, 10.0 if k % 3 else 0.2, 4)).tolist()
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        rot = quat_to_matrix(np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]))
+        com_x, com_y, vx, vy, yaw_rate = rng.normal(0.0, 1.0, 5).tolist()
+        state = np.array(targets)
+        assert reference_update(rot, com_x, com_y, vx, vy, yaw_rate, 0.002, XY_LEASH_M, YAW_LEASH_RAD, state, v_cmd)
+        want_state, want_v = _reference_python(targets, yaw_of(rot), com_x, com_y, vx, vy, yaw_rate, 0.002)
+        assert state.tolist() == want_state and v_cmd.tolist() == want_v
+        # and the reference's own Python update, which the staged tick calls
+        reference.targets[:] = targets
+        got_v = reference.update(yaw_of(rot), com_x, com_y, VelocityCommand(vx=vx, vy=vy, yaw_rate=yaw_rate))
+        assert reference.targets.tolist() == want_state and list(got_v) == want_v
+    # a NaN yaw goes through as Python's remainder hands it back; an infinite one is left to Python (which raises)
+    state = np.zeros(4)
+    assert reference_update(np.full((3, 3), np.nan), 0.0, 0.0, 0.0, 0.0, 0.0, 0.002, 0.15, 0.3, state, v_cmd)
+    assert math.isnan(state[0])
+    state = np.array([np.inf, 0.0, 0.0, 0.0])
+    assert not reference_update(np.eye(3), 0.0, 0.0, 0.0, 0.0, 0.0, 0.002, 0.15, 0.3, state, v_cmd)
+    assert state.tolist() == [np.inf, 0.0, 0.0, 0.0]
+
+
+def test_the_compiled_ground_height_is_math_fsums_to_the_bit():
+    rng = np.random.default_rng(8)
+    awkward = [0.0, -0.0, 1e-16, 1.0, 1e16, -1e16, 0.1, 0.2, 0.3, -0.1, 5e-324, 1.0 + 2.0**-52, 1e300, -1e300]
+    for k in range(20000):
+        feet = rng.normal(0.0, 1.0, (4, 3)) * 10.0 ** rng.integers(-20, 20)
+        if k % 2:
+            feet[:, 2] = rng.choice(awkward, 4)
+        stance = rng.random(4) < 0.6
+        assert feet_heights_in_bound(feet) == bool(np.all(np.abs(feet[:, 2]) <= FEET_HEIGHT_BOUND))
+        got, want = compiled_ground_height(feet, stance), ground_height(feet, stance)
+        assert got == want and math.copysign(1.0, got) == math.copysign(1.0, want)
+    assert not feet_heights_in_bound(np.array([[0.0, 0.0, np.nan]] * 4))
+    assert not feet_heights_in_bound(np.array([[0.0, 0.0, 2e300]] * 4))
+
+
+def _play(controller, robot_name, seconds, schedule, push):
+    from wbc.arena.divergence import DivergenceCheck
+    from wbc.arena.runner import run_episode
+    from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
+
+    rows = []
+
+    class Recording:
+        rate_hz = controller.rate_hz
+
+        def reset(self):
+            controller.reset()
+
+        def act(self, state, command):
+            out = controller.act(state, command)
+            rows.append(np.array(out.rows))
+            return out
+
+    robot = MujocoRobot(MujocoRobotConfig(robot=robot_name, arm_mode=controller.desc.arm_mode))
+    with robot:
+        robot.reset(seed=0)
+        if push is not None:
+            robot.apply_push(push)
+        episode = run_episode(robot, Recording(), schedule, seconds, divergence=DivergenceCheck())
+    assert not episode.fell
+    return np.stack(rows)
+
+
+@pytest.mark.parametrize(("name", "robot_name", "pushed"), [("mpc", "a1-wx200", True), ("mpc-noarm", "go1-arm", False)])
+def test_the_compiled_tick_gives_the_staged_ticks_commands_to_the_bit(monkeypatch, name, robot_name, pushed):
+    """Walking, turning and (a1) pushed sideways, its footholds clipped to the legs' reach: each tick's command from
+    the whole tick in one compiled call equals, to the bit, the command of the same tick played stage by stage."""
+    import wbc.mpc.controller as controller_module
+    from wbc.control.registry import get_controller
+    from wbc.scenario.push import Push
+    from wbc.scenario.trial import CommandSchedule
+
+    schedule = CommandSchedule(vx=0.5, vy=0.1, yaw_rate=0.5, ramp_s=0.3)
+    push = Push(force_in_world=np.array([0.0, 380.0, 0.0]), offset_in_base=np.array([0.05, 0.0, 0.0]), start=0.5,
+                duration=0.09) if pushed else None
+    spec = get_controller(name)
+    desc = get_robot(robot_name, spec.arm_mode)
+    staged = spec.make(desc)
+    staged._compiled_act = staged._staged_act  # every tick stage by stage
+    want = _play(staged, robot_name, 1.0, schedule, push)
+    stops = []
+
+    def counted(*args):
+        stage = compiled_tick(*args)
+        stops.append((args[0], args[1], stage))
+        return stage
+
+    compiled_tick = controller_module.control_tick
+    monkeypatch.setattr(controller_module, "control_tick", counted)
+    got = _play(spec.make(desc), robot_name, 1.0, schedule, push)
+    assert got.shape == want.shape
+    assert np.array_equal(got.view(np.uint64), want.view(np.uint64))
+    whole = sum(first == STAGE_FRONT and last == STAGE_DONE for first, last, _ in stops)
+    assert whole > 0.8 * len(got)  # most ticks are one call
+    assert any(first == STAGE_REFERENCE for first, _, _ in stops)  # MPC updates split the tick around them
+    if pushed:
+        assert any(stage == STAGE_CLIP for _, _, stage in stops)  # the push's step-out clipped a foothold in Python
+
+
+def test_a_stage_leaves_to_python_what_python_must_do():
+    """The footholds' stage stops before touching anything when a foot's height is outside what its exact sum takes;
+    the whole tick then gives what the staged tick gives (here: a command refused, never sent)."""
+    desc = get_robot("a1-wx200")
+    ctrl = MpcController(desc)
+    n = desc.num_joints
+    state = RobotState(tick=0, time=0.0, q=np.asarray(desc.nominal_q, dtype=np.float64)[:n].copy(), dq=np.zeros(n),
+                       tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
+    ctrl.act(state, VelocityCommand())  # the first tick, staged
+    feet_before = ctrl.feet.footholds.copy()
+    model_f, model_i, kin_buffer, floats, flags, constants = ctrl._tick_arrays()
+    kin_buffer[93 + 2] = np.inf  # foot FR's height (`wbc.estimation.tree.tick_arrays`: the feet from entry 93)
+    stage = control_tick(STAGE_FOOTHOLDS, STAGE_DONE, state.imu_quat, state.gyro_in_body, state.q, state.dq,
+                         state.accel_in_body, state.foot_force, ctrl.t, 0.0, 0.0, 0.0, True, ctrl.plan.forces[0],
+                         np.zeros(3), model_f, model_i, kin_buffer, floats, flags, constants, np.empty((5, n)))
+    assert stage == STAGE_FOOTHOLDS
+    np.testing.assert_array_equal(ctrl.feet.footholds, feet_before)
+    # a non-finite measurement on a compiled tick: the command is refused as a constructed one is
+    dq = np.zeros(n)
+    dq[4] = np.nan
+    ctrl.act(state, VelocityCommand())
+    with pytest.raises(CommandError, match="non-finite"):
+        ctrl.act(RobotState(**{**state.__dict__, "dq": dq}), VelocityCommand())
+
+
+def test_the_compiled_tick_is_compiled_again_when_a_module_it_calls_into_changes():
+    """numba keys its disk cache by the function's own file; the tick's key also holds the digest of the modules it
+    calls into (the kinematics pass, the estimator's step), so an edit there cannot leave stale machine code."""
+    from wbc.estimation import filter as filter_module
+    from wbc.estimation import tree
+    from wbc.mpc.compiled import _sources_digest
+
+    cells = [cell.cell_contents for cell in control_tick.py_func.__closure__]
+    assert _sources_digest(tree, filter_module) in cells
+
+
+@pytest.mark.parametrize(("name", "robot_name"), [("mpc", "a1-wx200"), ("mpc-locked", "a1-wx200"),
+                                                  ("mpc-noarm", "go1-arm")])
+def test_an_updates_inputs_are_the_python_statements_to_the_bit(monkeypatch, name, robot_name):
+    """x0, the reference, the contact table and the feet of an MPC update from the one compiled call equal, to the
+    bit, those of the Python statements it replaces (the fallback), at every tick of a walk that turns."""
+    import wbc.mpc.controller as controller_module
+    from wbc.control.registry import get_controller
+    from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
+
+    spec = get_controller(name)
+    robot = MujocoRobot(MujocoRobotConfig(robot=robot_name, arm_mode=spec.arm_mode))
+    ctrl = spec.make(robot.desc)
+    compiled = controller_module.update_inputs
+    with robot:
+        robot.reset(seed=1)
+        ctrl.reset()
+        for k in range(300):
+            command = VelocityCommand(vx=0.6, vy=-0.1 * (k > 150), yaw_rate=1.0 if k > 100 else 0)
+            state = robot.read()
+            robot.write(ctrl.act(state, command))
+            robot.advance(ctrl.dt)
+            if k % 7:
+                continue
+            got = ctrl._update_inputs(state, command)
+            monkeypatch.setattr(controller_module, "update_inputs", lambda *args: False)
+            want = ctrl._update_inputs(state, command)
+            monkeypatch.setattr(controller_module, "update_inputs", compiled)
+            for a, b in zip(got, want, strict=True):
+                assert a.shape == b.shape and a.dtype == b.dtype
+                assert a.tobytes() == b.tobytes()
+
+
+def test_an_array_a_reset_replaced_is_moved_back_into_the_compiled_ticks_buffers():
+    """The compiled tick writes its buffers; a part whose reset replaced one of its arrays (as a subclass may) gets
+    the buffer's view back, with its values, before the first compiled tick of the episode reads it."""
+    desc = get_robot("a1-wx200")
+    ctrl = MpcController(desc)
+    n = desc.num_joints
+    state = RobotState(tick=0, time=0.0, q=np.asarray(desc.nominal_q, dtype=np.float64)[:n].copy(), dq=np.zeros(n),
+                       tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
+    ctrl.reset()
+    ctrl._arm_target = np.array([0.1, -0.2, 0.3])
+    ctrl.feet.footholds = np.full((4, 3), 7.0)
+    ctrl.act(state, VelocityCommand())  # the first tick of the episode, staged
+    ctrl.act(state, VelocityCommand())  # compiled
+    assert np.shares_memory(ctrl._arm_target, ctrl._tick_floats)
+    assert np.shares_memory(ctrl.feet.footholds, ctrl._tick_floats)
+    # the arm's target moved on from the value the reset left, not from the buffer's old one
+    assert np.abs(ctrl._arm_target - [0.1, -0.2, 0.3]).max() < 0.01

@@ -93,7 +93,9 @@ def test_tick_timings_report_the_mpc_update_and_the_whole_body_qp_on_the_ticks_t
         solves_before = solves
         assert updated == (k % ctrl.config.replan_every == 0)
         assert ("mpc_setup_s" in timings) == updated and ("mpc_solve_s" in timings) == updated
-        assert "whole_body_s" in timings  # the whole-body layer runs every tick once there is a plan (the first)
+        # the leg layer is timed apart on the ticks that make an MPC update; on the others it runs inside the tick's
+        # one compiled call
+        assert ("whole_body_s" in timings) == updated
         assert set(timings) <= {"mpc_setup_s", "mpc_solve_s", "whole_body_s"}
         assert all(v > 0 for v in timings.values())
     # PlaCo's QP, the other whole-body layer, reports its time the same way

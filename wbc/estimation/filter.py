@@ -24,7 +24,7 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.robots.conventions import GRAVITY
 
-__all__ = ["EstimatorConfig", "BaseEstimator"]
+__all__ = ["EstimatorConfig", "BaseEstimator", "steady_step"]
 
 
 
@@ -113,8 +113,8 @@ def _steady_gain(dt: float, cfg: EstimatorConfig, pattern: int) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _steady_step(x, trust, rot, accel_body, feet_rel, feet_vel_rel, keep_a, keep_b, keep_g,
-                       gain):  # pragma: no cover
+def steady_step(x, trust, rot, accel_body, feet_rel, feet_vel_rel, keep_a, keep_b, keep_g,
+                gain):  # pragma: no cover
     """One predict-and-correct step of the base estimator with the steady gain of the trusted feet's pattern.
 
     x+ = keep_a[p] x + keep_b[p] (R a) + gain[p] y + keep_g[p], with y the feet's positions and velocities relative
@@ -181,6 +181,19 @@ class BaseEstimator:
                 rows.append((keep @ a, keep @ b, keep @ b @ GRAVITY, signed))
             self._steady = tuple(np.ascontiguousarray(np.stack(m)) for m in zip(*rows, strict=True))
 
+    def steady_arrays(self) -> tuple[np.ndarray, ...]:
+        """The state and the steady-gain step's matrices, as `steady_step` takes them: x, keep_a, keep_b, keep_g, gain.
+
+        `x` is the estimator's own state (a compiled step updates it in place).
+
+        Raises:
+            ConfigError: the filter runs the full gain (``EstimatorConfig.gain = "full"``), which has no steady step.
+        """
+        if not self._steady:
+            raise ConfigError("BaseEstimator.steady_arrays: this filter runs the full Kalman gain (EstimatorConfig."
+                              "gain='full'), which has no steady-gain step; use gain='steady'")
+        return (self.x, *self._steady)
+
     def reset(self, base_pos: np.ndarray, feet_world: np.ndarray) -> None:
         """Start at a known base position with zero velocity and the feet where kinematics put them."""
         self.x[:] = 0.0
@@ -213,7 +226,7 @@ class BaseEstimator:
         if self.config.gain == "steady":
             # predict and correct in one, compiled: x+ = (I - K C) (A x + B (R a + g)) + K y; the velocity rows of y
             # are negated inside the stored gain and its foot-height rows (zeros) dropped
-            _steady_step(x, np.asarray(trust, dtype=np.float64), rot, np.asarray(accel_body, dtype=np.float64),
+            steady_step(x, np.asarray(trust, dtype=np.float64), rot, np.asarray(accel_body, dtype=np.float64),
                          np.asarray(feet_rel_world, dtype=np.float64),
                          np.asarray(feet_vel_rel_world, dtype=np.float64), *self._steady)
             return

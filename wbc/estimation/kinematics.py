@@ -14,8 +14,9 @@ controller needs. It is split along what a tick can afford:
   the exact CoM at the placed state (Pinocchio's CCRBA), and the CoM's offset in the trunk frame that `place` uses
   between updates.
 
-The per-tick arrays are allocated once and overwritten in place by `tick` and `place` (no allocation at a tick): a
-caller that keeps one past the tick copies it.
+The per-tick arrays are allocated once, as views of one buffer (`wbc.estimation.tree.tick_arrays`), and overwritten
+in place by `tick` and `place` (no allocation at a tick): a caller that keeps one past the tick copies it. A compiled
+caller runs the pass and the placement itself on that buffer (`compiled_arrays`).
 """
 
 from __future__ import annotations
@@ -25,8 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
-from wbc.estimation.tree import TreeModel, tree_pass
-from wbc.estimation.tree import place as place_kinematics
+from wbc.estimation.tree import TreeModel, packed_pass, packed_place, tick_arrays, tick_buffer_size
 from wbc.robots.description import ARM_JOINTS, FOOT_NAMES, LEG_NAMES, RobotDescription
 from wbc.robots.pinocchio_model import PinocchioRobot, build_pinocchio
 
@@ -110,37 +110,37 @@ class RobotKinematics:
         self.n = desc.num_joints
         self.arm_v = self._house_cols[ARM_JOINTS] if self.n == 15 else None
         self.mass = float(sum(inertia.mass for inertia in model.inertias))
-        # the per-tick pass: base at the origin and at rest (only its orientation and angular velocity are set)
-        self._q_tick = pin.neutral(model)
-        self._v_tick = np.zeros(model.nv)
-        self.feet_rel = np.zeros((4, 3))
-        self.hips_rel = np.zeros((4, 3))
-        self.feet_vel_rel = np.zeros((4, 3))
-        self.leg_jacobians = np.zeros((4, 3, 3))
-        self.gravity = np.zeros(self.n)
-        self.feet = np.zeros((4, 3))
-        self.feet_vel = np.zeros((4, 3))
-        self.com = np.zeros(3)
-        self.com_vel = np.zeros(3)
+        # every per-tick array is a view of one buffer (`wbc.estimation.tree.tick_arrays`), so that a compiled call
+        # is handed one array for all of them; the pass runs with the base at the origin and at rest
+        self._buffer = np.zeros(tick_buffer_size(self.n))
+        (self.rot, self._q_tick, self._v_tick, self.feet_rel, self.hips_rel, self.feet_vel_rel, self.leg_jacobians,
+         self.gravity, self.omega_world, self._com_in_base, self.base_position, self.base_velocity, self.feet,
+         self.feet_vel, self.com, self.com_vel) = tick_arrays(self._buffer)
+        self.rot[:] = np.eye(3)
+        self._q_tick[:] = pin.neutral(model)
+        # `self._com_in_base`: the CoM in the trunk frame, from the last `centroidal` (or the first tick)
         self.momentum = np.zeros(3)
         self.params: CentroidalParams | None = None
-        self.rot = np.eye(3)
-        self.omega_world = np.zeros(3)
-        self.base_position = np.zeros(3)
-        self.base_velocity = np.zeros(3)
-        self._com_in_base = np.zeros(3)  # the CoM in the trunk frame, from the last `centroidal` (or the first tick)
         self._com_known = False
         # the per-tick pass runs compiled on the model's tree (Pinocchio's joint order, from its joint 2 on); its
-        # constant arguments and outputs, gathered once
+        # constants, packed once
         pin_of_house = self.robot.joints.house_from_pin  # the Pinocchio-order index of each house joint
         tree = TreeModel.of(model, list(FOOT_NAMES), [f"{leg}_thigh_joint" for leg in LEG_NAMES],
                             pin_of_house[:12].reshape(4, 3))
-        self._pass_args = (self._perm, float(model.gravity.linear[2]), *tree.arrays(), self.rot, self._q_tick,
-                           self._v_tick, self.feet_rel, self.hips_rel, self.feet_vel_rel, self.leg_jacobians,
-                           self.gravity, self.omega_world)
-        self._place_args = (self.feet_rel, self.feet_vel_rel, self.rot, self._com_in_base, self.omega_world)
-        self._place_outputs = (self.base_position, self.base_velocity, self.feet, self.feet_vel, self.com,
-                               self.com_vel)
+        self._model = tree.packed(self._perm, float(model.gravity.linear[2]))
+
+    @property
+    def com_known(self) -> bool:
+        """Whether the CoM's place in the trunk frame is known (`tick` measures it first, `centroidal` again)."""
+        return self._com_known
+
+    def compiled_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The packed model and the tick buffer, as a compiled tick takes them (`wbc.estimation.tree.packed_pass`).
+
+        The buffer's views are this object's per-tick attributes (`wbc.estimation.tree.tick_arrays`): a compiled
+        call that runs the pass and the placement on it leaves them as `tick` and `place` would.
+        """
+        return (*self._model, self._buffer)
 
     def forget_com(self) -> None:
         """Measure the CoM in the trunk frame again at the next `tick` (as at the first tick of a new controller)."""
@@ -156,7 +156,7 @@ class RobotKinematics:
             dq: joint velocities, house order.
             omega_body: base angular velocity, body frame (3,) [rad/s].
         """
-        tree_pass(base_quat, omega_body, q, dq, *self._pass_args)
+        packed_pass(base_quat, omega_body, q, dq, *self._model, self._buffer)
         if not self._com_known:
             model, data = self.robot.model, self.robot.data
             self._com_in_base[:] = self.rot.T @ pin.centerOfMass(model, data, self._q_tick, False)
@@ -164,7 +164,7 @@ class RobotKinematics:
 
     def place(self, base_position: np.ndarray, base_velocity: np.ndarray) -> None:
         """Put the last `tick`'s configuration at a base position and velocity (world) [m], [m/s] (copied)."""
-        place_kinematics(*self._place_args, base_position, base_velocity, *self._place_outputs)
+        packed_place(self._buffer, base_position, base_velocity)
 
     def update(self, base_pos: np.ndarray, base_quat: np.ndarray, q: np.ndarray, dq: np.ndarray,
                v_base_world: np.ndarray, omega_body: np.ndarray, *, centroidal: bool) -> None:

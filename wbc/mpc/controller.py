@@ -11,6 +11,12 @@ Every tick (500 Hz) it orchestrates the pieces of this package:
    layer (`LegLayer`) does when it is chosen or the QP fails;
 6. the motor command: those torques, joint damping, and the arm held by PD on its planned path.
 
+With the leg layer, most ticks run steps 1-3, 5 and 6 as one compiled call (`wbc.mpc.compiled.control_tick`, the
+stages the other ticks call one by one, to the same bits); a tick that makes an MPC update calls it around the
+update, whose inputs are one compiled call too (`wbc.mpc.compiled.update_inputs`). The command's rows are checked
+(finite, gains non-negative) in the call that fills them, so the command is built without a second check; the robot
+clamps it to its motors' limits before anything reaches a motor.
+
 Ground truth is never used unless the explicit debug switch `use_ground_truth` is thrown (``wbc run --debug-truth``,
 recorded in the results): the controller sees only `RobotState`. A failed MPC solve falls back to the previous
 plan, shifted in time, and is counted (``fallbacks``); a failed whole-body QP falls back to the leg layer
@@ -28,14 +34,15 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.estimation.kinematics import RobotKinematics
+from wbc.mpc import compiled as tick_stages
 from wbc.mpc.centroidal_model import ARM_Q, COM, COM_VEL, MOMENTUM, NX, RPY
 from wbc.mpc.centroidal_mpc import CentroidalMpc, MpcConfig, MpcSolution, MpcSolveError
-from wbc.mpc.compiled import command_rows, contact_trust
-from wbc.mpc.footholds import FootholdConfig, FootholdPlanner, ground_height
+from wbc.mpc.compiled import command_rows, contact_trust, control_tick, update_inputs
+from wbc.mpc.footholds import MIN_CAPTURE_HEIGHT_M, FootholdConfig, FootholdPlanner, ground_height
 from wbc.mpc.gait import TROT, GaitConfig, GaitScheduler, gait_fits_steps
-from wbc.mpc.leg_layer import LegLayer
+from wbc.mpc.leg_layer import FORCE_BEFORE_PLAN, LegLayer
 from wbc.mpc.plan_targets import PlanTargets
-from wbc.mpc.reference import MotionReference
+from wbc.mpc.reference import XY_LEASH_M, YAW_LEASH_RAD, MotionReference
 from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
 from wbc.robots.description import ARM_JOINTS, RobotDescription, joint_gains
 from wbc.robots.euler import rpy_of, yaw_of
@@ -163,11 +170,66 @@ class MpcController:
         self._arm_hold = np.zeros(3)  # the arm's velocity while no plan moves it
         self._inv_contact_force = 1.0 / cfg.contact_force
         self._slip2 = cfg.slip_speed * cfg.slip_speed
-        # the gait's state at this tick, and the estimator's trust in each foot (overwritten every tick)
-        self._contact, self._progress, self._touchdown = np.ones(4, dtype=bool), np.zeros(4), np.zeros(4)
-        self._trust = np.zeros(4)
+        # the arrays of a tick live in three buffers that `control_tick` is handed whole (`wbc.mpc.compiled`'s
+        # `tick_floats`, `tick_flags`, `tick_constant_arrays`); this controller's own are views of them from here on,
+        # those of its parts are moved into them (`_hold_tick_arrays`)
+        ts, n = tick_stages, self.kin.n
+        self._tick_floats, self._tick_flags = np.zeros(ts.TICK_FLOATS + n), np.zeros(ts.TICK_FLAGS, dtype=bool)
+        self._float_views, self._flag_views = ts.tick_floats(self._tick_floats), ts.tick_flags(self._tick_flags)
+        # the gait's state at this tick, the estimator's trust in each foot and the feet it dropped at the last tick
+        # (they slide), the arm's target, the compiled tick's results and torques
+        (self._progress, self._touchdown, self._trust, _, _, _, _, _, _, _, self._arm_target, self._tick_out, _,
+         self._tau) = self._float_views
+        self._contact, self.slipping = self._flag_views[0:2]
+        self._contact[:] = True
+        self._arm_target[:] = desc.arm.nominal_q
+        self._hold_tick_arrays()
+        self._tick_constants = self._make_tick_constants()
         self.reset()
         self._load_compiled()
+
+    def _tick_owners(self) -> tuple[tuple[object, str], ...]:
+        """Who holds each of `tick_floats`' and then `tick_flags`' arrays, under which attribute."""
+        feet = self.feet
+        return ((self, "_progress"), (self, "_touchdown"), (self, "_trust"), (self.reference, "targets"),
+                (feet, "liftoff"), (feet, "footholds"), (feet, "_parts"), (feet, "_swing_pos"), (feet, "_swing_vel"),
+                (self.legs, "scale"), (self, "_arm_target"), (self, "_tick_out"), (self.estimator, "x"),
+                (self, "_tau"), (self, "_contact"), (self, "slipping"), (feet, "_was_stance"), (feet, "_lifted"),
+                (feet, "_clip"))
+
+    def _hold_tick_arrays(self) -> None:
+        """Make every array `control_tick` works on a view of its buffers (their values copied in), where it is not.
+
+        Run when the controller is made and at the first compiled tick of every episode, so that an array a reset
+        replaced (a subclass's, say) is moved back in before the tick writes the buffers.
+        """
+        for view, (owner, name) in zip((*self._float_views, *self._flag_views), self._tick_owners(), strict=True):
+            held = getattr(owner, name)
+            if held is not view:
+                view[...] = held
+                setattr(owner, name, view)
+
+    def _make_tick_constants(self) -> np.ndarray:
+        """`control_tick`'s constants buffer (`wbc.mpc.compiled.tick_constant_arrays`), from the settings and parts."""
+        cfg, ts, n = self.config, tick_stages, self.kin.n
+        buffer = np.zeros(ts.tick_constants_size(n))
+        out, offsets, limit, kp, kd, *steady = ts.tick_constant_arrays(buffer, n)
+        offsets[:], limit[:] = self.gait.clock[3], self.legs.limit
+        kp[:], kd[:] = self._gains
+        if self.estimator.config.gain == "steady":  # the full gain has no steady step (no compiled tick either)
+            for view, matrices in zip(steady, self.estimator.steady_arrays()[1:], strict=True):
+                view[...] = matrices
+        out[ts.C_ARM_FIRST] = self._arm_first
+        out[ts.C_PERIOD], out[ts.C_DUTY], out[ts.C_MARGIN] = self.gait.clock[:3]
+        out[ts.C_INV_FORCE], out[ts.C_SLIP2], out[ts.C_DT] = self._inv_contact_force, self._slip2, self.dt
+        out[ts.C_XY_LEASH], out[ts.C_YAW_LEASH] = XY_LEASH_M, YAW_LEASH_RAD
+        out[ts.C_STANCE_S], out[ts.C_CAPTURE] = cfg.gait.stance_s, cfg.footholds.capture_gain
+        out[ts.C_CENTRIPETAL], out[ts.C_MAX_OFFSET] = cfg.footholds.centripetal_gain, cfg.footholds.max_offset
+        out[ts.C_MIN_HEIGHT], out[ts.C_BELOW_Z] = MIN_CAPTURE_HEIGHT_M, float(cfg.touchdown_depth)
+        out[ts.C_SWING_S], out[ts.C_APEX] = cfg.gait.swing_s, cfg.swing_height
+        out[ts.C_SWING_KP], out[ts.C_SWING_KD], out[ts.C_STANCE_KD] = self.legs.swing_kp, self.legs.swing_kd, \
+            self.legs.stance_kd
+        return buffer
 
     def _load_compiled(self) -> None:
         """Play two ticks (one with an MPC update) on a synthetic standing frame, then forget them.
@@ -206,9 +268,10 @@ class MpcController:
         self._x0 = np.zeros(NX)
         self._started = False
         self._warm_start: np.ndarray | None = None
-        self._arm_target = self.desc.arm.nominal_q.copy()
+        self._arm_target[:] = self.desc.arm.nominal_q
         self._timings: dict[str, float] = {}
-        self.slipping = np.zeros(4, dtype=bool)  # stance feet the estimator dropped at the last tick: they slide
+        self.slipping[:] = False
+        self._tick_args: tuple | None = None  # `_tick_arrays`, gathered at the first compiled tick of the episode
         self.reference.reset()
         self.feet.reset()
         self.targets.reset()
@@ -223,7 +286,9 @@ class MpcController:
         Returns:
             ``mpc_setup_s`` (linearise, condense, constraints) and ``mpc_solve_s`` (the QP) on a tick that made an
             MPC update (a failed update, counted in ``fallbacks``, reports neither); ``whole_body_s``, the
-            whole-body layer's time (leg layer or PlaCo's QP), every tick. Empty before the first tick.
+            whole-body layer's time: PlaCo's QP every tick; the leg layer on the ticks due for an MPC update and
+            the first of an episode, where it runs apart (on the others it runs inside the tick's one compiled call,
+            `_compiled_act`, and is not timed apart). Empty before the first tick.
         """
         return dict(self._timings)
 
@@ -251,8 +316,20 @@ class MpcController:
     # -- one tick -------------------------------------------------------------------------------------------------
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """Estimate, (re)plan, and turn the plan into motor commands."""
-        cfg, kin = self.config, self.kin
         self._timings.clear()
+        if self._started and self.wbc is None and self._truth is None and self.kin.com_known and \
+                self.estimator.config.gain == "steady":
+            return self._compiled_act(state, command)
+        return self._staged_act(state, command)
+
+    def _staged_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """The tick stage by stage: each stage one call (most of them compiled, `wbc.mpc.compiled`).
+
+        Every tick of a controller on PlaCo's whole-body QP, with the debug truth or the full-gain estimator, and
+        the first tick of an episode (which measures the CoM and starts the estimator) run this way; the others run
+        `_compiled_act`, the same stages in one compiled call, to the same bits.
+        """
+        cfg, kin = self.config, self.kin
         kin.tick(state.imu_quat, state.q, state.dq, state.gyro_in_body)
         if not self._started:
             self._start()
@@ -272,6 +349,70 @@ class MpcController:
         if tau is None:
             tau = self._leg_torques(contact, progress, step)
         return self._command(state, tau, step)
+
+    def _tick_arrays(self) -> tuple[np.ndarray, ...]:
+        """The arrays `control_tick` takes after the plan's forces and arm velocity, up to the command's rows."""
+        self._hold_tick_arrays()
+        return (*self.kin.compiled_arrays(), self._tick_floats, self._tick_flags, self._tick_constants)
+
+    def _compiled_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """The tick as `_staged_act` plays it, its stages in `control_tick`: one compiled call on most ticks.
+
+        A tick that makes an MPC update calls it twice, around the centroidal quantities (between the estimate and
+        the reference), then makes the update and ends as the staged tick does (the leg layer timed apart). Where a
+        stage stops for the Python law (`control_tick`), the Python stage runs and the call resumes after it.
+        """
+        ts, kin, out = tick_stages, self.kin, self._tick_out
+        if self._tick_args is None:
+            self._tick_args = self._tick_arrays()
+        replan = self._replan_due()
+        refresh = self.tick % self.config.foothold_every == 0
+        vx, vy, yaw_rate = float(command.vx), float(command.vy), float(command.yaw_rate)
+        rows = np.empty((5, kin.n))  # a new array each tick: it becomes the command's (immutable) storage
+        head = (state.imu_quat, state.gyro_in_body, state.q, state.dq, state.accel_in_body, state.foot_force, self.t,
+                vx, vy, yaw_rate, refresh)
+        tail = (*self._tick_args, rows)
+        step, forces, v_arm = self._step_inputs()
+        if replan:
+            control_tick(ts.STAGE_FRONT, ts.STAGE_REFERENCE, *head, forces, v_arm, *tail)
+            kin.centroidal()
+            stage = control_tick(ts.STAGE_REFERENCE, ts.STAGE_LEGS, *head, forces, v_arm, *tail)
+        else:
+            stage = control_tick(ts.STAGE_FRONT, ts.STAGE_DONE, *head, forces, v_arm, *tail)
+        if stage < ts.STAGE_LEGS:  # a stage handed to the Python law
+            self._python_stages(stage, command, refresh)
+            stage = ts.STAGE_LEGS
+        if replan:
+            self._replan(state, command)
+            step = self._plan_step() if self.plan is not None else 0
+            return self._command(state, self._leg_torques(self._contact, self._progress, step), step)
+        if stage < ts.STAGE_DONE:
+            stage = control_tick(stage, ts.STAGE_DONE, *head, forces, v_arm, *tail)
+        valid = self._arm_rows(rows, step) and out[ts.OUT_VALID] == 1.0
+        self.t += self.dt
+        self.tick += 1
+        return MotorCommand.trusted(rows) if valid else MotorCommand.from_rows(rows)
+
+    def _step_inputs(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """The plan's step at this tick, its contact forces (4, 3) [N] and the arm's velocity (3,) [rad/s]."""
+        plan = self.plan
+        if plan is None:
+            return 0, FORCE_BEFORE_PLAN, self._arm_hold
+        step = self._plan_step()
+        return step, plan.forces[step], plan.arm_velocity[step] if self._arm_moves else self._arm_hold
+
+    def _python_stages(self, stage: int, command: VelocityCommand, refresh: bool) -> None:
+        """The stages from `stage` (where `control_tick` stopped) to the legs, by the Python law."""
+        ts, kin, out = tick_stages, self.kin, self._tick_out
+        if stage == ts.STAGE_REFERENCE:
+            out[ts.OUT_V_CMD_X], out[ts.OUT_V_CMD_Y] = self.reference.update(
+                yaw_of(kin.rot), kin.com.item(0), kin.com.item(1), command)
+            stage = ts.STAGE_FOOTHOLDS
+        if stage == ts.STAGE_FOOTHOLDS:
+            self.feet.update(kin, self._contact, self._touchdown, (out.item(0), out.item(1)), command.yaw_rate,
+                             refresh=refresh)
+        elif stage == ts.STAGE_CLIP:
+            self.feet.clip_left(out.item(ts.OUT_GROUND))
 
     def _start(self) -> None:
         """First tick of an episode: the estimator starts with the feet on the ground at z = 0."""
@@ -307,23 +448,42 @@ class MpcController:
         """Whether this tick makes an MPC update: the first tick, then every `replan_every` ticks."""
         return self.plan is None or self.tick % self.config.replan_every == 0
 
-    def _replan(self, state: RobotState, command: VelocityCommand) -> None:
-        cfg, kin = self.config, self.kin
+    def _update_inputs(self, state: RobotState, command: VelocityCommand) -> tuple[np.ndarray, ...]:
+        """An MPC update's current state x0 (15,), reference x_ref (N, 15), contact table (N, 4) and feet (N, 4, 3).
+
+        One compiled call (`wbc.mpc.compiled.update_inputs`) but for the reference's momentum rows; the statements
+        below it where that call leaves the inputs to Python (a foot's height past what its exact sum takes).
+        """
+        cfg, kin, reference = self.config, self.kin, self.reference
         n, dt = cfg.mpc.horizon, cfg.mpc.dt
+        arm_q = state.q[ARM_JOINTS] if self.has_arm else self.desc.arm.nominal_q
+        x0, x_ref = np.empty(NX), np.zeros((n, NX))
+        contact, feet = np.empty((n, 4), dtype=bool), np.empty((n, 4, 3))
+        if update_inputs(self.t, dt, float(command.vx), float(command.vy), float(command.yaw_rate),
+                         reference.body_height, reference.step_times, *self.gait.clock, kin.compiled_arrays()[2],
+                         self.feet.footholds, reference.targets, reference.arm_q, kin.momentum, arm_q, x0, x_ref,
+                         contact, feet):
+            x_ref[:, MOMENTUM] = kin.params.inertia_world @ np.array([0.0, 0.0, command.yaw_rate])
+            return x0, x_ref, contact, feet
         x0 = np.zeros(NX)
         x0[COM] = kin.com
         x0[COM_VEL] = kin.com_vel
         rpy = rpy_of(kin.rot)
-        x0[RPY] = (rpy[0], rpy[1], self.reference.yaw)
+        x0[RPY] = (rpy[0], rpy[1], reference.yaw)
         x0[MOMENTUM] = kin.momentum
-        x0[ARM_Q] = state.q[ARM_JOINTS] if self.has_arm else self.desc.arm.nominal_q
+        x0[ARM_Q] = arm_q
         ground = ground_height(kin.feet, self.gait.contact(self.t))
-        x_ref = self.reference.trajectory(command, ground, kin.params.inertia_world)
+        x_ref = reference.trajectory(command, ground, kin.params.inertia_world)
         contact = self.gait.contact_table(self.t, dt, n)
         # a foot stands where it is until it first lifts; from then on (in swing, and after it lands within the
         # horizon) it is at its foothold
         lifted = np.cumsum(~contact, axis=0) > 0
         feet = np.where(lifted[:, :, None], self.feet.footholds[None], kin.feet[None])
+        return x0, x_ref, contact, feet
+
+    def _replan(self, state: RobotState, command: VelocityCommand) -> None:
+        cfg, kin = self.config, self.kin
+        x0, x_ref, contact, feet = self._update_inputs(state, command)
         params = kin.params
         if not (self.has_arm and cfg.use_arm_momentum):
             params = type(params)(mass=params.mass, inertia_world=params.inertia_world,

@@ -86,15 +86,21 @@ class FootholdPlanner:
         self._below_z = float(touchdown_depth)
         self._stance_s = gait.stance_s
         self._clip, self._parts = np.zeros(4, dtype=bool), np.zeros((4, 4))  # `plan_footholds`' feet left to clip
-        self.reset()
-
-    def reset(self) -> None:
-        """Start a new episode: every foot standing."""
+        # allocated once and reset in place: the MPC controller's compiled tick moves them into its buffers
         self.liftoff = np.zeros((4, 3))
         self.footholds = np.zeros((4, 3))
         self._was_stance = np.ones(4, dtype=bool)
         self._lifted = np.zeros(4, dtype=bool)  # the feet that lifted off at this tick
         self._swing_pos, self._swing_vel = np.zeros((4, 3)), np.zeros((4, 3))
+
+    def reset(self) -> None:
+        """Start a new episode: every foot standing."""
+        self.liftoff[:] = 0.0
+        self.footholds[:] = 0.0
+        self._was_stance[:] = True
+        self._lifted[:] = False
+        self._swing_pos[:] = 0.0
+        self._swing_vel[:] = 0.0
 
     def update(self, kin: RobotKinematics, contact: np.ndarray, touchdown: np.ndarray,
                v_cmd_xy: tuple[float, float], yaw_rate: float, *, refresh: bool) -> None:
@@ -117,10 +123,14 @@ class FootholdPlanner:
                           float(v_cmd_xy[0]), float(v_cmd_xy[1]), float(yaw_rate), touchdown, self._stance_s, ground,
                           cfg.capture_gain, cfg.centripetal_gain, cfg.max_offset, MIN_CAPTURE_HEIGHT_M, self.footholds,
                           self._parts, self._clip):
-            self._clip_footholds(ground)
+            self.clip_left(ground)
 
-    def _clip_footholds(self, ground: float) -> None:
-        """Place the feet `plan_footholds` left, their offsets from the hip clipped to `FootholdConfig.max_offset`."""
+    def clip_left(self, ground: float) -> None:
+        """Place the feet `plan_footholds` left, their offsets from the hip clipped to `FootholdConfig.max_offset`.
+
+        Args:
+            ground: the ground height the placement used [m].
+        """
         limit = self.config.max_offset
         for i in np.flatnonzero(self._clip).tolist():
             hip_x, hip_y, off_x, off_y = self._parts[i].tolist()

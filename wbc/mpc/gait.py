@@ -82,7 +82,8 @@ class GaitScheduler:
     def __init__(self, config: GaitConfig) -> None:
         self.config = config
         self._offsets = np.asarray(config.offsets, dtype=np.float64)
-        self._clock = (config.period, config.duty, STANCE_END_MARGIN, self._offsets)  # `gait_state`'s constants
+        self.clock = (config.period, config.duty, STANCE_END_MARGIN, self._offsets)
+        """`wbc.mpc.compiled.gait_state`'s constants: period [s], duty, `STANCE_END_MARGIN`, phase offsets (4,)."""
 
     def phase(self, t: float) -> np.ndarray:
         """Phase of each foot in its cycle, in [0, 1): stance first (< duty), then swing."""
@@ -117,7 +118,7 @@ class GaitScheduler:
 
     def state_into(self, t: float, contact: np.ndarray, progress: np.ndarray, touchdown: np.ndarray) -> None:
         """`state` at `t` [s] into the caller's arrays (4,) (every control tick: one compiled call, no allocation)."""
-        gait_state(t, *self._clock, contact, progress, touchdown)
+        gait_state(t, *self.clock, contact, progress, touchdown)
 
     def time_to_touchdown(self, t: float) -> np.ndarray:
         """For each foot, time until its next touchdown [s] (0 for feet in stance)."""

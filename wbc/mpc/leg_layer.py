@@ -19,7 +19,7 @@ import numpy as np
 from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.compiled import leg_torques
 
-__all__ = ["STANCE_FORCE_BEFORE_PLAN_N", "LegLayer"]
+__all__ = ["FORCE_BEFORE_PLAN", "STANCE_FORCE_BEFORE_PLAN_N", "LegLayer"]
 
 STANCE_FORCE_BEFORE_PLAN_N = 35.0
 """Vertical force each stance foot pushes while there is no plan yet (the first MPC update failed) [N].
@@ -27,7 +27,9 @@ STANCE_FORCE_BEFORE_PLAN_N = 35.0
 About a quarter of the robots' weight (a1-wx200: 15.6 kg, 153 N over four feet). A tuning value from the
 controller's first version; no measurement behind it is recorded (docs/mpc-notes.md)."""
 
-_FORCE_BEFORE_PLAN = np.tile([0.0, 0.0, STANCE_FORCE_BEFORE_PLAN_N], (4, 1))
+FORCE_BEFORE_PLAN = np.tile([0.0, 0.0, STANCE_FORCE_BEFORE_PLAN_N], (4, 1))
+"""The stance feet's forces while there is no plan, world, shape (4, 3) [N]. Not to be written; left writable so that
+the compiled leg layer takes it as it takes a plan's forces (a read-only array would compile another version)."""
 
 
 class LegLayer:
@@ -63,7 +65,7 @@ class LegLayer:
             Torques, house order (n,) [N m]; on the arm's joints, gravity compensation.
         """
         if forces is None:
-            forces = _FORCE_BEFORE_PLAN
+            forces = FORCE_BEFORE_PLAN
         tau = np.empty(kin.n)
         leg_torques(kin.leg_jacobians, kin.gravity, kin.feet, kin.feet_vel, contact, forces, swing_pos, swing_vel,
                     self.swing_kp, self.swing_kd, self.stance_kd, self.limit, self.scale, tau)

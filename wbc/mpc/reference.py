@@ -54,6 +54,8 @@ class MotionReference:
         yaw: the measured yaw, unwrapped (continuous over turns) [rad].
         yaw_target: the yaw target, within `YAW_LEASH_RAD` of `yaw` [rad].
         xy_target: the horizontal CoM target, world, within `XY_LEASH_M` of the CoM on each axis (2,) [m].
+        targets: the targets as one array, (yaw, yaw target, CoM target x, CoM target y), updated in place by
+            `update` (or the controller's compiled tick, `wbc.mpc.compiled.reference_update`, the same law).
     """
 
     def __init__(self, *, control_dt: float, horizon: int, step_s: float, body_height: float,
@@ -63,19 +65,29 @@ class MotionReference:
         self.step_s = step_s
         self.body_height = body_height
         self.arm_q = arm_q
-        self._step_times = np.arange(1, horizon + 1) * step_s  # the ends of the horizon's steps from now [s]
+        self.step_times = np.arange(1, horizon + 1) * step_s
+        """The ends of the horizon's steps from now (N,) [s]."""
+        self.targets = np.zeros(4)
         self.reset()
 
     def reset(self) -> None:
         """Forget the episode's targets (`start` sets the yaw at the first tick)."""
-        self.yaw = 0.0
-        self.yaw_target = 0.0
-        self._target_x, self._target_y = 0.0, 0.0
+        self.targets[:] = 0.0
+
+    @property
+    def yaw(self) -> float:
+        """The measured yaw, unwrapped [rad]."""
+        return self.targets.item(0)
+
+    @property
+    def yaw_target(self) -> float:
+        """The yaw target [rad]."""
+        return self.targets.item(1)
 
     @property
     def xy_target(self) -> np.ndarray:
         """The horizontal CoM target, world (2,) [m] (a new array)."""
-        return np.array([self._target_x, self._target_y])
+        return self.targets[2:4].copy()
 
     def start(self, yaw: float) -> None:
         """Aim at the robot's heading at the first tick of an episode.
@@ -83,8 +95,8 @@ class MotionReference:
         Args:
             yaw: measured yaw [rad].
         """
-        self.yaw = yaw
-        self.yaw_target = yaw
+        self.targets[0] = yaw
+        self.targets[1] = yaw
 
     def update(self, yaw: float, com_x: float, com_y: float, command: VelocityCommand) -> tuple[float, float]:
         """Advance the targets by one control tick of the command, and leash them to the robot.
@@ -98,15 +110,16 @@ class MotionReference:
         Returns:
             The commanded horizontal velocity in the world frame (vx, vy) [m/s], turned by the unwrapped yaw.
         """
-        dt = self.control_dt
-        self.yaw = unwrapped = self.yaw + math.remainder(yaw - self.yaw, 2 * math.pi)
+        dt, targets = self.control_dt, self.targets
+        before = targets.item(0)
+        targets[0] = unwrapped = before + math.remainder(yaw - before, 2 * math.pi)
         cy, sy = math.cos(unwrapped), math.sin(unwrapped)
         vx, vy = command.vx, command.vy
         vx_world = cy * vx - sy * vy
         vy_world = sy * vx + cy * vy
-        self._target_x = com_x + _leash(self._target_x + vx_world * dt - com_x, XY_LEASH_M)
-        self._target_y = com_y + _leash(self._target_y + vy_world * dt - com_y, XY_LEASH_M)
-        self.yaw_target = unwrapped + _leash(self.yaw_target + command.yaw_rate * dt - unwrapped, YAW_LEASH_RAD)
+        targets[2] = com_x + _leash(targets.item(2) + vx_world * dt - com_x, XY_LEASH_M)
+        targets[3] = com_y + _leash(targets.item(3) + vy_world * dt - com_y, XY_LEASH_M)
+        targets[1] = unwrapped + _leash(targets.item(1) + command.yaw_rate * dt - unwrapped, YAW_LEASH_RAD)
         return vx_world, vy_world
 
     def trajectory(self, command: VelocityCommand, ground_z: float, inertia_world: np.ndarray) -> np.ndarray:
@@ -128,12 +141,12 @@ class MotionReference:
         dt = self.step_s
         x_ref = np.zeros((self.horizon, NX))
         # while turning, the commanded body-frame velocity turns with the yaw reference along the horizon
-        yaw_k = self.yaw_target + command.yaw_rate * self._step_times
+        yaw_k = self.yaw_target + command.yaw_rate * self.step_times
         cos_k, sin_k = np.cos(yaw_k), np.sin(yaw_k)
         vx_k = cos_k * command.vx - sin_k * command.vy
         vy_k = sin_k * command.vx + cos_k * command.vy
-        x_ref[:, 0] = self._target_x + np.cumsum(vx_k) * dt
-        x_ref[:, 1] = self._target_y + np.cumsum(vy_k) * dt
+        x_ref[:, 0] = self.targets.item(2) + np.cumsum(vx_k) * dt
+        x_ref[:, 1] = self.targets.item(3) + np.cumsum(vy_k) * dt
         x_ref[:, 2] = ground_z + self.body_height
         x_ref[:, 3] = vx_k
         x_ref[:, 4] = vy_k

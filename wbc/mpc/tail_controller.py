@@ -130,7 +130,7 @@ class TailMpcController(MpcController):
             self.observer = MomentumObserver(self.kin.mass, self.tail_config.observer)
         if self.observer is not None:
             self.observer.reset()
-        self._arm_target = self.ready_q.copy()  # where a held arm stays
+        self._arm_target[:] = self.ready_q  # where a held arm stays
         self._tail_now = None
         self._push_pending = False
         self.pushes_detected = 0
