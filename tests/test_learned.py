@@ -1048,3 +1048,24 @@ def test_policy_inference_gives_the_same_bits_whatever_blas_kernel_the_cpu_selec
                              text=True, timeout=60, check=True)
         digests.add(out.stdout.strip())
     assert len(digests) == 1, digests
+
+
+@pytest.mark.parametrize("band, option_yaw", [("stand", 0.0), ("2.0", -2.0), ("2.0", 2.0), ("1.0", -0.5)])
+def test_the_shipped_turn_policy_turns_both_ways_and_stands(band, option_yaw, tmp_path, monkeypatch):
+    """The shipped go1-arm pi3 (`learned`) on turn-both-ways: right turns at 2 m/s, left, and standing still."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log file here
+    from wbc.arena.sim_trial import run_trial
+    from wbc.scenario import load_scenario
+
+    scenario = load_scenario("scenarios/turn-both-ways.toml")
+    trial = next(t for t in (scenario.trial(band, 0, i) for i in range(40)) if t.command.yaw_rate == option_yaw)
+    record, episode = run_trial(dataclasses.replace(trial, duration_s=8.0), "learned")
+    assert record.success and not record.error
+    late = episode.t > 3.0  # after the 1 s command ramp and the turn's build-up
+    speed = episode.v_base_in_yaw[late, 0].mean()
+    yaw_rate = episode.yaw_rate[late].mean()
+    if band == "stand":
+        assert np.abs(episode.v_base_in_yaw[late]).mean() < 0.1 and abs(yaw_rate) < 0.1  # it stands, not walks on
+    else:
+        assert abs(speed - trial.command.vx) < 0.3 * trial.command.vx
+        assert np.sign(yaw_rate) == np.sign(option_yaw) and abs(yaw_rate) > 0.5 * abs(option_yaw)
