@@ -386,26 +386,32 @@ def test_the_compiled_tick_gives_the_staged_ticks_commands_to_the_bit(monkeypatc
         assert any(stage == STAGE_CLIP for _, _, stage in stops)  # the push's step-out clipped a foothold in Python
 
 
-def test_a_stage_leaves_to_python_what_python_must_do():
-    """The footholds' stage stops before touching anything when a foot's height is outside what its exact sum takes;
-    the whole tick then gives what the staged tick gives (here: a command refused, never sent)."""
+def _standing_a1() -> tuple[MpcController, RobotState]:
+    """An MPC for the A1 with its arm and the state of that robot standing still in its nominal pose."""
     desc = get_robot("a1-wx200")
-    ctrl = MpcController(desc)
     n = desc.num_joints
     state = RobotState(tick=0, time=0.0, q=np.asarray(desc.nominal_q, dtype=np.float64)[:n].copy(), dq=np.zeros(n),
                        tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),
                        accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
+    return MpcController(desc), state
+
+
+def test_a_stage_leaves_to_python_what_python_must_do():
+    """The footholds' stage stops before touching anything when a foot's height is outside what its exact sum takes;
+    the whole tick then gives what the staged tick gives (here: a command refused, never sent)."""
+    ctrl, state = _standing_a1()
     ctrl.act(state, VelocityCommand())  # the first tick, staged
     feet_before = ctrl.feet.footholds.copy()
     model_f, model_i, kin_buffer, floats, flags, constants = ctrl._tick_arrays()
     kin_buffer[93 + 2] = np.inf  # foot FR's height (`wbc.estimation.tree.tick_arrays`: the feet from entry 93)
     stage = control_tick(STAGE_FOOTHOLDS, STAGE_DONE, state.imu_quat, state.gyro_in_body, state.q, state.dq,
                          state.accel_in_body, state.foot_force, ctrl.t, 0.0, 0.0, 0.0, True, ctrl.plan.forces[0],
-                         np.zeros(3), model_f, model_i, kin_buffer, floats, flags, constants, np.empty((5, n)))
+                         np.zeros(3), model_f, model_i, kin_buffer, floats, flags, constants,
+                         np.empty((5, state.q.size)))
     assert stage == STAGE_FOOTHOLDS
     np.testing.assert_array_equal(ctrl.feet.footholds, feet_before)
     # a non-finite measurement on a compiled tick: the command is refused as a constructed one is
-    dq = np.zeros(n)
+    dq = np.zeros(state.q.size)
     dq[4] = np.nan
     ctrl.act(state, VelocityCommand())
     with pytest.raises(CommandError, match="non-finite"):
@@ -458,12 +464,7 @@ def test_an_updates_inputs_are_the_python_statements_to_the_bit(monkeypatch, nam
 def test_an_array_a_reset_replaced_is_moved_back_into_the_compiled_ticks_buffers():
     """The compiled tick writes its buffers; a part whose reset replaced one of its arrays (as a subclass may) gets
     the buffer's view back, with its values, before the first compiled tick of the episode reads it."""
-    desc = get_robot("a1-wx200")
-    ctrl = MpcController(desc)
-    n = desc.num_joints
-    state = RobotState(tick=0, time=0.0, q=np.asarray(desc.nominal_q, dtype=np.float64)[:n].copy(), dq=np.zeros(n),
-                       tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),
-                       accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
+    ctrl, state = _standing_a1()
     ctrl.reset()
     ctrl._arm_target = np.array([0.1, -0.2, 0.3])
     ctrl.feet.footholds = np.full((4, 3), 7.0)
