@@ -506,3 +506,71 @@ def test_cli_view_live_pauses_until_a_key(short, tmp_path):
         os.close(slave)
     assert proc.returncode == 0, err
     assert "survived" in out
+
+
+# -- frames posed and keyed in batches --------------------------------------------------------------------------------
+def _frames(desc, n: int, seed: int = 0) -> list[VizFrame]:
+    """n frames of a moving robot with pushes, foot forces, commands and an MPC-like plan on some of them."""
+    rng = np.random.default_rng(seed)
+    frames = []
+    for i in range(n):
+        t = 0.02 * i
+        quat = np.r_[1.0, 0.1 * rng.standard_normal(3)]
+        joints = desc.nominal_q + 0.2 * rng.standard_normal(desc.num_joints)
+        q = np.r_[0.01 * i, 0.0, 0.3, quat / np.linalg.norm(quat), joints]
+        pushed = 40 <= i % 97 < 50
+        forces = None if i % 11 == 0 else rng.uniform(-5.0, 60.0, (4, 3))
+        plan = None
+        if i % 7 < 4:
+            steps = 10
+            plan = {"com_path_in_world": q[:3] + 0.01 * rng.standard_normal((steps, 3)),
+                    "footholds_in_world": rng.uniform(-0.3, 0.3, (4, 3)),
+                    "contact_schedule": rng.random((steps, 4)) < 0.5,
+                    "forces_in_world": rng.uniform(-10.0, 80.0, (steps, 4, 3)),
+                    "arm_q_plan": 0.3 * rng.standard_normal((steps, 3))}
+        frames.append(VizFrame(t=t, qpos=q, command=np.array([0.5 * (i % 3 != 0), 0.1, 0.3]),
+                               push_force_in_world=np.array([0.0, 150.0, 10.0]) if pushed else np.zeros(3),
+                               push_point_in_world=q[:3] + 0.05, foot_force_in_world=forces, plan=plan))
+    return frames
+
+
+def test_batched_poses_are_each_frame_posed_alone():
+    desc = get_robot("a1-wx200", "actuated")
+    content = SceneContent(desc, TerrainConfig(), None)
+    frames = _frames(desc, 60)
+    batch = content.poses_many(frames)
+    alone = [content.poses(f) for f in frames]
+    paths = {p for poses in alone for p in poses}
+    assert paths == set(batch)
+    for path in paths:
+        posed = [i for i, poses in enumerate(alone) if path in poses]
+        track = batch[path]
+        np.testing.assert_array_equal(track.frames, posed, err_msg=path)
+        np.testing.assert_array_equal(track.visible, [alone[i][path].visible for i in posed], err_msg=path)
+        np.testing.assert_allclose(track.matrices, [alone[i][path].matrix for i in posed], atol=1e-12, err_msg=path)
+    # what the batch covers: pushes on and off, foot forces missing on some frames, plans on some
+    assert 0 < batch["wbc/push/shaft"].frames.size < len(frames)
+    assert batch["wbc/contacts/FR"].visible.sum() < len(frames)
+    assert 0 < batch["wbc/plan/com/0"].frames.size < len(frames)
+
+
+def test_recording_keys_alike_in_chunks_and_frame_by_frame():
+    desc = get_robot("a1-wx200", "actuated")
+    frames = _frames(desc, 600, seed=1)  # past two chunks of 256
+    chunked = Recording(SceneContent(desc, TerrainConfig(), None), fps=50.0)
+    single = Recording(SceneContent(desc, TerrainConfig(), None), fps=50.0)
+    for f in frames:
+        assert chunked.add(f)
+        assert single.add(f)
+        single._tracks()  # keys what is pending: one frame at a time
+    a = {(path, prop): (frames, values) for path, prop, _, frames, values in chunked._tracks()}
+    b = {(path, prop): (frames, values) for path, prop, _, frames, values in single._tracks()}
+    assert set(a) == set(b)  # the same tracks (in another order: a track comes where its node was first keyed)
+    for (path, prop), (fa, va) in a.items():
+        fb, vb = b[(path, prop)]
+        np.testing.assert_array_equal(fa, fb, err_msg=f"{path} {prop}")
+        if prop == "visible":
+            assert va == vb, path
+        else:
+            np.testing.assert_allclose(va, vb, atol=1e-12, err_msg=f"{path} {prop}")
+    assert chunked.frames == single.frames == len(frames)

@@ -70,6 +70,7 @@ class FrameCapture:
         self.fps = fps
         self.run: CapturedRun | None = None
         self._make: FrameMaker | None = None
+        self._simulated: SimulatedWorld | None = None  # the robot, when it is a simulation
         self._last_key = -1
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
@@ -80,6 +81,7 @@ class FrameCapture:
                 raise ConfigError(f"{type(robot).__name__}: nothing to draw (not a simulation)")
             self.run = CapturedRun(self.name, scene[0](), signals=TrialSignals(self.name))
             self._make = scene[1]
+            self._simulated = robot if isinstance(robot, SimulatedWorld) else None
         k = int(round(t * self.fps))
         if k <= self._last_key:
             return
@@ -90,7 +92,7 @@ class FrameCapture:
         if frame.plan is not None and len(frame.plan.get("com_path_in_world", ())):
             path = np.asarray(frame.plan["com_path_in_world"])
             plan_com = path[min(1, len(path) - 1)]
-        self.run.signals.add_frame(frame, robot if isinstance(robot, SimulatedWorld) else None, plan_com)
+        self.run.signals.add_frame(frame, robot if robot is self._simulated else None, plan_com)
 
 
 def capture_trial(trial: Trial, controller: ControllerSpec | str, fps: float,

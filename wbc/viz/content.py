@@ -12,8 +12,8 @@ import numpy as np
 
 from wbc.robots.description import RobotDescription
 from wbc.scenario.terrain import TerrainConfig
-from wbc.viz.frame import Pose, VizFrame
-from wbc.viz.geometry import translation
+from wbc.viz.frame import Pose, PoseTrack, VizFrame
+from wbc.viz.geometry import translation, translations
 from wbc.viz.overlays import CommandArrow, ContactArrows, PlanOverlay, PushArrow
 from wbc.viz.scene import RobotScene
 from wbc.viz.sim_frames import SimulatedWorld
@@ -105,4 +105,18 @@ class SceneContent:
         if self.follow:
             base = np.asarray(frame.qpos[:3], dtype=np.float64)
             out[CAMERA] = Pose(translation(np.array([base[0], base[1], 0.0])))
+        return out
+
+    def poses_many(self, frames: list[VizFrame]) -> dict[str, PoseTrack]:
+        """`poses` over a batch of frames, each moving node's as one track (what a recording keys)."""
+        qpos = np.array([f.qpos for f in frames], dtype=np.float64)
+        out, feet = self.robot.poses_many(qpos)
+        out.update(self.push.poses_many(frames))
+        out.update(self.contacts.poses_many(frames, feet))
+        out.update(self.command.poses_many(frames))
+        out.update(self.plan.poses_many(frames, self.robot))
+        if self.follow:
+            ground = qpos[:, :3].copy()
+            ground[:, 2] = 0.0
+            out[CAMERA] = PoseTrack.everywhere(translations(ground))
         return out

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Pose", "VizFrame"]
+__all__ = ["Pose", "PoseTrack", "VizFrame", "identities", "tracks_of"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -55,3 +55,47 @@ class Pose:
 
     matrix: np.ndarray
     visible: bool = True
+
+
+@dataclass(frozen=True)
+class PoseTrack:
+    """A node's poses over a batch of frames: the frames that pose it, with each one's transform and visibility.
+
+    Attributes:
+        frames: indices into the batch of the frames that pose the node, increasing, shape (m,).
+        matrices: the node's transform in its parent at each of them (see `Pose`), shape (m, 4, 4).
+        visible: whether it shows at each of them, shape (m,).
+    """
+
+    frames: np.ndarray
+    matrices: np.ndarray
+    visible: np.ndarray
+
+    @classmethod
+    def everywhere(cls, matrices: np.ndarray, visible: np.ndarray | None = None) -> PoseTrack:
+        """A node posed at every frame of the batch (shown at all of them unless `visible` says otherwise)."""
+        n = len(matrices)
+        return cls(np.arange(n), matrices, np.ones(n, dtype=bool) if visible is None else visible)
+
+
+_IDENTITY = np.eye(4)
+
+
+def identities(n: int) -> np.ndarray:
+    """Identity transforms, shape (n, 4, 4) (a read-only view)."""
+    return np.broadcast_to(_IDENTITY, (n, 4, 4))
+
+
+def tracks_of(poses: list[dict[str, Pose]]) -> dict[str, PoseTrack]:
+    """The tracks of a batch of frames each posed on its own (a dict of node poses per frame), in first-posed order."""
+    rows: dict[str, tuple[list[int], list[np.ndarray], list[bool]]] = {}
+    for i, frame in enumerate(poses):
+        for path, pose in frame.items():
+            row = rows.get(path)
+            if row is None:
+                row = rows[path] = ([], [], [])
+            row[0].append(i)
+            row[1].append(pose.matrix)
+            row[2].append(bool(pose.visible))
+    return {path: PoseTrack(np.array(ks, dtype=np.int64), np.array(ms, dtype=np.float64), np.array(vs, dtype=bool))
+            for path, (ks, ms, vs) in rows.items()}

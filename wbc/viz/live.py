@@ -124,11 +124,13 @@ class LiveObserver:
         self.name = ""
         self.last_frame: VizFrame | None = None
         self._last_t = float("inf")
+        self._quiet_until = -float("inf")  # [s] ticks before this time have no frame to key (recording only)
         self._make: FrameMaker | None = None
         self._told = False
         self._prepared: Robot | None = None
         self._drawer = _Drawer(viewer) if background and viewer is not None else None
         self._last_drawn = -float("inf")
+        self._simulated: SimulatedWorld | None = None  # the episode's robot, when it is a simulation
 
     def prepare(self, robot: Robot) -> None:
         """Build the scene of `robot` now, for the episode it plays next (its first tick then draws at once)."""
@@ -141,6 +143,7 @@ class LiveObserver:
             self._drawer.stop()
 
     def _start_episode(self, robot: Robot) -> None:
+        self._simulated = robot if isinstance(robot, SimulatedWorld) else None
         scene = scene_of(robot)
         self._make = None if scene is None else scene[1]
         if scene is None:
@@ -160,6 +163,9 @@ class LiveObserver:
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """One tick (the `wbc.arena.runner.TickObserver` signature)."""
+        if self._last_t <= t < self._quiet_until:  # recording only, and no frame due yet: most ticks
+            self._last_t = t
+            return
         new_episode = t < self._last_t
         self._last_t = t
         if new_episode:
@@ -167,6 +173,7 @@ class LiveObserver:
                 self._start_episode(robot)
             self._prepared = None
             self._last_drawn = -float("inf")
+            self._quiet_until = -float("inf")
         if self._make is None:
             return
         if self._drawer is not None:
@@ -181,6 +188,8 @@ class LiveObserver:
         if keyed:
             rec.add(frame)
             self._sample(frame, robot)
+            if self.viewer is None:  # nothing else to do before the next frame is due (it rounds to the next key)
+                self._quiet_until = (rec.last_key + 0.5) / rec.fps - 1e-9
         if draw:
             if self.player is not None:
                 self.player.wait(t)
@@ -194,7 +203,7 @@ class LiveObserver:
         if frame.plan is not None and len(frame.plan.get("com_path_in_world", ())):
             path = np.asarray(frame.plan["com_path_in_world"])
             plan_com = path[min(1, len(path) - 1)]
-        self.signals[-1].add_frame(frame, robot if isinstance(robot, SimulatedWorld) else None, plan_com)
+        self.signals[-1].add_frame(frame, robot if robot is self._simulated else None, plan_com)
 
     def _tick_in_background(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         rec = self.recordings[-1] if self.recording_fps is not None else None

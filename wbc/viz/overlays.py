@@ -24,8 +24,8 @@ import meshcat.geometry as mg
 import numpy as np
 
 from wbc.robots.conventions import quat_to_matrix
-from wbc.viz.frame import Pose, VizFrame
-from wbc.viz.geometry import arrow_transforms, translation
+from wbc.viz.frame import Pose, PoseTrack, VizFrame, identities, tracks_of
+from wbc.viz.geometry import arrow_transforms, arrow_transforms_many, translation, translations
 from wbc.viz.scene import RobotScene
 
 __all__ = ["Arrow", "CommandArrow", "ContactArrows", "PlanOverlay", "PushArrow"]
@@ -73,6 +73,20 @@ class Arrow:
         shaft, head = arrow_transforms(start, vector, min(self.head_length, 0.5 * float(np.linalg.norm(vector))))
         return {self.path: _SHOWN, f"{self.path}/shaft": Pose(shaft), f"{self.path}/head": Pose(head)}
 
+    def poses_many(self, start: np.ndarray, vector: np.ndarray, visible: np.ndarray) -> dict[str, PoseTrack]:
+        """`poses` over a batch of frames: `start`, `vector` shape (n, 3) [m], `visible` shape (n,)."""
+        norm = np.sqrt(np.einsum("ij,ij->i", vector, vector))
+        shown = np.asarray(visible, dtype=bool) & (norm >= 1e-6)
+        out = {self.path: PoseTrack.everywhere(identities(len(vector)), shown)}
+        idx = np.flatnonzero(shown)
+        if len(idx):
+            head = np.minimum(self.head_length, 0.5 * norm[idx])
+            shafts, heads = arrow_transforms_many(start[idx], vector[idx], head)
+            on = np.ones(len(idx), dtype=bool)
+            out[f"{self.path}/shaft"] = PoseTrack(idx, shafts, on)
+            out[f"{self.path}/head"] = PoseTrack(idx, heads, on)
+        return out
+
 
 class PushArrow:
     """The push: an arrow ending at its application point, 2 mm per newton, shown while the push acts."""
@@ -91,6 +105,13 @@ class PushArrow:
         """The arrow for `frame` (hidden when no push acts)."""
         vec = self.m_per_n * frame.push_force_in_world
         return self.arrow.poses(frame.push_point_in_world - vec, vec, frame.pushed)
+
+    def poses_many(self, frames: list[VizFrame]) -> dict[str, PoseTrack]:
+        """`poses` over a batch of frames."""
+        force = np.array([f.push_force_in_world for f in frames], dtype=np.float64).reshape(-1, 3)
+        point = np.array([f.push_point_in_world for f in frames], dtype=np.float64).reshape(-1, 3)
+        vec = self.m_per_n * force
+        return self.arrow.poses_many(point - vec, vec, np.any(force != 0.0, axis=1))
 
 
 class ContactArrows:
@@ -116,6 +137,16 @@ class ContactArrows:
             out.update(a.poses(feet[i], self.m_per_n * f, float(np.linalg.norm(f)) > 1.0))
         return out
 
+    def poses_many(self, frames: list[VizFrame], feet: np.ndarray) -> dict[str, PoseTrack]:
+        """`poses` over a batch of frames (`feet`: shape (n, 4, 3) [m])."""
+        forces = np.array([np.zeros((4, 3)) if f.foot_force_in_world is None else f.foot_force_in_world
+                           for f in frames], dtype=np.float64).reshape(-1, 4, 3)
+        out: dict[str, PoseTrack] = {}
+        for i, a in enumerate(self.arrows):
+            f = forces[:, i]
+            out.update(a.poses_many(feet[:, i], self.m_per_n * f, np.sqrt(np.einsum("ij,ij->i", f, f)) > 1.0))
+        return out
+
 
 class CommandArrow:
     """The commanded horizontal velocity, drawn from above the trunk, 1 m per m/s, in the yaw-aligned frame."""
@@ -138,6 +169,19 @@ class CommandArrow:
         vec = np.array([c * vx - s * vy, s * vx + c * vy, 0.0])
         start = frame.qpos[:3] + np.array([0.0, 0.0, 0.15])
         return self.arrow.poses(start, vec, bool(np.hypot(vx, vy) > 1e-3))
+
+    def poses_many(self, frames: list[VizFrame]) -> dict[str, PoseTrack]:
+        """`poses` over a batch of frames."""
+        qpos = np.array([f.qpos[:7] for f in frames], dtype=np.float64).reshape(-1, 7)
+        cmd = np.array([f.command[:2] for f in frames], dtype=np.float64).reshape(-1, 2)
+        w, x, y, z = qpos[:, 3], qpos[:, 4], qpos[:, 5], qpos[:, 6]
+        yaw = np.arctan2(2 * (x * y + w * z), 1 - 2 * (y * y + z * z))  # from the rotation's first column
+        c, s = np.cos(yaw), np.sin(yaw)
+        vec = np.zeros((len(frames), 3))
+        vec[:, 0] = c * cmd[:, 0] - s * cmd[:, 1]
+        vec[:, 1] = s * cmd[:, 0] + c * cmd[:, 1]
+        start = qpos[:, :3] + np.array([0.0, 0.0, 0.15])
+        return self.arrow.poses_many(start, vec, np.hypot(cmd[:, 0], cmd[:, 1]) > 1e-3)
 
 
 class PlanOverlay:
@@ -192,18 +236,18 @@ class PlanOverlay:
         if plan is None:
             return {self.root: _HIDDEN}
         out: dict[str, Pose] = {self.root: _SHOWN}
-        com = _translations(np.asarray(plan["com_path_in_world"])[: self.horizon])
+        com = translations(np.asarray(plan["com_path_in_world"])[: self.horizon])
         for i, path in enumerate(self._com_paths):
             out[path] = Pose(com[i]) if i < len(com) else _HIDDEN
         tips = None
         if "arm_q_plan" in plan:
             tips = scene.arm_tip_path(frame.qpos, np.asarray(plan["arm_q_plan"])[: self.horizon])
-        tips = _translations(tips) if tips is not None else ()
+        tips = translations(tips) if tips is not None else ()
         for i, path in enumerate(self._arm_paths):
             out[path] = Pose(tips[i]) if i < len(tips) else _HIDDEN
         rot_z = _yaw_rotation(frame.qpos)
         holds = np.asarray(plan["footholds_in_world"])
-        discs = _translations(holds[: len(PIN_LEGS)])
+        discs = translations(holds[: len(PIN_LEGS)])
         discs[:, :3, :3] = _UPRIGHT  # a disc flat on the ground
         for k, path in enumerate(self._hold_paths):
             out[path] = Pose(discs[k])
@@ -225,17 +269,15 @@ class PlanOverlay:
             out.update(a.poses(holds[k], self.n_per_m * f, float(np.linalg.norm(f)) > 1.0))
         return out
 
+    def poses_many(self, frames: list[VizFrame], scene: RobotScene) -> dict[str, PoseTrack]:
+        """`poses` over a batch of frames (the plan changes shape from frame to frame: posed one frame at a time)."""
+        if all(f.plan is None for f in frames):
+            return {self.root: PoseTrack.everywhere(identities(len(frames)), np.zeros(len(frames), dtype=bool))}
+        return tracks_of([self.poses(f, scene) for f in frames])
+
 
 _UPRIGHT = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])
 """Rotation laying meshcat's cylinder (axis y) flat on the ground (axis z)."""
-
-
-def _translations(points: np.ndarray) -> np.ndarray:
-    """Homogeneous translations to each row of `points`, shape (n, 4, 4)."""
-    out = np.zeros((len(points), 4, 4))
-    out[:, 0, 0] = out[:, 1, 1] = out[:, 2, 2] = out[:, 3, 3] = 1.0
-    out[:, :3, 3] = points
-    return out
 
 
 def _yaw_rotation(qpos: np.ndarray) -> np.ndarray:

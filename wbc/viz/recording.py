@@ -8,9 +8,9 @@ server. The page plays the animation once; meshcat's panel (Animations) has play
 plays on from there).
 
 Keys are thinned: a track gets a key only where its value changes (and just before, so a held value is not
-interpolated), and visibility only where it flips. A frame only appends each node's transform to a buffer; the
-buffers are turned into keys a chunk at a time, with numpy over the chunk (`_NodeKeys`), which keeps recording
-cheap beside the simulation and its memory bounded whatever the trial's length.
+interpolated), and visibility only where it flips. Adding a frame only keeps it; the frames are posed and keyed a
+chunk at a time, with numpy over the chunk (`SceneContent.poses_many`, `_NodeKeys`), which keeps recording cheap
+beside the simulation and its memory bounded whatever the trial's length.
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from meshcat.servers.zmqserver import VIEWER_ROOT
 from wbc.errors import ConfigError
 from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
-from wbc.viz.frame import Pose, VizFrame
+from wbc.viz.frame import PoseTrack, VizFrame
 
 __all__ = ["GHOST_COLOR", "Recording", "viewer_script"]
 
@@ -122,7 +122,7 @@ class _SceneWindow:
 _TOL = 1e-5
 """A transform component moving less than this between two frames is held, not keyed."""
 _CHUNK = 256
-"""Frames of a node buffered before they are turned into keys (bounds the buffer of a long trial)."""
+"""Frames buffered before they are posed and keyed as one batch (bounds the buffer of a long trial)."""
 _PROPS = (("position", "vector3"), ("quaternion", "quaternion"), ("scale", "vector3"))
 
 
@@ -131,48 +131,29 @@ class _NodeKeys:
 
     A transform is keyed where any component of its position, quaternion or scale differs from the frame before by
     more than `_TOL`; the frame before is keyed too when it was not (the value held up to there is not
-    interpolated). Transforms are buffered and decomposed `_CHUNK` at a time. A run of frames that hand over the very
-    same matrix (a gait chart cell, an overlay's group) is buffered as its first and last frame only: the frames
-    between can be no key.
+    interpolated). Frames come a batch at a time (`add_track`); each batch continues from the last frame of the one
+    before.
     """
 
     def __init__(self) -> None:
         self.visible: list[tuple[int, bool]] = []
         self.frames: dict[str, list[np.ndarray]] = {prop: [] for prop, _ in _PROPS}
         self.values: dict[str, list[np.ndarray]] = {prop: [] for prop, _ in _PROPS}
-        self._buffer: list[tuple[int, np.ndarray]] = []
-        self._run_end: int | None = None  # newest frame repeating the last buffered matrix object, not buffered yet
         self._last: dict[str, tuple[int, np.ndarray, bool]] = {}  # prop -> last frame, its value, whether keyed
 
-    def add(self, k: int, pose: Pose) -> None:
-        """The node's pose at frame `k`."""
-        visible = bool(pose.visible)
-        if not self.visible or self.visible[-1][1] != visible:
-            self.visible.append((k, visible))
-        if visible:
-            buffer, matrix = self._buffer, pose.matrix
-            if buffer and buffer[-1][1] is matrix:
-                self._run_end = k
-                return
-            if self._run_end is not None:
-                buffer.append((self._run_end, buffer[-1][1]))
-                self._run_end = None
-            buffer.append((k, matrix))
-            if len(buffer) >= _CHUNK:
-                self.flush()
-
-    def flush(self) -> None:
-        """Turn the buffered transforms into keys."""
-        if self._run_end is not None:
-            self._buffer.append((self._run_end, self._buffer[-1][1]))
-            self._run_end = None
-        if not self._buffer:
+    def add_track(self, ks: np.ndarray, track: PoseTrack) -> None:
+        """The node's poses over a batch of frames: at frame ``ks[i]`` for each i in ``track.frames``."""
+        ks = ks[track.frames]
+        if not len(ks):
             return
-        frames = np.fromiter((k for k, _ in self._buffer), dtype=np.int64, count=len(self._buffer))
-        matrices = np.array([m for _, m in self._buffer], dtype=np.float64)
-        self._buffer = []
-        for (prop, _), values in zip(_PROPS, _decompose(matrices), strict=True):
-            self._key(prop, frames, values)
+        vis = np.asarray(track.visible, dtype=bool)
+        flips = np.empty(len(vis), dtype=bool)
+        flips[0] = not self.visible or self.visible[-1][1] != bool(vis[0])
+        flips[1:] = vis[1:] != vis[:-1]
+        self.visible.extend((k, v) for k, v in zip(ks[flips].tolist(), vis[flips].tolist(), strict=True))
+        if vis.any():
+            for (prop, _), values in zip(_PROPS, _decompose(np.asarray(track.matrices)[vis]), strict=True):
+                self._key(prop, ks[vis], values)
 
     def _key(self, prop: str, frames: np.ndarray, values: np.ndarray) -> None:
         last = self._last.get(prop)
@@ -193,7 +174,7 @@ class _NodeKeys:
         self._last[prop] = (int(frames[-1]), values[-1].copy(), bool(changed[-1]))
 
     def keys(self, prop: str) -> tuple[np.ndarray, np.ndarray]:
-        """(frames, values) of the keys of `prop` (call `flush` first)."""
+        """(frames, values) of the keys of `prop`."""
         if not self.frames[prop]:
             return np.zeros(0, dtype=np.int64), np.zeros((0, 4 if prop == "quaternion" else 3))
         return np.concatenate(self.frames[prop]), np.concatenate(self.values[prop])
@@ -295,6 +276,7 @@ class Recording:
         self.frames = 0
         self._ghosts: list[tuple[SceneContent, meshcat.Visualizer]] = []
         self._ghost_last: list[int] = []
+        self._pending: dict[int, list[tuple[int, VizFrame]]] = {-1: []}  # owner -> frames not keyed yet
 
     @property
     def last_key(self) -> int:
@@ -309,6 +291,9 @@ class Recording:
     def add(self, frame: VizFrame) -> bool:
         """Add `frame` as the animation's state at its time; frames closer than 1/fps to the last are skipped.
 
+        Frames are keyed `_CHUNK` at a time, their node poses computed over the batch (`SceneContent.poses_many`):
+        a frame handed over is not changed afterwards (no `VizFrame` is).
+
         Returns:
             True if the frame was keyed.
         """
@@ -317,13 +302,29 @@ class Recording:
             return False
         self._last_frame = k
         self.frames += 1
-        full = self._full
-        for path, pose in self.content.poses(frame).items():
-            node = full.get((-1, path))
-            if node is None:
-                node = self._node(-1, path, path if path.startswith("/") else self.vis[path].path.lower())
-            node.add(k, pose)
+        pending = self._pending[-1]
+        pending.append((k, frame))
+        if len(pending) >= _CHUNK:
+            self._key_pending(-1)
         return True
+
+    def _key_pending(self, owner: int) -> None:
+        """Key the frames of `owner` (-1: the recording's robot; else a ghost's index) still waiting."""
+        pending = self._pending[owner]
+        if not pending:
+            return
+        self._pending[owner] = []
+        ks = np.array([k for k, _ in pending], dtype=np.int64)
+        frames = [f for _, f in pending]
+        content, vis = (self.content, self.vis) if owner < 0 else self._ghosts[owner]
+        full = self._full
+        for path, track in content.poses_many(frames).items():
+            node = full.get((owner, path))
+            if node is None:
+                if owner >= 0 and path.startswith(_GHOST_SKIP):
+                    continue
+                node = self._node(owner, path, path if owner < 0 and path.startswith("/") else vis[path].path.lower())
+            node.add_track(ks, track)
 
     def add_ghost(self, content: SceneContent, *, color: tuple[float, float, float, float] = GHOST_COLOR) -> int:
         """Add a second robot to the scene, drawn translucent (a ghost), under ``ghost<i>/``; its index.
@@ -341,23 +342,19 @@ class Recording:
             vis[path].set_property("visible", False)
         self._ghosts.append((content, vis))
         self._ghost_last.append(-1)
+        self._pending[i] = []
         return i
 
     def add_to_ghost(self, i: int, frame: VizFrame) -> bool:
         """Add `frame` of ghost `i` (see `add_ghost`) at its time; True if keyed."""
-        content, vis = self._ghosts[i]
         k = int(round(frame.t * self.fps))
         if k <= self._ghost_last[i]:
             return False
         self._ghost_last[i] = k
-        full = self._full
-        for path, pose in content.poses(frame).items():
-            node = full.get((i, path))
-            if node is None:
-                if path.startswith(_GHOST_SKIP):
-                    continue
-                node = self._node(i, path, vis[path].path.lower())
-            node.add(k, pose)
+        pending = self._pending[i]
+        pending.append((k, frame))
+        if len(pending) >= _CHUNK:
+            self._key_pending(i)
         return True
 
     def _node(self, owner: int, path: str, full: str) -> _NodeKeys:
@@ -369,9 +366,10 @@ class Recording:
 
     def _tracks(self) -> list[tuple[str, str, str, np.ndarray, list]]:
         """(full path, property, three.js type, key frames, key values) of every track, in the order first keyed."""
+        for owner in list(self._pending):
+            self._key_pending(owner)
         out = []
         for full, node in self._nodes.items():
-            node.flush()
             out.append((full, "visible", "boolean", np.array([k for k, _ in node.visible], dtype=np.int64),
                         [v for _, v in node.visible]))
             for prop, jstype in _PROPS:

@@ -15,7 +15,7 @@ import pinocchio as pin
 
 from wbc.robots.description import FOOT_NAMES, RobotDescription
 from wbc.robots.pinocchio_model import build_pinocchio
-from wbc.viz.frame import Pose
+from wbc.viz.frame import Pose, PoseTrack
 from wbc.viz.meshes import visual_parts
 
 __all__ = ["RobotScene"]
@@ -79,6 +79,29 @@ class RobotScene:
     def poses(self, data: pin.Data) -> dict[str, Pose]:
         """Poses of the joint nodes after `kinematics`."""
         return {path: Pose(data.oMi[j].homogeneous.copy()) for path, j in self._nodes}
+
+    def poses_many(self, qpos: np.ndarray) -> tuple[dict[str, PoseTrack], np.ndarray]:
+        """`poses` and `feet_in_world` over a batch of configurations, shape (n, nq).
+
+        Returns:
+            (the joint nodes' tracks, the foot centres shape (n, 4, 3) [m]).
+        """
+        model, data, joints = self.pin.model, self.pin.data, self.pin.joints
+        n = len(qpos)
+        mats = np.empty((len(self._nodes), n, 4, 4))
+        feet = np.empty((n, 4, 3))
+        ids = [j for _, j in self._nodes]
+        # `q_pin` over the batch: base position, quaternion (x, y, z, w), joints in Pinocchio's order
+        q = np.concatenate([qpos[:, :3], qpos[:, [4, 5, 6, 3]], qpos[:, 7:][:, joints.pin_from_house]], axis=1)
+        for i in range(n):
+            pin.framesForwardKinematics(model, data, q[i])
+            placements = data.oMi
+            for k, j in enumerate(ids):
+                mats[k, i] = placements[j].homogeneous
+            frames = data.oMf
+            for k, f in enumerate(self._foot_frames):
+                feet[i, k] = frames[f].translation
+        return {path: PoseTrack.everywhere(mats[k]) for k, (path, _) in enumerate(self._nodes)}, feet
 
     def feet_in_world(self, data: pin.Data) -> np.ndarray:
         """Foot centres, house order FR, FL, RR, RL, after `kinematics`, shape (4, 3) [m]."""

@@ -25,7 +25,7 @@ import mujoco
 import numpy as np
 
 from wbc.arena.episode import Episode
-from wbc.robots.conventions import quat_to_matrix
+from wbc.hardware.mujoco.physics import base_body_id
 from wbc.viz.frame import VizFrame
 from wbc.viz.sim_frames import SimulatedWorld
 
@@ -44,6 +44,13 @@ PLOTS: dict[str, tuple[str, str]] = {
 """Plot keys, in page order, with their titles and units."""
 
 _LEGS = ("FR", "FL", "RR", "RL")
+# the (plot, line) of each value a frame samples, in the order `TrialSignals.add_frame` computes them
+_BASE_KEYS = [("attitude", "roll"), ("attitude", "pitch"), ("height", "height"), ("velocity", "vx cmd"),
+              ("velocity", "vy cmd"), ("yaw_rate", "cmd")]
+_VELOCITY_KEYS = [("velocity", "vx"), ("velocity", "vy"), ("yaw_rate", "yaw rate")]
+_FOOT_KEYS = [("foot_forces", leg) for leg in _LEGS]
+_ARM_KEYS = [("arm_momentum", f"arm L{a}") for a in "xyz"] + [("arm_momentum", f"push H{a}") for a in "xyz"]
+_PLAN_KEYS = [("mpc_com", "plan z"), ("mpc_com", "CoM z"), ("mpc_com", "plan x-CoM x")]
 
 
 @dataclass(frozen=True)
@@ -94,19 +101,34 @@ class TrialSignals:
     _push_impulse: np.ndarray = field(default_factory=lambda: np.zeros(3))
     _push_was_on: bool = False
     _last_t: float = 0.0
-    _model: tuple[mujoco.MjModel, list[str], np.ndarray, int | None] | None = field(default=None, repr=False)
+    _model: tuple[mujoco.MjModel, list[tuple[str, str]], np.ndarray, int | None, int] | None = field(
+        default=None, repr=False)
+    _columns: dict[tuple[str, str], list[float | None]] = field(default_factory=dict, repr=False)
 
-    def _model_info(self, m: mujoco.MjModel) -> tuple[list[str], np.ndarray, int | None]:
-        """(actuator names, torque limits, the arm's root body) of `m`, looked up once per model."""
+    def _model_info(self, m: mujoco.MjModel) -> tuple[list[tuple[str, str]], np.ndarray, int | None, int]:
+        """(the torque lines' keys, torque limits, the arm's root body, the trunk's body) of `m`, once per model."""
         if self._model is None or self._model[0] is not m:
             names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or f"joint {i}" for i in range(m.nu)]
-            self._model = (m, names, m.actuator_forcerange[:, 1].copy(), _arm_root(m))
-        return self._model[1], self._model[2], self._model[3]
+            self._model = (m, [("torques", n) for n in names], m.actuator_forcerange[:, 1].copy(), _arm_root(m),
+                           base_body_id(m))
+        return self._model[1], self._model[2], self._model[3], self._model[4]
 
     def _put(self, plot: str, line: str, value: float | None) -> None:
         column = self.lines.setdefault(plot, {}).setdefault(line, [])
         column.extend([None] * (len(self.t) - 1 - len(column)))  # a line that starts late has a gap before
         column.append(_r(value))
+
+    def _put_row(self, keys: list[tuple[str, str]], values: list[float | None]) -> None:
+        """`_put` of each (plot, line) key in `keys` with the value at its place in `values`."""
+        n = len(self.t) - 1
+        columns = self._columns
+        for key, value in zip(keys, values, strict=True):
+            column = columns.get(key)
+            if column is None:
+                column = columns[key] = self.lines.setdefault(key[0], {}).setdefault(key[1], [])
+            if len(column) != n:
+                column.extend([None] * (n - len(column)))
+            column.append(_r(value))
 
     def add_frame(self, frame: VizFrame, robot: SimulatedWorld | None = None, plan_com: np.ndarray | None = None
                   ) -> None:
@@ -120,55 +142,56 @@ class TrialSignals:
         dt = frame.t - self._last_t if self.t else 0.0
         self._last_t = frame.t
         self.t.append(_r(frame.t))
-        qpos = np.asarray(frame.qpos)
-        rot = quat_to_matrix(qpos[3:7])
-        roll = math.atan2(rot[2, 1], rot[2, 2])
-        pitch = -math.asin(max(-1.0, min(1.0, rot[2, 0])))
-        self._put("attitude", "roll", roll)
-        self._put("attitude", "pitch", pitch)
-        self._put("height", "height", float(qpos[2]))
-        cmd = np.asarray(frame.command)
-        self._put("velocity", "vx cmd", float(cmd[0]))
-        self._put("velocity", "vy cmd", float(cmd[1]))
-        self._put("yaw_rate", "cmd", float(cmd[2]))
+        qpos = frame.qpos
+        w, x, y, z = float(qpos[3]), float(qpos[4]), float(qpos[5]), float(qpos[6])
+        # the rotation's entries these need (`quat_to_matrix`)
+        r00, r10, r20 = 1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)
+        r21, r22 = 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+        cmd = frame.command
+        keys = _BASE_KEYS
+        values: list[float | None] = [math.atan2(r21, r22), -math.asin(max(-1.0, min(1.0, r20))), float(qpos[2]),
+                                      float(cmd[0]), float(cmd[1]), float(cmd[2])]
         if robot is None:
+            self._put_row(keys, values)
             return
-        truth = robot.sim_truth()  # also fills MuJoCo's subtree velocities, read below
-        yaw = math.atan2(rot[1, 0], rot[0, 0])
-        c, s = math.cos(yaw), math.sin(yaw)
-        v = truth.base_linvel_in_world
-        self._put("velocity", "vx", c * v[0] + s * v[1])
-        self._put("velocity", "vy", -s * v[0] + c * v[1])
-        self._put("yaw_rate", "yaw rate", float((rot @ truth.base_angvel_in_body)[2]))
-        if frame.foot_force_in_world is not None:
-            for leg, f in zip(_LEGS, frame.foot_force_in_world, strict=True):
-                self._put("foot_forces", leg, float(f[2]))
         m, d = robot.model, robot.data
-        names, limit, arm = self._model_info(m)
-        force = d.actuator_force
-        for i, name in enumerate(names):
-            self._put("torques", name, float(force[i] / limit[i]) if limit[i] > 0 else None)
-        com = truth.com_in_world
-        if frame.pushed:
-            r = frame.push_point_in_world - com
+        torque_keys, limit, arm, base = self._model_info(m)
+        mujoco.mj_subtreeVel(m, d)  # MuJoCo's subtree velocities, read below
+        yaw = math.atan2(r10, r00)
+        c, s = math.cos(yaw), math.sin(yaw)
+        vx, vy, _ = d.qvel[:3].tolist()
+        wx, wy, wz = d.qvel[3:6].tolist()
+        keys = keys + _VELOCITY_KEYS
+        values += [c * vx + s * vy, -s * vx + c * vy, r20 * wx + r21 * wy + r22 * wz]
+        if frame.foot_force_in_world is not None:
+            keys = keys + _FOOT_KEYS
+            values += np.asarray(frame.foot_force_in_world)[:, 2].tolist()
+        keys = keys + torque_keys
+        values += [f / lim if lim > 0 else None for f, lim in zip(d.actuator_force.tolist(), limit.tolist(),
+                                                                   strict=True)]
+        com = d.subtree_com[base].tolist()
+        pushed = frame.pushed
+        if pushed:
+            px, py, pz = (float(v) - c0 for v, c0 in zip(frame.push_point_in_world, com, strict=True))
+            fx, fy, fz = (float(v) for v in frame.push_force_in_world)
             if not self._push_was_on:
                 self._push_impulse = np.zeros(3)
-            self._push_impulse = self._push_impulse + np.cross(r, frame.push_force_in_world) * dt
-        self._push_was_on = frame.pushed
+            self._push_impulse = self._push_impulse + dt * np.array([py * fz - pz * fy, pz * fx - px * fz,
+                                                                     px * fy - py * fx])
+        self._push_was_on = pushed
         if arm is not None:
             mass = float(m.body_subtreemass[arm])
-            c_arm, v_arm = d.subtree_com[arm], d.subtree_linvel[arm]
-            spin = d.subtree_angmom[arm]
-            orbit = mass * np.cross(c_arm - com, v_arm - truth.com_velocity_in_world)
-            h = spin + orbit
-            for k, axis in enumerate("xyz"):
-                self._put("arm_momentum", f"arm L{axis}", float(h[k]))
-            for k, axis in enumerate("xyz"):
-                self._put("arm_momentum", f"push H{axis}", float(self._push_impulse[k]))
+            ax, ay, az = (a - b for a, b in zip(d.subtree_com[arm].tolist(), com, strict=True))
+            ux, uy, uz = (a - b for a, b in zip(d.subtree_linvel[arm].tolist(), d.subtree_linvel[base].tolist(),
+                                                strict=True))
+            sx, sy, sz = d.subtree_angmom[arm].tolist()
+            keys = keys + _ARM_KEYS
+            values += [sx + mass * (ay * uz - az * uy), sy + mass * (az * ux - ax * uz),
+                       sz + mass * (ax * uy - ay * ux)] + self._push_impulse.tolist()
         if plan_com is not None:
-            self._put("mpc_com", "plan z", float(plan_com[2]))
-            self._put("mpc_com", "CoM z", float(com[2]))
-            self._put("mpc_com", "plan x-CoM x", float(plan_com[0] - com[0]))
+            keys = keys + _PLAN_KEYS
+            values += [float(plan_com[2]), com[2], float(plan_com[0]) - com[0]]
+        self._put_row(keys, values)
 
     def mark_episode(self, episode: Episode, *, pushes: bool = True) -> None:
         """Add the episode's events: its pushes, its fall and its safety layer's transitions."""
