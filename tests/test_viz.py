@@ -574,3 +574,15 @@ def test_recording_keys_alike_in_chunks_and_frame_by_frame():
         else:
             np.testing.assert_allclose(va, vb, atol=1e-12, err_msg=f"{path} {prop}")
     assert chunked.frames == single.frames == len(frames)
+
+
+def test_plot_values_round_alike_sampled_at_once_and_one_by_one():
+    from wbc.viz.signals import _r, _round4
+
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.standard_normal(20000) * 10.0 ** rng.uniform(-7, 6, 20000),
+                        np.round(rng.standard_normal(2000), 5),  # many exact ties at the fifth digit
+                        [0.12345, -0.00012345, 12345.0, 99995.0, 0.0, -0.0, np.nan, np.inf, -np.inf, 2.5e-5]])
+    at_once = _round4(x)
+    alone = np.array([np.nan if _r(v) is None else _r(v) for v in x.tolist()])
+    np.testing.assert_array_equal(at_once, alone)

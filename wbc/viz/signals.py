@@ -74,6 +74,31 @@ class Mark:
         return {"t": _r(self.t), "kind": self.kind, "label": self.label, "d": _r(self.duration)}
 
 
+def _round4(x: np.ndarray) -> np.ndarray:
+    """`_r` of every element of `x` (NaN where unknown or not finite), the same values, in numpy.
+
+    Scaled to four digits before the point and rounded there; a value that lands within a hair of a tie (where the
+    scaling's own rounding could decide) is rounded as `_r` does it, from its decimal form.
+    """
+    out = np.full(x.shape, np.nan)
+    ok = np.isfinite(x)
+    v = x[ok]
+    if not v.size:
+        return out
+    a = np.abs(v)
+    k = 3 - np.floor(np.log10(np.where(a > 0.0, a, 1.0))).astype(np.int64)
+    p = 10.0 ** np.abs(k)
+    up = k >= 0
+    scaled = np.where(up, v * p, v / p)
+    rounded = np.round(scaled)
+    r = np.where(up, rounded / p, rounded * p)
+    near_tie = np.abs(np.abs(scaled - np.trunc(scaled)) - 0.5) < 1e-6
+    for i in np.flatnonzero(near_tie).tolist():
+        r[i] = float(f"{v[i]:.4g}")
+    out[ok] = r
+    return out
+
+
 def _r(x: float | None) -> float | None:
     """`x` to 4 significant digits (None for unknown or not finite)."""
     if x is None or not math.isfinite(x):
@@ -90,7 +115,7 @@ class TrialSignals:
 
     Attributes:
         t: sample times [s].
-        lines: values by plot key and line name, one per sample (None where unknown).
+        lines: values by plot key and line name, one per sample (None where unknown); complete after `settle`.
         marks: the events.
     """
 
@@ -103,7 +128,8 @@ class TrialSignals:
     _last_t: float = 0.0
     _model: tuple[mujoco.MjModel, list[tuple[str, str]], np.ndarray, int | None, int] | None = field(
         default=None, repr=False)
-    _columns: dict[tuple[str, str], list[float | None]] = field(default_factory=dict, repr=False)
+    _rows: list[tuple[int, tuple[tuple[str, str], ...], list[float]]] = field(default_factory=list, repr=False)
+    _layouts: dict[tuple[object, ...], tuple[tuple[str, str], ...]] = field(default_factory=dict, repr=False)
 
     def _model_info(self, m: mujoco.MjModel) -> tuple[list[tuple[str, str]], np.ndarray, int | None, int]:
         """(the torque lines' keys, torque limits, the arm's root body, the trunk's body) of `m`, once per model."""
@@ -111,24 +137,56 @@ class TrialSignals:
             names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, i) or f"joint {i}" for i in range(m.nu)]
             self._model = (m, [("torques", n) for n in names], m.actuator_forcerange[:, 1].copy(), _arm_root(m),
                            base_body_id(m))
+            self._layouts.clear()  # a layout names the torque lines of the model before
         return self._model[1], self._model[2], self._model[3], self._model[4]
 
     def _put(self, plot: str, line: str, value: float | None) -> None:
+        self.settle()
         column = self.lines.setdefault(plot, {}).setdefault(line, [])
         column.extend([None] * (len(self.t) - 1 - len(column)))  # a line that starts late has a gap before
         column.append(_r(value))
 
-    def _put_row(self, keys: list[tuple[str, str]], values: list[float | None]) -> None:
-        """`_put` of each (plot, line) key in `keys` with the value at its place in `values`."""
-        n = len(self.t) - 1
-        columns = self._columns
-        for key, value in zip(keys, values, strict=True):
-            column = columns.get(key)
-            if column is None:
-                column = columns[key] = self.lines.setdefault(key[0], {}).setdefault(key[1], [])
-            if len(column) != n:
-                column.extend([None] * (n - len(column)))
-            column.append(_r(value))
+    def _put_row(self, layout: tuple[object, ...], keys: list[tuple[str, str]], values: list[float | None]) -> None:
+        """Sample each (plot, line) of `keys` with the value at its place in `values` (`layout` names the keys).
+
+        The row waits in `_rows` until `settle` (every sample of a run at once costs a fraction of one at a time).
+        """
+        named = self._layouts.get(layout)
+        if named is None:
+            named = self._layouts[layout] = tuple(keys)
+        self._rows.append((len(self.t) - 1, named, values))
+
+    def settle(self) -> None:
+        """Put the samples still waiting into `lines` (what reads `lines` calls this first)."""
+        rows, self._rows = self._rows, []
+        if not rows:
+            return
+        groups: dict[tuple[tuple[str, str], ...], tuple[list[int], list[list[float | None]]]] = {}
+        for i, keys, values in rows:
+            group = groups.get(keys)
+            if group is None:
+                group = groups[keys] = ([], [])
+            group[0].append(i)
+            group[1].append(values)
+        samples: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
+        for keys, (at, values) in groups.items():
+            table = _round4(np.array(values, dtype=np.float64))  # None: NaN
+            index = np.array(at, dtype=np.int64)
+            for j, key in enumerate(keys):
+                samples.setdefault(key, []).append((index, table[:, j]))
+        for (plot, line), parts in samples.items():
+            at = np.concatenate([p[0] for p in parts])
+            values = np.concatenate([p[1] for p in parts])
+            if len(parts) > 1:
+                order = np.argsort(at, kind="stable")
+                at, values = at[order], values[order]
+            column = self.lines.setdefault(plot, {}).setdefault(line, [])
+            start, end = int(at[0]), int(at[-1]) + 1
+            if len(column) < start:
+                column.extend([None] * (start - len(column)))  # a line that starts late has a gap before
+            dense = np.full(end - start, np.nan)
+            dense[at - start] = values
+            column.extend(v if v == v else None for v in dense.tolist())
 
     def add_frame(self, frame: VizFrame, robot: SimulatedWorld | None = None, plan_com: np.ndarray | None = None
                   ) -> None:
@@ -152,7 +210,7 @@ class TrialSignals:
         values: list[float | None] = [math.atan2(r21, r22), -math.asin(max(-1.0, min(1.0, r20))), float(qpos[2]),
                                       float(cmd[0]), float(cmd[1]), float(cmd[2])]
         if robot is None:
-            self._put_row(keys, values)
+            self._put_row((), keys, values)
             return
         m, d = robot.model, robot.data
         torque_keys, limit, arm, base = self._model_info(m)
@@ -161,9 +219,11 @@ class TrialSignals:
         c, s = math.cos(yaw), math.sin(yaw)
         vx, vy, _ = d.qvel[:3].tolist()
         wx, wy, wz = d.qvel[3:6].tolist()
+        layout: tuple[object, ...] = (id(torque_keys),)
         keys = keys + _VELOCITY_KEYS
         values += [c * vx + s * vy, -s * vx + c * vy, r20 * wx + r21 * wy + r22 * wz]
         if frame.foot_force_in_world is not None:
+            layout += ("feet",)
             keys = keys + _FOOT_KEYS
             values += np.asarray(frame.foot_force_in_world)[:, 2].tolist()
         keys = keys + torque_keys
@@ -185,13 +245,15 @@ class TrialSignals:
             ux, uy, uz = (a - b for a, b in zip(d.subtree_linvel[arm].tolist(), d.subtree_linvel[base].tolist(),
                                                 strict=True))
             sx, sy, sz = d.subtree_angmom[arm].tolist()
+            layout += ("arm",)
             keys = keys + _ARM_KEYS
             values += [sx + mass * (ay * uz - az * uy), sy + mass * (az * ux - ax * uz),
                        sz + mass * (ax * uy - ay * ux)] + self._push_impulse.tolist()
         if plan_com is not None:
+            layout += ("plan",)
             keys = keys + _PLAN_KEYS
             values += [float(plan_com[2]), com[2], float(plan_com[0]) - com[0]]
-        self._put_row(keys, values)
+        self._put_row(layout, keys, values)
 
     def mark_episode(self, episode: Episode, *, pushes: bool = True) -> None:
         """Add the episode's events: its pushes, its fall and its safety layer's transitions."""
@@ -222,6 +284,7 @@ class TrialSignals:
 
     def thinned(self, fps: float) -> TrialSignals:
         """These signals at most `fps` samples per second [1/s] (a stored episode holds every control tick)."""
+        self.settle()
         keep, last = [], -1
         for i, t in enumerate(self.t):
             k = int(round(t * fps))
@@ -235,6 +298,7 @@ class TrialSignals:
 
     def to_json(self) -> dict[str, object]:
         """The run as the page reads it: ``{name, t, plots: {key: {title, unit, lines: {name: values}}}, marks}``."""
+        self.settle()
         n = len(self.t)
         plots = {}
         for key, (title, unit) in PLOTS.items():

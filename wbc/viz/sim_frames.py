@@ -55,28 +55,30 @@ def foot_forces_in_world(robot: SimulatedWorld) -> np.ndarray:
     the force is the one the ground exerts on the robot.
     """
     m, d = robot.model, robot.data
-    out = np.zeros((4, 3))
     n = d.ncon
     if n == 0:
-        return out
-    sites = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f) for f in FOOT_NAMES]
+        return np.zeros((4, 3))
+    # in Python floats: a handful of contacts, where numpy's per-call cost would dominate
+    centres = d.site_xpos[[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f) for f in FOOT_NAMES]].tolist()
     contacts = d.contact
-    gap = contacts.pos[:n, None, :] - d.site_xpos[sites][None, :, :]
-    near = np.sqrt(np.einsum("nkj,nkj->nk", gap, gap))
-    foot = np.argmin(near, axis=1)
-    mine = np.flatnonzero(near[np.arange(n), foot] <= FOOT_ZONE)
-    if not len(mine):
-        return out
-    local = np.zeros((len(mine), 3))
+    zone2 = FOOT_ZONE * FOOT_ZONE
+    out = [[0.0, 0.0, 0.0] for _ in range(4)]
     wrench = np.zeros(6)
-    for row, i in enumerate(mine.tolist()):
+    body = m.geom_bodyid
+    for i, ((px, py, pz), frame, g2) in enumerate(zip(contacts.pos[:n].tolist(), contacts.frame[:n].tolist(),
+                                                       contacts.geom[:n, 1].tolist(), strict=True)):
+        near = [(px - cx) * (px - cx) + (py - cy) * (py - cy) + (pz - cz) * (pz - cz) for cx, cy, cz in centres]
+        k = near.index(min(near))
+        if near[k] > zone2:
+            continue
         mujoco.mj_contactForce(m, d, i, wrench)
-        local[row] = wrench[:3]
-    frames = contacts.frame[:n][mine].reshape(-1, 3, 3)  # rows: normal, tangents (world)
-    f = np.einsum("nji,nj->ni", frames, local)  # force of geom1 on geom2, in the world
-    robot_is_geom2 = m.geom_bodyid[contacts.geom[:n][mine, 1]] != 0
-    np.add.at(out, foot[mine], np.where(robot_is_geom2[:, None], f, -f))
-    return out
+        fn, f1, f2 = wrench[:3].tolist()
+        sign = 1.0 if body[g2] != 0 else -1.0  # the force of geom1 on geom2: on the robot when it is geom2
+        # the frame's rows are the normal and the two tangents (world): the force in the world is frame^T wrench
+        foot = out[k]
+        for j in range(3):
+            foot[j] += sign * (frame[j] * fn + frame[3 + j] * f1 + frame[6 + j] * f2)
+    return np.array(out)
 
 
 _PLANNER: list[object] = [None, False]  # the last controller seen, whether it is a `HasDebugPlan` (a check: ~30 us)
