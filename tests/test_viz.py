@@ -534,7 +534,10 @@ def _frames(desc, n: int, seed: int = 0) -> list[VizFrame]:
     return frames
 
 
-def test_batched_poses_are_each_frame_posed_alone():
+@pytest.mark.parametrize("by_pinocchio", [False, True])
+def test_batched_poses_are_each_frame_posed_alone(by_pinocchio, monkeypatch):
+    if by_pinocchio:  # joints the batch does not pose itself: the kinematics falls back on Pinocchio
+        monkeypatch.setattr("wbc.viz.scene._REVOLUTE", {})
     desc = get_robot("a1-wx200", "actuated")
     content = SceneContent(desc, TerrainConfig(), None)
     frames = _frames(desc, 60)

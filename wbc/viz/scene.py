@@ -22,6 +22,8 @@ __all__ = ["RobotScene"]
 
 ROBOT = "wbc/robot"
 ARM = "wbc/arm"
+_REVOLUTE = {"JointModelRX": 0, "JointModelRY": 1, "JointModelRZ": 2}
+"""Pinocchio's revolute joints about one axis of their frame, and that axis."""
 
 
 class RobotScene:
@@ -86,22 +88,66 @@ class RobotScene:
         Returns:
             (the joint nodes' tracks, the foot centres shape (n, 4, 3) [m]).
         """
-        model, data, joints = self.pin.model, self.pin.data, self.pin.joints
-        n = len(qpos)
-        mats = np.empty((len(self._nodes), n, 4, 4))
-        feet = np.empty((n, 4, 3))
-        ids = [j for _, j in self._nodes]
         # `q_pin` over the batch: base position, quaternion (x, y, z, w), joints in Pinocchio's order
-        q = np.concatenate([qpos[:, :3], qpos[:, [4, 5, 6, 3]], qpos[:, 7:][:, joints.pin_from_house]], axis=1)
-        for i in range(n):
-            pin.framesForwardKinematics(model, data, q[i])
-            placements = data.oMi
-            for k, j in enumerate(ids):
-                mats[k, i] = placements[j].homogeneous
-            frames = data.oMf
-            for k, f in enumerate(self._foot_frames):
-                feet[i, k] = frames[f].translation
-        return {path: PoseTrack.everywhere(mats[k]) for k, (path, _) in enumerate(self._nodes)}, feet
+        q = np.concatenate([qpos[:, :3], qpos[:, [4, 5, 6, 3]], qpos[:, 7:][:, self.pin.joints.pin_from_house]],
+                           axis=1)
+        placements = self._placements(q)
+        model = self.pin.model
+        feet = np.empty((len(q), 4, 3))
+        for k, f in enumerate(self._foot_frames):
+            frame = model.frames[f]
+            parent, point = placements[frame.parentJoint], frame.placement.translation
+            feet[:, k] = parent[:, :3, :3] @ point + parent[:, :3, 3]
+        return {path: PoseTrack.everywhere(placements[j]) for path, j in self._nodes}, feet
+
+    def _placements(self, q: np.ndarray) -> np.ndarray:
+        """Every joint's placement in the world (Pinocchio's ``oMi``) at each configuration of `q` (n, nq).
+
+        Forward kinematics over the whole batch at once, joint by joint down the tree: a free flyer at the root,
+        revolute joints about x, y or z below it (the robots' joints); any other joint is posed by Pinocchio, one
+        configuration at a time.
+
+        Returns:
+            Shape (njoints, n, 4, 4).
+        """
+        model = self.pin.model
+        n = len(q)
+        out = np.empty((model.njoints, n, 4, 4))
+        out[0] = np.eye(4)
+        for j in range(1, model.njoints):
+            joint = model.joints[j]
+            kind, iq = joint.shortname(), joint.idx_q
+            local = np.zeros((n, 4, 4))
+            local[:, 3, 3] = 1.0
+            if kind == "JointModelFreeFlyer":
+                local[:, :3, 3] = q[:, iq:iq + 3]
+                x, y, z, w = (q[:, iq + 3 + i] for i in range(4))
+                local[:, 0, 0], local[:, 0, 1], local[:, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), \
+                    2 * (x * z + w * y)
+                local[:, 1, 0], local[:, 1, 1], local[:, 1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), \
+                    2 * (y * z - w * x)
+                local[:, 2, 0], local[:, 2, 1], local[:, 2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), \
+                    1 - 2 * (x * x + y * y)
+            elif kind in _REVOLUTE:
+                a = _REVOLUTE[kind]
+                b, c = (a + 1) % 3, (a + 2) % 3
+                cos, sin = np.cos(q[:, iq]), np.sin(q[:, iq])
+                local[:, a, a] = 1.0
+                local[:, b, b], local[:, b, c], local[:, c, b], local[:, c, c] = cos, -sin, sin, cos
+            else:
+                return self._placements_one_by_one(q)
+            out[j] = out[model.parents[j]] @ model.jointPlacements[j].homogeneous @ local
+        return out
+
+    def _placements_one_by_one(self, q: np.ndarray) -> np.ndarray:
+        """`_placements` by Pinocchio, one configuration at a time (for joints the batch does not pose)."""
+        model, data = self.pin.model, self.pin.data
+        out = np.empty((model.njoints, len(q), 4, 4))
+        for i in range(len(q)):
+            pin.forwardKinematics(model, data, q[i])
+            for j in range(model.njoints):
+                out[j, i] = data.oMi[j].homogeneous
+        return out
 
     def feet_in_world(self, data: pin.Data) -> np.ndarray:
         """Foot centres, house order FR, FL, RR, RL, after `kinematics`, shape (4, 3) [m]."""
