@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import os
+import shutil
 import sys
+import tempfile
 import textwrap
 from dataclasses import dataclass
 
@@ -13,6 +15,21 @@ import wbc  # noqa: F401  (first: it pins the numeric kernels before numpy loads
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators import UnitreeEmulator
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+
+_CACHE: list[str] = []
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The suite keeps the robots' drawable parts (`wbc.viz.meshes.robot_parts`) in a cache of its own."""
+    if not os.environ.get("WBC_CACHE_DIR"):
+        _CACHE.append(tempfile.mkdtemp(prefix="wbc-test-cache-"))
+        os.environ["WBC_CACHE_DIR"] = _CACHE[0]
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    for path in _CACHE:
+        shutil.rmtree(path, ignore_errors=True)
+
 
 LIMP = '''
     """A controller that switches its motors off: the robot folds and falls within a second."""

@@ -589,3 +589,58 @@ def test_plot_values_round_alike_sampled_at_once_and_one_by_one():
     at_once = _round4(x)
     alone = np.array([np.nan if _r(v) is None else _r(v) for v in x.tolist()])
     np.testing.assert_array_equal(at_once, alone)
+
+
+def _same_parts(a, b):
+    assert [(p.name, p.joint, p.joint_id, p.color, p.is_arm, type(p.geometry)) for p in a] == \
+        [(p.name, p.joint, p.joint_id, p.color, p.is_arm, type(p.geometry)) for p in b]
+    for p, q in zip(a, b, strict=True):
+        np.testing.assert_array_equal(p.placement, q.placement)
+        if hasattr(p.geometry, "vertices"):
+            np.testing.assert_array_equal(p.geometry.vertices, q.geometry.vertices)
+            np.testing.assert_array_equal(p.geometry.faces, q.geometry.faces)
+        else:
+            keep = {k: v for k, v in vars(p.geometry).items() if k != "uuid"}
+            assert keep == {k: v for k, v in vars(q.geometry).items() if k != "uuid"}
+
+
+def test_robot_parts_come_back_the_same_from_the_cache(tmp_path, monkeypatch):
+    from wbc.robots.pinocchio_model import build_pinocchio
+    from wbc.viz import meshes
+
+    desc = get_robot("a1-wx200", "actuated")
+    robot = build_pinocchio(desc, with_visuals=True)
+    built = meshes.visual_parts(robot.model, robot.visual_model)
+    monkeypatch.setenv(meshes.CACHE_ENV, str(tmp_path / "cache"))
+    first = meshes.robot_parts(desc, robot.model)  # builds them and writes the cache
+    files = list((tmp_path / "cache").glob("parts-*.npz"))
+    assert len(files) == 1
+    monkeypatch.setattr(meshes, "build_pinocchio", lambda *a, **k: pytest.fail("the cache was not read"))
+    cached = meshes.robot_parts(desc, robot.model)
+    _same_parts(built, first)
+    _same_parts(built, cached)
+    assert any(hasattr(p.geometry, "vertices") for p in cached)  # the meshes, not only the primitives
+    # another robot or arm mode is another file
+    monkeypatch.undo()
+    monkeypatch.setenv(meshes.CACHE_ENV, str(tmp_path / "cache"))
+    meshes.robot_parts(get_robot("a1-wx200", "none"), build_pinocchio(get_robot("a1-wx200", "none")).model)
+    assert len(list((tmp_path / "cache").glob("parts-*.npz"))) == 2
+
+
+def test_a_broken_or_unwritable_cache_only_costs_the_rebuild(tmp_path, monkeypatch):
+    from wbc.robots.pinocchio_model import build_pinocchio
+    from wbc.viz import meshes
+
+    desc = get_robot("a1-wx200", "locked")
+    model = build_pinocchio(desc).model
+    monkeypatch.setenv(meshes.CACHE_ENV, str(tmp_path))
+    good = meshes.robot_parts(desc, model)
+    (file,) = tmp_path.glob("parts-*.npz")
+    file.write_bytes(b"not a cache file")
+    again = meshes.robot_parts(desc, model)  # rebuilt, and the file rewritten
+    _same_parts(good, again)
+    assert file.read_bytes() != b"not a cache file"
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    monkeypatch.setenv(meshes.CACHE_ENV, str(blocked / "cache"))  # a directory that cannot be made
+    _same_parts(good, meshes.robot_parts(desc, model))

@@ -16,7 +16,7 @@ import pinocchio as pin
 from wbc.robots.description import FOOT_NAMES, RobotDescription
 from wbc.robots.pinocchio_model import build_pinocchio
 from wbc.viz.frame import Pose, PoseTrack
-from wbc.viz.meshes import visual_parts
+from wbc.viz.meshes import robot_parts
 
 __all__ = ["RobotScene"]
 
@@ -39,8 +39,8 @@ class RobotScene:
 
     def __init__(self, desc: RobotDescription, *, mesh_cell: float = 0.003) -> None:
         self.desc = desc
-        self.pin = build_pinocchio(desc, with_visuals=True)
-        self.parts = visual_parts(self.pin.model, self.pin.visual_model, cell=mesh_cell)
+        self.pin = build_pinocchio(desc)
+        self.parts = robot_parts(desc, self.pin.model, cell=mesh_cell)
         model = self.pin.model
         self._foot_frames = [model.getFrameId(f) for f in FOOT_NAMES]
         self._nodes: list[tuple[str, int]] = []  # (path, joint id) of every moving node
