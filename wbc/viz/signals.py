@@ -129,7 +129,7 @@ class TrialSignals:
     _model: tuple[mujoco.MjModel, list[tuple[str, str]], np.ndarray, int | None, int] | None = field(
         default=None, repr=False)
     _rows: list[tuple[int, tuple[tuple[str, str], ...], list[float]]] = field(default_factory=list, repr=False)
-    _layouts: dict[tuple[object, ...], tuple[tuple[str, str], ...]] = field(default_factory=dict, repr=False)
+    _layouts: dict[tuple[int, ...], tuple[tuple[str, str], ...]] = field(default_factory=dict, repr=False)
 
     def _model_info(self, m: mujoco.MjModel) -> tuple[list[tuple[str, str]], np.ndarray, int | None, int]:
         """(the torque lines' keys, torque limits, the arm's root body, the trunk's body) of `m`, once per model."""
@@ -146,14 +146,15 @@ class TrialSignals:
         column.extend([None] * (len(self.t) - 1 - len(column)))  # a line that starts late has a gap before
         column.append(_r(value))
 
-    def _put_row(self, layout: tuple[object, ...], keys: list[tuple[str, str]], values: list[float | None]) -> None:
-        """Sample each (plot, line) of `keys` with the value at its place in `values` (`layout` names the keys).
+    def _put_row(self, groups: list[list[tuple[str, str]]], values: list[float | None]) -> None:
+        """Sample each (plot, line) of `groups`, in order, with the value at its place in `values`.
 
         The row waits in `_rows` until `settle` (every sample of a run at once costs a fraction of one at a time).
         """
+        layout = tuple(map(id, groups))  # the groups are lists held by the module or by `_model`
         named = self._layouts.get(layout)
         if named is None:
-            named = self._layouts[layout] = tuple(keys)
+            named = self._layouts[layout] = tuple(key for group in groups for key in group)
         self._rows.append((len(self.t) - 1, named, values))
 
     def settle(self) -> None:
@@ -206,11 +207,11 @@ class TrialSignals:
         r00, r10, r20 = 1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)
         r21, r22 = 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
         cmd = frame.command
-        keys = _BASE_KEYS
+        groups = [_BASE_KEYS]
         values: list[float | None] = [math.atan2(r21, r22), -math.asin(max(-1.0, min(1.0, r20))), float(qpos[2]),
                                       float(cmd[0]), float(cmd[1]), float(cmd[2])]
         if robot is None:
-            self._put_row((), keys, values)
+            self._put_row(groups, values)
             return
         m, d = robot.model, robot.data
         torque_keys, limit, arm, base = self._model_info(m)
@@ -219,14 +220,12 @@ class TrialSignals:
         c, s = math.cos(yaw), math.sin(yaw)
         vx, vy, _ = d.qvel[:3].tolist()
         wx, wy, wz = d.qvel[3:6].tolist()
-        layout: tuple[object, ...] = (id(torque_keys),)
-        keys = keys + _VELOCITY_KEYS
+        groups.append(_VELOCITY_KEYS)
         values += [c * vx + s * vy, -s * vx + c * vy, r20 * wx + r21 * wy + r22 * wz]
         if frame.foot_force_in_world is not None:
-            layout += ("feet",)
-            keys = keys + _FOOT_KEYS
+            groups.append(_FOOT_KEYS)
             values += np.asarray(frame.foot_force_in_world)[:, 2].tolist()
-        keys = keys + torque_keys
+        groups.append(torque_keys)
         values += [f / lim if lim > 0 else None for f, lim in zip(d.actuator_force.tolist(), limit.tolist(),
                                                                    strict=True)]
         com = d.subtree_com[base].tolist()
@@ -245,15 +244,13 @@ class TrialSignals:
             ux, uy, uz = (a - b for a, b in zip(d.subtree_linvel[arm].tolist(), d.subtree_linvel[base].tolist(),
                                                 strict=True))
             sx, sy, sz = d.subtree_angmom[arm].tolist()
-            layout += ("arm",)
-            keys = keys + _ARM_KEYS
+            groups.append(_ARM_KEYS)
             values += [sx + mass * (ay * uz - az * uy), sy + mass * (az * ux - ax * uz),
                        sz + mass * (ax * uy - ay * ux)] + self._push_impulse.tolist()
         if plan_com is not None:
-            layout += ("plan",)
-            keys = keys + _PLAN_KEYS
+            groups.append(_PLAN_KEYS)
             values += [float(plan_com[2]), com[2], float(plan_com[0]) - com[0]]
-        self._put_row(layout, keys, values)
+        self._put_row(groups, values)
 
     def mark_episode(self, episode: Episode, *, pushes: bool = True) -> None:
         """Add the episode's events: its pushes, its fall and its safety layer's transitions."""
