@@ -18,6 +18,7 @@ from wbc.robots import get_robot, joint_table
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import FOOT_NAMES, LEG_NAMES
 from wbc.robots.pinocchio_model import build_pinocchio
+from wbc.robots.urdf import foot_radii
 from wbc.scenario.terrain import TerrainConfig
 
 FEET = ("FR_foot", "FL_foot", "RR_foot", "RL_foot")
@@ -334,6 +335,8 @@ def test_the_per_tick_kinematics_placed_at_a_base_state_agree_with_pinocchio_the
     frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
     cols = 6 + kin.robot.joints.house_from_pin[:12].reshape(4, 3)  # each leg's columns of the velocity
     feet = [model.getFrameId(name) for name in FOOT_NAMES]
+    radii = foot_radii(desc)
+    assert np.all(radii == 0.02)  # both robots' URDF feet
     n = desc.num_joints
     for _ in range(20):
         quat = rng.standard_normal(4)
@@ -348,8 +351,11 @@ def test_the_per_tick_kinematics_placed_at_a_base_state_agree_with_pinocchio_the
         pin.updateFramePlacements(model, data)
         for i, fid in enumerate(feet):
             np.testing.assert_allclose(kin.feet[i], data.oMf[fid].translation, atol=1e-12)
-            np.testing.assert_allclose(kin.feet_vel[i], pin.getFrameVelocity(model, data, fid, frame).linear,
-                                       atol=1e-12)
+            twist = pin.getFrameVelocity(model, data, fid, frame)
+            np.testing.assert_allclose(kin.feet_vel[i], twist.linear, atol=1e-12)
+            # the point of the foot's sphere right below its centre, fixed to the foot, relative to the base
+            below = twist.linear + np.cross(twist.angular, [0.0, 0.0, -radii[i]])
+            np.testing.assert_allclose(kin.contact_vel_rel[i] + v, below, atol=1e-12)
             jac = pin.getFrameJacobian(model, data, fid, frame)[:3]
             np.testing.assert_allclose(kin.leg_jacobians[i], jac[:, cols[i]], atol=1e-12)
             assert np.abs(np.delete(jac[:, 6:], cols[i] - 6, axis=1)).max() < 1e-12  # no other joint moves it

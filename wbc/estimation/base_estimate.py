@@ -105,7 +105,8 @@ class BaseEstimate:
         p_prior, v_prior = est.position, est.velocity
         kin.update(p_prior, quat, state.q, state.dq, v_prior, state.gyro_in_body, centroidal=False)
         trust = np.clip(np.asarray(state.foot_force, dtype=np.float64) / self.contact_force, 0.0, 1.0)
-        est.update(rot, state.accel_in_body, kin.feet - p_prior, kin.feet_vel - v_prior, trust)
+        # the feet's points in contact, not their frames, are still on the ground: a loaded foot rolls on its sphere
+        est.update(rot, state.accel_in_body, kin.feet_rel, kin.contact_vel_rel, trust)
         self._latest = BaseTruth(base_position_in_world=est.position, base_quat=quat.copy(),
                                  base_linvel_in_world=est.velocity,
                                  base_angvel_in_body=np.array(state.gyro_in_body, dtype=np.float64))

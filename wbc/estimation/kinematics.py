@@ -29,6 +29,7 @@ import pinocchio as pin
 from wbc.estimation.tree import TreeModel, packed_pass, packed_place, tick_arrays, tick_buffer_size
 from wbc.robots.description import ARM_JOINTS, FOOT_NAMES, LEG_NAMES, RobotDescription
 from wbc.robots.pinocchio_model import PinocchioRobot, build_pinocchio
+from wbc.robots.urdf import foot_radii
 
 __all__ = ["CentroidalParams", "RobotKinematics"]
 
@@ -87,6 +88,9 @@ class RobotKinematics:
         rot: base orientation, body to world (3, 3).
         feet_rel: foot positions relative to the base origin, world axes, shape (4, 3) [m].
         feet_vel_rel: foot velocities relative to the base (omega x r + J dq), world axes, shape (4, 3) [m/s].
+        contact_vel_rel: relative to the base, the velocities of the points of the feet's spheres in contact with
+            flat ground (right below each foot frame, fixed to the foot), world axes, shape (4, 3) [m/s]; minus the
+            base's velocity while a foot rolls without slipping (`wbc.estimation.tree.tree_pass`).
         hips_rel: thigh joint positions relative to the base origin, world axes, shape (4, 3) [m].
         leg_jacobians: d foot / d (hip, thigh, calf) of each leg, world axes, shape (4, 3, 3) [m/rad].
         gravity: joint torques that hold the configuration against gravity, house order (n,) [N m].
@@ -115,7 +119,7 @@ class RobotKinematics:
         self._buffer = np.zeros(tick_buffer_size(self.n))
         (self.rot, self._q_tick, self._v_tick, self.feet_rel, self.hips_rel, self.feet_vel_rel, self.leg_jacobians,
          self.gravity, self.omega_world, self._com_in_base, self.base_position, self.base_velocity, self.feet,
-         self.feet_vel, self.com, self.com_vel) = tick_arrays(self._buffer)
+         self.feet_vel, self.com, self.com_vel, self.contact_vel_rel) = tick_arrays(self._buffer)
         self.rot[:] = np.eye(3)
         self._q_tick[:] = pin.neutral(model)
         # `self._com_in_base`: the CoM in the trunk frame, from the last `centroidal` (or the first tick)
@@ -126,7 +130,7 @@ class RobotKinematics:
         # constants, packed once
         pin_of_house = self.robot.joints.house_from_pin  # the Pinocchio-order index of each house joint
         tree = TreeModel.of(model, list(FOOT_NAMES), [f"{leg}_thigh_joint" for leg in LEG_NAMES],
-                            pin_of_house[:12].reshape(4, 3))
+                            pin_of_house[:12].reshape(4, 3), foot_radii(desc))
         self._model = tree.packed(self._perm, float(model.gravity.linear[2]))
 
     @property

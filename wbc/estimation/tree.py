@@ -3,10 +3,11 @@
 `TreeModel` is the kinematic tree of a Pinocchio model with revolute joints on a free-flying base, as flat arrays the
 compiled code reads (built once per robot model); `tree_pass` computes, with the base at the origin and at rest (only
 its orientation and angular velocity set), what `wbc.estimation.kinematics.RobotKinematics.tick` needs: the base's
-rotation matrix, feet and hips relative to the base, the feet's velocities relative to the base, the leg Jacobians
-and the joints' gravity torques. Its results equal Pinocchio's (`computeJointJacobians`, frame Jacobians in
-LOCAL_WORLD_ALIGNED, `computeGeneralizedGravity`) to rounding; the tests check that on every robot. `place` puts
-that configuration at the base's estimated (or true) position and velocity.
+rotation matrix, feet and hips relative to the base, the feet's velocities relative to the base (of the foot frames,
+and of the points in contact below each rolling foot sphere), the leg Jacobians and the joints' gravity torques. Its
+results equal Pinocchio's (`computeJointJacobians`, frame Jacobians in LOCAL_WORLD_ALIGNED,
+`computeGeneralizedGravity`) to rounding; the tests check that on every robot. `place` puts that configuration at
+the base's estimated (or true) position and velocity.
 
 `packed_pass` and `packed_place` are the same two on packed arrays: the model and `tree_pass`'s constants in two
 (`TreeModel.packed`, `model_arrays`), every per-tick input and output in one buffer (`tick_arrays`). A compiled call
@@ -51,6 +52,7 @@ class TreeModel:
         foot_pos: each foot frame's origin in its joint's frame (4, 3) [m].
         hip_joint: each leg's thigh joint (4,).
         leg_joints: each leg's hip, thigh and calf joints (4, 3).
+        foot_radius: each foot's sphere radius (4,) [m]: its point in contact is that far below the foot frame.
     """
 
     parent: np.ndarray
@@ -63,9 +65,11 @@ class TreeModel:
     foot_pos: np.ndarray
     hip_joint: np.ndarray
     leg_joints: np.ndarray
+    foot_radius: np.ndarray
 
     @classmethod
-    def of(cls, model: pin.Model, foot_frames: list[str], thigh_joints: list[str], leg_joints: np.ndarray) -> TreeModel:
+    def of(cls, model: pin.Model, foot_frames: list[str], thigh_joints: list[str], leg_joints: np.ndarray,
+           foot_radius: np.ndarray | None = None) -> TreeModel:
         """Flatten `model` (a free-flyer, then revolute joints about x, y or z).
 
         Args:
@@ -73,10 +77,15 @@ class TreeModel:
             foot_frames: the four foot frames' names.
             thigh_joints: the four thigh joints' names.
             leg_joints: each leg's hip, thigh and calf as Pinocchio joint indices minus 2 (4, 3).
+            foot_radius: each foot's sphere radius (4,) [m] (None: 0, a point foot).
 
         Raises:
-            ConfigError: the model's root is not a free-flyer, or a joint is not revolute about a frame axis.
+            ConfigError: the model's root is not a free-flyer, a joint is not revolute about a frame axis, or a foot
+                radius is negative.
         """
+        radius = np.zeros(4) if foot_radius is None else np.array(foot_radius, dtype=np.float64).reshape(4)
+        if not np.all(radius >= 0.0):
+            raise ConfigError(f"TreeModel: foot radii must be >= 0, got {radius.tolist()}")
         if model.joints[1].shortname() != "JointModelFreeFlyer":
             raise ConfigError(f"TreeModel: joint 1 of model {model.name!r} is {model.joints[1].shortname()}, not the "
                               "free-flyer the compiled kinematics expect")
@@ -101,12 +110,12 @@ class TreeModel:
                    foot_joint=np.array([f.parentJoint - 2 for f in frames], dtype=np.int64),
                    foot_pos=np.array([f.placement.translation for f in frames]),
                    hip_joint=np.array([model.getJointId(n) - 2 for n in thigh_joints], dtype=np.int64),
-                   leg_joints=np.ascontiguousarray(leg_joints, dtype=np.int64))
+                   leg_joints=np.ascontiguousarray(leg_joints, dtype=np.int64), foot_radius=radius)
 
     def arrays(self) -> tuple[np.ndarray, ...]:
-        """The model's arrays in the order `tree_pass` takes them (parent to leg_joints, as the attributes)."""
+        """The model's arrays in the order `tree_pass` takes them (parent to foot_radius, as the attributes)."""
         return (self.parent, self.rot, self.pos, self.axis, self.mass, self.com, self.foot_joint, self.foot_pos,
-                self.hip_joint, self.leg_joints)
+                self.hip_joint, self.leg_joints, self.foot_radius)
 
     def packed(self, perm: np.ndarray, gravity_z: float) -> tuple[np.ndarray, np.ndarray]:
         """The model with `tree_pass`'s other constants as two flat arrays, which `model_arrays` reads back.
@@ -119,11 +128,11 @@ class TreeModel:
             gravity_z: the gravity's z component [m/s^2].
 
         Returns:
-            floats (gravity_z, rot, pos, axis, mass, com, foot_pos, each flattened) and ints (nj, perm, parent,
-            foot_joint, hip_joint, leg_joints).
+            floats (gravity_z, rot, pos, axis, mass, com, foot_pos, foot_radius, each flattened) and ints (nj, perm,
+            parent, foot_joint, hip_joint, leg_joints).
         """
         floats = np.concatenate([[gravity_z], self.rot.ravel(), self.pos.ravel(), self.axis.ravel(), self.mass,
-                                 self.com.ravel(), self.foot_pos.ravel()]).astype(np.float64)
+                                 self.com.ravel(), self.foot_pos.ravel(), self.foot_radius]).astype(np.float64)
         ints = np.concatenate([[self.parent.size], np.asarray(perm).ravel(), self.parent, self.foot_joint,
                                self.hip_joint, self.leg_joints.ravel()]).astype(np.int64)
         return floats, ints
@@ -131,7 +140,7 @@ class TreeModel:
 
 @numba.njit(cache=True, nogil=True)
 def model_arrays(floats, ints):  # pragma: no cover
-    """`TreeModel.packed`'s two arrays as the views `tree_pass` takes, in its order (perm to leg_joints)."""
+    """`TreeModel.packed`'s two arrays as the views `tree_pass` takes, in its order (perm to foot_radius)."""
     nj = ints[0]
     perm = ints[1:1 + nj]
     parent = ints[1 + nj:1 + 2 * nj]
@@ -150,10 +159,12 @@ def model_arrays(floats, ints):  # pragma: no cover
     com = floats[o:o + 3 * nj].reshape((nj, 3))
     o += 3 * nj
     foot_pos = floats[o:o + 12].reshape((4, 3))
-    return perm, floats[0], parent, rot, pos, axis, mass, com, foot_joint, foot_pos, hip_joint, leg_joints
+    o += 12
+    foot_radius = floats[o:o + 4]
+    return perm, floats[0], parent, rot, pos, axis, mass, com, foot_joint, foot_pos, hip_joint, leg_joints, foot_radius
 
 
-TICK_FIXED = 123
+TICK_FIXED = 135
 """Entries of a tick buffer (`tick_arrays`) before its three joint-sized arrays."""
 
 
@@ -167,8 +178,9 @@ def tick_arrays(buf):  # pragma: no cover
     """The per-tick arrays of the kinematics as views of one buffer of `tick_buffer_size` (n joints) entries.
 
     In order: rot_base (3, 3), q_pin (7 + n), v_pin (6 + n), feet_rel, hips_rel, feet_vel_rel (4, 3), leg_jac
-    (4, 3, 3), gravity (n), omega_world (3) (`tree_pass`'s outputs, in its order), then com_in_base (3),
-    base_position, base_velocity (3), feet, feet_vel (4, 3), com, com_vel (3) (`place`'s inputs and outputs).
+    (4, 3, 3), gravity (n), omega_world (3), contact_vel_rel (4, 3) (`tree_pass`'s outputs, in its order), then
+    com_in_base (3), base_position, base_velocity (3), feet, feet_vel (4, 3), com, com_vel (3) (`place`'s inputs and
+    outputs).
     `wbc.estimation.kinematics.RobotKinematics` keeps these views as its attributes, so one compiled call reads
     and writes all of them through one array.
     """
@@ -185,12 +197,13 @@ def tick_arrays(buf):  # pragma: no cover
     feet_vel = buf[105:117].reshape((4, 3))
     com = buf[117:120]
     com_vel = buf[120:123]
+    contact_vel_rel = buf[123:135].reshape((4, 3))
     n = (buf.shape[0] - TICK_FIXED - 13) // 3
-    gravity = buf[123:123 + n]
-    q_pin = buf[123 + n:130 + 2 * n]
-    v_pin = buf[130 + 2 * n:136 + 3 * n]
+    gravity = buf[135:135 + n]
+    q_pin = buf[135 + n:142 + 2 * n]
+    v_pin = buf[142 + 2 * n:148 + 3 * n]
     return (rot_base, q_pin, v_pin, feet_rel, hips_rel, feet_vel_rel, leg_jac, gravity, omega_world, com_in_base,
-            base_position, base_velocity, feet, feet_vel, com, com_vel)
+            base_position, base_velocity, feet, feet_vel, com, com_vel, contact_vel_rel)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -213,8 +226,8 @@ def rotation_of(quat, rot):  # pragma: no cover
 
 @numba.njit(cache=True, fastmath=False, nogil=True)
 def tree_pass(base_quat, omega_body, q_house, dq_house, perm, gravity_z, parent, rot, pos, axis, mass, com,
-              foot_joint, foot_pos, hip_joint, leg_joints, rot_base, q_pin, v_pin, feet_rel, hips_rel, feet_vel_rel,
-              leg_jac, gravity_house, omega_world):  # pragma: no cover
+              foot_joint, foot_pos, hip_joint, leg_joints, foot_radius, rot_base, q_pin, v_pin, feet_rel, hips_rel,
+              feet_vel_rel, leg_jac, gravity_house, omega_world, contact_vel_rel):  # pragma: no cover
     """One kinematics pass with the base at the origin and at rest, into the output arrays.
 
     Args:
@@ -234,6 +247,7 @@ def tree_pass(base_quat, omega_body, q_house, dq_house, perm, gravity_z, parent,
         foot_pos: each foot in its joint's frame.
         hip_joint: each leg's thigh joint.
         leg_joints: each leg's three joints.
+        foot_radius: each foot's sphere radius.
         rot_base: out, the rotation matrix of `base_quat` (3, 3).
         q_pin: out, Pinocchio's configuration: its rows from 3 on are written (the base position is left alone).
         v_pin: out, Pinocchio's velocity: its rows from 3 on are written.
@@ -243,6 +257,9 @@ def tree_pass(base_quat, omega_body, q_house, dq_house, perm, gravity_z, parent,
         leg_jac: out, d foot / d (hip, thigh, calf) per leg, world axes (4, 3, 3) [m/rad].
         gravity_house: out, each joint's generalized gravity, house order (n,) [N m].
         omega_world: out, the base's angular velocity in the world (3,) [rad/s].
+        contact_vel_rel: out, relative to the base, the velocity of the point of each foot's sphere right below its
+            centre, fixed to the foot (feet_vel_rel + omega_foot x (0, 0, -radius)), world axes (4, 3) [m/s]: zero
+            relative to the ground for a foot that rolls without slipping, where the foot frame moves.
     """
     rotation_of(base_quat, rot_base)
     nj = q_house.shape[0]
@@ -325,6 +342,7 @@ def tree_pass(base_quat, omega_body, q_house, dq_house, perm, gravity_z, parent,
         vx = wy * fz - wz * fy
         vy = wz * fx - wx * fz
         vz = wx * fy - wy * fx
+        ox, oy, oz = wx, wy, wz  # the foot's angular velocity: the base's plus its leg joints'
         for m in range(3):
             k = leg_joints[i, m]
             # d foot / d q_k = a_k x (foot - p_k)
@@ -338,9 +356,17 @@ def tree_pass(base_quat, omega_body, q_house, dq_house, perm, gravity_z, parent,
             vx += jx * dq[k]
             vy += jy * dq[k]
             vz += jz * dq[k]
+            ox += wa[k, 0] * dq[k]
+            oy += wa[k, 1] * dq[k]
+            oz += wa[k, 2] * dq[k]
         feet_vel_rel[i, 0] = vx
         feet_vel_rel[i, 1] = vy
         feet_vel_rel[i, 2] = vz
+        # omega x (0, 0, -r) = (-r oy, r ox, 0)
+        r = foot_radius[i]
+        contact_vel_rel[i, 0] = vx - r * oy
+        contact_vel_rel[i, 1] = vy + r * ox
+        contact_vel_rel[i, 2] = vz
 
 
 @numba.njit(cache=True, nogil=True)
@@ -372,18 +398,18 @@ def place(feet_rel, feet_vel_rel, rot_base, com_in_base, omega_world, position, 
 def packed_pass(base_quat, omega_body, q_house, dq_house, model_f, model_i, buf):  # pragma: no cover
     """`tree_pass` on a packed model (`TreeModel.packed`) into a tick buffer (`tick_arrays`)."""
     (rot_base, q_pin, v_pin, feet_rel, hips_rel, feet_vel_rel, leg_jac, gravity, omega_world, _, _, _, _, _, _,
-     _) = tick_arrays(buf)
+     _, contact_vel_rel) = tick_arrays(buf)
     (perm, gravity_z, parent, rot, pos, axis, mass, com, foot_joint, foot_pos, hip_joint,
-     leg_joints) = model_arrays(model_f, model_i)
+     leg_joints, foot_radius) = model_arrays(model_f, model_i)
     tree_pass(base_quat, omega_body, q_house, dq_house, perm, gravity_z, parent, rot, pos, axis, mass, com,
-              foot_joint, foot_pos, hip_joint, leg_joints, rot_base, q_pin, v_pin, feet_rel, hips_rel, feet_vel_rel,
-              leg_jac, gravity, omega_world)
+              foot_joint, foot_pos, hip_joint, leg_joints, foot_radius, rot_base, q_pin, v_pin, feet_rel, hips_rel,
+              feet_vel_rel, leg_jac, gravity, omega_world, contact_vel_rel)
 
 
 @numba.njit(cache=True, nogil=True)
 def packed_place(buf, position, velocity):  # pragma: no cover
     """`place` on a tick buffer (`tick_arrays`)."""
     (rot_base, _, _, feet_rel, _, feet_vel_rel, _, _, omega_world, com_in_base, base_position, base_velocity, feet,
-     feet_vel, com, com_vel) = tick_arrays(buf)
+     feet_vel, com, com_vel, _) = tick_arrays(buf)
     place(feet_rel, feet_vel_rel, rot_base, com_in_base, omega_world, position, velocity, base_position,
           base_velocity, feet, feet_vel, com, com_vel)

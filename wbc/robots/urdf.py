@@ -16,10 +16,10 @@ import numpy as np
 
 from wbc.errors import WbcError
 from wbc.robots.arm_spec import ArmLinkSpec
-from wbc.robots.description import RobotDescription
+from wbc.robots.description import FOOT_NAMES, RobotDescription
 from wbc.robots.inertial import Inertial
 
-__all__ = ["example_robot_data_share", "robot_urdf", "ARM_PREFIX"]
+__all__ = ["example_robot_data_share", "foot_radii", "robot_urdf", "ARM_PREFIX"]
 
 ARM_PREFIX = "arm_"
 
@@ -176,3 +176,29 @@ def robot_urdf(desc: RobotDescription) -> str:
     if key not in _URDF_CACHE:
         _URDF_CACHE[key] = _build_urdf(desc)
     return _URDF_CACHE[key]
+
+
+def foot_radii(desc: RobotDescription) -> np.ndarray:
+    """Each foot's collision-sphere radius in the robot's URDF, in `FOOT_NAMES` order (4,) [m].
+
+    A loaded foot rolls on its sphere: the point in contact is still while the sphere's centre (the foot frame) moves
+    at omega x r, so a velocity estimate that assumes the foot frame still reads the robot's speed low by that much
+    (`wbc.estimation.tree.tree_pass`'s contact velocities correct it).
+
+    Raises:
+        WbcError: a foot link without exactly one collision sphere.
+    """
+    robot = ET.fromstring(robot_urdf(desc))
+    links = {link.get("name"): link for link in robot.findall("link")}
+    radii = []
+    for foot in FOOT_NAMES:
+        link = links.get(foot)
+        spheres = [] if link is None else link.findall("collision/geometry/sphere")
+        if len(spheres) != 1:
+            raise WbcError(f"the URDF of robot {desc.name!r}: link {foot!r} has {len(spheres)} collision spheres, the "
+                           "contact-velocity estimate needs exactly one")
+        radii.append(float(spheres[0].get("radius", "nan")))
+    out = np.array(radii)
+    if not np.all(np.isfinite(out) & (out >= 0.0)):
+        raise WbcError(f"the URDF of robot {desc.name!r}: foot sphere radii {out.tolist()} are not all finite and >= 0")
+    return out
