@@ -10,6 +10,8 @@ from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.mpc import MpcSolveError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.mpc.gait import GaitConfig
+from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.euler import yaw_of
 from wbc.types import VelocityCommand
 
 
@@ -251,3 +253,58 @@ def test_an_mpc_trial_is_bit_identical_whatever_was_allocated_before_it():
     outs = {subprocess.run([sys.executable, "-c", _HEAP_PROBE, held, scenario], capture_output=True, text=True,
                            check=True).stdout for held in ("1", "5,7")}
     assert len(outs) == 1
+
+
+def _go1_loop(seconds, command, config):
+    """The go1-arm under `MpcController(config)`: each tick's true and estimated velocity in the yaw frame (N, 4)."""
+    robot = MujocoRobot(MujocoRobotConfig(robot="go1-arm"))
+    robot.connect()
+    robot.reset(seed=2)
+    ctrl = MpcController(robot.desc, config)
+    ctrl.reset()
+    log = []
+    for _ in range(int(seconds * ctrl.rate_hz)):
+        robot.write(ctrl.act(robot.read(), command))
+        robot.advance(1.0 / ctrl.rate_hz)
+        truth = robot.sim_truth()
+        yaw = yaw_of(quat_to_matrix(truth.base_quat))
+        to_yaw = np.array([[np.cos(yaw), np.sin(yaw)], [-np.sin(yaw), np.cos(yaw)]])
+        log.append(np.r_[to_yaw @ truth.base_linvel_in_world[:2], to_yaw @ ctrl.estimator.velocity[:2]])
+        assert not robot.fallen(), f"fell at t={truth.time:.2f}"
+    return np.array(log), ctrl
+
+
+def test_at_speed_the_estimate_follows_rolling_feet_and_the_velocity_integral_closes_the_shortfall():
+    # the go1-arm commanded 1.5 m/s straight ahead, the settled second half of 6 s. The estimator reads the points
+    # of the feet in contact: on the foot frames (the sphere's centres, which roll forward) it read 0.10 m/s slow.
+    # The MPC alone settles at 1.42 m/s, its own estimate agreeing; the integral of the error brings it to 1.5
+    command = VelocityCommand(vx=1.5)
+    log, _ = _go1_loop(6.0, command, MpcControllerConfig(velocity_ki=0.0))
+    last = log[len(log) // 2:]
+    assert abs((last[:, 2] - last[:, 0]).mean()) < 0.03
+    assert last[:, 0].mean() < 1.46
+    log, ctrl = _go1_loop(6.0, command, MpcControllerConfig())
+    last = log[len(log) // 2:]
+    assert abs((last[:, 2] - last[:, 0]).mean()) < 0.03
+    assert last[:, 0].mean() == pytest.approx(1.5, abs=0.03)
+    assert 0.05 < ctrl.velocity_offset[0] < ctrl.config.velocity_offset_limit
+    ctrl.reset()
+    assert ctrl.velocity_offset == (0.0, 0.0)
+
+
+def test_the_velocity_offset_integrates_the_clipped_error_in_the_yaw_frame_up_to_its_limit():
+    from wbc.robots import get_robot
+
+    cfg = MpcControllerConfig(velocity_ki=2.0, velocity_error_clip=0.1, velocity_offset_limit=0.25)
+    ctrl = MpcController(get_robot("a1-wx200"), cfg)
+    ctrl.reference.targets[0] = np.pi / 2  # facing world +y
+    ctrl.estimator.x[3:6] = (0.0, 1.0, 0.0)  # 1 m/s forward in the yaw frame
+    command = ctrl._offset_command(VelocityCommand(vx=1.05, vy=-0.3, yaw_rate=0.4))
+    # error (0.05, -0.3), clipped to (0.05, -0.1), times ki dt = 2 / 500
+    assert ctrl.velocity_offset == pytest.approx((0.05 * 0.004, -0.1 * 0.004), abs=1e-12)
+    assert (command.vx, command.vy, command.yaw_rate) == pytest.approx((1.05 + 0.0002, -0.3 - 0.0004, 0.4))
+    for _ in range(1000):
+        ctrl._offset_command(VelocityCommand(vx=1.05, vy=-0.3))
+    assert ctrl.velocity_offset == pytest.approx((0.05 * 1001 * 0.004, -0.25))  # 1001 ticks of 0.05; the limit
+    with pytest.raises(ConfigError, match="velocity_ki"):
+        MpcControllerConfig(velocity_ki=-1.0)

@@ -25,6 +25,7 @@ plan, shifted in time, and is counted (``fallbacks``); a failed whole-body QP fa
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -81,6 +82,15 @@ class MpcControllerConfig:
         contact_force: foot sensor force at which a scheduled stance foot is fully trusted by the estimator [N].
         slip_speed: a trusted stance foot moving faster than this over the ground is slipping: the estimator drops
             it [m/s].
+        velocity_ki: integral gain on the horizontal velocity error [1/s] (0: off). The MPC's model leaves out
+            what slows the real robot down (the legs' swing, joint friction and damping, feet that roll and slide),
+            so at speed it settles below its command (0.08 m/s short of 1.5 m/s in turn.toml's slow turns, its
+            own estimate and the simulator agreeing). The error of the estimated velocity against the command,
+            in the yaw-aligned frame, is integrated into an offset that the MPC's reference adds to the command.
+        velocity_error_clip: the error is clipped to this, per axis, before it is integrated [m/s], so that the
+            seconds of a push (errors of 1-2 m/s) add little: the offset learns the steady shortfall, not the
+            disturbance.
+        velocity_offset_limit: the largest offset, per axis [m/s].
         whole_body: ``legs`` (the leg-level layer, `LegLayer`: stance feet -J^T f, swing feet Cartesian PD,
             gravity compensation; also the fallback when the QP fails) or ``qp`` (PlaCo's inverse-dynamics QP,
             `WholeBodyQp`; it fell in fast turns, see docs/mpc-notes.md).
@@ -110,6 +120,9 @@ class MpcControllerConfig:
     use_arm_momentum: bool = True
     contact_force: float = 15.0
     slip_speed: float = 0.3
+    velocity_ki: float = 1.0
+    velocity_error_clip: float = 0.15
+    velocity_offset_limit: float = 0.5
     whole_body: str = "legs"
     wbc: WholeBodyConfig = field(default_factory=WholeBodyConfig)
 
@@ -117,6 +130,9 @@ class MpcControllerConfig:
         if self.whole_body not in WHOLE_BODY_LAYERS:
             raise ConfigError(f"MpcControllerConfig.whole_body must be 'qp' (PlaCo's whole-body QP) or 'legs' (the "
                               f"leg-level layer), got {self.whole_body!r}; pass one of {', '.join(WHOLE_BODY_LAYERS)}")
+        for name in ("velocity_ki", "velocity_error_clip", "velocity_offset_limit"):
+            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
+                raise ConfigError(f"MpcControllerConfig.{name} must be finite and >= 0, got {getattr(self, name)}")
         if self.replan_every < 1 or self.foothold_every < 1:
             raise ConfigError(f"MpcControllerConfig.replan_every and foothold_every count ticks between updates and "
                               f"must be at least 1, got {self.replan_every} and {self.foothold_every}; use 1 to "
@@ -170,6 +186,10 @@ class MpcController:
         self._arm_hold = np.zeros(3)  # the arm's velocity while no plan moves it
         self._inv_contact_force = 1.0 / cfg.contact_force
         self._slip2 = cfg.slip_speed * cfg.slip_speed
+        self._ki, self._velocity_clip, self._velocity_limit = (cfg.velocity_ki, cfg.velocity_error_clip,
+                                                               cfg.velocity_offset_limit)
+        self.velocity_offset = (0.0, 0.0)
+        """The offset added to the commanded (vx, vy), yaw-aligned frame [m/s] (`MpcControllerConfig.velocity_ki`)."""
         # the arrays of a tick live in three buffers that `control_tick` is handed whole (`wbc.mpc.compiled`'s
         # `tick_floats`, `tick_flags`, `tick_constant_arrays`); this controller's own are views of them from here on,
         # those of its parts are moved into them (`_hold_tick_arrays`)
@@ -271,6 +291,7 @@ class MpcController:
         self._arm_target[:] = self.desc.arm.nominal_q
         self._timings: dict[str, float] = {}
         self.slipping[:] = False
+        self.velocity_offset = (0.0, 0.0)
         self._tick_args: tuple | None = None  # `_tick_arrays`, gathered at the first compiled tick of the episode
         self.reference.reset()
         self.feet.reset()
@@ -317,10 +338,31 @@ class MpcController:
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """Estimate, (re)plan, and turn the plan into motor commands."""
         self._timings.clear()
+        if self._ki > 0.0 and self._started:
+            command = self._offset_command(command)
         if self._started and self.wbc is None and self._truth is None and self.kin.com_known and \
                 self.estimator.config.gain == "steady":
             return self._compiled_act(state, command)
         return self._staged_act(state, command)
+
+    def _offset_command(self, command: VelocityCommand) -> VelocityCommand:
+        """The command plus the velocity offset, after integrating the last tick's error (`velocity_ki`).
+
+        The error is the command's against the estimated velocity of the last tick, both in the frame of the yaw
+        measured then; the offset is kept in that frame, so it turns with the robot.
+        """
+        x, yaw = self.estimator.x, self.reference.yaw
+        c, s = math.cos(yaw), math.sin(yaw)
+        vx_world, vy_world = x.item(3), x.item(4)
+        clip, limit, gain = self._velocity_clip, self._velocity_limit, self._ki * self.dt
+        ex = command.vx - (c * vx_world + s * vy_world)
+        ey = command.vy - (-s * vx_world + c * vy_world)
+        ox = self.velocity_offset[0] + gain * min(max(ex, -clip), clip)
+        oy = self.velocity_offset[1] + gain * min(max(ey, -clip), clip)
+        ox = min(max(ox, -limit), limit)
+        oy = min(max(oy, -limit), limit)
+        self.velocity_offset = (ox, oy)
+        return VelocityCommand(vx=command.vx + ox, vy=command.vy + oy, yaw_rate=command.yaw_rate)
 
     def _staged_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """The tick stage by stage: each stage one call (most of them compiled, `wbc.mpc.compiled`).
@@ -437,9 +479,10 @@ class MpcController:
             return
         estimator = self.estimator
         x = estimator.x
-        contact_trust(contact, state.foot_force, kin.feet_vel_rel, x.item(3), x.item(4), self._inv_contact_force,
+        # the points in contact, not the foot frames: a loaded foot rolls on its sphere
+        contact_trust(contact, state.foot_force, kin.contact_vel_rel, x.item(3), x.item(4), self._inv_contact_force,
                       self._slip2, self._trust, self.slipping)
-        estimator.update(kin.rot, state.accel_in_body, kin.feet_rel, kin.feet_vel_rel, self._trust)
+        estimator.update(kin.rot, state.accel_in_body, kin.feet_rel, kin.contact_vel_rel, self._trust)
         x = estimator.x
         kin.place(x[0:3], x[3:6])
 
