@@ -360,7 +360,7 @@ def test_the_compiled_tick_gives_the_staged_ticks_commands_to_the_bit(monkeypatc
     from wbc.scenario.trial import CommandSchedule
 
     schedule = CommandSchedule(vx=0.5, vy=0.1, yaw_rate=0.5, ramp_s=0.3)
-    push = Push(force_in_world=np.array([0.0, 380.0, 0.0]), offset_in_base=np.array([0.05, 0.0, 0.0]), start=0.5,
+    push = Push(force_in_world=np.array([0.0, 360.0, 0.0]), offset_in_base=np.array([0.05, 0.0, 0.0]), start=0.5,
                 duration=0.09) if pushed else None
     spec = get_controller(name)
     desc = get_robot(robot_name, spec.arm_mode)

@@ -183,3 +183,24 @@ def test_placos_whole_body_qp_is_a_registered_variant_that_plays_in_the_arena(tm
     # PlaCo's QP ran every tick without failing over to the leg layer, and the MPC solved at every update
     assert wbqp.counter_values["wbc_failures"] == 0 and wbqp.counter_values["mpc_solves"] >= 31
     assert rows["mpc"].counter_values["wbc_failures"] == 0
+
+
+def test_the_octagonal_pyramid_keeps_every_planned_force_inside_the_friction_cone():
+    # kicked along a diagonal of the world's axes, where the square around the cone lets a force reach sqrt(2) mu
+    import dataclasses
+
+    from wbc.errors import ConfigError
+    from wbc.mpc.centroidal_mpc import MpcConfig
+
+    ratios = {}
+    for pyramid in ("octagon", "outer"):
+        mpc, x, args = _standing_qp("pushed")
+        mpc.config = dataclasses.replace(mpc.config, pyramid=pyramid)
+        x[3:6] = (1.5, 1.5, 0.0)
+        f = mpc.solve(mpc.build(x, *args)).forces
+        stance = f[..., 2] > 1e-6
+        ratios[pyramid] = (np.linalg.norm(f[..., :2], axis=-1)[stance] / f[..., 2][stance]).max()
+    assert ratios["octagon"] <= mpc.config.mu + 1e-6
+    assert ratios["outer"] > 1.2 * mpc.config.mu  # the square around the cone, past it along the diagonal
+    with pytest.raises(ConfigError, match="pyramid"):
+        MpcConfig(pyramid="cone")

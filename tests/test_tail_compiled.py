@@ -53,20 +53,24 @@ def _oracle(mpc: TailMpc, x0, x_ref, contact, feet, steps) -> dict[str, np.ndarr
     h = gamma_z.T @ weighted + np.diag(np.where(kind < 12, cfg.weight_force, cfg.weight_arm_acc) * scale**2)
     g = weighted.T @ (free - x_ref.ravel())
     top, comp, is_force = cfg.fz_max / cfg.force_scale, kind % 3, kind < 12
-    l_box = np.where(comp == 2, cfg.fz_min / cfg.force_scale, -cfg.mu * top)
-    u_box = np.where(comp == 2, top, cfg.mu * top)
+    # the friction cone of mu, inside it: the octagon reaches mu cos(pi / 8) across its faces
+    assert cfg.pyramid == "octagon"
+    mu = cfg.mu * np.cos(np.pi / 8)
+    l_box = np.where(comp == 2, cfg.fz_min / cfg.force_scale, -mu * top)
+    u_box = np.where(comp == 2, top, mu * top)
     limit = 1e3 if cfg.arm_moves else 0.0
     l_box[~is_force], u_box[~is_force] = -limit, limit
     rows, lo, hi = [], [], []
     for col in np.flatnonzero(is_force & (comp == 2)):
-        for axis in (0, 1):
-            for sign in (1.0, -1.0):
-                row = np.zeros(idx.size)
-                row[col - 2 + axis] = sign * scale[col - 2 + axis]
-                row[col] = -cfg.mu * scale[col]
-                rows.append(row)
-                lo.append(-np.inf)
-                hi.append(0.0)
+        d = np.sqrt(0.5)
+        for cx, cy in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0), (d, d), (d, -d), (-d, d), (-d, -d)):
+            row = np.zeros(idx.size)
+            row[col - 2] = cx * scale[col - 2]
+            row[col - 1] = cy * scale[col - 1]
+            row[col] = -mu * scale[col]
+            rows.append(row)
+            lo.append(-np.inf)
+            hi.append(0.0)
     if cfg.arm_moves:
         acc_cols = np.flatnonzero(~is_force).reshape(n, 3)
         for k in range(n):

@@ -6,10 +6,10 @@ state and the gravity-compensating reference input (`CentroidalModel.discretize`
 the horizon with the planned footholds and the reference CoM. States are condensed out: X = Phi x0 + Gamma U + delta,
 so the QP is dense in U only.
 
-Constraints: friction pyramids (|f_x|, |f_y| <= mu f_z, with the controller's friction setting `MpcConfig.mu`, never
-the simulator's) and f_min <= f_z <= f_max on stance feet; swing feet carry no force (their variables are dropped); arm
-joint velocity limits (box) and arm joint position limits along the horizon (rows of the condensed dynamics). A
-frozen arm (locked, absent, or momentum terms off) has no variables.
+Constraints: friction pyramids (|f_x|, |f_y| <= mu / sqrt(2) f_z, inside the cone of the controller's friction setting
+`MpcConfig.mu`, never the simulator's; `MpcConfig.pyramid`) and f_min <= f_z <= f_max on stance feet; swing feet carry
+no force (their variables are dropped); arm joint velocity limits (box) and arm joint position limits along the horizon
+(rows of the condensed dynamics). A frozen arm (locked, absent, or momentum terms off) has no variables.
 
 Solver: the backend `MpcConfig.qp_solver` names (`wbc.mpc.qp_solvers`): DAQP by default, a dual active-set method
 for small dense QPs (its Python package; a plain C library, so a solve does not depend on where its buffers were
@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from wbc.errors import MpcProblemFileError, WbcError
+from wbc.errors import ConfigError, MpcProblemFileError, WbcError
 from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams
 from wbc.mpc.condensing import condense
 from wbc.mpc.dense_qp import DenseQp
@@ -46,7 +46,14 @@ class MpcConfig:
     Attributes:
         horizon: number of steps N.
         dt: step length [s].
-        mu: friction coefficient of the pyramids.
+        mu: friction coefficient of the feet's friction cone.
+        pyramid: how the friction cone of `mu` becomes linear rows (`pyramid_faces`): ``octagon`` (the octagon
+            inside the cone: |f_x|, |f_y| and |f_x +- f_y| / sqrt(2) <= 0.924 mu f_z, eight rows a foot),
+            ``inscribed`` (the square inside it: |f_x|, |f_y| <= mu / sqrt(2) f_z) or ``outer`` (the square around
+            it: |f_x|, |f_y| <= mu f_z, up to sqrt(2) mu along a diagonal). The pyramid's axes are the world's: the
+            outer square planned a push or a turn at 45 degrees to them 41 % past the cone, and on push-low-friction's
+            ground (0.4-0.5) those forces slid; the inscribed square keeps them but gives up 29 % of the grip along
+            the axes, which fast turns need (docs/mpc-notes.md).
         fz_min: smallest normal force per stance foot [N]: a stance foot keeps pressing. Without it, a pushed
             robot whose stance feet stood badly for the moments it needed was planned to fall freely until the next
             pair landed (docs/mpc-notes.md).
@@ -80,6 +87,7 @@ class MpcConfig:
     horizon: int = 10
     dt: float = 0.032
     mu: float = 0.4
+    pyramid: str = "octagon"
     fz_min: float = 10.0
     fz_max: float = 250.0
     force_scale: float = 100.0
@@ -97,6 +105,44 @@ class MpcConfig:
 
     def __post_init__(self) -> None:
         check_qp_solver(self.qp_solver, "MpcConfig.qp_solver")
+        friction_per_axis(self.mu, self.pyramid, "MpcConfig")
+
+    @property
+    def mu_axis(self) -> float:
+        """The bound on |f_x| / f_z and |f_y| / f_z of the pyramid (`pyramid`)."""
+        return friction_per_axis(self.mu, self.pyramid, "MpcConfig")
+
+
+PYRAMIDS = ("octagon", "inscribed", "outer")
+"""Valid values of `MpcConfig.pyramid` (and the tail MPC's)."""
+
+
+_OCTAGON = math.cos(math.pi / 8.0)
+"""The octagon inscribed in a circle of radius mu reaches mu cos(pi / 8) = 0.924 mu across its faces."""
+
+
+def pyramid_faces(pyramid: str) -> tuple[tuple[float, float], ...]:
+    """The pyramid's faces as (c_x, c_y): each a row c_x f_x + c_y f_y - mu_axis f_z <= 0 (`friction_per_axis`)."""
+    axes = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
+    if pyramid != "octagon":
+        return axes
+    d = 1.0 / math.sqrt(2.0)
+    return (*axes, (d, d), (d, -d), (-d, d), (-d, -d))
+
+
+def friction_per_axis(mu: float, pyramid: str, where: str) -> float:
+    """The pyramid's bound on |f_x| / f_z and |f_y| / f_z (the octagon's on |f_x +- f_y| / (sqrt(2) f_z) too).
+
+    `pyramid` is one of `PYRAMIDS`, for the friction cone of coefficient `mu`.
+
+    Raises:
+        ConfigError: `mu` not a positive finite number, or an unknown `pyramid` (named in `where`).
+    """
+    if not (math.isfinite(mu) and mu > 0.0):
+        raise ConfigError(f"{where}.mu must be a positive friction coefficient, got {mu!r}")
+    if pyramid not in PYRAMIDS:
+        raise ConfigError(f"{where}.pyramid must be one of {', '.join(PYRAMIDS)}, got {pyramid!r}")
+    return mu * _OCTAGON if pyramid == "octagon" else mu / math.sqrt(2.0) if pyramid == "inscribed" else mu
 
 
 @dataclass
@@ -362,20 +408,24 @@ class CentroidalMpc:
         kind = idx % NU  # 0..11 force components, 12..14 arm
         is_force = kind < 12
         comp = kind % 3
-        l_box[is_force] = np.where(comp[is_force] == 2, cfg.fz_min / cfg.force_scale, -cfg.mu * fz_max)
-        u_box[is_force] = np.where(comp[is_force] == 2, fz_max, cfg.mu * fz_max)
+        mu = cfg.mu_axis
+        l_box[is_force] = np.where(comp[is_force] == 2, cfg.fz_min / cfg.force_scale, -mu * fz_max)
+        u_box[is_force] = np.where(comp[is_force] == 2, fz_max, mu * fz_max)
         arm_cols = ~is_force
         l_box[arm_cols] = -self._arm_vmax[kind[arm_cols] - 12]
         u_box[arm_cols] = self._arm_vmax[kind[arm_cols] - 12]
-        # friction pyramid rows: +-f_x - mu f_z <= 0 and +-f_y - mu f_z <= 0 for every stance foot
+        # friction pyramid rows for every stance foot: +-f_x - mu f_z <= 0 and +-f_y - mu f_z <= 0 (mu per axis), and
+        # for the octagon (+-f_x +- f_y) / sqrt(2) - mu f_z <= 0
         fz_cols = np.flatnonzero(is_force & (comp == 2))  # one per stance foot and step, preceded by its x, y
         m = fz_cols.size
-        friction = np.zeros((4 * m, idx.size))
-        fric = friction.reshape(m, 4, idx.size)
+        faces = pyramid_faces(cfg.pyramid)
+        friction = np.zeros((len(faces) * m, idx.size))
+        fric = friction.reshape(m, len(faces), idx.size)
         steps = np.arange(m)
-        for r, (axis, sign) in enumerate(((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0))):
-            fric[steps, r, fz_cols - 2 + axis] = sign * s[fz_cols - 2 + axis]
-            fric[steps, r, fz_cols] = -cfg.mu * s[fz_cols]
+        for r, (cx, cy) in enumerate(faces):
+            fric[steps, r, fz_cols - 2] = cx * s[fz_cols - 2]
+            fric[steps, r, fz_cols - 1] = cy * s[fz_cols - 1]
+            fric[steps, r, fz_cols] = -mu * s[fz_cols]
         out = (idx, s, l_box, u_box, friction)
         for a in out:
             a.setflags(write=False)

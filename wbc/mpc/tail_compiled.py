@@ -127,8 +127,8 @@ def _sparse_left(m, x, out):  # pragma: no cover
 
 @numba.njit(cache=True, nogil=True)
 def tail_qp(x0, x_ref, contact, feet, mass, inertia, momentum_matrix, momentum_jacobian, mass_matrix, bias, arm_q,
-            arm_dq, weights, velocity_factor, arm_lower, arm_upper, vmax, stall, gravity, dt, mu, fz_min, fz_max,
-            force_scale, weight_force, weight_arm_acc, arm_moves):  # pragma: no cover
+            arm_dq, weights, velocity_factor, arm_lower, arm_upper, vmax, stall, gravity, dt, mu, octagon, fz_min,
+            fz_max, force_scale, weight_force, weight_arm_acc, arm_moves):  # pragma: no cover
     """The tail MPC's QP: `wbc.mpc.tail_mpc.TailMpc`'s build (see there for the model, cost and rows).
 
     Args:
@@ -152,7 +152,8 @@ def tail_qp(x0, x_ref, contact, feet, mass, inertia, momentum_matrix, momentum_j
         stall: the arm servos' stall torques (3,) [N m].
         gravity: gravity (3,) [m/s^2].
         dt: step length [s].
-        mu: friction coefficient.
+        mu: the pyramid's bound per axis (`wbc.mpc.centroidal_mpc.friction_per_axis`).
+        octagon: also the diagonal faces, (+-f_x +- f_y) / sqrt(2) - mu f_z <= 0 (`pyramid_faces`'s octagon).
         fz_min: smallest normal force of a stance foot [N].
         fz_max: largest normal force of a foot [N].
         force_scale: the QP's force unit [N].
@@ -164,8 +165,8 @@ def tail_qp(x0, x_ref, contact, feet, mass, inertia, momentum_matrix, momentum_j
         (H, g, C, l, u, l_box, u_box, scale, index, free, gamma_z), as `wbc.mpc.centroidal_mpc.MpcProblem` names
         them: min 1/2 z^T H z + g^T z s.t. l <= C z <= u, l_box <= z <= u_box, U[index] = scale z, X = free +
         gamma_z z. The rows: friction pyramids (per stance foot and step: +f_x, -f_x, +f_y, -f_y, each - mu f_z <=
-        0), then the servos' torque-speed lines (3 per step), the arm's positions, then its speeds along the horizon
-        (3 per step each); the last three only when `arm_moves`.
+        0, then with `octagon` the four diagonals), then the servos' torque-speed lines (3 per step), the arm's
+        positions, then its speeds along the horizon (3 per step each); the last three only when `arm_moves`.
     """
     n = x_ref.shape[0]
     # the variables: step k's stance forces (foot by foot, x y z), then its three arm accelerations
@@ -323,7 +324,8 @@ def tail_qp(x0, x_ref, contact, feet, mass, inertia, momentum_matrix, momentum_j
     feet_total = 0
     for k in range(n):
         feet_total += stance[k]
-    rows = 4 * feet_total + (9 * n if arm_moves else 0)
+    faces = 8 if octagon else 4
+    rows = faces * feet_total + (9 * n if arm_moves else 0)
     cmat = np.zeros((rows, nz))
     lo = np.empty(rows)
     hi = np.empty(rows)
@@ -334,6 +336,14 @@ def tail_qp(x0, x_ref, contact, feet, mass, inertia, momentum_matrix, momentum_j
             for axis in range(2):
                 for sign in (1.0, -1.0):
                     cmat[r, i - 2 + axis] = sign * scale[i - 2 + axis]
+                    cmat[r, i] = -mu * scale[i]
+                    lo[r], hi[r] = -np.inf, 0.0
+                    r += 1
+            if octagon:  # the faces of `wbc.mpc.centroidal_mpc.pyramid_faces`' octagon, in its order
+                d = 1.0 / math.sqrt(2.0)
+                for sx, sy in ((d, d), (d, -d), (-d, d), (-d, -d)):
+                    cmat[r, i - 2] = sx * scale[i - 2]
+                    cmat[r, i - 1] = sy * scale[i - 1]
                     cmat[r, i] = -mu * scale[i]
                     lo[r], hi[r] = -np.inf, 0.0
                     r += 1

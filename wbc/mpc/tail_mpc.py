@@ -37,7 +37,7 @@ import daqp
 import numpy as np
 
 from wbc.errors import ConfigError
-from wbc.mpc.centroidal_mpc import MpcSolveError
+from wbc.mpc.centroidal_mpc import MpcSolveError, friction_per_axis
 from wbc.mpc.tail_compiled import tail_qp
 from wbc.mpc.tail_model import ArmTail, ArmTailPath
 from wbc.robots.conventions import GRAVITY
@@ -61,7 +61,9 @@ class TailMpcConfig:
     Attributes:
         horizon: steps N.
         dt: step length [s].
-        mu: friction coefficient of the pyramids.
+        mu: friction coefficient of the feet's friction cone.
+        pyramid: how the friction cone of `mu` becomes linear rows, as `wbc.mpc.centroidal_mpc.MpcConfig.pyramid`
+            (``octagon``, the octagon inside the cone, by default).
         fz_min: smallest normal force of a stance foot [N].
         fz_max: largest normal force of a foot [N].
         force_scale: the QP's force unit [N].
@@ -80,6 +82,7 @@ class TailMpcConfig:
     horizon: int = 10
     dt: float = 0.032
     mu: float = 0.4
+    pyramid: str = "octagon"
     fz_min: float = 10.0
     fz_max: float = 250.0
     force_scale: float = 100.0
@@ -99,9 +102,15 @@ class TailMpcConfig:
     def __post_init__(self) -> None:
         if self.horizon < 1 or not self.dt > 0:
             raise ConfigError(f"TailMpcConfig: horizon must be >= 1 and dt > 0, got {self.horizon} and {self.dt}")
+        friction_per_axis(self.mu, self.pyramid, "TailMpcConfig")
         if not (0 < self.mu and 0 <= self.fz_min < self.fz_max and self.force_scale > 0):
             raise ConfigError(f"TailMpcConfig: need mu > 0, 0 <= fz_min < fz_max and force_scale > 0, got mu "
                               f"{self.mu}, fz {self.fz_min}..{self.fz_max}, scale {self.force_scale}")
+
+    @property
+    def mu_axis(self) -> float:
+        """The bound on |f_x| / f_z and |f_y| / f_z of the pyramid (`pyramid`)."""
+        return friction_per_axis(self.mu, self.pyramid, "TailMpcConfig")
 
     def state_weights(self) -> np.ndarray:
         """The 18 state weights, in the state's order."""
@@ -283,9 +292,9 @@ class TailMpc:
         arrays = tail_qp(f64(x0), x_ref, np.ascontiguousarray(contact, dtype=np.bool_), f64(feet), f64(path.mass),
                          f64(path.inertia_world), f64(path.momentum_matrix), f64(path.momentum_jacobian),
                          f64(path.mass_matrix), f64(path.bias), f64(path.arm_q), f64(path.arm_dq), self._weights,
-                         factor, self._arm_lower, self._arm_upper, self._vmax, self._stall, _GRAVITY, cfg.dt, cfg.mu,
-                         cfg.fz_min, cfg.fz_max, cfg.force_scale, cfg.weight_force, cfg.weight_arm_acc,
-                         cfg.arm_moves)
+                         factor, self._arm_lower, self._arm_upper, self._vmax, self._stall, _GRAVITY, cfg.dt,
+                         cfg.mu_axis, cfg.pyramid == "octagon", cfg.fz_min, cfg.fz_max, cfg.force_scale,
+                         cfg.weight_force, cfg.weight_arm_acc, cfg.arm_moves)
         return dict(zip(names, arrays, strict=True))
 
     def _solve(self, qp: dict[str, np.ndarray], warm_start: np.ndarray | None) -> TailPlan:
