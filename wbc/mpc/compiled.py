@@ -459,7 +459,7 @@ def update_inputs(t, step_s, vx, vy, yaw_rate, body_height, step_times, period, 
         contact: out.
         feet: out.
     """
-    (rot, _, _, _, _, _, _, _, _, _, _, _, feet_now, _, com, com_vel) = tick_arrays(kin)
+    (rot, _, _, _, _, _, _, _, _, _, _, _, feet_now, _, com, com_vel, _) = tick_arrays(kin)
     if not feet_heights_in_bound(feet_now):
         return False
     n = x_ref.shape[0]
@@ -659,8 +659,8 @@ def _make_control_tick(sources: str):  # noqa: ANN202 (returns a numba dispatche
             The stage to run next: `last` when every stage ran.
         """
         sources  # noqa: B018 - in numba's cache key (`_sources_digest`)
-        (rot, _, _, feet_rel, hips_rel, feet_vel_rel, leg_jac, gravity, _, _, base_position, _, feet, feet_vel, com,
-         com_vel) = tick_arrays(kin)
+        (rot, _, _, feet_rel, hips_rel, _, leg_jac, gravity, _, _, base_position, _, feet, feet_vel, com,
+         com_vel, contact_vel_rel) = tick_arrays(kin)
         (progress, touchdown, trust, reference, liftoff, footholds, parts, swing_pos, swing_vel, scale, arm_target,
          out, x, tau) = tick_floats(floats)
         contact, slipping, was_stance, lifted, clip = tick_flags(flags)
@@ -670,9 +670,9 @@ def _make_control_tick(sources: str):  # noqa: ANN202 (returns a numba dispatche
         if stage == STAGE_FRONT and stage < last:
             packed_pass(base_quat, omega_body, q, dq, model_f, model_i, kin)
             gait_state(t, consts[C_PERIOD], consts[C_DUTY], consts[C_MARGIN], offsets, contact, progress, touchdown)
-            contact_trust(contact, foot_force, feet_vel_rel, x[3], x[4], consts[C_INV_FORCE], consts[C_SLIP2], trust,
-                          slipping)
-            steady_step(x, trust, rot, accel_body, feet_rel, feet_vel_rel, keep_a, keep_b, keep_g, gain)
+            contact_trust(contact, foot_force, contact_vel_rel, x[3], x[4], consts[C_INV_FORCE], consts[C_SLIP2],
+                          trust, slipping)
+            steady_step(x, trust, rot, accel_body, feet_rel, contact_vel_rel, keep_a, keep_b, keep_g, gain)
             packed_place(kin, x[0:3], x[3:6])
             stage = STAGE_REFERENCE
         if stage == STAGE_REFERENCE and stage < last:
