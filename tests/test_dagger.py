@@ -33,7 +33,7 @@ def test_the_expert_action_asks_for_the_expert_torque_at_that_state():
         expert_action(cmd, q, dq, default_q=default_q, action_scale=scale, kp=np.zeros(n), kd=kd)
 
 
-def test_the_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
+def test_the_memoryless_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
     from wbc.learned.env.env_config import EnvConfig
     from wbc.learned.policy.numpy_policy import NumpyPolicy
     from wbc.learned.policy.observations import ObsLayout
@@ -45,7 +45,7 @@ def test_the_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
     obs = rng.normal(size=(2000, ObsLayout(15).size)).astype(np.float32) * 3.0 + 1.0
     w = rng.normal(size=(obs.shape[1], 15)) * 0.03
     actions = np.tanh(obs @ w)
-    net, losses = fit_student(obs, actions, FitConfig(epochs=60, hidden_dims=(64, 64)))
+    net, losses = fit_student(obs, actions, FitConfig(epochs=60, hidden_dims=(64, 64), history=0))
     assert losses[-1] < 0.1 * losses[0]
     save_policy(tmp_path / "student", student_policy_file(net, env, task="push", extra={"method": "dagger"}))
     pf = load_policy(tmp_path / "student")
@@ -63,7 +63,7 @@ def test_the_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
     # an input the data barely moves is not blown up by the normaliser
     flat = obs.copy()
     flat[:, 0] = 0.5 + 1e-4 * rng.normal(size=flat.shape[0])
-    net, _ = fit_student(flat, actions, FitConfig(epochs=1, std_floor=0.1))
+    net, _ = fit_student(flat, actions, FitConfig(epochs=1, std_floor=0.1, history=0))
     assert float(net.obs_normalizer._std[0]) == pytest.approx(0.1)
 
 

@@ -543,6 +543,12 @@ def _add_train_parser(sub: _Commands) -> None:
                     help="with a controller as --teacher: episodes per DAgger round (default 20)")
     tr.add_argument("--episode-s", type=float, default=None,
                     help="with a controller as --teacher: play only the first seconds of each episode")
+    tr.add_argument("--history", type=bounded_int(0, 200), default=None,
+                    help="with a controller as --teacher: observations (policy ticks) the student's adaptation "
+                         "module reads, 0 for a memoryless student (default 25)")
+    tr.add_argument("--expert-noise", type=bounded_float(0.0, 10.0), default=None,
+                    help="with a controller as --teacher: DART's action noise while the expert drives, standard "
+                         "deviation in action units (default 0)")
     tr.add_argument("--run-root", default="runs/train",
                     help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>]")
     tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")

@@ -12,7 +12,15 @@ never visits under the expert (Ross et al., 2011). After each round the student 
 finished round.
 
 While the expert drives, the student's previous-action input is the expert's action as a policy would have sent it,
-so the observation means the same thing under both drivers.
+so the observation means the same thing under both drivers. The samples of each episode are kept in time order with
+the episode's id (``episode`` in ``data.npz``), so a student with memory (`FitConfig.history`) is fitted on the very
+window of observations it would have read had it driven: the observations it sees and the previous actions in them
+are built the same way whoever drives.
+
+DART (Laskey et al., 2017): with ``expert_noise`` > 0 the robot, while the expert drives, gets the expert's command
+plus the torque of a Gaussian action offset (standard deviation ``expert_noise`` action units, drawn each policy tick
+and held over it, as a policy's action is), and the labels stay the expert's clean actions: the expert then shows how
+it recovers from the small errors a student makes, from round 0 on.
 """
 
 from __future__ import annotations
@@ -70,6 +78,7 @@ class DaggerConfig:
         episode_s: play only the first seconds of each episode (None: the scenario's whole duration).
         beta: in round k an episode is driven by the expert with probability beta^k.
         seed: training seed (episodes use scenario seed `TRAIN_SEED_OFFSET` + seed).
+        expert_noise: DART's action noise while the expert drives [action units, standard deviation]; 0: none.
         fit: the student's supervised fit.
         run_dir: where the data, the policy and the progress go.
     """
@@ -81,6 +90,7 @@ class DaggerConfig:
     episode_s: float | None = None
     beta: float = 0.5
     seed: int = 0
+    expert_noise: float = 0.0
     fit: FitConfig = field(default_factory=FitConfig)
     run_dir: str = "runs/train/push-dagger-mpc"
 
@@ -93,6 +103,8 @@ class DaggerConfig:
             raise ConfigError(f"DaggerConfig: episode_s must be a positive number of seconds, got {self.episode_s}")
         if not 0.0 <= self.beta <= 1.0:
             raise ConfigError(f"DaggerConfig: beta must be in [0, 1], got {self.beta}")
+        if not (math.isfinite(self.expert_noise) and self.expert_noise >= 0.0):
+            raise ConfigError(f"DaggerConfig: expert_noise must be >= 0, got {self.expert_noise}")
 
     def expert_drives(self, round_index: int, episode: int) -> bool:
         """Whether the expert drives `episode` of round `round_index` (a pure function of the seed)."""
@@ -113,6 +125,8 @@ class DaggerController:
         env: the student's env configuration (observation scales, action scale, gains, policy rate).
         student: the student's controller (its policy file), or None while there is none (the expert must drive).
         expert_drives: who drives this episode.
+        noise: DART's action noise while the expert drives (standard deviation, action units); 0: none.
+        rng: draws the noise (with `noise` > 0).
 
     Raises:
         ConfigError: the student must drive but there is none, or the expert's period does not divide the
@@ -120,7 +134,7 @@ class DaggerController:
     """
 
     def __init__(self, expert: Controller, desc: RobotDescription, env: EnvConfig, student: LearnedController | None,
-                 *, expert_drives: bool) -> None:
+                 *, expert_drives: bool, noise: float = 0.0, rng: np.random.Generator | None = None) -> None:
         if student is None and not expert_drives:
             raise ConfigError("DaggerController: no student yet; the expert must drive")
         ratio = expert.rate_hz * env.policy_dt
@@ -133,6 +147,8 @@ class DaggerController:
         self.default_q = desc.nominal_q.copy()
         self.kp, self.kd = env.gains(desc.num_joints)
         self.scale, self.clip, self.scales = env.action_scale, env.clip_actions, env.obs_scales
+        self.noise, self.rng = noise, rng if rng is not None else np.random.default_rng(0)
+        self.offset_tau = np.zeros(self.default_q.size)
         self.obs: list[np.ndarray] = []
         self.labels: list[np.ndarray] = []
         self.reset()
@@ -140,6 +156,8 @@ class DaggerController:
     def reset(self) -> None:
         """Reset the expert and the student's inputs; the collected samples stay."""
         self.expert.reset()
+        if self.student is not None:
+            self.student.reset()
         self.tick = 0
         self.last_action = np.zeros(self.default_q.size)
         self.held: MotorCommand | None = None
@@ -157,15 +175,23 @@ class DaggerController:
             self.obs.append(obs)
             self.labels.append(label)
             if self.expert_drives:
-                self.last_action = label
+                if self.noise > 0.0:
+                    offset = self.noise * self.rng.standard_normal(label.size)
+                    self.last_action = np.clip(label + offset, -self.clip, self.clip)
+                    self.offset_tau = self.kp * self.scale * (self.last_action - label)
+                else:
+                    self.last_action = label
             else:
                 assert self.student is not None
-                action = np.clip(self.student.policy(obs[None], {})[0], -self.clip, self.clip)
+                # the student's own history: the same observations, in order, as recorded
+                action = self.student.step(obs)
                 self.last_action = action
                 self.held = MotorCommand(q=self.default_q + self.scale * action, dq=np.zeros_like(action),
                                          kp=self.kp, kd=self.kd, tau=np.zeros_like(action))
         self.tick += 1
         if self.expert_drives:
+            if self.noise > 0.0:
+                return dataclasses.replace(expert_cmd, tau=expert_cmd.tau + self.offset_tau)
             return expert_cmd
         assert self.held is not None
         return self.held
@@ -205,6 +231,7 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
     progress: dict[str, Any] = {"rounds": []}
     obs_all: list[np.ndarray] = []
     act_all: list[np.ndarray] = []
+    ep_all: list[np.ndarray] = []
     if resume:
         if not (run_dir / "progress.json").exists():
             raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
@@ -214,7 +241,9 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
         progress = json.loads((run_dir / "progress.json").read_text())
         with np.load(run_dir / "data.npz") as data:
-            obs_all, act_all = [data["obs"]], [data["actions"]]
+            if "episode" not in data.files:
+                raise ConfigError(f"--resume: {run_dir}/data.npz predates the samples' episode ids; start a new run")
+            obs_all, act_all, ep_all = [data["obs"]], [data["actions"]], [data["episode"]]
     elif (run_dir / "progress.json").exists():
         raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
                           "--run-root")
@@ -242,10 +271,11 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                                             pushes=tuple(p for p in trial.pushes if p.start < cfg.episode_s))
             drives = cfg.expert_drives(k, e) or net is None
 
-            def make(desc: RobotDescription, drives: bool = drives,
+            def make(desc: RobotDescription, drives: bool = drives, index: int = index,
                      built: dict[str, DaggerController] = built) -> DaggerController:
                 student = LearnedController(desc, student_path) if not drives else None
-                ctrl = DaggerController(expert_spec.make(desc), desc, env, student, expert_drives=drives)
+                ctrl = DaggerController(expert_spec.make(desc), desc, env, student, expert_drives=drives,
+                                        noise=cfg.expert_noise, rng=np.random.default_rng([cfg.seed, index, 7]))
                 built["ctrl"] = ctrl
                 return ctrl
 
@@ -257,13 +287,15 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             if ctrl is not None and ctrl.obs:
                 obs_all.append(np.asarray(ctrl.obs))
                 act_all.append(np.asarray(ctrl.labels))
+                ep_all.append(np.full(len(ctrl.obs), index))
             fell = bool(math.isfinite(record.fall_time_s))
             episodes.append({"index": index, "band": band, "expert_drives": drives,
                              "samples": 0 if ctrl is None else len(ctrl.obs), "fell": fell,
                              "fall_time_s": record.fall_time_s if fell else None, "error": record.error or None})
-        obs, actions = np.concatenate(obs_all), np.concatenate(act_all)
-        obs_all, act_all = [obs], [actions]
-        net, losses = fit_student(obs, actions, dataclasses.replace(cfg.fit, seed=cfg.fit.seed + k), start=net)
+        obs, actions, episode_ids = np.concatenate(obs_all), np.concatenate(act_all), np.concatenate(ep_all)
+        obs_all, act_all, ep_all = [obs], [actions], [episode_ids]
+        net, losses = fit_student(obs, actions, dataclasses.replace(cfg.fit, seed=cfg.fit.seed + k), start=net,
+                                  episode=episode_ids)
         wall = time.perf_counter() - t0
         student_rounds = [ep for ep in episodes if not ep["expert_drives"]]
         summary = {"round": k, "episodes": episodes, "samples_total": int(obs.shape[0]),
@@ -274,9 +306,10 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                    else math.nan, "wall_s": wall}
         progress["rounds"].append(summary)
         extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
+                 "history": cfg.fit.history, "expert_noise": cfg.expert_noise, "beta": cfg.beta, "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
-        np.savez(run_dir / "data.npz", obs=obs, actions=actions)
+        np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
         save_student(net, run_dir / "student.pt")
         save_policy(student_path, student_policy_file(net, env, task=cfg.task, extra=extra))
         (run_dir / "progress.json").write_text(json.dumps(progress, indent=2, default=float) + "\n")
