@@ -549,6 +549,9 @@ def _add_train_parser(sub: _Commands) -> None:
     tr.add_argument("--expert-noise", type=bounded_float(0.0, 10.0), default=None,
                     help="with a controller as --teacher: DART's action noise while the expert drives, standard "
                          "deviation in action units (default 0)")
+    tr.add_argument("--average-labels", action="store_true", default=None,
+                    help="with a controller as --teacher: label each sample with the expert's actions averaged over "
+                         "its policy period")
     tr.add_argument("--run-root", default="runs/train",
                     help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>]")
     tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")

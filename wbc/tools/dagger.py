@@ -79,6 +79,9 @@ class DaggerConfig:
         beta: in round k an episode is driven by the expert with probability beta^k.
         seed: training seed (episodes use scenario seed `TRAIN_SEED_OFFSET` + seed).
         expert_noise: DART's action noise while the expert drives [action units, standard deviation]; 0: none.
+        average_labels: label a sample with the mean of the expert's actions over its policy period, the constant
+            action that best matches the expert's torques while a policy holds it, instead of the action at the
+            period's first tick.
         fit: the student's supervised fit.
         run_dir: where the data, the policy and the progress go.
     """
@@ -91,6 +94,7 @@ class DaggerConfig:
     beta: float = 0.5
     seed: int = 0
     expert_noise: float = 0.0
+    average_labels: bool = False
     fit: FitConfig = field(default_factory=FitConfig)
     run_dir: str = "runs/train/push-dagger-mpc"
 
@@ -127,6 +131,9 @@ class DaggerController:
         expert_drives: who drives this episode.
         noise: DART's action noise while the expert drives (standard deviation, action units); 0: none.
         rng: draws the noise (with `noise` > 0).
+        average: label each sample with the mean of the expert's actions over its policy period (the constant
+            action closest, in least squares, to the expert's torques over the period) instead of the action at its
+            first tick.
 
     Raises:
         ConfigError: the student must drive but there is none, or the expert's period does not divide the
@@ -134,7 +141,8 @@ class DaggerController:
     """
 
     def __init__(self, expert: Controller, desc: RobotDescription, env: EnvConfig, student: LearnedController | None,
-                 *, expert_drives: bool, noise: float = 0.0, rng: np.random.Generator | None = None) -> None:
+                 *, expert_drives: bool, noise: float = 0.0, rng: np.random.Generator | None = None,
+                 average: bool = False) -> None:
         if student is None and not expert_drives:
             raise ConfigError("DaggerController: no student yet; the expert must drive")
         ratio = expert.rate_hz * env.policy_dt
@@ -148,7 +156,10 @@ class DaggerController:
         self.kp, self.kd = env.gains(desc.num_joints)
         self.scale, self.clip, self.scales = env.action_scale, env.clip_actions, env.obs_scales
         self.noise, self.rng = noise, rng if rng is not None else np.random.default_rng(0)
+        self.average = average
+        self.offset = np.zeros(self.default_q.size)
         self.offset_tau = np.zeros(self.default_q.size)
+        self._sum, self._count = np.zeros(self.default_q.size), 0
         self.obs: list[np.ndarray] = []
         self.labels: list[np.ndarray] = []
         self.reset()
@@ -159,28 +170,32 @@ class DaggerController:
         if self.student is not None:
             self.student.reset()
         self.tick = 0
+        self._count = 0
+        self.offset = np.zeros(self.default_q.size)
         self.last_action = np.zeros(self.default_q.size)
         self.held: MotorCommand | None = None
 
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """One expert tick; on policy ticks also a labelled sample and, when it drives, the student's command."""
         expert_cmd = self.expert.act(state, command)
-        if self.tick % self.every == 0:
+        policy_tick = self.tick % self.every == 0
+        instant = None
+        if policy_tick or self.average:
+            instant = expert_action(expert_cmd, state.q, state.dq, default_q=self.default_q, action_scale=self.scale,
+                                    kp=self.kp, kd=self.kd)
+        if policy_tick:
+            self.finish()
             obs = policy_observation(
                 gyro_in_body=state.gyro_in_body[None], imu_quat=state.imu_quat[None],
                 command=command.as_array()[None], q=state.q[None], dq=state.dq[None],
                 last_action=self.last_action[None], default_q=self.default_q, scales=self.scales)[0]
-            label = np.clip(expert_action(expert_cmd, state.q, state.dq, default_q=self.default_q,
-                                          action_scale=self.scale, kp=self.kp, kd=self.kd), -self.clip, self.clip)
             self.obs.append(obs)
-            self.labels.append(label)
+            self.labels.append(np.clip(instant, -self.clip, self.clip))
+            self._sum, self._count = instant.copy(), 1
             if self.expert_drives:
                 if self.noise > 0.0:
-                    offset = self.noise * self.rng.standard_normal(label.size)
-                    self.last_action = np.clip(label + offset, -self.clip, self.clip)
-                    self.offset_tau = self.kp * self.scale * (self.last_action - label)
-                else:
-                    self.last_action = label
+                    self.offset = self.noise * self.rng.standard_normal(instant.size)
+                    self.offset_tau = self.kp * self.scale * self.offset
             else:
                 assert self.student is not None
                 # the student's own history: the same observations, in order, as recorded
@@ -188,6 +203,9 @@ class DaggerController:
                 self.last_action = action
                 self.held = MotorCommand(q=self.default_q + self.scale * action, dq=np.zeros_like(action),
                                          kp=self.kp, kd=self.kd, tau=np.zeros_like(action))
+        elif self.average and self._count:
+            self._sum += instant
+            self._count += 1
         self.tick += 1
         if self.expert_drives:
             if self.noise > 0.0:
@@ -195,6 +213,21 @@ class DaggerController:
             return expert_cmd
         assert self.held is not None
         return self.held
+
+    def finish(self) -> None:
+        """Close the last sample's policy period.
+
+        Its label becomes final (averaged over the period with `average`) and, while the expert drives, so does the
+        previous action the next observation reads (the label, plus DART's offset). Called at each policy tick and
+        once after the episode.
+        """
+        if not self._count:
+            return
+        if self.average:
+            self.labels[-1] = np.clip(self._sum / self._count, -self.clip, self.clip)
+        if self.expert_drives:
+            self.last_action = np.clip(self.labels[-1] + self.offset, -self.clip, self.clip)
+        self._count = 0
 
     def counters(self) -> dict[str, int]:
         """The expert's event counters."""
@@ -275,7 +308,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                      built: dict[str, DaggerController] = built) -> DaggerController:
                 student = LearnedController(desc, student_path) if not drives else None
                 ctrl = DaggerController(expert_spec.make(desc), desc, env, student, expert_drives=drives,
-                                        noise=cfg.expert_noise, rng=np.random.default_rng([cfg.seed, index, 7]))
+                                        noise=cfg.expert_noise, rng=np.random.default_rng([cfg.seed, index, 7]),
+                                        average=cfg.average_labels)
                 built["ctrl"] = ctrl
                 return ctrl
 
@@ -284,6 +318,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             # a controller failure costs this episode's remaining ticks only: the samples before it are kept
             record, _ = run_trial(trial, dagger_spec)
             ctrl = built.pop("ctrl", None)
+            if ctrl is not None:
+                ctrl.finish()
             if ctrl is not None and ctrl.obs:
                 obs_all.append(np.asarray(ctrl.obs))
                 act_all.append(np.asarray(ctrl.labels))
@@ -306,7 +342,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                    else math.nan, "wall_s": wall}
         progress["rounds"].append(summary)
         extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
-                 "history": cfg.fit.history, "expert_noise": cfg.expert_noise, "beta": cfg.beta, "seed": cfg.seed,
+                 "history": cfg.fit.history, "expert_noise": cfg.expert_noise,
+                 "average_labels": cfg.average_labels, "beta": cfg.beta, "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
         np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
