@@ -9,7 +9,8 @@ expert with probability beta^k and otherwise by the current student, whose mista
 never visits under the expert (Ross et al., 2011). After each round the student is fitted to everything collected so far
 (`fit_student`) and exported (``<run_dir>/policy.npz/.json``), with the data (``data.npz``) and the round's figures
 (``progress.json``): a run that stops loses at most the round in progress, and ``resume`` continues after the last
-finished round.
+finished round. Each round's export also stays as ``<run_dir>/rounds/policy-<k>``: the episodes the student drives in
+round k + 1 measure the student fitted in round k, on training seeds.
 
 While the expert drives, the student's previous-action input is the expert's action as a policy would have sent it,
 so the observation means the same thing under both drivers. The samples of each episode are kept in time order with
@@ -348,7 +349,10 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                      start_round:])}
         np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
         save_student(net, run_dir / "student.pt")
-        save_policy(student_path, student_policy_file(net, env, task=cfg.task, extra=extra))
+        exported = student_policy_file(net, env, task=cfg.task, extra=extra)
+        save_policy(student_path, exported)
+        # each round's student stays: the next round's figures measure it, and the newest is not always the best
+        save_policy(run_dir / "rounds" / f"policy-{k}", exported)
         (run_dir / "progress.json").write_text(json.dumps(progress, indent=2, default=float) + "\n")
         if log is not None:
             log(f"round {k}: {len(episodes)} episodes ({len(student_rounds)} driven by the student, "
