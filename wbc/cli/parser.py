@@ -552,6 +552,9 @@ def _add_train_parser(sub: _Commands) -> None:
     tr.add_argument("--average-labels", action="store_true", default=None,
                     help="with a controller as --teacher: label each sample with the expert's actions averaged over "
                          "its policy period")
+    tr.add_argument("--expert-truth", action="store_true", default=None,
+                    help="with a controller as --teacher: the expert reads the simulator's base state instead of "
+                         "estimating it (the student never does)")
     tr.add_argument("--run-root", default="runs/train",
                     help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>]")
     tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")

@@ -83,6 +83,10 @@ class DaggerConfig:
         average_labels: label a sample with the mean of the expert's actions over its policy period, the constant
             action that best matches the expert's torques while a policy holds it, instead of the action at the
             period's first tick.
+        expert_truth: the expert reads the simulator's base position and velocity instead of estimating them (its
+            ground-truth switch). While the student drives, a state-estimating expert's estimator trusts the feet
+            its own gait schedule puts on the ground, which the student's feet need not be, and its labels drift
+            away from anything a policy should do; the student's observation is unchanged.
         fit: the student's supervised fit.
         run_dir: where the data, the policy and the progress go.
     """
@@ -96,6 +100,7 @@ class DaggerConfig:
     seed: int = 0
     expert_noise: float = 0.0
     average_labels: bool = False
+    expert_truth: bool = False
     fit: FitConfig = field(default_factory=FitConfig)
     run_dir: str = "runs/train/push-dagger-mpc"
 
@@ -230,6 +235,14 @@ class DaggerController:
             self.last_action = np.clip(self.labels[-1] + self.offset, -self.clip, self.clip)
         self._count = 0
 
+    def use_ground_truth(self, truth: Any) -> None:
+        """Pass the simulator's base state to the expert (`DaggerConfig.expert_truth`); the student never reads it."""
+        switch = getattr(self.expert, "use_ground_truth", None)
+        if switch is None:
+            raise ConfigError(f"DaggerController: the expert {type(self.expert).__name__} has no ground-truth switch; "
+                              "run without expert_truth")
+        switch(truth)
+
     def counters(self) -> dict[str, int]:
         """The expert's event counters."""
         return self.expert.counters()
@@ -317,7 +330,7 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             dagger_spec = ControllerSpec(name=f"dagger:{cfg.expert}", arm_mode=expert_spec.arm_mode, make=make,
                                          summary="DAgger collection")
             # a controller failure costs this episode's remaining ticks only: the samples before it are kept
-            record, _ = run_trial(trial, dagger_spec)
+            record, _ = run_trial(trial, dagger_spec, debug_truth=cfg.expert_truth)
             ctrl = built.pop("ctrl", None)
             if ctrl is not None:
                 ctrl.finish()
@@ -344,7 +357,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         progress["rounds"].append(summary)
         extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
                  "history": cfg.fit.history, "expert_noise": cfg.expert_noise,
-                 "average_labels": cfg.average_labels, "beta": cfg.beta, "seed": cfg.seed,
+                 "average_labels": cfg.average_labels, "expert_truth": cfg.expert_truth, "beta": cfg.beta,
+                 "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
         np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
