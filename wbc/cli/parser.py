@@ -552,6 +552,9 @@ def _add_train_parser(sub: _Commands) -> None:
     tr.add_argument("--average-labels", action="store_true", default=None,
                     help="with a controller as --teacher: label each sample with the expert's actions averaged over "
                          "its policy period")
+    tr.add_argument("--expert-follows", action="store_true", default=None,
+                    help="with mpc as --teacher: the expert's CoM and yaw targets follow the robot (it tracks the "
+                         "commanded velocity, not a position the student cannot observe)")
     tr.add_argument("--expert-truth", action="store_true", default=None,
                     help="with a controller as --teacher: the expert reads the simulator's base state instead of "
                          "estimating it (the student never does)")

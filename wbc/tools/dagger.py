@@ -55,6 +55,7 @@ from wbc.learned.train.distill import (
     student_policy_file,
 )
 from wbc.learned.train.stages import TASKS
+from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.provenance import provenance
 from wbc.robots.description import RobotDescription
 from wbc.scenario import load_scenario
@@ -83,6 +84,11 @@ class DaggerConfig:
         average_labels: label a sample with the mean of the expert's actions over its policy period, the constant
             action that best matches the expert's torques while a policy holds it, instead of the action at the
             period's first tick.
+        expert_follows: the expert's CoM and yaw targets follow the robot (`MpcControllerConfig` leashes 0): the
+            MPC then tracks the commanded velocity and yaw rate and forgets where the command would have put the
+            robot, which no policy observation holds. With the arena's leashes (0.15 m, 0.3 rad) a student that
+            drifts draws labels that pull it back by up to the leash, a correction it cannot see the reason for.
+            Only an expert built by `MpcController` (``mpc``, ``mpc-locked``, ``mpc-noarm``).
         expert_truth: the expert reads the simulator's base position and velocity instead of estimating them (its
             ground-truth switch). While the student drives, a state-estimating expert's estimator trusts the feet
             its own gait schedule puts on the ground, which the student's feet need not be, and its labels drift
@@ -100,6 +106,7 @@ class DaggerConfig:
     seed: int = 0
     expert_noise: float = 0.0
     average_labels: bool = False
+    expert_follows: bool = False
     expert_truth: bool = False
     fit: FitConfig = field(default_factory=FitConfig)
     run_dir: str = "runs/train/push-dagger-mpc"
@@ -270,6 +277,15 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             configuration, or a run directory that already holds a run (without ``resume``).
     """
     expert_spec = get_controller(cfg.expert)
+    make_expert = expert_spec.make
+    if cfg.expert_follows:
+        if expert_spec.make is not MpcController:
+            raise ConfigError(f"DaggerConfig.expert_follows: {cfg.expert!r} is not built by MpcController; its "
+                              "targets cannot be made to follow the robot")
+
+        def make_expert(desc: RobotDescription) -> Controller:
+            return MpcController(desc, MpcControllerConfig(xy_leash=0.0, yaw_leash=0.0))
+
     spec = TASKS[cfg.task]
     scenario = load_scenario(spec.scenario)
     env = _student_env(cfg, expert_spec.arm_mode)
@@ -321,7 +337,7 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             def make(desc: RobotDescription, drives: bool = drives, index: int = index,
                      built: dict[str, DaggerController] = built) -> DaggerController:
                 student = LearnedController(desc, student_path) if not drives else None
-                ctrl = DaggerController(expert_spec.make(desc), desc, env, student, expert_drives=drives,
+                ctrl = DaggerController(make_expert(desc), desc, env, student, expert_drives=drives,
                                         noise=cfg.expert_noise, rng=np.random.default_rng([cfg.seed, index, 7]),
                                         average=cfg.average_labels)
                 built["ctrl"] = ctrl
@@ -357,8 +373,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         progress["rounds"].append(summary)
         extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
                  "history": cfg.fit.history, "expert_noise": cfg.expert_noise,
-                 "average_labels": cfg.average_labels, "expert_truth": cfg.expert_truth, "beta": cfg.beta,
-                 "seed": cfg.seed,
+                 "average_labels": cfg.average_labels, "expert_truth": cfg.expert_truth,
+                 "expert_follows": cfg.expert_follows, "beta": cfg.beta, "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
         np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
