@@ -449,7 +449,8 @@ def _train(args: argparse.Namespace) -> int:
     if args.teacher is not None and args.teacher in CONTROLLERS:
         return _distil(args)
     dagger_only = [f"--{n.replace('_', '-')}" for n in ("rounds", "episodes", "episode_s", "history", "expert_noise",
-                                                              "average_labels", "expert_truth", "expert_follows")
+                                                              "average_labels", "expert_truth", "expert_follows",
+                                                              "takeover")
                    if getattr(args, n) is not None]
     if dagger_only:
         raise ConfigError(f"{', '.join(dagger_only)}: only with a controller as --teacher (DAgger), e.g. "
@@ -481,14 +482,15 @@ def _distil(args: argparse.Namespace) -> int:
         if value is not None:
             raise ConfigError(f"{flag} does not apply to DAgger (--teacher {args.teacher}); its options are --rounds, "
                               "--episodes, --episode-s, --history, --expert-noise, --average-labels, --expert-follows, "
-                              "--expert-truth, --seed, --run-root and --resume")
+                              "--takeover, --expert-truth, --seed, --run-root and --resume")
     # torch loads only when a run really trains
     from wbc.tools.dagger import DaggerConfig, run_dagger
 
     fields = {k: v for k, v in (("rounds", args.rounds), ("episodes", args.episodes),
                                 ("episode_s", args.episode_s), ("seed", args.seed),
                                 ("expert_noise", args.expert_noise), ("average_labels", args.average_labels),
-                                ("expert_truth", args.expert_truth), ("expert_follows", args.expert_follows))
+                                ("expert_truth", args.expert_truth), ("expert_follows", args.expert_follows),
+                                ("takeover", args.takeover))
               if v is not None}
     if args.history is not None:
         from wbc.learned.train.distill import FitConfig

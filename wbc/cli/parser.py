@@ -555,6 +555,9 @@ def _add_train_parser(sub: _Commands) -> None:
     tr.add_argument("--expert-follows", action="store_true", default=None,
                     help="with mpc as --teacher: the expert's CoM and yaw targets follow the robot (it tracks the "
                          "commanded velocity, not a position the student cannot observe)")
+    tr.add_argument("--takeover", type=bounded_float(0.0, 100.0, lo_open=True), default=None,
+                    help="with a controller as --teacher: the expert takes a student's episode over once their "
+                         "actions differ by more than this (rms, action units, smoothed over 0.2 s)")
     tr.add_argument("--expert-truth", action="store_true", default=None,
                     help="with a controller as --teacher: the expert reads the simulator's base state instead of "
                          "estimating it (the student never does)")

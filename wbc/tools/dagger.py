@@ -89,6 +89,10 @@ class DaggerConfig:
             robot, which no policy observation holds. With the arena's leashes (0.15 m, 0.3 rad) a student that
             drifts draws labels that pull it back by up to the leash, a correction it cannot see the reason for.
             Only an expert built by `MpcController` (``mpc``, ``mpc-locked``, ``mpc-noarm``).
+        takeover: in the episodes the student drives, the expert takes over once the student's actions differ from
+            its labels by more than this (rms over the joints, action units, smoothed over about 0.2 s), and drives to
+            the end: the rest of the episode shows the expert recovering from where the student led, and labels that
+            drift away from anything the student can act on are not collected under the student. None: never.
         expert_truth: the expert reads the simulator's base position and velocity instead of estimating them (its
             ground-truth switch). While the student drives, a state-estimating expert's estimator trusts the feet
             its own gait schedule puts on the ground, which the student's feet need not be, and its labels drift
@@ -107,6 +111,7 @@ class DaggerConfig:
     expert_noise: float = 0.0
     average_labels: bool = False
     expert_follows: bool = False
+    takeover: float | None = None
     expert_truth: bool = False
     fit: FitConfig = field(default_factory=FitConfig)
     run_dir: str = "runs/train/push-dagger-mpc"
@@ -120,6 +125,8 @@ class DaggerConfig:
             raise ConfigError(f"DaggerConfig: episode_s must be a positive number of seconds, got {self.episode_s}")
         if not 0.0 <= self.beta <= 1.0:
             raise ConfigError(f"DaggerConfig: beta must be in [0, 1], got {self.beta}")
+        if self.takeover is not None and not (math.isfinite(self.takeover) and self.takeover > 0.0):
+            raise ConfigError(f"DaggerConfig: takeover must be > 0 or None, got {self.takeover}")
         if not (math.isfinite(self.expert_noise) and self.expert_noise >= 0.0):
             raise ConfigError(f"DaggerConfig: expert_noise must be >= 0, got {self.expert_noise}")
 
@@ -147,6 +154,9 @@ class DaggerController:
         average: label each sample with the mean of the expert's actions over its policy period (the constant
             action closest, in least squares, to the expert's torques over the period) instead of the action at its
             first tick.
+        takeover: hand the episode to the expert once the student's actions differ from the labels by more than
+            this (root mean square over the joints, action units, smoothed over about 0.2 s: an exponential mean
+            with weight 0.2 per policy tick); None: the student drives to the end.
 
     Raises:
         ConfigError: the student must drive but there is none, or the expert's period does not divide the
@@ -155,7 +165,7 @@ class DaggerController:
 
     def __init__(self, expert: Controller, desc: RobotDescription, env: EnvConfig, student: LearnedController | None,
                  *, expert_drives: bool, noise: float = 0.0, rng: np.random.Generator | None = None,
-                 average: bool = False) -> None:
+                 average: bool = False, takeover: float | None = None) -> None:
         if student is None and not expert_drives:
             raise ConfigError("DaggerController: no student yet; the expert must drive")
         ratio = expert.rate_hz * env.policy_dt
@@ -169,7 +179,8 @@ class DaggerController:
         self.kp, self.kd = env.gains(desc.num_joints)
         self.scale, self.clip, self.scales = env.action_scale, env.clip_actions, env.obs_scales
         self.noise, self.rng = noise, rng if rng is not None else np.random.default_rng(0)
-        self.average = average
+        self.average, self.takeover = average, takeover
+        self.student_drove = not expert_drives
         self.offset = np.zeros(self.default_q.size)
         self.offset_tau = np.zeros(self.default_q.size)
         self._sum, self._count = np.zeros(self.default_q.size), 0
@@ -184,6 +195,9 @@ class DaggerController:
             self.student.reset()
         self.tick = 0
         self._count = 0
+        self.expert_drives = not self.student_drove
+        self.taken_over_at: int | None = None
+        self.disagreement = 0.0
         self.offset = np.zeros(self.default_q.size)
         self.last_action = np.zeros(self.default_q.size)
         self.held: MotorCommand | None = None
@@ -240,6 +254,14 @@ class DaggerController:
             self.labels[-1] = np.clip(self._sum / self._count, -self.clip, self.clip)
         if self.expert_drives:
             self.last_action = np.clip(self.labels[-1] + self.offset, -self.clip, self.clip)
+        elif self.takeover is not None:
+            # the student's action over the period against its label; the next observation still reads the
+            # student's action, which is what the robot got
+            error = float(np.sqrt(np.mean((self.last_action - self.labels[-1]) ** 2)))
+            self.disagreement = 0.8 * self.disagreement + 0.2 * error
+            if self.disagreement > self.takeover:
+                self.expert_drives = True
+                self.taken_over_at = len(self.labels)
         self._count = 0
 
     def use_ground_truth(self, truth: Any) -> None:
@@ -339,7 +361,7 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                 student = LearnedController(desc, student_path) if not drives else None
                 ctrl = DaggerController(make_expert(desc), desc, env, student, expert_drives=drives,
                                         noise=cfg.expert_noise, rng=np.random.default_rng([cfg.seed, index, 7]),
-                                        average=cfg.average_labels)
+                                        average=cfg.average_labels, takeover=cfg.takeover)
                 built["ctrl"] = ctrl
                 return ctrl
 
@@ -355,7 +377,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                 act_all.append(np.asarray(ctrl.labels))
                 ep_all.append(np.full(len(ctrl.obs), index))
             fell = bool(math.isfinite(record.fall_time_s))
-            episodes.append({"index": index, "band": band, "expert_drives": drives,
+            taken = None if ctrl is None or ctrl.taken_over_at is None else ctrl.taken_over_at * env.policy_dt
+            episodes.append({"index": index, "band": band, "expert_drives": drives, "takeover_s": taken,
                              "samples": 0 if ctrl is None else len(ctrl.obs), "fell": fell,
                              "fall_time_s": record.fall_time_s if fell else None, "error": record.error or None})
         obs, actions, episode_ids = np.concatenate(obs_all), np.concatenate(act_all), np.concatenate(ep_all)
@@ -366,7 +389,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         student_rounds = [ep for ep in episodes if not ep["expert_drives"]]
         summary = {"round": k, "episodes": episodes, "samples_total": int(obs.shape[0]),
                    "student_episodes": len(student_rounds),
-                   "student_falls": sum(ep["fell"] for ep in student_rounds),
+                   "student_falls": sum(ep["fell"] and ep["takeover_s"] is None for ep in student_rounds),
+                   "student_takeovers": sum(ep["takeover_s"] is not None for ep in student_rounds),
                    "errors": sum(ep["error"] is not None for ep in episodes),
                    "fit_loss_first": losses[0] if losses else math.nan, "fit_loss_last": losses[-1] if losses
                    else math.nan, "wall_s": wall}
@@ -374,7 +398,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
                  "history": cfg.fit.history, "expert_noise": cfg.expert_noise,
                  "average_labels": cfg.average_labels, "expert_truth": cfg.expert_truth,
-                 "expert_follows": cfg.expert_follows, "beta": cfg.beta, "seed": cfg.seed,
+                 "expert_follows": cfg.expert_follows, "takeover": cfg.takeover, "beta": cfg.beta,
+                 "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
         np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
@@ -386,7 +411,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         (run_dir / "progress.json").write_text(json.dumps(progress, indent=2, default=float) + "\n")
         if log is not None:
             log(f"round {k}: {len(episodes)} episodes ({len(student_rounds)} driven by the student, "
-                f"{summary['student_falls']} of them fell), {obs.shape[0]} samples, fit loss "
+                f"{summary['student_falls']} of them fell, {summary['student_takeovers']} taken over), "
+                f"{obs.shape[0]} samples, fit loss "
                 f"{summary['fit_loss_first']:.4f} -> {summary['fit_loss_last']:.4f}, {wall:.1f} s")
     load_policy(student_path)  # the export reads back
     return {"run_dir": str(run_dir), "rounds": len(progress["rounds"]),
