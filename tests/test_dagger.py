@@ -175,6 +175,55 @@ def test_averaged_labels_and_dart_noise_label_the_expert_and_perturb_only_the_ro
             np.testing.assert_allclose(ctrl.obs[1][-n:], ctrl.labels[0])
 
 
+def test_the_expert_takes_over_once_the_student_parts_from_its_labels(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    from wbc.learned.env.env_config import EnvConfig
+    from wbc.robots.registry import get_robot
+    from wbc.tools.dagger import DaggerController
+    from wbc.types import RobotState, VelocityCommand
+
+    desc = get_robot("a1-wx200", "actuated")
+    env = EnvConfig(robot="a1-wx200", arm_mode="actuated")
+    n = desc.num_joints
+
+    class Holding:
+        """An expert holding the nominal pose with no torque: its label is the action 0 at the nominal pose."""
+
+        rate_hz = 500.0
+
+        def reset(self):
+            pass
+
+        def act(self, state, command):
+            return MotorCommand(q=state.q.copy(), dq=np.zeros(n), kp=np.zeros(n), kd=np.zeros(n), tau=np.zeros(n))
+
+    class Drifting:
+        """A student whose action grows by 0.5 units a tick."""
+
+        def __init__(self):
+            self.k = 0
+
+        def reset(self):
+            self.k = 0
+
+        def step(self, obs):
+            self.k += 1
+            return np.full(n, 0.5 * self.k)
+
+    state = RobotState(tick=0, time=0.0, q=desc.nominal_q.copy(), dq=np.zeros(n), tau_est=np.zeros(n),
+                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.zeros(4))
+    ctrl = DaggerController(Holding(), desc, env, Drifting(), expert_drives=False, takeover=1.0)
+    sent = [ctrl.act(state, VelocityCommand()) for _ in range(100)]
+    # errors 0.5, 1.0, 1.5, 2.0 ...: the smoothed disagreement 0.1, 0.28, 0.52, 0.82, 1.15 passes 1 after the 5th
+    assert ctrl.taken_over_at == 5 and ctrl.expert_drives
+    assert np.all(sent[49].kp > 0) and np.all(sent[50].kp == 0)  # the student's held target, then the expert's
+    # the observation after the takeover still reads the student's last action, which the robot got
+    np.testing.assert_allclose(ctrl.obs[5][-n:], np.full(n, 2.5))
+    ctrl.reset()
+    assert not ctrl.expert_drives and ctrl.taken_over_at is None
+
+
 def test_who_drives_is_the_expert_first_then_less_and_less_often():
     from wbc.tools.dagger import DaggerConfig
 
