@@ -94,9 +94,9 @@ class DaggerConfig:
             the end: the rest of the episode shows the expert recovering from where the student led, and labels that
             drift away from anything the student can act on are not collected under the student. None: never.
         expert_truth: the expert reads the simulator's base position and velocity instead of estimating them (its
-            ground-truth switch). While the student drives, a state-estimating expert's estimator trusts the feet
-            its own gait schedule puts on the ground, which the student's feet need not be, and its labels drift
-            away from anything a policy should do; the student's observation is unchanged.
+            ground-truth switch); the student's observation is unchanged. A test of whether the expert's estimator,
+            which trusts the feet its own schedule puts down, makes its labels drift from a student that stands:
+            the drift stayed with it.
         fit: the student's supervised fit.
         run_dir: where the data, the policy and the progress go.
     """
