@@ -33,7 +33,7 @@ def test_the_expert_action_asks_for_the_expert_torque_at_that_state():
         expert_action(cmd, q, dq, default_q=default_q, action_scale=scale, kp=np.zeros(n), kd=kd)
 
 
-def test_the_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
+def test_the_memoryless_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
     from wbc.learned.env.env_config import EnvConfig
     from wbc.learned.policy.numpy_policy import NumpyPolicy
     from wbc.learned.policy.observations import ObsLayout
@@ -45,7 +45,7 @@ def test_the_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
     obs = rng.normal(size=(2000, ObsLayout(15).size)).astype(np.float32) * 3.0 + 1.0
     w = rng.normal(size=(obs.shape[1], 15)) * 0.03
     actions = np.tanh(obs @ w)
-    net, losses = fit_student(obs, actions, FitConfig(epochs=60, hidden_dims=(64, 64)))
+    net, losses = fit_student(obs, actions, FitConfig(epochs=60, hidden_dims=(64, 64), history=0))
     assert losses[-1] < 0.1 * losses[0]
     save_policy(tmp_path / "student", student_policy_file(net, env, task="push", extra={"method": "dagger"}))
     pf = load_policy(tmp_path / "student")
@@ -63,8 +63,165 @@ def test_the_student_fits_its_data_and_exports_as_our_policies_do(tmp_path):
     # an input the data barely moves is not blown up by the normaliser
     flat = obs.copy()
     flat[:, 0] = 0.5 + 1e-4 * rng.normal(size=flat.shape[0])
-    net, _ = fit_student(flat, actions, FitConfig(epochs=1, std_floor=0.1))
+    net, _ = fit_student(flat, actions, FitConfig(epochs=1, std_floor=0.1, history=0))
     assert float(net.obs_normalizer._std[0]) == pytest.approx(0.1)
+
+
+def test_the_history_window_repeats_the_first_observation_until_the_episode_has_enough():
+    from wbc.learned.train.distill import history_index
+
+    np.testing.assert_array_equal(history_index(np.array([4, 4, 4, 4, 9, 9]), 3),
+                                  [[0, 0, 0], [0, 0, 1], [0, 1, 2], [1, 2, 3], [4, 4, 4], [4, 4, 5]])
+
+
+def test_the_exported_history_student_reproduces_the_torch_student_on_a_history(tmp_path):
+    from wbc.learned.env.env_config import EnvConfig
+    from wbc.learned.policy.controller import LearnedController
+    from wbc.learned.policy.observations import ObsLayout
+    from wbc.learned.policy.policy_file import load_policy, save_policy
+    from wbc.learned.train.distill import (
+        FitConfig,
+        fit_student,
+        history_index,
+        load_student,
+        save_student,
+        student_policy_file,
+    )
+    from wbc.robots.registry import get_robot
+
+    rng = np.random.default_rng(1)
+    env = EnvConfig(robot="a1-wx200", arm_mode="actuated")
+    n, h = 120, 6
+    obs = (rng.normal(size=(3 * n, ObsLayout(15).size)) * 2.0 + 0.5).astype(np.float32)
+    episode = np.repeat([0, 1, 2], n)
+    # a label that needs the history: the first observation entry three ticks ago
+    idx = history_index(episode, h)
+    actions = np.tanh(obs[idx[:, -4], :15])
+    cfg = FitConfig(epochs=40, batch_size=32, hidden_dims=(32,), history=h, z_dim=4, adaptation_dims=(32,))
+    net, losses = fit_student(obs, actions, cfg, episode=episode)
+    assert losses[-1] < 0.5 * losses[0]
+    with pytest.raises(ConfigError, match="episode"):
+        fit_student(obs, actions, cfg)
+    save_policy(tmp_path / "student", student_policy_file(net, env, task="push", extra={}))
+    pf = load_policy(tmp_path / "student")
+    assert pf.meta["adaptation"]["history"] == h and pf.meta["extrinsics"]["dim"] == 4
+    # the arena's controller, fed one episode's observations in order, acts as the torch student on its windows
+    ctrl = LearnedController(get_robot("a1-wx200", "actuated"), tmp_path / "student")
+    ctrl.reset()
+    got = np.array([ctrl.step(o) for o in obs[n:2 * n]])
+    with torch.no_grad():
+        want = net(torch.from_numpy(obs[n:2 * n]), torch.from_numpy(obs[idx[n:2 * n]])).double().numpy()
+    np.testing.assert_allclose(got, np.clip(want, -ctrl.clip, ctrl.clip), atol=1e-4)
+    save_student(net, tmp_path / "student.pt")
+    again = load_student(tmp_path / "student.pt")
+    with torch.no_grad():
+        np.testing.assert_array_equal(again(torch.from_numpy(obs[:5]), torch.from_numpy(obs[idx[:5]])).numpy(),
+                                      net(torch.from_numpy(obs[:5]), torch.from_numpy(obs[idx[:5]])).numpy())
+
+
+def test_averaged_labels_and_dart_noise_label_the_expert_and_perturb_only_the_robot(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    from wbc.learned.env.env_config import EnvConfig
+    from wbc.learned.train.distill import expert_action
+    from wbc.robots.registry import get_robot
+    from wbc.tools.dagger import DaggerController
+    from wbc.types import RobotState, VelocityCommand
+
+    desc = get_robot("a1-wx200", "actuated")
+    env = EnvConfig(robot="a1-wx200", arm_mode="actuated")
+
+    class Scripted:
+        """An expert whose feed-forward torque is its tick count: its labels are known in closed form."""
+
+        rate_hz = 500.0
+
+        def __init__(self):
+            self.k = 0
+
+        def reset(self):
+            self.k = 0
+
+        def act(self, state, command):
+            self.k += 1
+            n = desc.num_joints
+            return MotorCommand(q=state.q.copy(), dq=np.zeros(n), kp=np.zeros(n), kd=np.zeros(n),
+                                tau=np.full(n, float(self.k)))
+
+    n = desc.num_joints
+    state = RobotState(tick=0, time=0.0, q=desc.nominal_q.copy(), dq=np.zeros(n), tau_est=np.zeros(n),
+                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.zeros(4))
+    kp, _ = env.gains(n)
+    for average, noise in ((False, 0.0), (True, 0.0), (True, 0.5)):
+        ctrl = DaggerController(Scripted(), desc, env, None, expert_drives=True, noise=noise,
+                                rng=np.random.default_rng(0), average=average)
+        sent = [ctrl.act(state, VelocityCommand()) for _ in range(20)]
+        ctrl.finish()
+        first = [1.0, 11.0] if not average else [5.5, 15.5]  # ticks 1..10 and 11..20
+        want = [expert_action(MotorCommand(q=state.q, dq=np.zeros(n), kp=np.zeros(n), kd=np.zeros(n),
+                                           tau=np.full(n, t)), state.q, state.dq, default_q=desc.nominal_q,
+                              action_scale=env.action_scale, kp=kp, kd=env.gains(n)[1]) for t in first]
+        np.testing.assert_allclose(np.array(ctrl.labels), np.clip(want, -env.clip_actions, env.clip_actions))
+        offset = np.array([s.tau for s in sent]) - np.arange(1, 21)[:, None]
+        if noise:
+            # drawn each policy period and held over it
+            np.testing.assert_allclose(offset[:10], np.broadcast_to(offset[0], offset[:10].shape), atol=1e-9)
+            assert np.abs(offset[0]).min() > 0 and np.abs(offset[10] - offset[0]).min() > 0
+            # the next observation's previous action is the label plus the offset the robot got
+            np.testing.assert_allclose(ctrl.obs[1][-n:], np.clip(ctrl.labels[0] + offset[0] / (kp * env.action_scale),
+                                                                 -env.clip_actions, env.clip_actions))
+        else:
+            assert np.all(offset == 0)
+            np.testing.assert_allclose(ctrl.obs[1][-n:], ctrl.labels[0])
+
+
+def test_the_expert_takes_over_once_the_student_parts_from_its_labels(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    from wbc.learned.env.env_config import EnvConfig
+    from wbc.robots.registry import get_robot
+    from wbc.tools.dagger import DaggerController
+    from wbc.types import RobotState, VelocityCommand
+
+    desc = get_robot("a1-wx200", "actuated")
+    env = EnvConfig(robot="a1-wx200", arm_mode="actuated")
+    n = desc.num_joints
+
+    class Holding:
+        """An expert holding the nominal pose with no torque: its label is the action 0 at the nominal pose."""
+
+        rate_hz = 500.0
+
+        def reset(self):
+            pass
+
+        def act(self, state, command):
+            return MotorCommand(q=state.q.copy(), dq=np.zeros(n), kp=np.zeros(n), kd=np.zeros(n), tau=np.zeros(n))
+
+    class Drifting:
+        """A student whose action grows by 0.5 units a tick."""
+
+        def __init__(self):
+            self.k = 0
+
+        def reset(self):
+            self.k = 0
+
+        def step(self, obs):
+            self.k += 1
+            return np.full(n, 0.5 * self.k)
+
+    state = RobotState(tick=0, time=0.0, q=desc.nominal_q.copy(), dq=np.zeros(n), tau_est=np.zeros(n),
+                       imu_quat=np.array([1.0, 0, 0, 0]), gyro_in_body=np.zeros(3),
+                       accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.zeros(4))
+    ctrl = DaggerController(Holding(), desc, env, Drifting(), expert_drives=False, takeover=1.0)
+    sent = [ctrl.act(state, VelocityCommand()) for _ in range(100)]
+    # errors 0.5, 1.0, 1.5, 2.0 ...: the smoothed disagreement 0.1, 0.28, 0.52, 0.82, 1.15 passes 1 after the 5th
+    assert ctrl.taken_over_at == 5 and ctrl.expert_drives
+    assert np.all(sent[49].kp > 0) and np.all(sent[50].kp == 0)  # the student's held target, then the expert's
+    # the observation after the takeover still reads the student's last action, which the robot got
+    np.testing.assert_allclose(ctrl.obs[5][-n:], np.full(n, 2.5))
+    ctrl.reset()
+    assert not ctrl.expert_drives and ctrl.taken_over_at is None
 
 
 def test_who_drives_is_the_expert_first_then_less_and_less_often():
@@ -104,6 +261,17 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
         assert np.all(np.abs(data["actions"]) <= 10.0)  # clipped to the policy's action range
     meta = json.loads((run / "policy.json").read_text())
     assert meta["training"]["method"] == "dagger" and meta["training"]["expert"] == "mpc"
+    # the student reads the last 25 observations through the file's adaptation module; its latent is declared as the
+    # extrinsics, with a note that it comes from the history
+    assert meta["adaptation"]["history"] == 25 and meta["extrinsics"]["privileged_parts"] == [["none", 1]]
+    assert "history" in meta["extrinsics"]["note"] and "nothing privileged" in meta["extrinsics"]["note"]
+    with np.load(run / "data.npz") as data:
+        episodes = data["episode"]
+        assert episodes.shape == (second["samples_total"],) and list(np.unique(episodes)) == [0, 1, 2, 3]
+        assert np.all(np.diff(episodes) >= 0)  # each episode's samples together, in time order
+    from wbc.control.controller_contract import check_controller
+
+    check_controller(f"policy:{run / 'policy'}").raise_if_failed()
     # the arena plays the export as it plays any policy file
     trial = load_scenario("scenarios/push.toml").trial("in", 0, 0)
     import dataclasses

@@ -448,7 +448,9 @@ def _hw_live_observer(args: argparse.Namespace):
 def _train(args: argparse.Namespace) -> int:
     if args.teacher is not None and args.teacher in CONTROLLERS:
         return _distil(args)
-    dagger_only = [f"--{n.replace('_', '-')}" for n in ("rounds", "episodes", "episode_s")
+    dagger_only = [f"--{n.replace('_', '-')}" for n in ("rounds", "episodes", "episode_s", "history", "expert_noise",
+                                                              "average_labels", "expert_truth", "expert_follows",
+                                                              "takeover")
                    if getattr(args, n) is not None]
     if dagger_only:
         raise ConfigError(f"{', '.join(dagger_only)}: only with a controller as --teacher (DAgger), e.g. "
@@ -479,12 +481,21 @@ def _distil(args: argparse.Namespace) -> int:
                         ("--envs", args.envs), ("--threads", args.threads)):
         if value is not None:
             raise ConfigError(f"{flag} does not apply to DAgger (--teacher {args.teacher}); its options are --rounds, "
-                              "--episodes, --episode-s, --seed, --run-root and --resume")
+                              "--episodes, --episode-s, --history, --expert-noise, --average-labels, --expert-follows, "
+                              "--takeover, --expert-truth, --seed, --run-root and --resume")
     # torch loads only when a run really trains
     from wbc.tools.dagger import DaggerConfig, run_dagger
 
     fields = {k: v for k, v in (("rounds", args.rounds), ("episodes", args.episodes),
-                                ("episode_s", args.episode_s), ("seed", args.seed)) if v is not None}
+                                ("episode_s", args.episode_s), ("seed", args.seed),
+                                ("expert_noise", args.expert_noise), ("average_labels", args.average_labels),
+                                ("expert_truth", args.expert_truth), ("expert_follows", args.expert_follows),
+                                ("takeover", args.takeover))
+              if v is not None}
+    if args.history is not None:
+        from wbc.learned.train.distill import FitConfig
+
+        fields["fit"] = FitConfig(history=args.history)
     cfg = DaggerConfig(task=args.task, expert=args.teacher,
                        run_dir=str(Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"), **fields)
     if args.dry_run:

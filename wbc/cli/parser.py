@@ -543,6 +543,24 @@ def _add_train_parser(sub: _Commands) -> None:
                     help="with a controller as --teacher: episodes per DAgger round (default 20)")
     tr.add_argument("--episode-s", type=float, default=None,
                     help="with a controller as --teacher: play only the first seconds of each episode")
+    tr.add_argument("--history", type=bounded_int(0, 200), default=None,
+                    help="with a controller as --teacher: observations (policy ticks) the student's adaptation "
+                         "module reads, 0 for a memoryless student (default 25)")
+    tr.add_argument("--expert-noise", type=bounded_float(0.0, 10.0), default=None,
+                    help="with a controller as --teacher: DART's action noise while the expert drives, standard "
+                         "deviation in action units (default 0)")
+    tr.add_argument("--average-labels", action="store_true", default=None,
+                    help="with a controller as --teacher: label each sample with the expert's actions averaged over "
+                         "its policy period")
+    tr.add_argument("--expert-follows", action="store_true", default=None,
+                    help="with mpc as --teacher: the expert's CoM and yaw targets follow the robot (it tracks the "
+                         "commanded velocity, not a position the student cannot observe)")
+    tr.add_argument("--takeover", type=bounded_float(0.0, 100.0, lo_open=True), default=None,
+                    help="with a controller as --teacher: the expert takes a student's episode over once their "
+                         "actions differ by more than this (rms, action units, smoothed over 0.2 s)")
+    tr.add_argument("--expert-truth", action="store_true", default=None,
+                    help="with a controller as --teacher: the expert reads the simulator's base state instead of "
+                         "estimating it (the student never does)")
     tr.add_argument("--run-root", default="runs/train",
                     help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>]")
     tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")

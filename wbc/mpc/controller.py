@@ -95,6 +95,9 @@ class MpcControllerConfig:
             gravity compensation; also the fallback when the QP fails) or ``qp`` (PlaCo's inverse-dynamics QP,
             `WholeBodyQp`; it fell in fast turns, see docs/mpc-notes.md).
         wbc: the whole-body QP's gains and weights.
+        xy_leash: the CoM target's leash around the measured CoM, per horizontal axis (`wbc.mpc.reference`) [m];
+            0 tracks the commanded velocity alone, forgetting where the command would have put the robot.
+        yaw_leash: the yaw target's leash around the measured yaw [rad]; 0 tracks the commanded yaw rate alone.
 
     Raises:
         ConfigError: an unknown `whole_body`, update intervals below one tick, an MPC step that is not
@@ -125,8 +128,14 @@ class MpcControllerConfig:
     velocity_offset_limit: float = 0.5
     whole_body: str = "legs"
     wbc: WholeBodyConfig = field(default_factory=WholeBodyConfig)
+    xy_leash: float = XY_LEASH_M
+    yaw_leash: float = YAW_LEASH_RAD
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.xy_leash) and math.isfinite(self.yaw_leash)
+                and self.xy_leash >= 0.0 and self.yaw_leash >= 0.0):
+            raise ConfigError(f"MpcControllerConfig: xy_leash and yaw_leash must be >= 0, got {self.xy_leash} and "
+                              f"{self.yaw_leash}")
         if self.whole_body not in WHOLE_BODY_LAYERS:
             raise ConfigError(f"MpcControllerConfig.whole_body must be 'qp' (PlaCo's whole-body QP) or 'legs' (the "
                               f"leg-level layer), got {self.whole_body!r}; pass one of {', '.join(WHOLE_BODY_LAYERS)}")
@@ -172,7 +181,8 @@ class MpcController:
         self.gait = GaitScheduler(cfg.gait)
         self.estimator = BaseEstimator(self.dt, cfg.estimator)
         self.reference = MotionReference(control_dt=self.dt, horizon=cfg.mpc.horizon, step_s=cfg.mpc.dt,
-                                         body_height=cfg.body_height, arm_q=desc.arm.nominal_q)
+                                         body_height=cfg.body_height, arm_q=desc.arm.nominal_q,
+                                         xy_leash=cfg.xy_leash, yaw_leash=cfg.yaw_leash)
         self.feet = FootholdPlanner(cfg.gait, cfg.footholds, cfg.swing_height, cfg.touchdown_depth)
         self.targets = PlanTargets(horizon=cfg.mpc.horizon, step_s=cfg.mpc.dt, arm_moves=arm_moves)
         self.wbc = WholeBodyQp(desc, cfg.wbc) if cfg.whole_body == "qp" else None
@@ -242,7 +252,7 @@ class MpcController:
         out[ts.C_ARM_FIRST] = self._arm_first
         out[ts.C_PERIOD], out[ts.C_DUTY], out[ts.C_MARGIN] = self.gait.clock[:3]
         out[ts.C_INV_FORCE], out[ts.C_SLIP2], out[ts.C_DT] = self._inv_contact_force, self._slip2, self.dt
-        out[ts.C_XY_LEASH], out[ts.C_YAW_LEASH] = XY_LEASH_M, YAW_LEASH_RAD
+        out[ts.C_XY_LEASH], out[ts.C_YAW_LEASH] = cfg.xy_leash, cfg.yaw_leash
         out[ts.C_STANCE_S], out[ts.C_CAPTURE] = cfg.gait.stance_s, cfg.footholds.capture_gain
         out[ts.C_CENTRIPETAL], out[ts.C_MAX_OFFSET] = cfg.footholds.centripetal_gain, cfg.footholds.max_offset
         out[ts.C_MIN_HEIGHT], out[ts.C_BELOW_Z] = MIN_CAPTURE_HEIGHT_M, float(cfg.touchdown_depth)

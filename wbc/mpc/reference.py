@@ -49,18 +49,21 @@ class MotionReference:
         step_s: MPC step length [s].
         body_height: CoM height above the stance feet to hold [m].
         arm_q: nominal arm joint positions, the arm's reference (3,) [rad].
+        xy_leash: the CoM target's leash, per horizontal axis [m] (`XY_LEASH_M`).
+        yaw_leash: the yaw target's leash [rad] (`YAW_LEASH_RAD`).
 
     Attributes:
         yaw: the measured yaw, unwrapped (continuous over turns) [rad].
-        yaw_target: the yaw target, within `YAW_LEASH_RAD` of `yaw` [rad].
-        xy_target: the horizontal CoM target, world, within `XY_LEASH_M` of the CoM on each axis (2,) [m].
+        yaw_target: the yaw target, within `yaw_leash` of `yaw` [rad].
+        xy_target: the horizontal CoM target, world, within `xy_leash` of the CoM on each axis (2,) [m].
         targets: the targets as one array, (yaw, yaw target, CoM target x, CoM target y), updated in place by
             `update` (or the controller's compiled tick, `wbc.mpc.compiled.reference_update`, the same law).
     """
 
     def __init__(self, *, control_dt: float, horizon: int, step_s: float, body_height: float,
-                 arm_q: np.ndarray) -> None:
+                 arm_q: np.ndarray, xy_leash: float = XY_LEASH_M, yaw_leash: float = YAW_LEASH_RAD) -> None:
         self.control_dt = control_dt
+        self.xy_leash, self.yaw_leash = xy_leash, yaw_leash
         self.horizon = horizon
         self.step_s = step_s
         self.body_height = body_height
@@ -117,9 +120,9 @@ class MotionReference:
         vx, vy = command.vx, command.vy
         vx_world = cy * vx - sy * vy
         vy_world = sy * vx + cy * vy
-        targets[2] = com_x + _leash(targets.item(2) + vx_world * dt - com_x, XY_LEASH_M)
-        targets[3] = com_y + _leash(targets.item(3) + vy_world * dt - com_y, XY_LEASH_M)
-        targets[1] = unwrapped + _leash(targets.item(1) + command.yaw_rate * dt - unwrapped, YAW_LEASH_RAD)
+        targets[2] = com_x + _leash(targets.item(2) + vx_world * dt - com_x, self.xy_leash)
+        targets[3] = com_y + _leash(targets.item(3) + vy_world * dt - com_y, self.xy_leash)
+        targets[1] = unwrapped + _leash(targets.item(1) + command.yaw_rate * dt - unwrapped, self.yaw_leash)
         return vx_world, vy_world
 
     def trajectory(self, command: VelocityCommand, ground_z: float, inertia_world: np.ndarray) -> np.ndarray:

@@ -9,10 +9,19 @@ expert with probability beta^k and otherwise by the current student, whose mista
 never visits under the expert (Ross et al., 2011). After each round the student is fitted to everything collected so far
 (`fit_student`) and exported (``<run_dir>/policy.npz/.json``), with the data (``data.npz``) and the round's figures
 (``progress.json``): a run that stops loses at most the round in progress, and ``resume`` continues after the last
-finished round.
+finished round. Each round's export also stays as ``<run_dir>/rounds/policy-<k>``: the episodes the student drives in
+round k + 1 measure the student fitted in round k, on training seeds.
 
 While the expert drives, the student's previous-action input is the expert's action as a policy would have sent it,
-so the observation means the same thing under both drivers.
+so the observation means the same thing under both drivers. The samples of each episode are kept in time order with
+the episode's id (``episode`` in ``data.npz``), so a student with memory (`FitConfig.history`) is fitted on the very
+window of observations it would have read had it driven: the observations it sees and the previous actions in them
+are built the same way whoever drives.
+
+DART (Laskey et al., 2017): with ``expert_noise`` > 0 the robot, while the expert drives, gets the expert's command
+plus the torque of a Gaussian action offset (standard deviation ``expert_noise`` action units, drawn each policy tick
+and held over it, as a policy's action is), and the labels stay the expert's clean actions: the expert then shows how
+it recovers from the small errors a student makes, from round 0 on.
 """
 
 from __future__ import annotations
@@ -46,6 +55,7 @@ from wbc.learned.train.distill import (
     student_policy_file,
 )
 from wbc.learned.train.stages import TASKS
+from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.provenance import provenance
 from wbc.robots.description import RobotDescription
 from wbc.scenario import load_scenario
@@ -70,6 +80,23 @@ class DaggerConfig:
         episode_s: play only the first seconds of each episode (None: the scenario's whole duration).
         beta: in round k an episode is driven by the expert with probability beta^k.
         seed: training seed (episodes use scenario seed `TRAIN_SEED_OFFSET` + seed).
+        expert_noise: DART's action noise while the expert drives [action units, standard deviation]; 0: none.
+        average_labels: label a sample with the mean of the expert's actions over its policy period, the constant
+            action that best matches the expert's torques while a policy holds it, instead of the action at the
+            period's first tick.
+        expert_follows: the expert's CoM and yaw targets follow the robot (`MpcControllerConfig` leashes 0): the
+            MPC then tracks the commanded velocity and yaw rate and forgets where the command would have put the
+            robot, which no policy observation holds. With the arena's leashes (0.15 m, 0.3 rad) a student that
+            drifts draws labels that pull it back by up to the leash, a correction it cannot see the reason for.
+            Only an expert built by `MpcController` (``mpc``, ``mpc-locked``, ``mpc-noarm``).
+        takeover: in the episodes the student drives, the expert takes over once the student's actions differ from
+            its labels by more than this (rms over the joints, action units, smoothed over about 0.2 s), and drives to
+            the end: the rest of the episode shows the expert recovering from where the student led, and labels that
+            drift away from anything the student can act on are not collected under the student. None: never.
+        expert_truth: the expert reads the simulator's base position and velocity instead of estimating them (its
+            ground-truth switch); the student's observation is unchanged. A test of whether the expert's estimator,
+            which trusts the feet its own schedule puts down, makes its labels drift from a student that stands:
+            the drift stayed with it.
         fit: the student's supervised fit.
         run_dir: where the data, the policy and the progress go.
     """
@@ -81,6 +108,11 @@ class DaggerConfig:
     episode_s: float | None = None
     beta: float = 0.5
     seed: int = 0
+    expert_noise: float = 0.0
+    average_labels: bool = False
+    expert_follows: bool = False
+    takeover: float | None = None
+    expert_truth: bool = False
     fit: FitConfig = field(default_factory=FitConfig)
     run_dir: str = "runs/train/push-dagger-mpc"
 
@@ -93,6 +125,10 @@ class DaggerConfig:
             raise ConfigError(f"DaggerConfig: episode_s must be a positive number of seconds, got {self.episode_s}")
         if not 0.0 <= self.beta <= 1.0:
             raise ConfigError(f"DaggerConfig: beta must be in [0, 1], got {self.beta}")
+        if self.takeover is not None and not (math.isfinite(self.takeover) and self.takeover > 0.0):
+            raise ConfigError(f"DaggerConfig: takeover must be > 0 or None, got {self.takeover}")
+        if not (math.isfinite(self.expert_noise) and self.expert_noise >= 0.0):
+            raise ConfigError(f"DaggerConfig: expert_noise must be >= 0, got {self.expert_noise}")
 
     def expert_drives(self, round_index: int, episode: int) -> bool:
         """Whether the expert drives `episode` of round `round_index` (a pure function of the seed)."""
@@ -113,6 +149,14 @@ class DaggerController:
         env: the student's env configuration (observation scales, action scale, gains, policy rate).
         student: the student's controller (its policy file), or None while there is none (the expert must drive).
         expert_drives: who drives this episode.
+        noise: DART's action noise while the expert drives (standard deviation, action units); 0: none.
+        rng: draws the noise (with `noise` > 0).
+        average: label each sample with the mean of the expert's actions over its policy period (the constant
+            action closest, in least squares, to the expert's torques over the period) instead of the action at its
+            first tick.
+        takeover: hand the episode to the expert once the student's actions differ from the labels by more than
+            this (root mean square over the joints, action units, smoothed over about 0.2 s: an exponential mean
+            with weight 0.2 per policy tick); None: the student drives to the end.
 
     Raises:
         ConfigError: the student must drive but there is none, or the expert's period does not divide the
@@ -120,7 +164,8 @@ class DaggerController:
     """
 
     def __init__(self, expert: Controller, desc: RobotDescription, env: EnvConfig, student: LearnedController | None,
-                 *, expert_drives: bool) -> None:
+                 *, expert_drives: bool, noise: float = 0.0, rng: np.random.Generator | None = None,
+                 average: bool = False, takeover: float | None = None) -> None:
         if student is None and not expert_drives:
             raise ConfigError("DaggerController: no student yet; the expert must drive")
         ratio = expert.rate_hz * env.policy_dt
@@ -133,6 +178,12 @@ class DaggerController:
         self.default_q = desc.nominal_q.copy()
         self.kp, self.kd = env.gains(desc.num_joints)
         self.scale, self.clip, self.scales = env.action_scale, env.clip_actions, env.obs_scales
+        self.noise, self.rng = noise, rng if rng is not None else np.random.default_rng(0)
+        self.average, self.takeover = average, takeover
+        self.student_drove = not expert_drives
+        self.offset = np.zeros(self.default_q.size)
+        self.offset_tau = np.zeros(self.default_q.size)
+        self._sum, self._count = np.zeros(self.default_q.size), 0
         self.obs: list[np.ndarray] = []
         self.labels: list[np.ndarray] = []
         self.reset()
@@ -140,35 +191,86 @@ class DaggerController:
     def reset(self) -> None:
         """Reset the expert and the student's inputs; the collected samples stay."""
         self.expert.reset()
+        if self.student is not None:
+            self.student.reset()
         self.tick = 0
+        self._count = 0
+        self.expert_drives = not self.student_drove
+        self.taken_over_at: int | None = None
+        self.disagreement = 0.0
+        self.offset = np.zeros(self.default_q.size)
         self.last_action = np.zeros(self.default_q.size)
         self.held: MotorCommand | None = None
 
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """One expert tick; on policy ticks also a labelled sample and, when it drives, the student's command."""
         expert_cmd = self.expert.act(state, command)
-        if self.tick % self.every == 0:
+        policy_tick = self.tick % self.every == 0
+        instant = None
+        if policy_tick or self.average:
+            instant = expert_action(expert_cmd, state.q, state.dq, default_q=self.default_q, action_scale=self.scale,
+                                    kp=self.kp, kd=self.kd)
+        if policy_tick:
+            self.finish()
             obs = policy_observation(
                 gyro_in_body=state.gyro_in_body[None], imu_quat=state.imu_quat[None],
                 command=command.as_array()[None], q=state.q[None], dq=state.dq[None],
                 last_action=self.last_action[None], default_q=self.default_q, scales=self.scales)[0]
-            label = np.clip(expert_action(expert_cmd, state.q, state.dq, default_q=self.default_q,
-                                          action_scale=self.scale, kp=self.kp, kd=self.kd), -self.clip, self.clip)
             self.obs.append(obs)
-            self.labels.append(label)
+            self.labels.append(np.clip(instant, -self.clip, self.clip))
+            self._sum, self._count = instant.copy(), 1
             if self.expert_drives:
-                self.last_action = label
+                if self.noise > 0.0:
+                    self.offset = self.noise * self.rng.standard_normal(instant.size)
+                    self.offset_tau = self.kp * self.scale * self.offset
             else:
                 assert self.student is not None
-                action = np.clip(self.student.policy(obs[None], {})[0], -self.clip, self.clip)
+                # the student's own history: the same observations, in order, as recorded
+                action = self.student.step(obs)
                 self.last_action = action
                 self.held = MotorCommand(q=self.default_q + self.scale * action, dq=np.zeros_like(action),
                                          kp=self.kp, kd=self.kd, tau=np.zeros_like(action))
+        elif self.average and self._count:
+            self._sum += instant
+            self._count += 1
         self.tick += 1
         if self.expert_drives:
+            if self.noise > 0.0:
+                return dataclasses.replace(expert_cmd, tau=expert_cmd.tau + self.offset_tau)
             return expert_cmd
         assert self.held is not None
         return self.held
+
+    def finish(self) -> None:
+        """Close the last sample's policy period.
+
+        Its label becomes final (averaged over the period with `average`) and, while the expert drives, so does the
+        previous action the next observation reads (the label, plus DART's offset). Called at each policy tick and
+        once after the episode.
+        """
+        if not self._count:
+            return
+        if self.average:
+            self.labels[-1] = np.clip(self._sum / self._count, -self.clip, self.clip)
+        if self.expert_drives:
+            self.last_action = np.clip(self.labels[-1] + self.offset, -self.clip, self.clip)
+        elif self.takeover is not None:
+            # the student's action over the period against its label; the next observation still reads the
+            # student's action, which is what the robot got
+            error = float(np.sqrt(np.mean((self.last_action - self.labels[-1]) ** 2)))
+            self.disagreement = 0.8 * self.disagreement + 0.2 * error
+            if self.disagreement > self.takeover:
+                self.expert_drives = True
+                self.taken_over_at = len(self.labels)
+        self._count = 0
+
+    def use_ground_truth(self, truth: Any) -> None:
+        """Pass the simulator's base state to the expert (`DaggerConfig.expert_truth`); the student never reads it."""
+        switch = getattr(self.expert, "use_ground_truth", None)
+        if switch is None:
+            raise ConfigError(f"DaggerController: the expert {type(self.expert).__name__} has no ground-truth switch; "
+                              "run without expert_truth")
+        switch(truth)
 
     def counters(self) -> dict[str, int]:
         """The expert's event counters."""
@@ -197,6 +299,15 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             configuration, or a run directory that already holds a run (without ``resume``).
     """
     expert_spec = get_controller(cfg.expert)
+    make_expert = expert_spec.make
+    if cfg.expert_follows:
+        if expert_spec.make is not MpcController:
+            raise ConfigError(f"DaggerConfig.expert_follows: {cfg.expert!r} is not built by MpcController; its "
+                              "targets cannot be made to follow the robot")
+
+        def make_expert(desc: RobotDescription) -> Controller:
+            return MpcController(desc, MpcControllerConfig(xy_leash=0.0, yaw_leash=0.0))
+
     spec = TASKS[cfg.task]
     scenario = load_scenario(spec.scenario)
     env = _student_env(cfg, expert_spec.arm_mode)
@@ -205,6 +316,7 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
     progress: dict[str, Any] = {"rounds": []}
     obs_all: list[np.ndarray] = []
     act_all: list[np.ndarray] = []
+    ep_all: list[np.ndarray] = []
     if resume:
         if not (run_dir / "progress.json").exists():
             raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
@@ -214,7 +326,9 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
         progress = json.loads((run_dir / "progress.json").read_text())
         with np.load(run_dir / "data.npz") as data:
-            obs_all, act_all = [data["obs"]], [data["actions"]]
+            if "episode" not in data.files:
+                raise ConfigError(f"--resume: {run_dir}/data.npz predates the samples' episode ids; start a new run")
+            obs_all, act_all, ep_all = [data["obs"]], [data["actions"]], [data["episode"]]
     elif (run_dir / "progress.json").exists():
         raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
                           "--run-root")
@@ -242,47 +356,63 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                                             pushes=tuple(p for p in trial.pushes if p.start < cfg.episode_s))
             drives = cfg.expert_drives(k, e) or net is None
 
-            def make(desc: RobotDescription, drives: bool = drives,
+            def make(desc: RobotDescription, drives: bool = drives, index: int = index,
                      built: dict[str, DaggerController] = built) -> DaggerController:
                 student = LearnedController(desc, student_path) if not drives else None
-                ctrl = DaggerController(expert_spec.make(desc), desc, env, student, expert_drives=drives)
+                ctrl = DaggerController(make_expert(desc), desc, env, student, expert_drives=drives,
+                                        noise=cfg.expert_noise, rng=np.random.default_rng([cfg.seed, index, 7]),
+                                        average=cfg.average_labels, takeover=cfg.takeover)
                 built["ctrl"] = ctrl
                 return ctrl
 
             dagger_spec = ControllerSpec(name=f"dagger:{cfg.expert}", arm_mode=expert_spec.arm_mode, make=make,
                                          summary="DAgger collection")
             # a controller failure costs this episode's remaining ticks only: the samples before it are kept
-            record, _ = run_trial(trial, dagger_spec)
+            record, _ = run_trial(trial, dagger_spec, debug_truth=cfg.expert_truth)
             ctrl = built.pop("ctrl", None)
+            if ctrl is not None:
+                ctrl.finish()
             if ctrl is not None and ctrl.obs:
                 obs_all.append(np.asarray(ctrl.obs))
                 act_all.append(np.asarray(ctrl.labels))
+                ep_all.append(np.full(len(ctrl.obs), index))
             fell = bool(math.isfinite(record.fall_time_s))
-            episodes.append({"index": index, "band": band, "expert_drives": drives,
+            taken = None if ctrl is None or ctrl.taken_over_at is None else ctrl.taken_over_at * env.policy_dt
+            episodes.append({"index": index, "band": band, "expert_drives": drives, "takeover_s": taken,
                              "samples": 0 if ctrl is None else len(ctrl.obs), "fell": fell,
                              "fall_time_s": record.fall_time_s if fell else None, "error": record.error or None})
-        obs, actions = np.concatenate(obs_all), np.concatenate(act_all)
-        obs_all, act_all = [obs], [actions]
-        net, losses = fit_student(obs, actions, dataclasses.replace(cfg.fit, seed=cfg.fit.seed + k), start=net)
+        obs, actions, episode_ids = np.concatenate(obs_all), np.concatenate(act_all), np.concatenate(ep_all)
+        obs_all, act_all, ep_all = [obs], [actions], [episode_ids]
+        net, losses = fit_student(obs, actions, dataclasses.replace(cfg.fit, seed=cfg.fit.seed + k), start=net,
+                                  episode=episode_ids)
         wall = time.perf_counter() - t0
         student_rounds = [ep for ep in episodes if not ep["expert_drives"]]
         summary = {"round": k, "episodes": episodes, "samples_total": int(obs.shape[0]),
                    "student_episodes": len(student_rounds),
-                   "student_falls": sum(ep["fell"] for ep in student_rounds),
+                   "student_falls": sum(ep["fell"] and ep["takeover_s"] is None for ep in student_rounds),
+                   "student_takeovers": sum(ep["takeover_s"] is not None for ep in student_rounds),
                    "errors": sum(ep["error"] is not None for ep in episodes),
                    "fit_loss_first": losses[0] if losses else math.nan, "fit_loss_last": losses[-1] if losses
                    else math.nan, "wall_s": wall}
         progress["rounds"].append(summary)
         extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
+                 "history": cfg.fit.history, "expert_noise": cfg.expert_noise,
+                 "average_labels": cfg.average_labels, "expert_truth": cfg.expert_truth,
+                 "expert_follows": cfg.expert_follows, "takeover": cfg.takeover, "beta": cfg.beta,
+                 "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
-        np.savez(run_dir / "data.npz", obs=obs, actions=actions)
+        np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
         save_student(net, run_dir / "student.pt")
-        save_policy(student_path, student_policy_file(net, env, task=cfg.task, extra=extra))
+        exported = student_policy_file(net, env, task=cfg.task, extra=extra)
+        save_policy(student_path, exported)
+        # each round's student stays: the next round's figures measure it, and the newest is not always the best
+        save_policy(run_dir / "rounds" / f"policy-{k}", exported)
         (run_dir / "progress.json").write_text(json.dumps(progress, indent=2, default=float) + "\n")
         if log is not None:
             log(f"round {k}: {len(episodes)} episodes ({len(student_rounds)} driven by the student, "
-                f"{summary['student_falls']} of them fell), {obs.shape[0]} samples, fit loss "
+                f"{summary['student_falls']} of them fell, {summary['student_takeovers']} taken over), "
+                f"{obs.shape[0]} samples, fit loss "
                 f"{summary['fit_loss_first']:.4f} -> {summary['fit_loss_last']:.4f}, {wall:.1f} s")
     load_policy(student_path)  # the export reads back
     return {"run_dir": str(run_dir), "rounds": len(progress["rounds"]),

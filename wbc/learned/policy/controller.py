@@ -121,7 +121,17 @@ class LearnedController:
 
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """One policy step."""
-        obs = self.observation(state, command)[None]
+        action = self.step(self.observation(state, command))
+        target = self.default_q + self.action_scale * action
+        return MotorCommand(q=target, dq=self._zeros, kp=self.kp, kd=self.kd, tau=self._zeros)
+
+    def step(self, observation: np.ndarray) -> np.ndarray:
+        """The clipped action for this tick's policy observation (`observation`), which joins the history.
+
+        What `act` does short of the motor command: a caller that builds the observation itself (DAgger's collection,
+        whose previous action is the driver's) gets the same action, and the previous action becomes this one.
+        """
+        obs = np.asarray(observation, dtype=np.float64)[None]
         z = {}
         for part in self.policy.parts:
             history = self.histories.get(part.name)
@@ -136,8 +146,7 @@ class LearnedController:
         self._fresh = False
         action = np.clip(self.policy(obs, z)[0], -self.clip, self.clip)
         self.last_action = action
-        target = self.default_q + self.action_scale * action
-        return MotorCommand(q=target, dq=self._zeros, kp=self.kp, kd=self.kd, tau=self._zeros)
+        return action
 
     def counters(self) -> dict[str, int]:
         """No events."""
