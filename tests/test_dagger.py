@@ -105,6 +105,12 @@ def test_the_exported_history_student_reproduces_the_torch_student_on_a_history(
     save_policy(tmp_path / "student", student_policy_file(net, env, task="push", extra={}))
     pf = load_policy(tmp_path / "student")
     assert pf.meta["adaptation"]["history"] == h and pf.meta["extrinsics"]["dim"] == 4
+    # z comes from the history alone: the file has no encoder of privileged observations to ask for it
+    from wbc.learned.policy.numpy_policy import NumpyPolicy, PolicyInputError
+
+    assert pf.meta["extrinsics"]["privileged_parts"] == [] and not NumpyPolicy(pf).has_encoder
+    with pytest.raises(PolicyInputError, match="history alone"):
+        NumpyPolicy(pf).extrinsics(np.zeros((1, 1)))
     # the arena's controller, fed one episode's observations in order, acts as the torch student on its windows
     ctrl = LearnedController(get_robot("a1-wx200", "actuated"), tmp_path / "student")
     ctrl.reset()
@@ -261,9 +267,11 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
         assert np.all(np.abs(data["actions"]) <= 10.0)  # clipped to the policy's action range
     meta = json.loads((run / "policy.json").read_text())
     assert meta["training"]["method"] == "dagger" and meta["training"]["expert"] == "mpc"
-    # the student reads the last 25 observations through the file's adaptation module; its latent is declared as the
-    # extrinsics, with a note that it comes from the history
-    assert meta["adaptation"]["history"] == 25 and meta["extrinsics"]["privileged_parts"] == [["none", 1]]
+    # the student reads the last 25 observations through the file's adaptation module; its latent is declared as
+    # extrinsics of no privileged parts and no encoder, with a note that it comes from the history
+    assert meta["adaptation"]["history"] == 25 and meta["extrinsics"]["privileged_parts"] == []
+    with np.load(run / "policy.npz") as weights:
+        assert not any(k.startswith(("encoder/", "privileged_")) for k in weights.files)
     assert "history" in meta["extrinsics"]["note"] and "nothing privileged" in meta["extrinsics"]["note"]
     with np.load(run / "data.npz") as data:
         episodes = data["episode"]

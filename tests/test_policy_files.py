@@ -118,6 +118,9 @@ JSON_CASES = [
     (("extrinsics",), {"dim": "8", "hidden_dims": [], "privileged_parts": [["friction", 1]]}, "extrinsics/dim",
      "expected an integer"),
     (("extrinsics",), {"dim": 8, "hidden_dims": []}, "extrinsics/privileged_parts", "missing key"),
+    # a latent of no privileged parts comes from the history alone: the file must then declare where it comes from
+    (("extrinsics",), {"dim": 8, "hidden_dims": [], "privileged_parts": []}, "extrinsics/privileged_parts",
+     "declares no adaptation module"),
     (("training",), [1], "training", "expected an object"),
     ((CHECKSUM_KEY,), "abc", CHECKSUM_KEY, "expected 64 lowercase hex digits"),
 ]

@@ -74,12 +74,21 @@ class NumpyPolicy:
         adapt = meta.get("adaptation")
         self.history = int(adapt["history"]) if adapt is not None else 0
         self._adaptation = [(w.astype(np.float64), b.astype(np.float64)) for w, b in policy.layers("adaptation")]
-        if self.uses_extrinsics:
+        self.has_encoder = bool(self._encoder)
+        """Whether z can come from privileged observations (False: from the history alone, `adaptation`)."""
+        if self.has_encoder:
             self._priv_mean = a["privileged_mean"].astype(np.float64)
             self._priv_scale = 1.0 / (a["privileged_std"].astype(np.float64) + self.eps)
 
     def extrinsics(self, privileged: np.ndarray) -> np.ndarray:
-        """The extrinsics z from privileged observations, (N, P) -> (N, z_dim)."""
+        """The extrinsics z from privileged observations, (N, P) -> (N, z_dim).
+
+        Raises:
+            PolicyInputError: the file's z is learned from the history alone (no encoder; use `adaptation`).
+        """
+        if not self.has_encoder:
+            raise PolicyInputError("this policy's z is learned from its observation history alone (the file has no "
+                                   "encoder of privileged observations): compute it with `adaptation`")
         x = (np.asarray(privileged, dtype=np.float64) - self._priv_mean) * self._priv_scale
         return _mlp(self._encoder, self.activation, x)
 

@@ -12,6 +12,10 @@ NPZ holds float arrays only:
     adaptation/<i>/weight, .../bias        RMA adaptation module: the last H normalised policy observations,
                                            oldest first, flattened -> z (after RMA phase 2)
 
+A latent z learned from the history alone (a distilled student with memory, `wbc.learned.train.distill`) declares
+extrinsics with no privileged parts (``privileged_parts: []``, ``hidden_dims: []``) and an adaptation module: the
+file then holds no encoder and no privileged normaliser, and z only ever comes from the history.
+
 A network may drive some of the robot's joints only, as a part of a composite file
 (`wbc.learned.policy.composite_policy`, the decoupled baseline): then ``num_actions``, ``default_q``, ``kp`` and ``kd``
 are its outputs' joints'.
@@ -312,9 +316,9 @@ def _dims(value: Any, js: Path, name: str) -> list[int]:
     return [_integer(w, js, f"{name}/{i}", 1, MAX_WIDTH, "a layer's width") for i, w in enumerate(value)]
 
 
-def _named_sizes(value: Any, js: Path, name: str) -> list[tuple[str, int]]:
-    """``[[name, size], ...]``: non-empty, each name a string, each size an integer >= 1."""
-    if not isinstance(value, list) or not value:
+def _named_sizes(value: Any, js: Path, name: str, *, empty: bool = False) -> list[tuple[str, int]]:
+    """``[[name, size], ...]``: non-empty (unless `empty`), each name a string, each size an integer >= 1."""
+    if not isinstance(value, list) or not (value or empty):
         _fail(js, name, f"expected a non-empty array of [name, size] pairs, got {_kind(value)} {short(value, 60)}")
     out = []
     for i, entry in enumerate(value):
@@ -427,7 +431,15 @@ def check_meta(meta: dict[str, Any], js: Path, prefix: str = "") -> None:
                 _fail(js, f"{prefix}extrinsics/{key}", "missing key")
         _integer(extr["dim"], js, f"{prefix}extrinsics/dim", 1, MAX_WIDTH, "the size of z")
         _dims(extr["hidden_dims"], js, f"{prefix}extrinsics/hidden_dims")
-        _named_sizes(extr["privileged_parts"], js, f"{prefix}extrinsics/privileged_parts")
+        if not _named_sizes(extr["privileged_parts"], js, f"{prefix}extrinsics/privileged_parts", empty=True):
+            # a latent learned from the history alone: no encoder, and an adaptation module to give z
+            if meta.get("adaptation") is None:
+                _fail(js, f"{prefix}extrinsics/privileged_parts", "empty, so z can only come from the observation "
+                      "history, and the file declares no adaptation module: name the privileged parts the encoder "
+                      "reads, or declare the adaptation module")
+            if extr["hidden_dims"]:
+                _fail(js, f"{prefix}extrinsics/hidden_dims", f"{extr['hidden_dims']} for an encoder of no "
+                      "privileged parts: a latent learned from the history has no encoder, use []")
     adapt = meta.get("adaptation")
     if adapt is not None:
         if not isinstance(adapt, dict):
@@ -521,9 +533,10 @@ def check_shapes(policy: PolicyFile, npz: Path, js: Path) -> None:
     if extr is not None:
         z_dim = int(extr["dim"])
         priv_size = sum(size for _, size in extr["privileged_parts"])
-        _check_normaliser(a, "privileged", priv_size, eps, npz)
-        expected |= {"privileged_mean", "privileged_std"}
-        expected |= _check_chain(policy, "encoder", priv_size, z_dim, list(extr["hidden_dims"]), npz)
+        if priv_size:  # none: z is learned from the history alone, there is no encoder
+            _check_normaliser(a, "privileged", priv_size, eps, npz)
+            expected |= {"privileged_mean", "privileged_std"}
+            expected |= _check_chain(policy, "encoder", priv_size, z_dim, list(extr["hidden_dims"]), npz)
     adapt = m.get("adaptation")
     if adapt is not None:
         expected |= _check_chain(policy, "adaptation", int(adapt["history"]) * obs_size, z_dim,

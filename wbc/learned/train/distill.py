@@ -19,9 +19,8 @@ H normalised observations (oldest first, the window filled with the episode's fi
 does) and outputs a small latent z, which the actor reads beside the observation. The expert's internal state (the
 MPC's gait clock: which legs swing) is absent from a single observation but shows in the recent joint motion and
 previous actions, so the window lets the student tell the phases apart. Both networks are fitted end to end on the
-expert's labels; the file declares z as its extrinsics, as the format requires of an adaptation module, with a note
-that z is learned from the history and observes nothing privileged (its encoder is a placeholder: one input, zero
-weights).
+expert's labels; the file declares z as extrinsics with no privileged parts and no encoder (the format's latent
+learned from the history alone), with a note that it observes nothing privileged.
 """
 
 from __future__ import annotations
@@ -264,25 +263,20 @@ def student_policy_file(net: StudentNet, env: EnvConfig, *, task: str, extra: di
     """The student as a `PolicyFile` (stage 3: it drives every joint of the robot, arm included).
 
     A student with a history exports its adaptation module as the file's (``adaptation``), and its latent z as the
-    file's extrinsics, with a note that z comes from the history: the format's extrinsics block requires an encoder
-    of privileged inputs, which this student does not have, so the file holds a placeholder (one input named
-    ``none``, zero weights) that nothing reads when the policy runs from its history.
+    file's extrinsics with no privileged parts and no encoder: z only ever comes from the history.
     """
     pf = policy_file_from_actor(net, env, task=task, stage=3, extra=extra)
     if net.adaptation is None:
         return pf
     arrays, meta = dict(pf.arrays), dict(pf.meta)
     z = net.z_dim
-    arrays["privileged_mean"], arrays["privileged_std"] = np.zeros(1), np.ones(1)
-    arrays["encoder/0/weight"], arrays["encoder/0/bias"] = np.zeros((z, 1)), np.zeros(z)
     for i, m in enumerate(mod for mod in net.adaptation if isinstance(mod, torch.nn.Linear)):
         arrays[f"adaptation/{i}/weight"] = m.weight.detach().double().numpy()
         arrays[f"adaptation/{i}/bias"] = m.bias.detach().double().numpy()
     meta["extrinsics"] = {
-        "dim": z, "hidden_dims": [], "privileged_parts": [["none", 1]],
+        "dim": z, "hidden_dims": [], "privileged_parts": [],
         "note": "z is a latent learned from the observation history by the adaptation module, fitted end to end "
-                "with the actor on the expert's actions; it observes nothing privileged, and the encoder is a "
-                "placeholder the format requires (zero weights, never run)"}
+                "with the actor on the expert's actions; it observes nothing privileged"}
     meta["adaptation"] = {"history": net.history, "hidden_dims": list(net.adaptation_dims), "source": "distilled"}
     return PolicyFile(meta=meta, arrays=arrays)
 
