@@ -299,12 +299,13 @@ def test_the_velocity_offset_integrates_the_clipped_error_in_the_yaw_frame_up_to
     ctrl = MpcController(get_robot("a1-wx200"), cfg)
     ctrl.reference.targets[0] = np.pi / 2  # facing world +y
     ctrl.estimator.x[3:6] = (0.0, 1.0, 0.0)  # 1 m/s forward in the yaw frame
-    command = ctrl._offset_command(VelocityCommand(vx=1.05, vy=-0.3, yaw_rate=0.4))
+    ctrl._integrate_velocity(VelocityCommand(vx=1.05, vy=-0.3, yaw_rate=0.4))
+    command = ctrl._offset(VelocityCommand(vx=1.05, vy=-0.3, yaw_rate=0.4))
     # error (0.05, -0.3), clipped to (0.05, -0.1), times ki dt = 2 / 500
     assert ctrl.velocity_offset == pytest.approx((0.05 * 0.004, -0.1 * 0.004), abs=1e-12)
     assert (command.vx, command.vy, command.yaw_rate) == pytest.approx((1.05 + 0.0002, -0.3 - 0.0004, 0.4))
     for _ in range(1000):
-        ctrl._offset_command(VelocityCommand(vx=1.05, vy=-0.3))
+        ctrl._integrate_velocity(VelocityCommand(vx=1.05, vy=-0.3))
     assert ctrl.velocity_offset == pytest.approx((0.05 * 1001 * 0.004, -0.25))  # 1001 ticks of 0.05; the limit
     with pytest.raises(ConfigError, match="velocity_ki"):
         MpcControllerConfig(velocity_ki=-1.0)

@@ -349,17 +349,25 @@ class MpcController:
         """Estimate, (re)plan, and turn the plan into motor commands."""
         self._timings.clear()
         if self._ki > 0.0 and self._started:
-            command = self._offset_command(command)
+            self._integrate_velocity(command)
         if self._started and self.wbc is None and self._truth is None and self.kin.com_known and \
                 self.estimator.config.gain == "steady":
             return self._compiled_act(state, command)
         return self._staged_act(state, command)
 
-    def _offset_command(self, command: VelocityCommand) -> VelocityCommand:
-        """The command plus the velocity offset, after integrating the last tick's error (`velocity_ki`).
+    def _offset(self, command: VelocityCommand) -> VelocityCommand:
+        """The command the MPC tracks: the operator's plus the velocity offset (`velocity_ki`; none when off)."""
+        if self._ki <= 0.0:
+            return command
+        ox, oy = self.velocity_offset
+        return VelocityCommand(vx=command.vx + ox, vy=command.vy + oy, yaw_rate=command.yaw_rate)
+
+    def _integrate_velocity(self, command: VelocityCommand) -> None:
+        """Integrate the last tick's velocity error into `velocity_offset` (`velocity_ki`).
 
         The error is the command's against the estimated velocity of the last tick, both in the frame of the yaw
-        measured then; the offset is kept in that frame, so it turns with the robot.
+        measured then; the offset is kept in that frame, so it turns with the robot. A few floats a tick: the
+        command object with the offset is made only where a Python stage reads it (`_offset`).
         """
         x, yaw = self.estimator.x, self.reference.yaw
         c, s = math.cos(yaw), math.sin(yaw)
@@ -369,10 +377,7 @@ class MpcController:
         ey = command.vy - (-s * vx_world + c * vy_world)
         ox = self.velocity_offset[0] + gain * min(max(ex, -clip), clip)
         oy = self.velocity_offset[1] + gain * min(max(ey, -clip), clip)
-        ox = min(max(ox, -limit), limit)
-        oy = min(max(oy, -limit), limit)
-        self.velocity_offset = (ox, oy)
-        return VelocityCommand(vx=command.vx + ox, vy=command.vy + oy, yaw_rate=command.yaw_rate)
+        self.velocity_offset = (min(max(ox, -limit), limit), min(max(oy, -limit), limit))
 
     def _staged_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """The tick stage by stage: each stage one call (most of them compiled, `wbc.mpc.compiled`).
@@ -382,6 +387,7 @@ class MpcController:
         `_compiled_act`, the same stages in one compiled call, to the same bits.
         """
         cfg, kin = self.config, self.kin
+        command = self._offset(command)
         kin.tick(state.imu_quat, state.q, state.dq, state.gyro_in_body)
         if not self._started:
             self._start()
@@ -420,6 +426,9 @@ class MpcController:
         replan = self._replan_due()
         refresh = self.tick % self.config.foothold_every == 0
         vx, vy, yaw_rate = float(command.vx), float(command.vy), float(command.yaw_rate)
+        if self._ki > 0.0:  # what `_offset` gives the Python stages, to the bit
+            vx += self.velocity_offset[0]
+            vy += self.velocity_offset[1]
         rows = np.empty((5, kin.n))  # a new array each tick: it becomes the command's (immutable) storage
         head = (state.imu_quat, state.gyro_in_body, state.q, state.dq, state.accel_in_body, state.foot_force, self.t,
                 vx, vy, yaw_rate, refresh)
@@ -432,10 +441,10 @@ class MpcController:
         else:
             stage = control_tick(ts.STAGE_FRONT, ts.STAGE_DONE, *head, forces, v_arm, *tail)
         if stage < ts.STAGE_LEGS:  # a stage handed to the Python law
-            self._python_stages(stage, command, refresh)
+            self._python_stages(stage, self._offset(command), refresh)
             stage = ts.STAGE_LEGS
         if replan:
-            self._replan(state, command)
+            self._replan(state, self._offset(command))
             step = self._plan_step() if self.plan is not None else 0
             return self._command(state, self._leg_torques(self._contact, self._progress, step), step)
         if stage < ts.STAGE_DONE:
