@@ -1050,6 +1050,38 @@ def test_policy_inference_gives_the_same_bits_whatever_blas_kernel_the_cpu_selec
     assert len(digests) == 1, digests
 
 
+def test_the_compiled_layers_give_numpys_bits_for_every_length_and_batch():
+    # the compiled affine layer must add in numpy's pairwise order (runs under 8, blocks of up to 128, halves above)
+    # and the ELU must be numpy's: every published trial of a policy was played with `np.add.reduce` and numpy's ELU
+    from wbc.learned.policy.numpy_policy import activation, dense
+
+    rng = np.random.default_rng(7)
+    lengths = [1, 7, 8, 9, 15, 16, 127, 128, 129, 130, 255, 256, 257, 300, 1350, 2049]
+    for n_in in lengths:
+        for shape in ((n_in,), (1, n_in), (5, n_in), (2, 3, n_in)):
+            x = rng.standard_normal(shape) * rng.choice([1e-3, 1.0, 30.0])
+            w32 = rng.standard_normal((int(rng.integers(1, 70)), n_in)).astype(np.float32)
+            b = rng.standard_normal(w32.shape[0])
+            expected = np.add.reduce(x[..., None, :] * w32.astype(np.float64), axis=-1) + b
+            got = dense(x, w32, b)
+            assert got.shape == expected.shape and got.tobytes() == expected.tobytes(), (n_in, shape)
+    x = np.concatenate([rng.standard_normal(500) * 5, [-0.0, 0.0, -1e-310, -800.0, np.nan, np.inf, -np.inf]])
+    expected = np.where(x > 0.0, x, np.expm1(np.minimum(x, 0.0)))
+    assert activation("elu", x).tobytes() == expected.tobytes()
+    assert activation("elu", x.reshape(1, -1)).tobytes() == expected.tobytes()
+
+
+def test_a_policy_handed_an_input_of_the_wrong_width_says_so():
+    from wbc.learned.policy import WEIGHTS_DIR
+    from wbc.learned.policy.numpy_policy import NumpyPolicy
+    from wbc.learned.policy.policy_file import load_policy
+
+    policy = NumpyPolicy(load_policy(WEIGHTS_DIR / "a1-wx200-actuated.npz"))
+    obs_size = len(policy.file.arrays["obs_mean"])
+    with pytest.raises(PolicyInputError, match=f"takes {policy.history * obs_size} inputs"):
+        policy.adaptation(np.zeros((1, policy.history * obs_size + 1)))
+
+
 @pytest.mark.parametrize("band, option_yaw", [("stand", 0.0), ("2.0", -2.0), ("2.0", 2.0), ("1.0", -0.5)])
 def test_the_shipped_turn_policy_turns_both_ways_and_stands(band, option_yaw, tmp_path, monkeypatch):
     """The shipped go1-arm pi3 (`learned`) on turn-both-ways: right turns at 2 m/s, left, and standing still."""
