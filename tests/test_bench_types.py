@@ -22,6 +22,8 @@ from wbc.cli import printers
 from wbc.cli.main import main
 from wbc.hardware.unitree import LinkStats
 from wbc.tools.bench import (
+    ActBenchResult,
+    ActCost,
     ArmBenchResult,
     ArmRateRow,
     ArmReactionRow,
@@ -170,6 +172,20 @@ def _latency(wire: bool = True) -> LatencyBenchResult:
                               fine_ms=2.0, wire=figures if wire else None, margins=(stand, mpc), machine=MACHINE)
 
 
+ACT_KEYS = ["scenario", "band", "seed", "trial", "costs", "machine", "load_1min", "ratios"]
+ACT_COST_KEYS = ["controller", "rate_hz", "ticks", "survived_s", "fell", "cpu_us_per_tick_median",
+                 "cpu_us_per_tick_mean", "cpu_ms_per_s", "rounds"]
+
+
+def _act() -> ActBenchResult:
+    mpc = ActCost(controller="mpc", rate_hz=500.0, ticks=10000, survived_s=20.0, fell=False,
+                  cpu_us_per_tick_median=18.0, cpu_us_per_tick_mean=50.0, cpu_ms_per_s=25.0, rounds=3)
+    student = ActCost(controller="policy:student", rate_hz=50.0, ticks=400, survived_s=8.0, fell=True,
+                      cpu_us_per_tick_median=60.0, cpu_us_per_tick_mean=62.5, cpu_ms_per_s=3.125, rounds=3)
+    return ActBenchResult(scenario="scenarios/push.toml", band="ood", seed=1, trial=2, costs=(mpc, student),
+                          machine=MACHINE, load_1min=1.5)
+
+
 def _arm() -> ArmBenchResult:
     return ArmBenchResult(
         robot="a1-wx200", latency_ms=1.0, seconds=0.3, step_rad=-0.05,
@@ -268,6 +284,39 @@ def test_latency_json_puts_the_wire_between_the_sweep_and_the_margins():
     assert list(_json(_latency(wire=False).as_dict())) == LATENCY_KEYS + ["margins", "machine"]
 
 
+def test_act_json_has_one_dict_per_controller_and_the_ratios_against_the_first():
+    out = _json(_act().as_dict())
+    assert list(out) == ACT_KEYS
+    assert [list(c) for c in out["costs"]] == [ACT_COST_KEYS] * 2
+    assert out["ratios"] == [{"controller": "mpc", "per_tick": 1.0, "per_simulated_s": 1.0},
+                             {"controller": "policy:student", "per_tick": 1.25, "per_simulated_s": 0.125}]
+
+
+def test_print_bench_act_shows_both_ratios_and_where_a_controller_fell(capsys):
+    printers.print_bench_act(_act())
+    text = capsys.readouterr().out
+    assert "band ood, seed 1, trial 2" in text
+    assert "  mpc " in text and "18.0 / 50.0" in text and "25.00" in text
+    assert "1.250" in text and "0.125" in text and "(fell at 8.00 s)" in text
+
+
+def test_bench_act_times_each_controllers_act_on_the_same_trial(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log file here
+    from pathlib import Path
+
+    from wbc.tools.bench import bench_act
+
+    scenario = str(Path(__file__).resolve().parent.parent / "scenarios/push.toml")
+    result = bench_act(["stand", "stand"], scenario=scenario, band="in", seed=0, trial=0, repeats=2)
+    assert [c.controller for c in result.costs] == ["stand", "stand"]
+    for cost in result.costs:
+        assert cost.rounds == 2 and cost.rate_hz > 0
+        if not cost.fell:
+            assert cost.ticks == round(cost.survived_s * cost.rate_hz)
+        assert 0 < cost.cpu_us_per_tick_median and 0 < cost.cpu_ms_per_s
+    assert result.ratios()[0][1:] == (1.0, 1.0)
+
+
 def test_arm_json_keeps_its_keys_and_one_dict_per_row():
     out = _json(_arm().as_dict())
     assert list(out) == ARM_KEYS
@@ -354,6 +403,7 @@ BENCHES = [
     (["bench", "hw"], "bench_hw", _hw, printers.print_bench_hw),
     (["bench", "latency"], "bench_latency", _latency, printers.print_bench_latency),
     (["bench", "arm"], "bench_arm", _arm, printers.print_bench_arm),
+    (["bench", "act", "mpc"], "bench_act", _act, printers.print_bench_act),
 ]
 
 

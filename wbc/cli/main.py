@@ -48,6 +48,7 @@ from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import Trial
 from wbc.tools.arm_momentum import arm_momentum_study
 from wbc.tools.bench import (
+    bench_act,
     bench_arm,
     bench_hw,
     bench_latency,
@@ -161,6 +162,16 @@ def _bench_latency(args: argparse.Namespace) -> int:
         printers.print_json(result.as_dict())
     else:
         printers.print_bench_latency(result)
+    return 0
+
+
+def _bench_act(args: argparse.Namespace) -> int:
+    result = bench_act(tuple(args.controllers), scenario=args.scenario, band=args.band, seed=args.seed,
+                       trial=args.trial, repeats=args.repeats)
+    if args.json:
+        printers.print_json(result.as_dict())
+    else:
+        printers.print_bench_act(result)
     return 0
 
 
@@ -761,6 +772,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "bench train": _bench_train,
     "bench hw": _bench_hw,
     "bench latency": _bench_latency,
+    "bench act": _bench_act,
     "bench arm": _bench_arm,
     "hw emulate": _hw_emulate,
     "hw check": _hw_check,

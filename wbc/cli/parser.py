@@ -234,6 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_bench_train_parser(bench)
     _add_bench_hw_parser(bench)
     _add_bench_latency_parser(bench)
+    _add_bench_act_parser(bench)
     _add_bench_arm_parser(bench)
     hw = sub.add_parser("hw", help="real robots: an emulator, a read-only check, a trial on the robot")
     hws = hw.add_subparsers(dest="what", required=True)
@@ -362,6 +363,23 @@ def _add_bench_hw_parser(bench: _Commands) -> None:
     add_realtime_options(bhw, who="the emulator's process (on the first CPU) and the link's side in the bench's own "
                          "(on the last, as the I/O process on a robot)", cpu="first")
     bhw.set_defaults(handler="bench hw")
+
+
+def _add_bench_act_parser(bench: _Commands) -> None:
+    """``wbc bench act``: each controller's act in CPU per call and per simulated second."""
+    bact = bench.add_parser("act", help="controllers' act in CPU per call and per simulated second, same trial",
+                            description="Play the same trial with each controller, taking turns, and time every act "
+                            "call on the thread's CPU clock: CPU per call (a control tick at the controller's own "
+                            "rate) and per simulated second, with both ratios against the first controller.")
+    bact.add_argument("controllers", nargs="+", help="controller names; the first is the reference of the ratios")
+    bact.add_argument("--scenario", default="scenarios/push.toml", help="scenario file (default scenarios/push.toml)")
+    bact.add_argument("--band", default="in", help="the trial's band (default in)")
+    bact.add_argument("--seed", type=bounded_int(0, 2**32 - 1), default=0, help="the trial's seed (default 0)")
+    bact.add_argument("--trial", type=bounded_int(0, 1_000_000), default=0, help="the trial's index (default 0)")
+    bact.add_argument("--repeats", type=bounded_int(1, 100), default=3,
+                      help="rounds, each controller one trial a round; the least CPU per second is kept (default 3)")
+    bact.add_argument("--json", action="store_true", help="print JSON")
+    bact.set_defaults(handler="bench act")
 
 
 def _add_bench_latency_parser(bench: _Commands) -> None:

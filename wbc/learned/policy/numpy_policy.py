@@ -133,6 +133,24 @@ def _elu_rows(x):  # pragma: no cover - compiled
     return x
 
 
+@numba.njit(cache=True, nogil=True)
+def _mlp_rows(x, weights, biases, elu):  # pragma: no cover - compiled
+    """The whole network in one call: each layer `_dense_rows`, the hidden ones through the ELU when `elu` (else none).
+
+    `weights` and `biases` are tuples of one array type, the weights transposed (in, out).
+    """
+    h = x
+    n = len(weights)
+    for k in range(n):
+        wt = weights[k]
+        out = np.empty((h.shape[0], wt.shape[1]))
+        _dense_rows(h, wt, biases[k], out)
+        if elu and k < n - 1:
+            _elu_rows(out)
+        h = out
+    return h
+
+
 def _rows(x: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x.reshape(-1, x.shape[-1]), dtype=np.float64)
 
@@ -177,22 +195,39 @@ def activation(name: str, x: np.ndarray) -> np.ndarray:
     return x
 
 
-def _mlp(layers: list[tuple[np.ndarray, np.ndarray]], act: str, x: np.ndarray) -> np.ndarray:
-    """The layers given as (weights transposed (in, out), biases): hidden layers activated, the last one not."""
+class _Layers:
+    """A network's layers ready for the compiled loop: weights transposed (in, out), biases float64.
+
+    The weights keep the file's float32 where every layer has it (each converts exactly to the float64 the products
+    are taken in, and half the bytes stream through the cache), else all become float64.
+    """
+
+    def __init__(self, layers: list[tuple[np.ndarray, np.ndarray]]) -> None:
+        dtype = np.float32 if all(np.asarray(w).dtype == np.float32 for w, _ in layers) else np.float64
+        self.weights = tuple(np.ascontiguousarray(np.asarray(w, dtype=dtype).T) for w, _ in layers)
+        self.biases = tuple(np.ascontiguousarray(b, dtype=np.float64) for _, b in layers)
+
+    def __bool__(self) -> bool:
+        return bool(self.weights)
+
+    def __len__(self) -> int:
+        return len(self.weights)
+
+
+def _mlp(layers: _Layers, act: str, x: np.ndarray) -> np.ndarray:
+    """The network on (..., in) inputs: hidden layers activated, the last one not."""
     x = np.asarray(x, dtype=np.float64)
-    for i, (wt, b) in enumerate(layers):
-        if x.ndim == 0 or x.shape[-1] != wt.shape[0]:
-            raise PolicyInputError(f"the layer takes {wt.shape[0]} inputs, got an array of shape {x.shape}")
+    n_in = layers.weights[0].shape[0]
+    if x.ndim == 0 or x.shape[-1] != n_in:
+        raise PolicyInputError(f"the layer takes {n_in} inputs, got an array of shape {x.shape}")
+    if act in ("elu", "identity"):
+        out = _mlp_rows(_rows(x), layers.weights, layers.biases, act == "elu")
+        return out.reshape(*x.shape[:-1], out.shape[1])
+    for i, (wt, b) in enumerate(zip(layers.weights, layers.biases, strict=True)):
         x = _dense_t(x, wt, b)
         if i < len(layers) - 1:
             x = activation(act, x)
     return x
-
-
-def _prepared(layers: list[tuple[np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
-    # the weights as the file holds them (float32: each converts exactly to the float64 the products are taken in),
-    # transposed so that the compiled layer runs along contiguous rows
-    return [(np.ascontiguousarray(np.asarray(w).T), np.asarray(b, dtype=np.float64)) for w, b in layers]
 
 
 class NumpyPolicy:
@@ -207,14 +242,14 @@ class NumpyPolicy:
         meta, a = policy.meta, policy.arrays
         self.activation = meta["activation"]
         self.eps = float(meta["normalizer_eps"])
-        self._layers = _prepared(policy.layers("policy"))
-        self._encoder = _prepared(policy.layers("encoder"))
+        self._layers = _Layers(policy.layers("policy"))
+        self._encoder = _Layers(policy.layers("encoder"))
         self._obs_mean = a["obs_mean"].astype(np.float64)
         self._obs_scale = 1.0 / (a["obs_std"].astype(np.float64) + self.eps)
         self.uses_extrinsics = meta.get("extrinsics") is not None
         adapt = meta.get("adaptation")
         self.history = int(adapt["history"]) if adapt is not None else 0
-        self._adaptation = _prepared(policy.layers("adaptation"))
+        self._adaptation = _Layers(policy.layers("adaptation"))
         self.has_encoder = bool(self._encoder)
         """Whether z can come from privileged observations (False: from the history alone, `adaptation`)."""
         if self.has_encoder:
