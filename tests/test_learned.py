@@ -1071,6 +1071,21 @@ def test_the_compiled_layers_give_numpys_bits_for_every_length_and_batch():
     assert activation("elu", x.reshape(1, -1)).tobytes() == expected.tobytes()
 
 
+def test_one_quaternions_projected_gravity_has_the_bits_of_the_batched_arrays():
+    # a robot's tick takes the Python-float path, the training env's batches the arrays' path: one policy, one result
+    from wbc.learned.policy.observations import projected_gravity
+
+    rng = np.random.default_rng(11)
+    quats = rng.standard_normal((2000, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    quats[:3] = [[1.0, 0.0, 0.0, 0.0], [-0.0, 1.0, -0.0, 0.0], [0.5, -0.5, 0.5, -0.5]]
+    batched = projected_gravity(quats)
+    assert np.allclose(batched[0], [0.0, 0.0, -1.0]) and np.allclose(batched[1], [0.0, 0.0, 1.0])
+    for quat, expected in zip(quats, batched, strict=True):
+        assert projected_gravity(quat[None]).tobytes() == expected.tobytes()
+        assert projected_gravity(quat).shape == (3,) and projected_gravity(quat).tobytes() == expected.tobytes()
+
+
 def test_a_policy_handed_an_input_of_the_wrong_width_says_so():
     from wbc.learned.policy import WEIGHTS_DIR
     from wbc.learned.policy.numpy_policy import NumpyPolicy

@@ -89,7 +89,16 @@ class ObsLayout:
 
 
 def projected_gravity(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Unit gravity (0, 0, -1) in the body frame, R^T g, for quaternions of shape (..., 4) (body to world)."""
+    """Unit gravity (0, 0, -1) in the body frame, R^T g, for quaternions of shape (..., 4) (body to world).
+
+    One quaternion (a robot's tick) is computed on Python floats: the same operations in the same order as the
+    arrays' path, the same bits, without a dozen numpy calls on arrays of one element.
+    """
+    q = np.asarray(quat_wxyz)
+    if q.size == 4 and q.dtype == np.float64:
+        w, x, y, z = q.reshape(4).tolist()
+        row = [-(2 * (x * z - w * y)), -(2 * (y * z + w * x)), -(1 - 2 * (x * x + y * y))]
+        return np.array(row, dtype=np.float64).reshape(q.shape[:-1] + (3,))
     w, x, y, z = (quat_wxyz[..., i] for i in range(4))
     # third row of R, negated: R^T (0, 0, -1) = -(R[2, 0], R[2, 1], R[2, 2])
     return -np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1)
