@@ -1116,3 +1116,37 @@ def test_the_shipped_turn_policy_turns_both_ways_and_stands(band, option_yaw, tm
     else:
         assert abs(speed - trial.command.vx) < 0.3 * trial.command.vx
         assert np.sign(yaw_rate) == np.sign(option_yaw) and abs(yaw_rate) > 0.5 * abs(option_yaw)
+
+
+def test_a_one_part_policy_acts_as_the_parts_loop_does_and_a_faulty_action_still_raises():
+    # `step` takes a short path for a policy of one part (every file but a composite): it must give the parts'
+    # loop's actions and commands to the bit, over an episode of ticks with a reset in it
+    from wbc.errors import CommandError
+    from wbc.learned.policy import LearnedController
+    from wbc.types import RobotState, VelocityCommand
+
+    desc = get_robot("a1-wx200", "actuated")
+    fast, loop = LearnedController(desc), LearnedController(desc)
+    assert fast._whole is not None and fast.policy.parts[0].policy.history > 0  # the shipped pi3 reads a history
+    loop._whole = None
+    rng = np.random.default_rng(3)
+    n = len(desc.nominal_q)
+    for tick in range(60):
+        if tick == 40:
+            fast.reset()
+            loop.reset()
+        quat = rng.standard_normal(4)
+        state = RobotState(tick=tick, time=0.02 * tick, q=np.asarray(desc.nominal_q) + 0.1 * rng.standard_normal(n),
+                           dq=rng.standard_normal(n), tau_est=np.zeros(n), imu_quat=quat / np.linalg.norm(quat),
+                           gyro_in_body=rng.standard_normal(3), accel_in_body=np.array([0.0, 0.0, 9.81]),
+                           foot_force=np.full(4, 40.0))
+        command = VelocityCommand(vx=float(rng.uniform(-1, 1)), yaw_rate=float(rng.uniform(-1, 1)))
+        a, b = fast.act(state, command), loop.act(state, command)
+        assert a.rows.tobytes() == b.rows.tobytes(), tick
+        assert fast.last_action.tobytes() == loop.last_action.tobytes()
+    assert not a.rows.flags.writeable
+    bad = RobotState(tick=0, time=0.0, q=np.full(n, np.nan), dq=np.zeros(n), tau_est=np.zeros(n),
+                     imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),
+                     accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
+    with pytest.raises(CommandError, match="non-finite"):
+        fast.act(bad, VelocityCommand())

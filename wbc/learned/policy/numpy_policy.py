@@ -290,7 +290,14 @@ class NumpyPolicy:
         Raises:
             PolicyInputError: `z` is missing for a policy that observes the extrinsics, or given to one that does not.
         """
-        x = (np.asarray(obs, dtype=np.float64) - self._obs_mean) * self._obs_scale
+        return self.normalised((np.asarray(obs, dtype=np.float64) - self._obs_mean) * self._obs_scale, z)
+
+    def normalised(self, x: np.ndarray, z: np.ndarray | None = None) -> np.ndarray:
+        """Deterministic actions from observations already normalised (`normalise`), as `__call__`.
+
+        Raises:
+            PolicyInputError: as `__call__`.
+        """
         if self.uses_extrinsics:
             if z is None:
                 raise PolicyInputError("this policy observes the extrinsics z: pass z (from `extrinsics` in "
