@@ -300,6 +300,19 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
         capsys.readouterr()
         assert main(wrong) == 2
         assert said in capsys.readouterr().err
+    # the student's networks are options of the run
+    capsys.readouterr()
+    assert main([*args, "--student-layers", "128,64", "--memory-layers", "32", "--dry-run"]) == 0
+    fit = json.loads(capsys.readouterr().out)["fit"]
+    assert fit["hidden_dims"] == [128, 64] and fit["adaptation_dims"] == [32] and fit["history"] == 25
+    for wrong, said in (([*args, "--student-layers", "128,x", "--dry-run"], "separated by commas"),
+                        ([*args, "--memory-layers", "0", "--dry-run"], "[1, 4096]")):
+        with pytest.raises(SystemExit) as exit_:  # a usage error: the parser states what it takes
+            main(wrong)
+        assert exit_.value.code == 2 and said in capsys.readouterr().err
+    assert main(["train", "--task", "push", "--stage", "3", "--memory-layers", "32", "--dry-run"]) == 2
+    assert "--memory-layers: only with a controller as --teacher" in capsys.readouterr().err
+
 
 def test_a_failing_expert_costs_only_its_episode(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)

@@ -461,7 +461,7 @@ def _train(args: argparse.Namespace) -> int:
         return _distil(args)
     dagger_only = [f"--{n.replace('_', '-')}" for n in ("rounds", "episodes", "episode_s", "history", "expert_noise",
                                                               "average_labels", "expert_truth", "expert_follows",
-                                                              "takeover")
+                                                              "takeover", "student_layers", "memory_layers")
                    if getattr(args, n) is not None]
     if dagger_only:
         raise ConfigError(f"{', '.join(dagger_only)}: only with a controller as --teacher (DAgger), e.g. "
@@ -492,8 +492,9 @@ def _distil(args: argparse.Namespace) -> int:
                         ("--envs", args.envs), ("--threads", args.threads)):
         if value is not None:
             raise ConfigError(f"{flag} does not apply to DAgger (--teacher {args.teacher}); its options are --rounds, "
-                              "--episodes, --episode-s, --history, --expert-noise, --average-labels, --expert-follows, "
-                              "--takeover, --expert-truth, --seed, --run-root and --resume")
+                              "--episodes, --episode-s, --history, --student-layers, --memory-layers, --expert-noise, "
+                              "--average-labels, --expert-follows, --takeover, --expert-truth, --seed, --run-root and "
+                              "--resume")
     # torch loads only when a run really trains
     from wbc.tools.dagger import DaggerConfig, run_dagger
 
@@ -503,10 +504,12 @@ def _distil(args: argparse.Namespace) -> int:
                                 ("expert_truth", args.expert_truth), ("expert_follows", args.expert_follows),
                                 ("takeover", args.takeover))
               if v is not None}
-    if args.history is not None:
+    fit = {k: v for k, v in (("history", args.history), ("hidden_dims", args.student_layers),
+                             ("adaptation_dims", args.memory_layers)) if v is not None}
+    if fit:
         from wbc.learned.train.distill import FitConfig
 
-        fields["fit"] = FitConfig(history=args.history)
+        fields["fit"] = FitConfig(**fit)
     cfg = DaggerConfig(task=args.task, expert=args.teacher,
                        run_dir=str(Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"), **fields)
     if args.dry_run:

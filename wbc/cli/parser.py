@@ -104,6 +104,23 @@ def bounded_float(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool 
     return number
 
 
+def layer_sizes(text: str) -> tuple[int, ...]:
+    """An argparse ``type=``: hidden layer sizes as comma-separated whole numbers, each in [1, 4096] (``256,128,64``).
+
+    Returns:
+        The sizes, in order.
+    """
+    parts = text.split(",")
+    try:
+        sizes = tuple(int(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected layer sizes as whole numbers separated by commas (256,128,64), "
+                                         f"got {short(text)}") from None
+    if not sizes or not all(1 <= n <= 4096 for n in sizes):
+        raise argparse.ArgumentTypeError(f"every layer size must be in [1, 4096], got {short(text)}")
+    return sizes
+
+
 def results_dir(text: str) -> str:
     """An argparse ``type=`` for ``--out``: a results directory, new or existing, never an existing file.
 
@@ -564,6 +581,11 @@ def _add_train_parser(sub: _Commands) -> None:
     tr.add_argument("--history", type=bounded_int(0, 200), default=None,
                     help="with a controller as --teacher: observations (policy ticks) the student's adaptation "
                          "module reads, 0 for a memoryless student (default 25)")
+    tr.add_argument("--student-layers", type=layer_sizes, default=None,
+                    help="with a controller as --teacher: the student actor's hidden layer sizes (default 256,128,64)")
+    tr.add_argument("--memory-layers", type=layer_sizes, default=None,
+                    help="with a controller as --teacher: the hidden layer sizes of the student's adaptation module, "
+                         "which reads its --history (default 128)")
     tr.add_argument("--expert-noise", type=bounded_float(0.0, 10.0), default=None,
                     help="with a controller as --teacher: DART's action noise while the expert drives, standard "
                          "deviation in action units (default 0)")
