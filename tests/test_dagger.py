@@ -293,6 +293,16 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
     progress = json.loads((run / "progress.json").read_text())
     assert [r["round"] for r in progress["rounds"]] == [0, 1, 2]
     assert progress["rounds"][2]["samples_total"] > second["samples_total"]
+    # the run's curves: per round, the fit's loss and how long the students drove (round 0: the expert alone)
+    from wbc.learned.train.curves import dagger_rounds, plot_dagger_curves
+
+    figures = dagger_rounds(run)
+    assert list(figures["round"]) == [0, 1, 2] and list(figures["samples"]) == [
+        r["samples_total"] for r in progress["rounds"]]
+    assert np.isnan(figures["driven_s"][0]) and np.isfinite(figures["fit_loss"]).all()
+    assert plot_dagger_curves([run], tmp_path / "dagger.png").stat().st_size > 1000
+    with pytest.raises(ConfigError, match="not a DAgger run"):
+        dagger_rounds(tmp_path)
     # DAgger's options need a controller as teacher, and the stage options do not apply to DAgger
     for wrong, said in ((["train", "--task", "push", "--stage", "3", "--rounds", "2", "--dry-run"], "--rounds"),
                         ([*args, "--stage", "3", "--dry-run"], "--stage does not apply to DAgger"),

@@ -3,6 +3,10 @@
 ``python -m wbc.learned.train.curves RUN_DIR [RUN_DIR ...] -o docs/training-push.png`` draws, against environment steps,
 the mean episode reward, the fall rate, the velocity-tracking reward, (for BC stages) the BC loss and the value loss,
 one line per run, labelled with the run directory's name.
+
+Given DAgger runs (``wbc train --teacher CONTROLLER``, whose rounds are in ``progress.json``), it draws per round the
+fit's loss, how long the students drove their episodes before the expert took over (or they fell) and the share of
+their episodes taken over or fallen (`plot_dagger_curves`).
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.optional import require
 
-__all__ = ["PANELS", "plot_training_curves", "read_scalars"]
+__all__ = ["PANELS", "dagger_rounds", "plot_dagger_curves", "plot_training_curves", "read_scalars"]
 
 PANELS = (("Train/mean_reward", "mean episode reward"), ("episode/fall_rate", "fall rate"),
           ("rew/tracking_lin_vel", "velocity tracking reward [1/s]"), ("Loss/bc", "BC loss"),
@@ -76,13 +80,86 @@ def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
     return path
 
 
+def dagger_rounds(run_dir: str | Path) -> dict[str, np.ndarray]:
+    """A DAgger run's figures per round, from its ``progress.json``.
+
+    Returns:
+        ``round``, ``samples`` (aggregated so far), ``fit_loss`` (the last epoch's), ``driven_s`` (median seconds a
+        student drove an episode before the expert took it over or it fell, the whole episode when neither; NaN in a
+        round the expert drove alone) and ``stopped`` (the share of the students' episodes taken over or fallen).
+
+    Raises:
+        ConfigError: the directory holds no DAgger progress.
+    """
+    path = Path(run_dir) / "progress.json"
+    try:
+        rounds = json.loads(path.read_text())["rounds"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"{path}: not a DAgger run's progress ({exc})") from None
+    policy_dt = 0.02
+    out: dict[str, list[float]] = {k: [] for k in ("round", "samples", "fit_loss", "driven_s", "stopped")}
+    for r in rounds:
+        driven, stopped = [], 0
+        for ep in r["episodes"]:
+            if ep["expert_drives"]:
+                continue
+            if ep["takeover_s"] is not None:
+                driven.append(ep["takeover_s"])
+            elif ep["fell"]:
+                driven.append(ep["fall_time_s"])
+            else:
+                driven.append(ep["samples"] * policy_dt)
+            stopped += ep["takeover_s"] is not None or ep["fell"]
+        out["round"].append(r["round"])
+        out["samples"].append(r["samples_total"])
+        out["fit_loss"].append(r["fit_loss_last"])
+        out["driven_s"].append(float(np.median(driven)) if driven else np.nan)
+        out["stopped"].append(stopped / len(driven) if driven else np.nan)
+    return {k: np.asarray(v, dtype=float) for k, v in out.items()}
+
+
+def plot_dagger_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
+    """Draw DAgger runs' figures per round (`dagger_rounds`) into `out` (a PNG); returns its path.
+
+    Raises:
+        ConfigError: a directory that holds no DAgger progress.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    # every DAgger run of a task has the same directory name (<task>-dagger-<expert>): the run root tells them apart
+    runs = [(f"{Path(d).parent.name}/{Path(d).name}", dagger_rounds(d)) for d in run_dirs]
+    panels = (("fit_loss", "fit loss (mean squared error)"),
+              ("driven_s", "median seconds a student drove"),
+              ("stopped", "students' episodes taken over or fallen"))
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.4), squeeze=False)
+    for ax, (key, title) in zip(axes[0], panels, strict=True):
+        for k, (name, figures) in enumerate(runs):
+            ax.plot(figures["round"], figures[key], marker="o", ms=3, label=name, color=f"C{k % 10}")
+        ax.set_title(title)
+        ax.set_xlabel("DAgger round")
+        ax.grid(alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(out)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command line: run directories in, one PNG out."""
     p = argparse.ArgumentParser(prog="python -m wbc.learned.train.curves", description=__doc__.splitlines()[0])
-    p.add_argument("runs", nargs="+", help="run directories (runs/train/<task>-stage<k>...)")
+    p.add_argument("runs", nargs="+", help="run directories (runs/train/<task>-stage<k>..., or DAgger runs)")
     p.add_argument("-o", "--out", required=True, help="PNG to write (e.g. docs/training-push.png)")
     args = p.parse_args(argv)
-    print(plot_training_curves(args.runs, args.out))
+    dagger = [(Path(d) / "progress.json").is_file() for d in args.runs]
+    if any(dagger) and not all(dagger):
+        raise SystemExit("python -m wbc.learned.train.curves: pass DAgger runs or PPO runs, not both")
+    print(plot_dagger_curves(args.runs, args.out) if all(dagger) else plot_training_curves(args.runs, args.out))
     return 0
 
 
