@@ -137,11 +137,17 @@ def test_table3_lists_its_baselines_and_says_which_are_missing(tiny, tmp_path):
     for key in ("ppo", "curriculum", "finetune-pi2", "decoupled", "one-stage-demo"):
         assert (rows[key].controller is not None) == (key in shipped)
     text = (tmp_path / "t3" / "paper.txt").read_text(encoding="utf-8")
-    for key in set(rows) - shipped - {"ours"}:
+    baselines = {"ppo", "curriculum", "finetune-pi2", "decoupled", "one-stage-demo"}
+    for key in baselines - shipped:
         assert f"({key}): no shipped weights (train: wbc train --task push --stage 3 --baseline {key}" in text
         assert f"{key}: missing" in text
-    for key in shipped:
+    for key in shipped & baselines:
         assert f"{key} = policy:" in text
+    # beside the paper's rows: the distilled MPC and its expert, in rows the paper does not have, compared
+    assert rows["mpc"].controller == "mpc" and rows["mpc-distilled"].controller == (
+        "mpc-distilled" if "mpc-distilled" in shipped else None)
+    assert "MPC distilled (not in the paper)" in text and "MPC (not in the paper)" in text
+    assert "MPC distilled vs its expert, mpc" in text
     assert "Ours vs PPO: B = learned" in text or "ppo" not in shipped
     assert "95.73" in text and "84.73" in text  # the paper's "Ours"
     assert result.paper_protocol_cpu_h == pytest.approx(

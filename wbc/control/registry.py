@@ -31,10 +31,10 @@ from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.composite_policy import load_composite
 from wbc.learned.policy.controller import LearnedController
 from wbc.learned.policy.policy_file import read_pair
-from wbc.learned.policy.shipped import shipped_weights
+from wbc.learned.policy.shipped import distilled_weights, shipped_weights
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.mpc.tail_controller import TailMpcController
-from wbc.robots.description import check_arm_mode
+from wbc.robots.description import RobotDescription, check_arm_mode
 from wbc.robots.registry import ROBOTS, get_robot
 
 __all__ = ["CONTROLLERS", "NAME_FORMS", "ONNX_PREFIX", "POLICY_PREFIX", "ControllerListing", "ControllerSpec",
@@ -66,6 +66,26 @@ def _shipped_files(arm_mode: str, posture: str | None = None) -> tuple[SourceFil
     return tuple(out)
 
 
+def _distilled_robots() -> tuple[str, ...]:
+    """The robots, in registry order, for which a policy distilled from the MPC ships (`distilled_weights`)."""
+    return tuple(robot for robot in ROBOTS if distilled_weights(get_robot(robot, "actuated")).is_file())
+
+
+def _distilled_files() -> tuple[SourceFile, ...]:
+    """The distilled policies' weights and metadata, for the provenance of a run of ``mpc-distilled``."""
+    out = []
+    for robot in _distilled_robots():
+        npz = distilled_weights(get_robot(robot, "actuated"))
+        out += [SourceFile(role="weights", path=str(npz)),
+                SourceFile(role="policy metadata", path=str(npz.with_suffix(".json")))]
+    return tuple(out)
+
+
+def _distilled(desc: RobotDescription) -> LearnedController:
+    """The policy distilled from ``mpc`` for `desc`'s robot."""
+    return LearnedController(desc, distilled_weights(desc))
+
+
 CONTROLLERS: dict[str, ControllerSpec] = {
     "stand": ControllerSpec("stand", "actuated", StandController,
                             "PD hold of the nominal pose, arm actuated and held"),
@@ -93,6 +113,9 @@ CONTROLLERS: dict[str, ControllerSpec] = {
     "learned-noarm": ControllerSpec("learned-noarm", "none", LearnedController,
                                     "learned policy pi1, robot without its arm; shipped weights, numpy",
                                     robots=_robots_with_weights("none"), files=_shipped_files("none")),
+    "mpc-distilled": ControllerSpec("mpc-distilled", "actuated", _distilled,
+                                    "policy distilled from mpc by DAgger (wbc train --teacher mpc), arm actuated; "
+                                    "shipped weights, numpy", robots=_distilled_robots(), files=_distilled_files()),
     "learned-crouched": ControllerSpec("learned-crouched", "actuated",
                                        functools.partial(LearnedController, posture="crouched"),
                                        "pi3 as first trained (no posture term: crouches), arm actuated; shipped "

@@ -6,7 +6,9 @@
    protocol, and what a cell shows (ours: mean ± std over seeds, or from one seed the mean and its 95 % interval
    over trials; the paper's: mean ± std over its 5 seeds);
 2. one block per metric of the table, a line per paper row followed by our contenders standing beside it (the
-   learned and the model-based family), a column per band (matched to the paper's columns by position);
+   learned and the model-based family), a column per band (matched to the paper's columns by position); rows of
+   ours that the paper does not have (the distilled MPC beside Table III's baselines) come last, their paper cells
+   "-";
 3. the table's paired comparisons, B - A on the same trials, with the 95 % bootstrap interval, the test's p-value
    (exact McNemar for success, Wilcoxon signed-rank otherwise), the discordant pairs and n80, and a verdict per band;
 4. where each contender fails, per band (`wbc.arena.breakdown`), and the push-recovery curve's file;
@@ -80,8 +82,10 @@ def _metric_block(result: PaperTableResult, metric: str) -> list[str]:
     header = ["paper row", "ours", *(f"{band} (paper {col})" if col else band
                                      for band, col in _band_columns(result))]
     rows: list[list[str]] = []
-    for paper_row in spec.paper:
-        cells = spec.paper[paper_row].get(metric, ())
+    # the paper's rows in its order, then rows of ours the paper does not have (its cells: "-")
+    extra = [c.row for c in result.contenders if c.row not in spec.paper]
+    for paper_row in (*spec.paper, *dict.fromkeys(extra)):
+        cells = spec.paper[paper_row].get(metric, ()) if paper_row in spec.paper else ()
         rows.append([paper_row, "paper", *(_paper_cell(cells[i] if i < len(cells) else None, metric)
                                            for i in range(len(result.bands)))])
         for contender in (c for c in result.contenders if c.row == paper_row):

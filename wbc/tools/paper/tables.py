@@ -9,6 +9,8 @@
   stage-3 baselines of `wbc.learned.train.stages.BASELINES` whose exported policy ships in
   ``wbc/learned/weights/a1-wx200-actuated-<baseline>.npz``, played as ``policy:PATH``; a baseline without shipped
   weights is listed as missing with the command that trains it, or given with ``--contender NAME=CONTROLLER``.
+  Two rows the paper does not have follow: ``mpc-distilled`` (the MPC distilled into a policy of our form by DAgger)
+  and its expert ``mpc``, compared with Ours and with each other.
 
 The learned rows play the shipped stages, trained to hold the robot's nominal trunk height. With ``--crouched``
 every learned row plays its posture variant instead (the same stage as first trained, without the posture term:
@@ -152,6 +154,15 @@ def _baseline_rows(crouched: bool = False) -> tuple[Contender, ...]:
                                   note=f"no shipped weights (train: wbc train --task push --stage 3 --baseline "
                                   f"{baseline}; play: --contender {baseline}=policy:PATH; they would ship as "
                                   f"{weights.name})"))
+    # beside the paper's baselines: the MPC distilled into a policy of the same form, and its expert
+    distilled = WEIGHTS_DIR / "a1-wx200-actuated-mpc-distilled.npz"
+    rows.append(Contender(key="mpc-distilled", row="MPC distilled (not in the paper)", family="learned",
+                          controller="mpc-distilled" if distilled.is_file() else None,
+                          note="DAgger student of mpc" if distilled.is_file() else
+                          f"no shipped weights (train: wbc train --task push --teacher mpc; play: --contender "
+                          f"mpc-distilled=policy:PATH; they would ship as {distilled.name})"))
+    rows.append(Contender(key="mpc", row="MPC (not in the paper)", family="model-based", controller="mpc",
+                          note="MPC, the distilled policy's expert"))
     return tuple(rows)
 
 
@@ -175,7 +186,9 @@ TABLES: dict[str, PaperTableSpec] = {
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
         paper_columns=("200-300", "300-400"), paper=TABLE_III, contenders=_baseline_rows(),
         crouched_contenders=_baseline_rows(crouched=True),
-        contrasts=tuple(Contrast(a=key, b="ours", question=f"Ours vs {row}") for key, row in _BASELINE_ROWS.items()),
+        contrasts=(*(Contrast(a=key, b="ours", question=f"Ours vs {row}") for key, row in _BASELINE_ROWS.items()),
+                   Contrast(a="mpc-distilled", b="ours", question="Ours vs MPC distilled"),
+                   Contrast(a="mpc", b="mpc-distilled", question="MPC distilled vs its expert, mpc")),
         paper_protocol="2000 trials, 20 s each; half standing, half at 0.3 m/s"),
 }
 """The three tables, by the name ``wbc paper`` takes."""
