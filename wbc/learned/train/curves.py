@@ -130,7 +130,7 @@ def plot_dagger_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     # every DAgger run of a task has the same directory name (<task>-dagger-<expert>): the run root tells them apart
-    runs = [(f"{Path(d).parent.name}/{Path(d).name}", dagger_rounds(d)) for d in run_dirs]
+    runs = [(Path(d).parent.name if "-dagger-" in Path(d).name else Path(d).name, dagger_rounds(d)) for d in run_dirs]
     panels = (("fit_loss", "fit loss (mean squared error)"),
               ("driven_s", "median seconds a student drove"),
               ("stopped", "students' episodes taken over or fallen"))
