@@ -1118,32 +1118,50 @@ def test_the_shipped_turn_policy_turns_both_ways_and_stands(band, option_yaw, tm
         assert np.sign(yaw_rate) == np.sign(option_yaw) and abs(yaw_rate) > 0.5 * abs(option_yaw)
 
 
-def test_a_one_part_policy_acts_as_the_parts_loop_does_and_a_faulty_action_still_raises():
-    # `step` takes a short path for a policy of one part (every file but a composite): it must give the parts'
-    # loop's actions and commands to the bit, over an episode of ticks with a reset in it
+@pytest.mark.parametrize("weights", ["a1-wx200-actuated", "a1-wx200-actuated-mpc-distilled", "a1-wx200-none"])
+def test_a_one_part_policy_acts_as_the_parts_loop_does_and_a_faulty_action_still_raises(weights):
+    from wbc.learned.policy import WEIGHTS_DIR
+
+    _three_paths_agree(WEIGHTS_DIR / f"{weights}.npz")
+
+
+def test_a_policy_without_memory_acts_alike_on_every_path(vec, tmp_path):
+    from wbc.learned.train.export import policy_file_from_actor
+
+    save_policy(tmp_path / "p", policy_file_from_actor(_actor(vec, False), vec.cfg, task="push", stage=3))
+    _three_paths_agree(tmp_path / "p.npz")
+
+
+def _three_paths_agree(path):
+    # a policy of one part (every file but a composite) acts in one compiled call (`policy_tick`), or else through
+    # `step`'s short path: both must give the parts' loop's actions and commands to the bit, over an episode of
+    # ticks with a reset in it
     from wbc.errors import CommandError
     from wbc.learned.policy import LearnedController
     from wbc.types import RobotState, VelocityCommand
 
-    desc = get_robot("a1-wx200", "actuated")
-    fast, loop = LearnedController(desc), LearnedController(desc)
-    assert fast._whole is not None and fast.policy.parts[0].policy.history > 0  # the shipped pi3 reads a history
-    loop._whole = None
+    desc = get_robot("a1-wx200", load_policy(path).meta["arm_mode"])
+    fast, whole, loop = (LearnedController(desc, path) for _ in range(3))
+    assert fast._tick is not None and fast._whole is not None
+    whole._tick = None
+    loop._tick, loop._whole = None, None
     rng = np.random.default_rng(3)
     n = len(desc.nominal_q)
     for tick in range(60):
         if tick == 40:
-            fast.reset()
-            loop.reset()
+            for ctrl in (fast, whole, loop):
+                ctrl.reset()
         quat = rng.standard_normal(4)
         state = RobotState(tick=tick, time=0.02 * tick, q=np.asarray(desc.nominal_q) + 0.1 * rng.standard_normal(n),
                            dq=rng.standard_normal(n), tau_est=np.zeros(n), imu_quat=quat / np.linalg.norm(quat),
                            gyro_in_body=rng.standard_normal(3), accel_in_body=np.array([0.0, 0.0, 9.81]),
                            foot_force=np.full(4, 40.0))
         command = VelocityCommand(vx=float(rng.uniform(-1, 1)), yaw_rate=float(rng.uniform(-1, 1)))
-        a, b = fast.act(state, command), loop.act(state, command)
-        assert a.rows.tobytes() == b.rows.tobytes(), tick
-        assert fast.last_action.tobytes() == loop.last_action.tobytes()
+        a, b, c = fast.act(state, command), whole.act(state, command), loop.act(state, command)
+        assert a.rows.tobytes() == b.rows.tobytes() == c.rows.tobytes(), tick
+        assert fast.last_action.tobytes() == whole.last_action.tobytes() == loop.last_action.tobytes()
+        if tick == 30:  # the history the numpy path keeps is the one the compiled tick fills
+            assert all(fast.histories[k].buf.tobytes() == loop.histories[k].buf.tobytes() for k in fast.histories)
     assert not a.rows.flags.writeable
     bad = RobotState(tick=0, time=0.0, q=np.full(n, np.nan), dq=np.zeros(n), tau_est=np.zeros(n),
                      imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from wbc.errors import ConfigError
+from wbc.learned.policy.compiled_tick import policy_tick
 from wbc.learned.policy.composite_policy import CompositePolicyFile, load_composite
 from wbc.learned.policy.numpy_composite import NumpyComposite
 from wbc.learned.policy.obs_history import ObsHistory
@@ -36,6 +37,17 @@ from wbc.robots.description import RobotDescription
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
 __all__ = ["LearnedController"]
+
+
+def _takes_state(state: RobotState, n: int) -> bool:
+    """Whether `policy_tick` takes the state's arrays as they are: float64 vectors of the robot's sizes.
+
+    Anything else takes the numpy path, which converts what it can and raises numpy's error on what it cannot: the
+    compiled tick does not check its indices.
+    """
+    arrays = (state.gyro_in_body, state.imu_quat, state.q, state.dq)
+    return all(isinstance(a, np.ndarray) and a.dtype == np.float64 for a in arrays) and \
+        (state.gyro_in_body.shape, state.imu_quat.shape, state.q.shape, state.dq.shape) == ((3,), (4,), (n,), (n,))
 
 
 class LearnedController:
@@ -105,6 +117,7 @@ class LearnedController:
         self._rows = np.zeros((5, n))
         self._rows[2], self._rows[3] = self.kp, self.kd
         self._gains_ok = bool(np.isfinite(self._rows).all() and (self._rows[2:4] >= 0.0).all())
+        self._tick = self._compiled_constants()
 
     def reset(self) -> None:
         """Forget the previous action and the observation history."""
@@ -128,8 +141,32 @@ class LearnedController:
         obs = self.observation(state, command)
         return [(name, obs[start:stop]) for name, start, stop in ObsLayout(self.last_action.size).term_slices()]
 
+    def _compiled_constants(self) -> tuple | None:
+        """`policy_tick`'s arguments that do not change, or None where it does not serve the policy.
+
+        It serves a policy of one part on the whole observation (`_whole`) whose activation the compiled layers have
+        (ELU or identity).
+        """
+        part = self._whole
+        if part is None:
+            return None
+        policy = part.policy
+        if policy.activation not in ("elu", "identity"):
+            return None
+        actor = policy._layers
+        remembers = bool(policy.history)
+        adaptation = policy._adaptation if remembers else actor
+        window = self.histories[part.name].buf[0] if remembers else np.zeros((1, 1), dtype=np.float32)
+        sc = self.scales
+        return (window, self.default_q, np.asarray(sc.command, dtype=np.float64), float(sc.ang_vel), float(sc.dof_pos),
+                float(sc.dof_vel), policy._obs_mean, policy._obs_scale, adaptation.weights, adaptation.biases,
+                actor.weights, actor.biases, policy.activation == "elu", remembers, self.clip, self.action_scale,
+                self.kp, self.kd)
+
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """One policy step."""
+        if self._tick is not None and _takes_state(state, self.last_action.size):
+            return self._compiled_act(state, command)
         action = self.step(self.observation(state, command))
         target = self.default_q + self.action_scale * action
         if self._gains_ok and np.isfinite(target).all():  # what the constructor checks, on the one row that changes
@@ -137,6 +174,20 @@ class LearnedController:
             rows[0] = target
             return MotorCommand.trusted(rows)
         return MotorCommand(q=target, dq=self._zeros, kp=self.kp, kd=self.kd, tau=self._zeros)
+
+    def _compiled_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
+        """`act` in one compiled call (`policy_tick`): the same operations, the same bits."""
+        window, *constants = self._tick
+        n = self.last_action.size
+        action = np.empty(n)
+        rows = np.empty((5, n))  # a new array each tick: it becomes the command's (immutable) storage
+        valid = policy_tick(state.gyro_in_body, state.imu_quat, float(command.vx), float(command.vy),
+                            float(command.yaw_rate), state.q, state.dq, self.last_action, self._fresh, window, action,
+                            rows, *constants)
+        self._fresh = False
+        self.last_action = action
+        # a command that fails the check is refused by the constructor, which names the fault
+        return MotorCommand.trusted(rows) if valid else MotorCommand.from_rows(rows)
 
     def step(self, observation: np.ndarray) -> np.ndarray:
         """The clipped action for this tick's policy observation (`observation`), which joins the history.
