@@ -43,10 +43,12 @@ def _takes_state(state: RobotState, n: int) -> bool:
     """Whether `policy_tick` takes the state's arrays as they are: float64 vectors of the robot's sizes.
 
     Anything else takes the numpy path, which converts what it can and raises numpy's error on what it cannot: the
-    compiled tick does not check its indices.
+    compiled tick does not check its indices. Arrays that are read-only or not contiguous take it too, with the same
+    result: the compiled tick would load another version of itself for them at their first tick.
     """
     arrays = (state.gyro_in_body, state.imu_quat, state.q, state.dq)
-    return all(isinstance(a, np.ndarray) and a.dtype == np.float64 for a in arrays) and \
+    return all(isinstance(a, np.ndarray) and a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
+               for a in arrays) and \
         (state.gyro_in_body.shape, state.imu_quat.shape, state.q.shape, state.dq.shape) == ((3,), (4,), (n,), (n,))
 
 
@@ -118,6 +120,8 @@ class LearnedController:
         self._rows[2], self._rows[3] = self.kp, self.kd
         self._gains_ok = bool(np.isfinite(self._rows).all() and (self._rows[2:4] >= 0.0).all())
         self._tick = self._compiled_constants()
+        if self._tick is not None:
+            self._load_compiled()
 
     def reset(self) -> None:
         """Forget the previous action and the observation history."""
@@ -174,6 +178,17 @@ class LearnedController:
             rows[0] = target
             return MotorCommand.trusted(rows)
         return MotorCommand(q=target, dq=self._zeros, kp=self.kp, kd=self.kd, tau=self._zeros)
+
+    def _load_compiled(self) -> None:
+        """Play one compiled tick on a synthetic standing state, on copies of the window: nothing of it survives.
+
+        The compiled tick loads at its first call in a process (compiles at the first on a new machine): here, when
+        the controller is made, not at the first tick of a robot that waits for its command.
+        """
+        window, *constants = self._tick
+        n = self.last_action.size
+        policy_tick(np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), 0.0, 0.0, 0.0, self.default_q.copy(), np.zeros(n),
+                    np.zeros(n), True, window.copy(), np.empty(n), np.empty((5, n)), *constants)
 
     def _compiled_act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
         """`act` in one compiled call (`policy_tick`): the same operations, the same bits."""
