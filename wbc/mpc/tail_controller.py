@@ -34,7 +34,18 @@ from wbc.robots.euler import rpy_of
 from wbc.robots.joint_table import joint_table
 from wbc.types import RobotState, VelocityCommand
 
-__all__ = ["TailControllerConfig", "TailMpcController", "ready_pose"]
+__all__ = ["TAIL_YAW_LEASH_RAD", "TailControllerConfig", "TailMpcController", "ready_pose"]
+
+
+TAIL_YAW_LEASH_RAD = 0.1
+"""`mpc-tail`'s yaw leash (`MpcControllerConfig.yaw_leash`) [rad], a third of the base MPC's.
+
+Measured on dev trials of ``turn.toml`` band 1.5 m/s (seeds 100-101, 12 trials; docs/mpc-notes.md): with the base
+MPC's 0.3 rad the fast turns ask the feet for the sideways forces that take the robot back to its yaw target, the
+friction octagon binds sideways and the forward push falls short (V_lin err 0.099 m/s, V_ang err 0.175 rad/s); at
+0.1 rad both errors are smaller (0.082, 0.171); below it the speed is tracked better still and the yaw rate worse
+(0.05 rad: 0.076, 0.216; 0: 0.075, 0.294). Push v2 and push-low-friction band ood: every dev trial survived at 0.05
+and 0.1 rad."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -43,7 +54,7 @@ class TailControllerConfig:
 
     Attributes:
         base: the MPC controller's settings (estimator, gait, footholds, leg layer); its ``mpc`` horizon and step
-            are taken from `tail`.
+            are taken from `tail`; its yaw leash is `TAIL_YAW_LEASH_RAD` unless given.
         tail: the tail MPC's settings.
         ready_q: the arm's ready pose (waist, shoulder, elbow) [rad]; None: chosen for its leverage (`ready_pose`).
         observer: the push detector's settings.
@@ -52,7 +63,7 @@ class TailControllerConfig:
         arm_kd: arm joint damping around the planned speed [N m s/rad].
     """
 
-    base: MpcControllerConfig = field(default_factory=MpcControllerConfig)
+    base: MpcControllerConfig = field(default_factory=lambda: MpcControllerConfig(yaw_leash=TAIL_YAW_LEASH_RAD))
     tail: TailMpcConfig = field(default_factory=TailMpcConfig)
     ready_q: tuple[float, float, float] | None = None
     observer: ObserverConfig = field(default_factory=ObserverConfig)
