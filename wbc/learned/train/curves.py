@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -71,6 +72,11 @@ def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
         ax.set_title(title)
         ax.set_xlabel("environment steps [M]")
         ax.grid(alpha=0.3)
+    return _save(fig, axes, out, plt)
+
+
+def _save(fig: Any, axes: Any, out: str | Path, plt: Any) -> Path:
+    """Put the legend in the first panel, write the figure to `out` (a PNG) and close it; returns the path."""
     axes[0][0].legend(fontsize=8)
     fig.tight_layout()
     path = Path(out)
@@ -141,13 +147,7 @@ def plot_dagger_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
         ax.set_title(title)
         ax.set_xlabel("DAgger round")
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=8)
-    fig.tight_layout()
-    path = Path(out)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return _save(fig, axes, out, plt)
 
 
 def main(argv: list[str] | None = None) -> int:
