@@ -58,11 +58,12 @@ TRAIN_KEYS = ["control_steps_per_s", "physics_steps_per_s", "rollout_only_contro
 TRAIN_REFERENCE_KEYS = ["reference_physics_limit_control_steps_per_s", "control_steps_ratio_to_reference",
                         "scaled_target_control_steps_per_s"]
 MPC_KEYS = ["robot", "controller", "horizon", "mpc_solve_ms_median", "mpc_solve_ms_p99", "mpc_setup_ms_median",
-            "wbc_tick_us_median", "control_tick_us_median", "realtime_factor", "warmup_episode_s", "fell", "blas",
+            "wbc_tick_us_median", "control_tick_us_median", "realtime_factor", "cpu_realtime_factor",
+            "walk_physics_realtime_factor", "walk_physics_share", "warmup_episode_s", "fell", "blas",
             "qp_solver", "machine", "load_1min"]
 MPC_REFERENCE_KEYS = ["reference_placo_tick_us", "reference_steps_per_s", "physics_realtime_factor",
                       "control_tick_over_reference_tick", "closed_loop_over_physics_rtf", "scaled_target_wbc_tick_us",
-                      "scaled_target_realtime_factor"]
+                      "scaled_target_realtime_factor", "physics_cpu_realtime_factor", "closed_loop_over_physics_cpu"]
 SWEEP_KEYS = ["scenario", "controller", "terrain", "trials", "batched_physics_steps_per_s", "machine"]
 SWEEP_EXECUTOR_KEYS = ["{}_wall_s", "{}_sweep_steps_per_s", "{}_ratio_to_batched_physics"]
 HW_KEYS = ["robot", "seconds", "rate_hz", "transport", "emulator_process", "sends", "replies_received",
@@ -127,8 +128,10 @@ def _mpc(reference: bool = True) -> MpcBenchResult:
                            wbc_tick_us_median=80.0, control_tick_us_median=150.0)
     ref = MpcReference(reference_placo_tick_us=40.0, reference_steps_per_s=110_000.0, physics_realtime_factor=200.0,
                        control_tick_over_reference_tick=3.75, closed_loop_over_physics_rtf=0.03,
-                       scaled_target_wbc_tick_us=100.0, scaled_target_realtime_factor=5.0)
+                       scaled_target_wbc_tick_us=100.0, scaled_target_realtime_factor=5.0,
+                       physics_cpu_realtime_factor=210.0, closed_loop_over_physics_cpu=0.035)
     return MpcBenchResult(robot="a1-wx200", controller="mpc", horizon=10, ticks=ticks, realtime_factor=6.0,
+                          cpu_realtime_factor=7.35, walk_physics_realtime_factor=20.0, walk_physics_share=0.3,
                           warmup_episode_s=1.5, fell=False, blas="single-threaded", qp_solver="daqp 0.5.1",
                           machine=MACHINE, reference=ref if reference else None)
 
@@ -348,6 +351,8 @@ def test_print_bench_mpc_shows_the_tick_and_the_references(capsys):
     assert "N = 10" in text and "median 1.25 ms, p99 3.50 ms (setup median 0.75 ms)" in text
     assert "median 80 us per tick" in text and "control tick: median 150 us" in text and "6.0x real time" in text
     assert "control tick 3.75x the reference PlaCo tick" in text and "closed loop 0.030 of" in text
+    assert "6.0x real time on one core (7.3x in CPU time); the walk's physics steps 30% of it (20x" in text
+    assert "0.035 in CPU time (210x; target >= 0.20)" in text
     assert "references" not in _printed(printers.print_bench_mpc, _mpc(reference=False), capsys)
 
 

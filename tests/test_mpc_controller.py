@@ -226,6 +226,12 @@ def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_refer
         ticks.control_tick_us_median / ref.reference_placo_tick_us)
     assert ref.closed_loop_over_physics_rtf == pytest.approx(result.realtime_factor / ref.physics_realtime_factor)
     assert 0 < ref.closed_loop_over_physics_rtf < 1  # the controller costs something
+    # the same ratio in CPU time; the walk's own physics is part of the loop, and slower than standing physics
+    assert ref.closed_loop_over_physics_cpu == pytest.approx(result.cpu_realtime_factor
+                                                             / ref.physics_cpu_realtime_factor)
+    assert 0 < ref.closed_loop_over_physics_cpu < 1
+    assert 0 < result.walk_physics_share < 1
+    assert result.walk_physics_realtime_factor == pytest.approx(result.realtime_factor / result.walk_physics_share)
     without = bench_mpc(seconds=0.1, single_thread=False, reference=False)
     assert without.reference is None and "reference_placo_tick_us" not in without.as_dict()
 
