@@ -185,8 +185,9 @@ def print_bench_mpc(result: MpcBenchResult) -> None:
     print(f"  whole-body layer: median {ticks.wbc_tick_us_median:.0f} us per tick")
     print(f"  control tick: median {ticks.control_tick_us_median:.0f} us (kinematics, estimator, footholds, "
           "whole-body layer, command; ticks without an MPC update)")
-    print(f"  closed loop    : {result.realtime_factor:.1f}x real time on one core ({result.cpu_realtime_factor:.1f}x in "
-          f"CPU time); the walk's physics steps {result.walk_physics_share:.0%} of it "
+    print(f"  closed loop    : {result.realtime_factor:.1f}x real time on one core "
+          f"({result.cpu_realtime_factor:.1f}x in CPU time); the walk's physics steps "
+          f"{result.walk_physics_share:.0%} of it "
           f"({result.walk_physics_realtime_factor:.0f}x real time on their own)")
     ref = result.reference
     if ref is not None:
