@@ -267,6 +267,8 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
         assert np.all(np.abs(data["actions"]) <= 10.0)  # clipped to the policy's action range
     meta = json.loads((run / "policy.json").read_text())
     assert meta["training"]["method"] == "dagger" and meta["training"]["expert"] == "mpc"
+    training = meta["training"]  # the run's recipe travels with its student
+    assert (training["rounds"], training["episodes"], training["episode_s"]) == (2, 2, 0.6)
     # the student reads the last 25 observations through the file's adaptation module; its latent is declared as
     # extrinsics of no privileged parts and no encoder, with a note that it comes from the history
     assert meta["adaptation"]["history"] == 25 and meta["extrinsics"]["privileged_parts"] == []
