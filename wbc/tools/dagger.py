@@ -396,7 +396,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                    else math.nan, "wall_s": wall}
         progress["rounds"].append(summary)
         extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
-                 "episodes": cfg.episodes, "episode_s": cfg.episode_s, "history": cfg.fit.history, "expert_noise": cfg.expert_noise,
+                 "episodes": cfg.episodes, "episode_s": cfg.episode_s, "history": cfg.fit.history,
+                 "expert_noise": cfg.expert_noise,
                  "average_labels": cfg.average_labels, "expert_truth": cfg.expert_truth,
                  "expert_follows": cfg.expert_follows, "takeover": cfg.takeover, "beta": cfg.beta,
                  "seed": cfg.seed,

@@ -45,7 +45,7 @@ from wbc.types import VelocityCommand
 
 __all__ = ["MAX_RECORDED_QPS", "WARMUP_S", "MpcBenchResult", "MpcReference", "MpcTickFigures", "PhysicsTimedRobot",
            "QpLog", "QpSolverFigures", "TickTimingLog", "bench_mpc", "compare_qp_solvers",
-           "physics_realtime_factor", "physics_realtime_factors"]
+           "physics_realtime_factors"]
 
 WARMUP_S = 0.2
 """Length of the untimed episode played before the timed walk [s] (its wall time is reported as
@@ -90,7 +90,7 @@ class MpcReference:
     Attributes:
         reference_placo_tick_us: a bare-A1 PlaCo whole-body tick, mean of the measurements [us].
         reference_steps_per_s: the bare A1's single-threaded physics, best of the measurements [steps/s].
-        physics_realtime_factor: the same robot's physics alone (`physics_realtime_factor`), best.
+        physics_realtime_factor: the same robot's physics alone (`physics_realtime_factors`), best.
         control_tick_over_reference_tick: the control tick's median over the reference PlaCo tick (target <= 1.8).
         closed_loop_over_physics_rtf: the closed loop's real-time factor over the physics-only one (target >= 0.075).
         physics_cpu_realtime_factor: the same robot's physics alone, simulated seconds per second of the thread's CPU
@@ -336,29 +336,20 @@ def compare_qp_solvers(qps: Sequence[tuple[MpcProblem, np.ndarray | None]]) -> t
     return tuple(figures)
 
 
-def physics_realtime_factor(sim: MujocoRobot, seconds: float = 1.0) -> float:
-    """Real-time factor of `sim`'s physics alone: the robot standing under the motor law, no controller in the loop.
-
-    The closed loop's real-time factor is stated against this one, measured on the same robot in the same process:
-    it is what the loop would reach if the controller and the runner took no time and the walk's contacts cost what
-    standing ones do.
-
-    Args:
-        sim: a connected simulated robot (reset here, and left standing).
-        seconds: simulated time measured [s].
-    """
-    return physics_realtime_factors(sim, seconds)[0]
-
-
 def physics_realtime_factors(sim: MujocoRobot, seconds: float = 1.0) -> tuple[float, float]:
-    """`physics_realtime_factor` in wall time and in the thread's CPU time (`time.thread_time`), from one run.
+    """Real-time factors of `sim`'s physics alone: the robot standing under the motor law, no controller in the loop.
+
+    The closed loop's real-time factor is stated against these, measured on the same robot in the same process: they
+    are what the loop would reach if the controller and the runner took no time and the walk's contacts cost what
+    standing ones do.
 
     Args:
         sim: a connected simulated robot (reset here, and left standing).
         seconds: simulated time measured [s].
 
     Returns:
-        (wall, CPU) real-time factors.
+        (wall, CPU) real-time factors: simulated seconds per second of wall time and of the thread's CPU time
+        (`time.thread_time`), from one run.
     """
     sim.reset(seed=0)
     sim.write(stand_command(sim.desc))
@@ -409,7 +400,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured before and after the
     closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`), the bare A1's
-    single-threaded physics (`reference_a1`) and the same robot's physics alone (`physics_realtime_factor`). The
+    single-threaded physics (`reference_a1`) and the same robot's physics alone (`physics_realtime_factors`). The
     result then holds them (`MpcReference`) with the ratios the targets are set on, ``control_tick_over_reference_tick``
     (the control tick's median over the reference PlaCo tick; target <= 1.8) and ``closed_loop_over_physics_rtf``
     (the closed loop's real-time factor over the same robot's physics-only one; target >= 0.075; in CPU time
