@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from wbc.arena.runner import run_episode
 from wbc.control.protocol import HasDebugPlan, HasTickTimings, TruthSwitch
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError
@@ -234,6 +235,27 @@ def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_refer
     assert result.walk_physics_realtime_factor == pytest.approx(result.realtime_factor / result.walk_physics_share)
     without = bench_mpc(seconds=0.1, single_thread=False, reference=False)
     assert without.reference is None and "reference_placo_tick_us" not in without.as_dict()
+
+
+def test_bench_mpc_times_a_walk_no_bench_observer_watches_and_files_the_same_walk_played_again(monkeypatch):
+    # the bench's own observers cost a share of every tick: the real-time figures must not carry it
+    import wbc.tools.bench.mpc as bench
+
+    played = []
+
+    def spy(*args, observer=None, **kwargs):
+        episode = run_episode(*args, observer=observer, **kwargs)
+        played.append((observer, episode))
+        return episode
+
+    monkeypatch.setattr(bench, "run_episode", spy)
+    result = bench.bench_mpc(seconds=0.1, single_thread=False, reference=False)
+    (warmup, _), (timed_observer, timed), (observer, observed) = played
+    assert warmup is None and timed_observer is None and observer is not None
+    # the same walk: the breakdown filed from the second describes the first
+    assert np.array_equal(timed.qpos, observed.qpos)
+    assert result.realtime_factor > 0 and not result.fell
+    assert result.walk_physics_realtime_factor == pytest.approx(result.realtime_factor / result.walk_physics_share)
 
 
 _HEAP_PROBE = """
