@@ -116,6 +116,35 @@ def test_write_clamps_to_motor_limits_and_returns_what_was_sent():
             robot.write(MotorCommand.hold(np.zeros(12), 1.0, 0.1))
 
 
+def test_a_command_within_the_limits_is_sent_as_it_is_and_one_value_outside_clamps_only_that_value():
+    from wbc.hardware.robot import command_bounds, within_bounds
+
+    lim = joint_table(get_robot("a1-wx200", "actuated"))
+    lower, upper = command_bounds(lim)
+    with MujocoRobot(MujocoRobotConfig()) as robot:
+        n = robot.num_joints
+        mid = 0.5 * (lim.lower + lim.upper)
+        inside = MotorCommand(q=mid, dq=np.zeros(n), kp=np.full(n, 20.0), kd=np.full(n, 0.5), tau=np.zeros(n))
+        assert within_bounds(inside.rows, lower, upper)
+        assert robot.write(inside) is inside  # nothing to clamp: no copy
+        # a bound itself is within; one value past it, in any row, is not, and only that value moves
+        for row, col, value in ((0, 3, lim.upper[3]), (4, 13, -lim.torque_limit[13])):
+            rows = inside.stacked()
+            rows[row, col] = value
+            edge = MotorCommand.from_rows(rows.copy())  # the array becomes the command's, read-only
+            assert within_bounds(edge.rows, lower, upper) and robot.write(edge) is edge
+            rows[row, col] = value + np.sign(value) * 1e-9
+            past = MotorCommand.from_rows(rows)
+            assert not within_bounds(past.rows, lower, upper)
+            sent = robot.write(past)
+            assert sent is not past and sent.rows[row, col] == value
+            changed = sent.rows != past.rows
+            assert changed.sum() == 1 and changed[row, col]
+    rows = np.zeros((5, 2))
+    rows[1, 1] = np.nan  # no command holds one, but the check must not call it within
+    assert not within_bounds(rows, np.full((5, 2), -1.0), np.ones((5, 2)))
+
+
 def test_lifecycle():
     robot = MujocoRobot(MujocoRobotConfig(arm_mode="none"))
     assert isinstance(robot, Robot)

@@ -36,7 +36,7 @@ from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
 from wbc.errors import CommandError, ConfigError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, SimulatorHealth, TruthSource
-from wbc.hardware.robot import Robot, command_bounds, exceeded_rows
+from wbc.hardware.robot import Robot, command_bounds, exceeded_rows, within_bounds
 from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, VelocityCommand
@@ -117,6 +117,7 @@ def run_episode(
     safety = robot if isinstance(robot, HasSafetyEvents) else None
     events_before = len(safety.safety_events()) if safety is not None else 0
     bounds = command_bounds(robot.limits)
+    lower, upper = bounds
     clamped = 0
     clamped_rows = np.zeros(5, dtype=np.int64)  # per command row (q, dq, kp, kd, tau): ticks it was clamped
 
@@ -154,10 +155,11 @@ def run_episode(
             robot.write(out)
         except CommandError as exc:  # refused before reaching a motor: NaN, wrong length, not a MotorCommand
             raise failure("command", k, exc) from exc
-        over = exceeded_rows(out, bounds)
-        if over.any():
-            clamped += 1
-            clamped_rows += over
+        if not within_bounds(out.rows, lower, upper):  # one compiled pass; the rows are told apart only when needed
+            over = exceeded_rows(out, bounds)
+            if over.any():
+                clamped += 1
+                clamped_rows += over
         robot.advance(dt)
         # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
         now = truth()
