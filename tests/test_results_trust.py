@@ -32,7 +32,7 @@ from wbc.errors import ConfigError, RecordError, ResultsDirError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import CommandSchedule
-from wbc.types import BaseTruth
+from wbc.types import BaseTruth, RobotState
 
 
 @pytest.fixture(scope="module")
@@ -209,6 +209,27 @@ def test_the_divergence_check_finds_impossible_states_only():
     assert "moves at 25 m/s" in check.truth(dataclasses.replace(ok, base_linvel_in_world=np.array([15., 20., 0.])))
     assert "spins at" in check.truth(dataclasses.replace(ok, base_angvel_in_body=np.array([0.0, 0.0, 1e3])))
     assert "through the floor" in check.truth(dataclasses.replace(ok, base_position_in_world=np.array([0, 0, -2.])))
+
+
+def test_the_divergence_check_finds_impossible_joints_only():
+    check = DivergenceCheck()  # the joints' speeds as one vector's norm: 500 rad/s
+    n = 15
+
+    def joints(q=None, dq=None):
+        return RobotState(tick=0, time=0.0, q=np.zeros(n) if q is None else q, dq=np.zeros(n) if dq is None else dq,
+                          tau_est=np.zeros(n), imu_quat=np.array([1.0, 0.0, 0.0, 0.0]), gyro_in_body=np.zeros(3),
+                          accel_in_body=np.zeros(3), foot_force=np.zeros(4))
+
+    fast = np.zeros(n)
+    fast[[2, 9]] = 300.0, 400.0  # the norm exactly at the limit
+    assert check.state(joints(q=np.full(n, 3.0), dq=fast)) is None
+    for bad in (np.nan, np.inf, -np.inf):
+        q = np.zeros(n)
+        q[n - 1] = bad
+        assert check.state(joints(q=q)) == "a joint position or speed is not finite"
+        assert check.state(joints(dq=-q)) is not None
+    fast[0] = 1.0
+    assert check.state(joints(dq=fast)).startswith("the joints turn at 500 rad/s")
 
 
 def test_a_diverging_simulation_ends_as_diverged_with_no_absurd_number_in_the_summary(stored, tmp_path, monkeypatch):

@@ -192,6 +192,7 @@ class MujocoRobot(Robot):
         self._qpos, self._qvel, self._geom_xpos = d.qpos, d.qvel, d.geom_xpos
         self._joint_q, self._joint_dq = d.qpos[7:], d.qvel[6:]
         self._motor_force, self._sensordata = d.actuator_force, d.sensordata
+        self._warning_counts = d.warning.number  # each warning's count (mjtWarning order), read by `instability`
         self._base_body = base_body_id(m)
         self._terrain_geom = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, TERRAIN_GEOM)
         # index arrays, not slices: each field `read` returns is its own array, not a view into one sensordata copy
@@ -437,9 +438,10 @@ class MujocoRobot(Robot):
         warning, resets its state to the model's initial one and carries on; the warning's count, which the reset
         keeps, is all that shows it happened. Three integer reads: cheap enough for every tick.
         """
-        warning = self.data.warning
-        if not (warning[_BAD_QPOS].number or warning[_BAD_QVEL].number or warning[_BAD_QACC].number):
+        counts = self._warning_counts
+        if not (counts[_BAD_QPOS] or counts[_BAD_QVEL] or counts[_BAD_QACC]):
             return None
+        warning = self.data.warning
         what = ", ".join(f"{name} ({warning[i].number} time{'s' if warning[i].number > 1 else ''}, last at DOF "
                          f"{warning[i].lastinfo})" for name, i in (("a position", _BAD_QPOS), ("a velocity", _BAD_QVEL),
                                                                   ("an acceleration", _BAD_QACC))
