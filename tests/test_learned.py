@@ -1171,3 +1171,25 @@ def _three_paths_agree(path):
                      accel_in_body=np.array([0.0, 0.0, 9.81]), foot_force=np.full(4, 40.0))
     with pytest.raises(CommandError, match="non-finite"):
         fast.act(bad, VelocityCommand())
+
+
+def test_curves_name_every_run_once_under_the_panels_where_no_line_is_hidden(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from wbc.learned.train.curves import LEGEND_ROW_IN, _save
+
+    fig, axes = plt.subplots(1, 2, figsize=(8.0, 3.0), squeeze=False)
+    for k in range(4):  # the last run logs only in the second panel
+        if k < 3:
+            axes[0][0].plot([0, 1], [k, k + 1], label=f"run {k}")
+        axes[0][1].plot([0, 1], [k, 0], label=f"run {k}")
+    path = _save(fig, axes, tmp_path / "c.png", plt)
+    assert path.stat().st_size > 1000
+    assert all(ax.get_legend() is None for ax in axes[0])
+    (legend,) = fig.legends
+    assert [t.get_text() for t in legend.get_texts()] == ["run 0", "run 1", "run 2", "run 3"]
+    # four names in three columns: two rows, and the figure grew by them
+    assert fig.get_size_inches()[1] == pytest.approx(3.0 + 2 * LEGEND_ROW_IN + 0.1)

@@ -75,10 +75,27 @@ def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
     return _save(fig, axes, out, plt)
 
 
+LEGEND_ROW_IN = 0.2
+"""Height of one row of the legend under the panels [in] (8-point type)."""
+
+
 def _save(fig: Any, axes: Any, out: str | Path, plt: Any) -> Path:
-    """Put the legend in the first panel, write the figure to `out` (a PNG) and close it; returns the path."""
-    axes[0][0].legend(fontsize=8)
-    fig.tight_layout()
+    """Put the legend under the panels, write the figure to `out` (a PNG) and close it; returns the path.
+
+    Under them, not in a panel, where it would hide the lines it names; the figure grows by its rows. Every run
+    named in any panel is in it once.
+    """
+    named: dict[str, Any] = {}
+    for ax in axes[0]:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            named.setdefault(label, handle)
+    columns = max(1, min(len(named), 3))
+    rows = -(-len(named) // columns)
+    width, height = fig.get_size_inches()
+    legend_in = LEGEND_ROW_IN * rows + 0.1
+    fig.set_size_inches(width, height + legend_in)
+    fig.legend(list(named.values()), list(named), loc="lower center", ncol=columns, fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0.0, legend_in / (height + legend_in), 1.0, 1.0))
     path = Path(out)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=120)
