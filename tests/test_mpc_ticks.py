@@ -41,6 +41,12 @@ CASES = {
                          schedule=CommandSchedule(vx=0.5, yaw_rate=0.5, ramp_s=0.3),
                          push=Push(force_in_world=np.array([0.0, 380.0, 0.0]),
                                    offset_in_base=np.array([0.05, 0.0, 0.0]), start=0.9, duration=0.09)),
+    # the tail MPC: the arm on its planned path with its torque fed forward, the momentum observer on every tick, a
+    # push it detects (an update out of turn)
+    "a1-tail-push": dict(controller="mpc-tail", robot="a1-wx200", seconds=1.6,
+                         schedule=CommandSchedule(vx=0.5, yaw_rate=0.5, ramp_s=0.3),
+                         push=Push(force_in_world=np.array([0.0, 300.0, 0.0]),
+                                   offset_in_base=np.array([0.05, 0.0, 0.0]), start=0.9, duration=0.09)),
     # no arm joints (12 motors), sideways and turning the other way
     "go1-noarm": dict(controller="mpc-noarm", robot="go1-arm", seconds=0.8,
                       schedule=CommandSchedule(vx=0.2, vy=-0.2, yaw_rate=-0.8, ramp_s=0.2), push=None),
