@@ -11,7 +11,7 @@ from wbc.arena.runner import run_episode
 from wbc.control.registry import get_controller
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
-from wbc.mpc.observer import MomentumObserver, ObserverConfig
+from wbc.mpc.observer import MomentumObserver, ObserverConfig, stance_force_sum
 from wbc.robots.conventions import GRAVITY
 from wbc.scenario.push import Push
 from wbc.scenario.trial import CommandSchedule
@@ -97,3 +97,27 @@ def test_under_the_mpc_a_known_push_is_detected_within_20_ms_and_nothing_else_is
     assert not episode.fell
     assert peak[0] < 0.25 * observer.config.threshold_n  # trotting in place: within a quarter of the threshold
     assert len(detections) == 1 and 0.0 < detections[0] - 1.5 <= 0.020
+
+
+def test_the_compiled_stance_sum_and_sample_give_numpys_bits():
+    rng = np.random.default_rng(3)
+    out = np.empty(3)
+    for _ in range(200):
+        forces = rng.normal(0.0, 80.0, (4, 3)) * rng.choice([1e-300, 1.0, 1e300], (4, 3))
+        stance = rng.random(4) < 0.5
+        stance_force_sum(forces, stance, out)
+        want = (forces * stance[:, None]).sum(axis=0)
+        assert np.array_equal(out, want) and np.array_equal(np.signbit(out), np.signbit(want))
+    # the observer's samples, against the numpy formulas they stand for
+    compiled, mass, gain = MomentumObserver(13.7, ObserverConfig(gain=25.0)), 13.7, 25.0
+    p0, integral, residual = None, np.zeros(3), np.zeros(3)
+    weight = mass * np.asarray(GRAVITY, dtype=np.float64)
+    for _ in range(100):
+        v, forces, stance = rng.normal(0.0, 0.5, 3), rng.normal(0.0, 60.0, (4, 3)), rng.random(4) < 0.5
+        compiled.update_stance(v, forces, stance, DT)
+        if p0 is None:
+            p0 = mass * v
+            continue
+        integral += ((forces * stance[:, None]).sum(axis=0) + weight + residual) * DT
+        residual = gain * (mass * v - p0 - integral)
+        assert np.array_equal(compiled.residual, residual)

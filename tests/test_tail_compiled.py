@@ -177,3 +177,22 @@ def test_the_path_is_each_steps_own_tail(robot):
     assert np.all(q[arm_q_idx] == 0.0) and np.all(v == 0.0)
     # the arm moving changes the model along the path (the test is not of four equal steps)
     assert np.abs(path.momentum_matrix[0] - path.momentum_matrix[1]).max() > 1e-3
+
+
+def test_the_arm_path_rows_are_the_numpy_expressions_bit_for_bit_and_tell_a_non_finite_row():
+    from wbc.mpc.tail_compiled import arm_path_rows
+
+    rng = np.random.default_rng(5)
+    for _ in range(100):
+        rows = rng.normal(size=(5, 15))
+        start, acc, torque, tau = rng.normal(size=6), rng.normal(0.0, 30.0, 3), rng.normal(size=3), rng.random() * 0.03
+        want = rows.copy()
+        want[0, ARM_JOINTS] = start[:3] + start[3:] * tau + 0.5 * acc * tau * tau
+        want[1, ARM_JOINTS] = start[3:] + acc * tau
+        want[4, ARM_JOINTS] = torque
+        assert arm_path_rows(rows, ARM_JOINTS.start, start, acc, tau, torque)
+        assert np.array_equal(rows, want)
+    rows[2, ARM_JOINTS.start + 1] = np.nan  # a row the function does not write is checked too
+    assert not arm_path_rows(rows, ARM_JOINTS.start, start, acc, tau, torque)
+    rows[2, ARM_JOINTS.start + 1] = 0.0
+    assert not arm_path_rows(rows, ARM_JOINTS.start, start, acc, tau, np.array([0.0, np.inf, 0.0]))

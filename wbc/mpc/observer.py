@@ -26,12 +26,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.robots.conventions import GRAVITY
 
-__all__ = ["MomentumObserver", "ObserverConfig"]
+__all__ = ["MomentumObserver", "ObserverConfig", "stance_force_sum"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -72,11 +73,36 @@ class ObserverConfig:
         return math.ceil(math.log(1.0 - self.threshold_n / force_n) / math.log(decay) - 1e-9) * dt
 
 
+@numba.njit(cache=True, nogil=True)
+def stance_force_sum(forces: np.ndarray, stance: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover - compiled
+    """The summed force of the feet in stance into `out` (3,): ``(forces * stance[:, None]).sum(axis=0)``, bit for bit.
+
+    Args:
+        forces: each foot's force, (feet, 3) [N].
+        stance: each foot's stance flag, (feet,) bool.
+        out: (3,) [N], written.
+    """
+    for j in range(3):
+        total = 0.0  # numpy's reduction starts from the sum's identity, +0 (a swing foot's -0 adds to +0), row by row
+        for i in range(forces.shape[0]):
+            total = total + forces[i, j] * (1.0 if stance[i] else 0.0)
+        out[j] = total
+
+
+@numba.njit(cache=True, nogil=True)
+def _residual_step(mass, velocity, p0, contact_force, weight, gain, dt, integral, residual):  # pragma: no cover
+    """One sample of the residual, in place: the integral with the last residual, then the residual."""
+    for j in range(3):
+        integral[j] += (contact_force[j] + weight[j] + residual[j]) * dt
+    for j in range(3):
+        residual[j] = gain * (mass * velocity[j] - p0[j] - integral[j])
+
+
 class MomentumObserver:
     """The linear-momentum residual of a robot of mass `mass` [kg] (see the module), sampled every tick.
 
     Attributes:
-        residual: the estimated external force now, world axes, shape (3,) [N].
+        residual: the estimated external force now, world axes, shape (3,) [N] (updated in place by each sample).
         detections: disturbances detected since `reset` (rising edges of the horizontal residual past the
             threshold).
     """
@@ -93,6 +119,10 @@ class MomentumObserver:
         self._integral = np.zeros(3)
         self._armed = True
         self._started = False
+        self._stance_force = np.zeros(3)
+        # compiled once here (numba's cache on disk), not at a control tick
+        _residual_step(1.0, np.zeros(3), np.zeros(3), np.zeros(3), np.zeros(3), 1.0, 1.0, np.zeros(3), np.zeros(3))
+        stance_force_sum(np.zeros((4, 3)), np.zeros(4, dtype=np.bool_), np.zeros(3))
 
     def reset(self) -> None:
         """Forget the episode: the next `update` is the first sample."""
@@ -114,14 +144,30 @@ class MomentumObserver:
         Returns:
             True on the sample at which a disturbance is detected (once per disturbance).
         """
-        p = self.mass * np.asarray(com_velocity, dtype=np.float64)
+        velocity = np.asarray(com_velocity, dtype=np.float64)
         if not self._started:
-            self._p0 = p.copy()
+            self._p0 = self.mass * velocity
             self._started = True
             return False
-        self._integral += (np.asarray(contact_force, dtype=np.float64) + self._weight + self.residual) * dt
-        self.residual = self.config.gain * (p - self._p0 - self._integral)
-        horizontal = math.hypot(self.residual[0], self.residual[1])
+        residual = self.residual
+        _residual_step(self.mass, velocity, self._p0, np.asarray(contact_force, dtype=np.float64), self._weight,
+                       self.config.gain, dt, self._integral, residual)
+        return self._detect(math.hypot(residual[0], residual[1]))
+
+    def update_stance(self, com_velocity: np.ndarray, forces: np.ndarray, stance: np.ndarray, dt: float) -> bool:
+        """`update` with the contact force given as each foot's force and its stance flag (summed over the stance feet).
+
+        Args:
+            com_velocity: the estimated CoM velocity, world axes, (3,) float [m/s].
+            forces: each foot's commanded force, world axes, (4, 3) float [N].
+            stance: each foot's stance flag, (4,) bool.
+            dt: time since the last sample [s].
+        """
+        stance_force_sum(forces, stance, self._stance_force)
+        return self.update(com_velocity, self._stance_force, dt)
+
+    def _detect(self, horizontal: float) -> bool:
+        """The detector's step on the horizontal residual's magnitude [N]: True at a rising edge past the threshold."""
         cfg = self.config
         if self._armed and horizontal > cfg.threshold_n:
             self._armed = False

@@ -30,7 +30,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["tail_qp"]
+__all__ = ["arm_path_rows", "tail_qp"]
 
 _NX = 18  # the state: c, v, Theta, h, q_a, dq_a (`wbc.mpc.tail_mpc.TNX`)
 _NU = 15  # the input: four feet's forces, the arm's accelerations (`wbc.mpc.tail_mpc.TNU`)
@@ -369,3 +369,23 @@ def tail_qp(x0, x_ref, contact, feet, mass, inertia, momentum_matrix, momentum_j
                     lo[r], hi[r] = low - free[state], high - free[state]
                     r += 1
     return h, g, cmat, lo, hi, l_box, u_box, scale, index, free, gamma_z
+
+
+@numba.njit(cache=True, nogil=True)
+def arm_path_rows(rows, first, start, acc, tau, torque):  # pragma: no cover - compiled
+    """The arm's command rows on its planned path, `tau` [s] into a step; whether the arm's rows are all finite.
+
+    Position ``q + dq tau + acc tau^2 / 2`` and speed ``dq + acc tau`` from the step's start (`start`: q (3), dq (3))
+    under its constant acceleration `acc` (3,), and the feed-forward `torque` (3,), into the three columns of `rows`
+    (5, n) from `first`; the same operations in the same order as the numpy expressions they replace.
+    """
+    for i in range(3):
+        j = first + i
+        rows[0, j] = start[i] + start[3 + i] * tau + 0.5 * acc[i] * tau * tau
+        rows[1, j] = start[3 + i] + acc[i] * tau
+        rows[4, j] = torque[i]
+    for r in range(rows.shape[0]):
+        for i in range(3):
+            if not math.isfinite(rows[r, first + i]):
+                return False
+    return True

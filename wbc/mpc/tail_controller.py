@@ -27,6 +27,7 @@ from wbc.mpc.centroidal_mpc import MpcSolveError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.mpc.footholds import ground_height
 from wbc.mpc.observer import MomentumObserver, ObserverConfig
+from wbc.mpc.tail_compiled import arm_path_rows
 from wbc.mpc.tail_model import ArmTail, ArmTailPath, arm_leverage, arm_tail_path, choose_ready_pose
 from wbc.mpc.tail_mpc import ARM_DQ, ARM_Q, TNX, TailMpc, TailMpcConfig, TailPlan
 from wbc.robots.description import ARM_JOINTS, RobotDescription
@@ -225,19 +226,21 @@ class TailMpcController(MpcController):
             tau = self.t + self.dt - self.plan_t - k * self.tail_config.tail.dt  # into step k, at this command's end
             start = self._x0[12:] if k == 0 else plan.states[k - 1, 12:]
             acc = plan.arm_acceleration[k]
-            rows[0, ARM_JOINTS] = start[:3] + start[3:] * tau + 0.5 * acc * tau * tau
-            rows[1, ARM_JOINTS] = start[3:] + acc * tau
-            rows[4, ARM_JOINTS] = self._tail_now.mass_matrix @ acc + self._tail_now.bias
+            torque = self._tail_now.mass_matrix @ acc + self._tail_now.bias
+            finite = arm_path_rows(rows, ARM_JOINTS.start, start, acc, tau, torque)
+        else:
+            finite = bool(np.isfinite(rows[:, ARM_JOINTS]).all())
         self._observe(step)
-        return bool(np.isfinite(rows[:, ARM_JOINTS]).all())
+        return finite
 
     def _observe(self, step: int) -> None:
-        """Feed the observer this tick's estimate and the forces the plan asks of the stance feet."""
+        """Feed the observer this tick's estimate and the forces the plan asks of the stance feet.
+
+        The stance flags are the gait's at this tick, as the tick's gait stage wrote them (`gait.contact(self.t)`).
+        """
         if self.observer is None or self.plan is None:
             return
-        contact = self.gait.contact(self.t)
-        forces = self.plan.forces[step]
-        if self.observer.update(self.kin.com_vel, (forces * contact[:, None]).sum(axis=0), self.dt):
+        if self.observer.update_stance(self.kin.com_vel, self.plan.forces[step], self._contact, self.dt):
             self.pushes_detected += 1
             self._push_pending = True
 
