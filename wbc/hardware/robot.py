@@ -101,9 +101,12 @@ class Robot(ABC):
     def connect(self) -> None:
         """Open the connection (or build the simulation). Idempotent."""
         if not self._connected:
-            # the write's compiled check loads here (from numba's cache on disk), not at the first command
-            zeros = np.zeros((5, 1))
+            # the write's compiled check loads here (from numba's cache on disk), not at the first command; a
+            # command's rows are read-only, which numba compiles apart
+            zeros, frozen = np.zeros((5, 1)), np.zeros((5, 1))
+            frozen.setflags(write=False)
             within_bounds(zeros, zeros, zeros)
+            within_bounds(frozen, zeros, zeros)
             self._connect()
             self._connected = True
 
