@@ -111,3 +111,43 @@ def test_a_settings_file_runs_the_tail_mpc_with_the_arm_held_and_refuses_a_bad_p
         tail_config_from_table({"ready_q": "up"})
     with pytest.raises(ConfigError, match=r"TailControllerConfig.tail: unknown key 'arm_move'; valid keys: .*"):
         tail_config_from_table({"tail": {"arm_move": False}})
+
+
+_COMPILE_PROBE = """
+import json
+import numpy as np
+from wbc.arena import divergence
+from wbc.arena.runner import run_episode
+from wbc.control.registry import get_controller
+from wbc.hardware import robot as robot_module
+from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.mpc import observer, tail_compiled
+from wbc.scenario.push import Push
+from wbc.scenario.trial import CommandSchedule
+
+kernels = (robot_module.within_bounds, divergence._joints_possible, observer.stance_force_sum,
+           observer._residual_step, tail_compiled.arm_path_rows)
+spec = get_controller("mpc-tail")
+with MujocoRobot(MujocoRobotConfig(arm_mode=spec.arm_mode)) as sim:
+    controller = spec.make(sim.desc)
+    loaded = [len(k.signatures) for k in kernels]
+    sim.reset(seed=0)
+    sim.apply_push(Push(force_in_world=np.array([0.0, 300.0, 0.0]), offset_in_base=np.zeros(3), start=0.4,
+                        duration=0.09))
+    episode = run_episode(sim, controller, CommandSchedule(vx=0.3), 0.8, divergence=divergence.DivergenceCheck())
+print(json.dumps({"fell": bool(episode.fell), "pushes": controller.pushes_detected, "loaded": loaded,
+                  "after": [len(k.signatures) for k in kernels]}))
+"""
+
+
+def test_nothing_compiles_during_a_pushed_mpc_tail_episode():
+    # the per-tick compiled passes load when the robot connects and the controller is made, never at a tick; a
+    # fresh interpreter, so that no earlier test has loaded them
+    import json
+    import subprocess
+    import sys
+
+    out = json.loads(subprocess.run([sys.executable, "-c", _COMPILE_PROBE], capture_output=True, text=True,
+                                    check=True).stdout)
+    assert not out["fell"] and out["pushes"] == 1  # the observer's path ran
+    assert out["after"] == out["loaded"] and min(out["loaded"]) >= 1
