@@ -117,7 +117,7 @@ def test_server_listens_on_loopback_only():
         assert {port for _, port in listening} >= {server.web_port}
         assert listening and all(ip == "127.0.0.1" for ip, _ in listening), listening
         assert server.web_url.startswith("http://127.0.0.1:")
-        page = urllib.request.urlopen(server.web_url, timeout=5).read().decode()
+        page = urllib.request.urlopen(server.web_url, timeout=60).read().decode()
         assert "main.min.js" in page
         other = _other_local_address()
         if other is not None:  # the same port on this machine's other interface must refuse the connection
