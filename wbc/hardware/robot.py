@@ -24,8 +24,8 @@ from wbc.errors import CommandError, ConfigError, RobotNotConnectedError
 from wbc.robots.joint_table import JointTable
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["Robot", "KP_MAX", "KD_MAX", "COMMAND_ROWS", "clamp_command", "command_bounds", "exceeds_bounds",
-           "exceeded_rows", "within_bounds"]
+__all__ = ["Robot", "KP_MAX", "KD_MAX", "COMMAND_ROWS", "clamp_command", "command_bounds", "exceeded_rows",
+           "within_bounds"]
 
 COMMAND_ROWS = ("q", "dq", "kp", "kd", "tau")
 """A command's rows, in the order of `MotorCommand.rows` and `command_bounds`."""
@@ -53,19 +53,13 @@ def within_bounds(rows: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> boo
     """Whether every value of `rows` lies within [`lower`, `upper`] (all (5, n)); a NaN lies within no bounds.
 
     One compiled pass, stopping at the first value outside: the check of every write and of the runner's count of
-    clamped ticks, where `exceeds_bounds` and `exceeded_rows` (which say more) cost several numpy calls each.
+    clamped ticks, where `exceeded_rows` (which says which rows) costs several numpy calls.
     """
     for i in range(rows.shape[0]):
         for j in range(rows.shape[1]):
             if not lower[i, j] <= rows[i, j] <= upper[i, j]:
                 return False
     return True
-
-
-def exceeds_bounds(cmd: MotorCommand, bounds: tuple[np.ndarray, np.ndarray]) -> bool:
-    """Whether `clamp_command` would change `cmd`: some value lies outside `bounds` (`command_bounds`)."""
-    rows = cmd.rows
-    return bool((rows < bounds[0]).any() or (rows > bounds[1]).any())
 
 
 def clamp_command(cmd: MotorCommand, limits: JointTable,
