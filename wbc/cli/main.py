@@ -40,8 +40,9 @@ from wbc.hardware.realtime import AUTO_CPU, CONTROLLER_PRIORITY_BELOW, NO_REALTI
 from wbc.hardware.serial_port_policy import is_emulated_port
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
+from wbc.learned.policy.shipped import distilled_weights
 from wbc.learned.train.adaptation_config import AdaptationConfig
-from wbc.learned.train.stages import stage_config
+from wbc.learned.train.stages import TASKS, fine_tune_config, stage_config
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
@@ -457,6 +458,8 @@ def _hw_live_observer(args: argparse.Namespace):
 
 
 def _train(args: argparse.Namespace) -> int:
+    if args.fine_tune is not None:
+        return _fine_tune(args)
     if args.teacher is not None and args.teacher in CONTROLLERS:
         return _distil(args)
     dagger_only = [f"--{n.replace('_', '-')}" for n in ("rounds", "episodes", "episode_s", "history", "expert_noise",
@@ -482,6 +485,33 @@ def _train(args: argparse.Namespace) -> int:
 
     result = train(cfg, resume=args.resume)
     printers.print_trained(result, task=args.task, stage=args.stage, baseline=args.variant or args.baseline)
+    return 0
+
+
+def _fine_tune(args: argparse.Namespace) -> int:
+    """``wbc train --fine-tune STUDENT``: PPO + BC on a distilled student."""
+    dagger_only = ("rounds", "episodes", "episode_s", "history", "expert_noise", "average_labels", "expert_truth",
+                   "expert_follows", "takeover", "student_layers", "memory_layers")
+    for name in ("stage", "baseline", "variant", "teacher", "rma_iterations", *dagger_only):
+        if getattr(args, name) is not None:
+            raise ConfigError(f"--{name.replace('_', '-')} does not apply to --fine-tune (the student is the actor "
+                              "and its own BC teacher); its options are --iterations, --envs, --threads, --seed, "
+                              "--run-root, --resume and --dry-run")
+    if args.task not in TASKS:
+        raise UnknownNameError("task", args.task, tuple(TASKS))
+    student = args.fine_tune
+    if student == "shipped":
+        student = str(distilled_weights(get_robot(TASKS[args.task].robot, "actuated")))
+    env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
+    overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
+    cfg = fine_tune_config(args.task, student, run_root=args.run_root, env_overrides=env, **overrides)
+    if args.dry_run:
+        printers.print_json(dataclasses.asdict(cfg))
+        return 0
+    from wbc.learned.train.train import train
+
+    result = train(cfg, resume=args.resume)
+    printers.print_trained(result, task=args.task, stage=3, baseline="fine-tune")
     return 0
 
 

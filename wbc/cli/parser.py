@@ -571,6 +571,10 @@ def _add_train_parser(sub: _Commands) -> None:
     tr.add_argument("--teacher", default=None,
                     help="BC teacher policy file (default: the previous stage's export); or a controller of the "
                          "arena (e.g. mpc): distil it into a policy by DAgger (--rounds, --episodes)")
+    tr.add_argument("--fine-tune", default=None, metavar="STUDENT",
+                    help="fine-tune a student distilled with --teacher CONTROLLER (its policy file, or 'shipped' for "
+                         "the task robot's mpc-distilled weights) by PPO + BC towards itself on stage 3's conditions "
+                         "(--iterations, default 200); the run is RUN_ROOT/<task>-fine-tune")
     tr.add_argument("--rounds", type=bounded_int(1, 10_000), default=None,
                     help="with a controller as --teacher: DAgger rounds, the expert-driven first one included "
                          "(default 8)")

@@ -4,10 +4,14 @@
 
 mu_theta is the actor's mean action; pi_prev is the previous stage's exported policy (a frozen `TorchPolicy`) on the
 compatible part of the observation (the ``teacher`` group, which the env builds from the same state) and, when that
-policy observes the extrinsics, the ``privileged`` group; `mask` lists the actor's action indices that correspond,
-in order, to the teacher's actions (the legs when the arm is new). The expectation runs over on-policy states: the
-teacher labels the states the student visits, as the paper prescribes. lambda follows a `BCSchedule` over PPO
-iterations and is saved with the checkpoint, so a resumed run continues the same schedule.
+policy observes the extrinsics, the ``privileged`` group, or its observation window (the ``history`` group) when it
+reads its own memory (a distilled student fine-tuned against its starting self); `mask` lists the actor's action
+indices that correspond, in order, to the teacher's actions (the legs when the arm is new). The expectation runs over
+on-policy states: the teacher labels the states the student visits, as the paper prescribes. lambda follows a
+`BCSchedule` over PPO iterations and is saved with the checkpoint, so a resumed run continues the same schedule.
+
+`actor_frozen_iterations` trains the critic alone for the first iterations: an actor that starts as a good policy
+(a student) would otherwise be moved by the advantages of a critic that has not yet learnt anything.
 
 rsl-rl's `PPO.update` has no hook for an extra loss, so `update` is re-implemented here for the configuration this
 project uses (feed-forward models, one device, no RND, no symmetry augmentation); other configurations are refused.
@@ -59,6 +63,8 @@ class PPOWithBC(_ppo.PPO):
         action_mask: student action index for each teacher action (default: the first n_teacher).
         teacher_group: observation group the teacher sees.
         privileged_group: observation group of the teacher's extrinsics input.
+        history_group: observation group of the teacher's window, when it reads its history.
+        actor_frozen_iterations: first iterations in which only the critic learns.
         **kwargs: `PPO` arguments.
 
     Raises:
@@ -69,7 +75,8 @@ class PPOWithBC(_ppo.PPO):
 
     def __init__(self, actor, critic, storage, *, teacher_path: str, bc_schedule: dict[str, Any] | None = None,
                  action_mask: list[int] | None = None, teacher_group: str = "teacher",
-                 privileged_group: str = "privileged", **kwargs) -> None:
+                 privileged_group: str = "privileged", history_group: str = "history",
+                 actor_frozen_iterations: int = 0, **kwargs) -> None:
         super().__init__(actor, critic, storage, **kwargs)
         if self.rnd or self.symmetry or self.is_multi_gpu or actor.is_recurrent or critic.is_recurrent:
             raise ConfigError("PPOWithBC supports feed-forward models on one device, without RND or symmetry: "
@@ -86,16 +93,21 @@ class PPOWithBC(_ppo.PPO):
         self.schedule_bc = BCSchedule(**(bc_schedule or {}))
         self.teacher_group = teacher_group
         self.privileged_group = privileged_group
+        self.history_group = history_group
+        self.actor_frozen_iterations = int(actor_frozen_iterations)
         self.bc_iteration = 0
 
     def teacher_actions(self, obs):
         """The teacher's actions for an observation TensorDict."""
+        if self.teacher.reads_history:
+            return self.teacher(obs[self.teacher_group], history=obs[self.history_group])
         priv = obs[self.privileged_group] if self.teacher.uses_extrinsics else None
         return self.teacher(obs[self.teacher_group], priv)
 
     def update(self) -> dict[str, float]:
         """PPO epochs over the rollout, with lambda * BC added to every minibatch's loss."""
         lam = self.schedule_bc.weight(self.bc_iteration)
+        actor_learns = self.bc_iteration >= self.actor_frozen_iterations
         sums = {"value": 0.0, "surrogate": 0.0, "entropy": 0.0, "bc": 0.0}
         n = 0
         for batch in self.storage.mini_batch_generator(self.num_mini_batches, self.num_learning_epochs):
@@ -107,7 +119,7 @@ class PPOWithBC(_ppo.PPO):
             values = self.critic(batch.observations)
             params = self.actor.output_distribution_params
             entropy = self.actor.output_entropy
-            if self.desired_kl is not None and self.schedule == "adaptive":
+            if actor_learns and self.desired_kl is not None and self.schedule == "adaptive":  # frozen: KL 0
                 with torch.inference_mode():
                     kl = self.actor.get_kl_divergence(batch.old_distribution_params, params).mean()
                     if kl > self.desired_kl * 2.0:
@@ -128,9 +140,12 @@ class PPOWithBC(_ppo.PPO):
             with torch.no_grad():
                 target = self.teacher_actions(batch.observations)
             bc = bc_loss(self.actor.output_mean, target, self.action_mask)
-            loss = surrogate_loss + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
-            if lam > 0.0:
-                loss = loss + lam * bc
+            if actor_learns:
+                loss = surrogate_loss + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
+                if lam > 0.0:
+                    loss = loss + lam * bc
+            else:
+                loss = self.value_loss_coef * value_loss
             self.optimizer.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(self.actor.parameters(), self.max_grad_norm)

@@ -30,6 +30,9 @@ the arm's distance from its stowed pose), ``from-pi2`` (the actor starts from pi
 
 A stage's teacher is the policy file the previous stage exported (``<run_dir>/<task>-stage<k-1>/policy``), unless
 a path is given.
+
+`fine_tune_config` is not a stage: it improves a policy distilled from a controller (``wbc train --teacher mpc``) by
+PPO + BC on stage 3's conditions, the student itself being the actor and the BC term's teacher.
 """
 
 from __future__ import annotations
@@ -43,12 +46,13 @@ from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.env.env_config import EnvConfig, RewardScales
 from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.bc_schedule import BCSchedule
-from wbc.learned.train.train_config import TrainConfig
+from wbc.learned.train.train_config import PPOConfig, TrainConfig
 
-__all__ = ["BASELINES", "PUSH_POSTURE", "RECIPE_VARIANTS", "TASKS", "TURN_POSTURE", "TURN_SCENARIO",
+__all__ = ["BASELINES", "FINE_TUNE_BC", "FINE_TUNE_CRITIC_ONLY", "FINE_TUNE_INIT_STD",
+           "PUSH_POSTURE", "RECIPE_VARIANTS", "TASKS", "TURN_POSTURE", "TURN_SCENARIO",
            "TURN_STANDING_SHARE", "TURN_TAUGHT_INIT_STD", "TURN_WALKING_PRIOR_COMMANDS", "TURN_WALKING_PRIOR_INIT",
-           "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA", "run_name",
-           "stage_config"]
+           "TURN_WALKING_PRIOR_TERMINATION", "TaskSpec", "WALKING_PRIOR_COMMANDS", "WALKING_PRIOR_SIGMA",
+           "fine_tune_config", "run_name", "stage_config"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -280,4 +284,46 @@ def stage_config(task: str, stage: int, baseline: str | None = None, *, run_root
                       teacher=teacher_path, init_from=init_path, action_mask=tuple(range(12)) if transfer else None,
                       run_dir=str(Path(run_root) / run_name(task, stage, baseline, variant)), save_interval=25,
                       **decoupled, **init_std)
+    return dataclasses.replace(cfg, **overrides)
+
+
+FINE_TUNE_BC = BCSchedule(initial=1.0, final=0.1, hold_iterations=50, anneal_iterations=100, kind="linear")
+"""The BC weight towards the student as it was, in a fine-tune: held for 50 iterations (the critic's 20 alone
+included), then down to 0.1 over 100, where it stays: PPO may move the student, not forget what the expert taught
+it."""
+
+FINE_TUNE_INIT_STD = 0.3
+"""A fine-tune's initial action noise, in action units (0.075 rad a joint): the student already walks and recovers,
+and the stage-3 recipe's 1.0 would trip it; the noise the student met while learning, DART's 0.9 on the expert's
+actions, came with the expert to catch it."""
+
+FINE_TUNE_CRITIC_ONLY = 20
+"""Iterations of a fine-tune in which only the critic learns, before the student's first PPO update."""
+
+
+def fine_tune_config(task: str, student: str, *, run_root: str = "runs/train",
+                     env_overrides: dict[str, Any] | None = None, **overrides: Any) -> TrainConfig:
+    """The `TrainConfig` that fine-tunes a distilled student by PPO + BC on its task's stage-3 conditions.
+
+    The student (`wbc train --teacher mpc`, with a history) is the actor from the first iteration, reading its own
+    observation window; the env is stage 3's (arm actuated, the scenario's ground, pushes and bands); the BC term
+    pulls towards the student as it started (`FINE_TUNE_BC`), the expert's teaching as the student holds it (the expert
+    itself does not run in the batched env); PPO starts at a tenth of the stages' step size.
+
+    Args:
+        task: a key of `TASKS`.
+        student: the student's policy file.
+        run_root: the run directory is ``<run_root>/<task>-fine-tune``.
+        env_overrides: `EnvConfig` fields to change (num_envs, seed ...).
+        **overrides: `TrainConfig` fields to change (max_iterations, seed ...).
+
+    Raises:
+        UnknownNameError: unknown task.
+    """
+    base = stage_config(task, 3, run_root=run_root, env_overrides=env_overrides)
+    env = dataclasses.replace(base.env, teacher_arm_mode=None)
+    cfg = TrainConfig(task=task, stage=3, env=env, bc=FINE_TUNE_BC, teacher=str(student), student=str(student),
+                      actor_frozen_iterations=FINE_TUNE_CRITIC_ONLY, extrinsics_dim=0, init_std=FINE_TUNE_INIT_STD,
+                      ppo=PPOConfig(learning_rate=1e-4), max_iterations=200, save_interval=25,
+                      run_dir=str(Path(run_root) / f"{task}-fine-tune"))
     return dataclasses.replace(cfg, **overrides)

@@ -44,17 +44,30 @@ class TorchPolicy(torch.nn.Module):
         self.register_buffer("obs_div", torch.as_tensor(a["obs_std"], dtype=torch.float32) + eps)
         self.mlp = sequential(policy.layers("policy"), meta["activation"])
         self.uses_extrinsics = meta.get("extrinsics") is not None
-        if self.uses_extrinsics:
+        self.reads_history = self.uses_extrinsics and not policy.layers("encoder")
+        """z comes from the observation history alone (a distilled student): `forward` takes the window."""
+        if self.reads_history:
+            self.history = int(meta["adaptation"]["history"])
+            self.adaptation = sequential(policy.layers("adaptation"), meta["activation"])
+        elif self.uses_extrinsics:
             self.register_buffer("priv_mean", torch.as_tensor(a["privileged_mean"], dtype=torch.float32))
             self.register_buffer("priv_div", torch.as_tensor(a["privileged_std"], dtype=torch.float32) + eps)
             self.encoder = sequential(policy.layers("encoder"), meta["activation"])
         self.requires_grad_(False)
         self.eval()
 
-    def forward(self, obs, privileged=None):
-        """Actions for observations (N, obs_size) and, with extrinsics, privileged observations (N, P)."""
+    def forward(self, obs, privileged=None, history=None):
+        """Actions for observations (N, obs_size).
+
+        With extrinsics, the privileged observations (N, P) too or, for a policy that reads its own history, the raw
+        window (N, H * obs_size), oldest first.
+        """
         x = (obs - self.obs_mean) / self.obs_div
-        if self.uses_extrinsics:
+        if self.reads_history:
+            n = history.shape[0]
+            window = (history.reshape(n, self.history, -1) - self.obs_mean) / self.obs_div
+            x = torch.cat([x, self.adaptation(window.reshape(n, -1))], dim=-1)
+        elif self.uses_extrinsics:
             z = self.encoder((privileged - self.priv_mean) / self.priv_div)
             x = torch.cat([x, z], dim=-1)
         return self.mlp(x)

@@ -28,8 +28,10 @@ from wbc.learned.policy.composite_policy import save_composite
 from wbc.learned.policy.policy_file import PolicyFileError, load_policy, save_policy
 from wbc.learned.policy.replay_file import replay_path_for
 from wbc.learned.policy.replay_recorder import record_replay
+from wbc.learned.train.distill import student_policy_file
 from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
+from wbc.learned.train.history_actor import HistoryActor, student_layout
 from wbc.learned.train.rma import train_adaptation
 from wbc.learned.train.train_config import TrainConfig
 from wbc.learned.train.vec_env import RslVecEnv
@@ -53,7 +55,10 @@ def rsl_rl_config(cfg: TrainConfig) -> dict[str, Any]:
     actor: dict[str, Any] = {"class_name": "MLPModel", "hidden_dims": list(cfg.actor_hidden_dims),
                              "activation": cfg.activation, "obs_normalization": True, "distribution_cfg": dist}
     actor_groups = ["policy"]
-    if cfg.extrinsics_dim > 0:
+    if cfg.student is not None:
+        actor.update(class_name="wbc.learned.train.history_actor:HistoryActor", student_path=cfg.student)
+        actor_groups = ["policy", "history"]
+    elif cfg.extrinsics_dim > 0:
         actor.update(class_name="wbc.learned.train.extrinsics_actor:ExtrinsicsActor", extrinsics_dim=cfg.extrinsics_dim,
                      encoder_dims=list(cfg.encoder_dims))
         actor_groups = ["policy", "privileged"]
@@ -61,7 +66,10 @@ def rsl_rl_config(cfg: TrainConfig) -> dict[str, Any]:
     if cfg.bc is not None:
         algorithm.update(class_name="wbc.learned.train.ppo_bc:PPOWithBC", teacher_path=cfg.teacher,
                          bc_schedule=dataclasses.asdict(cfg.bc),
-                         action_mask=None if cfg.action_mask is None else list(cfg.action_mask))
+                         action_mask=None if cfg.action_mask is None else list(cfg.action_mask),
+                         actor_frozen_iterations=cfg.actor_frozen_iterations)
+        if cfg.student is not None:
+            algorithm["teacher_group"] = "policy"  # the student as it was: same arm, same observation
     return {
         "num_steps_per_env": cfg.num_steps_per_env,
         "save_interval": cfg.save_interval,
@@ -101,6 +109,11 @@ def _check_teacher(cfg: TrainConfig) -> None:
             raise ConfigError(f"frozen leg policy {cfg.frozen_legs} drives {legs.meta['robot']} with arm "
                               f"{legs.meta['arm_mode']!r}; this run needs {cfg.env.robot} with arm "
                               f"{cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
+    if cfg.student is not None:
+        student_layout(_load_for(cfg.student, "the student to fine-tune (student)"))  # one that reads its history
+        if cfg.extrinsics_dim != 0 or cfg.frozen_legs is not None or cfg.init_from is not None:
+            raise ConfigError("fine-tuning a student: the actor is the student (extrinsics_dim=0, no frozen_legs, "
+                              "no init_from)")
     if cfg.bc is None:
         return
     if cfg.teacher is None:
@@ -110,10 +123,11 @@ def _check_teacher(cfg: TrainConfig) -> None:
     except PolicyFileError as exc:
         raise ConfigError(f"stage {cfg.stage} learns from the previous stage's policy, which is not usable: {exc}. "
                           "Train the previous stage first, or pass --teacher PATH") from None
-    if teacher.meta["robot"] != cfg.env.robot or teacher.meta["arm_mode"] != cfg.env.teacher_arm_mode:
+    arm = cfg.env.arm_mode if cfg.student is not None else cfg.env.teacher_arm_mode  # a student teaches itself
+    if teacher.meta["robot"] != cfg.env.robot or teacher.meta["arm_mode"] != arm:
+        what = "the fine-tune" if cfg.student is not None else f"stage {cfg.stage}"
         raise ConfigError(f"teacher {cfg.teacher} drives {teacher.meta['robot']} with arm "
-                          f"{teacher.meta['arm_mode']!r}; stage {cfg.stage} needs {cfg.env.robot} with arm "
-                          f"{cfg.env.teacher_arm_mode!r}")
+                          f"{teacher.meta['arm_mode']!r}; {what} needs {cfg.env.robot} with arm {arm!r}")
 
 
 class _Runner(_runners.OnPolicyRunner):
@@ -125,6 +139,11 @@ class _Runner(_runners.OnPolicyRunner):
         self._wall_before = float(before["wall_s"])
         self._steps_before = int(before["env_steps"])
         self._t0 = time.perf_counter()
+        self._student_meta = {}
+        if cfg.student is not None:  # what the student was: its file and its own training
+            student = load_policy(cfg.student)
+            self._student_meta = {"method": "ppo-bc fine-tune of a distilled student", "student": str(cfg.student),
+                                  "student_training": student.meta.get("training", {})}
 
     def save(self, path: str, infos: dict | None = None) -> None:
         super().save(path, infos)
@@ -137,7 +156,10 @@ class _Runner(_runners.OnPolicyRunner):
                     "env_steps": self._steps_before + int(self.env.env.total_steps), "wall_s": wall}
         actor = self.alg.get_policy()
         extra = {"baseline": cfg.baseline, **({"variant": cfg.variant} if cfg.variant else {}), **progress}
-        if isinstance(self.env, FrozenLegsVecEnv):
+        if isinstance(actor, HistoryActor):
+            save_policy(Path(cfg.run_dir) / "policy",
+                        student_policy_file(actor, cfg.env, task=cfg.task, extra={**self._student_meta, **extra}))
+        elif isinstance(self.env, FrozenLegsVecEnv):
             extra["frozen_legs"] = cfg.frozen_legs
             save_composite(Path(cfg.run_dir) / "policy", decoupled_policy(
                 actor, self.env.legs.file, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra))
@@ -183,7 +205,8 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     if cfg.frozen_legs is not None:
         vec: RslVecEnv = FrozenLegsVecEnv(env, load_policy(cfg.frozen_legs), device=cfg.device)
     else:
-        vec = RslVecEnv(env, device=cfg.device)
+        history = student_layout(load_policy(cfg.student))[1] if cfg.student is not None else 0
+        vec = RslVecEnv(env, device=cfg.device, history=history)
     runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
     done = 0
     if checkpoint is None and cfg.init_from is not None:

@@ -57,6 +57,11 @@ class TrainConfig:
         frozen_legs: a policy file (pi2) that drives the legs, frozen, while PPO trains an actor for the remaining
             joints only (the decoupled baseline, `wbc.learned.train.frozen_legs_vec_env`); the run exports a composite
             policy (`wbc.learned.policy.composite_policy`). None: the actor drives every joint.
+        student: a distilled student's policy file (`wbc train --teacher mpc`, with a history) to fine-tune by PPO +
+            BC: the actor is that student, reading its own observation window
+            (`wbc.learned.train.history_actor.HistoryActor`), the BC term pulls towards the student as it was, and the
+            run exports the student's file format. None: an ordinary stage.
+        actor_frozen_iterations: first PPO iterations in which only the critic learns (`PPOWithBC`).
         run_dir: where checkpoints, TensorBoard logs, the resolved config and the exported policy go.
         device: torch device.
         torch_threads: torch's intra-op threads. 1 by default: on a shared machine with few cores, torch's
@@ -85,6 +90,8 @@ class TrainConfig:
     action_mask: tuple[int, ...] | None = None
     init_from: str | None = None
     frozen_legs: str | None = None
+    student: str | None = None
+    actor_frozen_iterations: int = 0
     run_dir: str = "runs/train"
     device: str = "cpu"
     torch_threads: int = 1

@@ -1,7 +1,10 @@
 """`RslVecEnv`: the numpy `BatchedEnv` behind rsl-rl-lib 5.x's `VecEnv` interface (torch tensors in and out).
 
-Observation groups: ``policy`` (what the robot measures), ``privileged`` (what only the simulator knows) and, when
-the env config names a teacher arm mode, ``teacher`` (the teacher policy's view of the same state, for the BC term).
+Observation groups: ``policy`` (what the robot measures), ``privileged`` (what only the simulator knows), when the
+env config names a teacher arm mode ``teacher`` (the teacher policy's view of the same state, for the BC term), and
+with a history of H > 0 ``history``: each robot's last H policy observations, raw, oldest first, the newest being the
+current one, the window filled with an episode's first observation when it begins (as `ObsHistory` and the
+controllers do), for an actor that reads its own memory (`wbc.learned.train.history_actor`).
 Episode statistics go to ``extras["log"]`` (keys namespaced with "/"), time-outs to ``extras["time_outs"]``.
 """
 
@@ -10,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from wbc.learned.env.env import BatchedEnv
+from wbc.learned.policy.obs_history import ObsHistory
 from wbc.optional import require
 
 torch = require("torch")
@@ -25,16 +29,22 @@ class RslVecEnv(_vec_env.VecEnv):
     Args:
         env: the batched env (owned: `close` closes it).
         device: torch device of the returned tensors.
+        history: observations in the ``history`` group (0: no such group).
     """
 
-    def __init__(self, env: BatchedEnv, device: str = "cpu") -> None:
+    def __init__(self, env: BatchedEnv, device: str = "cpu", history: int = 0) -> None:
         self.env = env
         self.num_envs = env.num_envs
         self.num_actions = env.num_actions
         self.max_episode_length = env.max_episode_steps
         self.device = device
         self.cfg = env.config
-        self._obs = self._pack(*env.reset())
+        self._history: ObsHistory | None = None
+        obs, privileged, teacher = env.reset()
+        if history > 0:
+            self._history = ObsHistory(env.num_envs, history, obs.shape[1])
+            self._history.fill(np.arange(env.num_envs), obs)
+        self._obs = self._pack(obs, privileged, teacher)
 
     @property
     def episode_length_buf(self):
@@ -52,6 +62,10 @@ class RslVecEnv(_vec_env.VecEnv):
     def step(self, actions):
         """One policy step: (obs, rewards, dones, extras)."""
         r = self.env.step(actions.detach().cpu().numpy())
+        if self._history is not None:  # a robot whose episode ended starts its new one with a full window
+            self._history.push(r.obs)
+            began = np.flatnonzero(r.terminated | r.time_out)
+            self._history.fill(began, r.obs[began])
         self._obs = self._pack(r.obs, r.privileged, r.teacher)
         rewards = torch.from_numpy(r.reward.astype(np.float32)).to(self.device)
         dones = torch.from_numpy((r.terminated | r.time_out).astype(np.int64)).to(self.device)
@@ -66,4 +80,6 @@ class RslVecEnv(_vec_env.VecEnv):
         groups = {"policy": torch.from_numpy(obs), "privileged": torch.from_numpy(privileged)}
         if teacher is not None:
             groups["teacher"] = torch.from_numpy(np.ascontiguousarray(teacher))
+        if self._history is not None:
+            groups["history"] = torch.from_numpy(self._history.flat().copy())
         return _tensordict.TensorDict(groups, batch_size=[self.num_envs], device=self.device)
