@@ -140,3 +140,52 @@ def test_cli_fine_tune_dry_run_and_errors(capsys):
     assert "--stage does not apply to --fine-tune" in capsys.readouterr().err
     assert main(["train", "--task", "nope", "--fine-tune", "shipped", "--dry-run"]) == 2
     assert "valid tasks" in capsys.readouterr().err
+
+
+def _expert_data(path: Path, n: int = 40) -> Path:
+    rng = np.random.default_rng(0)
+    obs = rng.normal(size=(2 * n, 54)).astype(np.float32)
+    np.savez(path, obs=obs, actions=rng.normal(size=(2 * n, 15)), episode=np.repeat([3, 7], n))
+    return path
+
+
+def test_expert_samples_are_drawn_with_the_windows_of_their_own_episodes(tmp_path):
+    from wbc.errors import ConfigError
+    from wbc.learned.train.ppo_bc import ExpertSamples
+
+    data = ExpertSamples(str(_expert_data(tmp_path / "data.npz", n=5)), history=3)
+    inputs, labels = data.draw(200, torch.Generator().manual_seed(0))
+    window = inputs["history"].reshape(200, 3, 54)
+    assert torch.equal(window[:, -1], inputs["policy"])  # the newest entry is the sample itself
+    obs = data.obs.numpy()
+    for w, o in zip(window.numpy(), inputs["policy"].numpy(), strict=True):
+        i = int(np.flatnonzero((obs == o).all(axis=1))[0])
+        first = 0 if i < 5 else 5  # its episode's first sample: the window never reaches into the other episode
+        want = [obs[max(i - 2 + k, first)] for k in range(3)]
+        np.testing.assert_array_equal(w, np.array(want))
+    assert labels.dtype == torch.float32 and labels.shape == (200, 15)
+    np.savez(tmp_path / "bad.npz", obs=np.zeros((4, 54)), actions=np.zeros((4, 15)))
+    with pytest.raises(ConfigError, match=r"bad\.npz: no episode array"):
+        ExpertSamples(str(tmp_path / "bad.npz"), history=3)
+    with pytest.raises(ConfigError, match="reads none"):
+        ExpertSamples(str(tmp_path / "data.npz"), history=0)
+
+
+def test_a_fine_tune_can_take_the_experts_samples_as_its_bc_target(tmp_path):
+    from wbc.errors import ConfigError
+    from wbc.learned.train.curves import read_scalars
+    from wbc.learned.train.train import train
+
+    data = _expert_data(tmp_path / "data.npz")
+    with pytest.raises(ConfigError, match="no such file"):
+        train(_tiny(tmp_path / "none", expert_data=str(tmp_path / "missing.npz"), max_iterations=1))
+    run = train(_tiny(tmp_path, expert_data=str(data), max_iterations=2, actor_frozen_iterations=1))
+    assert run["run_dir"].endswith("push-fine-tune-expert")
+    pf = load_policy(Path(run["run_dir"]) / "policy")
+    assert pf.meta["training"]["bc_towards"] == "the expert's samples"
+    assert pf.meta["training"]["expert_data"] == str(data)
+    _, bc = read_scalars(run["run_dir"])["Loss/bc"]
+    # random labels are far from the student's actions, in both iterations; only the second moved the student
+    assert bc.min() > 0.5
+    student = load_policy(STUDENT)
+    assert not np.array_equal(pf.arrays["policy/0/weight"], student.arrays["policy/0/weight"])

@@ -460,6 +460,8 @@ def _hw_live_observer(args: argparse.Namespace):
 def _train(args: argparse.Namespace) -> int:
     if args.fine_tune is not None:
         return _fine_tune(args)
+    if args.expert_data is not None:
+        raise ConfigError("--expert-data: only with --fine-tune STUDENT")
     if args.teacher is not None and args.teacher in CONTROLLERS:
         return _distil(args)
     dagger_only = [f"--{n.replace('_', '-')}" for n in ("rounds", "episodes", "episode_s", "history", "expert_noise",
@@ -495,8 +497,8 @@ def _fine_tune(args: argparse.Namespace) -> int:
     for name in ("stage", "baseline", "variant", "teacher", "rma_iterations", *dagger_only):
         if getattr(args, name) is not None:
             raise ConfigError(f"--{name.replace('_', '-')} does not apply to --fine-tune (the student is the actor "
-                              "and its own BC teacher); its options are --iterations, --envs, --threads, --seed, "
-                              "--run-root, --resume and --dry-run")
+                              "and its own BC teacher); its options are --expert-data, --iterations, --envs, "
+                              "--threads, --seed, --run-root, --resume and --dry-run")
     if args.task not in TASKS:
         raise UnknownNameError("task", args.task, tuple(TASKS))
     student = args.fine_tune
@@ -504,7 +506,8 @@ def _fine_tune(args: argparse.Namespace) -> int:
         student = str(distilled_weights(get_robot(TASKS[args.task].robot, "actuated")))
     env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
     overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
-    cfg = fine_tune_config(args.task, student, run_root=args.run_root, env_overrides=env, **overrides)
+    cfg = fine_tune_config(args.task, student, run_root=args.run_root, expert_data=args.expert_data,
+                           env_overrides=env, **overrides)
     if args.dry_run:
         printers.print_json(dataclasses.asdict(cfg))
         return 0

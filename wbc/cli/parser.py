@@ -575,6 +575,9 @@ def _add_train_parser(sub: _Commands) -> None:
                     help="fine-tune a student distilled with --teacher CONTROLLER (its policy file, or 'shipped' for "
                          "the task robot's mpc-distilled weights) by PPO + BC towards itself on stage 3's conditions "
                          "(--iterations, default 200); the run is RUN_ROOT/<task>-fine-tune")
+    tr.add_argument("--expert-data", default=None, metavar="DATA.npz",
+                    help="with --fine-tune: the BC term pulls towards the expert's actions in a DAgger run's "
+                         "data.npz instead of towards the student (the run is RUN_ROOT/<task>-fine-tune-expert)")
     tr.add_argument("--rounds", type=bounded_int(1, 10_000), default=None,
                     help="with a controller as --teacher: DAgger rounds, the expert-driven first one included "
                          "(default 8)")

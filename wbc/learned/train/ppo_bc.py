@@ -10,6 +10,12 @@ indices that correspond, in order, to the teacher's actions (the legs when the a
 on-policy states: the teacher labels the states the student visits, as the paper prescribes. lambda follows a
 `BCSchedule` over PPO iterations and is saved with the checkpoint, so a resumed run continues the same schedule.
 
+With `expert_data` (a DAgger run's ``data.npz``: observations, the expert's actions, episode ids) the BC term is the
+expert's own instead: each minibatch draws as many of the expert's samples, the actor reads each one's observation
+and window (built from its episode, as the student was fitted), and lambda weighs the mean squared difference to the
+expert's action. That is BC towards the expert where the expert cannot run (an MPC in a batched env), on the states
+DAgger labelled; the teacher policy is then not used.
+
 `actor_frozen_iterations` trains the critic alone for the first iterations: an actor that starts as a good policy
 (a student) would otherwise be moved by the advantages of a critic that has not yet learnt anything.
 
@@ -21,16 +27,62 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
+
 from wbc.errors import ConfigError, NetworkMismatchError
 from wbc.learned.policy.policy_file import load_policy
 from wbc.learned.train.bc_schedule import BCSchedule
+from wbc.learned.train.distill import history_index
 from wbc.learned.train.torch_policy import TorchPolicy
 from wbc.optional import require
 
 torch = require("torch")
 _ppo = require("rsl_rl.algorithms")
 
-__all__ = ["PPOWithBC", "bc_loss"]
+__all__ = ["ExpertSamples", "PPOWithBC", "bc_loss"]
+
+
+class ExpertSamples:
+    """A DAgger run's samples, drawn as an actor that reads its observation window sees them.
+
+    Args:
+        path: the run's ``data.npz``: ``obs`` (N, D), ``actions`` (N, A) (the expert's, clipped to the policy's
+            range), ``episode`` (N,) (an episode's samples contiguous and in time order).
+        history: the window length the actor reads (>= 1).
+
+    Raises:
+        ConfigError: the file is missing or unreadable, lacks one of the arrays, or their shapes disagree; or
+            `history` < 1 (an actor without a window).
+    """
+
+    def __init__(self, path: str, history: int) -> None:
+        if history < 1:
+            raise ConfigError(f"BC towards the expert's samples ({path}) is for an actor that reads an observation "
+                              "window (a distilled student); this actor reads none")
+        try:
+            with np.load(path) as data:
+                arrays = {k: data[k] for k in ("obs", "actions", "episode") if k in data.files}
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"expert samples {path}: cannot be read ({exc}); give a DAgger run's data.npz") from None
+        missing = [k for k in ("obs", "actions", "episode") if k not in arrays]
+        if missing:
+            raise ConfigError(f"expert samples {path}: no {', '.join(missing)} array; give a DAgger run's data.npz "
+                              "(obs, actions, episode)")
+        obs, actions, episode = arrays["obs"], arrays["actions"], arrays["episode"]
+        n = obs.shape[0]
+        if obs.ndim != 2 or actions.shape[:1] != (n,) or episode.shape != (n,) or n == 0:
+            raise ConfigError(f"expert samples {path}: obs {obs.shape}, actions {actions.shape} and episode "
+                              f"{episode.shape} do not describe the same N >= 1 samples")
+        self.obs = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))
+        self.actions = torch.from_numpy(np.ascontiguousarray(actions, dtype=np.float32))
+        self.windows = torch.from_numpy(history_index(episode, history))
+        self.size = n
+
+    def draw(self, count: int, generator) -> tuple[dict[str, Any], Any]:
+        """`count` samples at random: ({"policy": (count, D), "history": (count, H * D)}, expert actions)."""
+        idx = torch.randint(self.size, (count,), generator=generator)
+        window = self.obs[self.windows[idx]]
+        return {"policy": self.obs[idx], "history": window.reshape(count, -1)}, self.actions[idx]
 
 
 def bc_loss(student_mean, teacher_actions, mask):
@@ -65,6 +117,9 @@ class PPOWithBC(_ppo.PPO):
         privileged_group: observation group of the teacher's extrinsics input.
         history_group: observation group of the teacher's window, when it reads its history.
         actor_frozen_iterations: first iterations in which only the critic learns.
+        expert_data: a DAgger run's ``data.npz`` whose expert actions the BC term pulls towards (the actor must read
+            an observation window: `wbc.learned.train.history_actor.HistoryActor`); None: the teacher's actions.
+        expert_seed: seeds the draw of the expert's samples.
         **kwargs: `PPO` arguments.
 
     Raises:
@@ -73,23 +128,31 @@ class PPOWithBC(_ppo.PPO):
         PolicyFileError: the teacher's file is missing or malformed.
     """
 
-    def __init__(self, actor, critic, storage, *, teacher_path: str, bc_schedule: dict[str, Any] | None = None,
-                 action_mask: list[int] | None = None, teacher_group: str = "teacher",
-                 privileged_group: str = "privileged", history_group: str = "history",
-                 actor_frozen_iterations: int = 0, **kwargs) -> None:
+    def __init__(self, actor, critic, storage, *, teacher_path: str | None = None,
+                 bc_schedule: dict[str, Any] | None = None, action_mask: list[int] | None = None,
+                 teacher_group: str = "teacher", privileged_group: str = "privileged", history_group: str = "history",
+                 actor_frozen_iterations: int = 0, expert_data: str | None = None, expert_seed: int = 0,
+                 **kwargs) -> None:
         super().__init__(actor, critic, storage, **kwargs)
         if self.rnd or self.symmetry or self.is_multi_gpu or actor.is_recurrent or critic.is_recurrent:
             raise ConfigError("PPOWithBC supports feed-forward models on one device, without RND or symmetry: "
                               "remove rnd_cfg / symmetry_cfg and recurrent models from the rsl-rl configuration")
-        teacher = load_policy(teacher_path)
-        self.teacher = TorchPolicy(teacher).to(self.device)
-        n_teacher = teacher.num_actions
-        mask = list(range(n_teacher)) if action_mask is None else list(action_mask)
-        self.action_mask = torch.as_tensor(mask, dtype=torch.long, device=self.device)
-        if self.action_mask.numel() != n_teacher:
-            raise NetworkMismatchError(f"action_mask has {len(mask)} entries, the teacher {teacher_path} has "
-                                       f"{n_teacher} actions; set TrainConfig.action_mask to one student index per "
-                                       "teacher action")
+        self.expert = None if expert_data is None else ExpertSamples(expert_data, int(getattr(actor, "history", 0)))
+        self._expert_gen = torch.Generator().manual_seed(int(expert_seed))
+        self.teacher = None
+        if self.expert is None:
+            if teacher_path is None:
+                raise ConfigError("PPOWithBC needs a teacher policy file (teacher_path) or the expert's samples "
+                                  "(expert_data)")
+            teacher = load_policy(teacher_path)
+            self.teacher = TorchPolicy(teacher).to(self.device)
+            n_teacher = teacher.num_actions
+            mask = list(range(n_teacher)) if action_mask is None else list(action_mask)
+            self.action_mask = torch.as_tensor(mask, dtype=torch.long, device=self.device)
+            if self.action_mask.numel() != n_teacher:
+                raise NetworkMismatchError(f"action_mask has {len(mask)} entries, the teacher {teacher_path} has "
+                                           f"{n_teacher} actions; set TrainConfig.action_mask to one student index per "
+                                           "teacher action")
         self.schedule_bc = BCSchedule(**(bc_schedule or {}))
         self.teacher_group = teacher_group
         self.privileged_group = privileged_group
@@ -137,9 +200,13 @@ class PPOWithBC(_ppo.PPO):
                 value_loss = torch.max((values - batch.returns).pow(2), (clipped - batch.returns).pow(2)).mean()
             else:
                 value_loss = (batch.returns - values).pow(2).mean()
-            with torch.no_grad():
-                target = self.teacher_actions(batch.observations)
-            bc = bc_loss(self.actor.output_mean, target, self.action_mask)
+            if self.expert is not None:
+                inputs, labels = self.expert.draw(int(adv.shape[0]), self._expert_gen)
+                bc = (self.actor(inputs) - labels).pow(2).mean()
+            else:
+                with torch.no_grad():
+                    target = self.teacher_actions(batch.observations)
+                bc = bc_loss(self.actor.output_mean, target, self.action_mask)
             if actor_learns:
                 loss = surrogate_loss + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
                 if lam > 0.0:

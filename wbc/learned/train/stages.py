@@ -301,19 +301,21 @@ FINE_TUNE_CRITIC_ONLY = 20
 """Iterations of a fine-tune in which only the critic learns, before the student's first PPO update."""
 
 
-def fine_tune_config(task: str, student: str, *, run_root: str = "runs/train",
+def fine_tune_config(task: str, student: str, *, run_root: str = "runs/train", expert_data: str | None = None,
                      env_overrides: dict[str, Any] | None = None, **overrides: Any) -> TrainConfig:
     """The `TrainConfig` that fine-tunes a distilled student by PPO + BC on its task's stage-3 conditions.
 
     The student (`wbc train --teacher mpc`, with a history) is the actor from the first iteration, reading its own
     observation window; the env is stage 3's (arm actuated, the scenario's ground, pushes and bands); the BC term
     pulls towards the student as it started (`FINE_TUNE_BC`), the expert's teaching as the student holds it (the expert
-    itself does not run in the batched env); PPO starts at a tenth of the stages' step size.
+    itself does not run in the batched env), or, with `expert_data`, towards the expert's own actions on the samples
+    DAgger collected; PPO starts at a tenth of the stages' step size.
 
     Args:
         task: a key of `TASKS`.
         student: the student's policy file.
-        run_root: the run directory is ``<run_root>/<task>-fine-tune``.
+        run_root: the run directory is ``<run_root>/<task>-fine-tune`` (``-fine-tune-expert`` with `expert_data`).
+        expert_data: a DAgger run's ``data.npz``, the BC term's target (None: the student).
         env_overrides: `EnvConfig` fields to change (num_envs, seed ...).
         **overrides: `TrainConfig` fields to change (max_iterations, seed ...).
 
@@ -322,8 +324,9 @@ def fine_tune_config(task: str, student: str, *, run_root: str = "runs/train",
     """
     base = stage_config(task, 3, run_root=run_root, env_overrides=env_overrides)
     env = dataclasses.replace(base.env, teacher_arm_mode=None)
-    cfg = TrainConfig(task=task, stage=3, env=env, bc=FINE_TUNE_BC, teacher=str(student), student=str(student),
+    cfg = TrainConfig(task=task, stage=3, env=env, bc=FINE_TUNE_BC, student=str(student),
+                      teacher=None if expert_data else str(student), expert_data=expert_data and str(expert_data),
                       actor_frozen_iterations=FINE_TUNE_CRITIC_ONLY, extrinsics_dim=0, init_std=FINE_TUNE_INIT_STD,
                       ppo=PPOConfig(learning_rate=1e-4), max_iterations=200, save_interval=25,
-                      run_dir=str(Path(run_root) / f"{task}-fine-tune"))
+                      run_dir=str(Path(run_root) / (f"{task}-fine-tune" + ("-expert" if expert_data else ""))))
     return dataclasses.replace(cfg, **overrides)

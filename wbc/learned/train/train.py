@@ -68,6 +68,8 @@ def rsl_rl_config(cfg: TrainConfig) -> dict[str, Any]:
                          bc_schedule=dataclasses.asdict(cfg.bc),
                          action_mask=None if cfg.action_mask is None else list(cfg.action_mask),
                          actor_frozen_iterations=cfg.actor_frozen_iterations)
+        if cfg.expert_data is not None:
+            algorithm.update(expert_data=cfg.expert_data, expert_seed=cfg.seed)
         if cfg.student is not None:
             algorithm["teacher_group"] = "policy"  # the student as it was: same arm, same observation
     return {
@@ -114,6 +116,12 @@ def _check_teacher(cfg: TrainConfig) -> None:
         if cfg.extrinsics_dim != 0 or cfg.frozen_legs is not None or cfg.init_from is not None:
             raise ConfigError("fine-tuning a student: the actor is the student (extrinsics_dim=0, no frozen_legs, "
                               "no init_from)")
+    if cfg.expert_data is not None:
+        if cfg.student is None or cfg.bc is None:
+            raise ConfigError("expert_data is the BC term's target when fine-tuning a student: set student and bc too")
+        if not Path(cfg.expert_data).is_file():
+            raise ConfigError(f"expert samples {cfg.expert_data}: no such file; give a DAgger run's data.npz")
+        return
     if cfg.bc is None:
         return
     if cfg.teacher is None:
@@ -143,6 +151,8 @@ class _Runner(_runners.OnPolicyRunner):
         if cfg.student is not None:  # what the student was: its file and its own training
             student = load_policy(cfg.student)
             self._student_meta = {"method": "ppo-bc fine-tune of a distilled student", "student": str(cfg.student),
+                                  "bc_towards": "the expert's samples" if cfg.expert_data else "the student",
+                                  **({"expert_data": str(cfg.expert_data)} if cfg.expert_data else {}),
                                   "student_training": student.meta.get("training", {})}
 
     def save(self, path: str, infos: dict | None = None) -> None:

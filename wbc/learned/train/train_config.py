@@ -62,6 +62,8 @@ class TrainConfig:
             (`wbc.learned.train.history_actor.HistoryActor`), the BC term pulls towards the student as it was, and the
             run exports the student's file format. None: an ordinary stage.
         actor_frozen_iterations: first PPO iterations in which only the critic learns (`PPOWithBC`).
+        expert_data: with `student`, a DAgger run's ``data.npz``: the BC term pulls towards the expert's own actions
+            on those samples instead of towards the student (`PPOWithBC`); None: towards `teacher`.
         run_dir: where checkpoints, TensorBoard logs, the resolved config and the exported policy go.
         device: torch device.
         torch_threads: torch's intra-op threads. 1 by default: on a shared machine with few cores, torch's
@@ -92,6 +94,7 @@ class TrainConfig:
     frozen_legs: str | None = None
     student: str | None = None
     actor_frozen_iterations: int = 0
+    expert_data: str | None = None
     run_dir: str = "runs/train"
     device: str = "cpu"
     torch_threads: int = 1
