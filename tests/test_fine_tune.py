@@ -20,7 +20,7 @@ pytest.importorskip("rsl_rl")
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIO = str(ROOT / "scenarios" / "push.toml")
 STUDENT = str(WEIGHTS_DIR / "a1-wx200-actuated-mpc-distilled")
-"""The shipped student: a 25-observation window, an adaptation module 1350-32-8, an actor 256-128-64."""
+"""The shipped DAgger student: a 25-observation window, an adaptation module 1350-32-8, an actor 256-128-64."""
 
 
 def _env(**kw) -> EnvConfig:
@@ -184,6 +184,7 @@ def test_a_fine_tune_can_take_the_experts_samples_as_its_bc_target(tmp_path):
     pf = load_policy(Path(run["run_dir"]) / "policy")
     assert pf.meta["training"]["bc_towards"] == "the expert's samples"
     assert pf.meta["training"]["expert_data"] == str(data)
+    assert "fine-tuned with it by PPO + BC" in pf.meta["extrinsics"]["note"]
     _, bc = read_scalars(run["run_dir"])["Loss/bc"]
     # random labels are far from the student's actions, in both iterations; only the second moved the student
     assert bc.min() > 0.5

@@ -167,8 +167,11 @@ class _Runner(_runners.OnPolicyRunner):
         actor = self.alg.get_policy()
         extra = {"baseline": cfg.baseline, **({"variant": cfg.variant} if cfg.variant else {}), **progress}
         if isinstance(actor, HistoryActor):
-            save_policy(Path(cfg.run_dir) / "policy",
-                        student_policy_file(actor, cfg.env, task=cfg.task, extra={**self._student_meta, **extra}))
+            pf = student_policy_file(actor, cfg.env, task=cfg.task, extra={**self._student_meta, **extra})
+            pf.meta["extrinsics"]["note"] = (
+                "z is a latent learned from the observation history by the adaptation module, fitted with the actor "
+                "on an expert's actions, then fine-tuned with it by PPO + BC; it observes nothing privileged")
+            save_policy(Path(cfg.run_dir) / "policy", pf)
         elif isinstance(self.env, FrozenLegsVecEnv):
             extra["frozen_legs"] = cfg.frozen_legs
             save_composite(Path(cfg.run_dir) / "policy", decoupled_policy(
