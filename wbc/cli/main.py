@@ -496,8 +496,8 @@ def _fine_tune(args: argparse.Namespace) -> int:
                    "expert_follows", "takeover", "student_layers", "memory_layers")
     for name in ("stage", "baseline", "variant", "teacher", "rma_iterations", *dagger_only):
         if getattr(args, name) is not None:
-            raise ConfigError(f"--{name.replace('_', '-')} does not apply to --fine-tune (the student is the actor "
-                              "and its own BC teacher); its options are --expert-data, --iterations, --envs, "
+            raise ConfigError(f"--{name.replace('_', '-')} does not apply to --fine-tune (the student is the actor, "
+                              "trained on stage 3's conditions); its options are --expert-data, --iterations, --envs, "
                               "--threads, --seed, --run-root, --resume and --dry-run")
     if args.task not in TASKS:
         raise UnknownNameError("task", args.task, tuple(TASKS))
