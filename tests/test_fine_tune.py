@@ -190,3 +190,18 @@ def test_a_fine_tune_can_take_the_experts_samples_as_its_bc_target(tmp_path):
     assert bc.min() > 0.5
     student = load_policy(STUDENT)
     assert not np.array_equal(pf.arrays["policy/0/weight"], student.arrays["policy/0/weight"])
+
+
+def test_a_fine_tune_refuses_an_env_that_gives_the_student_other_numbers(tmp_path):
+    import dataclasses
+
+    from wbc.errors import ConfigError
+    from wbc.learned.train.train import train
+
+    cfg = _tiny(tmp_path, max_iterations=1)
+    with pytest.raises(ConfigError, match=r"its action_scale is 0\.25, the fine-tune's env gives 0\.5"):
+        train(dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, action_scale=0.5)))
+    with pytest.raises(ConfigError, match="its obs_scales is"):
+        scales = dataclasses.replace(cfg.env.obs_scales, dof_vel=0.1)
+        train(dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, obs_scales=scales)))
+    assert not (tmp_path / "push-fine-tune" / "config.json").exists()  # refused before anything was written

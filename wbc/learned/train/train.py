@@ -22,6 +22,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from wbc.errors import ConfigError
 from wbc.learned.env.env import BatchedEnv
 from wbc.learned.policy.composite_policy import save_composite
@@ -38,6 +40,7 @@ from wbc.learned.train.vec_env import RslVecEnv
 from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
 from wbc.provenance import provenance
+from wbc.robots.registry import get_robot
 
 torch = require("torch")
 _runners = require("rsl_rl.runners")
@@ -112,7 +115,9 @@ def _check_teacher(cfg: TrainConfig) -> None:
                               f"{legs.meta['arm_mode']!r}; this run needs {cfg.env.robot} with arm "
                               f"{cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
     if cfg.student is not None:
-        student_layout(_load_for(cfg.student, "the student to fine-tune (student)"))  # one that reads its history
+        student = _load_for(cfg.student, "the student to fine-tune (student)")
+        student_layout(student)  # one that reads its own history
+        _check_student_env(student, cfg)
         if cfg.extrinsics_dim != 0 or cfg.frozen_legs is not None or cfg.init_from is not None:
             raise ConfigError("fine-tuning a student: the actor is the student (extrinsics_dim=0, no frozen_legs, "
                               "no init_from)")
@@ -136,6 +141,25 @@ def _check_teacher(cfg: TrainConfig) -> None:
         what = "the fine-tune" if cfg.student is not None else f"stage {cfg.stage}"
         raise ConfigError(f"teacher {cfg.teacher} drives {teacher.meta['robot']} with arm "
                           f"{teacher.meta['arm_mode']!r}; {what} needs {cfg.env.robot} with arm {arm!r}")
+
+
+def _check_student_env(student, cfg: TrainConfig) -> None:
+    """The env must give the student the observations and motor law it was made for: the same numbers mean the same."""
+    env = cfg.env
+    desc = get_robot(env.robot, env.arm_mode)
+    kp, kd = env.gains(desc.num_joints)
+    meta = student.meta
+    given = {"robot": env.robot, "arm_mode": env.arm_mode, "action_scale": env.action_scale,
+             "clip_actions": env.clip_actions, "policy_dt": env.policy_dt, "kp": kp.tolist(), "kd": kd.tolist(),
+             "default_q": desc.nominal_q.tolist(),
+             "obs_scales": {k: (list(v) if isinstance(v, tuple) else v)
+                            for k, v in dataclasses.asdict(env.obs_scales).items()}}
+    for key, value in given.items():
+        exact = key in ("robot", "arm_mode", "obs_scales")
+        if (meta[key] != value) if exact else not np.allclose(meta[key], value):
+            raise ConfigError(f"student {cfg.student}: its {key} is {meta[key]}, the fine-tune's env gives {value} "
+                              f"(EnvConfig); a student fine-tuned in another env would read other numbers than it was "
+                              "trained on: fine-tune it on its own task's env")
 
 
 class _Runner(_runners.OnPolicyRunner):
