@@ -179,6 +179,9 @@ def test_a_fine_tune_can_take_the_experts_samples_as_its_bc_target(tmp_path):
     data = _expert_data(tmp_path / "data.npz")
     with pytest.raises(ConfigError, match="no such file"):
         train(_tiny(tmp_path / "none", expert_data=str(tmp_path / "missing.npz"), max_iterations=1))
+    np.savez(tmp_path / "legs.npz", obs=np.zeros((4, 54)), actions=np.zeros((4, 12)), episode=np.zeros(4, dtype=int))
+    with pytest.raises(ConfigError, match=r"legs\.npz: their actions have 12 entries, the actor has 15"):
+        train(_tiny(tmp_path / "legs", expert_data=str(tmp_path / "legs.npz"), max_iterations=1))
     run = train(_tiny(tmp_path, expert_data=str(data), max_iterations=2, actor_frozen_iterations=1))
     assert run["run_dir"].endswith("push-fine-tune-expert")
     pf = load_policy(Path(run["run_dir"]) / "policy")

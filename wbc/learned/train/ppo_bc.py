@@ -138,6 +138,11 @@ class PPOWithBC(_ppo.PPO):
             raise ConfigError("PPOWithBC supports feed-forward models on one device, without RND or symmetry: "
                               "remove rnd_cfg / symmetry_cfg and recurrent models from the rsl-rl configuration")
         self.expert = None if expert_data is None else ExpertSamples(expert_data, int(getattr(actor, "history", 0)))
+        if self.expert is not None:
+            outputs = [m for m in actor.mlp if isinstance(m, torch.nn.Linear)][-1].out_features
+            if self.expert.actions.shape[1] != outputs:
+                raise ConfigError(f"expert samples {expert_data}: their actions have {self.expert.actions.shape[1]} "
+                                  f"entries, the actor has {outputs}; give the data of a DAgger run on this robot")
         self._expert_gen = torch.Generator().manual_seed(int(expert_seed))
         self.teacher = None
         if self.expert is None:
