@@ -23,7 +23,7 @@ from wbc.robots.registry import get_robot
 
 torch = require("torch")
 
-__all__ = ["decoupled_policy", "policy_file_from_actor"]
+__all__ = ["decoupled_policy", "env_meta", "policy_file_from_actor"]
 
 
 def _linear_layers(mlp: Any) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -38,6 +38,24 @@ def _activation_name(mlp: Any) -> str:
         raise NetworkMismatchError(f"cannot export activations {sorted(found)}; the policy file supports one of "
                                    f"{', '.join(ACTIVATIONS)} throughout: set TrainConfig.activation to one")
     return next(iter(found))
+
+
+def env_meta(env: EnvConfig, joints: np.ndarray | None = None) -> dict[str, Any]:
+    """What a policy file says of the env it was trained in: the numbers its inputs and outputs mean.
+
+    Robot, arm mode, observation scales, action scale and clip, joint defaults and gains (of `joints`, default all),
+    policy period.
+    """
+    desc = get_robot(env.robot, env.arm_mode)
+    idx = np.arange(desc.num_joints) if joints is None else np.asarray(joints, dtype=int)
+    kp, kd = env.gains(desc.num_joints)
+    return {
+        "robot": env.robot, "arm_mode": env.arm_mode,
+        "obs_scales": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(env.obs_scales).items()},
+        "action_scale": env.action_scale, "clip_actions": env.clip_actions,
+        "default_q": desc.nominal_q[idx].tolist(), "kp": kp[idx].tolist(), "kd": kd[idx].tolist(),
+        "policy_dt": env.policy_dt,
+    }
 
 
 def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
@@ -88,14 +106,9 @@ def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,
     if layers[-1][0].shape[0] != idx.size:
         raise NetworkMismatchError(f"the actor has {layers[-1][0].shape[0]} outputs for joints {idx.tolist()}; "
                                    "pass the joints it drives (joints=...), one per output")
-    kp, kd = env.gains(desc.num_joints)
     meta = {
-        "robot": env.robot, "arm_mode": env.arm_mode, "task": task, "stage": int(stage),
-        "num_actions": int(idx.size), "obs_layout": layout.as_list(),
-        "obs_scales": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(env.obs_scales).items()},
-        "action_scale": env.action_scale, "clip_actions": env.clip_actions,
-        "default_q": desc.nominal_q[idx].tolist(), "kp": kp[idx].tolist(), "kd": kd[idx].tolist(),
-        "policy_dt": env.policy_dt,
+        **env_meta(env, idx), "task": task, "stage": int(stage), "num_actions": int(idx.size),
+        "obs_layout": layout.as_list(),
         "activation": _activation_name(actor.mlp), "hidden_dims": [int(w.shape[0]) for w, _ in layers[:-1]],
         "normalizer_eps": eps, "extrinsics": extrinsics, "training": extra or {},
     }

@@ -18,6 +18,7 @@ from typing import Any
 
 from wbc.errors import NetworkMismatchError
 from wbc.learned.policy.policy_file import PolicyFile, load_policy
+from wbc.learned.train.torch_policy import sequential
 from wbc.optional import require
 
 torch = require("torch")
@@ -59,23 +60,6 @@ def student_layout(policy: PolicyFile) -> tuple[int, int, int]:
     return d, int(adapt["history"]), int(extr["dim"])
 
 
-def _linear_from(layers: list, activation: str):
-    """A trainable ``torch.nn.Sequential`` of `layers` (weight, bias) with `activation` between them."""
-    acts = {"elu": torch.nn.ELU, "relu": torch.nn.ReLU, "tanh": torch.nn.Tanh}
-    if activation not in acts:
-        raise NetworkMismatchError(f"fine-tuning supports ELU, ReLU or tanh networks, the student's are {activation}")
-    mods = []
-    for i, (w, b) in enumerate(layers):
-        lin = torch.nn.Linear(w.shape[1], w.shape[0])
-        with torch.no_grad():
-            lin.weight.copy_(torch.as_tensor(w, dtype=torch.float32))
-            lin.bias.copy_(torch.as_tensor(b, dtype=torch.float32))
-        mods.append(lin)
-        if i < len(layers) - 1:
-            mods.append(acts[activation]())
-    return torch.nn.Sequential(*mods)
-
-
 class HistoryActor(_models.MLPModel):
     """An `rsl_rl.models.MLPModel` that is a distilled student: [normalised observation, adaptation(window)] -> MLP.
 
@@ -115,7 +99,7 @@ class HistoryActor(_models.MLPModel):
         self.obs_dim = d  # what the exporter reads: the policy observation's size
         eps = float(student.meta["normalizer_eps"])
         self.obs_normalizer = FixedNormaliser(student.arrays["obs_mean"], student.arrays["obs_std"], eps)
-        self.adaptation = _linear_from(student.layers("adaptation"), activation)
+        self.adaptation = sequential(student.layers("adaptation"), activation)  # trainable: nothing freezes it here
         self.adaptation_dims = tuple(int(w.shape[0]) for w, _ in student.layers("adaptation")[:-1])
         self.z_dim = z
         linear = [m for m in self.mlp if isinstance(m, torch.nn.Linear)]

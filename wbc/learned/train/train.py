@@ -31,7 +31,7 @@ from wbc.learned.policy.policy_file import PolicyFileError, load_policy, save_po
 from wbc.learned.policy.replay_file import replay_path_for
 from wbc.learned.policy.replay_recorder import record_replay
 from wbc.learned.train.distill import student_policy_file
-from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
+from wbc.learned.train.export import decoupled_policy, env_meta, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.history_actor import HistoryActor, student_layout
 from wbc.learned.train.rma import train_adaptation
@@ -40,7 +40,6 @@ from wbc.learned.train.vec_env import RslVecEnv
 from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
 from wbc.provenance import provenance
-from wbc.robots.registry import get_robot
 
 torch = require("torch")
 _runners = require("rsl_rl.runners")
@@ -145,15 +144,7 @@ def _check_teacher(cfg: TrainConfig) -> None:
 
 def _check_student_env(student, cfg: TrainConfig) -> None:
     """The env must give the student the observations and motor law it was made for: the same numbers mean the same."""
-    env = cfg.env
-    desc = get_robot(env.robot, env.arm_mode)
-    kp, kd = env.gains(desc.num_joints)
-    meta = student.meta
-    given = {"robot": env.robot, "arm_mode": env.arm_mode, "action_scale": env.action_scale,
-             "clip_actions": env.clip_actions, "policy_dt": env.policy_dt, "kp": kp.tolist(), "kd": kd.tolist(),
-             "default_q": desc.nominal_q.tolist(),
-             "obs_scales": {k: (list(v) if isinstance(v, tuple) else v)
-                            for k, v in dataclasses.asdict(env.obs_scales).items()}}
+    meta, given = student.meta, env_meta(cfg.env)
     for key, value in given.items():
         exact = key in ("robot", "arm_mode", "obs_scales")
         if (meta[key] != value) if exact else not np.allclose(meta[key], value):
