@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-import gc
+import subprocess
 import sys
+import textwrap
 from collections.abc import Iterator
 
 import pytest
 
-from wbc.hardware.interpreter import REALTIME_SWITCH_INTERVAL_S, freeze_heap, realtime_switch_interval
+from wbc.hardware.interpreter import REALTIME_SWITCH_INTERVAL_S, realtime_switch_interval
 
 
 @pytest.fixture(autouse=True)
@@ -35,18 +36,28 @@ def test_rejects_a_non_positive_interval() -> None:
         realtime_switch_interval(0.0)
 
 
-def test_freeze_heap_exempts_what_is_alive_and_still_collects_new_garbage() -> None:
+_FREEZE_CHECK = textwrap.dedent("""
+    import gc
+
+    from wbc.hardware.interpreter import freeze_heap
+
     class Node:
-        def __init__(self) -> None:
+        def __init__(self):
             self.me = self  # a reference cycle: only the collector frees it
 
     kept = [Node() for _ in range(100)]
-    try:
-        frozen = freeze_heap()
-        assert frozen == gc.get_freeze_count() > 0
-        assert not any(gc.is_tracked(k) and k in gc.get_objects() for k in kept[:3])  # out of the collector's sight
-        for _ in range(10):
-            Node()
-        assert gc.collect() >= 10  # the cycles made after the freeze are still freed
-    finally:
-        gc.unfreeze()
+    frozen = freeze_heap()
+    assert frozen == gc.get_freeze_count() > 0, (frozen, gc.get_freeze_count())
+    assert not any(gc.is_tracked(k) and k in gc.get_objects() for k in kept[:3])  # out of the collector's sight
+    for _ in range(10):
+        Node()
+    assert gc.collect() >= 10  # the cycles made after the freeze are still freed
+    print("ok")
+""")
+
+
+def test_freeze_heap_exempts_what_is_alive_and_still_collects_new_garbage() -> None:
+    # in a fresh interpreter: in the suite's, a thread left by an earlier test can free frozen objects between two
+    # reads of the count (seen once: 673302 frozen, 673300 a moment later)
+    done = subprocess.run([sys.executable, "-c", _FREEZE_CHECK], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
