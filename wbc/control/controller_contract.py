@@ -82,8 +82,8 @@ class ObservesTerms(Protocol):
     def observation_terms(self, state: RobotState, command: VelocityCommand) -> list[tuple[str, np.ndarray]]:
         """This tick's observation frame as (term name, values) in the order the network sees them.
 
-        Term names are those of `wbc.control.onnx_io.TERMS`; calling it changes nothing (`act` then feeds the
-        network the same frame).
+        Term names are those of `wbc.control.onnx_io.TERMS`; calling it leaves what `act` does on the same state
+        unchanged (`act` then feeds the network the same frame).
         """
 
 

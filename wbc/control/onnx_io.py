@@ -21,7 +21,10 @@ arena as ``onnx:PATH``; the TOML file beside it (``PATH`` with the suffix ``.tom
   ``first``, or zeros, ``zeros``), ``clip`` (optional: the whole vector clipped to [-clip, clip] after scaling) and
   the terms in order, ``[[observation.terms]]``: ``name`` (one of `TERMS`), ``scale`` (a number or one per entry,
   default 1), ``clip`` (optional, a bound c for [-c, c] or an interval, applied after the scale), ``history``
-  (optional, with ``history_order = "terms"`` only).
+  (optional, with ``history_order = "terms"`` only). A robot does not measure its base's linear velocity:
+  ``base_lin_vel`` takes ``source = "estimator"`` (required: the policy then sees the state estimator's estimate
+  where it trained on the simulator's truth, and the file says so) and ``contact_force`` (optional, default 15: the
+  foot sensor reading at which the estimator trusts a foot as standing [N, or a real robot's sensor counts]).
 - ``[action]``: ``kind = "joint_position"`` (targets = default_q + scale * action), ``scale`` (a number or one per
   joint, in [-10, 10] rad per unit action), ``clip`` (optional: the raw action is clipped to [-clip, clip] first;
   ``last_action`` sees the clipped one).
@@ -50,10 +53,12 @@ from wbc.robots.description import ARM_MODES, RobotDescription
 from wbc.robots.registry import ROBOTS, get_robot
 from wbc.scenario.toml_fields import Range, TomlLines, TomlTable, show
 
-__all__ = ["ACTION_KINDS", "HISTORY_FILLS", "HISTORY_ORDERS", "NOT_MEASURED", "TERMS", "ObsTerm", "OnnxIo",
-           "io_path_for", "load_onnx_io"]
+__all__ = ["ACTION_KINDS", "DEFAULT_CONTACT_FORCE", "ESTIMATED", "HISTORY_FILLS", "HISTORY_ORDERS", "NOT_MEASURED",
+           "SOURCES", "TERMS", "ObsTerm", "OnnxIo", "io_path_for", "load_onnx_io"]
 
 TERMS: dict[str, str] = {
+    "base_lin_vel": "the trunk's linear velocity, body frame (3) [m/s], estimated from the IMU and the legs' "
+                    "kinematics (`wbc.estimation.base_estimate`; needs source = \"estimator\")",
     "base_ang_vel": "the trunk's angular velocity from the IMU gyro, body frame (3) [rad/s]",
     "projected_gravity": "unit gravity direction in the body frame, from the IMU quaternion (3)",
     "velocity_commands": "the operator's command (vx [m/s], vy [m/s], yaw rate [rad/s]) (3)",
@@ -65,12 +70,23 @@ TERMS: dict[str, str] = {
 """Observation terms a robot provides, by name (Isaac Lab's names), with what they hold."""
 
 NOT_MEASURED: dict[str, str] = {
-    "base_lin_vel": "a robot does not measure its base's linear velocity (RobotState has the IMU and the joint "
-                    "encoders only); retrain the policy without it (legged_gym: drop it from compute_observations; "
-                    "Isaac Lab: remove the base_lin_vel term)",
     "height_scan": "this robot has no height scanner; retrain the policy blind (without the height scan term)",
 }
 """Terms trainers offer that a robot cannot give a controller, with what to do instead."""
+
+ESTIMATED: dict[str, str] = {
+    "base_lin_vel": "a robot does not measure its base's linear velocity (RobotState has the IMU and the joint "
+                    "encoders only); add source = \"estimator\" to this term to feed the state estimator's estimate "
+                    "(IMU and leg kinematics, updated at the policy's rate; the policy trained on the simulator's "
+                    "truth), or retrain the policy without it (legged_gym: drop it from compute_observations; Isaac "
+                    "Lab: remove the base_lin_vel term)",
+}
+"""Terms a robot does not measure that the state estimator gives (``source = "estimator"``), with the choice."""
+
+SOURCES = ("estimator",)
+"""Where an `ESTIMATED` term comes from: the base estimator (`wbc.estimation.base_estimate.BaseEstimate`)."""
+DEFAULT_CONTACT_FORCE = 15.0
+"""The estimator's default foot sensor reading at which a foot is fully trusted as standing [N]."""
 
 HISTORY_ORDERS = ("frames", "terms")
 HISTORY_FILLS = ("first", "zeros")
@@ -90,6 +106,9 @@ class ObsTerm:
         scale: multiplier of each entry (size,).
         clip: bounds applied after the scale, or None.
         history: frames of this term in the network's input.
+        source: ``estimator`` for an `ESTIMATED` term, None for a measured one.
+        contact_force: an estimated term's foot sensor reading at which the estimator trusts a foot as standing
+            [N, or sensor counts]; None for a measured term.
     """
 
     name: str
@@ -97,6 +116,8 @@ class ObsTerm:
     scale: tuple[float, ...]
     clip: tuple[float, float] | None
     history: int
+    source: str | None = None
+    contact_force: float | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -231,6 +252,21 @@ def _external_data_sha256(net: TomlTable, model_sha256: str | None) -> tuple[tup
     return tuple(table.items())
 
 
+def _source(term: TomlTable, name: str) -> tuple[str | None, float | None]:
+    """A term's ``source`` and ``contact_force``: both for an `ESTIMATED` term (``source`` required), neither else."""
+    if name not in ESTIMATED:
+        for key in ("source", "contact_force"):
+            if key in term.data:
+                term.fail(key, f"{name!r} is measured by the robot; only {', '.join(ESTIMATED)} takes a source and "
+                          "a contact_force (it is estimated)")
+        return None, None
+    if "source" not in term.data:
+        term.fail("name", f"{name!r}: {ESTIMATED[name]}")
+    source = _choice(term, "source", SOURCES, SOURCES[0])
+    contact_force = term.number("contact_force", Range(lo=0.0, lo_open=True), DEFAULT_CONTACT_FORCE)
+    return source, contact_force
+
+
 def _choice(table: TomlTable, key: str, valid: tuple[str, ...], default: str) -> str:
     value = table.string(key, default)
     if value not in valid:
@@ -324,14 +360,21 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
     fill = _choice(obs, "history_fill", HISTORY_FILLS, "first")
     obs_clip = obs.optional_number("clip", Range(lo=0.0, lo_open=True))
     terms: list[ObsTerm] = []
-    sizes = {"base_ang_vel": 3, "projected_gravity": 3, "velocity_commands": 3}
+    sizes = {"base_lin_vel": 3, "base_ang_vel": 3, "projected_gravity": 3, "velocity_commands": 3}
+    shared_force: float | None = None  # one estimator serves every estimated term
     for term in obs.table_array("terms", "[[observation.terms]]"):
-        term.check_keys(("name", "scale", "clip", "history"))
+        term.check_keys(("name", "scale", "clip", "history", "source", "contact_force"))
         name = term.string("name")
         if name in NOT_MEASURED:
             term.fail("name", f"{name!r}: {NOT_MEASURED[name]}")
         if name not in TERMS:
             term.fail("name", f"unknown term {name!r}; valid terms: {', '.join(TERMS)}")
+        source, contact_force = _source(term, name)
+        if contact_force is not None:
+            if shared_force is not None and contact_force != shared_force:
+                term.fail("contact_force", f"{contact_force:g}, where an earlier estimated term has {shared_force:g}: "
+                          "the terms share one estimator; give them the same value")
+            shared_force = contact_force
         size = sizes.get(name, n)
         if "history" in term.data and order != "terms":
             term.fail("history", "a term's own history needs history_order = \"terms\" in [observation]; with "
@@ -341,6 +384,7 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
             scale=_numbers(term, "scale", (1, size), f"1 or {size} multipliers", Range(), default=1.0),
             clip=_clip(term, "clip"),
             history=term.integer("history", Range(lo=1, hi=1000), history),
+            source=source, contact_force=contact_force,
         ))
 
     act = top.sub_table("action", ("kind", "scale", "clip"), required=True)

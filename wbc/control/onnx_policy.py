@@ -5,7 +5,10 @@ Every tick, from `RobotState` and the operator's command only: each observation 
 file says so; the history (whole frames or each term's own, oldest first; after a reset filled with the first
 observation or with zeros); the network's output, clipped, is the action; the motor command holds
 ``q* = default_q + scale * action`` with the file's PD gains, mapped back to the house joint order, zero target
-velocity and feed-forward torque. Nothing from the simulator's truth is read.
+velocity and feed-forward torque. Nothing from the simulator's truth is read: a ``base_lin_vel`` term (``source =
+"estimator"``) is the state estimator's estimate (`wbc.estimation.base_estimate.BaseEstimate`, the one a hardware
+trial's metrics use), fed this controller's states at its rate and rotated into the body frame; the arena plays
+such a policy as a robot would run it.
 
 onnxruntime is an optional dependency (``pip install 'wbc[onnx]'``); the session runs on one thread, as every arena
 worker runs on one core. ``onnx:PATH`` names are resolved by `onnx_spec`, which reads the I/O file and checks the
@@ -41,9 +44,11 @@ from wbc.control.errors import OnnxModelError
 from wbc.control.onnx_io import OnnxIo, io_path_for, load_onnx_io
 from wbc.control.spec import ControllerSpec, SourceFile
 from wbc.errors import ConfigError
+from wbc.estimation.base_estimate import BaseEstimate
 from wbc.input_files import LIMITS, read_bytes
 from wbc.learned.policy.observations import projected_gravity
 from wbc.optional import require
+from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import RobotDescription
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
@@ -357,15 +362,39 @@ class OnnxController:
                          else [np.zeros((t.history, t.size)) for t in io.terms])
         self.last_action = np.zeros(n)
         self._fresh = True
+        forces = [t.contact_force for t in io.terms if t.source == "estimator"]
+        # the base estimator behind the estimated terms (one, whatever their number: the I/O file gives them one
+        # contact force), and the last state folded into it with its velocity in the body frame
+        self.estimate = BaseEstimate(desc, 1.0 / self.rate_hz, contact_force=forces[0]) if forces else None
+        self._folded: tuple[RobotState, np.ndarray] | None = None
 
     def reset(self) -> None:
-        """Forget the previous action and the observation history."""
+        """Forget the previous action, the observation history and the base estimate."""
         self.last_action = np.zeros_like(self.last_action)
         for w in self._windows:
             w[:] = 0.0
         self._fresh = True
+        if self.estimate is not None:
+            self.estimate.reset()
+        self._folded = None
+
+    def _velocity_in_body(self, state: RobotState) -> np.ndarray:
+        """The estimated base velocity in the body frame after folding `state` in, once per state (3,) [m/s].
+
+        The observation of a state may be asked for before `act` on it (``observation_terms``, a replay's
+        comparison): the same state object is folded into the filter once, so `act` sees the same frame.
+        """
+        folded = self._folded
+        if folded is not None and folded[0] is state:
+            return folded[1]
+        est = self.estimate.update(state)
+        velocity = quat_to_matrix(est.base_quat).T @ est.base_linvel_in_world
+        self._folded = (state, velocity)
+        return velocity
 
     def _term(self, name: str, state: RobotState, command: VelocityCommand) -> np.ndarray:
+        if name == "base_lin_vel":
+            return self._velocity_in_body(state)
         if name == "base_ang_vel":
             return state.gyro_in_body
         if name == "projected_gravity":
@@ -393,9 +422,10 @@ class OnnxController:
         return parts
 
     def observation_terms(self, state: RobotState, command: VelocityCommand) -> list[tuple[str, np.ndarray]]:
-        """This tick's observation frame as (term name, values), in the I/O file's order; nothing changes.
+        """This tick's observation frame as (term name, values), in the I/O file's order.
 
-        ``wbc check-controller --replay`` compares it with a recording, term by term.
+        ``wbc check-controller --replay`` compares it with a recording, term by term. Nothing changes but the base
+        estimate, which folds `state` in as `act` on the same state would (once: `act` then feeds the same frame).
         """
         return [(term.name, part) for term, part in zip(self.io.terms, self.observation(state, command), strict=True)]
 
