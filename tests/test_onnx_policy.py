@@ -21,6 +21,7 @@ from wbc.control import CheckConfig, check_controller
 from wbc.control.errors import OnnxIoError, OnnxModelError
 from wbc.control.onnx_io import load_onnx_io
 from wbc.control.registry import get_controller
+from wbc.errors import ConfigError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.robots.registry import get_robot
 from wbc.types import RobotState, VelocityCommand
@@ -99,10 +100,11 @@ def test_the_history_holds_frames_oldest_first_filled_with_the_first_after_a_res
     assert x.shape == (ONNX_FRAME + 3,) and x[:6].tolist() == [0.0, 0.0, 0.0, 1.0, 0.0, 0.0]
 
 
-def _estimating_controller(tmp_path, name: str):
-    """An ONNX controller on a1-wx200 (no arm) whose first term is the estimated base_lin_vel x 2 (zero network)."""
+def _estimating_controller(tmp_path, name: str, weight: np.ndarray | None = None):
+    """An ONNX controller on a1-wx200 (no arm) whose first term is the estimated base_lin_vel x 2 (by default a
+    network that answers zeros)."""
     model, io = tmp_path / f"{name}.onnx", tmp_path / f"{name}.toml"
-    _linear_model(model, np.zeros((3 + ONNX_FRAME, 12)))
+    _linear_model(model, np.zeros((3 + ONNX_FRAME, 12)) if weight is None else weight)
     first = '[[observation.terms]]\nname = "base_ang_vel"'
     estimated = '[[observation.terms]]\nname = "base_lin_vel"\nsource = "estimator"\nscale = 2.0\n\n'
     io.write_text(_io().replace(first, estimated + first, 1))
@@ -169,6 +171,69 @@ def test_asking_for_the_observation_before_acting_folds_the_state_into_the_estim
             sim.write(walker.act(state, command))
             sim.advance(1.0 / walker.rate_hz)
     assert np.abs(x_plain[:3]).max() > 0.1  # it moved: the frames compared were not all zero
+
+
+def test_a_replay_feeds_an_estimated_term_the_recorded_truth_and_checks_the_rest_of_the_policy_exactly(tmp_path):
+    """A trainer records the simulator's truth where the controller estimates: the replay check feeds the network the
+    recorded values, compares every other term and the actions as usual, and reports how far the estimate lay."""
+    from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+    from wbc.learned.policy.replay_file import Replay, save_replay
+    from wbc.robots.conventions import quat_to_matrix
+
+    rng = np.random.default_rng(5)
+    trainer = _estimating_controller(tmp_path, "r", weight=0.05 * rng.standard_normal((3 + ONNX_FRAME, 12)))
+    walker = get_controller("learned-noarm").make(get_robot("a1-wx200", "none"))
+    sim = MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none"))
+    fields = ("tick", "time", "q", "dq", "tau_est", "imu_quat", "gyro_in_body", "accel_in_body", "foot_force")
+    states, commands, frames, actions = {f: [] for f in fields}, [], [], []
+    with sim:
+        sim.reset(seed=2)
+        trainer.reset()
+        walker.reset()
+        for k in range(60):
+            state, command = sim.read(), VelocityCommand(vx=0.5, yaw_rate=0.3 * (k > 30))
+            truth = sim.base_truth()
+            true_velocity = 2.0 * quat_to_matrix(truth.base_quat).T @ truth.base_linvel_in_world  # scale 2
+            terms = trainer.observation_terms(state, command)
+            frames.append(np.concatenate([true_velocity] + [v for _, v in terms[1:]]))
+            trainer.feed_recorded({0: true_velocity})  # the trainer's network saw the truth
+            trainer.act(state, command)
+            actions.append(trainer.last_action.copy())
+            for f in fields:
+                states[f].append(np.copy(getattr(state, f)))
+            commands.append(command.as_array())
+            sim.write(walker.act(state, command))
+            sim.advance(1.0 / walker.rate_hz)
+    names = ("base_lin_vel", "base_ang_vel", "velocity_commands", "joint_pos_rel", "last_action")
+    sizes = (3, 3, 3, 12, 12)
+    ends = np.cumsum(sizes)
+    path = save_replay(tmp_path / "r.replay.npz", Replay(
+        path="", robot="a1-wx200", arm_mode="none", rate_hz=50.0, source="a trainer's rollout",
+        states={f: np.asarray(v) for f, v in states.items()}, command=np.asarray(commands), obs=np.asarray(frames),
+        obs_terms=names, obs_slices=tuple((int(e - n), int(e)) for e, n in zip(ends, sizes, strict=True)),
+        actions=np.asarray(actions), action_joints=tuple(ONNX_JOINTS), default_q=trainer.default_q,
+        action_scale=trainer.action_scale))
+    result = check_controller(f"onnx:{tmp_path / 'r.onnx'}", CheckConfig(seconds=0.1, robots=("a1-wx200",),
+                                                                          replay=path))
+    (outcome,) = [o for o in result.outcomes if o.check == "replay"]
+    assert outcome.passed, outcome.detail
+    assert "(base_ang_vel, velocity_commands, joint_pos_rel, last_action; max |difference|" in outcome.detail
+    assert "base_lin_vel is estimated by the controller, and the network was fed the recorded values" in outcome.detail
+    spread = float(outcome.detail.split("lies rms ")[1].split(",")[0])
+    assert 0.0 < spread < 0.2  # the estimate, in the network's units (x 2), from the recorded states
+
+
+def test_recorded_values_are_refused_for_a_measured_term_or_of_the_wrong_size(tmp_path):
+    ctrl = _estimating_controller(tmp_path, "f")
+    assert ctrl.estimated_terms == ("base_lin_vel",)
+    with pytest.raises(ConfigError, match=r"term 1 is not an estimated term; the estimated ones: \[0\]"):
+        ctrl.feed_recorded({1: np.zeros(3)})
+    with pytest.raises(ConfigError, match=r"term 0 \(base_lin_vel\) has 3 entries, the values fed to it 2"):
+        ctrl.feed_recorded({0: np.zeros(2)})
+    q = get_robot("a1-wx200", "none").nominal_q
+    ctrl.feed_recorded({0: np.array([1.0, 2.0, 3.0])})
+    assert ctrl.network_input(_state(q), VelocityCommand())[:3].tolist() == [1.0, 2.0, 3.0]
+    assert ctrl.network_input(_state(q, tick=1), VelocityCommand())[:3].tolist() != [1.0, 2.0, 3.0]  # one act only
 
 
 IO_ERRORS = [

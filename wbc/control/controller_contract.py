@@ -42,7 +42,7 @@ from __future__ import annotations
 import math
 import time
 import traceback
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
@@ -63,7 +63,7 @@ if TYPE_CHECKING:
     from wbc.learned.policy.replay_file import Replay
 
 __all__ = ["CHECKS", "DEFAULT_SECONDS", "EXTRA_CHECKS", "ActTiming", "CheckConfig", "CheckOutcome", "ControllerCheck",
-           "ObservesTerms", "check_controller"]
+           "EstimatesTerms", "ObservesTerms", "check_controller"]
 
 CHECKS = ("build", "rate", "output", "reset", "truth", "timing")
 """The checks, in the order they are run and reported."""
@@ -84,6 +84,28 @@ class ObservesTerms(Protocol):
 
         Term names are those of `wbc.control.onnx_io.TERMS`; calling it leaves what `act` does on the same state
         unchanged (`act` then feeds the network the same frame).
+        """
+
+
+@runtime_checkable
+class EstimatesTerms(Protocol):
+    """A policy controller that estimates some of its observation terms from the states.
+
+    An ONNX policy's ``base_lin_vel`` (``source = "estimator"``) is one: a trainer recorded the simulator's truth
+    there, which no estimate equals, so a replay feeds those terms the recorded values and checks the rest of the
+    policy exactly.
+
+    Attributes:
+        estimated_terms: the names of the estimated terms (`wbc.control.onnx_io.ESTIMATED`).
+    """
+
+    estimated_terms: tuple[str, ...]
+
+    def feed_recorded(self, values: Mapping[int, np.ndarray]) -> None:
+        """For the next `act` only, the network sees `values` in place of the estimated terms'.
+
+        `values` are by the term's position in the frame, scaled and clipped as the network saw them;
+        ``observation_terms`` still reports the estimate.
         """
 
 
@@ -598,10 +620,16 @@ class _TermFinding:
 
 
 def _observation_findings(frames: np.ndarray, layout: tuple[tuple[str, int], ...], replay: Replay,
-                          atol: float) -> tuple[list[_TermFinding], str | None, float]:
-    """The terms that differ (earliest first), a layout-size problem, and the largest difference."""
+                          atol: float, fed: frozenset[str] = frozenset()
+                          ) -> tuple[list[_TermFinding], str | None, float]:
+    """The terms that differ (earliest first), a layout-size problem, and the largest difference.
+
+    The recorded terms named in `fed` (estimated by the controller, the network fed the recorded values) are not
+    findings, and their entries are left out of the largest difference.
+    """
     mine = _spans(layout)
-    recorded = [(name, a, b) for name, (a, b) in zip(replay.obs_terms, replay.obs_slices, strict=True)]
+    recorded = [(name, a, b) for name, (a, b) in zip(replay.obs_terms, replay.obs_slices, strict=True)
+                if name not in fed]
     width = replay.obs.shape[1]
     if frames.shape[1] != width:
         missing = [n for n, _, _ in recorded if n not in {name for name, _ in layout}]
@@ -611,6 +639,9 @@ def _observation_findings(frames: np.ndarray, layout: tuple[tuple[str, int], ...
         return [], (f"the controller's observation frame has {frames.shape[1]} entries ({_layout_text(mine)}), the "
                     f"recording's {width} ({_layout_text(recorded)}){also}"), math.inf
     diff = np.abs(frames - replay.obs)
+    for name, (a, b) in zip(replay.obs_terms, replay.obs_slices, strict=True):
+        if name in fed:
+            diff[:, a:b] = 0.0
     bad = diff > atol
     found = []
     for name, a, b in recorded:
@@ -635,6 +666,18 @@ def _observation_findings(frames: np.ndarray, layout: tuple[tuple[str, int], ...
     return found, None, float(diff.max())
 
 
+def _estimate_text(frames: np.ndarray, replay: Replay, fed: set[str]) -> str:
+    """What the replay says of the estimated terms: fed the recorded values, and how far the estimate lies from them."""
+    parts = []
+    for name, (a, b) in zip(replay.obs_terms, replay.obs_slices, strict=True):
+        if name in fed:
+            diff = frames[:, a:b] - replay.obs[:, a:b]
+            parts.append(f"{name} is estimated by the controller, and the network was fed the recorded values (its "
+                         f"estimate from the recorded states lies rms {float(np.sqrt(np.mean(diff ** 2))):.3g}, max "
+                         f"{float(np.abs(diff).max()):.3g} from them, in the network's units)")
+    return "; ".join(parts)
+
+
 def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tuple[bool, str]:
     """The ``replay`` outcome: a fresh controller fed the recorded states; its observation and actions compared."""
     label = f"{len(replay)} recorded ticks of {replay.path}"
@@ -646,6 +689,9 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
         return False, (f"{replay.path}: rate_hz: recorded at {replay.rate_hz:g} Hz, the controller runs at "
                        f"{rate!r} Hz; replay a recording of this controller's policy")
     observes = isinstance(ctrl, ObservesTerms)
+    estimated = frozenset(ctrl.estimated_terms) if observes and isinstance(ctrl, EstimatesTerms) else frozenset()
+    recorded_spans = {(name, a, b) for name, (a, b) in zip(replay.obs_terms, replay.obs_slices, strict=True)}
+    fed: set[str] = set()  # the estimated terms the network was fed the recording's values of
     index = replay.action_index()
     frames: list[np.ndarray] = []
     layout: tuple[tuple[str, int], ...] | None = None
@@ -666,6 +712,13 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
                                    f"{_layout_text(_spans(here))} after {_layout_text(_spans(layout))}")
                 layout = here
                 frames.append(np.concatenate([np.asarray(v, dtype=np.float64).reshape(-1) for _, v in terms]))
+                # an estimated term where the recording holds the same term: the network gets the recorded values
+                recorded = {i: replay.obs[k, a:b] for i, (name, a, b) in enumerate(_spans(here))
+                            if name in estimated and (name, a, b) in recorded_spans}
+                if recorded:
+                    step = "feed_recorded"
+                    ctrl.feed_recorded(recorded)  # type: ignore[attr-defined]
+                    fed.update(here[i][0] for i in recorded)
             step = "act"
             out = ctrl.act(state, cmd)
         except Exception as exc:  # noqa: BLE001
@@ -686,13 +739,17 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
                           "say what it observes (observation_terms)")
         return False, (f"{label}: {act_text}; {type(ctrl).__name__} does not say what it observes "
                        "(observation_terms), so the difference cannot be traced to an observation term")
-    found, size_problem, worst = _observation_findings(np.asarray(frames), layout or (), replay, atol)
+    found, size_problem, worst = _observation_findings(np.asarray(frames), layout or (), replay, atol,
+                                                       frozenset(fed))
     if size_problem is not None:
         return False, f"{label}: {size_problem}; {act_text}"
+    compared = [name for name in replay.obs_terms if name not in fed]
+    if fed:
+        act_text += "; " + _estimate_text(np.asarray(frames), replay, fed)
     if not found:
         if act_first is None:
             return True, (f"{label}: the observation equals the recording term by term "
-                          f"({', '.join(replay.obs_terms)}; max |difference| {worst:.2g}), {act_text}")
+                          f"({', '.join(compared)}; max |difference| {worst:.2g}), {act_text}")
         return False, (f"{label}: the observation equals the recording term by term, but {act_text}: the network, "
                        "its action scale or its default pose are not the recorded policy's")
     # the previous action is the controller's own: once its actions differ, so does that term, as a consequence

@@ -34,6 +34,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -367,6 +368,8 @@ class OnnxController:
         # contact force), and the last state folded into it with its velocity in the body frame
         self.estimate = BaseEstimate(desc, 1.0 / self.rate_hz, contact_force=forces[0]) if forces else None
         self._folded: tuple[RobotState, np.ndarray] | None = None
+        self.estimated_terms = tuple(dict.fromkeys(t.name for t in io.terms if t.source is not None))
+        self._recorded: dict[int, np.ndarray] | None = None  # a replay's values for the next act (`feed_recorded`)
 
     def reset(self) -> None:
         """Forget the previous action, the observation history and the base estimate."""
@@ -377,6 +380,34 @@ class OnnxController:
         if self.estimate is not None:
             self.estimate.reset()
         self._folded = None
+        self._recorded = None
+
+    def feed_recorded(self, values: Mapping[int, np.ndarray]) -> None:
+        """For the next `act` only, the network sees `values` in place of these estimated terms' (`EstimatesTerms`).
+
+        ``wbc check-controller --replay`` feeds an estimated term the recording's values: a trainer records the
+        simulator's truth, which no estimate equals, and with it the rest of the policy is checked against the
+        recorded actions exactly. The estimator still folds the state in, and ``observation_terms`` reports it.
+
+        Args:
+            values: by the term's position in the I/O file's terms, its values as the network saw them (scaled and
+                clipped).
+
+        Raises:
+            ConfigError: a position is not an estimated term's, or a value's size is not the term's.
+        """
+        terms = self.io.terms
+        checked = {}
+        for i, value in values.items():
+            if not (0 <= i < len(terms) and terms[i].source is not None):
+                raise ConfigError(f"{self.io.path}: term {i} is not an estimated term; the estimated ones: "
+                                  f"{[j for j, t in enumerate(terms) if t.source is not None]}")
+            v = np.asarray(value, dtype=np.float64).reshape(-1)
+            if v.size != terms[i].size:
+                raise ConfigError(f"{self.io.path}: term {i} ({terms[i].name}) has {terms[i].size} entries, the "
+                                  f"values fed to it {v.size}")
+            checked[i] = v
+        self._recorded = checked
 
     def _velocity_in_body(self, state: RobotState) -> np.ndarray:
         """The estimated base velocity in the body frame after folding `state` in, once per state (3,) [m/s].
@@ -432,6 +463,10 @@ class OnnxController:
     def network_input(self, state: RobotState, command: VelocityCommand) -> np.ndarray:
         """Push this tick's observation into the history and return the network's input, (input_size,)."""
         parts = self.observation(state, command)
+        recorded, self._recorded = self._recorded, None
+        if recorded:
+            for i, value in recorded.items():
+                parts[i] = value
         rows = [np.concatenate(parts)] if self.io.history_order == "frames" else parts
         for window, row in zip(self._windows, rows, strict=True):
             if self._fresh and self.io.history_fill == "first":

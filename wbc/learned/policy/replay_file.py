@@ -3,7 +3,8 @@
 A trainer writes one beside the weights it exports (`wbc.learned.policy.replay_recorder.record_replay`; ``wbc train``
 leaves ``policy.replay.npz`` in its run directory and the ONNX export ``<name>.replay.npz`` beside the model), and
 ``wbc check-controller NAME --replay FILE.npz`` feeds the recorded states to the controller under test: the
-observation it builds is compared with the recorded one term by term, and its actions with the recorded actions.
+observation it builds is compared with the recorded one term by term, and its actions with the recorded actions
+(a term the controller estimates, an ONNX policy's ``base_lin_vel``, is fed the recorded values instead).
 A controller that passes the contract but reads its inputs in another layout (two observation terms swapped in an
 I/O file, a policy trained with another layout) fails there, with the terms named.
 
