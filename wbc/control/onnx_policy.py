@@ -363,7 +363,7 @@ class OnnxController:
                          else [np.zeros((t.history, t.size)) for t in io.terms])
         self.last_action = np.zeros(n)
         self._fresh = True
-        forces = [t.contact_force for t in io.terms if t.source == "estimator"]
+        forces = [t.contact_force for t in io.terms if t.source is not None]
         # the base estimator behind the estimated terms (one, whatever their number: the I/O file gives them one
         # contact force), and the last state folded into it with its velocity in the body frame
         self.estimate = BaseEstimate(desc, 1.0 / self.rate_hz, contact_force=forces[0]) if forces else None
