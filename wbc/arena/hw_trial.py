@@ -65,6 +65,7 @@ from wbc.control.stand import stand_command
 from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError, UnknownNameError
 from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
+from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
 from wbc.hardware.capabilities import HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
@@ -134,7 +135,7 @@ class HardwareTrialConfig:
     out_dir: Path = field(default_factory=lambda: Path("runs/hw"))
     safety: SafetyConfig | None = None
     settle_s: float = 1.0
-    contact_force: float = 15.0
+    contact_force: float = DEFAULT_CONTACT_FORCE
     controller_config: Path | None = None
     io_file: Path | None = None
     io_process: bool = True

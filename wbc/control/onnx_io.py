@@ -47,13 +47,14 @@ from typing import Any
 
 from wbc.control.errors import OnnxIoError
 from wbc.errors import UnknownNameError
+from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
 from wbc.input_files import read_text, read_toml
 from wbc.learned.policy.control_rate import rate_problem
 from wbc.robots.description import ARM_MODES, RobotDescription
 from wbc.robots.registry import ROBOTS, get_robot
 from wbc.scenario.toml_fields import Range, TomlLines, TomlTable, show
 
-__all__ = ["ACTION_KINDS", "DEFAULT_CONTACT_FORCE", "ESTIMATED", "HISTORY_FILLS", "HISTORY_ORDERS", "NOT_MEASURED",
+__all__ = ["ACTION_KINDS", "ESTIMATED", "HISTORY_FILLS", "HISTORY_ORDERS", "NOT_MEASURED",
            "SOURCES", "TERMS", "ObsTerm", "OnnxIo", "io_path_for", "load_onnx_io"]
 
 TERMS: dict[str, str] = {
@@ -85,8 +86,6 @@ ESTIMATED: dict[str, str] = {
 
 SOURCES = ("estimator",)
 """Where an `ESTIMATED` term comes from: the base estimator (`wbc.estimation.base_estimate.BaseEstimate`)."""
-DEFAULT_CONTACT_FORCE = 15.0
-"""The estimator's default foot sensor reading at which a foot is fully trusted as standing [N]."""
 
 HISTORY_ORDERS = ("frames", "terms")
 HISTORY_FILLS = ("first", "zeros")

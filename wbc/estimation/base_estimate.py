@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from wbc.errors import ConfigError
-from wbc.estimation.filter import BaseEstimator, EstimatorConfig
+from wbc.estimation.filter import DEFAULT_CONTACT_FORCE, BaseEstimator, EstimatorConfig
 from wbc.estimation.kinematics import RobotKinematics
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.description import RobotDescription
@@ -42,7 +42,7 @@ class BaseEstimate:
         ConfigError: `dt` or `contact_force` is not positive.
     """
 
-    def __init__(self, desc: RobotDescription, dt: float, *, contact_force: float = 15.0,
+    def __init__(self, desc: RobotDescription, dt: float, *, contact_force: float = DEFAULT_CONTACT_FORCE,
                  config: EstimatorConfig | None = None) -> None:
         if not dt > 0:
             raise ConfigError(f"BaseEstimate: dt must be > 0 s, got {dt}")

@@ -24,7 +24,11 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.robots.conventions import GRAVITY
 
-__all__ = ["EstimatorConfig", "BaseEstimator", "steady_step"]
+__all__ = ["DEFAULT_CONTACT_FORCE", "EstimatorConfig", "BaseEstimator", "steady_step"]
+
+DEFAULT_CONTACT_FORCE = 15.0
+"""The foot sensor reading at which an estimator fed from a robot's states trusts a foot as standing, by default
+[N in simulation; a real robot's sensors read raw counts] (`wbc.estimation.base_estimate.BaseEstimate`)."""
 
 
 
