@@ -35,6 +35,7 @@ from wbc.tools.bench import (
     LatencyBenchResult,
     MpcBenchResult,
     MpcReference,
+    MpcRound,
     MpcTickFigures,
     SafetyBenchResult,
     SimBenchResult,
@@ -60,10 +61,11 @@ TRAIN_REFERENCE_KEYS = ["reference_physics_limit_control_steps_per_s", "control_
 MPC_KEYS = ["robot", "controller", "horizon", "mpc_solve_ms_median", "mpc_solve_ms_p99", "mpc_setup_ms_median",
             "wbc_tick_us_median", "control_tick_us_median", "realtime_factor", "cpu_realtime_factor",
             "walk_physics_realtime_factor", "walk_physics_share", "warmup_episode_s", "fell", "blas",
-            "qp_solver", "machine", "load_1min"]
+            "qp_solver", "machine", "load_1min", "rounds"]
 MPC_REFERENCE_KEYS = ["reference_placo_tick_us", "reference_steps_per_s", "physics_realtime_factor",
                       "control_tick_over_reference_tick", "closed_loop_over_physics_rtf", "scaled_target_wbc_tick_us",
-                      "scaled_target_realtime_factor", "physics_cpu_realtime_factor", "closed_loop_over_physics_cpu"]
+                      "scaled_target_realtime_factor", "physics_cpu_realtime_factor", "closed_loop_over_physics_cpu",
+                      "closed_loop_over_physics_cpu_min", "closed_loop_over_physics_cpu_max"]
 SWEEP_KEYS = ["scenario", "controller", "terrain", "trials", "batched_physics_steps_per_s", "machine"]
 SWEEP_EXECUTOR_KEYS = ["{}_wall_s", "{}_sweep_steps_per_s", "{}_ratio_to_batched_physics"]
 HW_KEYS = ["robot", "seconds", "rate_hz", "transport", "emulator_process", "sends", "replies_received",
@@ -129,11 +131,16 @@ def _mpc(reference: bool = True) -> MpcBenchResult:
     ref = MpcReference(reference_placo_tick_us=40.0, reference_steps_per_s=110_000.0, physics_realtime_factor=200.0,
                        control_tick_over_reference_tick=3.75, closed_loop_over_physics_rtf=0.03,
                        scaled_target_wbc_tick_us=100.0, scaled_target_realtime_factor=5.0,
-                       physics_cpu_realtime_factor=210.0, closed_loop_over_physics_cpu=0.035)
+                       physics_cpu_realtime_factor=210.0, closed_loop_over_physics_cpu=0.035,
+                       closed_loop_over_physics_cpu_min=0.025, closed_loop_over_physics_cpu_max=0.04)
+    nan = math.nan
+    rounds = tuple(MpcRound(realtime_factor=6.0, cpu_realtime_factor=cpu, walk_physics_realtime_factor=20.0,
+                            walk_physics_share=0.3, physics_realtime_factor=200.0 if reference else nan,
+                            physics_cpu_realtime_factor=210.0 if reference else nan) for cpu in (5.25, 7.35, 8.4))
     return MpcBenchResult(robot="a1-wx200", controller="mpc", horizon=10, ticks=ticks, realtime_factor=6.0,
                           cpu_realtime_factor=7.35, walk_physics_realtime_factor=20.0, walk_physics_share=0.3,
                           warmup_episode_s=1.5, fell=False, blas="single-threaded", qp_solver="daqp 0.5.1",
-                          machine=MACHINE, reference=ref if reference else None)
+                          machine=MACHINE, reference=ref if reference else None, rounds=rounds)
 
 
 def _sweep(ray: bool = True) -> SweepBenchResult:
@@ -353,7 +360,14 @@ def test_print_bench_mpc_shows_the_tick_and_the_references(capsys):
     assert "control tick 3.75x the reference PlaCo tick" in text and "closed loop 0.030 of" in text
     assert "6.0x real time on one core (7.3x in CPU time); the walk's physics steps 30% of it (20x" in text
     assert "0.035 in CPU time (210x; target >= 0.20)" in text
-    assert "references" not in _printed(printers.print_bench_mpc, _mpc(reference=False), capsys)
+    # each round against its own references, with the spread the machine made
+    assert "median of 3 timed walks" in text
+    assert "just before and after it, in CPU time: 0.025, 0.035, 0.040 (median 0.035, 0.025 to 0.040" in text
+    without = _printed(printers.print_bench_mpc, _mpc(reference=False), capsys)
+    assert "references" not in without and "just before and after" not in without
+    one = dataclasses.replace(_mpc(), rounds=_mpc().rounds[:1])
+    assert "on their own); one timed walk\n" in _printed(printers.print_bench_mpc, one, capsys)
+    assert "just before and after" not in _printed(printers.print_bench_mpc, one, capsys)
 
 
 def test_print_bench_sweep_prints_one_line_per_executor_then_rays_overhead(capsys):

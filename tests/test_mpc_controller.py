@@ -1,5 +1,7 @@
 """The MPC controller in closed loop on the MuJoCo robot: estimation, walking, failure handling."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -213,7 +215,7 @@ def test_ground_truth_debug_switch_replaces_the_estimate():
 def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_references():
     from wbc.tools.bench import bench_mpc
 
-    result = bench_mpc(seconds=0.2, single_thread=False)
+    result = bench_mpc(seconds=0.2, single_thread=False, rounds=3)
     ticks, ref = result.ticks, result.reference
     for value in (ticks.mpc_solve_ms_median, ticks.mpc_solve_ms_p99, ticks.wbc_tick_us_median, result.realtime_factor):
         assert value > 0
@@ -225,16 +227,37 @@ def test_bench_mpc_reports_the_issue_figures_and_the_targets_scaled_by_its_refer
     # issue 16's figures: the control tick over the reference tick, the closed loop over this robot's physics alone
     assert ref.control_tick_over_reference_tick == pytest.approx(
         ticks.control_tick_us_median / ref.reference_placo_tick_us)
-    assert ref.closed_loop_over_physics_rtf == pytest.approx(result.realtime_factor / ref.physics_realtime_factor)
+    # each of the three timed walks is read against the physics alone measured just before and just after it, and
+    # the ratios are the rounds' medians: a machine that changes speed between two walks moves one round, not all
+    rounds = result.rounds
+    assert len(rounds) == 3 and result.as_dict()["rounds"] == 3
+    assert ref.physics_realtime_factor == max(r.physics_realtime_factor for r in rounds)
+    for r in rounds:
+        assert r.over_physics == pytest.approx(r.realtime_factor / r.physics_realtime_factor)
+        assert r.over_physics_cpu == pytest.approx(r.cpu_realtime_factor / r.physics_cpu_realtime_factor)
+    assert ref.closed_loop_over_physics_rtf == pytest.approx(np.median([r.over_physics for r in rounds]))
+    assert result.realtime_factor == pytest.approx(np.median([r.realtime_factor for r in rounds]))
     assert 0 < ref.closed_loop_over_physics_rtf < 1  # the controller costs something
-    # the same ratio in CPU time; the walk's own physics is part of the loop, and slower than standing physics
-    assert ref.closed_loop_over_physics_cpu == pytest.approx(result.cpu_realtime_factor
-                                                             / ref.physics_cpu_realtime_factor)
+    # the same ratio in CPU time, with the rounds' spread; the walk's own physics is part of the loop
+    cpu_ratios = sorted(r.over_physics_cpu for r in rounds)
+    assert (ref.closed_loop_over_physics_cpu_min, ref.closed_loop_over_physics_cpu,
+            ref.closed_loop_over_physics_cpu_max) == pytest.approx(cpu_ratios)
+    assert result.cpu_realtime_factor == pytest.approx(np.median([r.cpu_realtime_factor for r in rounds]))
     assert 0 < ref.closed_loop_over_physics_cpu < 1
     assert 0 < result.walk_physics_share < 1
     assert result.walk_physics_realtime_factor == pytest.approx(result.realtime_factor / result.walk_physics_share)
-    without = bench_mpc(seconds=0.1, single_thread=False, reference=False)
+    without = bench_mpc(seconds=0.1, single_thread=False, reference=False, rounds=1)
     assert without.reference is None and "reference_placo_tick_us" not in without.as_dict()
+    assert len(without.rounds) == 1 and math.isnan(without.rounds[0].over_physics_cpu)
+
+
+@pytest.mark.parametrize("rounds", [0, -1, 21, 2.0, True, "3"])
+def test_bench_mpc_refuses_a_number_of_rounds_out_of_its_range_before_any_walk(rounds, monkeypatch):
+    import wbc.tools.bench.mpc as bench
+
+    monkeypatch.setattr(bench, "run_episode", lambda *a, **k: pytest.fail("a walk was played"))
+    with pytest.raises(ConfigError, match="--rounds must be a whole number of timed walks from 1 to 20"):
+        bench.bench_mpc(seconds=0.1, single_thread=False, rounds=rounds)
 
 
 def test_bench_mpc_times_a_walk_no_bench_observer_watches_and_files_the_same_walk_played_again(monkeypatch):
@@ -249,7 +272,7 @@ def test_bench_mpc_times_a_walk_no_bench_observer_watches_and_files_the_same_wal
         return episode
 
     monkeypatch.setattr(bench, "run_episode", spy)
-    result = bench.bench_mpc(seconds=0.1, single_thread=False, reference=False)
+    result = bench.bench_mpc(seconds=0.1, single_thread=False, reference=False, rounds=1)
     (warmup, _), (timed_observer, timed), (observer, observed) = played
     assert warmup is None and timed_observer is None and observer is not None
     # the same walk: the breakdown filed from the second describes the first

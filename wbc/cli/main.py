@@ -113,7 +113,7 @@ def _bench_sim(args: argparse.Namespace) -> int:
 
 def _bench_mpc(args: argparse.Namespace) -> int:
     result = bench_mpc(args.robot, args.controller, seconds=args.seconds, single_thread=not args.threaded_blas,
-                       reference=not args.no_reference, qp_solver=args.qp_solver)
+                       reference=not args.no_reference, qp_solver=args.qp_solver, rounds=args.rounds)
     if args.json:
         printers.print_json(result.as_dict())
     else:

@@ -28,6 +28,7 @@ from wbc.mpc.qp_solvers import QP_SOLVERS
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import ROBOTS
 from wbc.scenario.scenario import MAX_DURATION_S
+from wbc.tools.bench.mpc import DEFAULT_ROUNDS, MAX_ROUNDS
 from wbc.tools.paper import DEFAULT_SEEDS as PAPER_DEFAULT_SEEDS
 from wbc.tools.paper import DEFAULT_TRIALS as PAPER_DEFAULT_TRIALS
 from wbc.tools.paper import TABLES as PAPER_TABLES
@@ -162,6 +163,7 @@ _THREADS = bounded_int(1, MAX_THREADS)
 _SPEED = bounded_float(0.0, 100.0)  # 0: as fast as possible; 100 times real time is already a blur
 _EPISODE_S = bounded_float(0.0, MAX_DURATION_S, lo_open=True, unit="s")
 _MEASURE_S = bounded_float(0.0, MAX_HOURS_S, lo_open=True, unit="s")
+_ROUNDS = bounded_int(1, MAX_ROUNDS)
 
 
 def _add_resume_options(p: argparse.ArgumentParser) -> None:
@@ -325,6 +327,9 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
     mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     mpc.add_argument("--controller", default="mpc")
     mpc.add_argument("--seconds", type=_MEASURE_S, default=4.0, help="closed-loop time measured [s] (up to 4 h)")
+    mpc.add_argument("--rounds", type=_ROUNDS, default=DEFAULT_ROUNDS,
+                     help=f"timed walks, each between two measurements of the references (1..{MAX_ROUNDS}; "
+                          f"default {DEFAULT_ROUNDS}): the ratios are their medians, with their spread")
     mpc.add_argument("--threaded-blas", action="store_true",
                      help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
     mpc.add_argument("--json", action="store_true")

@@ -188,7 +188,8 @@ def print_bench_mpc(result: MpcBenchResult) -> None:
     print(f"  closed loop    : {result.realtime_factor:.1f}x real time on one core "
           f"({result.cpu_realtime_factor:.1f}x in CPU time); the walk's physics steps "
           f"{result.walk_physics_share:.0%} of it "
-          f"({result.walk_physics_realtime_factor:.0f}x real time on their own)")
+          f"({result.walk_physics_realtime_factor:.0f}x real time on their own); "
+          + (f"median of {len(result.rounds)} timed walks" if len(result.rounds) > 1 else "one timed walk"))
     ref = result.reference
     if ref is not None:
         tick_at = MPC_REFERENCE_TARGETS["wbc_tick_us_median"][1]
@@ -203,6 +204,11 @@ def print_bench_mpc(result: MpcBenchResult) -> None:
               f"this robot's physics alone ({ref.physics_realtime_factor:.0f}x real time; target >= 0.075), "
               f"{ref.closed_loop_over_physics_cpu:.3f} in CPU time ({ref.physics_cpu_realtime_factor:.0f}x; "
               "target >= 0.20)")
+        if len(result.rounds) > 1:
+            print(f"  each walk against the physics alone measured just before and after it, in CPU time: "
+                  f"{', '.join(f'{r.over_physics_cpu:.3f}' for r in result.rounds)} (median "
+                  f"{ref.closed_loop_over_physics_cpu:.3f}, {ref.closed_loop_over_physics_cpu_min:.3f} to "
+                  f"{ref.closed_loop_over_physics_cpu_max:.3f}: how far this machine moved the figure in one run)")
     if result.qp_solvers:
         _print_qp_solvers(result)
 

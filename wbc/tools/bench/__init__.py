@@ -12,7 +12,7 @@ from wbc.tools.bench.act import ActBenchResult, ActCost, bench_act
 from wbc.tools.bench.arm import ArmBenchResult, ArmRateRow, ArmReactionRow, ArmStepRow, EmulatorTimingRow, bench_arm
 from wbc.tools.bench.hw import EmulatorCounts, HwBenchResult, SafetyBenchResult, bench_hw
 from wbc.tools.bench.latency import DelayMargin, LatencyBenchResult, WireLatency, bench_latency
-from wbc.tools.bench.mpc import MpcBenchResult, MpcReference, MpcTickFigures, bench_mpc
+from wbc.tools.bench.mpc import MpcBenchResult, MpcReference, MpcRound, MpcTickFigures, bench_mpc
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
     REFERENCE_TARGETS,
@@ -28,7 +28,7 @@ from wbc.tools.bench.train import TrainBenchResult, TrainReference, bench_train
 __all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_TARGETS", "TRAIN_TARGET", "ActBenchResult", "ActCost", "ArmBenchResult",
            "ArmRateRow",
            "ArmReactionRow", "ArmStepRow", "DelayMargin", "EmulatorCounts", "EmulatorTimingRow", "HwBenchResult",
-           "LatencyBenchResult", "MpcBenchResult", "MpcReference", "MpcTickFigures", "SafetyBenchResult",
+           "LatencyBenchResult", "MpcBenchResult", "MpcReference", "MpcRound", "MpcTickFigures", "SafetyBenchResult",
            "SimBenchResult", "SimReference", "SweepBenchResult", "SweepExecutorRow", "TrainBenchResult",
            "TrainReference", "WireLatency", "bench_act", "bench_arm", "bench_hw", "bench_latency", "bench_mpc",
            "bench_sim", "bench_sweep", "bench_train", "machine_description", "reference_a1", "reference_placo_tick_us"]

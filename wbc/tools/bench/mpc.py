@@ -26,7 +26,7 @@ from wbc.arena.runner import run_episode
 from wbc.control.protocol import Controller, HasTickTimings
 from wbc.control.registry import CONTROLLERS, get_controller
 from wbc.control.stand import stand_command
-from wbc.errors import BenchError
+from wbc.errors import BenchError, ConfigError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
 from wbc.mpc.centroidal_model import NU
@@ -43,13 +43,20 @@ from wbc.tools.bench.references import (
 )
 from wbc.types import VelocityCommand
 
-__all__ = ["MAX_RECORDED_QPS", "WARMUP_S", "MpcBenchResult", "MpcReference", "MpcTickFigures", "PhysicsTimedRobot",
-           "QpLog", "QpSolverFigures", "TickTimingLog", "bench_mpc", "compare_qp_solvers",
-           "physics_realtime_factors"]
+__all__ = ["DEFAULT_ROUNDS", "MAX_RECORDED_QPS", "MAX_ROUNDS", "WARMUP_S", "MpcBenchResult", "MpcReference",
+           "MpcRound", "MpcTickFigures", "PhysicsTimedRobot", "QpLog", "QpSolverFigures", "TickTimingLog", "bench_mpc",
+           "compare_qp_solvers", "physics_realtime_factors"]
 
 WARMUP_S = 0.2
 """Length of the untimed episode played before the timed walk [s] (its wall time is reported as
 ``warmup_episode_s``: it holds the compiled code's first load)."""
+
+
+DEFAULT_ROUNDS = 3
+"""Timed walks of `bench_mpc`, each between two measurements of the references."""
+
+MAX_ROUNDS = 20
+"""The most timed walks `bench_mpc` plays."""
 
 
 MAX_RECORDED_QPS = 1000
@@ -92,11 +99,16 @@ class MpcReference:
         reference_steps_per_s: the bare A1's single-threaded physics, best of the measurements [steps/s].
         physics_realtime_factor: the same robot's physics alone (`physics_realtime_factors`), best.
         control_tick_over_reference_tick: the control tick's median over the reference PlaCo tick (target <= 1.8).
-        closed_loop_over_physics_rtf: the closed loop's real-time factor over the physics-only one (target >= 0.075).
+        closed_loop_over_physics_rtf: the closed loop's real-time factor over the physics-only one, the median of
+            the rounds' (`MpcRound`; target >= 0.075).
         physics_cpu_realtime_factor: the same robot's physics alone, simulated seconds per second of the thread's CPU
             time, best of the measurements.
-        closed_loop_over_physics_cpu: the closed loop's CPU real-time factor over the physics-only one (the same
-            ratio in CPU time, which the machine's other jobs move less than wall time; target >= 0.20).
+        closed_loop_over_physics_cpu: the closed loop's CPU real-time factor over the physics-only one, the median
+            of the rounds' (the same ratio in CPU time, which the machine's other jobs move less than wall time;
+            target >= 0.20).
+        closed_loop_over_physics_cpu_min: the lowest of the rounds' CPU ratios.
+        closed_loop_over_physics_cpu_max: the highest of them: with the median, how far the machine moved the figure
+            within one run.
         scaled_target_wbc_tick_us: 100 us times the reference tick over 40 us [us].
         scaled_target_realtime_factor: 5x times the reference physics over 110k steps/s.
     """
@@ -110,10 +122,47 @@ class MpcReference:
     scaled_target_realtime_factor: float
     physics_cpu_realtime_factor: float = math.nan
     closed_loop_over_physics_cpu: float = math.nan
+    closed_loop_over_physics_cpu_min: float = math.nan
+    closed_loop_over_physics_cpu_max: float = math.nan
 
     def as_dict(self) -> dict[str, float]:
         """Plain dict, keys as the attributes' names."""
         return asdict(self)
+
+
+@dataclass(frozen=True, kw_only=True)
+class MpcRound:
+    """One round of `bench_mpc`: the timed walk, and the physics-alone references measured just before and after it.
+
+    A machine shared with others (a cloud VM) changes speed over seconds, by up to 2x here: a ratio is only read
+    against references taken around the same walk, and the rounds' spread says how much the machine moved.
+
+    Attributes:
+        realtime_factor: the walk's simulated seconds per wall-clock second.
+        cpu_realtime_factor: the walk's simulated seconds per second of the thread's CPU time.
+        walk_physics_realtime_factor: the walk's simulated seconds per wall-clock second of its physics steps.
+        walk_physics_share: the part of the walk's wall time spent in its physics steps.
+        physics_realtime_factor: the robot's physics alone, the better of the two measurements around the walk
+            (nan without references).
+        physics_cpu_realtime_factor: the same in CPU time (nan without references).
+    """
+
+    realtime_factor: float
+    cpu_realtime_factor: float
+    walk_physics_realtime_factor: float
+    walk_physics_share: float
+    physics_realtime_factor: float = math.nan
+    physics_cpu_realtime_factor: float = math.nan
+
+    @property
+    def over_physics(self) -> float:
+        """The walk's real-time factor over the physics-alone one around it (nan without references)."""
+        return self.realtime_factor / self.physics_realtime_factor
+
+    @property
+    def over_physics_cpu(self) -> float:
+        """The same in CPU time (nan without references)."""
+        return self.cpu_realtime_factor / self.physics_cpu_realtime_factor
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -160,7 +209,8 @@ class MpcBenchResult:
         controller: the MPC controller's registry name.
         horizon: the MPC's horizon N [steps].
         ticks: the tick's breakdown (nan for a controller that reports none).
-        realtime_factor: simulated seconds per wall-clock second of the whole closed loop.
+        realtime_factor: simulated seconds per wall-clock second of the whole closed loop (the median of the
+            rounds', as are the three figures below).
         cpu_realtime_factor: simulated seconds per second of the thread's CPU time (`time.thread_time`) over the
             same closed loop.
         walk_physics_realtime_factor: simulated seconds per wall-clock second spent in the simulator's steps during
@@ -178,6 +228,7 @@ class MpcBenchResult:
         reference: the references' figures, or None when they were not measured.
         qp_solvers: every QP backend on the QPs of the timed walk, DAQP first (`compare_qp_solvers`); empty when
             none was recorded.
+        rounds: each timed walk with the references around it, in order (`MpcRound`).
     """
 
     robot: str
@@ -196,6 +247,7 @@ class MpcBenchResult:
     walk_physics_share: float = math.nan
     reference: MpcReference | None = None
     qp_solvers: tuple[QpSolverFigures, ...] = ()
+    rounds: tuple[MpcRound, ...] = ()
 
     def as_dict(self) -> dict[str, float | str | int | bool]:
         """Plain flat dict (the JSON output of ``wbc bench mpc``).
@@ -210,7 +262,8 @@ class MpcBenchResult:
                                                     "walk_physics_share": self.walk_physics_share,
                                                     "warmup_episode_s": self.warmup_episode_s, "fell": self.fell,
                                                     "blas": self.blas, "qp_solver": self.qp_solver,
-                                                    "machine": self.machine, "load_1min": self.load_1min}
+                                                    "machine": self.machine, "load_1min": self.load_1min,
+                                                    "rounds": len(self.rounds)}
         if self.reference is not None:
             out.update(self.reference.as_dict())
         for figures in self.qp_solvers:
@@ -375,7 +428,8 @@ class PhysicsTimedRobot(MujocoRobot):
 
 
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
-              single_thread: bool = True, reference: bool = True, qp_solver: str = "daqp") -> MpcBenchResult:
+              single_thread: bool = True, reference: bool = True, qp_solver: str = "daqp",
+              rounds: int = DEFAULT_ROUNDS) -> MpcBenchResult:
     """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
 
     With `single_thread` (the default) it runs in a spawned process whose BLAS is single-threaded, as every arena
@@ -384,31 +438,33 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     The robot walks at `vx` on flat ground for `seconds` (or until it falls) through `run_episode`, after an untimed
     walk of `WARMUP_S` (the compiled parts of the tick load at their first call; ``warmup_episode_s`` is that walk's
-    wall time). From the controller's breakdown of each tick (`HasTickTimings`): every MPC update's QP solve time
-    (the `qp_solver` backend's) and setup time (linearisation and condensing), and ``wbc_tick_us_median``, the
-    whole-body QP's time per tick (PlaCo: kinematics, dynamics, tasks, QP, plus setting its targets from Python).
-    ``control_tick_us_median`` is the whole control tick without an MPC update (estimator, kinematics, footholds,
-    swing targets, whole-body QP, motor command). These are nan for a controller that reports no breakdown. The
-    real-time factor covers everything: physics, controller, MPC updates and the runner's episode log; it is given in
-    wall time and in the thread's CPU time (``cpu_realtime_factor``), and the simulator's steps are timed within the
-    walk (``walk_physics_realtime_factor``, ``walk_physics_share``): a walking robot's physics costs more than the
-    standing robot's that the reference measures. These come from a walk that nothing but the runner watches; the
-    breakdown and the QPs come from the same walk played again (same seed, the same ticks) with the bench's
-    observers, whose own cost (10-20 % of a tick) would otherwise count as the loop's.
+    wall time). The timed walk is played `rounds` times (the same walk each time), with the references measured before
+    the first and after each (`MpcRound`): each round's ratio is read against the references just around it, and the
+    result gives the rounds' medians and the ratio's spread. From the controller's breakdown of each tick
+    (`HasTickTimings`): every MPC update's QP solve time (the `qp_solver` backend's) and setup time (linearisation and
+    condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo: kinematics, dynamics, tasks, QP,
+    plus setting its targets from Python). ``control_tick_us_median`` is the whole control tick without an MPC update
+    (estimator, kinematics, footholds, swing targets, whole-body QP, motor command). These are nan for a controller that
+    reports no breakdown. The real-time factor covers everything: physics, controller, MPC updates and the runner's
+    episode log; it is given in wall time and in the thread's CPU time (``cpu_realtime_factor``), and the simulator's
+    steps are timed within the walk (``walk_physics_realtime_factor``, ``walk_physics_share``): a walking robot's
+    physics costs more than the standing robot's that the reference measures. These come from a walk that nothing but
+    the runner watches; the breakdown and the QPs come from the same walk played again (same seed, the same ticks) with
+    the bench's observers, whose own cost (10-20 % of a tick) would otherwise count as the loop's.
 
     The QPs of the walk's MPC updates (up to `MAX_RECORDED_QPS`) are then solved again by every QP backend, from the
     warm starts the loop gave them (`compare_qp_solvers`): ``qp_solvers`` holds their solve times, iterations and
     distance from DAQP's solutions.
 
-    With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured before and after the
-    closed loop in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`), the bare A1's
-    single-threaded physics (`reference_a1`) and the same robot's physics alone (`physics_realtime_factors`). The
-    result then holds them (`MpcReference`) with the ratios the targets are set on, ``control_tick_over_reference_tick``
-    (the control tick's median over the reference PlaCo tick; target <= 1.8) and ``closed_loop_over_physics_rtf``
-    (the closed loop's real-time factor over the same robot's physics-only one; target >= 0.075; in CPU time
-    ``closed_loop_over_physics_cpu``, target >= 0.20), and the older
-    targets scaled by the references to this machine: ``scaled_target_wbc_tick_us`` (100 us times the reference tick
-    over 40 us) and ``scaled_target_realtime_factor`` (5x times the reference physics over 110k steps/s).
+    With `reference`, the references of the MPC targets (`MPC_REFERENCE_TARGETS`) are measured around every timed walk
+    in the same process: a bare-A1 PlaCo tick (`reference_placo_tick_us`), the bare A1's single-threaded physics
+    (`reference_a1`) and the same robot's physics alone (`physics_realtime_factors`). The result then holds them
+    (`MpcReference`) with the ratios the targets are set on, ``control_tick_over_reference_tick`` (the control tick's
+    median over the reference PlaCo tick; target <= 1.8) and ``closed_loop_over_physics_rtf`` (the closed loop's
+    real-time factor over the same robot's physics-only one, the median of the rounds' ratios; target >= 0.075; in CPU
+    time ``closed_loop_over_physics_cpu``, target >= 0.20, with the rounds' lowest and highest), and the older targets
+    scaled by the references to this machine: ``scaled_target_wbc_tick_us`` (100 us times the reference tick over 40 us)
+    and ``scaled_target_realtime_factor`` (5x times the reference physics over 110k steps/s).
 
     Args:
         robot: robot registry name.
@@ -418,6 +474,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         single_thread: run in a spawned process with a single-threaded BLAS.
         reference: also measure the references.
         qp_solver: the closed loop's QP backend (`wbc.mpc.qp_solvers.QP_SOLVERS`); the comparison runs them all.
+        rounds: how many times the timed walk is played (1 to `MAX_ROUNDS`).
 
     Returns:
         The figures above with the horizon, whether the robot fell, the BLAS threading and the machine.
@@ -426,13 +483,15 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         UnknownNameError: unknown robot or controller.
         SimulationDiverged: the simulation blew up during the walk (no figure of a blown-up walk is reported).
         BenchError: the controller is not an MPC controller, or a reference failed.
-        ConfigError: `qp_solver` is not a QP backend (the message lists them).
+        ConfigError: `qp_solver` is not a QP backend (the message lists them), or `rounds` is out of its range.
     """
     check_qp_solver(qp_solver, "--qp-solver")
+    if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= MAX_ROUNDS:
+        raise ConfigError(f"--rounds must be a whole number of timed walks from 1 to {MAX_ROUNDS}, got {rounds!r}")
     if single_thread:
         with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
-                                 reference=reference, qp_solver=qp_solver).result()
+                                 reference=reference, qp_solver=qp_solver, rounds=rounds).result()
         return replace(result, blas="single-threaded")
     spec = get_controller(controller)
     sim = PhysicsTimedRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
@@ -460,47 +519,62 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         qps(t, robot, controller, command)
 
     with sim:
-        if reference:
-            measure_references()
         # a short episode first, untimed: the compiled parts of the tick load (or compile, on a machine's first run)
         # at their first call, once per process; an arena worker pays that once for all its trials
         sim.reset(seed=0)
         warm_start = time.perf_counter()
         run_episode(sim, ctrl, CommandSchedule(vx=vx), WARMUP_S, divergence=DivergenceCheck())
         warmup_wall = time.perf_counter() - warm_start
+        if reference:
+            measure_references()
         # the timed walk runs without the bench's own observers (they cost 10-20 % of a tick); the same walk again,
         # observed, gives the breakdown of its ticks and the QPs (the loop is deterministic: same seed, same walk)
-        sim.reset(seed=0)
-        sim.physics_s = 0.0
-        cpu_start, start = time.thread_time(), time.perf_counter()
-        timed = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, divergence=DivergenceCheck())
-        wall, cpu = time.perf_counter() - start, time.thread_time() - cpu_start
-        walk_physics_s = sim.physics_s
+        timed_rounds, fell = [], False
+        for _ in range(rounds):
+            sim.reset(seed=0)
+            sim.physics_s = 0.0
+            cpu_start, start = time.thread_time(), time.perf_counter()
+            timed = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, divergence=DivergenceCheck())
+            wall, cpu = time.perf_counter() - start, time.thread_time() - cpu_start
+            walk_physics_s = sim.physics_s
+            fell = fell or timed.fell
+            if reference:
+                measure_references()
+            timed_rounds.append(MpcRound(
+                realtime_factor=timed.survived_s / wall, cpu_realtime_factor=timed.survived_s / max(cpu, 1e-9),
+                walk_physics_realtime_factor=timed.survived_s / max(walk_physics_s, 1e-9),
+                walk_physics_share=walk_physics_s / wall,
+                physics_realtime_factor=max(physics[-2:]) if reference else math.nan,
+                physics_cpu_realtime_factor=max(physics_cpu[-2:]) if reference else math.nan))
         load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
         sim.reset(seed=0)
         episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=observe,
                               divergence=DivergenceCheck())
-        if reference:
-            measure_references()
     figures = log.figures(episode)
-    realtime = timed.survived_s / wall
-    realtime_cpu = timed.survived_s / max(cpu, 1e-9)
+
+    def median(values: Sequence[float]) -> float:
+        return float(np.median(values))
+
+    realtime = median([r.realtime_factor for r in timed_rounds])
     refs = None
     if reference:
         tick_ref, rate_ref, physics_rtf = float(np.mean(ref_ticks)), max(ref_rates), max(physics)
+        cpu_ratios = [r.over_physics_cpu for r in timed_rounds]
         refs = MpcReference(
             reference_placo_tick_us=tick_ref, reference_steps_per_s=rate_ref, physics_realtime_factor=physics_rtf,
             control_tick_over_reference_tick=figures.control_tick_us_median / tick_ref,
-            closed_loop_over_physics_rtf=realtime / physics_rtf,
-            physics_cpu_realtime_factor=max(physics_cpu), closed_loop_over_physics_cpu=realtime_cpu / max(physics_cpu),
+            closed_loop_over_physics_rtf=median([r.over_physics for r in timed_rounds]),
+            physics_cpu_realtime_factor=max(physics_cpu), closed_loop_over_physics_cpu=median(cpu_ratios),
+            closed_loop_over_physics_cpu_min=min(cpu_ratios), closed_loop_over_physics_cpu_max=max(cpu_ratios),
             scaled_target_wbc_tick_us=scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"], tick_ref),
             scaled_target_realtime_factor=scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"], rate_ref))
     solver = ctrl.mpc.qp_solver
     return MpcBenchResult(robot=robot, controller=controller, horizon=int(ctrl.config.mpc.horizon), ticks=figures,
-                          realtime_factor=realtime, cpu_realtime_factor=realtime_cpu,
-                          walk_physics_realtime_factor=timed.survived_s / max(walk_physics_s, 1e-9),
-                          walk_physics_share=walk_physics_s / wall, warmup_episode_s=warmup_wall,
-                          fell=bool(timed.fell or episode.fell),
+                          realtime_factor=realtime,
+                          cpu_realtime_factor=median([r.cpu_realtime_factor for r in timed_rounds]),
+                          walk_physics_realtime_factor=median([r.walk_physics_realtime_factor for r in timed_rounds]),
+                          walk_physics_share=median([r.walk_physics_share for r in timed_rounds]),
+                          warmup_episode_s=warmup_wall, fell=bool(fell or episode.fell), rounds=tuple(timed_rounds),
                           blas="default threads", qp_solver=f"{solver.name} {solver.version()}",
                           machine=machine_description(), load_1min=load, reference=refs,
                           qp_solvers=compare_qp_solvers(qps.qps))
