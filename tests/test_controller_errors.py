@@ -41,6 +41,10 @@ BROKEN = {
              'if self.ticks > 25: raise RuntimeError("lost track of the ground")  # MARK'),
     "nan": ("returns NaN", "pass",
             "out = MotorCommand(q=np.full(15, np.nan), dq=out.dq, kp=out.kp, kd=out.kd, tau=out.tau)  # MARK"),
+    # built unchecked (`MotorCommand.trusted`, as a compiled controller may): the robot's write refuses it
+    "nan_trusted": ("returns NaN in a command built unchecked", "pass",
+                    "out = MotorCommand.trusted(np.vstack([out.q, out.dq, out.kp, out.kd, "
+                    "np.r_[np.nan, out.tau[1:]]]))"),
     "short": ("returns 12 of 15 joints", "pass",
               "out = MotorCommand(q=out.q[:12], dq=out.dq[:12], kp=out.kp[:12], kd=out.kd[:12], tau=out.tau[:12])"),
     "reset": ("raises in reset", 'raise KeyError("no calibration")  # MARK', "pass"),
@@ -104,6 +108,9 @@ EXPECTED = {
     "late": ("act raised RuntimeError at tick 25 (t = 0.500 s): lost track of the ground", "# MARK"),
     "nan": ("act raised CommandError at tick 0 (t = 0.000 s): MotorCommand.q: non-finite value at joint index 0",
             "# MARK"),
+    "nan_trusted": ("act returned a command the robot refused: CommandError at tick 0 (t = 0.000 s): "
+                    "MujocoRobot.write: the command holds a non-finite value at tau[FR_hip_joint]; refused before it "
+                    "reached a motor", "def act"),
     "short": ("act returned a command the robot refused: CommandError at tick 0 (t = 0.000 s): MujocoRobot.write: "
               "command has 12 joints, this robot has 15", "def act"),
     "reset": ("reset raised KeyError before the first tick: 'no calibration'", "# MARK"),

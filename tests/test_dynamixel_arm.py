@@ -27,7 +27,14 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 
-from wbc.errors import ConfigError, MissingExtraError, RobotLinkError, SerialPortError, UnknownNameError
+from wbc.errors import (
+    CommandError,
+    ConfigError,
+    MissingExtraError,
+    RobotLinkError,
+    SerialPortError,
+    UnknownNameError,
+)
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
 from wbc.hardware.dynamixel.arm_fault import (
@@ -37,10 +44,10 @@ from wbc.hardware.dynamixel.arm_fault import (
     MODE_PORT_LOST,
     MODE_SERVO,
 )
-from wbc.hardware.dynamixel.control_table import HW_OVERHEATING, HW_OVERLOAD, OperatingMode
+from wbc.hardware.dynamixel.control_table import HW_OVERHEATING, HW_OVERLOAD, XM430_W350, OperatingMode
 from wbc.hardware.dynamixel.current_law import CurrentLaw
 from wbc.hardware.dynamixel.protocol import Instruction
-from wbc.hardware.dynamixel.sdk_bus import COMM_RX_TIMEOUT, COMM_SUCCESS, SdkBus, ServoRead
+from wbc.hardware.dynamixel.sdk_bus import COMM_RX_TIMEOUT, COMM_SUCCESS, SdkBus, ServoRead, register_bytes
 from wbc.hardware.dynamixel.units import CURRENT_UNIT, TORQUE_CONSTANT
 from wbc.hardware.dynamixel.wx200_bus import WX200_SERVOS
 from wbc.hardware.emulators import BusFault, DynamixelEmulator, DynamixelEmulatorConfig, LoggedPacket, SharedPlant
@@ -165,7 +172,8 @@ def test_a_port_name_other_than_the_one_given_is_never_opened(emu: DynamixelEmul
     opened = []
 
     def elsewhere(port: str) -> tuple[object, object]:
-        handler, packet = sdk_handlers("/dev/ttyUSB9", 4.0)  # built, not opened (an in-process name is refused)
+        # built, not opened (an in-process name is refused; a real device's name needs the consent)
+        handler, packet = sdk_handlers("/dev/ttyUSB9", 4.0, allow_hardware=True)
         handler.openPort = lambda: opened.append(True) or True  # would record an open
         return handler, packet
 
@@ -177,7 +185,7 @@ def test_a_port_name_other_than_the_one_given_is_never_opened(emu: DynamixelEmul
 def test_a_missing_sdk_names_the_extra(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "dynamixel_sdk", None)
     with pytest.raises(MissingExtraError, match=r"wbc\[hardware\]"):
-        sdk_handlers("/dev/ttyUSB0")
+        sdk_handlers("/dev/ttyUSB0", allow_hardware=True)
 
 
 def test_every_serial_layer_exception_is_one_error() -> None:
@@ -193,7 +201,7 @@ def test_every_serial_layer_exception_is_one_error() -> None:
 
     for exc in (termios.error(5, "Input/output error"), OSError(9, "Bad file descriptor"), TypeError("None")):
         with pytest.raises(SerialPortError, match=type(exc).__name__):
-            SdkBus(Port(exc), object(), port="/dev/null-arm").open(1_000_000)
+            SdkBus(Port(exc), object(), port="/dev/null-arm", allow_hardware=True).open(1_000_000)
 
 
 def test_connect_refuses_a_bus_that_is_not_the_wx200s(plant: SharedPlant) -> None:
@@ -420,6 +428,40 @@ def test_a_late_answer_of_another_length_is_discarded_as_late_by_the_bus(emu: Dy
     emu.clear(BusFault.LATE_ANSWER)
     bus.flush()
     assert bus.read(4, 70, 1) == ServoRead(4, b"\x00", COMM_SUCCESS, 0)
+    bus.close()
+
+
+def test_a_register_value_that_does_not_fit_is_refused_not_wrapped(emu: DynamixelEmulator) -> None:
+    # without a table: the width only (two's complement below zero, unsigned above)
+    assert register_bytes(-1, 2, 102) == [0xFF, 0xFF] and register_bytes(65535, 2, 102) == [0xFF, 0xFF]
+    assert register_bytes(np.int64(-32768), 2, 102) == [0x00, 0x80]
+    for value in (65536, -32769, 1 << 40):
+        with pytest.raises(CommandError, match=rf"register 102: {value} does not fit its 2 bytes"):
+            register_bytes(value, 2, 102)
+    for value in (1.5, np.float64(3.0), True, "7"):
+        with pytest.raises(CommandError, match="not an integer register value"):
+            register_bytes(value, 2, 102)
+    # with the servos' table: the register the write names, and its range
+    assert register_bytes(-1193, 2, 102, XM430_W350) == list((-1193 & 0xFFFF).to_bytes(2, "little"))
+    for value in (40000, 1194, -1194):
+        with pytest.raises(CommandError, match=rf"register 102 \(goal_current\): {value} lies outside its range "
+                                               r"-1193..1193"):
+            register_bytes(value, 2, 102, XM430_W350)
+    for address, size in ((103, 2), (102, 4), (126, 2), (1000, 1)):  # mid-register, wrong size, read-only, beyond
+        with pytest.raises(CommandError, match=rf"register {address} \({size} bytes\) is no writable register"):
+            register_bytes(0, size, address, XM430_W350)
+    port, packet = emu.port_handlers(LATENCY_MS)(emu.port)
+    bus = SdkBus(port, packet, port=emu.port, table=XM430_W350)
+    bus.open(1_000_000)
+    emu.clear_log()
+    # 40000 units of Goal Current fit two bytes and no servo takes them: nothing of either write goes out
+    with pytest.raises(CommandError, match="40000 lies outside"):
+        bus.sync_write(102, 2, [(1, 10), (4, 40000)])
+    with pytest.raises(CommandError, match="-40000 does not fit its 2 bytes"):
+        bus.write(4, 102, 2, -40000)
+    assert emu.packets() == []
+    bus.sync_write(102, 2, [(1, 10), (4, -20)])  # values within the range go out as they are
+    assert _goals(emu.packets()) == [{1: 10, 4: -20}]
     bus.close()
 
 

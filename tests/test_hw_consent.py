@@ -25,6 +25,7 @@ import pytest
 from wbc.cli import main
 from wbc.errors import SerialPortError, TargetRefusedError
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
+from wbc.hardware.dynamixel.sdk_bus import SdkBus
 from wbc.hardware.hardware_robot import HardwareRobotConfig
 from wbc.hardware.serial_port_policy import check_serial_port, is_emulated_port, is_pseudo_terminal
 
@@ -110,6 +111,45 @@ def test_the_sdk_never_opens_an_in_process_name() -> None:
     pytest.importorskip("dynamixel_sdk")
     with pytest.raises(SerialPortError, match="in_process_handlers"):
         sdk_handlers("in-process:dynamixel-1")  # the SDK would open a file of that name
+
+
+# -- the serial layer's own doors: a user may build a bus from the SDK's handlers without DynamixelArm ------------
+@pytest.mark.parametrize("port", REAL_PORTS)
+def test_the_sdks_handlers_for_a_real_device_need_the_consent(port: str, nothing_opened: list) -> None:
+    with pytest.raises(TargetRefusedError, match=rf"sdk_handlers port {port} is not a pseudo-terminal"):
+        sdk_handlers(port)
+    assert not nothing_opened
+
+
+def test_the_sdks_handlers_for_an_emulators_pty_are_built(pty_slave: str) -> None:
+    pytest.importorskip("dynamixel_sdk")
+    handler, _ = sdk_handlers(pty_slave)
+    assert handler.getPortName() == pty_slave  # built, not opened
+
+
+@pytest.mark.parametrize("port", REAL_PORTS)
+def test_a_bus_on_a_real_device_is_not_opened_without_the_consent(port: str, nothing_opened: list) -> None:
+    """A handler built with the consent (or by hand) still meets the policy where the bus opens it."""
+
+    class Handler:
+        opened = False
+
+        def getPortName(self) -> str:  # noqa: N802 - the SDK's name
+            return port
+
+        def openPort(self) -> bool:  # noqa: N802
+            Handler.opened = True
+            return True
+
+        def setBaudRate(self, rate: int) -> bool:  # noqa: N802
+            return True
+
+    with pytest.raises(TargetRefusedError, match=rf"SdkBus port {port} is not a pseudo-terminal"):
+        SdkBus(Handler(), object(), port=port).open(1_000_000)
+    assert not Handler.opened and not nothing_opened
+    consented = SdkBus(Handler(), object(), port=port, allow_hardware=True)
+    consented.open(1_000_000)  # the same handler, opened once the user said so
+    assert Handler.opened and consented.is_open
 
 
 # -- the backend's config and constructor --------------------------------------------------------------------------

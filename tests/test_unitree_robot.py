@@ -38,7 +38,7 @@ from wbc.errors import (
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
-from wbc.hardware.robot import KP_MAX
+from wbc.hardware.robot import COMMAND_ROWS, KP_MAX
 from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.unitree import DESCRIPTIONS, SdkTransport, Transport, UdpTransport, UnitreeRobot, UnitreeRobotConfig
 from wbc.hardware.unitree.command_codec import decode_command, encode_command
@@ -397,6 +397,14 @@ def test_wild_commands_reach_the_wire_clamped(stepped: Stepped) -> None:
         lim = robot.limits
         with pytest.raises(CommandError):
             robot.write(MotorCommand.hold(np.full(12, np.nan), 20.0, 1.0))
+        # a command built unchecked (as a compiled controller's) is held to the same rule by the robot's write
+        held = _hold(robot).stacked()
+        for row, value in ((0, np.nan), (4, np.inf), (3, -np.inf)):
+            rows = held.copy()
+            rows[row, 5] = value
+            where = rf"{COMMAND_ROWS[row]}\[{robot.joint_names[5]}\]"
+            with pytest.raises(CommandError, match=rf"non-finite value at {where}; refused"):
+                robot.write(MotorCommand.trusted(rows))
         wild = MotorCommand(q=lim.upper + 10.0, dq=lim.velocity_limit * 10.0, kp=np.full(12, 1e6),
                             kd=np.full(12, 1e6), tau=-(lim.torque_limit + 100.0))
         sent = robot.write(wild)
@@ -415,8 +423,8 @@ def test_wild_commands_reach_the_wire_clamped(stepped: Stepped) -> None:
     assert np.all(w.kp <= KP_MAX) and np.all(w.tau >= -lim.torque_limit)
     assert np.all(np.abs(w.dq) <= lim.velocity_limit.astype(np.float32))
     for frame in servo:
-        assert np.all(np.isfinite(frame.q)) and np.all(frame.q >= lim.lower.astype(np.float32))
-        assert np.all(frame.q <= lim.upper.astype(np.float32))
+        assert all(np.all(np.isfinite(getattr(frame, row))) for row in COMMAND_ROWS)
+        assert np.all(frame.q >= lim.lower.astype(np.float32)) and np.all(frame.q <= lim.upper.astype(np.float32))
 
 
 # -- state faults are reported, close damps -----------------------------------------------------------------------

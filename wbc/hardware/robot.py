@@ -78,6 +78,18 @@ def clamp_command(cmd: MotorCommand, limits: JointTable,
     return MotorCommand._trusted(rows)
 
 
+def _refuse_non_finite(robot: str, cmd: MotorCommand, joints: tuple[str, ...]) -> None:
+    """Raise `CommandError` naming the rows and joints of `cmd` that hold a non-finite value, if any."""
+    bad = ~np.isfinite(cmd.rows)
+    if not bad.any():
+        return
+    rows, cols = np.nonzero(bad)
+    named = [f"{COMMAND_ROWS[r]}[{joints[c] if c < len(joints) else c}]" for r, c in zip(rows, cols, strict=True)]
+    where = ", ".join(named[:6]) + (f" and {len(named) - 6} more" if len(named) > 6 else "")
+    raise CommandError(f"{robot}.write: the command holds a non-finite value at {where}; refused before it reached "
+                       "a motor")
+
+
 class Robot(ABC):
     """Abstract robot: proprioception in, low-level motor commands out."""
 
@@ -146,8 +158,12 @@ class Robot(ABC):
     def write(self, cmd: MotorCommand) -> MotorCommand:
         """Validate, clamp and send a command; return what was sent.
 
+        A command built unchecked (`MotorCommand.trusted`) is held to what the constructor checks: a non-finite value
+        is refused here, since clamping would carry it to the motors (a NaN lies within no bounds, and clamps to NaN).
+
         Raises:
-            CommandError: the command has the wrong number of joints.
+            CommandError: the command has the wrong number of joints, or holds a non-finite value (nothing is sent;
+                the robot keeps the last command it accepted).
             RobotNotConnectedError: not connected.
         """
         self._require_connected("write")
@@ -167,7 +183,11 @@ class Robot(ABC):
                 self._bounds = (limits, command_bounds(limits))
             lower, upper = self._bounds[1]
             # within the limits, clamping would change nothing: the command is sent as it is
-            applied = cmd if within_bounds(cmd.rows, lower, upper) else clamp_command(cmd, limits, self._bounds[1])
+            if within_bounds(cmd.rows, lower, upper):
+                applied = cmd
+            else:
+                _refuse_non_finite(type(self).__name__, cmd, self.joint_names)
+                applied = clamp_command(cmd, limits, self._bounds[1])
             self._last_written = (cmd, applied)
         self._send(applied)
         return applied

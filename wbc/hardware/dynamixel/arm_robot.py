@@ -165,7 +165,8 @@ class DynamixelArm(Robot):
         super().__init__()
         self.config = config
         self.clock = clock
-        self._handlers = handlers if handlers is not None else (lambda port: sdk_handlers(port, config.latency_ms))
+        self._handlers = handlers if handlers is not None else (
+            lambda port: sdk_handlers(port, config.latency_ms, allow_hardware=config.allow_hardware))
         torque_limit = arm_joint_table(config.robot).torque_limit
         self.law = CurrentLaw(config.joints, torque_limit, config.max_current_a)
         self._limits = arm_joint_table(config.robot, self.law)
@@ -224,7 +225,8 @@ class DynamixelArm(Robot):
         check_serial_port(cfg.port, allow_hardware=cfg.allow_hardware, what="DynamixelArmConfig.port")
         announce_hardware_port(cfg.port, f"{cfg.robot} arm bus")
         port_handler, packet_handler = self._handlers(cfg.port)
-        bus = SdkBus(port_handler, packet_handler, port=cfg.port)
+        bus = SdkBus(port_handler, packet_handler, port=cfg.port, allow_hardware=cfg.allow_hardware,
+                     table=XM430_W350)
         try:
             bus.open(cfg.baud_rate)
             self._configure(bus)

@@ -49,10 +49,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, Protocol, TypeVar, runtime_checkable
 
-from wbc.errors import SerialPortError
+import numpy as np
+
+from wbc.errors import CommandError, SerialPortError
 from wbc.hardware.clock import Clock, ManualClock
+from wbc.hardware.dynamixel.control_table import ControlTable
 from wbc.hardware.dynamixel.protocol import Instruction
-from wbc.hardware.serial_port_policy import IN_PROCESS_PREFIX
+from wbc.hardware.serial_port_policy import IN_PROCESS_PREFIX, check_serial_port
 from wbc.optional import require
 
 __all__ = [
@@ -65,6 +68,7 @@ __all__ = [
     "ServoRead",
     "describe_result",
     "in_process_handlers",
+    "register_bytes",
     "sdk_handlers",
 ]
 
@@ -294,18 +298,56 @@ def in_process_handlers(port: str, device: InProcessDevice, clock: Clock,
     return _in_process_port_handler()(port, device, clock, latency_ms), sdk.PacketHandler(2.0)
 
 
-def sdk_handlers(port: str, latency_ms: float = 1.0) -> tuple[Any, Any]:
+def register_bytes(value: int, size: int, address: int, table: ControlTable | None = None) -> list[int]:
+    """`value` as a register's `size` little-endian bytes (two's complement for a negative value), checked first.
+
+    A value that does not fit is refused, never wrapped: -40000 in a 2-byte Goal Current would reach the servo as
+    25536. With the servos' `table`, the write must also name a writable register exactly (its first byte and its
+    size) and stay within the register's range (`Register.low` / `high`): 40000 fits two bytes, and no servo takes it
+    as a Goal Current.
+
+    Args:
+        value: the register value (an integer; numpy integers too).
+        size: the register's width [bytes].
+        address: the register's address.
+        table: the servos' control table; None checks the width only.
+
+    Raises:
+        CommandError: `value` is not an integer or does not fit `size` bytes; with `table`, the address and size name
+            no writable register, or `value` lies outside its range.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise CommandError(f"register {address}: {value!r} is not an integer register value")
+    v, bits = int(value), 8 * size
+    if not -(1 << (bits - 1)) <= v < (1 << bits):
+        raise CommandError(f"register {address}: {v} does not fit its {size} bytes; refused, not wrapped")
+    if table is not None:
+        reg = table.at(address)
+        if reg is None or reg.address != address or reg.size != size or not reg.writable:
+            raise CommandError(f"register {address} ({size} bytes) is no writable register of the {table.model}")
+        if not reg.low <= v <= reg.high:
+            raise CommandError(f"register {address} ({reg.name}): {v} lies outside its range {reg.low}..{reg.high}; "
+                               "refused, not sent")
+    return list((v & ((1 << bits) - 1)).to_bytes(size, "little"))
+
+
+def sdk_handlers(port: str, latency_ms: float = 1.0, *, allow_hardware: bool = False) -> tuple[Any, Any]:
     """dynamixel_sdk's port handler for `port` (not opened) and its Protocol 2.0 packet handler.
 
     Args:
         port: the serial device (``/dev/ttyUSB0`` for a U2D2, or an emulator's pseudo-terminal).
         latency_ms: the adapter's latency timer [ms], which sets the reply timeout.
+        allow_hardware: whether `port` may be a real device (`wbc.hardware.serial_port_policy`); without it, only an
+            emulator's pseudo-terminal is accepted.
 
     Raises:
+        TargetRefusedError: `port` is a real device and `allow_hardware` is False (refused before anything is built).
         MissingExtraError: dynamixel_sdk is not installed (``pip install 'wbc[hardware]'``).
         SerialPortError: `port` names an in-process bus, which only `in_process_handlers` reaches (the SDK would open
             a file of that name).
     """
+    check_serial_port(port, allow_hardware=allow_hardware or port.startswith(IN_PROCESS_PREFIX),
+                      what="sdk_handlers port")
     if port.startswith(IN_PROCESS_PREFIX):
         raise SerialPortError(port, "an in-process bus is reached through in_process_handlers (the emulator's "
                                     "arm_handlers / port_handlers), never opened as a file")
@@ -320,13 +362,20 @@ class SdkBus:
         port_handler: the SDK's port handler (or one built like it), not yet opened.
         packet_handler: the SDK's Protocol 2.0 packet handler.
         port: the device the handler must name; anything else is refused before it is opened.
+        allow_hardware: whether `port` may be a real device; without it, `open` refuses anything but an emulator's
+            pseudo-terminal or an in-process bus (`wbc.hardware.serial_port_policy.check_serial_port`).
+        table: the servos' control table: every write is then checked against the register it names
+            (`register_bytes`); None checks only that each value fits its bytes.
 
     Raises:
         SerialPortError: the handler names another device than `port`.
     """
 
-    def __init__(self, port_handler: Any, packet_handler: Any, *, port: str) -> None:
+    def __init__(self, port_handler: Any, packet_handler: Any, *, port: str, allow_hardware: bool = False,
+                 table: ControlTable | None = None) -> None:
         self.port = port
+        self.allow_hardware = allow_hardware
+        self.table = table
         self._port = port_handler
         self._ph = packet_handler
         named = self._call(port_handler.getPortName)
@@ -346,8 +395,11 @@ class SdkBus:
         """Open the port at `baud_rate` [bit/s].
 
         Raises:
+            TargetRefusedError: the port is a real device and the bus was not given ``allow_hardware`` (nothing is
+                opened).
             SerialPortError: it cannot be opened (missing device, permissions, a rate the SDK does not list).
         """
+        check_serial_port(self.port, allow_hardware=self.allow_hardware, what="SdkBus port")
         if not self._call(self._port.openPort):
             raise SerialPortError(self.port, "the SDK could not open it")
         self.is_open = True
@@ -379,8 +431,12 @@ class SdkBus:
         return self._request(servo_id, Instruction.READ, params, length)
 
     def write(self, servo_id: int, address: int, size: int, value: int) -> tuple[int, int]:
-        """WRITE `value` (`size` bytes, little-endian, two's complement) at `address`; (result, error byte)."""
-        data = list((int(value) & ((1 << (8 * size)) - 1)).to_bytes(size, "little"))
+        """WRITE `value` (`size` bytes, little-endian, two's complement) at `address`; (result, error byte).
+
+        Raises:
+            CommandError: `value` is refused by `register_bytes` (nothing is sent).
+        """
+        data = register_bytes(value, size, address, self.table)
         read = self._request(servo_id, Instruction.WRITE, [*address.to_bytes(2, "little"), *data], 0)
         return read.result, read.error
 
@@ -427,9 +483,13 @@ class SdkBus:
         return out
 
     def sync_write(self, address: int, size: int, values: Sequence[tuple[int, int]]) -> int:
-        """SYNC_WRITE (no answer): `size` bytes at `address`, one (ID, value) pair per servo; the SDK's result."""
+        """SYNC_WRITE (no answer): `size` bytes at `address`, one (ID, value) pair per servo; the SDK's result.
+
+        Raises:
+            CommandError: a value is refused by `register_bytes` (nothing is sent).
+        """
         param: list[int] = []
         for servo_id, value in values:
             param.append(servo_id)
-            param += list((int(value) & ((1 << (8 * size)) - 1)).to_bytes(size, "little"))
+            param += register_bytes(value, size, address, self.table)
         return self._call(self._ph.syncWriteTxOnly, self._port, address, size, param, len(param))
