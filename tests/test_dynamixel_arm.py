@@ -306,6 +306,57 @@ def test_a_silent_writer_gets_damping_after_the_deadline(emu: DynamixelEmulator)
     assert all(g == {1: 0, 2: 0, 4: 0} for g in quiet)  # damping of a still arm asks for nothing
 
 
+def test_a_non_finite_command_built_unchecked_never_reaches_the_bus(emu: DynamixelEmulator) -> None:
+    """The current law would turn a NaN torque into a register value (INT64_MIN cast to 16 bits) on its way out."""
+    with _arm(emu) as arm:
+        hold = _hold_with_offset(arm)
+        _keep_writing(arm, hold, 0.05)
+        before = _goals(emu.packets())[-1]
+        for value in (np.nan, np.inf):
+            rows = hold.stacked()
+            rows[4, 1] = value
+            with pytest.raises(CommandError, match=r"non-finite value at tau\[.*\]; refused"):
+                arm.write(MotorCommand.trusted(rows))
+            arm.advance(STEP)
+        emu.clear_log()
+        emu.clock.advance(0.02)  # the bus goes on with the last command it accepted, until the write deadline
+        goals = _goals(emu.packets())
+    assert goals and all(g == before for g in goals)
+
+
+def test_damping_opposes_a_moving_arm_on_the_wire(emu: DynamixelEmulator, plant: SharedPlant) -> None:
+    """With the physics stepped, the damping after the deadline asks each servo for kd times its joint's speed,
+    against it: a zero current (a limp arm) would let the arm fall, and with a still plant the two look the same."""
+    ts = plant.sim.config.timestep
+    physics = emu.clock.call_every(ts, lambda: plant.step(ts))
+    cycles = []
+    try:
+        with _arm(emu) as arm:
+            _keep_writing(arm, _hold_with_offset(arm, 0.4, kp=20.0), 0.05)  # the arm swings towards the hold
+            silent = emu.clock.now()
+            for _ in range(round(0.15 / STEP)):  # one bus cycle a step, no write: past the deadline, damping
+                emu.clock.advance(STEP)
+                state = arm.read()
+                cycles.append((emu.clock.now(), state.q.copy(), state.dq.copy()))
+            damping = MotorCommand.damping(3, arm.config.damping_kd).stacked()
+            law, deadline, period = arm.law, arm.config.write_deadline, 1.0 / arm.config.rate_hz
+    finally:
+        physics.cancel()
+    goals = _timed_goals(_since(emu, silent))
+    damped = [(t, g) for t, g in goals if t - silent > deadline + 0.5 * period and t < cycles[-1][0]]
+    assert len(damped) >= 15
+    moving = 0
+    for t, g in damped:
+        # the state the arm published after the cycle that wrote these goals is the one its law read
+        _, q, dq = min((c for c in cycles if c[0] >= t), key=lambda c: c[0])
+        expected = law.goal_units(law.torque(damping, q, dq))
+        assert [g[i] for i in JOINTS] == expected.tolist()
+        moving += int(np.any(np.abs(dq) > 0.2))
+        assert all(expected[j] * law.sign[j] * dq[j] <= 0 for j in range(3))  # against the motion
+    assert moving >= 10  # the arm was moving: the goals above are not zero by a still plant's chance
+    assert any(any(g[i] != 0 for i in JOINTS) for _, g in damped)
+
+
 def test_close_damps_then_parks_each_joint_in_a_position_hold(emu: DynamixelEmulator) -> None:
     with _arm(emu, close_damping=0.1) as arm:
         _keep_writing(arm, _hold_with_offset(arm), 0.1)
@@ -392,6 +443,25 @@ def test_an_unreadable_servo_is_retried_identified_then_the_others_damped(
         assert all(4 not in g for g in goals)  # it hears nothing; its watchdog stops it
     else:
         assert all(g[4] == 0 for g in goals)  # it hears but cannot be read: goal current 0, limp
+
+
+def test_a_law_on_a_state_older_than_the_write_deadline_asks_for_no_current(emu: DynamixelEmulator) -> None:
+    """Between a servo falling silent and the latch (its watchdog's time), the reads fail and the last state ages:
+    the law goes on from it for up to the write deadline, then every joint it cannot read fresh gets goal 0."""
+    with _arm(emu) as arm:
+        _keep_writing(arm, _hold_with_offset(arm), 0.05)
+        held = _goals(emu.packets())[-1]
+        t0, packets = _fault_rig(emu, arm, BusFault.SILENT_ID, 4)
+        deadline, period, latched = arm.config.write_deadline, 1.0 / arm.config.rate_hz, arm.fault.time
+    assert held[1] > 300  # the hold's known current (2 N m on the waist: ~417 units)
+    reads = [p for p in packets if p.instruction == Instruction.SYNC_READ and 4 in [r.id for r in p.reads]]
+    last_good = reads[0].time - period  # the cycle before the first failed read read every joint
+    goals = [(t - last_good, g) for t, g in _timed_goals(packets) if t < latched]
+    fresh = [g for age, g in goals if age < deadline - 0.5 * period]
+    stale = [g for age, g in goals if deadline + 0.5 * period < age]
+    # each failing cycle spends its retries' timeouts (~18 ms): the ages run 23, 46, 69, 92 ms
+    assert len(fresh) >= 2 and all(g == held for g in fresh)  # open loop, not for long
+    assert len(stale) >= 2 and all(g == {1: 0, 2: 0, 4: 0} for g in stale)  # the whole sync read failed: all three
 
 
 def test_a_late_answer_is_retried_then_latched(emu: DynamixelEmulator) -> None:
