@@ -234,6 +234,51 @@ def test_silence_damps_within_the_stale_timeout_latches_and_ramps_after_reset(ro
         print(f"\n{robot}: ramp after reset starts {np.abs(q0 - cmd.q).max():.3f} rad from the stand target")
 
 
+@pytest.mark.parametrize("fault", [Fault.CORRUPT, Fault.SHORT, Fault.LONG, Fault.FOREIGN_PORT, Fault.DROP],
+                         ids=lambda f: f.value)
+def test_a_stream_of_bad_or_dropped_states_damps_as_a_silent_one_does(fault: Fault) -> None:
+    """Every reply corrupt, cut short, too long, from another port or dropped: no state is fresh, so the layer trips
+    on the stale timeout exactly as on silence, and the damping goes out on the wire."""
+    with _rig("go1", **FAST) as rig:
+        emu, safe = rig.emu, rig.safe
+        cmd = _stand(safe)
+        _run_to(safe, cmd, SafetyState.RUN)
+        last_state_at = rig.clock.now() - safe.robot.state_age
+        before = safe.robot.link_stats()
+        injected, tripped, first = _inject_until_damped(rig, cmd, fault, reason="stale_state", seconds=0.5)
+        after = safe.robot.link_stats()
+        timeout = safe.config.stale_timeout_s
+        assert timeout < tripped - last_state_at <= timeout + PERIOD + TIME_EPS
+        _assert_damping_in_the_next_frame(emu, tripped, first)
+        frames = _after(emu, injected)
+        assert all(not c.damping for c in frames if c.time < first.time)  # the stand hold until then
+        assert all(c.damping for c in frames if c.time >= first.time)
+        assert after.valid_states - before.valid_states <= 1  # a state already on its way when the fault came
+        refused = {Fault.FOREIGN_PORT: after.foreign - before.foreign, Fault.DROP: 0}.get(
+            fault, after.rejected_states - before.rejected_states)
+        assert refused >= (0 if fault is Fault.DROP else round(timeout / LINK_PERIOD))  # each one seen, and refused
+        emu.clear(fault)
+        _assert_latched(rig, cmd, first.time, 0.1)
+
+
+@pytest.mark.parametrize("fault,value", [(Fault.DELAY, 0.05), (Fault.JITTER, 0.004), (Fault.DROP, 0.5)],
+                         ids=lambda v: getattr(v, "value", str(v)))
+def test_late_uneven_or_thinned_states_keep_the_robot_running(fault: Fault, value: float) -> None:
+    """States that come late (within the stale timeout), unevenly or one in two still come: no trip, no damping."""
+    with _rig("go1", **FAST) as rig:
+        emu, safe = rig.emu, rig.safe
+        cmd = _stand(safe)
+        _run_to(safe, cmd, SafetyState.RUN)
+        emu.inject(fault, value)
+        injected = rig.clock.now()
+        _loop(safe, cmd, 0.4)
+        assert safe.safety_state is SafetyState.RUN
+        frames = _after(emu, injected)
+        assert len(frames) >= 0.4 / LINK_PERIOD - 2 and not any(c.damping for c in frames)
+        emu.clear(fault)
+        _loop(safe, cmd, 0.06)  # the replies still on their way arrive before the rig closes
+
+
 def test_a_silent_stream_damps_within_the_link_periods_of_the_stale_timeout() -> None:
     """The same trip, for every phase of the silence within the control period: damping is on the wire within
     ceil(stale timeout / link period) + control period / link period + 1 link periods after the last state."""
@@ -291,6 +336,7 @@ STATE_CASES = [
     (Fault.MOTOR_ERROR, None, "motor_mode"),  # the emulator's default: 0x08, overheat, the vendor's fault code
     (Fault.MOTOR_ERROR, 0x05, "motor_mode"),  # the A1 motor's open-loop calibration mode: never right here
     (Fault.FALL, np.pi / 2, "tilt"),  # the IMU reads the trunk rolled onto its side
+    (Fault.BAD_IMU, 0.5, "bad_state"),  # a quaternion of norm 0.5 in a frame whose checksum is right
 ]
 
 

@@ -166,6 +166,19 @@ def test_non_loopback_target_is_refused_before_any_socket(target: str, no_socket
     assert not no_socket
 
 
+@pytest.mark.parametrize("local", ["192.0.2.7:0", "0.0.0.0:9000", "10.0.0.2:8007"])
+def test_a_local_address_of_a_real_network_is_refused_before_any_socket(local: str, no_socket: list,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "check", "--target", "127.0.0.1:9", "--local", local]) == 2
+    err = capsys.readouterr().err
+    assert f"--local {local} is outside 127.0.0.0/8" in err and "--allow-hardware" in err
+    for bad, says in (("myhost:9000", "not an IPv4 address literal"), ("127.0.0.1", "give HOST:PORT"),
+                      ("127.0.0.1:70000", "out of range 0..65535")):
+        assert main(["hw", "check", "--target", "127.0.0.1:9", "--local", bad]) == 2
+        assert says in capsys.readouterr().err
+    assert not no_socket
+
+
 def test_hostname_target_is_refused(no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "check", "--target", "localhost:9000"]) == 2
     assert "not an IPv4 address literal" in capsys.readouterr().err and not no_socket

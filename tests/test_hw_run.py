@@ -358,6 +358,15 @@ def test_realtime_estop_key_latency(go1: UnitreeEmulator, tmp_path: Path) -> Non
     assert first.time - pressed < 5 * LINK_PERIOD
 
 
+def test_a_local_address_of_a_real_network_is_refused_before_any_socket_the_viewers_too(
+        no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
+    base = ["hw", "run", "stand", "--arm", "none", "--scenario", PUSH, "--trial", "0", "--target", "127.0.0.1:9"]
+    assert main([*base, "--local", "192.0.2.7:0", "--view"]) == 2
+    err = capsys.readouterr().err
+    assert "--local 192.0.2.7:0 is outside 127.0.0.0/8" in err and "--allow-hardware" in err
+    assert not no_socket
+
+
 def test_non_loopback_target_is_refused_before_any_socket(no_socket: list, monkeypatch: pytest.MonkeyPatch,
                                                           capsys: pytest.CaptureFixture[str]) -> None:
     base = ["hw", "run", "stand", "--arm", "none", "--scenario", PUSH, "--trial", "0", "--target", NOT_LOOPBACK]

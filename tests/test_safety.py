@@ -239,6 +239,27 @@ def test_standing_through_the_safety_layer_keeps_standing_and_ends_in_run(robot)
         assert [(e.to_state, e.reason) for e in safe.events] == [("ramp", "fresh_state"), ("run", "ramp_done")]
 
 
+def test_targets_are_clipped_into_a_position_table_narrower_than_the_robots_own():
+    """Go1's URDF lets the thigh reach 4.5 rad; Unitree's PositionLimit stops it at 2.966: with that table, a target
+    beyond it reaches the robot at the table's bound, in the ramp and in run, whatever the robot would accept."""
+    safe, faulty, _ = _make(robot="go1-arm", position_table="go1", **FAST)
+    with safe:
+        robot_upper = faulty.limits.upper
+        table_lower, table_upper = position_range("go1", faulty.limits)
+        thighs = [1, 4, 7, 10]
+        assert (robot_upper[thighs] > table_upper[thighs] + 1.0).all()  # the robot alone would take 3.5 rad
+        target = faulty.inner.desc.nominal_q.copy()
+        target[thighs] = 3.5
+        cmd = MotorCommand.hold(target, 20.0, 1.0)
+        _drive(safe, cmd, 500, until=SafetyState.RUN)
+        assert safe.safety_state is SafetyState.RUN
+        _drive(safe, cmd, 3)
+    sent = [c for c in faulty.sent if not _is_damping(c, safe.config)]
+    assert sent and all((c.q >= table_lower).all() and (c.q <= table_upper).all() for c in sent)
+    np.testing.assert_array_equal(sent[-1].q[thighs], table_upper[thighs])  # in run: the bound itself
+    np.testing.assert_array_equal(np.delete(sent[-1].q, thighs), np.delete(target, thighs))
+
+
 # -- trips ------------------------------------------------------------------------------------------------------
 def _tilted(angle):
     return np.array([math.cos(angle / 2), math.sin(angle / 2), 0.0, 0.0])  # roll about x

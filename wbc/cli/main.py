@@ -286,6 +286,29 @@ def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
     return host, port
 
 
+def _hardware_local(args: argparse.Namespace, purpose: str) -> tuple[str, int] | None:
+    """``--local`` as (host, port), or None when not given; refused unless loopback or ``--allow-hardware``.
+
+    Checked with ``--target``, before any socket exists (the viewer's included): binding a real network's interface
+    is using that network.
+
+    Raises:
+        ConfigError: not HOST:PORT.
+        TargetRefusedError: not an IPv4 literal, or a real network's address without ``--allow-hardware``.
+    """
+    if args.local is None:
+        return None
+    host, port = _address(args.local, "--local")
+    if port > 65535:
+        raise TargetRefusedError(f"--local port {port} is out of range 0..65535 (0: any free port)")
+    check_target(host, max(port, 1), allow_hardware=True, what="--local")  # an IPv4 literal
+    if not args.allow_hardware and not is_loopback(host):
+        raise TargetRefusedError(
+            f"--local {host}:{port} is outside 127.0.0.0/8: refusing to bind a real network's interface. To {purpose}, "
+            "add --allow-hardware (you will be asked to type yes; --yes confirms when stdin is not a terminal)")
+    return host, port
+
+
 def _hardware_arm_port(args: argparse.Namespace, purpose: str) -> str | None:
     """``--arm-port``, refused unless an emulator's (a pty) or ``--allow-hardware`` (before anything opens it).
 
@@ -336,11 +359,11 @@ def hw_check(args: argparse.Namespace, *,
         0, after printing the state, the link's counters and the safety layer's verdict.
     """
     host, port = _hardware_target(args, "check a real robot")
+    local = _hardware_local(args, "check a real robot") or (("127.0.0.1", 0) if is_loopback(host) else ("0.0.0.0", 0))
     arm_port = _hardware_arm_port(args, "check a real arm")
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     robot = _robot_name(args.robot)
-    local = _address(args.local or ("127.0.0.1:0" if is_loopback(host) else "0.0.0.0:0"), "--local")
 
     def confirm(hardware: HardwareRobot) -> None:
         real = _real_devices(host, port, arm_port)
@@ -384,13 +407,13 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
                           "protocol on the simulator; not both")
     host, port = _hardware_target(args, "run a trial on a real robot") if not args.sim else (None, None)
+    local = _hardware_local(args, "run a trial on a real robot")
     arm_port = _hardware_arm_port(args, "run a trial on a real arm")
     if not args.sim and not args.io_process:
         print("wbc: warning: --no-io-process: the robot's devices run in this process; if it dies, nothing damps the "
               "legs, whose motors keep the last command they got (the robot has no watchdog). For debugging only",
               file=sys.stderr)
     robot = _robot_name(args.robot) if args.robot is not None else None
-    local = _address(args.local, "--local") if args.local else None
     out = Path(args.out) if args.out else Path("runs") / (
         f"hw-{Path(args.scenario).stem}-{args.ctrl.replace(':', '_').replace('/', '_')}-"
         f"{time.strftime('%Y%m%d-%H%M%S')}")

@@ -38,7 +38,8 @@ class Fault(enum.Enum):
     `unitree.layout.MOTOR_STATE_MODES`] (every motor reports that mode); OVER_POWER [(tau_est N m, dq rad/s),
     default (20, 5)] (every motor reports that torque and speed: 12 x 100 W, above the safety layer's 500 W, on every
     reply while active); FALL [roll rad, default pi/2] (the IMU reads the trunk
-    rolled); REMOTE_L2_B (the remote's L2 and B held).
+    rolled); BAD_IMU [scale, default 0.5] (the IMU's quaternion comes scaled, no longer of unit norm: a reading no
+    orientation has, in a frame whose checksum is right); REMOTE_L2_B (the remote's L2 and B held).
     """
 
     SILENCE = "silence"
@@ -54,18 +55,19 @@ class Fault(enum.Enum):
     MOTOR_ERROR = "motor_error"
     OVER_POWER = "over_power"
     FALL = "fall"
+    BAD_IMU = "bad_imu"
     REMOTE_L2_B = "remote_l2_b"
 
 
 FRAME_FAULTS = (Fault.SILENCE, Fault.CORRUPT, Fault.SHORT, Fault.LONG, Fault.FOREIGN_PORT, Fault.DELAY, Fault.JITTER,
                 Fault.DROP)
 STATE_FAULTS = (Fault.JOINT_OUT_OF_RANGE, Fault.OVER_TEMPERATURE, Fault.MOTOR_ERROR, Fault.OVER_POWER, Fault.FALL,
-                Fault.REMOTE_L2_B)
+                Fault.BAD_IMU, Fault.REMOTE_L2_B)
 
 _DEFAULTS: dict[Fault, object] = {
     Fault.DELAY: 0.05, Fault.JITTER: 0.004, Fault.DROP: 1.0, Fault.JOINT_OUT_OF_RANGE: (2, 0.5),
     Fault.OVER_TEMPERATURE: 95, Fault.MOTOR_ERROR: MODE_OVERHEAT, Fault.OVER_POWER: (20.0, 5.0),
-    Fault.FALL: math.pi / 2,
+    Fault.FALL: math.pi / 2, Fault.BAD_IMU: 0.5,
 }
 
 
@@ -132,6 +134,8 @@ def apply_state_faults(active: dict[Fault, object], state: RobotState,
         gravity_in_body = 9.81 * np.array([0.0, math.sin(roll), math.cos(roll)])
         state = dataclasses.replace(state, imu_quat=quat, accel_in_body=gravity_in_body)
         extras = dataclasses.replace(extras, imu_rpy=np.array([roll, 0.0, 0.0]))
+    if Fault.BAD_IMU in active:
+        state = dataclasses.replace(state, imu_quat=state.imu_quat * float(active[Fault.BAD_IMU]))
     if Fault.REMOTE_L2_B in active:
         extras = dataclasses.replace(extras, remote=Remote.build(buttons=L2_B_MASK))
     return state, extras
