@@ -48,6 +48,8 @@ BROKEN = {
     "short": ("returns 12 of 15 joints", "pass",
               "out = MotorCommand(q=out.q[:12], dq=out.dq[:12], kp=out.kp[:12], kd=out.kd[:12], tau=out.tau[:12])"),
     "reset": ("raises in reset", 'raise KeyError("no calibration")  # MARK', "pass"),
+    # a plug-in that exits (sys.exit, or an argparse inside it): the command must go on, not end without a word
+    "exits": ("calls sys.exit after half a second", "pass", "if self.ticks > 25: raise SystemExit(7)  # MARK"),
     # not errors: late on every tick (21 ms at a 20 ms period), and a torque the motors cannot give on every tick
     "slow": ("acts in 21 ms", "pass", '__import__("time").sleep(0.021)'),
     "saturating": ("asks for 1e5 N m", "pass",
@@ -114,6 +116,7 @@ EXPECTED = {
     "short": ("act returned a command the robot refused: CommandError at tick 0 (t = 0.000 s): MujocoRobot.write: "
               "command has 12 joints, this robot has 15", "def act"),
     "reset": ("reset raised KeyError before the first tick: 'no calibration'", "# MARK"),
+    "exits": ("act raised SystemExit at tick 25 (t = 0.500 s): 7", "# MARK"),
 }
 """What each broken plug-in's error says, and the marker of the line it names."""
 
@@ -136,7 +139,7 @@ def test_a_broken_plugin_costs_its_own_trials_only(kind, broken, scenario, stand
         assert r.outcome == "controller_error" and r.success is False and math.isnan(r.fall_time_s)
         assert r.error.startswith(f"controller {name}, band soft, seed {r.seed}, trial {r.trial}: {what}")
         assert r.error.endswith(f" [{where}]")
-        assert r.ttf == (0.5 if kind == "late" else 0.0)
+        assert r.ttf == (0.5 if kind in ("late", "exits") else 0.0)
     # the command ends with status 1 and one line for the failing controller; no traceback
     captured = capsys.readouterr()
     # the table counts the errors in a column of their own: 2 trials, 2 errors; stand 2 trials, none

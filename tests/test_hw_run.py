@@ -251,14 +251,20 @@ BROKEN_ON_HARDWARE = '''
 '''
 
 
+@pytest.mark.parametrize(("raised", "said"), [
+    ('RuntimeError("lost track of the ground")', "RuntimeError at tick 25 (t = 0.500 s): lost track of the ground"),
+    ("SystemExit(7)", "SystemExit at tick 25 (t = 0.500 s): 7"),  # sys.exit in a plug-in: not the end of the run
+], ids=["raises", "exits"])
 def test_a_controller_error_on_the_wire_damps_the_robot_and_is_recorded(stepped_go1: Stepped, tmp_path: Path,
-                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+                                                                        monkeypatch: pytest.MonkeyPatch, raised: str,
+                                                                        said: str) -> None:
     import textwrap
 
     (tmp_path / "plug" / "hwbroken").mkdir(parents=True)
     (tmp_path / "plug" / "hwbroken" / "__init__.py").write_text('"""Broken plug-ins."""\n')
     source = tmp_path / "plug" / "hwbroken" / "late.py"
-    source.write_text(textwrap.dedent(BROKEN_ON_HARDWARE).lstrip())
+    text = textwrap.dedent(BROKEN_ON_HARDWARE).lstrip()
+    source.write_text(text.replace('RuntimeError("lost track of the ground")', raised))
     monkeypatch.syspath_prepend(str(tmp_path / "plug"))
     monkeypatch.delitem(sys.modules, "hwbroken", raising=False)
     monkeypatch.delitem(sys.modules, "hwbroken.late", raising=False)
@@ -276,7 +282,7 @@ def test_a_controller_error_on_the_wire_damps_the_robot_and_is_recorded(stepped_
     assert record.outcome == "controller_error" and not record.success and math.isnan(record.fall_time_s)
     line = next(i for i, text in enumerate(source.read_text().splitlines(), start=1) if "# MARK" in text)
     assert record.error == (f"controller hwbroken.late:plugin, band {record.band}, seed 0, trial 0: act raised "
-                            f"RuntimeError at tick 25 (t = 0.500 s): lost track of the ground [{source}:{line}]")
+                            f"{said} [{source}:{line}]")
     assert len(result.episode.t) == 25 and record.ttf == pytest.approx(0.25)
     assert TrialRecord.read_csv(tmp_path / "hw" / "trials.csv") == [record]
     # the robot did not keep the broken controller's last command: the layer damped it, for the whole settle time

@@ -9,6 +9,7 @@ import difflib
 from os import PathLike
 
 __all__ = [
+    "CONTROLLER_ERRORS",
     "WbcError",
     "UnknownNameError",
     "ConfigError",
@@ -37,6 +38,11 @@ __all__ = [
     "SerialPortError",
     "StandUpError",
 ]
+
+CONTROLLER_ERRORS: tuple[type[BaseException], ...] = (Exception, SystemExit)
+"""What a controller's code may raise that costs only its own part (a trial, a check): every `Exception`, and
+`SystemExit` (a plug-in that calls ``sys.exit``, or an ``argparse`` inside it that exits), which would otherwise end
+the whole command without a word and lose the other controllers' trials. `KeyboardInterrupt` still stops the run."""
 
 
 class WbcError(Exception):

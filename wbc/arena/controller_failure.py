@@ -20,10 +20,10 @@ import traceback
 from pathlib import Path
 
 from wbc.arena.episode import Episode
-from wbc.errors import WbcError
+from wbc.errors import CONTROLLER_ERRORS, WbcError
 from wbc.scenario.trial import Trial
 
-__all__ = ["ControllerFailure", "own_frame", "read_counters"]
+__all__ = ["CONTROLLER_ERRORS", "ControllerFailure", "own_frame", "read_counters"]
 
 _WBC_DIR = Path(__file__).resolve().parent.parent
 """The `wbc` package's directory: frames inside it are the house's, not the controller's."""
@@ -157,7 +157,7 @@ def read_counters(controller: object, name: str, trial: Trial, episode: Episode,
 
     try:
         return check_counters(controller.counters()), error
-    except Exception as exc:  # any: the controller's code is not ours
+    except CONTROLLER_ERRORS as exc:  # any: the controller's code is not ours
         if error:
             return {}, error
         played = float(episode.t[-1]) if len(episode.t) else 0.0

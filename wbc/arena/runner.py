@@ -34,7 +34,7 @@ from wbc.arena.controller_failure import ControllerFailure
 from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
 from wbc.control.protocol import Controller
-from wbc.errors import CommandError, ConfigError, MissingCapabilityError
+from wbc.errors import CONTROLLER_ERRORS, CommandError, ConfigError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, SimulatorHealth, TruthSource
 from wbc.hardware.robot import Robot, command_bounds, exceeded_rows, within_bounds
 from wbc.robots.description import ARM_JOINTS
@@ -135,7 +135,7 @@ def run_episode(
 
     try:
         controller.reset()
-    except Exception as exc:  # any: the controller's code is not ours, and the trial must still be recorded
+    except CONTROLLER_ERRORS as exc:  # any: the controller's code is not ours, and the trial must still be recorded
         raise failure("reset", 0, exc) from exc
     clock = time.perf_counter
     fell, fall_time = False, math.nan
@@ -148,7 +148,7 @@ def run_episode(
         started = clock()
         try:
             out = controller.act(state, cmd)
-        except Exception as exc:
+        except CONTROLLER_ERRORS as exc:
             raise failure("act", k, exc) from exc
         act_s = clock() - started
         try:

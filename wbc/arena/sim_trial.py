@@ -28,7 +28,7 @@ from wbc.arena.trial_record import TrialRecord
 from wbc.control.protocol import TruthSwitch
 from wbc.control.registry import get_controller
 from wbc.control.spec import ControllerSpec
-from wbc.errors import ConfigError, MissingCapabilityError
+from wbc.errors import CONTROLLER_ERRORS, ConfigError, MissingCapabilityError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.input_files import short
 from wbc.scenario.trial import Trial
@@ -109,7 +109,7 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
         # a plug-in's factory that raises is refused before any trial (`wbc.arena.compare`); one that raises only
         # here (in a worker, for this trial) costs this trial
         ctrl = spec.make(robot.desc)
-    except Exception as exc:  # any: the factory's code may not be ours
+    except CONTROLLER_ERRORS as exc:  # any: the factory's code may not be ours
         # no controller, so no control period: the physics step stands in for the episode that never began
         empty = EpisodeBuffer(nq=7 + robot.num_joints).finish(duration_s=trial.duration_s,
                                                                control_dt=robot.config.timestep, fell=False,

@@ -53,7 +53,7 @@ from wbc.control.errors import ControllerCheckError
 from wbc.control.plugin import controller_problems
 from wbc.control.protocol import Controller
 from wbc.control.spec import ControllerSpec
-from wbc.errors import ConfigError
+from wbc.errors import CONTROLLER_ERRORS, ConfigError
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import CommandSchedule, Trial
@@ -330,7 +330,7 @@ def _build(spec: ControllerSpec, desc) -> tuple[Controller | None, str]:
     """The built controller, or None and what went wrong."""
     try:
         ctrl = spec.make(desc)
-    except Exception as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
+    except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
         return None, f"make raised {_describe(exc)}"
     problems = controller_problems(ctrl)
     if problems:
@@ -371,7 +371,7 @@ def _output_problem(out: object, n: int) -> str | None:
 def _counters_problem(ctrl: Controller) -> str | None:
     try:
         counts = ctrl.counters()
-    except Exception as exc:  # noqa: BLE001
+    except CONTROLLER_ERRORS as exc:  # noqa: BLE001
         return f"counters() raised {_describe(exc)}"
     if not isinstance(counts, dict) or not all(isinstance(k, str) and isinstance(c, int) and not isinstance(c, bool)
                                                for k, c in counts.items()):
@@ -399,7 +399,7 @@ def _act(ctrl: Controller, state: RobotState, cmd: VelocityCommand, n: int, p: _
     start = time.perf_counter()
     try:
         out = ctrl.act(state, cmd)
-    except Exception as exc:  # noqa: BLE001
+    except CONTROLLER_ERRORS as exc:  # noqa: BLE001
         p.failure = f"act raised {_describe(exc)} at tick {k}"
         return None
     finally:
@@ -698,7 +698,7 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
     implied = np.empty_like(replay.actions)
     try:
         ctrl.reset()
-    except Exception as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
+    except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
         return False, f"reset() raised {_describe(exc)} before the replay"
     for k in range(len(replay)):
         state, cmd = replay.state(k), replay.velocity_command(k)
@@ -721,7 +721,7 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
                     fed.update(here[i][0] for i in recorded)
             step = "act"
             out = ctrl.act(state, cmd)
-        except Exception as exc:  # noqa: BLE001
+        except CONTROLLER_ERRORS as exc:  # noqa: BLE001
             return False, f"{step} raised {_describe(exc)} at recorded tick {k} of {replay.path}"
         problem = _output_problem(out, desc.num_joints)
         if problem is not None:
