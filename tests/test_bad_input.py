@@ -272,3 +272,50 @@ def test_a_run_of_more_trials_than_one_run_plays_is_refused_before_any_is_listed
     assert ("this run would play 4,000,000,000 trials (2 controllers x 2 bands x 10000 seeds x 100000 trials), more "
             "than the 1,000,000 one run plays") in err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("name", ["onnx:", "onnx:/", "onnx:.", "policy:", "policy:/", "policy:."])
+def test_a_policy_prefix_with_no_path_after_it_says_so(name, capsys):
+    for argv in (["check-controller", name], ["run", name, "--scenario", "scenarios/push.toml", "--trials", "1",
+                                              "--workers", "1", "--out", "runs/never-written"]):
+        err = _cli_error(capsys, argv)
+        prefix = name.split(":")[0] + ":"
+        assert f"controller {name!r}: {prefix} needs the path of" in err
+    assert not Path("runs/never-written").exists()
+
+
+def test_a_saved_episodes_path_is_checked_before_the_trial_plays(tmp_path, capsys, monkeypatch):
+    import wbc.viz.view as view
+
+    monkeypatch.setattr(view, "view_trial", lambda *a, **k: pytest.fail("the trial was played"))
+    (tmp_path / "adir").mkdir()
+    # a missing directory (the trial played, then numpy failed); a directory or another suffix (numpy added .npz,
+    # writing beside the path given, in silence)
+    for bad in (tmp_path / "nodir" / "e.npz", tmp_path / "adir", tmp_path / "e.txt"):
+        err = _cli_error(capsys, ["view", "stand", "--scenario", "scenarios/push.toml", "--trial", "0",
+                                  "--duration", "1", "--record", str(tmp_path / "v.html"), "--save-episode", str(bad)])
+        assert f"--save-episode {bad}: give an .npz file in an existing directory" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir"]
+
+
+def test_a_name_in_name_equals_file_that_is_no_controller_of_the_run_is_named(tmp_path, capsys):
+    toml = tmp_path / "ok.toml"
+    toml.write_text("")
+    for option in ("--controller-config", "--io"):
+        err = _cli_error(capsys, ["compare", "stand", "examples.my_controller:make", "--scenario",
+                                  "scenarios/push.toml", option, f"mpc={toml}", "--out", str(tmp_path / "o")])
+        assert f"{option} mpc={toml}: mpc is not a controller of this run; NAME= names one of: stand, " \
+               "examples.my_controller:make" in err
+        assert "file not found" not in err
+
+
+def test_a_policy_file_for_a_robot_not_here_or_with_an_unknown_key_names_the_file_and_field(tmp_path, capsys):
+    src = ROOT / "wbc" / "learned" / "weights" / "a1-wx200-actuated-ppo"
+    meta = json.loads(src.with_suffix(".json").read_text())
+    for field, change, says in (("robot", {"robot": "spot"}, "'spot' is not a robot here; valid: a1-wx200, go1-arm"),
+                                ("trainig", {"trainig": {}}, "unknown key; a network's keys are format, version")):
+        stem = tmp_path / field
+        stem.with_suffix(".npz").write_bytes(src.with_suffix(".npz").read_bytes())
+        stem.with_suffix(".json").write_text(json.dumps({**meta, **change}))
+        err = _cli_error(capsys, ["check-controller", f"policy:{stem}"])
+        assert f"{stem}.json" in err and field in err and says in err

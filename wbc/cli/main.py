@@ -599,6 +599,10 @@ def _controller_files(values: list[str] | None, controllers: tuple[str, ...], op
     eligible = [c for c in controllers if takes(c)]
     for value in values or ():
         name, sep, file = value.partition("=")
+        if sep and name not in controllers and not Path(value).exists():
+            # NAME=FILE whose NAME is no controller of this run (a path holding '=' exists as it is)
+            raise ConfigError(f"{option} {value}: {name} is not a controller of this run; NAME= names one of: "
+                              f"{', '.join(controllers)}")
         if not sep or name not in controllers:  # no NAME= (a path may hold '=' too): the only one that takes it
             if len(eligible) != 1:
                 raise ConfigError(f"{option} {value}: " + (
@@ -697,12 +701,16 @@ def _view(args: argparse.Namespace) -> int:
     record = Path(args.record) if args.record else None
     if record is not None and (record.suffix.lower() not in (".html", ".htm") or not record.parent.is_dir()):
         raise ViewerError(f"--record {record}: give an .html file in an existing directory")
+    save = Path(args.save_episode) if args.save_episode else None
+    if save is not None and (save.suffix.lower() != ".npz" or save.is_dir() or not save.parent.is_dir()):
+        # checked before the trial plays (numpy would add .npz to any other name, or fail after the trial)
+        raise ViewerError(f"--save-episode {save}: give an .npz file in an existing directory")
     cfg = ViewConfig(
         live=record is None or args.live, host=args.host, record=record, record_fps=args.fps,
         player=PlayerConfig(speed=args.speed, pause_at=tuple(args.pause_at or ()), step_s=args.step,
                             start_paused=args.paused),
         open_browser=args.open, wait_for_browser=args.wait,
-        save_episode=Path(args.save_episode) if args.save_episode else None,
+        save_episode=save,
         export_scenario=Path(args.export_scenario) if args.export_scenario else None,
     )
     ctrls = list(args.ctrl or [])

@@ -153,13 +153,18 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
         OnnxIoError, OnnxModelError: an ``onnx:`` policy's I/O file or model is missing, malformed or mismatched.
         PluginError: a plug-in that cannot be imported or whose factory does not fit (each kind its own subclass).
         PluginConfigError: `config` for a controller that is not a plug-in.
-        ConfigError: `io` for a controller that is not an ONNX policy.
+        ConfigError: `io` for a controller that is not an ONNX policy; ``policy:`` or ``onnx:`` with no path after it.
     """
     if io is not None and not name.startswith(ONNX_PREFIX):
         raise ConfigError(f"--io {io}: an I/O file describes an onnx:PATH policy, and {name} is not one")
     if config is not None and not takes_controller_config(name):
         raise PluginConfigError(f"--controller-config {config}: {name} takes no configuration table; it goes to "
                                 "plug-ins (package.module:factory, or an entry point's name)")
+    for prefix, what in ((POLICY_PREFIX, "a policy file (its .npz / .json pair, with or without the suffix)"),
+                         (ONNX_PREFIX, "an .onnx model")):
+        if name.startswith(prefix) and not Path(name[len(prefix):]).name:
+            raise ConfigError(f"controller {name!r}: {prefix} needs the path of {what} after it, e.g. "
+                              f"{prefix}runs/my-policy{'.onnx' if prefix == ONNX_PREFIX else ''}")
     if name.startswith(POLICY_PREFIX):
         return _policy_spec(name)
     if name.startswith(ONNX_PREFIX):

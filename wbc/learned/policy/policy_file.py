@@ -57,6 +57,7 @@ from wbc.input_files import LIMITS, open_npz, read_json, short
 from wbc.learned.policy.control_rate import period_problem
 from wbc.learned.policy.observations import ObsLayout
 from wbc.robots.description import ARM_MODES, RobotDescription
+from wbc.robots.registry import ROBOTS
 
 __all__ = ["ACTIVATIONS", "CHECKSUM_KEY", "COMPOSITE_FORMAT", "FORMAT", "MAX_HISTORY", "MAX_JOINTS", "MAX_LAYERS",
            "MAX_WIDTH", "VERSION", "PolicyFile", "PolicyFileError", "check_checksum_field", "check_meta",
@@ -85,6 +86,8 @@ _OBS_SCALE_KEYS = ("ang_vel", "dof_pos", "dof_vel", "command")
 _REQUIRED = ("format", "version", "robot", "arm_mode", "task", "stage", "num_actions", "obs_layout", "obs_scales",
              "action_scale", "clip_actions", "default_q", "kp", "kd", "policy_dt", "activation", "hidden_dims",
              "normalizer_eps")
+_OPTIONAL = ("extrinsics", "adaptation", "training", CHECKSUM_KEY)
+"""The keys a network's metadata may hold besides `_REQUIRED` (``weights_sha256`` at the top level only)."""
 _CHUNK = 1 << 20
 
 
@@ -360,6 +363,8 @@ def check_robot_keys(meta: dict[str, Any], js: Path, prefix: str = "") -> None:
         return meta[key]
 
     _string(get("robot"), js, prefix + "robot", "a robot registry name")
+    if meta["robot"] not in ROBOTS:
+        _fail(js, prefix + "robot", f"{short(meta['robot'], 60)} is not a robot here; valid: {', '.join(ROBOTS)}")
     if get("arm_mode") not in ARM_MODES:
         _fail(js, prefix + "arm_mode", f"must be one of {', '.join(map(repr, ARM_MODES))}, got "
               f"{short(meta['arm_mode'], 60)}")
@@ -411,6 +416,9 @@ def check_meta(meta: dict[str, Any], js: Path, prefix: str = "") -> None:
     for key in _REQUIRED:
         if key not in meta:
             _fail(js, prefix + key, "missing key")
+    unknown = sorted(set(meta) - set(_REQUIRED) - set(_OPTIONAL))
+    if unknown:  # a misspelt optional key would otherwise be ignored without a word
+        _fail(js, prefix + unknown[0], f"unknown key; a network's keys are {', '.join((*_REQUIRED, *_OPTIONAL))}")
     if meta["format"] != FORMAT:
         _fail(js, prefix + "format", f"expected {FORMAT!r}, got {short(meta['format'], 60)}")
     if isinstance(meta["version"], bool) or meta["version"] != VERSION:
