@@ -319,3 +319,11 @@ def test_a_policy_file_for_a_robot_not_here_or_with_an_unknown_key_names_the_fil
         stem.with_suffix(".json").write_text(json.dumps({**meta, **change}))
         err = _cli_error(capsys, ["check-controller", f"policy:{stem}"])
         assert f"{stem}.json" in err and field in err and says in err
+
+
+def test_compare_needs_two_controllers_each_named_once(tmp_path, capsys):
+    base = ["--scenario", "scenarios/push.toml", "--out", str(tmp_path / "o")]
+    assert "needs two or more controllers to compare, got stand; to play one controller, use wbc run" in \
+        _cli_error(capsys, ["compare", "stand", *base])
+    assert "wbc compare: stand named more than once" in _cli_error(capsys, ["compare", "stand", "mpc", "stand", *base])
+    assert not (tmp_path / "o").exists()

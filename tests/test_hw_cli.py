@@ -259,8 +259,10 @@ def test_the_vendor_transport_is_refused_for_the_a1_before_any_socket(no_socket:
 
 
 def test_bench_hw_refuses_a_bad_rate_before_starting_the_emulator(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["bench", "hw", "--rate", "50", "--seconds", "0.1"]) == 2
-    assert "rate_hz must be in 200..1000" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as usage:  # argparse's usage error, before anything starts
+        main(["bench", "hw", "--rate", "50", "--seconds", "0.1"])
+    assert usage.value.code == 2
+    assert "argument --rate: must be a finite number in [200, 1000] Hz, got '50'" in capsys.readouterr().err
 
 
 def test_emulate_carries_a_locked_arm_in_its_physics_and_refuses_an_unknown_mode(capsys: pytest.CaptureFixture[str],

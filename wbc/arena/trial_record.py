@@ -34,7 +34,7 @@ from wbc.arena.episode import Episode
 from wbc.arena.metrics import compute_metrics
 from wbc.errors import RecordError, UnknownNameError
 from wbc.hardware.capabilities import LinkStatsLike
-from wbc.input_files import read_bytes
+from wbc.input_files import read_bytes, short
 from wbc.scenario.trial import Trial
 
 __all__ = ["CHECKSUM", "CONTROLLER_ERROR", "DIVERGED", "FALL", "MACHINE_TIMED", "OPERATOR_STOP", "OUTCOMES",
@@ -429,7 +429,8 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRow
         return StoredRows(records=(), lines=(), refused=())
     columns = tuple(rows[0][1])
     if columns != COLUMNS:
-        raise RecordError(f"{path}: columns {', '.join(columns)} are not this version's ({', '.join(COLUMNS)}); "
+        raise RecordError(f"{path}: columns {short(', '.join(columns), 200)} are not this version's "
+                          f"({', '.join(COLUMNS)}); "
                           "the directory was written by another version of wbc: resume it with that version, "
                           "or start afresh with another --out")
     good: list[tuple[int, TrialRecord]] = []

@@ -664,6 +664,13 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _compare(args: argparse.Namespace) -> int:
+    named = list(dict.fromkeys(args.controllers))
+    if len(named) < len(args.controllers):
+        raise ConfigError(f"wbc compare: {', '.join(c for c in named if args.controllers.count(c) > 1)} named "
+                          "more than once; name each controller once")
+    if len(named) < 2:
+        raise ConfigError(f"wbc compare needs two or more controllers to compare, got {named[0]}; to play one "
+                          "controller, use wbc run")
     return _arena(args, tuple(args.controllers), until_significant=args.until_significant, alpha=args.alpha)
 
 

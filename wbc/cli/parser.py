@@ -164,6 +164,7 @@ _SPEED = bounded_float(0.0, 100.0)  # 0: as fast as possible; 100 times real tim
 _EPISODE_S = bounded_float(0.0, MAX_DURATION_S, lo_open=True, unit="s")
 _MEASURE_S = bounded_float(0.0, MAX_HOURS_S, lo_open=True, unit="s")
 _ROUNDS = bounded_int(1, MAX_ROUNDS)
+_LINK_RATE = bounded_float(200.0, 1000.0, unit="Hz")  # the Unitree link's (UnitreeRobotConfig.rate_hz)
 
 
 def _add_resume_options(p: argparse.ArgumentParser) -> None:
@@ -375,7 +376,7 @@ def _add_bench_hw_parser(bench: _Commands) -> None:
     bhw.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
     bhw.add_argument("--seconds", type=_MEASURE_S, default=3.0,
                      help="how long the link is measured [s] (default 3, at most 4 h)")
-    bhw.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
+    bhw.add_argument("--rate", type=_LINK_RATE, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
     bhw.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
     bhw.add_argument("--stand", type=bounded_float(0.0, MAX_HOURS_S, unit="s"), default=10.0,
                      help="then time the safety layer's reactions (e-stop, silence, stall, hot motor -> damping on "
@@ -535,7 +536,7 @@ def _add_hw_run_parser(hws: _Commands) -> None:
                        "--arm-port that is not a pty")
     hwrun.add_argument("--yes", action="store_true",
                        help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
-    hwrun.add_argument("--rate", type=float, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
+    hwrun.add_argument("--rate", type=_LINK_RATE, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
     hwrun.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
     hwrun.add_argument("--io-process", action=argparse.BooleanOptionalAction, default=True,
                        help="run the robot's devices (legs link, arm bus) in a child process with its own interpreter "
