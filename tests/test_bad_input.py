@@ -327,3 +327,33 @@ def test_compare_needs_two_controllers_each_named_once(tmp_path, capsys):
         _cli_error(capsys, ["compare", "stand", *base])
     assert "wbc compare: stand named more than once" in _cli_error(capsys, ["compare", "stand", "mpc", "stand", *base])
     assert not (tmp_path / "o").exists()
+
+
+def test_a_plug_in_that_exits_on_import_or_in_its_factory_is_an_error_naming_its_line(tmp_path, capsys, monkeypatch):
+    pkg = tmp_path / "exitpkg"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "atimport.py").write_text("import sys\nsys.exit(3)\n")
+    (pkg / "infactory.py").write_text("def make(desc):\n    raise SystemExit('no robot here')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    for name, says in (("exitpkg.atimport:make", "importing exitpkg.atimport failed: SystemExit: 3 at "
+                                                  f"{pkg / 'atimport.py'}:2"),
+                       ("exitpkg.infactory:make", "raised while building the controller for a1-wx200 (arm actuated): "
+                                                   f"SystemExit: no robot here at {pkg / 'infactory.py'}:2")):
+        err = _cli_error(capsys, ["compare", name, "stand", "--scenario", "scenarios/push.toml", "--trials", "1",
+                                  "--workers", "1", "--out", str(tmp_path / name)])
+        assert says in err
+        monkeypatch.delitem(__import__("sys").modules, name.split(":")[0], raising=False)
+
+
+def test_viewing_a_controller_that_cannot_be_built_says_why_and_writes_no_page(tmp_path, capsys, monkeypatch):
+    pkg = tmp_path / "brokenview"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "mod.py").write_text("def make(desc, config=None):\n    raise ValueError('no calibration file')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    page = tmp_path / "v.html"
+    err = _cli_error(capsys, ["view", "brokenview.mod:make", "--scenario", "scenarios/push.toml", "--trial", "0",
+                              "--duration", "1", "--record", str(page)])
+    assert "nothing to show: controller brokenview.mod:make, band in, seed 0, trial 0: building it raised" in err
+    assert f"ValueError: no calibration file at {pkg / 'mod.py'}:2" in err and not page.exists()

@@ -20,7 +20,9 @@ and ``wbc controllers`` lists them with their summaries; the entry point's name 
 What travels to pool and Ray workers is a `PluginFactory`: the ``module:factory`` text, the directory its package
 was found in and the configuration table, all plain data; the worker imports the module itself (that directory put
 on its ``sys.path`` if missing). Every failure is its own `wbc.control.errors.PluginError` subclass whose message
-says what was asked for, what is wrong and what would be valid.
+says what was asked for, what is wrong and what would be valid; a factory built from a ``--controller-config`` file
+that refuses the file's settings with a `ConfigError` raises that error again, its message beginning with the file's
+path, and its other ``ValueError`` or ``TypeError`` name the file too.
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ from wbc.control.errors import (
 )
 from wbc.control.protocol import Controller
 from wbc.control.spec import ControllerSpec, PluginSource, SourceFile
-from wbc.errors import FileFieldError, UnknownNameError
+from wbc.errors import CONTROLLER_ERRORS, ConfigError, FileFieldError, UnknownNameError
 from wbc.robots.description import RobotDescription, check_arm_mode
 from wbc.robots.registry import ROBOTS
 from wbc.scenario.toml_fields import read_toml
@@ -167,7 +169,7 @@ def _import_once(module: str) -> ModuleType:
             f"directory {os.getcwd()}. Valid plug-in names: package.module:factory of a module found there (e.g. "
             "examples.my_controller:make from a checkout's root), or an installed entry point of the "
             f"{PLUGIN_GROUP!r} group (`wbc controllers` lists them)") from exc
-    except Exception as exc:  # noqa: BLE001 (any error of the plug-in's own code, reported with its location)
+    except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any error of the plug-in's own code, reported with its location)
         raise PluginImportError(f"importing {module} failed: {_describe(exc)}{_where(exc)}") from exc
 
 
@@ -298,20 +300,35 @@ def controller_problems(obj: object) -> list[str]:
 
 
 def build_plugin(plugin: ControllerPlugin, desc: RobotDescription, config: Mapping[str, Any] | None,
-                 target: str) -> Controller:
+                 target: str, config_file: str | Path | None = None) -> Controller:
     """Call the plug-in's factory for `desc` (with `config` if given) and check that it built a `Controller`.
 
+    Args:
+        plugin: the plug-in (`load_plugin`).
+        desc: the robot to build the controller for.
+        config: the ``--controller-config`` table, or None.
+        target: ``package.module:factory``, as the messages name the plug-in.
+        config_file: the file `config` was read from, named by the errors its settings cause (None: none).
+
     Raises:
+        ConfigError: the factory refused the settings of `config_file` with a `ConfigError` (the same class, its
+            message prefixed with the file's path).
         PluginConfigError: a table was given and the factory takes none.
         PluginFactoryError: the factory has the wrong signature, or raised (the message gives the error and its
-            file:line).
+            file:line, and begins with `config_file` for a ``ValueError`` or ``TypeError``).
         PluginContractError: the result is not a `Controller` (the message lists what it lacks).
     """
     _check_signature(plugin, target, config)
     try:
         ctrl = plugin.make(desc) if config is None else plugin.make(desc, dict(config))
-    except Exception as exc:  # noqa: BLE001 (the plug-in's own failure, reported with its location)
-        raise PluginFactoryError(f"plug-in {target} raised while building the controller for {desc.name} "
+    except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (the plug-in's own failure, reported with its location)
+        if config_file is not None and isinstance(exc, ConfigError):
+            if str(exc).startswith(f"{config_file}: "):
+                raise
+            raise _in_file(exc, str(config_file)) from exc
+        # a bad value or a value of the wrong kind most likely came from the file: the message starts with it
+        origin = f"{config_file}: " if config_file is not None and isinstance(exc, ValueError | TypeError) else ""
+        raise PluginFactoryError(f"{origin}plug-in {target} raised while building the controller for {desc.name} "
                                  f"(arm {desc.arm_mode}): {_describe(exc)}{_where(exc)}") from exc
     problems = controller_problems(ctrl)
     if problems:
@@ -322,6 +339,16 @@ def build_plugin(plugin: ControllerPlugin, desc: RobotDescription, config: Mappi
     return ctrl
 
 
+def _in_file(exc: ConfigError, path: str) -> ConfigError:
+    """`exc`'s error again, its message prefixed with `path` (a plain `ConfigError` if its class cannot say it)."""
+    message = f"{path}: {exc}"
+    try:
+        again = type(exc)(message)
+    except TypeError:  # a subclass whose constructor takes other arguments than a message
+        return ConfigError(message)
+    return again if str(again) == message else ConfigError(message)
+
+
 @dataclass(frozen=True)
 class PluginFactory:
     """A plug-in, as it travels to a worker: plain data that imports and calls the factory when called.
@@ -330,16 +357,18 @@ class PluginFactory:
         target: ``package.module:factory``.
         root: the directory the parent imported the module's package from (put on a worker's ``sys.path``).
         config: the ``--controller-config`` table, or None.
+        config_file: the file the table was read from, named in the errors its settings cause, or None.
     """
 
     target: str
     root: str | None
     config: Mapping[str, Any] | None = None
+    config_file: str | None = None
 
     def __call__(self, desc: RobotDescription) -> Controller:
         """Build the controller for `desc` (importing the module here if this process has not yet)."""
         plugin, _ = load_plugin(self.target, self.root)
-        return build_plugin(plugin, desc, self.config, self.target)
+        return build_plugin(plugin, desc, self.config, self.target, self.config_file)
 
 
 def read_controller_config(path: str | Path) -> dict[str, Any]:
@@ -387,6 +416,8 @@ def plugin_spec(name: str, target: str, *, kind: str = "plug-in", config_file: s
     Raises:
         PluginError: any plug-in failure (see `load_plugin`, `build_plugin`).
         FileFieldError: the configuration file is unreadable.
+
+    The spec's `make` raises what `build_plugin` does, naming `config_file` when its settings are refused.
     """
     config = read_controller_config(config_file) if config_file is not None else None
     plugin, root = load_plugin(target)
@@ -396,7 +427,8 @@ def plugin_spec(name: str, target: str, *, kind: str = "plug-in", config_file: s
                           entry_point=entry_point.name if entry_point is not None else None,
                           distribution=_entry_point_distribution(entry_point) if entry_point is not None else None)
     files = (SourceFile.hashed("config", config_file),) if config_file is not None else ()
-    return ControllerSpec(name, plugin.arm_modes[0], PluginFactory(target, root, config), plugin.summary,
+    factory = PluginFactory(target, root, config, str(config_file) if config_file is not None else None)
+    return ControllerSpec(name, plugin.arm_modes[0], factory, plugin.summary,
                           robots=plugin.robots, arm_modes=plugin.arm_modes, kind=kind,
                           config_file=str(config_file) if config_file is not None else None, files=files,
                           plugin=source)

@@ -21,6 +21,7 @@ from functools import lru_cache
 import numba
 import numpy as np
 
+from wbc.config_checks import check_number
 from wbc.errors import ConfigError
 from wbc.robots.conventions import GRAVITY
 
@@ -29,7 +30,6 @@ __all__ = ["DEFAULT_CONTACT_FORCE", "EstimatorConfig", "BaseEstimator", "steady_
 DEFAULT_CONTACT_FORCE = 15.0
 """The foot sensor reading at which an estimator fed from a robot's states trusts a foot as standing, by default
 [N in simulation; a real robot's sensors read raw counts] (`wbc.estimation.base_estimate.BaseEstimate`)."""
-
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -44,6 +44,9 @@ class EstimatorConfig:
         foot_velocity_noise: stance-foot velocity measurement [m/s].
         foot_height_noise: foot height measurement [m].
         gain: ``steady`` (the steady-state gain of each contact pattern) or ``full`` (time-varying covariance).
+
+    Raises:
+        ConfigError: a noise that is not a positive finite number, or an unknown `gain`.
     """
 
     accel_noise: float = 0.5
@@ -55,6 +58,9 @@ class EstimatorConfig:
     gain: str = "steady"
 
     def __post_init__(self) -> None:
+        for name in ("accel_noise", "position_noise", "foot_process_noise", "foot_position_noise",
+                     "foot_velocity_noise", "foot_height_noise"):
+            check_number(f"EstimatorConfig.{name}", getattr(self, name), above=0.0)
         if self.gain not in ("steady", "full"):
             raise ConfigError(f"EstimatorConfig.gain must be 'steady' (the precomputed gain) or 'full' (a Kalman update"
                               f" every tick), got {self.gain!r}")

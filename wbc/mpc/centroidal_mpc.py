@@ -26,9 +26,11 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
+from wbc.config_checks import check_number
 from wbc.errors import ConfigError, MpcProblemFileError, WbcError
 from wbc.mpc.centroidal_model import NU, NX, CentroidalModel, CentroidalParams
 from wbc.mpc.condensing import condense
@@ -81,7 +83,9 @@ class MpcConfig:
             on these QPs, and the same bits whatever the heap held before) or ``proxsuite``.
 
     Raises:
-        ConfigError: an unknown `qp_solver` (the message lists the valid names).
+        ConfigError: an unknown `qp_solver` (the message lists the valid names), a `horizon` below one step, a
+            number that is not finite, a step, force or scale that is not positive, a negative weight or margin,
+            `fz_max` not above `fz_min`, or a `standstill_weight_factor` outside [0, 1].
     """
 
     horizon: int = 10
@@ -106,6 +110,8 @@ class MpcConfig:
     def __post_init__(self) -> None:
         check_qp_solver(self.qp_solver, "MpcConfig.qp_solver")
         friction_per_axis(self.mu, self.pyramid, "MpcConfig")
+        check_force_terms(self, "MpcConfig")
+        check_number("MpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0)
 
     @property
     def mu_axis(self) -> float:
@@ -128,6 +134,32 @@ def pyramid_faces(pyramid: str) -> tuple[tuple[float, float], ...]:
         return axes
     d = 1.0 / math.sqrt(2.0)
     return (*axes, (d, d), (d, -d), (-d, d), (-d, -d))
+
+
+def check_force_terms(config: Any, where: str) -> None:
+    """Check the settings `MpcConfig` and the tail MPC's `TailMpcConfig` share (the horizon, forces and body terms).
+
+    Args:
+        config: an `MpcConfig` or a `TailMpcConfig` (`wbc.mpc.tail_mpc`, which imports this module).
+        where: the class name, for the messages.
+
+    Raises:
+        ConfigError: `horizon` not an integer >= 1, `dt`, `force_scale` not positive, `fz_min` negative, `fz_max` not
+            above it, a negative `weight_force`, `arm_margin` or `full_weight_speed`, `standstill_weight_factor`
+            outside [0, 1], or any of them not finite (named in `where`).
+    """
+    check_number(f"{where}.horizon", config.horizon, at_least=1, integer=True)
+    check_number(f"{where}.dt", config.dt, above=0.0)
+    check_number(f"{where}.fz_min", config.fz_min, at_least=0.0)
+    check_number(f"{where}.fz_max", config.fz_max, above=0.0)
+    if not config.fz_max > config.fz_min:
+        raise ConfigError(f"{where}.fz_max must be above fz_min ({config.fz_min}), got {config.fz_max}")
+    check_number(f"{where}.force_scale", config.force_scale, above=0.0)
+    for name in ("weight_com", "weight_vel", "weight_rpy", "weight_momentum", "weight_arm_q"):
+        check_number(f"{where}.{name}", getattr(config, name), at_least=0.0, size=3)
+    for name in ("weight_force", "arm_margin", "full_weight_speed"):
+        check_number(f"{where}.{name}", getattr(config, name), at_least=0.0)
+    check_number(f"{where}.standstill_weight_factor", config.standstill_weight_factor, at_least=0.0, at_most=1.0)
 
 
 def friction_per_axis(mu: float, pyramid: str, where: str) -> float:

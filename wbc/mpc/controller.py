@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from wbc.config_checks import check_number
 from wbc.errors import ConfigError
 from wbc.estimation import BaseEstimator, EstimatorConfig
 from wbc.estimation.kinematics import RobotKinematics
@@ -100,8 +101,9 @@ class MpcControllerConfig:
         yaw_leash: the yaw target's leash around the measured yaw [rad]; 0 tracks the commanded yaw rate alone.
 
     Raises:
-        ConfigError: an unknown `whole_body`, update intervals below one tick, an MPC step that is not
-            `replan_every` ticks, or gait transitions that fall inside MPC steps.
+        ConfigError: a number that is not finite, a rate, height, force or speed that is not positive, a negative
+            gain, depth or leash, an unknown `whole_body`, update intervals that are not whole numbers of ticks from
+            one, an MPC step that is not `replan_every` ticks, or gait transitions that fall inside MPC steps.
     """
 
     rate_hz: float = 500.0
@@ -132,16 +134,19 @@ class MpcControllerConfig:
     yaw_leash: float = YAW_LEASH_RAD
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.xy_leash) and math.isfinite(self.yaw_leash)
-                and self.xy_leash >= 0.0 and self.yaw_leash >= 0.0):
-            raise ConfigError(f"MpcControllerConfig: xy_leash and yaw_leash must be >= 0, got {self.xy_leash} and "
-                              f"{self.yaw_leash}")
+        # a division by the rate, the contact force or a foot's speed, and the gains written into every command,
+        # are refused here, where the value is given, rather than failing (or falling) in the controller
+        for name in ("rate_hz", "body_height", "contact_force", "slip_speed"):
+            check_number(f"MpcControllerConfig.{name}", getattr(self, name), above=0.0)
+        for name in ("swing_height", "swing_kp", "swing_kd", "stance_kd", "touchdown_depth", "joint_kd", "arm_kp",
+                     "arm_kd", "velocity_ki", "velocity_error_clip", "velocity_offset_limit", "xy_leash",
+                     "yaw_leash"):
+            check_number(f"MpcControllerConfig.{name}", getattr(self, name), at_least=0.0)
         if self.whole_body not in WHOLE_BODY_LAYERS:
             raise ConfigError(f"MpcControllerConfig.whole_body must be 'qp' (PlaCo's whole-body QP) or 'legs' (the "
                               f"leg-level layer), got {self.whole_body!r}; pass one of {', '.join(WHOLE_BODY_LAYERS)}")
-        for name in ("velocity_ki", "velocity_error_clip", "velocity_offset_limit"):
-            if not (math.isfinite(getattr(self, name)) and getattr(self, name) >= 0.0):
-                raise ConfigError(f"MpcControllerConfig.{name} must be finite and >= 0, got {getattr(self, name)}")
+        check_number("MpcControllerConfig.replan_every", self.replan_every, integer=True)
+        check_number("MpcControllerConfig.foothold_every", self.foothold_every, integer=True)
         if self.replan_every < 1 or self.foothold_every < 1:
             raise ConfigError(f"MpcControllerConfig.replan_every and foothold_every count ticks between updates and "
                               f"must be at least 1, got {self.replan_every} and {self.foothold_every}; use 1 to "

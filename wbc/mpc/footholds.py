@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from wbc.config_checks import check_number
 from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.compiled import liftoffs, plan_footholds, swing_targets
 from wbc.mpc.gait import GaitConfig
@@ -46,11 +47,19 @@ class FootholdConfig:
         max_offset: largest horizontal distance from the hip's projection [m]: about the leg's reach (the A1's and
             Go1's 0.4 m legs reach 0.29 m out from a hip 0.28 m up). A 2 m/s push needs a capture step of ~0.35 m;
             at the former 0.22 m the feet landed short and the robot fell over them (docs/mpc-notes.md).
+
+    Raises:
+        ConfigError: a setting that is negative or not a finite number (0 switches a gain off, or keeps the feet
+            under the hips).
     """
 
     capture_gain: float = 1.0
     centripetal_gain: float = 0.1
     max_offset: float = 0.30
+
+    def __post_init__(self) -> None:
+        for name in ("capture_gain", "centripetal_gain", "max_offset"):
+            check_number(f"FootholdConfig.{name}", getattr(self, name), at_least=0.0)
 
 
 def ground_height(feet: np.ndarray, stance: np.ndarray) -> float:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbc.errors import ConfigError
+from wbc.config_checks import check_number
 from wbc.mpc.compiled import gait_state
 
 __all__ = ["GaitConfig", "GaitScheduler", "TROT", "STAND", "STANCE_END_MARGIN", "gait_fits_steps"]
@@ -26,6 +26,10 @@ class GaitConfig:
         period: cycle length [s].
         duty: fraction of the cycle each foot is on the ground (1.0: never lifts).
         offsets: phase offset of each foot (FR, FL, RR, RL) in cycles.
+
+    Raises:
+        ConfigError: a `period` that is not a positive finite number, `duty` outside (0, 1], or offsets that are not
+            four finite numbers.
     """
 
     period: float = 0.32
@@ -33,8 +37,9 @@ class GaitConfig:
     offsets: tuple[float, float, float, float] = (0.0, 0.5, 0.5, 0.0)
 
     def __post_init__(self) -> None:
-        if not self.period > 0 or not 0 < self.duty <= 1:
-            raise ConfigError(f"GaitConfig: period > 0 and 0 < duty <= 1 required, got {self.period}, {self.duty}")
+        check_number("GaitConfig.period", self.period, above=0.0)
+        check_number("GaitConfig.duty", self.duty, above=0.0, at_most=1.0)
+        check_number("GaitConfig.offsets", self.offsets, size=4)
 
     @property
     def stance_s(self) -> float:

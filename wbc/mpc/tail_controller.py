@@ -14,13 +14,13 @@ It is `wbc.mpc.controller.MpcController` (estimator, gait, footholds, leg layer)
 from __future__ import annotations
 
 import functools
-import math
 import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pinocchio as pin
 
+from wbc.config_checks import check_number
 from wbc.errors import ConfigError
 from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.centroidal_mpc import MpcSolveError
@@ -62,6 +62,10 @@ class TailControllerConfig:
         replan_on_push: re-plan at the tick a push is detected (off: on the MPC's clock only).
         arm_kp: arm joint stiffness around the planned path [N m/rad].
         arm_kd: arm joint damping around the planned speed [N m s/rad].
+
+    Raises:
+        ConfigError: a `ready_q` that is not 3 finite angles, or an arm gain that is negative or not finite (the
+            nested settings check their own fields).
     """
 
     base: MpcControllerConfig = field(default_factory=lambda: MpcControllerConfig(yaw_leash=TAIL_YAW_LEASH_RAD))
@@ -76,9 +80,8 @@ class TailControllerConfig:
         if self.ready_q is not None and (len(self.ready_q) != 3 or not np.all(np.isfinite(self.ready_q))):
             raise ConfigError(f"TailControllerConfig.ready_q must be 3 finite angles (waist, shoulder, elbow) [rad], "
                               f"got {self.ready_q!r}")
-        if not (math.isfinite(self.arm_kp) and self.arm_kp >= 0 and math.isfinite(self.arm_kd) and self.arm_kd >= 0):
-            raise ConfigError(f"TailControllerConfig.arm_kp and arm_kd must be finite and >= 0, got {self.arm_kp!r}, "
-                              f"{self.arm_kd!r}")
+        check_number("TailControllerConfig.arm_kp", self.arm_kp, at_least=0.0)
+        check_number("TailControllerConfig.arm_kd", self.arm_kd, at_least=0.0)
 
 
 @functools.lru_cache(maxsize=4)

@@ -36,8 +36,8 @@ from dataclasses import dataclass
 import daqp
 import numpy as np
 
-from wbc.errors import ConfigError
-from wbc.mpc.centroidal_mpc import MpcSolveError, friction_per_axis
+from wbc.config_checks import check_number
+from wbc.mpc.centroidal_mpc import MpcSolveError, check_force_terms, friction_per_axis
 from wbc.mpc.tail_compiled import tail_qp
 from wbc.mpc.tail_model import ArmTail, ArmTailPath
 from wbc.robots.conventions import GRAVITY
@@ -77,6 +77,10 @@ class TailMpcConfig:
         standstill_weight_factor: their factor at a zero command.
         arm_moves: plan the arm's accelerations (off: the arm is held where it is, its accelerations fixed at zero,
             an ablation that keeps everything else of the tail MPC).
+
+    Raises:
+        ConfigError: what `MpcConfig` refuses in the settings they share (`wbc.mpc.centroidal_mpc.check_force_terms`),
+            or a negative or non-finite arm weight.
     """
 
     horizon: int = 10
@@ -100,12 +104,10 @@ class TailMpcConfig:
     arm_moves: bool = True
 
     def __post_init__(self) -> None:
-        if self.horizon < 1 or not self.dt > 0:
-            raise ConfigError(f"TailMpcConfig: horizon must be >= 1 and dt > 0, got {self.horizon} and {self.dt}")
         friction_per_axis(self.mu, self.pyramid, "TailMpcConfig")
-        if not (0 < self.mu and 0 <= self.fz_min < self.fz_max and self.force_scale > 0):
-            raise ConfigError(f"TailMpcConfig: need mu > 0, 0 <= fz_min < fz_max and force_scale > 0, got mu "
-                              f"{self.mu}, fz {self.fz_min}..{self.fz_max}, scale {self.force_scale}")
+        check_force_terms(self, "TailMpcConfig")
+        check_number("TailMpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0, size=3)
+        check_number("TailMpcConfig.weight_arm_acc", self.weight_arm_acc, at_least=0.0)
 
     @property
     def mu_axis(self) -> float:

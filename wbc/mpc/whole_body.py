@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 import placo
 
+from wbc.config_checks import check_number
 from wbc.robots.description import FOOT_NAMES, RobotDescription
 from wbc.robots.joint_table import joint_table
 from wbc.robots.urdf import robot_urdf
@@ -55,6 +56,10 @@ class WholeBodyConfig:
         swing_weight: weight of each swing-foot task.
         arm_weight: weight of the arm task.
         force_weight: regularisation of the contact forces (spreads the load over the stance feet).
+
+    Raises:
+        ConfigError: a `friction` that is not a positive finite number, or a gain or weight that is negative or not
+            finite.
     """
 
     friction: float = 0.6
@@ -71,6 +76,12 @@ class WholeBodyConfig:
     swing_weight: float = 1.0
     arm_weight: float = 1.0
     force_weight: float = 1e-4
+
+    def __post_init__(self) -> None:
+        check_number("WholeBodyConfig.friction", self.friction, above=0.0)
+        for name in ("com_kp", "com_kd", "trunk_kp", "trunk_kd", "swing_kp", "swing_kd", "arm_kp", "arm_kd",
+                     "com_weight", "trunk_weight", "swing_weight", "arm_weight", "force_weight"):
+            check_number(f"WholeBodyConfig.{name}", getattr(self, name), at_least=0.0)
 
 
 @dataclass

@@ -217,6 +217,9 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
             played = dataclasses.replace(trial, command=page.command)
         watch = _Stopwatch(_with_page(observer, page, trial, name, cfg))
         row, episode = run_trial(played, controller, observer=watch)
+        if not observer.recordings and (cfg.record is not None or page is not None):
+            # no tick was played (the controller could not be built, or failed in reset): no page to show
+            raise ViewerError(f"nothing to show: {row.error or 'no tick was played'}")
         ran = time.perf_counter()  # from here on, everything is the viewer's: marks, the page
         signals = observer.signals[-1] if observer.signals else None
         if signals is not None:
