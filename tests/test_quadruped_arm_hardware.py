@@ -117,6 +117,36 @@ def test_the_factory_names_what_a_mode_needs() -> None:
     assert _build("go1-arm", "actuated", arm_port="/dev/ttyUSB0", allow_hardware=True).num_joints == 15
 
 
+def test_a_warm_arm_servo_below_its_own_limit_trips_the_layers_temperature_check() -> None:
+    """75 degC on the elbow: below the servo's own Temperature Limit (80, no alert, no latch on the bus) and above
+    the layer's 70: the layer trips on the arm's status read, names the servo, and damps both wires."""
+    with _whole_robot(ramp_time_s=0.2) as (emu, safe, events):
+        arm = safe.robot.arm
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        assert safe.safety_state is SafetyState.RUN
+        t0 = emu.clock.now()
+        emu.inject(BusFault.OVER_TEMPERATURE, (4, 75))
+        _stand(safe, 1.0, until=lambda: safe.safety_state is SafetyState.DAMPED)
+        assert safe.safety_state is SafetyState.DAMPED
+        event = events[-1]
+        assert event.reason == "motor_temperature" and event.detail.startswith("elbow (ID 4) "), event
+        assert "75" in event.detail and arm.fault is None  # the servo itself did not alert: the layer caught it
+        # the status read that saw it comes every 2 * status_every bus cycles
+        assert event.time - t0 <= 2 * arm.config.status_every / arm.config.rate_hz + 1.0 / 50.0 + 1e-9
+        _stand(safe, 0.3)
+        frames = [c for c in emu.legs.commands() if c.time > event.time + 0.002 + 1e-9]
+        assert frames and all(c.damping for c in frames)
+        goals = [{w.id: w.value for w in p.writes if w.name == "goal_current"} for p in emu.arm.packets()
+                 if p.time > event.time + 1.0 / arm.config.rate_hz and p.written("goal_current")]
+        assert goals and all(set(g) == {1, 2, 4} for g in goals)  # every servo still driven, none left limp
+        for _ in range(20):  # by the damping: the servos' torques only take energy out
+            cmd, _ = emu.plant.arm_command()
+            _, dq, _ = emu.plant.read_arm()
+            assert (cmd.kp == 0).all() and (cmd.tau * dq <= 0.05).all()  # [W]: at most quantisation
+            safe.write(MotorCommand.damping(15, 0.5))
+            safe.advance(0.02)
+
+
 @pytest.mark.parametrize("fault,value", [(BusFault.SILENT_ID, 4), (BusFault.BAD_CRC, 2), (BusFault.OVERLOAD, 1),
                                          (BusFault.OVER_TEMPERATURE, (4, 85)), (BusFault.PORT_CLOSED, None),
                                          (BusFault.LATE_ANSWER, (4, 0.2))])
