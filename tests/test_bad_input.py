@@ -198,6 +198,12 @@ def test_a_malformed_episode_is_refused_naming_the_field_and_never_drawn(tmp_pat
     for changes, says in cases:
         with pytest.raises(EpisodeFileError, match=says):
             Episode.load(str(broken(**changes)))
+    # read from the file only: the source named, and a log's own check named by its fields
+    with pytest.raises(EpisodeFileError, match=r"field base_source: 'bogus' is not a source; valid: truth, "
+                                               r"estimator"):
+        Episode.load(str(broken(base_source=np.str_("bogus"))))
+    with pytest.raises(EpisodeFileError, match=r"broken.npz: fields safety_\*: "):
+        Episode.load(str(broken(safety_time=np.array([0.5]))))
     # the same checks on an episode built in memory, before any frame of it is drawn
     made = _episode()
     assert len(list(frames_of(made))) == 20

@@ -328,17 +328,28 @@ class Episode:
         for name in (*(f"push_{k}" for k in _PUSH_KEYS), "safety_time", "operator_time"):
             fields.numbers(name, ndim=None)
         source = str(fields.scalar_text("base_source"))
+        if source not in BASE_SOURCES:
+            fields.fail("base_source", f"{short(source, 60)} is not a source; valid: {', '.join(BASE_SOURCES)}")
         # the tick a controller failed on may be counted before its row was stored: k + 1 at most
         clamped = int(fields.scalar("clamped_ticks", lo=0, hi=k + 1))
         rows = tuple(int(v) for v in fields.numbers("clamped_rows", rows=5))
+        logs = []
+        for prefix, log, keys in (("push", PushLog, _PUSH_KEYS), ("safety", SafetyLog, _SAFETY_KEYS),
+                                  ("operator", OperatorLog, _OPERATOR_KEYS)):
+            try:
+                logs.append(log(**{k: z[f"{prefix}_{k}"] for k in keys}))
+            except (ConfigError, ValueError, TypeError) as exc:  # the log's own check: lengths, values
+                raise EpisodeFileError(f"{path}: fields {prefix}_*: {_cut(str(exc))}; {_FILE_ADVICE}") from None
         try:
-            pushes = PushLog(**{k: z[f"push_{k}"] for k in _PUSH_KEYS})
-            safety = SafetyLog(**{k: z[f"safety_{k}"] for k in _SAFETY_KEYS})
-            actions = OperatorLog(**{k: z[f"operator_{k}"] for k in _OPERATOR_KEYS})
-            return cls(**scalars, **arrays, pushes=pushes, safety_events=safety, operator_events=actions,
+            return cls(**scalars, **arrays, pushes=logs[0], safety_events=logs[1], operator_events=logs[2],
                        base_source=source, clamped_ticks=clamped, clamped_rows=rows)
         except (ConfigError, ValueError, TypeError) as exc:
-            raise EpisodeFileError(f"{path}: {short(str(exc), 300)}") from None
+            raise EpisodeFileError(f"{path}: {_cut(str(exc))}") from None
+
+
+def _cut(text: str, limit: int = 300) -> str:
+    """`text` cut to `limit` characters (a message quoted inside another, without the quotes `short` adds)."""
+    return text if len(text) <= limit else f"{text[: limit - 30]}... ({len(text)} characters)"
 
 
 def _checked_core(fields: _EpisodeFields) -> tuple[dict[str, float | bool], dict[str, np.ndarray]]:
