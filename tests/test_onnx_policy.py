@@ -173,9 +173,12 @@ def test_asking_for_the_observation_before_acting_folds_the_state_into_the_estim
     assert np.abs(x_plain[:3]).max() > 0.1  # it moved: the frames compared were not all zero
 
 
-def test_a_replay_feeds_an_estimated_term_the_recorded_truth_and_checks_the_rest_of_the_policy_exactly(tmp_path):
+@pytest.mark.parametrize("recorded_scale", [2.0, 4.0, -2.0], ids=["the I/O file's scale", "twice it", "flipped"])
+def test_a_replay_feeds_an_estimated_term_the_recorded_truth_and_checks_the_rest_of_the_policy_exactly(
+        tmp_path, recorded_scale):
     """A trainer records the simulator's truth where the controller estimates: the replay check feeds the network the
-    recorded values, compares every other term and the actions as usual, and reports how far the estimate lay."""
+    recorded values, compares every other term and the actions as usual, and reports how far the estimate lay. A
+    recording at another scale or sign than the I/O file's (2) fails: the feeding would otherwise hide it."""
     from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
     from wbc.learned.policy.replay_file import Replay, save_replay
     from wbc.robots.conventions import quat_to_matrix
@@ -193,7 +196,7 @@ def test_a_replay_feeds_an_estimated_term_the_recorded_truth_and_checks_the_rest
         for k in range(60):
             state, command = sim.read(), VelocityCommand(vx=0.5, yaw_rate=0.3 * (k > 30))
             truth = sim.base_truth()
-            true_velocity = 2.0 * quat_to_matrix(truth.base_quat).T @ truth.base_linvel_in_world  # scale 2
+            true_velocity = recorded_scale * quat_to_matrix(truth.base_quat).T @ truth.base_linvel_in_world
             terms = trainer.observation_terms(state, command)
             frames.append(np.concatenate([true_velocity] + [v for _, v in terms[1:]]))
             trainer.feed_recorded({0: true_velocity})  # the trainer's network saw the truth
@@ -216,6 +219,12 @@ def test_a_replay_feeds_an_estimated_term_the_recorded_truth_and_checks_the_rest
     result = check_controller(f"onnx:{tmp_path / 'r.onnx'}", CheckConfig(seconds=0.1, robots=("a1-wx200",),
                                                                           replay=path))
     (outcome,) = [o for o in result.outcomes if o.check == "replay"]
+    if recorded_scale != 2.0:
+        gain = float(outcome.detail.split("estimate at ")[1].split(" times")[0])
+        assert not outcome.passed and gain == pytest.approx(recorded_scale / 2.0, rel=0.2), outcome.detail
+        assert ("the term's scale or sign in the I/O file" if recorded_scale < 0 else
+                "the term's scale in the I/O file") in outcome.detail
+        return
     assert outcome.passed, outcome.detail
     assert "(base_ang_vel, velocity_commands, joint_pos_rel, last_action; max |difference|" in outcome.detail
     assert "base_lin_vel is estimated by the controller, and the network was fed the recorded values" in outcome.detail

@@ -678,6 +678,39 @@ def _estimate_text(frames: np.ndarray, replay: Replay, fed: set[str]) -> str:
     return "; ".join(parts)
 
 
+ESTIMATE_SCALE_RANGE = (2.0 / 3.0, 1.5)
+"""The recorded values of an estimated term may lie within this factor of the controller's estimate (a least-squares
+gain, `_estimate_scale_problem`): an estimate is not the truth, but a term whose scale or frame is wrong lies 2x or
+-1x from it."""
+
+_ESTIMATE_CORRELATION = 0.8
+"""Below this correlation between the recording and the estimate, their gain says nothing (a robot standing still)."""
+
+
+def _estimate_scale_problem(frames: np.ndarray, replay: Replay, fed: set[str]) -> str | None:
+    """An estimated term whose recording follows the controller's estimate at another scale or sign, or None.
+
+    The replay feeds the network the recorded values of an estimated term, so a wrong ``scale`` (or a frame whose
+    axes differ) in the I/O file would pass it unseen and show only in the arena. Where the recording and the
+    estimate move together (correlation at least `_ESTIMATE_CORRELATION`, in magnitude), their least-squares gain
+    must lie in `ESTIMATE_SCALE_RANGE`.
+    """
+    lo, hi = ESTIMATE_SCALE_RANGE
+    for name, (a, b) in zip(replay.obs_terms, replay.obs_slices, strict=True):
+        if name not in fed:
+            continue
+        est, rec = frames[:, a:b].ravel(), replay.obs[:, a:b].ravel()
+        if np.std(est) == 0.0 or np.std(rec) == 0.0:
+            continue
+        corr = float(np.corrcoef(est, rec)[0, 1])
+        gain = float(est @ rec / (est @ est))
+        if abs(corr) >= _ESTIMATE_CORRELATION and not lo <= gain <= hi:
+            return (f"{name}: the recorded values follow the controller's estimate at {gain:.2f} times it "
+                    f"(correlation {corr:.2f}): the term's scale{' or sign' if gain < 0 else ''} in the I/O file is "
+                    f"not the trainer's (within {lo:.2f}..{hi:.2f} passes)")
+    return None
+
+
 def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tuple[bool, str]:
     """The ``replay`` outcome: a fresh controller fed the recorded states; its observation and actions compared."""
     label = f"{len(replay)} recorded ticks of {replay.path}"
@@ -746,6 +779,9 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
     compared = [name for name in replay.obs_terms if name not in fed]
     if fed:
         act_text += "; " + _estimate_text(np.asarray(frames), replay, fed)
+        scale_problem = _estimate_scale_problem(np.asarray(frames), replay, fed)
+        if scale_problem is not None:
+            return False, f"{label}: {scale_problem}; {act_text}"
     if not found:
         if act_first is None:
             return True, (f"{label}: the observation equals the recording term by term "
