@@ -363,3 +363,27 @@ def test_viewing_a_controller_that_cannot_be_built_says_why_and_writes_no_page(t
                               "--duration", "1", "--record", str(page)])
     assert "nothing to show: controller brokenview.mod:make, band in, seed 0, trial 0: building it raised" in err
     assert f"ValueError: no calibration file at {pkg / 'mod.py'}:2" in err and not page.exists()
+
+
+def test_resume_needs_the_results_directory_of_a_run(tmp_path, capsys):
+    base = ["--scenario", "scenarios/push.toml", "--trials", "1", "--workers", "1", "--resume"]
+    missing = tmp_path / "typo"
+    for argv in (["run", "stand", *base, "--out", str(missing)], ["compare", "stand", "mpc", *base, "--out",
+                                                                  str(missing)],
+                 ["paper", "table3", "--trials", "1", "--seeds", "1", "--resume", "--out", str(missing)]):
+        err = _cli_error(capsys, argv)
+        assert f"--resume --out {missing}: no such results directory, so nothing to finish" in err
+    assert "--resume finishes the run in --out: give its results directory" in _cli_error(capsys, ["run", "stand",
+                                                                                                    *base])
+    assert not missing.exists()
+
+
+def test_demo_resumes_and_refuses_a_results_directory_before_its_analysis(tmp_path, capsys):
+    out = tmp_path / "demo"
+    out.mkdir()
+    (out / "trials.csv").write_text("")
+    err = _cli_error(capsys, ["demo", "--trials", "1", "--seeds", "1", "--out", str(out)])
+    assert f"{out}: already holds results; pass --resume to finish that run" in err
+    parser = build_parser()
+    args = parser.parse_args(["demo", "--out", str(out), "--resume", "--drop-bad-rows"])
+    assert args.resume and args.drop_bad_rows

@@ -31,7 +31,7 @@ from wbc.control.registry import (
     list_controllers,
     takes_controller_config,
 )
-from wbc.errors import ConfigError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
+from wbc.errors import ConfigError, ResultsDirError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import realtime_switch_interval
@@ -617,9 +617,25 @@ def _controller_files(values: list[str] | None, controllers: tuple[str, ...], op
     return out
 
 
+def _check_resumable(args: argparse.Namespace) -> None:
+    """``--resume`` needs the results directory of a run: a misspelt ``--out`` would start a whole new study.
+
+    Raises:
+        ResultsDirError: ``--resume`` without ``--out``, or with an ``--out`` that does not exist.
+    """
+    if not args.resume:
+        return
+    if not args.out:
+        raise ResultsDirError("--resume finishes the run in --out: give its results directory")
+    if not Path(args.out).exists():
+        raise ResultsDirError(f"--resume --out {args.out}: no such results directory, so nothing to finish; check the "
+                              "path, or start the run without --resume")
+
+
 def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_significant: bool = False,
            alpha: float = 0.05) -> int:
     seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
+    _check_resumable(args)
     out = Path(args.out) if args.out else Path("runs") / (
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
     live = _live_observer(args) if args.view else None
@@ -683,6 +699,7 @@ def _paper(args: argparse.Namespace) -> int:
         if key in overrides:
             raise ConfigError(f"--contender: {key} is given twice ({overrides[key]}, {name}); give it once")
         overrides[key] = name
+    _check_resumable(args)
     result = run_paper_table(PaperRunConfig(
         table=args.table, trials=args.trials, seeds=args.seeds,
         scenario=Path(args.scenario) if args.scenario else None, out_dir=Path(args.out) if args.out else None,
@@ -796,12 +813,19 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
 
 def _demo(args: argparse.Namespace) -> int:
     """The A/B the arena is for: mpc against learned on the same push trials, paired; the tail analysis first."""
+    _check_resumable(args)
+    if args.out and not args.resume and (Path(args.out) / "trials.csv").exists():
+        # said before the tail analysis, not after it
+        raise ResultsDirError(f"{args.out}: already holds results; pass --resume to finish that run, or choose "
+                              "another --out")
+    robot = load_scenario(args.scenario).robot
     printers.print_demo_header(DEMO_CONTROLLERS, scenario=args.scenario, trials=args.trials, seeds=args.seeds)
-    printers.print_tail(analyze_tail(get_robot("a1-wx200", "actuated")))
+    printers.print_tail(analyze_tail(get_robot(robot, "actuated")))  # the scenario's robot's arm
     print(flush=True)
     cfg = ArenaConfig(controllers=DEMO_CONTROLLERS, scenario=Path(args.scenario), seeds=tuple(range(args.seeds)),
                       trials=args.trials, out_dir=Path(args.out or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}"),
-                      workers=args.workers, progress=not args.quiet)
+                      workers=args.workers, progress=not args.quiet, resume=args.resume,
+                      drop_bad_rows=args.drop_bad_rows)
     result = run_arena(cfg)
     printers.print_arena(result, verdict=False)
     printers.print_demo_end(result.out_dir, trial_to_watch(result.records, DEMO_CONTROLLERS), scenario=args.scenario,

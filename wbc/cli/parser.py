@@ -734,6 +734,7 @@ def _add_demo_parser(sub: _Commands) -> None:
                       help=f"local worker processes, 1..{MAX_WORKERS} (default: all cores)")
     demo.add_argument("--out", type=results_dir, default=None, help="results directory (default: runs/demo-<time>)")
     demo.add_argument("--quiet", action="store_true", help="no progress output")
+    _add_resume_options(demo)
     demo.set_defaults(handler="demo")
 
 
