@@ -16,6 +16,7 @@ import math
 import sys
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 
 from wbc.cli import printers
@@ -433,6 +434,18 @@ def test_each_bench_command_prints_its_result_as_json_or_as_its_table(argv, benc
     # the module, not the `main` function `wbc.cli` re-exports under the same name
     monkeypatch.setattr(importlib.import_module("wbc.cli.main"), bench, lambda *args, **kwargs: result)
     assert main([*argv, "--json"]) == 0
-    assert capsys.readouterr().out == json.dumps(result.as_dict(), indent=2, default=list) + "\n"
+    out = capsys.readouterr().out
+    assert out == json.dumps(printers.strict_json(result.as_dict()), indent=2) + "\n"
+    # strict JSON: a figure that could not be measured (nan) is null, which any JSON reader takes
+    json.loads(out, parse_constant=lambda name: pytest.fail(f"{name} in --json output"))
     assert main(argv) == 0
     assert capsys.readouterr().out == _printed(printer, result, capsys)
+
+
+def test_json_output_is_strict_json_with_null_for_a_figure_not_measured(capsys):
+    value = {"a": math.nan, "b": (1.0, math.inf, -math.inf), "c": [np.float64(np.nan), np.int64(3)],
+             "d": {"e": np.array([1.5, np.nan])}, "f": "NaN", "g": None, "h": True}
+    printers.print_json(value)
+    out = capsys.readouterr().out
+    assert json.loads(out, parse_constant=lambda name: pytest.fail(name)) == {
+        "a": None, "b": [1.0, None, None], "c": [None, 3], "d": {"e": [1.5, None]}, "f": "NaN", "g": None, "h": True}

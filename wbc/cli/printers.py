@@ -56,12 +56,34 @@ __all__ = ["print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_m
            "print_demo_end", "print_demo_header", "print_emulator_counts", "print_emulator_served",
            "print_emulator_serving", "print_emulator_started", "print_hw_check", "print_hw_run", "print_json",
            "print_paper_table", "print_recording", "print_tail", "print_thread_stats", "print_trained",
-           "print_viewed_trial"]
+           "print_viewed_trial", "strict_json"]
 
 
 def print_json(value: object) -> None:
-    """`value` as indented JSON (sequences of any kind as lists; NaN as ``NaN``, as `json` writes it)."""
-    print(json.dumps(value, indent=2, default=list))
+    """`value` as indented, strict JSON.
+
+    Sequences of any kind are lists, and a number that is not finite (a figure that could not be measured, nan) is
+    ``null``, which every JSON reader takes (``NaN`` is Python's, not JSON's).
+    """
+    print(json.dumps(strict_json(value), indent=2, allow_nan=False))
+
+
+def strict_json(value: object) -> object:
+    """`value` with every float that is not finite replaced by None, tuples and other sequences as lists."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: strict_json(v) for k, v in value.items()}
+    if isinstance(value, str | bytes | int | type(None)):
+        return value
+    if isinstance(value, np.generic):
+        return strict_json(value.item())
+    if isinstance(value, np.ndarray):
+        return strict_json(value.tolist())
+    try:
+        return [strict_json(v) for v in value]  # type: ignore[union-attr]
+    except TypeError:
+        return value
 
 
 def print_tail(result: TailAnalysis) -> None:
