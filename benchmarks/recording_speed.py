@@ -18,7 +18,11 @@ import tempfile
 import time
 from pathlib import Path
 
+from wbc.arena.identity import MAX_TRIALS
 from wbc.arena.sim_trial import run_trial
+from wbc.cli.parser import bounded_int
+from wbc.control.registry import get_controller
+from wbc.errors import WbcError
 from wbc.scenario import load_scenario
 from wbc.tools.bench import machine_description
 from wbc.viz.view import ViewConfig, view_trial
@@ -29,10 +33,14 @@ def main() -> None:
     parser.add_argument("--controller", default="mpc")
     parser.add_argument("--scenario", default="scenarios/push.toml")
     parser.add_argument("--band", default="in")
-    parser.add_argument("--trial", type=int, default=0)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--trial", type=bounded_int(0, MAX_TRIALS - 1), default=0)
+    parser.add_argument("--repeats", type=bounded_int(1, 100), default=3)
     args = parser.parse_args()
-    trial = load_scenario(args.scenario).trial(args.band, 0, args.trial)
+    try:
+        trial = load_scenario(args.scenario).trial(args.band, 0, args.trial)
+        get_controller(args.controller)  # an unknown name, said before the warm-up
+    except WbcError as exc:
+        parser.exit(2, f"recording_speed: error: {exc}\n")
     print(machine_description())
     print(f"{args.controller} on {trial.scenario} band {trial.band} trial {trial.index}, {trial.duration_s:g} s")
     with tempfile.TemporaryDirectory() as tmp:

@@ -387,3 +387,20 @@ def test_demo_resumes_and_refuses_a_results_directory_before_its_analysis(tmp_pa
     parser = build_parser()
     args = parser.parse_args(["demo", "--out", str(out), "--resume", "--drop-bad-rows"])
     assert args.resume and args.drop_bad_rows
+
+
+def test_analysis_and_bench_options_are_refused_naming_the_option_or_the_scenario(tmp_path, capsys):
+    # the default band of a command is not every scenario's: the scenario and its bands are named
+    err = _cli_error(capsys, ["bench", "act", "stand", "--scenario", "scenarios/turn.toml"])
+    assert "scenario 'turn': unknown band 'in'; valid bands: 1.0, 1.25, 1.5" in err
+    assert "more than the 1,000,000 one run plays" in _cli_error(
+        capsys, ["analyze", "arm-momentum", "--trials", "100000", "--seeds", "10000"])
+    assert "argument --terrain: invalid choice: 'fractal'" in _cli_error(capsys, ["bench", "train", "--terrain",
+                                                                                  "fractal"])
+
+
+def test_posture_takes_an_episode_shorter_than_its_default_ramp():
+    from wbc.tools.posture import posture_study
+
+    rows = posture_study(["stand"], duration_s=0.4)  # the command's ramp shortens to half the episode
+    assert [r.fell for r in rows] == [False, False]

@@ -200,7 +200,7 @@ def test_bench_mpc_reports_nan_for_what_a_controller_without_a_breakdown_cannot_
 def test_bench_mpc_refuses_a_controller_that_is_not_an_mpc(capsys):
     argv = ["bench", "mpc", "--controller", "stand", "--seconds", "0.1", "--threaded-blas", "--no-reference"]
     assert main(argv) == 2
-    assert "use one of: mpc, mpc-locked, mpc-noarm" in capsys.readouterr().err
+    assert "use one of: mpc, mpc-tail, mpc-locked, mpc-noarm, mpc-wbqp" in capsys.readouterr().err
 
 
 def test_every_command_of_the_parser_has_a_handler():

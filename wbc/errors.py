@@ -62,7 +62,8 @@ class UnknownNameError(WbcError, KeyError):
         suggestion: the valid name closest to `name`, or None when none is close.
     """
 
-    def __init__(self, kind: str, name: str, valid: list[str] | tuple[str, ...]) -> None:
+    def __init__(self, kind: str, name: str, valid: list[str] | tuple[str, ...], *, where: str = "") -> None:
+        """`where` (e.g. ``scenario 'turn'``), when given, opens the message: whose names these are."""
         self.kind = kind
         self.name = name
         self.valid = tuple(sorted(valid))
@@ -70,7 +71,8 @@ class UnknownNameError(WbcError, KeyError):
         self.suggestion = close[0] if close else None
         hint = f"; did you mean {self.suggestion!r}?" if self.suggestion is not None else ""
         shown = repr(name) if len(repr(name)) <= 120 else f"{repr(name)[:90]}... ({len(str(name))} characters)"
-        super().__init__(f"unknown {kind} {shown}{hint}; valid {kind}s: {', '.join(self.valid)}")
+        super().__init__(f"{where + ': ' if where else ''}unknown {kind} {shown}{hint}; valid {kind}s: "
+                         f"{', '.join(self.valid)}")
 
     def __str__(self) -> str:  # KeyError would repr() the message
         return str(self.args[0])

@@ -359,7 +359,8 @@ def _add_bench_train_parser(bench: _Commands) -> None:
     btrain.add_argument("--envs", type=bounded_int(1, 65_536), default=1024, help="parallel environments, 1..65536")
     btrain.add_argument("--threads", type=_THREADS, default=2, help=f"rollout threads, 1..{MAX_THREADS}")
     btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
-    btrain.add_argument("--terrain", default="scenario", help="scenario (the push scenario's ground) or flat")
+    btrain.add_argument("--terrain", default="scenario", choices=("scenario", "flat"),
+                        help="scenario (the push scenario's ground) or flat")
     btrain.add_argument("--steps", type=bounded_int(1, 1_000_000), default=50,
                         help="policy steps per measurement, 1..1000000")
     btrain.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measurement")

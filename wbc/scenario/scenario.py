@@ -217,7 +217,7 @@ class Scenario:
         for spec in self._bands:
             if spec.name == band:
                 return spec
-        raise UnknownNameError(f"band of scenario {self.name!r}", band, self.bands)
+        raise UnknownNameError("band", band, self.bands, where=f"scenario {self.name!r}")
 
     def trial(self, band: str, seed: int, index: int) -> Trial:
         """Trial `index` of `band` under `seed`: a pure function of the file's content, band, seed and index.

@@ -26,10 +26,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from wbc.arena.identity import MAX_RUN_TRIALS
 from wbc.arena.sim_trial import run_trial
 from wbc.control.protocol import Controller
 from wbc.control.registry import get_controller
-from wbc.errors import AnalysisError
+from wbc.errors import AnalysisError, ConfigError
 from wbc.hardware.capabilities import TruthSource
 from wbc.hardware.robot import Robot
 from wbc.robots.conventions import quat_to_matrix, quat_wxyz_to_xyzw
@@ -170,7 +171,11 @@ def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds:
 
     Raises:
         ScenarioError, UnknownNameError: bad scenario, band or controller.
+        ConfigError: more trials than one run plays (`wbc.arena.identity.MAX_RUN_TRIALS`), as the arena refuses.
     """
+    if len(seeds) * trials > MAX_RUN_TRIALS:
+        raise ConfigError(f"{len(seeds)} seeds x {trials} trials = {len(seeds) * trials:,} trials, more than the "
+                          f"{MAX_RUN_TRIALS:,} one run plays; pass fewer --seeds or --trials")
     scenario = load_scenario(scenario_path)
     get_controller(controller)  # an unknown name fails before the first trial is played
     out = []

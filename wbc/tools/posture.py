@@ -64,7 +64,7 @@ class PostureRow:
 
 
 def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_vx: float = 0.3,
-                  duration_s: float = 6.0, ramp_s: float = 0.5, seed: int = 0) -> list[PostureRow]:
+                  duration_s: float = 6.0, ramp_s: float | None = None, seed: int = 0) -> list[PostureRow]:
     """Play each controller standing (zero command) and walking (`walk_vx` forward) and measure its trunk height.
 
     Args:
@@ -72,7 +72,8 @@ def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_v
         robot: robot registry name.
         walk_vx: forward speed of the walking command [m/s].
         duration_s: length of each episode [s]; the mean is taken over its second half.
-        ramp_s: the walking command rises from zero over this time [s].
+        ramp_s: the walking command rises from zero over this time [s]; None: 0.5 s, or half the episode if
+            shorter.
         seed: the robot's reset seed.
 
     Returns:
@@ -85,6 +86,8 @@ def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_v
     """
     if not duration_s > 0:
         raise ConfigError(f"posture: duration_s must be positive, got {duration_s}")
+    if ramp_s is None:
+        ramp_s = min(0.5, duration_s / 2)
     if not 0 <= ramp_s <= duration_s / 2:
         raise ConfigError(f"posture: ramp_s must lie in [0, duration_s / 2] = [0, {duration_s / 2}], got {ramp_s}")
     if robot not in ROBOTS:

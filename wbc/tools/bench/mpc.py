@@ -497,7 +497,8 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     sim = PhysicsTimedRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
     ctrl = spec.make(sim.desc)
     if not isinstance(ctrl, MpcController):
-        valid = [name for name, s in CONTROLLERS.items() if getattr(s.make, "func", s.make) is MpcController]
+        valid = [name for name, s in CONTROLLERS.items() if isinstance(getattr(s.make, "func", s.make), type)
+                 and issubclass(getattr(s.make, "func", s.make), MpcController)]  # mpc-tail's is a subclass
         raise BenchError(f"bench mpc times an MPC controller, and {controller!r} is not one; use one of: "
                          f"{', '.join(valid)}")
     if ctrl.config.mpc.qp_solver != qp_solver:
