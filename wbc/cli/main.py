@@ -494,6 +494,10 @@ def _train(args: argparse.Namespace) -> int:
     if dagger_only:
         raise ConfigError(f"{', '.join(dagger_only)}: only with a controller as --teacher (DAgger), e.g. "
                           "--teacher mpc")
+    from wbc.learned.train.preflight import names_a_file
+
+    if args.teacher is not None and args.stage is None and not names_a_file(args.teacher):
+        raise _train_not_a_teacher(args.teacher)
     if args.stage is None:
         raise ConfigError("wbc train: --stage 1|2|3 is required (or --teacher CONTROLLER to distil a controller)")
     env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
@@ -502,14 +506,47 @@ def _train(args: argparse.Namespace) -> int:
         overrides["rma"] = AdaptationConfig(iterations=args.rma_iterations)
     cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
                        env_overrides=env, variant=args.variant, **overrides)
+    if args.teacher is not None:
+        if args.teacher not in (cfg.teacher, cfg.init_from, cfg.frozen_legs):
+            what = f"stage {args.stage}" + (f" --baseline {args.baseline}" if args.baseline else "")
+            raise ConfigError(f"--teacher does not apply to {what}: it learns from no teacher policy and starts from "
+                              "none (--teacher applies to stages 2 and 3 and the baselines one-stage-demo, "
+                              "finetune-pi2, curriculum after stage 1 and decoupled)")
+        if not names_a_file(args.teacher):
+            raise _train_not_a_teacher(args.teacher)
+    return _train_run(args, cfg, stage=args.stage, baseline=args.variant or args.baseline)
+
+
+def _train_not_a_teacher(name: str) -> ConfigError:
+    """The error for a --teacher that names neither a controller nor a file."""
+    return ConfigError(f"--teacher {name} is neither a controller nor a file; give a policy file (a stage's "
+                       f"policy.npz) or a controller to distil: {', '.join(CONTROLLERS)}")
+
+
+def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | None) -> int:
+    """Check a stage's or fine-tune's run (--dry-run: print its configuration), then train it."""
+    from wbc.learned.train.preflight import check_inputs, check_run_dir
+
+    check_run_dir(cfg, resume=args.resume)
     if args.dry_run:
+        try:
+            check_inputs(cfg)
+        except ConfigError as exc:
+            if args.teacher is not None or args.fine_tune is not None or args.expert_data is not None:
+                raise
+            # a default input (the previous stage's export) may be trained after this dry run
+            print(f"wbc: note: {exc}", file=sys.stderr)
         printers.print_json(dataclasses.asdict(cfg))
         return 0
     # torch and rsl-rl-lib (the train extra) load only when a run really trains
     from wbc.learned.train.train import train
 
     result = train(cfg, resume=args.resume)
-    printers.print_trained(result, task=args.task, stage=args.stage, baseline=args.variant or args.baseline)
+    if result.get("trained", 1) == 0:
+        print(f"{result['run_dir']} already holds {result['iterations']} iterations, no fewer than --iterations "
+              f"{cfg.max_iterations}: nothing new trained; pass a larger --iterations to train on")
+        return 0
+    printers.print_trained(result, task=args.task, stage=stage, baseline=baseline)
     return 0
 
 
@@ -525,20 +562,20 @@ def _fine_tune(args: argparse.Namespace) -> int:
     if args.task not in TASKS:
         raise UnknownNameError("task", args.task, tuple(TASKS))
     student = args.fine_tune
+    from wbc.learned.train.preflight import names_a_file
+
     if student == "shipped":
         student = str(distilled_weights(get_robot(TASKS[args.task].robot, "actuated")))
+    elif not names_a_file(student):
+        raise ConfigError(f"--fine-tune {student}: no such file; give a student's policy file (a DAgger run's "
+                          "policy.npz) or 'shipped'")
+    if args.expert_data is not None and not Path(args.expert_data).is_file():
+        raise ConfigError(f"--expert-data {args.expert_data}: no such file; give a DAgger run's data.npz")
     env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
     overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
     cfg = fine_tune_config(args.task, student, run_root=args.run_root, expert_data=args.expert_data,
                            env_overrides=env, **overrides)
-    if args.dry_run:
-        printers.print_json(dataclasses.asdict(cfg))
-        return 0
-    from wbc.learned.train.train import train
-
-    result = train(cfg, resume=args.resume)
-    printers.print_trained(result, task=args.task, stage=3, baseline="fine-tune")
-    return 0
+    return _train_run(args, cfg, stage=3, baseline="fine-tune")
 
 
 def _distil(args: argparse.Namespace) -> int:

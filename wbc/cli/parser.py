@@ -566,7 +566,9 @@ def _add_train_parser(sub: _Commands) -> None:
     tr.add_argument("--baseline", default=None, help=f"stage-3 baseline, one of: {', '.join(BASELINES)}")
     tr.add_argument("--variant", default=None,
                     help=f"a one-change variant of the method's stage 3, one of: {', '.join(RECIPE_VARIANTS)}")
-    tr.add_argument("--resume", action="store_true", help="continue from the newest checkpoint of the run")
+    tr.add_argument("--resume", action="store_true",
+                    help="continue from the newest checkpoint of the run (without it, a run directory that already "
+                         "holds a run is refused)")
     tr.add_argument("--iterations", type=bounded_int(1, 1_000_000), default=None,
                     help="PPO iterations of the whole run, 1..1000000 (default 1500)")
     tr.add_argument("--envs", type=bounded_int(1, 65_536), default=None,
@@ -576,7 +578,8 @@ def _add_train_parser(sub: _Commands) -> None:
     tr.add_argument("--rma-iterations", type=bounded_int(0, 1_000_000), default=None,
                     help="RMA phase-2 rounds after PPO (default 200; 0 skips phase 2)")
     tr.add_argument("--teacher", default=None,
-                    help="BC teacher policy file (default: the previous stage's export); or a controller of the "
+                    help="stages 2 and 3 (and the baselines that start from a policy): the teacher's policy file "
+                         "(default: the previous stage's export); or a controller of the "
                          "arena (e.g. mpc): distil it into a policy by DAgger (--rounds, --episodes)")
     tr.add_argument("--fine-tune", default=None, metavar="STUDENT",
                     help="fine-tune a student distilled with --teacher CONTROLLER (its policy file, or 'shipped' for "

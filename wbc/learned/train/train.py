@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import re
 import time
 from pathlib import Path
 from typing import Any
@@ -27,13 +26,14 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.learned.env.env import BatchedEnv
 from wbc.learned.policy.composite_policy import save_composite
-from wbc.learned.policy.policy_file import PolicyFileError, load_policy, save_policy
+from wbc.learned.policy.policy_file import load_policy, save_policy
 from wbc.learned.policy.replay_file import replay_path_for
 from wbc.learned.policy.replay_recorder import record_replay
 from wbc.learned.train.distill import student_policy_file
 from wbc.learned.train.export import decoupled_policy, env_meta, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.history_actor import HistoryActor, student_layout
+from wbc.learned.train.preflight import RESUMABLE, check_inputs, check_run_dir, latest_checkpoint, load_input_policy
 from wbc.learned.train.rma import train_adaptation
 from wbc.learned.train.train_config import TrainConfig
 from wbc.learned.train.vec_env import RslVecEnv
@@ -46,7 +46,7 @@ _runners = require("rsl_rl.runners")
 
 __all__ = ["latest_checkpoint", "rsl_rl_config", "train"]
 
-_RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
+_RESUMABLE = RESUMABLE
 """TrainConfig fields a resumed run may change; any other difference is refused."""
 
 
@@ -87,59 +87,24 @@ def rsl_rl_config(cfg: TrainConfig) -> dict[str, Any]:
     }
 
 
-def latest_checkpoint(run_dir: str | Path) -> Path | None:
-    """The ``model_<it>.pt`` with the highest iteration in `run_dir`, or None."""
-    found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
-             if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
-    return max(found)[1] if found else None
-
-
-def _load_for(path: str, role: str):
-    try:
-        return load_policy(path)
-    except PolicyFileError as exc:
-        raise ConfigError(f"{role} is not usable: {exc}. Train the previous stage first, or pass its path") from None
-
-
 def _check_teacher(cfg: TrainConfig) -> None:
-    if cfg.init_from is not None:
-        _load_for(cfg.init_from, "the policy this run starts from (init_from)")
-    if cfg.frozen_legs is not None:
-        if cfg.extrinsics_dim > 0:
-            raise ConfigError("with frozen_legs the actor observes the robot's measurements only: set "
-                              "extrinsics_dim=0 (RMA phase 2 is not built for a part of a composite policy)")
-        legs = _load_for(cfg.frozen_legs, "the frozen leg policy (frozen_legs)")
-        if legs.meta["robot"] != cfg.env.robot or legs.meta["arm_mode"] != cfg.env.teacher_arm_mode:
-            raise ConfigError(f"frozen leg policy {cfg.frozen_legs} drives {legs.meta['robot']} with arm "
-                              f"{legs.meta['arm_mode']!r}; this run needs {cfg.env.robot} with arm "
-                              f"{cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
-    if cfg.student is not None:
-        student = _load_for(cfg.student, "the student to fine-tune (student)")
+    student = check_inputs(cfg)
+    if student is not None:
         student_layout(student)  # one that reads its own history
         _check_student_env(student, cfg)
-        if cfg.extrinsics_dim != 0 or cfg.frozen_legs is not None or cfg.init_from is not None:
-            raise ConfigError("fine-tuning a student: the actor is the student (extrinsics_dim=0, no frozen_legs, "
-                              "no init_from)")
-    if cfg.expert_data is not None:
-        if cfg.student is None or cfg.bc is None:
-            raise ConfigError("expert_data is the BC term's target when fine-tuning a student: set student and bc too")
-        if not Path(cfg.expert_data).is_file():
-            raise ConfigError(f"expert samples {cfg.expert_data}: no such file; give a DAgger run's data.npz")
-        return
-    if cfg.bc is None:
-        return
-    if cfg.teacher is None:
-        raise ConfigError("TrainConfig.bc is set but no teacher policy file is given")
+
+
+def _check_checkpoint(path: Path) -> None:
+    """Refuse a checkpoint rsl-rl cannot load, before the env is built."""
     try:
-        teacher = load_policy(cfg.teacher)
-    except PolicyFileError as exc:
-        raise ConfigError(f"stage {cfg.stage} learns from the previous stage's policy, which is not usable: {exc}. "
-                          "Train the previous stage first, or pass --teacher PATH") from None
-    arm = cfg.env.arm_mode if cfg.student is not None else cfg.env.teacher_arm_mode  # a student teaches itself
-    if teacher.meta["robot"] != cfg.env.robot or teacher.meta["arm_mode"] != arm:
-        what = "the fine-tune" if cfg.student is not None else f"stage {cfg.stage}"
-        raise ConfigError(f"teacher {cfg.teacher} drives {teacher.meta['robot']} with arm "
-                          f"{teacher.meta['arm_mode']!r}; {what} needs {cfg.env.robot} with arm {arm!r}")
+        saved = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
+        raise ConfigError(f"--resume: {path}: not a readable checkpoint ({type(exc).__name__}: "
+                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); delete it to resume from the "
+                          "one before, or start a new run under another --run-root") from None
+    if not isinstance(saved, dict) or not isinstance(saved.get("iter"), int):
+        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: delete it to resume from the "
+                          "one before, or start a new run under another --run-root")
 
 
 def _check_student_env(student, cfg: TrainConfig) -> None:
@@ -206,26 +171,28 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
             `_RESUMABLE` fields (train longer with a larger max_iterations).
 
     Returns:
-        ``{"run_dir", "iterations", "env_steps", "wall_s", "policy"}``, and ``"replay"`` (the replay file of the
-        exported policy) unless the policy observes RMA extrinsics without an adaptation module to estimate them.
+        ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
+        ``trained``: in this call, 0 when a resumed run had already reached `max_iterations`), and ``"replay"`` (the
+        replay file of the exported policy) unless the policy observes RMA extrinsics without an adaptation module
+        to estimate them.
 
     Raises:
-        ConfigError: no checkpoint to resume from, a resumed config differs, or the teacher is missing/mismatched.
+        ConfigError: a new run in a directory that holds a run; no checkpoint to resume from, a damaged run directory
+            (config.json, progress.json, the newest checkpoint) or a resumed config that differs; or the teacher is
+            missing/mismatched.
     """
-    _check_teacher(cfg)
     run_dir = Path(cfg.run_dir)
     resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
-    checkpoint, progress = None, {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
-    if resume:
-        checkpoint = latest_checkpoint(run_dir)
-        if checkpoint is None:
-            raise ConfigError(f"--resume: no model_<it>.pt checkpoint in {run_dir}; start the run without --resume")
-        saved = json.loads((run_dir / "config.json").read_text())["train_config"]
-        diff = sorted(k for k in resolved if k not in _RESUMABLE and saved.get(k) != resolved[k])
-        if diff:
-            raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
-        if (run_dir / "progress.json").exists():
-            progress = json.loads((run_dir / "progress.json").read_text())
+    point = check_run_dir(cfg, resume=resume)
+    _check_teacher(cfg)
+    if point is not None:
+        _check_checkpoint(point.checkpoint)
+        if cfg.max_iterations <= point.done:  # nothing to train: the run stays as it is
+            replay = replay_path_for(run_dir / "policy")
+            return {"run_dir": str(run_dir), "iterations": point.done, "env_steps": point.progress["env_steps"],
+                    "wall_s": point.progress["wall_s"], "policy": str(run_dir / "policy.npz"), "trained": 0,
+                    **({"replay": str(replay)} if Path(replay).is_file() else {})}
+    progress = point.progress if point is not None else {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.torch_threads)
@@ -235,30 +202,35 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     else:
         history = student_layout(load_policy(cfg.student))[1] if cfg.student is not None else 0
         vec = RslVecEnv(env, device=cfg.device, history=history)
-    runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
     done = 0
-    if checkpoint is None and cfg.init_from is not None:
-        warm_start_actor(runner.alg.get_policy(), _load_for(cfg.init_from, "the policy this run starts from"),
-                         mask=None if cfg.action_mask is None else list(cfg.action_mask))
-    if checkpoint is not None:
-        runner.load(str(checkpoint), map_location=cfg.device)  # a run may resume on another device
-        done = runner.current_learning_iteration + 1
-        runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
-    else:
-        (run_dir / "config.json").write_text(json.dumps(
-            {"train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
-             "provenance": provenance(),
-             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
     try:
+        runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
+        if point is None and cfg.init_from is not None:
+            start = load_input_policy(cfg.init_from, "the policy this run starts from")
+            mask = None if cfg.action_mask is None else list(cfg.action_mask)
+            warm_start_actor(runner.alg.get_policy(), start, mask=mask)
+        if point is not None:
+            try:
+                runner.load(str(point.checkpoint), map_location=cfg.device)  # a run may resume on another device
+            except (RuntimeError, KeyError, ValueError) as exc:
+                raise ConfigError(f"--resume: {point.checkpoint}: does not fit this run's networks "
+                                  f"({type(exc).__name__}); start a new run under another --run-root") from None
+            done = runner.current_learning_iteration + 1
+            runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
+        else:
+            (run_dir / "config.json").write_text(json.dumps(
+                {"train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
+                 "provenance": provenance(),
+                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
         remaining = cfg.max_iterations - done
         if remaining > 0:
-            runner.learn(remaining, init_at_random_ep_len=checkpoint is None)
-        runner.export()
+            runner.learn(remaining, init_at_random_ep_len=point is None)
+            runner.export()
     finally:
         vec.close()
     final = json.loads((run_dir / "progress.json").read_text())
     result = {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
-              "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz")}
+              "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz"), "trained": max(remaining, 0)}
     if cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0:
         policy, summary = train_adaptation(load_policy(run_dir / "policy"), cfg.env, cfg.rma)
         save_policy(run_dir / "policy", policy)

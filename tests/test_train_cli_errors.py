@@ -1,0 +1,122 @@
+"""`wbc train`: refusals of bad runs and arguments, one line and status 2, and what a resumed run reports."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from wbc.cli.main import main
+
+TINY = ["--iterations", "1", "--envs", "1", "--rma-iterations", "0"]
+
+
+@pytest.fixture(scope="module")
+def stage1_run(tmp_path_factory) -> Path:
+    """A finished one-iteration push stage-1 run: its run root."""
+    pytest.importorskip("torch")
+    pytest.importorskip("rsl_rl")
+    root = tmp_path_factory.mktemp("runs")
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root)]) == 0
+    return root
+
+
+def _copy(root: Path, tmp_path: Path) -> Path:
+    """A copy of the run under `root`, its config.json naming where the copy lies (a resumed run must match it)."""
+    shutil.copytree(root, tmp_path / "runs")
+    config = tmp_path / "runs" / "push-stage1" / "config.json"
+    saved = json.loads(config.read_text())
+    saved["train_config"]["run_dir"] = str(config.parent)
+    config.write_text(json.dumps(saved, indent=2) + "\n")
+    return tmp_path / "runs"
+
+
+def _snapshot(run_dir: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(run_dir.iterdir()) if p.is_file()}
+
+
+def test_a_new_run_refuses_a_run_directory_that_holds_a_run(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)
+    before = _snapshot(root / "push-stage1")
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root)]) == 2
+    err = capsys.readouterr().err
+    assert "push-stage1 already holds a training run" in err and "--resume" in err and "--run-root" in err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert _snapshot(root / "push-stage1") == before
+    # a fine-tune's run directory too
+    run = root / "push-fine-tune"
+    run.mkdir()
+    (run / "config.json").write_text("{}")
+    assert main(["train", "--task", "push", "--fine-tune", "shipped", *TINY[:4], "--run-root", str(root)]) == 2
+    assert "push-fine-tune already holds a training run" in capsys.readouterr().err
+    assert (run / "config.json").read_text() == "{}"
+
+
+def test_a_resume_that_reaches_no_further_trains_nothing_and_says_so(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    before = _snapshot(run)
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume"]) == 0
+    out = capsys.readouterr().out
+    assert "already holds 1 iterations" in out and "nothing new trained" in out and "2 iterations" not in out
+    assert json.loads((run / "progress.json").read_text())["iteration"] == 0
+    assert json.loads((run / "policy.json").read_text())["training"]["iteration"] == 0
+    assert _snapshot(run) == before and not (run / "model_1.pt").exists()
+
+
+@pytest.mark.parametrize(("damage", "said"), [
+    (lambda run: (run / "config.json").unlink(), "config.json: no such file"),
+    (lambda run: (run / "config.json").write_text("{bad"), "config.json: not JSON"),
+    (lambda run: (run / "config.json").write_text("{}"), "config.json: train_config: missing"),
+    (lambda run: (run / "progress.json").write_text("nope"), "progress.json: not JSON"),
+    (lambda run: (run / "model_0.pt").write_text("text"), "model_0.pt: not a readable checkpoint"),
+])
+def test_resume_refuses_a_damaged_run_directory_in_one_line(stage1_run, tmp_path, capsys, damage, said):
+    root = _copy(stage1_run, tmp_path)
+    damage(root / "push-stage1")
+    capsys.readouterr()
+    argv = ["train", "--task", "push", "--stage", "1", "--iterations", "2", "--envs", "1", "--rma-iterations", "0",
+            "--run-root", str(root), "--resume"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert said in err and "--resume" in err and len(err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("where", [["--stage", "1"], ["--stage", "3", "--baseline", "ppo"]])
+def test_teacher_is_refused_where_it_does_not_apply(tmp_path, capsys, where):
+    argv = ["train", "--task", "push", *where, "--teacher", str(tmp_path / "missing.npz"), "--dry-run"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "--teacher does not apply to stage" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_mistyped_teacher_names_the_controllers_and_dry_run_checks_files(tmp_path, capsys):
+    assert main(["train", "--task", "push", "--teacher", "mcp", "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert "--teacher mcp is neither a controller nor a file" in err and "mpc" in err and "--stage" not in err
+    assert main(["train", "--task", "push", "--stage", "2", "--teacher", "mcp", "--dry-run"]) == 2
+    assert "--teacher mcp is neither a controller nor a file" in capsys.readouterr().err
+    missing = tmp_path / "student.npz"
+    assert main(["train", "--task", "push", "--fine-tune", str(missing), "--dry-run"]) == 2
+    assert f"--fine-tune {missing}: no such file" in capsys.readouterr().err
+
+
+def test_a_fine_tune_refuses_expert_samples_of_another_task(tmp_path, capsys):
+    pytest.importorskip("torch")
+    pytest.importorskip("rsl_rl")
+    dagger = tmp_path / "push-dagger-mpc"
+    dagger.mkdir()
+    (dagger / "data.npz").write_bytes(b"")  # refused before it is read
+    (dagger / "config.json").write_text(json.dumps({"dagger_config": {"task": "push", "expert": "mpc"}}))
+    argv = ["train", "--task", "turn", "--fine-tune", "shipped", "--expert-data", str(dagger / "data.npz"),
+            "--iterations", "1", "--envs", "1", "--run-root", str(tmp_path / "runs")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "data.npz: collected on task 'push' (a1-wx200" in err and "task 'turn' (go1-arm)" in err
+    assert not (tmp_path / "runs").exists()
+    assert main([*argv, "--dry-run"]) == 2
+    assert "collected on task 'push'" in capsys.readouterr().err

@@ -1,0 +1,196 @@
+"""Torch-free checks of a training run before it builds its env: its input files and its run directory.
+
+`check_inputs` loads the policy files a `TrainConfig` names (teacher, init_from, frozen_legs, student) and the expert
+samples of a fine-tune; `check_run_dir` refuses to start a run over another one and reads what a resumed run
+continues from (``config.json``, ``progress.json``, the newest ``model_<it>.pt``'s name). Both raise a `ConfigError`
+naming the file (and field), so ``wbc train --dry-run`` and `wbc.learned.train.train.train` check the same things.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from wbc.errors import ConfigError
+from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_policy
+from wbc.learned.train.stages import TASKS
+from wbc.learned.train.train_config import TrainConfig
+
+__all__ = ["RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "latest_checkpoint", "load_input_policy",
+           "names_a_file"]
+
+RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
+"""TrainConfig fields a resumed run may change; any other difference is refused."""
+
+_RUN_FILES = ("config.json", "progress.json", "policy.npz", "policy.json")
+"""Files of a run directory that say it already holds a run (besides ``model_<it>.pt`` checkpoints)."""
+
+
+@dataclass(frozen=True)
+class ResumePoint:
+    """Where a resumed run continues from.
+
+    Attributes:
+        checkpoint: the newest ``model_<it>.pt``.
+        done: iterations trained so far (the checkpoint's iteration + 1).
+        saved: the ``train_config`` object of the run's ``config.json``.
+        progress: ``progress.json`` (iteration, env_steps, wall_s), zeros when the file is absent.
+    """
+
+    checkpoint: Path
+    done: int
+    saved: dict[str, Any]
+    progress: dict[str, Any]
+
+
+def latest_checkpoint(run_dir: str | Path) -> Path | None:
+    """The ``model_<it>.pt`` with the highest iteration in `run_dir`, or None."""
+    found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
+             if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
+    return max(found)[1] if found else None
+
+
+def names_a_file(path: str | Path) -> bool:
+    """Whether `path` is a file, or the common stem of a policy's ``.npz``/``.json`` pair."""
+    p = Path(path)
+    return p.is_file() or Path(f"{p}.npz").is_file() or Path(f"{p}.json").is_file()
+
+
+def load_input_policy(path: str | Path, role: str) -> PolicyFile:
+    """Load a policy file a run reads, or raise a `ConfigError` naming its role and what is wrong."""
+    try:
+        return load_policy(path)
+    except PolicyFileError as exc:
+        raise ConfigError(f"{role} is not usable: {exc}. Train the previous stage first, or pass its path") from None
+
+
+def check_inputs(cfg: TrainConfig) -> PolicyFile | None:
+    """Check the files `cfg` reads: they load, and they drive the robot and arm the run needs.
+
+    Returns:
+        The student (`TrainConfig.student`), loaded, or None.
+
+    Raises:
+        ConfigError: a file is missing or unusable, drives another robot or arm, or the expert samples of a fine-tune
+            come from another task or robot.
+    """
+    if cfg.init_from is not None:
+        load_input_policy(cfg.init_from, "the policy this run starts from (init_from)")
+    if cfg.frozen_legs is not None:
+        if cfg.extrinsics_dim > 0:
+            raise ConfigError("with frozen_legs the actor observes the robot's measurements only: set "
+                              "extrinsics_dim=0 (RMA phase 2 is not built for a part of a composite policy)")
+        legs = load_input_policy(cfg.frozen_legs, "the frozen leg policy (frozen_legs)")
+        if legs.meta["robot"] != cfg.env.robot or legs.meta["arm_mode"] != cfg.env.teacher_arm_mode:
+            raise ConfigError(f"frozen leg policy {cfg.frozen_legs} drives {legs.meta['robot']} with arm "
+                              f"{legs.meta['arm_mode']!r}; this run needs {cfg.env.robot} with arm "
+                              f"{cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
+    student = None
+    if cfg.student is not None:
+        student = load_input_policy(cfg.student, "the student to fine-tune (student)")
+        if cfg.extrinsics_dim != 0 or cfg.frozen_legs is not None or cfg.init_from is not None:
+            raise ConfigError("fine-tuning a student: the actor is the student (extrinsics_dim=0, no frozen_legs, "
+                              "no init_from)")
+    if cfg.expert_data is not None:
+        if student is None or cfg.bc is None:
+            raise ConfigError("expert_data is the BC term's target when fine-tuning a student: set student and bc too")
+        _check_expert_data(cfg)
+        return student
+    if cfg.bc is None:
+        return student
+    if cfg.teacher is None:
+        raise ConfigError("TrainConfig.bc is set but no teacher policy file is given")
+    try:
+        teacher = load_policy(cfg.teacher)
+    except PolicyFileError as exc:
+        raise ConfigError(f"stage {cfg.stage} learns from the previous stage's policy, which is not usable: {exc}. "
+                          "Train the previous stage first, or pass --teacher PATH") from None
+    arm = cfg.env.arm_mode if cfg.student is not None else cfg.env.teacher_arm_mode  # a student teaches itself
+    if teacher.meta["robot"] != cfg.env.robot or teacher.meta["arm_mode"] != arm:
+        what = "the fine-tune" if cfg.student is not None else f"stage {cfg.stage}"
+        raise ConfigError(f"teacher {cfg.teacher} drives {teacher.meta['robot']} with arm "
+                          f"{teacher.meta['arm_mode']!r}; {what} needs {cfg.env.robot} with arm {arm!r}")
+    return student
+
+
+def _check_expert_data(cfg: TrainConfig) -> None:
+    """The expert's samples must come from the fine-tune's task (and so its robot), as its DAgger run's config says."""
+    path = Path(cfg.expert_data)
+    if not path.is_file():
+        raise ConfigError(f"expert samples {path}: no such file; give a DAgger run's data.npz")
+    config = path.parent / "config.json"
+    if config.is_file():  # a DAgger run's directory: its config names the task the samples were collected on
+        try:
+            task = json.loads(config.read_text())["dagger_config"]["task"]
+        except (OSError, ValueError, KeyError, TypeError):
+            task = None
+        if isinstance(task, str) and task != cfg.task:
+            robot = TASKS[task].robot if task in TASKS else "an unknown robot"
+            raise ConfigError(f"expert samples {path}: collected on task {task!r} ({robot}; {config} "
+                              f"dagger_config.task), the fine-tune is of task {cfg.task!r} ({cfg.env.robot}): give a "
+                              f"DAgger run's data.npz of task {cfg.task!r}")
+
+
+def _read_json(path: Path, what: str) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ConfigError(f"--resume: {path}: no such file; {what}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"--resume: {path}: not readable ({exc})") from None
+    except ValueError as exc:
+        raise ConfigError(f"--resume: {path}: not JSON ({exc}); the run directory is damaged: restore the file or "
+                          "start a new run under another --run-root") from None
+
+
+def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
+    """Check the run directory before anything is written or built.
+
+    Args:
+        cfg: the run.
+        resume: whether the run continues the one in ``cfg.run_dir``.
+
+    Returns:
+        Where a resumed run continues from, or None for a new run.
+
+    Raises:
+        ConfigError: a new run in a directory that holds a run; a resumed run without a checkpoint, with a missing or
+            damaged ``config.json`` or ``progress.json``, or with another config.
+    """
+    run_dir = Path(cfg.run_dir)
+    checkpoint = latest_checkpoint(run_dir)
+    if not resume:
+        held = [n for n in _RUN_FILES if (run_dir / n).exists()] + ([checkpoint.name] if checkpoint else [])
+        if held:
+            raise ConfigError(f"{run_dir} already holds a training run ({', '.join(held)}); pass --resume to continue "
+                              "it or choose another --run-root")
+        return None
+    if checkpoint is None:
+        raise ConfigError(f"--resume: no model_<it>.pt checkpoint in {run_dir}; start the run without --resume")
+    config = run_dir / "config.json"
+    data = _read_json(config, "the run directory is not a complete run: start a new run under another --run-root")
+    saved = data.get("train_config") if isinstance(data, dict) else None
+    if not isinstance(saved, dict):
+        raise ConfigError(f"--resume: {config}: train_config: missing or not an object; the run directory is damaged: "
+                          "start a new run under another --run-root")
+    resolved = json.loads(json.dumps(asdict(cfg), default=list))
+    diff = sorted(k for k in resolved if k not in RESUMABLE and saved.get(k) != resolved[k])
+    if diff:
+        raise ConfigError(f"--resume: {config} differs from this run's config in {diff}")
+    done = int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1)) + 1
+    progress: dict[str, Any] = {"iteration": done - 1, "env_steps": 0, "wall_s": 0.0}
+    path = run_dir / "progress.json"
+    if path.exists():
+        progress = _read_json(path, "")
+        kinds = {"iteration": int, "env_steps": int, "wall_s": (int, float)}
+        if not isinstance(progress, dict):
+            raise ConfigError(f"--resume: {path}: not a JSON object; restore it or delete it (the counts restart)")
+        for key, kind in kinds.items():
+            value = progress.get(key)
+            if not isinstance(value, kind) or isinstance(value, bool) or value < 0:
+                raise ConfigError(f"--resume: {path}: {key}: missing, negative or not a number; restore it or delete "
+                                  "the file (the counts restart)")
+    return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress)
