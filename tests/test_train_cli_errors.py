@@ -55,7 +55,7 @@ def test_a_new_run_refuses_a_run_directory_that_holds_a_run(stage1_run, tmp_path
     assert (run / "config.json").read_text() == "{}"
 
 
-def test_a_resume_that_reaches_no_further_trains_nothing_and_says_so(stage1_run, tmp_path, capsys):
+def test_a_resume_that_reaches_no_further_trains_nothing_and_exports_its_checkpoint(stage1_run, tmp_path, capsys):
     root = _copy(stage1_run, tmp_path)
     run = root / "push-stage1"
     before = _snapshot(run)
@@ -63,9 +63,13 @@ def test_a_resume_that_reaches_no_further_trains_nothing_and_says_so(stage1_run,
     assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume"]) == 0
     out = capsys.readouterr().out
     assert "already holds 1 iterations" in out and "nothing new trained" in out and "2 iterations" not in out
+    assert "its newest checkpoint is exported as it is" in out  # how an interrupted run is finished (the guide's)
     assert json.loads((run / "progress.json").read_text())["iteration"] == 0
     assert json.loads((run / "policy.json").read_text())["training"]["iteration"] == 0
-    assert _snapshot(run) == before and not (run / "model_1.pt").exists()
+    assert not (run / "model_1.pt").exists()
+    after = _snapshot(run)
+    for name in ("config.json", "model_0.pt"):  # the run itself untouched; its policy exported again
+        assert after[name] == before[name]
 
 
 @pytest.mark.parametrize(("damage", "said"), [

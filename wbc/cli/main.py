@@ -544,8 +544,8 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
     result = train(cfg, resume=args.resume)
     if result.get("trained", 1) == 0:
         print(f"{result['run_dir']} already holds {result['iterations']} iterations, no fewer than --iterations "
-              f"{cfg.max_iterations}: nothing new trained; pass a larger --iterations to train on")
-        return 0
+              f"{cfg.max_iterations}: nothing new trained; its newest checkpoint is exported as it is (pass a larger "
+              "--iterations to train on)")
     printers.print_trained(result, task=args.task, stage=stage, baseline=baseline)
     return 0
 

@@ -172,9 +172,9 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
 
     Returns:
         ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
-        ``trained``: in this call, 0 when a resumed run had already reached `max_iterations`), and ``"replay"`` (the
-        replay file of the exported policy) unless the policy observes RMA extrinsics without an adaptation module
-        to estimate them.
+        ``trained``: in this call, 0 when a resumed run had already reached `max_iterations`: its newest checkpoint is
+        then exported as it is, and the adaptation phase runs), and ``"replay"`` (the replay file of the exported
+        policy) unless the policy observes RMA extrinsics without an adaptation module to estimate them.
 
     Raises:
         ConfigError: a new run in a directory that holds a run; no checkpoint to resume from, a damaged run directory
@@ -187,11 +187,6 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     _check_teacher(cfg)
     if point is not None:
         _check_checkpoint(point.checkpoint)
-        if cfg.max_iterations <= point.done:  # nothing to train: the run stays as it is
-            replay = replay_path_for(run_dir / "policy")
-            return {"run_dir": str(run_dir), "iterations": point.done, "env_steps": point.progress["env_steps"],
-                    "wall_s": point.progress["wall_s"], "policy": str(run_dir / "policy.npz"), "trained": 0,
-                    **({"replay": str(replay)} if Path(replay).is_file() else {})}
     progress = point.progress if point is not None else {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(cfg.seed)
@@ -225,7 +220,11 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         remaining = cfg.max_iterations - done
         if remaining > 0:
             runner.learn(remaining, init_at_random_ep_len=point is None)
-            runner.export()
+        else:
+            # nothing left to train: the newest checkpoint is exported as it is (how an interrupted run is finished,
+            # phase 2 included), under its own iteration, not the next one
+            runner.current_learning_iteration = done - 1
+        runner.export()
     finally:
         vec.close()
     final = json.loads((run_dir / "progress.json").read_text())
