@@ -82,7 +82,7 @@ def test_bad_input_names_what_is_wrong():
         posture_study(["mpc"], robot="go2")
     with pytest.raises(ConfigError, match="cannot drive robot 'a1-wx200'"):
         posture_study(["policy:wbc/learned/weights/go1-arm-none"])
-    with pytest.raises(ConfigError, match="ramp_s"):
-        posture_study(["mpc"], duration_s=0.6)
+    with pytest.raises(ConfigError, match="ramp_s"):  # given: a ramp longer than half the episode
+        posture_study(["mpc"], duration_s=0.6, ramp_s=0.5)
     with pytest.raises(ConfigError, match="duration_s"):
         posture_study(["mpc"], duration_s=0.0)
