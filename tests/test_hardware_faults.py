@@ -202,6 +202,25 @@ def test_unitree_robot_reports_remote_and_motor_status_to_the_safety_layer() -> 
         assert robot.remote().l2_b and (robot.motor_status().motor_temperature == 80).all()
 
 
+def _trips_on_the_stale_timeout(rig: Rig, cmd: MotorCommand, fault: Fault) -> LoggedCommand:
+    """Inject `fault` into a running rig; the layer trips on the stale timeout and damps; the first damping frame.
+
+    The layer looks at every read and write (one control period apart): it trips at the first look after the stream
+    has brought no fresh state for the stale timeout, and the damping goes out in the next link period; the stand hold
+    goes out until then, damping only from then on.
+    """
+    safe = rig.safe
+    last_state_at = rig.clock.now() - safe.robot.state_age  # the newest state came in this link period
+    injected, tripped, first = _inject_until_damped(rig, cmd, fault, reason="stale_state", seconds=0.5)
+    timeout = safe.config.stale_timeout_s
+    assert timeout < tripped - last_state_at <= timeout + PERIOD + TIME_EPS
+    _assert_damping_in_the_next_frame(rig.emu, tripped, first)
+    frames = _after(rig.emu, injected)
+    assert all(not c.damping for c in frames if c.time < first.time)
+    assert all(c.damping for c in frames if c.time >= first.time)
+    return first
+
+
 # -- 1: the state stream stops ------------------------------------------------------------------------------------
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_silence_damps_within_the_stale_timeout_latches_and_ramps_after_reset(robot: str) -> None:
@@ -209,16 +228,7 @@ def test_silence_damps_within_the_stale_timeout_latches_and_ramps_after_reset(ro
         emu, safe = rig.emu, rig.safe
         cmd = _stand(safe)
         _run_to(safe, cmd, SafetyState.RUN)
-        last_state_at = rig.clock.now() - safe.robot.state_age  # the newest state came in this link period
-        silenced, tripped, first = _inject_until_damped(rig, cmd, Fault.SILENCE, reason="stale_state", seconds=0.5)
-        timeout = safe.config.stale_timeout_s
-        # the layer looks at every read and write (one control period apart): it trips at the first look after the
-        # stream has been silent for the stale timeout, and the damping goes out in the next link period
-        assert timeout < tripped - last_state_at <= timeout + PERIOD + TIME_EPS
-        _assert_damping_in_the_next_frame(emu, tripped, first)
-        frames = _after(emu, silenced)
-        assert all(not c.damping for c in frames if c.time < first.time)  # the stand hold until then
-        assert all(c.damping for c in frames if c.time >= first.time)
+        first = _trips_on_the_stale_timeout(rig, cmd, Fault.SILENCE)
         safe.read()
         with pytest.raises(SafetyResetError, match="stale"):
             safe.reset()  # nothing fresh to ramp from while the stream is silent
@@ -243,16 +253,10 @@ def test_a_stream_of_bad_or_dropped_states_damps_as_a_silent_one_does(fault: Fau
         emu, safe = rig.emu, rig.safe
         cmd = _stand(safe)
         _run_to(safe, cmd, SafetyState.RUN)
-        last_state_at = rig.clock.now() - safe.robot.state_age
         before = safe.robot.link_stats()
-        injected, tripped, first = _inject_until_damped(rig, cmd, fault, reason="stale_state", seconds=0.5)
+        first = _trips_on_the_stale_timeout(rig, cmd, fault)
         after = safe.robot.link_stats()
         timeout = safe.config.stale_timeout_s
-        assert timeout < tripped - last_state_at <= timeout + PERIOD + TIME_EPS
-        _assert_damping_in_the_next_frame(emu, tripped, first)
-        frames = _after(emu, injected)
-        assert all(not c.damping for c in frames if c.time < first.time)  # the stand hold until then
-        assert all(c.damping for c in frames if c.time >= first.time)
         assert after.valid_states - before.valid_states <= 1  # a state already on its way when the fault came
         refused = {Fault.FOREIGN_PORT: after.foreign - before.foreign, Fault.DROP: 0}.get(
             fault, after.rejected_states - before.rejected_states)
