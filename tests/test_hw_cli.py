@@ -166,7 +166,7 @@ def test_non_loopback_target_is_refused_before_any_socket(target: str, no_socket
     assert not no_socket
 
 
-@pytest.mark.parametrize("local", ["192.0.2.7:0", "0.0.0.0:9000", "10.0.0.2:8007"])
+@pytest.mark.parametrize("local", ["192.0.2.7:0", "0.0.0.0:9000", "198.51.100.2:8007"])
 def test_a_local_address_of_a_real_network_is_refused_before_any_socket(local: str, no_socket: list,
                                                                         capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "check", "--target", "127.0.0.1:9", "--local", local]) == 2

@@ -265,48 +265,46 @@ def _confirm_hardware(command: str, robot: str, devices: list[tuple[str, str]], 
         raise TargetRefusedError(f"not confirmed (got {answer.strip()!r}, not 'yes'): nothing was sent to {where}")
 
 
-def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
-    """``--target`` as (host, port), refused unless loopback or ``--allow-hardware`` (before any socket exists).
+def _hardware_address(text: str, option: str, purpose: str, allow_hardware: bool, *,
+                      binds: bool = False) -> tuple[str, int]:
+    """An address option (``HOST:PORT``) as (host, port), refused unless loopback or ``--allow-hardware``.
+
+    The policy is checked here, before any socket exists (the viewer's included), so that the refusal names the
+    command's own switch.
 
     Args:
-        args: the command's arguments (``target``, ``allow_hardware``).
-        purpose: what a real robot would be used for, for the refusal (``check a real robot``).
+        text: the option's value.
+        option: ``--target`` or ``--local``, for the messages.
+        purpose: what a real robot would be used for (``check a real robot``).
+        allow_hardware: the command's ``--allow-hardware``.
+        binds: an address to bind (``--local``): port 0 (any free port) is valid.
 
     Raises:
         ConfigError: not HOST:PORT.
         TargetRefusedError: not an IPv4 literal, a bad port, or a real network without ``--allow-hardware``.
     """
-    host, port = _address(args.target, "--target")
-    # the policy is checked here, before any socket exists, so the refusal can name the command's own switch
-    check_target(host, port, allow_hardware=True, what="--target")  # an IPv4 literal and a valid port
-    if not args.allow_hardware and not is_loopback(host):
+    host, port = _address(text, option)
+    if binds and port > 65535:
+        raise TargetRefusedError(f"{option} port {port} is out of range 0..65535 (0: any free port)")
+    check_target(host, max(port, 1) if binds else port, allow_hardware=True, what=option)  # an IPv4 literal
+    if not allow_hardware and not is_loopback(host):
+        refusing = "bind a real network's interface" if binds else "send to a real network"
         raise TargetRefusedError(
-            f"--target {host}:{port} is outside 127.0.0.0/8: refusing to send to a real network. To {purpose}, add "
+            f"{option} {host}:{port} is outside 127.0.0.0/8: refusing to {refusing}. To {purpose}, add "
             "--allow-hardware (you will be asked to type yes; --yes confirms when stdin is not a terminal)")
     return host, port
 
 
+def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
+    """``--target`` as (host, port), through `_hardware_address`."""
+    return _hardware_address(args.target, "--target", purpose, args.allow_hardware)
+
+
 def _hardware_local(args: argparse.Namespace, purpose: str) -> tuple[str, int] | None:
-    """``--local`` as (host, port), or None when not given; refused unless loopback or ``--allow-hardware``.
-
-    Checked with ``--target``, before any socket exists (the viewer's included): binding a real network's interface
-    is using that network.
-
-    Raises:
-        ConfigError: not HOST:PORT.
-        TargetRefusedError: not an IPv4 literal, or a real network's address without ``--allow-hardware``.
-    """
+    """``--local`` as (host, port) through `_hardware_address`, or None when not given (a bound interface is used)."""
     if args.local is None:
         return None
-    host, port = _address(args.local, "--local")
-    if port > 65535:
-        raise TargetRefusedError(f"--local port {port} is out of range 0..65535 (0: any free port)")
-    check_target(host, max(port, 1), allow_hardware=True, what="--local")  # an IPv4 literal
-    if not args.allow_hardware and not is_loopback(host):
-        raise TargetRefusedError(
-            f"--local {host}:{port} is outside 127.0.0.0/8: refusing to bind a real network's interface. To {purpose}, "
-            "add --allow-hardware (you will be asked to type yes; --yes confirms when stdin is not a terminal)")
-    return host, port
+    return _hardware_address(args.local, "--local", purpose, args.allow_hardware, binds=True)
 
 
 def _hardware_arm_port(args: argparse.Namespace, purpose: str) -> str | None:

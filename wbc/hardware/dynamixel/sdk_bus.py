@@ -346,11 +346,10 @@ def sdk_handlers(port: str, latency_ms: float = 1.0, *, allow_hardware: bool = F
         SerialPortError: `port` names an in-process bus, which only `in_process_handlers` reaches (the SDK would open
             a file of that name).
     """
-    check_serial_port(port, allow_hardware=allow_hardware or port.startswith(IN_PROCESS_PREFIX),
-                      what="sdk_handlers port")
     if port.startswith(IN_PROCESS_PREFIX):
         raise SerialPortError(port, "an in-process bus is reached through in_process_handlers (the emulator's "
                                     "arm_handlers / port_handlers), never opened as a file")
+    check_serial_port(port, allow_hardware=allow_hardware, what="sdk_handlers port")
     sdk = require("dynamixel_sdk")
     return _low_latency_port_handler()(port, latency_ms), sdk.PacketHandler(2.0)
 
