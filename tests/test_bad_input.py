@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from wbc.arena.episode import Episode, PushLog
+from wbc.arena.executors import LocalExecutor
 from wbc.arena.identity import RunIdentity, ScenarioRef, SimulatedRunIdentity
 from wbc.arena.results import episode_path
 from wbc.cli.main import main
@@ -255,6 +256,8 @@ def test_other_flags_state_their_range_and_out_may_not_be_a_file(tmp_path, capsy
         (["view", "stand", "--trial", "0", "--speed", "inf"], "argument --speed: must be a finite number in [0, 100]"),
         (["bench", "mpc", "--seconds", "inf"], "argument --seconds: must be a finite number in (0, 14400] s"),
         (["hw", "emulate", "--seconds", "0"], "argument --seconds: must be a finite number in (0, 14400] s"),
+        (["train", "--task", "push", "--teacher", "mpc", "--episode-s", "nan"],
+         "argument --episode-s: must be a finite number in (0, 600] s, got 'nan'"),
         (["compare", "stand", "mpc", "--scenario", "x.toml", "--until-significant", "--alpha", "1"],
          "argument --alpha: must be a finite number in (0, 1)"),
     ):
@@ -404,3 +407,30 @@ def test_posture_takes_an_episode_shorter_than_its_default_ramp():
 
     rows = posture_study(["stand"], duration_s=0.4)  # the command's ramp shortens to half the episode
     assert [r.fell for r in rows] == [False, False]
+
+
+def test_options_that_would_do_nothing_are_refused_naming_what_they_need(tmp_path, capsys, monkeypatch):
+    base = ["--scenario", "scenarios/push.toml", "--trials", "1", "--out", str(tmp_path / "o")]
+    assert "--speed sets how --view shows the run, and nothing is viewed: add --view, or leave it out" in _cli_error(
+        capsys, ["run", "stand", *base, "--speed", "0.5"])
+    assert "--host and --speed set how --view shows the run" in _cli_error(
+        capsys, ["compare", "stand", "mpc", *base, "--host", "127.0.0.1", "--speed", "0"])
+    assert "--host sets how --view shows the run" in _cli_error(
+        capsys, ["hw", "run", "stand", "--robot", "go1", "--scenario", "scenarios/push.toml", "--trial", "0", "--sim",
+                 "--host", "127.0.0.1"])
+    assert "--address auto names a Ray cluster, which the local executor does not use: add --executor ray" in \
+        _cli_error(capsys, ["run", "stand", *base, "--address", "auto"])
+    assert "--workers 1 with --address auto: a Ray cluster's CPUs are its own" in _cli_error(
+        capsys, ["run", "stand", *base, "--executor", "ray", "--address", "auto", "--workers", "1"])
+    assert not (tmp_path / "o").exists()
+    # without --address, --workers sizes the Ray this machine starts
+    made = []
+
+    class Recorder(LocalExecutor):  # plays the trials in a local pool, so that the run finishes as on Ray
+        def __init__(self, address, num_cpus):
+            made.append((address, num_cpus))
+            super().__init__(1, None)
+
+    monkeypatch.setattr("wbc.arena.compare.RayExecutor", Recorder)
+    assert main(["run", "stand", *base, "--executor", "ray", "--workers", "1", "--band", "in", "--quiet"]) == 0
+    assert made == [(None, 1)]

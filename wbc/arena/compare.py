@@ -63,8 +63,9 @@ class ArenaConfig:
         trials: trials per (band, seed).
         out_dir: results directory.
         executor: ``local`` or ``ray``.
-        workers: local worker processes (None: all cores).
-        address: Ray cluster address (None: a local Ray).
+        workers: local worker processes, or with the Ray executor and no `address` the CPUs of the Ray it starts
+            on this machine (None: all cores).
+        address: Ray cluster address (None: a Ray started on this machine); Ray executor only.
         resume: finish an interrupted run in `out_dir`.
         drop_bad_rows: with `resume`, drop the rows of ``trials.csv`` the results store refuses (edited, corrupted,
             repeated, of another scenario file; `wbc.arena.trial_record.scan_csv`) and play their trials again;
@@ -121,6 +122,13 @@ class ArenaConfig:
             raise ConfigError(f"--trials must be >= 1, got {self.trials}; pass --trials 1 or more")
         if not self.seeds:
             raise ConfigError("at least one seed is needed; pass --seeds 1 or more")
+        if self.address is not None and self.executor != "ray":
+            raise ConfigError(f"--address {self.address} names a Ray cluster, which the {self.executor} executor "
+                              "does not use: add --executor ray, or leave --address out")
+        if self.address is not None and self.workers is not None:
+            raise ConfigError(f"--workers {self.workers} with --address {self.address}: a Ray cluster's CPUs are its "
+                              "own; --workers sizes the local pool, or the Ray started on this machine without "
+                              "--address")
         if self.observer is not None and self.executor != "local":
             raise ConfigError("a live view (--view) watches trials played in this process: use the local executor")
         if self.until_significant:
@@ -292,7 +300,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         keys = [(t, c) for t in trials for c in cfg.controllers if (c, *t.key) not in done]
         tasks = (task(t, c) for t, c in keys if not guard.stopped(c))
         todo = len(keys)
-    executor = (RayExecutor(cfg.address) if cfg.executor == "ray" else LocalExecutor(cfg.workers, cfg.observer))
+    executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
+                LocalExecutor(cfg.workers, cfg.observer))
     bar = progress(total, total - todo, cfg.progress)
     start = time.perf_counter()
     steps = 0

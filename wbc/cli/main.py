@@ -401,6 +401,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
         the outcome ``controller_error``); 130 when interrupted.
     """
+    _view_options(args)
     if args.sim == (args.target is not None):
         raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
                           "protocol on the simulator; not both")
@@ -667,9 +668,30 @@ def _check_resumable(args: argparse.Namespace) -> None:
                               "path, or start the run without --resume")
 
 
+_VIEW_OPTIONS = {"host": "127.0.0.1", "speed": 1.0}
+"""The options that say how ``--view`` shows a run, and their values with ``--view`` when not given."""
+
+
+def _view_options(args: argparse.Namespace) -> None:
+    """Fill in ``--host`` / ``--speed``'s defaults, or refuse them without ``--view``, where they would do nothing.
+
+    Raises:
+        ConfigError: either is given without ``--view``.
+    """
+    names = [name for name in _VIEW_OPTIONS if hasattr(args, name)]
+    given = [f"--{name}" for name in names if getattr(args, name) is not None]
+    if given and not args.view:
+        raise ConfigError(f"{' and '.join(given)} {'set' if len(given) > 1 else 'sets'} how --view shows the run, "
+                          f"and nothing is viewed: add --view, or leave {'them' if len(given) > 1 else 'it'} out")
+    for name in names:
+        if getattr(args, name) is None:
+            setattr(args, name, _VIEW_OPTIONS[name])
+
+
 def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_significant: bool = False,
            alpha: float = 0.05) -> int:
     seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
+    _view_options(args)
     _check_resumable(args)
     out = Path(args.out) if args.out else Path("runs") / (
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")

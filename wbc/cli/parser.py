@@ -188,8 +188,10 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help="print summary.json instead of the table")
     p.add_argument("--executor", default="local", help="local (process pool, default) or ray")
     p.add_argument("--workers", type=_WORKERS, default=None,
-                   help=f"local worker processes, 1..{MAX_WORKERS} (default: all cores)")
-    p.add_argument("--address", default=None, help="Ray cluster address (default: start a local Ray)")
+                   help=f"worker processes, 1..{MAX_WORKERS}, or with --executor ray the CPUs of the Ray it starts "
+                        "(default: all cores)")
+    p.add_argument("--address", default=None,
+                   help="with --executor ray: the cluster's address (default: start a Ray on this machine)")
     _add_resume_options(p)
     p.add_argument("--max-consecutive-errors", type=bounded_int(0, MAX_TRIALS), default=DEFAULT_MAX_CONSECUTIVE_ERRORS,
                    metavar="K",
@@ -203,9 +205,9 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
                    help="also store every trial's episode log under OUT/episodes/ (for `wbc view --episode`)")
     p.add_argument("--view", action="store_true",
                    help="watch the trials live in the browser (meshcat); they then play one by one in this process")
-    p.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
-    p.add_argument("--speed", type=_SPEED, default=1.0,
-                   help="with --view: 1 real time, 0.25 slow motion, 0 flat out (0..100)")
+    p.add_argument("--host", default=None, help="with --view: address to listen on (default 127.0.0.1)")
+    p.add_argument("--speed", type=_SPEED, default=None,
+                   help="with --view: 1 real time (default), 0.25 slow motion, 0 flat out (0..100)")
     add_controller_file_options(p, repeatable=True)
 
 
@@ -552,7 +554,7 @@ def _add_hw_run_parser(hws: _Commands) -> None:
                        help="results directory (default: runs/hw-<scenario>-<ctrl>-<time>)")
     hwrun.add_argument("--view", action="store_true",
                        help="watch the robot live in the browser (meshcat), drawn from its own sensors")
-    hwrun.add_argument("--host", default="127.0.0.1", help="with --view: address to listen on (default 127.0.0.1)")
+    hwrun.add_argument("--host", default=None, help="with --view: address to listen on (default 127.0.0.1)")
     add_controller_file_options(hwrun, repeatable=False)
     hwrun.set_defaults(handler="hw run")
 
@@ -593,7 +595,7 @@ def _add_train_parser(sub: _Commands) -> None:
                          "(default 8)")
     tr.add_argument("--episodes", type=bounded_int(1, 1_000_000), default=None,
                     help="with a controller as --teacher: episodes per DAgger round (default 20)")
-    tr.add_argument("--episode-s", type=float, default=None,
+    tr.add_argument("--episode-s", type=_EPISODE_S, default=None,
                     help="with a controller as --teacher: play only the first seconds of each episode")
     tr.add_argument("--history", type=bounded_int(0, 200), default=None,
                     help="with a controller as --teacher: observations (policy ticks) the student's adaptation "
