@@ -351,7 +351,10 @@ def test_the_velocity_offset_integrates_the_clipped_error_in_the_yaw_frame_up_to
     cfg = MpcControllerConfig(velocity_ki=2.0, velocity_error_clip=0.1, velocity_offset_limit=0.25)
     ctrl = MpcController(get_robot("a1-wx200"), cfg)
     ctrl.reference.targets[0] = np.pi / 2  # facing world +y
-    ctrl.estimator.x[3:6] = (0.0, 1.0, 0.0)  # 1 m/s forward in the yaw frame
+    # the velocity the last tick planned from, 1 m/s forward in the yaw frame: the estimate, or the simulator's with
+    # the debug truth (the estimator, not run then, still reads 0: an integral of its velocity ran the robot away)
+    ctrl.kin.place(np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    ctrl.estimator.x[3:6] = 0.0
     ctrl._integrate_velocity(VelocityCommand(vx=1.05, vy=-0.3, yaw_rate=0.4))
     command = ctrl._offset(VelocityCommand(vx=1.05, vy=-0.3, yaw_rate=0.4))
     # error (0.05, -0.3), clipped to (0.05, -0.1), times ki dt = 2 / 500

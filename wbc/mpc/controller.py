@@ -370,13 +370,14 @@ class MpcController:
     def _integrate_velocity(self, command: VelocityCommand) -> None:
         """Integrate the last tick's velocity error into `velocity_offset` (`velocity_ki`).
 
-        The error is the command's against the estimated velocity of the last tick, both in the frame of the yaw
-        measured then; the offset is kept in that frame, so it turns with the robot. A few floats a tick: the
-        command object with the offset is made only where a Python stage reads it (`_offset`).
+        The error is the command's against the base velocity the last tick planned from (the estimate, or the
+        simulator's with the debug truth), both in the frame of the yaw measured then; the offset is kept in that
+        frame, so it turns with the robot. A few floats a tick: the command object with the offset is made only
+        where a Python stage reads it (`_offset`).
         """
-        x, yaw = self.estimator.x, self.reference.yaw
+        v, yaw = self.kin.base_velocity, self.reference.yaw
         c, s = math.cos(yaw), math.sin(yaw)
-        vx_world, vy_world = x.item(3), x.item(4)
+        vx_world, vy_world = v.item(0), v.item(1)
         clip, limit, gain = self._velocity_clip, self._velocity_limit, self._ki * self.dt
         ex = command.vx - (c * vx_world + s * vy_world)
         ey = command.vy - (-s * vx_world + c * vy_world)
