@@ -1,6 +1,7 @@
 """The main job's pieces: progress that a CI log can read, the trial the demo suggests watching, and the template
 controller entering the arena from a checkout exactly as the README shows it."""
 
+import dataclasses
 import io
 import math
 import os
@@ -75,6 +76,15 @@ def test_the_demo_suggests_the_trial_the_controllers_ended_differently():
     assert (watch.controller, watch.trial) == ("mpc", 1) and "380 N" in watch.why
     assert (watch.other, watch.at_s) == ("learned", None)
     assert trial_to_watch([], ("mpc", "learned")) is None
+    # a run that raised neither fell nor stood: not a trial the two ended differently, and not one to watch
+    raised = dataclasses.replace(_record("learned", 0, success=False, fall=10.0), outcome="controller_error",
+                                 fall_time_s=math.nan,
+                                 error="learned raised RuntimeError at tick 3")
+    records = [_record("mpc", 0, force=300.0), raised, _record("mpc", 1, force=200.0),
+               _record("learned", 1, force=200.0, roll=9.0)]
+    watch = trial_to_watch(records, ("mpc", "learned"))
+    assert (watch.controller, watch.trial) == ("mpc", 0) and "nan" not in watch.why and watch.other is None
+    assert trial_to_watch([raised], ("mpc", "learned")) is None
 
 
 def test_the_template_enters_the_arena_from_a_checkout_as_the_readme_shows(tmp_path):

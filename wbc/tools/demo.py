@@ -46,11 +46,13 @@ def trial_to_watch(records: Sequence[TrialRecord], controllers: Sequence[str]) -
     """The most telling trial of a comparison.
 
     A trial the controllers ended differently (one fell, another survived), watched with the one that fell; else
-    the trial with the strongest push, watched with the controller that rolled most in it. None without records.
+    the trial with the strongest push, watched with the controller that rolled most in it. Only runs that stood or
+    fell are watched: one that ended otherwise (a controller error, a safety trip, a stop, diverged physics) has no
+    fall to show, and a controller that raised would raise again in the viewer. None without a run to watch.
     """
     by_trial: dict[tuple[str, int, int], dict[str, TrialRecord]] = {}
     for r in records:
-        if r.controller in controllers:
+        if r.controller in controllers and r.outcome in ("success", "fall"):
             by_trial.setdefault(r.pair_key, {})[r.controller] = r
     if not by_trial:
         return None
