@@ -422,6 +422,11 @@ def test_options_that_would_do_nothing_are_refused_naming_what_they_need(tmp_pat
         _cli_error(capsys, ["run", "stand", *base, "--address", "auto"])
     assert "--workers 1 with --address auto: a Ray cluster's CPUs are its own" in _cli_error(
         capsys, ["run", "stand", *base, "--executor", "ray", "--address", "auto", "--workers", "1"])
+    assert "--duration with --episode: a stored episode replays the trial it ran, whole" in _cli_error(
+        capsys, ["view", "--episode", str(tmp_path), "--trial", "0", "--duration", "1"])
+    assert "--scenario and --duration with --episode" in _cli_error(
+        capsys, ["view", "stand", "--episode", str(tmp_path), "--scenario", "scenarios/push.toml", "--trial", "0",
+                 "--duration", "1", "--record", str(tmp_path / "r.html")])
     assert not (tmp_path / "o").exists()
     # without --address, --workers sizes the Ray this machine starts
     made = []

@@ -794,6 +794,14 @@ def _view(args: argparse.Namespace) -> int:
         save_episode=save,
         export_scenario=Path(args.export_scenario) if args.export_scenario else None,
     )
+    if args.episode is not None:
+        # a stored episode replays as it was run: its trial comes from the results directory, whole
+        given = [name for name, value in (("--scenario", args.scenario), ("--duration", args.duration))
+                 if value is not None]
+        if given:
+            raise ConfigError(f"{' and '.join(given)} with --episode: a stored episode replays the trial it ran, "
+                              "whole (use --pause-at T or --at T to reach a moment); leave "
+                              f"{'them' if len(given) > 1 else 'it'} out")
     ctrls = list(args.ctrl or [])
     if len(ctrls) > 2:
         raise ConfigError(f"wbc view takes one controller, or two for an A / B view; got {len(ctrls)}: "
