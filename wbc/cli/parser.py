@@ -480,7 +480,8 @@ def _add_hw_check_parser(hws: _Commands) -> None:
     check = hws.add_parser("check", help="connect to a robot, damping only, and print its state (never moves it)",
                            description="Connect the robot (the legs' UnitreeRobot, and the arm's DynamixelArm with "
                            "--arm-port), read states for a while through the safety layer, sending only damping "
-                           "(Kp 0: no servo command is ever sent), and print the state: joints with the ranges the "
+                           "(legs Kp 0, the arm's joints damped; no controller's command is sent; connecting the arm "
+                           "may switch its servos to current mode in EEPROM, torque off first), and print the state: joints with the ranges the "
                            "layer checks, motor modes and temperatures, IMU roll and pitch, battery, remote buttons, "
                            "the layer's verdict (would a ramp start from here, or what it refuses), link and bus "
                            "statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port that is not "
