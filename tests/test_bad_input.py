@@ -422,11 +422,28 @@ def test_options_that_would_do_nothing_are_refused_naming_what_they_need(tmp_pat
         _cli_error(capsys, ["run", "stand", *base, "--address", "auto"])
     assert "--workers 1 with --address auto: a Ray cluster's CPUs are its own" in _cli_error(
         capsys, ["run", "stand", *base, "--executor", "ray", "--address", "auto", "--workers", "1"])
-    assert "--duration with --episode: a stored episode replays the trial it ran, whole" in _cli_error(
+    # wbc view: what a stored replay, an A / B page or a recording without --live does not use
+    assert "--duration with --episode: a stored episode replays the run stored, whole" in _cli_error(
         capsys, ["view", "--episode", str(tmp_path), "--trial", "0", "--duration", "1"])
     assert "--scenario and --duration with --episode" in _cli_error(
         capsys, ["view", "stand", "--episode", str(tmp_path), "--scenario", "scenarios/push.toml", "--trial", "0",
                  "--duration", "1", "--record", str(tmp_path / "r.html")])
+    assert "--controller-config and --save-episode with --episode" in _cli_error(
+        capsys, ["view", "--episode", str(tmp_path), "--trial", "0", "--controller-config", "x.toml",
+                 "--save-episode", str(tmp_path / "e.npz")])
+    trial = ["--scenario", "scenarios/push.toml", "--trial", "0", "--duration", "0.1"]
+    assert "--controller picks whose stored run --episode replays" in _cli_error(
+        capsys, ["view", "stand", *trial, "--controller", "mpc", "--record", str(tmp_path / "r.html")])
+    assert "--save-episode and --live with two controllers" in _cli_error(
+        capsys, ["view", "stand", "mpc", *trial, "--save-episode", str(tmp_path / "e.npz"), "--live"])
+    assert "--speed and --pause-at and --paused plays no part here: this view is only recorded" in _cli_error(
+        capsys, ["view", "stand", *trial, "--record", str(tmp_path / "r.html"), "--speed", "0.5", "--paused",
+                 "--pause-at", "0.05"])
+    assert "--host and --wait plays no part here" in _cli_error(
+        capsys, ["view", "stand", "mpc", *trial, "--host", "127.0.0.1", "--wait"])
+    assert "--live streams a recorded view as well" in _cli_error(capsys, ["view", "stand", *trial, "--live"])
+    assert "--at opens a recorded page at a moment" in _cli_error(capsys, ["view", "stand", *trial, "--at", "1"])
+    assert not list(tmp_path.glob("*.html")) and not list(tmp_path.glob("*.npz"))
     assert not (tmp_path / "o").exists()
     # without --address, --workers sizes the Ray this machine starts
     made = []

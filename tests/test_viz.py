@@ -317,7 +317,7 @@ def test_replay_errors_name_the_file_and_field(results_dir, tmp_path):
         load_stored_episode(changed, 0)
 
 
-def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys):
+def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys, monkeypatch):
     assert main(["view", "--episode", str(results_dir), "--trial", "9", "--record", str(tmp_path / "x.html")]) == 2
     assert "field trials" in capsys.readouterr().err
     assert main(["view", "stand", "--scenario", str(short), "--trial", "0", "--record", str(tmp_path / "x.txt")]) == 2
@@ -325,10 +325,17 @@ def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys):
     assert main(["view", "nope", "--scenario", str(short), "--trial", "0", "--record", str(tmp_path / "x.html")]) == 2
     assert "unknown controller 'nope'" in capsys.readouterr().err
     out = tmp_path / "cli.html"
+    opened = []
+    monkeypatch.setattr("wbc.viz.view.webbrowser.open", lambda url, new=0: opened.append(url))
     assert main(["view", "stand", "--scenario", str(short), "--trial", "0", "--duration", "0.5",
-                 "--record", str(out)]) == 0
+                 "--record", str(out), "--open"]) == 0
     assert "recorded 25 frames" in capsys.readouterr().out
     assert out.stat().st_size > 100_000
+    # nothing served: --open opens the page written, as it does a stored run's replay
+    assert opened == [out.resolve().as_uri()]
+    assert main(["view", "--episode", str(results_dir), "--trial", "1", "--record", str(tmp_path / "r.html"),
+                 "--open"]) == 0
+    assert opened[1] == (tmp_path / "r.html").resolve().as_uri()
 
 
 # -- pacing ----------------------------------------------------------------------------------------------------------

@@ -779,6 +779,7 @@ def _view(args: argparse.Namespace) -> int:
     from wbc.viz.player import PlayerConfig
     from wbc.viz.view import ViewConfig, replay_episode, view_trial
 
+    _view_refusals(args)
     record = Path(args.record) if args.record else None
     if record is not None and (record.suffix.lower() not in (".html", ".htm") or not record.parent.is_dir()):
         raise ViewerError(f"--record {record}: give an .html file in an existing directory")
@@ -787,21 +788,13 @@ def _view(args: argparse.Namespace) -> int:
         # checked before the trial plays (numpy would add .npz to any other name, or fail after the trial)
         raise ViewerError(f"--save-episode {save}: give an .npz file in an existing directory")
     cfg = ViewConfig(
-        live=record is None or args.live, host=args.host, record=record, record_fps=args.fps,
-        player=PlayerConfig(speed=args.speed, pause_at=tuple(args.pause_at or ()), step_s=args.step,
-                            start_paused=args.paused),
+        live=record is None or args.live, host=args.host or "127.0.0.1", record=record, record_fps=args.fps,
+        player=PlayerConfig(speed=1.0 if args.speed is None else args.speed, pause_at=tuple(args.pause_at or ()),
+                            step_s=0.02 if args.step is None else args.step, start_paused=args.paused),
         open_browser=args.open, wait_for_browser=args.wait,
         save_episode=save,
         export_scenario=Path(args.export_scenario) if args.export_scenario else None,
     )
-    if args.episode is not None:
-        # a stored episode replays as it was run: its trial comes from the results directory, whole
-        given = [name for name, value in (("--scenario", args.scenario), ("--duration", args.duration))
-                 if value is not None]
-        if given:
-            raise ConfigError(f"{' and '.join(given)} with --episode: a stored episode replays the trial it ran, "
-                              "whole (use --pause-at T or --at T to reach a moment); leave "
-                              f"{'them' if len(given) > 1 else 'it'} out")
     ctrls = list(args.ctrl or [])
     if len(ctrls) > 2:
         raise ConfigError(f"wbc view takes one controller, or two for an A / B view; got {len(ctrls)}: "
@@ -834,6 +827,41 @@ def _view(args: argparse.Namespace) -> int:
         if args.at is not None:
             print(f"open: {result.recording.resolve().as_uri()}#t={args.at:g}")
     return 0
+
+
+def _view_refusals(args: argparse.Namespace) -> None:
+    """Refuse the ``wbc view`` options that this view would not use, naming what each needs, before anything plays."""
+    def refuse(given: list[str], why: str) -> None:
+        if given:
+            raise ConfigError(f"{' and '.join(given)} {why}; leave {'them' if len(given) > 1 else 'it'} out")
+
+    ab, stored = len(args.ctrl or []) == 2, args.episode is not None
+    live = not ab and (args.record is None or args.live)
+    if not stored:
+        refuse(["--controller"] if args.controller is not None else [],
+               "picks whose stored run --episode replays: without --episode, name the controller as CTRL")
+    else:
+        # a stored episode replays as it was run: its trial and its controller's run come from the results directory
+        refuse([name for name, value in (("--scenario", args.scenario), ("--duration", args.duration),
+                                         ("--controller-config", args.controller_config), ("--io", args.io),
+                                         ("--save-episode", args.save_episode)) if value is not None],
+               "with --episode: a stored episode replays the run stored, whole (--pause-at T or --at T reach a "
+               "moment)")
+    if ab:
+        refuse([name for name, value in (("--save-episode", args.save_episode), ("--live", args.live or None))
+                if value is not None],
+               "with two controllers: an A / B view is written to one page, never streamed, and saves no episode "
+               "(view one controller for those)")
+    if args.live and args.record is None:
+        raise ConfigError("--live streams a recorded view as well (with --record); without --record the view is "
+                          "live already: leave --live out")
+    if not live:
+        refuse([name for name, value in (("--host", args.host), ("--speed", args.speed), ("--step", args.step),
+                                         ("--pause-at", args.pause_at), ("--paused", args.paused or None),
+                                         ("--wait", args.wait or None)) if value is not None],
+               "plays no part here: this view is only recorded (with one controller, --live streams it too)")
+    elif args.record is None and args.at is not None:
+        raise ConfigError("--at opens a recorded page at a moment: add --record FILE.html, or use --pause-at T live")
 
 
 def _view_trial(args: argparse.Namespace) -> Trial:

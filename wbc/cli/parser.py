@@ -702,17 +702,19 @@ def _add_view_parser(sub: _Commands) -> None:
     view.add_argument("--episode", default=None, metavar="RESULTS_DIR",
                       help="replay a stored episode from a `wbc run --save-episodes` results directory")
     view.add_argument("--controller", default=None, help="with --episode: whose episode (default: the only one)")
-    view.add_argument("--host", default="127.0.0.1",
-                      help="address the viewer listens on (default 127.0.0.1: this machine only)")
-    view.add_argument("--speed", type=_SPEED, default=1.0, help="1 real time, 0.25 slow motion, 0 flat out (0..100)")
+    view.add_argument("--host", default=None,
+                      help="address the live viewer listens on (default 127.0.0.1: this machine only)")
+    view.add_argument("--speed", type=_SPEED, default=None,
+                      help="live: 1 real time (the default), 0.25 slow motion, 0 flat out (0..100)")
     view.add_argument("--pause-at", type=bounded_float(0.0, MAX_DURATION_S, unit="s"), action="append", metavar="T",
-                      help="pause at trial time T (repeatable)")
-    view.add_argument("--paused", action="store_true", help="start paused (then s to step, p to play)")
-    view.add_argument("--step", type=bounded_float(0.0, 10.0, lo_open=True, unit="s"), default=0.02,
-                      help="trial time of one single step, up to 10 [s] (default 0.02)")
+                      help="live: pause at trial time T (repeatable)")
+    view.add_argument("--paused", action="store_true", help="live: start paused (then s to step, p to play)")
+    view.add_argument("--step", type=bounded_float(0.0, 10.0, lo_open=True, unit="s"), default=None,
+                      help="live: trial time of one single step, up to 10 [s] (default 0.02)")
     view.add_argument("--record", default=None, metavar="FILE.html", help="write a self-contained HTML replay")
     view.add_argument("--fps", type=bounded_float(0.0, 240.0, lo_open=True), default=50.0,
-                      help="with --record: frames per second, up to 240 (default 50)")
+                      help="frames per second of the trial page's replay (recorded, or the live trial page), up "
+                      "to 240 (default 50)")
     view.add_argument("--live", action="store_true", help="with --record: also stream live")
     view.add_argument("--save-episode", default=None, metavar="FILE.npz",
                       help="write the episode played, with the pushes and commands set from the live page")
@@ -720,9 +722,10 @@ def _add_view_parser(sub: _Commands) -> None:
                       help="write a scenario (unpublished) whose trials replay this one as played, with the pushes "
                       "and commands set from the live page, for every controller")
     view.add_argument("--at", type=bounded_float(0.0, MAX_DURATION_S, unit="s"), default=None, metavar="T",
-                      help="open the recorded page at trial time T (its URL ends #t=T)")
-    view.add_argument("--open", action="store_true", help="open the page in the default browser")
-    view.add_argument("--wait", action="store_true", help="start once a browser has opened the page")
+                      help="with --record: open the recorded page at trial time T (its URL ends #t=T)")
+    view.add_argument("--open", action="store_true",
+                      help="open the page in the default browser (the live one, or else the recorded one)")
+    view.add_argument("--wait", action="store_true", help="live: start once a browser has opened the page")
     add_controller_file_options(view, repeatable=False)
     view.set_defaults(handler="view")
 

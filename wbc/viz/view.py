@@ -57,7 +57,7 @@ class ViewConfig:
         record: write a self-contained HTML replay here (None: no recording).
         record_fps: frames per second of the recording [1/s].
         player: pacing of the live view.
-        open_browser: open the page in the default browser.
+        open_browser: open the page in the default browser: the served page live, else the recorded one.
         wait_for_browser: play only once a browser has connected.
         keep_open: after the trial, keep the server up until q is typed (only when stdin is a terminal).
         save_episode: write the episode (with the pushes and commands set from the page) to this ``.npz``.
@@ -170,6 +170,12 @@ def _start_live(cfg: ViewConfig) -> tuple[MeshcatServer, LiveViewer, Player]:
     return server, viewer, Player(cfg.player, controls)
 
 
+def _open_recorded(cfg: ViewConfig, written: Path) -> None:
+    """With ``open_browser`` and nothing served, open the recorded page (a live view opens its served page)."""
+    if cfg.open_browser and not cfg.live:
+        webbrowser.open(written.resolve().as_uri(), new=2)
+
+
 def _linger(cfg: ViewConfig, player: Player) -> None:
     """Keep the page served after the trial until the person types q (stdin a terminal only)."""
     controls = player.controls
@@ -233,6 +239,7 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
         if cfg.record is not None:
             written = save_trial_page(cfg.record, observer.recordings[-1], [signals], title=title,
                                       duration=trial.duration_s)
+            _open_recorded(cfg, written)
             done = time.perf_counter()
             if not cfg.live:
                 timing = RecordingTime(total_s=done - started, viewer_s=watch.seconds + done - ran)
@@ -317,6 +324,7 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
         signals = TrialSignals.of_episode(stored.controller, stored.episode).thinned(cfg.record_fps)
         written = save_trial_page(cfg.record, rec, [signals], duration=stored.trial.duration_s,
                                   title=f"{stored.controller}: {_trial_name(stored.trial)} (replay)")
+        _open_recorded(cfg, written)
         recorded, paths = rec.frames, rec.paths
     if cfg.live:
         server, viewer, player = _start_live(cfg)
