@@ -418,6 +418,22 @@ def test_options_that_would_do_nothing_are_refused_naming_what_they_need(tmp_pat
     assert "--host sets how --view shows the run" in _cli_error(
         capsys, ["hw", "run", "stand", "--robot", "go1", "--scenario", "scenarios/push.toml", "--trial", "0", "--sim",
                  "--host", "127.0.0.1"])
+    sim = ["hw", "run", "stand", "--robot", "go1", "--scenario", "scenarios/push.toml", "--trial", "0", "--sim"]
+    assert "--rate, --transport, --no-io-process, --no-realtime with --sim: the simulator plays the trial in this " \
+        "process" in _cli_error(capsys, [*sim, "--rate", "200", "--transport", "udp", "--no-io-process",
+                                         "--no-realtime"])
+    assert "--allow-hardware, --yes with --sim" in _cli_error(capsys, [*sim, "--allow-hardware", "--yes"])
+    assert "--yes confirms using real hardware, which --allow-hardware asks for" in _cli_error(
+        capsys, ["hw", "check", "--robot", "go1", "--target", "127.0.0.1:9", "--yes", "--seconds", "0.1"])
+    assert "--rt-priority and --rt-cpu with --no-realtime" in _cli_error(
+        capsys, ["hw", "emulate", "--robot", "go1", "--seconds", "0.1", "--no-realtime", "--rt-priority", "50",
+                 "--rt-cpu", "0"])
+    assert "--stand times a stand through the safety layer, which --no-safety leaves out" in _cli_error(
+        capsys, ["bench", "hw", "--seconds", "0.1", "--stand", "0.5", "--no-safety", "--no-realtime"])
+    assert "--robot names the wire's robot, and --no-wire measures no wire" in _cli_error(
+        capsys, ["bench", "latency", "--no-wire", "--robot", "a1", "--controllers", "stand", "--trials", "1"])
+    assert "--alpha sets the significance level at which --until-significant stops" in _cli_error(
+        capsys, ["compare", "stand", "mpc", *base, "--alpha", "0.01"])
     assert "--address auto names a Ray cluster, which the local executor does not use: add --executor ray" in \
         _cli_error(capsys, ["run", "stand", *base, "--address", "auto"])
     assert "--workers 1 with --address auto: a Ray cluster's CPUs are its own" in _cli_error(

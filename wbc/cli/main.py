@@ -36,7 +36,7 @@ from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.io_process import build_process_robot
-from wbc.hardware.realtime import AUTO_CPU, CONTROLLER_PRIORITY_BELOW, NO_REALTIME, RealtimeRequest
+from wbc.hardware.realtime import AUTO_CPU, CONTROLLER_PRIORITY_BELOW, DEFAULT_RT_PRIORITY, NO_REALTIME, RealtimeRequest
 from wbc.hardware.serial_port_policy import is_emulated_port
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
@@ -142,10 +142,14 @@ def _bench_train(args: argparse.Namespace) -> int:
 
 def _bench_hw(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
-    if not args.stand > 0:
-        raise ConfigError(f"--stand must be > 0 s, got {args.stand}")
+    if args.no_safety and args.stand is not None:
+        raise ConfigError("--stand times a stand through the safety layer, which --no-safety leaves out; leave one "
+                          "of them out")
+    stand = 10.0 if args.stand is None else args.stand
+    if not stand > 0:
+        raise ConfigError(f"--stand must be > 0 s, got {stand}")
     result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport,
-                      stand_seconds=None if args.no_safety else args.stand,
+                      stand_seconds=None if args.no_safety else stand,
                       realtime=realtime_request(args, place="last"),
                       emulator_realtime=realtime_request(args, place="first"))
     if args.json:
@@ -157,8 +161,11 @@ def _bench_hw(args: argparse.Namespace) -> int:
 
 def _bench_latency(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
-    result = bench_latency(tuple(args.controllers), wire_robot=args.robot, scenario=args.scenario,
-                           trials=args.trials, wire=not args.no_wire)
+    if args.no_wire and args.robot is not None:
+        raise ConfigError("--robot names the wire's robot, and --no-wire measures no wire (the margins play the "
+                          "scenario's robot); leave one of them out")
+    result = bench_latency(tuple(args.controllers), wire_robot="go1" if args.robot is None else args.robot,
+                           scenario=args.scenario, trials=args.trials, wire=not args.no_wire)
     if args.json:
         printers.print_json(result.as_dict())
     else:
@@ -296,7 +303,10 @@ def _hardware_address(text: str, option: str, purpose: str, allow_hardware: bool
 
 
 def _hardware_target(args: argparse.Namespace, purpose: str) -> tuple[str, int]:
-    """``--target`` as (host, port), through `_hardware_address`."""
+    """``--target`` as (host, port), through `_hardware_address`; ``--yes`` is refused without ``--allow-hardware``."""
+    if args.yes and not args.allow_hardware:
+        raise ConfigError("--yes confirms using real hardware, which --allow-hardware asks for: without it nothing "
+                          "asks to be confirmed; add --allow-hardware, or leave --yes out")
     return _hardware_address(args.target, "--target", purpose, args.allow_hardware)
 
 
@@ -379,9 +389,19 @@ def hw_check(args: argparse.Namespace, *,
 def realtime_request(args: argparse.Namespace, *, place: str) -> RealtimeRequest:
     """The `RealtimeRequest` of ``--rt-priority``, ``--rt-cpu`` and ``--no-realtime`` (`place`: the default CPU)."""
     if args.no_realtime:
+        given = [name for name, value in (("--rt-priority", args.rt_priority), ("--rt-cpu", args.rt_cpu))
+                 if value is not None]
+        if given:
+            raise ConfigError(f"{' and '.join(given)} with --no-realtime: ordinary scheduling has no priority and "
+                              f"no CPU of its own; leave {'them' if len(given) > 1 else 'it'} out, or --no-realtime")
         return NO_REALTIME
-    return RealtimeRequest(priority=args.rt_priority, cpu=AUTO_CPU if args.rt_cpu is None else args.rt_cpu,
+    return RealtimeRequest(priority=_rt_priority(args), cpu=AUTO_CPU if args.rt_cpu is None else args.rt_cpu,
                            place=place)
+
+
+def _rt_priority(args: argparse.Namespace) -> int:
+    """``--rt-priority``, or its default."""
+    return DEFAULT_RT_PRIORITY if args.rt_priority is None else args.rt_priority
 
 
 def _hw_run(args: argparse.Namespace) -> int:
@@ -405,6 +425,20 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
     if args.sim == (args.target is not None):
         raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
                           "protocol on the simulator; not both")
+    if args.sim:
+        given = [name for name, value in (
+            ("--local", args.local), ("--arm-port", args.arm_port), ("--rate", args.rate),
+            ("--transport", args.transport), ("--io-process" if args.io_process else "--no-io-process",
+                                              args.io_process), ("--rt-priority", args.rt_priority),
+            ("--rt-cpu", args.rt_cpu), ("--no-realtime", args.no_realtime or None),
+            ("--allow-hardware", args.allow_hardware or None), ("--yes", args.yes or None)) if value is not None]
+        if given:
+            raise ConfigError(f"{', '.join(given)} with --sim: the simulator plays the trial in this process, with "
+                              "no link, devices, ports or real-time scheduling to set; leave "
+                              f"{'them' if len(given) > 1 else 'it'} out, or give --target")
+    args.rate = 500.0 if args.rate is None else args.rate
+    args.transport = "udp" if args.transport is None else args.transport
+    args.io_process = True if args.io_process is None else args.io_process
     host, port = _hardware_target(args, "run a trial on a real robot") if not args.sim else (None, None)
     local = _hardware_local(args, "run a trial on a real robot")
     arm_port = _hardware_arm_port(args, "run a trial on a real arm")
@@ -432,7 +466,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
             # the controller's loop below the devices, on any CPU: it must write before their deadline, never
             # pre-empt them (`controller_realtime`)
             cfg = dataclasses.replace(cfg, controller_realtime=RealtimeRequest(
-                priority=max(1, args.rt_priority - CONTROLLER_PRIORITY_BELOW), cpu=None, lock_memory=False))
+                priority=max(1, _rt_priority(args) - CONTROLLER_PRIORITY_BELOW), cpu=None, lock_memory=False))
 
         def build(config: HardwareRobotConfig) -> HardwareRobot:
             return make(dataclasses.replace(config, realtime=request))
@@ -744,7 +778,12 @@ def _compare(args: argparse.Namespace) -> int:
     if len(named) < 2:
         raise ConfigError(f"wbc compare needs two or more controllers to compare, got {named[0]}; to play one "
                           "controller, use wbc run")
-    return _arena(args, tuple(args.controllers), until_significant=args.until_significant, alpha=args.alpha)
+    if args.alpha is not None and not args.until_significant:
+        raise ConfigError("--alpha sets the significance level at which --until-significant stops, and a comparison "
+                          "of a fixed number of trials has no stop (its report gives each test's p-value): add "
+                          "--until-significant, or leave --alpha out")
+    return _arena(args, tuple(args.controllers), until_significant=args.until_significant,
+                  alpha=0.05 if args.alpha is None else args.alpha)
 
 
 def _paper(args: argparse.Namespace) -> int:

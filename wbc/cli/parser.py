@@ -231,13 +231,14 @@ _NAMES_HELP = (f"{', '.join(CONTROLLERS)}; policy:PATH (an exported policy file)
 
 def add_realtime_options(p: argparse.ArgumentParser, *, who: str, cpu: str) -> None:
     """``--rt-priority``, ``--rt-cpu``, ``--no-realtime``: what `who` asks the OS for (`wbc.hardware.realtime`)."""
-    p.add_argument("--rt-priority", type=bounded_int(1, 99), default=DEFAULT_RT_PRIORITY, metavar="N",
+    p.add_argument("--rt-priority", type=bounded_int(1, 99), default=None, metavar="N",
                    help=f"real-time priority (SCHED_FIFO) of {who}, 1..99 (default {DEFAULT_RT_PRIORITY}); refused "
                    "without CAP_SYS_NICE or an rtprio limit, and then it runs with ordinary scheduling and says so")
     p.add_argument("--rt-cpu", type=bounded_int(0, 4095), default=None, metavar="CPU",
                    help=f"the CPU {who} runs on (default: the {cpu} CPU where there are several)")
     p.add_argument("--no-realtime", action="store_true",
-                   help=f"run {who} with ordinary scheduling, on any CPU, memory not locked")
+                   help=f"run {who} with ordinary scheduling, on any CPU, memory not locked (then --rt-priority "
+                   "and --rt-cpu are refused)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -381,7 +382,7 @@ def _add_bench_hw_parser(bench: _Commands) -> None:
                      help="how long the link is measured [s] (default 3, at most 4 h)")
     bhw.add_argument("--rate", type=_LINK_RATE, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
     bhw.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
-    bhw.add_argument("--stand", type=bounded_float(0.0, MAX_HOURS_S, unit="s"), default=10.0,
+    bhw.add_argument("--stand", type=bounded_float(0.0, MAX_HOURS_S, unit="s"), default=None,
                      help="then time the safety layer's reactions (e-stop, silence, stall, hot motor -> damping on "
                      "the wire) and a stand of this many seconds through it, in real time [s] (default 10)")
     bhw.add_argument("--no-safety", action="store_true", help="the link's timing only (no safety reactions, no stand)")
@@ -416,7 +417,8 @@ def _add_bench_latency_parser(bench: _Commands) -> None:
                             "simulated actuation + sensing delay equivalent to it, and the largest actuation delay "
                             "at which each controller stands still and survives a push.")
     blat.add_argument("--controllers", nargs="+", default=["stand", "mpc"], help="controllers (default stand mpc)")
-    blat.add_argument("--robot", default="go1", help=f"the wire's robot, one of: {', '.join(DESCRIPTIONS)}")
+    blat.add_argument("--robot", default=None,
+                      help=f"the wire's robot, one of: {', '.join(DESCRIPTIONS)} (default go1)")
     blat.add_argument("--scenario", default="scenarios/push.toml", help="scenario of the margin trials")
     blat.add_argument("--trials", type=bounded_int(1, 1000), default=2,
                       help="standing trials per margin test, 1..1000 (default 2)")
@@ -481,11 +483,12 @@ def _add_hw_check_parser(hws: _Commands) -> None:
                            description="Connect the robot (the legs' UnitreeRobot, and the arm's DynamixelArm with "
                            "--arm-port), read states for a while through the safety layer, sending only damping "
                            "(legs Kp 0, the arm's joints damped; no controller's command is sent; connecting the arm "
-                           "may switch its servos to current mode in EEPROM, torque off first), and print the state: joints with the ranges the "
-                           "layer checks, motor modes and temperatures, IMU roll and pitch, battery, remote buttons, "
-                           "the layer's verdict (would a ramp start from here, or what it refuses), link and bus "
-                           "statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port that is not "
-                           "a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
+                           "may switch its servos to current mode in EEPROM, torque off first), and print the state: "
+                           "joints with the ranges the layer checks, motor modes and temperatures, IMU roll and "
+                           "pitch, battery, remote buttons, the layer's verdict (would a ramp start from here, or "
+                           "what it refuses), link and bus statistics, rejected frames. A target outside "
+                           "127.0.0.0/8, or an --arm-port that is not a pseudo-terminal, needs --allow-hardware and "
+                           "a typed confirmation (or --yes).")
     check.add_argument("--robot", default="go1", help=f"one of: {_ROBOT_NAMES_HELP} (default go1)")
     check.add_argument("--target", required=True, metavar="HOST:PORT",
                        help="the robot's (or an emulator's) IPv4 address and UDP port, e.g. 127.0.0.1:PORT")
@@ -540,9 +543,9 @@ def _add_hw_run_parser(hws: _Commands) -> None:
                        "--arm-port that is not a pty")
     hwrun.add_argument("--yes", action="store_true",
                        help="with --allow-hardware: do not ask for confirmation (needed when stdin is not a terminal)")
-    hwrun.add_argument("--rate", type=_LINK_RATE, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
-    hwrun.add_argument("--transport", default="udp", help=_TRANSPORT_HELP)
-    hwrun.add_argument("--io-process", action=argparse.BooleanOptionalAction, default=True,
+    hwrun.add_argument("--rate", type=_LINK_RATE, default=None, help="link rate, 200..1000 [Hz] (default 500)")
+    hwrun.add_argument("--transport", default=None, help=_TRANSPORT_HELP)
+    hwrun.add_argument("--io-process", action=argparse.BooleanOptionalAction, default=None,
                        help="run the robot's devices (legs link, arm bus) in a child process with its own interpreter "
                        "lock, so that the controller cannot starve them, and that damps the legs when this process "
                        "dies (default; --no-io-process: in this process, for debugging: if it dies, the legs' motors "
@@ -644,7 +647,7 @@ def _add_compare_parser(sub: _Commands) -> None:
                          help="play round by round (a trial index and seed, every band, every controller) and stop "
                          "once an anytime-valid sequential test has settled every pair's success difference in every "
                          "band (family-wise error <= --alpha at any stop); --trials is then the most played")
-    compare.add_argument("--alpha", type=bounded_float(0.0, 1.0, lo_open=True, hi_open=True), default=0.05,
+    compare.add_argument("--alpha", type=bounded_float(0.0, 1.0, lo_open=True, hi_open=True), default=None,
                          help="with --until-significant: the family-wise significance level (default 0.05)")
     compare.set_defaults(handler="compare")
 
