@@ -33,13 +33,21 @@ PUSH = str(ROOT / "scenarios" / "push.toml")
 
 MPC_SETTINGS = [
     ("foo = 1\n", "MpcControllerConfig: unknown key 'foo'; valid keys: rate_hz,"),
-    ("[mpc]\nhorizon = 0\n", "MpcConfig.horizon must be an integer >= 1, got 0"),
-    ("[mpc]\nhorizon = -3\n", "MpcConfig.horizon must be an integer >= 1, got -3"),
+    ("[mpc]\nhorizon = 0\n", "MpcConfig.horizon must be an integer in [1, 100], got 0"),
+    ("[mpc]\nhorizon = -3\n", "MpcConfig.horizon must be an integer in [1, 100], got -3"),
     ("contact_force = 0.0\n", "MpcControllerConfig.contact_force must be a finite number > 0, got 0.0"),
     ("rate_hz = 0.0\n", "MpcControllerConfig.rate_hz must be a finite number > 0, got 0.0"),
     ("joint_kd = nan\n", "MpcControllerConfig.joint_kd must be a finite number >= 0, got nan"),
     ("body_height = nan\n", "MpcControllerConfig.body_height must be a finite number > 0, got nan"),
     ("swing_kp = -700.0\n", "MpcControllerConfig.swing_kp must be a finite number >= 0, got -700.0"),
+    # values no robot can hold: a horizon whose dense QP would fill the memory, a CoM above the straight legs, an
+    # arm box with no room (each ran before, unnoticed, or ran the machine out of memory)
+    ("[mpc]\nhorizon = 100000000\n", "MpcConfig.horizon must be an integer in [1, 100], got 100000000"),
+    ("[mpc]\nhorizon = 99999999999999999999999\n", "MpcConfig.horizon must be an integer in [1, 100], got 9999"),
+    ("body_height = 5.0\n", "MpcControllerConfig.body_height must be below a1-wx200's straight leg (thigh + calf, "
+                            "0.400 m), which cannot hold the CoM higher; got 5.0"),
+    ("[mpc]\narm_margin = 10.0\n", "MpcConfig.arm_margin must be below half the narrowest arm joint's range "
+                                    "(1.684 rad), got 10.0"),
 ]
 """A settings file for ``wbc.mpc.config_table:make`` and what the error says about it (after the file's path)."""
 
@@ -67,9 +75,14 @@ def test_wbc_run_names_the_settings_file_and_the_field_it_refuses(tmp_path, caps
 
 
 @pytest.mark.parametrize(("text", "says"), [
-    ("[tail]\nhorizon = 0\n", "TailMpcConfig.horizon must be an integer >= 1, got 0"),
+    ("[tail]\nhorizon = 0\n", "TailMpcConfig.horizon must be an integer in [1, 100], got 0"),
     ("[base]\ncontact_force = 0.0\n", "MpcControllerConfig.contact_force must be a finite number > 0, got 0.0"),
     ("[base.mpc]\nfz_max = 5.0\n", "MpcConfig.fz_max must be above fz_min (10.0), got 5.0"),
+    ("ready_q = 0.5\n", "TailControllerConfig.ready_q must be 3 finite angles (waist, shoulder, elbow) [rad], got "
+                        "0.5"),
+    ("ready_q = [1e9, 0, 0]\n", "TailControllerConfig.ready_q must be within a1-wx200's arm joint limits (waist, "
+                                "shoulder, elbow: [-3.14, 3.14], [-1.40, 1.97], [-1.88, 1.62] rad)"),
+    ("[tail]\narm_margin = 10.0\n", "TailMpcConfig.arm_margin must be below half the narrowest arm joint's range"),
 ])
 def test_the_tail_mpcs_settings_file_is_named_too(tmp_path, capsys, text, says):
     path = _settings(tmp_path, text)
@@ -81,7 +94,7 @@ def test_wbc_compare_names_the_file_of_the_plugin_it_was_given_for(tmp_path, cap
     path = _settings(tmp_path, "[mpc]\nhorizon = 0\n")
     _refused(capsys, ["compare", "stand", "wbc.mpc.config_table:make", "--controller-config", str(path),
                       "--scenario", PUSH, "--trials", "1", "--out", str(tmp_path / "out"), "--quiet"], path,
-             "MpcConfig.horizon must be an integer >= 1, got 0")
+             "MpcConfig.horizon must be an integer in [1, 100], got 0")
 
 
 def test_wbc_hw_run_names_the_file_before_the_trial(tmp_path, capsys):
@@ -97,7 +110,8 @@ def test_check_controller_reports_the_file_in_its_failed_build(tmp_path, capsys)
     assert main(["check-controller", "wbc.mpc.config_table:make", "--controller-config", str(path),
                  "--robot", "a1-wx200"]) == 1
     out = capsys.readouterr().out
-    assert f"FAIL build    make raised ConfigError: {path}: MpcConfig.horizon must be an integer >= 1, got 0" in out
+    assert (f"FAIL build    make raised ConfigError: {path}: MpcConfig.horizon must be an integer in [1, 100], got "
+            "0") in out
 
 
 def test_a_plugins_own_value_error_names_the_file_in_the_factory_errors_format(tmp_path, capsys, monkeypatch):
@@ -147,7 +161,8 @@ def test_the_factory_sent_to_workers_carries_the_file_it_names(tmp_path):
     factory = PluginFactory("wbc.mpc.config_table:make", None, {"mpc": {"horizon": 0}}, str(tmp_path / "c.toml"))
     again = pickle.loads(pickle.dumps(factory))
     assert again == factory
-    with pytest.raises(ConfigError, match=rf"^{tmp_path / 'c.toml'}: MpcConfig\.horizon must be an integer >= 1"):
+    with pytest.raises(ConfigError,
+                       match=rf"^{tmp_path / 'c.toml'}: MpcConfig\.horizon must be an integer in \[1, 100\]"):
         again(get_robot("a1-wx200"))
 
 

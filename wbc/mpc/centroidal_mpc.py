@@ -136,6 +136,26 @@ def pyramid_faces(pyramid: str) -> tuple[tuple[float, float], ...]:
     return (*axes, (d, d), (d, -d), (-d, d), (-d, -d))
 
 
+MAX_HORIZON = 100
+"""The most steps an MPC horizon may have: its dense QP grows with the square of the steps (100 steps of the default
+0.032 s, 3.2 s, is ten times the default and beyond any horizon a push or a turn needs)."""
+
+
+def arm_box(lower: np.ndarray, upper: np.ndarray, margin: float, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """The arm joints' limits `margin` inside [`lower`, `upper`] [rad].
+
+    Raises:
+        ConfigError: a margin that leaves a joint no room (named in `where`).
+    """
+    lo = np.asarray(lower, dtype=np.float64) + margin
+    hi = np.asarray(upper, dtype=np.float64) - margin
+    if not np.all(lo < hi):
+        room = float(np.min(np.asarray(upper) - np.asarray(lower))) / 2.0
+        raise ConfigError(f"{where}.arm_margin must be below half the narrowest arm joint's range ({room:.3f} rad), "
+                          f"got {margin!r}: it leaves that joint no room")
+    return lo, hi
+
+
 def check_force_terms(config: Any, where: str) -> None:
     """Check the settings `MpcConfig` and the tail MPC's `TailMpcConfig` share (the horizon, forces and body terms).
 
@@ -144,11 +164,11 @@ def check_force_terms(config: Any, where: str) -> None:
         where: the class name, for the messages.
 
     Raises:
-        ConfigError: `horizon` not an integer >= 1, `dt`, `force_scale` not positive, `fz_min` negative, `fz_max` not
-            above it, a negative `weight_force`, `arm_margin` or `full_weight_speed`, `standstill_weight_factor`
-            outside [0, 1], or any of them not finite (named in `where`).
+        ConfigError: `horizon` not an integer in [1, `MAX_HORIZON`], `dt`, `force_scale` not positive, `fz_min`
+            negative, `fz_max` not above it, a negative `weight_force`, `arm_margin` or `full_weight_speed`,
+            `standstill_weight_factor` outside [0, 1], or any of them not finite (named in `where`).
     """
-    check_number(f"{where}.horizon", config.horizon, at_least=1, integer=True)
+    check_number(f"{where}.horizon", config.horizon, at_least=1, at_most=MAX_HORIZON, integer=True)
     check_number(f"{where}.dt", config.dt, above=0.0)
     check_number(f"{where}.fz_min", config.fz_min, at_least=0.0)
     check_number(f"{where}.fz_max", config.fz_max, above=0.0)
@@ -302,8 +322,7 @@ class CentroidalMpc:
         self.last_problem: MpcProblem | None = None
         self.last_warm_start: np.ndarray | None = None
         n = config.horizon
-        self._arm_lower = np.asarray(arm_lower, dtype=np.float64) + config.arm_margin
-        self._arm_upper = np.asarray(arm_upper, dtype=np.float64) - config.arm_margin
+        self._arm_lower, self._arm_upper = arm_box(arm_lower, arm_upper, config.arm_margin, "MpcConfig")
         self._arm_vmax = np.asarray(arm_velocity_limit, dtype=np.float64)
         scale = np.ones(NU)
         scale[:12] = config.force_scale

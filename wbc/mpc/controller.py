@@ -31,6 +31,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
+import pinocchio as pin
 
 from wbc.config_checks import check_number
 from wbc.errors import ConfigError
@@ -46,7 +47,7 @@ from wbc.mpc.leg_layer import FORCE_BEFORE_PLAN, LegLayer
 from wbc.mpc.plan_targets import PlanTargets
 from wbc.mpc.reference import XY_LEASH_M, YAW_LEASH_RAD, MotionReference
 from wbc.mpc.whole_body import WholeBodyConfig, WholeBodyQp
-from wbc.robots.description import ARM_JOINTS, RobotDescription, joint_gains
+from wbc.robots.description import ARM_JOINTS, FOOT_NAMES, RobotDescription, joint_gains
 from wbc.robots.euler import rpy_of, yaw_of
 from wbc.robots.joint_table import joint_table
 from wbc.types import BaseTruth, MotorCommand, RobotState, VelocityCommand
@@ -161,6 +162,17 @@ class MpcControllerConfig:
                               "mpc.dt, duty 0.5, offsets 0 and 0.5)")
 
 
+def leg_length(model: pin.Model) -> float:
+    """The shortest leg's length, straight: thigh (hip to knee) plus calf (knee to foot) [m]."""
+    lengths = []
+    for foot in FOOT_NAMES:
+        frame = model.frames[model.getFrameId(foot)]
+        knee = frame.parentJoint
+        lengths.append(float(np.linalg.norm(model.jointPlacements[knee].translation)
+                             + np.linalg.norm(frame.placement.translation)))
+    return min(lengths)
+
+
 class MpcController:
     """Centroidal MPC + whole-body QP (or leg-level layer) + estimator.
 
@@ -178,6 +190,10 @@ class MpcController:
         self.rate_hz = cfg.rate_hz
         self.dt = 1.0 / self.rate_hz
         self.kin = RobotKinematics(desc)
+        reach = leg_length(self.kin.robot.model)
+        if not cfg.body_height < reach:
+            raise ConfigError(f"MpcControllerConfig.body_height must be below {desc.name}'s straight leg (thigh + "
+                              f"calf, {reach:.3f} m), which cannot hold the CoM higher; got {cfg.body_height!r}")
         table = joint_table(desc.with_arm_mode("actuated"))
         self.has_arm = desc.arm_mode == "actuated"
         arm_moves = self.has_arm and cfg.use_arm_momentum

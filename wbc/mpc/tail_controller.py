@@ -77,9 +77,12 @@ class TailControllerConfig:
     arm_kd: float = 0.5
 
     def __post_init__(self) -> None:
-        if self.ready_q is not None and (len(self.ready_q) != 3 or not np.all(np.isfinite(self.ready_q))):
-            raise ConfigError(f"TailControllerConfig.ready_q must be 3 finite angles (waist, shoulder, elbow) [rad], "
-                              f"got {self.ready_q!r}")
+        if self.ready_q is not None:
+            try:
+                check_number("TailControllerConfig.ready_q", self.ready_q, size=3)
+            except ConfigError:  # a single number, a list of another length, or a value not finite
+                raise ConfigError(f"TailControllerConfig.ready_q must be 3 finite angles (waist, shoulder, elbow) "
+                                  f"[rad], got {self.ready_q!r}") from None
         check_number("TailControllerConfig.arm_kp", self.arm_kp, at_least=0.0)
         check_number("TailControllerConfig.arm_kd", self.arm_kd, at_least=0.0)
 
@@ -128,6 +131,11 @@ class TailMpcController(MpcController):
         self.tail_mpc = TailMpc(tail, table.lower[ARM_JOINTS], table.upper[ARM_JOINTS],
                                 table.velocity_limit[ARM_JOINTS], table.torque_limit[ARM_JOINTS])
         self.ready_q = np.array(cfg.ready_q if cfg.ready_q is not None else ready_pose(desc.name))
+        lower, upper = table.lower[ARM_JOINTS], table.upper[ARM_JOINTS]
+        if not np.all((lower <= self.ready_q) & (self.ready_q <= upper)):
+            ranges = ", ".join(f"[{a:.2f}, {b:.2f}]" for a, b in zip(lower, upper, strict=True))
+            raise ConfigError(f"TailControllerConfig.ready_q must be within {desc.name}'s arm joint limits (waist, "
+                              f"shoulder, elbow: {ranges} rad), got {cfg.ready_q!r}")
         self.observer: MomentumObserver | None = None  # made with the kinematics, in the base's constructor
         self._tail_now: ArmTail | None = None
         self._push_pending = False

@@ -37,7 +37,7 @@ import daqp
 import numpy as np
 
 from wbc.config_checks import check_number
-from wbc.mpc.centroidal_mpc import MpcSolveError, check_force_terms, friction_per_axis
+from wbc.mpc.centroidal_mpc import MpcSolveError, arm_box, check_force_terms, friction_per_axis
 from wbc.mpc.tail_compiled import tail_qp
 from wbc.mpc.tail_model import ArmTail, ArmTailPath
 from wbc.robots.conventions import GRAVITY
@@ -244,8 +244,7 @@ class TailMpc:
     def __init__(self, config: TailMpcConfig, arm_lower: np.ndarray, arm_upper: np.ndarray,
                  arm_velocity_limit: np.ndarray, arm_stall_torque: np.ndarray) -> None:
         self.config = config
-        self._arm_lower = np.asarray(arm_lower, dtype=np.float64) + config.arm_margin
-        self._arm_upper = np.asarray(arm_upper, dtype=np.float64) - config.arm_margin
+        self._arm_lower, self._arm_upper = arm_box(arm_lower, arm_upper, config.arm_margin, "TailMpcConfig")
         self._vmax = np.asarray(arm_velocity_limit, dtype=np.float64)
         self._stall = np.asarray(arm_stall_torque, dtype=np.float64)
         self._weights = config.state_weights()
