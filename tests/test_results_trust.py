@@ -112,6 +112,22 @@ def test_a_repeated_trial_and_a_row_of_another_scenario_are_refused(copy):
         run_arena(_config(scenario, out, resume=True))
 
 
+@pytest.mark.parametrize(("change", "why"), [
+    ({"trial": 2}, r"trial 2 is not one of this run's \(0 to 1 per band and seed\)"),
+    ({"seed": 7}, r"seed 7 is not one of this run's \(0\)"),
+    ({"band": "zzz"}, r"band 'zzz' is not one of this run's \(soft"),
+])
+def test_a_row_of_a_trial_outside_the_run_is_refused_with_its_line(copy, change, why):
+    # its checksum is right (written by hand, or by another run into this directory): before, a trial beyond the
+    # run's broke the push breakdown with a message naming no file, and another band's rows were kept unread
+    scenario, out = copy
+    lines = _lines(out)
+    (first, _) = scan_csv(out / "trials.csv").records
+    _write(out, [*lines, ",".join(dataclasses.replace(first, **change).to_row())])
+    with pytest.raises(RecordError, match=rf"trials\.csv:4: {why}"):
+        run_arena(_config(scenario, out, resume=True))
+
+
 def test_a_row_with_a_cell_too_few_or_a_byte_not_utf8_is_refused_and_the_cli_says_so_cleanly(copy, capsys):
     scenario, out = copy
     lines = _lines(out)

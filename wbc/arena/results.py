@@ -20,6 +20,7 @@ import json
 import os
 import re
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from wbc.arena.identity import RunIdentity
@@ -64,6 +65,23 @@ def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: in
     """
     folder = re.sub(r"[^A-Za-z0-9._-]+", "_", controller)
     return Path(out_dir) / "episodes" / folder / f"{band}-s{seed}-t{index}.npz"
+
+
+def _outside(identity: RunIdentity) -> Callable[[TrialRecord], str | None]:
+    """Why a stored record is not one of `identity`'s trials (its band, seed or trial index), or None."""
+    bands, seeds, trials = set(identity.bands), set(identity.seeds), set(identity.trials_played)
+
+    def why(record: TrialRecord) -> str | None:
+        if record.band not in bands:
+            return f"band {record.band!r} is not one of this run's ({', '.join(identity.bands)})"
+        if record.seed not in seeds:
+            return f"seed {record.seed} is not one of this run's ({', '.join(map(str, identity.seeds))})"
+        if record.trial not in trials:
+            return (f"trial {record.trial} is not one of this run's (0 to {max(trials)} per band and seed)"
+                    if trials == set(range(len(trials))) else f"trial {record.trial} is not this run's")
+        return None
+
+    return why
 
 
 class ResultsStore:
@@ -118,7 +136,7 @@ class ResultsStore:
         self.records: list[TrialRecord] = []
         self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
-            rows = scan_csv(self.trials_path, scenario_hash=identity.scenario_hash)
+            rows = scan_csv(self.trials_path, scenario_hash=identity.scenario_hash, outside=_outside(identity))
             if rows.records and not self.run_path.exists():
                 raise ResultsDirError(f"{self.run_path}: missing, so the run the {len(rows.records)} stored trial(s) "
                                       "of trials.csv belong to is unknown; restore run.json, or start afresh with "

@@ -24,7 +24,7 @@ import math
 import numbers
 import re
 import typing
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -394,7 +394,8 @@ _NOT_UTF8 = re.compile("[\udc80-\udcff]")
 """A byte that is not UTF-8, as ``surrogateescape`` decoding leaves it."""
 
 
-def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRows:
+def scan_csv(path: str | Path, *, scenario_hash: str | None = None,
+             outside: Callable[[TrialRecord], str | None] | None = None) -> StoredRows:
     """Read a ``trials.csv`` and sort its rows into trusted and refused ones.
 
     A last line without its newline (a write cut short by a kill) is dropped silently: that is how a killed run
@@ -405,12 +406,14 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRow
     - has a cell that does not parse, or an impossible value (`TrialRecord`);
     - fails its checksum (`checksum_of`);
     - was played on another scenario file than `scenario_hash` (when given);
+    - is not a trial of the run (`outside` says why, when given);
     - repeats the run key (controller, band, seed, trial) of another row: every copy is refused, since which one
       to trust cannot be told.
 
     Args:
         path: the ``trials.csv``.
         scenario_hash: the run's scenario hash; None: not checked.
+        outside: why a record is not one of the run's trials (None: it is); None: not checked.
 
     Raises:
         InputFileError: the file is missing, not a regular file, or too large (`wbc.input_files.read_bytes`).
@@ -452,6 +455,10 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None) -> StoredRow
         if scenario_hash is not None and record.scenario_hash != scenario_hash:
             refused.append(RefusedRow(line, f"played on scenario hash {record.scenario_hash!r}, not this run's "
                                             f"{scenario_hash!r}"))
+            continue
+        why = outside(record) if outside is not None else None
+        if why is not None:
+            refused.append(RefusedRow(line, why))
             continue
         good.append((line, record))
     first: dict[tuple[str, str, int, int], int] = {}
