@@ -22,6 +22,7 @@ from wbc.cli.main import main
 from wbc.cli.parser import build_parser
 from wbc.control.plugin import read_controller_config
 from wbc.errors import EpisodeError, EpisodeFileError, FileFieldError, RecordError, ScenarioError
+from wbc.input_files import read_toml
 from wbc.scenario.domain import DomainParams
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.terrain import TerrainConfig
@@ -111,6 +112,11 @@ def test_a_controller_config_that_cannot_be_read_is_a_clear_error(tmp_path, caps
         # read before the plug-in is imported: the missing module is never reached
         err = _cli_error(capsys, ["check-controller", "no_such_pkg.mod:make", "--controller-config", str(path)])
         assert says in err and str(path) in err and "no_such_pkg" not in err
+    # UTF-8 with a byte-order mark (as some Windows editors save it) is read as without it, by both TOML readers
+    marked = tmp_path / "bom.toml"
+    marked.write_bytes(b"\xef\xbb\xbf[mpc]\nhorizon = 12\n")
+    assert read_controller_config(marked) == {"mpc": {"horizon": 12}}
+    assert read_toml(marked) == {"mpc": {"horizon": 12}}
 
 
 def _identity() -> SimulatedRunIdentity:

@@ -636,6 +636,27 @@ def test_file_problems(tmp_path):
     with pytest.raises(ScenarioError, match="UTF-8") as err:
         load_scenario(bad)
     assert err.value.line == 5
+    # UTF-8 with a byte-order mark, as some Windows editors save it, reads as the same scenario, lines unmoved
+    marked = tmp_path / "bom.toml"
+    marked.write_bytes(b"\xef\xbb\xbf" + BASE.encode("utf-8"))
+    assert load_scenario(marked).hash == load_scenario(write(tmp_path, BASE)).hash
+    marked.write_bytes(b"\xef\xbb\xbf" + edit(BASE, "duration_s = 0.05", "duration_s = -0.05").encode("utf-8"))
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(marked)
+    assert err.value.line == 28
+
+
+def test_a_stray_sub_table_or_key_is_named_at_its_own_line(tmp_path):
+    n = BASE.count("\n")
+    path = write(tmp_path, BASE + "\n[scenario.extra]\ncolour = 1\n")
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    assert (err.value.line, err.value.field) == (n + 2, "[scenario] extra") and "unknown key" in str(err.value)
+    path = write(tmp_path, "colour = 1\n" + BASE)
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    assert str(err.value).startswith(f"{path}:1: colour: a key outside every table; each key belongs to one of "
+                                     "[scenario], [terrain]")
 
 
 def test_line_numbers_skip_multiline_strings(tmp_path):

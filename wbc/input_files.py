@@ -201,7 +201,8 @@ def read_toml(path: str | os.PathLike[str], *, limit: int | None = None, max_dep
         InputFileError: as `read_text`, nested deeper than `max_depth`, or not valid TOML (the message names the
             line and column as the parser does).
     """
-    text = read_text(path, kind="toml", limit=limit)
+    # a byte-order mark (as some Windows editors write UTF-8) starts no TOML statement: it is read past
+    text = read_text(path, kind="toml", limit=limit).removeprefix("\ufeff")
     # a table header's brackets count too: leave them room
     return _parse(path, text, slack=2, max_depth=max_depth, parse=tomllib.loads,
                   decode_error=_toml_error)

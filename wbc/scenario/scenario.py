@@ -349,8 +349,11 @@ def load_scenario(path: str | Path) -> Scenario:
     valid_tables = ("scenario", "terrain", "domain", "commands", "pushes", "fixed_pushes", "bands")
     for key in data:
         if key not in valid_tables:
-            raise ScenarioError(shown, "unknown table; valid tables: [scenario], [terrain], [domain], [commands], "
-                                "[pushes], [[fixed_pushes]], [[bands]]",
+            tables = "[scenario], [terrain], [domain], [commands], [pushes], [[fixed_pushes]], [[bands]]"
+            if not isinstance(data[key], dict | list):  # `foo = 1` above the first header, or under a deleted one
+                raise ScenarioError(shown, f"a key outside every table; each key belongs to one of {tables} (is "
+                                    "a table's header missing above it?)", line=lines.key(("", 0), key), field=key)
+            raise ScenarioError(shown, f"unknown table; valid tables: {tables}",
                                 line=lines.header((key, 0)) or lines.key(("", 0), key), field=f"[{key}]")
 
     head = top.sub_table("scenario", ("name", "version", "description", "notes", "robot", "duration_s"),

@@ -176,6 +176,10 @@ class TomlTable:
     def fail(self, key: str | None, reason: str, *, at_header: bool = False) -> NoReturn:
         """Raise a ScenarioError about `key` of this table (the table itself when `key` is None)."""
         line = None if key is None or at_header else self.lines.key(self.table, key)
+        if line is None and key is not None and not at_header:
+            # a sub-table written with its own header (`[scenario.x]`, `[[bands.x]]`): that header's line
+            name = f"{self.table[0]}.{key}" if self.table[0] else key
+            line = self.lines.header((name, 0)) or self.lines.header((name, 1))
         if line is None:
             line = self.header_line
         name = self.label if key is None else f"{self.label} {key}".strip()
@@ -352,7 +356,8 @@ def read_toml(path: Path, shown: str, error: type[FileFieldError] = FileFieldErr
             raise error(shown, f"file not found; {missing}") from None
         raise error(shown, f"cannot read the file: {str(exc).removeprefix(f'{path}: ')}") from None
     try:
-        text = raw.decode("utf-8")
+        # a byte-order mark (as some Windows editors write UTF-8) starts no TOML statement: it is read past
+        text = raw.decode("utf-8").removeprefix("\ufeff")
     except UnicodeDecodeError as exc:
         line = raw[: exc.start].count(b"\n") + 1
         raise error(shown, "the file is not valid UTF-8; save it as UTF-8", line=line) from None
