@@ -269,6 +269,9 @@ IO_ERRORS = [
     ('scale = 0.25\n', 'scale = 0.25\nhistory = 3\n', "[[observation.terms]] #1 history",
      'needs history_order = "terms"'),
     ("kd = 1.5", "kd = -1.5", "[pd] kd", "must be in [0, 100]"),
+    ("kd = 1.5", "kd = nan", "[pd] kd", "must be in [0, 100] and finite, got nan"),
+    ("scale = [2.0, 2.0, 0.25]", "scale = [2.0, nan, 0.25]", "[[observation.terms]] #2 scale",
+     "must be finite, got nan at position 2"),
     ("[pd]", "[gains]", "[gains]", "unknown table; valid tables: [policy], [onnx], [observation], [action], [pd]"),
     ('arm_mode = "none"', 'arm_mode = "folded"', "[policy] arm_mode", "must be one of 'none', 'locked', 'actuated'"),
 ]

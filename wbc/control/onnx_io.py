@@ -210,7 +210,8 @@ def _numbers(table: TomlTable, key: str, sizes: tuple[int, ...], what: str, allo
             table.fail(key, f"expected a number or an array of numbers ({what}), got {show(x)}{at}")
         if not math.isfinite(x) or x not in allowed:
             at = f" at position {position}" if isinstance(value, list) else ""
-            table.fail(key, f"must be {allowed} and finite, got {x}{at}")
+            bounded = allowed.lo > -math.inf or allowed.hi < math.inf
+            table.fail(key, f"must be {f'{allowed} and ' if bounded else ''}finite, got {x}{at}")
     floats = tuple(float(x) for x in items)
     return floats * n if len(floats) == 1 else floats
 
