@@ -324,6 +324,12 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
         assert exit_.value.code == 2 and said in capsys.readouterr().err
     assert main(["train", "--task", "push", "--stage", "3", "--memory-layers", "32", "--dry-run"]) == 2
     assert "--memory-layers: only with a controller as --teacher" in capsys.readouterr().err
+    # the dry run refuses what the run would: an expert that cannot follow, an adaptation phase with nothing to adapt
+    assert main(["train", "--task", "push", "--teacher", "stand", "--expert-follows", "--dry-run"]) == 2
+    assert "'stand' is not built by MpcController" in capsys.readouterr().err
+    assert main(["train", "--task", "push", "--stage", "3", "--baseline", "decoupled", "--rma-iterations", "5",
+                 "--dry-run"]) == 2
+    assert "stage 3 --baseline decoupled observes none" in capsys.readouterr().err
 
 
 def test_a_failing_expert_costs_only_its_episode(tmp_path, monkeypatch):

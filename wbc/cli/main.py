@@ -539,6 +539,10 @@ def _train(args: argparse.Namespace) -> int:
         overrides["rma"] = AdaptationConfig(iterations=args.rma_iterations)
     cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
                        env_overrides=env, variant=args.variant, **overrides)
+    if args.rma_iterations is not None and cfg.extrinsics_dim == 0:
+        what = f"stage {args.stage}" + (f" --baseline {args.baseline}" if args.baseline else "")
+        raise ConfigError(f"--rma-iterations sets the adaptation phase (RMA) of a policy that observes extrinsics, "
+                          f"and {what} observes none, so it has no such phase: leave --rma-iterations out")
     if args.teacher is not None:
         if args.teacher not in (cfg.teacher, cfg.init_from, cfg.frozen_legs):
             what = f"stage {args.stage}" + (f" --baseline {args.baseline}" if args.baseline else "")
@@ -622,7 +626,7 @@ def _distil(args: argparse.Namespace) -> int:
                               "--average-labels, --expert-follows, --takeover, --expert-truth, --seed, --run-root and "
                               "--resume")
     # torch loads only when a run really trains
-    from wbc.tools.dagger import DaggerConfig, run_dagger
+    from wbc.tools.dagger import DaggerConfig, dagger_expert, run_dagger
 
     fields = {k: v for k, v in (("rounds", args.rounds), ("episodes", args.episodes),
                                 ("episode_s", args.episode_s), ("seed", args.seed),
@@ -639,6 +643,7 @@ def _distil(args: argparse.Namespace) -> int:
     cfg = DaggerConfig(task=args.task, expert=args.teacher,
                        run_dir=str(Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"), **fields)
     if args.dry_run:
+        dagger_expert(cfg)  # what the run would refuse of its expert
         printers.print_json(dataclasses.asdict(cfg))
         return 0
     result = run_dagger(cfg, resume=args.resume, log=print)

@@ -289,7 +289,7 @@ def _add_analyze_arm_momentum_parser(analyze: _Commands) -> None:
     arm.add_argument("--scenario", default="scenarios/push.toml")
     arm.add_argument("--band", default="ood")
     arm.add_argument("--controller", default="mpc")
-    arm.add_argument("--trials", type=_TRIALS, default=5, help=f"trials per seed, 1..{MAX_TRIALS}")
+    arm.add_argument("--trials", type=_TRIALS, default=5, help=f"trials per seed, 1..{MAX_TRIALS} (default 5)")
     arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS}")
     arm.add_argument("--json", action="store_true")
     arm.set_defaults(handler="analyze arm-momentum")
@@ -350,7 +350,9 @@ def _add_bench_sweep_parser(bench: _Commands) -> None:
     sweep.add_argument("--scenario", default="scenarios/push.toml")
     sweep.add_argument("--controller", default="stand")
     sweep.add_argument("--trials", type=_TRIALS, default=10, help=f"trials per band, 1..{MAX_TRIALS}")
-    sweep.add_argument("--workers", type=_WORKERS, default=None, help=f"worker processes, 1..{MAX_WORKERS}")
+    sweep.add_argument("--workers", type=_WORKERS, default=None,
+                       help=f"worker processes of the arena, and threads of the physics rollout measured beside it, "
+                       f"1..{MAX_WORKERS} (default: all cores)")
     sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
     sweep.add_argument("--json", action="store_true")
     sweep.set_defaults(handler="bench sweep")
@@ -576,7 +578,7 @@ def _add_train_parser(sub: _Commands) -> None:
                     help="continue from the newest checkpoint of the run (without it, a run directory that already "
                          "holds a run is refused)")
     tr.add_argument("--iterations", type=bounded_int(1, 1_000_000), default=None,
-                    help="PPO iterations of the whole run, 1..1000000 (default 1500)")
+                    help="PPO iterations of the whole run, 1..1000000 (default 1500; with --fine-tune 200)")
     tr.add_argument("--envs", type=bounded_int(1, 65_536), default=None,
                     help="parallel environments, 1..65536 (default 1024)")
     tr.add_argument("--threads", type=_THREADS, default=None, help=f"physics threads, 1..{MAX_THREADS} (default 2)")
@@ -678,8 +680,9 @@ def _add_paper_parser(sub: _Commands) -> None:
                        help="play CONTROLLER in row KEY (repeatable): e.g. learned=policy:PATH for a retrained pi3, "
                        "ppo=policy:PATH for a Table III baseline trained anew")
     paper.add_argument("--crouched", action="store_true",
-                       help="play every learned row's crouched variant (the same stage as first trained, without the "
-                       "posture term: learned-crouched ..., <baseline>-crouched weights)")
+                       help="play the learned rows' crouched variants where weights for them ship (the same stages "
+                       "trained without the posture term: learned-crouched ..., <baseline>-crouched weights); "
+                       "mpc-distilled and rows given by --contender play as they are")
     paper.add_argument("--quiet", action="store_true", help="no progress output")
     paper.add_argument("--json", action="store_true", help="print paper.json instead of the table")
     paper.set_defaults(handler="paper")

@@ -30,6 +30,7 @@ import dataclasses
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -282,6 +283,29 @@ def _student_env(cfg: DaggerConfig, arm_mode: str) -> EnvConfig:
     return EnvConfig(robot=spec.robot, arm_mode=arm_mode, scenario=spec.scenario, bands=spec.bands)
 
 
+def dagger_expert(cfg: DaggerConfig) -> tuple[ControllerSpec, Callable[[RobotDescription], Controller]]:
+    """The expert's registry entry and what builds it for the run.
+
+    With ``expert_follows`` the builder makes the MPC with its leashes at 0. ``wbc train --dry-run`` calls it to
+    refuse what the run would.
+
+    Raises:
+        ConfigError: the expert is not a controller of the arena, or ``expert_follows`` with an expert that is not
+            built by `MpcController`.
+    """
+    expert_spec = get_controller(cfg.expert)
+    if not cfg.expert_follows:
+        return expert_spec, expert_spec.make
+    if expert_spec.make is not MpcController:
+        raise ConfigError(f"DaggerConfig.expert_follows: {cfg.expert!r} is not built by MpcController; its "
+                          "targets cannot be made to follow the robot")
+
+    def make_expert(desc: RobotDescription) -> Controller:
+        return MpcController(desc, MpcControllerConfig(xy_leash=0.0, yaw_leash=0.0))
+
+    return expert_spec, make_expert
+
+
 def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> dict[str, Any]:
     """Run DAgger rounds and export the student after each.
 
@@ -298,16 +322,7 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         ConfigError: the expert is not a controller of the arena, ``resume`` without a finished round or with another
             configuration, or a run directory that already holds a run (without ``resume``).
     """
-    expert_spec = get_controller(cfg.expert)
-    make_expert = expert_spec.make
-    if cfg.expert_follows:
-        if expert_spec.make is not MpcController:
-            raise ConfigError(f"DaggerConfig.expert_follows: {cfg.expert!r} is not built by MpcController; its "
-                              "targets cannot be made to follow the robot")
-
-        def make_expert(desc: RobotDescription) -> Controller:
-            return MpcController(desc, MpcControllerConfig(xy_leash=0.0, yaw_leash=0.0))
-
+    expert_spec, make_expert = dagger_expert(cfg)
     spec = TASKS[cfg.task]
     scenario = load_scenario(spec.scenario)
     env = _student_env(cfg, expert_spec.arm_mode)
