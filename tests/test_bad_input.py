@@ -201,6 +201,13 @@ def test_a_malformed_episode_is_refused_naming_the_field_and_never_drawn(tmp_pat
         (dict(control_dt=np.array(-0.02)), "field control_dt: -0.02, expected a finite number in \\(0, 1\\]"),
         (dict(roll=np.array(["a"] * 20)), "field roll: dtype <U1, expected numbers"),
         (dict(push_start=np.array([np.nan])), "field push_start: nan"),
+        # values each fine alone that no episode holds: times past its end, a position 1e300 m away, a negative count
+        (dict(t=fields["t"] * 100), r"field t: runs from 2 to 40 s, outside the 1 s episode"),
+        (dict(fall_time_s=np.array(999.0)), r"field fall_time_s: 999 s, after the 1 s episode"),
+        (dict(qpos=np.where(qpos_nan == qpos_nan, fields["qpos"], 1e300)), r"field qpos: values beyond \+-10000"),
+        (dict(clamped_ticks=np.array(2), clamped_rows=np.array([-1, 0, 0, 3, 0])),
+         r"field clamped_rows: \[-1.0, 0.0, 0.0, 3.0, 0.0\]: each row's count of clamped ticks is a whole number "
+         r"from 0 to clamped_ticks \(2\)"),
     ]
     for changes, says in cases:
         with pytest.raises(EpisodeFileError, match=says):
@@ -211,6 +218,11 @@ def test_a_malformed_episode_is_refused_naming_the_field_and_never_drawn(tmp_pat
         Episode.load(str(broken(base_source=np.str_("bogus"))))
     with pytest.raises(EpisodeFileError, match=r"broken.npz: fields safety_\*: "):
         Episode.load(str(broken(safety_time=np.array([0.5]))))
+    one_push = {"push_start": np.array([0.5]), "push_force_in_world": np.zeros((1, 3)),
+                "push_offset_in_base": np.zeros((1, 3))}
+    with pytest.raises(EpisodeFileError, match=r"fields push_\*: PushLog: every push starts at 0 s or later and "
+                                               r"lasts some time"):
+        Episode.load(str(broken(**one_push, push_duration=np.array([-0.1]))))
     # the same checks on an episode built in memory, before any frame of it is drawn
     made = _episode()
     assert len(list(frames_of(made))) == 20

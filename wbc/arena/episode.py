@@ -60,6 +60,10 @@ class PushLog:
                 raise ConfigError(f"PushLog.{name}: shape {value.shape}, expected {shape} for {n} pushes; build the "
                                   "log with PushLog.of(pushes)")
             object.__setattr__(self, name, value)
+        if np.any(self.start < 0.0) or np.any(self.duration <= 0.0):
+            raise ConfigError(f"PushLog: every push starts at 0 s or later and lasts some time; got starts "
+                              f"{short(str(self.start.tolist()), 80)} and durations "
+                              f"{short(str(self.duration.tolist()), 80)}")
 
     @classmethod
     def of(cls, pushes: Iterable[Push]) -> PushLog:
@@ -268,8 +272,7 @@ class Episode:
         _, arrays = _checked_core(fields)
         for name in (*(f"push_{k}" for k in _PUSH_KEYS), "safety_time", "operator_time"):
             fields.numbers(name, ndim=None)
-        fields.scalar("clamped_ticks", lo=0, hi=len(arrays["t"]) + 1)
-        fields.numbers("clamped_rows", rows=5)
+        _clamped_rows(fields, fields.scalar("clamped_ticks", lo=0, hi=len(arrays["t"]) + 1))
 
     def save(self, path: str) -> None:
         """Write the episode to a NumPy ``.npz`` file (no pickle).
@@ -332,7 +335,7 @@ class Episode:
             fields.fail("base_source", f"{short(source, 60)} is not a source; valid: {', '.join(BASE_SOURCES)}")
         # the tick a controller failed on may be counted before its row was stored: k + 1 at most
         clamped = int(fields.scalar("clamped_ticks", lo=0, hi=k + 1))
-        rows = tuple(int(v) for v in fields.numbers("clamped_rows", rows=5))
+        rows = tuple(int(v) for v in _clamped_rows(fields, clamped))
         logs = []
         for prefix, log, keys in (("push", PushLog, _PUSH_KEYS), ("safety", SafetyLog, _SAFETY_KEYS),
                                   ("operator", OperatorLog, _OPERATOR_KEYS)):
@@ -345,6 +348,15 @@ class Episode:
                        base_source=source, clamped_ticks=clamped, clamped_rows=rows)
         except (ConfigError, ValueError, TypeError) as exc:
             raise EpisodeFileError(f"{path}: {_cut(str(exc))}") from None
+
+
+def _clamped_rows(fields: _EpisodeFields, clamped_ticks: float) -> np.ndarray:
+    """``clamped_rows``: per command row, the ticks it was clamped on, each between 0 and ``clamped_ticks``."""
+    rows = fields.numbers("clamped_rows", rows=5)
+    if np.any(rows < 0) or np.any(rows > clamped_ticks) or np.any(rows != np.round(rows)):
+        fields.fail("clamped_rows", f"{rows.tolist()}: each row's count of clamped ticks is a whole number from 0 to "
+                                    f"clamped_ticks ({clamped_ticks:g})")
+    return rows
 
 
 def _cut(text: str, limit: int = 300) -> str:
@@ -363,6 +375,12 @@ def _checked_core(fields: _EpisodeFields) -> tuple[dict[str, float | bool], dict
         i = int(np.argmin(np.diff(t) > 0))
         fields.fail("t", f"not strictly increasing (t[{i}] = {t[i]:g}, t[{i + 1}] = {t[i + 1]:g})")
     k = len(t)
+    # the runner stores a tick's row at its end, (k + 1) dt: within the episode, as a fall is
+    end = scalars["duration_s"] + scalars["control_dt"]
+    if k and (t[0] < 0.0 or t[-1] > end):
+        fields.fail("t", f"runs from {t[0]:g} to {t[-1]:g} s, outside the {scalars['duration_s']:g} s episode")
+    if scalars["fall_time_s"] > end:  # NaN (no fall) compares False
+        fields.fail("fall_time_s", f"{scalars['fall_time_s']:g} s, after the {scalars['duration_s']:g} s episode")
     arrays = {"t": t, "command": fields.numbers("command", rows=k, cols=3),
               "v_base_in_yaw": fields.numbers("v_base_in_yaw", rows=k, cols=2),
               "yaw_rate": fields.numbers("yaw_rate", rows=k), "roll": fields.numbers("roll", rows=k),
@@ -370,6 +388,9 @@ def _checked_core(fields: _EpisodeFields) -> tuple[dict[str, float | bool], dict
               "arm_q": fields.numbers("arm_q", rows=k, ndim=2), "qpos": fields.numbers("qpos", rows=k, ndim=2),
               "act_s": fields.numbers("act_s", rows=k)}
     qpos = arrays["qpos"]
+    if np.any(np.abs(qpos) > _QPOS_BOUND):
+        fields.fail("qpos", f"values beyond +-{_QPOS_BOUND:g} (m or rad): no trunk travels so far in an episode, and "
+                            "no joint turns so far")
     if qpos.shape[1] < 8:
         fields.fail("qpos", f"shape {qpos.shape}, expected (ticks, 7 + joints): a base position, a quaternion and the "
                             "joints")
@@ -389,6 +410,9 @@ _FILE_ADVICE = ("the file is damaged or was not written by `Episode.save`: play 
                 "--save-episodes`")
 _MEMORY_ADVICE = "the episode was not made by the runner (`wbc.arena.runner.run_episode`) or was changed since"
 
+
+_QPOS_BOUND = 1e4
+"""The largest magnitude a stored configuration entry may have [m or rad]."""
 
 _QUAT_TOLERANCE = 1e-3
 """How far a stored base quaternion's norm may be from 1: a simulator's and an estimator's are unit to ~1e-9."""
