@@ -450,6 +450,8 @@ def test_options_that_would_do_nothing_are_refused_naming_what_they_need(tmp_pat
         capsys, ["bench", "hw", "--seconds", "0.1", "--stand", "0.5", "--no-safety", "--no-realtime"])
     assert "--robot names the wire's robot, and --no-wire measures no wire" in _cli_error(
         capsys, ["bench", "latency", "--no-wire", "--robot", "a1", "--controllers", "stand", "--trials", "1"])
+    assert "--workers 2 with --view: a viewed run plays its trials one by one in this process" in _cli_error(
+        capsys, ["run", "stand", *base, "--view", "--workers", "2"])
     assert "--alpha sets the significance level at which --until-significant stops" in _cli_error(
         capsys, ["compare", "stand", "mpc", *base, "--alpha", "0.01"])
     assert "--address auto names a Ray cluster, which the local executor does not use: add --executor ray" in \

@@ -731,6 +731,9 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
            alpha: float = 0.05) -> int:
     seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
     _view_options(args)
+    if args.view and args.workers not in (None, 1):
+        raise ConfigError(f"--workers {args.workers} with --view: a viewed run plays its trials one by one in this "
+                          "process, where the viewer draws them; leave --workers out (or 1)")
     _check_resumable(args)
     out = Path(args.out) if args.out else Path("runs") / (
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
