@@ -142,7 +142,7 @@ MAX_HORIZON = 100
 
 
 def arm_box(lower: np.ndarray, upper: np.ndarray, margin: float, where: str) -> tuple[np.ndarray, np.ndarray]:
-    """The arm joints' limits `margin` inside [`lower`, `upper`] [rad].
+    """The arm joints' limits, `margin` inside `lower` and `upper` (all in rad).
 
     Raises:
         ConfigError: a margin that leaves a joint no room (named in `where`).
