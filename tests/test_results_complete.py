@@ -194,6 +194,20 @@ def test_the_verdict_says_who_survives_more_on_how_many_pairs_and_what_would_set
                      scenario_name="s", scenario_hash="h", controllers=["mpc", "twin"], bands=["b"])
     assert any("mpc and twin survive alike: 3 of 8 paired trials each, with no discordant pair" in line
                for line in verdicts(same))
+    # one discordant pair, a tiny significant difference, a p below 1e-4: as the table writes them
+    one = [_record("c", i, success=i != 0, vlin=(0.1,)) for i in range(8)]
+    tiny = [_record("d", i, vlin=(0.1 + 1e-4 * (1 + i),)) for i in range(8)]
+    lines = verdicts(summarize([*one, *tiny], scenario_name="s", scenario_hash="h", controllers=["c", "d"],
+                               bands=["b"]))
+    assert "of 1 discordant pair d alone survived 1" in next(line for line in lines if "survives" in line)
+    tracking = next(line for line in lines if "linear velocity" in line)
+    assert "(difference -4.5e-04, 95 % bootstrap interval [-0.001, -2.9e-04])" in tracking, tracking
+    assert "significant (Wilcoxon signed-rank p = 0.00781)" in tracking and "-0.000" not in tracking
+    strong = [_record("e", i, vlin=(0.1 + 0.01 * i,)) for i in range(40)]
+    weak = [_record("f", i, vlin=(0.3 + 0.01 * i,)) for i in range(40)]
+    lines = verdicts(summarize([*strong, *weak], scenario_name="s", scenario_hash="h", controllers=["e", "f"],
+                               bands=["b"]))
+    assert "significant (Wilcoxon signed-rank p < 1e-4)" in next(line for line in lines if "linear velocity" in line)
 
 
 # --- the typed summary ---------------------------------------------------------------------------------------------

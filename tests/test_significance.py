@@ -17,7 +17,14 @@ from scipy.stats import binom
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.paired_tests import mcnemar_exact, paired_values, wilcoxon_signed_rank
-from wbc.arena.report import cell_text, format_table, paired_comparison, summarize
+from wbc.arena.report import (
+    _sequential_lines,
+    cell_text,
+    format_table,
+    format_verdict,
+    paired_comparison,
+    summarize,
+)
 from wbc.arena.sequential import DiscordantPairTest, SequentialComparison, mixture_log_e
 from wbc.arena.statistical_power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
 from wbc.arena.stats import wilson_interval
@@ -243,6 +250,17 @@ def test_sequential_comparison_splits_alpha_and_refuses_incomplete_rounds():
         SequentialComparison([], ["in"])
 
 
+def test_a_sequential_stop_is_reported_at_the_round_it_settled_and_the_rounds_under_way_after_it():
+    comparison = SequentialComparison([("a", "b")], ["in"], alpha=0.05)
+    # every pair discordant: the mixture reaches 1 / alpha = 20 at the 7th round; an 8th was under way
+    for k in range(8):
+        comparison.add_round([make_record("a", "in", 0, k), make_record("b", "in", 0, k, success=False)])
+    state = comparison.as_dict()
+    assert (state["settled"], state["settled_after_rounds"], state["rounds"]) == (True, 7, 8)
+    line = _sequential_lines(state)[0]
+    assert "every tested difference settled after 7 rounds (8 played: the 1 after it were under way" in line
+
+
 
 def test_until_significant_stops_the_run_once_the_difference_is_settled(limp, tmp_path):
     scenario = tmp_path / "short.toml"
@@ -260,6 +278,9 @@ def test_until_significant_stops_the_run_once_the_difference_is_settled(limp, tm
     assert sequential["tests"][0]["rejected_after_pairs"] == 7 and sequential["tests"][0]["b_only"] == 0
     assert len(records) == 14 and result.played == 14 and result.budget == 24
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["sequential"] == sequential
+    report = (tmp_path / "run" / "report.md").read_text()
+    assert "7 of at most 12: the sequential test settled every difference after 7 rounds" in report
+    assert "after the sequential test's stop these p-values are optimistic" in format_verdict(result.summary)
     # resuming the finished run plays nothing more; a fixed-budget run is another configuration
     again = run_arena(ArenaConfig(**{**cfg.__dict__, "resume": True}))
     assert again.played == 0 and again.summary == result.summary

@@ -17,6 +17,7 @@ stopped while the others finish (`wbc.arena.error_guard`). The result lists each
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import hashlib
 import itertools
@@ -340,9 +341,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
         "bands": ", ".join(bands),
         "seeds": ", ".join(str(s) for s in cfg.seeds),
-        "trials per band and seed": cfg.trials if rounds is None else
-        f"at most {cfg.trials}; stopped by the sequential test after {rounds.comparison.rounds} rounds"
-        if rounds.comparison.settled else f"{cfg.trials} (the sequential test did not settle every difference)",
+        "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
         "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
         "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
         "executor": cfg.executor,
@@ -389,6 +388,21 @@ class _Rounds:
     def played(self) -> int:
         """Rounds begun: the results directory holds them in full when the run ends."""
         return len(self.begun)
+
+    def trials_text(self, most: int, seeds: Sequence[int]) -> str:
+        """The report's "trials per band and seed" of a sequential run: those played per seed, and why it stopped."""
+        comparison = self.comparison
+        if not comparison.settled:
+            return f"{most} (the sequential test did not settle every difference)"
+        per_seed = collections.Counter(self.order[i][1] for i in self.begun)
+        played = (", ".join(f"{per_seed[s]} (seed {s})" for s in seeds) if len(seeds) > 1
+                  else str(per_seed[seeds[0]]))
+        after = comparison.settled_after or comparison.rounds
+        text = f"{played} of at most {most}: the sequential test settled every difference after {after} rounds"
+        extra = self.played - after
+        if extra > 0:
+            text += f" ({extra} more {'round was' if extra == 1 else 'rounds were'} under way then, and are played)"
+        return text
 
     def keys(self, i: int) -> list[tuple[str, str, int, int]]:
         """The run keys (controller, band, seed, trial) of round `i`."""

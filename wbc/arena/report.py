@@ -49,7 +49,7 @@ from wbc.arena.stats import (
 )
 from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning
 from wbc.arena.trial_record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
-from wbc.arena.verdict import verdicts
+from wbc.arena.verdict import ALPHA, verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
 
@@ -531,10 +531,17 @@ def _paired_rows(summary: Summary) -> list[list[str]]:
 
 def _sequential_lines(sequential: Mapping[str, Any]) -> list[str]:
     """The sequential test's verdict per pair and band (``wbc compare --until-significant``)."""
-    state = "every tested difference settled" if sequential["settled"] else "NOT every difference settled"
-    lines = [f"sequential test (--until-significant, family-wise alpha {sequential['alpha']:g}): {state} after "
-             f"{sequential['rounds']} rounds. Its p-values are anytime-valid; the fixed-n p-values above assume a "
-             "number of trials fixed in advance, which a sequential stop breaks."]
+    rounds, after = sequential["rounds"], sequential.get("settled_after_rounds") or sequential["rounds"]
+    if not sequential["settled"]:
+        state = f"NOT every difference settled after {rounds} rounds"
+    else:
+        state = f"every tested difference settled after {after} rounds"
+        if rounds > after:
+            state += (f" ({rounds} played: the {rounds - after} after it were under way when it settled, and their "
+                      "trials are in the results)")
+    lines = [f"sequential test (--until-significant, family-wise alpha {sequential['alpha']:g}): {state}. Its "
+             "p-values are anytime-valid; the fixed-n p-values above assume a number of trials fixed in advance, "
+             "which a sequential stop breaks."]
     lines += _aligned(*_sequential_table(sequential))
     return lines
 
@@ -607,7 +614,12 @@ def format_verdict(summary: Summary) -> str:
     sentences = verdicts(summary)
     if not sentences:
         return ""
-    lines = ["verdict (paired trials; significant: p < 0.05):"]
+    if summary.sequential is not None:
+        lines = [f"verdict (paired trials; significant: fixed-n p < {ALPHA:g}; after the sequential test's stop these "
+                 "p-values are optimistic: its own verdict, above, at family-wise alpha "
+                 f"{summary.sequential['alpha']:g}, is the one that holds):"]
+    else:
+        lines = [f"verdict (paired trials; significant: p < {ALPHA:g}):"]
     for sentence in sentences:
         lines += textwrap.wrap(sentence, width=118, initial_indent="  ", subsequent_indent="    ")
     return "\n".join(lines) + "\n"
@@ -728,7 +740,7 @@ def write_report(
             "",
         ]
         lines += md_table(_PAIRED_HEADER, _paired_rows(summary))
-        lines += ["", PAIRED_LEGEND[0].upper() + PAIRED_LEGEND[1:] + "."]
+        lines += ["", PAIRED_LEGEND[0].upper() + PAIRED_LEGEND[1:].rstrip(".") + "."]
     if summary.sequential:
         header, rows = _sequential_table(summary.sequential)
         lines += ["", "## Sequential test", "", _sequential_lines(summary.sequential)[0]]

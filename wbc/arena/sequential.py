@@ -152,6 +152,7 @@ class SequentialComparison:
         self.tests = {(a, b, band): DiscordantPairTest(alpha=alpha / m, prior=prior)
                       for a, b in self.pairs for band in self.bands}
         self.rounds = 0
+        self.settled_after: int | None = None  # the rounds fed when every test had first rejected
 
     @property
     def settled(self) -> bool:
@@ -178,6 +179,8 @@ class SequentialComparison:
                                       f"{a if a not in played else b}; feed complete rounds")
                 self.tests[(a, b, band)].observe(played[a].success, played[b].success)
         self.rounds += 1
+        if self.settled_after is None and self.settled:
+            self.settled_after = self.rounds
 
     def as_dict(self) -> dict[str, Any]:
         """The state of every test, JSON-serialisable (for ``summary.json`` and the printed table)."""
@@ -186,6 +189,7 @@ class SequentialComparison:
             "prior": self.prior,
             "rounds": self.rounds,
             "settled": self.settled,
+            "settled_after_rounds": self.settled_after,
             "tests": [
                 {"a": a, "b": b, "band": band, "pairs": t.pairs, "a_only": t.a_only, "b_only": t.b_only,
                  "alpha": t.alpha, "e_value": math.exp(min(t.log_e, 700.0)), "p_value": t.p_value,

@@ -47,9 +47,14 @@ def _settle(entry: PairSummary, what: str) -> str:
 
 def _significance(entry: PairSummary, test: str) -> str:
     p = entry.p
+    said = f"p {_p(p)}" if p is not None and p < 1e-4 else f"p = {_p(p)}"
     if p is not None and p < ALPHA:
-        return f"significant ({test} p = {_p(p)})"
-    return f"not significant ({test} p = {_p(p)})"
+        return f"significant ({test} {said})"
+    return f"not significant ({test} {said})"
+
+
+def _pairs(n: int) -> str:
+    return f"{n} discordant pair{'' if n == 1 else 's'}"
 
 
 def _survival(entry: PairSummary) -> str:
@@ -63,7 +68,7 @@ def _survival(entry: PairSummary) -> str:
         if discordant == 0:
             return (f"{head}, with no discordant pair (95 % interval of the difference [{100 * lo:+.0f}, "
                     f"{100 * hi:+.0f}] points): these trials do not tell them apart")
-        return (f"{head}; {discordant} discordant pairs split evenly ({a_only} each); "
+        return (f"{head}; {_pairs(discordant)} split evenly ({a_only} each); "
                 f"{_significance(entry, 'exact McNemar')}")
     winner, loser = (b, a) if b_only > a_only else (a, b)
     won, lost = max(a_only, b_only), min(a_only, b_only)
@@ -71,7 +76,7 @@ def _survival(entry: PairSummary) -> str:
     diff = abs(entry.diff) * 100.0
     lo_w, hi_w = (lo, hi) if winner == b else (-hi, -lo)
     text = (f"{winner} survives more than {loser}: {s_win} against {s_lose} of {n} paired trials ({diff:+.1f} points, "
-            f"95 % interval [{100 * lo_w:+.1f}, {100 * hi_w:+.1f}]); of {discordant} discordant pairs {winner} alone "
+            f"95 % interval [{100 * lo_w:+.1f}, {100 * hi_w:+.1f}]); of {_pairs(discordant)} {winner} alone "
             f"survived {won} and {loser} alone {lost}; {_significance(entry, 'exact McNemar')}")
     if not (entry.p is not None and entry.p < ALPHA):
         text += f"; {_settle(entry, 'difference')}"
@@ -79,6 +84,8 @@ def _survival(entry: PairSummary) -> str:
 
 
 def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
+    from wbc.arena.report import signed_text  # the table's own rendering; report imports this module
+
     a, b, n = entry.a, entry.b, entry.n
     if not n or entry.diff is None:
         return None
@@ -89,10 +96,11 @@ def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | 
     better, worse = (b, a) if entry.diff < 0 else (a, b)
     m_better, m_worse = (mb, ma) if better == b else (ma, mb)
     lo_b, hi_b = (lo, hi) if better == b else (-hi, -lo)
+    # a difference too small for the decimals is written in scientific notation, never as a -0.000 called better
     text = (f"{better} tracks the {what} better than {worse} over the seconds both survived: mean error "
             f"{m_better:.{decimals}f} against {m_worse:.{decimals}f} {unit} on {n} trials (difference "
-            f"{m_better - m_worse:+.{decimals}f}, 95 % bootstrap interval [{lo_b:+.{decimals}f}, "
-            f"{hi_b:+.{decimals}f}]); "
+            f"{signed_text(m_better - m_worse, entry.metric)}, 95 % bootstrap interval "
+            f"[{signed_text(lo_b, entry.metric)}, {signed_text(hi_b, entry.metric)}]); "
             f"{_significance(entry, 'Wilcoxon signed-rank')}")
     if not (entry.p is not None and entry.p < ALPHA):
         text += f"; {_settle(entry, 'difference')}"
