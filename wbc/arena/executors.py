@@ -14,15 +14,19 @@ name once (reading a ``policy:PATH`` file there), and the spec pickles to spawne
 from __future__ import annotations
 
 import itertools
+import math
 import multiprocessing
 import os
-from collections.abc import Iterable, Iterator
+import sys
+from collections.abc import Generator, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
 
+from wbc.arena.episode import EpisodeBuffer
 from wbc.arena.runner import TickObserver
-from wbc.arena.sim_trial import run_trial
+from wbc.arena.sim_trial import run_trial, simulated_robot
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.spec import ControllerSpec
 from wbc.optional import require
@@ -113,21 +117,116 @@ class LocalExecutor:
             yield from self._run_pool(tasks)
 
     def _run_pool(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
+        """The pool's records; a worker that dies costs only the trial it was playing.
+
+        A process that exits in a trial (a controller calling ``os._exit``, one killed by a signal or for its
+        memory) breaks the whole pool: every task then in flight fails with it. Each of those is played again alone,
+        in a pool of its own: the one whose worker dies again is recorded as that controller's error, the others
+        give their records (a trial's result does not depend on the process that plays it), and a fresh pool takes
+        the rest of the queue.
+        """
+        queue = iter(tasks)
+        while True:
+            suspects = yield from self._pool_pass(queue)
+            if suspects is None:
+                return
+            for task in suspects:
+                yield _alone(task)
+
+    def _pool_pass(self, queue: Iterator[TrialTask]) -> Generator[TrialRecord, None, list[TrialTask] | None]:
+        """Play `queue` in one pool until it is empty (None) or the pool breaks (the tasks it broke with)."""
         pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
-        with pool:
-            pending: set[Future] = set()
-            queue = iter(tasks)
+        broke = False
+        try:
+            pending: dict[Future, TrialTask] = {}
+            unsent: list[TrialTask] = []  # taken from the queue after the pool broke
+
+            def send(task: TrialTask) -> bool:
+                try:
+                    pending[pool.submit(run_task, task)] = task
+                    return True
+                except BrokenProcessPool:
+                    unsent.append(task)
+                    return False
+
             for task in queue:  # keep a bounded number in flight so a kill loses little
-                pending.add(pool.submit(run_task, task))
-                if len(pending) >= 2 * self.workers:
+                if not send(task) or len(pending) >= 2 * self.workers:
                     break
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            while pending and not unsent:
+                done, _ = wait(pending, return_when=FIRST_COMPLETED)
+                if any(isinstance(fut.exception(), BrokenProcessPool) for fut in done):
+                    break
                 for fut in done:
+                    pending.pop(fut)
                     yield fut.result()
                     nxt = next(queue, None)
-                    if nxt is not None:
-                        pending.add(pool.submit(run_task, nxt))
+                    if nxt is not None and not send(nxt):
+                        break
+            if not pending and not unsent:
+                return None
+            broke = True
+            # a broken pool fails every task in flight at once; those that finished before it keep their records
+            wait(pending, timeout=_LINGER_S)
+            finished = [fut for fut in pending if fut.done() and fut.exception() is None]
+            for fut in finished:
+                yield fut.result()
+            return [task for fut, task in pending.items() if fut not in finished] + unsent
+        finally:
+            _shut_down(pool, broken=broke)
+
+
+def _alone(task: TrialTask) -> TrialRecord:
+    """Play `task` in a pool of its own: its record, or, if its worker dies, the record of that controller error."""
+    pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+    try:
+        return pool.submit(run_task, task).result()
+    except BrokenProcessPool:
+        return worker_died(task)
+    finally:
+        _shut_down(pool, broken=True)  # its one task is done, or its worker dead: nothing left to wait for
+
+
+def worker_died(task: TrialTask) -> TrialRecord:
+    """The record of `task` whose worker process died playing it: a controller error, with no tick played."""
+    trial, spec = task.trial, task.controller
+    robot = simulated_robot(trial, spec.arm_mode)  # its joints and time step, for the empty episode
+    empty = EpisodeBuffer(nq=7 + robot.num_joints).finish(duration_s=trial.duration_s,
+                                                           control_dt=robot.config.timestep, fell=False,
+                                                           fall_time_s=math.nan)
+    error = (f"controller {spec.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}: the worker process "
+             "playing it died (it exited, or was killed by a signal or for its memory) and died again when the trial "
+             "was played alone; the trials beside it were played again")
+    return TrialRecord.of_trial(trial, controller=spec.name, episode=empty, counters={}, wall_s=0.0,
+                                debug_truth=task.debug_truth, error=error)
+
+
+_LINGER_S = 5.0
+"""How long a worker may take to exit once its pool is shut down [s]: one that a controller's thread keeps alive is
+stopped after this."""
+
+
+def _shut_down(pool: ProcessPoolExecutor, *, broken: bool = False) -> None:
+    """Shut `pool` down; a worker still alive after `_LINGER_S` (a controller's thread keeps it) is terminated.
+
+    A `broken` pool's workers are terminated at once: what they were playing is played again elsewhere.
+    """
+    processes = list((getattr(pool, "_processes", None) or {}).values())  # the pool's own worker processes
+    pool.shutdown(wait=False, cancel_futures=True)
+    if broken:
+        for process in processes:
+            process.terminate()
+            process.join(timeout=_LINGER_S)
+        return
+    lingering = []
+    for process in processes:
+        process.join(timeout=_LINGER_S)
+        if process.is_alive():
+            lingering.append(process)
+            process.terminate()
+            process.join(timeout=_LINGER_S)
+    if lingering:
+        print(f"wbc: warning: {len(lingering)} worker process(es) still ran {_LINGER_S:g} s after their trials "
+              "ended (a thread a controller started and left running?) and were stopped", file=sys.stderr)
 
 
 class RayExecutor:

@@ -1,0 +1,50 @@
+"""A worker process that dies costs only the trial it was playing; one a controller's thread keeps alive is stopped.
+
+A controller that exits its process (``os._exit``), or is killed by a signal or for its memory, breaks the local
+pool and every trial then in flight with it. The arena plays each of those again alone: the one whose worker dies
+again is that controller's error, the others keep their records, and the run goes on in a fresh pool. A worker a
+controller's non-daemon thread keeps alive after its trials is terminated, with a warning, instead of hanging the run.
+"""
+
+from conftest import SHORT_SCENARIO, STAND_PLUGIN
+
+from wbc.arena import executors
+from wbc.arena.compare import ArenaConfig, run_arena
+
+EXITS = STAND_PLUGIN.format(doc="The stand hold that exits its process on its fifth tick.", reset="pass",
+                            act="if self.ticks == 5:\n                __import__('os')._exit(3)",
+                            counters="return {}")
+
+SPINS = STAND_PLUGIN.format(doc="The stand hold that leaves a thread running in its process.",
+                            reset="__import__('threading').Thread(target=__import__('time').sleep, args=(3600,), "
+                                  "daemon=False).start()",
+                            act="pass", counters="return {}")
+
+
+def _run(tmp_path, controllers, out):
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SHORT_SCENARIO)
+    return run_arena(ArenaConfig(controllers=controllers, scenario=scenario, trials=3, out_dir=tmp_path / out,
+                                 workers=2, progress=False))
+
+
+def test_a_controller_that_exits_its_worker_costs_its_own_trials_only(plugin_package, tmp_path):
+    plugin_package("diepkg", {"exits": EXITS})
+    result = _run(tmp_path, ("stand", "diepkg.exits:make"), "run")
+    by = {(r.controller, r.trial): r for r in result.records}
+    assert len(by) == 6  # every trial recorded: stand's played again where the pool broke under them
+    assert all(by[("stand", i)].success for i in range(3))
+    for i in range(3):
+        died = by[("diepkg.exits:make", i)]
+        assert died.outcome == "controller_error" and f"trial {i}: the worker process playing it died" in died.error
+    (errors,) = result.controller_errors
+    assert errors.controller == "diepkg.exits:make"
+
+
+def test_a_worker_kept_alive_by_a_controllers_thread_is_stopped_with_a_warning(plugin_package, tmp_path, capsys,
+                                                                               monkeypatch):
+    plugin_package("spinpkg", {"spins": SPINS})
+    monkeypatch.setattr(executors, "_LINGER_S", 0.5)
+    result = _run(tmp_path, ("spinpkg.spins:make",), "run")
+    assert len(result.records) == 3 and all(r.success for r in result.records)
+    assert "still ran 0.5 s after their trials ended" in capsys.readouterr().err
