@@ -6,6 +6,10 @@ again is that controller's error, the others keep their records, and the run goe
 controller's non-daemon thread keeps alive after its trials is terminated, with a warning, instead of hanging the run.
 """
 
+import subprocess
+import sys
+import textwrap
+
 from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena import executors
@@ -48,3 +52,15 @@ def test_a_worker_kept_alive_by_a_controllers_thread_is_stopped_with_a_warning(p
     result = _run(tmp_path, ("spinpkg.spins:make",), "run")
     assert len(result.records) == 3 and all(r.success for r in result.records)
     assert "still ran 0.5 s after their trials ended" in capsys.readouterr().err
+
+
+def test_the_command_ends_past_a_thread_a_controller_left_running_in_its_own_process(tmp_path):
+    # --workers 1 plays in the command's own process: the thread would have kept it alive after the report
+    (tmp_path / "spins.py").write_text(textwrap.dedent(SPINS).lstrip())
+    (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
+    done = subprocess.run([sys.executable, "-m", "wbc.cli", "run", "spins:make", "--scenario", "short.toml",
+                           "--trials", "1", "--workers", "1", "--out", "out", "--quiet"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "thread(s) still running at the end" in done.stderr and "exiting without waiting for them" in done.stderr
+    assert (tmp_path / "out" / "report.md").is_file()

@@ -1,5 +1,43 @@
 """The ``wbc`` command."""
 
-from wbc.cli.main import main
+from __future__ import annotations
+
+import os
+import sys
+import threading
+
+from wbc.cli.main import main as _run
 
 __all__ = ["main"]
+
+LINGER_S = 2.0
+"""How long the command waits at its end for threads it did not start to finish [s]."""
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The ``wbc`` command: `wbc.cli.main.main`, and, from the command line, an exit that no stray thread holds up.
+
+    Run from the shell (`argv` None), a thread that a controller or plug-in started and never ended would keep the
+    process alive after its results are written: the command waits `LINGER_S` for such threads, then names them and
+    exits without them. Called with an `argv` (a test, a script), it returns as `wbc.cli.main.main` does.
+    """
+    code = _run(argv)
+    if argv is None:
+        exit_past_stray_threads(code)
+    return code
+
+
+def exit_past_stray_threads(code: int, linger_s: float = LINGER_S) -> None:
+    """Exit with `code` now if non-daemon threads are still running after `linger_s`, naming them; else return."""
+    stray = [t for t in threading.enumerate() if t is not threading.main_thread() and not t.daemon]
+    for thread in stray:
+        thread.join(timeout=linger_s / max(1, len(stray)))
+    stray = [t for t in stray if t.is_alive()]
+    if not stray:
+        return
+    names = ", ".join(t.name for t in stray[:5]) + (" ..." if len(stray) > 5 else "")
+    print(f"wbc: warning: {len(stray)} thread(s) still running at the end ({names}): started by a controller or "
+          "plug-in and never ended; exiting without waiting for them", file=sys.stderr)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)

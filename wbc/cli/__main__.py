@@ -2,7 +2,7 @@
 
 import sys
 
-from wbc.cli.main import main
+from wbc.cli import main
 
 if __name__ == "__main__":  # a spawned worker re-imports the main module: it must not run the command again
     sys.exit(main())
