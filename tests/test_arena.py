@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import STAND_PLUGIN
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode
@@ -475,3 +476,19 @@ def test_a_policy_file_is_read_once_per_run_not_once_per_trial(small, tmp_path, 
                       out_dir=tmp_path / "once", workers=1, progress=False)
     assert run_arena(cfg).played == 3
     assert reads == [str(weights)]
+
+
+def test_a_controller_that_changes_the_state_it_is_given_does_not_change_what_is_recorded(plugin_package, small):
+    # the same hold as stand, which then zeroes the arrays of the state it was handed: the episode log reads the
+    # robot's frame before the controller acts, so the metrics are stand's to the bit
+    plugin_package("mutpkg", {"zeroes": STAND_PLUGIN.format(
+        doc="The stand hold that zeroes the state it is given.", reset="pass",
+        act="state.q[:] = 0.0\n            state.dq[:] = 0.0\n            state.tau_est[:] = 0.0",
+        counters="return {}")})
+    trial = load_scenario(small).trial("hard", 0, 0)
+    ours, _ = run_trial(trial, "mutpkg.zeroes:make")
+    theirs, _ = run_trial(trial, "stand")
+    skip = {TrialRecord.header().index(n) for n in ("controller", *MACHINE_TIMED)}
+    assert [c for i, c in enumerate(ours.to_row()) if i not in skip] == [
+        c for i, c in enumerate(theirs.to_row()) if i not in skip]
+    assert ours.arm_travel_rad > 0.0 and ours.energy_j > 0.0

@@ -508,11 +508,22 @@ class EpisodeBuffer:
         """Ticks stored."""
         return len(self._rows)
 
-    def add(self, t: float, command: VelocityCommand, act_s: float, truth: BaseTruth, state: RobotState) -> None:
-        """Store one tick: its end time [s], command, act time [s], the trunk's truth and the robot's frame."""
-        self._rows.append(np.concatenate((truth.base_position_in_world, truth.base_quat, state.q,
-                                          truth.base_linvel_in_world, truth.base_angvel_in_body, state.tau_est,
-                                          state.dq)))
+    @staticmethod
+    def measured(state: RobotState) -> np.ndarray:
+        """What a tick stores of the robot's frame (q, tau_est, dq), copied.
+
+        Taken before the controller acts on `state`, whose arrays it could change.
+        """
+        return np.concatenate((state.q, state.tau_est, state.dq))
+
+    def add(self, t: float, command: VelocityCommand, act_s: float, truth: BaseTruth, measured: np.ndarray) -> None:
+        """Store one tick: its end time [s], command, act time [s], the trunk's truth and the robot's frame.
+
+        `measured` is `measured` of the tick's state, taken before the controller acted.
+        """
+        n = self.nq - 7
+        self._rows.append(np.concatenate((truth.base_position_in_world, truth.base_quat, measured[:n],
+                                          truth.base_linvel_in_world, truth.base_angvel_in_body, measured[n:])))
         self._scalars.append((t, command.vx, command.vy, command.yaw_rate, act_s))
 
     def _stacked(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

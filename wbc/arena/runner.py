@@ -145,6 +145,7 @@ def run_episode(
         if divergence is not None and (reason := divergence.state(state)) is not None:
             raise diverged(reason, k)
         cmd = schedule.at(t)
+        measured = buf.measured(state)  # before the controller, which could change the arrays it is given
         started = clock()
         try:
             out = controller.act(state, cmd)
@@ -163,7 +164,7 @@ def run_episode(
         robot.advance(dt)
         # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
         now = truth()
-        buf.add((k + 1) * dt, cmd, act_s, now, state)
+        buf.add((k + 1) * dt, cmd, act_s, now, measured)
         if health is not None and (reason := health.instability()) is not None:
             raise diverged(reason, k)
         if divergence is not None and (reason := divergence.truth(now)) is not None:
