@@ -85,6 +85,12 @@ def test_the_demo_suggests_the_trial_the_controllers_ended_differently():
     watch = trial_to_watch(records, ("mpc", "learned"))
     assert (watch.controller, watch.trial) == ("mpc", 0) and "nan" not in watch.why and watch.other is None
     assert trial_to_watch([raised], ("mpc", "learned")) is None
+    # played without pushes: the largest roll, not "the strongest push, 0 N"
+    records = [_record("mpc", 0, force=0.0, roll=2.0), _record("learned", 0, force=0.0, roll=3.0),
+               _record("mpc", 1, force=0.0, roll=7.0), _record("learned", 1, force=0.0, roll=1.0)]
+    watch = trial_to_watch(records, ("mpc", "learned"))
+    assert (watch.controller, watch.trial, watch.why) == ("mpc", 1, "no pushes; mpc rolled 7 deg, the most of any "
+                                                                    "trial")
 
 
 def test_the_template_enters_the_arena_from_a_checkout_as_the_readme_shows(tmp_path):

@@ -742,7 +742,8 @@ def _add_demo_parser(sub: _Commands) -> None:
                           description="The A/B the arena is for: the model-based controller (mpc) and the learned "
                           "policy (learned) play the same push trials; the table, the paired differences with 95 % "
                           "intervals, the report directory with its plots, and how to watch a trial in the browser.")
-    demo.add_argument("--scenario", default="scenarios/push.toml")
+    demo.add_argument("--scenario", default="scenarios/push.toml",
+                      help="scenario file the two controllers meet on (default scenarios/push.toml)")
     demo.add_argument("--trials", type=_TRIALS, default=4,
                       help=f"trials per band and seed, 1..{MAX_TRIALS} (default 4)")
     demo.add_argument("--seeds", type=_SEEDS, default=2, help=f"seeds, 1..{MAX_SEEDS} (default 2)")

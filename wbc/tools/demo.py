@@ -46,9 +46,10 @@ def trial_to_watch(records: Sequence[TrialRecord], controllers: Sequence[str]) -
     """The most telling trial of a comparison.
 
     A trial the controllers ended differently (one fell, another survived), watched with the one that fell; else
-    the trial with the strongest push, watched with the controller that rolled most in it. Only runs that stood or
-    fell are watched: one that ended otherwise (a controller error, a safety trip, a stop, diverged physics) has no
-    fall to show, and a controller that raised would raise again in the viewer. None without a run to watch.
+    the trial with the strongest push (without pushes, the largest roll), watched with the controller that rolled
+    most in it. Only runs that stood or fell are watched: one that ended otherwise (a controller error, a safety
+    trip, a stop, diverged physics) has no fall to show, and a controller that raised would raise again in the
+    viewer. None without a run to watch.
     """
     by_trial: dict[tuple[str, int, int], dict[str, TrialRecord]] = {}
     for r in records:
@@ -66,11 +67,15 @@ def trial_to_watch(records: Sequence[TrialRecord], controllers: Sequence[str]) -
             return TrialToWatch(controller=fell[0], band=band, seed=seed, trial=index, other=stood,
                                 at_s=max(0.0, round(fall - 1.0, 1)),
                                 why=f"{fell[0]} fell at {fall:.1f} s where {stood} stood")
-    key = max(by_trial, key=lambda k: (max(r.push_force_n for r in by_trial[k].values()), k))
+    pushed = any(r.push_force_n > 0 for played in by_trial.values() for r in played.values())
+    if pushed:
+        key = max(by_trial, key=lambda k: (max(r.push_force_n for r in by_trial[k].values()), k))
+    else:  # played without pushes (--no-push): the trial some controller rolled most in
+        key = max(by_trial, key=lambda k: (max(r.max_roll_deg for r in by_trial[k].values()), k))
     played = by_trial[key]
     worst = max(played.values(), key=lambda r: (r.max_roll_deg, r.controller))
     band, seed, index = key
     other = next((c for c in controllers if c in played and c != worst.controller), None)
-    return TrialToWatch(controller=worst.controller, band=band, seed=seed, trial=index, other=other,
-                        why=f"the strongest push, {worst.push_force_n:.0f} N; {worst.controller} rolled "
-                        f"{worst.max_roll_deg:.0f} deg")
+    why = (f"the strongest push, {worst.push_force_n:.0f} N; {worst.controller} rolled {worst.max_roll_deg:.0f} deg"
+           if pushed else f"no pushes; {worst.controller} rolled {worst.max_roll_deg:.0f} deg, the most of any trial")
+    return TrialToWatch(controller=worst.controller, band=band, seed=seed, trial=index, other=other, why=why)
