@@ -5,6 +5,7 @@ through the local pool and through Ray, and gives the same metrics; every way a 
 command with its own message and no traceback.
 """
 
+import hashlib
 import sys
 import textwrap
 
@@ -255,7 +256,9 @@ def test_a_plugin_records_its_target_module_file_and_that_no_distribution_instal
     prov = get_controller("plugpkg.good:make").provenance()
     assert (prov["name"], prov["kind"], prov["arm_mode"], prov["files"]) == ("plugpkg.good:make", "plug-in",
                                                                            "actuated", [])
-    assert prov["plugin"] == {"target": "plugpkg.good:make", "module_file": str(plugins / "plugpkg" / "good.py"),
+    module = plugins / "plugpkg" / "good.py"
+    assert prov["plugin"] == {"target": "plugpkg.good:make", "module_file": str(module),
+                              "module_sha256": hashlib.sha256(module.read_bytes()).hexdigest(),
                               "entry_point": None, "distribution": None,
                               "distribution_note": "not installed as a distribution"}
     # a module an installed distribution provides names it (wbc's own classes, as a plug-in)
@@ -277,7 +280,9 @@ def test_an_entry_point_records_the_distribution_that_declares_it(plugins, tmp_p
     config.write_text("leg_kp = 80.0\n")
     prov = get_controller("test-hold", config=config).provenance()
     assert prov["kind"] == "entry point"
-    assert prov["plugin"] == {"target": "plugpkg.good:make", "module_file": str(plugins / "plugpkg" / "good.py"),
+    module = plugins / "plugpkg" / "good.py"
+    assert prov["plugin"] == {"target": "plugpkg.good:make", "module_file": str(module),
+                              "module_sha256": hashlib.sha256(module.read_bytes()).hexdigest(),
                               "entry_point": "test-hold", "distribution": {"name": "plugdist", "version": "1.0"}}
     assert prov["files"] == [{"role": "config", "path": str(config.resolve()),
                               "sha256": hashlib.sha256(config.read_bytes()).hexdigest()}]

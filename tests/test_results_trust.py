@@ -334,3 +334,23 @@ def test_a_controller_never_asked_to_act_is_a_controller_error(stored, plugin_pa
         assert "never asked to act: its period 1/0.25 Hz is longer than the 1 s trial" in r.error
     assert result.summary.to_json()["controllers"]["lazypkg.lazy:make"]["bands"]["soft"]["outcomes"][
         "controller_error"] == 2
+
+
+def test_resume_refuses_a_plugin_whose_code_changed_since_the_run_began(plugin_package, tmp_path, capsys):
+    # the rows already stored were played by the module as it was: a resumed run would mix two versions of it
+    root = plugin_package("editpkg", {"hold": STAND_PLUGIN.format(doc="The stand hold.", reset="pass", act="pass",
+                                                                  counters="return {}")})
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SHORT_SCENARIO)
+    argv = ["run", "editpkg.hold:make", "--scenario", str(scenario), "--trials", "2", "--workers", "1", "--out",
+            str(tmp_path / "o"), "--quiet"]
+    assert main(argv) == 0
+    run = json.loads((tmp_path / "o" / "run.json").read_text())
+    assert len(run["controllers"]["editpkg.hold:make"]["plugin"]["module_sha256"]) == 64
+    assert main([*argv, "--resume"]) == 0  # the same code: nothing to play, nothing refused
+    module = root / "editpkg" / "hold.py"
+    module.write_text(module.read_text() + "\nGAIN = 2.0\n")
+    capsys.readouterr()
+    assert main([*argv, "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert f"controller editpkg.hold:make's module {module}" in err and "changed since the run began" in err

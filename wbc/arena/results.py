@@ -20,8 +20,9 @@ import json
 import os
 import re
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import Any
 
 from wbc.arena.identity import RunIdentity
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
@@ -84,6 +85,30 @@ def _outside(identity: RunIdentity) -> Callable[[TrialRecord], str | None]:
     return why
 
 
+def _changed_code(stored: Mapping[str, Any], current: Mapping[str, Any]) -> str | None:
+    """What of a controller's code or files differs between a stored run's ``controllers`` and this run's, or None.
+
+    Compared where both sides hashed it: each file's sha256 by role and path, and a plug-in module's sha256.
+    """
+    for name, now in current.items():
+        before = stored.get(name)
+        if not isinstance(before, Mapping) or not isinstance(now, Mapping):
+            continue
+        old_plugin, new_plugin = before.get("plugin") or {}, now.get("plugin") or {}
+        old_hash, new_hash = old_plugin.get("module_sha256"), new_plugin.get("module_sha256")
+        if old_hash and new_hash and old_hash != new_hash:
+            return (f"controller {name}'s module {new_plugin.get('module_file')} (sha256 {old_hash[:12]}... then, "
+                    f"{new_hash[:12]}... now)")
+        old_files = {(f.get("role"), f.get("path")): f.get("sha256") for f in before.get("files") or ()
+                     if isinstance(f, Mapping)}
+        for f in now.get("files") or ():
+            was = old_files.get((f.get("role"), f.get("path")))
+            if was and f.get("sha256") and was != f["sha256"]:
+                return f"controller {name}'s {f.get('role')} file {f.get('path')} (sha256 {was[:12]}... then, " \
+                       f"{f['sha256'][:12]}... now)"
+    return None
+
+
 class ResultsStore:
     """A results directory.
 
@@ -133,6 +158,11 @@ class ResultsStore:
                 diff = sorted(k for k in set(stored) | set(config) if stored.get(k) != config.get(k))
                 raise ResultsDirError(f"{self.dir}: --resume with a different configuration (differs in: "
                                       f"{', '.join(diff)}); rerun with the original options or another --out")
+            changed = _changed_code(self._stored_controllers, controllers or {})
+            if changed:
+                raise ResultsDirError(f"{self.run_path}: --resume with {changed} changed since the run began: its "
+                                      "stored trials were played by the earlier one, and a run mixes no two; restore "
+                                      "it, or start afresh with another --out")
         self.records: list[TrialRecord] = []
         self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
@@ -187,6 +217,7 @@ class ResultsStore:
                 raise RecordError(f"{self.run_path}: field {key}: expected an object, got {run[key]!r}; restore the "
                                   "file, or start afresh with another --out")
         RunIdentity.from_json(run["config"], source=self.run_path)
+        self._stored_controllers = run.get("controllers") or {}
         return run["config"]
 
     def _rewrite(self) -> None:

@@ -135,16 +135,23 @@ class PluginSource:
         """What the plug-in is, JSON-ready.
 
         Returns:
-            ``target``, ``module_file``, ``entry_point``, ``distribution`` ({name, version}, or None; then
-            ``distribution_note`` says the module is not installed as a distribution).
+            ``target``, ``module_file``, ``module_sha256`` (its bytes' hash, None when it is not a readable file),
+            ``entry_point``, ``distribution`` ({name, version}, or None; then ``distribution_note`` says the module
+            is not installed as a distribution).
         """
         dist = self.distribution
         if dist is None:
             module = self.target.split(":")[0]
             loaded = sys.modules.get(module)
             dist = distribution_of(module, getattr(loaded, "__file__", None) or self.module_file)
+        module_sha256 = None
+        if self.module_file is not None:
+            try:
+                module_sha256 = sha256_file(self.module_file)
+            except OSError:
+                pass  # not a file on disk (a zip import, say): the distribution and its version stand for it
         out: dict[str, object] = {"target": self.target, "module_file": self.module_file,
-                                  "entry_point": self.entry_point,
+                                  "module_sha256": module_sha256, "entry_point": self.entry_point,
                                   "distribution": None if dist is None else {"name": dist[0], "version": dist[1]}}
         if dist is None:
             out["distribution_note"] = NO_DISTRIBUTION
