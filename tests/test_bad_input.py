@@ -18,7 +18,7 @@ from wbc.arena.episode import Episode, PushLog
 from wbc.arena.executors import LocalExecutor
 from wbc.arena.identity import RunIdentity, ScenarioRef, SimulatedRunIdentity
 from wbc.arena.results import episode_path
-from wbc.cli.main import main
+from wbc.cli.main import HANDLERS, main
 from wbc.cli.parser import build_parser
 from wbc.control.plugin import read_controller_config
 from wbc.errors import EpisodeError, EpisodeFileError, FileFieldError, RecordError, ScenarioError
@@ -492,3 +492,17 @@ def test_options_that_would_do_nothing_are_refused_naming_what_they_need(tmp_pat
     monkeypatch.setattr("wbc.arena.compare.RayExecutor", Recorder)
     assert main(["run", "stand", *base, "--executor", "ray", "--workers", "1", "--band", "in", "--quiet"]) == 0
     assert made == [(None, 1)]
+
+
+def test_an_interrupted_command_says_so_in_one_line_and_how_a_run_is_finished(tmp_path, capsys, monkeypatch):
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(HANDLERS, "run", interrupted)
+    monkeypatch.setitem(HANDLERS, "bench sim", interrupted)
+    out = tmp_path / "o"
+    assert main(["run", "stand", "--scenario", "scenarios/push.toml", "--trials", "1", "--out", str(out)]) == 130
+    assert capsys.readouterr().err == (f"wbc: interrupted; the trials finished are stored in {out}: the same command "
+                                       "with --resume plays the rest\n")
+    assert main(["bench", "sim"]) == 130
+    assert capsys.readouterr().err == "wbc: interrupted\n"

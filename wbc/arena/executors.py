@@ -136,7 +136,7 @@ class LocalExecutor:
     def _pool_pass(self, queue: Iterator[TrialTask]) -> Generator[TrialRecord, None, list[TrialTask] | None]:
         """Play `queue` in one pool until it is empty (None) or the pool breaks (the tasks it broke with)."""
         pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
-        broke = False
+        broke = ended = False  # ended: every task played (else stopped early: an interrupt, a caller gone)
         try:
             pending: dict[Future, TrialTask] = {}
             unsent: list[TrialTask] = []  # taken from the queue after the pool broke
@@ -163,6 +163,7 @@ class LocalExecutor:
                     if nxt is not None and not send(nxt):
                         break
             if not pending and not unsent:
+                ended = True
                 return None
             broke = True
             # a broken pool fails every task in flight at once; those that finished before it keep their records
@@ -172,7 +173,8 @@ class LocalExecutor:
                 yield fut.result()
             return [task for fut, task in pending.items() if fut not in finished] + unsent
         finally:
-            _shut_down(pool, broken=broke)
+            # a pool stopped early or broken has nothing worth waiting for: its workers are stopped at once
+            _shut_down(pool, broken=broke or not ended)
 
 
 def _alone(task: TrialTask) -> TrialRecord:

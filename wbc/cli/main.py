@@ -1027,6 +1027,10 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
 """What each command does, by the ``handler`` name its parser sets."""
 
 
+_RESUMABLE = ("run", "compare", "paper", "demo")
+"""The commands whose results directory ``--resume`` finishes after an interruption."""
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``wbc`` console script.
 
@@ -1035,8 +1039,9 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
-        each on stderr), 2 for a `WbcError` (its message printed to stderr). A usage error exits
-        with status 2 from the parser, after its usage message.
+        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C; a run's
+        finished trials are stored, and the message says how to finish it). A usage error exits with status 2 from
+        the parser, after its usage message.
     """
     args = build_parser().parse_args(argv)
     try:
@@ -1044,6 +1049,11 @@ def main(argv: list[str] | None = None) -> int:
     except WbcError as exc:
         print(f"wbc: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        resumable = args.handler in _RESUMABLE and getattr(args, "out", None)
+        print("wbc: interrupted" + (f"; the trials finished are stored in {args.out}: the same command with --resume "
+                                    "plays the rest" if resumable else ""), file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
