@@ -49,7 +49,7 @@ from wbc.arena.stats import (
 )
 from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning
 from wbc.arena.trial_record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
-from wbc.arena.verdict import ALPHA, verdicts
+from wbc.arena.verdict import ALPHA, signed, verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
 
@@ -444,11 +444,7 @@ def signed_text(value: float | None, metric: str) -> str:
     """
     if value is None:
         return "n/a"
-    scaled = value * _SCALE.get(metric, 1.0)
-    decimals = _DECIMALS[metric]
-    if scaled != 0.0 and abs(scaled) < 0.5 * 10.0 ** -decimals:
-        return f"{scaled:+.1e}"
-    return f"{scaled:+.{decimals}f}"
+    return signed(value * _SCALE.get(metric, 1.0), _DECIMALS[metric])
 
 
 def number_text(value: float | None, metric: str) -> str:

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from wbc.arena.summary import PairSummary, Summary
 
-__all__ = ["ALPHA", "verdicts"]
+__all__ = ["ALPHA", "signed", "verdicts"]
 
 ALPHA = 0.05
 """The level a difference is called significant at."""
@@ -83,9 +83,18 @@ def _survival(entry: PairSummary) -> str:
     return text
 
 
-def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
-    from wbc.arena.report import signed_text  # the table's own rendering; report imports this module
+def signed(value: float, decimals: int) -> str:
+    """`value` with its sign to `decimals`, as the table's cells and the verdict write it.
 
+    A nonzero value too small for the decimals is in scientific notation (``-1.2e-04``), never a ``-0.000`` that a
+    significant test would call better.
+    """
+    if value != 0.0 and abs(value) < 0.5 * 10.0 ** -decimals:
+        return f"{value:+.1e}"
+    return f"{value:+.{decimals}f}"
+
+
+def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
     a, b, n = entry.a, entry.b, entry.n
     if not n or entry.diff is None:
         return None
@@ -99,8 +108,8 @@ def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | 
     # a difference too small for the decimals is written in scientific notation, never as a -0.000 called better
     text = (f"{better} tracks the {what} better than {worse} over the seconds both survived: mean error "
             f"{m_better:.{decimals}f} against {m_worse:.{decimals}f} {unit} on {n} trials (difference "
-            f"{signed_text(m_better - m_worse, entry.metric)}, 95 % bootstrap interval "
-            f"[{signed_text(lo_b, entry.metric)}, {signed_text(hi_b, entry.metric)}]); "
+            f"{signed(m_better - m_worse, decimals)}, 95 % bootstrap interval "
+            f"[{signed(lo_b, decimals)}, {signed(hi_b, decimals)}]); "
             f"{_significance(entry, 'Wilcoxon signed-rank')}")
     if not (entry.p is not None and entry.p < ALPHA):
         text += f"; {_settle(entry, 'difference')}"
