@@ -508,22 +508,29 @@ class EpisodeBuffer:
         """Ticks stored."""
         return len(self._rows)
 
-    @staticmethod
-    def measured(state: RobotState) -> np.ndarray:
-        """What a tick stores of the robot's frame (q, tau_est, dq), copied.
+    def measured(self, state: RobotState) -> np.ndarray:
+        """A tick's row with the robot's frame (q, tau_est, dq) copied in; `add` fills in the rest.
 
         Taken before the controller acts on `state`, whose arrays it could change.
         """
-        return np.concatenate((state.q, state.tau_est, state.dq))
+        nq, nj = self.nq, self.nq - 7
+        row = np.empty(nq + 6 + 2 * nj)
+        row[7:nq] = state.q
+        row[nq + 6:nq + 6 + nj] = state.tau_est
+        row[nq + 6 + nj:] = state.dq
+        return row
 
-    def add(self, t: float, command: VelocityCommand, act_s: float, truth: BaseTruth, measured: np.ndarray) -> None:
-        """Store one tick: its end time [s], command, act time [s], the trunk's truth and the robot's frame.
+    def add(self, t: float, command: VelocityCommand, act_s: float, truth: BaseTruth, row: np.ndarray) -> None:
+        """Store one tick: its end time [s], command, act time [s], the trunk's truth, and its row.
 
-        `measured` is `measured` of the tick's state, taken before the controller acted.
+        `row` is `measured` of the tick's state, taken before the controller acted; the truth is written into it.
         """
-        n = self.nq - 7
-        self._rows.append(np.concatenate((truth.base_position_in_world, truth.base_quat, measured[:n],
-                                          truth.base_linvel_in_world, truth.base_angvel_in_body, measured[n:])))
+        nq = self.nq
+        row[0:3] = truth.base_position_in_world
+        row[3:7] = truth.base_quat
+        row[nq:nq + 3] = truth.base_linvel_in_world
+        row[nq + 3:nq + 6] = truth.base_angvel_in_body
+        self._rows.append(row)
         self._scalars.append((t, command.vx, command.vy, command.yaw_rate, act_s))
 
     def _stacked(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
