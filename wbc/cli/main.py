@@ -13,7 +13,7 @@ import argparse
 import dataclasses
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, run_arena
@@ -389,14 +389,29 @@ def hw_check(args: argparse.Namespace, *,
 def realtime_request(args: argparse.Namespace, *, place: str) -> RealtimeRequest:
     """The `RealtimeRequest` of ``--rt-priority``, ``--rt-cpu`` and ``--no-realtime`` (`place`: the default CPU)."""
     if args.no_realtime:
-        given = [name for name, value in (("--rt-priority", args.rt_priority), ("--rt-cpu", args.rt_cpu))
-                 if value is not None]
-        if given:
-            raise ConfigError(f"{' and '.join(given)} with --no-realtime: ordinary scheduling has no priority and "
-                              f"no CPU of its own; leave {'them' if len(given) > 1 else 'it'} out, or --no-realtime")
+        _refuse((("--rt-priority", args.rt_priority), ("--rt-cpu", args.rt_cpu)),
+                "with --no-realtime: ordinary scheduling has no priority and no CPU of its own",
+                otherwise=", or --no-realtime")
         return NO_REALTIME
     return RealtimeRequest(priority=_rt_priority(args), cpu=AUTO_CPU if args.rt_cpu is None else args.rt_cpu,
                            place=place)
+
+
+def _refuse(options: Iterable[tuple[str, object]], why: str, *, join: str = " and ", otherwise: str = "") -> None:
+    """Refuse the options given (their value not None) that would do nothing: ``NAMES WHY; leave it out``.
+
+    Args:
+        options: (option, value) pairs; a flag passes ``value or None``.
+        why: what the message says after the options' names.
+        join: between the names.
+        otherwise: what else the user may do, after ``leave them out``.
+
+    Raises:
+        ConfigError: one of `options` was given.
+    """
+    given = [name for name, value in options if value is not None]
+    if given:
+        raise ConfigError(f"{join.join(given)} {why}; leave {'them' if len(given) > 1 else 'it'} out{otherwise}")
 
 
 def _rt_priority(args: argparse.Namespace) -> int:
@@ -426,16 +441,14 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         raise ConfigError("wbc hw run: give the robot's address (--target HOST:PORT), or --sim to play the same "
                           "protocol on the simulator; not both")
     if args.sim:
-        given = [name for name, value in (
-            ("--local", args.local), ("--arm-port", args.arm_port), ("--rate", args.rate),
-            ("--transport", args.transport), ("--io-process" if args.io_process else "--no-io-process",
-                                              args.io_process), ("--rt-priority", args.rt_priority),
-            ("--rt-cpu", args.rt_cpu), ("--no-realtime", args.no_realtime or None),
-            ("--allow-hardware", args.allow_hardware or None), ("--yes", args.yes or None)) if value is not None]
-        if given:
-            raise ConfigError(f"{', '.join(given)} with --sim: the simulator plays the trial in this process, with "
-                              "no link, devices, ports or real-time scheduling to set; leave "
-                              f"{'them' if len(given) > 1 else 'it'} out, or give --target")
+        _refuse((("--local", args.local), ("--arm-port", args.arm_port), ("--rate", args.rate),
+                 ("--transport", args.transport),
+                 ("--io-process" if args.io_process else "--no-io-process", args.io_process),
+                 ("--rt-priority", args.rt_priority), ("--rt-cpu", args.rt_cpu),
+                 ("--no-realtime", args.no_realtime or None), ("--allow-hardware", args.allow_hardware or None),
+                 ("--yes", args.yes or None)),
+                "with --sim: the simulator plays the trial in this process, with no link, devices, ports or real-time "
+                "scheduling to set", join=", ", otherwise=", or give --target")
     args.rate = 500.0 if args.rate is None else args.rate
     args.transport = "udp" if args.transport is None else args.transport
     args.io_process = True if args.io_process is None else args.io_process
@@ -878,35 +891,29 @@ def _view(args: argparse.Namespace) -> int:
 
 def _view_refusals(args: argparse.Namespace) -> None:
     """Refuse the ``wbc view`` options that this view would not use, naming what each needs, before anything plays."""
-    def refuse(given: list[str], why: str) -> None:
-        if given:
-            raise ConfigError(f"{' and '.join(given)} {why}; leave {'them' if len(given) > 1 else 'it'} out")
-
     ab, stored = len(args.ctrl or []) == 2, args.episode is not None
     live = not ab and (args.record is None or args.live)
     if not stored:
-        refuse(["--controller"] if args.controller is not None else [],
-               "picks whose stored run --episode replays: without --episode, name the controller as CTRL")
+        _refuse((("--controller", args.controller),),
+                "picks whose stored run --episode replays: without --episode, name the controller as CTRL")
     else:
         # a stored episode replays as it was run: its trial and its controller's run come from the results directory
-        refuse([name for name, value in (("--scenario", args.scenario), ("--duration", args.duration),
-                                         ("--controller-config", args.controller_config), ("--io", args.io),
-                                         ("--save-episode", args.save_episode)) if value is not None],
-               "with --episode: a stored episode replays the run stored, whole (--pause-at T or --at T reach a "
-               "moment)")
+        _refuse((("--scenario", args.scenario), ("--duration", args.duration),
+                 ("--controller-config", args.controller_config), ("--io", args.io),
+                 ("--save-episode", args.save_episode)),
+                "with --episode: a stored episode replays the run stored, whole (--pause-at T or --at T reach a "
+                "moment)")
     if ab:
-        refuse([name for name, value in (("--save-episode", args.save_episode), ("--live", args.live or None))
-                if value is not None],
-               "with two controllers: an A / B view is written to one page, never streamed, and saves no episode "
-               "(view one controller for those)")
+        _refuse((("--save-episode", args.save_episode), ("--live", args.live or None)),
+                "with two controllers: an A / B view is written to one page, never streamed, and saves no episode "
+                "(view one controller for those)")
     if args.live and args.record is None:
         raise ConfigError("--live streams a recorded view as well (with --record); without --record the view is "
                           "live already: leave --live out")
     if not live:
-        refuse([name for name, value in (("--host", args.host), ("--speed", args.speed), ("--step", args.step),
-                                         ("--pause-at", args.pause_at), ("--paused", args.paused or None),
-                                         ("--wait", args.wait or None)) if value is not None],
-               "plays no part here: this view is only recorded (with one controller, --live streams it too)")
+        _refuse((("--host", args.host), ("--speed", args.speed), ("--step", args.step), ("--pause-at", args.pause_at),
+                 ("--paused", args.paused or None), ("--wait", args.wait or None)),
+                "plays no part here: this view is only recorded (with one controller, --live streams it too)")
     elif args.record is None and args.at is not None:
         raise ConfigError("--at opens a recorded page at a moment: add --record FILE.html, or use --pause-at T live")
 
