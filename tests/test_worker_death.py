@@ -10,6 +10,7 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
 from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena import executors
@@ -64,3 +65,18 @@ def test_the_command_ends_past_a_thread_a_controller_left_running_in_its_own_pro
     assert done.returncode == 0, done.stderr
     assert "thread(s) still running at the end" in done.stderr and "exiting without waiting for them" in done.stderr
     assert (tmp_path / "out" / "report.md").is_file()
+
+
+def test_on_ray_a_controller_that_exits_its_worker_costs_its_own_trials_only(plugin_package, tmp_path, monkeypatch):
+    pytest.importorskip("ray")
+    root = plugin_package("raydiepkg", {"exits": EXITS})
+    monkeypatch.setenv("PYTHONPATH", str(root))  # Ray's workers import the plug-in from their environment
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SHORT_SCENARIO)
+    result = run_arena(ArenaConfig(controllers=("stand", "raydiepkg.exits:make"), scenario=scenario, trials=2,
+                                   out_dir=tmp_path / "ray", executor="ray", progress=False))
+    by = {(r.controller, r.trial): r for r in result.records}
+    assert len(by) == 4 and by[("stand", 0)].success and by[("stand", 1)].success
+    for i in range(2):
+        died = by[("raydiepkg.exits:make", i)]
+        assert died.outcome == "controller_error" and "died again when Ray played it once more" in died.error

@@ -183,24 +183,29 @@ def _alone(task: TrialTask) -> TrialRecord:
     try:
         return pool.submit(run_task, task).result()
     except BrokenProcessPool:
-        return worker_died(task)
+        return worker_died(task, "died again when the trial was played alone; the trials beside it were played again")
     finally:
         _shut_down(pool, broken=True)  # its one task is done, or its worker dead: nothing left to wait for
 
 
-def worker_died(task: TrialTask) -> TrialRecord:
-    """The record of `task` whose worker process died playing it: a controller error, with no tick played."""
+def worker_died(task: TrialTask, again: str) -> TrialRecord:
+    """The record of `task` whose worker process died playing it: a controller error, with no tick played.
+
+    `again` ends the message: how the trial was played once more, and died again.
+    """
     trial, spec = task.trial, task.controller
     robot = simulated_robot(trial, spec.arm_mode)  # its joints and time step, for the empty episode
     empty = EpisodeBuffer(nq=7 + robot.num_joints).finish(duration_s=trial.duration_s,
                                                            control_dt=robot.config.timestep, fell=False,
                                                            fall_time_s=math.nan)
     error = (f"controller {spec.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}: the worker process "
-             "playing it died (it exited, or was killed by a signal or for its memory) and died again when the trial "
-             "was played alone; the trials beside it were played again")
+             f"playing it died (it exited, or was killed by a signal or for its memory) and {again}")
     return TrialRecord.of_trial(trial, controller=spec.name, episode=empty, counters={}, wall_s=0.0,
                                 debug_truth=task.debug_truth, error=error)
 
+
+_RAY_RETRIES = 1
+"""How many times Ray plays again a task whose worker died, before the trial is recorded as its controller's error."""
 
 _LINGER_S = 5.0
 """How long a worker may take to exit once its pool is shut down [s]: one that a controller's thread keeps alive is
@@ -248,7 +253,9 @@ class RayExecutor:
     def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
         """Yield each task's record as it finishes.
 
-        `tasks` is read lazily: twice as many in flight as the cluster has CPUs, a new one when one finishes.
+        `tasks` is read lazily: twice as many in flight as the cluster has CPUs, a new one when one finishes. A
+        task whose worker process dies (a controller that exits it, a kill, Ray's memory monitor, a lost node) is
+        played once more; one that dies again is recorded as its controller's error, and the run goes on.
         """
         ray = require("ray", "cluster")
         started = False
@@ -259,16 +266,23 @@ class RayExecutor:
                      runtime_env={"env_vars": dict(_SINGLE_THREAD_ENV)}, **kwargs)
             started = True
         try:
-            remote = ray.remote(num_cpus=1)(run_task)
+            # a task whose worker dies is played once more (a trial on a lost node finishes elsewhere)
+            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(run_task)
+            died = (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError)
             ahead = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
             queue = iter(tasks)
-            refs = [remote.remote(task) for task in itertools.islice(queue, ahead)]
+            refs = {remote.remote(task): task for task in itertools.islice(queue, ahead)}
             while refs:
-                done, refs = ray.wait(refs, num_returns=1)
-                yield ray.get(done[0])
+                (done,), _ = ray.wait(list(refs), num_returns=1)
+                task = refs.pop(done)
+                try:
+                    record = ray.get(done)
+                except died:
+                    record = worker_died(task, "died again when Ray played it once more")
+                yield record
                 nxt = next(queue, None)
                 if nxt is not None:
-                    refs.append(remote.remote(nxt))
+                    refs[remote.remote(nxt)] = nxt
         finally:
             if started:
                 ray.shutdown()
