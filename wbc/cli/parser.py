@@ -660,7 +660,7 @@ def _add_paper_parser(sub: _Commands) -> None:
                            description="Play the protocol of the paper's Table I (pushes; arm actuated, locked, "
                            "absent), II (fast turns; the same) or III (the staged method and its baselines) for the "
                            "learned and the model-based family on the same trials, and print our rows beside the "
-                           "paper's, the paired comparisons (bootstrap intervals, exact McNemar / Wilcoxon "
+                           "paper's, the paired comparisons (exact or bootstrap intervals, exact McNemar / Wilcoxon "
                            "p-values, n80, verdicts), where each contender fails, and the run time. The paper played "
                            "5 seeds x 2000 trials: --seeds 5 --trials 400.")
     paper.add_argument("table", choices=tuple(PAPER_TABLES), help="which table")
