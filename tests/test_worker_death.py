@@ -15,6 +15,7 @@ from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena import executors
 from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.errors import ConfigError
 
 EXITS = STAND_PLUGIN.format(doc="The stand hold that exits its process on its fifth tick.", reset="pass",
                             act="if self.ticks == 5:\n                __import__('os')._exit(3)",
@@ -80,3 +81,54 @@ def test_on_ray_a_controller_that_exits_its_worker_costs_its_own_trials_only(plu
     for i in range(2):
         died = by[("raydiepkg.exits:make", i)]
         assert died.outcome == "controller_error" and "died again when Ray played it once more" in died.error
+
+
+HANGS = STAND_PLUGIN.format(doc="The stand hold that hangs on its fifth tick.", reset="pass",
+                            act="if self.ticks == 5:\n                __import__('threading').Event().wait()",
+                            counters="return {}")
+
+
+def test_a_controller_that_hangs_costs_its_own_trial_under_a_trial_time_limit(plugin_package, tmp_path):
+    # one worker: a time limit plays the trials in a worker process all the same, so that the hung one can be ended;
+    # the limit is far above what the standing trial takes on any machine
+    plugin_package("hangpkg", {"hangs": HANGS})
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SHORT_SCENARIO)
+    result = run_arena(ArenaConfig(controllers=("stand", "hangpkg.hangs:make"), scenario=scenario, trials=1,
+                                   out_dir=tmp_path / "run", workers=1, progress=False, trial_time_limit_s=10.0))
+    by = {r.controller: r for r in result.records}
+    assert by["stand"].success
+    hung = by["hangpkg.hangs:make"]
+    assert hung.outcome == "controller_error"
+    assert "trial 0: ran past the trial time limit of 10 s (--trial-time-limit)" in hung.error
+    (errors,) = result.controller_errors
+    assert errors.controller == "hangpkg.hangs:make"
+
+
+def test_the_watchdog_ends_the_worker_only_when_the_trial_overruns(tmp_path):
+    exits = []
+    flag = tmp_path / "flag"
+    # the trial ends first: the clock never runs out
+    with executors._Watchdog(5.0, str(flag), wait=lambda event, timeout: event.wait(), exit_=exits.append) as dog:
+        pass
+    dog._thread.join(timeout=60)
+    assert not dog._thread.is_alive() and exits == [] and not flag.exists()
+    # the clock runs out first: the flag is left, naming the limit, and the process ended with its own status
+    waited = []
+    dog = executors._Watchdog(5.0, str(flag), wait=lambda event, timeout: waited.append(timeout) or False,
+                              exit_=exits.append)
+    with dog:
+        dog._thread.join(timeout=60)
+    assert waited == [5.0] and exits == [executors.OVERRUN_EXIT] and flag.read_text() == "5.0\n"
+
+
+@pytest.mark.parametrize("limit", [0.0, -1.0, float("nan"), float("inf"), True, "10"])
+def test_a_trial_time_limit_must_be_a_positive_number_of_seconds(tmp_path, limit):
+    with pytest.raises(ConfigError, match="--trial-time-limit must be a number of seconds above 0"):
+        ArenaConfig(controllers=("stand",), scenario=tmp_path / "x.toml", trial_time_limit_s=limit)
+
+
+def test_a_trial_time_limit_is_refused_with_a_live_view(tmp_path):
+    with pytest.raises(ConfigError, match="a viewed run"):
+        ArenaConfig(controllers=("stand",), scenario=tmp_path / "x.toml", trial_time_limit_s=10.0,
+                    observer=lambda *a: None)

@@ -32,7 +32,14 @@ from wbc.arena.breakdown import breakdown, push_outcomes, recovery_curve
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErrors, ErrorGuard
 from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.finish import finish_results
-from wbc.arena.identity import MAX_RUN_TRIALS, ControllerFile, ScenarioRef, SequentialStop, SimulatedRunIdentity
+from wbc.arena.identity import (
+    MAX_RUN_TRIALS,
+    MAX_TRIAL_TIME_LIMIT_S,
+    ControllerFile,
+    ScenarioRef,
+    SequentialStop,
+    SimulatedRunIdentity,
+)
 from wbc.arena.progress import progress
 from wbc.arena.report import summarize
 from wbc.arena.results import ResultsStore, check_out_dir, episode_path
@@ -49,7 +56,11 @@ from wbc.robots.registry import get_robot
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.scenario.trial import Trial
 
-__all__ = ["ArenaConfig", "ArenaResult", "run_arena"]
+__all__ = ["VIEWED_TIME_LIMIT", "ArenaConfig", "ArenaResult", "run_arena"]
+
+VIEWED_TIME_LIMIT = ("--trial-time-limit ends the worker process of a trial that overruns, and a viewed run (--view) "
+                     "plays its trials in this process: leave one of them out")
+"""Why a time limit and a live view are refused together."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -86,6 +97,11 @@ class ArenaConfig:
         sequential_pairs: the (A, B) controller pairs the sequential test watches (empty: every pair).
         max_consecutive_errors: a controller that fails (raises, or returns an invalid command) on this many trials
             in a row is stopped, its remaining trials not played; 0: never stopped.
+        trial_time_limit_s: the wall time a trial may take in its worker [s]; a trial still playing then (a
+            controller that hangs) has its worker ended and is recorded as its controller's error, and the run goes
+            on (None: no limit). Results then depend on the machine's speed, so a run's results are reproducible only
+            where no trial comes near the limit: it is a guard against hangs, not a deadline. Trials then play in
+            worker processes even with one worker; not with a live view.
     """
 
     controllers: tuple[str, ...]
@@ -110,6 +126,7 @@ class ArenaConfig:
     alpha: float = 0.05
     sequential_pairs: tuple[tuple[str, str], ...] = ()
     max_consecutive_errors: int = DEFAULT_MAX_CONSECUTIVE_ERRORS
+    trial_time_limit_s: float | None = None
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -146,6 +163,14 @@ class ArenaConfig:
         if self.max_consecutive_errors < 0:
             raise ConfigError(f"--max-consecutive-errors must be >= 0 (0: never stop a controller), got "
                               f"{self.max_consecutive_errors}")
+        if self.trial_time_limit_s is not None:
+            limit = self.trial_time_limit_s
+            number = isinstance(limit, (int, float)) and not isinstance(limit, bool)
+            if not number or not 0 < limit <= MAX_TRIAL_TIME_LIMIT_S:
+                raise ConfigError(f"--trial-time-limit must be a number of seconds above 0 and at most "
+                                  f"{MAX_TRIAL_TIME_LIMIT_S:g} (a week), got {limit!r}")
+            if self.observer is not None:
+                raise ConfigError(VIEWED_TIME_LIMIT)
         for a, b in self.sequential_pairs:
             if a not in self.controllers or b not in self.controllers or a == b:
                 raise ConfigError(f"sequential pair ({a}, {b}) must name two different controllers played; "
@@ -286,7 +311,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         return str(path)
 
     def task(t: Trial, c: str) -> TrialTask:
-        return TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c))
+        return TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c),
+                         time_limit_s=cfg.trial_time_limit_s)
 
     total = len(cfg.controllers) * len(trials)
     rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None

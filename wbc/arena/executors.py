@@ -13,12 +13,15 @@ name once (reading a ``policy:PATH`` file there), and the spec pickles to spawne
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import math
 import multiprocessing
 import os
 import sys
-from collections.abc import Generator, Iterable, Iterator
+import tempfile
+import threading
+from collections.abc import Callable, Generator, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
@@ -44,12 +47,16 @@ class TrialTask:
         controller: the controller, resolved (`wbc.control.registry.get_controller`) once by the parent.
         debug_truth: throw the controller's ground-truth debug switch.
         episode_path: where to save the episode log as ``.npz`` (None: not saved).
+        time_limit_s: the wall time the trial may take in its worker, from the controller's construction to its
+            record [s]; past it the worker process is ended and the trial recorded as its controller's error (None:
+            no limit). Played in a worker process only (`LocalExecutor` uses its pool whenever a task has a limit).
     """
 
     trial: Trial
     controller: ControllerSpec
     debug_truth: bool = False
     episode_path: str | None = None
+    time_limit_s: float | None = None
 
 
 _SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -87,6 +94,61 @@ def run_task(task: TrialTask, observer: TickObserver | None = None) -> TrialReco
     return record
 
 
+OVERRUN_EXIT = 86
+"""The exit status of a worker ended because its trial ran past its time limit."""
+
+
+class _Watchdog:
+    """In a worker process: ends the process if the trial is still playing `limit_s` after it started.
+
+    A trial whose controller hangs (a sleep, a deadlock, a loop that never returns) cannot be interrupted from inside
+    its own process reliably (a loop in compiled code ignores signals), so the process is ended (``os._exit``), after
+    writing `flag`: the parent reads it to record the trial as overrun instead of playing it again. `wait` is
+    `threading.Event.wait`'s signature (tests pass their own clock).
+    """
+
+    def __init__(self, limit_s: float, flag: str, *, wait: Callable[[threading.Event, float], bool] | None = None,
+                 exit_: Callable[[int], object] = os._exit) -> None:
+        self._done = threading.Event()
+        self._limit_s, self._flag, self._exit = limit_s, flag, exit_
+        self._wait = wait or (lambda event, timeout: event.wait(timeout))
+        self._thread = threading.Thread(target=self._watch, name="wbc-trial-time-limit", daemon=True)
+
+    def __enter__(self) -> _Watchdog:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+
+    def _watch(self) -> None:
+        if self._wait(self._done, self._limit_s):
+            return
+        with open(self._flag, "w", encoding="utf-8") as f:
+            f.write(f"{self._limit_s!r}\n")
+        self._exit(OVERRUN_EXIT)
+
+
+def _run_limited(task: TrialTask, flag: str) -> TrialRecord:
+    """`run_task` in a worker, under `task`'s time limit (`_Watchdog`); `flag` is the file an overrun leaves."""
+    if task.time_limit_s is None:
+        return run_task(task)
+    with _Watchdog(task.time_limit_s, flag):
+        return run_task(task)
+
+
+def _flag_name(task: TrialTask) -> str:
+    """The name of the file `task`'s worker leaves if its trial overruns: one per (controller, band, seed, trial)."""
+    trial = task.trial
+    return hashlib.sha256(f"{trial.band}-s{trial.seed}-t{trial.index}-{task.controller.name}".encode()).hexdigest()[:32]
+
+
+def overran(task: TrialTask) -> TrialRecord:
+    """The record of `task`, whose worker was ended when the trial ran past its time limit: a controller error."""
+    return _no_tick_record(task, f"ran past the trial time limit of {task.time_limit_s:g} s (--trial-time-limit), and "
+                                 "its worker process was ended")
+
+
 class LocalExecutor:
     """Runs tasks in a pool of local processes (``workers`` <= 1: in this process).
 
@@ -100,6 +162,7 @@ class LocalExecutor:
     def __init__(self, workers: int | None = None, observer: TickObserver | None = None) -> None:
         self.workers = 1 if observer is not None else (workers or os.cpu_count() or 1)
         self.observer = observer
+        self._flags: str | None = None  # the directory of the overrun flags, while a pool runs
 
     def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
         """Yield each task's record as it finishes.
@@ -107,14 +170,28 @@ class LocalExecutor:
         `tasks` is read lazily, a task when a worker is free (a few ahead with a pool), so a caller that feeds a
         generator can stop handing out tasks in the middle of a run (``--until-significant``).
         """
-        if self.workers <= 1:
-            for task in tasks:
+        queue = iter(tasks)
+        first = next(queue, None)
+        if first is None:
+            return
+        queue = itertools.chain((first,), queue)
+        if self.workers <= 1 and (first.time_limit_s is None or self.observer is not None):
+            for task in queue:
                 yield run_task(task, self.observer)
             return
         # Spawned (not forked) workers, so each starts its BLAS single-threaded from the environment; the pool starts
-        # its processes on demand, so the environment stays set until the pool is done.
-        with single_threaded_blas():
-            yield from self._run_pool(tasks)
+        # its processes on demand, so the environment stays set until the pool is done. A time limit needs a worker
+        # process to end (one, with --workers 1).
+        with single_threaded_blas(), tempfile.TemporaryDirectory(prefix="wbc-overrun-") as flags:
+            self._flags = flags
+            try:
+                yield from self._run_pool(queue)
+            finally:
+                self._flags = None
+
+    def _flag(self, task: TrialTask) -> str:
+        """The file `task`'s worker leaves if the trial overruns its time limit."""
+        return os.path.join(self._flags or tempfile.gettempdir(), _flag_name(task))
 
     def _run_pool(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
         """The pool's records; a worker that dies costs only the trial it was playing.
@@ -131,7 +208,7 @@ class LocalExecutor:
             if suspects is None:
                 return
             for task in suspects:
-                yield _alone(task)
+                yield overran(task) if os.path.exists(self._flag(task)) else _alone(task, self._flag(task))
 
     def _pool_pass(self, queue: Iterator[TrialTask]) -> Generator[TrialRecord, None, list[TrialTask] | None]:
         """Play `queue` in one pool until it is empty (None) or the pool breaks (the tasks it broke with)."""
@@ -143,7 +220,7 @@ class LocalExecutor:
 
             def send(task: TrialTask) -> bool:
                 try:
-                    pending[pool.submit(run_task, task)] = task
+                    pending[pool.submit(_run_limited, task, self._flag(task))] = task
                     return True
                 except BrokenProcessPool:
                     unsent.append(task)
@@ -177,12 +254,14 @@ class LocalExecutor:
             _shut_down(pool, broken=broke or not ended)
 
 
-def _alone(task: TrialTask) -> TrialRecord:
+def _alone(task: TrialTask, flag: str) -> TrialRecord:
     """Play `task` in a pool of its own: its record, or, if its worker dies, the record of that controller error."""
     pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
     try:
-        return pool.submit(run_task, task).result()
+        return pool.submit(_run_limited, task, flag).result()
     except BrokenProcessPool:
+        if os.path.exists(flag):
+            return overran(task)
         return worker_died(task, "died again when the trial was played alone; the trials beside it were played again")
     finally:
         _shut_down(pool, broken=True)  # its one task is done, or its worker dead: nothing left to wait for
@@ -193,13 +272,18 @@ def worker_died(task: TrialTask, again: str) -> TrialRecord:
 
     `again` ends the message: how the trial was played once more, and died again.
     """
+    return _no_tick_record(task, f"the worker process playing it died (it exited, or was killed by a signal or for "
+                                 f"its memory) and {again}")
+
+
+def _no_tick_record(task: TrialTask, what: str) -> TrialRecord:
+    """A controller-error record of `task` with an empty episode: its worker ended before the trial gave a record."""
     trial, spec = task.trial, task.controller
     robot = simulated_robot(trial, spec.arm_mode)  # its joints and time step, for the empty episode
     empty = EpisodeBuffer(nq=7 + robot.num_joints).finish(duration_s=trial.duration_s,
                                                            control_dt=robot.config.timestep, fell=False,
                                                            fall_time_s=math.nan)
-    error = (f"controller {spec.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}: the worker process "
-             f"playing it died (it exited, or was killed by a signal or for its memory) and {again}")
+    error = f"controller {spec.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}: {what}"
     return TrialRecord.of_trial(trial, controller=spec.name, episode=empty, counters={}, wall_s=0.0,
                                 debug_truth=task.debug_truth, error=error)
 
@@ -265,25 +349,36 @@ class RayExecutor:
             ray.init(log_to_driver=False, configure_logging=False,
                      runtime_env={"env_vars": dict(_SINGLE_THREAD_ENV)}, **kwargs)
             started = True
+        flags = tempfile.TemporaryDirectory(prefix="wbc-overrun-")  # seen by the workers of a Ray on this machine
         try:
             # a task whose worker dies is played once more (a trial on a lost node finishes elsewhere)
-            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(run_task)
+            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(_run_limited)
             died = (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError)
             ahead = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
             queue = iter(tasks)
-            refs = {remote.remote(task): task for task in itertools.islice(queue, ahead)}
+
+            def flag(task: TrialTask) -> str:
+                return os.path.join(flags.name, _flag_name(task))
+
+            refs = {remote.remote(task, flag(task)): task for task in itertools.islice(queue, ahead)}
             while refs:
                 (done,), _ = ray.wait(list(refs), num_returns=1)
                 task = refs.pop(done)
                 try:
                     record = ray.get(done)
                 except died:
-                    record = worker_died(task, "died again when Ray played it once more")
+                    if os.path.exists(flag(task)):
+                        record = overran(task)
+                    else:
+                        limit = "" if task.time_limit_s is None else (
+                            f" (or, on another machine, ran past the trial time limit of {task.time_limit_s:g} s)")
+                        record = worker_died(task, f"died again when Ray played it once more{limit}")
                 yield record
                 nxt = next(queue, None)
                 if nxt is not None:
-                    refs[remote.remote(nxt)] = nxt
+                    refs[remote.remote(nxt, flag(nxt))] = nxt
         finally:
+            flags.cleanup()
             if started:
                 ray.shutdown()
 

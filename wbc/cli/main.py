@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
 
-from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.compare import VIEWED_TIME_LIMIT, ArenaConfig, run_arena
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
@@ -747,6 +747,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
     if args.view and args.workers not in (None, 1):
         raise ConfigError(f"--workers {args.workers} with --view: a viewed run plays its trials one by one in this "
                           "process, where the viewer draws them; leave --workers out (or 1)")
+    if args.view and args.trial_time_limit is not None:
+        raise ConfigError(VIEWED_TIME_LIMIT)  # before the viewer's server starts
     _check_resumable(args)
     out = Path(args.out) if args.out else Path("runs") / (
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
@@ -761,7 +763,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
                                                            takes_controller_config, "a plug-in"),
                       io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"),
                       until_significant=until_significant, alpha=alpha,
-                      max_consecutive_errors=args.max_consecutive_errors)
+                      max_consecutive_errors=args.max_consecutive_errors,
+                      trial_time_limit_s=args.trial_time_limit)
     try:
         return _play_arena(cfg, as_json=args.json)
     finally:
@@ -822,7 +825,7 @@ def _paper(args: argparse.Namespace) -> int:
         scenario=Path(args.scenario) if args.scenario else None, out_dir=Path(args.out) if args.out else None,
         workers=args.workers, resume=args.resume, drop_bad_rows=args.drop_bad_rows,
         progress=not (args.quiet or args.json), contenders=overrides,
-        crouched=args.crouched))
+        crouched=args.crouched, trial_time_limit_s=args.trial_time_limit))
     if args.json:
         printers.print_json(result.as_dict())
     else:

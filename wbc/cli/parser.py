@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
-from wbc.arena.identity import MAX_SEED, MAX_TRIALS
+from wbc.arena.identity import MAX_SEED, MAX_TRIAL_TIME_LIMIT_S, MAX_TRIALS
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES
@@ -197,6 +197,7 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
                    metavar="K",
                    help="stop a controller that fails (raises, or returns an invalid command) on K trials in a row; "
                         f"the others finish (default {DEFAULT_MAX_CONSECUTIVE_ERRORS}; 0: never stop one)")
+    add_trial_time_limit_option(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-push", action="store_true", help="play the trials without their pushes")
     p.add_argument("--debug-truth", action="store_true",
@@ -209,6 +210,15 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--speed", type=_SPEED, default=None,
                    help="with --view: 1 real time (default), 0.25 slow motion, 0 flat out (0..100)")
     add_controller_file_options(p, repeatable=True)
+
+
+def add_trial_time_limit_option(p: argparse.ArgumentParser) -> None:
+    """``--trial-time-limit S``: a guard against a controller that hangs (``wbc run``, ``compare``, ``paper``)."""
+    p.add_argument("--trial-time-limit", type=bounded_float(0.0, MAX_TRIAL_TIME_LIMIT_S, lo_open=True), default=None,
+                   metavar="S",
+                   help="end a trial still playing after S seconds of wall time (a controller that hangs) and record "
+                        "it as its controller's error; the run goes on (default: no limit; trials then play in "
+                        "worker processes, even with --workers 1)")
 
 
 def add_controller_file_options(p: argparse.ArgumentParser, *, repeatable: bool) -> None:
@@ -676,6 +686,7 @@ def _add_paper_parser(sub: _Commands) -> None:
     paper.add_argument("--workers", type=_WORKERS, default=None,
                        help=f"local worker processes, 1..{MAX_WORKERS} (default: all cores)")
     _add_resume_options(paper)
+    add_trial_time_limit_option(paper)
     paper.add_argument("--contender", action="append", default=None, metavar="KEY=CONTROLLER",
                        help="play CONTROLLER in row KEY (repeatable): e.g. learned=policy:PATH for a retrained pi3, "
                        "ppo=policy:PATH for a Table III baseline trained anew")

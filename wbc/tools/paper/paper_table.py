@@ -56,6 +56,8 @@ class PaperRunConfig:
         progress: progress on stderr.
         contenders: ``--contender KEY=CONTROLLER`` overrides, by key.
         crouched: play the learned rows' crouched posture variants (``--crouched``; `wbc.tools.paper.tables`).
+        trial_time_limit_s: the wall time a trial may take (`wbc.arena.compare.ArenaConfig.trial_time_limit_s`;
+            None: no limit).
     """
 
     table: str
@@ -69,6 +71,7 @@ class PaperRunConfig:
     progress: bool = True
     contenders: Mapping[str, str] = field(default_factory=dict)
     crouched: bool = False
+    trial_time_limit_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.table not in TABLES:
@@ -103,7 +106,8 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
     start = time.perf_counter()
     arena = run_arena(ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
                                   seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
-                                  resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows, progress=cfg.progress))
+                                  resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows, progress=cfg.progress,
+                                  trial_time_limit_s=cfg.trial_time_limit_s))
     wall = time.perf_counter() - start
     records = arena.records
     by_controller: dict[str, list[TrialRecord]] = {}
