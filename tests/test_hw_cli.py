@@ -33,6 +33,7 @@ from wbc.cli.parser import build_parser
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.safety import REMEDIES
 from wbc.hardware.unitree import UdpTransport
 from wbc.hardware.unitree.command_codec import encode_command
 from wbc.hardware.unitree.layout import frame_layout
@@ -152,7 +153,7 @@ def test_check_over_the_wire_sends_only_damping(emulator: UnitreeEmulator,
 def test_check_shows_the_estop_buttons(capsys: pytest.CaptureFixture[str]) -> None:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
         emu.inject(Fault.REMOTE_L2_B)
-        assert main(["hw", "check", "--target", f"127.0.0.1:{emu.address[1]}", "--seconds", "0.1"]) == 0
+        assert main(["hw", "check", "--target", f"127.0.0.1:{emu.address[1]}", "--seconds", "0.1"]) == 1  # refused
         assert all(c.damping for c in emu.commands())
     assert "remote buttons: L2, B  (L2+B held: e-stop)" in capsys.readouterr().out
 
@@ -285,10 +286,12 @@ def test_check_reports_the_safety_layers_refusal_of_a_folded_robot(capsys: pytes
         qpos = emu.sim.data.qpos.copy()
         qpos[7:19] = np.tile([0.0, 1.2, -2.9], 4)  # calves beyond the SDK's range and its margin: no ramp from here
         emu.reset(qpos)
-        assert main(["hw", "check", "--target", f"127.0.0.1:{emu.address[1]}", "--seconds", "0.2"]) == 0
+        # a refusal is the command's failure (status 1), so that a bring-up script stops there
+        assert main(["hw", "check", "--target", f"127.0.0.1:{emu.address[1]}", "--seconds", "0.2"]) == 1
         assert all(c.damping for c in emu.commands())  # still nothing but damping
     out = capsys.readouterr().out
     assert re.search(r"safety: WOULD REFUSE: joint_range: FR_calf_joint at -2\.\d+ rad", out)
+    assert f"what to do: {REMEDIES['joint_range']}" in out
     assert "FR_calf_joint" in out and " OUT" in out
 
 

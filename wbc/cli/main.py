@@ -364,7 +364,9 @@ def hw_check(args: argparse.Namespace, *,
             in-process channel; the seconds are then the robot's clock's).
 
     Returns:
-        0, after printing the state, the link's counters and the safety layer's verdict.
+        0 when the safety layer would start a ramp from the state read ("ready"); 1 when it would refuse (a trip:
+        an e-stop held, a joint out of range, a motor fault ...) or saw no live state stream, so that a bring-up
+        script can stop there. The state, the link's counters and the verdict are printed either way.
     """
     host, port = _hardware_target(args, "check a real robot")
     local = _hardware_local(args, "check a real robot") or (("127.0.0.1", 0) if is_loopback(host) else ("0.0.0.0", 0))
@@ -383,7 +385,7 @@ def hw_check(args: argparse.Namespace, *,
                                                seconds=args.seconds, transport=args.transport, arm_port=arm_port,
                                                allow_hardware=args.allow_hardware), build=build, confirm=confirm)
     printers.print_hw_check(check)
-    return 0
+    return 0 if check.safety_state == "ramp" else 1
 
 
 def realtime_request(args: argparse.Namespace, *, place: str) -> RealtimeRequest:

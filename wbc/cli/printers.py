@@ -672,6 +672,8 @@ def print_hw_check(check: HardwareCheck) -> None:
                "waiting": "waiting: no live state stream"}.get(check.safety_state, check.safety_state)
     print("  safety: " + (f"WOULD REFUSE: {trips[0].reason}: {trips[0].detail}" if trips else verdict)
           + f" (joint margin {check.margin} rad beyond each range)")
+    if trips and trips[0].remedy:
+        print(f"  what to do: {trips[0].remedy}")
     print(f"  link: {link.frames_sent} frames sent, all damping (the link's own, {link.damping_sent}, and any the "
           f"safety layer wrote on a trip); {link.foreign} foreign datagrams")
     print_thread_stats("link thread", check.link_thread)
