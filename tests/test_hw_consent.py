@@ -185,6 +185,20 @@ def test_check_refuses_a_real_arm_port_before_anything(nothing_opened: list,
     assert "Traceback" not in err and nothing_opened == []
 
 
+@pytest.mark.parametrize(("port", "why"), [
+    ("/dev/pts/999999", "names no pseudo-terminal on this machine: an emulator's goes away when the emulator stops"),
+    ("", "is empty: name the arm's serial device"),
+])
+def test_a_stopped_emulators_pty_or_an_empty_port_is_not_called_a_real_device(port: str, why: str,
+                                                                              nothing_opened: list,
+                                                                              capsys: pytest.CaptureFixture[str]
+                                                                              ) -> None:
+    assert main(["hw", "check", "--target", "127.0.0.1:9", "--arm-port", port]) == 2
+    err = capsys.readouterr().err
+    assert f"--arm-port {port} {why}" in err and "real serial device" not in err, err
+    assert nothing_opened == []
+
+
 def test_run_refuses_a_real_arm_port_before_anything(nothing_opened: list,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "run", "stand", "--scenario", "scenarios/push.toml", "--trial", "0", "--target",

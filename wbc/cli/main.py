@@ -37,7 +37,7 @@ from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, buil
 from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.io_process import build_process_robot
 from wbc.hardware.realtime import AUTO_CPU, CONTROLLER_PRIORITY_BELOW, DEFAULT_RT_PRIORITY, NO_REALTIME, RealtimeRequest
-from wbc.hardware.serial_port_policy import is_emulated_port
+from wbc.hardware.serial_port_policy import is_emulated_port, why_not_emulated
 from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.shipped import distilled_weights
@@ -333,8 +333,7 @@ def _hardware_arm_port(args: argparse.Namespace, purpose: str) -> str | None:
     port = args.arm_port
     if port is not None and not args.allow_hardware and not is_emulated_port(port):
         raise TargetRefusedError(
-            f"--arm-port {port} is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; "
-            f"opening it writes the servos' settings and torque). To {purpose}, add --allow-hardware (you will be "
+            f"--arm-port {port} {why_not_emulated(port)}. To {purpose}, add --allow-hardware (you will be "
             "asked to type yes; --yes confirms when stdin is not a terminal)")
     return port
 

@@ -25,7 +25,7 @@ import sys
 from wbc.errors import TargetRefusedError
 
 __all__ = ["IN_PROCESS_PREFIX", "announce_hardware_port", "check_serial_port", "is_emulated_port",
-           "is_pseudo_terminal"]
+           "is_pseudo_terminal", "why_not_emulated"]
 
 IN_PROCESS_PREFIX = "in-process:"
 """How an in-process bus names its port (`wbc.hardware.dynamixel.in_process_handlers`): never a file."""
@@ -54,6 +54,23 @@ def is_emulated_port(port: str) -> bool:
     return port.startswith(IN_PROCESS_PREFIX) or is_pseudo_terminal(port)
 
 
+def why_not_emulated(port: str) -> str:
+    """Why `port` is not an emulator's, as the end of a sentence that starts with the port's name.
+
+    A pseudo-terminal's name that names no device (an emulator that stopped takes its pty with it) and an empty
+    name are told apart from a real device, so that the refusal does not send the user to ``--allow-hardware`` for
+    a typo or a stopped emulator.
+    """
+    if not port:
+        return "is empty: name the arm's serial device (an emulator prints its pseudo-terminal)"
+    real = os.path.realpath(port)
+    if real.rpartition("/")[0] == _PTY_DIR and not os.path.exists(real):
+        return ("names no pseudo-terminal on this machine: an emulator's goes away when the emulator stops (is it "
+                "still running? it prints the one to use)")
+    return ("is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; opening it writes "
+            "the servos' settings and torque)")
+
+
 def check_serial_port(port: str, *, allow_hardware: bool, what: str = "port") -> None:
     """Refuse a serial device the policy does not allow, before anything opens it.
 
@@ -68,8 +85,7 @@ def check_serial_port(port: str, *, allow_hardware: bool, what: str = "port") ->
     if allow_hardware or is_emulated_port(port):
         return
     raise TargetRefusedError(
-        f"{what} {port} is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; opening "
-        "it writes the servos' settings and torque). To drive a real arm, set allow_hardware=True in the config "
+        f"{what} {port} {why_not_emulated(port)}. To drive a real arm, set allow_hardware=True in the config "
         "(for instance DynamixelArmConfig(..., allow_hardware=True))"
     )
 
