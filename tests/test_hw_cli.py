@@ -345,3 +345,21 @@ def test_check_takes_the_robot_by_either_name(stepped: Stepped, capsys: pytest.C
     out = capsys.readouterr().out
     assert f"{name} at 127.0.0.1:9" in out and "rejected states: 0" in out
     assert main(["hw", "check", "--robot", "b1", "--target", "127.0.0.1:9"]) == 2
+
+
+def test_emulate_takes_an_arm_name_only_with_its_arm_and_names_a_locked_arm(capsys: pytest.CaptureFixture[str]
+                                                                            ) -> None:
+    for arm in ((), ("--arm", "none")):  # go1-arm, served as a bare go1, was a contradiction said nowhere
+        assert main(["hw", "emulate", "--robot", "go1-arm", *arm, "--seconds", "0.2", "--no-realtime"]) == 2
+        err = capsys.readouterr().err
+        assert "--robot go1-arm names the robot with its arm: add --arm locked" in err and "--robot go1" in err
+    assert main(["hw", "emulate", "--robot", "go1-arm", "--arm", "locked", "--seconds", "0.2", "--lockstep",
+                 "--no-realtime"]) == 0
+    assert "emulated go1 with its arm locked on the trunk (lockstep)" in capsys.readouterr().out
+    assert main(["hw", "emulate", "--robot", "go1", "--seconds", "0.2", "--lockstep", "--no-realtime"]) == 0
+    assert "emulated go1 (lockstep)" in capsys.readouterr().out  # the bare quadruped stays the default
+
+
+def test_emulate_refuses_a_fault_given_twice(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["hw", "emulate", "--fault", "drop", "--fault", "DROP", "--seconds", "0.2", "--no-realtime"]) == 2
+    assert "--fault DROP is given twice" in capsys.readouterr().err

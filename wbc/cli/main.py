@@ -211,6 +211,13 @@ def _hw_emulate(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
     if args.robot not in _WIRE_OF:
         raise UnknownNameError("robot", args.robot, tuple(_WIRE_OF))
+    with_arm = args.robot not in DESCRIPTIONS  # a1-wx200, go1-arm: the name says the arm is there
+    if with_arm and args.arm in (None, "none"):
+        wire = _WIRE_OF[args.robot]
+        raise ConfigError(f"--robot {args.robot} names the robot with its arm: add --arm locked (the arm held on the "
+                          f"trunk) or --arm actuated (the arm on its own bus, a pty), or emulate the bare quadruped "
+                          f"with --robot {wire}")
+    args.arm = "none" if args.arm is None else args.arm
     if args.arm not in ARM_MODES:
         raise UnknownNameError("arm mode", args.arm, ARM_MODES)
     actuated = args.arm == "actuated"
@@ -221,7 +228,10 @@ def _hw_emulate(args: argparse.Namespace) -> int:
             raise ConfigError(f"--fault {name}: the arm's bus is emulated only with --arm actuated")
         if key not in FAULTS and key not in BUS_FAULTS:
             raise UnknownNameError("fault", name, tuple(FAULTS) + (tuple(BUS_FAULTS) if actuated else ()))
-        faults.append(FAULTS[key] if key in FAULTS else BUS_FAULTS[key])
+        fault = FAULTS[key] if key in FAULTS else BUS_FAULTS[key]
+        if fault in faults:
+            raise ConfigError(f"--fault {name} is given twice; give each fault once")
+        faults.append(fault)
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     served = emulate(EmulateConfig(robot=_WIRE_OF[args.robot], arm_mode=args.arm,

@@ -469,9 +469,10 @@ def _add_hw_emulate_parser(hws: _Commands) -> None:
                              "packets) when it stops (Ctrl-C or --seconds).")
     emulate.add_argument("--robot", default="go1",
                          help=f"one of: {', '.join((*DESCRIPTIONS, *DESCRIPTIONS.values()))} (default go1)")
-    emulate.add_argument("--arm", default="none",
-                         help="none (the bare quadruped, default), locked (its arm on the trunk, held) or actuated "
-                         "(the arm on its own bus: a pty speaking Dynamixel Protocol 2.0)")
+    emulate.add_argument("--arm", default=None,
+                         help="none (the bare quadruped; the default with a1 and go1), locked (its arm on the trunk, "
+                         "held) or actuated (the arm on its own bus: a pty speaking Dynamixel Protocol 2.0); a1-wx200 "
+                         "and go1-arm need locked or actuated")
     emulate.add_argument("--port", type=bounded_int(0, 65_535), default=0,
                          help="UDP port on 127.0.0.1, 0..65535 (default 0: a free one)")
     emulate.add_argument("--fault", action="append", default=None, metavar="NAME",

@@ -553,10 +553,11 @@ def print_realtime_grant(who: str, grant: RealtimeGrant | None) -> None:
 
 
 def print_emulator_started(robot: str, mode: str, address: tuple[str, int], faults: Sequence[str], *,
-                           seconds: float | None, held: bool = False) -> None:
-    """``wbc hw emulate``: where the emulator listens, and how it stops."""
+                           seconds: float | None, held: bool = False, arm_locked: bool = False) -> None:
+    """``wbc hw emulate``: where the emulator listens, and how it stops (`arm_locked`: its arm held on the trunk)."""
     host, port = address
-    print(f"emulated {robot} ({mode}) on {host}:{port}; faults: {', '.join(faults) or 'none'}; "
+    arm = " with its arm locked on the trunk" if arm_locked else ""
+    print(f"emulated {robot}{arm} ({mode}) on {host}:{port}; faults: {', '.join(faults) or 'none'}; "
           + (f"stopping after {seconds} s" if seconds is not None else "Ctrl-C to stop"), flush=True)
     print(f"  connect with: wbc hw check --robot {robot} --target {host}:{port}", flush=True)
     _print_held(held)
@@ -604,7 +605,7 @@ def print_emulator_serving(serving: EmulatorServing) -> None:
     faults = list(serving.faults)
     if serving.arm_port is None:
         print_emulator_started(serving.robot, serving.mode, serving.address, faults, seconds=serving.seconds,
-                               held=serving.held)
+                               held=serving.held, arm_locked=serving.arm_mode == "locked")
     else:
         print_robot_emulator_started(serving.robot, serving.mode, serving.address, serving.arm_port, faults,
                                      seconds=serving.seconds, held=serving.held)

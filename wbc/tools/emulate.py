@@ -88,6 +88,7 @@ class EmulatorServing:
         seconds: when it stops [s], or None (at a signal).
         held: held at its standing pose until a command drives a motor.
         grant: what the OS granted of the real-time request.
+        arm_mode: the arm's mode in the physics (``none``, ``locked``, ``actuated``).
     """
 
     robot: str
@@ -98,6 +99,7 @@ class EmulatorServing:
     seconds: float | None
     held: bool
     grant: RealtimeGrant
+    arm_mode: str = "none"
 
 
 @dataclass(frozen=True)
@@ -178,7 +180,7 @@ def emulate(cfg: EmulateConfig, *,
         for fault in cfg.faults:
             emulator.inject(fault)
         serving(EmulatorServing(robot=cfg.robot, mode=cfg.mode, address=emulator.address, arm_port=None,
-                                faults=names, seconds=cfg.seconds, held=cfg.held, grant=grant))
+                                faults=names, seconds=cfg.seconds, held=cfg.held, grant=grant, arm_mode=cfg.arm_mode))
         _serve(emulator, cfg.seconds)
     return EmulatorServed(counts=EmulatorCounts.of(emulator), last_reject=emulator.last_reject,
                           failure=emulator.failure)
@@ -196,7 +198,7 @@ def _emulate_with_arm(cfg: EmulateConfig, names: tuple[str, ...], grant: Realtim
         for fault in cfg.faults:
             emulator.inject(fault)
         serving(EmulatorServing(robot=robot, mode=cfg.mode, address=emulator.address, arm_port=emulator.port,
-                                faults=names, seconds=cfg.seconds, held=cfg.held, grant=grant))
+                                faults=names, seconds=cfg.seconds, held=cfg.held, grant=grant, arm_mode=cfg.arm_mode))
         _serve(emulator, cfg.seconds)
     return EmulatorServed(counts=EmulatorCounts.of(emulator.legs), last_reject=emulator.legs.last_reject,
                           arm_bus=emulator.arm.stats, arm_thread=emulator.arm.thread_stats(),
