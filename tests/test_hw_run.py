@@ -159,6 +159,17 @@ def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
     assert link["valid_states"] >= link["frames_sent"] - 1
 
 
+def test_a_locked_arm_without_its_port_is_said_to_need_a_mechanical_lock(stepped_go1: Stepped, tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    for arm, warned in (("locked", True), ("none", False)):
+        args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", arm, "--scenario",
+                                          PUSH, "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "0.2",
+                                          "--settle", "0.2", "--out", str(tmp_path / arm), "--no-io-process"])
+        hw_run(args, build=stepped_go1.build)
+        err = capsys.readouterr().err
+        assert ("nothing drives the arm's servos, so the arm must be fixed mechanically" in err) == warned, err
+
+
 @pytest.mark.realtime
 @pytest.mark.parametrize("io_process", ["--io-process", "--no-io-process"])
 def test_realtime_stand_trial_over_the_wire(go1: UnitreeEmulator, tmp_path: Path,

@@ -496,6 +496,10 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
             return make(dataclasses.replace(config, realtime=request))
 
     def confirm(hardware: HardwareRobot, spec: ControllerSpec) -> None:
+        if host is not None and spec.arm_mode == "locked" and arm_port is None:
+            print(f"wbc: warning: {spec.name} plays the arm locked and no --arm-port is given: nothing drives the "
+                  "arm's servos, so the arm must be fixed mechanically at its stowed pose (an unpowered arm falls "
+                  "and swings, which the controller does not model)", file=sys.stderr)
         real = _real_devices(host, port, arm_port) if host is not None else []
         if real:
             _confirm_hardware("hw run", hardware.description.name, real, f"The controller {spec.name} will MOVE it: "

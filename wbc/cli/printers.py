@@ -714,7 +714,8 @@ def print_hw_run(result: HardwareTrialResult) -> None:
           + f" over {result.episode_wall_s:.2f} s")
     if result.link is not None:
         link = result.link.as_dict(prefix="")
-        print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} damping, "
+        print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} of them the link's own "
+              "damping (before the first state, past the write deadline, closing; not the safety layer's), "
               f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states")
         if "io/states_published" in link:
             print(f"  I/O process: {link['io/states_published']} states published, "
