@@ -363,3 +363,13 @@ def test_emulate_takes_an_arm_name_only_with_its_arm_and_names_a_locked_arm(caps
 def test_emulate_refuses_a_fault_given_twice(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "emulate", "--fault", "drop", "--fault", "DROP", "--seconds", "0.2", "--no-realtime"]) == 2
     assert "--fault DROP is given twice" in capsys.readouterr().err
+
+
+def test_check_over_the_vendor_sdk_says_that_it_listens_on_every_interface(capsys: pytest.CaptureFixture[str]
+                                                                           ) -> None:
+    pytest.importorskip("unitree_legged_sdk")
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1")) as emu:
+        assert main(["hw", "check", "--robot", "go1", "--target", f"127.0.0.1:{emu.address[1]}", "--seconds", "0.2",
+                     "--transport", "sdk"]) == 0
+        assert all(c.damping for c in emu.commands())
+    assert "the vendor SDK binds its port on every interface" in capsys.readouterr().err

@@ -148,6 +148,7 @@ def _bench_hw(args: argparse.Namespace) -> int:
     stand = 10.0 if args.stand is None else args.stand
     if not stand > 0:
         raise ConfigError(f"--stand must be > 0 s, got {stand}")
+    _sdk_note(args)
     result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport,
                       stand_seconds=None if args.no_safety else stand,
                       realtime=realtime_request(args, place="last"),
@@ -327,6 +328,14 @@ def _hardware_local(args: argparse.Namespace, purpose: str) -> tuple[str, int] |
     return _hardware_address(args.local, "--local", purpose, args.allow_hardware, binds=True)
 
 
+def _sdk_note(args: argparse.Namespace) -> None:
+    """With ``--transport sdk``: say that the vendor SDK listens on every interface, whatever ``--local`` names."""
+    if getattr(args, "transport", None) == "sdk":
+        print("wbc: note: --transport sdk: the vendor SDK binds its port on every interface (it takes no local "
+              "address); its socket is connected to the target, so only the target's datagrams reach it",
+              file=sys.stderr)
+
+
 def _hardware_arm_port(args: argparse.Namespace, purpose: str) -> str | None:
     """``--arm-port``, refused unless an emulator's (a pty) or ``--allow-hardware`` (before anything opens it).
 
@@ -380,6 +389,7 @@ def hw_check(args: argparse.Namespace, *,
     host, port = _hardware_target(args, "check a real robot")
     local = _hardware_local(args, "check a real robot") or (("127.0.0.1", 0) if is_loopback(host) else ("0.0.0.0", 0))
     arm_port = _hardware_arm_port(args, "check a real arm")
+    _sdk_note(args)
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     robot = _robot_name(args.robot)
@@ -466,6 +476,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
     host, port = _hardware_target(args, "run a trial on a real robot") if not args.sim else (None, None)
     local = _hardware_local(args, "run a trial on a real robot")
     arm_port = _hardware_arm_port(args, "run a trial on a real arm")
+    _sdk_note(args)
     if not args.sim and not args.io_process:
         print("wbc: warning: --no-io-process: the robot's devices run in this process; if it dies, nothing damps the "
               "legs, whose motors keep the last command they got (the robot has no watchdog). For debugging only",

@@ -20,6 +20,9 @@ What the SDK does that the backend must not inherit, and what this class does ab
 - Its socket is never closed (the destructor only prints): after `close` the port stays held until the process
   exits, so a second link in the same process needs another local port (0 picks one).
 - It prints to standard output ("UDP Initialized ...", "Closing UDP.").
+- It binds its port on every interface (``INADDR_ANY``; it takes no local address), whatever ``local`` names:
+  `bound_address` says so, and `wbc hw` says it when ``--transport sdk`` is chosen. Its socket is connected to the
+  target, so the kernel hands it only the target's datagrams.
 """
 
 from __future__ import annotations
@@ -155,7 +158,8 @@ class SdkTransport:
                                             "the robot)")
         self._state = ri.LowState()
         self._queued: list[bytes] = []
-        self.local_address = (host, port)
+        self.local_address = (host, port)  # where it is reached from this machine
+        self.bound_address = ("0.0.0.0", port)  # what the SDK bound: every interface (it takes no address)
 
     @property
     def closed(self) -> bool:
