@@ -311,6 +311,18 @@ def test_nothing_but_damping_before_the_first_state(stepped: Stepped) -> None:
     assert not robot.is_connected
 
 
+@pytest.mark.parametrize(("fault", "said"), [
+    (Fault.FOREIGN_PORT, r"\(0 rejected; \d+ from another address\); \d+ datagram\(s\) came from another address or "
+                         r"port than the target and were dropped unread.*check --target"),
+    (Fault.CORRUPT, r"\(\d+ rejected: crc \d+; 0 from another address\); frames came but none was a valid"),
+])
+def test_a_connect_without_a_state_says_what_did_come(stepped: Stepped, fault: Fault, said: str) -> None:
+    stepped.emu.inject(fault)
+    robot = stepped.robot(connect_timeout=0.1)
+    with pytest.raises(RobotLinkError, match=said):
+        robot.connect()
+
+
 # -- fault 2: corrupt, short, long and foreign datagrams ----------------------------------------------------------
 @pytest.mark.parametrize(("fault", "reason"), [(Fault.CORRUPT, "crc"), (Fault.SHORT, "length"),
                                                (Fault.LONG, "length"), (Fault.FOREIGN_PORT, None)])

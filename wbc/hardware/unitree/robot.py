@@ -46,7 +46,7 @@ from wbc.hardware.device_thread import DeviceThread, DeviceThreadStats
 from wbc.hardware.pacing import WallPacer
 from wbc.hardware.robot import Robot
 from wbc.hardware.unitree.command_codec import encode_command
-from wbc.hardware.unitree.decode_stats import DecodeStats
+from wbc.hardware.unitree.decode_stats import REJECT_REASONS, DecodeStats
 from wbc.hardware.unitree.layout import LAYOUTS, FrameLayout, frame_layout, with_article
 from wbc.hardware.unitree.link_stats import LinkStats
 from wbc.hardware.unitree.remote import Remote
@@ -147,15 +147,24 @@ class UnitreeRobotConfig:
                               f"periods ({2.0 / self.rate_hz} s)")
 
 
-def _no_state_hint(robot: str, stats: DecodeStats) -> str:
-    """What to check when no valid LowState came: the frames that did come say which mistake it is."""
+def _no_state_hint(robot: str, stats: DecodeStats, foreign: int = 0) -> str:
+    """What to check when no valid LowState came: the frames that did come say which mistake it is.
+
+    Args:
+        robot: the robot model the link speaks.
+        stats: the frames rejected by reason.
+        foreign: datagrams that came from another address or port than the target (dropped unread).
+    """
     others = " or ".join(name for name in LAYOUTS if name != robot)
+    if foreign and not stats.rejected:
+        return (f"{foreign} datagram(s) came from another address or port than the target and were dropped unread: "
+                "the robot answers from its own address and port; check --target (the emulator prints it)")
     if stats.length:
         return (f"{stats.length} frame(s) had the wrong length for {with_article(robot)}: a robot of another model "
                 f"({others}) answers with frames of its own size; check that --robot names this robot (on the emulator "
                 "too)")
     if stats.rejected:
-        return "frames came but none was a valid low-level LowState (see the rejects); is the robot in low-level mode?"
+        return "frames came but none was a valid low-level LowState; is the robot in low-level mode?"
     return ("nothing came back at all: is the robot (or emulator) on, in low-level mode, and is target_port right? A "
             f"robot of another model ({others}) ignores {with_article(robot)}'s LowCmd, whose length it does not "
             "expect: check that --robot names this robot (on the emulator too)")
@@ -230,11 +239,14 @@ class UnitreeRobot(Robot):
         self._link.wait_until(lambda: self._state is not None, cfg.connect_timeout)
         ok = self._state is not None
         if not ok:
+            foreign = int(getattr(self._transport, "foreign", 0) or 0)  # read before the transport is closed
             self._shutdown(damp=False)
             stats = self.decode_stats
+            reasons = ", ".join(f"{r} {getattr(stats, r)}" for r in REJECT_REASONS if getattr(stats, r))
             raise RobotLinkError(
                 f"UnitreeRobot({cfg.robot}): no valid LowState from {cfg.target_host}:{cfg.target_port} within "
-                f"{cfg.connect_timeout} s ({self.decode_stats.rejected} rejected); {_no_state_hint(cfg.robot, stats)}"
+                f"{cfg.connect_timeout} s ({stats.rejected} rejected{': ' + reasons if reasons else ''}; {foreign} "
+                f"from another address); {_no_state_hint(cfg.robot, stats, foreign)}"
             ) from self._link.failure
 
     def _close(self) -> None:
