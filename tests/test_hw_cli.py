@@ -132,6 +132,7 @@ def test_check_prints_the_state_and_sends_only_damping(stepped: Stepped, capsys:
                  "remote buttons: none", "link:", "rejected states: 0"):
         assert text in out, (text, out)
     assert ("none in this robot's state" in out) == (robot == "a1")
+    assert ("NOT REPORTED: no cell voltage" in out) == (robot == "go1")  # the emulator reports no battery
     log = stepped.emu.commands()
     assert len(log) >= 0.3 / LINK_PERIOD  # a frame every link period of the 0.3 s, plus the closing damping
     assert stepped.clock.now() >= 0.3  # it read for its --seconds, on the robot's clock

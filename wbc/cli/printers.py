@@ -662,9 +662,11 @@ def print_hw_check(check: HardwareCheck) -> None:
         roll, pitch, _ = np.degrees(extras.imu_rpy)
         print(f"  IMU roll {roll:.1f} deg, pitch {pitch:.1f} deg")
         battery = extras.battery
+        volts = None if battery is None else float(np.sum(battery.cell_voltage))
         print("  battery: " + ("none in this robot's state (A1)" if battery is None else
-                               f"{battery.soc} % SOC, {battery.current:.2f} A, "
-                               f"{float(np.sum(battery.cell_voltage)):.2f} V over the cells"))
+                               f"{battery.soc} % SOC, {battery.current:.2f} A, {volts:.2f} V over the cells"
+                               + ("  (NOT REPORTED: no cell voltage in the state; an emulator, or a battery that "
+                                  "does not report: check it by hand)" if volts == 0.0 else "")))
         held = extras.remote.held
         estop = "  (L2+B held: e-stop)" if extras.remote.l2_b else ""
         print(f"  remote buttons: {', '.join(held) or 'none'}{estop}")
