@@ -363,7 +363,7 @@ def test_emulate_takes_an_arm_name_only_with_its_arm_and_names_a_locked_arm(caps
 
 def test_emulate_refuses_a_fault_given_twice(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "emulate", "--fault", "drop", "--fault", "DROP", "--seconds", "0.2", "--no-realtime"]) == 2
-    assert "--fault DROP is given twice" in capsys.readouterr().err
+    assert "--fault drop is given twice" in capsys.readouterr().err
 
 
 def test_check_over_the_vendor_sdk_says_that_it_listens_on_every_interface(capsys: pytest.CaptureFixture[str]

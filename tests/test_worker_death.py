@@ -68,10 +68,19 @@ def test_the_command_ends_past_a_thread_a_controller_left_running_in_its_own_pro
     assert (tmp_path / "out" / "report.md").is_file()
 
 
+EXITS_LOGGED = STAND_PLUGIN.format(doc="The stand hold that exits its process on its fifth tick; each reset is logged "
+                                       "to $ATTEMPTS.",
+                                   reset="open(__import__('os').environ['ATTEMPTS'], 'a').write('x')",
+                                   act="if self.ticks == 5:\n                __import__('os')._exit(3)",
+                                   counters="return {}")
+
+
 def test_on_ray_a_controller_that_exits_its_worker_costs_its_own_trials_only(plugin_package, tmp_path, monkeypatch):
     pytest.importorskip("ray")
-    root = plugin_package("raydiepkg", {"exits": EXITS})
+    root = plugin_package("raydiepkg", {"exits": EXITS_LOGGED})
     monkeypatch.setenv("PYTHONPATH", str(root))  # Ray's workers import the plug-in from their environment
+    attempts = tmp_path / "attempts"
+    monkeypatch.setenv("ATTEMPTS", str(attempts))
     scenario = tmp_path / "short.toml"
     scenario.write_text(SHORT_SCENARIO)
     result = run_arena(ArenaConfig(controllers=("stand", "raydiepkg.exits:make"), scenario=scenario, trials=2,
@@ -81,26 +90,37 @@ def test_on_ray_a_controller_that_exits_its_worker_costs_its_own_trials_only(plu
     for i in range(2):
         died = by[("raydiepkg.exits:make", i)]
         assert died.outcome == "controller_error" and "died again when Ray played it once more" in died.error
+    assert attempts.read_text() == "xxxx"  # each trial played twice, not once nor Ray's default four times
 
 
-HANGS = STAND_PLUGIN.format(doc="The stand hold that hangs on its fifth tick.", reset="pass",
+HANGS = STAND_PLUGIN.format(doc="The stand hold that hangs on its fifth tick; each reset is logged to $ATTEMPTS.",
+                            reset="open(__import__('os').environ['ATTEMPTS'], 'a').write('x')",
                             act="if self.ticks == 5:\n                __import__('threading').Event().wait()",
                             counters="return {}")
 
 
-def test_a_controller_that_hangs_costs_its_own_trial_under_a_trial_time_limit(plugin_package, tmp_path):
+@pytest.mark.parametrize(("workers", "trials"), [(1, 1), (2, 2)])
+def test_a_controller_that_hangs_costs_its_own_trial_under_a_trial_time_limit(plugin_package, tmp_path, monkeypatch,
+                                                                              workers, trials):
     # one worker: a time limit plays the trials in a worker process all the same, so that the hung one can be ended;
-    # the limit is far above what the standing trial takes on any machine
+    # two: the standing trials in flight when a hung one's worker is ended go back to the fresh pool. The limit is far
+    # above what a standing trial takes on any machine
     plugin_package("hangpkg", {"hangs": HANGS})
+    attempts = tmp_path / "attempts"
+    monkeypatch.setenv("ATTEMPTS", str(attempts))
     scenario = tmp_path / "short.toml"
     scenario.write_text(SHORT_SCENARIO)
-    result = run_arena(ArenaConfig(controllers=("stand", "hangpkg.hangs:make"), scenario=scenario, trials=1,
-                                   out_dir=tmp_path / "run", workers=1, progress=False, trial_time_limit_s=10.0))
-    by = {r.controller: r for r in result.records}
-    assert by["stand"].success
-    hung = by["hangpkg.hangs:make"]
-    assert hung.outcome == "controller_error"
-    assert "trial 0: ran past the trial time limit of 10 s (--trial-time-limit)" in hung.error
+    result = run_arena(ArenaConfig(controllers=("stand", "hangpkg.hangs:make"), scenario=scenario, trials=trials,
+                                   out_dir=tmp_path / "run", workers=workers, progress=False, trial_time_limit_s=10.0))
+    by = {(r.controller, r.trial): r for r in result.records}
+    assert len(by) == 2 * trials and all(by[("stand", i)].success for i in range(trials))
+    for i in range(trials):
+        hung = by[("hangpkg.hangs:make", i)]
+        assert hung.outcome == "controller_error"
+        assert f"trial {i}: ran past the trial time limit of 10 s (--trial-time-limit)" in hung.error
+    # an overrun trial is not played again; with two workers the second hung trial may have been beside the first
+    # when its worker was ended, and is then played once more in the fresh pool (where it overruns itself)
+    assert trials <= len(attempts.read_text()) <= (1 if workers == 1 else 2 * trials - 1)
     (errors,) = result.controller_errors
     assert errors.controller == "hangpkg.hangs:make"
 
@@ -120,15 +140,31 @@ def test_the_watchdog_ends_the_worker_only_when_the_trial_overruns(tmp_path):
     with dog:
         dog._thread.join(timeout=60)
     assert waited == [5.0] and exits == [executors.OVERRUN_EXIT] and flag.read_text() == "5.0\n"
+    flag.unlink()
+    # the clock runs out as the trial ends: the trial's end, taken first, stands
+    exits.clear()
+    with executors._Watchdog(5.0, str(flag), wait=lambda event, timeout: event.wait() and False,
+                             exit_=exits.append) as dog:
+        pass
+    dog._thread.join(timeout=60)
+    assert exits == [] and not flag.exists()
+    # a flag that cannot be written does not keep a hung trial's worker alive
+    dog = executors._Watchdog(5.0, str(tmp_path / "gone" / "flag"), wait=lambda event, timeout: False,
+                              exit_=exits.append)
+    with dog:
+        dog._thread.join(timeout=60)
+    assert exits == [executors.OVERRUN_EXIT]
 
 
-@pytest.mark.parametrize("limit", [0.0, -1.0, float("nan"), float("inf"), True, "10"])
-def test_a_trial_time_limit_must_be_a_positive_number_of_seconds(tmp_path, limit):
-    with pytest.raises(ConfigError, match="--trial-time-limit must be a number of seconds above 0"):
+@pytest.mark.parametrize("limit", [0.0, 0.5, -1.0, float("nan"), float("inf"), True, "10"])
+def test_a_trial_time_limit_must_be_a_number_of_seconds_from_one(tmp_path, limit):
+    with pytest.raises(ConfigError, match="--trial-time-limit must be a number of seconds from 1 to"):
         ArenaConfig(controllers=("stand",), scenario=tmp_path / "x.toml", trial_time_limit_s=limit)
 
 
-def test_a_trial_time_limit_is_refused_with_a_live_view(tmp_path):
+def test_a_trial_time_limit_is_refused_with_a_live_view_and_on_ray(tmp_path):
     with pytest.raises(ConfigError, match="a viewed run"):
         ArenaConfig(controllers=("stand",), scenario=tmp_path / "x.toml", trial_time_limit_s=10.0,
                     observer=lambda *a: None)
+    with pytest.raises(ConfigError, match="enforced in the local pool's workers, not on Ray"):
+        ArenaConfig(controllers=("stand",), scenario=tmp_path / "x.toml", trial_time_limit_s=10.0, executor="ray")

@@ -30,11 +30,12 @@ from typing import Any
 
 from wbc.arena.breakdown import breakdown, push_outcomes, recovery_curve
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErrors, ErrorGuard
-from wbc.arena.executors import EXECUTORS, LocalExecutor, RayExecutor, TrialTask
+from wbc.arena.executors import EXECUTORS, VIEWED_TIME_LIMIT, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.finish import finish_results
 from wbc.arena.identity import (
     MAX_RUN_TRIALS,
     MAX_TRIAL_TIME_LIMIT_S,
+    MIN_TRIAL_TIME_LIMIT_S,
     ControllerFile,
     ScenarioRef,
     SequentialStop,
@@ -58,9 +59,6 @@ from wbc.scenario.trial import Trial
 
 __all__ = ["VIEWED_TIME_LIMIT", "ArenaConfig", "ArenaResult", "run_arena"]
 
-VIEWED_TIME_LIMIT = ("--trial-time-limit ends the worker process of a trial that overruns, and a viewed run (--view) "
-                     "plays its trials in this process: leave one of them out")
-"""Why a time limit and a live view are refused together."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -166,11 +164,15 @@ class ArenaConfig:
         if self.trial_time_limit_s is not None:
             limit = self.trial_time_limit_s
             number = isinstance(limit, (int, float)) and not isinstance(limit, bool)
-            if not number or not 0 < limit <= MAX_TRIAL_TIME_LIMIT_S:
-                raise ConfigError(f"--trial-time-limit must be a number of seconds above 0 and at most "
-                                  f"{MAX_TRIAL_TIME_LIMIT_S:g} (a week), got {limit!r}")
+            if not number or not MIN_TRIAL_TIME_LIMIT_S <= limit <= MAX_TRIAL_TIME_LIMIT_S:
+                raise ConfigError(f"--trial-time-limit must be a number of seconds from {MIN_TRIAL_TIME_LIMIT_S:g} to "
+                                  f"{MAX_TRIAL_TIME_LIMIT_S:g} (a week), got {limit!r}: it guards against a "
+                                  "controller that hangs, far above what a trial takes")
             if self.observer is not None:
                 raise ConfigError(VIEWED_TIME_LIMIT)
+            if self.executor != "local":
+                raise ConfigError("--trial-time-limit is enforced in the local pool's workers, not on Ray: use the "
+                                  "local executor, or leave --trial-time-limit out")
         for a, b in self.sequential_pairs:
             if a not in self.controllers or b not in self.controllers or a == b:
                 raise ConfigError(f"sequential pair ({a}, {b}) must name two different controllers played; "
@@ -371,6 +373,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
         "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
         "executor": cfg.executor,
+        **({} if cfg.trial_time_limit_s is None else {
+            "trial time limit": f"{cfg.trial_time_limit_s:g} s (--trial-time-limit: a trial past it is its "
+                                "controller's error, kept on --resume)"}),
         **{k: v for k, v in store.environment.items() if k != "packages"},
         "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
     }

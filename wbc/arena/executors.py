@@ -32,10 +32,12 @@ from wbc.arena.runner import TickObserver
 from wbc.arena.sim_trial import run_trial, simulated_robot
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.spec import ControllerSpec
+from wbc.errors import ConfigError
 from wbc.optional import require
 from wbc.scenario.trial import Trial
 
-__all__ = ["EXECUTORS", "LocalExecutor", "RayExecutor", "TrialTask", "run_task", "single_threaded_blas"]
+__all__ = ["EXECUTORS", "VIEWED_TIME_LIMIT", "LocalExecutor", "RayExecutor", "TrialTask", "run_task",
+           "single_threaded_blas"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -94,6 +96,10 @@ def run_task(task: TrialTask, observer: TickObserver | None = None) -> TrialReco
     return record
 
 
+VIEWED_TIME_LIMIT = ("--trial-time-limit ends the worker process of a trial that overruns, and a viewed run (--view) "
+                     "plays its trials in this process: leave one of them out")
+"""Why a time limit and a live view are refused together."""
+
 OVERRUN_EXIT = 86
 """The exit status of a worker ended because its trial ran past its time limit."""
 
@@ -110,6 +116,7 @@ class _Watchdog:
     def __init__(self, limit_s: float, flag: str, *, wait: Callable[[threading.Event, float], bool] | None = None,
                  exit_: Callable[[int], object] = os._exit) -> None:
         self._done = threading.Event()
+        self._lock = threading.Lock()  # the trial's end and the watchdog's exit exclude each other
         self._limit_s, self._flag, self._exit = limit_s, flag, exit_
         self._wait = wait or (lambda event, timeout: event.wait(timeout))
         self._thread = threading.Thread(target=self._watch, name="wbc-trial-time-limit", daemon=True)
@@ -119,14 +126,20 @@ class _Watchdog:
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self._done.set()
+        with self._lock:  # once past this, the watchdog can no longer end the process
+            self._done.set()
 
     def _watch(self) -> None:
         if self._wait(self._done, self._limit_s):
             return
-        with open(self._flag, "w", encoding="utf-8") as f:
-            f.write(f"{self._limit_s!r}\n")
-        self._exit(OVERRUN_EXIT)
+        with self._lock:
+            if self._done.is_set():  # the trial ended as the clock ran out: its record stands
+                return
+            try:
+                with open(self._flag, "w", encoding="utf-8") as f:
+                    f.write(f"{self._limit_s!r}\n")
+            finally:  # ended even if the flag cannot be written: a hung trial must not hold its worker
+                self._exit(OVERRUN_EXIT)
 
 
 def _run_limited(task: TrialTask, flag: str) -> TrialRecord:
@@ -175,7 +188,9 @@ class LocalExecutor:
         if first is None:
             return
         queue = itertools.chain((first,), queue)
-        if self.workers <= 1 and (first.time_limit_s is None or self.observer is not None):
+        if first.time_limit_s is not None and self.observer is not None:
+            raise ConfigError(VIEWED_TIME_LIMIT)
+        if self.workers <= 1 and first.time_limit_s is None:
             for task in queue:
                 yield run_task(task, self.observer)
             return
@@ -190,8 +205,10 @@ class LocalExecutor:
                 self._flags = None
 
     def _flag(self, task: TrialTask) -> str:
-        """The file `task`'s worker leaves if the trial overruns its time limit."""
-        return os.path.join(self._flags or tempfile.gettempdir(), _flag_name(task))
+        """The file `task`'s worker leaves if the trial overruns its time limit (only while a pool runs)."""
+        if self._flags is None:
+            raise RuntimeError("LocalExecutor._flag is asked outside a pool's run")
+        return os.path.join(self._flags, _flag_name(task))
 
     def _run_pool(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
         """The pool's records; a worker that dies costs only the trial it was playing.
@@ -202,13 +219,22 @@ class LocalExecutor:
         give their records (a trial's result does not depend on the process that plays it), and a fresh pool takes
         the rest of the queue.
         """
-        queue = iter(tasks)
+        queue: Iterator[TrialTask] = iter(tasks)
         while True:
             suspects = yield from self._pool_pass(queue)
             if suspects is None:
                 return
-            for task in suspects:
-                yield overran(task) if os.path.exists(self._flag(task)) else _alone(task, self._flag(task))
+            late = [task for task in suspects if os.path.exists(self._flag(task))]
+            for task in late:
+                yield overran(task)
+            others = [task for task in suspects if task not in late]
+            if late:
+                # an overrun explains the break: the trials beside it are innocent, and go back to the fresh pool
+                # (each pass that breaks this way records at least one trial, so this ends)
+                queue = itertools.chain(others, queue)
+                continue
+            for task in others:
+                yield _alone(task, self._flag(task))
 
     def _pool_pass(self, queue: Iterator[TrialTask]) -> Generator[TrialRecord, None, list[TrialTask] | None]:
         """Play `queue` in one pool until it is empty (None) or the pool breaks (the tasks it broke with)."""
@@ -349,36 +375,28 @@ class RayExecutor:
             ray.init(log_to_driver=False, configure_logging=False,
                      runtime_env={"env_vars": dict(_SINGLE_THREAD_ENV)}, **kwargs)
             started = True
-        flags = tempfile.TemporaryDirectory(prefix="wbc-overrun-")  # seen by the workers of a Ray on this machine
         try:
             # a task whose worker dies is played once more (a trial on a lost node finishes elsewhere)
-            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(_run_limited)
+            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(run_task)
             died = (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError)
             ahead = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
             queue = iter(tasks)
-
-            def flag(task: TrialTask) -> str:
-                return os.path.join(flags.name, _flag_name(task))
-
-            refs = {remote.remote(task, flag(task)): task for task in itertools.islice(queue, ahead)}
+            refs = {remote.remote(task): task for task in itertools.islice(queue, ahead)}
             while refs:
                 (done,), _ = ray.wait(list(refs), num_returns=1)
                 task = refs.pop(done)
+                if task.time_limit_s is not None:
+                    raise ConfigError("a trial time limit is enforced in the local pool's workers, not on Ray: "
+                                      "leave --trial-time-limit out with --executor ray")
                 try:
                     record = ray.get(done)
                 except died:
-                    if os.path.exists(flag(task)):
-                        record = overran(task)
-                    else:
-                        limit = "" if task.time_limit_s is None else (
-                            f" (or, on another machine, ran past the trial time limit of {task.time_limit_s:g} s)")
-                        record = worker_died(task, f"died again when Ray played it once more{limit}")
+                    record = worker_died(task, "died again when Ray played it once more")
                 yield record
                 nxt = next(queue, None)
                 if nxt is not None:
-                    refs[remote.remote(nxt, flag(nxt))] = nxt
+                    refs[remote.remote(nxt)] = nxt
         finally:
-            flags.cleanup()
             if started:
                 ray.shutdown()
 

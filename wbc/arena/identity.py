@@ -29,8 +29,9 @@ from wbc.errors import InputFileError, RecordError
 from wbc.input_files import read_json, short
 from wbc.scenario.scenario import MAX_DURATION_S
 
-__all__ = ["MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "MAX_TRIAL_TIME_LIMIT_S", "ControllerFile",
-           "HardwareRunIdentity", "RunIdentity", "ScenarioRef", "SequentialStop", "SimulatedRunIdentity"]
+__all__ = ["MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "MAX_TRIAL_TIME_LIMIT_S", "MIN_TRIAL_TIME_LIMIT_S",
+           "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef", "SequentialStop",
+           "SimulatedRunIdentity"]
 
 MAX_TRIALS = 100_000
 """Most trials per band and seed a run plays (``wbc run --trials``)."""
@@ -41,6 +42,9 @@ cores busy for eleven days; a larger study is several runs."""
 
 MAX_SEED = 2**32 - 1
 """Largest seed (the scenario's `numpy.random.SeedSequence` takes any, the command line up to this)."""
+
+MIN_TRIAL_TIME_LIMIT_S = 1.0
+"""The shortest trial time limit [s]: below it, building the robot and the controller alone could overrun."""
 
 MAX_TRIAL_TIME_LIMIT_S = 7 * 24 * 3600.0
 """The longest trial time limit (``--trial-time-limit``) [s]: a week. An execution setting, not part of a run's

@@ -231,7 +231,7 @@ def _hw_emulate(args: argparse.Namespace) -> int:
             raise UnknownNameError("fault", name, tuple(FAULTS) + (tuple(BUS_FAULTS) if actuated else ()))
         fault = FAULTS[key] if key in FAULTS else BUS_FAULTS[key]
         if fault in faults:
-            raise ConfigError(f"--fault {name} is given twice; give each fault once")
+            raise ConfigError(f"--fault {key} is given twice; give each fault once")
         faults.append(fault)
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
@@ -328,6 +328,19 @@ def _hardware_local(args: argparse.Namespace, purpose: str) -> tuple[str, int] |
     return _hardware_address(args.local, "--local", purpose, args.allow_hardware, binds=True)
 
 
+def unpowered_arm_warning(controller: str, arm_mode: str, arm_port: str | None, *, real: bool) -> str | None:
+    """The warning of a trial on a real robot whose arm plays locked with no ``--arm-port``, or None.
+
+    Nothing then drives the arm's servos: on the robot the arm must be fixed mechanically. An emulator's arm
+    (`real` False) is held by its physics, so nothing is said.
+    """
+    if not real or arm_mode != "locked" or arm_port is not None:
+        return None
+    return (f"{controller} plays the arm locked and no --arm-port is given: nothing drives the arm's servos, so the "
+            "arm must be fixed mechanically at its stowed pose (an unpowered arm falls and swings, which the "
+            "controller does not model)")
+
+
 def _sdk_note(args: argparse.Namespace) -> None:
     """With ``--transport sdk``: say that the vendor SDK listens on every interface, whatever ``--local`` names."""
     if getattr(args, "transport", None) == "sdk":
@@ -351,9 +364,10 @@ def _hardware_arm_port(args: argparse.Namespace, purpose: str) -> str | None:
     """
     port = args.arm_port
     if port is not None and not args.allow_hardware and not is_emulated_port(port):
-        raise TargetRefusedError(
-            f"--arm-port {port} {why_not_emulated(port)}. To {purpose}, add --allow-hardware (you will be "
-            "asked to type yes; --yes confirms when stdin is not a terminal)")
+        why, real = why_not_emulated(port)
+        raise TargetRefusedError(f"--arm-port {why}" + (f". To {purpose}, add --allow-hardware (you will be asked to "
+                                                        "type yes; --yes confirms when stdin is not a terminal)"
+                                                        if real else ""))
     return port
 
 
@@ -507,10 +521,10 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
             return make(dataclasses.replace(config, realtime=request))
 
     def confirm(hardware: HardwareRobot, spec: ControllerSpec) -> None:
-        if host is not None and spec.arm_mode == "locked" and arm_port is None:
-            print(f"wbc: warning: {spec.name} plays the arm locked and no --arm-port is given: nothing drives the "
-                  "arm's servos, so the arm must be fixed mechanically at its stowed pose (an unpowered arm falls "
-                  "and swings, which the controller does not model)", file=sys.stderr)
+        real_legs = host is not None and bool(_real_devices(host, port, None))
+        warning = unpowered_arm_warning(spec.name, spec.arm_mode, arm_port, real=real_legs)
+        if warning is not None:
+            print(f"wbc: warning: {warning}", file=sys.stderr)
         real = _real_devices(host, port, arm_port) if host is not None else []
         if real:
             _confirm_hardware("hw run", hardware.description.name, real, f"The controller {spec.name} will MOVE it: "

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
-from wbc.arena.identity import MAX_SEED, MAX_TRIAL_TIME_LIMIT_S, MAX_TRIALS
+from wbc.arena.identity import MAX_SEED, MAX_TRIAL_TIME_LIMIT_S, MAX_TRIALS, MIN_TRIAL_TIME_LIMIT_S
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES
@@ -214,11 +214,11 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
 
 def add_trial_time_limit_option(p: argparse.ArgumentParser) -> None:
     """``--trial-time-limit S``: a guard against a controller that hangs (``wbc run``, ``compare``, ``paper``)."""
-    p.add_argument("--trial-time-limit", type=bounded_float(0.0, MAX_TRIAL_TIME_LIMIT_S, lo_open=True), default=None,
-                   metavar="S",
+    p.add_argument("--trial-time-limit", type=bounded_float(MIN_TRIAL_TIME_LIMIT_S, MAX_TRIAL_TIME_LIMIT_S),
+                   default=None, metavar="S",
                    help="end a trial still playing after S seconds of wall time (a controller that hangs) and record "
-                        "it as its controller's error; the run goes on (default: no limit; trials then play in "
-                        "worker processes, even with --workers 1)")
+                        "it as its controller's error; the run goes on (default: no limit; local executor only; trials "
+                        "then play in worker processes, even with --workers 1)")
 
 
 def add_controller_file_options(p: argparse.ArgumentParser, *, repeatable: bool) -> None:

@@ -54,21 +54,21 @@ def is_emulated_port(port: str) -> bool:
     return port.startswith(IN_PROCESS_PREFIX) or is_pseudo_terminal(port)
 
 
-def why_not_emulated(port: str) -> str:
-    """Why `port` is not an emulator's, as the end of a sentence that starts with the port's name.
+def why_not_emulated(port: str) -> tuple[str, bool]:
+    """Why `port` is not an emulator's: a sentence that starts with the port's name, and whether it may be real.
 
     A pseudo-terminal's name that names no device (an emulator that stopped takes its pty with it) and an empty
-    name are told apart from a real device, so that the refusal does not send the user to ``--allow-hardware`` for
-    a typo or a stopped emulator.
+    name are told apart from a real device (False), so that the refusal does not send the user to
+    ``--allow-hardware`` for a typo or a stopped emulator.
     """
     if not port:
-        return "is empty: name the arm's serial device (an emulator prints its pseudo-terminal)"
+        return "'' is empty: name the arm's serial device (an emulator prints its pseudo-terminal)", False
     real = os.path.realpath(port)
     if real.rpartition("/")[0] == _PTY_DIR and not os.path.exists(real):
-        return ("names no pseudo-terminal on this machine: an emulator's goes away when the emulator stops (is it "
-                "still running? it prints the one to use)")
-    return ("is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; opening it writes "
-            "the servos' settings and torque)")
+        return (f"{port} names no pseudo-terminal on this machine: an emulator's goes away when the emulator stops "
+                "(is it still running? it prints the one to use)"), False
+    return (f"{port} is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; opening it "
+            "writes the servos' settings and torque)"), True
 
 
 def check_serial_port(port: str, *, allow_hardware: bool, what: str = "port") -> None:
@@ -84,10 +84,10 @@ def check_serial_port(port: str, *, allow_hardware: bool, what: str = "port") ->
     """
     if allow_hardware or is_emulated_port(port):
         return
-    raise TargetRefusedError(
-        f"{what} {port} {why_not_emulated(port)}. To drive a real arm, set allow_hardware=True in the config "
-        "(for instance DynamixelArmConfig(..., allow_hardware=True))"
-    )
+    why, real = why_not_emulated(port)
+    consent = (". To drive a real arm, set allow_hardware=True in the config (for instance "
+               "DynamixelArmConfig(..., allow_hardware=True))")
+    raise TargetRefusedError(f"{what} {why}{consent if real else ''}")
 
 
 def announce_hardware_port(port: str, device: str) -> None:
