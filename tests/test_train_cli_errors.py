@@ -124,3 +124,17 @@ def test_a_fine_tune_refuses_expert_samples_of_another_task(tmp_path, capsys):
     assert not (tmp_path / "runs").exists()
     assert main([*argv, "--dry-run"]) == 2
     assert "collected on task 'push'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("resume", [[], ["--resume"]])
+def test_a_run_interrupted_before_its_first_checkpoint_starts_afresh(stage1_run, tmp_path, capsys, resume):
+    root = tmp_path / "runs"
+    run = root / "push-stage1"
+    run.mkdir(parents=True)
+    shutil.copy(stage1_run / "push-stage1" / "config.json", run / "config.json")  # all such a run leaves
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), *resume]) == 0
+    err = capsys.readouterr().err
+    assert "interrupted before its first checkpoint" in err and "starts afresh" in err
+    assert json.loads((run / "progress.json").read_text())["iteration"] == 0 and (run / "model_0.pt").is_file()
+    assert json.loads((run / "config.json").read_text())["train_config"]["run_dir"] == str(run)

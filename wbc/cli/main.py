@@ -575,8 +575,11 @@ def _train_not_a_teacher(name: str) -> ConfigError:
 
 def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | None) -> int:
     """Check a stage's or fine-tune's run (--dry-run: print its configuration), then train it."""
-    from wbc.learned.train.preflight import check_inputs, check_run_dir
+    from wbc.learned.train.preflight import check_inputs, check_run_dir, unstarted_run
 
+    if unstarted_run(cfg.run_dir):
+        print(f"wbc: note: {cfg.run_dir} holds a run interrupted before its first checkpoint (config.json, no "
+              "model_<it>.pt): it starts afresh from iteration 0", file=sys.stderr)
     check_run_dir(cfg, resume=args.resume)
     if args.dry_run:
         try:

@@ -20,7 +20,7 @@ from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
 
 __all__ = ["RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "latest_checkpoint", "load_input_policy",
-           "names_a_file"]
+           "names_a_file", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -51,6 +51,22 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
     found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
              if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
     return max(found)[1] if found else None
+
+
+def unstarted_run(run_dir: str | Path) -> bool:
+    """Whether `run_dir` holds a training run interrupted before its first checkpoint.
+
+    Such a run wrote its ``config.json`` (with a ``train_config``) and nothing it could continue from: no
+    ``model_<it>.pt``, ``progress.json`` or export. It starts afresh, with or without ``--resume``.
+    """
+    run_dir = Path(run_dir)
+    if latest_checkpoint(run_dir) is not None or any((run_dir / n).exists() for n in _RUN_FILES if n != "config.json"):
+        return False
+    try:
+        data = json.loads((run_dir / "config.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(data, dict) and isinstance(data.get("train_config"), dict)
 
 
 def names_a_file(path: str | Path) -> bool:
@@ -154,13 +170,16 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
         resume: whether the run continues the one in ``cfg.run_dir``.
 
     Returns:
-        Where a resumed run continues from, or None for a new run.
+        Where a resumed run continues from, or None for a run that starts at iteration 0: a new run, or one
+        interrupted before its first checkpoint (`unstarted_run`; its ``config.json`` is then written anew).
 
     Raises:
         ConfigError: a new run in a directory that holds a run; a resumed run without a checkpoint, with a missing or
             damaged ``config.json`` or ``progress.json``, or with another config.
     """
     run_dir = Path(cfg.run_dir)
+    if unstarted_run(run_dir):
+        return None
     checkpoint = latest_checkpoint(run_dir)
     if not resume:
         held = [n for n in _RUN_FILES if (run_dir / n).exists()] + ([checkpoint.name] if checkpoint else [])
