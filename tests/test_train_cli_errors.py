@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -9,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from wbc.cli.main import main
+from wbc.errors import ConfigError
 
 TINY = ["--iterations", "1", "--envs", "1", "--rma-iterations", "0"]
 
@@ -138,3 +140,30 @@ def test_a_run_interrupted_before_its_first_checkpoint_starts_afresh(stage1_run,
     assert "interrupted before its first checkpoint" in err and "starts afresh" in err
     assert json.loads((run / "progress.json").read_text())["iteration"] == 0 and (run / "model_0.pt").is_file()
     assert json.loads((run / "config.json").read_text())["train_config"]["run_dir"] == str(run)
+
+
+def test_resume_compares_the_run_directory_and_the_inputs_as_paths_not_text(tmp_path, monkeypatch):
+    from wbc.learned.train.preflight import check_run_dir
+    from wbc.learned.train.stages import stage_config
+
+    monkeypatch.chdir(tmp_path)
+    began = stage_config("push", 2, run_root="runs", teacher="teachers/pi1/policy")  # as the run began
+    run = tmp_path / "runs" / "push-stage2"
+    run.mkdir(parents=True)
+    (run / "model_0.pt").write_bytes(b"")  # its name is all this check reads
+    saved = json.loads(json.dumps(dataclasses.asdict(began), default=list))
+    (run / "config.json").write_text(json.dumps({"train_config": saved}))
+    # the same run, its root given as an absolute path and its teacher by the pair's .npz
+    same = stage_config("push", 2, run_root=str(tmp_path / "runs"), teacher=str(tmp_path / "teachers/pi1/policy.npz"))
+    assert check_run_dir(same, resume=True).done == 1
+    other = stage_config("push", 2, run_root="runs", teacher="teachers/pi0/policy")
+    with pytest.raises(ConfigError, match=r"differs from this run's config in \['teacher'\]"):
+        check_run_dir(other, resume=True)
+
+
+def test_a_dagger_run_resumes_under_another_spelling_of_its_run_root(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log file here
+    args = ["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s", "0.1"]
+    assert main([*args, "--run-root", "runs"]) == 0
+    assert main([*args, "--run-root", str(tmp_path / "runs"), "--resume"]) == 0
+    assert "differs" not in capsys.readouterr().err

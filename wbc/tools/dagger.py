@@ -336,7 +336,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         if not (run_dir / "progress.json").exists():
             raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
         saved = json.loads((run_dir / "config.json").read_text())["dagger_config"]
-        diff = sorted(k for k in resolved if k != "rounds" and saved.get(k) != resolved[k])
+        # where the run lies is not part of its config: a run directory may move, or be named another way
+        diff = sorted(k for k in resolved if k not in ("rounds", "run_dir") and saved.get(k) != resolved[k])
         if diff:
             raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
         progress = json.loads((run_dir / "progress.json").read_text())

@@ -19,11 +19,17 @@ from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_pol
 from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "latest_checkpoint", "load_input_policy",
-           "names_a_file", "unstarted_run"]
+__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "input_path", "latest_checkpoint",
+           "load_input_policy", "names_a_file", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
+
+INPUTS = ("teacher", "init_from", "frozen_legs", "student", "expert_data")
+"""TrainConfig fields that name a file the run reads; a resumed run compares them as paths, not as text."""
+
+_POLICY_INPUTS = ("teacher", "init_from", "frozen_legs", "student")
+"""Of `INPUTS`, those that name a policy (either file of its ``.npz``/``.json`` pair, or their common stem)."""
 
 _RUN_FILES = ("config.json", "progress.json", "policy.npz", "policy.json")
 """Files of a run directory that say it already holds a run (besides ``model_<it>.pt`` checkpoints)."""
@@ -67,6 +73,20 @@ def unstarted_run(run_dir: str | Path) -> bool:
     except (OSError, UnicodeDecodeError, ValueError):
         return False
     return isinstance(data, dict) and isinstance(data.get("train_config"), dict)
+
+
+def input_path(field: str, path: str | Path) -> Path:
+    """The absolute path an input of a run names: a policy's stem (``X/policy.npz`` and ``X/policy`` are one input)."""
+    p = Path(path)
+    if field in _POLICY_INPUTS and p.suffix in (".npz", ".json"):
+        p = p.with_name(p.name[:-len(p.suffix)])
+    return p.resolve()
+
+
+def _same_input(field: str, saved: Any, given: Any) -> bool:
+    if saved is None or given is None:
+        return saved is given
+    return isinstance(saved, str) and input_path(field, saved) == input_path(field, given)
 
 
 def names_a_file(path: str | Path) -> bool:
@@ -196,7 +216,9 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
         raise ConfigError(f"--resume: {config}: train_config: missing or not an object; the run directory is damaged: "
                           "start a new run under another --run-root")
     resolved = json.loads(json.dumps(asdict(cfg), default=list))
-    diff = sorted(k for k in resolved if k not in RESUMABLE and saved.get(k) != resolved[k])
+    # where the run lies is not part of its config (a run directory may move), and an input is the file it names
+    diff = sorted(k for k in resolved if k not in (*RESUMABLE, "run_dir", *INPUTS) and saved.get(k) != resolved[k])
+    diff += [k for k in INPUTS if not _same_input(k, saved.get(k), resolved[k])]
     if diff:
         raise ConfigError(f"--resume: {config} differs from this run's config in {diff}")
     done = int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1)) + 1
