@@ -167,3 +167,20 @@ def test_a_dagger_run_resumes_under_another_spelling_of_its_run_root(tmp_path, m
     assert main([*args, "--run-root", "runs"]) == 0
     assert main([*args, "--run-root", str(tmp_path / "runs"), "--resume"]) == 0
     assert "differs" not in capsys.readouterr().err
+
+
+def test_a_resume_takes_the_options_not_given_from_the_run_and_names_a_changed_nested_field(stage1_run, tmp_path,
+                                                                                           capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    capsys.readouterr()
+    # made with --iterations 1 --envs 1 --rma-iterations 0: resumed without them, it is that run, not the defaults'
+    assert main(["train", "--task", "push", "--stage", "1", "--run-root", str(root), "--resume"]) == 0
+    captured = capsys.readouterr()
+    assert "gave the options not given" in captured.err
+    assert "--iterations 1" in captured.err and "--envs 1" in captured.err and "--rma-iterations 0" in captured.err
+    assert "nothing new trained" in captured.out and not (run / "rma.json").exists()
+    assert main(["train", "--task", "push", "--stage", "1", "--envs", "2", "--run-root", str(root), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "differs from this run's config in ['env.num_envs']" in err.strip().splitlines()[-1]
+    assert "Traceback" not in err

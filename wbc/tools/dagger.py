@@ -55,6 +55,7 @@ from wbc.learned.train.distill import (
     save_student,
     student_policy_file,
 )
+from wbc.learned.train.preflight import config_diff
 from wbc.learned.train.stages import TASKS
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.provenance import provenance
@@ -337,7 +338,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
         saved = json.loads((run_dir / "config.json").read_text())["dagger_config"]
         # where the run lies is not part of its config: a run directory may move, or be named another way
-        diff = sorted(k for k in resolved if k not in ("rounds", "run_dir") and saved.get(k) != resolved[k])
+        diff = [name for key in sorted(resolved) if key not in ("rounds", "run_dir")
+                for name in config_diff(saved.get(key), resolved[key], key)]
         if diff:
             raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
         progress = json.loads((run_dir / "progress.json").read_text())

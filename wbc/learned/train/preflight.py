@@ -19,8 +19,8 @@ from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_pol
 from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "input_path", "latest_checkpoint",
-           "load_input_policy", "names_a_file", "unstarted_run"]
+__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "config_diff", "input_path",
+           "latest_checkpoint", "load_input_policy", "names_a_file", "saved_train_config", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -81,6 +81,27 @@ def input_path(field: str, path: str | Path) -> Path:
     if field in _POLICY_INPUTS and p.suffix in (".npz", ".json"):
         p = p.with_name(p.name[:-len(p.suffix)])
     return p.resolve()
+
+
+def config_diff(saved: Any, given: Any, name: str = "") -> list[str]:
+    """The dotted names of the fields in which two resolved configs (JSON objects) differ, e.g. ``env.num_envs``."""
+    if isinstance(saved, dict) and isinstance(given, dict):
+        return [field for key in sorted(set(saved) | set(given))
+                for field in config_diff(saved.get(key), given.get(key), f"{name}.{key}" if name else key)]
+    return [] if saved == given else [name]
+
+
+def saved_train_config(run_dir: str | Path) -> dict[str, Any] | None:
+    """The ``train_config`` object of a run's ``config.json``, or None where there is no readable one.
+
+    A resumed run takes from it the settings its command line leaves out; `check_run_dir` refuses a damaged one.
+    """
+    try:
+        data = json.loads((Path(run_dir) / "config.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    saved = data.get("train_config") if isinstance(data, dict) else None
+    return saved if isinstance(saved, dict) else None
 
 
 def _same_input(field: str, saved: Any, given: Any) -> bool:
@@ -217,10 +238,12 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
                           "start a new run under another --run-root")
     resolved = json.loads(json.dumps(asdict(cfg), default=list))
     # where the run lies is not part of its config (a run directory may move), and an input is the file it names
-    diff = sorted(k for k in resolved if k not in (*RESUMABLE, "run_dir", *INPUTS) and saved.get(k) != resolved[k])
+    diff = [field for key in sorted(resolved) if key not in (*RESUMABLE, "run_dir", *INPUTS)
+            for field in config_diff(saved.get(key), resolved[key], key)]
     diff += [k for k in INPUTS if not _same_input(k, saved.get(k), resolved[k])]
     if diff:
-        raise ConfigError(f"--resume: {config} differs from this run's config in {diff}")
+        raise ConfigError(f"--resume: {config} differs from this run's config in {diff}: give the run's own options, "
+                          "or leave them out (a resumed run takes the ones not given from its config.json)")
     done = int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1)) + 1
     progress: dict[str, Any] = {"iteration": done - 1, "env_steps": 0, "wall_s": 0.0}
     path = run_dir / "progress.json"
