@@ -184,3 +184,25 @@ def test_a_resume_takes_the_options_not_given_from_the_run_and_names_a_changed_n
     err = capsys.readouterr().err
     assert "differs from this run's config in ['env.num_envs']" in err.strip().splitlines()[-1]
     assert "Traceback" not in err
+
+
+def test_a_resume_refuses_a_teacher_whose_weights_changed_since_the_run_began(stage1_run, tmp_path, monkeypatch):
+    from wbc.learned.train.preflight import check_run_dir, input_files
+    from wbc.learned.train.stages import stage_config
+
+    assert json.loads((stage1_run / "push-stage1" / "config.json").read_text())["inputs"] == {}  # stage 1 reads none
+    monkeypatch.chdir(tmp_path)
+    teacher = tmp_path / "runs" / "push-stage1"
+    shutil.copytree(stage1_run / "push-stage1", teacher)
+    cfg = stage_config("push", 2, run_root="runs")  # its teacher: the stage-1 export beside it
+    run = tmp_path / "runs" / "push-stage2"
+    run.mkdir()
+    (run / "model_0.pt").write_bytes(b"")
+    inputs = input_files(cfg)
+    assert set(inputs["teacher"]["sha256"]) == {str(teacher / "policy.npz"), str(teacher / "policy.json")}
+    saved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
+    (run / "config.json").write_text(json.dumps({"train_config": saved, "inputs": inputs}))
+    assert check_run_dir(cfg, resume=True).done == 1
+    (teacher / "policy.npz").write_bytes((teacher / "policy.npz").read_bytes() + b"\0")  # stage 1 trained again
+    with pytest.raises(ConfigError, match=r"policy\.npz \(teacher\) changed since the run began"):
+        check_run_dir(cfg, resume=True)

@@ -8,6 +8,7 @@ naming the file (and field), so ``wbc train --dry-run`` and `wbc.learned.train.t
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from dataclasses import asdict, dataclass
@@ -19,8 +20,9 @@ from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_pol
 from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "config_diff", "input_path",
-           "latest_checkpoint", "load_input_policy", "names_a_file", "saved_train_config", "unstarted_run"]
+__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "config_diff", "input_files",
+           "input_path", "latest_checkpoint", "load_input_policy", "names_a_file", "saved_train_config",
+           "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -104,10 +106,53 @@ def saved_train_config(run_dir: str | Path) -> dict[str, Any] | None:
     return saved if isinstance(saved, dict) else None
 
 
-def _same_input(field: str, saved: Any, given: Any) -> bool:
+def _same_input(field: str, saved: Any, given: Any, recorded: Any) -> bool:
     if saved is None or given is None:
         return saved is given
+    if isinstance(recorded, dict) and isinstance(recorded.get("path"), str):  # where it was, resolved at the start
+        return Path(recorded["path"]) == input_path(field, given)
     return isinstance(saved, str) and input_path(field, saved) == input_path(field, given)
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def input_files(cfg: TrainConfig) -> dict[str, dict[str, Any]]:
+    """The files a run reads, for its ``config.json``: a resumed run refuses inputs that changed since it began.
+
+    Returns:
+        For each `INPUTS` field that names a file: ``{"path": the resolved path (a policy's stem), "sha256":
+        {file: its sha256}}``, over the files that exist (a policy's ``.npz`` and ``.json``).
+    """
+    found: dict[str, dict[str, Any]] = {}
+    for field in INPUTS:
+        value = getattr(cfg, field)
+        if value is None:
+            continue
+        path = input_path(field, value)
+        files = [Path(f"{path}.npz"), Path(f"{path}.json")] if field in _POLICY_INPUTS else [path]
+        found[field] = {"path": str(path), "sha256": {str(f): _sha256(f) for f in files if f.is_file()}}
+    return found
+
+
+def _check_unchanged(inputs: Any, config: Path) -> None:
+    """Refuse a resume whose input files (`input_files`, as ``config.json`` recorded them) changed since it began."""
+    if not isinstance(inputs, dict):
+        return  # a run begun before the inputs were recorded
+    for field, recorded in inputs.items():
+        hashes = recorded.get("sha256") if isinstance(recorded, dict) else None
+        for name, before in (hashes.items() if isinstance(hashes, dict) else ()):
+            path = Path(name)
+            if path.is_file() and _sha256(path) != before:
+                raise ConfigError(f"--resume: {path} ({field}) changed since the run began: {config} inputs.{field} "
+                                  f"records sha256 {str(before)[:16]}..., the file's is now {_sha256(path)[:16]}...; "
+                                  "the checkpoints learnt from the earlier file: restore it, or start a new run under "
+                                  "another --run-root")
 
 
 def names_a_file(path: str | Path) -> bool:
@@ -216,7 +261,8 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
 
     Raises:
         ConfigError: a new run in a directory that holds a run; a resumed run without a checkpoint, with a missing or
-            damaged ``config.json`` or ``progress.json``, or with another config.
+            damaged ``config.json`` or ``progress.json``, with another config, or whose input files changed since it
+            began (`input_files`).
     """
     run_dir = Path(cfg.run_dir)
     if unstarted_run(run_dir):
@@ -240,10 +286,13 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
     # where the run lies is not part of its config (a run directory may move), and an input is the file it names
     diff = [field for key in sorted(resolved) if key not in (*RESUMABLE, "run_dir", *INPUTS)
             for field in config_diff(saved.get(key), resolved[key], key)]
-    diff += [k for k in INPUTS if not _same_input(k, saved.get(k), resolved[k])]
+    inputs = data.get("inputs")
+    recorded = inputs if isinstance(inputs, dict) else {}
+    diff += [k for k in INPUTS if not _same_input(k, saved.get(k), resolved[k], recorded.get(k))]
     if diff:
         raise ConfigError(f"--resume: {config} differs from this run's config in {diff}: give the run's own options, "
                           "or leave them out (a resumed run takes the ones not given from its config.json)")
+    _check_unchanged(inputs, config)
     done = int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1)) + 1
     progress: dict[str, Any] = {"iteration": done - 1, "env_steps": 0, "wall_s": 0.0}
     path = run_dir / "progress.json"
