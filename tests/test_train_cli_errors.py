@@ -206,3 +206,24 @@ def test_a_resume_refuses_a_teacher_whose_weights_changed_since_the_run_began(st
     (teacher / "policy.npz").write_bytes((teacher / "policy.npz").read_bytes() + b"\0")  # stage 1 trained again
     with pytest.raises(ConfigError, match=r"policy\.npz \(teacher\) changed since the run began"):
         check_run_dir(cfg, resume=True)
+
+
+def test_a_resume_scales_progress_of_another_checkpoint_and_refuses_counts_that_are_not_finite(stage1_run, tmp_path,
+                                                                                                capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    progress = json.loads((run / "progress.json").read_text())
+    assert progress["iteration"] == 0
+    # a newer checkpoint, model_2.pt, was damaged and deleted: progress.json still counts its 3 iterations
+    (run / "progress.json").write_text(json.dumps({"iteration": 2, "env_steps": 3 * progress["env_steps"],
+                                                   "wall_s": 3.0}))
+    capsys.readouterr()
+    argv = ["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "counts 3 iterations, model_0.pt holds 1" in err
+    assert json.loads((run / "progress.json").read_text())["env_steps"] == progress["env_steps"]
+    assert json.loads((run / "policy.json").read_text())["training"]["env_steps"] == progress["env_steps"]
+    (run / "progress.json").write_text('{"iteration": 0, "env_steps": 24, "wall_s": NaN}')
+    assert main([*argv, "--dry-run"]) == 2
+    assert "progress.json: wall_s: missing, negative or not a finite number" in capsys.readouterr().err

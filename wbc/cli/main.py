@@ -643,7 +643,9 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
     if unstarted_run(cfg.run_dir):
         print(f"wbc: note: {cfg.run_dir} holds a run interrupted before its first checkpoint (config.json, no "
               "model_<it>.pt): it starts afresh from iteration 0", file=sys.stderr)
-    check_run_dir(cfg, resume=args.resume)
+    point = check_run_dir(cfg, resume=args.resume)
+    if point is not None and point.note:
+        print(f"wbc: note: --resume: {point.note}", file=sys.stderr)
     if args.dry_run:
         try:
             check_inputs(cfg)

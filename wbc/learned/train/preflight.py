@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -45,13 +46,16 @@ class ResumePoint:
         checkpoint: the newest ``model_<it>.pt``.
         done: iterations trained so far (the checkpoint's iteration + 1).
         saved: the ``train_config`` object of the run's ``config.json``.
-        progress: ``progress.json`` (iteration, env_steps, wall_s), zeros when the file is absent.
+        progress: ``progress.json`` (iteration, env_steps, wall_s), zeros when the file is absent; scaled to the
+            checkpoint's iterations when the file counts another iteration (`note` then says so).
+        note: what was reconciled, or None.
     """
 
     checkpoint: Path
     done: int
     saved: dict[str, Any]
     progress: dict[str, Any]
+    note: str | None = None
 
 
 def latest_checkpoint(run_dir: str | Path) -> Path | None:
@@ -303,7 +307,17 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
             raise ConfigError(f"--resume: {path}: not a JSON object; restore it or delete it (the counts restart)")
         for key, kind in kinds.items():
             value = progress.get(key)
-            if not isinstance(value, kind) or isinstance(value, bool) or value < 0:
-                raise ConfigError(f"--resume: {path}: {key}: missing, negative or not a number; restore it or delete "
-                                  "the file (the counts restart)")
+            if not isinstance(value, kind) or isinstance(value, bool) or not math.isfinite(value) or value < 0:
+                raise ConfigError(f"--resume: {path}: {key}: missing, negative or not a finite number; restore it or "
+                                  "delete the file (the counts restart)")
+        counted = progress["iteration"] + 1
+        if counted != done:
+            # its counts are of another checkpoint (a newer one deleted, or an interruption between a checkpoint and
+            # its progress): every iteration steps each env the same number of times, so the steps scale exactly;
+            # the wall time is the same share of it, an estimate
+            progress = {"iteration": done - 1, "env_steps": round(progress["env_steps"] * done / counted),
+                        "wall_s": progress["wall_s"] * done / counted}
+            note = (f"{path} counts {counted} iterations, {checkpoint.name} holds {done}: its env steps and wall time "
+                    f"are scaled to {done} iterations ({progress['env_steps']:,} steps; the wall time an estimate)")
+            return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress, note=note)
     return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress)
