@@ -29,11 +29,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -307,6 +309,15 @@ def dagger_expert(cfg: DaggerConfig) -> tuple[ControllerSpec, Callable[[RobotDes
     return expert_spec, make_expert
 
 
+@contextmanager
+def _replacing(path: Path) -> Iterator[BinaryIO]:
+    """Write `path` through a temporary file beside it: an interruption leaves the old file whole, never half of one."""
+    tmp = path.with_name(f"{path.name}.tmp")
+    with tmp.open("wb") as f:
+        yield f
+    os.replace(tmp, path)
+
+
 def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> dict[str, Any]:
     """Run DAgger rounds and export the student after each.
 
@@ -347,6 +358,15 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
             if "episode" not in data.files:
                 raise ConfigError(f"--resume: {run_dir}/data.npz predates the samples' episode ids; start a new run")
             obs_all, act_all, ep_all = [data["obs"]], [data["actions"]], [data["episode"]]
+        # the samples of the finished rounds only: a run stopped after saving a round's data and before its progress
+        # plays that round again
+        recorded = progress["rounds"][-1]["samples_total"] if progress["rounds"] else 0
+        if obs_all[0].shape[0] < recorded:
+            raise ConfigError(f"--resume: {run_dir}/data.npz holds {obs_all[0].shape[0]} samples, progress.json "
+                              f"records {recorded}: the run directory is damaged; start a new run under another "
+                              "--run-root")
+        obs_all, act_all, ep_all = [a[:recorded] for a in obs_all], [a[:recorded] for a in act_all], [
+            a[:recorded] for a in ep_all]
     elif (run_dir / "progress.json").exists():
         raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
                           "--run-root")
@@ -421,13 +441,17 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                  "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
-        np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
-        save_student(net, run_dir / "student.pt")
+        # each file replaced whole: a run stopped while writing keeps the previous round's
+        with _replacing(run_dir / "data.npz") as f:
+            np.savez(f, obs=obs, actions=actions, episode=episode_ids)
+        with _replacing(run_dir / "student.pt") as f:
+            save_student(net, f)
         exported = student_policy_file(net, env, task=cfg.task, extra=extra)
         save_policy(student_path, exported)
         # each round's student stays: the next round's figures measure it, and the newest is not always the best
         save_policy(run_dir / "rounds" / f"policy-{k}", exported)
-        (run_dir / "progress.json").write_text(json.dumps(progress, indent=2, default=float) + "\n")
+        with _replacing(run_dir / "progress.json") as f:
+            f.write((json.dumps(progress, indent=2, default=float) + "\n").encode())
         if log is not None:
             log(f"round {k}: {len(episodes)} episodes ({len(student_rounds)} driven by the student, "
                 f"{summary['student_falls']} of them fell, {summary['student_takeovers']} taken over), "
