@@ -412,3 +412,39 @@ def test_an_interrupted_dagger_round_keeps_the_finished_rounds_samples_once(tmp_
     with np.load(run / "data.npz") as data:  # round 1's episode once, not twice
         assert data["obs"].shape[0] == progress["rounds"][-1]["samples_total"] == 10
         assert list(data["episode"]) == [0] * 5 + [1] * 5
+
+
+@pytest.fixture(scope="module")
+def dagger_run(tmp_path_factory) -> Path:
+    """A finished one-round, one-episode DAgger run: its run root."""
+    from wbc.cli.main import main
+
+    root = tmp_path_factory.mktemp("dagger")
+    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
+                 "0.1", "--run-root", str(root)]) == 0
+    return root
+
+
+@pytest.mark.parametrize(("damage", "said"), [
+    (lambda run: (run / "config.json").unlink(), "config.json: no such file"),
+    (lambda run: (run / "config.json").write_text("{bad"), "config.json: not JSON"),
+    (lambda run: (run / "config.json").write_text("[]"), "config.json: dagger_config: missing"),
+    (lambda run: (run / "progress.json").write_text("garbage"), "progress.json: not JSON"),
+    (lambda run: (run / "progress.json").write_text('{"rounds": [{}]}'), "progress.json: rounds: missing"),
+    (lambda run: (run / "data.npz").unlink(), "data.npz: no such file"),
+    (lambda run: (run / "data.npz").write_bytes((run / "data.npz").read_bytes()[:100]), "data.npz: not readable"),
+    (lambda run: (run / "student.pt").write_bytes((run / "student.pt").read_bytes()[:100]),
+     "student.pt: not a readable student"),
+])
+def test_a_dagger_resume_refuses_a_damaged_run_directory_in_one_line(dagger_run, tmp_path, capsys, damage, said):
+    import shutil
+
+    from wbc.cli.main import main
+
+    shutil.copytree(dagger_run, tmp_path / "runs")
+    damage(tmp_path / "runs" / "push-dagger-mpc")
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
+                 "0.1", "--run-root", str(tmp_path / "runs"), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

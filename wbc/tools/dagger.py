@@ -31,6 +31,8 @@ import json
 import math
 import os
 import time
+import zipfile
+import zlib
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -57,7 +59,7 @@ from wbc.learned.train.distill import (
     save_student,
     student_policy_file,
 )
-from wbc.learned.train.preflight import config_diff
+from wbc.learned.train.preflight import config_diff, read_run_json
 from wbc.learned.train.stages import TASKS
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.provenance import provenance
@@ -318,6 +320,55 @@ def _replacing(path: Path) -> Iterator[BinaryIO]:
     os.replace(tmp, path)
 
 
+_DAMAGED = "the run directory is damaged: start a new run under another --run-root"
+
+
+def _resumed(run_dir: Path, resolved: dict[str, Any]) -> tuple[dict[str, Any], list, list, list]:
+    """What a resumed run continues from: its progress and the samples of its finished rounds.
+
+    Raises:
+        ConfigError: no finished round, another config, or a missing or damaged ``config.json``, ``progress.json``
+            or ``data.npz`` (the message names the file).
+    """
+    if not (run_dir / "progress.json").exists():
+        raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
+    config = run_dir / "config.json"
+    data = read_run_json(config, _DAMAGED)
+    saved = data.get("dagger_config") if isinstance(data, dict) else None
+    if not isinstance(saved, dict):
+        raise ConfigError(f"--resume: {config}: dagger_config: missing or not an object; {_DAMAGED}")
+    # where the run lies is not part of its config: a run directory may move, or be named another way
+    diff = [name for key in sorted(resolved) if key not in ("rounds", "run_dir")
+            for name in config_diff(saved.get(key), resolved[key], key)]
+    if diff:
+        raise ConfigError(f"--resume: {config} differs from this run's config in {diff}")
+    path = run_dir / "progress.json"
+    progress = read_run_json(path, _DAMAGED)
+    rounds = progress.get("rounds") if isinstance(progress, dict) else None
+    if not isinstance(rounds, list) or not all(
+            isinstance(r, dict) and isinstance(r.get("samples_total"), int) and r["samples_total"] >= 0
+            and isinstance(r.get("wall_s"), (int, float)) and math.isfinite(r["wall_s"]) for r in rounds):
+        raise ConfigError(f"--resume: {path}: rounds: missing, or a round without its samples_total or wall_s; "
+                          f"{_DAMAGED}")
+    try:
+        with np.load(run_dir / "data.npz") as npz:
+            if "episode" not in npz.files:
+                raise ConfigError(f"--resume: {run_dir}/data.npz predates the samples' episode ids; start a new run")
+            obs, actions, episode = npz["obs"], npz["actions"], npz["episode"]
+    except FileNotFoundError:
+        raise ConfigError(f"--resume: {run_dir / 'data.npz'}: no such file; {_DAMAGED}") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise ConfigError(f"--resume: {run_dir / 'data.npz'}: not readable ({type(exc).__name__}: {exc}); "
+                          f"{_DAMAGED}") from None
+    # the samples of the finished rounds only: a run stopped after saving a round's data and before its progress
+    # plays that round again
+    recorded = rounds[-1]["samples_total"] if rounds else 0
+    if obs.shape[0] < recorded or actions.shape[0] != obs.shape[0] or episode.shape[0] != obs.shape[0]:
+        raise ConfigError(f"--resume: {run_dir}/data.npz holds {obs.shape[0]} samples, progress.json records "
+                          f"{recorded}: {_DAMAGED}")
+    return progress, [obs[:recorded]], [actions[:recorded]], [episode[:recorded]]
+
+
 def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> dict[str, Any]:
     """Run DAgger rounds and export the student after each.
 
@@ -345,28 +396,7 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
     act_all: list[np.ndarray] = []
     ep_all: list[np.ndarray] = []
     if resume:
-        if not (run_dir / "progress.json").exists():
-            raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
-        saved = json.loads((run_dir / "config.json").read_text())["dagger_config"]
-        # where the run lies is not part of its config: a run directory may move, or be named another way
-        diff = [name for key in sorted(resolved) if key not in ("rounds", "run_dir")
-                for name in config_diff(saved.get(key), resolved[key], key)]
-        if diff:
-            raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
-        progress = json.loads((run_dir / "progress.json").read_text())
-        with np.load(run_dir / "data.npz") as data:
-            if "episode" not in data.files:
-                raise ConfigError(f"--resume: {run_dir}/data.npz predates the samples' episode ids; start a new run")
-            obs_all, act_all, ep_all = [data["obs"]], [data["actions"]], [data["episode"]]
-        # the samples of the finished rounds only: a run stopped after saving a round's data and before its progress
-        # plays that round again
-        recorded = progress["rounds"][-1]["samples_total"] if progress["rounds"] else 0
-        if obs_all[0].shape[0] < recorded:
-            raise ConfigError(f"--resume: {run_dir}/data.npz holds {obs_all[0].shape[0]} samples, progress.json "
-                              f"records {recorded}: the run directory is damaged; start a new run under another "
-                              "--run-root")
-        obs_all, act_all, ep_all = [a[:recorded] for a in obs_all], [a[:recorded] for a in act_all], [
-            a[:recorded] for a in ep_all]
+        progress, obs_all, act_all, ep_all = _resumed(run_dir, resolved)
     elif (run_dir / "progress.json").exists():
         raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
                           "--run-root")
@@ -379,7 +409,11 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
     student_path = run_dir / "policy"
     start_round = len(progress["rounds"])
     if start_round:
-        net = load_student(run_dir / "student.pt")
+        try:
+            net = load_student(run_dir / "student.pt")
+        except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
+            raise ConfigError(f"--resume: {run_dir / 'student.pt'}: not a readable student ({type(exc).__name__}); "
+                              f"{_DAMAGED}") from None
     wall_before = sum(r["wall_s"] for r in progress["rounds"])
     for k in range(start_round, cfg.rounds):
         t0 = time.perf_counter()

@@ -22,8 +22,8 @@ from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
 
 __all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "config_diff", "input_files",
-           "input_path", "latest_checkpoint", "load_input_policy", "names_a_file", "saved_train_config",
-           "unstarted_run"]
+           "input_path", "latest_checkpoint", "load_input_policy", "names_a_file", "read_run_json",
+           "saved_train_config", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -240,7 +240,13 @@ def _check_expert_data(cfg: TrainConfig) -> None:
                               f"DAgger run's data.npz of task {cfg.task!r}")
 
 
-def _read_json(path: Path, what: str) -> Any:
+def read_run_json(path: Path, what: str) -> Any:
+    """A JSON file of a run directory that ``--resume`` reads, or a `ConfigError` naming it and what is wrong.
+
+    Args:
+        path: the file.
+        what: what to do when it is missing (the end of the message).
+    """
     try:
         return json.loads(path.read_text())
     except FileNotFoundError:
@@ -281,7 +287,7 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
     if checkpoint is None:
         raise ConfigError(f"--resume: no model_<it>.pt checkpoint in {run_dir}; start the run without --resume")
     config = run_dir / "config.json"
-    data = _read_json(config, "the run directory is not a complete run: start a new run under another --run-root")
+    data = read_run_json(config, "the run directory is not a complete run: start a new run under another --run-root")
     saved = data.get("train_config") if isinstance(data, dict) else None
     if not isinstance(saved, dict):
         raise ConfigError(f"--resume: {config}: train_config: missing or not an object; the run directory is damaged: "
@@ -301,7 +307,7 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
     progress: dict[str, Any] = {"iteration": done - 1, "env_steps": 0, "wall_s": 0.0}
     path = run_dir / "progress.json"
     if path.exists():
-        progress = _read_json(path, "")
+        progress = read_run_json(path, "")
         kinds = {"iteration": int, "env_steps": int, "wall_s": (int, float)}
         if not isinstance(progress, dict):
             raise ConfigError(f"--resume: {path}: not a JSON object; restore it or delete it (the counts restart)")
