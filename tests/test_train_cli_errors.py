@@ -227,3 +227,14 @@ def test_a_resume_scales_progress_of_another_checkpoint_and_refuses_counts_that_
     (run / "progress.json").write_text('{"iteration": 0, "env_steps": 24, "wall_s": NaN}')
     assert main([*argv, "--dry-run"]) == 2
     assert "progress.json: wall_s: missing, negative or not a finite number" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("teacher", [[], ["--teacher", "mpc", "--rounds", "1", "--episodes", "1"]])
+def test_a_run_root_that_is_a_file_is_refused_naming_the_option(tmp_path, capsys, teacher):
+    pytest.importorskip("torch")
+    (tmp_path / "a-file").write_text("")
+    stage = [] if teacher else ["--stage", "1", *TINY]
+    for root in (tmp_path / "a-file", tmp_path / "a-file" / "below"):
+        assert main(["train", "--task", "push", *stage, *teacher, "--run-root", str(root)]) == 2
+        err = capsys.readouterr().err
+        assert "--run-root: " in err and "is a file, not a directory" in err and "Traceback" not in err

@@ -59,7 +59,7 @@ from wbc.learned.train.distill import (
     save_student,
     student_policy_file,
 )
-from wbc.learned.train.preflight import config_diff, read_run_json
+from wbc.learned.train.preflight import check_run_root, config_diff, make_run_dir, read_run_json
 from wbc.learned.train.stages import TASKS
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.provenance import provenance
@@ -395,13 +395,14 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
     obs_all: list[np.ndarray] = []
     act_all: list[np.ndarray] = []
     ep_all: list[np.ndarray] = []
+    check_run_root(run_dir)
     if resume:
         progress, obs_all, act_all, ep_all = _resumed(run_dir, resolved)
     elif (run_dir / "progress.json").exists():
         raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
                           "--run-root")
     else:
-        run_dir.mkdir(parents=True, exist_ok=True)
+        make_run_dir(run_dir)
         (run_dir / "config.json").write_text(json.dumps(
             {"dagger_config": resolved, "provenance": provenance(),
              "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")

@@ -21,9 +21,9 @@ from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_pol
 from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "config_diff", "input_files",
-           "input_path", "latest_checkpoint", "load_input_policy", "names_a_file", "read_run_json",
-           "saved_train_config", "unstarted_run"]
+__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "check_run_root", "config_diff",
+           "input_files", "input_path", "latest_checkpoint", "load_input_policy", "make_run_dir", "names_a_file",
+           "read_run_json", "saved_train_config", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -159,6 +159,29 @@ def _check_unchanged(inputs: Any, config: Path) -> None:
                                   "another --run-root")
 
 
+def check_run_root(run_dir: str | Path) -> None:
+    """Refuse a run directory that cannot be made: a file stands where it, or a folder above it, would be.
+
+    Raises:
+        ConfigError: naming ``--run-root`` and the file in the way.
+    """
+    for path in (Path(run_dir), *Path(run_dir).parents):
+        if path.exists():
+            if not path.is_dir():
+                raise ConfigError(f"--run-root: {path} is a file, not a directory, so the run directory {run_dir} "
+                                  "cannot be made there; give a directory")
+            return
+
+
+def make_run_dir(run_dir: str | Path) -> None:
+    """Make a run directory, or raise a `ConfigError` naming ``--run-root`` and why it cannot be made."""
+    try:
+        Path(run_dir).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--run-root: cannot make the run directory {run_dir} ({exc.strerror or exc}); give a "
+                          "directory this user can write") from None
+
+
 def names_a_file(path: str | Path) -> bool:
     """Whether `path` is a file, or the common stem of a policy's ``.npz``/``.json`` pair."""
     p = Path(path)
@@ -270,11 +293,13 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
         interrupted before its first checkpoint (`unstarted_run`; its ``config.json`` is then written anew).
 
     Raises:
-        ConfigError: a new run in a directory that holds a run; a resumed run without a checkpoint, with a missing or
+        ConfigError: a run directory that cannot be made (`check_run_root`); a new run in a directory that holds a
+            run; a resumed run without a checkpoint, with a missing or
             damaged ``config.json`` or ``progress.json``, with another config, or whose input files changed since it
             began (`input_files`).
     """
     run_dir = Path(cfg.run_dir)
+    check_run_root(run_dir)
     if unstarted_run(run_dir):
         return None
     checkpoint = latest_checkpoint(run_dir)

@@ -41,6 +41,7 @@ from wbc.learned.train.preflight import (
     input_files,
     latest_checkpoint,
     load_input_policy,
+    make_run_dir,
 )
 from wbc.learned.train.rma import train_adaptation
 from wbc.learned.train.train_config import TrainConfig
@@ -196,7 +197,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     if point is not None:
         _check_checkpoint(point.checkpoint)
     progress = point.progress if point is not None else {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
-    run_dir.mkdir(parents=True, exist_ok=True)
+    make_run_dir(run_dir)
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.torch_threads)
     env = BatchedEnv(cfg.env)
