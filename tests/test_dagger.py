@@ -372,3 +372,79 @@ def test_a_failing_expert_costs_only_its_episode(tmp_path, monkeypatch):
     assert rounds[0]["errors"] == 1 and "expert broke" in eps[0]["error"] and eps[1]["error"] is None
     # the broken episode keeps its samples up to the failure (ticks 0, 10, 20 of the expert's 500 Hz), the other all 20
     assert [e["samples"] for e in eps] == [3, 20] and result["samples"] == 23
+
+
+def test_an_interrupted_dagger_round_keeps_the_finished_rounds_samples_once(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log file here
+    import wbc.tools.dagger as dagger
+    from wbc.cli.main import main
+
+    args = ["train", "--task", "push", "--teacher", "mpc", "--rounds", "2", "--episodes", "1", "--episode-s", "0.1",
+            "--run-root", str(tmp_path / "runs")]
+    run = tmp_path / "runs" / "push-dagger-mpc"
+    savez, save_student = np.savez, dagger.save_student
+
+    def half_written(file, **arrays):  # round 1's data.npz: interrupted while it is written
+        if (run / "progress.json").exists():
+            with open(file, "wb") if isinstance(file, (str, Path)) else file as f:
+                f.write(b"PK\x03\x04 half a zip")
+            raise KeyboardInterrupt
+        return savez(file, **arrays)
+
+    monkeypatch.setattr(dagger.np, "savez", half_written)
+    assert main(args) == 130
+    with np.load(run / "data.npz") as data:  # round 0's samples, whole
+        assert data["obs"].shape[0] == 5 and set(data["episode"]) == {0}
+    monkeypatch.setattr(dagger.np, "savez", savez)
+
+    def interrupted(net, file):  # round 1: stopped after its data.npz, before its progress.json
+        if (run / "progress.json").exists():
+            raise KeyboardInterrupt
+        return save_student(net, file)
+
+    monkeypatch.setattr(dagger, "save_student", interrupted)
+    assert main([*args, "--resume"]) == 130
+    with np.load(run / "data.npz") as data:
+        assert data["obs"].shape[0] == 10  # round 1's samples saved, its progress not
+    monkeypatch.setattr(dagger, "save_student", save_student)
+    assert main([*args, "--resume"]) == 0
+    progress = json.loads((run / "progress.json").read_text())
+    with np.load(run / "data.npz") as data:  # round 1's episode once, not twice
+        assert data["obs"].shape[0] == progress["rounds"][-1]["samples_total"] == 10
+        assert list(data["episode"]) == [0] * 5 + [1] * 5
+
+
+@pytest.fixture(scope="module")
+def dagger_run(tmp_path_factory) -> Path:
+    """A finished one-round, one-episode DAgger run: its run root."""
+    from wbc.cli.main import main
+
+    root = tmp_path_factory.mktemp("dagger")
+    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
+                 "0.1", "--run-root", str(root)]) == 0
+    return root
+
+
+@pytest.mark.parametrize(("damage", "said"), [
+    (lambda run: (run / "config.json").unlink(), "config.json: no such file"),
+    (lambda run: (run / "config.json").write_text("{bad"), "config.json: not JSON"),
+    (lambda run: (run / "config.json").write_text("[]"), "config.json: dagger_config: missing"),
+    (lambda run: (run / "progress.json").write_text("garbage"), "progress.json: not JSON"),
+    (lambda run: (run / "progress.json").write_text('{"rounds": [{}]}'), "progress.json: rounds: missing"),
+    (lambda run: (run / "data.npz").unlink(), "data.npz: no such file"),
+    (lambda run: (run / "data.npz").write_bytes((run / "data.npz").read_bytes()[:100]), "data.npz: not readable"),
+    (lambda run: (run / "student.pt").write_bytes((run / "student.pt").read_bytes()[:100]),
+     "student.pt: not a readable student"),
+])
+def test_a_dagger_resume_refuses_a_damaged_run_directory_in_one_line(dagger_run, tmp_path, capsys, damage, said):
+    import shutil
+
+    from wbc.cli.main import main
+
+    shutil.copytree(dagger_run, tmp_path / "runs")
+    damage(tmp_path / "runs" / "push-dagger-mpc")
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
+                 "0.1", "--run-root", str(tmp_path / "runs"), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

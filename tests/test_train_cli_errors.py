@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -9,6 +10,7 @@ from pathlib import Path
 import pytest
 
 from wbc.cli.main import main
+from wbc.errors import ConfigError
 
 TINY = ["--iterations", "1", "--envs", "1", "--rma-iterations", "0"]
 
@@ -124,3 +126,115 @@ def test_a_fine_tune_refuses_expert_samples_of_another_task(tmp_path, capsys):
     assert not (tmp_path / "runs").exists()
     assert main([*argv, "--dry-run"]) == 2
     assert "collected on task 'push'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("resume", [[], ["--resume"]])
+def test_a_run_interrupted_before_its_first_checkpoint_starts_afresh(stage1_run, tmp_path, capsys, resume):
+    root = tmp_path / "runs"
+    run = root / "push-stage1"
+    run.mkdir(parents=True)
+    shutil.copy(stage1_run / "push-stage1" / "config.json", run / "config.json")  # all such a run leaves
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), *resume]) == 0
+    err = capsys.readouterr().err
+    assert "interrupted before its first checkpoint" in err and "starts afresh" in err
+    assert json.loads((run / "progress.json").read_text())["iteration"] == 0 and (run / "model_0.pt").is_file()
+    assert json.loads((run / "config.json").read_text())["train_config"]["run_dir"] == str(run)
+
+
+def test_resume_compares_the_run_directory_and_the_inputs_as_paths_not_text(tmp_path, monkeypatch):
+    from wbc.learned.train.preflight import check_run_dir
+    from wbc.learned.train.stages import stage_config
+
+    monkeypatch.chdir(tmp_path)
+    began = stage_config("push", 2, run_root="runs", teacher="teachers/pi1/policy")  # as the run began
+    run = tmp_path / "runs" / "push-stage2"
+    run.mkdir(parents=True)
+    (run / "model_0.pt").write_bytes(b"")  # its name is all this check reads
+    saved = json.loads(json.dumps(dataclasses.asdict(began), default=list))
+    (run / "config.json").write_text(json.dumps({"train_config": saved}))
+    # the same run, its root given as an absolute path and its teacher by the pair's .npz
+    same = stage_config("push", 2, run_root=str(tmp_path / "runs"), teacher=str(tmp_path / "teachers/pi1/policy.npz"))
+    assert check_run_dir(same, resume=True).done == 1
+    other = stage_config("push", 2, run_root="runs", teacher="teachers/pi0/policy")
+    with pytest.raises(ConfigError, match=r"differs from this run's config in \['teacher'\]"):
+        check_run_dir(other, resume=True)
+
+
+def test_a_dagger_run_resumes_under_another_spelling_of_its_run_root(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log file here
+    args = ["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s", "0.1"]
+    assert main([*args, "--run-root", "runs"]) == 0
+    assert main([*args, "--run-root", str(tmp_path / "runs"), "--resume"]) == 0
+    assert "differs" not in capsys.readouterr().err
+
+
+def test_a_resume_takes_the_options_not_given_from_the_run_and_names_a_changed_nested_field(stage1_run, tmp_path,
+                                                                                           capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    capsys.readouterr()
+    # made with --iterations 1 --envs 1 --rma-iterations 0: resumed without them, it is that run, not the defaults'
+    assert main(["train", "--task", "push", "--stage", "1", "--run-root", str(root), "--resume"]) == 0
+    captured = capsys.readouterr()
+    assert "gave the options not given" in captured.err
+    assert "--iterations 1" in captured.err and "--envs 1" in captured.err and "--rma-iterations 0" in captured.err
+    assert "nothing new trained" in captured.out and not (run / "rma.json").exists()
+    assert main(["train", "--task", "push", "--stage", "1", "--envs", "2", "--run-root", str(root), "--resume"]) == 2
+    err = capsys.readouterr().err
+    assert "differs from this run's config in ['env.num_envs']" in err.strip().splitlines()[-1]
+    assert "Traceback" not in err
+
+
+def test_a_resume_refuses_a_teacher_whose_weights_changed_since_the_run_began(stage1_run, tmp_path, monkeypatch):
+    from wbc.learned.train.preflight import check_run_dir, input_files
+    from wbc.learned.train.stages import stage_config
+
+    assert json.loads((stage1_run / "push-stage1" / "config.json").read_text())["inputs"] == {}  # stage 1 reads none
+    monkeypatch.chdir(tmp_path)
+    teacher = tmp_path / "runs" / "push-stage1"
+    shutil.copytree(stage1_run / "push-stage1", teacher)
+    cfg = stage_config("push", 2, run_root="runs")  # its teacher: the stage-1 export beside it
+    run = tmp_path / "runs" / "push-stage2"
+    run.mkdir()
+    (run / "model_0.pt").write_bytes(b"")
+    inputs = input_files(cfg)
+    assert set(inputs["teacher"]["sha256"]) == {str(teacher / "policy.npz"), str(teacher / "policy.json")}
+    saved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
+    (run / "config.json").write_text(json.dumps({"train_config": saved, "inputs": inputs}))
+    assert check_run_dir(cfg, resume=True).done == 1
+    (teacher / "policy.npz").write_bytes((teacher / "policy.npz").read_bytes() + b"\0")  # stage 1 trained again
+    with pytest.raises(ConfigError, match=r"policy\.npz \(teacher\) changed since the run began"):
+        check_run_dir(cfg, resume=True)
+
+
+def test_a_resume_scales_progress_of_another_checkpoint_and_refuses_counts_that_are_not_finite(stage1_run, tmp_path,
+                                                                                                capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    progress = json.loads((run / "progress.json").read_text())
+    assert progress["iteration"] == 0
+    # a newer checkpoint, model_2.pt, was damaged and deleted: progress.json still counts its 3 iterations
+    (run / "progress.json").write_text(json.dumps({"iteration": 2, "env_steps": 3 * progress["env_steps"],
+                                                   "wall_s": 3.0}))
+    capsys.readouterr()
+    argv = ["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "counts 3 iterations, model_0.pt holds 1" in err
+    assert json.loads((run / "progress.json").read_text())["env_steps"] == progress["env_steps"]
+    assert json.loads((run / "policy.json").read_text())["training"]["env_steps"] == progress["env_steps"]
+    (run / "progress.json").write_text('{"iteration": 0, "env_steps": 24, "wall_s": NaN}')
+    assert main([*argv, "--dry-run"]) == 2
+    assert "progress.json: wall_s: missing, negative or not a finite number" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("teacher", [[], ["--teacher", "mpc", "--rounds", "1", "--episodes", "1"]])
+def test_a_run_root_that_is_a_file_is_refused_naming_the_option(tmp_path, capsys, teacher):
+    pytest.importorskip("torch")
+    (tmp_path / "a-file").write_text("")
+    stage = [] if teacher else ["--stage", "1", *TINY]
+    for root in (tmp_path / "a-file", tmp_path / "a-file" / "below"):
+        assert main(["train", "--task", "push", *stage, *teacher, "--run-root", str(root)]) == 2
+        err = capsys.readouterr().err
+        assert "--run-root: " in err and "is a file, not a directory" in err and "Traceback" not in err

@@ -15,6 +15,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable
 from pathlib import Path
+from typing import Any
 
 from wbc.arena.compare import VIEWED_TIME_LIMIT, ArenaConfig, run_arena
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
@@ -592,6 +593,9 @@ def _train(args: argparse.Namespace) -> int:
         overrides["rma"] = AdaptationConfig(iterations=args.rma_iterations)
     cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
                        env_overrides=env, variant=args.variant, **overrides)
+    if args.resume and _inherit_saved(args, cfg.run_dir, env, overrides, adapts=cfg.extrinsics_dim > 0):
+        cfg = stage_config(args.task, args.stage, args.baseline, run_root=args.run_root, teacher=args.teacher,
+                           env_overrides=env, variant=args.variant, **overrides)
     if args.rma_iterations is not None and cfg.extrinsics_dim == 0:
         what = f"stage {args.stage}" + (f" --baseline {args.baseline}" if args.baseline else "")
         raise ConfigError(f"--rma-iterations sets the adaptation phase (RMA) of a policy that observes extrinsics, "
@@ -607,6 +611,65 @@ def _train(args: argparse.Namespace) -> int:
     return _train_run(args, cfg, stage=args.stage, baseline=args.variant or args.baseline)
 
 
+def _inherit_saved(args: argparse.Namespace, run_dir: str, env: dict[str, Any], overrides: dict[str, Any], *,
+                   adapts: bool) -> bool:
+    """Fill `env` and `overrides` with a resumed run's saved settings that its command line leaves out.
+
+    A resumed run is the run it continues: its PPO iterations, RMA phase, environments, threads and seeds are the
+    ones its ``config.json`` records unless an option is given (a changed one that may not change is then refused
+    by `check_run_dir`, naming the field). ``args.resume_note`` says what it takes, printed once the run is checked.
+
+    Args:
+        args: the command line.
+        run_dir: the run directory.
+        env: `EnvConfig` overrides, filled in place.
+        overrides: `TrainConfig` overrides, filled in place.
+        adapts: whether the run has an adaptation phase (RMA) to take the settings of.
+
+    Returns:
+        Whether anything was taken (the config is then built again).
+    """
+    from wbc.learned.train.preflight import saved_train_config
+
+    saved = saved_train_config(run_dir)
+    if saved is None:  # nothing to take from; check_run_dir says what is wrong
+        return False
+    saved_env = saved.get("env") if isinstance(saved.get("env"), dict) else {}
+
+    def whole(value: object) -> bool:
+        return isinstance(value, int) and not isinstance(value, bool)
+
+    taken: dict[str, object] = {}
+    for option, given, key, value, into in (
+            ("--iterations", args.iterations, "max_iterations", saved.get("max_iterations"), overrides),
+            ("--seed", args.seed, "seed", saved.get("seed"), overrides),
+            ("--envs", args.envs, "num_envs", saved_env.get("num_envs"), env),
+            ("--threads", args.threads, "nthread", saved_env.get("nthread"), env),
+            ("--seed", args.seed, "seed", saved_env.get("seed"), env)):
+        if given is None and whole(value):
+            into[key] = value
+            taken.setdefault(option, value)
+    rma = saved.get("rma")
+    if adapts and args.rma_iterations is None and isinstance(rma, dict):
+        try:
+            overrides["rma"] = AdaptationConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in rma.items()})
+        except (TypeError, ValueError, WbcError):
+            pass  # a damaged entry: the run's default phase, as before
+        else:
+            taken["--rma-iterations"] = overrides["rma"].iterations
+    if taken:
+        given = ", ".join(f"{option} {value}" for option, value in taken.items())
+        args.resume_note = f"--resume: {Path(run_dir) / 'config.json'} gave the options not given: {given}"
+    return bool(taken)
+
+
+def _print_resume_note(args: argparse.Namespace) -> None:
+    """Say which options a resumed run took from its config.json (`_inherit_saved`), if any."""
+    note = getattr(args, "resume_note", None)
+    if note:
+        print(f"wbc: note: {note}", file=sys.stderr)
+
+
 def _train_not_a_teacher(name: str) -> ConfigError:
     """The error for a --teacher that names neither a controller nor a file."""
     return ConfigError(f"--teacher {name} is neither a controller nor a file; give a policy file (a stage's "
@@ -615,9 +678,14 @@ def _train_not_a_teacher(name: str) -> ConfigError:
 
 def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | None) -> int:
     """Check a stage's or fine-tune's run (--dry-run: print its configuration), then train it."""
-    from wbc.learned.train.preflight import check_inputs, check_run_dir
+    from wbc.learned.train.preflight import check_inputs, check_run_dir, unstarted_run
 
-    check_run_dir(cfg, resume=args.resume)
+    if unstarted_run(cfg.run_dir):
+        print(f"wbc: note: {cfg.run_dir} holds a run interrupted before its first checkpoint (config.json, no "
+              "model_<it>.pt): it starts afresh from iteration 0", file=sys.stderr)
+    point = check_run_dir(cfg, resume=args.resume)
+    if point is not None and point.note:
+        print(f"wbc: note: --resume: {point.note}", file=sys.stderr)
     if args.dry_run:
         try:
             check_inputs(cfg)
@@ -626,12 +694,14 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
                 raise
             # a default input (the previous stage's export) may be trained after this dry run
             print(f"wbc: note: {exc}", file=sys.stderr)
+        _print_resume_note(args)
         printers.print_json(dataclasses.asdict(cfg))
         return 0
     # torch and rsl-rl-lib (the train extra) load only when a run really trains
     from wbc.learned.train.train import train
 
     result = train(cfg, resume=args.resume)
+    _print_resume_note(args)
     if result.get("trained", 1) == 0:
         print(f"{result['run_dir']} already holds {result['iterations']} iterations, no fewer than --iterations "
               f"{cfg.max_iterations}: nothing new trained; its newest checkpoint is exported as it is (pass a larger "
@@ -665,6 +735,9 @@ def _fine_tune(args: argparse.Namespace) -> int:
     overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
     cfg = fine_tune_config(args.task, student, run_root=args.run_root, expert_data=args.expert_data,
                            env_overrides=env, **overrides)
+    if args.resume and _inherit_saved(args, cfg.run_dir, env, overrides, adapts=False):
+        cfg = fine_tune_config(args.task, student, run_root=args.run_root, expert_data=args.expert_data,
+                               env_overrides=env, **overrides)
     return _train_run(args, cfg, stage=3, baseline="fine-tune")
 
 

@@ -29,11 +29,15 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 import time
-from collections.abc import Callable
+import zipfile
+import zlib
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -55,6 +59,7 @@ from wbc.learned.train.distill import (
     save_student,
     student_policy_file,
 )
+from wbc.learned.train.preflight import check_run_root, config_diff, make_run_dir, read_run_json
 from wbc.learned.train.stages import TASKS
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.provenance import provenance
@@ -306,6 +311,64 @@ def dagger_expert(cfg: DaggerConfig) -> tuple[ControllerSpec, Callable[[RobotDes
     return expert_spec, make_expert
 
 
+@contextmanager
+def _replacing(path: Path) -> Iterator[BinaryIO]:
+    """Write `path` through a temporary file beside it: an interruption leaves the old file whole, never half of one."""
+    tmp = path.with_name(f"{path.name}.tmp")
+    with tmp.open("wb") as f:
+        yield f
+    os.replace(tmp, path)
+
+
+_DAMAGED = "the run directory is damaged: start a new run under another --run-root"
+
+
+def _resumed(run_dir: Path, resolved: dict[str, Any]) -> tuple[dict[str, Any], list, list, list]:
+    """What a resumed run continues from: its progress and the samples of its finished rounds.
+
+    Raises:
+        ConfigError: no finished round, another config, or a missing or damaged ``config.json``, ``progress.json``
+            or ``data.npz`` (the message names the file).
+    """
+    if not (run_dir / "progress.json").exists():
+        raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
+    config = run_dir / "config.json"
+    data = read_run_json(config, _DAMAGED)
+    saved = data.get("dagger_config") if isinstance(data, dict) else None
+    if not isinstance(saved, dict):
+        raise ConfigError(f"--resume: {config}: dagger_config: missing or not an object; {_DAMAGED}")
+    # where the run lies is not part of its config: a run directory may move, or be named another way
+    diff = [name for key in sorted(resolved) if key not in ("rounds", "run_dir")
+            for name in config_diff(saved.get(key), resolved[key], key)]
+    if diff:
+        raise ConfigError(f"--resume: {config} differs from this run's config in {diff}")
+    path = run_dir / "progress.json"
+    progress = read_run_json(path, _DAMAGED)
+    rounds = progress.get("rounds") if isinstance(progress, dict) else None
+    if not isinstance(rounds, list) or not all(
+            isinstance(r, dict) and isinstance(r.get("samples_total"), int) and r["samples_total"] >= 0
+            and isinstance(r.get("wall_s"), (int, float)) and math.isfinite(r["wall_s"]) for r in rounds):
+        raise ConfigError(f"--resume: {path}: rounds: missing, or a round without its samples_total or wall_s; "
+                          f"{_DAMAGED}")
+    try:
+        with np.load(run_dir / "data.npz") as npz:
+            if "episode" not in npz.files:
+                raise ConfigError(f"--resume: {run_dir}/data.npz predates the samples' episode ids; start a new run")
+            obs, actions, episode = npz["obs"], npz["actions"], npz["episode"]
+    except FileNotFoundError:
+        raise ConfigError(f"--resume: {run_dir / 'data.npz'}: no such file; {_DAMAGED}") from None
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as exc:
+        raise ConfigError(f"--resume: {run_dir / 'data.npz'}: not readable ({type(exc).__name__}: {exc}); "
+                          f"{_DAMAGED}") from None
+    # the samples of the finished rounds only: a run stopped after saving a round's data and before its progress
+    # plays that round again
+    recorded = rounds[-1]["samples_total"] if rounds else 0
+    if obs.shape[0] < recorded or actions.shape[0] != obs.shape[0] or episode.shape[0] != obs.shape[0]:
+        raise ConfigError(f"--resume: {run_dir}/data.npz holds {obs.shape[0]} samples, progress.json records "
+                          f"{recorded}: {_DAMAGED}")
+    return progress, [obs[:recorded]], [actions[:recorded]], [episode[:recorded]]
+
+
 def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> dict[str, Any]:
     """Run DAgger rounds and export the student after each.
 
@@ -332,23 +395,14 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
     obs_all: list[np.ndarray] = []
     act_all: list[np.ndarray] = []
     ep_all: list[np.ndarray] = []
+    check_run_root(run_dir)
     if resume:
-        if not (run_dir / "progress.json").exists():
-            raise ConfigError(f"--resume: no finished DAgger round in {run_dir}; start the run without --resume")
-        saved = json.loads((run_dir / "config.json").read_text())["dagger_config"]
-        diff = sorted(k for k in resolved if k != "rounds" and saved.get(k) != resolved[k])
-        if diff:
-            raise ConfigError(f"--resume: {run_dir}/config.json differs from this run's config in {diff}")
-        progress = json.loads((run_dir / "progress.json").read_text())
-        with np.load(run_dir / "data.npz") as data:
-            if "episode" not in data.files:
-                raise ConfigError(f"--resume: {run_dir}/data.npz predates the samples' episode ids; start a new run")
-            obs_all, act_all, ep_all = [data["obs"]], [data["actions"]], [data["episode"]]
+        progress, obs_all, act_all, ep_all = _resumed(run_dir, resolved)
     elif (run_dir / "progress.json").exists():
         raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
                           "--run-root")
     else:
-        run_dir.mkdir(parents=True, exist_ok=True)
+        make_run_dir(run_dir)
         (run_dir / "config.json").write_text(json.dumps(
             {"dagger_config": resolved, "provenance": provenance(),
              "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
@@ -356,7 +410,11 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
     student_path = run_dir / "policy"
     start_round = len(progress["rounds"])
     if start_round:
-        net = load_student(run_dir / "student.pt")
+        try:
+            net = load_student(run_dir / "student.pt")
+        except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
+            raise ConfigError(f"--resume: {run_dir / 'student.pt'}: not a readable student ({type(exc).__name__}); "
+                              f"{_DAMAGED}") from None
     wall_before = sum(r["wall_s"] for r in progress["rounds"])
     for k in range(start_round, cfg.rounds):
         t0 = time.perf_counter()
@@ -418,13 +476,17 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                  "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
-        np.savez(run_dir / "data.npz", obs=obs, actions=actions, episode=episode_ids)
-        save_student(net, run_dir / "student.pt")
+        # each file replaced whole: a run stopped while writing keeps the previous round's
+        with _replacing(run_dir / "data.npz") as f:
+            np.savez(f, obs=obs, actions=actions, episode=episode_ids)
+        with _replacing(run_dir / "student.pt") as f:
+            save_student(net, f)
         exported = student_policy_file(net, env, task=cfg.task, extra=extra)
         save_policy(student_path, exported)
         # each round's student stays: the next round's figures measure it, and the newest is not always the best
         save_policy(run_dir / "rounds" / f"policy-{k}", exported)
-        (run_dir / "progress.json").write_text(json.dumps(progress, indent=2, default=float) + "\n")
+        with _replacing(run_dir / "progress.json") as f:
+            f.write((json.dumps(progress, indent=2, default=float) + "\n").encode())
         if log is not None:
             log(f"round {k}: {len(episodes)} episodes ({len(student_rounds)} driven by the student, "
                 f"{summary['student_falls']} of them fell, {summary['student_takeovers']} taken over), "

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -281,7 +281,7 @@ def student_policy_file(net: StudentNet, env: EnvConfig, *, task: str, extra: di
     return PolicyFile(meta=meta, arrays=arrays)
 
 
-def save_student(net: StudentNet, path: str | Path) -> None:
+def save_student(net: StudentNet, path: str | Path | BinaryIO) -> None:
     """Save a student (weights, normaliser, sizes) to continue fitting it later (`load_student`)."""
     norm = net.obs_normalizer
     hidden = tuple(m.out_features for m in net.mlp if isinstance(m, torch.nn.Linear))[:-1]

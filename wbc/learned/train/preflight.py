@@ -8,7 +8,9 @@ naming the file (and field), so ``wbc train --dry-run`` and `wbc.learned.train.t
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
 import re
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -19,11 +21,18 @@ from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_pol
 from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
 
-__all__ = ["RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "latest_checkpoint", "load_input_policy",
-           "names_a_file"]
+__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "check_run_root", "config_diff",
+           "input_files", "input_path", "latest_checkpoint", "load_input_policy", "make_run_dir", "names_a_file",
+           "read_run_json", "saved_train_config", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
+
+INPUTS = ("teacher", "init_from", "frozen_legs", "student", "expert_data")
+"""TrainConfig fields that name a file the run reads; a resumed run compares them as paths, not as text."""
+
+_POLICY_INPUTS = ("teacher", "init_from", "frozen_legs", "student")
+"""Of `INPUTS`, those that name a policy (either file of its ``.npz``/``.json`` pair, or their common stem)."""
 
 _RUN_FILES = ("config.json", "progress.json", "policy.npz", "policy.json")
 """Files of a run directory that say it already holds a run (besides ``model_<it>.pt`` checkpoints)."""
@@ -37,13 +46,16 @@ class ResumePoint:
         checkpoint: the newest ``model_<it>.pt``.
         done: iterations trained so far (the checkpoint's iteration + 1).
         saved: the ``train_config`` object of the run's ``config.json``.
-        progress: ``progress.json`` (iteration, env_steps, wall_s), zeros when the file is absent.
+        progress: ``progress.json`` (iteration, env_steps, wall_s), zeros when the file is absent; scaled to the
+            checkpoint's iterations when the file counts another iteration (`note` then says so).
+        note: what was reconciled, or None.
     """
 
     checkpoint: Path
     done: int
     saved: dict[str, Any]
     progress: dict[str, Any]
+    note: str | None = None
 
 
 def latest_checkpoint(run_dir: str | Path) -> Path | None:
@@ -51,6 +63,123 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
     found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
              if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
     return max(found)[1] if found else None
+
+
+def unstarted_run(run_dir: str | Path) -> bool:
+    """Whether `run_dir` holds a training run interrupted before its first checkpoint.
+
+    Such a run wrote its ``config.json`` (with a ``train_config``) and nothing it could continue from: no
+    ``model_<it>.pt``, ``progress.json`` or export. It starts afresh, with or without ``--resume``.
+    """
+    run_dir = Path(run_dir)
+    if latest_checkpoint(run_dir) is not None or any((run_dir / n).exists() for n in _RUN_FILES if n != "config.json"):
+        return False
+    try:
+        data = json.loads((run_dir / "config.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(data, dict) and isinstance(data.get("train_config"), dict)
+
+
+def input_path(field: str, path: str | Path) -> Path:
+    """The absolute path an input of a run names: a policy's stem (``X/policy.npz`` and ``X/policy`` are one input)."""
+    p = Path(path)
+    if field in _POLICY_INPUTS and p.suffix in (".npz", ".json"):
+        p = p.with_name(p.name[:-len(p.suffix)])
+    return p.resolve()
+
+
+def config_diff(saved: Any, given: Any, name: str = "") -> list[str]:
+    """The dotted names of the fields in which two resolved configs (JSON objects) differ, e.g. ``env.num_envs``."""
+    if isinstance(saved, dict) and isinstance(given, dict):
+        return [field for key in sorted(set(saved) | set(given))
+                for field in config_diff(saved.get(key), given.get(key), f"{name}.{key}" if name else key)]
+    return [] if saved == given else [name]
+
+
+def saved_train_config(run_dir: str | Path) -> dict[str, Any] | None:
+    """The ``train_config`` object of a run's ``config.json``, or None where there is no readable one.
+
+    A resumed run takes from it the settings its command line leaves out; `check_run_dir` refuses a damaged one.
+    """
+    try:
+        data = json.loads((Path(run_dir) / "config.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    saved = data.get("train_config") if isinstance(data, dict) else None
+    return saved if isinstance(saved, dict) else None
+
+
+def _same_input(field: str, saved: Any, given: Any, recorded: Any) -> bool:
+    if saved is None or given is None:
+        return saved is given
+    if isinstance(recorded, dict) and isinstance(recorded.get("path"), str):  # where it was, resolved at the start
+        return Path(recorded["path"]) == input_path(field, given)
+    return isinstance(saved, str) and input_path(field, saved) == input_path(field, given)
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def input_files(cfg: TrainConfig) -> dict[str, dict[str, Any]]:
+    """The files a run reads, for its ``config.json``: a resumed run refuses inputs that changed since it began.
+
+    Returns:
+        For each `INPUTS` field that names a file: ``{"path": the resolved path (a policy's stem), "sha256":
+        {file: its sha256}}``, over the files that exist (a policy's ``.npz`` and ``.json``).
+    """
+    found: dict[str, dict[str, Any]] = {}
+    for field in INPUTS:
+        value = getattr(cfg, field)
+        if value is None:
+            continue
+        path = input_path(field, value)
+        files = [Path(f"{path}.npz"), Path(f"{path}.json")] if field in _POLICY_INPUTS else [path]
+        found[field] = {"path": str(path), "sha256": {str(f): _sha256(f) for f in files if f.is_file()}}
+    return found
+
+
+def _check_unchanged(inputs: Any, config: Path) -> None:
+    """Refuse a resume whose input files (`input_files`, as ``config.json`` recorded them) changed since it began."""
+    if not isinstance(inputs, dict):
+        return  # a run begun before the inputs were recorded
+    for field, recorded in inputs.items():
+        hashes = recorded.get("sha256") if isinstance(recorded, dict) else None
+        for name, before in (hashes.items() if isinstance(hashes, dict) else ()):
+            path = Path(name)
+            if path.is_file() and _sha256(path) != before:
+                raise ConfigError(f"--resume: {path} ({field}) changed since the run began: {config} inputs.{field} "
+                                  f"records sha256 {str(before)[:16]}..., the file's is now {_sha256(path)[:16]}...; "
+                                  "the checkpoints learnt from the earlier file: restore it, or start a new run under "
+                                  "another --run-root")
+
+
+def check_run_root(run_dir: str | Path) -> None:
+    """Refuse a run directory that cannot be made: a file stands where it, or a folder above it, would be.
+
+    Raises:
+        ConfigError: naming ``--run-root`` and the file in the way.
+    """
+    for path in (Path(run_dir), *Path(run_dir).parents):
+        if path.exists():
+            if not path.is_dir():
+                raise ConfigError(f"--run-root: {path} is a file, not a directory, so the run directory {run_dir} "
+                                  "cannot be made there; give a directory")
+            return
+
+
+def make_run_dir(run_dir: str | Path) -> None:
+    """Make a run directory, or raise a `ConfigError` naming ``--run-root`` and why it cannot be made."""
+    try:
+        Path(run_dir).mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigError(f"--run-root: cannot make the run directory {run_dir} ({exc.strerror or exc}); give a "
+                          "directory this user can write") from None
 
 
 def names_a_file(path: str | Path) -> bool:
@@ -134,7 +263,13 @@ def _check_expert_data(cfg: TrainConfig) -> None:
                               f"DAgger run's data.npz of task {cfg.task!r}")
 
 
-def _read_json(path: Path, what: str) -> Any:
+def read_run_json(path: Path, what: str) -> Any:
+    """A JSON file of a run directory that ``--resume`` reads, or a `ConfigError` naming it and what is wrong.
+
+    Args:
+        path: the file.
+        what: what to do when it is missing (the end of the message).
+    """
     try:
         return json.loads(path.read_text())
     except FileNotFoundError:
@@ -154,13 +289,19 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
         resume: whether the run continues the one in ``cfg.run_dir``.
 
     Returns:
-        Where a resumed run continues from, or None for a new run.
+        Where a resumed run continues from, or None for a run that starts at iteration 0: a new run, or one
+        interrupted before its first checkpoint (`unstarted_run`; its ``config.json`` is then written anew).
 
     Raises:
-        ConfigError: a new run in a directory that holds a run; a resumed run without a checkpoint, with a missing or
-            damaged ``config.json`` or ``progress.json``, or with another config.
+        ConfigError: a run directory that cannot be made (`check_run_root`); a new run in a directory that holds a
+            run; a resumed run without a checkpoint, with a missing or
+            damaged ``config.json`` or ``progress.json``, with another config, or whose input files changed since it
+            began (`input_files`).
     """
     run_dir = Path(cfg.run_dir)
+    check_run_root(run_dir)
+    if unstarted_run(run_dir):
+        return None
     checkpoint = latest_checkpoint(run_dir)
     if not resume:
         held = [n for n in _RUN_FILES if (run_dir / n).exists()] + ([checkpoint.name] if checkpoint else [])
@@ -171,26 +312,43 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
     if checkpoint is None:
         raise ConfigError(f"--resume: no model_<it>.pt checkpoint in {run_dir}; start the run without --resume")
     config = run_dir / "config.json"
-    data = _read_json(config, "the run directory is not a complete run: start a new run under another --run-root")
+    data = read_run_json(config, "the run directory is not a complete run: start a new run under another --run-root")
     saved = data.get("train_config") if isinstance(data, dict) else None
     if not isinstance(saved, dict):
         raise ConfigError(f"--resume: {config}: train_config: missing or not an object; the run directory is damaged: "
                           "start a new run under another --run-root")
     resolved = json.loads(json.dumps(asdict(cfg), default=list))
-    diff = sorted(k for k in resolved if k not in RESUMABLE and saved.get(k) != resolved[k])
+    # where the run lies is not part of its config (a run directory may move), and an input is the file it names
+    diff = [field for key in sorted(resolved) if key not in (*RESUMABLE, "run_dir", *INPUTS)
+            for field in config_diff(saved.get(key), resolved[key], key)]
+    inputs = data.get("inputs")
+    recorded = inputs if isinstance(inputs, dict) else {}
+    diff += [k for k in INPUTS if not _same_input(k, saved.get(k), resolved[k], recorded.get(k))]
     if diff:
-        raise ConfigError(f"--resume: {config} differs from this run's config in {diff}")
+        raise ConfigError(f"--resume: {config} differs from this run's config in {diff}: give the run's own options, "
+                          "or leave them out (a resumed run takes the ones not given from its config.json)")
+    _check_unchanged(inputs, config)
     done = int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1)) + 1
     progress: dict[str, Any] = {"iteration": done - 1, "env_steps": 0, "wall_s": 0.0}
     path = run_dir / "progress.json"
     if path.exists():
-        progress = _read_json(path, "")
+        progress = read_run_json(path, "")
         kinds = {"iteration": int, "env_steps": int, "wall_s": (int, float)}
         if not isinstance(progress, dict):
             raise ConfigError(f"--resume: {path}: not a JSON object; restore it or delete it (the counts restart)")
         for key, kind in kinds.items():
             value = progress.get(key)
-            if not isinstance(value, kind) or isinstance(value, bool) or value < 0:
-                raise ConfigError(f"--resume: {path}: {key}: missing, negative or not a number; restore it or delete "
-                                  "the file (the counts restart)")
+            if not isinstance(value, kind) or isinstance(value, bool) or not math.isfinite(value) or value < 0:
+                raise ConfigError(f"--resume: {path}: {key}: missing, negative or not a finite number; restore it or "
+                                  "delete the file (the counts restart)")
+        counted = progress["iteration"] + 1
+        if counted != done:
+            # its counts are of another checkpoint (a newer one deleted, or an interruption between a checkpoint and
+            # its progress): every iteration steps each env the same number of times, so the steps scale exactly;
+            # the wall time is the same share of it, an estimate
+            progress = {"iteration": done - 1, "env_steps": round(progress["env_steps"] * done / counted),
+                        "wall_s": progress["wall_s"] * done / counted}
+            note = (f"{path} counts {counted} iterations, {checkpoint.name} holds {done}: its env steps and wall time "
+                    f"are scaled to {done} iterations ({progress['env_steps']:,} steps; the wall time an estimate)")
+            return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress, note=note)
     return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress)

@@ -1,6 +1,7 @@
 """`train`: one stage (or baseline) trained with rsl-rl-lib's `OnPolicyRunner` on the batched env.
 
-A run directory holds: ``config.json`` (the resolved `TrainConfig`, seed, package versions, git revision),
+A run directory holds: ``config.json`` (the resolved `TrainConfig`, seed, the sha256 of each file it reads, package
+versions, git revision),
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
 torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
 so far, summed over resumed sessions). ``resume`` continues from the newest checkpoint up to `max_iterations`.
@@ -33,7 +34,15 @@ from wbc.learned.train.distill import student_policy_file
 from wbc.learned.train.export import decoupled_policy, env_meta, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.history_actor import HistoryActor, student_layout
-from wbc.learned.train.preflight import RESUMABLE, check_inputs, check_run_dir, latest_checkpoint, load_input_policy
+from wbc.learned.train.preflight import (
+    RESUMABLE,
+    check_inputs,
+    check_run_dir,
+    input_files,
+    latest_checkpoint,
+    load_input_policy,
+    make_run_dir,
+)
 from wbc.learned.train.rma import train_adaptation
 from wbc.learned.train.train_config import TrainConfig
 from wbc.learned.train.vec_env import RslVecEnv
@@ -188,7 +197,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     if point is not None:
         _check_checkpoint(point.checkpoint)
     progress = point.progress if point is not None else {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
-    run_dir.mkdir(parents=True, exist_ok=True)
+    make_run_dir(run_dir)
     torch.manual_seed(cfg.seed)
     torch.set_num_threads(cfg.torch_threads)
     env = BatchedEnv(cfg.env)
@@ -215,7 +224,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
         else:
             (run_dir / "config.json").write_text(json.dumps(
                 {"train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
-                 "provenance": provenance(),
+                 "inputs": input_files(cfg), "provenance": provenance(),
                  "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
         remaining = cfg.max_iterations - done
         if remaining > 0:
