@@ -138,8 +138,9 @@ class _Watchdog:
             try:
                 with open(self._flag, "w", encoding="utf-8") as f:
                     f.write(f"{self._limit_s!r}\n")
-            finally:  # ended even if the flag cannot be written: a hung trial must not hold its worker
-                self._exit(OVERRUN_EXIT)
+            except OSError:
+                pass  # ended all the same (the parent then sees a worker that died): a hung trial must not hold it
+            self._exit(OVERRUN_EXIT)
 
 
 def _run_limited(task: TrialTask, flag: str) -> TrialRecord:
