@@ -314,7 +314,8 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
         assert said in capsys.readouterr().err
     # the student's networks are options of the run
     capsys.readouterr()
-    assert main([*args, "--student-layers", "128,64", "--memory-layers", "32", "--dry-run"]) == 0
+    fresh = ["--run-root", str(tmp_path / "fresh")]  # the dry run, as the run, refuses the run directory above
+    assert main([*args, *fresh, "--student-layers", "128,64", "--memory-layers", "32", "--dry-run"]) == 0
     fit = json.loads(capsys.readouterr().out)["fit"]
     assert fit["hidden_dims"] == [128, 64] and fit["adaptation_dims"] == [32] and fit["history"] == 25
     for wrong, said in (([*args, "--student-layers", "128,x", "--dry-run"], "separated by commas"),
@@ -444,7 +445,30 @@ def test_a_dagger_resume_refuses_a_damaged_run_directory_in_one_line(dagger_run,
     shutil.copytree(dagger_run, tmp_path / "runs")
     damage(tmp_path / "runs" / "push-dagger-mpc")
     capsys.readouterr()
-    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
-                 "0.1", "--run-root", str(tmp_path / "runs"), "--resume"]) == 2
-    err = capsys.readouterr().err
-    assert said in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    argv = ["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s", "0.1",
+            "--run-root", str(tmp_path / "runs"), "--resume"]
+    for dry_run in ([], ["--dry-run"]):  # the dry run refuses what the run would
+        assert main([*argv, *dry_run]) == 2
+        err = capsys.readouterr().err
+        assert said in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_dagger_dry_run_checks_the_run_directory_and_the_expert_as_the_run_does(dagger_run, tmp_path, capsys):
+    from wbc.cli.main import main
+
+    args = ["train", "--task", "push", "--rounds", "1", "--episodes", "1", "--episode-s", "0.1", "--dry-run"]
+    # a run there, and no --resume
+    assert main([*args, "--teacher", "mpc", "--run-root", str(dagger_run)]) == 2
+    assert "already holds a DAgger run; pass --resume" in capsys.readouterr().err
+    assert main([*args, "--teacher", "mpc", "--run-root", str(dagger_run), "--resume"]) == 0
+    # --resume, and no run there
+    assert main([*args, "--teacher", "mpc", "--run-root", str(tmp_path / "none"), "--resume"]) == 2
+    assert "--resume: no finished DAgger round in" in capsys.readouterr().err
+    # an expert without a ground-truth switch: refused by the run and by its dry run, before anything is written
+    for dry_run in (["--dry-run"], []):
+        argv = [*(a for a in args if a != "--dry-run"), *dry_run, "--teacher", "learned", "--expert-truth",
+                "--run-root", str(tmp_path / "runs")]
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "--expert-truth: the expert 'learned' (LearnedController) has no ground-truth switch" in err
+        assert len(err.strip().splitlines()) == 1 and not (tmp_path / "runs").exists()

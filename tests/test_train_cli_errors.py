@@ -238,3 +238,24 @@ def test_a_run_root_that_is_a_file_is_refused_naming_the_option(tmp_path, capsys
         assert main(["train", "--task", "push", *stage, *teacher, "--run-root", str(root)]) == 2
         err = capsys.readouterr().err
         assert "--run-root: " in err and "is a file, not a directory" in err and "Traceback" not in err
+
+
+def test_the_dry_run_refuses_the_checkpoint_student_and_expert_samples_the_run_would(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)
+    checkpoint = root / "push-stage1" / "model_0.pt"
+    checkpoint.write_bytes(checkpoint.read_bytes()[:1000])  # truncated
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume",
+                 "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert "model_0.pt: not a readable checkpoint" in err and len(err.strip().splitlines()) == 1
+    # a student that does not read its own history (a stage's policy), and expert samples that are no samples
+    fine_tune = ["train", "--task", "push", "--iterations", "1", "--envs", "1", "--run-root", str(tmp_path / "ft")]
+    assert main([*fine_tune, "--fine-tune", str(stage1_run / "push-stage1" / "policy"), "--dry-run"]) == 2
+    assert "latent z comes from its observation history alone" in capsys.readouterr().err
+    junk = tmp_path / "data.npz"
+    junk.write_bytes(b"junk")
+    assert main([*fine_tune, "--fine-tune", "shipped", "--expert-data", str(junk), "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert f"expert samples {junk}: cannot be read" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "ft").exists()

@@ -678,7 +678,7 @@ def _train_not_a_teacher(name: str) -> ConfigError:
 
 def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | None) -> int:
     """Check a stage's or fine-tune's run (--dry-run: print its configuration), then train it."""
-    from wbc.learned.train.preflight import check_inputs, check_run_dir, unstarted_run
+    from wbc.learned.train.preflight import check_run, check_run_dir, unstarted_run
 
     if unstarted_run(cfg.run_dir):
         print(f"wbc: note: {cfg.run_dir} holds a run interrupted before its first checkpoint (config.json, no "
@@ -687,13 +687,14 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
     if point is not None and point.note:
         print(f"wbc: note: --resume: {point.note}", file=sys.stderr)
     if args.dry_run:
-        try:
-            check_inputs(cfg)
-        except ConfigError as exc:
-            if args.teacher is not None or args.fine_tune is not None or args.expert_data is not None:
-                raise
+        given = args.teacher is not None or args.fine_tune is not None or args.expert_data is not None
+
+        def default_input_missing(exc: ConfigError) -> None:
             # a default input (the previous stage's export) may be trained after this dry run
             print(f"wbc: note: {exc}", file=sys.stderr)
+
+        # every check the run makes before it trains (the checkpoint's too)
+        check_run(cfg, resume=args.resume, default_input_missing=None if given else default_input_missing)
         _print_resume_note(args)
         printers.print_json(dataclasses.asdict(cfg))
         return 0
@@ -752,7 +753,7 @@ def _distil(args: argparse.Namespace) -> int:
                               "--average-labels, --expert-follows, --takeover, --expert-truth, --seed, --run-root and "
                               "--resume")
     # torch loads only when a run really trains
-    from wbc.tools.dagger import DaggerConfig, dagger_expert, run_dagger
+    from wbc.tools.dagger import DaggerConfig, check_dagger_run, run_dagger
 
     fields = {k: v for k, v in (("rounds", args.rounds), ("episodes", args.episodes),
                                 ("episode_s", args.episode_s), ("seed", args.seed),
@@ -769,7 +770,7 @@ def _distil(args: argparse.Namespace) -> int:
     cfg = DaggerConfig(task=args.task, expert=args.teacher,
                        run_dir=str(Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"), **fields)
     if args.dry_run:
-        dagger_expert(cfg)  # what the run would refuse of its expert
+        check_dagger_run(cfg, resume=args.resume)  # every check the run makes before its first round
         printers.print_json(dataclasses.asdict(cfg))
         return 0
     result = run_dagger(cfg, resume=args.resume, log=print)

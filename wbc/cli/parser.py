@@ -639,7 +639,9 @@ def _add_train_parser(sub: _Commands) -> None:
                          "estimating it (the student never does)")
     tr.add_argument("--run-root", default="runs/train",
                     help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>]")
-    tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")
+    tr.add_argument("--dry-run", action="store_true",
+                    help="make every check the run makes before it trains (the run directory, the files it reads, "
+                         "the checkpoint it resumes from), print the resolved configuration and stop")
     tr.set_defaults(handler="train")
 
 

@@ -2,8 +2,10 @@
 
 `check_inputs` loads the policy files a `TrainConfig` names (teacher, init_from, frozen_legs, student) and the expert
 samples of a fine-tune; `check_run_dir` refuses to start a run over another one and reads what a resumed run
-continues from (``config.json``, ``progress.json``, the newest ``model_<it>.pt``'s name). Both raise a `ConfigError`
-naming the file (and field), so ``wbc train --dry-run`` and `wbc.learned.train.train.train` check the same things.
+continues from (``config.json``, ``progress.json``, the newest ``model_<it>.pt``'s name); `check_checkpoint` loads
+that checkpoint (with torch, the one check here that needs it). `check_run` makes them all, in the order a run does:
+``wbc train --dry-run`` and `wbc.learned.train.train.train` call it, so a dry run refuses what the run would, naming
+the file (and field).
 """
 
 from __future__ import annotations
@@ -12,18 +14,27 @@ import hashlib
 import json
 import math
 import re
+import zipfile
+import zlib
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from wbc.errors import ConfigError
+import numpy as np
+
+from wbc.errors import ConfigError, NetworkMismatchError
+from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_policy
 from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
+from wbc.optional import require
+from wbc.robots.registry import get_robot
 
-__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "check_run_root", "config_diff",
-           "input_files", "input_path", "latest_checkpoint", "load_input_policy", "make_run_dir", "names_a_file",
-           "read_run_json", "saved_train_config", "unstarted_run"]
+__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_checkpoint", "check_inputs", "check_run", "check_run_dir",
+           "check_run_root", "config_diff", "env_meta", "input_files", "input_path", "latest_checkpoint",
+           "load_input_policy", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
+           "saved_train_config", "student_layout", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -223,10 +234,12 @@ def check_inputs(cfg: TrainConfig) -> PolicyFile | None:
         if cfg.extrinsics_dim != 0 or cfg.frozen_legs is not None or cfg.init_from is not None:
             raise ConfigError("fine-tuning a student: the actor is the student (extrinsics_dim=0, no frozen_legs, "
                               "no init_from)")
+        student_layout(student)  # one that reads its own history
+        _check_student_env(student, cfg)
     if cfg.expert_data is not None:
         if student is None or cfg.bc is None:
             raise ConfigError("expert_data is the BC term's target when fine-tuning a student: set student and bc too")
-        _check_expert_data(cfg)
+        _check_expert_data(cfg, student)
         return student
     if cfg.bc is None:
         return student
@@ -245,8 +258,84 @@ def check_inputs(cfg: TrainConfig) -> PolicyFile | None:
     return student
 
 
-def _check_expert_data(cfg: TrainConfig) -> None:
-    """The expert's samples must come from the fine-tune's task (and so its robot), as its DAgger run's config says."""
+def student_layout(policy: PolicyFile) -> tuple[int, int, int]:
+    """(D, H, z): observation size, window length and latent size of a student that reads its own history.
+
+    Raises:
+        NetworkMismatchError: the file's latent does not come from its observation history alone (it has an
+            encoder of privileged observations, or no adaptation module).
+    """
+    meta = policy.meta
+    extr, adapt = meta.get("extrinsics"), meta.get("adaptation")
+    if extr is None or adapt is None or policy.layers("encoder") or extr.get("privileged_parts"):
+        raise NetworkMismatchError(
+            "fine-tuning takes a student whose latent z comes from its observation history alone (a DAgger student, "
+            "`wbc train --teacher mpc`, with --history > 0); this file's z is "
+            + ("absent" if extr is None else "read from privileged observations"))
+    d = int(policy.arrays["obs_mean"].shape[0])
+    return d, int(adapt["history"]), int(extr["dim"])
+
+
+def env_meta(env: EnvConfig, joints: np.ndarray | None = None) -> dict[str, Any]:
+    """What a policy file says of the env it was trained in: the numbers its inputs and outputs mean.
+
+    Robot, arm mode, observation scales, action scale and clip, joint defaults and gains (of `joints`, default all),
+    policy period.
+    """
+    desc = get_robot(env.robot, env.arm_mode)
+    idx = np.arange(desc.num_joints) if joints is None else np.asarray(joints, dtype=int)
+    kp, kd = env.gains(desc.num_joints)
+    return {
+        "robot": env.robot, "arm_mode": env.arm_mode,
+        "obs_scales": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(env.obs_scales).items()},
+        "action_scale": env.action_scale, "clip_actions": env.clip_actions,
+        "default_q": desc.nominal_q[idx].tolist(), "kp": kp[idx].tolist(), "kd": kd[idx].tolist(),
+        "policy_dt": env.policy_dt,
+    }
+
+
+def _check_student_env(student: PolicyFile, cfg: TrainConfig) -> None:
+    """The env must give the student the observations and motor law it was made for: the same numbers mean the same."""
+    meta, given = student.meta, env_meta(cfg.env)
+    for key, value in given.items():
+        exact = key in ("robot", "arm_mode", "obs_scales")
+        if (meta[key] != value) if exact else not np.allclose(meta[key], value):
+            raise ConfigError(f"student {cfg.student}: its {key} is {meta[key]}, the fine-tune's env gives {value} "
+                              f"(EnvConfig); a student fine-tuned in another env would read other numbers than it was "
+                              "trained on: fine-tune it on its own task's env")
+
+
+def read_expert_samples(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A DAgger run's ``data.npz``: (obs (N, D), actions (N, A), episode (N,)), N >= 1.
+
+    Raises:
+        ConfigError: the file is missing or unreadable, lacks one of the arrays, or their shapes disagree.
+    """
+    try:
+        data = np.load(path)
+        if not isinstance(data, np.lib.npyio.NpzFile):  # a single array (.npy)
+            raise ValueError("a single array, not an archive of arrays")
+        with data:
+            arrays = {k: data[k] for k in ("obs", "actions", "episode") if k in data.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+        raise ConfigError(f"expert samples {path}: cannot be read ({exc}); give a DAgger run's data.npz") from None
+    missing = [k for k in ("obs", "actions", "episode") if k not in arrays]
+    if missing:
+        raise ConfigError(f"expert samples {path}: no {', '.join(missing)} array; give a DAgger run's data.npz "
+                          "(obs, actions, episode)")
+    obs, actions, episode = arrays["obs"], arrays["actions"], arrays["episode"]
+    n = obs.shape[0] if obs.ndim else 0
+    if obs.ndim != 2 or actions.ndim != 2 or actions.shape[0] != n or episode.shape != (n,) or n == 0:
+        raise ConfigError(f"expert samples {path}: obs {obs.shape}, actions {actions.shape} and episode "
+                          f"{episode.shape} do not describe the same N >= 1 samples")
+    return obs, actions, episode
+
+
+def _check_expert_data(cfg: TrainConfig, student: PolicyFile) -> None:
+    """The expert's samples: a DAgger run's of the fine-tune's task (and robot), readable, for the student's actions.
+
+    Their task is the one the DAgger run's ``config.json`` beside them names, when there is one.
+    """
     path = Path(cfg.expert_data)
     if not path.is_file():
         raise ConfigError(f"expert samples {path}: no such file; give a DAgger run's data.npz")
@@ -261,6 +350,13 @@ def _check_expert_data(cfg: TrainConfig) -> None:
             raise ConfigError(f"expert samples {path}: collected on task {task!r} ({robot}; {config} "
                               f"dagger_config.task), the fine-tune is of task {cfg.task!r} ({cfg.env.robot}): give a "
                               f"DAgger run's data.npz of task {cfg.task!r}")
+    obs, actions, _ = read_expert_samples(path)
+    # the actor is the student: its inputs and outputs are the student's
+    for what, have, actor in (("actions", actions.shape[1], student.num_actions),
+                              ("observations", obs.shape[1], int(student.arrays["obs_mean"].shape[0]))):
+        if have != actor:
+            raise ConfigError(f"expert samples {path}: their {what} have {have} entries, the actor has {actor} (the "
+                              f"student {cfg.student}); give the data of a DAgger run on this robot")
 
 
 def read_run_json(path: Path, what: str) -> Any:
@@ -352,3 +448,54 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
                     f"are scaled to {done} iterations ({progress['env_steps']:,} steps; the wall time an estimate)")
             return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress, note=note)
     return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress)
+
+
+def check_checkpoint(path: Path) -> None:
+    """Refuse a checkpoint rsl-rl cannot load (a truncated one, another program's), before the env is built.
+
+    It needs torch (the ``train`` extra), as the run does.
+
+    Raises:
+        ConfigError: naming the file, and what to do.
+    """
+    torch = require("torch")
+    try:
+        saved = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
+        raise ConfigError(f"--resume: {path}: not a readable checkpoint ({type(exc).__name__}: "
+                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); delete it to resume from the "
+                          "one before, or start a new run under another --run-root") from None
+    if not isinstance(saved, dict) or not isinstance(saved.get("iter"), int):
+        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: delete it to resume from the "
+                          "one before, or start a new run under another --run-root")
+
+
+def check_run(cfg: TrainConfig, *, resume: bool,
+              default_input_missing: Callable[[ConfigError], None] | None = None) -> ResumePoint | None:
+    """Every check a run makes before it builds its env: its run directory, its input files, its checkpoint.
+
+    `wbc.learned.train.train.train` calls it before it trains, ``wbc train --dry-run`` instead of training.
+
+    Args:
+        cfg: the run.
+        resume: whether the run continues the one in ``cfg.run_dir``.
+        default_input_missing: called with the refusal of an input file instead of raising it, for a dry run whose
+            inputs are all the defaults (the previous stage's export, which may be trained after the dry run).
+
+    Returns:
+        Where a resumed run continues from (`check_run_dir`), or None.
+
+    Raises:
+        ConfigError: what `check_run_dir`, `check_inputs` and `check_checkpoint` refuse.
+        NetworkMismatchError: a student that does not read its own history (`student_layout`).
+    """
+    point = check_run_dir(cfg, resume=resume)
+    try:
+        check_inputs(cfg)
+    except ConfigError as exc:
+        if default_input_missing is None:
+            raise
+        default_input_missing(exc)
+    if point is not None:
+        check_checkpoint(point.checkpoint)
+    return point
