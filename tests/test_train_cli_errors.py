@@ -257,5 +257,25 @@ def test_the_dry_run_refuses_the_checkpoint_student_and_expert_samples_the_run_w
     junk.write_bytes(b"junk")
     assert main([*fine_tune, "--fine-tune", "shipped", "--expert-data", str(junk), "--dry-run"]) == 2
     err = capsys.readouterr().err
-    assert f"expert samples {junk}: cannot be read" in err and len(err.strip().splitlines()) == 1
+    assert f"--expert-data {junk}: cannot be read" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "ft").exists()
+
+
+def test_a_refused_input_file_is_named_by_the_option_that_gave_it(stage1_run, tmp_path, capsys):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"junk")
+    args = ["train", "--task", "push", "--run-root", str(tmp_path / "runs"), "--dry-run"]
+    assert main([*args, "--stage", "2", "--teacher", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"--teacher {bad}: not usable" in err and "Train the previous stage first" not in err
+    stage1 = stage1_run / "push-stage1" / "policy"  # drives the arm 'none'
+    assert main([*args, "--stage", "3", "--teacher", str(stage1)]) == 2
+    assert f"--teacher {stage1} drives a1-wx200 with arm 'none'; stage 3 needs" in capsys.readouterr().err
+    # the student is the fine-tune's option, not a teacher
+    for student in (bad, stage1):
+        assert main([*args, "--fine-tune", str(student)]) == 2
+        err = capsys.readouterr().err
+        assert f"--fine-tune {student}: " in err and "error: teacher" not in err and len(err.strip().splitlines()) == 1
+    # a default input is still named as the previous stage's, which may be trained after the dry run
+    assert main([*args, "--stage", "2"]) == 0
+    assert "learns from the previous stage's policy" in capsys.readouterr().err

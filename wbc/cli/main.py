@@ -608,7 +608,11 @@ def _train(args: argparse.Namespace) -> int:
                               "finetune-pi2, curriculum after stage 1 and decoupled)")
         if not names_a_file(args.teacher):
             raise _train_not_a_teacher(args.teacher)
-    return _train_run(args, cfg, stage=args.stage, baseline=args.variant or args.baseline)
+    # the inputs --teacher set (a stage's teacher, the policy a baseline starts from, the frozen legs): a refusal of
+    # one names the option, not the previous stage that is its default
+    options = {field: "--teacher" for field in ("teacher", "init_from", "frozen_legs")
+               if args.teacher is not None and getattr(cfg, field) == args.teacher}
+    return _train_run(args, cfg, stage=args.stage, baseline=args.variant or args.baseline, options=options)
 
 
 def _inherit_saved(args: argparse.Namespace, run_dir: str, env: dict[str, Any], overrides: dict[str, Any], *,
@@ -676,8 +680,11 @@ def _train_not_a_teacher(name: str) -> ConfigError:
                        f"policy.npz) or a controller to distil: {', '.join(CONTROLLERS)}")
 
 
-def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | None) -> int:
-    """Check a stage's or fine-tune's run (--dry-run: print its configuration), then train it."""
+def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | None, options: dict[str, str]) -> int:
+    """Check a stage's or fine-tune's run (--dry-run: print its configuration), then train it.
+
+    `options` maps each input file's `TrainConfig` field to the option that set it, named when it is refused.
+    """
     from wbc.learned.train.preflight import check_run, check_run_dir, unstarted_run
 
     if unstarted_run(cfg.run_dir):
@@ -694,14 +701,15 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
             print(f"wbc: note: {exc}", file=sys.stderr)
 
         # every check the run makes before it trains (the checkpoint's too)
-        check_run(cfg, resume=args.resume, default_input_missing=None if given else default_input_missing)
+        check_run(cfg, resume=args.resume, options=options,
+                  default_input_missing=None if given else default_input_missing)
         _print_resume_note(args)
         printers.print_json(dataclasses.asdict(cfg))
         return 0
     # torch and rsl-rl-lib (the train extra) load only when a run really trains
     from wbc.learned.train.train import train
 
-    result = train(cfg, resume=args.resume)
+    result = train(cfg, resume=args.resume, options=options)
     _print_resume_note(args)
     if result.get("trained", 1) == 0:
         print(f"{result['run_dir']} already holds {result['iterations']} iterations, no fewer than --iterations "
@@ -739,7 +747,9 @@ def _fine_tune(args: argparse.Namespace) -> int:
     if args.resume and _inherit_saved(args, cfg.run_dir, env, overrides, adapts=False):
         cfg = fine_tune_config(args.task, student, run_root=args.run_root, expert_data=args.expert_data,
                                env_overrides=env, **overrides)
-    return _train_run(args, cfg, stage=3, baseline="fine-tune")
+    # the student is the BC term's teacher too, unless the expert's samples are
+    options = {"student": "--fine-tune", "teacher": "--fine-tune", "expert_data": "--expert-data"}
+    return _train_run(args, cfg, stage=3, baseline="fine-tune", options=options)
 
 
 def _distil(args: argparse.Namespace) -> int:

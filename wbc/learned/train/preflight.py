@@ -16,7 +16,7 @@ import math
 import re
 import zipfile
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -199,16 +199,32 @@ def names_a_file(path: str | Path) -> bool:
     return p.is_file() or Path(f"{p}.npz").is_file() or Path(f"{p}.json").is_file()
 
 
-def load_input_policy(path: str | Path, role: str) -> PolicyFile:
-    """Load a policy file a run reads, or raise a `ConfigError` naming its role and what is wrong."""
+def load_input_policy(path: str | Path, role: str, option: str | None = None) -> PolicyFile:
+    """Load a policy file a run reads, or raise a `ConfigError` saying what is wrong.
+
+    Args:
+        path: the file (either of its ``.npz``/``.json`` pair, or their stem).
+        role: what it is to the run, for a default input (the previous stage's export): the message then says to
+            train that stage first.
+        option: the option that named the file (``--teacher``, ``--fine-tune``), named in the message instead.
+    """
     try:
         return load_policy(path)
     except PolicyFileError as exc:
+        if option is not None:
+            raise ConfigError(f"{option} {path}: not usable: {exc}; give a policy file that a run exported (its "
+                              "policy.npz, beside its policy.json)") from None
         raise ConfigError(f"{role} is not usable: {exc}. Train the previous stage first, or pass its path") from None
 
 
-def check_inputs(cfg: TrainConfig) -> PolicyFile | None:
+def check_inputs(cfg: TrainConfig, options: Mapping[str, str] | None = None) -> PolicyFile | None:
     """Check the files `cfg` reads: they load, and they drive the robot and arm the run needs.
+
+    Args:
+        cfg: the run.
+        options: for each `INPUTS` field that an option of ``wbc train`` set, that option (``{"teacher":
+            "--teacher"}``, ``{"student": "--fine-tune", ...}``): a refusal names it, not the field, and the others
+            are defaults (the previous stage's export).
 
     Returns:
         The student (`TrainConfig.student`), loaded, or None.
@@ -216,44 +232,59 @@ def check_inputs(cfg: TrainConfig) -> PolicyFile | None:
     Raises:
         ConfigError: a file is missing or unusable, drives another robot or arm, or the expert samples of a fine-tune
             come from another task or robot.
+        NetworkMismatchError: a student that does not read its own history (`student_layout`).
     """
+    options = options or {}
+
+    def named(field: str, default: str) -> str:
+        """How a refusal names an input: by the option that set it, else as `default` says."""
+        return f"{options[field]} {getattr(cfg, field)}" if field in options else default
+
     if cfg.init_from is not None:
-        load_input_policy(cfg.init_from, "the policy this run starts from (init_from)")
+        load_input_policy(cfg.init_from, "the policy this run starts from (init_from)", options.get("init_from"))
     if cfg.frozen_legs is not None:
         if cfg.extrinsics_dim > 0:
             raise ConfigError("with frozen_legs the actor observes the robot's measurements only: set "
                               "extrinsics_dim=0 (RMA phase 2 is not built for a part of a composite policy)")
-        legs = load_input_policy(cfg.frozen_legs, "the frozen leg policy (frozen_legs)")
+        legs = load_input_policy(cfg.frozen_legs, "the frozen leg policy (frozen_legs)", options.get("frozen_legs"))
         if legs.meta["robot"] != cfg.env.robot or legs.meta["arm_mode"] != cfg.env.teacher_arm_mode:
-            raise ConfigError(f"frozen leg policy {cfg.frozen_legs} drives {legs.meta['robot']} with arm "
-                              f"{legs.meta['arm_mode']!r}; this run needs {cfg.env.robot} with arm "
-                              f"{cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
+            raise ConfigError(f"{named('frozen_legs', f'frozen leg policy {cfg.frozen_legs}')} drives "
+                              f"{legs.meta['robot']} with arm {legs.meta['arm_mode']!r}; this run needs "
+                              f"{cfg.env.robot} with arm {cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
     student = None
     if cfg.student is not None:
-        student = load_input_policy(cfg.student, "the student to fine-tune (student)")
+        student = load_input_policy(cfg.student, "the student to fine-tune (student)", options.get("student"))
         if cfg.extrinsics_dim != 0 or cfg.frozen_legs is not None or cfg.init_from is not None:
             raise ConfigError("fine-tuning a student: the actor is the student (extrinsics_dim=0, no frozen_legs, "
                               "no init_from)")
-        student_layout(student)  # one that reads its own history
-        _check_student_env(student, cfg)
+        try:
+            student_layout(student)  # one that reads its own history
+        except NetworkMismatchError as exc:
+            if "student" not in options:
+                raise
+            raise NetworkMismatchError(f"{named('student', '')}: {exc}") from None
+        _check_student_env(student, cfg, named("student", f"student {cfg.student}"))
     if cfg.expert_data is not None:
         if student is None or cfg.bc is None:
             raise ConfigError("expert_data is the BC term's target when fine-tuning a student: set student and bc too")
-        _check_expert_data(cfg, student)
+        _check_expert_data(cfg, student, named("expert_data", f"expert samples {cfg.expert_data}"))
         return student
     if cfg.bc is None:
         return student
     if cfg.teacher is None:
         raise ConfigError("TrainConfig.bc is set but no teacher policy file is given")
-    try:
-        teacher = load_policy(cfg.teacher)
-    except PolicyFileError as exc:
-        raise ConfigError(f"stage {cfg.stage} learns from the previous stage's policy, which is not usable: {exc}. "
-                          "Train the previous stage first, or pass --teacher PATH") from None
+    if "teacher" in options:
+        teacher = load_input_policy(cfg.teacher, "the teacher", options["teacher"])
+    else:
+        try:
+            teacher = load_policy(cfg.teacher)
+        except PolicyFileError as exc:
+            raise ConfigError(f"stage {cfg.stage} learns from the previous stage's policy, which is not usable: "
+                              f"{exc}. Train the previous stage first, or pass --teacher PATH") from None
     arm = cfg.env.arm_mode if cfg.student is not None else cfg.env.teacher_arm_mode  # a student teaches itself
     if teacher.meta["robot"] != cfg.env.robot or teacher.meta["arm_mode"] != arm:
         what = "the fine-tune" if cfg.student is not None else f"stage {cfg.stage}"
-        raise ConfigError(f"teacher {cfg.teacher} drives {teacher.meta['robot']} with arm "
+        raise ConfigError(f"{named('teacher', f'teacher {cfg.teacher}')} drives {teacher.meta['robot']} with arm "
                           f"{teacher.meta['arm_mode']!r}; {what} needs {cfg.env.robot} with arm {arm!r}")
     return student
 
@@ -294,23 +325,29 @@ def env_meta(env: EnvConfig, joints: np.ndarray | None = None) -> dict[str, Any]
     }
 
 
-def _check_student_env(student: PolicyFile, cfg: TrainConfig) -> None:
-    """The env must give the student the observations and motor law it was made for: the same numbers mean the same."""
+def _check_student_env(student: PolicyFile, cfg: TrainConfig, name: str) -> None:
+    """The env must give the student the observations and motor law it was made for: the same numbers mean the same.
+
+    `name` is how a refusal names the student (``--fine-tune PATH``).
+    """
     meta, given = student.meta, env_meta(cfg.env)
     for key, value in given.items():
         exact = key in ("robot", "arm_mode", "obs_scales")
         if (meta[key] != value) if exact else not np.allclose(meta[key], value):
-            raise ConfigError(f"student {cfg.student}: its {key} is {meta[key]}, the fine-tune's env gives {value} "
+            raise ConfigError(f"{name}: its {key} is {meta[key]}, the fine-tune's env gives {value} "
                               f"(EnvConfig); a student fine-tuned in another env would read other numbers than it was "
                               "trained on: fine-tune it on its own task's env")
 
 
-def read_expert_samples(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def read_expert_samples(path: str | Path, name: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A DAgger run's ``data.npz``: (obs (N, D), actions (N, A), episode (N,)), N >= 1.
+
+    `name` is how a refusal names the file (default ``expert samples PATH``; ``--expert-data PATH`` for the option).
 
     Raises:
         ConfigError: the file is missing or unreadable, lacks one of the arrays, or their shapes disagree.
     """
+    name = name or f"expert samples {path}"
     try:
         data = np.load(path)
         if not isinstance(data, np.lib.npyio.NpzFile):  # a single array (.npy)
@@ -318,27 +355,28 @@ def read_expert_samples(path: str | Path) -> tuple[np.ndarray, np.ndarray, np.nd
         with data:
             arrays = {k: data[k] for k in ("obs", "actions", "episode") if k in data.files}
     except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
-        raise ConfigError(f"expert samples {path}: cannot be read ({exc}); give a DAgger run's data.npz") from None
+        raise ConfigError(f"{name}: cannot be read ({exc}); give a DAgger run's data.npz") from None
     missing = [k for k in ("obs", "actions", "episode") if k not in arrays]
     if missing:
-        raise ConfigError(f"expert samples {path}: no {', '.join(missing)} array; give a DAgger run's data.npz "
+        raise ConfigError(f"{name}: no {', '.join(missing)} array; give a DAgger run's data.npz "
                           "(obs, actions, episode)")
     obs, actions, episode = arrays["obs"], arrays["actions"], arrays["episode"]
     n = obs.shape[0] if obs.ndim else 0
     if obs.ndim != 2 or actions.ndim != 2 or actions.shape[0] != n or episode.shape != (n,) or n == 0:
-        raise ConfigError(f"expert samples {path}: obs {obs.shape}, actions {actions.shape} and episode "
+        raise ConfigError(f"{name}: obs {obs.shape}, actions {actions.shape} and episode "
                           f"{episode.shape} do not describe the same N >= 1 samples")
     return obs, actions, episode
 
 
-def _check_expert_data(cfg: TrainConfig, student: PolicyFile) -> None:
+def _check_expert_data(cfg: TrainConfig, student: PolicyFile, name: str) -> None:
     """The expert's samples: a DAgger run's of the fine-tune's task (and robot), readable, for the student's actions.
 
-    Their task is the one the DAgger run's ``config.json`` beside them names, when there is one.
+    Their task is the one the DAgger run's ``config.json`` beside them names, when there is one. `name` is how a
+    refusal names the file (``--expert-data PATH``).
     """
     path = Path(cfg.expert_data)
     if not path.is_file():
-        raise ConfigError(f"expert samples {path}: no such file; give a DAgger run's data.npz")
+        raise ConfigError(f"{name}: no such file; give a DAgger run's data.npz")
     config = path.parent / "config.json"
     if config.is_file():  # a DAgger run's directory: its config names the task the samples were collected on
         try:
@@ -347,15 +385,15 @@ def _check_expert_data(cfg: TrainConfig, student: PolicyFile) -> None:
             task = None
         if isinstance(task, str) and task != cfg.task:
             robot = TASKS[task].robot if task in TASKS else "an unknown robot"
-            raise ConfigError(f"expert samples {path}: collected on task {task!r} ({robot}; {config} "
+            raise ConfigError(f"{name}: collected on task {task!r} ({robot}; {config} "
                               f"dagger_config.task), the fine-tune is of task {cfg.task!r} ({cfg.env.robot}): give a "
                               f"DAgger run's data.npz of task {cfg.task!r}")
-    obs, actions, _ = read_expert_samples(path)
+    obs, actions, _ = read_expert_samples(path, name)
     # the actor is the student: its inputs and outputs are the student's
     for what, have, actor in (("actions", actions.shape[1], student.num_actions),
                               ("observations", obs.shape[1], int(student.arrays["obs_mean"].shape[0]))):
         if have != actor:
-            raise ConfigError(f"expert samples {path}: their {what} have {have} entries, the actor has {actor} (the "
+            raise ConfigError(f"{name}: their {what} have {have} entries, the actor has {actor} (the "
                               f"student {cfg.student}); give the data of a DAgger run on this robot")
 
 
@@ -470,7 +508,7 @@ def check_checkpoint(path: Path) -> None:
                           "one before, or start a new run under another --run-root")
 
 
-def check_run(cfg: TrainConfig, *, resume: bool,
+def check_run(cfg: TrainConfig, *, resume: bool, options: Mapping[str, str] | None = None,
               default_input_missing: Callable[[ConfigError], None] | None = None) -> ResumePoint | None:
     """Every check a run makes before it builds its env: its run directory, its input files, its checkpoint.
 
@@ -479,6 +517,7 @@ def check_run(cfg: TrainConfig, *, resume: bool,
     Args:
         cfg: the run.
         resume: whether the run continues the one in ``cfg.run_dir``.
+        options: the options that set its input files, named in a refusal (`check_inputs`).
         default_input_missing: called with the refusal of an input file instead of raising it, for a dry run whose
             inputs are all the defaults (the previous stage's export, which may be trained after the dry run).
 
@@ -491,7 +530,7 @@ def check_run(cfg: TrainConfig, *, resume: bool,
     """
     point = check_run_dir(cfg, resume=resume)
     try:
-        check_inputs(cfg)
+        check_inputs(cfg, options)
     except ConfigError as exc:
         if default_input_missing is None:
             raise

@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -138,13 +139,15 @@ class _Runner(_runners.OnPolicyRunner):
         (Path(cfg.run_dir) / "progress.json").write_text(json.dumps(progress, indent=2) + "\n")
 
 
-def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
+def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None) -> dict[str, Any]:
     """Train (or resume) one run.
 
     Args:
         cfg: the run.
         resume: continue from the newest checkpoint in ``cfg.run_dir``; its saved config must match `cfg` except in
             `_RESUMABLE` fields (train longer with a larger max_iterations).
+        options: the options of ``wbc train`` that set its input files (``{"teacher": "--teacher"}``), named when
+            one is refused (`wbc.learned.train.preflight.check_inputs`).
 
     Returns:
         ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
@@ -159,7 +162,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     """
     run_dir = Path(cfg.run_dir)
     resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
-    point = check_run(cfg, resume=resume)  # the checks `wbc train --dry-run` makes
+    point = check_run(cfg, resume=resume, options=options)  # the checks `wbc train --dry-run` makes
     progress = point.progress if point is not None else {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
     make_run_dir(run_dir)
     torch.manual_seed(cfg.seed)
