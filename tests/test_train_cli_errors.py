@@ -279,3 +279,18 @@ def test_a_refused_input_file_is_named_by_the_option_that_gave_it(stage1_run, tm
     # a default input is still named as the previous stage's, which may be trained after the dry run
     assert main([*args, "--stage", "2"]) == 0
     assert "learns from the previous stage's policy" in capsys.readouterr().err
+
+
+def test_a_policy_exported_without_its_adaptation_module_says_it_is_not_playable(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)  # made with --rma-iterations 0
+    capsys.readouterr()
+    argv = ["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "observes extrinsics (RMA's z) and has no adaptation module" in err and "not playable" in err
+    assert "--resume --rma-iterations K" in err
+    # as the note says: the module is added, and the note is gone
+    assert main(["train", "--task", "push", "--stage", "1", "--iterations", "1", "--envs", "1", "--rma-iterations", "1",
+                 "--run-root", str(root), "--resume"]) == 0
+    assert "not playable" not in capsys.readouterr().err
+    assert (root / "push-stage1" / "rma.json").is_file()

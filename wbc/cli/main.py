@@ -716,6 +716,11 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
               f"{cfg.max_iterations}: nothing new trained; its newest checkpoint is exported as it is (pass a larger "
               "--iterations to train on)")
     printers.print_trained(result, task=args.task, stage=stage, baseline=baseline)
+    if cfg.extrinsics_dim > 0 and cfg.rma.iterations == 0:
+        print(f"wbc: note: --rma-iterations 0: {result['policy']} observes extrinsics (RMA's z) and has no adaptation "
+              "module to estimate them, so it is not playable (the arena and check-controller refuse it, and no "
+              "replay was recorded); the same command with --resume --rma-iterations K (K > 0, default 200) adds the "
+              "module without training PPO further", file=sys.stderr)
     return 0
 
 
