@@ -472,3 +472,19 @@ def test_the_dagger_dry_run_checks_the_run_directory_and_the_expert_as_the_run_d
         err = capsys.readouterr().err
         assert "--expert-truth: the expert 'learned' (LearnedController) has no ground-truth switch" in err
         assert len(err.strip().splitlines()) == 1 and not (tmp_path / "runs").exists()
+
+
+def test_an_interrupted_dagger_run_says_which_rounds_it_keeps(dagger_run, tmp_path, capsys, monkeypatch):
+    import wbc.tools.dagger as dagger
+    from wbc.cli.main import main
+
+    def interrupted(cfg, **_):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(dagger, "run_dagger", interrupted)
+    args = ["train", "--task", "push", "--teacher", "mpc", "--rounds", "2", "--episodes", "1", "--episode-s", "0.1"]
+    assert main([*args, "--run-root", str(dagger_run), "--resume"]) == 130
+    err = capsys.readouterr().err
+    assert "keeps 1 finished DAgger round" in err and "the same command with --resume continues after them" in err
+    assert main([*args, "--run-root", str(tmp_path / "new")]) == 130
+    assert "holds no finished DAgger round: the same command, without --resume, starts" in capsys.readouterr().err

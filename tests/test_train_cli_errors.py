@@ -294,3 +294,21 @@ def test_a_policy_exported_without_its_adaptation_module_says_it_is_not_playable
                  "--run-root", str(root), "--resume"]) == 0
     assert "not playable" not in capsys.readouterr().err
     assert (root / "push-stage1" / "rma.json").is_file()
+
+
+def test_an_interrupted_run_says_which_checkpoint_it_keeps_and_that_resume_continues(stage1_run, tmp_path, capsys,
+                                                                                     monkeypatch):
+    import wbc.learned.train.train as train_module
+
+    def interrupted(cfg, **_):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(train_module, "train", interrupted)
+    root = _copy(stage1_run, tmp_path)
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume"]) == 130
+    err = capsys.readouterr().err
+    assert "wbc: interrupted; " in err and "keeps its newest checkpoint, model_0.pt" in err
+    assert "the same command with --resume continues from it" in err and len(err.strip().splitlines()) == 1
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(tmp_path / "new")]) == 130
+    assert "holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh" in capsys.readouterr().err

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from collections.abc import Callable, Iterable
@@ -709,6 +710,8 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
     # torch and rsl-rl-lib (the train extra) load only when a run really trains
     from wbc.learned.train.train import train
 
+    args.training = ("ppo", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
+
     result = train(cfg, resume=args.resume, options=options)
     _print_resume_note(args)
     if result.get("trained", 1) == 0:
@@ -788,10 +791,35 @@ def _distil(args: argparse.Namespace) -> int:
         check_dagger_run(cfg, resume=args.resume)  # every check the run makes before its first round
         printers.print_json(dataclasses.asdict(cfg))
         return 0
+    args.training = ("dagger", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
     result = run_dagger(cfg, resume=args.resume, log=print)
     print(f"distilled {args.teacher} into a policy by DAgger: {result['rounds']} rounds, {result['samples']:,} "
           f"samples, {result['wall_s'] / 60:.1f} min; policy {result['policy']}")
     return 0
+
+
+def _interrupted_training(args: argparse.Namespace) -> str:
+    """What an interrupted ``wbc train`` keeps in its run directory, and how to go on: the end of its message."""
+    kind, run_dir = getattr(args, "training", (None, None))
+    if kind == "ppo":
+        from wbc.learned.train.preflight import latest_checkpoint
+
+        checkpoint = latest_checkpoint(run_dir)
+        if checkpoint is None:
+            return f"; {run_dir} holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh"
+        return (f"; {run_dir} keeps its newest checkpoint, {checkpoint.name}: the same command with --resume "
+                "continues from it")
+    if kind == "dagger":
+        try:
+            rounds = json.loads((Path(run_dir) / "progress.json").read_text())["rounds"]
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+            rounds = None
+        if not isinstance(rounds, list) or not rounds:
+            return (f"; {run_dir} holds no finished DAgger round: the same command, without --resume, starts the run "
+                    "afresh")
+        return (f"; {run_dir} keeps {len(rounds)} finished DAgger round{'s' if len(rounds) > 1 else ''} (its data, "
+                "student and progress): the same command with --resume continues after them")
+    return ""
 
 
 def _play_arena(cfg: ArenaConfig, *, as_json: bool) -> int:
@@ -1179,7 +1207,8 @@ def main(argv: list[str] | None = None) -> int:
     Returns:
         The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
         each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C; a run's
-        finished trials are stored, and the message says how to finish it). A usage error exits with status 2 from
+        finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
+        or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from
         the parser, after its usage message.
     """
     args = build_parser().parse_args(argv)
@@ -1191,7 +1220,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         resumable = args.handler in _RESUMABLE and getattr(args, "out", None)
         print("wbc: interrupted" + (f"; the trials finished are stored in {args.out}: the same command with --resume "
-                                    "plays the rest" if resumable else ""), file=sys.stderr)
+                                    "plays the rest" if resumable else _interrupted_training(args)), file=sys.stderr)
         return 130
 
 
