@@ -488,3 +488,20 @@ def test_an_interrupted_dagger_run_says_which_rounds_it_keeps(dagger_run, tmp_pa
     assert "keeps 1 finished DAgger round" in err and "the same command with --resume continues after them" in err
     assert main([*args, "--run-root", str(tmp_path / "new")]) == 130
     assert "holds no finished DAgger round: the same command, without --resume, starts" in capsys.readouterr().err
+
+
+def test_a_dagger_resume_with_no_more_rounds_says_that_nothing_new_was_trained(dagger_run, tmp_path, capsys):
+    import shutil
+
+    from wbc.cli.main import main
+
+    shutil.copytree(dagger_run, tmp_path / "runs")
+    run = tmp_path / "runs" / "push-dagger-mpc"
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
+                 "0.1", "--run-root", str(tmp_path / "runs"), "--resume"]) == 0
+    out = capsys.readouterr().out
+    assert "already holds 1 DAgger round, no fewer than --rounds 1: nothing new trained" in out
+    assert "round 0:" not in out and "pass a larger --rounds" in out
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before

@@ -793,6 +793,11 @@ def _distil(args: argparse.Namespace) -> int:
         return 0
     args.training = ("dagger", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
     result = run_dagger(cfg, resume=args.resume, log=print)
+    if result["trained"] == 0:
+        done = result["rounds"]
+        print(f"{result['run_dir']} already holds {done} DAgger round{'s' if done != 1 else ''}, no fewer than "
+              f"--rounds {cfg.rounds}: nothing new trained; its policy is its last round's student, unchanged (pass a "
+              "larger --rounds to train on)")
     print(f"distilled {args.teacher} into a policy by DAgger: {result['rounds']} rounds, {result['samples']:,} "
           f"samples, {result['wall_s'] / 60:.1f} min; policy {result['policy']}")
     return 0

@@ -451,7 +451,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         log: called with one line of progress per round (e.g. `print`), or None.
 
     Returns:
-        The run's summary: rounds, samples, the policy file, wall time and each round's figures.
+        The run's summary: ``rounds`` (finished in all), ``trained`` (in this call: 0 when a resumed run already held
+        ``cfg.rounds``), ``samples``, ``policy`` (the file), ``wall_s``.
 
     Raises:
         ConfigError: what `check_dagger_run` refuses.
@@ -549,6 +550,6 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                 f"{obs.shape[0]} samples, fit loss "
                 f"{summary['fit_loss_first']:.4f} -> {summary['fit_loss_last']:.4f}, {wall:.1f} s")
     load_policy(student_path)  # the export reads back
-    return {"run_dir": str(run_dir), "rounds": len(progress["rounds"]),
+    return {"run_dir": str(run_dir), "rounds": len(progress["rounds"]), "trained": max(cfg.rounds - start_round, 0),
             "samples": int(sum(len(a) for a in act_all)), "policy": str(student_path.with_suffix(".npz")),
             "wall_s": sum(r["wall_s"] for r in progress["rounds"])}
