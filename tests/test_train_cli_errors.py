@@ -312,3 +312,14 @@ def test_an_interrupted_run_says_which_checkpoint_it_keeps_and_that_resume_conti
     assert "the same command with --resume continues from it" in err and len(err.strip().splitlines()) == 1
     assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(tmp_path / "new")]) == 130
     assert "holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh" in capsys.readouterr().err
+
+
+def test_the_help_names_every_run_directory_and_when_stage_is_not_needed(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["train", "--help"])
+    assert exit_.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps the lines
+    assert "RUN_ROOT/<task>-dagger-<controller>" in text and "RUN_ROOT/<task>-fine-tune[-expert]" in text
+    assert "required unless --teacher names a controller, or with --fine-tune" in text
+    assert main(["train", "--task", "push", "--dry-run"]) == 2
+    assert "or --fine-tune STUDENT" in capsys.readouterr().err

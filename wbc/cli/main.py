@@ -587,7 +587,8 @@ def _train(args: argparse.Namespace) -> int:
     if args.teacher is not None and args.stage is None and not names_a_file(args.teacher):
         raise _train_not_a_teacher(args.teacher)
     if args.stage is None:
-        raise ConfigError("wbc train: --stage 1|2|3 is required (or --teacher CONTROLLER to distil a controller)")
+        raise ConfigError("wbc train: --stage 1|2|3 is required (or --teacher CONTROLLER to distil a controller, or "
+                          "--fine-tune STUDENT to fine-tune a distilled one)")
     env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
     overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
     if args.rma_iterations is not None:
