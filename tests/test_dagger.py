@@ -314,7 +314,8 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
         assert said in capsys.readouterr().err
     # the student's networks are options of the run
     capsys.readouterr()
-    assert main([*args, "--student-layers", "128,64", "--memory-layers", "32", "--dry-run"]) == 0
+    fresh = ["--run-root", str(tmp_path / "fresh")]  # the dry run, as the run, refuses the run directory above
+    assert main([*args, *fresh, "--student-layers", "128,64", "--memory-layers", "32", "--dry-run"]) == 0
     fit = json.loads(capsys.readouterr().out)["fit"]
     assert fit["hidden_dims"] == [128, 64] and fit["adaptation_dims"] == [32] and fit["history"] == 25
     for wrong, said in (([*args, "--student-layers", "128,x", "--dry-run"], "separated by commas"),
@@ -444,7 +445,63 @@ def test_a_dagger_resume_refuses_a_damaged_run_directory_in_one_line(dagger_run,
     shutil.copytree(dagger_run, tmp_path / "runs")
     damage(tmp_path / "runs" / "push-dagger-mpc")
     capsys.readouterr()
-    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
-                 "0.1", "--run-root", str(tmp_path / "runs"), "--resume"]) == 2
+    argv = ["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s", "0.1",
+            "--run-root", str(tmp_path / "runs"), "--resume"]
+    for dry_run in ([], ["--dry-run"]):  # the dry run refuses what the run would
+        assert main([*argv, *dry_run]) == 2
+        err = capsys.readouterr().err
+        assert said in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_dagger_dry_run_checks_the_run_directory_and_the_expert_as_the_run_does(dagger_run, tmp_path, capsys):
+    from wbc.cli.main import main
+
+    args = ["train", "--task", "push", "--rounds", "1", "--episodes", "1", "--episode-s", "0.1", "--dry-run"]
+    # a run there, and no --resume
+    assert main([*args, "--teacher", "mpc", "--run-root", str(dagger_run)]) == 2
+    assert "already holds a DAgger run; pass --resume" in capsys.readouterr().err
+    assert main([*args, "--teacher", "mpc", "--run-root", str(dagger_run), "--resume"]) == 0
+    # --resume, and no run there
+    assert main([*args, "--teacher", "mpc", "--run-root", str(tmp_path / "none"), "--resume"]) == 2
+    assert "--resume: no finished DAgger round in" in capsys.readouterr().err
+    # an expert without a ground-truth switch: refused by the run and by its dry run, before anything is written
+    for dry_run in (["--dry-run"], []):
+        argv = [*(a for a in args if a != "--dry-run"), *dry_run, "--teacher", "learned", "--expert-truth",
+                "--run-root", str(tmp_path / "runs")]
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "--expert-truth: the expert 'learned' (LearnedController) has no ground-truth switch" in err
+        assert len(err.strip().splitlines()) == 1 and not (tmp_path / "runs").exists()
+
+
+def test_an_interrupted_dagger_run_says_which_rounds_it_keeps(dagger_run, tmp_path, capsys, monkeypatch):
+    import wbc.tools.dagger as dagger
+    from wbc.cli.main import main
+
+    def interrupted(cfg, **_):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(dagger, "run_dagger", interrupted)
+    args = ["train", "--task", "push", "--teacher", "mpc", "--rounds", "2", "--episodes", "1", "--episode-s", "0.1"]
+    assert main([*args, "--run-root", str(dagger_run), "--resume"]) == 130
     err = capsys.readouterr().err
-    assert said in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "keeps 1 finished DAgger round" in err and "the same command with --resume continues after them" in err
+    assert main([*args, "--run-root", str(tmp_path / "new")]) == 130
+    assert "holds no finished DAgger round: the same command, without --resume, starts" in capsys.readouterr().err
+
+
+def test_a_dagger_resume_with_no_more_rounds_says_that_nothing_new_was_trained(dagger_run, tmp_path, capsys):
+    import shutil
+
+    from wbc.cli.main import main
+
+    shutil.copytree(dagger_run, tmp_path / "runs")
+    run = tmp_path / "runs" / "push-dagger-mpc"
+    before = {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()}
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
+                 "0.1", "--run-root", str(tmp_path / "runs"), "--resume"]) == 0
+    out = capsys.readouterr().out
+    assert "already holds 1 DAgger round, no fewer than --rounds 1: nothing new trained" in out
+    assert "round 0:" not in out and "pass a larger --rounds" in out
+    assert {p.name: p.read_bytes() for p in run.iterdir() if p.is_file()} == before

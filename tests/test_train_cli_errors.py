@@ -238,3 +238,88 @@ def test_a_run_root_that_is_a_file_is_refused_naming_the_option(tmp_path, capsys
         assert main(["train", "--task", "push", *stage, *teacher, "--run-root", str(root)]) == 2
         err = capsys.readouterr().err
         assert "--run-root: " in err and "is a file, not a directory" in err and "Traceback" not in err
+
+
+def test_the_dry_run_refuses_the_checkpoint_student_and_expert_samples_the_run_would(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)
+    checkpoint = root / "push-stage1" / "model_0.pt"
+    checkpoint.write_bytes(checkpoint.read_bytes()[:1000])  # truncated
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume",
+                 "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert "model_0.pt: not a readable checkpoint" in err and len(err.strip().splitlines()) == 1
+    # a student that does not read its own history (a stage's policy), and expert samples that are no samples
+    fine_tune = ["train", "--task", "push", "--iterations", "1", "--envs", "1", "--run-root", str(tmp_path / "ft")]
+    assert main([*fine_tune, "--fine-tune", str(stage1_run / "push-stage1" / "policy"), "--dry-run"]) == 2
+    assert "latent z comes from its observation history alone" in capsys.readouterr().err
+    junk = tmp_path / "data.npz"
+    junk.write_bytes(b"junk")
+    assert main([*fine_tune, "--fine-tune", "shipped", "--expert-data", str(junk), "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert f"--expert-data {junk}: cannot be read" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "ft").exists()
+
+
+def test_a_refused_input_file_is_named_by_the_option_that_gave_it(stage1_run, tmp_path, capsys):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"junk")
+    args = ["train", "--task", "push", "--run-root", str(tmp_path / "runs"), "--dry-run"]
+    assert main([*args, "--stage", "2", "--teacher", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert f"--teacher {bad}: not usable" in err and "Train the previous stage first" not in err
+    stage1 = stage1_run / "push-stage1" / "policy"  # drives the arm 'none'
+    assert main([*args, "--stage", "3", "--teacher", str(stage1)]) == 2
+    assert f"--teacher {stage1} drives a1-wx200 with arm 'none'; stage 3 needs" in capsys.readouterr().err
+    # the student is the fine-tune's option, not a teacher
+    for student in (bad, stage1):
+        assert main([*args, "--fine-tune", str(student)]) == 2
+        err = capsys.readouterr().err
+        assert f"--fine-tune {student}: " in err and "error: teacher" not in err and len(err.strip().splitlines()) == 1
+    # a default input is still named as the previous stage's, which may be trained after the dry run
+    assert main([*args, "--stage", "2"]) == 0
+    assert "learns from the previous stage's policy" in capsys.readouterr().err
+
+
+def test_a_policy_exported_without_its_adaptation_module_says_it_is_not_playable(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)  # made with --rma-iterations 0
+    capsys.readouterr()
+    argv = ["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume"]
+    assert main(argv) == 0
+    err = capsys.readouterr().err
+    assert "observes extrinsics (RMA's z) and has no adaptation module" in err and "not playable" in err
+    assert "--resume --rma-iterations K" in err
+    # as the note says: the module is added, and the note is gone
+    assert main(["train", "--task", "push", "--stage", "1", "--iterations", "1", "--envs", "1", "--rma-iterations", "1",
+                 "--run-root", str(root), "--resume"]) == 0
+    assert "not playable" not in capsys.readouterr().err
+    assert (root / "push-stage1" / "rma.json").is_file()
+
+
+def test_an_interrupted_run_says_which_checkpoint_it_keeps_and_that_resume_continues(stage1_run, tmp_path, capsys,
+                                                                                     monkeypatch):
+    import wbc.learned.train.train as train_module
+
+    def interrupted(cfg, **_):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(train_module, "train", interrupted)
+    root = _copy(stage1_run, tmp_path)
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(root), "--resume"]) == 130
+    err = capsys.readouterr().err
+    assert "wbc: interrupted; " in err and "keeps its newest checkpoint, model_0.pt" in err
+    assert "the same command with --resume continues from it" in err and len(err.strip().splitlines()) == 1
+    assert main(["train", "--task", "push", "--stage", "1", *TINY, "--run-root", str(tmp_path / "new")]) == 130
+    assert "holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh" in capsys.readouterr().err
+
+
+def test_the_help_names_every_run_directory_and_when_stage_is_not_needed(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["train", "--help"])
+    assert exit_.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())  # argparse wraps the lines
+    assert "RUN_ROOT/<task>-dagger-<controller>" in text and "RUN_ROOT/<task>-fine-tune[-expert]" in text
+    assert "required unless --teacher names a controller, or with --fine-tune" in text
+    assert main(["train", "--task", "push", "--dry-run"]) == 2
+    assert "or --fine-tune STUDENT" in capsys.readouterr().err

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from collections.abc import Callable, Iterable
@@ -586,7 +587,8 @@ def _train(args: argparse.Namespace) -> int:
     if args.teacher is not None and args.stage is None and not names_a_file(args.teacher):
         raise _train_not_a_teacher(args.teacher)
     if args.stage is None:
-        raise ConfigError("wbc train: --stage 1|2|3 is required (or --teacher CONTROLLER to distil a controller)")
+        raise ConfigError("wbc train: --stage 1|2|3 is required (or --teacher CONTROLLER to distil a controller, or "
+                          "--fine-tune STUDENT to fine-tune a distilled one)")
     env = {k: v for k, v in (("num_envs", args.envs), ("seed", args.seed), ("nthread", args.threads)) if v is not None}
     overrides = {k: v for k, v in (("max_iterations", args.iterations), ("seed", args.seed)) if v is not None}
     if args.rma_iterations is not None:
@@ -608,7 +610,11 @@ def _train(args: argparse.Namespace) -> int:
                               "finetune-pi2, curriculum after stage 1 and decoupled)")
         if not names_a_file(args.teacher):
             raise _train_not_a_teacher(args.teacher)
-    return _train_run(args, cfg, stage=args.stage, baseline=args.variant or args.baseline)
+    # the inputs --teacher set (a stage's teacher, the policy a baseline starts from, the frozen legs): a refusal of
+    # one names the option, not the previous stage that is its default
+    options = {field: "--teacher" for field in ("teacher", "init_from", "frozen_legs")
+               if args.teacher is not None and getattr(cfg, field) == args.teacher}
+    return _train_run(args, cfg, stage=args.stage, baseline=args.variant or args.baseline, options=options)
 
 
 def _inherit_saved(args: argparse.Namespace, run_dir: str, env: dict[str, Any], overrides: dict[str, Any], *,
@@ -676,9 +682,12 @@ def _train_not_a_teacher(name: str) -> ConfigError:
                        f"policy.npz) or a controller to distil: {', '.join(CONTROLLERS)}")
 
 
-def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | None) -> int:
-    """Check a stage's or fine-tune's run (--dry-run: print its configuration), then train it."""
-    from wbc.learned.train.preflight import check_inputs, check_run_dir, unstarted_run
+def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | None, options: dict[str, str]) -> int:
+    """Check a stage's or fine-tune's run (--dry-run: print its configuration), then train it.
+
+    `options` maps each input file's `TrainConfig` field to the option that set it, named when it is refused.
+    """
+    from wbc.learned.train.preflight import check_run, check_run_dir, unstarted_run
 
     if unstarted_run(cfg.run_dir):
         print(f"wbc: note: {cfg.run_dir} holds a run interrupted before its first checkpoint (config.json, no "
@@ -687,26 +696,35 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
     if point is not None and point.note:
         print(f"wbc: note: --resume: {point.note}", file=sys.stderr)
     if args.dry_run:
-        try:
-            check_inputs(cfg)
-        except ConfigError as exc:
-            if args.teacher is not None or args.fine_tune is not None or args.expert_data is not None:
-                raise
+        given = args.teacher is not None or args.fine_tune is not None or args.expert_data is not None
+
+        def default_input_missing(exc: ConfigError) -> None:
             # a default input (the previous stage's export) may be trained after this dry run
             print(f"wbc: note: {exc}", file=sys.stderr)
+
+        # every check the run makes before it trains (the checkpoint's too)
+        check_run(cfg, resume=args.resume, options=options,
+                  default_input_missing=None if given else default_input_missing)
         _print_resume_note(args)
         printers.print_json(dataclasses.asdict(cfg))
         return 0
     # torch and rsl-rl-lib (the train extra) load only when a run really trains
     from wbc.learned.train.train import train
 
-    result = train(cfg, resume=args.resume)
+    args.training = ("ppo", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
+
+    result = train(cfg, resume=args.resume, options=options)
     _print_resume_note(args)
     if result.get("trained", 1) == 0:
         print(f"{result['run_dir']} already holds {result['iterations']} iterations, no fewer than --iterations "
               f"{cfg.max_iterations}: nothing new trained; its newest checkpoint is exported as it is (pass a larger "
               "--iterations to train on)")
     printers.print_trained(result, task=args.task, stage=stage, baseline=baseline)
+    if cfg.extrinsics_dim > 0 and cfg.rma.iterations == 0:
+        print(f"wbc: note: --rma-iterations 0: {result['policy']} observes extrinsics (RMA's z) and has no adaptation "
+              "module to estimate them, so it is not playable (the arena and check-controller refuse it, and no "
+              "replay was recorded); the same command with --resume --rma-iterations K (K > 0, default 200) adds the "
+              "module without training PPO further", file=sys.stderr)
     return 0
 
 
@@ -738,7 +756,9 @@ def _fine_tune(args: argparse.Namespace) -> int:
     if args.resume and _inherit_saved(args, cfg.run_dir, env, overrides, adapts=False):
         cfg = fine_tune_config(args.task, student, run_root=args.run_root, expert_data=args.expert_data,
                                env_overrides=env, **overrides)
-    return _train_run(args, cfg, stage=3, baseline="fine-tune")
+    # the student is the BC term's teacher too, unless the expert's samples are
+    options = {"student": "--fine-tune", "teacher": "--fine-tune", "expert_data": "--expert-data"}
+    return _train_run(args, cfg, stage=3, baseline="fine-tune", options=options)
 
 
 def _distil(args: argparse.Namespace) -> int:
@@ -752,7 +772,7 @@ def _distil(args: argparse.Namespace) -> int:
                               "--average-labels, --expert-follows, --takeover, --expert-truth, --seed, --run-root and "
                               "--resume")
     # torch loads only when a run really trains
-    from wbc.tools.dagger import DaggerConfig, dagger_expert, run_dagger
+    from wbc.tools.dagger import DaggerConfig, check_dagger_run, run_dagger
 
     fields = {k: v for k, v in (("rounds", args.rounds), ("episodes", args.episodes),
                                 ("episode_s", args.episode_s), ("seed", args.seed),
@@ -769,13 +789,43 @@ def _distil(args: argparse.Namespace) -> int:
     cfg = DaggerConfig(task=args.task, expert=args.teacher,
                        run_dir=str(Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"), **fields)
     if args.dry_run:
-        dagger_expert(cfg)  # what the run would refuse of its expert
+        check_dagger_run(cfg, resume=args.resume)  # every check the run makes before its first round
         printers.print_json(dataclasses.asdict(cfg))
         return 0
+    args.training = ("dagger", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
     result = run_dagger(cfg, resume=args.resume, log=print)
+    if result["trained"] == 0:
+        done = result["rounds"]
+        print(f"{result['run_dir']} already holds {done} DAgger round{'s' if done != 1 else ''}, no fewer than "
+              f"--rounds {cfg.rounds}: nothing new trained; its policy is its last round's student, unchanged (pass a "
+              "larger --rounds to train on)")
     print(f"distilled {args.teacher} into a policy by DAgger: {result['rounds']} rounds, {result['samples']:,} "
           f"samples, {result['wall_s'] / 60:.1f} min; policy {result['policy']}")
     return 0
+
+
+def _interrupted_training(args: argparse.Namespace) -> str:
+    """What an interrupted ``wbc train`` keeps in its run directory, and how to go on: the end of its message."""
+    kind, run_dir = getattr(args, "training", (None, None))
+    if kind == "ppo":
+        from wbc.learned.train.preflight import latest_checkpoint
+
+        checkpoint = latest_checkpoint(run_dir)
+        if checkpoint is None:
+            return f"; {run_dir} holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh"
+        return (f"; {run_dir} keeps its newest checkpoint, {checkpoint.name}: the same command with --resume "
+                "continues from it")
+    if kind == "dagger":
+        try:
+            rounds = json.loads((Path(run_dir) / "progress.json").read_text())["rounds"]
+        except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+            rounds = None
+        if not isinstance(rounds, list) or not rounds:
+            return (f"; {run_dir} holds no finished DAgger round: the same command, without --resume, starts the run "
+                    "afresh")
+        return (f"; {run_dir} keeps {len(rounds)} finished DAgger round{'s' if len(rounds) > 1 else ''} (its data, "
+                "student and progress): the same command with --resume continues after them")
+    return ""
 
 
 def _play_arena(cfg: ArenaConfig, *, as_json: bool) -> int:
@@ -1163,7 +1213,8 @@ def main(argv: list[str] | None = None) -> int:
     Returns:
         The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
         each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C; a run's
-        finished trials are stored, and the message says how to finish it). A usage error exits with status 2 from
+        finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
+        or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from
         the parser, after its usage message.
     """
     args = build_parser().parse_args(argv)
@@ -1175,7 +1226,7 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         resumable = args.handler in _RESUMABLE and getattr(args, "out", None)
         print("wbc: interrupted" + (f"; the trials finished are stored in {args.out}: the same command with --resume "
-                                    "plays the rest" if resumable else ""), file=sys.stderr)
+                                    "plays the rest" if resumable else _interrupted_training(args)), file=sys.stderr)
         return 130
 
 

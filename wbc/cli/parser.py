@@ -581,7 +581,7 @@ def _add_train_parser(sub: _Commands) -> None:
     tr = sub.add_parser("train", help="train a stage of the learned policy (PPO + BC, rsl-rl-lib; needs wbc[train])")
     tr.add_argument("--task", required=True, help=f"one of: {', '.join(TASKS)}")
     tr.add_argument("--stage", type=int, default=None, choices=(1, 2, 3),
-                    help="1: pi1, 2: pi2, 3: pi3 (required unless --teacher names a controller)")
+                    help="1: pi1, 2: pi2, 3: pi3 (required unless --teacher names a controller, or with --fine-tune)")
     tr.add_argument("--baseline", default=None, help=f"stage-3 baseline, one of: {', '.join(BASELINES)}")
     tr.add_argument("--variant", default=None,
                     help=f"a one-change variant of the method's stage 3, one of: {', '.join(RECIPE_VARIANTS)}")
@@ -638,8 +638,12 @@ def _add_train_parser(sub: _Commands) -> None:
                     help="with a controller as --teacher: the expert reads the simulator's base state instead of "
                          "estimating it (the student never does)")
     tr.add_argument("--run-root", default="runs/train",
-                    help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>]")
-    tr.add_argument("--dry-run", action="store_true", help="print the resolved configuration and stop")
+                    help="runs live in RUN_ROOT/<task>-stage<k>[-<baseline>][-<variant>], a DAgger run (a controller "
+                         "as --teacher) in RUN_ROOT/<task>-dagger-<controller>, a fine-tune in "
+                         "RUN_ROOT/<task>-fine-tune[-expert] (default runs/train)")
+    tr.add_argument("--dry-run", action="store_true",
+                    help="make every check the run makes before it trains (the run directory, the files it reads, "
+                         "the checkpoint it resumes from), print the resolved configuration and stop")
     tr.set_defaults(handler="train")
 
 

@@ -42,7 +42,7 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from wbc.arena.sim_trial import run_trial
-from wbc.control.protocol import Controller
+from wbc.control.protocol import Controller, TruthSwitch
 from wbc.control.registry import get_controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError
@@ -64,10 +64,11 @@ from wbc.learned.train.stages import TASKS
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.provenance import provenance
 from wbc.robots.description import RobotDescription
+from wbc.robots.registry import get_robot
 from wbc.scenario import load_scenario
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
-__all__ = ["DaggerConfig", "DaggerController", "run_dagger"]
+__all__ = ["DaggerConfig", "DaggerController", "DaggerStart", "check_dagger_run", "run_dagger"]
 
 TRAIN_SEED_OFFSET = 100_000
 """Training episodes use seeds from here on, as the training env's (`EnvConfig.train_seed_offset`): never an
@@ -291,8 +292,8 @@ def _student_env(cfg: DaggerConfig, arm_mode: str) -> EnvConfig:
 def dagger_expert(cfg: DaggerConfig) -> tuple[ControllerSpec, Callable[[RobotDescription], Controller]]:
     """The expert's registry entry and what builds it for the run.
 
-    With ``expert_follows`` the builder makes the MPC with its leashes at 0. ``wbc train --dry-run`` calls it to
-    refuse what the run would.
+    With ``expert_follows`` the builder makes the MPC with its leashes at 0. `check_dagger_run` calls it, for the run
+    and for ``wbc train --dry-run``.
 
     Raises:
         ConfigError: the expert is not a controller of the arena, or ``expert_follows`` with an expert that is not
@@ -369,6 +370,77 @@ def _resumed(run_dir: Path, resolved: dict[str, Any]) -> tuple[dict[str, Any], l
     return progress, [obs[:recorded]], [actions[:recorded]], [episode[:recorded]]
 
 
+@dataclass
+class DaggerStart:
+    """What a DAgger run starts from, once `check_dagger_run` has checked it.
+
+    Attributes:
+        expert_spec: the expert's registry entry.
+        make_expert: builds the expert for the robot (`dagger_expert`).
+        progress: ``progress.json`` of the finished rounds (``{"rounds": []}`` for a new run).
+        obs: the finished rounds' observations, in one array (or none).
+        actions: their labels.
+        episode: their episode ids.
+        net: the student of the last finished round, or None.
+    """
+
+    expert_spec: ControllerSpec
+    make_expert: Callable[[RobotDescription], Controller]
+    progress: dict[str, Any]
+    obs: list[np.ndarray]
+    actions: list[np.ndarray]
+    episode: list[np.ndarray]
+    net: StudentNet | None
+
+
+def _check_truth_switch(cfg: DaggerConfig, expert_spec: ControllerSpec,
+                        make_expert: Callable[[RobotDescription], Controller]) -> None:
+    """With ``expert_truth``, the expert must have a ground-truth switch (`TruthSwitch`): built once to see."""
+    expert = make_expert(get_robot(TASKS[cfg.task].robot, expert_spec.arm_mode))
+    if not isinstance(expert, TruthSwitch):
+        raise ConfigError(f"--expert-truth: the expert {cfg.expert!r} ({type(expert).__name__}) has no ground-truth "
+                          "switch (wbc.control.protocol.TruthSwitch) to read the simulator's base state: leave "
+                          "--expert-truth out, or distil a controller that estimates its base state (mpc)")
+
+
+def check_dagger_run(cfg: DaggerConfig, *, resume: bool) -> DaggerStart:
+    """Every check a DAgger run makes before its first round, and what it starts from.
+
+    `run_dagger` calls it before it writes anything, ``wbc train --teacher CONTROLLER --dry-run`` instead of running:
+    a dry run refuses what the run would.
+
+    Raises:
+        ConfigError: the expert is not a controller of the arena, cannot follow (``expert_follows``) or has no
+            ground-truth switch (``expert_truth``); a run directory that cannot be made; ``resume`` without a
+            finished round, with another configuration or over a damaged run directory (`_resumed`, ``student.pt``);
+            or a run directory that already holds a run (without ``resume``).
+    """
+    expert_spec, make_expert = dagger_expert(cfg)
+    if cfg.expert_truth:
+        _check_truth_switch(cfg, expert_spec, make_expert)
+    run_dir = Path(cfg.run_dir)
+    check_run_root(run_dir)
+    progress: dict[str, Any] = {"rounds": []}
+    obs: list[np.ndarray] = []
+    actions: list[np.ndarray] = []
+    episode: list[np.ndarray] = []
+    if resume:
+        resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
+        progress, obs, actions, episode = _resumed(run_dir, resolved)
+    elif (run_dir / "progress.json").exists():
+        raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
+                          "--run-root")
+    net: StudentNet | None = None
+    if progress["rounds"]:
+        try:
+            net = load_student(run_dir / "student.pt")
+        except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
+            raise ConfigError(f"--resume: {run_dir / 'student.pt'}: not a readable student ({type(exc).__name__}); "
+                              f"{_DAMAGED}") from None
+    return DaggerStart(expert_spec=expert_spec, make_expert=make_expert, progress=progress, obs=obs, actions=actions,
+                       episode=episode, net=net)
+
+
 def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> dict[str, Any]:
     """Run DAgger rounds and export the student after each.
 
@@ -379,42 +451,27 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         log: called with one line of progress per round (e.g. `print`), or None.
 
     Returns:
-        The run's summary: rounds, samples, the policy file, wall time and each round's figures.
+        The run's summary: ``rounds`` (finished in all), ``trained`` (in this call: 0 when a resumed run already held
+        ``cfg.rounds``), ``samples``, ``policy`` (the file), ``wall_s``.
 
     Raises:
-        ConfigError: the expert is not a controller of the arena, ``resume`` without a finished round or with another
-            configuration, or a run directory that already holds a run (without ``resume``).
+        ConfigError: what `check_dagger_run` refuses.
     """
-    expert_spec, make_expert = dagger_expert(cfg)
+    start = check_dagger_run(cfg, resume=resume)  # the checks `wbc train --dry-run` makes
+    expert_spec, make_expert = start.expert_spec, start.make_expert
+    progress, obs_all, act_all, ep_all, net = start.progress, start.obs, start.actions, start.episode, start.net
     spec = TASKS[cfg.task]
     scenario = load_scenario(spec.scenario)
     env = _student_env(cfg, expert_spec.arm_mode)
     run_dir = Path(cfg.run_dir)
-    resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
-    progress: dict[str, Any] = {"rounds": []}
-    obs_all: list[np.ndarray] = []
-    act_all: list[np.ndarray] = []
-    ep_all: list[np.ndarray] = []
-    check_run_root(run_dir)
-    if resume:
-        progress, obs_all, act_all, ep_all = _resumed(run_dir, resolved)
-    elif (run_dir / "progress.json").exists():
-        raise ConfigError(f"{run_dir} already holds a DAgger run; pass --resume to continue it or choose another "
-                          "--run-root")
-    else:
+    if not resume:
         make_run_dir(run_dir)
+        resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
         (run_dir / "config.json").write_text(json.dumps(
             {"dagger_config": resolved, "provenance": provenance(),
              "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
-    net: StudentNet | None = None
     student_path = run_dir / "policy"
     start_round = len(progress["rounds"])
-    if start_round:
-        try:
-            net = load_student(run_dir / "student.pt")
-        except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
-            raise ConfigError(f"--resume: {run_dir / 'student.pt'}: not a readable student ({type(exc).__name__}); "
-                              f"{_DAMAGED}") from None
     wall_before = sum(r["wall_s"] for r in progress["rounds"])
     for k in range(start_round, cfg.rounds):
         t0 = time.perf_counter()
@@ -493,6 +550,6 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                 f"{obs.shape[0]} samples, fit loss "
                 f"{summary['fit_loss_first']:.4f} -> {summary['fit_loss_last']:.4f}, {wall:.1f} s")
     load_policy(student_path)  # the export reads back
-    return {"run_dir": str(run_dir), "rounds": len(progress["rounds"]),
+    return {"run_dir": str(run_dir), "rounds": len(progress["rounds"]), "trained": max(cfg.rounds - start_round, 0),
             "samples": int(sum(len(a) for a in act_all)), "policy": str(student_path.with_suffix(".npz")),
             "wall_s": sum(r["wall_s"] for r in progress["rounds"])}

@@ -8,7 +8,6 @@ was trained in. The decoupled baseline's arm actor commands only some joints: it
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from typing import Any
 
 import numpy as np
@@ -18,6 +17,7 @@ from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.composite_policy import ROBOT_KEYS, CompositePolicyFile, PolicyPart, compose
 from wbc.learned.policy.observations import PRIVILEGED_PARTS, ObsLayout
 from wbc.learned.policy.policy_file import ACTIVATIONS, PolicyFile
+from wbc.learned.train.preflight import env_meta
 from wbc.optional import require
 from wbc.robots.registry import get_robot
 
@@ -38,24 +38,6 @@ def _activation_name(mlp: Any) -> str:
         raise NetworkMismatchError(f"cannot export activations {sorted(found)}; the policy file supports one of "
                                    f"{', '.join(ACTIVATIONS)} throughout: set TrainConfig.activation to one")
     return next(iter(found))
-
-
-def env_meta(env: EnvConfig, joints: np.ndarray | None = None) -> dict[str, Any]:
-    """What a policy file says of the env it was trained in: the numbers its inputs and outputs mean.
-
-    Robot, arm mode, observation scales, action scale and clip, joint defaults and gains (of `joints`, default all),
-    policy period.
-    """
-    desc = get_robot(env.robot, env.arm_mode)
-    idx = np.arange(desc.num_joints) if joints is None else np.asarray(joints, dtype=int)
-    kp, kd = env.gains(desc.num_joints)
-    return {
-        "robot": env.robot, "arm_mode": env.arm_mode,
-        "obs_scales": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(env.obs_scales).items()},
-        "action_scale": env.action_scale, "clip_actions": env.clip_actions,
-        "default_q": desc.nominal_q[idx].tolist(), "kp": kp[idx].tolist(), "kd": kd[idx].tolist(),
-        "policy_dt": env.policy_dt,
-    }
 
 
 def policy_file_from_actor(actor: Any, env: EnvConfig, *, task: str, stage: int,

@@ -17,7 +17,8 @@ from __future__ import annotations
 from typing import Any
 
 from wbc.errors import NetworkMismatchError
-from wbc.learned.policy.policy_file import PolicyFile, load_policy
+from wbc.learned.policy.policy_file import load_policy
+from wbc.learned.train.preflight import student_layout
 from wbc.learned.train.torch_policy import sequential
 from wbc.optional import require
 
@@ -40,24 +41,6 @@ class FixedNormaliser(torch.nn.Module):
     def forward(self, x):
         """Normalised `x` (..., D)."""
         return (x - self._mean) / (self._std + self.eps)
-
-
-def student_layout(policy: PolicyFile) -> tuple[int, int, int]:
-    """(D, H, z): observation size, window length and latent size of a student that reads its own history.
-
-    Raises:
-        NetworkMismatchError: the file's latent does not come from its observation history alone (it has an
-            encoder of privileged observations, or no adaptation module).
-    """
-    meta = policy.meta
-    extr, adapt = meta.get("extrinsics"), meta.get("adaptation")
-    if extr is None or adapt is None or policy.layers("encoder") or extr.get("privileged_parts"):
-        raise NetworkMismatchError(
-            "fine-tuning takes a student whose latent z comes from its observation history alone (a DAgger student, "
-            "`wbc train --teacher mpc`, with --history > 0); this file's z is "
-            + ("absent" if extr is None else "read from privileged observations"))
-    d = int(policy.arrays["obs_mean"].shape[0])
-    return d, int(adapt["history"]), int(extr["dim"])
 
 
 class HistoryActor(_models.MLPModel):

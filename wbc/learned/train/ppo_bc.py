@@ -33,6 +33,7 @@ from wbc.errors import ConfigError, NetworkMismatchError
 from wbc.learned.policy.policy_file import load_policy
 from wbc.learned.train.bc_schedule import BCSchedule
 from wbc.learned.train.distill import history_index
+from wbc.learned.train.preflight import read_expert_samples
 from wbc.learned.train.torch_policy import TorchPolicy
 from wbc.optional import require
 
@@ -59,24 +60,11 @@ class ExpertSamples:
         if history < 1:
             raise ConfigError(f"BC towards the expert's samples ({path}) is for an actor that reads an observation "
                               "window (a distilled student); this actor reads none")
-        try:
-            with np.load(path) as data:
-                arrays = {k: data[k] for k in ("obs", "actions", "episode") if k in data.files}
-        except (OSError, ValueError) as exc:
-            raise ConfigError(f"expert samples {path}: cannot be read ({exc}); give a DAgger run's data.npz") from None
-        missing = [k for k in ("obs", "actions", "episode") if k not in arrays]
-        if missing:
-            raise ConfigError(f"expert samples {path}: no {', '.join(missing)} array; give a DAgger run's data.npz "
-                              "(obs, actions, episode)")
-        obs, actions, episode = arrays["obs"], arrays["actions"], arrays["episode"]
-        n = obs.shape[0]
-        if obs.ndim != 2 or actions.shape[:1] != (n,) or episode.shape != (n,) or n == 0:
-            raise ConfigError(f"expert samples {path}: obs {obs.shape}, actions {actions.shape} and episode "
-                              f"{episode.shape} do not describe the same N >= 1 samples")
+        obs, actions, episode = read_expert_samples(path)  # the checks a dry run makes too
         self.obs = torch.from_numpy(np.ascontiguousarray(obs, dtype=np.float32))
         self.actions = torch.from_numpy(np.ascontiguousarray(actions, dtype=np.float32))
         self.windows = torch.from_numpy(history_index(episode, history))
-        self.size = n
+        self.size = obs.shape[0]
 
     def draw(self, count: int, generator) -> tuple[dict[str, Any], Any]:
         """`count` samples at random: ({"policy": (count, D), "history": (count, H * D)}, expert actions)."""

@@ -2,8 +2,10 @@
 
 `check_inputs` loads the policy files a `TrainConfig` names (teacher, init_from, frozen_legs, student) and the expert
 samples of a fine-tune; `check_run_dir` refuses to start a run over another one and reads what a resumed run
-continues from (``config.json``, ``progress.json``, the newest ``model_<it>.pt``'s name). Both raise a `ConfigError`
-naming the file (and field), so ``wbc train --dry-run`` and `wbc.learned.train.train.train` check the same things.
+continues from (``config.json``, ``progress.json``, the newest ``model_<it>.pt``'s name); `check_checkpoint` loads
+that checkpoint (with torch, the one check here that needs it). `check_run` makes them all, in the order a run does:
+``wbc train --dry-run`` and `wbc.learned.train.train.train` call it, so a dry run refuses what the run would, naming
+the file (and field).
 """
 
 from __future__ import annotations
@@ -12,18 +14,27 @@ import hashlib
 import json
 import math
 import re
+import zipfile
+import zlib
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from wbc.errors import ConfigError
+import numpy as np
+
+from wbc.errors import ConfigError, NetworkMismatchError
+from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_policy
 from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
+from wbc.optional import require
+from wbc.robots.registry import get_robot
 
-__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_inputs", "check_run_dir", "check_run_root", "config_diff",
-           "input_files", "input_path", "latest_checkpoint", "load_input_policy", "make_run_dir", "names_a_file",
-           "read_run_json", "saved_train_config", "unstarted_run"]
+__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_checkpoint", "check_inputs", "check_run", "check_run_dir",
+           "check_run_root", "config_diff", "env_meta", "input_files", "input_path", "latest_checkpoint",
+           "load_input_policy", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
+           "saved_train_config", "student_layout", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -188,16 +199,32 @@ def names_a_file(path: str | Path) -> bool:
     return p.is_file() or Path(f"{p}.npz").is_file() or Path(f"{p}.json").is_file()
 
 
-def load_input_policy(path: str | Path, role: str) -> PolicyFile:
-    """Load a policy file a run reads, or raise a `ConfigError` naming its role and what is wrong."""
+def load_input_policy(path: str | Path, role: str, option: str | None = None) -> PolicyFile:
+    """Load a policy file a run reads, or raise a `ConfigError` saying what is wrong.
+
+    Args:
+        path: the file (either of its ``.npz``/``.json`` pair, or their stem).
+        role: what it is to the run, for a default input (the previous stage's export): the message then says to
+            train that stage first.
+        option: the option that named the file (``--teacher``, ``--fine-tune``), named in the message instead.
+    """
     try:
         return load_policy(path)
     except PolicyFileError as exc:
+        if option is not None:
+            raise ConfigError(f"{option} {path}: not usable: {exc}; give a policy file that a run exported (its "
+                              "policy.npz, beside its policy.json)") from None
         raise ConfigError(f"{role} is not usable: {exc}. Train the previous stage first, or pass its path") from None
 
 
-def check_inputs(cfg: TrainConfig) -> PolicyFile | None:
+def check_inputs(cfg: TrainConfig, options: Mapping[str, str] | None = None) -> PolicyFile | None:
     """Check the files `cfg` reads: they load, and they drive the robot and arm the run needs.
+
+    Args:
+        cfg: the run.
+        options: for each `INPUTS` field that an option of ``wbc train`` set, that option (``{"teacher":
+            "--teacher"}``, ``{"student": "--fine-tune", ...}``): a refusal names it, not the field, and the others
+            are defaults (the previous stage's export).
 
     Returns:
         The student (`TrainConfig.student`), loaded, or None.
@@ -205,51 +232,151 @@ def check_inputs(cfg: TrainConfig) -> PolicyFile | None:
     Raises:
         ConfigError: a file is missing or unusable, drives another robot or arm, or the expert samples of a fine-tune
             come from another task or robot.
+        NetworkMismatchError: a student that does not read its own history (`student_layout`).
     """
+    options = options or {}
+
+    def named(field: str, default: str) -> str:
+        """How a refusal names an input: by the option that set it, else as `default` says."""
+        return f"{options[field]} {getattr(cfg, field)}" if field in options else default
+
     if cfg.init_from is not None:
-        load_input_policy(cfg.init_from, "the policy this run starts from (init_from)")
+        load_input_policy(cfg.init_from, "the policy this run starts from (init_from)", options.get("init_from"))
     if cfg.frozen_legs is not None:
         if cfg.extrinsics_dim > 0:
             raise ConfigError("with frozen_legs the actor observes the robot's measurements only: set "
                               "extrinsics_dim=0 (RMA phase 2 is not built for a part of a composite policy)")
-        legs = load_input_policy(cfg.frozen_legs, "the frozen leg policy (frozen_legs)")
+        legs = load_input_policy(cfg.frozen_legs, "the frozen leg policy (frozen_legs)", options.get("frozen_legs"))
         if legs.meta["robot"] != cfg.env.robot or legs.meta["arm_mode"] != cfg.env.teacher_arm_mode:
-            raise ConfigError(f"frozen leg policy {cfg.frozen_legs} drives {legs.meta['robot']} with arm "
-                              f"{legs.meta['arm_mode']!r}; this run needs {cfg.env.robot} with arm "
-                              f"{cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
+            raise ConfigError(f"{named('frozen_legs', f'frozen leg policy {cfg.frozen_legs}')} drives "
+                              f"{legs.meta['robot']} with arm {legs.meta['arm_mode']!r}; this run needs "
+                              f"{cfg.env.robot} with arm {cfg.env.teacher_arm_mode!r} (EnvConfig.teacher_arm_mode)")
     student = None
     if cfg.student is not None:
-        student = load_input_policy(cfg.student, "the student to fine-tune (student)")
+        student = load_input_policy(cfg.student, "the student to fine-tune (student)", options.get("student"))
         if cfg.extrinsics_dim != 0 or cfg.frozen_legs is not None or cfg.init_from is not None:
             raise ConfigError("fine-tuning a student: the actor is the student (extrinsics_dim=0, no frozen_legs, "
                               "no init_from)")
+        try:
+            student_layout(student)  # one that reads its own history
+        except NetworkMismatchError as exc:
+            if "student" not in options:
+                raise
+            raise NetworkMismatchError(f"{named('student', '')}: {exc}") from None
+        _check_student_env(student, cfg, named("student", f"student {cfg.student}"))
     if cfg.expert_data is not None:
         if student is None or cfg.bc is None:
             raise ConfigError("expert_data is the BC term's target when fine-tuning a student: set student and bc too")
-        _check_expert_data(cfg)
+        _check_expert_data(cfg, student, named("expert_data", f"expert samples {cfg.expert_data}"))
         return student
     if cfg.bc is None:
         return student
     if cfg.teacher is None:
         raise ConfigError("TrainConfig.bc is set but no teacher policy file is given")
-    try:
-        teacher = load_policy(cfg.teacher)
-    except PolicyFileError as exc:
-        raise ConfigError(f"stage {cfg.stage} learns from the previous stage's policy, which is not usable: {exc}. "
-                          "Train the previous stage first, or pass --teacher PATH") from None
+    if "teacher" in options:
+        teacher = load_input_policy(cfg.teacher, "the teacher", options["teacher"])
+    else:
+        try:
+            teacher = load_policy(cfg.teacher)
+        except PolicyFileError as exc:
+            raise ConfigError(f"stage {cfg.stage} learns from the previous stage's policy, which is not usable: "
+                              f"{exc}. Train the previous stage first, or pass --teacher PATH") from None
     arm = cfg.env.arm_mode if cfg.student is not None else cfg.env.teacher_arm_mode  # a student teaches itself
     if teacher.meta["robot"] != cfg.env.robot or teacher.meta["arm_mode"] != arm:
         what = "the fine-tune" if cfg.student is not None else f"stage {cfg.stage}"
-        raise ConfigError(f"teacher {cfg.teacher} drives {teacher.meta['robot']} with arm "
+        raise ConfigError(f"{named('teacher', f'teacher {cfg.teacher}')} drives {teacher.meta['robot']} with arm "
                           f"{teacher.meta['arm_mode']!r}; {what} needs {cfg.env.robot} with arm {arm!r}")
     return student
 
 
-def _check_expert_data(cfg: TrainConfig) -> None:
-    """The expert's samples must come from the fine-tune's task (and so its robot), as its DAgger run's config says."""
+def student_layout(policy: PolicyFile) -> tuple[int, int, int]:
+    """(D, H, z): observation size, window length and latent size of a student that reads its own history.
+
+    Raises:
+        NetworkMismatchError: the file's latent does not come from its observation history alone (it has an
+            encoder of privileged observations, or no adaptation module).
+    """
+    meta = policy.meta
+    extr, adapt = meta.get("extrinsics"), meta.get("adaptation")
+    if extr is None or adapt is None or policy.layers("encoder") or extr.get("privileged_parts"):
+        raise NetworkMismatchError(
+            "fine-tuning takes a student whose latent z comes from its observation history alone (a DAgger student, "
+            "`wbc train --teacher mpc`, with --history > 0); this file's z is "
+            + ("absent" if extr is None else "read from privileged observations"))
+    d = int(policy.arrays["obs_mean"].shape[0])
+    return d, int(adapt["history"]), int(extr["dim"])
+
+
+def env_meta(env: EnvConfig, joints: np.ndarray | None = None) -> dict[str, Any]:
+    """What a policy file says of the env it was trained in: the numbers its inputs and outputs mean.
+
+    Robot, arm mode, observation scales, action scale and clip, joint defaults and gains (of `joints`, default all),
+    policy period.
+    """
+    desc = get_robot(env.robot, env.arm_mode)
+    idx = np.arange(desc.num_joints) if joints is None else np.asarray(joints, dtype=int)
+    kp, kd = env.gains(desc.num_joints)
+    return {
+        "robot": env.robot, "arm_mode": env.arm_mode,
+        "obs_scales": {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(env.obs_scales).items()},
+        "action_scale": env.action_scale, "clip_actions": env.clip_actions,
+        "default_q": desc.nominal_q[idx].tolist(), "kp": kp[idx].tolist(), "kd": kd[idx].tolist(),
+        "policy_dt": env.policy_dt,
+    }
+
+
+def _check_student_env(student: PolicyFile, cfg: TrainConfig, name: str) -> None:
+    """The env must give the student the observations and motor law it was made for: the same numbers mean the same.
+
+    `name` is how a refusal names the student (``--fine-tune PATH``).
+    """
+    meta, given = student.meta, env_meta(cfg.env)
+    for key, value in given.items():
+        exact = key in ("robot", "arm_mode", "obs_scales")
+        if (meta[key] != value) if exact else not np.allclose(meta[key], value):
+            raise ConfigError(f"{name}: its {key} is {meta[key]}, the fine-tune's env gives {value} "
+                              f"(EnvConfig); a student fine-tuned in another env would read other numbers than it was "
+                              "trained on: fine-tune it on its own task's env")
+
+
+def read_expert_samples(path: str | Path, name: str | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A DAgger run's ``data.npz``: (obs (N, D), actions (N, A), episode (N,)), N >= 1.
+
+    `name` is how a refusal names the file (default ``expert samples PATH``; ``--expert-data PATH`` for the option).
+
+    Raises:
+        ConfigError: the file is missing or unreadable, lacks one of the arrays, or their shapes disagree.
+    """
+    name = name or f"expert samples {path}"
+    try:
+        data = np.load(path)
+        if not isinstance(data, np.lib.npyio.NpzFile):  # a single array (.npy)
+            raise ValueError("a single array, not an archive of arrays")
+        with data:
+            arrays = {k: data[k] for k in ("obs", "actions", "episode") if k in data.files}
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
+        raise ConfigError(f"{name}: cannot be read ({exc}); give a DAgger run's data.npz") from None
+    missing = [k for k in ("obs", "actions", "episode") if k not in arrays]
+    if missing:
+        raise ConfigError(f"{name}: no {', '.join(missing)} array; give a DAgger run's data.npz "
+                          "(obs, actions, episode)")
+    obs, actions, episode = arrays["obs"], arrays["actions"], arrays["episode"]
+    n = obs.shape[0] if obs.ndim else 0
+    if obs.ndim != 2 or actions.ndim != 2 or actions.shape[0] != n or episode.shape != (n,) or n == 0:
+        raise ConfigError(f"{name}: obs {obs.shape}, actions {actions.shape} and episode "
+                          f"{episode.shape} do not describe the same N >= 1 samples")
+    return obs, actions, episode
+
+
+def _check_expert_data(cfg: TrainConfig, student: PolicyFile, name: str) -> None:
+    """The expert's samples: a DAgger run's of the fine-tune's task (and robot), readable, for the student's actions.
+
+    Their task is the one the DAgger run's ``config.json`` beside them names, when there is one. `name` is how a
+    refusal names the file (``--expert-data PATH``).
+    """
     path = Path(cfg.expert_data)
     if not path.is_file():
-        raise ConfigError(f"expert samples {path}: no such file; give a DAgger run's data.npz")
+        raise ConfigError(f"{name}: no such file; give a DAgger run's data.npz")
     config = path.parent / "config.json"
     if config.is_file():  # a DAgger run's directory: its config names the task the samples were collected on
         try:
@@ -258,9 +385,16 @@ def _check_expert_data(cfg: TrainConfig) -> None:
             task = None
         if isinstance(task, str) and task != cfg.task:
             robot = TASKS[task].robot if task in TASKS else "an unknown robot"
-            raise ConfigError(f"expert samples {path}: collected on task {task!r} ({robot}; {config} "
+            raise ConfigError(f"{name}: collected on task {task!r} ({robot}; {config} "
                               f"dagger_config.task), the fine-tune is of task {cfg.task!r} ({cfg.env.robot}): give a "
                               f"DAgger run's data.npz of task {cfg.task!r}")
+    obs, actions, _ = read_expert_samples(path, name)
+    # the actor is the student: its inputs and outputs are the student's
+    for what, have, actor in (("actions", actions.shape[1], student.num_actions),
+                              ("observations", obs.shape[1], int(student.arrays["obs_mean"].shape[0]))):
+        if have != actor:
+            raise ConfigError(f"{name}: their {what} have {have} entries, the actor has {actor} (the "
+                              f"student {cfg.student}); give the data of a DAgger run on this robot")
 
 
 def read_run_json(path: Path, what: str) -> Any:
@@ -352,3 +486,55 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
                     f"are scaled to {done} iterations ({progress['env_steps']:,} steps; the wall time an estimate)")
             return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress, note=note)
     return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress)
+
+
+def check_checkpoint(path: Path) -> None:
+    """Refuse a checkpoint rsl-rl cannot load (a truncated one, another program's), before the env is built.
+
+    It needs torch (the ``train`` extra), as the run does.
+
+    Raises:
+        ConfigError: naming the file, and what to do.
+    """
+    torch = require("torch")
+    try:
+        saved = torch.load(path, map_location="cpu", weights_only=False)
+    except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
+        raise ConfigError(f"--resume: {path}: not a readable checkpoint ({type(exc).__name__}: "
+                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); delete it to resume from the "
+                          "one before, or start a new run under another --run-root") from None
+    if not isinstance(saved, dict) or not isinstance(saved.get("iter"), int):
+        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: delete it to resume from the "
+                          "one before, or start a new run under another --run-root")
+
+
+def check_run(cfg: TrainConfig, *, resume: bool, options: Mapping[str, str] | None = None,
+              default_input_missing: Callable[[ConfigError], None] | None = None) -> ResumePoint | None:
+    """Every check a run makes before it builds its env: its run directory, its input files, its checkpoint.
+
+    `wbc.learned.train.train.train` calls it before it trains, ``wbc train --dry-run`` instead of training.
+
+    Args:
+        cfg: the run.
+        resume: whether the run continues the one in ``cfg.run_dir``.
+        options: the options that set its input files, named in a refusal (`check_inputs`).
+        default_input_missing: called with the refusal of an input file instead of raising it, for a dry run whose
+            inputs are all the defaults (the previous stage's export, which may be trained after the dry run).
+
+    Returns:
+        Where a resumed run continues from (`check_run_dir`), or None.
+
+    Raises:
+        ConfigError: what `check_run_dir`, `check_inputs` and `check_checkpoint` refuse.
+        NetworkMismatchError: a student that does not read its own history (`student_layout`).
+    """
+    point = check_run_dir(cfg, resume=resume)
+    try:
+        check_inputs(cfg, options)
+    except ConfigError as exc:
+        if default_input_missing is None:
+            raise
+        default_input_missing(exc)
+    if point is not None:
+        check_checkpoint(point.checkpoint)
+    return point

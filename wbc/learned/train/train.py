@@ -19,10 +19,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
-
-import numpy as np
 
 from wbc.errors import ConfigError
 from wbc.learned.env.env import BatchedEnv
@@ -31,17 +30,17 @@ from wbc.learned.policy.policy_file import load_policy, save_policy
 from wbc.learned.policy.replay_file import replay_path_for
 from wbc.learned.policy.replay_recorder import record_replay
 from wbc.learned.train.distill import student_policy_file
-from wbc.learned.train.export import decoupled_policy, env_meta, policy_file_from_actor
+from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
-from wbc.learned.train.history_actor import HistoryActor, student_layout
+from wbc.learned.train.history_actor import HistoryActor
 from wbc.learned.train.preflight import (
     RESUMABLE,
-    check_inputs,
-    check_run_dir,
+    check_run,
     input_files,
     latest_checkpoint,
     load_input_policy,
     make_run_dir,
+    student_layout,
 )
 from wbc.learned.train.rma import train_adaptation
 from wbc.learned.train.train_config import TrainConfig
@@ -96,37 +95,6 @@ def rsl_rl_config(cfg: TrainConfig) -> dict[str, Any]:
     }
 
 
-def _check_teacher(cfg: TrainConfig) -> None:
-    student = check_inputs(cfg)
-    if student is not None:
-        student_layout(student)  # one that reads its own history
-        _check_student_env(student, cfg)
-
-
-def _check_checkpoint(path: Path) -> None:
-    """Refuse a checkpoint rsl-rl cannot load, before the env is built."""
-    try:
-        saved = torch.load(path, map_location="cpu", weights_only=False)
-    except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
-        raise ConfigError(f"--resume: {path}: not a readable checkpoint ({type(exc).__name__}: "
-                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); delete it to resume from the "
-                          "one before, or start a new run under another --run-root") from None
-    if not isinstance(saved, dict) or not isinstance(saved.get("iter"), int):
-        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: delete it to resume from the "
-                          "one before, or start a new run under another --run-root")
-
-
-def _check_student_env(student, cfg: TrainConfig) -> None:
-    """The env must give the student the observations and motor law it was made for: the same numbers mean the same."""
-    meta, given = student.meta, env_meta(cfg.env)
-    for key, value in given.items():
-        exact = key in ("robot", "arm_mode", "obs_scales")
-        if (meta[key] != value) if exact else not np.allclose(meta[key], value):
-            raise ConfigError(f"student {cfg.student}: its {key} is {meta[key]}, the fine-tune's env gives {value} "
-                              f"(EnvConfig); a student fine-tuned in another env would read other numbers than it was "
-                              "trained on: fine-tune it on its own task's env")
-
-
 class _Runner(_runners.OnPolicyRunner):
     """rsl-rl's runner, also exporting the policy file and progress at every checkpoint."""
 
@@ -171,13 +139,15 @@ class _Runner(_runners.OnPolicyRunner):
         (Path(cfg.run_dir) / "progress.json").write_text(json.dumps(progress, indent=2) + "\n")
 
 
-def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
+def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None) -> dict[str, Any]:
     """Train (or resume) one run.
 
     Args:
         cfg: the run.
         resume: continue from the newest checkpoint in ``cfg.run_dir``; its saved config must match `cfg` except in
             `_RESUMABLE` fields (train longer with a larger max_iterations).
+        options: the options of ``wbc train`` that set its input files (``{"teacher": "--teacher"}``), named when
+            one is refused (`wbc.learned.train.preflight.check_inputs`).
 
     Returns:
         ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
@@ -192,10 +162,7 @@ def train(cfg: TrainConfig, *, resume: bool = False) -> dict[str, Any]:
     """
     run_dir = Path(cfg.run_dir)
     resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
-    point = check_run_dir(cfg, resume=resume)
-    _check_teacher(cfg)
-    if point is not None:
-        _check_checkpoint(point.checkpoint)
+    point = check_run(cfg, resume=resume, options=options)  # the checks `wbc train --dry-run` makes
     progress = point.progress if point is not None else {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
     make_run_dir(run_dir)
     torch.manual_seed(cfg.seed)
