@@ -184,6 +184,11 @@ def test_the_verdict_says_who_survives_more_on_how_many_pairs_and_what_would_set
     tracking = next(line for line in lines if "linear velocity" in line)
     assert tracking.startswith("band b: mpc tracks the linear velocity better than learned over the seconds both "
                                "survived: mean error 0.100 against 0.200 m/s on 8 trials")
+    # the time to fall: mpc's four falls at half time against learned's one
+    ttf = next(line for line in lines if "stays up longer" in line)
+    assert ttf.startswith("band b: learned stays up longer than mpc: mean TTF (the share of the episode survived) "
+                          "0.938 against 0.688 on 8 trials (difference +0.250"), ttf
+    assert "Wilcoxon signed-rank" in ttf
     entry = next(p for p in summary.paired if p.metric == "success_rate")
     assert entry.interval == "exact" and entry.ci95[0] < 0 < entry.ci95[1]  # agrees with p = 0.125
     assert format_table(summary).rstrip().splitlines()[-1].strip().endswith(")")
@@ -194,6 +199,7 @@ def test_the_verdict_says_who_survives_more_on_how_many_pairs_and_what_would_set
                      scenario_name="s", scenario_hash="h", controllers=["mpc", "twin"], bands=["b"])
     assert any("mpc and twin survive alike: 3 of 8 paired trials each, with no discordant pair" in line
                for line in verdicts(same))
+    assert not any("stays up longer" in line for line in verdicts(same))  # the same times to fall: nothing to say
     # one discordant pair, a tiny significant difference, a p below 1e-4: as the table writes them
     one = [_record("c", i, success=i != 0, vlin=(0.1,)) for i in range(8)]
     tiny = [_record("d", i, vlin=(0.1 + 1e-4 * (1 + i),)) for i in range(8)]

@@ -7,6 +7,8 @@ entries) and says, for one band and one pair of controllers:
   agrees with the test), on how many discordant pairs (the only ones that tell the two apart), whether the exact
   McNemar test calls it significant, and, when it does not, how many paired trials would settle a difference that
   large (80 % power);
+- time to fall: where the two fall at different times, who stays up longer (TTF, the fraction of the episode
+  survived), by how much, with the Wilcoxon signed-rank test's verdict and the same count of trials;
 - tracking: who tracks the commanded velocity better over the seconds both survived (the common window), by how much,
   with the Wilcoxon signed-rank test's verdict and the same count of trials.
 
@@ -116,6 +118,24 @@ def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | 
     return text
 
 
+def _time_to_fall(entry: PairSummary) -> str | None:
+    """Who stays up longer, or None where the two survive the same share of every episode (nothing to say)."""
+    a, b, n = entry.a, entry.b, entry.n
+    if not n or entry.diff is None or entry.diff == 0.0:
+        return None
+    longer, shorter = (b, a) if entry.diff > 0 else (a, b)
+    m_longer, m_shorter = (entry.mean_b, entry.mean_a) if longer == b else (entry.mean_a, entry.mean_b)
+    lo, hi = entry.ci95
+    lo_l, hi_l = (lo, hi) if longer == b else (-hi, -lo)
+    text = (f"{longer} stays up longer than {shorter}: mean TTF (the share of the episode survived) "
+            f"{m_longer:.3f} against {m_shorter:.3f} on {n} trials (difference {signed(m_longer - m_shorter, 3)}, "
+            f"95 % bootstrap interval [{signed(lo_l, 3)}, {signed(hi_l, 3)}]); "
+            f"{_significance(entry, 'Wilcoxon signed-rank')}")
+    if not (entry.p is not None and entry.p < ALPHA):
+        text += f"; {_settle(entry, 'difference')}"
+    return text
+
+
 def verdicts(summary: Summary) -> list[str]:
     """The verdict sentences of a summary, band by band, pair by pair (none for a run of one controller).
 
@@ -132,6 +152,8 @@ def verdicts(summary: Summary) -> list[str]:
         prefix = f"band {entry.band}: "
         if entry.metric == "success_rate":
             lines.append(prefix + _survival(entry))
+        if entry.metric == "ttf" and (sentence := _time_to_fall(entry)) is not None:
+            lines.append(prefix + sentence)
         for metric, what, unit, decimals in _TRACKING:
             if entry.metric == metric:
                 sentence = _tracking(entry, what, unit, decimals)
