@@ -96,44 +96,44 @@ def signed(value: float, decimals: int) -> str:
     return f"{value:+.{decimals}f}"
 
 
-def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
-    a, b, n = entry.a, entry.b, entry.n
-    if not n or entry.diff is None:
-        return None
-    ma, mb = entry.mean_a, entry.mean_b
+def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decimals: int, *,
+                     higher_is_better: bool) -> str:
+    """The sentence of a difference of means read off `entry`: the better side first, its interval and test.
+
+    `head` is the claim with ``{better}`` and ``{worse}`` in it; `what` names the means (``mean error``) and `unit`
+    their unit (empty for a share); the better side has the higher mean when `higher_is_better`, else the lower. A
+    difference too small for the decimals is written in scientific notation, never as a -0.000 called better.
+    """
+    b_better = (entry.diff > 0) == higher_is_better
+    better, worse = (entry.b, entry.a) if b_better else (entry.a, entry.b)
+    m_better, m_worse = (entry.mean_b, entry.mean_a) if b_better else (entry.mean_a, entry.mean_b)
     lo, hi = entry.ci95
-    if entry.diff == 0.0:
-        return f"{a} and {b} track the {what} alike over the seconds both survived ({n} trials)"
-    better, worse = (b, a) if entry.diff < 0 else (a, b)
-    m_better, m_worse = (mb, ma) if better == b else (ma, mb)
-    lo_b, hi_b = (lo, hi) if better == b else (-hi, -lo)
-    # a difference too small for the decimals is written in scientific notation, never as a -0.000 called better
-    text = (f"{better} tracks the {what} better than {worse} over the seconds both survived: mean error "
-            f"{m_better:.{decimals}f} against {m_worse:.{decimals}f} {unit} on {n} trials (difference "
-            f"{signed(m_better - m_worse, decimals)}, 95 % bootstrap interval "
-            f"[{signed(lo_b, decimals)}, {signed(hi_b, decimals)}]); "
+    lo_b, hi_b = (lo, hi) if b_better else (-hi, -lo)
+    unit = f" {unit}" if unit else ""
+    text = (f"{head.format(better=better, worse=worse)}: {what} {m_better:.{decimals}f} against "
+            f"{m_worse:.{decimals}f}{unit} on {entry.n} trials (difference {signed(m_better - m_worse, decimals)}, "
+            f"95 % bootstrap interval [{signed(lo_b, decimals)}, {signed(hi_b, decimals)}]); "
             f"{_significance(entry, 'Wilcoxon signed-rank')}")
     if not (entry.p is not None and entry.p < ALPHA):
         text += f"; {_settle(entry, 'difference')}"
     return text
+
+
+def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
+    if not entry.n or entry.diff is None:
+        return None
+    if entry.diff == 0.0:
+        return f"{entry.a} and {entry.b} track the {what} alike over the seconds both survived ({entry.n} trials)"
+    return _mean_difference(entry, f"{{better}} tracks the {what} better than {{worse}} over the seconds both survived",
+                            "mean error", unit, decimals, higher_is_better=False)
 
 
 def _time_to_fall(entry: PairSummary) -> str | None:
     """Who stays up longer, or None where the two survive the same share of every episode (nothing to say)."""
-    a, b, n = entry.a, entry.b, entry.n
-    if not n or entry.diff is None or entry.diff == 0.0:
+    if not entry.n or entry.diff is None or entry.diff == 0.0:
         return None
-    longer, shorter = (b, a) if entry.diff > 0 else (a, b)
-    m_longer, m_shorter = (entry.mean_b, entry.mean_a) if longer == b else (entry.mean_a, entry.mean_b)
-    lo, hi = entry.ci95
-    lo_l, hi_l = (lo, hi) if longer == b else (-hi, -lo)
-    text = (f"{longer} stays up longer than {shorter}: mean TTF (the share of the episode survived) "
-            f"{m_longer:.3f} against {m_shorter:.3f} on {n} trials (difference {signed(m_longer - m_shorter, 3)}, "
-            f"95 % bootstrap interval [{signed(lo_l, 3)}, {signed(hi_l, 3)}]); "
-            f"{_significance(entry, 'Wilcoxon signed-rank')}")
-    if not (entry.p is not None and entry.p < ALPHA):
-        text += f"; {_settle(entry, 'difference')}"
-    return text
+    return _mean_difference(entry, "{better} stays up longer than {worse}",
+                            "mean TTF (the share of the episode survived)", "", 3, higher_is_better=True)
 
 
 def verdicts(summary: Summary) -> list[str]:
