@@ -27,6 +27,7 @@ from wbc.errors import SerialPortError, TargetRefusedError
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
 from wbc.hardware.dynamixel.sdk_bus import SdkBus
 from wbc.hardware.hardware_robot import HardwareRobotConfig
+from wbc.hardware.pty_registry import is_served_pty, register_pty, registry_dir, unregister_pty
 from wbc.hardware.serial_port_policy import check_serial_port, is_emulated_port, is_pseudo_terminal
 
 REAL_PORTS = ("/dev/ttyUSB0", "/dev/ttyACM0", "/dev/ttyDXL", "/dev/serial/by-id/usb-FTDI_USB__-__Serial_Converter",
@@ -34,15 +35,34 @@ REAL_PORTS = ("/dev/ttyUSB0", "/dev/ttyACM0", "/dev/ttyDXL", "/dev/serial/by-id/
 """Adapters, a udev name, a by-id link, a UART, the pty multiplexer, a Windows name, a relative path: never a pty."""
 
 
+@pytest.fixture(autouse=True)
+def own_register(tmp_path_factory: pytest.TempPathFactory, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """The cross-process register of emulators' ptys in a directory of this test's own (`registry_dir`)."""
+    runtime = tmp_path_factory.mktemp("runtime")
+    runtime.chmod(0o700)
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))
+    return runtime / "wbc-ptys"
+
+
 @pytest.fixture
-def pty_slave() -> Iterator[str]:
-    """A pseudo-terminal's slave, as the Dynamixel emulator hands one out (``os.openpty``, ``os.ttyname``)."""
+def bare_pty() -> Iterator[str]:
+    """A pseudo-terminal's slave that no emulator serves (a terminal, a socat bridge: anything could be behind it)."""
     master, slave = os.openpty()
     try:
         yield os.ttyname(slave)
     finally:
         os.close(master)
         os.close(slave)
+
+
+@pytest.fixture
+def pty_slave(bare_pty: str) -> Iterator[str]:
+    """A pseudo-terminal's slave registered as the Dynamixel emulator registers the one it opens (`register_pty`)."""
+    assert register_pty(bare_pty)
+    try:
+        yield bare_pty
+    finally:
+        unregister_pty(bare_pty)
 
 
 @pytest.fixture
@@ -89,6 +109,90 @@ def test_an_emulators_ports_need_no_consent(pty_slave: str, tmp_path: Path) -> N
     link.symlink_to(pty_slave)
     check_serial_port(str(link), allow_hardware=False)  # a udev-style name for a pty: resolved, still a pty
     check_serial_port("in-process:dynamixel-1", allow_hardware=False)  # an in-process bus: no device at all
+
+
+def test_a_pty_no_emulator_serves_needs_the_consent(bare_pty: str, nothing_opened: list) -> None:
+    # a terminal or a socat bridge to a real adapter is a pty too: only a live emulator's pty passes without consent
+    assert is_pseudo_terminal(bare_pty) and not is_emulated_port(bare_pty)
+    with pytest.raises(TargetRefusedError, match=r"pseudo-terminal that no wbc emulator serves.*allow_hardware=True"):
+        check_serial_port(bare_pty, allow_hardware=False)
+    assert nothing_opened == []
+    check_serial_port(bare_pty, allow_hardware=True)
+
+
+def test_an_emulators_pty_passes_only_while_it_serves_it() -> None:
+    from wbc.hardware.emulators import DynamixelEmulator, SharedPlant
+
+    with SharedPlant() as plant:
+        emulator = DynamixelEmulator(plant).start()
+        try:
+            port = emulator.port
+            assert emulator.registered_everywhere and is_emulated_port(port)
+            check_serial_port(port, allow_hardware=False)
+        finally:
+            emulator.close()
+    assert not is_served_pty(port) and not is_emulated_port(port)  # its number may now be anyone's pty
+    with pytest.raises(TargetRefusedError):
+        check_serial_port(port, allow_hardware=False)
+
+
+_HOLDER = """
+import os, sys, time
+from wbc.hardware.pty_registry import register_pty
+master, slave = os.openpty()
+port = os.ttyname(slave)
+print(port, register_pty(port), flush=True)
+time.sleep(120)
+"""
+
+
+def test_another_processs_emulator_pty_passes_while_that_process_lives(bare_pty: str, own_register: Path) -> None:
+    import subprocess
+
+    holder = subprocess.Popen([sys.executable, "-c", _HOLDER], stdout=subprocess.PIPE, text=True,
+                              cwd=Path(__file__).resolve().parent.parent)
+    try:
+        port, shared = holder.stdout.readline().split()
+        assert shared == "True"
+        assert is_emulated_port(port)  # registered by the other process, which holds it
+        check_serial_port(port, allow_hardware=False)
+        assert not is_emulated_port(bare_pty)  # this one nobody registered
+    finally:
+        holder.kill()
+        holder.wait()
+    # killed without unregistering: the pty went with it; its record stays behind and registers nothing (the next
+    # test gives a pty of that number to someone else)
+    assert len(list(own_register.glob("pty-*.json"))) == 1
+    assert not is_served_pty(port) and not is_emulated_port(port)
+
+
+def test_a_stale_record_for_a_reused_pty_registers_nothing(bare_pty: str, own_register: Path) -> None:
+    # a record of a process that ended names the same device number as a pty opened since: refused, record removed
+    import json
+
+    own_register.mkdir(mode=0o700, exist_ok=True)
+    rdev = os.stat(bare_pty).st_rdev
+    gone = 2 ** 22 + 12345  # beyond pid_max's default: no such process
+    record = own_register / f"pty-{rdev}.json"
+    record.write_text(json.dumps({"port": bare_pty, "rdev": rdev, "pid": gone, "start": 1}))
+    assert not is_emulated_port(bare_pty)
+    assert not record.exists()
+    # this process, but a start time that is not its own: a reused process id
+    record.write_text(json.dumps({"port": bare_pty, "rdev": rdev, "pid": os.getpid(), "start": -1}))
+    assert not is_emulated_port(bare_pty)
+    record.write_text("{not json")
+    assert not is_emulated_port(bare_pty)
+
+
+def test_a_register_others_may_write_to_is_not_trusted(bare_pty: str, own_register: Path) -> None:
+    own_register.mkdir(mode=0o700)
+    own_register.chmod(0o777)
+    assert registry_dir() == own_register
+    assert not register_pty(bare_pty)  # not written there; this process still knows it
+    assert not any(own_register.iterdir())
+    assert is_emulated_port(bare_pty)
+    unregister_pty(bare_pty)
+    assert not is_emulated_port(bare_pty)
 
 
 def test_a_link_to_a_real_device_is_refused(tmp_path: Path) -> None:
@@ -216,7 +320,7 @@ def test_the_consent_asks_for_a_real_arm_too(nothing_opened: list, monkeypatch: 
     assert main(["hw", "check", "--robot", "a1-wx200", "--target", "127.0.0.1:9", "--arm-port", "/dev/ttyUSB0",
                  "--allow-hardware"]) == 2
     err = capsys.readouterr().err
-    assert "at /dev/ttyUSB0 is a REAL ROBOT (the arm's serial device, not a pseudo-terminal)" in err, err
+    assert "at /dev/ttyUSB0 is a REAL ROBOT (the arm's serial device, not a pty an emulator serves)" in err, err
     assert "nobody can confirm" in err and nothing_opened == []
 
 
@@ -224,3 +328,19 @@ def test_a_pty_arm_port_needs_no_flag(pty_slave: str) -> None:
     config = HardwareRobotConfig(robot="a1-wx200", arm_mode="actuated", legs_host="127.0.0.1", legs_port=9,
                                  arm_port=pty_slave)
     assert dataclasses.replace(config, arm_mode="locked").arm_port == pty_slave
+
+
+def test_the_emulator_banner_says_when_other_processes_cannot_see_its_pty(capsys: pytest.CaptureFixture[str]) -> None:
+    from wbc.cli.printers import print_emulator_serving
+    from wbc.hardware.realtime import RealtimeGrant
+    from wbc.tools.emulate import EmulatorServing
+
+    grant = RealtimeGrant(pid=1, asked="nothing", scheduling="SCHED_OTHER", cpus=(0,), memory_locked=False)
+    serving = EmulatorServing(robot="a1-wx200", mode="realtime", address=("127.0.0.1", 9), arm_port="/dev/pts/7",
+                              faults=(), seconds=None, held=False, grant=grant, arm_mode="actuated",
+                              arm_port_shared=False)
+    print_emulator_serving(serving)
+    out = capsys.readouterr().out
+    assert "/dev/pts/7 could not be registered" in out and "refuses it without --allow-hardware" in out
+    print_emulator_serving(dataclasses.replace(serving, arm_port_shared=True))
+    assert "could not be registered" not in capsys.readouterr().out

@@ -252,7 +252,7 @@ def _real_devices(host: str, port: int, arm_port: str | None) -> list[tuple[str,
     """The devices of a command that are real hardware: the legs' address outside 127.0.0.0/8, a real serial port."""
     real = [] if is_loopback(host) else [(f"{host}:{port}", "outside 127.0.0.0/8")]
     if arm_port is not None and not is_emulated_port(arm_port):
-        real.append((arm_port, "the arm's serial device, not a pseudo-terminal"))
+        real.append((arm_port, "the arm's serial device, not a pty an emulator serves"))
     return real
 
 

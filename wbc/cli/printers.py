@@ -27,6 +27,7 @@ from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.capabilities import HasRealtimeGrant
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.emulators import BusStats
+from wbc.hardware.pty_registry import registry_dir
 from wbc.hardware.realtime import RealtimeGrant
 from wbc.hardware.unitree import REJECT_REASONS
 from wbc.tools.arm_momentum import ArmMomentumTrial
@@ -609,6 +610,10 @@ def print_emulator_serving(serving: EmulatorServing) -> None:
     else:
         print_robot_emulator_started(serving.robot, serving.mode, serving.address, serving.arm_port, faults,
                                      seconds=serving.seconds, held=serving.held)
+        if not serving.arm_port_shared:
+            print(f"  note: {serving.arm_port} could not be registered where other processes look "
+                  f"({registry_dir()} is missing, not writable, or not this user's alone): a wbc command in "
+                  "another process refuses it without --allow-hardware")
     print_realtime_grant("emulator", serving.grant)
 
 

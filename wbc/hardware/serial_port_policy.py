@@ -4,16 +4,18 @@ The serial counterpart of the address policy (`wbc.hardware.unitree.check_target
 benchmark must never open a real adapter by accident: opening the arm's U2D2 is enough for the start-up to write
 EEPROM and torque to the servos. So a port is opened without consent only if it is what an emulator hands out:
 
-- a pseudo-terminal's slave: the path resolves (symlinks followed) to ``/dev/pts/N`` and is a character device
-  there (`wbc.hardware.emulators.DynamixelEmulator` opens one with ``os.openpty`` and names it ``os.ttyname``);
+- a pseudo-terminal's slave that one of our emulators serves: the path resolves (symlinks followed) to
+  ``/dev/pts/N``, is a character device there, and a live `wbc.hardware.emulators.DynamixelEmulator` registered it
+  when it opened it (`wbc.hardware.pty_registry`). Any other pty is refused like a device: a terminal, or a
+  ``socat`` bridge to a real adapter, is a pty too;
 - an in-process bus (a name starting with `IN_PROCESS_PREFIX`), which no serial device is ever opened for.
 
 Anything else (``/dev/ttyUSB0``, ``/dev/ttyACM0``, ``/dev/serial/by-id/...``, the udev name ``/dev/ttyDXL``, a path
 that does not exist) is refused unless the config says ``allow_hardware=True``. The decision reads the name, then at
-most resolves its symlinks (``lstat`` / ``readlink``) and calls ``stat`` on the result; it never opens the path. A
-refusal with ``allow_hardware=False`` therefore happens before any ``open``, and with ``allow_hardware=True`` the
-filesystem is not touched at all by the check. (On macOS, where ptys are ``/dev/ttysNNN``, an emulator's port needs
-``allow_hardware`` too: the policy errs on the side of refusing.)
+most resolves its symlinks (``lstat`` / ``readlink``), calls ``stat`` on the result and reads the register; it never
+opens the path. A refusal with ``allow_hardware=False`` therefore happens before any ``open`` of a device, and with
+``allow_hardware=True`` the filesystem is not touched at all by the check. (On macOS, where ptys are
+``/dev/ttysNNN``, an emulator's port needs ``allow_hardware`` too: the policy errs on the side of refusing.)
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ import stat
 import sys
 
 from wbc.errors import TargetRefusedError
+from wbc.hardware.pty_registry import is_served_pty
 
 __all__ = ["IN_PROCESS_PREFIX", "announce_hardware_port", "check_serial_port", "is_emulated_port",
            "is_pseudo_terminal", "why_not_emulated"]
@@ -50,8 +53,11 @@ def is_pseudo_terminal(path: str) -> bool:
 
 
 def is_emulated_port(port: str) -> bool:
-    """True for what an emulator hands out: an in-process bus's name or a pseudo-terminal (nothing is opened)."""
-    return port.startswith(IN_PROCESS_PREFIX) or is_pseudo_terminal(port)
+    """True for what an emulator hands out: an in-process bus's name, or a pty a live emulator of ours serves.
+
+    Nothing is opened: the name is resolved and stat'ed, and the register read (`wbc.hardware.pty_registry`).
+    """
+    return port.startswith(IN_PROCESS_PREFIX) or (is_pseudo_terminal(port) and is_served_pty(port))
 
 
 def why_not_emulated(port: str) -> tuple[str, bool]:
@@ -67,6 +73,10 @@ def why_not_emulated(port: str) -> tuple[str, bool]:
     if real.rpartition("/")[0] == _PTY_DIR and not os.path.exists(real):
         return (f"{port} names no pseudo-terminal on this machine: an emulator's goes away when the emulator stops "
                 "(is it still running? it prints the one to use)"), False
+    if is_pseudo_terminal(port):
+        return (f"{port} is a pseudo-terminal that no wbc emulator serves: refusing to open it without consent (a "
+                "terminal, or a bridge such as socat to a real adapter, is a pty too; an emulator's pty is known "
+                "while the emulator runs)"), True
     return (f"{port} is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; opening it "
             "writes the servos' settings and torque)"), True
 
@@ -80,7 +90,8 @@ def check_serial_port(port: str, *, allow_hardware: bool, what: str = "port") ->
         what: the config field or option, for the message.
 
     Raises:
-        TargetRefusedError: `port` is not a pseudo-terminal nor an in-process bus, and hardware is not allowed.
+        TargetRefusedError: `port` is neither a pty an emulator serves nor an in-process bus, and hardware is not
+            allowed.
     """
     if allow_hardware or is_emulated_port(port):
         return

@@ -89,6 +89,8 @@ class EmulatorServing:
         held: held at its standing pose until a command drives a motor.
         grant: what the OS granted of the real-time request.
         arm_mode: the arm's mode in the physics (``none``, ``locked``, ``actuated``).
+        arm_port_shared: whether other processes know `arm_port` as an emulator's
+            (`wbc.hardware.pty_registry`): if not, they refuse it without ``--allow-hardware``.
     """
 
     robot: str
@@ -100,6 +102,7 @@ class EmulatorServing:
     held: bool
     grant: RealtimeGrant
     arm_mode: str = "none"
+    arm_port_shared: bool = True
 
 
 @dataclass(frozen=True)
@@ -198,7 +201,8 @@ def _emulate_with_arm(cfg: EmulateConfig, names: tuple[str, ...], grant: Realtim
         for fault in cfg.faults:
             emulator.inject(fault)
         serving(EmulatorServing(robot=robot, mode=cfg.mode, address=emulator.address, arm_port=emulator.port,
-                                faults=names, seconds=cfg.seconds, held=cfg.held, grant=grant, arm_mode=cfg.arm_mode))
+                                faults=names, seconds=cfg.seconds, held=cfg.held, grant=grant, arm_mode=cfg.arm_mode,
+                                arm_port_shared=emulator.arm.registered_everywhere))
         _serve(emulator, cfg.seconds)
     return EmulatorServed(counts=EmulatorCounts.of(emulator.legs), last_reject=emulator.legs.last_reject,
                           arm_bus=emulator.arm.stats, arm_thread=emulator.arm.thread_stats(),

@@ -1,7 +1,9 @@
 """`DynamixelEmulator`: the WX200's Dynamixel bus on a pseudo-terminal, its XM430 servos backed by an `ArmPlant`.
 
 A client opens `DynamixelEmulator.port` (the pty's slave, e.g. ``/dev/pts/7``) as it would open the U2D2
-(``PortHandler(port)`` of dynamixel_sdk, unmodified) and speaks Protocol 2.0. One thread (a `DeviceThread`,
+(``PortHandler(port)`` of dynamixel_sdk, unmodified) and speaks Protocol 2.0. The emulator registers its pty while it
+holds it (`wbc.hardware.pty_registry`): the serial-port policy opens a pty without consent only if an emulator serves
+it (``registered_everywhere`` says whether other processes can see it too). One thread (a `DeviceThread`,
 `wbc.hardware.device_thread`) reads the master side, decodes each instruction packet (`wbc.hardware.dynamixel`), logs
 it (`packets()`), hands it to the servos it addresses (`EmulatedServo`: the control table and its rules) and writes
 their status packets back, in ID-list order. Its cycle is the servos' own time, every `THREAD_PERIOD` and after every
@@ -112,6 +114,7 @@ from wbc.hardware.emulators.bus_faults import BUS_FAULT_DEFAULTS, BusFault, faul
 from wbc.hardware.emulators.faults import FaultSet
 from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, decode_writes
 from wbc.hardware.emulators.servo import EmulatedServo
+from wbc.hardware.pty_registry import register_pty, unregister_pty
 from wbc.hardware.serial_port_policy import IN_PROCESS_PREFIX
 from wbc.types import MotorCommand
 
@@ -246,6 +249,7 @@ class DynamixelEmulator:
         self._started = False
         self._sent: tuple[np.ndarray, np.ndarray] | None = None
         self.port = ""
+        self.registered_everywhere = False
 
     def _wire(self, spec: ServoSpec) -> _Wiring:
         for k, joint in enumerate(self.config.joints):
@@ -278,6 +282,7 @@ class DynamixelEmulator:
         self._master, self._slave = master, slave
         self._wake = os.pipe()
         self.port = os.ttyname(slave)
+        self.registered_everywhere = register_pty(self.port)  # the serial-port policy lets only ours through
         self._power_up()
         self._closed.clear()
         self._device = DeviceThread("dynamixel-emulator", THREAD_PERIOD, self._servo_time, clock=self.clock,
@@ -873,6 +878,8 @@ class DynamixelEmulator:
 
     def _close_fds(self) -> None:
         with self._lock:
+            if self._slave is not None:
+                unregister_pty(self.port)  # before the close: a pty's number is handed out again
             for fd in (self._master, self._slave, *(self._wake or ())):
                 if fd is not None:
                     try:
