@@ -107,7 +107,8 @@ def test_the_template_enters_the_arena_from_a_checkout_as_the_readme_shows(tmp_p
     site.mkdir()
     (site / "wbc").symlink_to(ROOT / "wbc")
     script = tmp_path / "wbc_script.py"
-    script.write_text("import sys\nfrom wbc.cli.main import main\nsys.exit(main())\n")
+    # as pip writes the console script: the guard keeps a spawned worker, which imports it, from running the command
+    script.write_text("import sys\nfrom wbc.cli.main import main\nif __name__ == '__main__':\n    sys.exit(main())\n")
     env = {**os.environ, "PYTHONPATH": str(site)}
     out = tmp_path / "run"
     proc = subprocess.run([sys.executable, str(script), "compare", "examples.my_controller:make", "stand",

@@ -15,6 +15,8 @@ from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena import executors
 from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.trial_record import TrialRecord
+from wbc.cli import main
 from wbc.errors import ConfigError
 
 EXITS = STAND_PLUGIN.format(doc="The stand hold that exits its process on its fifth tick.", reset="pass",
@@ -56,12 +58,44 @@ def test_a_worker_kept_alive_by_a_controllers_thread_is_stopped_with_a_warning(p
     assert "still ran 0.5 s after their trials ended" in capsys.readouterr().err
 
 
+def test_with_one_worker_the_command_line_still_plays_in_a_worker_process(tmp_path):
+    # --workers 1 on the command line: a controller that ends its process costs its own trials, not the run
+    (tmp_path / "exits.py").write_text(textwrap.dedent(EXITS).lstrip())
+    (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
+    done = subprocess.run([sys.executable, "-m", "wbc.cli", "compare", "exits:make", "stand", "--scenario",
+                           "short.toml", "--trials", "2", "--workers", "1", "--out", "out", "--quiet"], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1, done.stderr  # a controller failed: status 1, and the report is written
+    by = {(r.controller, r.trial): r for r in TrialRecord.read_csv(tmp_path / "out" / "trials.csv")}
+    assert len(by) == 4 and all(by[("stand", i)].success for i in range(2))
+    assert all(by[("exits:make", i)].outcome == "controller_error" for i in range(2))
+    assert (tmp_path / "out" / "report.md").is_file()
+
+
+def test_in_process_a_controller_that_ends_the_process_ends_the_run(tmp_path):
+    # --in-process asks for it (a debugger, a profiler): the trials recorded before it are kept
+    (tmp_path / "exits.py").write_text(textwrap.dedent(EXITS).lstrip())
+    (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
+    done = subprocess.run([sys.executable, "-m", "wbc.cli", "compare", "stand", "exits:make", "--scenario",
+                           "short.toml", "--trials", "2", "--workers", "1", "--in-process", "--out", "out", "--quiet"],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 3  # the plug-in's os._exit(3)
+    records = TrialRecord.read_csv(tmp_path / "out" / "trials.csv")
+    assert [(r.controller, r.trial) for r in records] == [("stand", 0)]
+
+
+def test_in_process_refuses_what_needs_a_worker_process(capsys):
+    for extra in (["--trial-time-limit", "60"], ["--workers", "2"], ["--executor", "ray"]):
+        assert main(["run", "stand", "--scenario", "scenarios/push.toml", "--in-process", *extra]) == 2
+        assert "--in-process" in capsys.readouterr().err
+
+
 def test_the_command_ends_past_a_thread_a_controller_left_running_in_its_own_process(tmp_path):
-    # --workers 1 plays in the command's own process: the thread would have kept it alive after the report
+    # --in-process plays in the command's own process: the thread would have kept it alive after the report
     (tmp_path / "spins.py").write_text(textwrap.dedent(SPINS).lstrip())
     (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
     done = subprocess.run([sys.executable, "-m", "wbc.cli", "run", "spins:make", "--scenario", "short.toml",
-                           "--trials", "1", "--workers", "1", "--out", "out", "--quiet"], cwd=tmp_path,
+                           "--trials", "1", "--workers", "1", "--in-process", "--out", "out", "--quiet"], cwd=tmp_path,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert "thread(s) still running at the end" in done.stderr and "exiting without waiting for them" in done.stderr

@@ -100,6 +100,11 @@ class ArenaConfig:
             on (None: no limit). Results then depend on the machine's speed, so a run's results are reproducible only
             where no trial comes near the limit: it is a guard against hangs, not a deadline. Trials then play in
             worker processes even with one worker; not with a live view.
+        isolated: with the local executor and one worker, play the trials in a worker process all the same (the
+            command line's default; ``--in-process`` turns it off): a controller that ends its process
+            (``os._exit``, a crash in native code) then costs only its own trial. False plays them in this process,
+            where such a controller ends the run (the trials recorded before it are kept for ``resume``). Ignored with
+            an observer, whose trials play in this process.
     """
 
     controllers: tuple[str, ...]
@@ -125,6 +130,7 @@ class ArenaConfig:
     sequential_pairs: tuple[tuple[str, str], ...] = ()
     max_consecutive_errors: int = DEFAULT_MAX_CONSECUTIVE_ERRORS
     trial_time_limit_s: float | None = None
+    isolated: bool = False
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -330,7 +336,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         tasks = (task(t, c) for t, c in keys if not guard.stopped(c))
         todo = len(keys)
     executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
-                LocalExecutor(cfg.workers, cfg.observer))
+                LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
     bar = progress(total, total - todo, cfg.progress)
     start = time.perf_counter()
     steps = 0

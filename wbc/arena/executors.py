@@ -164,18 +164,22 @@ def overran(task: TrialTask) -> TrialRecord:
 
 
 class LocalExecutor:
-    """Runs tasks in a pool of local processes (``workers`` <= 1: in this process).
+    """Runs tasks in a pool of local processes (``workers`` <= 1: in this process, unless `isolated`).
 
     Args:
         workers: number of processes (default: all cores).
         observer: watches every tick of every trial (a live viewer); trials then run one by one in this process.
+        isolated: with one worker, play in a worker process all the same (without an observer): a controller that
+            ends its process (``os._exit``, a crash in native code) then costs only its own trial, as with a pool.
     """
 
     name = "local"
 
-    def __init__(self, workers: int | None = None, observer: TickObserver | None = None) -> None:
+    def __init__(self, workers: int | None = None, observer: TickObserver | None = None, *,
+                 isolated: bool = False) -> None:
         self.workers = 1 if observer is not None else (workers or os.cpu_count() or 1)
         self.observer = observer
+        self.isolated = isolated and observer is None
         self._flags: str | None = None  # the directory of the overrun flags, while a pool runs
 
     def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
@@ -191,13 +195,13 @@ class LocalExecutor:
         queue = itertools.chain((first,), queue)
         if first.time_limit_s is not None and self.observer is not None:
             raise ConfigError(VIEWED_TIME_LIMIT)
-        if self.workers <= 1 and first.time_limit_s is None:
+        if self.workers <= 1 and first.time_limit_s is None and not self.isolated:
             for task in queue:
                 yield run_task(task, self.observer)
             return
         # Spawned (not forked) workers, so each starts its BLAS single-threaded from the environment; the pool starts
         # its processes on demand, so the environment stays set until the pool is done. A time limit needs a worker
-        # process to end (one, with --workers 1).
+        # process to end (one, with --workers 1), and so does isolation.
         with single_threaded_blas(), tempfile.TemporaryDirectory(prefix="wbc-overrun-") as flags:
             self._flags = flags
             try:

@@ -907,6 +907,7 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
            alpha: float = 0.05) -> int:
     seeds = tuple(range(args.seeds)) if args.seeds is not None else (0,)
     _view_options(args)
+    _check_in_process(args)
     if args.view and args.workers not in (None, 1):
         raise ConfigError(f"--workers {args.workers} with --view: a viewed run plays its trials one by one in this "
                           "process, where the viewer draws them; leave --workers out (or 1)")
@@ -927,7 +928,7 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
                       io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"),
                       until_significant=until_significant, alpha=alpha,
                       max_consecutive_errors=args.max_consecutive_errors,
-                      trial_time_limit_s=args.trial_time_limit)
+                      trial_time_limit_s=args.trial_time_limit, isolated=not args.in_process)
     try:
         return _play_arena(cfg, as_json=args.json)
     finally:
@@ -973,7 +974,24 @@ def _compare(args: argparse.Namespace) -> int:
                   alpha=0.05 if args.alpha is None else args.alpha)
 
 
+def _check_in_process(args: argparse.Namespace) -> None:
+    """``--in-process`` needs trials played here: one local worker, and no time limit (which ends a worker)."""
+    if not args.in_process:
+        return
+    if getattr(args, "executor", "local") != "local":
+        raise ConfigError("--in-process plays the trials in this process, which the ray executor does not: leave one "
+                          "of them out")
+    if args.trial_time_limit is not None:
+        raise ConfigError("--in-process with --trial-time-limit: the limit ends a trial's worker process, and "
+                          "in process there is none to end; leave one of them out")
+    if args.workers not in (None, 1):
+        raise ConfigError(f"--in-process plays one trial at a time in this process: leave --workers {args.workers} "
+                          "out, or give --workers 1")
+    args.workers = 1
+
+
 def _paper(args: argparse.Namespace) -> int:
+    _check_in_process(args)
     overrides: dict[str, str] = {}
     for value in args.contender or ():
         key, sep, name = value.partition("=")
@@ -988,7 +1006,7 @@ def _paper(args: argparse.Namespace) -> int:
         scenario=Path(args.scenario) if args.scenario else None, out_dir=Path(args.out) if args.out else None,
         workers=args.workers, resume=args.resume, drop_bad_rows=args.drop_bad_rows,
         progress=not (args.quiet or args.json), contenders=overrides,
-        crouched=args.crouched, trial_time_limit_s=args.trial_time_limit))
+        crouched=args.crouched, trial_time_limit_s=args.trial_time_limit, isolated=not args.in_process))
     if args.json:
         printers.print_json(result.as_dict())
     else:

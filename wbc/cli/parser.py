@@ -213,7 +213,11 @@ def add_arena_options(p: argparse.ArgumentParser) -> None:
 
 
 def add_trial_time_limit_option(p: argparse.ArgumentParser) -> None:
-    """``--trial-time-limit S``: a guard against a controller that hangs (``wbc run``, ``compare``, ``paper``)."""
+    """``--trial-time-limit S`` and ``--in-process``: where and how long a trial plays (run, compare, paper)."""
+    p.add_argument("--in-process", action="store_true",
+                   help="with --workers 1: play the trials in this process (for a debugger or a profiler), where a "
+                        "controller that ends its process ends the run; by default even one worker is a process of "
+                        "its own, so that such a controller costs only its trial")
     p.add_argument("--trial-time-limit", type=bounded_float(MIN_TRIAL_TIME_LIMIT_S, MAX_TRIAL_TIME_LIMIT_S),
                    default=None, metavar="S",
                    help="end a trial still playing after S seconds of wall time (a controller that hangs) and record "

@@ -58,6 +58,7 @@ class PaperRunConfig:
         crouched: play the learned rows' crouched posture variants (``--crouched``; `wbc.tools.paper.tables`).
         trial_time_limit_s: the wall time a trial may take (`wbc.arena.compare.ArenaConfig.trial_time_limit_s`;
             None: no limit).
+        isolated: with one worker, play in a worker process all the same (`wbc.arena.compare.ArenaConfig.isolated`).
     """
 
     table: str
@@ -72,6 +73,7 @@ class PaperRunConfig:
     contenders: Mapping[str, str] = field(default_factory=dict)
     crouched: bool = False
     trial_time_limit_s: float | None = None
+    isolated: bool = False
 
     def __post_init__(self) -> None:
         if self.table not in TABLES:
@@ -107,7 +109,7 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
     arena = run_arena(ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
                                   seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
                                   resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows, progress=cfg.progress,
-                                  trial_time_limit_s=cfg.trial_time_limit_s))
+                                  trial_time_limit_s=cfg.trial_time_limit_s, isolated=cfg.isolated))
     wall = time.perf_counter() - start
     records = arena.records
     by_controller: dict[str, list[TrialRecord]] = {}
