@@ -7,6 +7,7 @@ tracking errors, the exact interval of a paired success difference and the verdi
 and counts built by hand.
 """
 
+import dataclasses
 import json
 import math
 
@@ -141,6 +142,23 @@ def test_tracking_is_compared_over_the_seconds_both_controllers_survived():
     # a trial one controller played for less than a second has no window
     short = [_record("a", 0, success=False, ttf=0.1, vlin=())]
     assert math.isnan(common_window_values({"a": short, "b": b[:1]}, "vlin_err_common")["b"][("b", 0, 0)])
+
+
+def test_a_controller_error_does_not_cut_the_others_common_window_in_the_summary():
+    # "a" raises on its first tick of every trial; "b" and "c" play 3 s: their run-wide window is their own 3 s
+    errored = [dataclasses.replace(_record("a", i, success=False, ttf=0.0), outcome="controller_error",
+                                   error=f"controller a, trial {i}: act raised") for i in range(2)]
+    b = [_record("b", i, vlin=(0.1, 0.2, 0.3)) for i in range(2)]
+    c = [_record("c", i, vlin=(0.3, 0.2, 0.1)) for i in range(2)]
+    values = common_window_values({"a": errored, "b": b, "c": c}, "vlin_err_common", skip_errors=True)
+    assert values["b"] == {("b", 0, 0): pytest.approx(0.2), ("b", 0, 1): pytest.approx(0.2)}
+    assert all(math.isnan(v) for v in values["a"].values())
+    # without skip_errors (a pair's comparison) the error's empty window leaves the trial out, as a fall's would
+    assert all(math.isnan(v) for v in common_window_values({"a": errored, "b": b}, "vlin_err_common")["b"].values())
+    summary = summarize([*errored, *b, *c], scenario_name="s", scenario_hash="h", controllers=("a", "b", "c"),
+                        bands=("b",))
+    assert summary.cells["b"]["b"].metrics["vlin_err_common"].mean == pytest.approx(0.2)
+    assert summary.cells["a"]["b"].metrics["vlin_err_common"].mean is None  # no window: n/a in the table
 
 
 def test_the_paired_success_interval_excludes_zero_exactly_when_mcnemar_rejects():

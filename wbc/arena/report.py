@@ -302,7 +302,7 @@ def summarize(
     warnings: list[TickWarning] = []
     for band in bands:
         played = {c: cells[c][band] for c in controllers if cells[c][band]}
-        common = {m: common_window_values(played, m) for m in COMMON_METRICS} if played else {}
+        common = {m: common_window_values(played, m, skip_errors=True) for m in COMMON_METRICS} if played else {}
         for controller in controllers:
             cell = cells[controller][band]
             metrics: dict[str, MetricSummary] = {}

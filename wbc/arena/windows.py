@@ -8,8 +8,11 @@ seconds: those that every controller it is compared with survived on that trial 
 
 The window of a trial is a whole number of seconds, the smallest number of whole seconds any of the compared
 controllers played on it; a trial on which one of them played less than a second has no window and is left out
-(its value is NaN). The profiles are stored as text, each second's mean with 6 significant digits
-(`wbc.arena.metrics.profile_text`), so that a results file read back gives the same statistics to the last bit.
+(its value is NaN). In a run's summary of every controller, a trial that ended in a controller error (the
+controller raised, returned an invalid command, or ended its worker) does not shorten the others' window: it costs
+that controller its own trial, not the others' tracking figures. The profiles are stored as text, each second's
+mean with 6 significant digits (`wbc.arena.metrics.profile_text`), so that a results file read back gives the same
+statistics to the last bit.
 """
 
 from __future__ import annotations
@@ -20,7 +23,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from wbc.arena.metrics import per_second, profile_text
-from wbc.arena.trial_record import TrialRecord
+from wbc.arena.trial_record import CONTROLLER_ERROR, TrialRecord
 from wbc.errors import RecordError
 
 __all__ = ["COMMON_WINDOW", "common_window_values", "parse_profile", "per_second", "profile_text", "window_mean"]
@@ -50,12 +53,16 @@ def window_mean(record: TrialRecord, field: str, seconds: int) -> float:
     return float(profile[:seconds].mean())
 
 
-def common_window_values(cells: Mapping[str, Sequence[TrialRecord]], metric: str) -> dict[str, dict[tuple, float]]:
+def common_window_values(cells: Mapping[str, Sequence[TrialRecord]], metric: str, *,
+                         skip_errors: bool = False) -> dict[str, dict[tuple, float]]:
     """Each controller's tracking error over each trial's common window.
 
     Args:
         cells: controller -> its records (of one band, say); a trial counts when every controller played it.
         metric: a `COMMON_WINDOW` name (``vlin_err_common``, ``vang_err_common``).
+        skip_errors: a record that ended in a controller error does not shorten the window of the others (its own
+            value is NaN): the error costs only that controller's trial. Off, it does, as a fall would (a pair of
+            controllers is compared on the seconds both played).
 
     Returns:
         Controller -> {pair key: the mean of its per-second errors over the seconds every controller in `cells`
@@ -67,8 +74,8 @@ def common_window_values(cells: Mapping[str, Sequence[TrialRecord]], metric: str
     shared = set.intersection(*(set(k) for k in by_key.values())) if by_key else set()
     out: dict[str, dict[tuple, float]] = {c: {} for c in cells}
     for key in sorted(shared):
-        lengths = [len(str(by_key[c][key][field]).split()) for c in cells]
-        seconds = min(lengths)
+        judged = [c for c in cells if not (skip_errors and by_key[c][key].outcome == CONTROLLER_ERROR)]
+        seconds = min((len(str(by_key[c][key][field]).split()) for c in judged), default=0)
         for c in cells:
-            out[c][key] = window_mean(by_key[c][key], field, seconds)
+            out[c][key] = window_mean(by_key[c][key], field, seconds) if c in judged else math.nan
     return out
