@@ -294,6 +294,21 @@ def test_a_bad_io_file_names_its_line_field_and_what_is_valid(tmp_path, old, new
     assert (key in line) or line.startswith("[")
 
 
+def test_a_term_listed_twice_is_refused_even_where_the_model_takes_that_many_inputs(tmp_path):
+    # joint_pos_rel in place of last_action: the same 30 inputs, so only the duplicate can tell the file is wrong
+    model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
+    bad = _io().replace('name = "last_action"', 'name = "joint_pos_rel"')
+    io.write_text(bad)
+    _linear_model(model, np.zeros((ONNX_FRAME, 12)))
+    with pytest.raises(OnnxIoError) as caught:
+        get_controller(f"onnx:{model}")
+    err = caught.value
+    assert err.field == "[[observation.terms]] #4 name"
+    assert "term 'joint_pos_rel' is listed twice (terms #3 and #4); list each term once" in err.reason
+    assert bad.splitlines()[err.line - 1] == 'name = "joint_pos_rel"'
+    assert str(err).startswith(f"{io}:{err.line}: [[observation.terms]] #4 name: ")
+
+
 def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_path, capsys):
     model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
     io.write_text(_io())

@@ -19,9 +19,9 @@ arena as ``onnx:PATH``; the TOML file beside it (``PATH`` with the suffix ``.tom
   whole observation frames stacked oldest first, legged_gym style; ``terms``: each term's own history, oldest first,
   then the next term, Isaac Lab style), ``history_fill`` (after a reset the history holds the first observation,
   ``first``, or zeros, ``zeros``), ``clip`` (optional: the whole vector clipped to [-clip, clip] after scaling) and
-  the terms in order, ``[[observation.terms]]``: ``name`` (one of `TERMS`), ``scale`` (a number or one per entry,
-  default 1), ``clip`` (optional, a bound c for [-c, c] or an interval, applied after the scale), ``history``
-  (optional, with ``history_order = "terms"`` only). A robot does not measure its base's linear velocity:
+  the terms in order, ``[[observation.terms]]``: ``name`` (one of `TERMS`, each once), ``scale`` (a number or one
+  per entry, default 1), ``clip`` (optional, a bound c for [-c, c] or an interval, applied after the scale),
+  ``history`` (optional, with ``history_order = "terms"`` only). A robot does not measure its base's linear velocity:
   ``base_lin_vel`` takes ``source = "estimator"`` (required: the policy then sees the state estimator's estimate
   where it trained on the simulator's truth, and the file says so) and ``contact_force`` (optional, default 15: the
   foot sensor reading at which the estimator trusts a foot as standing [N, or a real robot's sensor counts]).
@@ -362,7 +362,8 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
     terms: list[ObsTerm] = []
     sizes = {"base_lin_vel": 3, "base_ang_vel": 3, "projected_gravity": 3, "velocity_commands": 3}
     shared_force: float | None = None  # one estimator serves every estimated term
-    for term in obs.table_array("terms", "[[observation.terms]]"):
+    first_at: dict[str, int] = {}  # each term's position (1-based) where it is first listed
+    for position, term in enumerate(obs.table_array("terms", "[[observation.terms]]"), start=1):
         term.check_keys(("name", "scale", "clip", "history", "source", "contact_force"))
         name = term.string("name")
         if name in NOT_MEASURED:
@@ -375,6 +376,10 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
                 term.fail("contact_force", f"{contact_force:g}, where an earlier estimated term has {shared_force:g}: "
                           "the terms share one estimator; give them the same value")
             shared_force = contact_force
+        if name in first_at:
+            term.fail("name", f"term {name!r} is listed twice (terms #{first_at[name]} and #{position}); list each "
+                      "term once, in the network's order (a term's past frames are its history, not a second entry)")
+        first_at[name] = position
         size = sizes.get(name, n)
         if "history" in term.data and order != "terms":
             term.fail("history", "a term's own history needs history_order = \"terms\" in [observation]; with "
