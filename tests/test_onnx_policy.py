@@ -339,6 +339,51 @@ def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_p
     assert "no controller here is an onnx:PATH policy" in capsys.readouterr().err
 
 
+def _two_outputs(path: Path, value_size: int, actions_size: int = 12, *, symbolic: bool = False) -> None:
+    """A network of two outputs, ``value`` first and ``actions`` second, of the sizes given; with `symbolic`, their
+    last axes are named, not sized (the sizes are known only once the network runs)."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    def out(name, size):
+        return helper.make_tensor_value_info(name, TensorProto.FLOAT, [1, f"{name}_size" if symbolic else size])
+
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", ["obs", "w"], ["actions"]), helper.make_node("MatMul", ["obs", "v"], ["value"])],
+        "two_outputs", [helper.make_tensor_value_info("obs", TensorProto.FLOAT, [1, ONNX_FRAME])],
+        [out("value", value_size), out("actions", actions_size)],
+        [numpy_helper.from_array(np.zeros((ONNX_FRAME, actions_size), np.float32), "w"),
+         numpy_helper.from_array(np.zeros((ONNX_FRAME, value_size), np.float32), "v")])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    path.write_bytes(model.SerializeToString())
+
+
+@pytest.mark.parametrize("symbolic", [False, True], ids=["sized", "sized-at-run-time"])
+def test_a_model_of_several_outputs_none_named_lists_them_and_says_which_to_name(tmp_path, symbolic):
+    model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
+    io.write_text(_io())
+    desc = get_robot("a1-wx200", "none")
+    _two_outputs(model, 1, symbolic=symbolic)  # a value head first, as an actor-critic export may write
+    with pytest.raises(OnnxModelError) as caught:
+        get_controller(f"onnx:{model}")
+    assert str(caught.value) == (
+        f"{io}: [onnx] output: not set, and {model} has 2 outputs: 'value' (1 entry), 'actions' (12 entries); the "
+        "first, 'value', read by default, is not one action per joint (12): set [onnx] output = \"actions\" (the "
+        "output with 12 entries)")
+    # no output has one entry per joint: NAME stands for the one that holds the actions
+    _two_outputs(model, 1, 13, symbolic=symbolic)
+    with pytest.raises(OnnxModelError, match=r"'value' \(1 entry\), 'actions' \(13 entries\); .*: set \[onnx\] "
+                       r'output = "NAME", the output that holds the actions \(none has 12 entries\)$'):
+        get_controller(f"onnx:{model}")
+    # the first output fits: it is read, as the I/O file's default promises
+    _two_outputs(model, 12, symbolic=symbolic)
+    assert get_controller(f"onnx:{model}").make(desc).ports.output_name == "value"
+    # named, the actions' output is read
+    _two_outputs(model, 1, symbolic=symbolic)
+    io.write_text(_io().replace("[observation]", '[onnx]\noutput = "actions"\n\n[observation]'))
+    assert get_controller(f"onnx:{model}").make(desc).ports.output_name == "actions"
+
+
 def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller(tmp_path):
     pytest.importorskip("torch")
     from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
