@@ -384,6 +384,35 @@ def test_a_model_of_several_outputs_none_named_lists_them_and_says_which_to_name
     assert get_controller(f"onnx:{model}").make(desc).ports.output_name == "actions"
 
 
+def test_a_float64_model_with_an_operator_onnxruntime_lacks_in_double_is_named_valid_and_asked_in_float32(tmp_path):
+    import onnxruntime as ort
+    from onnx import TensorProto, helper, numpy_helper
+
+    model, io = tmp_path / "f64.onnx", tmp_path / "f64.toml"
+    io.write_text(_io())
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", ["obs", "w"], ["y"]), helper.make_node("Elu", ["y"], ["actions"], name="act")],
+        "f64", [helper.make_tensor_value_info("obs", TensorProto.DOUBLE, [1, ONNX_FRAME])],
+        [helper.make_tensor_value_info("actions", TensorProto.DOUBLE, [1, 12])],
+        [numpy_helper.from_array(np.zeros((ONNX_FRAME, 12)), "w")])
+    proto = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    proto.ir_version = 8
+    onnx.checker.check_model(proto)  # a valid model
+    model.write_bytes(proto.SerializeToString())
+    try:
+        ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
+        pytest.skip(f"onnxruntime {ort.__version__} runs Elu in double")
+    except ort.capi.onnxruntime_pybind11_state.NotImplemented:
+        pass
+    with pytest.raises(OnnxModelError) as caught:
+        get_controller(f"onnx:{model}")
+    text = str(caught.value)
+    assert text.startswith(f"{model}: a valid ONNX model that onnxruntime ")
+    assert "has no implementation of its Elu operator (version 6, node 'act')" in text
+    assert text.endswith("export the network in float32 (torch: model.float() and a float32 example input)")
+    assert "damaged" not in text and "export it again" not in text
+
+
 def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller(tmp_path):
     pytest.importorskip("torch")
     from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig

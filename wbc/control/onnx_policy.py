@@ -24,9 +24,10 @@ provenance (`ControllerSpec.provenance`) holds the sha256 of the model, of each 
 Before any trial `onnx_spec` refuses, with one line naming the file: a model (or external data file) that is not a
 regular file or is larger than `wbc.input_files.LIMITS` allows; a model whose sha256 differs from the one its I/O
 file records (``[onnx] sha256``, written by ``wbc``'s export; without it the model runs unchecked); a model
-onnxruntime cannot load (a damaged file); a graph whose inputs are not exactly the one observation the controller
-feeds, or whose output is not the joints' actions (`check_model`); and a graph that fails, or answers with the wrong
-size or a non-finite action, on the observation of a robot at rest.
+onnxruntime cannot load (a damaged file, or a valid one with an operator onnxruntime does not implement for its
+element type, named as such: a float64 Elu, say); a graph whose inputs are not exactly the one observation the
+controller feeds, or whose output is not the joints' actions (`check_model`); and a graph that fails, or answers with
+the wrong size or a non-finite action, on the observation of a robot at rest.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +62,9 @@ ONNX_PREFIX = "onnx:"
 """``onnx:PATH`` names the ONNX model at PATH (its I/O file: PATH with the suffix .toml, or ``--io FILE``)."""
 
 _DTYPES = {"tensor(float)": np.float32, "tensor(double)": np.float64}
+_MISSING_KERNEL = re.compile(r"NOT_IMPLEMENTED\s*:\s*Could not find an implementation for (?P<op>[\w.]+)"
+                             r"\((?P<version>\d+)\)(?: node with name '(?P<node>[^']*)')?")
+"""onnxruntime's message for a valid model's operator that it implements for neither its element type nor version."""
 
 
 # -- external data: the few protobuf fields of onnx.proto that lead to a tensor's external_data ----------------------
@@ -202,7 +207,8 @@ def open_session(model: str | Path) -> Any:
     Raises:
         MissingExtraError: onnxruntime is not installed (the message names the ``onnx`` extra).
         OnnxModelError: the file is missing or not a model onnxruntime can run, or an external data file it names is
-            missing.
+            missing; a valid model with an operator onnxruntime does not implement for its element type (a float64
+            Elu, say) is named as such, with the operator, and asked for in float32.
     """
     path, _ = resolve_model(model)
     ort = require("onnxruntime", "onnx")
@@ -213,6 +219,15 @@ def open_session(model: str | Path) -> Any:
     try:
         return ort.InferenceSession(str(path), sess_options=opts, providers=["CPUExecutionProvider"])
     except Exception as exc:  # noqa: BLE001 (onnxruntime raises its own types; all mean "cannot run this file")
+        missing = _MISSING_KERNEL.search(str(exc))
+        if missing is not None:
+            node = f", node {missing['node']!r}" if missing["node"] else ""
+            raise OnnxModelError(
+                f"{model}: a valid ONNX model that onnxruntime {ort.__version__} cannot run: it has no implementation "
+                f"of its {missing['op']} operator (version {missing['version']}{node}) for the element type or the "
+                "operator version the model uses (a float64 model meets this most: onnxruntime implements few "
+                "operators in double); export the network in float32 (torch: model.float() and a float32 example "
+                "input)") from None
         raise OnnxModelError(f"{model}: not an ONNX model onnxruntime can run, or a damaged one "
                              f"({type(exc).__name__}: {_one_line(exc)}); export it again") from None
 
