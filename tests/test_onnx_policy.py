@@ -330,6 +330,10 @@ def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_p
     assert main(["run", f"onnx:{model}", "--scenario", "scenarios/push.toml", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{io}: file not found; an onnx:PATH policy needs its I/O file beside it" in err
+    # the recipe is where the message says (the README links to the guide, which holds it)
+    guide = Path("docs/guides/own-controller.md")
+    assert f"an example and a recipe for each trainer: {guide}, 'A policy from another trainer'" in err
+    assert "## A policy from another trainer" in guide.read_text() and "README" not in err
     # --io names another file; it goes only to an onnx: policy
     other = tmp_path / "elsewhere.toml"
     other.write_text(_io())

@@ -309,7 +309,8 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
     shown = str(path)
     if not Path(path).exists():
         raise OnnxIoError(shown, "file not found; an onnx:PATH policy needs its I/O file beside it (PATH with the "
-                          "suffix .toml) or named with --io FILE; see the README's recipe")
+                          "suffix .toml) or named with --io FILE; an example and a recipe for each trainer: "
+                          "docs/guides/own-controller.md, 'A policy from another trainer'")
     data = read_toml(path)
     lines = TomlLines(read_text(path, kind="toml"))
     top = TomlTable(shown, lines, data, "", ("", 0), error=OnnxIoError)
