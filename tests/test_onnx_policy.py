@@ -248,6 +248,9 @@ def test_recorded_values_are_refused_for_a_measured_term_or_of_the_wrong_size(tm
 IO_ERRORS = [
     ('name = "last_action"', 'name = "height"', "[[observation.terms]] #4 name",
      "unknown term 'height'; valid terms: base_lin_vel, base_ang_vel, projected_gravity, velocity_commands"),
+    ('name = "last_action"', 'name = "joint_vel_rel"', "[[observation.terms]] #4 name",
+     "unknown term 'joint_vel_rel': Isaac Lab's joint_vel_rel is our joint_vel (the same, with a zero default "
+     'velocity); write name = "joint_vel"; valid terms: base_lin_vel, '),
     ('name = "base_ang_vel"', 'name = "base_lin_vel"', "[[observation.terms]] #1 name",
      "does not measure its base's linear velocity (RobotState has the IMU and the joint encoders only); add source = "
      '"estimator" to this term'),

@@ -31,6 +31,8 @@ arena as ``onnx:PATH``; the TOML file beside it (``PATH`` with the suffix ``.tom
 - ``[pd]``: ``kp`` [N m / rad] and ``kd`` [N m s / rad], a number or one per joint (network order), the gains the
   motors track the targets with.
 
+A term a trainer names otherwise (`TRAINER_NAMES`: Isaac Lab's ``joint_vel_rel``) is refused with our name for it.
+
 The file is read through `wbc.input_files.read_toml` (a regular file of at most 1 MiB, UTF-8, nesting bounded, valid
 TOML: an `InputFileError` otherwise, naming the file and line). Every bad value is an `OnnxIoError` that reads
 ``path:line: [table] key: what is wrong``, like a scenario file's.
@@ -55,7 +57,7 @@ from wbc.robots.registry import ROBOTS, get_robot
 from wbc.scenario.toml_fields import Range, TomlLines, TomlTable, show
 
 __all__ = ["ACTION_KINDS", "ESTIMATED", "HISTORY_FILLS", "HISTORY_ORDERS", "NOT_MEASURED",
-           "SOURCES", "TERMS", "ObsTerm", "OnnxIo", "io_path_for", "load_onnx_io"]
+           "SOURCES", "TERMS", "TRAINER_NAMES", "ObsTerm", "OnnxIo", "io_path_for", "load_onnx_io"]
 
 TERMS: dict[str, str] = {
     "base_lin_vel": "the trunk's linear velocity, body frame (3) [m/s], estimated from the IMU and the legs' "
@@ -74,6 +76,13 @@ NOT_MEASURED: dict[str, str] = {
     "height_scan": "this robot has no height scanner; retrain the policy blind (without the height scan term)",
 }
 """Terms trainers offer that a robot cannot give a controller, with what to do instead."""
+
+TRAINER_NAMES: dict[str, tuple[str, str]] = {
+    "joint_vel_rel": ("joint_vel", "Isaac Lab's joint_vel_rel is our joint_vel (the same, with a zero default "
+                                   "velocity)"),
+}
+"""Terms a trainer names otherwise, by the trainer's name: our name and the correspondence, which an unknown-term
+message gives (docs/guides/own-controller.md, the Isaac Lab recipe)."""
 
 ESTIMATED: dict[str, str] = {
     "base_lin_vel": "a robot does not measure its base's linear velocity (RobotState has the IMU and the joint "
@@ -370,7 +379,9 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
         if name in NOT_MEASURED:
             term.fail("name", f"{name!r}: {NOT_MEASURED[name]}")
         if name not in TERMS:
-            term.fail("name", f"unknown term {name!r}; valid terms: {', '.join(TERMS)}")
+            ours, why = TRAINER_NAMES.get(name, (None, ""))
+            hint = f": {why}; write name = \"{ours}\"" if ours is not None else ""
+            term.fail("name", f"unknown term {name!r}{hint}; valid terms: {', '.join(TERMS)}")
         source, contact_force = _source(term, name)
         if contact_force is not None:
             if shared_force is not None and contact_force != shared_force:
