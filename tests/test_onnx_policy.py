@@ -248,6 +248,9 @@ def test_recorded_values_are_refused_for_a_measured_term_or_of_the_wrong_size(tm
 IO_ERRORS = [
     ('name = "last_action"', 'name = "height"', "[[observation.terms]] #4 name",
      "unknown term 'height'; valid terms: base_lin_vel, base_ang_vel, projected_gravity, velocity_commands"),
+    ('name = "last_action"', 'name = "joint_vel_rel"', "[[observation.terms]] #4 name",
+     "unknown term 'joint_vel_rel': Isaac Lab's joint_vel_rel is our joint_vel (the same, with a zero default "
+     'velocity); write name = "joint_vel"; valid terms: base_lin_vel, '),
     ('name = "base_ang_vel"', 'name = "base_lin_vel"', "[[observation.terms]] #1 name",
      "does not measure its base's linear velocity (RobotState has the IMU and the joint encoders only); add source = "
      '"estimator" to this term'),
@@ -294,6 +297,21 @@ def test_a_bad_io_file_names_its_line_field_and_what_is_valid(tmp_path, old, new
     assert (key in line) or line.startswith("[")
 
 
+def test_a_term_listed_twice_is_refused_even_where_the_model_takes_that_many_inputs(tmp_path):
+    # joint_pos_rel in place of last_action: the same 30 inputs, so only the duplicate can tell the file is wrong
+    model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
+    bad = _io().replace('name = "last_action"', 'name = "joint_pos_rel"')
+    io.write_text(bad)
+    _linear_model(model, np.zeros((ONNX_FRAME, 12)))
+    with pytest.raises(OnnxIoError) as caught:
+        get_controller(f"onnx:{model}")
+    err = caught.value
+    assert err.field == "[[observation.terms]] #4 name"
+    assert "term 'joint_pos_rel' is listed twice (terms #3 and #4); list each term once" in err.reason
+    assert bad.splitlines()[err.line - 1] == 'name = "joint_pos_rel"'
+    assert str(err).startswith(f"{io}:{err.line}: [[observation.terms]] #4 name: ")
+
+
 def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_path, capsys):
     model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
     io.write_text(_io())
@@ -315,6 +333,10 @@ def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_p
     assert main(["run", f"onnx:{model}", "--scenario", "scenarios/push.toml", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert f"{io}: file not found; an onnx:PATH policy needs its I/O file beside it" in err
+    # the recipe is where the message says (the README links to the guide, which holds it)
+    guide = Path("docs/guides/own-controller.md")
+    assert f"an example and a recipe for each trainer: {guide}, 'A policy from another trainer'" in err
+    assert "## A policy from another trainer" in guide.read_text() and "README" not in err
     # --io names another file; it goes only to an onnx: policy
     other = tmp_path / "elsewhere.toml"
     other.write_text(_io())
@@ -322,6 +344,80 @@ def test_a_model_that_does_not_fit_its_io_file_is_refused_before_any_trial(tmp_p
     assert get_controller(f"onnx:{model}", io=other).config_file == str(other)
     assert main(["run", "stand", "--scenario", "scenarios/push.toml", "--io", str(other)]) == 2
     assert "no controller here is an onnx:PATH policy" in capsys.readouterr().err
+
+
+def _two_outputs(path: Path, value_size: int, actions_size: int = 12, *, symbolic: bool = False) -> None:
+    """A network of two outputs, ``value`` first and ``actions`` second, of the sizes given; with `symbolic`, their
+    last axes are named, not sized (the sizes are known only once the network runs)."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    def out(name, size):
+        return helper.make_tensor_value_info(name, TensorProto.FLOAT, [1, f"{name}_size" if symbolic else size])
+
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", ["obs", "w"], ["actions"]), helper.make_node("MatMul", ["obs", "v"], ["value"])],
+        "two_outputs", [helper.make_tensor_value_info("obs", TensorProto.FLOAT, [1, ONNX_FRAME])],
+        [out("value", value_size), out("actions", actions_size)],
+        [numpy_helper.from_array(np.zeros((ONNX_FRAME, actions_size), np.float32), "w"),
+         numpy_helper.from_array(np.zeros((ONNX_FRAME, value_size), np.float32), "v")])
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    model.ir_version = 8
+    path.write_bytes(model.SerializeToString())
+
+
+@pytest.mark.parametrize("symbolic", [False, True], ids=["sized", "sized-at-run-time"])
+def test_a_model_of_several_outputs_none_named_lists_them_and_says_which_to_name(tmp_path, symbolic):
+    model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
+    io.write_text(_io())
+    desc = get_robot("a1-wx200", "none")
+    _two_outputs(model, 1, symbolic=symbolic)  # a value head first, as an actor-critic export may write
+    with pytest.raises(OnnxModelError) as caught:
+        get_controller(f"onnx:{model}")
+    assert str(caught.value) == (
+        f"{io}: [onnx] output: not set, and {model} has 2 outputs: 'value' (1 entry), 'actions' (12 entries); the "
+        "first, 'value', read by default, is not one action per joint (12): set [onnx] output = \"actions\" (the "
+        "output with 12 entries)")
+    # no output has one entry per joint: NAME stands for the one that holds the actions
+    _two_outputs(model, 1, 13, symbolic=symbolic)
+    with pytest.raises(OnnxModelError, match=r"'value' \(1 entry\), 'actions' \(13 entries\); .*: set \[onnx\] "
+                       r'output = "NAME", the output that holds the actions \(none has 12 entries\)$'):
+        get_controller(f"onnx:{model}")
+    # the first output fits: it is read, as the I/O file's default promises
+    _two_outputs(model, 12, symbolic=symbolic)
+    assert get_controller(f"onnx:{model}").make(desc).ports.output_name == "value"
+    # named, the actions' output is read
+    _two_outputs(model, 1, symbolic=symbolic)
+    io.write_text(_io().replace("[observation]", '[onnx]\noutput = "actions"\n\n[observation]'))
+    assert get_controller(f"onnx:{model}").make(desc).ports.output_name == "actions"
+
+
+def test_a_float64_model_with_an_operator_onnxruntime_lacks_in_double_is_named_valid_and_asked_in_float32(tmp_path):
+    import onnxruntime as ort
+    from onnx import TensorProto, helper, numpy_helper
+
+    model, io = tmp_path / "f64.onnx", tmp_path / "f64.toml"
+    io.write_text(_io())
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", ["obs", "w"], ["y"]), helper.make_node("Elu", ["y"], ["actions"], name="act")],
+        "f64", [helper.make_tensor_value_info("obs", TensorProto.DOUBLE, [1, ONNX_FRAME])],
+        [helper.make_tensor_value_info("actions", TensorProto.DOUBLE, [1, 12])],
+        [numpy_helper.from_array(np.zeros((ONNX_FRAME, 12)), "w")])
+    proto = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    proto.ir_version = 8
+    onnx.checker.check_model(proto)  # a valid model
+    model.write_bytes(proto.SerializeToString())
+    try:
+        ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
+        pytest.skip(f"onnxruntime {ort.__version__} runs Elu in double")
+    except ort.capi.onnxruntime_pybind11_state.NotImplemented:
+        pass
+    with pytest.raises(OnnxModelError) as caught:
+        get_controller(f"onnx:{model}")
+    text = str(caught.value)
+    assert text.startswith(f"{model}: a valid ONNX model that onnxruntime ")
+    assert "has no implementation of its Elu operator (version 6, node 'act')" in text
+    assert text.endswith("export the network in float32 (torch: model.float() and a float32 example input)")
+    assert "damaged" not in text and "export it again" not in text
 
 
 def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller(tmp_path):

@@ -19,9 +19,9 @@ arena as ``onnx:PATH``; the TOML file beside it (``PATH`` with the suffix ``.tom
   whole observation frames stacked oldest first, legged_gym style; ``terms``: each term's own history, oldest first,
   then the next term, Isaac Lab style), ``history_fill`` (after a reset the history holds the first observation,
   ``first``, or zeros, ``zeros``), ``clip`` (optional: the whole vector clipped to [-clip, clip] after scaling) and
-  the terms in order, ``[[observation.terms]]``: ``name`` (one of `TERMS`), ``scale`` (a number or one per entry,
-  default 1), ``clip`` (optional, a bound c for [-c, c] or an interval, applied after the scale), ``history``
-  (optional, with ``history_order = "terms"`` only). A robot does not measure its base's linear velocity:
+  the terms in order, ``[[observation.terms]]``: ``name`` (one of `TERMS`, each once), ``scale`` (a number or one
+  per entry, default 1), ``clip`` (optional, a bound c for [-c, c] or an interval, applied after the scale),
+  ``history`` (optional, with ``history_order = "terms"`` only). A robot does not measure its base's linear velocity:
   ``base_lin_vel`` takes ``source = "estimator"`` (required: the policy then sees the state estimator's estimate
   where it trained on the simulator's truth, and the file says so) and ``contact_force`` (optional, default 15: the
   foot sensor reading at which the estimator trusts a foot as standing [N, or a real robot's sensor counts]).
@@ -30,6 +30,8 @@ arena as ``onnx:PATH``; the TOML file beside it (``PATH`` with the suffix ``.tom
   ``last_action`` sees the clipped one).
 - ``[pd]``: ``kp`` [N m / rad] and ``kd`` [N m s / rad], a number or one per joint (network order), the gains the
   motors track the targets with.
+
+A term a trainer names otherwise (`TRAINER_NAMES`: Isaac Lab's ``joint_vel_rel``) is refused with our name for it.
 
 The file is read through `wbc.input_files.read_toml` (a regular file of at most 1 MiB, UTF-8, nesting bounded, valid
 TOML: an `InputFileError` otherwise, naming the file and line). Every bad value is an `OnnxIoError` that reads
@@ -55,7 +57,7 @@ from wbc.robots.registry import ROBOTS, get_robot
 from wbc.scenario.toml_fields import Range, TomlLines, TomlTable, show
 
 __all__ = ["ACTION_KINDS", "ESTIMATED", "HISTORY_FILLS", "HISTORY_ORDERS", "NOT_MEASURED",
-           "SOURCES", "TERMS", "ObsTerm", "OnnxIo", "io_path_for", "load_onnx_io"]
+           "SOURCES", "TERMS", "TRAINER_NAMES", "ObsTerm", "OnnxIo", "io_path_for", "load_onnx_io"]
 
 TERMS: dict[str, str] = {
     "base_lin_vel": "the trunk's linear velocity, body frame (3) [m/s], estimated from the IMU and the legs' "
@@ -74,6 +76,13 @@ NOT_MEASURED: dict[str, str] = {
     "height_scan": "this robot has no height scanner; retrain the policy blind (without the height scan term)",
 }
 """Terms trainers offer that a robot cannot give a controller, with what to do instead."""
+
+TRAINER_NAMES: dict[str, tuple[str, str]] = {
+    "joint_vel_rel": ("joint_vel", "Isaac Lab's joint_vel_rel is our joint_vel (the same, with a zero default "
+                                   "velocity)"),
+}
+"""Terms a trainer names otherwise, by the trainer's name: our name and the correspondence, which an unknown-term
+message gives (docs/guides/own-controller.md, the Isaac Lab recipe)."""
 
 ESTIMATED: dict[str, str] = {
     "base_lin_vel": "a robot does not measure its base's linear velocity (RobotState has the IMU and the joint "
@@ -309,7 +318,8 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
     shown = str(path)
     if not Path(path).exists():
         raise OnnxIoError(shown, "file not found; an onnx:PATH policy needs its I/O file beside it (PATH with the "
-                          "suffix .toml) or named with --io FILE; see the README's recipe")
+                          "suffix .toml) or named with --io FILE; an example and a recipe for each trainer: "
+                          "docs/guides/own-controller.md, 'A policy from another trainer'")
     data = read_toml(path)
     lines = TomlLines(read_text(path, kind="toml"))
     top = TomlTable(shown, lines, data, "", ("", 0), error=OnnxIoError)
@@ -362,19 +372,26 @@ def load_onnx_io(path: str | Path) -> OnnxIo:
     terms: list[ObsTerm] = []
     sizes = {"base_lin_vel": 3, "base_ang_vel": 3, "projected_gravity": 3, "velocity_commands": 3}
     shared_force: float | None = None  # one estimator serves every estimated term
-    for term in obs.table_array("terms", "[[observation.terms]]"):
+    first_at: dict[str, int] = {}  # each term's position (1-based) where it is first listed
+    for position, term in enumerate(obs.table_array("terms", "[[observation.terms]]"), start=1):
         term.check_keys(("name", "scale", "clip", "history", "source", "contact_force"))
         name = term.string("name")
         if name in NOT_MEASURED:
             term.fail("name", f"{name!r}: {NOT_MEASURED[name]}")
         if name not in TERMS:
-            term.fail("name", f"unknown term {name!r}; valid terms: {', '.join(TERMS)}")
+            ours, why = TRAINER_NAMES.get(name, (None, ""))
+            hint = f": {why}; write name = \"{ours}\"" if ours is not None else ""
+            term.fail("name", f"unknown term {name!r}{hint}; valid terms: {', '.join(TERMS)}")
         source, contact_force = _source(term, name)
         if contact_force is not None:
             if shared_force is not None and contact_force != shared_force:
                 term.fail("contact_force", f"{contact_force:g}, where an earlier estimated term has {shared_force:g}: "
                           "the terms share one estimator; give them the same value")
             shared_force = contact_force
+        if name in first_at:
+            term.fail("name", f"term {name!r} is listed twice (terms #{first_at[name]} and #{position}); list each "
+                      "term once, in the network's order (a term's past frames are its history, not a second entry)")
+        first_at[name] = position
         size = sizes.get(name, n)
         if "history" in term.data and order != "terms":
             term.fail("history", "a term's own history needs history_order = \"terms\" in [observation]; with "

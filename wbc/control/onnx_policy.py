@@ -24,9 +24,10 @@ provenance (`ControllerSpec.provenance`) holds the sha256 of the model, of each 
 Before any trial `onnx_spec` refuses, with one line naming the file: a model (or external data file) that is not a
 regular file or is larger than `wbc.input_files.LIMITS` allows; a model whose sha256 differs from the one its I/O
 file records (``[onnx] sha256``, written by ``wbc``'s export; without it the model runs unchecked); a model
-onnxruntime cannot load (a damaged file); a graph whose inputs are not exactly the one observation the controller
-feeds, or whose output is not the joints' actions (`check_model`); and a graph that fails, or answers with the wrong
-size or a non-finite action, on the observation of a robot at rest.
+onnxruntime cannot load (a damaged file, or a valid one with an operator onnxruntime does not implement for its
+element type, named as such: a float64 Elu, say); a graph whose inputs are not exactly the one observation the
+controller feeds, or whose output is not the joints' actions (`check_model`); and a graph that fails, or answers with
+the wrong size or a non-finite action, on the observation of a robot at rest.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import os
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -60,6 +62,9 @@ ONNX_PREFIX = "onnx:"
 """``onnx:PATH`` names the ONNX model at PATH (its I/O file: PATH with the suffix .toml, or ``--io FILE``)."""
 
 _DTYPES = {"tensor(float)": np.float32, "tensor(double)": np.float64}
+_MISSING_KERNEL = re.compile(r"NOT_IMPLEMENTED\s*:\s*Could not find an implementation for (?P<op>[\w.]+)"
+                             r"\((?P<version>\d+)\)(?: node with name '(?P<node>[^']*)')?")
+"""onnxruntime's message for a valid model's operator that it implements for neither its element type nor version."""
 
 
 # -- external data: the few protobuf fields of onnx.proto that lead to a tensor's external_data ----------------------
@@ -202,7 +207,8 @@ def open_session(model: str | Path) -> Any:
     Raises:
         MissingExtraError: onnxruntime is not installed (the message names the ``onnx`` extra).
         OnnxModelError: the file is missing or not a model onnxruntime can run, or an external data file it names is
-            missing.
+            missing; a valid model with an operator onnxruntime does not implement for its element type (a float64
+            Elu, say) is named as such, with the operator, and asked for in float32.
     """
     path, _ = resolve_model(model)
     ort = require("onnxruntime", "onnx")
@@ -213,6 +219,15 @@ def open_session(model: str | Path) -> Any:
     try:
         return ort.InferenceSession(str(path), sess_options=opts, providers=["CPUExecutionProvider"])
     except Exception as exc:  # noqa: BLE001 (onnxruntime raises its own types; all mean "cannot run this file")
+        missing = _MISSING_KERNEL.search(str(exc))
+        if missing is not None:
+            node = f", node {missing['node']!r}" if missing["node"] else ""
+            raise OnnxModelError(
+                f"{model}: a valid ONNX model that onnxruntime {ort.__version__} cannot run: it has no implementation "
+                f"of its {missing['op']} operator (version {missing['version']}{node}) for the element type or the "
+                "operator version the model uses (a float64 model meets this most: onnxruntime implements few "
+                "operators in double); export the network in float32 (torch: model.float() and a float32 example "
+                "input)") from None
         raise OnnxModelError(f"{model}: not an ONNX model onnxruntime can run, or a damaged one "
                              f"({type(exc).__name__}: {_one_line(exc)}); export it again") from None
 
@@ -252,8 +267,10 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
     The graph must take exactly one input, the observation the controller feeds (named by ``[onnx] input``, or the
     only one): an input beyond it would be left unfed and fail in the first `OnnxController.act`. Its element type
     is float or double, its shape ``[size]`` or ``[batch, size]`` with a batch of 1 (or free) and the I/O file's
-    input size; the output read (``[onnx] output``, or the first) is float or double with one entry per joint. The
-    graph is then run once on the zero observation: it must answer with one finite action per joint.
+    input size; the output read (``[onnx] output``, or the first) is float or double with one entry per joint (a
+    model of several outputs whose first is not the actions is refused with each output's size: the I/O file names
+    the output to read). The graph is then run once on the zero observation: it must answer with one finite action
+    per joint.
 
     Raises:
         OnnxModelError: a mismatch, or a graph that fails or answers wrongly on the zero observation; the message
@@ -297,6 +314,8 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
         raise OnnxModelError(f"{model}: output {out.name!r} is a {out.type}; the actions must be tensor(float) or "
                              "tensor(double)")
     out_size = _size(list(out.shape))
+    if out_size is not None and out_size != io.num_joints and io.output_name is None and len(outputs) > 1:
+        _unnamed_output(io, model, [(o.name, _size(list(o.shape))) for o in outputs])
     if out_size is not None and out_size != io.num_joints:
         raise OnnxModelError(f"{io.path}: [policy] joints: {io.num_joints} joints listed, but {model} output "
                              f"{out.name!r} has {out_size} entries; list the network's joints in its order")
@@ -304,6 +323,33 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
                          batched=len(shape) == 2)
     _dry_run(session, ports, io, model)
     return ports
+
+
+def _unnamed_output(io: OnnxIo, model: str | Path, sizes: list[tuple[str, int | None]]) -> None:
+    """Refuse a model of several outputs whose first, read by default, is not the joints' actions.
+
+    Args:
+        io: the I/O file, which names no ``[onnx] output``.
+        model: the model, as named.
+        sizes: each output's name and entries (None: fixed only at run time), in the model's order.
+
+    Raises:
+        OnnxModelError: always; the message lists the outputs with their sizes and says which to name.
+    """
+    n = io.num_joints
+
+    def entries(size: int | None) -> str:
+        return "size fixed at run time" if size is None else f"{size} {'entry' if size == 1 else 'entries'}"
+
+    listed = ", ".join(f"{name!r} ({entries(size)})" for name, size in sizes)
+    fits = [name for name, size in sizes if size == n]
+    if len(fits) == 1:
+        fix = f'set [onnx] output = "{fits[0]}" (the output with {n} entries)'
+    else:
+        which = "none has" if not fits else f"{', '.join(map(repr, fits))} have"
+        fix = f'set [onnx] output = "NAME", the output that holds the actions ({which} {n} entries)'
+    raise OnnxModelError(f"{io.path}: [onnx] output: not set, and {model} has {len(sizes)} outputs: {listed}; the "
+                         f"first, {sizes[0][0]!r}, read by default, is not one action per joint ({n}): {fix}")
 
 
 def _dry_run(session: Any, ports: NetworkPorts, io: OnnxIo, model: str | Path) -> None:
@@ -315,6 +361,14 @@ def _dry_run(session: Any, ports: NetworkPorts, io: OnnxIo, model: str | Path) -
         raise OnnxModelError(f"{model}: the network fails on the observation the controller feeds ({io.input_size} "
                              f"zeros): {type(exc).__name__}: {_one_line(exc)}; export it again") from None
     action = np.asarray(out, dtype=np.float64)
+    outputs = session.get_outputs()
+    if action.size != io.num_joints and io.output_name is None and len(outputs) > 1:
+        try:
+            every = session.run(None, {ports.input_name: x[None] if ports.batched else x})
+        except Exception:  # noqa: BLE001 (the output read ran; another may not: its size is then unknown)
+            every = [None] * len(outputs)
+        _unnamed_output(io, model, [(o.name, None if v is None else int(np.asarray(v).size))
+                                    for o, v in zip(outputs, every, strict=True)])
     if action.size != io.num_joints:
         raise OnnxModelError(f"{io.path}: [policy] joints: {io.num_joints} joints listed, but {model} answers with "
                              f"{action.size} actions (shape {list(action.shape)}); list the network's joints in its "
