@@ -197,15 +197,18 @@ class ControllerCheck:
 
     @property
     def passed(self) -> bool:
-        """Every check ran and passed."""
-        return all(o.passed is True for o in self.outcomes)
+        """Some check ran, and every check ran and passed (nothing checked is not a pass)."""
+        return bool(self.outcomes) and all(o.passed is True for o in self.outcomes)
 
     def failed(self, check: str | None = None) -> list[CheckOutcome]:
         """The outcomes that failed (of `check` only, if given)."""
         return [o for o in self.outcomes if o.passed is False and check in (None, o.check)]
 
     def raise_if_failed(self) -> None:
-        """Raise `ControllerCheckError` listing every failed check, if any failed or could not run."""
+        """Raise `ControllerCheckError` listing every failed check, if any failed or could not run, or none ran."""
+        if not self.outcomes:
+            raise ControllerCheckError(f"controller {self.controller}: no check ran (no robot and arm mode to check it "
+                                       "on), so it has not met its contract")
         bad = [o for o in self.outcomes if o.passed is not True]
         if bad:
             lines = "; ".join(f"{o.check} on {o.robot}/{o.arm_mode}: {o.detail}" for o in bad)
@@ -235,8 +238,10 @@ def check_controller(controller: ControllerSpec | str, config: CheckConfig | Non
         WbcError: the name cannot be resolved (unknown name, unreadable file, plug-in that cannot be imported).
         ScenarioError: the scenario file is missing or invalid (the message names the file and field).
         ReplayFileError: the replay file is missing or invalid (the message names the file and field).
-        ConfigError: `seconds` is not positive, or the scenario or the replay is for a robot or arm mode the
-            controller does not claim or `robots` leaves out (the message names the file).
+        ConfigError: `seconds` is not positive; `robots` names no robot the controller claims, or it claims none
+            (the message names the controller, the robots it drives and those asked for); the scenario or the replay
+            is for a robot or arm mode the controller does not claim or `robots` leaves out (the message names the
+            file).
     """
     from threadpoolctl import threadpool_limits  # single-threaded BLAS, as in the arena's workers
 
@@ -250,6 +255,8 @@ def check_controller(controller: ControllerSpec | str, config: CheckConfig | Non
     else:
         spec = controller
     claims = [(robot, mode) for robot, mode in spec.claims() if cfg.robots is None or robot in cfg.robots]
+    if not claims:  # no check would run, and a check of nothing must not read as a pass
+        raise ConfigError(_nothing_to_check(spec, cfg.robots))
     trial = _first_trial(cfg.scenario, spec, claims, cfg.robots) if cfg.scenario is not None else None
     if trial is not None:
         claims = [(robot, mode) for robot, mode in claims if robot == trial.robot]
@@ -270,6 +277,17 @@ def _claimed(spec: ControllerSpec, robots: tuple[str, ...] | None) -> str:
     have = sorted({robot for robot, _ in spec.claims()})
     text = f"controller {spec.name} drives {', '.join(have)}"
     return text + (f" (checked here: {', '.join(robots)}, as --robot asks)" if robots is not None else "")
+
+
+def _nothing_to_check(spec: ControllerSpec, robots: tuple[str, ...] | None) -> str:
+    """Why no (robot, arm mode) is left to check: the controller claims none, or none that `robots` asks for."""
+    have = sorted({robot for robot, _ in spec.claims()})
+    if not have:
+        return (f"controller {spec.name} claims no robot, so there is nothing to check; a ControllerPlugin's (or "
+                "ControllerSpec's) robots must name at least one robot, or be None for every robot")
+    asked = ", ".join(robots or ())
+    return (f"--robot {asked}: controller {spec.name} drives {', '.join(have)}, not {asked}; check it on a robot it "
+            f"drives (--robot {have[0]}), or leave --robot out to check every robot it drives")
 
 
 def _first_trial(path: str | Path, spec: ControllerSpec, claims: list[tuple[str, str]],
