@@ -175,6 +175,40 @@ def test_check_controller_on_the_command_line(capsys):
     assert "Traceback" not in capsys.readouterr().err
 
 
+class ResetRaises(Stand):
+    def reset(self):
+        raise RuntimeError("no home pose")
+
+
+class ResetRaisesAfterAct(Stand):
+    """Its reset() fails once act() has run: the replays' reset, after the closed loop."""
+
+    def __init__(self, desc):
+        super().__init__(desc)
+        self.acted = False
+
+    def reset(self):
+        if self.acted:
+            raise KeyError("history")
+
+    def act(self, state, command):
+        self.acted = True
+        return self.command
+
+
+@pytest.mark.parametrize(("broken", "says"), [
+    (ResetRaises, "reset() raised RuntimeError: no home pose at "),
+    (ResetRaisesAfterAct, "reset() raised KeyError: 'history' at "),
+])
+def test_a_reset_that_raises_fails_the_reset_check_naming_the_exception(broken, says, capsys):
+    spec = ControllerSpec("reset-raises", "actuated", broken, "reset() raises", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert not result.passed
+    assert {o.check for o in result.failed()} == {"reset"}, [(o.check, o.detail) for o in result.failed()]
+    assert says in result.failed("reset")[0].detail
+    assert all(o.passed is not True for o in result.outcomes if o.check in ("output", "truth"))
+
+
 GO1_ONLY = '''"""The stand controller, claiming go1-arm only."""
 from wbc.control import ControllerPlugin
 from wbc.control.stand import StandController

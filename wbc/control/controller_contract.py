@@ -403,12 +403,26 @@ def _copy(state: RobotState) -> RobotState:
 
 
 class _Pass:
-    """One pass of `act` over a sequence: the stacked outputs and the times, or the failure."""
+    """One pass of `act` over a sequence: the stacked outputs and the times, or the failure.
+
+    `reset_failure` is set instead of `failure` when the `reset` before the pass raised (the ``reset`` check's
+    finding, not the ``output`` check's).
+    """
 
     def __init__(self) -> None:
         self.outputs: list[np.ndarray] = []
         self.times: list[float] = []
         self.failure: str | None = None
+        self.reset_failure: str | None = None
+
+
+def _reset(ctrl: Controller, before: str) -> str | None:
+    """Call `ctrl.reset()`; what it raised, as a finding that says when (`before`), or None."""
+    try:
+        ctrl.reset()
+    except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
+        return f"reset() raised {_describe(exc)} {before}; reset() must put the controller back in its initial state"
+    return None
 
 
 def _act(ctrl: Controller, state: RobotState, cmd: VelocityCommand, n: int, p: _Pass, k: int,
@@ -434,7 +448,9 @@ def _act(ctrl: Controller, state: RobotState, cmd: VelocityCommand, n: int, p: _
 def _replay(ctrl: Controller, states: list[RobotState], cmds: list[VelocityCommand], n: int,
             watch: Callable[[bool], None]) -> _Pass:
     p = _Pass()
-    ctrl.reset()
+    p.reset_failure = _reset(ctrl, "before a replay of the closed loop's states")
+    if p.reset_failure is not None:
+        return p
     for k, (state, cmd) in enumerate(zip(states, cmds, strict=True)):
         if _act(ctrl, state, cmd, n, p, k, watch) is None:
             break
@@ -499,7 +515,11 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         schedule = cfg.command
     a, states, cmds = _Pass(), [], []
     fell_at: float | None = None
-    ctrl.reset()
+    reset_failure = _reset(ctrl, "before the closed loop")
+    if reset_failure is not None:
+        v.set("reset", False, reset_failure)
+        v.set("rate", True, f"{rate:g} Hz (whether it stays constant was not checked: reset() failed)")
+        return v.outcomes("reset() failed before the closed loop"), None
     for k in range(ticks):
         state = _copy(sim.read())
         cmd = schedule.at(k * period)
@@ -540,14 +560,17 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         moved[7:] += 0.1
         sim.reset(seed=1, qpos=moved)
         c = _replay(fresh, states, cmds, n, sim.watch)
+    reset_failure = next((p.reset_failure for p in (b1, b2, d, c) if p is not None and p.reset_failure), None)
+    if reset_failure is not None:
+        v.set("reset", False, reset_failure)
     failure = next((p.failure for p in (b1, b2, d, c) if p is not None and p.failure is not None), None)
     problem = _counters_problem(ctrl)
     if failure is not None or problem is not None:
         v.set("output", False, failure or problem)
-    else:
+    elif reset_failure is None:  # else a replay did not run: the output over every pass was not seen
         v.set("output", True, f"{len(states)} ticks x 5 passes: {n} joints, finite, gains >= 0; counters "
               f"{ctrl.counters()}")
-    if failure is None and d is not None:
+    if failure is None and reset_failure is None and d is not None:
         same = _difference(b1, b2)
         fresh_diff = _difference(b1, d) if same is None else None
         if same is not None:
@@ -565,6 +588,8 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         seen = ", ".join(f"MujocoRobot.{name} x{calls}" for name, calls in reads.items())
         v.set("truth", False, f"act() read the simulator's truth ({seen}); a controller gets RobotState and "
               "VelocityCommand only, as on a real robot")
+    elif reset_failure is not None:  # a replay did not run: no finding either way, reported as not run
+        v.set("truth", None, "not run: reset() failed, so the replays that move the simulator did not all run")
     elif c is not None and c.failure is None and v.ok("reset"):
         shift = _difference(d, c)
         if shift is not None:
