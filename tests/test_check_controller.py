@@ -175,6 +175,13 @@ def test_check_controller_on_the_command_line(capsys):
     assert "Traceback" not in capsys.readouterr().err
 
 
+def test_a_make_that_returns_the_class_fails_the_build_check():
+    spec = ControllerSpec("the-class", "actuated", lambda desc: Stand, "returns the class", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert {o.check for o in result.failed()} == {"build"}
+    assert "make returned the class Stand, not an instance: return Stand(...)" in result.failed("build")[0].detail
+
+
 class ResetRaises(Stand):
     def reset(self):
         raise RuntimeError("no home pose")

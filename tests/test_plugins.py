@@ -94,6 +94,26 @@ MODULES = {
         def make(desc):
             return Almost()
     ''',
+    "returns_class.py": '''
+        """A factory that returns the controller's class, not an instance."""
+
+
+        class Hold:
+            rate_hz = 50.0
+
+            def reset(self):
+                pass
+
+            def act(self, state, command):
+                return None
+
+            def counters(self):
+                return {}
+
+
+        def make(desc):
+            return Hold
+    ''',
 }
 
 
@@ -189,6 +209,8 @@ BROKEN = [
       "raises.py:5"]),
     ("plugpkg.not_a_controller:make", PluginContractError,
      ["returned a Almost, which is not a wbc.control.Controller", "it has no act", "it has no counters"]),
+    ("plugpkg.returns_class:make", PluginContractError,
+     ["factory plugpkg.returns_class:make returned the class Hold, not an instance: return Hold(...)"]),
 ]
 
 

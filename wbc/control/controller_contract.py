@@ -350,6 +350,8 @@ def _build(spec: ControllerSpec, desc) -> tuple[Controller | None, str]:
         ctrl = spec.make(desc)
     except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
         return None, f"make raised {_describe(exc)}"
+    if isinstance(ctrl, type):
+        return None, f"make returned the class {ctrl.__name__}, not an instance: return {ctrl.__name__}(...)"
     problems = controller_problems(ctrl)
     if problems:
         return None, f"built a {type(ctrl).__name__}, not a wbc.control.Controller: {'; '.join(problems)}"

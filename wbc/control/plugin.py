@@ -290,7 +290,13 @@ def _signature(make: Callable[..., Any]) -> str:
 
 
 def controller_problems(obj: object) -> list[str]:
-    """What keeps `obj` from being a `wbc.control.Controller` (empty when it is one)."""
+    """What keeps `obj` from being a `wbc.control.Controller` (empty when it is one).
+
+    A class is never one, though the protocol's check accepts a class that defines the members: its methods would
+    be called without an instance.
+    """
+    if isinstance(obj, type):
+        return [f"it is the class {obj.__name__}, not an instance: return {obj.__name__}(...)"]
     if isinstance(obj, Controller):
         rate = obj.rate_hz
         if isinstance(rate, bool) or not isinstance(rate, int | float):
@@ -316,7 +322,8 @@ def build_plugin(plugin: ControllerPlugin, desc: RobotDescription, config: Mappi
         PluginConfigError: a table was given and the factory takes none.
         PluginFactoryError: the factory has the wrong signature, or raised (the message gives the error and its
             file:line, and begins with `config_file` for a ``ValueError`` or ``TypeError``).
-        PluginContractError: the result is not a `Controller` (the message lists what it lacks).
+        PluginContractError: the result is not a `Controller` (the message lists what it lacks), or is a class
+            rather than an instance of one.
     """
     _check_signature(plugin, target, config)
     try:
@@ -330,6 +337,10 @@ def build_plugin(plugin: ControllerPlugin, desc: RobotDescription, config: Mappi
         origin = f"{config_file}: " if config_file is not None and isinstance(exc, ValueError | TypeError) else ""
         raise PluginFactoryError(f"{origin}plug-in {target} raised while building the controller for {desc.name} "
                                  f"(arm {desc.arm_mode}): {_describe(exc)}{_where(exc)}") from exc
+    if isinstance(ctrl, type):
+        raise PluginContractError(
+            f"factory {target} returned the class {ctrl.__name__}, not an instance: return {ctrl.__name__}(...), "
+            "the controller built for the robot description")
     problems = controller_problems(ctrl)
     if problems:
         raise PluginContractError(
