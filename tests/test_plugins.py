@@ -17,6 +17,7 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord
 from wbc.cli.main import main
 from wbc.control.errors import (
+    PluginAmbiguousError,
     PluginAttributeError,
     PluginConfigError,
     PluginContractError,
@@ -264,6 +265,39 @@ def test_an_entry_point_is_listed_with_its_summary_and_plays_by_its_name(plugins
     # an entry point that cannot be loaded fails when named, with the plug-in's own message
     assert main(["run", "test-broken", "--scenario", str(small), "--out", str(tmp_path / "b")]) == 2
     assert "the plug-in's module is broken" in capsys.readouterr().err
+
+
+def _declare(root, dist, version, lines):
+    """A distribution `dist` installed in `root` that declares the entry points `lines` (name = value)."""
+    info = root / f"{dist}-{version}.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: {version}\n")
+    (info / "entry_points.txt").write_text(f"[{PLUGIN_GROUP}]\n" + "".join(f"{line}\n" for line in lines))
+
+
+def test_an_entry_point_name_two_distributions_declare_is_ambiguous(plugins, small, tmp_path, capsys):
+    _declare(plugins, "plugdist", "1.0", ["test-hold = plugpkg.good:make", "test-mine = plugpkg.good:make"])
+    _declare(plugins, "otherdist", "2.0", ["test-hold = plugpkg.good:Hold"])
+    with pytest.raises(PluginAmbiguousError) as caught:
+        get_controller("test-hold")
+    text = str(caught.value)
+    for phrase in ("controller 'test-hold' is ambiguous", "plugdist 1.0 (plugpkg.good:make)",
+                   "otherdist 2.0 (plugpkg.good:Hold)", "name the one you mean by its package.module:factory"):
+        assert phrase in text, text
+    assert get_controller("test-mine").kind == "entry point"  # the other names stay usable
+    assert get_controller("plugpkg.good:make").name == "plugpkg.good:make"  # and so does the target itself
+    rows = {r.name: r for r in list_controllers()}
+    assert not rows["test-hold"].loaded and rows["test-hold"].kind == "entry point"
+    assert "plugdist 1.0 (plugpkg.good:make)" in rows["test-hold"].summary
+    assert "otherdist 2.0 (plugpkg.good:Hold)" in rows["test-hold"].summary
+    assert rows["test-mine"].loaded
+    assert main(["controllers"]) == 0
+    out = capsys.readouterr().out
+    line = next(line for line in out.splitlines() if "test-hold" in line)
+    assert "ambiguous" in line and "plugdist" in line and "otherdist" in line
+    assert main(["run", "test-hold", "--scenario", str(small), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "is ambiguous" in err and "Traceback" not in err
 
 
 def test_a_plugin_is_watched_in_the_viewer_like_any_controller(plugins, small, tmp_path, capsys):

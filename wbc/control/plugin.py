@@ -61,7 +61,9 @@ __all__ = [
     "ControllerPlugin",
     "PluginFactory",
     "build_plugin",
+    "ambiguity",
     "controller_problems",
+    "declared_entry_points",
     "entry_points",
     "is_plugin_name",
     "load_plugin",
@@ -393,12 +395,37 @@ def read_controller_config(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def entry_points() -> dict[str, importlib.metadata.EntryPoint]:
-    """The installed ``wbc.controllers`` entry points by name (nothing is imported)."""
-    out: dict[str, importlib.metadata.EntryPoint] = {}
+def declared_entry_points() -> dict[str, tuple[importlib.metadata.EntryPoint, ...]]:
+    """Every installed ``wbc.controllers`` entry point by name, each name with every distribution's that declares it.
+
+    Nothing is imported. A name with more than one entry point is ambiguous: no name of it is a controller, and
+    `ambiguity` says why.
+    """
+    out: dict[str, list[importlib.metadata.EntryPoint]] = {}
     for ep in importlib.metadata.entry_points(group=PLUGIN_GROUP):
-        out.setdefault(ep.name, ep)
-    return out
+        out.setdefault(ep.name, []).append(ep)
+    return {name: tuple(eps) for name, eps in out.items()}
+
+
+def entry_points() -> dict[str, importlib.metadata.EntryPoint]:
+    """The installed ``wbc.controllers`` entry points by name, of names one distribution declares (none imported)."""
+    return {name: eps[0] for name, eps in declared_entry_points().items() if len(eps) == 1}
+
+
+def _declared_by(ep: importlib.metadata.EntryPoint) -> str:
+    dist = _entry_point_distribution(ep)
+    return f"{dist[0]} {dist[1]}" if dist is not None else "a distribution Python does not name"
+
+
+def ambiguity(name: str, eps: tuple[importlib.metadata.EntryPoint, ...]) -> str:
+    """Why the entry point name `name` that `eps` share names no controller: who declares it, and how to choose.
+
+    Used as the message of `PluginAmbiguousError` and as the summary ``wbc controllers`` lists the name with.
+    """
+    who = ", ".join(f"{_declared_by(ep)} ({ep.value})" for ep in eps)
+    return (f"controller {name!r} is ambiguous: {len(eps)} installed distributions declare a {PLUGIN_GROUP!r} entry "
+            f"point of that name: {who}; name the one you mean by its package.module:factory (e.g. {eps[0].value}), "
+            "or uninstall the others")
 
 
 def _entry_point_distribution(ep: importlib.metadata.EntryPoint) -> tuple[str, str] | None:
