@@ -27,7 +27,7 @@ from wbc.control.errors import (
 )
 from wbc.control.plugin import PLUGIN_GROUP
 from wbc.control.registry import get_controller, list_controllers
-from wbc.errors import UnknownNameError
+from wbc.errors import UnknownNameError, WbcError
 from wbc.robots.registry import get_robot
 
 SMALL = """
@@ -241,6 +241,41 @@ def test_an_unknown_name_lists_every_kind_of_valid_name(tmp_path, capsys):
     assert main(["view", "no.such.module:make", "--scenario", "scenarios/push.toml", "--trial", "0",
                  "--record", str(tmp_path / "x.html")]) == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+MALFORMED = [
+    ("mypkg.good.make", ["no colon between the module and the factory", "did you mean 'mypkg.good:make'?"]),
+    ("mypkg/good.py:make", ["a file path", "dotted import path", "did you mean 'mypkg.good:make'?"]),
+    ("mypkg.good:", ["nothing after the colon"]),
+    (":make", ["nothing before the colon"]),
+    ("mypkg.good::make", ["2 colons", "did you mean 'mypkg.good:make'?"]),
+    ("mypkg.good:make()", ["parentheses", "did you mean 'mypkg.good:make'?"]),
+    ("my-pkg.good:make", ["'my-pkg' is not a Python identifier"]),
+    ("runs/pi3.onnx", ["a .onnx file is named onnx:PATH", "did you mean 'onnx:runs/pi3.onnx'?"]),
+]
+
+
+@pytest.mark.parametrize(("name", "phrases"), MALFORMED, ids=[m[0] for m in MALFORMED])
+def test_a_malformed_plugin_name_says_what_is_wrong_with_it(name, phrases, capsys):
+    with pytest.raises(PluginNotFoundError) as caught:
+        get_controller(name)
+    text = str(caught.value)
+    assert text.startswith(f"{name!r} is not a plug-in name: "), text
+    assert "write package.module:factory" in text and "unknown controller" not in text
+    for phrase in phrases:
+        assert phrase in text, text
+    assert main(["check-controller", name]) == 2
+    err = capsys.readouterr().err
+    assert "is not a plug-in name" in err and "Traceback" not in err
+
+
+def test_the_other_name_forms_are_not_taken_for_malformed_plugin_names(tmp_path):
+    for name in (f"onnx:{tmp_path / 'none.onnx'}", f"policy:{tmp_path / 'none'}"):
+        with pytest.raises(WbcError) as caught:
+            get_controller(name)
+        assert "not a plug-in name" not in str(caught.value) and "file not found" in str(caught.value)
+    with pytest.raises(UnknownNameError, match="unknown controller 'standd'; did you mean 'stand'"):
+        get_controller("standd")
 
 
 def test_an_entry_point_is_listed_with_its_summary_and_plays_by_its_name(plugins, small, tmp_path, capsys):

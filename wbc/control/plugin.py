@@ -67,6 +67,7 @@ __all__ = [
     "entry_points",
     "is_plugin_name",
     "load_plugin",
+    "plugin_name_problem",
     "plugin_spec",
     "read_controller_config",
 ]
@@ -118,11 +119,68 @@ def is_plugin_name(name: str) -> bool:
     return _TARGET.match(name) is not None
 
 
+_IDENT_ONLY = re.compile(_IDENT)
+
+
+_FILE_FORMS = {".onnx": "onnx:", ".npz": "policy:", ".json": "policy:"}
+"""Files a controller name may hold, by suffix, and the prefix that names them."""
+
+
+def _name_flaw(name: str) -> tuple[str, str | None]:
+    """What is wrong with `name` as ``package.module:factory``, and the name it most likely meant (or None)."""
+    module, colon, factory = name.partition(":")
+    suffix = "." + module.rpartition(".")[2].lower() if "." in module else ""
+    if not colon and suffix in _FILE_FORMS:
+        prefix = _FILE_FORMS[suffix]
+        return f"it is a file, and a {suffix} file is named {prefix}PATH", f"{prefix}{name}"
+    if "/" in module or "\\" in module or suffix == ".py":
+        dotted = re.sub(r"\.py$", "", module).replace("\\", "/").strip("/").replace("/", ".")
+        return (f"{module} is a file path; a plug-in names its module by its dotted import path, not its file (and "
+                "a policy file is named policy:PATH, an ONNX model onnx:PATH)"), f"{dotted}:{factory}"
+    if not colon:
+        head, _, tail = name.rpartition(".")
+        return "it has no colon between the module and the factory", f"{head}:{tail}" if suffix != ".toml" else None
+    if name.count(":") > 1:
+        return f"it has {name.count(':')} colons; one separates the module from the factory", re.sub(":+", ":", name)
+    if "(" in factory or ")" in factory:
+        return "it has parentheses: name the factory, do not call it", f"{module}:{factory.partition('(')[0]}"
+    if not module.strip():
+        return "nothing before the colon: name the module the factory is defined in", None
+    if not factory.strip():
+        return "nothing after the colon: name the factory, e.g. make", None
+    bad = next((part for part in (*module.split("."), *factory.split(".")) if not _IDENT_ONLY.fullmatch(part)), None)
+    if not bad:
+        return "it has an empty part between dots, or a dot at an end", None
+    return f"{bad!r} is not a Python identifier (letters, digits and underscores, not beginning with a digit)", None
+
+
+def plugin_name_problem(name: str) -> str | None:
+    """Why `name` is not a plug-in name though it looks like one was meant, or None.
+
+    A name looks like a plug-in's when it holds a colon, a path separator or a dot (``mypkg.good.make``,
+    ``mypkg/good.py:make``, ``mypkg.good:``, ``mypkg.good::make``, ``mypkg.good:make()``); the caller checks the
+    other names first (the registry's, ``policy:PATH``, ``onnx:PATH``, entry points, which may hold dots).
+
+    Returns:
+        ``'NAME' is not a plug-in name: what is wrong; for a plug-in, write package.module:factory ...; did you mean
+        ...?``, or None
+        for a valid plug-in name and for a name with none of those characters.
+    """
+    if is_plugin_name(name) or not any(c in name for c in ":/\\."):
+        return None
+    flaw, meant = _name_flaw(name)
+    valid = meant is not None and (is_plugin_name(meant) or meant.startswith(tuple(_FILE_FORMS.values())))
+    hint = f"; did you mean {meant!r}?" if valid else ""
+    return (f"{name!r} is not a plug-in name: {flaw}; for a plug-in, write package.module:factory (dotted module "
+            f"path, a colon, the factory's name), e.g. examples.my_controller:make{hint}")
+
+
 def _split(target: str) -> tuple[str, str]:
     match = _TARGET.match(target)
     if match is None:
-        raise PluginNotFoundError(f"{target!r} is not a plug-in name: write package.module:factory (dotted module "
-                                  "path, a colon, the factory's name), e.g. examples.my_controller:make")
+        raise PluginNotFoundError(plugin_name_problem(target) or f"{target!r} is not a plug-in name: write "
+                                  "package.module:factory (dotted module path, a colon, the factory's name), e.g. "
+                                  "examples.my_controller:make")
     return match.group(1), match.group(2)
 
 

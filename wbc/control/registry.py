@@ -22,9 +22,16 @@ import functools
 from dataclasses import dataclass
 from pathlib import Path
 
-from wbc.control.errors import PluginAmbiguousError, PluginConfigError, PluginError
+from wbc.control.errors import PluginAmbiguousError, PluginConfigError, PluginError, PluginNotFoundError
 from wbc.control.onnx_policy import ONNX_PREFIX, onnx_spec
-from wbc.control.plugin import ambiguity, declared_entry_points, is_plugin_name, load_plugin, plugin_spec
+from wbc.control.plugin import (
+    ambiguity,
+    declared_entry_points,
+    is_plugin_name,
+    load_plugin,
+    plugin_name_problem,
+    plugin_spec,
+)
 from wbc.control.spec import ControllerSpec, SourceFile
 from wbc.control.stand import StandController
 from wbc.errors import ConfigError, UnknownNameError
@@ -149,6 +156,8 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
 
     Raises:
         UnknownNameError: an unknown name (the message lists the registry's names, the entry points and the forms).
+        PluginNotFoundError: a name with a colon, a dot or a path separator that is none of those and not a valid
+            ``package.module:factory`` (the message says what is wrong with it, and the name it likely meant).
         PolicyFileError: a ``policy:`` file that is missing or malformed (the message names the file and field).
         OnnxIoError, OnnxModelError: an ``onnx:`` policy's I/O file or model is missing, malformed or mismatched.
         PluginError: a plug-in that cannot be imported or whose factory does not fit (each kind its own subclass).
@@ -180,6 +189,9 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
             raise PluginAmbiguousError(ambiguity(name, installed[name]))
         (ep,) = installed[name]
         return plugin_spec(name, f"{ep.module}:{ep.attr}", kind="entry point", config_file=config, entry_point=ep)
+    problem = plugin_name_problem(name)  # a plug-in meant (a colon, a dot, a path), but written wrong
+    if problem is not None:
+        raise PluginNotFoundError(problem)
     raise UnknownNameError("controller", name, (*CONTROLLERS, *installed, *NAME_FORMS))
 
 
