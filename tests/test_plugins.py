@@ -335,6 +335,25 @@ def test_an_entry_point_name_two_distributions_declare_is_ambiguous(plugins, sma
     assert "is ambiguous" in err and "Traceback" not in err
 
 
+def test_an_entry_point_with_no_factory_says_so_and_how_to_write_it(plugins, capsys):
+    _declare(plugins, "plugdist", "1.0", ["no-attr = plugpkg.good", "test-hold = plugpkg.good:make"])
+    phrases = ("entry point 'no-attr' of the 'wbc.controllers' group in plugdist 1.0 points at module plugpkg.good "
+               "with no factory", 'write "plugpkg.good:make"')
+    with pytest.raises(PluginAttributeError) as caught:
+        get_controller("no-attr")
+    for phrase in phrases:
+        assert phrase in str(caught.value), str(caught.value)
+    assert "None" not in str(caught.value)
+    rows = {r.name: r for r in list_controllers()}
+    assert not rows["no-attr"].loaded and phrases[0] in rows["no-attr"].summary
+    assert rows["no-attr"].target == "plugpkg.good" and rows["test-hold"].loaded
+    assert main(["controllers"]) == 0
+    assert phrases[0] in capsys.readouterr().out
+    assert main(["check-controller", "no-attr"]) == 2
+    err = capsys.readouterr().err
+    assert phrases[0] in err and "Traceback" not in err
+
+
 def test_a_plugin_is_watched_in_the_viewer_like_any_controller(plugins, small, tmp_path, capsys):
     out = tmp_path / "plugin.html"
     assert main(["view", "plugpkg.good:make", "--scenario", str(small), "--trial", "0", "--duration", "0.5",

@@ -64,6 +64,7 @@ __all__ = [
     "ambiguity",
     "controller_problems",
     "declared_entry_points",
+    "entry_point_target",
     "entry_points",
     "is_plugin_name",
     "load_plugin",
@@ -473,6 +474,29 @@ def entry_points() -> dict[str, importlib.metadata.EntryPoint]:
 def _declared_by(ep: importlib.metadata.EntryPoint) -> str:
     dist = _entry_point_distribution(ep)
     return f"{dist[0]} {dist[1]}" if dist is not None else "a distribution Python does not name"
+
+
+def entry_point_target(ep: importlib.metadata.EntryPoint) -> str:
+    """The ``package.module:factory`` an entry point names.
+
+    Raises:
+        PluginAttributeError: its value names a module and no factory (``"pkg.ctl"``), or is not of the form
+            ``package.module:factory``; the message names the entry point, its distribution and the value to write.
+    """
+    value = ep.value.partition("[")[0].strip()  # less any extras: "pkg.ctl:make [gpu]"
+    where = f"entry point {ep.name!r} of the {PLUGIN_GROUP!r} group in {_declared_by(ep)}"
+    module, colon, factory = (part.strip() for part in value.partition(":"))
+    if not colon and is_plugin_name(f"{module}:make"):
+        raise PluginAttributeError(
+            f"{where} points at module {module} with no factory; its value names the factory after a colon: "
+            f'write "{module}:make" (with your factory\'s name) in that distribution\'s '
+            f'[project.entry-points."{PLUGIN_GROUP}"] table')
+    target = f"{module}:{factory}"
+    if not is_plugin_name(target):
+        raise PluginAttributeError(f"{where} has the value {ep.value!r}, which is not package.module:factory "
+                                   f'({_name_flaw(value)[0]}); write "package.module:factory" (e.g. '
+                                   '"my_package.controller:make") as its value')
+    return target
 
 
 def ambiguity(name: str, eps: tuple[importlib.metadata.EntryPoint, ...]) -> str:

@@ -27,6 +27,7 @@ from wbc.control.onnx_policy import ONNX_PREFIX, onnx_spec
 from wbc.control.plugin import (
     ambiguity,
     declared_entry_points,
+    entry_point_target,
     is_plugin_name,
     load_plugin,
     plugin_name_problem,
@@ -188,7 +189,7 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
         if len(installed[name]) > 1:
             raise PluginAmbiguousError(ambiguity(name, installed[name]))
         (ep,) = installed[name]
-        return plugin_spec(name, f"{ep.module}:{ep.attr}", kind="entry point", config_file=config, entry_point=ep)
+        return plugin_spec(name, entry_point_target(ep), kind="entry point", config_file=config, entry_point=ep)
     problem = plugin_name_problem(name)  # a plug-in meant (a colon, a dot, a path), but written wrong
     if problem is not None:
         raise PluginNotFoundError(problem)
@@ -247,7 +248,8 @@ class ControllerListing:
         arm_modes: the arm modes it drives (the first is played); empty when it could not be loaded.
         robots: the robots it drives, or None for every robot.
         summary: its one-line summary, or why it could not be loaded.
-        target: an entry point's ``module:factory``, else None (also for a name several distributions declare).
+        target: an entry point's ``module:factory`` (its value as declared, for one that names no factory), else
+            None (also for a name several distributions declare).
         loaded: False for an entry point whose plug-in could not be loaded.
     """
 
@@ -270,7 +272,7 @@ def list_controllers() -> list[ControllerListing]:
             for s in CONTROLLERS.values()]
     for name, eps in sorted(declared_entry_points().items()):
         ep = eps[0]
-        target = f"{ep.module}:{ep.attr}"
+        target = ep.value
         if name in CONTROLLERS:
             rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=target,
                                           summary=f"not usable: the registry's {name!r} has this name", loaded=False))
@@ -280,6 +282,7 @@ def list_controllers() -> list[ControllerListing]:
                                           summary=f"not usable: {ambiguity(name, eps)}", loaded=False))
             continue
         try:
+            target = entry_point_target(ep)
             plugin, _ = load_plugin(target)
         except PluginError as exc:
             rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=target,
