@@ -354,6 +354,16 @@ def test_an_entry_point_with_no_factory_says_so_and_how_to_write_it(plugins, cap
     assert phrases[0] in err and "Traceback" not in err
 
 
+def test_an_unknown_name_lists_each_valid_name_once(plugins):
+    _declare(plugins, "plugdist", "1.0", ["stand = plugpkg.good:make", "test-hold = plugpkg.good:make"])
+    _declare(plugins, "otherdist", "2.0", ["test-hold = plugpkg.good:Hold"])
+    with pytest.raises(UnknownNameError) as caught:
+        get_controller("walker")
+    assert caught.value.valid.count("stand") == 1 and "test-hold" not in caught.value.valid  # shadowed, ambiguous
+    assert "stand, stand," not in str(caught.value)
+    assert UnknownNameError("robot", "x", ("go1-arm", "a1-wx200", "go1-arm")).valid == ("a1-wx200", "go1-arm")
+
+
 def test_a_plugin_is_watched_in_the_viewer_like_any_controller(plugins, small, tmp_path, capsys):
     out = tmp_path / "plugin.html"
     assert main(["view", "plugpkg.good:make", "--scenario", str(small), "--trial", "0", "--duration", "0.5",

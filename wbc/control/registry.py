@@ -193,7 +193,8 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
     problem = plugin_name_problem(name)  # a plug-in meant (a colon, a dot, a path), but written wrong
     if problem is not None:
         raise PluginNotFoundError(problem)
-    raise UnknownNameError("controller", name, (*CONTROLLERS, *installed, *NAME_FORMS))
+    usable = [n for n, eps in installed.items() if len(eps) == 1 and n not in CONTROLLERS]  # not shadowed, ambiguous
+    raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS))
 
 
 def _policy_spec(name: str) -> ControllerSpec:
