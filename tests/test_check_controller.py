@@ -3,12 +3,13 @@ exactly the check for that way."""
 
 import gc
 import re
+import sys
 import time
 
 import pytest
 
 from wbc.cli.main import main
-from wbc.control import CheckConfig, ControllerSpec, check_controller
+from wbc.control import CheckConfig, ControllerCheck, ControllerSpec, check_controller
 from wbc.control.controller_contract import CHECKS
 from wbc.control.errors import ControllerCheckError
 from wbc.control.registry import CONTROLLERS
@@ -172,6 +173,81 @@ def test_check_controller_on_the_command_line(capsys):
     assert '"passed": true' in capsys.readouterr().out
     assert main(["check-controller", "no_such_pkg.x:make"]) == 2
     assert "Traceback" not in capsys.readouterr().err
+
+
+def test_a_make_that_returns_the_class_fails_the_build_check():
+    spec = ControllerSpec("the-class", "actuated", lambda desc: Stand, "returns the class", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert {o.check for o in result.failed()} == {"build"}
+    assert "make returned the class Stand, not an instance: return Stand(...)" in result.failed("build")[0].detail
+
+
+class ResetRaises(Stand):
+    def reset(self):
+        raise RuntimeError("no home pose")
+
+
+class ResetRaisesAfterAct(Stand):
+    """Its reset() fails once act() has run: the replays' reset, after the closed loop."""
+
+    def __init__(self, desc):
+        super().__init__(desc)
+        self.acted = False
+
+    def reset(self):
+        if self.acted:
+            raise KeyError("history")
+
+    def act(self, state, command):
+        self.acted = True
+        return self.command
+
+
+@pytest.mark.parametrize(("broken", "says"), [
+    (ResetRaises, "reset() raised RuntimeError: no home pose at "),
+    (ResetRaisesAfterAct, "reset() raised KeyError: 'history' at "),
+])
+def test_a_reset_that_raises_fails_the_reset_check_naming_the_exception(broken, says, capsys):
+    spec = ControllerSpec("reset-raises", "actuated", broken, "reset() raises", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert not result.passed
+    assert {o.check for o in result.failed()} == {"reset"}, [(o.check, o.detail) for o in result.failed()]
+    assert says in result.failed("reset")[0].detail
+    assert all(o.passed is not True for o in result.outcomes if o.check in ("output", "truth"))
+
+
+GO1_ONLY = '''"""The stand controller, claiming go1-arm only."""
+from wbc.control import ControllerPlugin
+from wbc.control.stand import StandController
+
+plugin = ControllerPlugin(make=StandController, summary="PD stand, go1-arm only", robots=("go1-arm",))
+'''
+
+
+def test_a_robot_the_controller_does_not_drive_is_refused_and_nothing_checked_never_passes(tmp_path, monkeypatch,
+                                                                                         capsys):
+    spec = ControllerSpec("hold", "actuated", Stand, "a PD hold", robots=("a1-wx200",))
+    with pytest.raises(ConfigError, match=r"--robot go1-arm: controller hold drives a1-wx200, not go1-arm; check it "
+                                          r"on a robot it drives \(--robot a1-wx200\)"):
+        check_controller(spec, CheckConfig(seconds=0.2, robots=("go1-arm",)))
+    nobody = ControllerSpec("nobody", "actuated", Stand, "claims no robot", robots=())
+    with pytest.raises(ConfigError, match="controller nobody claims no robot, so there is nothing to check"):
+        check_controller(nobody)
+    empty = ControllerCheck(controller="hold", outcomes=(), timings=())
+    assert not empty.passed and not empty.as_dict()["passed"]
+    with pytest.raises(ControllerCheckError, match="no check ran"):
+        empty.raise_if_failed()
+    # the command line: an error naming the controller, what it drives and the robot asked for; exit status 2
+    (tmp_path / "go1_only_ctl.py").write_text(GO1_ONLY)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        for argv in (["--robot", "a1-wx200"], ["--robot", "a1-wx200", "--json"]):
+            assert main(["check-controller", "go1_only_ctl:plugin", *argv]) == 2
+            out, err = capsys.readouterr()
+            assert "passed" not in out and "Traceback" not in err
+            assert "--robot a1-wx200: controller go1_only_ctl:plugin drives go1-arm, not a1-wx200" in err
+    finally:
+        sys.modules.pop("go1_only_ctl", None)
 
 
 # -- --seconds, --scenario -------------------------------------------------------------------------------------------

@@ -17,6 +17,7 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord
 from wbc.cli.main import main
 from wbc.control.errors import (
+    PluginAmbiguousError,
     PluginAttributeError,
     PluginConfigError,
     PluginContractError,
@@ -26,7 +27,7 @@ from wbc.control.errors import (
 )
 from wbc.control.plugin import PLUGIN_GROUP
 from wbc.control.registry import get_controller, list_controllers
-from wbc.errors import UnknownNameError
+from wbc.errors import UnknownNameError, WbcError
 from wbc.robots.registry import get_robot
 
 SMALL = """
@@ -93,6 +94,26 @@ MODULES = {
 
         def make(desc):
             return Almost()
+    ''',
+    "returns_class.py": '''
+        """A factory that returns the controller's class, not an instance."""
+
+
+        class Hold:
+            rate_hz = 50.0
+
+            def reset(self):
+                pass
+
+            def act(self, state, command):
+                return None
+
+            def counters(self):
+                return {}
+
+
+        def make(desc):
+            return Hold
     ''',
 }
 
@@ -189,6 +210,8 @@ BROKEN = [
       "raises.py:5"]),
     ("plugpkg.not_a_controller:make", PluginContractError,
      ["returned a Almost, which is not a wbc.control.Controller", "it has no act", "it has no counters"]),
+    ("plugpkg.returns_class:make", PluginContractError,
+     ["factory plugpkg.returns_class:make returned the class Hold, not an instance: return Hold(...)"]),
 ]
 
 
@@ -220,6 +243,41 @@ def test_an_unknown_name_lists_every_kind_of_valid_name(tmp_path, capsys):
     assert "Traceback" not in capsys.readouterr().err
 
 
+MALFORMED = [
+    ("mypkg.good.make", ["no colon between the module and the factory", "did you mean 'mypkg.good:make'?"]),
+    ("mypkg/good.py:make", ["a file path", "dotted import path", "did you mean 'mypkg.good:make'?"]),
+    ("mypkg.good:", ["nothing after the colon"]),
+    (":make", ["nothing before the colon"]),
+    ("mypkg.good::make", ["2 colons", "did you mean 'mypkg.good:make'?"]),
+    ("mypkg.good:make()", ["parentheses", "did you mean 'mypkg.good:make'?"]),
+    ("my-pkg.good:make", ["'my-pkg' is not a Python identifier"]),
+    ("runs/pi3.onnx", ["a .onnx file is named onnx:PATH", "did you mean 'onnx:runs/pi3.onnx'?"]),
+]
+
+
+@pytest.mark.parametrize(("name", "phrases"), MALFORMED, ids=[m[0] for m in MALFORMED])
+def test_a_malformed_plugin_name_says_what_is_wrong_with_it(name, phrases, capsys):
+    with pytest.raises(PluginNotFoundError) as caught:
+        get_controller(name)
+    text = str(caught.value)
+    assert text.startswith(f"{name!r} is not a plug-in name: "), text
+    assert "write package.module:factory" in text and "unknown controller" not in text
+    for phrase in phrases:
+        assert phrase in text, text
+    assert main(["check-controller", name]) == 2
+    err = capsys.readouterr().err
+    assert "is not a plug-in name" in err and "Traceback" not in err
+
+
+def test_the_other_name_forms_are_not_taken_for_malformed_plugin_names(tmp_path):
+    for name in (f"onnx:{tmp_path / 'none.onnx'}", f"policy:{tmp_path / 'none'}"):
+        with pytest.raises(WbcError) as caught:
+            get_controller(name)
+        assert "not a plug-in name" not in str(caught.value) and "file not found" in str(caught.value)
+    with pytest.raises(UnknownNameError, match="unknown controller 'standd'; did you mean 'stand'"):
+        get_controller("standd")
+
+
 def test_an_entry_point_is_listed_with_its_summary_and_plays_by_its_name(plugins, small, tmp_path, capsys):
     dist = plugins / "plugdist-1.0.dist-info"
     dist.mkdir()
@@ -242,6 +300,68 @@ def test_an_entry_point_is_listed_with_its_summary_and_plays_by_its_name(plugins
     # an entry point that cannot be loaded fails when named, with the plug-in's own message
     assert main(["run", "test-broken", "--scenario", str(small), "--out", str(tmp_path / "b")]) == 2
     assert "the plug-in's module is broken" in capsys.readouterr().err
+
+
+def _declare(root, dist, version, lines):
+    """A distribution `dist` installed in `root` that declares the entry points `lines` (name = value)."""
+    info = root / f"{dist}-{version}.dist-info"
+    info.mkdir()
+    (info / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {dist}\nVersion: {version}\n")
+    (info / "entry_points.txt").write_text(f"[{PLUGIN_GROUP}]\n" + "".join(f"{line}\n" for line in lines))
+
+
+def test_an_entry_point_name_two_distributions_declare_is_ambiguous(plugins, small, tmp_path, capsys):
+    _declare(plugins, "plugdist", "1.0", ["test-hold = plugpkg.good:make", "test-mine = plugpkg.good:make"])
+    _declare(plugins, "otherdist", "2.0", ["test-hold = plugpkg.good:Hold"])
+    with pytest.raises(PluginAmbiguousError) as caught:
+        get_controller("test-hold")
+    text = str(caught.value)
+    for phrase in ("controller 'test-hold' is ambiguous", "plugdist 1.0 (plugpkg.good:make)",
+                   "otherdist 2.0 (plugpkg.good:Hold)", "name the one you mean by its package.module:factory"):
+        assert phrase in text, text
+    assert get_controller("test-mine").kind == "entry point"  # the other names stay usable
+    assert get_controller("plugpkg.good:make").name == "plugpkg.good:make"  # and so does the target itself
+    rows = {r.name: r for r in list_controllers()}
+    assert not rows["test-hold"].loaded and rows["test-hold"].kind == "entry point"
+    assert "plugdist 1.0 (plugpkg.good:make)" in rows["test-hold"].summary
+    assert "otherdist 2.0 (plugpkg.good:Hold)" in rows["test-hold"].summary
+    assert rows["test-mine"].loaded
+    assert main(["controllers"]) == 0
+    out = capsys.readouterr().out
+    line = next(line for line in out.splitlines() if "test-hold" in line)
+    assert "ambiguous" in line and "plugdist" in line and "otherdist" in line
+    assert main(["run", "test-hold", "--scenario", str(small), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "is ambiguous" in err and "Traceback" not in err
+
+
+def test_an_entry_point_with_no_factory_says_so_and_how_to_write_it(plugins, capsys):
+    _declare(plugins, "plugdist", "1.0", ["no-attr = plugpkg.good", "test-hold = plugpkg.good:make"])
+    phrases = ("entry point 'no-attr' of the 'wbc.controllers' group in plugdist 1.0 points at module plugpkg.good "
+               "with no factory", 'write "plugpkg.good:make"')
+    with pytest.raises(PluginAttributeError) as caught:
+        get_controller("no-attr")
+    for phrase in phrases:
+        assert phrase in str(caught.value), str(caught.value)
+    assert "None" not in str(caught.value)
+    rows = {r.name: r for r in list_controllers()}
+    assert not rows["no-attr"].loaded and phrases[0] in rows["no-attr"].summary
+    assert rows["no-attr"].target == "plugpkg.good" and rows["test-hold"].loaded
+    assert main(["controllers"]) == 0
+    assert phrases[0] in capsys.readouterr().out
+    assert main(["check-controller", "no-attr"]) == 2
+    err = capsys.readouterr().err
+    assert phrases[0] in err and "Traceback" not in err
+
+
+def test_an_unknown_name_lists_each_valid_name_once(plugins):
+    _declare(plugins, "plugdist", "1.0", ["stand = plugpkg.good:make", "test-hold = plugpkg.good:make"])
+    _declare(plugins, "otherdist", "2.0", ["test-hold = plugpkg.good:Hold"])
+    with pytest.raises(UnknownNameError) as caught:
+        get_controller("walker")
+    assert caught.value.valid.count("stand") == 1 and "test-hold" not in caught.value.valid  # shadowed, ambiguous
+    assert "stand, stand," not in str(caught.value)
+    assert UnknownNameError("robot", "x", ("go1-arm", "a1-wx200", "go1-arm")).valid == ("a1-wx200", "go1-arm")
 
 
 def test_a_plugin_is_watched_in_the_viewer_like_any_controller(plugins, small, tmp_path, capsys):

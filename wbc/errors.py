@@ -58,7 +58,7 @@ class UnknownNameError(WbcError, KeyError):
     Attributes:
         kind: what the name names (``controller``, ``robot`` ...).
         name: the name given.
-        valid: the valid names, sorted.
+        valid: the valid names, sorted, each once.
         suggestion: the valid name closest to `name`, or None when none is close.
     """
 
@@ -66,7 +66,7 @@ class UnknownNameError(WbcError, KeyError):
         """`where` (e.g. ``scenario 'turn'``), when given, opens the message: whose names these are."""
         self.kind = kind
         self.name = name
-        self.valid = tuple(sorted(valid))
+        self.valid = tuple(sorted(set(valid)))  # each once, though two sources may name it
         close = difflib.get_close_matches(str(name), self.valid, n=1) if len(str(name)) <= 200 else []
         self.suggestion = close[0] if close else None
         hint = f"; did you mean {self.suggestion!r}?" if self.suggestion is not None else ""

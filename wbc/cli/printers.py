@@ -380,7 +380,7 @@ def print_controllers(rows: Sequence[ControllerListing]) -> None:
         robots_width = max(10, *(len(robots(r)) for r in selected))
         for r in selected:
             arms = "/".join(r.arm_modes) or "-"
-            target = f"  ({r.target})" if with_target else ""
+            target = f"  ({r.target})" if with_target and r.target is not None else ""
             print(f"  {r.name:<{width}}  {arms:<9} {robots(r):<{robots_width}}  {r.summary}{target}")
 
     print("registered controllers:")

@@ -197,15 +197,18 @@ class ControllerCheck:
 
     @property
     def passed(self) -> bool:
-        """Every check ran and passed."""
-        return all(o.passed is True for o in self.outcomes)
+        """Some check ran, and every check ran and passed (nothing checked is not a pass)."""
+        return bool(self.outcomes) and all(o.passed is True for o in self.outcomes)
 
     def failed(self, check: str | None = None) -> list[CheckOutcome]:
         """The outcomes that failed (of `check` only, if given)."""
         return [o for o in self.outcomes if o.passed is False and check in (None, o.check)]
 
     def raise_if_failed(self) -> None:
-        """Raise `ControllerCheckError` listing every failed check, if any failed or could not run."""
+        """Raise `ControllerCheckError` listing every failed check, if any failed or could not run, or none ran."""
+        if not self.outcomes:
+            raise ControllerCheckError(f"controller {self.controller}: no check ran (no robot and arm mode to check it "
+                                       "on), so it has not met its contract")
         bad = [o for o in self.outcomes if o.passed is not True]
         if bad:
             lines = "; ".join(f"{o.check} on {o.robot}/{o.arm_mode}: {o.detail}" for o in bad)
@@ -235,8 +238,10 @@ def check_controller(controller: ControllerSpec | str, config: CheckConfig | Non
         WbcError: the name cannot be resolved (unknown name, unreadable file, plug-in that cannot be imported).
         ScenarioError: the scenario file is missing or invalid (the message names the file and field).
         ReplayFileError: the replay file is missing or invalid (the message names the file and field).
-        ConfigError: `seconds` is not positive, or the scenario or the replay is for a robot or arm mode the
-            controller does not claim or `robots` leaves out (the message names the file).
+        ConfigError: `seconds` is not positive; `robots` names no robot the controller claims, or it claims none
+            (the message names the controller, the robots it drives and those asked for); the scenario or the replay
+            is for a robot or arm mode the controller does not claim or `robots` leaves out (the message names the
+            file).
     """
     from threadpoolctl import threadpool_limits  # single-threaded BLAS, as in the arena's workers
 
@@ -250,6 +255,8 @@ def check_controller(controller: ControllerSpec | str, config: CheckConfig | Non
     else:
         spec = controller
     claims = [(robot, mode) for robot, mode in spec.claims() if cfg.robots is None or robot in cfg.robots]
+    if not claims:  # no check would run, and a check of nothing must not read as a pass
+        raise ConfigError(_nothing_to_check(spec, cfg.robots))
     trial = _first_trial(cfg.scenario, spec, claims, cfg.robots) if cfg.scenario is not None else None
     if trial is not None:
         claims = [(robot, mode) for robot, mode in claims if robot == trial.robot]
@@ -270,6 +277,17 @@ def _claimed(spec: ControllerSpec, robots: tuple[str, ...] | None) -> str:
     have = sorted({robot for robot, _ in spec.claims()})
     text = f"controller {spec.name} drives {', '.join(have)}"
     return text + (f" (checked here: {', '.join(robots)}, as --robot asks)" if robots is not None else "")
+
+
+def _nothing_to_check(spec: ControllerSpec, robots: tuple[str, ...] | None) -> str:
+    """Why no (robot, arm mode) is left to check: the controller claims none, or none that `robots` asks for."""
+    have = sorted({robot for robot, _ in spec.claims()})
+    if not have:
+        return (f"controller {spec.name} claims no robot, so there is nothing to check; a ControllerPlugin's (or "
+                "ControllerSpec's) robots must name at least one robot, or be None for every robot")
+    asked = ", ".join(robots or ())
+    return (f"--robot {asked}: controller {spec.name} drives {', '.join(have)}, not {asked}; check it on a robot it "
+            f"drives (--robot {have[0]}), or leave --robot out to check every robot it drives")
 
 
 def _first_trial(path: str | Path, spec: ControllerSpec, claims: list[tuple[str, str]],
@@ -332,6 +350,8 @@ def _build(spec: ControllerSpec, desc) -> tuple[Controller | None, str]:
         ctrl = spec.make(desc)
     except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
         return None, f"make raised {_describe(exc)}"
+    if isinstance(ctrl, type):
+        return None, f"make returned the class {ctrl.__name__}, not an instance: return {ctrl.__name__}(...)"
     problems = controller_problems(ctrl)
     if problems:
         return None, f"built a {type(ctrl).__name__}, not a wbc.control.Controller: {'; '.join(problems)}"
@@ -385,12 +405,26 @@ def _copy(state: RobotState) -> RobotState:
 
 
 class _Pass:
-    """One pass of `act` over a sequence: the stacked outputs and the times, or the failure."""
+    """One pass of `act` over a sequence: the stacked outputs and the times, or the failure.
+
+    `reset_failure` is set instead of `failure` when the `reset` before the pass raised (the ``reset`` check's
+    finding, not the ``output`` check's).
+    """
 
     def __init__(self) -> None:
         self.outputs: list[np.ndarray] = []
         self.times: list[float] = []
         self.failure: str | None = None
+        self.reset_failure: str | None = None
+
+
+def _reset(ctrl: Controller, before: str) -> str | None:
+    """Call `ctrl.reset()`; what it raised, as a finding that says when (`before`), or None."""
+    try:
+        ctrl.reset()
+    except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
+        return f"reset() raised {_describe(exc)} {before}; reset() must put the controller back in its initial state"
+    return None
 
 
 def _act(ctrl: Controller, state: RobotState, cmd: VelocityCommand, n: int, p: _Pass, k: int,
@@ -416,7 +450,9 @@ def _act(ctrl: Controller, state: RobotState, cmd: VelocityCommand, n: int, p: _
 def _replay(ctrl: Controller, states: list[RobotState], cmds: list[VelocityCommand], n: int,
             watch: Callable[[bool], None]) -> _Pass:
     p = _Pass()
-    ctrl.reset()
+    p.reset_failure = _reset(ctrl, "before a replay of the closed loop's states")
+    if p.reset_failure is not None:
+        return p
     for k, (state, cmd) in enumerate(zip(states, cmds, strict=True)):
         if _act(ctrl, state, cmd, n, p, k, watch) is None:
             break
@@ -481,7 +517,11 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         schedule = cfg.command
     a, states, cmds = _Pass(), [], []
     fell_at: float | None = None
-    ctrl.reset()
+    reset_failure = _reset(ctrl, "before the closed loop")
+    if reset_failure is not None:
+        v.set("reset", False, reset_failure)
+        v.set("rate", True, f"{rate:g} Hz (whether it stays constant was not checked: reset() failed)")
+        return v.outcomes("reset() failed before the closed loop"), None
     for k in range(ticks):
         state = _copy(sim.read())
         cmd = schedule.at(k * period)
@@ -522,14 +562,17 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         moved[7:] += 0.1
         sim.reset(seed=1, qpos=moved)
         c = _replay(fresh, states, cmds, n, sim.watch)
+    reset_failure = next((p.reset_failure for p in (b1, b2, d, c) if p is not None and p.reset_failure), None)
+    if reset_failure is not None:
+        v.set("reset", False, reset_failure)
     failure = next((p.failure for p in (b1, b2, d, c) if p is not None and p.failure is not None), None)
     problem = _counters_problem(ctrl)
     if failure is not None or problem is not None:
         v.set("output", False, failure or problem)
-    else:
+    elif reset_failure is None:  # else a replay did not run: the output over every pass was not seen
         v.set("output", True, f"{len(states)} ticks x 5 passes: {n} joints, finite, gains >= 0; counters "
               f"{ctrl.counters()}")
-    if failure is None and d is not None:
+    if failure is None and reset_failure is None and d is not None:
         same = _difference(b1, b2)
         fresh_diff = _difference(b1, d) if same is None else None
         if same is not None:
@@ -547,6 +590,8 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         seen = ", ".join(f"MujocoRobot.{name} x{calls}" for name, calls in reads.items())
         v.set("truth", False, f"act() read the simulator's truth ({seen}); a controller gets RobotState and "
               "VelocityCommand only, as on a real robot")
+    elif reset_failure is not None:  # a replay did not run: no finding either way, reported as not run
+        v.set("truth", None, "not run: reset() failed, so the replays that move the simulator did not all run")
     elif c is not None and c.failure is None and v.ok("reset"):
         shift = _difference(d, c)
         if shift is not None:

@@ -13,6 +13,7 @@ __all__ = [
     "ControllerCheckError",
     "OnnxIoError",
     "OnnxModelError",
+    "PluginAmbiguousError",
     "PluginAttributeError",
     "PluginConfigError",
     "PluginContractError",
@@ -29,6 +30,10 @@ class PluginError(WbcError):
 
 class PluginNotFoundError(PluginError, LookupError):
     """The plug-in's module (or entry point) does not exist where it was looked for; the message lists where."""
+
+
+class PluginAmbiguousError(PluginError, LookupError):
+    """Several installed distributions declare an entry point of the name; the message names them and their targets."""
 
 
 class PluginImportError(PluginError, ImportError):

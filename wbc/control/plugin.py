@@ -61,10 +61,14 @@ __all__ = [
     "ControllerPlugin",
     "PluginFactory",
     "build_plugin",
+    "ambiguity",
     "controller_problems",
+    "declared_entry_points",
+    "entry_point_target",
     "entry_points",
     "is_plugin_name",
     "load_plugin",
+    "plugin_name_problem",
     "plugin_spec",
     "read_controller_config",
 ]
@@ -116,11 +120,68 @@ def is_plugin_name(name: str) -> bool:
     return _TARGET.match(name) is not None
 
 
+_IDENT_ONLY = re.compile(_IDENT)
+
+
+_FILE_FORMS = {".onnx": "onnx:", ".npz": "policy:", ".json": "policy:"}
+"""Files a controller name may hold, by suffix, and the prefix that names them."""
+
+
+def _name_flaw(name: str) -> tuple[str, str | None]:
+    """What is wrong with `name` as ``package.module:factory``, and the name it most likely meant (or None)."""
+    module, colon, factory = name.partition(":")
+    suffix = "." + module.rpartition(".")[2].lower() if "." in module else ""
+    if not colon and suffix in _FILE_FORMS:
+        prefix = _FILE_FORMS[suffix]
+        return f"it is a file, and a {suffix} file is named {prefix}PATH", f"{prefix}{name}"
+    if "/" in module or "\\" in module or suffix == ".py":
+        dotted = re.sub(r"\.py$", "", module).replace("\\", "/").strip("/").replace("/", ".")
+        return (f"{module} is a file path; a plug-in names its module by its dotted import path, not its file (and "
+                "a policy file is named policy:PATH, an ONNX model onnx:PATH)"), f"{dotted}:{factory}"
+    if not colon:
+        head, _, tail = name.rpartition(".")
+        return "it has no colon between the module and the factory", f"{head}:{tail}" if suffix != ".toml" else None
+    if name.count(":") > 1:
+        return f"it has {name.count(':')} colons; one separates the module from the factory", re.sub(":+", ":", name)
+    if "(" in factory or ")" in factory:
+        return "it has parentheses: name the factory, do not call it", f"{module}:{factory.partition('(')[0]}"
+    if not module.strip():
+        return "nothing before the colon: name the module the factory is defined in", None
+    if not factory.strip():
+        return "nothing after the colon: name the factory, e.g. make", None
+    bad = next((part for part in (*module.split("."), *factory.split(".")) if not _IDENT_ONLY.fullmatch(part)), None)
+    if not bad:
+        return "it has an empty part between dots, or a dot at an end", None
+    return f"{bad!r} is not a Python identifier (letters, digits and underscores, not beginning with a digit)", None
+
+
+def plugin_name_problem(name: str) -> str | None:
+    """Why `name` is not a plug-in name though it looks like one was meant, or None.
+
+    A name looks like a plug-in's when it holds a colon, a path separator or a dot (``mypkg.good.make``,
+    ``mypkg/good.py:make``, ``mypkg.good:``, ``mypkg.good::make``, ``mypkg.good:make()``); the caller checks the
+    other names first (the registry's, ``policy:PATH``, ``onnx:PATH``, entry points, which may hold dots).
+
+    Returns:
+        ``'NAME' is not a plug-in name: what is wrong; for a plug-in, write package.module:factory ...; did you mean
+        ...?``, or None
+        for a valid plug-in name and for a name with none of those characters.
+    """
+    if is_plugin_name(name) or not any(c in name for c in ":/\\."):
+        return None
+    flaw, meant = _name_flaw(name)
+    valid = meant is not None and (is_plugin_name(meant) or meant.startswith(tuple(_FILE_FORMS.values())))
+    hint = f"; did you mean {meant!r}?" if valid else ""
+    return (f"{name!r} is not a plug-in name: {flaw}; for a plug-in, write package.module:factory (dotted module "
+            f"path, a colon, the factory's name), e.g. examples.my_controller:make{hint}")
+
+
 def _split(target: str) -> tuple[str, str]:
     match = _TARGET.match(target)
     if match is None:
-        raise PluginNotFoundError(f"{target!r} is not a plug-in name: write package.module:factory (dotted module "
-                                  "path, a colon, the factory's name), e.g. examples.my_controller:make")
+        raise PluginNotFoundError(plugin_name_problem(target) or f"{target!r} is not a plug-in name: write "
+                                  "package.module:factory (dotted module path, a colon, the factory's name), e.g. "
+                                  "examples.my_controller:make")
     return match.group(1), match.group(2)
 
 
@@ -290,7 +351,13 @@ def _signature(make: Callable[..., Any]) -> str:
 
 
 def controller_problems(obj: object) -> list[str]:
-    """What keeps `obj` from being a `wbc.control.Controller` (empty when it is one)."""
+    """What keeps `obj` from being a `wbc.control.Controller` (empty when it is one).
+
+    A class is never one, though the protocol's check accepts a class that defines the members: its methods would
+    be called without an instance.
+    """
+    if isinstance(obj, type):
+        return [f"it is the class {obj.__name__}, not an instance: return {obj.__name__}(...)"]
     if isinstance(obj, Controller):
         rate = obj.rate_hz
         if isinstance(rate, bool) or not isinstance(rate, int | float):
@@ -316,7 +383,8 @@ def build_plugin(plugin: ControllerPlugin, desc: RobotDescription, config: Mappi
         PluginConfigError: a table was given and the factory takes none.
         PluginFactoryError: the factory has the wrong signature, or raised (the message gives the error and its
             file:line, and begins with `config_file` for a ``ValueError`` or ``TypeError``).
-        PluginContractError: the result is not a `Controller` (the message lists what it lacks).
+        PluginContractError: the result is not a `Controller` (the message lists what it lacks), or is a class
+            rather than an instance of one.
     """
     _check_signature(plugin, target, config)
     try:
@@ -330,6 +398,10 @@ def build_plugin(plugin: ControllerPlugin, desc: RobotDescription, config: Mappi
         origin = f"{config_file}: " if config_file is not None and isinstance(exc, ValueError | TypeError) else ""
         raise PluginFactoryError(f"{origin}plug-in {target} raised while building the controller for {desc.name} "
                                  f"(arm {desc.arm_mode}): {_describe(exc)}{_where(exc)}") from exc
+    if isinstance(ctrl, type):
+        raise PluginContractError(
+            f"factory {target} returned the class {ctrl.__name__}, not an instance: return {ctrl.__name__}(...), "
+            "the controller built for the robot description")
     problems = controller_problems(ctrl)
     if problems:
         raise PluginContractError(
@@ -382,12 +454,60 @@ def read_controller_config(path: str | Path) -> dict[str, Any]:
     return data
 
 
-def entry_points() -> dict[str, importlib.metadata.EntryPoint]:
-    """The installed ``wbc.controllers`` entry points by name (nothing is imported)."""
-    out: dict[str, importlib.metadata.EntryPoint] = {}
+def declared_entry_points() -> dict[str, tuple[importlib.metadata.EntryPoint, ...]]:
+    """Every installed ``wbc.controllers`` entry point by name, each name with every distribution's that declares it.
+
+    Nothing is imported. A name with more than one entry point is ambiguous: no name of it is a controller, and
+    `ambiguity` says why.
+    """
+    out: dict[str, list[importlib.metadata.EntryPoint]] = {}
     for ep in importlib.metadata.entry_points(group=PLUGIN_GROUP):
-        out.setdefault(ep.name, ep)
-    return out
+        out.setdefault(ep.name, []).append(ep)
+    return {name: tuple(eps) for name, eps in out.items()}
+
+
+def entry_points() -> dict[str, importlib.metadata.EntryPoint]:
+    """The installed ``wbc.controllers`` entry points by name, of names one distribution declares (none imported)."""
+    return {name: eps[0] for name, eps in declared_entry_points().items() if len(eps) == 1}
+
+
+def _declared_by(ep: importlib.metadata.EntryPoint) -> str:
+    dist = _entry_point_distribution(ep)
+    return f"{dist[0]} {dist[1]}" if dist is not None else "a distribution Python does not name"
+
+
+def entry_point_target(ep: importlib.metadata.EntryPoint) -> str:
+    """The ``package.module:factory`` an entry point names.
+
+    Raises:
+        PluginAttributeError: its value names a module and no factory (``"pkg.ctl"``), or is not of the form
+            ``package.module:factory``; the message names the entry point, its distribution and the value to write.
+    """
+    value = ep.value.partition("[")[0].strip()  # less any extras: "pkg.ctl:make [gpu]"
+    where = f"entry point {ep.name!r} of the {PLUGIN_GROUP!r} group in {_declared_by(ep)}"
+    module, colon, factory = (part.strip() for part in value.partition(":"))
+    if not colon and is_plugin_name(f"{module}:make"):
+        raise PluginAttributeError(
+            f"{where} points at module {module} with no factory; its value names the factory after a colon: "
+            f'write "{module}:make" (with your factory\'s name) in that distribution\'s '
+            f'[project.entry-points."{PLUGIN_GROUP}"] table')
+    target = f"{module}:{factory}"
+    if not is_plugin_name(target):
+        raise PluginAttributeError(f"{where} has the value {ep.value!r}, which is not package.module:factory "
+                                   f'({_name_flaw(value)[0]}); write "package.module:factory" (e.g. '
+                                   '"my_package.controller:make") as its value')
+    return target
+
+
+def ambiguity(name: str, eps: tuple[importlib.metadata.EntryPoint, ...]) -> str:
+    """Why the entry point name `name` that `eps` share names no controller: who declares it, and how to choose.
+
+    Used as the message of `PluginAmbiguousError` and as the summary ``wbc controllers`` lists the name with.
+    """
+    who = ", ".join(f"{_declared_by(ep)} ({ep.value})" for ep in eps)
+    return (f"controller {name!r} is ambiguous: {len(eps)} installed distributions declare a {PLUGIN_GROUP!r} entry "
+            f"point of that name: {who}; name the one you mean by its package.module:factory (e.g. {eps[0].value}), "
+            "or uninstall the others")
 
 
 def _entry_point_distribution(ep: importlib.metadata.EntryPoint) -> tuple[str, str] | None:

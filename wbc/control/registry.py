@@ -22,9 +22,17 @@ import functools
 from dataclasses import dataclass
 from pathlib import Path
 
-from wbc.control.errors import PluginConfigError, PluginError
+from wbc.control.errors import PluginAmbiguousError, PluginConfigError, PluginError, PluginNotFoundError
 from wbc.control.onnx_policy import ONNX_PREFIX, onnx_spec
-from wbc.control.plugin import entry_points, is_plugin_name, load_plugin, plugin_spec
+from wbc.control.plugin import (
+    ambiguity,
+    declared_entry_points,
+    entry_point_target,
+    is_plugin_name,
+    load_plugin,
+    plugin_name_problem,
+    plugin_spec,
+)
 from wbc.control.spec import ControllerSpec, SourceFile
 from wbc.control.stand import StandController
 from wbc.errors import ConfigError, UnknownNameError
@@ -149,9 +157,12 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
 
     Raises:
         UnknownNameError: an unknown name (the message lists the registry's names, the entry points and the forms).
+        PluginNotFoundError: a name with a colon, a dot or a path separator that is none of those and not a valid
+            ``package.module:factory`` (the message says what is wrong with it, and the name it likely meant).
         PolicyFileError: a ``policy:`` file that is missing or malformed (the message names the file and field).
         OnnxIoError, OnnxModelError: an ``onnx:`` policy's I/O file or model is missing, malformed or mismatched.
         PluginError: a plug-in that cannot be imported or whose factory does not fit (each kind its own subclass).
+        PluginAmbiguousError: an entry point's name that several installed distributions declare.
         PluginConfigError: `config` for a controller that is not a plug-in.
         ConfigError: `io` for a controller that is not an ONNX policy; ``policy:`` or ``onnx:`` with no path after it.
     """
@@ -173,11 +184,17 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
         return CONTROLLERS[name]
     if is_plugin_name(name):
         return plugin_spec(name, name, config_file=config)
-    installed = entry_points()
+    installed = declared_entry_points()
     if name in installed:
-        ep = installed[name]
-        return plugin_spec(name, f"{ep.module}:{ep.attr}", kind="entry point", config_file=config, entry_point=ep)
-    raise UnknownNameError("controller", name, (*CONTROLLERS, *installed, *NAME_FORMS))
+        if len(installed[name]) > 1:
+            raise PluginAmbiguousError(ambiguity(name, installed[name]))
+        (ep,) = installed[name]
+        return plugin_spec(name, entry_point_target(ep), kind="entry point", config_file=config, entry_point=ep)
+    problem = plugin_name_problem(name)  # a plug-in meant (a colon, a dot, a path), but written wrong
+    if problem is not None:
+        raise PluginNotFoundError(problem)
+    usable = [n for n, eps in installed.items() if len(eps) == 1 and n not in CONTROLLERS]  # not shadowed, ambiguous
+    raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS))
 
 
 def _policy_spec(name: str) -> ControllerSpec:
@@ -232,7 +249,8 @@ class ControllerListing:
         arm_modes: the arm modes it drives (the first is played); empty when it could not be loaded.
         robots: the robots it drives, or None for every robot.
         summary: its one-line summary, or why it could not be loaded.
-        target: an entry point's ``module:factory``, else None.
+        target: an entry point's ``module:factory`` (its value as declared, for one that names no factory), else
+            None (also for a name several distributions declare).
         loaded: False for an entry point whose plug-in could not be loaded.
     """
 
@@ -249,17 +267,23 @@ def list_controllers() -> list[ControllerListing]:
     """The registry's controllers, then every installed ``wbc.controllers`` entry point.
 
     Each entry point is imported to read its summary; one that fails to load is listed with its error instead of
-    stopping the listing.
+    stopping the listing, and a name several distributions declare is listed once, with who declares it.
     """
     rows = [ControllerListing(name=s.name, kind="registry", arm_modes=s.arm_modes, robots=s.robots, summary=s.summary)
             for s in CONTROLLERS.values()]
-    for name, ep in sorted(entry_points().items()):
-        target = f"{ep.module}:{ep.attr}"
+    for name, eps in sorted(declared_entry_points().items()):
+        ep = eps[0]
+        target = ep.value
         if name in CONTROLLERS:
             rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=target,
                                           summary=f"not usable: the registry's {name!r} has this name", loaded=False))
             continue
+        if len(eps) > 1:
+            rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=None,
+                                          summary=f"not usable: {ambiguity(name, eps)}", loaded=False))
+            continue
         try:
+            target = entry_point_target(ep)
             plugin, _ = load_plugin(target)
         except PluginError as exc:
             rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=target,
