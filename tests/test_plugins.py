@@ -276,6 +276,12 @@ def test_the_other_name_forms_are_not_taken_for_malformed_plugin_names(tmp_path)
         assert "not a plug-in name" not in str(caught.value) and "file not found" in str(caught.value)
     with pytest.raises(UnknownNameError, match="unknown controller 'standd'; did you mean 'stand'"):
         get_controller("standd")
+    # a registry name written with a dot or an underscore is a typo of that name, not a malformed plug-in
+    for typo in ("mpc.tail", "mpc_tail", "learned.locked"):
+        with pytest.raises(UnknownNameError, match=f"did you mean '{typo.replace('.', '-').replace('_', '-')}'"):
+            get_controller(typo)
+    with pytest.raises(UnknownNameError, match="a scenario goes after --scenario"):  # wbc run push.toml
+        get_controller("push.toml")
 
 
 def test_an_entry_point_is_listed_with_its_summary_and_plays_by_its_name(plugins, small, tmp_path, capsys):

@@ -18,7 +18,9 @@ Besides the registry's names, `get_controller` resolves:
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import functools
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -190,11 +192,16 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
             raise PluginAmbiguousError(ambiguity(name, installed[name]))
         (ep,) = installed[name]
         return plugin_spec(name, entry_point_target(ep), kind="entry point", config_file=config, entry_point=ep)
-    problem = plugin_name_problem(name)  # a plug-in meant (a colon, a dot, a path), but written wrong
-    if problem is not None:
-        raise PluginNotFoundError(problem)
     usable = [n for n, eps in installed.items() if len(eps) == 1 and n not in CONTROLLERS]  # not shadowed, ambiguous
-    raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS))
+    if Path(name).suffix.lower() == ".toml":
+        raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS),
+                               where="a TOML file is not a controller (a scenario goes after --scenario, a plug-in's "
+                                     "table after --controller-config)")
+    problem = plugin_name_problem(name)  # a plug-in meant (a colon, a dot, a path), but written wrong
+    if problem is not None and not difflib.get_close_matches(re.sub(r"[._]", "-", name), [*CONTROLLERS, *usable],
+                                                             n=1, cutoff=0.85):
+        raise PluginNotFoundError(problem)
+    raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS))  # a typo of a name suggests it
 
 
 def _policy_spec(name: str) -> ControllerSpec:
