@@ -240,6 +240,23 @@ def test_a_run_root_that_is_a_file_is_refused_naming_the_option(tmp_path, capsys
         assert "--run-root: " in err and "is a file, not a directory" in err and "Traceback" not in err
 
 
+@pytest.mark.parametrize("teacher", [[], ["--teacher", "mpc", "--rounds", "1", "--episodes", "1"]])
+def test_a_run_root_this_user_cannot_write_is_refused_by_the_dry_run_too(tmp_path, capsys, monkeypatch, teacher):
+    # root may write anywhere, so the folder's mode cannot show it here: os.access answers as for another user
+    pytest.importorskip("torch")
+    from wbc.learned.train import preflight
+
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    monkeypatch.setattr(preflight.os, "access", lambda path, mode: Path(path) != locked)
+    stage = [] if teacher else ["--stage", "1", *TINY]
+    for root in (locked, locked / "below"):
+        assert main(["train", "--task", "push", *stage, *teacher, "--run-root", str(root), "--dry-run"]) == 2
+        err = capsys.readouterr().err
+        assert f"--run-root: {locked} cannot be written by this user" in err and "Traceback" not in err
+    assert not any(locked.iterdir())
+
+
 def test_the_dry_run_refuses_the_checkpoint_student_and_expert_samples_the_run_would(stage1_run, tmp_path, capsys):
     root = _copy(stage1_run, tmp_path)
     checkpoint = root / "push-stage1" / "model_0.pt"

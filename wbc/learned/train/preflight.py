@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import re
 import zipfile
 import zlib
@@ -171,16 +172,23 @@ def _check_unchanged(inputs: Any, config: Path) -> None:
 
 
 def check_run_root(run_dir: str | Path) -> None:
-    """Refuse a run directory that cannot be made: a file stands where it, or a folder above it, would be.
+    """Refuse a run directory that cannot be made or written.
+
+    A file stands where it, or a folder above it, would be; or the nearest folder that exists is not this user's to
+    write (``os.access``).
 
     Raises:
-        ConfigError: naming ``--run-root`` and the file in the way.
+        ConfigError: naming ``--run-root`` and the file in the way, or the folder that cannot be written.
     """
     for path in (Path(run_dir), *Path(run_dir).parents):
         if path.exists():
             if not path.is_dir():
                 raise ConfigError(f"--run-root: {path} is a file, not a directory, so the run directory {run_dir} "
                                   "cannot be made there; give a directory")
+            if not os.access(path, os.W_OK | os.X_OK):
+                raise ConfigError(f"--run-root: {path} cannot be written by this user, so the run directory "
+                                  f"{run_dir} cannot be {'written' if path == Path(run_dir) else 'made'}; give a "
+                                  "directory this user can write")
             return
 
 
