@@ -15,21 +15,25 @@ import pytest
 from conftest import SHORT_SCENARIO
 from scipy.stats import binom
 
+from wbc.arena import paired_tests
 from wbc.arena.compare import ArenaConfig, run_arena
-from wbc.arena.paired_tests import mcnemar_exact, paired_values, wilcoxon_signed_rank
+from wbc.arena.paired_tests import hodges_lehmann, mcnemar_exact, paired_values, wilcoxon_signed_rank
 from wbc.arena.report import (
     _sequential_lines,
     cell_text,
     format_table,
     format_verdict,
+    n80_text,
+    p_text,
     paired_comparison,
     summarize,
 )
 from wbc.arena.sequential import DiscordantPairTest, SequentialComparison, mixture_log_e
 from wbc.arena.statistical_power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
 from wbc.arena.stats import wilson_interval
-from wbc.arena.summary import MetricSummary
+from wbc.arena.summary import MetricSummary, PairSummary, Summary, p_digits
 from wbc.arena.trial_record import TrialRecord
+from wbc.arena.verdict import verdicts
 from wbc.errors import ConfigError, RecordError
 
 
@@ -106,6 +110,95 @@ def test_wilcoxon_exact_small_samples_by_hand():
     assert wilcoxon_signed_rank(np.zeros(5)).p_value == 1.0
     with pytest.raises(RecordError, match="finite"):
         wilcoxon_signed_rank(np.array([1.0, math.nan]))
+
+
+def _signs_enumerated(d: np.ndarray) -> float:
+    """The exact two-sided signed-rank p-value by enumerating every sign pattern (ties share their mean rank)."""
+    import itertools
+
+    from scipy.stats import rankdata
+
+    nonzero = d[d != 0.0]
+    ranks = rankdata(np.abs(nonzero))
+    total, observed = ranks.sum(), ranks[nonzero > 0].sum()
+    sums = np.array([ranks[np.array(signs, dtype=bool)].sum()
+                     for signs in itertools.product((0, 1), repeat=nonzero.size)])
+    return float(np.mean(np.abs(2 * sums - total) >= abs(2 * observed - total) - 1e-9))
+
+
+def test_wilcoxon_is_exact_with_ties_and_equals_scipys_exact_test_without():
+    from scipy.stats import wilcoxon
+
+    rng = np.random.default_rng(7)
+    for k in range(60):  # ties from rounding: scipy would switch to an approximation there
+        d = np.round(rng.normal(0.3, 1.0, rng.integers(2, 12)), k % 2)
+        if np.any(d):
+            assert wilcoxon_signed_rank(d).p_value == pytest.approx(_signs_enumerated(d), abs=1e-12)
+    for n in (6, 20, 50):  # untied: scipy's exact null distribution
+        d = rng.normal(0.2, 1.0, n)
+        assert wilcoxon_signed_rank(d).p_value == pytest.approx(wilcoxon(d, method="exact").pvalue, abs=1e-12)
+    # beyond the exact range, the normal approximation stays close to the exact p
+    d = np.round(rng.normal(0.1, 1.0, 300), 1)
+    approx = wilcoxon_signed_rank(d)
+    assert not approx.exact and approx.nonzero > paired_tests.WILCOXON_EXACT_MAX
+    exact_max = paired_tests.WILCOXON_EXACT_MAX
+    try:
+        paired_tests.WILCOXON_EXACT_MAX = 1000
+        assert wilcoxon_signed_rank(d).exact
+        assert approx.p_value == pytest.approx(wilcoxon_signed_rank(d).p_value, abs=2e-3)
+    finally:
+        paired_tests.WILCOXON_EXACT_MAX = exact_max
+
+
+def test_fall_times_on_one_tick_grid_tie_instead_of_being_ranked_by_rounding_noise():
+    # TTF is a share of the episode; differences equal in ticks differ in their last bits after the subtraction
+    dt, episode = 0.02, 10.0
+    ticks_a = np.array([453, 452, 426, 215, 371, 142, 405])
+    ticks_b = np.array([483, 462, 436, 245, 381, 172, 395])
+    d = (ticks_b + 1) * dt / episode - (ticks_a + 1) * dt / episode
+    assert len(set(d.tolist())) > len(set((ticks_b - ticks_a).tolist()))  # the noise is there
+    assert wilcoxon_signed_rank(d).p_value == pytest.approx(_signs_enumerated((ticks_b - ticks_a).astype(float)))
+    assert wilcoxon_signed_rank(d).p_value == pytest.approx(0.078125)  # not significant; noise ranks gave 0.047
+
+
+def test_the_hodges_lehmann_shift_is_the_median_of_walsh_averages():
+    assert hodges_lehmann(np.array([1.0, 2.0, 9.0])) == 3.5  # averages 1, 1.5, 2, 5, 5.5, 9: their median
+    assert hodges_lehmann(np.array([0.01] * 20 + [-1.0])) == pytest.approx(0.01)
+    assert math.isnan(hodges_lehmann(np.array([])))
+
+
+def test_a_significant_test_whose_side_is_not_the_means_calls_neither_better():
+    # B is 0.01 m/s worse on 20 trials and 1.0 better on one: the mean favours B, the test finds B worse
+    a = [make_record("a", "in", 0, i, vlin_err=0.5) for i in range(21)]
+    b = [make_record("b", "in", 0, i, vlin_err=0.51 if i < 20 else -0.5) for i in range(21)]
+    vlin = paired_comparison(a, b, "vlin_err")
+    assert vlin["diff"] < 0 < vlin["shift"] and vlin["p"] < 0.05
+    entry = PairSummary(a="a", b="b", band="in", metric="vlin_err_common", ci95=tuple(vlin.pop("ci95")), **vlin)
+    (sentence,) = [line for line in verdicts(Summary(scenario_name="s", scenario_hash="h", cells={},
+                                                     paired=(entry,), warnings=()))]
+    assert "differ in how they track the linear velocity" in sentence and "not one way" in sentence
+    assert "favours a" in sentence and "favours b" in sentence and "neither is called better" in sentence
+    assert "tracks the linear velocity better" not in sentence
+
+
+def test_a_p_value_is_never_printed_on_the_other_side_of_005():
+    assert p_digits(0.0499832) == "0.04998" and p_text(0.0499832) == "0.04998"
+    assert p_digits(0.05) == "0.05" and p_digits(0.0500004) == "0.05"  # not significant, and written so
+    assert p_digits(0.0123456) == "0.0123" and p_digits(0.9999) == "1"
+    # a McNemar p just under 0.05: 117 pairs A alone won, 150 B alone (n = 300)
+    p = mcnemar_exact(np.array([1] * 117 + [0] * 150 + [1] * 33), np.array([0] * 117 + [1] * 150 + [1] * 33)).p_value
+    assert 0.0499 < p < 0.05 and float(p_text(p)) < 0.05
+
+
+def test_one_pair_of_a_continuous_metric_gives_no_n80_and_says_why():
+    a = [make_record("a", "in", 0, 0, vlin_err=0.2, vlin_err_by_s="0.2")]
+    b = [make_record("b", "in", 0, 0, vlin_err=0.3, vlin_err_by_s="0.3")]
+    summary = summarize([*a, *b], scenario_name="flat_push", scenario_hash="abc123", controllers=["a", "b"],
+                        bands=["in"])
+    (entry,) = [p for p in summary.paired if p.metric == "vlin_err_common"]
+    assert n80_text(entry) == "n/a"
+    (line,) = [v for v in verdicts(summary) if "linear velocity" in v]
+    assert "one pair shows nothing of how the differences spread" in line and "search's limit" not in line
 
 
 # --- Wilson interval --------------------------------------------------------------------------------------------------

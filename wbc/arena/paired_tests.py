@@ -9,10 +9,13 @@ The arena plays paired trials (`wbc.arena.stats`), so the right tests are paired
   (`scipy.stats.binomtest`, the same number as ``statsmodels.stats.contingency_tables.mcnemar(exact=True)``). Exact
   at every n; it needs no large-sample approximation, which the arena's small runs would not justify.
 - continuous metrics (TTF, tracking errors): the **Wilcoxon signed-rank test** on the paired differences
-  d_i = B_i - A_i (`scipy.stats.wilcoxon`; zero differences dropped, Wilcoxon's convention; exact null distribution
-  when the nonzero differences are few and untied, the normal approximation with tie correction otherwise). H0: the
-  differences are symmetric about 0. It assumes no normality, which TTF (most trials at 1.0) and error
-  distributions with long tails do not have.
+  d_i = B_i - A_i (`wilcoxon_signed_rank`; zero differences dropped, Wilcoxon's convention; differences rounded to 12
+  decimals first, so that fall times on one tick grid tie instead of being ranked by rounding noise; the exact null
+  distribution, ties included, up to 200 nonzero differences, the normal approximation with the ties' variance and a
+  continuity correction beyond). H0: the differences are symmetric about 0. It assumes no normality, which TTF (most
+  trials at 1.0) and error distributions with long tails do not have. The side it leans to is the side of the larger
+  rank sum, whose estimate is the Hodges-Lehmann shift (`hodges_lehmann`); the mean difference may lie on the other
+  side, when a few large differences outweigh most pairs: the verdict then calls neither controller better.
 
 The interval quoted for a paired success difference, `paired_success_interval`, is built from the same discordant
 pairs, so that it excludes 0 exactly when the exact McNemar test rejects at its level: of n pairs, m = b + c are
@@ -43,8 +46,9 @@ from wbc.arena.stats import PairKey
 from wbc.arena.trial_record import TrialRecord
 from wbc.errors import RecordError
 
-__all__ = ["BINARY_FIELDS", "McNemarResult", "WilcoxonResult", "clopper_pearson", "mcnemar_exact",
-           "paired_success_interval", "paired_values", "wilcoxon_signed_rank"]
+__all__ = ["BINARY_FIELDS", "DIFFERENCE_DECIMALS", "WILCOXON_EXACT_MAX", "McNemarResult", "WilcoxonResult",
+           "clopper_pearson", "hodges_lehmann", "mcnemar_exact", "paired_success_interval", "paired_values",
+           "wilcoxon_signed_rank"]
 
 BINARY_FIELDS = ("success",)
 """Record fields that are binary outcomes (compared by McNemar); every other metric is compared by Wilcoxon."""
@@ -74,15 +78,21 @@ class WilcoxonResult:
     Attributes:
         n: pairs in all.
         nonzero: pairs whose difference is not zero (the ones the test ranks).
-        statistic: scipy's statistic (the smaller of the positive and negative rank sums, two-sided); NaN when no
-            difference is nonzero.
+        statistic: the smaller of the positive and negative rank sums (two-sided); NaN when no difference is nonzero.
         p_value: two-sided p-value; 1.0 when every difference is zero.
+        rank_sum_plus: the ranks of the positive differences, summed (0 when none is nonzero).
+        rank_sum_minus: the ranks of the negative differences, summed: the side with the larger sum is the side the
+            test leans to.
+        exact: whether `p_value` is the exact permutation p-value (ties included), else the normal approximation.
     """
 
     n: int
     nonzero: int
     statistic: float
     p_value: float
+    rank_sum_plus: float = 0.0
+    rank_sum_minus: float = 0.0
+    exact: bool = True
 
 
 def mcnemar_exact(a: np.ndarray, b: np.ndarray) -> McNemarResult:
@@ -163,8 +173,24 @@ def paired_success_interval(a_only: int, b_only: int, n: int, *, level: float = 
     return float(min(lows)), float(max(highs))
 
 
+WILCOXON_EXACT_MAX = 200
+"""Up to this many nonzero differences the Wilcoxon p-value is exact (`wilcoxon_signed_rank`); beyond, the normal
+approximation (ties and continuity corrected) is used, within about 1e-3 of it there."""
+
+DIFFERENCE_DECIMALS = 12
+"""Differences are rounded to this many decimals before they are ranked: two differences equal in their units
+(fall times on the same tick grid, say) differ in their last bits after a subtraction, and must tie, not be ranked
+by that noise."""
+
+
 def wilcoxon_signed_rank(differences: np.ndarray) -> WilcoxonResult:
     """Two-sided Wilcoxon signed-rank test that paired differences are symmetric about zero.
+
+    Zero differences are dropped (Wilcoxon's own convention) and tied magnitudes share their mean rank, after the
+    differences are rounded to `DIFFERENCE_DECIMALS` decimals. Up to `WILCOXON_EXACT_MAX` nonzero differences the
+    p-value is exact, ties included: the null distribution of the positive rank sum, every sign equally likely, is
+    counted over the (doubled, hence whole) ranks. Beyond, it is the normal approximation with the ties' variance
+    and a continuity correction.
 
     Args:
         differences: d_i = B_i - A_i, shape (n,), finite.
@@ -179,15 +205,51 @@ def wilcoxon_signed_rank(differences: np.ndarray) -> WilcoxonResult:
     if not np.all(np.isfinite(d)):
         raise RecordError("wilcoxon_signed_rank: differences must be finite; leave out the pairs where a metric is "
                           "NaN (paired_values does)")
-    nonzero = d[d != 0.0]
+    nonzero = np.round(d, DIFFERENCE_DECIMALS)
+    nonzero = nonzero[nonzero != 0.0]
     if nonzero.size == 0:
         return WilcoxonResult(n=int(d.size), nonzero=0, statistic=math.nan, p_value=1.0)
-    from scipy.stats import wilcoxon
+    from scipy.stats import norm, rankdata
 
-    # zeros dropped here (Wilcoxon's own convention), so scipy sees only the differences it ranks
-    result = wilcoxon(nonzero, alternative="two-sided")
-    return WilcoxonResult(n=int(d.size), nonzero=int(nonzero.size), statistic=float(result.statistic),
-                          p_value=min(1.0, float(result.pvalue)))
+    ranks2 = np.rint(2.0 * rankdata(np.abs(nonzero))).astype(np.int64)  # doubled mean ranks: whole numbers
+    total2 = int(ranks2.sum())
+    plus2 = int(ranks2[nonzero > 0].sum())
+    deviation2 = abs(2 * plus2 - total2)  # |W+ - E[W+]|, in quarter ranks
+    exact = nonzero.size <= WILCOXON_EXACT_MAX
+    if exact:
+        dist = np.zeros(total2 + 1)  # P(2 W+ = w), built one rank at a time
+        dist[0], top = 1.0, 0
+        for r in ranks2:
+            shifted = np.zeros_like(dist)
+            shifted[r:top + r + 1] = dist[:top + 1]
+            dist = 0.5 * (dist + shifted)
+            top += int(r)
+        w2 = np.arange(total2 + 1)
+        p = float(dist[np.abs(2 * w2 - total2) >= deviation2].sum())
+    else:
+        sd = math.sqrt(float((ranks2.astype(float) ** 2).sum()) / 16.0)  # of W+; ranks2 / 2 are the ranks
+        step = math.gcd(*map(int, ranks2)) / 2.0  # how far apart W+'s values lie
+        z = max(0.0, deviation2 / 4.0 - step / 2.0) / sd
+        p = float(2.0 * norm.sf(z))
+    plus, minus = plus2 / 2.0, (total2 - plus2) / 2.0
+    return WilcoxonResult(n=int(d.size), nonzero=int(nonzero.size), statistic=min(plus, minus),
+                          p_value=min(1.0, p), rank_sum_plus=plus, rank_sum_minus=minus, exact=exact)
+
+
+def hodges_lehmann(differences: np.ndarray) -> float:
+    """The Hodges-Lehmann estimate of the differences' centre: the median of their Walsh averages.
+
+    The shift the Wilcoxon signed-rank test is about (its sign is the side the test leans to, where the mean's may
+    not be: a few large differences can outweigh most pairs in a mean). NaN without differences.
+
+    Args:
+        differences: d_i = B_i - A_i, shape (n,), finite.
+    """
+    d = np.round(np.asarray(differences, dtype=float).ravel(), DIFFERENCE_DECIMALS)
+    if d.size == 0:
+        return math.nan
+    i, j = np.triu_indices(d.size)
+    return float(np.median(0.5 * (d[i] + d[j])))
 
 
 def _index(records: Iterable[TrialRecord], which: str) -> dict[PairKey, TrialRecord]:

@@ -33,6 +33,7 @@ from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.error_guard import ControllerErrors, outcome_counts
 from wbc.arena.paired_tests import (
     BINARY_FIELDS,
+    hodges_lehmann,
     mcnemar_exact,
     paired_success_interval,
     paired_values,
@@ -47,7 +48,7 @@ from wbc.arena.stats import (
     mean_std_over_seeds,
     wilson_interval,
 )
-from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning
+from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning, p_digits
 from wbc.arena.trial_record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
 from wbc.arena.verdict import ALPHA, signed, verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
@@ -185,10 +186,11 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
         alpha: the significance level the power is computed for.
 
     Returns:
-        ``{"diff", "ci95", "interval", "n", "mean_a", "mean_b", "test", "p", "n80", "a_only", "b_only"}``:
+        ``{"diff", "ci95", "interval", "n", "mean_a", "mean_b", "test", "p", "n80", "a_only", "b_only", "shift"}``:
         ``interval`` names how ``ci95`` was made (``exact`` or ``bootstrap``), ``mean_a`` / ``mean_b`` are each
         controller's mean over the pairs used, ``a_only`` / ``b_only`` the discordant pair counts of a binary field
-        (None otherwise); NaN where undefined.
+        (None otherwise), ``shift`` the Hodges-Lehmann estimate of B - A that the Wilcoxon test is about (None for
+        a binary field); NaN where undefined.
 
     Raises:
         RecordError: one controller's records repeat a trial.
@@ -199,7 +201,7 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
         a, b = paired_values(records_a, records_b, field)
     out: dict[str, Any] = {"diff": math.nan, "ci95": [math.nan, math.nan], "interval": None, "n": int(a.size),
                            "mean_a": math.nan, "mean_b": math.nan, "test": None, "p": math.nan, "n80": None,
-                           "a_only": None, "b_only": None}
+                           "a_only": None, "b_only": None, "shift": None}
     if a.size == 0:
         return out
     d = b - a
@@ -211,7 +213,7 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
                    n80=pairs_for_mcnemar(test.a_only / a.size, test.b_only / a.size, alpha=alpha))
     else:
         out.update(test="Wilcoxon signed-rank", p=wilcoxon_signed_rank(d).p_value,
-                   ci95=list(bootstrap_mean_ci(d)), interval="bootstrap")
+                   ci95=list(bootstrap_mean_ci(d)), interval="bootstrap", shift=hodges_lehmann(d))
         if d.size >= 2:
             out["n80"] = pairs_for_mean_difference(float(d.mean()), float(d.std(ddof=1)), alpha=alpha)
     return out
@@ -421,18 +423,24 @@ def cell_text(stat: MetricSummary, metric: str, seeds: int | None) -> str:
 
 
 def p_text(p: float | None) -> str:
-    """A p-value as printed: 3 significant digits, ``<1e-04`` below 1e-4, ``n/a`` when undefined."""
+    """A p-value as printed: ``<1e-04`` below 1e-4, ``n/a`` when undefined, else `p_digits` (3 digits or more)."""
     if p is None:
         return "n/a"
-    return "<1e-04" if p < 1e-4 else f"{p:.3g}"
+    return "<1e-04" if p < 1e-4 else p_digits(p)
 
 
 def n80_text(pair: PairSummary) -> str:
-    """A paired comparison's n80 as printed: ``-`` when no difference was observed, ``>N`` beyond the search."""
+    """A paired comparison's n80 as printed.
+
+    ``-`` when no difference was observed, ``n/a`` from one pair of a continuous metric (no spread to size the test
+    by), ``>N`` beyond the search.
+    """
     if pair.n80 is not None:
         return str(pair.n80)
     if pair.diff in (None, 0.0) or pair.test is None:
         return "-"
+    if pair.n < 2 and pair.test != "exact McNemar":
+        return "n/a"  # one pair shows no spread to size a test by
     return f">{N_MAX}"
 
 
@@ -513,7 +521,8 @@ PAIRED_LEGEND = ("95% CI: for success the exact interval built from the discorda
                  "otherwise, two-sided; n80: paired trials that test needs to detect the observed difference with "
                  "80 % power at alpha = 0.05 (- when no difference was observed). On a few pairs a bootstrap "
                  "interval is narrower than the test allows (it may exclude 0 where no test could reject on so few "
-                 "pairs): the verdict follows the test.")
+                 "pairs): the verdict follows the test. Each p is its own comparison's, not corrected for the "
+                 "others in this table: where nothing differs, about 1 test in 20 has p < 0.05 by chance.")
 """What the p and n80 columns of the paired differences mean, printed under them."""
 
 

@@ -15,7 +15,23 @@ from typing import Any
 from wbc.arena.error_guard import ControllerErrors
 from wbc.errors import RecordError
 
-__all__ = ["CellSummary", "CounterTotal", "MetricSummary", "PairSummary", "Summary", "TickWarning", "json_float"]
+__all__ = ["SIGNIFICANCE", "CellSummary", "CounterTotal", "MetricSummary", "PairSummary", "Summary", "TickWarning",
+           "json_float", "p_digits"]
+
+SIGNIFICANCE = 0.05
+"""The level at which a paired test's difference is called significant (p < 0.05)."""
+
+
+def p_digits(p: float) -> str:
+    """A p-value to 3 significant digits, or as many more as keep it on its side of `SIGNIFICANCE`.
+
+    0.0499832 is called significant, so it is written 0.04998, never 0.05; 0.05 itself is not, and stays 0.05.
+    """
+    for digits in range(3, 12):
+        text = f"{p:.{digits}g}"
+        if (float(text) < SIGNIFICANCE) == (p < SIGNIFICANCE):
+            return text
+    return repr(p)
 
 
 def json_float(value: float | None) -> float | None:
@@ -174,6 +190,9 @@ class PairSummary:
             beyond the search.
         a_only: discordant pairs A alone won (success only).
         b_only: discordant pairs B alone won (success only).
+        shift: the Hodges-Lehmann estimate of B - A (the median of the differences' Walsh averages), the shift the
+            Wilcoxon test is about: its sign is the side the test leans to, which the mean's may not be. None for
+            success, without pairs, and in a ``summary.json`` written before it was recorded.
     """
 
     a: str
@@ -191,23 +210,24 @@ class PairSummary:
     n80: int | None
     a_only: int | None
     b_only: int | None
+    shift: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("diff", "mean_a", "mean_b", "p"):
+        for name in ("diff", "mean_a", "mean_b", "p", "shift"):
             object.__setattr__(self, name, json_float(getattr(self, name)))
         object.__setattr__(self, "ci95", (json_float(self.ci95[0]), json_float(self.ci95[1])))
 
     @property
     def significant(self) -> bool:
-        """The test rejected at 0.05."""
-        return self.p is not None and self.p < 0.05
+        """The test rejected at `SIGNIFICANCE` (0.05)."""
+        return self.p is not None and self.p < SIGNIFICANCE
 
     def to_json(self) -> dict[str, Any]:
         """The ``summary.json`` form (``paired`` entries)."""
         return {"a": self.a, "b": self.b, "band": self.band, "metric": self.metric, "diff": self.diff,
                 "ci95": list(self.ci95), "interval": self.interval, "n": self.n, "mean_a": self.mean_a,
                 "mean_b": self.mean_b, "test": self.test, "p": self.p, "n80": self.n80, "a_only": self.a_only,
-                "b_only": self.b_only}
+                "b_only": self.b_only, "shift": self.shift}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PairSummary:
@@ -216,7 +236,7 @@ class PairSummary:
         return cls(a=data["a"], b=data["b"], band=data["band"], metric=data["metric"], diff=data["diff"],
                    ci95=(ci[0], ci[1]), interval=data["interval"], n=data["n"], mean_a=data["mean_a"],
                    mean_b=data["mean_b"], test=data["test"], p=data["p"], n80=data["n80"], a_only=data["a_only"],
-                   b_only=data["b_only"])
+                   b_only=data["b_only"], shift=data.get("shift"))
 
 
 @dataclass(frozen=True, kw_only=True)

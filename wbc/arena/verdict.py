@@ -18,11 +18,11 @@ beside them does not show.
 
 from __future__ import annotations
 
-from wbc.arena.summary import PairSummary, Summary
+from wbc.arena.summary import SIGNIFICANCE, PairSummary, Summary, p_digits
 
 __all__ = ["ALPHA", "signed", "verdicts"]
 
-ALPHA = 0.05
+ALPHA = SIGNIFICANCE
 """The level a difference is called significant at."""
 
 _PRACTICAL = 1000
@@ -34,11 +34,13 @@ _TRACKING = (("vlin_err_common", "linear velocity", "m/s", 3), ("vang_err_common
 def _p(p: float | None) -> str:
     if p is None:
         return "n/a"
-    return "< 1e-4" if p < 1e-4 else f"{p:.3g}"
+    return "< 1e-4" if p < 1e-4 else p_digits(p)
 
 
 def _settle(entry: PairSummary, what: str) -> str:
     """What would settle a difference the test did not: the paired trials for 80 % power."""
+    if entry.n80 is None and entry.n < 2 and entry.test != "exact McNemar":
+        return f"one pair shows nothing of how the differences spread: play more trials to size a {what} this large"
     if entry.n80 and entry.n80 > _PRACTICAL:
         return (f"a {what} this small would take about {entry.n80} paired trials to settle (80 % power): for "
                 "practical purposes there is none")
@@ -97,14 +99,21 @@ def signed(value: float, decimals: int) -> str:
 
 
 def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decimals: int, *,
-                     higher_is_better: bool) -> str:
+                     higher_is_better: bool, subject: str) -> str:
     """The sentence of a difference of means read off `entry`: the better side first, its interval and test.
 
     `head` is the claim with ``{better}`` and ``{worse}`` in it; `what` names the means (``mean error``) and `unit`
     their unit (empty for a share); the better side has the higher mean when `higher_is_better`, else the lower. A
     difference too small for the decimals is written in scientific notation, never as a -0.000 called better.
+
+    A significant test whose side (the sign of the Hodges-Lehmann shift, `PairSummary.shift`) is not the mean's
+    calls neither better: most pairs lean one way and a few large differences pull the mean the other (`_split`,
+    which names the `subject` compared).
     """
     b_better = (entry.diff > 0) == higher_is_better
+    if entry.p is not None and entry.p < ALPHA and entry.shift is not None and (
+            entry.shift == 0.0 or (entry.shift > 0) != (entry.diff > 0)):
+        return _split(entry, subject, unit, decimals, higher_is_better=higher_is_better)
     better, worse = (entry.b, entry.a) if b_better else (entry.a, entry.b)
     m_better, m_worse = (entry.mean_b, entry.mean_a) if b_better else (entry.mean_a, entry.mean_b)
     lo, hi = entry.ci95
@@ -119,13 +128,29 @@ def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decima
     return text
 
 
+def _split(entry: PairSummary, subject: str, unit: str, decimals: int, *, higher_is_better: bool) -> str:
+    """A significant Wilcoxon test whose median shift and mean difference point to different sides: neither wins."""
+    unit = f" {unit}" if unit else ""
+    if entry.shift == 0.0:
+        lean = "the pairs' median shift (Hodges-Lehmann) is 0"
+    else:
+        favoured = entry.b if (entry.shift > 0) == higher_is_better else entry.a
+        lean = f"the pairs' median shift (Hodges-Lehmann, {signed(entry.shift, decimals)}{unit}) favours {favoured}"
+    by_mean = entry.b if (entry.diff > 0) == higher_is_better else entry.a
+    return (f"{entry.a} and {entry.b} differ in {subject}, but not one way: {lean}, while the mean difference "
+            f"({signed(entry.diff, decimals)}{unit} on {entry.n} trials, B - A with B = {entry.b}) favours {by_mean} "
+            f"through a few large differences; {_significance(entry, 'Wilcoxon signed-rank')}: neither is called "
+            "better")
+
+
 def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
     if not entry.n or entry.diff is None:
         return None
     if entry.diff == 0.0:
         return f"{entry.a} and {entry.b} track the {what} alike over the seconds both survived ({entry.n} trials)"
     return _mean_difference(entry, f"{{better}} tracks the {what} better than {{worse}} over the seconds both survived",
-                            "mean error", unit, decimals, higher_is_better=False)
+                            "mean error", unit, decimals, higher_is_better=False,
+                            subject=f"how they track the {what} over the seconds both survived")
 
 
 def _time_to_fall(entry: PairSummary) -> str | None:
@@ -133,7 +158,8 @@ def _time_to_fall(entry: PairSummary) -> str | None:
     if not entry.n or entry.diff is None or entry.diff == 0.0:
         return None
     return _mean_difference(entry, "{better} stays up longer than {worse}",
-                            "mean TTF (the share of the episode survived)", "", 3, higher_is_better=True)
+                            "mean TTF (the share of the episode survived)", "", 3, higher_is_better=True,
+                            subject="how long they stay up (TTF)")
 
 
 def verdicts(summary: Summary) -> list[str]:
