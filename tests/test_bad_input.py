@@ -24,6 +24,7 @@ from wbc.control.plugin import read_controller_config
 from wbc.errors import EpisodeError, EpisodeFileError, FileFieldError, RecordError, ScenarioError
 from wbc.input_files import read_toml
 from wbc.scenario.domain import DomainParams
+from wbc.scenario.lock import check_published
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.terrain import TerrainConfig
 from wbc.viz.replay import frames_of
@@ -506,3 +507,33 @@ def test_an_interrupted_command_says_so_in_one_line_and_how_a_run_is_finished(tm
                                        "with --resume plays the rest\n")
     assert main(["bench", "sim"]) == 130
     assert capsys.readouterr().err == "wbc: interrupted\n"
+
+
+def test_an_edited_copy_of_a_published_scenario_is_warned_about_by_every_command_that_plays_it(tmp_path, capsys,
+                                                                                                monkeypatch):
+    import importlib
+
+    import wbc.viz.view as view
+
+    cli = importlib.import_module("wbc.cli.main")  # the module (the package's name `main` is the function)
+    # push.toml edited beside a copy of the lock: its version is listed, with the hash it was published with
+    edited = _scenario(tmp_path, "duration_s = 20.0", "duration_s = 19.0", "push.toml")
+    (tmp_path / "published.toml").write_text((ROOT / "scenarios" / "published.toml").read_text())
+    warning = "wbc: warning: " + str(pytest.raises(ScenarioError, check_published, load_scenario(edited)).value)
+    assert "changed without a version bump" in warning
+
+    def stop(*args, **kwargs):
+        raise ScenarioError(edited, "stopped by the test before any trial")
+
+    for name in ("arm_momentum_study", "bench_act", "bench_latency"):
+        monkeypatch.setattr(cli, name, stop)
+    monkeypatch.setattr(view, "view_trial", stop)
+    commands = (["analyze", "arm-momentum", "--trials", "1"], ["bench", "act", "stand"],
+                ["bench", "latency", "--controllers", "stand", "--no-wire"],
+                ["view", "stand", "--trial", "0", "--record", str(tmp_path / "v.html")])
+    for argv in commands:
+        err = _cli_error(capsys, [*argv, "--scenario", str(edited)])
+        assert err.startswith(warning), argv  # said before anything plays
+    # the published file itself is played without a warning
+    for argv in commands:
+        assert "warning" not in _cli_error(capsys, [*argv, "--scenario", str(ROOT / "scenarios" / "push.toml")])

@@ -47,7 +47,7 @@ from wbc.learned.train.adaptation_config import AdaptationConfig
 from wbc.learned.train.stages import TASKS, fine_tune_config, stage_config
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
-from wbc.scenario.scenario import load_scenario
+from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.tools.arm_momentum import arm_momentum_study
 from wbc.tools.bench import (
@@ -82,7 +82,17 @@ def _analyze_tail(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scenario_played(path: str) -> None:
+    """Load the scenario a command plays and warn, as the arena does, when it is not the published one.
+
+    An edited copy of a published file (push.toml) must not be taken for it in silence: the warning says whether the
+    lock beside it lists it, or lists another hash.
+    """
+    warn_if_unpublished(load_scenario(path))
+
+
 def _analyze_arm_momentum(args: argparse.Namespace) -> int:
+    _scenario_played(args.scenario)
     rows = arm_momentum_study(args.scenario, args.controller, band=args.band, seeds=tuple(range(args.seeds)),
                               trials=args.trials)
     if args.json:
@@ -167,6 +177,7 @@ def _bench_latency(args: argparse.Namespace) -> int:
     if args.no_wire and args.robot is not None:
         raise ConfigError("--robot names the wire's robot, and --no-wire measures no wire (the margins play the "
                           "scenario's robot); leave one of them out")
+    _scenario_played(args.scenario)
     result = bench_latency(tuple(args.controllers), wire_robot="go1" if args.robot is None else args.robot,
                            scenario=args.scenario, trials=args.trials, wire=not args.no_wire)
     if args.json:
@@ -177,6 +188,7 @@ def _bench_latency(args: argparse.Namespace) -> int:
 
 
 def _bench_act(args: argparse.Namespace) -> int:
+    _scenario_played(args.scenario)
     result = bench_act(tuple(args.controllers), scenario=args.scenario, band=args.band, seed=args.seed,
                        trial=args.trial, repeats=args.repeats)
     if args.json:
@@ -1105,6 +1117,7 @@ def _view_refusals(args: argparse.Namespace) -> None:
 def _view_trial(args: argparse.Namespace) -> Trial:
     """The trial ``wbc view`` plays: ``--scenario``'s band (its first by default), seed and trial, cut short."""
     scenario = load_scenario(args.scenario)
+    warn_if_unpublished(scenario)
     trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
     if args.duration is not None:
         if not 0 < args.duration <= trial.duration_s:
