@@ -537,3 +537,29 @@ def test_an_edited_copy_of_a_published_scenario_is_warned_about_by_every_command
     # the published file itself is played without a warning
     for argv in commands:
         assert "warning" not in _cli_error(capsys, [*argv, "--scenario", str(ROOT / "scenarios" / "push.toml")])
+
+
+def _nothing_plays(monkeypatch) -> None:
+    """Make playing a trial, or starting the viewer's server, fail the test."""
+    import wbc.viz.server as server
+    import wbc.viz.view as view
+
+    for name in ("view_trial", "view_ab"):
+        monkeypatch.setattr(view, name, lambda *a, **k: pytest.fail("the trial was played"))
+    monkeypatch.setattr(server.subprocess, "Popen", lambda *a, **k: pytest.fail("a server was started"))
+
+
+_VIEWED = ["--scenario", "scenarios/push.toml", "--trial", "0"]
+
+
+def test_a_recording_path_that_is_a_directory_is_refused_before_the_trial_plays(tmp_path, capsys, monkeypatch):
+    _nothing_plays(monkeypatch)
+    (tmp_path / "adir.html").mkdir()
+    for ctrls in (["stand"], ["stand", "mpc"]):
+        # the trial played, then the page could not be written
+        err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--record", str(tmp_path / "adir.html")])
+        assert f"--record {tmp_path / 'adir.html'} is a directory: give an .html file in it, e.g. " \
+               f"{tmp_path / 'adir.html' / 'view.html'}" in err
+        err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--record", str(tmp_path / "nodir" / "v.html")])
+        assert f"--record {tmp_path / 'nodir' / 'v.html'}: give an .html file in an existing directory" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir.html"]

@@ -1036,6 +1036,8 @@ def _view(args: argparse.Namespace) -> int:
 
     _view_refusals(args)
     record = Path(args.record) if args.record else None
+    if record is not None and record.is_dir():  # checked before the trial plays, as the other paths
+        raise ViewerError(f"--record {record} is a directory: give an .html file in it, e.g. {record / 'view.html'}")
     if record is not None and (record.suffix.lower() not in (".html", ".htm") or not record.parent.is_dir()):
         raise ViewerError(f"--record {record}: give an .html file in an existing directory")
     save = Path(args.save_episode) if args.save_episode else None
