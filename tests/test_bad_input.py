@@ -563,3 +563,15 @@ def test_a_recording_path_that_is_a_directory_is_refused_before_the_trial_plays(
         err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--record", str(tmp_path / "nodir" / "v.html")])
         assert f"--record {tmp_path / 'nodir' / 'v.html'}: give an .html file in an existing directory" in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["adir.html"]
+
+
+def test_a_moment_past_the_trials_end_is_refused_before_the_trial_plays(tmp_path, capsys, monkeypatch):
+    _nothing_plays(monkeypatch)
+    for ctrls in (["stand"], ["stand", "mpc"]):
+        # the address printed opened the page at no moment of the trial
+        err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--record", str(tmp_path / "v.html"), "--at", "500"])
+        assert "--at 500 s is past the end of the trial, which lasts 20 s: give --at in [0, 20]" in err
+        err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--duration", "2", "--record", str(tmp_path / "v.html"),
+                                  "--at", "3"])
+        assert "--at 3 s is past the end of the trial, which lasts 2 s (its --duration): give --at in [0, 2]" in err
+    assert not list(tmp_path.iterdir())

@@ -1064,6 +1064,7 @@ def _view(args: argparse.Namespace) -> int:
 
         stored = load_stored_episode(args.episode, args.trial, controller=args.controller or args.ctrl,
                                      band=args.band, seed=args.seed)
+        _check_at(args.at, stored.trial.duration_s)
         result = replay_episode(stored, cfg)
         what = f"{stored.path}"
     else:
@@ -1072,6 +1073,7 @@ def _view(args: argparse.Namespace) -> int:
                               "RESULTS_DIR --trial I (replay a stored one)")
         spec = get_controller(args.ctrl, config=args.controller_config, io=args.io)
         trial = _view_trial(args)
+        _check_at(args.at, trial.duration_s, cut=args.duration is not None)
         result = view_trial(trial, spec, cfg)
         what = f"{args.ctrl} on {trial.scenario} band {trial.band} seed {trial.seed} trial {trial.index}"
         printers.print_viewed_trial(what, result.trial_record)
@@ -1115,6 +1117,20 @@ def _view_refusals(args: argparse.Namespace) -> None:
         raise ConfigError("--at opens a recorded page at a moment: add --record FILE.html, or use --pause-at T live")
 
 
+def _check_at(at: float | None, duration_s: float, *, cut: bool = False) -> None:
+    """Refuse an ``--at`` past the end of the trial shown, before it plays: the page would open at no moment of it.
+
+    Args:
+        at: ``--at`` [s], or None.
+        duration_s: how long the trial shown lasts [s].
+        cut: `duration_s` is ``--duration``'s, for the message.
+    """
+    if at is not None and at > duration_s:
+        lasts = f"{duration_s:g} s (its --duration)" if cut else f"{duration_s:g} s"
+        raise ConfigError(f"--at {at:g} s is past the end of the trial, which lasts {lasts}: give --at in "
+                          f"[0, {duration_s:g}]")
+
+
 def _view_trial(args: argparse.Namespace) -> Trial:
     """The trial ``wbc view`` plays: ``--scenario``'s band (its first by default), seed and trial, cut short."""
     scenario = load_scenario(args.scenario)
@@ -1137,12 +1153,14 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
 
         first, second = (load_stored_episode(args.episode, args.trial, controller=c, band=args.band, seed=args.seed)
                          for c in ctrls)
+        _check_at(args.at, first.trial.duration_s)
         result = replay_ab(first, second, cfg, path)
     else:
         if args.scenario is None:
             raise ConfigError("wbc view A B needs --scenario FILE --trial I (play the trial with both), or "
                               "--episode RESULTS_DIR --trial I (their stored runs)")
         trial = _view_trial(args)
+        _check_at(args.at, trial.duration_s, cut=args.duration is not None)
         specs = tuple(get_controller(c, config=args.controller_config, io=args.io) for c in ctrls)
         result = view_ab(trial, specs, cfg, path)
     for name, fall in zip(result.names, result.fall_s, strict=True):
