@@ -12,6 +12,7 @@ import pytest
 import umsgpack
 
 from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.episode import Episode
 from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
 from wbc.scenario import ScenarioError, check_published
@@ -230,6 +231,15 @@ def test_cli_view_exports_the_trial_and_says_where_the_recording_time_went(scena
     assert main(["view", "stand", "--scenario", str(scenario), "--trial", "0", "--record", str(out),
                  "--export-scenario", str(tmp_path / "t.json")]) != 0
     assert "give a .toml file" in capsys.readouterr().err
+
+
+def test_cli_view_says_where_it_saved_the_episode(scenario, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
+    saved = tmp_path / "e.npz"
+    assert main(["view", "stand", "--scenario", str(scenario), "--trial", "0", "--duration", "0.3", "--record",
+                 str(tmp_path / "e.html"), "--save-episode", str(saved)]) == 0
+    assert f"saved the episode played to {saved}" in capsys.readouterr().out.splitlines()
+    assert Episode.load(str(saved)).survived_s == pytest.approx(0.3)
 
 
 def test_cli_view_refuses_three_controllers(scenario, capsys):

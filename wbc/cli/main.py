@@ -1079,6 +1079,8 @@ def _view(args: argparse.Namespace) -> int:
         printers.print_viewed_trial(what, result.trial_record)
         if result.exported is not None:
             print(result.exported.line(args.ctrl))
+        if save is not None:
+            print(f"saved the episode played to {save}")
     if result.recording is not None:
         printers.print_recording(what, result.frames_recorded, result.recording)
         if result.timing is not None:
