@@ -575,3 +575,32 @@ def test_a_moment_past_the_trials_end_is_refused_before_the_trial_plays(tmp_path
                                   "--at", "3"])
         assert "--at 3 s is past the end of the trial, which lasts 2 s (its --duration): give --at in [0, 2]" in err
     assert not list(tmp_path.iterdir())
+
+
+def test_a_host_that_is_no_address_is_refused_before_the_viewer_starts(tmp_path, capsys, monkeypatch):
+    _nothing_plays(monkeypatch)
+    # refused at once, not after the server's 20 s start timeout
+    for host, says in (("999.1.1.1", "is not an IPv4 address: give four numbers in 0..255 joined by dots"),
+                       ("bad_host", "is neither an IP address nor a host name"), ("::g", "is not an IPv6 address")):
+        assert f"--host {host} {says}" in _cli_error(capsys, ["view", "stand", *_VIEWED, "--host", host])
+        assert f"--host {host} {says}" in _cli_error(capsys, ["run", "stand", *_VIEWED[:2], "--view", "--host", host,
+                                                              "--out", str(tmp_path / "run")])
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("host", ["127.0.0.1", "127.0.0.2", "0.0.0.0", "::1", "localhost", "viewer-1.lab.example",
+                                  "example.org."])
+def test_a_host_of_valid_syntax_is_not_refused_and_nothing_is_looked_up(host):
+    from wbc.viz.server import host_problem
+
+    assert host_problem(host) is None
+
+
+@pytest.mark.parametrize("host", ["", "999.1.1.1", "1.2.3", "1.2.3.4.5", "-a.example", "a..b", "a_b", "x" * 64,
+                                  "1:2:3", "example.123"])
+def test_a_host_of_invalid_syntax_is_refused_by_the_server_at_once(host, monkeypatch):
+    import wbc.viz.server as server
+
+    monkeypatch.setattr(server.subprocess, "Popen", lambda *a, **k: pytest.fail("a server was started"))
+    with pytest.raises(server.ViewerError, match="the viewer's host"):
+        server.MeshcatServer(server.ServerConfig(host=host)).start()

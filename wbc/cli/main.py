@@ -902,7 +902,7 @@ def _view_options(args: argparse.Namespace) -> None:
     """Fill in ``--host`` / ``--speed``'s defaults, or refuse them without ``--view``, where they would do nothing.
 
     Raises:
-        ConfigError: either is given without ``--view``.
+        ConfigError: either is given without ``--view``, or ``--host`` is no IP address or host name.
     """
     names = [name for name in _VIEW_OPTIONS if hasattr(args, name)]
     given = [f"--{name}" for name in names if getattr(args, name) is not None]
@@ -912,6 +912,8 @@ def _view_options(args: argparse.Namespace) -> None:
     for name in names:
         if getattr(args, name) is None:
             setattr(args, name, _VIEW_OPTIONS[name])
+    if args.view and "host" in names:
+        _check_host(args.host)
 
 
 def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_significant: bool = False,
@@ -1035,6 +1037,7 @@ def _view(args: argparse.Namespace) -> int:
     from wbc.viz.view import ViewConfig, replay_episode, view_trial
 
     _view_refusals(args)
+    _check_host(args.host)
     record = Path(args.record) if args.record else None
     if record is not None and record.is_dir():  # checked before the trial plays, as the other paths
         raise ViewerError(f"--record {record} is a directory: give an .html file in it, e.g. {record / 'view.html'}")
@@ -1131,6 +1134,18 @@ def _check_at(at: float | None, duration_s: float, *, cut: bool = False) -> None
         lasts = f"{duration_s:g} s (its --duration)" if cut else f"{duration_s:g} s"
         raise ConfigError(f"--at {at:g} s is past the end of the trial, which lasts {lasts}: give --at in "
                           f"[0, {duration_s:g}]")
+
+
+def _check_host(host: str | None) -> None:
+    """Refuse a ``--host`` that is no IP address or host name (`host_problem`), before any server or trial starts.
+
+    Only its syntax is checked (nothing is looked up); which addresses a viewer may listen on is left as it is.
+    """
+    from wbc.viz.server import host_problem
+
+    problem = None if host is None else host_problem(host)
+    if problem is not None:
+        raise ConfigError(f"--host {host or repr(host)} {problem}")
 
 
 def _view_trial(args: argparse.Namespace) -> Trial:
