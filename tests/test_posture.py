@@ -95,3 +95,12 @@ def test_the_study_takes_no_seed_since_nothing_in_it_is_drawn(capsys):
     assert stop.value.code == 2 and "unrecognized arguments: --seed 1" in capsys.readouterr().err
     with pytest.raises(TypeError):
         posture_study(["stand"], duration_s=0.2, seed=1)
+
+
+def test_a_duration_shorter_than_a_control_period_is_blamed_on_the_duration(capsys):
+    """The cause is the --duration given, not the controller's rate: the message names the option and its least."""
+    assert main(["analyze", "posture", "stand", "--duration", "0.001"]) == 2
+    err = capsys.readouterr().err
+    assert ("--duration 0.001 s is shorter than one control period of controller StandController (1/50.0 Hz = "
+            "0.02 s), so it would never be asked to act; give --duration of at least 0.02 s") in err
+    assert "rate of at least" not in err

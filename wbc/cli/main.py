@@ -103,7 +103,8 @@ def _analyze_arm_momentum(args: argparse.Namespace) -> int:
 
 
 def _analyze_posture(args: argparse.Namespace) -> int:
-    rows = posture_study(args.controllers, robot=args.robot, walk_vx=args.walk, duration_s=args.duration)
+    rows = posture_study(args.controllers, robot=args.robot, walk_vx=args.walk, duration_s=args.duration,
+                         duration_option="--duration")
     if args.json:
         printers.print_json([dataclasses.asdict(r) for r in rows])
     else:
