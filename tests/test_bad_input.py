@@ -24,6 +24,7 @@ from wbc.control.plugin import read_controller_config
 from wbc.errors import EpisodeError, EpisodeFileError, FileFieldError, RecordError, ScenarioError
 from wbc.input_files import read_toml
 from wbc.scenario.domain import DomainParams
+from wbc.scenario.lock import check_published
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.terrain import TerrainConfig
 from wbc.viz.replay import frames_of
@@ -506,3 +507,100 @@ def test_an_interrupted_command_says_so_in_one_line_and_how_a_run_is_finished(tm
                                        "with --resume plays the rest\n")
     assert main(["bench", "sim"]) == 130
     assert capsys.readouterr().err == "wbc: interrupted\n"
+
+
+def test_an_edited_copy_of_a_published_scenario_is_warned_about_by_every_command_that_plays_it(tmp_path, capsys,
+                                                                                                monkeypatch):
+    import importlib
+
+    import wbc.viz.view as view
+
+    cli = importlib.import_module("wbc.cli.main")  # the module (the package's name `main` is the function)
+    # push.toml edited beside a copy of the lock: its version is listed, with the hash it was published with
+    edited = _scenario(tmp_path, "duration_s = 20.0", "duration_s = 19.0", "push.toml")
+    (tmp_path / "published.toml").write_text((ROOT / "scenarios" / "published.toml").read_text())
+    warning = "wbc: warning: " + str(pytest.raises(ScenarioError, check_published, load_scenario(edited)).value)
+    assert "changed without a version bump" in warning
+
+    def stop(*args, **kwargs):
+        raise ScenarioError(edited, "stopped by the test before any trial")
+
+    for name in ("arm_momentum_study", "bench_act", "bench_latency"):
+        monkeypatch.setattr(cli, name, stop)
+    monkeypatch.setattr(view, "view_trial", stop)
+    commands = (["analyze", "arm-momentum", "--trials", "1"], ["bench", "act", "stand"],
+                ["bench", "latency", "--controllers", "stand", "--no-wire"],
+                ["view", "stand", "--trial", "0", "--record", str(tmp_path / "v.html")])
+    for argv in commands:
+        err = _cli_error(capsys, [*argv, "--scenario", str(edited)])
+        assert err.startswith(warning), argv  # said before anything plays
+    # the published file itself is played without a warning
+    for argv in commands:
+        assert "warning" not in _cli_error(capsys, [*argv, "--scenario", str(ROOT / "scenarios" / "push.toml")])
+
+
+def _nothing_plays(monkeypatch) -> None:
+    """Make playing a trial, or starting the viewer's server, fail the test."""
+    import wbc.viz.server as server
+    import wbc.viz.view as view
+
+    for name in ("view_trial", "view_ab"):
+        monkeypatch.setattr(view, name, lambda *a, **k: pytest.fail("the trial was played"))
+    monkeypatch.setattr(server.subprocess, "Popen", lambda *a, **k: pytest.fail("a server was started"))
+
+
+_VIEWED = ["--scenario", "scenarios/push.toml", "--trial", "0"]
+
+
+def test_a_recording_path_that_is_a_directory_is_refused_before_the_trial_plays(tmp_path, capsys, monkeypatch):
+    _nothing_plays(monkeypatch)
+    (tmp_path / "adir.html").mkdir()
+    for ctrls in (["stand"], ["stand", "mpc"]):
+        # the trial played, then the page could not be written
+        err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--record", str(tmp_path / "adir.html")])
+        assert f"--record {tmp_path / 'adir.html'} is a directory: give an .html file in it, e.g. " \
+               f"{tmp_path / 'adir.html' / 'view.html'}" in err
+        err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--record", str(tmp_path / "nodir" / "v.html")])
+        assert f"--record {tmp_path / 'nodir' / 'v.html'}: give an .html file in an existing directory" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir.html"]
+
+
+def test_a_moment_past_the_trials_end_is_refused_before_the_trial_plays(tmp_path, capsys, monkeypatch):
+    _nothing_plays(monkeypatch)
+    for ctrls in (["stand"], ["stand", "mpc"]):
+        # the address printed opened the page at no moment of the trial
+        err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--record", str(tmp_path / "v.html"), "--at", "500"])
+        assert "--at 500 s is past the end of the trial, which lasts 20 s: give --at in [0, 20]" in err
+        err = _cli_error(capsys, ["view", *ctrls, *_VIEWED, "--duration", "2", "--record", str(tmp_path / "v.html"),
+                                  "--at", "3"])
+        assert "--at 3 s is past the end of the trial, which lasts 2 s (its --duration): give --at in [0, 2]" in err
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_host_that_is_no_address_is_refused_before_the_viewer_starts(tmp_path, capsys, monkeypatch):
+    _nothing_plays(monkeypatch)
+    # refused at once, not after the server's 20 s start timeout
+    for host, says in (("999.1.1.1", "is not an IPv4 address: give four numbers in 0..255 joined by dots"),
+                       ("bad_host", "is neither an IP address nor a host name"), ("::g", "is not an IPv6 address")):
+        assert f"--host {host} {says}" in _cli_error(capsys, ["view", "stand", *_VIEWED, "--host", host])
+        assert f"--host {host} {says}" in _cli_error(capsys, ["run", "stand", *_VIEWED[:2], "--view", "--host", host,
+                                                              "--out", str(tmp_path / "run")])
+    assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("host", ["127.0.0.1", "127.0.0.2", "0.0.0.0", "::1", "localhost", "viewer-1.lab.example",
+                                  "example.org."])
+def test_a_host_of_valid_syntax_is_not_refused_and_nothing_is_looked_up(host):
+    from wbc.viz.server import host_problem
+
+    assert host_problem(host) is None
+
+
+@pytest.mark.parametrize("host", ["", "999.1.1.1", "1.2.3", "1.2.3.4.5", "-a.example", "a..b", "a_b", "x" * 64,
+                                  "1:2:3", "example.123"])
+def test_a_host_of_invalid_syntax_is_refused_by_the_server_at_once(host, monkeypatch):
+    import wbc.viz.server as server
+
+    monkeypatch.setattr(server.subprocess, "Popen", lambda *a, **k: pytest.fail("a server was started"))
+    with pytest.raises(server.ViewerError, match="the viewer's host"):
+        server.MeshcatServer(server.ServerConfig(host=host)).start()

@@ -107,6 +107,48 @@ def test_arm_momentum_study_measures_the_arm_against_the_push():
     assert 0.05 < a.arm_momentum_bound < 1.0 and 0.0 < a.bound_fraction < 1.0 and -1.0 <= a.alignment <= 1.0
 
 
+def test_arm_momentum_says_in_words_what_it_cannot_measure(capsys):
+    """No arm, or a band with no push: a sentence that says so, not nan % and 0 % lines; the JSON holds null."""
+    turn = PUSH.parent / "turn.toml"
+    assert main(["analyze", "arm-momentum", "--controller", "stand-noarm", "--trials", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "stand-noarm has no arm (arm mode none): no arm moves to take up the pushes' angular momentum" in out
+    assert "nan" not in out and "% of" not in out
+    assert main(["analyze", "arm-momentum", "--scenario", str(turn), "--band", "1.0", "--controller", "stand",
+                 "--trials", "1"]) == 0
+    out = capsys.readouterr().out
+    assert f"band 1.0 of {turn} has no push: there is no push's angular impulse to set the arm's momentum against" \
+        in out
+    assert "nan" not in out and "% of" not in out
+    assert main(["analyze", "arm-momentum", "--controller", "stand-noarm", "--trials", "1", "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["arm_mode"] == "none" and row["bound_fraction"] is None and row["alignment"] is None
+
+
+def test_a_trial_that_fell_before_its_push_is_left_out_of_the_arm_momentum_means(limp, capsys):
+    import dataclasses
+
+    from wbc.cli.printers import print_arm_momentum
+    from wbc.tools.arm_momentum import arm_momentum_study
+
+    # the limp robot is down within a second; band ood trial 0's first push starts at 2.334 s
+    (fell,) = arm_momentum_study(str(PUSH.parent / "push.toml"), limp, band="ood", trials=1)
+    assert not fell.survived and fell.pushes > 0 and fell.pushes_measured == 0
+    assert np.isnan(fell.push_angular_impulse) and np.isnan(fell.arm_momentum_peak)
+    reached = dataclasses.replace(fell, trial=1, survived=True, pushes_measured=fell.pushes, arm_travel_rad=2.0,
+                                  push_angular_impulse=1.0, arm_momentum_peak=0.2, arm_momentum_mean=0.05,
+                                  arm_momentum_bound=0.4, bound_fraction=0.5, alignment=0.8)
+    print_arm_momentum([reached, fell], controller=limp, scenario="push.toml", band="ood")
+    out = capsys.readouterr().out
+    assert "1 of 2 trials fell before their first push and are left out of the means" in out
+    # the means are the trial that reached its push's, not halved by a zero impulse and a zero peak
+    assert ("mean over the 1 trial that reached a push: travel 2.0 rad, push angular impulse 1.000 N m s, arm "
+            "momentum peak 0.200 N m s (20 % of the impulse), mean 0.050 N m s") in out
+    assert "bound from its pose at each push: 0.400 N m s; its peak reached 50 % of it" in out and "nan" not in out
+    print_arm_momentum([fell], controller=limp, scenario="push.toml", band="ood")
+    assert "no trial lasted to its first push: nothing to average" in capsys.readouterr().out
+
+
 def test_the_arms_momentum_bound_is_the_largest_over_its_speed_box():
     """The bound from the corners of the speed box is the maximum over the whole box, on a grid of it."""
     import pinocchio as pin

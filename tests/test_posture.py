@@ -86,3 +86,21 @@ def test_bad_input_names_what_is_wrong():
         posture_study(["mpc"], duration_s=0.6, ramp_s=0.5)
     with pytest.raises(ConfigError, match="duration_s"):
         posture_study(["mpc"], duration_s=0.0)
+
+
+def test_the_study_takes_no_seed_since_nothing_in_it_is_drawn(capsys):
+    """Flat ground, nominal domain, no sensor noise: a seed would change nothing, so the command offers none."""
+    with pytest.raises(SystemExit) as stop:
+        main(["analyze", "posture", "stand", "--seed", "1"])
+    assert stop.value.code == 2 and "unrecognized arguments: --seed 1" in capsys.readouterr().err
+    with pytest.raises(TypeError):
+        posture_study(["stand"], duration_s=0.2, seed=1)
+
+
+def test_a_duration_shorter_than_a_control_period_is_blamed_on_the_duration(capsys):
+    """The cause is the --duration given, not the controller's rate: the message names the option and its least."""
+    assert main(["analyze", "posture", "stand", "--duration", "0.001"]) == 2
+    err = capsys.readouterr().err
+    assert ("--duration 0.001 s is shorter than one control period of controller StandController (1/50.0 Hz = "
+            "0.02 s), so it would never be asked to act; give --duration of at least 0.02 s") in err
+    assert "rate of at least" not in err

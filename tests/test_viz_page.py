@@ -12,6 +12,7 @@ import pytest
 import umsgpack
 
 from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.episode import Episode
 from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
 from wbc.scenario import ScenarioError, check_published
@@ -230,6 +231,15 @@ def test_cli_view_exports_the_trial_and_says_where_the_recording_time_went(scena
     assert main(["view", "stand", "--scenario", str(scenario), "--trial", "0", "--record", str(out),
                  "--export-scenario", str(tmp_path / "t.json")]) != 0
     assert "give a .toml file" in capsys.readouterr().err
+
+
+def test_cli_view_says_where_it_saved_the_episode(scenario, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
+    saved = tmp_path / "e.npz"
+    assert main(["view", "stand", "--scenario", str(scenario), "--trial", "0", "--duration", "0.3", "--record",
+                 str(tmp_path / "e.html"), "--save-episode", str(saved)]) == 0
+    assert f"saved the episode played to {saved}" in capsys.readouterr().out.splitlines()
+    assert Episode.load(str(saved)).survived_s == pytest.approx(0.3)
 
 
 def test_cli_view_refuses_three_controllers(scenario, capsys):
@@ -502,3 +512,21 @@ def test_screenshot_of_a_trial_page_is_a_small_picture_of_the_page(page, tmp_pat
         rgb = image.convert("RGB")
         scene = rgb.crop((0, 0, SIZE[0] // 2, SIZE[1] - 100))  # the 3D view: drawn, not left white
         assert len(scene.getcolors(maxcolors=COLORS) or ()) > 8
+
+
+def test_screenshots_refuse_a_missing_folder_before_anything_plays(tmp_path, capsys, monkeypatch):
+    """A missing --out is refused up front (not created: a misspelt folder would be filled), not after rendering."""
+    import wbc.tools.screenshots as screenshots
+    from wbc.errors import WbcError
+
+    for name in ("_trial_page", "_ab_page", "_live_page"):
+        monkeypatch.setattr(screenshots, name, lambda *a, **k: pytest.fail("a page was played"))
+    missing, afile = tmp_path / "nodir", tmp_path / "f.png"
+    afile.write_bytes(b"")
+    with pytest.raises(SystemExit) as stop:
+        screenshots.main(["--out", str(missing)])
+    assert stop.value.code == 2
+    assert f"--out {missing}: no such folder; create it first (mkdir -p {missing})" in capsys.readouterr().err
+    with pytest.raises(WbcError, match=f"{afile} is a file, not a folder"):
+        screenshots.shoot(afile)
+    assert not missing.exists()

@@ -21,7 +21,6 @@ import collections
 import dataclasses
 import hashlib
 import itertools
-import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -54,7 +53,7 @@ from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
 from wbc.robots.registry import get_robot
-from wbc.scenario import ScenarioError, check_published, load_scenario
+from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 
 __all__ = ["VIEWED_TIME_LIMIT", "ArenaConfig", "ArenaResult", "run_arena"]
@@ -282,12 +281,7 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         raise ConfigError(f"this run would play {budget:,} trials ({len(cfg.controllers)} controllers x "
                           f"{len(bands)} bands x {len(cfg.seeds)} seeds x {cfg.trials} trials), more than the "
                           f"{MAX_RUN_TRIALS:,} one run plays; pass fewer --seeds or --trials, or split the study")
-    try:
-        check_published(scenario)
-        published = True
-    except ScenarioError as exc:
-        published = False
-        print(f"wbc: warning: {exc}", file=sys.stderr)
+    published = warn_if_unpublished(scenario)
     trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
     if cfg.no_push:
         trials = [dataclasses.replace(t, pushes=()) for t in trials]

@@ -42,7 +42,6 @@ import contextlib
 import dataclasses
 import json
 import math
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -62,7 +61,7 @@ from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
-from wbc.errors import ConfigError, ResultsDirError, ScenarioError, StandUpError, UnknownNameError
+from wbc.errors import ConfigError, ResultsDirError, StandUpError, UnknownNameError
 from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
@@ -73,7 +72,7 @@ from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import RealtimeGrant, RealtimeRequest, controller_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
-from wbc.scenario import check_published, load_scenario
+from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
 
@@ -247,12 +246,7 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     out = Path(cfg.out_dir)
     if (out / "trials.csv").exists():
         raise ResultsDirError(f"{out}: already holds results; a hardware trial is played once: choose another --out")
-    try:
-        check_published(scenario)
-        published = True
-    except ScenarioError as exc:
-        published = False
-        print(f"wbc: warning: {exc}", file=sys.stderr)
+    published = warn_if_unpublished(scenario)
     with threadpool_limits(limits=1, user_api="blas"):  # as in simulation: one BLAS thread, beside the link thread
         return _play(cfg, scenario_published=published, trial=trial, spec=spec, hardware=hardware, out=out,
                      keys=keys, observer=observer, before_connect=before_connect)

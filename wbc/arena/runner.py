@@ -73,6 +73,7 @@ def run_episode(
     fallen: Callable[[], bool] | None = None,
     observer: TickObserver | None = None,
     divergence: DivergenceCheck | None = None,
+    duration_option: str | None = None,
 ) -> Episode:
     """Play one episode.
 
@@ -89,6 +90,8 @@ def run_episode(
         divergence: check every tick that the simulation has not blown up (a few NumPy reductions per tick), and,
             if the robot is a `SimulatorHealth`, that the simulator did not reset itself after a failed step;
             None: no check (a real robot, whose safety layer watches it).
+        duration_option: the caller's option that set `duration_s` (``--duration``): an episode shorter than the
+            controller's period is then blamed on it, not on the controller's rate.
 
     Returns:
         The episode log (no pushes: whoever applied them adds them, see `wbc.arena.sim_trial.run_trial`), with the
@@ -108,6 +111,10 @@ def run_episode(
     health = robot if divergence is not None and isinstance(robot, SimulatorHealth) else None
     dt = 1.0 / controller.rate_hz
     n = int(round(duration_s / dt))
+    if n < 1 and duration_option is not None:
+        raise ConfigError(f"{duration_option} {duration_s:g} s is shorter than one control period of controller "
+                          f"{type(controller).__name__} (1/{controller.rate_hz} Hz = {dt:g} s), so it would never be "
+                          f"asked to act; give {duration_option} of at least {dt:g} s")
     if n < 1:
         raise ConfigError(f"controller {type(controller).__name__}: its period 1/{controller.rate_hz} Hz = {dt:g} s is "
                           f"longer than the {duration_s:g} s episode, so it would never be asked to act; give it a "

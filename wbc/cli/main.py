@@ -47,7 +47,7 @@ from wbc.learned.train.adaptation_config import AdaptationConfig
 from wbc.learned.train.stages import TASKS, fine_tune_config, stage_config
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
-from wbc.scenario.scenario import load_scenario
+from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.tools.arm_momentum import arm_momentum_study
 from wbc.tools.bench import (
@@ -82,7 +82,17 @@ def _analyze_tail(args: argparse.Namespace) -> int:
     return 0
 
 
+def _scenario_played(path: str) -> None:
+    """Load the scenario a command plays and warn, as the arena does, when it is not the published one.
+
+    An edited copy of a published file (push.toml) must not be taken for it in silence: the warning says whether the
+    lock beside it lists it, or lists another hash.
+    """
+    warn_if_unpublished(load_scenario(path))
+
+
 def _analyze_arm_momentum(args: argparse.Namespace) -> int:
+    _scenario_played(args.scenario)
     rows = arm_momentum_study(args.scenario, args.controller, band=args.band, seeds=tuple(range(args.seeds)),
                               trials=args.trials)
     if args.json:
@@ -94,7 +104,7 @@ def _analyze_arm_momentum(args: argparse.Namespace) -> int:
 
 def _analyze_posture(args: argparse.Namespace) -> int:
     rows = posture_study(args.controllers, robot=args.robot, walk_vx=args.walk, duration_s=args.duration,
-                         seed=args.seed)
+                         duration_option="--duration")
     if args.json:
         printers.print_json([dataclasses.asdict(r) for r in rows])
     else:
@@ -167,6 +177,7 @@ def _bench_latency(args: argparse.Namespace) -> int:
     if args.no_wire and args.robot is not None:
         raise ConfigError("--robot names the wire's robot, and --no-wire measures no wire (the margins play the "
                           "scenario's robot); leave one of them out")
+    _scenario_played(args.scenario)
     result = bench_latency(tuple(args.controllers), wire_robot="go1" if args.robot is None else args.robot,
                            scenario=args.scenario, trials=args.trials, wire=not args.no_wire)
     if args.json:
@@ -177,6 +188,7 @@ def _bench_latency(args: argparse.Namespace) -> int:
 
 
 def _bench_act(args: argparse.Namespace) -> int:
+    _scenario_played(args.scenario)
     result = bench_act(tuple(args.controllers), scenario=args.scenario, band=args.band, seed=args.seed,
                        trial=args.trial, repeats=args.repeats)
     if args.json:
@@ -891,7 +903,7 @@ def _view_options(args: argparse.Namespace) -> None:
     """Fill in ``--host`` / ``--speed``'s defaults, or refuse them without ``--view``, where they would do nothing.
 
     Raises:
-        ConfigError: either is given without ``--view``.
+        ConfigError: either is given without ``--view``, or ``--host`` is no IP address or host name.
     """
     names = [name for name in _VIEW_OPTIONS if hasattr(args, name)]
     given = [f"--{name}" for name in names if getattr(args, name) is not None]
@@ -901,6 +913,8 @@ def _view_options(args: argparse.Namespace) -> None:
     for name in names:
         if getattr(args, name) is None:
             setattr(args, name, _VIEW_OPTIONS[name])
+    if args.view and "host" in names:
+        _check_host(args.host)
 
 
 def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_significant: bool = False,
@@ -1024,7 +1038,10 @@ def _view(args: argparse.Namespace) -> int:
     from wbc.viz.view import ViewConfig, replay_episode, view_trial
 
     _view_refusals(args)
+    _check_host(args.host)
     record = Path(args.record) if args.record else None
+    if record is not None and record.is_dir():  # checked before the trial plays, as the other paths
+        raise ViewerError(f"--record {record} is a directory: give an .html file in it, e.g. {record / 'view.html'}")
     if record is not None and (record.suffix.lower() not in (".html", ".htm") or not record.parent.is_dir()):
         raise ViewerError(f"--record {record}: give an .html file in an existing directory")
     save = Path(args.save_episode) if args.save_episode else None
@@ -1051,6 +1068,7 @@ def _view(args: argparse.Namespace) -> int:
 
         stored = load_stored_episode(args.episode, args.trial, controller=args.controller or args.ctrl,
                                      band=args.band, seed=args.seed)
+        _check_at(args.at, stored.trial.duration_s)
         result = replay_episode(stored, cfg)
         what = f"{stored.path}"
     else:
@@ -1059,11 +1077,14 @@ def _view(args: argparse.Namespace) -> int:
                               "RESULTS_DIR --trial I (replay a stored one)")
         spec = get_controller(args.ctrl, config=args.controller_config, io=args.io)
         trial = _view_trial(args)
+        _check_at(args.at, trial.duration_s, cut=args.duration is not None)
         result = view_trial(trial, spec, cfg)
         what = f"{args.ctrl} on {trial.scenario} band {trial.band} seed {trial.seed} trial {trial.index}"
         printers.print_viewed_trial(what, result.trial_record)
         if result.exported is not None:
             print(result.exported.line(args.ctrl))
+        if save is not None:
+            print(f"saved the episode played to {save}")
     if result.recording is not None:
         printers.print_recording(what, result.frames_recorded, result.recording)
         if result.timing is not None:
@@ -1102,9 +1123,36 @@ def _view_refusals(args: argparse.Namespace) -> None:
         raise ConfigError("--at opens a recorded page at a moment: add --record FILE.html, or use --pause-at T live")
 
 
+def _check_at(at: float | None, duration_s: float, *, cut: bool = False) -> None:
+    """Refuse an ``--at`` past the end of the trial shown, before it plays: the page would open at no moment of it.
+
+    Args:
+        at: ``--at`` [s], or None.
+        duration_s: how long the trial shown lasts [s].
+        cut: `duration_s` is ``--duration``'s, for the message.
+    """
+    if at is not None and at > duration_s:
+        lasts = f"{duration_s:g} s (its --duration)" if cut else f"{duration_s:g} s"
+        raise ConfigError(f"--at {at:g} s is past the end of the trial, which lasts {lasts}: give --at in "
+                          f"[0, {duration_s:g}]")
+
+
+def _check_host(host: str | None) -> None:
+    """Refuse a ``--host`` that is no IP address or host name (`host_problem`), before any server or trial starts.
+
+    Only its syntax is checked (nothing is looked up); which addresses a viewer may listen on is left as it is.
+    """
+    from wbc.viz.server import host_problem
+
+    problem = None if host is None else host_problem(host)
+    if problem is not None:
+        raise ConfigError(f"--host {host or repr(host)} {problem}")
+
+
 def _view_trial(args: argparse.Namespace) -> Trial:
     """The trial ``wbc view`` plays: ``--scenario``'s band (its first by default), seed and trial, cut short."""
     scenario = load_scenario(args.scenario)
+    warn_if_unpublished(scenario)
     trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
     if args.duration is not None:
         if not 0 < args.duration <= trial.duration_s:
@@ -1123,12 +1171,14 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
 
         first, second = (load_stored_episode(args.episode, args.trial, controller=c, band=args.band, seed=args.seed)
                          for c in ctrls)
+        _check_at(args.at, first.trial.duration_s)
         result = replay_ab(first, second, cfg, path)
     else:
         if args.scenario is None:
             raise ConfigError("wbc view A B needs --scenario FILE --trial I (play the trial with both), or "
                               "--episode RESULTS_DIR --trial I (their stored runs)")
         trial = _view_trial(args)
+        _check_at(args.at, trial.duration_s, cut=args.duration is not None)
         specs = tuple(get_controller(c, config=args.controller_config, io=args.io) for c in ctrls)
         result = view_ab(trial, specs, cfg, path)
     for name, fall in zip(result.names, result.fall_s, strict=True):

@@ -319,7 +319,6 @@ def _add_analyze_posture_parser(analyze: _Commands) -> None:
                          help="forward speed of the walking command, -3..3 [m/s] (a scenario's vx range)")
     posture.add_argument("--duration", type=_EPISODE_S, default=6.0,
                          help=f"episode length, up to {MAX_DURATION_S:g} [s]; the means cover its second half")
-    posture.add_argument("--seed", type=_SEED, default=0)
     posture.add_argument("--json", action="store_true", help="print JSON")
     posture.set_defaults(handler="analyze posture")
 

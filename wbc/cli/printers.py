@@ -126,26 +126,75 @@ def _metres(row: PostureRow) -> str:
 
 
 def print_arm_momentum(rows: Sequence[ArmMomentumTrial], *, controller: str, scenario: str, band: str) -> None:
-    """One line per trial of the arm-momentum study, then the means."""
+    """One line per trial of the arm-momentum study, then the means over the trials that reached a push.
+
+    What cannot be measured is said in words, never as nan or 0 %: a band with no push, a controller with no arm
+    that moves on its own, the trials left out of the means because they fell before their first push.
+    """
     print(f"arm momentum during push recovery: {controller}, {scenario} band {band}")
     print("  seed trial survived  arm travel [rad]  push |r x F| T [N m s]  arm |h| peak [N m s]  arm |h| mean  "
           "bound [N m s]  peak/bound  cos(h, r x F)")
     for r in rows:
         print(f"  {r.seed:4d} {r.trial:5d} {str(r.survived):8s}  {r.arm_travel_rad:16.1f}  "
-              f"{r.push_angular_impulse:22.3f}  {r.arm_momentum_peak:20.3f}  {r.arm_momentum_mean:12.3f}  "
-              f"{r.arm_momentum_bound:13.3f}  {r.bound_fraction:10.2f}  {r.alignment:+13.2f}")
-    if rows:
-        mean = {k: float(np.nanmean([getattr(r, k) for r in rows])) if any(
-                    np.isfinite(getattr(r, k)) for r in rows) else math.nan
-                for k in ("arm_travel_rad", "push_angular_impulse", "arm_momentum_peak", "arm_momentum_mean",
-                          "arm_momentum_bound", "bound_fraction", "alignment")}
-        print(f"  mean: travel {mean['arm_travel_rad']:.1f} rad, push angular impulse "
-              f"{mean['push_angular_impulse']:.3f} N m s, arm momentum peak {mean['arm_momentum_peak']:.3f} N m s "
-              f"({100 * mean['arm_momentum_peak'] / max(mean['push_angular_impulse'], 1e-9):.0f} % of the impulse), "
-              f"mean {mean['arm_momentum_mean']:.3f} N m s")
-        print(f"  the arm's bound from its pose at each push: {mean['arm_momentum_bound']:.3f} N m s; its peak reached "
-              f"{100 * mean['bound_fraction']:.0f} % of it; alignment with the push's r x F: cos "
-              f"{mean['alignment']:+.2f} (+1: the arm takes up the push's angular momentum)")
+              f"{_figure(r.push_angular_impulse, '22.3f')}  {_figure(r.arm_momentum_peak, '20.3f')}  "
+              f"{r.arm_momentum_mean:12.3f}  {_figure(r.arm_momentum_bound, '13.3f')}  "
+              f"{_figure(r.bound_fraction, '10.2f')}  {_figure(r.alignment, '+13.2f')}")
+    if not rows:
+        return
+    if not any(r.pushes for r in rows):
+        print(f"  mean: travel {np.mean([r.arm_travel_rad for r in rows]):.1f} rad, arm momentum mean "
+              f"{np.mean([r.arm_momentum_mean for r in rows]):.3f} N m s")
+        print(f"  band {band} of {scenario} has no push: there is no push's angular impulse to set the arm's momentum "
+              "against; give a scenario and band with pushes (e.g. --scenario scenarios/push.toml --band ood)")
+        return
+    measured = [r for r in rows if r.pushes_measured > 0]
+    early = len(rows) - len(measured)
+    if early:
+        print(f"  {early} of {_count(len(rows), 'trial')} fell before their first push and are left out of the "
+              "means: they have no push to measure the arm against")
+    if not measured:
+        print("  no trial lasted to its first push: nothing to average")
+        return
+    mean = {k: _nanmean([getattr(r, k) for r in measured])
+            for k in ("arm_travel_rad", "push_angular_impulse", "arm_momentum_peak", "arm_momentum_mean",
+                      "arm_momentum_bound", "bound_fraction", "alignment")}
+    over = f" over the {_count(len(measured), 'trial')} that reached a push" if early else ""
+    arm_mode = rows[0].arm_mode
+    if arm_mode != "actuated":
+        print(f"  mean{over}: push angular impulse {mean['push_angular_impulse']:.3f} N m s")
+        has = "has no arm" if arm_mode == "none" else "holds its arm locked on the trunk"
+        print(f"  {controller} {has} (arm mode {arm_mode}): no arm moves to take up the pushes' angular momentum, so "
+              "there is no arm momentum, bound or alignment to report; play a controller with an actuated arm "
+              "(e.g. --controller mpc)")
+        return
+    print(f"  mean{over}: travel {mean['arm_travel_rad']:.1f} rad, push angular impulse "
+          f"{mean['push_angular_impulse']:.3f} N m s, arm momentum peak {mean['arm_momentum_peak']:.3f} N m s "
+          f"({100 * mean['arm_momentum_peak'] / max(mean['push_angular_impulse'], 1e-9):.0f} % of the impulse), "
+          f"mean {mean['arm_momentum_mean']:.3f} N m s")
+    alignment = ("undefined (the arm held no momentum at its peaks)" if math.isnan(mean["alignment"])
+                 else f"{mean['alignment']:+.2f}")
+    print(f"  the arm's bound from its pose at each push: {mean['arm_momentum_bound']:.3f} N m s; its peak reached "
+          f"{100 * mean['bound_fraction']:.0f} % of it; alignment with the push's r x F: cos {alignment} (+1: the "
+          "arm takes up the push's angular momentum)")
+
+
+def _figure(value: float, spec: str) -> str:
+    """`value` formatted by `spec`, or ``-`` right-aligned in its width where it is nan (not measured)."""
+    if math.isnan(value):
+        width = int("".join(c for c in spec.split(".")[0] if c.isdigit()) or 0)
+        return f"{'-':>{width}}"
+    return format(value, spec)
+
+
+def _count(n: int, noun: str) -> str:
+    """``1 trial``, ``2 trials``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"
+
+
+def _nanmean(values: Sequence[float]) -> float:
+    """The mean of the values that are not nan; nan when none is."""
+    finite = [v for v in values if not math.isnan(v)]
+    return float(np.mean(finite)) if finite else math.nan
 
 
 def print_bench_sim(result: SimBenchResult) -> None:

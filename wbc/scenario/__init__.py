@@ -5,7 +5,7 @@ domain parameters, command schedule and pushes. Nothing here knows a robot backe
 """
 
 from wbc.scenario.domain import DomainParams, SensorNoise
-from wbc.scenario.lock import check_published
+from wbc.scenario.lock import check_published, warn_if_unpublished
 from wbc.scenario.push import Push
 from wbc.scenario.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario_path
 from wbc.scenario.terrain import TerrainConfig
@@ -14,4 +14,4 @@ from wbc.scenario.trial_file import trial_scenario_text, write_trial_scenario
 
 __all__ = ["CommandChange", "CommandSchedule", "DomainParams", "Push", "Scenario", "ScenarioError", "SensorNoise",
            "TerrainConfig", "Trial", "check_published", "load_scenario", "resolve_scenario_path", "trial_scenario_text",
-           "write_trial_scenario"]
+           "warn_if_unpublished", "write_trial_scenario"]

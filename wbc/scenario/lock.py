@@ -6,13 +6,14 @@ file that changes must bump its version and add a new entry, never edit one.
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from wbc.errors import ScenarioError
 from wbc.scenario.scenario import Scenario
 from wbc.scenario.toml_fields import read_toml, show
 
-__all__ = ["check_published"]
+__all__ = ["check_published", "warn_if_unpublished"]
 
 
 def check_published(scenario: Scenario, lock_path: Path | None = None) -> None:
@@ -54,3 +55,24 @@ def check_published(scenario: Scenario, lock_path: Path | None = None) -> None:
             f"add the new hash to {lock}",
             field="[scenario] version",
         )
+
+
+def warn_if_unpublished(scenario: Scenario) -> bool:
+    """`check_published`, as a warning: print why the scenario is not the published one on stderr, and go on.
+
+    A command that plays a scenario (the arena, an analysis, a bench, the viewer) calls it before it plays, so that an
+    edited copy of a published file is never taken for it in silence; the warning is ``wbc: warning: `` and
+    `check_published`'s message (the lines that would publish it, or the hash it was published with).
+
+    Args:
+        scenario: a loaded scenario.
+
+    Returns:
+        True when the lock beside the file lists the scenario with its hash.
+    """
+    try:
+        check_published(scenario)
+    except ScenarioError as exc:
+        print(f"wbc: warning: {exc}", file=sys.stderr)
+        return False
+    return True

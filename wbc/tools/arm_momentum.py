@@ -21,6 +21,7 @@ Two more figures per push say how much of what the arm could do it did, and whet
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -63,28 +64,39 @@ def arm_momentum_bound(a_arm: np.ndarray, speed_limit: np.ndarray) -> float:
 class ArmMomentumTrial:
     """One trial's figures.
 
+    The per-push figures are means over the pushes measured: those that started before the trial ended. A trial
+    that fell before its first push (or whose band has no push) has none, and its per-push figures are nan.
+
     Attributes:
         controller: controller name.
+        arm_mode: the controller's arm mode: ``actuated``, or ``locked`` / ``none`` (no arm that moves on its own:
+            its momentum figures are zero, its bound fraction and alignment nan).
         band: scenario band.
         seed: seed.
         trial: trial index.
         survived: the trial ended without a fall.
+        pushes: the trial's pushes.
+        pushes_measured: those that started before the trial ended (a fall ends it).
         arm_travel_rad: summed absolute arm joint motion [rad].
-        push_angular_impulse: mean over the trial's pushes of |r x F| T about the CoM [N m s].
-        arm_momentum_peak: mean over pushes of the largest |h_arm| within 0.5 s of the push's start [N m s].
+        push_angular_impulse: mean over the pushes measured of |r x F| T about the CoM [N m s] (nan without one).
+        arm_momentum_peak: mean over pushes of the largest |h_arm| within 0.5 s of the push's start [N m s] (nan
+            without a push measured).
         arm_momentum_mean: mean |h_arm| over the whole trial [N m s].
         arm_momentum_bound: mean over pushes of the most |h_arm| the arm could hold from its pose at the push's start,
-            its joints at their no-load speeds [N m s] (0 without an actuated arm).
+            its joints at their no-load speeds [N m s] (0 without an actuated arm; nan without a push measured).
         bound_fraction: mean over pushes of the peak |h_arm| after the push over that bound (nan without an arm).
         alignment: mean over pushes of the cosine between h_arm at its peak and the push's r x F (nan without an
             arm, or where the arm held no momentum).
     """
 
     controller: str
+    arm_mode: str
     band: str
     seed: int
     trial: int
     survived: bool
+    pushes: int
+    pushes_measured: int
     arm_travel_rad: float
     push_angular_impulse: float
     arm_momentum_peak: float
@@ -211,11 +223,14 @@ def _study_trial(trial: Trial, controller: str) -> ArmMomentumTrial:
         norms = float(np.linalg.norm(turn)) * peaks[-1]
         if norms > 0.0:
             cosines.append(float(log.h_arm_vec[k_peak] @ turn) / norms)
+    # a trial with no push measured (it fell before its first, or its band has none) has nothing to set the arm
+    # against: nan, never a zero impulse and a zero peak that would pull the means down
     return ArmMomentumTrial(
-        controller=controller, band=trial.band, seed=trial.seed, trial=trial.index, survived=not episode.fell,
-        arm_travel_rad=log.arm_travel_rad, push_angular_impulse=float(np.mean(impulses)) if impulses else 0.0,
-        arm_momentum_peak=float(np.mean(peaks)) if peaks else 0.0,
+        controller=controller, arm_mode=spec.arm_mode, band=trial.band, seed=trial.seed, trial=trial.index,
+        survived=not episode.fell, pushes=len(trial.pushes), pushes_measured=len(impulses),
+        arm_travel_rad=log.arm_travel_rad, push_angular_impulse=float(np.mean(impulses)) if impulses else math.nan,
+        arm_momentum_peak=float(np.mean(peaks)) if peaks else math.nan,
         arm_momentum_mean=float(h_arm.mean()) if played else 0.0,
-        arm_momentum_bound=float(np.mean(bounds)) if bounds else 0.0,
+        arm_momentum_bound=float(np.mean(bounds)) if bounds else math.nan,
         bound_fraction=float(np.mean(fractions)) if fractions else float("nan"),
         alignment=float(np.mean(cosines)) if cosines else float("nan"))

@@ -6,6 +6,8 @@ one episode per command (the arena's physics: `MujocoRobot`, nominal domain, no 
 runner's loop), and the study reports the mean trunk height above the ground and the mean forward speed over the
 episode's second half (after the command's ramp and the start transient), so "stands at 0.28 m and walks at 0.3 m/s"
 is a measured statement. Trunk height is the base frame's origin above the flat ground, from the simulator's truth.
+Nothing is drawn at random (no terrain, domain or noise to draw), so the study takes no seed: its figures are the same
+on every run.
 An episode whose simulation blows up costs only its own row (nan, and what diverged).
 """
 
@@ -64,7 +66,8 @@ class PostureRow:
 
 
 def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_vx: float = 0.3,
-                  duration_s: float = 6.0, ramp_s: float | None = None, seed: int = 0) -> list[PostureRow]:
+                  duration_s: float = 6.0, ramp_s: float | None = None,
+                  duration_option: str = "duration_s") -> list[PostureRow]:
     """Play each controller standing (zero command) and walking (`walk_vx` forward) and measure its trunk height.
 
     Args:
@@ -74,18 +77,18 @@ def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_v
         duration_s: length of each episode [s]; the mean is taken over its second half.
         ramp_s: the walking command rises from zero over this time [s]; None: 0.5 s, or half the episode if
             shorter.
-        seed: the robot's reset seed.
+        duration_option: what the messages call `duration_s` (the command's ``--duration``).
 
     Returns:
         Two rows per controller (stand, walk), in the order given.
 
     Raises:
-        ConfigError: a non-positive duration, a ramp longer than half the episode, or a controller that cannot drive
-            `robot`.
+        ConfigError: a non-positive duration or one shorter than a controller's period, a ramp longer than half the
+            episode, or a controller that cannot drive `robot`.
         UnknownNameError: an unknown controller or robot name.
     """
     if not duration_s > 0:
-        raise ConfigError(f"posture: duration_s must be positive, got {duration_s}")
+        raise ConfigError(f"posture: {duration_option} must be positive, got {duration_s}")
     if ramp_s is None:
         ramp_s = min(0.5, duration_s / 2)
     if not 0 <= ramp_s <= duration_s / 2:
@@ -105,18 +108,20 @@ def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_v
             sim.connect()
             try:
                 for name, schedule in commands:
-                    rows.append(_play(sim, spec, name, schedule, duration_s=duration_s, seed=seed))
+                    rows.append(_play(sim, spec, name, schedule, duration_s=duration_s,
+                                      duration_option=duration_option))
             finally:
                 sim.close()
     return rows
 
 
 def _play(sim: MujocoRobot, spec: ControllerSpec, name: str, schedule: CommandSchedule, *, duration_s: float,
-          seed: int) -> PostureRow:
+          duration_option: str) -> PostureRow:
     controller = spec.make(sim.desc)
-    sim.reset(seed=seed)
+    sim.reset()  # a reset's seed draws the terrain and the sensor noise, and here there are neither
     try:
-        episode = run_episode(sim, controller, schedule, duration_s, divergence=DivergenceCheck())
+        episode = run_episode(sim, controller, schedule, duration_s, divergence=DivergenceCheck(),
+                              duration_option=duration_option)
     except SimulationDiverged as exc:  # only this row's numbers are lost: nan, and what diverged
         return PostureRow(controller=spec.name, robot=sim.config.robot, arm_mode=spec.arm_mode, command=name,
                           vx=schedule.vx, height_m=math.nan, height_std_m=math.nan, speed_m_s=math.nan, fell=False,

@@ -1,7 +1,8 @@
 """The viewer's screenshots in the README and the docs, taken from real runs in headless Chromium.
 
 ``python -m wbc.tools.screenshots [--out docs] [--which trial ab live]`` plays each trial, renders its page in headless
-Chromium (WebGL in software: SwiftShader) and writes a small PNG (a palette of `COLORS` colours):
+Chromium (WebGL in software: SwiftShader) and writes a small PNG (a palette of `COLORS` colours) into ``--out``, a
+folder that must exist:
 
 - ``viewer-trial-page.png``: the recorded trial page of ``mpc`` on ``scenarios/push.toml`` band ood seed 0 trial 0
   (4 s of it), opened during its first push (312 N, the red arrow), the plots beside the 3D view;
@@ -37,7 +38,7 @@ from wbc.viz.live_page import LivePage
 from wbc.viz.player import PlayerConfig
 from wbc.viz.view import ViewConfig, view_ab, view_trial
 
-__all__ = ["COLORS", "SHOTS", "chromium", "screenshot", "shoot"]
+__all__ = ["COLORS", "SHOTS", "chromium", "out_problem", "screenshot", "shoot"]
 
 COLORS = 128
 """Colours of the written PNGs' palette: a 1200 x 700 page stays near 100 KB."""
@@ -129,8 +130,30 @@ def _live_page(out: Path, work: Path) -> Path:
             thread.join(timeout=300)
 
 
+def out_problem(out: str | Path) -> str | None:
+    """Why the PNGs cannot go into the folder `out`, or None.
+
+    The folder must exist: it is not created, so that a misspelt ``--out`` (``doc`` for ``docs``) is refused rather
+    than filled, as every path the viewer writes must be in an existing directory.
+    """
+    out = Path(out)
+    if out.is_dir():
+        return None
+    if out.exists():
+        return f"{out} is a file, not a folder; give the folder the PNGs go into (default docs)"
+    return f"{out}: no such folder; create it first (mkdir -p {out}), or give an existing one (default docs)"
+
+
 def shoot(out: str | Path, which: tuple[str, ...] = SHOTS) -> list[Path]:
-    """Play the trials of `which` (of `SHOTS`), render their pages and write the PNGs into `out`."""
+    """Play the trials of `which` (of `SHOTS`), render their pages and write the PNGs into `out`.
+
+    Raises:
+        WbcError: `out` is not an existing folder (`out_problem`; checked before anything plays), or a page could not
+            be rendered (`screenshot`).
+    """
+    problem = out_problem(out)
+    if problem is not None:
+        raise WbcError(problem)
     out = Path(out)
     takers = {"trial": _trial_page, "ab": _ab_page, "live": _live_page}
     written = []
@@ -144,9 +167,12 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m wbc.tools.screenshots``."""
     parser = argparse.ArgumentParser(prog="python -m wbc.tools.screenshots",
                                      description="the viewer's screenshots, from real runs in headless Chromium")
-    parser.add_argument("--out", default="docs", help="where the PNGs go (default docs/)")
+    parser.add_argument("--out", default="docs", help="the existing folder the PNGs go into (default docs/)")
     parser.add_argument("--which", nargs="+", choices=SHOTS, default=list(SHOTS), help="which pages (default all)")
     args = parser.parse_args(argv)
+    problem = out_problem(args.out)
+    if problem is not None:  # before the trials play and the pages render, not when the first PNG is written
+        parser.error(f"--out {problem}")
     for png in shoot(args.out, tuple(args.which)):
         print(f"{png}: {png.stat().st_size / 1000:.0f} KB")
     return 0

@@ -11,8 +11,10 @@ which builds meshcat's bridge through a subclass that passes the address to ``li
 from __future__ import annotations
 
 import argparse
+import ipaddress
 import os
 import queue
+import re
 import subprocess
 import sys
 import threading
@@ -22,9 +24,43 @@ from pathlib import Path
 
 from wbc.viz.errors import ViewerError
 
-__all__ = ["MeshcatServer", "ServerConfig", "serve"]
+__all__ = ["MeshcatServer", "ServerConfig", "host_problem", "serve"]
 
 LOOPBACK = "127.0.0.1"
+
+_LABEL = re.compile(r"[A-Za-z0-9]([A-Za-z0-9-]{0,61}[A-Za-z0-9])?")
+"""One label of a host name (RFC 1123): letters, digits and inner hyphens, at most 63 characters."""
+
+
+def host_problem(host: str) -> str | None:
+    """Why `host` cannot be an address to listen on, or None: an IP address, or a host name by its syntax alone.
+
+    Nothing is looked up (no DNS): a name of valid syntax passes, and the server reports one that does not resolve.
+    A name of digits and dots only is read as an IPv4 address, as the system's resolver reads it.
+
+    Args:
+        host: the address given (``127.0.0.1``, ``::1``, ``localhost``).
+
+    Returns:
+        What is wrong with it, to follow the option's name in a message; None when it is well formed.
+    """
+    try:
+        ipaddress.ip_address(host)
+        return None
+    except ValueError:
+        pass
+    if not host:
+        return "is empty; give an IP address or a host name, e.g. 127.0.0.1"
+    if re.fullmatch(r"[0-9.]+", host):
+        return "is not an IPv4 address: give four numbers in 0..255 joined by dots, e.g. 127.0.0.1"
+    if ":" in host:
+        return "is not an IPv6 address (e.g. ::1)"
+    name = host[:-1] if host.endswith(".") else host
+    labels = name.split(".")
+    if len(name) > 253 or not all(_LABEL.fullmatch(label) for label in labels) or labels[-1].isdigit():
+        return ("is neither an IP address nor a host name (letters, digits and hyphens, in dot-separated parts); "
+                "give an address of this machine, e.g. 127.0.0.1")
+    return None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -68,9 +104,13 @@ class MeshcatServer:
         """Start the child process and wait until it reports its URLs.
 
         Raises:
-            ViewerError: the server exited or did not report its URLs within ``start_timeout_s``.
+            ViewerError: the host is not an IP address or a host name (`host_problem`), or the server exited or did
+                not report its URLs within ``start_timeout_s``.
         """
         cfg = self.config
+        problem = host_problem(cfg.host)
+        if problem is not None:  # said at once, not after waiting start_timeout_s for a server that cannot bind
+            raise ViewerError(f"the viewer's host {cfg.host!r} {problem}")
         cmd = [sys.executable, "-u", "-m", "wbc.viz.server", "--host", cfg.host, "--parent", str(os.getpid())]
         # the child imports this very package, wherever it was imported from
         root = str(Path(__file__).resolve().parents[2])
