@@ -332,6 +332,7 @@ def test_a_controller_never_asked_to_act_is_a_controller_error(stored, plugin_pa
     for r in result.records:
         assert r.success is False and r.ticks == 0 and r.ttf == 0.0
         assert "never asked to act: its period 1/0.25 Hz is longer than the 1 s trial" in r.error
+        assert "or make the trial at least 4 s long" in r.error
     assert result.summary.to_json()["controllers"]["lazypkg.lazy:make"]["bands"]["soft"]["outcomes"][
         "controller_error"] == 2
 

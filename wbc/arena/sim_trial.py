@@ -137,7 +137,8 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
         # the runner refuses such an episode; the arena records it against the controller, as any failure of its own
         never = (f"controller {spec.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}: never asked to "
                  f"act: its period 1/{ctrl.rate_hz} Hz is longer than the {trial.duration_s:g} s trial, so no control "
-                 f"tick was played; give it a rate of at least {1.0 / trial.duration_s:g} Hz")
+                 f"tick was played; give it a rate of at least {1.0 / trial.duration_s:g} Hz, or make the trial "
+                 f"at least {1.0 / ctrl.rate_hz:g} s long (the scenario's duration, or a --duration that cut it)")
         if not record_errors:
             raise ConfigError(never)
         empty = EpisodeBuffer(nq=7 + robot.num_joints).finish(duration_s=trial.duration_s,
