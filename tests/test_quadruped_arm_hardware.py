@@ -248,6 +248,64 @@ def test_locked_mode_holds_the_arm_stowed_through_the_servos() -> None:
     np.testing.assert_allclose(arm_q, QuadrupedArmConfig().stowed_q, atol=0.08)
 
 
+def _arm_goals(emu: RobotEmulator, since: float) -> list[dict[int, int]]:
+    """The arm's Goal Current writes on the bus after `since`, each as {servo ID: value}."""
+    return [{w.id: w.value for w in p.writes if w.name == "goal_current"} for p in emu.arm.packets()
+            if p.time > since and p.written("goal_current")]
+
+
+def test_a_locked_arm_obeys_the_safety_layer_on_the_wire() -> None:
+    """Damped while the layer waits and after an e-stop, ramped into its hold from where it is: never a jump."""
+    with _whole_robot("locked", ramp_time_s=0.2) as (emu, safe, _):
+        robot, clock = safe.robot, emu.clock
+        asked: list[MotorCommand] = []  # what the joined robot asks of the arm device, beside what reaches the bus
+        write = robot.arm.write
+        robot.arm.write = lambda cmd: asked.append(cmd) or write(cmd)
+        limit = robot.arm.law.limit_units
+        ctrl = StandController(get_robot("a1-wx200", "locked"))
+        held = QuadrupedArmConfig().stowed_q + np.array([0.8, 0.7, -0.7])  # far from its hold: kp 20 would slam it
+        qpos = emu.plant.sim.data.qpos.copy()
+        qpos[-3:] = held
+        emu.reset(qpos)
+        start = clock.now()
+        for _ in range(3):
+            safe.write(MotorCommand.damping(12, 3.0))  # waiting: the layer sends damping
+            clock.advance(0.02)
+        assert safe.safety_state is SafetyState.WAITING
+        assert asked and all((c.kp == 0).all() for c in asked)
+        waiting = _arm_goals(emu, start)
+        assert waiting and all(abs(v) < 0.05 * limit for goal in waiting for v in goal.values())  # no hold current
+        # the ramp: the hold's target leaves the measured pose at the ramp's slew, its gain rises from the start's
+        asked.clear()
+        ramp_start = clock.now()
+        for _ in range(60):
+            safe.write(ctrl.act(safe.read(), None))
+            safe.advance(0.02)
+        assert safe.safety_state is SafetyState.RUN
+        ramp = [c for c in asked if c.kp.any()]
+        np.testing.assert_allclose(ramp[0].kp, safe.config.ramp_kp)  # the ramp's start gain, not the hold's 20
+        assert np.abs(ramp[0].q - held).max() < 0.05  # it starts where the arm is
+        steps = np.abs(np.diff([c.q for c in ramp], axis=0))
+        assert steps.max() <= safe.config.ramp_slew * 0.02 + 1e-6  # and moves its target at the ramp's slew
+        np.testing.assert_allclose(asked[-1].q, robot.config.stowed_q)  # into the hold
+        np.testing.assert_allclose(asked[-1].kp, robot.config.hold_kp)
+        early = _arm_goals(emu, ramp_start)[:10]
+        assert early and all(abs(v) < limit for goal in early for v in goal.values())  # no stall current at once
+        arm_q, _, _ = emu.plant.read_arm()
+        np.testing.assert_allclose(arm_q, robot.config.stowed_q, atol=0.1)
+        # an e-stop damps the locked arm as it damps the legs, and the controller's writes do not undo it
+        asked.clear()
+        t0 = clock.now()
+        safe.estop()
+        for _ in range(10):
+            safe.write(ctrl.act(safe.read(), None))
+            safe.advance(0.02)
+        assert asked and all((c.kp == 0).all() and np.allclose(c.kd, safe.config.arm_damping_kd) for c in asked)
+        assert all(c.damping for c in emu.legs.commands() if c.time > t0 + 0.004)
+        _, dq, _ = emu.plant.read_arm()
+        assert np.abs(dq).max() < 0.5  # resting: damping only takes energy out
+
+
 def test_hw_emulate_serves_one_robot_on_both_wires(monkeypatch: pytest.MonkeyPatch) -> None:
     # the wires' clients wait up to seconds for an answer: only a hung machine misses that
     monkeypatch.setattr(sdk.port_handler, "LATENCY_TIMER", 500)

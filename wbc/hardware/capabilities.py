@@ -32,11 +32,12 @@ from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.realtime import RealtimeGrant
 from wbc.robots.description import RobotDescription
 from wbc.scenario.push import Push
-from wbc.types import BaseTruth
+from wbc.types import BaseTruth, MotorCommand
 
 __all__ = ["ConfigurationEstimate", "FallDetector", "HasLinkStats", "HasRealtimeGrant", "HasSafetyEvents",
-           "HasThreadStats", "LinkStatsLike", "MotorNames", "MotorStatus", "MotorStatusSource", "Pushable",
-           "RemoteButtons", "RemoteSource", "SafetyEventLike", "SimulatorHealth", "TruthSource", "WallClock"]
+           "HasThreadStats", "HeldJoints", "HeldRamp", "LinkStatsLike", "MotorNames", "MotorStatus",
+           "MotorStatusSource", "Pushable", "RemoteButtons", "RemoteSource", "SafetyEventLike", "SimulatorHealth",
+           "TruthSource", "WallClock"]
 
 
 @runtime_checkable
@@ -227,3 +228,39 @@ class MotorStatusSource(Protocol):
 
     def motor_status(self) -> MotorStatus | None:
         """The motors' status as of the latest state; None if none of its motors report one."""
+
+
+class HeldRamp(Protocol):
+    """A bounded move into a command (`wbc.hardware.safety.ramp.CommandRamp`).
+
+    It starts at the measured pose (`start`), then steps towards the target until it says it is done (`step`).
+    """
+
+    @property
+    def started(self) -> bool:
+        """True once `start` was called."""
+
+    def start(self, q_measured: np.ndarray, time: float) -> MotorCommand:
+        """The first command: hold `q_measured` with the ramp's start gains."""
+
+    def step(self, target: MotorCommand, time: float) -> tuple[MotorCommand, bool]:
+        """The command at `time` towards `target`, and whether the ramp is done."""
+
+
+@runtime_checkable
+class HeldJoints(Protocol):
+    """A robot that drives joints no controller commands: a locked arm, held at its stowed pose.
+
+    A safety layer above it (`wbc.hardware.safety.SafeRobot`) decides what those joints get, as it does for the
+    controller's: damping while it waits for a live state or after a trip (`damp_held`), and a ramp from where they
+    are into their hold when it lets the controller in (`ramp_held`). Without a safety layer they are held.
+    """
+
+    def damp_held(self, kd: float) -> None:
+        """From the next write on, damp the held joints (kp 0, kd `kd`), until `ramp_held`."""
+
+    def ramp_held(self, ramp: HeldRamp) -> None:
+        """From the next write on, move the held joints from their measured pose into their hold through `ramp`.
+
+        `ramp` is not yet started: the robot starts it at the pose it measures at its next write.
+        """

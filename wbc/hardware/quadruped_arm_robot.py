@@ -4,8 +4,10 @@ On a real robot the legs (a Unitree low-level link, 12 motors) and the arm (a Dy
 moves) are separate devices, each with its own thread, rate and faults. This class makes them one `Robot`:
 
 - Joints: the 12 legs, then (arm mode ``actuated``) the arm's 3: waist, shoulder, elbow. In mode ``locked`` the arm
-  is still driven, but not by the controller: every write holds it at its stowed pose (`QuadrupedArmConfig`), as a
-  welded arm is held in simulation, and the robot has 12 joints. In mode ``none`` there is no arm device.
+  is still driven, but not by the controller: it is held at its stowed pose (`QuadrupedArmConfig`), as a welded arm
+  is held in simulation, and the robot has 12 joints. A safety layer above (`HeldJoints`) decides when: the arm is
+  damped while the layer waits or after a trip, and ramped from where it is into its hold when the layer lets the
+  controller in, as the legs are; without a layer every write holds it. In mode ``none`` there is no arm device.
 - One frame: `read` joins the newest leg and arm states under the legs' timestamp. Its tick (a freshness counter)
   advances when the legs' tick did, and only while the arm's did too within `arm_stale_s`: a stale arm makes the whole
   frame stale, so a safety layer above (`wbc.hardware.safety.SafeRobot`) trips on a dead arm bus as on a dead leg
@@ -32,6 +34,7 @@ from wbc.errors import ConfigError, UnknownNameError
 from wbc.hardware.capabilities import (
     HasLinkStats,
     HasThreadStats,
+    HeldRamp,
     LinkStatsLike,
     MotorNames,
     MotorStatusSource,
@@ -172,6 +175,7 @@ class QuadrupedArmRobot(Robot):
             f: np.concatenate([getattr(t, f) for t in tables])
             for f in ("lower", "upper", "torque_limit", "velocity_limit", "armature", "damping", "frictionloss")})
         self._hold = MotorCommand.hold(self.config.stowed_q, self.config.hold_kp, self.config.hold_kd)
+        self._held: MotorCommand | HeldRamp = self._hold  # what a locked arm gets: its hold, damping, or a ramp
         self._reset_frames()
 
     def _reset_frames(self) -> None:
@@ -236,7 +240,33 @@ class QuadrupedArmRobot(Robot):
         rows = cmd.stacked()
         self.legs.write(MotorCommand._trusted(rows[:, :_LEGS].copy()))
         if self.arm is not None:
-            self.arm.write(MotorCommand._trusted(rows[:, _LEGS:].copy()) if self._actuated else self._hold)
+            self.arm.write(MotorCommand._trusted(rows[:, _LEGS:].copy()) if self._actuated else self._held_command())
+
+    def _held_command(self) -> MotorCommand:
+        """A locked arm's command: its hold, damping, or the next step of the ramp into its hold."""
+        held = self._held
+        if isinstance(held, MotorCommand):
+            return held
+        now = self.wall_time()
+        if not held.started:
+            state = self._arm_state if self._arm_state is not None else self.arm.read()
+            limits = self.arm.limits
+            return held.start(np.clip(state.q, limits.lower, limits.upper), now)
+        out, done = held.step(self._hold, now)
+        if done:
+            self._held = self._hold
+        return out
+
+    # -- HeldJoints -----------------------------------------------------------------------------------------------
+    def damp_held(self, kd: float) -> None:
+        """In mode ``locked``, damp the arm (kp 0, kd `kd`) from the next write on (`HeldJoints`); else nothing."""
+        if self.arm is not None and not self._actuated:
+            self._held = MotorCommand.damping(_ARM, kd)
+
+    def ramp_held(self, ramp: HeldRamp) -> None:
+        """In mode ``locked``, move the arm from where it is into its hold through `ramp` (`HeldJoints`)."""
+        if self.arm is not None and not self._actuated:
+            self._held = ramp
 
     def _advance(self, dt: float) -> None:
         self.legs.advance(dt)

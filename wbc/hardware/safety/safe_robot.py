@@ -31,7 +31,14 @@ from typing import cast
 import numpy as np
 
 from wbc.errors import SafetyResetError
-from wbc.hardware.capabilities import MotorNames, MotorStatusSource, RemoteButtons, RemoteSource, WallClock
+from wbc.hardware.capabilities import (
+    HeldJoints,
+    MotorNames,
+    MotorStatusSource,
+    RemoteButtons,
+    RemoteSource,
+    WallClock,
+)
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.config import SafetyConfig
 from wbc.hardware.safety.events import SafetyEvent
@@ -181,6 +188,7 @@ class SafeRobot(Robot):
         kd = np.full(n, self.config.damping_kd)
         kd[_ARM_START:] = self.config.arm_damping_kd
         self._damping = MotorCommand(q=np.zeros(n), dq=np.zeros(n), kp=np.zeros(n), kd=kd, tau=np.zeros(n))
+        self._damp_held()  # a locked arm too, until the ramp lets the controller in
         self._latest, self._last_tick, self._fresh = None, None, False
         self._last_fresh_time = -math.inf
         self._over_power_frames = 0
@@ -190,6 +198,7 @@ class SafeRobot(Robot):
 
     def _close(self) -> None:
         if self.robot.is_connected and self._damping is not None:
+            self._damp_held()
             self._sent = self.robot.write(self._damping)
         self.robot.close()
 
@@ -227,10 +236,10 @@ class SafeRobot(Robot):
         if self._state is SafetyState.RAMP:
             target = self._limit_positions(cmd)
             if self._ramp is None:
-                cfg = self.config
-                self._ramp = CommandRamp(duration_s=cfg.ramp_time_s, slew=cfg.ramp_slew, kp=cfg.ramp_kp,
-                                         kd=cfg.ramp_kd, hold_s=cfg.ramp_hold_s)
+                self._ramp = self._new_ramp()
                 out = self._ramp.start(np.clip(self._latest.q, self._lower, self._upper), now)
+                if isinstance(self.robot, HeldJoints):  # a locked arm ramps into its hold beside the legs
+                    self.robot.ramp_held(self._new_ramp())
             else:
                 out, done = self._ramp.step(target, now)
                 out = self._limit_positions(out)  # the controller's target plus the closing gap may leave the table
@@ -242,6 +251,16 @@ class SafeRobot(Robot):
         else:
             out = self._damping
         self._sent = self.robot.write(out)
+
+    def _new_ramp(self) -> CommandRamp:
+        cfg = self.config
+        return CommandRamp(duration_s=cfg.ramp_time_s, slew=cfg.ramp_slew, kp=cfg.ramp_kp, kd=cfg.ramp_kd,
+                           hold_s=cfg.ramp_hold_s)
+
+    def _damp_held(self) -> None:
+        """Damp the joints the wrapped robot drives for no controller (a locked arm; `HeldJoints`), if any."""
+        if isinstance(self.robot, HeldJoints):
+            self.robot.damp_held(self.config.arm_damping_kd)
 
     def _advance(self, dt: float) -> None:
         self.robot.advance(dt)
@@ -324,6 +343,7 @@ class SafeRobot(Robot):
         self._ramp = None
         self._over_power_frames = 0
         self._transition(SafetyState.DAMPED, reason, detail)
+        self._damp_held()
         if self.is_connected and self.robot.is_connected and self._damping is not None:
             self._sent = self.robot.write(self._damping)
 
