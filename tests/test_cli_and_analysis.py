@@ -203,6 +203,26 @@ def test_bench_mpc_refuses_a_controller_that_is_not_an_mpc(capsys):
     assert "use one of: mpc, mpc-tail, mpc-locked, mpc-noarm, mpc-wbqp" in capsys.readouterr().err
 
 
+@pytest.fixture
+def no_worker(monkeypatch):
+    """Fail if ``bench mpc`` spawns its worker: what is tested must be refused before it."""
+    import wbc.tools.bench.mpc as bench
+
+    def spawn(*args, **kwargs):
+        raise AssertionError("bench mpc spawned its worker before it checked its options")
+
+    monkeypatch.setattr(bench, "ProcessPoolExecutor", spawn)
+
+
+@pytest.mark.parametrize(("option", "value", "message"), [
+    ("--controller", "nosuch", "wbc: error: unknown controller 'nosuch'; valid controllers: "),
+    ("--robot", "foo", "wbc: error: unknown robot 'foo'; valid robots: a1-wx200, go1-arm"),
+])
+def test_bench_mpc_refuses_an_unknown_name_before_it_spawns_its_worker(option, value, message, no_worker, capsys):
+    assert main(["bench", "mpc", option, value, "--seconds", "0.1", "--rounds", "1", "--no-reference"]) == 2
+    assert capsys.readouterr().err.startswith(message)
+
+
 def test_every_command_of_the_parser_has_a_handler():
     import argparse
 

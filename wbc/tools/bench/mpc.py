@@ -33,6 +33,7 @@ from wbc.mpc.centroidal_model import NU
 from wbc.mpc.centroidal_mpc import MpcProblem
 from wbc.mpc.controller import MpcController
 from wbc.mpc.qp_solvers import QP_SOLVERS, QpResult, check_qp_solver
+from wbc.robots.registry import get_robot
 from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
@@ -488,12 +489,15 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     check_qp_solver(qp_solver, "--qp-solver")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= MAX_ROUNDS:
         raise ConfigError(f"--rounds must be a whole number of timed walks from 1 to {MAX_ROUNDS}, got {rounds!r}")
+    # the names are checked here, before the worker is spawned: a mistyped name is refused at once, and its message
+    # does not depend on the error travelling back from the worker
+    spec = get_controller(controller)
+    get_robot(robot, spec.arm_mode)
     if single_thread:
         with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
                                  reference=reference, qp_solver=qp_solver, rounds=rounds).result()
         return replace(result, blas="single-threaded")
-    spec = get_controller(controller)
     sim = PhysicsTimedRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
     ctrl = spec.make(sim.desc)
     if not isinstance(ctrl, MpcController):
