@@ -62,7 +62,7 @@ TRAIN_REFERENCE_KEYS = ["reference_physics_limit_control_steps_per_s", "control_
 MPC_KEYS = ["robot", "controller", "horizon", "mpc_solve_ms_median", "mpc_solve_ms_p99", "mpc_setup_ms_median",
             "wbc_tick_us_median", "control_tick_us_median", "realtime_factor", "cpu_realtime_factor",
             "walk_physics_realtime_factor", "walk_physics_share", "warmup_episode_s", "fell", "blas",
-            "qp_solver", "machine", "load_1min", "rounds"]
+            "qp_solver", "machine", "load_1min", "rounds", "qp_comparison_skipped"]
 MPC_REFERENCE_KEYS = ["reference_placo_tick_us", "reference_steps_per_s", "physics_realtime_factor",
                       "control_tick_over_reference_tick", "closed_loop_over_physics_rtf", "scaled_target_wbc_tick_us",
                       "scaled_target_realtime_factor", "physics_cpu_realtime_factor", "closed_loop_over_physics_cpu",
@@ -369,6 +369,13 @@ def test_print_bench_mpc_shows_the_tick_and_the_references(capsys):
     one = dataclasses.replace(_mpc(), rounds=_mpc().rounds[:1])
     assert "on their own); one timed walk\n" in _printed(printers.print_bench_mpc, one, capsys)
     assert "just before and after" not in _printed(printers.print_bench_mpc, one, capsys)
+
+
+def test_print_bench_mpc_says_why_the_qp_backends_were_not_compared(capsys):
+    tail = dataclasses.replace(_mpc(), controller="mpc-tail", qp_comparison_skipped="mpc-tail solves its own QP")
+    assert "  QP backends not compared: mpc-tail solves its own QP\n" in _printed(printers.print_bench_mpc, tail,
+                                                                                    capsys)
+    assert _json(tail.as_dict())["qp_comparison_skipped"] == "mpc-tail solves its own QP"
 
 
 def test_print_bench_sweep_prints_one_line_per_executor_then_rays_overhead(capsys):

@@ -223,6 +223,24 @@ def test_bench_mpc_refuses_an_unknown_name_before_it_spawns_its_worker(option, v
     assert capsys.readouterr().err.startswith(message)
 
 
+def test_bench_mpc_refuses_another_qp_backend_for_the_tail_mpc_which_solves_its_own_qp(no_worker, capsys):
+    argv = ["bench", "mpc", "--controller", "mpc-tail", "--qp-solver", "proxsuite", "--seconds", "0.1", "--rounds", "1",
+            "--no-reference"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wbc: error: --qp-solver proxsuite: mpc-tail solves its tail MPC's QP with daqp only")
+    assert "leave --qp-solver out or give daqp" in err
+
+
+def test_bench_mpc_of_the_tail_mpc_says_why_it_compares_no_qp_backends(capsys):
+    argv = ["bench", "mpc", "--controller", "mpc-tail", "--seconds", "0.1", "--rounds", "1", "--no-reference",
+            "--threaded-blas", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["qp_solver"].startswith("daqp ") and not any(key.startswith("qp_daqp_") for key in out)
+    assert out["qp_comparison_skipped"].startswith("mpc-tail solves its tail MPC's QP with DAQP directly")
+
+
 def test_every_command_of_the_parser_has_a_handler():
     import argparse
 

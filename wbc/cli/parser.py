@@ -353,8 +353,8 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
     mpc.add_argument("--json", action="store_true")
     mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
     mpc.add_argument("--qp-solver", default="daqp", choices=tuple(QP_SOLVERS),
-                     help="the closed loop's QP backend (default daqp); the walk's QPs are then solved by every "
-                          "backend and compared")
+                     help="the closed loop's QP backend (default daqp; mpc-tail solves its own QP with daqp only); "
+                          "the walk's QPs are then solved by every backend and compared")
     mpc.set_defaults(handler="bench mpc")
 
 

@@ -234,6 +234,8 @@ def print_bench_mpc(result: MpcBenchResult) -> None:
                   f"{ref.closed_loop_over_physics_cpu_max:.3f}: how far this machine moved the figure in one run)")
     if result.qp_solvers:
         _print_qp_solvers(result)
+    else:
+        print(f"  QP backends not compared: {result.qp_comparison_skipped or 'no QP of the walk was kept'}")
 
 
 def _print_qp_solvers(result: MpcBenchResult) -> None:

@@ -33,6 +33,7 @@ from wbc.mpc.centroidal_model import NU
 from wbc.mpc.centroidal_mpc import MpcProblem
 from wbc.mpc.controller import MpcController
 from wbc.mpc.qp_solvers import QP_SOLVERS, QpResult, check_qp_solver
+from wbc.mpc.tail_controller import TailMpcController
 from wbc.robots.registry import get_robot
 from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
@@ -229,6 +230,8 @@ class MpcBenchResult:
         reference: the references' figures, or None when they were not measured.
         qp_solvers: every QP backend on the QPs of the timed walk, DAQP first (`compare_qp_solvers`); empty when
             none was recorded.
+        qp_comparison_skipped: why `qp_solvers` is empty (the tail MPC solves a QP of its own, or the walk made no
+            MPC update), or None when the backends were compared.
         rounds: each timed walk with the references around it, in order (`MpcRound`).
     """
 
@@ -249,22 +252,22 @@ class MpcBenchResult:
     reference: MpcReference | None = None
     qp_solvers: tuple[QpSolverFigures, ...] = ()
     rounds: tuple[MpcRound, ...] = ()
+    qp_comparison_skipped: str | None = None
 
-    def as_dict(self) -> dict[str, float | str | int | bool]:
+    def as_dict(self) -> dict[str, float | str | int | bool | None]:
         """Plain flat dict (the JSON output of ``wbc bench mpc``).
 
-        The references' figures follow when measured, then each QP backend's (``qp_<solver>_...``).
+        The references' figures follow when measured, then each QP backend's (``qp_<solver>_...``);
+        ``qp_comparison_skipped`` says why there are none (null when there are).
         """
-        out: dict[str, float | str | int | bool] = {"robot": self.robot, "controller": self.controller,
-                                                    "horizon": self.horizon, **self.ticks.as_dict(),
-                                                    "realtime_factor": self.realtime_factor,
-                                                    "cpu_realtime_factor": self.cpu_realtime_factor,
-                                                    "walk_physics_realtime_factor": self.walk_physics_realtime_factor,
-                                                    "walk_physics_share": self.walk_physics_share,
-                                                    "warmup_episode_s": self.warmup_episode_s, "fell": self.fell,
-                                                    "blas": self.blas, "qp_solver": self.qp_solver,
-                                                    "machine": self.machine, "load_1min": self.load_1min,
-                                                    "rounds": len(self.rounds)}
+        out: dict[str, float | str | int | bool | None] = {
+            "robot": self.robot, "controller": self.controller, "horizon": self.horizon, **self.ticks.as_dict(),
+            "realtime_factor": self.realtime_factor, "cpu_realtime_factor": self.cpu_realtime_factor,
+            "walk_physics_realtime_factor": self.walk_physics_realtime_factor,
+            "walk_physics_share": self.walk_physics_share, "warmup_episode_s": self.warmup_episode_s,
+            "fell": self.fell, "blas": self.blas, "qp_solver": self.qp_solver, "machine": self.machine,
+            "load_1min": self.load_1min, "rounds": len(self.rounds),
+            "qp_comparison_skipped": self.qp_comparison_skipped}
         if self.reference is not None:
             out.update(self.reference.as_dict())
         for figures in self.qp_solvers:
@@ -428,6 +431,21 @@ class PhysicsTimedRobot(MujocoRobot):
         self.physics_s += time.perf_counter() - t0
 
 
+def _check_tail_qp_solver(factory: object, controller: str, qp_solver: str) -> None:
+    """Refuse a QP backend other than DAQP for a tail MPC controller (`factory`: its class, or any factory).
+
+    The tail controller plans with `wbc.mpc.tail_mpc.TailMpc`, whose QP (the arm's accelerations and the servos'
+    bounds besides the forces) DAQP solves directly; the backends of `QP_SOLVERS` take the centroidal MPC's QP only.
+
+    Raises:
+        ConfigError: `factory` is a `TailMpcController` class and `qp_solver` is not ``daqp``.
+    """
+    if qp_solver != "daqp" and isinstance(factory, type) and issubclass(factory, TailMpcController):
+        raise ConfigError(f"--qp-solver {qp_solver}: {controller} solves its tail MPC's QP with daqp only (the other "
+                          "backends take the centroidal MPC's QP, which it does not build); leave --qp-solver out "
+                          "or give daqp")
+
+
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
               single_thread: bool = True, reference: bool = True, qp_solver: str = "daqp",
               rounds: int = DEFAULT_ROUNDS) -> MpcBenchResult:
@@ -469,12 +487,14 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     Args:
         robot: robot registry name.
-        controller: an MPC controller's registry name (``mpc``, ``mpc-locked``, ``mpc-noarm``).
+        controller: an MPC controller's registry name (``mpc``, ``mpc-tail``, ``mpc-locked``, ``mpc-noarm`` ...).
         seconds: length of the walk [s].
         vx: forward velocity command [m/s].
         single_thread: run in a spawned process with a single-threaded BLAS.
         reference: also measure the references.
         qp_solver: the closed loop's QP backend (`wbc.mpc.qp_solvers.QP_SOLVERS`); the comparison runs them all.
+            A tail controller (``mpc-tail``) solves its own QP with DAQP: it takes ``daqp`` only, and its result
+            holds no comparison (``qp_comparison_skipped`` says why).
         rounds: how many times the timed walk is played (1 to `MAX_ROUNDS`).
 
     Returns:
@@ -484,7 +504,8 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         UnknownNameError: unknown robot or controller.
         SimulationDiverged: the simulation blew up during the walk (no figure of a blown-up walk is reported).
         BenchError: the controller is not an MPC controller, or a reference failed.
-        ConfigError: `qp_solver` is not a QP backend (the message lists them), or `rounds` is out of its range.
+        ConfigError: `qp_solver` is not a QP backend (the message lists them), or is not ``daqp`` for the tail MPC
+            controller (``mpc-tail``, which solves its own QP with DAQP), or `rounds` is out of its range.
     """
     check_qp_solver(qp_solver, "--qp-solver")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= MAX_ROUNDS:
@@ -493,6 +514,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     # does not depend on the error travelling back from the worker
     spec = get_controller(controller)
     get_robot(robot, spec.arm_mode)
+    _check_tail_qp_solver(getattr(spec.make, "func", spec.make), controller, qp_solver)
     if single_thread:
         with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
@@ -505,6 +527,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
                  and issubclass(getattr(s.make, "func", s.make), MpcController)]  # mpc-tail's is a subclass
         raise BenchError(f"bench mpc times an MPC controller, and {controller!r} is not one; use one of: "
                          f"{', '.join(valid)}")
+    _check_tail_qp_solver(type(ctrl), controller, qp_solver)  # a plug-in's factory may return a tail controller
     if ctrl.config.mpc.qp_solver != qp_solver:
         config = replace(ctrl.config, mpc=replace(ctrl.config.mpc, qp_solver=qp_solver))
         ctrl = type(ctrl)(sim.desc, config)
@@ -574,6 +597,12 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
             scaled_target_wbc_tick_us=scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"], tick_ref),
             scaled_target_realtime_factor=scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"], rate_ref))
     solver = ctrl.mpc.qp_solver
+    skipped = None
+    if isinstance(ctrl, TailMpcController):
+        skipped = (f"{controller} solves its tail MPC's QP with DAQP directly, and the backends take the centroidal "
+                   "MPC's QP, which it does not build")
+    elif not qps.qps:
+        skipped = "the walk made no MPC update whose QP could be kept"
     return MpcBenchResult(robot=robot, controller=controller, horizon=int(ctrl.config.mpc.horizon), ticks=figures,
                           realtime_factor=realtime,
                           cpu_realtime_factor=median([r.cpu_realtime_factor for r in timed_rounds]),
@@ -582,4 +611,4 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
                           warmup_episode_s=warmup_wall, fell=bool(fell or episode.fell), rounds=tuple(timed_rounds),
                           blas="default threads", qp_solver=f"{solver.name} {solver.version()}",
                           machine=machine_description(), load_1min=load, reference=refs,
-                          qp_solvers=compare_qp_solvers(qps.qps))
+                          qp_solvers=compare_qp_solvers(qps.qps), qp_comparison_skipped=skipped)
