@@ -330,7 +330,8 @@ def _add_bench_sim_parser(bench: _Commands) -> None:
     sim.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
     sim.add_argument("--batch", type=bounded_int(1, 65_536), default=64,
-                     help="environments in the batched rollout, 1..65536")
+                     help="environments in the batched rollout, 1..65536, as many as half the available memory holds "
+                          "(each keeps every step's state)")
     sim.add_argument("--threads", type=_THREADS, default=None,
                      help=f"threads for the batched rollout, 1..{MAX_THREADS} (default: all)")
     sim.add_argument("--json", action="store_true", help="print JSON")

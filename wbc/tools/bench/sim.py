@@ -12,7 +12,7 @@ from mujoco import rollout
 from wbc.control.stand import stand_command
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.scenario.terrain import TerrainConfig
-from wbc.tools.bench.batched_rollout import BatchedRollout
+from wbc.tools.bench.batched_rollout import BatchedRollout, check_rollout_memory
 from wbc.tools.bench.references import REFERENCE_TARGETS, machine_description, reference_a1, scaled_target
 
 __all__ = ["SimBenchResult", "SimReference", "bench_sim"]
@@ -131,11 +131,14 @@ def bench_sim(
 
     Raises:
         UnknownNameError: unknown robot or arm mode.
+        ConfigError: the batched rollouts' buffers (every step's state of every environment) would take more than
+            half the memory available (`check_rollout_memory`; the message names ``--batch``).
     """
     nthread = nthread or os.cpu_count() or 1
     sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=arm_mode, terrain=TerrainConfig(kind=terrain)))
     ref_model, ref_data = reference_a1() if reference else (None, None)
     with sim:
+        check_rollout_memory([sim.model] + ([ref_model] if reference else []), batch, batch_steps)
         sim.reset(seed=1)
         sim.write(stand_command(sim.desc))
         sim.advance(0.5)
