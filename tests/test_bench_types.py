@@ -309,6 +309,10 @@ def test_print_bench_act_shows_both_ratios_and_where_a_controller_fell(capsys):
     assert "band ood, seed 1, trial 2" in text
     assert "  mpc " in text and "18.0 / 50.0" in text and "25.00" in text
     assert "1.250" in text and "0.125" in text and "(fell at 8.00 s)" in text
+    # the per-call ratio is of the means (62.5 / 50), and its label says so beside the median / mean column
+    header = text.splitlines()[1]
+    assert "x ref, mean act" in header and "x ref, tick" not in header
+    assert "ratios against mpc's mean per act and its CPU per simulated second" in text
 
 
 def test_bench_act_times_each_controllers_act_on_the_same_trial(tmp_path, monkeypatch):

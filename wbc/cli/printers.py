@@ -477,14 +477,14 @@ def print_bench_act(result: ActBenchResult) -> None:
     print(f"act on the thread's CPU clock: {result.scenario} band {result.band}, seed {result.seed}, trial "
           f"{result.trial}; {result.machine}, load {result.load_1min:.2f}")
     print(f"  {'controller':<28}{'rate [Hz]':>10}{'ticks':>8}{'per act [us] median / mean':>30}{'per sim s [ms]':>16}"
-          f"{'x ref, tick':>13}{'x ref, s':>10}")
+          f"{'x ref, mean act':>17}{'x ref, s':>10}")
     for cost, (_, tick, second) in zip(result.costs, result.ratios(), strict=True):
         note = f"  (fell at {cost.survived_s:.2f} s)" if cost.fell else ""
         print(f"  {cost.controller:<28}{cost.rate_hz:>10g}{cost.ticks:>8}"
               f"{f'{cost.cpu_us_per_tick_median:.1f} / {cost.cpu_us_per_tick_mean:.1f}':>30}"
-              f"{cost.cpu_ms_per_s:>16.2f}{tick:>13.3f}{second:>10.3f}{note}")
+              f"{cost.cpu_ms_per_s:>16.2f}{tick:>17.3f}{second:>10.3f}{note}")
     print(f"  the least CPU per simulated second of {result.costs[0].rounds} rounds each; ratios against "
-          f"{result.costs[0].controller}")
+          f"{result.costs[0].controller}'s mean per act and its CPU per simulated second")
 
 
 def print_bench_latency(result: LatencyBenchResult) -> None:

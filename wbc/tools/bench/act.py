@@ -84,13 +84,17 @@ class ActBenchResult:
     load_1min: float
 
     def ratios(self) -> list[tuple[str, float, float]]:
-        """(controller, CPU per tick over the reference's, CPU per simulated second over the reference's)."""
+        """(controller, mean CPU per ``act`` over the reference's mean, CPU per simulated second over its)."""
         ref = self.costs[0]
         return [(c.controller, c.cpu_us_per_tick_mean / ref.cpu_us_per_tick_mean, c.cpu_ms_per_s / ref.cpu_ms_per_s)
                 for c in self.costs]
 
     def as_dict(self) -> dict[str, object]:
-        """Plain dict, keys as the attributes' names, with the ratios against the first controller."""
+        """Plain dict, keys as the attributes' names, with the ratios against the first controller.
+
+        Each ratio's ``per_tick`` is the mean CPU per ``act`` over the first controller's mean (`ratios`), and its
+        ``per_simulated_s`` the CPU per simulated second over the first controller's.
+        """
         out = dataclasses.asdict(self)
         out["costs"] = [dataclasses.asdict(c) for c in self.costs]
         out["ratios"] = [{"controller": name, "per_tick": tick, "per_simulated_s": second}
