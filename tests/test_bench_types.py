@@ -361,7 +361,9 @@ def test_print_bench_train_shows_the_scaled_target_only_when_measured(capsys):
 def test_print_bench_mpc_shows_the_tick_and_the_references(capsys):
     text = _printed(printers.print_bench_mpc, _mpc(), capsys)
     assert "N = 10" in text and "median 1.25 ms, p99 3.50 ms (setup median 0.75 ms)" in text
-    assert "median 80 us per tick" in text and "control tick: median 150 us" in text and "6.0x real time" in text
+    assert "median 80 us per timed tick (the leg layer's: the MPC-update ticks; PlaCo's QP: every tick)" in text
+    assert "control tick: median 150 us" in text and "6.0x real time" in text
+    assert text.splitlines()[0].endswith("QP solver daqp 0.5.1, BLAS single-threaded")
     assert "control tick 3.75x the reference PlaCo tick" in text and "closed loop 0.030 of" in text
     assert "6.0x real time on one core (7.3x in CPU time); the walk's physics steps 30% of it (20x" in text
     assert "0.035 in CPU time (210x; target >= 0.20)" in text
@@ -373,6 +375,13 @@ def test_print_bench_mpc_shows_the_tick_and_the_references(capsys):
     one = dataclasses.replace(_mpc(), rounds=_mpc().rounds[:1])
     assert "on their own); one timed walk\n" in _printed(printers.print_bench_mpc, one, capsys)
     assert "just before and after" not in _printed(printers.print_bench_mpc, one, capsys)
+
+
+def test_print_bench_mpc_says_how_blas_was_threaded_and_claims_one_core_only_when_it_was(capsys):
+    threaded = _printed(printers.print_bench_mpc, dataclasses.replace(_mpc(), blas="default threads"), capsys)
+    assert threaded.splitlines()[0].endswith(", BLAS default threads")
+    assert "6.0x real time with the BLAS's default threads (7.3x in CPU time)" in threaded
+    assert "one core" not in threaded
 
 
 def test_print_bench_mpc_says_why_the_qp_backends_were_not_compared(capsys):

@@ -200,15 +200,18 @@ def print_bench_train(result: TrainBenchResult) -> None:
 def print_bench_mpc(result: MpcBenchResult) -> None:
     """`bench_mpc`'s figures, and the targets scaled to this machine when the references were measured."""
     ticks = result.ticks
+    one_core = result.blas == "single-threaded"  # the spawned worker's; --threaded-blas runs with the default threads
     print(f"MPC speed: {result.controller} on {result.robot} walking at 0.3 m/s, N = {result.horizon}, QP solver "
-          f"{result.qp_solver}")
+          f"{result.qp_solver}, BLAS {result.blas}")
     print(f"  machine: {result.machine}, load {result.load_1min:.2f} (1 min)")
     print(f"  MPC QP solve   : median {ticks.mpc_solve_ms_median:.2f} ms, p99 {ticks.mpc_solve_ms_p99:.2f} ms "
           f"(setup median {ticks.mpc_setup_ms_median:.2f} ms)")
-    print(f"  whole-body layer: median {ticks.wbc_tick_us_median:.0f} us per tick")
+    print(f"  whole-body layer: median {ticks.wbc_tick_us_median:.0f} us per timed tick (the leg layer's: the "
+          "MPC-update ticks; PlaCo's QP: every tick)")
     print(f"  control tick: median {ticks.control_tick_us_median:.0f} us (kinematics, estimator, footholds, "
           "whole-body layer, command; ticks without an MPC update)")
-    print(f"  closed loop    : {result.realtime_factor:.1f}x real time on one core "
+    where = "on one core" if one_core else f"with the BLAS's {result.blas}"
+    print(f"  closed loop    : {result.realtime_factor:.1f}x real time {where} "
           f"({result.cpu_realtime_factor:.1f}x in CPU time); the walk's physics steps "
           f"{result.walk_physics_share:.0%} of it "
           f"({result.walk_physics_realtime_factor:.0f}x real time on their own); "

@@ -77,7 +77,9 @@ class MpcTickFigures:
         mpc_solve_ms_median: median QP solve time of the MPC updates [ms].
         mpc_solve_ms_p99: 99th percentile of that time [ms].
         mpc_setup_ms_median: median setup time (linearisation, condensing) of the MPC updates [ms].
-        wbc_tick_us_median: median whole-body QP time per tick [us].
+        wbc_tick_us_median: median time of the whole-body layer over the ticks it was timed on [us]: the leg layer
+            (the default) is timed apart only on the MPC-update ticks and an episode's first (on the others it runs
+            inside the tick's one compiled call), PlaCo's whole-body QP (``mpc-wbqp``) on every tick.
         control_tick_us_median: median whole control tick without an MPC update [us].
     """
 
@@ -280,13 +282,14 @@ class TickTimingLog:
     """A runner observer that files each tick by what ran in it, from the controller's breakdown [s].
 
     Ticks with an MPC update (the breakdown has ``mpc_solve_s``) give the MPC's solve and setup times; the others are
-    plain control ticks, whose durations `figures` takes from the episode (``act_s``). Every tick the whole-body QP
-    ran gives ``whole_body_s``. Without a breakdown a tick cannot be filed.
+    plain control ticks, whose durations `figures` takes from the episode (``act_s``). Every tick whose whole-body
+    layer the controller timed apart gives ``whole_body_s`` (`MpcController.tick_timings`: the MPC-update ticks and an
+    episode's first for the leg layer, every tick for PlaCo's QP). Without a breakdown a tick cannot be filed.
 
     Attributes:
         mpc_solve_s: QP solve time of each MPC update [s].
         mpc_setup_s: setup time (linearisation, condensing) of each MPC update [s].
-        whole_body_s: whole-body QP time of each tick that ran it [s].
+        whole_body_s: the whole-body layer's time on each tick it was timed on [s].
         plain_ticks: indices of the ticks filed without an MPC update.
     """
 
@@ -461,8 +464,9 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     the first and after each (`MpcRound`): each round's ratio is read against the references just around it, and the
     result gives the rounds' medians and the ratio's spread. From the controller's breakdown of each tick
     (`HasTickTimings`): every MPC update's QP solve time (the `qp_solver` backend's) and setup time (linearisation and
-    condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo: kinematics, dynamics, tasks, QP,
-    plus setting its targets from Python). ``control_tick_us_median`` is the whole control tick without an MPC update
+    condensing), and ``wbc_tick_us_median``, the whole-body layer's median time over the ticks it is timed on (the leg
+    layer's: the MPC-update ticks; PlaCo's QP, every tick: kinematics, dynamics, tasks, QP, plus setting its targets
+    from Python). ``control_tick_us_median`` is the whole control tick without an MPC update
     (estimator, kinematics, footholds, swing targets, whole-body QP, motor command). These are nan for a controller that
     reports no breakdown. The real-time factor covers everything: physics, controller, MPC updates and the runner's
     episode log; it is given in wall time and in the thread's CPU time (``cpu_realtime_factor``), and the simulator's
