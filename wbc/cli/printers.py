@@ -148,11 +148,16 @@ def print_arm_momentum(rows: Sequence[ArmMomentumTrial], *, controller: str, sce
               f"{mean['alignment']:+.2f} (+1: the arm takes up the push's angular momentum)")
 
 
+def _machine_line(machine: str, load_1min: float) -> str:
+    """The benches' machine line: `machine_description`'s text and the 1-minute load average beside it."""
+    return f"  machine: {machine}, load {load_1min:.2f} (1 min)"
+
+
 def print_bench_sim(result: SimBenchResult) -> None:
     """`bench_sim`'s figures, and the reference's beside them when it was measured."""
     print(f"Simulation speed: {result.robot} (arm {result.arm_mode}), standing under the motor law on "
           f"{result.terrain} ground, dt {result.timestep_s * 1e3:.1f} ms")
-    print(f"  machine: {result.machine}")
+    print(_machine_line(result.machine, result.load_1min))
     print(f"  single-threaded : {result.steps_per_s:>10,.0f} steps/s  (real-time factor "
           f"{result.realtime_factor:.0f}x)")
     print(f"  batched rollout : {result.batched_steps_per_s:>10,.0f} steps/s  ({result.batch} envs, "
@@ -178,7 +183,7 @@ def print_bench_train(result: TrainBenchResult) -> None:
     print(f"Training env speed: {result.robot} (arm {result.arm_mode}), {result.num_envs} envs, "
           f"{result.threads} threads, policy at {1 / (result.timestep_s * result.decimation):.0f} Hz, "
           f"dt {result.timestep_s * 1e3:.1f} ms, random actions")
-    print(f"  machine: {result.machine}")
+    print(_machine_line(result.machine, result.load_1min))
     print(f"  env            : {result.control_steps_per_s:>10,.0f} control steps/s "
           f"({result.physics_steps_per_s:,.0f} physics steps/s)")
     print(f"  rollout only   : {result.rollout_only_control_steps_per_s:>10,.0f} control steps/s (physics limit)")
@@ -203,7 +208,7 @@ def print_bench_mpc(result: MpcBenchResult) -> None:
     one_core = result.blas == "single-threaded"  # the spawned worker's; --threaded-blas runs with the default threads
     print(f"MPC speed: {result.controller} on {result.robot} walking at 0.3 m/s, N = {result.horizon}, QP solver "
           f"{result.qp_solver}, BLAS {result.blas}")
-    print(f"  machine: {result.machine}, load {result.load_1min:.2f} (1 min)")
+    print(_machine_line(result.machine, result.load_1min))
     print(f"  MPC QP solve   : median {ticks.mpc_solve_ms_median:.2f} ms, p99 {ticks.mpc_solve_ms_p99:.2f} ms "
           f"(setup median {ticks.mpc_setup_ms_median:.2f} ms)")
     print(f"  whole-body layer: median {ticks.wbc_tick_us_median:.0f} us per timed tick (the leg layer's: the "
@@ -260,7 +265,7 @@ def print_bench_sweep(result: SweepBenchResult) -> None:
     """`bench_sweep`'s figures, one line per executor measured."""
     print(f"Sweep speed: {result.controller} on {result.scenario} ({result.trials} trials, "
           f"{result.terrain} terrain)")
-    print(f"  machine: {result.machine}")
+    print(_machine_line(result.machine, result.load_1min))
     print(f"  batched physics (bench sim, same terrain): {result.batched_physics_steps_per_s:>10,.0f} steps/s")
     for row in result.executors:
         print(f"  sweep, {row.executor:<5} executor: {row.sweep_steps_per_s:>10,.0f} steps/s "
@@ -517,6 +522,7 @@ def print_bench_latency(result: LatencyBenchResult) -> None:
             cells.append(f"{passed}, fell at {fell:g}" if fell is not None else f"{passed} (no fall up to {top:g})")
         forces = ", ".join(f"{f:g}" for f in m.push_force_n)
         print(f"  {m.controller:<12}{cells[0]:<26}{cells[1]:<26}{forces:<18}{m.wall_s:.0f} ({m.runs} runs)")
+    print(_machine_line(result.machine, result.load_1min))
 
 
 def print_bench_arm(result: ArmBenchResult) -> None:
@@ -546,7 +552,7 @@ def print_bench_arm(result: ArmBenchResult) -> None:
             label = "with byte timing" if e.what.endswith("byte_timing") else "no byte timing  "
             print(f"  sync read of 3 joints over a pty, {label}: p50 {e.value:.3f} ms, p99 {e.worst:.3f} ms "
                   f"(wire model {e.model:.2f} ms)")
-    print(f"  machine: {result.machine}")
+    print(_machine_line(result.machine, result.load_1min))
 
 
 def print_realtime_grant(who: str, grant: RealtimeGrant | None) -> None:

@@ -15,7 +15,6 @@ A trial in which a controller falls ends early: its figures cover the time it st
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ from wbc.control.spec import ControllerSpec
 from wbc.errors import BenchError
 from wbc.robots.description import RobotDescription
 from wbc.scenario.scenario import load_scenario
-from wbc.tools.bench.references import machine_description
+from wbc.tools.bench.references import load_1min, machine_description
 
 __all__ = ["ActBenchResult", "ActCost", "bench_act"]
 
@@ -178,7 +177,7 @@ def bench_act(controllers: Sequence[str], *, scenario: str = "scenarios/push.tom
                 best[k] = cost
             else:
                 best[k] = dataclasses.replace(best[k], rounds=cost.rounds)
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    load = load_1min()
     return ActBenchResult(scenario=scenario, band=band, seed=seed, trial=trial,
                           costs=tuple(best[k] for k in range(len(specs))), machine=machine_description(),
                           load_1min=load)

@@ -48,7 +48,7 @@ from wbc.hardware.unitree import (
     UnitreeRobot,
     UnitreeRobotConfig,
 )
-from wbc.tools.bench.references import machine_description
+from wbc.tools.bench.references import load_1min, machine_description
 from wbc.types import MotorCommand
 
 __all__ = ["EmulatorCounts", "HwBenchResult", "SafetyBenchResult", "TimedTransport", "bench_hw", "bench_safety",
@@ -350,7 +350,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
                 timed.recording = False
                 stats = link.link_stats()
                 rejects = link.decode_stats.rejected
-                load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+                load = load_1min()
         finally:
             timed.close()
         proc.stdin.write("stop\n")

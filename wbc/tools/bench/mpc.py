@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import multiprocessing
-import os
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -38,6 +37,7 @@ from wbc.robots.registry import get_robot
 from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
+    load_1min,
     machine_description,
     reference_a1_steps_per_s,
     reference_placo_tick_us,
@@ -578,7 +578,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
                 walk_physics_share=walk_physics_s / wall,
                 physics_realtime_factor=max(physics[-2:]) if reference else math.nan,
                 physics_cpu_realtime_factor=max(physics_cpu[-2:]) if reference else math.nan))
-        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+        load = load_1min()
         sim.reset(seed=0)
         episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=observe,
                               divergence=DivergenceCheck())
