@@ -416,7 +416,11 @@ def test_print_bench_sweep_prints_one_line_per_executor_then_rays_overhead(capsy
 
 def test_print_bench_hw_shows_the_counts_and_the_safety_figures(capsys):
     text = _printed(printers.print_bench_hw, _hw(), capsys)
-    assert "250 sent, 249 states received, 0 rejected by the robot; emulator decoded 300, rejected 1" in text
+    # the two counts cover different windows, and each line says which
+    assert ("  frames          250 sent, 249 states received, 0 rejected by the robot (the link, from its start to the "
+            "end of the measurement)\n") in text
+    assert ("  emulator        decoded 300, rejected 1 (its whole session: the link's damping frames at close "
+            "included)\n") in text
     assert "e-stop          1.75 ms" in text and "stale timeout 100 ms" in text and "deadline misses 1" in text
     assert "    trip: 0.40 s run -> damped (stale): no state for 0.12 s" in text
     assert ("scheduling      link side: asked SCHED_FIFO 50; got SCHED_FIFO 50; emulator: nothing asked; load "

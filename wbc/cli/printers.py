@@ -458,8 +458,9 @@ def print_bench_hw(result: HwBenchResult) -> None:
           f"advances {result.late_advances} (worst {result.worst_lateness_ms:.2f} ms)")
     emu = result.emulator
     print(f"  frames          {result.sends} sent, {result.replies_received} states received, "
-          f"{result.rejects} rejected by the robot; emulator decoded {emu.accepted}, rejected "
-          f"{sum(emu.rejected.values())}")
+          f"{result.rejects} rejected by the robot (the link, from its start to the end of the measurement)")
+    print(f"  emulator        decoded {emu.accepted}, rejected {sum(emu.rejected.values())} (its whole session: "
+          "the link's damping frames at close included)")
     safety = result.safety
     if safety is not None:
         print(f"Safety layer over the wire, real-time emulator (first damping frame on the wire after the cause; link "
