@@ -22,7 +22,15 @@ from wbc.arena.results import episode_path
 from wbc.cli.main import HANDLERS, main
 from wbc.cli.parser import build_parser
 from wbc.control.plugin import read_controller_config
-from wbc.errors import ConfigError, EpisodeError, EpisodeFileError, FileFieldError, RecordError, ScenarioError
+from wbc.errors import (
+    BenchError,
+    ConfigError,
+    EpisodeError,
+    EpisodeFileError,
+    FileFieldError,
+    RecordError,
+    ScenarioError,
+)
 from wbc.input_files import read_toml
 from wbc.scenario.domain import DomainParams
 from wbc.scenario.scenario import load_scenario
@@ -545,3 +553,23 @@ def test_the_rollout_memory_check_reads_meminfo_and_refuses_nothing_where_the_sy
     monkeypatch.setattr(batched, "available_memory_bytes", lambda: 10**5)
     with pytest.raises(ConfigError, match="free some memory"):
         batched.check_rollout_memory([model], 65536, 500)
+
+
+def test_bench_arm_names_the_option_at_fault_and_its_help_gives_the_rates_range(monkeypatch, capsys):
+    import wbc.tools.bench.arm as arm
+
+    def start(*args, **kwargs):
+        raise AssertionError("the emulator was started before the settings were checked")
+
+    monkeypatch.setattr(arm, "_start_emulator", start)
+    err = _cli_error(capsys, ["bench", "arm", "--rates", "0,200,2000", "--seconds", "0.2", "--no-realtime"])
+    assert ("wbc: error: bench arm: --rates: each bus rate must be in 10..1000 Hz, got 0, 2000; give comma-separated "
+            "rates, e.g. 100,200,400,1000") in err
+    assert "--seconds" not in err
+    with pytest.raises(BenchError, match=r"^bench arm: --seconds must be > 0 s, got 0$"):
+        arm.bench_arm(rates=(200.0,), seconds=0.0)
+    with pytest.raises(SystemExit):
+        main(["bench", "arm", "--help"])
+    usage = " ".join(capsys.readouterr().out.split())
+    assert "--rates RATES bus rates to run, comma-separated, each 10..1000 Hz" in usage
+

@@ -454,7 +454,8 @@ def _add_bench_arm_parser(bench: _Commands) -> None:
     barm.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(DESCRIPTIONS.values())}")
     barm.add_argument("--seconds", type=_MEASURE_S, default=2.0,
                       help="how long each rate runs [s] (default 2, at most 4 h)")
-    barm.add_argument("--rates", default="100,200,400,1000", help="bus rates to run, comma-separated [Hz]")
+    barm.add_argument("--rates", default="100,200,400,1000",
+                      help="bus rates to run, comma-separated, each 10..1000 Hz (default 100,200,400,1000)")
     barm.add_argument("--latency", type=bounded_float(0.0, 255.0, lo_open=True, unit="ms"), default=1.0,
                       help="the adapter's latency timer, up to 255 [ms] (the FTDI chip's largest; default 1)")
     barm.add_argument("--json", action="store_true", help="print JSON")

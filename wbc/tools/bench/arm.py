@@ -518,8 +518,13 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
     """
     if robot not in LEG_WIRES:
         raise BenchError(f"bench arm: --robot must be one of {', '.join(LEG_WIRES)}, got {robot!r}")
-    if not seconds > 0 or not rates or any(not 10.0 <= r <= 1000.0 for r in rates):
-        raise BenchError(f"bench arm: --seconds must be > 0 and each rate in 10..1000 Hz, got {seconds}, {rates}")
+    if not seconds > 0:
+        raise BenchError(f"bench arm: --seconds must be > 0 s, got {seconds:g}")
+    out_of_range = [r for r in rates if not 10.0 <= r <= 1000.0]
+    if not rates or out_of_range:
+        got = ", ".join(f"{r:g}" for r in out_of_range) if out_of_range else "none"
+        raise BenchError(f"bench arm: --rates: each bus rate must be in 10..1000 Hz, got {got}; give comma-separated "
+                         "rates, e.g. 100,200,400,1000")
     total = len(rates) * (seconds + 1.0) + len(gains) * (_DISCARDS + 1) * (_SETTLE + _REPEATS * (_RECORD + 0.1) + 1.0) \
         + (len(_FAULTS) + 1) * (2 * _REACTION_TIMEOUT + 2.0)
     proc, where = _start_emulator(robot, total, realtime)
