@@ -573,3 +573,10 @@ def test_bench_arm_names_the_option_at_fault_and_its_help_gives_the_rates_range(
     usage = " ".join(capsys.readouterr().out.split())
     assert "--rates RATES bus rates to run, comma-separated, each 10..1000 Hz" in usage
 
+
+def test_bench_mpc_names_seconds_when_the_walk_is_shorter_than_a_control_tick(capsys):
+    err = _cli_error(capsys, ["bench", "mpc", "--seconds", "0.001", "--rounds", "1", "--no-reference",
+                              "--threaded-blas"])
+    assert ("wbc: error: --seconds 0.001: the walk must hold at least one control tick of mpc (0.002 s at 500 Hz); "
+            "give --seconds 0.002 or more") in err
+    assert "give it a rate" not in err

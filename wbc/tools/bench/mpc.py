@@ -509,7 +509,8 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         SimulationDiverged: the simulation blew up during the walk (no figure of a blown-up walk is reported).
         BenchError: the controller is not an MPC controller, or a reference failed.
         ConfigError: `qp_solver` is not a QP backend (the message lists them), or is not ``daqp`` for the tail MPC
-            controller (``mpc-tail``, which solves its own QP with DAQP), or `rounds` is out of its range.
+            controller (``mpc-tail``, which solves its own QP with DAQP), or `rounds` is out of its range, or
+            `seconds` is shorter than one control tick.
     """
     check_qp_solver(qp_solver, "--qp-solver")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= MAX_ROUNDS:
@@ -532,6 +533,10 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         raise BenchError(f"bench mpc times an MPC controller, and {controller!r} is not one; use one of: "
                          f"{', '.join(valid)}")
     _check_tail_qp_solver(type(ctrl), controller, qp_solver)  # a plug-in's factory may return a tail controller
+    period = 1.0 / ctrl.rate_hz
+    if int(round(seconds / period)) < 1:  # the runner would refuse the walk, naming the controller's rate
+        raise ConfigError(f"--seconds {seconds:g}: the walk must hold at least one control tick of {controller} "
+                          f"({period:g} s at {ctrl.rate_hz:g} Hz); give --seconds {period:g} or more")
     if ctrl.config.mpc.qp_solver != qp_solver:
         config = replace(ctrl.config, mpc=replace(ctrl.config.mpc, qp_solver=qp_solver))
         ctrl = type(ctrl)(sim.desc, config)
