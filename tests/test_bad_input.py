@@ -9,6 +9,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,15 @@ from wbc.arena.results import episode_path
 from wbc.cli.main import HANDLERS, main
 from wbc.cli.parser import build_parser
 from wbc.control.plugin import read_controller_config
-from wbc.errors import EpisodeError, EpisodeFileError, FileFieldError, RecordError, ScenarioError
+from wbc.errors import (
+    BenchError,
+    ConfigError,
+    EpisodeError,
+    EpisodeFileError,
+    FileFieldError,
+    RecordError,
+    ScenarioError,
+)
 from wbc.input_files import read_toml
 from wbc.scenario.domain import DomainParams
 from wbc.scenario.lock import check_published
@@ -604,3 +613,68 @@ def test_a_host_of_invalid_syntax_is_refused_by_the_server_at_once(host, monkeyp
     monkeypatch.setattr(server.subprocess, "Popen", lambda *a, **k: pytest.fail("a server was started"))
     with pytest.raises(server.ViewerError, match="the viewer's host"):
         server.MeshcatServer(server.ServerConfig(host=host)).start()
+
+
+def test_bench_sim_refuses_a_batch_whose_rollout_buffers_would_not_fit_before_allocating_them(monkeypatch, capsys):
+    import wbc.tools.bench.batched_rollout as batched
+    import wbc.tools.bench.sim as sim
+
+    def allocate(*args, **kwargs):
+        raise AssertionError("the rollout's buffers were allocated before the memory was checked")
+
+    monkeypatch.setattr(batched, "available_memory_bytes", lambda: 4 * 10**9)
+    monkeypatch.setattr(sim, "BatchedRollout", allocate)
+    err = _cli_error(capsys, ["bench", "sim", "--batch", "65536", "--threads", "1"])
+    # 65536 x 500 steps of the robot's state (44 numbers) and the bare A1's (38), 8 bytes each
+    assert re.search(r"^wbc: error: --batch 65536: the batched rollouts' buffers \(65536 environments x 500 steps\) "
+                     r"need about 21\.\d GB, more than 50% of the memory available \(4\.0 GB\); give --batch 6\d{3} "
+                     r"or less$", err, re.MULTILINE)
+    err = _cli_error(capsys, ["bench", "sim", "--batch", "65536", "--threads", "1", "--no-reference"])
+    assert re.search(r"need about 11\.\d GB, more than 50% of the memory available \(4\.0 GB\); give --batch "
+                     r"11\d{3} or less$", err, re.MULTILINE)
+
+
+def test_the_rollout_memory_check_reads_meminfo_and_refuses_nothing_where_the_system_does_not_tell(tmp_path,
+                                                                                                monkeypatch):
+    from wbc.tools.bench import batched_rollout as batched
+    from wbc.tools.bench.references import reference_a1
+
+    meminfo = tmp_path / "meminfo"
+    meminfo.write_text("MemTotal:       16000000 kB\nMemAvailable:    2000000 kB\n")
+    assert batched.available_memory_bytes(meminfo) == 2_048_000_000
+    meminfo.write_text("MemTotal:       16000000 kB\n")
+    assert batched.available_memory_bytes(meminfo) is None
+    assert batched.available_memory_bytes(tmp_path / "missing") is None
+    model, _ = reference_a1()
+    monkeypatch.setattr(batched, "available_memory_bytes", lambda: None)
+    batched.check_rollout_memory([model], 65536, 500)  # unknown: not refused
+    monkeypatch.setattr(batched, "available_memory_bytes", lambda: 10**5)
+    with pytest.raises(ConfigError, match="free some memory"):
+        batched.check_rollout_memory([model], 65536, 500)
+
+
+def test_bench_arm_names_the_option_at_fault_and_its_help_gives_the_rates_range(monkeypatch, capsys):
+    import wbc.tools.bench.arm as arm
+
+    def start(*args, **kwargs):
+        raise AssertionError("the emulator was started before the settings were checked")
+
+    monkeypatch.setattr(arm, "_start_emulator", start)
+    err = _cli_error(capsys, ["bench", "arm", "--rates", "0,200,2000", "--seconds", "0.2", "--no-realtime"])
+    assert ("wbc: error: bench arm: --rates: each bus rate must be in 10..1000 Hz, got 0, 2000; give comma-separated "
+            "rates, e.g. 100,200,400,1000") in err
+    assert "--seconds" not in err
+    with pytest.raises(BenchError, match=r"^bench arm: --seconds must be > 0 s, got 0$"):
+        arm.bench_arm(rates=(200.0,), seconds=0.0)
+    with pytest.raises(SystemExit):
+        main(["bench", "arm", "--help"])
+    usage = " ".join(capsys.readouterr().out.split())
+    assert "--rates RATES bus rates to run, comma-separated, each 10..1000 Hz" in usage
+
+
+def test_bench_mpc_names_seconds_when_the_walk_is_shorter_than_a_control_tick(capsys):
+    err = _cli_error(capsys, ["bench", "mpc", "--seconds", "0.001", "--rounds", "1", "--no-reference",
+                              "--threaded-blas"])
+    assert ("wbc: error: --seconds 0.001: the walk must hold at least one control tick of mpc (0.002 s at 500 Hz); "
+            "give --seconds 0.002 or more") in err
+    assert "give it a rate" not in err

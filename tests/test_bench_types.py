@@ -50,24 +50,25 @@ from wbc.tools.bench import (
 )
 
 SIM_KEYS = ["robot", "arm_mode", "terrain", "timestep_s", "steps_per_s", "batched_steps_per_s", "realtime_factor",
-            "batch", "threads", "final_base_height_m", "machine"]
+            "batch", "threads", "final_base_height_m", "machine", "load_1min"]
 SIM_REFERENCE_KEYS = ["reference_steps_per_s", "reference_batched_steps_per_s", "steps_ratio_to_reference",
                       "batched_ratio_to_reference", "scaled_target_steps_per_s", "scaled_target_batched_steps_per_s"]
 TRAIN_KEYS = ["control_steps_per_s", "physics_steps_per_s", "rollout_only_control_steps_per_s", "env_efficiency",
               "python_ms_per_step", "python_cpu_ms_per_step", "physics_cpu_ms_per_step",
               "cpu_bound_control_steps_per_s", "cpu_bound_physics_only_control_steps_per_s", "resets_per_step",
-              "num_envs", "threads", "decimation", "timestep_s", "robot", "arm_mode", "terrain", "mujoco", "machine"]
+              "num_envs", "threads", "decimation", "timestep_s", "robot", "arm_mode", "terrain", "mujoco", "machine",
+              "load_1min"]
 TRAIN_REFERENCE_KEYS = ["reference_physics_limit_control_steps_per_s", "control_steps_ratio_to_reference",
                         "scaled_target_control_steps_per_s"]
 MPC_KEYS = ["robot", "controller", "horizon", "mpc_solve_ms_median", "mpc_solve_ms_p99", "mpc_setup_ms_median",
             "wbc_tick_us_median", "control_tick_us_median", "realtime_factor", "cpu_realtime_factor",
             "walk_physics_realtime_factor", "walk_physics_share", "warmup_episode_s", "fell", "blas",
-            "qp_solver", "machine", "load_1min", "rounds"]
+            "qp_solver", "machine", "load_1min", "rounds", "qp_comparison_skipped"]
 MPC_REFERENCE_KEYS = ["reference_placo_tick_us", "reference_steps_per_s", "physics_realtime_factor",
                       "control_tick_over_reference_tick", "closed_loop_over_physics_rtf", "scaled_target_wbc_tick_us",
                       "scaled_target_realtime_factor", "physics_cpu_realtime_factor", "closed_loop_over_physics_cpu",
                       "closed_loop_over_physics_cpu_min", "closed_loop_over_physics_cpu_max"]
-SWEEP_KEYS = ["scenario", "controller", "terrain", "trials", "batched_physics_steps_per_s", "machine"]
+SWEEP_KEYS = ["scenario", "controller", "terrain", "trials", "batched_physics_steps_per_s", "machine", "load_1min"]
 SWEEP_EXECUTOR_KEYS = ["{}_wall_s", "{}_sweep_steps_per_s", "{}_ratio_to_batched_physics"]
 HW_KEYS = ["robot", "seconds", "rate_hz", "transport", "emulator_process", "sends", "replies_received",
            "period_ms_p50", "period_ms_p99", "period_ms_max", "round_trip_ms_p50", "round_trip_ms_p99",
@@ -89,7 +90,7 @@ LATENCY_WIRE_KEYS = ["round_trip_ms_p50", "round_trip_ms_p99", "period_ms", "wir
 LATENCY_MARGIN_KEYS = ["controller", "trials", "push_force_n", "still_margin_ms", "still_fell_at_ms", "push_margin_ms",
                        "push_fell_at_ms", "runs", "wall_s"]
 ARM_KEYS = ["robot", "latency_ms", "seconds", "step_rad", "emulator_bus", "rates", "steps", "reactions", "emulator",
-            "machine", "host_realtime"]
+            "machine", "load_1min", "host_realtime"]
 ARM_RATE_KEYS = ["rate_hz", "achieved_hz", "busy_ms_mean", "busy_ms_max", "period_ms_max", "failed_reads", "cycles",
                  "faults"]
 ARM_STEP_KEYS = ["source", "kp", "kd", "rate_hz", "rise_ms", "overshoot_pct", "settle_ms", "final_error_rad",
@@ -111,7 +112,8 @@ def _sim(reference: bool = True) -> SimBenchResult:
                        scaled_target_batched_steps_per_s=137_614.7)
     return SimBenchResult(robot="a1-wx200", arm_mode="actuated", terrain="flat", timestep_s=0.002,
                           steps_per_s=82_500.0, batched_steps_per_s=140_000.0, realtime_factor=165.0, batch=64,
-                          threads=2, final_base_height_m=0.29, machine=MACHINE, reference=ref if reference else None)
+                          threads=2, final_base_height_m=0.29, machine=MACHINE, load_1min=1.5,
+                          reference=ref if reference else None)
 
 
 def _train(reference: bool = True) -> TrainBenchResult:
@@ -123,6 +125,7 @@ def _train(reference: bool = True) -> TrainBenchResult:
                             cpu_bound_control_steps_per_s=15_000.0, cpu_bound_physics_only_control_steps_per_s=21_558.0,
                             resets_per_step=0.5, num_envs=1024, threads=2, decimation=10, timestep_s=0.002,
                             robot="a1-wx200", arm_mode="actuated", terrain="scenario", mujoco="3.0.0", machine=MACHINE,
+                            load_1min=1.5,
                             reference=ref if reference else None)
 
 
@@ -141,7 +144,7 @@ def _mpc(reference: bool = True) -> MpcBenchResult:
     return MpcBenchResult(robot="a1-wx200", controller="mpc", horizon=10, ticks=ticks, realtime_factor=6.0,
                           cpu_realtime_factor=7.35, walk_physics_realtime_factor=20.0, walk_physics_share=0.3,
                           warmup_episode_s=1.5, fell=False, blas="single-threaded", qp_solver="daqp 0.5.1",
-                          machine=MACHINE, reference=ref if reference else None, rounds=rounds)
+                          machine=MACHINE, load_1min=1.5, reference=ref if reference else None, rounds=rounds)
 
 
 def _sweep(ray: bool = True) -> SweepBenchResult:
@@ -150,7 +153,8 @@ def _sweep(ray: bool = True) -> SweepBenchResult:
         rows.append(SweepExecutorRow(executor="ray", wall_s=6.0, sweep_steps_per_s=1333.3,
                                      ratio_to_batched_physics=0.0333))
     return SweepBenchResult(scenario="push", controller="stand", terrain="fractal", trials=8,
-                            batched_physics_steps_per_s=40_000.0, machine=MACHINE, executors=tuple(rows))
+                            batched_physics_steps_per_s=40_000.0, machine=MACHINE, load_1min=1.5,
+                            executors=tuple(rows))
 
 
 def _hw(safety: bool = True) -> HwBenchResult:
@@ -180,7 +184,8 @@ def _latency(wire: bool = True) -> LatencyBenchResult:
                           wire_ticks_p50=2.0, wire_ticks_mean=3.0, wire_ticks_max=5, typical_delay_ms=2.0,
                           sim_ticks_typical=2.0, worst_delay_ms=8.0, sim_ticks_worst=5.0)
     return LatencyBenchResult(wire_robot="go1", scenario="scenarios/push.toml", coarse_ms=(0.0, 10.0, 20.0),
-                              fine_ms=2.0, wire=figures if wire else None, margins=(stand, mpc), machine=MACHINE)
+                              fine_ms=2.0, wire=figures if wire else None, margins=(stand, mpc), machine=MACHINE,
+                              load_1min=1.5)
 
 
 ACT_KEYS = ["scenario", "band", "seed", "trial", "costs", "machine", "load_1min", "ratios"]
@@ -212,7 +217,7 @@ def _arm() -> ArmBenchResult:
                                   watchdog_ms=100.4)),
         emulator=(EmulatorTimingRow(what="plant_realtime_factor", value=0.999, worst=0.0, model=1.0),
                   EmulatorTimingRow(what="sync_read_round_trip_byte_timing", value=1.234, worst=2.5, model=0.63)),
-        machine=MACHINE)
+        machine=MACHINE, load_1min=1.5)
 
 
 def _printed(printer, result: object, capsys: pytest.CaptureFixture[str]) -> str:
@@ -288,11 +293,11 @@ def test_hw_json_keeps_its_keys_and_nests_the_emulator_link_and_safety():
 
 def test_latency_json_puts_the_wire_between_the_sweep_and_the_margins():
     out = _json(_latency().as_dict())
-    assert list(out) == LATENCY_KEYS + LATENCY_WIRE_KEYS + ["margins", "machine"]
+    assert list(out) == LATENCY_KEYS + LATENCY_WIRE_KEYS + ["margins", "machine", "load_1min"]
     assert out["wire_ticks"] == [2, 3, 2, 5] and out["coarse_ms"] == [0.0, 10.0, 20.0]
     assert [list(m) for m in out["margins"]] == [LATENCY_MARGIN_KEYS] * 2
     assert (out["margins"][0]["still_fell_at_ms"], out["margins"][0]["push_margin_ms"]) == (None, None)
-    assert list(_json(_latency(wire=False).as_dict())) == LATENCY_KEYS + ["margins", "machine"]
+    assert list(_json(_latency(wire=False).as_dict())) == LATENCY_KEYS + ["margins", "machine", "load_1min"]
 
 
 def test_act_json_has_one_dict_per_controller_and_the_ratios_against_the_first():
@@ -309,6 +314,10 @@ def test_print_bench_act_shows_both_ratios_and_where_a_controller_fell(capsys):
     assert "band ood, seed 1, trial 2" in text
     assert "  mpc " in text and "18.0 / 50.0" in text and "25.00" in text
     assert "1.250" in text and "0.125" in text and "(fell at 8.00 s)" in text
+    # the per-call ratio is of the means (62.5 / 50), and its label says so beside the median / mean column
+    header = text.splitlines()[1]
+    assert "x ref, mean act" in header and "x ref, tick" not in header
+    assert "ratios against mpc's mean per act and its CPU per simulated second" in text
 
 
 def test_bench_act_times_each_controllers_act_on_the_same_trial(tmp_path, monkeypatch):
@@ -357,7 +366,9 @@ def test_print_bench_train_shows_the_scaled_target_only_when_measured(capsys):
 def test_print_bench_mpc_shows_the_tick_and_the_references(capsys):
     text = _printed(printers.print_bench_mpc, _mpc(), capsys)
     assert "N = 10" in text and "median 1.25 ms, p99 3.50 ms (setup median 0.75 ms)" in text
-    assert "median 80 us per tick" in text and "control tick: median 150 us" in text and "6.0x real time" in text
+    assert "median 80 us per timed tick (the leg layer's: the MPC-update ticks; PlaCo's QP: every tick)" in text
+    assert "control tick: median 150 us" in text and "6.0x real time" in text
+    assert text.splitlines()[0].endswith("QP solver daqp 0.5.1, BLAS single-threaded")
     assert "control tick 3.75x the reference PlaCo tick" in text and "closed loop 0.030 of" in text
     assert "6.0x real time on one core (7.3x in CPU time); the walk's physics steps 30% of it (20x" in text
     assert "0.035 in CPU time (210x; target >= 0.20)" in text
@@ -371,6 +382,30 @@ def test_print_bench_mpc_shows_the_tick_and_the_references(capsys):
     assert "just before and after" not in _printed(printers.print_bench_mpc, one, capsys)
 
 
+def test_print_bench_mpc_says_how_blas_was_threaded_and_claims_one_core_only_when_it_was(capsys):
+    threaded = _printed(printers.print_bench_mpc, dataclasses.replace(_mpc(), blas="default threads"), capsys)
+    assert threaded.splitlines()[0].endswith(", BLAS default threads")
+    assert "6.0x real time with the BLAS's default threads (7.3x in CPU time)" in threaded
+    assert "one core" not in threaded
+
+
+def test_print_bench_mpc_says_why_the_qp_backends_were_not_compared(capsys):
+    tail = dataclasses.replace(_mpc(), controller="mpc-tail", qp_comparison_skipped="mpc-tail solves its own QP")
+    assert "  QP backends not compared: mpc-tail solves its own QP\n" in _printed(printers.print_bench_mpc, tail,
+                                                                                    capsys)
+    assert _json(tail.as_dict())["qp_comparison_skipped"] == "mpc-tail solves its own QP"
+
+
+@pytest.mark.parametrize(("printer", "build"), [
+    (printers.print_bench_sim, lambda: _sim()), (printers.print_bench_train, lambda: _train()),
+    (printers.print_bench_mpc, lambda: _mpc()), (printers.print_bench_sweep, lambda: _sweep()),
+    (printers.print_bench_latency, lambda: _latency()), (printers.print_bench_latency, lambda: _latency(wire=False)),
+    (printers.print_bench_arm, lambda: _arm()),
+], ids=["sim", "train", "mpc", "sweep", "latency", "latency-no-wire", "arm"])
+def test_each_bench_prints_the_machine_and_its_load(printer, build, capsys):
+    assert f"  machine: {MACHINE}, load 1.50 (1 min)\n" in _printed(printer, build(), capsys)
+
+
 def test_print_bench_sweep_prints_one_line_per_executor_then_rays_overhead(capsys):
     lines = _printed(printers.print_bench_sweep, _sweep(), capsys).splitlines()
     assert "  sweep, local executor:      4,000 steps/s (10 % of batched physics, 2.0 s)" in lines
@@ -381,7 +416,11 @@ def test_print_bench_sweep_prints_one_line_per_executor_then_rays_overhead(capsy
 
 def test_print_bench_hw_shows_the_counts_and_the_safety_figures(capsys):
     text = _printed(printers.print_bench_hw, _hw(), capsys)
-    assert "250 sent, 249 states received, 0 rejected by the robot; emulator decoded 300, rejected 1" in text
+    # the two counts cover different windows, and each line says which
+    assert ("  frames          250 sent, 249 states received, 0 rejected by the robot (the link, from its start to the "
+            "end of the measurement)\n") in text
+    assert ("  emulator        decoded 300, rejected 1 (its whole session: the link's damping frames at close "
+            "included)\n") in text
     assert "e-stop          1.75 ms" in text and "stale timeout 100 ms" in text and "deadline misses 1" in text
     assert "    trip: 0.40 s run -> damped (stale): no state for 0.12 s" in text
     assert ("scheduling      link side: asked SCHED_FIFO 50; got SCHED_FIFO 50; emulator: nothing asked; load "

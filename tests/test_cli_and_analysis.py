@@ -245,6 +245,44 @@ def test_bench_mpc_refuses_a_controller_that_is_not_an_mpc(capsys):
     assert "use one of: mpc, mpc-tail, mpc-locked, mpc-noarm, mpc-wbqp" in capsys.readouterr().err
 
 
+@pytest.fixture
+def no_worker(monkeypatch):
+    """Fail if ``bench mpc`` spawns its worker: what is tested must be refused before it."""
+    import wbc.tools.bench.mpc as bench
+
+    def spawn(*args, **kwargs):
+        raise AssertionError("bench mpc spawned its worker before it checked its options")
+
+    monkeypatch.setattr(bench, "ProcessPoolExecutor", spawn)
+
+
+@pytest.mark.parametrize(("option", "value", "message"), [
+    ("--controller", "nosuch", "wbc: error: unknown controller 'nosuch'; valid controllers: "),
+    ("--robot", "foo", "wbc: error: unknown robot 'foo'; valid robots: a1-wx200, go1-arm"),
+])
+def test_bench_mpc_refuses_an_unknown_name_before_it_spawns_its_worker(option, value, message, no_worker, capsys):
+    assert main(["bench", "mpc", option, value, "--seconds", "0.1", "--rounds", "1", "--no-reference"]) == 2
+    assert capsys.readouterr().err.startswith(message)
+
+
+def test_bench_mpc_refuses_another_qp_backend_for_the_tail_mpc_which_solves_its_own_qp(no_worker, capsys):
+    argv = ["bench", "mpc", "--controller", "mpc-tail", "--qp-solver", "proxsuite", "--seconds", "0.1", "--rounds", "1",
+            "--no-reference"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("wbc: error: --qp-solver proxsuite: mpc-tail solves its tail MPC's QP with daqp only")
+    assert "leave --qp-solver out or give daqp" in err
+
+
+def test_bench_mpc_of_the_tail_mpc_says_why_it_compares_no_qp_backends(capsys):
+    argv = ["bench", "mpc", "--controller", "mpc-tail", "--seconds", "0.1", "--rounds", "1", "--no-reference",
+            "--threaded-blas", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["qp_solver"].startswith("daqp ") and not any(key.startswith("qp_daqp_") for key in out)
+    assert out["qp_comparison_skipped"].startswith("mpc-tail solves its tail MPC's QP with DAQP directly")
+
+
 def test_every_command_of_the_parser_has_a_handler():
     import argparse
 

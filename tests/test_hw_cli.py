@@ -254,10 +254,18 @@ def test_bench_hw_prints_the_safety_figures(capsys: pytest.CaptureFixture[str]) 
     assert json.loads(capsys.readouterr().out)["safety"] is None
 
 
-def test_the_vendor_transport_is_refused_for_the_a1_before_any_socket(no_socket: list,
-                                                                     capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["hw", "check", "--robot", "a1", "--target", "127.0.0.1:9", "--transport", "sdk"]) == 2
-    assert "speaks the wire of go1 only" in capsys.readouterr().err and not no_socket
+@pytest.mark.parametrize("argv", [["hw", "check", "--target", "127.0.0.1:9"], ["bench", "hw", "--no-safety"]],
+                         ids=["hw check", "bench hw"])
+def test_the_vendor_transport_is_refused_for_the_a1_naming_the_options_before_any_socket(
+        argv: list[str], no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main([*argv, "--robot", "a1", "--transport", "sdk"]) == 2
+    err = capsys.readouterr().err
+    assert ("wbc: error: --transport sdk: the vendor SDK speaks only the go1's wire, not the a1's (--robot a1); leave "
+            "--transport out for it (udp, our own socket)") in err
+    assert "UnitreeRobotConfig" not in err and "binds its port" not in err and not no_socket
+    assert main([*argv, "--transport", "tcp"]) == 2
+    assert ("wbc: error: --transport: unknown Unitree transport 'tcp'; valid Unitree "
+            "transports: sdk, udp") in capsys.readouterr().err and not no_socket
 
 
 def test_bench_hw_refuses_a_bad_rate_before_starting_the_emulator(capsys: pytest.CaptureFixture[str]) -> None:

@@ -149,7 +149,7 @@ def test_bench_mpc_walks_on_proxsuite_and_compares_every_backend_on_the_walks_qp
     argv = ["bench", "mpc", "--qp-solver", "proxsuite", "--seconds", "0.3", "--threaded-blas", "--no-reference"]
     assert main(argv) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0].endswith("QP solver proxsuite 0.8.0")
+    assert lines[0].endswith("QP solver proxsuite 0.8.0, BLAS default threads")
     head = next(i for i, line in enumerate(lines) if "QP backends on the same" in line)
     assert "the loop ran proxsuite 0.8.0" in lines[head]
     assert lines[head + 1].split() == ["solver", "solve", "ms", "p50", "p99", "iters", "p50", "max", "unsolved", "max",
@@ -161,6 +161,7 @@ def test_bench_mpc_walks_on_proxsuite_and_compares_every_backend_on_the_walks_qp
     assert main([*argv, "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["qp_solver"] == "proxsuite 0.8.0"
+    assert out["qp_comparison_skipped"] is None
     # the walk's MPC updates (one per 32 ms), every one solved by both backends
     assert out["qp_daqp_qps"] == out["qp_proxsuite_qps"] >= 0.3 / 0.032
     assert out["qp_daqp_unsolved"] == out["qp_proxsuite_unsolved"] == 0

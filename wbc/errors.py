@@ -45,8 +45,27 @@ CONTROLLER_ERRORS: tuple[type[BaseException], ...] = (Exception, SystemExit)
 the whole command without a word and lose the other controllers' trials. `KeyboardInterrupt` still stops the run."""
 
 
+def _rebuild_error(cls: type[WbcError], args: tuple[object, ...]) -> WbcError:
+    """An error of `cls` with `args`, its constructor not called (`WbcError.__reduce__`; pickle sets its state)."""
+    err = cls.__new__(cls, *args)
+    err.args = args
+    return err
+
+
 class WbcError(Exception):
-    """Root of every error raised on purpose by `wbc`."""
+    """Root of every error raised on purpose by `wbc`.
+
+    It pickles with its message and attributes whatever its subclass's constructor takes, so that an error raised in
+    a worker process (a bench's spawned process, an arena worker) reaches the parent as itself.
+    """
+
+    def __reduce__(self) -> tuple[object, ...]:
+        """Rebuild without calling the constructor: the message (``args``) and the attributes (``__dict__``).
+
+        A subclass whose constructor takes other arguments than its message (`UnknownNameError`, `FileFieldError`)
+        could not be rebuilt from ``args`` alone, and the pool that carried it back would break instead.
+        """
+        return _rebuild_error, (type(self), self.args), self.__dict__ or None
 
 
 class UnknownNameError(WbcError, KeyError):

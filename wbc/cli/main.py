@@ -40,7 +40,8 @@ from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.io_process import build_process_robot
 from wbc.hardware.realtime import AUTO_CPU, CONTROLLER_PRIORITY_BELOW, DEFAULT_RT_PRIORITY, NO_REALTIME, RealtimeRequest
 from wbc.hardware.serial_port_policy import is_emulated_port, why_not_emulated
-from wbc.hardware.unitree import DESCRIPTIONS, check_target, is_loopback
+from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS, check_target, is_loopback
+from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.shipped import distilled_weights
 from wbc.learned.train.adaptation_config import AdaptationConfig
@@ -160,7 +161,7 @@ def _bench_hw(args: argparse.Namespace) -> int:
     stand = 10.0 if args.stand is None else args.stand
     if not stand > 0:
         raise ConfigError(f"--stand must be > 0 s, got {stand}")
-    _sdk_note(args)
+    _check_transport(args)
     result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport,
                       stand_seconds=None if args.no_safety else stand,
                       realtime=realtime_request(args, place="last"),
@@ -355,9 +356,23 @@ def unpowered_arm_warning(controller: str, arm_mode: str, arm_port: str | None, 
             "controller does not model)")
 
 
-def _sdk_note(args: argparse.Namespace) -> None:
-    """With ``--transport sdk``: say that the vendor SDK listens on every interface, whatever ``--local`` names."""
-    if getattr(args, "transport", None) == "sdk":
+def _check_transport(args: argparse.Namespace) -> None:
+    """Check ``--transport`` against ``--robot``, then with ``sdk`` say that the vendor SDK listens on every interface.
+
+    The link's config refuses the same (`UnitreeRobotConfig`), naming its own field; here the options are named.
+
+    Raises:
+        UnknownNameError: ``--transport`` names no transport.
+        ConfigError: ``--transport sdk`` for a robot whose wire the vendor SDK does not speak (the A1's).
+    """
+    transport = getattr(args, "transport", None)
+    if transport is not None and transport not in TRANSPORTS:
+        raise UnknownNameError("Unitree transport", transport, TRANSPORTS, where="--transport")
+    wire = _WIRE_OF.get(args.robot) if getattr(args, "robot", None) is not None else None
+    if transport == "sdk" and wire is not None and wire not in SDK_ROBOTS:
+        raise ConfigError(f"--transport sdk: the vendor SDK speaks only the {' and '.join(SDK_ROBOTS)}'s wire, not "
+                          f"the {wire}'s (--robot {args.robot}); leave --transport out for it (udp, our own socket)")
+    if transport == "sdk":
         print("wbc: note: --transport sdk: the vendor SDK binds its port on every interface (it takes no local "
               "address); its socket is connected to the target, so only the target's datagrams reach it",
               file=sys.stderr)
@@ -417,7 +432,7 @@ def hw_check(args: argparse.Namespace, *,
     host, port = _hardware_target(args, "check a real robot")
     local = _hardware_local(args, "check a real robot") or (("127.0.0.1", 0) if is_loopback(host) else ("0.0.0.0", 0))
     arm_port = _hardware_arm_port(args, "check a real arm")
-    _sdk_note(args)
+    _check_transport(args)
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     robot = _robot_name(args.robot)
@@ -504,7 +519,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
     host, port = _hardware_target(args, "run a trial on a real robot") if not args.sim else (None, None)
     local = _hardware_local(args, "run a trial on a real robot")
     arm_port = _hardware_arm_port(args, "run a trial on a real arm")
-    _sdk_note(args)
+    _check_transport(args)
     if not args.sim and not args.io_process:
         print("wbc: warning: --no-io-process: the robot's devices run in this process; if it dies, nothing damps the "
               "legs, whose motors keep the last command they got (the robot has no watchdog). For debugging only",

@@ -329,7 +329,8 @@ def _add_bench_sim_parser(bench: _Commands) -> None:
     sim.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
     sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
     sim.add_argument("--batch", type=bounded_int(1, 65_536), default=64,
-                     help="environments in the batched rollout, 1..65536")
+                     help="environments in the batched rollout, 1..65536, as many as half the available memory holds "
+                          "(each keeps every step's state)")
     sim.add_argument("--threads", type=_THREADS, default=None,
                      help=f"threads for the batched rollout, 1..{MAX_THREADS} (default: all)")
     sim.add_argument("--json", action="store_true", help="print JSON")
@@ -352,8 +353,8 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
     mpc.add_argument("--json", action="store_true")
     mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
     mpc.add_argument("--qp-solver", default="daqp", choices=tuple(QP_SOLVERS),
-                     help="the closed loop's QP backend (default daqp); the walk's QPs are then solved by every "
-                          "backend and compared")
+                     help="the closed loop's QP backend (default daqp; mpc-tail solves its own QP with daqp only); "
+                          "the walk's QPs are then solved by every backend and compared")
     mpc.set_defaults(handler="bench mpc")
 
 
@@ -452,7 +453,8 @@ def _add_bench_arm_parser(bench: _Commands) -> None:
     barm.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(DESCRIPTIONS.values())}")
     barm.add_argument("--seconds", type=_MEASURE_S, default=2.0,
                       help="how long each rate runs [s] (default 2, at most 4 h)")
-    barm.add_argument("--rates", default="100,200,400,1000", help="bus rates to run, comma-separated [Hz]")
+    barm.add_argument("--rates", default="100,200,400,1000",
+                      help="bus rates to run, comma-separated, each 10..1000 Hz (default 100,200,400,1000)")
     barm.add_argument("--latency", type=bounded_float(0.0, 255.0, lo_open=True, unit="ms"), default=1.0,
                       help="the adapter's latency timer, up to 255 [ms] (the FTDI chip's largest; default 1)")
     barm.add_argument("--json", action="store_true", help="print JSON")

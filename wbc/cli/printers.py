@@ -197,11 +197,16 @@ def _nanmean(values: Sequence[float]) -> float:
     return float(np.mean(finite)) if finite else math.nan
 
 
+def _machine_line(machine: str, load_1min: float) -> str:
+    """The benches' machine line: `machine_description`'s text and the 1-minute load average beside it."""
+    return f"  machine: {machine}, load {load_1min:.2f} (1 min)"
+
+
 def print_bench_sim(result: SimBenchResult) -> None:
     """`bench_sim`'s figures, and the reference's beside them when it was measured."""
     print(f"Simulation speed: {result.robot} (arm {result.arm_mode}), standing under the motor law on "
           f"{result.terrain} ground, dt {result.timestep_s * 1e3:.1f} ms")
-    print(f"  machine: {result.machine}")
+    print(_machine_line(result.machine, result.load_1min))
     print(f"  single-threaded : {result.steps_per_s:>10,.0f} steps/s  (real-time factor "
           f"{result.realtime_factor:.0f}x)")
     print(f"  batched rollout : {result.batched_steps_per_s:>10,.0f} steps/s  ({result.batch} envs, "
@@ -227,7 +232,7 @@ def print_bench_train(result: TrainBenchResult) -> None:
     print(f"Training env speed: {result.robot} (arm {result.arm_mode}), {result.num_envs} envs, "
           f"{result.threads} threads, policy at {1 / (result.timestep_s * result.decimation):.0f} Hz, "
           f"dt {result.timestep_s * 1e3:.1f} ms, random actions")
-    print(f"  machine: {result.machine}")
+    print(_machine_line(result.machine, result.load_1min))
     print(f"  env            : {result.control_steps_per_s:>10,.0f} control steps/s "
           f"({result.physics_steps_per_s:,.0f} physics steps/s)")
     print(f"  rollout only   : {result.rollout_only_control_steps_per_s:>10,.0f} control steps/s (physics limit)")
@@ -249,15 +254,18 @@ def print_bench_train(result: TrainBenchResult) -> None:
 def print_bench_mpc(result: MpcBenchResult) -> None:
     """`bench_mpc`'s figures, and the targets scaled to this machine when the references were measured."""
     ticks = result.ticks
+    one_core = result.blas == "single-threaded"  # the spawned worker's; --threaded-blas runs with the default threads
     print(f"MPC speed: {result.controller} on {result.robot} walking at 0.3 m/s, N = {result.horizon}, QP solver "
-          f"{result.qp_solver}")
-    print(f"  machine: {result.machine}, load {result.load_1min:.2f} (1 min)")
+          f"{result.qp_solver}, BLAS {result.blas}")
+    print(_machine_line(result.machine, result.load_1min))
     print(f"  MPC QP solve   : median {ticks.mpc_solve_ms_median:.2f} ms, p99 {ticks.mpc_solve_ms_p99:.2f} ms "
           f"(setup median {ticks.mpc_setup_ms_median:.2f} ms)")
-    print(f"  whole-body layer: median {ticks.wbc_tick_us_median:.0f} us per tick")
+    print(f"  whole-body layer: median {ticks.wbc_tick_us_median:.0f} us per timed tick (the leg layer's: the "
+          "MPC-update ticks; PlaCo's QP: every tick)")
     print(f"  control tick: median {ticks.control_tick_us_median:.0f} us (kinematics, estimator, footholds, "
           "whole-body layer, command; ticks without an MPC update)")
-    print(f"  closed loop    : {result.realtime_factor:.1f}x real time on one core "
+    where = "on one core" if one_core else f"with the BLAS's {result.blas}"
+    print(f"  closed loop    : {result.realtime_factor:.1f}x real time {where} "
           f"({result.cpu_realtime_factor:.1f}x in CPU time); the walk's physics steps "
           f"{result.walk_physics_share:.0%} of it "
           f"({result.walk_physics_realtime_factor:.0f}x real time on their own); "
@@ -283,6 +291,8 @@ def print_bench_mpc(result: MpcBenchResult) -> None:
                   f"{ref.closed_loop_over_physics_cpu_max:.3f}: how far this machine moved the figure in one run)")
     if result.qp_solvers:
         _print_qp_solvers(result)
+    else:
+        print(f"  QP backends not compared: {result.qp_comparison_skipped or 'no QP of the walk was kept'}")
 
 
 def _print_qp_solvers(result: MpcBenchResult) -> None:
@@ -304,7 +314,7 @@ def print_bench_sweep(result: SweepBenchResult) -> None:
     """`bench_sweep`'s figures, one line per executor measured."""
     print(f"Sweep speed: {result.controller} on {result.scenario} ({result.trials} trials, "
           f"{result.terrain} terrain)")
-    print(f"  machine: {result.machine}")
+    print(_machine_line(result.machine, result.load_1min))
     print(f"  batched physics (bench sim, same terrain): {result.batched_physics_steps_per_s:>10,.0f} steps/s")
     for row in result.executors:
         print(f"  sweep, {row.executor:<5} executor: {row.sweep_steps_per_s:>10,.0f} steps/s "
@@ -497,8 +507,9 @@ def print_bench_hw(result: HwBenchResult) -> None:
           f"advances {result.late_advances} (worst {result.worst_lateness_ms:.2f} ms)")
     emu = result.emulator
     print(f"  frames          {result.sends} sent, {result.replies_received} states received, "
-          f"{result.rejects} rejected by the robot; emulator decoded {emu.accepted}, rejected "
-          f"{sum(emu.rejected.values())}")
+          f"{result.rejects} rejected by the robot (the link, from its start to the end of the measurement)")
+    print(f"  emulator        decoded {emu.accepted}, rejected {sum(emu.rejected.values())} (its whole session: "
+          "the link's damping frames at close included)")
     safety = result.safety
     if safety is not None:
         print(f"Safety layer over the wire, real-time emulator (first damping frame on the wire after the cause; link "
@@ -524,14 +535,14 @@ def print_bench_act(result: ActBenchResult) -> None:
     print(f"act on the thread's CPU clock: {result.scenario} band {result.band}, seed {result.seed}, trial "
           f"{result.trial}; {result.machine}, load {result.load_1min:.2f}")
     print(f"  {'controller':<28}{'rate [Hz]':>10}{'ticks':>8}{'per act [us] median / mean':>30}{'per sim s [ms]':>16}"
-          f"{'x ref, tick':>13}{'x ref, s':>10}")
+          f"{'x ref, mean act':>17}{'x ref, s':>10}")
     for cost, (_, tick, second) in zip(result.costs, result.ratios(), strict=True):
         note = f"  (fell at {cost.survived_s:.2f} s)" if cost.fell else ""
         print(f"  {cost.controller:<28}{cost.rate_hz:>10g}{cost.ticks:>8}"
               f"{f'{cost.cpu_us_per_tick_median:.1f} / {cost.cpu_us_per_tick_mean:.1f}':>30}"
-              f"{cost.cpu_ms_per_s:>16.2f}{tick:>13.3f}{second:>10.3f}{note}")
+              f"{cost.cpu_ms_per_s:>16.2f}{tick:>17.3f}{second:>10.3f}{note}")
     print(f"  the least CPU per simulated second of {result.costs[0].rounds} rounds each; ratios against "
-          f"{result.costs[0].controller}")
+          f"{result.costs[0].controller}'s mean per act and its CPU per simulated second")
 
 
 def print_bench_latency(result: LatencyBenchResult) -> None:
@@ -561,6 +572,7 @@ def print_bench_latency(result: LatencyBenchResult) -> None:
             cells.append(f"{passed}, fell at {fell:g}" if fell is not None else f"{passed} (no fall up to {top:g})")
         forces = ", ".join(f"{f:g}" for f in m.push_force_n)
         print(f"  {m.controller:<12}{cells[0]:<26}{cells[1]:<26}{forces:<18}{m.wall_s:.0f} ({m.runs} runs)")
+    print(_machine_line(result.machine, result.load_1min))
 
 
 def print_bench_arm(result: ArmBenchResult) -> None:
@@ -590,7 +602,7 @@ def print_bench_arm(result: ArmBenchResult) -> None:
             label = "with byte timing" if e.what.endswith("byte_timing") else "no byte timing  "
             print(f"  sync read of 3 joints over a pty, {label}: p50 {e.value:.3f} ms, p99 {e.worst:.3f} ms "
                   f"(wire model {e.model:.2f} ms)")
-    print(f"  machine: {result.machine}")
+    print(_machine_line(result.machine, result.load_1min))
 
 
 def print_realtime_grant(who: str, grant: RealtimeGrant | None) -> None:

@@ -15,7 +15,6 @@ A trial in which a controller falls ends early: its figures cover the time it st
 from __future__ import annotations
 
 import dataclasses
-import os
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ from wbc.control.spec import ControllerSpec
 from wbc.errors import BenchError
 from wbc.robots.description import RobotDescription
 from wbc.scenario.scenario import load_scenario
-from wbc.tools.bench.references import machine_description
+from wbc.tools.bench.references import load_1min, machine_description
 
 __all__ = ["ActBenchResult", "ActCost", "bench_act"]
 
@@ -84,13 +83,17 @@ class ActBenchResult:
     load_1min: float
 
     def ratios(self) -> list[tuple[str, float, float]]:
-        """(controller, CPU per tick over the reference's, CPU per simulated second over the reference's)."""
+        """(controller, mean CPU per ``act`` over the reference's mean, CPU per simulated second over its)."""
         ref = self.costs[0]
         return [(c.controller, c.cpu_us_per_tick_mean / ref.cpu_us_per_tick_mean, c.cpu_ms_per_s / ref.cpu_ms_per_s)
                 for c in self.costs]
 
     def as_dict(self) -> dict[str, object]:
-        """Plain dict, keys as the attributes' names, with the ratios against the first controller."""
+        """Plain dict, keys as the attributes' names, with the ratios against the first controller.
+
+        Each ratio's ``per_tick`` is the mean CPU per ``act`` over the first controller's mean (`ratios`), and its
+        ``per_simulated_s`` the CPU per simulated second over the first controller's.
+        """
         out = dataclasses.asdict(self)
         out["costs"] = [dataclasses.asdict(c) for c in self.costs]
         out["ratios"] = [{"controller": name, "per_tick": tick, "per_simulated_s": second}
@@ -174,7 +177,7 @@ def bench_act(controllers: Sequence[str], *, scenario: str = "scenarios/push.tom
                 best[k] = cost
             else:
                 best[k] = dataclasses.replace(best[k], rounds=cost.rounds)
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    load = load_1min()
     return ActBenchResult(scenario=scenario, band=band, seed=seed, trial=trial,
                           costs=tuple(best[k] for k in range(len(specs))), machine=machine_description(),
                           load_1min=load)

@@ -58,7 +58,7 @@ from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
 from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
 from wbc.optional import require
 from wbc.robots.registry import get_robot
-from wbc.tools.bench.references import machine_description
+from wbc.tools.bench.references import load_1min, machine_description
 from wbc.types import MotorCommand
 
 __all__ = ["ArmBenchResult", "ArmReactionRow", "ArmRateRow", "ArmStepRow", "EmulatorTimingRow", "bench_arm",
@@ -193,6 +193,7 @@ class ArmBenchResult:
         reactions: the write deadline and each bus fault, in wall time.
         emulator: the emulators' own real-time figures.
         machine: `machine_description`.
+        load_1min: the machine's 1-minute load average at the end (`load_1min`; nan where the OS has none).
         host_realtime: what the bench's own process (the bus's host side) asked the OS for and got
             (`RealtimeGrant.describe`).
     """
@@ -207,6 +208,7 @@ class ArmBenchResult:
     reactions: tuple[ArmReactionRow, ...]
     emulator: tuple[EmulatorTimingRow, ...]
     machine: str
+    load_1min: float = float("nan")
     host_realtime: str = "nothing asked"
 
     def as_dict(self) -> dict[str, object]:
@@ -215,7 +217,7 @@ class ArmBenchResult:
                 "step_rad": self.step_rad, "emulator_bus": dict(self.emulator_bus),
                 "rates": [asdict(r) for r in self.rates], "steps": [asdict(s) for s in self.steps],
                 "reactions": [asdict(r) for r in self.reactions], "emulator": [asdict(r) for r in self.emulator],
-                "machine": self.machine, "host_realtime": self.host_realtime}
+                "machine": self.machine, "load_1min": self.load_1min, "host_realtime": self.host_realtime}
 
 
 def step_metrics(t: np.ndarray, y: np.ndarray, target: float) -> tuple[float, float, float, float]:
@@ -516,8 +518,13 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
     """
     if robot not in LEG_WIRES:
         raise BenchError(f"bench arm: --robot must be one of {', '.join(LEG_WIRES)}, got {robot!r}")
-    if not seconds > 0 or not rates or any(not 10.0 <= r <= 1000.0 for r in rates):
-        raise BenchError(f"bench arm: --seconds must be > 0 and each rate in 10..1000 Hz, got {seconds}, {rates}")
+    if not seconds > 0:
+        raise BenchError(f"bench arm: --seconds must be > 0 s, got {seconds:g}")
+    out_of_range = [r for r in rates if not 10.0 <= r <= 1000.0]
+    if not rates or out_of_range:
+        got = ", ".join(f"{r:g}" for r in out_of_range) if out_of_range else "none"
+        raise BenchError(f"bench arm: --rates: each bus rate must be in 10..1000 Hz, got {got}; give comma-separated "
+                         "rates, e.g. 100,200,400,1000")
     total = len(rates) * (seconds + 1.0) + len(gains) * (_DISCARDS + 1) * (_SETTLE + _REPEATS * (_RECORD + 0.1) + 1.0) \
         + (len(_FAULTS) + 1) * (2 * _REACTION_TIMEOUT + 2.0)
     proc, where = _start_emulator(robot, total, realtime)
@@ -600,4 +607,5 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
     emulator = _emulator_timing(robot, seconds, latency_ms)
     return ArmBenchResult(robot=robot, latency_ms=latency_ms, seconds=seconds, step_rad=step, emulator_bus=bus,
                           rates=tuple(rate_rows), steps=tuple(step_rows), reactions=tuple(reaction_rows),
-                          emulator=tuple(emulator), machine=machine_description(), host_realtime=host)
+                          emulator=tuple(emulator), machine=machine_description(), load_1min=load_1min(),
+                          host_realtime=host)

@@ -1,18 +1,80 @@
 """`BatchedRollout`: a repeatable ``mujoco.rollout`` throughput measurement, for ``bench sim`` and ``bench train``.
 
 Both benches time the same batched physics, on their own robot and on the bare-A1 reference, interleaved in the same
-repeats so that the two figures see the same machine.
+repeats so that the two figures see the same machine. A rollout keeps every step's state of every copy, so its buffers
+grow with the batch times the steps: `check_rollout_memory` refuses a batch whose buffers would not fit before they
+are allocated.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
+from pathlib import Path
 
 import mujoco
 import numpy as np
 from mujoco import rollout
 
-__all__ = ["BatchedRollout"]
+from wbc.errors import ConfigError
+
+__all__ = ["MEMORY_SHARE", "BatchedRollout", "available_memory_bytes", "check_rollout_memory", "rollout_bytes"]
+
+MEMORY_SHARE = 0.5
+"""The most of the available memory (`available_memory_bytes`) the rollouts' buffers may take."""
+
+
+def available_memory_bytes(meminfo: str | Path = "/proc/meminfo") -> int | None:
+    """The memory available to a new allocation without swapping (``MemAvailable``) [bytes].
+
+    Args:
+        meminfo: the file that tells it (Linux's).
+
+    Returns:
+        The figure, or None where the system does not tell (no such file, or no readable ``MemAvailable`` line).
+    """
+    try:
+        with open(meminfo, encoding="ascii") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024  # given in kB
+    except (OSError, ValueError, IndexError, UnicodeDecodeError):
+        return None
+    return None
+
+
+def rollout_bytes(model: mujoco.MjModel, batch: int, nstep: int) -> int:
+    """The bytes of the buffers a `BatchedRollout` of `model` allocates: start states, controls, every step's state."""
+    state = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    return 8 * batch * (state * (nstep + 1) + model.nu)
+
+
+def check_rollout_memory(models: Sequence[mujoco.MjModel], batch: int, nstep: int, option: str = "--batch") -> None:
+    """Refuse a batch whose rollouts' buffers, one rollout per model, would not fit in memory.
+
+    They may take at most `MEMORY_SHARE` of the memory available (`available_memory_bytes`); where the system does not
+    tell how much that is, nothing is refused.
+
+    Args:
+        models: the model of each rollout that will be allocated together.
+        batch: copies of the state in each.
+        nstep: physics steps of each copy.
+        option: the command-line option that sets `batch`, named in the message.
+
+    Raises:
+        ConfigError: the buffers would take more than `MEMORY_SHARE` of the available memory; the message names
+            `option`, the estimate, the memory available and the largest batch that fits.
+    """
+    need = sum(rollout_bytes(model, batch, nstep) for model in models)
+    available = available_memory_bytes()
+    if available is None or need <= MEMORY_SHARE * available:
+        return
+    fits = int(MEMORY_SHARE * available // (need / batch))
+    advice = (f"give {option} {fits} or less" if fits >= 1
+              else "free some memory (no batch fits in what is left)")
+    raise ConfigError(f"{option} {batch}: the batched rollouts' buffers ({batch} environments x {nstep} steps) need "
+                      f"about {need / 1e9:.1f} GB, more than {MEMORY_SHARE:.0%} of the memory available "
+                      f"({available / 1e9:.1f} GB); {advice}")
 
 
 class BatchedRollout:

@@ -48,7 +48,7 @@ from wbc.hardware.unitree import (
     UnitreeRobot,
     UnitreeRobotConfig,
 )
-from wbc.tools.bench.references import machine_description
+from wbc.tools.bench.references import load_1min, machine_description
 from wbc.types import MotorCommand
 
 __all__ = ["EmulatorCounts", "HwBenchResult", "SafetyBenchResult", "TimedTransport", "bench_hw", "bench_safety",
@@ -149,8 +149,9 @@ class HwBenchResult:
         rate_hz: the link thread's rate [Hz].
         transport: ``udp`` or ``sdk``.
         emulator_process: how the emulator ran.
-        sends: command frames the link thread sent while measured.
-        replies_received: state datagrams it took meanwhile.
+        sends: command frames the link thread sent from its start (the connection's start-up included) to the end
+            of the measurement; the frames it sends as it closes are not counted.
+        replies_received: state datagrams it took over the same window.
         period_ms_p50: median interval between two sends of the link thread [ms].
         period_ms_p99: its 99th percentile [ms].
         period_ms_max: the longest such interval [ms].
@@ -163,8 +164,9 @@ class HwBenchResult:
         advance_ms_p99: its 99th percentile [ms].
         late_advances: advance calls that found their deadline past.
         worst_lateness_ms: by how much the latest of them was late [ms].
-        rejects: state frames the robot rejected.
-        emulator: the emulator's counts.
+        rejects: state frames the robot rejected, over the same window as `sends`.
+        emulator: the emulator's counts over its whole session: every frame the link sent, the damping frames it
+            sends as it closes (`UnitreeRobotConfig.close_damping`) included, so more than `sends`.
         link: the link's own counters.
         safety: `bench_safety`'s figures, or None when they were not measured.
         machine: `machine_description`.
@@ -350,7 +352,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
                 timed.recording = False
                 stats = link.link_stats()
                 rejects = link.decode_stats.rejected
-                load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+                load = load_1min()
         finally:
             timed.close()
         proc.stdin.write("stop\n")

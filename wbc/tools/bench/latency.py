@@ -46,7 +46,7 @@ from wbc.scenario.domain import DomainParams
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import Trial
 from wbc.tools.bench.hw import bench_hw
-from wbc.tools.bench.references import machine_description
+from wbc.tools.bench.references import load_1min, machine_description
 from wbc.types import MotorCommand
 
 __all__ = ["COARSE_MS", "FINE_MS", "DelayMargin", "LatencyBenchResult", "WireLatency", "bench_latency", "delay_margin",
@@ -144,6 +144,7 @@ class LatencyBenchResult:
         wire: the wire's figures, or None when the wire was not measured.
         margins: one per controller, in the order asked.
         machine: `machine_description`.
+        load_1min: the machine's 1-minute load average at the end (`load_1min`; nan where the OS has none).
     """
 
     wire_robot: str
@@ -153,6 +154,7 @@ class LatencyBenchResult:
     wire: WireLatency | None
     margins: tuple[DelayMargin, ...]
     machine: str
+    load_1min: float = float("nan")
 
     def as_dict(self) -> dict[str, object]:
         """Plain flat dict (the JSON output of ``wbc bench latency``): the wire's keys after ``fine_ms``."""
@@ -162,6 +164,7 @@ class LatencyBenchResult:
             out.update(self.wire.as_dict())
         out["margins"] = [m.as_dict() for m in self.margins]
         out["machine"] = self.machine
+        out["load_1min"] = self.load_1min
         return out
 
 
@@ -369,4 +372,4 @@ def bench_latency(controllers: tuple[str, ...] = ("stand", "mpc"), *, wire_robot
                               worst_delay_ms=delays["worst"], sim_ticks_worst=sim_ticks["worst"])
     margins = tuple(delay_margin(c, scenario, trials=trials) for c in controllers)
     return LatencyBenchResult(wire_robot=wire_robot, scenario=scenario, coarse_ms=COARSE_MS, fine_ms=FINE_MS,
-                              wire=figures, margins=margins, machine=machine_description())
+                              wire=figures, margins=margins, machine=machine_description(), load_1min=load_1min())

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 import multiprocessing
-import os
 import time
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
@@ -33,9 +32,12 @@ from wbc.mpc.centroidal_model import NU
 from wbc.mpc.centroidal_mpc import MpcProblem
 from wbc.mpc.controller import MpcController
 from wbc.mpc.qp_solvers import QP_SOLVERS, QpResult, check_qp_solver
+from wbc.mpc.tail_controller import TailMpcController
+from wbc.robots.registry import get_robot
 from wbc.scenario.trial import CommandSchedule
 from wbc.tools.bench.references import (
     MPC_REFERENCE_TARGETS,
+    load_1min,
     machine_description,
     reference_a1_steps_per_s,
     reference_placo_tick_us,
@@ -75,7 +77,9 @@ class MpcTickFigures:
         mpc_solve_ms_median: median QP solve time of the MPC updates [ms].
         mpc_solve_ms_p99: 99th percentile of that time [ms].
         mpc_setup_ms_median: median setup time (linearisation, condensing) of the MPC updates [ms].
-        wbc_tick_us_median: median whole-body QP time per tick [us].
+        wbc_tick_us_median: median time of the whole-body layer over the ticks it was timed on [us]: the leg layer
+            (the default) is timed apart only on the MPC-update ticks and an episode's first (on the others it runs
+            inside the tick's one compiled call), PlaCo's whole-body QP (``mpc-wbqp``) on every tick.
         control_tick_us_median: median whole control tick without an MPC update [us].
     """
 
@@ -228,6 +232,8 @@ class MpcBenchResult:
         reference: the references' figures, or None when they were not measured.
         qp_solvers: every QP backend on the QPs of the timed walk, DAQP first (`compare_qp_solvers`); empty when
             none was recorded.
+        qp_comparison_skipped: why `qp_solvers` is empty (the tail MPC solves a QP of its own, or the walk made no
+            MPC update), or None when the backends were compared.
         rounds: each timed walk with the references around it, in order (`MpcRound`).
     """
 
@@ -248,22 +254,22 @@ class MpcBenchResult:
     reference: MpcReference | None = None
     qp_solvers: tuple[QpSolverFigures, ...] = ()
     rounds: tuple[MpcRound, ...] = ()
+    qp_comparison_skipped: str | None = None
 
-    def as_dict(self) -> dict[str, float | str | int | bool]:
+    def as_dict(self) -> dict[str, float | str | int | bool | None]:
         """Plain flat dict (the JSON output of ``wbc bench mpc``).
 
-        The references' figures follow when measured, then each QP backend's (``qp_<solver>_...``).
+        The references' figures follow when measured, then each QP backend's (``qp_<solver>_...``);
+        ``qp_comparison_skipped`` says why there are none (null when there are).
         """
-        out: dict[str, float | str | int | bool] = {"robot": self.robot, "controller": self.controller,
-                                                    "horizon": self.horizon, **self.ticks.as_dict(),
-                                                    "realtime_factor": self.realtime_factor,
-                                                    "cpu_realtime_factor": self.cpu_realtime_factor,
-                                                    "walk_physics_realtime_factor": self.walk_physics_realtime_factor,
-                                                    "walk_physics_share": self.walk_physics_share,
-                                                    "warmup_episode_s": self.warmup_episode_s, "fell": self.fell,
-                                                    "blas": self.blas, "qp_solver": self.qp_solver,
-                                                    "machine": self.machine, "load_1min": self.load_1min,
-                                                    "rounds": len(self.rounds)}
+        out: dict[str, float | str | int | bool | None] = {
+            "robot": self.robot, "controller": self.controller, "horizon": self.horizon, **self.ticks.as_dict(),
+            "realtime_factor": self.realtime_factor, "cpu_realtime_factor": self.cpu_realtime_factor,
+            "walk_physics_realtime_factor": self.walk_physics_realtime_factor,
+            "walk_physics_share": self.walk_physics_share, "warmup_episode_s": self.warmup_episode_s,
+            "fell": self.fell, "blas": self.blas, "qp_solver": self.qp_solver, "machine": self.machine,
+            "load_1min": self.load_1min, "rounds": len(self.rounds),
+            "qp_comparison_skipped": self.qp_comparison_skipped}
         if self.reference is not None:
             out.update(self.reference.as_dict())
         for figures in self.qp_solvers:
@@ -276,13 +282,14 @@ class TickTimingLog:
     """A runner observer that files each tick by what ran in it, from the controller's breakdown [s].
 
     Ticks with an MPC update (the breakdown has ``mpc_solve_s``) give the MPC's solve and setup times; the others are
-    plain control ticks, whose durations `figures` takes from the episode (``act_s``). Every tick the whole-body QP
-    ran gives ``whole_body_s``. Without a breakdown a tick cannot be filed.
+    plain control ticks, whose durations `figures` takes from the episode (``act_s``). Every tick whose whole-body
+    layer the controller timed apart gives ``whole_body_s`` (`MpcController.tick_timings`: the MPC-update ticks and an
+    episode's first for the leg layer, every tick for PlaCo's QP). Without a breakdown a tick cannot be filed.
 
     Attributes:
         mpc_solve_s: QP solve time of each MPC update [s].
         mpc_setup_s: setup time (linearisation, condensing) of each MPC update [s].
-        whole_body_s: whole-body QP time of each tick that ran it [s].
+        whole_body_s: the whole-body layer's time on each tick it was timed on [s].
         plain_ticks: indices of the ticks filed without an MPC update.
     """
 
@@ -427,6 +434,21 @@ class PhysicsTimedRobot(MujocoRobot):
         self.physics_s += time.perf_counter() - t0
 
 
+def _check_tail_qp_solver(factory: object, controller: str, qp_solver: str) -> None:
+    """Refuse a QP backend other than DAQP for a tail MPC controller (`factory`: its class, or any factory).
+
+    The tail controller plans with `wbc.mpc.tail_mpc.TailMpc`, whose QP (the arm's accelerations and the servos'
+    bounds besides the forces) DAQP solves directly; the backends of `QP_SOLVERS` take the centroidal MPC's QP only.
+
+    Raises:
+        ConfigError: `factory` is a `TailMpcController` class and `qp_solver` is not ``daqp``.
+    """
+    if qp_solver != "daqp" and isinstance(factory, type) and issubclass(factory, TailMpcController):
+        raise ConfigError(f"--qp-solver {qp_solver}: {controller} solves its tail MPC's QP with daqp only (the other "
+                          "backends take the centroidal MPC's QP, which it does not build); leave --qp-solver out "
+                          "or give daqp")
+
+
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
               single_thread: bool = True, reference: bool = True, qp_solver: str = "daqp",
               rounds: int = DEFAULT_ROUNDS) -> MpcBenchResult:
@@ -442,8 +464,9 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     the first and after each (`MpcRound`): each round's ratio is read against the references just around it, and the
     result gives the rounds' medians and the ratio's spread. From the controller's breakdown of each tick
     (`HasTickTimings`): every MPC update's QP solve time (the `qp_solver` backend's) and setup time (linearisation and
-    condensing), and ``wbc_tick_us_median``, the whole-body QP's time per tick (PlaCo: kinematics, dynamics, tasks, QP,
-    plus setting its targets from Python). ``control_tick_us_median`` is the whole control tick without an MPC update
+    condensing), and ``wbc_tick_us_median``, the whole-body layer's median time over the ticks it is timed on (the leg
+    layer's: the MPC-update ticks; PlaCo's QP, every tick: kinematics, dynamics, tasks, QP, plus setting its targets
+    from Python). ``control_tick_us_median`` is the whole control tick without an MPC update
     (estimator, kinematics, footholds, swing targets, whole-body QP, motor command). These are nan for a controller that
     reports no breakdown. The real-time factor covers everything: physics, controller, MPC updates and the runner's
     episode log; it is given in wall time and in the thread's CPU time (``cpu_realtime_factor``), and the simulator's
@@ -468,12 +491,14 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
 
     Args:
         robot: robot registry name.
-        controller: an MPC controller's registry name (``mpc``, ``mpc-locked``, ``mpc-noarm``).
+        controller: an MPC controller's registry name (``mpc``, ``mpc-tail``, ``mpc-locked``, ``mpc-noarm`` ...).
         seconds: length of the walk [s].
         vx: forward velocity command [m/s].
         single_thread: run in a spawned process with a single-threaded BLAS.
         reference: also measure the references.
         qp_solver: the closed loop's QP backend (`wbc.mpc.qp_solvers.QP_SOLVERS`); the comparison runs them all.
+            A tail controller (``mpc-tail``) solves its own QP with DAQP: it takes ``daqp`` only, and its result
+            holds no comparison (``qp_comparison_skipped`` says why).
         rounds: how many times the timed walk is played (1 to `MAX_ROUNDS`).
 
     Returns:
@@ -483,17 +508,23 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         UnknownNameError: unknown robot or controller.
         SimulationDiverged: the simulation blew up during the walk (no figure of a blown-up walk is reported).
         BenchError: the controller is not an MPC controller, or a reference failed.
-        ConfigError: `qp_solver` is not a QP backend (the message lists them), or `rounds` is out of its range.
+        ConfigError: `qp_solver` is not a QP backend (the message lists them), or is not ``daqp`` for the tail MPC
+            controller (``mpc-tail``, which solves its own QP with DAQP), or `rounds` is out of its range, or
+            `seconds` is shorter than one control tick.
     """
     check_qp_solver(qp_solver, "--qp-solver")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= MAX_ROUNDS:
         raise ConfigError(f"--rounds must be a whole number of timed walks from 1 to {MAX_ROUNDS}, got {rounds!r}")
+    # the names are checked here, before the worker is spawned: a mistyped name is refused at once, and its message
+    # does not depend on the error travelling back from the worker
+    spec = get_controller(controller)
+    get_robot(robot, spec.arm_mode)
+    _check_tail_qp_solver(getattr(spec.make, "func", spec.make), controller, qp_solver)
     if single_thread:
         with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
                                  reference=reference, qp_solver=qp_solver, rounds=rounds).result()
         return replace(result, blas="single-threaded")
-    spec = get_controller(controller)
     sim = PhysicsTimedRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
     ctrl = spec.make(sim.desc)
     if not isinstance(ctrl, MpcController):
@@ -501,6 +532,11 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
                  and issubclass(getattr(s.make, "func", s.make), MpcController)]  # mpc-tail's is a subclass
         raise BenchError(f"bench mpc times an MPC controller, and {controller!r} is not one; use one of: "
                          f"{', '.join(valid)}")
+    _check_tail_qp_solver(type(ctrl), controller, qp_solver)  # a plug-in's factory may return a tail controller
+    period = 1.0 / ctrl.rate_hz
+    if int(round(seconds / period)) < 1:  # the runner would refuse the walk, naming the controller's rate
+        raise ConfigError(f"--seconds {seconds:g}: the walk must hold at least one control tick of {controller} "
+                          f"({period:g} s at {ctrl.rate_hz:g} Hz); give --seconds {period:g} or more")
     if ctrl.config.mpc.qp_solver != qp_solver:
         config = replace(ctrl.config, mpc=replace(ctrl.config.mpc, qp_solver=qp_solver))
         ctrl = type(ctrl)(sim.desc, config)
@@ -547,7 +583,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
                 walk_physics_share=walk_physics_s / wall,
                 physics_realtime_factor=max(physics[-2:]) if reference else math.nan,
                 physics_cpu_realtime_factor=max(physics_cpu[-2:]) if reference else math.nan))
-        load = os.getloadavg()[0] if hasattr(os, "getloadavg") else math.nan
+        load = load_1min()
         sim.reset(seed=0)
         episode = run_episode(sim, ctrl, CommandSchedule(vx=vx), seconds, observer=observe,
                               divergence=DivergenceCheck())
@@ -570,6 +606,12 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
             scaled_target_wbc_tick_us=scaled_target(MPC_REFERENCE_TARGETS["wbc_tick_us_median"], tick_ref),
             scaled_target_realtime_factor=scaled_target(MPC_REFERENCE_TARGETS["realtime_factor"], rate_ref))
     solver = ctrl.mpc.qp_solver
+    skipped = None
+    if isinstance(ctrl, TailMpcController):
+        skipped = (f"{controller} solves its tail MPC's QP with DAQP directly, and the backends take the centroidal "
+                   "MPC's QP, which it does not build")
+    elif not qps.qps:
+        skipped = "the walk made no MPC update whose QP could be kept"
     return MpcBenchResult(robot=robot, controller=controller, horizon=int(ctrl.config.mpc.horizon), ticks=figures,
                           realtime_factor=realtime,
                           cpu_realtime_factor=median([r.cpu_realtime_factor for r in timed_rounds]),
@@ -578,4 +620,4 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
                           warmup_episode_s=warmup_wall, fell=bool(fell or episode.fell), rounds=tuple(timed_rounds),
                           blas="default threads", qp_solver=f"{solver.name} {solver.version()}",
                           machine=machine_description(), load_1min=load, reference=refs,
-                          qp_solvers=compare_qp_solvers(qps.qps))
+                          qp_solvers=compare_qp_solvers(qps.qps), qp_comparison_skipped=skipped)

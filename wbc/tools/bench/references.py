@@ -22,7 +22,7 @@ from wbc.mpc.whole_body import placo_robot
 from wbc.robots.urdf import example_robot_data_share
 
 __all__ = ["MPC_REFERENCE_TARGETS", "REFERENCE_STEPS_PER_CONTROL_STEP", "REFERENCE_TARGETS", "TRAIN_TARGET",
-           "machine_description", "reference_a1", "reference_a1_steps_per_s", "reference_placo_tick_us",
+           "load_1min", "machine_description", "reference_a1", "reference_a1_steps_per_s", "reference_placo_tick_us",
            "scaled_target"]
 
 REFERENCE_TARGETS = {"steps_per_s": (80_000.0, 110_000.0), "batched_steps_per_s": (150_000.0, 218_000.0)}
@@ -74,6 +74,11 @@ def machine_description() -> str:
     except OSError:
         pass
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, MuJoCo {mujoco.__version__}"
+
+
+def load_1min() -> float:
+    """The machine's load average over the last minute: what else ran beside a bench (nan where the OS has none)."""
+    return os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
 
 
 def reference_a1() -> tuple[mujoco.MjModel, mujoco.MjData]:

@@ -12,8 +12,14 @@ from mujoco import rollout
 from wbc.control.stand import stand_command
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.scenario.terrain import TerrainConfig
-from wbc.tools.bench.batched_rollout import BatchedRollout
-from wbc.tools.bench.references import REFERENCE_TARGETS, machine_description, reference_a1, scaled_target
+from wbc.tools.bench.batched_rollout import BatchedRollout, check_rollout_memory
+from wbc.tools.bench.references import (
+    REFERENCE_TARGETS,
+    load_1min,
+    machine_description,
+    reference_a1,
+    scaled_target,
+)
 
 __all__ = ["SimBenchResult", "SimReference", "bench_sim"]
 
@@ -64,6 +70,7 @@ class SimBenchResult:
         threads: rollout threads.
         final_base_height_m: the base's height at the end of the first environment's rollout [m] (it stood).
         machine: `machine_description`.
+        load_1min: the machine's 1-minute load average at the end (`load_1min`; nan where the OS has none).
         reference: the bare A1's figures, or None when they were not measured.
     """
 
@@ -78,6 +85,7 @@ class SimBenchResult:
     threads: int
     final_base_height_m: float
     machine: str
+    load_1min: float = float("nan")
     reference: SimReference | None = None
 
     def as_dict(self) -> dict[str, float | str | int]:
@@ -86,7 +94,7 @@ class SimBenchResult:
             "robot": self.robot, "arm_mode": self.arm_mode, "terrain": self.terrain, "timestep_s": self.timestep_s,
             "steps_per_s": self.steps_per_s, "batched_steps_per_s": self.batched_steps_per_s,
             "realtime_factor": self.realtime_factor, "batch": self.batch, "threads": self.threads,
-            "final_base_height_m": self.final_base_height_m, "machine": self.machine,
+            "final_base_height_m": self.final_base_height_m, "machine": self.machine, "load_1min": self.load_1min,
         }
         if self.reference is not None:
             out.update(self.reference.as_dict())
@@ -131,11 +139,14 @@ def bench_sim(
 
     Raises:
         UnknownNameError: unknown robot or arm mode.
+        ConfigError: the batched rollouts' buffers (every step's state of every environment) would take more than
+            half the memory available (`check_rollout_memory`; the message names ``--batch``).
     """
     nthread = nthread or os.cpu_count() or 1
     sim = MujocoRobot(MujocoRobotConfig(robot=robot, arm_mode=arm_mode, terrain=TerrainConfig(kind=terrain)))
     ref_model, ref_data = reference_a1() if reference else (None, None)
     with sim:
+        check_rollout_memory([sim.model] + ([ref_model] if reference else []), batch, batch_steps)
         sim.reset(seed=1)
         sim.write(stand_command(sim.desc))
         sim.advance(0.5)
@@ -156,6 +167,7 @@ def bench_sim(
                 best["ref_single"] = max(best["ref_single"], steps / (time.perf_counter() - t0))
                 best["ref_batched"] = max(best["ref_batched"], ref_batched.rate())
         rollout.shutdown_persistent_pool()
+        load = load_1min()
         height = float(batched.out[0, -1, 1 + 2])  # time is state[0]; qpos starts at 1
     figures = None
     if reference:
@@ -169,4 +181,4 @@ def bench_sim(
     return SimBenchResult(robot=robot, arm_mode=arm_mode, terrain=terrain, timestep_s=dt, steps_per_s=best["single"],
                           batched_steps_per_s=best["batched"], realtime_factor=best["single"] * dt, batch=batch,
                           threads=nthread, final_base_height_m=height, machine=machine_description(),
-                          reference=figures)
+                          load_1min=load, reference=figures)

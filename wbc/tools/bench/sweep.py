@@ -10,7 +10,7 @@ from pathlib import Path
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.control.registry import get_controller
 from wbc.scenario.scenario import load_scenario
-from wbc.tools.bench.references import machine_description
+from wbc.tools.bench.references import load_1min, machine_description
 from wbc.tools.bench.sim import bench_sim
 
 __all__ = ["SweepBenchResult", "SweepExecutorRow", "bench_sweep"]
@@ -51,6 +51,7 @@ class SweepBenchResult:
         batched_physics_steps_per_s: the batched physics throughput of the same robot standing on the same terrain
             (`bench_sim`) [steps/s].
         machine: `machine_description`.
+        load_1min: the machine's 1-minute load average at the end (`load_1min`; nan where the OS has none).
         executors: one row per executor, in the order played (local first).
     """
 
@@ -60,6 +61,7 @@ class SweepBenchResult:
     trials: int
     batched_physics_steps_per_s: float
     machine: str
+    load_1min: float = float("nan")
     executors: tuple[SweepExecutorRow, ...] = ()
 
     def executor(self, name: str) -> SweepExecutorRow | None:
@@ -79,6 +81,7 @@ class SweepBenchResult:
         out: dict[str, float | str | int] = {
             "scenario": self.scenario, "controller": self.controller, "terrain": self.terrain, "trials": self.trials,
             "batched_physics_steps_per_s": self.batched_physics_steps_per_s, "machine": self.machine,
+            "load_1min": self.load_1min,
         }
         for row in self.executors:
             out.update(row.as_dict())
@@ -132,4 +135,4 @@ def bench_sweep(
                                      / physics.batched_steps_per_s))
     return SweepBenchResult(scenario=sc.name, controller=controller, terrain=kind, trials=trials * len(sc.bands),
                             batched_physics_steps_per_s=physics.batched_steps_per_s, machine=machine_description(),
-                            executors=tuple(rows))
+                            load_1min=load_1min(), executors=tuple(rows))

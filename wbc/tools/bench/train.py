@@ -28,6 +28,7 @@ from wbc.tools.bench.batched_rollout import BatchedRollout
 from wbc.tools.bench.references import (
     REFERENCE_STEPS_PER_CONTROL_STEP,
     TRAIN_TARGET,
+    load_1min,
     machine_description,
     reference_a1,
     scaled_target,
@@ -85,6 +86,7 @@ class TrainBenchResult:
         terrain: the env's terrain.
         mujoco: MuJoCo's version.
         machine: `machine_description`.
+        load_1min: the machine's 1-minute load average at the end (`load_1min`; nan where the OS has none).
         reference: the bare-A1 reference, or None when it was not measured.
     """
 
@@ -107,6 +109,7 @@ class TrainBenchResult:
     terrain: str
     mujoco: str
     machine: str
+    load_1min: float = float("nan")
     reference: TrainReference | None = None
 
     def as_dict(self) -> dict[str, float | int | str]:
@@ -131,6 +134,7 @@ class TrainBenchResult:
             "terrain": self.terrain,
             "mujoco": self.mujoco,
             "machine": self.machine,
+            "load_1min": self.load_1min,
         }
         if self.reference is not None:
             out.update(self.reference.as_dict())
@@ -212,5 +216,6 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
         terrain=cfg.terrain,
         mujoco=mujoco.__version__,
         machine=machine_description(),
+        load_1min=load_1min(),
         reference=figures,
     )
