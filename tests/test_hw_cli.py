@@ -31,6 +31,7 @@ from wbc.cli import main
 from wbc.cli.main import hw_check
 from wbc.cli.parser import build_parser
 from wbc.hardware.clock import ManualClock
+from wbc.hardware.dynamixel import DynamixelArmConfig
 from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.safety import REMEDIES
@@ -312,11 +313,18 @@ def test_check_reads_the_arm_too_and_never_drives_it_in_lockstep(capsys: pytest.
             return build_hardware_robot(config, clock=clock, legs_transport=emu.legs_transport,
                                         arm_handlers=emu.arm_handlers())
 
+        # the wrist and gripper, which no model joint moves, stand away from the goals a run would hold them at
+        held = {spec.id: 1500 + 100 * k for k, spec in enumerate(DynamixelArmConfig(port=emu.port).held_servos)}
+        for servo in emu.arm._servos:  # the emulator's servos, set as a hand would have left them
+            if servo.spec.id in held:
+                servo.set("present_position", held[servo.spec.id])
         args = build_parser().parse_args(["hw", "check", "--robot", "a1", "--target", "127.0.0.1:9", "--arm-port",
                                           emu.port, "--seconds", "0.5"])
         assert hw_check(args, build=build) == 0
         legs = emu.legs.commands()
+        goals = [(w.id, w.value) for p in emu.arm.packets() for w in p.writes if w.name == "goal_position"]
     out = capsys.readouterr().out
+    assert goals and all(value == held[i] for i, value in goals if i in held)  # held where they were: no motion
     assert "arm on " in out and "arm_elbow" in out and "safety: ready: a ramp would start" in out
     cycles = re.search(r"arm bus: (\d+) cycles, (\d+) of them damping", out)
     assert cycles and int(cycles[1]) >= 0.5 * 100 and cycles[1] == cycles[2]  # every cycle damped: no servo command

@@ -440,8 +440,10 @@ def hw_check(args: argparse.Namespace, *,
     def confirm(hardware: HardwareRobot) -> None:
         real = _real_devices(host, port, arm_port)
         if real:
-            _confirm_hardware("hw check", robot, real, "Only damping will be sent (Kp 0, on the arm too); hang the "
-                              "robot in its harness first.", yes=args.yes)
+            arm = (" The arm's joint servos are switched to current mode (an EEPROM write, with their torque off) "
+                   "and damped; its wrist and gripper are torqued and held where they are." if arm_port else "")
+            _confirm_hardware("hw check", robot, real, "Only damping will be sent (Kp 0, on the arm too)." + arm +
+                              " Hang the robot in its harness first.", yes=args.yes)
 
     check = check_hardware(HardwareCheckConfig(robot=robot, label=args.robot, target=(host, port), local=local,
                                                seconds=args.seconds, transport=args.transport, arm_port=arm_port,

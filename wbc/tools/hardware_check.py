@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from wbc.hardware.capabilities import SafetyEventLike, WallClock
 from wbc.hardware.device_thread import DeviceThreadStats
-from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus
+from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus, DynamixelArmConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
@@ -120,10 +120,15 @@ def check_hardware(cfg: HardwareCheckConfig, *,
     """
     host, port = cfg.target
     local_host, local_port = cfg.local
+    # the wrist and gripper, which no model joint moves, are held where they are: a check moves nothing
+    arm = None
+    if cfg.arm_port:
+        arm = DynamixelArmConfig(robot=cfg.robot, port=cfg.arm_port, allow_hardware=cfg.allow_hardware)
+        arm = replace(arm, held_ticks=(None,) * len(arm.held_servos))
     hardware = build(HardwareRobotConfig(
         robot=cfg.robot, arm_mode="actuated" if cfg.arm_port else "none", legs_host=host,
         legs_port=port, local_host=local_host, local_port=local_port, allow_hardware=cfg.allow_hardware,
-        transport=cfg.transport, arm_port=cfg.arm_port))
+        transport=cfg.transport, arm=arm))
     if confirm is not None:
         confirm(hardware)
     events: list[SafetyEvent] = []
