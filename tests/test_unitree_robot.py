@@ -13,6 +13,7 @@ bounded. What the backend sent is read from the emulator's log of decoded comman
 
 from __future__ import annotations
 
+import errno
 import json
 import socket
 import struct
@@ -191,6 +192,48 @@ def test_the_link_thread_over_udp_connects_streams_and_closes(emulator: UnitreeE
         assert not [t.name for t in threading.enumerate() if t.name.endswith("-link")]  # the link thread ended
     log = emulator.commands()
     assert any(not c.damping for c in log) and log[-1].damping  # it drove the motors, and closed damped
+
+
+class _NetworkGone:
+    """A socket whose network is down while `down` is set: ``sendto`` fails as Linux fails it (ENETUNREACH)."""
+
+    def __init__(self, sock: socket.socket) -> None:
+        self.sock, self.down = sock, False
+
+    def sendto(self, data: bytes, address: tuple[str, int]) -> int:
+        if self.down:
+            raise OSError(errno.ENETUNREACH, "Network is unreachable")
+        return self.sock.sendto(data, address)
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self.sock, name)
+
+
+def test_a_network_that_goes_away_for_a_while_costs_frames_not_the_link(emulator: UnitreeEmulator) -> None:
+    """An unplugged cable drops the frames sent meanwhile; the link keeps its period and is heard again after it."""
+    robot = UnitreeRobot(_config(emulator))
+    with robot:
+        transport = robot._transport
+        gone = _NetworkGone(transport._sock)
+        transport._sock = gone
+        tick = robot.read().tick
+        assert _until(lambda: (robot.write(_hold(robot)), robot.advance(LOOP), robot.read().tick > tick + 2)[2])
+        gone.down = True
+        assert _until(lambda: (robot.write(_hold(robot)), robot.advance(LOOP), robot.link_stats().unsent > 20)[2])
+        assert robot.link_failure is None and "unreachable" in transport.last_send_error
+        heard = len(emulator.commands())
+        gone.down = False
+        assert _until(lambda: (robot.write(_hold(robot)), robot.advance(LOOP), len(emulator.commands()) > heard + 5)[2])
+        assert robot.link_failure is None
+    # any other error of the socket still ends the link: it is not the network coming and going
+    bad = UdpTransport((LOOPBACK, 0), (LOOPBACK, 9))
+    try:
+        bad._sock = _NetworkGone(bad._sock)
+        bad._sock.sendto = lambda data, address: (_ for _ in ()).throw(OSError(errno.EINVAL, "Invalid argument"))
+        with pytest.raises(OSError, match="Invalid argument"):
+            bad.send(b"x")
+    finally:
+        bad.close()
 
 
 def test_the_in_process_transport_serves_a_link_thread_too() -> None:

@@ -24,6 +24,7 @@ class LinkStats:
         valid_states: LowState frames accepted (the freshness tick of `read`).
         rejected_states: LowState frames rejected by the decoder (`decode_stats` says why).
         foreign: datagrams dropped because they came from another address than the target.
+        unsent: frames the network refused to send (down or unreachable for a while); the link went on.
         state_age: time since the newest valid state arrived [s] (inf before the first).
         period_mean: mean interval between two periods of the link thread [s] (0 before two).
         period_std: standard deviation of that interval (the link's jitter) [s].
@@ -41,6 +42,7 @@ class LinkStats:
     valid_states: int = 0
     rejected_states: int = 0
     foreign: int = 0
+    unsent: int = 0
     state_age: float = float("inf")
     period_mean: float = 0.0
     period_std: float = 0.0

@@ -351,9 +351,10 @@ class UnitreeRobot(Robot):
         thread = self._link.stats()
         with self._lock:
             foreign = self._transport.foreign if self._transport is not None else 0
+            unsent = int(getattr(self._transport, "unsent", 0) or 0)  # a test's fake transport may not count it
             return LinkStats(
                 **self._counts, valid_states=self._fresh, rejected_states=self.decode_stats.rejected,
-                foreign=foreign, state_age=self.clock.now() - self._state_at,
+                foreign=foreign, unsent=unsent, state_age=self.clock.now() - self._state_at,
                 period_mean=thread.period_mean, period_std=thread.period_std, period_min=thread.period_min,
                 period_max=thread.period_max, overruns=thread.late,
                 late_advances=self._pacer.late_advances, worst_lateness=self._pacer.worst_lateness,

@@ -20,6 +20,9 @@ __all__ = ["MAX_DATAGRAM", "Transport", "UdpTransport"]
 
 MAX_DATAGRAM = 65535  # [B] receive buffer: a longer-than-expected frame arrives whole, to be rejected by length
 _MAX_DRAIN = 256  # datagrams taken per `receive` call, so a flood cannot hold the link thread
+_NETWORK_GONE = frozenset(getattr(errno, name) for name in ("ENETUNREACH", "EHOSTUNREACH", "ENETDOWN", "EHOSTDOWN",
+                                                            "ENOBUFS", "EADDRNOTAVAIL") if hasattr(errno, name))
+"""Send errors of a network that is down or unreachable for a while: the frame is dropped, the link goes on."""
 
 
 @runtime_checkable
@@ -64,6 +67,8 @@ class UdpTransport:
         check_target(local[0], 1, allow_hardware=allow_hardware, what="local address")
         self.target = (str(target[0]), int(target[1]))
         self.foreign = 0  # datagrams dropped because they came from another address than the target
+        self.unsent = 0  # frames dropped because the network was down or unreachable (`send`)
+        self.last_send_error = ""
         sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         try:
             sock.bind((local[0], int(local[1])))
@@ -87,11 +92,22 @@ class UdpTransport:
         return self._sock
 
     def send(self, frame: bytes) -> None:
-        """Send `frame` to the target (a full send buffer or an unreachable port drops it, as UDP does)."""
+        """Send `frame` to the target (a full send buffer or an unreachable port drops it, as UDP does).
+
+        A network that is down or unreachable for a while (an unplugged cable, an interface that restarts) drops the
+        frame too, counted in `unsent` with its reason in `last_send_error`: the link keeps its period, its state
+        stream goes stale (the safety layer damps), and the damping reaches the robot as soon as the network is back.
+        Any other error of the socket ends the link.
+        """
         try:
             self._socket().sendto(frame, self.target)
         except (BlockingIOError, ConnectionRefusedError):
             pass
+        except OSError as exc:
+            if exc.errno not in _NETWORK_GONE:
+                raise
+            self.unsent += 1
+            self.last_send_error = exc.strerror or str(exc)
 
     def receive(self) -> list[bytes]:
         """Every datagram queued from the target (at most 256), oldest first; others are counted in `foreign`."""
