@@ -34,7 +34,7 @@ from wbc.errors import ConfigError, TargetRefusedError, UnknownNameError
 from wbc.hardware import Robot
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
-from wbc.hardware.emulators import BusFault, RobotEmulator, RobotEmulatorConfig
+from wbc.hardware.emulators import BusFault, Fault, RobotEmulator, RobotEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -304,6 +304,38 @@ def test_a_locked_arm_obeys_the_safety_layer_on_the_wire() -> None:
         assert all(c.damping for c in emu.legs.commands() if c.time > t0 + 0.004)
         _, dq, _ = emu.plant.read_arm()
         assert np.abs(dq).max() < 0.5  # resting: damping only takes energy out
+
+
+@pytest.mark.parametrize("arm_mode", ["actuated", "locked"])
+@pytest.mark.parametrize("trigger", ["estop", "remote"])
+def test_an_estop_damps_the_arm_on_its_bus_as_it_damps_the_legs(arm_mode: str, trigger: str) -> None:
+    with _whole_robot(arm_mode, ramp_time_s=0.2) as (emu, safe, events):
+        robot, clock = safe.robot, emu.clock
+        asked: list[MotorCommand] = []
+        write = robot.arm.write
+        robot.arm.write = lambda cmd: asked.append(cmd) or write(cmd)
+        ctrl = StandController(get_robot("a1-wx200", arm_mode))
+        for _ in range(60):
+            safe.write(ctrl.act(safe.read(), None))
+            safe.advance(0.02)
+        assert safe.safety_state is SafetyState.RUN and any(c.kp.any() for c in asked)
+        t0 = clock.now()
+        if trigger == "estop":
+            safe.estop()
+        else:
+            emu.inject(Fault.REMOTE_L2_B)
+        asked.clear()
+        for _ in range(15):
+            safe.write(ctrl.act(safe.read(), None))  # the controller goes on asking for its hold
+            safe.advance(0.02)
+            cmd, _ = emu.plant.arm_command()
+            _, dq, _ = emu.plant.read_arm()
+            assert (cmd.tau * dq <= 0.05).all()  # [W]: the servos' torques only take energy out
+        assert safe.safety_state is SafetyState.DAMPED
+        assert events[-1].reason == ("software_estop" if trigger == "estop" else "remote_estop")
+        damped = asked[3:]  # from the next control tick on (the remote's frame takes a link period to arrive)
+        assert damped and all((c.kp == 0).all() and np.allclose(c.kd, safe.config.arm_damping_kd) for c in damped)
+        assert all(c.damping for c in emu.legs.commands() if c.time > t0 + 0.06)
 
 
 def test_hw_emulate_serves_one_robot_on_both_wires(monkeypatch: pytest.MonkeyPatch) -> None:
