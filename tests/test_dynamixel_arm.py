@@ -44,6 +44,7 @@ from wbc.hardware.dynamixel.arm_fault import (
     MODE_PORT_LOST,
     MODE_SERVO,
 )
+from wbc.hardware.dynamixel.arm_robot import ARM_KD_MAX, ARM_KP_MAX
 from wbc.hardware.dynamixel.control_table import HW_OVERHEATING, HW_OVERLOAD, XM430_W350, OperatingMode
 from wbc.hardware.dynamixel.current_law import CurrentLaw
 from wbc.hardware.dynamixel.protocol import Instruction
@@ -322,6 +323,29 @@ def test_a_non_finite_command_built_unchecked_never_reaches_the_bus(emu: Dynamix
         emu.clock.advance(0.02)  # the bus goes on with the last command it accepted, until the write deadline
         goals = _goals(emu.packets())
     assert goals and all(g == before for g in goals)
+
+
+def test_gains_the_bus_loop_cannot_hold_are_clamped_on_the_way_and_the_arm_stays_still(
+        emu: DynamixelEmulator, plant: SharedPlant) -> None:
+    """The legs' driver takes kd up to 100; closed over the bus at 200 Hz, kd 12 already chatters between the current
+    limits (against the emulator). The arm bounds its own gains (`ARM_KP_MAX`, `ARM_KD_MAX`)."""
+    ts = plant.sim.config.timestep
+    physics = emu.clock.call_every(ts, lambda: plant.step(ts))
+    try:
+        with _arm(emu) as arm:
+            _keep_writing(arm, _hold_with_offset(arm, 0.2, kp=20.0), 0.15)  # the arm moving
+            wild = MotorCommand.hold(arm.read().q, 1000.0, 100.0)
+            applied = arm.write(wild)
+            np.testing.assert_array_equal(applied.kp, ARM_KP_MAX)
+            np.testing.assert_array_equal(applied.kd, ARM_KD_MAX)
+            start = emu.clock.now()
+            _keep_writing(arm, wild, 1.0)
+    finally:
+        physics.cancel()
+    elbow = np.array([g[4] for t, g in _timed_goals(_since(emu, start + 0.5))])
+    flips = int((np.diff(np.sign(elbow)) != 0).sum())
+    assert elbow.size >= 90 and flips <= 5, (flips, elbow.min(), elbow.max())  # kd 100 flipped on ~9 of 10 cycles
+    assert np.abs(elbow).max() < arm.law.limit_units  # never at the current limit: the arm is at rest
 
 
 def test_damping_opposes_a_moving_arm_on_the_wire(emu: DynamixelEmulator, plant: SharedPlant) -> None:

@@ -34,11 +34,15 @@ KP_MAX = 1000.0  # [N m / rad] largest position gain a Unitree driver encodes (i
 KD_MAX = 100.0  # [N m s / rad] largest velocity gain accepted (the driver encodes more; none is stable above)
 
 
-def command_bounds(limits: JointTable) -> tuple[np.ndarray, np.ndarray]:
-    """Lower and upper bounds of a command's rows (q, dq, kp, kd, tau), each (5, n): what `clamp_command` clips to."""
+def command_bounds(limits: JointTable, kp_max: float = KP_MAX,
+                   kd_max: float = KD_MAX) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of a command's rows (q, dq, kp, kd, tau), each (5, n): what `clamp_command` clips to.
+
+    `kp_max` and `kd_max` are the robot's own gain bounds (`Robot.gain_limits`).
+    """
     zeros = np.zeros_like(limits.lower)
     lower = np.array((limits.lower, -limits.velocity_limit, zeros, zeros, -limits.torque_limit))
-    upper = np.array((limits.upper, limits.velocity_limit, zeros + KP_MAX, zeros + KD_MAX, limits.torque_limit))
+    upper = np.array((limits.upper, limits.velocity_limit, zeros + kp_max, zeros + kd_max, limits.torque_limit))
     return lower, upper
 
 
@@ -91,7 +95,14 @@ def _refuse_non_finite(robot: str, cmd: MotorCommand, joints: tuple[str, ...]) -
 
 
 class Robot(ABC):
-    """Abstract robot: proprioception in, low-level motor commands out."""
+    """Abstract robot: proprioception in, low-level motor commands out.
+
+    Attributes:
+        gain_limits: the largest (kp, kd) a write passes on: the Unitree driver's by default; a device whose loop is
+            closed slower or over less (the arm's current loop over its bus) sets its own.
+    """
+
+    gain_limits: tuple[float, float] = (KP_MAX, KD_MAX)
 
     def __init__(self) -> None:
         self._connected = False
@@ -180,7 +191,7 @@ class Robot(ABC):
         else:
             limits = self.limits
             if self._bounds is None or self._bounds[0] is not limits:
-                self._bounds = (limits, command_bounds(limits))
+                self._bounds = (limits, command_bounds(limits, *self.gain_limits))
             lower, upper = self._bounds[1]
             # within the limits, clamping would change nothing: the command is sent as it is
             if within_bounds(cmd.rows, lower, upper):

@@ -111,7 +111,16 @@ from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["HELD_MODEL_NUMBERS", "PING_WAITS", "DynamixelArm", "arm_joint_table"]
+__all__ = ["ARM_KD_MAX", "ARM_KP_MAX", "HELD_MODEL_NUMBERS", "PING_WAITS", "DynamixelArm", "arm_joint_table"]
+
+ARM_KP_MAX = 150.0
+"""[N m / rad] The largest position gain the arm's host-side law passes on. Its PD is closed over the bus at the
+bus rate (200 Hz), far slower than a Unitree driver's: against the emulator the elbow rings from kp 400 (kd 1 to 5)
+and holds still to kp 300 (kd 2); this is half of that. Every controller of ours asks for kp 10-20."""
+ARM_KD_MAX = 5.0
+"""[N m s / rad] The largest velocity gain the arm's law passes on: against the emulator the elbow chatters between
+the current limits from kd 12, rings at kd 10 and is still at kd 8 and below (kp 0); this is about half of that.
+Every controller of ours asks for kd 0.3-0.5 (the safety layer's damping, 0.5)."""
 
 HELD_MODEL_NUMBERS = (XM430_W350_MODEL_NUMBER, 1060)
 """Models a held servo may be: the XM430-W350, or the XL430-W250 (1060) that some WX200s carry at the wrist rotate
@@ -151,6 +160,9 @@ def arm_joint_table(robot: str, law: CurrentLaw | None = None) -> JointTable:
 class DynamixelArm(Robot):
     """The WX200's waist, shoulder and elbow over its Dynamixel bus (see the module docstring).
 
+    Its gains are bounded by `ARM_KP_MAX` and `ARM_KD_MAX` (`gain_limits`), not by the legs' driver's figures: a
+    command above them is clamped on its way to the bus, as every command is to the joints' limits.
+
     Args:
         config: the port and the bus's behaviour.
         handlers: builds dynamixel_sdk's (port handler, packet handler) for a port name at `connect`; the default
@@ -159,6 +171,8 @@ class DynamixelArm(Robot):
         clock: where the backend reads the time and waits; the monotonic clock runs the bus loop on a thread, a
             `ManualClock` runs it as a task on that clock (no thread: the bus moves when the clock is moved).
     """
+
+    gain_limits = (ARM_KP_MAX, ARM_KD_MAX)
 
     def __init__(self, config: DynamixelArmConfig,
                  handlers: Callable[[str], tuple[Any, Any]] | None = None, *, clock: Clock = MONOTONIC) -> None:
