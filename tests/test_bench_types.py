@@ -75,7 +75,7 @@ HW_KEYS = ["robot", "seconds", "rate_hz", "transport", "emulator_process", "send
            "cpu_us_per_tick", "advance_ms_p50", "advance_ms_p99", "late_advances", "worst_lateness_ms", "rejects",
            "emulator", "link", "safety", "machine", "load_1min", "realtime", "emulator_realtime"]
 HW_EMULATOR_KEYS = ["accepted", "rejected", "refused", "replies"]
-HW_LINK_KEYS = ["frames_sent", "damping_sent", "deadline_trips", "valid_states", "rejected_states", "foreign",
+HW_LINK_KEYS = ["frames_sent", "damping_sent", "deadline_trips", "valid_states", "rejected_states", "foreign", "unsent",
                 "state_age", "period_mean", "period_std", "period_min", "period_max", "overruns", "late_advances",
                 "worst_lateness"]
 HW_SAFETY_KEYS = ["robot", "write_deadline_ms", "link_period_ms", "stale_timeout_ms", "estop_to_damping_ms",

@@ -190,6 +190,14 @@ def test_a_p_value_is_never_printed_on_the_other_side_of_005():
     assert 0.0499 < p < 0.05 and float(p_text(p)) < 0.05
 
 
+def test_a_success_interval_just_clear_of_zero_is_not_printed_as_zero():
+    entry = PairSummary(a="a", b="b", band="in", metric="success_rate", diff=0.11, ci95=(0.0004, 0.226),
+                        interval="exact", n=300, mean_a=0.5, mean_b=0.61, test="exact McNemar", p=0.0499832, n80=None,
+                        a_only=117, b_only=150)
+    (sentence,) = verdicts(Summary(scenario_name="s", scenario_hash="h", cells={}, paired=(entry,), warnings=()))
+    assert "95 % interval [+4.0e-02, +22.6]" in sentence and "significant (exact McNemar p = 0.04998)" in sentence
+
+
 def test_one_pair_of_a_continuous_metric_gives_no_n80_and_says_why():
     a = [make_record("a", "in", 0, 0, vlin_err=0.2, vlin_err_by_s="0.2")]
     b = [make_record("b", "in", 0, 0, vlin_err=0.3, vlin_err_by_s="0.3")]

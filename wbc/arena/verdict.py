@@ -80,8 +80,8 @@ def _survival(entry: PairSummary) -> str:
     diff = abs(entry.diff) * 100.0
     lo_w, hi_w = (lo, hi) if winner == b else (-hi, -lo)
     text = (f"{winner} survives more than {loser}: {s_win} against {s_lose} of {n} paired trials ({diff:+.1f} points, "
-            f"95 % interval [{100 * lo_w:+.1f}, {100 * hi_w:+.1f}]); of {_pairs(discordant)} {winner} alone "
-            f"survived {won} and {loser} alone {lost}; {_significance(entry, 'exact McNemar')}")
+            f"95 % interval [{signed(100 * lo_w, 1)}, {signed(100 * hi_w, 1)}]); of {_pairs(discordant)} {winner} "
+            f"alone survived {won} and {loser} alone {lost}; {_significance(entry, 'exact McNemar')}")
     if not (entry.p is not None and entry.p < ALPHA):
         text += f"; {_settle(entry, 'difference')}"
     return text
