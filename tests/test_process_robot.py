@@ -27,6 +27,7 @@ import pytest
 
 from wbc.control.stand import StandController
 from wbc.errors import PortBusyError, RobotLinkError, TargetRefusedError
+from wbc.hardware.capabilities import HeldJoints
 from wbc.hardware.dynamixel import DynamixelArmConfig
 from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
@@ -38,6 +39,7 @@ from wbc.hardware.io_process import (
     error_report,
     rebuild_error,
 )
+from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig
 from wbc.hardware.realtime import NO_REALTIME
 from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
@@ -91,6 +93,35 @@ def test_contract_legs_and_arm_actuated_and_the_same_robot_as_in_process() -> No
             assert grant is not None and grant.pid == pid and grant.asked.startswith("SCHED_FIFO 50")
             assert grant.realtime or any(r.startswith("SCHED_FIFO 50: ") for r in grant.refused)
         assert robot.pid is None and not _alive(pid)
+        assert emu.failure is None
+
+
+def test_a_locked_arm_in_the_io_process_obeys_the_safety_layer_on_the_wire() -> None:
+    """The layer's damping of a locked arm travels with the command it goes with (waiting, after an e-stop)."""
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
+        qpos = emu.plant.sim.data.qpos.copy()
+        qpos[-3:] = QuadrupedArmConfig().stowed_q + np.array([0.8, 0.7, -0.7])  # far from its hold
+        emu.reset(qpos)
+        cfg = HardwareRobotConfig(robot="a1-wx200", arm_mode="locked", legs_host=emu.address[0],
+                                  legs_port=emu.address[1], arm=DynamixelArmConfig(port=emu.port, **ARM))
+        robot = ProcessRobot(cfg)
+        assert isinstance(robot, HeldJoints)
+        safe = SafeRobot(robot, SafetyConfig(position_table="a1", on_event=lambda event: None))
+        with safe:
+            start = time.monotonic()
+            while time.monotonic() < start + 0.3:  # waiting or damped: the layer sends damping only
+                safe.write(MotorCommand.damping(12, 3.0))
+                safe.advance(0.02)
+            goals = [w.value for p in emu.arm.packets() for w in p.writes if w.name == "goal_current"]
+            # damping of an arm that sinks (kd 0.5 x its speed), not the stall current (855) kp 20 asks of 0.8 rad
+            assert goals and max(abs(v) for v in goals) < 0.4 * 855
+            safe.estop()
+            emu.arm.clear_log()
+            for _ in range(10):
+                safe.write(MotorCommand.hold(np.zeros(12), 30.0, 1.0))  # the controller goes on; the layer damps
+                safe.advance(0.02)
+            goals = [w.value for p in emu.arm.packets() for w in p.writes if w.name == "goal_current"]
+            assert goals and max(abs(v) for v in goals) < 0.4 * 855
         assert emu.failure is None
 
 

@@ -237,6 +237,10 @@ class HeldRamp(Protocol):
     """
 
     @property
+    def settings(self) -> dict[str, float]:
+        """What it was built with, as plain numbers (a robot whose devices run in another process sends them)."""
+
+    @property
     def started(self) -> bool:
         """True once `start` was called."""
 

@@ -29,7 +29,8 @@ import numpy as np
 from wbc.errors import RobotLinkError
 from wbc.hardware.unitree.layout import REMOTE_SIZE
 
-__all__ = ["MAX_STATUS", "IoBlocks", "SeqBlock", "command_dtype", "state_dtype"]
+__all__ = ["HELD_DAMP", "HELD_FIELDS", "HELD_HOLD", "HELD_RAMP", "MAX_STATUS", "IoBlocks", "SeqBlock", "command_dtype",
+           "state_dtype"]
 
 MAX_STATUS = 32
 """Most motors whose mode and temperature a state carries (legs 12 + the arm's servos)."""
@@ -50,9 +51,16 @@ def state_dtype(num_joints: int) -> np.dtype:
     ])
 
 
+HELD_FIELDS = ("generation", "mode", "kd", "duration_s", "slew", "kp", "ramp_kd", "hold_s")
+"""The ``held`` field of a command record: what the joints no controller drives get (`HeldJoints`), as of this
+command. ``generation`` counts the safety layer's calls (a new one starts a new ramp); ``mode`` is `HELD_HOLD`,
+`HELD_DAMP` (``kd``) or `HELD_RAMP` (a `CommandRamp` of the other fields)."""
+HELD_HOLD, HELD_DAMP, HELD_RAMP = 0.0, 1.0, 2.0
+
+
 def command_dtype(num_joints: int) -> np.dtype:
-    """The record of one command: its rows q, dq, kp, kd, tau, shape (5, n)."""
-    return np.dtype([("rows", "<f8", (5, num_joints))])
+    """One command: its rows q, dq, kp, kd, tau, shape (5, n), and the held joints' mode (`HELD_FIELDS`)."""
+    return np.dtype([("rows", "<f8", (5, num_joints)), ("held", "<f8", (len(HELD_FIELDS),))])
 
 
 def _round_up(n: int, to: int = 64) -> int:

@@ -44,11 +44,11 @@ import numpy as np
 
 import wbc
 from wbc.errors import RobotLinkError, WbcError
-from wbc.hardware.capabilities import MotorNames
+from wbc.hardware.capabilities import HeldRamp, MotorNames
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel.arm_fault import ArmBusStats
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.io_process.blocks import IoBlocks
+from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, IoBlocks
 from wbc.hardware.io_process.channel import ChannelClosed, LineChannel, rebuild_error
 from wbc.hardware.pacing import WallPacer
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, JointMotorStatus
@@ -130,6 +130,7 @@ class ProcessRobot(Robot):
         self._state_count = -1  # the publication `_state` was built from
         self._pacer = WallPacer()
         self._grant: RealtimeGrant | None = None
+        self._held = np.zeros(len(HELD_FIELDS))  # generation 0, HELD_HOLD: as a robot with no safety layer above
 
     # -- Robot ----------------------------------------------------------------------------------------------------
     @property
@@ -208,8 +209,29 @@ class ProcessRobot(Robot):
     def _send(self, cmd: MotorCommand) -> None:
         self._check()
         block = self._blocks.command
-        block.record()["rows"] = (cmd.q, cmd.dq, cmd.kp, cmd.kd, cmd.tau)
+        record = block.record()
+        record["rows"] = (cmd.q, cmd.dq, cmd.kp, cmd.kd, cmd.tau)
+        record["held"] = self._held  # with the command it goes with: the I/O process applies both in one period
         block.publish()  # the link takes it before its next send
+
+    # -- HeldJoints: a locked arm, held in the I/O process --------------------------------------------------------
+    def damp_held(self, kd: float) -> None:
+        """Damp the joints the robot drives for no controller (a locked arm) from the next write on (`HeldJoints`)."""
+        self._set_held(HELD_DAMP, kd=kd)
+
+    def ramp_held(self, ramp: HeldRamp) -> None:
+        """Ramp them into their hold, through a ramp built as `ramp` is, from the next write on (`HeldJoints`)."""
+        settings = ramp.settings
+        self._set_held(HELD_RAMP, duration_s=settings["duration_s"], slew=settings["slew"], kp=settings["kp"],
+                       ramp_kd=settings["kd"], hold_s=settings["hold_s"])
+
+    def _set_held(self, mode: float, **values: float) -> None:
+        held = np.zeros(len(HELD_FIELDS))
+        held[0] = self._held[0] + 1.0  # a new generation: the I/O process calls the robot's HeldJoints again
+        held[1] = mode
+        for name, value in values.items():
+            held[HELD_FIELDS.index(name)] = value
+        self._held = held
 
     def _advance(self, dt: float) -> None:
         self._check()

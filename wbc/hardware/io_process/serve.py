@@ -40,14 +40,15 @@ from dataclasses import asdict
 import numpy as np
 
 from wbc.errors import RobotLinkError
-from wbc.hardware.capabilities import MotorStatusSource, RemoteSource
+from wbc.hardware.capabilities import HeldJoints, MotorStatusSource, RemoteSource
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
-from wbc.hardware.io_process.blocks import MAX_STATUS, IoBlocks
+from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, MAX_STATUS, IoBlocks
 from wbc.hardware.io_process.channel import ChannelClosed, LineChannel, error_report
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, QuadrupedArmRobot
 from wbc.hardware.realtime import RealtimeGrant, request_realtime
 from wbc.hardware.robot import Robot
+from wbc.hardware.safety.ramp import CommandRamp
 from wbc.hardware.unitree.remote import Remote
 from wbc.hardware.unitree.robot import UnitreeRobot
 from wbc.types import MotorCommand
@@ -111,6 +112,7 @@ class _Server:
         self.stop = threading.Event()
         self.failure: dict | None = None
         self.command_seen = 0
+        self.held_seen = 0.0  # the generation of the held joints' mode last applied (`_hold_as_asked`)
         self.counts = dict(states_published=0, commands_forwarded=0, bells_missed=0)
         self.started = started
 
@@ -140,10 +142,23 @@ class _Server:
             block = self.blocks.command
             if block.count != self.command_seen:
                 self.command_seen, record = block.read()
+                self._hold_as_asked(record["held"])
                 self.robot.write(MotorCommand._trusted(np.array(record["rows"])))
                 self.counts["commands_forwarded"] += 1
         except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
             self._fail(exc)
+
+    def _hold_as_asked(self, held: np.ndarray) -> None:
+        """A new generation of the held joints' mode (the safety layer's damp or ramp) to the robot (`HeldJoints`)."""
+        if held[0] == self.held_seen or not isinstance(self.robot, HeldJoints):
+            return
+        self.held_seen = float(held[0])
+        values = dict(zip(HELD_FIELDS, (float(v) for v in held), strict=True))
+        if values["mode"] == HELD_DAMP:
+            self.robot.damp_held(values["kd"])
+        elif values["mode"] == HELD_RAMP:
+            self.robot.ramp_held(CommandRamp(duration_s=values["duration_s"], slew=values["slew"], kp=values["kp"],
+                                             kd=values["ramp_kd"], hold_s=values["hold_s"]))
 
     def _on_state(self) -> None:
         """The link thread, after each new leg state: the robot's state to the shared block."""

@@ -45,6 +45,12 @@ class CommandRamp:
         self._t_last = 0.0
 
     @property
+    def settings(self) -> dict[str, float]:
+        """What it was built with (``CommandRamp(**settings)`` builds an unstarted twin, in another process too)."""
+        return {"duration_s": self._duration, "slew": self._slew, "kp": self._kp0, "kd": self._kd0,
+                "hold_s": self._hold}
+
+    @property
     def started(self) -> bool:
         """True once `start` was called."""
         return self._q is not None
