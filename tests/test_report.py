@@ -318,7 +318,7 @@ def test_summary_has_exactly_the_required_shape():
     assert pairs == expected
     for p in summary["paired"]:
         assert set(p) == {"a", "b", "band", "metric", "diff", "ci95", "interval", "n", "mean_a", "mean_b", "test",
-                          "p", "n80", "a_only", "b_only", "shift"}
+                          "p", "n80", "a_only", "b_only", "shift", "rank_biserial"}
         assert len(p["ci95"]) == 2
         if p["metric"] in COMMON_METRICS:
             assert p["n"] == 0 and p["test"] is None

@@ -164,7 +164,8 @@ def test_fall_times_on_one_tick_grid_tie_instead_of_being_ranked_by_rounding_noi
 def test_the_hodges_lehmann_shift_is_the_median_of_walsh_averages():
     assert hodges_lehmann(np.array([1.0, 2.0, 9.0])) == 3.5  # averages 1, 1.5, 2, 5, 5.5, 9: their median
     assert hodges_lehmann(np.array([0.01] * 20 + [-1.0])) == pytest.approx(0.01)
-    assert math.isnan(hodges_lehmann(np.array([])))
+    assert hodges_lehmann(np.array([0.0] * 30 + [-0.1] * 10)) == pytest.approx(-0.1)  # the zeros are not ranked
+    assert math.isnan(hodges_lehmann(np.array([]))) and math.isnan(hodges_lehmann(np.zeros(4)))
 
 
 def test_a_significant_test_whose_side_is_not_the_means_calls_neither_better():
@@ -177,8 +178,26 @@ def test_a_significant_test_whose_side_is_not_the_means_calls_neither_better():
     (sentence,) = [line for line in verdicts(Summary(scenario_name="s", scenario_hash="h", cells={},
                                                      paired=(entry,), warnings=()))]
     assert "differ in how they track the linear velocity" in sentence and "not one way" in sentence
-    assert "favours a" in sentence and "favours b" in sentence and "neither is called better" in sentence
-    assert "tracks the linear velocity better" not in sentence
+    assert "the pairs' ranks favour a (rank-biserial r = +0.82" in sentence and "favours b" in sentence
+    assert "neither is called better" in sentence and "tracks the linear velocity better" not in sentence
+
+
+def test_pairs_tied_at_zero_do_not_turn_a_one_sided_test_into_a_split():
+    # TTF: 30 trials both survive (tied at 0), on 10 B falls earlier: every pair that differs favours A
+    a = [make_record("a", "in", 0, i, ttf=1.0) for i in range(40)]
+    b = [make_record("b", "in", 0, i, ttf=1.0 if i < 30 else 0.9) for i in range(40)]
+    ttf = paired_comparison(a, b, "ttf")
+    assert ttf["p"] < 0.01 and ttf["rank_biserial"] == -1.0 and ttf["shift"] == pytest.approx(-0.1)
+    entry = PairSummary(a="a", b="b", band="in", metric="ttf", ci95=tuple(ttf.pop("ci95")), **ttf)
+    (sentence,) = verdicts(Summary(scenario_name="s", scenario_hash="h", cells={}, paired=(entry,), warnings=()))
+    assert "a stays up longer than b" in sentence and "not one way" not in sentence
+
+
+def test_the_hodges_lehmann_shift_of_many_pairs_is_estimated_in_bounded_memory():
+    rng = np.random.default_rng(3)
+    d = rng.normal(0.2, 1.0, paired_tests.HODGES_LEHMANN_EXACT_MAX + 2000)
+    estimate = hodges_lehmann(d)  # from a fixed-seed sample of the Walsh averages
+    assert estimate == hodges_lehmann(d) and abs(estimate - 0.2) < 0.05
 
 
 def test_a_p_value_is_never_printed_on_the_other_side_of_005():

@@ -14,8 +14,9 @@ The arena plays paired trials (`wbc.arena.stats`), so the right tests are paired
   distribution, ties included, up to 200 nonzero differences, the normal approximation with the ties' variance and a
   continuity correction beyond). H0: the differences are symmetric about 0. It assumes no normality, which TTF (most
   trials at 1.0) and error distributions with long tails do not have. The side it leans to is the side of the larger
-  rank sum, whose estimate is the Hodges-Lehmann shift (`hodges_lehmann`); the mean difference may lie on the other
-  side, when a few large differences outweigh most pairs: the verdict then calls neither controller better.
+  rank sum (`rank_biserial`'s sign), the size of its shift the Hodges-Lehmann estimate (`hodges_lehmann`); the mean
+  difference may lie on the other side, when a few large differences outweigh most pairs: the verdict then calls
+  neither controller better.
 
 The interval quoted for a paired success difference, `paired_success_interval`, is built from the same discordant
 pairs, so that it excludes 0 exactly when the exact McNemar test rejects at its level: of n pairs, m = b + c are
@@ -48,7 +49,7 @@ from wbc.errors import RecordError
 
 __all__ = ["BINARY_FIELDS", "DIFFERENCE_DECIMALS", "WILCOXON_EXACT_MAX", "McNemarResult", "WilcoxonResult",
            "clopper_pearson", "hodges_lehmann", "mcnemar_exact", "paired_success_interval", "paired_values",
-           "wilcoxon_signed_rank"]
+           "rank_biserial", "wilcoxon_signed_rank"]
 
 BINARY_FIELDS = ("success",)
 """Record fields that are binary outcomes (compared by McNemar); every other metric is compared by Wilcoxon."""
@@ -236,20 +237,43 @@ def wilcoxon_signed_rank(differences: np.ndarray) -> WilcoxonResult:
                           p_value=min(1.0, p), rank_sum_plus=plus, rank_sum_minus=minus, exact=exact)
 
 
+HODGES_LEHMANN_EXACT_MAX = 3000
+"""Up to this many nonzero differences `hodges_lehmann` takes every Walsh average (4.5 million at most); beyond, the
+median of `HODGES_LEHMANN_SAMPLE` of them drawn with a fixed seed (an estimate, the same on every run)."""
+HODGES_LEHMANN_SAMPLE = 4_000_000
+
+
 def hodges_lehmann(differences: np.ndarray) -> float:
     """The Hodges-Lehmann estimate of the differences' centre: the median of their Walsh averages.
 
-    The shift the Wilcoxon signed-rank test is about (its sign is the side the test leans to, where the mean's may
-    not be: a few large differences can outweigh most pairs in a mean). NaN without differences.
+    Over the nonzero differences (rounded to `DIFFERENCE_DECIMALS`), as the Wilcoxon test ranks them: with most pairs
+    tied at zero (TTF, where most trials survive) the estimate over every pair would be 0 whatever the others say.
+    The side the test leans to is the sign of its rank sums (`WilcoxonResult`); this is the size of the shift. NaN
+    without a nonzero difference.
 
     Args:
         differences: d_i = B_i - A_i, shape (n,), finite.
     """
     d = np.round(np.asarray(differences, dtype=float).ravel(), DIFFERENCE_DECIMALS)
+    d = d[d != 0.0]
     if d.size == 0:
         return math.nan
-    i, j = np.triu_indices(d.size)
+    if d.size <= HODGES_LEHMANN_EXACT_MAX:
+        i, j = np.triu_indices(d.size)
+    else:  # a fixed-seed sample of the pairs (i <= j), so that memory stays bounded and the figure reproducible
+        rng = np.random.default_rng(0)
+        a, b = rng.integers(0, d.size, (2, HODGES_LEHMANN_SAMPLE))
+        i, j = np.minimum(a, b), np.maximum(a, b)
     return float(np.median(0.5 * (d[i] + d[j])))
+
+
+def rank_biserial(result: WilcoxonResult) -> float:
+    """The matched-pairs rank-biserial correlation of a Wilcoxon test: (R+ - R-) / (R+ + R-), in [-1, 1].
+
+    Its sign is the side the test leans to (positive: B - A tends to be positive); 0 without a nonzero difference.
+    """
+    total = result.rank_sum_plus + result.rank_sum_minus
+    return (result.rank_sum_plus - result.rank_sum_minus) / total if total > 0 else 0.0
 
 
 def _index(records: Iterable[TrialRecord], which: str) -> dict[PairKey, TrialRecord]:

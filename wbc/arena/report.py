@@ -37,6 +37,7 @@ from wbc.arena.paired_tests import (
     mcnemar_exact,
     paired_success_interval,
     paired_values,
+    rank_biserial,
     wilcoxon_signed_rank,
 )
 from wbc.arena.plots import PLOTS, write_plots
@@ -186,11 +187,12 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
         alpha: the significance level the power is computed for.
 
     Returns:
-        ``{"diff", "ci95", "interval", "n", "mean_a", "mean_b", "test", "p", "n80", "a_only", "b_only", "shift"}``:
+        ``{"diff", "ci95", "interval", "n", "mean_a", "mean_b", "test", "p", "n80", "a_only", "b_only", "shift",
+        "rank_biserial"}``:
         ``interval`` names how ``ci95`` was made (``exact`` or ``bootstrap``), ``mean_a`` / ``mean_b`` are each
         controller's mean over the pairs used, ``a_only`` / ``b_only`` the discordant pair counts of a binary field
-        (None otherwise), ``shift`` the Hodges-Lehmann estimate of B - A that the Wilcoxon test is about (None for
-        a binary field); NaN where undefined.
+        (None otherwise), ``shift`` the Hodges-Lehmann estimate of B - A and ``rank_biserial`` the side and strength
+        of the Wilcoxon test's lean (both None for a binary field); NaN where undefined.
 
     Raises:
         RecordError: one controller's records repeat a trial.
@@ -201,7 +203,7 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
         a, b = paired_values(records_a, records_b, field)
     out: dict[str, Any] = {"diff": math.nan, "ci95": [math.nan, math.nan], "interval": None, "n": int(a.size),
                            "mean_a": math.nan, "mean_b": math.nan, "test": None, "p": math.nan, "n80": None,
-                           "a_only": None, "b_only": None, "shift": None}
+                           "a_only": None, "b_only": None, "shift": None, "rank_biserial": None}
     if a.size == 0:
         return out
     d = b - a
@@ -212,8 +214,9 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
                    ci95=list(paired_success_interval(test.a_only, test.b_only, int(a.size))), interval="exact",
                    n80=pairs_for_mcnemar(test.a_only / a.size, test.b_only / a.size, alpha=alpha))
     else:
-        out.update(test="Wilcoxon signed-rank", p=wilcoxon_signed_rank(d).p_value,
-                   ci95=list(bootstrap_mean_ci(d)), interval="bootstrap", shift=hodges_lehmann(d))
+        test = wilcoxon_signed_rank(d)
+        out.update(test="Wilcoxon signed-rank", p=test.p_value, ci95=list(bootstrap_mean_ci(d)), interval="bootstrap",
+                   shift=hodges_lehmann(d), rank_biserial=rank_biserial(test))
         if d.size >= 2:
             out["n80"] = pairs_for_mean_difference(float(d.mean()), float(d.std(ddof=1)), alpha=alpha)
     return out

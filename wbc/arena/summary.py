@@ -190,9 +190,12 @@ class PairSummary:
             beyond the search.
         a_only: discordant pairs A alone won (success only).
         b_only: discordant pairs B alone won (success only).
-        shift: the Hodges-Lehmann estimate of B - A (the median of the differences' Walsh averages), the shift the
-            Wilcoxon test is about: its sign is the side the test leans to, which the mean's may not be. None for
-            success, without pairs, and in a ``summary.json`` written before it was recorded.
+        shift: the Hodges-Lehmann estimate of B - A (the median of the nonzero differences' Walsh averages), the
+            size of the shift the Wilcoxon test is about. None for success, without a nonzero difference, and in a
+            ``summary.json`` written before it was recorded.
+        rank_biserial: the Wilcoxon test's matched-pairs rank-biserial correlation, (R+ - R-) / (R+ + R-): its sign
+            is the side the test leans to (positive: B - A tends to be positive), which the mean's may not be. None
+            for success and in a ``summary.json`` written before it was recorded.
     """
 
     a: str
@@ -211,9 +214,10 @@ class PairSummary:
     a_only: int | None
     b_only: int | None
     shift: float | None = None
+    rank_biserial: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("diff", "mean_a", "mean_b", "p", "shift"):
+        for name in ("diff", "mean_a", "mean_b", "p", "shift", "rank_biserial"):
             object.__setattr__(self, name, json_float(getattr(self, name)))
         object.__setattr__(self, "ci95", (json_float(self.ci95[0]), json_float(self.ci95[1])))
 
@@ -227,7 +231,7 @@ class PairSummary:
         return {"a": self.a, "b": self.b, "band": self.band, "metric": self.metric, "diff": self.diff,
                 "ci95": list(self.ci95), "interval": self.interval, "n": self.n, "mean_a": self.mean_a,
                 "mean_b": self.mean_b, "test": self.test, "p": self.p, "n80": self.n80, "a_only": self.a_only,
-                "b_only": self.b_only, "shift": self.shift}
+                "b_only": self.b_only, "shift": self.shift, "rank_biserial": self.rank_biserial}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PairSummary:
@@ -236,7 +240,7 @@ class PairSummary:
         return cls(a=data["a"], b=data["b"], band=data["band"], metric=data["metric"], diff=data["diff"],
                    ci95=(ci[0], ci[1]), interval=data["interval"], n=data["n"], mean_a=data["mean_a"],
                    mean_b=data["mean_b"], test=data["test"], p=data["p"], n80=data["n80"], a_only=data["a_only"],
-                   b_only=data["b_only"], shift=data.get("shift"))
+                   b_only=data["b_only"], shift=data.get("shift"), rank_biserial=data.get("rank_biserial"))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -106,13 +106,13 @@ def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decima
     their unit (empty for a share); the better side has the higher mean when `higher_is_better`, else the lower. A
     difference too small for the decimals is written in scientific notation, never as a -0.000 called better.
 
-    A significant test whose side (the sign of the Hodges-Lehmann shift, `PairSummary.shift`) is not the mean's
-    calls neither better: most pairs lean one way and a few large differences pull the mean the other (`_split`,
-    which names the `subject` compared).
+    A significant test whose side (the sign of its rank-biserial correlation, `PairSummary.rank_biserial`) is not
+    the mean's calls neither better: most pairs lean one way and a few large differences pull the mean the other
+    (`_split`, which names the `subject` compared).
     """
     b_better = (entry.diff > 0) == higher_is_better
-    if entry.p is not None and entry.p < ALPHA and entry.shift is not None and (
-            entry.shift == 0.0 or (entry.shift > 0) != (entry.diff > 0)):
+    lean = entry.rank_biserial if entry.rank_biserial is not None else entry.shift  # a summary.json of before
+    if entry.p is not None and entry.p < ALPHA and lean is not None and (lean == 0.0 or (lean > 0) != (entry.diff > 0)):
         return _split(entry, subject, unit, decimals, higher_is_better=higher_is_better)
     better, worse = (entry.b, entry.a) if b_better else (entry.a, entry.b)
     m_better, m_worse = (entry.mean_b, entry.mean_a) if b_better else (entry.mean_a, entry.mean_b)
@@ -129,13 +129,16 @@ def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decima
 
 
 def _split(entry: PairSummary, subject: str, unit: str, decimals: int, *, higher_is_better: bool) -> str:
-    """A significant Wilcoxon test whose median shift and mean difference point to different sides: neither wins."""
+    """A significant Wilcoxon test that leans to one side while the mean difference lies on the other: neither wins."""
     unit = f" {unit}" if unit else ""
-    if entry.shift == 0.0:
-        lean = "the pairs' median shift (Hodges-Lehmann) is 0"
+    side = entry.rank_biserial if entry.rank_biserial is not None else entry.shift
+    if not side:
+        lean = "the pairs' ranks lean to neither"
     else:
-        favoured = entry.b if (entry.shift > 0) == higher_is_better else entry.a
-        lean = f"the pairs' median shift (Hodges-Lehmann, {signed(entry.shift, decimals)}{unit}) favours {favoured}"
+        favoured = entry.b if (side > 0) == higher_is_better else entry.a
+        size = "" if entry.shift is None else f", Hodges-Lehmann shift {signed(entry.shift, decimals)}{unit}"
+        r = "" if entry.rank_biserial is None else f"rank-biserial r = {entry.rank_biserial:+.2f}"
+        lean = f"the pairs' ranks favour {favoured} ({r}{size})".replace("(, ", "(")
     by_mean = entry.b if (entry.diff > 0) == higher_is_better else entry.a
     return (f"{entry.a} and {entry.b} differ in {subject}, but not one way: {lean}, while the mean difference "
             f"({signed(entry.diff, decimals)}{unit} on {entry.n} trials, B - A with B = {entry.b}) favours {by_mean} "
