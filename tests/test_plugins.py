@@ -284,6 +284,16 @@ def test_the_other_name_forms_are_not_taken_for_malformed_plugin_names(tmp_path)
         get_controller("push.toml")
 
 
+def test_a_typo_of_a_dotted_entry_point_name_is_offered_that_name(plugins):
+    dist = plugins / "dotdist-1.0.dist-info"
+    dist.mkdir()
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: dotdist\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text(f"[{PLUGIN_GROUP}]\nmy.dotted = plugpkg.good:make\n")
+    assert get_controller("my.dotted").kind == "entry point"
+    with pytest.raises(UnknownNameError, match="did you mean 'my.dotted'"):
+        get_controller("my.dottd")
+
+
 def test_an_entry_point_is_listed_with_its_summary_and_plays_by_its_name(plugins, small, tmp_path, capsys):
     dist = plugins / "plugdist-1.0.dist-info"
     dist.mkdir()

@@ -34,6 +34,7 @@ from wbc.errors import ConfigError, TargetRefusedError, UnknownNameError
 from wbc.hardware import Robot
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
+from wbc.hardware.dynamixel.arm_robot import ARM_KD_MAX, ARM_KP_MAX
 from wbc.hardware.emulators import BusFault, Fault, RobotEmulator, RobotEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
@@ -304,6 +305,18 @@ def test_a_locked_arm_obeys_the_safety_layer_on_the_wire() -> None:
         assert all(c.damping for c in emu.legs.commands() if c.time > t0 + 0.004)
         _, dq, _ = emu.plant.read_arm()
         assert np.abs(dq).max() < 0.5  # resting: damping only takes energy out
+
+
+def test_each_joint_is_bounded_by_its_own_devices_gains_and_the_layer_says_what_went_out() -> None:
+    with _whole_robot("actuated", ramp_time_s=0.2) as (emu, safe, _):
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        assert safe.safety_state is SafetyState.RUN
+        sent = safe.write(MotorCommand.hold(safe.read().q, 300.0, 20.0))
+        np.testing.assert_array_equal(sent.kp[:12], 300.0)  # within the legs' driver's bounds
+        np.testing.assert_array_equal(sent.kd[:12], 20.0)
+        np.testing.assert_array_equal(sent.kp[12:], ARM_KP_MAX)  # the arm's own, as its bus got them
+        np.testing.assert_array_equal(sent.kd[12:], ARM_KD_MAX)
+        assert safe.robot.gain_limits[0][12:].tolist() == [ARM_KP_MAX] * 3
 
 
 @pytest.mark.parametrize("arm_mode", ["actuated", "locked"])

@@ -123,7 +123,7 @@ def run_episode(
     buf = EpisodeBuffer(nq=7 + robot.num_joints, arm=arm)
     safety = robot if isinstance(robot, HasSafetyEvents) else None
     events_before = len(safety.safety_events()) if safety is not None else 0
-    bounds = command_bounds(robot.limits)
+    bounds = command_bounds(robot.limits, *robot.gain_limits)
     lower, upper = bounds
     clamped = 0
     clamped_rows = np.zeros(5, dtype=np.int64)  # per command row (q, dq, kp, kd, tau): ticks it was clamped

@@ -198,7 +198,10 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
                                where="a TOML file is not a controller (a scenario goes after --scenario, a plug-in's "
                                      "table after --controller-config)")
     problem = plugin_name_problem(name)  # a plug-in meant (a colon, a dot, a path), but written wrong
-    if problem is not None and not difflib.get_close_matches(re.sub(r"[._]", "-", name), [*CONTROLLERS, *usable],
+    def plain(text: str) -> str:  # a name with its separators alike: mpc.tail ~ mpc-tail, my.dottd ~ my.dotted
+        return re.sub(r"[._-]", "-", text)
+
+    if problem is not None and not difflib.get_close_matches(plain(name), [plain(n) for n in (*CONTROLLERS, *usable)],
                                                              n=1, cutoff=0.85):
         raise PluginNotFoundError(problem)
     raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS))  # a typo of a name suggests it

@@ -174,6 +174,9 @@ class QuadrupedArmRobot(Robot):
         self._limits = JointTable(names=self._names, **{
             f: np.concatenate([getattr(t, f) for t in tables])
             for f in ("lower", "upper", "torque_limit", "velocity_limit", "armature", "damping", "frictionloss")})
+        # each joint's gains bounded as its own device bounds them (the arm's current loop far below the legs')
+        self.gain_limits = tuple(np.concatenate([np.broadcast_to(np.asarray(p.gain_limits[k], dtype=float),
+                                                                  (p.num_joints,)) for p in parts]) for k in (0, 1))
         self._hold = MotorCommand.hold(self.config.stowed_q, self.config.hold_kp, self.config.hold_kd)
         self._held: MotorCommand | HeldRamp = self._hold  # what a locked arm gets: its hold, damping, or a ramp
         self._reset_frames()

@@ -34,8 +34,8 @@ KP_MAX = 1000.0  # [N m / rad] largest position gain a Unitree driver encodes (i
 KD_MAX = 100.0  # [N m s / rad] largest velocity gain accepted (the driver encodes more; none is stable above)
 
 
-def command_bounds(limits: JointTable, kp_max: float = KP_MAX,
-                   kd_max: float = KD_MAX) -> tuple[np.ndarray, np.ndarray]:
+def command_bounds(limits: JointTable, kp_max: float | np.ndarray = KP_MAX,
+                   kd_max: float | np.ndarray = KD_MAX) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of a command's rows (q, dq, kp, kd, tau), each (5, n): what `clamp_command` clips to.
 
     `kp_max` and `kd_max` are the robot's own gain bounds (`Robot.gain_limits`).
@@ -98,11 +98,12 @@ class Robot(ABC):
     """Abstract robot: proprioception in, low-level motor commands out.
 
     Attributes:
-        gain_limits: the largest (kp, kd) a write passes on: the Unitree driver's by default; a device whose loop is
-            closed slower or over less (the arm's current loop over its bus) sets its own.
+        gain_limits: the largest (kp, kd) a write passes on, each a number or one per joint: the Unitree driver's
+            by default; a device whose loop is closed slower or over less (the arm's current loop over its bus) sets
+            its own, and a robot of several devices (or a wrapper) gives each joint its device's.
     """
 
-    gain_limits: tuple[float, float] = (KP_MAX, KD_MAX)
+    gain_limits: tuple[float | np.ndarray, float | np.ndarray] = (KP_MAX, KD_MAX)
 
     def __init__(self) -> None:
         self._connected = False

@@ -114,6 +114,7 @@ class ProcessRobot(Robot):
         self._names = built.robot.joint_names
         self._motor_names = built.robot.motor_names if isinstance(built.robot, MotorNames) else ()
         self._limits = built.robot.limits
+        self.gain_limits = built.robot.gain_limits
         self._period = 1.0 / config.rate_hz
         self._start_timeout = start_timeout
         self._proc: subprocess.Popen[bytes] | None = None

@@ -76,6 +76,7 @@ class SafeRobot(Robot):
                  clock: Callable[[], float] | None = None) -> None:
         super().__init__()
         self.robot = robot
+        self.gain_limits = robot.gain_limits  # what the robot passes on is what this layer says it sent
         self.config = config if config is not None else SafetyConfig()
         self._clock = clock if clock is not None else (robot.wall_time if isinstance(robot, WallClock) else None)
         self._time = 0.0
