@@ -58,13 +58,17 @@ def test_a_worker_kept_alive_by_a_controllers_thread_is_stopped_with_a_warning(p
     assert "still ran 0.5 s after their trials ended" in capsys.readouterr().err
 
 
+def _command(tmp_path, module: str, source: str, *args: str) -> subprocess.CompletedProcess:
+    """``python -m wbc.cli ARGS`` in `tmp_path`, beside the plug-in `module` (`source`) and the short scenario."""
+    (tmp_path / f"{module}.py").write_text(textwrap.dedent(source).lstrip())
+    (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
+    return subprocess.run([sys.executable, "-m", "wbc.cli", *args, "--scenario", "short.toml", "--out", "out",
+                           "--quiet"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+
+
 def test_with_one_worker_the_command_line_still_plays_in_a_worker_process(tmp_path):
     # --workers 1 on the command line: a controller that ends its process costs its own trials, not the run
-    (tmp_path / "exits.py").write_text(textwrap.dedent(EXITS).lstrip())
-    (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
-    done = subprocess.run([sys.executable, "-m", "wbc.cli", "compare", "exits:make", "stand", "--scenario",
-                           "short.toml", "--trials", "2", "--workers", "1", "--out", "out", "--quiet"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=300)
+    done = _command(tmp_path, "exits", EXITS, "compare", "exits:make", "stand", "--trials", "2", "--workers", "1")
     assert done.returncode == 1, done.stderr  # a controller failed: status 1, and the report is written
     by = {(r.controller, r.trial): r for r in TrialRecord.read_csv(tmp_path / "out" / "trials.csv")}
     assert len(by) == 4 and all(by[("stand", i)].success for i in range(2))
@@ -74,11 +78,8 @@ def test_with_one_worker_the_command_line_still_plays_in_a_worker_process(tmp_pa
 
 def test_in_process_a_controller_that_ends_the_process_ends_the_run(tmp_path):
     # --in-process asks for it (a debugger, a profiler): the trials recorded before it are kept
-    (tmp_path / "exits.py").write_text(textwrap.dedent(EXITS).lstrip())
-    (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
-    done = subprocess.run([sys.executable, "-m", "wbc.cli", "compare", "stand", "exits:make", "--scenario",
-                           "short.toml", "--trials", "2", "--workers", "1", "--in-process", "--out", "out", "--quiet"],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    done = _command(tmp_path, "exits", EXITS, "compare", "stand", "exits:make", "--trials", "2", "--workers", "1",
+                    "--in-process")
     assert done.returncode == 3  # the plug-in's os._exit(3)
     records = TrialRecord.read_csv(tmp_path / "out" / "trials.csv")
     assert [(r.controller, r.trial) for r in records] == [("stand", 0)]
@@ -92,11 +93,7 @@ def test_in_process_refuses_what_needs_a_worker_process(capsys):
 
 def test_the_command_ends_past_a_thread_a_controller_left_running_in_its_own_process(tmp_path):
     # --in-process plays in the command's own process: the thread would have kept it alive after the report
-    (tmp_path / "spins.py").write_text(textwrap.dedent(SPINS).lstrip())
-    (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
-    done = subprocess.run([sys.executable, "-m", "wbc.cli", "run", "spins:make", "--scenario", "short.toml",
-                           "--trials", "1", "--workers", "1", "--in-process", "--out", "out", "--quiet"], cwd=tmp_path,
-                          capture_output=True, text=True, timeout=120)
+    done = _command(tmp_path, "spins", SPINS, "run", "spins:make", "--trials", "1", "--workers", "1", "--in-process")
     assert done.returncode == 0, done.stderr
     assert "thread(s) still running at the end" in done.stderr and "exiting without waiting for them" in done.stderr
     assert (tmp_path / "out" / "report.md").is_file()
