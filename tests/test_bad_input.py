@@ -534,12 +534,12 @@ def test_an_edited_copy_of_a_published_scenario_is_warned_about_by_every_command
     def stop(*args, **kwargs):
         raise ScenarioError(edited, "stopped by the test before any trial")
 
-    for name in ("arm_momentum_study", "bench_act", "bench_latency"):
+    for name in ("arm_momentum_study", "bench_act", "bench_latency", "check_controller"):
         monkeypatch.setattr(cli, name, stop)
     monkeypatch.setattr(view, "view_trial", stop)
     commands = (["analyze", "arm-momentum", "--trials", "1"], ["bench", "act", "stand"],
                 ["bench", "latency", "--controllers", "stand", "--no-wire"],
-                ["view", "stand", "--trial", "0", "--record", str(tmp_path / "v.html")])
+                ["view", "stand", "--trial", "0", "--record", str(tmp_path / "v.html")], ["check-controller", "stand"])
     for argv in commands:
         err = _cli_error(capsys, [*argv, "--scenario", str(edited)])
         assert err.startswith(warning), argv  # said before anything plays

@@ -1248,6 +1248,8 @@ def _check_controller(args: argparse.Namespace) -> int:
     for robot in args.robot or ():
         get_robot(robot)  # an unknown name fails here, listing the valid ones
     spec = get_controller(args.name, config=args.controller_config, io=args.io)
+    if args.scenario is not None:
+        _scenario_played(args.scenario)  # checked on an edited copy of a published file: said so
     result = check_controller(spec, CheckConfig(seconds=args.seconds, strict_timing=args.strict_timing,
                                                 robots=tuple(args.robot) if args.robot else None,
                                                 scenario=args.scenario, replay=args.replay))
