@@ -113,7 +113,7 @@ def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decima
     b_better = (entry.diff > 0) == higher_is_better
     lean = entry.rank_biserial if entry.rank_biserial is not None else entry.shift  # a summary.json of before
     if entry.p is not None and entry.p < ALPHA and lean is not None and (lean == 0.0 or (lean > 0) != (entry.diff > 0)):
-        return _split(entry, subject, unit, decimals, higher_is_better=higher_is_better)
+        return _split(entry, lean, subject, unit, decimals, higher_is_better=higher_is_better)
     better, worse = (entry.b, entry.a) if b_better else (entry.a, entry.b)
     m_better, m_worse = (entry.mean_b, entry.mean_a) if b_better else (entry.mean_a, entry.mean_b)
     lo, hi = entry.ci95
@@ -128,17 +128,18 @@ def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decima
     return text
 
 
-def _split(entry: PairSummary, subject: str, unit: str, decimals: int, *, higher_is_better: bool) -> str:
-    """A significant Wilcoxon test that leans to one side while the mean difference lies on the other: neither wins."""
+def _split(entry: PairSummary, side: float, subject: str, unit: str, decimals: int, *,
+           higher_is_better: bool) -> str:
+    """A significant Wilcoxon test that leans to `side` (its sign), the mean difference to the other: neither wins."""
     unit = f" {unit}" if unit else ""
-    side = entry.rank_biserial if entry.rank_biserial is not None else entry.shift
     if not side:
         lean = "the pairs' ranks lean to neither"
     else:
         favoured = entry.b if (side > 0) == higher_is_better else entry.a
-        size = "" if entry.shift is None else f", Hodges-Lehmann shift {signed(entry.shift, decimals)}{unit}"
-        r = "" if entry.rank_biserial is None else f"rank-biserial r = {entry.rank_biserial:+.2f}"
-        lean = f"the pairs' ranks favour {favoured} ({r}{size})".replace("(, ", "(")
+        figures = [f"rank-biserial r = {entry.rank_biserial:+.2f}"] if entry.rank_biserial is not None else []
+        if entry.shift is not None:
+            figures.append(f"Hodges-Lehmann shift {signed(entry.shift, decimals)}{unit}")
+        lean = f"the pairs' ranks favour {favoured} ({', '.join(figures)})"
     by_mean = entry.b if (entry.diff > 0) == higher_is_better else entry.a
     return (f"{entry.a} and {entry.b} differ in {subject}, but not one way: {lean}, while the mean difference "
             f"({signed(entry.diff, decimals)}{unit} on {entry.n} trials, B - A with B = {entry.b}) favours {by_mean} "
