@@ -415,6 +415,48 @@ def test_an_interrupted_dagger_round_keeps_the_finished_rounds_samples_once(tmp_
         assert list(data["episode"]) == [0] * 5 + [1] * 5
 
 
+@pytest.mark.parametrize("stopped_at", ["progress.json", "student.pt"])
+def test_a_dagger_run_resumed_after_a_round_wrote_its_student_ends_with_the_uninterrupted_runs(
+        tmp_path, monkeypatch, stopped_at):
+    """Round 1 stops after its own student is written: before its progress (the round is not finished: it plays
+    again from round 0's student), or after it while the run's current student is replaced. Resumed, the run ends
+    with the student, the policy and the rounds of the same run never stopped."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log file here
+    from contextlib import contextmanager
+
+    import wbc.tools.dagger as dagger
+    from wbc.cli.main import main
+
+    args = ["train", "--task", "push", "--teacher", "mpc", "--rounds", "3", "--episodes", "1", "--episode-s", "0.1"]
+    assert main([*args, "--run-root", str(tmp_path / "whole")]) == 0
+    run = tmp_path / "stopped" / "push-dagger-mpc"
+    replacing = dagger._replacing
+
+    @contextmanager
+    def stop_in_round_1(path):
+        progress = run / "progress.json"
+        finished = len(json.loads(progress.read_text())["rounds"]) if progress.exists() else 0
+        if path.name == stopped_at and finished == (1 if stopped_at == "progress.json" else 2):
+            raise KeyboardInterrupt
+        with replacing(path) as f:
+            yield f
+
+    monkeypatch.setattr(dagger, "_replacing", stop_in_round_1)
+    assert main([*args, "--run-root", str(tmp_path / "stopped")]) == 130
+    assert (run / "rounds" / "student-1.pt").is_file()  # round 1's own student was written before it stopped
+    monkeypatch.setattr(dagger, "_replacing", replacing)
+    assert main([*args, "--run-root", str(tmp_path / "stopped"), "--resume"]) == 0
+    whole = tmp_path / "whole" / "push-dagger-mpc"
+    samples = [[r["samples_total"] for r in json.loads((d / "progress.json").read_text())["rounds"]]
+               for d in (whole, run)]
+    assert samples[0] == samples[1] and len(samples[0]) == 3
+    for name in ("policy.npz", "rounds/policy-1.npz", "rounds/policy-2.npz"):
+        with np.load(whole / name) as a, np.load(run / name) as b:
+            assert a.files == b.files and all(np.array_equal(a[k], b[k]) for k in a.files), name
+    states = [torch.load(d / "student.pt", weights_only=True)["state"] for d in (whole, run)]
+    assert all(torch.equal(states[0][k], states[1][k]) for k in states[0])
+
+
 @pytest.fixture(scope="module")
 def dagger_run(tmp_path_factory) -> Path:
     """A finished one-round, one-episode DAgger run: its run root."""
@@ -434,7 +476,11 @@ def dagger_run(tmp_path_factory) -> Path:
     (lambda run: (run / "progress.json").write_text('{"rounds": [{}]}'), "progress.json: rounds: missing"),
     (lambda run: (run / "data.npz").unlink(), "data.npz: no such file"),
     (lambda run: (run / "data.npz").write_bytes((run / "data.npz").read_bytes()[:100]), "data.npz: not readable"),
-    (lambda run: (run / "student.pt").write_bytes((run / "student.pt").read_bytes()[:100]),
+    (lambda run: (run / "rounds" / "student-0.pt").write_bytes((run / "rounds" / "student-0.pt").read_bytes()[:100]),
+     "student-0.pt: not a readable student"),
+    # a run that kept no student per round resumes from its student.pt
+    (lambda run: ((run / "rounds" / "student-0.pt").unlink(),
+                  (run / "student.pt").write_bytes((run / "student.pt").read_bytes()[:100])),
      "student.pt: not a readable student"),
 ])
 def test_a_dagger_resume_refuses_a_damaged_run_directory_in_one_line(dagger_run, tmp_path, capsys, damage, said):

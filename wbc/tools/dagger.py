@@ -9,8 +9,10 @@ expert with probability beta^k and otherwise by the current student, whose mista
 never visits under the expert (Ross et al., 2011). After each round the student is fitted to everything collected so far
 (`fit_student`) and exported (``<run_dir>/policy.npz/.json``), with the data (``data.npz``) and the round's figures
 (``progress.json``): a run that stops loses at most the round in progress, and ``resume`` continues after the last
-finished round. Each round's export also stays as ``<run_dir>/rounds/policy-<k>``: the episodes the student drives in
-round k + 1 measure the student fitted in round k, on training seeds.
+finished round, from that round's student. Each round's student also stays, as ``<run_dir>/rounds/policy-<k>`` and
+``rounds/student-<k>.pt``: the episodes the student drives in round k + 1 measure the student fitted in round k, on
+training seeds, and a resumed run starts from the student of its last finished round even where the round after it
+had already replaced the run's ``policy`` and ``student.pt`` when it stopped.
 
 While the expert drives, the student's previous-action input is the expert's action as a policy would have sent it,
 so the observation means the same thing under both drivers. The samples of each episode are kept in time order with
@@ -324,6 +326,30 @@ def _replacing(path: Path) -> Iterator[BinaryIO]:
 _DAMAGED = "the run directory is damaged: start a new run under another --run-root"
 
 
+def _round_student(run_dir: Path, k: int) -> Path:
+    """Where round `k` keeps its fitted student (``rounds/student-<k>.pt``)."""
+    return run_dir / "rounds" / f"student-{k}.pt"
+
+
+def _current_from_round(run_dir: Path, k: int) -> None:
+    """Make round `k`'s student the run's current one: ``student.pt`` and ``policy.npz/.json`` copied from its own.
+
+    A file already equal to the round's is left as it is; so is one the round did not keep (a run that kept no
+    student per round has ``student.pt`` only).
+    """
+    rounds = run_dir / "rounds"
+    pairs = [(_round_student(run_dir, k), run_dir / "student.pt")]
+    pairs += [(rounds / f"policy-{k}{ext}", run_dir / f"policy{ext}") for ext in (".npz", ".json")]
+    for kept, current in pairs:
+        if not kept.is_file():
+            continue
+        data = kept.read_bytes()
+        if current.is_file() and current.read_bytes() == data:
+            continue
+        with _replacing(current) as f:
+            f.write(data)
+
+
 def _resumed(run_dir: Path, resolved: dict[str, Any]) -> tuple[dict[str, Any], list, list, list]:
     """What a resumed run continues from: its progress and the samples of its finished rounds.
 
@@ -432,10 +458,12 @@ def check_dagger_run(cfg: DaggerConfig, *, resume: bool) -> DaggerStart:
                           "--run-root")
     net: StudentNet | None = None
     if progress["rounds"]:
+        kept = _round_student(run_dir, len(progress["rounds"]) - 1)
+        source = kept if kept.is_file() else run_dir / "student.pt"  # a run that kept no student per round
         try:
-            net = load_student(run_dir / "student.pt")
+            net = load_student(source)
         except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
-            raise ConfigError(f"--resume: {run_dir / 'student.pt'}: not a readable student ({type(exc).__name__}); "
+            raise ConfigError(f"--resume: {source}: not a readable student ({type(exc).__name__}); "
                               f"{_DAMAGED}") from None
     return DaggerStart(expert_spec=expert_spec, make_expert=make_expert, progress=progress, obs=obs, actions=actions,
                        episode=episode, net=net)
@@ -472,6 +500,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
              "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
     student_path = run_dir / "policy"
     start_round = len(progress["rounds"])
+    if start_round:  # a run stopped after a round wrote its student and before its progress: that round plays again
+        _current_from_round(run_dir, start_round - 1)
     wall_before = sum(r["wall_s"] for r in progress["rounds"])
     for k in range(start_round, cfg.rounds):
         t0 = time.perf_counter()
@@ -533,17 +563,20 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
                  "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
                      start_round:])}
-        # each file replaced whole: a run stopped while writing keeps the previous round's
+        # each file replaced whole: a run stopped while writing keeps the previous round's. The round's own files
+        # first, then its progress (the round is finished once that is written), then the run's current student:
+        # a resumed run starts from the student of its last finished round, whatever the next round wrote
         with _replacing(run_dir / "data.npz") as f:
             np.savez(f, obs=obs, actions=actions, episode=episode_ids)
-        with _replacing(run_dir / "student.pt") as f:
+        # each round's student stays: the next round's figures measure it, and the newest is not always the best
+        _round_student(run_dir, k).parent.mkdir(parents=True, exist_ok=True)
+        with _replacing(_round_student(run_dir, k)) as f:
             save_student(net, f)
         exported = student_policy_file(net, env, task=cfg.task, extra=extra)
-        save_policy(student_path, exported)
-        # each round's student stays: the next round's figures measure it, and the newest is not always the best
         save_policy(run_dir / "rounds" / f"policy-{k}", exported)
         with _replacing(run_dir / "progress.json") as f:
             f.write((json.dumps(progress, indent=2, default=float) + "\n").encode())
+        _current_from_round(run_dir, k)
         if log is not None:
             log(f"round {k}: {len(episodes)} episodes ({len(student_rounds)} driven by the student, "
                 f"{summary['student_falls']} of them fell, {summary['student_takeovers']} taken over), "
