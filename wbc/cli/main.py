@@ -1097,6 +1097,7 @@ def _view(args: argparse.Namespace) -> int:
 
         stored = load_stored_episode(args.episode, args.trial, controller=args.controller or args.ctrl,
                                      band=args.band, seed=args.seed)
+        warn_if_unpublished(stored.scenario)  # the run's content, replayed as any other command plays a scenario
         _check_at(args.at, stored.trial.duration_s)
         result = replay_episode(stored, cfg)
         what = f"{stored.path}"
@@ -1200,6 +1201,7 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
 
         first, second = (load_stored_episode(args.episode, args.trial, controller=c, band=args.band, seed=args.seed)
                          for c in ctrls)
+        warn_if_unpublished(first.scenario)  # one run's, so both controllers': said once
         _check_at(args.at, first.trial.duration_s)
         result = replay_ab(first, second, cfg, path)
     else:
