@@ -634,6 +634,40 @@ def test_bench_sim_refuses_a_batch_whose_rollout_buffers_would_not_fit_before_al
                      r"11\d{3} or less$", err, re.MULTILINE)
 
 
+def test_bench_train_refuses_envs_whose_buffers_would_not_fit_before_allocating_them(monkeypatch, capsys):
+    import wbc.tools.bench.batched_rollout as batched
+    import wbc.tools.bench.train as train
+
+    built = []
+    real_env = train.BatchedEnv
+
+    def env(config):
+        if config.num_envs != 1:  # the sizes are read from an env of one environment; no other is built
+            raise AssertionError(f"an env of {config.num_envs} environments was built before the memory was checked")
+        built.append(config.num_envs)
+        return real_env(config)
+
+    def allocate(*args, **kwargs):
+        raise AssertionError("the reference's rollout buffers were allocated before the memory was checked")
+
+    monkeypatch.setattr(batched, "available_memory_bytes", lambda: 10**9)
+    monkeypatch.setattr(train, "BatchedEnv", env)
+    monkeypatch.setattr(train, "BatchedRollout", allocate)
+    err = _cli_error(capsys, ["bench", "train", "--envs", "65536", "--threads", "1", "--no-reference"])
+    # per environment, 8 bytes x (twice the env's state, controls, rollout states, sensor data and torques: 2196
+    # numbers; the bench's 50 x 15 random actions and its copies: 1438): 46640 bytes
+    assert re.search(r"^wbc: error: --envs 65536: the training env's buffers and the bench's \(65536 environments, 50 "
+                     r"steps of random actions\) need about 3\.\d GB, more than 50% of the memory available \(1\.0 "
+                     r"GB\); give --envs 10\d{3} or less$", err, re.MULTILINE)
+    assert built == [1]
+    err = _cli_error(capsys, ["bench", "train", "--envs", "64", "--threads", "1", "--steps", "1000000"])
+    assert "(64 environments, 1000000 steps of random actions) need about 7" in err and "give --envs 4 or less" in err
+    monkeypatch.setattr(batched, "available_memory_bytes", lambda: 10**8)
+    err = _cli_error(capsys, ["bench", "train", "--envs", "64", "--threads", "1", "--steps", "1000000"])
+    assert err.rstrip().endswith("give fewer --steps, or free some memory (no environment fits in what is left)")
+    assert built == [1, 1, 1]
+
+
 def test_the_rollout_memory_check_reads_meminfo_and_refuses_nothing_where_the_system_does_not_tell(tmp_path,
                                                                                                 monkeypatch):
     from wbc.tools.bench import batched_rollout as batched

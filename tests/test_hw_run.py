@@ -400,6 +400,20 @@ def test_non_loopback_target_is_refused_before_any_socket(no_socket: list, monke
     assert not no_socket
 
 
+def test_the_vendor_transport_for_the_scenarios_a1_names_the_options_and_the_scenario_before_any_socket(
+        no_socket: list, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # no --robot: the scenario's robot (the push scenario's a1-wx200) is the one refused, not an internal field
+    assert load_scenario(PUSH).robot == "a1-wx200"
+    assert main(["hw", "run", "stand", "--arm", "none", "--scenario", PUSH, "--trial", "0", "--target", "127.0.0.1:9",
+                 "--transport", "sdk", "--out", str(tmp_path / "run")]) == 2
+    err = capsys.readouterr().err
+    assert (f"wbc: error: --transport sdk: the vendor SDK speaks only the go1's wire, not the a1's (the a1-wx200, "
+            f"{PUSH}'s robot, played as no --robot is given); leave --transport out for it (udp, our own socket), or "
+            "give --robot go1-arm to play it on the go1") in err
+    assert "UnitreeRobotConfig" not in err and "binds its port" not in err and not no_socket
+    assert not (tmp_path / "run").exists()
+
+
 def test_the_same_protocol_on_the_simulator(tmp_path: Path, no_socket: list,
                                             capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "sim"

@@ -18,9 +18,10 @@ import umsgpack
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
-from wbc.errors import ConfigError
+from wbc.errors import ConfigError, ScenarioError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.robots.registry import get_robot
+from wbc.scenario.lock import check_published
 from wbc.scenario.push import Push
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.terrain import TerrainConfig
@@ -336,6 +337,40 @@ def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys, monkey
     assert main(["view", "--episode", str(results_dir), "--trial", "1", "--record", str(tmp_path / "r.html"),
                  "--open"]) == 0
     assert opened[1] == (tmp_path / "r.html").resolve().as_uri()
+
+
+def test_a_stored_run_of_an_unpublished_scenario_is_warned_about_as_every_command_that_plays_one_warns(
+        results_dir, short, tmp_path, capsys, monkeypatch):
+    import wbc.viz.server as server
+    import wbc.viz.view as view
+
+    monkeypatch.setattr(server.subprocess, "Popen", lambda *a, **k: pytest.fail("a server was started"))
+    # the run played `short`, which no lock lists: the warning `wbc run` gave, said before the replay
+    warning = "wbc: warning: " + str(pytest.raises(ScenarioError, check_published, load_scenario(short)).value)
+    assert "unpublished" in warning
+    assert main(["view", "--episode", str(results_dir), "--trial", "1", "--record", str(tmp_path / "r.html")]) == 0
+    assert capsys.readouterr().err == warning + "\n"
+
+    def stop(*args, **kwargs):
+        raise ViewerError("stopped by the test before the replay")
+
+    monkeypatch.setattr(view, "replay_ab", stop)  # an A / B of two stored runs of the same run: said once
+    assert main(["view", "stand", "stand", "--episode", str(results_dir), "--trial", "1", "--record",
+                 str(tmp_path / "ab.html")]) == 2
+    assert capsys.readouterr().err == warning + "\nwbc: error: stopped by the test before the replay\n"
+    # the same run of the scenario published (the lock beside it lists its hash): replayed without a warning
+    published = tmp_path / "published" / short.name
+    published.parent.mkdir()
+    shutil.copy(short, published)
+    scenario = load_scenario(published)
+    (published.parent / "published.toml").write_text(f'[{scenario.name}]\n"{scenario.version}" = "{scenario.hash}"\n')
+    run = tmp_path / "run"
+    shutil.copytree(results_dir, run)
+    config = json.loads((run / "run.json").read_text())
+    config["config"]["scenario"]["path"] = str(published)
+    (run / "run.json").write_text(json.dumps(config))
+    assert main(["view", "--episode", str(run), "--trial", "1", "--record", str(tmp_path / "p.html")]) == 0
+    assert capsys.readouterr().err == ""
 
 
 # -- pacing ----------------------------------------------------------------------------------------------------------

@@ -356,10 +356,15 @@ def unpowered_arm_warning(controller: str, arm_mode: str, arm_port: str | None, 
             "controller does not model)")
 
 
-def _check_transport(args: argparse.Namespace) -> None:
+def _check_transport(args: argparse.Namespace, *, scenario: str | None = None) -> None:
     """Check ``--transport`` against ``--robot``, then with ``sdk`` say that the vendor SDK listens on every interface.
 
     The link's config refuses the same (`UnitreeRobotConfig`), naming its own field; here the options are named.
+
+    Args:
+        args: the command's arguments (``transport``, ``robot``).
+        scenario: the scenario file whose robot is played when ``--robot`` is left out (``hw run``); that robot is
+            checked then, and the refusal names the file and ``--robot``.
 
     Raises:
         UnknownNameError: ``--transport`` names no transport.
@@ -368,10 +373,17 @@ def _check_transport(args: argparse.Namespace) -> None:
     transport = getattr(args, "transport", None)
     if transport is not None and transport not in TRANSPORTS:
         raise UnknownNameError("Unitree transport", transport, TRANSPORTS, where="--transport")
-    wire = _WIRE_OF.get(args.robot) if getattr(args, "robot", None) is not None else None
+    robot = getattr(args, "robot", None)
+    named, otherwise = f"--robot {robot}", ""
+    if robot is None and scenario is not None and transport == "sdk":
+        robot = load_scenario(scenario).robot
+        named = f"the {robot}, {scenario}'s robot, played as no --robot is given"
+        otherwise = (f", or give --robot {' or '.join(DESCRIPTIONS[w] for w in SDK_ROBOTS)} to play it on the "
+                     f"{' or '.join(SDK_ROBOTS)}")
+    wire = _WIRE_OF.get(robot) if robot is not None else None
     if transport == "sdk" and wire is not None and wire not in SDK_ROBOTS:
         raise ConfigError(f"--transport sdk: the vendor SDK speaks only the {' and '.join(SDK_ROBOTS)}'s wire, not "
-                          f"the {wire}'s (--robot {args.robot}); leave --transport out for it (udp, our own socket)")
+                          f"the {wire}'s ({named}); leave --transport out for it (udp, our own socket){otherwise}")
     if transport == "sdk":
         print("wbc: note: --transport sdk: the vendor SDK binds its port on every interface (it takes no local "
               "address); its socket is connected to the target, so only the target's datagrams reach it",
@@ -521,7 +533,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
     host, port = _hardware_target(args, "run a trial on a real robot") if not args.sim else (None, None)
     local = _hardware_local(args, "run a trial on a real robot")
     arm_port = _hardware_arm_port(args, "run a trial on a real arm")
-    _check_transport(args)
+    _check_transport(args, scenario=args.scenario)
     if not args.sim and not args.io_process:
         print("wbc: warning: --no-io-process: the robot's devices run in this process; if it dies, nothing damps the "
               "legs, whose motors keep the last command they got (the robot has no watchdog). For debugging only",
@@ -1085,6 +1097,7 @@ def _view(args: argparse.Namespace) -> int:
 
         stored = load_stored_episode(args.episode, args.trial, controller=args.controller or args.ctrl,
                                      band=args.band, seed=args.seed)
+        warn_if_unpublished(stored.scenario)  # the run's content, replayed as any other command plays a scenario
         _check_at(args.at, stored.trial.duration_s)
         result = replay_episode(stored, cfg)
         what = f"{stored.path}"
@@ -1188,6 +1201,7 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
 
         first, second = (load_stored_episode(args.episode, args.trial, controller=c, band=args.band, seed=args.seed)
                          for c in ctrls)
+        warn_if_unpublished(first.scenario)  # one run's, so both controllers': said once
         _check_at(args.at, first.trial.duration_s)
         result = replay_ab(first, second, cfg, path)
     else:

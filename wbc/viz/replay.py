@@ -24,7 +24,7 @@ from wbc.control.registry import get_controller
 from wbc.errors import EpisodeFileError, RecordError, WbcError
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.registry import get_robot
-from wbc.scenario.scenario import load_scenario
+from wbc.scenario.scenario import Scenario, load_scenario
 from wbc.scenario.terrain import TerrainConfig
 from wbc.scenario.trial import Trial
 from wbc.viz.content import SceneContent
@@ -68,12 +68,16 @@ class StoredEpisode:
         controller: who played it.
         trial: the trial (robot, ground, pushes as sampled).
         episode: the log.
+        scenario: the scenario file the trial was drawn from, as loaded: the run's content (its hash is the one
+            ``run.json`` records), which a command warns about when it is not the published one
+            (`wbc.scenario.warn_if_unpublished`).
     """
 
     path: Path
     controller: str
     trial: Trial
     episode: Episode
+    scenario: Scenario
 
     def content(self) -> SceneContent:
         """What to draw: the controller's robot (arm mode) on the trial's ground."""
@@ -158,4 +162,4 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
         raise ViewerError(f"{path}: field qpos: shape {episode.qpos.shape}, expected (ticks, {nq}) for "
                           f"{trial.robot} driven by {controller}; the file belongs to another run: store it again "
                           "with `wbc run --save-episodes`")
-    return StoredEpisode(path=path, controller=controller, trial=trial, episode=episode)
+    return StoredEpisode(path=path, controller=controller, trial=trial, episode=episode, scenario=scenario)

@@ -3,7 +3,7 @@
 Both benches time the same batched physics, on their own robot and on the bare-A1 reference, interleaved in the same
 repeats so that the two figures see the same machine. A rollout keeps every step's state of every copy, so its buffers
 grow with the batch times the steps: `check_rollout_memory` refuses a batch whose buffers would not fit before they
-are allocated.
+are allocated, with `check_memory`, which ``bench train`` refuses its environments with too.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from mujoco import rollout
 
 from wbc.errors import ConfigError
 
-__all__ = ["MEMORY_SHARE", "BatchedRollout", "available_memory_bytes", "check_rollout_memory", "rollout_bytes"]
+__all__ = ["MEMORY_SHARE", "BatchedRollout", "available_memory_bytes", "check_memory", "check_rollout_memory",
+           "rollout_bytes"]
 
 MEMORY_SHARE = 0.5
 """The most of the available memory (`available_memory_bytes`) the rollouts' buffers may take."""
@@ -66,15 +67,36 @@ def check_rollout_memory(models: Sequence[mujoco.MjModel], batch: int, nstep: in
             `option`, the estimate, the memory available and the largest batch that fits.
     """
     need = sum(rollout_bytes(model, batch, nstep) for model in models)
+    check_memory(option, batch, need, each=need / batch,
+                 what=f"the batched rollouts' buffers ({batch} environments x {nstep} steps)",
+                 none_fits="free some memory (no batch fits in what is left)")
+
+
+def check_memory(option: str, count: int, need: float, *, each: float, what: str, none_fits: str) -> None:
+    """Refuse `count`, the value of `option`, when the `need` bytes it takes exceed `MEMORY_SHARE` of available memory.
+
+    Where the system does not tell how much memory is available (`available_memory_bytes`), nothing is refused.
+
+    Args:
+        option: the command-line option that sets `count`, named in the message.
+        count: its value.
+        need: the bytes `count` takes in all.
+        each: the bytes each unit of `count` takes; the rest of `need` is taken whatever `count` is. The message
+            gives the largest `count` that fits.
+        what: what takes them, for the message (``the batched rollouts' buffers (N environments x S steps)``).
+        none_fits: what the message advises when not even a `count` of 1 fits.
+
+    Raises:
+        ConfigError: `need` is more than `MEMORY_SHARE` of the available memory; the message names `option`, the
+            estimate, the memory available and the largest `count` that fits.
+    """
     available = available_memory_bytes()
     if available is None or need <= MEMORY_SHARE * available:
         return
-    fits = int(MEMORY_SHARE * available // (need / batch))
-    advice = (f"give {option} {fits} or less" if fits >= 1
-              else "free some memory (no batch fits in what is left)")
-    raise ConfigError(f"{option} {batch}: the batched rollouts' buffers ({batch} environments x {nstep} steps) need "
-                      f"about {need / 1e9:.1f} GB, more than {MEMORY_SHARE:.0%} of the memory available "
-                      f"({available / 1e9:.1f} GB); {advice}")
+    fits = int((MEMORY_SHARE * available - (need - each * count)) // each)
+    advice = f"give {option} {fits} or less" if fits >= 1 else none_fits
+    raise ConfigError(f"{option} {count}: {what} need about {need / 1e9:.1f} GB, more than {MEMORY_SHARE:.0%} of the "
+                      f"memory available ({available / 1e9:.1f} GB); {advice}")
 
 
 class BatchedRollout:

@@ -15,6 +15,7 @@ scaled to this machine's speed (``scaled_target_control_steps_per_s``).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -24,7 +25,7 @@ from mujoco import rollout
 
 from wbc.learned.env.env import BatchedEnv
 from wbc.learned.env.env_config import EnvConfig
-from wbc.tools.bench.batched_rollout import BatchedRollout
+from wbc.tools.bench.batched_rollout import BatchedRollout, check_memory, rollout_bytes
 from wbc.tools.bench.references import (
     REFERENCE_STEPS_PER_CONTROL_STEP,
     TRAIN_TARGET,
@@ -34,7 +35,10 @@ from wbc.tools.bench.references import (
     scaled_target,
 )
 
-__all__ = ["TrainBenchResult", "TrainReference", "bench_train"]
+__all__ = ["TrainBenchResult", "TrainReference", "bench_train", "check_train_memory"]
+
+REFERENCE_BATCH, REFERENCE_STEPS = 64, 500
+"""The bare-A1 reference's batched rollout: environments, physics steps per rollout."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -156,12 +160,19 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
     Returns:
         The env's control steps per second beside the physics limit, its CPU-time figures and the settings; with
         `reference` also the bare-A1 limit and `TRAIN_TARGET` scaled by it (`TrainReference`).
+
+    Raises:
+        ConfigError: the environments' buffers, the bench's and the reference's would take more than half the memory
+            available (`check_train_memory`; the message names ``--envs``), checked before any is allocated.
     """
     cfg = config if config is not None else EnvConfig()
+    ref_model = reference_a1() if reference else None
+    check_train_memory(cfg, steps=steps, reference=None if ref_model is None else ref_model[0])
     env = BatchedEnv(cfg)
     rng = np.random.default_rng(0)
     n = cfg.num_envs
-    ref = BatchedRollout(*reference_a1(), batch=64, nthread=cfg.nthread, nstep=500) if reference else None
+    ref = (BatchedRollout(*ref_model, batch=REFERENCE_BATCH, nthread=cfg.nthread, nstep=REFERENCE_STEPS)
+           if ref_model is not None else None)
     best_ref = 0.0
     try:
         for _ in range(5):
@@ -219,3 +230,42 @@ def bench_train(config: EnvConfig | None = None, *, steps: int = 50, repeats: in
         load_1min=load_1min(),
         reference=figures,
     )
+
+
+def check_train_memory(config: EnvConfig, *, steps: int, reference: mujoco.MjModel | None = None) -> None:
+    """Refuse a `config.num_envs` whose buffers in `bench_train` would not fit in memory, before any is allocated.
+
+    The sizes are read from an env of one environment and one model variant (the variants share them), so nothing
+    grows with `config.num_envs` here; `wbc.tools.bench.batched_rollout.check_memory` refuses beyond its share of the
+    memory available.
+
+    Args:
+        config: the env to be benched.
+        steps: policy steps per measurement (the bench draws every step's random actions before it times them).
+        reference: the bare-A1 reference's model, when it is measured too (its rollout does not grow with the envs).
+
+    Raises:
+        ConfigError: the estimate is more than `MEMORY_SHARE` of the memory available; the message names ``--envs``,
+            the estimate, the memory available and the most environments that fit.
+    """
+    probe = BatchedEnv(dataclasses.replace(config, num_envs=1,
+                                           domain=dataclasses.replace(config.domain, num_variants=1)))
+    dec = config.decimation
+    # An over-estimate, in float64 numbers per environment, of what `BatchedEnv` allocates and the bench adds:
+    # - the env's buffers: the state, and per physics step of a policy step the controls, the rollout's states, its
+    #   sensor data and the motor torques;
+    # - the env's small per-environment vectors (commands, actions, IMU, episode sums) and a step's temporaries (push
+    #   wrenches, torques, observations, rewards): each a fraction of those buffers, counted as the buffers once more;
+    # - the bench's own: every step's random actions of one measurement, and the copies of the state, the controls
+    #   and the rollout's states that the physics-only measurement rolls out with.
+    # Against the peak resident memory of the push env (a1-wx200, arm actuated), this is about 1.4x what an
+    # environment takes at 50 steps, and 1.1x at 500 (where the actions, counted exactly, are most of it).
+    buffers = probe.nstate + dec * (probe.ncontrol + probe.nstate + probe.pool.model.nsensordata
+                                    + probe.desc.num_joints)
+    bench = steps * probe.num_actions + probe.nstate + dec * (probe.ncontrol + probe.nstate)
+    each = 8 * (2 * buffers + bench)
+    n = config.num_envs
+    fixed = 0 if reference is None else rollout_bytes(reference, REFERENCE_BATCH, REFERENCE_STEPS)
+    check_memory("--envs", n, n * each + fixed, each=each,
+                 what=f"the training env's buffers and the bench's ({n} environments, {steps} steps of random actions)",
+                 none_fits="give fewer --steps, or free some memory (no environment fits in what is left)")
