@@ -1051,7 +1051,9 @@ def test_a_client_of_another_model_is_told_to_check_the_robot_on_both_sides() ->
     rig = _stepped("go1")
     cfg = UnitreeRobotConfig(robot="a1", target_host=LOOPBACK, target_port=9, connect_timeout=0.05)
     robot = UnitreeRobot(cfg, rig.emu.transport(rig.clock), clock=rig.clock)
-    with pytest.raises(RobotLinkError, match=r"nothing came back at all.*go1\) ignores an a1's LowCmd.*--robot"):
+    with pytest.raises(RobotLinkError,
+                       match=r"nothing came back at all.*port of --target right.*go1\) ignores an a1's LowCmd"
+                             r".*--robot"):
         robot.connect()
     assert rig.emu.stats.length >= 0.05 / LINK_PERIOD and rig.emu.stats.accepted == 0
     assert "610 bytes is an a1 LowCmd, and this side speaks go1; check --robot on both sides" in rig.emu.last_reject

@@ -165,9 +165,9 @@ def _no_state_hint(robot: str, stats: DecodeStats, foreign: int = 0) -> str:
                 "too)")
     if stats.rejected:
         return "frames came but none was a valid low-level LowState; is the robot in low-level mode?"
-    return ("nothing came back at all: is the robot (or emulator) on, in low-level mode, and is target_port right? A "
-            f"robot of another model ({others}) ignores {with_article(robot)}'s LowCmd, whose length it does not "
-            "expect: check that --robot names this robot (on the emulator too)")
+    return ("nothing came back at all: is the robot (or emulator) on, in low-level mode, and is the port of --target "
+            f"right? A robot of another model ({others}) ignores {with_article(robot)}'s LowCmd, whose length it does "
+            "not expect: check that --robot names this robot (on the emulator too)")
 
 
 class UnitreeRobot(Robot):
