@@ -160,6 +160,25 @@ def test_check_shows_the_estop_buttons(capsys: pytest.CaptureFixture[str]) -> No
     assert "remote buttons: L2, B  (L2+B held: e-stop)" in capsys.readouterr().out
 
 
+def test_check_of_a_robot_that_sends_nothing_is_a_result_not_an_error(capsys: pytest.CaptureFixture[str]) -> None:
+    """No state stream at all is what the check found (status 1, said on its line with what to check), as a refusal
+    is; a usage error (status 2) is for options and targets refused before anything connects."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as silent:  # bound, and never answers
+        silent.bind(("127.0.0.1", 0))
+        port = silent.getsockname()[1]
+        assert main(["hw", "check", "--robot", "go1", "--target", f"127.0.0.1:{port}", "--seconds", "0.1"]) == 1
+        silent.setblocking(False)
+        heard = silent.recv(4096)  # the link damped a silent robot: it sent its frames all the same
+    captured = capsys.readouterr()
+    assert "error" not in captured.err and "Traceback" not in captured.err
+    first, *rest = captured.out.splitlines()
+    assert first.startswith(f"go1 at 127.0.0.1:{port}: no live state stream: ")
+    assert "nothing came back at all: is the robot (or emulator) on" in first  # the link's hint
+    assert any(line.startswith("  safety: waiting: no live state stream") for line in rest)
+    assert any(line.startswith("  link: ") and "all damping" in line for line in rest)
+    assert len(heard) == frame_layout("go1").cmd_size
+
+
 @pytest.mark.parametrize("target", [NOT_LOOPBACK, "198.51.100.7:9000"])
 def test_non_loopback_target_is_refused_before_any_socket(target: str, no_socket: list,
                                                           capsys: pytest.CaptureFixture[str]) -> None:

@@ -182,6 +182,13 @@ def test_verdicts_name_the_better_side_only_when_the_test_says_so():
     assert verdict(pair("ttf", 0.0, 1.0, n80=None)) == "TTF: no significant difference (p = 1)"
 
 
+def test_a_verdict_from_one_pair_says_that_one_pair_cannot_size_the_test():
+    one = PairSummary(a="pi2", b="pi3", band="in", metric="ttf", diff=1.5, ci95=(None, None), interval=None, n=1,
+                      mean_a=None, mean_b=None, test="Wilcoxon signed-rank", p=1.0, n80=None, a_only=None, b_only=None)
+    assert verdict(one) == ("TTF: no significant difference (p = 1; one pair shows no spread to tell how many pairs "
+                            "would detect the observed difference)")
+
+
 def test_the_paper_rows_are_the_published_ones():
     assert [row for row in TABLE_I] == ["No arm", "Locked", "Actuated"]
     assert TABLE_I["Locked"]["success_rate"][1].mean == pytest.approx(0.4583)

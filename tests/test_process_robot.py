@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 from wbc.control.stand import StandController
-from wbc.errors import PortBusyError, RobotLinkError, TargetRefusedError
+from wbc.errors import NoStateStreamError, PortBusyError, RobotLinkError, TargetRefusedError
 from wbc.hardware.capabilities import HeldJoints
 from wbc.hardware.dynamixel import DynamixelArmConfig
 from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
@@ -263,7 +263,8 @@ def test_refusals_and_connect_failures_are_the_in_process_errors() -> None:
         robot = ProcessRobot(cfg)
         with pytest.raises(RobotLinkError) as proc:
             robot.connect()
-        assert type(proc.value) is RobotLinkError and str(proc.value) == str(in_process.value)
+        assert type(proc.value) is type(in_process.value) is NoStateStreamError
+        assert str(proc.value) == str(in_process.value)
         assert not robot.is_connected and robot.pid is None
         # a local port held by another socket: PortBusyError, with its attributes
         busy = _legs(silent.getsockname(), local_port=silent.getsockname()[1])

@@ -34,6 +34,7 @@ __all__ = [
     "PortBusyError",
     "TargetRefusedError",
     "RobotLinkError",
+    "NoStateStreamError",
     "PacketError",
     "SerialPortError",
     "StandUpError",
@@ -281,6 +282,14 @@ class TargetRefusedError(ConfigError):
 
 class RobotLinkError(WbcError, RuntimeError):
     """The link to a robot failed: no valid state arrived in time, or the link thread died; the message says which."""
+
+
+class NoStateStreamError(RobotLinkError):
+    """A robot's link connected and no valid state came within its connect timeout: no live state stream at all.
+
+    Nothing answered, or everything that came was refused (another model's frames, another address); the message
+    counts what came and says what to check. ``wbc hw check`` reports it as its result (status 1), not as an error.
+    """
 
 
 class PacketError(WbcError, ValueError):

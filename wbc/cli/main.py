@@ -438,8 +438,10 @@ def hw_check(args: argparse.Namespace, *,
 
     Returns:
         0 when the safety layer would start a ramp from the state read ("ready"); 1 when it would refuse (a trip:
-        an e-stop held, a joint out of range, a motor fault ...) or saw no live state stream, so that a bring-up
-        script can stop there. The state, the link's counters and the verdict are printed either way.
+        an e-stop held, a joint out of range, a motor fault ...) or saw no live state stream (nothing valid came
+        within the link's connect timeout: the line says so, with what did come and what to check), so that a
+        bring-up script can stop there. The state (when one came), the link's counters and the verdict are printed
+        either way. A refusal of the options or of the target raises instead (status 2).
     """
     host, port = _hardware_target(args, "check a real robot")
     local = _hardware_local(args, "check a real robot") or (("127.0.0.1", 0) if is_loopback(host) else ("0.0.0.0", 0))

@@ -700,11 +700,19 @@ def print_emulator_counts(counts: EmulatorCounts, *, last_reject: str = "") -> N
 
 
 def print_hw_check(check: HardwareCheck) -> None:
-    """``wbc hw check``: the robot's state as read, its limits, the safety layer's verdict, and how the links went."""
+    """``wbc hw check``: the robot's state as read, its limits, the safety layer's verdict, and how the links went.
+
+    When no valid state came at all, the first line says so with the link's account of what came and what to check.
+    """
     host, port = check.target
     state, extras, link = check.state, check.extras, check.link
-    print(f"{check.robot} at {host}:{port}" + (f", arm on {check.arm_port}" if check.arm_port else "") +
-          f": {link.valid_states} leg states received, newest {1e3 * link.state_age:.1f} ms old")
+    where = f"{check.robot} at {host}:{port}" + (f", arm on {check.arm_port}" if check.arm_port else "")
+    if state is None:
+        print(f"{where}: no live state stream: {check.no_state}")
+        print("  safety: waiting: no live state stream, so no verdict (a ramp starts only from a live one)")
+        _print_check_link(check)
+        return
+    print(f"{where}: {link.valid_states} leg states received, newest {1e3 * link.state_age:.1f} ms old")
     print("  joint                 q [rad]   dq [rad/s]   tau_est [N m]   range [rad]       mode  temp [C]")
     modes = list(extras.motor_mode) if extras is not None else []
     temps = list(extras.motor_temperature) if extras is not None else []
@@ -743,6 +751,12 @@ def print_hw_check(check: HardwareCheck) -> None:
           + f" (joint margin {check.margin} rad beyond each range)")
     if trips and trips[0].remedy:
         print(f"  what to do: {trips[0].remedy}")
+    _print_check_link(check)
+
+
+def _print_check_link(check: HardwareCheck) -> None:
+    """``wbc hw check``'s closing lines: the legs' link counters, its thread, the rejected frames, the arm's bus."""
+    link = check.link
     print(f"  link: {link.frames_sent} frames sent, all damping (the link's own, {link.damping_sent}, and any the "
           f"safety layer wrote on a trip); {link.foreign} foreign datagrams")
     print_thread_stats("link thread", check.link_thread)

@@ -4,7 +4,8 @@ The procedure behind ``wbc hw check``. It builds the robot (the legs' `UnitreeRo
 when its serial port is given), lets the caller confirm a real robot before anything connects, then reads states
 through `SafeRobot` without ever writing to it: the layer's checks judge each state, and a trip only sends damping.
 The result, a `HardwareCheck`, holds the newest state, the limits the layer checks, its verdict and the links'
-counters; the command prints it.
+counters; the command prints it. A robot that sends no valid state at all within the link's connect timeout is a
+result too: no state, the link's account of what came (`HardwareCheck.no_state`), the layer still waiting.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from wbc.errors import NoStateStreamError
 from wbc.hardware.capabilities import SafetyEventLike, WallClock
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus, DynamixelArmConfig
@@ -66,7 +68,7 @@ class HardwareCheck:
         robot: the robot's name as given (``go1``, ``go1-arm``).
         target: the legs' address.
         joint_names: the joints read, house order (the arm's last, when its port was given).
-        state: the newest state.
+        state: the newest state; None when no valid state came at all (`no_state` says why).
         lower: each joint's lower limit as the safety layer checks it [rad].
         upper: each joint's upper limit [rad].
         margin: how far beyond a limit the layer lets a measured joint go [rad].
@@ -81,12 +83,14 @@ class HardwareCheck:
         arm_faults: the arm's latched bus faults.
         arm_bus: the arm's bus counters, or None.
         arm_thread: the arm's bus loop's statistics, or None.
+        no_state: why no live state stream came (the link's message: what came, and what to check), or None when
+            states came; the layer then stays ``waiting`` and the limits are empty.
     """
 
     robot: str
     target: tuple[str, int]
     joint_names: Sequence[str]
-    state: RobotState
+    state: RobotState | None
     lower: np.ndarray
     upper: np.ndarray
     margin: float
@@ -101,6 +105,7 @@ class HardwareCheck:
     arm_faults: Sequence[object] = ()
     arm_bus: ArmBusStats | None = None
     arm_thread: DeviceThreadStats | None = None
+    no_state: str | None = None
 
 
 def check_hardware(cfg: HardwareCheckConfig, *,
@@ -116,7 +121,8 @@ def check_hardware(cfg: HardwareCheckConfig, *,
             person at the terminal about a real robot here).
 
     Returns:
-        What was read: the newest state, the layer's verdict, the links' counters.
+        What was read: the newest state, the layer's verdict, the links' counters; when no valid state came within
+        the link's connect timeout, no state and why (`HardwareCheck.no_state`).
     """
     host, port = cfg.target
     local_host, local_port = cfg.local
@@ -137,6 +143,15 @@ def check_hardware(cfg: HardwareCheckConfig, *,
     legs = hardware.robot.legs if isinstance(hardware.robot, QuadrupedArmRobot) else hardware.robot
     arm = hardware.robot.arm if isinstance(hardware.robot, QuadrupedArmRobot) else None
     clock = hardware.robot.wall_time if isinstance(hardware.robot, WallClock) else time.monotonic
+    try:
+        safe.connect()
+    except NoStateStreamError as exc:  # nothing to judge: a result of the check, not a failure of the command
+        empty = np.zeros(0)
+        return HardwareCheck(
+            robot=cfg.label, target=cfg.target, joint_names=(), state=None, lower=empty, upper=empty,
+            margin=safe.config.joint_margin, extras=None, link=legs.link_stats(), link_thread=legs.thread_stats(),
+            decode=legs.decode_stats, safety_state=safe.safety_state.value, safety_events=tuple(events),
+            arm_port=cfg.arm_port, no_state=str(exc))
     with safe:
         end = clock() + cfg.seconds
         for _ in range(int(cfg.seconds / CHECK_STEP_S) + 2):

@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from wbc.errors import ConfigError, FrameError, RobotLinkError, UnknownNameError
+from wbc.errors import ConfigError, FrameError, NoStateStreamError, RobotLinkError, UnknownNameError
 from wbc.hardware.clock import MONOTONIC, Clock
 from wbc.hardware.device_thread import DeviceThread, DeviceThreadStats
 from wbc.hardware.pacing import WallPacer
@@ -243,7 +243,7 @@ class UnitreeRobot(Robot):
             self._shutdown(damp=False)
             stats = self.decode_stats
             reasons = ", ".join(f"{r} {getattr(stats, r)}" for r in REJECT_REASONS if getattr(stats, r))
-            raise RobotLinkError(
+            raise NoStateStreamError(
                 f"UnitreeRobot({cfg.robot}): no valid LowState from {cfg.target_host}:{cfg.target_port} within "
                 f"{cfg.connect_timeout} s ({stats.rejected} rejected{': ' + reasons if reasons else ''}; {foreign} "
                 f"from another address); {_no_state_hint(cfg.robot, stats, foreign)}"

@@ -61,7 +61,7 @@ def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
 
     Success and TTF: larger is better; tracking errors: smaller is better. "Better" only when the paired test's
     p-value is at most `alpha`; otherwise "no significant difference", with n80 (the pairs that would detect the
-    observed difference with 80 % power).
+    observed difference with 80 % power), or, from one pair of a continuous metric, that one pair cannot tell.
     """
     metric, p, diff = entry.metric, entry.p, entry.diff
     what = LABELS[metric].split(" [")[0].removesuffix(" %")
@@ -73,7 +73,9 @@ def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
         unit = " points" if metric == "success_rate" else ""
         return f"{what}: {winner} better ({signed_text(diff, metric)}{unit}, p = {p_text(p)})"
     n80 = n80_text(entry)
-    need = "" if n80 == "-" else f"; {n80} pairs would detect the observed difference"
+    need = ("" if n80 == "-" else
+            "; one pair shows no spread to tell how many pairs would detect the observed difference" if n80 == "n/a"
+            else f"; {n80} pairs would detect the observed difference")
     return f"{what}: no significant difference (p = {p_text(p)}{need})"
 
 
