@@ -4,7 +4,8 @@ A run directory holds: ``config.json`` (the resolved `TrainConfig`, seed, the sh
 versions, git revision),
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
 torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
-so far, summed over resumed sessions). ``resume`` continues from the newest checkpoint up to `max_iterations`.
+so far, summed over resumed sessions). Each of these files is replaced whole (`wbc.output_files`): a run killed while
+it writes one keeps the one before. ``resume`` continues from the newest checkpoint up to `max_iterations`.
 When the run ends, ``policy.replay.npz`` records a short rollout of the exported policy (robot states, commands,
 observation frames and actions, `wbc.learned.policy.replay_recorder`): ``wbc check-controller NAME --replay
 policy.replay.npz`` then checks that a controller built from these weights (an ONNX export, an I/O file written by
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -47,6 +49,7 @@ from wbc.learned.train.train_config import TrainConfig
 from wbc.learned.train.vec_env import RslVecEnv
 from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
+from wbc.output_files import replacing, temporary_name
 from wbc.provenance import provenance
 
 torch = require("torch")
@@ -113,7 +116,22 @@ class _Runner(_runners.OnPolicyRunner):
                                   "student_training": student.meta.get("training", {})}
 
     def save(self, path: str, infos: dict | None = None) -> None:
-        super().save(path, infos)
+        """rsl-rl's checkpoint ``model_<it>.pt``, written whole or not at all, then the export (`export`).
+
+        rsl-rl writes the checkpoint in place (``torch.save(path)``), so a run killed while writing it left a torn
+        file that ``--resume`` refuses. It is written here to ``model_<it>.pt.tmp`` beside it (a name
+        `wbc.learned.train.preflight.latest_checkpoint` never takes for a checkpoint) and renamed over its name once
+        complete (`wbc.output_files`): a kill leaves the previous checkpoints whole and at most that temporary file,
+        which the next save of the iteration replaces. (rsl-rl also hands the path to its logger, to upload the
+        file; the TensorBoard logger a run uses uploads nothing.)
+        """
+        tmp = temporary_name(path)
+        try:
+            super().save(str(tmp), infos)
+            os.replace(tmp, path)
+        except BaseException:  # KeyboardInterrupt too: no half-written file stays behind
+            tmp.unlink(missing_ok=True)
+            raise
         self.export()
 
     def export(self) -> None:
@@ -136,7 +154,15 @@ class _Runner(_runners.OnPolicyRunner):
         else:
             pf = policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra)
             save_policy(Path(cfg.run_dir) / "policy", pf)
-        (Path(cfg.run_dir) / "progress.json").write_text(json.dumps(progress, indent=2) + "\n")
+        # after the policy files: a kill in between leaves a progress of the checkpoint before, which --resume
+        # reconciles (`wbc.learned.train.preflight.check_run_dir`)
+        _write_json(Path(cfg.run_dir) / "progress.json", progress)
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write a JSON file of the run directory whole (`wbc.output_files`): ``--resume`` refuses a torn one."""
+    with replacing(path) as f:
+        f.write((json.dumps(data, indent=2) + "\n").encode())
 
 
 def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None) -> dict[str, Any]:
@@ -189,10 +215,10 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
             done = runner.current_learning_iteration + 1
             runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
         else:
-            (run_dir / "config.json").write_text(json.dumps(
-                {"train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
-                 "inputs": input_files(cfg), "provenance": provenance(),
-                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
+            _write_json(run_dir / "config.json", {
+                "train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
+                "inputs": input_files(cfg), "provenance": provenance(),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
         remaining = cfg.max_iterations - done
         if remaining > 0:
             runner.learn(remaining, init_at_random_ep_len=point is None)
@@ -209,7 +235,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
     if cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0:
         policy, summary = train_adaptation(load_policy(run_dir / "policy"), cfg.env, cfg.rma)
         save_policy(run_dir / "policy", policy)
-        (run_dir / "rma.json").write_text(json.dumps(summary, indent=2) + "\n")
+        _write_json(run_dir / "rma.json", summary)
         result["rma_wall_s"] = summary["wall_s"]
     if cfg.extrinsics_dim == 0 or cfg.rma.iterations > 0:  # else it observes extrinsics a robot cannot give it
         result["replay"] = str(record_replay(run_dir / "policy", replay_path_for(run_dir / "policy")))
