@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import errno
+import json
 import shutil
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -107,3 +109,79 @@ def test_a_policy_file_whose_write_fails_leaves_the_pair_before_it_whole(two_ite
         load_policy(npz)
     save_policy(tmp_path / "policy", new)  # written again: whole
     np.testing.assert_array_equal(load_policy(npz).arrays["obs_mean"], new.arrays["obs_mean"])
+
+
+def _ctrl_c_in_update(monkeypatch, at: int, times: int = 1) -> None:
+    """Ctrl-C (SIGINT, `times` times) in the PPO update of the `at`-th iteration (from 0) the run trains from now."""
+    from rsl_rl.algorithms import PPO
+
+    update, calls = PPO.update, []
+
+    def interrupted(self, *args, **kwargs):
+        calls.append(None)
+        if len(calls) == at + 1:
+            for _ in range(times):
+                signal.raise_signal(signal.SIGINT)
+        return update(self, *args, **kwargs)
+
+    monkeypatch.setattr(PPO, "update", interrupted)
+
+
+def _state(checkpoint: Path) -> dict:
+    """A checkpoint's networks, normalisers and optimiser (what rsl-rl saves but the iteration and infos)."""
+    saved = torch.load(checkpoint, map_location="cpu", weights_only=False)
+    return {k: v for k, v in saved.items() if k not in ("iter", "infos")}
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list | tuple):
+        return isinstance(b, list | tuple) and len(a) == len(b) and all(map(_same, a, b))
+    return torch.equal(a, b) if isinstance(a, torch.Tensor) else a == b
+
+
+def test_ctrl_c_saves_the_iteration_it_stops_at_and_resume_continues_after_it(tmp_path, monkeypatch, capsys):
+    from wbc.learned.train.preflight import latest_checkpoint
+    from wbc.learned.train.train import train
+
+    cfg = _tiny(tmp_path / "stopped", max_iterations=5, save_interval=25)  # periodic checkpoints: model_0.pt only
+    run = Path(cfg.run_dir)
+    _ctrl_c_in_update(monkeypatch, at=2)
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler before is back
+    assert "stops at the end of the iteration in progress" in capsys.readouterr().err
+    assert sorted(p.name for p in run.glob("model_*")) == ["model_0.pt", "model_2.pt"]
+    assert json.loads((run / "progress.json").read_text())["iteration"] == 2
+    assert json.loads((run / "policy.json").read_text())["training"]["iteration"] == 2
+    monkeypatch.undo()
+    # iteration 2 ended before it was saved: its checkpoint is the one a run never interrupted has after it
+    whole = Path(train(_tiny(tmp_path / "whole", max_iterations=3, save_interval=25))["run_dir"])
+    assert _same(_state(run / "model_2.pt"), _state(whole / "model_2.pt"))
+    result = train(_tiny(tmp_path / "stopped", max_iterations=5, save_interval=25), resume=True)
+    assert (result["iterations"], result["trained"]) == (5, 2) and latest_checkpoint(run).name == "model_4.pt"
+
+
+def test_an_interrupted_run_names_the_checkpoint_it_saved_and_a_second_ctrl_c_stops_at_once(tmp_path, monkeypatch,
+                                                                                           capsys):
+    from wbc.cli.main import main
+
+    argv = ["train", "--task", "push", "--stage", "1", "--iterations", "4", "--envs", "1", "--rma-iterations", "0",
+            "--run-root", str(tmp_path)]
+    run = tmp_path / "push-stage1"
+    _ctrl_c_in_update(monkeypatch, at=2)
+    assert main(argv) == 130
+    err = capsys.readouterr().err
+    assert "wbc: interrupted; " in err and "keeps its newest checkpoint, model_2.pt: the same command with --resume " \
+        "continues from it" in err
+    # twice: the second stops in the middle of the update, whose model is no iteration's: nothing more is saved
+    monkeypatch.undo()
+    _ctrl_c_in_update(monkeypatch, at=0, times=2)
+    assert main([*argv, "--resume"]) == 130
+    assert "keeps its newest checkpoint, model_2.pt" in capsys.readouterr().err
+    assert sorted(p.name for p in run.glob("model_*")) == ["model_0.pt", "model_2.pt"]
+    assert json.loads((run / "progress.json").read_text())["iteration"] == 2
+    monkeypatch.undo()
+    assert main([*argv, "--resume"]) == 0
+    assert json.loads((run / "progress.json").read_text())["iteration"] == 3 and (run / "model_3.pt").is_file()

@@ -33,9 +33,9 @@ from wbc.optional import require
 from wbc.robots.registry import get_robot
 
 __all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_checkpoint", "check_inputs", "check_run", "check_run_dir",
-           "check_run_root", "config_diff", "env_meta", "input_files", "input_path", "latest_checkpoint",
-           "load_input_policy", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
-           "saved_train_config", "student_layout", "unstarted_run"]
+           "check_run_root", "checkpoint_iteration", "config_diff", "env_meta", "input_files", "input_path",
+           "latest_checkpoint", "load_input_policy", "make_run_dir", "names_a_file", "read_expert_samples",
+           "read_run_json", "saved_train_config", "student_layout", "unstarted_run"]
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -75,6 +75,11 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
     found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
              if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
     return max(found)[1] if found else None
+
+
+def checkpoint_iteration(checkpoint: Path) -> int:
+    """The iteration a ``model_<it>.pt`` (as `latest_checkpoint` finds it) holds: ``<it>``."""
+    return int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1))
 
 
 def unstarted_run(run_dir: str | Path) -> bool:
@@ -470,7 +475,7 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
         raise ConfigError(f"--resume: {config} differs from this run's config in {diff}: give the run's own options, "
                           "or leave them out (a resumed run takes the ones not given from its config.json)")
     _check_unchanged(inputs, config)
-    done = int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1)) + 1
+    done = checkpoint_iteration(checkpoint) + 1
     progress: dict[str, Any] = {"iteration": done - 1, "env_steps": 0, "wall_s": 0.0}
     path = run_dir / "progress.json"
     if path.exists():

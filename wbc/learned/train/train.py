@@ -5,7 +5,8 @@ versions, git revision),
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
 torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
 so far, summed over resumed sessions). Each of these files is replaced whole (`wbc.output_files`): a run killed while
-it writes one keeps the one before. ``resume`` continues from the newest checkpoint up to `max_iterations`.
+it writes one keeps the one before. ``resume`` continues from the newest checkpoint up to `max_iterations`; Ctrl-C
+stops a run at the end of the iteration in progress, whose checkpoint it saves first (`_learn`).
 When the run ends, ``policy.replay.npz`` records a short rollout of the exported policy (robot states, commands,
 observation frames and actions, `wbc.learned.policy.replay_recorder`): ``wbc check-controller NAME --replay
 policy.replay.npz`` then checks that a controller built from these weights (an ONNX export, an I/O file written by
@@ -20,6 +21,9 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import signal
+import sys
+import threading
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -38,6 +42,7 @@ from wbc.learned.train.history_actor import HistoryActor
 from wbc.learned.train.preflight import (
     RESUMABLE,
     check_run,
+    checkpoint_iteration,
     input_files,
     latest_checkpoint,
     load_input_policy,
@@ -165,6 +170,81 @@ def _write_json(path: Path, data: dict[str, Any]) -> None:
         f.write((json.dumps(data, indent=2) + "\n").encode())
 
 
+class _StopAfterIteration(KeyboardInterrupt):
+    """A Ctrl-C deferred to the end of an iteration (`_learn`), raised there."""
+
+
+class _DeferredInterrupt:
+    """A SIGINT handler that notes the first Ctrl-C, says so, and puts the handler before it back for a second."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.previous: Any = signal.default_int_handler
+
+    def install(self) -> None:
+        previous = signal.signal(signal.SIGINT, self)
+        self.previous = signal.default_int_handler if previous is None else previous  # None: set outside Python
+
+    def restore(self) -> None:
+        signal.signal(signal.SIGINT, self.previous)
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        self.requested = True
+        self.restore()
+        print("wbc: Ctrl-C: the run stops at the end of the iteration in progress and saves its checkpoint (Ctrl-C "
+              "again stops at once, keeping the checkpoints saved so far)", file=sys.stderr, flush=True)
+
+
+def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> None:
+    """`runner.learn`, which Ctrl-C stops at the end of an iteration, keeping that iteration's checkpoint.
+
+    rsl-rl's loop may be interrupted anywhere: in a rollout, whose steps have already moved the observation
+    normalisers, or in the PPO update, some of its minibatches applied. The model in memory then is no iteration's,
+    and is not saved. So SIGINT is deferred while the loop runs: its handler notes it (and says so on stderr), and the
+    interruption is raised at the end of the iteration in progress, once it is updated and logged (in rsl-rl's
+    ``logger.log``, the loop's last step before its periodic save). The runner then holds that iteration's networks,
+    normalisers and optimiser, and ``current_learning_iteration`` is its number: its checkpoint is saved, with its
+    export and progress (unless a checkpoint as new is already there), and KeyboardInterrupt is raised, so that
+    ``wbc train`` names the newest checkpoint, this one, and ``--resume`` continues after it.
+
+    A second Ctrl-C stops at once (the handler before is back), and the run keeps the checkpoints saved until then, as
+    does a KeyboardInterrupt that is not SIGINT's. A Ctrl-C after the last iteration's log lets the loop end (its
+    final checkpoint saved) and is raised once it has. Outside the main thread, where no signal is handled, the loop
+    runs as rsl-rl's.
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
+        return
+    interrupt = _DeferredInterrupt()
+    log = runner.logger.log
+
+    def log_then_stop(*args: Any, **kwargs: Any) -> None:
+        log(*args, **kwargs)
+        if interrupt.requested:
+            raise _StopAfterIteration
+
+    runner.logger.log = log_then_stop
+    interrupt.install()
+    try:
+        runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
+    except _StopAfterIteration:
+        it = runner.current_learning_iteration
+        newest = latest_checkpoint(runner.wbc_cfg.run_dir)
+        if newest is None or checkpoint_iteration(newest) < it:
+            runner.save(str(Path(runner.wbc_cfg.run_dir) / f"model_{it}.pt"))
+        if hasattr(runner.logger.writer, "flush"):  # the curves up to the checkpoint
+            runner.logger.writer.flush()
+        raise KeyboardInterrupt from None
+    finally:
+        interrupt.restore()
+        del runner.logger.log  # rsl-rl's own again
+    if interrupt.requested:
+        raise KeyboardInterrupt
+
+
 def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None) -> dict[str, Any]:
     """Train (or resume) one run.
 
@@ -185,6 +265,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
         ConfigError: a new run in a directory that holds a run; no checkpoint to resume from, a damaged run directory
             (config.json, progress.json, the newest checkpoint) or a resumed config that differs; or the teacher is
             missing/mismatched.
+        KeyboardInterrupt: Ctrl-C; during PPO, once the iteration in progress has ended and its checkpoint is saved
+            (`_learn`).
     """
     run_dir = Path(cfg.run_dir)
     resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
@@ -221,7 +303,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
         remaining = cfg.max_iterations - done
         if remaining > 0:
-            runner.learn(remaining, init_at_random_ep_len=point is None)
+            _learn(runner, remaining, init_at_random_ep_len=point is None)
         else:
             # nothing left to train: the newest checkpoint is exported as it is (how an interrupted run is finished,
             # phase 2 included), under its own iteration, not the next one
