@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import errno
 import json
+import os
 import shutil
 import signal
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +19,8 @@ from wbc.learned.env.env_config import DomainRandomisation
 torch = pytest.importorskip("torch")
 pytest.importorskip("rsl_rl")
 
-SCENARIO = str(Path(__file__).resolve().parent.parent / "scenarios" / "push.toml")
+ROOT = Path(__file__).resolve().parent.parent
+SCENARIO = str(ROOT / "scenarios" / "push.toml")
 
 
 def _tiny(root: Path, **kw):
@@ -185,3 +189,73 @@ def test_an_interrupted_run_names_the_checkpoint_it_saved_and_a_second_ctrl_c_st
     monkeypatch.undo()
     assert main([*argv, "--resume"]) == 0
     assert json.loads((run / "progress.json").read_text())["iteration"] == 3 and (run / "model_3.pt").is_file()
+
+
+_HOLDER = """
+import signal, sys
+from wbc.learned.train.preflight import lock_run_dir
+locks = [lock_run_dir(d) for d in sys.argv[1:]]
+print("held", flush=True)
+signal.pause()
+"""
+
+
+@pytest.fixture()
+def holder():
+    """Start another process that locks run directories as a run does (`lock_run_dir`), until it is killed."""
+    procs: list[subprocess.Popen] = []
+
+    def hold(*run_dirs: Path) -> subprocess.Popen:
+        path = os.pathsep.join([str(ROOT), *filter(None, [os.environ.get("PYTHONPATH")])])
+        proc = subprocess.Popen([sys.executable, "-c", _HOLDER, *map(str, run_dirs)], stdout=subprocess.PIPE,
+                                text=True, env={**os.environ, "PYTHONPATH": path})
+        procs.append(proc)
+        assert proc.stdout.readline().strip() == "held"
+        return proc
+
+    yield hold
+    for proc in procs:
+        proc.kill()
+        proc.wait()
+
+
+def _tree(run_dir: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(run_dir)): p.read_bytes() for p in sorted(run_dir.rglob("*")) if p.is_file()}
+
+
+def test_a_run_directory_another_run_holds_is_refused_naming_it_and_its_pid(two_iterations, tmp_path, capsys, holder):
+    from wbc.cli.main import main
+    from wbc.errors import ConfigError
+    from wbc.learned.train.preflight import lock_run_dir
+    from wbc.learned.train.train import train
+    from wbc.tools.dagger import DaggerConfig, run_dagger
+
+    root = tmp_path / "runs"
+    shutil.copytree(two_iterations, root)
+    stage1, fine_tune, dagger = root / "push-stage1", root / "push-fine-tune", root / "push-dagger-mpc"
+    for run in (fine_tune, dagger):
+        run.mkdir()
+    other = holder(stage1, fine_tune, dagger)
+    before = {run: _tree(run) for run in (stage1, fine_tune, dagger)}
+    tiny = ["--envs", "1", "--run-root", str(root)]
+    for run, argv in ((stage1, ["--stage", "1", "--iterations", "3", "--rma-iterations", "0", *tiny, "--resume"]),
+                      (stage1, ["--stage", "1", "--iterations", "3", "--rma-iterations", "0", *tiny]),
+                      (fine_tune, ["--fine-tune", "shipped", "--iterations", "1", *tiny]),
+                      (dagger, ["--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--run-root", str(root)])):
+        for dry_run in ([], ["--dry-run"]):
+            assert main(["train", "--task", "push", *argv, *dry_run]) == 2
+            err = capsys.readouterr().err
+            assert f"{run} is in use by another run (pid {other.pid}, holding {run / '.lock'})" in err, err
+            assert "--run-root" in err and len(err.strip().splitlines()) == 1
+    # the runs themselves lock their directory before they read it, whoever calls them
+    with pytest.raises(ConfigError, match=f"in use by another run \\(pid {other.pid}"):
+        train(_tiny(root, max_iterations=3), resume=True)
+    with pytest.raises(ConfigError, match=f"in use by another run \\(pid {other.pid}"):
+        run_dagger(DaggerConfig(task="push", rounds=1, episodes=1, episode_s=0.1, run_dir=str(dagger)))
+    assert {run: _tree(run) for run in before} == before
+    # the lock dies with its process, however it ends
+    other.kill()
+    other.wait()
+    lock_run_dir(stage1).release()
+    assert train(_tiny(root, max_iterations=3), resume=True)["iterations"] == 3
+    assert (stage1 / ".lock").read_bytes() == b""  # released: no pid left to name

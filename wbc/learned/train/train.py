@@ -41,11 +41,13 @@ from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.history_actor import HistoryActor
 from wbc.learned.train.preflight import (
     RESUMABLE,
+    ResumePoint,
     check_run,
     checkpoint_iteration,
     input_files,
     latest_checkpoint,
     load_input_policy,
+    locked_run_dir,
     make_run_dir,
     student_layout,
 )
@@ -261,16 +263,25 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
         then exported as it is, and the adaptation phase runs), and ``"replay"`` (the replay file of the exported
         policy) unless the policy observes RMA extrinsics without an adaptation module to estimate them.
 
+    The run holds its directory's lock (`wbc.learned.train.preflight.locked_run_dir`) from before it reads it to its
+    end: a second run on the directory (a training, a DAgger run, a fine-tune) is refused while this one lives.
+
     Raises:
-        ConfigError: a new run in a directory that holds a run; no checkpoint to resume from, a damaged run directory
-            (config.json, progress.json, the newest checkpoint) or a resumed config that differs; or the teacher is
-            missing/mismatched.
+        ConfigError: another run holds the run directory (naming it and that run's pid); a new run in a directory
+            that holds a run; no checkpoint to resume from, a damaged run directory (config.json, progress.json, the
+            newest checkpoint) or a resumed config that differs; or the teacher is missing/mismatched.
         KeyboardInterrupt: Ctrl-C; during PPO, once the iteration in progress has ended and its checkpoint is saved
             (`_learn`).
     """
+    # the checks `wbc train --dry-run` makes, under the lock
+    with locked_run_dir(cfg.run_dir, lambda: check_run(cfg, resume=resume, options=options)) as point:
+        return _train(cfg, point)
+
+
+def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
+    """`train` once its run directory is checked and locked; `point`: where a resumed run continues from, or None."""
     run_dir = Path(cfg.run_dir)
     resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
-    point = check_run(cfg, resume=resume, options=options)  # the checks `wbc train --dry-run` makes
     progress = point.progress if point is not None else {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
     make_run_dir(run_dir)
     torch.manual_seed(cfg.seed)
