@@ -259,3 +259,32 @@ def test_a_run_directory_another_run_holds_is_refused_naming_it_and_its_pid(two_
     lock_run_dir(stage1).release()
     assert train(_tiny(root, max_iterations=3), resume=True)["iterations"] == 3
     assert (stage1 / ".lock").read_bytes() == b""  # released: no pid left to name
+
+
+@pytest.mark.parametrize("torn", [0, 1 << 20])
+def test_a_torn_newest_checkpoint_is_refused_naming_the_one_before_and_nothing_is_deleted(two_iterations, tmp_path,
+                                                                                         torn):
+    from wbc.errors import ConfigError
+    from wbc.learned.train.train import train
+
+    for copy in ("only", "runs"):
+        shutil.copytree(two_iterations, tmp_path / copy)
+    only = tmp_path / "only" / "push-stage1"
+    (only / "model_0.pt").unlink()
+    run = tmp_path / "runs" / "push-stage1"
+    for newest in (run / "model_1.pt", only / "model_1.pt"):
+        with newest.open("r+b") as f:  # as an in-place write killed midway left it: 0 bytes, or exactly 1 MiB
+            f.truncate(torn)
+    before = _tree(run)
+    with pytest.raises(ConfigError) as refused:
+        train(_tiny(tmp_path / "runs", max_iterations=3), resume=True)
+    assert "model_1.pt: not a readable checkpoint" in str(refused.value)
+    assert "to resume from model_0.pt, the newest checkpoint before it (training again from iteration 1)" in str(
+        refused.value)
+    assert _tree(run) == before  # refused, not skipped: the file may be whole to another version of torch
+    with pytest.raises(ConfigError, match="model_1.pt: not a readable checkpoint.*the run's only checkpoint"):
+        train(_tiny(tmp_path / "only", max_iterations=3), resume=True)
+    # as the message says: moved away, the run resumes from the checkpoint before it
+    (run / "model_1.pt").rename(tmp_path / "model_1.pt")
+    assert train(_tiny(tmp_path / "runs", max_iterations=3), resume=True)["iterations"] == 3
+    assert sorted(p.name for p in run.glob("model_*")) == ["model_0.pt", "model_1.pt", "model_2.pt"]

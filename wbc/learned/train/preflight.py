@@ -634,6 +634,10 @@ def check_checkpoint(path: Path) -> None:
 
     It needs torch (the ``train`` extra), as the run does.
 
+    The run is not resumed from the checkpoint before it on its own: the file may be whole and unreadable here only
+    (pickled by another version), and the resumed run would write over it when it reached its iteration again. The
+    message names the checkpoint before it, from which a resume continues once the file is moved away.
+
     Raises:
         ConfigError: naming the file, and what to do.
     """
@@ -642,11 +646,22 @@ def check_checkpoint(path: Path) -> None:
         saved = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
         raise ConfigError(f"--resume: {path}: not a readable checkpoint ({type(exc).__name__}: "
-                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); delete it to resume from the "
-                          "one before, or start a new run under another --run-root") from None
+                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); {_unreadable_fix(path)}, or "
+                          "start a new run under another --run-root") from None
     if not isinstance(saved, dict) or not isinstance(saved.get("iter"), int):
-        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: delete it to resume from the "
-                          "one before, or start a new run under another --run-root")
+        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: {_unreadable_fix(path)}, or "
+                          "start a new run under another --run-root")
+
+
+def _unreadable_fix(path: Path) -> str:
+    """What to do with a newest checkpoint `check_checkpoint` refuses: the checkpoint before it, or none."""
+    before = [(checkpoint_iteration(p), p) for p in path.parent.glob("model_*.pt")
+              if re.fullmatch(r"model_(\d+)\.pt", p.name) and checkpoint_iteration(p) < checkpoint_iteration(path)]
+    if not before:
+        return "it is the run's only checkpoint: restore it"
+    it, previous = max(before)
+    return (f"move it out of the run directory (or delete it) to resume from {previous.name}, the newest checkpoint "
+            f"before it (training again from iteration {it + 1})")
 
 
 def check_run(cfg: TrainConfig, *, resume: bool, options: Mapping[str, str] | None = None,
