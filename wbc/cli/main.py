@@ -730,8 +730,9 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
 
     `options` maps each input file's `TrainConfig` field to the option that set it, named when it is refused.
     """
-    from wbc.learned.train.preflight import check_run, check_run_dir, unstarted_run
+    from wbc.learned.train.preflight import check_run, check_run_dir, check_unlocked, unstarted_run
 
+    check_unlocked(cfg.run_dir)  # another run on it: refused before anything is said of it (the run then locks it)
     if unstarted_run(cfg.run_dir):
         print(f"wbc: note: {cfg.run_dir} holds a run interrupted before its first checkpoint (config.json, no "
               "model_<it>.pt): it starts afresh from iteration 0", file=sys.stderr)
@@ -831,6 +832,9 @@ def _distil(args: argparse.Namespace) -> int:
         fields["fit"] = FitConfig(**fit)
     cfg = DaggerConfig(task=args.task, expert=args.teacher,
                        run_dir=str(Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"), **fields)
+    from wbc.learned.train.preflight import check_unlocked
+
+    check_unlocked(cfg.run_dir)  # another run on it: refused, by the dry run too (the run itself then locks it)
     if args.dry_run:
         check_dagger_run(cfg, resume=args.resume)  # every check the run makes before its first round
         printers.print_json(dataclasses.asdict(cfg))

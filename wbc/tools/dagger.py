@@ -61,7 +61,7 @@ from wbc.learned.train.distill import (
     save_student,
     student_policy_file,
 )
-from wbc.learned.train.preflight import check_run_root, config_diff, make_run_dir, read_run_json
+from wbc.learned.train.preflight import check_run_root, config_diff, locked_run_dir, make_run_dir, read_run_json
 from wbc.learned.train.stages import TASKS
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.provenance import provenance
@@ -482,10 +482,20 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         The run's summary: ``rounds`` (finished in all), ``trained`` (in this call: 0 when a resumed run already held
         ``cfg.rounds``), ``samples``, ``policy`` (the file), ``wall_s``.
 
+    The run holds its directory's lock (`wbc.learned.train.preflight.locked_run_dir`) from before it reads it to its
+    end: a second run on the directory is refused while this one lives.
+
     Raises:
-        ConfigError: what `check_dagger_run` refuses.
+        ConfigError: another run holds the run directory (naming it and that run's pid); what `check_dagger_run`
+            refuses.
     """
-    start = check_dagger_run(cfg, resume=resume)  # the checks `wbc train --dry-run` makes
+    # the checks `wbc train --dry-run` makes, under the lock
+    with locked_run_dir(cfg.run_dir, lambda: check_dagger_run(cfg, resume=resume)) as start:
+        return _run_rounds(cfg, start, resume=resume, log=log)
+
+
+def _run_rounds(cfg: DaggerConfig, start: DaggerStart, *, resume: bool, log: Any) -> dict[str, Any]:
+    """`run_dagger` once its run directory is checked and locked, from `start`."""
     expert_spec, make_expert = start.expert_spec, start.make_expert
     progress, obs_all, act_all, ep_all, net = start.progress, start.obs, start.actions, start.episode, start.net
     spec = TASKS[cfg.task]

@@ -25,6 +25,8 @@ failure is a `PolicyFileError` naming the file and the field.
 
 from __future__ import annotations
 
+import hashlib
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,12 +46,11 @@ from wbc.learned.policy.policy_file import (
     check_meta,
     check_robot_keys,
     check_shapes,
-    json_text,
     layout_joints,
     load_policy,
     read_arrays,
     read_pair,
-    weights_sha256,
+    replace_pair,
 )
 from wbc.robots.description import RobotDescription
 
@@ -128,7 +129,8 @@ def save_composite(path: str | Path, composite: CompositePolicyFile) -> tuple[Pa
     """Write ``<path>.npz`` and ``<path>.json``; the result is loaded back and checked. Returns both paths.
 
     The JSON records the ``.npz`` file's sha256 (``weights_sha256``), which `load_composite` verifies; a part's own
-    checksum (a part made from a loaded policy file carries one) is dropped, since the composite's covers it.
+    checksum (a part made from a loaded policy file carries one) is dropped, since the composite's covers it. Each
+    file is replaced whole, as `save_policy` replaces its own (`wbc.learned.policy.policy_file.replace_pair`).
 
     Raises:
         PolicyFileError: the composite does not pass `load_composite`'s checks (the message names the field).
@@ -147,9 +149,10 @@ def save_composite(path: str | Path, composite: CompositePolicyFile) -> tuple[Pa
     meta = {"format": COMPOSITE_FORMAT, "version": VERSION,
             **{k: v for k, v in composite.meta.items() if k not in ("format", "version", "parts", CHECKSUM_KEY)},
             "parts": parts}
-    np.savez(npz, **arrays)
-    meta[CHECKSUM_KEY] = weights_sha256(npz)
-    js.write_text(json_text(meta), encoding="utf-8")
+    weights = io.BytesIO()
+    np.savez(weights, **arrays)
+    meta[CHECKSUM_KEY] = hashlib.sha256(weights.getvalue()).hexdigest()
+    replace_pair(npz, js, weights.getvalue(), meta)  # each file whole, the JSON last, as `save_policy`
     load_composite(npz)
     return npz, js
 

@@ -41,6 +41,7 @@ are its outputs' joints'.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import math
 import re
@@ -56,13 +57,14 @@ from wbc.errors import InputFileError, WbcError
 from wbc.input_files import LIMITS, open_npz, read_json, short
 from wbc.learned.policy.control_rate import period_problem
 from wbc.learned.policy.observations import ObsLayout
+from wbc.output_files import replace_files
 from wbc.robots.description import ARM_MODES, RobotDescription
 from wbc.robots.registry import ROBOTS
 
 __all__ = ["ACTIVATIONS", "CHECKSUM_KEY", "COMPOSITE_FORMAT", "FORMAT", "MAX_HISTORY", "MAX_JOINTS", "MAX_LAYERS",
            "MAX_WIDTH", "VERSION", "PolicyFile", "PolicyFileError", "check_checksum_field", "check_meta",
            "check_robot_keys", "check_shapes", "json_text", "layout_joints", "load_policy", "read_arrays", "read_pair",
-           "save_policy", "weights_sha256"]
+           "replace_pair", "save_policy", "weights_sha256"]
 
 FORMAT = "wbc-policy"
 COMPOSITE_FORMAT = "wbc-composite-policy"
@@ -209,21 +211,37 @@ def weights_sha256(npz: str | Path) -> str:
 def save_policy(path: str | Path, policy: PolicyFile) -> tuple[Path, Path]:
     """Write ``<path>.npz`` and ``<path>.json`` (a suffix on `path` is replaced); returns both paths.
 
-    The JSON records the ``.npz`` file's sha256 (``weights_sha256``), which `load_policy` verifies. The result is
-    loaded back and checked, so a file that `load_policy` would refuse is never left behind silently.
+    The JSON records the ``.npz`` file's sha256 (``weights_sha256``), which `load_policy` verifies. Each file is
+    replaced whole (`wbc.output_files.replace_files`): a write that fails, or a process killed while writing, leaves
+    the previous pair as it was. The result is loaded back and checked, so a file that `load_policy` would refuse is
+    never left behind silently.
 
     Raises:
         PolicyFileError: the policy does not pass `load_policy`'s checks (the message names the field).
+        OSError: a file cannot be written (the previous pair is then as it was).
     """
     npz, js = _paths(path)
     npz.parent.mkdir(parents=True, exist_ok=True)
     meta = {"format": FORMAT, "version": VERSION, **{k: v for k, v in policy.meta.items()
                                                       if k not in ("format", "version", CHECKSUM_KEY)}}
-    np.savez(npz, **{k: np.asarray(v, dtype=np.float32) for k, v in policy.arrays.items()})
-    meta[CHECKSUM_KEY] = weights_sha256(npz)
-    js.write_text(json_text(meta), encoding="utf-8")
+    weights = io.BytesIO()
+    np.savez(weights, **{k: np.asarray(v, dtype=np.float32) for k, v in policy.arrays.items()})
+    meta[CHECKSUM_KEY] = hashlib.sha256(weights.getvalue()).hexdigest()
+    replace_pair(npz, js, weights.getvalue(), meta)
     load_policy(npz)
     return npz, js
+
+
+def replace_pair(npz: Path, js: Path, weights: bytes, meta: dict[str, Any]) -> None:
+    """Replace a policy's ``.npz`` (`weights`, its bytes) and ``.json`` (`meta`, with the weights' sha256), each whole.
+
+    Both are written beside their names before either is renamed, so a failed write changes neither. The weights are
+    renamed first and the JSON last: the JSON names the weights it goes with (their sha256), so once the new JSON is
+    in place the new pair is complete, and the one state a reader can find between the two renames (a process killed
+    there) is new weights beside the old JSON, which `load_policy` refuses for their checksum (and a resumed or
+    re-run export writes again), never a pair that loads with the metadata of other weights.
+    """
+    replace_files({npz: weights, js: json_text(meta).encode("utf-8")})
 
 
 def json_text(meta: dict[str, Any]) -> str:

@@ -5,11 +5,14 @@ samples of a fine-tune; `check_run_dir` refuses to start a run over another one 
 continues from (``config.json``, ``progress.json``, the newest ``model_<it>.pt``'s name); `check_checkpoint` loads
 that checkpoint (with torch, the one check here that needs it). `check_run` makes them all, in the order a run does:
 ``wbc train --dry-run`` and `wbc.learned.train.train.train` call it, so a dry run refuses what the run would, naming
-the file (and field).
+the file (and field). A run makes them holding its directory's lock (`locked_run_dir`, ``RUN_DIR/.lock``), which it
+keeps to its end, so that two runs never share a directory; a dry run only checks that no run holds it
+(`check_unlocked`).
 """
 
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import math
@@ -17,10 +20,11 @@ import os
 import re
 import zipfile
 import zlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -32,10 +36,13 @@ from wbc.learned.train.train_config import TrainConfig
 from wbc.optional import require
 from wbc.robots.registry import get_robot
 
-__all__ = ["INPUTS", "RESUMABLE", "ResumePoint", "check_checkpoint", "check_inputs", "check_run", "check_run_dir",
-           "check_run_root", "config_diff", "env_meta", "input_files", "input_path", "latest_checkpoint",
-           "load_input_policy", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
+__all__ = ["INPUTS", "LOCK_FILE", "RESUMABLE", "ResumePoint", "RunDirLock", "check_checkpoint", "check_inputs",
+           "check_run", "check_run_dir", "check_run_root", "check_unlocked", "checkpoint_iteration", "config_diff",
+           "env_meta", "input_files", "input_path", "latest_checkpoint", "load_input_policy", "lock_run_dir",
+           "locked_run_dir", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
            "saved_train_config", "student_layout", "unstarted_run"]
+
+T = TypeVar("T")
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
@@ -75,6 +82,11 @@ def latest_checkpoint(run_dir: str | Path) -> Path | None:
     found = [(int(m.group(1)), p) for p in Path(run_dir).glob("model_*.pt")
              if (m := re.fullmatch(r"model_(\d+)\.pt", p.name))]
     return max(found)[1] if found else None
+
+
+def checkpoint_iteration(checkpoint: Path) -> int:
+    """The iteration a ``model_<it>.pt`` (as `latest_checkpoint` finds it) holds: ``<it>``."""
+    return int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1))
 
 
 def unstarted_run(run_dir: str | Path) -> bool:
@@ -190,6 +202,127 @@ def check_run_root(run_dir: str | Path) -> None:
                                   f"{run_dir} cannot be {'written' if path == Path(run_dir) else 'made'}; give a "
                                   "directory this user can write")
             return
+
+
+LOCK_FILE = ".lock"
+"""The file of a run directory that its run holds locked (`lock_run_dir`), the run's pid written inside."""
+
+
+class RunDirLock:
+    """The lock a run holds on its directory (`lock_run_dir`), given back by `release` or at the end of a ``with``."""
+
+    def __init__(self, path: Path, fd: int) -> None:
+        self.path = path
+        self._fd: int | None = fd
+
+    def release(self) -> None:
+        """Give the lock back (closing the file does); the pid is erased first, so a refusal never names a run gone."""
+        if self._fd is None:
+            return
+        try:
+            os.ftruncate(self._fd, 0)
+        except OSError:
+            pass
+        os.close(self._fd)
+        self._fd = None
+
+    def __enter__(self) -> RunDirLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def _in_use(run_dir: str | Path, path: Path, fd: int) -> ConfigError:
+    """The refusal of a run directory another run holds, naming it and the holder's pid (as its lock file says)."""
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+    except OSError:
+        text = ""
+    holder = f"pid {text}" if text.isdigit() else "its pid not yet written"
+    return ConfigError(f"{run_dir} is in use by another run ({holder}, holding {path}): wait for it to end, or choose "
+                       "another --run-root")
+
+
+def lock_run_dir(run_dir: str | Path) -> RunDirLock:
+    """Lock a run directory for this process, or refuse it: another run holds it.
+
+    The lock is `fcntl.flock`, exclusive and not waiting, on ``RUN_DIR/.lock`` (`LOCK_FILE`), with this process's pid
+    written inside for a refusal to name. The OS releases it when the process ends, however it ends (a SIGKILL too),
+    so the file a dead run leaves locks nothing. The file stays: were it removed, a run could lock a new file of that
+    name while another still held the old one.
+
+    Raises:
+        ConfigError: another process holds the lock (the message names the directory and its pid), or the lock file
+            cannot be made or locked.
+    """
+    path = Path(run_dir) / LOCK_FILE
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        raise ConfigError(f"--run-root: cannot make the lock file {path} of the run directory ({exc.strerror or exc});"
+                          " give a directory this user can write") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        error = _in_use(run_dir, path, fd)
+        os.close(fd)
+        raise error from None
+    except OSError as exc:
+        os.close(fd)
+        raise ConfigError(f"--run-root: cannot lock {path} ({exc.strerror or exc}): its file system takes no locks, "
+                          "and a run must hold its directory alone; give a directory on another file system") from None
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())
+    return RunDirLock(path, fd)
+
+
+def check_unlocked(run_dir: str | Path) -> None:
+    """Refuse a run directory another run holds (`lock_run_dir`), without holding it: a dry run's check.
+
+    Where the directory has a lock file, its lock is taken (shared) for an instant only; nothing is written.
+
+    Raises:
+        ConfigError: another process holds the lock, naming the directory and its pid.
+    """
+    path = Path(run_dir) / LOCK_FILE
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return  # no lock file, so no run holds it (a run makes it); or not readable, which the run would say
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        raise _in_use(run_dir, path, fd) from None
+    except OSError:
+        pass  # a file system that takes no locks: the run says so
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def locked_run_dir(run_dir: str | Path, check: Callable[[], T]) -> Iterator[T]:
+    """Hold a run directory's lock (`lock_run_dir`) from before `check` reads it to the end of the block.
+
+    A directory that exists is locked first, then checked. One that does not has nothing to read: it is checked
+    first (a refused run then leaves nothing behind), made, locked, and checked again, which refuses a run begun in
+    it between the two.
+
+    Args:
+        run_dir: the run directory.
+        check: the run's checks of its directory and inputs (`check_run`); what it returns is the block's value.
+
+    Raises:
+        ConfigError: another run holds the directory (naming it and the holder's pid); a directory that cannot be
+            made or written (`check_run_root`); what `check` raises.
+    """
+    run_dir = Path(run_dir)
+    check_run_root(run_dir)
+    if not run_dir.is_dir():
+        check()
+        make_run_dir(run_dir)
+    with lock_run_dir(run_dir):
+        yield check()
 
 
 def make_run_dir(run_dir: str | Path) -> None:
@@ -470,7 +603,7 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
         raise ConfigError(f"--resume: {config} differs from this run's config in {diff}: give the run's own options, "
                           "or leave them out (a resumed run takes the ones not given from its config.json)")
     _check_unchanged(inputs, config)
-    done = int(re.fullmatch(r"model_(\d+)\.pt", checkpoint.name).group(1)) + 1
+    done = checkpoint_iteration(checkpoint) + 1
     progress: dict[str, Any] = {"iteration": done - 1, "env_steps": 0, "wall_s": 0.0}
     path = run_dir / "progress.json"
     if path.exists():
@@ -501,6 +634,10 @@ def check_checkpoint(path: Path) -> None:
 
     It needs torch (the ``train`` extra), as the run does.
 
+    The run is not resumed from the checkpoint before it on its own: the file may be whole and unreadable here only
+    (pickled by another version), and the resumed run would write over it when it reached its iteration again. The
+    message names the checkpoint before it, from which a resume continues once the file is moved away.
+
     Raises:
         ConfigError: naming the file, and what to do.
     """
@@ -509,11 +646,22 @@ def check_checkpoint(path: Path) -> None:
         saved = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
         raise ConfigError(f"--resume: {path}: not a readable checkpoint ({type(exc).__name__}: "
-                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); delete it to resume from the "
-                          "one before, or start a new run under another --run-root") from None
+                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); {_unreadable_fix(path)}, or "
+                          "start a new run under another --run-root") from None
     if not isinstance(saved, dict) or not isinstance(saved.get("iter"), int):
-        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: delete it to resume from the "
-                          "one before, or start a new run under another --run-root")
+        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: {_unreadable_fix(path)}, or "
+                          "start a new run under another --run-root")
+
+
+def _unreadable_fix(path: Path) -> str:
+    """What to do with a newest checkpoint `check_checkpoint` refuses: the checkpoint before it, or none."""
+    before = [(checkpoint_iteration(p), p) for p in path.parent.glob("model_*.pt")
+              if re.fullmatch(r"model_(\d+)\.pt", p.name) and checkpoint_iteration(p) < checkpoint_iteration(path)]
+    if not before:
+        return "it is the run's only checkpoint: restore it"
+    it, previous = max(before)
+    return (f"move it out of the run directory (or delete it) to resume from {previous.name}, the newest checkpoint "
+            f"before it (training again from iteration {it + 1})")
 
 
 def check_run(cfg: TrainConfig, *, resume: bool, options: Mapping[str, str] | None = None,

@@ -4,7 +4,9 @@ A run directory holds: ``config.json`` (the resolved `TrainConfig`, seed, the sh
 versions, git revision),
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
 torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
-so far, summed over resumed sessions). ``resume`` continues from the newest checkpoint up to `max_iterations`.
+so far, summed over resumed sessions). Each of these files is replaced whole (`wbc.output_files`): a run killed while
+it writes one keeps the one before. ``resume`` continues from the newest checkpoint up to `max_iterations`; Ctrl-C
+stops a run at the end of the iteration in progress, whose checkpoint it saves first (`_learn`).
 When the run ends, ``policy.replay.npz`` records a short rollout of the exported policy (robot states, commands,
 observation frames and actions, `wbc.learned.policy.replay_recorder`): ``wbc check-controller NAME --replay
 policy.replay.npz`` then checks that a controller built from these weights (an ONNX export, an I/O file written by
@@ -18,6 +20,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
+import signal
+import sys
+import threading
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -35,10 +41,13 @@ from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.history_actor import HistoryActor
 from wbc.learned.train.preflight import (
     RESUMABLE,
+    ResumePoint,
     check_run,
+    checkpoint_iteration,
     input_files,
     latest_checkpoint,
     load_input_policy,
+    locked_run_dir,
     make_run_dir,
     student_layout,
 )
@@ -47,6 +56,7 @@ from wbc.learned.train.train_config import TrainConfig
 from wbc.learned.train.vec_env import RslVecEnv
 from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
+from wbc.output_files import replacing, temporary_name
 from wbc.provenance import provenance
 
 torch = require("torch")
@@ -113,7 +123,22 @@ class _Runner(_runners.OnPolicyRunner):
                                   "student_training": student.meta.get("training", {})}
 
     def save(self, path: str, infos: dict | None = None) -> None:
-        super().save(path, infos)
+        """rsl-rl's checkpoint ``model_<it>.pt``, written whole or not at all, then the export (`export`).
+
+        rsl-rl writes the checkpoint in place (``torch.save(path)``), so a run killed while writing it left a torn
+        file that ``--resume`` refuses. It is written here to ``model_<it>.pt.tmp`` beside it (a name
+        `wbc.learned.train.preflight.latest_checkpoint` never takes for a checkpoint) and renamed over its name once
+        complete (`wbc.output_files`): a kill leaves the previous checkpoints whole and at most that temporary file,
+        which the next save of the iteration replaces. (rsl-rl also hands the path to its logger, to upload the
+        file; the TensorBoard logger a run uses uploads nothing.)
+        """
+        tmp = temporary_name(path)
+        try:
+            super().save(str(tmp), infos)
+            os.replace(tmp, path)
+        except BaseException:  # KeyboardInterrupt too: no half-written file stays behind
+            tmp.unlink(missing_ok=True)
+            raise
         self.export()
 
     def export(self) -> None:
@@ -136,7 +161,90 @@ class _Runner(_runners.OnPolicyRunner):
         else:
             pf = policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra)
             save_policy(Path(cfg.run_dir) / "policy", pf)
-        (Path(cfg.run_dir) / "progress.json").write_text(json.dumps(progress, indent=2) + "\n")
+        # after the policy files: a kill in between leaves a progress of the checkpoint before, which --resume
+        # reconciles (`wbc.learned.train.preflight.check_run_dir`)
+        _write_json(Path(cfg.run_dir) / "progress.json", progress)
+
+
+def _write_json(path: Path, data: dict[str, Any]) -> None:
+    """Write a JSON file of the run directory whole (`wbc.output_files`): ``--resume`` refuses a torn one."""
+    with replacing(path) as f:
+        f.write((json.dumps(data, indent=2) + "\n").encode())
+
+
+class _StopAfterIteration(KeyboardInterrupt):
+    """A Ctrl-C deferred to the end of an iteration (`_learn`), raised there."""
+
+
+class _DeferredInterrupt:
+    """A SIGINT handler that notes the first Ctrl-C, says so, and puts the handler before it back for a second."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.previous: Any = signal.default_int_handler
+
+    def install(self) -> None:
+        previous = signal.signal(signal.SIGINT, self)
+        self.previous = signal.default_int_handler if previous is None else previous  # None: set outside Python
+
+    def restore(self) -> None:
+        signal.signal(signal.SIGINT, self.previous)
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        self.requested = True
+        self.restore()
+        print("wbc: Ctrl-C: the run stops at the end of the iteration in progress and saves its checkpoint (Ctrl-C "
+              "again stops at once, keeping the checkpoints saved so far)", file=sys.stderr, flush=True)
+
+
+def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> None:
+    """`runner.learn`, which Ctrl-C stops at the end of an iteration, keeping that iteration's checkpoint.
+
+    rsl-rl's loop may be interrupted anywhere: in a rollout, whose steps have already moved the observation
+    normalisers, or in the PPO update, some of its minibatches applied. The model in memory then is no iteration's,
+    and is not saved. So SIGINT is deferred while the loop runs: its handler notes it (and says so on stderr), and the
+    interruption is raised at the end of the iteration in progress, once it is updated and logged (in rsl-rl's
+    ``logger.log``, the loop's last step before its periodic save). The runner then holds that iteration's networks,
+    normalisers and optimiser, and ``current_learning_iteration`` is its number: its checkpoint is saved, with its
+    export and progress (unless a checkpoint as new is already there), and KeyboardInterrupt is raised, so that
+    ``wbc train`` names the newest checkpoint, this one, and ``--resume`` continues after it.
+
+    A second Ctrl-C stops at once (the handler before is back), and the run keeps the checkpoints saved until then, as
+    does a KeyboardInterrupt that is not SIGINT's. A Ctrl-C after the last iteration's log lets the loop end (its
+    final checkpoint saved) and is raised once it has. Outside the main thread, where no signal is handled, the loop
+    runs as rsl-rl's.
+
+    Raises:
+        KeyboardInterrupt: Ctrl-C.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
+        return
+    interrupt = _DeferredInterrupt()
+    log = runner.logger.log
+
+    def log_then_stop(*args: Any, **kwargs: Any) -> None:
+        log(*args, **kwargs)
+        if interrupt.requested:
+            raise _StopAfterIteration
+
+    runner.logger.log = log_then_stop
+    interrupt.install()
+    try:
+        runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
+    except _StopAfterIteration:
+        it = runner.current_learning_iteration
+        newest = latest_checkpoint(runner.wbc_cfg.run_dir)
+        if newest is None or checkpoint_iteration(newest) < it:
+            runner.save(str(Path(runner.wbc_cfg.run_dir) / f"model_{it}.pt"))
+        if hasattr(runner.logger.writer, "flush"):  # the curves up to the checkpoint
+            runner.logger.writer.flush()
+        raise KeyboardInterrupt from None
+    finally:
+        interrupt.restore()
+        del runner.logger.log  # rsl-rl's own again
+    if interrupt.requested:
+        raise KeyboardInterrupt
 
 
 def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None) -> dict[str, Any]:
@@ -155,14 +263,25 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
         then exported as it is, and the adaptation phase runs), and ``"replay"`` (the replay file of the exported
         policy) unless the policy observes RMA extrinsics without an adaptation module to estimate them.
 
+    The run holds its directory's lock (`wbc.learned.train.preflight.locked_run_dir`) from before it reads it to its
+    end: a second run on the directory (a training, a DAgger run, a fine-tune) is refused while this one lives.
+
     Raises:
-        ConfigError: a new run in a directory that holds a run; no checkpoint to resume from, a damaged run directory
-            (config.json, progress.json, the newest checkpoint) or a resumed config that differs; or the teacher is
-            missing/mismatched.
+        ConfigError: another run holds the run directory (naming it and that run's pid); a new run in a directory
+            that holds a run; no checkpoint to resume from, a damaged run directory (config.json, progress.json, the
+            newest checkpoint) or a resumed config that differs; or the teacher is missing/mismatched.
+        KeyboardInterrupt: Ctrl-C; during PPO, once the iteration in progress has ended and its checkpoint is saved
+            (`_learn`).
     """
+    # the checks `wbc train --dry-run` makes, under the lock
+    with locked_run_dir(cfg.run_dir, lambda: check_run(cfg, resume=resume, options=options)) as point:
+        return _train(cfg, point)
+
+
+def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
+    """`train` once its run directory is checked and locked; `point`: where a resumed run continues from, or None."""
     run_dir = Path(cfg.run_dir)
     resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
-    point = check_run(cfg, resume=resume, options=options)  # the checks `wbc train --dry-run` makes
     progress = point.progress if point is not None else {"iteration": 0, "env_steps": 0, "wall_s": 0.0}
     make_run_dir(run_dir)
     torch.manual_seed(cfg.seed)
@@ -189,13 +308,13 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
             done = runner.current_learning_iteration + 1
             runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
         else:
-            (run_dir / "config.json").write_text(json.dumps(
-                {"train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
-                 "inputs": input_files(cfg), "provenance": provenance(),
-                 "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
+            _write_json(run_dir / "config.json", {
+                "train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
+                "inputs": input_files(cfg), "provenance": provenance(),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
         remaining = cfg.max_iterations - done
         if remaining > 0:
-            runner.learn(remaining, init_at_random_ep_len=point is None)
+            _learn(runner, remaining, init_at_random_ep_len=point is None)
         else:
             # nothing left to train: the newest checkpoint is exported as it is (how an interrupted run is finished,
             # phase 2 included), under its own iteration, not the next one
@@ -209,7 +328,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
     if cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0:
         policy, summary = train_adaptation(load_policy(run_dir / "policy"), cfg.env, cfg.rma)
         save_policy(run_dir / "policy", policy)
-        (run_dir / "rma.json").write_text(json.dumps(summary, indent=2) + "\n")
+        _write_json(run_dir / "rma.json", summary)
         result["rma_wall_s"] = summary["wall_s"]
     if cfg.extrinsics_dim == 0 or cfg.rma.iterations > 0:  # else it observes extrinsics a robot cannot give it
         result["replay"] = str(record_replay(run_dir / "policy", replay_path_for(run_dir / "policy")))
