@@ -10,12 +10,15 @@ configuration and scenario hash), package versions, git revision and what each c
 target and distribution version, the sha256 of every file it was built from: weights, an ONNX model and its external
 data, an I/O or configuration file); it is read back as strictly as a scenario (`RunIdentity.from_json`: every
 field known and of its type), and reopening a directory for another run is refused, naming the fields that differ.
-The paths the run will write are checked before any trial is played (`check_out_dir`).
+The paths the run will write are checked before any trial is played (`check_out_dir`). A run holds its directory
+locked (`LOCK_FILE`) from before it reads anything there until it is done: a second run on it, with or without
+``--resume``, is refused, naming the pid of the one that holds it.
 """
 
 from __future__ import annotations
 
 import csv
+import fcntl
 import json
 import os
 import re
@@ -30,11 +33,14 @@ from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
 from wbc.provenance import provenance
 
-__all__ = ["OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path"]
+__all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path"]
 
 OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "report.md", "push_recovery.png",
                 "ttf.png", "tracking.png")
 """The files a results directory holds (`ResultsStore`, `wbc.arena.finish.finish_results`)."""
+
+LOCK_FILE = ".lock"
+"""The file in a results directory that the run writing it holds locked (``flock``) and writes its pid to."""
 
 _RUN_KEYS = ("config", "environment", "controllers")
 """The top-level fields of ``run.json``."""
@@ -56,6 +62,43 @@ def check_out_dir(out_dir: Path) -> None:
         if path.exists() and not path.is_file():
             raise ResultsDirError(f"{path}: the run writes this file, but it is a directory (or not a regular file); "
                                   "move it away, or choose another --out")
+
+
+def _lock(out_dir: Path) -> int:
+    """Lock `out_dir` for this process: the descriptor of its `LOCK_FILE`, held exclusively, with this pid in it.
+
+    The lock is the OS's (``flock``): it goes when the descriptor is closed or the process ends, however it ends, so a
+    killed run leaves nothing to clean up.
+
+    Raises:
+        ResultsDirError: another process holds it (the message names its pid, as written in the file), or the lock
+            file cannot be opened.
+    """
+    path = out_dir / LOCK_FILE
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise ResultsDirError(f"{path}: cannot open the results directory's lock file ({exc.strerror}); move it away, "
+                              "or choose another --out") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        try:
+            pid = os.read(fd, 32).decode("ascii", "replace").strip()
+        finally:
+            os.close(fd)
+        holder = f" (pid {pid})" if pid.isdigit() else ""
+        raise ResultsDirError(f"{out_dir} is in use by another wbc run{holder}; wait for it to end, or give another "
+                              "--out") from None
+    except BaseException:
+        os.close(fd)
+        raise
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+    except OSError:
+        pass  # the lock holds all the same; only the pid a refused run names is missing
+    return fd
 
 
 def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: int) -> Path:
@@ -110,7 +153,7 @@ def _changed_code(stored: Mapping[str, Any], current: Mapping[str, Any]) -> str 
 
 
 class ResultsStore:
-    """A results directory.
+    """A results directory, held locked by this process until `close` (a second run on it is refused).
 
     Args:
         out_dir: the directory (created if missing).
@@ -124,9 +167,10 @@ class ResultsStore:
             warning line each on stderr, so that their trials are played again; off: such rows are refused.
 
     Raises:
-        ResultsDirError: `out_dir` is a file, or a file the run writes is a directory (`check_out_dir`); it holds
-            results and `resume` is off, or holds another run (the message names the fields that differ), or its
-            ``run.json`` is unreadable or missing beside stored trials.
+        ResultsDirError: `out_dir` is a file, or a file the run writes is a directory (`check_out_dir`); another
+            process holds it (a run still going: `LOCK_FILE`); it holds results and `resume` is off, or holds another
+            run (the message names the fields that differ), or its ``run.json`` is unreadable or missing beside
+            stored trials.
         RecordError: its ``run.json`` is malformed (the message names the field), its ``trials.csv`` has other
             columns, or holds a refused row and `drop_bad_rows` is off (the message names the file and line).
 
@@ -142,11 +186,23 @@ class ResultsStore:
                  controllers: dict[str, object] | None = None, drop_bad_rows: bool = False) -> None:
         self.dir = Path(out_dir)
         self.identity = identity
-        config = identity.as_json()
         self.trials_path = self.dir / "trials.csv"
         self.run_path = self.dir / "run.json"
         check_out_dir(self.dir)
         self.dir.mkdir(parents=True, exist_ok=True)
+        # held until `close`, taken before anything in the directory is read or rewritten: a second run on it would
+        # replace trials.csv under this one, whose appends would then go to a deleted file
+        self._lock: int | None = _lock(self.dir)
+        self._file = None
+        try:
+            self._open(identity.as_json(), resume=resume, controllers=controllers, drop_bad_rows=drop_bad_rows)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open(self, config: dict, *, resume: bool, controllers: dict[str, object] | None,
+              drop_bad_rows: bool) -> None:
+        """Check the directory against this run, read its trials and write ``run.json`` (the lock held)."""
         if self.trials_path.exists() and not resume:
             raise ResultsDirError(f"{self.dir}: already holds results; pass --resume to finish that run, or choose "
                                   "another --out")
@@ -166,7 +222,8 @@ class ResultsStore:
         self.records: list[TrialRecord] = []
         self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
-            rows = scan_csv(self.trials_path, scenario_hash=identity.scenario_hash, outside=_outside(identity))
+            rows = scan_csv(self.trials_path, scenario_hash=self.identity.scenario_hash,
+                            outside=_outside(self.identity))
             if rows.records and not self.run_path.exists():
                 raise ResultsDirError(f"{self.run_path}: missing, so the run the {len(rows.records)} stored trial(s) "
                                       "of trials.csv belong to is unknown; restore run.json, or start afresh with "
@@ -182,7 +239,12 @@ class ResultsStore:
             # this version's columns
             self._rewrite()
         else:
-            with self.trials_path.open("w", encoding="utf-8", newline="") as f:
+            try:  # created, never overwritten: a file that appeared since is another run's
+                f = self.trials_path.open("x", encoding="utf-8", newline="")
+            except FileExistsError:
+                raise ResultsDirError(f"{self.dir}: already holds results; pass --resume to finish that run, or "
+                                      "choose another --out") from None
+            with f:
                 csv.writer(f).writerow(TrialRecord.header())
         self.environment = provenance()  # what `run.json` records; the report shows the same, taken once
         run = {"config": config, "environment": self.environment}
@@ -242,5 +304,12 @@ class ResultsStore:
         self.records.append(record)
 
     def close(self) -> None:
-        """Close the trials file."""
-        self._file.close()
+        """Close the trials file and give the directory's lock back (`LOCK_FILE`); closing again does nothing."""
+        try:
+            if self._file is not None:
+                self._file.close()
+                self._file = None
+        finally:
+            if self._lock is not None:
+                os.close(self._lock)  # the lock goes with the file's last descriptor
+                self._lock = None
