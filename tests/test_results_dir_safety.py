@@ -2,14 +2,23 @@
 
 A run holds its directory locked from before it reads anything there until its report is written: a second run on it,
 with or without ``--resume``, is refused with one line naming the pid of the one that holds it, and changes nothing.
+SIGTERM (a batch scheduler, ``timeout``, ``docker stop``) interrupts a run as Ctrl-C does: status 130 and the line
+that says how to finish it; and a pool's workers end with the process that started them, however it ends.
 """
 
 import os
+import select
+import signal
+import subprocess
+import sys
+import textwrap
+import time
 from pathlib import Path
 
 import pytest
 from conftest import SHORT_SCENARIO
 
+from wbc.arena import executors
 from wbc.arena.identity import RunIdentity
 from wbc.arena.results import LOCK_FILE, ResultsStore
 from wbc.arena.trial_record import TrialRecord
@@ -70,3 +79,76 @@ def test_a_store_that_refuses_a_directory_gives_its_lock_back(short, tmp_path):
     with pytest.raises(Exception, match="already holds results"):
         ResultsStore(out, identity, resume=False)
     ResultsStore(out, identity, resume=True).close()  # not refused as in use: the refusal above let it go
+
+
+def test_sigterm_interrupts_a_run_as_ctrl_c_does(short, tmp_path):
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "compare", "stand", "stand-noarm", "--scenario",
+                             str(short), "--trials", "30", "--workers", "2", "--out", "out", "--quiet"],
+                            cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        trials_csv = out / "trials.csv"
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if trials_csv.exists() and trials_csv.read_text().count("\n") >= 2:  # header + a trial
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.stderr.read()
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130, err
+    assert err.splitlines()[-1] == ("wbc: interrupted; the trials finished are stored in out: the same command with "
+                                    "--resume plays the rest")
+    assert "Traceback" not in err
+    assert 1 <= len(TrialRecord.read_csv(trials_csv)) < 60
+
+
+def _gone(pid: int) -> bool:
+    """`pid` has ended: no such process, or a zombie left for an init that does not reap."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rpartition(")")[2].split()[0] == "Z"
+    except FileNotFoundError:
+        return True
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_a_pools_workers_end_when_the_process_that_started_them_is_killed(tmp_path):
+    parent = textwrap.dedent("""
+        import time
+        from wbc.arena.executors import _new_pool
+
+        pool = _new_pool(2)
+        for future in [pool.submit(time.sleep, 0.5) for _ in range(2)]:  # both workers started, both initialised
+            future.result()
+        print(*pool._processes, flush=True)
+        time.sleep(600)
+    """)
+    # its stderr dropped: the resource tracker it leaves warns there of the pool's semaphores, which it cleans up
+    proc = subprocess.Popen([sys.executable, "-c", parent], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
+    workers: list[int] = []
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], 120)
+        assert ready, "the parent did not start its workers"
+        workers = [int(pid) for pid in proc.stdout.readline().split()]
+        assert len(workers) == 2 and not any(_gone(pid) for pid in workers)
+        proc.kill()  # SIGKILL: the parent shuts nothing down
+        proc.wait()
+        deadline = time.monotonic() + 30  # a bound for failing, not a figure the test asserts
+        while time.monotonic() < deadline and not all(_gone(pid) for pid in workers):
+            time.sleep(0.1)
+        assert all(_gone(pid) for pid in workers)
+    finally:
+        proc.kill()
+        for pid in workers:  # not left behind if the test fails
+            if not _gone(pid):
+                os.kill(pid, signal.SIGKILL)
+
+
+def test_a_worker_without_the_kernels_help_ends_once_its_parent_is_gone():
+    parents, exits = iter([7, 7, 7, 1]), []
+    executors._watch_parent(7, getppid=lambda: next(parents), sleep=lambda s: None, exit_=exits.append)
+    assert exits == [1]

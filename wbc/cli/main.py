@@ -4,7 +4,8 @@ Also ``check-controller``, ``train``, ``demo`` and ``paper``. `main` parses the 
 calls the tool the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the
 command with its message and exit status 2; anything else is a bug and keeps its traceback. A ``run`` or
 ``compare`` in which a controller failed on some trials (`wbc.arena.error_guard`) finishes, then exits with status 1
-after one line per failing controller.
+after one line per failing controller. Ctrl-C and SIGTERM interrupt a command alike: status 130, and one line that
+says what a run stored and how to finish it.
 """
 
 from __future__ import annotations
@@ -12,9 +13,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -1305,6 +1309,28 @@ _RESUMABLE = ("run", "compare", "paper", "demo")
 """The commands whose results directory ``--resume`` finishes after an interruption."""
 
 
+@contextmanager
+def _terminate_interrupts() -> Iterator[None]:
+    """SIGTERM ends the command as Ctrl-C does (`KeyboardInterrupt`); the previous handler is restored after.
+
+    A batch scheduler, ``timeout`` or ``docker stop`` ends a command with SIGTERM: the run then stops its workers and
+    says what it stored and how to finish it, where it ended without a word (status -15). Signals reach the main
+    thread only: a command run from another thread keeps the handler it has.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``wbc`` console script.
 
@@ -1313,14 +1339,15 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
-        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C; a run's
-        finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
-        or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from
+        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C, or
+        SIGTERM; a run's finished trials are stored, and the message says how to finish it; a training run's says
+        which checkpoint, or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from
         the parser, after its usage message.
     """
     args = build_parser().parse_args(argv)
     try:
-        return int(HANDLERS[args.handler](args) or 0)
+        with _terminate_interrupts():
+            return int(HANDLERS[args.handler](args) or 0)
     except WbcError as exc:
         print(f"wbc: error: {exc}", file=sys.stderr)
         return 2
