@@ -3,10 +3,13 @@
 A run holds its directory locked from before it reads anything there until its report is written: a second run on it,
 with or without ``--resume``, is refused with one line naming the pid of the one that holds it, and changes nothing.
 SIGTERM (a batch scheduler, ``timeout``, ``docker stop``) interrupts a run as Ctrl-C does: status 130 and the line
-that says how to finish it; and a pool's workers end with the process that started them, however it ends.
+that says how to finish it; and a pool's workers end with the process that started them, however it ends. That line
+names the directory the run wrote, the default one included, which its ``--resume`` then names too.
 """
 
+import importlib
 import os
+import re
 import select
 import signal
 import subprocess
@@ -19,10 +22,13 @@ import pytest
 from conftest import SHORT_SCENARIO
 
 from wbc.arena import executors
+from wbc.arena import results as results_module
 from wbc.arena.identity import RunIdentity
 from wbc.arena.results import LOCK_FILE, ResultsStore
 from wbc.arena.trial_record import TrialRecord
 from wbc.cli.main import main
+
+cli = importlib.import_module("wbc.cli.main")  # the module (the package's name `main` is the function)
 
 
 @pytest.fixture
@@ -152,3 +158,61 @@ def test_a_worker_without_the_kernels_help_ends_once_its_parent_is_gone():
     parents, exits = iter([7, 7, 7, 1]), []
     executors._watch_parent(7, getppid=lambda: next(parents), sleep=lambda s: None, exit_=exits.append)
     assert exits == [1]
+
+
+def test_an_interrupted_run_without_out_names_the_directory_it_wrote_and_resume_finishes_it(short, tmp_path, capsys,
+                                                                                           monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    append = results_module.ResultsStore.append
+
+    def interrupted(store, record):  # Ctrl-C once the first trial is stored
+        append(store, record)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(results_module.ResultsStore, "append", interrupted)
+    args = ["run", "stand", "--scenario", "short.toml", "--trials", "2", "--workers", "1", "--in-process", "--quiet"]
+    assert main(args) == 130
+    (out,) = Path("runs").iterdir()
+    assert out.name.startswith("short-stand-")
+    assert _last_line(capsys) == (f"wbc: interrupted; the trials finished are stored in {out}: the same command with "
+                                  f"--resume --out {out} plays the rest")
+    monkeypatch.setattr(results_module.ResultsStore, "append", append)
+    assert main([*args, "--resume", "--out", str(out)]) == 0  # as the line says
+    assert len(TrialRecord.read_csv(out / "trials.csv")) == 2
+
+
+@pytest.mark.parametrize(("command", "patched", "default"), [
+    (["compare", "stand", "stand-noarm", "--scenario", "short.toml"], "run_arena", "short-stand-stand-noarm-"),
+    (["paper", "table1"], "run_paper_table", "paper-table1-"),
+    (["demo", "--scenario", "short.toml"], "run_arena", "demo-"),
+])
+def test_each_resumable_command_names_its_default_directory_when_interrupted(short, tmp_path, capsys, monkeypatch,
+                                                                            command, patched, default):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(cli, "analyze_tail", lambda robot: None)  # demo's analysis first: not what is tested
+    monkeypatch.setattr(cli.printers, "print_tail", lambda result: None)
+
+    def interrupted(cfg):  # the run has stored a trial, then Ctrl-C
+        cfg.out_dir.mkdir(parents=True)
+        (cfg.out_dir / "trials.csv").write_text("")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, patched, interrupted)
+    assert main([*command, "--quiet"]) == 130
+    (out,) = Path("runs").iterdir()
+    assert out.name.startswith(default)
+    assert _last_line(capsys) == (f"wbc: interrupted; the trials finished are stored in {out}: the same command with "
+                                  f"--resume --out {out} plays the rest")
+
+
+def test_a_run_interrupted_before_it_stored_anything_says_a_new_run_starts_afresh(short, tmp_path, capsys,
+                                                                                 monkeypatch):
+    monkeypatch.chdir(tmp_path)
+
+    def interrupted(cfg):  # Ctrl-C while the controllers are built, before the directory exists
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "run_arena", interrupted)
+    assert main(["run", "stand", "--scenario", "short.toml", "--quiet"]) == 130
+    assert re.fullmatch(r"wbc: interrupted; no trial was stored yet \(runs/short-stand-[0-9-]+ holds no trials\.csv\): "
+                        r"the same command starts the run afresh", _last_line(capsys))
