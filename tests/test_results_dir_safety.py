@@ -4,10 +4,12 @@ A run holds its directory locked from before it reads anything there until its r
 with or without ``--resume``, is refused with one line naming the pid of the one that holds it, and changes nothing.
 SIGTERM (a batch scheduler, ``timeout``, ``docker stop``) interrupts a run as Ctrl-C does: status 130 and the line
 that says how to finish it; and a pool's workers end with the process that started them, however it ends. That line
-names the directory the run wrote, the default one included, which its ``--resume`` then names too.
+names the directory the run wrote, the default one included, which its ``--resume`` then names too. The files a run
+rewrites (``run.json`` on every resume, the summary and report at its end) are written whole or not at all.
 """
 
 import importlib
+import json
 import os
 import re
 import select
@@ -216,3 +218,47 @@ def test_a_run_interrupted_before_it_stored_anything_says_a_new_run_starts_afres
     assert main(["run", "stand", "--scenario", "short.toml", "--quiet"]) == 130
     assert re.fullmatch(r"wbc: interrupted; no trial was stored yet \(runs/short-stand-[0-9-]+ holds no trials\.csv\): "
                         r"the same command starts the run afresh", _last_line(capsys))
+
+
+class _TornFile:
+    """A file being written that is interrupted (Ctrl-C) halfway through its first write."""
+
+    def __init__(self, file):
+        self.file = file
+
+    def write(self, data):
+        self.file.write(data[: len(data) // 2])
+        self.file.flush()
+        raise KeyboardInterrupt
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.file.close()
+
+    def __getattr__(self, name):
+        return getattr(self.file, name)
+
+
+@pytest.mark.parametrize("name", ["run.json", "summary.json", "report.md"])
+def test_a_results_file_interrupted_while_it_is_rewritten_is_left_whole_and_the_run_resumes(short, tmp_path, capsys,
+                                                                                           monkeypatch, name):
+    out = tmp_path / "out"
+    assert main(_run(short, out)) == 0
+    before = (out / name).read_bytes()
+    open_ = Path.open
+
+    def torn(path, mode="r", *args, **kwargs):  # every write of `name`, or of a file beside it that replaces it
+        file = open_(path, mode, *args, **kwargs)
+        return _TornFile(file) if path.name.startswith(name) and "w" in mode else file
+
+    monkeypatch.setattr(Path, "open", torn)
+    assert main(_run(short, out, "--resume")) == 130  # run.json: as the resumed run opens; the others: as it ends
+    monkeypatch.setattr(Path, "open", open_)
+    assert (out / name).read_bytes() == before  # the old file, whole
+    assert sorted(p.name for p in out.iterdir() if p.name.endswith(".tmp")) == []
+    capsys.readouterr()
+    assert main(_run(short, out, "--resume")) == 0  # the run is finished as if it had never been interrupted
+    assert len(TrialRecord.read_csv(out / "trials.csv")) == 2
+    assert json.loads((out / "summary.json").read_text())["controllers"]["stand"]

@@ -4,7 +4,8 @@ A results directory is written in two parts. While trials play, the results stor
 appends each record to ``trials.csv`` and keeps ``run.json``. When they are done, `finish_results` writes what is
 derived from the records: ``summary.json`` (`wbc.arena.summary.Summary.to_json`), ``failures.json`` (where each
 controller fails, when given) and ``report.md`` with its plots. ``wbc compare`` and ``wbc hw run`` both end here, so
-the two kinds of directory hold the same files in the same form.
+the two kinds of directory hold the same files in the same form. Each file is written whole or not at all
+(`wbc.arena.atomic_write`): an interrupted finish leaves the previous one's files, and ``--resume`` writes them again.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.report import write_report
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
@@ -40,9 +42,8 @@ def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[Tria
     """
     out = Path(out_dir)
     written = [out / "summary.json"]
-    written[0].write_text(json.dumps(summary.to_json(), indent=2), encoding="utf-8")
+    write_text(written[0], json.dumps(summary.to_json(), indent=2))
     if failures is not None:
         written.append(out / "failures.json")
-        written[-1].write_text(json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2),
-                               encoding="utf-8")
+        write_text(written[-1], json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2))
     return [*written, *write_report(out, summary, records, meta, sections=sections, failures=failures, curve=curve)]

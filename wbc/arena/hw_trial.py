@@ -49,6 +49,7 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.episode import Episode
 from wbc.arena.error_guard import ErrorGuard
@@ -417,7 +418,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             "safety_events": [e.to_dict() for e in result.safety_events],
             "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
         }
-        (store.dir / "hardware.json").write_text(json.dumps(hardware_json, indent=2), encoding="utf-8")
+        write_text(store.dir / "hardware.json", json.dumps(hardware_json, indent=2))
         meta = {
             "controller": (record.controller if record.controller == cfg.controller else
                            f"{record.controller} ({cfg.controller} on a robot with arm mode "

@@ -27,6 +27,7 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.identity import RunIdentity
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
@@ -250,7 +251,7 @@ class ResultsStore:
         run = {"config": config, "environment": self.environment}
         if controllers:
             run["controllers"] = controllers
-        self.run_path.write_text(json.dumps(run, indent=2), encoding="utf-8")
+        write_text(self.run_path, json.dumps(run, indent=2))  # whole or not at all: the stored trials need it
         self._file = self.trials_path.open("a", encoding="utf-8", newline="")
         self._writer = csv.writer(self._file)
 

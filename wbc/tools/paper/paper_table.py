@@ -20,6 +20,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.report import compare_pair
 from wbc.arena.trial_record import TrialRecord
@@ -141,6 +142,6 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
         trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, wall_s=wall, workers=cfg.workers,
         controller_errors=arena.controller_errors)
-    (arena.out_dir / "paper.txt").write_text(format_paper_table(result), encoding="utf-8")
-    (arena.out_dir / "paper.json").write_text(json.dumps(result.as_dict(), indent=2), encoding="utf-8")
+    write_text(arena.out_dir / "paper.txt", format_paper_table(result))
+    write_text(arena.out_dir / "paper.json", json.dumps(result.as_dict(), indent=2))
     return result
