@@ -5,9 +5,12 @@ with or without ``--resume``, is refused with one line naming the pid of the one
 SIGTERM (a batch scheduler, ``timeout``, ``docker stop``) interrupts a run as Ctrl-C does: status 130 and the line
 that says how to finish it; and a pool's workers end with the process that started them, however it ends. That line
 names the directory the run wrote, the default one included, which its ``--resume`` then names too. The files a run
-rewrites (``run.json`` on every resume, the summary and report at its end) are written whole or not at all.
+rewrites (``run.json`` on every resume, the summary and report at its end) are written whole or not at all. A file
+that cannot be written (a full disk, a read-only file system) stops the run with one line (status 2) that names it,
+says the trials stored are kept, and how ``--resume`` finishes the run.
 """
 
+import errno
 import importlib
 import json
 import os
@@ -262,3 +265,80 @@ def test_a_results_file_interrupted_while_it_is_rewritten_is_left_whole_and_the_
     assert main(_run(short, out, "--resume")) == 0  # the run is finished as if it had never been interrupted
     assert len(TrialRecord.read_csv(out / "trials.csv")) == 2
     assert json.loads((out / "summary.json").read_text())["controllers"]["stand"]
+
+
+class _FullDisk:
+    """A file whose writes fail with `code` (a full disk, a read-only file system) after its first `writes`."""
+
+    def __init__(self, file, writes, code):
+        self.file, self.writes, self.code = file, writes, code
+
+    def write(self, data):
+        if self.writes <= 0:
+            raise OSError(self.code, os.strerror(self.code))
+        self.writes -= 1
+        return self.file.write(data)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.file.close()
+
+    def __getattr__(self, name):
+        return getattr(self.file, name)
+
+
+def _failing(monkeypatch, name: str, opened: str, writes: int, code: int) -> None:
+    """Writes of the files named `name` (or their temporary files), `opened` so, fail after `writes` writes."""
+    open_ = Path.open
+
+    def failing(path, mode="r", *args, **kwargs):
+        file = open_(path, mode, *args, **kwargs)
+        return _FullDisk(file, writes, code) if path.name.startswith(name) and opened in mode else file
+
+    monkeypatch.setattr(Path, "open", failing)
+
+
+def test_a_full_disk_stops_the_run_in_one_line_keeping_the_trials_stored(short, tmp_path, capsys, monkeypatch):
+    out = tmp_path / "out"
+    args = ["run", "stand", "--scenario", str(short), "--trials", "4", "--out", str(out), "--workers", "1",
+            "--in-process", "--quiet"]
+    _failing(monkeypatch, "trials.csv", "a", 2, errno.ENOSPC)  # the disk fills up as the third trial is stored
+    assert main(args) == 2
+    assert _last_line(capsys) == (f"wbc: error: {out / 'trials.csv'}: cannot be written (No space left on device); "
+                                  f"the 2 trial(s) finished are kept in {out / 'trials.csv'}: the same command with "
+                                  f"--resume --out {out} finishes the run once there is room")
+    monkeypatch.undo()
+    assert len(TrialRecord.read_csv(out / "trials.csv")) == 2
+    assert main([*args, "--resume"]) == 0
+    assert len(TrialRecord.read_csv(out / "trials.csv")) == 4
+
+
+def test_a_summary_that_cannot_be_written_stops_the_run_in_one_line_and_resume_writes_it(short, tmp_path, capsys,
+                                                                                       monkeypatch):
+    out = tmp_path / "out"
+    _failing(monkeypatch, "summary.json", "w", 0, errno.EROFS)
+    assert main(_run(short, out)) == 2
+    assert _last_line(capsys) == (f"wbc: error: {out / 'summary.json'}: cannot be written (Read-only file system); "
+                                  f"the 2 trial(s) finished are kept in {out / 'trials.csv'}: the same command with "
+                                  f"--resume --out {out} finishes the run once {out} can be written")
+    assert not (out / "summary.json").exists() and not (out / "summary.json.tmp").exists()
+    monkeypatch.undo()
+    assert main(_run(short, out, "--resume")) == 0  # plays nothing, and writes the summary and report
+    assert json.loads((out / "summary.json").read_text())["controllers"]["stand"]
+    assert len(TrialRecord.read_csv(out / "trials.csv")) == 2
+
+
+def test_an_episode_that_cannot_be_saved_stops_the_run_in_one_line(short, tmp_path, capsys, monkeypatch):
+    from wbc.arena.episode import Episode
+
+    def full(episode, path):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(Episode, "save", full)
+    out = tmp_path / "out"
+    assert main(_run(short, out, "--save-episodes")) == 2
+    assert _last_line(capsys) == (f"wbc: error: {out / 'episodes' / 'stand' / 'soft-s0-t0.npz'}: cannot be written (No "
+                                  f"space left on device); no trial was stored yet: the same command with --resume "
+                                  f"--out {out} finishes the run once there is room")

@@ -27,7 +27,8 @@ def replacing(path: str | Path) -> Iterator[BinaryIO]:
     removed and `path` is left as it was.
 
     Raises:
-        OSError: the temporary file cannot be written or moved (a full disk, no permission), as raised.
+        OSError: the temporary file cannot be written or moved (a full disk, a quota, no permission, a read-only file
+            system): its errno and strerror, and `path` as its filename (the file that was not written).
     """
     path = Path(path)
     tmp = path.with_name(f"{path.name}.tmp")
@@ -37,9 +38,11 @@ def replacing(path: str | Path) -> Iterator[BinaryIO]:
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from exc
         raise
 
 

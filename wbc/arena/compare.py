@@ -42,7 +42,7 @@ from wbc.arena.identity import (
 )
 from wbc.arena.progress import progress
 from wbc.arena.report import summarize
-from wbc.arena.results import ResultsStore, check_out_dir, episode_path
+from wbc.arena.results import ResultsStore, check_out_dir, episode_path, unwritable
 from wbc.arena.runner import TickObserver
 from wbc.arena.sequential import SequentialComparison
 from wbc.arena.sim_trial import check_rate
@@ -250,7 +250,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         ScenarioError: the scenario file is invalid.
         ConfigError: bad options, or a controller for another robot than the scenario's.
         ResultsDirError: a results directory that belongs to another run, or that misses trials at the end (other
-            than those of a controller stopped for its errors).
+            than those of a controller stopped for its errors), or that another run holds
+            (`wbc.arena.results.LOCK_FILE`), or a file of it that cannot be written (a full disk, a quota, no
+            permission: the message names it, and says that the trials stored are kept for ``--resume``).
         RecordError: a ``trials.csv`` row refused on `ArenaConfig.resume` without `ArenaConfig.drop_bad_rows`, or
             a malformed ``run.json``.
 
@@ -347,6 +349,11 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
                     rounds.advance(store.records)
                 if bar is not None:
                     bar.update(1)
+        except OSError as exc:
+            # an episode's file or folder (--save-episodes) that could not be written: said as trials.csv's would be
+            if not exc.filename or not Path(exc.filename).resolve().is_relative_to(store.dir.resolve()):
+                raise
+            raise unwritable(exc.filename, exc, store.dir, stored=len(store.records)) from exc
         finally:
             if bar is not None:
                 bar.close()

@@ -93,10 +93,16 @@ def run_task(task: TrialTask, observer: TickObserver | None = None) -> TrialReco
 
     The episode is saved (when the task names a path) before the record is returned, so a stored record always has its
     episode. `observer` watches every tick (a live viewer; see `wbc.arena.runner.run_episode`).
+
+    Raises:
+        OSError: the episode could not be saved (a full disk, no permission), with its path as the filename.
     """
     record, episode = run_trial(task.trial, task.controller, debug_truth=task.debug_truth, observer=observer)
     if task.episode_path is not None:
-        episode.save(task.episode_path)
+        try:
+            episode.save(task.episode_path)
+        except OSError as exc:  # named, for the run's message (a full disk: `wbc.arena.results.unwritable`)
+            raise OSError(exc.errno, exc.strerror or str(exc), task.episode_path) from exc
     return record
 
 

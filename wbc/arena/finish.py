@@ -17,6 +17,7 @@ from typing import Any
 
 from wbc.arena.atomic_write import write_text
 from wbc.arena.report import write_report
+from wbc.arena.results import unwritable
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
 
@@ -25,7 +26,7 @@ __all__ = ["finish_results"]
 
 def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[TrialRecord], meta: Mapping[str, Any],
                    *, sections: Sequence[tuple[str, Sequence[str]]] = (), failures: Mapping[str, Any] | None = None,
-                   curve: Mapping[str, Any] | None = None) -> list[Path]:
+                   curve: Mapping[str, Any] | None = None, resumable: bool = True) -> list[Path]:
     """Write ``summary.json``, ``failures.json`` (when `failures` is given) and the report into `out_dir`.
 
     Args:
@@ -36,14 +37,24 @@ def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[Tria
         sections: more report sections (a hardware trial's timing, safety events and operator actions).
         failures: where each controller fails (`wbc.arena.breakdown.breakdown`), None for none.
         curve: the push-recovery curve (`wbc.arena.breakdown.recovery_curve`), None for none.
+        resumable: the run can be resumed (``--resume``), as the message of a file that cannot be written then says;
+            off: a hardware trial.
 
     Returns:
         The files written: ``summary.json``, ``failures.json`` (if any), ``report.md``, then the plots.
+
+    Raises:
+        ResultsDirError: a file could not be written (a full disk, a quota, no permission; `unwritable`: the message
+            names it, and says that ``--resume`` writes them all again).
     """
     out = Path(out_dir)
     written = [out / "summary.json"]
-    write_text(written[0], json.dumps(summary.to_json(), indent=2))
-    if failures is not None:
-        written.append(out / "failures.json")
-        write_text(written[-1], json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2))
-    return [*written, *write_report(out, summary, records, meta, sections=sections, failures=failures, curve=curve)]
+    try:
+        write_text(written[0], json.dumps(summary.to_json(), indent=2))
+        if failures is not None:
+            written.append(out / "failures.json")
+            write_text(written[-1], json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2))
+        return [*written, *write_report(out, summary, records, meta, sections=sections, failures=failures,
+                                        curve=curve)]
+    except OSError as exc:
+        raise unwritable(exc.filename or out, exc, out, stored=len(records), resumable=resumable) from exc

@@ -57,7 +57,7 @@ from wbc.arena.finish import finish_results
 from wbc.arena.identity import HardwareRunIdentity, ScenarioRef
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
 from wbc.arena.report import md_table, summarize
-from wbc.arena.results import ResultsStore, episode_path
+from wbc.arena.results import ResultsStore, episode_path, unwritable
 from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
@@ -396,12 +396,15 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         target=hardware.target,
     )
     store = ResultsStore(result.out_dir, identity, resume=False,
-                         controllers={result.controller.name: result.controller.provenance()})
+                         controllers={result.controller.name: result.controller.provenance()}, resumable=False)
     try:  # the directory stays locked until its report is written
         store.append(record)
         path = episode_path(store.dir, record.controller, trial.band, trial.seed, trial.index)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        episode.save(str(path))
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            episode.save(str(path))
+        except OSError as exc:
+            raise unwritable(path, exc, store.dir, stored=1, resumable=False) from exc
         guard = ErrorGuard([record.controller], 0)
         guard.observe(record)
         summary = summarize([record], scenario_name=scenario_name, scenario_hash=scenario_hash,
@@ -418,7 +421,10 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             "safety_events": [e.to_dict() for e in result.safety_events],
             "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
         }
-        write_text(store.dir / "hardware.json", json.dumps(hardware_json, indent=2))
+        try:
+            write_text(store.dir / "hardware.json", json.dumps(hardware_json, indent=2))
+        except OSError as exc:
+            raise unwritable(exc.filename, exc, store.dir, stored=1, resumable=False) from exc
         meta = {
             "controller": (record.controller if record.controller == cfg.controller else
                            f"{record.controller} ({cfg.controller} on a robot with arm mode "
@@ -433,7 +439,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             **{k: v for k, v in store.environment.items() if k != "packages"},
             "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
         }
-        finish_results(store.dir, summary, [record], meta, sections=_hardware_sections(result))
+        finish_results(store.dir, summary, [record], meta, sections=_hardware_sections(result), resumable=False)
     finally:
         store.close()
 

@@ -23,6 +23,7 @@ from pathlib import Path
 from wbc.arena.atomic_write import write_text
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.report import compare_pair
+from wbc.arena.results import unwritable
 from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.scenario import ScenarioError, check_published, load_scenario
@@ -142,6 +143,9 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
         trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, wall_s=wall, workers=cfg.workers,
         controller_errors=arena.controller_errors)
-    write_text(arena.out_dir / "paper.txt", format_paper_table(result))
-    write_text(arena.out_dir / "paper.json", json.dumps(result.as_dict(), indent=2))
+    try:
+        write_text(arena.out_dir / "paper.txt", format_paper_table(result))
+        write_text(arena.out_dir / "paper.json", json.dumps(result.as_dict(), indent=2))
+    except OSError as exc:
+        raise unwritable(exc.filename or arena.out_dir, exc, arena.out_dir, stored=len(records)) from exc
     return result
