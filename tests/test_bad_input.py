@@ -512,6 +512,11 @@ def test_an_interrupted_command_says_so_in_one_line_and_how_a_run_is_finished(tm
     monkeypatch.setitem(HANDLERS, "bench sim", interrupted)
     out = tmp_path / "o"
     assert main(["run", "stand", "--scenario", "scenarios/push.toml", "--trials", "1", "--out", str(out)]) == 130
+    assert capsys.readouterr().err == (f"wbc: interrupted; no trial was stored yet ({out} holds no trials.csv): the "
+                                       "same command starts the run afresh\n")
+    out.mkdir()
+    (out / "trials.csv").write_text("")  # the run had stored its trials there
+    assert main(["run", "stand", "--scenario", "scenarios/push.toml", "--trials", "1", "--out", str(out)]) == 130
     assert capsys.readouterr().err == (f"wbc: interrupted; the trials finished are stored in {out}: the same command "
                                        "with --resume plays the rest\n")
     assert main(["bench", "sim"]) == 130

@@ -42,7 +42,7 @@ from wbc.arena.identity import (
 )
 from wbc.arena.progress import progress
 from wbc.arena.report import summarize
-from wbc.arena.results import ResultsStore, check_out_dir, episode_path
+from wbc.arena.results import ResultsStore, check_out_dir, episode_path, unwritable
 from wbc.arena.runner import TickObserver
 from wbc.arena.sequential import SequentialComparison
 from wbc.arena.sim_trial import check_rate
@@ -250,7 +250,9 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
         ScenarioError: the scenario file is invalid.
         ConfigError: bad options, or a controller for another robot than the scenario's.
         ResultsDirError: a results directory that belongs to another run, or that misses trials at the end (other
-            than those of a controller stopped for its errors).
+            than those of a controller stopped for its errors), or that another run holds
+            (`wbc.arena.results.LOCK_FILE`), or a file of it that cannot be written (a full disk, a quota, no
+            permission: the message names it, and says that the trials stored are kept for ``--resume``).
         RecordError: a ``trials.csv`` row refused on `ArenaConfig.resume` without `ArenaConfig.drop_bad_rows`, or
             a malformed ``run.json``.
 
@@ -301,94 +303,101 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume,
                          controllers={name: spec.provenance() for name, spec in specs.items()},
                          drop_bad_rows=cfg.drop_bad_rows)
-    done = store.done()
-    guard = ErrorGuard(cfg.controllers, cfg.max_consecutive_errors)
-    guard.observe_all(store.records)  # a controller stopped before stays stopped
+    try:  # the directory stays locked until its summary and report are written
+        done = store.done()
+        guard = ErrorGuard(cfg.controllers, cfg.max_consecutive_errors)
+        guard.observe_all(store.records)  # a controller stopped before stays stopped
 
-    def where(t: Trial, c: str) -> str | None:
-        if not cfg.save_episodes:
-            return None
-        path = episode_path(store.dir, c, t.band, t.seed, t.index)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        return str(path)
+        def where(t: Trial, c: str) -> str | None:
+            if not cfg.save_episodes:
+                return None
+            path = episode_path(store.dir, c, t.band, t.seed, t.index)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            return str(path)
 
-    def task(t: Trial, c: str) -> TrialTask:
-        return TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c),
-                         time_limit_s=cfg.trial_time_limit_s)
+        def task(t: Trial, c: str) -> TrialTask:
+            return TrialTask(trial=t, controller=specs[c], debug_truth=cfg.debug_truth, episode_path=where(t, c),
+                             time_limit_s=cfg.trial_time_limit_s)
 
-    total = len(cfg.controllers) * len(trials)
-    rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None
-    if rounds is not None:
-        rounds.advance(store.records)  # a resumed run's complete rounds count before any new trial
-        tasks = rounds.tasks(task, done, guard.stopped)
-        todo = total - len(done & {(c, *t.key) for t in trials for c in cfg.controllers})
-    else:
-        # trial by trial, every controller in turn: pairs finish together and the progress estimate mixes fast and
-        # slow controllers from the start (the order does not change a result); handed out lazily, so that a
-        # controller stopped for its errors gets no more
-        keys = [(t, c) for t in trials for c in cfg.controllers if (c, *t.key) not in done]
-        tasks = (task(t, c) for t, c in keys if not guard.stopped(c))
-        todo = len(keys)
-    executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
-                LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
-    bar = progress(total, total - todo, cfg.progress)
-    start = time.perf_counter()
-    steps = 0
-    played = 0
-    physics_dt = MujocoRobotConfig().timestep
-    try:
-        for record in executor.run(tasks):
-            store.append(record)
-            guard.observe(record)
-            played += 1
-            steps += int(round(record.ttf * scenario.duration_s / physics_dt))
-            if rounds is not None:
-                rounds.advance(store.records)
+        total = len(cfg.controllers) * len(trials)
+        rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None
+        if rounds is not None:
+            rounds.advance(store.records)  # a resumed run's complete rounds count before any new trial
+            tasks = rounds.tasks(task, done, guard.stopped)
+            todo = total - len(done & {(c, *t.key) for t in trials for c in cfg.controllers})
+        else:
+            # trial by trial, every controller in turn: pairs finish together and the progress estimate mixes fast and
+            # slow controllers from the start (the order does not change a result); handed out lazily, so that a
+            # controller stopped for its errors gets no more
+            keys = [(t, c) for t in trials for c in cfg.controllers if (c, *t.key) not in done]
+            tasks = (task(t, c) for t, c in keys if not guard.stopped(c))
+            todo = len(keys)
+        executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
+                    LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
+        bar = progress(total, total - todo, cfg.progress)
+        start = time.perf_counter()
+        steps = 0
+        played = 0
+        physics_dt = MujocoRobotConfig().timestep
+        try:
+            for record in executor.run(tasks):
+                store.append(record)
+                guard.observe(record)
+                played += 1
+                steps += int(round(record.ttf * scenario.duration_s / physics_dt))
+                if rounds is not None:
+                    rounds.advance(store.records)
+                if bar is not None:
+                    bar.update(1)
+        except OSError as exc:
+            # an episode's file or folder (--save-episodes) that could not be written: said as trials.csv's would be
+            if not exc.filename or not Path(exc.filename).resolve().is_relative_to(store.dir.resolve()):
+                raise
+            raise unwritable(exc.filename, exc, store.dir, stored=len(store.records)) from exc
+        finally:
             if bar is not None:
-                bar.update(1)
+                bar.close()
+        wall = time.perf_counter() - start
+        # in canonical order: the store holds them in the order they finished, which varies between runs
+        records = in_canonical_order((r for r in store.records if r.scenario_hash == scenario.hash), cfg.controllers,
+                                     scenario.bands)
+        per_controller = len(trials) if rounds is None else rounds.played * len(bands)
+        errors = guard.report([r for r in store.records if r.scenario_hash == scenario.hash], per_controller)
+        summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
+                            controllers=list(cfg.controllers), bands=list(bands), errors=errors,
+                            sequential=rounds.comparison.as_dict() if rounds is not None else None)
+        outcomes = push_outcomes(records, scenario.trial)
+        failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands)
+        curve = recovery_curve(outcomes, controllers=cfg.controllers)
+        meta = {
+            "controllers": ", ".join(cfg.controllers),
+            "scenario": f"{scenario.name} v{scenario.version} ({cfg.scenario})",
+            "scenario hash": scenario.hash,
+            "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
+            "bands": ", ".join(bands),
+            "seeds": ", ".join(str(s) for s in cfg.seeds),
+            "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
+            "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
+            "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
+            "executor": cfg.executor,
+            **({} if cfg.trial_time_limit_s is None else {
+                "trial time limit": f"{cfg.trial_time_limit_s:g} s (--trial-time-limit: a trial past it is its "
+                                    "controller's error, kept on --resume)"}),
+            **{k: v for k, v in store.environment.items() if k != "packages"},
+            "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
+        }
+        finish_results(store.dir, summary, records, meta, failures=failures, curve=curve)
+        expected = ({(c, *t.key) for t in trials for c in cfg.controllers} if rounds is None else
+                    {key for i in rounds.begun for key in rounds.keys(i)})
+        missing = expected - {r.run_key for r in records}
+        if any(not guard.stopped(key[0]) for key in missing):
+            raise ResultsDirError(f"{store.dir}: {len(expected) - len(missing)} of {len(expected)} trials stored; "
+                                  "rerun with --resume to play the rest")
+        return ArenaResult(summary=summary, records=tuple(records), failures=failures, curve=curve, out_dir=store.dir,
+                           played=played, wall_s=wall, physics_steps=steps, budget=total,
+                           controller_errors=tuple(errors))
     finally:
-        if bar is not None:
-            bar.close()
         store.close()
-    wall = time.perf_counter() - start
-    # in canonical order: the store holds them in the order they finished, which varies between runs
-    records = in_canonical_order((r for r in store.records if r.scenario_hash == scenario.hash), cfg.controllers,
-                                 scenario.bands)
-    per_controller = len(trials) if rounds is None else rounds.played * len(bands)
-    errors = guard.report([r for r in store.records if r.scenario_hash == scenario.hash], per_controller)
-    summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
-                        controllers=list(cfg.controllers), bands=list(bands), errors=errors,
-                        sequential=rounds.comparison.as_dict() if rounds is not None else None)
-    outcomes = push_outcomes(records, scenario.trial)
-    failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands)
-    curve = recovery_curve(outcomes, controllers=cfg.controllers)
-    meta = {
-        "controllers": ", ".join(cfg.controllers),
-        "scenario": f"{scenario.name} v{scenario.version} ({cfg.scenario})",
-        "scenario hash": scenario.hash,
-        "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
-        "bands": ", ".join(bands),
-        "seeds": ", ".join(str(s) for s in cfg.seeds),
-        "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
-        "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
-        "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
-        "executor": cfg.executor,
-        **({} if cfg.trial_time_limit_s is None else {
-            "trial time limit": f"{cfg.trial_time_limit_s:g} s (--trial-time-limit: a trial past it is its "
-                                "controller's error, kept on --resume)"}),
-        **{k: v for k, v in store.environment.items() if k != "packages"},
-        "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
-    }
-    finish_results(store.dir, summary, records, meta, failures=failures, curve=curve)
-    expected = ({(c, *t.key) for t in trials for c in cfg.controllers} if rounds is None else
-                {key for i in rounds.begun for key in rounds.keys(i)})
-    missing = expected - {r.run_key for r in records}
-    if any(not guard.stopped(key[0]) for key in missing):
-        raise ResultsDirError(f"{store.dir}: {len(expected) - len(missing)} of {len(expected)} trials stored; rerun "
-                              "with --resume to play the rest")
-    return ArenaResult(summary=summary, records=tuple(records), failures=failures, curve=curve, out_dir=store.dir,
-                       played=played, wall_s=wall, physics_steps=steps, budget=total,
-                       controller_errors=tuple(errors))
 
 
 def _tested_pairs(cfg: ArenaConfig) -> tuple[tuple[str, str], ...]:

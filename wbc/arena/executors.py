@@ -13,14 +13,18 @@ name once (reading a ``policy:PATH`` file there), and the spec pickles to spawne
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import hashlib
 import itertools
 import math
 import multiprocessing
 import os
+import signal
 import sys
 import tempfile
 import threading
+import time
 from collections.abc import Callable, Generator, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
@@ -89,10 +93,16 @@ def run_task(task: TrialTask, observer: TickObserver | None = None) -> TrialReco
 
     The episode is saved (when the task names a path) before the record is returned, so a stored record always has its
     episode. `observer` watches every tick (a live viewer; see `wbc.arena.runner.run_episode`).
+
+    Raises:
+        OSError: the episode could not be saved (a full disk, no permission), with its path as the filename.
     """
     record, episode = run_trial(task.trial, task.controller, debug_truth=task.debug_truth, observer=observer)
     if task.episode_path is not None:
-        episode.save(task.episode_path)
+        try:
+            episode.save(task.episode_path)
+        except OSError as exc:  # named, for the run's message (a full disk: `wbc.arena.results.unwritable`)
+            raise OSError(exc.errno, exc.strerror or str(exc), task.episode_path) from exc
     return record
 
 
@@ -161,6 +171,53 @@ def overran(task: TrialTask) -> TrialRecord:
     """The record of `task`, whose worker was ended when the trial ran past its time limit: a controller error."""
     return _no_tick_record(task, f"ran past the trial time limit of {task.time_limit_s:g} s (--trial-time-limit), and "
                                  "its worker process was ended")
+
+
+_PR_SET_PDEATHSIG = 1
+"""``prctl``'s option that has the kernel signal a process when its parent ends (Linux)."""
+
+_PARENT_POLL_S = 0.5
+"""How often a worker without ``PR_SET_PDEATHSIG`` checks that its parent is still there [s]."""
+
+
+def _new_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of `workers` spawned processes, each ended when this process ends (`_die_with_parent`)."""
+    return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
+                               initializer=_die_with_parent, initargs=(os.getpid(),))
+
+
+def _die_with_parent(parent: int) -> None:
+    """In a pool's worker, as it starts: end it when `parent`, the process that started it, ends, however it ends.
+
+    A parent killed (SIGKILL, the out-of-memory killer) or ended by a signal it does not handle never shuts its pool
+    down, and an idle worker waits for work forever (reparented to init, a few hundred MB each). On Linux the kernel
+    kills the worker (``PR_SET_PDEATHSIG``; it fires when the parent's thread that spawned the worker ends, and the
+    pool spawns its workers from the thread that submits to it, the run's own); elsewhere a daemon thread checks the
+    parent every `_PARENT_POLL_S`. A parent that died before the request was made is caught by the check after it.
+    """
+    if not _killed_with_parent():
+        threading.Thread(target=_watch_parent, args=(parent,), name="wbc-parent-watch", daemon=True).start()
+    if os.getppid() != parent:  # ended before the kernel was asked: it will not signal for it
+        os._exit(1)
+
+
+def _killed_with_parent() -> bool:
+    """Ask the kernel to SIGKILL this process when its parent ends (``prctl``); False where it cannot be asked."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or None, use_errno=True)
+        return libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+    except (OSError, AttributeError):
+        return False
+
+
+def _watch_parent(parent: int, *, period_s: float = _PARENT_POLL_S, getppid: Callable[[], int] = os.getppid,
+                  sleep: Callable[[float], object] = time.sleep, exit_: Callable[[int], object] = os._exit) -> None:
+    """End this process (``os._exit(1)``) once its parent is no longer `parent`; tests pass their own functions."""
+    while getppid() == parent:
+        sleep(period_s)
+    exit_(1)
 
 
 class LocalExecutor:
@@ -243,7 +300,7 @@ class LocalExecutor:
 
     def _pool_pass(self, queue: Iterator[TrialTask]) -> Generator[TrialRecord, None, list[TrialTask] | None]:
         """Play `queue` in one pool until it is empty (None) or the pool breaks (the tasks it broke with)."""
-        pool = ProcessPoolExecutor(max_workers=self.workers, mp_context=multiprocessing.get_context("spawn"))
+        pool = _new_pool(self.workers)
         broke = ended = False  # ended: every task played (else stopped early: an interrupt, a caller gone)
         try:
             pending: dict[Future, TrialTask] = {}
@@ -287,7 +344,7 @@ class LocalExecutor:
 
 def _alone(task: TrialTask, flag: str) -> TrialRecord:
     """Play `task` in a pool of its own: its record, or, if its worker dies, the record of that controller error."""
-    pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn"))
+    pool = _new_pool(1)
     try:
         return pool.submit(_run_limited, task, flag).result()
     except BrokenProcessPool:

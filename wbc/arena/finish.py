@@ -4,7 +4,8 @@ A results directory is written in two parts. While trials play, the results stor
 appends each record to ``trials.csv`` and keeps ``run.json``. When they are done, `finish_results` writes what is
 derived from the records: ``summary.json`` (`wbc.arena.summary.Summary.to_json`), ``failures.json`` (where each
 controller fails, when given) and ``report.md`` with its plots. ``wbc compare`` and ``wbc hw run`` both end here, so
-the two kinds of directory hold the same files in the same form.
+the two kinds of directory hold the same files in the same form. Each file is written whole or not at all
+(`wbc.arena.atomic_write`): an interrupted finish leaves the previous one's files, and ``--resume`` writes them again.
 """
 
 from __future__ import annotations
@@ -14,7 +15,9 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.report import write_report
+from wbc.arena.results import unwritable
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
 
@@ -23,7 +26,7 @@ __all__ = ["finish_results"]
 
 def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[TrialRecord], meta: Mapping[str, Any],
                    *, sections: Sequence[tuple[str, Sequence[str]]] = (), failures: Mapping[str, Any] | None = None,
-                   curve: Mapping[str, Any] | None = None) -> list[Path]:
+                   curve: Mapping[str, Any] | None = None, resumable: bool = True) -> list[Path]:
     """Write ``summary.json``, ``failures.json`` (when `failures` is given) and the report into `out_dir`.
 
     Args:
@@ -34,15 +37,24 @@ def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[Tria
         sections: more report sections (a hardware trial's timing, safety events and operator actions).
         failures: where each controller fails (`wbc.arena.breakdown.breakdown`), None for none.
         curve: the push-recovery curve (`wbc.arena.breakdown.recovery_curve`), None for none.
+        resumable: the run can be resumed (``--resume``), as the message of a file that cannot be written then says;
+            off: a hardware trial.
 
     Returns:
         The files written: ``summary.json``, ``failures.json`` (if any), ``report.md``, then the plots.
+
+    Raises:
+        ResultsDirError: a file could not be written (a full disk, a quota, no permission; `unwritable`: the message
+            names it, and says that ``--resume`` writes them all again).
     """
     out = Path(out_dir)
     written = [out / "summary.json"]
-    written[0].write_text(json.dumps(summary.to_json(), indent=2), encoding="utf-8")
-    if failures is not None:
-        written.append(out / "failures.json")
-        written[-1].write_text(json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2),
-                               encoding="utf-8")
-    return [*written, *write_report(out, summary, records, meta, sections=sections, failures=failures, curve=curve)]
+    try:
+        write_text(written[0], json.dumps(summary.to_json(), indent=2))
+        if failures is not None:
+            written.append(out / "failures.json")
+            write_text(written[-1], json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2))
+        return [*written, *write_report(out, summary, records, meta, sections=sections, failures=failures,
+                                        curve=curve)]
+    except OSError as exc:
+        raise unwritable(exc.filename or out, exc, out, stored=len(records), resumable=resumable) from exc

@@ -49,6 +49,7 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.episode import Episode
 from wbc.arena.error_guard import ErrorGuard
@@ -56,7 +57,7 @@ from wbc.arena.finish import finish_results
 from wbc.arena.identity import HardwareRunIdentity, ScenarioRef
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
 from wbc.arena.report import md_table, summarize
-from wbc.arena.results import ResultsStore, episode_path
+from wbc.arena.results import ResultsStore, episode_path, unwritable
 from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
@@ -395,46 +396,52 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         target=hardware.target,
     )
     store = ResultsStore(result.out_dir, identity, resume=False,
-                         controllers={result.controller.name: result.controller.provenance()})
-    try:
+                         controllers={result.controller.name: result.controller.provenance()}, resumable=False)
+    try:  # the directory stays locked until its report is written
         store.append(record)
+        path = episode_path(store.dir, record.controller, trial.band, trial.seed, trial.index)
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            episode.save(str(path))
+        except OSError as exc:
+            raise unwritable(path, exc, store.dir, stored=1, resumable=False) from exc
+        guard = ErrorGuard([record.controller], 0)
+        guard.observe(record)
+        summary = summarize([record], scenario_name=scenario_name, scenario_hash=scenario_hash,
+                            controllers=[record.controller], bands=[trial.band], errors=guard.report([record], 1))
+        hardware_json = {
+            "robot": hardware.description.name, "arm_mode": hardware.description.arm_mode, "backend": hardware.backend,
+            "target": hardware.target, "control_rate_hz": 1.0 / episode.control_dt, "notes": list(result.notes),
+            "episode_wall_s": result.episode_wall_s, "cpu_s": result.cpu_s, "io_cpu_s": result.io_cpu_s,
+            "link": result.link.as_dict(prefix="") if result.link is not None else None,
+            "trial_started_s": result.trial_started_s,
+            "realtime": grant.to_dict() if grant is not None else None,  # the devices' process: asked, granted, refused
+            "controller_realtime": (result.controller_realtime.to_dict() if result.controller_realtime is not None
+                                    else None),  # the controller's loop
+            "safety_events": [e.to_dict() for e in result.safety_events],
+            "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
+        }
+        try:
+            write_text(store.dir / "hardware.json", json.dumps(hardware_json, indent=2))
+        except OSError as exc:
+            raise unwritable(exc.filename, exc, store.dir, stored=1, resumable=False) from exc
+        meta = {
+            "controller": (record.controller if record.controller == cfg.controller else
+                           f"{record.controller} ({cfg.controller} on a robot with arm mode "
+                           f"{hardware.description.arm_mode})"),
+            "robot": f"{hardware.description.name}, arm {hardware.description.arm_mode}, backend {hardware.backend}, "
+                     f"{hardware.target}",
+            "scenario": f"{scenario_name} ({cfg.scenario}), written for {trial.robot}",
+            "scenario hash": scenario_hash,
+            "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
+            "trial": f"band {trial.band}, seed {trial.seed}, trial {trial.index}, {trial.duration_s:g} s",
+            "metrics source": "the state estimator (IMU and leg kinematics): a robot has no simulator truth",
+            **{k: v for k, v in store.environment.items() if k != "packages"},
+            "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
+        }
+        finish_results(store.dir, summary, [record], meta, sections=_hardware_sections(result), resumable=False)
     finally:
         store.close()
-    path = episode_path(store.dir, record.controller, trial.band, trial.seed, trial.index)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    episode.save(str(path))
-    guard = ErrorGuard([record.controller], 0)
-    guard.observe(record)
-    summary = summarize([record], scenario_name=scenario_name, scenario_hash=scenario_hash,
-                        controllers=[record.controller], bands=[trial.band], errors=guard.report([record], 1))
-    hardware_json = {
-        "robot": hardware.description.name, "arm_mode": hardware.description.arm_mode, "backend": hardware.backend,
-        "target": hardware.target, "control_rate_hz": 1.0 / episode.control_dt, "notes": list(result.notes),
-        "episode_wall_s": result.episode_wall_s, "cpu_s": result.cpu_s, "io_cpu_s": result.io_cpu_s,
-        "link": result.link.as_dict(prefix="") if result.link is not None else None,
-        "trial_started_s": result.trial_started_s,
-        "realtime": grant.to_dict() if grant is not None else None,  # the devices' process: asked, granted, refused
-        "controller_realtime": (result.controller_realtime.to_dict() if result.controller_realtime is not None
-                                else None),  # the controller's loop
-        "safety_events": [e.to_dict() for e in result.safety_events],
-        "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
-    }
-    (store.dir / "hardware.json").write_text(json.dumps(hardware_json, indent=2), encoding="utf-8")
-    meta = {
-        "controller": (record.controller if record.controller == cfg.controller else
-                       f"{record.controller} ({cfg.controller} on a robot with arm mode "
-                       f"{hardware.description.arm_mode})"),
-        "robot": f"{hardware.description.name}, arm {hardware.description.arm_mode}, backend {hardware.backend}, "
-                 f"{hardware.target}",
-        "scenario": f"{scenario_name} ({cfg.scenario}), written for {trial.robot}",
-        "scenario hash": scenario_hash,
-        "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
-        "trial": f"band {trial.band}, seed {trial.seed}, trial {trial.index}, {trial.duration_s:g} s",
-        "metrics source": "the state estimator (IMU and leg kinematics): a robot has no simulator truth",
-        **{k: v for k, v in store.environment.items() if k != "packages"},
-        "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
-    }
-    finish_results(store.dir, summary, [record], meta, sections=_hardware_sections(result))
 
 
 def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]]]:

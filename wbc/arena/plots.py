@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from wbc.arena.atomic_write import replacing
 from wbc.arena.summary import MetricSummary, Summary
 from wbc.arena.trial_record import TrialRecord
 
@@ -76,7 +77,8 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), fontsize=8, ncol=3, frameon=False)
         ax.set_title("Push recovery (all bands; a push is survived when no fall precedes the next)", fontsize=9)
         fig.tight_layout()
-        fig.savefig(path, dpi=100)
+        with replacing(path) as f:  # whole or not at all
+            fig.savefig(f, format="png", dpi=100)
     finally:
         plt.close(fig)
     return True
@@ -113,7 +115,8 @@ def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers:
         axes[0][0].set_ylabel("trials still standing [%]")
         fig.suptitle("Time to fall, per band", fontsize=10)
         fig.tight_layout()
-        fig.savefig(path, dpi=100)
+        with replacing(path) as f:  # whole or not at all
+            fig.savefig(f, format="png", dpi=100)
     finally:
         plt.close(fig)
 
@@ -156,7 +159,8 @@ def _plot_tracking(plt: Any, path: Path, summary: Summary, bands: Sequence[str],
         axes[0].legend(fontsize=7)
         fig.suptitle("Tracking error over the seconds every controller survived", fontsize=10)
         fig.tight_layout()
-        fig.savefig(path, dpi=100)
+        with replacing(path) as f:  # whole or not at all
+            fig.savefig(f, format="png", dpi=100)
     finally:
         plt.close(fig)
 

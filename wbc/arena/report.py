@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.error_guard import ControllerErrors, outcome_counts
 from wbc.arena.paired_tests import (
@@ -768,5 +769,5 @@ def write_report(
         else:
             lines += [f"- {title}: not drawn (no trial had a push{'' if curve else ', or no push outcomes given'})", ""]
     report = out / "report.md"
-    report.write_text("\n".join(lines).rstrip("\n") + "\n", encoding="utf-8")
+    write_text(report, "\n".join(lines).rstrip("\n") + "\n")
     return [report, *plots]

@@ -10,31 +10,40 @@ configuration and scenario hash), package versions, git revision and what each c
 target and distribution version, the sha256 of every file it was built from: weights, an ONNX model and its external
 data, an I/O or configuration file); it is read back as strictly as a scenario (`RunIdentity.from_json`: every
 field known and of its type), and reopening a directory for another run is refused, naming the fields that differ.
-The paths the run will write are checked before any trial is played (`check_out_dir`).
+The paths the run will write are checked before any trial is played (`check_out_dir`). A run holds its directory
+locked (`LOCK_FILE`) from before it reads anything there until it is done: a second run on it, with or without
+``--resume``, is refused, naming the pid of the one that holds it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import errno
+import fcntl
 import json
 import os
 import re
 import sys
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.identity import RunIdentity
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
 from wbc.provenance import provenance
 
-__all__ = ["OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path"]
+__all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path", "unwritable"]
 
 OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "report.md", "push_recovery.png",
                 "ttf.png", "tracking.png")
 """The files a results directory holds (`ResultsStore`, `wbc.arena.finish.finish_results`)."""
+
+LOCK_FILE = ".lock"
+"""The file in a results directory that the run writing it holds locked (``flock``) and writes its pid to."""
 
 _RUN_KEYS = ("config", "environment", "controllers")
 """The top-level fields of ``run.json``."""
@@ -56,6 +65,72 @@ def check_out_dir(out_dir: Path) -> None:
         if path.exists() and not path.is_file():
             raise ResultsDirError(f"{path}: the run writes this file, but it is a directory (or not a regular file); "
                                   "move it away, or choose another --out")
+
+
+def unwritable(path: str | Path, exc: OSError, out_dir: Path, *, stored: int,
+               resumable: bool = True) -> ResultsDirError:
+    """The error of a results file that could not be written: one line, what failed, what is kept, how to go on.
+
+    Every row of ``trials.csv`` written before is kept (each was flushed to disk as its trial finished), so the same
+    command with ``--resume`` finishes the run: once there is room, for a full disk or quota (ENOSPC, EDQUOT), or
+    once the directory can be written, for anything else (no permission, a read-only file system).
+
+    Args:
+        path: the file (or directory) that could not be written.
+        exc: what writing it raised.
+        out_dir: the results directory.
+        stored: the trials stored in its ``trials.csv``.
+        resumable: the run can be resumed (``--resume``); off: a hardware trial, which is played again instead.
+    """
+    why = exc.strerror or str(exc)
+    room = exc.errno in (errno.ENOSPC, errno.EDQUOT)
+    if not resumable:
+        return ResultsDirError(f"{path}: cannot be written ({why}); the results in {out_dir} are incomplete, and a "
+                               "hardware trial is not resumed: " + ("free some space, then play the trial again with "
+                                                                    "another --out" if room else
+                                                                    "play the trial again with a writable --out"))
+    kept = (f"the {stored} trial(s) finished are kept in {Path(out_dir) / 'trials.csv'}" if stored else
+            "no trial was stored yet")
+    when = "once there is room" if room else f"once {out_dir} can be written"
+    return ResultsDirError(f"{path}: cannot be written ({why}); {kept}: the same command with --resume --out "
+                           f"{out_dir} finishes the run {when}")
+
+
+def _lock(out_dir: Path) -> int:
+    """Lock `out_dir` for this process: the descriptor of its `LOCK_FILE`, held exclusively, with this pid in it.
+
+    The lock is the OS's (``flock``): it goes when the descriptor is closed or the process ends, however it ends, so a
+    killed run leaves nothing to clean up.
+
+    Raises:
+        ResultsDirError: another process holds it (the message names its pid, as written in the file), or the lock
+            file cannot be opened.
+    """
+    path = out_dir / LOCK_FILE
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise ResultsDirError(f"{path}: cannot open the results directory's lock file ({exc.strerror}); move it away, "
+                              "or choose another --out") from None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        try:
+            pid = os.read(fd, 32).decode("ascii", "replace").strip()
+        finally:
+            os.close(fd)
+        holder = f" (pid {pid})" if pid.isdigit() else ""
+        raise ResultsDirError(f"{out_dir} is in use by another wbc run{holder}; wait for it to end, or give another "
+                              "--out") from None
+    except BaseException:
+        os.close(fd)
+        raise
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+    except OSError:
+        pass  # the lock holds all the same; only the pid a refused run names is missing
+    return fd
 
 
 def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: int) -> Path:
@@ -110,7 +185,7 @@ def _changed_code(stored: Mapping[str, Any], current: Mapping[str, Any]) -> str 
 
 
 class ResultsStore:
-    """A results directory.
+    """A results directory, held locked by this process until `close` (a second run on it is refused).
 
     Args:
         out_dir: the directory (created if missing).
@@ -122,11 +197,13 @@ class ResultsStore:
             ``run.json`` beside the configuration.
         drop_bad_rows: drop the rows of ``trials.csv`` that are refused (`wbc.arena.trial_record.scan_csv`), with one
             warning line each on stderr, so that their trials are played again; off: such rows are refused.
+        resumable: the run can be resumed (``--resume``), as its messages then say; off: a hardware trial.
 
     Raises:
-        ResultsDirError: `out_dir` is a file, or a file the run writes is a directory (`check_out_dir`); it holds
-            results and `resume` is off, or holds another run (the message names the fields that differ), or its
-            ``run.json`` is unreadable or missing beside stored trials.
+        ResultsDirError: `out_dir` is a file, or a file the run writes is a directory (`check_out_dir`); another
+            process holds it (a run still going: `LOCK_FILE`); it holds results and `resume` is off, or holds another
+            run (the message names the fields that differ), or its ``run.json`` is unreadable or missing beside
+            stored trials; or a file of it cannot be written (a full disk, no permission: `unwritable`).
         RecordError: its ``run.json`` is malformed (the message names the field), its ``trials.csv`` has other
             columns, or holds a refused row and `drop_bad_rows` is off (the message names the file and line).
 
@@ -136,17 +213,38 @@ class ResultsStore:
         environment: the package versions and git revision ``run.json`` records (`wbc.provenance.provenance`).
         records: the trials stored, in the order they finished.
         dropped: the rows of ``trials.csv`` dropped on opening (with `drop_bad_rows`), in file order.
+        resumable: as given.
     """
 
     def __init__(self, out_dir: Path, identity: RunIdentity, *, resume: bool,
-                 controllers: dict[str, object] | None = None, drop_bad_rows: bool = False) -> None:
+                 controllers: dict[str, object] | None = None, drop_bad_rows: bool = False,
+                 resumable: bool = True) -> None:
         self.dir = Path(out_dir)
+        self.resumable = resumable
         self.identity = identity
-        config = identity.as_json()
         self.trials_path = self.dir / "trials.csv"
         self.run_path = self.dir / "run.json"
         check_out_dir(self.dir)
-        self.dir.mkdir(parents=True, exist_ok=True)
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ResultsDirError(f"{self.dir}: cannot be created ({exc.strerror or exc}); choose another --out, or "
+                                  "make its parent directory writable") from exc
+        # held until `close`, taken before anything in the directory is read or rewritten: a second run on it would
+        # replace trials.csv under this one, whose appends would then go to a deleted file
+        self._lock: int | None = _lock(self.dir)
+        self._file = None
+        self._failed = False  # a write of trials.csv failed: closing it does not try again
+        self.records: list[TrialRecord] = []
+        try:
+            self._open(identity.as_json(), resume=resume, controllers=controllers, drop_bad_rows=drop_bad_rows)
+        except BaseException:
+            self.close()
+            raise
+
+    def _open(self, config: dict, *, resume: bool, controllers: dict[str, object] | None,
+              drop_bad_rows: bool) -> None:
+        """Check the directory against this run, read its trials and write ``run.json`` (the lock held)."""
         if self.trials_path.exists() and not resume:
             raise ResultsDirError(f"{self.dir}: already holds results; pass --resume to finish that run, or choose "
                                   "another --out")
@@ -163,10 +261,10 @@ class ResultsStore:
                 raise ResultsDirError(f"{self.run_path}: --resume with {changed} changed since the run began: its "
                                       "stored trials were played by the earlier one, and a run mixes no two; restore "
                                       "it, or start afresh with another --out")
-        self.records: list[TrialRecord] = []
         self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
-            rows = scan_csv(self.trials_path, scenario_hash=identity.scenario_hash, outside=_outside(identity))
+            rows = scan_csv(self.trials_path, scenario_hash=self.identity.scenario_hash,
+                            outside=_outside(self.identity))
             if rows.records and not self.run_path.exists():
                 raise ResultsDirError(f"{self.run_path}: missing, so the run the {len(rows.records)} stored trial(s) "
                                       "of trials.csv belong to is unknown; restore run.json, or start afresh with "
@@ -180,17 +278,34 @@ class ResultsStore:
             self.records, self.dropped = list(rows.records), rows.refused
             # rewrite without a torn last line (so appends start on a fresh line) and without the rows dropped, with
             # this version's columns
-            self._rewrite()
+            with self._writing(self.trials_path):
+                self._rewrite()
         else:
-            with self.trials_path.open("w", encoding="utf-8", newline="") as f:
-                csv.writer(f).writerow(TrialRecord.header())
+            with self._writing(self.trials_path):
+                try:  # created, never overwritten: a file that appeared since is another run's
+                    f = self.trials_path.open("x", encoding="utf-8", newline="")
+                except FileExistsError:
+                    raise ResultsDirError(f"{self.dir}: already holds results; pass --resume to finish that run, or "
+                                          "choose another --out") from None
+                with f:
+                    csv.writer(f).writerow(TrialRecord.header())
         self.environment = provenance()  # what `run.json` records; the report shows the same, taken once
         run = {"config": config, "environment": self.environment}
         if controllers:
             run["controllers"] = controllers
-        self.run_path.write_text(json.dumps(run, indent=2), encoding="utf-8")
-        self._file = self.trials_path.open("a", encoding="utf-8", newline="")
+        with self._writing(self.run_path):
+            write_text(self.run_path, json.dumps(run, indent=2))  # whole or not at all: the stored trials need it
+        with self._writing(self.trials_path):
+            self._file = self.trials_path.open("a", encoding="utf-8", newline="")
         self._writer = csv.writer(self._file)
+
+    @contextlib.contextmanager
+    def _writing(self, path: Path) -> Iterator[None]:
+        """Turn an `OSError` of the block, which writes `path`, into its one-line error (`unwritable`)."""
+        try:
+            yield
+        except OSError as exc:
+            raise unwritable(path, exc, self.dir, stored=len(self.records), resumable=self.resumable) from exc
 
     def _stored_config(self) -> dict:
         """The ``config`` of the stored ``run.json``, checked to be a run identity this version reads.
@@ -235,12 +350,34 @@ class ResultsStore:
         return {r.run_key for r in self.records}
 
     def append(self, record: TrialRecord) -> None:
-        """Store one finished trial durably."""
-        self._writer.writerow(record.to_row())
-        self._file.flush()
-        os.fsync(self._file.fileno())
+        """Store one finished trial durably.
+
+        Raises:
+            ResultsDirError: it could not be written (a full disk, a quota, no permission: `unwritable`); the rows
+                written before are kept, and a row cut short is dropped when the directory is reopened.
+        """
+        try:
+            with self._writing(self.trials_path):
+                self._writer.writerow(record.to_row())
+                self._file.flush()
+                os.fsync(self._file.fileno())
+        except ResultsDirError:
+            self._failed = True
+            raise
         self.records.append(record)
 
     def close(self) -> None:
-        """Close the trials file."""
-        self._file.close()
+        """Close the trials file and give the directory's lock back (`LOCK_FILE`); closing again does nothing."""
+        try:
+            if self._file is not None:
+                file, self._file = self._file, None
+                if self._failed:  # what it still buffers is the row that failed: closed without another error
+                    with contextlib.suppress(OSError):
+                        file.close()
+                else:
+                    with self._writing(self.trials_path):
+                        file.close()
+        finally:
+            if self._lock is not None:
+                os.close(self._lock)  # the lock goes with the file's last descriptor
+                self._lock = None

@@ -4,7 +4,8 @@ Also ``check-controller``, ``train``, ``demo`` and ``paper``. `main` parses the 
 calls the tool the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the
 command with its message and exit status 2; anything else is a bug and keeps its traceback. A ``run`` or
 ``compare`` in which a controller failed on some trials (`wbc.arena.error_guard`) finishes, then exits with status 1
-after one line per failing controller.
+after one line per failing controller. Ctrl-C and SIGTERM interrupt a command alike: status 130, and one line that
+says what a run stored and how to finish it.
 """
 
 from __future__ import annotations
@@ -12,9 +13,12 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import signal
 import sys
+import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -64,7 +68,7 @@ from wbc.tools.bench import (
 from wbc.tools.demo import DEMO_CONTROLLERS, trial_to_watch
 from wbc.tools.emulate import BUS_FAULTS, FAULTS, EmulateConfig, emulate
 from wbc.tools.hardware_check import HardwareCheckConfig, check_hardware
-from wbc.tools.paper import PaperRunConfig, run_paper_table
+from wbc.tools.paper import PaperRunConfig, default_out_dir, run_paper_table
 from wbc.tools.posture import posture_study
 from wbc.tools.tail import analyze_tail
 
@@ -851,6 +855,21 @@ def _distil(args: argparse.Namespace) -> int:
     return 0
 
 
+def _interrupted_run(args: argparse.Namespace) -> str:
+    """What an interrupted ``run``, ``compare``, ``paper`` or ``demo`` stored, and how to go on: the end of its message.
+
+    The directory is the one the run wrote: ``--out``'s, or the default the command chose (``args.results_dir``), which
+    the ``--resume`` it suggests then names, as a rerun would choose another.
+    """
+    out = getattr(args, "results_dir", None) or (Path(args.out) if getattr(args, "out", None) else None)
+    if out is None:
+        return ""  # interrupted before it chose one
+    if not (Path(out) / "trials.csv").is_file():
+        return f"; no trial was stored yet ({out} holds no trials.csv): the same command starts the run afresh"
+    again = "--resume" if getattr(args, "out", None) else f"--resume --out {out}"
+    return f"; the trials finished are stored in {out}: the same command with {again} plays the rest"
+
+
 def _interrupted_training(args: argparse.Namespace) -> str:
     """What an interrupted ``wbc train`` keeps in its run directory, and how to go on: the end of its message."""
     kind, run_dir = getattr(args, "training", (None, None))
@@ -965,6 +984,7 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
     _check_resumable(args)
     out = Path(args.out) if args.out else Path("runs") / (
         f"{Path(args.scenario).stem}-{'-'.join(controllers)}-{time.strftime('%Y%m%d-%H%M%S')}")
+    args.results_dir = out  # what an interruption names (`main`)
     live = _live_observer(args) if args.view else None
     cfg = ArenaConfig(controllers=controllers, scenario=Path(args.scenario), bands=tuple(args.band or ()),
                       seeds=seeds, trials=args.trials, out_dir=out, executor=args.executor, workers=args.workers,
@@ -1050,9 +1070,10 @@ def _paper(args: argparse.Namespace) -> int:
             raise ConfigError(f"--contender: {key} is given twice ({overrides[key]}, {name}); give it once")
         overrides[key] = name
     _check_resumable(args)
+    args.results_dir = Path(args.out) if args.out else default_out_dir(args.table)  # what an interruption names
     result = run_paper_table(PaperRunConfig(
         table=args.table, trials=args.trials, seeds=args.seeds,
-        scenario=Path(args.scenario) if args.scenario else None, out_dir=Path(args.out) if args.out else None,
+        scenario=Path(args.scenario) if args.scenario else None, out_dir=args.results_dir,
         workers=args.workers, resume=args.resume, drop_bad_rows=args.drop_bad_rows,
         progress=not (args.quiet or args.json), contenders=overrides,
         crouched=args.crouched, trial_time_limit_s=args.trial_time_limit, isolated=not args.in_process))
@@ -1240,8 +1261,9 @@ def _demo(args: argparse.Namespace) -> int:
     printers.print_demo_header(DEMO_CONTROLLERS, scenario=args.scenario, trials=args.trials, seeds=args.seeds)
     printers.print_tail(analyze_tail(get_robot(robot, "actuated")))  # the scenario's robot's arm
     print(flush=True)
+    args.results_dir = Path(args.out or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}")  # what an interruption names
     cfg = ArenaConfig(controllers=DEMO_CONTROLLERS, scenario=Path(args.scenario), seeds=tuple(range(args.seeds)),
-                      trials=args.trials, out_dir=Path(args.out or f"runs/demo-{time.strftime('%Y%m%d-%H%M%S')}"),
+                      trials=args.trials, out_dir=args.results_dir,
                       workers=args.workers, progress=not args.quiet, resume=args.resume,
                       drop_bad_rows=args.drop_bad_rows)
     result = run_arena(cfg)
@@ -1311,6 +1333,28 @@ _RESUMABLE = ("run", "compare", "paper", "demo")
 """The commands whose results directory ``--resume`` finishes after an interruption."""
 
 
+@contextmanager
+def _terminate_interrupts() -> Iterator[None]:
+    """SIGTERM ends the command as Ctrl-C does (`KeyboardInterrupt`); the previous handler is restored after.
+
+    A batch scheduler, ``timeout`` or ``docker stop`` ends a command with SIGTERM: the run then stops its workers and
+    says what it stored and how to finish it, where it ended without a word (status -15). Signals reach the main
+    thread only: a command run from another thread keeps the handler it has.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``wbc`` console script.
 
@@ -1319,21 +1363,21 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
-        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C; a run's
-        finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
-        or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from
+        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C, or
+        SIGTERM; a run's finished trials are stored, and the message says how to finish it; a training run's says
+        which checkpoint, or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from
         the parser, after its usage message.
     """
     args = build_parser().parse_args(argv)
     try:
-        return int(HANDLERS[args.handler](args) or 0)
+        with _terminate_interrupts():
+            return int(HANDLERS[args.handler](args) or 0)
     except WbcError as exc:
         print(f"wbc: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        resumable = args.handler in _RESUMABLE and getattr(args, "out", None)
-        print("wbc: interrupted" + (f"; the trials finished are stored in {args.out}: the same command with --resume "
-                                    "plays the rest" if resumable else _interrupted_training(args)), file=sys.stderr)
+        print("wbc: interrupted" + (_interrupted_run(args) if args.handler in _RESUMABLE else
+                                    _interrupted_training(args)), file=sys.stderr)
         return 130
 
 

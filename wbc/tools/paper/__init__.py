@@ -7,10 +7,11 @@ from wbc.tools.paper.paper_table import (
     DEFAULT_TRIALS,
     PaperRunConfig,
     PaperTableResult,
+    default_out_dir,
     run_paper_table,
 )
 from wbc.tools.paper.tables import TABLES, Contender, Contrast, PaperTableSpec, resolve_contenders
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TRIALS", "TABLES", "TABLE_I", "TABLE_II", "TABLE_III", "Contender", "Contrast",
-           "PaperRunConfig", "PaperTableResult", "PaperTableSpec", "PaperValue", "format_paper_table",
-           "resolve_contenders", "run_paper_table", "verdict"]
+           "PaperRunConfig", "PaperTableResult", "PaperTableSpec", "PaperValue", "default_out_dir",
+           "format_paper_table", "resolve_contenders", "run_paper_table", "verdict"]

@@ -20,8 +20,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from wbc.arena.atomic_write import write_text
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.report import compare_pair
+from wbc.arena.results import unwritable
 from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.scenario import ScenarioError, check_published, load_scenario
@@ -30,13 +32,18 @@ from wbc.tools.paper.result import PAPER_TRIALS_PER_BAND, PaperComparison, Paper
 from wbc.tools.paper.tables import TABLES, resolve_contenders
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TRIALS", "PAPER_TRIALS_PER_BAND", "PaperRunConfig", "PaperTableResult",
-           "run_paper_table"]
+           "default_out_dir", "run_paper_table"]
 
 DEFAULT_TRIALS = 10
 """Trials per band and seed by default: the size that fits a 2-core machine in minutes, not hours."""
 
 DEFAULT_SEEDS = 1
 """Seeds by default."""
+
+def default_out_dir(table: str) -> Path:
+    """The results directory of a run of `table` without ``--out``: ``runs/paper-<table>-<time>``."""
+    return Path("runs") / f"paper-{table}-{time.strftime('%Y%m%d-%H%M%S')}"
+
 
 @dataclass(frozen=True, kw_only=True)
 class PaperRunConfig:
@@ -48,7 +55,7 @@ class PaperRunConfig:
         seeds: seeds 0 .. seeds - 1.
         scenario: the scenario file (None: the table's; a later version of it, or another scenario with the same
             robot and the same number of bands, works alike).
-        out_dir: results directory (None: ``runs/paper-<table>-<time>``).
+        out_dir: results directory (None: ``runs/paper-<table>-<time>``, `default_out_dir`).
         workers: local worker processes (None: all cores).
         resume: finish an interrupted run in `out_dir`.
         drop_bad_rows: with `resume`, drop the rows of ``trials.csv`` the results store refuses and play their
@@ -104,7 +111,7 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
     except ScenarioError:
         published = False
     played_rows = [c for c in contenders if c.controller is not None]
-    out = cfg.out_dir or Path("runs") / f"paper-{spec.name}-{time.strftime('%Y%m%d-%H%M%S')}"
+    out = cfg.out_dir or default_out_dir(spec.name)
     start = time.perf_counter()
     arena = run_arena(ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
                                   seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
@@ -136,6 +143,9 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
         trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, wall_s=wall, workers=cfg.workers,
         controller_errors=arena.controller_errors)
-    (arena.out_dir / "paper.txt").write_text(format_paper_table(result), encoding="utf-8")
-    (arena.out_dir / "paper.json").write_text(json.dumps(result.as_dict(), indent=2), encoding="utf-8")
+    try:
+        write_text(arena.out_dir / "paper.txt", format_paper_table(result))
+        write_text(arena.out_dir / "paper.json", json.dumps(result.as_dict(), indent=2))
+    except OSError as exc:
+        raise unwritable(exc.filename or arena.out_dir, exc, arena.out_dir, stored=len(records)) from exc
     return result
