@@ -5,7 +5,7 @@ appends each record to ``trials.csv`` and keeps ``run.json``. When they are done
 derived from the records: ``summary.json`` (`wbc.arena.summary.Summary.to_json`), ``failures.json`` (where each
 controller fails, when given) and ``report.md`` with its plots. ``wbc compare`` and ``wbc hw run`` both end here, so
 the two kinds of directory hold the same files in the same form. Each file is written whole or not at all
-(`wbc.arena.atomic_write`): an interrupted finish leaves the previous one's files, and ``--resume`` writes them again.
+(`wbc.output_files`): an interrupted finish leaves the previous one's files, and ``--resume`` writes them again.
 """
 
 from __future__ import annotations
@@ -15,11 +15,11 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from wbc.arena.atomic_write import write_text
 from wbc.arena.report import write_report
 from wbc.arena.results import unwritable
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
+from wbc.output_files import write_text
 
 __all__ = ["finish_results"]
 

@@ -49,7 +49,6 @@ from pathlib import Path
 
 from threadpoolctl import threadpool_limits
 
-from wbc.arena.atomic_write import write_text
 from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.episode import Episode
 from wbc.arena.error_guard import ErrorGuard
@@ -73,6 +72,7 @@ from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import RealtimeGrant, RealtimeRequest, controller_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
+from wbc.output_files import write_text
 from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand

@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.atomic_write import replacing
 from wbc.arena.summary import MetricSummary, Summary
 from wbc.arena.trial_record import TrialRecord
+from wbc.output_files import replacing
 
 __all__ = ["PLOTS", "write_plots"]
 

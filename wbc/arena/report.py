@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 
-from wbc.arena.atomic_write import write_text
 from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.error_guard import ControllerErrors, outcome_counts
 from wbc.arena.paired_tests import (
@@ -55,6 +54,7 @@ from wbc.arena.trial_record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SA
 from wbc.arena.verdict import ALPHA, signed, verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
+from wbc.output_files import write_text
 
 __all__ = [
     "METRICS",

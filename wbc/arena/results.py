@@ -29,11 +29,11 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from wbc.arena.atomic_write import write_text
 from wbc.arena.identity import RunIdentity
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
+from wbc.output_files import write_text
 from wbc.provenance import provenance
 
 __all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path", "unwritable"]

@@ -31,15 +31,13 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import os
 import time
 import zipfile
 import zlib
-from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any
 
 import numpy as np
 
@@ -64,6 +62,7 @@ from wbc.learned.train.distill import (
 from wbc.learned.train.preflight import check_run_root, config_diff, locked_run_dir, make_run_dir, read_run_json
 from wbc.learned.train.stages import TASKS
 from wbc.mpc.controller import MpcController, MpcControllerConfig
+from wbc.output_files import replacing as _replacing  # a name of this module: the tests interrupt its writes
 from wbc.provenance import provenance
 from wbc.robots.description import RobotDescription
 from wbc.robots.registry import get_robot
@@ -312,15 +311,6 @@ def dagger_expert(cfg: DaggerConfig) -> tuple[ControllerSpec, Callable[[RobotDes
         return MpcController(desc, MpcControllerConfig(xy_leash=0.0, yaw_leash=0.0))
 
     return expert_spec, make_expert
-
-
-@contextmanager
-def _replacing(path: Path) -> Iterator[BinaryIO]:
-    """Write `path` through a temporary file beside it: an interruption leaves the old file whole, never half of one."""
-    tmp = path.with_name(f"{path.name}.tmp")
-    with tmp.open("wb") as f:
-        yield f
-    os.replace(tmp, path)
 
 
 _DAMAGED = "the run directory is damaged: start a new run under another --run-root"

@@ -20,12 +20,12 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wbc.arena.atomic_write import write_text
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.report import compare_pair
 from wbc.arena.results import unwritable
 from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, UnknownNameError
+from wbc.output_files import write_text
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.tools.paper.format import format_paper_table
 from wbc.tools.paper.result import PAPER_TRIALS_PER_BAND, PaperComparison, PaperTableResult
