@@ -15,13 +15,15 @@ row by row, has its own rules (`wbc.arena.results.ResultsStore`).
 
 from __future__ import annotations
 
+import fcntl
 import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import BinaryIO
 
-__all__ = ["replace_files", "replacing", "temporary_name", "write_text"]
+__all__ = ["LOCK_FILE", "DirectoryInUse", "DirectoryLock", "directory_holder", "lock_directory", "replace_files",
+           "replacing", "temporary_name", "write_text"]
 
 
 def temporary_name(path: str | Path) -> Path:
@@ -85,3 +87,114 @@ def replace_files(contents: Mapping[Path, bytes]) -> None:
         for tmp in written:
             tmp.unlink(missing_ok=True)
         raise
+
+
+LOCK_FILE = ".lock"
+"""The file of a directory that the run writing it holds locked (`lock_directory`), the run's pid written inside."""
+
+
+class DirectoryInUse(Exception):
+    """Another process holds the directory's lock (`lock_directory`).
+
+    Attributes:
+        path: the lock file.
+        pid: the holder's pid as its lock file says, or None where it is not written (yet).
+    """
+
+    def __init__(self, path: Path, pid: int | None) -> None:
+        super().__init__(f"{path} is held by {'pid ' + str(pid) if pid is not None else 'another process'}")
+        self.path = path
+        self.pid = pid
+
+
+class DirectoryLock:
+    """A directory this process holds (`lock_directory`), given back by `release` or at the end of a ``with``."""
+
+    def __init__(self, path: Path, fd: int) -> None:
+        self.path = path
+        self._fd: int | None = fd
+
+    def release(self) -> None:
+        """Give the lock back (closing its file does); the pid is erased first, so a refusal never names a run gone.
+
+        Releasing again does nothing.
+        """
+        if self._fd is None:
+            return
+        fd, self._fd = self._fd, None
+        try:
+            os.ftruncate(fd, 0)
+        except OSError:
+            pass
+        os.close(fd)
+
+    def __enter__(self) -> DirectoryLock:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def _pid_in(fd: int) -> int | None:
+    try:
+        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
+    except OSError:
+        return None
+    return int(text) if text.isdigit() else None
+
+
+def lock_directory(directory: str | Path) -> DirectoryLock:
+    """Hold `directory` for this process, or refuse it: another process holds it.
+
+    The lock is `fcntl.flock`, exclusive and not waiting, on ``DIRECTORY/.lock`` (`LOCK_FILE`), with this process's
+    pid written inside for a refusal to name. The OS releases it when the process ends, however it ends (a SIGKILL
+    too), so the file a dead run leaves locks nothing. The file stays: were it removed, a run could lock a new file of
+    that name while another still held the old one.
+
+    Raises:
+        DirectoryInUse: another process holds it.
+        OSError: the lock file cannot be made or opened (its filename set), or its file system takes no locks.
+    """
+    path = Path(directory) / LOCK_FILE
+    fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        pid = _pid_in(fd)
+        os.close(fd)
+        raise DirectoryInUse(path, pid) from None
+    except BaseException:
+        os.close(fd)
+        raise
+    try:
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
+    except OSError:
+        pass  # the lock holds all the same; only the pid a refused run names is missing
+    return DirectoryLock(path, fd)
+
+
+def directory_holder(directory: str | Path) -> DirectoryInUse | None:
+    """Whether another process holds `directory` (`lock_directory`), without holding it: a dry run's check.
+
+    Where the directory has a lock file, its lock is taken (shared) for an instant only; nothing is written. A
+    directory without one (or whose file cannot be read, or whose file system takes no locks) is not held: the run
+    itself then says what stops it.
+
+    Returns:
+        The holder, as `lock_directory` would raise it; None where no process holds the directory.
+    """
+    path = Path(directory) / LOCK_FILE
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return DirectoryInUse(path, _pid_in(fd))
+    except OSError:
+        return None
+    finally:
+        os.close(fd)
+    return None

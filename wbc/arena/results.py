@@ -20,7 +20,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import errno
-import fcntl
 import json
 import os
 import re
@@ -33,7 +32,7 @@ from wbc.arena.identity import RunIdentity
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
-from wbc.output_files import write_text
+from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, lock_directory, write_text
 from wbc.provenance import provenance
 
 __all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path", "unwritable"]
@@ -42,8 +41,6 @@ OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "repo
                 "ttf.png", "tracking.png")
 """The files a results directory holds (`ResultsStore`, `wbc.arena.finish.finish_results`)."""
 
-LOCK_FILE = ".lock"
-"""The file in a results directory that the run writing it holds locked (``flock``) and writes its pid to."""
 
 _RUN_KEYS = ("config", "environment", "controllers")
 """The top-level fields of ``run.json``."""
@@ -96,41 +93,25 @@ def unwritable(path: str | Path, exc: OSError, out_dir: Path, *, stored: int,
                            f"{out_dir} finishes the run {when}")
 
 
-def _lock(out_dir: Path) -> int:
-    """Lock `out_dir` for this process: the descriptor of its `LOCK_FILE`, held exclusively, with this pid in it.
+def _lock(out_dir: Path) -> DirectoryLock:
+    """Hold `out_dir` for this run (`wbc.output_files.lock_directory`): ``LOCK_FILE``, locked, with this pid in it.
 
-    The lock is the OS's (``flock``): it goes when the descriptor is closed or the process ends, however it ends, so a
+    The lock is the OS's (``flock``): it goes when its file is closed or the process ends, however it ends, so a
     killed run leaves nothing to clean up.
 
     Raises:
         ResultsDirError: another process holds it (the message names its pid, as written in the file), or the lock
-            file cannot be opened.
+            file cannot be opened or locked.
     """
-    path = out_dir / LOCK_FILE
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    except OSError as exc:
-        raise ResultsDirError(f"{path}: cannot open the results directory's lock file ({exc.strerror}); move it away, "
-                              "or choose another --out") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        try:
-            pid = os.read(fd, 32).decode("ascii", "replace").strip()
-        finally:
-            os.close(fd)
-        holder = f" (pid {pid})" if pid.isdigit() else ""
+        return lock_directory(out_dir)
+    except DirectoryInUse as held:
+        holder = f" (pid {held.pid})" if held.pid is not None else ""
         raise ResultsDirError(f"{out_dir} is in use by another wbc run{holder}; wait for it to end, or give another "
                               "--out") from None
-    except BaseException:
-        os.close(fd)
-        raise
-    try:
-        os.ftruncate(fd, 0)
-        os.write(fd, f"{os.getpid()}\n".encode("ascii"))
-    except OSError:
-        pass  # the lock holds all the same; only the pid a refused run names is missing
-    return fd
+    except OSError as exc:
+        raise ResultsDirError(f"{out_dir / LOCK_FILE}: cannot open or lock the results directory's lock file "
+                              f"({exc.strerror or exc}); move it away, or choose another --out") from None
 
 
 def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: int) -> Path:
@@ -232,7 +213,7 @@ class ResultsStore:
                                   "make its parent directory writable") from exc
         # held until `close`, taken before anything in the directory is read or rewritten: a second run on it would
         # replace trials.csv under this one, whose appends would then go to a deleted file
-        self._lock: int | None = _lock(self.dir)
+        self._lock: DirectoryLock | None = _lock(self.dir)
         self._file = None
         self._failed = False  # a write of trials.csv failed: closing it does not try again
         self.records: list[TrialRecord] = []
@@ -379,5 +360,5 @@ class ResultsStore:
                         file.close()
         finally:
             if self._lock is not None:
-                os.close(self._lock)  # the lock goes with the file's last descriptor
+                self._lock.release()
                 self._lock = None

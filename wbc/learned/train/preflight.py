@@ -12,7 +12,6 @@ keeps to its end, so that two runs never share a directory; a dry run only check
 
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import math
@@ -34,9 +33,10 @@ from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_pol
 from wbc.learned.train.stages import TASKS
 from wbc.learned.train.train_config import TrainConfig
 from wbc.optional import require
+from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory_holder, lock_directory
 from wbc.robots.registry import get_robot
 
-__all__ = ["INPUTS", "LOCK_FILE", "RESUMABLE", "ResumePoint", "RunDirLock", "check_checkpoint", "check_inputs",
+__all__ = ["INPUTS", "LOCK_FILE", "RESUMABLE", "ResumePoint", "check_checkpoint", "check_inputs",
            "check_run", "check_run_dir", "check_run_root", "check_unlocked", "checkpoint_iteration", "config_diff",
            "env_meta", "input_files", "input_path", "latest_checkpoint", "load_input_policy", "lock_run_dir",
            "locked_run_dir", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
@@ -204,53 +204,15 @@ def check_run_root(run_dir: str | Path) -> None:
             return
 
 
-LOCK_FILE = ".lock"
-"""The file of a run directory that its run holds locked (`lock_run_dir`), the run's pid written inside."""
-
-
-class RunDirLock:
-    """The lock a run holds on its directory (`lock_run_dir`), given back by `release` or at the end of a ``with``."""
-
-    def __init__(self, path: Path, fd: int) -> None:
-        self.path = path
-        self._fd: int | None = fd
-
-    def release(self) -> None:
-        """Give the lock back (closing the file does); the pid is erased first, so a refusal never names a run gone."""
-        if self._fd is None:
-            return
-        try:
-            os.ftruncate(self._fd, 0)
-        except OSError:
-            pass
-        os.close(self._fd)
-        self._fd = None
-
-    def __enter__(self) -> RunDirLock:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
-
-
-def _in_use(run_dir: str | Path, path: Path, fd: int) -> ConfigError:
+def _in_use(run_dir: str | Path, held: DirectoryInUse) -> ConfigError:
     """The refusal of a run directory another run holds, naming it and the holder's pid (as its lock file says)."""
-    try:
-        text = os.pread(fd, 32, 0).decode("ascii", "replace").strip()
-    except OSError:
-        text = ""
-    holder = f"pid {text}" if text.isdigit() else "its pid not yet written"
-    return ConfigError(f"{run_dir} is in use by another run ({holder}, holding {path}): wait for it to end, or choose "
-                       "another --run-root")
+    holder = f"pid {held.pid}" if held.pid is not None else "its pid not yet written"
+    return ConfigError(f"{run_dir} is in use by another run ({holder}, holding {held.path}): wait for it to end, or "
+                       "choose another --run-root")
 
 
-def lock_run_dir(run_dir: str | Path) -> RunDirLock:
-    """Lock a run directory for this process, or refuse it: another run holds it.
-
-    The lock is `fcntl.flock`, exclusive and not waiting, on ``RUN_DIR/.lock`` (`LOCK_FILE`), with this process's pid
-    written inside for a refusal to name. The OS releases it when the process ends, however it ends (a SIGKILL too),
-    so the file a dead run leaves locks nothing. The file stays: were it removed, a run could lock a new file of that
-    name while another still held the old one.
+def lock_run_dir(run_dir: str | Path) -> DirectoryLock:
+    """Lock a run directory for this process, or refuse it: another run holds it (`wbc.output_files.lock_directory`).
 
     Raises:
         ConfigError: another process holds the lock (the message names the directory and its pid), or the lock file
@@ -258,46 +220,24 @@ def lock_run_dir(run_dir: str | Path) -> RunDirLock:
     """
     path = Path(run_dir) / LOCK_FILE
     try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+        return lock_directory(run_dir)
+    except DirectoryInUse as held:
+        raise _in_use(run_dir, held) from None
     except OSError as exc:
-        raise ConfigError(f"--run-root: cannot make the lock file {path} of the run directory ({exc.strerror or exc});"
-                          " give a directory this user can write") from None
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        error = _in_use(run_dir, path, fd)
-        os.close(fd)
-        raise error from None
-    except OSError as exc:
-        os.close(fd)
-        raise ConfigError(f"--run-root: cannot lock {path} ({exc.strerror or exc}): its file system takes no locks, "
-                          "and a run must hold its directory alone; give a directory on another file system") from None
-    os.ftruncate(fd, 0)
-    os.write(fd, f"{os.getpid()}\n".encode())
-    return RunDirLock(path, fd)
+        raise ConfigError(f"--run-root: cannot make or lock the run directory's lock file {path} "
+                          f"({exc.strerror or exc}): a run must hold its directory alone; give a directory this user "
+                          "can write, on a file system that takes locks") from None
 
 
 def check_unlocked(run_dir: str | Path) -> None:
     """Refuse a run directory another run holds (`lock_run_dir`), without holding it: a dry run's check.
 
-    Where the directory has a lock file, its lock is taken (shared) for an instant only; nothing is written.
-
     Raises:
         ConfigError: another process holds the lock, naming the directory and its pid.
     """
-    path = Path(run_dir) / LOCK_FILE
-    try:
-        fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
-    except OSError:
-        return  # no lock file, so no run holds it (a run makes it); or not readable, which the run would say
-    try:
-        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
-    except BlockingIOError:
-        raise _in_use(run_dir, path, fd) from None
-    except OSError:
-        pass  # a file system that takes no locks: the run says so
-    finally:
-        os.close(fd)
+    held = directory_holder(run_dir)
+    if held is not None:
+        raise _in_use(run_dir, held)
 
 
 @contextmanager
