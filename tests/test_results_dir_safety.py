@@ -223,16 +223,11 @@ def test_a_run_interrupted_before_it_stored_anything_says_a_new_run_starts_afres
                         r"the same command starts the run afresh", _last_line(capsys))
 
 
-class _TornFile:
-    """A file being written that is interrupted (Ctrl-C) halfway through its first write."""
+class _WrappedFile:
+    """A file opened for the code under test, whose `write` a subclass replaces; the rest is the file's."""
 
     def __init__(self, file):
         self.file = file
-
-    def write(self, data):
-        self.file.write(data[: len(data) // 2])
-        self.file.flush()
-        raise KeyboardInterrupt
 
     def __enter__(self):
         return self
@@ -242,6 +237,15 @@ class _TornFile:
 
     def __getattr__(self, name):
         return getattr(self.file, name)
+
+
+class _TornFile(_WrappedFile):
+    """A file being written that is interrupted (Ctrl-C) halfway through its first write."""
+
+    def write(self, data):
+        self.file.write(data[: len(data) // 2])
+        self.file.flush()
+        raise KeyboardInterrupt
 
 
 @pytest.mark.parametrize("name", ["run.json", "summary.json", "report.md"])
@@ -267,26 +271,18 @@ def test_a_results_file_interrupted_while_it_is_rewritten_is_left_whole_and_the_
     assert json.loads((out / "summary.json").read_text())["controllers"]["stand"]
 
 
-class _FullDisk:
+class _FullDisk(_WrappedFile):
     """A file whose writes fail with `code` (a full disk, a read-only file system) after its first `writes`."""
 
     def __init__(self, file, writes, code):
-        self.file, self.writes, self.code = file, writes, code
+        super().__init__(file)
+        self.writes, self.code = writes, code
 
     def write(self, data):
         if self.writes <= 0:
             raise OSError(self.code, os.strerror(self.code))
         self.writes -= 1
         return self.file.write(data)
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.file.close()
-
-    def __getattr__(self, name):
-        return getattr(self.file, name)
 
 
 def _failing(monkeypatch, name: str, opened: str, writes: int, code: int) -> None:
