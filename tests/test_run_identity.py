@@ -177,8 +177,16 @@ def test_a_run_writes_the_old_dict_and_resumes_a_directory_written_before(short:
     # another option is refused, naming the field that differs
     with pytest.raises(ResultsDirError, match=r"differs in: max_consecutive_errors\)"):
         run_arena(dataclasses.replace(cfg, resume=True, max_consecutive_errors=5))
-    with pytest.raises(ResultsDirError, match=r"differs in: no_push, trials\)"):
+    with pytest.raises(ResultsDirError, match=r"differs in: no_push, trials\): no_push stored false, given true; "
+                                              r"trials stored 1, given 2; rerun"):
         run_arena(dataclasses.replace(cfg, resume=True, trials=2, no_push=True))
+    # the same scenario by another path: the field that differs is named, with both paths
+    moved = tmp_path / "moved.toml"
+    moved.write_bytes(short.read_bytes())
+    with pytest.raises(ResultsDirError) as refused:
+        run_arena(dataclasses.replace(cfg, resume=True, scenario=moved))
+    assert f"(differs in: scenario): scenario.path stored {json.dumps(str(short))}, given {json.dumps(str(moved))};" \
+        in str(refused.value)
 
 
 def test_a_run_with_every_option_writes_the_old_dict(short: Path, hold: str, tmp_path: Path) -> None:
@@ -212,7 +220,8 @@ def test_the_store_resumes_an_old_directory_and_names_the_differing_fields(tmp_p
     assert store.identity == plain and RunIdentity.load(out / "run.json") == plain
     other = SimulatedRunIdentity(controllers=("stand",), scenario=SCENARIO, bands=("soft", "hard"), seeds=(0,),
                                  trials=2, no_push=False, debug_truth=False, max_consecutive_errors=0)
-    with pytest.raises(ResultsDirError, match=r"differs in: bands, max_consecutive_errors\)"):
+    with pytest.raises(ResultsDirError, match=r'differs in: bands, max_consecutive_errors\): bands stored \["soft"\], '
+                                              r'given \["soft", "hard"\]; max_consecutive_errors stored none, given 0'):
         ResultsStore(out, other, resume=True)
     # a hardware run's directory is another run, not a malformed one
     _write_config(out, HARDWARE.as_json())

@@ -114,6 +114,43 @@ def _lock(out_dir: Path) -> DirectoryLock:
                               f"({exc.strerror or exc}); move it away, or choose another --out") from None
 
 
+_MISSING = object()
+
+
+def _differences(stored: Mapping[str, Any], given: Mapping[str, Any], *, most: int = 4) -> str:
+    """The first `most` fields in which two run configurations differ, each with its stored and its given value.
+
+    Nested objects (the scenario's path, name and hash) are followed to the field that differs, so a scenario given by
+    another path reads as its path, not as "scenario".
+    """
+    found: list[str] = []
+
+    def walk(a: object, b: object, name: str) -> None:
+        if isinstance(a, Mapping) and isinstance(b, Mapping):
+            for key in sorted(set(a) | set(b)):
+                walk(a.get(key, _MISSING), b.get(key, _MISSING), f"{name}.{key}" if name else str(key))
+        elif a != b:
+            found.append(f"{name} stored {_shown(a)}, given {_shown(b)}")
+
+    walk(stored, given, "")
+    more = f" (and {len(found) - most} more)" if len(found) > most else ""
+    return "; ".join(found[:most]) + more
+
+
+def _shown(value: object, width: int = 80) -> str:
+    """A configuration value as a message shows it: its JSON; "none" when absent.
+
+    A string (a path, a hash) is shown whole up to 200 characters, and beyond by its two ends, where paths differ;
+    anything else up to `width` characters, then its beginning.
+    """
+    if value is _MISSING:
+        return "none"
+    text = json.dumps(value, sort_keys=True)
+    if isinstance(value, str):
+        return text if len(text) <= 200 else f"{text[:97]}...{text[-100:]}"
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
 def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: int) -> Path:
     """Where a results directory keeps a trial's episode log (``wbc run --save-episodes``).
 
@@ -236,7 +273,8 @@ class ResultsStore:
             if stored != config:
                 diff = sorted(k for k in set(stored) | set(config) if stored.get(k) != config.get(k))
                 raise ResultsDirError(f"{self.dir}: --resume with a different configuration (differs in: "
-                                      f"{', '.join(diff)}); rerun with the original options or another --out")
+                                      f"{', '.join(diff)}): {_differences(stored, config)}; rerun with the original "
+                                      "options or another --out")
             changed = _changed_code(self._stored_controllers, controllers or {})
             if changed:
                 raise ResultsDirError(f"{self.run_path}: --resume with {changed} changed since the run began: its "
