@@ -113,6 +113,8 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
                  "--workers", "1", "--quiet", "--resume"]) == 0
     again = capsys.readouterr().out
     assert again.split("\nrun: ")[0] == printed.split("\nrun: ")[0] and "run: 0 trials played" in again
+    assert "(and 14 stored before, resumed: 14 in all)" in again and "resumed" not in printed.split("\nrun: ")[1]
+    assert json.loads((out / "paper.json").read_text(encoding="utf-8"))["stored"] == 14
     # a row edited by hand is refused on --resume, naming its line; --drop-bad-rows drops it and plays it again
     lines = (out / "trials.csv").read_text(encoding="utf-8").splitlines(keepends=True)
     row = lines[3].rstrip("\n")

@@ -184,6 +184,8 @@ def test_an_interrupted_run_without_out_names_the_directory_it_wrote_and_resume_
     monkeypatch.setattr(results_module.ResultsStore, "append", append)
     assert main([*args, "--resume", "--out", str(out)]) == 0  # as the line says
     assert len(TrialRecord.read_csv(out / "trials.csv")) == 2
+    assert "\n1 trials played in " in (printed := capsys.readouterr().out)
+    assert "(and 1 stored before, resumed: 2 in all)" in printed
 
 
 @pytest.mark.parametrize(("command", "patched", "default"), [

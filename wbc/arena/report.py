@@ -74,6 +74,7 @@ __all__ = [
     "number_text",
     "p_text",
     "paired_comparison",
+    "resumed_note",
     "compare_pair",
     "signed_text",
     "trial_interval",
@@ -133,6 +134,20 @@ _SPREAD_LEGEND = {
 _TRACKING_LEGEND = ("V_lin / V_ang err: over each trial's own survived time, as the paper reports them (a controller "
                     "that falls early is judged on fewer, often calmer, seconds); 'common': over the leading whole "
                     "seconds that every controller survived on that trial.")
+
+
+def resumed_note(played: int, stored: int) -> str:
+    """What a printout adds after "N trials played in T s" when the run resumed a directory that held trials.
+
+    Args:
+        played: trials played by this call.
+        stored: trials in the results, this call's and those resumed from disk.
+
+    Returns:
+        ``" (and 5 stored before, resumed: 14 in all)"``; empty where this call played every trial of the results.
+    """
+    before = stored - played
+    return f" (and {before} stored before, resumed: {stored} in all)" if before > 0 else ""
 
 
 def cell_legend(summary: Summary) -> str:

@@ -19,7 +19,7 @@ import numpy as np
 
 from wbc.arena.compare import ArenaResult
 from wbc.arena.hw_trial import HardwareTrialResult
-from wbc.arena.report import format_table, format_verdict
+from wbc.arena.report import format_table, format_verdict, resumed_note
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.controller_contract import ControllerCheck
@@ -333,7 +333,8 @@ def print_arena(result: ArenaResult, *, verdict: bool = True) -> None:
     """
     print(format_table(result.summary, verdict=verdict))
     rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
-    print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s); "
+    print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s)"
+          f"{resumed_note(result.played, len(result.records))}; "
           f"results in {result.out_dir}/ (trials.csv, summary.json, failures.json, report.md)")
     if result.summary.sequential is not None:
         stored = result.summary.stored

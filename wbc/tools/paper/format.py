@@ -22,7 +22,7 @@ import textwrap
 from collections.abc import Sequence
 
 from wbc.arena.breakdown import breakdown_tables
-from wbc.arena.report import LABELS, cell_text, n80_text, number_text, p_text, signed_text
+from wbc.arena.report import LABELS, cell_text, n80_text, number_text, p_text, resumed_note, signed_text
 from wbc.arena.summary import PairSummary
 from wbc.tools.paper.paper_numbers import PaperValue
 from wbc.tools.paper.result import PaperComparison, PaperTableResult
@@ -194,7 +194,8 @@ def format_paper_table(result: PaperTableResult) -> str:
     per_trial = ", ".join(f"{names.get(c, c)} {s:.1f} s" for c, s in result.trial_wall_s.items())
     lines += [""]
     lines += _wrap(f"run: {result.played} trials played in {result.wall_s:.0f} s ({result.workers or 'all'} "
-                   f"worker{'s' if result.workers != 1 else ''}); mean wall time per trial: {per_trial}. The paper's "
+                   f"worker{'s' if result.workers != 1 else ''}){resumed_note(result.played, result.stored)}; mean "
+                   f"wall time per trial: {per_trial}. The paper's "
                    f"protocol (2000 trials per band and contender) would take about "
                    f"{result.paper_protocol_cpu_h:.0f} CPU hours here.")
     lines += [f"results: {result.out_dir}/ (paper.txt, paper.json, report.md, trials.csv, summary.json, "

@@ -141,8 +141,8 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
                   "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
         bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
         comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
-        trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, wall_s=wall, workers=cfg.workers,
-        controller_errors=arena.controller_errors)
+        trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, stored=len(records), wall_s=wall,
+        workers=cfg.workers, controller_errors=arena.controller_errors)
     try:
         write_text(arena.out_dir / "paper.txt", format_paper_table(result))
         write_text(arena.out_dir / "paper.json", json.dumps(result.as_dict(), indent=2))

@@ -56,6 +56,7 @@ class PaperTableResult:
         trial_wall_s: each controller's mean wall time per trial [s].
         out_dir: the results directory.
         played: trials played by this call.
+        stored: trials in the results, this call's and those of the run it resumed.
         wall_s: wall time of this call [s].
         workers: worker processes used.
         controller_errors: each contender that failed on a trial (`wbc.arena.compare.ArenaResult.controller_errors`);
@@ -76,6 +77,7 @@ class PaperTableResult:
     out_dir: Path
     played: int
     wall_s: float
+    stored: int = 0
     workers: int | None
     controller_errors: tuple[ControllerErrors, ...] = ()
 
@@ -97,7 +99,7 @@ class PaperTableResult:
             "scenario": self.scenario, "bands": list(self.bands), "paper_columns": list(self.spec.paper_columns),
             "trials": self.trials, "seeds": list(self.seeds),
             "comparisons": [c.to_json() for c in self.comparisons],
-            "trial_wall_s": self.trial_wall_s, "wall_s": self.wall_s, "played": self.played,
+            "trial_wall_s": self.trial_wall_s, "wall_s": self.wall_s, "played": self.played, "stored": self.stored,
             "workers": self.workers, "paper_protocol_cpu_h": self.paper_protocol_cpu_h,
             "paper": {row: {m: [{"mean": v.mean, "std": v.std} for v in values] for m, values in cells.items()}
                       for row, cells in self.spec.paper.items()},
