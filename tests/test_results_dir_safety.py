@@ -129,9 +129,9 @@ def _gone(pid: int) -> bool:
 def test_a_pools_workers_end_when_the_process_that_started_them_is_killed(tmp_path):
     parent = textwrap.dedent("""
         import time
-        from wbc.arena.executors import _new_pool
+        from wbc.arena.executors import spawn_pool
 
-        pool = _new_pool(2)
+        pool = spawn_pool(2)
         for future in [pool.submit(time.sleep, 0.5) for _ in range(2)]:  # both workers started, both initialised
             future.result()
         print(*pool._processes, flush=True)

@@ -41,7 +41,7 @@ from wbc.optional import require
 from wbc.scenario.trial import Trial
 
 __all__ = ["EXECUTORS", "VIEWED_TIME_LIMIT", "LocalExecutor", "RayExecutor", "TrialTask", "run_task",
-           "single_threaded_blas"]
+           "single_threaded_blas", "spawn_pool"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -180,7 +180,7 @@ _PARENT_POLL_S = 0.5
 """How often a worker without ``PR_SET_PDEATHSIG`` checks that its parent is still there [s]."""
 
 
-def _new_pool(workers: int) -> ProcessPoolExecutor:
+def spawn_pool(workers: int) -> ProcessPoolExecutor:
     """A pool of `workers` spawned processes, each ended when this process ends (`_die_with_parent`)."""
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
                                initializer=_die_with_parent, initargs=(os.getpid(),))
@@ -300,7 +300,7 @@ class LocalExecutor:
 
     def _pool_pass(self, queue: Iterator[TrialTask]) -> Generator[TrialRecord, None, list[TrialTask] | None]:
         """Play `queue` in one pool until it is empty (None) or the pool breaks (the tasks it broke with)."""
-        pool = _new_pool(self.workers)
+        pool = spawn_pool(self.workers)
         broke = ended = False  # ended: every task played (else stopped early: an interrupt, a caller gone)
         try:
             pending: dict[Future, TrialTask] = {}
@@ -344,7 +344,7 @@ class LocalExecutor:
 
 def _alone(task: TrialTask, flag: str) -> TrialRecord:
     """Play `task` in a pool of its own: its record, or, if its worker dies, the record of that controller error."""
-    pool = _new_pool(1)
+    pool = spawn_pool(1)
     try:
         return pool.submit(_run_limited, task, flag).result()
     except BrokenProcessPool:

@@ -10,17 +10,15 @@ the warm start the loop gave it, and the backends are compared on the same QPs (
 from __future__ import annotations
 
 import math
-import multiprocessing
 import time
 from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
 from wbc.arena.divergence import DivergenceCheck
 from wbc.arena.episode import Episode
-from wbc.arena.executors import single_threaded_blas
+from wbc.arena.executors import single_threaded_blas, spawn_pool
 from wbc.arena.runner import run_episode
 from wbc.control.protocol import Controller, HasTickTimings
 from wbc.control.registry import CONTROLLERS, get_controller
@@ -521,7 +519,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     get_robot(robot, spec.arm_mode)
     _check_tail_qp_solver(getattr(spec.make, "func", spec.make), controller, qp_solver)
     if single_thread:
-        with single_threaded_blas(), ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        with single_threaded_blas(), spawn_pool(1) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
                                  reference=reference, qp_solver=qp_solver, rounds=rounds).result()
         return replace(result, blas="single-threaded")
