@@ -115,8 +115,8 @@ def test_a_policy_file_whose_write_fails_leaves_the_pair_before_it_whole(two_ite
     np.testing.assert_array_equal(load_policy(npz).arrays["obs_mean"], new.arrays["obs_mean"])
 
 
-def _ctrl_c_in_update(monkeypatch, at: int, times: int = 1) -> None:
-    """Ctrl-C (SIGINT, `times` times) in the PPO update of the `at`-th iteration (from 0) the run trains from now."""
+def _ctrl_c_in_update(monkeypatch, at: int, times: int = 1, signum: int = signal.SIGINT) -> None:
+    """Ctrl-C (`signum`, `times` times) in the PPO update of the `at`-th iteration (from 0) the run trains from now."""
     from rsl_rl.algorithms import PPO
 
     update, calls = PPO.update, []
@@ -125,7 +125,7 @@ def _ctrl_c_in_update(monkeypatch, at: int, times: int = 1) -> None:
         calls.append(None)
         if len(calls) == at + 1:
             for _ in range(times):
-                signal.raise_signal(signal.SIGINT)
+                signal.raise_signal(signum)
         return update(self, *args, **kwargs)
 
     monkeypatch.setattr(PPO, "update", interrupted)
@@ -189,6 +189,22 @@ def test_an_interrupted_run_names_the_checkpoint_it_saved_and_a_second_ctrl_c_st
     monkeypatch.undo()
     assert main([*argv, "--resume"]) == 0
     assert json.loads((run / "progress.json").read_text())["iteration"] == 3 and (run / "model_3.pt").is_file()
+
+
+def test_sigterm_stops_a_training_run_as_ctrl_c_does_at_the_end_of_its_iteration(tmp_path, monkeypatch, capsys):
+    """A batch scheduler's SIGTERM: the iteration in progress ends and is saved, then the command stops as Ctrl-C."""
+    from wbc.cli.main import main
+
+    argv = ["train", "--task", "push", "--stage", "1", "--iterations", "4", "--envs", "1", "--rma-iterations", "0",
+            "--run-root", str(tmp_path)]
+    before = signal.getsignal(signal.SIGTERM)
+    _ctrl_c_in_update(monkeypatch, at=2, signum=signal.SIGTERM)
+    assert main(argv) == 130
+    err = capsys.readouterr().err
+    assert "wbc: SIGTERM: the run stops at the end of the iteration in progress" in err
+    assert "keeps its newest checkpoint, model_2.pt: the same command with --resume continues from it" in err
+    assert json.loads((tmp_path / "push-stage1" / "progress.json").read_text())["iteration"] == 2
+    assert signal.getsignal(signal.SIGTERM) == before  # the command's handlers are gone
 
 
 _HOLDER = """

@@ -177,42 +177,54 @@ class _StopAfterIteration(KeyboardInterrupt):
 
 
 class _DeferredInterrupt:
-    """A SIGINT handler that notes the first Ctrl-C, says so, and puts the handler before it back for a second."""
+    """Handlers of the deferred signals (`_DEFERRED`): the first noted and said, the handlers before put back."""
 
     def __init__(self) -> None:
         self.requested = False
-        self.previous: Any = signal.default_int_handler
+        self.previous: dict[int, Any] = {}
 
     def install(self) -> None:
-        previous = signal.signal(signal.SIGINT, self)
-        self.previous = signal.default_int_handler if previous is None else previous  # None: set outside Python
+        for signum in _DEFERRED:
+            previous = signal.signal(signum, self)
+            # None: a handler set outside Python; SIGINT's default in Python is KeyboardInterrupt
+            self.previous[signum] = previous if previous is not None else (
+                signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
 
     def restore(self) -> None:
-        signal.signal(signal.SIGINT, self.previous)
+        for signum, previous in self.previous.items():
+            signal.signal(signum, previous)
+        self.previous = {}
 
     def __call__(self, signum: int, frame: Any) -> None:
         self.requested = True
         self.restore()
-        print("wbc: Ctrl-C: the run stops at the end of the iteration in progress and saves its checkpoint (Ctrl-C "
-              "again stops at once, keeping the checkpoints saved so far)", file=sys.stderr, flush=True)
+        what = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+        print(f"wbc: {what}: the run stops at the end of the iteration in progress and saves its checkpoint (Ctrl-C "
+              "or SIGTERM again stops at once, keeping the checkpoints saved so far)", file=sys.stderr, flush=True)
+
+
+_DEFERRED = (signal.SIGINT, signal.SIGTERM)
+"""The signals `_learn` defers to the end of the iteration in progress: Ctrl-C, and the request to end that a batch
+scheduler, ``timeout`` or ``docker stop`` sends (before a SIGKILL, after a grace period)."""
 
 
 def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> None:
-    """`runner.learn`, which Ctrl-C stops at the end of an iteration, keeping that iteration's checkpoint.
+    """`runner.learn`, which Ctrl-C (or SIGTERM) stops at the end of an iteration, keeping that iteration's checkpoint.
 
     rsl-rl's loop may be interrupted anywhere: in a rollout, whose steps have already moved the observation
     normalisers, or in the PPO update, some of its minibatches applied. The model in memory then is no iteration's,
-    and is not saved. So SIGINT is deferred while the loop runs: its handler notes it (and says so on stderr), and the
+    and is not saved. So SIGINT and SIGTERM are deferred while the loop runs (`_DEFERRED`): the handler notes the
+    first (and says so on stderr), and the
     interruption is raised at the end of the iteration in progress, once it is updated and logged (in rsl-rl's
     ``logger.log``, the loop's last step before its periodic save). The runner then holds that iteration's networks,
     normalisers and optimiser, and ``current_learning_iteration`` is its number: its checkpoint is saved, with its
     export and progress (unless a checkpoint as new is already there), and KeyboardInterrupt is raised, so that
     ``wbc train`` names the newest checkpoint, this one, and ``--resume`` continues after it.
 
-    A second Ctrl-C stops at once (the handler before is back), and the run keeps the checkpoints saved until then, as
-    does a KeyboardInterrupt that is not SIGINT's. A Ctrl-C after the last iteration's log lets the loop end (its
-    final checkpoint saved) and is raised once it has. Outside the main thread, where no signal is handled, the loop
-    runs as rsl-rl's.
+    A second Ctrl-C or SIGTERM stops at once (the handlers before are back), and the run keeps the checkpoints saved
+    until then, as does a KeyboardInterrupt raised otherwise. A Ctrl-C after the last iteration's log lets the loop
+    end (its final checkpoint saved) and is raised once it has. Outside the main thread, where no signal is handled,
+    the loop runs as rsl-rl's.
 
     Raises:
         KeyboardInterrupt: Ctrl-C.
