@@ -427,6 +427,41 @@ def test_the_same_protocol_on_the_simulator(tmp_path: Path, no_socket: list,
     assert capsys.readouterr().err.count("or --sim") == 2
 
 
+@pytest.mark.parametrize("times", [1, 2])
+def test_ctrl_c_while_the_results_are_written_waits_for_them_and_twice_says_what_is_left(
+        tmp_path: Path, no_socket: list, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
+        times: int) -> None:
+    """A trial is played once: Ctrl-C after it (the robot closed) lets its results be written whole; a second stops
+    the writing, and the line says what the directory then holds."""
+    import signal
+
+    import wbc.arena.hw_trial as hw_trial
+
+    write = hw_trial.write_text
+
+    def interrupted(path, text):  # hardware.json, written after the trial's row and episode
+        for _ in range(times):
+            signal.raise_signal(signal.SIGINT)
+        return write(path, text)
+
+    monkeypatch.setattr(hw_trial, "write_text", interrupted)
+    out = tmp_path / "sim"
+    assert main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                 "--sim", "--seconds", "0.5", "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert "the robot is closed into damping; the trial's results are being written to" in err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    if times == 1:
+        assert err.strip().endswith(f"interrupted after the trial; the robot was closed into damping; its results are "
+                                    f"complete in {out}")
+        assert all((out / name).is_file() for name in ("hardware.json", "summary.json", "report.md", "run.json"))
+    else:
+        assert err.strip().endswith(f"the writing of its results was stopped: {out} holds what was written until "
+                                    "then, and a hardware trial is played once (no --resume)")
+        assert not (out / "hardware.json").exists() and not (out / "summary.json").exists()
+
+
 def test_an_actuated_arm_needs_its_serial_port(no_socket: list, capsys: pytest.CaptureFixture[str]) -> None:
     # stand drives an actuated arm: on the robot that is a second device, on its own bus
     assert main(["hw", "run", "stand", "--robot", "go1-arm", "--scenario", PUSH, "--trial", "0", "--target",

@@ -72,12 +72,13 @@ from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import RealtimeGrant, RealtimeRequest, controller_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
+from wbc.interrupts import DeferredInterrupts
 from wbc.output_files import write_text
 from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
 
-__all__ = ["HardwareTrialConfig", "HardwareTrialResult", "run_hardware_trial"]
+__all__ = ["HardwareTrialConfig", "HardwareTrialResult", "ResultsInterrupted", "run_hardware_trial"]
 
 _STAND_UP_DT = 0.02  # [s] period of the stand hold that precedes a trial (the stand controller's 50 Hz)
 
@@ -310,8 +311,33 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                                  notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
                                  safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
                                  controller_realtime=grant)
-    _write_results(cfg, result, trial, published=scenario_published)
+    # the robot is closed into damping; the trial is played once, so its results are written whole: Ctrl-C (or a
+    # request to end) waits for them, and a second one stops the writing, saying what it left
+    with DeferredInterrupts(lambda what: f"wbc hw run: {what}: the robot is closed into damping; the trial's results "
+                            f"are being written to {out} and the run ends once they are (again: stop at once, "
+                            "leaving them incomplete)") as interrupts:
+        try:
+            _write_results(cfg, result, trial, published=scenario_published)
+        except KeyboardInterrupt:
+            raise ResultsInterrupted(out) from None
+    if interrupts.requested:
+        raise ResultsInterrupted(out, complete=True)
     return result
+
+
+class ResultsInterrupted(KeyboardInterrupt):
+    """A hardware trial interrupted once its robot was closed, while or after its results were written.
+
+    Attributes:
+        out_dir: the results directory.
+        complete: whether the results were written whole (the interruption waited for them) or the writing was
+            stopped (a second interruption): then the directory holds what was written until then.
+    """
+
+    def __init__(self, out_dir: Path, *, complete: bool = False) -> None:
+        super().__init__(str(out_dir))
+        self.out_dir = out_dir
+        self.complete = complete
 
 
 def _simulated(robot: str, arm_mode: str) -> HardwareRobot:

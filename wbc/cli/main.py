@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.compare import VIEWED_TIME_LIMIT, ArenaConfig, run_arena
-from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
+from wbc.arena.hw_trial import HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
@@ -586,6 +586,14 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
     try:
         result = run_hardware_trial(cfg, keys=keys, observer=live[1] if live is not None else None,
                                     before_connect=confirm, build=build)
+    except ResultsInterrupted as stopped:
+        if stopped.complete:
+            said = f"its results are complete in {stopped.out_dir}"
+        else:
+            said = (f"the writing of its results was stopped: {stopped.out_dir} holds what was written until then, "
+                    "and a hardware trial is played once (no --resume)")
+        print(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}", file=sys.stderr)
+        return 130
     except KeyboardInterrupt:
         print("wbc hw run: interrupted; the robot was closed into damping; no results were written", file=sys.stderr)
         return 130

@@ -21,8 +21,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import signal
-import sys
 import threading
 import time
 from collections.abc import Mapping
@@ -30,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.errors import ConfigError
+from wbc.interrupts import DeferredInterrupts
 from wbc.learned.env.env import BatchedEnv
 from wbc.learned.policy.composite_policy import save_composite
 from wbc.learned.policy.policy_file import load_policy, save_policy
@@ -176,45 +175,13 @@ class _StopAfterIteration(KeyboardInterrupt):
     """A Ctrl-C deferred to the end of an iteration (`_learn`), raised there."""
 
 
-class _DeferredInterrupt:
-    """Handlers of the deferred signals (`_DEFERRED`): the first noted and said, the handlers before put back."""
-
-    def __init__(self) -> None:
-        self.requested = False
-        self.previous: dict[int, Any] = {}
-
-    def install(self) -> None:
-        for signum in _DEFERRED:
-            previous = signal.signal(signum, self)
-            # None: a handler set outside Python; SIGINT's default in Python is KeyboardInterrupt
-            self.previous[signum] = previous if previous is not None else (
-                signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
-
-    def restore(self) -> None:
-        for signum, previous in self.previous.items():
-            signal.signal(signum, previous)
-        self.previous = {}
-
-    def __call__(self, signum: int, frame: Any) -> None:
-        self.requested = True
-        self.restore()
-        what = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
-        print(f"wbc: {what}: the run stops at the end of the iteration in progress and saves its checkpoint (Ctrl-C "
-              "or SIGTERM again stops at once, keeping the checkpoints saved so far)", file=sys.stderr, flush=True)
-
-
-_DEFERRED = (signal.SIGINT, signal.SIGTERM)
-"""The signals `_learn` defers to the end of the iteration in progress: Ctrl-C, and the request to end that a batch
-scheduler, ``timeout`` or ``docker stop`` sends (before a SIGKILL, after a grace period)."""
-
-
 def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> None:
     """`runner.learn`, which Ctrl-C (or SIGTERM) stops at the end of an iteration, keeping that iteration's checkpoint.
 
     rsl-rl's loop may be interrupted anywhere: in a rollout, whose steps have already moved the observation
     normalisers, or in the PPO update, some of its minibatches applied. The model in memory then is no iteration's,
-    and is not saved. So SIGINT and SIGTERM are deferred while the loop runs (`_DEFERRED`): the handler notes the
-    first (and says so on stderr), and the
+    and is not saved. So Ctrl-C and the requests to end (`wbc.interrupts.ASKS_TO_END`: SIGTERM, SIGHUP) are deferred
+    while the loop runs: the first is noted (and said on stderr), and the
     interruption is raised at the end of the iteration in progress, once it is updated and logged (in rsl-rl's
     ``logger.log``, the loop's last step before its periodic save). The runner then holds that iteration's networks,
     normalisers and optimiser, and ``current_learning_iteration`` is its number: its checkpoint is saved, with its
@@ -232,7 +199,9 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
     if threading.current_thread() is not threading.main_thread():
         runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
         return
-    interrupt = _DeferredInterrupt()
+    interrupt = DeferredInterrupts(lambda what: f"wbc: {what}: the run stops at the end of the iteration in progress "
+                                   "and saves its checkpoint (Ctrl-C or SIGTERM again stops at once, keeping the "
+                                   "checkpoints saved so far)")
     log = runner.logger.log
 
     def log_then_stop(*args: Any, **kwargs: Any) -> None:
@@ -241,9 +210,9 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
             raise _StopAfterIteration
 
     runner.logger.log = log_then_stop
-    interrupt.install()
     try:
-        runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
+        with interrupt:
+            runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
     except _StopAfterIteration:
         it = runner.current_learning_iteration
         newest = latest_checkpoint(runner.wbc_cfg.run_dir)
@@ -253,7 +222,6 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
             runner.logger.writer.flush()
         raise KeyboardInterrupt from None
     finally:
-        interrupt.restore()
         del runner.logger.log  # rsl-rl's own again
     if interrupt.requested:
         raise KeyboardInterrupt

@@ -1,0 +1,67 @@
+"""Signals that ask a command to end, deferred to a point where ending loses nothing (`DeferredInterrupts`).
+
+A training iteration caught in the middle of its update is no iteration's, and a hardware trial's results caught
+half-written are no trial's: both defer Ctrl-C (SIGINT) and the requests to end that a batch scheduler, ``timeout``,
+``docker stop`` or a closed terminal send (SIGTERM, SIGHUP) to the end of what is in progress. The first such signal
+is noted and said on stderr; the handlers before are then back, so a second one interrupts at once.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["ASKS_TO_END", "DeferredInterrupts", "signal_label"]
+
+ASKS_TO_END = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+"""The signals `DeferredInterrupts` defers: Ctrl-C, a request to end (a scheduler's, ``timeout``'s, ``docker stop``'s,
+before a SIGKILL after a grace period), and a closed terminal."""
+
+
+def signal_label(signum: int) -> str:
+    """How a message names a signal: ``Ctrl-C`` for SIGINT, else its name (``SIGTERM``)."""
+    return "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+
+
+class DeferredInterrupts:
+    """While installed, the first of `ASKS_TO_END` is noted (`requested`) and said; the handlers before are put back.
+
+    Use it as a context manager around the work to finish, then check `requested` (and raise, or carry on) where
+    ending loses nothing. Outside the main thread, where Python runs no signal handler, it installs nothing.
+
+    Args:
+        says: the line printed on stderr when the first signal comes, given the signal's label (`signal_label`).
+    """
+
+    def __init__(self, says: Callable[[str], str]) -> None:
+        self.says = says
+        self.requested: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> DeferredInterrupts:
+        if threading.current_thread() is threading.main_thread():
+            for signum in ASKS_TO_END:
+                previous = signal.signal(signum, self._note)
+                # None: a handler set outside Python; SIGINT's own in Python raises KeyboardInterrupt
+                self._previous[signum] = previous if previous is not None else (
+                    signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._restore()
+
+    def _restore(self) -> None:
+        for signum, previous in self._previous.items():
+            signal.signal(signum, previous)
+        self._previous = {}
+
+    def _note(self, signum: int, frame: Any) -> None:
+        self.requested = signum
+        self._restore()
+        try:
+            print(self.says(signal_label(signum)), file=sys.stderr, flush=True)
+        except (OSError, ValueError):  # a closed terminal (SIGHUP) takes no more lines: the work goes on all the same
+            pass
