@@ -227,6 +227,35 @@ def test_the_io_process_killed_is_a_link_error_at_the_next_call_and_all_is_relea
         assert not robot.is_connected
 
 
+def _drive(robot: ProcessRobot, hold: MotorCommand, ticks: int) -> None:
+    for _ in range(ticks):
+        robot.read()
+        robot.write(hold)
+        robot.advance(0.004)
+
+
+def _ends_damped(frames: list) -> None:
+    first = next((k for k, c in enumerate(frames) if c.damping), None)
+    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
+    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
+def test_a_hangup_leaves_the_io_process_to_its_controller() -> None:
+    """SIGHUP to the I/O process (its terminal closed) is ignored: the controller's process decides, and its close
+    then damps the robot. It used to kill the I/O process, the legs holding their last command."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        with ProcessRobot(_legs(emu.address)) as robot:
+            hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+            _drive(robot, hold, 20)
+            os.kill(robot.pid, signal.SIGHUP)
+            sent = len(emu.commands())
+            _drive(robot, hold, 50)  # served on, as if nothing came
+            assert all(not c.damping for c in emu.commands()[sent:])
+            pid = robot.pid
+        assert not _alive(pid)
+        _ends_damped(emu.commands()[sent:])
+
+
 def test_this_process_dying_ends_the_io_process() -> None:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
         script = ("import os, sys\n"

@@ -61,7 +61,10 @@ from wbc.types import MotorCommand, RobotState
 
 __all__ = ["ProcessLinkStats", "ProcessRobot", "build_process_robot"]
 
-_START = "from wbc.hardware.io_process.serve import serve_io_process; serve_io_process()"
+_START = ("import signal; signal.signal(signal.SIGINT, signal.SIG_IGN); signal.signal(signal.SIGHUP, signal.SIG_IGN); "
+          "from wbc.hardware.io_process.serve import serve_io_process; serve_io_process()")
+"""The I/O process's program. The terminal's signals are ignored before anything is imported (a Ctrl-C or a closed
+terminal during the imports would end it with a traceback): the controller's process decides, and closes it."""
 
 
 @dataclass(frozen=True)

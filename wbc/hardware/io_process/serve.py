@@ -20,8 +20,10 @@ The devices keep their own safety: the legs' link damps once `write` has not bee
 arm's bus likewise, so a controller's process that stalls or hangs (holding its own interpreter lock forever) leaves
 the robot damped. A failure of the devices (the link thread died, the serial port is lost) is reported on the channel
 and flagged in the state block, and the process closes the robot and exits; so does it when the controller's process
-goes away (end of file on the channel: no orphan), and on ``close``. Closing the robot leaves it damped. SIGINT is
-ignored: a Ctrl-C at the terminal reaches both processes, and the controller's process closes this one in order.
+goes away (end of file on the channel: no orphan), and on ``close``. Closing the robot leaves it damped. SIGINT and
+SIGHUP are ignored from the start (`ProcessRobot`'s program ignores them before its imports): a Ctrl-C at the
+terminal, or the terminal closed, reaches both processes, and the controller's process closes this one in order (or,
+if it died of it, its end of the channel closes, and this process closes the robot on its own).
 """
 
 from __future__ import annotations
@@ -66,7 +68,8 @@ def serve_io_process(argv: list[str] | None = None) -> None:
             descriptors inherited from the controller's process (default: ``sys.argv[1:]``).
     """
     args = sys.argv[1:] if argv is None else argv
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for signum in (signal.SIGINT, signal.SIGHUP):  # the terminal's: the controller's process decides (`_START`)
+        signal.signal(signum, signal.SIG_IGN)
     realtime_switch_interval()
     config: HardwareRobotConfig = pickle.loads(base64.b64decode(args[0]))
     control = LineChannel(socket.socket(fileno=int(args[2])))
