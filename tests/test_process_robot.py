@@ -282,6 +282,35 @@ def test_a_stop_signal_to_the_io_process_closes_the_robot_into_damping(signum: i
         assert emu.failure is None
 
 
+def test_closing_through_the_safety_layer_damps_the_legs_at_once_then_parks_the_arm() -> None:
+    """The safety layer's close posts damping, then asks the I/O process to close: the legs' link takes that damping
+    in its next period, before the arm's close (its damping, then its park) begins. The shutdown stopped the
+    forwarding first, dropping the damping, and closed the arm first: the legs held their command until their write
+    deadline, 25 frames at 500 Hz, no sooner than had the I/O process been killed."""
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
+        safe = SafeRobot(ProcessRobot(_arm(emu)), SafetyConfig(position_table="a1", on_event=lambda event: None))
+        with safe:
+            hold = MotorCommand.hold(safe.read().q, 20.0, 0.5)
+            for _ in range(50):  # the layer ramps the robot towards the hold: frames with kp > 0
+                safe.read()
+                safe.write(hold)
+                safe.advance(0.004)
+            assert safe.safety_state is SafetyState.RAMP and not emu.legs.commands()[-1].damping
+            emu.arm.clear_log()  # the start-up's writes of the operating mode
+            sent = len(emu.legs.commands())
+        frames = emu.legs.commands()[sent:]
+        parked = [p.time for p in emu.arm.packets() if p.written("operating_mode")]
+        assert emu.failure is None
+    held = next((k for k, c in enumerate(frames) if c.damping), None)
+    # The link forwards the newest command posted before each send, so the damping goes out in the period after it was
+    # posted: one frame being sent then, and any frames of the hold still on their way to the emulator's thread when
+    # `sent` was counted (none but on a starved machine). 5 frames is well short of the 25 of the write deadline: what
+    # is bounded is the link's forwarding, not this machine's speed.
+    assert held is not None and held <= 5, held
+    assert all(c.damping for c in frames[held:])
+    assert parked and frames[held].time < min(parked) and _parked(emu)  # the legs damped, then the arm parked
+
+
 def test_a_hangup_leaves_the_io_process_to_its_controller() -> None:
     """SIGHUP to the I/O process (its terminal closed) is ignored: the controller's process decides, and its close
     then damps the robot. It used to kill the I/O process, the legs holding their last command."""

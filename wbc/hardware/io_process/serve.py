@@ -171,6 +171,7 @@ class _Server:
         if not isinstance(self.legs, UnitreeRobot):
             raise RobotLinkError(f"I/O process: the legs are a {type(self.legs).__name__}, not a UnitreeRobot")
         self.send_lock = threading.Lock()
+        self.forward_lock = threading.Lock()  # no command is forwarded once `stop` is set under it (`shut_down`)
         self.stop = threading.Event()
         self.failure: dict | None = None
         self.command_seen = 0
@@ -211,8 +212,12 @@ class _Server:
 
     def _forward(self) -> None:
         """The link thread, each period before it sends: the newest command, if a new one was posted, to `write`."""
-        if self.stop.is_set():
-            return
+        with self.forward_lock:
+            if not self.stop.is_set():
+                self._forward_newest()
+
+    def _forward_newest(self) -> None:
+        """The newest command, if a new one was posted, to the robot's `write` (the lock held)."""
         try:
             block = self.blocks.command
             if block.count != self.command_seen:
@@ -311,8 +316,17 @@ class _Server:
         self._ring()
 
     def shut_down(self) -> None:
-        """Unhook, close the robot (it is left damped), tell the controller's process, release all."""
-        self.stop.set()
+        """Forward the last command, unhook, close the robot (left damped), tell the controller's process, release all.
+
+        The command posted last goes out first, unless a failure stopped the process: before its ``close``, the
+        controller's safety layer posts damping, which must not wait for the link's write deadline (the legs would hold
+        their last command meanwhile, as long as if nothing had damped them). Then the robot is closed, which damps the
+        legs from their next frame on before the arm's close begins (`QuadrupedArmRobot`).
+        """
+        with self.forward_lock:  # the link thread is not forwarding now, and forwards nothing from now on
+            self.stop.set()
+            if self.failure is None:
+                self._forward_newest()
         self.legs.set_link_hooks()
         try:
             self.robot.close()
