@@ -25,6 +25,7 @@ import subprocess
 import sys
 import termios
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -208,6 +209,84 @@ def test_a_stand_trial_with_the_devices_in_their_io_process(go1: UnitreeEmulator
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.backend == "unitree" and record.controller == "stand-noarm"
     assert any(not c.damping for c in go1.commands())  # the I/O process drove the motors
+
+
+def _children(pid: int) -> list[int]:
+    """The processes whose parent is `pid` (read from /proc)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            if entry.name.isdigit() and int((entry / "stat").read_text().rpartition(")")[2].split()[1]) == pid:
+                found.append(int(entry.name))
+        except (OSError, ValueError, IndexError):
+            continue  # it ended meanwhile
+    return found
+
+
+def _running(pid: int) -> bool:
+    """`pid` runs (neither gone nor a zombie left for its parent to reap)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z"
+    except OSError:
+        return False
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_a_closed_terminal_closes_the_robot_into_damping_and_ends_the_io_process(go1: UnitreeEmulator,
+                                                                                 tmp_path: Path) -> None:
+    """SIGHUP to the process group of ``wbc hw run`` (its terminal closed, which reads no more of what it prints): the
+    command closes the robot as on Ctrl-C, and the I/O process, which ignores the hangup, damps the legs and exits.
+    The command used to die at once, and its I/O process with it, leaving the legs holding the stand's kp 60."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wbc.cli", "hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario",
+         PUSH, "--trial", "0", "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "20", "--no-realtime", "--out",
+         str(tmp_path / "hw")], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True)  # a group of its own, as a terminal's
+    try:
+        for _ in range(6000):  # bounded (60 s): until the safety layer drives the legs (the ramp into the stand)
+            if proc.poll() is not None or any(not c.damping for c in go1.commands()[-5:]):
+                break
+            time.sleep(0.01)
+        assert proc.poll() is None, proc.stderr.read().decode()
+        io_process = _children(proc.pid)
+        assert len(io_process) == 1
+        proc.stdout.close()  # the terminal is gone: whatever is printed from now on fails (EPIPE)
+        proc.stderr.close()
+        sent = len(go1.commands())
+        os.killpg(proc.pid, signal.SIGHUP)
+        code = proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert code == 130  # interrupted, its last words dropped: neither a lost line nor the flush at exit failed it
+    for _ in range(500):  # bounded (5 s)
+        if not _running(io_process[0]):
+            break
+        time.sleep(0.01)
+    assert not _running(io_process[0])
+    frames = go1.commands()[sent:]
+    first = next((k for k, c in enumerate(frames) if c.damping), None)
+    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
+    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
+def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> None:
+    from wbc.cli.main import _terminate_interrupts
+
+    before = signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    try:
+        with _terminate_interrupts(), pytest.raises(KeyboardInterrupt):  # as Ctrl-C: the robot is closed into damping
+            os.kill(os.getpid(), signal.SIGHUP)
+            time.sleep(1.0)  # the handler raises at once; this is only a bound
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_DFL  # the handler before is back
+        signal.signal(signal.SIGHUP, signal.SIG_IGN)  # nohup: the user asked the command to outlive its terminal
+        with _terminate_interrupts():
+            assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+            assert signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL
+        assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGHUP, before)
 
 
 def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: Stepped, tmp_path: Path) -> None:

@@ -2,8 +2,9 @@
 
 The emulators run in this (the controller's) process; the I/O process reaches them as a robot's, over UDP and the
 pty. The cases: the `Robot` contract (legs only; legs and arm actuated), a stand through `SafeRobot(ProcessRobot)`,
-damping on the wire when this process stops writing (by holding its interpreter lock), the I/O process killed, this
-process killed (no orphan), and the refusals and connect failures raised as in-process.
+damping on the wire when this process stops writing (by holding its interpreter lock), the I/O process killed or
+signalled (a stop closes the robot into damping, a hangup is left to this process), this process killed (no orphan),
+and the refusals and connect failures raised as in-process.
 
 The I/O process runs its devices on the monotonic clock, in real time, by design: what it achieves in real time (a
 stand through the safety layer, how soon its link damps a robot whose controller froze) is checked by the
@@ -19,6 +20,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -215,7 +217,8 @@ def test_the_io_process_killed_is_a_link_error_at_the_next_call_and_all_is_relea
         hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
         pid = robot.pid
         os.kill(pid, signal.SIGKILL)
-        with pytest.raises(RobotLinkError, match="I/O process died"):
+        # killed, it could not damp the robot, and the controller is told so
+        with pytest.raises(RobotLinkError, match="I/O process died .* the legs may keep their last command"):
             for _ in range(500):
                 robot.read()
                 robot.write(hold)
@@ -225,6 +228,138 @@ def test_the_io_process_killed_is_a_link_error_at_the_next_call_and_all_is_relea
             robot.read()  # the same failure again, until closed
         robot.close()
         assert not robot.is_connected
+
+
+def _arm(emu: RobotEmulator, **extra: object) -> HardwareRobotConfig:
+    return HardwareRobotConfig(robot="a1-wx200", arm_mode="actuated", legs_host=emu.address[0],
+                               legs_port=emu.address[1], arm=DynamixelArmConfig(port=emu.port, **ARM), **extra)
+
+
+def _drive(robot: ProcessRobot, hold: MotorCommand, ticks: int) -> None:
+    for _ in range(ticks):
+        robot.read()
+        robot.write(hold)
+        robot.advance(0.004)
+
+
+def _parked(emu: RobotEmulator) -> bool:
+    """Every joint of the arm parked (`DynamixelArm` closed): held in current-based position mode, watchdog off."""
+    return all(emu.arm.register(i, "operating_mode") == 5 and emu.arm.register(i, "torque_enable") == 1
+               and emu.arm.register(i, "bus_watchdog") == 0 for i in (1, 2, 4))
+
+
+def _ends_damped(frames: list) -> None:
+    first = next((k for k, c in enumerate(frames) if c.damping), None)
+    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
+    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGQUIT])
+def test_a_stop_signal_to_the_io_process_closes_the_robot_into_damping(signum: int) -> None:
+    """SIGTERM or SIGQUIT to the I/O process (a service manager's stop, ``kill``, Ctrl-\\ at the terminal): it closes
+    the robot as on close, the legs damped and the arm parked, says why at the controller's next call and exits. It
+    used to die at once, leaving the legs holding the last command (kp 20 here) and the arm unparked."""
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
+        robot = ProcessRobot(_arm(emu))
+        robot.connect()
+        try:
+            hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+            _drive(robot, hold, 50)
+            assert not emu.legs.commands()[-1].damping and not _parked(emu)
+            sent, pid = len(emu.legs.commands()), robot.pid
+            os.kill(pid, signum)
+            with pytest.raises(RobotLinkError, match=f"stopped by {signal.Signals(signum).name}: it closes the robot"):
+                _drive(robot, hold, 2500)  # bounded (10 s of ticks): until the controller hears of it
+            for _ in range(500):  # bounded (5 s)
+                if not _alive(pid):
+                    break
+                time.sleep(0.01)
+            assert not _alive(pid) and robot.pid is None
+        finally:
+            robot.close()
+        _ends_damped(emu.legs.commands()[sent:])
+        assert _parked(emu)
+        assert emu.failure is None
+
+
+def test_closing_through_the_safety_layer_damps_the_legs_at_once_then_parks_the_arm() -> None:
+    """The safety layer's close posts damping, then asks the I/O process to close: the legs' link takes that damping
+    in its next period, before the arm's close (its damping, then its park) begins. The shutdown stopped the
+    forwarding first, dropping the damping, and closed the arm first: the legs held their command until their write
+    deadline, 25 frames at 500 Hz, no sooner than had the I/O process been killed."""
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
+        safe = SafeRobot(ProcessRobot(_arm(emu)), SafetyConfig(position_table="a1", on_event=lambda event: None))
+        with safe:
+            hold = MotorCommand.hold(safe.read().q, 20.0, 0.5)
+            for _ in range(50):  # the layer ramps the robot towards the hold: frames with kp > 0
+                safe.read()
+                safe.write(hold)
+                safe.advance(0.004)
+            assert safe.safety_state is SafetyState.RAMP and not emu.legs.commands()[-1].damping
+            emu.arm.clear_log()  # the start-up's writes of the operating mode
+            sent = len(emu.legs.commands())
+        frames = emu.legs.commands()[sent:]
+        parked = [p.time for p in emu.arm.packets() if p.written("operating_mode")]
+        assert emu.failure is None
+    held = next((k for k, c in enumerate(frames) if c.damping), None)
+    # The link forwards the newest command posted before each send, so the damping goes out in the period after it was
+    # posted: one frame being sent then, and any frames of the hold still on their way to the emulator's thread when
+    # `sent` was counted (none but on a starved machine). 5 frames is well short of the 25 of the write deadline: what
+    # is bounded is the link's forwarding, not this machine's speed.
+    assert held is not None and held <= 5, held
+    assert all(c.damping for c in frames[held:])
+    assert parked and frames[held].time < min(parked) and _parked(emu)  # the legs damped, then the arm parked
+
+
+def test_a_hangup_leaves_the_io_process_to_its_controller() -> None:
+    """SIGHUP to the I/O process (its terminal closed) is ignored: the controller's process decides, and its close
+    then damps the robot. It used to kill the I/O process, the legs holding their last command."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        with ProcessRobot(_legs(emu.address)) as robot:
+            hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+            _drive(robot, hold, 20)
+            os.kill(robot.pid, signal.SIGHUP)
+            sent = len(emu.commands())
+            _drive(robot, hold, 50)  # served on, as if nothing came
+            assert all(not c.damping for c in emu.commands()[sent:])
+            pid = robot.pid
+        assert not _alive(pid)
+        _ends_damped(emu.commands()[sent:])
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGHUP, signal.SIGTERM])
+def test_a_signal_during_the_io_processs_start_up_waits_for_it(signum: int, capfd: pytest.CaptureFixture[str]) -> None:
+    """A signal sent as soon as the I/O process exists (during its interpreter's start-up and its imports) is taken as
+    it is later: a Ctrl-C or a hangup is ignored, a SIGTERM stops it in order, said at the controller's `connect`. A
+    Ctrl-C then ended it with a traceback, and a SIGTERM without a word (status -15)."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        robot = ProcessRobot(_legs(emu.address))
+        sent: list[int] = []
+
+        def send_at_once() -> None:
+            for _ in range(100_000):  # bounded (at most a few seconds): until the process exists
+                proc = robot._proc
+                if proc is not None:
+                    os.kill(proc.pid, signum)
+                    sent.append(proc.pid)
+                    return
+                time.sleep(0.0001)
+
+        sender = threading.Thread(target=send_at_once)
+        sender.start()
+        try:
+            if signum == signal.SIGTERM:
+                with pytest.raises(RobotLinkError, match="stopped by SIGTERM"):
+                    robot.connect()
+            else:
+                robot.connect()
+                robot.read()
+        finally:
+            sender.join()
+            robot.close()
+        assert sent and not _alive(sent[0])
+        assert "Traceback" not in capfd.readouterr().err
+        assert emu.failure is None
 
 
 def test_this_process_dying_ends_the_io_process() -> None:

@@ -97,6 +97,30 @@ def test_contract_of_the_joined_robot_over_both_emulators() -> None:
         assert emu.failure is None
 
 
+def test_close_damps_the_legs_from_their_next_frame_then_parks_the_arm() -> None:
+    """Without a safety layer's damping before it, `close` damps the legs from the very next frame, then closes the
+    arm (its close damping, then its park). The arm was closed first: the legs held their last command through it
+    until their own write deadline (25 frames), as long as if nothing had closed them."""
+    clock = ManualClock()
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep"), clock=clock) as emu:
+        robot = _lockstep("a1-wx200", "actuated", clock, emu)
+        robot.connect()
+        hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+        for _ in range(25):
+            robot.write(hold)
+            robot.advance(0.004)
+        sent = len(emu.legs.commands())
+        assert not emu.legs.commands()[-1].damping
+        emu.arm.clear_log()
+        robot.close()
+        frames = emu.legs.commands()[sent:]
+        parked = [p.time for p in emu.arm.packets() if p.written("operating_mode")]
+        assert emu.failure is None
+    held = next((k for k, c in enumerate(frames) if c.damping), None)
+    assert held == 0 and all(c.damping for c in frames)  # from the next frame on, and nothing else after it
+    assert parked and frames[0].time < min(parked)  # the legs damped before the arm is parked
+
+
 def _build(robot: str, arm_mode: str, target: tuple[str, int] = ("127.0.0.1", 9), **arm: object) -> Robot:
     return build_hardware_robot(HardwareRobotConfig(robot=robot, arm_mode=arm_mode, legs_host=target[0],
                                                     legs_port=target[1], **arm)).robot

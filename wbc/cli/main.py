@@ -4,8 +4,8 @@ Also ``check-controller``, ``train``, ``demo`` and ``paper``. `main` parses the 
 calls the tool the command names and hands its result to a printer (`wbc.cli.printers`). A `WbcError` ends the
 command with its message and exit status 2; anything else is a bug and keeps its traceback. A ``run`` or
 ``compare`` in which a controller failed on some trials (`wbc.arena.error_guard`) finishes, then exits with status 1
-after one line per failing controller. Ctrl-C and SIGTERM interrupt a command alike: status 130, and one line that
-says what a run stored and how to finish it.
+after one line per failing controller. Ctrl-C, SIGTERM and SIGHUP (the terminal closed) interrupt a command alike:
+status 130, and one line that says what a run stored and how to finish it (or that a robot was closed into damping).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import signal
 import sys
 import threading
@@ -518,7 +519,8 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
 
     Returns:
         0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
-        the outcome ``controller_error``); 130 when interrupted.
+        the outcome ``controller_error``); 130 when interrupted (Ctrl-C, SIGTERM, SIGHUP: the robot is closed
+        into damping first).
     """
     _view_options(args)
     if args.sim == (args.target is not None):
@@ -595,7 +597,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         print(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}", file=sys.stderr)
         return 130
     except KeyboardInterrupt:
-        print("wbc hw run: interrupted; the robot was closed into damping; no results were written", file=sys.stderr)
+        _say("wbc hw run: interrupted; the robot was closed into damping; no results were written")
         return 130
     finally:
         keys.close()
@@ -1343,11 +1345,13 @@ _RESUMABLE = ("run", "compare", "paper", "demo")
 
 @contextmanager
 def _terminate_interrupts() -> Iterator[None]:
-    """SIGTERM ends the command as Ctrl-C does (`KeyboardInterrupt`); the previous handler is restored after.
+    """SIGTERM and SIGHUP end the command as Ctrl-C does (`KeyboardInterrupt`); the handlers before are restored after.
 
-    A batch scheduler, ``timeout`` or ``docker stop`` ends a command with SIGTERM: the run then stops its workers and
-    says what it stored and how to finish it, where it ended without a word (status -15). Signals reach the main
-    thread only: a command run from another thread keeps the handler it has.
+    A batch scheduler, ``timeout`` or ``docker stop`` ends a command with SIGTERM, and a terminal that is closed hangs
+    up the command with SIGHUP: the run then stops its workers and says what it stored and how to finish it, and a
+    hardware command closes its robot into damping, where it ended without a word (status -15, -1) and left the legs
+    holding their last command. A SIGHUP ignored when the command starts (``nohup``) stays ignored. Signals reach the
+    main thread only: a command run from another thread keeps the handlers it has.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -1356,11 +1360,33 @@ def _terminate_interrupts() -> Iterator[None]:
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
-    previous = signal.signal(signal.SIGTERM, interrupt)
+    wanted = (signal.SIGTERM,) + (() if signal.getsignal(signal.SIGHUP) is signal.SIG_IGN else (signal.SIGHUP,))
+    previous = {signum: signal.signal(signum, interrupt) for signum in wanted}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+
+
+def _say(text: str) -> None:
+    """Print `text` on standard error, where a terminal that was closed (or a pipe nobody reads) is no failure.
+
+    A command's last words after SIGHUP meet a terminal that is gone (OSError, BrokenPipeError): they are dropped, and
+    standard output and error then go to the null device, so that neither a later line nor the flush at exit fails.
+    """
+    try:
+        print(text, file=sys.stderr, flush=True)
+    except OSError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        try:
+            for stream in (sys.stdout, sys.stderr):
+                try:
+                    os.dup2(devnull, stream.fileno())
+                except (OSError, ValueError, AttributeError):  # closed, or not a file (a test's capture)
+                    pass
+        finally:
+            os.close(devnull)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -1371,21 +1397,21 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
-        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C, or
-        SIGTERM; a run's finished trials are stored, and the message says how to finish it; a training run's says
-        which checkpoint, or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from
-        the parser, after its usage message.
+        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C,
+        SIGTERM, or SIGHUP when its terminal is closed; a run's finished trials are stored, and the message says how
+        to finish it; a training run's says which checkpoint, or which DAgger rounds, its run directory keeps). A
+        usage error exits with status 2 from the parser, after its usage message.
     """
     args = build_parser().parse_args(argv)
     try:
         with _terminate_interrupts():
             return int(HANDLERS[args.handler](args) or 0)
     except WbcError as exc:
-        print(f"wbc: error: {exc}", file=sys.stderr)
+        _say(f"wbc: error: {exc}")
         return 2
     except KeyboardInterrupt:
-        print("wbc: interrupted" + (_interrupted_run(args) if args.handler in _RESUMABLE else
-                                    _interrupted_training(args)), file=sys.stderr)
+        _say("wbc: interrupted" + (_interrupted_run(args) if args.handler in _RESUMABLE else
+                                   _interrupted_training(args)))
         return 130
 
 

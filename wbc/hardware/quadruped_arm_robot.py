@@ -19,7 +19,8 @@ moves) are separate devices, each with its own thread, rate and faults. This cla
   robot is a `WallClock` on the legs' clock.
 - What the safety layer reads: the legs' remote (`RemoteSource`), and the motor status of both devices joined
   (`MotorStatusSource`: legs then arm), so an arm servo's alarm or heat trips the layer like a leg motor's.
-- `close` closes both (each leaves its motors damped); `connect` connects both or neither.
+- `close` closes both (each leaves its motors damped), the legs first, which are damped from their next frame on,
+  then the arm (its close damping, then its park); `connect` connects both or neither.
 """
 
 from __future__ import annotations
@@ -210,11 +211,13 @@ class QuadrupedArmRobot(Robot):
                 raise
 
     def _close(self) -> None:
+        # the legs first: their close damps them from their next frame on, while the arm's takes its close damping and
+        # its park (0.2 s and more), during which the legs would hold their last command until their write deadline
         try:
+            self.legs.close()
+        finally:
             if self.arm is not None:
                 self.arm.close()
-        finally:
-            self.legs.close()
 
     def _read(self) -> RobotState:
         legs = self.legs.read()

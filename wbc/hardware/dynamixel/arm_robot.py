@@ -144,6 +144,14 @@ class _Next(enum.Enum):
     PARK = "park"  # the close damping is over: park the arm, then end
 
 
+def _print(line: str) -> None:
+    """`line` on standard error, from the bus thread too: a terminal that was closed (OSError) must not end the loop."""
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except OSError:
+        pass  # nobody is left to read it; the fault is latched and the park done all the same
+
+
 def arm_joint_table(robot: str, law: CurrentLaw | None = None) -> JointTable:
     """The arm's three joints of `robot` (arm actuated), torque limits lowered to what `law` can ask if given."""
     table = joint_table(get_robot(robot, "actuated"))
@@ -371,7 +379,7 @@ class DynamixelArm(Robot):
 
     # -- start-up -------------------------------------------------------------------------------------------------
     def _say(self, text: str) -> None:
-        print(f"DynamixelArm({self.config.port}): {text}", file=sys.stderr, flush=True)
+        _print(f"DynamixelArm({self.config.port}): {text}")
 
     def _name(self, servo_id: int) -> str:
         return f"ID {servo_id} ({self._names.get(servo_id, '?')})"
@@ -593,7 +601,7 @@ class DynamixelArm(Robot):
                 self._port_lost = True
             self._faults.append(fault)
             self._lock.notify_all()
-        print(fault, file=sys.stderr, flush=True)
+        _print(str(fault))
 
     def _read_joints(self, bus: SdkBus) -> None:
         ids = tuple(i for i in self._primaries if self._readable(i))

@@ -19,7 +19,9 @@ capabilities as `build_hardware_robot`'s) with its devices in a fresh interprete
   `realtime_grant` says what scheduling the I/O process asked the OS for and got (`HardwareRobotConfig.realtime`).
   An exception there (a refused connect, `PortBusyError`, `RobotLinkError`, a lost serial port) is raised here as the
   same `wbc` error class with the same message; the I/O process dying is a `RobotLinkError` at the next `read`,
-  `write` or `advance`. Either way the process, the sockets and the shared memory are released at once;
+  `write` or `advance`, which says that nothing may have damped the robot (check it); stopped by SIGTERM or SIGQUIT,
+  the I/O process closes the robot into damping and says so instead. Either way the process, the sockets and the
+  shared memory are released at once;
 - safety: the devices keep their write deadlines, so when this process stops writing (stalled, or hung holding its
   interpreter lock) the robot is damped within the deadline; when this process dies, the I/O process sees its end
   of the channel close, closes the robot (damped) and exits: no orphan. Address refusals happen in this process, when
@@ -33,6 +35,7 @@ import dataclasses
 import os
 import pickle
 import select
+import signal
 import socket
 import subprocess
 import sys
@@ -50,6 +53,7 @@ from wbc.hardware.dynamixel.arm_fault import ArmBusStats
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, IoBlocks
 from wbc.hardware.io_process.channel import ChannelClosed, LineChannel, rebuild_error
+from wbc.hardware.io_process.serve import HELD_AT_START
 from wbc.hardware.pacing import WallPacer
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, JointMotorStatus
 from wbc.hardware.realtime import RealtimeGrant
@@ -62,6 +66,10 @@ from wbc.types import MotorCommand, RobotState
 __all__ = ["ProcessLinkStats", "ProcessRobot", "build_process_robot"]
 
 _START = "from wbc.hardware.io_process.serve import serve_io_process; serve_io_process()"
+
+_LEFT_UNKNOWN = ("nothing may have damped the robot: the legs may keep their last command (they have no watchdog of "
+                 "their own), and the arm goes limp when its servos' bus watchdog acts; check the robot")
+"""What the controller's process is told when the I/O process ended without saying that it closed the robot."""
 
 
 @dataclass(frozen=True)
@@ -154,9 +162,14 @@ class ProcessRobot(Robot):
             root = str(Path(wbc.__file__).resolve().parents[1])
             env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
             fds = (blocks.fd, control_child.fileno(), bell_child.fileno())
-            self._proc = subprocess.Popen(
-                [sys.executable, "-c", _START, base64.b64encode(pickle.dumps(self.config)).decode(),
-                 *(str(fd) for fd in fds)], pass_fds=fds, env=env, stdin=subprocess.DEVNULL)
+            # the I/O process starts with the signals it takes blocked (a signal mask survives exec), until it can
+            mask = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_AT_START)
+            try:
+                self._proc = subprocess.Popen(
+                    [sys.executable, "-c", _START, base64.b64encode(pickle.dumps(self.config)).decode(),
+                     *(str(fd) for fd in fds)], pass_fds=fds, env=env, stdin=subprocess.DEVNULL)
+            finally:
+                signal.pthread_sigmask(signal.SIG_SETMASK, mask)
             control_child.close()
             bell_child.close()
             bell.setblocking(False)
@@ -358,7 +371,7 @@ class ProcessRobot(Robot):
             except subprocess.TimeoutExpired:
                 status = None
             failure = RobotLinkError(f"ProcessRobot: the I/O process died (exit status {status}); the robot's "
-                                     "devices are no longer served")
+                                     f"devices are no longer served: {_LEFT_UNKNOWN}")
         self._failure = failure
         self._release()
         raise failure
@@ -377,7 +390,7 @@ class ProcessRobot(Robot):
                     return message
         except ChannelClosed:
             return RobotLinkError(f"ProcessRobot: the I/O process exited (status {self._exit_status()}) before "
-                                  f"answering {key!r}")
+                                  f"answering {key!r}: {_LEFT_UNKNOWN}")
 
     def _exit_status(self) -> int | None:
         if self._proc is None:

@@ -20,8 +20,12 @@ The devices keep their own safety: the legs' link damps once `write` has not bee
 arm's bus likewise, so a controller's process that stalls or hangs (holding its own interpreter lock forever) leaves
 the robot damped. A failure of the devices (the link thread died, the serial port is lost) is reported on the channel
 and flagged in the state block, and the process closes the robot and exits; so does it when the controller's process
-goes away (end of file on the channel: no orphan), and on ``close``. Closing the robot leaves it damped. SIGINT is
-ignored: a Ctrl-C at the terminal reaches both processes, and the controller's process closes this one in order.
+goes away (end of file on the channel: no orphan), and on ``close``. Closing the robot leaves it damped. SIGINT and
+SIGHUP are ignored: a Ctrl-C at the terminal, or the terminal closed, reaches both processes, and the controller's
+process closes this one in order (or, if it died of it, its end of the channel closes, and this process closes the
+robot on its own). SIGTERM and SIGQUIT, to this process alone or to the whole command, stop it in order
+(`_STOPPING`): the stop is reported and flagged as a failure, and the robot closed as on ``close``. All four are
+blocked from the process's start (`HELD_AT_START`) until they are set so.
 """
 
 from __future__ import annotations
@@ -53,9 +57,24 @@ from wbc.hardware.unitree.remote import Remote
 from wbc.hardware.unitree.robot import UnitreeRobot
 from wbc.types import MotorCommand
 
-__all__ = ["serve_io_process"]
+__all__ = ["HELD_AT_START", "serve_io_process"]
 
 _WAIT_S = 0.02  # [s] longest a thread blocks before it looks at its stop flag
+
+_TERMINAL = (signal.SIGINT, signal.SIGHUP)
+"""The terminal's signals, Ctrl-C and the hangup of a closed terminal, which reach both processes: ignored, the
+controller's process decides, and closes this one in order (or, if it died of them, its end of the channel closes)."""
+
+_STOPPING = (signal.SIGTERM, signal.SIGQUIT)
+"""The signals that stop the I/O process in order, sent to it alone or to the whole command (a service manager's stop,
+``kill``, Ctrl-\\ at the terminal): the robot is closed as on the controller's ``close`` (the legs damped, the
+arm parked), then the process exits."""
+
+HELD_AT_START = _TERMINAL + _STOPPING
+"""The signals the I/O process starts with blocked: `ProcessRobot` blocks them around its start (a signal mask
+survives exec), and `serve_io_process` unblocks them once it has set what they do. One that came meanwhile waits (a
+stop is then taken; a Ctrl-C or a hangup is dropped): delivered during the interpreter's start-up and the imports,
+they ended the process half started, a Ctrl-C with a traceback."""
 
 
 def serve_io_process(argv: list[str] | None = None) -> None:
@@ -66,7 +85,10 @@ def serve_io_process(argv: list[str] | None = None) -> None:
             descriptors inherited from the controller's process (default: ``sys.argv[1:]``).
     """
     args = sys.argv[1:] if argv is None else argv
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for signum in _TERMINAL:
+        signal.signal(signum, signal.SIG_IGN)
+    signals = _StopSignals()
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, HELD_AT_START)  # blocked since the start (`ProcessRobot`): taken now
     realtime_switch_interval()
     config: HardwareRobotConfig = pickle.loads(base64.b64decode(args[0]))
     control = LineChannel(socket.socket(fileno=int(args[2])))
@@ -78,12 +100,14 @@ def serve_io_process(argv: list[str] | None = None) -> None:
         robot = build_hardware_robot(config).robot
         blocks = IoBlocks(robot.num_joints, fd=int(args[1]))
         freeze_heap()
+        if signals.received is not None:  # stopped before the robot was reached: nothing to close
+            raise signals.stopped()
         robot.connect()
         started = time.process_time()
     except BaseException as exc:  # noqa: BLE001 - every failure is reported to the controller's process
         _report(control, error_report(exc))
         return
-    server = _Server(robot, blocks, control, bell, started, grant)
+    server = _Server(robot, blocks, control, bell, started, grant, signals)
     try:
         server.run()
     finally:
@@ -97,10 +121,48 @@ def _report(control: LineChannel, message: dict) -> None:
         pass  # the controller's process is gone; nobody is left to tell
 
 
+class _StopSignals:
+    """SIGTERM and SIGQUIT (`_STOPPING`) noted, the first of them, rather than ending the process.
+
+    The handler only notes the signal; the byte the interpreter then writes to `wake`'s other end
+    (`signal.set_wakeup_fd`) wakes the main thread's wait at once, and the main thread reports the stop and closes the
+    robot in order. An exception raised from the handler instead could land anywhere: in a message half sent, or in
+    the closing itself.
+    """
+
+    def __init__(self) -> None:
+        self.received: int | None = None
+        self.wake, self._ring = socket.socketpair()
+        for sock in (self.wake, self._ring):
+            sock.setblocking(False)
+        signal.set_wakeup_fd(self._ring.fileno(), warn_on_full_buffer=False)
+        for signum in _STOPPING:
+            signal.signal(signum, self._note)
+
+    def _note(self, signum: int, frame: object) -> None:
+        if self.received is None:
+            self.received = signum
+
+    def drain(self) -> None:
+        """Empty `wake` (the bytes of the signals noted), so that a wait on it blocks again."""
+        try:
+            while self.wake.recv(4096):
+                pass
+        except (BlockingIOError, InterruptedError):
+            pass
+
+    def stopped(self) -> RobotLinkError:
+        """The failure the controller's process is told of, once a signal came."""
+        name = signal.Signals(self.received).name if self.received is not None else "a signal"
+        return RobotLinkError(f"the I/O process was stopped by {name}: it closes the robot as on close, leaving it "
+                              "damped, and exits")
+
+
 class _Server:
     def __init__(self, robot: Robot, blocks: IoBlocks, control: LineChannel, bell: socket.socket,
-                 started: float, grant: RealtimeGrant) -> None:
+                 started: float, grant: RealtimeGrant, signals: _StopSignals) -> None:
         self.robot = robot
+        self.signals = signals
         self.grant = grant
         self.blocks = blocks
         self.control = control
@@ -109,6 +171,7 @@ class _Server:
         if not isinstance(self.legs, UnitreeRobot):
             raise RobotLinkError(f"I/O process: the legs are a {type(self.legs).__name__}, not a UnitreeRobot")
         self.send_lock = threading.Lock()
+        self.forward_lock = threading.Lock()  # no command is forwarded once `stop` is set under it (`shut_down`)
         self.stop = threading.Event()
         self.failure: dict | None = None
         self.command_seen = 0
@@ -119,10 +182,16 @@ class _Server:
     def run(self) -> None:
         self._publish()  # the first state, before the controller's process is told
         self.legs.set_link_hooks(before_send=self._forward, on_state=self._on_state)
+        if self._signalled():  # stopped while connecting: the controller's `connect` raises it
+            return
         self._send({"connected": True, "pid": os.getpid(), "realtime": self.grant.to_dict()})
         while not self.stop.is_set():
-            ready = select.select([self.control], [], [], _WAIT_S)[0]
-            if ready or self.control.pending():
+            ready = select.select([self.control, self.signals.wake], [], [], _WAIT_S)[0]
+            if self.signals.wake in ready:
+                self.signals.drain()
+            if self._signalled():
+                return
+            if self.control in ready or self.control.pending():
                 try:
                     request = self.control.receive(0.0)
                 except ChannelClosed:
@@ -134,10 +203,21 @@ class _Server:
             except Exception as exc:  # noqa: BLE001 - reported, then the robot is closed
                 self._fail(exc)
 
+    def _signalled(self) -> bool:
+        """True once SIGTERM or SIGQUIT came: reported and flagged as a failure, then `shut_down` closes the robot."""
+        if self.signals.received is None:
+            return False
+        self._fail(self.signals.stopped())
+        return True
+
     def _forward(self) -> None:
         """The link thread, each period before it sends: the newest command, if a new one was posted, to `write`."""
-        if self.stop.is_set():
-            return
+        with self.forward_lock:
+            if not self.stop.is_set():
+                self._forward_newest()
+
+    def _forward_newest(self) -> None:
+        """The newest command, if a new one was posted, to the robot's `write` (the lock held)."""
         try:
             block = self.blocks.command
             if block.count != self.command_seen:
@@ -236,8 +316,17 @@ class _Server:
         self._ring()
 
     def shut_down(self) -> None:
-        """Unhook, close the robot (it is left damped), tell the controller's process, release all."""
-        self.stop.set()
+        """Forward the last command, unhook, close the robot (left damped), tell the controller's process, release all.
+
+        The command posted last goes out first, unless a failure stopped the process: before its ``close``, the
+        controller's safety layer posts damping, which must not wait for the link's write deadline (the legs would hold
+        their last command meanwhile, as long as if nothing had damped them). Then the robot is closed, which damps the
+        legs from their next frame on before the arm's close begins (`QuadrupedArmRobot`).
+        """
+        with self.forward_lock:  # the link thread is not forwarding now, and forwards nothing from now on
+            self.stop.set()
+            if self.failure is None:
+                self._forward_newest()
         self.legs.set_link_hooks()
         try:
             self.robot.close()

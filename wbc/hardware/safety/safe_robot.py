@@ -355,7 +355,10 @@ class SafeRobot(Robot):
         if self.config.on_event is not None:
             self.config.on_event(event)
         else:
-            print(event, file=sys.stderr)
+            try:
+                print(event, file=sys.stderr)
+            except OSError:
+                pass  # the terminal was closed (SIGHUP): the event is kept in `events`, and the trip must go on
 
 
 def _power(state: RobotState) -> float:
