@@ -594,7 +594,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         else:
             said = (f"the writing of its results was stopped: {stopped.out_dir} holds what was written until then, "
                     "and a hardware trial is played once (no --resume)")
-        print(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}", file=sys.stderr)
+        _say(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}")
         return 130
     except KeyboardInterrupt:
         _say("wbc hw run: interrupted; the robot was closed into damping; no results were written")
