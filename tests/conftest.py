@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import sys
 import tempfile
 import textwrap
@@ -238,3 +239,29 @@ class Stepped:
     def build(self, config: HardwareRobotConfig) -> HardwareRobot:
         """The robot `config` names, its legs on the clock over the emulator's in-process channel."""
         return build_hardware_robot(config, clock=self.clock, legs_transport=self.emu.transport(self.clock))
+
+
+_TERMINAL_DISPOSITIONS = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL,
+                          signal.SIGHUP: signal.SIG_DFL}
+"""How a command started from a terminal handles Ctrl-C, SIGTERM and the hangup (Python's own for SIGINT)."""
+
+
+@pytest.fixture
+def terminal_signals():
+    """Ctrl-C, SIGTERM and the hangup handled, for the test's duration, as in a command started from a terminal.
+
+    A suite started in the background of a script inherits SIGINT ignored, and one started under ``nohup`` SIGHUP
+    ignored; the tests of what a command does on those signals must not depend on how the suite was started.
+    """
+    before = {signum: signal.signal(signum, handler) for signum, handler in _TERMINAL_DISPOSITIONS.items()}
+    try:
+        yield
+    finally:
+        for signum, handler in before.items():
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)
+
+
+def terminal_signals_in_child() -> None:
+    """A child process's Ctrl-C, SIGTERM and hangup as a terminal's command has them (``Popen(preexec_fn=...)``)."""
+    for signum in _TERMINAL_DISPOSITIONS:
+        signal.signal(signum, signal.SIG_DFL)  # Python installs its own SIGINT handler over the default at start

@@ -253,7 +253,7 @@ def no_worker(monkeypatch):
     def spawn(*args, **kwargs):
         raise AssertionError("bench mpc spawned its worker before it checked its options")
 
-    monkeypatch.setattr(bench, "ProcessPoolExecutor", spawn)
+    monkeypatch.setattr(bench, "spawn_pool", spawn)
 
 
 @pytest.mark.parametrize(("option", "value", "message"), [

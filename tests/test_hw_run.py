@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Stepped
+from conftest import Stepped, terminal_signals_in_child
 
 from wbc.arena.episode import Episode
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
@@ -241,7 +241,8 @@ def test_a_closed_terminal_closes_the_robot_into_damping_and_ends_the_io_process
         [sys.executable, "-m", "wbc.cli", "hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario",
          PUSH, "--trial", "0", "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "20", "--no-realtime", "--out",
          str(tmp_path / "hw")], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
-        env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True)  # a group of its own, as a terminal's
+        env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True,  # a group of its own, as a terminal's
+        preexec_fn=terminal_signals_in_child)  # the hangup not ignored, whether or not this suite runs under nohup
     try:
         for _ in range(6000):  # bounded (60 s): until the safety layer drives the legs (the ramp into the stand)
             if proc.poll() is not None or any(not c.damping for c in go1.commands()[-5:]):
@@ -506,6 +507,7 @@ def test_the_same_protocol_on_the_simulator(tmp_path: Path, no_socket: list,
     assert capsys.readouterr().err.count("or --sim") == 2
 
 
+@pytest.mark.usefixtures("terminal_signals")
 @pytest.mark.parametrize("times", [1, 2])
 def test_ctrl_c_while_the_results_are_written_waits_for_them_and_twice_says_what_is_left(
         tmp_path: Path, no_socket: list, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,

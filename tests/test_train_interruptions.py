@@ -145,6 +145,7 @@ def _same(a, b) -> bool:
     return torch.equal(a, b) if isinstance(a, torch.Tensor) else a == b
 
 
+@pytest.mark.usefixtures("terminal_signals")
 def test_ctrl_c_saves_the_iteration_it_stops_at_and_resume_continues_after_it(tmp_path, monkeypatch, capsys):
     from wbc.learned.train.preflight import latest_checkpoint
     from wbc.learned.train.train import train
@@ -167,6 +168,7 @@ def test_ctrl_c_saves_the_iteration_it_stops_at_and_resume_continues_after_it(tm
     assert (result["iterations"], result["trained"]) == (5, 2) and latest_checkpoint(run).name == "model_4.pt"
 
 
+@pytest.mark.usefixtures("terminal_signals")
 def test_an_interrupted_run_names_the_checkpoint_it_saved_and_a_second_ctrl_c_stops_at_once(tmp_path, monkeypatch,
                                                                                            capsys):
     from wbc.cli.main import main
@@ -191,6 +193,7 @@ def test_an_interrupted_run_names_the_checkpoint_it_saved_and_a_second_ctrl_c_st
     assert json.loads((run / "progress.json").read_text())["iteration"] == 3 and (run / "model_3.pt").is_file()
 
 
+@pytest.mark.usefixtures("terminal_signals")
 def test_sigterm_stops_a_training_run_as_ctrl_c_does_at_the_end_of_its_iteration(tmp_path, monkeypatch, capsys):
     """A batch scheduler's SIGTERM: the iteration in progress ends and is saved, then the command stops as Ctrl-C."""
     from wbc.cli.main import main
