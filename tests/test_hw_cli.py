@@ -364,8 +364,8 @@ def test_check_reads_the_arm_too_and_never_drives_it(capsys: pytest.CaptureFixtu
     finally:
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=20)
-    out = capsys.readouterr().out
-    assert code == 0, out
+    out, err = capsys.readouterr()
+    assert code == 0, out + err
     assert "arm on /dev/" in out and "arm_elbow" in out and "safety: ready: a ramp would start" in out
     cycles = re.search(r"arm bus: (\d+) cycles, (\d+) of them damping", out)
     # every cycle damped: no servo command (how many cycles real time allowed: the lockstep twin counts them)
