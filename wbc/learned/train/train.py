@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import threading
 import time
 from collections.abc import Mapping
 from pathlib import Path
@@ -190,15 +189,12 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
 
     A second Ctrl-C or SIGTERM stops at once (the handlers before are back), and the run keeps the checkpoints saved
     until then, as does a KeyboardInterrupt raised otherwise. A Ctrl-C after the last iteration's log lets the loop
-    end (its final checkpoint saved) and is raised once it has. Outside the main thread, where no signal is handled,
-    the loop runs as rsl-rl's.
+    end (its final checkpoint saved) and is raised once it has. Outside the main thread, where Python handles no
+    signal, nothing is deferred (`DeferredInterrupts` installs nothing there) and the loop runs as rsl-rl's.
 
     Raises:
         KeyboardInterrupt: Ctrl-C.
     """
-    if threading.current_thread() is not threading.main_thread():
-        runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
-        return
     interrupt = DeferredInterrupts(lambda what: f"wbc: {what}: the run stops at the end of the iteration in progress "
                                    "and saves its checkpoint (Ctrl-C or SIGTERM again stops at once, keeping the "
                                    "checkpoints saved so far)")
