@@ -35,8 +35,10 @@ $(STAMP): $(LOCK) $(NO_DEPS_LOCK) pyproject.toml
 demo: $(STAMP)
 	$(BIN)/wbc demo
 
+# The suite in parallel, one process a core up to four (pytest-xdist): every test stands alone, on its own temporary
+# files and its own loopback ports. The wall-clock suites below stay in one process.
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -n auto --maxprocesses 4
 
 # What a real loop achieves against the wall clock (a busy machine can fail these; the default suite does not time).
 test-realtime: $(STAMP)
