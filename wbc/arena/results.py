@@ -260,6 +260,7 @@ class ResultsStore:
             stored trials; or a file of it cannot be written (a full disk, no permission: `unwritable`).
         RecordError: its ``run.json`` is malformed (the message names the field), its ``trials.csv`` has other
             columns, or holds a refused row and `drop_bad_rows` is off (the message names the file and line).
+        ValueError: `lock` is given back already, or is another directory's (a caller's mistake, not the user's).
 
     Attributes:
         dir: the directory.
