@@ -2,23 +2,32 @@
 
 End to end on a tiny run (1 trial, 1 seed, 1.5 s trials of a short push scenario for the same robot), through the
 command line: every row of the paper and of ours, the comparisons with their tests, where each contender fails and
-the run time are printed, and ``paper.txt`` holds exactly what was printed.
+the run time are printed, and ``paper.txt`` holds exactly what was printed. The results directory stays held until
+``paper.txt`` and ``paper.json`` are written, checked with the real lock from a second file descriptor.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
+import os
+import re
 import sys
+from pathlib import Path
 
 import pytest
 
+from wbc.arena.results import LOCK_FILE
 from wbc.arena.summary import PairSummary
 from wbc.cli.main import main
-from wbc.errors import ConfigError, UnknownNameError
+from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
+from wbc.output_files import directory_holder, lock_directory
 from wbc.scenario import check_published, load_scenario
 from wbc.tools.paper import TABLE_I, TABLES, PaperRunConfig, resolve_contenders, run_paper_table, verdict
 from wbc.tools.paper.paper_table import PAPER_TRIALS_PER_BAND
+
+paper_table = importlib.import_module("wbc.tools.paper.paper_table")  # the module (the package re-exports names)
 
 TINY_PUSH = """
 [scenario]
@@ -154,6 +163,37 @@ def test_table3_lists_its_baselines_and_says_which_are_missing(tiny, tmp_path):
     assert "95.73" in text and "84.73" in text  # the paper's "Ours"
     assert result.paper_protocol_cpu_h == pytest.approx(
         sum(result.trial_wall_s.values()) * PAPER_TRIALS_PER_BAND * 2 / 3600)
+
+
+def test_the_paper_files_are_written_while_the_results_directory_is_still_held(tiny, tmp_path, monkeypatch):
+    # as each paper file is written, the directory's lock is tried from a second file descriptor, as a `wbc paper
+    # --resume` or `wbc compare --resume` started at that moment would try it: it must find this run holding it
+    out = tmp_path / "t3"
+    holders = {}
+    write = paper_table.write_text
+
+    def write_and_check(path, text):
+        holders[Path(path).name] = directory_holder(Path(path).parent)
+        write(path, text)
+
+    monkeypatch.setattr(paper_table, "write_text", write_and_check)
+    run_paper_table(PaperRunConfig(table="table3", trials=1, seeds=1, scenario=tiny, out_dir=out, workers=1,
+                                   progress=False))
+    assert set(holders) == {"paper.txt", "paper.json"}
+    for name, holder in holders.items():
+        assert holder is not None, f"{name} was written with {out} free to another run"
+        assert holder.pid == os.getpid()
+    lock_directory(out).release()  # given back once they are written
+
+
+def test_a_paper_run_on_a_directory_another_run_holds_is_refused_before_anything_is_played(tiny, tmp_path):
+    out = tmp_path / "held"
+    out.mkdir()
+    with lock_directory(out):
+        with pytest.raises(ResultsDirError, match=re.escape(f"{out} is in use by another wbc run (pid {os.getpid()})")):
+            run_paper_table(PaperRunConfig(table="table3", trials=1, seeds=1, scenario=tiny, out_dir=out, workers=1,
+                                           progress=False))
+    assert [p.name for p in out.iterdir()] == [LOCK_FILE]
 
 
 def test_contenders_can_be_replaced_and_tables_check_their_robot(tiny):

@@ -29,9 +29,11 @@ from conftest import SHORT_SCENARIO
 from wbc.arena import executors
 from wbc.arena import results as results_module
 from wbc.arena.identity import RunIdentity
-from wbc.arena.results import LOCK_FILE, ResultsStore
+from wbc.arena.results import LOCK_FILE, ResultsStore, hold_results_dir
 from wbc.arena.trial_record import TrialRecord
 from wbc.cli.main import main
+from wbc.errors import ResultsDirError
+from wbc.output_files import directory_holder
 
 cli = importlib.import_module("wbc.cli.main")  # the module (the package's name `main` is the function)
 
@@ -90,6 +92,24 @@ def test_a_store_that_refuses_a_directory_gives_its_lock_back(short, tmp_path):
     with pytest.raises(Exception, match="already holds results"):
         ResultsStore(out, identity, resume=False)
     ResultsStore(out, identity, resume=True).close()  # not refused as in use: the refusal above let it go
+
+
+def test_a_store_given_its_callers_lock_uses_it_and_leaves_it_held(short, tmp_path):
+    # how a command that writes files of its own beside the run's (wbc paper) keeps the directory until they are written
+    out = tmp_path / "out"
+    assert main(_run(short, out)) == 0
+    identity = RunIdentity.load(out / "run.json")
+    with hold_results_dir(out) as lock:
+        ResultsStore(out, identity, resume=True, lock=lock).close()
+        assert lock.held and directory_holder(out).pid == os.getpid()  # closing the store left it to its caller
+        with pytest.raises(ResultsDirError, match="in use by another wbc run"):
+            ResultsStore(out, identity, resume=True)  # another run is refused all the same
+        with hold_results_dir(tmp_path / "other") as theirs, pytest.raises(ValueError, match="another directory"):
+            ResultsStore(out, identity, resume=True, lock=theirs)
+    assert directory_holder(out) is None
+    with pytest.raises(ValueError, match="released"):
+        ResultsStore(out, identity, resume=True, lock=lock)
+    ResultsStore(out, identity, resume=True).close()
 
 
 def test_sigterm_interrupts_a_run_as_ctrl_c_does(short, tmp_path):

@@ -114,6 +114,11 @@ class DirectoryLock:
         self.path = path
         self._fd: int | None = fd
 
+    @property
+    def held(self) -> bool:
+        """Whether this process still holds the directory: not yet given back (`release`)."""
+        return self._fd is not None
+
     def release(self) -> None:
         """Give the lock back (closing its file does); the pid is erased first, so a refusal never names a run gone.
 

@@ -52,6 +52,7 @@ from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
+from wbc.output_files import DirectoryLock
 from wbc.robots.registry import get_robot
 from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
@@ -239,8 +240,14 @@ def _files_of(specs: Mapping[str, ControllerSpec]) -> dict[str, dict[str, str]]:
             for name, spec in specs.items() if spec.config_file is not None}
 
 
-def run_arena(cfg: ArenaConfig) -> ArenaResult:
+def run_arena(cfg: ArenaConfig, *, lock: DirectoryLock | None = None) -> ArenaResult:
     """Run (or resume) a comparison and write its results directory.
+
+    Args:
+        cfg: what to play, and where to store it.
+        lock: `ArenaConfig.out_dir`'s lock, already held by the caller (`wbc.arena.results.hold_results_dir`), who
+            writes files of its own there after the run and then gives it back; None: the run takes the lock and
+            gives it back once its files are written.
 
     Raises:
         UnknownNameError: an unknown controller name (the message lists the valid ones).
@@ -302,8 +309,8 @@ def run_arena(cfg: ArenaConfig) -> ArenaResult:
     )
     store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume,
                          controllers={name: spec.provenance() for name, spec in specs.items()},
-                         drop_bad_rows=cfg.drop_bad_rows)
-    try:  # the directory stays locked until its summary and report are written
+                         drop_bad_rows=cfg.drop_bad_rows, lock=lock)
+    try:  # the directory stays locked until its summary and report are written (and after, with a caller's lock)
         done = store.done()
         guard = ErrorGuard(cfg.controllers, cfg.max_consecutive_errors)
         guard.observe_all(store.records)  # a controller stopped before stays stopped

@@ -12,7 +12,9 @@ data, an I/O or configuration file); it is read back as strictly as a scenario (
 field known and of its type), and reopening a directory for another run is refused, naming the fields that differ.
 The paths the run will write are checked before any trial is played (`check_out_dir`). A run holds its directory
 locked (`LOCK_FILE`) from before it reads anything there until it is done: a second run on it, with or without
-``--resume``, is refused, naming the pid of the one that holds it.
+``--resume``, is refused, naming the pid of the one that holds it. A command that writes files of its own beside the
+run's (``wbc paper``: ``paper.txt``, ``paper.json``) takes the lock first (`hold_results_dir`) and hands it to the
+store, so that the directory stays held until those files are written too.
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ from wbc.input_files import read_json
 from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, lock_directory, write_text
 from wbc.provenance import provenance
 
-__all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path", "unwritable"]
+__all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path", "hold_results_dir",
+           "unwritable"]
 
 OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "report.md", "push_recovery.png",
                 "ttf.png", "tracking.png")
@@ -112,6 +115,37 @@ def _lock(out_dir: Path) -> DirectoryLock:
     except OSError as exc:
         raise ResultsDirError(f"{out_dir / LOCK_FILE}: cannot open or lock the results directory's lock file "
                               f"({exc.strerror or exc}); move it away, or choose another --out") from None
+
+
+def _make_dir(out_dir: Path) -> None:
+    """Create `out_dir` (and its parents) if missing.
+
+    Raises:
+        ResultsDirError: it cannot be created; the message says to choose another ``--out``.
+    """
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ResultsDirError(f"{out_dir}: cannot be created ({exc.strerror or exc}); choose another --out, or "
+                              "make its parent directory writable") from exc
+
+
+def hold_results_dir(out_dir: Path) -> DirectoryLock:
+    """Hold a results directory (created if missing) for a command that writes files of its own beside a run's.
+
+    The lock is the one a `ResultsStore` takes (`LOCK_FILE`); handed to the store (its ``lock``, through
+    `wbc.arena.compare.run_arena`), it is used by the store and outlives it, so that the directory stays held after
+    the run's own files are written, until the caller has written its own and gives the lock back (`release`, or the
+    end of a ``with``). A second run on the directory, with or without ``--resume``, is refused meanwhile.
+
+    Raises:
+        ResultsDirError: `out_dir` is a file, or a file a run writes there is a directory (`check_out_dir`); it
+            cannot be created; or another process holds it (the message names its pid).
+    """
+    out = Path(out_dir)
+    check_out_dir(out)
+    _make_dir(out)
+    return _lock(out)
 
 
 _MISSING = object()
@@ -216,6 +250,8 @@ class ResultsStore:
         drop_bad_rows: drop the rows of ``trials.csv`` that are refused (`wbc.arena.trial_record.scan_csv`), with one
             warning line each on stderr, so that their trials are played again; off: such rows are refused.
         resumable: the run can be resumed (``--resume``), as its messages then say; off: a hardware trial.
+        lock: the directory's lock, already held by the caller (`hold_results_dir`), who gives it back after `close`;
+            None: the store takes the lock and gives it back on `close`.
 
     Raises:
         ResultsDirError: `out_dir` is a file, or a file the run writes is a directory (`check_out_dir`); another
@@ -224,6 +260,7 @@ class ResultsStore:
             stored trials; or a file of it cannot be written (a full disk, no permission: `unwritable`).
         RecordError: its ``run.json`` is malformed (the message names the field), its ``trials.csv`` has other
             columns, or holds a refused row and `drop_bad_rows` is off (the message names the file and line).
+        ValueError: `lock` is given back already, or is another directory's (a caller's mistake, not the user's).
 
     Attributes:
         dir: the directory.
@@ -236,21 +273,23 @@ class ResultsStore:
 
     def __init__(self, out_dir: Path, identity: RunIdentity, *, resume: bool,
                  controllers: dict[str, object] | None = None, drop_bad_rows: bool = False,
-                 resumable: bool = True) -> None:
+                 resumable: bool = True, lock: DirectoryLock | None = None) -> None:
         self.dir = Path(out_dir)
         self.resumable = resumable
         self.identity = identity
         self.trials_path = self.dir / "trials.csv"
         self.run_path = self.dir / "run.json"
+        if lock is not None and not (lock.held and lock.path.resolve() == (self.dir / LOCK_FILE).resolve()):
+            raise ValueError(f"ResultsStore({self.dir}): the lock given is "
+                             + ("released" if not lock.held else f"another directory's ({lock.path})")
+                             + "; give the one hold_results_dir returned for this directory, still held")
         check_out_dir(self.dir)
-        try:
-            self.dir.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise ResultsDirError(f"{self.dir}: cannot be created ({exc.strerror or exc}); choose another --out, or "
-                                  "make its parent directory writable") from exc
+        _make_dir(self.dir)
         # held until `close`, taken before anything in the directory is read or rewritten: a second run on it would
-        # replace trials.csv under this one, whose appends would then go to a deleted file
-        self._lock: DirectoryLock | None = _lock(self.dir)
+        # replace trials.csv under this one, whose appends would then go to a deleted file; a lock the caller holds
+        # is the caller's to give back
+        self._owns_lock = lock is None
+        self._lock: DirectoryLock | None = _lock(self.dir) if lock is None else lock
         self._file = None
         self._failed = False  # a write of trials.csv failed: closing it does not try again
         self.records: list[TrialRecord] = []
@@ -386,7 +425,10 @@ class ResultsStore:
         self.records.append(record)
 
     def close(self) -> None:
-        """Close the trials file and give the directory's lock back (`LOCK_FILE`); closing again does nothing."""
+        """Close the trials file and give the directory's lock back (`LOCK_FILE`); closing again does nothing.
+
+        A lock the caller handed in (``lock``) stays held: the caller gives it back.
+        """
         try:
             if self._file is not None:
                 file, self._file = self._file, None
@@ -398,5 +440,6 @@ class ResultsStore:
                         file.close()
         finally:
             if self._lock is not None:
-                self._lock.release()
+                if self._owns_lock:
+                    self._lock.release()
                 self._lock = None

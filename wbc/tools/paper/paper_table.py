@@ -5,7 +5,9 @@ scenario (`wbc.arena.compare.run_arena`: resumable, every trial stored as it fin
 breakdown of where each contender fails and the push-recovery curve), then computes the table's paired comparisons
 (difference, its 95 % interval, exact McNemar or Wilcoxon p-value, n80: `wbc.arena.report.compare_pair`) and
 writes ``paper.txt`` (what the command prints, `wbc.tools.paper.format.format_paper_table`) and ``paper.json`` beside
-the arena's files.
+the arena's files. The results directory is held (`wbc.arena.results.hold_results_dir`) from before the arena reads it
+until both are written: a ``wbc paper --resume`` or ``wbc compare --resume`` on it meanwhile is refused, as during the
+trials.
 
 The default size, `DEFAULT_TRIALS` trials x `DEFAULT_SEEDS` seed per band, fits a 2-core machine (the documentation's
 results pages give measured run times); the paper's protocol is 5 seeds and 2000 trials: ``--seeds 5 --trials
@@ -22,7 +24,7 @@ from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.report import compare_pair
-from wbc.arena.results import unwritable
+from wbc.arena.results import hold_results_dir, unwritable
 from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.output_files import write_text
@@ -96,7 +98,8 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         UnknownNameError: an unknown table or ``--contender`` key.
         ScenarioError: the scenario file is invalid.
         ConfigError: the scenario is for another robot than the table's, or options out of range.
-        ResultsDirError: `out_dir` holds another run (or, without `resume`, any run).
+        ResultsDirError: `out_dir` holds another run (or, without `resume`, any run), or another process holds it
+            (its lock, held here until ``paper.txt`` and ``paper.json`` are written).
     """
     spec = TABLES[cfg.table]
     contenders = resolve_contenders(spec, cfg.contenders, crouched=cfg.crouched)
@@ -112,40 +115,43 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         published = False
     played_rows = [c for c in contenders if c.controller is not None]
     out = cfg.out_dir or default_out_dir(spec.name)
-    start = time.perf_counter()
-    arena = run_arena(ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
-                                  seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
-                                  resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows, progress=cfg.progress,
-                                  trial_time_limit_s=cfg.trial_time_limit_s, isolated=cfg.isolated))
-    wall = time.perf_counter() - start
-    records = arena.records
-    by_controller: dict[str, list[TrialRecord]] = {}
-    for record in records:
-        by_controller.setdefault(record.controller, []).append(record)
-    key_to_controller = {c.key: c.controller for c in played_rows}
-    comparisons = []
-    for contrast in spec.contrasts:
-        a, b = key_to_controller.get(contrast.a), key_to_controller.get(contrast.b)
-        if a is None or b is None:
-            continue
-        for band in scenario.bands:
-            cell_a = [r for r in by_controller.get(a, []) if r.band == band]
-            cell_b = [r for r in by_controller.get(b, []) if r.band == band]
-            for metric in spec.metrics:
-                pair = compare_pair(cell_a, cell_b, a=contrast.a, b=contrast.b, band=band, metric=metric)
-                comparisons.append(PaperComparison(question=contrast.question, pair=pair))
-    wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}
-    result = PaperTableResult(
-        spec=spec, contenders=contenders,
-        scenario={"name": scenario.name, "version": scenario.version, "path": str(scenario_path),
-                  "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
-        bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
-        comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
-        trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, stored=len(records), wall_s=wall,
-        workers=cfg.workers, controller_errors=arena.controller_errors)
-    try:
-        write_text(arena.out_dir / "paper.txt", format_paper_table(result))
-        write_text(arena.out_dir / "paper.json", json.dumps(result.as_dict(), indent=2))
-    except OSError as exc:
-        raise unwritable(exc.filename or arena.out_dir, exc, arena.out_dir, stored=len(records)) from exc
+    # held across the trials and the paper files: a resumed run on the directory must not interleave with them
+    with hold_results_dir(out) as lock:
+        start = time.perf_counter()
+        arena = run_arena(ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
+                                      seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out,
+                                      workers=cfg.workers, resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows,
+                                      progress=cfg.progress, trial_time_limit_s=cfg.trial_time_limit_s,
+                                      isolated=cfg.isolated), lock=lock)
+        wall = time.perf_counter() - start
+        records = arena.records
+        by_controller: dict[str, list[TrialRecord]] = {}
+        for record in records:
+            by_controller.setdefault(record.controller, []).append(record)
+        key_to_controller = {c.key: c.controller for c in played_rows}
+        comparisons = []
+        for contrast in spec.contrasts:
+            a, b = key_to_controller.get(contrast.a), key_to_controller.get(contrast.b)
+            if a is None or b is None:
+                continue
+            for band in scenario.bands:
+                cell_a = [r for r in by_controller.get(a, []) if r.band == band]
+                cell_b = [r for r in by_controller.get(b, []) if r.band == band]
+                for metric in spec.metrics:
+                    pair = compare_pair(cell_a, cell_b, a=contrast.a, b=contrast.b, band=band, metric=metric)
+                    comparisons.append(PaperComparison(question=contrast.question, pair=pair))
+        wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}
+        result = PaperTableResult(
+            spec=spec, contenders=contenders,
+            scenario={"name": scenario.name, "version": scenario.version, "path": str(scenario_path),
+                      "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
+            bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
+            comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
+            trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, stored=len(records), wall_s=wall,
+            workers=cfg.workers, controller_errors=arena.controller_errors)
+        try:
+            write_text(arena.out_dir / "paper.txt", format_paper_table(result))
+            write_text(arena.out_dir / "paper.json", json.dumps(result.as_dict(), indent=2))
+        except OSError as exc:
+            raise unwritable(exc.filename or arena.out_dir, exc, arena.out_dir, stored=len(records)) from exc
     return result
