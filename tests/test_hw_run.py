@@ -48,7 +48,7 @@ from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
@@ -270,6 +270,44 @@ def test_a_closed_terminal_closes_the_robot_into_damping_and_ends_the_io_process
     first = next((k for k, c in enumerate(frames) if c.damping), None)
     assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
     assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
+def test_a_link_lost_in_the_trial_exits_1_and_says_the_damping_may_not_have_reached_the_robot(
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot stops answering 1 s into the trial: the safety layer trips on the stale stream and sends damping, and
+    the results are written, but nothing shows that the damping reached the robot. The command exits 1 and its last
+    line says so, with when the last state came. It exited 0, its last line the results directory."""
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    started: list[float] = []
+
+    def build(config: HardwareRobotConfig) -> HardwareRobot:
+        built = stepped_go1.build(config)
+        # the stand-up takes 1.06 s of this clock (the ramp's hold, time and slew): about 1 s into the trial
+        clock.call_at(clock.now() + 2.0, lambda: (started.append(clock.now()), emu.inject(Fault.SILENCE)))
+        return built
+
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--settle", "0.5",
+                                      "--out", str(out), "--no-io-process"])
+    assert hw_run(args, build=build) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    (record,) = TrialRecord.read_csv(out / "trials.csv")  # the trial is stored, ended by the trip
+    assert record.outcome == "safety_trip" and record.safety_trips == 1
+    hardware = json.loads((out / "hardware.json").read_text())
+    trip = hardware["safety_events"][-1]
+    assert trip["reason"] == "stale_state"
+    lost = hardware["link_lost"]  # on the layer's clock: the last state came as the silence began, none after
+    last_state, silent = lost["last_state_s"], lost["silent_s"]
+    assert last_state <= started[0] + LINK_PERIOD + TIME_EPS and trip["time"] - last_state > 0.1 and silent >= 0.5 + 0.1
+    assert err[-1] == (f"wbc hw run: the link to the robot was lost: its last state came {last_state:.3f} s after it "
+                       f"was connected ({last_state - hardware['trial_started_s']:.3f} s into the trial) and none "
+                       f"came in the {silent:.3f} s after: the damping frames sent since may not have reached the "
+                       "robot. Check it and power it down by hand")
+    assert "## Link lost" in (out / "report.md").read_text()
+    # what went out: the layer's damping from the trip to the close, as on any trip
+    after = [c for c in emu.commands() if c.time > trip["time"] + LINK_PERIOD + TIME_EPS]
+    assert after and all(c.damping for c in after)
 
 
 def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> None:

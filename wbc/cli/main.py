@@ -519,8 +519,10 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
 
     Returns:
         0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
-        the outcome ``controller_error``); 130 when interrupted (Ctrl-C, SIGTERM, SIGHUP: the robot is closed
-        into damping first).
+        the outcome ``controller_error``), or when the robot stopped answering and its link was lost (the results
+        are written too, the outcome ``safety_trip``; the last line says when, and that the damping sent since may
+        not have reached the robot: check it and power it down by hand); 130 when interrupted (Ctrl-C, SIGTERM,
+        SIGHUP: the robot is closed into damping first).
     """
     _view_options(args)
     if args.sim == (args.target is not None):
@@ -605,10 +607,14 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
             live[1].close()
             live[0].stop()
     printers.print_hw_run(result)
+    failed = False
     if result.record.error:  # played and stored, but its controller broke in it
         print(f"wbc: {result.record.error}", file=sys.stderr)
-        return 1
-    return 0
+        failed = True
+    if result.link_lost is not None:  # last: what the operator must do now, by the robot
+        _say(f"wbc hw run: {result.link_lost.describe()}")
+        failed = True
+    return 1 if failed else 0
 
 
 def _hw_live_observer(args: argparse.Namespace):
@@ -1397,10 +1403,11 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
-        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C,
-        SIGTERM, or SIGHUP when its terminal is closed; a run's finished trials are stored, and the message says how
-        to finish it; a training run's says which checkpoint, or which DAgger rounds, its run directory keeps). A
-        usage error exits with status 2 from the parser, after its usage message.
+        each on stderr) or a hardware trial lost its robot's link (`hw_run`), 2 for a `WbcError` (its message
+        printed to stderr), 130 when interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal is closed; a run's
+        finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
+        or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from the parser, after
+        its usage message.
     """
     args = build_parser().parse_args(argv)
     try:
