@@ -310,6 +310,46 @@ def test_a_link_lost_in_the_trial_exits_1_and_says_the_damping_may_not_have_reac
     assert after and all(c.damping for c in after)
 
 
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_sigterm_to_the_commands_group_is_an_interruption_and_the_robot_ends_damped(go1: UnitreeEmulator,
+                                                                                     tmp_path: Path) -> None:
+    """SIGTERM to the process group of ``wbc hw run`` (a service manager's stop): the command and its I/O process both
+    take it. The command closes the robot as on Ctrl-C and exits 130 with the same last line. It exited 2: the I/O
+    process's report that SIGTERM stopped it, taken for a failure of the close."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wbc.cli", "hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario",
+         PUSH, "--trial", "0", "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "20", "--no-realtime", "--out",
+         str(tmp_path / "hw")], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True, preexec_fn=terminal_signals_in_child)
+    try:
+        for _ in range(6000):  # bounded (60 s): until the safety layer drives the legs (the ramp into the stand)
+            if proc.poll() is not None or any(not c.damping for c in go1.commands()[-5:]):
+                break
+            time.sleep(0.01)
+        assert proc.poll() is None, proc.stderr.read().decode()
+        (io_process,) = _children(proc.pid)
+        sent = len(go1.commands())
+        os.killpg(proc.pid, signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    err = err.decode()
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted; the robot was closed into damping; no results "
+                                            "were written")
+    for _ in range(500):  # bounded (5 s)
+        if not _running(io_process):
+            break
+        time.sleep(0.01)
+    assert not _running(io_process)
+    frames = go1.commands()[sent:]
+    first = next((k for k, c in enumerate(frames) if c.damping), None)
+    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
+    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
 def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> None:
     from wbc.cli.main import _terminate_interrupts
 

@@ -38,7 +38,15 @@ from wbc.control.registry import (
     list_controllers,
     takes_controller_config,
 )
-from wbc.errors import ConfigError, ResultsDirError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
+from wbc.errors import (
+    ConfigError,
+    IoProcessStopped,
+    ResultsDirError,
+    RobotLinkError,
+    TargetRefusedError,
+    UnknownNameError,
+    WbcError,
+)
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import realtime_switch_interval
@@ -522,7 +530,8 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         the outcome ``controller_error``), or when the robot stopped answering and its link was lost (the results
         are written too, the outcome ``safety_trip``; the last line says when, and that the damping sent since may
         not have reached the robot: check it and power it down by hand); 130 when interrupted (Ctrl-C, SIGTERM,
-        SIGHUP: the robot is closed into damping first).
+        SIGHUP: the robot is closed into damping first), SIGTERM to the command's group or to its I/O process
+        included (`IoProcessStopped`, the robot closed by the I/O process).
     """
     _view_options(args)
     if args.sim == (args.target is not None):
@@ -598,7 +607,9 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                     "and a hardware trial is played once (no --resume)")
         _say(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}")
         return 130
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, IoProcessStopped):
+        # SIGTERM to the command's whole group reaches its I/O process too, which closes the robot itself; it is
+        # raised only once the I/O process has said that the robot is closed, and reads as the stop it is
         _say("wbc hw run: interrupted; the robot was closed into damping; no results were written")
         return 130
     finally:

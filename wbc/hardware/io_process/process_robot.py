@@ -20,8 +20,11 @@ capabilities as `build_hardware_robot`'s) with its devices in a fresh interprete
   An exception there (a refused connect, `PortBusyError`, `RobotLinkError`, a lost serial port) is raised here as the
   same `wbc` error class with the same message; the I/O process dying is a `RobotLinkError` at the next `read`,
   `write` or `advance`, which says that nothing may have damped the robot (check it); stopped by SIGTERM or SIGQUIT,
-  the I/O process closes the robot into damping and says so instead. Either way the process, the sockets and the
-  shared memory are released at once;
+  the I/O process closes the robot into damping, and the next call raises `IoProcessStopped` once it has said that
+  the robot is closed (a `RobotLinkError` that says nothing may have damped it, if it ended without saying so). A
+  ``close`` that meets such a stop does not raise: the robot is closed, as asked (SIGTERM to the whole command
+  reaches both processes, and its close then met the I/O process's own). Either way the process, the sockets and
+  the shared memory are released at once;
 - safety: the devices keep their write deadlines, so when this process stops writing (stalled, or hung holding its
   interpreter lock) the robot is damped within the deadline; when this process dies, the I/O process sees its end
   of the channel close, closes the robot (damped) and exits: no orphan. Address refusals happen in this process, when
@@ -46,7 +49,7 @@ from pathlib import Path
 import numpy as np
 
 import wbc
-from wbc.errors import RobotLinkError, WbcError
+from wbc.errors import IoProcessStopped, RobotLinkError, WbcError
 from wbc.hardware.capabilities import HeldRamp, MotorNames
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel.arm_fault import ArmBusStats
@@ -198,6 +201,9 @@ class ProcessRobot(Robot):
         if self._failure is None and self._control is not None:
             try:
                 self._control.send({"op": "close"})
+            except ChannelClosed:
+                pass  # it is closing already (a stop signal): what it said before is still to be read
+            try:
                 failure = self._await("closed", timeout=5.0)
             except WbcError as exc:
                 failure = exc
@@ -372,12 +378,20 @@ class ProcessRobot(Robot):
                 status = None
             failure = RobotLinkError(f"ProcessRobot: the I/O process died (exit status {status}); the robot's "
                                      f"devices are no longer served: {_LEFT_UNKNOWN}")
+        elif isinstance(failure, IoProcessStopped) and failure.connected:
+            closed = self._await("closed", timeout=5.0)  # the stop closes the robot: said only once it is
+            if isinstance(closed, WbcError):
+                failure = closed
         self._failure = failure
         self._release()
         raise failure
 
     def _await(self, key: str, *, timeout: float) -> dict | WbcError:
-        """The reply carrying `key`, or the error the I/O process reported first (returned, not raised)."""
+        """The reply carrying `key`, or the error the I/O process reported first (returned, not raised).
+
+        Awaiting ``closed``, a stop report (`IoProcessStopped`) is passed over: the I/O process is closing the robot,
+        as asked, and says ``closed`` next (or its close's error).
+        """
         deadline = time.monotonic() + timeout
         try:
             while True:
@@ -385,7 +399,10 @@ class ProcessRobot(Robot):
                 if message is None:
                     return RobotLinkError(f"ProcessRobot: the I/O process did not answer {key!r} within {timeout} s")
                 if "error" in message:
-                    return rebuild_error(message, where="ProcessRobot I/O process")
+                    error = rebuild_error(message, where="ProcessRobot I/O process")
+                    if key == "closed" and isinstance(error, IoProcessStopped):
+                        continue
+                    return error
                 if key in message:
                     return message
         except ChannelClosed:
