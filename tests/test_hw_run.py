@@ -14,6 +14,7 @@ by its ``--seconds``. What reached the robot is read from the emulator's log of 
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
@@ -34,7 +35,7 @@ import pytest
 from conftest import Stepped, terminal_signals_in_child
 
 from wbc.arena.episode import Episode
-from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
+from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import ScriptedKeys
 from wbc.arena.runner import PreparingObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
@@ -50,7 +51,9 @@ from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.realtime import NO_REALTIME
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.events import REMEDIES
 from wbc.scenario.scenario import load_scenario
@@ -309,6 +312,63 @@ def test_a_link_lost_in_the_trial_exits_1_and_says_the_damping_may_not_have_reac
     after = [c for c in emu.commands() if c.time > trip["time"] + LINK_PERIOD + TIME_EPS]
     assert after and all(c.damping for c in after)
 
+
+@pytest.mark.usefixtures("terminal_signals")
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_a_stop_while_the_io_process_starts_says_that_nothing_was_connected(
+        go1: UnitreeEmulator, tmp_path: Path, capsys: pytest.CaptureFixture[str], signum: int) -> None:
+    """Ctrl-C or SIGTERM to the command as soon as its I/O process exists, long before it has imported `wbc`: the
+    command exits 130 and says that the robot was not connected, and nothing but damping reached it. It said that the
+    robot was closed into damping."""
+    from wbc.cli.main import _terminate_interrupts
+
+    robots: list[ProcessRobot] = []
+
+    def build(config: HardwareRobotConfig) -> HardwareRobot:
+        built = build_process_robot(dataclasses.replace(config, realtime=NO_REALTIME))
+        robots.append(built.robot)
+        return built
+
+    def stop_at_once() -> None:
+        for _ in range(600_000):  # bounded (at most a minute): until the I/O process exists
+            if robots and robots[0]._proc is not None:
+                os.kill(os.getpid(), signum)
+                return
+            time.sleep(0.0001)
+
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "1",
+                                      "--out", str(out)])
+    sender = threading.Thread(target=stop_at_once)
+    sender.start()
+    try:
+        with _terminate_interrupts():
+            code = hw_run(args, build=build)
+    finally:
+        sender.join()
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert "closed into damping" not in err
+    assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted while the robot was being connected, before the "
+                                            "controller or the safety layer sent it anything: nothing was played; no "
+                                            "results were written")
+    assert robots[0].pid is None and not robots[0].is_connected  # the I/O process is gone
+    assert all(c.damping for c in go1.commands())  # not one servo frame
+    assert not (out / "trials.csv").exists()
+
+
+def test_a_stop_before_the_robot_connects_is_said_to_have_sent_it_nothing(stepped_go1: Stepped, tmp_path: Path) -> None:
+    """Ctrl-C at the confirmation, before the robot's connect began: the trial says that nothing was opened."""
+    def confirm(hardware: HardwareRobot, spec: object) -> None:
+        raise KeyboardInterrupt
+
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=1.0, target=("127.0.0.1", 9), out_dir=tmp_path / "hw", io_process=False)
+    with pytest.raises(ConnectInterrupted) as stopped:
+        run_hardware_trial(cfg, before_connect=confirm, build=stepped_go1.build)
+    assert not stopped.value.opening
+    assert not stepped_go1.emu.commands()  # not one frame
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 def test_sigterm_to_the_commands_group_is_an_interruption_and_the_robot_ends_damped(go1: UnitreeEmulator,

@@ -64,7 +64,7 @@ from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
-from wbc.errors import ConfigError, ResultsDirError, StandUpError, UnknownNameError
+from wbc.errors import ConfigError, IoProcessStopped, ResultsDirError, StandUpError, UnknownNameError
 from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
@@ -81,7 +81,8 @@ from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
 
-__all__ = ["HardwareTrialConfig", "HardwareTrialResult", "LinkLost", "ResultsInterrupted", "run_hardware_trial"]
+__all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "LinkLost", "ResultsInterrupted",
+           "run_hardware_trial"]
 
 _STAND_UP_DT = 0.02  # [s] period of the stand hold that precedes a trial (the stand controller's 50 Hz)
 
@@ -256,6 +257,7 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
         RobotLinkError: the robot did not answer, or its link (the I/O process) died. A robot that stops answering
             during the trial is a trip of the safety layer and a `LinkLost` in the result instead.
         StandUpError: the safety layer tripped while standing the robot up, before the trial (nothing was played).
+        ConnectInterrupted: interrupted before the robot was connected (nothing was sent to it).
     """
     scenario = load_scenario(cfg.scenario)
     band = cfg.band if cfg.band is not None else scenario.bands[0]
@@ -311,14 +313,21 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     link: LinkStatsLike | None = None
     if isinstance(observer, PreparingObserver):
         observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait for them
-    if before_connect is not None:
-        before_connect(hardware, spec)
-    if wall:
-        freeze_heap()  # all is built: a full collection of it would stall the link and bus threads (interpreter.py)
-    connected_at[0] = wall_time()
     scheduling = (controller_realtime(cfg.controller_realtime) if cfg.controller_realtime is not None
                   else contextlib.nullcontext(None))
-    with scheduling as grant, robot:
+    with contextlib.ExitStack() as stack:
+        opening = False
+        try:
+            if before_connect is not None:
+                before_connect(hardware, spec)
+            if wall:
+                freeze_heap()  # all is built: a full collection would stall the link and bus threads (interpreter.py)
+            connected_at[0] = wall_time()
+            grant = stack.enter_context(scheduling)
+            opening = True
+            stack.enter_context(robot)
+        except (KeyboardInterrupt, IoProcessStopped) as stopped:
+            raise ConnectInterrupted(opening=opening) from stopped
         _stand_up(robot, safe, console, cfg.settle_s)
         started_s = safe.now()
         io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
@@ -360,6 +369,22 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     if interrupts.requested:
         raise ResultsInterrupted(out, complete=True)
     return result
+
+
+class ConnectInterrupted(KeyboardInterrupt):
+    """A hardware trial interrupted before its robot was connected (Ctrl-C, SIGTERM, its I/O process stopped).
+
+    Neither the controller nor the safety layer had sent the robot anything: there was nothing to close into damping.
+
+    Attributes:
+        opening: False when it came before the robot's connect began (the confirmation, the viewer's meshes): nothing
+            was opened; True when it came while the robot was being connected (its I/O process starting, its link
+            waiting for the first state): what its devices had opened was closed again.
+    """
+
+    def __init__(self, *, opening: bool) -> None:
+        super().__init__("while connecting the robot" if opening else "before connecting the robot")
+        self.opening = opening
 
 
 class ResultsInterrupted(KeyboardInterrupt):

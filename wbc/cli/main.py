@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.compare import VIEWED_TIME_LIMIT, ArenaConfig, run_arena
-from wbc.arena.hw_trial import HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
+from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
@@ -531,7 +531,8 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         are written too, the outcome ``safety_trip``; the last line says when, and that the damping sent since may
         not have reached the robot: check it and power it down by hand); 130 when interrupted (Ctrl-C, SIGTERM,
         SIGHUP: the robot is closed into damping first), SIGTERM to the command's group or to its I/O process
-        included (`IoProcessStopped`, the robot closed by the I/O process).
+        included (`IoProcessStopped`, the robot closed by the I/O process); interrupted before the robot was
+        connected, the line says that nothing was sent to it (`ConnectInterrupted`).
     """
     _view_options(args)
     if args.sim == (args.target is not None):
@@ -606,6 +607,14 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
             said = (f"the writing of its results was stopped: {stopped.out_dir} holds what was written until then, "
                     "and a hardware trial is played once (no --resume)")
         _say(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}")
+        return 130
+    except ConnectInterrupted as stopped:
+        if stopped.opening:
+            said = ("while the robot was being connected, before the controller or the safety layer sent it anything: "
+                    "nothing was played")
+        else:
+            said = "before the robot was connected: nothing was sent to it"
+        _say(f"wbc hw run: interrupted {said}; no results were written")
         return 130
     except (KeyboardInterrupt, IoProcessStopped):
         # SIGTERM to the command's whole group reaches its I/O process too, which closes the robot itself; it is

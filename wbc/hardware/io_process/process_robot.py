@@ -13,7 +13,8 @@ capabilities as `build_hardware_robot`'s) with its devices in a fresh interprete
 - `advance(dt)` paces on the monotonic clock as `UnitreeRobot` does: a call that finds its deadline past is counted
   late and resynchronises; then, unless a state newer than the one last read has already been published, it waits
   (at most two link periods) for one;
-- control channel (`channel.py`): `connect` starts the I/O process, which builds, connects and reports; `close`
+- control channel (`channel.py`): `connect` starts the I/O process, which builds, connects and reports (a `connect`
+  given up, interrupted or timed out, sends it SIGTERM first: it then stops before it reaches the robot); `close`
   asks it to close the robot (which leaves it damped) and exit; `link_stats` fetches the devices' counters and their
   threads' statistics;
   `realtime_grant` says what scheduling the I/O process asked the OS for and got (`HardwareRobotConfig.realtime`).
@@ -190,6 +191,7 @@ class ProcessRobot(Robot):
             raise RobotLinkError(f"ProcessRobot: the I/O process exited while connecting (status "
                                  f"{self._exit_status()})") from None
         except BaseException:
+            self._stop_starting()
             self._release()
             raise
         finally:
@@ -408,6 +410,16 @@ class ProcessRobot(Robot):
         except ChannelClosed:
             return RobotLinkError(f"ProcessRobot: the I/O process exited (status {self._exit_status()}) before "
                                   f"answering {key!r}: {_LEFT_UNKNOWN}")
+
+    def _stop_starting(self) -> None:
+        """Send a start-up that is given up (interrupted, timed out, refused) the I/O process's stop signal.
+
+        Stopped before it reaches the robot, it sends it nothing; caught in the robot's connect, it closes the robot
+        (damped) as soon as it is connected. Left to run, it connected a robot nobody would drive, then found its
+        channel closed and closed it again.
+        """
+        if self._proc is not None and self._proc.poll() is None:
+            self._proc.send_signal(signal.SIGTERM)
 
     def _exit_status(self) -> int | None:
         if self._proc is None:
