@@ -13,6 +13,7 @@ import wbc.errors
 from wbc.errors import (
     FileFieldError,
     FrameError,
+    IoProcessStopped,
     MissingExtraError,
     MpcProblemFileError,
     PacketError,
@@ -32,6 +33,7 @@ CONSTRUCTOR_ARGS: dict[type, tuple[tuple[object, ...], dict[str, object]]] = {
     PortBusyError: (("127.0.0.1", 8007, "address in use"), {}),
     PacketError: (("header", "starts with 00"), {}),
     SerialPortError: (("/dev/ttyUSB0", "unplugged"), {}),
+    IoProcessStopped: (("SIGTERM",), {"connected": True}),
 }
 
 

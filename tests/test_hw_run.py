@@ -14,6 +14,7 @@ by its ``--seconds``. What reached the robot is read from the emulator's log of 
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
@@ -34,7 +35,7 @@ import pytest
 from conftest import Stepped, terminal_signals_in_child
 
 from wbc.arena.episode import Episode
-from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
+from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import ScriptedKeys
 from wbc.arena.runner import PreparingObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
@@ -48,9 +49,11 @@ from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
+from wbc.hardware.realtime import NO_REALTIME
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.events import REMEDIES
 from wbc.scenario.scenario import load_scenario
@@ -266,6 +269,141 @@ def test_a_closed_terminal_closes_the_robot_into_damping_and_ends_the_io_process
             break
         time.sleep(0.01)
     assert not _running(io_process[0])
+    frames = go1.commands()[sent:]
+    first = next((k for k, c in enumerate(frames) if c.damping), None)
+    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
+    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
+def test_a_link_lost_in_the_trial_exits_1_and_says_the_damping_may_not_have_reached_the_robot(
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot stops answering 1 s into the trial: the safety layer trips on the stale stream and sends damping, and
+    the results are written, but nothing shows that the damping reached the robot. The command exits 1 and its last
+    line says so, with when the last state came. It exited 0, its last line the results directory."""
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    started: list[float] = []
+
+    def build(config: HardwareRobotConfig) -> HardwareRobot:
+        built = stepped_go1.build(config)
+        # the stand-up takes 1.06 s of this clock (the ramp's hold, time and slew): about 1 s into the trial
+        clock.call_at(clock.now() + 2.0, lambda: (started.append(clock.now()), emu.inject(Fault.SILENCE)))
+        return built
+
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--settle", "0.5",
+                                      "--out", str(out), "--no-io-process"])
+    assert hw_run(args, build=build) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    (record,) = TrialRecord.read_csv(out / "trials.csv")  # the trial is stored, ended by the trip
+    assert record.outcome == "safety_trip" and record.safety_trips == 1
+    hardware = json.loads((out / "hardware.json").read_text())
+    trip = hardware["safety_events"][-1]
+    assert trip["reason"] == "stale_state"
+    lost = hardware["link_lost"]  # on the layer's clock: the last state came as the silence began, none after
+    last_state, silent = lost["last_state_s"], lost["silent_s"]
+    assert last_state <= started[0] + LINK_PERIOD + TIME_EPS and trip["time"] - last_state > 0.1 and silent >= 0.5 + 0.1
+    assert err[-1] == (f"wbc hw run: the link to the robot was lost: its last state came {last_state:.3f} s after it "
+                       f"was connected ({last_state - hardware['trial_started_s']:.3f} s into the trial) and none "
+                       f"came in the {silent:.3f} s after: the damping frames sent since may not have reached the "
+                       "robot. Check it and power it down by hand")
+    assert "## Link lost" in (out / "report.md").read_text()
+    # what went out: the layer's damping from the trip to the close, as on any trip
+    after = [c for c in emu.commands() if c.time > trip["time"] + LINK_PERIOD + TIME_EPS]
+    assert after and all(c.damping for c in after)
+
+
+@pytest.mark.usefixtures("terminal_signals")
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_a_stop_while_the_io_process_starts_says_that_nothing_was_connected(
+        go1: UnitreeEmulator, tmp_path: Path, capsys: pytest.CaptureFixture[str], signum: int) -> None:
+    """Ctrl-C or SIGTERM to the command as soon as its I/O process exists, long before it has imported `wbc`: the
+    command exits 130 and says that the robot was not connected, and nothing but damping reached it. It said that the
+    robot was closed into damping."""
+    from wbc.cli.main import _terminate_interrupts
+
+    robots: list[ProcessRobot] = []
+
+    def build(config: HardwareRobotConfig) -> HardwareRobot:
+        built = build_process_robot(dataclasses.replace(config, realtime=NO_REALTIME))
+        robots.append(built.robot)
+        return built
+
+    def stop_at_once() -> None:
+        for _ in range(600_000):  # bounded (at most a minute): until the I/O process exists
+            if robots and robots[0]._proc is not None:
+                os.kill(os.getpid(), signum)
+                return
+            time.sleep(0.0001)
+
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "1",
+                                      "--out", str(out)])
+    sender = threading.Thread(target=stop_at_once)
+    sender.start()
+    try:
+        with _terminate_interrupts():
+            code = hw_run(args, build=build)
+    finally:
+        sender.join()
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert "closed into damping" not in err
+    assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted while the robot was being connected, before the "
+                                            "controller or the safety layer sent it anything: nothing was played; no "
+                                            "results were written")
+    assert robots[0].pid is None and not robots[0].is_connected  # the I/O process is gone
+    assert all(c.damping for c in go1.commands())  # not one servo frame
+    assert not (out / "trials.csv").exists()
+
+
+def test_a_stop_before_the_robot_connects_is_said_to_have_sent_it_nothing(stepped_go1: Stepped, tmp_path: Path) -> None:
+    """Ctrl-C at the confirmation, before the robot's connect began: the trial says that nothing was opened."""
+    def confirm(hardware: HardwareRobot, spec: object) -> None:
+        raise KeyboardInterrupt
+
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=1.0, target=("127.0.0.1", 9), out_dir=tmp_path / "hw", io_process=False)
+    with pytest.raises(ConnectInterrupted) as stopped:
+        run_hardware_trial(cfg, before_connect=confirm, build=stepped_go1.build)
+    assert not stopped.value.opening
+    assert not stepped_go1.emu.commands()  # not one frame
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+def test_sigterm_to_the_commands_group_is_an_interruption_and_the_robot_ends_damped(go1: UnitreeEmulator,
+                                                                                     tmp_path: Path) -> None:
+    """SIGTERM to the process group of ``wbc hw run`` (a service manager's stop): the command and its I/O process both
+    take it. The command closes the robot as on Ctrl-C and exits 130 with the same last line. It exited 2: the I/O
+    process's report that SIGTERM stopped it, taken for a failure of the close."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "wbc.cli", "hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario",
+         PUSH, "--trial", "0", "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "20", "--no-realtime", "--out",
+         str(tmp_path / "hw")], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT,
+        env=dict(os.environ, PYTHONPATH=str(ROOT)), start_new_session=True, preexec_fn=terminal_signals_in_child)
+    try:
+        for _ in range(6000):  # bounded (60 s): until the safety layer drives the legs (the ramp into the stand)
+            if proc.poll() is not None or any(not c.damping for c in go1.commands()[-5:]):
+                break
+            time.sleep(0.01)
+        assert proc.poll() is None, proc.stderr.read().decode()
+        (io_process,) = _children(proc.pid)
+        sent = len(go1.commands())
+        os.killpg(proc.pid, signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    err = err.decode()
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted; the robot was closed into damping; no results "
+                                            "were written")
+    for _ in range(500):  # bounded (5 s)
+        if not _running(io_process):
+            break
+        time.sleep(0.01)
+    assert not _running(io_process)
     frames = go1.commands()[sent:]
     first = next((k for k, c in enumerate(frames) if c.damping), None)
     assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]

@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 
 from wbc.control.stand import StandController
-from wbc.errors import NoStateStreamError, PortBusyError, RobotLinkError, TargetRefusedError
+from wbc.errors import IoProcessStopped, NoStateStreamError, PortBusyError, RobotLinkError, TargetRefusedError
 from wbc.hardware.capabilities import HeldJoints
 from wbc.hardware.dynamixel import DynamixelArmConfig
 from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
@@ -268,7 +268,7 @@ def test_a_stop_signal_to_the_io_process_closes_the_robot_into_damping(signum: i
             assert not emu.legs.commands()[-1].damping and not _parked(emu)
             sent, pid = len(emu.legs.commands()), robot.pid
             os.kill(pid, signum)
-            with pytest.raises(RobotLinkError, match=f"stopped by {signal.Signals(signum).name}: it closes the robot"):
+            with pytest.raises(IoProcessStopped, match=f"by {signal.Signals(signum).name}: it closes the robot"):
                 _drive(robot, hold, 2500)  # bounded (10 s of ticks): until the controller hears of it
             for _ in range(500):  # bounded (5 s)
                 if not _alive(pid):
@@ -281,6 +281,27 @@ def test_a_stop_signal_to_the_io_process_closes_the_robot_into_damping(signum: i
         assert _parked(emu)
         assert emu.failure is None
 
+
+def test_a_close_that_meets_a_stop_signal_closes_without_an_error() -> None:
+    """SIGTERM to the whole command reaches its I/O process as the command closes the robot: the I/O process's report
+    of the stop comes first, then its ``closed``. The close does not raise (the robot is closed into damping, as
+    asked); it raised the stop report, which ended the command with status 2 instead of 130."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        robot = ProcessRobot(_legs(emu.address))
+        robot.connect()
+        hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+        _drive(robot, hold, 20)
+        sent, pid = len(emu.commands()), robot.pid
+        os.kill(pid, signal.SIGTERM)
+        for _ in range(1000):  # bounded (10 s): until it has closed the robot and said so, then exited
+            if not _alive(pid):
+                break
+            time.sleep(0.01)
+        assert not _alive(pid)
+        robot.close()  # its stop report, then `closed`, wait on the channel: the close reads both
+        assert not robot.is_connected and robot.pid is None
+        _ends_damped(emu.commands()[sent:])
+        assert emu.failure is None
 
 def test_closing_through_the_safety_layer_damps_the_legs_at_once_then_parks_the_arm() -> None:
     """The safety layer's close posts damping, then asks the I/O process to close: the legs' link takes that damping

@@ -35,6 +35,7 @@ __all__ = [
     "TargetRefusedError",
     "RobotLinkError",
     "NoStateStreamError",
+    "IoProcessStopped",
     "PacketError",
     "SerialPortError",
     "StandUpError",
@@ -290,6 +291,27 @@ class NoStateStreamError(RobotLinkError):
     Nothing answered, or everything that came was refused (another model's frames, another address); the message
     counts what came and says what to check. ``wbc hw check`` reports it as its result (status 1), not as an error.
     """
+
+
+class IoProcessStopped(RobotLinkError):
+    """A robot's I/O process (`wbc.hardware.io_process`) was stopped by SIGTERM or SIGQUIT, and stopped in order.
+
+    Connected, it closed the robot as the controller's close does (the legs damped, the arm parked); the controller's
+    process raises this only once the I/O process has said that the robot is closed, and its ``close`` does not raise
+    it at all (the robot is closed, as asked). Stopped before it connected the robot, it sent the robot nothing.
+
+    Attributes:
+        signal_name: the signal, ``SIGTERM`` or ``SIGQUIT``.
+        connected: whether it had connected the robot (and so closed it) when the signal came.
+    """
+
+    def __init__(self, signal_name: str, *, connected: bool) -> None:
+        self.signal_name = signal_name
+        self.connected = connected
+        super().__init__(f"the I/O process was stopped by {signal_name}: it closes the robot as on close, leaving it "
+                         "damped, and exits" if connected else
+                         f"the I/O process was stopped by {signal_name} before it connected the robot: nothing was "
+                         "sent to it")
 
 
 class PacketError(WbcError, ValueError):

@@ -18,6 +18,9 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
   e-stop ends the trial too); the robot is then held in the layer's damping for ``settle_s`` while it comes to rest,
   before the link is closed. The record's outcome tells them apart: ``safety_trip`` for the layer's own checks,
   ``operator_stop`` for an e-stop (the console's key, the remote);
+- a robot that stopped answering (its state stream stale, and still so when the link is closed) is a lost link
+  (`LinkLost`, in the result, ``hardware.json`` and the report): nothing then shows that the layer's damping reached
+  the robot, which must be checked and powered down by hand;
 - a controller that raises, or returns a command the robot refuses, ends the episode too: the layer is tripped into
   damping (a software e-stop), and the trial is recorded with the outcome ``controller_error`` and what failed;
 - deadline misses (``controller.act`` longer than the period), the link's late advances and the process's CPU time
@@ -61,7 +64,7 @@ from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
-from wbc.errors import ConfigError, ResultsDirError, StandUpError, UnknownNameError
+from wbc.errors import ConfigError, IoProcessStopped, ResultsDirError, StandUpError, UnknownNameError
 from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
@@ -78,7 +81,8 @@ from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
 
-__all__ = ["HardwareTrialConfig", "HardwareTrialResult", "ResultsInterrupted", "run_hardware_trial"]
+__all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "LinkLost", "ResultsInterrupted",
+           "run_hardware_trial"]
 
 _STAND_UP_DT = 0.02  # [s] period of the stand hold that precedes a trial (the stand controller's 50 Hz)
 
@@ -155,6 +159,35 @@ class HardwareTrialConfig:
 
 
 @dataclass(frozen=True)
+class LinkLost:
+    """The robot's state stream stopped during a hardware trial and had not come back when its link was closed.
+
+    The safety layer then tripped on the stale stream and sent damping, but a robot that no longer answers may not
+    hear it either (a cable pulled, a network down, the robot's board off): nothing shows that the damping reached it.
+
+    Attributes:
+        last_state_s: when the last state came, on the safety layer's clock (seconds since the robot was connected) [s].
+        silent_s: how long no state had come when the link was closed (the trip, then the damped settle) [s].
+        trial_started_s: when the trial began on that clock [s].
+    """
+
+    last_state_s: float
+    silent_s: float
+    trial_started_s: float
+
+    def describe(self) -> str:
+        """What happened and what to do, in one sentence."""
+        return (f"the link to the robot was lost: its last state came {self.last_state_s:.3f} s after it was connected "
+                f"({self.last_state_s - self.trial_started_s:.3f} s into the trial) and none came in the "
+                f"{self.silent_s:.3f} s after: the damping frames sent since may not have reached the robot. Check it "
+                "and power it down by hand")
+
+    def to_dict(self) -> dict[str, float]:
+        """Its JSON form (``hardware.json``'s ``link_lost``)."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
 class HardwareTrialResult:
     """What a hardware trial produced.
 
@@ -175,6 +208,8 @@ class HardwareTrialResult:
             None when the devices ran in this process.
         controller_realtime: what the controller's loop asked for and got (`HardwareTrialConfig.controller_realtime`),
             or None when it asked for nothing.
+        link_lost: the robot's state stream had stopped and not come back when the link was closed (`LinkLost`);
+            None when it was live to the end (or the robot has no link: the simulator).
     """
 
     record: TrialRecord
@@ -190,6 +225,7 @@ class HardwareTrialResult:
     trial_started_s: float
     io_cpu_s: float | None = None
     controller_realtime: RealtimeGrant | None = None
+    link_lost: LinkLost | None = None
 
 
 def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
@@ -218,8 +254,10 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
         ConfigError: an arm mode the hardware cannot be built with (``actuated`` today) or the controller has no
             variant for; a controller for another robot; a results directory that holds results.
         TargetRefusedError: a target outside 127.0.0.0/8 without `allow_hardware` (before any socket exists).
-        RobotLinkError: the robot did not answer, or its link died.
+        RobotLinkError: the robot did not answer, or its link (the I/O process) died. A robot that stops answering
+            during the trial is a trip of the safety layer and a `LinkLost` in the result instead.
         StandUpError: the safety layer tripped while standing the robot up, before the trial (nothing was played).
+        ConnectInterrupted: interrupted before the robot was connected (nothing was sent to it).
     """
     scenario = load_scenario(cfg.scenario)
     band = cfg.band if cfg.band is not None else scenario.bands[0]
@@ -275,14 +313,21 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     link: LinkStatsLike | None = None
     if isinstance(observer, PreparingObserver):
         observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait for them
-    if before_connect is not None:
-        before_connect(hardware, spec)
-    if wall:
-        freeze_heap()  # all is built: a full collection of it would stall the link and bus threads (interpreter.py)
-    connected_at[0] = wall_time()
     scheduling = (controller_realtime(cfg.controller_realtime) if cfg.controller_realtime is not None
                   else contextlib.nullcontext(None))
-    with scheduling as grant, robot:
+    with contextlib.ExitStack() as stack:
+        opening = False
+        try:
+            if before_connect is not None:
+                before_connect(hardware, spec)
+            if wall:
+                freeze_heap()  # all is built: a full collection would stall the link and bus threads (interpreter.py)
+            connected_at[0] = wall_time()
+            grant = stack.enter_context(scheduling)
+            opening = True
+            stack.enter_context(robot)
+        except (KeyboardInterrupt, IoProcessStopped) as stopped:
+            raise ConnectInterrupted(opening=opening) from stopped
         _stand_up(robot, safe, console, cfg.settle_s)
         started_s = safe.now()
         io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
@@ -302,6 +347,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
         if safe.safety_state is SafetyState.DAMPED:
             _settle(robot, dt, cfg.settle_s)
+        link_lost = _link_lost(safe, started_s) if wall else None
     episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
     counters, error = read_counters(ctrl, spec.name, trial, episode, error)
     record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
@@ -310,7 +356,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                  notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
                                  safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
-                                 controller_realtime=grant)
+                                 controller_realtime=grant, link_lost=link_lost)
     # the robot is closed into damping; the trial is played once, so its results are written whole: Ctrl-C (or a
     # request to end) waits for them, and a second one stops the writing, saying what it left
     with DeferredInterrupts(lambda what: f"wbc hw run: {what}: the robot is closed into damping; the trial's results "
@@ -323,6 +369,22 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     if interrupts.requested:
         raise ResultsInterrupted(out, complete=True)
     return result
+
+
+class ConnectInterrupted(KeyboardInterrupt):
+    """A hardware trial interrupted before its robot was connected (Ctrl-C, SIGTERM, its I/O process stopped).
+
+    Neither the controller nor the safety layer had sent the robot anything: there was nothing to close into damping.
+
+    Attributes:
+        opening: False when it came before the robot's connect began (the confirmation, the viewer's meshes): nothing
+            was opened; True when it came while the robot was being connected (its I/O process starting, its link
+            waiting for the first state): what its devices had opened was closed again.
+    """
+
+    def __init__(self, *, opening: bool) -> None:
+        super().__init__("while connecting the robot" if opening else "before connecting the robot")
+        self.opening = opening
 
 
 class ResultsInterrupted(KeyboardInterrupt):
@@ -401,6 +463,18 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, 
                        f"{safe.safety_state}); nothing was played")
 
 
+def _link_lost(safe: SafeRobot, started_s: float) -> LinkLost | None:
+    """A `LinkLost` when no fresh state has come for longer than the layer's stale timeout, now, before the close.
+
+    A control loop that stalled trips the layer on the same timeout, but the states come again as soon as it reads:
+    after the settle's reads, only a robot that stopped answering is still silent.
+    """
+    now, last = safe.now(), safe.last_fresh_time
+    if now - last <= safe.config.stale_timeout_s:
+        return None
+    return LinkLost(last_state_s=last, silent_s=now - last, trial_started_s=started_s)
+
+
 def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
     """Keep reading and pacing the tripped robot for `seconds` while its safety layer sends damping."""
     damping = MotorCommand.damping(robot.num_joints, 0.0)  # replaced by the layer's own damping: it is latched
@@ -445,6 +519,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             "controller_realtime": (result.controller_realtime.to_dict() if result.controller_realtime is not None
                                     else None),  # the controller's loop
             "safety_events": [e.to_dict() for e in result.safety_events],
+            "link_lost": result.link_lost.to_dict() if result.link_lost is not None else None,
             "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
         }
         try:
@@ -510,6 +585,8 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
                                            f"{result.trial_started_s:.3f} s.", "", *body]))
     else:
         sections.append(("Safety events", ["None recorded."]))
+    if result.link_lost is not None:
+        sections.append(("Link lost", [result.link_lost.describe()[0].upper() + result.link_lost.describe()[1:] + "."]))
     actions = episode.operator_events.rows()
     sections.append(("Operator actions", md_table(["trial time [s]", "key", "action"],
                                                   [(f"{t:.3f}", repr(k), a) for t, k, a in actions])

@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.compare import VIEWED_TIME_LIMIT, ArenaConfig, run_arena
-from wbc.arena.hw_trial import HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
+from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
@@ -38,7 +38,15 @@ from wbc.control.registry import (
     list_controllers,
     takes_controller_config,
 )
-from wbc.errors import ConfigError, ResultsDirError, RobotLinkError, TargetRefusedError, UnknownNameError, WbcError
+from wbc.errors import (
+    ConfigError,
+    IoProcessStopped,
+    ResultsDirError,
+    RobotLinkError,
+    TargetRefusedError,
+    UnknownNameError,
+    WbcError,
+)
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import realtime_switch_interval
@@ -519,8 +527,12 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
 
     Returns:
         0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
-        the outcome ``controller_error``); 130 when interrupted (Ctrl-C, SIGTERM, SIGHUP: the robot is closed
-        into damping first).
+        the outcome ``controller_error``), or when the robot stopped answering and its link was lost (the results
+        are written too, the outcome ``safety_trip``; the last line says when, and that the damping sent since may
+        not have reached the robot: check it and power it down by hand); 130 when interrupted (Ctrl-C, SIGTERM,
+        SIGHUP: the robot is closed into damping first), SIGTERM to the command's group or to its I/O process
+        included (`IoProcessStopped`, the robot closed by the I/O process); interrupted before the robot was
+        connected, the line says that nothing was sent to it (`ConnectInterrupted`).
     """
     _view_options(args)
     if args.sim == (args.target is not None):
@@ -596,7 +608,17 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                     "and a hardware trial is played once (no --resume)")
         _say(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}")
         return 130
-    except KeyboardInterrupt:
+    except ConnectInterrupted as stopped:
+        if stopped.opening:
+            said = ("while the robot was being connected, before the controller or the safety layer sent it anything: "
+                    "nothing was played")
+        else:
+            said = "before the robot was connected: nothing was sent to it"
+        _say(f"wbc hw run: interrupted {said}; no results were written")
+        return 130
+    except (KeyboardInterrupt, IoProcessStopped):
+        # SIGTERM to the command's whole group reaches its I/O process too, which closes the robot itself; it is
+        # raised only once the I/O process has said that the robot is closed, and reads as the stop it is
         _say("wbc hw run: interrupted; the robot was closed into damping; no results were written")
         return 130
     finally:
@@ -605,10 +627,14 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
             live[1].close()
             live[0].stop()
     printers.print_hw_run(result)
+    failed = False
     if result.record.error:  # played and stored, but its controller broke in it
         print(f"wbc: {result.record.error}", file=sys.stderr)
-        return 1
-    return 0
+        failed = True
+    if result.link_lost is not None:  # last: what the operator must do now, by the robot
+        _say(f"wbc hw run: {result.link_lost.describe()}")
+        failed = True
+    return 1 if failed else 0
 
 
 def _hw_live_observer(args: argparse.Namespace):
@@ -1397,10 +1423,11 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
-        each on stderr), 2 for a `WbcError` (its message printed to stderr), 130 when interrupted (Ctrl-C,
-        SIGTERM, or SIGHUP when its terminal is closed; a run's finished trials are stored, and the message says how
-        to finish it; a training run's says which checkpoint, or which DAgger rounds, its run directory keeps). A
-        usage error exits with status 2 from the parser, after its usage message.
+        each on stderr) or a hardware trial lost its robot's link (`hw_run`), 2 for a `WbcError` (its message
+        printed to stderr), 130 when interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal is closed; a run's
+        finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
+        or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from the parser, after
+        its usage message.
     """
     args = build_parser().parse_args(argv)
     try:

@@ -533,7 +533,11 @@ def _add_hw_run_parser(hws: _Commands) -> None:
                            "metrics come from the state estimator. Keys during the trial: e or space e-stop "
                            "(damping, latched: the trial ends), p marks a push given by hand. Results go to a "
                            "results directory of the arena's format. A target outside 127.0.0.0/8, or an --arm-port "
-                           "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
+                           "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes). "
+                           "Exit status: 0 once the results are written; 1 when the controller failed in the trial, or "
+                           "the robot stopped answering (the link was lost: the last line says when, and that the "
+                           "damping sent since may not have reached the robot) - the results are written either way; "
+                           "2 for an error; 130 when interrupted (Ctrl-C, SIGTERM, a closed terminal).")
     hwrun.add_argument("ctrl", help=f"controller (its variant for --arm is played): one of {_NAMES_HELP}")
     hwrun.add_argument("--robot", default=None,
                        help=f"one of: {_ROBOT_NAMES_HELP} (default: the scenario's robot)")

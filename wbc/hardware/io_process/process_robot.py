@@ -13,15 +13,19 @@ capabilities as `build_hardware_robot`'s) with its devices in a fresh interprete
 - `advance(dt)` paces on the monotonic clock as `UnitreeRobot` does: a call that finds its deadline past is counted
   late and resynchronises; then, unless a state newer than the one last read has already been published, it waits
   (at most two link periods) for one;
-- control channel (`channel.py`): `connect` starts the I/O process, which builds, connects and reports; `close`
+- control channel (`channel.py`): `connect` starts the I/O process, which builds, connects and reports (a `connect`
+  given up, interrupted or timed out, sends it SIGTERM first: it then stops before it reaches the robot); `close`
   asks it to close the robot (which leaves it damped) and exit; `link_stats` fetches the devices' counters and their
   threads' statistics;
   `realtime_grant` says what scheduling the I/O process asked the OS for and got (`HardwareRobotConfig.realtime`).
   An exception there (a refused connect, `PortBusyError`, `RobotLinkError`, a lost serial port) is raised here as the
   same `wbc` error class with the same message; the I/O process dying is a `RobotLinkError` at the next `read`,
   `write` or `advance`, which says that nothing may have damped the robot (check it); stopped by SIGTERM or SIGQUIT,
-  the I/O process closes the robot into damping and says so instead. Either way the process, the sockets and the
-  shared memory are released at once;
+  the I/O process closes the robot into damping, and the next call raises `IoProcessStopped` once it has said that
+  the robot is closed (a `RobotLinkError` that says nothing may have damped it, if it ended without saying so). A
+  ``close`` that meets such a stop does not raise: the robot is closed, as asked (SIGTERM to the whole command
+  reaches both processes, and its close then met the I/O process's own). Either way the process, the sockets and
+  the shared memory are released at once;
 - safety: the devices keep their write deadlines, so when this process stops writing (stalled, or hung holding its
   interpreter lock) the robot is damped within the deadline; when this process dies, the I/O process sees its end
   of the channel close, closes the robot (damped) and exits: no orphan. Address refusals happen in this process, when
@@ -46,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 import wbc
-from wbc.errors import RobotLinkError, WbcError
+from wbc.errors import IoProcessStopped, RobotLinkError, WbcError
 from wbc.hardware.capabilities import HeldRamp, MotorNames
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel.arm_fault import ArmBusStats
@@ -187,6 +191,7 @@ class ProcessRobot(Robot):
             raise RobotLinkError(f"ProcessRobot: the I/O process exited while connecting (status "
                                  f"{self._exit_status()})") from None
         except BaseException:
+            self._stop_starting()
             self._release()
             raise
         finally:
@@ -198,6 +203,9 @@ class ProcessRobot(Robot):
         if self._failure is None and self._control is not None:
             try:
                 self._control.send({"op": "close"})
+            except ChannelClosed:
+                pass  # it is closing already (a stop signal): what it said before is still to be read
+            try:
                 failure = self._await("closed", timeout=5.0)
             except WbcError as exc:
                 failure = exc
@@ -372,12 +380,20 @@ class ProcessRobot(Robot):
                 status = None
             failure = RobotLinkError(f"ProcessRobot: the I/O process died (exit status {status}); the robot's "
                                      f"devices are no longer served: {_LEFT_UNKNOWN}")
+        elif isinstance(failure, IoProcessStopped) and failure.connected:
+            closed = self._await("closed", timeout=5.0)  # the stop closes the robot: said only once it is
+            if isinstance(closed, WbcError):
+                failure = closed
         self._failure = failure
         self._release()
         raise failure
 
     def _await(self, key: str, *, timeout: float) -> dict | WbcError:
-        """The reply carrying `key`, or the error the I/O process reported first (returned, not raised)."""
+        """The reply carrying `key`, or the error the I/O process reported first (returned, not raised).
+
+        Awaiting ``closed``, a stop report (`IoProcessStopped`) is passed over: the I/O process is closing the robot,
+        as asked, and says ``closed`` next (or its close's error).
+        """
         deadline = time.monotonic() + timeout
         try:
             while True:
@@ -385,12 +401,25 @@ class ProcessRobot(Robot):
                 if message is None:
                     return RobotLinkError(f"ProcessRobot: the I/O process did not answer {key!r} within {timeout} s")
                 if "error" in message:
-                    return rebuild_error(message, where="ProcessRobot I/O process")
+                    error = rebuild_error(message, where="ProcessRobot I/O process")
+                    if key == "closed" and isinstance(error, IoProcessStopped):
+                        continue
+                    return error
                 if key in message:
                     return message
         except ChannelClosed:
             return RobotLinkError(f"ProcessRobot: the I/O process exited (status {self._exit_status()}) before "
                                   f"answering {key!r}: {_LEFT_UNKNOWN}")
+
+    def _stop_starting(self) -> None:
+        """Send a start-up that is given up (interrupted, timed out, refused) the I/O process's stop signal.
+
+        Stopped before it reaches the robot, it sends it nothing; caught in the robot's connect, it closes the robot
+        (damped) as soon as it is connected. Left to run, it connected a robot nobody would drive, then found its
+        channel closed and closed it again.
+        """
+        if self._proc is not None and self._proc.poll() is None:
+            self._proc.send_signal(signal.SIGTERM)
 
     def _exit_status(self) -> int | None:
         if self._proc is None:

@@ -43,7 +43,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from wbc.errors import RobotLinkError
+from wbc.errors import IoProcessStopped, RobotLinkError
 from wbc.hardware.capabilities import HeldJoints, MotorStatusSource, RemoteSource
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
@@ -101,7 +101,7 @@ def serve_io_process(argv: list[str] | None = None) -> None:
         blocks = IoBlocks(robot.num_joints, fd=int(args[1]))
         freeze_heap()
         if signals.received is not None:  # stopped before the robot was reached: nothing to close
-            raise signals.stopped()
+            raise signals.stopped(connected=False)
         robot.connect()
         started = time.process_time()
     except BaseException as exc:  # noqa: BLE001 - every failure is reported to the controller's process
@@ -127,7 +127,7 @@ class _StopSignals:
     The handler only notes the signal; the byte the interpreter then writes to `wake`'s other end
     (`signal.set_wakeup_fd`) wakes the main thread's wait at once, and the main thread reports the stop and closes the
     robot in order. An exception raised from the handler instead could land anywhere: in a message half sent, or in
-    the closing itself.
+    the closing itself. The report (`IoProcessStopped`) is followed by ``closed`` once the robot is closed.
     """
 
     def __init__(self) -> None:
@@ -151,11 +151,10 @@ class _StopSignals:
         except (BlockingIOError, InterruptedError):
             pass
 
-    def stopped(self) -> RobotLinkError:
-        """The failure the controller's process is told of, once a signal came."""
+    def stopped(self, *, connected: bool) -> IoProcessStopped:
+        """The failure the controller's process is told of, once a signal came (`connected`: the robot was)."""
         name = signal.Signals(self.received).name if self.received is not None else "a signal"
-        return RobotLinkError(f"the I/O process was stopped by {name}: it closes the robot as on close, leaving it "
-                              "damped, and exits")
+        return IoProcessStopped(name, connected=connected)
 
 
 class _Server:
@@ -207,7 +206,7 @@ class _Server:
         """True once SIGTERM or SIGQUIT came: reported and flagged as a failure, then `shut_down` closes the robot."""
         if self.signals.received is None:
             return False
-        self._fail(self.signals.stopped())
+        self._fail(self.signals.stopped(connected=True))
         return True
 
     def _forward(self) -> None:

@@ -121,6 +121,15 @@ class SafeRobot(Robot):
         """The layer's clock [s]."""
         return self._clock() if self._clock is not None else self._time
 
+    @property
+    def last_fresh_time(self) -> float:
+        """When `read` last returned a fresh state (its tick advanced), on the layer's clock [s]; -inf before one.
+
+        It moves in every state, ``damped`` included: a runner that goes on reading a tripped robot learns from it
+        whether the state stream came back (a control loop that stalled) or not (a robot that stopped answering).
+        """
+        return self._last_fresh_time
+
     # -- operator actions -----------------------------------------------------------------------------------------
     def estop(self) -> None:
         """Software e-stop: go to ``damped`` (latched) and send damping now, if connected."""
