@@ -16,10 +16,13 @@ a call, so no scaling, factorisation or active set of an earlier QP leaks into a
   is already scaled, and equilibrating took about two thirds of each solve. Its tolerance is absolute, 1e-9 on the
   primal and dual residuals (relative 0), near DAQP's exact active-set optimum: the cost is flat along some force
   directions, and at 1e-7 one QP of a push recovery stopped 25 N from that optimum with its dual residual within
-  tolerance. Its iterations are capped at 200 (the MPC's QPs take at most ~50): ProxQP did not report infeasible QPs
-  as such (its infeasibility thresholds are 1e-9 here, so a feasible QP is never called infeasible) and ran to the
-  cap, which bounds what a failure costs. The registry's wheel runs an AVX build whose last bits can depend on its
-  buffers' addresses, so the arena's bit-for-bit reproducibility holds with DAQP only.
+  tolerance. Its outer iterations are capped at 200 (the MPC's QPs take at most ~50 iterations in all); the cap does
+  not bound the inner ones (up to ProxQP's 1,500 an outer iteration), so an infeasible QP, which the MPC's boxes and
+  rows do not make, costs it seconds: its infeasibility thresholds are 1e-9 here, so a feasible QP is never called
+  infeasible, and the A1's standing QP with a friction row pushed beyond the boxes took ~16,000 iterations over its
+  two attempts, ~30 s, before ProxQP called it infeasible (DAQP: microseconds). The registry's wheel runs an AVX
+  build whose last bits can depend on its buffers' addresses, so the arena's bit-for-bit reproducibility holds with
+  DAQP only.
 
 A warm-started solve that fails is followed by a cold start; the iterations of both are counted and the time covers
 both.
