@@ -523,13 +523,16 @@ def _hw_run(args: argparse.Namespace) -> int:
     return hw_run(args)
 
 
-def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], HardwareRobot] | None = None) -> int:
+def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], HardwareRobot] | None = None,
+           safety: SafetyConfig | None = None) -> int:
     """``wbc hw run``: play a scenario's trial on a robot (`run_hardware_trial`) and print what it did.
 
     Args:
         args: the parsed command line.
         build: builds the robot from its config instead of the default (`run_hardware_trial`'s `build`: a test's
             clock and an emulator's in-process channel).
+        safety: the safety layer's settings instead of the defaults (`HardwareTrialConfig.safety`; a test over a real
+            wire on a busy machine hands a stale timeout that only a hung emulator misses).
 
     Returns:
         0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
@@ -573,7 +576,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                               target=None if args.sim else (host, port), simulate=args.sim, local=local,
                               allow_hardware=args.allow_hardware, rate_hz=args.rate, transport=args.transport,
                               arm_port=arm_port, out_dir=out, settle_s=args.settle,
-                              io_process=args.io_process,
+                              io_process=args.io_process, safety=safety,
                               controller_config=Path(args.controller_config) if args.controller_config else None,
                               io_file=Path(args.io) if args.io else None)
 
