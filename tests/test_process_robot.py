@@ -309,7 +309,11 @@ def test_closing_through_the_safety_layer_damps_the_legs_at_once_then_parks_the_
     forwarding first, dropping the damping, and closed the arm first: the legs held their command until their write
     deadline, 25 frames at 500 Hz, no sooner than had the I/O process been killed."""
     with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
-        safe = SafeRobot(ProcessRobot(_arm(emu)), SafetyConfig(position_table="a1", on_event=lambda event: None))
+        # the layer's clock is the wall clock: a stale timeout and a ramp that only a hung machine outlasts keep it
+        # ramping through the 50 ticks however slowly a busy machine runs them (the default 0.1 s tripped it)
+        safety = SafetyConfig(position_table="a1", on_event=lambda event: None, stale_timeout_s=30.0,
+                              ramp_time_s=30.0)
+        safe = SafeRobot(ProcessRobot(_arm(emu)), safety)
         with safe:
             hold = MotorCommand.hold(safe.read().q, 20.0, 0.5)
             for _ in range(50):  # the layer ramps the robot towards the hold: frames with kp > 0
