@@ -120,7 +120,7 @@ def test_emulate_counts_what_it_decoded_and_rejected(capsys: pytest.CaptureFixtu
         link.send(frame[:-1])  # one byte short: rejected as length
     finally:
         link.close()
-    server.join(timeout=10.0)
+    server.join(timeout=60.0)  # a bound for a hung emulator: it builds its simulation, then serves its 1.0 s
     assert codes == [0] and replies, "the emulator never answered"
     out = capsys.readouterr().out
     assert "emulated go1 (realtime) on 127.0.0.1:" + str(port) in out

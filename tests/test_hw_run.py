@@ -869,7 +869,7 @@ def test_terminal_keys_read_single_keys_and_restore_the_terminal() -> None:
         assert not termios.tcgetattr(slave)[3] & termios.ICANON
         os.write(master, b"pe")
         got: list[str] = []
-        for _ in range(100):  # bounded: 100 x 10 ms
+        for _ in range(6000):  # bounded (60 s): until the reader thread, however late it runs, has read both
             got += keys.poll(0.0)
             if len(got) == 2:
                 break
