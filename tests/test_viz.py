@@ -8,6 +8,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 import urllib.request
 from pathlib import Path
 
@@ -420,13 +421,22 @@ def test_player_pauses_at_a_time_and_steps():
     def reached():
         return max(t for t, _ in drawn)
 
+    def settles(held) -> None:
+        """Wait (bounded: 60 s) until the player thread has paused at `held` s or ended, however late a busy machine
+        runs it; then 0.3 s more, in which a player that does not hold its pause would play on."""
+        end = time.monotonic() + 60.0
+        while time.monotonic() < end and thread.is_alive() and not (controls.paused and drawn and
+                                                                      reached() >= held - 0.003):
+            time.sleep(0.005)
+        thread.join(0.3)
+
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
-    thread.join(0.3)
+    settles(0.5)
     assert thread.is_alive() and controls.paused  # held at 0.5 s
     assert reached() == pytest.approx(0.5)
     controls.step()  # 0.1 s more, then paused again
-    thread.join(0.3)
+    settles(0.6)
     assert thread.is_alive() and reached() == pytest.approx(0.6, abs=0.003)
     controls.toggle_pause()  # play on to the end
     thread.join(5)

@@ -52,6 +52,7 @@ from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, buil
 from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.io_process import build_process_robot
 from wbc.hardware.realtime import AUTO_CPU, CONTROLLER_PRIORITY_BELOW, DEFAULT_RT_PRIORITY, NO_REALTIME, RealtimeRequest
+from wbc.hardware.safety import SafetyConfig
 from wbc.hardware.serial_port_policy import is_emulated_port, why_not_emulated
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS, check_target, is_loopback
 from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS
@@ -438,7 +439,8 @@ def _hw_check(args: argparse.Namespace) -> int:
 
 
 def hw_check(args: argparse.Namespace, *,
-             build: Callable[[HardwareRobotConfig], HardwareRobot] = build_hardware_robot) -> int:
+             build: Callable[[HardwareRobotConfig], HardwareRobot] = build_hardware_robot,
+             safety: SafetyConfig | None = None) -> int:
     """``wbc hw check``: read the robot through the safety layer for ``--seconds`` of its clock, sending only damping.
 
     The addresses and the arm's port are checked here, and a real robot confirmed, before anything connects; the
@@ -448,6 +450,8 @@ def hw_check(args: argparse.Namespace, *,
         args: the parsed command line.
         build: builds the robot from its config (a test hands its devices a clock it moves and an emulator's
             in-process channel; the seconds are then the robot's clock's).
+        safety: the safety layer's settings instead of the defaults (a test over a real wire on a busy machine hands
+            a stale timeout that only a hung emulator misses).
 
     Returns:
         0 when the safety layer would start a ramp from the state read ("ready"); 1 when it would refuse (a trip:
@@ -474,7 +478,9 @@ def hw_check(args: argparse.Namespace, *,
 
     check = check_hardware(HardwareCheckConfig(robot=robot, label=args.robot, target=(host, port), local=local,
                                                seconds=args.seconds, transport=args.transport, arm_port=arm_port,
-                                               allow_hardware=args.allow_hardware), build=build, confirm=confirm)
+                                               allow_hardware=args.allow_hardware,
+                                               safety=SafetyConfig() if safety is None else safety),
+                           build=build, confirm=confirm)
     printers.print_hw_check(check)
     return 0 if check.safety_state == "ramp" else 1
 
@@ -517,13 +523,16 @@ def _hw_run(args: argparse.Namespace) -> int:
     return hw_run(args)
 
 
-def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], HardwareRobot] | None = None) -> int:
+def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], HardwareRobot] | None = None,
+           safety: SafetyConfig | None = None) -> int:
     """``wbc hw run``: play a scenario's trial on a robot (`run_hardware_trial`) and print what it did.
 
     Args:
         args: the parsed command line.
         build: builds the robot from its config instead of the default (`run_hardware_trial`'s `build`: a test's
             clock and an emulator's in-process channel).
+        safety: the safety layer's settings instead of the defaults (`HardwareTrialConfig.safety`; a test over a real
+            wire on a busy machine hands a stale timeout that only a hung emulator misses).
 
     Returns:
         0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
@@ -567,7 +576,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                               target=None if args.sim else (host, port), simulate=args.sim, local=local,
                               allow_hardware=args.allow_hardware, rate_hz=args.rate, transport=args.transport,
                               arm_port=arm_port, out_dir=out, settle_s=args.settle,
-                              io_process=args.io_process,
+                              io_process=args.io_process, safety=safety,
                               controller_config=Path(args.controller_config) if args.controller_config else None,
                               io_file=Path(args.io) if args.io else None)
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -48,6 +48,8 @@ class HardwareCheckConfig:
         transport: the legs' datagram channel (`wbc.hardware.unitree.TRANSPORTS`).
         arm_port: the arm's serial device, or None (legs only).
         allow_hardware: a real robot may be reached (an address outside 127.0.0.0/8, a real serial device).
+        safety: the safety layer's settings (its stale timeout, limits, ramp); its position table is the robot's
+            and its events are the check's, whatever this one says.
     """
 
     robot: str
@@ -58,6 +60,7 @@ class HardwareCheckConfig:
     transport: str = "udp"
     arm_port: str | None = None
     allow_hardware: bool = False
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
 
 
 @dataclass(frozen=True)
@@ -139,7 +142,8 @@ def check_hardware(cfg: HardwareCheckConfig, *,
         confirm(hardware)
     events: list[SafetyEvent] = []
     # Read through the safety layer, never written to: its checks judge each state, and a trip only sends damping.
-    safe = SafeRobot(hardware.robot, SafetyConfig(position_table=hardware.position_table, on_event=events.append))
+    safe = SafeRobot(hardware.robot, replace(cfg.safety, position_table=hardware.position_table,
+                                             on_event=events.append))
     legs = hardware.robot.legs if isinstance(hardware.robot, QuadrupedArmRobot) else hardware.robot
     arm = hardware.robot.arm if isinstance(hardware.robot, QuadrupedArmRobot) else None
     clock = hardware.robot.wall_time if isinstance(hardware.robot, WallClock) else time.monotonic
