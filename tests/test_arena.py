@@ -241,13 +241,28 @@ class _Blind(Robot):
         self.inner.advance(dt)
 
 
-class _SlowEveryTenth:
-    """The stand controller, taking 5 ms longer on every tenth tick."""
+class _ActClock:
+    """A clock the test moves: each reading 1 us after the last, and what a controller spends (`spend`) on top."""
 
-    def __init__(self, desc) -> None:
+    def __init__(self) -> None:
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        self.now += 1e-6
+        return self.now
+
+    def spend(self, seconds: float) -> None:
+        self.now += seconds
+
+
+class _SlowEveryTenth:
+    """The stand controller, taking 5 ms longer on every tenth tick (of `clock`'s time)."""
+
+    def __init__(self, desc, clock: _ActClock) -> None:
         self.inner = StandController(desc)
         self.rate_hz = self.inner.rate_hz
         self.ticks = 0
+        self.clock = clock
 
     def reset(self):
         self.inner.reset()
@@ -256,7 +271,7 @@ class _SlowEveryTenth:
     def act(self, state, command):
         self.ticks += 1
         if self.ticks % 10 == 0:
-            time.sleep(0.005)
+            self.clock.spend(0.005)
         return self.inner.act(state, command)
 
     def counters(self):
@@ -275,17 +290,23 @@ def test_the_loop_runs_on_any_robot_and_times_every_act(small):
     with pytest.raises(MissingCapabilityError, match="FallDetector.*fallen="):
         run_episode(blind, StandController(sim.desc), trial.command, 1.0, truth=sim.base_truth)
     sim.reset(seed=trial.terrain_seed, domain=trial.domain)
-    direct = run_episode(sim, StandController(sim.desc), trial.command, 1.0)
+    direct = run_episode(sim, StandController(sim.desc), trial.command, 1.0, clock=_ActClock())
     sim.reset(seed=trial.terrain_seed, domain=trial.domain)
     ticks = []
-    through = run_episode(blind, _SlowEveryTenth(sim.desc), trial.command, 1.0, truth=sim.base_truth,
-                          fallen=sim.fallen, observer=lambda t, robot, ctrl, cmd: ticks.append(t))
+    clock = _ActClock()
+    through = run_episode(blind, _SlowEveryTenth(sim.desc, clock), trial.command, 1.0, truth=sim.base_truth,
+                          fallen=sim.fallen, observer=lambda t, robot, ctrl, cmd: ticks.append(t), clock=clock)
     # the same loop, the same physics: only where truth and falls come from differ
     np.testing.assert_array_equal(through.qpos, direct.qpos)
     assert len(ticks) == len(through.t) == len(through.act_s) == 50 and not through.fell
-    # the runner timed every act call: the slow ticks show, and count as deadline misses against a 5 ms budget
-    assert np.all(through.act_s > 0) and np.all(through.act_s[9::10] >= 0.005)
-    assert through.deadline_misses(0.005) >= 5 and direct.deadline_misses() == 0
+    # the runner timed every act call on the clock it was given: the slow ticks show, and count as deadline misses
+    # against a 5 ms budget; the others, and every tick of the direct run, took the clock's one step
+    slow = np.zeros(50, dtype=bool)
+    slow[9::10] = True
+    np.testing.assert_allclose(through.act_s[slow], 0.005 + 1e-6, rtol=1e-9)
+    np.testing.assert_allclose(through.act_s[~slow], 1e-6, rtol=1e-6)
+    np.testing.assert_allclose(direct.act_s, 1e-6, rtol=1e-6)
+    assert through.deadline_misses(0.005) == 5 and direct.deadline_misses() == 0
 
 
 def test_episode_round_trips_through_npz(small, tmp_path):

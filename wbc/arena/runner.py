@@ -74,6 +74,7 @@ def run_episode(
     observer: TickObserver | None = None,
     divergence: DivergenceCheck | None = None,
     duration_option: str | None = None,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> Episode:
     """Play one episode.
 
@@ -92,6 +93,7 @@ def run_episode(
             None: no check (a real robot, whose safety layer watches it).
         duration_option: the caller's option that set `duration_s` (``--duration``): an episode shorter than the
             controller's period is then blamed on it, not on the controller's rate.
+        clock: what times each ``act`` call (the episode's ``act_s``) [s]: the wall clock, or a clock a test moves.
 
     Returns:
         The episode log (no pushes: whoever applied them adds them, see `wbc.arena.sim_trial.run_trial`), with the
@@ -144,7 +146,6 @@ def run_episode(
         controller.reset()
     except CONTROLLER_ERRORS as exc:  # any: the controller's code is not ours, and the trial must still be recorded
         raise failure("reset", 0, exc) from exc
-    clock = time.perf_counter
     fell, fall_time = False, math.nan
     for k in range(n):
         t = k * dt
