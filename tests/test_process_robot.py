@@ -115,6 +115,7 @@ def test_a_locked_arm_in_the_io_process_obeys_the_safety_layer_on_the_wire() -> 
         robot = ProcessRobot(cfg)
         assert isinstance(robot, HeldJoints)
         safe = SafeRobot(robot, SafetyConfig(position_table="a1", on_event=lambda event: None))
+
         def goal_currents() -> list[int]:
             return [w.value for p in emu.arm.packets() for w in p.writes if w.name == "goal_current"]
 
@@ -315,6 +316,7 @@ def test_a_close_that_meets_a_stop_signal_closes_without_an_error() -> None:
         assert not robot.is_connected and robot.pid is None
         _ends_damped(emu.commands()[sent:])
         assert emu.failure is None
+
 
 def test_closing_through_the_safety_layer_damps_the_legs_at_once_then_parks_the_arm() -> None:
     """The safety layer's close posts damping, then asks the I/O process to close: the legs' link takes that damping
