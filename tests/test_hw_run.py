@@ -341,6 +341,36 @@ def test_a_link_lost_in_the_trial_exits_1_and_says_the_damping_may_not_have_reac
     assert after and all(c.damping for c in after)
 
 
+def test_a_link_lost_during_the_stand_up_says_the_damping_may_not_have_reached_the_robot(
+        stepped_go1: Stepped, tmp_path: Path) -> None:
+    """The robot stops answering half a second into the stand-up: the layer trips on the stale stream, nothing is
+    played, and the error says that the damping may not have reached the robot and to power it down by hand, before
+    the stale trip's own remedy. It gave that remedy alone, as if the robot had heard the damping."""
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+
+    def build(config: HardwareRobotConfig) -> HardwareRobot:
+        built = stepped_go1.build(config)
+        clock.call_at(clock.now() + 0.5, lambda: emu.inject(Fault.SILENCE))  # the stand-up takes 1.06 s
+        return built
+
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--settle", "0.5",
+                                      "--out", str(tmp_path / "hw"), "--no-io-process"])
+    with pytest.raises(StandUpError) as caught:
+        hw_run(args, build=build)
+    said = str(caught.value)
+    assert said.startswith("the safety layer tripped while standing the robot up, before the trial: stale_state")
+    assert re.search(r"nothing was played\. The link to the robot was lost: its last state came [0-9.]+ s after it "
+                     r"was connected \(during the stand-up\) and none came in the [0-9.]+ s after: the damping frames "
+                     r"sent since may not have reached the robot\. Check it and power it down by hand\. The robot "
+                     r"stopped answering", said), said
+    assert said.endswith("Then run again")
+    assert not (tmp_path / "hw" / "trials.csv").exists()
+    frames = emu.commands()
+    first = next(k for k, c in enumerate(frames) if k > 0 and c.damping and not frames[k - 1].damping)
+    assert all(c.damping for c in frames[first:])  # from the trip on: damping only
+
+
 @pytest.mark.usefixtures("terminal_signals")
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
 def test_a_stop_while_the_io_process_starts_says_that_nothing_was_connected(

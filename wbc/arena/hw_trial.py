@@ -164,23 +164,25 @@ class LinkLost:
 
     The safety layer then tripped on the stale stream and sent damping, but a robot that no longer answers may not
     hear it either (a cable pulled, a network down, the robot's board off): nothing shows that the damping reached it.
+    The same holds for a stream that stopped during the stand-up, before the trial (`StandUpError` then says so).
 
     Attributes:
         last_state_s: when the last state came, on the safety layer's clock (seconds since the robot was connected) [s].
         silent_s: how long no state had come when the link was closed (the trip, then the damped settle) [s].
-        trial_started_s: when the trial began on that clock [s].
+        trial_started_s: when the trial began on that clock [s]; None: it was lost during the stand-up.
     """
 
     last_state_s: float
     silent_s: float
-    trial_started_s: float
+    trial_started_s: float | None
 
     def describe(self) -> str:
         """What happened and what to do, in one sentence."""
+        when = ("during the stand-up" if self.trial_started_s is None
+                else f"{self.last_state_s - self.trial_started_s:.3f} s into the trial")
         return (f"the link to the robot was lost: its last state came {self.last_state_s:.3f} s after it was connected "
-                f"({self.last_state_s - self.trial_started_s:.3f} s into the trial) and none came in the "
-                f"{self.silent_s:.3f} s after: the damping frames sent since may not have reached the robot. Check it "
-                "and power it down by hand")
+                f"({when}) and none came in the {self.silent_s:.3f} s after: the damping frames sent since may not "
+                "have reached the robot. Check it and power it down by hand")
 
     def to_dict(self) -> dict[str, float]:
         """Its JSON form (``hardware.json``'s ``link_lost``)."""
@@ -328,7 +330,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
             stack.enter_context(robot)
         except (KeyboardInterrupt, IoProcessStopped) as stopped:
             raise ConnectInterrupted(opening=opening) from stopped
-        _stand_up(robot, safe, console, cfg.settle_s)
+        _stand_up(robot, safe, console, cfg.settle_s, on_wall_clock=wall)
         started_s = safe.now()
         io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
         io_cpu0 = io_robot.link_stats().io["cpu_s"] if io_robot is not None else 0.0
@@ -432,14 +434,24 @@ def _key_for(action: str) -> str:
     return next(k for k, a in OPERATOR_ACTIONS.items() if a == action and k.strip())
 
 
-def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, settle_s: float) -> None:
+def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, settle_s: float, *,
+              on_wall_clock: bool) -> None:
     """Ramp the robot into the stand hold of its nominal pose until the safety layer is in ``run``.
 
     The operator's e-stop works meanwhile (`OperatorConsole.before_trial`).
 
+    Args:
+        robot: the robot, seen through its sensors.
+        safe: its safety layer.
+        console: the operator's keys.
+        settle_s: how long a tripped robot is held damped, still read, before the error [s].
+        on_wall_clock: the robot runs on the wall clock (a robot over its wire, not the simulator): a state stream
+            still silent after the settle is a lost link, which the error then reports (`LinkLost`).
+
     Raises:
         StandUpError: the layer tripped, or the ramp did not finish within its time plus the slowest joint's travel
-            at the slew rate (and a second); the robot is held damped for `settle_s` first.
+            at the slew rate (and a second); the robot is held damped for `settle_s` first. When the robot stopped
+            answering, the message says that the damping may not have reached it, and to power it down by hand.
     """
     hold = stand_command(robot.description)
     cfg = safe.config
@@ -456,15 +468,20 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, 
     if safe.safety_state is SafetyState.DAMPED:
         _settle(robot, _STAND_UP_DT, settle_s)
         last = safe.events[-1]
-        # each reason its own remedy: a remote e-stop or a hot motor is not a pose out of range
+        lost = _link_lost(safe, None) if on_wall_clock else None
+        # each reason its own remedy: a remote e-stop or a hot motor is not a pose out of range; a robot that stopped
+        # answering may not have heard the damping either
+        lost_said = f"{lost.describe()[0].upper()}{lost.describe()[1:]}. " if lost is not None else ""
         raise StandUpError(f"the safety layer tripped while standing the robot up, before the trial: {last.reason} "
-                           f"({last.detail}); nothing was played. {last.remedy} Then run again")
+                           f"({last.detail}); nothing was played. {lost_said}{last.remedy} Then run again")
     raise StandUpError(f"the safety layer's ramp did not reach the standing pose within {budget:.1f} s (state "
                        f"{safe.safety_state}); nothing was played")
 
 
-def _link_lost(safe: SafeRobot, started_s: float) -> LinkLost | None:
+def _link_lost(safe: SafeRobot, started_s: float | None) -> LinkLost | None:
     """A `LinkLost` when no fresh state has come for longer than the layer's stale timeout, now, before the close.
+
+    `started_s` is when the trial began on the layer's clock; None during the stand-up.
 
     A control loop that stalled trips the layer on the same timeout, but the states come again as soon as it reads:
     after the settle's reads, only a robot that stopped answering is still silent.
