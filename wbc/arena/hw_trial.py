@@ -184,6 +184,11 @@ class LinkLost:
                 f"({when}) and none came in the {self.silent_s:.3f} s after: the damping frames sent since may not "
                 "have reached the robot. Check it and power it down by hand")
 
+    def sentence(self) -> str:
+        """`describe` as a sentence of its own: capitalised, with its full stop (the report, the stand-up error)."""
+        said = self.describe()
+        return f"{said[0].upper()}{said[1:]}."
+
     def to_dict(self) -> dict[str, float]:
         """Its JSON form (``hardware.json``'s ``link_lost``)."""
         return dataclasses.asdict(self)
@@ -471,7 +476,7 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, 
         lost = _link_lost(safe, None) if on_wall_clock else None
         # each reason its own remedy: a remote e-stop or a hot motor is not a pose out of range; a robot that stopped
         # answering may not have heard the damping either
-        lost_said = f"{lost.describe()[0].upper()}{lost.describe()[1:]}. " if lost is not None else ""
+        lost_said = f"{lost.sentence()} " if lost is not None else ""
         raise StandUpError(f"the safety layer tripped while standing the robot up, before the trial: {last.reason} "
                            f"({last.detail}); nothing was played. {lost_said}{last.remedy} Then run again")
     raise StandUpError(f"the safety layer's ramp did not reach the standing pose within {budget:.1f} s (state "
@@ -603,7 +608,7 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
     else:
         sections.append(("Safety events", ["None recorded."]))
     if result.link_lost is not None:
-        sections.append(("Link lost", [result.link_lost.describe()[0].upper() + result.link_lost.describe()[1:] + "."]))
+        sections.append(("Link lost", [result.link_lost.sentence()]))
     actions = episode.operator_events.rows()
     sections.append(("Operator actions", md_table(["trial time [s]", "key", "action"],
                                                   [(f"{t:.3f}", repr(k), a) for t, k, a in actions])
