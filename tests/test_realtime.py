@@ -56,6 +56,21 @@ def test_each_refusal_is_recorded_with_its_reason_and_the_process_runs_on(monkey
 
 
 @linux
+def test_the_memory_is_locked_before_the_priority_rises(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Locking faults in every page the process maps (~50 ms of CPU): done at a real-time priority, it held off every
+    other thread of that priority on the CPU."""
+    calls: list[str] = []
+    monkeypatch.setattr(os, "sched_getaffinity", lambda _pid: {0, 1})
+    monkeypatch.setattr(os, "sched_setaffinity", lambda _pid, _cpus: calls.append("cpu"))
+    monkeypatch.setattr(os, "sched_setscheduler", lambda *_: calls.append("priority"))
+    monkeypatch.setattr(realtime, "_lock_memory", lambda: calls.append("memory"))
+    grant = request_realtime(RealtimeRequest(priority=50, cpu=AUTO_CPU, place="last"))
+    assert calls == ["memory", "cpu", "priority"]
+    assert grant.asked == "SCHED_FIFO 50, CPU 1 (the last of 0,1), locked memory"
+    assert grant.memory_locked and grant.refused == ()
+
+
+@linux
 def test_the_grant_is_what_the_os_reports_in_a_child_process() -> None:
     code = ("import json; from wbc.hardware.realtime import RealtimeRequest, request_realtime; "
             "g = request_realtime(RealtimeRequest(priority=1, cpu=None, lock_memory=False)); "

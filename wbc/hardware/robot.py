@@ -25,7 +25,7 @@ from wbc.robots.joint_table import JointTable
 from wbc.types import MotorCommand, RobotState
 
 __all__ = ["Robot", "KP_MAX", "KD_MAX", "COMMAND_ROWS", "clamp_command", "command_bounds", "exceeded_rows",
-           "within_bounds"]
+           "load_write_check", "within_bounds"]
 
 COMMAND_ROWS = ("q", "dq", "kp", "kd", "tau")
 """A command's rows, in the order of `MotorCommand.rows` and `command_bounds`."""
@@ -64,6 +64,22 @@ def within_bounds(rows: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> boo
             if not lower[i, j] <= rows[i, j] <= upper[i, j]:
                 return False
     return True
+
+
+def load_write_check() -> None:
+    """Load the compiled check of every write (`within_bounds`) now, from numba's cache on disk.
+
+    A process's first call of compiled code loads numba itself: some 0.2-0.5 s of CPU. `Robot.connect` calls this,
+    so that the cost does not land on the first command; a process that asks for real-time scheduling calls it
+    before asking (`wbc.hardware.io_process`), so that the cost is not paid at a real-time priority, where it holds
+    off every other real-time thread of the same priority on that CPU. Loaded once per process; later calls cost
+    two compiled calls.
+    """
+    # a command's rows are read-only, which numba compiles apart
+    zeros, frozen = np.zeros((5, 1)), np.zeros((5, 1))
+    frozen.setflags(write=False)
+    within_bounds(zeros, zeros, zeros)
+    within_bounds(frozen, zeros, zeros)
 
 
 def clamp_command(cmd: MotorCommand, limits: JointTable,
@@ -119,12 +135,7 @@ class Robot(ABC):
     def connect(self) -> None:
         """Open the connection (or build the simulation). Idempotent."""
         if not self._connected:
-            # the write's compiled check loads here (from numba's cache on disk), not at the first command; a
-            # command's rows are read-only, which numba compiles apart
-            zeros, frozen = np.zeros((5, 1)), np.zeros((5, 1))
-            frozen.setflags(write=False)
-            within_bounds(zeros, zeros, zeros)
-            within_bounds(frozen, zeros, zeros)
+            load_write_check()  # here, not at the first command
             self._connect()
             self._connected = True
 

@@ -1,11 +1,15 @@
 """The I/O process: a hardware robot's devices (legs link, arm bus) served to a controller in another process.
 
 `ProcessRobot` (`process_robot.py`) starts this as a fresh interpreter (``python -c``, not multiprocessing, whose
-spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the switch interval, asks the OS for
+spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the switch interval, builds the robot with
+`build_hardware_robot`, loads its compiled code (`load_write_check`) and freezes its heap, then asks the OS for
 real-time scheduling, a CPU of its own and locked memory (`HardwareRobotConfig.realtime`, `wbc.hardware.realtime`),
-builds the robot with `build_hardware_robot`, freezes its heap, connects it and reports on the control channel, with
-what the OS granted. The legs' link thread then does the serving itself, through its hooks
-(`UnitreeRobot.set_link_hooks`), so that no thread of this process wakes twice a period only to pass data on:
+connects the robot and reports on the control channel, with what the OS granted. The slow part of the start-up runs
+before the real-time priority is asked: run at that priority, it held off every other thread of the same priority
+on its CPU (each I/O process takes the same last CPU) for as long as it took, up to 0.5 s.
+
+The legs' link thread then does the serving itself, through its hooks (`UnitreeRobot.set_link_hooks`), so that no
+thread of this process wakes twice a period only to pass data on:
 
 - before each send it forwards the newest command of the shared command block, if a new one was posted, to the
   robot's `write` (legs and arm), so the command goes out in that very period;
@@ -51,7 +55,7 @@ from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, MA
 from wbc.hardware.io_process.channel import ChannelClosed, LineChannel, error_report
 from wbc.hardware.quadruped_arm_robot import JoinedLinkStats, QuadrupedArmRobot
 from wbc.hardware.realtime import RealtimeGrant, request_realtime
-from wbc.hardware.robot import Robot
+from wbc.hardware.robot import Robot, load_write_check
 from wbc.hardware.safety.ramp import CommandRamp
 from wbc.hardware.unitree.remote import Remote
 from wbc.hardware.unitree.robot import UnitreeRobot
@@ -95,11 +99,7 @@ def serve_io_process(argv: list[str] | None = None) -> None:
     bell = socket.socket(fileno=int(args[3]))
     bell.setblocking(False)
     try:
-        # before any thread exists: the link's and the bus's threads inherit the policy and the CPU
-        grant = request_realtime(config.realtime)
-        robot = build_hardware_robot(config).robot
-        blocks = IoBlocks(robot.num_joints, fd=int(args[1]))
-        freeze_heap()
+        robot, blocks, grant = _start_up(config, int(args[1]))
         if signals.received is not None:  # stopped before the robot was reached: nothing to close
             raise signals.stopped(connected=False)
         robot.connect()
@@ -112,6 +112,22 @@ def serve_io_process(argv: list[str] | None = None) -> None:
         server.run()
     finally:
         server.shut_down()
+
+
+def _start_up(config: HardwareRobotConfig, memory_fd: int) -> tuple[Robot, IoBlocks, RealtimeGrant]:
+    """Build the robot, load its compiled code, map the shared blocks and freeze the heap; then ask for real time.
+
+    The request comes last: run at a real-time priority, the slow start-up (the first compiled call loads numba,
+    some 0.2-0.5 s of CPU) held off every other thread of that priority on the CPU, such as another I/O process's
+    link, for as long as it took. It still comes before any thread exists (the robot is connected after it): the
+    link's and the bus's threads inherit the policy and the CPU.
+    """
+    robot = build_hardware_robot(config).robot
+    load_write_check()
+    blocks = IoBlocks(robot.num_joints, fd=memory_fd)
+    freeze_heap()
+    grant = request_realtime(config.realtime)
+    return robot, blocks, grant
 
 
 def _report(control: LineChannel, message: dict) -> None:
