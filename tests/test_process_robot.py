@@ -298,6 +298,12 @@ def test_a_stop_signal_to_the_io_process_closes_the_robot_into_damping(signum: i
         try:
             hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
             _drive(robot, hold, 50)
+            # the legs hold the command when the signal comes: driven on (bounded: 10 s of ticks) while a busy machine
+            # keeps the emulator's log behind the link, or held this process off for the link's 50 ms write deadline
+            for _ in range(100):
+                if not emu.legs.commands()[-1].damping:
+                    break
+                _drive(robot, hold, 25)
             assert not emu.legs.commands()[-1].damping and not _parked(emu)
             sent, pid = len(emu.legs.commands()), robot.pid
             os.kill(pid, signum)
