@@ -5,8 +5,8 @@ spawn re-imports the parent's ``__main__``). `serve_io_process` shortens the swi
 `build_hardware_robot`, loads its compiled code (`load_write_check`) and freezes its heap, then asks the OS for
 real-time scheduling, a CPU of its own and locked memory (`HardwareRobotConfig.realtime`, `wbc.hardware.realtime`),
 connects the robot and reports on the control channel, with what the OS granted. The slow part of the start-up runs
-before the real-time priority is asked: run at that priority, it held off every other thread of the same priority
-on its CPU (each I/O process takes the same last CPU) for as long as it took, up to 0.5 s.
+before the real-time priority is asked: run at that priority, it would hold off every other thread of the same
+priority on its CPU (each I/O process takes the same last CPU) for as long as it takes, up to 0.5 s.
 
 The legs' link thread then does the serving itself, through its hooks (`UnitreeRobot.set_link_hooks`), so that no
 thread of this process wakes twice a period only to pass data on:
@@ -118,9 +118,9 @@ def _start_up(config: HardwareRobotConfig, memory_fd: int) -> tuple[Robot, IoBlo
     """Build the robot, load its compiled code, map the shared blocks and freeze the heap; then ask for real time.
 
     The request comes last: run at a real-time priority, the slow start-up (the first compiled call loads numba,
-    some 0.2-0.5 s of CPU) held off every other thread of that priority on the CPU, such as another I/O process's
-    link, for as long as it took. It still comes before any thread exists (the robot is connected after it): the
-    link's and the bus's threads inherit the policy and the CPU.
+    some 0.2-0.5 s of CPU) would hold off every other thread of that priority on the CPU, such as another I/O
+    process's link, for as long as it takes. It still comes before any thread exists (the robot is connected after
+    it): the link's and the bus's threads inherit the policy and the CPU.
     """
     robot = build_hardware_robot(config).robot
     load_write_check()
