@@ -35,10 +35,12 @@ from wbc.hardware.clock import ManualClock
 from wbc.hardware.dynamixel import DynamixelArmConfig
 from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
 from wbc.hardware.safety import REMEDIES, SafetyConfig
 from wbc.hardware.unitree import UdpTransport
 from wbc.hardware.unitree.command_codec import encode_command
 from wbc.hardware.unitree.layout import frame_layout
+from wbc.tools import emulate as emulate_tool
 from wbc.types import MotorCommand
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -93,6 +95,34 @@ def test_emulate_runs_and_prints_counts(capsys: pytest.CaptureFixture[str]) -> N
     out = capsys.readouterr().out
     assert "emulated a1 (lockstep) on 127.0.0.1:" in out and "faults: corrupt" in out
     assert "commands decoded 0; rejected 0 (length 0, header 0, crc 0, non_finite 0)" in out and "replies 0" in out
+
+
+def test_emulate_asks_for_real_time_once_the_emulator_is_built(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Built at a real-time priority, the emulator's physics (~0.3 s of CPU) held off every other thread of that
+    priority on its CPU. The request follows the build (`prepare`) and precedes the start, whose threads inherit it;
+    the request is replaced here, and this process keeps its scheduling."""
+    calls: list[str] = []
+
+    def spied(cls: type, name: str) -> None:
+        original = getattr(cls, name)
+        monkeypatch.setattr(cls, name, lambda self: (calls.append(f"{cls.__name__}.{name}"), original(self))[1])
+
+    for cls in (UnitreeEmulator, RobotEmulator):
+        spied(cls, "prepare")
+        spied(cls, "start")
+    monkeypatch.setattr(emulate_tool, "request_realtime",
+                        lambda request: calls.append("real time") or request_realtime(NO_REALTIME))
+    expected = {"none": ["UnitreeEmulator.prepare", "real time", "UnitreeEmulator.start"],
+                "actuated": ["RobotEmulator.prepare", "real time", "RobotEmulator.start", "UnitreeEmulator.start"]}
+    for arm, order in expected.items():
+        calls.clear()
+        served = emulate_tool.emulate(emulate_tool.EmulateConfig(robot="go1", arm_mode=arm, mode="lockstep",
+                                                                 seconds=0.05, realtime=RealtimeRequest()))
+        assert served.failure is None and calls == order, arm
+    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot="go1"))
+    threads = threading.active_count()
+    assert emu.prepare() is emu and emu.sim.is_connected and threading.active_count() == threads  # no thread yet
+    emu.close()
 
 
 def _free_loopback_port() -> int:

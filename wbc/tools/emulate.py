@@ -2,10 +2,11 @@
 
 The procedure behind ``wbc hw emulate``. Without the arm's bus it serves a `UnitreeEmulator` (the legs' low-level UDP
 wire, with the arm locked or absent); with the arm actuated a `RobotEmulator` (legs over UDP and the arm's Dynamixel
-bus on a pseudo-terminal, one physics). It asks the OS for real-time scheduling first (the emulator stands in for
-the robot's own processors, and its threads inherit the scheduling), injects the faults asked for, says where it
-serves (`EmulatorServing`, handed to the caller once it does), and returns the counts (`EmulatorServed`) when it
-stops: after `EmulateConfig.seconds`, on SIGINT or SIGTERM, or when its thread fails.
+bus on a pseudo-terminal, one physics). It builds the emulator at the caller's priority, then asks the OS for
+real-time scheduling and starts it (the emulator stands in for the robot's own processors, and its threads inherit the
+scheduling), injects the faults asked for, says where it serves (`EmulatorServing`, handed to the caller once it
+does), and returns the counts (`EmulatorServed`) when it stops: after `EmulateConfig.seconds`, on SIGINT or SIGTERM,
+or when its thread fails.
 """
 
 from __future__ import annotations
@@ -170,14 +171,13 @@ def emulate(cfg: EmulateConfig, *,
     Returns:
         The counts, and the failure of the emulator's thread if one ended it.
     """
-    # it stands in for the robot's own processors: asked before its threads start, as they inherit the scheduling
-    grant = request_realtime(cfg.realtime)
     names = tuple(f"arm_{f.value}" if isinstance(f, BusFault) else f.value for f in cfg.faults)
     if cfg.arm_mode == "actuated":
-        return _emulate_with_arm(cfg, names, grant, serving)
+        return _emulate_with_arm(cfg, names, serving)
     # no log: nobody reads it here, and a long one stalls the replies in each full garbage collection
     emulator = UnitreeEmulator(UnitreeEmulatorConfig(robot=cfg.robot, arm_mode=cfg.arm_mode, mode=cfg.mode,
                                                      port=cfg.port, held_until_driven=cfg.held, log_size=0))
+    grant = _built_then_asked(emulator, cfg)
     with emulator:
         freeze_heap()  # built and serving: its full collections must not stall the answers
         for fault in cfg.faults:
@@ -189,13 +189,24 @@ def emulate(cfg: EmulateConfig, *,
                           failure=emulator.failure)
 
 
-def _emulate_with_arm(cfg: EmulateConfig, names: tuple[str, ...], grant: RealtimeGrant,
+def _built_then_asked(emulator: UnitreeEmulator | RobotEmulator, cfg: EmulateConfig) -> RealtimeGrant:
+    """Build `emulator` (`prepare`), then ask the OS for `cfg`'s real-time scheduling; before its threads start.
+
+    It stands in for the robot's own processors, and its threads inherit the scheduling. The build comes first: some
+    0.3 s of CPU, which at a real-time priority would hold off every other thread of that priority on the CPU.
+    """
+    emulator.prepare()
+    return request_realtime(cfg.realtime)
+
+
+def _emulate_with_arm(cfg: EmulateConfig, names: tuple[str, ...],
                       serving: Callable[[EmulatorServing], None]) -> EmulatorServed:
     """The arm actuated: one `RobotEmulator`, legs over UDP and arm over a pty, one physics."""
     robot = DESCRIPTIONS[cfg.robot]
     # no logs: nobody reads them here, and long ones stall the answers in each full garbage collection
     emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode=cfg.mode, port=cfg.port, held_until_driven=cfg.held,
                                                  legs_log_size=0, arm=DynamixelEmulatorConfig(log_size=0)))
+    grant = _built_then_asked(emulator, cfg)
     with emulator:
         freeze_heap()  # built and serving: its full collections must not stall the answers
         for fault in cfg.faults:

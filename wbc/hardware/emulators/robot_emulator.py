@@ -104,8 +104,17 @@ class RobotEmulator:
         self._legs_transport: EmulatorTransport | None = None
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
+    def prepare(self) -> RobotEmulator:
+        """Build the physics at the standing pose and load its compiled code, binding, opening and starting nothing.
+
+        Idempotent; `start` does it when it is not done. A process that asks for real-time scheduling for the
+        emulator's threads calls it first (`UnitreeEmulator.prepare`).
+        """
+        self.plant.start()
+        return self
+
     def start(self) -> RobotEmulator:
-        """Build the physics at the standing pose, bind the UDP port, open the pty, start both threads. Idempotent.
+        """Build the physics (unless `prepare` did), bind the UDP port, open the pty, start both threads. Idempotent.
 
         Raises:
             PortBusyError: the configured UDP port is held by another socket.

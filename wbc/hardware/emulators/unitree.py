@@ -158,8 +158,18 @@ class UnitreeEmulator:
         self._realtime_task: ScheduledCall | None = None
 
     # -- lifecycle ------------------------------------------------------------------------------------------------
+    def prepare(self) -> UnitreeEmulator:
+        """Build the simulation and load its compiled code, binding no socket and starting no thread. Idempotent.
+
+        `start` does it when it is not done. A process that asks for real-time scheduling for the emulator's thread
+        calls it first (``wbc hw emulate``): the build takes some 0.3 s of CPU, which at a real-time priority would
+        hold off every other thread of that priority on the CPU.
+        """
+        self.sim.connect()
+        return self
+
     def start(self) -> UnitreeEmulator:
-        """Bind the socket, build the simulation and start the server thread. Idempotent.
+        """Bind the socket, build the simulation (unless `prepare` did) and start the server thread. Idempotent.
 
         Raises:
             PortBusyError: the configured port is held by another socket.
