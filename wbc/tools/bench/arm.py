@@ -55,6 +55,7 @@ from wbc.hardware.emulators import (
 from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
+from wbc.hardware.robot import load_write_check
 from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
 from wbc.optional import require
 from wbc.robots.registry import get_robot
@@ -247,13 +248,15 @@ def step_metrics(t: np.ndarray, y: np.ndarray, target: float) -> tuple[float, fl
 def serve_robot_emulator_stdio(robot: str, seconds: float, realtime: dict | None = None) -> None:
     """The emulator process's body (``bench_arm`` starts it): a real-time `RobotEmulator`.
 
-    It first asks the OS for what `realtime` names (`RealtimeRequest`'s fields; None: nothing), as ``wbc hw emulate``
-    does. Writes the UDP address, the pty and what the OS granted as a JSON line, serves until a line arrives on
-    stdin (or `seconds` plus a margin pass), then writes any failure as a JSON line.
+    It builds the emulator, then asks the OS for what `realtime` names (`RealtimeRequest`'s fields; None: nothing)
+    before starting it, as ``wbc hw emulate`` does. Writes the UDP address, the pty and what the OS granted as a JSON
+    line, serves until a line arrives on stdin (or `seconds` plus a margin pass), then writes any failure as a JSON
+    line.
     """
     realtime_switch_interval()  # the emulated robot answers its wires promptly
+    emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode="realtime")).prepare()
     grant = request_realtime(RealtimeRequest(**realtime) if realtime is not None else NO_REALTIME)
-    with RobotEmulator(RobotEmulatorConfig(robot=robot, mode="realtime")) as emu:
+    with emulator as emu:
         host, port = emu.address
         print(json.dumps({"host": host, "port": port, "pty": emu.port, "realtime": grant.describe()}), flush=True)
         end = time.monotonic() + seconds + _STOP_MARGIN
@@ -529,6 +532,7 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         + (len(_FAULTS) + 1) * (2 * _REACTION_TIMEOUT + 2.0)
     proc, where = _start_emulator(robot, total, realtime)
     print(f"bench arm: the emulator's process: {where.get('realtime')}", file=sys.stderr, flush=True)
+    load_write_check()  # its first compiled call, before a real-time priority: as the I/O process does
     host = request_realtime(host_realtime).describe() if host_realtime != NO_REALTIME else "nothing asked"
     print(f"bench arm: this process (the bus's host side): {host}", file=sys.stderr, flush=True)
     desc = get_robot(robot, "actuated")

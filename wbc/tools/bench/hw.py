@@ -256,13 +256,15 @@ class TimedTransport:
 def serve_emulator_stdio(robot: str, seconds: float, realtime: dict | None = None) -> None:
     """The emulator process's body (``bench_hw`` starts it): lockstep emulator on a free loopback port.
 
-    First asks the OS for what `realtime` names (`RealtimeRequest`'s fields; None: nothing), as ``wbc hw emulate``
-    does. Writes the address and that grant as a JSON line, serves until a line arrives on stdin (or `seconds` plus a
-    margin pass: never longer), then writes the counts (`EmulatorCounts`) and any failure as a JSON line.
+    It builds the emulator, then asks the OS for what `realtime` names (`RealtimeRequest`'s fields; None: nothing)
+    before starting it, as ``wbc hw emulate`` does. Writes the address and that grant as a JSON line, serves until a
+    line arrives on stdin (or `seconds` plus a margin pass: never longer), then writes the counts (`EmulatorCounts`)
+    and any failure as a JSON line.
     """
     realtime_switch_interval()  # the emulated robot answers its wires promptly
+    emulator = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode="lockstep")).prepare()
     grant = request_realtime(RealtimeRequest(**realtime) if realtime is not None else NO_REALTIME)
-    with UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode="lockstep")) as emu:
+    with emulator as emu:
         host, port = emu.address
         print(json.dumps({"host": host, "port": port, "realtime": grant.describe()}), flush=True)
         select.select([sys.stdin], [], [], seconds + _STOP_MARGIN)
