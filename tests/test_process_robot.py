@@ -160,6 +160,20 @@ def test_the_io_process_asks_for_real_time_once_its_slow_start_up_is_done(monkey
     assert robot is built.robot and not robot.is_connected and (blocks, grant) == ("blocks", "grant")
 
 
+def test_the_io_process_runs_no_blas_thread_pool() -> None:
+    """numpy's and scipy's BLAS each start a pool of worker threads, one per further CPU, whose buffers the I/O
+    process's locked memory holds too (~40 MB a worker). Started single-threaded, it runs its own two threads only:
+    its main thread and the legs' link."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        with ProcessRobot(_legs(emu.address)) as robot:
+            robot.advance(0.01)
+            environ = Path(f"/proc/{robot.pid}/environ").read_bytes().split(b"\0")
+            status = dict(line.split(":", 1) for line in Path(f"/proc/{robot.pid}/status").read_text().splitlines())
+            assert b"OPENBLAS_NUM_THREADS=1" in environ and b"OMP_NUM_THREADS=1" in environ
+            assert int(status["Threads"]) == 2
+        assert emu.failure is None
+
+
 def test_the_io_process_asks_nothing_when_told_so() -> None:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
         with ProcessRobot(_legs(emu.address, realtime=NO_REALTIME)) as robot:

@@ -37,6 +37,7 @@ from wbc.arena.sim_trial import run_trial, simulated_robot
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError
+from wbc.hardware.interpreter import SINGLE_THREAD_BLAS_ENV
 from wbc.optional import require
 from wbc.scenario.trial import Trial
 
@@ -65,7 +66,7 @@ class TrialTask:
     time_limit_s: float | None = None
 
 
-_SINGLE_THREAD_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+_SINGLE_THREAD_ENV = SINGLE_THREAD_BLAS_ENV
 """Workers run one trial each on one core: a multi-threaded BLAS in every worker oversubscribes the cores (two MPC
 workers on two cores ran 2.5x slower than one)."""
 

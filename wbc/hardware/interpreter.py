@@ -18,6 +18,12 @@ the host's up to 165 ms, stalls during which the arm's bus answered nothing and 
 retries and pings failed together and a no-answer fault latched. `freeze_heap`, called once everything is built and
 before the loop starts, moves the objects alive then into the collector's permanent generation: later collections
 traverse only what was made since (the same measurement: 0.003 ms). Garbage made later is still collected.
+
+A third cost is memory. numpy's and scipy's BLAS each start a pool of worker threads, one per further CPU, with
+buffers of their own; a process that locks its memory (`wbc.hardware.realtime`) locks those too. A process that
+talks to motors does no parallel linear algebra: started with `SINGLE_THREAD_BLAS_ENV` in its environment, it has
+no pool. Measured on the 2-core VM, the I/O process of `ProcessRobot` (legs only) ran 4 threads with 577 MB locked,
+and 2 threads (its main thread and the link's) with 495 MB locked once started so; a pool's worker locks some 40 MB.
 """
 
 from __future__ import annotations
@@ -25,9 +31,14 @@ from __future__ import annotations
 import gc
 import sys
 
-__all__ = ["REALTIME_SWITCH_INTERVAL_S", "freeze_heap", "realtime_switch_interval"]
+__all__ = ["REALTIME_SWITCH_INTERVAL_S", "SINGLE_THREAD_BLAS_ENV", "freeze_heap", "realtime_switch_interval"]
 
 REALTIME_SWITCH_INTERVAL_S = 0.0005  # [s] a quarter of the link's 2 ms period
+
+SINGLE_THREAD_BLAS_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+"""The environment in which a process's BLAS (numpy's, scipy's) starts single-threaded: no pool of worker threads.
+It acts when the library loads, so it is given to a process when it is started (`ProcessRobot`'s I/O process, the
+arena's workers)."""
 
 
 def realtime_switch_interval(interval_s: float = REALTIME_SWITCH_INTERVAL_S) -> float:

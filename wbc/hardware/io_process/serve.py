@@ -119,8 +119,8 @@ def _start_up(config: HardwareRobotConfig, memory_fd: int) -> tuple[Robot, IoBlo
 
     The request comes last: run at a real-time priority, the slow start-up (the first compiled call loads numba,
     some 0.2-0.5 s of CPU) would hold off every other thread of that priority on the CPU, such as another I/O
-    process's link, for as long as it takes. It still comes before any thread exists (the robot is connected after
-    it): the link's and the bus's threads inherit the policy and the CPU.
+    process's link, for as long as it takes. It still comes before any of the process's own threads start (the robot
+    is connected after it): the link's and the bus's threads inherit the policy and the CPU.
     """
     robot = build_hardware_robot(config).robot
     load_write_check()

@@ -36,8 +36,9 @@ import wbc
 from wbc.control.stand import StandController, stand_command
 from wbc.errors import BenchError
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
-from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
+from wbc.hardware.interpreter import SINGLE_THREAD_BLAS_ENV, freeze_heap, realtime_switch_interval
 from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, controller_realtime, request_realtime
+from wbc.hardware.robot import load_write_check
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
 from wbc.hardware.unitree import (
     REJECT_REASONS,
@@ -277,7 +278,8 @@ def _start_emulator_process(robot: str, seconds: float, realtime: RealtimeReques
     # a fresh interpreter rather than multiprocessing: its spawn re-imports the parent's __main__, which for
     # ``python -m wbc.cli`` would run the command again
     root = str(Path(wbc.__file__).resolve().parents[1])
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    env = dict(os.environ, **SINGLE_THREAD_BLAS_ENV,  # no BLAS pool: memory the emulator would lock
+               PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
     code = (f"from wbc.tools.bench.hw import serve_emulator_stdio; serve_emulator_stdio({robot!r}, {seconds!r}, "
             f"{asdict(realtime)!r})")
     return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
@@ -338,6 +340,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         channel = SdkTransport if transport == "sdk" else UdpTransport
         timed = TimedTransport(channel((cfg.local_host, 0), (host, port)))
         link = UnitreeRobot(cfg, transport=timed)
+        load_write_check()  # its first compiled call, before a real-time priority: as the I/O process does
         try:
             with controller_realtime(realtime) as grant, link:
                 hold = MotorCommand.hold(link.desc.nominal_q, 20.0, 0.5)
