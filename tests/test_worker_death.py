@@ -6,6 +6,7 @@ again is that controller's error, the others keep their records, and the run goe
 controller's non-daemon thread keeps alive after its trials is terminated, with a warning, instead of hanging the run.
 """
 
+import os
 import subprocess
 import sys
 import textwrap
@@ -199,3 +200,26 @@ def test_a_trial_time_limit_is_refused_with_a_live_view_and_on_ray(tmp_path):
                     observer=lambda *a: None)
     with pytest.raises(ConfigError, match="enforced in the local pool's workers, not on Ray"):
         ArenaConfig(controllers=("stand",), scenario=tmp_path / "x.toml", trial_time_limit_s=10.0, executor="ray")
+
+
+def _worker_sees() -> tuple[str | None, str | None, bool]:
+    import os
+    import sys
+
+    import mujoco  # noqa: F401 - what a worker imports to simulate
+
+    return os.environ.get("MUJOCO_GL"), os.environ.get("OPENBLAS_NUM_THREADS"), "glfw" in sys.modules
+
+
+def test_a_worker_starts_with_its_blas_single_threaded_and_mujocos_rendering_off(monkeypatch):
+    """Importing MuJoCo with its rendering on loads GLFW, whose library check runs a Python subprocess in each worker;
+    a run stopped while its workers started printed that subprocess's broken-pipe traceback. A MUJOCO_GL the user
+    sets is kept, and this process's environment is given back."""
+    monkeypatch.delenv("MUJOCO_GL", raising=False)
+    with executors.worker_environment(), executors.spawn_pool(1) as pool:
+        assert pool.submit(_worker_sees).result(timeout=120) == ("disable", "1", False)
+    assert "MUJOCO_GL" not in os.environ
+    monkeypatch.setenv("MUJOCO_GL", "egl")
+    with executors.worker_environment(), executors.spawn_pool(1) as pool:
+        assert pool.submit(_worker_sees).result(timeout=120)[0] == "egl"
+    assert os.environ["MUJOCO_GL"] == "egl"

@@ -37,12 +37,12 @@ from wbc.arena.sim_trial import run_trial, simulated_robot
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.spec import ControllerSpec
 from wbc.errors import ConfigError
-from wbc.hardware.interpreter import SINGLE_THREAD_BLAS_ENV
+from wbc.hardware.interpreter import child_process_env
 from wbc.optional import require
 from wbc.scenario.trial import Trial
 
 __all__ = ["EXECUTORS", "VIEWED_TIME_LIMIT", "LocalExecutor", "RayExecutor", "TrialTask", "run_task",
-           "single_threaded_blas", "spawn_pool"]
+           "spawn_pool", "worker_environment"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -66,19 +66,18 @@ class TrialTask:
     time_limit_s: float | None = None
 
 
-_SINGLE_THREAD_ENV = SINGLE_THREAD_BLAS_ENV
-"""Workers run one trial each on one core: a multi-threaded BLAS in every worker oversubscribes the cores (two MPC
-workers on two cores ran 2.5x slower than one)."""
-
-
 @contextmanager
-def single_threaded_blas() -> Iterator[None]:
-    """Processes spawned inside this context start their BLAS single-threaded; the environment is restored after.
+def worker_environment() -> Iterator[None]:
+    """Processes spawned inside this context start in a worker's environment; this process's is restored after.
 
-    Only processes started inside it are affected: a BLAS already loaded keeps its thread count.
+    That is `wbc.hardware.interpreter.child_process_env`: the BLAS single-threaded, since workers run one trial each
+    on one core and a multi-threaded BLAS in every worker oversubscribes the cores (two MPC workers on two cores ran
+    2.5x slower than one); and MuJoCo's rendering off unless ``MUJOCO_GL`` is set. Only processes started inside it
+    are affected: a library already loaded keeps its settings.
     """
-    saved = {k: os.environ.get(k) for k in _SINGLE_THREAD_ENV}
-    os.environ.update(_SINGLE_THREAD_ENV)
+    env = child_process_env()
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
     try:
         yield
     finally:
@@ -260,7 +259,7 @@ class LocalExecutor:
         # Spawned (not forked) workers, so each starts its BLAS single-threaded from the environment; the pool starts
         # its processes on demand, so the environment stays set until the pool is done. A time limit needs a worker
         # process to end (one, with --workers 1), and so does isolation.
-        with single_threaded_blas(), tempfile.TemporaryDirectory(prefix="wbc-overrun-") as flags:
+        with worker_environment(), tempfile.TemporaryDirectory(prefix="wbc-overrun-") as flags:
             self._flags = flags
             try:
                 yield from self._run_pool(queue)
@@ -436,7 +435,7 @@ class RayExecutor:
             kwargs = {"address": self.address} if self.address else {
                 "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
             ray.init(log_to_driver=False, configure_logging=False,
-                     runtime_env={"env_vars": dict(_SINGLE_THREAD_ENV)}, **kwargs)
+                     runtime_env={"env_vars": child_process_env()}, **kwargs)
             started = True
         try:
             # a task whose worker dies is played once more (a trial on a lost node finishes elsewhere)

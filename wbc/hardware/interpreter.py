@@ -24,21 +24,41 @@ buffers of their own; a process that locks its memory (`wbc.hardware.realtime`) 
 talks to motors does no parallel linear algebra: started with `SINGLE_THREAD_BLAS_ENV` in its environment, it has
 no pool. Measured on the 2-core VM, the I/O process of `ProcessRobot` (legs only) ran 4 threads with 577 MB locked,
 and 2 threads (its main thread and the link's) with 495 MB locked once started so; a pool's worker locks some 40 MB.
+
+`child_process_env` gives what every process wbc starts itself takes in its environment (the arena's workers, the I/O
+process, the benches' emulators): that, and MuJoCo's rendering off, since none of them renders.
 """
 
 from __future__ import annotations
 
 import gc
+import os
 import sys
+from collections.abc import Mapping
 
-__all__ = ["REALTIME_SWITCH_INTERVAL_S", "SINGLE_THREAD_BLAS_ENV", "freeze_heap", "realtime_switch_interval"]
+__all__ = ["REALTIME_SWITCH_INTERVAL_S", "SINGLE_THREAD_BLAS_ENV", "child_process_env", "freeze_heap",
+           "realtime_switch_interval"]
 
 REALTIME_SWITCH_INTERVAL_S = 0.0005  # [s] a quarter of the link's 2 ms period
 
 SINGLE_THREAD_BLAS_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 """The environment in which a process's BLAS (numpy's, scipy's) starts single-threaded: no pool of worker threads.
-It acts when the library loads, so it is given to a process when it is started (`ProcessRobot`'s I/O process, the
-arena's workers)."""
+It acts when the library loads, so it is given to a process when it is started (`child_process_env`)."""
+
+
+def child_process_env(base: Mapping[str, str] | None = None) -> dict[str, str]:
+    """The variables a process that wbc starts itself takes on top of `base` (default: this process's environment).
+
+    `SINGLE_THREAD_BLAS_ENV`, and ``MUJOCO_GL=disable`` unless `base` sets ``MUJOCO_GL``: none of these processes
+    renders, and importing MuJoCo otherwise loads GLFW, whose library check runs a Python subprocess in every process
+    (~25 ms) and, when its parent is killed meanwhile (a run stopped as its workers start), prints that subprocess's
+    broken-pipe traceback. A ``MUJOCO_GL`` set by the user is kept (a plug-in that renders in a worker).
+    """
+    base = os.environ if base is None else base
+    env = dict(SINGLE_THREAD_BLAS_ENV)
+    if "MUJOCO_GL" not in base:
+        env["MUJOCO_GL"] = "disable"
+    return env
 
 
 def realtime_switch_interval(interval_s: float = REALTIME_SWITCH_INTERVAL_S) -> float:

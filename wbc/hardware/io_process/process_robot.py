@@ -55,7 +55,7 @@ from wbc.hardware.capabilities import HeldRamp, MotorNames
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel.arm_fault import ArmBusStats
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.interpreter import SINGLE_THREAD_BLAS_ENV
+from wbc.hardware.interpreter import child_process_env
 from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, IoBlocks
 from wbc.hardware.io_process.channel import ChannelClosed, LineChannel, rebuild_error
 from wbc.hardware.io_process.serve import HELD_AT_START
@@ -166,8 +166,8 @@ class ProcessRobot(Robot):
         try:
             root = str(Path(wbc.__file__).resolve().parents[1])
             # its BLAS single-threaded: it does no parallel linear algebra, and an idle pool's buffers are memory it
-            # would lock (`SINGLE_THREAD_BLAS_ENV`)
-            env = dict(os.environ, **SINGLE_THREAD_BLAS_ENV,
+            # would lock (`child_process_env`)
+            env = dict(os.environ, **child_process_env(),
                        PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
             fds = (blocks.fd, control_child.fileno(), bell_child.fileno())
             # the I/O process starts with the signals it takes blocked (a signal mask survives exec), until it can

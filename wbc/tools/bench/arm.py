@@ -52,7 +52,7 @@ from wbc.hardware.emulators import (
     SharedPlant,
     SharedPlantConfig,
 )
-from wbc.hardware.interpreter import SINGLE_THREAD_BLAS_ENV, realtime_switch_interval
+from wbc.hardware.interpreter import child_process_env, realtime_switch_interval
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
 from wbc.hardware.robot import load_write_check
@@ -307,7 +307,7 @@ def _command(proc: subprocess.Popen[str], command: dict) -> dict:
 def _start_emulator(robot: str, seconds: float,
                     realtime: RealtimeRequest) -> tuple[subprocess.Popen[str], dict]:
     root = str(Path(wbc.__file__).resolve().parents[1])
-    env = dict(os.environ, **SINGLE_THREAD_BLAS_ENV,  # no BLAS pool: memory the emulator would lock
+    env = dict(os.environ, **child_process_env(),  # no BLAS pool: memory the emulator would lock
                PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
     code = f"from wbc.tools.bench.arm import serve_robot_emulator_stdio; serve_robot_emulator_stdio({robot!r}, " \
            f"{seconds!r}, {asdict(realtime)!r})"

@@ -36,7 +36,7 @@ import wbc
 from wbc.control.stand import StandController, stand_command
 from wbc.errors import BenchError
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
-from wbc.hardware.interpreter import SINGLE_THREAD_BLAS_ENV, freeze_heap, realtime_switch_interval
+from wbc.hardware.interpreter import child_process_env, freeze_heap, realtime_switch_interval
 from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, controller_realtime, request_realtime
 from wbc.hardware.robot import load_write_check
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
@@ -278,7 +278,7 @@ def _start_emulator_process(robot: str, seconds: float, realtime: RealtimeReques
     # a fresh interpreter rather than multiprocessing: its spawn re-imports the parent's __main__, which for
     # ``python -m wbc.cli`` would run the command again
     root = str(Path(wbc.__file__).resolve().parents[1])
-    env = dict(os.environ, **SINGLE_THREAD_BLAS_ENV,  # no BLAS pool: memory the emulator would lock
+    env = dict(os.environ, **child_process_env(),  # no BLAS pool: memory the emulator would lock
                PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
     code = (f"from wbc.tools.bench.hw import serve_emulator_stdio; serve_emulator_stdio({robot!r}, {seconds!r}, "
             f"{asdict(realtime)!r})")

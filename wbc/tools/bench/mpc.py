@@ -18,7 +18,7 @@ import numpy as np
 
 from wbc.arena.divergence import DivergenceCheck
 from wbc.arena.episode import Episode
-from wbc.arena.executors import single_threaded_blas, spawn_pool
+from wbc.arena.executors import spawn_pool, worker_environment
 from wbc.arena.runner import run_episode
 from wbc.control.protocol import Controller, HasTickTimings
 from wbc.control.registry import CONTROLLERS, get_controller
@@ -519,7 +519,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     get_robot(robot, spec.arm_mode)
     _check_tail_qp_solver(getattr(spec.make, "func", spec.make), controller, qp_solver)
     if single_thread:
-        with single_threaded_blas(), spawn_pool(1) as pool:
+        with worker_environment(), spawn_pool(1) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
                                  reference=reference, qp_solver=qp_solver, rounds=rounds).result()
         return replace(result, blas="single-threaded")
