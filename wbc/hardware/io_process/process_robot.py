@@ -165,8 +165,8 @@ class ProcessRobot(Robot):
         self._blocks, self._control, self._bell = blocks, LineChannel(control), bell
         try:
             root = str(Path(wbc.__file__).resolve().parents[1])
-            # its BLAS single-threaded: it does no parallel linear algebra, and an idle pool's buffers are memory it
-            # would lock (`child_process_env`)
+            # its BLAS single-threaded (it does no parallel linear algebra, and an idle pool's buffers are memory it
+            # would lock) and MuJoCo's rendering off: `child_process_env`
             env = dict(os.environ, **child_process_env(),
                        PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
             fds = (blocks.fd, control_child.fileno(), bell_child.fileno())
