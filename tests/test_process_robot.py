@@ -145,7 +145,7 @@ def test_a_locked_arm_in_the_io_process_obeys_the_safety_layer_on_the_wire() -> 
 def test_the_io_process_asks_for_real_time_once_its_slow_start_up_is_done(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every I/O process takes the same CPU at the same priority. Built and connected after the request, one whose
     first compiled call loaded numba there (~0.2-0.5 s of CPU) held off the link of another beside it: a busy machine
-    running several saw that link send nothing for ~0.25 s. The request now follows the build, the compiled code and
+    running several saw that link send nothing for ~0.25 s. The request follows the build, the compiled code and
     the heap's freeze, and still precedes the connect, whose threads inherit it."""
     calls: list[str] = []
     config = _legs(("127.0.0.1", 9))

@@ -35,9 +35,10 @@ import gc
 import os
 import sys
 from collections.abc import Mapping
+from pathlib import Path
 
 __all__ = ["REALTIME_SWITCH_INTERVAL_S", "SINGLE_THREAD_BLAS_ENV", "child_process_env", "freeze_heap",
-           "realtime_switch_interval"]
+           "realtime_switch_interval", "wbc_interpreter_env"]
 
 REALTIME_SWITCH_INTERVAL_S = 0.0005  # [s] a quarter of the link's 2 ms period
 
@@ -59,6 +60,17 @@ def child_process_env(base: Mapping[str, str] | None = None) -> dict[str, str]:
     if "MUJOCO_GL" not in base:
         env["MUJOCO_GL"] = "disable"
     return env
+
+
+def wbc_interpreter_env(overrides: Mapping[str, str] | None = None) -> dict[str, str]:
+    """This process's environment for a fresh interpreter that runs this very wbc (``python -c``, ``python -m``).
+
+    Its root comes first on ``PYTHONPATH``, so the child imports the package this process imported, wherever that
+    is; `overrides` (such as `child_process_env`) are set on top.
+    """
+    root = str(Path(__file__).resolve().parents[2])
+    path = os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p)
+    return dict(os.environ, **(overrides or {}), PYTHONPATH=path)
 
 
 def realtime_switch_interval(interval_s: float = REALTIME_SWITCH_INTERVAL_S) -> float:

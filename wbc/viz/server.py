@@ -20,8 +20,8 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
+from wbc.hardware.interpreter import wbc_interpreter_env
 from wbc.viz.errors import ViewerError
 
 __all__ = ["MeshcatServer", "ServerConfig", "host_problem", "serve"]
@@ -112,9 +112,7 @@ class MeshcatServer:
         if problem is not None:  # said at once, not after waiting start_timeout_s for a server that cannot bind
             raise ViewerError(f"the viewer's host {cfg.host!r} {problem}")
         cmd = [sys.executable, "-u", "-m", "wbc.viz.server", "--host", cfg.host, "--parent", str(os.getpid())]
-        # the child imports this very package, wherever it was imported from
-        root = str(Path(__file__).resolve().parents[2])
-        env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
+        env = wbc_interpreter_env()  # the child imports this very package, wherever it was imported from
         self._proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                                       start_new_session=True, env=env)
         # a thread reads the child's lines: select() on a buffered pipe misses lines already buffered

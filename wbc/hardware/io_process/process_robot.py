@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import base64
 import dataclasses
-import os
 import pickle
 import select
 import signal
@@ -45,17 +44,15 @@ import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-import wbc
 from wbc.errors import IoProcessStopped, RobotLinkError, WbcError
 from wbc.hardware.capabilities import HeldRamp, MotorNames
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel.arm_fault import ArmBusStats
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.interpreter import child_process_env
+from wbc.hardware.interpreter import child_process_env, wbc_interpreter_env
 from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, IoBlocks
 from wbc.hardware.io_process.channel import ChannelClosed, LineChannel, rebuild_error
 from wbc.hardware.io_process.serve import HELD_AT_START
@@ -164,11 +161,9 @@ class ProcessRobot(Robot):
         bell, bell_child = socket.socketpair()
         self._blocks, self._control, self._bell = blocks, LineChannel(control), bell
         try:
-            root = str(Path(wbc.__file__).resolve().parents[1])
             # its BLAS single-threaded (it does no parallel linear algebra, and an idle pool's buffers are memory it
             # would lock) and MuJoCo's rendering off: `child_process_env`
-            env = dict(os.environ, **child_process_env(),
-                       PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+            env = wbc_interpreter_env(child_process_env())
             fds = (blocks.fd, control_child.fileno(), bell_child.fileno())
             # the I/O process starts with the signals it takes blocked (a signal mask survives exec), until it can
             mask = signal.pthread_sigmask(signal.SIG_BLOCK, HELD_AT_START)

@@ -26,18 +26,15 @@ a `DynamixelArm` on the emulator's pty, with dynamixel_sdk and the robot's defau
 from __future__ import annotations
 
 import json
-import os
 import select
 import subprocess
 import sys
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass
-from pathlib import Path
 
 import numpy as np
 
-import wbc
 from wbc.control.stand import stand_command
 from wbc.errors import BenchError
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig, sdk_handlers
@@ -52,7 +49,7 @@ from wbc.hardware.emulators import (
     SharedPlant,
     SharedPlantConfig,
 )
-from wbc.hardware.interpreter import child_process_env, realtime_switch_interval
+from wbc.hardware.interpreter import child_process_env, realtime_switch_interval, wbc_interpreter_env
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
 from wbc.hardware.robot import load_write_check
@@ -306,9 +303,7 @@ def _command(proc: subprocess.Popen[str], command: dict) -> dict:
 
 def _start_emulator(robot: str, seconds: float,
                     realtime: RealtimeRequest) -> tuple[subprocess.Popen[str], dict]:
-    root = str(Path(wbc.__file__).resolve().parents[1])
-    env = dict(os.environ, **child_process_env(),  # no BLAS pool: memory the emulator would lock
-               PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    env = wbc_interpreter_env(child_process_env())  # no BLAS pool: memory the emulator would lock
     code = f"from wbc.tools.bench.arm import serve_robot_emulator_stdio; serve_robot_emulator_stdio({robot!r}, " \
            f"{seconds!r}, {asdict(realtime)!r})"
     proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,

@@ -22,21 +22,18 @@ from __future__ import annotations
 
 import gc
 import json
-import os
 import select
 import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass, fields
-from pathlib import Path
 
 import numpy as np
 
-import wbc
 from wbc.control.stand import StandController, stand_command
 from wbc.errors import BenchError
 from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
-from wbc.hardware.interpreter import child_process_env, freeze_heap, realtime_switch_interval
+from wbc.hardware.interpreter import child_process_env, freeze_heap, realtime_switch_interval, wbc_interpreter_env
 from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, controller_realtime, request_realtime
 from wbc.hardware.robot import load_write_check
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyState
@@ -277,9 +274,7 @@ def serve_emulator_stdio(robot: str, seconds: float, realtime: dict | None = Non
 def _start_emulator_process(robot: str, seconds: float, realtime: RealtimeRequest) -> subprocess.Popen[str]:
     # a fresh interpreter rather than multiprocessing: its spawn re-imports the parent's __main__, which for
     # ``python -m wbc.cli`` would run the command again
-    root = str(Path(wbc.__file__).resolve().parents[1])
-    env = dict(os.environ, **child_process_env(),  # no BLAS pool: memory the emulator would lock
-               PYTHONPATH=os.pathsep.join(p for p in (root, os.environ.get("PYTHONPATH")) if p))
+    env = wbc_interpreter_env(child_process_env())  # no BLAS pool: memory the emulator would lock
     code = (f"from wbc.tools.bench.hw import serve_emulator_stdio; serve_emulator_stdio({robot!r}, {seconds!r}, "
             f"{asdict(realtime)!r})")
     return subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
