@@ -4,6 +4,9 @@ A training iteration caught in the middle of its update is no iteration's, and a
 half-written are no trial's: both defer Ctrl-C (SIGINT) and the requests to end that a batch scheduler, ``timeout``,
 ``docker stop`` or a closed terminal send (SIGTERM, SIGHUP) to the end of what is in progress. The first such signal
 is noted and said on stderr; the handlers before are then back, so a second one interrupts at once.
+
+A robot's close is held whole (`HeldInterrupts`): there the legs damp and an arm parks, and a second Ctrl-C that cut
+it would leave the arm limp. Every such signal waits for the close's end, and the first is then delivered.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["ASKS_TO_END", "DeferredInterrupts", "signal_label"]
+__all__ = ["ASKS_TO_END", "DeferredInterrupts", "HeldInterrupts", "signal_label"]
 
 ASKS_TO_END = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 """The signals `DeferredInterrupts` defers: Ctrl-C, a request to end (a scheduler's, ``timeout``'s, ``docker stop``'s,
@@ -61,6 +64,56 @@ class DeferredInterrupts:
     def _note(self, signum: int, frame: Any) -> None:
         self.requested = signum
         self._restore()
+        try:
+            print(self.says(signal_label(signum)), file=sys.stderr, flush=True)
+        except (OSError, ValueError):  # a closed terminal (SIGHUP) takes no more lines: the work goes on all the same
+            pass
+
+
+class HeldInterrupts:
+    r"""While installed, every one of `ASKS_TO_END` is held, none interrupts; the first is delivered at the end.
+
+    The first is said when it comes; at the end, the handlers before are put back and it goes to them. For work that
+    must not be cut, however often the user presses Ctrl-C: a robot's close (`Robot.close`), where the legs damp and
+    an arm parks. The work must end by itself (every close waits for a bounded time). A signal that is not one of
+    `ASKS_TO_END` (SIGQUIT, Ctrl-\) still acts at once. Only the outermost of nested ones installs anything: an inner
+    one inside it (a robot closing the robots it wraps) holds nothing of its own. Outside the main thread, where
+    Python runs no signal handler, it installs nothing.
+
+    Args:
+        says: the line printed on stderr when the first signal comes, given the signal's label (`signal_label`).
+    """
+
+    _installed = False  # one per process, in its main thread
+
+    def __init__(self, says: Callable[[str], str]) -> None:
+        self.says = says
+        self.held: int | None = None
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> HeldInterrupts:
+        if threading.current_thread() is threading.main_thread() and not HeldInterrupts._installed:
+            HeldInterrupts._installed = True
+            for signum in ASKS_TO_END:
+                previous = signal.signal(signum, self._note)
+                self._previous[signum] = previous if previous is not None else (
+                    signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if not self._previous:
+            return
+        for signum, previous in self._previous.items():
+            signal.signal(signum, previous)
+        self._previous = {}
+        HeldInterrupts._installed = False
+        if self.held is not None:
+            signal.raise_signal(self.held)  # to the handlers put back: Ctrl-C's raises KeyboardInterrupt here
+
+    def _note(self, signum: int, frame: Any) -> None:
+        if self.held is not None:
+            return
+        self.held = signum
         try:
             print(self.says(signal_label(signum)), file=sys.stderr, flush=True)
         except (OSError, ValueError):  # a closed terminal (SIGHUP) takes no more lines: the work goes on all the same

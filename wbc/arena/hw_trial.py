@@ -322,39 +322,49 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait for them
     scheduling = (controller_realtime(cfg.controller_realtime) if cfg.controller_realtime is not None
                   else contextlib.nullcontext(None))
-    with contextlib.ExitStack() as stack:
-        opening = False
-        try:
-            if before_connect is not None:
-                before_connect(hardware, spec)
-            if wall:
-                freeze_heap()  # all is built: a full collection would stall the link and bus threads (interpreter.py)
-            connected_at[0] = wall_time()
-            grant = stack.enter_context(scheduling)
-            opening = True
-            stack.enter_context(robot)
-        except (KeyboardInterrupt, IoProcessStopped) as stopped:
-            raise ConnectInterrupted(opening=opening) from stopped
-        _stand_up(robot, safe, console, cfg.settle_s, on_wall_clock=wall)
-        started_s = safe.now()
-        io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
-        io_cpu0 = io_robot.link_stats().io["cpu_s"] if io_robot is not None else 0.0
-        cpu0, wall0 = time.process_time(), time.perf_counter()
-        error = ""
-        try:
-            episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
-                                  fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console)
-        except ControllerFailure as failure:
-            episode, error = failure.episode, failure.record_error(spec.name, trial)
-            if safe.safety_state is not SafetyState.DAMPED:
-                safe.estop()  # the robot must not keep the broken controller's last command
-        cpu_s, episode_wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
-        if isinstance(hardware.robot, HasLinkStats):
-            link = hardware.robot.link_stats()
-        io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
-        if safe.safety_state is SafetyState.DAMPED:
-            _settle(robot, dt, cfg.settle_s)
-        link_lost = _link_lost(safe, started_s) if wall else None
+    # a Ctrl-C (or a request to end) while the robot closes waits for its close (`Robot.close`), then acts: after a
+    # trial played to its end, the trial's results are still written whole
+    played, stopped_while_closing = False, False
+    try:
+        with contextlib.ExitStack() as stack:
+            opening = False
+            try:
+                if before_connect is not None:
+                    before_connect(hardware, spec)
+                if wall:
+                    # all is built: a full collection would stall the link and bus threads (interpreter.py)
+                    freeze_heap()
+                connected_at[0] = wall_time()
+                grant = stack.enter_context(scheduling)
+                opening = True
+                stack.enter_context(robot)
+            except (KeyboardInterrupt, IoProcessStopped) as stopped:
+                raise ConnectInterrupted(opening=opening) from stopped
+            _stand_up(robot, safe, console, cfg.settle_s, on_wall_clock=wall)
+            started_s = safe.now()
+            io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
+            io_cpu0 = io_robot.link_stats().io["cpu_s"] if io_robot is not None else 0.0
+            cpu0, wall0 = time.process_time(), time.perf_counter()
+            error = ""
+            try:
+                episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
+                                      fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console)
+            except ControllerFailure as failure:
+                episode, error = failure.episode, failure.record_error(spec.name, trial)
+                if safe.safety_state is not SafetyState.DAMPED:
+                    safe.estop()  # the robot must not keep the broken controller's last command
+            cpu_s, episode_wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
+            if isinstance(hardware.robot, HasLinkStats):
+                link = hardware.robot.link_stats()
+            io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
+            if safe.safety_state is SafetyState.DAMPED:
+                _settle(robot, dt, cfg.settle_s)
+            link_lost = _link_lost(safe, started_s) if wall else None
+            played = True
+    except KeyboardInterrupt:
+        if not played:
+            raise
+        stopped_while_closing = True
     episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
     counters, error = read_counters(ctrl, spec.name, trial, episode, error)
     record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
@@ -373,7 +383,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
             _write_results(cfg, result, trial, published=scenario_published)
         except KeyboardInterrupt:
             raise ResultsInterrupted(out) from None
-    if interrupts.requested:
+    if interrupts.requested or stopped_while_closing:
         raise ResultsInterrupted(out, complete=True)
     return result
 

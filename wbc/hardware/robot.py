@@ -21,6 +21,7 @@ import numba
 import numpy as np
 
 from wbc.errors import CommandError, ConfigError, RobotNotConnectedError
+from wbc.interrupts import HeldInterrupts
 from wbc.robots.joint_table import JointTable
 from wbc.types import MotorCommand, RobotState
 
@@ -50,6 +51,10 @@ def exceeded_rows(cmd: MotorCommand, bounds: tuple[np.ndarray, np.ndarray]) -> n
     """Which of the command's rows (`COMMAND_ROWS`) hold a value outside `bounds`: five booleans."""
     rows = cmd.rows
     return ((rows < bounds[0]) | (rows > bounds[1])).any(axis=1)
+
+
+def _closing_first(what: str) -> str:
+    return f"wbc: {what} waits for the robot's close (its legs damp, an arm parks) and acts once it is closed"
 
 
 @numba.njit(cache=True, nogil=True)
@@ -140,10 +145,16 @@ class Robot(ABC):
             self._connected = True
 
     def close(self) -> None:
-        """Release the connection; a real robot is left in damping mode. Idempotent."""
+        """Release the connection; a real robot is left in damping mode. Idempotent.
+
+        The close is never cut by Ctrl-C or a request to end (SIGTERM, SIGHUP): each waits for its end
+        (`HeldInterrupts`), then the first acts. A real robot's close damps its legs and parks an arm; cut by a
+        second Ctrl-C, it left the arm limp.
+        """
         if self._connected:
-            self._close()
-            self._connected = False
+            with HeldInterrupts(_closing_first):
+                self._close()
+                self._connected = False
 
     def __enter__(self) -> Robot:
         self.connect()
