@@ -8,6 +8,7 @@ on any machine at any load; the arm's case runs its devices in lockstep with the
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig
 from wbc.hardware.emulators.logged_packet import LoggedPacket
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.robot import Robot
-from wbc.interrupts import HeldInterrupts
+from wbc.interrupts import DeferredInterrupts, HeldInterrupts
 from wbc.robots.joint_table import JointTable
 from wbc.types import MotorCommand, RobotState
 
@@ -86,7 +87,7 @@ def test_ctrl_c_during_a_close_waits_for_its_end_then_interrupts(capsys: pytest.
     assert robot.steps == ["damping", "parked"] and not robot.is_connected
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the handler before, back
     err = capsys.readouterr().err
-    assert err.count("wbc: Ctrl-C waits for the robot's close") == 1  # said once, however often pressed
+    assert err.count("wbc: Ctrl-C waits until the robot is closed") == 1  # said once, however often pressed
 
 
 @pytest.mark.usefixtures("terminal_signals")
@@ -96,27 +97,86 @@ def test_a_robot_closing_the_robots_it_wraps_holds_once(capsys: pytest.CaptureFi
     outer.connect()
     seen: list[int] = []
     signal.signal(signal.SIGTERM, lambda signum, frame: seen.append(signum))
-    outer.close()  # the first signal (SIGTERM, in the outer close) goes to its handler once both are closed
+    try:
+        outer.close()  # the first signal (SIGTERM, in the outer close) goes to its handler once both are closed
+    except KeyboardInterrupt:
+        pytest.fail("the inner close's Ctrl-C was not held")
     assert inner.steps == outer.steps == ["damping", "parked"] and not inner.is_connected
     assert seen == [signal.SIGTERM]
-    assert capsys.readouterr().err.count("waits for the robot's close") == 1
+    assert capsys.readouterr().err.count("waits until the robot is closed") == 1
 
 
-def test_a_held_signal_that_was_ignored_stays_ignored() -> None:
-    previous = signal.signal(signal.SIGHUP, signal.SIG_IGN)  # a command started under nohup
-    try:
-        robot = _Closing(lambda: signal.raise_signal(signal.SIGHUP))
-        robot.connect()
+@pytest.mark.usefixtures("terminal_signals")
+def test_a_close_that_fails_ends_with_its_error_and_says_the_signal_came() -> None:
+    """The error says what the close left (a link lost: check the robot by hand); a Ctrl-C must not replace it."""
+    def fails() -> None:
+        signal.raise_signal(signal.SIGINT)
+        raise RuntimeError("the link is lost")
+
+    robot = _Closing(fails)
+    robot.connect()
+    with pytest.raises(RuntimeError, match="the link is lost") as raised:
         robot.close()
-        assert robot.steps == ["damping", "parked"]
+    assert raised.value.__notes__ == ["(Ctrl-C came while this was under way)"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_an_ignored_signal_stays_ignored_and_a_later_one_still_acts(capsys: pytest.CaptureFixture[str]) -> None:
+    """A command started under ``nohup`` ignores the hangup: said nowhere, held by nothing, and a SIGTERM after it
+    in the same close still acts once the robot is closed."""
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    seen: list[int] = []
+    signal.signal(signal.SIGTERM, lambda signum, frame: seen.append(signum))
+
+    def hangup_then_term() -> None:
+        signal.raise_signal(signal.SIGHUP)
+        signal.raise_signal(signal.SIGTERM)
+
+    robot = _Closing(hangup_then_term)
+    robot.connect()
+    robot.close()
+    assert robot.steps == ["damping", "parked"] and seen == [signal.SIGTERM]
+    assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
+    assert capsys.readouterr().err.count("SIGHUP") == 0
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_a_deferral_leaves_an_ignored_hangup_ignored() -> None:
+    """Training and a hardware trial's results defer the requests to end; under ``nohup`` a hangup requests nothing."""
+    signal.signal(signal.SIGHUP, signal.SIG_IGN)
+    with DeferredInterrupts(lambda what: what) as deferred:
         assert signal.getsignal(signal.SIGHUP) is signal.SIG_IGN
-    finally:
-        signal.signal(signal.SIGHUP, previous)
+        signal.raise_signal(signal.SIGHUP)
+    assert deferred.requested is None
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_an_install_cut_by_a_signal_leaves_nothing_installed(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A request to end that the command's own handler turns into KeyboardInterrupt can come while the handlers are
+    being installed: those installed are put back, and the next close holds again."""
+    install = signal.signal
+    calls = []
+
+    def cut_at_the_second(signum: int, handler: object) -> object:
+        calls.append(signum)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+        return install(signum, handler)
+
+    monkeypatch.setattr(signal, "signal", cut_at_the_second)
+    with pytest.raises(KeyboardInterrupt), HeldInterrupts(None):
+        pass
+    monkeypatch.setattr(signal, "signal", install)
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    robot = _Closing(_ctrl_c_twice)
+    robot.connect()
+    with pytest.raises(KeyboardInterrupt):
+        robot.close()
+    assert robot.steps == ["damping", "parked"]
 
 
 def test_nothing_is_held_outside_the_main_thread() -> None:
-    import threading
-
     installed: list[object] = []
 
     def close() -> None:
@@ -184,11 +244,13 @@ def test_ctrl_c_while_the_arm_closes_lets_it_park(tmp_path: Path, capsys: pytest
     err = capsys.readouterr().err
     assert code == 130, err
     assert _parked(packets) == set(JOINT_SERVOS)
-    assert "Ctrl-C waits for the robot's close (its legs damp, an arm parks) and acts once it is closed" in err
+    assert err.count("wbc: Ctrl-C waits until the robot is closed (a real robot's legs damp, its arm parks), "
+                     "then acts") == 1
     if during_the_trial:
         assert err.strip().endswith("interrupted; the robot was closed into damping; no results were written")
         assert not (out / "trials.csv").exists()
-    else:
+    else:  # the held Ctrl-C, once the robot is closed, is the first after the trial: it waits for the results
+        assert "wbc hw run: Ctrl-C: the robot is closed into damping; the trial's results are being written to" in err
         assert err.strip().endswith(f"its results are complete in {out}")
         (record,) = TrialRecord.read_csv(out / "trials.csv")
         assert record.controller == "stand" and record.backend == "unitree+dynamixel"

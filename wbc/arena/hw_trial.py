@@ -322,10 +322,13 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait for them
     scheduling = (controller_realtime(cfg.controller_realtime) if cfg.controller_realtime is not None
                   else contextlib.nullcontext(None))
-    # a Ctrl-C (or a request to end) while the robot closes waits for its close (`Robot.close`), then acts: after a
-    # trial played to its end, the trial's results are still written whole
-    played, stopped_while_closing = False, False
-    try:
+    # after the trial, Ctrl-C (or a request to end) waits for the trial's results, written whole (the trial is played
+    # once), and a second one stops the writing, saying what it left; during the robot's close, every one waits for the
+    # close (`Robot.close`)
+    after_the_trial = DeferredInterrupts(
+        lambda what: f"wbc hw run: {what}: the robot is closed into damping; the trial's results are being written to "
+                     f"{out} and the run ends once they are (again: stop at once, leaving them incomplete)")
+    with contextlib.ExitStack() as deferred:
         with contextlib.ExitStack() as stack:
             opening = False
             try:
@@ -360,30 +363,21 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
             if safe.safety_state is SafetyState.DAMPED:
                 _settle(robot, dt, cfg.settle_s)
             link_lost = _link_lost(safe, started_s) if wall else None
-            played = True
-    except KeyboardInterrupt:
-        if not played:
-            raise
-        stopped_while_closing = True
-    episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
-    counters, error = read_counters(ctrl, spec.name, trial, episode, error)
-    record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
-                                  counters=counters, wall_s=time.perf_counter() - start,
-                                  backend=hardware.backend, domain_applied=False, link=link, error=error)
-    result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
-                                 notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
-                                 safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
-                                 controller_realtime=grant, link_lost=link_lost)
-    # the robot is closed into damping; the trial is played once, so its results are written whole: Ctrl-C (or a
-    # request to end) waits for them, and a second one stops the writing, saying what it left
-    with DeferredInterrupts(lambda what: f"wbc hw run: {what}: the robot is closed into damping; the trial's results "
-                            f"are being written to {out} and the run ends once they are (again: stop at once, "
-                            "leaving them incomplete)") as interrupts:
+            deferred.enter_context(after_the_trial)
+        episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
+        counters, error = read_counters(ctrl, spec.name, trial, episode, error)
+        record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
+                                      counters=counters, wall_s=time.perf_counter() - start,
+                                      backend=hardware.backend, domain_applied=False, link=link, error=error)
+        result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
+                                     notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
+                                     safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
+                                     controller_realtime=grant, link_lost=link_lost)
         try:
             _write_results(cfg, result, trial, published=scenario_published)
         except KeyboardInterrupt:
             raise ResultsInterrupted(out) from None
-    if interrupts.requested or stopped_while_closing:
+    if after_the_trial.requested:
         raise ResultsInterrupted(out, complete=True)
     return result
 

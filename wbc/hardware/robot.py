@@ -53,8 +53,9 @@ def exceeded_rows(cmd: MotorCommand, bounds: tuple[np.ndarray, np.ndarray]) -> n
     return ((rows < bounds[0]) | (rows > bounds[1])).any(axis=1)
 
 
-def _closing_first(what: str) -> str:
-    return f"wbc: {what} waits for the robot's close (its legs damp, an arm parks) and acts once it is closed"
+def _waits_for_the_close(what: str) -> str:
+    """The line said when a signal comes during a robot's close."""
+    return f"wbc: {what} waits until the robot is closed (a real robot's legs damp, its arm parks), then acts"
 
 
 @numba.njit(cache=True, nogil=True)
@@ -147,12 +148,12 @@ class Robot(ABC):
     def close(self) -> None:
         """Release the connection; a real robot is left in damping mode. Idempotent.
 
-        The close is never cut by Ctrl-C or a request to end (SIGTERM, SIGHUP): each waits for its end
-        (`HeldInterrupts`), then the first acts. A real robot's close damps its legs and parks an arm; cut by a
-        second Ctrl-C, it left the arm limp.
+        Called in the main thread, the close is never cut by Ctrl-C or a request to end (SIGTERM, SIGHUP): each
+        waits for its end, then the first acts (`HeldInterrupts`). A real robot's close damps its legs and parks an
+        arm, which a cut close would leave limp.
         """
         if self._connected:
-            with HeldInterrupts(_closing_first):
+            with HeldInterrupts(_waits_for_the_close):
                 self._close()
                 self._connected = False
 

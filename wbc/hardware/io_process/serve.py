@@ -59,6 +59,7 @@ from wbc.hardware.robot import Robot, load_write_check
 from wbc.hardware.safety.ramp import CommandRamp
 from wbc.hardware.unitree.remote import Remote
 from wbc.hardware.unitree.robot import UnitreeRobot
+from wbc.interrupts import HeldInterrupts
 from wbc.types import MotorCommand
 
 __all__ = ["HELD_AT_START", "serve_io_process"]
@@ -344,7 +345,8 @@ class _Server:
                 self._forward_newest()
         self.legs.set_link_hooks()
         try:
-            self.robot.close()
+            with HeldInterrupts(None):  # its stop signals are noted by its own handlers; the close need not say them
+                self.robot.close()
             self._send({"closed": True})
         except BaseException as exc:  # noqa: BLE001 - reported; the process exits anyway
             self._send(error_report(exc))
