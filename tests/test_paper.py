@@ -196,6 +196,80 @@ def test_a_paper_run_on_a_directory_another_run_holds_is_refused_before_anything
     assert [p.name for p in out.iterdir()] == [LOCK_FILE]
 
 
+@pytest.fixture
+def refusing_plugin(tmp_path, monkeypatch):
+    """A plug-in whose factory raises, importable as ``paperrefused:make``."""
+    root = tmp_path / "refusedroot"
+    root.mkdir()
+    (root / "paperrefused.py").write_text('"""Builds no controller."""\n\n\n'
+                                          "def make(desc):\n"
+                                          '    raise RuntimeError("no weights for this robot")\n', encoding="utf-8")
+    monkeypatch.syspath_prepend(str(root))
+    yield "paperrefused:make"
+    sys.modules.pop("paperrefused", None)
+
+
+REFUSED_INPUT = {
+    "an unknown controller": (["table1", "--contender", "learned=nosuch"], "nosuch"),
+    "a missing policy file": (["table1", "--contender", "learned=policy:{tmp}/missing"], "missing"),
+    "a controller for another robot": (["table2", "--contender", f"learned=policy:{WEIGHTS_DIR}/a1-wx200-actuated"],
+                                       "drives a1-wx200"),
+    "a plug-in whose factory raises": (["table1", "--contender", "mpc={plugin}"], "no weights for this robot"),
+    "--drop-bad-rows without --resume": (["table1", "--drop-bad-rows"], "--drop-bad-rows"),
+    "more trials than a run plays": (["table1", "--trials", "100000", "--seeds", "10"], "more than the"),
+}
+
+
+@pytest.mark.parametrize("case", REFUSED_INPUT)
+def test_a_paper_run_refused_for_its_input_creates_no_directory(case, tiny, tmp_path, capsys, refusing_plugin):
+    # as wbc compare, everything the input can refuse is checked before --out (and its missing parent) is created
+    args, said = REFUSED_INPUT[case]
+    table, *options = [a.format(tmp=tmp_path, plugin=refusing_plugin) for a in args]
+    scenario = tiny
+    if table == "table2":
+        scenario = tmp_path / "tinyturn.toml"
+        scenario.write_text(TINY_PUSH.replace('robot = "a1-wx200"', 'robot = "go1-arm"'))
+    out = tmp_path / "new" / "paper"
+    assert main(["paper", table, "--trials", "1", "--seeds", "1", "--scenario", str(scenario), "--out", str(out),
+                 "--workers", "1", "--quiet", *options]) == 2
+    assert said in capsys.readouterr().err
+    assert not (tmp_path / "new").exists()
+
+
+def test_a_refused_paper_run_leaves_a_directory_with_results_as_it_was(tiny, tmp_path, capsys):
+    out = tmp_path / "done"
+    out.mkdir()
+    stored = {"trials.csv": "a row\n", "run.json": "{}", "paper.txt": "the table\n"}
+    for name, text in stored.items():
+        (out / name).write_text(text)
+    base = ["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
+            "--workers", "1", "--quiet"]
+    assert main([*base, "--contender", "learned=nosuch"]) == 2  # refused before the directory is taken
+    assert {p.name: p.read_text() for p in out.iterdir()} == stored
+    assert main(base) == 2  # refused by the results store, the directory held: it already holds a run
+    assert "already holds results" in capsys.readouterr().err
+    assert {p.name: p.read_text() for p in out.iterdir() if p.name != LOCK_FILE} == stored
+
+
+def test_a_paper_run_stopped_before_it_stored_anything_removes_the_directory_it_created(tiny, tmp_path,
+                                                                                       monkeypatch):
+    # Ctrl-C, or a refusal that comes only once the directory is held, before the results store wrote anything there
+    def stopped(plan, *, lock):
+        assert lock.held and [p.name for p in plan.cfg.out_dir.iterdir()] == [LOCK_FILE]
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(paper_table, "play_arena", stopped)
+    config = {"table": "table1", "trials": 1, "seeds": 1, "scenario": tiny, "workers": 1, "progress": False}
+    with pytest.raises(KeyboardInterrupt):
+        run_paper_table(PaperRunConfig(out_dir=tmp_path / "new" / "paper", **config))
+    assert not (tmp_path / "new").exists()
+    mine = tmp_path / "mine"
+    mine.mkdir()  # the user's: it stays, with the lock file any run leaves
+    with pytest.raises(KeyboardInterrupt):
+        run_paper_table(PaperRunConfig(out_dir=mine, **config))
+    assert [p.name for p in mine.iterdir()] == [LOCK_FILE]
+
+
 def test_contenders_can_be_replaced_and_tables_check_their_robot(tiny):
     spec = TABLES["table1"]
     rows = resolve_contenders(spec, {"learned": "policy:runs/v2/policy"})

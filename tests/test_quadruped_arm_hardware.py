@@ -15,6 +15,7 @@ real-time figures (the bus loop's rate and busy time, the fault-to-latch times).
 from __future__ import annotations
 
 import gc
+import io
 import re
 import signal
 import socket
@@ -40,6 +41,7 @@ from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robo
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmConfig, QuadrupedArmRobot
+from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
 from wbc.hardware.robot_contract import check_robot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
@@ -421,11 +423,82 @@ def test_step_metrics_of_a_known_response() -> None:
     assert error == pytest.approx(0.1, abs=1e-3)
 
 
-@pytest.mark.slow
-def test_bench_arm_measures_rates_and_a_step_against_the_emulator_in_its_own_process() -> None:
-    from wbc.tools.bench import bench_arm
+def test_bench_arm_builds_everything_before_it_asks_for_real_time(monkeypatch: pytest.MonkeyPatch) -> None:
+    """What runs at a real-time priority holds off every other thread of that priority on its CPU, for as long as a
+    MuJoCo reference takes to build (~0.1-0.4 s of CPU). The references in simulation, the bus's SDK, the compiled
+    check, the plant of the emulators' timing and the legs' robot come before the request; the legs' link connects
+    after it, its thread inheriting the priority. Every builder and the request are replaced here by recorders, and
+    this process keeps its scheduling; the legs' connect ends the bench."""
+    from wbc.tools.bench import arm as bench
 
-    result = bench_arm(rates=(200.0,), seconds=0.5, gains=((20.0, 0.5),))
+    calls: list[str] = []
+
+    class Stop(Exception):
+        pass
+
+    class Plant:
+        def start(self) -> Plant:
+            calls.append("plant built")
+            return self
+
+        def __enter__(self) -> Plant:
+            return self.start()
+
+        def __exit__(self, *exc: object) -> None:
+            calls.append("plant closed")
+
+    class Legs:
+        def __init__(self, config: UnitreeRobotConfig) -> None:
+            calls.append("legs built")
+
+        def __enter__(self) -> Legs:
+            calls.append("legs connected")
+            raise Stop
+
+        def __exit__(self, *exc: object) -> None:
+            pass
+
+    class Process:
+        stdin = io.StringIO()
+
+        def communicate(self, timeout: float) -> tuple[str, str]:
+            calls.append("emulator process stopped")
+            return "", ""
+
+    def reference(robot: str, q0: np.ndarray, kp: float, kd: float, step: float) -> tuple[np.ndarray, np.ndarray]:
+        calls.append(f"reference kp {kp:g}")
+        t = np.arange(-0.1, 1.0, 0.002)
+        return t, np.where(t < 0.0, q0[2], q0[2] + step)
+
+    monkeypatch.setattr(bench, "_sim_step", reference)
+    monkeypatch.setattr(bench, "require", lambda module: calls.append(f"import {module}"))
+    monkeypatch.setattr(bench, "load_write_check", lambda: calls.append("compiled code"))
+    monkeypatch.setattr(bench, "SharedPlant", lambda config: Plant())
+    monkeypatch.setattr(bench, "_start_emulator", lambda robot, seconds, realtime: (
+        calls.append("emulator process started"), (Process(), {"host": "127.0.0.1", "port": 9, "pty": "/dev/null"}))[1])
+    monkeypatch.setattr(bench, "UnitreeRobot", Legs)
+    monkeypatch.setattr(bench, "request_realtime",
+                        lambda request: calls.append("real time") or request_realtime(NO_REALTIME))
+    with pytest.raises(Stop):
+        bench.bench_arm(gains=((20.0, 0.5), (60.0, 1.0)), host_realtime=RealtimeRequest())
+    assert calls == ["reference kp 20", "reference kp 60", "import dynamixel_sdk", "compiled code", "plant built",
+                     "emulator process started", "legs built", "real time", "legs connected",
+                     "emulator process stopped", "plant closed"]
+
+
+@pytest.mark.slow
+def test_bench_arm_measures_rates_and_a_step_against_the_emulator_in_its_own_process(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from wbc.tools.bench import arm as bench
+
+    # the request is recorded, not made: every MuJoCo model of this process is built before it
+    calls: list[str] = []
+    connect = MujocoRobot._connect
+    monkeypatch.setattr(MujocoRobot, "_connect", lambda self: (calls.append("MuJoCo model built"), connect(self))[1])
+    monkeypatch.setattr(bench, "request_realtime",
+                        lambda request: calls.append("real time") or request_realtime(NO_REALTIME))
+    result = bench.bench_arm(rates=(200.0,), seconds=0.5, gains=((20.0, 0.5),), host_realtime=RealtimeRequest())
+    assert calls == ["MuJoCo model built", "MuJoCo model built", "real time"]  # the reference, the plant
     (rate,) = result.rates
     assert 100.0 < rate.achieved_hz <= 205.0 and rate.cycles > 50
     bus, sim = result.steps

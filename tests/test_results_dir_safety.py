@@ -112,6 +112,27 @@ def test_a_store_given_its_callers_lock_uses_it_and_leaves_it_held(short, tmp_pa
     ResultsStore(out, identity, resume=True).close()
 
 
+def test_a_held_directory_that_a_refusal_leaves_empty_goes_if_this_hold_created_it(tmp_path):
+    # a command that takes its directory before the run (wbc paper), refused or interrupted before anything is stored
+    out = tmp_path / "new" / "out"
+    with pytest.raises(ResultsDirError, match="refused"), hold_results_dir(out):
+        raise ResultsDirError("refused")
+    assert not (tmp_path / "new").exists()  # nor the parent created with it
+    with pytest.raises(KeyboardInterrupt), hold_results_dir(out):
+        (out / "trials.csv").write_text("header\n")  # what the store writes first
+        raise KeyboardInterrupt
+    assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE, "trials.csv"]
+    with hold_results_dir(tmp_path / "done"):
+        pass  # a run that ends well keeps its directory
+    assert [p.name for p in (tmp_path / "done").iterdir()] == [LOCK_FILE]
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    with pytest.raises(KeyboardInterrupt), hold_results_dir(mine):
+        raise KeyboardInterrupt
+    assert [p.name for p in mine.iterdir()] == [LOCK_FILE]  # the user's: it stays
+    assert directory_holder(mine) is None and directory_holder(out) is None
+
+
 def test_sigterm_interrupts_a_run_as_ctrl_c_does(short, tmp_path):
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "compare", "stand", "stand-noarm", "--scenario",

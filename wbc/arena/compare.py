@@ -1,6 +1,8 @@
 """The arena: play every (controller, trial) pair of a scenario, store each result at once, summarise and report.
 
-``wbc run`` and ``wbc compare`` are thin wrappers around `run_arena`. Trials are paired: every controller plays the
+``wbc run`` and ``wbc compare`` are thin wrappers around `run_arena`: `plan_arena` (every check that needs no results
+directory; the controllers resolved), then `play_arena`. ``wbc paper`` calls the two itself and takes the directory
+between them, so that a refused run leaves no directory behind. Trials are paired: every controller plays the
 very same trials, so differences between controllers come with paired confidence intervals and paired tests.
 
 With ``until_significant`` (``wbc compare --until-significant``) the trials are played round by round (a round: one
@@ -54,10 +56,11 @@ from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
 from wbc.output_files import DirectoryLock
 from wbc.robots.registry import get_robot
-from wbc.scenario import load_scenario, warn_if_unpublished
+from wbc.scenario import Scenario, load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 
-__all__ = ["VIEWED_TIME_LIMIT", "ArenaConfig", "ArenaResult", "run_arena"]
+__all__ = ["VIEWED_TIME_LIMIT", "ArenaConfig", "ArenaPlan", "ArenaResult", "play_arena", "plan_arena",
+           "run_arena"]
 
 
 
@@ -240,8 +243,31 @@ def _files_of(specs: Mapping[str, ControllerSpec]) -> dict[str, dict[str, str]]:
             for name, spec in specs.items() if spec.config_file is not None}
 
 
+@dataclass(frozen=True, kw_only=True)
+class ArenaPlan:
+    """A run checked and resolved, its results directory not touched yet (`plan_arena`): what `play_arena` plays.
+
+    Attributes:
+        cfg: what to play, and where to store it.
+        specs: each controller, resolved once, by name.
+        scenario: the scenario, loaded.
+        published: the scenario is the published version of its file (`wbc.scenario.warn_if_unpublished`).
+        bands: the bands played.
+        trials: every trial of the run, in order (without their pushes with `ArenaConfig.no_push`).
+        identity: what the run is (``run.json``'s ``config``).
+    """
+
+    cfg: ArenaConfig
+    specs: Mapping[str, ControllerSpec]
+    scenario: Scenario
+    published: bool
+    bands: tuple[str, ...]
+    trials: tuple[Trial, ...]
+    identity: SimulatedRunIdentity
+
+
 def run_arena(cfg: ArenaConfig, *, lock: DirectoryLock | None = None) -> ArenaResult:
-    """Run (or resume) a comparison and write its results directory.
+    """Run (or resume) a comparison and write its results directory: `plan_arena`, then `play_arena`.
 
     Args:
         cfg: what to play, and where to store it.
@@ -265,6 +291,25 @@ def run_arena(cfg: ArenaConfig, *, lock: DirectoryLock | None = None) -> ArenaRe
 
     A controller's failure on a trial is not raised: it is recorded (outcome ``controller_error``) and reported in
     `ArenaResult.controller_errors`.
+    """
+    return play_arena(plan_arena(cfg), lock=lock)
+
+
+def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
+    """Check a run and resolve what it plays, before its results directory is created, locked or read.
+
+    Every refusal that does not depend on what the directory holds comes from here: a command that takes the
+    directory itself (``wbc paper``, `wbc.arena.results.hold_results_dir`) plans first, so that a run refused for its
+    input leaves no directory behind, as `run_arena` leaves none.
+
+    Raises:
+        UnknownNameError: an unknown controller name or band (the message lists the valid ones).
+        ResultsDirError: `ArenaConfig.out_dir` is a file, or a file the run writes there is a directory.
+        PolicyFileError: a ``policy:PATH`` file that is missing or malformed.
+        PluginError: a plug-in that cannot be imported, or whose factory raises or builds no controller.
+        ScenarioError: the scenario file is invalid.
+        ConfigError: a controller for another robot than the scenario's, a plug-in's rate that is no whole number of
+            physics steps, or more trials than a run plays (`MAX_RUN_TRIALS`).
     """
     check_out_dir(cfg.out_dir)  # before any controller is built or trial played: the run could not store its results
     # each name resolved once, here; the tasks carry the spec to the workers
@@ -307,7 +352,33 @@ def run_arena(cfg: ArenaConfig, *, lock: DirectoryLock | None = None) -> ArenaRe
                                for name, f in _files_of(specs).items()),
         max_consecutive_errors=cfg.max_consecutive_errors,
     )
-    store = ResultsStore(cfg.out_dir, identity, resume=cfg.resume,
+    return ArenaPlan(cfg=cfg, specs=specs, scenario=scenario, published=published, bands=tuple(bands),
+                     trials=tuple(trials), identity=identity)
+
+
+def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaResult:
+    """Play a planned run (`plan_arena`), or resume it, and write its results directory.
+
+    Args:
+        plan: the run, checked and resolved.
+        lock: `ArenaConfig.out_dir`'s lock, already held by the caller (`wbc.arena.results.hold_results_dir`), who
+            writes files of its own there after the run and then gives it back; None: the run takes the lock and
+            gives it back once its files are written.
+
+    Raises:
+        ResultsDirError: a results directory that belongs to another run, or that misses trials at the end (other
+            than those of a controller stopped for its errors), or that another run holds
+            (`wbc.arena.results.LOCK_FILE`), or a file of it that cannot be written (a full disk, a quota, no
+            permission: the message names it, and says that the trials stored are kept for ``--resume``).
+        RecordError: a ``trials.csv`` row refused on `ArenaConfig.resume` without `ArenaConfig.drop_bad_rows`, or
+            a malformed ``run.json``.
+
+    A controller's failure on a trial is not raised: it is recorded (outcome ``controller_error``) and reported in
+    `ArenaResult.controller_errors`.
+    """
+    cfg, specs, scenario, published, bands = plan.cfg, plan.specs, plan.scenario, plan.published, plan.bands
+    trials = list(plan.trials)
+    store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
                          controllers={name: spec.provenance() for name, spec in specs.items()},
                          drop_bad_rows=cfg.drop_bad_rows, lock=lock)
     try:  # the directory stays locked until its summary and report are written (and after, with a caller's lock)

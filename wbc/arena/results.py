@@ -14,7 +14,8 @@ The paths the run will write are checked before any trial is played (`check_out_
 locked (`LOCK_FILE`) from before it reads anything there until it is done: a second run on it, with or without
 ``--resume``, is refused, naming the pid of the one that holds it. A command that writes files of its own beside the
 run's (``wbc paper``: ``paper.txt``, ``paper.json``) takes the lock first (`hold_results_dir`) and hands it to the
-store, so that the directory stays held until those files are written too.
+store, so that the directory stays held until those files are written too; refused or interrupted before the run
+stored anything there, it leaves no directory it created.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ import json
 import os
 import re
 import sys
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -34,11 +35,11 @@ from wbc.arena.identity import RunIdentity
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
-from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, lock_directory, write_text
+from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory_holder, lock_directory, write_text
 from wbc.provenance import provenance
 
-__all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_out_dir", "episode_path", "hold_results_dir",
-           "unwritable"]
+__all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_not_held", "check_out_dir", "episode_path",
+           "hold_results_dir", "unwritable"]
 
 OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "report.md", "push_recovery.png",
                 "ttf.png", "tracking.png")
@@ -109,34 +110,84 @@ def _lock(out_dir: Path) -> DirectoryLock:
     try:
         return lock_directory(out_dir)
     except DirectoryInUse as held:
-        holder = f" (pid {held.pid})" if held.pid is not None else ""
-        raise ResultsDirError(f"{out_dir} is in use by another wbc run{holder}; wait for it to end, or give another "
-                              "--out") from None
+        raise _in_use(out_dir, held) from None
     except OSError as exc:
         raise ResultsDirError(f"{out_dir / LOCK_FILE}: cannot open or lock the results directory's lock file "
                               f"({exc.strerror or exc}); move it away, or choose another --out") from None
 
 
-def _make_dir(out_dir: Path) -> None:
+def _in_use(out_dir: Path, held: DirectoryInUse) -> ResultsDirError:
+    """The refusal of a results directory another process holds: it names the holder's pid where its file has it."""
+    holder = f" (pid {held.pid})" if held.pid is not None else ""
+    return ResultsDirError(f"{out_dir} is in use by another wbc run{holder}; wait for it to end, or give another --out")
+
+
+def check_not_held(out_dir: Path) -> None:
+    """Refuse a results directory another process holds, without taking it (`wbc.output_files.directory_holder`).
+
+    A command that checks its input before it takes its directory (``wbc paper``) asks first, so that a held
+    directory is refused before any controller is built; the lock, taken once the run starts, still refuses a run
+    that took the directory in between.
+
+    Raises:
+        ResultsDirError: another process holds it (the message names its pid), as taking its lock would say.
+    """
+    held = directory_holder(out_dir)
+    if held is not None:
+        raise _in_use(Path(out_dir), held)
+
+
+def _make_dir(out_dir: Path) -> tuple[Path, ...]:
     """Create `out_dir` (and its parents) if missing.
+
+    Returns:
+        The directories this call created, outermost first (none where `out_dir` existed); one that another process
+        created meanwhile is not among them.
 
     Raises:
         ResultsDirError: it cannot be created; the message says to choose another ``--out``.
     """
+    missing = []
+    for folder in (out_dir, *out_dir.parents):
+        if os.path.lexists(folder):
+            break
+        missing.append(folder)
+    made = []
     try:
-        out_dir.mkdir(parents=True, exist_ok=True)
+        for folder in reversed(missing):
+            with contextlib.suppress(FileExistsError):  # made meanwhile by another process: not this call's
+                folder.mkdir()
+                made.append(folder)
+        out_dir.mkdir(parents=True, exist_ok=True)  # refuses an `out_dir` that exists as something else
     except OSError as exc:
+        _remove_made(made)
         raise ResultsDirError(f"{out_dir}: cannot be created ({exc.strerror or exc}); choose another --out, or "
                               "make its parent directory writable") from exc
+    return tuple(made)
 
 
-def hold_results_dir(out_dir: Path) -> DirectoryLock:
+def _remove_made(made: Sequence[Path]) -> None:
+    """Remove the directories `_make_dir` created, innermost first, each only while empty."""
+    for folder in reversed(made):
+        try:
+            folder.rmdir()
+        except OSError:
+            return  # not empty (or gone): it and its parents stay
+
+
+@contextlib.contextmanager
+def hold_results_dir(out_dir: Path) -> Iterator[DirectoryLock]:
     """Hold a results directory (created if missing) for a command that writes files of its own beside a run's.
 
     The lock is the one a `ResultsStore` takes (`LOCK_FILE`); handed to the store (its ``lock``, through
-    `wbc.arena.compare.run_arena`), it is used by the store and outlives it, so that the directory stays held after
-    the run's own files are written, until the caller has written its own and gives the lock back (`release`, or the
-    end of a ``with``). A second run on the directory, with or without ``--resume``, is refused meanwhile.
+    `wbc.arena.compare.play_arena`), it is used by the store and outlives it, so that the directory stays held after
+    the run's own files are written, until the caller has written its own and the ``with`` block ends (or `release`
+    gives it back earlier). A second run on the directory, with or without ``--resume``, is refused meanwhile.
+
+    A block that ends by an exception (a refusal, Ctrl-C) while the directory holds nothing but its lock file, the
+    run having stored nothing there, leaves no trace of a directory this call created: the lock file is removed while
+    still held, then the directory and the parents created with it, each while empty. A directory that existed
+    before stays, and so does one that holds anything else (``trials.csv``, even without a trial in it).
 
     Raises:
         ResultsDirError: `out_dir` is a file, or a file a run writes there is a directory (`check_out_dir`); it
@@ -144,8 +195,31 @@ def hold_results_dir(out_dir: Path) -> DirectoryLock:
     """
     out = Path(out_dir)
     check_out_dir(out)
-    _make_dir(out)
-    return _lock(out)
+    made = _make_dir(out)
+    try:
+        lock = _lock(out)
+    except BaseException:
+        _remove_made(made)  # a lock file there, whoever made it, keeps it
+        raise
+    try:
+        yield lock
+    except BaseException:
+        if made and lock.held and _holds_only_its_lock(out):
+            with contextlib.suppress(OSError):
+                (out / LOCK_FILE).unlink()
+            lock.release()
+            _remove_made(made)
+        raise
+    finally:
+        lock.release()
+
+
+def _holds_only_its_lock(out_dir: Path) -> bool:
+    """Whether `out_dir` holds its lock file and nothing else."""
+    try:
+        return [entry.name for entry in out_dir.iterdir()] == [LOCK_FILE]
+    except OSError:
+        return False
 
 
 _MISSING = object()

@@ -431,40 +431,42 @@ def _reactions(rig: _Rig, proc: subprocess.Popen[str], config: DynamixelArmConfi
     return rows
 
 
-def _emulator_timing(robot: str, seconds: float, latency_ms: float) -> list[EmulatorTimingRow]:
-    """The plant's real-time factor on its own thread, and a sync read's round trip over a pty (this process)."""
+def _emulator_timing(plant: SharedPlant, seconds: float, latency_ms: float) -> list[EmulatorTimingRow]:
+    """The plant's real-time factor on its own thread, and a sync read's round trip over a pty (this process).
+
+    `plant` is built by the caller, before its real-time priority; its thread starts here and inherits it.
+    """
     sdk = require("dynamixel_sdk")
     rows = []
-    with SharedPlant(SharedPlantConfig(robot=robot)) as plant:
-        plant.start_realtime()
-        t0, w0 = plant.time, time.monotonic()
-        time.sleep(seconds)
-        simulated, wall = plant.time - t0, time.monotonic() - w0
-        plant.stop_realtime()
-        rows.append(EmulatorTimingRow(what="plant_realtime_factor", value=simulated / wall, worst=plant.overruns,
-                                      model=1.0))
-        for byte_timing in (False, True):
-            with DynamixelEmulator(plant, DynamixelEmulatorConfig(byte_timing=byte_timing, log_size=0)) as emu:
-                port, packet = sdk_handlers(emu.port, latency_ms)
-                if not port.openPort():
-                    raise BenchError(f"bench arm: could not open the emulator's pty {emu.port}")
-                group = sdk.GroupSyncRead(port, packet, 126, 10)
-                for servo_id in (1, 2, 4):
-                    group.addParam(servo_id)
-                times = []
-                for _ in range(_ROUND_TRIPS):
-                    start = time.perf_counter()
-                    ok = group.txRxPacket() == sdk.COMM_SUCCESS
-                    if ok:
-                        times.append(time.perf_counter() - start)
-                    else:
-                        port.clearPort()
-                port.closePort()
-            wire = 3 * 21 * 10 / 1e6 if byte_timing else 0.0  # three answers of 21 bytes, Return Delay Time 0
-            rows.append(EmulatorTimingRow(
-                what="sync_read_round_trip" + ("_byte_timing" if byte_timing else ""),
-                value=1e3 * float(np.median(times)) if times else float("nan"),
-                worst=1e3 * float(np.percentile(times, 99)) if times else float("nan"), model=1e3 * wire))
+    plant.start_realtime()
+    t0, w0 = plant.time, time.monotonic()
+    time.sleep(seconds)
+    simulated, wall = plant.time - t0, time.monotonic() - w0
+    plant.stop_realtime()
+    rows.append(EmulatorTimingRow(what="plant_realtime_factor", value=simulated / wall, worst=plant.overruns,
+                                  model=1.0))
+    for byte_timing in (False, True):
+        with DynamixelEmulator(plant, DynamixelEmulatorConfig(byte_timing=byte_timing, log_size=0)) as emu:
+            port, packet = sdk_handlers(emu.port, latency_ms)
+            if not port.openPort():
+                raise BenchError(f"bench arm: could not open the emulator's pty {emu.port}")
+            group = sdk.GroupSyncRead(port, packet, 126, 10)
+            for servo_id in (1, 2, 4):
+                group.addParam(servo_id)
+            times = []
+            for _ in range(_ROUND_TRIPS):
+                start = time.perf_counter()
+                ok = group.txRxPacket() == sdk.COMM_SUCCESS
+                if ok:
+                    times.append(time.perf_counter() - start)
+                else:
+                    port.clearPort()
+            port.closePort()
+        wire = 3 * 21 * 10 / 1e6 if byte_timing else 0.0  # three answers of 21 bytes, Return Delay Time 0
+        rows.append(EmulatorTimingRow(
+            what="sync_read_round_trip" + ("_byte_timing" if byte_timing else ""),
+            value=1e3 * float(np.median(times)) if times else float("nan"),
+            worst=1e3 * float(np.percentile(times, 99)) if times else float("nan"), model=1e3 * wire))
     return rows
 
 
@@ -506,7 +508,9 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
         realtime: what the emulator's process asks the OS for (it stands in for the robot's processors).
         host_realtime: what this process asks the OS for before it starts the bus and the legs' link: on a robot
             they run in the I/O process, which asks for real-time scheduling (`wbc.hardware.io_process`). Asked for
-            the rest of the process's life.
+            the rest of the process's life, once everything slow is built (the references in simulation, the plant
+            of the emulators' timing, the legs' robot; the bus's SDK and the compiled check loaded), as the I/O
+            process asks once its robot is built.
 
     Returns:
         The rows of each part (rates, steps on the bus and in simulation for each gain, reactions, the emulators'
@@ -526,86 +530,93 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
                          "rates, e.g. 100,200,400,1000")
     total = len(rates) * (seconds + 1.0) + len(gains) * (_DISCARDS + 1) * (_SETTLE + _REPEATS * (_RECORD + 0.1) + 1.0) \
         + (len(_FAULTS) + 1) * (2 * _REACTION_TIMEOUT + 2.0)
-    proc, where = _start_emulator(robot, total, realtime)
-    print(f"bench arm: the emulator's process: {where.get('realtime')}", file=sys.stderr, flush=True)
-    load_write_check()  # its first compiled call, before a real-time priority: as the I/O process does
-    host = request_realtime(host_realtime).describe() if host_realtime != NO_REALTIME else "nothing asked"
-    print(f"bench arm: this process (the bus's host side): {host}", file=sys.stderr, flush=True)
     desc = get_robot(robot, "actuated")
     stand = stand_command(desc).stacked()
     stowed = desc.nominal_q[12:].copy()
-    rate_rows, step_rows, reaction_rows = [], [], []
-    fault = None
-    try:
-        legs = UnitreeRobot(UnitreeRobotConfig(robot=LEG_WIRES[robot], target_host=where["host"],
-                                               target_port=int(where["port"])))
-        with legs:
-            rig = _Rig(legs, MotorCommand._trusted(stand[:, :12].copy()))
-            hold = MotorCommand.hold(stowed, 20.0, 0.5)
-            for rate in rates:
-                arm = DynamixelArm(DynamixelArmConfig(robot=robot, port=where["pty"], latency_ms=latency_ms,
-                                                      rate_hz=rate, write_deadline=max(0.05, 2.0 / rate)))
-                with arm:
-                    rig.run(arm, hold, 0.3)
-                    before = arm.bus_stats()
-                    t0 = time.monotonic()
-                    rig.run(arm, hold, seconds)
-                    after = arm.bus_stats()
-                    wall = time.monotonic() - t0
-                rate_rows.append(ArmRateRow(
-                    rate_hz=rate, achieved_hz=(after.cycles - before.cycles) / wall,
-                    busy_ms_mean=1e3 * after.busy_mean, busy_ms_max=1e3 * after.busy_max,
-                    period_ms_max=1e3 * after.period_max,
-                    failed_reads=after.failed_transfers - before.failed_transfers, cycles=after.cycles,
-                    faults=len(arm.faults)))
-            for kp, kd in gains:
-                runs, discarded = [], 0
-                while not runs:
-                    arm = DynamixelArm(DynamixelArmConfig(robot=robot, port=where["pty"], latency_ms=latency_ms))
-                    with arm:
-                        series = _step_series(rig, arm, stowed, kp, kd, step)
-                    if not arm.faults:
-                        runs = series
-                    elif discarded < _DISCARDS:
-                        discarded += 1  # a servo of the emulator starved of CPU for long enough to look dead
-                    else:
-                        fault = f"a bus fault latched in {discarded + 1} step series at kp {kp}: {arm.faults[0]}"
-                        break
-                if fault is not None:
-                    break
-                median = np.median(np.array(runs), axis=0)
-                step_rows.append(ArmStepRow(source="bus", kp=kp, kd=kd, rate_hz=arm.config.rate_hz,
-                                            discarded=discarded,
-                                            **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
-                                                       (float(v) for v in median), strict=True))))
-            if fault is None:
-                reaction_rows = _reactions(rig, proc, DynamixelArmConfig(robot=robot, port=where["pty"],
-                                                                         latency_ms=latency_ms), hold)
-    finally:
-        try:
-            proc.stdin.write("stop\n")
-            proc.stdin.flush()
-        except OSError:
-            pass
-        try:
-            out, _ = proc.communicate(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            out = ""
-    tail = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
-    if tail and tail[-1].get("failure"):
-        raise BenchError(f"bench arm: the emulator failed: {tail[-1]['failure']}")
-    bus = tail[-1].get("arm_bus", {}) if tail else {}
-    if fault is not None:
-        raise BenchError(f"bench arm: {fault} (the emulator's bus counts: {bus})")
-    # the references afterwards: simulating here while the bus runs would leave the legs' link unwritten
+    # everything slow is built before this process asks for a real-time priority, as the I/O process builds its robot
+    # first: what runs at that priority holds off every other thread of it on the CPU. The references in simulation
+    # (a MuJoCo model each, its compiled code loaded by the first: ~0.1-0.4 s of CPU) are played here, before the bus
+    # runs, since simulating while it ran would leave the legs' link unwritten
+    references = []
     for kp, kd in gains:
         t, y = _sim_step(robot, stowed, kp, kd, step)
-        step_rows.append(ArmStepRow(source="simulation", kp=kp, kd=kd, rate_hz=500.0,
-                                    **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
-                                               step_metrics(t, y, float(stowed[_ELBOW] + step)), strict=True))))
-    emulator = _emulator_timing(robot, seconds, latency_ms)
+        references.append(ArmStepRow(source="simulation", kp=kp, kd=kd, rate_hz=500.0,
+                                     **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
+                                                step_metrics(t, y, float(stowed[_ELBOW] + step)), strict=True))))
+    require("dynamixel_sdk")  # the bus's SDK, which the first DynamixelArm would import
+    load_write_check()  # its first compiled call
+    with SharedPlant(SharedPlantConfig(robot=robot)) as plant:  # the emulators' own timing's, at the end
+        proc, where = _start_emulator(robot, total, realtime)
+        rate_rows, step_rows, reaction_rows = [], [], []
+        fault = None
+        try:
+            print(f"bench arm: the emulator's process: {where.get('realtime')}", file=sys.stderr, flush=True)
+            # built before the request too, and connected after it: its link's thread inherits the priority
+            legs = UnitreeRobot(UnitreeRobotConfig(robot=LEG_WIRES[robot], target_host=where["host"],
+                                                   target_port=int(where["port"])))
+            host = request_realtime(host_realtime).describe() if host_realtime != NO_REALTIME else "nothing asked"
+            print(f"bench arm: this process (the bus's host side): {host}", file=sys.stderr, flush=True)
+            with legs:
+                rig = _Rig(legs, MotorCommand._trusted(stand[:, :12].copy()))
+                hold = MotorCommand.hold(stowed, 20.0, 0.5)
+                for rate in rates:
+                    arm = DynamixelArm(DynamixelArmConfig(robot=robot, port=where["pty"], latency_ms=latency_ms,
+                                                          rate_hz=rate, write_deadline=max(0.05, 2.0 / rate)))
+                    with arm:
+                        rig.run(arm, hold, 0.3)
+                        before = arm.bus_stats()
+                        t0 = time.monotonic()
+                        rig.run(arm, hold, seconds)
+                        after = arm.bus_stats()
+                        wall = time.monotonic() - t0
+                    rate_rows.append(ArmRateRow(
+                        rate_hz=rate, achieved_hz=(after.cycles - before.cycles) / wall,
+                        busy_ms_mean=1e3 * after.busy_mean, busy_ms_max=1e3 * after.busy_max,
+                        period_ms_max=1e3 * after.period_max,
+                        failed_reads=after.failed_transfers - before.failed_transfers, cycles=after.cycles,
+                        faults=len(arm.faults)))
+                for kp, kd in gains:
+                    runs, discarded = [], 0
+                    while not runs:
+                        arm = DynamixelArm(DynamixelArmConfig(robot=robot, port=where["pty"], latency_ms=latency_ms))
+                        with arm:
+                            series = _step_series(rig, arm, stowed, kp, kd, step)
+                        if not arm.faults:
+                            runs = series
+                        elif discarded < _DISCARDS:
+                            discarded += 1  # a servo of the emulator starved of CPU for long enough to look dead
+                        else:
+                            fault = f"a bus fault latched in {discarded + 1} step series at kp {kp}: {arm.faults[0]}"
+                            break
+                    if fault is not None:
+                        break
+                    median = np.median(np.array(runs), axis=0)
+                    step_rows.append(ArmStepRow(source="bus", kp=kp, kd=kd, rate_hz=arm.config.rate_hz,
+                                                discarded=discarded,
+                                                **dict(zip(("rise_ms", "overshoot_pct", "settle_ms", "final_error_rad"),
+                                                           (float(v) for v in median), strict=True))))
+                if fault is None:
+                    reaction_rows = _reactions(rig, proc, DynamixelArmConfig(robot=robot, port=where["pty"],
+                                                                             latency_ms=latency_ms), hold)
+        finally:
+            try:
+                proc.stdin.write("stop\n")
+                proc.stdin.flush()
+            except OSError:
+                pass
+            try:
+                out, _ = proc.communicate(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                out = ""
+        tail = [json.loads(line) for line in out.splitlines() if line.startswith("{")]
+        if tail and tail[-1].get("failure"):
+            raise BenchError(f"bench arm: the emulator failed: {tail[-1]['failure']}")
+        bus = tail[-1].get("arm_bus", {}) if tail else {}
+        if fault is not None:
+            raise BenchError(f"bench arm: {fault} (the emulator's bus counts: {bus})")
+        emulator = _emulator_timing(plant, seconds, latency_ms)
     return ArmBenchResult(robot=robot, latency_ms=latency_ms, seconds=seconds, step_rad=step, emulator_bus=bus,
-                          rates=tuple(rate_rows), steps=tuple(step_rows), reactions=tuple(reaction_rows),
+                          rates=tuple(rate_rows), steps=tuple(step_rows + references), reactions=tuple(reaction_rows),
                           emulator=tuple(emulator), machine=machine_description(), load_1min=load_1min(),
                           host_realtime=host)

@@ -7,7 +7,10 @@ breakdown of where each contender fails and the push-recovery curve), then compu
 writes ``paper.txt`` (what the command prints, `wbc.tools.paper.format.format_paper_table`) and ``paper.json`` beside
 the arena's files. The results directory is held (`wbc.arena.results.hold_results_dir`) from before the arena reads it
 until both are written: a ``wbc paper --resume`` or ``wbc compare --resume`` on it meanwhile is refused, as during the
-trials.
+trials. Everything that can refuse the run for its input (the contenders and their files, the scenario, the options,
+a directory another run holds) is checked before the directory is created (`wbc.arena.compare.plan_arena`), as
+``wbc compare`` checks it: a refused ``wbc paper`` leaves no directory behind, and one refused or interrupted after,
+before it stored anything, removes the directory it created.
 
 The default size, `DEFAULT_TRIALS` trials x `DEFAULT_SEEDS` seed per band, fits a 2-core machine (the documentation's
 results pages give measured run times); the paper's protocol is 5 seeds and 2000 trials: ``--seeds 5 --trials
@@ -22,9 +25,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from wbc.arena.compare import ArenaConfig, run_arena
+from wbc.arena.compare import ArenaConfig, plan_arena, play_arena
 from wbc.arena.report import compare_pair
-from wbc.arena.results import hold_results_dir, unwritable
+from wbc.arena.results import check_not_held, hold_results_dir, unwritable
 from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.output_files import write_text
@@ -95,11 +98,15 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
     """Play a paper table's protocol and compute its comparisons; write the arena's files, ``paper.txt/json``.
 
     Raises:
-        UnknownNameError: an unknown table or ``--contender`` key.
+        UnknownNameError: an unknown table, ``--contender`` key or controller.
+        PolicyFileError: a contender's ``policy:PATH`` file that is missing or malformed.
+        PluginError: a contender's plug-in that cannot be imported, or whose factory raises.
         ScenarioError: the scenario file is invalid.
-        ConfigError: the scenario is for another robot than the table's, or options out of range.
+        ConfigError: the scenario (or a contender) is for another robot than the table's, or options out of range.
         ResultsDirError: `out_dir` holds another run (or, without `resume`, any run), or another process holds it
             (its lock, held here until ``paper.txt`` and ``paper.json`` are written).
+
+    Every refusal but that of a directory holding another run comes before `out_dir` is created.
     """
     spec = TABLES[cfg.table]
     contenders = resolve_contenders(spec, cfg.contenders, crouched=cfg.crouched)
@@ -115,14 +122,17 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         published = False
     played_rows = [c for c in contenders if c.controller is not None]
     out = cfg.out_dir or default_out_dir(spec.name)
+    arena_cfg = ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
+                            seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
+                            resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows, progress=cfg.progress,
+                            trial_time_limit_s=cfg.trial_time_limit_s, isolated=cfg.isolated)
+    check_not_held(out)  # before any controller is built
+    # checked before the directory is created or taken: a run refused for its input leaves none behind
+    plan = plan_arena(arena_cfg)
     # held across the trials and the paper files: a resumed run on the directory must not interleave with them
     with hold_results_dir(out) as lock:
         start = time.perf_counter()
-        arena = run_arena(ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
-                                      seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out,
-                                      workers=cfg.workers, resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows,
-                                      progress=cfg.progress, trial_time_limit_s=cfg.trial_time_limit_s,
-                                      isolated=cfg.isolated), lock=lock)
+        arena = play_arena(plan, lock=lock)
         wall = time.perf_counter() - start
         records = arena.records
         by_controller: dict[str, list[TrialRecord]] = {}
