@@ -356,7 +356,7 @@ class ResultsStore:
         if lock is not None and not (lock.held and lock.path.resolve() == (self.dir / LOCK_FILE).resolve()):
             raise ValueError(f"ResultsStore({self.dir}): the lock given is "
                              + ("released" if not lock.held else f"another directory's ({lock.path})")
-                             + "; give the one hold_results_dir returned for this directory, still held")
+                             + "; give the one hold_results_dir gives for this directory, still held")
         check_out_dir(self.dir)
         _make_dir(self.dir)
         # held until `close`, taken before anything in the directory is read or rewritten: a second run on it would
