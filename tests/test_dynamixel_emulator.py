@@ -30,7 +30,7 @@ from wbc.hardware.dynamixel.protocol import (
     ERR_RESULT_FAIL,
     Instruction,
 )
-from wbc.hardware.dynamixel.units import CURRENT_UNIT, TORQUE_CONSTANT, position_gains_to_pd
+from wbc.hardware.dynamixel.units import CURRENT_UNIT, TORQUE_CONSTANT, VELOCITY_UNIT, position_gains_to_pd
 from wbc.hardware.dynamixel.wx200_bus import WX200_ARM_JOINTS, servo_spec
 from wbc.hardware.emulators import BusFault, DynamixelEmulator, DynamixelEmulatorConfig, SharedPlant
 from wbc.hardware.emulators.dynamixel import TICK_PERIOD
@@ -201,6 +201,36 @@ def test_sync_write_of_goal_current_reaches_the_plant_and_the_log(bus):
     last = [p for p in bus.emu.packets() if p.instruction == Instruction.SYNC_WRITE][-1]
     assert [(w.id, w.name, w.value) for w in last.writes] == [(1, "goal_current", 100), (2, "goal_current", -200),
                                                               (4, "goal_current", 300)]
+
+
+def test_a_sync_read_is_logged_with_the_values_the_plant_gave(bus):
+    """Each answer's registers are logged decoded, signed where the control table says, as the SDK received them."""
+    bus.current_mode()
+    assert bus.sync_write("goal_current", 2, {1: 300, 2: 200, 4: -500}) == sdk.COMM_SUCCESS
+    bus.plant.step(0.05)  # the arm moves under those torques: velocities and currents of both signs
+    q, dq, tau = bus.plant.read_arm()
+    group, result = bus.sync_read()
+    assert result == sdk.COMM_SUCCESS
+    logged = [p for p in bus.emu.packets() if p.instruction == Instruction.SYNC_READ][-1]
+    names = ("present_current", "present_velocity", "present_position")
+    assert [(a.id, a.name) for a in logged.answers] == [(i, name) for i in JOINT_IDS for name in names]
+    for joint in WX200_ARM_JOINTS:
+        i, j, servos = joint.servo_id, joint.house_index - 12, len(joint.servo_ids)
+        assert logged.answered("present_position", i) == [joint.to_ticks(q[j])]
+        assert logged.answered("present_velocity", i) == [round(joint.sign * dq[j] / VELOCITY_UNIT)]
+        amps = joint.sign * tau[j] / servos / TORQUE_CONSTANT
+        assert logged.answered("present_current", i) == [round(amps / CURRENT_UNIT)]
+        for name in names:  # what the SDK took off the wire, read as the register's two's complement
+            reg = XM430_W350[name]
+            assert logged.answered(name, i) == [reg.decode(reg.encode(group.getData(i, reg.address, reg.size)))]
+    assert min(logged.answered("present_velocity")) < 0 < max(logged.answered("present_velocity"))
+    assert min(logged.answered("present_current")) < 0 < max(logged.answered("present_current"))
+    current, _, _ = bus.read(4, "present_current", 2)
+    last = bus.emu.packets()[-1]
+    assert last.instruction == Instruction.READ and last.answered("present_current") == [current]
+    assert [(a.id, a.address) for a in last.answers] == [(4, REG["present_current"])]
+    assert bus.sync_write("goal_current", 2, {1: 0, 2: 0, 4: 0}) == sdk.COMM_SUCCESS
+    assert bus.emu.packets()[-1].answers == ()  # a write's status carries no register
 
 
 def test_the_shadow_acts_on_writes_to_the_shoulder_and_never_answers_for_it(bus):

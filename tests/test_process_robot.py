@@ -30,8 +30,15 @@ import pytest
 from wbc.control.stand import StandController
 from wbc.errors import IoProcessStopped, NoStateStreamError, PortBusyError, RobotLinkError, TargetRefusedError
 from wbc.hardware.capabilities import HeldJoints
-from wbc.hardware.dynamixel import DynamixelArmConfig
-from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
+from wbc.hardware.dynamixel.current_law import CurrentLaw
+from wbc.hardware.emulators import (
+    LoggedPacket,
+    RobotEmulator,
+    RobotEmulatorConfig,
+    UnitreeEmulator,
+    UnitreeEmulatorConfig,
+)
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.io_process import (
     IoBlocks,
@@ -105,8 +112,53 @@ def test_contract_legs_and_arm_actuated_and_the_same_robot_as_in_process() -> No
         assert emu.failure is None
 
 
+def _undamped_goals(packets: list[LoggedPacket], law: CurrentLaw, kd: float, ids: tuple[int, ...]) -> list[str]:
+    """The writes of goal currents in `packets` that are not the damping law (kp 0, kd `kd`) of a state the bus read.
+
+    The bus loop writes each joint the law of the state its cycle's joint read took, or 0 where that state is older
+    than its write deadline (`DynamixelArm`). The law's goals for each joint read come from the values its answers
+    carried, through the bus's own `CurrentLaw` (`state`, `torque`, `goal_units`): the same integers through the same
+    arithmetic and the same rounding, so a goal matches exactly, whatever the arm's speed. A write is the law of the
+    last complete joint read before it, or of an earlier one: a read whose tries all failed leaves the bus its previous
+    state, and the late answer to a read that was tried again has the ID and length of the retry's answer, so the bus
+    takes it instead and takes each later answer one read behind. It takes answers in the order they were sent, though:
+    each write is checked against the reads from the one the write before it matched to the last one logged before it,
+    and matches the earliest of them that gives its goals (never one later than the read the bus used).
+
+    Returns:
+        One line per write that matches none of those reads: the packet's index, its goals and the law's goals of the
+        latest reads it was checked against.
+    """
+    rows = MotorCommand.damping(len(ids), kd).stacked()
+    expected: list[np.ndarray] = []  # the law's goal currents of each complete joint read, in log order
+    taken = 0  # the read the latest checked write matched
+    bad = []
+    for k, packet in enumerate(packets):
+        if all(packet.answered("present_velocity", i) for i in ids):
+            ticks, velocity, current = (np.array([packet.answered(name, i)[0] for i in ids])
+                                        for name in ("present_position", "present_velocity", "present_current"))
+            q, dq, _ = law.state(ticks, velocity, current)
+            expected.append(law.goal_units(law.torque(rows, q, dq)))
+        goals = [(ids.index(w.id), w.value) for w in packet.writes if w.name == "goal_current"]
+        if all(value == 0 for _, value in goals):
+            continue  # no goal, or the goal of a joint whose state is stale (the start-up's too)
+        match = next((j for j in range(taken, len(expected))
+                      if all(value in (0, expected[j][n]) for n, value in goals)), None)
+        if match is None:
+            bad.append(f"packet {k} ({packet.instruction_name}): goal currents {[v for _, v in goals]}; the damping "
+                       f"law of the latest reads: {[e.tolist() for e in expected[taken:][-3:]]}")
+        else:
+            taken = match
+    return bad
+
+
 def test_a_locked_arm_in_the_io_process_obeys_the_safety_layer_on_the_wire() -> None:
-    """The layer's damping of a locked arm travels with the command it goes with (waiting, after an e-stop)."""
+    """The layer's damping of a locked arm travels with the command it goes with (waiting, after an e-stop).
+
+    Every goal current the arm's bus receives is the damping law of the velocity the servos reported, or 0: checked
+    against the log of what they answered, it holds however fast the arm sinks and however late a busy machine runs
+    the bus loop. Started 0.8 rad from its hold, the arm would get the stall current from the hold's kp 20.
+    """
     with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
         qpos = emu.plant.sim.data.qpos.copy()
         qpos[-3:] = QuadrupedArmConfig().stowed_q + np.array([0.8, 0.7, -0.7])  # far from its hold
@@ -115,30 +167,37 @@ def test_a_locked_arm_in_the_io_process_obeys_the_safety_layer_on_the_wire() -> 
                                   legs_port=emu.address[1], arm=DynamixelArmConfig(port=emu.port, **ARM))
         robot = ProcessRobot(cfg)
         assert isinstance(robot, HeldJoints)
-        safe = SafeRobot(robot, SafetyConfig(position_table="a1", on_event=lambda event: None))
+        safety = SafetyConfig(position_table="a1", on_event=lambda event: None)
+        safe = SafeRobot(robot, safety)
+        # the layer's damping of the locked arm and the bus's own (before the first command, past the write deadline)
+        # are one law here: a goal is checked against it whichever of the two sent it
+        assert safety.arm_damping_kd == cfg.arm.damping_kd
+        law = DynamixelArm(cfg.arm).law  # the bus's law (built, never connected)
+        ids = tuple(joint.servo_id for joint in cfg.arm.joints)
 
-        def goal_currents() -> list[int]:
-            return [w.value for p in emu.arm.packets() for w in p.writes if w.name == "goal_current"]
+        def goal_currents(since: int = 0) -> list[int]:
+            return [w.value for p in emu.arm.packets()[since:] for w in p.writes if w.name == "goal_current"]
 
         with safe:
             start = time.monotonic()
-            # waiting or damped: the layer sends damping only; 0.3 s of it, and on until the emulator's thread, however
-            # late a busy machine runs it, has logged some of the arm's writes (bounded: 10 s)
+            # waiting: the layer sends damping only; 0.3 s of it, and on until the emulator's thread, however late a
+            # busy machine runs it, has logged some of the arm's writes (bounded: 10 s)
             while time.monotonic() < start + 0.3 or (not goal_currents() and time.monotonic() < start + 10.0):
                 safe.write(MotorCommand.damping(12, 3.0))
                 safe.advance(0.02)
-            goals = goal_currents()
-            # damping of an arm that sinks (kd 0.5 x its speed), not the stall current (855) kp 20 asks of 0.8 rad
-            assert goals and max(abs(v) for v in goals) < 0.4 * 855
+            assert safe.safety_state is SafetyState.WAITING
+            assert goal_currents()
+            assert _undamped_goals(emu.arm.packets(), law, safety.arm_damping_kd, ids) == []
             safe.estop()
-            emu.arm.clear_log()
+            estop = len(emu.arm.packets())
             for k in range(500):  # 10 ticks, and on until the arm's writes since the e-stop are logged (bounded)
                 safe.write(MotorCommand.hold(np.zeros(12), 30.0, 1.0))  # the controller goes on; the layer damps
                 safe.advance(0.02)
-                if k >= 9 and goal_currents():
+                if k >= 9 and goal_currents(estop):
                     break
-            goals = goal_currents()
-            assert goals and max(abs(v) for v in goals) < 0.4 * 855
+            assert safe.safety_state is SafetyState.DAMPED
+            assert goal_currents(estop)
+            assert _undamped_goals(emu.arm.packets(), law, safety.arm_damping_kd, ids) == []
         assert emu.failure is None
 
 

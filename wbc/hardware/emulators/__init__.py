@@ -12,7 +12,7 @@ from wbc.hardware.emulators.bus_faults import BUS_FAULT_DEFAULTS, BusFault
 from wbc.hardware.emulators.dynamixel import BusStats, DynamixelEmulator, DynamixelEmulatorConfig
 from wbc.hardware.emulators.faults import FRAME_FAULTS, STATE_FAULTS, Fault, FaultSet, apply_state_faults, mangle_frame
 from wbc.hardware.emulators.logged_command import LoggedCommand
-from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, RegisterWrite
+from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, RegisterValue, RegisterWrite
 from wbc.hardware.emulators.plant import PlantLegs, SharedPlant, SharedPlantConfig
 from wbc.hardware.emulators.robot_emulator import LEG_WIRES, RobotEmulator, RobotEmulatorConfig
 from wbc.hardware.emulators.servo import EmulatedServo
@@ -37,6 +37,7 @@ __all__ = [
     "LoggedPacket",
     "PlantLegs",
     "RegisterRead",
+    "RegisterValue",
     "RegisterWrite",
     "Reply",
     "RobotEmulator",

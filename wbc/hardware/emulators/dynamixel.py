@@ -4,10 +4,10 @@ A client opens `DynamixelEmulator.port` (the pty's slave, e.g. ``/dev/pts/7``) a
 (``PortHandler(port)`` of dynamixel_sdk, unmodified) and speaks Protocol 2.0. The emulator registers its pty while it
 holds it (`wbc.hardware.pty_registry`): the serial-port policy opens a pty without consent only if an emulator serves
 it (``registered_everywhere`` says whether other processes can see it too). One thread (a `DeviceThread`,
-`wbc.hardware.device_thread`) reads the master side, decodes each instruction packet (`wbc.hardware.dynamixel`), logs
-it (`packets()`), hands it to the servos it addresses (`EmulatedServo`: the control table and its rules) and writes
-their status packets back, in ID-list order. Its cycle is the servos' own time, every `THREAD_PERIOD` and after every
-packet; `thread_stats()` gives its period, late cycles and overruns.
+`wbc.hardware.device_thread`) reads the master side, decodes each instruction packet (`wbc.hardware.dynamixel`), hands
+it to the servos it addresses (`EmulatedServo`: the control table and its rules), logs it with the register values its
+answers carry (`packets()`) and writes the servos' status packets back, in ID-list order. Its cycle is the servos' own
+time, every `THREAD_PERIOD` and after every packet; `thread_stats()` gives its period, late cycles and overruns.
 
 The packet handling does not depend on that thread. Built with ``in_process=True`` the emulator opens no pty and
 starts no thread: `receive` takes the bytes a client wrote and hands every answer, with when it reaches the client,
@@ -112,7 +112,7 @@ from wbc.hardware.dynamixel.wx200_bus import WX200_ARM_JOINTS, WX200_SERVOS, Arm
 from wbc.hardware.emulators.arm_plant import ArmPlant
 from wbc.hardware.emulators.bus_faults import BUS_FAULT_DEFAULTS, BusFault, fault_ids
 from wbc.hardware.emulators.faults import FaultSet
-from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, decode_writes
+from wbc.hardware.emulators.logged_packet import LoggedPacket, RegisterRead, decode_values, decode_writes
 from wbc.hardware.emulators.servo import EmulatedServo
 from wbc.hardware.pty_registry import register_pty, unregister_pty
 from wbc.hardware.serial_port_policy import IN_PROCESS_PREFIX
@@ -233,6 +233,7 @@ class DynamixelEmulator:
         self.faults = FaultSet(BusFault, BUS_FAULT_DEFAULTS)
         self.stats = BusStats()
         self._log: collections.deque[LoggedPacket] = collections.deque(maxlen=self.config.log_size)
+        self._answered: list[tuple[int, int, bytes]] = []  # (servo ID, address, data) of the running packet's answers
         self._lock = threading.RLock()
         self._reader = PacketReader()
         self._master: int | None = None
@@ -392,7 +393,10 @@ class DynamixelEmulator:
         self._wakeup()
 
     def packets(self) -> list[LoggedPacket]:
-        """The decoded instruction packets received so far (the latest `log_size`), oldest first."""
+        """The decoded instruction packets received so far (the latest `log_size`), oldest first.
+
+        Each carries the register values its answers carried (`LoggedPacket.answers`).
+        """
         with self._lock:
             return list(self._log)
 
@@ -522,14 +526,17 @@ class DynamixelEmulator:
             return
         self.stats.packets += 1
         with self._lock:
-            if self.config.log_size:
-                self._log.append(self._logged(pkt, now))
-            listeners = self._listeners(now, baud)
-            if not listeners:
-                self.stats.unheard += 1
-                return
-            if self._execute(pkt, listeners, now):
-                self._update_plant()
+            self._answered.clear()
+            try:
+                listeners = self._listeners(now, baud)
+                if not listeners:
+                    self.stats.unheard += 1
+                    return
+                if self._execute(pkt, listeners, now):
+                    self._update_plant()
+            finally:
+                if self.config.log_size:  # logged once run, with what it answered, and before the answers go out
+                    self._log.append(self._logged(pkt, now))
             # the answers go out once the servos have acted: a client that reads a status sees the plant updated
             self._flush()
 
@@ -589,7 +596,7 @@ class DynamixelEmulator:
                 self._answer(owner, owner.status_error(ERR_DATA_LENGTH))
                 return False
             self._refresh(now, (owner,))
-            error, data = owner.read(address, length)
+            error, data = self._read(owner, address, length)
             self._answer(owner, owner.status_error(error), data)
             return False
         if inst == Instruction.WRITE:
@@ -650,7 +657,7 @@ class DynamixelEmulator:
                 if inst in (Instruction.FAST_SYNC_READ, Instruction.FAST_BULK_READ):
                     break  # the chain of a fast read stops at the first servo that does not answer
                 continue
-            error, data = servo.read(address, length)
+            error, data = self._read(servo, address, length)
             answers.append((servo, servo.status_error(error), data))
         if inst in (Instruction.SYNC_READ, Instruction.BULK_READ):
             for servo, error, data in answers:
@@ -660,6 +667,13 @@ class DynamixelEmulator:
         return False
 
     # -- answers ----------------------------------------------------------------------------------------------
+    def _read(self, servo: EmulatedServo, address: int, length: int) -> tuple[int, bytes]:
+        """`servo`'s READ of `length` bytes at `address`: (error number, data); the data is kept for the log."""
+        error, data = servo.read(address, length)
+        if data and self.config.log_size:
+            self._answered.append((servo.id, address, data))
+        return error, data
+
     def _answer_write(self, servo: EmulatedServo, error: int) -> None:
         if servo.get("status_return_level") >= 2:
             self._answer(servo, servo.status_error(error))
@@ -836,8 +850,9 @@ class DynamixelEmulator:
                 reads = tuple(RegisterRead(id=i, address=a, length=n) for i, a, n in parse_bulk_read_params(pkt.params))
         except PacketError:
             pass  # logged with its raw parameters only
+        answers = tuple(v for i, address, data in self._answered for v in decode_values(self.table, i, address, data))
         return LoggedPacket(time=now, id=pkt.id, instruction=pkt.instruction, params=pkt.params, writes=writes,
-                            reads=reads)
+                            reads=reads, answers=answers)
 
     def _fault_ids(self, fault: BusFault, active: dict | None = None) -> frozenset[int]:
         """The servo IDs an active fault names (none if it is not active)."""
