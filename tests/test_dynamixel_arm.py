@@ -407,6 +407,42 @@ def test_close_damps_then_parks_each_joint_in_a_position_hold(emu: DynamixelEmul
     assert (emu.plant.arm_command()[0].kp > 0).all()
 
 
+def test_a_park_the_elbow_misses_is_tried_again_until_it_holds(emu: DynamixelEmulator,
+                                                                monkeypatch: pytest.MonkeyPatch) -> None:
+    """The elbow neither hears nor answers its park's first three tries (noise on the bus, a connector that lets go
+    for an instant; to the host, as an answer that came too late). The park's transfers are tried again as at
+    start-up, and every joint ends parked; tried once more only, the elbow was left limp."""
+    arm = _arm(emu, close_damping=0.1)
+    arm.connect()
+    _keep_writing(arm, _hold_with_offset(arm), 0.1)
+    park = DynamixelArm._park
+
+    def elbow_writes() -> list[str]:
+        return [w.name for p in emu.packets() if p.instruction == Instruction.WRITE for w in p.writes if w.id == 4]
+
+    def late_park(self: DynamixelArm, bus: SdkBus) -> None:
+        emu.inject(BusFault.SILENT_ID, 4)
+        sleep = self.clock.sleep
+
+        def wait(seconds: float) -> None:  # the host's waits (the port's, the pause before a try again)
+            if len(elbow_writes()) >= 3:  # its third try is on the bus: it hears the next
+                emu.clear(BusFault.SILENT_ID)
+            sleep(seconds)
+
+        monkeypatch.setattr(self.clock, "sleep", wait)
+        park(self, bus)
+
+    monkeypatch.setattr(DynamixelArm, "_park", late_park)
+    emu.clear_log()
+    arm.close()
+    for servo_id in JOINTS:
+        assert emu.register(servo_id, "operating_mode") == OperatingMode.CURRENT_BASED_POSITION
+        assert emu.register(servo_id, "torque_enable") == 1 and emu.register(servo_id, "bus_watchdog") == 0
+    writes = elbow_writes()
+    assert writes[:4] == ["bus_watchdog"] * 4 and writes[4] != "bus_watchdog"  # its first write, made four times
+    assert (emu.plant.arm_command()[0].kp > 0).all()  # a position hold on every joint
+
+
 # -- fault case 10: bounded retries, then the torque policy, read at the emulator ---------------------------------
 def _fault_rig(emu: DynamixelEmulator, arm: DynamixelArm, fault: BusFault,
                value: object = None) -> tuple[float, list[LoggedPacket]]:

@@ -52,7 +52,7 @@ class DynamixelArmConfig:
         held_ticks: goal positions of the servos without a model joint (wrist angle, wrist rotate, gripper) [ticks];
             None holds a servo where it is. The default holds the wrist at 0 rad, the pose the model lumps it at.
         held_profile_velocity: Profile Velocity of the held servos, so that they reach their goal slowly [0.229 rpm].
-        connect_retries: how often a start-up transfer that timed out is tried again.
+        connect_retries: how often a start-up or park transfer (`close`) that timed out is tried again.
         connect_timeout: how long `connect` waits for the first state once the bus thread runs [s].
         servos: the servos on the bus (the WX200's, as Interbotix configures them).
         joints: the model's joints on the bus.

@@ -43,6 +43,8 @@ torque still on. The arm is then limp: only the gearbox's friction holds it, and
 avoids that on purpose: it damps for `close_damping` seconds, then parks each joint it can still read. Parking
 means: torque off for three register writes (an instant), current-based position mode, goal = where the joint is,
 goal current `park_current_a`, torque on, watchdog off. The arm then holds its pose, compliantly, without the host.
+Each of those transfers that times out is tried again, as at start-up (`connect_retries`): the park is made once, with
+no bus cycle to keep, and a late answer must not leave a joint limp.
 
 Start-up (`connect`). Every servo is pinged. The backend checks each model number, the drive modes and the
 shadow's Secondary ID against the WX200's bus map, and that no hardware error is latched. It refuses to connect
@@ -385,7 +387,7 @@ class DynamixelArm(Robot):
         return f"ID {servo_id} ({self._names.get(servo_id, '?')})"
 
     def _retry(self, bus: SdkBus, call: Callable[[], Any], result_of: Callable[[Any], int]) -> Any:
-        """`call()` again after a flush while its result is a timeout, at most `connect_retries` times."""
+        """`call()` again after a flush while it times out, at most `connect_retries` times (start-up, park)."""
         out = call()
         for _ in range(self.config.connect_retries):
             if result_of(out) != COMM_RX_TIMEOUT:
@@ -718,7 +720,8 @@ class DynamixelArm(Robot):
                 steps = (("bus_watchdog", 0), ("torque_enable", 0),
                          ("operating_mode", int(OperatingMode.CURRENT_BASED_POSITION)), ("goal_current", park_units))
                 ok = all(self._park_write(bus, servo_id, name, value) for name, value in steps)
-                read = bus.read(servo_id, _ADDR["present_position"], 4) if ok else None
+                read = self._retry(bus, lambda i=servo_id: bus.read(i, _ADDR["present_position"], 4),
+                                   lambda r: r.result) if ok else None
                 ok = ok and read is not None and read.ok
                 if ok:
                     ticks = read.value(0, 4, signed=True)
@@ -735,11 +738,9 @@ class DynamixelArm(Robot):
         self._say(text)
 
     def _park_write(self, bus: SdkBus, servo_id: int, name: str, value: int) -> bool:
+        # tried again as a start-up transfer is: a park made once, at the close, with no cycle to keep; one late answer
+        # more than the bus cycle's retries allow (a loaded host, a slow servo) must not leave the joint limp
         reg = XM430_W350[name]
-        result, error = bus.write(servo_id, reg.address, reg.size, value)
-        if result == COMM_RX_TIMEOUT:
-            self.clock.sleep(self.config.retry_wait_s)
-            bus.flush()
-            result, error = bus.write(servo_id, reg.address, reg.size, value)
+        result, error = self._retry(bus, lambda: bus.write(servo_id, reg.address, reg.size, value), lambda r: r[0])
         return result == COMM_SUCCESS and not error & ~ALERT
 
