@@ -306,3 +306,32 @@ def test_a_trunk_without_a_collision_box_is_an_error_that_says_what_to_add(monke
     monkeypatch.setattr(tail, "robot_urdf", lambda desc: '<robot name="r"><link name="trunk"/></robot>')
     assert main(["analyze", "tail"]) == 2
     assert "give that link a <collision><geometry><box" in capsys.readouterr().err
+
+
+def test_a_reader_that_closes_the_output_ends_the_command_quietly() -> None:
+    """``wbc controllers | head -1``: the reader closes the pipe before the list is written. The command ends as one
+    that SIGPIPE ends (141), without a word: it printed a BrokenPipeError traceback and exited 1, read by a script as
+    a controller's failure."""
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "controllers"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=root)
+    proc.stdout.close()  # before the interpreter has even started: every line meets a closed pipe
+    err = proc.stderr.read().decode()
+    proc.stderr.close()
+    assert proc.wait(timeout=60) == 141 and err == ""
+
+
+def test_a_broken_pipe_that_is_not_the_output_is_not_taken_for_a_closed_reader(monkeypatch: pytest.MonkeyPatch) -> None:
+    import importlib
+
+    cli = importlib.import_module("wbc.cli.main")
+
+    def broken(args):
+        raise BrokenPipeError("a socket's")
+
+    monkeypatch.setitem(cli.HANDLERS, "controllers", broken)
+    with pytest.raises(BrokenPipeError, match="a socket's"):
+        main(["controllers"])

@@ -229,6 +229,26 @@ def test_an_interrupted_run_without_out_names_the_directory_it_wrote_and_resume_
     assert "(and 1 stored before, resumed: 2 in all)" in printed
 
 
+def test_a_run_interrupted_once_every_trial_is_stored_says_that_resume_only_writes_its_summary(short, tmp_path, capsys,
+                                                                                             monkeypatch):
+    import wbc.arena.compare as compare
+
+    summarize = compare.summarize
+
+    def interrupted(*args, **kwargs):  # Ctrl-C after the last trial, as the summary is made
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(compare, "summarize", interrupted)
+    out = tmp_path / "out"
+    assert main(_run(short, out)) == 130
+    assert _last_line(capsys) == (f"wbc: interrupted; every trial is stored in {out}, its summary and report are not "
+                                  "yet written: the same command with --resume writes them")
+    assert not (out / "summary.json").exists()
+    monkeypatch.setattr(compare, "summarize", summarize)
+    assert main([*_run(short, out), "--resume"]) == 0  # as the line says
+    assert "\n0 trials played in " in capsys.readouterr().out and (out / "summary.json").is_file()
+
+
 @pytest.mark.parametrize(("command", "patched", "default"), [
     (["compare", "stand", "stand-noarm", "--scenario", "short.toml"], "run_arena", "short-stand-stand-noarm-"),
     (["paper", "table1"], "run_paper_table", "paper-table1-"),

@@ -14,6 +14,7 @@ import argparse
 import dataclasses
 import json
 import os
+import select
 import signal
 import sys
 import threading
@@ -912,7 +913,24 @@ def _interrupted_run(args: argparse.Namespace) -> str:
     if not (Path(out) / "trials.csv").is_file():
         return f"; no trial was stored yet ({out} holds no trials.csv): the same command starts the run afresh"
     again = "--resume" if getattr(args, "out", None) else f"--resume --out {out}"
+    if _every_trial_stored(Path(out)):
+        return (f"; every trial is stored in {out}, its summary and report are not yet written: the same command with "
+                f"{again} writes them")
     return f"; the trials finished are stored in {out}: the same command with {again} plays the rest"
+
+
+def _every_trial_stored(out: Path) -> bool:
+    """Whether `out`'s ``trials.csv`` holds a trusted row of every trial its ``run.json`` plans (False if unsure)."""
+    from wbc.arena.identity import RunIdentity
+    from wbc.arena.trial_record import scan_csv
+
+    try:
+        run = RunIdentity.load(out / "run.json")
+        stored = {(r.controller, r.band, r.seed, r.trial) for r in scan_csv(out / "trials.csv").records}
+    except (WbcError, OSError):
+        return False
+    planned = {(c, b, s, t) for c in run.controllers for b in run.bands for s in run.seeds for t in run.trials_played}
+    return planned <= stored
 
 
 def _interrupted_training(args: argparse.Namespace) -> str:
@@ -1424,6 +1442,27 @@ def _say(text: str) -> None:
             os.close(devnull)
 
 
+def _stdout_reader_gone() -> bool:
+    """Whether standard output is a pipe whose reader has closed it (``wbc ... | head``, once `head` has its lines)."""
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLOUT)
+        return any(events & select.POLLERR for _, events in poller.poll(0))
+    except (OSError, ValueError, AttributeError):  # closed, or not a file (a test's capture)
+        return False
+
+
+def _quiet_stdout() -> None:
+    """Standard output to the null device: what is left in its buffer, and the flush at exit, then go nowhere."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):
+        pass
+    finally:
+        os.close(devnull)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``wbc`` console script.
 
@@ -1435,8 +1474,9 @@ def main(argv: list[str] | None = None) -> int:
         each on stderr) or a hardware trial lost its robot's link (`hw_run`), 2 for a `WbcError` (its message
         printed to stderr), 130 when interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal is closed; a run's
         finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
-        or which DAgger rounds, its run directory keeps). A usage error exits with status 2 from the parser, after
-        its usage message.
+        or which DAgger rounds, its run directory keeps), 141 without a word when the reader of its standard output
+        closed it (``| head``), as for a command that SIGPIPE ends. A usage error exits with status 2 from the
+        parser, after its usage message.
     """
     args = build_parser().parse_args(argv)
     try:
@@ -1449,6 +1489,11 @@ def main(argv: list[str] | None = None) -> int:
         _say("wbc: interrupted" + (_interrupted_run(args) if args.handler in _RESUMABLE else
                                    _interrupted_training(args)))
         return 130
+    except BrokenPipeError:
+        if not _stdout_reader_gone():
+            raise  # another pipe's: a fault to see
+        _quiet_stdout()
+        return 128 + signal.SIGPIPE
 
 
 if __name__ == "__main__":
