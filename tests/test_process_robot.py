@@ -57,7 +57,11 @@ from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand
 
 ROOT = Path(__file__).resolve().parents[1]
-ARM = dict(latency_ms=4.0)  # the arm emulator answers from a thread of this process (tests/test_dynamixel_arm.py)
+# The arm emulator's servos answer from a thread of this process (tests/test_dynamixel_arm.py), which a busy machine can
+# keep from running for longer than the default watchdog (0.1 s), while the I/O process's bus runs at its real-time
+# priority: the bus then found every servo silent, latched the fault and parked no joint at its close (seen once
+# beside busy loops). A real servo is not starved so; no test here is about the watchdog.
+ARM = dict(latency_ms=4.0, watchdog_s=1.0)
 
 
 def _legs(address: tuple[str, int], **extra: object) -> HardwareRobotConfig:
