@@ -117,6 +117,18 @@ def test_actuated_joins_joints_limits_states_and_splits_commands() -> None:
     assert legs.closed_count == arm.closed_count == 1
 
 
+def test_the_legs_close_first_then_the_arm() -> None:
+    """The legs' close damps them from their next frame on; the arm's takes its damping and its park (0.2 s and more),
+    during which legs closed after it would hold their last command until their write deadline."""
+    robot, legs, arm, _ = _pair()
+    order: list[str] = []
+    legs._close = lambda: order.append("legs")
+    arm._close = lambda: order.append("arm")
+    robot.connect()
+    robot.close()
+    assert order == ["legs", "arm"]
+
+
 def test_locked_holds_the_arm_at_its_stowed_pose_whatever_the_controller_sends() -> None:
     robot, legs, arm, _ = _pair("locked")
     assert robot.num_joints == 12 and robot.joint_names == legs.joint_names
