@@ -186,6 +186,11 @@ def _figure(value: float, spec: str) -> str:
     return format(value, spec)
 
 
+def _cpu_time(ms: float) -> str:
+    """A CPU time per step that keeps its figures at any size: ``120 us`` below a millisecond, ``20.5 ms`` above."""
+    return f"{ms * 1e3:.0f} us" if ms < 1.0 else f"{ms:,.1f} ms"
+
+
 def _count(n: int, noun: str) -> str:
     """``1 trial``, ``2 trials``."""
     return f"{n} {noun}{'' if n == 1 else 's'}"
@@ -237,10 +242,10 @@ def print_bench_train(result: TrainBenchResult) -> None:
           f"({result.physics_steps_per_s:,.0f} physics steps/s)")
     print(f"  rollout only   : {result.rollout_only_control_steps_per_s:>10,.0f} control steps/s (physics limit)")
     print(f"  env efficiency : {100 * result.env_efficiency:>9.0f} %  "
-          f"({result.python_ms_per_step:.1f} ms of Python per policy step)")
+          f"({_cpu_time(result.python_ms_per_step)} of Python per policy step)")
     print(f"  CPU-time bound : {result.cpu_bound_control_steps_per_s:>10,.0f} control steps/s with the cores to "
           f"itself (physics alone {result.cpu_bound_physics_only_control_steps_per_s:,.0f}; CPU per step: "
-          f"physics {result.physics_cpu_ms_per_step:.0f} ms, Python {result.python_cpu_ms_per_step:.1f} ms)")
+          f"physics {_cpu_time(result.physics_cpu_ms_per_step)}, Python {_cpu_time(result.python_cpu_ms_per_step)})")
     ref = result.reference
     if ref is not None:
         target, at = TRAIN_TARGET
