@@ -78,7 +78,7 @@ def test_exact_alpha_ratio_agrees_with_mujocos_mass_matrix():
 
 def test_unknown_names_list_the_valid_ones(capsys):
     assert main(["analyze", "tail", "--robot", "spot"]) == 2
-    assert "a1-wx200, go1-arm" in capsys.readouterr().err
+    assert "a1-wx200 (or a1), go1-arm (or go1)" in capsys.readouterr().err
     assert main(["bench", "sim", "--arm", "floppy"]) == 2
     assert "actuated, locked, none" in capsys.readouterr().err
 
@@ -258,7 +258,7 @@ def no_worker(monkeypatch):
 
 @pytest.mark.parametrize(("option", "value", "message"), [
     ("--controller", "nosuch", "wbc: error: unknown controller 'nosuch'; valid controllers: "),
-    ("--robot", "foo", "wbc: error: unknown robot 'foo'; valid robots: a1-wx200, go1-arm"),
+    ("--robot", "foo", "wbc: error: unknown robot 'foo'; valid robots: a1-wx200 (or a1), go1-arm (or go1)"),
 ])
 def test_bench_mpc_refuses_an_unknown_name_before_it_spawns_its_worker(option, value, message, no_worker, capsys):
     assert main(["bench", "mpc", option, value, "--seconds", "0.1", "--rounds", "1", "--no-reference"]) == 2

@@ -17,16 +17,16 @@ from typing import Any
 
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
 from wbc.arena.identity import MAX_SEED, MAX_TRIAL_TIME_LIMIT_S, MAX_TRIALS, MIN_TRIAL_TIME_LIMIT_S
+from wbc.cli.robot_names import ROBOT_NAMES_HELP
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES
 from wbc.hardware.realtime import DEFAULT_RT_PRIORITY
-from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
+from wbc.hardware.unitree import TRANSPORTS
 from wbc.input_files import short
 from wbc.learned.train.stages import BASELINES, RECIPE_VARIANTS, TASKS
 from wbc.mpc.qp_solvers import QP_SOLVERS
 from wbc.robots.description import ARM_MODES
-from wbc.robots.registry import ROBOTS
 from wbc.scenario.scenario import MAX_DURATION_S
 from wbc.tools.bench.mpc import DEFAULT_ROUNDS, MAX_ROUNDS
 from wbc.tools.paper import DEFAULT_SEEDS as PAPER_DEFAULT_SEEDS
@@ -48,8 +48,6 @@ MAX_SEEDS = 10_000
 MAX_HOURS_S = 4 * 3600.0
 """Longest a measurement or an emulator may be asked to run (``--seconds``) [s]: four hours."""
 
-_ROBOT_NAMES_HELP = ", ".join(f"{arm} (or {wire})" for wire, arm in DESCRIPTIONS.items())
-"""``hw check`` and ``hw run`` take a robot by either name: its own (go1-arm) or its legs' wire (go1)."""
 _TRANSPORT_HELP = (f"the link's datagram channel, one of: {', '.join(TRANSPORTS)} (default udp: our socket; sdk: "
                    "the vendor's Go1 SDK, installed with the hardware extra, carrying the same checked frames)")
 
@@ -292,7 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_analyze_tail_parser(analyze: _Commands) -> None:
     """``wbc analyze tail``: the tail analysis of the model."""
     tail = analyze.add_parser("tail", help="the paper's CoM shift and body/arm acceleration ratio, from the model")
-    tail.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    tail.add_argument("--robot", default="a1-wx200",
+                      help=f"one of: {ROBOT_NAMES_HELP}; its arm is analysed either way (default a1-wx200)")
     tail.add_argument("--json", action="store_true", help="print JSON")
     tail.set_defaults(handler="analyze tail")
 
@@ -314,7 +313,9 @@ def _add_analyze_posture_parser(analyze: _Commands) -> None:
     posture = analyze.add_parser("posture", help="trunk height and speed of controllers standing and walking, flat "
                                  "ground, no pushes (is the comparison at the same posture?)")
     posture.add_argument("controllers", nargs="+", help=_NAMES_HELP)
-    posture.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    posture.add_argument("--robot", default="a1-wx200",
+                         help=f"one of: {ROBOT_NAMES_HELP}; the controllers' arm modes say whether its arm is there "
+                         "(default a1-wx200)")
     posture.add_argument("--walk", type=bounded_float(-3.0, 3.0, unit="m/s"), default=0.3,
                          help="forward speed of the walking command, -3..3 [m/s] (a scenario's vx range)")
     posture.add_argument("--duration", type=_EPISODE_S, default=6.0,
@@ -326,7 +327,8 @@ def _add_analyze_posture_parser(analyze: _Commands) -> None:
 def _add_bench_sim_parser(bench: _Commands) -> None:
     """``wbc bench sim``: physics steps per second."""
     sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")
-    sim.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    sim.add_argument("--robot", default="a1-wx200",
+                     help=f"one of: {ROBOT_NAMES_HELP}; --arm says whether its arm is there (default a1-wx200)")
     sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
     sim.add_argument("--batch", type=bounded_int(1, 65_536), default=64,
                      help="environments in the batched rollout, 1..65536, as many as half the available memory holds "
@@ -342,7 +344,9 @@ def _add_bench_sim_parser(bench: _Commands) -> None:
 def _add_bench_mpc_parser(bench: _Commands) -> None:
     """``wbc bench mpc``: the MPC's solve times and closed-loop speed."""
     mpc = bench.add_parser("mpc", help="MPC solve times, whole-body tick, closed-loop real-time factor")
-    mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    mpc.add_argument("--robot", default="a1-wx200",
+                     help=f"one of: {ROBOT_NAMES_HELP}; the controller's arm mode says whether its arm is there "
+                     "(default a1-wx200)")
     mpc.add_argument("--controller", default="mpc")
     mpc.add_argument("--seconds", type=_MEASURE_S, default=4.0, help="closed-loop time measured [s] (up to 4 h)")
     mpc.add_argument("--rounds", type=_ROUNDS, default=DEFAULT_ROUNDS,
@@ -393,7 +397,9 @@ def _add_bench_hw_parser(bench: _Commands) -> None:
                            description="Run a UnitreeRobot against a UnitreeEmulator (lockstep) in its own process "
                            "on 127.0.0.1 and time the link: the interval between sends, a command's round trip to "
                            "the state that answers it, the link thread's CPU time per period, rejected frames.")
-    bhw.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
+    bhw.add_argument("--robot", default="go1",
+                     help=f"one of: {ROBOT_NAMES_HELP}; its legs' link alone is measured, either name (the arm's bus "
+                     "is bench arm's) (default go1)")
     bhw.add_argument("--seconds", type=_MEASURE_S, default=3.0,
                      help="how long the link is measured [s] (default 3, at most 4 h)")
     bhw.add_argument("--rate", type=_LINK_RATE, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
@@ -434,7 +440,8 @@ def _add_bench_latency_parser(bench: _Commands) -> None:
                             "at which each controller stands still and survives a push.")
     blat.add_argument("--controllers", nargs="+", default=["stand", "mpc"], help="controllers (default stand mpc)")
     blat.add_argument("--robot", default=None,
-                      help=f"the wire's robot, one of: {', '.join(DESCRIPTIONS)} (default go1)")
+                      help=f"the wire's robot, one of: {ROBOT_NAMES_HELP}; its legs' wire alone is measured, either "
+                      "name (default go1)")
     blat.add_argument("--scenario", default="scenarios/push.toml", help="scenario of the margin trials")
     blat.add_argument("--trials", type=bounded_int(1, 1000), default=2,
                       help="standing trials per margin test, 1..1000 (default 2)")
@@ -450,7 +457,9 @@ def _add_bench_arm_parser(bench: _Commands) -> None:
                             "real-time RobotEmulator in its own process: the bus loop's achieved rate at each "
                             "requested rate, and the elbow's closed-loop step response beside the same step in pure "
                             "simulation.")
-    barm.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(DESCRIPTIONS.values())}")
+    barm.add_argument("--robot", default="a1-wx200",
+                      help=f"one of: {ROBOT_NAMES_HELP}; its arm is measured, either name, its legs holding a stand "
+                      "(default a1-wx200)")
     barm.add_argument("--seconds", type=_MEASURE_S, default=2.0,
                       help="how long each rate runs [s] (default 2, at most 4 h)")
     barm.add_argument("--rates", default="100,200,400,1000",
@@ -473,7 +482,9 @@ def _add_hw_emulate_parser(hws: _Commands) -> None:
                              "the pty), and the counts (commands decoded, rejects by reason, replies; the arm's "
                              "packets) when it stops (Ctrl-C or --seconds).")
     emulate.add_argument("--robot", default="go1",
-                         help=f"one of: {', '.join((*DESCRIPTIONS, *DESCRIPTIONS.values()))} (default go1)")
+                         help=f"one of: {ROBOT_NAMES_HELP}; the legs' name (a1, go1) serves the bare quadruped unless "
+                         "--arm says otherwise, the arm's name (a1-wx200, go1-arm) needs --arm locked or actuated "
+                         "(default go1)")
     emulate.add_argument("--arm", default=None,
                          help="none (the bare quadruped; the default with a1 and go1), locked (its arm on the trunk, "
                          "held) or actuated (the arm on its own bus: a pty speaking Dynamixel Protocol 2.0); a1-wx200 "
@@ -507,7 +518,8 @@ def _add_hw_check_parser(hws: _Commands) -> None:
                            "what it refuses), link and bus statistics, rejected frames. A target outside "
                            "127.0.0.0/8, or an --arm-port that is not a pseudo-terminal, needs --allow-hardware and "
                            "a typed confirmation (or --yes).")
-    check.add_argument("--robot", default="go1", help=f"one of: {_ROBOT_NAMES_HELP} (default go1)")
+    check.add_argument("--robot", default="go1",
+                       help=f"one of: {ROBOT_NAMES_HELP}; the arm is read with --arm-port, either name (default go1)")
     check.add_argument("--target", required=True, metavar="HOST:PORT",
                        help="the robot's (or an emulator's) IPv4 address and UDP port, e.g. 127.0.0.1:PORT")
     check.add_argument("--local", default=None, metavar="HOST:PORT",
@@ -540,7 +552,8 @@ def _add_hw_run_parser(hws: _Commands) -> None:
                            "2 for an error; 130 when interrupted (Ctrl-C, SIGTERM, a closed terminal).")
     hwrun.add_argument("ctrl", help=f"controller (its variant for --arm is played): one of {_NAMES_HELP}")
     hwrun.add_argument("--robot", default=None,
-                       help=f"one of: {_ROBOT_NAMES_HELP} (default: the scenario's robot)")
+                       help=f"one of: {ROBOT_NAMES_HELP}; --arm says whether its arm is there, either name "
+                       "(default: the scenario's robot)")
     hwrun.add_argument("--arm", default=None,
                        help=f"arm mode on the robot: {', '.join(HARDWARE_ARM_MODES)} (default: the controller's; "
                        "actuated needs --arm-port; locked with --arm-port holds the arm by its servos)")
@@ -800,7 +813,7 @@ def _add_check_controller_parser(sub: _Commands) -> None:
     chk.add_argument("name", help=f"the controller: {_NAMES_HELP}")
     add_controller_file_options(chk, repeatable=False)
     chk.add_argument("--robot", action=_AppendOnce, default=None, help=f"check on this robot only (repeatable; one of: "
-                     f"{', '.join(ROBOTS)}; default: every robot it claims)")
+                     f"{ROBOT_NAMES_HELP}; default: every robot it claims)")
     chk.add_argument("--seconds", type=_EPISODE_S, default=None, help="closed-loop run per robot and arm mode [s], "
                      f"up to {MAX_DURATION_S:g} (default 0.5; with --scenario the trial's duration)")
     chk.add_argument("--scenario", default=None, metavar="FILE", help="play this scenario's first trial (first band, "
