@@ -300,6 +300,25 @@ def test_every_command_of_the_parser_has_a_handler():
     assert sorted(handlers(build_parser())) == sorted(HANDLERS)
 
 
+def test_every_option_of_every_command_has_a_help_line_that_names_its_default():
+    import argparse
+
+    from wbc.cli.parser import build_parser
+
+    def options(parser, path):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    yield from options(sub, f"{path} {name}")
+            elif action.option_strings and not isinstance(action, argparse._HelpAction):
+                yield path, action
+
+    missing = [f"{path} {action.option_strings[0]}" for path, action in options(build_parser(), "wbc")
+               if not action.help
+               or action.default not in (None, False) and "default" not in action.help]
+    assert not missing, f"options without help, or whose help does not name their default: {missing}"
+
+
 def test_a_trunk_without_a_collision_box_is_an_error_that_says_what_to_add(monkeypatch, capsys):
     import wbc.tools.tail as tail
 

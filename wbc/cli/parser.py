@@ -299,12 +299,13 @@ def _add_analyze_tail_parser(analyze: _Commands) -> None:
 def _add_analyze_arm_momentum_parser(analyze: _Commands) -> None:
     """``wbc analyze arm-momentum``: the arm's momentum against the pushes'."""
     arm = analyze.add_parser("arm-momentum", help="the arm's angular momentum against the pushes' angular impulse")
-    arm.add_argument("--scenario", default="scenarios/push.toml")
-    arm.add_argument("--band", default="ood")
-    arm.add_argument("--controller", default="mpc")
+    arm.add_argument("--scenario", default="scenarios/push.toml",
+                     help="scenario file whose pushes are measured (default scenarios/push.toml)")
+    arm.add_argument("--band", default="ood", help="the scenario's band to play (default ood)")
+    arm.add_argument("--controller", default="mpc", help="the controller that plays the trials (default mpc)")
     arm.add_argument("--trials", type=_TRIALS, default=5, help=f"trials per seed, 1..{MAX_TRIALS} (default 5)")
-    arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS}")
-    arm.add_argument("--json", action="store_true")
+    arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS} (default 1)")
+    arm.add_argument("--json", action="store_true", help="print JSON (a list, one object per trial)")
     arm.set_defaults(handler="analyze arm-momentum")
 
 
@@ -317,9 +318,11 @@ def _add_analyze_posture_parser(analyze: _Commands) -> None:
                          help=f"one of: {ROBOT_NAMES_HELP}; the controllers' arm modes say whether its arm is there "
                          "(default a1-wx200)")
     posture.add_argument("--walk", type=bounded_float(-3.0, 3.0, unit="m/s"), default=0.3,
-                         help="forward speed of the walking command, -3..3 [m/s] (a scenario's vx range)")
+                         help="forward speed of the walking command, -3..3 [m/s] (a scenario's vx range; default "
+                         "0.3)")
     posture.add_argument("--duration", type=_EPISODE_S, default=6.0,
-                         help=f"episode length, up to {MAX_DURATION_S:g} [s]; the means cover its second half")
+                         help=f"episode length, up to {MAX_DURATION_S:g} [s]; the means cover its second half "
+                         "(default 6)")
     posture.add_argument("--json", action="store_true", help="print JSON")
     posture.set_defaults(handler="analyze posture")
 
@@ -329,14 +332,14 @@ def _add_bench_sim_parser(bench: _Commands) -> None:
     sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")
     sim.add_argument("--robot", default="a1-wx200",
                      help=f"one of: {ROBOT_NAMES_HELP}; --arm says whether its arm is there (default a1-wx200)")
-    sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)} (default actuated)")
     sim.add_argument("--batch", type=bounded_int(1, 65_536), default=64,
                      help="environments in the batched rollout, 1..65536, as many as half the available memory holds "
-                          "(each keeps every step's state)")
+                          "(each keeps every step's state; default 64)")
     sim.add_argument("--threads", type=_THREADS, default=None,
                      help=f"threads for the batched rollout, 1..{MAX_THREADS} (default: all)")
     sim.add_argument("--json", action="store_true", help="print JSON")
-    sim.add_argument("--terrain", default="flat", help="flat or fractal")
+    sim.add_argument("--terrain", default="flat", help="flat or fractal (default flat)")
     sim.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measured alongside")
     sim.set_defaults(handler="bench sim")
 
@@ -347,14 +350,16 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
     mpc.add_argument("--robot", default="a1-wx200",
                      help=f"one of: {ROBOT_NAMES_HELP}; the controller's arm mode says whether its arm is there "
                      "(default a1-wx200)")
-    mpc.add_argument("--controller", default="mpc")
-    mpc.add_argument("--seconds", type=_MEASURE_S, default=4.0, help="closed-loop time measured [s] (up to 4 h)")
+    mpc.add_argument("--controller", default="mpc",
+                     help="the MPC controller timed: mpc, one of its variants or a plug-in's (default mpc)")
+    mpc.add_argument("--seconds", type=_MEASURE_S, default=4.0,
+                     help="closed-loop time measured [s] (default 4, at most 4 h)")
     mpc.add_argument("--rounds", type=_ROUNDS, default=DEFAULT_ROUNDS,
                      help=f"timed walks, each between two measurements of the references (1..{MAX_ROUNDS}; "
                           f"default {DEFAULT_ROUNDS}): the ratios are their medians, with their spread")
     mpc.add_argument("--threaded-blas", action="store_true",
                      help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
-    mpc.add_argument("--json", action="store_true")
+    mpc.add_argument("--json", action="store_true", help="print JSON")
     mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
     mpc.add_argument("--qp-solver", default="daqp", choices=tuple(QP_SOLVERS),
                      help="the closed loop's QP backend (default daqp; mpc-tail solves its own QP with daqp only); "
@@ -365,29 +370,31 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
 def _add_bench_sweep_parser(bench: _Commands) -> None:
     """``wbc bench sweep``: an arena sweep's throughput."""
     sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
-    sweep.add_argument("--scenario", default="scenarios/push.toml")
-    sweep.add_argument("--controller", default="stand")
-    sweep.add_argument("--trials", type=_TRIALS, default=10, help=f"trials per band, 1..{MAX_TRIALS}")
+    sweep.add_argument("--scenario", default="scenarios/push.toml",
+                       help="scenario file of the sweep (default scenarios/push.toml)")
+    sweep.add_argument("--controller", default="stand", help="the controller of every trial (default stand)")
+    sweep.add_argument("--trials", type=_TRIALS, default=10, help=f"trials per band, 1..{MAX_TRIALS} (default 10)")
     sweep.add_argument("--workers", type=_WORKERS, default=None,
                        help=f"worker processes of the arena, and threads of the physics rollout measured beside it, "
                        f"1..{MAX_WORKERS} (default: all cores)")
     sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
-    sweep.add_argument("--json", action="store_true")
+    sweep.add_argument("--json", action="store_true", help="print JSON")
     sweep.set_defaults(handler="bench sweep")
 
 
 def _add_bench_train_parser(bench: _Commands) -> None:
     """``wbc bench train``: the training env's throughput."""
     btrain = bench.add_parser("train", help="training env throughput: control steps per second, random actions")
-    btrain.add_argument("--envs", type=bounded_int(1, 65_536), default=1024, help="parallel environments, 1..65536")
-    btrain.add_argument("--threads", type=_THREADS, default=2, help=f"rollout threads, 1..{MAX_THREADS}")
-    btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    btrain.add_argument("--envs", type=bounded_int(1, 65_536), default=1024,
+                        help="parallel environments, 1..65536 (default 1024)")
+    btrain.add_argument("--threads", type=_THREADS, default=2, help=f"rollout threads, 1..{MAX_THREADS} (default 2)")
+    btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)} (default actuated)")
     btrain.add_argument("--terrain", default="scenario", choices=("scenario", "flat"),
-                        help="scenario (the push scenario's ground) or flat")
+                        help="scenario (the push scenario's ground) or flat (default scenario)")
     btrain.add_argument("--steps", type=bounded_int(1, 1_000_000), default=50,
-                        help="policy steps per measurement, 1..1000000")
+                        help="policy steps per measurement, 1..1000000 (default 50)")
     btrain.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measurement")
-    btrain.add_argument("--json", action="store_true")
+    btrain.add_argument("--json", action="store_true", help="print JSON")
     btrain.set_defaults(handler="bench train")
 
 
@@ -442,7 +449,8 @@ def _add_bench_latency_parser(bench: _Commands) -> None:
     blat.add_argument("--robot", default=None,
                       help=f"the wire's robot, one of: {ROBOT_NAMES_HELP}; its legs' wire alone is measured, either "
                       "name (default go1)")
-    blat.add_argument("--scenario", default="scenarios/push.toml", help="scenario of the margin trials")
+    blat.add_argument("--scenario", default="scenarios/push.toml",
+                      help="scenario of the margin trials (default scenarios/push.toml)")
     blat.add_argument("--trials", type=bounded_int(1, 1000), default=2,
                       help="standing trials per margin test, 1..1000 (default 2)")
     blat.add_argument("--no-wire", action="store_true", help="margins only (no emulator)")
