@@ -300,6 +300,15 @@ def test_every_command_of_the_parser_has_a_handler():
     assert sorted(handlers(build_parser())) == sorted(HANDLERS)
 
 
+def test_bench_arm_help_says_what_runs_whatever_its_rates_and_how_long(capsys):
+    with pytest.raises(SystemExit):
+        main(["bench", "arm", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "Then, whatever --rates and --seconds say: the elbow's closed-loop step response at 200 Hz" in text
+    assert "the reactions at 200 Hz" in text and "about 20 s more than the rates' own time" in text
+    assert "the step responses and the reactions run at 200 Hz whatever it says" in text
+
+
 def test_every_option_of_every_command_has_a_help_line_that_names_its_default():
     import argparse
 
