@@ -1459,9 +1459,11 @@ def main(argv: list[str] | None = None) -> int:
         argv: the arguments after the program name (default: ``sys.argv[1:]``).
 
     Returns:
-        The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
-        each on stderr) or a hardware trial lost its robot's link (`hw_run`), 2 for a `WbcError` (its message
-        printed to stderr), 130 when interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal is closed; a run's
+        The exit status: 0 on success, 1 when a controller errored on some trials of a run or comparison (outcome
+        ``controller_error``, one line each on stderr; a fall is a result, not a failure), a hardware trial's
+        controller errored or its robot's link was lost (`hw_run`), a controller check did not pass, or the safety
+        layer would refuse the state `hw_check` read (or no state came), 2 for a `WbcError` (its message printed to
+        stderr), 130 when interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal is closed; a run's
         finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
         or which DAgger rounds, its run directory keeps), 141 without a word when the reader of its standard output
         closed it (``| head``), as for a command that SIGPIPE ends. A usage error exits with status 2 from the
