@@ -527,12 +527,13 @@ def _add_hw_check_parser(hws: _Commands) -> None:
                            description="Connect the robot (the legs' UnitreeRobot, and the arm's DynamixelArm with "
                            "--arm-port), read states for a while through the safety layer, sending only damping "
                            "(legs Kp 0, the arm's joints damped; no controller's command is sent; connecting the arm "
-                           "may switch its servos to current mode in EEPROM, torque off first), and print the state: "
-                           "joints with their ranges (marked margin beyond one but within the layer's joint margin, "
-                           "OUT beyond both), motor modes and temperatures, IMU roll and pitch, battery, remote "
-                           "buttons, the layer's verdict (would a ramp start from here, or what it refuses), link and "
-                           "bus statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port that is "
-                           "not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
+                           "switches its joint servos to current mode in EEPROM, torque off first, which after a close "
+                           "is every connect, as the close parks them in a hold that needs no host), and print the "
+                           "state: joints with their ranges (marked margin beyond one but within the layer's joint "
+                           "margin, OUT beyond both), motor modes and temperatures, IMU roll and pitch, battery, "
+                           "remote buttons, the layer's verdict (would a ramp start from here, or what it refuses), "
+                           "link and bus statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port "
+                           "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
     check.add_argument("--robot", default="go1",
                        help=f"one of: {ROBOT_NAMES_HELP}; the arm is read with --arm-port, either name (default go1)")
     check.add_argument("--target", required=True, metavar="HOST:PORT",
