@@ -405,8 +405,8 @@ def _add_bench_hw_parser(bench: _Commands) -> None:
                            "on 127.0.0.1 and time the link: the interval between sends, a command's round trip to "
                            "the state that answers it, the link thread's CPU time per period, rejected frames.")
     bhw.add_argument("--robot", default="go1",
-                     help=f"one of: {ROBOT_NAMES_HELP}; its legs' link alone is measured, either name (the arm's bus "
-                     "is bench arm's) (default go1)")
+                     help=f"one of: {ROBOT_NAMES_HELP}; either name measures its legs' link alone (bench arm "
+                     "measures the arm's bus; default go1)")
     bhw.add_argument("--seconds", type=_MEASURE_S, default=3.0,
                      help="how long the link is measured [s] (default 3, at most 4 h)")
     bhw.add_argument("--rate", type=_LINK_RATE, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
@@ -447,8 +447,8 @@ def _add_bench_latency_parser(bench: _Commands) -> None:
                             "at which each controller stands still and survives a push.")
     blat.add_argument("--controllers", nargs="+", default=["stand", "mpc"], help="controllers (default stand mpc)")
     blat.add_argument("--robot", default=None,
-                      help=f"the wire's robot, one of: {ROBOT_NAMES_HELP}; its legs' wire alone is measured, either "
-                      "name (default go1)")
+                      help=f"the wire's robot, one of: {ROBOT_NAMES_HELP}; either name measures its legs' wire "
+                      "alone (default go1)")
     blat.add_argument("--scenario", default="scenarios/push.toml",
                       help="scenario of the margin trials (default scenarios/push.toml)")
     blat.add_argument("--trials", type=bounded_int(1, 1000), default=2,
@@ -472,7 +472,7 @@ def _add_bench_arm_parser(bench: _Commands) -> None:
                             "more than the rates' own time (each rate --seconds and 0.3 s): --seconds 1 --rates 100 "
                             "about 22 s.")
     barm.add_argument("--robot", default="a1-wx200",
-                      help=f"one of: {ROBOT_NAMES_HELP}; its arm is measured, either name, its legs holding a stand "
+                      help=f"one of: {ROBOT_NAMES_HELP}; either name measures its arm, the legs holding a stand "
                       "(default a1-wx200)")
     barm.add_argument("--seconds", type=_MEASURE_S, default=2.0,
                       help="how long each rate runs, and the shared plant's measurement [s] (default 2, at most 4 h)")
@@ -535,7 +535,8 @@ def _add_hw_check_parser(hws: _Commands) -> None:
                            "link and bus statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port "
                            "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
     check.add_argument("--robot", default="go1",
-                       help=f"one of: {ROBOT_NAMES_HELP}; the arm is read with --arm-port, either name (default go1)")
+                       help=f"one of: {ROBOT_NAMES_HELP}; either name reads the arm only with --arm-port (default "
+                       "go1)")
     check.add_argument("--target", required=True, metavar="HOST:PORT",
                        help="the robot's (or an emulator's) IPv4 address and UDP port, e.g. 127.0.0.1:PORT")
     check.add_argument("--local", default=None, metavar="HOST:PORT",
