@@ -20,12 +20,18 @@ __all__ = ["ROBOT_ALIASES", "ROBOT_NAMES_HELP", "robot_name", "wire_name"]
 ROBOT_ALIASES: dict[str, str] = {wire: name for wire, name in DESCRIPTIONS.items() if name in ROBOTS}
 """The legs' name of each robot -> its registry name: ``go1`` -> ``go1-arm``."""
 
-ROBOT_NAMES_HELP = ", ".join(
-    f"{name} (or {', '.join(a for a, named in ROBOT_ALIASES.items() if named == name)})"
-    if name in ROBOT_ALIASES.values() else name for name in ROBOTS)
+
+def _both_names(name: str) -> str:
+    """``go1-arm (or go1)``: a registry name with its aliases, as the refusal lists it (`UnknownNameError`)."""
+    aliases = [alias for alias, named in ROBOT_ALIASES.items() if named == name]
+    return f"{name} (or {', '.join(aliases)})" if aliases else name
+
+
+ROBOT_NAMES_HELP = ", ".join(_both_names(name) for name in ROBOTS)
 """The accepted names for a help line: ``a1-wx200 (or a1), go1-arm (or go1)``."""
 
 _WIRES = {name: wire for wire, name in DESCRIPTIONS.items()}
+"""Registry name -> the legs' wire its robot speaks: ``go1-arm`` -> ``go1``."""
 
 
 def robot_name(name: str) -> str:
