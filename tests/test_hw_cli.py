@@ -196,7 +196,7 @@ def test_check_marks_a_joint_beyond_its_range_apart_from_one_beyond_the_safety_m
         check = read(*args, **kwargs)
         q, names = check.state.q.copy(), list(check.joint_names)
         rr, fr = names.index("RR_calf_joint"), names.index("FR_calf_joint")
-        q[rr] = check.lower[rr] - check.margin / 3  # a little past its stop, as the walkthrough's was
+        q[rr] = check.lower[rr] - check.margin / 3  # a little past its stop, within the margin
         q[fr] = check.upper[fr] + 2 * check.margin  # past range and margin
         return replace(check, state=replace(check.state, q=q))
 
