@@ -363,6 +363,15 @@ def test_print_bench_train_shows_the_scaled_target_only_when_measured(capsys):
     assert "reference      :" not in _printed(printers.print_bench_train, _train(reference=False), capsys)
 
 
+def test_print_bench_train_keeps_a_small_cpu_time_per_step(capsys):
+    text = _printed(printers.print_bench_train, _train(), capsys)
+    assert "CPU per step: physics 95.0 ms, Python 20.5 ms)" in text and "(24.4 ms of Python per policy step)" in text
+    few = dataclasses.replace(_train(), physics_cpu_ms_per_step=0.12, python_cpu_ms_per_step=0.4,
+                              python_ms_per_step=0.45)  # two envs: rounded to ms, the physics read 0
+    text = _printed(printers.print_bench_train, few, capsys)
+    assert "CPU per step: physics 120 us, Python 400 us)" in text and "(450 us of Python per policy step)" in text
+
+
 def test_print_bench_mpc_shows_the_tick_and_the_references(capsys):
     text = _printed(printers.print_bench_mpc, _mpc(), capsys)
     assert "N = 10" in text and "median 1.25 ms, p99 3.50 ms (setup median 0.75 ms)" in text

@@ -78,7 +78,7 @@ def test_exact_alpha_ratio_agrees_with_mujocos_mass_matrix():
 
 def test_unknown_names_list_the_valid_ones(capsys):
     assert main(["analyze", "tail", "--robot", "spot"]) == 2
-    assert "a1-wx200, go1-arm" in capsys.readouterr().err
+    assert "a1-wx200 (or a1), go1-arm (or go1)" in capsys.readouterr().err
     assert main(["bench", "sim", "--arm", "floppy"]) == 2
     assert "actuated, locked, none" in capsys.readouterr().err
 
@@ -258,7 +258,7 @@ def no_worker(monkeypatch):
 
 @pytest.mark.parametrize(("option", "value", "message"), [
     ("--controller", "nosuch", "wbc: error: unknown controller 'nosuch'; valid controllers: "),
-    ("--robot", "foo", "wbc: error: unknown robot 'foo'; valid robots: a1-wx200, go1-arm"),
+    ("--robot", "foo", "wbc: error: unknown robot 'foo'; valid robots: a1-wx200 (or a1), go1-arm (or go1)"),
 ])
 def test_bench_mpc_refuses_an_unknown_name_before_it_spawns_its_worker(option, value, message, no_worker, capsys):
     assert main(["bench", "mpc", option, value, "--seconds", "0.1", "--rounds", "1", "--no-reference"]) == 2
@@ -298,6 +298,34 @@ def test_every_command_of_the_parser_has_a_handler():
             yield parser._defaults["handler"]
 
     assert sorted(handlers(build_parser())) == sorted(HANDLERS)
+
+
+def test_bench_arm_help_says_what_runs_whatever_its_rates_and_how_long(capsys):
+    with pytest.raises(SystemExit):
+        main(["bench", "arm", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "Then, whatever --rates and --seconds say: the elbow's closed-loop step response at 200 Hz" in text
+    assert "the reactions at 200 Hz" in text and "about 20 s more than the rates' own time" in text
+    assert "the step responses and the reactions run at 200 Hz whatever it says" in text
+
+
+def test_every_option_of_every_command_has_a_help_line_that_names_its_default():
+    import argparse
+
+    from wbc.cli.parser import build_parser
+
+    def options(parser, path):
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for name, sub in action.choices.items():
+                    yield from options(sub, f"{path} {name}")
+            elif action.option_strings and not isinstance(action, argparse._HelpAction):
+                yield path, action
+
+    missing = [f"{path} {action.option_strings[0]}" for path, action in options(build_parser(), "wbc")
+               if not action.help
+               or action.default not in (None, False) and "default" not in action.help]
+    assert not missing, f"options without help, or whose help does not name their default: {missing}"
 
 
 def test_a_trunk_without_a_collision_box_is_an_error_that_says_what_to_add(monkeypatch, capsys):

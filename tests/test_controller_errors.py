@@ -7,7 +7,8 @@ cannot give), are compared with ``stand``: every ``stand`` trial is recorded exa
 controller, the trial and the plug-in's own file and line, and the command ends with status 1 and one line per failing
 controller. A controller failing on K trials in a row is stopped while the others finish, on the local pool and on
 Ray, and a resumed run plays none of the recorded failures again. The slow and the saturating plug-ins fail nothing:
-their late and clamped ticks are counted in every row and warned about, alike on both executors.
+their late and clamped ticks are counted in every row and warned about, alike on both executors. Nor does the limp
+one, which falls in every trial: a fall is a result, and the command exits 0.
 """
 
 import dataclasses
@@ -54,6 +55,9 @@ BROKEN = {
     "slow": ("acts in 21 ms", "pass", '__import__("time").sleep(0.021)'),
     "saturating": ("asks for 1e5 N m", "pass",
                    "out = MotorCommand(q=out.q, dq=out.dq, kp=out.kp, kd=out.kd, tau=np.full(15, 1e5))"),
+    # not an error either: limp (no gain, no torque), it falls in every trial
+    "limp": ("lets go of every joint", "pass",
+             "out = MotorCommand(q=out.q, dq=out.dq, kp=np.zeros(15), kd=np.zeros(15), tau=np.zeros(15))"),
     # fails every other trial this process plays (a counter kept across the controllers it builds)
     "flaky": ("fails every other trial", "pass",
               "if self.ticks == 1 and next(COUNT) % 2: raise ValueError(\"odd trial\")  # MARK"),
@@ -233,6 +237,18 @@ def test_slow_and_saturating_plugins_are_counted_not_failed_on_the_local_pool_an
     for name in names:
         assert _metrics(results["local"], name) == _metrics(results["ray"], name)
     assert _metrics(results["ray"], "stand") == _metrics(stand_alone, "stand")
+
+
+def test_a_controller_that_falls_in_every_trial_fails_no_command(broken, scenario, tmp_path, capsys):
+    # a fall is a result, counted in the table: only a controller's error makes run and compare exit 1
+    name = "brokenpkg.limp:make"
+    for command in (["run", name], ["compare", name, "stand"]):
+        out = tmp_path / command[0]
+        assert main([*command, "--scenario", str(scenario), "--trials", "2", "--workers", "1", "--out", str(out),
+                     "--quiet"]) == 0
+        mine = [r for r in TrialRecord.read_csv(out / "trials.csv") if r.controller == name]
+        assert [r.outcome for r in mine] == ["fall", "fall"] and not any(r.error for r in mine)
+        assert "wbc: controller " not in capsys.readouterr().err
 
 
 def _episode(fell, reasons=()):

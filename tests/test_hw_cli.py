@@ -11,6 +11,7 @@ run is bounded by its ``--seconds``.
 
 from __future__ import annotations
 
+import importlib
 import io
 import json
 import os
@@ -182,6 +183,33 @@ def test_check_prints_the_state_and_sends_only_damping(stepped: Stepped, capsys:
     assert len(log) >= 0.3 / LINK_PERIOD  # a frame every link period of the 0.3 s, plus the closing damping
     assert stepped.clock.now() >= 0.3  # it read for its --seconds, on the robot's clock
     assert all(c.damping and (c.wire.kp == 0).all() for c in log)
+
+
+def test_check_marks_a_joint_beyond_its_range_apart_from_one_beyond_the_safety_margin(
+        stepped: Stepped, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """A joint beyond its printed range but within the layer's margin is marked ``margin`` (the layer lets it pass),
+    one beyond both ``OUT`` (the layer refuses it); the verdict line says which is which."""
+    cli = importlib.import_module("wbc.cli.main")
+    read = cli.check_hardware
+
+    def moved(*args: object, **kwargs: object) -> object:
+        check = read(*args, **kwargs)
+        q, names = check.state.q.copy(), list(check.joint_names)
+        rr, fr = names.index("RR_calf_joint"), names.index("FR_calf_joint")
+        q[rr] = check.lower[rr] - check.margin / 3  # a little past its stop, within the margin
+        q[fr] = check.upper[fr] + 2 * check.margin  # past range and margin
+        return replace(check, state=replace(check.state, q=q))
+
+    monkeypatch.setattr(cli, "check_hardware", moved)
+    robot = stepped.emu.config.robot
+    args = build_parser().parse_args(["hw", "check", "--robot", robot, "--target", "127.0.0.1:9", "--seconds", "0.1"])
+    assert hw_check(args, build=stepped.build) == 0  # the layer's verdict on the state it read: ready
+    rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith("  ")}
+    assert "] margin " in rows["RR_calf_joint"] and "OUT" not in rows["RR_calf_joint"]
+    assert "] OUT " in rows["FR_calf_joint"] and "margin" not in rows["FR_calf_joint"]
+    assert re.search(r"\]\s+0x", rows["FR_hip_joint"])  # inside its range: no mark
+    assert ("joint margin 0.087 rad beyond each range: a joint marked margin is beyond its range and within the "
+            "margin, which the layer lets pass; one marked OUT is beyond both, which it refuses") in rows["safety:"]
 
 
 def test_check_over_the_wire_sends_only_damping(emulator: UnitreeEmulator,

@@ -15,6 +15,7 @@ import builtins
 import dataclasses
 import io
 import os
+import re
 import socket
 import sys
 from collections.abc import Iterator
@@ -95,11 +96,51 @@ def nothing_opened(monkeypatch: pytest.MonkeyPatch) -> list[tuple]:
 
 # -- the policy ---------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("port", REAL_PORTS)
-def test_a_port_that_is_not_a_pty_is_refused_and_names_the_switch(port: str) -> None:
+def test_a_port_that_is_not_a_pty_is_refused(port: str) -> None:
     assert not is_pseudo_terminal(port) and not is_emulated_port(port)
-    with pytest.raises(TargetRefusedError, match=r"not a pseudo-terminal.*allow_hardware=True"):
+    with pytest.raises(TargetRefusedError, match=rf"^port {re.escape(port)} "):
         check_serial_port(port, allow_hardware=False)
     check_serial_port(port, allow_hardware=True)  # the consent allows it
+
+
+def _path_of_kind(kind: str, tmp_path: Path) -> str:
+    """A path that is `kind`: made under `tmp_path`, or a character device every Linux has (/dev/null)."""
+    path = tmp_path / "ttyARM"
+    if kind == "regular file":
+        path.write_text("")
+    elif kind == "directory":
+        path.mkdir()
+    elif kind == "named pipe":
+        os.mkfifo(path)
+    elif kind == "link to a character device":
+        path.symlink_to("/dev/null")
+    elif kind == "link to nothing":
+        path.symlink_to(tmp_path / "gone")
+    elif kind == "character device":
+        return "/dev/null"
+    return str(path)  # "missing": nothing made
+
+
+@pytest.mark.parametrize(("kind", "says", "consent"), [
+    ("missing", "ttyARM does not exist: no serial device of that name on this machine", False),
+    ("link to nothing", "ttyARM resolves to {tmp}/gone, which is missing: no serial device", False),
+    ("regular file", "ttyARM is a regular file, not a serial device: nothing to open as the arm's bus", False),
+    ("directory", "ttyARM is a directory, not a serial device", False),
+    ("named pipe", "ttyARM is a named pipe, not a serial device", False),
+    ("character device", "/dev/null is a character device that is not a pseudo-terminal: refusing to open a real "
+                         "serial device", True),
+    ("link to a character device", "ttyARM resolves to /dev/null, which is a character device that is not a "
+                                   "pseudo-terminal", True),
+])
+def test_the_refusal_says_what_the_path_is(kind: str, says: str, consent: bool, tmp_path: Path,
+                                           nothing_opened: list) -> None:
+    port = _path_of_kind(kind, tmp_path)
+    with pytest.raises(TargetRefusedError) as refused:
+        check_serial_port(port, allow_hardware=False)
+    message = str(refused.value)
+    assert says.format(tmp=os.path.realpath(tmp_path)) in message, message
+    assert ("allow_hardware=True" in message) == consent, message  # the consent only where a device may be real
+    assert nothing_opened == []
 
 
 def test_an_emulators_ports_need_no_consent(pty_slave: str, tmp_path: Path) -> None:
@@ -197,8 +238,8 @@ def test_a_register_others_may_write_to_is_not_trusted(bare_pty: str, own_regist
 
 def test_a_link_to_a_real_device_is_refused(tmp_path: Path) -> None:
     link = tmp_path / "ttyARM"
-    link.symlink_to("/dev/ttyUSB0")  # need not exist: the link is resolved, never opened
-    with pytest.raises(TargetRefusedError, match="ttyARM is not a pseudo-terminal"):
+    link.symlink_to("/dev/null")  # a character device, as an adapter is: the link is resolved, never opened
+    with pytest.raises(TargetRefusedError, match="ttyARM resolves to /dev/null, which is a character device"):
         check_serial_port(str(link), allow_hardware=False)
 
 
@@ -220,7 +261,7 @@ def test_the_sdk_never_opens_an_in_process_name() -> None:
 # -- the serial layer's own doors: a user may build a bus from the SDK's handlers without DynamixelArm ------------
 @pytest.mark.parametrize("port", REAL_PORTS)
 def test_the_sdks_handlers_for_a_real_device_need_the_consent(port: str, nothing_opened: list) -> None:
-    with pytest.raises(TargetRefusedError, match=rf"sdk_handlers port {port} is not a pseudo-terminal"):
+    with pytest.raises(TargetRefusedError, match=rf"^sdk_handlers port {re.escape(port)} "):
         sdk_handlers(port)
     assert not nothing_opened
 
@@ -248,7 +289,7 @@ def test_a_bus_on_a_real_device_is_not_opened_without_the_consent(port: str, not
         def setBaudRate(self, rate: int) -> bool:  # noqa: N802
             return True
 
-    with pytest.raises(TargetRefusedError, match=rf"SdkBus port {port} is not a pseudo-terminal"):
+    with pytest.raises(TargetRefusedError, match=rf"^SdkBus port {re.escape(port)} "):
         SdkBus(Handler(), object(), port=port).open(1_000_000)
     assert not Handler.opened and not nothing_opened
     consented = SdkBus(Handler(), object(), port=port, allow_hardware=True)
@@ -258,9 +299,9 @@ def test_a_bus_on_a_real_device_is_not_opened_without_the_consent(port: str, not
 
 # -- the backend's config and constructor --------------------------------------------------------------------------
 def test_the_arm_config_refuses_a_real_port_and_nothing_is_opened(nothing_opened: list) -> None:
-    with pytest.raises(TargetRefusedError, match=r"DynamixelArmConfig\.port /dev/ttyUSB0 is not a pseudo-terminal"):
+    with pytest.raises(TargetRefusedError, match=r"DynamixelArmConfig\.port /dev/ttyUSB0 does not exist"):
         DynamixelArmConfig(port="/dev/ttyUSB0")
-    with pytest.raises(TargetRefusedError, match="not a pseudo-terminal"):
+    with pytest.raises(TargetRefusedError, match="arm_port /dev/ttyUSB0 does not exist"):
         HardwareRobotConfig(robot="go1-arm", arm_mode="actuated", legs_host="127.0.0.1", legs_port=9,
                             arm_port="/dev/ttyUSB0")
     consented = DynamixelArmConfig(port="/dev/ttyUSB0", allow_hardware=True)  # built, not opened
@@ -275,7 +316,7 @@ def test_the_backend_checks_again_before_it_opens(nothing_opened: list, pty_slav
     object.__setattr__(config, "port", "/dev/ttyUSB0")  # a config changed behind its checks
     asked = []
     arm = DynamixelArm(config, handlers=lambda port: asked.append(port) or (None, None))
-    with pytest.raises(TargetRefusedError, match="not a pseudo-terminal"):
+    with pytest.raises(TargetRefusedError, match="/dev/ttyUSB0 does not exist"):
         arm.connect()
     assert asked == [] and nothing_opened == []  # no port handler was even built
 
@@ -283,10 +324,34 @@ def test_the_backend_checks_again_before_it_opens(nothing_opened: list, pty_slav
 # -- the command line ---------------------------------------------------------------------------------------------
 def test_check_refuses_a_real_arm_port_before_anything(nothing_opened: list,
                                                        capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["hw", "check", "--target", "127.0.0.1:9", "--arm-port", "/dev/ttyUSB0"]) == 2
+    # /dev/null stands in for an adapter: a character device that is not a pseudo-terminal
+    assert main(["hw", "check", "--target", "127.0.0.1:9", "--arm-port", "/dev/null"]) == 2
     err = capsys.readouterr().err
-    assert "--arm-port /dev/ttyUSB0 is not a pseudo-terminal" in err and "add --allow-hardware" in err, err
-    assert "Traceback" not in err and nothing_opened == []
+    assert "--arm-port /dev/null is a character device that is not a pseudo-terminal" in err, err
+    assert "add --allow-hardware" in err and "Traceback" not in err and nothing_opened == []
+
+
+@pytest.mark.parametrize(("kind", "says"), [
+    ("regular file", "is a regular file, not a serial device"),
+    ("directory", "is a directory, not a serial device"),
+    ("missing", "does not exist: no serial device of that name on this machine"),
+])
+def test_check_says_what_an_arm_port_that_is_no_device_is(kind: str, says: str, tmp_path: Path, nothing_opened: list,
+                                                          monkeypatch: pytest.MonkeyPatch,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    port = _path_of_kind(kind, tmp_path)
+    opened = os.open
+
+    def refuse_the_port(path: object, *args: object, **kwargs: object) -> int:
+        assert os.path.realpath(str(path)) != os.path.realpath(port), f"{port} was opened"
+        return opened(path, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", refuse_the_port)
+    assert main(["hw", "check", "--robot", "go1", "--target", "127.0.0.1:9", "--arm-port", port]) == 2
+    err = capsys.readouterr().err
+    assert f"--arm-port {port} {says}" in err, err
+    assert "real serial device" not in err and "--allow-hardware" not in err, err  # no device to consent to
+    assert nothing_opened == []
 
 
 @pytest.mark.parametrize(("port", "why"), [
@@ -307,9 +372,10 @@ def test_a_stopped_emulators_pty_or_an_empty_port_is_not_called_a_real_device(po
 def test_run_refuses_a_real_arm_port_before_anything(nothing_opened: list,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["hw", "run", "stand", "--scenario", "scenarios/push.toml", "--trial", "0", "--target",
-                 "127.0.0.1:9", "--arm", "locked", "--arm-port", "/dev/ttyACM0"]) == 2
+                 "127.0.0.1:9", "--arm", "locked", "--arm-port", "/dev/null"]) == 2
     err = capsys.readouterr().err
-    assert "--arm-port /dev/ttyACM0 is not a pseudo-terminal" in err and "run a trial on a real arm" in err, err
+    assert "--arm-port /dev/null is a character device that is not a pseudo-terminal" in err, err
+    assert "run a trial on a real arm" in err, err
     assert nothing_opened == []
 
 

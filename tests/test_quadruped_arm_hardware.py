@@ -135,8 +135,8 @@ def test_the_factory_names_what_a_mode_needs() -> None:
         _build("go1-arm", "none", arm_port="/dev/ttyUSB0")
     with pytest.raises(UnknownNameError, match="a1-wx200"):
         _build("a1", "actuated", arm_port="/dev/ttyUSB0")
-    with pytest.raises(TargetRefusedError, match="not a pseudo-terminal"):
-        _build("go1-arm", "locked", arm_port="/dev/ttyUSB0")  # a real adapter needs the consent
+    with pytest.raises(TargetRefusedError, match="/dev/null is a character device that is not a pseudo-terminal"):
+        _build("go1-arm", "locked", arm_port="/dev/null")  # a real adapter (a character device) needs the consent
     locked = _build("go1-arm", "locked", arm_port="/dev/ttyUSB0", allow_hardware=True)  # built, never opened
     assert locked.num_joints == 12 and isinstance(locked.arm, DynamixelArm)  # locked: the servos hold it stowed
     assert _build("go1-arm", "locked").num_joints == 12  # no port: fixed on the trunk, the legs' wire alone

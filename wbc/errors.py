@@ -6,6 +6,7 @@ Messages say what was wrong and how to fix it (valid names, the field at fault, 
 from __future__ import annotations
 
 import difflib
+from collections.abc import Mapping
 from os import PathLike
 
 __all__ = [
@@ -73,27 +74,35 @@ class WbcError(Exception):
 class UnknownNameError(WbcError, KeyError):
     """A name (robot, arm mode, controller ...) is not in its registry; the message lists the valid ones.
 
-    When a valid name is close to the one given (`difflib.get_close_matches`, a typo such as ``mcp`` for ``mpc``),
-    the message suggests it first.
+    When a valid name (or an alias of one) is close to the one given (`difflib.get_close_matches`, a typo such as
+    ``mcp`` for ``mpc``), the message suggests it first.
 
     Attributes:
         kind: what the name names (``controller``, ``robot`` ...).
         name: the name given.
         valid: the valid names, sorted, each once.
-        suggestion: the valid name closest to `name`, or None when none is close.
+        aliases: other names accepted for valid ones (alias -> valid name), listed beside them: ``go1-arm (or go1)``.
+        suggestion: the valid name or alias closest to `name`, or None when none is close.
     """
 
-    def __init__(self, kind: str, name: str, valid: list[str] | tuple[str, ...], *, where: str = "") -> None:
+    def __init__(self, kind: str, name: str, valid: list[str] | tuple[str, ...], *, where: str = "",
+                 aliases: Mapping[str, str] | None = None) -> None:
         """`where` (e.g. ``scenario 'turn'``), when given, opens the message: whose names these are."""
         self.kind = kind
         self.name = name
         self.valid = tuple(sorted(set(valid)))  # each once, though two sources may name it
-        close = difflib.get_close_matches(str(name), self.valid, n=1) if len(str(name)) <= 200 else []
+        self.aliases = dict(sorted((aliases or {}).items()))
+        known = self.valid + tuple(self.aliases)
+        close = difflib.get_close_matches(str(name), known, n=1) if len(str(name)) <= 200 else []
         self.suggestion = close[0] if close else None
         hint = f"; did you mean {self.suggestion!r}?" if self.suggestion is not None else ""
         shown = repr(name) if len(repr(name)) <= 120 else f"{repr(name)[:90]}... ({len(str(name))} characters)"
+        listed = []
+        for valid_name in self.valid:
+            others = [alias for alias, named in self.aliases.items() if named == valid_name]
+            listed.append(f"{valid_name} (or {', '.join(others)})" if others else valid_name)
         super().__init__(f"{where + ': ' if where else ''}unknown {kind} {shown}{hint}; valid {kind}s: "
-                         f"{', '.join(self.valid)}")
+                         f"{', '.join(listed)}")
 
     def __str__(self) -> str:  # KeyError would repr() the message
         return str(self.args[0])

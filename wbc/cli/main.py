@@ -29,6 +29,7 @@ from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, ResultsI
 from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
+from wbc.cli.robot_names import robot_name, wire_name
 from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.controller_contract import CheckConfig, check_controller
 from wbc.control.onnx_policy import ONNX_PREFIX
@@ -85,12 +86,8 @@ from wbc.tools.tail import analyze_tail
 
 __all__ = ["HANDLERS", "hw_check", "hw_run", "main"]
 
-_WIRE_OF = {**{wire: wire for wire in DESCRIPTIONS}, **{desc: wire for wire, desc in DESCRIPTIONS.items()}}
-"""``wbc hw emulate|check|run --robot``: a1, go1, or the name with the arm (a1-wx200, go1-arm), -> the legs' wire."""
-
-
 def _analyze_tail(args: argparse.Namespace) -> int:
-    result = analyze_tail(get_robot(args.robot, "actuated"))
+    result = analyze_tail(get_robot(robot_name(args.robot), "actuated"))
     if args.json:
         printers.print_json(result.as_dict())
     else:
@@ -119,7 +116,7 @@ def _analyze_arm_momentum(args: argparse.Namespace) -> int:
 
 
 def _analyze_posture(args: argparse.Namespace) -> int:
-    rows = posture_study(args.controllers, robot=args.robot, walk_vx=args.walk, duration_s=args.duration,
+    rows = posture_study(args.controllers, robot=robot_name(args.robot), walk_vx=args.walk, duration_s=args.duration,
                          duration_option="--duration")
     if args.json:
         printers.print_json([dataclasses.asdict(r) for r in rows])
@@ -129,8 +126,9 @@ def _analyze_posture(args: argparse.Namespace) -> int:
 
 
 def _bench_sim(args: argparse.Namespace) -> int:
-    get_robot(args.robot, args.arm)  # validate names before any work
-    result = bench_sim(args.robot, args.arm, batch=args.batch, nthread=args.threads, terrain=args.terrain,
+    robot = robot_name(args.robot)
+    get_robot(robot, args.arm)  # validate names before any work
+    result = bench_sim(robot, args.arm, batch=args.batch, nthread=args.threads, terrain=args.terrain,
                        reference=not args.no_reference)
     if args.json:
         printers.print_json(result.as_dict())
@@ -140,8 +138,9 @@ def _bench_sim(args: argparse.Namespace) -> int:
 
 
 def _bench_mpc(args: argparse.Namespace) -> int:
-    result = bench_mpc(args.robot, args.controller, seconds=args.seconds, single_thread=not args.threaded_blas,
-                       reference=not args.no_reference, qp_solver=args.qp_solver, rounds=args.rounds)
+    result = bench_mpc(robot_name(args.robot), args.controller, seconds=args.seconds,
+                       single_thread=not args.threaded_blas, reference=not args.no_reference,
+                       qp_solver=args.qp_solver, rounds=args.rounds)
     if args.json:
         printers.print_json(result.as_dict())
     else:
@@ -177,7 +176,7 @@ def _bench_hw(args: argparse.Namespace) -> int:
     if not stand > 0:
         raise ConfigError(f"--stand must be > 0 s, got {stand}")
     _check_transport(args)
-    result = bench_hw(args.robot, seconds=args.seconds, rate_hz=args.rate, transport=args.transport,
+    result = bench_hw(wire_name(args.robot), seconds=args.seconds, rate_hz=args.rate, transport=args.transport,
                       stand_seconds=None if args.no_safety else stand,
                       realtime=realtime_request(args, place="last"),
                       emulator_realtime=realtime_request(args, place="first"))
@@ -194,7 +193,7 @@ def _bench_latency(args: argparse.Namespace) -> int:
         raise ConfigError("--robot names the wire's robot, and --no-wire measures no wire (the margins play the "
                           "scenario's robot); leave one of them out")
     _scenario_played(args.scenario)
-    result = bench_latency(tuple(args.controllers), wire_robot="go1" if args.robot is None else args.robot,
+    result = bench_latency(tuple(args.controllers), wire_robot="go1" if args.robot is None else wire_name(args.robot),
                            scenario=args.scenario, trials=args.trials, wire=not args.no_wire)
     if args.json:
         printers.print_json(result.as_dict())
@@ -220,7 +219,7 @@ def _bench_arm(args: argparse.Namespace) -> int:
         rates = tuple(float(r) for r in args.rates.split(","))
     except ValueError:
         raise ConfigError(f"--rates {args.rates!r}: give comma-separated numbers in Hz, e.g. 100,200,400") from None
-    result = bench_arm(args.robot, rates=rates, seconds=args.seconds, latency_ms=args.latency,
+    result = bench_arm(robot_name(args.robot), rates=rates, seconds=args.seconds, latency_ms=args.latency,
                        realtime=realtime_request(args, place="first"),
                        host_realtime=realtime_request(args, place="last"))
     if args.json:
@@ -240,11 +239,9 @@ def _address(text: str, option: str) -> tuple[str, int]:
 
 def _hw_emulate(args: argparse.Namespace) -> int:
     realtime_switch_interval()  # the link and bus threads must not wait 5 ms for the interpreter
-    if args.robot not in _WIRE_OF:
-        raise UnknownNameError("robot", args.robot, tuple(_WIRE_OF))
-    with_arm = args.robot not in DESCRIPTIONS  # a1-wx200, go1-arm: the name says the arm is there
+    wire = wire_name(args.robot)
+    with_arm = args.robot == robot_name(args.robot)  # a1-wx200, go1-arm: the registry's name says the arm is there
     if with_arm and args.arm in (None, "none"):
-        wire = _WIRE_OF[args.robot]
         raise ConfigError(f"--robot {args.robot} names the robot with its arm: add --arm locked (the arm held on the "
                           f"trunk) or --arm actuated (the arm on its own bus, a pty), or emulate the bare quadruped "
                           f"with --robot {wire}")
@@ -265,7 +262,7 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         faults.append(fault)
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
-    served = emulate(EmulateConfig(robot=_WIRE_OF[args.robot], arm_mode=args.arm,
+    served = emulate(EmulateConfig(robot=wire, arm_mode=args.arm,
                                    mode="lockstep" if args.lockstep else "realtime", port=args.port,
                                    faults=tuple(faults), seconds=args.seconds, held=not args.drop,
                                    realtime=realtime_request(args, place="first")),
@@ -395,7 +392,7 @@ def _check_transport(args: argparse.Namespace, *, scenario: str | None = None) -
         named = f"the {robot}, {scenario}'s robot, played as no --robot is given"
         otherwise = (f", or give --robot {' or '.join(DESCRIPTIONS[w] for w in SDK_ROBOTS)} to play it on the "
                      f"{' or '.join(SDK_ROBOTS)}")
-    wire = _WIRE_OF.get(robot) if robot is not None else None
+    wire = wire_name(robot) if robot is not None else None
     if transport == "sdk" and wire is not None and wire not in SDK_ROBOTS:
         raise ConfigError(f"--transport sdk: the vendor SDK speaks only the {' and '.join(SDK_ROBOTS)}'s wire, not "
                           f"the {wire}'s ({named}); leave --transport out for it (udp, our own socket){otherwise}")
@@ -425,13 +422,6 @@ def _hardware_arm_port(args: argparse.Namespace, purpose: str) -> str | None:
                                                         "type yes; --yes confirms when stdin is not a terminal)"
                                                         if real else ""))
     return port
-
-
-def _robot_name(name: str) -> str:
-    """``--robot`` of ``hw check`` / ``hw run``: go1 or go1-arm, a1 or a1-wx200 -> the robot registry's name."""
-    if name not in _WIRE_OF:  # the registry's names are listed; their legs' names (go1, a1) are accepted too
-        raise UnknownNameError("hardware robot", name, tuple(DESCRIPTIONS.values()))
-    return DESCRIPTIONS[_WIRE_OF[name]]
 
 
 def _hw_check(args: argparse.Namespace) -> int:
@@ -467,7 +457,7 @@ def hw_check(args: argparse.Namespace, *,
     _check_transport(args)
     if not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
-    robot = _robot_name(args.robot)
+    robot = robot_name(args.robot)
 
     def confirm(hardware: HardwareRobot) -> None:
         real = _real_devices(host, port, arm_port)
@@ -568,7 +558,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         print("wbc: warning: --no-io-process: the robot's devices run in this process; if it dies, nothing damps the "
               "legs, whose motors keep the last command they got (the robot has no watchdog). For debugging only",
               file=sys.stderr)
-    robot = _robot_name(args.robot) if args.robot is not None else None
+    robot = robot_name(args.robot) if args.robot is not None else None
     out = Path(args.out) if args.out else Path("runs") / (
         f"hw-{Path(args.scenario).stem}-{args.ctrl.replace(':', '_').replace('/', '_')}-"
         f"{time.strftime('%Y%m%d-%H%M%S')}")
@@ -1350,13 +1340,12 @@ def _controllers(args: argparse.Namespace) -> int:
 def _check_controller(args: argparse.Namespace) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
-    for robot in args.robot or ():
-        get_robot(robot)  # an unknown name fails here, listing the valid ones
+    robots = tuple(dict.fromkeys(robot_name(r) for r in args.robot)) if args.robot else None  # a1 and a1-wx200: once
     spec = get_controller(args.name, config=args.controller_config, io=args.io)
     if args.scenario is not None:
         _scenario_played(args.scenario)  # checked on an edited copy of a published file: said so
     result = check_controller(spec, CheckConfig(seconds=args.seconds, strict_timing=args.strict_timing,
-                                                robots=tuple(args.robot) if args.robot else None,
+                                                robots=robots,
                                                 scenario=args.scenario, replay=args.replay))
     if args.json:
         printers.print_json(result.as_dict())
@@ -1470,9 +1459,11 @@ def main(argv: list[str] | None = None) -> int:
         argv: the arguments after the program name (default: ``sys.argv[1:]``).
 
     Returns:
-        The exit status: 0 on success, 1 when a controller failed on some trials of a run or comparison (one line
-        each on stderr) or a hardware trial lost its robot's link (`hw_run`), 2 for a `WbcError` (its message
-        printed to stderr), 130 when interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal is closed; a run's
+        The exit status: 0 on success, 1 when a controller errored on some trials of a run or comparison (outcome
+        ``controller_error``, one line each on stderr; a fall is a result, not a failure), a hardware trial's
+        controller errored or its robot's link was lost (`hw_run`), a controller check did not pass, or the safety
+        layer would refuse the state `hw_check` read (or no state came), 2 for a `WbcError` (its message printed to
+        stderr), 130 when interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal is closed; a run's
         finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
         or which DAgger rounds, its run directory keeps), 141 without a word when the reader of its standard output
         closed it (``| head``), as for a command that SIGPIPE ends. A usage error exits with status 2 from the

@@ -17,16 +17,16 @@ from typing import Any
 
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
 from wbc.arena.identity import MAX_SEED, MAX_TRIAL_TIME_LIMIT_S, MAX_TRIALS, MIN_TRIAL_TIME_LIMIT_S
+from wbc.cli.robot_names import ROBOT_NAMES_HELP
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import BusFault, Fault
 from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES
 from wbc.hardware.realtime import DEFAULT_RT_PRIORITY
-from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS
+from wbc.hardware.unitree import TRANSPORTS
 from wbc.input_files import short
 from wbc.learned.train.stages import BASELINES, RECIPE_VARIANTS, TASKS
 from wbc.mpc.qp_solvers import QP_SOLVERS
 from wbc.robots.description import ARM_MODES
-from wbc.robots.registry import ROBOTS
 from wbc.scenario.scenario import MAX_DURATION_S
 from wbc.tools.bench.mpc import DEFAULT_ROUNDS, MAX_ROUNDS
 from wbc.tools.paper import DEFAULT_SEEDS as PAPER_DEFAULT_SEEDS
@@ -48,8 +48,6 @@ MAX_SEEDS = 10_000
 MAX_HOURS_S = 4 * 3600.0
 """Longest a measurement or an emulator may be asked to run (``--seconds``) [s]: four hours."""
 
-_ROBOT_NAMES_HELP = ", ".join(f"{arm} (or {wire})" for wire, arm in DESCRIPTIONS.items())
-"""``hw check`` and ``hw run`` take a robot by either name: its own (go1-arm) or its legs' wire (go1)."""
 _TRANSPORT_HELP = (f"the link's datagram channel, one of: {', '.join(TRANSPORTS)} (default udp: our socket; sdk: "
                    "the vendor's Go1 SDK, installed with the hardware extra, carrying the same checked frames)")
 
@@ -292,7 +290,8 @@ def build_parser() -> argparse.ArgumentParser:
 def _add_analyze_tail_parser(analyze: _Commands) -> None:
     """``wbc analyze tail``: the tail analysis of the model."""
     tail = analyze.add_parser("tail", help="the paper's CoM shift and body/arm acceleration ratio, from the model")
-    tail.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    tail.add_argument("--robot", default="a1-wx200",
+                      help=f"one of: {ROBOT_NAMES_HELP}; its arm is analysed either way (default a1-wx200)")
     tail.add_argument("--json", action="store_true", help="print JSON")
     tail.set_defaults(handler="analyze tail")
 
@@ -300,12 +299,13 @@ def _add_analyze_tail_parser(analyze: _Commands) -> None:
 def _add_analyze_arm_momentum_parser(analyze: _Commands) -> None:
     """``wbc analyze arm-momentum``: the arm's momentum against the pushes'."""
     arm = analyze.add_parser("arm-momentum", help="the arm's angular momentum against the pushes' angular impulse")
-    arm.add_argument("--scenario", default="scenarios/push.toml")
-    arm.add_argument("--band", default="ood")
-    arm.add_argument("--controller", default="mpc")
+    arm.add_argument("--scenario", default="scenarios/push.toml",
+                     help="scenario file whose pushes are measured (default scenarios/push.toml)")
+    arm.add_argument("--band", default="ood", help="the scenario's band to play (default ood)")
+    arm.add_argument("--controller", default="mpc", help="the controller that plays the trials (default mpc)")
     arm.add_argument("--trials", type=_TRIALS, default=5, help=f"trials per seed, 1..{MAX_TRIALS} (default 5)")
-    arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS}")
-    arm.add_argument("--json", action="store_true")
+    arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS} (default 1)")
+    arm.add_argument("--json", action="store_true", help="print JSON (a list, one object per trial)")
     arm.set_defaults(handler="analyze arm-momentum")
 
 
@@ -314,11 +314,15 @@ def _add_analyze_posture_parser(analyze: _Commands) -> None:
     posture = analyze.add_parser("posture", help="trunk height and speed of controllers standing and walking, flat "
                                  "ground, no pushes (is the comparison at the same posture?)")
     posture.add_argument("controllers", nargs="+", help=_NAMES_HELP)
-    posture.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
+    posture.add_argument("--robot", default="a1-wx200",
+                         help=f"one of: {ROBOT_NAMES_HELP}; the controllers' arm modes say whether its arm is there "
+                         "(default a1-wx200)")
     posture.add_argument("--walk", type=bounded_float(-3.0, 3.0, unit="m/s"), default=0.3,
-                         help="forward speed of the walking command, -3..3 [m/s] (a scenario's vx range)")
+                         help="forward speed of the walking command, -3..3 [m/s] (a scenario's vx range; default "
+                         "0.3)")
     posture.add_argument("--duration", type=_EPISODE_S, default=6.0,
-                         help=f"episode length, up to {MAX_DURATION_S:g} [s]; the means cover its second half")
+                         help=f"episode length, up to {MAX_DURATION_S:g} [s]; the means cover its second half "
+                         "(default 6)")
     posture.add_argument("--json", action="store_true", help="print JSON")
     posture.set_defaults(handler="analyze posture")
 
@@ -326,15 +330,16 @@ def _add_analyze_posture_parser(analyze: _Commands) -> None:
 def _add_bench_sim_parser(bench: _Commands) -> None:
     """``wbc bench sim``: physics steps per second."""
     sim = bench.add_parser("sim", help="physics steps per second, single-threaded and batched")
-    sim.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
-    sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    sim.add_argument("--robot", default="a1-wx200",
+                     help=f"one of: {ROBOT_NAMES_HELP}; --arm says whether its arm is there (default a1-wx200)")
+    sim.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)} (default actuated)")
     sim.add_argument("--batch", type=bounded_int(1, 65_536), default=64,
                      help="environments in the batched rollout, 1..65536, as many as half the available memory holds "
-                          "(each keeps every step's state)")
+                          "(each keeps every step's state; default 64)")
     sim.add_argument("--threads", type=_THREADS, default=None,
                      help=f"threads for the batched rollout, 1..{MAX_THREADS} (default: all)")
     sim.add_argument("--json", action="store_true", help="print JSON")
-    sim.add_argument("--terrain", default="flat", help="flat or fractal")
+    sim.add_argument("--terrain", default="flat", help="flat or fractal (default flat)")
     sim.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measured alongside")
     sim.set_defaults(handler="bench sim")
 
@@ -342,15 +347,19 @@ def _add_bench_sim_parser(bench: _Commands) -> None:
 def _add_bench_mpc_parser(bench: _Commands) -> None:
     """``wbc bench mpc``: the MPC's solve times and closed-loop speed."""
     mpc = bench.add_parser("mpc", help="MPC solve times, whole-body tick, closed-loop real-time factor")
-    mpc.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(ROBOTS)}")
-    mpc.add_argument("--controller", default="mpc")
-    mpc.add_argument("--seconds", type=_MEASURE_S, default=4.0, help="closed-loop time measured [s] (up to 4 h)")
+    mpc.add_argument("--robot", default="a1-wx200",
+                     help=f"one of: {ROBOT_NAMES_HELP}; the controller's arm mode says whether its arm is there "
+                     "(default a1-wx200)")
+    mpc.add_argument("--controller", default="mpc",
+                     help="the MPC controller timed: mpc, one of its variants or a plug-in's (default mpc)")
+    mpc.add_argument("--seconds", type=_MEASURE_S, default=4.0,
+                     help="closed-loop time measured [s] (default 4, at most 4 h)")
     mpc.add_argument("--rounds", type=_ROUNDS, default=DEFAULT_ROUNDS,
                      help=f"timed walks, each between two measurements of the references (1..{MAX_ROUNDS}; "
                           f"default {DEFAULT_ROUNDS}): the ratios are their medians, with their spread")
     mpc.add_argument("--threaded-blas", action="store_true",
                      help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
-    mpc.add_argument("--json", action="store_true")
+    mpc.add_argument("--json", action="store_true", help="print JSON")
     mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
     mpc.add_argument("--qp-solver", default="daqp", choices=tuple(QP_SOLVERS),
                      help="the closed loop's QP backend (default daqp; mpc-tail solves its own QP with daqp only); "
@@ -361,29 +370,31 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
 def _add_bench_sweep_parser(bench: _Commands) -> None:
     """``wbc bench sweep``: an arena sweep's throughput."""
     sweep = bench.add_parser("sweep", help="arena sweep throughput against raw physics; Ray overhead")
-    sweep.add_argument("--scenario", default="scenarios/push.toml")
-    sweep.add_argument("--controller", default="stand")
-    sweep.add_argument("--trials", type=_TRIALS, default=10, help=f"trials per band, 1..{MAX_TRIALS}")
+    sweep.add_argument("--scenario", default="scenarios/push.toml",
+                       help="scenario file of the sweep (default scenarios/push.toml)")
+    sweep.add_argument("--controller", default="stand", help="the controller of every trial (default stand)")
+    sweep.add_argument("--trials", type=_TRIALS, default=10, help=f"trials per band, 1..{MAX_TRIALS} (default 10)")
     sweep.add_argument("--workers", type=_WORKERS, default=None,
                        help=f"worker processes of the arena, and threads of the physics rollout measured beside it, "
                        f"1..{MAX_WORKERS} (default: all cores)")
     sweep.add_argument("--ray", action="store_true", help="also run on a local Ray and report its overhead")
-    sweep.add_argument("--json", action="store_true")
+    sweep.add_argument("--json", action="store_true", help="print JSON")
     sweep.set_defaults(handler="bench sweep")
 
 
 def _add_bench_train_parser(bench: _Commands) -> None:
     """``wbc bench train``: the training env's throughput."""
     btrain = bench.add_parser("train", help="training env throughput: control steps per second, random actions")
-    btrain.add_argument("--envs", type=bounded_int(1, 65_536), default=1024, help="parallel environments, 1..65536")
-    btrain.add_argument("--threads", type=_THREADS, default=2, help=f"rollout threads, 1..{MAX_THREADS}")
-    btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)}")
+    btrain.add_argument("--envs", type=bounded_int(1, 65_536), default=1024,
+                        help="parallel environments, 1..65536 (default 1024)")
+    btrain.add_argument("--threads", type=_THREADS, default=2, help=f"rollout threads, 1..{MAX_THREADS} (default 2)")
+    btrain.add_argument("--arm", default="actuated", help=f"one of: {', '.join(ARM_MODES)} (default actuated)")
     btrain.add_argument("--terrain", default="scenario", choices=("scenario", "flat"),
-                        help="scenario (the push scenario's ground) or flat")
+                        help="scenario (the push scenario's ground) or flat (default scenario)")
     btrain.add_argument("--steps", type=bounded_int(1, 1_000_000), default=50,
-                        help="policy steps per measurement, 1..1000000")
+                        help="policy steps per measurement, 1..1000000 (default 50)")
     btrain.add_argument("--no-reference", action="store_true", help="skip the bare-A1 reference measurement")
-    btrain.add_argument("--json", action="store_true")
+    btrain.add_argument("--json", action="store_true", help="print JSON")
     btrain.set_defaults(handler="bench train")
 
 
@@ -393,7 +404,9 @@ def _add_bench_hw_parser(bench: _Commands) -> None:
                            description="Run a UnitreeRobot against a UnitreeEmulator (lockstep) in its own process "
                            "on 127.0.0.1 and time the link: the interval between sends, a command's round trip to "
                            "the state that answers it, the link thread's CPU time per period, rejected frames.")
-    bhw.add_argument("--robot", default="go1", help=f"one of: {', '.join(DESCRIPTIONS)} (default go1)")
+    bhw.add_argument("--robot", default="go1",
+                     help=f"one of: {ROBOT_NAMES_HELP}; either name measures its legs' link alone (bench arm "
+                     "measures the arm's bus; default go1)")
     bhw.add_argument("--seconds", type=_MEASURE_S, default=3.0,
                      help="how long the link is measured [s] (default 3, at most 4 h)")
     bhw.add_argument("--rate", type=_LINK_RATE, default=500.0, help="link rate, 200..1000 [Hz] (default 500)")
@@ -434,8 +447,10 @@ def _add_bench_latency_parser(bench: _Commands) -> None:
                             "at which each controller stands still and survives a push.")
     blat.add_argument("--controllers", nargs="+", default=["stand", "mpc"], help="controllers (default stand mpc)")
     blat.add_argument("--robot", default=None,
-                      help=f"the wire's robot, one of: {', '.join(DESCRIPTIONS)} (default go1)")
-    blat.add_argument("--scenario", default="scenarios/push.toml", help="scenario of the margin trials")
+                      help=f"the wire's robot, one of: {ROBOT_NAMES_HELP}; either name measures its legs' wire "
+                      "alone (default go1)")
+    blat.add_argument("--scenario", default="scenarios/push.toml",
+                      help="scenario of the margin trials (default scenarios/push.toml)")
     blat.add_argument("--trials", type=bounded_int(1, 1000), default=2,
                       help="standing trials per margin test, 1..1000 (default 2)")
     blat.add_argument("--no-wire", action="store_true", help="margins only (no emulator)")
@@ -445,16 +460,25 @@ def _add_bench_latency_parser(bench: _Commands) -> None:
 
 def _add_bench_arm_parser(bench: _Commands) -> None:
     """``wbc bench arm``: the arm's bus loop against the emulated robot."""
-    barm = bench.add_parser("arm", help="the arm's Dynamixel bus loop against the emulated robot: rate, step response",
+    barm = bench.add_parser("arm", help="the arm's Dynamixel bus loop against the emulated robot: rate, step "
+                            "response, reactions (about 20 s more than its rates)",
                             description="Run a DynamixelArm (and the legs' UnitreeRobot holding a stand) against a "
-                            "real-time RobotEmulator in its own process: the bus loop's achieved rate at each "
-                            "requested rate, and the elbow's closed-loop step response beside the same step in pure "
-                            "simulation.")
-    barm.add_argument("--robot", default="a1-wx200", help=f"one of: {', '.join(DESCRIPTIONS.values())}")
+                            "real-time RobotEmulator in its own process: the bus loop's achieved rate at each of "
+                            "--rates, for --seconds each. Then, whatever --rates and --seconds say: the elbow's "
+                            "closed-loop step response at 200 Hz for two gains, four steps each, beside the same step "
+                            "in pure simulation (about 12 s); the reactions at 200 Hz (the write deadline, four bus "
+                            "faults, the servos' watchdog; a few seconds); and the emulators' own timing (the shared "
+                            "plant on its own thread for --seconds, pty round trips). The whole takes about 20 s "
+                            "more than the rates' own time (each rate --seconds and 0.3 s): --seconds 1 --rates 100 "
+                            "about 22 s.")
+    barm.add_argument("--robot", default="a1-wx200",
+                      help=f"one of: {ROBOT_NAMES_HELP}; either name measures its arm, the legs holding a stand "
+                      "(default a1-wx200)")
     barm.add_argument("--seconds", type=_MEASURE_S, default=2.0,
-                      help="how long each rate runs [s] (default 2, at most 4 h)")
+                      help="how long each rate runs, and the shared plant's measurement [s] (default 2, at most 4 h)")
     barm.add_argument("--rates", default="100,200,400,1000",
-                      help="bus rates to run, comma-separated, each 10..1000 Hz (default 100,200,400,1000)")
+                      help="bus rates to run, comma-separated, each 10..1000 Hz (default 100,200,400,1000); the step "
+                      "responses and the reactions run at 200 Hz whatever it says")
     barm.add_argument("--latency", type=bounded_float(0.0, 255.0, lo_open=True, unit="ms"), default=1.0,
                       help="the adapter's latency timer, up to 255 [ms] (the FTDI chip's largest; default 1)")
     barm.add_argument("--json", action="store_true", help="print JSON")
@@ -473,7 +497,9 @@ def _add_hw_emulate_parser(hws: _Commands) -> None:
                              "the pty), and the counts (commands decoded, rejects by reason, replies; the arm's "
                              "packets) when it stops (Ctrl-C or --seconds).")
     emulate.add_argument("--robot", default="go1",
-                         help=f"one of: {', '.join((*DESCRIPTIONS, *DESCRIPTIONS.values()))} (default go1)")
+                         help=f"one of: {ROBOT_NAMES_HELP}; the legs' name (a1, go1) serves the bare quadruped unless "
+                         "--arm says otherwise, the arm's name (a1-wx200, go1-arm) needs --arm locked or actuated "
+                         "(default go1)")
     emulate.add_argument("--arm", default=None,
                          help="none (the bare quadruped; the default with a1 and go1), locked (its arm on the trunk, "
                          "held) or actuated (the arm on its own bus: a pty speaking Dynamixel Protocol 2.0); a1-wx200 "
@@ -501,13 +527,16 @@ def _add_hw_check_parser(hws: _Commands) -> None:
                            description="Connect the robot (the legs' UnitreeRobot, and the arm's DynamixelArm with "
                            "--arm-port), read states for a while through the safety layer, sending only damping "
                            "(legs Kp 0, the arm's joints damped; no controller's command is sent; connecting the arm "
-                           "may switch its servos to current mode in EEPROM, torque off first), and print the state: "
-                           "joints with the ranges the layer checks, motor modes and temperatures, IMU roll and "
-                           "pitch, battery, remote buttons, the layer's verdict (would a ramp start from here, or "
-                           "what it refuses), link and bus statistics, rejected frames. A target outside "
-                           "127.0.0.0/8, or an --arm-port that is not a pseudo-terminal, needs --allow-hardware and "
-                           "a typed confirmation (or --yes).")
-    check.add_argument("--robot", default="go1", help=f"one of: {_ROBOT_NAMES_HELP} (default go1)")
+                           "switches its joint servos to current mode in EEPROM, torque off first, which after a close "
+                           "is every connect, as the close parks them in a hold that needs no host), and print the "
+                           "state: joints with their ranges (marked margin beyond one but within the layer's joint "
+                           "margin, OUT beyond both), motor modes and temperatures, IMU roll and pitch, battery, "
+                           "remote buttons, the layer's verdict (would a ramp start from here, or what it refuses), "
+                           "link and bus statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port "
+                           "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
+    check.add_argument("--robot", default="go1",
+                       help=f"one of: {ROBOT_NAMES_HELP}; either name reads the arm only with --arm-port (default "
+                       "go1)")
     check.add_argument("--target", required=True, metavar="HOST:PORT",
                        help="the robot's (or an emulator's) IPv4 address and UDP port, e.g. 127.0.0.1:PORT")
     check.add_argument("--local", default=None, metavar="HOST:PORT",
@@ -540,7 +569,8 @@ def _add_hw_run_parser(hws: _Commands) -> None:
                            "2 for an error; 130 when interrupted (Ctrl-C, SIGTERM, a closed terminal).")
     hwrun.add_argument("ctrl", help=f"controller (its variant for --arm is played): one of {_NAMES_HELP}")
     hwrun.add_argument("--robot", default=None,
-                       help=f"one of: {_ROBOT_NAMES_HELP} (default: the scenario's robot)")
+                       help=f"one of: {ROBOT_NAMES_HELP}; --arm says whether its arm is there, either name "
+                       "(default: the scenario's robot)")
     hwrun.add_argument("--arm", default=None,
                        help=f"arm mode on the robot: {', '.join(HARDWARE_ARM_MODES)} (default: the controller's; "
                        "actuated needs --arm-port; locked with --arm-port holds the arm by its servos)")
@@ -800,7 +830,7 @@ def _add_check_controller_parser(sub: _Commands) -> None:
     chk.add_argument("name", help=f"the controller: {_NAMES_HELP}")
     add_controller_file_options(chk, repeatable=False)
     chk.add_argument("--robot", action=_AppendOnce, default=None, help=f"check on this robot only (repeatable; one of: "
-                     f"{', '.join(ROBOTS)}; default: every robot it claims)")
+                     f"{ROBOT_NAMES_HELP}; default: every robot it claims)")
     chk.add_argument("--seconds", type=_EPISODE_S, default=None, help="closed-loop run per robot and arm mode [s], "
                      f"up to {MAX_DURATION_S:g} (default 0.5; with --scenario the trial's duration)")
     chk.add_argument("--scenario", default=None, metavar="FILE", help="play this scenario's first trial (first band, "

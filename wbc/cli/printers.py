@@ -186,6 +186,11 @@ def _figure(value: float, spec: str) -> str:
     return format(value, spec)
 
 
+def _cpu_time(ms: float) -> str:
+    """A CPU time per step that keeps its figures at any size: ``120 us`` below a millisecond, ``20.5 ms`` above."""
+    return f"{ms * 1e3:.0f} us" if ms < 1.0 else f"{ms:,.1f} ms"
+
+
 def _count(n: int, noun: str) -> str:
     """``1 trial``, ``2 trials``."""
     return f"{n} {noun}{'' if n == 1 else 's'}"
@@ -237,10 +242,10 @@ def print_bench_train(result: TrainBenchResult) -> None:
           f"({result.physics_steps_per_s:,.0f} physics steps/s)")
     print(f"  rollout only   : {result.rollout_only_control_steps_per_s:>10,.0f} control steps/s (physics limit)")
     print(f"  env efficiency : {100 * result.env_efficiency:>9.0f} %  "
-          f"({result.python_ms_per_step:.1f} ms of Python per policy step)")
+          f"({_cpu_time(result.python_ms_per_step)} of Python per policy step)")
     print(f"  CPU-time bound : {result.cpu_bound_control_steps_per_s:>10,.0f} control steps/s with the cores to "
           f"itself (physics alone {result.cpu_bound_physics_only_control_steps_per_s:,.0f}; CPU per step: "
-          f"physics {result.physics_cpu_ms_per_step:.0f} ms, Python {result.python_cpu_ms_per_step:.1f} ms)")
+          f"physics {_cpu_time(result.physics_cpu_ms_per_step)}, Python {_cpu_time(result.python_cpu_ms_per_step)})")
     ref = result.reference
     if ref is not None:
         target, at = TRAIN_TARGET
@@ -714,7 +719,7 @@ def print_hw_check(check: HardwareCheck) -> None:
         _print_check_link(check)
         return
     print(f"{where}: {link.valid_states} leg states received, newest {1e3 * link.state_age:.1f} ms old")
-    print("  joint                 q [rad]   dq [rad/s]   tau_est [N m]   range [rad]       mode  temp [C]")
+    print("  joint                 q [rad]   dq [rad/s]   tau_est [N m]   range [rad]          mode  temp [C]")
     modes = list(extras.motor_mode) if extras is not None else []
     temps = list(extras.motor_temperature) if extras is not None else []
     if check.arm_status is not None:
@@ -727,9 +732,8 @@ def print_hw_check(check: HardwareCheck) -> None:
             temps.append(temp)
     for i, name in enumerate(check.joint_names):
         q = state.q[i]
-        outside = q < check.lower[i] - check.margin or q > check.upper[i] + check.margin
         row = (f"  {name:<20}{q:>9.3f}{state.dq[i]:>13.3f}{state.tau_est[i]:>16.2f}   "
-               f"[{check.lower[i]:>6.3f}, {check.upper[i]:>6.3f}]" + (" OUT" if outside else "    "))
+               f"[{check.lower[i]:>6.3f}, {check.upper[i]:>6.3f}] {_range_mark(q, check, i):<6}")
         if i < len(modes) and modes[i] is not None:
             row += f"  0x{int(modes[i]):02X}{int(temps[i]):>10d}"
         print(row)
@@ -749,10 +753,24 @@ def print_hw_check(check: HardwareCheck) -> None:
     verdict = {"ramp": "ready: a ramp would start from this pose",
                "waiting": "waiting: no live state stream"}.get(check.safety_state, check.safety_state)
     print("  safety: " + (f"WOULD REFUSE: {trips[0].reason}: {trips[0].detail}" if trips else verdict)
-          + f" (joint margin {check.margin} rad beyond each range)")
+          + f" (joint margin {check.margin} rad beyond each range: a joint marked margin is beyond its range and "
+          "within the margin, which the layer lets pass; one marked OUT is beyond both, which it refuses)")
     if trips and trips[0].remedy:
         print(f"  what to do: {trips[0].remedy}")
     _print_check_link(check)
+
+
+def _range_mark(q: float, check: HardwareCheck, i: int) -> str:
+    """Where joint `i`'s `q` stands against its range, as the safety layer checks it with its margin.
+
+    Returns:
+        ``""`` inside the range; ``margin`` beyond it but within the layer's joint margin (which the layer lets
+        pass); ``OUT`` beyond range and margin (which the layer refuses).
+    """
+    lower, upper = check.lower[i], check.upper[i]
+    if q < lower - check.margin or q > upper + check.margin:  # the layer's own test (`SafeRobot`)
+        return "OUT"
+    return "margin" if q < lower or q > upper else ""
 
 
 def _print_check_link(check: HardwareCheck) -> None:

@@ -11,11 +11,12 @@ EEPROM and torque to the servos. So a port is opened without consent only if it 
 - an in-process bus (a name starting with `IN_PROCESS_PREFIX`), which no serial device is ever opened for.
 
 Anything else (``/dev/ttyUSB0``, ``/dev/ttyACM0``, ``/dev/serial/by-id/...``, the udev name ``/dev/ttyDXL``, a path
-that does not exist) is refused unless the config says ``allow_hardware=True``. The decision reads the name, then at
-most resolves its symlinks (``lstat`` / ``readlink``), calls ``stat`` on the result and reads the register; it never
-opens the path. A refusal with ``allow_hardware=False`` therefore happens before any ``open`` of a device, and with
-``allow_hardware=True`` the filesystem is not touched at all by the check. (On macOS, where ptys are
-``/dev/ttysNNN``, an emulator's port needs ``allow_hardware`` too: the policy errs on the side of refusing.)
+that does not exist, a regular file) is refused unless the config says ``allow_hardware=True``; the refusal says
+what the path is, and points to the consent only where it may be a real device (a character device). The decision
+reads the name, then at most resolves its symlinks (``lstat`` / ``readlink``), calls ``stat`` on the result and reads
+the register; it never opens the path. A refusal with ``allow_hardware=False`` therefore happens before any ``open``
+of a device, and with ``allow_hardware=True`` the filesystem is not touched at all by the check. (On macOS, where ptys
+are ``/dev/ttysNNN``, an emulator's port needs ``allow_hardware`` too: the policy errs on the side of refusing.)
 """
 
 from __future__ import annotations
@@ -34,6 +35,10 @@ IN_PROCESS_PREFIX = "in-process:"
 """How an in-process bus names its port (`wbc.hardware.dynamixel.in_process_handlers`): never a file."""
 
 _PTY_DIR = "/dev/pts"
+
+_NOT_DEVICES = ((stat.S_ISREG, "a regular file"), (stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe"),
+                (stat.S_ISSOCK, "a socket"), (stat.S_ISBLK, "a block device (a disk)"))
+"""What a path may be besides a character device, in the refusal's words."""
 
 
 def is_pseudo_terminal(path: str) -> bool:
@@ -63,9 +68,12 @@ def is_emulated_port(port: str) -> bool:
 def why_not_emulated(port: str) -> tuple[str, bool]:
     """Why `port` is not an emulator's: a sentence that starts with the port's name, and whether it may be real.
 
-    A pseudo-terminal's name that names no device (an emulator that stopped takes its pty with it) and an empty
-    name are told apart from a real device (False), so that the refusal does not send the user to
-    ``--allow-hardware`` for a typo or a stopped emulator.
+    The sentence says what the path is (missing, a regular file, a directory, a character device that is not a
+    pseudo-terminal ...), read with ``stat`` only, never opened. Only a character device (a serial adapter, a
+    UART, a pty no emulator serves) or a path that cannot be examined may be a real device (True); the others
+    (an empty name, a pseudo-terminal's name that names no device, as an emulator that stopped takes its pty with
+    it, a path that does not exist, a file that is no device) are told apart (False), so that the refusal does not
+    send the user to ``--allow-hardware`` for a typo, a stopped emulator or an adapter not plugged in.
     """
     if not port:
         return "'' is empty: name the arm's serial device (an emulator prints its pseudo-terminal)", False
@@ -77,8 +85,22 @@ def why_not_emulated(port: str) -> tuple[str, bool]:
         return (f"{port} is a pseudo-terminal that no wbc emulator serves: refusing to open it without consent (a "
                 "terminal, or a bridge such as socat to a real adapter, is a pty too; an emulator's pty is known "
                 "while the emulator runs)"), True
-    return (f"{port} is not a pseudo-terminal: refusing to open a real serial device (the arm's adapter; opening it "
-            "writes the servos' settings and torque)"), True
+    subject = f"{port} is" if real == os.path.abspath(port) else f"{port} resolves to {real}, which is"
+    try:
+        mode = os.stat(real).st_mode
+    except FileNotFoundError:
+        subject = f"{port} does not exist" if real == os.path.abspath(port) else f"{subject} missing"
+        return (f"{subject}: no serial device of that name on this machine (an adapter appears once plugged in, as "
+                "/dev/ttyUSB0 or a name under /dev/serial/by-id; an emulator prints the pseudo-terminal to use)"), False
+    except OSError as err:
+        return (f"{port} cannot be examined ({err.strerror}): refusing to open it as a real serial device (the "
+                "arm's adapter; opening it writes the servos' settings and torque)"), True
+    if stat.S_ISCHR(mode):
+        return (f"{subject} a character device that is not a pseudo-terminal: refusing to open a real serial device "
+                "(the arm's adapter; opening it writes the servos' settings and torque)"), True
+    kind = next((name for test, name in _NOT_DEVICES if test(mode)), "not a device file")
+    return (f"{subject} {kind}, not a serial device: nothing to open as the arm's bus (name the arm's adapter, e.g. "
+            "/dev/ttyUSB0, or the pseudo-terminal an emulator prints)"), False
 
 
 def check_serial_port(port: str, *, allow_hardware: bool, what: str = "port") -> None:
