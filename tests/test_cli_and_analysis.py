@@ -340,12 +340,14 @@ def test_a_reader_that_closes_the_output_ends_the_command_quietly() -> None:
     """``wbc controllers | head -1``: the reader closes the pipe before the list is written. The command ends as one
     that SIGPIPE ends (141), without a word: it printed a BrokenPipeError traceback and exited 1, read by a script as
     a controller's failure."""
+    import os
     import subprocess
     import sys
 
     root = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # buffered: written at the end, as usual
     proc = subprocess.Popen([sys.executable, "-m", "wbc.cli", "controllers"], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, cwd=root)
+                            stderr=subprocess.PIPE, cwd=root, env=env)
     proc.stdout.close()  # before the interpreter has even started: every line meets a closed pipe
     err = proc.stderr.read().decode()
     proc.stderr.close()

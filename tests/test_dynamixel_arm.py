@@ -44,7 +44,7 @@ from wbc.hardware.dynamixel.arm_fault import (
     MODE_PORT_LOST,
     MODE_SERVO,
 )
-from wbc.hardware.dynamixel.arm_robot import ARM_KD_MAX, ARM_KP_MAX
+from wbc.hardware.dynamixel.arm_robot import ARM_KD_MAX, ARM_KP_MAX, PARK_RETRIES_S
 from wbc.hardware.dynamixel.control_table import HW_OVERHEATING, HW_OVERLOAD, XM430_W350, OperatingMode
 from wbc.hardware.dynamixel.current_law import CurrentLaw
 from wbc.hardware.dynamixel.protocol import Instruction
@@ -411,7 +411,7 @@ def test_a_park_the_elbow_misses_is_tried_again_until_it_holds(emu: DynamixelEmu
                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
     """The elbow neither hears nor answers its park's first three tries (noise on the bus, a connector that lets go
     for an instant; to the host, as an answer that came too late). The park's transfers are tried again as at
-    start-up, and every joint ends parked; tried once more only, the elbow was left limp."""
+    start-up, and every joint ends parked; tried once more only, the elbow would be left limp."""
     arm = _arm(emu, close_damping=0.1)
     arm.connect()
     _keep_writing(arm, _hold_with_offset(arm), 0.1)
@@ -441,6 +441,30 @@ def test_a_park_the_elbow_misses_is_tried_again_until_it_holds(emu: DynamixelEmu
     writes = elbow_writes()
     assert writes[:4] == ["bus_watchdog"] * 4 and writes[4] != "bus_watchdog"  # its first write, made four times
     assert (emu.plant.arm_command()[0].kp > 0).all()  # a position hold on every joint
+
+
+def test_a_park_tries_again_for_a_bounded_time_only(emu: DynamixelEmulator, monkeypatch: pytest.MonkeyPatch) -> None:
+    """An elbow that never answers at the park: its transfers are tried again for `PARK_RETRIES_S` in all, however many
+    tries `connect_retries` allows and however long each waits, so that the close ends within what its callers wait
+    for (the bus loop's join, the I/O process's close); the other joints are parked."""
+    arm = _arm(emu, close_damping=0.1, connect_retries=100, retry_wait_s=0.05)  # ~0.05 s a try: 100 tries, ~5 s
+    arm.connect()
+    _keep_writing(arm, _hold_with_offset(arm), 0.1)
+    park = DynamixelArm._park
+
+    def silent_elbow(self: DynamixelArm, bus: SdkBus) -> None:
+        emu.inject(BusFault.SILENT_ID, 4)
+        park(self, bus)
+
+    monkeypatch.setattr(DynamixelArm, "_park", silent_elbow)
+    emu.clear_log()
+    start = emu.clock.now()
+    arm.close()
+    assert emu.clock.now() - start < 0.1 + PARK_RETRIES_S + 0.2  # the damping, the tries, the last one's timeout
+    for servo_id in (1, 2):
+        assert emu.register(servo_id, "operating_mode") == OperatingMode.CURRENT_BASED_POSITION
+    tries = [p for p in emu.packets() if p.instruction == Instruction.WRITE and any(w.id == 4 for w in p.writes)]
+    assert 10 < len(tries) < 101
 
 
 # -- fault case 10: bounded retries, then the torque policy, read at the emulator ---------------------------------

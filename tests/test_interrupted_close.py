@@ -1,8 +1,9 @@
 """A robot's close is never cut: Ctrl-C and the requests to end wait for its end, then act (`HeldInterrupts`).
 
-A real robot's close damps its legs and parks an arm (a position hold that needs no host). Cut by a second Ctrl-C, the
-arm went limp. The signals here are raised by the test itself, at a known point of the close, so each case is the same
-on any machine at any load; the arm's case runs its devices in lockstep with the emulator on one manual clock.
+A real robot's close damps its legs and parks an arm (a position hold that needs no host). Cut by a second Ctrl-C, it
+would leave the arm limp. The signals here are raised by the test itself, at a known point of the close, so each case
+is the same on any machine at any load; the arm's case runs its devices in lockstep with the emulator on one manual
+clock.
 """
 
 from __future__ import annotations

@@ -204,7 +204,7 @@ def hold_results_dir(out_dir: Path) -> Iterator[DirectoryLock]:
     try:
         yield lock
     except BaseException:
-        if made and lock.held and _holds_only_its_lock(out):
+        if out in made and lock.held and _holds_only_its_lock(out):
             with contextlib.suppress(OSError):
                 (out / LOCK_FILE).unlink()
             lock.release()

@@ -1472,7 +1472,9 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         with _terminate_interrupts():
-            return int(HANDLERS[args.handler](args) or 0)
+            code = int(HANDLERS[args.handler](args) or 0)
+            sys.stdout.flush()  # here, where a reader that closed the output is told apart; not at the exit
+            return code
     except WbcError as exc:
         _say(f"wbc: error: {exc}")
         return 2

@@ -43,8 +43,8 @@ torque still on. The arm is then limp: only the gearbox's friction holds it, and
 avoids that on purpose: it damps for `close_damping` seconds, then parks each joint it can still read. Parking
 means: torque off for three register writes (an instant), current-based position mode, goal = where the joint is,
 goal current `park_current_a`, torque on, watchdog off. The arm then holds its pose, compliantly, without the host.
-Each of those transfers that times out is tried again, as at start-up (`connect_retries`): the park is made once, with
-no bus cycle to keep, and a late answer must not leave a joint limp.
+Each of those transfers that times out is tried again, as at start-up (`connect_retries`), for `PARK_RETRIES_S` at
+most in all: the park is made once, with no bus cycle to keep, and a late answer must not leave a joint limp.
 
 Start-up (`connect`). Every servo is pinged. The backend checks each model number, the drive modes and the
 shadow's Secondary ID against the WX200's bus map, and that no hardware error is latched. It refuses to connect
@@ -136,6 +136,9 @@ _PRESENT = (_ADDR["present_current"], 10)  # current (2), velocity (4), position
 _STATUS_TEMP = (_ADDR["present_input_voltage"], 3)  # input voltage (2), temperature (1)
 PING_WAITS = (0.002, 0.01)
 """[s] The waits before the second and third ping of a servo whose read failed for good."""
+PARK_RETRIES_S = 2.0
+"""[s] How long the park goes on trying again the transfers that time out, all joints together: well within the
+close's wait for the bus loop (`close_damping` + 5 s) and the I/O process's for the close (5 s)."""
 
 
 class _Next(enum.Enum):
@@ -386,11 +389,15 @@ class DynamixelArm(Robot):
     def _name(self, servo_id: int) -> str:
         return f"ID {servo_id} ({self._names.get(servo_id, '?')})"
 
-    def _retry(self, bus: SdkBus, call: Callable[[], Any], result_of: Callable[[Any], int]) -> Any:
-        """`call()` again after a flush while it times out, at most `connect_retries` times (start-up, park)."""
+    def _retry(self, bus: SdkBus, call: Callable[[], Any], result_of: Callable[[Any], int], *,
+               until: float | None = None) -> Any:
+        """`call()` again after a flush while it times out: `connect_retries` times at most, none from `until` on.
+
+        Start-up's transfers and the park's (which gives an `until`) are made once, with no bus cycle to keep.
+        """
         out = call()
         for _ in range(self.config.connect_retries):
-            if result_of(out) != COMM_RX_TIMEOUT:
+            if result_of(out) != COMM_RX_TIMEOUT or (until is not None and self.clock.now() >= until):
                 break
             self.clock.sleep(max(self.config.retry_wait_s, 0.01))
             bus.flush()
@@ -711,6 +718,7 @@ class DynamixelArm(Robot):
         cfg = self.config
         parked, left = [], []
         park_units = int(round(cfg.park_current_a / CURRENT_UNIT))
+        until = self.clock.now() + PARK_RETRIES_S
         for joint in cfg.joints:
             servo_id = joint.servo_id
             if not self._readable(servo_id) or self._has_error((servo_id,)):
@@ -719,14 +727,14 @@ class DynamixelArm(Robot):
             try:
                 steps = (("bus_watchdog", 0), ("torque_enable", 0),
                          ("operating_mode", int(OperatingMode.CURRENT_BASED_POSITION)), ("goal_current", park_units))
-                ok = all(self._park_write(bus, servo_id, name, value) for name, value in steps)
+                ok = all(self._park_write(bus, servo_id, name, value, until) for name, value in steps)
                 read = self._retry(bus, lambda i=servo_id: bus.read(i, _ADDR["present_position"], 4),
-                                   lambda r: r.result) if ok else None
+                                   lambda r: r.result, until=until) if ok else None
                 ok = ok and read is not None and read.ok
                 if ok:
                     ticks = read.value(0, 4, signed=True)
-                    ok = self._park_write(bus, servo_id, "goal_position", ticks) and \
-                        self._park_write(bus, servo_id, "torque_enable", 1)
+                    ok = self._park_write(bus, servo_id, "goal_position", ticks, until) and \
+                        self._park_write(bus, servo_id, "torque_enable", 1, until)
             except SerialPortError:
                 ok = False
             (parked if ok else left).append(joint.name)
@@ -737,10 +745,12 @@ class DynamixelArm(Robot):
             text += f"; LIMP: {', '.join(left)}"
         self._say(text)
 
-    def _park_write(self, bus: SdkBus, servo_id: int, name: str, value: int) -> bool:
-        # tried again as a start-up transfer is: a park made once, at the close, with no cycle to keep; one late answer
-        # more than the bus cycle's retries allow (a loaded host, a slow servo) must not leave the joint limp
+    def _park_write(self, bus: SdkBus, servo_id: int, name: str, value: int, until: float) -> bool:
+        # tried again as a start-up transfer is, until `until`: a park made once, at the close, with no cycle to keep;
+        # one late answer more than the bus cycle's retries allow (a loaded host, a slow servo) must not leave the
+        # joint limp
         reg = XM430_W350[name]
-        result, error = self._retry(bus, lambda: bus.write(servo_id, reg.address, reg.size, value), lambda r: r[0])
+        result, error = self._retry(bus, lambda: bus.write(servo_id, reg.address, reg.size, value), lambda r: r[0],
+                                    until=until)
         return result == COMM_SUCCESS and not error & ~ALERT
 
