@@ -29,6 +29,14 @@ def signal_label(signum: int) -> str:
     return "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
 
 
+def _say(line: str) -> None:
+    """Print `line` on stderr; a closed terminal (SIGHUP) takes no more lines, and the work goes on all the same."""
+    try:
+        print(line, file=sys.stderr, flush=True)
+    except (OSError, ValueError):
+        pass
+
+
 def _install(handler: Callable[[int, Any], None]) -> dict[int, Any]:
     """Put `handler` on each of `ASKS_TO_END` that the process does not ignore; the handlers before, by signal.
 
@@ -92,10 +100,7 @@ class DeferredInterrupts:
     def _note(self, signum: int, frame: Any) -> None:
         self.requested = signum
         self._restore()
-        try:
-            print(self.says(signal_label(signum)), file=sys.stderr, flush=True)
-        except (OSError, ValueError):  # a closed terminal (SIGHUP) takes no more lines: the work goes on all the same
-            pass
+        _say(self.says(signal_label(signum)))
 
 
 class HeldInterrupts:
@@ -146,9 +151,5 @@ class HeldInterrupts:
         if self.held is not None:
             return
         self.held = signum
-        if self.says is None:
-            return
-        try:
-            print(self.says(signal_label(signum)), file=sys.stderr, flush=True)
-        except (OSError, ValueError):  # a closed terminal (SIGHUP) takes no more lines: the work goes on all the same
-            pass
+        if self.says is not None:
+            _say(self.says(signal_label(signum)))

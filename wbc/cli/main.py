@@ -1420,15 +1420,7 @@ def _say(text: str) -> None:
     try:
         print(text, file=sys.stderr, flush=True)
     except OSError:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        try:
-            for stream in (sys.stdout, sys.stderr):
-                try:
-                    os.dup2(devnull, stream.fileno())
-                except (OSError, ValueError, AttributeError):  # closed, or not a file (a test's capture)
-                    pass
-        finally:
-            os.close(devnull)
+        _to_the_null_device(sys.stdout, sys.stderr)
 
 
 def _stdout_reader_gone() -> bool:
@@ -1441,13 +1433,15 @@ def _stdout_reader_gone() -> bool:
         return False
 
 
-def _quiet_stdout() -> None:
-    """Standard output to the null device: what is left in its buffer, and the flush at exit, then go nowhere."""
+def _to_the_null_device(*streams: Any) -> None:
+    """`streams` to the null device: what is left in their buffers, and the flush at exit, then go nowhere."""
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
-        os.dup2(devnull, sys.stdout.fileno())
-    except (OSError, ValueError, AttributeError):
-        pass
+        for stream in streams:
+            try:
+                os.dup2(devnull, stream.fileno())
+            except (OSError, ValueError, AttributeError):  # closed, or not a file (a test's capture)
+                pass
     finally:
         os.close(devnull)
 
@@ -1485,7 +1479,7 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:
         if not _stdout_reader_gone():
             raise  # another pipe's: a fault to see
-        _quiet_stdout()
+        _to_the_null_device(sys.stdout)
         return 128 + signal.SIGPIPE
 
 
