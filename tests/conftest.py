@@ -14,7 +14,7 @@ import pytest
 
 import wbc  # noqa: F401  (first: it pins the numeric kernels before numpy loads, wbc/_kernels.py)
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.emulators import UnitreeEmulator
+from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig, UnitreeEmulator
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 
 _CACHE: list[str] = []
@@ -239,6 +239,27 @@ class Stepped:
     def build(self, config: HardwareRobotConfig) -> HardwareRobot:
         """The robot `config` names, its legs on the clock over the emulator's in-process channel."""
         return build_hardware_robot(config, clock=self.clock, legs_transport=self.emu.transport(self.clock))
+
+
+def hw_run_arm_in_lockstep(scenario: str, out: str, seconds: float) -> tuple[int, RobotEmulator]:
+    """``wbc hw run stand --robot a1-wx200 --arm actuated --no-io-process``, legs and arm emulated in process on one
+    manual clock, the trial's devices (the legs' link, the arm's bus) on that clock too; (its exit status, the
+    emulator, closed: its logs are kept)."""
+    from wbc.cli.main import hw_run
+    from wbc.cli.parser import build_parser
+
+    clock = ManualClock()
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="realtime"), clock=clock) as emu:
+        def build(config: HardwareRobotConfig) -> HardwareRobot:
+            return build_hardware_robot(config, clock=clock, legs_transport=emu.legs_transport,
+                                        arm_handlers=emu.arm_handlers())
+
+        args = build_parser().parse_args(["hw", "run", "stand", "--robot", "a1-wx200", "--arm", "actuated",
+                                          "--scenario", scenario, "--trial", "0", "--target", "127.0.0.1:9",
+                                          "--arm-port", emu.port, "--seconds", str(seconds), "--out", out,
+                                          "--no-io-process"])
+        code = hw_run(args, build=build)
+    return code, emu
 
 
 _TERMINAL_DISPOSITIONS = {signal.SIGINT: signal.default_int_handler, signal.SIGTERM: signal.SIG_DFL,

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import Stepped, terminal_signals_in_child
+from conftest import Stepped, hw_run_arm_in_lockstep, terminal_signals_in_child
 
 from wbc.arena.episode import Episode
 from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, run_hardware_trial
@@ -49,8 +49,8 @@ from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
-from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
+from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig
 from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import NO_REALTIME
@@ -749,18 +749,9 @@ def test_a_trial_with_the_arm_actuated_over_both_wires_in_lockstep(tmp_path: Pat
     (the legs' link and the arm's bus) on that clock too."""
     pytest.importorskip("dynamixel_sdk")
     out = tmp_path / "hw"
-    clock = ManualClock()
-    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="realtime"), clock=clock) as emu:
-        def build(config: HardwareRobotConfig) -> HardwareRobot:
-            return build_hardware_robot(config, clock=clock, legs_transport=emu.legs_transport,
-                                        arm_handlers=emu.arm_handlers())
-
-        args = build_parser().parse_args(["hw", "run", "stand", "--robot", "a1-wx200", "--arm", "actuated",
-                                          "--scenario", PUSH, "--trial", "0", "--target", "127.0.0.1:9",
-                                          "--arm-port", emu.port, "--seconds", "3", "--out", str(out),
-                                          "--no-io-process"])
-        assert hw_run(args, build=build) == 0, capsys.readouterr().err
-        packets = emu.arm.stats.packets
+    code, emu = hw_run_arm_in_lockstep(PUSH, str(out), 3)
+    assert code == 0, capsys.readouterr().err
+    packets = emu.arm.stats.packets
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.controller == "stand" and record.backend == "unitree+dynamixel" and record.safety_trips == 0
     assert record.success and record.metrics_source == "estimator"

@@ -15,16 +15,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import hw_run_arm_in_lockstep
 
 from wbc.arena.trial_record import TrialRecord
-from wbc.cli.main import hw_run
-from wbc.cli.parser import build_parser
-from wbc.hardware.clock import ManualClock
 from wbc.hardware.dynamixel.arm_robot import DynamixelArm
 from wbc.hardware.dynamixel.control_table import OperatingMode
-from wbc.hardware.emulators import RobotEmulator, RobotEmulatorConfig
 from wbc.hardware.emulators.logged_packet import LoggedPacket
-from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.robot import Robot
 from wbc.interrupts import DeferredInterrupts, HeldInterrupts
 from wbc.robots.joint_table import JointTable
@@ -229,19 +225,9 @@ def test_ctrl_c_while_the_arm_closes_lets_it_park(tmp_path: Path, capsys: pytest
 
         monkeypatch.setattr(hw_trial, "run_episode", interrupted_trial)
     out = tmp_path / "hw"
-    clock = ManualClock()
-    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="realtime"), clock=clock) as emu:
-        def build(config: HardwareRobotConfig) -> HardwareRobot:
-            return build_hardware_robot(config, clock=clock, legs_transport=emu.legs_transport,
-                                        arm_handlers=emu.arm_handlers())
-
-        args = build_parser().parse_args(["hw", "run", "stand", "--robot", "a1-wx200", "--arm", "actuated",
-                                          "--scenario", PUSH, "--trial", "0", "--target", "127.0.0.1:9",
-                                          "--arm-port", emu.port, "--seconds", "1", "--out", str(out),
-                                          "--no-io-process"])
-        code = hw_run(args, build=build)
-        packets = emu.arm.packets()
-        assert emu.failure is None
+    code, emu = hw_run_arm_in_lockstep(PUSH, str(out), 1)
+    packets = emu.arm.packets()
+    assert emu.failure is None
     err = capsys.readouterr().err
     assert code == 130, err
     assert _parked(packets) == set(JOINT_SERVOS)

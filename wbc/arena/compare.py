@@ -271,25 +271,11 @@ def run_arena(cfg: ArenaConfig, *, lock: DirectoryLock | None = None) -> ArenaRe
 
     Args:
         cfg: what to play, and where to store it.
-        lock: `ArenaConfig.out_dir`'s lock, already held by the caller (`wbc.arena.results.hold_results_dir`), who
-            writes files of its own there after the run and then gives it back; None: the run takes the lock and
-            gives it back once its files are written.
+        lock: as `play_arena`'s.
 
-    Raises:
-        UnknownNameError: an unknown controller name (the message lists the valid ones).
-        ResultsDirError: `ArenaConfig.out_dir` is a file, or a file the run writes there is a directory (checked
-            before anything else), or see below.
-        PolicyFileError: a ``policy:PATH`` file that is missing or malformed.
-        ScenarioError: the scenario file is invalid.
-        ConfigError: bad options, or a controller for another robot than the scenario's.
-        ResultsDirError: a results directory that belongs to another run, or that misses trials at the end (other
-            than those of a controller stopped for its errors), or that another run holds
-            (`wbc.arena.results.LOCK_FILE`), or a file of it that cannot be written (a full disk, a quota, no
-            permission: the message names it, and says that the trials stored are kept for ``--resume``).
-        RecordError: a ``trials.csv`` row refused on `ArenaConfig.resume` without `ArenaConfig.drop_bad_rows`, or
-            a malformed ``run.json``.
-
-    A controller's failure on a trial is not raised: it is recorded (outcome ``controller_error``) and reported in
+    It raises what `plan_arena` raises (the input refused, before the directory is touched), then what `play_arena`
+    raises (the directory refused, a file of it that cannot be written, a ``trials.csv`` row refused). A controller's
+    failure on a trial is not raised: it is recorded (outcome ``controller_error``) and reported in
     `ArenaResult.controller_errors`.
     """
     return play_arena(plan_arena(cfg), lock=lock)
