@@ -13,6 +13,7 @@ __all__ = [
     "CONTROLLER_ERRORS",
     "WbcError",
     "UnknownNameError",
+    "with_aliases",
     "ConfigError",
     "CommandError",
     "FileFieldError",
@@ -71,6 +72,12 @@ class WbcError(Exception):
         return _rebuild_error, (type(self), self.args), self.__dict__ or None
 
 
+def with_aliases(name: str, aliases: Mapping[str, str]) -> str:
+    """``go1-arm (or go1)``: `name` with the aliases (alias -> name) that name it, as a refusal lists it."""
+    others = [alias for alias, named in aliases.items() if named == name]
+    return f"{name} (or {', '.join(others)})" if others else name
+
+
 class UnknownNameError(WbcError, KeyError):
     """A name (robot, arm mode, controller ...) is not in its registry; the message lists the valid ones.
 
@@ -97,12 +104,8 @@ class UnknownNameError(WbcError, KeyError):
         self.suggestion = close[0] if close else None
         hint = f"; did you mean {self.suggestion!r}?" if self.suggestion is not None else ""
         shown = repr(name) if len(repr(name)) <= 120 else f"{repr(name)[:90]}... ({len(str(name))} characters)"
-        listed = []
-        for valid_name in self.valid:
-            others = [alias for alias, named in self.aliases.items() if named == valid_name]
-            listed.append(f"{valid_name} (or {', '.join(others)})" if others else valid_name)
-        super().__init__(f"{where + ': ' if where else ''}unknown {kind} {shown}{hint}; valid {kind}s: "
-                         f"{', '.join(listed)}")
+        listed = ", ".join(with_aliases(valid_name, self.aliases) for valid_name in self.valid)
+        super().__init__(f"{where + ': ' if where else ''}unknown {kind} {shown}{hint}; valid {kind}s: {listed}")
 
     def __str__(self) -> str:  # KeyError would repr() the message
         return str(self.args[0])

@@ -11,8 +11,8 @@ name suggested.
 
 from __future__ import annotations
 
-from wbc.errors import UnknownNameError
-from wbc.hardware.unitree import DESCRIPTIONS
+from wbc.errors import UnknownNameError, with_aliases
+from wbc.hardware.unitree import DESCRIPTIONS, LEG_WIRES
 from wbc.robots.registry import ROBOTS
 
 __all__ = ["ROBOT_ALIASES", "ROBOT_NAMES_HELP", "robot_name", "wire_name"]
@@ -21,17 +21,8 @@ ROBOT_ALIASES: dict[str, str] = {wire: name for wire, name in DESCRIPTIONS.items
 """The legs' name of each robot -> its registry name: ``go1`` -> ``go1-arm``."""
 
 
-def _both_names(name: str) -> str:
-    """``go1-arm (or go1)``: a registry name with its aliases, as the refusal lists it (`UnknownNameError`)."""
-    aliases = [alias for alias, named in ROBOT_ALIASES.items() if named == name]
-    return f"{name} (or {', '.join(aliases)})" if aliases else name
-
-
-ROBOT_NAMES_HELP = ", ".join(_both_names(name) for name in ROBOTS)
+ROBOT_NAMES_HELP = ", ".join(with_aliases(name, ROBOT_ALIASES) for name in ROBOTS)
 """The accepted names for a help line: ``a1-wx200 (or a1), go1-arm (or go1)``."""
-
-_WIRES = {name: wire for wire, name in DESCRIPTIONS.items()}
-"""Registry name -> the legs' wire its robot speaks: ``go1-arm`` -> ``go1``."""
 
 
 def robot_name(name: str) -> str:
@@ -61,8 +52,8 @@ def wire_name(name: str) -> str:
         UnknownNameError: `name` names no robot (`robot_name`), or one whose legs speak no wire we emulate.
     """
     robot = robot_name(name)
-    if robot not in _WIRES:
-        wired = tuple(r for r in ROBOTS if r in _WIRES)
+    if robot not in LEG_WIRES:
+        wired = tuple(r for r in ROBOTS if r in LEG_WIRES)
         raise UnknownNameError("robot with a Unitree wire", name, wired,
                                aliases={a: r for a, r in ROBOT_ALIASES.items() if r in wired})
-    return _WIRES[robot]
+    return LEG_WIRES[robot]

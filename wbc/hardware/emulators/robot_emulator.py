@@ -32,13 +32,10 @@ from wbc.hardware.emulators.dynamixel import DynamixelEmulator, DynamixelEmulato
 from wbc.hardware.emulators.faults import Fault
 from wbc.hardware.emulators.plant import SharedPlant, SharedPlantConfig
 from wbc.hardware.emulators.unitree import MODES, EmulatorTransport, UnitreeEmulator, UnitreeEmulatorConfig
-from wbc.hardware.unitree.robot import DESCRIPTIONS
+from wbc.hardware.unitree.robot import LEG_WIRES
 from wbc.types import BaseTruth
 
 __all__ = ["LEG_WIRES", "RobotEmulator", "RobotEmulatorConfig"]
-
-LEG_WIRES = {description: wire for wire, description in DESCRIPTIONS.items()}
-"""Robot with its arm (``a1-wx200``, ``go1-arm``) -> the Unitree wire its legs speak (``a1``, ``go1``)."""
 
 
 @dataclass(frozen=True, kw_only=True)

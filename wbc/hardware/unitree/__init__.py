@@ -17,7 +17,7 @@ from wbc.hardware.unitree.battery import Battery
 from wbc.hardware.unitree.decode_stats import REJECT_REASONS, DecodeStats
 from wbc.hardware.unitree.link_stats import LinkStats
 from wbc.hardware.unitree.remote import Remote
-from wbc.hardware.unitree.robot import DESCRIPTIONS, TRANSPORTS, UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree.robot import DESCRIPTIONS, LEG_WIRES, TRANSPORTS, UnitreeRobot, UnitreeRobotConfig
 from wbc.hardware.unitree.sdk_transport import SdkTransport
 from wbc.hardware.unitree.state_extras import LowStateExtras
 from wbc.hardware.unitree.target import check_target, is_loopback
@@ -25,6 +25,7 @@ from wbc.hardware.unitree.transport import Transport, UdpTransport
 
 __all__ = [
     "DESCRIPTIONS",
+    "LEG_WIRES",
     "REJECT_REASONS",
     "TRANSPORTS",
     "Battery",

@@ -60,7 +60,7 @@ from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
 from wbc.types import MotorCommand, RobotState
 
-__all__ = ["DESCRIPTIONS", "SDK_POSITION_LIMITS", "TRANSPORTS", "UnitreeRobot", "UnitreeRobotConfig",
+__all__ = ["DESCRIPTIONS", "LEG_WIRES", "SDK_POSITION_LIMITS", "TRANSPORTS", "UnitreeRobot", "UnitreeRobotConfig",
            "unitree_joint_table"]
 
 TRANSPORTS = ("udp", "sdk")
@@ -68,6 +68,9 @@ TRANSPORTS = ("udp", "sdk")
 
 DESCRIPTIONS = {"a1": "a1-wx200", "go1": "go1-arm"}
 """Robot name -> registry description whose legs-only variant (arm mode ``none``) the backend drives."""
+
+LEG_WIRES = {description: wire for wire, description in DESCRIPTIONS.items()}
+"""Robot with its arm (``a1-wx200``, ``go1-arm``) -> the Unitree wire its legs speak (``a1``, ``go1``)."""
 
 SDK_POSITION_LIMITS = {
     "go1": (np.array([-1.047, -0.663, -2.721]), np.array([1.047, 2.966, -0.837])),
