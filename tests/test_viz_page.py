@@ -206,6 +206,19 @@ def test_cli_view_ab_and_stored_episodes(scenario, tmp_path, capsys, monkeypatch
     assert {"attitude", "height", "velocity", "yaw_rate"} <= set(plots)
 
 
+def test_cli_view_ab_names_its_page_from_names_that_hold_path_separators(scenario, tmp_path, capsys, monkeypatch):
+    """Without --record the page is ab-A-B-trialI.html in the current directory, a path's separators made ``_``."""
+    from wbc.learned.policy.shipped import shipped_weights
+    from wbc.robots.registry import get_robot
+
+    monkeypatch.chdir(tmp_path)
+    policy = f"policy:{shipped_weights(get_robot('a1-wx200', 'locked'))}"
+    assert main(["view", "stand", policy, "--scenario", str(scenario), "--trial", "0", "--duration", "0.2"]) == 0
+    (page,) = tmp_path.glob("ab-*.html")
+    assert page.name == f"ab-stand-{re.sub(r'[^A-Za-z0-9._-]+', '_', policy)}-trial0.html"
+    assert page.resolve().as_uri() in capsys.readouterr().out
+
+
 def test_cli_view_exports_the_trial_and_says_where_the_recording_time_went(scenario, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
     out, toml = tmp_path / "t.html", tmp_path / "t.toml"

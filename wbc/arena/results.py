@@ -39,7 +39,7 @@ from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory
 from wbc.provenance import provenance
 
 __all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_not_held", "check_out_dir", "episode_path",
-           "hold_results_dir", "unwritable"]
+           "file_name_part", "hold_results_dir", "unwritable"]
 
 OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "report.md", "push_recovery.png",
                 "ttf.png", "tracking.png")
@@ -259,14 +259,20 @@ def _shown(value: object, width: int = 80) -> str:
     return text if len(text) <= width else text[: width - 3] + "..."
 
 
+def file_name_part(controller: str) -> str:
+    """A controller name as one part of a file or directory name (``onnx:runs/x/p.onnx`` -> ``onnx_runs_x_p.onnx``).
+
+    Each run of characters other than letters, digits, ``.``, ``_`` and ``-`` becomes ``_``.
+    """
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", controller)
+
+
 def episode_path(out_dir: Path, controller: str, band: str, seed: int, index: int) -> Path:
     """Where a results directory keeps a trial's episode log (``wbc run --save-episodes``).
 
-    A controller name that is not a plain word (``policy:runs/x/policy``) becomes one directory, its separators
-    replaced by ``_``.
+    A controller name that is not a plain word (``policy:runs/x/policy``) becomes one directory (`file_name_part`).
     """
-    folder = re.sub(r"[^A-Za-z0-9._-]+", "_", controller)
-    return Path(out_dir) / "episodes" / folder / f"{band}-s{seed}-t{index}.npz"
+    return Path(out_dir) / "episodes" / file_name_part(controller) / f"{band}-s{seed}-t{index}.npz"
 
 
 def _outside(identity: RunIdentity) -> Callable[[TrialRecord], str | None]:

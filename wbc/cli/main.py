@@ -1273,9 +1273,11 @@ def _view_trial(args: argparse.Namespace) -> Trial:
 
 def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
     """``wbc view A B``: both controllers' runs of one trial in one recorded page, B as a ghost."""
+    from wbc.arena.results import file_name_part
     from wbc.viz.view import replay_ab, view_ab
 
-    path = Path(args.record) if args.record else Path(f"ab-{ctrls[0]}-{ctrls[1]}-trial{args.trial}.html")
+    path = (Path(args.record) if args.record
+            else Path(f"ab-{file_name_part(ctrls[0])}-{file_name_part(ctrls[1])}-trial{args.trial}.html"))
     if args.episode is not None:
         from wbc.viz.replay import load_stored_episode
 
