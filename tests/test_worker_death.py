@@ -59,6 +59,30 @@ def test_a_worker_kept_alive_by_a_controllers_thread_is_stopped_with_a_warning(p
     assert "still ran 0.5 s after their trials ended" in capsys.readouterr().err
 
 
+def test_a_worker_that_the_pools_own_thread_reaps_is_not_taken_for_a_lingering_one(tmp_path, capsys, monkeypatch):
+    """The pool's thread reaps its workers; a wait here for the same worker gets ECHILD, where a poll reads None.
+
+    Modelled by polls from this thread that always read so: the run's shut-down must not take the worker for one still
+    running (it warned of a controller's thread, and signalled a process id no longer the worker's).
+    """
+    import threading
+    from multiprocessing import popen_fork
+
+    poll = popen_fork.Popen.poll
+
+    def lost_the_reap(self, flag=os.WNOHANG):
+        if threading.current_thread() is threading.main_thread() and self.returncode is None:
+            return None  # what popen_fork's poll returns on ECHILD
+        return poll(self, flag)
+
+    signalled = []
+    monkeypatch.setattr(popen_fork.Popen, "poll", lost_the_reap)
+    monkeypatch.setattr(popen_fork.Popen, "terminate", lambda self: signalled.append(self.pid))
+    result = _run(tmp_path, ("stand",), "run")
+    assert len(result.records) == 3 and all(r.success for r in result.records)
+    assert "still ran" not in capsys.readouterr().err and signalled == []
+
+
 def _command(tmp_path, module: str, source: str, *args: str) -> subprocess.CompletedProcess:
     """``python -m wbc.cli ARGS`` in `tmp_path`, beside the plug-in `module` (`source`) and the short scenario."""
     (tmp_path / f"{module}.py").write_text(textwrap.dedent(source).lstrip())

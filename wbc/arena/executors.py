@@ -19,6 +19,8 @@ import hashlib
 import itertools
 import math
 import multiprocessing
+import multiprocessing.connection
+import multiprocessing.process
 import os
 import signal
 import sys
@@ -388,24 +390,41 @@ def _shut_down(pool: ProcessPoolExecutor, *, broken: bool = False) -> None:
     """Shut `pool` down; a worker still alive after `_LINGER_S` (a controller's thread keeps it) is terminated.
 
     A `broken` pool's workers are terminated at once: what they were playing is played again elsewhere.
+
+    The pool's own thread reaps its workers (it joins each of them): this waits for that thread, and reads whether a
+    worker has ended from its sentinel (`_running`), which reaps nothing. Joining the workers here as well raced that
+    thread: the join that lost the reap read a worker that had ended as still alive, and was sent a signal to a process
+    id that was no longer its own, with a warning that blamed a controller's thread.
     """
     processes = list((getattr(pool, "_processes", None) or {}).values())  # the pool's own worker processes
+    reaper = getattr(pool, "_executor_manager_thread", None)  # None once shut down: taken before
     pool.shutdown(wait=False, cancel_futures=True)
     if broken:
-        for process in processes:
+        for process in _running(processes):
             process.terminate()
-            process.join(timeout=_LINGER_S)
+    if reaper is None:  # no task was ever submitted: no worker was started
         return
-    lingering = []
-    for process in processes:
-        process.join(timeout=_LINGER_S)
-        if process.is_alive():
-            lingering.append(process)
-            process.terminate()
-            process.join(timeout=_LINGER_S)
-    if lingering:
+    reaper.join(timeout=_LINGER_S)
+    if not reaper.is_alive():
+        return
+    lingering = _running(processes)
+    for process in lingering:
+        process.terminate()
+    reaper.join(timeout=_LINGER_S)
+    if lingering and not broken:
         print(f"wbc: warning: {len(lingering)} worker process(es) still ran {_LINGER_S:g} s after their trials "
               "ended (a thread a controller started and left running?) and were stopped", file=sys.stderr)
+
+
+def _running(processes: Iterable[multiprocessing.process.BaseProcess]) -> list[multiprocessing.process.BaseProcess]:
+    """The `processes` that have not ended, read from their sentinels (a process's end closes it): nothing is reaped."""
+    def ended(process: multiprocessing.process.BaseProcess) -> bool:
+        try:
+            return bool(multiprocessing.connection.wait([process.sentinel], timeout=0))
+        except ValueError:  # the process object was closed: its process ended and was reaped
+            return True
+
+    return [process for process in processes if not ended(process)]
 
 
 class RayExecutor:
