@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import STAND_PLUGIN
+from conftest import STAND_PLUGIN, untimed_summary
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode
@@ -91,17 +91,6 @@ def _metrics(records):
     return sorted(tuple(c for i, c in enumerate(r.to_row()) if i not in timed) for r in records)
 
 
-def _untimed(path):
-    """A summary.json's text without what the machine's clock decided: each cell's deadline misses, and the warnings
-    about them (a busy machine misses more); everything else must match to the byte."""
-    data = json.loads(path.read_text(encoding="utf-8"))
-    for entry in data["controllers"].values():
-        for cell in entry["bands"].values():
-            cell.pop("deadline_misses")
-    data["warnings"] = [w for w in data["warnings"] if w["kind"] != "deadline_misses"]
-    return json.dumps(data, indent=2)
-
-
 def _run(small, out, **kw):
     cfg = ArenaConfig(controllers=("stand", "stand-noarm"), scenario=small, seeds=(0, 1), trials=3, out_dir=out,
                       progress=False, **kw)
@@ -117,7 +106,7 @@ def test_same_seed_same_metrics_across_runs_and_worker_counts(small, tmp_path):
     assert _metrics(ra) == _metrics(rb) == _metrics(rc)
     # the summary too, to the last bit, whatever order the two workers finished their trials in (but for the deadline
     # misses, which the machine's load decides)
-    assert len({_untimed(r.out_dir / "summary.json") for r in (a, b, c)}) == 1
+    assert len({untimed_summary(r.out_dir / "summary.json") for r in (a, b, c)}) == 1
     # the bands discriminate: the soft pushes are survived more often than the hard ones
     soft = [r.success for r in ra if r.band == "soft"]
     hard = [r.success for r in ra if r.band == "hard"]
@@ -136,7 +125,7 @@ def test_local_and_ray_executors_agree(small, tmp_path):
     ray = _run(small, tmp_path / "ray", executor="ray")
     local_rows, ray_rows = (TrialRecord.read_csv(r.out_dir / "trials.csv") for r in (local, ray))
     assert _metrics(local_rows) == _metrics(ray_rows)
-    assert _untimed(local.out_dir / "summary.json") == _untimed(ray.out_dir / "summary.json")
+    assert untimed_summary(local.out_dir / "summary.json") == untimed_summary(ray.out_dir / "summary.json")
 
 
 def test_sigkilled_sweep_resumes_without_duplicates_or_reruns(small, tmp_path):

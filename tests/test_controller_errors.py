@@ -25,10 +25,11 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from conftest import SHORT_SCENARIO, STAND_PLUGIN
+from conftest import SHORT_SCENARIO, STAND_PLUGIN, untimed_summary
 
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode, SafetyLog
+from wbc.arena.error_guard import ErrorGuard
 from wbc.arena.report import format_table
 from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord
 from wbc.cli.main import main
@@ -194,6 +195,49 @@ def test_a_controller_failing_k_trials_in_a_row_is_stopped_and_resume_replays_no
                  "--max-consecutive-errors", "2", "--out", str(out), "--resume", "--quiet"]) == 1
     lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("wbc: controller ")]
     assert lines == [f"wbc: {late.line()}", f"wbc: {flaky.line()}"]
+
+
+def _record(controller, trial, failed):
+    return SimpleNamespace(controller=controller, run_key=(controller, "soft", 0, trial),
+                           outcome="controller_error" if failed else "success", error="raised" if failed else "")
+
+
+def test_errors_in_a_row_are_counted_in_the_runs_order_of_trials_not_the_order_they_finish():
+    order = [("soft", 0, i) for i in range(6)]
+    # trials 0, 2 and 3 fail and finish first; trial 1 succeeds last: never three in a row
+    guard = ErrorGuard(["c"], 3, order)
+    for trial, failed in ((0, True), (2, True), (3, True)):
+        guard.observe(_record("c", trial, failed))
+    assert not guard.stopped("c")  # trial 1 is still under way
+    guard.observe(_record("c", 1, False))
+    assert not guard.stopped("c")
+    # trials 1, 2 and 0 fail, finishing in that order, with trial 3 under way: stopped at trial 2 once 0 is in
+    guard = ErrorGuard(["c"], 3, order)
+    guard.observe(_record("c", 1, True))
+    guard.observe(_record("c", 2, True))
+    assert not guard.stopped("c")
+    guard.observe(_record("c", 0, True))
+    assert guard.stopped("c")
+    late = _record("c", 3, False)  # under way when it stopped: stored, and not counted, whatever its outcome
+    guard.observe(late)
+    assert not guard.counted(late) and guard.counted(_record("c", 2, True))
+    (errors,) = guard.report([_record("c", i, True) for i in (1, 2, 0)] + [late], budget=6)
+    assert (errors.errored, errors.recorded, errors.not_played, errors.beyond) == (3, 3, 3, 1)
+    assert "3 trial(s) not played (1 of them under way then: played, stored in trials.csv and not counted)" in \
+        errors.line()
+
+
+def test_a_controller_stopped_for_its_errors_is_counted_alike_on_one_worker_and_two(broken, scenario, tmp_path):
+    summaries, counted = [], []
+    for workers in (1, 2):
+        cfg = ArenaConfig(controllers=("brokenpkg.late:make", "stand"), scenario=scenario, seeds=(0,), trials=5,
+                          out_dir=tmp_path / f"w{workers}", workers=workers, progress=False, max_consecutive_errors=2)
+        result = run_arena(cfg)
+        (late,) = result.controller_errors
+        assert (late.errored, late.recorded, late.stopped, late.not_played) == (2, 2, True, 3)
+        counted.append([r.trial for r in result.records if r.controller == "brokenpkg.late:make"])
+        summaries.append(untimed_summary(cfg.out_dir / "summary.json"))
+    assert counted == [[0, 1], [0, 1]] and summaries[0] == summaries[1]
 
 
 def test_errors_are_recorded_alike_on_the_local_pool_and_on_ray(broken, scenario, stand_alone, tmp_path):

@@ -369,7 +369,10 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                          drop_bad_rows=cfg.drop_bad_rows, lock=lock)
     try:  # the directory stays locked until its summary and report are written (and after, with a caller's lock)
         done = store.done()
-        guard = ErrorGuard(cfg.controllers, cfg.max_consecutive_errors)
+        rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None
+        # a controller's errors in a row are counted in the order its trials are handed out
+        order = [t.key for t in trials] if rounds is None else rounds.trial_order()
+        guard = ErrorGuard(cfg.controllers, cfg.max_consecutive_errors, order)
         guard.observe_all(store.records)  # a controller stopped before stays stopped
 
         def where(t: Trial, c: str) -> str | None:
@@ -384,9 +387,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                              time_limit_s=cfg.trial_time_limit_s)
 
         total = len(cfg.controllers) * len(trials)
-        rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None
         if rounds is not None:
-            rounds.advance(store.records)  # a resumed run's complete rounds count before any new trial
+            rounds.advance(store.records, guard.counted)  # a resumed run's complete rounds count before any new trial
             tasks = rounds.tasks(task, done, guard.stopped)
             todo = total - len(done & {(c, *t.key) for t in trials for c in cfg.controllers})
         else:
@@ -410,7 +412,7 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                 played += 1
                 steps += int(round(record.ttf * scenario.duration_s / physics_dt))
                 if rounds is not None:
-                    rounds.advance(store.records)
+                    rounds.advance(store.records, guard.counted)
                 if bar is not None:
                     bar.update(1)
         except OSError as exc:
@@ -422,11 +424,12 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             if bar is not None:
                 bar.close()
         wall = time.perf_counter() - start
-        # in canonical order: the store holds them in the order they finished, which varies between runs
-        records = in_canonical_order((r for r in store.records if r.scenario_hash == scenario.hash), cfg.controllers,
-                                     scenario.bands)
+        # in canonical order: the store holds them in the order they finished, which varies between runs; a stopped
+        # controller's trials beyond its stop, under way then in a pool, are stored and not counted
+        mine = [r for r in store.records if r.scenario_hash == scenario.hash]
+        records = in_canonical_order((r for r in mine if guard.counted(r)), cfg.controllers, scenario.bands)
         per_controller = len(trials) if rounds is None else rounds.played * len(bands)
-        errors = guard.report([r for r in store.records if r.scenario_hash == scenario.hash], per_controller)
+        errors = guard.report(mine, per_controller)
         summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
                             controllers=list(cfg.controllers), bands=list(bands), errors=errors,
                             sequential=rounds.comparison.as_dict() if rounds is not None else None)
@@ -512,10 +515,17 @@ class _Rounds:
         """The run keys (controller, band, seed, trial) of round `i`."""
         return [(c, *t.key) for t in self.trials[self.order[i]] for c in self.controllers]
 
-    def advance(self, stored: Sequence[TrialRecord]) -> None:
+    def trial_order(self) -> list[tuple[str, int, int]]:
+        """The trials' keys (band, seed, trial) in the order `tasks` hands them out, round after round."""
+        return [t.key for key in self.order for t in self.trials[key]]
+
+    def advance(self, stored: Sequence[TrialRecord], counted: Callable[[TrialRecord], bool]) -> None:
         """Feed the test every round, from the next one on, that `stored` now holds complete.
 
         `stored` is the store's list of records, which only grows: each call reads the records added since the last.
+        A record not `counted` (`ErrorGuard.counted`: beyond a stopped controller's stop) does not complete a round.
+        By the time a round is complete up to it, every round before it is fed, so the trial that stopped its
+        controller is known, and whether the record counts with it.
         """
         for record in stored[self._read:]:
             self._by_key[record.run_key] = record
@@ -524,7 +534,7 @@ class _Rounds:
         self._read = len(stored)
         while self.next < len(self.order):
             keys = self.keys(self.next)
-            if not all(k in self._by_key for k in keys):
+            if not all(k in self._by_key and counted(self._by_key[k]) for k in keys):
                 return
             self.comparison.add_round(self._by_key[k] for k in keys)
             self.next += 1
