@@ -365,3 +365,34 @@ def test_a_broken_pipe_that_is_not_the_output_is_not_taken_for_a_closed_reader(m
     monkeypatch.setitem(cli.HANDLERS, "controllers", broken)
     with pytest.raises(BrokenPipeError, match="a socket's"):
         main(["controllers"])
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM", "SIGHUP"])
+def test_a_signal_while_the_command_loads_ends_it_with_one_line(signum: str) -> None:
+    """The console script's entry: a Ctrl-C, SIGTERM or SIGHUP that comes while the command's modules load ends it in
+    one line with status 130, as one that comes later does. A Ctrl-C printed the import's traceback; SIGTERM and
+    SIGHUP ended the command without a word (143, 129). The signal is sent from within the import of the command."""
+    import subprocess
+    import sys
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    (entry,) = tomllib.loads((root / "pyproject.toml").read_text())["project"]["scripts"].values()
+    module, function = entry.split(":")
+    script = f"""
+import os, signal, sys
+
+class SignalWhileLoading:
+    def find_spec(self, name, path=None, target=None):
+        if name == "wbc.cli":
+            os.kill(os.getpid(), signal.{signum})
+        return None
+
+sys.meta_path.insert(0, SignalWhileLoading())
+from {module} import {function}
+sys.exit({function}())
+"""
+    done = subprocess.run([sys.executable, "-c", script, "controllers"], cwd=root, capture_output=True, text=True,
+                          timeout=120)
+    assert (done.returncode, done.stderr, done.stdout) == (130, "wbc: interrupted while starting: nothing was done\n",
+                                                           "")

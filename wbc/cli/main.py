@@ -1465,7 +1465,11 @@ def main(argv: list[str] | None = None) -> int:
         closed it (``| head``), as for a command that SIGPIPE ends. A usage error exits with status 2 from the
         parser, after its usage message.
     """
-    args = build_parser().parse_args(argv)
+    try:
+        args = build_parser().parse_args(argv)
+    except KeyboardInterrupt:
+        _say("wbc: interrupted while starting: nothing was done")
+        return 130
     try:
         with _terminate_interrupts():
             code = int(HANDLERS[args.handler](args) or 0)

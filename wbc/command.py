@@ -1,0 +1,36 @@
+"""The ``wbc`` console script: the command (`wbc.cli.main`), ended in its own words from its first moment.
+
+Loading the command's modules takes a second or more (MuJoCo, the controllers, the arena). A Ctrl-C in that time
+printed the import's traceback, and a SIGTERM or SIGHUP ended the process without a word (status 143, 129) before the
+command's own handlers (`wbc.cli.main.main`) were installed. Here they end it from the start as they end it later:
+``wbc: interrupted while starting: nothing was done``, status 130. SIGTERM and SIGHUP raise `KeyboardInterrupt` until
+the command installs its own handlers, which restore these when it ends; a SIGHUP ignored when the command starts
+(``nohup``) stays ignored. This module imports nothing of the project before they are installed.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+
+__all__ = ["main"]
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def main() -> int:
+    """Run the ``wbc`` command with ``sys.argv``; its exit status (130 when interrupted while it loads)."""
+    for signum in (signal.SIGTERM, signal.SIGHUP):
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            signal.signal(signum, _interrupt)
+    try:
+        from wbc.cli import main as command
+    except KeyboardInterrupt:
+        try:
+            print("wbc: interrupted while starting: nothing was done", file=sys.stderr, flush=True)
+        except OSError:  # a terminal closed (SIGHUP) takes the line with it
+            pass
+        return 130
+    return command()
