@@ -515,10 +515,10 @@ def test_an_interrupted_command_says_so_in_one_line_and_how_a_run_is_finished(tm
     assert capsys.readouterr().err == (f"wbc: interrupted; no trial was stored yet ({out} holds no trials.csv): the "
                                        "same command starts the run afresh\n")
     out.mkdir()
-    (out / "trials.csv").write_text("")  # the run had stored its trials there
+    (out / "trials.csv").write_text("")  # the run had begun to store its trials there, and none had finished
     assert main(["run", "stand", "--scenario", "scenarios/push.toml", "--trials", "1", "--out", str(out)]) == 130
-    assert capsys.readouterr().err == (f"wbc: interrupted; the trials finished are stored in {out}: the same command "
-                                       "with --resume plays the rest\n")
+    assert capsys.readouterr().err == (f"wbc: interrupted; no trial had finished ({out} holds the run's plan only): "
+                                       "the same command with --resume plays it\n")
     assert main(["bench", "sim"]) == 130
     assert capsys.readouterr().err == "wbc: interrupted\n"
 

@@ -260,7 +260,7 @@ def test_each_resumable_command_names_its_default_directory_when_interrupted(sho
     monkeypatch.setattr(cli, "analyze_tail", lambda robot: None)  # demo's analysis first: not what is tested
     monkeypatch.setattr(cli.printers, "print_tail", lambda result: None)
 
-    def interrupted(cfg):  # the run has stored a trial, then Ctrl-C
+    def interrupted(cfg):  # the run has begun to store its trials, then Ctrl-C before the first finished
         cfg.out_dir.mkdir(parents=True)
         (cfg.out_dir / "trials.csv").write_text("")
         raise KeyboardInterrupt
@@ -269,8 +269,8 @@ def test_each_resumable_command_names_its_default_directory_when_interrupted(sho
     assert main([*command, "--quiet"]) == 130
     (out,) = Path("runs").iterdir()
     assert out.name.startswith(default)
-    assert _last_line(capsys) == (f"wbc: interrupted; the trials finished are stored in {out}: the same command with "
-                                  f"--resume --out {out} plays the rest")
+    assert _last_line(capsys) == (f"wbc: interrupted; no trial had finished ({out} holds the run's plan only): the "
+                                  f"same command with --resume --out {out} plays it")
 
 
 def test_a_run_interrupted_before_it_stored_anything_says_a_new_run_starts_afresh(short, tmp_path, capsys,

@@ -903,24 +903,32 @@ def _interrupted_run(args: argparse.Namespace) -> str:
     if not (Path(out) / "trials.csv").is_file():
         return f"; no trial was stored yet ({out} holds no trials.csv): the same command starts the run afresh"
     again = "--resume" if getattr(args, "out", None) else f"--resume --out {out}"
-    if _every_trial_stored(Path(out)):
+    stored = _stored_trials(Path(out))
+    if stored == "all":
         return (f"; every trial is stored in {out}, its summary and report are not yet written: the same command with "
                 f"{again} writes them")
+    if stored == "none":
+        return f"; no trial had finished ({out} holds the run's plan only): the same command with {again} plays it"
     return f"; the trials finished are stored in {out}: the same command with {again} plays the rest"
 
 
-def _every_trial_stored(out: Path) -> bool:
-    """Whether `out`'s ``trials.csv`` holds a trusted row of every trial its ``run.json`` plans (False if unsure)."""
+def _stored_trials(out: Path) -> str:
+    """How much of its planned run `out`'s ``trials.csv`` holds in trusted rows: ``none``, ``all`` or ``some``.
+
+    ``some`` where unsure (a file that cannot be read).
+    """
     from wbc.arena.identity import RunIdentity
     from wbc.arena.trial_record import scan_csv
 
     try:
-        run = RunIdentity.load(out / "run.json")
         stored = {(r.controller, r.band, r.seed, r.trial) for r in scan_csv(out / "trials.csv").records}
+        if not stored:
+            return "none"
+        run = RunIdentity.load(out / "run.json")
     except (WbcError, OSError):
-        return False
+        return "some"
     planned = {(c, b, s, t) for c in run.controllers for b in run.bands for s in run.seeds for t in run.trials_played}
-    return planned <= stored
+    return "all" if planned <= stored else "some"
 
 
 def _interrupted_training(args: argparse.Namespace) -> str:
