@@ -523,6 +523,8 @@ BROKEN = [
     ("unknown-table", BASE + "\n[extra]\nx = 1\n", "[extra]", 39),
     ("missing-bands", edit(BASE, BANDS, ""), "[[bands]]", None),
     ("empty-bands", "bands = []\n" + edit(BASE, BANDS, ""), "[[bands]]", 1),
+    ("bands-as-tables", edit(BASE, BANDS, BANDS.replace('[[bands]]\nname = "in"', "[bands.in]").replace(
+        '[[bands]]\nname = "ood"', "[bands.ood]")), "[[bands]]", 31),
     ("duplicate-band", edit(BASE, 'name = "ood"', 'name = "in"'), "[[bands]] #2 name", 36),
     ("bad-band-name", edit(BASE, 'name = "ood"', 'name = "o o d"'), "[[bands]] #2 name", 36),
     ("band-unknown-key", edit(BASE, 'name = "ood"', 'name = "ood"\ncolour = 1'), "[[bands]] #2 colour", 37),

@@ -113,6 +113,11 @@ class TomlLines:
         """Line of ``key =`` in `table`, or None."""
         return self._keys.get((table, key))
 
+    def first_header(self, name: str) -> int | None:
+        """Line of the first header of table `name` or of a table inside it (``[name.x]``), or None."""
+        return min((line for (table, _), line in self._headers.items()
+                    if table == name or table.startswith(f"{name}.")), default=None)
+
 
 MISSING: Any = object()
 
@@ -283,7 +288,9 @@ class TomlTable:
     def table_array(self, key: str, label: str) -> list[TomlTable]:
         """A non-empty array of tables ``[[key]]`` (key relative to this table), each labelled ``label #k``."""
         field_name = f"{self.label} {key}" if self.label else label
-        line = self.lines.key(self.table, key) or self.header_line
+        name = ".".join(p for p in (self.table[0], key) if p)
+        # `key = ...`, else the first header that writes it as tables (`[bands.in]` where `[[bands]]` was meant)
+        line = self.lines.key(self.table, key) or self.lines.first_header(name) or self.header_line
         if key not in self.data:
             raise self.error(self.path, f"missing; add at least one {label} table", field=field_name,
                                 line=self.header_line)
@@ -293,7 +300,6 @@ class TomlTable:
                                 field=field_name, line=line)
         if not value:
             raise self.error(self.path, f"must hold at least one {label} table", field=field_name, line=line)
-        name = ".".join(p for p in (self.table[0], key) if p)
         return [TomlTable(self.path, self.lines, v, f"{label} #{k}", (name, k), error=self.error)
                 for k, v in enumerate(value, start=1)]
 
