@@ -18,6 +18,9 @@ from conftest import HOLD_PLUGIN
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.identity import (
+    MAX_CONSECUTIVE_ERRORS,
+    MAX_SEED,
+    MAX_TRIALS,
     ControllerFile,
     HardwareRunIdentity,
     RunIdentity,
@@ -27,8 +30,8 @@ from wbc.arena.identity import (
 )
 from wbc.arena.results import ResultsStore
 from wbc.arena.trial_record import TrialRecord
-from wbc.errors import RecordError, ResultsDirError
-from wbc.scenario.scenario import load_scenario
+from wbc.errors import ConfigError, RecordError, ResultsDirError, ScenarioError
+from wbc.scenario.scenario import MAX_VERSION, load_scenario
 from wbc.viz.errors import ViewerError
 from wbc.viz.replay import load_stored_episode
 
@@ -332,6 +335,38 @@ def test_a_malformed_run_json_names_the_file_and_the_field(config: object, field
     with pytest.raises(RecordError, match=rf"^{_re(path)}: field {_re(field)}: .*{_re(reason)}") as caught:
         RunIdentity.load(path)
     assert "another --out" in str(caught.value)  # and says what to do
+
+
+def test_what_a_run_accepts_its_run_json_reader_accepts(short: Path, tmp_path: Path) -> None:
+    # every bound of a field run.json records is the one its writer's input took: a run never writes a run.json that
+    # its own --resume then refuses
+    path = tmp_path / "run.json"
+    for version in (MAX_VERSION, MAX_VERSION + 1):
+        text = SHORT.replace("version = 2", f"version = {version}")
+        short.write_text(text)
+        config = _with(SIMULATED.as_json(), version, "scenario", "version")
+        _write_config(tmp_path, config)
+        if version <= MAX_VERSION:
+            assert load_scenario(short).version == RunIdentity.load(path).scenario.version == version
+            continue
+        with pytest.raises(ScenarioError, match=rf"^{_re(short)}:4: \[scenario\] version: must be in \[1, "
+                                                rf"{MAX_VERSION}\], got {version}$"):
+            load_scenario(short)
+        with pytest.raises(RecordError, match=rf"whole number in \[1, {MAX_VERSION}\], got {version}"):
+            RunIdentity.load(path)
+    # the arena's and the hardware trial's options are refused before anything plays, within the reader's bounds
+    base = ArenaConfig(controllers=("stand",), scenario=short, out_dir=tmp_path / "r", progress=False)
+    for option, bad in (("trials", MAX_TRIALS + 1), ("seeds", (MAX_SEED + 1,)), ("seeds", (-1,)),
+                        ("max_consecutive_errors", MAX_CONSECUTIVE_ERRORS + 1)):
+        dataclasses.replace(base, **{option: bad // 2 if isinstance(bad, int) else (0,)})
+        with pytest.raises(ConfigError, match=r"must be in \["):
+            dataclasses.replace(base, **{option: bad})
+    hw = dict(controller="stand", scenario=short, trial=0, seed=0, robot="go1-arm", simulate=True,
+              out_dir=tmp_path / "hw")
+    for option, bad in (("trial", MAX_TRIALS), ("seed", MAX_SEED + 1), ("seed", -1)):
+        HardwareTrialConfig(**{**hw, option: MAX_TRIALS - 1 if option == "trial" else MAX_SEED})
+        with pytest.raises(ConfigError, match=r"must be in \["):
+            HardwareTrialConfig(**{**hw, option: bad})
 
 
 def test_an_unreadable_run_json_and_one_of_another_kind(tmp_path: Path) -> None:

@@ -469,6 +469,8 @@ BROKEN = [
     ("version-string", edit(BASE, "version = 1", 'version = "1"'), "[scenario] version", 4),
     ("version-bool", edit(BASE, "version = 1", "version = true"), "[scenario] version", 4),
     ("version-zero", edit(BASE, "version = 1", "version = 0"), "[scenario] version", 4),
+    ("version-too-big", edit(BASE, "version = 1", "version = 1000001"), "[scenario] version", 4),
+    ("version-huge", edit(BASE, "version = 1", "version = 99999999999999999999999"), "[scenario] version", 4),
     ("empty-description", edit(BASE, '"A valid scenario that the tests break one edit at a time."', '"  "'),
      "[scenario] description", 5),
     ("unknown-robot", edit(BASE, '"a1-wx200"', '"spot"'), "[scenario] robot", 6),
@@ -597,6 +599,8 @@ def test_messages_say_what_and_how(tmp_path):
     cases = {
         "version-bool": "expected an integer, got boolean true",
         "version-string": "expected an integer, got string '1'",
+        "version-too-big": "must be in [1, 1000000], got 1000001",
+        "terrain-seed-too-big": "must be in [0, 2147483647], got 2147483648",
         "unknown-robot": "valid robots: a1-wx200, go1-arm",
         "unknown-key-terrain": "valid keys of [terrain]: kind, amplitude_m",
         "push-duration-negative": "must be in [0.01, 1], got -0.05",

@@ -27,11 +27,11 @@ from typing import Any
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
 from wbc.errors import InputFileError, RecordError
 from wbc.input_files import read_json, short
-from wbc.scenario.scenario import MAX_DURATION_S
+from wbc.scenario.scenario import MAX_DURATION_S, MAX_VERSION
 
-__all__ = ["MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "MAX_TRIAL_TIME_LIMIT_S", "MIN_TRIAL_TIME_LIMIT_S",
-           "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef", "SequentialStop",
-           "SimulatedRunIdentity"]
+__all__ = ["MAX_CONSECUTIVE_ERRORS", "MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "MAX_TRIAL_TIME_LIMIT_S",
+           "MIN_TRIAL_TIME_LIMIT_S", "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef",
+           "SequentialStop", "SimulatedRunIdentity"]
 
 MAX_TRIALS = 100_000
 """Most trials per band and seed a run plays (``wbc run --trials``)."""
@@ -50,8 +50,8 @@ MAX_TRIAL_TIME_LIMIT_S = 7 * 24 * 3600.0
 """The longest trial time limit (``--trial-time-limit``) [s]: a week. An execution setting, not part of a run's
 identity: a run resumed with another limit plays on."""
 
-MAX_COUNT = 1_000_000
-"""Largest value of a count no run comes near (a scenario's version, a consecutive-error limit)."""
+MAX_CONSECUTIVE_ERRORS = MAX_RUN_TRIALS
+"""Largest consecutive-error limit (``max_consecutive_errors``): a run's trials in all, a limit no run reaches."""
 
 _FIX = ("run.json is written by `wbc run`, `wbc compare` and `wbc hw run`: restore the file as written, or play the "
         "run again with another --out")
@@ -95,7 +95,7 @@ class ScenarioRef:
         table = _Table(data, source, "scenario", required=keys)
         return cls(path=table.text("path"), name=table.text("name"), hash=table.text("hash"),
                    published=table.flag("published"),
-                   version=table.whole("version", lo=1, hi=MAX_COUNT) if with_version else None)
+                   version=table.whole("version", lo=1, hi=MAX_VERSION) if with_version else None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -312,8 +312,8 @@ class SimulatedRunIdentity(RunIdentity):
         if files is not None and not isinstance(files, dict):
             raise _error(source, "controller_files", f"expected an object of controller -> {{path, sha256}}, got "
                                                      f"{short(files)}")
-        limit = table.whole("max_consecutive_errors", lo=0, hi=MAX_COUNT) if "max_consecutive_errors" in table else (
-            DEFAULT_MAX_CONSECUTIVE_ERRORS)
+        limit = (table.whole("max_consecutive_errors", lo=0, hi=MAX_CONSECUTIVE_ERRORS)
+                 if "max_consecutive_errors" in table else DEFAULT_MAX_CONSECUTIVE_ERRORS)
         return cls(**_common_fields(table, source, with_version=True),
                    trials=table.whole("trials", lo=1, hi=MAX_TRIALS),
                    no_push=table.flag("no_push"), debug_truth=table.flag("debug_truth"),

@@ -137,11 +137,17 @@ class Range:
         return above and below
 
     def __str__(self) -> str:
+        lo, hi = _bound(self.lo), _bound(self.hi)
         if self.hi == math.inf:
-            return f"{'>' if self.lo_open else '>='} {self.lo:g}"
+            return f"{'>' if self.lo_open else '>='} {lo}"
         if self.lo == -math.inf:
-            return f"{'<' if self.hi_open else '<='} {self.hi:g}"
-        return f"in {'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
+            return f"{'<' if self.hi_open else '<='} {hi}"
+        return f"in {'(' if self.lo_open else '['}{lo}, {hi}{')' if self.hi_open else ']'}"
+
+
+def _bound(x: float) -> str:
+    """A range's end as a message prints it: a whole number in full (1000000, not 1e+06), any other shortest."""
+    return str(int(x)) if math.isfinite(x) and float(x).is_integer() and abs(x) < 2**53 else f"{x:g}"
 
 
 def toml_type(value: object) -> str:
