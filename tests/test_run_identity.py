@@ -27,6 +27,8 @@ from wbc.arena.identity import (
     ScenarioRef,
     SequentialStop,
     SimulatedRunIdentity,
+    compared,
+    moved_files,
 )
 from wbc.arena.results import ResultsStore
 from wbc.arena.trial_record import TrialRecord
@@ -183,13 +185,59 @@ def test_a_run_writes_the_old_dict_and_resumes_a_directory_written_before(short:
     with pytest.raises(ResultsDirError, match=r"differs in: no_push, trials\): no_push stored false, given true; "
                                               r"trials stored 1, given 2; rerun"):
         run_arena(dataclasses.replace(cfg, resume=True, trials=2, no_push=True))
-    # the same scenario by another path: the field that differs is named, with both paths
-    moved = tmp_path / "moved.toml"
-    moved.write_bytes(short.read_bytes())
-    with pytest.raises(ResultsDirError) as refused:
-        run_arena(dataclasses.replace(cfg, resume=True, scenario=moved))
-    assert f"(differs in: scenario): scenario.path stored {json.dumps(str(short))}, given {json.dumps(str(moved))};" \
-        in str(refused.value)
+    # another scenario file is refused by its hash, whatever its path
+    other = tmp_path / "other.toml"
+    other.write_text(SHORT.replace("amplitude_m = 0.03", "amplitude_m = 0.04"))
+    with pytest.raises(ResultsDirError, match=r"\(differs in: scenario\): scenario\.hash stored \"[0-9a-f]{64}\", "
+                                              r"given \"[0-9a-f]{64}\"; rerun"):
+        run_arena(dataclasses.replace(cfg, resume=True, scenario=other))
+
+
+def test_a_run_resumes_with_its_scenario_by_another_path_or_a_copy(short: Path, tmp_path: Path, monkeypatch,
+                                                                    capsys) -> None:
+    # a file is its content's hash: the path it is given by is recorded, not compared, and a new one is noted
+    monkeypatch.chdir(tmp_path)
+    cfg = ArenaConfig(controllers=("stand",), scenario=Path(short.name), trials=2, out_dir=Path("r"), workers=1,
+                      progress=False)
+    run_arena(dataclasses.replace(cfg, trials=1))
+    _write_config(cfg.out_dir, _with(_stored(cfg.out_dir), 2, "trials"))  # one trial of two stored
+    capsys.readouterr()
+    copy = tmp_path / "elsewhere" / "copy.toml"
+    copy.parent.mkdir()
+    copy.write_text(SHORT)
+    for scenario, out in ((tmp_path / short.name, tmp_path / "r"), (Path("..") / short.name, Path("../r")),
+                          (copy, tmp_path / "r")):
+        monkeypatch.chdir(tmp_path / ("elsewhere" if str(scenario).startswith("..") else "."))
+        was = _stored(out)["scenario"]["path"]
+        result = run_arena(dataclasses.replace(cfg, resume=True, scenario=scenario, out_dir=out))
+        assert result.played == (1 if was == short.name else 0)
+        assert _stored(out)["scenario"]["path"] == str(scenario)  # the path given last, for the viewer
+        note = capsys.readouterr().err
+        assert (f"wbc: note: {out / 'run.json'}: the scenario is given as {json.dumps(str(scenario))}, the run's was "
+                f"{json.dumps(was)}: the same content, so the run resumes") in note
+    run_arena(dataclasses.replace(cfg, resume=True, scenario=copy, out_dir=tmp_path / "r"))
+    assert "wbc: note" not in capsys.readouterr().err  # the same path: nothing to say
+
+
+def test_the_store_compares_files_by_their_hashes_not_their_paths(tmp_path: Path, capsys) -> None:
+    moved = dataclasses.replace(SIMULATED, scenario=dataclasses.replace(SCENARIO, path="elsewhere/p.toml"),
+                                controller_files=(ControllerFile(controller="mpc", path="../gains.toml",
+                                                                 sha256="cd" * 32),))
+    assert compared(moved.as_json()) == compared(SIMULATED.as_json()) != compared(HARDWARE.as_json())
+    assert moved_files(SIMULATED.as_json(), moved.as_json()) == [
+        ("the scenario", "scenarios/push-v1.toml", "elsewhere/p.toml"),
+        ("mpc's configuration file", "gains.toml", "../gains.toml")]
+    out = tmp_path / "r"
+    _write_config(out, SIMULATED.as_json())
+    ResultsStore(out, moved, resume=True).close()
+    assert RunIdentity.load(out / "run.json") == moved  # the paths given last are recorded
+    err = capsys.readouterr().err
+    assert 'the scenario is given as "elsewhere/p.toml", the run\'s was "scenarios/push-v1.toml"' in err
+    assert 'mpc\'s configuration file is given as "../gains.toml", the run\'s was "gains.toml"' in err
+    edited = dataclasses.replace(moved, controller_files=(ControllerFile(controller="mpc", path="gains.toml",
+                                                                         sha256="ef" * 32),))
+    with pytest.raises(ResultsDirError, match=r"\(differs in: controller_files\): controller_files\.mpc\.sha256 "):
+        ResultsStore(out, edited, resume=True)
 
 
 def test_a_run_with_every_option_writes_the_old_dict(short: Path, hold: str, tmp_path: Path) -> None:

@@ -12,14 +12,15 @@ A run is one of two kinds, each its own frozen type behind the one base:
 `RunIdentity.from_json` and `RunIdentity.load` read a ``run.json`` as it is written (a hardware run names its
 ``trial``, a simulated one its ``trials``), and refuse a malformed one with a `RecordError` that names the file and
 the field. The results store writes the identity and compares it with the stored one on resume
-(`wbc.arena.results.ResultsStore`); the viewer reads it back to find a stored trial (`wbc.viz.replay`).
+(`wbc.arena.results.ResultsStore`), files by their content's hash and not by the paths they were given by
+(`compared`); the viewer reads it back to find a stored trial (`wbc.viz.replay`).
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,7 +32,7 @@ from wbc.scenario.scenario import MAX_DURATION_S, MAX_VERSION
 
 __all__ = ["MAX_CONSECUTIVE_ERRORS", "MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "MAX_TRIAL_TIME_LIMIT_S",
            "MIN_TRIAL_TIME_LIMIT_S", "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef",
-           "SequentialStop", "SimulatedRunIdentity"]
+           "SequentialStop", "SimulatedRunIdentity", "compared", "moved_files"]
 
 MAX_TRIALS = 100_000
 """Most trials per band and seed a run plays (``wbc run --trials``)."""
@@ -62,7 +63,8 @@ class ScenarioRef:
     """The scenario a run played, as the run found it.
 
     Attributes:
-        path: the scenario file, as given on the command line.
+        path: the scenario file, as given on the command line (that of the call that last played the run; not
+            compared on ``--resume``, where `hash` names the file).
         name: the scenario's name.
         hash: the content hash of the file the run played.
         published: whether the file matched the lock of published scenarios.
@@ -382,6 +384,41 @@ class HardwareRunIdentity(RunIdentity):
 
 
 _KIND_OF = {RunIdentity: "simulated or hardware", SimulatedRunIdentity: "simulated", HardwareRunIdentity: "hardware"}
+
+
+def _file_paths(config: Mapping[str, Any]) -> dict[str, object]:
+    """The paths a ``config`` object gives its files by: the scenario's and each controller file's, by what each is."""
+    paths: dict[str, object] = {}
+    scenario = config.get("scenario")
+    if isinstance(scenario, Mapping) and "path" in scenario:
+        paths["the scenario"] = scenario["path"]
+    files = config.get("controller_files")
+    if isinstance(files, Mapping):
+        paths.update((f"{name}'s configuration file", entry["path"]) for name, entry in files.items()
+                     if isinstance(entry, Mapping) and "path" in entry)
+    return paths
+
+
+def compared(config: Mapping[str, Any]) -> dict[str, Any]:
+    """A ``config`` object as ``--resume`` compares it with the stored one: without the paths its files were given by.
+
+    A file is the content its hash names (the scenario's ``hash``, of its parsed content; a controller file's
+    ``sha256``); the path it was given by, relative to the directory the command ran in, is provenance, written but not
+    compared. So a run resumes from another directory, with the path spelled otherwise, or with a copy of the file.
+    """
+    out = dict(config)
+    if isinstance(out.get("scenario"), Mapping):
+        out["scenario"] = {k: v for k, v in out["scenario"].items() if k != "path"}
+    if isinstance(out.get("controller_files"), Mapping):
+        out["controller_files"] = {name: {k: v for k, v in entry.items() if k != "path"} if isinstance(entry, Mapping)
+                                   else entry for name, entry in out["controller_files"].items()}
+    return out
+
+
+def moved_files(stored: Mapping[str, Any], given: Mapping[str, Any]) -> list[tuple[str, object, object]]:
+    """The files two ``config`` objects give by different paths: (what the file is, stored path, given path)."""
+    before, now = _file_paths(stored), _file_paths(given)
+    return [(what, before[what], path) for what, path in now.items() if what in before and before[what] != path]
 
 
 def _error(source: str, field: str, reason: str) -> RecordError:
