@@ -462,7 +462,12 @@ def test_bad_seed_is_refused():
 
 BROKEN = [
     ("toml-syntax", edit(BASE, "version = 1", "version = = 1"), None, 4),
-    ("toml-duplicate-key", edit(BASE, "kind = \"fractal\"", "kind = \"fractal\"\nkind = \"flat\""), None, 11),
+    ("toml-duplicate-key", edit(BASE, "kind = \"fractal\"", "kind = \"fractal\"\nkind = \"flat\""),
+     "[terrain] kind", 11),
+    ("toml-duplicate-table", BASE + "\n[terrain]\nkind = \"flat\"\n", "[terrain]", 39),
+    ("toml-duplicate-band-key", edit(BASE, 'name = "ood"', 'name = "ood"\nname = "far"'), "[[bands]] #2 name", 37),
+    ("toml-duplicate-multiline", edit(BASE, "friction = [0.8, 1.0]", "friction = [0.8, 1.0]\nfriction = [\n  0.8,\n"
+                                                                      "  1.0,\n]"), "[domain] friction", 15),
     ("missing-scenario", edit(BASE, SCENARIO_TABLE, ""), "[scenario]", None),
     ("missing-name", edit(BASE, 'name = "base"\n', ""), "[scenario] name", 2),
     ("bad-name", edit(BASE, 'name = "base"', 'name = "Base!"'), "[scenario] name", 3),
@@ -600,6 +605,9 @@ def test_messages_say_what_and_how(tmp_path):
         "version-bool": "expected an integer, got boolean true",
         "version-string": "expected an integer, got string '1'",
         "version-too-big": "must be in [1, 1000000], got 1000001",
+        "toml-duplicate-key": "invalid TOML: kind is set twice (first at line 10); keep one",
+        "toml-duplicate-table": "invalid TOML: [terrain] is defined twice (first at line 9); merge the two",
+        "toml-duplicate-multiline": "invalid TOML: friction is set twice (first at line 14)",
         "terrain-seed-too-big": "must be in [0, 2147483647], got 2147483648",
         "unknown-robot": "valid robots: a1-wx200, go1-arm",
         "unknown-key-terrain": "valid keys of [terrain]: kind, amplitude_m",
