@@ -28,6 +28,7 @@ from wbc.errors import (
     EpisodeError,
     EpisodeFileError,
     FileFieldError,
+    InputFileError,
     RecordError,
     ScenarioError,
 )
@@ -127,6 +128,32 @@ def test_a_controller_config_that_cannot_be_read_is_a_clear_error(tmp_path, caps
     marked.write_bytes(b"\xef\xbb\xbf[mpc]\nhorizon = 12\n")
     assert read_controller_config(marked) == {"mpc": {"horizon": 12}}
     assert read_toml(marked) == {"mpc": {"horizon": 12}}
+
+
+def test_a_key_or_table_defined_twice_is_named_by_every_toml_reader(tmp_path, capsys):
+    # the parser's "Cannot overwrite a value" names neither: each reader names the key, its table and both lines
+    twice = tmp_path / "cc-dup.toml"
+    twice.write_text("[mpc]\nhorizon = 12\nhorizon = 10\n")
+    says = f"{twice}:3: [mpc] horizon: invalid TOML: horizon is set twice (first at line 2); keep one"
+    with pytest.raises(FileFieldError) as caught:
+        read_controller_config(twice)
+    assert str(caught.value).startswith(says) and (caught.value.line, caught.value.field) == (3, "[mpc] horizon")
+    with pytest.raises(InputFileError) as caught:
+        read_toml(twice)
+    assert str(caught.value).startswith(says)
+    err = _cli_error(capsys, ["check-controller", "no_such_pkg.mod:make", "--controller-config", str(twice)])
+    assert says in err and "no_such_pkg" not in err
+    # a table twice, a key twice in an inline table, at top level; other faults keep the parser's words and column
+    for text, said in (("[mpc]\na = 1\n\n[mpc]\nb = 2\n", ":4: [mpc]: invalid TOML: [mpc] is defined twice (first "
+                                                        "at line 1); merge the two into one table"),
+                       ("gains = {kp = 1, kp = 2}\n", ":1: gains: invalid TOML: its inline table sets 'kp' twice"),
+                       ("a = 1\nb = 2\na = 3\n", ":3: a: invalid TOML: a is set twice (first at line 1)"),
+                       ("a = = 1\n", ":1: invalid TOML: Invalid value (column 5); fix the syntax")):
+        twice.write_text(text)
+        for read, error in ((read_controller_config, FileFieldError), (read_toml, InputFileError)):
+            with pytest.raises(error) as caught:
+                read(twice)
+            assert str(caught.value).startswith(f"{twice}{said}"), str(caught.value)
 
 
 def _identity() -> SimulatedRunIdentity:

@@ -166,6 +166,28 @@ def test_the_trials_csv_columns_are_the_stored_format_and_any_other_is_another_v
         make_record("mpc", "nominal", 0, 0, success=True, outcome="controller_error")
 
 
+def test_a_header_of_other_columns_is_refused_naming_the_columns_that_differ(tmp_path):
+    # the columns that differ are named, wherever they are: a header is longer than a message can quote
+    header = list(TrialRecord.header())
+    old = tmp_path / "trials.csv"
+    seed, trial = header.index("seed"), header.index("trial")
+    swapped = [*header[:seed], "trial", "seed", *header[trial + 1:]]
+    for columns, said in ((header + ["pull_ms"], "(extra 'pull_ms')"),
+                          ([c for c in header if c != "counters"], "(missing 'counters')"),
+                          (swapped, f"(out of place 'seed' (column {trial + 1}, this version's {seed + 1}))"),
+                          ([*header, "seed"], "(repeated 'seed')"),
+                          ([c for c in header if c != "wall_s"] + ["pull_ms", "wall_s"],
+                           "(extra 'pull_ms'; out of place 'wall_s' (column 45, this version's 35))")):
+        old.write_text(",".join(columns) + "\n")
+        with pytest.raises(RecordError) as refused:
+            TrialRecord.read_csv(old)
+        assert f"trials.csv: columns not this version's {said}; the directory was written by another version" \
+            in str(refused.value)
+    old.write_text(",".join([f"extra_{i}" for i in range(12)] + header) + "\n")
+    with pytest.raises(RecordError, match=r"\(extra 'extra_0', .*, 'extra_7' and 4 more\);"):
+        TrialRecord.read_csv(old)
+
+
 def test_read_csv_drops_a_torn_last_line_and_refuses_other_columns(tmp_path):
     records = arena_records()[:3]
     path = tmp_path / "trials.csv"

@@ -18,17 +18,22 @@ from conftest import HOLD_PLUGIN
 from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.identity import (
+    MAX_CONSECUTIVE_ERRORS,
+    MAX_SEED,
+    MAX_TRIALS,
     ControllerFile,
     HardwareRunIdentity,
     RunIdentity,
     ScenarioRef,
     SequentialStop,
     SimulatedRunIdentity,
+    compared,
+    moved_files,
 )
 from wbc.arena.results import ResultsStore
 from wbc.arena.trial_record import TrialRecord
-from wbc.errors import RecordError, ResultsDirError
-from wbc.scenario.scenario import load_scenario
+from wbc.errors import ConfigError, RecordError, ResultsDirError, ScenarioError
+from wbc.scenario.scenario import MAX_VERSION, load_scenario
 from wbc.viz.errors import ViewerError
 from wbc.viz.replay import load_stored_episode
 
@@ -180,13 +185,59 @@ def test_a_run_writes_the_old_dict_and_resumes_a_directory_written_before(short:
     with pytest.raises(ResultsDirError, match=r"differs in: no_push, trials\): no_push stored false, given true; "
                                               r"trials stored 1, given 2; rerun"):
         run_arena(dataclasses.replace(cfg, resume=True, trials=2, no_push=True))
-    # the same scenario by another path: the field that differs is named, with both paths
-    moved = tmp_path / "moved.toml"
-    moved.write_bytes(short.read_bytes())
-    with pytest.raises(ResultsDirError) as refused:
-        run_arena(dataclasses.replace(cfg, resume=True, scenario=moved))
-    assert f"(differs in: scenario): scenario.path stored {json.dumps(str(short))}, given {json.dumps(str(moved))};" \
-        in str(refused.value)
+    # another scenario file is refused by its hash, whatever its path
+    other = tmp_path / "other.toml"
+    other.write_text(SHORT.replace("amplitude_m = 0.03", "amplitude_m = 0.04"))
+    with pytest.raises(ResultsDirError, match=r"\(differs in: scenario\): scenario\.hash stored \"[0-9a-f]{64}\", "
+                                              r"given \"[0-9a-f]{64}\"; rerun"):
+        run_arena(dataclasses.replace(cfg, resume=True, scenario=other))
+
+
+def test_a_run_resumes_with_its_scenario_by_another_path_or_a_copy(short: Path, tmp_path: Path, monkeypatch,
+                                                                    capsys) -> None:
+    # a file is its content's hash: the path it is given by is recorded, not compared, and a new one is noted
+    monkeypatch.chdir(tmp_path)
+    cfg = ArenaConfig(controllers=("stand",), scenario=Path(short.name), trials=2, out_dir=Path("r"), workers=1,
+                      progress=False)
+    run_arena(dataclasses.replace(cfg, trials=1))
+    _write_config(cfg.out_dir, _with(_stored(cfg.out_dir), 2, "trials"))  # one trial of two stored
+    capsys.readouterr()
+    copy = tmp_path / "elsewhere" / "copy.toml"
+    copy.parent.mkdir()
+    copy.write_text(SHORT)
+    for scenario, out in ((tmp_path / short.name, tmp_path / "r"), (Path("..") / short.name, Path("../r")),
+                          (copy, tmp_path / "r")):
+        monkeypatch.chdir(tmp_path / ("elsewhere" if str(scenario).startswith("..") else "."))
+        was = _stored(out)["scenario"]["path"]
+        result = run_arena(dataclasses.replace(cfg, resume=True, scenario=scenario, out_dir=out))
+        assert result.played == (1 if was == short.name else 0)
+        assert _stored(out)["scenario"]["path"] == str(scenario)  # the path given last, for the viewer
+        note = capsys.readouterr().err
+        assert (f"wbc: note: {out / 'run.json'}: the scenario is given as {json.dumps(str(scenario))}, the run's was "
+                f"{json.dumps(was)}: the same content, so the run resumes") in note
+    run_arena(dataclasses.replace(cfg, resume=True, scenario=copy, out_dir=tmp_path / "r"))
+    assert "wbc: note" not in capsys.readouterr().err  # the same path: nothing to say
+
+
+def test_the_store_compares_files_by_their_hashes_not_their_paths(tmp_path: Path, capsys) -> None:
+    moved = dataclasses.replace(SIMULATED, scenario=dataclasses.replace(SCENARIO, path="elsewhere/p.toml"),
+                                controller_files=(ControllerFile(controller="mpc", path="../gains.toml",
+                                                                 sha256="cd" * 32),))
+    assert compared(moved.as_json()) == compared(SIMULATED.as_json()) != compared(HARDWARE.as_json())
+    assert moved_files(SIMULATED.as_json(), moved.as_json()) == [
+        ("the scenario", "scenarios/push-v1.toml", "elsewhere/p.toml"),
+        ("mpc's configuration file", "gains.toml", "../gains.toml")]
+    out = tmp_path / "r"
+    _write_config(out, SIMULATED.as_json())
+    ResultsStore(out, moved, resume=True).close()
+    assert RunIdentity.load(out / "run.json") == moved  # the paths given last are recorded
+    err = capsys.readouterr().err
+    assert 'the scenario is given as "elsewhere/p.toml", the run\'s was "scenarios/push-v1.toml"' in err
+    assert 'mpc\'s configuration file is given as "../gains.toml", the run\'s was "gains.toml"' in err
+    edited = dataclasses.replace(moved, controller_files=(ControllerFile(controller="mpc", path="gains.toml",
+                                                                         sha256="ef" * 32),))
+    with pytest.raises(ResultsDirError, match=r"\(differs in: controller_files\): controller_files\.mpc\.sha256 "):
+        ResultsStore(out, edited, resume=True)
 
 
 def test_a_run_with_every_option_writes_the_old_dict(short: Path, hold: str, tmp_path: Path) -> None:
@@ -332,6 +383,38 @@ def test_a_malformed_run_json_names_the_file_and_the_field(config: object, field
     with pytest.raises(RecordError, match=rf"^{_re(path)}: field {_re(field)}: .*{_re(reason)}") as caught:
         RunIdentity.load(path)
     assert "another --out" in str(caught.value)  # and says what to do
+
+
+def test_what_a_run_accepts_its_run_json_reader_accepts(short: Path, tmp_path: Path) -> None:
+    # every bound of a field run.json records is the one its writer's input took: a run never writes a run.json that
+    # its own --resume then refuses
+    path = tmp_path / "run.json"
+    for version in (MAX_VERSION, MAX_VERSION + 1):
+        text = SHORT.replace("version = 2", f"version = {version}")
+        short.write_text(text)
+        config = _with(SIMULATED.as_json(), version, "scenario", "version")
+        _write_config(tmp_path, config)
+        if version <= MAX_VERSION:
+            assert load_scenario(short).version == RunIdentity.load(path).scenario.version == version
+            continue
+        with pytest.raises(ScenarioError, match=rf"^{_re(short)}:4: \[scenario\] version: must be in \[1, "
+                                                rf"{MAX_VERSION}\], got {version}$"):
+            load_scenario(short)
+        with pytest.raises(RecordError, match=rf"whole number in \[1, {MAX_VERSION}\], got {version}"):
+            RunIdentity.load(path)
+    # the arena's and the hardware trial's options are refused before anything plays, within the reader's bounds
+    base = ArenaConfig(controllers=("stand",), scenario=short, out_dir=tmp_path / "r", progress=False)
+    for option, bad in (("trials", MAX_TRIALS + 1), ("seeds", (MAX_SEED + 1,)), ("seeds", (-1,)),
+                        ("max_consecutive_errors", MAX_CONSECUTIVE_ERRORS + 1)):
+        dataclasses.replace(base, **{option: bad // 2 if isinstance(bad, int) else (0,)})
+        with pytest.raises(ConfigError, match=r"must be in \["):
+            dataclasses.replace(base, **{option: bad})
+    hw = dict(controller="stand", scenario=short, trial=0, seed=0, robot="go1-arm", simulate=True,
+              out_dir=tmp_path / "hw")
+    for option, bad in (("trial", MAX_TRIALS), ("seed", MAX_SEED + 1), ("seed", -1)):
+        HardwareTrialConfig(**{**hw, option: MAX_TRIALS - 1 if option == "trial" else MAX_SEED})
+        with pytest.raises(ConfigError, match=r"must be in \["):
+            HardwareTrialConfig(**{**hw, option: bad})
 
 
 def test_an_unreadable_run_json_and_one_of_another_kind(tmp_path: Path) -> None:

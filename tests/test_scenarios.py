@@ -462,13 +462,20 @@ def test_bad_seed_is_refused():
 
 BROKEN = [
     ("toml-syntax", edit(BASE, "version = 1", "version = = 1"), None, 4),
-    ("toml-duplicate-key", edit(BASE, "kind = \"fractal\"", "kind = \"fractal\"\nkind = \"flat\""), None, 11),
+    ("toml-duplicate-key", edit(BASE, "kind = \"fractal\"", "kind = \"fractal\"\nkind = \"flat\""),
+     "[terrain] kind", 11),
+    ("toml-duplicate-table", BASE + "\n[terrain]\nkind = \"flat\"\n", "[terrain]", 39),
+    ("toml-duplicate-band-key", edit(BASE, 'name = "ood"', 'name = "ood"\nname = "far"'), "[[bands]] #2 name", 37),
+    ("toml-duplicate-multiline", edit(BASE, "friction = [0.8, 1.0]", "friction = [0.8, 1.0]\nfriction = [\n  0.8,\n"
+                                                                      "  1.0,\n]"), "[domain] friction", 15),
     ("missing-scenario", edit(BASE, SCENARIO_TABLE, ""), "[scenario]", None),
     ("missing-name", edit(BASE, 'name = "base"\n', ""), "[scenario] name", 2),
     ("bad-name", edit(BASE, 'name = "base"', 'name = "Base!"'), "[scenario] name", 3),
     ("version-string", edit(BASE, "version = 1", 'version = "1"'), "[scenario] version", 4),
     ("version-bool", edit(BASE, "version = 1", "version = true"), "[scenario] version", 4),
     ("version-zero", edit(BASE, "version = 1", "version = 0"), "[scenario] version", 4),
+    ("version-too-big", edit(BASE, "version = 1", "version = 1000001"), "[scenario] version", 4),
+    ("version-huge", edit(BASE, "version = 1", "version = 99999999999999999999999"), "[scenario] version", 4),
     ("empty-description", edit(BASE, '"A valid scenario that the tests break one edit at a time."', '"  "'),
      "[scenario] description", 5),
     ("unknown-robot", edit(BASE, '"a1-wx200"', '"spot"'), "[scenario] robot", 6),
@@ -523,6 +530,8 @@ BROKEN = [
     ("unknown-table", BASE + "\n[extra]\nx = 1\n", "[extra]", 39),
     ("missing-bands", edit(BASE, BANDS, ""), "[[bands]]", None),
     ("empty-bands", "bands = []\n" + edit(BASE, BANDS, ""), "[[bands]]", 1),
+    ("bands-as-tables", edit(BASE, BANDS, BANDS.replace('[[bands]]\nname = "in"', "[bands.in]").replace(
+        '[[bands]]\nname = "ood"', "[bands.ood]")), "[[bands]]", 31),
     ("duplicate-band", edit(BASE, 'name = "ood"', 'name = "in"'), "[[bands]] #2 name", 36),
     ("bad-band-name", edit(BASE, 'name = "ood"', 'name = "o o d"'), "[[bands]] #2 name", 36),
     ("band-unknown-key", edit(BASE, 'name = "ood"', 'name = "ood"\ncolour = 1'), "[[bands]] #2 colour", 37),
@@ -595,6 +604,11 @@ def test_messages_say_what_and_how(tmp_path):
     cases = {
         "version-bool": "expected an integer, got boolean true",
         "version-string": "expected an integer, got string '1'",
+        "version-too-big": "must be in [1, 1000000], got 1000001",
+        "toml-duplicate-key": "invalid TOML: kind is set twice (first at line 10); keep one",
+        "toml-duplicate-table": "invalid TOML: [terrain] is defined twice (first at line 9); merge the two",
+        "toml-duplicate-multiline": "invalid TOML: friction is set twice (first at line 14)",
+        "terrain-seed-too-big": "must be in [0, 2147483647], got 2147483648",
         "unknown-robot": "valid robots: a1-wx200, go1-arm",
         "unknown-key-terrain": "valid keys of [terrain]: kind, amplitude_m",
         "push-duration-negative": "must be in [0.01, 1], got -0.05",

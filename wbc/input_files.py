@@ -33,6 +33,7 @@ from typing import Any
 import numpy as np
 
 from wbc.errors import InputFileError
+from wbc.toml_lines import syntax_fault
 
 __all__ = ["LIMITS", "MAX_DEPTH", "open_npz", "read_bytes", "read_json", "read_text", "read_toml", "short"]
 
@@ -184,8 +185,15 @@ def _parse(path: str | os.PathLike[str], text: str, *, slack: int, max_depth: in
     return data
 
 
-def _toml_error(exc: Exception) -> str | None:
-    return f": not valid TOML: {exc}" if isinstance(exc, tomllib.TOMLDecodeError) else None
+def _toml_error(text: str) -> Callable[[Exception], str | None]:
+    def decode_error(exc: Exception) -> str | None:
+        if not isinstance(exc, tomllib.TOMLDecodeError):
+            return None
+        fault = syntax_fault(text, exc)
+        return "".join((f":{fault.line}" if fault.line else "", f": {fault.field}" if fault.field else "",
+                        f": {fault.reason}"))
+
+    return decode_error
 
 
 def _json_error(exc: Exception) -> str | None:
@@ -198,14 +206,15 @@ def read_toml(path: str | os.PathLike[str], *, limit: int | None = None, max_dep
     """A TOML file parsed, its size and nesting bounded.
 
     Raises:
-        InputFileError: as `read_text`, nested deeper than `max_depth`, or not valid TOML (the message names the
-            line and column as the parser does).
+        InputFileError: as `read_text`, nested deeper than `max_depth`, or not valid TOML: ``path:line: reason``
+            with the column, or ``path:line: [table] key: reason`` for a key or table defined twice
+            (`wbc.toml_lines.syntax_fault`).
     """
     # a byte-order mark (as some Windows editors write UTF-8) starts no TOML statement: it is read past
     text = read_text(path, kind="toml", limit=limit).removeprefix("\ufeff")
     # a table header's brackets count too: leave them room
     return _parse(path, text, slack=2, max_depth=max_depth, parse=tomllib.loads,
-                  decode_error=_toml_error)
+                  decode_error=_toml_error(text))
 
 
 def read_json(path: str | os.PathLike[str], *, limit: int | None = None, max_depth: int = MAX_DEPTH) -> Any:

@@ -34,8 +34,11 @@ from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErro
 from wbc.arena.executors import EXECUTORS, VIEWED_TIME_LIMIT, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.finish import finish_results
 from wbc.arena.identity import (
+    MAX_CONSECUTIVE_ERRORS,
     MAX_RUN_TRIALS,
+    MAX_SEED,
     MAX_TRIAL_TIME_LIMIT_S,
+    MAX_TRIALS,
     MIN_TRIAL_TIME_LIMIT_S,
     ControllerFile,
     ScenarioRef,
@@ -143,10 +146,15 @@ class ArenaConfig:
             raise ConfigError(f"controllers repeat: {', '.join(self.controllers)}; name each controller once")
         if self.executor not in EXECUTORS:
             raise UnknownNameError("executor", self.executor, EXECUTORS)
-        if self.trials < 1:
-            raise ConfigError(f"--trials must be >= 1, got {self.trials}; pass --trials 1 or more")
+        # the bounds run.json's reader takes (`wbc.arena.identity`): a run it could not resume is refused unplayed
+        if not 1 <= self.trials <= MAX_TRIALS:
+            raise ConfigError(f"--trials must be in [1, {MAX_TRIALS}], got {self.trials}; pass --trials 1 or more, or "
+                              "split the study")
         if not self.seeds:
             raise ConfigError("at least one seed is needed; pass --seeds 1 or more")
+        bad_seeds = [seed for seed in self.seeds if not 0 <= seed <= MAX_SEED]
+        if bad_seeds:
+            raise ConfigError(f"seeds must be in [0, {MAX_SEED}], got {bad_seeds[0]}")
         if self.address is not None and self.executor != "ray":
             raise ConfigError(f"--address {self.address} names a Ray cluster, which the {self.executor} executor "
                               "does not use: add --executor ray, or leave --address out")
@@ -167,9 +175,9 @@ class ArenaConfig:
                               "--resume")
         if not 0.0 < self.alpha < 1.0:
             raise ConfigError(f"alpha must be in (0, 1), got {self.alpha}; pass a significance level such as 0.05")
-        if self.max_consecutive_errors < 0:
-            raise ConfigError(f"--max-consecutive-errors must be >= 0 (0: never stop a controller), got "
-                              f"{self.max_consecutive_errors}")
+        if not 0 <= self.max_consecutive_errors <= MAX_CONSECUTIVE_ERRORS:
+            raise ConfigError(f"--max-consecutive-errors must be in [0, {MAX_CONSECUTIVE_ERRORS}] (0: never stop a "
+                              f"controller), got {self.max_consecutive_errors}")
         if self.trial_time_limit_s is not None:
             limit = self.trial_time_limit_s
             number = isinstance(limit, (int, float)) and not isinstance(limit, bool)

@@ -56,7 +56,7 @@ from wbc.arena.controller_failure import ControllerFailure, read_counters
 from wbc.arena.episode import Episode
 from wbc.arena.error_guard import ErrorGuard
 from wbc.arena.finish import finish_results
-from wbc.arena.identity import HardwareRunIdentity, ScenarioRef
+from wbc.arena.identity import MAX_SEED, MAX_TRIALS, HardwareRunIdentity, ScenarioRef
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
 from wbc.arena.report import md_table, summarize
 from wbc.arena.results import ResultsStore, episode_path, unwritable
@@ -147,8 +147,10 @@ class HardwareTrialConfig:
     controller_realtime: RealtimeRequest | None = None
 
     def __post_init__(self) -> None:
-        if self.trial < 0 or self.seed < 0:
-            raise ConfigError(f"--trial and --seed must be >= 0, got {self.trial} and {self.seed}")
+        # the bounds run.json's reader takes (`wbc.arena.identity`), so that the viewer finds the trial played
+        if not 0 <= self.trial <= MAX_TRIALS - 1 or not 0 <= self.seed <= MAX_SEED:
+            raise ConfigError(f"--trial must be in [0, {MAX_TRIALS - 1}] and --seed in [0, {MAX_SEED}], got "
+                              f"{self.trial} and {self.seed}")
         if self.seconds is not None and not self.seconds > 0:
             raise ConfigError(f"--seconds must be > 0, got {self.seconds}")
         if not self.settle_s >= 0:

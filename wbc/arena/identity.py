@@ -12,14 +12,15 @@ A run is one of two kinds, each its own frozen type behind the one base:
 `RunIdentity.from_json` and `RunIdentity.load` read a ``run.json`` as it is written (a hardware run names its
 ``trial``, a simulated one its ``trials``), and refuse a malformed one with a `RecordError` that names the file and
 the field. The results store writes the identity and compares it with the stored one on resume
-(`wbc.arena.results.ResultsStore`); the viewer reads it back to find a stored trial (`wbc.viz.replay`).
+(`wbc.arena.results.ResultsStore`), files by their content's hash and not by the paths they were given by
+(`compared`); the viewer reads it back to find a stored trial (`wbc.viz.replay`).
 """
 
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,11 +28,11 @@ from typing import Any
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
 from wbc.errors import InputFileError, RecordError
 from wbc.input_files import read_json, short
-from wbc.scenario.scenario import MAX_DURATION_S
+from wbc.scenario.scenario import MAX_DURATION_S, MAX_VERSION
 
-__all__ = ["MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "MAX_TRIAL_TIME_LIMIT_S", "MIN_TRIAL_TIME_LIMIT_S",
-           "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef", "SequentialStop",
-           "SimulatedRunIdentity"]
+__all__ = ["MAX_CONSECUTIVE_ERRORS", "MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "MAX_TRIAL_TIME_LIMIT_S",
+           "MIN_TRIAL_TIME_LIMIT_S", "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef",
+           "SequentialStop", "SimulatedRunIdentity", "compared", "moved_files"]
 
 MAX_TRIALS = 100_000
 """Most trials per band and seed a run plays (``wbc run --trials``)."""
@@ -50,8 +51,8 @@ MAX_TRIAL_TIME_LIMIT_S = 7 * 24 * 3600.0
 """The longest trial time limit (``--trial-time-limit``) [s]: a week. An execution setting, not part of a run's
 identity: a run resumed with another limit plays on."""
 
-MAX_COUNT = 1_000_000
-"""Largest value of a count no run comes near (a scenario's version, a consecutive-error limit)."""
+MAX_CONSECUTIVE_ERRORS = MAX_RUN_TRIALS
+"""Largest consecutive-error limit (``max_consecutive_errors``): a run's trials in all, a limit no run reaches."""
 
 _FIX = ("run.json is written by `wbc run`, `wbc compare` and `wbc hw run`: restore the file as written, or play the "
         "run again with another --out")
@@ -62,7 +63,8 @@ class ScenarioRef:
     """The scenario a run played, as the run found it.
 
     Attributes:
-        path: the scenario file, as given on the command line.
+        path: the scenario file, as given on the command line (that of the call that last played the run; not
+            compared on ``--resume``, where `hash` names the file).
         name: the scenario's name.
         hash: the content hash of the file the run played.
         published: whether the file matched the lock of published scenarios.
@@ -95,7 +97,7 @@ class ScenarioRef:
         table = _Table(data, source, "scenario", required=keys)
         return cls(path=table.text("path"), name=table.text("name"), hash=table.text("hash"),
                    published=table.flag("published"),
-                   version=table.whole("version", lo=1, hi=MAX_COUNT) if with_version else None)
+                   version=table.whole("version", lo=1, hi=MAX_VERSION) if with_version else None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -312,8 +314,8 @@ class SimulatedRunIdentity(RunIdentity):
         if files is not None and not isinstance(files, dict):
             raise _error(source, "controller_files", f"expected an object of controller -> {{path, sha256}}, got "
                                                      f"{short(files)}")
-        limit = table.whole("max_consecutive_errors", lo=0, hi=MAX_COUNT) if "max_consecutive_errors" in table else (
-            DEFAULT_MAX_CONSECUTIVE_ERRORS)
+        limit = (table.whole("max_consecutive_errors", lo=0, hi=MAX_CONSECUTIVE_ERRORS)
+                 if "max_consecutive_errors" in table else DEFAULT_MAX_CONSECUTIVE_ERRORS)
         return cls(**_common_fields(table, source, with_version=True),
                    trials=table.whole("trials", lo=1, hi=MAX_TRIALS),
                    no_push=table.flag("no_push"), debug_truth=table.flag("debug_truth"),
@@ -382,6 +384,41 @@ class HardwareRunIdentity(RunIdentity):
 
 
 _KIND_OF = {RunIdentity: "simulated or hardware", SimulatedRunIdentity: "simulated", HardwareRunIdentity: "hardware"}
+
+
+def _file_paths(config: Mapping[str, Any]) -> dict[str, object]:
+    """The paths a ``config`` object gives its files by: the scenario's and each controller file's, by what each is."""
+    paths: dict[str, object] = {}
+    scenario = config.get("scenario")
+    if isinstance(scenario, Mapping) and "path" in scenario:
+        paths["the scenario"] = scenario["path"]
+    files = config.get("controller_files")
+    if isinstance(files, Mapping):
+        paths.update((f"{name}'s configuration file", entry["path"]) for name, entry in files.items()
+                     if isinstance(entry, Mapping) and "path" in entry)
+    return paths
+
+
+def compared(config: Mapping[str, Any]) -> dict[str, Any]:
+    """A ``config`` object as ``--resume`` compares it with the stored one: without the paths its files were given by.
+
+    A file is the content its hash names (the scenario's ``hash``, of its parsed content; a controller file's
+    ``sha256``); the path it was given by, relative to the directory the command ran in, is provenance, written but not
+    compared. So a run resumes from another directory, with the path spelled otherwise, or with a copy of the file.
+    """
+    out = dict(config)
+    if isinstance(out.get("scenario"), Mapping):
+        out["scenario"] = {k: v for k, v in out["scenario"].items() if k != "path"}
+    if isinstance(out.get("controller_files"), Mapping):
+        out["controller_files"] = {name: {k: v for k, v in entry.items() if k != "path"} if isinstance(entry, Mapping)
+                                   else entry for name, entry in out["controller_files"].items()}
+    return out
+
+
+def moved_files(stored: Mapping[str, Any], given: Mapping[str, Any]) -> list[tuple[str, object, object]]:
+    """The files two ``config`` objects give by different paths: (what the file is, stored path, given path)."""
+    before, now = _file_paths(stored), _file_paths(given)
+    return [(what, before[what], path) for what, path in now.items() if what in before and before[what] != path]
 
 
 def _error(source: str, field: str, reason: str) -> RecordError:

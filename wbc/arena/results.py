@@ -31,7 +31,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from wbc.arena.identity import RunIdentity
+from wbc.arena.identity import RunIdentity, compared, moved_files
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
@@ -228,8 +228,8 @@ _MISSING = object()
 def _differences(stored: Mapping[str, Any], given: Mapping[str, Any], *, most: int = 4) -> str:
     """The first `most` fields in which two run configurations differ, each with its stored and its given value.
 
-    Nested objects (the scenario's path, name and hash) are followed to the field that differs, so a scenario given by
-    another path reads as its path, not as "scenario".
+    Nested objects (the scenario's name, version and hash) are followed to the field that differs, so another scenario
+    file reads as its hash, not as "scenario".
     """
     found: list[str] = []
 
@@ -322,7 +322,8 @@ class ResultsStore:
     Args:
         out_dir: the directory (created if missing).
         identity: what the run is; when resuming, its JSON form must equal the stored one (``run.json``'s
-            ``config``); unset options are absent from both.
+            ``config``) but for the paths its files were given by (`wbc.arena.identity.compared`: a file given by
+            another path, with the same hash, is noted on stderr); unset options are absent from both.
         resume: continue a run already in `out_dir`; without it, a directory holding trials is refused.
         controllers: what each controller is, by name (`wbc.control.spec.ControllerSpec.provenance`: its kind, a
             plug-in's target and distribution version, the sha256 of every file it was built from), recorded in
@@ -389,11 +390,16 @@ class ResultsStore:
             # validated as a RunIdentity (every field known and typed), then compared as JSON: a stored run of
             # another kind or with other options is named field by field as differing
             stored = self._stored_config()
-            if stored != config:
-                diff = sorted(k for k in set(stored) | set(config) if stored.get(k) != config.get(k))
+            before, now = compared(stored), compared(config)  # files by their hashes, not by the paths given
+            if before != now:
+                diff = sorted(k for k in set(before) | set(now) if before.get(k) != now.get(k))
                 raise ResultsDirError(f"{self.dir}: --resume with a different configuration (differs in: "
-                                      f"{', '.join(diff)}): {_differences(stored, config)}; rerun with the original "
+                                      f"{', '.join(diff)}): {_differences(before, now)}; rerun with the original "
                                       "options or another --out")
+            for what, was, given in moved_files(stored, config):
+                print(f"wbc: note: {self.run_path}: {what} is given as {_shown(given)}, the run's was "
+                      f"{_shown(was)}: the same content, so the run resumes, and run.json records the path given",
+                      file=sys.stderr)
             changed = _changed_code(self._stored_controllers, controllers or {})
             if changed:
                 raise ResultsDirError(f"{self.run_path}: --resume with {changed} changed since the run began: its "

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import difflib
 import hashlib
 import io
 import json
@@ -432,8 +433,7 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None,
         return StoredRows(records=(), lines=(), refused=())
     columns = tuple(rows[0][1])
     if columns != COLUMNS:
-        raise RecordError(f"{path}: columns {short(', '.join(columns), 200)} are not this version's "
-                          f"({', '.join(COLUMNS)}); "
+        raise RecordError(f"{path}: columns not this version's ({_column_changes(columns)}); "
                           "the directory was written by another version of wbc: resume it with that version, "
                           "or start afresh with another --out")
     good: list[tuple[int, TrialRecord]] = []
@@ -474,6 +474,37 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None,
     refused.sort(key=lambda r: r.line)
     kept = [(line, r) for line, r in good if r.run_key not in repeated]
     return StoredRows(records=tuple(r for _, r in kept), lines=tuple(line for line, _ in kept), refused=tuple(refused))
+
+
+def _column_changes(columns: Sequence[str], *, most: int = 8) -> str:
+    """How a ``trials.csv`` header differs from this version's `COLUMNS`, each kind listing at most `most` names.
+
+    The kinds are the columns missing, extra, repeated and out of place. Out of place are the columns both have whose
+    order differs, fewest first: those outside the longest run of them in the same order (a swap names one of the
+    two, one column moved names that one), each with its column and this version's.
+    """
+
+    def names(found: Sequence[str]) -> str:
+        more = f" and {len(found) - most} more" if len(found) > most else ""
+        return ", ".join(short(name, 60) for name in found[:most]) + more
+
+    unique = list(dict.fromkeys(columns))
+    missing = [c for c in COLUMNS if c not in unique]
+    extra = [c for c in unique if c not in COLUMNS]
+    repeated = [c for c in unique if columns.count(c) > 1]
+    stored = [c for c in unique if c in COLUMNS]
+    wanted = [c for c in COLUMNS if c in unique]
+    blocks = difflib.SequenceMatcher(a=stored, b=wanted, autojunk=False).get_matching_blocks()
+    in_order = {c for block in blocks for c in stored[block.a: block.a + block.size]}
+    moved = [c for c in stored if c not in in_order]
+    parts = [f"{kind} {names(found)}" for kind, found in (("missing", missing), ("extra", extra),
+                                                            ("repeated", repeated)) if found]
+    if moved:
+        shown = [f"{short(c, 60)} (column {columns.index(c) + 1}, this version's {COLUMNS.index(c) + 1})"
+                 for c in moved[:most]]
+        parts.append(f"out of place {', '.join(shown)}" + (f" and {len(moved) - most} more" if len(moved) > most
+                                                          else ""))
+    return "; ".join(parts)
 
 
 def checksum_of(cells: Sequence[str]) -> str:

@@ -54,7 +54,8 @@ from wbc.input_files import read_text, read_toml
 from wbc.learned.policy.control_rate import rate_problem
 from wbc.robots.description import ARM_MODES, RobotDescription
 from wbc.robots.registry import ROBOTS, get_robot
-from wbc.scenario.toml_fields import Range, TomlLines, TomlTable, show
+from wbc.scenario.toml_fields import Range, TomlTable, show
+from wbc.toml_lines import TomlLines
 
 __all__ = ["ACTION_KINDS", "ESTIMATED", "HISTORY_FILLS", "HISTORY_ORDERS", "NOT_MEASURED",
            "SOURCES", "TERMS", "TRAINER_NAMES", "ObsTerm", "OnnxIo", "io_path_for", "load_onnx_io"]

@@ -9,8 +9,8 @@ second table of an array). `Scenario.trial` turns (band, seed, index) into a ful
 
 Schema (every other key is an error):
 
-- ``[scenario]``: ``name`` (``^[a-z0-9][a-z0-9_-]*$``), ``version`` (int >= 1), ``description``, ``notes``
-  (optional), ``robot`` (a key of `wbc.robots.registry.ROBOTS`), ``duration_s`` ([0.1, 600]).
+- ``[scenario]``: ``name`` (``^[a-z0-9][a-z0-9_-]*$``), ``version`` (int in [1, `MAX_VERSION`]), ``description``,
+  ``notes`` (optional), ``robot`` (a key of `wbc.robots.registry.ROBOTS`), ``duration_s`` ([0.1, 600]).
 - ``[terrain]``: ``kind`` (``flat`` | ``fractal``), ``amplitude_m`` [0, 0.3], ``octaves`` [1, 8], ``half_extent_m``
   (1, 50] (at most 2001 heightfield samples of 5 cm per axis), ``base_wavelength_m`` [0.05 * 2^(octaves - 1), 20]
   (the finest octave spans at least one heightfield cell: a finer one is invisible on the grid and its noise
@@ -90,12 +90,16 @@ from wbc.scenario.toml_fields import Range, TomlTable, read_toml
 from wbc.scenario.trial import CommandChange, CommandSchedule, Trial
 from wbc.types import VelocityCommand
 
-__all__ = ["Scenario", "ScenarioError", "load_scenario", "resolve_scenario_path"]
+__all__ = ["MAX_VERSION", "Scenario", "ScenarioError", "load_scenario", "resolve_scenario_path"]
 
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 _BAND_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 _MAX_PUSHES = 1000  # per trial: bounds the sampling loop whatever interval_s says
 _MAX_CHANGES = 1000  # command changes per file
+MAX_VERSION = 1_000_000
+"""Largest ``[scenario] version``: a scenario bumped once a day for a thousand years stays below it. A run's
+``run.json`` records the version, and its reader (`wbc.arena.identity`) refuses a larger one: the loader refuses the
+file first, so that no run writes a ``run.json`` it cannot resume."""
 MAX_TERRAIN_SEED = 2**31 - 1
 """Largest ``[terrain] seed``: the range the trials' own terrain seeds are drawn from."""
 MAX_PUSH_OFFSET_M = 0.5
@@ -361,7 +365,7 @@ def load_scenario(path: str | Path) -> Scenario:
     name = head.string("name")
     if not _NAME_RE.match(name):
         head.fail("name", f"must match {_NAME_RE.pattern} (lower-case letters, digits, '_', '-'), got {name!r}")
-    version = head.integer("version", Range(lo=1))
+    version = head.integer("version", Range(lo=1, hi=MAX_VERSION))
     description = head.string("description")
     if not description.strip():
         head.fail("description", "must not be empty; say in a sentence what the scenario tests")

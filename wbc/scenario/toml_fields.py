@@ -1,16 +1,15 @@
 """Typed, located access to TOML files: every bad value is an error naming the file, the line and the field.
 
-`tomllib` parses but reports no line numbers, so `TomlLines` scans the raw text for table headers and ``key =``
-lines; `TomlTable` reads typed values (strings, booleans, bounded integers and numbers, intervals, vectors, arrays of
-tables)
-and raises the caller's `FileFieldError` subclass, whose text reads ``path:line: [table] key: what is wrong and how to
-fix it``. Scenario files use it (`ScenarioError`); any other declarative TOML input of the toolkit can.
+`tomllib` parses but reports no line numbers, so `TomlLines` (`wbc.toml_lines`) scans the raw text for table headers
+and ``key =`` lines; `TomlTable` reads typed values (strings, booleans, bounded integers and numbers, intervals,
+vectors, arrays of tables) and raises the caller's `FileFieldError` subclass, whose text reads ``path:line: [table]
+key: what is wrong and how to fix it``. Scenario files use it (`ScenarioError`); any other declarative TOML input
+of the toolkit can.
 """
 
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -19,100 +18,9 @@ from typing import Any, NoReturn
 
 from wbc.errors import FileFieldError, InputFileError
 from wbc.input_files import MAX_DEPTH, read_bytes
+from wbc.toml_lines import TableId, TomlLines, syntax_fault
 
 __all__ = ["MISSING", "Range", "TableId", "TomlLines", "TomlTable", "is_number", "read_toml", "show", "toml_type"]
-
-_HEADER_RE = re.compile(r"^\s*(\[\[|\[)\s*([^\[\]#]+?)\s*(\]\]|\])\s*(?:#.*)?$")
-_KEY_PART = r"(?:\"[^\"]*\"|'[^']*'|[A-Za-z0-9_-]+)"
-_KEY_RE = re.compile(rf"^\s*({_KEY_PART}(?:\s*\.\s*{_KEY_PART})*)\s*=")
-
-TableId = tuple[str, int]  # (dotted table name, occurrence: 0 for [x], k >= 1 for the k-th [[x]])
-
-
-def _split_key(key: str) -> list[str]:
-    """Parts of a dotted TOML key, quotes removed (a dot inside quotes is not handled: best effort)."""
-    return [part.strip().strip("\"'") for part in key.split(".")]
-
-
-def _scan_line(line: str, state: str | None, depth: int) -> tuple[str | None, int]:
-    """Advance the string state and bracket depth of the TOML lexer over one line.
-
-    Args:
-        line: the line, without its newline.
-        state: None outside strings, else the open string's delimiter (``"``, ``'``, ``\"\"\"``, ``'''``).
-        depth: open ``[``/``{`` brackets (arrays and inline tables spanning several lines).
-
-    Returns:
-        The state and depth at the end of the line.
-    """
-    i, n = 0, len(line)
-    while i < n:
-        if state is None:
-            c = line[i]
-            if c == "#":
-                break
-            if line.startswith('"""', i) or line.startswith("'''", i):
-                state = line[i : i + 3]
-                i += 3
-                continue
-            if c in "\"'":
-                state = c
-            elif c in "[{":
-                depth += 1
-            elif c in "]}":
-                depth = max(depth - 1, 0)
-            i += 1
-        elif state in ('"', '"""') and line[i] == "\\":
-            i += 2
-        elif line.startswith(state, i):
-            i += len(state)
-            state = None
-        else:
-            i += 1
-    if state in ('"', "'"):  # single-line strings cannot span lines
-        state = None
-    return state, depth
-
-
-class TomlLines:
-    """Where table headers and keys sit in a TOML text (1-based lines)."""
-
-    def __init__(self, text: str) -> None:
-        self._headers: dict[TableId, int] = {}
-        self._keys: dict[tuple[TableId, str], int] = {}
-        counts: dict[str, int] = {}
-        table: TableId = ("", 0)
-        state: str | None = None
-        depth = 0
-        for lineno, line in enumerate(text.splitlines(), start=1):
-            if state is None and depth == 0:
-                header = _HEADER_RE.match(line)
-                if header:
-                    name = ".".join(_split_key(header.group(2)))
-                    if header.group(1) == "[[":
-                        counts[name] = counts.get(name, 0) + 1
-                        table = (name, counts[name])
-                    else:
-                        table = (name, 0)
-                    self._headers.setdefault(table, lineno)
-                    continue
-                key = _KEY_RE.match(line)
-                if key:
-                    parts = _split_key(key.group(1))
-                    self._keys.setdefault((table, ".".join(parts)), lineno)
-                    if len(parts) > 1 and table[1] == 0:  # `terrain.kind = ...` at top level, or similar
-                        prefix = ".".join(p for p in (table[0], *parts[:-1]) if p)
-                        self._keys.setdefault(((prefix, 0), parts[-1]), lineno)
-            state, depth = _scan_line(line, state, depth)
-
-    def header(self, table: TableId) -> int | None:
-        """Line of the header of `table`, or None."""
-        return self._headers.get(table)
-
-    def key(self, table: TableId, key: str) -> int | None:
-        """Line of ``key =`` in `table`, or None."""
-        return self._keys.get((table, key))
-
 
 MISSING: Any = object()
 
@@ -132,11 +40,17 @@ class Range:
         return above and below
 
     def __str__(self) -> str:
+        lo, hi = _bound(self.lo), _bound(self.hi)
         if self.hi == math.inf:
-            return f"{'>' if self.lo_open else '>='} {self.lo:g}"
+            return f"{'>' if self.lo_open else '>='} {lo}"
         if self.lo == -math.inf:
-            return f"{'<' if self.hi_open else '<='} {self.hi:g}"
-        return f"in {'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}{')' if self.hi_open else ']'}"
+            return f"{'<' if self.hi_open else '<='} {hi}"
+        return f"in {'(' if self.lo_open else '['}{lo}, {hi}{')' if self.hi_open else ']'}"
+
+
+def _bound(x: float) -> str:
+    """A range's end as a message prints it: a whole number in full (1000000, not 1e+06), any other shortest."""
+    return str(int(x)) if math.isfinite(x) and float(x).is_integer() and abs(x) < 2**53 else f"{x:g}"
 
 
 def toml_type(value: object) -> str:
@@ -283,7 +197,9 @@ class TomlTable:
     def table_array(self, key: str, label: str) -> list[TomlTable]:
         """A non-empty array of tables ``[[key]]`` (key relative to this table), each labelled ``label #k``."""
         field_name = f"{self.label} {key}" if self.label else label
-        line = self.lines.key(self.table, key) or self.header_line
+        name = ".".join(p for p in (self.table[0], key) if p)
+        # `key = ...`, else the first header that writes it as tables (`[bands.in]` where `[[bands]]` was meant)
+        line = self.lines.key(self.table, key) or self.lines.first_header(name) or self.header_line
         if key not in self.data:
             raise self.error(self.path, f"missing; add at least one {label} table", field=field_name,
                                 line=self.header_line)
@@ -293,7 +209,6 @@ class TomlTable:
                                 field=field_name, line=line)
         if not value:
             raise self.error(self.path, f"must hold at least one {label} table", field=field_name, line=line)
-        name = ".".join(p for p in (self.table[0], key) if p)
         return [TomlTable(self.path, self.lines, v, f"{label} #{k}", (name, k), error=self.error)
                 for k, v in enumerate(value, start=1)]
 
@@ -347,7 +262,8 @@ def read_toml(path: Path, shown: str, error: type[FileFieldError] = FileFieldErr
 
     Raises:
         FileFieldError: (`error`) missing, not a regular file, too large, not UTF-8 (the line named), not TOML (the
-            line and column named), or nested too deep.
+            line and column named; a key or table defined twice by its ``[table] key``: `wbc.toml_lines.syntax_fault`),
+            or nested too deep.
     """
     try:
         raw = read_bytes(path, kind="toml")
@@ -364,15 +280,8 @@ def read_toml(path: Path, shown: str, error: type[FileFieldError] = FileFieldErr
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        message = str(exc)
-        where = re.search(r"\s*\(at line (\d+), column (\d+)\)$", message)
-        if where:
-            line: int | None = int(where.group(1))
-            message = f"{message[: where.start()]} (column {where.group(2)})"
-        else:
-            line = text.count("\n") + 1 if message.endswith("(at end of document)") else None
-            message = re.sub(r"\s*\(at end of document\)$", "", message)
-        raise error(shown, f"invalid TOML: {message}; fix the syntax (https://toml.io)", line=line) from None
+        fault = syntax_fault(text, exc)
+        raise error(shown, fault.reason, line=fault.line, field=fault.field) from None
     except RecursionError:
         raise error(shown, f"arrays or inline tables nested too deep to parse; no valid file nests more than "
                     f"{MAX_DEPTH} levels") from None
