@@ -58,6 +58,8 @@ from wbc.hardware.realtime import NO_REALTIME
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety import SafetyConfig
 from wbc.hardware.safety.events import REMEDIES
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree.target_lock import hold_target
 from wbc.scenario.scenario import load_scenario
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 from wbc.viz.content import SceneContent
@@ -467,6 +469,40 @@ def test_a_second_run_on_a_results_directory_is_refused_before_it_sends_anything
                                 "give another --out")
     assert str(refusals[1]) == f"{out}: already holds results; a hardware trial is played once: choose another --out"
     assert [len(emu.commands()) for emu in others] == [0, 0]  # neither sent its robot a frame
+
+
+def test_a_second_run_to_a_robot_another_link_drives_is_refused_before_its_socket_exists(
+        go1: UnitreeEmulator, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """One link drives the emulated robot (a run's, over UDP); ``hw run`` to the same target is refused with status 2,
+    naming the process that holds it, before it makes a socket, and so before any frame of its could reach the robot.
+    Each link binds a port of its own, so the second used to connect as well and drive the robot between the first's
+    frames. Once the first is closed, its target is free again."""
+    config = UnitreeRobotConfig(robot="go1", target_host="127.0.0.1", target_port=go1.address[1],
+                                connect_timeout=30.0)  # a bound: a busy machine's emulator answers late
+    first = UnitreeRobot(config)
+    with first:
+        sockets: list[tuple] = []
+        made = socket.socket
+
+        def counted(*args: object, **kwargs: object) -> socket.socket:
+            sockets.append(args)
+            return made(*args, **kwargs)
+
+        monkeypatch.setattr(socket, "socket", counted)
+        code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                     "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "1", "--out", str(tmp_path / "hw"),
+                     "--no-io-process", "--no-realtime"])
+        monkeypatch.undo()
+        err = capsys.readouterr().err
+        assert code == 2, err
+        assert err.strip().splitlines()[-1] == (
+            f"wbc: error: 127.0.0.1:{go1.address[1]}: another wbc process (pid {os.getpid()}) is connected to this "
+            "robot (a hw run, its I/O process, a hw check or a bench); nothing was sent to it: wait for that one to "
+            "end, or stop it, then run again")
+        assert not sockets  # no socket, no frame
+        assert not (tmp_path / "hw").exists()
+    hold_target("127.0.0.1", go1.address[1]).release()  # free once the first link is closed
 
 
 class _MeshesInterrupted:

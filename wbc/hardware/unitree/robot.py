@@ -54,7 +54,9 @@ from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS, SdkTransport
 from wbc.hardware.unitree.state_codec import decode_state
 from wbc.hardware.unitree.state_extras import LowStateExtras
 from wbc.hardware.unitree.target import announce_hardware_target, check_target
+from wbc.hardware.unitree.target_lock import hold_target
 from wbc.hardware.unitree.transport import Transport, UdpTransport
+from wbc.output_files import DirectoryLock
 from wbc.robots.description import RobotDescription
 from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
@@ -198,6 +200,7 @@ class UnitreeRobot(Robot):
         self.desc, self._limits = unitree_joint_table(config.robot)
         self._given_transport = transport
         self._transport: Transport | None = None
+        self._target_lock: DirectoryLock | None = None  # held from the connect to the close (`hold_target`)
         self._period = 1.0 / config.rate_hz
         self._damping = encode_command(self.layout, MotorCommand.damping(12, config.damping_kd), limits=self._limits)
         self._lock = threading.Condition()
@@ -240,10 +243,16 @@ class UnitreeRobot(Robot):
         if self._given_transport is not None:
             self._transport = self._given_transport
         else:
-            announce_hardware_target(cfg.target_host, cfg.target_port, cfg.robot)
-            channel = SdkTransport if cfg.transport == "sdk" else UdpTransport
-            self._transport = channel((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
-                                      allow_hardware=cfg.allow_hardware)
+            # one link to a robot at a time: a second would bind a port of its own and drive it too
+            self._target_lock = hold_target(cfg.target_host, cfg.target_port)
+            try:
+                announce_hardware_target(cfg.target_host, cfg.target_port, cfg.robot)
+                channel = SdkTransport if cfg.transport == "sdk" else UdpTransport
+                self._transport = channel((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
+                                          allow_hardware=cfg.allow_hardware)
+            except BaseException:
+                self._release_target()
+                raise
         self._link.start()
         self._link.wait_until(lambda: self._state is not None, cfg.connect_timeout)
         ok = self._state is not None
@@ -274,6 +283,13 @@ class UnitreeRobot(Robot):
         if self._transport is not None and self._given_transport is None:
             self._transport.close()
         self._transport = None
+        self._release_target()
+
+    def _release_target(self) -> None:
+        """Give back the robot's address (`hold_target`), once nothing of this link can send to it."""
+        if self._target_lock is not None:
+            lock, self._target_lock = self._target_lock, None
+            lock.release()
 
     def _read(self) -> RobotState:
         self._raise_failure()
