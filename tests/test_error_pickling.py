@@ -19,6 +19,7 @@ from wbc.errors import (
     PacketError,
     PortBusyError,
     SerialPortError,
+    TargetInUseError,
     UnknownNameError,
     WbcError,
 )
@@ -31,6 +32,7 @@ CONSTRUCTOR_ARGS: dict[type, tuple[tuple[object, ...], dict[str, object]]] = {
     MpcProblemFileError: (("problem.npz", ["H", "g"]), {}),
     FrameError: (("crc", "go1", "LowState", "crc 0x1234 != 0x4321"), {}),
     PortBusyError: (("127.0.0.1", 8007, "address in use"), {}),
+    TargetInUseError: (("127.0.0.1", 8007, 4242), {}),
     PacketError: (("header", "starts with 00"), {}),
     SerialPortError: (("/dev/ttyUSB0", "unplugged"), {}),
     IoProcessStopped: (("SIGTERM",), {"connected": True}),

@@ -485,3 +485,22 @@ def test_check_over_the_vendor_sdk_says_that_it_listens_on_every_interface(capsy
         assert hw_check(args, safety=LENIENT_SAFETY) == 0
         assert all(c.damping for c in emu.commands())
     assert "the vendor SDK binds its port on every interface" in capsys.readouterr().err
+
+
+def test_check_of_a_robot_answering_from_another_port_counts_its_datagrams_on_the_link_line_too(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """Every reply comes from the emulator's other port: the link finds no state stream and closes its channel. The
+    link line gives the count the first line gives; it read 0 from the channel already closed."""
+    rig = Stepped(ManualClock(), UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")))
+    try:
+        rig.emu.inject(Fault.FOREIGN_PORT)
+        args = build_parser().parse_args(["hw", "check", "--robot", "go1", "--target", "127.0.0.1:9",
+                                          "--seconds", "0.1"])
+        assert hw_check(args, build=rig.build) == 1
+    finally:
+        rig.emu.close()
+    first, *rest = capsys.readouterr().out.splitlines()
+    counted = re.search(r"\(0 rejected; (\d+) from another address\)", first)
+    assert counted is not None and int(counted.group(1)) > 0, first
+    (link,) = [line for line in rest if line.startswith("  link: ")]
+    assert f"; {counted.group(1)} foreign datagrams" in link, link

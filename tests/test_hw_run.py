@@ -15,6 +15,7 @@ by its ``--seconds``. What reached the robot is read from the emulator's log of 
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import io
 import json
 import math
@@ -43,8 +44,8 @@ from wbc.cli import main
 from wbc.cli.main import hw_run, unpowered_arm_warning
 from wbc.cli.parser import build_parser
 from wbc.cli.terminal_keys import TerminalKeys
-from wbc.control.registry import get_controller
-from wbc.errors import ConfigError, StandUpError
+from wbc.control.registry import ControllerSpec, arm_variant, get_controller
+from wbc.errors import ConfigError, ResultsDirError, StandUpError
 from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
@@ -57,6 +58,8 @@ from wbc.hardware.realtime import NO_REALTIME
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety import SafetyConfig
 from wbc.hardware.safety.events import REMEDIES
+from wbc.hardware.unitree import UnitreeRobot, UnitreeRobotConfig
+from wbc.hardware.unitree.target_lock import hold_target
 from wbc.scenario.scenario import load_scenario
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 from wbc.viz.content import SceneContent
@@ -427,6 +430,144 @@ def test_a_stop_before_the_robot_connects_is_said_to_have_sent_it_nothing(steppe
         run_hardware_trial(cfg, before_connect=confirm, build=stepped_go1.build)
     assert not stopped.value.opening
     assert not stepped_go1.emu.commands()  # not one frame
+
+def test_a_second_run_on_a_results_directory_is_refused_before_it_sends_anything(
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A second ``hw run`` with the same ``--out`` while the first plays, and another once the first has written its
+    results: each is refused before its robot is built, and its emulator got no frame. The second used to stand its
+    robot up and play the trial, and be refused only when it wrote its results, its frames interleaved on the wire
+    with the first's when both drove one robot."""
+    out = tmp_path / "dup"
+    argv = ["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+            "--target", "127.0.0.1:9", "--seconds", "1", "--out", str(out), "--no-io-process"]
+    refusals: list[BaseException] = []
+    others: list[UnitreeEmulator] = []
+
+    def second_run() -> None:
+        other = Stepped(ManualClock(), UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime",
+                                                                             held_until_driven=True)))
+        others.append(other.emu)
+        try:
+            hw_run(build_parser().parse_args(argv), build=other.build)
+        except ResultsDirError as refused:
+            refusals.append(refused)
+        finally:
+            other.emu.close()
+
+    def build(config: HardwareRobotConfig) -> HardwareRobot:
+        built = stepped_go1.build(config)
+        # the stand-up takes 1.06 s of this clock: half a second into the trial
+        stepped_go1.clock.call_at(stepped_go1.clock.now() + 1.5, second_run)
+        return built
+
+    assert hw_run(build_parser().parse_args(argv), build=build) == 0  # the first run, undisturbed
+    assert TrialRecord.read_csv(out / "trials.csv")
+    second_run()  # once the first has written its results
+    capsys.readouterr()
+    assert len(refusals) == 2, refusals
+    assert str(refusals[0]) == (f"{out} is in use by another wbc run (pid {os.getpid()}); wait for it to end, or "
+                                "give another --out")
+    assert str(refusals[1]) == f"{out}: already holds results; a hardware trial is played once: choose another --out"
+    assert [len(emu.commands()) for emu in others] == [0, 0]  # neither sent its robot a frame
+
+
+def test_a_second_run_to_a_robot_another_link_drives_is_refused_before_its_socket_exists(
+        go1: UnitreeEmulator, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """One link drives the emulated robot (a run's, over UDP); ``hw run`` to the same target is refused with status 2,
+    naming the process that holds it, before it makes a socket, and so before any frame of its could reach the robot.
+    Each link binds a port of its own, so the second used to connect as well and drive the robot between the first's
+    frames. Once the first is closed, its target is free again."""
+    config = UnitreeRobotConfig(robot="go1", target_host="127.0.0.1", target_port=go1.address[1],
+                                connect_timeout=30.0)  # a bound: a busy machine's emulator answers late
+    first = UnitreeRobot(config)
+    with first:
+        sockets: list[tuple] = []
+        made = socket.socket
+
+        def counted(*args: object, **kwargs: object) -> socket.socket:
+            sockets.append(args)
+            return made(*args, **kwargs)
+
+        monkeypatch.setattr(socket, "socket", counted)
+        code = main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
+                     "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "1", "--out", str(tmp_path / "hw"),
+                     "--no-io-process", "--no-realtime"])
+        monkeypatch.undo()
+        err = capsys.readouterr().err
+        assert code == 2, err
+        assert err.strip().splitlines()[-1] == (
+            f"wbc: error: 127.0.0.1:{go1.address[1]}: another wbc process (pid {os.getpid()}) is connected to this "
+            "robot (a hw run, its I/O process, a hw check or a bench); nothing was sent to it: wait for that one to "
+            "end, or stop it, then run again")
+        assert not sockets  # no socket, no frame
+        assert not (tmp_path / "hw").exists()
+    hold_target("127.0.0.1", go1.address[1]).release()  # free once the first link is closed
+
+
+class _MeshesInterrupted:
+    """A live viewer's observer whose meshes load until Ctrl-C comes."""
+
+    def __call__(self, *args: object) -> None:
+        raise AssertionError("no tick may be drawn: the trial was interrupted before the robot was connected")
+
+    def prepare(self, robot: Robot) -> None:
+        raise KeyboardInterrupt
+
+    def close(self) -> None:
+        pass
+
+
+class _Server:
+    def stop(self) -> None:
+        pass
+
+
+def _interrupted(*args: object, **kwargs: object) -> None:
+    raise KeyboardInterrupt
+
+
+def _controller_interrupted(named: ControllerSpec, arm_mode: str) -> ControllerSpec:
+    return dataclasses.replace(arm_variant(named, arm_mode), make=_interrupted)
+
+
+_BEFORE_THE_CONNECT = {
+    "viewer's server": ("wbc.cli.main", "_hw_live_observer", _interrupted),
+    "viewer's meshes": ("wbc.cli.main", "_hw_live_observer", lambda args: (_Server(), _MeshesInterrupted())),
+    "operator's keys": ("wbc.cli.main", "TerminalKeys", _interrupted),
+    "scenario": ("wbc.arena.hw_trial", "load_scenario", _interrupted),
+    "robot built": ("wbc.arena.hw_trial", "warn_if_unpublished", _interrupted),
+    "controller": ("wbc.arena.hw_trial", "arm_variant", _controller_interrupted),
+    "safety layer": ("wbc.arena.hw_trial", "SafeRobot", _interrupted),
+    "estimator": ("wbc.arena.hw_trial", "BaseEstimate", _interrupted),
+}
+"""Steps of ``wbc hw run`` before its robot is connected, and what stands in for each to be interrupted there."""
+
+
+@pytest.mark.parametrize("step", list(_BEFORE_THE_CONNECT))
+def test_ctrl_c_at_any_step_before_the_connect_says_that_nothing_was_sent(
+        stepped_go1: Stepped, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        step: str) -> None:
+    """Ctrl-C while the viewer loads its meshes, the controller is built, the safety layer or the estimator is made
+    (and every other step before the robot's connect): the command exits 130 and says that nothing was sent to the
+    robot, and the emulator got no frame. It said that the robot was closed into damping."""
+    module, name, stand_in = _BEFORE_THE_CONNECT[step]
+    monkeypatch.setattr(importlib.import_module(module), name, stand_in)
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "1", "--out", str(out),
+                                      "--no-io-process", *(["--view"] if "viewer" in step else [])])
+    try:
+        code = hw_run(args, build=stepped_go1.build)
+    except KeyboardInterrupt:
+        pytest.fail("the interruption escaped the command, unsaid")
+    err = capsys.readouterr().err
+    assert code == 130, err
+    assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted before the robot was connected: nothing was "
+                                            "sent to it; no results were written")
+    assert not stepped_go1.emu.commands()  # not one frame
+    assert not out.exists()  # the results directory it made, holding nothing, is gone
+
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 def test_sigterm_to_the_commands_group_is_an_interruption_and_the_robot_ends_damped(go1: UnitreeEmulator,

@@ -305,6 +305,28 @@ class NoStateStreamError(RobotLinkError):
     """
 
 
+class TargetInUseError(RobotLinkError):
+    """A robot's low-level address is held by another link on this machine (`wbc.hardware.unitree.target_lock`).
+
+    Each link binds a port of its own, so a second one to the same robot would connect as well and its frames would
+    reach the robot between the first's; it is refused before its socket exists.
+
+    Attributes:
+        host: the robot's address.
+        port: its port.
+        pid: the process that holds it, as its lock file says, or None where that is not written.
+    """
+
+    def __init__(self, host: str, port: int, pid: int | None) -> None:
+        self.host = host
+        self.port = port
+        self.pid = pid
+        holder = f" (pid {pid})" if pid is not None else ""
+        super().__init__(f"{host}:{port}: another wbc process{holder} is connected to this robot (a hw run, its I/O "
+                         "process, a hw check or a bench); nothing was sent to it: wait for that one to end, or stop "
+                         "it, then run again")
+
+
 class IoProcessStopped(RobotLinkError):
     """A robot's I/O process (`wbc.hardware.io_process`) was stopped by SIGTERM or SIGQUIT, and stopped in order.
 

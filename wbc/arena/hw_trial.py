@@ -59,12 +59,12 @@ from wbc.arena.finish import finish_results
 from wbc.arena.identity import MAX_SEED, MAX_TRIALS, HardwareRunIdentity, ScenarioRef
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
 from wbc.arena.report import md_table, summarize
-from wbc.arena.results import ResultsStore, episode_path, unwritable
+from wbc.arena.results import ResultsStore, episode_path, hold_results_dir, holds_results, unwritable
 from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
-from wbc.errors import ConfigError, IoProcessStopped, ResultsDirError, StandUpError, UnknownNameError
+from wbc.errors import ConfigError, IoProcessStopped, StandUpError, UnknownNameError
 from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
@@ -76,7 +76,7 @@ from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import RealtimeGrant, RealtimeRequest, controller_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.interrupts import DeferredInterrupts
-from wbc.output_files import write_text
+from wbc.output_files import DirectoryLock, write_text
 from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
@@ -261,69 +261,64 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     Raises:
         ScenarioError, UnknownNameError, PolicyFileError: bad scenario, band, controller or robot name.
         ConfigError: an arm mode the hardware cannot be built with (``actuated`` today) or the controller has no
-            variant for; a controller for another robot; a results directory that holds results.
+            variant for; a controller for another robot.
+        ResultsDirError: the results directory holds results, another run holds it, or it cannot be made (checked
+            before the robot is built and connected; it is held until the results are written).
         TargetRefusedError: a target outside 127.0.0.0/8 without `allow_hardware` (before any socket exists).
         RobotLinkError: the robot did not answer, or its link (the I/O process) died. A robot that stops answering
             during the trial is a trip of the safety layer and a `LinkLost` in the result instead.
         StandUpError: the safety layer tripped while standing the robot up, before the trial (nothing was played).
         ConnectInterrupted: interrupted before the robot was connected (nothing was sent to it).
     """
-    scenario = load_scenario(cfg.scenario)
-    band = cfg.band if cfg.band is not None else scenario.bands[0]
-    trial = scenario.trial(band, cfg.seed, cfg.trial)
-    if cfg.seconds is not None:
-        if cfg.seconds > trial.duration_s:
-            raise ConfigError(f"--seconds must be in (0, {trial.duration_s}] s (the trial's length), got {cfg.seconds}")
-        trial = dataclasses.replace(trial, duration_s=cfg.seconds)
-    named = get_controller(cfg.controller, config=cfg.controller_config, io=cfg.io_file)
-    spec = arm_variant(named, cfg.arm_mode if cfg.arm_mode is not None else named.arm_mode)
-    robot_name = cfg.robot if cfg.robot is not None else scenario.robot
-    if spec.robot is not None and spec.robot != robot_name:
-        raise ConfigError(f"controller {spec.name} drives {spec.robot}, not {robot_name}; choose a controller for "
-                          f"{robot_name}, or --robot {spec.robot}")
-    if cfg.simulate:
-        hardware = _simulated(robot_name, spec.arm_mode)
-    else:
-        host, port = cfg.target
-        local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
-        if build is None:
-            build = build_process_robot if cfg.io_process else build_hardware_robot
-        hardware = build(HardwareRobotConfig(
-            robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port, local_host=local_host,
-            local_port=local_port, allow_hardware=cfg.allow_hardware, rate_hz=cfg.rate_hz, transport=cfg.transport,
-            arm_port=cfg.arm_port))
     out = Path(cfg.out_dir)
-    if (out / "trials.csv").exists():
-        raise ResultsDirError(f"{out}: already holds results; a hardware trial is played once: choose another --out")
-    published = warn_if_unpublished(scenario)
-    with threadpool_limits(limits=1, user_api="blas"):  # as in simulation: one BLAS thread, beside the link thread
-        return _play(cfg, scenario_published=published, trial=trial, spec=spec, hardware=hardware, out=out,
-                     keys=keys, observer=observer, before_connect=before_connect)
+    with contextlib.ExitStack() as holding:
+        try:  # nothing is connected before `_play`: an interruption until then has sent the robot nothing
+            scenario = load_scenario(cfg.scenario)
+            band = cfg.band if cfg.band is not None else scenario.bands[0]
+            trial = scenario.trial(band, cfg.seed, cfg.trial)
+            if cfg.seconds is not None:
+                if cfg.seconds > trial.duration_s:
+                    raise ConfigError(f"--seconds must be in (0, {trial.duration_s}] s (the trial's length), got "
+                                      f"{cfg.seconds}")
+                trial = dataclasses.replace(trial, duration_s=cfg.seconds)
+            named = get_controller(cfg.controller, config=cfg.controller_config, io=cfg.io_file)
+            spec = arm_variant(named, cfg.arm_mode if cfg.arm_mode is not None else named.arm_mode)
+            robot_name = cfg.robot if cfg.robot is not None else scenario.robot
+            if spec.robot is not None and spec.robot != robot_name:
+                raise ConfigError(f"controller {spec.name} drives {spec.robot}, not {robot_name}; choose a "
+                                  f"controller for {robot_name}, or --robot {spec.robot}")
+            # held from before the robot is connected until the results are written: a second run on the same
+            # directory is refused before it sends anything, not once it has played its trial
+            lock = holding.enter_context(hold_results_dir(out))
+            if (out / "trials.csv").exists():
+                raise holds_results(out, resumable=False)
+            if cfg.simulate:
+                hardware = _simulated(robot_name, spec.arm_mode)
+            else:
+                host, port = cfg.target
+                local_host, local_port = cfg.local if cfg.local is not None else (None, 0)
+                if build is None:
+                    build = build_process_robot if cfg.io_process else build_hardware_robot
+                hardware = build(HardwareRobotConfig(
+                    robot=robot_name, arm_mode=spec.arm_mode, legs_host=host, legs_port=port,
+                    local_host=local_host, local_port=local_port, allow_hardware=cfg.allow_hardware,
+                    rate_hz=cfg.rate_hz, transport=cfg.transport, arm_port=cfg.arm_port))
+            published = warn_if_unpublished(scenario)
+        except KeyboardInterrupt as stopped:
+            raise ConnectInterrupted(opening=False) from stopped
+        with threadpool_limits(limits=1, user_api="blas"):  # as in simulation: one BLAS thread, beside the link's
+            return _play(cfg, scenario_published=published, trial=trial, spec=spec, hardware=hardware, out=out,
+                         lock=lock, keys=keys, observer=observer, before_connect=before_connect)
 
 
 def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, spec: ControllerSpec,
-          hardware: HardwareRobot, out: Path, keys: KeySource | None, observer: TickObserver | None,
+          hardware: HardwareRobot, out: Path, lock: DirectoryLock, keys: KeySource | None,
+          observer: TickObserver | None,
           before_connect: Callable[[HardwareRobot, ControllerSpec], None] | None) -> HardwareTrialResult:
     start = time.perf_counter()
-    desc = hardware.description
-    ctrl = spec.make(desc)
-    dt = 1.0 / ctrl.rate_hz
-    safety = cfg.safety if cfg.safety is not None else SafetyConfig(position_table=hardware.position_table)
-    # a robot on the wall clock (its own: the monotonic clock, or a test's): its layer's times in seconds since it was
-    # connected; the simulator: robot time
-    wall = isinstance(hardware.robot, WallClock)
-    wall_time = hardware.robot.wall_time if wall else time.monotonic
-    connected_at = [wall_time()]
-    safe = SafeRobot(hardware.robot, safety, clock=(lambda: wall_time() - connected_at[0]) if wall else None)
-    robot = EstimatedRobot(safe, desc, BaseEstimate(desc, dt, contact_force=cfg.contact_force))
     notes = _skipped(trial)
     trial = dataclasses.replace(trial, pushes=())  # no robot here can apply them
-    console = OperatorConsole(keys, safe.estop, then=observer)
     link: LinkStatsLike | None = None
-    if isinstance(observer, PreparingObserver):
-        observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait for them
-    scheduling = (controller_realtime(cfg.controller_realtime) if cfg.controller_realtime is not None
-                  else contextlib.nullcontext(None))
     # after the trial, Ctrl-C (or a request to end) waits for the trial's results, written whole (the trial is played
     # once), and a second one stops the writing, saying what it left; during the robot's close, every one waits for the
     # close (`Robot.close`)
@@ -333,7 +328,24 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     with contextlib.ExitStack() as deferred:
         with contextlib.ExitStack() as stack:
             opening = False
-            try:
+            try:  # until the robot's connect begins nothing exists to send it anything; during it, not the controller
+                desc = hardware.description
+                ctrl = spec.make(desc)
+                dt = 1.0 / ctrl.rate_hz
+                safety = cfg.safety if cfg.safety is not None else SafetyConfig(position_table=hardware.position_table)
+                # a robot on the wall clock (its own: the monotonic clock, or a test's): its layer's times in seconds
+                # since it was connected; the simulator: robot time
+                wall = isinstance(hardware.robot, WallClock)
+                wall_time = hardware.robot.wall_time if wall else time.monotonic
+                connected_at = [wall_time()]
+                safe = SafeRobot(hardware.robot, safety,
+                                 clock=(lambda: wall_time() - connected_at[0]) if wall else None)
+                robot = EstimatedRobot(safe, desc, BaseEstimate(desc, dt, contact_force=cfg.contact_force))
+                console = OperatorConsole(keys, safe.estop, then=observer)
+                if isinstance(observer, PreparingObserver):
+                    observer.prepare(robot)  # a viewer's meshes load now: the robot's first ticks must not wait
+                scheduling = (controller_realtime(cfg.controller_realtime) if cfg.controller_realtime is not None
+                              else contextlib.nullcontext(None))
                 if before_connect is not None:
                     before_connect(hardware, spec)
                 if wall:
@@ -376,7 +388,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                                      safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
                                      controller_realtime=grant, link_lost=link_lost)
         try:
-            _write_results(cfg, result, trial, published=scenario_published)
+            _write_results(cfg, result, trial, lock, published=scenario_published)
         except KeyboardInterrupt:
             raise ResultsInterrupted(out) from None
     if after_the_trial.requested:
@@ -512,7 +524,8 @@ def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
         robot.advance(dt)
 
 
-def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial: Trial, *, published: bool) -> None:
+def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial: Trial, lock: DirectoryLock, *,
+                   published: bool) -> None:
     record, episode, hardware = result.record, result.episode, result.robot
     grant = hardware.robot.realtime_grant if isinstance(hardware.robot, HasRealtimeGrant) else None
     scenario_name, scenario_hash = trial.scenario, trial.scenario_hash
@@ -524,8 +537,9 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
         target=hardware.target,
     )
     store = ResultsStore(result.out_dir, identity, resume=False,
-                         controllers={result.controller.name: result.controller.provenance()}, resumable=False)
-    try:  # the directory stays locked until its report is written
+                         controllers={result.controller.name: result.controller.provenance()}, resumable=False,
+                         lock=lock)
+    try:  # the directory stays held (`lock`) until its report is written, and the trial's caller gives it back
         store.append(record)
         path = episode_path(store.dir, record.controller, trial.band, trial.seed, trial.index)
         try:

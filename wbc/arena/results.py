@@ -39,7 +39,7 @@ from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory
 from wbc.provenance import provenance
 
 __all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_not_held", "check_out_dir", "episode_path",
-           "file_name_part", "hold_results_dir", "unwritable"]
+           "file_name_part", "hold_results_dir", "holds_results", "unwritable"]
 
 OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "report.md", "push_recovery.png",
                 "ttf.png", "tracking.png")
@@ -95,6 +95,21 @@ def unwritable(path: str | Path, exc: OSError, out_dir: Path, *, stored: int,
     when = "once there is room" if room else f"once {out_dir} can be written"
     return ResultsDirError(f"{path}: cannot be written ({why}); {kept}: the same command with --resume --out "
                            f"{out_dir} finishes the run {when}")
+
+
+def holds_results(out_dir: Path, *, resumable: bool = True) -> ResultsDirError:
+    """The refusal of a results directory that holds results already (its ``trials.csv``).
+
+    Args:
+        out_dir: the directory.
+        resumable: the run can be resumed, and the message says how (``--resume``); off: a hardware trial, which is
+            played once.
+    """
+    if not resumable:
+        return ResultsDirError(f"{out_dir}: already holds results; a hardware trial is played once: choose another "
+                               "--out")
+    return ResultsDirError(f"{out_dir}: already holds results; pass --resume to finish that run, or choose another "
+                           "--out")
 
 
 def _lock(out_dir: Path) -> DirectoryLock:
@@ -384,8 +399,7 @@ class ResultsStore:
               drop_bad_rows: bool) -> None:
         """Check the directory against this run, read its trials and write ``run.json`` (the lock held)."""
         if self.trials_path.exists() and not resume:
-            raise ResultsDirError(f"{self.dir}: already holds results; pass --resume to finish that run, or choose "
-                                  "another --out")
+            raise holds_results(self.dir, resumable=self.resumable)
         if resume and self.run_path.exists():
             # validated as a RunIdentity (every field known and typed), then compared as JSON: a stored run of
             # another kind or with other options is named field by field as differing
@@ -429,8 +443,7 @@ class ResultsStore:
                 try:  # created, never overwritten: a file that appeared since is another run's
                     f = self.trials_path.open("x", encoding="utf-8", newline="")
                 except FileExistsError:
-                    raise ResultsDirError(f"{self.dir}: already holds results; pass --resume to finish that run, or "
-                                          "choose another --out") from None
+                    raise holds_results(self.dir, resumable=self.resumable) from None
                 with f:
                     csv.writer(f).writerow(TrialRecord.header())
         self.environment = provenance()  # what `run.json` records; the report shows the same, taken once

@@ -594,10 +594,14 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                               "hang it in its harness first, keep the remote (L2+B) and the power switch within "
                               "reach.", yes=args.yes)
 
-    live = _hw_live_observer(args) if args.view else None
-    keys = TerminalKeys(announce="keys: " + ", ".join(f"{'space' if k == ' ' else k} {a}" for k, a in
-                                                      OPERATOR_ACTIONS.items()) + " (no Enter needed)")
+    live = keys = None
     try:
+        try:  # the viewer's server and the terminal's keys come before the trial, which connects the robot
+            live = _hw_live_observer(args) if args.view else None
+            keys = TerminalKeys(announce="keys: " + ", ".join(f"{'space' if k == ' ' else k} {a}" for k, a in
+                                                              OPERATOR_ACTIONS.items()) + " (no Enter needed)")
+        except KeyboardInterrupt as stopped:
+            raise ConnectInterrupted(opening=False) from stopped
         result = run_hardware_trial(cfg, keys=keys, observer=live[1] if live is not None else None,
                                     before_connect=confirm, build=build)
     except ResultsInterrupted as stopped:
@@ -622,7 +626,8 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         _say("wbc hw run: interrupted; the robot was closed into damping; no results were written")
         return 130
     finally:
-        keys.close()
+        if keys is not None:
+            keys.close()
         if live is not None:
             live[1].close()
             live[0].stop()

@@ -54,7 +54,9 @@ from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS, SdkTransport
 from wbc.hardware.unitree.state_codec import decode_state
 from wbc.hardware.unitree.state_extras import LowStateExtras
 from wbc.hardware.unitree.target import announce_hardware_target, check_target
+from wbc.hardware.unitree.target_lock import hold_target
 from wbc.hardware.unitree.transport import Transport, UdpTransport
+from wbc.output_files import DirectoryLock
 from wbc.robots.description import RobotDescription
 from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
@@ -150,6 +152,11 @@ class UnitreeRobotConfig:
                               f"periods ({2.0 / self.rate_hz} s)")
 
 
+def _transport_counts(transport: Transport) -> tuple[int, int]:
+    """(foreign, unsent): datagrams from another address, frames the network dropped (a fake may count neither)."""
+    return int(getattr(transport, "foreign", 0) or 0), int(getattr(transport, "unsent", 0) or 0)
+
+
 def _no_state_hint(robot: str, stats: DecodeStats, foreign: int = 0) -> str:
     """What to check when no valid LowState came: the frames that did come say which mistake it is.
 
@@ -193,6 +200,7 @@ class UnitreeRobot(Robot):
         self.desc, self._limits = unitree_joint_table(config.robot)
         self._given_transport = transport
         self._transport: Transport | None = None
+        self._target_lock: DirectoryLock | None = None  # held from the connect to the close (`hold_target`)
         self._period = 1.0 / config.rate_hz
         self._damping = encode_command(self.layout, MotorCommand.damping(12, config.damping_kd), limits=self._limits)
         self._lock = threading.Condition()
@@ -212,6 +220,7 @@ class UnitreeRobot(Robot):
         self._tripped = True
         self._closing_until: float | None = None
         self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0)
+        self._closed_counts = (0, 0)  # the transport's (foreign, unsent) when it was closed: its counts stay readable
         self._link = DeviceThread(f"unitree-{self.config.robot}-link", self._period, self._link_cycle, clock=self.clock,
                                   idle=self._link_idle, condition=self._lock)
         self._pacer = WallPacer(self.clock)
@@ -234,16 +243,22 @@ class UnitreeRobot(Robot):
         if self._given_transport is not None:
             self._transport = self._given_transport
         else:
-            announce_hardware_target(cfg.target_host, cfg.target_port, cfg.robot)
-            channel = SdkTransport if cfg.transport == "sdk" else UdpTransport
-            self._transport = channel((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
-                                      allow_hardware=cfg.allow_hardware)
+            # one link to a robot at a time: a second would bind a port of its own and drive it too
+            self._target_lock = hold_target(cfg.target_host, cfg.target_port)
+            try:
+                announce_hardware_target(cfg.target_host, cfg.target_port, cfg.robot)
+                channel = SdkTransport if cfg.transport == "sdk" else UdpTransport
+                self._transport = channel((cfg.local_host, cfg.local_port), (cfg.target_host, cfg.target_port),
+                                          allow_hardware=cfg.allow_hardware)
+            except BaseException:
+                self._release_target()
+                raise
         self._link.start()
         self._link.wait_until(lambda: self._state is not None, cfg.connect_timeout)
         ok = self._state is not None
         if not ok:
-            foreign = int(getattr(self._transport, "foreign", 0) or 0)  # read before the transport is closed
             self._shutdown(damp=False)
+            foreign = self._closed_counts[0]
             stats = self.decode_stats
             reasons = ", ".join(f"{r} {getattr(stats, r)}" for r in REJECT_REASONS if getattr(stats, r))
             raise NoStateStreamError(
@@ -262,9 +277,19 @@ class UnitreeRobot(Robot):
             # the close damping goes out as the link runs through it; the period after it ends the link
             self._link.join(timeout=self.config.close_damping + 1.0)
         self._link.stop()
+        if self._transport is not None:
+            with self._lock:
+                self._closed_counts = _transport_counts(self._transport)
         if self._transport is not None and self._given_transport is None:
             self._transport.close()
         self._transport = None
+        self._release_target()
+
+    def _release_target(self) -> None:
+        """Give back the robot's address (`hold_target`), once nothing of this link can send to it."""
+        if self._target_lock is not None:
+            lock, self._target_lock = self._target_lock, None
+            lock.release()
 
     def _read(self) -> RobotState:
         self._raise_failure()
@@ -353,8 +378,10 @@ class UnitreeRobot(Robot):
         """A snapshot of the link's counters; its period figures are the link thread's (`thread_stats`)."""
         thread = self._link.stats()
         with self._lock:
-            foreign = self._transport.foreign if self._transport is not None else 0
-            unsent = int(getattr(self._transport, "unsent", 0) or 0)  # a test's fake transport may not count it
+            # once closed, what the transport counted until then: a connect that found no state stream closes it
+            # before its caller reads the counts
+            foreign, unsent = (_transport_counts(self._transport) if self._transport is not None
+                               else self._closed_counts)
             return LinkStats(
                 **self._counts, valid_states=self._fresh, rejected_states=self.decode_stats.rejected,
                 foreign=foreign, unsent=unsent, state_age=self.clock.now() - self._state_at,
