@@ -169,6 +169,32 @@ def test_unknown_fault_exits_2_with_the_valid_names() -> None:
     assert "emulated" not in proc.stdout  # refused before the emulator started
 
 
+def test_emulate_injects_a_fault_at_the_value_given(monkeypatch: pytest.MonkeyPatch,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    """``--fault drop=0.3``: the emulator drops each reply with probability 0.3 (at its default, 1.0, drop was the
+    same as silence); a value out of range, or for a fault that takes none, is refused before it starts."""
+    injected: list[tuple[object, object]] = []
+    inject = UnitreeEmulator.inject
+
+    def spied(self: UnitreeEmulator, fault: Fault, value: object = None) -> None:
+        injected.append((fault, value))
+        inject(self, fault, value)
+
+    monkeypatch.setattr(UnitreeEmulator, "inject", spied)
+    assert main(["hw", "emulate", "--robot", "go1", "--seconds", "0.05", "--lockstep", "--no-realtime", "--fault",
+                 "drop=0.3", "--fault", "motor_error=0x20", "--fault", "corrupt"]) == 0
+    assert injected == [(Fault.DROP, 0.3), (Fault.MOTOR_ERROR, 0x20), (Fault.CORRUPT, None)]
+    assert "faults: drop=0.3, motor_error=32, corrupt;" in capsys.readouterr().out
+    for given, said in (("drop=1.5", "--fault drop=1.5: expected a number in (0, 1] (probability)"),
+                        ("drop=0", "--fault drop=0: expected a number in (0, 1] (probability)"),
+                        ("delay=nan", "--fault delay=nan: expected a number in (0, 1] (s)"),
+                        ("motor_error=256", "--fault motor_error=256: expected a whole number in [0, 255] (mode byte)"),
+                        ("corrupt=1", "--fault corrupt=1: corrupt takes no value from the command line")):
+        injected.clear()
+        assert main(["hw", "emulate", "--seconds", "0.05", "--lockstep", "--no-realtime", "--fault", given]) == 2
+        assert said in capsys.readouterr().err and injected == [], given
+
+
 def test_check_prints_the_state_and_sends_only_damping(stepped: Stepped, capsys: pytest.CaptureFixture[str]) -> None:
     robot = stepped.emu.config.robot
     args = build_parser().parse_args(["hw", "check", "--robot", robot, "--target", "127.0.0.1:9", "--seconds", "0.3"])

@@ -50,6 +50,7 @@ from wbc.errors import (
     WbcError,
 )
 from wbc.hardware.emulators import BusFault, Fault
+from wbc.hardware.emulators.faults import fault_value
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import realtime_switch_interval
 from wbc.hardware.io_process import build_process_robot
@@ -250,7 +251,9 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         raise UnknownNameError("arm mode", args.arm, ARM_MODES)
     actuated = args.arm == "actuated"
     faults: list[Fault | BusFault] = []
-    for name in args.fault or ():
+    values: list[tuple[Fault, float]] = []
+    for given in args.fault or ():
+        name, _, value = given.partition("=")
         key = name.lower().replace("-", "_")
         if key in BUS_FAULTS and not actuated:
             raise ConfigError(f"--fault {name}: the arm's bus is emulated only with --arm actuated")
@@ -260,11 +263,17 @@ def _hw_emulate(args: argparse.Namespace) -> int:
         if fault in faults:
             raise ConfigError(f"--fault {key} is given twice; give each fault once")
         faults.append(fault)
+        if "=" in given:
+            if isinstance(fault, BusFault):
+                raise ConfigError(f"--fault {given}: the arm's bus faults take no value from the command line (each "
+                                  "runs at its default)")
+            values.append((fault, fault_value(fault, value)))
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     served = emulate(EmulateConfig(robot=wire, arm_mode=args.arm,
                                    mode="lockstep" if args.lockstep else "realtime", port=args.port,
-                                   faults=tuple(faults), seconds=args.seconds, held=not args.drop,
+                                   faults=tuple(faults), fault_values=tuple(values), seconds=args.seconds,
+                                   held=not args.drop,
                                    realtime=realtime_request(args, place="first")),
                      serving=printers.print_emulator_serving)
     printers.print_emulator_served(served)

@@ -20,6 +20,7 @@ from wbc.arena.identity import MAX_SEED, MAX_TRIAL_TIME_LIMIT_S, MAX_TRIALS, MIN
 from wbc.cli.robot_names import ROBOT_NAMES_HELP
 from wbc.control.registry import CONTROLLERS
 from wbc.hardware.emulators import BusFault, Fault
+from wbc.hardware.emulators.faults import FAULT_VALUES
 from wbc.hardware.hardware_robot import HARDWARE_ARM_MODES
 from wbc.hardware.realtime import DEFAULT_RT_PRIORITY
 from wbc.hardware.unitree import TRANSPORTS
@@ -506,10 +507,12 @@ def _add_hw_emulate_parser(hws: _Commands) -> None:
                          "and go1-arm need locked or actuated")
     emulate.add_argument("--port", type=bounded_int(0, 65_535), default=0,
                          help="UDP port on 127.0.0.1, 0..65535 (default 0: a free one)")
-    emulate.add_argument("--fault", action="append", default=None, metavar="NAME",
-                         help="inject a fault at its default value (repeatable): "
+    emulate.add_argument("--fault", action="append", default=None, metavar="NAME[=VALUE]",
+                         help="inject a fault from the start (repeatable): "
                          f"{', '.join(f.value for f in Fault)}; with --arm actuated also the arm's bus faults "
-                         f"{', '.join('arm_' + f.value for f in BusFault)}")
+                         f"{', '.join('arm_' + f.value for f in BusFault)}; each at its default value, or at VALUE for "
+                         + ", ".join(f"{f.value} ({unit})" for f, (unit, *_) in FAULT_VALUES.items())
+                         + " (drop=0.3: each reply dropped with probability 0.3)")
     emulate.add_argument("--lockstep", action="store_true",
                          help="one physics step and one reply per command (default: real time, a reply per period)")
     emulate.add_argument("--seconds", type=_MEASURE_S, default=None,

@@ -56,7 +56,10 @@ class EmulateConfig:
         arm_mode: ``none``, ``locked`` or ``actuated`` (the arm on its own bus, on a pseudo-terminal).
         mode: ``realtime`` (a reply per period) or ``lockstep`` (one physics step and one reply per command).
         port: UDP port on 127.0.0.1 (0: a free one).
-        faults: faults injected at their default values; bus faults only with the arm actuated.
+        faults: faults injected, at their default values unless `fault_values` gives one; bus faults only with the arm
+            actuated.
+        fault_values: (fault, value) of the faults injected at a value of their own (`wbc.hardware.emulators.faults.
+            FAULT_VALUES`, `fault_value`).
         seconds: stop after this long [s] (None: at SIGINT or SIGTERM).
         held: the robot is held at its standing pose, as in a harness, until a command drives a motor.
         realtime: what to ask the OS for before the emulator's threads start.
@@ -67,6 +70,7 @@ class EmulateConfig:
     mode: str
     port: int = 0
     faults: tuple[Fault | BusFault, ...] = ()
+    fault_values: tuple[tuple[Fault, float], ...] = ()
     seconds: float | None = None
     held: bool = True
     realtime: RealtimeRequest
@@ -74,6 +78,17 @@ class EmulateConfig:
     def __post_init__(self) -> None:
         if self.arm_mode != "actuated" and any(isinstance(f, BusFault) for f in self.faults):
             raise ConfigError("the arm's bus faults need the arm's bus: emulate it with arm_mode actuated")
+        if any(fault not in self.faults for fault, _ in self.fault_values):
+            raise ConfigError("EmulateConfig.fault_values: give a value only to a fault in `faults`")
+
+    def value(self, fault: Fault | BusFault) -> object:
+        """The value `fault` is injected at (None: its default)."""
+        return dict(self.fault_values).get(fault)
+
+    def names(self) -> tuple[str, ...]:
+        """The faults by name (`FAULTS`, `BUS_FAULTS`), each with its own value where it has one (``drop=0.3``)."""
+        return tuple((f"arm_{f.value}" if isinstance(f, BusFault) else f.value)
+                     + ("" if self.value(f) is None else f"={self.value(f):g}") for f in self.faults)
 
 
 @dataclass(frozen=True)
@@ -171,7 +186,7 @@ def emulate(cfg: EmulateConfig, *,
     Returns:
         The counts, and the failure of the emulator's thread if one ended it.
     """
-    names = tuple(f"arm_{f.value}" if isinstance(f, BusFault) else f.value for f in cfg.faults)
+    names = cfg.names()
     if cfg.arm_mode == "actuated":
         return _emulate_with_arm(cfg, names, serving)
     # no log: nobody reads it here, and a long one stalls the replies in each full garbage collection
@@ -181,7 +196,7 @@ def emulate(cfg: EmulateConfig, *,
     with emulator:
         freeze_heap()  # built and serving: its full collections must not stall the answers
         for fault in cfg.faults:
-            emulator.inject(fault)
+            emulator.inject(fault, cfg.value(fault))
         serving(EmulatorServing(robot=cfg.robot, mode=cfg.mode, address=emulator.address, arm_port=None,
                                 faults=names, seconds=cfg.seconds, held=cfg.held, grant=grant, arm_mode=cfg.arm_mode))
         _serve(emulator, cfg.seconds)
@@ -210,7 +225,7 @@ def _emulate_with_arm(cfg: EmulateConfig, names: tuple[str, ...],
     with emulator:
         freeze_heap()  # built and serving: its full collections must not stall the answers
         for fault in cfg.faults:
-            emulator.inject(fault)
+            emulator.inject(fault, cfg.value(fault))
         serving(EmulatorServing(robot=robot, mode=cfg.mode, address=emulator.address, arm_port=emulator.port,
                                 faults=names, seconds=cfg.seconds, held=cfg.held, grant=grant, arm_mode=cfg.arm_mode,
                                 arm_port_shared=emulator.arm.registered_everywhere))

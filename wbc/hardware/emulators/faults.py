@@ -23,7 +23,8 @@ from wbc.hardware.unitree.layout import MODE_OVERHEAT
 from wbc.hardware.unitree.remote import L2_B_MASK
 from wbc.types import RobotState
 
-__all__ = ["FRAME_FAULTS", "STATE_FAULTS", "Fault", "FaultSet", "apply_state_faults", "mangle_frame"]
+__all__ = ["FAULT_VALUES", "FRAME_FAULTS", "STATE_FAULTS", "Fault", "FaultSet", "apply_state_faults", "fault_value",
+           "mangle_frame"]
 
 
 class Fault(enum.Enum):
@@ -69,6 +70,39 @@ _DEFAULTS: dict[Fault, object] = {
     Fault.OVER_TEMPERATURE: 95, Fault.MOTOR_ERROR: MODE_OVERHEAT, Fault.OVER_POWER: (20.0, 5.0),
     Fault.FALL: math.pi / 2, Fault.BAD_IMU: 0.5,
 }
+
+
+FAULT_VALUES: dict[Fault, tuple[str, float, float, bool]] = {
+    Fault.DELAY: ("s", 0.0, 1.0, False), Fault.JITTER: ("s", 0.0, 1.0, False),
+    Fault.DROP: ("probability", 0.0, 1.0, False), Fault.OVER_TEMPERATURE: ("deg C", 0.0, 150.0, True),
+    Fault.MOTOR_ERROR: ("mode byte", 0.0, 255.0, True), Fault.FALL: ("rad", 0.0, math.pi, False),
+    Fault.BAD_IMU: ("scale", 0.0, 10.0, False),
+}
+"""The faults that take one number from the command line (``--fault drop=0.3``): (unit, lowest, highest, whole).
+The lowest is excluded, but for whole numbers."""
+
+
+def fault_value(fault: Fault, text: str) -> float | int:
+    """`fault`'s value read from `text` (``0.3``; a mode byte also as ``0x20``), checked against `FAULT_VALUES`.
+
+    Raises:
+        ConfigError: `fault` takes no number, or `text` is not one within its range (the message gives both).
+    """
+    if fault not in FAULT_VALUES:
+        takes = ", ".join(f.value for f in FAULT_VALUES)
+        raise ConfigError(f"--fault {fault.value}={text}: {fault.value} takes no value from the command line (it runs "
+                          f"at its default, {_DEFAULTS.get(fault, 'on')}); those that take one: {takes}")
+    unit, low, high, whole = FAULT_VALUES[fault]
+    try:
+        value: float | int = int(text, 0) if whole else float(text)
+    except ValueError:
+        value = math.nan
+    inside = low <= value <= high if whole else low < value <= high
+    if not (isinstance(value, int) or math.isfinite(value)) or not inside:
+        span = f"[{low:g}, {high:g}]" if whole else f"({low:g}, {high:g}]"
+        raise ConfigError(f"--fault {fault.value}={text}: expected {'a whole number' if whole else 'a number'} "
+                          f"in {span} ({unit})")
+    return value
 
 
 class FaultSet:
