@@ -527,9 +527,10 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
 
     Returns:
         0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
-        the outcome ``controller_error``), or when the robot stopped answering and its link was lost (the results
-        are written too, the outcome ``safety_trip``; the last line says when, and that the damping sent since may
-        not have reached the robot: check it and power it down by hand); 130 when interrupted (Ctrl-C, SIGTERM,
+        the outcome ``controller_error``), or when the robot stopped answering and its link (the legs') was lost
+        (the results are written too, the outcome ``safety_trip``; the last line says when, and that the damping
+        sent since may not have reached the robot: check it and power it down by hand); a fault of the arm's bus is
+        a trip like any other, printed as the arm's (0); 130 when interrupted (Ctrl-C, SIGTERM,
         SIGHUP: the robot is closed into damping first), SIGTERM to the command's group or to its I/O process
         included (`IoProcessStopped`, the robot closed by the I/O process); interrupted before the robot was
         connected, the line says that nothing was sent to it (`ConnectInterrupted`).

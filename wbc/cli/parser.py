@@ -564,8 +564,9 @@ def _add_hw_run_parser(hws: _Commands) -> None:
                            "results directory of the arena's format. A target outside 127.0.0.0/8, or an --arm-port "
                            "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes). "
                            "Exit status: 0 once the results are written; 1 when the controller failed in the trial, or "
-                           "the robot stopped answering (the link was lost: the last line says when, and that the "
-                           "damping sent since may not have reached the robot) - the results are written either way; "
+                           "the robot stopped answering (its legs' link was lost: the last line says when, and that "
+                           "the damping sent since may not have reached the robot) - the results are written either "
+                           "way (a safety trip, an arm's bus fault among them, is the trial's outcome: 0); "
                            "2 for an error; 130 when interrupted (Ctrl-C, SIGTERM, a closed terminal).")
     hwrun.add_argument("ctrl", help=f"controller (its variant for --arm is played): one of {_NAMES_HELP}")
     hwrun.add_argument("--robot", default=None,

@@ -825,6 +825,8 @@ def print_hw_run(result: HardwareTrialResult) -> None:
     print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions ({clock}, the trial "
           f"began at {result.trial_started_s:.2f} s): "
           + ", ".join(f"{e.time:.2f} s {e.to_state} ({e.reason})" for e in result.safety_events))
+    for fault in result.arm_faults:  # the arm's own, apart from the layer's trip it caused
+        print(f"  arm bus: {fault}")
     if len(ep.operator_events):
         print("  operator: " + ", ".join(f"{t:.2f} s {a}" for t, _, a in ep.operator_events.rows()))
     print(f"  results: {result.out_dir} (trials.csv, report.md, hardware.json, episodes/)")
