@@ -37,6 +37,7 @@ __all__ = [
     "TargetRefusedError",
     "RobotLinkError",
     "NoStateStreamError",
+    "ArmRefusedError",
     "IoProcessStopped",
     "PacketError",
     "SerialPortError",
@@ -302,6 +303,15 @@ class NoStateStreamError(RobotLinkError):
 
     Nothing answered, or everything that came was refused (another model's frames, another address); the message
     counts what came and says what to check. ``wbc hw check`` reports it as its result (status 1), not as an error.
+    """
+
+
+class ArmRefusedError(RobotLinkError):
+    """An arm's backend found a servo it will not drive when it connected.
+
+    A hardware error latched in it, or no answer to its ping (silent, or its answers corrupt). Nothing was driven:
+    the bus was closed again. The message names the servo, what was read and what to do.
+    ``wbc hw check`` reports it as its result (status 1), with what the servos that answer say, not as an error.
     """
 
 

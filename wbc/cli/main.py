@@ -446,7 +446,9 @@ def hw_check(args: argparse.Namespace, *,
 
     Returns:
         0 when the safety layer would start a ramp from the state read ("ready"); 1 when it would refuse (a trip:
-        an e-stop held, a joint out of range, a motor fault ...) or saw no live state stream (nothing valid came
+        an e-stop held, a joint out of range, a motor fault ...), when the arm's backend refused a servo at connect
+        (a hardware error latched in it, a servo that did not answer its ping: the legs and the servos that answer
+        are read all the same, and the line says what to do), or saw no live state stream (nothing valid came
         within the link's connect timeout: the line says so, with what did come and what to check), so that a
         bring-up script can stop there. The state (when one came), the link's counters and the verdict are printed
         either way. A refusal of the options or of the target raises instead (status 2).
@@ -473,7 +475,7 @@ def hw_check(args: argparse.Namespace, *,
                                                safety=SafetyConfig() if safety is None else safety),
                            build=build, confirm=confirm)
     printers.print_hw_check(check)
-    return 0 if check.safety_state == "ramp" else 1
+    return 0 if check.ready else 1
 
 
 def realtime_request(args: argparse.Namespace, *, place: str) -> RealtimeRequest:

@@ -532,7 +532,10 @@ def _add_hw_check_parser(hws: _Commands) -> None:
                            "state: joints with their ranges (marked margin beyond one but within the layer's joint "
                            "margin, OUT beyond both), motor modes and temperatures, IMU roll and pitch, battery, "
                            "remote buttons, the layer's verdict (would a ramp start from here, or what it refuses), "
-                           "link and bus statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port "
+                           "link and bus statistics, rejected frames. An arm with a servo in fault at connect (a "
+                           "latched hardware error, no valid answer to its ping) is not driven: the legs are read "
+                           "alone and each servo once, nothing written, and the verdict says what to do (exit 1). "
+                           "A target outside 127.0.0.0/8, or an --arm-port "
                            "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
     check.add_argument("--robot", default="go1",
                        help=f"one of: {ROBOT_NAMES_HELP}; either name reads the arm only with --arm-port (default "
