@@ -9,6 +9,7 @@ import signal
 import sys
 import tempfile
 import textwrap
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import pytest
@@ -253,16 +254,21 @@ class Stepped:
         return build_hardware_robot(config, clock=self.clock, legs_transport=self.emu.transport(self.clock))
 
 
-def hw_run_arm_in_lockstep(scenario: str, out: str, seconds: float) -> tuple[int, RobotEmulator]:
+def hw_run_arm_in_lockstep(scenario: str, out: str, seconds: float,
+                           inject: Callable[[RobotEmulator], None] | None = None,
+                           inject_at: float = 0.0) -> tuple[int, RobotEmulator]:
     """``wbc hw run stand --robot a1-wx200 --arm actuated --no-io-process``, legs and arm emulated in process on one
     manual clock, the trial's devices (the legs' link, the arm's bus) on that clock too; (its exit status, the
-    emulator, closed: its logs are kept)."""
+    emulator, closed: its logs are kept). `inject`, if given, is called with the emulator `inject_at` seconds of that
+    clock after the robot is built (the stand-up before the trial takes about 1.06 s)."""
     from wbc.cli.main import hw_run
     from wbc.cli.parser import build_parser
 
     clock = ManualClock()
     with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="realtime"), clock=clock) as emu:
         def build(config: HardwareRobotConfig) -> HardwareRobot:
+            if inject is not None:
+                clock.call_at(clock.now() + inject_at, lambda: inject(emu))
             return build_hardware_robot(config, clock=clock, legs_transport=emu.legs_transport,
                                         arm_handlers=emu.arm_handlers())
 

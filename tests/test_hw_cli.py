@@ -34,7 +34,14 @@ from wbc.cli.main import hw_check
 from wbc.cli.parser import build_parser
 from wbc.hardware.clock import ManualClock
 from wbc.hardware.dynamixel import DynamixelArmConfig
-from wbc.hardware.emulators import Fault, RobotEmulator, RobotEmulatorConfig, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.emulators import (
+    BusFault,
+    Fault,
+    RobotEmulator,
+    RobotEmulatorConfig,
+    UnitreeEmulator,
+    UnitreeEmulatorConfig,
+)
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
 from wbc.hardware.safety import REMEDIES, SafetyConfig
@@ -447,6 +454,41 @@ def test_check_reads_the_arm_too_and_never_drives_it_in_lockstep(capsys: pytest.
     assert "arm on " in out and "arm_elbow" in out and "safety: ready: a ramp would start" in out
     cycles = re.search(r"arm bus: (\d+) cycles, (\d+) of them damping", out)
     assert cycles and int(cycles[1]) >= 0.5 * 100 and cycles[1] == cycles[2]  # every cycle damped: no servo command
+    assert len(legs) >= 0.5 / LINK_PERIOD and all(c.damping for c in legs)
+
+
+@pytest.mark.parametrize(("fault", "elbow", "said"), [
+    (BusFault.OVERLOAD, r"elbow\s+4\s+1020\s+3 \(position\)\s+0x20 overload",
+     "ID 4 (elbow) reports a hardware error (overload; 0x20), latched in the servo: find the cause, then reboot it"),
+    (BusFault.SILENT_ID, r"elbow\s+4  NO VALID ANSWER to its ping: rx timeout",
+     "servos did not answer a ping: ID 4 (elbow): rx timeout (-3001). Check the arm's 12 V supply")],
+    ids=["overload", "silent-id"])
+def test_check_of_an_arm_with_a_fault_at_connect_reads_what_answers_and_exits_1(
+        fault: BusFault, elbow: str, said: str, capsys: pytest.CaptureFixture[str]) -> None:
+    """The elbow overloaded (latched in the servo), or silent, before the check: the arm's backend refuses to drive
+    it, and the check reads the legs alone, each servo once without writing to it, says what the arm's refusal says
+    and exits 1 (a state the safety layer would refuse). It printed that refusal as an error, no readout, status 2."""
+    pytest.importorskip("dynamixel_sdk")
+    clock = ManualClock()
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="realtime"), clock=clock) as emu:
+        emu.inject(fault)
+
+        def build(config: HardwareRobotConfig) -> HardwareRobot:
+            return build_hardware_robot(config, clock=clock, legs_transport=emu.legs_transport,
+                                        arm_handlers=emu.arm_handlers())
+
+        args = build_parser().parse_args(["hw", "check", "--robot", "a1", "--target", "127.0.0.1:9", "--arm-port",
+                                          emu.port, "--seconds", "0.5"])
+        assert hw_check(args, build=build) == 1
+        legs = emu.legs.commands()
+        writes = [w for p in emu.arm.packets() for w in p.writes]
+    out = capsys.readouterr().out
+    assert "FR_hip_joint" in out and "arm_elbow" not in out  # the legs' table; the arm's joints were not read
+    assert "arm: not driven" in out and re.search(elbow, out), out
+    for servo in ("waist", "shoulder_shadow", "wrist_angle", "wrist_rotate", "gripper"):  # those that answer
+        assert re.search(rf"{servo}\s+\d\s+1020\s+3 \(position\)\s+none", out), servo
+    assert re.search(r"safety: WOULD REFUSE: the arm: DynamixelArm\(\S+\): " + re.escape(said), out), out
+    assert not writes  # nothing written to the arm: no torque, no mode, no goal
     assert len(legs) >= 0.5 / LINK_PERIOD and all(c.damping for c in legs)
 
 

@@ -50,7 +50,7 @@ from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.hardware.capabilities import ConfigurationEstimate, HasSafetyEvents
 from wbc.hardware.clock import ManualClock
-from wbc.hardware.emulators import Fault, UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.emulators import BusFault, Fault, UnitreeEmulator, UnitreeEmulatorConfig
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig
 from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
@@ -899,6 +899,52 @@ def test_a_trial_with_the_arm_actuated_over_both_wires_in_lockstep(tmp_path: Pat
     (path,) = (out / "episodes" / "stand").glob("*.npz")
     assert Episode.load(str(path)).qpos.shape[1] == 7 + 15  # the arm's joints are in the episode
     assert packets > 3 * 150  # the arm's bus cycled all through the trial (about 200 cycles a second)
+
+
+@pytest.mark.parametrize(("fault", "kind", "trip"), [(BusFault.OVERLOAD, "hardware_error", "motor_mode"),
+                                                     (BusFault.SILENT_ID, "no_answer", "stale_state")],
+                         ids=["overload", "silent-id"])
+def test_an_arm_fault_in_the_trial_is_its_outcome_and_not_a_lost_link(
+        fault: BusFault, kind: str, trip: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The elbow overloads, or stops answering, about 0.9 s into the trial, the legs' link alive throughout: the
+    layer trips (on the servo's mode, or on the joined state the silent arm froze) and damps the legs, which hear it.
+    That is the trial's outcome, exit 0, the arm's fault recorded as the arm's. The frozen arm froze the joined frames'
+    freshness, which the lost-link verdict read: the run exited 1 and called it the robot's link lost."""
+    pytest.importorskip("dynamixel_sdk")
+    out = tmp_path / "hw"
+    code, emu = hw_run_arm_in_lockstep(PUSH, str(out), 2, inject=lambda e: e.inject(fault), inject_at=2.0)
+    err = capsys.readouterr().err
+    assert code == 0, err
+    assert "the link to the robot was lost" not in err
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.outcome == "safety_trip" and record.safety_trips == 1
+    hardware = json.loads((out / "hardware.json").read_text())
+    assert hardware["link_lost"] is None
+    last = hardware["safety_events"][-1]
+    assert last["reason"] == trip and last["to_state"] == "damped"
+    (arm_fault,) = hardware["arm_faults"]
+    assert (arm_fault["kind"], arm_fault["ids"]) == (kind, [4]) and "LIMP" in arm_fault["policy"]
+    report = (out / "report.md").read_text()
+    assert "## Arm faults" in report and "## Link lost" not in report
+    # the legs heard the layer's damping from the trip to the close: nothing lost on their wire
+    frames = emu.legs.commands()
+    after = [c for c in frames if c.time > last["time"] + LINK_PERIOD + TIME_EPS]
+    assert len(after) > 400 and all(c.damping for c in after)  # the 1 s settle at 500 Hz, then the close
+
+
+def test_a_legs_link_lost_with_the_arm_actuated_is_still_a_lost_link(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """The legs stop answering while the arm's bus is fine: the verdict rests on the legs' link, exit 1."""
+    pytest.importorskip("dynamixel_sdk")
+    out = tmp_path / "hw"
+    code, _ = hw_run_arm_in_lockstep(PUSH, str(out), 2, inject=lambda e: e.inject(Fault.SILENCE), inject_at=2.0)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1
+    assert err[-1].startswith("wbc hw run: the link to the robot was lost: its last state came 2.000 s after it was "
+                              "connected")
+    hardware = json.loads((out / "hardware.json").read_text())
+    assert hardware["safety_events"][-1]["reason"] == "stale_state" and hardware["arm_faults"] == []
+    assert hardware["link_lost"]["last_state_s"] == pytest.approx(2.0, abs=LINK_PERIOD)
 
 
 @pytest.mark.realtime

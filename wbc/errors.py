@@ -37,6 +37,7 @@ __all__ = [
     "TargetRefusedError",
     "RobotLinkError",
     "NoStateStreamError",
+    "ArmRefusedError",
     "IoProcessStopped",
     "PacketError",
     "SerialPortError",
@@ -325,6 +326,15 @@ class TargetInUseError(RobotLinkError):
         super().__init__(f"{host}:{port}: another wbc process{holder} is connected to this robot (a hw run, its I/O "
                          "process, a hw check or a bench); nothing was sent to it: wait for that one to end, or stop "
                          "it, then run again")
+
+
+class ArmRefusedError(RobotLinkError):
+    """An arm's backend found a servo it will not drive when it connected.
+
+    A hardware error latched in it, or no answer to its ping (silent, or its answers corrupt). Nothing was driven:
+    the bus was closed again. The message names the servo, what was read and what to do.
+    ``wbc hw check`` reports it as its result (status 1), with what the servos that answer say, not as an error.
+    """
 
 
 class IoProcessStopped(RobotLinkError):

@@ -18,9 +18,12 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
   e-stop ends the trial too); the robot is then held in the layer's damping for ``settle_s`` while it comes to rest,
   before the link is closed. The record's outcome tells them apart: ``safety_trip`` for the layer's own checks,
   ``operator_stop`` for an e-stop (the console's key, the remote);
-- a robot that stopped answering (its state stream stale, and still so when the link is closed) is a lost link
-  (`LinkLost`, in the result, ``hardware.json`` and the report): nothing then shows that the layer's damping reached
-  the robot, which must be checked and powered down by hand;
+- a robot that stopped answering (its own link's state stream stale, the legs' on a quadruped, and still so when
+  the link is closed) is a lost link (`LinkLost`, in the result, ``hardware.json`` and the report): nothing then shows
+  that the layer's damping reached the robot, which must be checked and powered down by hand;
+- a fault the arm's bus latched (a servo's hardware error, a servo that stopped answering, the port lost) trips the
+  layer (the servo's mode, or the joined state gone stale) and is recorded as the arm's (``arm_faults``, with the
+  torque policy it applied), not as a lost link while the legs answer: the trial's outcome, as any trip;
 - a controller that raises, or returns a command the robot refuses, ends the episode too: the layer is tripped into
   damping (a software e-stop), and the trial is recorded with the outcome ``controller_error`` and what failed;
 - deadline misses (``controller.act`` longer than the period), the link's late advances and the process's CPU time
@@ -68,7 +71,8 @@ from wbc.errors import ConfigError, IoProcessStopped, StandUpError, UnknownNameE
 from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
-from wbc.hardware.capabilities import HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
+from wbc.hardware.capabilities import HasLatchedFaults, HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
+from wbc.hardware.dynamixel.arm_fault import ArmFault
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.io_process import ProcessRobot, build_process_robot
@@ -219,6 +223,10 @@ class HardwareTrialResult:
             or None when it asked for nothing.
         link_lost: the robot's state stream had stopped and not come back when the link was closed (`LinkLost`);
             None when it was live to the end (or the robot has no link: the simulator).
+        arm_faults: the faults the arm's bus latched (`wbc.hardware.dynamixel.ArmFault`: a servo that stopped
+            answering, its hardware error, the port lost), oldest first, as of the close; each says which joints its
+            torque policy damped and which it left limp. An arm's fault ends the trial through the safety layer (the
+            servo's mode, or its frozen state); it is not a lost link while the legs still answer.
     """
 
     record: TrialRecord
@@ -235,6 +243,7 @@ class HardwareTrialResult:
     io_cpu_s: float | None = None
     controller_realtime: RealtimeGrant | None = None
     link_lost: LinkLost | None = None
+    arm_faults: tuple[ArmFault, ...] = ()
 
 
 def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
@@ -377,6 +386,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
             if safe.safety_state is SafetyState.DAMPED:
                 _settle(robot, dt, cfg.settle_s)
             link_lost = _link_lost(safe, started_s) if wall else None
+            arm_faults = _latched_faults(hardware.robot)
             deferred.enter_context(after_the_trial)
         episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
         counters, error = read_counters(ctrl, spec.name, trial, episode, error)
@@ -386,7 +396,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                      notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
                                      safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
-                                     controller_realtime=grant, link_lost=link_lost)
+                                     controller_realtime=grant, link_lost=link_lost, arm_faults=arm_faults)
         try:
             _write_results(cfg, result, trial, lock, published=scenario_published)
         except KeyboardInterrupt:
@@ -502,17 +512,28 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, 
 
 
 def _link_lost(safe: SafeRobot, started_s: float | None) -> LinkLost | None:
-    """A `LinkLost` when no fresh state has come for longer than the layer's stale timeout, now, before the close.
+    """A `LinkLost` when the robot's own link brought no state for longer than the layer's stale timeout, now.
 
     `started_s` is when the trial began on the layer's clock; None during the stand-up.
 
-    A control loop that stalled trips the layer on the same timeout, but the states come again as soon as it reads:
-    after the settle's reads, only a robot that stopped answering is still silent.
+    The robot's own link is the one its link counters name (`LinkStatsLike.state_age`: a quadruped's legs'), not the
+    layer's fresh frames: a robot with an arm joins the arm's bus into every frame, so an arm that stopped answering, or
+    whose fault froze its state, leaves the frames stale while the legs still answer and take the damping; that is the
+    arm's fault (`HardwareTrialResult.arm_faults`), not a lost link. A robot without such counters is judged by the
+    layer's fresh frames. A control loop that stalled trips the layer on the same timeout, but the states come again as
+    soon as it reads: after the settle's reads, only a robot that stopped answering is still silent.
     """
-    now, last = safe.now(), safe.last_fresh_time
+    now = safe.now()
+    age = safe.robot.link_stats().state_age if isinstance(safe.robot, HasLinkStats) else None
+    last = now - age if age is not None else safe.last_fresh_time
     if now - last <= safe.config.stale_timeout_s:
         return None
     return LinkLost(last_state_s=last, silent_s=now - last, trial_started_s=started_s)
+
+
+def _latched_faults(robot: object) -> tuple[ArmFault, ...]:
+    """The faults the robot's devices latched (its arm's bus), before its close; none for a robot that latches none."""
+    return robot.faults if isinstance(robot, HasLatchedFaults) else ()
 
 
 def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
@@ -562,6 +583,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
                                     else None),  # the controller's loop
             "safety_events": [e.to_dict() for e in result.safety_events],
             "link_lost": result.link_lost.to_dict() if result.link_lost is not None else None,
+            "arm_faults": [dataclasses.asdict(fault) for fault in result.arm_faults],
             "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
         }
         try:
@@ -627,6 +649,10 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
                                            f"{result.trial_started_s:.3f} s.", "", *body]))
     else:
         sections.append(("Safety events", ["None recorded."]))
+    if result.arm_faults:
+        sections.append(("Arm faults", ["The arm's bus latched these faults (times on the bus's clock, not the "
+                                        "layer's), each with the torque policy it applied:", "",
+                                        *(f"- {fault}" for fault in result.arm_faults)]))
     if result.link_lost is not None:
         sections.append(("Link lost", [result.link_lost.sentence()]))
     actions = episode.operator_events.rows()

@@ -455,7 +455,9 @@ def hw_check(args: argparse.Namespace, *,
 
     Returns:
         0 when the safety layer would start a ramp from the state read ("ready"); 1 when it would refuse (a trip:
-        an e-stop held, a joint out of range, a motor fault ...) or saw no live state stream (nothing valid came
+        an e-stop held, a joint out of range, a motor fault ...), when the arm's backend refused a servo at connect
+        (a hardware error latched in it, a servo that did not answer its ping: the legs and the servos that answer
+        are read all the same, and the line says what to do), or saw no live state stream (nothing valid came
         within the link's connect timeout: the line says so, with what did come and what to check), so that a
         bring-up script can stop there. The state (when one came), the link's counters and the verdict are printed
         either way. A refusal of the options or of the target raises instead (status 2).
@@ -482,7 +484,7 @@ def hw_check(args: argparse.Namespace, *,
                                                safety=SafetyConfig() if safety is None else safety),
                            build=build, confirm=confirm)
     printers.print_hw_check(check)
-    return 0 if check.safety_state == "ramp" else 1
+    return 0 if check.ready else 1
 
 
 def realtime_request(args: argparse.Namespace, *, place: str) -> RealtimeRequest:
@@ -536,9 +538,10 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
 
     Returns:
         0 once the trial's results are written; 1 when its controller failed in it (the results are written too,
-        the outcome ``controller_error``), or when the robot stopped answering and its link was lost (the results
-        are written too, the outcome ``safety_trip``; the last line says when, and that the damping sent since may
-        not have reached the robot: check it and power it down by hand); 130 when interrupted (Ctrl-C, SIGTERM,
+        the outcome ``controller_error``), or when the robot stopped answering and its link (the legs') was lost
+        (the results are written too, the outcome ``safety_trip``; the last line says when, and that the damping
+        sent since may not have reached the robot: check it and power it down by hand); a fault of the arm's bus is
+        a trip like any other, printed as the arm's (0); 130 when interrupted (Ctrl-C, SIGTERM,
         SIGHUP: the robot is closed into damping first), SIGTERM to the command's group or to its I/O process
         included (`IoProcessStopped`, the robot closed by the I/O process); interrupted before the robot was
         connected, the line says that nothing was sent to it (`ConnectInterrupted`).

@@ -535,7 +535,10 @@ def _add_hw_check_parser(hws: _Commands) -> None:
                            "state: joints with their ranges (marked margin beyond one but within the layer's joint "
                            "margin, OUT beyond both), motor modes and temperatures, IMU roll and pitch, battery, "
                            "remote buttons, the layer's verdict (would a ramp start from here, or what it refuses), "
-                           "link and bus statistics, rejected frames. A target outside 127.0.0.0/8, or an --arm-port "
+                           "link and bus statistics, rejected frames. An arm with a servo in fault at connect (a "
+                           "latched hardware error, no valid answer to its ping) is not driven: the legs are read "
+                           "alone and each servo once, nothing written, and the verdict says what to do (exit 1). "
+                           "A target outside 127.0.0.0/8, or an --arm-port "
                            "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes).")
     check.add_argument("--robot", default="go1",
                        help=f"one of: {ROBOT_NAMES_HELP}; either name reads the arm only with --arm-port (default "
@@ -567,8 +570,9 @@ def _add_hw_run_parser(hws: _Commands) -> None:
                            "results directory of the arena's format. A target outside 127.0.0.0/8, or an --arm-port "
                            "that is not a pseudo-terminal, needs --allow-hardware and a typed confirmation (or --yes). "
                            "Exit status: 0 once the results are written; 1 when the controller failed in the trial, or "
-                           "the robot stopped answering (the link was lost: the last line says when, and that the "
-                           "damping sent since may not have reached the robot) - the results are written either way; "
+                           "the robot stopped answering (its legs' link was lost: the last line says when, and that "
+                           "the damping sent since may not have reached the robot) - the results are written either "
+                           "way (a safety trip, an arm's bus fault among them, is the trial's outcome: 0); "
                            "2 for an error; 130 when interrupted (Ctrl-C, SIGTERM, a closed terminal).")
     hwrun.add_argument("ctrl", help=f"controller (its variant for --arm is played): one of {_NAMES_HELP}")
     hwrun.add_argument("--robot", default=None,

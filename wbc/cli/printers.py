@@ -26,6 +26,7 @@ from wbc.control.controller_contract import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.capabilities import HasRealtimeGrant
 from wbc.hardware.device_thread import DeviceThreadStats
+from wbc.hardware.dynamixel.control_table import HARDWARE_ERROR_BITS, OperatingMode
 from wbc.hardware.emulators import BusStats
 from wbc.hardware.pty_registry import registry_dir
 from wbc.hardware.realtime import RealtimeGrant
@@ -715,6 +716,7 @@ def print_hw_check(check: HardwareCheck) -> None:
     where = f"{check.robot} at {host}:{port}" + (f", arm on {check.arm_port}" if check.arm_port else "")
     if state is None:
         print(f"{where}: no live state stream: {check.no_state}")
+        _print_refused_arm(check)
         print("  safety: waiting: no live state stream, so no verdict (a ramp starts only from a live one)")
         _print_check_link(check)
         return
@@ -749,6 +751,11 @@ def print_hw_check(check: HardwareCheck) -> None:
         held = extras.remote.held
         estop = "  (L2+B held: e-stop)" if extras.remote.l2_b else ""
         print(f"  remote buttons: {', '.join(held) or 'none'}{estop}")
+    _print_refused_arm(check)
+    if check.arm_refused is not None:
+        print(f"  safety: WOULD REFUSE: the arm: {check.arm_refused}")
+        _print_check_link(check)
+        return
     trips = [e for e in check.safety_events if e.to_state == "damped"]
     verdict = {"ramp": "ready: a ramp would start from this pose",
                "waiting": "waiting: no live state stream"}.get(check.safety_state, check.safety_state)
@@ -758,6 +765,31 @@ def print_hw_check(check: HardwareCheck) -> None:
     if trips and trips[0].remedy:
         print(f"  what to do: {trips[0].remedy}")
     _print_check_link(check)
+
+
+def _print_refused_arm(check: HardwareCheck) -> None:
+    """The arm's servos as read once, nothing written, after its backend refused to drive the arm (if it did)."""
+    if check.arm_refused is None:
+        return
+    print("  arm: not driven (its backend refused it at connect); each servo as read, nothing written:")
+    print("  servo               ID  model  operating mode              hardware error          temp [C]  input [V]")
+    for s in check.arm_servos:
+        if s.answer:
+            print(f"  {s.name:<18}{s.id:>4}  NO VALID ANSWER to its ping: {s.answer}")
+            continue
+        mode = "?" if s.operating_mode is None else _operating_mode(s.operating_mode)
+        errors = ", ".join(n for b, n in HARDWARE_ERROR_BITS.items() if s.hardware_error & b)
+        error = f"{s.hardware_error:#04x} {errors}" if s.hardware_error else "none"
+        print(f"  {s.name:<18}{s.id:>4}  {s.model:>5}  {mode:<26}  {error:<22}  {s.temperature:>8.0f}  "
+              f"{s.voltage:>9.1f}")
+
+
+def _operating_mode(mode: int) -> str:
+    """An Operating Mode register's value with its name (``0 (current)``)."""
+    try:
+        return f"{mode} ({OperatingMode(mode).name.lower().replace('_', '-')})"
+    except ValueError:
+        return f"{mode} (unknown)"
 
 
 def _range_mark(q: float, check: HardwareCheck, i: int) -> str:
@@ -825,6 +857,8 @@ def print_hw_run(result: HardwareTrialResult) -> None:
     print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions ({clock}, the trial "
           f"began at {result.trial_started_s:.2f} s): "
           + ", ".join(f"{e.time:.2f} s {e.to_state} ({e.reason})" for e in result.safety_events))
+    for fault in result.arm_faults:  # the arm's own, apart from the layer's trip it caused
+        print(f"  arm bus: {fault}")
     if len(ep.operator_events):
         print("  operator: " + ", ".join(f"{t:.2f} s {a}" for t, _, a in ep.operator_events.rows()))
     print(f"  results: {result.out_dir} (trials.csv, report.md, hardware.json, episodes/)")

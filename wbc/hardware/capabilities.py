@@ -7,10 +7,11 @@ transitions is a `HasSafetyEvents` (`wbc.hardware.safety.SafeRobot` is one); the
 runner logs the events without importing the safety layer. A robot that paces `advance` on a wall clock over a link
 reports its lateness as a `HasLinkStats` (`wbc.hardware.unitree.UnitreeRobot` is one); a device whose link or bus
 runs as a `wbc.hardware.device_thread.DeviceThread` reports that loop's period, late cycles and overruns as a
-`HasThreadStats`. A robot whose devices run in a process that asked for real-time scheduling says what it got as a
-`HasRealtimeGrant` (`ProcessRobot`). A robot that
-knows its own configuration only from its sensors (joint encoders, IMU, a base state estimator) offers it as a
-`ConfigurationEstimate`, which is what a viewer draws of a real robot. A simulator that reports its own integration
+`HasThreadStats`. A device that latches its own faults (an arm's bus) offers them as a `HasLatchedFaults`, and so
+does a robot that joins it, so that a runner records them apart from the safety layer's trips. A robot whose devices
+run in a process that asked for real-time scheduling says what it got as a `HasRealtimeGrant` (`ProcessRobot`). A
+robot that knows its own configuration only from its sensors (joint encoders, IMU, a base state estimator) offers it
+as a `ConfigurationEstimate`, which is what a viewer draws of a real robot. A simulator that reports its own integration
 failures is a `SimulatorHealth`. A robot that lives in wall-clock time (a real robot, or an emulator over a wire) is
 a `WallClock`, so a safety layer times its checks on the clock the motors live on.
 
@@ -24,7 +25,7 @@ that need them are then skipped.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -34,8 +35,11 @@ from wbc.robots.description import RobotDescription
 from wbc.scenario.push import Push
 from wbc.types import BaseTruth, MotorCommand
 
-__all__ = ["ConfigurationEstimate", "FallDetector", "HasLinkStats", "HasRealtimeGrant", "HasSafetyEvents",
-           "HasThreadStats", "HeldJoints", "HeldRamp", "LinkStatsLike", "MotorNames", "MotorStatus",
+if TYPE_CHECKING:
+    from wbc.hardware.dynamixel.arm_fault import ArmFault
+
+__all__ = ["ConfigurationEstimate", "FallDetector", "HasLatchedFaults", "HasLinkStats", "HasRealtimeGrant",
+           "HasSafetyEvents", "HasThreadStats", "HeldJoints", "HeldRamp", "LinkStatsLike", "MotorNames", "MotorStatus",
            "MotorStatusSource", "Pushable", "RemoteButtons", "RemoteSource", "SafetyEventLike", "SimulatorHealth",
            "TruthSource", "WallClock"]
 
@@ -131,6 +135,15 @@ class LinkStatsLike(Protocol):
     def worst_lateness(self) -> float:
         """By how much the latest such call was late [s]."""
 
+    @property
+    def state_age(self) -> float | None:
+        """How long before the snapshot the link brought its newest valid state [s]; inf before the first.
+
+        None for a robot whose link keeps no such figure. The link is the robot's own (a quadruped's legs' link, which
+        paces it), not a device beside it (an arm's bus): this alone tells a robot that stopped answering from one
+        whose joined state went stale on another device.
+        """
+
     def as_dict(self, prefix: str = "link/") -> dict[str, float]:
         """Every counter as a flat dict, keys namespaced with `prefix`."""
 
@@ -141,6 +154,19 @@ class HasLinkStats(Protocol):
 
     def link_stats(self) -> LinkStatsLike:
         """A snapshot of the link's counters since `connect`."""
+
+
+@runtime_checkable
+class HasLatchedFaults(Protocol):
+    """A robot, or a device of one, that latches its faults until it is closed.
+
+    `DynamixelArm` does (a silent servo, corrupt answers, a servo's hardware error, its port lost); `QuadrupedArmRobot`
+    and `ProcessRobot` pass their arm's on.
+    """
+
+    @property
+    def faults(self) -> tuple[ArmFault, ...]:
+        """The faults latched since `connect`, oldest first (empty while all is well)."""
 
 
 @runtime_checkable

@@ -11,7 +11,9 @@ moves) are separate devices, each with its own thread, rate and faults. This cla
 - One frame: `read` joins the newest leg and arm states under the legs' timestamp. Its tick (a freshness counter)
   advances when the legs' tick did, and only while the arm's did too within `arm_stale_s`: a stale arm makes the whole
   frame stale, so a safety layer above (`wbc.hardware.safety.SafeRobot`) trips on a dead arm bus as on a dead leg
-  link, even in ``locked`` mode where the controller never sees the arm.
+  link, even in ``locked`` mode where the controller never sees the arm. Whether the robot itself still answers is
+  the legs' link's to say (`link_stats().state_age`), and what the arm's bus latched is the arm's (`faults`): a runner
+  tells a robot that stopped answering from an arm that did by those two, not by the joined tick.
 - Time: both devices run their own loops on one clock, the wall clock on a robot (each device on a thread of its
   own), or a `ManualClock` in a deterministic test (each device's loop a task of that clock, moved by whoever
   advances it); `advance` paces on the legs' link (which waits for a fresh leg state) and never calls the arm's,
@@ -33,6 +35,7 @@ import numpy as np
 
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.hardware.capabilities import (
+    HasLatchedFaults,
     HasLinkStats,
     HasThreadStats,
     HeldRamp,
@@ -44,6 +47,7 @@ from wbc.hardware.capabilities import (
     WallClock,
 )
 from wbc.hardware.device_thread import DeviceThreadStats
+from wbc.hardware.dynamixel.arm_fault import ArmFault
 from wbc.hardware.robot import Robot
 from wbc.robots.description import ARM_MODES
 from wbc.robots.joint_table import JointTable
@@ -126,6 +130,11 @@ class JoinedLinkStats:
     def worst_lateness(self) -> float:
         """By how much the latest late `advance` was late [s]."""
         return self.legs.worst_lateness if self.legs is not None else 0.0
+
+    @property
+    def state_age(self) -> float | None:
+        """How old the legs' newest valid state was [s]: the robot's own link, whatever the arm's bus does."""
+        return self.legs.state_age if self.legs is not None else None
 
     def as_dict(self, prefix: str = "link/") -> dict[str, float]:
         """Every counter as a flat dict, keys namespaced with `prefix`.
@@ -289,6 +298,11 @@ class QuadrupedArmRobot(Robot):
         threads = {device: robot.thread_stats() for device, robot in (("legs", self.legs), ("arm", self.arm))
                    if isinstance(robot, HasThreadStats)}
         return JoinedLinkStats(legs=legs, arm=bus_stats() if bus_stats is not None else None, threads=threads)
+
+    @property
+    def faults(self) -> tuple[ArmFault, ...]:
+        """The faults the arm's bus latched since `connect`, oldest first (`HasLatchedFaults`); empty without one."""
+        return self.arm.faults if isinstance(self.arm, HasLatchedFaults) else ()
 
     def remote(self) -> RemoteButtons | None:
         """The legs' wireless remote (the arm has none), or None when the legs device offers no remote."""

@@ -16,10 +16,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from wbc.errors import NoStateStreamError
+from wbc.errors import ArmRefusedError, NoStateStreamError
 from wbc.hardware.capabilities import SafetyEventLike, WallClock
 from wbc.hardware.device_thread import DeviceThreadStats
-from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus, DynamixelArmConfig
+from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus, DynamixelArm, DynamixelArmConfig, ServoReading
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
@@ -88,6 +88,12 @@ class HardwareCheck:
         arm_thread: the arm's bus loop's statistics, or None.
         no_state: why no live state stream came (the link's message: what came, and what to check), or None when
             states came; the layer then stays ``waiting`` and the limits are empty.
+        arm_refused: why the arm's backend refused to drive the arm when it connected (a servo's hardware error, a
+            servo that did not answer its ping: `ArmRefusedError`'s message, with what to do), or None. The legs were
+            then read alone (`joint_names`, `state` and the layer's verdict are theirs) and the arm surveyed
+            (`arm_servos`); the check's verdict is a refusal either way.
+        arm_servos: each servo of the arm as a read-only pass found it after that refusal (`DynamixelArm.survey`);
+            empty when the arm was driven.
     """
 
     robot: str
@@ -109,6 +115,13 @@ class HardwareCheck:
     arm_bus: ArmBusStats | None = None
     arm_thread: DeviceThreadStats | None = None
     no_state: str | None = None
+    arm_refused: str | None = None
+    arm_servos: tuple[ServoReading, ...] = ()
+
+    @property
+    def ready(self) -> bool:
+        """True when the safety layer would start a ramp from the state read and the arm (if any) was driven."""
+        return self.safety_state == "ramp" and self.arm_refused is None
 
 
 def check_hardware(cfg: HardwareCheckConfig, *,
@@ -125,7 +138,9 @@ def check_hardware(cfg: HardwareCheckConfig, *,
 
     Returns:
         What was read: the newest state, the layer's verdict, the links' counters; when no valid state came within
-        the link's connect timeout, no state and why (`HardwareCheck.no_state`).
+        the link's connect timeout, no state and why (`HardwareCheck.no_state`); when the arm's backend refused a
+        servo at connect (`ArmRefusedError`), the legs read alone, the arm's servos surveyed without driving them
+        and why (`HardwareCheck.arm_refused`).
     """
     host, port = cfg.target
     local_host, local_port = cfg.local
@@ -156,14 +171,12 @@ def check_hardware(cfg: HardwareCheckConfig, *,
             margin=safe.config.joint_margin, extras=None, link=legs.link_stats(), link_thread=legs.thread_stats(),
             decode=legs.decode_stats, safety_state=safe.safety_state.value, safety_events=tuple(events),
             arm_port=cfg.arm_port, no_state=str(exc))
+    except ArmRefusedError as refused:  # a servo's state, read at connect: a result of the check, with what answers
+        if not isinstance(arm, DynamixelArm):
+            raise
+        return _legs_beside_a_refused_arm(cfg, hardware, arm, str(refused), clock)
     with safe:
-        end = clock() + cfg.seconds
-        for _ in range(int(cfg.seconds / CHECK_STEP_S) + 2):
-            if clock() >= end:
-                break
-            safe.read()
-            safe.advance(CHECK_STEP_S)
-        state = safe.read()
+        state = _read_for(safe, clock, cfg.seconds)
         return HardwareCheck(
             robot=cfg.label, target=cfg.target, joint_names=safe.joint_names, state=state,
             lower=safe.position_lower, upper=safe.position_upper, margin=safe.config.joint_margin,
@@ -172,3 +185,45 @@ def check_hardware(cfg: HardwareCheckConfig, *,
             arm_status=arm.motor_status() if arm is not None else None,
             arm_faults=arm.faults if arm is not None else (), arm_bus=arm.bus_stats() if arm is not None else None,
             arm_thread=arm.thread_stats() if arm is not None else None)
+
+
+def _read_for(safe: SafeRobot, clock: Callable[[], float], seconds: float) -> RobotState:
+    """Read `safe` (connected) for `seconds` of `clock`, never writing to it; the newest state."""
+    end = clock() + seconds
+    for _ in range(int(seconds / CHECK_STEP_S) + 2):
+        if clock() >= end:
+            break
+        safe.read()
+        safe.advance(CHECK_STEP_S)
+    return safe.read()
+
+
+def _legs_beside_a_refused_arm(cfg: HardwareCheckConfig, hardware: HardwareRobot, arm: DynamixelArm, refused: str,
+                               clock: Callable[[], float]) -> HardwareCheck:
+    """The legs read alone through their own safety layer, then the arm's servos surveyed without driving them.
+
+    The robot's connect refused the arm (`ArmRefusedError`, its bus closed again) and closed the legs with it
+    (connect both or neither); the check connects the legs again on their own, as ``hw check`` without
+    ``--arm-port`` would.
+    """
+    legs = hardware.robot.legs
+    events: list[SafetyEvent] = []
+    safe = SafeRobot(legs, replace(cfg.safety, position_table=hardware.position_table, on_event=events.append))
+    try:
+        safe.connect()
+    except NoStateStreamError as exc:
+        empty = np.zeros(0)
+        return HardwareCheck(
+            robot=cfg.label, target=cfg.target, joint_names=(), state=None, lower=empty, upper=empty,
+            margin=safe.config.joint_margin, extras=None, link=legs.link_stats(), link_thread=legs.thread_stats(),
+            decode=legs.decode_stats, safety_state=safe.safety_state.value, safety_events=tuple(events),
+            arm_port=cfg.arm_port, no_state=str(exc), arm_refused=refused, arm_servos=arm.survey())
+    with safe:
+        state = _read_for(safe, clock, cfg.seconds)
+        check = HardwareCheck(
+            robot=cfg.label, target=cfg.target, joint_names=safe.joint_names, state=state,
+            lower=safe.position_lower, upper=safe.position_upper, margin=safe.config.joint_margin,
+            extras=legs.extras, link=legs.link_stats(), link_thread=legs.thread_stats(), decode=legs.decode_stats,
+            safety_state=safe.safety_state.value, safety_events=tuple(events), arm_port=cfg.arm_port,
+            arm_refused=refused)
+    return replace(check, arm_servos=arm.survey())

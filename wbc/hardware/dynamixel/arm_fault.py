@@ -12,6 +12,8 @@ one entry per servo, in ID order, whose mode is `MODE_SERVO` while the servo is 
 | 0x42 `MODE_CORRUPT` | its answers arrive corrupt (bad CRC) |
 | 0x43 `MODE_PORT_LOST` | the serial port failed: no servo can be reached |
 
+`ServoReading` is one servo as a read-only pass over the bus found it (`DynamixelArm.survey`).
+
 `ArmBusStats` counts the bus loop's cycles, retries and timing since `connect`, timed on the backend's clock (on a
 `ManualClock` the busy time is the clock time the cycle's reply timeouts and pauses took). Its timing is the bus
 loop's own statistics (`wbc.hardware.device_thread.DeviceThreadStats`, from `DynamixelArm.thread_stats()`).
@@ -33,6 +35,7 @@ __all__ = [
     "ArmBusStats",
     "ArmFault",
     "ArmMotorStatus",
+    "ServoReading",
 ]
 
 MODE_SERVO = 0x0A
@@ -89,6 +92,32 @@ class ArmMotorStatus:
     motor_temperature: np.ndarray
     input_voltage: np.ndarray
     hardware_error: np.ndarray
+
+
+@dataclass(frozen=True, kw_only=True)
+class ServoReading:
+    """One servo as a read-only pass over the bus found it (`DynamixelArm.survey`): nothing written, nothing driven.
+
+    Attributes:
+        id: the servo's ID.
+        name: its name on the arm (``elbow``, ``gripper``).
+        answer: the SDK's result of its ping in words; empty when it answered.
+        model: its model number (0 when it did not answer).
+        operating_mode: its Operating Mode register (0 current, 3 position, 5 current-based position); None when
+            it could not be read.
+        hardware_error: its Hardware Error Status bits (0x20 overload, 0x04 overheating ...).
+        temperature: its Present Temperature [degC]; NaN when it could not be read.
+        voltage: its Present Input Voltage [V]; NaN when it could not be read.
+    """
+
+    id: int
+    name: str
+    answer: str = ""
+    model: int = 0
+    operating_mode: int | None = None
+    hardware_error: int = 0
+    temperature: float = float("nan")
+    voltage: float = float("nan")
 
 
 @dataclass(frozen=True, kw_only=True)

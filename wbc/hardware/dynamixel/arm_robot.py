@@ -74,7 +74,7 @@ from typing import Any
 
 import numpy as np
 
-from wbc.errors import RobotLinkError, SerialPortError
+from wbc.errors import ArmRefusedError, RobotLinkError, SerialPortError
 from wbc.hardware.clock import MONOTONIC, Clock
 from wbc.hardware.device_thread import DeviceThread, DeviceThreadStats
 from wbc.hardware.dynamixel.arm_config import DynamixelArmConfig
@@ -87,6 +87,7 @@ from wbc.hardware.dynamixel.arm_fault import (
     ArmBusStats,
     ArmFault,
     ArmMotorStatus,
+    ServoReading,
 )
 from wbc.hardware.dynamixel.control_table import (
     HARDWARE_ERROR_BITS,
@@ -362,6 +363,44 @@ class DynamixelArm(Robot):
         """The exception that stopped the bus thread unexpectedly (not a bus fault), or None."""
         return self._loop.failure
 
+    def survey(self) -> tuple[ServoReading, ...]:
+        """Each servo as the bus finds it, read once and nothing written: a check of an arm that `connect` refused.
+
+        Each servo is pinged (tried again as at start-up); one that answers has its Operating Mode, Hardware Error
+        Status, temperature and input voltage read. No torque, mode or goal is written, no watchdog armed: the servos
+        are left as they were. Only while not connected (the bus is `connect`'s otherwise).
+
+        Raises:
+            RobotLinkError: connected, or the port could not be opened (`SerialPortError`).
+        """
+        cfg = self.config
+        if self.is_connected:
+            raise RobotLinkError(f"DynamixelArm({cfg.port}): survey() reads the bus while not connected; close() first")
+        check_serial_port(cfg.port, allow_hardware=cfg.allow_hardware, what="DynamixelArmConfig.port")
+        port_handler, packet_handler = self._handlers(cfg.port)
+        bus = SdkBus(port_handler, packet_handler, port=cfg.port, allow_hardware=cfg.allow_hardware,
+                     table=XM430_W350)
+        readings = []
+        try:
+            bus.open(cfg.baud_rate)
+            for spec in cfg.servos:
+                model, result, _ = self._retry(bus, lambda i=spec.id: bus.ping(i), lambda r: r[1])
+                if result != COMM_SUCCESS:
+                    readings.append(ServoReading(id=spec.id, name=spec.name, answer=describe_result(result)))
+                    continue
+                mode = self._retry(bus, lambda i=spec.id: bus.read(i, _ADDR["operating_mode"], 1), lambda r: r.result)
+                error = self._retry(bus, lambda i=spec.id: bus.read(i, _ADDR["hardware_error_status"], 1),
+                                    lambda r: r.result)
+                heat = self._retry(bus, lambda i=spec.id: bus.read(i, *_STATUS_TEMP), lambda r: r.result)
+                readings.append(ServoReading(
+                    id=spec.id, name=spec.name, model=model, operating_mode=mode.data[0] if mode.ok else None,
+                    hardware_error=error.data[0] if error.ok else 0,
+                    temperature=float(heat.data[2]) if heat.ok else float("nan"),
+                    voltage=heat.value(0, 2) * VOLTAGE_UNIT if heat.ok else float("nan")))
+        finally:
+            bus.close()
+        return tuple(readings)
+
     def bus_stats(self) -> ArmBusStats:
         """A snapshot of the bus thread's counters; its period and busy figures are the bus loop's (`thread_stats`)."""
         thread = self._loop.stats()
@@ -434,7 +473,7 @@ class DynamixelArm(Robot):
                 raise RobotLinkError(f"DynamixelArm({cfg.port}): {self._name(spec.id)} is model {model}, expected "
                                      f"one of {HELD_MODEL_NUMBERS}")
         if missing:
-            raise RobotLinkError(f"DynamixelArm({cfg.port}): servos did not answer a ping: {'; '.join(missing)}. "
+            raise ArmRefusedError(f"DynamixelArm({cfg.port}): servos did not answer a ping: {'; '.join(missing)}. "
                                  f"Check the arm's 12 V supply, the daisy-chain cables, the baud rate "
                                  f"({cfg.baud_rate} bit/s) and the IDs (Dynamixel Wizard)")
         modes = {}
@@ -450,7 +489,7 @@ class DynamixelArm(Robot):
             hw = self._read_at_start(bus, spec.id, _ADDR["hardware_error_status"], 1).data[0]
             if hw:
                 bits = ", ".join(n for b, n in HARDWARE_ERROR_BITS.items() if hw & b)
-                raise RobotLinkError(f"DynamixelArm({cfg.port}): {self._name(spec.id)} reports a hardware error "
+                raise ArmRefusedError(f"DynamixelArm({cfg.port}): {self._name(spec.id)} reports a hardware error "
                                      f"({bits}; {hw:#04x}), latched in the servo: find the cause, then reboot it "
                                      "(power-cycle the arm, or REBOOT it with Dynamixel Wizard)")
             if spec.id in joint_ids:

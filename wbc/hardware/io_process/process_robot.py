@@ -16,7 +16,7 @@ capabilities as `build_hardware_robot`'s) with its devices in a fresh interprete
 - control channel (`channel.py`): `connect` starts the I/O process, which builds, connects and reports (a `connect`
   given up, interrupted or timed out, sends it SIGTERM first: it then stops before it reaches the robot); `close`
   asks it to close the robot (which leaves it damped) and exit; `link_stats` fetches the devices' counters and their
-  threads' statistics;
+  threads' statistics, `faults` the faults the arm's bus latched;
   `realtime_grant` says what scheduling the I/O process asked the OS for and got (`HardwareRobotConfig.realtime`).
   An exception there (a refused connect, `PortBusyError`, `RobotLinkError`, a lost serial port) is raised here as the
   same `wbc` error class with the same message; the I/O process dying is a `RobotLinkError` at the next `read`,
@@ -50,7 +50,7 @@ import numpy as np
 from wbc.errors import IoProcessStopped, RobotLinkError, WbcError
 from wbc.hardware.capabilities import HeldRamp, MotorNames
 from wbc.hardware.device_thread import DeviceThreadStats
-from wbc.hardware.dynamixel.arm_fault import ArmBusStats
+from wbc.hardware.dynamixel.arm_fault import ArmBusStats, ArmFault
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import child_process_env, wbc_interpreter_env
 from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, IoBlocks
@@ -98,6 +98,11 @@ class ProcessLinkStats:
     def worst_lateness(self) -> float:
         """By how much the latest late `advance` was late [s]."""
         return self.devices.worst_lateness
+
+    @property
+    def state_age(self) -> float | None:
+        """How old the legs' newest valid state was when the I/O process answered [s] (`JoinedLinkStats.state_age`)."""
+        return self.devices.state_age
 
     def as_dict(self, prefix: str = "link/") -> dict[str, float]:
         """The devices' counters under `prefix`, the I/O process's under `prefix` + ``io/``."""
@@ -325,6 +330,22 @@ class ProcessRobot(Robot):
         arm = ArmBusStats(**reply["arm"]) if reply["arm"] is not None else None
         threads = {device: DeviceThreadStats(**thread) for device, thread in reply["threads"].items()}
         return ProcessLinkStats(devices=JoinedLinkStats(legs=legs, arm=arm, threads=threads), io=dict(reply["io"]))
+
+    @property
+    def faults(self) -> tuple[ArmFault, ...]:
+        """The faults the arm's bus latched since `connect`, fetched from the I/O process (`HasLatchedFaults`).
+
+        Raises:
+            RobotNotConnectedError: not connected.
+            RobotLinkError: the I/O process failed or died.
+        """
+        self._require_connected("faults")
+        self._check()
+        self._control.send({"op": "faults"})
+        reply = self._await("faults", timeout=5.0)
+        if isinstance(reply, WbcError):
+            raise reply
+        return tuple(ArmFault(**{**fault, "ids": tuple(fault["ids"])}) for fault in reply["faults"])
 
     @property
     def realtime_grant(self) -> RealtimeGrant | None:

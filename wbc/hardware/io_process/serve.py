@@ -48,7 +48,7 @@ from dataclasses import asdict
 import numpy as np
 
 from wbc.errors import IoProcessStopped, RobotLinkError
-from wbc.hardware.capabilities import HeldJoints, MotorStatusSource, RemoteSource
+from wbc.hardware.capabilities import HasLatchedFaults, HeldJoints, MotorStatusSource, RemoteSource
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, MAX_STATUS, IoBlocks
@@ -278,6 +278,10 @@ class _Server:
                 "legs": asdict(legs) if legs is not None else None, "arm": asdict(arm) if arm is not None else None,
                 "threads": {device: asdict(thread) for device, thread in stats.threads.items()},
                 "io": dict(self.counts, cpu_s=time.process_time() - self.started)}})
+            return True
+        if op == "faults":
+            faults = self.robot.faults if isinstance(self.robot, HasLatchedFaults) else ()
+            self._send({"faults": [asdict(fault) for fault in faults]})
             return True
         self._send({"error": "ConfigError", "message": f"I/O process: unknown request {op!r}", "attrs": {}})
         return True
