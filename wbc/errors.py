@@ -37,6 +37,7 @@ __all__ = [
     "TargetRefusedError",
     "RobotLinkError",
     "NoStateStreamError",
+    "TargetInUseError",
     "ArmRefusedError",
     "IoProcessStopped",
     "PacketError",
