@@ -6,6 +6,7 @@ import re
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from wbc.cli.main import main
@@ -214,6 +215,70 @@ def test_a_reset_that_raises_fails_the_reset_check_naming_the_exception(broken, 
     assert {o.check for o in result.failed()} == {"reset"}, [(o.check, o.detail) for o in result.failed()]
     assert says in result.failed("reset")[0].detail
     assert all(o.passed is not True for o in result.outcomes if o.check in ("output", "truth"))
+
+
+class NanLater(Stand):
+    """Builds a command with a NaN from its fourth tick: the house's MotorCommand refuses it."""
+
+    def __init__(self, desc):
+        super().__init__(desc)
+        self.ticks = 0
+
+    def reset(self):
+        self.ticks = 0
+
+    def act(self, state, command):
+        self.ticks += 1
+        q = self.command.q.copy()
+        q[3] = np.nan if self.ticks > 3 else q[3]
+        return MotorCommand(q=q, dq=self.command.dq, kp=self.command.kp, kd=self.command.kd,  # NAN-HERE
+                            tau=self.command.tau)
+
+
+def _line_of(marker: str) -> str:
+    """``file:line`` of this file's line holding `marker` (the marker written once, apart from this call)."""
+    lines = open(__file__, encoding="utf-8").read().splitlines()
+    (line,) = [i for i, text in enumerate(lines, start=1) if f"# {marker}" in text]
+    return f"{__file__}:{line}"
+
+
+def test_a_failure_is_named_at_the_controllers_own_line_as_the_arena_names_it():
+    spec = ControllerSpec("nan-later", "actuated", NanLater, "a NaN from tick 3", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert {o.check for o in result.failed()} == {"output"}
+    detail = result.failed("output")[0].detail
+    # the line of the controller that built the command, not the house's line in wbc/types.py that refused it
+    assert detail == (f"act raised CommandError: MotorCommand.q: non-finite value at joint index 3 at "
+                      f"{_line_of('NAN-HERE')} at tick 3")
+
+
+RAISING_FACTORY = '''
+    """A factory that refuses its settings."""
+    from wbc.control.stand import StandController
+
+
+    def make(desc, config=None):
+        gain = (config or {}).get("gain", -1.0)
+        if gain < 0:
+            raise ValueError(f"gain must be >= 0, got {gain}")  # RAISES-HERE
+        return StandController(desc)
+'''
+
+
+@pytest.mark.parametrize("with_config", [False, True])
+def test_a_factory_that_raises_is_named_at_its_own_line_once(with_config, plugin_package, tmp_path, capsys):
+    root = plugin_package("raisingpkg", {"factory": RAISING_FACTORY})
+    path = root / "raisingpkg" / "factory.py"
+    (line,) = [i for i, text in enumerate(path.read_text().splitlines(), start=1) if "# RAISES-HERE" in text]
+    settings = tmp_path / "settings.toml"
+    settings.write_text("gain = -2.0\n")
+    config = ["--controller-config", str(settings)] if with_config else []
+    assert main(["check-controller", "raisingpkg.factory:make", "--robot", "a1-wx200", *config]) == 1
+    (build,) = [text for text in capsys.readouterr().out.splitlines() if "FAIL build" in text]
+    # one place, the plug-in's: not also the house's line that wrapped the error
+    gain = -2.0 if with_config else -1.0
+    assert build.endswith(f"ValueError: gain must be >= 0, got {gain} at {path}:{line}")
+    assert build.count(" at /") == 1 and "wbc/control/plugin.py" not in build
 
 
 GO1_ONLY = '''"""The stand controller, claiming go1-arm only."""
