@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from wbc.cli.main import main
+from wbc.cli.printers import print_controller_check
 from wbc.control import CheckConfig, ControllerCheck, ControllerSpec, check_controller
-from wbc.control.controller_contract import CHECKS
+from wbc.control.controller_contract import CHECKS, CheckOutcome
 from wbc.control.errors import ControllerCheckError
 from wbc.control.registry import CONTROLLERS
 from wbc.control.stand import stand_command
@@ -183,6 +184,22 @@ def test_a_make_that_returns_the_class_fails_the_build_check():
     assert "make returned the class Stand, not an instance: return Stand(...)" in result.failed("build")[0].detail
 
 
+def _outcomes(*passed: bool | None) -> ControllerCheck:
+    return ControllerCheck(controller="c", timings=(), outcomes=tuple(
+        CheckOutcome(check=check, robot="a1-wx200", arm_mode="actuated", passed=p, detail="")
+        for check, p in zip(CHECKS, passed, strict=False)))
+
+
+@pytest.mark.parametrize(("passed", "verdict"), [
+    ((True, False, None, None, None, True), "FAILED: 1 of 6 checks failed, 3 not run"),
+    ((True, True, False, True, False, True), "FAILED: 2 of 6 checks failed"),
+    ((True, True, True, True, None, True), "FAILED: 1 of 6 checks not run"),
+])
+def test_the_verdict_counts_failed_and_not_run_checks_apart(passed, verdict, capsys):
+    print_controller_check(_outcomes(*passed))
+    assert capsys.readouterr().out.splitlines()[-1] == verdict
+
+
 class ResetRaises(Stand):
     def reset(self):
         raise RuntimeError("no home pose")
@@ -274,7 +291,10 @@ def test_a_factory_that_raises_is_named_at_its_own_line_once(with_config, plugin
     settings.write_text("gain = -2.0\n")
     config = ["--controller-config", str(settings)] if with_config else []
     assert main(["check-controller", "raisingpkg.factory:make", "--robot", "a1-wx200", *config]) == 1
-    (build,) = [text for text in capsys.readouterr().out.splitlines() if "FAIL build" in text]
+    out = capsys.readouterr().out
+    (build,) = [text for text in out.splitlines() if "FAIL build" in text]
+    # the verdict counts the check that failed apart from those that could not run after it
+    assert out.splitlines()[-1] == "FAILED: 1 of 6 checks failed, 5 not run"
     # one place, the plug-in's: not also the house's line that wrapped the error
     gain = -2.0 if with_config else -1.0
     assert build.endswith(f"ValueError: gain must be >= 0, got {gain} at {path}:{line}")

@@ -206,6 +206,10 @@ class ControllerCheck:
         """The outcomes that failed (of `check` only, if given)."""
         return [o for o in self.outcomes if o.passed is False and check in (None, o.check)]
 
+    def not_run(self) -> list[CheckOutcome]:
+        """The outcomes that could not be judged because an earlier check failed (``passed`` None)."""
+        return [o for o in self.outcomes if o.passed is None]
+
     def raise_if_failed(self) -> None:
         """Raise `ControllerCheckError` listing every failed check, if any failed or could not run, or none ran."""
         if not self.outcomes:
