@@ -134,7 +134,10 @@ def test_a_controller_broken_one_way_fails_that_check_only(check):
     expected = {
         "build": "make raised RuntimeError: no gains for this robot",
         "rate": "period 1/300 s is not a whole number of physics steps",
-        "output": "MotorCommand.q has shape (12,); the robot has 15 joints",
+        "output": "MotorCommand.q has shape (12,); the robot has 15 joints (house order): 12 joints are the legs "
+                  "alone, and this robot's arm is actuated (15 joints, the arm mode a plain factory claims): a "
+                  'controller of the legs declares the arm modes it drives, ControllerPlugin(make=..., '
+                  'arm_modes=("none",))',
         "reset": "the same states and commands gave different motor commands",
         "truth": "act() read the simulator's truth (MujocoRobot.base_truth",
         "timing": "the median call does not fit the period",
@@ -146,6 +149,21 @@ def test_a_controller_broken_one_way_fails_that_check_only(check):
     pattern = f"broken-{check} fails its contract: .*{check} on a1-wx200/actuated: .*{re.escape(expected)}"
     with pytest.raises(ControllerCheckError, match=pattern):
         result.raise_if_failed()
+
+
+class WithArm(Stand):
+    def act(self, state, command):
+        return MotorCommand.hold(np.zeros(15), 60.0, 2.0)  # the legs and the arm, on a robot without an arm
+
+
+def test_a_command_of_the_legs_and_the_arm_on_a_robot_without_an_arm_says_to_declare_actuated():
+    spec = ControllerSpec("with-arm", "none", WithArm, "commands the arm too", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert {o.check for o in result.failed()} == {"output"}
+    assert result.failed("output")[0].detail.startswith(
+        "MotorCommand.q has shape (15,); the robot has 12 joints (house order): 15 joints are the legs and the arm, "
+        'and this robot has no actuated arm (12 joints, arm mode "none" or "locked"): a controller that drives the '
+        'arm declares it, ControllerPlugin(make=..., arm_modes=("actuated",))')
 
 
 def test_reading_the_simulator_without_its_accessors_is_caught_by_moving_it():

@@ -124,6 +124,13 @@ EXPECTED = {
 }
 """What each broken plug-in's error says, and the marker of the line it names."""
 
+HINTS = {
+    "short": '; 12 joints are the legs alone, and this robot\'s arm is actuated (15 joints, the arm mode a plain '
+             'factory claims): a controller of the legs declares the arm modes it drives, ControllerPlugin(make=..., '
+             'arm_modes=("none",))',
+}
+"""What the error says after the exception's message, on how to fix it, where the house can tell."""
+
 
 @pytest.mark.parametrize("kind", sorted(EXPECTED))
 def test_a_broken_plugin_costs_its_own_trials_only(kind, broken, scenario, stand_alone, tmp_path, capsys):
@@ -143,6 +150,7 @@ def test_a_broken_plugin_costs_its_own_trials_only(kind, broken, scenario, stand
         assert r.outcome == "controller_error" and r.success is False and math.isnan(r.fall_time_s)
         assert r.error.startswith(f"controller {name}, band soft, seed {r.seed}, trial {r.trial}: {what}")
         assert r.error.endswith(f" [{where}]")
+        assert HINTS.get(kind, "") in r.error
         assert r.ttf == (0.5 if kind in ("late", "exits") else 0.0)
     # the command ends with status 1 and one line for the failing controller; no traceback
     captured = capsys.readouterr()

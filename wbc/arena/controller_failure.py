@@ -34,17 +34,20 @@ class ControllerFailure(WbcError, RuntimeError):
         time_s: the episode time of that tick [s].
         exc: the exception.
         episode: the episode up to the tick before the failure (not a fall: ``fell`` False).
+        hint: how to fix it, where the house can tell (a command of the legs alone on a robot whose arm is actuated:
+            `wbc.control.arm_mode_hint`), or None.
 
     Attributes:
-        phase, tick, time_s, episode: as given.
+        phase, tick, time_s, episode, hint: as given.
         error_type: the exception's type name.
         error_message: the exception's message.
         where: ``file:line`` of the controller's own code (module docstring), or None if unknown.
     """
 
     def __init__(self, controller: object, *, phase: str, tick: int, time_s: float, exc: BaseException,
-                 episode: Episode) -> None:
+                 episode: Episode, hint: str | None = None) -> None:
         self.phase = phase
+        self.hint = hint
         self.tick = tick
         self.time_s = time_s
         self.episode = episode
@@ -55,7 +58,7 @@ class ControllerFailure(WbcError, RuntimeError):
         super().__init__(self.describe())
 
     def describe(self) -> str:
-        """One line: what failed, at which tick and time, the exception, and the controller's own file:line."""
+        """One line: what failed, at which tick and time, the exception, a hint, and the controller's own file:line."""
         what = {"build": "building it raised", "reset": "reset raised", "act": "act raised",
                 "command": "act returned a command the robot refused:",
                 "counters": "counters() failed:"}[self.phase]
@@ -65,7 +68,8 @@ class ControllerFailure(WbcError, RuntimeError):
             when = (f"at tick {self.tick} (t = {self.time_s:.3f} s)" if math.isfinite(self.time_s)
                     else f"at tick {self.tick}")
         at = f" [{self.where}]" if self.where else ""
-        return f"{what} {self.error_type} {when}: {self.error_message}{at}"
+        hint = f"; {self.hint}" if self.hint else ""
+        return f"{what} {self.error_type} {when}: {self.error_message}{hint}{at}"
 
     def record_error(self, controller: str, trial: Trial) -> str:
         """The trial record's ``error``, on one line: the controller, the trial (band, seed, index) and `describe`.

@@ -50,6 +50,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
+from wbc.control.arm_mode_hint import arm_mode_hint
 from wbc.control.errors import ControllerCheckError
 from wbc.control.failure_site import failure_site, own_frame
 from wbc.control.plugin import controller_problems
@@ -391,7 +392,9 @@ def _output_problem(out: object, n: int) -> str | None:
     for name in ("q", "dq", "kp", "kd", "tau"):
         a = getattr(out, name)
         if a.shape != (n,):
-            return f"MotorCommand.{name} has shape {a.shape}; the robot has {n} joints (house order)"
+            hint = arm_mode_hint(a.shape[0], n) if a.ndim == 1 else None
+            return (f"MotorCommand.{name} has shape {a.shape}; the robot has {n} joints (house order)"
+                    + (f": {hint}" if hint else ""))
         if not np.all(np.isfinite(a)):
             return f"MotorCommand.{name} is not finite"
     if (out.kp < 0).any() or (out.kd < 0).any():
