@@ -133,7 +133,8 @@ def test_a_controller_broken_one_way_fails_that_check_only(check):
     detail = result.failed(check)[0].detail
     expected = {
         "build": "make raised RuntimeError: no gains for this robot",
-        "rate": "period 1/300 s is not a whole number of physics steps",
+        "rate": "period 1/300 s is not a whole number of physics steps of 0.002 s; the arena refuses it: choose a "
+                "rate that divides 500 Hz: the nearest are 500 Hz and 250 Hz",
         "output": "MotorCommand.q has shape (12,); the robot has 15 joints (house order): 12 joints are the legs "
                   "alone, and this robot's arm is actuated (15 joints, the arm mode a plain factory claims): a "
                   'controller of the legs declares the arm modes it drives, ControllerPlugin(make=..., '

@@ -323,6 +323,18 @@ def test_a_run_with_a_broken_controller_killed_mid_run_resumes_losing_nothing(br
     assert (errors.errored, errors.stopped, errors.not_played) == (3, True, 3)
 
 
+def test_a_rate_that_is_not_whole_physics_steps_is_refused_naming_the_nearest_that_are(plugin_package, scenario,
+                                                                                        tmp_path, capsys):
+    source = STAND_PLUGIN.format(doc="runs at 60 Hz", reset="pass", act="pass", counters="return {}")
+    plugin_package("ratepkg", {"sixty": source.replace("self.rate_hz = self.inner.rate_hz", "self.rate_hz = 60.0")})
+    assert main(["run", "ratepkg.sixty:make", "--scenario", str(scenario), "--trials", "1", "--out",
+                 str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert ("controller 'ratepkg.sixty:make': period 1/60 s is not a multiple of the physics step 0.002 s; give the "
+            "controller a rate that divides 500 Hz: the nearest are 62.5 Hz and 55.5556 Hz") in err
+    assert "Traceback" not in err and not (tmp_path / "o" / "trials.csv").exists()
+
+
 def test_a_factory_that_fails_while_the_trials_play_costs_its_trials(tmp_path, scenario, monkeypatch):
     # builds once (the arena's check before any trial), then raises: a factory that depends on something that went
     # away (a file, a device) fails where the trials are played, and those trials are recorded, not the run lost

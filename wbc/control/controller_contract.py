@@ -57,6 +57,7 @@ from wbc.control.plugin import controller_problems
 from wbc.control.protocol import Controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import CONTROLLER_ERRORS, ConfigError
+from wbc.physics_steps import nearest_rates
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import CommandSchedule, Trial
@@ -378,7 +379,8 @@ def _rate(ctrl: Controller, physics_dt: float, v: _Verdicts) -> float | None:
     ratio = (1.0 / rate) / physics_dt
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         v.set("rate", False, f"period 1/{rate:g} s is not a whole number of physics steps of {physics_dt} s; the "
-              f"arena refuses it: choose a rate that divides {1 / physics_dt:g} Hz (e.g. 500, 250, 100, 50)")
+              f"arena refuses it: choose a rate that divides {1 / physics_dt:g} Hz: "
+              f"{nearest_rates(rate, physics_dt)}")
     return float(rate)
 
 
