@@ -3,9 +3,10 @@
 The place named is the controller's own: the innermost frame of the exception's traceback that is not inside the
 `wbc` package nor generated code (a dataclass's ``__init__``), preferring one inside the controller's own package
 over a library it called (NumPy raising in a plug-in names the plug-in's line); for a failure with no frame of the
-controller left on the traceback (a command refused after ``act`` returned, or a controller of `wbc`'s own), where
-the controller's method is defined. A command the house refuses (`wbc.types.MotorCommand` raising on a NaN) is thus
-named at the plug-in's line that built it, not at the house's line that checked it.
+controller left on the traceback (a command refused after ``act`` returned), where the controller's method is defined.
+A command the house refuses (`wbc.types.MotorCommand` raising on a NaN) is thus named at the plug-in's line that built
+it, not at the house's line that checked it. A controller of `wbc`'s own classes has no place named: no line of the
+house is the user's, and what its errors are about (an ONNX policy's network, a policy file) their messages name.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ def failure_site(exc: BaseException, controller: object, method: str) -> str | N
             definition is named when no frame of the controller is on the traceback.
 
     Returns:
-        `own_frame`, else where `method` is defined, else None (a builtin, a C extension).
+        `own_frame`, else where `method` is defined, else None (a builtin, a C extension, a class of `wbc`'s own).
     """
     where = own_frame(exc, controller)
     return where if where is not None else _defined_at(controller, method)
@@ -76,9 +77,10 @@ def _package_dir(owner: object) -> Path | None:
 
 
 def _defined_at(controller: object, method: str) -> str | None:
-    """``file:line`` where `controller`'s `method` is defined, or None (a builtin, a C extension)."""
+    """``file:line`` where `controller`'s `method` is defined, or None (a builtin, a C extension, `wbc`'s code)."""
     fn = getattr(type(controller), method, None)
     try:
-        return f"{inspect.getsourcefile(fn)}:{inspect.getsourcelines(fn)[1]}"
+        file, line = inspect.getsourcefile(fn), inspect.getsourcelines(fn)[1]
     except (TypeError, OSError):
         return None
+    return None if file is None or Path(file).resolve().is_relative_to(_WBC_DIR) else f"{file}:{line}"
