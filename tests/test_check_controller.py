@@ -6,11 +6,13 @@ import re
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from wbc.cli.main import main
+from wbc.cli.printers import print_controller_check
 from wbc.control import CheckConfig, ControllerCheck, ControllerSpec, check_controller
-from wbc.control.controller_contract import CHECKS
+from wbc.control.controller_contract import CHECKS, CheckOutcome
 from wbc.control.errors import ControllerCheckError
 from wbc.control.registry import CONTROLLERS
 from wbc.control.stand import stand_command
@@ -131,8 +133,12 @@ def test_a_controller_broken_one_way_fails_that_check_only(check):
     detail = result.failed(check)[0].detail
     expected = {
         "build": "make raised RuntimeError: no gains for this robot",
-        "rate": "period 1/300 s is not a whole number of physics steps",
-        "output": "MotorCommand.q has shape (12,); the robot has 15 joints",
+        "rate": "period 1/300 s is not a whole number of physics steps of 0.002 s; the arena refuses it: choose a "
+                "rate that divides 500 Hz: the nearest are 500 Hz and 250 Hz",
+        "output": "MotorCommand.q has shape (12,); the robot has 15 joints (house order): 12 joints are the legs "
+                  "alone, and this robot's arm is actuated (15 joints, the arm mode a plain factory claims): a "
+                  'controller of the legs declares the arm modes it drives, ControllerPlugin(make=..., '
+                  'arm_modes=("none",))',
         "reset": "the same states and commands gave different motor commands",
         "truth": "act() read the simulator's truth (MujocoRobot.base_truth",
         "timing": "the median call does not fit the period",
@@ -144,6 +150,21 @@ def test_a_controller_broken_one_way_fails_that_check_only(check):
     pattern = f"broken-{check} fails its contract: .*{check} on a1-wx200/actuated: .*{re.escape(expected)}"
     with pytest.raises(ControllerCheckError, match=pattern):
         result.raise_if_failed()
+
+
+class WithArm(Stand):
+    def act(self, state, command):
+        return MotorCommand.hold(np.zeros(15), 60.0, 2.0)  # the legs and the arm, on a robot without an arm
+
+
+def test_a_command_of_the_legs_and_the_arm_on_a_robot_without_an_arm_says_to_declare_actuated():
+    spec = ControllerSpec("with-arm", "none", WithArm, "commands the arm too", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert {o.check for o in result.failed()} == {"output"}
+    assert result.failed("output")[0].detail.startswith(
+        "MotorCommand.q has shape (15,); the robot has 12 joints (house order): 15 joints are the legs and the arm, "
+        'and this robot has no actuated arm (12 joints, arm mode "none" or "locked"): a controller that drives the '
+        'arm declares it, ControllerPlugin(make=..., arm_modes=("actuated",))')
 
 
 def test_reading_the_simulator_without_its_accessors_is_caught_by_moving_it():
@@ -182,6 +203,22 @@ def test_a_make_that_returns_the_class_fails_the_build_check():
     assert "make returned the class Stand, not an instance: return Stand(...)" in result.failed("build")[0].detail
 
 
+def _outcomes(*passed: bool | None) -> ControllerCheck:
+    return ControllerCheck(controller="c", timings=(), outcomes=tuple(
+        CheckOutcome(check=check, robot="a1-wx200", arm_mode="actuated", passed=p, detail="")
+        for check, p in zip(CHECKS, passed, strict=False)))
+
+
+@pytest.mark.parametrize(("passed", "verdict"), [
+    ((True, False, None, None, None, True), "FAILED: 1 of 6 checks failed, 3 not run"),
+    ((True, True, False, True, False, True), "FAILED: 2 of 6 checks failed"),
+    ((True, True, True, True, None, True), "FAILED: 1 of 6 checks not run"),
+])
+def test_the_verdict_counts_failed_and_not_run_checks_apart(passed, verdict, capsys):
+    print_controller_check(_outcomes(*passed))
+    assert capsys.readouterr().out.splitlines()[-1] == verdict
+
+
 class ResetRaises(Stand):
     def reset(self):
         raise RuntimeError("no home pose")
@@ -214,6 +251,73 @@ def test_a_reset_that_raises_fails_the_reset_check_naming_the_exception(broken, 
     assert {o.check for o in result.failed()} == {"reset"}, [(o.check, o.detail) for o in result.failed()]
     assert says in result.failed("reset")[0].detail
     assert all(o.passed is not True for o in result.outcomes if o.check in ("output", "truth"))
+
+
+class NanLater(Stand):
+    """Builds a command with a NaN from its fourth tick: the house's MotorCommand refuses it."""
+
+    def __init__(self, desc):
+        super().__init__(desc)
+        self.ticks = 0
+
+    def reset(self):
+        self.ticks = 0
+
+    def act(self, state, command):
+        self.ticks += 1
+        q = self.command.q.copy()
+        q[3] = np.nan if self.ticks > 3 else q[3]
+        return MotorCommand(q=q, dq=self.command.dq, kp=self.command.kp, kd=self.command.kd,  # NAN-HERE
+                            tau=self.command.tau)
+
+
+def _line_of(marker: str) -> str:
+    """``file:line`` of this file's line holding `marker` (the marker written once, apart from this call)."""
+    lines = open(__file__, encoding="utf-8").read().splitlines()
+    (line,) = [i for i, text in enumerate(lines, start=1) if f"# {marker}" in text]
+    return f"{__file__}:{line}"
+
+
+def test_a_failure_is_named_at_the_controllers_own_line_as_the_arena_names_it():
+    spec = ControllerSpec("nan-later", "actuated", NanLater, "a NaN from tick 3", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert {o.check for o in result.failed()} == {"output"}
+    detail = result.failed("output")[0].detail
+    # the line of the controller that built the command, not the house's line in wbc/types.py that refused it
+    assert detail == (f"act raised CommandError: MotorCommand.q: non-finite value at joint index 3 at "
+                      f"{_line_of('NAN-HERE')} at tick 3")
+
+
+RAISING_FACTORY = '''
+    """A factory that refuses its settings."""
+    from wbc.control.stand import StandController
+
+
+    def make(desc, config=None):
+        gain = (config or {}).get("gain", -1.0)
+        if gain < 0:
+            raise ValueError(f"gain must be >= 0, got {gain}")  # RAISES-HERE
+        return StandController(desc)
+'''
+
+
+@pytest.mark.parametrize("with_config", [False, True])
+def test_a_factory_that_raises_is_named_at_its_own_line_once(with_config, plugin_package, tmp_path, capsys):
+    root = plugin_package("raisingpkg", {"factory": RAISING_FACTORY})
+    path = root / "raisingpkg" / "factory.py"
+    (line,) = [i for i, text in enumerate(path.read_text().splitlines(), start=1) if "# RAISES-HERE" in text]
+    settings = tmp_path / "settings.toml"
+    settings.write_text("gain = -2.0\n")
+    config = ["--controller-config", str(settings)] if with_config else []
+    assert main(["check-controller", "raisingpkg.factory:make", "--robot", "a1-wx200", *config]) == 1
+    out = capsys.readouterr().out
+    (build,) = [text for text in out.splitlines() if "FAIL build" in text]
+    # the verdict counts the check that failed apart from those that could not run after it
+    assert out.splitlines()[-1] == "FAILED: 1 of 6 checks failed, 5 not run"
+    # one place, the plug-in's: not also the house's line that wrapped the error
+    gain = -2.0 if with_config else -1.0
+    assert build.endswith(f"ValueError: gain must be >= 0, got {gain} at {path}:{line}")
+    assert build.count(" at /") == 1 and "wbc/control/plugin.py" not in build
 
 
 GO1_ONLY = '''"""The stand controller, claiming go1-arm only."""

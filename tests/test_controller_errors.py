@@ -125,6 +125,13 @@ EXPECTED = {
 }
 """What each broken plug-in's error says, and the marker of the line it names."""
 
+HINTS = {
+    "short": '; 12 joints are the legs alone, and this robot\'s arm is actuated (15 joints, the arm mode a plain '
+             'factory claims): a controller of the legs declares the arm modes it drives, ControllerPlugin(make=..., '
+             'arm_modes=("none",))',
+}
+"""What the error says after the exception's message, on how to fix it, where the house can tell."""
+
 
 @pytest.mark.parametrize("kind", sorted(EXPECTED))
 def test_a_broken_plugin_costs_its_own_trials_only(kind, broken, scenario, stand_alone, tmp_path, capsys):
@@ -144,6 +151,7 @@ def test_a_broken_plugin_costs_its_own_trials_only(kind, broken, scenario, stand
         assert r.outcome == "controller_error" and r.success is False and math.isnan(r.fall_time_s)
         assert r.error.startswith(f"controller {name}, band soft, seed {r.seed}, trial {r.trial}: {what}")
         assert r.error.endswith(f" [{where}]")
+        assert HINTS.get(kind, "") in r.error
         assert r.ttf == (0.5 if kind in ("late", "exits") else 0.0)
     # the command ends with status 1 and one line for the failing controller; no traceback
     captured = capsys.readouterr()
@@ -357,6 +365,18 @@ def test_a_run_with_a_broken_controller_killed_mid_run_resumes_losing_nothing(br
     assert [r.trial for r in late] == [0, 1, 2] and all(r.outcome == "controller_error" for r in late)
     (errors,) = result.controller_errors
     assert (errors.errored, errors.stopped, errors.not_played) == (3, True, 3)
+
+
+def test_a_rate_that_is_not_whole_physics_steps_is_refused_naming_the_nearest_that_are(plugin_package, scenario,
+                                                                                        tmp_path, capsys):
+    source = STAND_PLUGIN.format(doc="runs at 60 Hz", reset="pass", act="pass", counters="return {}")
+    plugin_package("ratepkg", {"sixty": source.replace("self.rate_hz = self.inner.rate_hz", "self.rate_hz = 60.0")})
+    assert main(["run", "ratepkg.sixty:make", "--scenario", str(scenario), "--trials", "1", "--out",
+                 str(tmp_path / "o"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert ("controller 'ratepkg.sixty:make': period 1/60 s is not a multiple of the physics step 0.002 s; give the "
+            "controller a rate that divides 500 Hz: the nearest are 62.5 Hz and 55.5556 Hz") in err
+    assert "Traceback" not in err and not (tmp_path / "o" / "trials.csv").exists()
 
 
 def test_a_factory_that_fails_while_the_trials_play_costs_its_trials(tmp_path, scenario, monkeypatch):

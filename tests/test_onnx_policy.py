@@ -420,6 +420,66 @@ def test_a_float64_model_with_an_operator_onnxruntime_lacks_in_double_is_named_v
     assert "damaged" not in text and "export it again" not in text
 
 
+def _sqrt_model(path: Path, weight: np.ndarray, bias: np.ndarray) -> None:
+    """An ONNX network ``actions = sqrt(obs @ weight + bias)``: NaN where the sum is negative."""
+    from onnx import TensorProto, helper, numpy_helper
+
+    graph = helper.make_graph(
+        [helper.make_node("MatMul", ["obs", "w"], ["y"]), helper.make_node("Add", ["y", "b"], ["z"]),
+         helper.make_node("Sqrt", ["z"], ["actions"])],
+        "sqrt", [helper.make_tensor_value_info("obs", TensorProto.FLOAT, [1, weight.shape[0]])],
+        [helper.make_tensor_value_info("actions", TensorProto.FLOAT, [1, weight.shape[1]])],
+        [numpy_helper.from_array(weight.astype(np.float32), "w"),
+         numpy_helper.from_array(bias.astype(np.float32), "b")])
+    proto = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    proto.ir_version = 8
+    path.write_bytes(proto.SerializeToString())
+
+
+def test_a_network_that_returns_nan_mid_trial_is_named_with_its_outputs_and_the_step(tmp_path):
+    model, io = tmp_path / "n.onnx", tmp_path / "n.toml"
+    io.write_text(_io())
+    weight = np.zeros((ONNX_FRAME, 12))
+    weight[3, 1] = -10.0  # the network's entry 1 is sqrt(1 - 10 x the scaled vx): NaN from vx > 0.05 m/s
+    _sqrt_model(model, weight, np.ones(12))
+    desc = get_robot("a1-wx200", "none")
+    ctrl = get_controller(f"onnx:{model}").make(desc)  # the zero observation passes the check before any trial
+    ctrl.reset()
+    for _ in range(2):
+        ctrl.act(_state(desc.nominal_q), VelocityCommand())
+    said = (f"{model}: the network returned non-finite actions at step 2 after reset (t = 0.040 s at 50 Hz): output "
+            f"'actions' entry 1 ({ONNX_JOINTS[1]}) nan (1 of 12, in the network's joint order, {io} [policy] joints); "
+            "its input was finite, so they arose inside the network")
+    with pytest.raises(OnnxModelError) as caught:
+        ctrl.act(_state(desc.nominal_q), VelocityCommand(vx=0.3))
+    assert str(caught.value).startswith(said)
+    ctrl.reset()  # the step counts from the reset
+    with pytest.raises(OnnxModelError, match=r"at step 0 after reset \(t = 0\.000 s"):
+        ctrl.act(_state(desc.nominal_q), VelocityCommand(vx=0.3))
+    # the contract checker names the network's failure, at the closed loop's tick (the command ramps up from 0)
+    result = check_controller(f"onnx:{model}", CheckConfig(seconds=0.5))
+    (output,) = result.failed("output")
+    assert output.detail.startswith(f"act raised OnnxModelError: {model}: the network returned non-finite actions "
+                                    "at step 4 after reset (t = 0.080 s at 50 Hz): output 'actions' entry 1")
+    # no place in wbc's code is named: the model is the user's, and the message names it
+    assert output.detail.endswith("or a value beyond its float range) at tick 4")
+
+
+def test_a_network_that_answers_the_zero_observation_with_nan_says_what_was_seen_and_the_likely_causes(tmp_path):
+    model, io = tmp_path / "z.onnx", tmp_path / "z.toml"
+    io.write_text(_io())
+    _sqrt_model(model, np.zeros((ONNX_FRAME, 12)), np.r_[-1.0, np.ones(11)])
+    with pytest.raises(OnnxModelError) as caught:
+        get_controller(f"onnx:{model}")
+    text = str(caught.value)
+    assert text.startswith(f"{model}: the network answers the zero observation (30 zeros, all finite) with "
+                           f"non-finite actions: output 'actions' entry 0 ({ONNX_JOINTS[0]}) nan (1 of 12, in the "
+                           f"network's joint order, {io} [policy] joints). A finite input gave them")
+    assert "likely causes: weights or normalisation statistics that hold NaN" in text
+    assert "an operation undefined at this input" in text
+    assert "damaged: export it again" not in text
+
+
 def test_the_shipped_pi3_exported_to_onnx_acts_and_plays_as_the_numpy_controller(tmp_path):
     pytest.importorskip("torch")
     from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig

@@ -28,6 +28,7 @@ from wbc.learned.policy.control_rate import PHYSICS_DT, period_problem, rate_pro
 from wbc.learned.policy.observations import ObsLayout
 from wbc.learned.policy.policy_file import CHECKSUM_KEY, PolicyFile, PolicyFileError, save_policy, weights_sha256
 from wbc.learned.policy.shipped import WEIGHTS_DIR
+from wbc.physics_steps import nearest_rates
 from wbc.robots.registry import get_robot
 from wbc.types import RobotState, VelocityCommand
 
@@ -273,6 +274,13 @@ def test_the_rate_rule_is_the_arenas_physics_step():
     for bad in (0.0, -50.0, 0.02, 1e-6, 1e-300, math.inf, math.nan, 600.0, 33.0):
         assert rate_problem(bad) is not None, bad
     assert "the nearest are 500 Hz and 250 Hz" in rate_problem(300.0)
+
+
+def test_a_refused_rate_is_told_the_nearest_rates_whose_period_is_whole_steps():
+    assert nearest_rates(60.0, PHYSICS_DT) == "the nearest are 62.5 Hz and 55.5556 Hz"
+    assert nearest_rates(300.0, 0.001) == "the nearest are 333.333 Hz and 250 Hz"
+    assert nearest_rates(600.0, PHYSICS_DT) == "the nearest is 500 Hz"  # faster than one step
+    assert rate_problem(60.0).endswith(nearest_rates(60.0, PHYSICS_DT))  # the I/O files' refusal says the same
 
 
 # -- ONNX policies ---------------------------------------------------------------------------------------------------

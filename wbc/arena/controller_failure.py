@@ -5,75 +5,20 @@ The runner (`wbc.arena.runner.run_episode`) raises it when the controller's ``re
 `MotorCommand`). It carries the episode played up to that tick, so that whoever plays the trial records the failure
 as the trial's outcome (``controller_error`` in `wbc.arena.trial_record.TrialRecord`) instead of losing the whole run.
 
-The place named is the controller's own: the innermost frame of the exception's traceback that is not inside the
-`wbc` package nor generated code (a dataclass's ``__init__``), preferring one inside the controller's own package
-over a library it called (NumPy raising in a plug-in names the plug-in's line); for a command refused after ``act``
-returned (no frame of the controller is left on the traceback), where the controller's ``act`` is defined.
+The place named is the controller's own (`wbc.control.failure_site`, which the contract checker names too): the
+innermost frame of the exception's traceback in the controller's code, or where its method is defined.
 """
 
 from __future__ import annotations
 
-import inspect
 import math
-import sys
-import traceback
-from pathlib import Path
 
 from wbc.arena.episode import Episode
+from wbc.control.failure_site import failure_site, own_frame
 from wbc.errors import CONTROLLER_ERRORS, WbcError
 from wbc.scenario.trial import Trial
 
-__all__ = ["CONTROLLER_ERRORS", "ControllerFailure", "own_frame", "read_counters"]
-
-_WBC_DIR = Path(__file__).resolve().parent.parent
-"""The `wbc` package's directory: frames inside it are the house's, not the controller's."""
-
-
-def own_frame(exc: BaseException, owner: object = None) -> str | None:
-    """``file:line`` of the innermost traceback frame of `exc` that is the controller's (module docstring).
-
-    Args:
-        exc: a raised exception (with its traceback).
-        owner: the controller; frames inside its top-level package are preferred (None: no preference).
-
-    Returns:
-        The innermost frame inside `owner`'s package, else the innermost outside `wbc` and not generated code, else
-        None.
-    """
-    home = _package_dir(owner)
-    fallback = None
-    for frame in reversed(traceback.extract_tb(exc.__traceback__)):
-        if frame.filename.startswith("<"):
-            continue
-        path = Path(frame.filename).resolve()
-        if path.is_relative_to(_WBC_DIR):
-            continue
-        if home is None or path.is_relative_to(home):
-            return f"{frame.filename}:{frame.lineno}"
-        fallback = fallback or f"{frame.filename}:{frame.lineno}"
-    return fallback
-
-
-def _package_dir(owner: object) -> Path | None:
-    """The directory of `owner`'s class's top-level package (its file for a lone module); None if unknown or wbc."""
-    if owner is None:
-        return None
-    top = sys.modules.get(type(owner).__module__.partition(".")[0])
-    file = getattr(top, "__file__", None)
-    if not file:
-        return None
-    path = Path(file).resolve()
-    home = path.parent if path.name == "__init__.py" else path
-    return None if home.is_relative_to(_WBC_DIR) else home
-
-
-def _defined_at(controller: object, method: str) -> str | None:
-    """``file:line`` where `controller`'s `method` is defined, or None (a builtin, a C extension)."""
-    fn = getattr(type(controller), method, None)
-    try:
-        return f"{inspect.getsourcefile(fn)}:{inspect.getsourcelines(fn)[1]}"
-    except (TypeError, OSError):
-        return None
+__all__ = ["CONTROLLER_ERRORS", "ControllerFailure", "read_counters"]
 
 
 class ControllerFailure(WbcError, RuntimeError):
@@ -89,29 +34,31 @@ class ControllerFailure(WbcError, RuntimeError):
         time_s: the episode time of that tick [s].
         exc: the exception.
         episode: the episode up to the tick before the failure (not a fall: ``fell`` False).
+        hint: how to fix it, where the house can tell (a command of the legs alone on a robot whose arm is actuated:
+            `wbc.control.arm_mode_hint`), or None.
 
     Attributes:
-        phase, tick, time_s, episode: as given.
+        phase, tick, time_s, episode, hint: as given.
         error_type: the exception's type name.
         error_message: the exception's message.
         where: ``file:line`` of the controller's own code (module docstring), or None if unknown.
     """
 
     def __init__(self, controller: object, *, phase: str, tick: int, time_s: float, exc: BaseException,
-                 episode: Episode) -> None:
+                 episode: Episode, hint: str | None = None) -> None:
         self.phase = phase
+        self.hint = hint
         self.tick = tick
         self.time_s = time_s
         self.episode = episode
         self.error_type = type(exc).__name__
         self.error_message = str(exc)
-        where = own_frame(exc, controller)
-        self.where = where if where is not None or phase == "build" else _defined_at(
-            controller, "act" if phase == "command" else phase)
+        self.where = (own_frame(exc) if phase == "build"
+                      else failure_site(exc, controller, "act" if phase == "command" else phase))
         super().__init__(self.describe())
 
     def describe(self) -> str:
-        """One line: what failed, at which tick and time, the exception, and the controller's own file:line."""
+        """One line: what failed, at which tick and time, the exception, a hint, and the controller's own file:line."""
         what = {"build": "building it raised", "reset": "reset raised", "act": "act raised",
                 "command": "act returned a command the robot refused:",
                 "counters": "counters() failed:"}[self.phase]
@@ -121,7 +68,8 @@ class ControllerFailure(WbcError, RuntimeError):
             when = (f"at tick {self.tick} (t = {self.time_s:.3f} s)" if math.isfinite(self.time_s)
                     else f"at tick {self.tick}")
         at = f" [{self.where}]" if self.where else ""
-        return f"{what} {self.error_type} {when}: {self.error_message}{at}"
+        hint = f"; {self.hint}" if self.hint else ""
+        return f"{what} {self.error_type} {when}: {self.error_message}{hint}{at}"
 
     def record_error(self, controller: str, trial: Trial) -> str:
         """The trial record's ``error``, on one line: the controller, the trial (band, seed, index) and `describe`.

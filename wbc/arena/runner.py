@@ -13,8 +13,9 @@ capture), or are handed in by the caller. Falls are checked at the control rate;
 for far longer than a control period, so none is missed. Setting a simulated trial up (robot, terrain, pushes) and
 turning its episode into a record is `wbc.arena.sim_trial`. A robot behind a safety layer (`HasSafetyEvents`) has
 the layer's transitions during the episode logged in it (`Episode.safety_events`). A controller that raises, or
-returns a command the robot refuses, ends the episode with a `ControllerFailure` that says where and carries the
-episode so far. Given a `DivergenceCheck` (a simulated trial's), the loop checks the joints the robot reports before
+returns a command the robot refuses, ends the episode with a `ControllerFailure` that says where (and, for a command
+of the joints of another arm mode, how to declare that mode: `wbc.control.arm_mode_hint`) and carries the episode so
+far. Given a `DivergenceCheck` (a simulated trial's), the loop checks the joints the robot reports before
 each ``act``, the trunk's truth and the simulator's own warnings (`SimulatorHealth`) after each step, and ends an
 episode whose simulation blew up with `SimulationDiverged` (its own outcome, never numbers in the means). A
 controller whose period is longer than the episode would never be asked to act: that is refused before the episode
@@ -33,13 +34,14 @@ import numpy as np
 from wbc.arena.controller_failure import ControllerFailure
 from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.episode import Episode, EpisodeBuffer, SafetyLog
+from wbc.control.arm_mode_hint import arm_mode_hint
 from wbc.control.protocol import Controller
 from wbc.errors import CONTROLLER_ERRORS, CommandError, ConfigError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, SimulatorHealth, TruthSource
 from wbc.hardware.robot import Robot, command_bounds, exceeded_rows, within_bounds
 from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
-from wbc.types import BaseTruth, VelocityCommand
+from wbc.types import BaseTruth, MotorCommand, VelocityCommand
 
 __all__ = ["PreparingObserver", "TickObserver", "run_episode"]
 
@@ -130,11 +132,12 @@ def run_episode(
     clamped = 0
     clamped_rows = np.zeros(5, dtype=np.int64)  # per command row (q, dq, kp, kd, tau): ticks it was clamped
 
-    def failure(phase: str, tick: int, exc: Exception) -> ControllerFailure:
+    def failure(phase: str, tick: int, exc: Exception, hint: str | None = None) -> ControllerFailure:
         events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
         played = buf.finish(duration_s=duration_s, control_dt=dt, fell=False, fall_time_s=math.nan,
                             safety_events=events, clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
-        return ControllerFailure(controller, phase=phase, tick=tick, time_s=tick * dt, exc=exc, episode=played)
+        return ControllerFailure(controller, phase=phase, tick=tick, time_s=tick * dt, exc=exc, episode=played,
+                                 hint=hint)
 
     def diverged(reason: str, tick: int) -> SimulationDiverged:
         events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
@@ -163,7 +166,8 @@ def run_episode(
         try:
             robot.write(out)
         except CommandError as exc:  # refused before reaching a motor: NaN, wrong length, not a MotorCommand
-            raise failure("command", k, exc) from exc
+            hint = arm_mode_hint(out.num_joints, robot.num_joints) if isinstance(out, MotorCommand) else None
+            raise failure("command", k, exc, hint) from exc
         if not within_bounds(out.rows, lower, upper):  # one compiled pass; the rows are told apart only when needed
             over = exceeded_rows(out, bounds)
             if over.any():

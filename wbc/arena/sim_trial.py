@@ -31,6 +31,7 @@ from wbc.control.spec import ControllerSpec
 from wbc.errors import CONTROLLER_ERRORS, ConfigError, MissingCapabilityError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.input_files import short
+from wbc.physics_steps import nearest_rates
 from wbc.scenario.trial import Trial
 
 __all__ = ["check_rate", "run_trial", "simulated_robot"]
@@ -62,8 +63,9 @@ def check_rate(ctrl: object, name: str, timestep: float) -> None:
                           f"give it a rate that divides 1/{timestep} Hz, such as 50")
     ratio = (1.0 / rate) / timestep
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
-        raise ConfigError(f"controller {short(name)}: period 1/{rate} s is not a multiple of the physics step "
-                          f"{timestep} s; give the controller a rate that divides 1/{timestep} Hz")
+        raise ConfigError(f"controller {short(name)}: period 1/{rate:g} s is not a multiple of the physics step "
+                          f"{timestep:g} s; give the controller a rate that divides {1 / timestep:g} Hz: "
+                          f"{nearest_rates(rate, timestep)}")
 
 
 def run_trial(trial: Trial, controller: ControllerSpec | str, *, debug_truth: bool = False,

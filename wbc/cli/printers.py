@@ -477,8 +477,17 @@ def print_controller_check(result: ControllerCheck) -> None:
             where = (o.robot, o.arm_mode)
             print(f"\n  {o.robot}, arm {o.arm_mode}")
         print(f"    {marks[o.passed]} {o.check:<8} {o.detail}")
-    bad = len([o for o in result.outcomes if o.passed is not True])
-    print(f"\n{'passed' if result.passed else f'FAILED: {bad} of {len(result.outcomes)} checks'}")
+    print(f"\n{'passed' if result.passed else _check_tally(result)}")
+
+
+def _check_tally(result: ControllerCheck) -> str:
+    """The verdict of a check that did not pass: the checks that failed and those not run, counted apart."""
+    failed, not_run, total = len(result.failed()), len(result.not_run()), len(result.outcomes)
+    if not total:
+        return "FAILED: no check ran"
+    if not failed:
+        return f"FAILED: {not_run} of {total} checks not run"
+    return f"FAILED: {failed} of {total} checks failed" + (f", {not_run} not run" if not_run else "")
 
 
 def print_trained(result: Mapping[str, object], *, task: str, stage: int, baseline: str | None) -> None:

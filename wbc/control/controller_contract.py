@@ -15,9 +15,11 @@ For every robot and arm mode the controller claims (`ControllerSpec.claims`), on
 - ``timing``: `act`'s wall time against its period: the median must fit the period (the p99 too with
   ``strict_timing``); p50, p99 and the share of late ticks are reported either way.
 
-A check that cannot be judged because an earlier one failed is reported as not run. The result is a
-`ControllerCheck`; ``wbc check-controller NAME`` prints it, and the test suite runs it on every registered controller.
-The simulator and the registry are imported when a check runs, so ``import wbc.control`` stays light.
+A failure of the controller's code is named at its own ``file:line`` (`wbc.control.failure_site`, as the arena names
+it), not at the house's line that refused what it returned. A check that cannot be judged because an earlier one
+failed is reported as not run. The result is a `ControllerCheck`; ``wbc check-controller NAME`` prints it, and the
+test suite runs it on every registered controller. The simulator and the registry are imported when a check runs, so
+``import wbc.control`` stays light.
 
 Two more checks run when asked for (`EXTRA_CHECKS`), because a controller can meet the contract and still mean
 something else than its author thinks:
@@ -41,7 +43,6 @@ from __future__ import annotations
 
 import math
 import time
-import traceback
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -49,11 +50,14 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
 
+from wbc.control.arm_mode_hint import arm_mode_hint
 from wbc.control.errors import ControllerCheckError
+from wbc.control.failure_site import failure_site, own_frame
 from wbc.control.plugin import controller_problems
 from wbc.control.protocol import Controller
 from wbc.control.spec import ControllerSpec
 from wbc.errors import CONTROLLER_ERRORS, ConfigError
+from wbc.physics_steps import nearest_rates
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import load_scenario
 from wbc.scenario.trial import CommandSchedule, Trial
@@ -204,6 +208,10 @@ class ControllerCheck:
         """The outcomes that failed (of `check` only, if given)."""
         return [o for o in self.outcomes if o.passed is False and check in (None, o.check)]
 
+    def not_run(self) -> list[CheckOutcome]:
+        """The outcomes that could not be judged because an earlier check failed (``passed`` None)."""
+        return [o for o in self.outcomes if o.passed is None]
+
     def raise_if_failed(self) -> None:
         """Raise `ControllerCheckError` listing every failed check, if any failed or could not run, or none ran."""
         if not self.outcomes:
@@ -338,10 +346,15 @@ class _Verdicts:
         return [self.found[c] for c in checks]
 
 
-def _describe(exc: BaseException) -> str:
-    frames = traceback.extract_tb(exc.__traceback__)
-    where = f" at {frames[-1].filename}:{frames[-1].lineno}" if frames else ""
-    return f"{type(exc).__name__}: {exc}{where}"
+def _describe(exc: BaseException, ctrl: Controller | None = None, method: str = "") -> str:
+    """The exception and the controller's own ``file:line`` where it arose, as the arena names it.
+
+    `ctrl` is None for a failure of `make` (no controller yet): the place is the factory's own innermost frame, as
+    the arena names a build's failure, and none for a plug-in's error, which `wbc.control.plugin.build_plugin`
+    raises from the house's code with the plug-in's place in its message.
+    """
+    site = own_frame(exc) if ctrl is None else failure_site(exc, ctrl, method)
+    return f"{type(exc).__name__}: {exc}{f' at {site}' if site else ''}"
 
 
 def _build(spec: ControllerSpec, desc) -> tuple[Controller | None, str]:
@@ -366,7 +379,8 @@ def _rate(ctrl: Controller, physics_dt: float, v: _Verdicts) -> float | None:
     ratio = (1.0 / rate) / physics_dt
     if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
         v.set("rate", False, f"period 1/{rate:g} s is not a whole number of physics steps of {physics_dt} s; the "
-              f"arena refuses it: choose a rate that divides {1 / physics_dt:g} Hz (e.g. 500, 250, 100, 50)")
+              f"arena refuses it: choose a rate that divides {1 / physics_dt:g} Hz: "
+              f"{nearest_rates(rate, physics_dt)}")
     return float(rate)
 
 
@@ -380,7 +394,9 @@ def _output_problem(out: object, n: int) -> str | None:
     for name in ("q", "dq", "kp", "kd", "tau"):
         a = getattr(out, name)
         if a.shape != (n,):
-            return f"MotorCommand.{name} has shape {a.shape}; the robot has {n} joints (house order)"
+            hint = arm_mode_hint(a.shape[0], n) if a.ndim == 1 else None
+            return (f"MotorCommand.{name} has shape {a.shape}; the robot has {n} joints (house order)"
+                    + (f": {hint}" if hint else ""))
         if not np.all(np.isfinite(a)):
             return f"MotorCommand.{name} is not finite"
     if (out.kp < 0).any() or (out.kd < 0).any():
@@ -392,7 +408,7 @@ def _counters_problem(ctrl: Controller) -> str | None:
     try:
         counts = ctrl.counters()
     except CONTROLLER_ERRORS as exc:  # noqa: BLE001
-        return f"counters() raised {_describe(exc)}"
+        return f"counters() raised {_describe(exc, ctrl, 'counters')}"
     if not isinstance(counts, dict) or not all(isinstance(k, str) and isinstance(c, int) and not isinstance(c, bool)
                                                for k, c in counts.items()):
         return f"counters() returned {counts!r}; return a dict of event name -> count (int)"
@@ -423,7 +439,8 @@ def _reset(ctrl: Controller, before: str) -> str | None:
     try:
         ctrl.reset()
     except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
-        return f"reset() raised {_describe(exc)} {before}; reset() must put the controller back in its initial state"
+        return (f"reset() raised {_describe(exc, ctrl, 'reset')} {before}; reset() must put the controller back in "
+                "its initial state")
     return None
 
 
@@ -434,7 +451,7 @@ def _act(ctrl: Controller, state: RobotState, cmd: VelocityCommand, n: int, p: _
     try:
         out = ctrl.act(state, cmd)
     except CONTROLLER_ERRORS as exc:  # noqa: BLE001
-        p.failure = f"act raised {_describe(exc)} at tick {k}"
+        p.failure = f"act raised {_describe(exc, ctrl, 'act')} at tick {k}"
         return None
     finally:
         p.times.append(time.perf_counter() - start)
@@ -777,7 +794,7 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
     try:
         ctrl.reset()
     except CONTROLLER_ERRORS as exc:  # noqa: BLE001 (any failure of the controller's code is the finding)
-        return False, f"reset() raised {_describe(exc)} before the replay"
+        return False, f"reset() raised {_describe(exc, ctrl, 'reset')} before the replay"
     for k in range(len(replay)):
         state, cmd = replay.state(k), replay.velocity_command(k)
         step = "observation_terms"
@@ -800,7 +817,7 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
             step = "act"
             out = ctrl.act(state, cmd)
         except CONTROLLER_ERRORS as exc:  # noqa: BLE001
-            return False, f"{step} raised {_describe(exc)} at recorded tick {k} of {replay.path}"
+            return False, f"{step} raised {_describe(exc, ctrl, step)} at recorded tick {k} of {replay.path}"
         problem = _output_problem(out, desc.num_joints)
         if problem is not None:
             return False, f"{problem} (recorded tick {k} of {replay.path})"

@@ -27,7 +27,9 @@ file records (``[onnx] sha256``, written by ``wbc``'s export; without it the mod
 onnxruntime cannot load (a damaged file, or a valid one with an operator onnxruntime does not implement for its
 element type, named as such: a float64 Elu, say); a graph whose inputs are not exactly the one observation the
 controller feeds, or whose output is not the joints' actions (`check_model`); and a graph that fails, or answers with
-the wrong size or a non-finite action, on the observation of a robot at rest.
+the wrong size or a non-finite action, on the observation of a robot at rest. A non-finite action the network returns
+later, in `OnnxController.act`, is refused as the network's: the error names the model, the output entries with their
+joints in the network's order, the step since the reset, and whether the input was finite.
 """
 
 from __future__ import annotations
@@ -374,8 +376,21 @@ def _dry_run(session: Any, ports: NetworkPorts, io: OnnxIo, model: str | Path) -
                              f"{action.size} actions (shape {list(action.shape)}); list the network's joints in its "
                              "order")
     if not np.all(np.isfinite(action)):
-        raise OnnxModelError(f"{model}: the network answers the zero observation with non-finite actions "
-                             f"({action.reshape(-1).tolist()}); its weights are damaged: export it again")
+        raise OnnxModelError(
+            f"{model}: the network answers the zero observation ({io.input_size} zeros, all finite) with non-finite "
+            f"actions: {_non_finite_entries(action.reshape(-1), io, ports.output_name)}. A finite input gave them, so "
+            "they arise inside the network; likely causes: weights or normalisation statistics that hold NaN or "
+            "infinity (a training run that diverged, a damaged copy or export), or an operation undefined at this "
+            "input (a division by a zero standard deviation, the log or square root of zero or less). Run the "
+            "network on the same input where it was trained to tell them apart")
+
+
+def _non_finite_entries(action: np.ndarray, io: OnnxIo, output: str) -> str:
+    """The non-finite entries of one action, by their place and joint in the network's order (its I/O file's)."""
+    bad = np.flatnonzero(~np.isfinite(action))
+    entries = ", ".join(f"{i} ({io.joints[i]}) {action[i]}" for i in bad)
+    return (f"output {output!r} entr{'y' if bad.size == 1 else 'ies'} {entries} ({bad.size} of {action.size}, in the "
+            f"network's joint order, {io.path} [policy] joints)")
 
 
 class OnnxController:
@@ -424,6 +439,8 @@ class OnnxController:
         self._folded: tuple[RobotState, np.ndarray] | None = None
         self.estimated_terms = tuple(dict.fromkeys(t.name for t in io.terms if t.source is not None))
         self._recorded: dict[int, np.ndarray] | None = None  # a replay's values for the next act (`feed_recorded`)
+        self.model_path = str(model_path)
+        self._steps = 0  # acts since the last reset: the step a non-finite action is reported at
 
     def reset(self) -> None:
         """Forget the previous action, the observation history and the base estimate."""
@@ -435,6 +452,7 @@ class OnnxController:
             self.estimate.reset()
         self._folded = None
         self._recorded = None
+        self._steps = 0
 
     def feed_recorded(self, values: Mapping[int, np.ndarray]) -> None:
         """For the next `act` only, the network sees `values` in place of these estimated terms' (`EstimatesTerms`).
@@ -532,7 +550,15 @@ class OnnxController:
         return np.concatenate([w.reshape(-1) for w in self._windows])
 
     def act(self, state: RobotState, command: VelocityCommand) -> MotorCommand:
-        """One policy step."""
+        """One policy step.
+
+        Raises:
+            OnnxModelError: the network returned the wrong number of actions, or a non-finite one (NaN, or an
+                infinity the action clip does not bound): the message names the model, each such output entry with
+                its joint in the network's order, the step since `reset` and its time, and whether the input was
+                finite.
+        """
+        step, self._steps = self._steps, self._steps + 1
         x = self.network_input(state, command).astype(self.ports.dtype)
         out = self.session.run([self.ports.output_name], {self.ports.input_name: x[None] if self.ports.batched
                                                           else x})[0]
@@ -542,6 +568,8 @@ class OnnxController:
                                  f"{self.io.num_joints} joints")
         if self.io.action_clip is not None:
             action = np.clip(action, -self.io.action_clip, self.io.action_clip)
+        if not np.all(np.isfinite(action)):
+            raise OnnxModelError(self._non_finite(action, x, step))
         self.last_action = action
         target = np.empty_like(action)
         target[self._index] = self.default_q + self.action_scale * action
@@ -550,6 +578,17 @@ class OnnxController:
     def counters(self) -> dict[str, int]:
         """No events."""
         return {}
+
+    def _non_finite(self, action: np.ndarray, x: np.ndarray, step: int) -> str:
+        """Why `act` refuses the network's `action` at `step`: what it returned, when, and on what input."""
+        bad_in = np.flatnonzero(~np.isfinite(x))
+        fed = ("its input was finite, so they arose inside the network (an operation undefined for this input, or "
+               "a value beyond its float range)" if not bad_in.size else
+               f"its input held {bad_in.size} non-finite entries (the first at entry {int(bad_in[0])}), from the "
+               "robot's state or the command")
+        entries = _non_finite_entries(action, self.io, self.ports.output_name)
+        return (f"{self.model_path}: the network returned non-finite actions at step {step} after reset (t = "
+                f"{step / self.rate_hz:.3f} s at {self.rate_hz:g} Hz): {entries}; {fed}")
 
 
 def _verify_external_data(model: Path, io: OnnxIo, io_path: Path, data: list[Path],

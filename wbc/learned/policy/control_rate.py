@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import math
 
+from wbc.physics_steps import nearest_rates
+
 __all__ = ["MAX_RATE_HZ", "MIN_RATE_HZ", "PHYSICS_DT", "RATE_RULE", "period_problem", "rate_problem"]
 
 PHYSICS_DT = 0.002  # [s]
@@ -69,5 +71,5 @@ def rate_problem(rate_hz: float) -> str | None:
     if rate_hz < MIN_RATE_HZ or rate_hz > MAX_RATE_HZ * (1.0 + _TOLERANCE):
         return f"{rate_hz!r} Hz is out of range; {RATE_RULE}"
     steps = MAX_RATE_HZ / rate_hz
-    return (f"{rate_hz!r} Hz has a period of {steps:.6g} physics steps, not a whole number; {RATE_RULE}; the nearest "
-            f"are {MAX_RATE_HZ / math.floor(steps):g} Hz and {MAX_RATE_HZ / math.ceil(steps):g} Hz")
+    return (f"{rate_hz!r} Hz has a period of {steps:.6g} physics steps, not a whole number; {RATE_RULE}; "
+            f"{nearest_rates(rate_hz, PHYSICS_DT)}")
