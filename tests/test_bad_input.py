@@ -144,8 +144,8 @@ def test_a_key_or_table_defined_twice_is_named_by_every_toml_reader(tmp_path, ca
     err = _cli_error(capsys, ["check-controller", "no_such_pkg.mod:make", "--controller-config", str(twice)])
     assert says in err and "no_such_pkg" not in err
     # a table twice, a key twice in an inline table, at top level; other faults keep the parser's words and column
-    for text, said in (("[mpc]\na = 1\n\n[mpc]\nb = 2\n", ":4: [mpc]: invalid TOML: [mpc] is defined twice (first "
-                                                        "at line 1); merge the two into one table"),
+    for text, said in (("[mpc]\na = 1\n\n[mpc]\nb = 2\n", ":4: [mpc]: invalid TOML: [mpc] names what is defined "
+                                                        "already (first at line 1), as a table"),
                        ("gains = {kp = 1, kp = 2}\n", ":1: gains: invalid TOML: its inline table sets 'kp' twice"),
                        ("a = 1\nb = 2\na = 3\n", ":3: a: invalid TOML: a is set twice (first at line 1)"),
                        ("a = = 1\n", ":1: invalid TOML: Invalid value (column 5); fix the syntax")):

@@ -382,6 +382,8 @@ def test_a_signal_while_the_command_loads_ends_it_with_one_line(signum: str) -> 
     script = f"""
 import os, signal, sys
 
+signal.signal(signal.SIGHUP, signal.SIG_DFL)  # a command started from a terminal (a suite run under nohup ignores it)
+
 class SignalWhileLoading:
     def find_spec(self, name, path=None, target=None):
         if name == "wbc.cli":

@@ -207,7 +207,8 @@ def test_a_controller_failing_k_trials_in_a_row_is_stopped_and_resume_replays_no
 
 def _record(controller, trial, failed):
     return SimpleNamespace(controller=controller, run_key=(controller, "soft", 0, trial),
-                           outcome="controller_error" if failed else "success", error="raised" if failed else "")
+                           outcome="controller_error" if failed else "success",
+                           error=f"trial {trial} raised" if failed else "")
 
 
 def test_errors_in_a_row_are_counted_in_the_runs_order_of_trials_not_the_order_they_finish():
@@ -231,6 +232,7 @@ def test_errors_in_a_row_are_counted_in_the_runs_order_of_trials_not_the_order_t
     assert not guard.counted(late) and guard.counted(_record("c", 2, True))
     (errors,) = guard.report([_record("c", i, True) for i in (1, 2, 0)] + [late], budget=6)
     assert (errors.errored, errors.recorded, errors.not_played, errors.beyond) == (3, 3, 3, 1)
+    assert errors.first == "trial 0 raised"  # the first in the run's order, though trial 1's finished first
     assert "3 trial(s) not played (1 of them under way then: played, stored in trials.csv and not counted)" in \
         errors.line()
 

@@ -196,6 +196,7 @@ def test_emulate_injects_a_fault_at_the_value_given(monkeypatch: pytest.MonkeyPa
                         ("drop=0", "--fault drop=0: expected a number in (0, 1] (probability)"),
                         ("delay=nan", "--fault delay=nan: expected a number in (0, 1] (s)"),
                         ("motor_error=256", "--fault motor_error=256: expected a whole number in [0, 255] (mode byte)"),
+                        ("over_temperature=128", "expected a whole number in [0, 127] (deg C)"),  # a signed byte
                         ("corrupt=1", "--fault corrupt=1: corrupt takes no value from the command line")):
         injected.clear()
         assert main(["hw", "emulate", "--seconds", "0.05", "--lockstep", "--no-realtime", "--fault", given]) == 2

@@ -606,7 +606,7 @@ def test_messages_say_what_and_how(tmp_path):
         "version-string": "expected an integer, got string '1'",
         "version-too-big": "must be in [1, 1000000], got 1000001",
         "toml-duplicate-key": "invalid TOML: kind is set twice (first at line 10); keep one",
-        "toml-duplicate-table": "invalid TOML: [terrain] is defined twice (first at line 9); merge the two",
+        "toml-duplicate-table": "invalid TOML: [terrain] names what is defined already (first at line 9)",
         "toml-duplicate-multiline": "invalid TOML: friction is set twice (first at line 14)",
         "terrain-seed-too-big": "must be in [0, 2147483647], got 2147483648",
         "unknown-robot": "valid robots: a1-wx200, go1-arm",

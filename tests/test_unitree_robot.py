@@ -194,6 +194,26 @@ def test_the_link_thread_over_udp_connects_streams_and_closes(emulator: UnitreeE
     assert any(not c.damping for c in log) and log[-1].damping  # it drove the motors, and closed damped
 
 
+def test_a_connect_interrupted_while_it_waits_gives_back_the_link_and_the_address(
+        emulator: UnitreeEmulator, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A Ctrl-C while the connect waits for the first state: the link thread ends and the robot's address is free
+    again, so that a connect in the same process is not refused as held by another (its own pid)."""
+    robot = UnitreeRobot(_config(emulator))
+    wait_until = type(robot._link).wait_until
+
+    def interrupted(link: object, *args: object, **kwargs: object) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(type(robot._link), "wait_until", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        robot.connect()
+    assert not robot.is_connected
+    assert not [t.name for t in threading.enumerate() if t.name.endswith("-link")]  # the link thread ended
+    monkeypatch.setattr(type(robot._link), "wait_until", wait_until)
+    with UnitreeRobot(_config(emulator)) as again:  # the address is free
+        assert again.read() is not None
+
+
 class _NetworkGone:
     """A socket whose network is down while `down` is set: ``sendto`` fails as Linux fails it (ENETUNREACH)."""
 

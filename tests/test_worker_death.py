@@ -76,6 +76,7 @@ def test_a_worker_that_the_pools_own_thread_reaps_is_not_taken_for_a_lingering_o
         return poll(self, flag)
 
     signalled = []
+    monkeypatch.setattr(executors, "_LINGER_S", 600.0)  # a bound only: however loaded the machine, never reached
     monkeypatch.setattr(popen_fork.Popen, "poll", lost_the_reap)
     monkeypatch.setattr(popen_fork.Popen, "terminate", lambda self: signalled.append(self.pid))
     result = _run(tmp_path, ("stand",), "run")

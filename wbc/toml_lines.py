@@ -193,8 +193,9 @@ def syntax_fault(text: str, exc: tomllib.TOMLDecodeError) -> SyntaxFault:
         first = next((n for n in (lines.header(table), lines.key((parent, 0), last)) if n is not None and n < begun),
                      None)
         again = f" (first at line {first})" if first else ""
-        return SyntaxFault(begun, label, f"invalid TOML: {label} is defined twice{again}; merge the two into one "
-                                         "table (https://toml.io)")
+        return SyntaxFault(begun, label, f"invalid TOML: {label} names what is defined already{again}, as a table, "
+                                         "an array of tables or a value; define it once, in one form "
+                                         "(https://toml.io)")
     field = f"{label} {key or ''}".strip()
     first = None if key is None else lines.key(table, key)
     if message.startswith("Duplicate inline table key"):

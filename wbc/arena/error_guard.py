@@ -38,7 +38,7 @@ class ControllerErrors:
         controller: the controller's name.
         errored: its trials recorded with the outcome ``controller_error``.
         recorded: its trials recorded in all.
-        first: the first failure's message (the record's ``error``), in the order the trials finished.
+        first: the first failure's message (the record's ``error``), in the run's order of trials.
         stopped: it was stopped after failing on `limit` trials in a row, with trials left to play.
         limit: the guard's number of consecutive failures (0: never stops).
         not_played: its trials left unplayed because it was stopped (those played beyond its stop are among them).
@@ -84,16 +84,17 @@ class ErrorGuard:
         limit: consecutive failures that stop a controller; 0 never stops one.
         order: the trials' keys (band, seed, trial) in the order the run hands them out, the same for every
             controller. A controller's streak runs along it: a record is counted when every trial before it is.
-            Records of trials not in it are not counted towards a streak.
+            Records of trials not in it are not counted towards a streak. Empty only with a limit of 0.
 
     Raises:
-        ConfigError: a negative limit.
+        ConfigError: a negative limit, or a limit without an order to count along.
     """
 
-    def __init__(self, controllers: Sequence[str], limit: int = DEFAULT_MAX_CONSECUTIVE_ERRORS,
-                 order: Sequence[tuple[str, int, int]] = ()) -> None:
+    def __init__(self, controllers: Sequence[str], limit: int, order: Sequence[tuple[str, int, int]]) -> None:
         if limit < 0:
             raise ConfigError(f"--max-consecutive-errors must be >= 0 (0: never stop a controller), got {limit}")
+        if limit and not order:
+            raise ConfigError("ErrorGuard: a limit of errors in a row needs the run's order of trials to count along")
         self.limit = limit
         self._position = {key: i for i, key in enumerate(order)}
         self._failed: dict[str, dict[int, bool]] = {c: {} for c in controllers}  # position -> failed, not yet counted
@@ -144,7 +145,9 @@ class ErrorGuard:
         out = []
         for controller in self._failed:
             mine = [r for r in records if r.controller == controller and self.counted(r)]
-            errors = [r for r in mine if r.outcome == CONTROLLER_ERROR]
+            # the first in the run's order, not the first to finish: the summary is the same whatever the workers
+            errors = sorted((r for r in mine if r.outcome == CONTROLLER_ERROR),
+                            key=lambda r: self._position.get(r.run_key[1:], len(self._position)))
             if not errors:
                 continue
             stopped = self.stopped(controller) and len(mine) < budget  # not when its last trial stopped it

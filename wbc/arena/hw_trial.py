@@ -71,7 +71,7 @@ from wbc.errors import ConfigError, IoProcessStopped, StandUpError, UnknownNameE
 from wbc.estimation.base_estimate import BaseEstimate
 from wbc.estimation.estimated_robot import EstimatedRobot
 from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
-from wbc.hardware.capabilities import HasLatchedFaults, HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
+from wbc.hardware.capabilities import HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
 from wbc.hardware.dynamixel.arm_fault import ArmFault
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap
@@ -533,7 +533,8 @@ def _link_lost(safe: SafeRobot, started_s: float | None) -> LinkLost | None:
 
 def _latched_faults(robot: object) -> tuple[ArmFault, ...]:
     """The faults the robot's devices latched (its arm's bus), before its close; none for a robot that latches none."""
-    return robot.faults if isinstance(robot, HasLatchedFaults) else ()
+    # by its class: on Python 3.11 an isinstance check of a protocol reads the property, a round trip to the I/O process
+    return robot.faults if isinstance(getattr(type(robot), "faults", None), property) else ()
 
 
 def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
@@ -568,7 +569,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             episode.save(str(path))
         except OSError as exc:
             raise unwritable(path, exc, store.dir, stored=1, resumable=False) from exc
-        guard = ErrorGuard([record.controller], 0)
+        guard = ErrorGuard([record.controller], 0, ())
         guard.observe(record)
         summary = summarize([record], scenario_name=scenario_name, scenario_hash=scenario_hash,
                             controllers=[record.controller], bands=[trial.band], errors=guard.report([record], 1))

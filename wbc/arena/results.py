@@ -410,15 +410,14 @@ class ResultsStore:
                 raise ResultsDirError(f"{self.dir}: --resume with a different configuration (differs in: "
                                       f"{', '.join(diff)}): {_differences(before, now)}; rerun with the original "
                                       "options or another --out")
-            for what, was, given in moved_files(stored, config):
-                print(f"wbc: note: {self.run_path}: {what} is given as {_shown(given)}, the run's was "
-                      f"{_shown(was)}: the same content, so the run resumes, and run.json records the path given",
-                      file=sys.stderr)
+            moved = list(moved_files(stored, config))
             changed = _changed_code(self._stored_controllers, controllers or {})
             if changed:
                 raise ResultsDirError(f"{self.run_path}: --resume with {changed} changed since the run began: its "
                                       "stored trials were played by the earlier one, and a run mixes no two; restore "
                                       "it, or start afresh with another --out")
+        else:
+            moved = []
         self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
             rows = scan_csv(self.trials_path, scenario_hash=self.identity.scenario_hash,
@@ -446,6 +445,10 @@ class ResultsStore:
                     raise holds_results(self.dir, resumable=self.resumable) from None
                 with f:
                     csv.writer(f).writerow(TrialRecord.header())
+        for what, was, given in moved:  # said once the resume is sure to go on
+            print(f"wbc: note: {self.run_path}: {what} is given as {_shown(given)}, the run's was "
+                  f"{_shown(was)}: the same content, so the run resumes, and run.json records the path given",
+                  file=sys.stderr)
         self.environment = provenance()  # what `run.json` records; the report shows the same, taken once
         run = {"config": config, "environment": self.environment}
         if controllers:

@@ -74,12 +74,12 @@ _DEFAULTS: dict[Fault, object] = {
 
 FAULT_VALUES: dict[Fault, tuple[str, float, float, bool]] = {
     Fault.DELAY: ("s", 0.0, 1.0, False), Fault.JITTER: ("s", 0.0, 1.0, False),
-    Fault.DROP: ("probability", 0.0, 1.0, False), Fault.OVER_TEMPERATURE: ("deg C", 0.0, 150.0, True),
+    Fault.DROP: ("probability", 0.0, 1.0, False), Fault.OVER_TEMPERATURE: ("deg C", 0.0, 127.0, True),
     Fault.MOTOR_ERROR: ("mode byte", 0.0, 255.0, True), Fault.FALL: ("rad", 0.0, math.pi, False),
     Fault.BAD_IMU: ("scale", 0.0, 10.0, False),
 }
 """The faults that take one number from the command line (``--fault drop=0.3``): (unit, lowest, highest, whole).
-The lowest is excluded, but for whole numbers."""
+The lowest is excluded, but for whole numbers. A motor's temperature is a signed byte on the wire (at most 127)."""
 
 
 def fault_value(fault: Fault, text: str) -> float | int:

@@ -253,8 +253,12 @@ class UnitreeRobot(Robot):
             except BaseException:
                 self._release_target()
                 raise
-        self._link.start()
-        self._link.wait_until(lambda: self._state is not None, cfg.connect_timeout)
+        try:
+            self._link.start()
+            self._link.wait_until(lambda: self._state is not None, cfg.connect_timeout)
+        except BaseException:  # a Ctrl-C while it waits: the link, its socket and the address are given back
+            self._shutdown(damp=False)
+            raise
         ok = self._state is not None
         if not ok:
             self._shutdown(damp=False)
