@@ -23,10 +23,15 @@ _CACHE: list[str] = []
 
 
 def pytest_configure(config: pytest.Config) -> None:
-    """The suite keeps the robots' drawable parts (`wbc.viz.meshes.robot_parts`) in a cache of its own."""
+    """The suite keeps the robots' drawable parts (`wbc.viz.meshes.robot_parts`) in a cache of its own, and the locks
+    its links take on the emulators' addresses (`wbc.hardware.unitree.target_lock`, one per port) in a runtime
+    directory of its own, removed at its end; the parallel workers, started after, inherit both."""
     if not os.environ.get("WBC_CACHE_DIR"):
         _CACHE.append(tempfile.mkdtemp(prefix="wbc-test-cache-"))
-        os.environ["WBC_CACHE_DIR"] = _CACHE[0]
+        os.environ["WBC_CACHE_DIR"] = _CACHE[-1]
+    if not os.environ.get("WBC_TEST_RUNTIME_DIR"):
+        _CACHE.append(tempfile.mkdtemp(prefix="wbc-test-runtime-"))  # mode 0700, as a runtime directory is
+        os.environ["WBC_TEST_RUNTIME_DIR"] = os.environ["XDG_RUNTIME_DIR"] = _CACHE[-1]
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
