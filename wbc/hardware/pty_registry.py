@@ -22,9 +22,10 @@ from __future__ import annotations
 import json
 import os
 import stat
-import tempfile
 import threading
 from pathlib import Path
+
+from wbc.hardware.user_dirs import is_private_dir, user_runtime_dir
 
 __all__ = ["is_served_pty", "register_pty", "registry_dir", "unregister_pty"]
 
@@ -34,21 +35,7 @@ _LOCK = threading.Lock()
 
 def registry_dir() -> Path:
     """The directory of the cross-process register (not created here)."""
-    runtime = os.environ.get("XDG_RUNTIME_DIR", "")
-    if runtime and os.path.isabs(runtime) and os.path.isdir(runtime):
-        return Path(runtime) / "wbc-ptys"
-    uid = os.getuid() if hasattr(os, "getuid") else 0
-    return Path(tempfile.gettempdir()) / f"wbc-ptys-{uid}"
-
-
-def _trusted(path: Path) -> bool:
-    """True if `path` is a real directory of this user's that no one else may write to."""
-    try:
-        info = os.lstat(path)
-    except OSError:
-        return False
-    owner = os.getuid() if hasattr(os, "getuid") else info.st_uid
-    return stat.S_ISDIR(info.st_mode) and info.st_uid == owner and not info.st_mode & 0o022
+    return user_runtime_dir("wbc-ptys")
 
 
 def _device(port: str) -> int | None:
@@ -102,7 +89,7 @@ def register_pty(port: str) -> bool:
         folder.mkdir(mode=0o700, exist_ok=True)
     except OSError:
         return False
-    if not _trusted(folder):
+    if not is_private_dir(folder):
         return False
     record = {"port": port, "rdev": rdev, "pid": os.getpid(), "start": _process_start(os.getpid())}
     target = folder / f"pty-{rdev}.json"
@@ -148,7 +135,7 @@ def is_served_pty(port: str) -> bool:
         if rdev in _LOCAL:
             return True
     folder = registry_dir()
-    if not _trusted(folder):
+    if not is_private_dir(folder):
         return False
     target = folder / f"pty-{rdev}.json"
     try:

@@ -318,13 +318,7 @@ class ProcessRobot(Robot):
             RobotNotConnectedError: not connected.
             RobotLinkError: the I/O process failed or died.
         """
-        self._require_connected("link_stats")
-        self._check()
-        self._control.send({"op": "link_stats"})
-        reply = self._await("link_stats", timeout=5.0)
-        if isinstance(reply, WbcError):
-            raise reply
-        reply = reply["link_stats"]
+        reply = self._ask("link_stats")["link_stats"]
         pacing = dict(late_advances=self._pacer.late_advances, worst_lateness=self._pacer.worst_lateness)
         legs = LinkStats(**{**reply["legs"], **pacing}) if reply["legs"] is not None else None
         arm = ArmBusStats(**reply["arm"]) if reply["arm"] is not None else None
@@ -339,13 +333,7 @@ class ProcessRobot(Robot):
             RobotNotConnectedError: not connected.
             RobotLinkError: the I/O process failed or died.
         """
-        self._require_connected("faults")
-        self._check()
-        self._control.send({"op": "faults"})
-        reply = self._await("faults", timeout=5.0)
-        if isinstance(reply, WbcError):
-            raise reply
-        return tuple(ArmFault(**{**fault, "ids": tuple(fault["ids"])}) for fault in reply["faults"])
+        return tuple(ArmFault(**{**fault, "ids": tuple(fault["ids"])}) for fault in self._ask("faults")["faults"])
 
     @property
     def realtime_grant(self) -> RealtimeGrant | None:
@@ -407,6 +395,21 @@ class ProcessRobot(Robot):
         self._failure = failure
         self._release()
         raise failure
+
+    def _ask(self, op: str) -> dict:
+        """The I/O process's reply to the request `op` (connected only; its error raised here).
+
+        Raises:
+            RobotNotConnectedError: not connected.
+            RobotLinkError: the I/O process failed or died.
+        """
+        self._require_connected(op)
+        self._check()
+        self._control.send({"op": op})
+        reply = self._await(op, timeout=5.0)
+        if isinstance(reply, WbcError):
+            raise reply
+        return reply
 
     def _await(self, key: str, *, timeout: float) -> dict | WbcError:
         """The reply carrying `key`, or the error the I/O process reported first (returned, not raised).

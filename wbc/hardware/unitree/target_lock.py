@@ -13,12 +13,10 @@ What it cannot see: a link of another user, of another machine, or one that name
 
 from __future__ import annotations
 
-import os
-import stat
-import tempfile
 from pathlib import Path
 
 from wbc.errors import RobotLinkError, TargetInUseError
+from wbc.hardware.user_dirs import is_private_dir, user_runtime_dir
 from wbc.output_files import DirectoryInUse, DirectoryLock, lock_directory
 
 __all__ = ["hold_target", "target_lock_dir"]
@@ -26,23 +24,17 @@ __all__ = ["hold_target", "target_lock_dir"]
 
 def target_lock_dir() -> Path:
     """The directory of the targets' locks (not created here)."""
-    runtime = os.environ.get("XDG_RUNTIME_DIR", "")
-    if runtime and os.path.isabs(runtime) and os.path.isdir(runtime):
-        return Path(runtime) / "wbc-targets"
-    uid = os.getuid() if hasattr(os, "getuid") else 0
-    return Path(tempfile.gettempdir()) / f"wbc-targets-{uid}"
+    return user_runtime_dir("wbc-targets")
 
 
 def _private_dir(path: Path) -> None:
     """Make `path` a directory of this user's that no one else may write to, or refuse it."""
     try:
         path.mkdir(mode=0o700, exist_ok=True)
-        info = os.lstat(path)
     except OSError as exc:
         raise RobotLinkError(f"{path}: cannot make the directory of the robots' address locks "
                              f"({exc.strerror or exc}); set XDG_RUNTIME_DIR to a directory of yours") from None
-    owner = os.getuid() if hasattr(os, "getuid") else info.st_uid
-    if not stat.S_ISDIR(info.st_mode) or info.st_uid != owner or info.st_mode & 0o022:
+    if not is_private_dir(path):
         raise RobotLinkError(f"{path}: not a directory of this user's that only this user may write to, so it cannot "
                              "hold the robots' address locks; remove it, or set XDG_RUNTIME_DIR to a directory of "
                              "yours")
