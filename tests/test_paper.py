@@ -215,6 +215,10 @@ REFUSED_INPUT = {
     "a controller for another robot": (["table2", "--contender", f"learned=policy:{WEIGHTS_DIR}/a1-wx200-actuated"],
                                        "drives a1-wx200"),
     "a plug-in whose factory raises": (["table1", "--contender", "mpc={plugin}"], "no weights for this robot"),
+    "a controller of another arm mode than its row's": (
+        ["table1", "--contender", f"learned=policy:{WEIGHTS_DIR}/a1-wx200-locked"],
+        f"--contender learned=policy:{WEIGHTS_DIR}/a1-wx200-locked: it plays with the arm 'locked', and table1's row "
+        "learned (Actuated) stands for the arm 'actuated'"),
     "--drop-bad-rows without --resume": (["table1", "--drop-bad-rows"], "--drop-bad-rows"),
     "more trials than a run plays": (["table1", "--trials", "100000", "--seeds", "10"], "more than the"),
 }

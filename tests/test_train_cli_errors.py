@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -106,6 +107,10 @@ def test_a_mistyped_teacher_names_the_controllers_and_dry_run_checks_files(tmp_p
     assert "--teacher mcp is neither a controller nor a file" in err and "mpc" in err and "--stage" not in err
     assert main(["train", "--task", "push", "--stage", "2", "--teacher", "mcp", "--dry-run"]) == 2
     assert "--teacher mcp is neither a controller nor a file" in capsys.readouterr().err
+    # with DAgger's own options, the name is what is wrong, not the options (they were said to need a controller)
+    assert main(["train", "--task", "push", "--teacher", "mcp", "--rounds", "1", "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert "--teacher mcp is neither a controller nor a file" in err and "--rounds" not in err
     missing = tmp_path / "student.npz"
     assert main(["train", "--task", "push", "--fine-tune", str(missing), "--dry-run"]) == 2
     assert f"--fine-tune {missing}: no such file" in capsys.readouterr().err
@@ -340,3 +345,21 @@ def test_the_help_names_every_run_directory_and_when_stage_is_not_needed(capsys)
     assert "required unless --teacher names a controller, or with --fine-tune" in text
     assert main(["train", "--task", "push", "--dry-run"]) == 2
     assert "or --fine-tune STUDENT" in capsys.readouterr().err
+
+
+def test_a_stage_refuses_the_export_of_a_previous_stage_that_still_trains(tmp_path, capsys):
+    """Stage 2 started while stage 1 trains would learn from stage 1's latest export, which changes under it (before
+    stage 1's adaptation phase, a policy without its module), and could not be resumed once it had changed."""
+    from wbc.learned.train.preflight import lock_run_dir
+
+    (tmp_path / "push-stage1").mkdir()
+    held = lock_run_dir(tmp_path / "push-stage1")  # the stage-1 run, still training
+    try:
+        for dry in ([], ["--dry-run"]):
+            assert main(["train", "--task", "push", "--stage", "2", "--run-root", str(tmp_path), "--iterations", "1",
+                         "--envs", "2", *dry]) == 2
+            err = capsys.readouterr().err
+            assert f"the teacher {tmp_path / 'push-stage1' / 'policy'} is the export of a run still training" in err
+            assert f"(pid {os.getpid()})" in err and not (tmp_path / "push-stage2").exists()
+    finally:
+        held.release()

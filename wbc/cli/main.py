@@ -679,10 +679,13 @@ def _train(args: argparse.Namespace) -> int:
                                                               "average_labels", "expert_truth", "expert_follows",
                                                               "takeover", "student_layers", "memory_layers")
                    if getattr(args, n) is not None]
+    from wbc.learned.train.preflight import names_a_file
+
     if dagger_only:
+        if args.teacher is not None and not names_a_file(args.teacher):  # a mistyped controller: said as such
+            raise _train_not_a_teacher(args.teacher)
         raise ConfigError(f"{', '.join(dagger_only)}: only with a controller as --teacher (DAgger), e.g. "
                           "--teacher mpc")
-    from wbc.learned.train.preflight import names_a_file
 
     if args.teacher is not None and args.stage is None and not names_a_file(args.teacher):
         raise _train_not_a_teacher(args.teacher)

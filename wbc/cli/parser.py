@@ -689,7 +689,9 @@ def _add_train_parser(sub: _Commands) -> None:
                          "RUN_ROOT/<task>-fine-tune[-expert] (default runs/train)")
     tr.add_argument("--dry-run", action="store_true",
                     help="make every check the run makes before it trains (the run directory, the files it reads, "
-                         "the checkpoint it resumes from), print the resolved configuration and stop")
+                         "the checkpoint it resumes from), print the resolved configuration and stop; a previous "
+                         "stage's policy that is not trained yet is noted, not refused, so that a chain of stages can "
+                         "be checked before any trains (default: off)")
     tr.set_defaults(handler="train")
 
 

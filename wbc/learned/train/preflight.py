@@ -604,6 +604,28 @@ def _unreadable_fix(path: Path) -> str:
             f"before it (training again from iteration {it + 1})")
 
 
+def check_inputs_settled(cfg: TrainConfig, options: Mapping[str, str] | None = None) -> None:
+    """Refuse an input policy file whose run directory another run holds: a run still training, whose export it is.
+
+    Stage 2 started while stage 1 trains would learn from whatever stage 1 exported last (before its adaptation
+    phase, none of it), and its resume would then be refused, the teacher having changed since.
+
+    Raises:
+        ConfigError: naming the input, the option that set it (or the default it is) and the holder's pid.
+    """
+    for field in ("teacher", "init_from", "frozen_legs", "student", "expert_data"):
+        path = getattr(cfg, field, None)
+        if path is None or Path(path).parent.resolve() == Path(cfg.run_dir).resolve():
+            continue
+        held = directory_holder(Path(path).parent)
+        if held is not None:
+            holder = f"pid {held.pid}" if held.pid is not None else "its pid not yet written"
+            given = f" ({(options or {})[field]})" if field in (options or {}) else ""
+            raise ConfigError(f"the {field.replace('_', ' ')}{given} {path} is the export of a run still training in "
+                              f"{Path(path).parent} ({holder}), which replaces it as it trains: wait for that run to "
+                              "end, then start this one")
+
+
 def check_run(cfg: TrainConfig, *, resume: bool, options: Mapping[str, str] | None = None,
               default_input_missing: Callable[[ConfigError], None] | None = None) -> ResumePoint | None:
     """Every check a run makes before it builds its env: its run directory, its input files, its checkpoint.
@@ -625,6 +647,7 @@ def check_run(cfg: TrainConfig, *, resume: bool, options: Mapping[str, str] | No
         NetworkMismatchError: a student that does not read its own history (`student_layout`).
     """
     point = check_run_dir(cfg, resume=resume)
+    check_inputs_settled(cfg, options)
     try:
         check_inputs(cfg, options)
     except ConfigError as exc:

@@ -129,6 +129,13 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
     check_not_held(out)  # before any controller is built
     # checked before the directory is created or taken: a run refused for its input leaves none behind
     plan = plan_arena(arena_cfg)
+    for row in played_rows:  # a row stands for an arm mode: a controller given for it must play with that one
+        mode = plan.specs[row.controller].arm_mode
+        if mode != row.arm_mode:
+            given = f"--contender {row.key}={row.controller}" if row.key in cfg.contenders else row.controller
+            raise ConfigError(f"{given}: it plays with the arm {mode!r}, and {spec.name}'s row {row.key} "
+                              f"({row.row}) stands for the arm {row.arm_mode!r}; give that row a controller of arm "
+                              f"{row.arm_mode!r}")
     # held across the trials and the paper files: a resumed run on the directory must not interleave with them
     with hold_results_dir(out) as lock:
         start = time.perf_counter()

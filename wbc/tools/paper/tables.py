@@ -47,6 +47,8 @@ class Contender:
         family: ``learned`` or ``model-based``.
         controller: the arena controller name it plays; None when it is missing.
         note: what it is (``pi3``), or why it is missing and how to get it.
+        arm_mode: the arm mode its row stands for (``actuated``, ``locked``, ``none``): a controller given for it by
+            ``--contender`` must play with that one.
     """
 
     key: str
@@ -54,6 +56,7 @@ class Contender:
     family: str
     controller: str | None
     note: str
+    arm_mode: str = "actuated"
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -109,14 +112,16 @@ def _arm_rows(crouched: bool = False) -> tuple[Contender, ...]:
     return (
         Contender(key="learned", row="Actuated", family="learned", controller="learned" + suffix, note="pi3" + note),
         Contender(key="learned-locked", row="Locked", family="learned", controller="learned-locked" + suffix,
-                  note="pi2" + note),
+                  note="pi2" + note, arm_mode="locked"),
         Contender(key="learned-noarm", row="No arm", family="learned", controller="learned-noarm" + suffix,
-                  note="pi1" + note),
+                  note="pi1" + note, arm_mode="none"),
         Contender(key="mpc", row="Actuated", family="model-based", controller="mpc", note="MPC"),
         Contender(key="mpc-tail", row="Actuated", family="model-based", controller="mpc-tail",
                   note="MPC, arm as a tail"),
-        Contender(key="mpc-locked", row="Locked", family="model-based", controller="mpc-locked", note="MPC"),
-        Contender(key="mpc-noarm", row="No arm", family="model-based", controller="mpc-noarm", note="MPC"),
+        Contender(key="mpc-locked", row="Locked", family="model-based", controller="mpc-locked", note="MPC",
+                  arm_mode="locked"),
+        Contender(key="mpc-noarm", row="No arm", family="model-based", controller="mpc-noarm", note="MPC",
+                  arm_mode="none"),
     )
 
 
