@@ -382,7 +382,10 @@ def test_a_signal_while_the_command_loads_ends_it_with_one_line(signum: str) -> 
     script = f"""
 import os, signal, sys
 
-signal.signal(signal.SIGHUP, signal.SIG_DFL)  # a command started from a terminal (a suite run under nohup ignores it)
+# as a command started from a terminal has them: a suite run under nohup, or in the background of a script, ignores
+# SIGHUP or SIGINT, and its children inherit that
+signal.signal(signal.SIGHUP, signal.SIG_DFL)
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 class SignalWhileLoading:
     def find_spec(self, name, path=None, target=None):
