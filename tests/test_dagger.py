@@ -457,6 +457,24 @@ def test_a_dagger_run_resumed_after_a_round_wrote_its_student_ends_with_the_unin
     assert all(torch.equal(states[0][k], states[1][k]) for k in states[0])
 
 
+def test_a_resumed_dagger_run_takes_the_options_left_out_from_its_config(tmp_path, monkeypatch, capsys):
+    """As a stage's resume does: a resumed DAgger run is the run it continues, so only what changes is given (here a
+    larger --rounds). It was refused, naming config fields, unless the whole first command was given again."""
+    monkeypatch.chdir(tmp_path)  # MuJoCo may write its log file here
+    from wbc.cli.main import main
+
+    root = str(tmp_path / "runs")
+    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "1", "--episodes", "1", "--episode-s",
+                 "0.1", "--history", "3", "--student-layers", "16", "--memory-layers", "4", "--run-root", root]) == 0
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--teacher", "mpc", "--rounds", "2", "--run-root", root, "--resume"]) == 0
+    out, err = capsys.readouterr()
+    assert ("gave the options not given: --episodes 1, --episode-s 0.1, --seed 0, --expert-noise 0.0, --history 3, "
+            "--student-layers 16, --memory-layers 4") in err
+    progress = json.loads((tmp_path / "runs" / "push-dagger-mpc" / "progress.json").read_text())
+    assert len(progress["rounds"]) == 2 and "2 rounds" in out
+
+
 @pytest.fixture(scope="module")
 def dagger_run(tmp_path_factory) -> Path:
     """A finished one-round, one-episode DAgger run: its run root."""

@@ -772,6 +772,53 @@ def _inherit_saved(args: argparse.Namespace, run_dir: str, env: dict[str, Any], 
     return bool(taken)
 
 
+_DAGGER_OPTIONS = {"rounds": "--rounds", "episodes": "--episodes", "episode_s": "--episode-s", "seed": "--seed",
+                   "expert_noise": "--expert-noise", "average_labels": "--average-labels",
+                   "expert_truth": "--expert-truth", "expert_follows": "--expert-follows", "takeover": "--takeover"}
+"""A DAgger run's `DaggerConfig` fields that options set, with the option."""
+
+_FIT_OPTIONS = {"history": "--history", "hidden_dims": "--student-layers", "adaptation_dims": "--memory-layers"}
+"""The student's `FitConfig` fields that options set, with the option."""
+
+
+def _inherit_saved_dagger(args: argparse.Namespace, run_dir: Path, fields: dict[str, Any],
+                          fit: dict[str, Any]) -> None:
+    """Fill `fields` and `fit` with a resumed DAgger run's saved settings that its command line leaves out.
+
+    As a stage's resume does (`_inherit_saved`): a resumed run is the run it continues, so an option left out takes
+    its ``config.json``'s value, said in ``args.resume_note``. A saved setting no option sets (the student's fit
+    beyond its sizes, DAgger's beta) is taken too. A file that cannot be read gives nothing: the run's own check
+    then says what is wrong with it.
+    """
+    try:
+        saved = json.loads((run_dir / "config.json").read_text(encoding="utf-8"))["dagger_config"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    if not isinstance(saved, dict):
+        return
+    taken: dict[str, object] = {}
+    for key, option in _DAGGER_OPTIONS.items():
+        if key not in fields and key in saved and saved[key] is not None:
+            fields[key] = saved[key]
+            taken[option] = saved[key]
+    if "beta" in saved:
+        fields["beta"] = saved["beta"]
+    saved_fit = saved.get("fit")
+    if isinstance(saved_fit, dict):
+        given_fit = set(fit)
+        for key, value in saved_fit.items():
+            if key not in given_fit:
+                fit[key] = tuple(value) if isinstance(value, list) else value
+        for key, option in _FIT_OPTIONS.items():
+            if key not in given_fit and key in saved_fit:
+                value = saved_fit[key]
+                taken[option] = ",".join(str(v) for v in value) if isinstance(value, list) else value
+    # a flag is said as given (or not at all, when it was off), as the command line would give it
+    said = [option if value is True else f"{option} {value}" for option, value in taken.items() if value is not False]
+    if said:
+        args.resume_note = f"--resume: {run_dir / 'config.json'} gave the options not given: {', '.join(said)}"
+
+
 def _print_resume_note(args: argparse.Namespace) -> None:
     """Say which options a resumed run took from its config.json (`_inherit_saved`), if any."""
     note = getattr(args, "resume_note", None)
@@ -886,21 +933,25 @@ def _distil(args: argparse.Namespace) -> int:
               if v is not None}
     fit = {k: v for k, v in (("history", args.history), ("hidden_dims", args.student_layers),
                              ("adaptation_dims", args.memory_layers)) if v is not None}
+    run_dir = Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"
+    if args.resume:
+        _inherit_saved_dagger(args, run_dir, fields, fit)
     if fit:
         from wbc.learned.train.distill import FitConfig
 
         fields["fit"] = FitConfig(**fit)
-    cfg = DaggerConfig(task=args.task, expert=args.teacher,
-                       run_dir=str(Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"), **fields)
+    cfg = DaggerConfig(task=args.task, expert=args.teacher, run_dir=str(run_dir), **fields)
     from wbc.learned.train.preflight import check_unlocked
 
     check_unlocked(cfg.run_dir)  # another run on it: refused, by the dry run too (the run itself then locks it)
     if args.dry_run:
         check_dagger_run(cfg, resume=args.resume)  # every check the run makes before its first round
+        _print_resume_note(args)
         printers.print_json(dataclasses.asdict(cfg))
         return 0
     args.training = ("dagger", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
-    result = run_dagger(cfg, resume=args.resume, log=print)
+    # the note is said once the run is checked, before its rounds (which may take hours)
+    result = run_dagger(cfg, resume=args.resume, log=print, checked=lambda: _print_resume_note(args))
     if result["trained"] == 0:
         done = result["rounds"]
         print(f"{result['run_dir']} already holds {done} DAgger round{'s' if done != 1 else ''}, no fewer than "

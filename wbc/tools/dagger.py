@@ -459,7 +459,8 @@ def check_dagger_run(cfg: DaggerConfig, *, resume: bool) -> DaggerStart:
                        episode=episode, net=net)
 
 
-def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> dict[str, Any]:
+def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None,
+               checked: Callable[[], object] | None = None) -> dict[str, Any]:
     """Run DAgger rounds and export the student after each.
 
     Args:
@@ -467,6 +468,7 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
         resume: continue after the last finished round in ``cfg.run_dir`` (its config must be the same but for
             ``rounds``).
         log: called with one line of progress per round (e.g. `print`), or None.
+        checked: called once the run's checks have passed, before its first round (the command's resume note).
 
     Returns:
         The run's summary: ``rounds`` (finished in all), ``trained`` (in this call: 0 when a resumed run already held
@@ -481,6 +483,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None) -> d
     """
     # the checks `wbc train --dry-run` makes, under the lock
     with locked_run_dir(cfg.run_dir, lambda: check_dagger_run(cfg, resume=resume)) as start:
+        if checked is not None:
+            checked()
         return _run_rounds(cfg, start, resume=resume, log=log)
 
 
