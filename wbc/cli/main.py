@@ -781,6 +781,11 @@ _FIT_OPTIONS = {"history": "--history", "hidden_dims": "--student-layers", "adap
 """The student's `FitConfig` fields that options set, with the option."""
 
 
+def _dest(option: str) -> str:
+    """The parsed arguments' attribute of `option` (``--episode-s`` -> ``episode_s``)."""
+    return option.removeprefix("--").replace("-", "_")
+
+
 def _inherit_saved_dagger(args: argparse.Namespace, run_dir: Path, fields: dict[str, Any],
                           fit: dict[str, Any]) -> None:
     """Fill `fields` and `fit` with a resumed DAgger run's saved settings that its command line leaves out.
@@ -925,14 +930,8 @@ def _distil(args: argparse.Namespace) -> int:
     # torch loads only when a run really trains
     from wbc.tools.dagger import DaggerConfig, check_dagger_run, run_dagger
 
-    fields = {k: v for k, v in (("rounds", args.rounds), ("episodes", args.episodes),
-                                ("episode_s", args.episode_s), ("seed", args.seed),
-                                ("expert_noise", args.expert_noise), ("average_labels", args.average_labels),
-                                ("expert_truth", args.expert_truth), ("expert_follows", args.expert_follows),
-                                ("takeover", args.takeover))
-              if v is not None}
-    fit = {k: v for k, v in (("history", args.history), ("hidden_dims", args.student_layers),
-                             ("adaptation_dims", args.memory_layers)) if v is not None}
+    fields, fit = ({key: getattr(args, _dest(option)) for key, option in options.items()
+                    if getattr(args, _dest(option)) is not None} for options in (_DAGGER_OPTIONS, _FIT_OPTIONS))
     run_dir = Path(args.run_root) / f"{args.task}-dagger-{args.teacher}"
     if args.resume:
         _inherit_saved_dagger(args, run_dir, fields, fit)

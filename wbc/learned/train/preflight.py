@@ -613,6 +613,7 @@ def check_inputs_settled(cfg: TrainConfig, options: Mapping[str, str] | None = N
     Raises:
         ConfigError: naming the input, the option that set it (or the default it is) and the holder's pid.
     """
+    options = options or {}
     for field in ("teacher", "init_from", "frozen_legs", "student", "expert_data"):
         path = getattr(cfg, field, None)
         if path is None or Path(path).parent.resolve() == Path(cfg.run_dir).resolve():
@@ -620,7 +621,7 @@ def check_inputs_settled(cfg: TrainConfig, options: Mapping[str, str] | None = N
         held = directory_holder(Path(path).parent)
         if held is not None:
             holder = f"pid {held.pid}" if held.pid is not None else "its pid not yet written"
-            given = f" ({(options or {})[field]})" if field in (options or {}) else ""
+            given = f" ({options[field]})" if field in options else ""
             raise ConfigError(f"the {field.replace('_', ' ')}{given} {path} is the export of a run still training in "
                               f"{Path(path).parent} ({holder}), which replaces it as it trains: wait for that run to "
                               "end, then start this one")
