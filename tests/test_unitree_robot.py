@@ -814,6 +814,64 @@ def test_lockstep_is_deterministic(robot_name: str) -> None:
 
 
 
+def _queued_bytes(port: int) -> int:
+    """The bytes waiting in the receive queue of the UDP socket bound to 127.0.0.1:`port` (Linux's /proc/net/udp)."""
+    with open("/proc/net/udp") as table:
+        for line in table.readlines()[1:]:
+            local, queues = line.split()[1], line.split()[4]
+            if local == f"0100007F:{port:04X}":
+                return int(queues.split(":")[1], 16)
+    raise AssertionError(f"no UDP socket on 127.0.0.1:{port}")
+
+
+def test_the_emulator_logs_how_many_frames_its_socket_dropped_before_each() -> None:
+    """A starved emulator thread (held here by its own lock, as a busy machine holds it off the CPU) finds its socket's
+    buffer full: the kernel drops what does not fit. Each logged frame keeps the count of those dropped before it, so a
+    frame's place in what its sender sent is known: a test that reads the wire by the link's own frame count (the I/O
+    process's closing test) relied on a log that could silently skip frames."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep", receive_buffer=65536)) as emu:
+        def frame(k: int) -> bytes:  # motor 0's position target numbers the frame (a float32 on the wire; Kp is 0)
+            q = np.zeros(12)
+            q[0] = k * 1e-4
+            return encode_command(emu.layout, MotorCommand(q=q, dq=np.zeros(12), kp=np.zeros(12), kd=np.ones(12),
+                                                           tau=np.zeros(12)))
+
+        count = 2000  # 1.2 MB: past the buffer asked for, which the kernel doubles
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            sender.sendto(frame(0), emu.address)
+            for _ in range(500):  # bounded (5 s): the first frame is taken
+                if emu.commands():
+                    break
+                time.sleep(0.01)
+            with emu._lock:  # the thread stops at its next frame, holding it; the rest queue, then overflow
+                sender.setblocking(False)
+                for k in range(1, count):
+                    try:
+                        sender.sendto(frame(k), emu.address)
+                    except BlockingIOError:  # this side's own buffer full: wait for the kernel to pass it on
+                        time.sleep(0.001)
+                        sender.setblocking(True)
+                        sender.sendto(frame(k), emu.address)
+                        sender.setblocking(False)
+            for _ in range(3000):  # bounded (30 s): the emulator takes what its socket kept
+                if _queued_bytes(emu.address[1]) == 0:
+                    break
+                time.sleep(0.01)
+            sender.setblocking(True)
+            sender.sendto(frame(count), emu.address)  # then one more
+            for _ in range(3000):  # bounded (30 s)
+                log = emu.commands()
+                if log and round(log[-1].wire.q[0] * 1e4) == count:
+                    break
+                time.sleep(0.01)
+        log = emu.commands()
+        assert emu.failure is None
+    numbers = [round(c.wire.q[0] * 1e4) for c in log]
+    assert numbers[-1] == count  # the last frame sent was kept: the buffer had room again
+    assert emu.dropped > 0 and emu.dropped == log[-1].dropped_before and len(log) + emu.dropped == count + 1
+    assert [k + c.dropped_before for k, c in enumerate(log)] == numbers  # each frame's place in what was sent
+
+
 def test_emulator_gives_no_torque_to_what_a_motor_cannot_apply() -> None:
     clock = ManualClock()
     emu = UnitreeEmulator(UnitreeEmulatorConfig(robot="go1"))

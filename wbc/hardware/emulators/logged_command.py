@@ -21,11 +21,15 @@ class LoggedCommand:
             server, the test's clock behind an in-process `EmulatorTransport`) [s].
         sim_time: the emulated robot's simulation time when it arrived [s].
         wire: the frame's leg-motor block, dequantised.
+        dropped_before: datagrams the emulator's socket dropped, its receive buffer full, before this one arrived
+            (the kernel's count, on Linux; 0 elsewhere and in process). A frame's place in what its sender sent is
+            its place in the log plus this, when one sender sent them all.
     """
 
     time: float
     sim_time: float
     wire: WireCommand
+    dropped_before: int = 0
 
     @property
     def damping(self) -> bool:

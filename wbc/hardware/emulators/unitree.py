@@ -27,6 +27,8 @@ import math
 import random
 import select
 import socket
+import struct
+import sys
 import threading
 from dataclasses import dataclass
 
@@ -50,6 +52,10 @@ __all__ = ["LEG_ONLY_ARM_MODES", "MODES", "EmulatorTransport", "Reply", "Unitree
 
 MODES = ("lockstep", "realtime")
 _POLL = 0.01  # [s] longest the emulator thread blocks, so `close` is prompt
+# Linux's socket option that hands each datagram the count of those the socket has dropped (its buffer full) so far,
+# which Python's socket module does not name: the log keeps it, so that a dropped frame is known, not guessed.
+_SO_RXQ_OVFL = 40 if sys.platform.startswith("linux") else None
+_DROP_COUNT_SPACE = socket.CMSG_SPACE(4)
 
 
 LEG_ONLY_ARM_MODES = ("none", "locked")
@@ -87,6 +93,10 @@ class UnitreeEmulatorConfig:
         log_size: most recent decoded commands kept; 0 keeps none (a long log is thousands of objects that each
             full garbage collection traverses, stalling the replies).
         seed: seed of the simulation and of the DROP fault's coin.
+        receive_buffer: the UDP server's receive buffer [bytes], asked of the kernel, which caps it at its own limit
+            (net.core.rmem_max) and doubles it for its bookkeeping. The default holds seconds of a link's frames while
+            a busy machine keeps the emulator's thread off the CPU; a small one has it drop frames sooner, as a
+            robot's board with its small buffer does.
         held_until_driven: the robot is held at its spawn pose (the physics waits; states are still sent), as an
             operator or a harness holds a real robot, until the first command that drives a motor (Kp > 0 or a
             torque); `reset` holds it again. Without it, an idle robot with its motors off folds to its joint stops
@@ -102,6 +112,7 @@ class UnitreeEmulatorConfig:
     motor_temperature: int = 35
     log_size: int = 100_000
     seed: int = 0
+    receive_buffer: int = 4 << 20
     held_until_driven: bool = False
 
     def __post_init__(self) -> None:
@@ -114,6 +125,9 @@ class UnitreeEmulatorConfig:
             raise UnknownNameError("emulator mode", self.mode, MODES)
         if not is_loopback(self.host):
             raise ConfigError(f"UnitreeEmulatorConfig.host {self.host!r}: an emulator binds 127.0.0.0/8 only")
+        if not 4096 <= self.receive_buffer <= 1 << 30:
+            raise ConfigError(f"UnitreeEmulatorConfig.receive_buffer must be in [4096, 2**30] bytes, got "
+                              f"{self.receive_buffer}")
         if not 0 < self.control_period <= 0.01:
             raise ConfigError(f"UnitreeEmulatorConfig.control_period must be in (0, 0.01] s, got "
                               f"{self.control_period}")
@@ -139,6 +153,7 @@ class UnitreeEmulator:
         self.last_reject = ""  # the latest rejected LowCmd's reason, empty until one is rejected
         self.refused = 0  # valid frames whose gains a motor cannot apply (negative): the motors got no torque
         self.replies = 0  # state datagrams sent
+        self.dropped = 0  # datagrams the server's socket dropped, its buffer full, as of the latest one it took
         self.faults = FaultSet()
         self._log: collections.deque[LoggedCommand] = collections.deque(maxlen=self.config.log_size)
         self._lock = threading.Lock()
@@ -190,6 +205,12 @@ class UnitreeEmulator:
             raise RobotLinkError(f"UnitreeEmulator: cannot bind {self.config.host}:{self.config.port}: {exc}; "
                                  "port 0 picks a free one") from None
         sock.setblocking(False)
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, self.config.receive_buffer)
+            if _SO_RXQ_OVFL is not None:
+                sock.setsockopt(socket.SOL_SOCKET, _SO_RXQ_OVFL, 1)
+        except OSError:  # a kernel without them: the default buffer, and drops not counted
+            pass
         foreign = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         foreign.bind((self.config.host, 0))
         self._sock, self._foreign = sock, foreign
@@ -329,7 +350,8 @@ class UnitreeEmulator:
                 self.refused += 1
         with self._lock:
             if self.config.log_size:
-                self._log.append(LoggedCommand(time=self.clock.now(), sim_time=self.sim.time, wire=wire))
+                self._log.append(LoggedCommand(time=self.clock.now(), sim_time=self.sim.time, wire=wire,
+                                               dropped_before=self.dropped))
             self.sim.write(cmd)
             if self._held and (np.any(cmd.kp > 0) or np.any(cmd.tau != 0)):
                 self._held = False
@@ -404,11 +426,14 @@ class UnitreeEmulator:
     def _drain(self, sock: socket.socket, *, step: bool) -> None:
         for _ in range(256):
             try:
-                data, peer = sock.recvfrom(MAX_DATAGRAM)
+                data, ancillary, _, peer = sock.recvmsg(MAX_DATAGRAM, _DROP_COUNT_SPACE)
             except (BlockingIOError, InterruptedError):
                 return
             except ConnectionRefusedError:
                 continue
+            for level, kind, value in ancillary:
+                if level == socket.SOL_SOCKET and kind == _SO_RXQ_OVFL and len(value) >= 4:
+                    self.dropped = struct.unpack("I", value[:4])[0]
             if not self.handle_command(data, step=step):
                 continue
             self._peer = peer[:2]
