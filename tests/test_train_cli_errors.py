@@ -191,6 +191,25 @@ def test_a_resume_takes_the_options_not_given_from_the_run_and_names_a_changed_n
     assert "Traceback" not in err
 
 
+def test_a_resumed_stage_says_which_options_it_took_before_it_trains(stage1_run, tmp_path, capsys, monkeypatch):
+    """The note comes once the run's checks pass, before anything is built: it came at the run's end, after hours."""
+    import wbc.learned.train.train as train_module
+
+    root = _copy(stage1_run, tmp_path)
+    said_before: list[str] = []
+    real = train_module._train
+
+    def training(cfg, point):
+        said_before.append(capsys.readouterr().err)
+        return real(cfg, point)
+
+    monkeypatch.setattr(train_module, "_train", training)
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", "--run-root", str(root), "--resume"]) == 0
+    assert len(said_before) == 1 and said_before[0].count("gave the options not given") == 1
+    assert "gave the options not given" not in capsys.readouterr().err  # said once
+
+
 def test_a_resume_refuses_a_teacher_whose_weights_changed_since_the_run_began(stage1_run, tmp_path, monkeypatch):
     from wbc.learned.train.preflight import check_run_dir, input_files
     from wbc.learned.train.stages import stage_config

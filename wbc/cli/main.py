@@ -825,10 +825,11 @@ def _inherit_saved_dagger(args: argparse.Namespace, run_dir: Path, fields: dict[
 
 
 def _print_resume_note(args: argparse.Namespace) -> None:
-    """Say which options a resumed run took from its config.json (`_inherit_saved`), if any."""
+    """Say which options a resumed run took from its config.json (`_inherit_saved`), if any; once."""
     note = getattr(args, "resume_note", None)
     if note:
         print(f"wbc: note: {note}", file=sys.stderr)
+        args.resume_note = None
 
 
 def _train_not_a_teacher(name: str) -> ConfigError:
@@ -869,8 +870,7 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
 
     args.training = ("ppo", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
 
-    result = train(cfg, resume=args.resume, options=options)
-    _print_resume_note(args)
+    result = train(cfg, resume=args.resume, options=options, checked=lambda: _print_resume_note(args))
     if result.get("trained", 1) == 0:
         print(f"{result['run_dir']} already holds {result['iterations']} iterations, no fewer than --iterations "
               f"{cfg.max_iterations}: nothing new trained; its newest checkpoint is exported as it is (pass a larger "

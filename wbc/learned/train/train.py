@@ -22,7 +22,7 @@ import dataclasses
 import json
 import os
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -223,7 +223,8 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
         raise KeyboardInterrupt
 
 
-def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None) -> dict[str, Any]:
+def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None,
+          checked: Callable[[], object] | None = None) -> dict[str, Any]:
     """Train (or resume) one run.
 
     Args:
@@ -232,6 +233,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
             `_RESUMABLE` fields (train longer with a larger max_iterations).
         options: the options of ``wbc train`` that set its input files (``{"teacher": "--teacher"}``), named when
             one is refused (`wbc.learned.train.preflight.check_inputs`).
+        checked: called once the run's checks have passed, before anything is built or trained (the command's
+            resume note).
 
     Returns:
         ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
@@ -249,8 +252,13 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
         KeyboardInterrupt: Ctrl-C; during PPO, once the iteration in progress has ended and its checkpoint is saved
             (`_learn`).
     """
-    # the checks `wbc train --dry-run` makes, under the lock
-    with locked_run_dir(cfg.run_dir, lambda: check_run(cfg, resume=resume, options=options)) as point:
+    def check() -> ResumePoint | None:  # the checks `wbc train --dry-run` makes, under the lock
+        point = check_run(cfg, resume=resume, options=options)
+        if checked is not None:
+            checked()
+        return point
+
+    with locked_run_dir(cfg.run_dir, check) as point:
         return _train(cfg, point)
 
 
