@@ -366,6 +366,23 @@ def test_stand_rides_out_a_gentle_push_and_falls_under_a_strong_one():
     assert strong.max_roll_deg > 45 > quiet.max_roll_deg
 
 
+def test_a_trial_that_ends_with_the_robot_upside_down_in_the_air_is_a_fall_at_its_end():
+    """A push up and off-centre flings the robot over; the trial ends before it lands, nothing but its feet touched
+    the ground: success by the contact rule alone (it was so reported, the trunk rolled 175 degrees). Given a second
+    more, it lands on its back, a fall by contact."""
+    base = dataclasses.replace(load_scenario(SCENARIOS_DIR / "push.toml").trial("in", 0, 0), duration_s=1.3)
+    fling = Push(force_in_world=np.array([0.0, 0.0, 1000.0]), offset_in_base=np.array([0.0, 0.3, 0.0]), start=1.0,
+                 duration=0.1)
+    flung, flung_ep = run_trial(dataclasses.replace(base, pushes=(fling,)), "stand")
+    assert not flung.success and flung.outcome == "fall" and flung_ep.fell
+    assert flung.fall_time_s == pytest.approx(1.3) and flung_ep.t[-1] == pytest.approx(1.3)
+    assert flung.max_roll_deg > 90
+    landed, _ = run_trial(dataclasses.replace(base, pushes=(fling,), duration_s=4.0), "stand")
+    assert not landed.success and 1.3 < landed.fall_time_s < 4.0
+    quiet, _ = run_trial(dataclasses.replace(base, pushes=()), "stand")
+    assert quiet.success and math.isnan(quiet.fall_time_s)
+
+
 def test_cli_reports_broken_scenarios_without_traceback(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text(SMALL.replace("duration_s = 0.05", "duration_s = -0.05"))

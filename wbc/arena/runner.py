@@ -8,18 +8,18 @@ command lay outside the robot's motor limits, which the robot clamped before sen
 controller that asks for 1e5 N m is told so in the results, not silently saturated.
 
 Where the base's true state comes from and how a fall is detected are capabilities of the robot
-(`wbc.hardware.capabilities.TruthSource`, `FallDetector`: the simulator has both, a real robot may have motion
-capture), or are handed in by the caller. Falls are checked at the control rate; a fall keeps the trunk on the ground
-for far longer than a control period, so none is missed. Setting a simulated trial up (robot, terrain, pushes) and
-turning its episode into a record is `wbc.arena.sim_trial`. A robot behind a safety layer (`HasSafetyEvents`) has
-the layer's transitions during the episode logged in it (`Episode.safety_events`). A controller that raises, or
-returns a command the robot refuses, ends the episode with a `ControllerFailure` that says where (and, for a command
-of the joints of another arm mode, how to declare that mode: `wbc.control.arm_mode_hint`) and carries the episode so
-far. Given a `DivergenceCheck` (a simulated trial's), the loop checks the joints the robot reports before
-each ``act``, the trunk's truth and the simulator's own warnings (`SimulatorHealth`) after each step, and ends an
-episode whose simulation blew up with `SimulationDiverged` (its own outcome, never numbers in the means). A
-controller whose period is longer than the episode would never be asked to act: that is refused before the episode
-starts.
+(`wbc.hardware.capabilities.TruthSource`, `FallDetector`: the simulator has both, a real robot may have motion capture),
+or are handed in by the caller. Falls are checked at the control rate; a fall keeps the trunk on the ground for far
+longer than a control period, so none is missed. An episode that ends with the trunk upside down (flung into the air by
+a push, not yet landed) ends in a fall at its last tick. Setting a simulated trial up (robot, terrain, pushes) and
+turning its episode into a record is `wbc.arena.sim_trial`. A robot behind a safety layer (`HasSafetyEvents`) has the
+layer's transitions during the episode logged in it (`Episode.safety_events`). A controller that raises, or returns a
+command the robot refuses, ends the episode with a `ControllerFailure` that says where (and, for a command of the joints
+of another arm mode, how to declare that mode: `wbc.control.arm_mode_hint`) and carries the episode so far. Given a
+`DivergenceCheck` (a simulated trial's), the loop checks the joints the robot reports before each ``act``, the trunk's
+truth and the simulator's own warnings (`SimulatorHealth`) after each step, and ends an episode whose simulation blew up
+with `SimulationDiverged` (its own outcome, never numbers in the means). A controller whose period is longer than the
+episode would never be asked to act: that is refused before the episode starts.
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ from wbc.control.protocol import Controller
 from wbc.errors import CONTROLLER_ERRORS, CommandError, ConfigError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, SimulatorHealth, TruthSource
 from wbc.hardware.robot import Robot, command_bounds, exceeded_rows, within_bounds
+from wbc.robots.conventions import upside_down
 from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, MotorCommand, VelocityCommand
@@ -88,7 +89,7 @@ def run_episode(
         truth: returns the base's true state (motion capture, say); default: the robot's own, if it is a
             `TruthSource`.
         fallen: returns True when the trunk or a non-foot link touches the ground; default: the robot's own, if it
-            is a `FallDetector`.
+            is a `FallDetector`. (The truth's trunk upside down at the last tick is a fall there too.)
         observer: called after every tick (e.g. a viewer); None costs nothing.
         divergence: check every tick that the simulation has not blown up (a few NumPy reductions per tick), and,
             if the robot is a `SimulatorHealth`, that the simulator did not reset itself after a failed step;
@@ -186,6 +187,11 @@ def run_episode(
         if fallen():
             fell, fall_time = True, (k + 1) * dt
             break
+    else:
+        # a trunk upside down at the end has not survived, touching the ground or not (flung into the air by a push,
+        # the trial ended before it landed): a fall at the last tick
+        if upside_down(now.base_quat):
+            fell, fall_time = True, n * dt
     events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
     return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time, safety_events=events,
                       clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))

@@ -19,7 +19,7 @@ import numpy as np
 from wbc.errors import ConfigError
 
 __all__ = ["G", "GRAVITY", "ROOT_JOINT", "JointIndexMap", "quat_to_matrices", "quat_to_matrix", "quat_wxyz_to_xyzw",
-           "quat_xyzw_to_wxyz"]
+           "quat_xyzw_to_wxyz", "upside_down"]
 
 ROOT_JOINT = "root"
 G = 9.81
@@ -47,6 +47,15 @@ def quat_to_matrix(q_wxyz: np.ndarray) -> np.ndarray:
         2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
         2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
     ]).reshape(3, 3)
+
+
+def upside_down(q_wxyz: np.ndarray) -> bool:
+    """Whether a trunk of orientation `q_wxyz` (a unit quaternion, body to world) is upside down.
+
+    Upside down: its up axis points below the horizon. The up axis's height in the world is 1 - 2 (x^2 + y^2).
+    """
+    x, y = float(q_wxyz[1]), float(q_wxyz[2])
+    return x * x + y * y > 0.5
 
 
 def quat_to_matrices(quat_wxyz: np.ndarray) -> np.ndarray:
