@@ -413,7 +413,8 @@ def _shut_down(pool: ProcessPoolExecutor, *, broken: bool = False) -> None:
     reaper.join(timeout=_LINGER_S)
     if lingering and not broken:
         print(f"wbc: warning: {len(lingering)} worker process(es) still ran {_LINGER_S:g} s after their trials "
-              "ended (a thread a controller started and left running?) and were stopped", file=sys.stderr)
+              "ended and were stopped; every trial's record is kept. A thread a controller started and left running "
+              "keeps its worker alive; so can a machine too busy for the worker to exit in time", file=sys.stderr)
 
 
 def _running(processes: Iterable[multiprocessing.process.BaseProcess]) -> list[multiprocessing.process.BaseProcess]:
