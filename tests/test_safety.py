@@ -190,6 +190,8 @@ def test_unsafe_start_begins_at_the_measured_pose_and_ramps_without_a_jump():
         distance = np.abs(log[1][0] - cmd.q).max()
         assert len(log) * DT >= distance / safe.config.ramp_slew
         assert [e.reason for e in events] == ["fresh_state", "ramp_done"]
+        # the printed line says what was reached, in a whole sentence
+        assert events[-1].detail == "the ramp reached the controller's own command (its targets and gains)"
         _drive(safe, cmd, 50)
         truth = robot.sim_truth()
         assert truth.base_position_in_world[2] > 0.2 and truth.ground_contact_bodies == ()  # it stood up

@@ -255,7 +255,8 @@ class SafeRobot(Robot):
                 out = self._limit_positions(out)  # the controller's target plus the closing gap may leave the table
                 if done:
                     self._ramp = None
-                    self._transition(SafetyState.RUN, "ramp_done", "the targets reached the controller's")
+                    self._transition(SafetyState.RUN, "ramp_done",
+                                     "the ramp reached the controller's own command (its targets and gains)")
         elif self._state is SafetyState.RUN:
             out = self._limit_positions(cmd)
         else:

@@ -113,6 +113,14 @@ def display_name(contender: Contender) -> str:
     return f"{contender.controller} ({stage})" if stage in ("pi1", "pi2", "pi3") else contender.controller
 
 
+def _estimate_note(result: PaperTableResult) -> str:
+    """What the run-time estimate leaves out, or that it counts compiling (too few trials to leave it out)."""
+    if result.estimate_includes_compile:
+        return (" (from each worker's first trials, which compile the numba code on a fresh machine: play more "
+                "trials than workers for an estimate without it)")
+    return " (each worker's first trial of a controller left out: it may compile the numba code)"
+
+
 def _names(result: PaperTableResult) -> dict[str, str]:
     """Controller name -> its `display_name` in this table."""
     return {c.controller: display_name(c) for c in result.contenders if c.controller is not None}
@@ -197,7 +205,7 @@ def format_paper_table(result: PaperTableResult) -> str:
                    f"worker{'s' if result.workers != 1 else ''}){resumed_note(result.played, result.stored)}; mean "
                    f"wall time per trial: {per_trial}. The paper's "
                    f"protocol (2000 trials per band and contender) would take about "
-                   f"{result.paper_protocol_cpu_h:.0f} CPU hours here.")
+                   f"{result.paper_protocol_cpu_h:.0f} CPU hours here{_estimate_note(result)}.")
     lines += [f"results: {result.out_dir}/ (paper.txt, paper.json, report.md, trials.csv, summary.json, "
               "failures.json, plots)"]
     return "\n".join(lines) + "\n"

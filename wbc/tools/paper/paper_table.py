@@ -20,6 +20,7 @@ results pages give measured run times); the paper's protocol is 5 seeds and 2000
 from __future__ import annotations
 
 import json
+import os
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -33,7 +34,7 @@ from wbc.errors import ConfigError, UnknownNameError
 from wbc.output_files import write_text
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.tools.paper.format import format_paper_table
-from wbc.tools.paper.result import PAPER_TRIALS_PER_BAND, PaperComparison, PaperTableResult
+from wbc.tools.paper.result import PAPER_TRIALS_PER_BAND, PaperComparison, PaperTableResult, warm_trial_wall_s
 from wbc.tools.paper.tables import TABLES, resolve_contenders
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TRIALS", "PAPER_TRIALS_PER_BAND", "PaperRunConfig", "PaperTableResult",
@@ -158,13 +159,17 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
                     pair = compare_pair(cell_a, cell_b, a=contrast.a, b=contrast.b, band=band, metric=metric)
                     comparisons.append(PaperComparison(question=contrast.question, pair=pair))
         wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}
+        workers = cfg.workers or os.cpu_count() or 1  # the local pool's size (`wbc.arena.executors.LocalExecutor`)
+        warm_by = {c: w for c, rs in by_controller.items()
+                   if (w := warm_trial_wall_s([r.wall_s for r in rs], workers)) is not None}
         result = PaperTableResult(
             spec=spec, contenders=contenders,
             scenario={"name": scenario.name, "version": scenario.version, "path": str(scenario_path),
                       "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
             bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
             comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
-            trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, stored=len(records), wall_s=wall,
+            trial_wall_s=wall_by, warm_wall_s=warm_by, out_dir=arena.out_dir, played=arena.played, stored=len(records),
+            wall_s=wall,
             workers=cfg.workers, controller_errors=arena.controller_errors)
         try:
             write_text(arena.out_dir / "paper.txt", format_paper_table(result))

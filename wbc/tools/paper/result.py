@@ -6,6 +6,7 @@ neither of the two imports the other.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,10 +15,29 @@ from wbc.arena.error_guard import ControllerErrors
 from wbc.arena.summary import PairSummary, Summary
 from wbc.tools.paper.tables import Contender, PaperTableSpec
 
-__all__ = ["PAPER_TRIALS_PER_BAND", "PaperComparison", "PaperTableResult"]
+__all__ = ["PAPER_TRIALS_PER_BAND", "PaperComparison", "PaperTableResult", "warm_trial_wall_s"]
 
 PAPER_TRIALS_PER_BAND = 2000
 """The paper's trials per band and contender (over its 5 seeds), for the run-time estimate printed with each table."""
+
+
+def warm_trial_wall_s(walls: Sequence[float], workers: int) -> float | None:
+    """The mean wall time per trial of one controller, each worker's first trial of it left out [s].
+
+    A process's first trial of a controller builds it, and on a fresh machine compiles its numba code (tens of
+    seconds, against seconds for a trial that loads the compiled code); a worker plays that trial once, not once per
+    trial, so the run-time estimate leaves it out. Which trial a worker played first is not recorded; the compiling
+    one is the slowest, so the `workers` slowest are left out (at most one per worker).
+
+    Args:
+        walls: the wall time of each of the controller's trials [s].
+        workers: worker processes that played them.
+
+    Returns:
+        The mean of the others, or None when no trial is left (every one may have been a worker's first).
+    """
+    rest = sorted(walls)[:len(walls) - max(workers, 1)]
+    return sum(rest) / len(rest) if rest else None
 
 
 @dataclass(frozen=True)
@@ -54,6 +74,8 @@ class PaperTableResult:
         failures: the arena's breakdown of where each contender fails (`wbc.arena.breakdown.breakdown`).
         curve: the push-recovery curve (`wbc.arena.breakdown.recovery_curve`).
         trial_wall_s: each controller's mean wall time per trial [s].
+        warm_wall_s: each controller's mean wall time per trial without each worker's first (`warm_trial_wall_s`),
+            for the run-time estimate; a controller left out played no trial beside those [s].
         out_dir: the results directory.
         played: trials played by this call.
         stored: trials in the results, this call's and those of the run it resumed.
@@ -74,6 +96,7 @@ class PaperTableResult:
     failures: dict[str, Any]
     curve: dict[str, Any]
     trial_wall_s: dict[str, float]
+    warm_wall_s: dict[str, float]
     out_dir: Path
     played: int
     wall_s: float
@@ -85,10 +108,19 @@ class PaperTableResult:
     def paper_protocol_cpu_h(self) -> float:
         """CPU hours the paper's protocol (`PAPER_TRIALS_PER_BAND` per band and contender) would take here.
 
-        Estimated from this run's mean wall time per trial of each controller (one core per trial; a trial that
-        falls ends early, so a controller that falls less costs more).
+        Estimated from this run's mean wall time per trial of each controller, each worker's first trial of it
+        left out: that one compiles the numba code on a fresh machine, once per worker and not once per trial
+        (`warm_wall_s`). A controller that played no other trial counts with its mean over all, compiling included
+        (`estimate_includes_compile`). One core per trial; a trial that falls ends early, so a controller that falls
+        less costs more.
         """
-        return sum(self.trial_wall_s.values()) * PAPER_TRIALS_PER_BAND * len(self.bands) / 3600.0
+        walls = [self.warm_wall_s.get(c, s) for c, s in self.trial_wall_s.items()]
+        return sum(walls) * PAPER_TRIALS_PER_BAND * len(self.bands) / 3600.0
+
+    @property
+    def estimate_includes_compile(self) -> bool:
+        """Whether `paper_protocol_cpu_h` counts first trials, which may include compiling (an overestimate)."""
+        return any(c not in self.warm_wall_s for c in self.trial_wall_s)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-serialisable (``paper.json``)."""
@@ -99,7 +131,8 @@ class PaperTableResult:
             "scenario": self.scenario, "bands": list(self.bands), "paper_columns": list(self.spec.paper_columns),
             "trials": self.trials, "seeds": list(self.seeds),
             "comparisons": [c.to_json() for c in self.comparisons],
-            "trial_wall_s": self.trial_wall_s, "wall_s": self.wall_s, "played": self.played, "stored": self.stored,
+            "trial_wall_s": self.trial_wall_s, "warm_wall_s": self.warm_wall_s, "wall_s": self.wall_s,
+            "played": self.played, "stored": self.stored,
             "workers": self.workers, "paper_protocol_cpu_h": self.paper_protocol_cpu_h,
             "paper": {row: {m: [{"mean": v.mean, "std": v.std} for v in values] for m, values in cells.items()}
                       for row, cells in self.spec.paper.items()},
