@@ -358,7 +358,7 @@ def load_scenario(path: str | Path) -> Scenario:
                 raise ScenarioError(shown, f"a key outside every table; each key belongs to one of {tables} (is "
                                     "a table's header missing above it?)", line=lines.key(("", 0), key), field=key)
             raise ScenarioError(shown, f"unknown table; valid tables: {tables}",
-                                line=lines.header((key, 0)) or lines.key(("", 0), key), field=f"[{key}]")
+                                line=lines.first_header(key) or lines.key(("", 0), key), field=f"[{key}]")
 
     head = top.sub_table("scenario", ("name", "version", "description", "notes", "robot", "duration_s"),
                       required=True)
