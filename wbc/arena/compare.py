@@ -442,7 +442,7 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                             controllers=list(cfg.controllers), bands=list(bands), errors=errors,
                             sequential=rounds.comparison.as_dict() if rounds is not None else None)
         outcomes = push_outcomes(records, scenario.trial)
-        failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands)
+        failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands, trial_of=scenario.trial)
         curve = recovery_curve(outcomes, controllers=cfg.controllers)
         meta = {
             "controllers": ", ".join(cfg.controllers),
