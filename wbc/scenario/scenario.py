@@ -33,8 +33,9 @@ Schema (every other key is an error):
   200 N s), ``offset_m`` (3 numbers: the application point in the base frame [m], each in [-0.5, 0.5]; default
   the base origin). A trial played live with pushes from the browser is exported as such a file
   (``wbc view --export-scenario``).
-- ``[[bands]]``: ``name``, ``push_force_n`` (an interval in [0, 2000], its upper end times ``[pushes] duration_s`` at
-  most 200 N s; required with ``[pushes]``, forbidden without), ``vx`` and ``yaw_rate`` (optional overrides of the
+- ``[[bands]]``: ``name``, ``push_force_n`` (an interval in [0, 2000], its upper end above 0 and, times ``[pushes]
+  duration_s``, at most 200 N s; required with ``[pushes]``, forbidden without: a scenario without pushes leaves out
+  both), ``vx`` and ``yaw_rate`` (optional overrides of the
   drawn option's vx and yaw rate; the option's sign flip applies to an overridden yaw rate too, so a band of
   ``vx = 0``, ``yaw_rate = 0`` stands whatever option is drawn).
 
@@ -488,6 +489,11 @@ def load_scenario(path: str | Path) -> Scenario:
             bnd.fail("push_force_n", "missing required key (the scenario has a [pushes] table); add "
                      "`push_force_n = [lo, hi]` [N]", at_header=True)
         force = bnd.interval("push_force_n", Range(lo=0.0, hi=MAX_PUSH_FORCE_N)) if pushes is not None else None
+        if force is not None and force[1] == 0.0:
+            bnd.fail("push_force_n", "[0, 0] makes every push of the band 0 N, a push that pushes nothing (a trial "
+                     "of it cannot be written as a scenario: a fixed push needs a force above 0 N); give an upper end "
+                     "above 0 N, or, to play no pushes, leave out [pushes] and every band's push_force_n (`wbc run` "
+                     "and `wbc compare` play any scenario's trials without their pushes with --no-push)")
         if force is not None and pushes is not None and force[1] * pushes.duration_s > MAX_PUSH_IMPULSE_NS:
             bnd.fail("push_force_n", f"a push of {force[1]:g} N for [pushes] duration_s {pushes.duration_s:g} s "
                      f"delivers {force[1] * pushes.duration_s:g} N s, more than {MAX_PUSH_IMPULSE_NS:g} N s (it "
