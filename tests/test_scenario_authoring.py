@@ -78,3 +78,24 @@ def test_a_trial_the_schema_refuses_is_not_written_and_leaves_the_file_as_it_was
     assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.toml"]  # no temporary file left either
     write_trial_scenario(fresh, trial, name="pushed", description="the trial itself")
     assert load_scenario(fresh).trial("in", 0, 0).pushes[0].start == trial.pushes[0].start
+
+
+def test_the_hash_covers_values_as_written_and_not_the_layout(tmp_path):
+    """What the scenarios guide says the hash covers."""
+
+    def hash_of(text: str) -> str:
+        path = tmp_path / "copy.toml"
+        path.write_text(text)
+        return load_scenario(path).hash
+
+    published = load_scenario("scenarios/push.toml").hash
+    terrain = '[terrain]\nkind = "fractal"\namplitude_m = 0.05\n'
+    assert terrain in PUSH
+    same = (PUSH.replace("ramp_s = 0.5", "# a comment\nramp_s   =   0.5  # another"),
+            PUSH.replace(terrain, "[terrain]\namplitude_m = 0.05\nkind = 'fractal'\n"),  # key order, quoting
+            'terrain = {kind = "fractal", amplitude_m = 0.05}\n' + PUSH.replace(terrain, ""))  # inline, first
+    assert {hash_of(text) for text in same} == {published}
+    other = (PUSH.replace("duration_s = 20.0", "duration_s = 20"),  # an integer, not a float
+             PUSH.replace("vx = 0.0\n", "", 1))  # a default left out
+    hashes = [hash_of(text) for text in other]
+    assert published not in hashes and len(set(hashes)) == 2

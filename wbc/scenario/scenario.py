@@ -193,8 +193,9 @@ class Scenario:
         notes: calibration reasoning and evidence.
         robot: robot registry name.
         duration_s: episode length [s].
-        hash: sha256 (hex) of the canonical JSON of the parsed file: comments and layout do not change it, any value
-            does.
+        hash: sha256 (hex) of the canonical JSON of the parsed file: comments and layout do not change it; every
+            key and value as written does, an integer against a float of the same value (``20`` and ``20.0``) and a
+            key left out against the same key written with its default included.
         path: the file it was loaded from, as given.
         bands: band names, in file order.
     """
