@@ -225,6 +225,19 @@ class Scenario:
                 return spec
         raise UnknownNameError("band", band, self.bands, where=f"scenario {self.name!r}")
 
+    def band_settings(self, band: str) -> dict[str, Any]:
+        """What `band` sets, as its ``[[bands]]`` table writes it: the keys it gives besides its name.
+
+        ``push_force_n`` as ``(lo, hi)`` [N], ``vx`` [m/s], ``yaw_rate`` [rad/s]; a key the band leaves out (the drawn
+        option's value plays) is absent.
+
+        Raises:
+            UnknownNameError: `band` is not a band of this scenario; the message lists the valid ones.
+        """
+        spec = self._band(band)
+        return {key: value for key, value in (("push_force_n", spec.push_force_n), ("vx", spec.vx),
+                                              ("yaw_rate", spec.yaw_rate)) if value is not None}
+
     def trial(self, band: str, seed: int, index: int) -> Trial:
         """Trial `index` of `band` under `seed`: a pure function of the file's content, band, seed and index.
 

@@ -34,7 +34,7 @@ from wbc.output_files import write_text
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.tools.paper.format import format_paper_table
 from wbc.tools.paper.result import PAPER_TRIALS_PER_BAND, PaperComparison, PaperTableResult
-from wbc.tools.paper.tables import TABLES, resolve_contenders
+from wbc.tools.paper.tables import TABLES, paper_column, resolve_contenders
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TRIALS", "PAPER_TRIALS_PER_BAND", "PaperRunConfig", "PaperTableResult",
            "default_out_dir", "run_paper_table"]
@@ -162,7 +162,9 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
             spec=spec, contenders=contenders,
             scenario={"name": scenario.name, "version": scenario.version, "path": str(scenario_path),
                       "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
-            bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
+            bands=scenario.bands,
+            band_columns=tuple(paper_column(spec, scenario.band_settings(band)) for band in scenario.bands),
+            trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
             comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
             trial_wall_s=wall_by, out_dir=arena.out_dir, played=arena.played, stored=len(records), wall_s=wall,
             workers=cfg.workers, controller_errors=arena.controller_errors)
