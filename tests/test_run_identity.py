@@ -219,6 +219,38 @@ def test_a_run_resumes_with_its_scenario_by_another_path_or_a_copy(short: Path, 
     assert "wbc: note" not in capsys.readouterr().err  # the same path: nothing to say
 
 
+def test_a_run_resumes_once_its_scenario_is_published_and_records_what_was(short: Path, tmp_path: Path,
+                                                                           capsys) -> None:
+    # begun on an unpublished file, interrupted, the file then published as the warning says: the same content
+    cfg = ArenaConfig(controllers=("stand",), scenario=short, trials=2, out_dir=tmp_path / "r", workers=1,
+                      progress=False)
+    run_arena(dataclasses.replace(cfg, trials=1))
+    _write_config(cfg.out_dir, _with(_stored(cfg.out_dir), 2, "trials"))  # one trial of two stored
+    assert _stored(cfg.out_dir)["scenario"]["published"] is False
+    capsys.readouterr()
+    scenario = load_scenario(short)
+    (tmp_path / "published.toml").write_text(f'[{scenario.name}]\n"{scenario.version}" = "{scenario.hash}"\n')
+    assert run_arena(dataclasses.replace(cfg, resume=True)).played == 1
+    err = capsys.readouterr().err
+    assert (f"wbc: note: {cfg.out_dir / 'run.json'}: the scenario is published now (a lock lists its hash), and was "
+            "not when the run began: the same content, so the run resumes, and run.json records both "
+            "(scenario.published true, scenario.published_at_start false)") in err
+    assert {k: _stored(cfg.out_dir)["scenario"][k] for k in ("published", "published_at_start")} == {
+        "published": True, "published_at_start": False}
+    report = (cfg.out_dir / "report.md").read_text()
+    assert "yes; not when the run began (published at a resume; the same content)" in report
+    # resumed again, published still: what was at the start stays recorded, and nothing more is said
+    run_arena(dataclasses.replace(cfg, resume=True))
+    assert "published" not in capsys.readouterr().err
+    assert _stored(cfg.out_dir)["scenario"]["published_at_start"] is False
+    # the lock removed again: published as at the start, which needs no second field
+    (tmp_path / "published.toml").unlink()
+    run_arena(dataclasses.replace(cfg, resume=True))
+    assert "is not published now (no lock lists its hash), as when the run began" in capsys.readouterr().err
+    assert "published_at_start" not in _stored(cfg.out_dir)["scenario"]
+    assert RunIdentity.load(cfg.out_dir / "run.json").scenario.published is False
+
+
 def test_the_store_compares_files_by_their_hashes_not_their_paths(tmp_path: Path, capsys) -> None:
     moved = dataclasses.replace(SIMULATED, scenario=dataclasses.replace(SCENARIO, path="elsewhere/p.toml"),
                                 controller_files=(ControllerFile(controller="mpc", path="../gains.toml",

@@ -448,7 +448,9 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             "controllers": ", ".join(cfg.controllers),
             "scenario": f"{scenario.name} v{scenario.version} ({cfg.scenario})",
             "scenario hash": scenario.hash,
-            "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
+            "published scenario": ("yes" if published else "NO (results are not comparable with published ones)")
+            + {None: "", False: "; not when the run began (published at a resume; the same content)",
+               True: "; it was when the run began (the same content)"}[store.identity.scenario.published_at_start],
             "bands": ", ".join(bands),
             "seeds": ", ".join(str(s) for s in cfg.seeds),
             "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
