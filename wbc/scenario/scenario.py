@@ -91,7 +91,7 @@ from wbc.scenario.toml_fields import Range, TomlTable, read_toml
 from wbc.scenario.trial import CommandChange, CommandSchedule, Trial
 from wbc.types import VelocityCommand
 
-__all__ = ["MAX_VERSION", "Scenario", "ScenarioError", "load_scenario", "resolve_scenario_path"]
+__all__ = ["MAX_VERSION", "Scenario", "ScenarioError", "fallback_note", "load_scenario", "resolve_scenario_path"]
 
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 _BAND_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -196,7 +196,8 @@ class Scenario:
         hash: sha256 (hex) of the canonical JSON of the parsed file: comments and layout do not change it; every
             key and value as written does, an integer against a float of the same value (``20`` and ``20.0``) and a
             key left out against the same key written with its default included.
-        path: the file it was loaded from, as given.
+        path: the file it was loaded from: as given, or, for a relative path not found from the working directory,
+            the file under the source checkout that played (`resolve_scenario_path`), as an absolute path.
         bands: band names, in file order.
     """
 
@@ -344,6 +345,19 @@ def resolve_scenario_path(path: str | Path) -> Path:
         return given
     under_root = SOURCE_ROOT / given
     return under_root if under_root.exists() else given
+
+
+def fallback_note(given: str | Path, scenario: Scenario) -> str | None:
+    """What a command says when `given` played a file other than the one it names from the working directory.
+
+    A relative path not found from the working directory is looked up under the source checkout
+    (`resolve_scenario_path`): ``scenarios/turn.toml`` given in another directory plays the shipped file. The note
+    names the file that plays (`scenario.path`, which results record); None when `given` is that file.
+    """
+    if scenario.path == str(given):
+        return None
+    return (f"{given} is not found from the working directory ({Path.cwd()}): it plays {scenario.path}, the file "
+            "under the source checkout, and the results record that path")
 
 
 def load_scenario(path: str | Path) -> Scenario:

@@ -160,7 +160,7 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}
         result = PaperTableResult(
             spec=spec, contenders=contenders,
-            scenario={"name": scenario.name, "version": scenario.version, "path": str(scenario_path),
+            scenario={"name": scenario.name, "version": scenario.version, "path": scenario.path,
                       "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
             bands=scenario.bands,
             band_columns=tuple(paper_column(spec, scenario.band_settings(band)) for band in scenario.bands),
