@@ -7,6 +7,7 @@ section and plot.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -26,7 +27,8 @@ from wbc.errors import RecordError
 from wbc.scenario.domain import DomainParams
 from wbc.scenario.push import Push
 from wbc.scenario.terrain import TerrainConfig
-from wbc.scenario.trial import CommandSchedule, Trial
+from wbc.scenario.trial import CommandChange, CommandSchedule, Trial
+from wbc.types import VelocityCommand
 
 HASH = "feed"
 DURATION = 0.1  # [s] every push lasts this long
@@ -195,3 +197,37 @@ def test_a_band_shows_only_the_commands_played_in_it():
     assert breakdown_tables(result, "in", pushes=False)[0][0] == ["controller", "standing"]
     assert breakdown_tables(result, "fast", pushes=False) == [
         (["controller", "vx 1.5 yaw 2"], [["steady", "100% 1/1"]])]
+
+
+def test_a_vertical_push_has_its_own_sector_and_equal_offsets_their_own_axis():
+    up = Push(force_in_world=np.array([0.0, 0.0, 1000.0]), offset_in_base=np.array([0.05, 0.05, 0.0]), start=2.0,
+              duration=DURATION)
+    steep = Push(force_in_world=np.array([-100.0, 0.0, -300.0]), offset_in_base=np.array([0.05, -0.02, 0.0]),
+                 start=6.0, duration=DURATION)
+    TRIALS[("up", 0, 0)] = (0.0, (up, steep))
+    try:
+        record = _record("steady", 0, band="up", push_force_n=1000.0, n_pushes=2)
+        first, second = push_outcomes([record], _trial)
+        assert (first.sector, first.offset_axis, math.isnan(first.heading_deg)) == ("vertical", "x=y", True)
+        assert (second.sector, second.offset_axis, second.heading_deg) == ("vertical", "x", 180.0)
+        result = breakdown([record], [first, second], controllers=["steady"], bands=["up"])
+        _, (header, rows) = breakdown_tables(result, "up", pushes=True)
+        assert header[1:] == ["pushed forward", "pushed left", "pushed backward", "pushed right", "pushed vertical",
+                              "offset x", "offset y", "offset x=y"]
+        assert rows == [["steady", "-", "-", "-", "-", "100% 2/2", "100% 1/1", "-", "100% 1/1"]]
+    finally:
+        del TRIALS[("up", 0, 0)]
+
+
+def test_a_trial_whose_command_changes_is_labelled_so():
+    stop = CommandChange(at_s=3.0, command=VelocityCommand())
+
+    def changing(band: str, seed: int, index: int) -> Trial:
+        trial = _trial(band, seed, index)
+        changes = (stop,) * (index % 3)  # trials 0 and 3: none, 1: one, 2: two
+        return dataclasses.replace(trial, command=CommandSchedule(vx=trial.command.vx, changes=changes))
+
+    assert command_label(_record("steady", 0, vx_cmd=0.5, yaw_rate_cmd=1.0), 1) == "vx 0.5 yaw 1, then 1 change"
+    result = breakdown(RECORDS, push_outcomes(RECORDS, changing), controllers=CONTROLLERS, bands=["in"],
+                       trial_of=changing)
+    assert result["commands"] == ["standing", "standing, then 1 change", "vx 0.3", "vx 0.3, then 2 changes"]

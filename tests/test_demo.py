@@ -2,17 +2,26 @@
 controller entering the arena from a checkout exactly as the README shows it."""
 
 import dataclasses
+import importlib
 import io
 import math
 import os
+import shlex
 import subprocess
 import sys
 from pathlib import Path
 
+from conftest import HOLD_PLUGIN
+
+from wbc.arena.compare import ArenaConfig, plan_arena
 from wbc.arena.progress import LineProgress, progress
 from wbc.arena.trial_record import TrialRecord
 from wbc.cli import printers
-from wbc.tools.demo import trial_to_watch
+from wbc.cli.parser import build_parser
+from wbc.scenario.trial_file import _same_trial as same_trial
+from wbc.tools.demo import TrialToWatch, trial_to_watch
+
+cli_main = importlib.import_module("wbc.cli.main")  # the module (the package re-exports its `main`)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -156,3 +165,29 @@ def test_the_command_the_demo_prints_runs_as_printed(tmp_path, capsys):
     out = capsys.readouterr().out.splitlines()
     command = next(x.strip() for x in out if " view learned " in x)
     assert command == demo_watch_command(watch, scenario="scenarios/push.toml")  # alone on its line, nothing after
+
+
+def test_the_printed_watch_command_plays_the_trial_the_run_measured(plugin_package, tmp_path):
+    plugin_package("holdpkg", {"hold": HOLD_PLUGIN})
+    hold = "holdpkg.hold:make"
+    gains = tmp_path / "my gains.toml"
+    gains.write_text("leg_kp = 55.0\n")
+    cfg = ArenaConfig(controllers=(hold, "stand"), scenario=Path("scenarios/push.toml"), seeds=(0, 1), trials=3,
+                      out_dir=tmp_path / "r", no_push=True, debug_truth=True, controller_configs={hold: gains})
+    plan = plan_arena(cfg)
+    watch = TrialToWatch(controller=hold, band="ood", seed=1, trial=2, other="stand", at_s=3.0, why="a test")
+    command = printers.ab_watch_command(watch, scenario="scenarios/push.toml", wbc="wbc",
+                                        options=printers.arena_trial_options(cfg, (hold, "stand")))
+    assert command == (f"wbc view {hold} stand --scenario scenarios/push.toml --band ood --seed 1 --trial 2 --no-push "
+                       f"--debug-truth --controller-config '{hold}={gains}' --at 3")
+    args = build_parser().parse_args(shlex.split(command)[1:])
+    # the trial the view plays is the one the run measured: without its pushes, the plug-in with its file, truth on
+    measured = next(t for t in plan.trials if (t.band, t.seed, t.index) == ("ood", 1, 2))
+    viewed = cli_main._view_trial(args)
+    assert measured.pushes == viewed.pushes == () and same_trial(viewed, measured)
+    specs = cli_main._view_controllers(args, tuple(args.ctrl))
+    assert [s.config_file for s in specs] == [plan.specs[hold].config_file, None] and specs[0].config_file == str(gains)
+    assert args.debug_truth and args.no_push
+    # a run that changed nothing prints none of them
+    plain = dataclasses.replace(cfg, no_push=False, debug_truth=False, controller_configs={})
+    assert printers.arena_trial_options(plain, (hold, "stand")) == ()

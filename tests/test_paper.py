@@ -14,6 +14,7 @@ import os
 import re
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 
@@ -25,8 +26,10 @@ from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.output_files import directory_holder, lock_directory
 from wbc.scenario import check_published, load_scenario
 from wbc.tools.paper import TABLE_I, TABLES, PaperRunConfig, resolve_contenders, run_paper_table, verdict
+from wbc.tools.paper.format import _metric_block
 from wbc.tools.paper.paper_table import PAPER_TRIALS_PER_BAND
 from wbc.tools.paper.result import warm_trial_wall_s
+from wbc.tools.paper.tables import paper_column
 
 paper_table = importlib.import_module("wbc.tools.paper.paper_table")  # the module (the package re-exports names)
 
@@ -382,3 +385,32 @@ def test_a_contender_that_fails_costs_its_trials_and_the_command_exits_1(tiny, t
     assert len(lines) == 1 and lines[0].startswith("wbc: controller paperbroken:make: 2 of 2 trial(s) failed with a "
                                                    "controller error; first: ")
     assert "Table I" in captured.out  # the table is printed all the same, the other contenders' rows included
+
+
+def test_a_band_stands_beside_the_paper_column_that_commands_what_it_does():
+    spec = TABLES["table2"]
+    columns = {path: tuple(paper_column(spec, load_scenario(path).band_settings(b)) for b in load_scenario(path).bands)
+               for path in ("scenarios/turn.toml", "scenarios/turn-both-ways.toml")}
+    # the published turn: each band in its column, as before; turn-both-ways: stand and 2.0 have no paper figure
+    assert columns == {"scenarios/turn.toml": (0, 1, 2), "scenarios/turn-both-ways.toml": (None, 0, 2, None)}
+    for path in ("scenarios/push.toml", "scenarios/push-v1.toml", "scenarios/push-strong.toml"):
+        scenario = load_scenario(path)
+        assert [paper_column(TABLES["table1"], scenario.band_settings(b)) for b in scenario.bands] == [0, 1]
+    # a band that also fixes the yaw rate, or another force, is not the paper's column
+    assert paper_column(spec, {"vx": 1.25, "yaw_rate": 0.5}) is None
+    assert paper_column(TABLES["table1"], {"push_force_n": (200.0, 350.0)}) is None
+
+    def block(bands, band_columns):
+        result = SimpleNamespace(spec=spec, contenders=(), bands=bands, band_columns=band_columns,
+                                 summary=SimpleNamespace(cell=lambda controller, band: None))
+        return [line.split("  ") for line in _metric_block(result, "success_rate")]
+
+    def cells(lines):
+        return [[cell.strip() for cell in line if cell.strip()] for line in lines]
+
+    both = cells(block(("stand", "1.0", "1.5", "2.0"), columns["scenarios/turn-both-ways.toml"]))
+    assert both[1] == ["paper row", "ours", "stand", "1.0 (paper 1)", "1.5 (paper 1.5)", "2.0"]
+    assert both[3] == ["No arm", "paper", "-", "90.29 ± 0.46", "86.48 ± 0.85", "-"]
+    turn = cells(block(("1.0", "1.25", "1.5"), columns["scenarios/turn.toml"]))
+    assert turn[1] == ["paper row", "ours", "1.0 (paper 1)", "1.25 (paper 1.25)", "1.5 (paper 1.5)"]
+    assert turn[3] == ["No arm", "paper", "90.29 ± 0.46", "89.14 ± 0.70", "86.48 ± 0.85"]

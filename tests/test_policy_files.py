@@ -211,7 +211,7 @@ def test_an_npz_member_claiming_2_to_the_40_floats_and_a_deflate_bomb_are_refuse
         np.save(buf, np.zeros(1 << 19))  # 4 MiB of zeros, a few kB deflated
         z.writestr("obs_std.npy", buf.getvalue())
     assert npz.stat().st_size < 64 << 10
-    with pytest.raises(PolicyFileError, match=r"its members hold 4 MiB uncompressed, more than the 1 MiB"):
+    with pytest.raises(PolicyFileError, match=r"its members hold 4,194,432 bytes uncompressed, more than the 1 MiB"):
         get_controller(f"policy:{npz}")
 
 

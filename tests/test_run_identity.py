@@ -33,6 +33,7 @@ from wbc.arena.identity import (
 from wbc.arena.results import ResultsStore
 from wbc.arena.trial_record import TrialRecord
 from wbc.errors import ConfigError, RecordError, ResultsDirError, ScenarioError
+from wbc.scenario import scenario as scenario_module
 from wbc.scenario.scenario import MAX_VERSION, load_scenario
 from wbc.viz.errors import ViewerError
 from wbc.viz.replay import load_stored_episode
@@ -217,6 +218,65 @@ def test_a_run_resumes_with_its_scenario_by_another_path_or_a_copy(short: Path, 
                 f"{json.dumps(was)}: the same content, so the run resumes") in note
     run_arena(dataclasses.replace(cfg, resume=True, scenario=copy, out_dir=tmp_path / "r"))
     assert "wbc: note" not in capsys.readouterr().err  # the same path: nothing to say
+
+
+def test_a_run_resumes_once_its_scenario_is_published_and_records_what_was(short: Path, tmp_path: Path,
+                                                                           capsys) -> None:
+    # begun on an unpublished file, interrupted, the file then published as the warning says: the same content
+    cfg = ArenaConfig(controllers=("stand",), scenario=short, trials=2, out_dir=tmp_path / "r", workers=1,
+                      progress=False)
+    run_arena(dataclasses.replace(cfg, trials=1))
+    _write_config(cfg.out_dir, _with(_stored(cfg.out_dir), 2, "trials"))  # one trial of two stored
+    assert _stored(cfg.out_dir)["scenario"]["published"] is False
+    capsys.readouterr()
+    scenario = load_scenario(short)
+    (tmp_path / "published.toml").write_text(f'[{scenario.name}]\n"{scenario.version}" = "{scenario.hash}"\n')
+    assert run_arena(dataclasses.replace(cfg, resume=True)).played == 1
+    err = capsys.readouterr().err
+    assert (f"wbc: note: {cfg.out_dir / 'run.json'}: the scenario is published now (a lock lists its hash), and was "
+            "not when the run began: the same content, so the run resumes, and run.json records both "
+            "(scenario.published true, scenario.published_at_start false)") in err
+    assert {k: _stored(cfg.out_dir)["scenario"][k] for k in ("published", "published_at_start")} == {
+        "published": True, "published_at_start": False}
+    report = (cfg.out_dir / "report.md").read_text()
+    assert "yes; not when the run began (published at a resume; the same content)" in report
+    # resumed again, published still: what was at the start stays recorded, and nothing more is said
+    run_arena(dataclasses.replace(cfg, resume=True))
+    assert "published" not in capsys.readouterr().err
+    assert _stored(cfg.out_dir)["scenario"]["published_at_start"] is False
+    # the lock removed again: published as at the start, which needs no second field
+    (tmp_path / "published.toml").unlink()
+    run_arena(dataclasses.replace(cfg, resume=True))
+    assert "is not published now (no lock lists its hash), as when the run began" in capsys.readouterr().err
+    assert "published_at_start" not in _stored(cfg.out_dir)["scenario"]
+    assert RunIdentity.load(cfg.out_dir / "run.json").scenario.published is False
+
+
+def test_a_relative_scenario_path_found_under_the_checkout_is_noted_and_recorded_whole(tmp_path: Path, monkeypatch,
+                                                                                      capsys) -> None:
+    # `scenarios/idtest.toml` exists in the checkout (here a stand-in), not in the directory the command runs in
+    root, work = tmp_path / "checkout", tmp_path / "work"
+    (root / "scenarios").mkdir(parents=True)
+    work.mkdir()
+    (root / "scenarios" / "idtest.toml").write_text(SHORT)
+    monkeypatch.setattr(scenario_module, "SOURCE_ROOT", root)
+    monkeypatch.chdir(work)
+    shipped = str(root / "scenarios" / "idtest.toml")
+    cfg = ArenaConfig(controllers=("stand",), scenario=Path("scenarios/idtest.toml"), trials=2, out_dir=work / "r",
+                      workers=1, progress=False)
+    run_arena(dataclasses.replace(cfg, trials=1))
+    assert (f"wbc: note: scenarios/idtest.toml is not found from the working directory ({work}): it plays {shipped}, "
+            "the file under the source checkout, and the results record that path") in capsys.readouterr().err
+    assert _stored(cfg.out_dir)["scenario"]["path"] == shipped  # a path that names the file from anywhere
+    assert f"({shipped})" in (cfg.out_dir / "report.md").read_text()
+    # resumed from the checkout, where the relative path names the same file: the same content, and it goes on
+    _write_config(cfg.out_dir, _with(_stored(cfg.out_dir), 2, "trials"))
+    monkeypatch.chdir(root)
+    assert run_arena(dataclasses.replace(cfg, resume=True)).played == 1
+    err = capsys.readouterr().err
+    assert "is not found from the working directory" not in err
+    assert f'the scenario is given as "scenarios/idtest.toml", the run\'s was {json.dumps(shipped)}' in err
+    assert _stored(cfg.out_dir)["scenario"]["path"] == "scenarios/idtest.toml"
 
 
 def test_the_store_compares_files_by_their_hashes_not_their_paths(tmp_path: Path, capsys) -> None:

@@ -61,7 +61,8 @@ def short(value: object, limit: int = _SHORT) -> str:
 
 
 def _mib(n: int) -> str:
-    return f"{n / (1 << 20):.0f} MiB" if n >= 1 << 20 else f"{n} bytes"
+    """A size as messages give it, exactly: whole MiB as such (a limit), any other in bytes (1,069,152 bytes)."""
+    return f"{n >> 20} MiB" if n >= 1 << 20 and n % (1 << 20) == 0 else f"{n:,} bytes"
 
 
 def _checked(path: str | os.PathLike[str], kind: str, limit: int | None) -> tuple[Path, int]:

@@ -3,12 +3,14 @@
 A success rate says how often a controller falls, not where. This module splits the records of a run:
 
 - by command: success of the trials standing still and of those walking (or, on the turn task, per yaw rate),
-  labelled from the record's commanded velocity (`command_label`);
+  labelled from the record's commanded velocity at the trial's start and the number of its command changes
+  (`command_label`: ``vx 0.5 yaw 1, then 1 change``);
 - by push: every push a trial met becomes a `PushOutcome`. The push is *survived* when the robot did not fall before
   the next push began (or before the episode ended, for the last one); a fall is charged to the last push that began
-  before it, and a fall before any push to none. Survival is then split by the push's heading sector and by the axis
-  of its application point's offset, and binned by impulse into the push-recovery curve (survival against |F| T,
-  with Wilson 95 % intervals), the dose-response curve the bands' two points sample;
+  before it, and a fall before any push to none. Survival is then split by the push's heading sector (`push_sector`:
+  a push steeper than 45 degrees out of the horizontal plane is ``vertical``, whatever its heading) and by the axis
+  of its application point's offset (``x=y`` when the two are equal), and binned by impulse into the push-recovery
+  curve (survival against |F| T, with Wilson 95 % intervals), the dose-response curve the bands' two points sample;
 - falls: how many came before any push, and the median time from the charged push to the fall (a fall a second or
   more after a push is not a push knocking the robot over, but a gait losing its footing).
 
@@ -38,15 +40,23 @@ from wbc.arena.trial_record import CONTROLLER_ERROR, TrialRecord
 from wbc.errors import ConfigError, RecordError
 from wbc.scenario.trial import Trial
 
-__all__ = ["AXES", "SECTORS", "PushOutcome", "breakdown", "breakdown_tables", "command_label", "heading_sector",
-           "push_outcomes", "recovery_curve"]
+__all__ = ["AXES", "SECTORS", "TIED_AXES", "VERTICAL", "PushOutcome", "breakdown", "breakdown_tables", "command_label",
+           "heading_sector", "push_outcomes", "push_sector", "recovery_curve"]
 
 SECTORS = ("forward", "left", "backward", "right")
 """Push heading sectors, by where the force points: 90 degrees each, centred on +x, +y, -x, -y of the world (the
 robot's initial heading is +x)."""
 
+VERTICAL = "vertical"
+"""The sector of a push steeper than 45 degrees out of the horizontal plane (`push_sector`): its heading says little
+of where it pushes the robot. Listed, in the tables and the breakdown, only where such a push was met."""
+
 AXES = ("x", "y")
 """Offset axes of a push's application point (base frame)."""
+
+TIED_AXES = "x=y"
+"""The offset axis of a point offset equally along base x and y (neither axis is the larger). Listed, like
+`VERTICAL`, only where such a push was met."""
 
 _N_BINS = 8
 
@@ -64,9 +74,11 @@ class PushOutcome:
         start_s: when it began [s].
         force_n: its magnitude [N].
         impulse_ns: magnitude times duration [N s].
-        heading_deg: where the force points in the world frame, in (-180, 180] [deg].
-        sector: `heading_sector` of the heading.
-        offset_axis: the base axis its application point is offset along (``x``, ``y``; ``none`` at the centre).
+        heading_deg: where the force's horizontal part points in the world frame, in (-180, 180] [deg]; NaN for a
+            force with no horizontal part.
+        sector: `push_sector` of the force.
+        offset_axis: the base axis its application point is offset along (``x``, ``y``; `TIED_AXES` when both are
+            equal, ``none`` at the centre).
         survived: the robot did not fall before the next push began (or the episode ended).
         fall_after_s: time from this push's start to the fall, NaN when survived [s].
     """
@@ -98,18 +110,35 @@ def heading_sector(heading_rad: float) -> str:
     return "backward"
 
 
-def command_label(record: TrialRecord) -> str:
-    """The trial's command in words: ``standing``, or its nonzero parts (``vx 0.3``, ``vx 1 yaw 2``)."""
+def push_sector(force_in_world: np.ndarray) -> str:
+    """Where a push's force points, a sector of `SECTORS` or `VERTICAL`.
+
+    `VERTICAL` when steeper than 45 degrees out of the horizontal plane (|F_z| above the horizontal part's length),
+    else the `heading_sector` of its horizontal part.
+    """
+    fx, fy, fz = (float(f) for f in force_in_world)
+    if abs(fz) > math.hypot(fx, fy):
+        return VERTICAL
+    return heading_sector(math.atan2(fy, fx))
+
+
+def command_label(record: TrialRecord, changes: int = 0) -> str:
+    """The trial's command in words: ``standing``, or its nonzero parts (``vx 0.3``, ``vx 1 yaw 2``).
+
+    The record's command is the one the trial starts with; a trial whose command then changes (`changes`, its
+    ``[[commands.changes]]``) says so: ``vx 0.5 yaw 1, then 1 change``, ``standing, then 2 changes``.
+    """
     parts = [f"{name} {value:g}" for name, value in (("vx", record.vx_cmd), ("vy", record.vy_cmd),
                                                     ("yaw", record.yaw_rate_cmd)) if value != 0.0]
-    return " ".join(parts) if parts else "standing"
+    label = " ".join(parts) if parts else "standing"
+    return label if not changes else f"{label}, then {changes} change{'s' if changes > 1 else ''}"
 
 
 def _offset_axis(offset: np.ndarray) -> str:
-    xy = np.abs(offset[:2])
-    if not np.any(xy > 0.0):
-        return "none"
-    return AXES[int(np.argmax(xy))]
+    x, y = (abs(float(v)) for v in offset[:2])
+    if x == y:
+        return "none" if x == 0.0 else TIED_AXES
+    return AXES[0] if x > y else AXES[1]
 
 
 def push_outcomes(records: Iterable[TrialRecord], trial_of: Callable[[str, int, int], Trial]) -> list[PushOutcome]:
@@ -147,11 +176,12 @@ def push_outcomes(records: Iterable[TrialRecord], trial_of: Callable[[str, int, 
             following = trial.pushes[k + 1].start if k + 1 < len(trial.pushes) else math.inf
             survived = fall >= following
             force = float(np.linalg.norm(push.force_in_world))
-            heading = math.atan2(float(push.force_in_world[1]), float(push.force_in_world[0]))
+            fx, fy = float(push.force_in_world[0]), float(push.force_in_world[1])
             out.append(PushOutcome(
                 controller=record.controller, band=record.band, seed=record.seed, trial=record.trial, push=k,
                 start_s=push.start, force_n=force, impulse_ns=force * push.duration,
-                heading_deg=math.degrees(heading), sector=heading_sector(heading),
+                heading_deg=math.degrees(math.atan2(fy, fx)) if fx or fy else math.nan,
+                sector=push_sector(push.force_in_world),
                 offset_axis=_offset_axis(push.offset_in_base), survived=survived,
                 fall_after_s=math.nan if survived else fall - push.start))
     return out
@@ -164,7 +194,7 @@ def _cell(k: int, n: int) -> dict[str, Any]:
 
 
 def breakdown(records: Sequence[TrialRecord], outcomes: Sequence[PushOutcome], *, controllers: Sequence[str],
-              bands: Sequence[str]) -> dict[str, Any]:
+              bands: Sequence[str], trial_of: Callable[[str, int, int], Trial] | None = None) -> dict[str, Any]:
     """Success by command, push survival by heading sector and offset axis, and falls, per controller and band.
 
     Args:
@@ -172,17 +202,26 @@ def breakdown(records: Sequence[TrialRecord], outcomes: Sequence[PushOutcome], *
         outcomes: their `push_outcomes` (empty for a scenario without pushes).
         controllers: the controllers, in order.
         bands: the bands, in order.
+        trial_of: ``(band, seed, index) -> Trial`` of the scenario (``scenario.trial``), whose command changes the
+            labels count (`command_label`); None: the records' commands alone.
 
     Returns:
         A JSON-serialisable dict: ``{"commands": [labels], "controllers": {NAME: {BAND: {"by_command": {label:
         cell}, "by_sector": {sector: cell}, "by_offset_axis": {axis: cell}, "falls": {"trials", "falls",
         "controller_errors", "before_first_push", "after_push", "median_s_after_push"}}}}}``, a cell being ``{"k",
         "n", "rate", "ci95"}`` (successes or pushes survived out of n, with a Wilson interval; rate and interval None
-        when n is 0). ``falls`` counts the trials that ended without success and not by a controller error (those
-        are ``controller_errors``).
+        when n is 0). The sectors are `SECTORS`, with `VERTICAL` after them where a push of the run was vertical; the
+        axes `AXES`, with `TIED_AXES` where one was offset equally along both. ``falls`` counts the trials that
+        ended without success and not by a controller error (those are ``controller_errors``).
     """
-    labels = sorted({command_label(r) for r in records if r.controller in controllers and r.band in bands},
-                    key=lambda s: (s != "standing", s))
+    def label(record: TrialRecord) -> str:
+        changes = 0 if trial_of is None else len(trial_of(record.band, record.seed, record.trial).command.changes)
+        return command_label(record, changes)
+
+    label_of = {id(r): label(r) for r in records if r.controller in controllers and r.band in bands}
+    labels = sorted(set(label_of.values()), key=lambda s: (not s.startswith("standing"), s))
+    sectors = (*SECTORS, *((VERTICAL,) if any(o.sector == VERTICAL for o in outcomes) else ()))
+    axes = (*AXES, *((TIED_AXES,) if any(o.offset_axis == TIED_AXES for o in outcomes) else ()))
     result: dict[str, Any] = {"commands": labels, "controllers": {}}
     for controller in controllers:
         per_band: dict[str, Any] = {}
@@ -191,12 +230,12 @@ def breakdown(records: Sequence[TrialRecord], outcomes: Sequence[PushOutcome], *
             pushes = [o for o in outcomes if o.controller == controller and o.band == band]
             by_command = {}
             for label in labels:
-                cell = [r for r in mine if command_label(r) == label]
+                cell = [r for r in mine if label_of[id(r)] == label]
                 by_command[label] = _cell(sum(r.success for r in cell), len(cell))
             by_sector = {s: _cell(sum(o.survived for o in pushes if o.sector == s),
-                                  sum(1 for o in pushes if o.sector == s)) for s in SECTORS}
+                                  sum(1 for o in pushes if o.sector == s)) for s in sectors}
             by_axis = {a: _cell(sum(o.survived for o in pushes if o.offset_axis == a),
-                                sum(1 for o in pushes if o.offset_axis == a)) for a in AXES}
+                                sum(1 for o in pushes if o.offset_axis == a)) for a in axes}
             charged = [o for o in pushes if not o.survived]
             errors = sum(r.outcome == CONTROLLER_ERROR for r in mine)
             falls = sum(not r.success for r in mine) - errors
@@ -238,6 +277,8 @@ def breakdown_tables(result: Mapping[str, Any], band: str, *,
     if pushes:
         first_header += ["falls: no push / after one", "median fall delay [s]"]
     first, second = [], []
+    any_band = next(iter(result["controllers"].values()), {}).get(band, {})
+    sectors, axes = list(any_band.get("by_sector", SECTORS)), list(any_band.get("by_offset_axis", AXES))
     for controller, per_band in result["controllers"].items():
         cell = per_band[band]
         row = [controller, *(_rate_text(cell["by_command"][label]) for label in labels)]
@@ -245,12 +286,12 @@ def breakdown_tables(result: Mapping[str, Any], band: str, *,
             falls = cell["falls"]
             delay = falls["median_s_after_push"]
             row += [f"{falls['before_first_push']} / {falls['after_push']}", "-" if delay is None else f"{delay:.2f}"]
-            second.append([controller, *(_rate_text(cell["by_sector"][s]) for s in SECTORS),
-                           *(_rate_text(cell["by_offset_axis"][a]) for a in AXES)])
+            second.append([controller, *(_rate_text(cell["by_sector"][s]) for s in sectors),
+                           *(_rate_text(cell["by_offset_axis"][a]) for a in axes)])
         first.append(row)
     tables = [(first_header, first)]
     if pushes:
-        tables.append((["controller", *(f"pushed {s}" for s in SECTORS), *(f"offset {a}" for a in AXES)], second))
+        tables.append((["controller", *(f"pushed {s}" for s in sectors), *(f"offset {a}" for a in axes)], second))
     return tables
 
 

@@ -23,6 +23,7 @@ import collections
 import dataclasses
 import hashlib
 import itertools
+import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -60,6 +61,7 @@ from wbc.hardware.mujoco.robot import MujocoRobotConfig
 from wbc.output_files import DirectoryLock
 from wbc.robots.registry import get_robot
 from wbc.scenario import Scenario, load_scenario, warn_if_unpublished
+from wbc.scenario.scenario import fallback_note
 from wbc.scenario.trial import Trial
 
 __all__ = ["VIEWED_TIME_LIMIT", "ArenaConfig", "ArenaPlan", "ArenaResult", "play_arena", "plan_arena",
@@ -329,6 +331,9 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
         raise ConfigError(f"this run would play {budget:,} trials ({len(cfg.controllers)} controllers x "
                           f"{len(bands)} bands x {len(cfg.seeds)} seeds x {cfg.trials} trials), more than the "
                           f"{MAX_RUN_TRIALS:,} one run plays; pass fewer --seeds or --trials, or split the study")
+    note = fallback_note(cfg.scenario, scenario)
+    if note is not None:
+        print(f"wbc: note: {note}", file=sys.stderr)
     published = warn_if_unpublished(scenario)
     trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
     if cfg.no_push:
@@ -336,7 +341,7 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
     # the options left unset are absent from run.json: a run naming one at its default resumes a run that did not
     identity = SimulatedRunIdentity(
         controllers=tuple(cfg.controllers),
-        scenario=ScenarioRef(path=str(cfg.scenario), name=scenario.name, version=scenario.version,
+        scenario=ScenarioRef(path=scenario.path, name=scenario.name, version=scenario.version,
                              hash=scenario.hash, published=published),
         bands=tuple(bands), seeds=tuple(cfg.seeds), trials=cfg.trials, no_push=cfg.no_push,
         debug_truth=cfg.debug_truth,
@@ -442,13 +447,15 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                             controllers=list(cfg.controllers), bands=list(bands), errors=errors,
                             sequential=rounds.comparison.as_dict() if rounds is not None else None)
         outcomes = push_outcomes(records, scenario.trial)
-        failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands)
+        failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands, trial_of=scenario.trial)
         curve = recovery_curve(outcomes, controllers=cfg.controllers)
         meta = {
             "controllers": ", ".join(cfg.controllers),
-            "scenario": f"{scenario.name} v{scenario.version} ({cfg.scenario})",
+            "scenario": f"{scenario.name} v{scenario.version} ({scenario.path})",
             "scenario hash": scenario.hash,
-            "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
+            "published scenario": ("yes" if published else "NO (results are not comparable with published ones)")
+            + {None: "", False: "; not when the run began (published at a resume; the same content)",
+               True: "; it was when the run began (the same content)"}[store.identity.scenario.published_at_start],
             "bands": ", ".join(bands),
             "seeds": ", ".join(str(s) for s in cfg.seeds),
             "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),

@@ -48,6 +48,7 @@ import contextlib
 import dataclasses
 import json
 import math
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -82,6 +83,7 @@ from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyStat
 from wbc.interrupts import DeferredInterrupts
 from wbc.output_files import DirectoryLock, write_text
 from wbc.scenario import load_scenario, warn_if_unpublished
+from wbc.scenario.scenario import fallback_note
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
 
@@ -283,6 +285,10 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
     with contextlib.ExitStack() as holding:
         try:  # nothing is connected before `_play`: an interruption until then has sent the robot nothing
             scenario = load_scenario(cfg.scenario)
+            note = fallback_note(cfg.scenario, scenario)
+            if note is not None:
+                print(f"wbc: note: {note}", file=sys.stderr)
+            cfg = dataclasses.replace(cfg, scenario=Path(scenario.path))  # the file that plays, as results record it
             band = cfg.band if cfg.band is not None else scenario.bands[0]
             trial = scenario.trial(band, cfg.seed, cfg.trial)
             if cfg.seconds is not None:

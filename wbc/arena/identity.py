@@ -32,7 +32,7 @@ from wbc.scenario.scenario import MAX_DURATION_S, MAX_VERSION
 
 __all__ = ["MAX_CONSECUTIVE_ERRORS", "MAX_RUN_TRIALS", "MAX_SEED", "MAX_TRIALS", "MAX_TRIAL_TIME_LIMIT_S",
            "MIN_TRIAL_TIME_LIMIT_S", "ControllerFile", "HardwareRunIdentity", "RunIdentity", "ScenarioRef",
-           "SequentialStop", "SimulatedRunIdentity", "compared", "moved_files"]
+           "SequentialStop", "SimulatedRunIdentity", "compared", "moved_files", "publication_change"]
 
 MAX_TRIALS = 100_000
 """Most trials per band and seed a run plays (``wbc run --trials``)."""
@@ -67,8 +67,12 @@ class ScenarioRef:
             compared on ``--resume``, where `hash` names the file).
         name: the scenario's name.
         hash: the content hash of the file the run played.
-        published: whether the file matched the lock of published scenarios.
+        published: whether the file matched the lock of published scenarios (as the call that last played the run
+            found it; not compared on ``--resume``: publishing a scenario does not change its content).
         version: the scenario's version; None in a hardware run's identity, which does not record it.
+        published_at_start: whether the file was published when the run began, where that differs from
+            `published` (the run was resumed after its scenario was published, or on a copy away from its lock);
+            None (not written) where it does not.
     """
 
     path: str
@@ -76,13 +80,16 @@ class ScenarioRef:
     hash: str
     published: bool
     version: int | None = None
+    published_at_start: bool | None = None
 
     def as_json(self) -> dict[str, Any]:
-        """The ``scenario`` object: path, name, version (when recorded), hash, published."""
+        """The ``scenario`` object: path, name, version (when recorded), hash, published (and published_at_start)."""
         out: dict[str, Any] = {"path": self.path, "name": self.name}
         if self.version is not None:
             out["version"] = self.version
         out.update(hash=self.hash, published=self.published)
+        if self.published_at_start is not None:
+            out["published_at_start"] = self.published_at_start
         return out
 
     @classmethod
@@ -94,10 +101,11 @@ class ScenarioRef:
         """
         keys = ("path", "name", "version", "hash", "published") if with_version else ("path", "name", "hash",
                                                                                        "published")
-        table = _Table(data, source, "scenario", required=keys)
+        table = _Table(data, source, "scenario", required=keys, optional=("published_at_start",))
         return cls(path=table.text("path"), name=table.text("name"), hash=table.text("hash"),
                    published=table.flag("published"),
-                   version=table.whole("version", lo=1, hi=MAX_VERSION) if with_version else None)
+                   version=table.whole("version", lo=1, hi=MAX_VERSION) if with_version else None,
+                   published_at_start=table.flag("published_at_start") if "published_at_start" in table else None)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -399,20 +407,45 @@ def _file_paths(config: Mapping[str, Any]) -> dict[str, object]:
     return paths
 
 
+_NOT_COMPARED = ("path", "published", "published_at_start")
+"""The ``scenario`` fields ``--resume`` does not compare: where the file was given, and whether a lock listed it."""
+
+
 def compared(config: Mapping[str, Any]) -> dict[str, Any]:
     """A ``config`` object as ``--resume`` compares it with the stored one: without the paths its files were given by.
 
     A file is the content its hash names (the scenario's ``hash``, of its parsed content; a controller file's
     ``sha256``); the path it was given by, relative to the directory the command ran in, is provenance, written but not
     compared. So a run resumes from another directory, with the path spelled otherwise, or with a copy of the file.
+    Nor is the scenario's ``published`` compared: a lock that lists the file's hash since the run began (or a copy
+    away from the lock) leaves its content, and so every trial, as it was (`publication_change`).
     """
     out = dict(config)
     if isinstance(out.get("scenario"), Mapping):
-        out["scenario"] = {k: v for k, v in out["scenario"].items() if k != "path"}
+        out["scenario"] = {k: v for k, v in out["scenario"].items() if k not in _NOT_COMPARED}
     if isinstance(out.get("controller_files"), Mapping):
         out["controller_files"] = {name: {k: v for k, v in entry.items() if k != "path"} if isinstance(entry, Mapping)
                                    else entry for name, entry in out["controller_files"].items()}
     return out
+
+
+def publication_change(stored: Mapping[str, Any], given: Mapping[str, Any]) -> bool | None:
+    """Whether the scenario was published when a run began, where a resume finds it otherwise; else None.
+
+    Args:
+        stored: the stored ``config`` object.
+        given: the resuming call's ``config`` object (its ``published`` as found now).
+
+    Returns:
+        The stored run's ``published_at_start`` (its ``published`` where it has none) when that differs from
+        `given`'s ``published``, the value the resumed run records as its ``published_at_start``; None when the two
+        agree (or either has no scenario).
+    """
+    before, now = stored.get("scenario"), given.get("scenario")
+    if not isinstance(before, Mapping) or not isinstance(now, Mapping):
+        return None
+    at_start = before.get("published_at_start", before.get("published"))
+    return at_start if isinstance(at_start, bool) and at_start != now.get("published") else None
 
 
 def moved_files(stored: Mapping[str, Any], given: Mapping[str, Any]) -> list[tuple[str, object, object]]:

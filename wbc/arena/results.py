@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import dataclasses
 import errno
 import json
 import os
@@ -31,7 +32,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from wbc.arena.identity import RunIdentity, compared, moved_files
+from wbc.arena.identity import RunIdentity, compared, moved_files, publication_change
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
@@ -416,8 +417,15 @@ class ResultsStore:
                 raise ResultsDirError(f"{self.run_path}: --resume with {changed} changed since the run began: its "
                                       "stored trials were played by the earlier one, and a run mixes no two; restore "
                                       "it, or start afresh with another --out")
+            at_start = publication_change(stored, config)
+            # said when this call finds it otherwise than the last one; recorded as long as it differs from the start
+            republished = stored.get("scenario", {}).get("published") != config["scenario"]["published"]
+            if at_start is not None:  # the same content: run.json records both what was and what is
+                scenario = dataclasses.replace(self.identity.scenario, published_at_start=at_start)
+                self.identity = dataclasses.replace(self.identity, scenario=scenario)
+                config = self.identity.as_json()
         else:
-            moved = []
+            moved, at_start, republished = [], None, False
         self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
             rows = scan_csv(self.trials_path, scenario_hash=self.identity.scenario_hash,
@@ -449,6 +457,14 @@ class ResultsStore:
             print(f"wbc: note: {self.run_path}: {what} is given as {_shown(given)}, the run's was "
                   f"{_shown(was)}: the same content, so the run resumes, and run.json records the path given",
                   file=sys.stderr)
+        if republished:
+            published = bool(config["scenario"]["published"])
+            now = "published now (a lock lists its hash)" if published else "not published now (no lock lists its hash)"
+            said = (f"and {'was' if at_start else 'was not'} when the run began: the same content, so the run "
+                    f"resumes, and run.json records both (scenario.published {str(published).lower()}, "
+                    f"scenario.published_at_start {str(at_start).lower()})" if at_start is not None else
+                    "as when the run began, not as at its last call: the same content, so the run resumes")
+            print(f"wbc: note: {self.run_path}: the scenario is {now}, {said}", file=sys.stderr)
         self.environment = provenance()  # what `run.json` records; the report shows the same, taken once
         run = {"config": config, "environment": self.environment}
         if controllers:

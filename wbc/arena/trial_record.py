@@ -91,9 +91,10 @@ class TrialRecord:
         arm_travel_rad: total arm joint travel [rad].
         push_force_n: largest push magnitude of the trial (0 without pushes) [N].
         n_pushes: number of pushes in the trial (played or not, if the robot fell first).
-        vx_cmd: commanded forward velocity after the ramp [m/s].
-        vy_cmd: commanded lateral velocity after the ramp [m/s].
-        yaw_rate_cmd: commanded yaw rate after the ramp [rad/s].
+        vx_cmd: commanded forward velocity after the ramp [m/s]: the command the trial starts with, held until the
+            scenario's first ``[[commands.changes]]`` if it has any (the changes are the scenario's, not a column).
+        vy_cmd: commanded lateral velocity after the ramp [m/s], likewise the starting command.
+        yaw_rate_cmd: commanded yaw rate after the ramp [rad/s], likewise the starting command.
         friction: ground friction coefficient of the trial.
         payload_kg: payload mass added to the trunk [kg].
         fallbacks: controller solves that failed and fell back to a safe command.

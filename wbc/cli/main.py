@@ -65,7 +65,7 @@ from wbc.learned.train.adaptation_config import AdaptationConfig
 from wbc.learned.train.stages import TASKS, fine_tune_config, stage_config
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
-from wbc.scenario import load_scenario, warn_if_unpublished
+from wbc.scenario import load_scenario, resolve_scenario_path, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.tools.arm_momentum import arm_momentum_study
 from wbc.tools.bench import (
@@ -1032,8 +1032,11 @@ def _play_arena(cfg: ArenaConfig, *, as_json: bool) -> int:
     else:
         printers.print_arena(result)
         if len(set(cfg.controllers)) > 1:
-            printers.print_compare_watch(trial_to_watch(result.records, list(cfg.controllers)),
-                                         scenario=str(cfg.scenario))
+            watch = trial_to_watch(result.records, list(cfg.controllers))
+            shown = () if watch is None else (watch.controller, str(watch.other))
+            # the file that played and every option that changed the trial: the command plays the trial measured
+            printers.print_compare_watch(watch, scenario=str(resolve_scenario_path(cfg.scenario)),
+                                         options=printers.arena_trial_options(cfg, shown))
     # a controller's errors cost its own trials only, but the command says so and fails: one line per controller
     for errors in result.controller_errors:
         print(f"wbc: {errors.line()}", file=sys.stderr)
@@ -1242,6 +1245,7 @@ def _view(args: argparse.Namespace) -> int:
         open_browser=args.open, wait_for_browser=args.wait,
         save_episode=save,
         export_scenario=Path(args.export_scenario) if args.export_scenario else None,
+        debug_truth=args.debug_truth,
     )
     ctrls = list(args.ctrl or [])
     if len(ctrls) > 2:
@@ -1263,7 +1267,7 @@ def _view(args: argparse.Namespace) -> int:
         if args.ctrl is None or args.scenario is None:
             raise ConfigError("wbc view needs CTRL --scenario FILE --trial I (play a trial), or --episode "
                               "RESULTS_DIR --trial I (replay a stored one)")
-        spec = get_controller(args.ctrl, config=args.controller_config, io=args.io)
+        (spec,) = _view_controllers(args, (args.ctrl,))
         trial = _view_trial(args)
         _check_at(args.at, trial.duration_s, cut=args.duration is not None)
         result = view_trial(trial, spec, cfg)
@@ -1293,7 +1297,8 @@ def _view_refusals(args: argparse.Namespace) -> None:
         # a stored episode replays as it was run: its trial and its controller's run come from the results directory
         _refuse((("--scenario", args.scenario), ("--duration", args.duration),
                  ("--controller-config", args.controller_config), ("--io", args.io),
-                 ("--save-episode", args.save_episode)),
+                 ("--save-episode", args.save_episode), ("--no-push", args.no_push or None),
+                 ("--debug-truth", args.debug_truth or None)),
                 "with --episode: a stored episode replays the run stored, whole (--pause-at T or --at T reach a "
                 "moment)")
     if ab:
@@ -1338,15 +1343,28 @@ def _check_host(host: str | None) -> None:
 
 
 def _view_trial(args: argparse.Namespace) -> Trial:
-    """The trial ``wbc view`` plays: ``--scenario``'s band (its first by default), seed and trial, cut short."""
+    """The trial ``wbc view`` plays: ``--scenario``'s band (its first by default), seed and trial, cut short.
+
+    Without its pushes with ``--no-push``, as ``wbc run --no-push`` plays it.
+    """
     scenario = load_scenario(args.scenario)
     warn_if_unpublished(scenario)
     trial = scenario.trial(args.band or scenario.bands[0], 0 if args.seed is None else args.seed, args.trial)
+    if args.no_push:
+        trial = dataclasses.replace(trial, pushes=())
     if args.duration is not None:
         if not 0 < args.duration <= trial.duration_s:
             raise ConfigError(f"--duration must be in (0, {trial.duration_s}] s, got {args.duration}")
         trial = dataclasses.replace(trial, duration_s=args.duration)
     return trial
+
+
+def _view_controllers(args: argparse.Namespace, ctrls: tuple[str, ...]) -> tuple[ControllerSpec, ...]:
+    """The controllers ``wbc view`` plays, each with its ``--controller-config`` / ``--io`` file (``[NAME=]FILE``)."""
+    configs = _controller_files(args.controller_config, ctrls, "--controller-config", takes_controller_config,
+                                "a plug-in")
+    ios = _controller_files(args.io, ctrls, "--io", _is_onnx, "an onnx:PATH policy")
+    return tuple(get_controller(c, config=configs.get(c), io=ios.get(c)) for c in ctrls)
 
 
 def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
@@ -1370,7 +1388,7 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
                               "--episode RESULTS_DIR --trial I (their stored runs)")
         trial = _view_trial(args)
         _check_at(args.at, trial.duration_s, cut=args.duration is not None)
-        specs = tuple(get_controller(c, config=args.controller_config, io=args.io) for c in ctrls)
+        specs = _view_controllers(args, tuple(ctrls))
         result = view_ab(trial, specs, cfg, path)
     for name, fall in zip(result.names, result.fall_s, strict=True):
         print(f"{name}: " + ("survived" if fall is None else f"fell at {fall:.2f} s"))

@@ -796,7 +796,12 @@ def _add_view_parser(sub: _Commands) -> None:
     view.add_argument("--open", action="store_true",
                       help="open the page in the default browser (the live one, or else the recorded one)")
     view.add_argument("--wait", action="store_true", help="live: start once a browser has opened the page")
-    add_controller_file_options(view, repeatable=False)
+    view.add_argument("--no-push", action="store_true",
+                      help="play the trial without its pushes (as `wbc run --no-push` plays it)")
+    view.add_argument("--debug-truth", action="store_true",
+                      help="debug: controllers read the simulator's base state instead of estimating it (as `wbc run "
+                      "--debug-truth`)")
+    add_controller_file_options(view, repeatable=True)
     view.set_defaults(handler="view")
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from wbc.arena.compare import ArenaResult
+from wbc.arena.compare import ArenaConfig, ArenaResult
 from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.report import format_table, format_verdict, resumed_note
 from wbc.arena.summary import Summary
@@ -417,21 +417,45 @@ def demo_watch_command(watch: TrialToWatch, *, scenario: str, wbc: str | None = 
             f"--band {shlex.quote(watch.band)} --seed {watch.seed} --trial {watch.trial}")
 
 
-def ab_watch_command(watch: TrialToWatch, *, scenario: str, wbc: str | None = None) -> str:
-    """The shell command that shows `watch`'s two controllers on one page (`wbc view A B`), opened at its moment."""
+def arena_trial_options(cfg: ArenaConfig, controllers: Sequence[str]) -> tuple[str, ...]:
+    """The ``wbc view`` options that play a trial as `cfg`'s run played it for `controllers`.
+
+    Every option of ``wbc run`` / ``wbc compare`` that changes what a trial plays: ``--no-push``,
+    ``--debug-truth``, and each of `controllers`' ``--controller-config`` and ``--io`` files (as ``NAME=FILE``).
+    """
+    options: list[str] = []
+    if cfg.no_push:
+        options.append("--no-push")
+    if cfg.debug_truth:
+        options.append("--debug-truth")
+    for option, files in (("--controller-config", cfg.controller_configs), ("--io", cfg.io_files)):
+        options += [f"{option} {shlex.quote(f'{name}={path}')}" for name, path in files.items() if name in controllers]
+    return tuple(options)
+
+
+def ab_watch_command(watch: TrialToWatch, *, scenario: str, wbc: str | None = None,
+                     options: Sequence[str] = ()) -> str:
+    """The shell command that shows `watch`'s two controllers on one page (`wbc view A B`), opened at its moment.
+
+    Args:
+        watch: the trial.
+        scenario: the scenario file that played it.
+        wbc: how the command is called (default `wbc_command`).
+        options: the options that played the trial as the run did (`arena_trial_options`), already quoted.
+    """
     wbc = wbc_command() if wbc is None else wbc
     at = f" --at {watch.at_s:g}" if watch.at_s is not None else ""
     return (f"{wbc} view {shlex.quote(watch.controller)} {shlex.quote(str(watch.other))} --scenario "
             f"{shlex.quote(str(scenario))} --band {shlex.quote(watch.band)} --seed {watch.seed} --trial "
-            f"{watch.trial}{at}")
+            f"{watch.trial}{''.join(f' {o}' for o in options)}{at}")
 
 
-def print_compare_watch(watch: TrialToWatch | None, *, scenario: str) -> None:
+def print_compare_watch(watch: TrialToWatch | None, *, scenario: str, options: Sequence[str] = ()) -> None:
     """``wbc compare``'s last lines: the most telling trial, with the command that shows both runs of it."""
     if watch is None or watch.other is None:
         return
     print(f"watch it ({watch.why}; both runs on one page, {watch.other} as the ghost):")
-    print(f"  {ab_watch_command(watch, scenario=scenario)}")
+    print(f"  {ab_watch_command(watch, scenario=scenario, options=options)}")
 
 
 def print_controllers(rows: Sequence[ControllerListing]) -> None:

@@ -33,8 +33,9 @@ Schema (every other key is an error):
   200 N s), ``offset_m`` (3 numbers: the application point in the base frame [m], each in [-0.5, 0.5]; default
   the base origin). A trial played live with pushes from the browser is exported as such a file
   (``wbc view --export-scenario``).
-- ``[[bands]]``: ``name``, ``push_force_n`` (an interval in [0, 2000], its upper end times ``[pushes] duration_s`` at
-  most 200 N s; required with ``[pushes]``, forbidden without), ``vx`` and ``yaw_rate`` (optional overrides of the
+- ``[[bands]]``: ``name``, ``push_force_n`` (an interval in [0, 2000], its upper end above 0 and, times ``[pushes]
+  duration_s``, at most 200 N s; required with ``[pushes]``, forbidden without: a scenario without pushes leaves out
+  both), ``vx`` and ``yaw_rate`` (optional overrides of the
   drawn option's vx and yaw rate; the option's sign flip applies to an overridden yaw rate too, so a band of
   ``vx = 0``, ``yaw_rate = 0`` stands whatever option is drawn).
 
@@ -90,7 +91,7 @@ from wbc.scenario.toml_fields import Range, TomlTable, read_toml
 from wbc.scenario.trial import CommandChange, CommandSchedule, Trial
 from wbc.types import VelocityCommand
 
-__all__ = ["MAX_VERSION", "Scenario", "ScenarioError", "load_scenario", "resolve_scenario_path"]
+__all__ = ["MAX_VERSION", "Scenario", "ScenarioError", "fallback_note", "load_scenario", "resolve_scenario_path"]
 
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 _BAND_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -192,9 +193,11 @@ class Scenario:
         notes: calibration reasoning and evidence.
         robot: robot registry name.
         duration_s: episode length [s].
-        hash: sha256 (hex) of the canonical JSON of the parsed file: comments and layout do not change it, any value
-            does.
-        path: the file it was loaded from, as given.
+        hash: sha256 (hex) of the canonical JSON of the parsed file: comments and layout do not change it; every
+            key and value as written does, an integer against a float of the same value (``20`` and ``20.0``) and a
+            key left out against the same key written with its default included.
+        path: the file it was loaded from: as given, or, for a relative path not found from the working directory,
+            the file under the source checkout that played (`resolve_scenario_path`), as an absolute path.
         bands: band names, in file order.
     """
 
@@ -222,6 +225,19 @@ class Scenario:
             if spec.name == band:
                 return spec
         raise UnknownNameError("band", band, self.bands, where=f"scenario {self.name!r}")
+
+    def band_settings(self, band: str) -> dict[str, Any]:
+        """What `band` sets, as its ``[[bands]]`` table writes it: the keys it gives besides its name.
+
+        ``push_force_n`` as ``(lo, hi)`` [N], ``vx`` [m/s], ``yaw_rate`` [rad/s]; a key the band leaves out (the drawn
+        option's value plays) is absent.
+
+        Raises:
+            UnknownNameError: `band` is not a band of this scenario; the message lists the valid ones.
+        """
+        spec = self._band(band)
+        return {key: value for key, value in (("push_force_n", spec.push_force_n), ("vx", spec.vx),
+                                              ("yaw_rate", spec.yaw_rate)) if value is not None}
 
     def trial(self, band: str, seed: int, index: int) -> Trial:
         """Trial `index` of `band` under `seed`: a pure function of the file's content, band, seed and index.
@@ -331,6 +347,19 @@ def resolve_scenario_path(path: str | Path) -> Path:
     return under_root if under_root.exists() else given
 
 
+def fallback_note(given: str | Path, scenario: Scenario) -> str | None:
+    """What a command says when `given` played a file other than the one it names from the working directory.
+
+    A relative path not found from the working directory is looked up under the source checkout
+    (`resolve_scenario_path`): ``scenarios/turn.toml`` given in another directory plays the shipped file. The note
+    names the file that plays (`scenario.path`, which results record); None when `given` is that file.
+    """
+    if scenario.path == str(given):
+        return None
+    return (f"{given} is not found from the working directory ({Path.cwd()}): it plays {scenario.path}, the file "
+            "under the source checkout, and the results record that path")
+
+
 def load_scenario(path: str | Path) -> Scenario:
     """Load, validate and hash a scenario file.
 
@@ -358,7 +387,7 @@ def load_scenario(path: str | Path) -> Scenario:
                 raise ScenarioError(shown, f"a key outside every table; each key belongs to one of {tables} (is "
                                     "a table's header missing above it?)", line=lines.key(("", 0), key), field=key)
             raise ScenarioError(shown, f"unknown table; valid tables: {tables}",
-                                line=lines.header((key, 0)) or lines.key(("", 0), key), field=f"[{key}]")
+                                line=lines.first_header(key) or lines.key(("", 0), key), field=f"[{key}]")
 
     head = top.sub_table("scenario", ("name", "version", "description", "notes", "robot", "duration_s"),
                       required=True)
@@ -488,6 +517,11 @@ def load_scenario(path: str | Path) -> Scenario:
             bnd.fail("push_force_n", "missing required key (the scenario has a [pushes] table); add "
                      "`push_force_n = [lo, hi]` [N]", at_header=True)
         force = bnd.interval("push_force_n", Range(lo=0.0, hi=MAX_PUSH_FORCE_N)) if pushes is not None else None
+        if force is not None and force[1] == 0.0:
+            bnd.fail("push_force_n", "[0, 0] makes every push of the band 0 N, a push that pushes nothing (a trial "
+                     "of it cannot be written as a scenario: a fixed push needs a force above 0 N); give an upper end "
+                     "above 0 N, or, to play no pushes, leave out [pushes] and every band's push_force_n (`wbc run` "
+                     "and `wbc compare` play any scenario's trials without their pushes with --no-push)")
         if force is not None and pushes is not None and force[1] * pushes.duration_s > MAX_PUSH_IMPULSE_NS:
             bnd.fail("push_force_n", f"a push of {force[1]:g} N for [pushes] duration_s {pushes.duration_s:g} s "
                      f"delivers {force[1] * pushes.duration_s:g} N s, more than {MAX_PUSH_IMPULSE_NS:g} N s (it "

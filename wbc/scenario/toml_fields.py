@@ -209,8 +209,9 @@ class TomlTable:
                                 field=field_name, line=line)
         if not value:
             raise self.error(self.path, f"must hold at least one {label} table", field=field_name, line=line)
-        return [TomlTable(self.path, self.lines, v, f"{label} #{k}", (name, k), error=self.error)
-                for k, v in enumerate(value, start=1)]
+        # a table of an inline array (`bands = [{...}, {...}]`) has no header: its errors name the array's line
+        return [TomlTable(self.path, self.lines, v, f"{label} #{k}", (name, k), self.lines.header((name, k)) or line,
+                          error=self.error) for k, v in enumerate(value, start=1)]
 
     def sub_table(self, key: str, valid: Sequence[str], *, required: bool) -> TomlTable:
         """Sub-table ``[key]`` of this table, its keys checked against `valid`; empty when absent and optional."""

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 
 from wbc.errors import ConfigError, ScenarioError
+from wbc.output_files import temporary_name
 from wbc.scenario.scenario import Scenario, load_scenario
 from wbc.scenario.trial import Trial
 
@@ -110,6 +112,9 @@ def write_trial_scenario(path: str | Path, trial: Trial, *, name: str, descripti
                          header: str = "") -> Scenario:
     """Write `trial_scenario_text` to `path`, its content hash in its first comment lines, and check it replays.
 
+    The file is written under a temporary name beside `path` and renamed to `path` once it loads and replays the
+    trial: a trial the schema refuses, or a write that fails, leaves `path` as it was.
+
     Args:
         path: the ``.toml`` file to write.
         trial: the trial, as played.
@@ -123,23 +128,31 @@ def write_trial_scenario(path: str | Path, trial: Trial, *, name: str, descripti
 
     Raises:
         ConfigError: the trial holds what a scenario file cannot say, or the file cannot be written.
-        ScenarioError: the trial breaks the schema (a value out of its range), named with the file and the line.
+        ScenarioError: the trial breaks the schema (a value out of its range), named with the file and the line;
+            nothing is written.
     """
     path = Path(path)
+    tmp = temporary_name(path)  # checked under this name, renamed over `path` only once it loads and replays
     body = trial_scenario_text(trial, name=name, description=description, notes=notes)
     try:
-        path.write_text(body, encoding="utf-8")
-        content_hash = load_scenario(path).hash  # comments do not enter it: the header may name it
-        lines = [header] if header else []
-        lines += ["Unpublished. Content hash (sha256 of the parsed file, what results record; comments and layout do "
-                  "not change it):", f"  {content_hash}"]
-        path.write_text(trial_scenario_text(trial, name=name, description=description, notes=notes,
-                                            header="\n".join(lines)), encoding="utf-8")
+        try:
+            tmp.write_text(body, encoding="utf-8")
+            content_hash = load_scenario(tmp).hash  # comments do not enter it: the header may name it
+            lines = [header] if header else []
+            lines += ["Unpublished. Content hash (sha256 of the parsed file, what results record; comments and "
+                      "layout do not change it):", f"  {content_hash}"]
+            tmp.write_text(trial_scenario_text(trial, name=name, description=description, notes=notes,
+                                               header="\n".join(lines)), encoding="utf-8")
+            written = load_scenario(tmp)
+        except ScenarioError as exc:  # named by the file asked for, which is left as it was
+            raise ScenarioError(str(path), f"{exc.reason} (the trial's file was not written)", line=exc.line,
+                                field=exc.field) from None
+        if written.hash != content_hash or not _same_trial(written.trial(trial.band, 0, 0), trial):
+            raise ScenarioError(str(path), "the written file does not replay the trial exactly (a bug in "
+                                "wbc.scenario.trial_file); please report it with the trial; nothing was written")
+        os.replace(tmp, path)
     except OSError as exc:
         raise ConfigError(f"{path}: cannot write the scenario ({exc.strerror})") from None
-    scenario = load_scenario(path)
-    replayed = scenario.trial(trial.band, 0, 0)
-    if scenario.hash != content_hash or not _same_trial(replayed, trial):
-        raise ScenarioError(str(path), "the written file does not replay the trial exactly (a bug in "
-                            "wbc.scenario.trial_file); please report it with the file")
-    return scenario
+    finally:
+        tmp.unlink(missing_ok=True)
+    return load_scenario(path)

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import base64
 import dataclasses
+import functools
 import sys
 import time
 import webbrowser
@@ -63,6 +64,8 @@ class ViewConfig:
         save_episode: write the episode (with the pushes and commands set from the page) to this ``.npz``.
         export_scenario: write a scenario that replays the trial as played (with the pushes and commands set from
             the page) to this ``.toml`` (`wbc.viz.trial_export`).
+        debug_truth: throw the controllers' ground-truth debug switch (`wbc.arena.sim_trial.run_trial`), as a run
+            with ``--debug-truth`` plays its trials.
     """
 
     live: bool = True
@@ -75,6 +78,7 @@ class ViewConfig:
     keep_open: bool = True
     save_episode: Path | None = None
     export_scenario: Path | None = None
+    debug_truth: bool = False
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -222,7 +226,7 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
             page.controls = player.controls if player is not None else None
             played = dataclasses.replace(trial, command=page.command)
         watch = _Stopwatch(_with_page(observer, page, trial, name, cfg))
-        row, episode = run_trial(played, controller, observer=watch)
+        row, episode = run_trial(played, controller, observer=watch, debug_truth=cfg.debug_truth)
         if not observer.recordings and (cfg.record is not None or page is not None):
             # no tick was played (the controller could not be built, or failed in reset): no page to show
             raise ViewerError(f"nothing to show: {row.error or 'no tick was played'}")
@@ -384,7 +388,8 @@ def view_ab(trial: Trial, controllers: tuple[ControllerSpec | str, ControllerSpe
             path: Path) -> ABResult:
     """Play `trial` with both controllers in simulation and write one page of both runs to `path`."""
     _no_export(cfg, "an A / B view")
-    a, b = (capture_trial(trial, c, cfg.record_fps) for c in controllers)
+    run = functools.partial(run_trial, debug_truth=cfg.debug_truth)
+    a, b = (capture_trial(trial, c, cfg.record_fps, run=run) for c in controllers)
     return _write_ab(a, b, trial, cfg, path, "")
 
 

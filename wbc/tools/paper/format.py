@@ -6,7 +6,8 @@
    protocol, and what a cell shows (ours: mean ± std over seeds, or from one seed the mean and its 95 % interval
    over trials; the paper's: mean ± std over its 5 seeds);
 2. one block per metric of the table, a line per paper row followed by our contenders standing beside it (the
-   learned and the model-based family), a column per band (matched to the paper's columns by position); rows of
+   learned and the model-based family), a column per band (the paper's figure beside a band that commands what its
+   column did: `wbc.tools.paper.tables.paper_column`); rows of
    ours that the paper does not have (the distilled MPC beside Table III's baselines) come last, their paper cells
    "-";
 3. the table's paired comparisons, B - A on the same trials, with the 95 % bootstrap interval, the test's p-value
@@ -88,8 +89,8 @@ def _metric_block(result: PaperTableResult, metric: str) -> list[str]:
     extra = [c.row for c in result.contenders if c.row not in spec.paper]
     for paper_row in (*spec.paper, *dict.fromkeys(extra)):
         cells = spec.paper[paper_row].get(metric, ()) if paper_row in spec.paper else ()
-        rows.append([paper_row, "paper", *(_paper_cell(cells[i] if i < len(cells) else None, metric)
-                                           for i in range(len(result.bands)))])
+        rows.append([paper_row, "paper", *(_paper_cell(cells[i] if i is not None and i < len(cells) else None, metric)
+                                           for i in result.band_columns)])
         for contender in (c for c in result.contenders if c.row == paper_row):
             name = display_name(contender)
             if contender.controller is None:
@@ -127,8 +128,9 @@ def _names(result: PaperTableResult) -> dict[str, str]:
 
 
 def _band_columns(result: PaperTableResult) -> list[tuple[str, str]]:
+    """Each band and the label of the paper's column it stands in ("" where the paper has none)."""
     cols = result.spec.paper_columns
-    return [(band, cols[i] if i < len(cols) else "") for i, band in enumerate(result.bands)]
+    return [(band, "" if i is None else cols[i]) for band, i in zip(result.bands, result.band_columns, strict=True)]
 
 
 def _comparison_lines(result: PaperTableResult) -> list[str]:

@@ -35,7 +35,7 @@ from wbc.output_files import write_text
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.tools.paper.format import format_paper_table
 from wbc.tools.paper.result import PAPER_TRIALS_PER_BAND, PaperComparison, PaperTableResult, warm_trial_wall_s
-from wbc.tools.paper.tables import TABLES, resolve_contenders
+from wbc.tools.paper.tables import TABLES, paper_column, resolve_contenders
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TRIALS", "PAPER_TRIALS_PER_BAND", "PaperRunConfig", "PaperTableResult",
            "default_out_dir", "run_paper_table"]
@@ -164,9 +164,11 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
                    if (w := warm_trial_wall_s([r.wall_s for r in rs], workers)) is not None}
         result = PaperTableResult(
             spec=spec, contenders=contenders,
-            scenario={"name": scenario.name, "version": scenario.version, "path": str(scenario_path),
+            scenario={"name": scenario.name, "version": scenario.version, "path": scenario.path,
                       "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
-            bands=scenario.bands, trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
+            bands=scenario.bands,
+            band_columns=tuple(paper_column(spec, scenario.band_settings(band)) for band in scenario.bands),
+            trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
             comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
             trial_wall_s=wall_by, warm_wall_s=warm_by, out_dir=arena.out_dir, played=arena.played, stored=len(records),
             wall_s=wall,

@@ -66,7 +66,9 @@ class PaperTableResult:
         spec: the table.
         contenders: our rows as played (missing ones with controller None).
         scenario: name, version, path, hash and whether it is published.
-        bands: the scenario's bands, in the order matched to the paper's columns.
+        bands: the scenario's bands, in file order.
+        band_columns: each band's column of the paper's table (an index into ``spec.paper_columns``,
+            `wbc.tools.paper.tables.paper_column`), None for a band the paper has no figure for.
         trials: trials per band and seed.
         seeds: the seeds.
         summary: the arena's summary.
@@ -89,6 +91,7 @@ class PaperTableResult:
     contenders: tuple[Contender, ...]
     scenario: dict[str, Any]
     bands: tuple[str, ...]
+    band_columns: tuple[int | None, ...]
     trials: int
     seeds: tuple[int, ...]
     summary: Summary
@@ -129,6 +132,8 @@ class PaperTableResult:
             "contenders": [{"key": c.key, "row": c.row, "family": c.family, "controller": c.controller,
                             "note": c.note} for c in self.contenders],
             "scenario": self.scenario, "bands": list(self.bands), "paper_columns": list(self.spec.paper_columns),
+            "band_columns": {band: None if col is None else self.spec.paper_columns[col]
+                             for band, col in zip(self.bands, self.band_columns, strict=True)},
             "trials": self.trials, "seeds": list(self.seeds),
             "comparisons": [c.to_json() for c in self.comparisons],
             "trial_wall_s": self.trial_wall_s, "warm_wall_s": self.warm_wall_s, "wall_s": self.wall_s,

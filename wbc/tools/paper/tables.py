@@ -28,13 +28,14 @@ import os
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.stages import BASELINES
 from wbc.tools.paper.paper_numbers import TABLE_I, TABLE_II, TABLE_III, PaperValue
 
-__all__ = ["Contender", "Contrast", "PaperTableSpec", "TABLES", "resolve_contenders"]
+__all__ = ["Contender", "Contrast", "PaperTableSpec", "TABLES", "paper_column", "resolve_contenders"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -84,7 +85,10 @@ class PaperTableSpec:
         scenario: the default scenario file.
         robot: the robot the table's contenders drive.
         metrics: the summary metrics of its columns, in order (`wbc.arena.report.METRICS` names).
-        paper_columns: the paper's column labels, matched to the scenario's bands by position.
+        paper_columns: the paper's column labels.
+        paper_bands: what each of the paper's columns commands, as a scenario band's settings
+            (`wbc.scenario.Scenario.band_settings`): ``{"vx": 1.25}``, ``{"push_force_n": (200.0, 300.0)}``. A band
+            of the scenario played stands in a column when its settings are exactly those (`paper_column`).
         paper: paper row -> metric -> a `PaperValue` per column.
         contenders: our rows, in the order they are played (printed grouped by the paper's rows).
         crouched_contenders: the same rows with the learned ones' crouched posture variants (``--crouched``: as first
@@ -99,6 +103,7 @@ class PaperTableSpec:
     robot: str
     metrics: tuple[str, ...]
     paper_columns: tuple[str, ...]
+    paper_bands: tuple[Mapping[str, Any], ...]
     paper: Mapping[str, Mapping[str, tuple[PaperValue, ...]]]
     contenders: tuple[Contender, ...]
     crouched_contenders: tuple[Contender, ...]
@@ -171,25 +176,45 @@ def _baseline_rows(crouched: bool = False) -> tuple[Contender, ...]:
     return tuple(rows)
 
 
+_PUSH_BANDS: tuple[Mapping[str, Any], ...] = ({"push_force_n": (200.0, 300.0)}, {"push_force_n": (300.0, 400.0)})
+"""The push tables' columns: the paper's push forces in and out of distribution [N]."""
+
+
+def paper_column(spec: PaperTableSpec, settings: Mapping[str, Any]) -> int | None:
+    """The paper's column (an index into `spec.paper_columns`) that a band of these settings stands in, or None.
+
+    A band stands in a column when it sets exactly what the column commands (``vx = 1.25`` for Table II's "1.25",
+    ``push_force_n = [200, 300]`` for Table I's "200-300") and nothing else; any other band (a speed or a force the
+    paper did not play, a band that also fixes the yaw rate) has no paper figure beside it.
+
+    Args:
+        spec: the table.
+        settings: the band's settings (`wbc.scenario.Scenario.band_settings`).
+    """
+    given = {key: tuple(value) if isinstance(value, list | tuple) else value for key, value in settings.items()}
+    return next((i for i, column in enumerate(spec.paper_bands) if given == dict(column)), None)
+
+
 TABLES: dict[str, PaperTableSpec] = {
     "table1": PaperTableSpec(
         name="table1", title="Table I: locomotion under pushes, arm actuated / locked / absent",
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
-        paper_columns=("200-300", "300-400"), paper=TABLE_I, contenders=_arm_rows(),
+        paper_columns=("200-300", "300-400"), paper_bands=_PUSH_BANDS, paper=TABLE_I, contenders=_arm_rows(),
         crouched_contenders=_arm_rows(crouched=True),
         contrasts=_ARM_CONTRASTS,
         paper_protocol="5 seeds, 2000 trials, 20 s each"),
     "table2": PaperTableSpec(
         name="table2", title="Table II: high-speed turns, arm actuated / locked / absent",
         scenario="scenarios/turn.toml", robot="go1-arm", metrics=("success_rate", "vang_err", "vlin_err"),
-        paper_columns=("1", "1.25", "1.5"), paper=TABLE_II, contenders=_arm_rows(),
+        paper_columns=("1", "1.25", "1.5"), paper_bands=({"vx": 1.0}, {"vx": 1.25}, {"vx": 1.5}),
+        paper=TABLE_II, contenders=_arm_rows(),
         crouched_contenders=_arm_rows(crouched=True),
         contrasts=_ARM_CONTRASTS,
         paper_protocol="5 seeds, 2000 trials, 20 s each; yaw rate 0.5 rad/s in half the trials, 2 rad/s in the rest"),
     "table3": PaperTableSpec(
         name="table3", title="Table III: the staged method against its baselines, under pushes",
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
-        paper_columns=("200-300", "300-400"), paper=TABLE_III, contenders=_baseline_rows(),
+        paper_columns=("200-300", "300-400"), paper_bands=_PUSH_BANDS, paper=TABLE_III, contenders=_baseline_rows(),
         crouched_contenders=_baseline_rows(crouched=True),
         contrasts=(*(Contrast(a=key, b="ours", question=f"Ours vs {row}") for key, row in _BASELINE_ROWS.items()),
                    Contrast(a="mpc-distilled", b="ours", question="Ours vs MPC distilled"),
