@@ -644,6 +644,46 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert "software_estop" in report and "| push |" in report and "| estop |" in report
 
 
+@pytest.mark.usefixtures("terminal_signals")
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_a_request_to_end_during_the_settle_after_an_estop_keeps_the_trials_results(
+        stepped_go1: Stepped, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        signum: int) -> None:
+    """The trial is over at the e-stop: a Ctrl-C or SIGTERM in the settle after it (5 s here) cuts the settle short,
+    the robot kept in damping, and the trial's record is written whole. It was thrown away: no results were written."""
+    import wbc.arena.hw_trial as hw_trial
+    from wbc.cli.main import _terminate_interrupts
+
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    settle = hw_trial._settle
+    sent: list[float] = []
+
+    def settle_then_signal(robot, dt, seconds, **kwargs):  # the request to end comes 0.3 s into the settle
+        if seconds == 5.0:
+            sent.append(clock.now() + 0.3)
+            clock.call_at(sent[0], lambda: signal.raise_signal(signum))
+        return settle(robot, dt, seconds, **kwargs)
+
+    monkeypatch.setattr(hw_trial, "_settle", settle_then_signal)
+    keys = ScriptedKeys([(1.0, "e")], clock=clock.now)
+    out = tmp_path / "hw"
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=3.0, target=("127.0.0.1", 9), out_dir=out, settle_s=5.0, io_process=False)
+    with _terminate_interrupts(), pytest.raises(KeyboardInterrupt) as stopped:
+        run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: emu.reset(), build=stepped_go1.build)
+    assert isinstance(stopped.value, hw_trial.ResultsInterrupted), "the trial's results were thrown away"
+    assert stopped.value.complete and stopped.value.out_dir == out
+    assert "the settle after the trip is cut short and the robot is closed into damping" in capsys.readouterr().err
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.outcome == "operator_stop" and 1.0 <= record.fall_time_s <= 1.0 + TICK + TIME_EPS
+    assert all((out / name).is_file() for name in ("hardware.json", "summary.json", "report.md"))
+    pressed = dict(keys.delivered)["e"]
+    after = [c for c in emu.commands() if c.time > pressed + LINK_PERIOD + TIME_EPS]
+    assert after and all(c.damping for c in after)  # damping to the end, and the end came soon after the signal
+    assert after[-1].time < sent[0] + 0.1
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
 BROKEN_ON_HARDWARE = '''
     """The stand hold on a robot without its arm, until it raises after half a second."""
     from wbc.control.plugin import ControllerPlugin

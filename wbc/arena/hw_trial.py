@@ -331,9 +331,11 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     # after the trial, Ctrl-C (or a request to end) waits for the trial's results, written whole (the trial is played
     # once), and a second one stops the writing, saying what it left; during the robot's close, every one waits for the
     # close (`Robot.close`)
+    settling = [False]
     after_the_trial = DeferredInterrupts(
-        lambda what: f"wbc hw run: {what}: the robot is closed into damping; the trial's results are being written to "
-                     f"{out} and the run ends once they are (again: stop at once, leaving them incomplete)")
+        lambda what: f"wbc hw run: {what}: {'the settle after the trip is cut short and ' if settling[0] else ''}"
+                     f"the robot is closed into damping; the trial's results are being written to {out} and the run "
+                     "ends once they are (again: stop at once, leaving them incomplete)")
     with contextlib.ExitStack() as deferred:
         with contextlib.ExitStack() as stack:
             opening = False
@@ -380,14 +382,26 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 if safe.safety_state is not SafetyState.DAMPED:
                     safe.estop()  # the robot must not keep the broken controller's last command
             cpu_s, episode_wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
+            # the trial is over: from here a request to end keeps its record; the settle after a trip (its robot
+            # already damped by the latched layer) is cut short, and the robot closed into damping
+            deferred.enter_context(after_the_trial)
             if isinstance(hardware.robot, HasLinkStats):
                 link = hardware.robot.link_stats()
             io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
+            io_stopped = False
             if safe.safety_state is SafetyState.DAMPED:
-                _settle(robot, dt, cfg.settle_s)
-            link_lost = _link_lost(safe, started_s) if wall else None
-            arm_faults = _latched_faults(hardware.robot)
-            deferred.enter_context(after_the_trial)
+                settling[0] = True
+                try:
+                    _settle(robot, dt, cfg.settle_s, until=lambda: after_the_trial.requested is not None)
+                except IoProcessStopped:
+                    if after_the_trial.requested is None:
+                        raise
+                    # the request to end went to the command's whole group: its I/O process closed the robot itself
+                    # and answers no more
+                    io_stopped = True
+                settling[0] = False
+            link_lost = _link_lost(safe, started_s) if wall and not io_stopped else None
+            arm_faults = _latched_faults(hardware.robot) if not io_stopped else ()
         episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
         counters, error = read_counters(ctrl, spec.name, trial, episode, error)
         record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
@@ -537,10 +551,15 @@ def _latched_faults(robot: object) -> tuple[ArmFault, ...]:
     return robot.faults if isinstance(getattr(type(robot), "faults", None), property) else ()
 
 
-def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
-    """Keep reading and pacing the tripped robot for `seconds` while its safety layer sends damping."""
+def _settle(robot: EstimatedRobot, dt: float, seconds: float, *, until: Callable[[], bool] = lambda: False) -> None:
+    """Keep reading and pacing the tripped robot for `seconds` while its safety layer sends damping.
+
+    It ends sooner once `until` is true (a request to end the command).
+    """
     damping = MotorCommand.damping(robot.num_joints, 0.0)  # replaced by the layer's own damping: it is latched
     for _ in range(int(round(seconds / dt))):
+        if until():
+            return
         robot.read()
         robot.write(damping)
         robot.advance(dt)
