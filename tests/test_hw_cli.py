@@ -219,6 +219,21 @@ def test_check_prints_the_state_and_sends_only_damping(stepped: Stepped, capsys:
     assert all(c.damping and (c.wire.kp == 0).all() for c in log)
 
 
+def test_check_freezes_the_heap_once_all_is_built_before_it_connects(
+        stepped: Stepped, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A full collection of the start-up heap stalled the link and bus threads for 130-300 ms, and the layer called the
+    arm's live state stale ("WOULD REFUSE: stale_state"): ``hw check`` freezes the heap as ``hw run`` does, once the
+    robot is built and before anything is sent to it."""
+    import wbc.tools.hardware_check as hardware_check
+
+    frozen: list[int] = []  # the frames on the wire when the heap was frozen
+    monkeypatch.setattr(hardware_check, "freeze_heap", lambda: frozen.append(len(stepped.emu.commands())) or 0)
+    robot = stepped.emu.config.robot
+    args = build_parser().parse_args(["hw", "check", "--robot", robot, "--target", "127.0.0.1:9", "--seconds", "0.1"])
+    assert hw_check(args, build=stepped.build) == 0
+    assert frozen == [0] and stepped.emu.commands()
+
+
 def test_check_marks_a_joint_beyond_its_range_apart_from_one_beyond_the_safety_margin(
         stepped: Stepped, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
     """A joint beyond its printed range but within the layer's margin is marked ``margin`` (the layer lets it pass),
