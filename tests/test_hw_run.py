@@ -628,6 +628,8 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
                                 build=stepped_go1.build)
     record, episode = result.record, result.episode
     assert record.safety_trips == 1 and not record.success and record.outcome == "operator_stop"
+    # the trial's own play time, as a simulated trial's: not the build, the connect, the stand-up and the settle
+    assert record.wall_s == result.episode_wall_s
     assert 1.6 <= record.fall_time_s <= 1.6 + TICK + TIME_EPS  # ended at the tick that handled the key
     assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
     assert episode.safety_events.reason[-1] == "software_estop"

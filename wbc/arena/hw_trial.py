@@ -324,7 +324,6 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
           hardware: HardwareRobot, out: Path, lock: DirectoryLock, keys: KeySource | None,
           observer: TickObserver | None,
           before_connect: Callable[[HardwareRobot, ControllerSpec], None] | None) -> HardwareTrialResult:
-    start = time.perf_counter()
     notes = _skipped(trial)
     trial = dataclasses.replace(trial, pushes=())  # no robot here can apply them
     link: LinkStatsLike | None = None
@@ -405,7 +404,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
         counters, error = read_counters(ctrl, spec.name, trial, episode, error)
         record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
-                                      counters=counters, wall_s=time.perf_counter() - start,
+                                      counters=counters, wall_s=episode_wall_s,
                                       backend=hardware.backend, domain_applied=False, link=link, error=error)
         result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                      notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
