@@ -338,6 +338,17 @@ def test_allow_hardware_without_a_terminal_needs_yes(no_socket: list, monkeypatc
     assert not no_socket
 
 
+def test_the_confirmation_without_an_arm_port_names_the_legs_alone(no_socket: list, monkeypatch: pytest.MonkeyPatch,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """Without ``--arm-port`` only the legs are driven: the confirmation said "on the arm too" and named go1-arm."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))
+    assert main(["hw", "check", "--robot", "go1", "--target", NOT_LOOPBACK, "--allow-hardware"]) == 2
+    err = capsys.readouterr().err
+    assert ("wbc hw check: go1 at 192.0.2.1:9 is a REAL ROBOT (outside 127.0.0.0/8). Only damping will be sent to "
+            "its legs (Kp 0); no arm is driven (no --arm-port).") in err
+    assert "go1-arm" not in err and "arm too" not in err and not no_socket
+
+
 def test_allow_hardware_asks_and_a_no_refuses(no_socket: list, monkeypatch: pytest.MonkeyPatch,
                                               capsys: pytest.CaptureFixture[str]) -> None:
     class Terminal:
