@@ -211,6 +211,9 @@ def test_check_prints_the_state_and_sends_only_damping(stepped: Stepped, capsys:
     for text in (f"{robot} at 127.0.0.1:9", "FR_hip_joint", "RL_calf_joint", "IMU roll", "battery",
                  "remote buttons: none", "link:", "rejected states: 0"):
         assert text in out, (text, out)
+    # the age is the datagram's since it arrived, not the robot's latency, which damping alone cannot show: said so
+    assert "ms old (since its datagram arrived here)" in out and "  latency: NOT MEASURED: " in out
+    assert "a constant delay reads as none. `wbc bench latency` gives the delay each controller tolerates" in out
     assert ("none in this robot's state" in out) == (robot == "a1")
     assert ("NOT REPORTED: no cell voltage" in out) == (robot == "go1")  # the emulator reports no battery
     log = stepped.emu.commands()
