@@ -742,10 +742,10 @@ def print_hw_check(check: HardwareCheck) -> None:
     print(f"{where}: {link.valid_states} leg states received, newest {1e3 * link.state_age:.1f} ms old (since its "
           "datagram arrived here)")
     print("  latency: NOT MEASURED: what the robot took before it sent a state, and what a command takes to its "
-          "motors, cannot be seen on this wire while only damping is sent: no field of the state answers a damping "
-          "command to a robot that hangs still, and the state's tick counts on the robot's own clock, so a constant "
-          "delay reads as none. `wbc bench latency` gives the delay each controller tolerates (its margins); know "
-          "your robot's own before a controller drives it")
+          "motors: with damping only, no field of the state answers a command (a damped joint of a robot hanging "
+          "still gives no torque), and the state's tick counts on the robot's own clock, so a constant delay reads "
+          "as none. `wbc bench latency` gives the delay each controller tolerates (its margins); know your robot's "
+          "own before a controller drives it")
     print("  joint                 q [rad]   dq [rad/s]   tau_est [N m]   range [rad]          mode  temp [C]")
     modes = list(extras.motor_mode) if extras is not None else []
     temps = list(extras.motor_temperature) if extras is not None else []
