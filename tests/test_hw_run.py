@@ -242,7 +242,7 @@ def _running(pid: int) -> bool:
         return False
 
 
-def _standing_hw_run(go1: UnitreeEmulator, out: Path) -> subprocess.Popen:
+def _standing_hw_run(go1: UnitreeEmulator, out: Path, *options: str) -> subprocess.Popen:
     """``wbc hw run stand`` in a process group of its own, once its safety layer drives the emulator's legs.
 
     The command runs on the real clock: on a busy machine its safety layer can trip on a stale state during the
@@ -254,7 +254,8 @@ def _standing_hw_run(go1: UnitreeEmulator, out: Path) -> subprocess.Popen:
         proc = subprocess.Popen(
             [sys.executable, "-m", "wbc.cli", "hw", "run", "stand", "--robot", "go1-arm", "--arm", "none",
              "--scenario", PUSH, "--trial", "0", "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "20",
-             "--no-realtime", "--out", str(out / f"hw-{attempt}")], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+             "--no-realtime", "--out", str(out / f"hw-{attempt}"), *options], stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)),
             start_new_session=True,  # a group of its own, as a terminal's
             preexec_fn=terminal_signals_in_child)  # the hangup not ignored, whether or not this suite runs under nohup
@@ -598,6 +599,46 @@ def test_sigterm_to_the_commands_group_is_an_interruption_and_the_robot_ends_dam
     first = next((k for k, c in enumerate(frames) if c.damping), None)
     assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
     assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
+def test_sigterm_to_the_commands_group_during_the_settle_after_a_trip_keeps_the_trials_results(
+        go1: UnitreeEmulator, tmp_path: Path) -> None:
+    """The trial is over at the trip: SIGTERM to the whole group (the command and its I/O process, which closes the
+    robot itself) during the 30 s settle after it ends the command with the trial's results written whole. The I/O
+    process's stop, met in the settle and in the close, threw them away ("no results were written")."""
+    proc = _standing_hw_run(go1, tmp_path, "--settle", "30")
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(line.decode() for line in proc.stderr), daemon=True)
+    reader.start()
+
+    def said(text: str) -> bool:
+        for _ in range(6000):  # bounded (60 s)
+            if proc.poll() is not None or any(text in line for line in list(lines)):
+                return proc.poll() is None
+            time.sleep(0.01)
+        return False
+
+    try:
+        if said("-> run (ramp_done)"):  # the stand-up is done: the trial begins
+            time.sleep(1.0)  # well into the trial (its --seconds are 20): a trip before it is the stand-up's
+            go1.inject(Fault.FALL)  # the trunk reads rolled over: the layer trips on tilt and damps the legs
+            if said("-> damped (tilt)"):  # the trial ends at the tick that tripped; the settle follows
+                time.sleep(0.5)  # in the settle (30 s), past the trial's last tick
+                os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        go1.clear()
+    reader.join(timeout=10)
+    err = "".join(lines)
+    assert proc.returncode == 130, err
+    (results,) = [d for d in tmp_path.iterdir() if (d / "trials.csv").exists()] or [err]
+    assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted after the trial; the robot was closed into "
+                                            f"damping; its results are complete in {results}")
+    (record,) = TrialRecord.read_csv(results / "trials.csv")
+    assert record.outcome == "safety_trip" and (results / "hardware.json").is_file()
 
 
 def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> None:

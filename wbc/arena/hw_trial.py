@@ -52,6 +52,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 from threadpoolctl import threadpool_limits
 
@@ -84,6 +85,8 @@ from wbc.output_files import DirectoryLock, write_text
 from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
+
+_T = TypeVar("_T")
 
 __all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "LinkLost", "ResultsInterrupted",
            "run_hardware_trial"]
@@ -335,6 +338,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         lambda what: f"wbc hw run: {what}: {'the settle after the trip is cut short and ' if settling[0] else ''}"
                      f"the robot is closed into damping; the trial's results are being written to {out} and the run "
                      "ends once they are (again: stop at once, leaving them incomplete)")
+    io_stopped: list[IoProcessStopped] = []  # a request to end after the trial that stopped its I/O process
     with contextlib.ExitStack() as deferred:
         with contextlib.ExitStack() as stack:
             opening = False
@@ -364,6 +368,8 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 connected_at[0] = wall_time()
                 grant = stack.enter_context(scheduling)
                 opening = True
+                # stopped after the trial, the I/O process closed the robot itself (damped): its close says so again
+                stack.push(lambda kind, exc, tb: bool(io_stopped) and isinstance(exc, IoProcessStopped))
                 stack.enter_context(robot)
             except (KeyboardInterrupt, IoProcessStopped) as stopped:
                 raise ConnectInterrupted(opening=opening) from stopped
@@ -384,23 +390,31 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
             # the trial is over: from here a request to end keeps its record; the settle after a trip (its robot
             # already damped by the latched layer) is cut short, and the robot closed into damping
             deferred.enter_context(after_the_trial)
-            if isinstance(hardware.robot, HasLinkStats):
-                link = hardware.robot.link_stats()
-            io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
-            io_stopped = False
-            if safe.safety_state is SafetyState.DAMPED:
-                settling[0] = True
+
+            def unless_stopped(read: Callable[[], _T], otherwise: _T) -> _T:
+                # `read()`, or `otherwise` once a request to end sent to the command's whole group stopped its I/O
+                # process: that closed the robot itself (damped), and answers no more
+                if io_stopped:
+                    return otherwise
                 try:
-                    _settle(robot, dt, cfg.settle_s, until=lambda: after_the_trial.requested is not None)
-                except IoProcessStopped:
+                    return read()
+                except IoProcessStopped as exc:
                     if after_the_trial.requested is None:
                         raise
-                    # the request to end went to the command's whole group: its I/O process closed the robot itself
-                    # and answers no more
-                    io_stopped = True
+                    io_stopped.append(exc)
+                    return otherwise
+
+            if isinstance(hardware.robot, HasLinkStats):
+                link = unless_stopped(hardware.robot.link_stats, None)
+            io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
+            arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), ())
+            if safe.safety_state is SafetyState.DAMPED:
+                settling[0] = True
+                unless_stopped(lambda: _settle(robot, dt, cfg.settle_s,
+                                               until=lambda: after_the_trial.requested is not None), None)
                 settling[0] = False
-            link_lost = _link_lost(safe, started_s) if wall and not io_stopped else None
-            arm_faults = _latched_faults(hardware.robot) if not io_stopped else ()
+            link_lost = unless_stopped(lambda: _link_lost(safe, started_s), None) if wall else None
+            arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), arm_faults)  # the settle's too
         episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
         counters, error = read_counters(ctrl, spec.name, trial, episode, error)
         record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
