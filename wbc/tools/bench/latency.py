@@ -29,6 +29,7 @@ emulator, not of a robot's network and firmware, which add their own latency (me
 from __future__ import annotations
 
 import dataclasses
+import gc
 import time
 from dataclasses import dataclass
 
@@ -40,6 +41,7 @@ from wbc.errors import BenchError
 from wbc.hardware.capabilities import WallClock
 from wbc.hardware.clock import Clock
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.physics import delay_steps
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
@@ -251,12 +253,16 @@ def wire_probe(robot: str = "go1", *, samples: int = 40, period: float = 0.002, 
     """
     emu = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode=mode, control_period=period), sim=sim)
     if clock is None:
-        with emu:
-            host, port = emu.address
-            cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=1.0 / period)
-            with UnitreeRobot(cfg) as link:
-                hold = MotorCommand.hold(link.desc.nominal_q, PROBE_KP, PROBE_KD)
-                return probe_ticks(link, hold, period=period, samples=samples)
+        freeze_heap()  # as `wbc hw run` does once all is built: a full collection would stall the link's thread
+        try:
+            with emu:
+                host, port = emu.address
+                cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=1.0 / period)
+                with UnitreeRobot(cfg) as link:
+                    hold = MotorCommand.hold(link.desc.nominal_q, PROBE_KP, PROBE_KD)
+                    return probe_ticks(link, hold, period=period, samples=samples)
+        finally:
+            gc.unfreeze()  # a library call: what it kept is collected again after it
     cfg = UnitreeRobotConfig(robot=robot, target_host="127.0.0.1", target_port=9, rate_hz=1.0 / period)
     try:
         with UnitreeRobot(cfg, emu.transport(clock), clock=clock) as link:
