@@ -13,6 +13,7 @@ import dataclasses
 import importlib
 import json
 import math
+import re
 import sys
 from collections.abc import Iterator
 
@@ -87,8 +88,8 @@ LATENCY_KEYS = ["wire_robot", "scenario", "coarse_ms", "fine_ms"]
 LATENCY_WIRE_KEYS = ["round_trip_ms_p50", "round_trip_ms_p99", "period_ms", "wire_ticks", "wire_ticks_p50",
                      "wire_ticks_mean", "wire_ticks_max", "typical_delay_ms", "sim_ticks_typical", "worst_delay_ms",
                      "sim_ticks_worst"]
-LATENCY_MARGIN_KEYS = ["controller", "trials", "push_force_n", "still_margin_ms", "still_fell_at_ms", "push_margin_ms",
-                       "push_fell_at_ms", "runs", "wall_s"]
+LATENCY_MARGIN_KEYS = ["controller", "robot", "scenario", "standing", "still_s", "trials", "push_force_n",
+                       "still_margin_ms", "still_fell_at_ms", "push_margin_ms", "push_fell_at_ms", "runs", "wall_s"]
 ARM_KEYS = ["robot", "latency_ms", "seconds", "step_rad", "emulator_bus", "rates", "steps", "reactions", "emulator",
             "machine", "load_1min", "host_realtime"]
 ARM_RATE_KEYS = ["rate_hz", "achieved_hz", "busy_ms_mean", "busy_ms_max", "period_ms_max", "failed_reads", "cycles",
@@ -176,10 +177,11 @@ def _hw(safety: bool = True) -> HwBenchResult:
 
 
 def _latency(wire: bool = True) -> LatencyBenchResult:
-    stand = DelayMargin(controller="stand", trials=1, push_force_n=(233.2,), still_margin_ms=200.0,
+    on = {"robot": "a1-wx200", "scenario": "push", "standing": True, "still_s": 3.0}
+    stand = DelayMargin(controller="stand", **on, trials=1, push_force_n=(233.2,), still_margin_ms=200.0,
                         still_fell_at_ms=None, push_margin_ms=None, push_fell_at_ms=0.0, runs=3, wall_s=0.62)
-    mpc = DelayMargin(controller="mpc", trials=1, push_force_n=(233.2,), still_margin_ms=18.0, still_fell_at_ms=20.0,
-                      push_margin_ms=10.0, push_fell_at_ms=12.0, runs=9, wall_s=30.0)
+    mpc = DelayMargin(controller="mpc", **on, trials=1, push_force_n=(233.2,), still_margin_ms=18.0,
+                      still_fell_at_ms=20.0, push_margin_ms=10.0, push_fell_at_ms=12.0, runs=9, wall_s=30.0)
     figures = WireLatency(round_trip_ms_p50=0.4, round_trip_ms_p99=0.82, period_ms=2.0, wire_ticks=(2, 3, 2, 5),
                           wire_ticks_p50=2.0, wire_ticks_mean=3.0, wire_ticks_max=5, typical_delay_ms=2.0,
                           sim_ticks_typical=2.0, worst_delay_ms=8.0, sim_ticks_worst=5.0)
@@ -444,6 +446,23 @@ def test_print_bench_latency_shows_the_wire_and_each_margin(capsys):
     assert "none, fell at 0" in text and "200 (no fall up to 20)" in text and "18, fell at 20" in text
     assert "(9 runs)" in text
     assert "Wire (" not in _printed(printers.print_bench_latency, _latency(wire=False), capsys)
+
+
+def test_print_bench_latency_names_the_robot_and_the_trials_of_the_margins(capsys):
+    """The margins play the scenario's robot, which may not be the wire's: the a1-wx200 of the default push scenario
+    beside a go1 wire was not named; a Go1 scenario's walking trials, without pushes, are said to be so."""
+    text = _printed(printers.print_bench_latency, _latency(), capsys)
+    assert "standing trials of scenarios/push.toml, on the a1-wx200 (the scenario push's robot)" in text
+    assert "the margins are the a1-wx200's, not the go1's of the wire above" in text
+    walking = DelayMargin(controller="mpc", robot="go1-arm", scenario="turn", standing=False, still_s=6.0, trials=2,
+                          push_force_n=(), still_margin_ms=30.0, still_fell_at_ms=40.0, push_margin_ms=None,
+                          push_fell_at_ms=None, runs=5, wall_s=40.0)
+    go1 = dataclasses.replace(_latency(), scenario="scenarios/turn.toml", margins=(walking,))
+    text = _printed(printers.print_bench_latency, go1, capsys)
+    assert ("walking trials of scenarios/turn.toml (it has no standing trials with pushes): each walks its command "
+            "6 s, and has no push to survive, on the go1-arm (the scenario turn's robot)") in text
+    assert "not the go1's" not in text
+    assert re.search(r"mpc +30, fell at 40 +no push in the trials", text), text
 
 
 def test_print_bench_arm_shows_every_row(capsys):

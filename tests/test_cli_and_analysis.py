@@ -401,3 +401,37 @@ sys.exit({function}())
                           timeout=120)
     assert (done.returncode, done.stderr, done.stdout) == (130, "wbc: interrupted while starting: nothing was done\n",
                                                            "")
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("module", ["wbc.cli", "wbc"])
+def test_a_signal_while_python_dash_m_loads_the_command_ends_it_with_one_line(module: str, signum: str,
+                                                                              tmp_path: Path) -> None:
+    """``python -m wbc.cli`` and ``python -m wbc`` end as the console script does when a Ctrl-C or SIGTERM comes while
+    the command's modules load. ``python -m wbc.cli`` printed the import's traceback and died of the signal: its
+    package loads the command before its ``__main__`` runs. The signal is sent from within the import of the command's
+    main module, by a ``sitecustomize`` that the interpreter loads at its start."""
+    import os
+    import subprocess
+    import sys
+
+    root = Path(__file__).resolve().parents[1]
+    (tmp_path / "sitecustomize.py").write_text(f"""
+import os, signal, sys
+
+signal.signal(signal.SIGHUP, signal.SIG_DFL)  # as a command started from a terminal has them
+signal.signal(signal.SIGINT, signal.default_int_handler)
+
+class SignalWhileLoading:
+    def find_spec(self, name, path=None, target=None):
+        if name == "wbc.cli.main":
+            os.kill(os.getpid(), signal.{signum})
+        return None
+
+sys.meta_path.insert(0, SignalWhileLoading())
+""")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path), str(root)])}
+    done = subprocess.run([sys.executable, "-m", module, "controllers"], cwd=root, capture_output=True, text=True,
+                          timeout=120, env=env)
+    assert (done.returncode, done.stderr, done.stdout) == (130, "wbc: interrupted while starting: nothing was done\n",
+                                                           "")

@@ -18,6 +18,7 @@ known one, so the goals on the wire can be compared with numbers.
 from __future__ import annotations
 
 import dataclasses
+import re
 import sys
 import termios
 import threading
@@ -566,6 +567,19 @@ def test_a_late_answer_is_retried_then_latched(emu: DynamixelEmulator) -> None:
     assert arm.config.watchdog_s <= arm.fault.time - failing[0].time < arm.config.watchdog_s + 0.005 + SILENT_LATCH_S
     goals = _goals(_after_latch(arm, packets))
     assert goals and all(4 not in g and g.get(1) == 0 and g.get(2) == 0 for g in goals)
+
+
+@pytest.mark.parametrize("late", [2 * SILENT_LATCH_S, 0.05, 0.02])
+def test_a_late_answers_latch_says_the_silence_that_triggered_it(emu: DynamixelEmulator, late: float) -> None:
+    """The latch's figure is the silence that reached the watchdog's time, in the read that failed: a late elbow fails
+    the status reads of all five servos, and the wrist, read only there, is the first silent for 0.1 s. It said "ID 4
+    (elbow): no valid answer for 0.085 s (the watchdog's 0.1 s)", counted from the elbow's last answered ping."""
+    with _arm(emu) as arm:
+        _fault_rig(emu, arm, BusFault.LATE_ANSWER, (4, late))
+        fault = arm.fault
+    assert fault.kind == "no_answer" and fault.ids == (4,) and fault.detail.startswith("ID 4 (elbow): ")
+    (silence,) = re.findall(r"for (\d+\.\d+) s \(the watchdog's 0\.1 s\)", fault.detail)
+    assert float(silence) >= arm.config.watchdog_s, fault.detail
 
 
 def test_a_late_answer_of_another_length_is_discarded_as_late_by_the_bus(emu: DynamixelEmulator) -> None:

@@ -211,12 +211,30 @@ def test_check_prints_the_state_and_sends_only_damping(stepped: Stepped, capsys:
     for text in (f"{robot} at 127.0.0.1:9", "FR_hip_joint", "RL_calf_joint", "IMU roll", "battery",
                  "remote buttons: none", "link:", "rejected states: 0"):
         assert text in out, (text, out)
+    # the age is the datagram's since it arrived, not the robot's latency, which damping alone cannot show: said so
+    assert "ms old (since its datagram arrived here)" in out and "  latency: NOT MEASURED: " in out
+    assert "a constant delay reads as none. `wbc bench latency` gives the delay each controller tolerates" in out
     assert ("none in this robot's state" in out) == (robot == "a1")
     assert ("NOT REPORTED: no cell voltage" in out) == (robot == "go1")  # the emulator reports no battery
     log = stepped.emu.commands()
     assert len(log) >= 0.3 / LINK_PERIOD  # a frame every link period of the 0.3 s, plus the closing damping
     assert stepped.clock.now() >= 0.3  # it read for its --seconds, on the robot's clock
     assert all(c.damping and (c.wire.kp == 0).all() for c in log)
+
+
+def test_check_freezes_the_heap_once_all_is_built_before_it_connects(
+        stepped: Stepped, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A full collection of the start-up heap stalled the link and bus threads for 130-300 ms, and the layer called the
+    arm's live state stale ("WOULD REFUSE: stale_state"): ``hw check`` freezes the heap as ``hw run`` does, once the
+    robot is built and before anything is sent to it."""
+    import wbc.tools.hardware_check as hardware_check
+
+    frozen: list[int] = []  # the frames on the wire when the heap was frozen
+    monkeypatch.setattr(hardware_check, "freeze_heap", lambda: frozen.append(len(stepped.emu.commands())) or 0)
+    robot = stepped.emu.config.robot
+    args = build_parser().parse_args(["hw", "check", "--robot", robot, "--target", "127.0.0.1:9", "--seconds", "0.1"])
+    assert hw_check(args, build=stepped.build) == 0
+    assert frozen == [0] and stepped.emu.commands()
 
 
 def test_check_marks_a_joint_beyond_its_range_apart_from_one_beyond_the_safety_margin(
@@ -321,6 +339,17 @@ def test_allow_hardware_without_a_terminal_needs_yes(no_socket: list, monkeypatc
     err = capsys.readouterr().err
     assert "192.0.2.1:9 is a REAL ROBOT" in err and "stdin is not a terminal" in err and "--yes" in err
     assert not no_socket
+
+
+def test_the_confirmation_without_an_arm_port_names_the_legs_alone(no_socket: list, monkeypatch: pytest.MonkeyPatch,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """Without ``--arm-port`` only the legs are driven: the confirmation said "on the arm too" and named go1-arm."""
+    monkeypatch.setattr(sys, "stdin", io.StringIO(""))
+    assert main(["hw", "check", "--robot", "go1", "--target", NOT_LOOPBACK, "--allow-hardware"]) == 2
+    err = capsys.readouterr().err
+    assert ("wbc hw check: go1 at 192.0.2.1:9 is a REAL ROBOT (outside 127.0.0.0/8). Only damping will be sent to "
+            "its legs (Kp 0); no arm is driven (no --arm-port).") in err
+    assert "go1-arm" not in err and "arm too" not in err and not no_socket
 
 
 def test_allow_hardware_asks_and_a_no_refuses(no_socket: list, monkeypatch: pytest.MonkeyPatch,

@@ -242,7 +242,7 @@ def _running(pid: int) -> bool:
         return False
 
 
-def _standing_hw_run(go1: UnitreeEmulator, out: Path) -> subprocess.Popen:
+def _standing_hw_run(go1: UnitreeEmulator, out: Path, *options: str) -> subprocess.Popen:
     """``wbc hw run stand`` in a process group of its own, once its safety layer drives the emulator's legs.
 
     The command runs on the real clock: on a busy machine its safety layer can trip on a stale state during the
@@ -254,7 +254,8 @@ def _standing_hw_run(go1: UnitreeEmulator, out: Path) -> subprocess.Popen:
         proc = subprocess.Popen(
             [sys.executable, "-m", "wbc.cli", "hw", "run", "stand", "--robot", "go1-arm", "--arm", "none",
              "--scenario", PUSH, "--trial", "0", "--target", f"127.0.0.1:{go1.address[1]}", "--seconds", "20",
-             "--no-realtime", "--out", str(out / f"hw-{attempt}")], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+             "--no-realtime", "--out", str(out / f"hw-{attempt}"), *options], stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
             stderr=subprocess.PIPE, cwd=ROOT, env=dict(os.environ, PYTHONPATH=str(ROOT)),
             start_new_session=True,  # a group of its own, as a terminal's
             preexec_fn=terminal_signals_in_child)  # the hangup not ignored, whether or not this suite runs under nohup
@@ -600,6 +601,46 @@ def test_sigterm_to_the_commands_group_is_an_interruption_and_the_robot_ends_dam
     assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
 
 
+def test_sigterm_to_the_commands_group_during_the_settle_after_a_trip_keeps_the_trials_results(
+        go1: UnitreeEmulator, tmp_path: Path) -> None:
+    """The trial is over at the trip: SIGTERM to the whole group (the command and its I/O process, which closes the
+    robot itself) during the 30 s settle after it ends the command with the trial's results written whole. The I/O
+    process's stop, met in the settle and in the close, threw them away ("no results were written")."""
+    proc = _standing_hw_run(go1, tmp_path, "--settle", "30")
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(line.decode() for line in proc.stderr), daemon=True)
+    reader.start()
+
+    def said(text: str) -> bool:
+        for _ in range(6000):  # bounded (60 s)
+            if proc.poll() is not None or any(text in line for line in list(lines)):
+                return proc.poll() is None
+            time.sleep(0.01)
+        return False
+
+    try:
+        if said("-> run (ramp_done)"):  # the stand-up is done: the trial begins
+            time.sleep(1.0)  # well into the trial (its --seconds are 20): a trip before it is the stand-up's
+            go1.inject(Fault.FALL)  # the trunk reads rolled over: the layer trips on tilt and damps the legs
+            if said("-> damped (tilt)"):  # the trial ends at the tick that tripped; the settle follows
+                time.sleep(0.5)  # in the settle (30 s), past the trial's last tick
+                os.killpg(proc.pid, signal.SIGTERM)
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+        go1.clear()
+    reader.join(timeout=10)
+    err = "".join(lines)
+    assert proc.returncode == 130, err
+    (results,) = [d for d in tmp_path.iterdir() if (d / "trials.csv").exists()] or [err]
+    assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted after the trial; the robot was closed into "
+                                            f"damping; its results are complete in {results}")
+    (record,) = TrialRecord.read_csv(results / "trials.csv")
+    assert record.outcome == "safety_trip" and (results / "hardware.json").is_file()
+
+
 def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> None:
     from wbc.cli.main import _terminate_interrupts
 
@@ -628,6 +669,8 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
                                 build=stepped_go1.build)
     record, episode = result.record, result.episode
     assert record.safety_trips == 1 and not record.success and record.outcome == "operator_stop"
+    # the trial's own play time, as a simulated trial's: not the build, the connect, the stand-up and the settle
+    assert record.wall_s == result.episode_wall_s
     assert 1.6 <= record.fall_time_s <= 1.6 + TICK + TIME_EPS  # ended at the tick that handled the key
     assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
     assert episode.safety_events.reason[-1] == "software_estop"
@@ -642,6 +685,46 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert all(c.damping for c in after) and len(after) >= 0.5 / LINK_PERIOD
     report = (tmp_path / "hw" / "report.md").read_text()
     assert "software_estop" in report and "| push |" in report and "| estop |" in report
+
+
+@pytest.mark.usefixtures("terminal_signals")
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_a_request_to_end_during_the_settle_after_an_estop_keeps_the_trials_results(
+        stepped_go1: Stepped, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        signum: int) -> None:
+    """The trial is over at the e-stop: a Ctrl-C or SIGTERM in the settle after it (5 s here) cuts the settle short,
+    the robot kept in damping, and the trial's record is written whole. It was thrown away: no results were written."""
+    import wbc.arena.hw_trial as hw_trial
+    from wbc.cli.main import _terminate_interrupts
+
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    settle = hw_trial._settle
+    sent: list[float] = []
+
+    def settle_then_signal(robot, dt, seconds, **kwargs):  # the request to end comes 0.3 s into the settle
+        if seconds == 5.0:
+            sent.append(clock.now() + 0.3)
+            clock.call_at(sent[0], lambda: signal.raise_signal(signum))
+        return settle(robot, dt, seconds, **kwargs)
+
+    monkeypatch.setattr(hw_trial, "_settle", settle_then_signal)
+    keys = ScriptedKeys([(1.0, "e")], clock=clock.now)
+    out = tmp_path / "hw"
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=3.0, target=("127.0.0.1", 9), out_dir=out, settle_s=5.0, io_process=False)
+    with _terminate_interrupts(), pytest.raises(KeyboardInterrupt) as stopped:
+        run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: emu.reset(), build=stepped_go1.build)
+    assert isinstance(stopped.value, hw_trial.ResultsInterrupted), "the trial's results were thrown away"
+    assert stopped.value.complete and stopped.value.out_dir == out
+    assert "the settle after the trip is cut short and the robot is closed into damping" in capsys.readouterr().err
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.outcome == "operator_stop" and 1.0 <= record.fall_time_s <= 1.0 + TICK + TIME_EPS
+    assert all((out / name).is_file() for name in ("hardware.json", "summary.json", "report.md"))
+    pressed = dict(keys.delivered)["e"]
+    after = [c for c in emu.commands() if c.time > pressed + LINK_PERIOD + TIME_EPS]
+    assert after and all(c.damping for c in after)  # damping to the end, and the end came soon after the signal
+    assert after[-1].time < sent[0] + 0.1
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 BROKEN_ON_HARDWARE = '''

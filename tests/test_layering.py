@@ -33,6 +33,7 @@ LAYERS = (
     ("wbc.tools",),
     ("wbc.cli",),
     ("wbc.command",),
+    ("wbc.__main__", "wbc.cli.__main__"),
 )
 """Rooms from the bottom up. A module belongs to the room of its longest prefix here; it may import its own room and
 any room of a lower layer, never a room of its own layer or above (peers such as `wbc.mpc` and `wbc.learned` do not

@@ -216,6 +216,17 @@ def test_stand_keeps_its_margin_to_the_largest_delay():
     assert m.runs == 4 and len(m.push_force_n) == 1 and 200.0 <= m.push_force_n[0] <= 300.0
 
 
+def test_a_go1_margin_plays_the_turn_scenarios_walking_trials_on_the_go1():
+    """The Go1's turn scenario has no standing trials with pushes: it was refused, so a Go1 team had no Go1 margin.
+    Its first trials play as they are, walking their command; with no push, no push margin is claimed."""
+    m = delay_margin("stand", str(SCENARIOS / "turn.toml"), trials=1, coarse_ms=(0.0,))
+    assert (m.robot, m.scenario, m.standing, m.still_s) == ("go1-arm", "turn", False, 6.0)
+    assert (m.still_margin_ms, m.still_fell_at_ms, m.push_margin_ms, m.push_fell_at_ms) == (0.0, None, None, None)
+    assert m.push_force_n == () and m.runs == 1
+    pushed = delay_margin("stand", str(SCENARIOS / "push-v1.toml"), trials=1, coarse_ms=(0.0,))
+    assert (pushed.robot, pushed.standing, pushed.still_s) == ("a1-wx200", True, 3.0)
+
+
 @pytest.mark.slow
 def test_mpc_margin_is_bracketed_to_the_fine_step():
     m = delay_margin("mpc", str(SCENARIOS / "push-v1.toml"), trials=1, coarse_ms=(0.0, 40.0), fine_ms=20.0)

@@ -5,36 +5,26 @@ printed the import's traceback, and a SIGTERM or SIGHUP ended the process withou
 command's own handlers (`wbc.cli.main.main`) were installed. Here they end it from the start as they end it later:
 ``wbc: interrupted while starting: nothing was done``, status 130. SIGTERM and SIGHUP raise `KeyboardInterrupt` until
 the command installs its own handlers, which restore these when it ends; a SIGHUP ignored when the command starts
-(``nohup``) stays ignored. They are installed before the command's modules load; the package's own start (``wbc``,
+(``nohup``) stays ignored (`wbc.starting`, which ``python -m wbc`` and ``python -m wbc.cli`` use too). They are
+installed before the command's modules load; the package's own start (``wbc``,
 which loads numpy, about a tenth of a second) comes before this module runs. A signal that comes after the command
 has ended (while it waits for threads a plug-in left running) ends it with status 130 without a word.
 """
 
 from __future__ import annotations
 
-import signal
-import sys
+from wbc.starting import requests_to_end_interrupt, say_interrupted_while_starting
 
 __all__ = ["main"]
 
 
-def _interrupt(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
-
-
 def main() -> int:
     """Run the ``wbc`` command with ``sys.argv``; its exit status (130 when interrupted while it loads)."""
-    for signum in (signal.SIGTERM, signal.SIGHUP):
-        if signal.getsignal(signum) is not signal.SIG_IGN:
-            signal.signal(signum, _interrupt)
+    requests_to_end_interrupt()
     try:
         from wbc.cli import main as command
     except KeyboardInterrupt:
-        try:
-            print("wbc: interrupted while starting: nothing was done", file=sys.stderr, flush=True)
-        except OSError:  # a terminal closed (SIGHUP) takes the line with it
-            pass
-        return 130
+        return say_interrupted_while_starting()
     try:
         return command()
     except KeyboardInterrupt:  # after the command's end, which said its last words

@@ -53,6 +53,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 from threadpoolctl import threadpool_limits
 
@@ -86,6 +87,8 @@ from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.scenario import fallback_note
 from wbc.scenario.trial import Trial
 from wbc.types import MotorCommand
+
+_T = TypeVar("_T")
 
 __all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "LinkLost", "ResultsInterrupted",
            "run_hardware_trial"]
@@ -330,16 +333,18 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
           hardware: HardwareRobot, out: Path, lock: DirectoryLock, keys: KeySource | None,
           observer: TickObserver | None,
           before_connect: Callable[[HardwareRobot, ControllerSpec], None] | None) -> HardwareTrialResult:
-    start = time.perf_counter()
     notes = _skipped(trial)
     trial = dataclasses.replace(trial, pushes=())  # no robot here can apply them
     link: LinkStatsLike | None = None
     # after the trial, Ctrl-C (or a request to end) waits for the trial's results, written whole (the trial is played
     # once), and a second one stops the writing, saying what it left; during the robot's close, every one waits for the
     # close (`Robot.close`)
+    settling = [False]
     after_the_trial = DeferredInterrupts(
-        lambda what: f"wbc hw run: {what}: the robot is closed into damping; the trial's results are being written to "
-                     f"{out} and the run ends once they are (again: stop at once, leaving them incomplete)")
+        lambda what: f"wbc hw run: {what}: {'the settle after the trip is cut short and ' if settling[0] else ''}"
+                     f"the robot is closed into damping; the trial's results are being written to {out} and the run "
+                     "ends once they are (again: stop at once, leaving them incomplete)")
+    io_stopped: list[IoProcessStopped] = []  # a request to end after the trial that stopped its I/O process
     with contextlib.ExitStack() as deferred:
         with contextlib.ExitStack() as stack:
             opening = False
@@ -369,6 +374,8 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 connected_at[0] = wall_time()
                 grant = stack.enter_context(scheduling)
                 opening = True
+                # stopped after the trial, the I/O process closed the robot itself (damped): its close says so again
+                stack.push(lambda kind, exc, tb: bool(io_stopped) and isinstance(exc, IoProcessStopped))
                 stack.enter_context(robot)
             except (KeyboardInterrupt, IoProcessStopped) as stopped:
                 raise ConnectInterrupted(opening=opening) from stopped
@@ -386,18 +393,38 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 if safe.safety_state is not SafetyState.DAMPED:
                     safe.estop()  # the robot must not keep the broken controller's last command
             cpu_s, episode_wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
-            if isinstance(hardware.robot, HasLinkStats):
-                link = hardware.robot.link_stats()
-            io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
-            if safe.safety_state is SafetyState.DAMPED:
-                _settle(robot, dt, cfg.settle_s)
-            link_lost = _link_lost(safe, started_s) if wall else None
-            arm_faults = _latched_faults(hardware.robot)
+            # the trial is over: from here a request to end keeps its record; the settle after a trip (its robot
+            # already damped by the latched layer) is cut short, and the robot closed into damping
             deferred.enter_context(after_the_trial)
+
+            def unless_stopped(read: Callable[[], _T], otherwise: _T) -> _T:
+                # `read()`, or `otherwise` once a request to end sent to the command's whole group stopped its I/O
+                # process: that closed the robot itself (damped), and answers no more
+                if io_stopped:
+                    return otherwise
+                try:
+                    return read()
+                except IoProcessStopped as exc:
+                    if after_the_trial.requested is None:
+                        raise
+                    io_stopped.append(exc)
+                    return otherwise
+
+            if isinstance(hardware.robot, HasLinkStats):
+                link = unless_stopped(hardware.robot.link_stats, None)
+            io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
+            arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), ())
+            if safe.safety_state is SafetyState.DAMPED:
+                settling[0] = True
+                unless_stopped(lambda: _settle(robot, dt, cfg.settle_s,
+                                               until=lambda: after_the_trial.requested is not None), None)
+                settling[0] = False
+            link_lost = unless_stopped(lambda: _link_lost(safe, started_s), None) if wall else None
+            arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), arm_faults)  # the settle's too
         episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
         counters, error = read_counters(ctrl, spec.name, trial, episode, error)
         record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
-                                      counters=counters, wall_s=time.perf_counter() - start,
+                                      counters=counters, wall_s=episode_wall_s,
                                       backend=hardware.backend, domain_applied=False, link=link, error=error)
         result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                      notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
@@ -543,10 +570,15 @@ def _latched_faults(robot: object) -> tuple[ArmFault, ...]:
     return robot.faults if isinstance(getattr(type(robot), "faults", None), property) else ()
 
 
-def _settle(robot: EstimatedRobot, dt: float, seconds: float) -> None:
-    """Keep reading and pacing the tripped robot for `seconds` while its safety layer sends damping."""
+def _settle(robot: EstimatedRobot, dt: float, seconds: float, *, until: Callable[[], bool] = lambda: False) -> None:
+    """Keep reading and pacing the tripped robot for `seconds` while its safety layer sends damping.
+
+    It ends sooner once `until` is true (a request to end the command).
+    """
     damping = MotorCommand.damping(robot.num_joints, 0.0)  # replaced by the layer's own damping: it is latched
     for _ in range(int(round(seconds / dt))):
+        if until():
+            return
         robot.read()
         robot.write(damping)
         robot.advance(dt)

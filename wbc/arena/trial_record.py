@@ -110,8 +110,11 @@ class TrialRecord:
         deadline_misses: control ticks whose ``controller.act`` took longer than the control period.
         act_ms_p50: median ``controller.act`` wall time [ms].
         act_ms_p99: its 99th percentile [ms].
-        wall_s: wall time the trial took to play [s]. This field, `deadline_misses`, `act_ms_p50` and `act_ms_p99`
-            depend on the machine (and so, on a real robot, do `late_advances` and `worst_lateness_ms`).
+        wall_s: wall time the trial took to play [s]: in simulation from its robot's and controller's build to its
+            last tick; on a robot (``wbc hw run``) its episode alone, from its first tick to its last, without the
+            controller's build, the connect, the stand-up and the settle (``hardware.json``'s ``episode_wall_s``).
+            This field, `deadline_misses`, `act_ms_p50` and `act_ms_p99` depend on the machine (and so, on a real
+            robot, do `late_advances` and `worst_lateness_ms`).
         error: for a ``controller_error``, what failed: the controller, band, seed, trial, tick and time, the
             exception's type and message, and the controller's own ``file:line``; for a ``diverged`` trial, what
             diverged, at which tick; empty otherwise.

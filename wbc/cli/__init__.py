@@ -6,7 +6,18 @@ import os
 import sys
 import threading
 
-from wbc.cli.main import main as _run
+from wbc.starting import requests_to_end_interrupt, say_interrupted_while_starting
+
+if sys.argv[:1] == ["-m"]:
+    # ``python -m wbc.cli``: the command's modules load here, before its ``__main__`` runs (Python names the program
+    # "-m" until then); a signal while they load ends it as the console script's entry does (`wbc.command`)
+    requests_to_end_interrupt()
+    try:
+        from wbc.cli.main import main as _run
+    except KeyboardInterrupt:
+        raise SystemExit(say_interrupted_while_starting()) from None
+else:
+    from wbc.cli.main import main as _run
 
 __all__ = ["main"]
 

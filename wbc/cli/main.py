@@ -472,11 +472,16 @@ def hw_check(args: argparse.Namespace, *,
 
     def confirm(hardware: HardwareRobot) -> None:
         real = _real_devices(host, port, arm_port)
-        if real:
-            arm = (" The arm's joint servos are switched to current mode (an EEPROM write, with their torque off) "
-                   "and damped; its wrist and gripper are torqued and held where they are." if arm_port else "")
-            _confirm_hardware("hw check", robot, real, "Only damping will be sent (Kp 0, on the arm too)." + arm +
-                              " Hang the robot in its harness first.", yes=args.yes)
+        if not real:
+            return
+        if arm_port:
+            _confirm_hardware("hw check", robot, real, "Only damping will be sent (Kp 0, on the arm too). The arm's "
+                              "joint servos are switched to current mode (an EEPROM write, with their torque off) and "
+                              "damped; its wrist and gripper are torqued and held where they are. Hang the robot in "
+                              "its harness first.", yes=args.yes)
+        else:  # the legs alone: the arm, if the robot carries one, is sent nothing
+            _confirm_hardware("hw check", wire_name(robot), real, "Only damping will be sent to its legs (Kp 0); "
+                              "no arm is driven (no --arm-port). Hang the robot in its harness first.", yes=args.yes)
 
     check = check_hardware(HardwareCheckConfig(robot=robot, label=args.robot, target=(host, port), local=local,
                                                seconds=args.seconds, transport=args.transport, arm_port=arm_port,

@@ -451,9 +451,11 @@ def _add_bench_latency_parser(bench: _Commands) -> None:
                       help=f"the wire's robot, one of: {ROBOT_NAMES_HELP}; either name measures its legs' wire "
                       "alone (default go1)")
     blat.add_argument("--scenario", default="scenarios/push.toml",
-                      help="scenario of the margin trials (default scenarios/push.toml)")
+                      help="scenario of the margin trials, which play its robot (default scenarios/push.toml, the "
+                      "a1-wx200's; scenarios/turn.toml for the go1-arm: its walking trials, no push)")
     blat.add_argument("--trials", type=bounded_int(1, 1000), default=2,
-                      help="standing trials per margin test, 1..1000 (default 2)")
+                      help="trials per margin test, 1..1000 (default 2): standing trials with pushes, or the first "
+                      "trials of a scenario that has none")
     blat.add_argument("--no-wire", action="store_true", help="margins only (no emulator)")
     blat.add_argument("--json", action="store_true", help="print JSON")
     blat.set_defaults(handler="bench latency")

@@ -30,7 +30,7 @@ from wbc.hardware.dynamixel.control_table import HARDWARE_ERROR_BITS, OperatingM
 from wbc.hardware.emulators import BusStats
 from wbc.hardware.pty_registry import registry_dir
 from wbc.hardware.realtime import RealtimeGrant
-from wbc.hardware.unitree import REJECT_REASONS
+from wbc.hardware.unitree import LEG_WIRES, REJECT_REASONS
 from wbc.tools.arm_momentum import ArmMomentumTrial
 from wbc.tools.bench import (
     MPC_REFERENCE_TARGETS,
@@ -600,16 +600,26 @@ def print_bench_latency(result: LatencyBenchResult) -> None:
         print(f"  equivalent sim delay  typical {wire.typical_delay_ms:g} ms, worst {wire.worst_delay_ms:g} "
               f"ms (actuation + sensing); the simulator's probe with them: {wire.sim_ticks_typical:g} and "
               f"{wire.sim_ticks_worst:g} ticks")
+    first = result.margins[0]  # every controller's sweep played the same trials
+    trials = (f"standing trials of {result.scenario}" if first.standing else
+              f"walking trials of {result.scenario} (it has no standing trials with pushes): each walks its command "
+              f"{first.still_s:g} s" + ("" if first.push_force_n else ", and has no push to survive"))
     print(f"Margin: the largest actuation delay passed [ms] before the first that failed (sweep: "
           f"{', '.join(f'{x:g}' for x in result.coarse_ms)}, then {result.fine_ms:g} ms steps below the first "
-          f"failure); standing trials of {result.scenario}")
-    print(f"  {'controller':<12}{'stands still':<26}{'survives a push':<26}{'push [N]':<18}wall [s]")
+          f"failure); {trials}, on the {first.robot} (the scenario {first.scenario}'s robot)")
+    if result.wire is not None and LEG_WIRES.get(first.robot) != result.wire_robot:
+        print(f"  (the margins are the {first.robot}'s, not the {result.wire_robot}'s of the wire above: give a "
+              f"{result.wire_robot} scenario with --scenario for the {result.wire_robot}'s)")
+    still = "stands still" if first.standing else "walks its command"
+    print(f"  {'controller':<12}{still:<26}{'survives a push':<26}{'push [N]':<18}wall [s]")
     top = result.coarse_ms[-1]
     for m in result.margins:
         cells = []
         for margin, fell in ((m.still_margin_ms, m.still_fell_at_ms), (m.push_margin_ms, m.push_fell_at_ms)):
             passed = "none" if margin is None else f"{margin:g}"
             cells.append(f"{passed}, fell at {fell:g}" if fell is not None else f"{passed} (no fall up to {top:g})")
+        if not m.push_force_n:
+            cells[1] = "no push in the trials"
         forces = ", ".join(f"{f:g}" for f in m.push_force_n)
         print(f"  {m.controller:<12}{cells[0]:<26}{cells[1]:<26}{forces:<18}{m.wall_s:.0f} ({m.runs} runs)")
     print(_machine_line(result.machine, result.load_1min))
@@ -753,7 +763,13 @@ def print_hw_check(check: HardwareCheck) -> None:
         print("  safety: waiting: no live state stream, so no verdict (a ramp starts only from a live one)")
         _print_check_link(check)
         return
-    print(f"{where}: {link.valid_states} leg states received, newest {1e3 * link.state_age:.1f} ms old")
+    print(f"{where}: {link.valid_states} leg states received, newest {1e3 * link.state_age:.1f} ms old (since its "
+          "datagram arrived here)")
+    print("  latency: NOT MEASURED: what the robot took before it sent a state, and what a command takes to its "
+          "motors: with damping only, no field of the state answers a command (a damped joint of a robot hanging "
+          "still gives no torque), and the state's tick counts on the robot's own clock, so a constant delay reads "
+          "as none. `wbc bench latency` gives the delay each controller tolerates (its margins); know your robot's "
+          "own before a controller drives it")
     print("  joint                 q [rad]   dq [rad/s]   tau_est [N m]   range [rad]          mode  temp [C]")
     modes = list(extras.motor_mode) if extras is not None else []
     temps = list(extras.motor_temperature) if extras is not None else []

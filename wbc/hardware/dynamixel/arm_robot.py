@@ -587,14 +587,19 @@ class DynamixelArm(Robot):
     def _unanswered(self, bus: SdkBus, ids: tuple[int, ...]) -> None:
         """A read of `ids` failed for good: a missed cycle while each answered within `watchdog_s`, else identify."""
         now = self.clock.now()
-        if all(now - self._heard_at[i] < self.config.watchdog_s for i in ids):
+        silence = {i: now - self._heard_at[i] for i in ids}
+        if all(s < self.config.watchdog_s for s in silence.values()):
             with self._lock:
                 self._counts["missed_reads"] += 1
             return
-        self._identify(bus, ids)
+        self._identify(bus, ids, silence)
 
-    def _identify(self, bus: SdkBus, ids: tuple[int, ...]) -> None:
-        """Ping each of `ids` after their silence reached `watchdog_s`; latch those silent or answering corrupt."""
+    def _identify(self, bus: SdkBus, ids: tuple[int, ...], silence: dict[int, float]) -> None:
+        """Ping each of `ids` after their silence reached `watchdog_s`; latch those silent or answering corrupt.
+
+        `silence` is each one's time without a valid answer when the read failed for good [s]: the longest, at or
+        past the watchdog's time, is what the latch says triggered it.
+        """
         silent, corrupt = [], []
         for servo_id in ids:
             bus.flush()
@@ -615,16 +620,21 @@ class DynamixelArm(Robot):
             with self._lock:
                 self._counts["unexplained"] += 1
             return
-        retries = self.config.retries
+        retries, watchdog = self.config.retries, self.config.watchdog_s
+        trigger = max(ids, key=silence.__getitem__)
         for kind, bad, result in (("no_answer", silent, COMM_RX_TIMEOUT), ("corrupt", corrupt, COMM_RX_CORRUPT)):
             if bad:
                 with self._lock:
                     (self._silent if kind == "no_answer" else self._corrupt).update(bad)
-                self._latch(kind, tuple(bad),
-                            f"{', '.join(self._name(i) for i in bad)}: no valid answer for "
-                            f"{self.clock.now() - min(self._heard_at[i] for i in bad):.3f} s (the watchdog's "
-                            f"{self.config.watchdog_s} s), {describe_result(result)} on {retries + 1} reads and on its "
-                            f"pings", self._policy())
+                names = ", ".join(self._name(i) for i in bad)
+                if trigger in bad:  # the latched servo's own silence is what triggered the pings
+                    said = (f"{names}: no valid answer for {silence[trigger]:.3f} s (the watchdog's {watchdog} s), "
+                            f"{describe_result(result)} on {retries + 1} reads and on its pings")
+                else:
+                    said = (f"{names}: {describe_result(result)} on its pings, after the sync read it failed had left "
+                            f"{self._name(trigger)} without a valid answer for {silence[trigger]:.3f} s (the "
+                            f"watchdog's {watchdog} s) on {retries + 1} reads")
+                self._latch(kind, tuple(bad), said, self._policy())
 
     def _policy(self) -> str:
         """The torque policy in words, for the servos as they are now."""

@@ -25,6 +25,7 @@ a `DynamixelArm` on the emulator's pty, with dynamixel_sdk and the robot's defau
 
 from __future__ import annotations
 
+import gc
 import json
 import select
 import subprocess
@@ -49,7 +50,7 @@ from wbc.hardware.emulators import (
     SharedPlant,
     SharedPlantConfig,
 )
-from wbc.hardware.interpreter import child_process_env, realtime_switch_interval, wbc_interpreter_env
+from wbc.hardware.interpreter import child_process_env, freeze_heap, realtime_switch_interval, wbc_interpreter_env
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import NO_REALTIME, RealtimeRequest, request_realtime
 from wbc.hardware.robot import load_write_check
@@ -252,6 +253,7 @@ def serve_robot_emulator_stdio(robot: str, seconds: float, realtime: dict | None
     """
     realtime_switch_interval()  # the emulated robot answers its wires promptly
     emulator = RobotEmulator(RobotEmulatorConfig(robot=robot, mode="realtime")).prepare()
+    freeze_heap()  # built: its full collections must not stall the answers (as `wbc hw emulate`)
     grant = request_realtime(RealtimeRequest(**realtime) if realtime is not None else NO_REALTIME)
     with emulator as emu:
         host, port = emu.address
@@ -556,6 +558,7 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
                                                    target_port=int(where["port"])))
             host = request_realtime(host_realtime).describe() if host_realtime != NO_REALTIME else "nothing asked"
             print(f"bench arm: this process (the bus's host side): {host}", file=sys.stderr, flush=True)
+            freeze_heap()  # as `wbc hw run` does once all is built: a full collection would stall the bus's thread
             with legs:
                 rig = _Rig(legs, MotorCommand._trusted(stand[:, :12].copy()))
                 hold = MotorCommand.hold(stowed, 20.0, 0.5)
@@ -599,6 +602,7 @@ def bench_arm(robot: str = "a1-wx200", *, rates: tuple[float, ...] = (100.0, 200
                     reaction_rows = _reactions(rig, proc, DynamixelArmConfig(robot=robot, port=where["pty"],
                                                                              latency_ms=latency_ms), hold)
         finally:
+            gc.unfreeze()  # a library call: what it kept is collected again after it
             try:
                 proc.stdin.write("stop\n")
                 proc.stdin.flush()

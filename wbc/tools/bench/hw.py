@@ -261,6 +261,7 @@ def serve_emulator_stdio(robot: str, seconds: float, realtime: dict | None = Non
     """
     realtime_switch_interval()  # the emulated robot answers its wires promptly
     emulator = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode="lockstep")).prepare()
+    freeze_heap()  # built: its full collections must not stall the answers (as `wbc hw emulate`)
     grant = request_realtime(RealtimeRequest(**realtime) if realtime is not None else NO_REALTIME)
     with emulator as emu:
         host, port = emu.address
@@ -336,6 +337,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
         timed = TimedTransport(channel((cfg.local_host, 0), (host, port)))
         link = UnitreeRobot(cfg, transport=timed)
         load_write_check()  # its first compiled call, before a real-time priority: as the I/O process does
+        freeze_heap()  # as `wbc hw run` does once all is built: a full collection would stall the link's thread
         try:
             with controller_realtime(realtime) as grant, link:
                 hold = MotorCommand.hold(link.desc.nominal_q, 20.0, 0.5)
@@ -354,6 +356,7 @@ def bench_hw(robot: str = "go1", *, seconds: float = 3.0, rate_hz: float = 500.0
                 rejects = link.decode_stats.rejected
                 load = load_1min()
         finally:
+            gc.unfreeze()  # a library call: what it kept is collected again after it
             timed.close()
         proc.stdin.write("stop\n")
         proc.stdin.flush()

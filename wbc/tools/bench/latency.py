@@ -14,8 +14,11 @@ Three figures, so that a user can check a controller against latency before the 
    probe on the simulated robot with each checks it.
 2. The margin: the largest actuation delay at which a controller still stands still for `STILL_S`, and still
    survives a push trial's first push (its trial cut `AFTER_PUSH_S` after that push), over standing trials of the
-   push scenario. The sweep climbs `COARSE_MS` to the first delay that fails, then the bracket below it one physics
-   step (`FINE_MS`) at a time: the margin is the last delay passed before the first failure.
+   push scenario, on the scenario's robot. A scenario without standing trials with pushes (the Go1's turns) gives
+   its first trials as they are: the controller must keep walking their command for `WALK_S`, and survive their
+   first push if they have one (the turns have none: no push margin). The sweep climbs `COARSE_MS` to the first
+   delay that fails, then the bracket below it one physics step (`FINE_MS`) at a time: the margin is the last delay
+   passed before the first failure.
 3. What a user should set: ``actuation_delay_s`` + ``sensing_delay_s`` of a scenario's ``[domain]`` summing to the
    equivalent delay; a controller whose margin is not well above it will not survive the robot's loop.
 
@@ -26,6 +29,7 @@ emulator, not of a robot's network and firmware, which add their own latency (me
 from __future__ import annotations
 
 import dataclasses
+import gc
 import time
 from dataclasses import dataclass
 
@@ -37,6 +41,7 @@ from wbc.errors import BenchError
 from wbc.hardware.capabilities import WallClock
 from wbc.hardware.clock import Clock
 from wbc.hardware.emulators import UnitreeEmulator, UnitreeEmulatorConfig
+from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.physics import delay_steps
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.robot import Robot
@@ -57,6 +62,7 @@ COARSE_MS = (0.0, 10.0, 20.0, 30.0, 40.0, 60.0, 80.0, 100.0, 150.0, 200.0)
 FINE_MS = 2.0  # [ms] the sweep's step within the bracket of the first failure: the default physics step
 
 STILL_S = 3.0  # [s] how long a controller must stand still
+WALK_S = 6.0  # [s] how long it must walk a walking trial's command (a ramp of a second or so, then the command)
 AFTER_PUSH_S = 2.0  # [s] a push trial ends this long after its first push starts
 PROBE_JOINT = 2  # the front right calf: it carries weight, so a torque step there is plain in its estimate
 PROBE_STEP_NM = 3.0  # [N m] the feed-forward torque step
@@ -69,19 +75,30 @@ class DelayMargin:
 
     Attributes:
         controller: controller registry name.
-        trials: standing trials; each had to pass at a delay.
-        push_force_n: the magnitude of each trial's first push [N].
-        still_margin_ms: standing still: the last delay passed before the first failure [ms]; None if the first
-            delay failed.
-        still_fell_at_ms: standing still: the first delay that failed [ms]; None if none did.
+        robot: the robot the trials played (their scenario's).
+        scenario: the scenario's name.
+        standing: True for standing trials with pushes; False for the scenario's first trials as they are (it has
+            no standing trials with pushes): the ``still`` test then walks their command for `WALK_S`.
+        still_s: how long the ``still`` test played each trial [s] (`STILL_S`, or `WALK_S`).
+        trials: the trials; each had to pass at a delay.
+        push_force_n: the magnitude of each trial's first push [N]; empty when the trials have no push (then no
+            push test was played: its margin and first failure are None).
+        still_margin_ms: standing still (or walking the command): the last delay passed before the first failure
+            [ms]; None if the first delay failed.
+        still_fell_at_ms: standing still (or walking the command): the first delay that failed [ms]; None if none
+            did.
         push_margin_ms: surviving the first push: the last delay passed before the first failure [ms]; None if the
-            first delay failed.
+            first delay failed, or no push test was played.
         push_fell_at_ms: surviving the first push: the first delay that failed [ms]; None if none did.
         runs: trials played.
         wall_s: the wall time of the sweep [s].
     """
 
     controller: str
+    robot: str
+    scenario: str
+    standing: bool
+    still_s: float
     trials: int
     push_force_n: tuple[float, ...]
     still_margin_ms: float | None
@@ -236,12 +253,16 @@ def wire_probe(robot: str = "go1", *, samples: int = 40, period: float = 0.002, 
     """
     emu = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, mode=mode, control_period=period), sim=sim)
     if clock is None:
-        with emu:
-            host, port = emu.address
-            cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=1.0 / period)
-            with UnitreeRobot(cfg) as link:
-                hold = MotorCommand.hold(link.desc.nominal_q, PROBE_KP, PROBE_KD)
-                return probe_ticks(link, hold, period=period, samples=samples)
+        freeze_heap()  # as `wbc hw run` does once all is built: a full collection would stall the link's thread
+        try:
+            with emu:
+                host, port = emu.address
+                cfg = UnitreeRobotConfig(robot=robot, target_host=host, target_port=port, rate_hz=1.0 / period)
+                with UnitreeRobot(cfg) as link:
+                    hold = MotorCommand.hold(link.desc.nominal_q, PROBE_KP, PROBE_KD)
+                    return probe_ticks(link, hold, period=period, samples=samples)
+        finally:
+            gc.unfreeze()  # a library call: what it kept is collected again after it
     cfg = UnitreeRobotConfig(robot=robot, target_host="127.0.0.1", target_port=9, rate_hz=1.0 / period)
     try:
         with UnitreeRobot(cfg, emu.transport(clock), clock=clock) as link:
@@ -259,8 +280,12 @@ def sim_probe(robot: str, total_delay_s: float, *, samples: int = 10, period: fl
         return probe_ticks(sim, hold, period=period, samples=samples)
 
 
-def _margin_trials(scenario: str, trials: int) -> list[Trial]:
-    """The first `trials` standing trials (no velocity command) of the scenario's first band, seed 0."""
+def _margin_trials(scenario: str, trials: int) -> tuple[list[Trial], bool]:
+    """The first `trials` standing trials with pushes of the scenario's first band, seed 0, and True.
+
+    A scenario without so many among its first 1000 (a walking task) gives its first `trials` trials of that band as
+    they are, and False.
+    """
     if trials < 1:
         raise BenchError(f"bench latency: --trials must be >= 1, got {trials}")
     sc = load_scenario(scenario)
@@ -270,30 +295,33 @@ def _margin_trials(scenario: str, trials: int) -> list[Trial]:
         if trial.command.vx == trial.command.vy == trial.command.yaw_rate == 0.0 and trial.pushes:
             found.append(trial)
             if len(found) == trials:
-                return found
-    raise BenchError(f"bench latency: scenario {sc.name!r} has no {trials} standing trials with pushes among its "
-                     f"first 1000 in band {sc.bands[0]!r}; give a scenario with pushes and a standing command option")
+                return found, True
+    return [sc.trial(sc.bands[0], 0, index) for index in range(trials)], False
 
 
 def delay_margin(controller: str, scenario: str = "scenarios/push.toml", *, trials: int = 2,
                  coarse_ms: tuple[float, ...] = COARSE_MS, fine_ms: float = FINE_MS) -> DelayMargin:
-    """The largest actuation delay at which `controller` stands still, and survives a push.
+    """The largest actuation delay at which `controller` stands still, and survives a push, on the scenario's robot.
 
     Args:
         controller: controller registry name.
-        scenario: a scenario with pushes and a standing command option (its standing trials are used).
-        trials: standing trials; each must pass at a delay.
+        scenario: a scenario with pushes and a standing command option (its standing trials are used); another (a
+            walking task) gives its first trials: the controller must walk their command for `WALK_S`, and survive
+            their first push if they have one.
+        trials: trials; each must pass at a delay.
         coarse_ms: the delays climbed first, ascending [ms].
         fine_ms: the step within the bracket of the first coarse failure [ms].
 
     Returns:
-        Per test (``still``: standing `STILL_S` without pushes; ``push``: the trial's first push, cut `AFTER_PUSH_S`
-        after it) the last delay passed before the first failure and the first delay failed; the pushes'
-        magnitudes, the trials played and the wall time.
+        Per test (``still``: standing `STILL_S`, or walking the trials' command `WALK_S`, without pushes; ``push``:
+        the trial's first push, cut `AFTER_PUSH_S` after it, when every trial has one) the last delay passed before
+        the first failure and the first delay failed; the robot, the pushes' magnitudes, the trials played and the
+        wall time.
     """
     spec = get_controller(controller)
-    base = _margin_trials(scenario, trials)
-    forces = [round(float(np.linalg.norm(t.pushes[0].force_in_world)), 1) for t in base]
+    base, standing = _margin_trials(scenario, trials)
+    pushed = all(t.pushes for t in base)
+    forces = [round(float(np.linalg.norm(t.pushes[0].force_in_world)), 1) for t in base] if pushed else []
     found: dict[str, float | None] = {}
     runs = 0
 
@@ -302,7 +330,7 @@ def delay_margin(controller: str, scenario: str = "scenarios/push.toml", *, tria
         for t in base:
             domain = dataclasses.replace(t.domain, actuation_delay=ms / 1e3)
             if test == "still":
-                trial = dataclasses.replace(t, domain=domain, pushes=(), duration_s=STILL_S)
+                trial = dataclasses.replace(t, domain=domain, pushes=(), duration_s=STILL_S if standing else WALK_S)
             else:
                 trial = dataclasses.replace(t, domain=domain, pushes=t.pushes[:1],
                                             duration_s=t.pushes[0].start + AFTER_PUSH_S)
@@ -312,7 +340,8 @@ def delay_margin(controller: str, scenario: str = "scenarios/push.toml", *, tria
         return True
 
     start = time.perf_counter()
-    for test in ("still", "push"):
+    found["push_margin_ms"] = found["push_fell_at_ms"] = None
+    for test in ("still", "push") if pushed else ("still",):
         margin, fell_at = None, None
         for ms in coarse_ms:
             if not passes(test, ms):
@@ -328,8 +357,10 @@ def delay_margin(controller: str, scenario: str = "scenarios/push.toml", *, tria
                 margin = ms
                 ms += fine_ms
         found[f"{test}_margin_ms"], found[f"{test}_fell_at_ms"] = margin, fell_at
-    return DelayMargin(controller=controller, trials=trials, push_force_n=tuple(forces), **found, runs=runs,
-                       wall_s=time.perf_counter() - start)
+    sc = load_scenario(scenario)
+    return DelayMargin(controller=controller, robot=sc.robot, scenario=sc.name, standing=standing,
+                       still_s=STILL_S if standing else WALK_S, trials=trials,
+                       push_force_n=tuple(forces), **found, runs=runs, wall_s=time.perf_counter() - start)
 
 
 def bench_latency(controllers: tuple[str, ...] = ("stand", "mpc"), *, wire_robot: str = "go1",
@@ -340,8 +371,9 @@ def bench_latency(controllers: tuple[str, ...] = ("stand", "mpc"), *, wire_robot
     Args:
         controllers: controllers whose margin is measured (`delay_margin`).
         wire_robot: the Unitree robot of the wire measurements (``a1`` or ``go1``).
-        scenario: the scenario of the margin trials.
-        trials: standing trials per margin test.
+        scenario: the scenario of the margin trials; they play its robot (`DelayMargin.robot`), which may not be
+            `wire_robot`.
+        trials: trials per margin test.
         samples: torque steps of the wire probe.
         wire: measure the wire (False: margins only).
 
