@@ -35,7 +35,14 @@ __all__ = ["StoredEpisode", "frames_of", "load_stored_episode"]
 
 
 def frames_of(episode: Episode) -> Iterator[VizFrame]:
-    """One frame per control tick of `episode`, its pushes drawn while they act.
+    """One frame per control tick of `episode` but its last, each drawing the trunk and joints of one instant.
+
+    A row of an episode holds the trunk's pose at the end of its tick (after the physics step) but the joints the
+    controller read at its start: the joints of the instant row ``k`` ends are those row ``k + 1`` read. Frame ``k``
+    pairs them, as the viewer draws a trial it plays (both read after the step), so a replay draws what the trial
+    drew played afresh. The joints at the end of the last tick were never read, so the last row has no frame: a replay
+    ends one control tick before its episode. The joints are what the controller read: with sensor noise or latency
+    in the scenario, its measurement rather than the simulator's truth.
 
     A push is drawn in the frame of every tick whose control period overlaps it, at its application point on the
     trunk (the last acting push's point when several act together, their forces summed).
@@ -46,9 +53,9 @@ def frames_of(episode: Episode) -> Iterator[VizFrame]:
     episode.validate()
     dt = episode.control_dt
     pushes = episode.pushes
-    for i in range(len(episode.t)):
+    for i in range(len(episode.t) - 1):
         t = float(episode.t[i])
-        qpos = episode.qpos[i]
+        qpos = np.concatenate([episode.qpos[i][:7], episode.qpos[i + 1][7:]])
         force, point = np.zeros(3), np.zeros(3)
         for j in range(len(pushes)):
             start = pushes.start[j]
