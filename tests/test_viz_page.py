@@ -265,6 +265,7 @@ def _dump(url: str, tmp_path, budget_ms: int = 6000) -> dict:
     """The page's state (``<pre id="wbc-state">``) after headless Chromium ran its scripts for `budget_ms`."""
     cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
            "--enable-unsafe-swiftshader", "--hide-scrollbars", "--window-size=1000,700",
+           "--disable-background-networking", "--disable-component-update", "--no-first-run",
            f"--user-data-dir={tmp_path / 'profile'}", f"--virtual-time-budget={budget_ms}", "--dump-dom", url]
     dom = subprocess.run(cmd, capture_output=True, timeout=120).stdout.decode("utf-8", errors="replace")
     m = re.search(r'<pre id="wbc-state"[^>]*>(.*?)</pre>', dom, re.S)
@@ -286,6 +287,52 @@ def test_browser_trial_page_plots_and_a_scrub_moves_scene_and_cursor_together(pa
     assert state["sceneT"] == pytest.approx(0.55, abs=1e-3)
     assert any(m["kind"] == "push" for m in state["marks"])
     assert "push 150 N" in state["_dom"]  # the push acting at 0.55 s is named in the bar
+
+
+def _walking_page(path, follow_at=(4.0, 2.0)):
+    """A page of the A1 carried in a straight line from the origin to `follow_at` over 2 s (frames made up)."""
+    from wbc.robots.registry import get_robot
+    from wbc.viz.content import SceneContent
+    from wbc.viz.frame import VizFrame
+    from wbc.viz.page import save_trial_page
+    from wbc.viz.recording import Recording
+
+    desc = get_robot("a1-wx200", "actuated")
+    rec = Recording(SceneContent.for_description(desc), fps=50.0)
+    signals = TrialSignals("walk")
+    for k in range(1, 101):
+        qpos = np.zeros(7 + desc.num_joints)
+        qpos[:3] = [follow_at[0] * k / 100, follow_at[1] * k / 100, 0.3]
+        qpos[3] = 1.0
+        frame = VizFrame(t=k * 0.02, qpos=qpos)
+        rec.add(frame)
+        signals.add_frame(frame, None, None)
+    return save_trial_page(path, rec, [signals], title="walk", duration=2.0)
+
+
+def test_follow_trunk_poses_a_point_under_the_trunk_and_leaves_the_camera_to_the_page(tmp_path):
+    # meshcat's orbit controls look at their target in the world: the recording moved /Cameras/default alone, so
+    # the camera went with the robot while looking back at the origin, and the robot left the screen
+    html = _walking_page(tmp_path / "walk.html").read_text()
+    animated = {}
+    for c in _commands(html):
+        if c["type"] == "set_animation":
+            for a in c["animations"]:
+                animated[a["path"]] = a["clip"]["tracks"]
+    assert "/Cameras/default" not in animated
+    track = next(t for t in animated["/Cameras/follow"] if t["name"] == ".position")
+    values = np.frombuffer(track["values"].data, dtype="<f4").reshape(-1, 3)
+    assert values[-1] == pytest.approx([4.0, 2.0, 0.0], abs=1e-5)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_follow_trunk_moves_the_camera_target_with_the_robot(tmp_path):
+    path = _walking_page(tmp_path / "walk.html")
+    # meshcat's scene turns z-up into three.js's y-up: the world's (x, y, z) is three.js's (x, z, -y)
+    state = _dump(f"{path.resolve().as_uri()}#t=2", tmp_path)
+    assert state["cameraTarget"] == pytest.approx([4.0, 0.0, -2.0], abs=1e-3)
+    fixed = _dump(f"{path.resolve().as_uri()}#t=2&follow=0", tmp_path)
+    assert fixed["cameraTarget"] == pytest.approx([0.0, 0.0, 0.0], abs=1e-3)
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
