@@ -472,6 +472,55 @@ def test_browser_live_page_shows_the_push(scenario, tmp_path, monkeypatch):
     assert 'id="wbc-push"' in state["_dom"]  # the page's own push control
 
 
+def test_a_live_page_served_before_the_trial_began_is_told_to_load_its_scene():
+    from wbc.viz.live_page import LivePage
+
+    with LivePage() as page:
+        early = read_page_data(_http(page.url)[1].decode())
+        state = json.loads(_http(page.url + "state")[1])
+        assert early["duration"] == 0 and state["scene"] == early["scene"] == 0
+        content, scene, signals = _scene_for_live_page()
+        page.begin(scene, content, signals, title="t", duration=1.5, fps=50.0)
+        state = json.loads(_http(page.url + "state")[1])
+        assert state["scene"] != early["scene"] and state["data"]["duration"] == 1.5
+        assert read_page_data(_http(page.url)[1].decode())["scene"] == state["scene"]
+
+
+def _scene_for_live_page():
+    import base64 as b64
+
+    from wbc.robots.registry import get_robot
+    from wbc.viz.content import SceneContent
+    from wbc.viz.recording import Recording
+
+    rec = Recording(SceneContent.for_description(get_robot("a1-wx200", "actuated")), fps=50.0)
+    return rec.content, [b64.b64encode(c).decode() for c in rec.window.commands()], TrialSignals("stand")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_live_page_opened_before_the_first_tick_picks_up_the_scene_and_duration(tmp_path, monkeypatch):
+    from wbc.viz.frame import VizFrame
+    from wbc.viz.live_page import LivePage
+
+    with LivePage() as page:
+        served = page._page
+        content, scene, signals = _scene_for_live_page()
+
+        def first_then_begin():  # the trial begins right after the browser got the empty page
+            html = served()
+            if page._content is None:
+                page.begin(scene, content, signals, title="t", duration=1.5, fps=50.0)
+                qpos = np.zeros(22)
+                qpos[2], qpos[3] = 0.3, 1.0
+                page.show(VizFrame(t=0.2, qpos=qpos))
+            return html
+
+        monkeypatch.setattr(page, "_page", first_then_begin)
+        state = _dump(page.url, tmp_path, budget_ms=4000)
+    assert state["live"] and state["duration"] == 1.5 and state["t"] == pytest.approx(0.2)
+    assert "trunk_0" in set(re.findall(r'<li class="title">([^<]*)</li>', state["_dom"]))
+
+
 _CLICK_PUSH = """<script>
 // what a person does: fill in the page's push control and press its button, once the live panel is built
 var wbcClick = setInterval(function () {

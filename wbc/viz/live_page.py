@@ -6,7 +6,8 @@ robot; nobody else may), serves:
 - ``GET /``: the trial page (`wbc.viz.page`) in its live form: the scene built from the same commands as a recording,
   posed from ``/state`` as the trial plays, the plots growing; once the trial has ended, the recorded page itself
   (the live page reloads into it, so scrubbing and slow motion work over the whole trial);
-- ``GET /state``: the trial time, the newest poses and the plots so far (JSON);
+- ``GET /state``: the trial time, the newest poses, the plots so far and the trial's duration (JSON), and which
+  trial's scene the page should hold (a page opened before the trial's first tick reloads into its scene);
 - ``POST /push``: ``{"force_n", "heading_deg", "duration_s", "point_in_base": [x, y, z], "t"}`` a horizontal push
   towards world heading ``heading_deg`` (0 along world x, 90 along world y), applied at trial time ``t`` (default:
   now) through the same `wbc.scenario.push.Push` the scenarios use and the robot's `Pushable` hook;
@@ -186,6 +187,7 @@ class LivePage:
         self._fps = 50.0
         self._final: str | None = None
         self._content: SceneContent | None = None
+        self._scene_id = 0  # trials begun: a page served before the trial's scene existed reloads once it does
 
     def start(self) -> LivePage:
         """Serve on a thread of its own."""
@@ -214,6 +216,7 @@ class LivePage:
         with self._lock:
             self._scene, self._content, self._signals = scene, content, signals
             self._title, self._duration, self._fps, self._final = title, duration, fps, None
+            self._scene_id += 1
 
     def tick(self, t: float, robot: object) -> None:
         """Before the observer draws tick `t`: apply the pushes due (on a `Pushable` robot) and the command set."""
@@ -269,14 +272,15 @@ class LivePage:
         with self._lock:
             if self._final is not None:
                 return self._final
-            return live_page_html(self._scene, title=self._title, duration=self._duration, fps=self._fps)
+            return live_page_html(self._scene, title=self._title, duration=self._duration, fps=self._fps,
+                                  scene_id=self._scene_id)
 
     def _state(self) -> dict[str, object]:
         with self._lock:
             runs = [self._signals.to_json()] if self._signals is not None else []
             for run in runs:
                 run["marks"] = run["marks"] + [m.to_json() for m in self._marks]
-            return {"t": self._t, "done": self._final is not None, "poses": self._poses,
+            return {"t": self._t, "done": self._final is not None, "poses": self._poses, "scene": self._scene_id,
                     "data": {"duration": self._duration, "runs": runs}}
 
     def _post(self, route: str, body: dict) -> dict[str, object]:

@@ -292,6 +292,9 @@ PAGE_SCRIPT = r"""
   page.setFollow = setFollow;
   // a live page grows: its runs are replaced as the trial plays (`wbc.viz.live_page`)
   page.extend = function (data) {
+    if (typeof data.duration === "number" && data.duration !== D.duration) {
+      D.duration = page.duration = data.duration; slider.max = String(data.duration);
+    }
     D.runs = data.runs; allMarks.length = 0;
     D.runs.forEach(function (run, ri) { run.marks.forEach(function (m) {
       allMarks.push({t: m.t, kind: m.kind, label: m.label, d: m.d, run: ri}); }); });
@@ -377,7 +380,8 @@ PAGE_SCRIPT = r"""
   }
   function poll() {
     fetch("state", {cache: "no-store"}).then(function (r) { return r.json(); }).then(function (s) {
-      if (s.done) { window.location.reload(); return; }
+      // the trial's scene came after the page (opened before the first tick) or another trial began: load it
+      if (s.done || (s.scene !== undefined && s.scene !== (D.scene || 0))) { window.location.reload(); return; }
       Object.keys(s.poses).forEach(function (path) {
         var m = s.poses[path];
         viewer.handle_command({type: "set_property", path: path, property: "visible", value: m !== null});
