@@ -15,9 +15,11 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode
 from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
+from wbc.errors import ConfigError
 from wbc.scenario import ScenarioError, check_published
 from wbc.scenario.scenario import load_scenario
 from wbc.types import VelocityCommand
+from wbc.viz.errors import ViewerError
 from wbc.viz.page import read_page_data
 from wbc.viz.recording import GHOST_COLOR
 from wbc.viz.replay import load_stored_episode
@@ -253,6 +255,57 @@ def test_cli_view_says_where_it_saved_the_episode(scenario, tmp_path, capsys, mo
                  str(tmp_path / "e.html"), "--save-episode", str(saved)]) == 0
     assert f"saved the episode played to {saved}" in capsys.readouterr().out.splitlines()
     assert Episode.load(str(saved)).survived_s == pytest.approx(0.3)
+
+
+def test_a_stored_run_replays_with_the_arm_mode_its_run_json_records_without_building_the_controller(
+        scenario, tmp_path, monkeypatch):
+    # a policy file moved since, or an onnx: policy's I/O file given by --io, cannot be found again: the replay
+    # must not need the controller, whose arm mode run.json records
+    import wbc.viz.replay as replay
+
+    out = tmp_path / "r"
+    run_arena(ArenaConfig(controllers=("stand",), scenario=scenario, trials=1, out_dir=out, workers=1,
+                          progress=False, save_episodes=True))
+    run = json.loads((out / "run.json").read_text())
+    assert run["controllers"]["stand"]["arm_mode"] == "actuated"
+
+    def unbuildable(name, **kw):
+        raise ConfigError(f"{name}: file not found")
+
+    monkeypatch.setattr(replay, "get_controller", unbuildable)
+    stored = load_stored_episode(out, 0)
+    assert stored.arm_mode == "actuated" and stored.content().robot is not None
+    replay_episode(stored, ViewConfig(live=False, record=tmp_path / "replay.html"))
+    del run["controllers"]  # a run.json that records no controllers: asked of the controller, named when it fails
+    (out / "run.json").write_text(json.dumps(run))
+    with pytest.raises(ViewerError, match=r"run\.json: field controllers\.stand\.arm_mode: missing, and stand "):
+        load_stored_episode(out, 0)
+
+
+def test_cli_view_ab_gives_io_to_the_onnx_policy_only(scenario, tmp_path, capsys, monkeypatch):
+    pytest.importorskip("onnxruntime")
+    from fuzz.cases import ONNX_FRAME, ONNX_IO_TEMPLATE, ONNX_JOINTS, onnx_linear_model
+
+    import wbc.viz.view as view
+
+    model, io = tmp_path / "nets" / "p.onnx", tmp_path / "p-io.toml"
+    model.parent.mkdir()
+    model.write_bytes(onnx_linear_model(np.zeros((ONNX_FRAME, 12)), None))
+    io.write_text(ONNX_IO_TEMPLATE.format(joints=json.dumps(ONNX_JOINTS), history=1))
+    built = []
+
+    def fake_view_ab(trial, specs, cfg, path):
+        built.extend(specs)
+        raise ConfigError("stop here")
+
+    monkeypatch.setattr(view, "view_ab", fake_view_ab)
+    common = ["--scenario", str(scenario), "--trial", "0", "--record", str(tmp_path / "ab.html")]
+    assert main(["view", f"onnx:{model}", "stand", "--io", str(io), *common]) != 0
+    assert [s.name for s in built] == [f"onnx:{model}", "stand"], capsys.readouterr().err
+    assert main(["view", f"onnx:{model}", f"onnx:{model}x", "--io", str(io), *common]) != 0
+    assert "both controllers are onnx:PATH policies" in capsys.readouterr().err
+    assert main(["view", "mpc", "stand", "--io", str(io), *common]) != 0
+    assert "is not one" in capsys.readouterr().err
 
 
 def test_cli_view_refuses_three_controllers(scenario, capsys):

@@ -1370,7 +1370,13 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
                               "--episode RESULTS_DIR --trial I (their stored runs)")
         trial = _view_trial(args)
         _check_at(args.at, trial.duration_s, cut=args.duration is not None)
-        specs = tuple(get_controller(c, config=args.controller_config, io=args.io) for c in ctrls)
+        onnx = [c for c in ctrls if _is_onnx(c)]
+        if args.io is not None and len(onnx) == 2:
+            raise ConfigError(f"--io {args.io}: both controllers are onnx:PATH policies, and one I/O file would "
+                              "describe both; leave --io out (each reads PATH with the suffix .toml)")
+        # --io is the onnx: policy's; a controller of no I/O file is built without it (when neither is, refused)
+        specs = tuple(get_controller(c, config=args.controller_config,
+                                     io=args.io if _is_onnx(c) or not onnx else None) for c in ctrls)
         result = view_ab(trial, specs, cfg, path)
     for name, fall in zip(result.names, result.fall_s, strict=True):
         print(f"{name}: " + ("survived" if fall is None else f"fell at {fall:.2f} s"))

@@ -18,11 +18,13 @@ from pathlib import Path
 import numpy as np
 
 from wbc.arena.episode import Episode
-from wbc.arena.identity import RunIdentity
+from wbc.arena.identity import HardwareRunIdentity, RunIdentity
 from wbc.arena.results import episode_path
 from wbc.control.registry import get_controller
-from wbc.errors import EpisodeFileError, RecordError, WbcError
+from wbc.errors import EpisodeFileError, InputFileError, RecordError, WbcError
+from wbc.input_files import read_json
 from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import Scenario, load_scenario
 from wbc.scenario.terrain import TerrainConfig
@@ -73,6 +75,8 @@ class StoredEpisode:
     Attributes:
         path: the episode file.
         controller: who played it.
+        arm_mode: its arm mode, as the run recorded it (``run.json``'s ``controllers``): the controller is not built
+            to replay it, so a policy file moved or deleted since, or an I/O file given by ``--io``, does not matter.
         trial: the trial (robot, ground, pushes as sampled).
         episode: the log.
         scenario: the scenario file the trial was drawn from, as loaded: the run's content (its hash is the one
@@ -82,13 +86,14 @@ class StoredEpisode:
 
     path: Path
     controller: str
+    arm_mode: str
     trial: Trial
     episode: Episode
     scenario: Scenario
 
     def content(self) -> SceneContent:
         """What to draw: the controller's robot (arm mode) on the trial's ground."""
-        desc = get_robot(self.trial.robot, get_controller(self.controller).arm_mode)
+        desc = get_robot(self.trial.robot, self.arm_mode)
         return SceneContent.for_trial(desc, self.trial.terrain, self.trial.terrain_seed)
 
     def frames(self) -> Iterator[VizFrame]:
@@ -164,9 +169,33 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     trial = scenario.trial(band, seed, index)
     if played_on is not None:  # on a robot: its own ground (unknown, drawn flat) and none of the scenario's pushes
         trial = dataclasses.replace(trial, robot=played_on, terrain=TerrainConfig(kind="flat"), pushes=())
-    nq = get_robot(trial.robot, get_controller(controller).arm_mode).num_joints + 7
+    arm_mode = _recorded_arm_mode(run_json, identity, controller)
+    nq = get_robot(trial.robot, arm_mode).num_joints + 7
     if episode.qpos.ndim != 2 or episode.qpos.shape[1] != nq:
         raise ViewerError(f"{path}: field qpos: shape {episode.qpos.shape}, expected (ticks, {nq}) for "
                           f"{trial.robot} driven by {controller}; the file belongs to another run: store it again "
                           "with `wbc run --save-episodes`")
-    return StoredEpisode(path=path, controller=controller, trial=trial, episode=episode, scenario=scenario)
+    return StoredEpisode(path=path, controller=controller, arm_mode=arm_mode, trial=trial, episode=episode,
+                         scenario=scenario)
+
+
+def _recorded_arm_mode(run_json: Path, identity: RunIdentity, controller: str) -> str:
+    """The arm mode `controller` played the run with, as ``run.json`` records it (``controllers.NAME.arm_mode``).
+
+    A run written before ``run.json`` recorded its controllers (or a hardware run's, which names its robot's arm
+    mode) is read as it can be; only a run that records neither builds the controller to ask it.
+    """
+    try:
+        entry = read_json(run_json).get("controllers", {}).get(controller)
+    except (InputFileError, ValueError, AttributeError):  # the identity was read from it already: an old layout
+        entry = None
+    arm_mode = entry.get("arm_mode") if isinstance(entry, dict) else None
+    if arm_mode in ARM_MODES:
+        return arm_mode
+    if isinstance(identity, HardwareRunIdentity):
+        return identity.arm_mode
+    try:
+        return get_controller(controller).arm_mode
+    except WbcError as exc:
+        raise ViewerError(f"{run_json}: field controllers.{controller}.arm_mode: missing, and {controller} cannot be "
+                          f"built here to ask it ({exc})") from None
