@@ -308,6 +308,62 @@ def test_cli_view_ab_gives_io_to_the_onnx_policy_only(scenario, tmp_path, capsys
     assert "is not one" in capsys.readouterr().err
 
 
+def _carried(desc, xs):
+    """Frames of `desc` standing at trunk x = each of `xs` [m], at times 0.002 s apart from 0.002 s (a 500 Hz run)."""
+    from wbc.viz.frame import VizFrame
+
+    out = []
+    for i, x in enumerate(xs):
+        qpos = np.zeros(7 + desc.num_joints)
+        qpos[:4] = [x, 0.0, 0.3, 1.0]
+        out.append(VizFrame(t=round(0.002 * (i + 1), 9), qpos=qpos))
+    return out
+
+
+def test_a_fast_controller_is_keyed_at_its_tick_nearest_each_frame():
+    # rounding t * fps keyed a 500 Hz run's tick at 0.012 s as the frame at 0.02 s: drawn 8 ms before it happened
+    from wbc.robots.registry import get_robot
+    from wbc.viz.content import FOLLOW, SceneContent
+    from wbc.viz.recording import Recording, frame_key
+
+    assert [frame_key(t, 50.0, 0.002) for t in (0.010, 0.012, 0.018, 0.02, 0.022)] == [0, 0, 0, 1, 1]
+    assert [frame_key(t, 50.0, 0.02) for t in (0.02, 0.04, 0.06)] == [1, 2, 3]
+    # a 30 Hz run: each tick keys the last frame it is the nearest tick to (0.0667 s is nearest to 0.06 and 0.08 s)
+    assert [frame_key(t, 50.0, 1 / 30) for t in (1 / 30, 2 / 30, 3 / 30)] == [2, 4, 5]
+    desc = get_robot("a1-wx200", "actuated")
+    rec = Recording(SceneContent.for_description(desc), fps=50.0, tick_s=0.002)
+    frames = _carried(desc, [0.002 * (i + 1) for i in range(100)])  # the trunk's x is the frame's time
+    keyed = [f.t for f in frames if rec.add(f)]
+    assert keyed[:3] == [0.002, 0.02, 0.04] and keyed[-1] == pytest.approx(0.2)
+    html = rec.html()
+    for c in _commands(html):
+        if c["type"] == "set_animation":
+            track = next(t for a in c["animations"] if a["path"] == FOLLOW for t in a["clip"]["tracks"]
+                         if t["name"] == ".position")
+            times = np.frombuffer(track["times"].data, dtype="<f4")
+            xs = np.frombuffer(track["values"].data, dtype="<f4").reshape(-1, 3)[:, 0]
+            assert xs[0] == pytest.approx(0.002)  # no tick at 0 s: the first frame is the first tick's
+            assert xs[1:] == pytest.approx(times[1:] / 50.0, abs=1e-6)  # the state drawn at each frame is its own
+
+
+def test_the_first_divergence_of_two_runs_does_not_depend_on_their_order():
+    from wbc.robots.registry import get_robot
+    from wbc.viz.ab import first_divergence
+
+    desc = get_robot("a1-wx200", "actuated")
+    fast = _carried(desc, [0.0 if 0.002 * (i + 1) < 2.487 else 0.1 for i in range(1500)])  # parts at 2.488 s
+    slow = _carried(desc, [0.0] * 1500)[9::10]  # 50 Hz: one frame each 0.02 s
+    fast_kept, last = [], -1
+    for f in fast:  # as a capture keeps them: the tick nearest each frame
+        k = int(np.floor((f.t + 0.001) * 50 + 1e-6))
+        if k > last:
+            fast_kept.append(f)
+            last = k
+    ab = first_divergence(fast_kept, slow, 50.0, tick_a=0.002, tick_b=0.02)
+    ba = first_divergence(slow, fast_kept, 50.0, tick_a=0.02, tick_b=0.002)
+    assert ab == ba == pytest.approx(2.5)
+
+
 def test_cli_view_refuses_three_controllers(scenario, capsys):
     assert main(["view", "stand", "mpc", "stand", "--scenario", str(scenario), "--trial", "0"]) != 0
     assert "two for an A / B view" in capsys.readouterr().err
