@@ -364,6 +364,31 @@ def test_the_first_divergence_of_two_runs_does_not_depend_on_their_order():
     assert ab == ba == pytest.approx(2.5)
 
 
+def test_the_push_angular_impulse_is_integrated_over_the_push_alone_whatever_the_frame_rate(scenario, tmp_path,
+                                                                                             monkeypatch):
+    # a 90 ms push starting between frames: summed over whole frame intervals, it read 0.1 s of push at 50 frames a
+    # second (five frames saw it) and another figure at another rate
+    monkeypatch.chdir(tmp_path)
+    text = scenario.read_text().replace("first_s = [0.5, 0.5]", "first_s = [0.505, 0.505]").replace(
+        "duration_s = 0.1\n", "duration_s = 0.09\n")
+    odd = tmp_path / "odd.toml"
+    odd.write_text(text)
+    trial = load_scenario(odd).trial("soft", 0, 0)
+    assert trial.pushes[0].duration == pytest.approx(0.09)
+    final = {}
+    for fps in (50.0, 100.0, 30.0):
+        out = tmp_path / f"p{fps:g}.html"
+        view_trial(trial, "stand", ViewConfig(live=False, record=out, record_fps=fps))
+        run = read_page_data(out.read_text())["runs"][0]
+        lines = run["plots"]["arm_momentum"]["lines"]
+        t = np.array(run["t"])
+        at = int(np.searchsorted(t, 0.75))
+        final[fps] = np.array([lines[f"push H{a}"][at] for a in "xyz"], dtype=float)
+    assert np.linalg.norm(final[50.0]) > 0.5
+    for fps in (100.0, 30.0):
+        assert final[fps] == pytest.approx(final[50.0], rel=0.02), final
+
+
 def test_cli_view_refuses_three_controllers(scenario, capsys):
     assert main(["view", "stand", "mpc", "stand", "--scenario", str(scenario), "--trial", "0"]) != 0
     assert "two for an A / B view" in capsys.readouterr().err
