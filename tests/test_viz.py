@@ -337,6 +337,27 @@ def test_replay_errors_name_the_file_and_field(results_dir, tmp_path):
         load_stored_episode(changed, 0)
 
 
+def test_replay_of_a_trial_an_interrupted_run_never_played_says_to_resume(results_dir, tmp_path):
+    # the run saved its episodes: the remedy for a trial it has not played yet is --resume, not --save-episodes
+    cut = tmp_path / "cut"
+    shutil.copytree(results_dir, cut)
+    rows = (cut / "trials.csv").read_text().splitlines(keepends=True)
+    kept = [r for r in rows if not r.startswith("stand,viztest,") or ",soft,0,1," not in r]
+    assert len(kept) == len(rows) - 1
+    (cut / "trials.csv").write_text("".join(kept))
+    (cut / "episodes" / "stand" / "soft-s0-t1.npz").unlink()
+    with pytest.raises(ViewerError, match=r"trial 1 of controller stand, band soft, seed 0 was not played: the run "
+                                          r"was interrupted .* with --resume, plays the rest") as caught:
+        load_stored_episode(cut, 1)
+    assert "--save-episodes" not in str(caught.value)
+    with pytest.raises(ViewerError, match=r"--trial 5 is out of range; the run's trials are 0\.\.1 per band and "
+                                          r"seed; stand has played 1 \(0\.\.0\) of them so far"):
+        load_stored_episode(cut, 5)
+    (cut / "episodes" / "stand" / "soft-s0-t0.npz").unlink()  # played, its episode not stored
+    with pytest.raises(ViewerError, match="no episode stored .* with --save-episodes"):
+        load_stored_episode(cut, 0)
+
+
 def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys, monkeypatch):
     assert main(["view", "--episode", str(results_dir), "--trial", "9", "--record", str(tmp_path / "x.html")]) == 2
     assert "field trials" in capsys.readouterr().err

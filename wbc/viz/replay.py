@@ -20,6 +20,7 @@ import numpy as np
 from wbc.arena.episode import Episode
 from wbc.arena.identity import HardwareRunIdentity, RunIdentity
 from wbc.arena.results import episode_path
+from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import get_controller
 from wbc.errors import EpisodeFileError, InputFileError, RecordError, WbcError
 from wbc.input_files import read_json
@@ -146,12 +147,11 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     band = _pick(run_json, "bands", band, bands, "--band")
     seed = _pick(run_json, "seeds", seed, seeds, "--seed")
     if index not in played:
-        raise ViewerError(f"{run_json}: field trials: --trial {index} is out of range; the run played trials "
-                          f"{played[0]}..{played[-1]} per band and seed")
+        raise ViewerError(f"{run_json}: field trials: --trial {index} is out of range; the run's trials are "
+                          f"{played[0]}..{played[-1]} per band and seed{_so_far(root, controller, band, seed)}")
     path = episode_path(root, controller, band, seed, index)
     if not path.exists():
-        raise ViewerError(f"{path}: no episode stored for controller {controller}, band {band}, seed {seed}, "
-                          f"trial {index}; rerun `wbc run` with --save-episodes")
+        raise ViewerError(_no_episode(root, path, controller, band, seed, index))
     try:
         episode = Episode.load(str(path))  # checked in depth: a malformed episode is refused, never drawn
     except EpisodeFileError as exc:  # names the file and the field
@@ -177,6 +177,37 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
                           "with `wbc run --save-episodes`")
     return StoredEpisode(path=path, controller=controller, arm_mode=arm_mode, trial=trial, episode=episode,
                          scenario=scenario)
+
+
+def _played(root: Path, controller: str, band: str, seed: int) -> list[int] | None:
+    """The trials of (controller, band, seed) that ``trials.csv`` records, in order (None: no file to trust)."""
+    try:
+        records = TrialRecord.read_csv(root / "trials.csv")
+    except (WbcError, OSError):
+        return None
+    return sorted(r.trial for r in records if (r.controller, r.band, r.seed) == (controller, band, seed))
+
+
+def _so_far(root: Path, controller: str, band: str, seed: int) -> str:
+    """`` (...): ...--resume...`` when the run has played fewer trials of (controller, band, seed) than it plans."""
+    done = _played(root, controller, band, seed)
+    if done is None:
+        return ""
+    shown = "none" if not done else f"{len(done)} ({done[0]}..{done[-1]})" if done == list(
+        range(done[0], done[-1] + 1)) else f"{len(done)}"
+    return (f"; {controller} has played {shown} of them so far in band {band}, seed {seed}: the run was "
+            "interrupted, and the `wbc run` or `wbc compare` command that wrote it, with --resume, plays the rest")
+
+
+def _no_episode(root: Path, path: Path, controller: str, band: str, seed: int, index: int) -> str:
+    """Why `path` is missing, with the remedy: the trial was not played yet, or was played without its episode."""
+    done = _played(root, controller, band, seed)
+    if done is not None and index not in done:
+        return (f"{path}: trial {index} of controller {controller}, band {band}, seed {seed} was not played: the run "
+                f"was interrupted ({root / 'trials.csv'} records {len(done)} of its trials there); the `wbc run` or "
+                "`wbc compare` command that wrote it, with --resume, plays the rest and stores their episodes")
+    return (f"{path}: no episode stored for controller {controller}, band {band}, seed {seed}, trial {index}; rerun "
+            "`wbc run` with --save-episodes")
 
 
 def _recorded_arm_mode(run_json: Path, identity: RunIdentity, controller: str) -> str:
