@@ -577,6 +577,48 @@ def test_live_page_push_and_command_land_in_the_episode(scenario, tmp_path, monk
     assert np.array_equal(replay.command, episode.command) and np.array_equal(replay.qpos, episode.qpos)
 
 
+def _raw_post(url: str, body: bytes, length: str) -> tuple[int, bytes]:
+    import http.client
+    import urllib.parse
+
+    u = urllib.parse.urlsplit(url)
+    conn = http.client.HTTPConnection(u.hostname, u.port, timeout=30)
+    conn.putrequest("POST", u.path)
+    conn.putheader("Content-Type", "application/json")
+    conn.putheader("Content-Length", length)
+    conn.endheaders()
+    conn.send(body)
+    reply = conn.getresponse()
+    out = reply.status, reply.read()
+    conn.close()
+    return out
+
+
+def test_live_page_endpoints_answer_a_bad_request_with_400_and_what_is_wrong():
+    from wbc.viz.live_page import LivePage
+    from wbc.viz.player import Controls
+
+    with LivePage() as page:
+        page.controls = Controls()
+        for body, says in (({"speed": "abc"}, "speed must be a number"), ({"speed": None}, "speed must be a number"),
+                           ({"speed": True}, "speed must be a number"), ({"pause": "false"}, "pause must be true or")):
+            code, reply = _http(page.url + "control", body)
+            assert code == 400 and says in json.loads(reply)["error"], (body, reply)
+        assert not page.controls.paused  # "false" as a string paused the trial
+        assert _raw_post(page.url + "control", b'{"pause": true}', "abc")[0] == 400
+        assert _raw_post(page.url + "control", b"\xff\xfe", "2")[0] == 400
+        assert _http(page.url + "control", {"pause": True}) == (200, b'{"paused": true, "speed": 1.0}')
+        content, scene, signals = _scene_for_live_page()
+        page.begin(scene, content, signals, title="t", duration=1.5, fps=50.0)
+        push = {"force_n": 100.0, "duration_s": 0.1}
+        for t in (1e9, 1.5, -1.0, float("inf")):
+            code, reply = _http(page.url + "push", push | {"t": t})
+            assert code == 400 and "t must be a trial time in [0, 1.5) s" in json.loads(reply)["error"], reply
+        assert _http(page.url + "push", push | {"t": 1.4})[0] == 200
+        page.finish("<html></html>")
+        assert json.loads(_http(page.url + "push", push)[1])["error"] == "push: the trial has ended"
+
+
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
 def test_browser_live_page_shows_the_push(scenario, tmp_path, monkeypatch):
     import threading
