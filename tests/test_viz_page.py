@@ -209,7 +209,7 @@ def test_cli_view_ab_and_stored_episodes(scenario, tmp_path, capsys, monkeypatch
 
 
 def test_cli_view_ab_names_its_page_from_names_that_hold_path_separators(scenario, tmp_path, capsys, monkeypatch):
-    """Without --record the page is ab-A-B-trialI.html in the current directory, a path's separators made ``_``."""
+    """Without --record the page is ab-A-B-SCENARIO-BAND-sSEED-tI.html here, a path's separators made ``_``."""
     from wbc.learned.policy.shipped import shipped_weights
     from wbc.robots.registry import get_robot
 
@@ -217,8 +217,14 @@ def test_cli_view_ab_names_its_page_from_names_that_hold_path_separators(scenari
     policy = f"policy:{shipped_weights(get_robot('a1-wx200', 'locked'))}"
     assert main(["view", "stand", policy, "--scenario", str(scenario), "--trial", "0", "--duration", "0.2"]) == 0
     (page,) = tmp_path.glob("ab-*.html")
-    assert page.name == f"ab-stand-{re.sub(r'[^A-Za-z0-9._-]+', '_', policy)}-trial0.html"
+    assert page.name == f"ab-stand-{re.sub(r'[^A-Za-z0-9._-]+', '_', policy)}-pagetest-soft-s0-t0.html"
     assert page.resolve().as_uri() in capsys.readouterr().out
+    # another band or seed of the same trial index is another page: neither overwrites the other
+    for more in (["--band", "hard"], ["--seed", "1"]):
+        assert main(["view", "stand", policy, "--scenario", str(scenario), "--trial", "0", "--duration", "0.2",
+                     *more]) == 0
+    assert {p.name.split("-pagetest-")[1] for p in tmp_path.glob("ab-*.html")} == {
+        "soft-s0-t0.html", "hard-s0-t0.html", "soft-s1-t0.html"}
 
 
 def test_cli_view_exports_the_trial_and_says_where_the_recording_time_went(scenario, tmp_path, capsys, monkeypatch):

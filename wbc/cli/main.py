@@ -1354,8 +1354,13 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
     from wbc.arena.results import file_name_part
     from wbc.viz.view import replay_ab, view_ab
 
-    path = (Path(args.record) if args.record
-            else Path(f"ab-{file_name_part(ctrls[0])}-{file_name_part(ctrls[1])}-trial{args.trial}.html"))
+    def page_path(trial: Trial) -> Path:
+        """``--record``, else a name of its own for each pair of controllers and trial (scenario, band, seed)."""
+        if args.record:
+            return Path(args.record)
+        return Path(f"ab-{file_name_part(ctrls[0])}-{file_name_part(ctrls[1])}-{file_name_part(trial.scenario)}-"
+                    f"{file_name_part(trial.band)}-s{trial.seed}-t{trial.index}.html")
+
     if args.episode is not None:
         from wbc.viz.replay import load_stored_episode
 
@@ -1363,7 +1368,7 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
                          for c in ctrls)
         warn_if_unpublished(first.scenario)  # one run's, so both controllers': said once
         _check_at(args.at, first.trial.duration_s)
-        result = replay_ab(first, second, cfg, path)
+        result = replay_ab(first, second, cfg, page_path(first.trial))
     else:
         if args.scenario is None:
             raise ConfigError("wbc view A B needs --scenario FILE --trial I (play the trial with both), or "
@@ -1377,7 +1382,7 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
         # --io is the onnx: policy's; a controller of no I/O file is built without it (when neither is, refused)
         specs = tuple(get_controller(c, config=args.controller_config,
                                      io=args.io if _is_onnx(c) or not onnx else None) for c in ctrls)
-        result = view_ab(trial, specs, cfg, path)
+        result = view_ab(trial, specs, cfg, page_path(trial))
     for name, fall in zip(result.names, result.fall_s, strict=True):
         print(f"{name}: " + ("survived" if fall is None else f"fell at {fall:.2f} s"))
     if result.divergence_s is not None:
