@@ -150,6 +150,18 @@ def test_server_exits_with_its_parent():
     assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
 
 
+def test_the_printed_address_opens_in_a_browser_and_says_who_can_reach_it():
+    from wbc.viz.server import listening_on, web_address
+
+    assert web_address("127.0.0.1", 7000) == "http://127.0.0.1:7000/static/"
+    assert web_address("::1", 7000) == "http://[::1]:7000/static/"  # no brackets: not an address a browser takes
+    assert web_address("0.0.0.0", 7001) == "http://127.0.0.1:7001/static/"
+    assert web_address("::", 7001) == "http://[::1]:7001/static/"
+    assert listening_on("127.0.0.1") == "127.0.0.1 only" and listening_on(None) == "127.0.0.1 only"
+    assert listening_on("0.0.0.0").startswith("every interface (0.0.0.0)")  # "0.0.0.0 only" said the opposite
+    assert listening_on("::").startswith("every interface (::)")
+
+
 def test_server_bad_host_is_a_clear_error():
     with pytest.raises(ViewerError, match="192.0.2.123"):
         MeshcatServer(ServerConfig(host="192.0.2.123", start_timeout_s=10)).start()

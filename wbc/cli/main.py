@@ -664,7 +664,7 @@ def _hw_live_observer(args: argparse.Namespace):
     from wbc.viz.server import MeshcatServer, ServerConfig
 
     server = MeshcatServer(ServerConfig(host=args.host)).start()
-    print(f"viewer: {server.web_url}  (listening on {args.host} only)", file=sys.stderr)
+    print(f"viewer: {server.web_url}  (listening on {server.listening})", file=sys.stderr)
     return server, LiveObserver(LiveViewer(server), background=True)
 
 
@@ -1148,7 +1148,7 @@ def _live_observer(args: argparse.Namespace):
     from wbc.viz.server import MeshcatServer, ServerConfig
 
     server = MeshcatServer(ServerConfig(host=args.host)).start()
-    print(f"viewer: {server.web_url}  (listening on {args.host} only; trials play one by one in this process)",
+    print(f"viewer: {server.web_url}  (listening on {server.listening}; trials play one by one in this process)",
           file=sys.stderr)
     player = Player(PlayerConfig(speed=args.speed), KeyboardControls().start())
     return server, LiveObserver(LiveViewer(server), player)

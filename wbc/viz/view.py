@@ -161,7 +161,7 @@ def _start_live(cfg: ViewConfig) -> tuple[MeshcatServer, LiveViewer, Player]:
                           "interactively, or record with --record and pause in the page")
     server = MeshcatServer(ServerConfig(host=cfg.host)).start()
     viewer = LiveViewer(server)
-    print(f"viewer: {server.web_url}  (listening on {cfg.host} only)", file=sys.stderr)
+    print(f"viewer: {server.web_url}  (listening on {server.listening})", file=sys.stderr)
     if cfg.open_browser:
         webbrowser.open(server.web_url, new=2)
     if cfg.wait_for_browser:
