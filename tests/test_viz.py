@@ -370,6 +370,17 @@ def test_replay_of_a_trial_an_interrupted_run_never_played_says_to_resume(result
         load_stored_episode(cut, 0)
 
 
+def test_cli_view_refuses_a_controller_named_twice_for_a_replay(results_dir, tmp_path, capsys):
+    # CTRL and --controller naming two controllers replayed --controller's silently; an A / B view ignored it
+    out = str(tmp_path / "x.html")
+    common = ["--episode", str(results_dir), "--trial", "0", "--record", out]
+    assert main(["view", "mpc", "--controller", "stand", *common]) != 0
+    assert "--controller stand and mpc: two controllers named for one replay" in capsys.readouterr().err
+    assert main(["view", "stand", "mpc", "--controller", "stand", *common]) != 0
+    assert "an A / B view replays the two controllers it names" in capsys.readouterr().err
+    assert main(["view", "stand", "--controller", "stand", *common]) == 0  # the same one twice: no doubt
+
+
 def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys, monkeypatch):
     assert main(["view", "--episode", str(results_dir), "--trial", "9", "--record", str(tmp_path / "x.html")]) == 2
     assert "field trials" in capsys.readouterr().err

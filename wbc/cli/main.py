@@ -1289,7 +1289,12 @@ def _view_refusals(args: argparse.Namespace) -> None:
     if not stored:
         _refuse((("--controller", args.controller),),
                 "picks whose stored run --episode replays: without --episode, name the controller as CTRL")
-    else:
+    elif args.controller is not None and (ab or (args.ctrl and args.ctrl[0] != args.controller)):
+        named = " ".join(args.ctrl)
+        raise ConfigError(f"--controller {args.controller} and {named}: " + (
+            "an A / B view replays the two controllers it names (wbc view A B --episode DIR); leave --controller out"
+            if ab else "two controllers named for one replay; give one, as CTRL or as --controller"))
+    if stored:
         # a stored episode replays as it was run: its trial and its controller's run come from the results directory
         _refuse((("--scenario", args.scenario), ("--duration", args.duration),
                  ("--controller-config", args.controller_config), ("--io", args.io),
