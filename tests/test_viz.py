@@ -381,6 +381,13 @@ def test_cli_view_refuses_a_controller_named_twice_for_a_replay(results_dir, tmp
     assert main(["view", "stand", "--controller", "stand", *common]) == 0  # the same one twice: no doubt
 
 
+def test_an_episode_file_given_to_episode_says_what_replays_it(tmp_path):
+    saved = tmp_path / "live.npz"
+    saved.write_bytes(b"")
+    with pytest.raises(ViewerError, match=r"live\.npz: an episode file alone .* --export-scenario FILE\.toml"):
+        load_stored_episode(saved, 0)
+
+
 def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys, monkeypatch):
     assert main(["view", "--episode", str(results_dir), "--trial", "9", "--record", str(tmp_path / "x.html")]) == 2
     assert "field trials" in capsys.readouterr().err

@@ -16,10 +16,10 @@ robot; nobody else may), serves:
 - ``POST /control``: ``{"pause": true|false}`` or ``{"speed": s}`` the pacing of the live trial.
 
 A request that is not a JSON object of these fields, in range (a push's ``t`` within the trial), is answered 400
-with what is wrong; once the trial has ended, every request is.
+with what is wrong; once the trial has ended, every request is refused so.
 
 Every push and command change is kept (`pushes`, the command's `SteeredCommand.changes`, `operator_rows`) so the
-viewer logs them in the episode: pushes in its `PushLog` (replays draw them), both as operator actions (``browser``
+viewer logs them in the episode: pushes in its `PushLog` (as a scenario's), both as operator actions (``browser``
 key), and as marks on the page. Both take effect at a control tick and are kept with that tick's time, so a scenario
 written from them (`wbc.viz.trial_export`) plays them again exactly.
 """

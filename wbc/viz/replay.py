@@ -131,6 +131,10 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     """
     root = Path(results_dir)
     run_json = root / "run.json"
+    if root.is_file() and root.suffix.lower() == ".npz":
+        raise ViewerError(f"{root}: an episode file alone (`wbc view --save-episode`) holds no trial to draw it on; "
+                          "--episode takes a results directory (`wbc run --save-episodes --out DIR`). To see a trial "
+                          "played live again, write it with --export-scenario FILE.toml and view that scenario")
     if not root.is_dir():
         raise ViewerError(f"{root}: no such results directory (give the --out of a `wbc run --save-episodes`)")
     if not run_json.exists():
