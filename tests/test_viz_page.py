@@ -132,6 +132,13 @@ def test_trial_page_holds_plots_with_data_and_event_marks(page):
     assert np.all(before == 0.0) and np.all(after > 0.0)
 
 
+def test_the_height_plot_says_it_is_the_world_z(page):
+    # it was titled and documented as the height above the ground under the trunk, which it is not on rough ground
+    _, data, _ = page
+    title = data["runs"][0]["plots"]["height"]["title"]
+    assert title == "trunk height (world z)"
+
+
 def test_mpc_page_plots_its_prediction_against_what_happened(scenario, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
     trial = dataclasses.replace(load_scenario(scenario).trial("soft", 0, 0), duration_s=0.3)

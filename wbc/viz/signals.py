@@ -2,7 +2,8 @@
 
 A trial page (`wbc.viz.page`) draws, beside the 3D scene and on one timeline:
 
-- ``attitude``: trunk roll and pitch [rad]; ``height``: trunk height above the ground under it [m];
+- ``attitude``: trunk roll and pitch [rad]; ``height``: the trunk origin's world z [m] (not its height above the
+  ground under it: on rough ground the two differ by the terrain's height there);
 - ``velocity``: forward / lateral velocity against the commanded one [m/s]; ``yaw_rate`` against its command [rad/s];
 - ``foot_forces``: vertical ground reaction force on each foot [N] (simulation only);
 - ``torques``: each joint's torque as a fraction of its limit (1 is saturation) [-] (simulation only);
@@ -33,7 +34,7 @@ __all__ = ["PLOTS", "Mark", "TrialSignals"]
 
 PLOTS: dict[str, tuple[str, str]] = {
     "attitude": ("trunk roll / pitch", "rad"),
-    "height": ("trunk height", "m"),
+    "height": ("trunk height (world z)", "m"),
     "velocity": ("velocity vs command", "m/s"),
     "yaw_rate": ("yaw rate vs command", "rad/s"),
     "foot_forces": ("foot contact forces (vertical)", "N"),
