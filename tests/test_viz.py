@@ -350,6 +350,8 @@ def test_replay_errors_name_the_file_and_field(results_dir, tmp_path):
 
 
 def test_replay_of_a_trial_an_interrupted_run_never_played_says_to_resume(results_dir, tmp_path):
+    with pytest.raises(ViewerError, match=r"the run's trials are 0\.\.1 per band and seed$"):  # a finished run
+        load_stored_episode(results_dir, 5)
     # the run saved its episodes: the remedy for a trial it has not played yet is --resume, not --save-episodes
     cut = tmp_path / "cut"
     shutil.copytree(results_dir, cut)

@@ -152,7 +152,7 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     seed = _pick(run_json, "seeds", seed, seeds, "--seed")
     if index not in played:
         raise ViewerError(f"{run_json}: field trials: --trial {index} is out of range; the run's trials are "
-                          f"{played[0]}..{played[-1]} per band and seed{_so_far(root, controller, band, seed)}")
+                          f"{played[0]}..{played[-1]} per band and seed{_so_far(root, controller, band, seed, played)}")
     path = episode_path(root, controller, band, seed, index)
     if not path.exists():
         raise ViewerError(_no_episode(root, path, controller, band, seed, index))
@@ -192,10 +192,10 @@ def _played(root: Path, controller: str, band: str, seed: int) -> list[int] | No
     return sorted(r.trial for r in records if (r.controller, r.band, r.seed) == (controller, band, seed))
 
 
-def _so_far(root: Path, controller: str, band: str, seed: int) -> str:
-    """`` (...): ...--resume...`` when the run has played fewer trials of (controller, band, seed) than it plans."""
+def _so_far(root: Path, controller: str, band: str, seed: int, planned: list[int]) -> str:
+    """``; ...--resume...`` when the run has played fewer trials of (controller, band, seed) than it plans."""
     done = _played(root, controller, band, seed)
-    if done is None:
+    if done is None or set(planned) <= set(done):
         return ""
     shown = "none" if not done else f"{len(done)} ({done[0]}..{done[-1]})" if done == list(
         range(done[0], done[-1] + 1)) else f"{len(done)}"
