@@ -621,6 +621,8 @@ def test_live_page_endpoints_answer_a_bad_request_with_400_and_what_is_wrong():
         assert _raw_post(page.url + "control", b'{"pause": true}', "abc")[0] == 400
         assert _raw_post(page.url + "control", b"\xff\xfe", "2")[0] == 400
         assert _http(page.url + "control", {"pause": True}) == (200, b'{"paused": true, "speed": 1.0}')
+        page.trial_s = 1.5  # known before the first tick (view_trial sets it): an early push is checked too
+        assert _http(page.url + "push", {"force_n": 100.0, "t": 1e9})[0] == 400
         content, scene, signals = _scene_for_live_page()
         page.begin(scene, content, signals, title="t", duration=1.5, fps=50.0)
         push = {"force_n": 100.0, "duration_s": 0.1}

@@ -175,6 +175,8 @@ class LivePage:
         url: the page (``http://127.0.0.1:PORT/``).
         pushes: the pushes applied from the page, in order.
         operator_rows: (time, ``browser``, action) of every push and command set from the page.
+        trial_s: the length of the trial about to play [s], when known before its first tick (the viewer sets it),
+            so that a push posted early for a time past its end is refused; `begin` sets it too.
     """
 
     def __init__(self, port: int = 0) -> None:
@@ -199,6 +201,7 @@ class LivePage:
         self._fps = 50.0
         self._final: str | None = None
         self._content: SceneContent | None = None
+        self.trial_s: float | None = None
         self._scene_id = 0  # trials begun: a page served before the trial's scene existed reloads once it does
 
     def start(self) -> LivePage:
@@ -229,6 +232,7 @@ class LivePage:
             self._scene, self._content, self._signals = scene, content, signals
             self._title, self._duration, self._fps, self._final = title, duration, fps, None
             self._scene_id += 1
+            self.trial_s = duration
 
     def tick(self, t: float, robot: object) -> None:
         """Before the observer draws tick `t`: apply the pushes due (on a `Pushable` robot) and the command set."""
@@ -299,7 +303,7 @@ class LivePage:
         with self._lock:
             if self._final is not None and route in ("/push", "/command", "/control"):
                 raise ConfigError(f"{route[1:]}: the trial has ended")
-            duration = self._duration if self._scene_id else None
+            duration = self.trial_s
         if route == "/push":
             req = PushRequest.parse(body, duration=duration)
             with self._lock:

@@ -219,6 +219,7 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
         played = trial
         if page is not None:
             page.command = SteeredCommand(trial.command)
+            page.trial_s = trial.duration_s  # a push posted before the first tick is checked against it
             page.controls = player.controls if player is not None else None
             played = dataclasses.replace(trial, command=page.command)
         watch = _Stopwatch(_with_page(observer, page, trial, name, cfg))
