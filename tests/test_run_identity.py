@@ -368,9 +368,9 @@ def test_a_hardware_trial_writes_the_old_dict_and_the_viewer_finds_its_trial(sho
     stored = load_stored_episode(out, 1)
     assert (stored.controller, stored.trial.robot, stored.trial.terrain.kind, stored.trial.pushes) == (
         "stand-noarm", "go1-arm", "flat", ())
-    assert len(list(stored.frames())) == len(stored.episode.t) > 0
-    with pytest.raises(ViewerError, match=r"run\.json: field trials: --trial 0 is out of range; the run played "
-                                          r"trials 1\.\.1"):
+    assert len(list(stored.frames())) == len(stored.episode.t) - 1 > 0
+    with pytest.raises(ViewerError, match=r"run\.json: field trials: --trial 0 is out of range; the run's trials are "
+                                          r"1\.\.1 per band and seed"):
         load_stored_episode(out, 0)
 
 

@@ -150,6 +150,18 @@ def test_server_exits_with_its_parent():
     assert not psutil.pid_exists(pid) or psutil.Process(pid).status() == psutil.STATUS_ZOMBIE
 
 
+def test_the_printed_address_opens_in_a_browser_and_says_who_can_reach_it():
+    from wbc.viz.server import listening_on, web_address
+
+    assert web_address("127.0.0.1", 7000) == "http://127.0.0.1:7000/static/"
+    assert web_address("::1", 7000) == "http://[::1]:7000/static/"  # no brackets: not an address a browser takes
+    assert web_address("0.0.0.0", 7001) == "http://127.0.0.1:7001/static/"
+    assert web_address("::", 7001) == "http://[::1]:7001/static/"
+    assert listening_on("127.0.0.1") == "127.0.0.1 only" and listening_on(None) == "127.0.0.1 only"
+    assert listening_on("0.0.0.0").startswith("every interface (0.0.0.0)")  # "0.0.0.0 only" said the opposite
+    assert listening_on("::").startswith("every interface (::)")
+
+
 def test_server_bad_host_is_a_clear_error():
     with pytest.raises(ViewerError, match="192.0.2.123"):
         MeshcatServer(ServerConfig(host="192.0.2.123", start_timeout_s=10)).start()
@@ -285,7 +297,7 @@ def test_replay_from_results_dir(results_dir, tmp_path):
     assert stored.path == results_dir / "episodes" / "stand" / "soft-s0-t1.npz"
     assert len(stored.episode.pushes) == 1 and stored.episode.pushes.start[0] == pytest.approx(1.0)
     frames = list(stored.frames())
-    assert len(frames) == len(stored.episode.t)
+    assert len(frames) == len(stored.episode.t) - 1  # the last row's joints of its instant were never read
     pushed = [f.t for f in frames if f.pushed]
     dt = stored.episode.control_dt
     assert pushed and 1.0 < pushed[0] <= 1.0 + dt + 1e-9 and 1.1 <= pushed[-1] < 1.1 + dt
@@ -293,6 +305,24 @@ def test_replay_from_results_dir(results_dir, tmp_path):
     result = replay_episode(stored, ViewConfig(live=False, record=out))
     assert result.recording == out and result.frames_recorded > 90
     assert "/meshcat/wbc/push/shaft" in {c["path"] for c in _commands(out.read_text())}
+
+
+def test_a_replay_draws_the_trunk_and_joints_of_one_instant_as_the_trial_played_afresh(short):
+    # the viewer draws a trial it plays from the simulation after each tick; a stored row holds the trunk after
+    # the tick but the joints read before it: paired as rows, the legs were drawn one control tick late
+    from wbc.viz.replay import frames_of
+
+    trial = load_scenario(short).trial("soft", 0, 0)
+    fresh = {}
+
+    def observe(t, robot, controller, command):
+        fresh[round(t, 9)] = robot.data.qpos.copy()
+
+    _, episode = run_trial(trial, "stand", observer=observe)
+    frames = list(frames_of(episode))
+    assert len(frames) == len(episode.t) - 1 > 50
+    for frame in frames:
+        assert np.array_equal(frame.qpos, fresh[round(frame.t, 9)]), frame.t
 
 
 def test_replay_errors_name_the_file_and_field(results_dir, tmp_path):
@@ -317,6 +347,47 @@ def test_replay_errors_name_the_file_and_field(results_dir, tmp_path):
     (changed / "run.json").write_text(json.dumps(config))
     with pytest.raises(ViewerError, match="field scenario.hash"):
         load_stored_episode(changed, 0)
+
+
+def test_replay_of_a_trial_an_interrupted_run_never_played_says_to_resume(results_dir, tmp_path):
+    with pytest.raises(ViewerError, match=r"the run's trials are 0\.\.1 per band and seed$"):  # a finished run
+        load_stored_episode(results_dir, 5)
+    # the run saved its episodes: the remedy for a trial it has not played yet is --resume, not --save-episodes
+    cut = tmp_path / "cut"
+    shutil.copytree(results_dir, cut)
+    rows = (cut / "trials.csv").read_text().splitlines(keepends=True)
+    kept = [r for r in rows if not r.startswith("stand,viztest,") or ",soft,0,1," not in r]
+    assert len(kept) == len(rows) - 1
+    (cut / "trials.csv").write_text("".join(kept))
+    (cut / "episodes" / "stand" / "soft-s0-t1.npz").unlink()
+    with pytest.raises(ViewerError, match=r"trial 1 of controller stand, band soft, seed 0 was not played: the run "
+                                          r"was interrupted .* with --resume, plays the rest") as caught:
+        load_stored_episode(cut, 1)
+    assert "--save-episodes" not in str(caught.value)
+    with pytest.raises(ViewerError, match=r"--trial 5 is out of range; the run's trials are 0\.\.1 per band and "
+                                          r"seed; stand has played 1 \(0\.\.0\) of them so far"):
+        load_stored_episode(cut, 5)
+    (cut / "episodes" / "stand" / "soft-s0-t0.npz").unlink()  # played, its episode not stored
+    with pytest.raises(ViewerError, match="no episode stored .* with --save-episodes"):
+        load_stored_episode(cut, 0)
+
+
+def test_cli_view_refuses_a_controller_named_twice_for_a_replay(results_dir, tmp_path, capsys):
+    # CTRL and --controller naming two controllers replayed --controller's silently; an A / B view ignored it
+    out = str(tmp_path / "x.html")
+    common = ["--episode", str(results_dir), "--trial", "0", "--record", out]
+    assert main(["view", "mpc", "--controller", "stand", *common]) != 0
+    assert "--controller stand and mpc: two controllers named for one replay" in capsys.readouterr().err
+    assert main(["view", "stand", "mpc", "--controller", "stand", *common]) != 0
+    assert "an A / B view replays the two controllers it names" in capsys.readouterr().err
+    assert main(["view", "stand", "--controller", "stand", *common]) == 0  # the same one twice: no doubt
+
+
+def test_an_episode_file_given_to_episode_says_what_replays_it(tmp_path):
+    saved = tmp_path / "live.npz"
+    saved.write_bytes(b"")
+    with pytest.raises(ViewerError, match=r"live\.npz: an episode file alone .* --export-scenario FILE\.toml"):
+        load_stored_episode(saved, 0)
 
 
 def test_cli_view_errors_and_record(results_dir, short, tmp_path, capsys, monkeypatch):

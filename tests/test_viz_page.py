@@ -15,9 +15,11 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.episode import Episode
 from wbc.arena.sim_trial import run_trial
 from wbc.cli.main import main
+from wbc.errors import ConfigError
 from wbc.scenario import ScenarioError, check_published
 from wbc.scenario.scenario import load_scenario
 from wbc.types import VelocityCommand
+from wbc.viz.errors import ViewerError
 from wbc.viz.page import read_page_data
 from wbc.viz.recording import GHOST_COLOR
 from wbc.viz.replay import load_stored_episode
@@ -130,6 +132,13 @@ def test_trial_page_holds_plots_with_data_and_event_marks(page):
     assert np.all(before == 0.0) and np.all(after > 0.0)
 
 
+def test_the_height_plot_says_it_is_the_world_z(page):
+    # it was titled and documented as the height above the ground under the trunk, which it is not on rough ground
+    _, data, _ = page
+    title = data["runs"][0]["plots"]["height"]["title"]
+    assert title == "trunk height (world z)"
+
+
 def test_mpc_page_plots_its_prediction_against_what_happened(scenario, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)  # MuJoCo may write its log here
     trial = dataclasses.replace(load_scenario(scenario).trial("soft", 0, 0), duration_s=0.3)
@@ -207,7 +216,7 @@ def test_cli_view_ab_and_stored_episodes(scenario, tmp_path, capsys, monkeypatch
 
 
 def test_cli_view_ab_names_its_page_from_names_that_hold_path_separators(scenario, tmp_path, capsys, monkeypatch):
-    """Without --record the page is ab-A-B-trialI.html in the current directory, a path's separators made ``_``."""
+    """Without --record the page is ab-A-B-SCENARIO-BAND-sSEED-tI.html here, a path's separators made ``_``."""
     from wbc.learned.policy.shipped import shipped_weights
     from wbc.robots.registry import get_robot
 
@@ -215,8 +224,14 @@ def test_cli_view_ab_names_its_page_from_names_that_hold_path_separators(scenari
     policy = f"policy:{shipped_weights(get_robot('a1-wx200', 'locked'))}"
     assert main(["view", "stand", policy, "--scenario", str(scenario), "--trial", "0", "--duration", "0.2"]) == 0
     (page,) = tmp_path.glob("ab-*.html")
-    assert page.name == f"ab-stand-{re.sub(r'[^A-Za-z0-9._-]+', '_', policy)}-trial0.html"
+    assert page.name == f"ab-stand-{re.sub(r'[^A-Za-z0-9._-]+', '_', policy)}-pagetest-soft-s0-t0.html"
     assert page.resolve().as_uri() in capsys.readouterr().out
+    # another band or seed of the same trial index is another page: neither overwrites the other
+    for more in (["--band", "hard"], ["--seed", "1"]):
+        assert main(["view", "stand", policy, "--scenario", str(scenario), "--trial", "0", "--duration", "0.2",
+                     *more]) == 0
+    assert {p.name.split("-pagetest-")[1] for p in tmp_path.glob("ab-*.html")} == {
+        "soft-s0-t0.html", "hard-s0-t0.html", "soft-s1-t0.html"}
 
 
 def test_cli_view_exports_the_trial_and_says_where_the_recording_time_went(scenario, tmp_path, capsys, monkeypatch):
@@ -255,6 +270,138 @@ def test_cli_view_says_where_it_saved_the_episode(scenario, tmp_path, capsys, mo
     assert Episode.load(str(saved)).survived_s == pytest.approx(0.3)
 
 
+def test_a_stored_run_replays_with_the_arm_mode_its_run_json_records_without_building_the_controller(
+        scenario, tmp_path, monkeypatch):
+    # a policy file moved since, or an onnx: policy's I/O file given by --io, cannot be found again: the replay
+    # must not need the controller, whose arm mode run.json records
+    import wbc.viz.replay as replay
+
+    out = tmp_path / "r"
+    run_arena(ArenaConfig(controllers=("stand",), scenario=scenario, trials=1, out_dir=out, workers=1,
+                          progress=False, save_episodes=True))
+    run = json.loads((out / "run.json").read_text())
+    assert run["controllers"]["stand"]["arm_mode"] == "actuated"
+
+    def unbuildable(name, **kw):
+        raise ConfigError(f"{name}: file not found")
+
+    monkeypatch.setattr(replay, "get_controller", unbuildable)
+    stored = load_stored_episode(out, 0)
+    assert stored.arm_mode == "actuated" and stored.content().robot is not None
+    replay_episode(stored, ViewConfig(live=False, record=tmp_path / "replay.html"))
+    del run["controllers"]  # a run.json that records no controllers: asked of the controller, named when it fails
+    (out / "run.json").write_text(json.dumps(run))
+    with pytest.raises(ViewerError, match=r"run\.json: field controllers\.stand\.arm_mode: missing, and stand "):
+        load_stored_episode(out, 0)
+
+
+def test_cli_view_ab_gives_io_to_the_onnx_policy_only(scenario, tmp_path, capsys, monkeypatch):
+    pytest.importorskip("onnxruntime")
+    from fuzz.cases import ONNX_FRAME, ONNX_IO_TEMPLATE, ONNX_JOINTS, onnx_linear_model
+
+    import wbc.viz.view as view
+
+    model, io = tmp_path / "nets" / "p.onnx", tmp_path / "p-io.toml"
+    model.parent.mkdir()
+    model.write_bytes(onnx_linear_model(np.zeros((ONNX_FRAME, 12)), None))
+    io.write_text(ONNX_IO_TEMPLATE.format(joints=json.dumps(ONNX_JOINTS), history=1))
+    built = []
+
+    def fake_view_ab(trial, specs, cfg, path):
+        built.extend(specs)
+        raise ConfigError("stop here")
+
+    monkeypatch.setattr(view, "view_ab", fake_view_ab)
+    common = ["--scenario", str(scenario), "--trial", "0", "--record", str(tmp_path / "ab.html")]
+    assert main(["view", f"onnx:{model}", "stand", "--io", str(io), *common]) != 0
+    assert [s.name for s in built] == [f"onnx:{model}", "stand"], capsys.readouterr().err
+    assert main(["view", f"onnx:{model}", f"onnx:{model}x", "--io", str(io), *common]) != 0
+    assert "several controllers are an onnx:PATH policy" in capsys.readouterr().err  # write NAME=FILE
+    assert main(["view", "mpc", "stand", "--io", str(io), *common]) != 0
+    assert "no controller here is an onnx:PATH policy" in capsys.readouterr().err
+
+
+def _carried(desc, xs):
+    """Frames of `desc` standing at trunk x = each of `xs` [m], at times 0.002 s apart from 0.002 s (a 500 Hz run)."""
+    from wbc.viz.frame import VizFrame
+
+    out = []
+    for i, x in enumerate(xs):
+        qpos = np.zeros(7 + desc.num_joints)
+        qpos[:4] = [x, 0.0, 0.3, 1.0]
+        out.append(VizFrame(t=round(0.002 * (i + 1), 9), qpos=qpos))
+    return out
+
+
+def test_a_fast_controller_is_keyed_at_its_tick_nearest_each_frame():
+    # rounding t * fps keyed a 500 Hz run's tick at 0.012 s as the frame at 0.02 s: drawn 8 ms before it happened
+    from wbc.robots.registry import get_robot
+    from wbc.viz.content import FOLLOW, SceneContent
+    from wbc.viz.recording import Recording, frame_key
+
+    assert [frame_key(t, 50.0, 0.002) for t in (0.010, 0.012, 0.018, 0.02, 0.022)] == [0, 0, 0, 1, 1]
+    assert [frame_key(t, 50.0, 0.02) for t in (0.02, 0.04, 0.06)] == [1, 2, 3]
+    # a 30 Hz run: each tick keys the last frame it is the nearest tick to (0.0667 s is nearest to 0.06 and 0.08 s)
+    assert [frame_key(t, 50.0, 1 / 30) for t in (1 / 30, 2 / 30, 3 / 30)] == [2, 4, 5]
+    desc = get_robot("a1-wx200", "actuated")
+    rec = Recording(SceneContent.for_description(desc), fps=50.0, tick_s=0.002)
+    frames = _carried(desc, [0.002 * (i + 1) for i in range(100)])  # the trunk's x is the frame's time
+    keyed = [f.t for f in frames if rec.add(f)]
+    assert keyed[:3] == [0.002, 0.02, 0.04] and keyed[-1] == pytest.approx(0.2)
+    html = rec.html()
+    for c in _commands(html):
+        if c["type"] == "set_animation":
+            track = next(t for a in c["animations"] if a["path"] == FOLLOW for t in a["clip"]["tracks"]
+                         if t["name"] == ".position")
+            times = np.frombuffer(track["times"].data, dtype="<f4")
+            xs = np.frombuffer(track["values"].data, dtype="<f4").reshape(-1, 3)[:, 0]
+            assert xs[0] == pytest.approx(0.002)  # no tick at 0 s: the first frame is the first tick's
+            assert xs[1:] == pytest.approx(times[1:] / 50.0, abs=1e-6)  # the state drawn at each frame is its own
+
+
+def test_the_first_divergence_of_two_runs_does_not_depend_on_their_order():
+    from wbc.robots.registry import get_robot
+    from wbc.viz.ab import first_divergence
+
+    desc = get_robot("a1-wx200", "actuated")
+    fast = _carried(desc, [0.0 if 0.002 * (i + 1) < 2.487 else 0.1 for i in range(1500)])  # parts at 2.488 s
+    slow = _carried(desc, [0.0] * 1500)[9::10]  # 50 Hz: one frame each 0.02 s
+    fast_kept, last = [], -1
+    for f in fast:  # as a capture keeps them: the tick nearest each frame
+        k = int(np.floor((f.t + 0.001) * 50 + 1e-6))
+        if k > last:
+            fast_kept.append(f)
+            last = k
+    ab = first_divergence(fast_kept, slow, 50.0, tick_a=0.002, tick_b=0.02)
+    ba = first_divergence(slow, fast_kept, 50.0, tick_a=0.02, tick_b=0.002)
+    assert ab == ba == pytest.approx(2.5)
+
+
+def test_the_push_angular_impulse_is_integrated_over_the_push_alone_whatever_the_frame_rate(scenario, tmp_path,
+                                                                                             monkeypatch):
+    # a 90 ms push starting between frames: summed over whole frame intervals, it read 0.1 s of push at 50 frames a
+    # second (five frames saw it) and another figure at another rate
+    monkeypatch.chdir(tmp_path)
+    text = scenario.read_text().replace("first_s = [0.5, 0.5]", "first_s = [0.505, 0.505]").replace(
+        "duration_s = 0.1\n", "duration_s = 0.09\n")
+    odd = tmp_path / "odd.toml"
+    odd.write_text(text)
+    trial = load_scenario(odd).trial("soft", 0, 0)
+    assert trial.pushes[0].duration == pytest.approx(0.09)
+    final = {}
+    for fps in (50.0, 100.0, 30.0):
+        out = tmp_path / f"p{fps:g}.html"
+        view_trial(trial, "stand", ViewConfig(live=False, record=out, record_fps=fps))
+        run = read_page_data(out.read_text())["runs"][0]
+        lines = run["plots"]["arm_momentum"]["lines"]
+        t = np.array(run["t"])
+        at = int(np.searchsorted(t, 0.75))
+        final[fps] = np.array([lines[f"push H{a}"][at] for a in "xyz"], dtype=float)
+    assert np.linalg.norm(final[50.0]) > 0.5
+    for fps in (100.0, 30.0):
+        assert final[fps] == pytest.approx(final[50.0], rel=0.02), final
+
+
 def test_cli_view_refuses_three_controllers(scenario, capsys):
     assert main(["view", "stand", "mpc", "stand", "--scenario", str(scenario), "--trial", "0"]) != 0
     assert "two for an A / B view" in capsys.readouterr().err
@@ -265,6 +412,7 @@ def _dump(url: str, tmp_path, budget_ms: int = 6000) -> dict:
     """The page's state (``<pre id="wbc-state">``) after headless Chromium ran its scripts for `budget_ms`."""
     cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-dev-shm-usage", "--use-angle=swiftshader",
            "--enable-unsafe-swiftshader", "--hide-scrollbars", "--window-size=1000,700",
+           "--disable-background-networking", "--disable-component-update", "--no-first-run",
            f"--user-data-dir={tmp_path / 'profile'}", f"--virtual-time-budget={budget_ms}", "--dump-dom", url]
     dom = subprocess.run(cmd, capture_output=True, timeout=120).stdout.decode("utf-8", errors="replace")
     m = re.search(r'<pre id="wbc-state"[^>]*>(.*?)</pre>', dom, re.S)
@@ -286,6 +434,52 @@ def test_browser_trial_page_plots_and_a_scrub_moves_scene_and_cursor_together(pa
     assert state["sceneT"] == pytest.approx(0.55, abs=1e-3)
     assert any(m["kind"] == "push" for m in state["marks"])
     assert "push 150 N" in state["_dom"]  # the push acting at 0.55 s is named in the bar
+
+
+def _walking_page(path, follow_at=(4.0, 2.0)):
+    """A page of the A1 carried in a straight line from the origin to `follow_at` over 2 s (frames made up)."""
+    from wbc.robots.registry import get_robot
+    from wbc.viz.content import SceneContent
+    from wbc.viz.frame import VizFrame
+    from wbc.viz.page import save_trial_page
+    from wbc.viz.recording import Recording
+
+    desc = get_robot("a1-wx200", "actuated")
+    rec = Recording(SceneContent.for_description(desc), fps=50.0)
+    signals = TrialSignals("walk")
+    for k in range(1, 101):
+        qpos = np.zeros(7 + desc.num_joints)
+        qpos[:3] = [follow_at[0] * k / 100, follow_at[1] * k / 100, 0.3]
+        qpos[3] = 1.0
+        frame = VizFrame(t=k * 0.02, qpos=qpos)
+        rec.add(frame)
+        signals.add_frame(frame, None, None)
+    return save_trial_page(path, rec, [signals], title="walk", duration=2.0)
+
+
+def test_follow_trunk_poses_a_point_under_the_trunk_and_leaves_the_camera_to_the_page(tmp_path):
+    # meshcat's orbit controls look at their target in the world: the recording moved /Cameras/default alone, so
+    # the camera went with the robot while looking back at the origin, and the robot left the screen
+    html = _walking_page(tmp_path / "walk.html").read_text()
+    animated = {}
+    for c in _commands(html):
+        if c["type"] == "set_animation":
+            for a in c["animations"]:
+                animated[a["path"]] = a["clip"]["tracks"]
+    assert "/Cameras/default" not in animated
+    track = next(t for t in animated["/Cameras/follow"] if t["name"] == ".position")
+    values = np.frombuffer(track["values"].data, dtype="<f4").reshape(-1, 3)
+    assert values[-1] == pytest.approx([4.0, 2.0, 0.0], abs=1e-5)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_follow_trunk_moves_the_camera_target_with_the_robot(tmp_path):
+    path = _walking_page(tmp_path / "walk.html")
+    # meshcat's scene turns z-up into three.js's y-up: the world's (x, y, z) is three.js's (x, z, -y)
+    state = _dump(f"{path.resolve().as_uri()}#t=2", tmp_path)
+    assert state["cameraTarget"] == pytest.approx([4.0, 0.0, -2.0], abs=1e-3)
+    fixed = _dump(f"{path.resolve().as_uri()}#t=2&follow=0", tmp_path)
+    assert fixed["cameraTarget"] == pytest.approx([0.0, 0.0, 0.0], abs=1e-3)
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
@@ -396,6 +590,50 @@ def test_live_page_push_and_command_land_in_the_episode(scenario, tmp_path, monk
     assert np.array_equal(replay.command, episode.command) and np.array_equal(replay.qpos, episode.qpos)
 
 
+def _raw_post(url: str, body: bytes, length: str) -> tuple[int, bytes]:
+    import http.client
+    import urllib.parse
+
+    u = urllib.parse.urlsplit(url)
+    conn = http.client.HTTPConnection(u.hostname, u.port, timeout=30)
+    conn.putrequest("POST", u.path)
+    conn.putheader("Content-Type", "application/json")
+    conn.putheader("Content-Length", length)
+    conn.endheaders()
+    conn.send(body)
+    reply = conn.getresponse()
+    out = reply.status, reply.read()
+    conn.close()
+    return out
+
+
+def test_live_page_endpoints_answer_a_bad_request_with_400_and_what_is_wrong():
+    from wbc.viz.live_page import LivePage
+    from wbc.viz.player import Controls
+
+    with LivePage() as page:
+        page.controls = Controls()
+        for body, says in (({"speed": "abc"}, "speed must be a number"), ({"speed": None}, "speed must be a number"),
+                           ({"speed": True}, "speed must be a number"), ({"pause": "false"}, "pause must be true or")):
+            code, reply = _http(page.url + "control", body)
+            assert code == 400 and says in json.loads(reply)["error"], (body, reply)
+        assert not page.controls.paused  # "false" as a string paused the trial
+        assert _raw_post(page.url + "control", b'{"pause": true}', "abc")[0] == 400
+        assert _raw_post(page.url + "control", b"\xff\xfe", "2")[0] == 400
+        assert _http(page.url + "control", {"pause": True}) == (200, b'{"paused": true, "speed": 1.0}')
+        page.trial_s = 1.5  # known before the first tick (view_trial sets it): an early push is checked too
+        assert _http(page.url + "push", {"force_n": 100.0, "t": 1e9})[0] == 400
+        content, scene, signals = _scene_for_live_page()
+        page.begin(scene, content, signals, title="t", duration=1.5, fps=50.0)
+        push = {"force_n": 100.0, "duration_s": 0.1}
+        for t in (1e9, 1.5, -1.0, float("inf")):
+            code, reply = _http(page.url + "push", push | {"t": t})
+            assert code == 400 and "t must be a trial time in [0, 1.5) s" in json.loads(reply)["error"], reply
+        assert _http(page.url + "push", push | {"t": 1.4})[0] == 200
+        page.finish("<html></html>")
+        assert json.loads(_http(page.url + "push", push)[1])["error"] == "push: the trial has ended"
+
+
 @pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
 def test_browser_live_page_shows_the_push(scenario, tmp_path, monkeypatch):
     import threading
@@ -423,6 +661,55 @@ def test_browser_live_page_shows_the_push(scenario, tmp_path, monkeypatch):
     assert any(m["kind"] == "browser_push" for m in state["marks"]), state["marks"]
     assert state["plots"]["attitude"]["n"] > 10 and state["t"] >= 0.6
     assert 'id="wbc-push"' in state["_dom"]  # the page's own push control
+
+
+def test_a_live_page_served_before_the_trial_began_is_told_to_load_its_scene():
+    from wbc.viz.live_page import LivePage
+
+    with LivePage() as page:
+        early = read_page_data(_http(page.url)[1].decode())
+        state = json.loads(_http(page.url + "state")[1])
+        assert early["duration"] == 0 and state["scene"] == early["scene"] == 0
+        content, scene, signals = _scene_for_live_page()
+        page.begin(scene, content, signals, title="t", duration=1.5, fps=50.0)
+        state = json.loads(_http(page.url + "state")[1])
+        assert state["scene"] != early["scene"] and state["data"]["duration"] == 1.5
+        assert read_page_data(_http(page.url)[1].decode())["scene"] == state["scene"]
+
+
+def _scene_for_live_page():
+    import base64 as b64
+
+    from wbc.robots.registry import get_robot
+    from wbc.viz.content import SceneContent
+    from wbc.viz.recording import Recording
+
+    rec = Recording(SceneContent.for_description(get_robot("a1-wx200", "actuated")), fps=50.0)
+    return rec.content, [b64.b64encode(c).decode() for c in rec.window.commands()], TrialSignals("stand")
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_live_page_opened_before_the_first_tick_picks_up_the_scene_and_duration(tmp_path, monkeypatch):
+    from wbc.viz.frame import VizFrame
+    from wbc.viz.live_page import LivePage
+
+    with LivePage() as page:
+        served = page._page
+        content, scene, signals = _scene_for_live_page()
+
+        def first_then_begin():  # the trial begins right after the browser got the empty page
+            html = served()
+            if page._content is None:
+                page.begin(scene, content, signals, title="t", duration=1.5, fps=50.0)
+                qpos = np.zeros(22)
+                qpos[2], qpos[3] = 0.3, 1.0
+                page.show(VizFrame(t=0.2, qpos=qpos))
+            return html
+
+        monkeypatch.setattr(page, "_page", first_then_begin)
+        state = _dump(page.url, tmp_path, budget_ms=4000)
+    assert state["live"] and state["duration"] == 1.5 and state["t"] == pytest.approx(0.2)
+    assert "trunk_0" in set(re.findall(r'<li class="title">([^<]*)</li>', state["_dom"]))
 
 
 _CLICK_PUSH = """<script>

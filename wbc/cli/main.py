@@ -669,7 +669,7 @@ def _hw_live_observer(args: argparse.Namespace):
     from wbc.viz.server import MeshcatServer, ServerConfig
 
     server = MeshcatServer(ServerConfig(host=args.host)).start()
-    print(f"viewer: {server.web_url}  (listening on {args.host} only)", file=sys.stderr)
+    print(f"viewer: {server.web_url}  (listening on {server.listening})", file=sys.stderr)
     return server, LiveObserver(LiveViewer(server), background=True)
 
 
@@ -1156,7 +1156,7 @@ def _live_observer(args: argparse.Namespace):
     from wbc.viz.server import MeshcatServer, ServerConfig
 
     server = MeshcatServer(ServerConfig(host=args.host)).start()
-    print(f"viewer: {server.web_url}  (listening on {args.host} only; trials play one by one in this process)",
+    print(f"viewer: {server.web_url}  (listening on {server.listening}; trials play one by one in this process)",
           file=sys.stderr)
     player = Player(PlayerConfig(speed=args.speed), KeyboardControls().start())
     return server, LiveObserver(LiveViewer(server), player)
@@ -1298,7 +1298,12 @@ def _view_refusals(args: argparse.Namespace) -> None:
     if not stored:
         _refuse((("--controller", args.controller),),
                 "picks whose stored run --episode replays: without --episode, name the controller as CTRL")
-    else:
+    elif args.controller is not None and (ab or (args.ctrl and args.ctrl[0] != args.controller)):
+        named = " ".join(args.ctrl)
+        raise ConfigError(f"--controller {args.controller} and {named}: " + (
+            "an A / B view replays the two controllers it names (wbc view A B --episode DIR); leave --controller out"
+            if ab else "two controllers named for one replay; give one, as CTRL or as --controller"))
+    if stored:
         # a stored episode replays as it was run: its trial and its controller's run come from the results directory
         _refuse((("--scenario", args.scenario), ("--duration", args.duration),
                  ("--controller-config", args.controller_config), ("--io", args.io),
@@ -1377,8 +1382,13 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
     from wbc.arena.results import file_name_part
     from wbc.viz.view import replay_ab, view_ab
 
-    path = (Path(args.record) if args.record
-            else Path(f"ab-{file_name_part(ctrls[0])}-{file_name_part(ctrls[1])}-trial{args.trial}.html"))
+    def page_path(trial: Trial) -> Path:
+        """``--record``, else a name of its own for each pair of controllers and trial (scenario, band, seed)."""
+        if args.record:
+            return Path(args.record)
+        return Path(f"ab-{file_name_part(ctrls[0])}-{file_name_part(ctrls[1])}-{file_name_part(trial.scenario)}-"
+                    f"{file_name_part(trial.band)}-s{trial.seed}-t{trial.index}.html")
+
     if args.episode is not None:
         from wbc.viz.replay import load_stored_episode
 
@@ -1386,7 +1396,7 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
                          for c in ctrls)
         warn_if_unpublished(first.scenario)  # one run's, so both controllers': said once
         _check_at(args.at, first.trial.duration_s)
-        result = replay_ab(first, second, cfg, path)
+        result = replay_ab(first, second, cfg, page_path(first.trial))
     else:
         if args.scenario is None:
             raise ConfigError("wbc view A B needs --scenario FILE --trial I (play the trial with both), or "
@@ -1394,7 +1404,7 @@ def _view_ab(args: argparse.Namespace, ctrls: list[str], cfg: object) -> int:
         trial = _view_trial(args)
         _check_at(args.at, trial.duration_s, cut=args.duration is not None)
         specs = _view_controllers(args, tuple(ctrls))
-        result = view_ab(trial, specs, cfg, path)
+        result = view_ab(trial, specs, cfg, page_path(trial))
     for name, fall in zip(result.names, result.fall_s, strict=True):
         print(f"{name}: " + ("survived" if fall is None else f"fell at {fall:.2f} s"))
     if result.divergence_s is not None:

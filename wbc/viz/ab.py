@@ -30,7 +30,7 @@ from wbc.types import VelocityCommand
 from wbc.viz.content import SceneContent
 from wbc.viz.frame import VizFrame
 from wbc.viz.live import FrameMaker, scene_of
-from wbc.viz.recording import Recording
+from wbc.viz.recording import Recording, frame_key
 from wbc.viz.signals import Mark, TrialSignals
 from wbc.viz.sim_frames import SimulatedWorld
 
@@ -53,6 +53,7 @@ class CapturedRun:
         frames: the frames, at most one per recording frame.
         signals: the time plots and events.
         record: the trial's record (None for a stored episode).
+        tick_s: its controller's period [s], by which its frames are keyed (`wbc.viz.recording.frame_key`).
     """
 
     name: str
@@ -60,6 +61,7 @@ class CapturedRun:
     frames: list[VizFrame] = field(default_factory=list)
     signals: TrialSignals | None = None
     record: TrialRecord | None = None
+    tick_s: float = 0.0
 
 
 class FrameCapture:
@@ -79,10 +81,11 @@ class FrameCapture:
             scene = scene_of(robot)
             if scene is None:
                 raise ConfigError(f"{type(robot).__name__}: nothing to draw (not a simulation)")
-            self.run = CapturedRun(self.name, scene[0](), signals=TrialSignals(self.name))
+            self.run = CapturedRun(self.name, scene[0](), signals=TrialSignals(self.name),
+                                   tick_s=1.0 / controller.rate_hz)
             self._make = scene[1]
             self._simulated = robot if isinstance(robot, SimulatedWorld) else None
-        k = int(round(t * self.fps))
+        k = frame_key(t, self.fps, self.run.tick_s)
         if k <= self._last_key:
             return
         self._last_key = k
@@ -113,31 +116,37 @@ def _attitude(qpos: np.ndarray) -> tuple[float, float]:
     return math.atan2(rot[2, 1], rot[2, 2]), -math.asin(max(-1.0, min(1.0, rot[2, 0])))
 
 
-def first_divergence(a: list[VizFrame], b: list[VizFrame], fps: float) -> float | None:
-    """The first time [s] the two runs part (`DIVERGED_M`, `DIVERGED_RAD`), comparing frames at the same time."""
-    by_key = {int(round(f.t * fps)): f for f in b}
+def first_divergence(a: list[VizFrame], b: list[VizFrame], fps: float, *, tick_a: float = 0.0,
+                     tick_b: float = 0.0) -> float | None:
+    """The first frame time [s] the two runs part (`DIVERGED_M`, `DIVERGED_RAD`), comparing their frames keyed alike.
+
+    Each run's frames are keyed by `frame_key` with its own control period (`tick_a`, `tick_b` [s]); the time is the
+    frame's, ``k / fps``, so it does not depend on which run is first.
+    """
+    by_key = {frame_key(f.t, fps, tick_b): f for f in b}
     for fa in a:
-        fb = by_key.get(int(round(fa.t * fps)))
+        k = frame_key(fa.t, fps, tick_a)
+        fb = by_key.get(k)
         if fb is None:
             continue
         if float(np.linalg.norm(np.asarray(fa.qpos[:3]) - np.asarray(fb.qpos[:3]))) > DIVERGED_M:
-            return fa.t
+            return k / fps
         ra, rb = _attitude(np.asarray(fa.qpos)), _attitude(np.asarray(fb.qpos))
         if max(abs(ra[0] - rb[0]), abs(ra[1] - rb[1])) > DIVERGED_RAD:
-            return fa.t
+            return k / fps
     return None
 
 
 def ab_recording(a: CapturedRun, b: CapturedRun, fps: float) -> tuple[Recording, list[Mark]]:
     """One recording of both runs (`b` the ghost) and the marks of neither alone (the first divergence)."""
-    rec = Recording(a.content, fps=fps)
-    ghost = rec.add_ghost(b.content)
+    rec = Recording(a.content, fps=fps, tick_s=a.tick_s)
+    ghost = rec.add_ghost(b.content, tick_s=b.tick_s)
     for frame in a.frames:
         rec.add(frame)
     for frame in b.frames:
         rec.add_to_ghost(ghost, frame)
     marks = []
-    t = first_divergence(a.frames, b.frames, fps)
+    t = first_divergence(a.frames, b.frames, fps, tick_a=a.tick_s, tick_b=b.tick_s)
     if t is not None:
         marks.append(Mark(t, "divergence", f"{a.name} and {b.name} part (trunks {DIVERGED_M * 100:.0f} cm or "
                                            f"{math.degrees(DIVERGED_RAD):.0f} deg apart)"))

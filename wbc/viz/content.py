@@ -2,7 +2,8 @@
 
 It builds the scene once (`setup`) on any meshcat `Visualizer` (a live server's, or a recording's) and turns a
 `VizFrame` into node poses (`poses`); the live viewer sends those poses, the recorder turns them into an animation.
-The camera follows the trunk (it orbits a point under it).
+The camera follows the trunk: the point under it is posed as `FOLLOW`, which the trial page's script moves the camera
+and its orbit target with (`wbc.viz.page_script`).
 """
 
 from __future__ import annotations
@@ -19,9 +20,15 @@ from wbc.viz.scene import RobotScene
 from wbc.viz.sim_frames import SimulatedWorld
 from wbc.viz.terrain_mesh import setup_terrain, terrain_heights
 
-__all__ = ["CAMERA", "SceneContent"]
+__all__ = ["CAMERA", "FOLLOW", "SceneContent"]
 
 CAMERA = "/Cameras/default"
+FOLLOW = "/Cameras/follow"
+"""An empty node posed at the point on the ground under the trunk, for the trial page to frame (with `follow`).
+
+meshcat's orbit controls look at a target in the world whatever the camera's parent is posed at, so moving
+`CAMERA` alone turned the camera towards the world's origin as the robot walked off; the page moves the camera and
+the target together by where this node went."""
 CAMERA_OFFSET = (0.75, 0.55, 1.05)
 """Camera position relative to the point it orbits, in meshcat's y-up camera frame: 0.75 m along world x, 1.05 m
 along world y, 0.55 m up (a three-quarter view of the robot's left side)."""
@@ -34,7 +41,7 @@ class SceneContent:
         desc: the robot.
         terrain: the trial's ground.
         heights: its normalised heights (`wbc.viz.terrain_mesh.terrain_heights`; None when flat).
-        follow: move the camera with the trunk.
+        follow: pose `FOLLOW` under the trunk, for the page's camera to follow.
 
     Attributes:
         paths: every scene path created by `setup`, by role (``robot``, ``arm``, ``terrain``, ``push``,
@@ -95,7 +102,7 @@ class SceneContent:
         vis["/Grid"].set_property("visible", self.terrain.kind == "flat")
 
     def poses(self, frame: VizFrame) -> dict[str, Pose]:
-        """Every moving node's pose at `frame` (paths relative to the root, the camera's absolute)."""
+        """Every moving node's pose at `frame` (paths relative to the root, `FOLLOW`'s absolute)."""
         data = self.robot.kinematics(frame.qpos)
         out = self.robot.poses(data)
         out.update(self.push.poses(frame))
@@ -104,7 +111,7 @@ class SceneContent:
         out.update(self.plan.poses(frame, self.robot))
         if self.follow:
             base = np.asarray(frame.qpos[:3], dtype=np.float64)
-            out[CAMERA] = Pose(translation(np.array([base[0], base[1], 0.0])))
+            out[FOLLOW] = Pose(translation(np.array([base[0], base[1], 0.0])))
         return out
 
     def poses_many(self, frames: list[VizFrame]) -> dict[str, PoseTrack]:
@@ -118,5 +125,5 @@ class SceneContent:
         if self.follow:
             ground = qpos[:, :3].copy()
             ground[:, 2] = 0.0
-            out[CAMERA] = PoseTrack.everywhere(translations(ground))
+            out[FOLLOW] = PoseTrack.everywhere(translations(ground))
         return out

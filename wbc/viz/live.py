@@ -180,8 +180,10 @@ class LiveObserver:
             self._tick_in_background(t, robot, controller, command)
             return
         rec = self.recordings[-1] if self.recording_fps is not None else None
+        if rec is not None and rec.frames == 0:
+            rec.tick_s = 1.0 / controller.rate_hz  # each frame keyed at its nearest tick (`frame_key`)
         draw = self.viewer is not None and (self.player is None or self.player.due(t))
-        keyed = rec is not None and int(round(t * rec.fps)) > rec.last_key
+        keyed = rec is not None and rec.key_of(t) > rec.last_key
         if not (draw or keyed):
             return
         frame = self.last_frame = self._make(robot, controller, command, t)
@@ -189,7 +191,7 @@ class LiveObserver:
             rec.add(frame)
             self._sample(frame, robot)
             if self.viewer is None:  # nothing else to do before the next frame is due (it rounds to the next key)
-                self._quiet_until = (rec.last_key + 0.5) / rec.fps - 1e-9
+                self._quiet_until = rec.next_key_s
         if draw:
             if self.player is not None:
                 self.player.wait(t)
@@ -207,7 +209,9 @@ class LiveObserver:
 
     def _tick_in_background(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         rec = self.recordings[-1] if self.recording_fps is not None else None
-        keyed = rec is not None and int(round(t * rec.fps)) > rec.last_key
+        if rec is not None and rec.frames == 0:
+            rec.tick_s = 1.0 / controller.rate_hz
+        keyed = rec is not None and rec.key_of(t) > rec.last_key
         draw = t - self._last_drawn >= 1.0 / _BACKGROUND_FPS - 1e-9
         if not (draw or keyed):
             return

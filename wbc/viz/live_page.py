@@ -6,7 +6,8 @@ robot; nobody else may), serves:
 - ``GET /``: the trial page (`wbc.viz.page`) in its live form: the scene built from the same commands as a recording,
   posed from ``/state`` as the trial plays, the plots growing; once the trial has ended, the recorded page itself
   (the live page reloads into it, so scrubbing and slow motion work over the whole trial);
-- ``GET /state``: the trial time, the newest poses and the plots so far (JSON);
+- ``GET /state``: the trial time, the newest poses, the plots so far and the trial's duration (JSON), and which
+  trial's scene the page should hold (a page opened before the trial's first tick reloads into its scene);
 - ``POST /push``: ``{"force_n", "heading_deg", "duration_s", "point_in_base": [x, y, z], "t"}`` a horizontal push
   towards world heading ``heading_deg`` (0 along world x, 90 along world y), applied at trial time ``t`` (default:
   now) through the same `wbc.scenario.push.Push` the scenarios use and the robot's `Pushable` hook;
@@ -14,8 +15,11 @@ robot; nobody else may), serves:
   `wbc.scenario.trial.CommandChange` of the trial's schedule, at the time of the tick that first plays it);
 - ``POST /control``: ``{"pause": true|false}`` or ``{"speed": s}`` the pacing of the live trial.
 
+A request that is not a JSON object of these fields, in range (a push's ``t`` within the trial), is answered 400
+with what is wrong; once the trial has ended, every request is refused so.
+
 Every push and command change is kept (`pushes`, the command's `SteeredCommand.changes`, `operator_rows`) so the
-viewer logs them in the episode: pushes in its `PushLog` (replays draw them), both as operator actions (``browser``
+viewer logs them in the episode: pushes in its `PushLog` (as a scenario's), both as operator actions (``browser``
 key), and as marks on the page. Both take effect at a control tick and are kept with that tick's time, so a scenario
 written from them (`wbc.viz.trial_export`) plays them again exactly.
 """
@@ -47,6 +51,7 @@ __all__ = ["LivePage", "PushRequest", "SteeredCommand"]
 LOOPBACK = "127.0.0.1"
 _MAX_FORCE_N = 2000.0  # as a scenario's pushes
 _MAX_IMPULSE_NS = 200.0
+_MAX_BODY = 1 << 16  # [bytes] a request's body: a push or a command is a few dozen
 
 
 @dataclass(frozen=True)
@@ -68,8 +73,12 @@ class PushRequest:
     t: float | None = None
 
     @classmethod
-    def parse(cls, body: dict) -> PushRequest:
+    def parse(cls, body: dict, *, duration: float | None = None) -> PushRequest:
         """The request in a POSTed JSON object.
+
+        Args:
+            body: the object.
+            duration: the trial's length [s], past which ``t`` is refused (None: not known yet).
 
         Raises:
             ConfigError: a missing or out-of-range field (the message names it and its range).
@@ -92,6 +101,10 @@ class PushRequest:
             raise ConfigError(f"push: point_in_base must be 3 numbers within 0.5 m, got {req.point_in_base}")
         if not all(math.isfinite(x) for x in (req.heading_deg, *req.point_in_base)):
             raise ConfigError("push: heading_deg and point_in_base must be finite")
+        if req.t is not None and not (0.0 <= req.t < math.inf and (duration is None or req.t < duration)):
+            within = f"[0, {duration:g})" if duration is not None else "0 or later"
+            raise ConfigError(f"push: t must be a trial time in {within} s (a push after the trial's end is never "
+                              f"applied), got {req.t}")
         return req
 
     def push(self, now: float) -> Push:
@@ -162,6 +175,8 @@ class LivePage:
         url: the page (``http://127.0.0.1:PORT/``).
         pushes: the pushes applied from the page, in order.
         operator_rows: (time, ``browser``, action) of every push and command set from the page.
+        trial_s: the length of the trial about to play [s], when known before its first tick (the viewer sets it),
+            so that a push posted early for a time past its end is refused; `begin` sets it too.
     """
 
     def __init__(self, port: int = 0) -> None:
@@ -186,6 +201,8 @@ class LivePage:
         self._fps = 50.0
         self._final: str | None = None
         self._content: SceneContent | None = None
+        self.trial_s: float | None = None
+        self._scene_id = 0  # trials begun: a page served before the trial's scene existed reloads once it does
 
     def start(self) -> LivePage:
         """Serve on a thread of its own."""
@@ -214,6 +231,8 @@ class LivePage:
         with self._lock:
             self._scene, self._content, self._signals = scene, content, signals
             self._title, self._duration, self._fps, self._final = title, duration, fps, None
+            self._scene_id += 1
+            self.trial_s = duration
 
     def tick(self, t: float, robot: object) -> None:
         """Before the observer draws tick `t`: apply the pushes due (on a `Pushable` robot) and the command set."""
@@ -269,19 +288,24 @@ class LivePage:
         with self._lock:
             if self._final is not None:
                 return self._final
-            return live_page_html(self._scene, title=self._title, duration=self._duration, fps=self._fps)
+            return live_page_html(self._scene, title=self._title, duration=self._duration, fps=self._fps,
+                                  scene_id=self._scene_id)
 
     def _state(self) -> dict[str, object]:
         with self._lock:
             runs = [self._signals.to_json()] if self._signals is not None else []
             for run in runs:
                 run["marks"] = run["marks"] + [m.to_json() for m in self._marks]
-            return {"t": self._t, "done": self._final is not None, "poses": self._poses,
+            return {"t": self._t, "done": self._final is not None, "poses": self._poses, "scene": self._scene_id,
                     "data": {"duration": self._duration, "runs": runs}}
 
     def _post(self, route: str, body: dict) -> dict[str, object]:
+        with self._lock:
+            if self._final is not None and route in ("/push", "/command", "/control"):
+                raise ConfigError(f"{route[1:]}: the trial has ended")
+            duration = self.trial_s
         if route == "/push":
-            req = PushRequest.parse(body)
+            req = PushRequest.parse(body, duration=duration)
             with self._lock:
                 self._queued.append(req)
             return {"queued": True}
@@ -301,13 +325,16 @@ class LivePage:
         if route == "/control":
             if self.controls is None:
                 raise ConfigError("control: this trial is not paced")
-            if "pause" in body and bool(body["pause"]) != self.controls.paused:
+            pause, speed = body.get("pause"), body.get("speed")
+            if "pause" in body and not isinstance(pause, bool):
+                raise ConfigError(f"control: pause must be true or false, got {json.dumps(pause)}")
+            if "speed" in body and (isinstance(speed, bool) or not isinstance(speed, int | float)
+                                    or not 0.01 <= speed <= 100):
+                raise ConfigError(f"control: speed must be a number in [0.01, 100], got {json.dumps(speed)}")
+            if "pause" in body and pause != self.controls.paused:
                 self.controls.toggle_pause()
             if "speed" in body:
-                speed = float(body["speed"])
-                if not 0.01 <= speed <= 100:
-                    raise ConfigError(f"control: speed must be in [0.01, 100], got {speed}")
-                self.controls.speed_factor = speed
+                self.controls.speed_factor = float(speed)
             return {"paused": self.controls.paused, "speed": self.controls.speed_factor}
         raise ConfigError(f"no such endpoint {route}; valid: /push, /command, /control")
 
@@ -335,7 +362,15 @@ def _handler(page: LivePage) -> Callable[..., BaseHTTPRequestHandler]:
                 self._send(404, b"not found", "text/plain")
 
         def do_POST(self) -> None:  # noqa: N802 - the standard library's name
-            length = int(self.headers.get("Content-Length") or 0)
+            try:
+                length = int(self.headers.get("Content-Length") or 0)
+                if not 0 <= length <= _MAX_BODY:
+                    raise ValueError(length)
+            except ValueError:
+                self._send(400, json.dumps({"error": f"Content-Length must be a number of bytes in [0, {_MAX_BODY}], "
+                                                     f"got {self.headers.get('Content-Length')!r}"}).encode(),
+                           "application/json")
+                return
             # JSON only: a page of another origin cannot send it without a preflight this server never grants
             if self.headers.get("Content-Type", "").split(";")[0].strip() != "application/json":
                 self._send(415, b'{"error": "send Content-Type: application/json"}', "application/json")
@@ -345,7 +380,7 @@ def _handler(page: LivePage) -> Callable[..., BaseHTTPRequestHandler]:
                 if not isinstance(body, dict):
                     raise ConfigError("send a JSON object")
                 reply = page._post(self.path.split("?", 1)[0], body)
-            except (ConfigError, json.JSONDecodeError) as exc:
+            except (ConfigError, ValueError) as exc:  # ValueError: not JSON, or not UTF-8
                 self._send(400, json.dumps({"error": str(exc)}).encode(), "application/json")
                 return
             self._send(200, json.dumps(reply).encode(), "application/json")

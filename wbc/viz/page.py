@@ -55,9 +55,12 @@ def trial_page(recording: Recording, runs: list[TrialSignals], *, title: str, ma
     return _html(title, data, recording.scene_commands(play=True))
 
 
-def live_page_html(scene: list[str], *, title: str, duration: float, fps: float) -> str:
-    """The live form of the trial page: the scene (base64 commands, no animation), posed from ``/state``."""
-    data = page_data([], title=title, fps=fps, duration=duration, live=True)
+def live_page_html(scene: list[str], *, title: str, duration: float, fps: float, scene_id: int = 0) -> str:
+    """The live form of the trial page: the scene (base64 commands, no animation), posed from ``/state``.
+
+    `scene_id` names the trial whose scene it holds (0: none yet); a page whose ``/state`` names another reloads.
+    """
+    data = page_data([], title=title, fps=fps, duration=duration, live=True) | {"scene": scene_id}
     return _html(title, data, scene)
 
 

@@ -227,10 +227,23 @@ PAGE_SCRIPT = r"""
   });
 
   // -- the one clock -----------------------------------------------------------------------------------------------
-  var camFixed = null;
-  function camera() {
-    var node = viewer.scene_tree.find(["Cameras", "default"]);
-    return node ? node.object : null;
+  // "follow trunk": the recording poses /Cameras/follow under the trunk; the camera and the point its orbit controls
+  // turn about move with it, so the robot stays framed and the person's own orbit, zoom and pan are kept. The camera's
+  // frame is three.js's world (/Cameras/default stays put: meshcat's orbit controls take their target in the world)
+  var followed = null;
+  function follow() {
+    var node = viewer.scene_tree.find(["Cameras", "follow"]), controls = viewer.controls, cam = viewer.camera;
+    if (!node || !controls || !cam) { return; }
+    node.object.updateMatrixWorld(true);
+    var p = controls.target.clone();
+    node.object.getWorldPosition(p);
+    if (followed === null) { followed = controls.target.clone(); }
+    if (page.follow) {
+      var d = p.clone().sub(followed);
+      cam.position.add(d); controls.target.add(d); controls.update(); viewer.set_dirty();
+    }
+    followed = p;
+    page.cameraTarget = [controls.target.x, controls.target.y, controls.target.z];
   }
   function sceneReady() { return !!(anim && anim.actions && anim.actions.length > 0); }
 
@@ -245,7 +258,7 @@ PAGE_SCRIPT = r"""
                                            playing: page.playing, speed: page.speed, follow: page.follow,
                                            plots: page.plots, robots: page.robots, runs: page.runs,
                                            marks: page.marks, ready: page.ready, live: page.live,
-                                           duration: page.duration});
+                                           duration: page.duration, cameraTarget: page.cameraTarget || null});
   }
 
   function seek(t) {
@@ -255,9 +268,8 @@ PAGE_SCRIPT = r"""
       if (anim.playing) { anim.pause(); }
       anim.seek(t);
       page.sceneT = anim.actions[0].time;
-      var cam = camera();
-      if (cam && !page.follow && camFixed) { cam.position.copy(camFixed); viewer.set_dirty(); }
     }
+    follow();
     publish();
   }
   page.seek = seek;
@@ -274,13 +286,15 @@ PAGE_SCRIPT = r"""
   page.setSpeed = setSpeed;
   function setFollow(on) {
     page.follow = on; followBox.checked = on;
-    var cam = camera();
-    camFixed = (!on && cam) ? cam.position.clone() : null;
+    if (on && viewer.controls) { followed = viewer.controls.target.clone(); }  // back to the trunk at once
     seek(page.t);
   }
   page.setFollow = setFollow;
   // a live page grows: its runs are replaced as the trial plays (`wbc.viz.live_page`)
   page.extend = function (data) {
+    if (typeof data.duration === "number" && data.duration !== D.duration) {
+      D.duration = page.duration = data.duration; slider.max = String(data.duration);
+    }
     D.runs = data.runs; allMarks.length = 0;
     D.runs.forEach(function (run, ri) { run.marks.forEach(function (m) {
       allMarks.push({t: m.t, kind: m.kind, label: m.label, d: m.d, run: ri}); }); });
@@ -366,7 +380,8 @@ PAGE_SCRIPT = r"""
   }
   function poll() {
     fetch("state", {cache: "no-store"}).then(function (r) { return r.json(); }).then(function (s) {
-      if (s.done) { window.location.reload(); return; }
+      // the trial's scene came after the page (opened before the first tick) or another trial began: load it
+      if (s.done || (s.scene !== undefined && s.scene !== (D.scene || 0))) { window.location.reload(); return; }
       Object.keys(s.poses).forEach(function (path) {
         var m = s.poses[path];
         viewer.handle_command({type: "set_property", path: path, property: "visible", value: m !== null});

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import base64
 import html as html_lib
+import math
 from pathlib import Path
 
 import meshcat
@@ -30,7 +31,7 @@ from wbc.viz.content import SceneContent
 from wbc.viz.errors import ViewerError
 from wbc.viz.frame import PoseTrack, VizFrame
 
-__all__ = ["GHOST_COLOR", "Recording", "viewer_script"]
+__all__ = ["GHOST_COLOR", "Recording", "frame_key", "viewer_script"]
 
 GHOST_COLOR = (0.35, 0.55, 1.0, 0.35)
 """RGB and opacity of a ghost robot (the second run of an A / B view)."""
@@ -251,22 +252,36 @@ def _floats(values: np.ndarray) -> umsgpack.Ext:
 _FLOAT32_EXT = 0x17  # meshcat's msgpack extension code for a Float32Array
 
 
+def frame_key(t: float, fps: float, tick_s: float = 0.0) -> int:
+    """The animation frame (index at `fps` [1/s]) that a control tick at `t` [s] is the nearest tick to, or after.
+
+    A controller of period `tick_s` [s] is drawn at frame ``k`` by its tick nearest to ``k / fps``: the first tick
+    from ``k / fps - tick_s / 2`` on, so the tick at ``k / fps`` exactly when there is one (a 500 Hz or 50 Hz
+    controller at 50 frames a second). Rounding ``t * fps`` instead drew a 500 Hz controller's tick at 0.012 s at
+    0.02 s. With `tick_s` 0 (unknown), the first tick at or after ``k / fps``.
+    """
+    return math.floor((t + 0.5 * tick_s) * fps + 1e-6)
+
+
 class Recording:
     """Record frames of one trial into a self-contained HTML replay.
 
     Args:
         content: what to draw (its `setup` is run here).
-        fps: animation frame rate [1/s]; frames are keyed at their own time, rounded to this rate.
+        fps: animation frame rate [1/s]; each frame is keyed at its nearest control tick (`frame_key`).
+        tick_s: the control period of the frames' source [s] (0: unknown; see `frame_key`); settable until the
+            first frame.
 
     Attributes:
         vis: the meshcat visualizer that draws into this recording (for extra objects).
     """
 
-    def __init__(self, content: SceneContent, *, fps: float = 50.0) -> None:
+    def __init__(self, content: SceneContent, *, fps: float = 50.0, tick_s: float = 0.0) -> None:
         if not fps > 0:
             raise ConfigError(f"the recording's frame rate (--fps) must be > 0, got {fps}")
         self.content = content
         self.fps = fps
+        self.tick_s = tick_s
         self.window = _SceneWindow()
         self.vis = meshcat.Visualizer(window=self.window)
         content.setup(self.vis)
@@ -276,12 +291,22 @@ class Recording:
         self.frames = 0
         self._ghosts: list[tuple[SceneContent, meshcat.Visualizer]] = []
         self._ghost_last: list[int] = []
+        self._ghost_tick: list[float] = []
         self._pending: dict[int, list[tuple[int, VizFrame]]] = {-1: []}  # owner -> frames not keyed yet
 
     @property
     def last_key(self) -> int:
-        """Index of the last keyed frame (-1 before the first); a frame at t is keyed if round(t fps) exceeds it."""
+        """Index of the last keyed frame (-1 before the first); a frame at t is keyed if its `frame_key` exceeds it."""
         return self._last_frame
+
+    def key_of(self, t: float) -> int:
+        """The animation frame a tick at `t` [s] of this recording's source would be keyed at (`frame_key`)."""
+        return frame_key(t, self.fps, self.tick_s)
+
+    @property
+    def next_key_s(self) -> float:
+        """The earliest tick time [s] that `add` would key (no tick before it rounds to a new frame)."""
+        return (self._last_frame + 1 - 1e-6) / self.fps - 0.5 * self.tick_s - 1e-9
 
     @property
     def paths(self) -> dict[str, list[str]]:
@@ -297,7 +322,7 @@ class Recording:
         Returns:
             True if the frame was keyed.
         """
-        k = int(round(frame.t * self.fps))
+        k = frame_key(frame.t, self.fps, self.tick_s)
         if k <= self._last_frame:
             return False
         self._last_frame = k
@@ -326,11 +351,13 @@ class Recording:
                 node = self._node(owner, path, path if owner < 0 and path.startswith("/") else vis[path].path.lower())
             node.add_track(ks, track)
 
-    def add_ghost(self, content: SceneContent, *, color: tuple[float, float, float, float] = GHOST_COLOR) -> int:
+    def add_ghost(self, content: SceneContent, *, color: tuple[float, float, float, float] = GHOST_COLOR,
+                  tick_s: float = 0.0) -> int:
         """Add a second robot to the scene, drawn translucent (a ghost), under ``ghost<i>/``; its index.
 
         The ghost's ground, contact arrows, command arrow and plan are not drawn (the first robot's are); its push
-        arrow is. Its camera does not move (the first robot's follows the trunk).
+        arrow is. Its camera does not move (the first robot's follows the trunk). `tick_s` is its source's control
+        period [s] (`frame_key`).
         """
         i = len(self._ghosts)
         content.follow = False
@@ -342,12 +369,13 @@ class Recording:
             vis[path].set_property("visible", False)
         self._ghosts.append((content, vis))
         self._ghost_last.append(-1)
+        self._ghost_tick.append(tick_s)
         self._pending[i] = []
         return i
 
     def add_to_ghost(self, i: int, frame: VizFrame) -> bool:
         """Add `frame` of ghost `i` (see `add_ghost`) at its time; True if keyed."""
-        k = int(round(frame.t * self.fps))
+        k = frame_key(frame.t, self.fps, self._ghost_tick[i])
         if k <= self._ghost_last[i]:
             return False
         self._ghost_last[i] = k

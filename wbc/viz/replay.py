@@ -18,11 +18,14 @@ from pathlib import Path
 import numpy as np
 
 from wbc.arena.episode import Episode
-from wbc.arena.identity import RunIdentity
+from wbc.arena.identity import HardwareRunIdentity, RunIdentity
 from wbc.arena.results import episode_path
+from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import get_controller
-from wbc.errors import EpisodeFileError, RecordError, WbcError
+from wbc.errors import EpisodeFileError, InputFileError, RecordError, WbcError
+from wbc.input_files import read_json
 from wbc.robots.conventions import quat_to_matrix
+from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
 from wbc.scenario.scenario import Scenario, load_scenario
 from wbc.scenario.terrain import TerrainConfig
@@ -35,7 +38,14 @@ __all__ = ["StoredEpisode", "frames_of", "load_stored_episode"]
 
 
 def frames_of(episode: Episode) -> Iterator[VizFrame]:
-    """One frame per control tick of `episode`, its pushes drawn while they act.
+    """One frame per control tick of `episode` but its last, each drawing the trunk and joints of one instant.
+
+    A row of an episode holds the trunk's pose at the end of its tick (after the physics step) but the joints the
+    controller read at its start: the joints of the instant row ``k`` ends are those row ``k + 1`` read. Frame ``k``
+    pairs them, as the viewer draws a trial it plays (both read after the step), so a replay draws what the trial
+    drew played afresh. The joints at the end of the last tick were never read, so the last row has no frame: a replay
+    ends one control tick before its episode. The joints are what the controller read: with sensor noise or latency
+    in the scenario, its measurement rather than the simulator's truth.
 
     A push is drawn in the frame of every tick whose control period overlaps it, at its application point on the
     trunk (the last acting push's point when several act together, their forces summed).
@@ -46,9 +56,9 @@ def frames_of(episode: Episode) -> Iterator[VizFrame]:
     episode.validate()
     dt = episode.control_dt
     pushes = episode.pushes
-    for i in range(len(episode.t)):
+    for i in range(len(episode.t) - 1):
         t = float(episode.t[i])
-        qpos = episode.qpos[i]
+        qpos = np.concatenate([episode.qpos[i][:7], episode.qpos[i + 1][7:]])
         force, point = np.zeros(3), np.zeros(3)
         for j in range(len(pushes)):
             start = pushes.start[j]
@@ -66,6 +76,8 @@ class StoredEpisode:
     Attributes:
         path: the episode file.
         controller: who played it.
+        arm_mode: its arm mode, as the run recorded it (``run.json``'s ``controllers``): the controller is not built
+            to replay it, so a policy file moved or deleted since, or an I/O file given by ``--io``, does not matter.
         trial: the trial (robot, ground, pushes as sampled).
         episode: the log.
         scenario: the scenario file the trial was drawn from, as loaded: the run's content (its hash is the one
@@ -75,13 +87,14 @@ class StoredEpisode:
 
     path: Path
     controller: str
+    arm_mode: str
     trial: Trial
     episode: Episode
     scenario: Scenario
 
     def content(self) -> SceneContent:
         """What to draw: the controller's robot (arm mode) on the trial's ground."""
-        desc = get_robot(self.trial.robot, get_controller(self.controller).arm_mode)
+        desc = get_robot(self.trial.robot, self.arm_mode)
         return SceneContent.for_trial(desc, self.trial.terrain, self.trial.terrain_seed)
 
     def frames(self) -> Iterator[VizFrame]:
@@ -118,6 +131,10 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     """
     root = Path(results_dir)
     run_json = root / "run.json"
+    if root.is_file() and root.suffix.lower() == ".npz":
+        raise ViewerError(f"{root}: an episode file alone (`wbc view --save-episode`) holds no trial to draw it on; "
+                          "--episode takes a results directory (`wbc run --save-episodes --out DIR`). To see a trial "
+                          "played live again, write it with --export-scenario FILE.toml and view that scenario")
     if not root.is_dir():
         raise ViewerError(f"{root}: no such results directory (give the --out of a `wbc run --save-episodes`)")
     if not run_json.exists():
@@ -134,12 +151,11 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     band = _pick(run_json, "bands", band, bands, "--band")
     seed = _pick(run_json, "seeds", seed, seeds, "--seed")
     if index not in played:
-        raise ViewerError(f"{run_json}: field trials: --trial {index} is out of range; the run played trials "
-                          f"{played[0]}..{played[-1]} per band and seed")
+        raise ViewerError(f"{run_json}: field trials: --trial {index} is out of range; the run's trials are "
+                          f"{played[0]}..{played[-1]} per band and seed{_so_far(root, controller, band, seed, played)}")
     path = episode_path(root, controller, band, seed, index)
     if not path.exists():
-        raise ViewerError(f"{path}: no episode stored for controller {controller}, band {band}, seed {seed}, "
-                          f"trial {index}; rerun `wbc run` with --save-episodes")
+        raise ViewerError(_no_episode(root, path, controller, band, seed, index))
     try:
         episode = Episode.load(str(path))  # checked in depth: a malformed episode is refused, never drawn
     except EpisodeFileError as exc:  # names the file and the field
@@ -157,9 +173,64 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
     trial = scenario.trial(band, seed, index)
     if played_on is not None:  # on a robot: its own ground (unknown, drawn flat) and none of the scenario's pushes
         trial = dataclasses.replace(trial, robot=played_on, terrain=TerrainConfig(kind="flat"), pushes=())
-    nq = get_robot(trial.robot, get_controller(controller).arm_mode).num_joints + 7
+    arm_mode = _recorded_arm_mode(run_json, identity, controller)
+    nq = get_robot(trial.robot, arm_mode).num_joints + 7
     if episode.qpos.ndim != 2 or episode.qpos.shape[1] != nq:
         raise ViewerError(f"{path}: field qpos: shape {episode.qpos.shape}, expected (ticks, {nq}) for "
                           f"{trial.robot} driven by {controller}; the file belongs to another run: store it again "
                           "with `wbc run --save-episodes`")
-    return StoredEpisode(path=path, controller=controller, trial=trial, episode=episode, scenario=scenario)
+    return StoredEpisode(path=path, controller=controller, arm_mode=arm_mode, trial=trial, episode=episode,
+                         scenario=scenario)
+
+
+def _played(root: Path, controller: str, band: str, seed: int) -> list[int] | None:
+    """The trials of (controller, band, seed) that ``trials.csv`` records, in order (None: no file to trust)."""
+    try:
+        records = TrialRecord.read_csv(root / "trials.csv")
+    except (WbcError, OSError):
+        return None
+    return sorted(r.trial for r in records if (r.controller, r.band, r.seed) == (controller, band, seed))
+
+
+def _so_far(root: Path, controller: str, band: str, seed: int, planned: list[int]) -> str:
+    """``; ...--resume...`` when the run has played fewer trials of (controller, band, seed) than it plans."""
+    done = _played(root, controller, band, seed)
+    if done is None or set(planned) <= set(done):
+        return ""
+    shown = "none" if not done else f"{len(done)} ({done[0]}..{done[-1]})" if done == list(
+        range(done[0], done[-1] + 1)) else f"{len(done)}"
+    return (f"; {controller} has played {shown} of them so far in band {band}, seed {seed}: the run was "
+            "interrupted, and the `wbc run` or `wbc compare` command that wrote it, with --resume, plays the rest")
+
+
+def _no_episode(root: Path, path: Path, controller: str, band: str, seed: int, index: int) -> str:
+    """Why `path` is missing, with the remedy: the trial was not played yet, or was played without its episode."""
+    done = _played(root, controller, band, seed)
+    if done is not None and index not in done:
+        return (f"{path}: trial {index} of controller {controller}, band {band}, seed {seed} was not played: the run "
+                f"was interrupted ({root / 'trials.csv'} records {len(done)} of its trials there); the `wbc run` or "
+                "`wbc compare` command that wrote it, with --resume, plays the rest and stores their episodes")
+    return (f"{path}: no episode stored for controller {controller}, band {band}, seed {seed}, trial {index}; rerun "
+            "`wbc run` with --save-episodes")
+
+
+def _recorded_arm_mode(run_json: Path, identity: RunIdentity, controller: str) -> str:
+    """The arm mode `controller` played the run with, as ``run.json`` records it (``controllers.NAME.arm_mode``).
+
+    A run written before ``run.json`` recorded its controllers (or a hardware run's, which names its robot's arm
+    mode) is read as it can be; only a run that records neither builds the controller to ask it.
+    """
+    try:
+        entry = read_json(run_json).get("controllers", {}).get(controller)
+    except (InputFileError, ValueError, AttributeError):  # the identity was read from it already: an old layout
+        entry = None
+    arm_mode = entry.get("arm_mode") if isinstance(entry, dict) else None
+    if arm_mode in ARM_MODES:
+        return arm_mode
+    if isinstance(identity, HardwareRunIdentity):
+        return identity.arm_mode
+    try:
+        return get_controller(controller).arm_mode
+    except WbcError as exc:
+        raise ViewerError(f"{run_json}: field controllers.{controller}.arm_mode: missing, and {controller} cannot be "
+                          f"built here to ask it ({exc})") from None

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from wbc.hardware.interpreter import wbc_interpreter_env
 from wbc.viz.errors import ViewerError
 
-__all__ = ["MeshcatServer", "ServerConfig", "host_problem", "serve"]
+__all__ = ["MeshcatServer", "ServerConfig", "host_problem", "listening_on", "serve", "web_address"]
 
 LOOPBACK = "127.0.0.1"
 
@@ -76,6 +76,27 @@ class ServerConfig:
     start_timeout_s: float = 20.0
 
 
+_EVERY_INTERFACE = ("0.0.0.0", "::", "")
+
+
+def web_address(host: str | None, port: int) -> str:
+    """The viewer's page on `host` as a browser opens it: an IPv6 address in brackets, a wildcard as loopback."""
+    host = host or LOOPBACK
+    if host in _EVERY_INTERFACE:
+        host = LOOPBACK if host != "::" else "::1"
+    if ":" in host:
+        host = f"[{host}]"
+    return f"http://{host}:{port}/static/"
+
+
+def listening_on(host: str | None) -> str:
+    """Where a viewer listening on `host` can be reached from, for the line that prints its address."""
+    host = host or LOOPBACK
+    if host in _EVERY_INTERFACE:
+        return f"every interface ({host or '0.0.0.0'}): any machine that reaches this one can open it"
+    return f"{host} only"
+
+
 class MeshcatServer:
     """A meshcat server in a child process; a context manager that stops it on exit.
 
@@ -84,7 +105,8 @@ class MeshcatServer:
 
     Attributes:
         zmq_url: the command socket (``tcp://127.0.0.1:PORT``), for ``meshcat.Visualizer(zmq_url=...)``.
-        web_url: the page to open in a browser.
+        web_url: the page to open in a browser (`web_address`).
+        listening: where it can be opened from, in words (`listening_on`).
         web_port: the HTTP port.
     """
 
@@ -94,6 +116,11 @@ class MeshcatServer:
         self.web_url = ""
         self.web_port = 0
         self._proc: subprocess.Popen | None = None
+
+    @property
+    def listening(self) -> str:
+        """Where the page can be opened from (`listening_on` its host)."""
+        return listening_on(self.config.host)
 
     @property
     def pid(self) -> int | None:
@@ -134,7 +161,8 @@ class MeshcatServer:
             key, _, value = line.strip().partition("=")
             if key in ("zmq_url", "web_url", "web_port"):
                 urls[key] = value
-        self.zmq_url, self.web_url, self.web_port = urls["zmq_url"], urls["web_url"], int(urls["web_port"])
+        self.zmq_url, self.web_port = urls["zmq_url"], int(urls["web_port"])
+        self.web_url = web_address(self.config.host, self.web_port)  # meshcat's own omits an IPv6 address's brackets
         return self
 
     def stop(self) -> None:

@@ -38,7 +38,7 @@ from wbc.viz.live import LiveObserver, LiveViewer
 from wbc.viz.live_page import LivePage, SteeredCommand
 from wbc.viz.page import save_trial_page, trial_page
 from wbc.viz.player import KeyboardControls, Player, PlayerConfig
-from wbc.viz.recording import Recording
+from wbc.viz.recording import Recording, frame_key
 from wbc.viz.replay import StoredEpisode
 from wbc.viz.server import MeshcatServer, ServerConfig
 from wbc.viz.signals import TrialSignals
@@ -165,7 +165,7 @@ def _start_live(cfg: ViewConfig) -> tuple[MeshcatServer, LiveViewer, Player]:
                           "interactively, or record with --record and pause in the page")
     server = MeshcatServer(ServerConfig(host=cfg.host)).start()
     viewer = LiveViewer(server)
-    print(f"viewer: {server.web_url}  (listening on {cfg.host} only)", file=sys.stderr)
+    print(f"viewer: {server.web_url}  (listening on {server.listening})", file=sys.stderr)
     if cfg.open_browser:
         webbrowser.open(server.web_url, new=2)
     if cfg.wait_for_browser:
@@ -223,6 +223,7 @@ def view_trial(trial: Trial, controller: ControllerSpec | str, cfg: ViewConfig, 
         played = trial
         if page is not None:
             page.command = SteeredCommand(trial.command)
+            page.trial_s = trial.duration_s  # a push posted before the first tick is checked against it
             page.controls = player.controls if player is not None else None
             played = dataclasses.replace(trial, command=page.command)
         watch = _Stopwatch(_with_page(observer, page, trial, name, cfg))
@@ -322,7 +323,7 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
     _no_export(cfg, "a stored episode")
     written, recorded, drawn, paths = None, 0, 0, {}
     if cfg.record is not None:
-        rec = Recording(stored.content(), fps=cfg.record_fps)
+        rec = Recording(stored.content(), fps=cfg.record_fps, tick_s=stored.episode.control_dt)
         for frame in stored.frames():
             rec.add(frame)
         signals = TrialSignals.of_episode(stored.controller, stored.episode).thinned(cfg.record_fps)
@@ -399,10 +400,11 @@ def replay_ab(first: StoredEpisode, second: StoredEpisode, cfg: ViewConfig, path
     runs = []
     for stored in (first, second):
         run = CapturedRun(stored.controller, stored.content(),
-                          signals=TrialSignals.of_episode(stored.controller, stored.episode).thinned(cfg.record_fps))
+                          signals=TrialSignals.of_episode(stored.controller, stored.episode).thinned(cfg.record_fps),
+                          tick_s=stored.episode.control_dt)
         last = -1
         for frame in stored.frames():
-            k = int(round(frame.t * cfg.record_fps))
+            k = frame_key(frame.t, cfg.record_fps, run.tick_s)
             if k > last:
                 run.frames.append(frame)
                 last = k
