@@ -7,6 +7,7 @@ early stop on a clear difference, and ``wbc compare --until-significant`` end to
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -28,6 +29,7 @@ from wbc.arena.report import (
     p_text,
     paired_comparison,
     summarize,
+    write_report,
 )
 from wbc.arena.sequential import DiscordantPairTest, SequentialComparison, mixture_log_e
 from wbc.arena.statistical_power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
@@ -302,9 +304,10 @@ def test_one_seed_tables_show_an_interval_over_trials_not_a_zero_spread():
     assert f"60.00 [{100 * lo:.2f}, {100 * hi:.2f}]" in table
     assert "± 0.00" not in table
     assert "exact McNemar" in table and "n80" in table
-    # several seeds: the spread across them, as the paper prints
+    # several seeds: the spread across them, as the paper prints, and success's interval over all the trials
     cell = MetricSummary(mean=0.9, std=0.05, ci95=(0.8, 0.95))
-    assert cell_text(cell, "success_rate", 5) == "90.00 ± 5.00"
+    assert cell_text(cell, "success_rate", 5) == "90.00 ± 5.00 [80.00, 95.00]"
+    assert cell_text(MetricSummary(mean=0.9, std=0.05, ci95=(0.8, 0.95)), "ttf", 5) == "0.900 ± 0.050"
     assert cell_text(cell, "success_rate", 1) == "90.00 [80.00, 95.00]"
 
 
@@ -463,3 +466,30 @@ def test_a_negated_zero_is_written_with_a_plus_sign():
     assert signed(-0.0, 3) == "+0.000" and signed(-0.0, 1) == "+0.0"
     assert signed(-1e-5, 3) == "-1.0e-05" and signed(-0.25, 1) == "-0.2"
 
+
+def test_reportmd_qualifies_significance_after_a_sequential_stop_as_the_printed_table_does(tmp_path):
+    records = [make_record(c, "in", 0, i, success=(c == "a" or i < 3)) for c in ("a", "b") for i in range(8)]
+    summary = summarize(records, scenario_name="flat_push", scenario_hash="abc123", controllers=["a", "b"],
+                        bands=["in"])
+    comparison = SequentialComparison([("a", "b")], ["in"], alpha=0.05)
+    for k in range(8):
+        comparison.add_round([records[k], records[8 + k]])
+    sequential = dataclasses.replace(summary, sequential=comparison.as_dict())
+    write_report(tmp_path / "seq", sequential, records, {})
+    report = (tmp_path / "seq" / "report.md").read_text(encoding="utf-8")
+    verdict_section = report.split("## Verdict")[1].split("## Results")[0]
+    assert "after the sequential test's stop these p-values are optimistic" in verdict_section
+    assert "after the sequential test's stop these p-values are optimistic" in format_verdict(sequential)
+    write_report(tmp_path / "fixed", summary, records, {})
+    fixed = (tmp_path / "fixed" / "report.md").read_text(encoding="utf-8")
+    assert "(paired trials; significant: p < 0.05)" in fixed and "optimistic" not in fixed
+
+
+def test_a_several_seed_success_cell_shows_its_wilson_interval_beside_the_spread_of_seed_means():
+    # every trial of both seeds succeeds: the seeds' means do not spread, the success rate is still uncertain
+    records = [make_record("a", "in", s, i) for s in (0, 1) for i in range(8)]
+    summary = summarize(records, scenario_name="flat_push", scenario_hash="abc123", controllers=["a"], bands=["in"])
+    lo, hi = wilson_interval(16, 16)
+    table = format_table(summary)
+    assert f"100.00 ± 0.00 [{100 * lo:.2f}, {100 * hi:.2f}]" in table and lo < 0.85
+    assert "not the mean's uncertainty" in table
