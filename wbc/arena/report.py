@@ -598,7 +598,8 @@ def format_table(summary: Summary, *, verdict: bool = True) -> str:
     """Render a summary (from `summarize`) as plain text in the shape of the paper's results table.
 
     One block per band, one row per controller, columns Trials, Success %, TTF, V_lin err, V_ang err as
-    "mean ± std" across seeds (success in percent with 2 decimals, e.g. ``95.02 ± 0.62``; the others with 3), or,
+    "mean ± std" across seeds (success in percent with 2 decimals and its Wilson interval over all the trials, e.g.
+    ``95.00 ± 0.00 [83.50, 98.62]``; the others with 3), or,
     from a single seed, "mean [lo, hi]" with the 95 % interval over trials (`cell_text`). Then, when two controllers
     or more played, a block "paired differences (B - A, 95% CI)" with one line per pair, band and metric, its test's
     p-value and n80; success differences are in percentage points. Undefined statistics show as ``n/a``. A run
