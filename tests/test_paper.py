@@ -119,6 +119,9 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
     saved = json.loads((out / "paper.json").read_text(encoding="utf-8"))
     assert saved["table"] == "table1" and saved["bands"] == ["in", "ood"] and saved["trials"] == 1
     assert len(saved["comparisons"]) == 6 * 2 * 3
+    # the tests compare tracking over the seconds both survived; the cells stay over each trial's own time
+    assert {c["metric"] for c in saved["comparisons"]} == {"success_rate", "ttf", "vlin_err_common"}
+    assert "V_lin err, common [m/s]" in printed and "over the seconds both survived" in " ".join(printed.split())
     assert {c["controller"] for c in saved["contenders"]} == {"learned", "learned-locked", "learned-noarm", "mpc",
                                                               "mpc-tail", "mpc-locked", "mpc-noarm"}
     # resuming the finished run plays nothing and prints the same table but for the run line
@@ -315,6 +318,32 @@ def test_verdicts_name_the_better_side_only_when_the_test_says_so():
     assert verdict(pair("success_rate", 0.05, 0.5)) == (
         "Success: no significant difference (p = 0.5; 42 pairs would detect the observed difference)")
     assert verdict(pair("ttf", 0.0, 1.0, n80=None)) == "TTF: no significant difference (p = 1)"
+
+
+def test_a_paper_verdict_follows_the_side_the_test_leans_to_as_the_arenas_does():
+    def pair(metric, diff, p, rank_biserial):
+        return PairSummary(a="pi2", b="pi3", band="in", metric=metric, diff=diff, ci95=(None, None), interval=None,
+                           n=21, mean_a=None, mean_b=None, test="Wilcoxon signed-rank", p=p, n80=40, a_only=None,
+                           b_only=None, shift=0.01 if rank_biserial > 0 else -0.01, rank_biserial=rank_biserial)
+
+    # 20 pairs 0.01 worse and one 1.0 better: the mean favours pi3, the test finds pi3 worse on most pairs
+    split = verdict(pair("vlin_err_common", -0.038, 0.0002, 0.82))
+    assert split.startswith("V_lin err, common: neither called better") and "pi3 better" not in split
+    assert "ranks favour pi2" in split and "favours pi3" in split
+    # TTF the other way round; a mean difference of 0 follows the test
+    assert "neither called better" in verdict(pair("ttf", 0.036, 0.0002, -0.82))
+    assert verdict(pair("ttf", 0.0, 0.002, 0.78)).startswith("TTF: pi3 better")
+    # the common-window errors are errors: smaller is better
+    assert verdict(pair("vang_err_common", -0.02, 0.001, -0.9)).startswith("V_ang err, common: pi3 better")
+    # significant means p < alpha, as everywhere else
+    assert verdict(pair("ttf", 0.05, 0.05, 0.9)).startswith("TTF: no significant difference (p = 0.05")
+
+
+def test_the_paired_tests_of_tracking_use_the_common_window():
+    assert TABLES["table1"].paired_metrics == ("success_rate", "ttf", "vlin_err_common")
+    assert TABLES["table2"].paired_metrics == ("success_rate", "vang_err_common", "vlin_err_common")
+    assert TABLES["table3"].paired_metrics == ("success_rate", "ttf", "vlin_err_common")
+    assert TABLES["table1"].metrics == ("success_rate", "ttf", "vlin_err")  # the cells: the paper's own time
 
 
 def test_a_verdict_from_one_pair_says_that_one_pair_cannot_size_the_test():

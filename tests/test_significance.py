@@ -7,6 +7,7 @@ early stop on a clear difference, and ``wbc compare --until-significant`` end to
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -21,19 +22,21 @@ from wbc.arena.paired_tests import hodges_lehmann, mcnemar_exact, paired_values,
 from wbc.arena.report import (
     _sequential_lines,
     cell_text,
+    compare_pair,
     format_table,
     format_verdict,
     n80_text,
     p_text,
     paired_comparison,
     summarize,
+    write_report,
 )
 from wbc.arena.sequential import DiscordantPairTest, SequentialComparison, mixture_log_e
 from wbc.arena.statistical_power import mcnemar_power, pairs_for_mcnemar, pairs_for_mean_difference, t_test_power
 from wbc.arena.stats import wilson_interval
 from wbc.arena.summary import MetricSummary, PairSummary, Summary, p_digits
 from wbc.arena.trial_record import TrialRecord
-from wbc.arena.verdict import verdicts
+from wbc.arena.verdict import signed, verdicts
 from wbc.errors import ConfigError, RecordError
 
 
@@ -301,9 +304,10 @@ def test_one_seed_tables_show_an_interval_over_trials_not_a_zero_spread():
     assert f"60.00 [{100 * lo:.2f}, {100 * hi:.2f}]" in table
     assert "± 0.00" not in table
     assert "exact McNemar" in table and "n80" in table
-    # several seeds: the spread across them, as the paper prints
+    # several seeds: the spread across them, as the paper prints, and success's interval over all the trials
     cell = MetricSummary(mean=0.9, std=0.05, ci95=(0.8, 0.95))
-    assert cell_text(cell, "success_rate", 5) == "90.00 ± 5.00"
+    assert cell_text(cell, "success_rate", 5) == "90.00 ± 5.00 [80.00, 95.00]"
+    assert cell_text(MetricSummary(mean=0.9, std=0.05, ci95=(0.8, 0.95)), "ttf", 5) == "0.900 ± 0.050"
     assert cell_text(cell, "success_rate", 1) == "90.00 [80.00, 95.00]"
 
 
@@ -406,3 +410,86 @@ def test_until_significant_stops_the_run_once_the_difference_is_settled(limp, tm
     assert again.played == 0 and again.summary == result.summary
     with pytest.raises(ConfigError, match="local executor"):
         ArenaConfig(controllers=("stand", limp), scenario=scenario, executor="ray", until_significant=True)
+
+
+def _verdict_of(a_records, b_records, metric, band="in"):
+    entry = compare_pair(a_records, b_records, a="a", b="b", band=band, metric=metric)
+    return entry, verdicts(Summary(scenario_name="s", scenario_hash="h", cells={}, paired=(entry,), warnings=()))
+
+
+def test_a_survival_difference_the_test_does_not_reject_is_neither_a_winner_nor_an_equivalence():
+    # 20 pairs, 6 : 5 discordant: the interval spans about -51 to +41 points, n80 is in the thousands
+    a = [make_record("a", "in", 0, i, success=i < 6 or i >= 11) for i in range(20)]
+    b = [make_record("b", "in", 0, i, success=i >= 6) for i in range(20)]
+    entry, (sentence,) = _verdict_of(a, b, "success_rate")
+    assert entry.p == 1.0 and entry.n80 > 1000
+    assert sentence.startswith("band in: a and b do not differ significantly in survival: a 15 against 14 of 20")
+    assert "survives more than" not in sentence and "practical purposes" not in sentence
+    assert "there is none" not in sentence and "rule out neither side" in sentence
+    assert f"about {entry.n80} paired trials would settle" in sentence
+
+
+def test_tracking_and_fall_times_the_test_does_not_reject_do_not_open_with_a_better_side():
+    rng = np.random.default_rng(5)
+    d = rng.normal(0.0, 0.05, 12)
+    d = d - d.mean() + 0.002
+    a = [make_record("a", "in", 0, i, vlin_err=0.2, vlin_err_by_s="0.2", ttf=0.5, success=False) for i in range(12)]
+    b = [make_record("b", "in", 0, i, vlin_err=0.2 + d[i], vlin_err_by_s=repr(float(0.2 + d[i])), ttf=0.5 + d[i],
+                     success=False) for i in range(12)]
+    for metric, subject in (("vlin_err_common", "how they track the linear velocity"),
+                            ("ttf", "how long they stay up (TTF)")):
+        entry, (sentence,) = _verdict_of(a, b, metric)
+        assert not entry.significant
+        assert sentence.startswith(f"band in: a and b do not differ significantly in {subject}"), sentence
+        assert "better than" not in sentence and "longer than" not in sentence and "there is none" not in sentence
+
+
+def test_a_significant_test_with_a_zero_mean_difference_follows_the_tests_lean():
+    # 16 pairs lean one way by a little, one pair the other way by as much as all of them: the mean difference is 0
+    t_a = [0.5] * 16 + [1.0]
+    t_b = [0.5625] * 16 + [0.0]
+    a = [make_record("a", "in", 0, i, ttf=t_a[i], success=False) for i in range(17)]
+    b = [make_record("b", "in", 0, i, ttf=t_b[i], success=False) for i in range(17)]
+    entry, (sentence,) = _verdict_of(a, b, "ttf")
+    assert entry.diff == 0.0 and entry.significant and entry.rank_biserial > 0
+    assert sentence.startswith("band in: b stays up longer than a"), sentence
+    e_a = [0.1] * 17
+    e_b = [0.0375] * 16 + [1.1]
+    a = [make_record("a", "in", 0, i, vlin_err_by_s=f"{e_a[i]!r}") for i in range(17)]
+    b = [make_record("b", "in", 0, i, vlin_err_by_s=f"{e_b[i]!r}") for i in range(17)]
+    entry, (sentence,) = _verdict_of(a, b, "vlin_err_common")
+    assert entry.diff == pytest.approx(0.0, abs=1e-15) and entry.significant and entry.rank_biserial < 0
+    assert sentence.startswith("band in: b tracks the linear velocity better than a"), sentence
+
+
+def test_a_negated_zero_is_written_with_a_plus_sign():
+    assert signed(-0.0, 3) == "+0.000" and signed(-0.0, 1) == "+0.0"
+    assert signed(-1e-5, 3) == "-1.0e-05" and signed(-0.25, 1) == "-0.2"
+
+
+def test_reportmd_qualifies_significance_after_a_sequential_stop_as_the_printed_table_does(tmp_path):
+    records = [make_record(c, "in", 0, i, success=(c == "a" or i < 3)) for c in ("a", "b") for i in range(8)]
+    summary = summarize(records, scenario_name="flat_push", scenario_hash="abc123", controllers=["a", "b"],
+                        bands=["in"])
+    comparison = SequentialComparison([("a", "b")], ["in"], alpha=0.05)
+    for k in range(8):
+        comparison.add_round([records[k], records[8 + k]])
+    sequential = dataclasses.replace(summary, sequential=comparison.as_dict())
+    write_report(tmp_path / "seq", sequential, records, {})
+    report = (tmp_path / "seq" / "report.md").read_text(encoding="utf-8")
+    verdict_section = report.split("## Verdict")[1].split("## Results")[0]
+    assert "after the sequential test's stop these p-values are optimistic" in verdict_section
+    assert "after the sequential test's stop these p-values are optimistic" in format_verdict(sequential)
+    write_report(tmp_path / "fixed", summary, records, {})
+    fixed = (tmp_path / "fixed" / "report.md").read_text(encoding="utf-8")
+    assert "(paired trials; significant: p < 0.05)" in fixed and "optimistic" not in fixed
+
+
+def test_a_several_seed_success_cell_shows_its_wilson_interval_beside_the_spread_of_seed_means():
+    # every trial of both seeds succeeds: the seeds' means do not spread, the success rate is still uncertain
+    records = [make_record("a", "in", s, i) for s in (0, 1) for i in range(8)]
+    summary = summarize(records, scenario_name="flat_push", scenario_hash="abc123", controllers=["a"], bands=["in"])
+    lo, hi = wilson_interval(16, 16)
+    table = format_table(summary)
+    assert f"100.00 ± 0.00 [{100 * lo:.2f}, {100 * hi:.2f}]" in table and lo < 0.85
+    assert "not the mean's uncertainty" in table

@@ -127,7 +127,9 @@ WARN_FRACTION = 0.01
 ticks in a band gets a warning in the table and the report."""
 
 _SPREAD_LEGEND = {
-    "seeds": "cells: mean ± std across seeds (each seed's trials averaged first).",
+    "seeds": "cells: mean ± std across seeds (each seed's trials averaged first; the std is the spread of the seeds' "
+             "means, batches of independent trials, not the mean's uncertainty: 8 of 8 in each seed gives ± 0.00); "
+             "success adds its Wilson 95 % interval over all the trials [lo, hi].",
     "trials": "cells: from one seed, the mean and its 95 % interval over trials [lo, hi] (Wilson for success, "
               "percentile bootstrap otherwise).",
 }
@@ -430,6 +432,11 @@ def cell_text(stat: MetricSummary, metric: str, seeds: int | None) -> str:
     A single seed has no spread across seeds to quote (its std would print as ± 0.00); its interval over trials
     says how far the mean could be off. A cell without an interval (no value to draw it from) keeps ± std.
 
+    Several seeds are batches of independent trials (each trial draws its own scenario sample): their std is the
+    spread of the batch means, the paper's convention, which says nothing of the mean's uncertainty and is 0 whenever
+    every seed succeeds in every trial. A success cell of several seeds therefore adds its Wilson interval over all
+    the trials, "mean ± std [lo, hi]": 8 of 8 in each of 2 seeds gives "100.00 ± 0.00 [80.64, 100.00]".
+
     Args:
         stat: a summary cell's metric.
         metric: the summary metric name (for scale and decimals).
@@ -438,6 +445,8 @@ def cell_text(stat: MetricSummary, metric: str, seeds: int | None) -> str:
     ci = stat.ci95
     if seeds == 1 and stat.mean is not None and None not in ci:
         return f"{_number(stat.mean, metric)} [{_number(ci[0], metric)}, {_number(ci[1], metric)}]"
+    if metric == "success_rate" and stat.mean is not None and None not in ci:
+        return f"{_mean_std(stat, metric)} [{_number(ci[0], metric)}, {_number(ci[1], metric)}]"
     return _mean_std(stat, metric)
 
 
@@ -589,7 +598,8 @@ def format_table(summary: Summary, *, verdict: bool = True) -> str:
     """Render a summary (from `summarize`) as plain text in the shape of the paper's results table.
 
     One block per band, one row per controller, columns Trials, Success %, TTF, V_lin err, V_ang err as
-    "mean ± std" across seeds (success in percent with 2 decimals, e.g. ``95.02 ± 0.62``; the others with 3), or,
+    "mean ± std" across seeds (success in percent with 2 decimals and its Wilson interval over all the trials, e.g.
+    ``95.00 ± 0.00 [83.50, 98.62]``; the others with 3), or,
     from a single seed, "mean [lo, hi]" with the 95 % interval over trials (`cell_text`). Then, when two controllers
     or more played, a block "paired differences (B - A, 95% CI)" with one line per pair, band and metric, its test's
     p-value and n80; success differences are in percentage points. Undefined statistics show as ``n/a``. A run
@@ -633,17 +643,25 @@ def format_table(summary: Summary, *, verdict: bool = True) -> str:
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
+def verdict_basis(summary: Summary, *, where: str) -> str:
+    """What the verdict sentences' "significant" means, as the printed table and report.md both say it.
+
+    The fixed-n p-values, which after a sequential test's stop are optimistic: its own verdict, `where` it is
+    printed, is the one that holds.
+    """
+    if summary.sequential is None:
+        return f"paired trials; significant: p < {ALPHA:g}"
+    return (f"paired trials; significant: fixed-n p < {ALPHA:g}; after the sequential test's stop these p-values are "
+            f"optimistic: its own verdict, {where}, at family-wise alpha {summary.sequential['alpha']:g}, is the one "
+            "that holds")
+
+
 def format_verdict(summary: Summary) -> str:
     """The verdict sentences of a summary (`wbc.arena.verdict.verdicts`) under a heading, wrapped; empty without."""
     sentences = verdicts(summary)
     if not sentences:
         return ""
-    if summary.sequential is not None:
-        lines = [f"verdict (paired trials; significant: fixed-n p < {ALPHA:g}; after the sequential test's stop these "
-                 "p-values are optimistic: its own verdict, above, at family-wise alpha "
-                 f"{summary.sequential['alpha']:g}, is the one that holds):"]
-    else:
-        lines = [f"verdict (paired trials; significant: p < {ALPHA:g}):"]
+    lines = [f"verdict ({verdict_basis(summary, where='above')}):"]
     for sentence in sentences:
         lines += textwrap.wrap(sentence, width=118, initial_indent="  ", subsequent_indent="    ")
     return "\n".join(lines) + "\n"
@@ -724,8 +742,9 @@ def write_report(
         lines += ["", f"## {title}", "", *body]
     sentences = verdicts(summary)
     if sentences:
-        lines += ["", "## Verdict", "", "Per band and pair of controllers, on the same trials (significant: p < 0.05).",
-                  "", *(f"- {sentence}" for sentence in sentences)]
+        lines += ["", "## Verdict", "", f"Per band and pair of controllers, on the same trials "
+                  f"({verdict_basis(summary, where='in the section Sequential test')}).", "",
+                  *(f"- {sentence}" for sentence in sentences)]
     legend = cell_legend(summary)
     lines += ["", "## Results", "", legend[0].upper() + legend[1:] + " Success in %."]
     metrics = (*METRICS, *_common_of(summary), *EXTRA_METRICS)

@@ -6,8 +6,11 @@ The arena plays paired trials: every controller meets exactly the same trials, e
 
 Three estimators, all deterministic:
 
-- `mean_std_over_seeds`: the spread a reader should quote is across seeds (independent runs of the whole
-  experiment), not across trials, which share a seed's scenario sample. Each seed's trials are averaged first.
+- `mean_std_over_seeds`: the paper's cell, the mean and std across seeds, each seed's trials averaged first. Every
+  trial draws its own scenario sample (`wbc.scenario.Scenario.trial`: its generator is seeded by the seed, the
+  trial's index and the scenario's hash), so trials are independent draws and a seed is a batch of them: the std is the
+  spread of the batch means, not the uncertainty of the mean (0 whenever every trial of every seed succeeds).
+  The tables add the Wilson interval over all the trials to a success cell (`wbc.arena.report.cell_text`).
 - `paired_difference`: controller B minus controller A on the same trials, with a percentile bootstrap over the
   pairs; pairing removes the trial-to-trial difficulty that both controllers share.
 - `wilson_interval`: the interval of a success rate over trials (one seed gives no spread over seeds to quote).

@@ -5,14 +5,16 @@ entries) and says, for one band and one pair of controllers:
 
 - survival: who survived more of the same trials, by how much (percentage points, with the exact interval that
   agrees with the test), on how many discordant pairs (the only ones that tell the two apart), whether the exact
-  McNemar test calls it significant, and, when it does not, how many paired trials would settle a difference that
-  large (80 % power);
+  McNemar test calls it significant, and, when it does not, that the two do not differ significantly (never that
+  they are alike: the interval beside it says what is left open) and how many paired trials would settle a
+  difference that large (80 % power);
 - time to fall: where the two fall at different times, who stays up longer (TTF, the fraction of the episode
   survived), by how much, with the Wilcoxon signed-rank test's verdict and the same count of trials;
 - tracking: who tracks the commanded velocity better over the seconds both survived (the common window), by how much,
   with the Wilcoxon signed-rank test's verdict and the same count of trials.
 
-The significance level is that of the paired tests' power figures (0.05); the sentences make no claim the table
+A side is called better only where its test rejects at 0.05 and leans to it (`called_better`, which ``wbc paper``'s
+verdicts use too); a sentence whose test does not reject opens by saying so. The sentences make no claim the table
 beside them does not show.
 """
 
@@ -20,13 +22,13 @@ from __future__ import annotations
 
 from wbc.arena.summary import SIGNIFICANCE, PairSummary, Summary, p_digits
 
-__all__ = ["ALPHA", "signed", "verdicts"]
+__all__ = ["ALPHA", "LOWER_IS_BETTER", "called_better", "leans", "signed", "split", "verdicts"]
 
 ALPHA = SIGNIFICANCE
 """The level a difference is called significant at."""
 
-_PRACTICAL = 1000
-"""Beyond this many paired trials to settle it, a difference is called too small to matter in practice."""
+LOWER_IS_BETTER = frozenset({"vlin_err", "vang_err", "vlin_err_common", "vang_err_common"})
+"""The metrics whose smaller value is the better one (tracking errors); success and TTF: larger is better."""
 
 _TRACKING = (("vlin_err_common", "linear velocity", "m/s", 3), ("vang_err_common", "yaw rate", "rad/s", 3))
 
@@ -38,15 +40,60 @@ def _p(p: float | None) -> str:
 
 
 def _settle(entry: PairSummary, what: str) -> str:
-    """What would settle a difference the test did not: the paired trials for 80 % power."""
+    """What would settle a difference the test did not: the paired trials for 80 % power.
+
+    Not rejecting is no evidence that the two are alike: the sentence never says there is no difference, only what
+    the interval beside it allows and how many trials would tell.
+    """
     if entry.n80 is None and entry.n < 2 and entry.test != "exact McNemar":
         return f"one pair shows nothing of how the differences spread: play more trials to size a {what} this large"
-    if entry.n80 and entry.n80 > _PRACTICAL:
-        return (f"a {what} this small would take about {entry.n80} paired trials to settle (80 % power): for "
-                "practical purposes there is none")
     if entry.n80:
-        return f"about {entry.n80} paired trials would settle a {what} this large (80 % power)"
-    return f"no number of paired trials up to the search's limit would settle a {what} this small"
+        return (f"these trials rule out neither side nor a difference anywhere in that interval; about {entry.n80} "
+                f"paired trials would settle a {what} this large (80 % power)")
+    return ("these trials rule out neither side nor a difference anywhere in that interval; no number of paired "
+            f"trials up to the search's limit would settle a {what} this small")
+
+
+def leans(entry: PairSummary) -> float | None:
+    """The side the paired test leans to, as the sign of B - A (0: neither); None without pairs.
+
+    Exact McNemar: the side with more discordant pairs (the sign of the difference in success). Wilcoxon signed-rank:
+    the sign of the matched-pairs rank-biserial correlation (`PairSummary.rank_biserial`), or of the Hodges-Lehmann
+    shift or the mean difference in a ``summary.json`` written before they were recorded.
+    """
+    if entry.diff is None:
+        return None
+    if entry.test == "exact McNemar" or entry.metric == "success_rate":
+        return entry.diff
+    for side in (entry.rank_biserial, entry.shift):
+        if side is not None:
+            return side
+    return entry.diff
+
+
+def split(entry: PairSummary, *, alpha: float = ALPHA) -> bool:
+    """A significant test that calls neither side better.
+
+    Its lean is to neither, or the mean difference is on the other side (most pairs lean one way and a few large
+    differences pull the mean the other).
+    """
+    side = leans(entry)
+    if entry.p is None or not entry.p < alpha or side is None or entry.diff is None:
+        return False
+    return side == 0.0 or (entry.diff != 0.0 and (side > 0) != (entry.diff > 0))
+
+
+def called_better(entry: PairSummary, *, higher_is_better: bool, alpha: float = ALPHA) -> str | None:
+    """The controller a comparison calls better, or None where it calls neither.
+
+    One side is called better only where the paired test rejects (p < `alpha`) and leans to it (`leans`), and the
+    mean difference does not lie on the other side (`split`); a mean difference of exactly 0 follows the test.
+    The arena's verdicts and ``wbc paper``'s read comparisons by this one rule.
+    """
+    side = leans(entry)
+    if entry.p is None or not entry.p < alpha or side is None or split(entry, alpha=alpha):
+        return None
+    return entry.b if (side > 0) == higher_is_better else entry.a
 
 
 def _significance(entry: PairSummary, test: str) -> str:
@@ -68,23 +115,24 @@ def _survival(entry: PairSummary) -> str:
     discordant = a_only + b_only
     lo, hi = entry.ci95
     if a_only == b_only:
-        head = f"{a} and {b} survive alike: {sa} of {n} paired trials each"
+        head = f"{a} and {b} survive the same number of these trials: {sa} of {n} paired trials each"
         if discordant == 0:
-            return (f"{head}, with no discordant pair (95 % interval of the difference [{100 * lo:+.0f}, "
-                    f"{100 * hi:+.0f}] points): these trials do not tell them apart")
+            return (f"{head}, with no discordant pair (95 % interval of the difference [{signed(100 * lo, 0)}, "
+                    f"{signed(100 * hi, 0)}] points): these trials do not tell them apart")
         return (f"{head}; {_pairs(discordant)} split evenly ({a_only} each); "
                 f"{_significance(entry, 'exact McNemar')}")
-    winner, loser = (b, a) if b_only > a_only else (a, b)
+    more, fewer = (b, a) if b_only > a_only else (a, b)
     won, lost = max(a_only, b_only), min(a_only, b_only)
-    s_win, s_lose = (sb, sa) if winner == b else (sa, sb)
+    s_more, s_fewer = (sb, sa) if more == b else (sa, sb)
     diff = abs(entry.diff) * 100.0
-    lo_w, hi_w = (lo, hi) if winner == b else (-hi, -lo)
-    text = (f"{winner} survives more than {loser}: {s_win} against {s_lose} of {n} paired trials ({diff:+.1f} points, "
-            f"95 % interval [{signed(100 * lo_w, 1)}, {signed(100 * hi_w, 1)}]); of {_pairs(discordant)} {winner} "
-            f"alone survived {won} and {loser} alone {lost}; {_significance(entry, 'exact McNemar')}")
-    if not (entry.p is not None and entry.p < ALPHA):
-        text += f"; {_settle(entry, 'difference')}"
-    return text
+    lo_m, hi_m = (lo, hi) if more == b else (-hi, -lo)
+    figures = (f"{s_more} against {s_fewer} of {n} paired trials ({diff:+.1f} points, 95 % interval "
+               f"[{signed(100 * lo_m, 1)}, {signed(100 * hi_m, 1)}]); of {_pairs(discordant)} {more} alone survived "
+               f"{won} and {fewer} alone {lost}; {_significance(entry, 'exact McNemar')}")
+    if entry.significant:
+        return f"{more} survives more than {fewer}: {figures}"
+    return (f"{a} and {b} do not differ significantly in survival: {more} {figures}; "
+            f"{_settle(entry, 'difference')}")
 
 
 def signed(value: float, decimals: int) -> str:
@@ -93,39 +141,44 @@ def signed(value: float, decimals: int) -> str:
     A nonzero value too small for the decimals is in scientific notation (``-1.2e-04``), never a ``-0.000`` that a
     significant test would call better.
     """
-    if value != 0.0 and abs(value) < 0.5 * 10.0 ** -decimals:
+    if value == 0.0:
+        value = 0.0  # a negated zero (the lower bound of [-0.0, ...]) is written +0.000
+    elif abs(value) < 0.5 * 10.0 ** -decimals:
         return f"{value:+.1e}"
     return f"{value:+.{decimals}f}"
 
 
 def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decimals: int, *,
                      higher_is_better: bool, subject: str) -> str:
-    """The sentence of a difference of means read off `entry`: the better side first, its interval and test.
+    """The sentence of a difference of means read off `entry`: the side the test calls better first, or none.
 
-    `head` is the claim with ``{better}`` and ``{worse}`` in it; `what` names the means (``mean error``) and `unit`
-    their unit (empty for a share); the better side has the higher mean when `higher_is_better`, else the lower. A
-    difference too small for the decimals is written in scientific notation, never as a -0.000 called better.
+    `head` is the claim with ``{better}`` and ``{worse}`` in it, said only where the test rejects and leans to that
+    side (`called_better`; a mean difference of exactly 0 follows the test's lean); `what` names the means (``mean
+    error``) and `unit` their unit (empty for a share); the better side has the higher mean when `higher_is_better`,
+    else the lower. A difference too small for the decimals is written in scientific notation, never as a -0.000
+    called better.
 
     A significant test whose side (the sign of its rank-biserial correlation, `PairSummary.rank_biserial`) is not
     the mean's calls neither better: most pairs lean one way and a few large differences pull the mean the other
-    (`_split`, which names the `subject` compared).
+    (`_split`, which names the `subject` compared). A test that does not reject opens with that, ``{a} and {b} do
+    not differ significantly in {subject}``, and says what the interval leaves open (`_settle`).
     """
-    b_better = (entry.diff > 0) == higher_is_better
-    lean = entry.rank_biserial if entry.rank_biserial is not None else entry.shift  # a summary.json of before
-    if entry.p is not None and entry.p < ALPHA and lean is not None and (lean == 0.0 or (lean > 0) != (entry.diff > 0)):
-        return _split(entry, lean, subject, unit, decimals, higher_is_better=higher_is_better)
-    better, worse = (entry.b, entry.a) if b_better else (entry.a, entry.b)
-    m_better, m_worse = (entry.mean_b, entry.mean_a) if b_better else (entry.mean_a, entry.mean_b)
+    if split(entry):
+        return _split(entry, leans(entry), subject, unit, decimals, higher_is_better=higher_is_better)
+    better = called_better(entry, higher_is_better=higher_is_better)
+    b_first = better == entry.b if better is not None else (entry.diff > 0) == higher_is_better
+    first, second = (entry.b, entry.a) if b_first else (entry.a, entry.b)
+    m_first, m_second = (entry.mean_b, entry.mean_a) if b_first else (entry.mean_a, entry.mean_b)
     lo, hi = entry.ci95
-    lo_b, hi_b = (lo, hi) if b_better else (-hi, -lo)
+    lo_f, hi_f = (lo, hi) if b_first else (-hi, -lo)
     unit = f" {unit}" if unit else ""
-    text = (f"{head.format(better=better, worse=worse)}: {what} {m_better:.{decimals}f} against "
-            f"{m_worse:.{decimals}f}{unit} on {entry.n} trials (difference {signed(m_better - m_worse, decimals)}, "
-            f"95 % bootstrap interval [{signed(lo_b, decimals)}, {signed(hi_b, decimals)}]); "
-            f"{_significance(entry, 'Wilcoxon signed-rank')}")
-    if not (entry.p is not None and entry.p < ALPHA):
-        text += f"; {_settle(entry, 'difference')}"
-    return text
+    figures = (f"{what} {m_first:.{decimals}f} against {m_second:.{decimals}f}{unit} on {entry.n} trials (difference "
+               f"{signed(m_first - m_second, decimals)}, 95 % bootstrap interval [{signed(lo_f, decimals)}, "
+               f"{signed(hi_f, decimals)}]); {_significance(entry, 'Wilcoxon signed-rank')}")
+    if better is not None:
+        return f"{head.format(better=first, worse=second)}: {figures}"
+    return (f"{entry.a} and {entry.b} do not differ significantly in {subject}: {first} {figures}; "
+            f"{_settle(entry, 'difference')}")
 
 
 def _split(entry: PairSummary, side: float, subject: str, unit: str, decimals: int, *,
@@ -150,16 +203,17 @@ def _split(entry: PairSummary, side: float, subject: str, unit: str, decimals: i
 def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
     if not entry.n or entry.diff is None:
         return None
-    if entry.diff == 0.0:
-        return f"{entry.a} and {entry.b} track the {what} alike over the seconds both survived ({entry.n} trials)"
+    subject = f"how they track the {what} over the seconds both survived"
+    if entry.diff == 0.0 and not entry.significant:
+        return (f"{entry.a} and {entry.b} have the same mean error in the {what} over the seconds both survived "
+                f"({entry.n} trials); {_significance(entry, 'Wilcoxon signed-rank')}")
     return _mean_difference(entry, f"{{better}} tracks the {what} better than {{worse}} over the seconds both survived",
-                            "mean error", unit, decimals, higher_is_better=False,
-                            subject=f"how they track the {what} over the seconds both survived")
+                            "mean error", unit, decimals, higher_is_better=False, subject=subject)
 
 
 def _time_to_fall(entry: PairSummary) -> str | None:
-    """Who stays up longer, or None where the two survive the same share of every episode (nothing to say)."""
-    if not entry.n or entry.diff is None or entry.diff == 0.0:
+    """Who stays up longer, or None where the mean times are the same and the test does not reject (nothing to say)."""
+    if not entry.n or entry.diff is None or (entry.diff == 0.0 and not entry.significant):
         return None
     return _mean_difference(entry, "{better} stays up longer than {worse}",
                             "mean TTF (the share of the episode survived)", "", 3, higher_is_better=True,

@@ -3,15 +3,17 @@
 `format_paper_table` is what ``wbc paper TABLE`` prints and writes to ``paper.txt``:
 
 1. a header: the scenario (name, version, file, hash, published or not), the size of the run and the paper's
-   protocol, and what a cell shows (ours: mean ± std over seeds, or from one seed the mean and its 95 % interval
-   over trials; the paper's: mean ± std over its 5 seeds);
+   protocol, and what a cell shows (ours: mean ± std over seeds, success with its Wilson interval over all the
+   trials, or from one seed the mean and its 95 % interval over trials; the paper's: mean ± std over its 5 seeds);
 2. one block per metric of the table, a line per paper row followed by our contenders standing beside it (the
    learned and the model-based family), a column per band (the paper's figure beside a band that commands what its
    column did: `wbc.tools.paper.tables.paper_column`); rows of
    ours that the paper does not have (the distilled MPC beside Table III's baselines) come last, their paper cells
    "-";
-3. the table's paired comparisons, B - A on the same trials, with the 95 % bootstrap interval, the test's p-value
-   (exact McNemar for success, Wilcoxon signed-rank otherwise), the discordant pairs and n80, and a verdict per band;
+3. the table's paired comparisons, B - A on the same trials (tracking over the seconds both survived, the arena's
+   common window, where the cells are over each trial's own time), with the 95 % interval, the test's p-value
+   (exact McNemar for success, Wilcoxon signed-rank otherwise), the discordant pairs and n80, and a verdict per band
+   (a side is called better by the arena's rule, `wbc.arena.verdict.called_better`);
 4. where each contender fails, per band (`wbc.arena.breakdown`), and the push-recovery curve's file;
 5. the run time, each controller's time per trial, and the paper's protocol's cost estimated from them.
 """
@@ -25,6 +27,7 @@ from collections.abc import Sequence
 from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.report import LABELS, cell_text, n80_text, number_text, p_text, resumed_note, signed_text
 from wbc.arena.summary import PairSummary
+from wbc.arena.verdict import LOWER_IS_BETTER, called_better, leans, split
 from wbc.tools.paper.paper_numbers import PaperValue
 from wbc.tools.paper.result import PaperComparison, PaperTableResult
 from wbc.tools.paper.tables import Contender
@@ -34,7 +37,6 @@ __all__ = ["ALPHA", "display_name", "format_paper_table", "verdict"]
 ALPHA = 0.05
 """The level the verdicts are read at (two-sided)."""
 
-_LOWER_IS_BETTER = {"vlin_err", "vang_err"}
 _WIDTH = 118
 
 
@@ -60,19 +62,28 @@ def _paper_cell(value: PaperValue | None, metric: str) -> str:
 def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
     """One comparison in words: which side is better, or that the test finds no difference and what would.
 
-    Success and TTF: larger is better; tracking errors: smaller is better. "Better" only when the paired test's
-    p-value is at most `alpha`; otherwise "no significant difference", with n80 (the pairs that would detect the
-    observed difference with 80 % power), or, from one pair of a continuous metric, that one pair cannot tell.
+    Success and TTF: larger is better; tracking errors: smaller is better. A side is "better" by the arena's rule
+    (`wbc.arena.verdict.called_better`): the paired test's p-value is below `alpha` and the test leans to that side,
+    the mean difference not on the other. A significant test whose lean and mean difference disagree calls neither
+    better. Otherwise "no significant difference", with n80 (the pairs that would detect the observed difference with
+    80 % power), or, from one pair of a continuous metric, that one pair cannot tell.
     """
     metric, p, diff = entry.metric, entry.p, entry.diff
     what = LABELS[metric].split(" [")[0].removesuffix(" %")
     if p is None or diff is None:
         return f"{what}: no pairs"
-    if p <= alpha and diff != 0.0:
-        b_better = (diff < 0.0) if metric in _LOWER_IS_BETTER else (diff > 0.0)
-        winner = entry.b if b_better else entry.a
-        unit = " points" if metric == "success_rate" else ""
+    unit = " points" if metric == "success_rate" else ""
+    higher_is_better = metric not in LOWER_IS_BETTER
+    winner = called_better(entry, higher_is_better=higher_is_better, alpha=alpha)
+    if winner is not None:
         return f"{what}: {winner} better ({signed_text(diff, metric)}{unit}, p = {p_text(p)})"
+    if split(entry, alpha=alpha):
+        side = leans(entry)
+        ranks = ("lean to neither" if not side else
+                 f"favour {entry.b if (side > 0) == higher_is_better else entry.a}")
+        by_mean = entry.b if (diff > 0) == higher_is_better else entry.a
+        return (f"{what}: neither called better (p = {p_text(p)}; the pairs' ranks {ranks}, the mean difference "
+                f"({signed_text(diff, metric)}{unit}) favours {by_mean})")
     n80 = n80_text(entry)
     need = ("" if n80 == "-" else
             "; one pair shows no spread to tell how many pairs would detect the observed difference" if n80 == "n/a"
@@ -134,9 +145,11 @@ def _band_columns(result: PaperTableResult) -> list[tuple[str, str]]:
 
 
 def _comparison_lines(result: PaperTableResult) -> list[str]:
-    lines = _wrap("paired comparisons, B - A on the same trials (success and its interval in points; p: exact McNemar "
-                  "for success, Wilcoxon signed-rank otherwise, two-sided, each comparison on its own; n80: pairs for "
-                  "80 % power at the observed difference)")
+    lines = _wrap("paired comparisons, B - A on the same trials (success and its interval in points; tracking errors "
+                  "over the seconds both survived on each trial, 'common', where the cells above are over each "
+                  "trial's own survived time; p: exact McNemar for success, Wilcoxon signed-rank otherwise, "
+                  "two-sided, each comparison on its own, not corrected for the table's many; n80: pairs for 80 % "
+                  "power at the observed difference)")
     names = {c.key: display_name(c) for c in result.contenders}
     questions: dict[tuple[str, str], list[PaperComparison]] = {}
     for comparison in result.comparisons:
@@ -189,7 +202,8 @@ def format_paper_table(result: PaperTableResult) -> str:
     lines += _wrap(f"ours: {result.trials} trials x {len(result.seeds)} seed{'s' if not one_seed else ''} per band "
                    f"and controller, {sc['duration_s']:g} s each; cells: "
                    + ("mean [95 % interval over trials: Wilson for success, bootstrap otherwise]" if one_seed else
-                      "mean ± std over seeds (each seed's trials averaged first)")
+                      "mean ± std over seeds (each seed's trials averaged first: the spread of the seeds' means, "
+                      "not the mean's uncertainty), success with its Wilson 95 % interval over all the trials")
                    + f". Paper: {spec.paper_protocol}; cells: mean ± std over seeds where it gives one.")
     for c in result.contenders:
         if c.controller is None:

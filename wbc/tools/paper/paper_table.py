@@ -3,7 +3,8 @@
 `run_paper_table` resolves the table's contenders (`wbc.tools.paper.tables`), plays them on the same trials of the
 scenario (`wbc.arena.compare.run_arena`: resumable, every trial stored as it finishes, the arena's report with the
 breakdown of where each contender fails and the push-recovery curve), then computes the table's paired comparisons
-(difference, its 95 % interval, exact McNemar or Wilcoxon p-value, n80: `wbc.arena.report.compare_pair`) and
+(difference, its 95 % interval, exact McNemar or Wilcoxon p-value, n80: `wbc.arena.report.compare_pair`; tracking
+over the seconds both contenders survived, `PaperTableSpec.paired_metrics`) and
 writes ``paper.txt`` (what the command prints, `wbc.tools.paper.format.format_paper_table`) and ``paper.json`` beside
 the arena's files. The results directory is held (`wbc.arena.results.hold_results_dir`) from before the arena reads it
 until both are written: a ``wbc paper --resume`` or ``wbc compare --resume`` on it meanwhile is refused, as during the
@@ -155,7 +156,7 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
             for band in scenario.bands:
                 cell_a = [r for r in by_controller.get(a, []) if r.band == band]
                 cell_b = [r for r in by_controller.get(b, []) if r.band == band]
-                for metric in spec.metrics:
+                for metric in spec.paired_metrics:
                     pair = compare_pair(cell_a, cell_b, a=contrast.a, b=contrast.b, band=band, metric=metric)
                     comparisons.append(PaperComparison(question=contrast.question, pair=pair))
         wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}

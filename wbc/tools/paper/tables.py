@@ -35,7 +35,10 @@ from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.stages import BASELINES
 from wbc.tools.paper.paper_numbers import TABLE_I, TABLE_II, TABLE_III, PaperValue
 
-__all__ = ["Contender", "Contrast", "PaperTableSpec", "TABLES", "paper_column", "resolve_contenders"]
+__all__ = ["PAIRED_TRACKING", "Contender", "Contrast", "PaperTableSpec", "TABLES", "paper_column", "resolve_contenders"]
+
+PAIRED_TRACKING: Mapping[str, str] = {"vlin_err": "vlin_err_common", "vang_err": "vang_err_common"}
+"""A table's tracking metric -> the one its paired comparisons test: over the seconds both controllers survived."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -93,7 +96,7 @@ class PaperTableSpec:
         contenders: our rows, in the order they are played (printed grouped by the paper's rows).
         crouched_contenders: the same rows with the learned ones' crouched posture variants (``--crouched``: as first
             trained, without the posture term).
-        contrasts: the paired comparisons printed under the table.
+        contrasts: the paired comparisons printed under the table, on `paired_metrics`.
         paper_protocol: how the paper evaluated it (seeds, trials, episode length).
     """
 
@@ -109,6 +112,16 @@ class PaperTableSpec:
     crouched_contenders: tuple[Contender, ...]
     contrasts: tuple[Contrast, ...]
     paper_protocol: str
+
+    @property
+    def paired_metrics(self) -> tuple[str, ...]:
+        """The metrics the paired comparisons test: `metrics` with each tracking error over the common window.
+
+        A cell's tracking error is over each trial's own survived time, as the paper reports it; two controllers'
+        own times on a trial differ, so the paired test compares them over the seconds both survived
+        (`PAIRED_TRACKING`), as the arena does.
+        """
+        return tuple(PAIRED_TRACKING.get(m, m) for m in self.metrics)
 
 
 def _arm_rows(crouched: bool = False) -> tuple[Contender, ...]:
