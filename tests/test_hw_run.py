@@ -605,36 +605,46 @@ def test_sigterm_to_the_commands_group_during_the_settle_after_a_trip_keeps_the_
         go1: UnitreeEmulator, tmp_path: Path) -> None:
     """The trial is over at the trip: SIGTERM to the whole group (the command and its I/O process, which closes the
     robot itself) during the 30 s settle after it ends the command with the trial's results written whole. The I/O
-    process's stop, met in the settle and in the close, threw them away ("no results were written")."""
-    proc = _standing_hw_run(go1, tmp_path, "--settle", "30")
-    lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(line.decode() for line in proc.stderr), daemon=True)
-    reader.start()
+    process's stop, met in the settle and in the close, threw them away ("no results were written").
 
-    def said(text: str) -> bool:
-        for _ in range(6000):  # bounded (60 s)
-            if proc.poll() is not None or any(text in line for line in list(lines)):
-                return proc.poll() is None
-            time.sleep(0.01)
-        return False
+    The command runs on the real clock: a machine busy enough to hold the emulator's thread off for 0.1 s trips the
+    stand-up's ramp on a stale state (exit 2, nothing played), as it should. That start is made again, up to three
+    times: what is checked begins at the trial's trip."""
+    for attempt in range(3):
+        out = tmp_path / f"try-{attempt}"
+        out.mkdir()
+        proc = _standing_hw_run(go1, out, "--settle", "30")
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda p=proc, ls=lines: ls.extend(line.decode() for line in p.stderr),
+                                  daemon=True)
+        reader.start()
 
-    try:
-        if said("-> run (ramp_done)"):  # the stand-up is done: the trial begins
-            time.sleep(1.0)  # well into the trial (its --seconds are 20): a trip before it is the stand-up's
-            go1.inject(Fault.FALL)  # the trunk reads rolled over: the layer trips on tilt and damps the legs
-            if said("-> damped (tilt)"):  # the trial ends at the tick that tripped; the settle follows
-                time.sleep(0.5)  # in the settle (30 s), past the trial's last tick
-                os.killpg(proc.pid, signal.SIGTERM)
-        proc.wait(timeout=60)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-        go1.clear()
-    reader.join(timeout=10)
-    err = "".join(lines)
+        def said(text: str, proc: subprocess.Popen = proc, lines: list[str] = lines) -> bool:
+            for _ in range(6000):  # bounded (60 s)
+                if proc.poll() is not None or any(text in line for line in list(lines)):
+                    return proc.poll() is None
+                time.sleep(0.01)
+            return False
+
+        try:
+            if said("-> run (ramp_done)"):  # the stand-up is done: the trial begins
+                time.sleep(1.0)  # well into the trial (its --seconds are 20): a trip before it is the stand-up's
+                go1.inject(Fault.FALL)  # the trunk reads rolled over: the layer trips on tilt and damps the legs
+                if said("-> damped (tilt)"):  # the trial ends at the tick that tripped; the settle follows
+                    time.sleep(0.5)  # in the settle (30 s), past the trial's last tick
+                    os.killpg(proc.pid, signal.SIGTERM)
+            proc.wait(timeout=60)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+            go1.clear()
+        reader.join(timeout=10)
+        err = "".join(lines)
+        if not (proc.returncode == 2 and "nothing was played" in err and attempt < 2):
+            break
     assert proc.returncode == 130, err
-    (results,) = [d for d in tmp_path.iterdir() if (d / "trials.csv").exists()] or [err]
+    (results,) = [d for d in out.iterdir() if (d / "trials.csv").exists()] or [err]
     assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted after the trial; the robot was closed into "
                                             f"damping; its results are complete in {results}")
     (record,) = TrialRecord.read_csv(results / "trials.csv")
@@ -716,7 +726,8 @@ def test_a_request_to_end_during_the_settle_after_an_estop_keeps_the_trials_resu
         run_hardware_trial(cfg, keys=keys, before_connect=lambda hardware, spec: emu.reset(), build=stepped_go1.build)
     assert isinstance(stopped.value, hw_trial.ResultsInterrupted), "the trial's results were thrown away"
     assert stopped.value.complete and stopped.value.out_dir == out
-    assert "the settle after the trip is cut short and the robot is closed into damping" in capsys.readouterr().err
+    said = capsys.readouterr().err
+    assert "the settle after the trip or e-stop is cut short and the robot is closed into damping" in said
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.outcome == "operator_stop" and 1.0 <= record.fall_time_s <= 1.0 + TICK + TIME_EPS
     assert all((out / name).is_file() for name in ("hardware.json", "summary.json", "report.md"))

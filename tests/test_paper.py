@@ -170,7 +170,6 @@ def test_table3_lists_its_baselines_and_says_which_are_missing(tiny, tmp_path):
     assert "95.73" in text and "84.73" in text  # the paper's "Ours"
     # 2 trials per controller on one worker: the estimate leaves out the first (the slower), which compiles
     assert set(result.warm_wall_s) == set(result.trial_wall_s) and not result.estimate_includes_compile
-    assert all(result.warm_wall_s[c] <= s for c, s in result.trial_wall_s.items())
     assert result.paper_protocol_cpu_h == pytest.approx(
         sum(result.warm_wall_s.values()) * PAPER_TRIALS_PER_BAND * 2 / 3600)
     assert "each worker's first trial of a controller left out" in " ".join(text.split())  # wrapped

@@ -824,6 +824,7 @@ def _queued_bytes(port: int) -> int:
     raise AssertionError(f"no UDP socket on 127.0.0.1:{port}")
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the kernel's drop count, /proc/net/udp: Linux's")
 def test_the_emulator_logs_how_many_frames_its_socket_dropped_before_each() -> None:
     """A starved emulator thread (held here by its own lock, as a busy machine holds it off the CPU) finds its socket's
     buffer full: the kernel drops what does not fit. Each logged frame keeps the count of those dropped before it, so a

@@ -341,7 +341,8 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
     # close (`Robot.close`)
     settling = [False]
     after_the_trial = DeferredInterrupts(
-        lambda what: f"wbc hw run: {what}: {'the settle after the trip is cut short and ' if settling[0] else ''}"
+        lambda what: f"wbc hw run: {what}: "
+                     f"{'the settle after the trip or e-stop is cut short and ' if settling[0] else ''}"
                      f"the robot is closed into damping; the trial's results are being written to {out} and the run "
                      "ends once they are (again: stop at once, leaving them incomplete)")
     io_stopped: list[IoProcessStopped] = []  # a request to end after the trial that stopped its I/O process

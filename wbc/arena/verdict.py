@@ -48,9 +48,9 @@ def _settle(entry: PairSummary, what: str) -> str:
     if entry.n80 is None and entry.n < 2 and entry.test != "exact McNemar":
         return f"one pair shows nothing of how the differences spread: play more trials to size a {what} this large"
     if entry.n80:
-        return (f"these trials rule out neither side nor a difference anywhere in that interval; about {entry.n80} "
+        return (f"the test leaves the difference open (not rejecting is no evidence of none); about {entry.n80} "
                 f"paired trials would settle a {what} this large (80 % power)")
-    return ("these trials rule out neither side nor a difference anywhere in that interval; no number of paired "
+    return ("the test leaves the difference open (not rejecting is no evidence of none); no number of paired "
             f"trials up to the search's limit would settle a {what} this small")
 
 

@@ -76,14 +76,19 @@ class ServerConfig:
     start_timeout_s: float = 20.0
 
 
-_EVERY_INTERFACE = ("0.0.0.0", "::", "")
+def _every_interface(host: str) -> bool:
+    """Whether `host` is a wildcard address (0.0.0.0, ::, or another spelling of them): every interface."""
+    try:
+        return ipaddress.ip_address(host).is_unspecified
+    except ValueError:  # a name, not an address
+        return False
 
 
 def web_address(host: str | None, port: int) -> str:
     """The viewer's page on `host` as a browser opens it: an IPv6 address in brackets, a wildcard as loopback."""
     host = host or LOOPBACK
-    if host in _EVERY_INTERFACE:
-        host = LOOPBACK if host != "::" else "::1"
+    if _every_interface(host):
+        host = LOOPBACK if ":" not in host else "::1"
     if ":" in host:
         host = f"[{host}]"
     return f"http://{host}:{port}/static/"
@@ -92,8 +97,8 @@ def web_address(host: str | None, port: int) -> str:
 def listening_on(host: str | None) -> str:
     """Where a viewer listening on `host` can be reached from, for the line that prints its address."""
     host = host or LOOPBACK
-    if host in _EVERY_INTERFACE:
-        return f"every interface ({host or '0.0.0.0'}): any machine that reaches this one can open it"
+    if _every_interface(host):
+        return f"every interface ({host}): any machine that reaches this one can open it"
     return f"{host} only"
 
 

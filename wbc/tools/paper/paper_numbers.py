@@ -5,7 +5,8 @@ the arena's success rates; TTF as the fraction of the episode survived; tracking
 no unit; its text defines them as L2 distances of velocities, m/s and rad/s). Table I and II cells are mean and
 standard deviation over 5 seeds; Table III gives means only. Columns are the paper's push-force bands (Tables I and
 III: 200-300 and 300-400, the paper's force unit, which its footnote doubts) or forward speeds (Table II: 1, 1.25
-and 1.5 m/s); a scenario's bands are matched to them by position.
+and 1.5 m/s); a scenario's band stands beside the column that commands what it does
+(`wbc.tools.paper.tables.paper_column`).
 """
 
 from __future__ import annotations
