@@ -11,6 +11,8 @@ run is bounded by its ``--seconds``.
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import importlib
 import io
 import json
@@ -229,12 +231,23 @@ def test_check_freezes_the_heap_once_all_is_built_before_it_connects(
     robot is built and before anything is sent to it."""
     import wbc.tools.hardware_check as hardware_check
 
-    frozen: list[int] = []  # the frames on the wire when the heap was frozen
-    monkeypatch.setattr(hardware_check, "freeze_heap", lambda: frozen.append(len(stepped.emu.commands())) or 0)
+    frozen: list[tuple[int, int]] = []  # the frames on the wire when the heap was frozen, and the objects frozen
+    real = hardware_check.frozen_heap
+
+    @contextlib.contextmanager
+    def watched() -> Iterator[int]:
+        with real() as count:
+            frozen.append((len(stepped.emu.commands()), gc.get_freeze_count()))
+            yield count
+
+    monkeypatch.setattr(hardware_check, "frozen_heap", watched)
+    gc.unfreeze()  # as a library caller's heap would be: not frozen
     robot = stepped.emu.config.robot
     args = build_parser().parse_args(["hw", "check", "--robot", robot, "--target", "127.0.0.1:9", "--seconds", "0.1"])
     assert hw_check(args, build=stepped.build) == 0
-    assert frozen == [0] and stepped.emu.commands()
+    assert [f for f, _ in frozen] == [0] and frozen[0][1] > 0 and stepped.emu.commands()
+    # a library call: once it returns, what it froze is the collector's again (what it built and dropped is freed)
+    assert gc.get_freeze_count() == 0
 
 
 def test_check_marks_a_joint_beyond_its_range_apart_from_one_beyond_the_safety_margin(

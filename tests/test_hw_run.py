@@ -14,7 +14,9 @@ by its ``--seconds``. What reached the robot is read from the emulator's log of 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import gc
 import importlib
 import io
 import json
@@ -35,6 +37,7 @@ import numpy as np
 import pytest
 from conftest import Stepped, hw_run_arm_in_lockstep, terminal_signals_in_child
 
+from wbc.arena import hw_trial
 from wbc.arena.episode import Episode
 from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import ScriptedKeys
@@ -152,13 +155,28 @@ def _check_stand_trial(out: Path, printed: pytest.CaptureFixture, io_process: bo
 
 
 def test_stand_trial_over_the_wire_writes_a_results_dir_with_estimator_metrics(
-        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
     out = tmp_path / "hw"
     args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
                                       "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--out", str(out),
                                       "--no-io-process"])
+    frozen: list[int] = []  # the objects frozen while the trial played
+    real = hw_trial.frozen_heap
+
+    @contextlib.contextmanager
+    def watched() -> Iterator[int]:
+        with real() as count:
+            frozen.append(gc.get_freeze_count())
+            yield count
+
+    monkeypatch.setattr(hw_trial, "frozen_heap", watched)
+    gc.unfreeze()  # as a library caller's heap would be: not frozen
     assert hw_run(args, build=stepped_go1.build) == 0
     _check_stand_trial(out, capsys.readouterr(), False, stepped_go1.emu.commands())
+    # the heap was frozen once all was built (the robot's clock is a wall clock: the test's), and handed back to the
+    # collector once the robot closed, for a caller that plays trial after trial
+    assert len(frozen) == 1 and frozen[0] > 0 and gc.get_freeze_count() == 0
     hardware = json.loads((out / "hardware.json").read_text())
     link = hardware["link"]
     # on the trial's clock, the link sent a frame every period and was answered every period, and the controller's

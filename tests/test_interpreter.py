@@ -61,3 +61,35 @@ def test_freeze_heap_exempts_what_is_alive_and_still_collects_new_garbage() -> N
     # reads of the count (seen once: 673302 frozen, 673300 a moment later)
     done = subprocess.run([sys.executable, "-c", _FREEZE_CHECK], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
+
+
+_FROZEN_FOR_A_CALL = textwrap.dedent("""
+    import gc
+
+    from wbc.hardware.interpreter import freeze_heap, frozen_heap
+
+    class Node:
+        def __init__(self):
+            self.me = self  # a reference cycle: only the collector frees it
+
+    assert gc.get_freeze_count() == 0
+    with frozen_heap() as count:
+        assert count > 0 and gc.get_freeze_count() > 0  # (objects frozen alive then may die since: not equal)
+        built = [Node() for _ in range(100)]
+        freeze_heap()  # frozen again within the call (as a trial freezes what it built)
+    del built
+    assert gc.get_freeze_count() == 0  # handed back to the collector
+    assert gc.collect() >= 100  # what the call built, froze and dropped is freed
+    freeze_heap()  # a caller's own freeze, for its own loop
+    frozen = gc.get_freeze_count()
+    with frozen_heap():
+        pass
+    assert gc.get_freeze_count() >= frozen > 0  # left as the caller had it
+    print("ok")
+""")
+
+
+def test_frozen_heap_hands_the_heap_back_after_a_call_unless_the_caller_had_frozen_it() -> None:
+    # a fresh interpreter, as above
+    done = subprocess.run([sys.executable, "-c", _FROZEN_FOR_A_CALL], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr

@@ -76,7 +76,7 @@ from wbc.estimation.filter import DEFAULT_CONTACT_FORCE
 from wbc.hardware.capabilities import HasLinkStats, HasRealtimeGrant, LinkStatsLike, WallClock
 from wbc.hardware.dynamixel.arm_fault import ArmFault
 from wbc.hardware.hardware_robot import HARDWARE_ROBOTS, HardwareRobot, HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.interpreter import freeze_heap
+from wbc.hardware.interpreter import frozen_heap
 from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import RealtimeGrant, RealtimeRequest, controller_realtime
@@ -370,8 +370,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 if before_connect is not None:
                     before_connect(hardware, spec)
                 if wall:
-                    # all is built: a full collection would stall the link and bus threads (interpreter.py)
-                    freeze_heap()
+                    # all is built: a full collection would stall the link and bus threads (interpreter.py); handed
+                    # back to the collector once the robot is closed, for a caller that plays trial after trial
+                    stack.enter_context(frozen_heap())
                 connected_at[0] = wall_time()
                 grant = stack.enter_context(scheduling)
                 opening = True

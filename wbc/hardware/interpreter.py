@@ -31,13 +31,14 @@ process, the benches' emulators): that, and MuJoCo's rendering off, since none o
 
 from __future__ import annotations
 
+import contextlib
 import gc
 import os
 import sys
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
-__all__ = ["REALTIME_SWITCH_INTERVAL_S", "SINGLE_THREAD_BLAS_ENV", "child_process_env", "freeze_heap",
+__all__ = ["REALTIME_SWITCH_INTERVAL_S", "SINGLE_THREAD_BLAS_ENV", "child_process_env", "freeze_heap", "frozen_heap",
            "realtime_switch_interval", "wbc_interpreter_env"]
 
 REALTIME_SWITCH_INTERVAL_S = 0.0005  # [s] a quarter of the link's 2 ms period
@@ -101,3 +102,23 @@ def freeze_heap() -> int:
     gc.collect()
     gc.freeze()
     return gc.get_freeze_count()
+
+
+@contextlib.contextmanager
+def frozen_heap() -> Iterator[int]:
+    """`freeze_heap` for the span of a `with` block, for a library call that talks to motors and then returns.
+
+    On leaving, the objects frozen are handed back to the collector (`gc.unfreeze`), so that what the call built and
+    dropped is freed; when the heap was already frozen on entry (the caller froze it, for its own loop), it stays so,
+    since the collector cannot tell one freeze from another.
+
+    Yields:
+        How many objects are frozen.
+    """
+    already = gc.get_freeze_count() > 0
+    count = freeze_heap()
+    try:
+        yield count
+    finally:
+        if not already:
+            gc.unfreeze()

@@ -21,7 +21,7 @@ from wbc.hardware.capabilities import SafetyEventLike, WallClock
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel import ArmBusStats, ArmMotorStatus, DynamixelArm, DynamixelArmConfig, ServoReading
 from wbc.hardware.hardware_robot import HardwareRobot, HardwareRobotConfig, build_hardware_robot
-from wbc.hardware.interpreter import freeze_heap
+from wbc.hardware.interpreter import frozen_heap
 from wbc.hardware.quadruped_arm_robot import QuadrupedArmRobot
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent
 from wbc.hardware.unitree import DecodeStats, LinkStats, LowStateExtras
@@ -157,8 +157,14 @@ def check_hardware(cfg: HardwareCheckConfig, *,
     if confirm is not None:
         confirm(hardware)
     # all is built: a full collection of the start-up heap would stall the link and bus threads for 100 ms or more,
-    # long enough for the layer to call a live state stale (`wbc.hardware.interpreter`)
-    freeze_heap()
+    # long enough for the layer to call a live state stale (`wbc.hardware.interpreter`); a library call, the check
+    # hands the heap back to the collector when it returns
+    with frozen_heap():
+        return _check_built(cfg, hardware)
+
+
+def _check_built(cfg: HardwareCheckConfig, hardware: HardwareRobot) -> HardwareCheck:
+    """`check_hardware` once the robot is built and the heap frozen: connect, read, close."""
     events: list[SafetyEvent] = []
     # Read through the safety layer, never written to: its checks judge each state, and a trip only sends damping.
     safe = SafeRobot(hardware.robot, replace(cfg.safety, position_table=hardware.position_table,
