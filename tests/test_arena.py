@@ -413,6 +413,31 @@ def test_cli_run_prints_the_table_and_writes_the_directory(small, tmp_path, caps
     assert summary["controllers"]["stand"]["bands"]["soft"]["trials"] == 1
 
 
+def test_controllers_on_different_arms_are_said_to_play_different_robots(small, tmp_path, capsys):
+    """Every controller plays the same trials, each on the robot its arm mode builds: a comparison of a controller
+    without an arm and one with it was printed and paired as any other, the robots' difference (1.8 kg) said nowhere
+    but in run.json. The run says so before it plays and under its verdict, and the report names each one's robot."""
+    out = tmp_path / "arms"
+    assert main(["compare", "stand-noarm", "stand-locked", "--scenario", str(small), "--trials", "1", "--band",
+                 "soft", "--out", str(out), "--quiet", "--workers", "1"]) == 0
+    printed = capsys.readouterr()
+    said = re.search(r"stand-noarm: a1-wx200 with no arm \((\d+\.\d\d) kg\); stand-locked: a1-wx200 with its arm "
+                     r"locked \((\d+\.\d\d) kg\)", printed.err)
+    assert said and float(said[1]) < float(said[2]), printed.err  # the arm's mass, carried by one of them only
+    assert "wbc: note: the controllers play different robots" in printed.err
+    after = " ".join(printed.out[printed.out.index("verdict ("):].split())
+    assert "note: the controllers play different robots" in after and "play them in one arm mode" in after
+    report = (out / "report.md").read_text()
+    assert (f"- **robots**: stand-noarm: a1-wx200 with no arm ({said[1]} kg); stand-locked: a1-wx200 with its arm "
+            f"locked ({said[2]} kg) (NOT the same robot for every controller)") in report
+    # the same arm mode: one robot, nothing to say
+    assert main(["compare", "stand", "mpc", "--scenario", str(small), "--trials", "1", "--band", "soft",
+                 "--out", str(tmp_path / "same"), "--quiet", "--workers", "1"]) == 0
+    printed = capsys.readouterr()
+    assert "different robots" not in printed.out + printed.err
+    assert "(NOT the same robot" not in (tmp_path / "same" / "report.md").read_text()
+
+
 def test_no_push_and_debug_truth_are_recorded_with_the_run(small, tmp_path):
     cfg = ArenaConfig(controllers=("mpc",), scenario=small, seeds=(0,), trials=1, bands=("hard",),
                       out_dir=tmp_path / "np", progress=False, workers=1, no_push=True, debug_truth=True)

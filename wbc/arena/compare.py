@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import functools
 import hashlib
 import itertools
 import sys
@@ -64,8 +65,8 @@ from wbc.scenario import Scenario, load_scenario, warn_if_unpublished
 from wbc.scenario.scenario import fallback_note
 from wbc.scenario.trial import Trial
 
-__all__ = ["VIEWED_TIME_LIMIT", "ArenaConfig", "ArenaPlan", "ArenaResult", "play_arena", "plan_arena",
-           "run_arena"]
+__all__ = ["VIEWED_TIME_LIMIT", "ArenaConfig", "ArenaPlan", "ArenaResult", "arms_note", "arms_played", "play_arena",
+           "plan_arena", "run_arena"]
 
 
 
@@ -218,6 +219,8 @@ class ArenaResult:
         played: trials played by this call (not counting those resumed from disk).
         wall_s: wall time of this call [s].
         physics_steps: physics steps simulated by this call.
+        arms_differ: the controllers played different arm modes: what each carried (`arms_note`); None when they
+            played the same robot.
         budget: trials the run could have played (controllers x bands x seeds x trials); more than the trials stored
             when the sequential test stopped it early, or a controller was stopped for its errors.
         controller_errors: each controller that failed on at least one trial (stored ones included, on resume), in
@@ -234,6 +237,7 @@ class ArenaResult:
     physics_steps: int
     budget: int = 0
     controller_errors: tuple[ControllerErrors, ...] = ()
+    arms_differ: str | None = None
 
 
 def _resolve(cfg: ArenaConfig) -> dict[str, ControllerSpec]:
@@ -265,6 +269,8 @@ class ArenaPlan:
         bands: the bands played.
         trials: every trial of the run, in order (without their pushes with `ArenaConfig.no_push`).
         identity: what the run is (``run.json``'s ``config``).
+        arms: what each controller's robot carries (`arms_played`), by name.
+        arms_differ: `arms_note` when the controllers play different arm modes, else None.
     """
 
     cfg: ArenaConfig
@@ -274,6 +280,8 @@ class ArenaPlan:
     bands: tuple[str, ...]
     trials: tuple[Trial, ...]
     identity: SimulatedRunIdentity
+    arms: Mapping[str, str] = field(default_factory=dict)
+    arms_differ: str | None = None
 
 
 def run_arena(cfg: ArenaConfig, *, lock: DirectoryLock | None = None) -> ArenaResult:
@@ -334,6 +342,10 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
     note = fallback_note(cfg.scenario, scenario)
     if note is not None:
         print(f"wbc: note: {note}", file=sys.stderr)
+    arms = {name: arms_played(scenario.robot, spec.arm_mode) for name, spec in specs.items()}
+    arms_differ = arms_note(scenario.robot, {name: spec.arm_mode for name, spec in specs.items()})
+    if arms_differ is not None:
+        print(f"wbc: note: {arms_differ}", file=sys.stderr)
     published = warn_if_unpublished(scenario)
     trials = scenario.trials(bands, list(cfg.seeds), cfg.trials)
     if cfg.no_push:
@@ -352,7 +364,44 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
         max_consecutive_errors=cfg.max_consecutive_errors,
     )
     return ArenaPlan(cfg=cfg, specs=specs, scenario=scenario, published=published, bands=tuple(bands),
-                     trials=tuple(trials), identity=identity)
+                     trials=tuple(trials), identity=identity, arms=arms, arms_differ=arms_differ)
+
+
+def arms_played(robot: str, arm_mode: str) -> str:
+    """What `robot` carries in `arm_mode`, for a run's report: the mode and the whole robot's mass."""
+    mass = _robot_mass(robot, arm_mode)
+    what = {"none": "no arm", "locked": "its arm locked", "actuated": "its arm actuated"}[arm_mode]
+    return f"{robot} with {what} ({mass:.2f} kg)"
+
+
+def arms_note(robot: str, arm_modes: Mapping[str, str]) -> str | None:
+    """A note for controllers that play `robot` in different arm modes (controller name -> mode); None if they do not.
+
+    The arena gives every controller the same trials (pushes, ground, commands, domain), each on the robot its arm
+    mode builds: a controller without an arm plays a lighter robot than one with it, and a locked arm is carried
+    where an actuated one can also be swung. Such a comparison is legitimate (the paper's tables rank all three), but
+    its differences are the robots' as much as the controllers', and the pairing does not remove that.
+    """
+    if len(set(arm_modes.values())) < 2:
+        return None
+    groups: dict[str, list[str]] = {}
+    for name, mode in arm_modes.items():
+        groups.setdefault(mode, []).append(name)
+    said = "; ".join(f"{', '.join(names)}: {arms_played(robot, mode)}" for mode, names in groups.items())
+    return (f"the controllers play different robots: {said}. Every trial's pushes, ground and commands are the same "
+            "for each, the robot is not: a difference between them can come from the arm (its mass, where it is "
+            "held, whether it moves) as much as from the controller. To compare the controllers alone, play them in "
+            "one arm mode (the -locked and -noarm variants; arm_mode in an ONNX policy's I/O file)")
+
+
+@functools.cache
+def _robot_mass(robot: str, arm_mode: str) -> float:
+    # imported here: only a run's plan needs the model, and the trials' workers import this module
+    import pinocchio as pin
+
+    from wbc.robots.pinocchio_model import build_pinocchio
+
+    return float(pin.computeTotalMass(build_pinocchio(get_robot(robot, arm_mode)).model))
 
 
 def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaResult:
@@ -451,6 +500,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
         curve = recovery_curve(outcomes, controllers=cfg.controllers)
         meta = {
             "controllers": ", ".join(cfg.controllers),
+            "robots": "; ".join(f"{name}: {arm}" for name, arm in plan.arms.items())
+            + ("" if plan.arms_differ is None else " (NOT the same robot for every controller)"),
             "scenario": f"{scenario.name} v{scenario.version} ({scenario.path})",
             "scenario hash": scenario.hash,
             "published scenario": ("yes" if published else "NO (results are not comparable with published ones)")
@@ -477,7 +528,7 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                                   "rerun with --resume to play the rest")
         return ArenaResult(summary=summary, records=tuple(records), failures=failures, curve=curve, out_dir=store.dir,
                            played=played, wall_s=wall, physics_steps=steps, budget=total,
-                           controller_errors=tuple(errors))
+                           controller_errors=tuple(errors), arms_differ=plan.arms_differ)
     finally:
         store.close()
 

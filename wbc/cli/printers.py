@@ -12,6 +12,7 @@ import os
 import shlex
 import shutil
 import sys
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -338,6 +339,8 @@ def print_arena(result: ArenaResult, *, verdict: bool = True) -> None:
         verdict: end the table with the verdict sentences (``wbc demo`` prints them last, after the report's path).
     """
     print(format_table(result.summary, verdict=verdict))
+    if result.arms_differ is not None:  # under the verdict, which pairs them: the pairing does not make them one robot
+        print(textwrap.fill(f"note: {result.arms_differ}", width=118, subsequent_indent="  "))
     rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
     print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s)"
           f"{resumed_note(result.played, len(result.records))}; "
