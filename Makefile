@@ -26,7 +26,10 @@ UV_COMPILE = $(BIN)/uv pip compile --quiet --generate-hashes --python $(BIN)/pyt
 # without resolving anything and with the locked setuptools as its build backend.
 $(STAMP): $(LOCK) $(NO_DEPS_LOCK) pyproject.toml
 	$(PYTHON) -m venv --clear $(VENV)
-	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r $(LOCK)
+	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r $(LOCK) || { echo "make: the locked \
+	packages did not install; the lock pins PyTorch's CPU build (torch==2.13.0+cpu), which PyPI does not serve: \
+	give pip PyTorch's CPU index, PIP_EXTRA_INDEX_URL=https://download.pytorch.org/whl/cpu make $(MAKECMDGOALS)" >&2; \
+	exit 1; }
 	$(BIN)/python -m pip install --quiet --require-hashes --no-deps -r $(NO_DEPS_LOCK)
 	$(BIN)/python -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)

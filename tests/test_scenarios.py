@@ -19,6 +19,7 @@ from wbc.scenario import (
     check_published,
     load_scenario,
     trial_scenario_text,
+    warn_if_unpublished,
     write_trial_scenario,
 )
 from wbc.types import VelocityCommand
@@ -197,6 +198,27 @@ def test_changed_published_file_is_refused(tmp_path):
         check_published(changed)
     assert "without a version bump" in str(err.value) and "bump [scenario] version" in str(err.value)
     assert str(tmp_path / "push.toml") in str(err.value)
+
+
+def test_a_lock_beside_a_copy_cannot_publish_other_content_under_the_toolkits_name_and_version(tmp_path, capsys):
+    """A lock beside any file publishes what it lists: a copy of push.toml with one value changed, beside a lock that
+    listed its hash as push version 2, played as the published push v2 (run.json: published, report: yes). The
+    toolkit's names and versions are its own; a scenario of another name publishes in any lock."""
+    changed = write(tmp_path, edit(PUSH.read_text(), "offset_m = 0.12", "offset_m = 0.1"), "push.toml")
+    scenario = load_scenario(changed)
+    write(tmp_path, f'[push]\n"{scenario.version}" = "{scenario.hash}"\n', "published.toml")
+    with pytest.raises(ScenarioError) as err:
+        check_published(scenario)
+    text = str(err.value)
+    assert "the toolkit's published scenario" in text and str(SCENARIOS / "published.toml") in text
+    assert scenario.hash in text and err.value.field == "[scenario] name"
+    assert not warn_if_unpublished(scenario) and "the toolkit's published scenario" in capsys.readouterr().err
+    # renamed, the same content publishes in its own lock
+    mine = load_scenario(write(tmp_path, edit(changed.read_text(), 'name = "push"', 'name = "my-push"'), "mine.toml"))
+    write(tmp_path, f'[my-push]\n"{mine.version}" = "{mine.hash}"\n', "published.toml")
+    check_published(mine)
+    # the toolkit's own file, beside the toolkit's own lock, is published as ever
+    check_published(load_scenario(PUSH))
 
 
 def test_unpublished_version_is_refused_with_the_fix(tmp_path):

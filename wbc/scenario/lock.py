@@ -10,10 +10,14 @@ import sys
 from pathlib import Path
 
 from wbc.errors import ScenarioError
-from wbc.scenario.scenario import Scenario
+from wbc.scenario.scenario import SOURCE_ROOT, Scenario
 from wbc.scenario.toml_fields import read_toml, show
 
-__all__ = ["check_published", "warn_if_unpublished"]
+__all__ = ["TOOLKIT_LOCK", "check_published", "warn_if_unpublished"]
+
+TOOLKIT_LOCK = SOURCE_ROOT / "scenarios" / "published.toml"
+"""The toolkit's own lock: the scenarios it publishes (``push`` version 2 ...) and their hashes, when `wbc` runs from
+its source checkout."""
 
 
 def check_published(scenario: Scenario, lock_path: Path | None = None) -> None:
@@ -54,6 +58,32 @@ def check_published(scenario: Scenario, lock_path: Path | None = None) -> None:
             f"{scenario.hash}: the file changed without a version bump; restore it, or bump [scenario] version and "
             f"add the new hash to {lock}",
             field="[scenario] version",
+        )
+    _check_against_the_toolkit(scenario, lock)
+
+
+def _check_against_the_toolkit(scenario: Scenario, lock: Path) -> None:
+    """Refuse a scenario that another lock publishes under a (name, version) the toolkit publishes with other content.
+
+    A lock beside any file publishes what it lists: a copy of ``push.toml`` with one force changed, beside a lock
+    that lists its hash as push version 2, was played and reported as the published push v2. The toolkit's names and
+    versions are its own: results under them must be comparable with the toolkit's published results.
+    """
+    if not TOOLKIT_LOCK.is_file() or lock.resolve() == TOOLKIT_LOCK.resolve():
+        return
+    try:
+        data, _ = read_toml(TOOLKIT_LOCK, str(TOOLKIT_LOCK), ScenarioError)
+    except ScenarioError:
+        return  # the toolkit's own lock is checked where it is used; a broken one must not block another's
+    entry = data.get(scenario.name)
+    ours = entry.get(str(scenario.version)) if isinstance(entry, dict) else None
+    if isinstance(ours, str) and ours != scenario.hash:
+        raise ScenarioError(
+            scenario.path,
+            f"{scenario.name!r} version {scenario.version} is the toolkit's published scenario, with hash {ours} "
+            f"({TOOLKIT_LOCK}), and this file hashes to {scenario.hash}: {lock} cannot publish other content under "
+            "the toolkit's name and version; give your scenario a name of its own ([scenario] name) and publish that",
+            field="[scenario] name",
         )
 
 
