@@ -438,6 +438,31 @@ def test_controllers_on_different_arms_are_said_to_play_different_robots(small, 
     assert "(NOT the same robot" not in (tmp_path / "same" / "report.md").read_text()
 
 
+def test_damaged_shipped_weights_are_refused_before_the_run_not_in_each_trial(tmp_path, monkeypatch, capsys):
+    """Shipped weights are read in each trial's worker: a weights file changed since its export (its checksum) made
+    every trial of `learned` a controller error (0 % success beside mpc's, and a verdict), where a damaged
+    ``policy:PATH`` file is refused before the run. A registry controller's weights are checked in the plan too."""
+    spec = CONTROLLERS["learned"]
+    src = shipped_weights(get_robot("a1-wx200", "actuated"))
+    npz = tmp_path / src.name
+    npz.with_suffix(".json").write_text(src.with_suffix(".json").read_text())
+    with np.load(src) as data:
+        arrays = dict(data)
+    name = sorted(arrays)[0]
+    arrays[name] = arrays[name] + 1e-3  # one array changed by a little, as a bad copy or an edit would
+    np.savez(npz, **arrays)
+    monkeypatch.setitem(CONTROLLERS, "learned", dataclasses.replace(
+        spec, files=tuple(dataclasses.replace(f, path=str(npz if f.role == "weights" else npz.with_suffix(".json")))
+                          for f in spec.files if "a1-wx200" in f.path)))
+    out = tmp_path / "run"
+    assert main(["compare", "mpc", "learned", "--scenario", "scenarios/push.toml", "--trials", "1", "--band", "in",
+                 "--out", str(out), "--quiet", "--workers", "1"]) == 2
+    err = capsys.readouterr().err
+    assert str(npz.with_suffix(".json")) in err or str(npz) in err, err
+    assert "sha256" in err or "checksum" in err, err
+    assert not out.exists()  # refused before the results directory was made: no trial played
+
+
 def test_no_push_and_debug_truth_are_recorded_with_the_run(small, tmp_path):
     cfg = ArenaConfig(controllers=("mpc",), scenario=small, seeds=(0,), trials=1, bands=("hard",),
                       out_dir=tmp_path / "np", progress=False, workers=1, no_push=True, debug_truth=True)

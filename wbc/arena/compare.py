@@ -59,6 +59,7 @@ from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
+from wbc.learned.policy.composite_policy import load_composite
 from wbc.output_files import DirectoryLock
 from wbc.robots.registry import get_robot
 from wbc.scenario import Scenario, load_scenario, warn_if_unpublished
@@ -309,7 +310,8 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
     Raises:
         UnknownNameError: an unknown controller name or band (the message lists the valid ones).
         ResultsDirError: `ArenaConfig.out_dir` is a file, or a file the run writes there is a directory.
-        PolicyFileError: a ``policy:PATH`` file that is missing or malformed.
+        PolicyFileError: a ``policy:PATH`` file that is missing or malformed, or shipped weights a registry
+            controller plays that are (changed since their export: their checksum).
         PluginError: a plug-in that cannot be imported, or whose factory raises or builds no controller.
         ScenarioError: the scenario file is invalid.
         ConfigError: a controller for another robot than the scenario's, a plug-in's rate that is no whole number of
@@ -324,6 +326,12 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
             robots = ", ".join(spec.robots or ())
             raise ConfigError(f"controller {name} drives {robots}, but scenario {cfg.scenario} is played by "
                               f"{scenario.robot}; choose a controller for {scenario.robot}, or a scenario for {robots}")
+        if spec.kind == "registry":
+            # shipped weights are read in each trial's worker: a damaged file is refused here, before any trial and
+            # before the results directory exists, as a policy:PATH file is, not recorded as every trial's error
+            for f in spec.files:
+                if f.role == "weights":
+                    load_composite(f.path)
         if spec.kind in ("plug-in", "entry point"):
             # outside code is built once here, so a factory that raises or builds no controller fails before any
             # trial, in this process, with its own message
