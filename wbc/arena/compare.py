@@ -56,10 +56,9 @@ from wbc.arena.sim_trial import check_rate
 from wbc.arena.stats import in_canonical_order
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
-from wbc.control.registry import ControllerSpec, get_controller
+from wbc.control.registry import ControllerSpec, check_shipped_weights, get_controller
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
-from wbc.learned.policy.composite_policy import load_composite
 from wbc.output_files import DirectoryLock
 from wbc.robots.registry import get_robot
 from wbc.scenario import Scenario, load_scenario, warn_if_unpublished
@@ -326,12 +325,9 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
             robots = ", ".join(spec.robots or ())
             raise ConfigError(f"controller {name} drives {robots}, but scenario {cfg.scenario} is played by "
                               f"{scenario.robot}; choose a controller for {scenario.robot}, or a scenario for {robots}")
-        if spec.kind == "registry":
-            # shipped weights are read in each trial's worker: a damaged file is refused here, before any trial and
-            # before the results directory exists, as a policy:PATH file is, not recorded as every trial's error
-            for f in spec.files:
-                if f.role == "weights":
-                    load_composite(f.path)
+        # shipped weights are read in each trial's worker: a damaged file is refused here, before any trial and
+        # before the results directory exists, as a policy:PATH file is, not recorded as every trial's error
+        check_shipped_weights(spec)
         if spec.kind in ("plug-in", "entry point"):
             # outside code is built once here, so a factory that raises or builds no controller fails before any
             # trial, in this process, with its own message

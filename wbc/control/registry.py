@@ -48,7 +48,7 @@ from wbc.robots.description import RobotDescription, check_arm_mode
 from wbc.robots.registry import ROBOTS, get_robot
 
 __all__ = ["CONTROLLERS", "NAME_FORMS", "ONNX_PREFIX", "POLICY_PREFIX", "ControllerListing", "ControllerSpec",
-           "arm_variant", "get_controller", "list_controllers", "takes_controller_config"]
+           "arm_variant", "check_shipped_weights", "get_controller", "list_controllers", "takes_controller_config"]
 
 POLICY_PREFIX = "policy:"
 """``policy:PATH`` names the exported policy at PATH (the .npz, the .json or their stem)."""
@@ -146,6 +146,23 @@ CONTROLLERS: dict[str, ControllerSpec] = {
 
 NAME_FORMS = (f"{POLICY_PREFIX}PATH", f"{ONNX_PREFIX}PATH", "package.module:factory")
 """The forms of controller names besides the registry's and the entry points'."""
+
+
+def check_shipped_weights(spec: ControllerSpec) -> None:
+    """Read and check the shipped weights a registry controller plays (`load_composite`: the checksum included).
+
+    A registry entry reads its weights when it is built, in each trial's worker; a run checks them once before it
+    plays (`wbc.arena.compare.plan_arena`), as a ``policy:PATH`` file is checked when its name is resolved. Other kinds
+    of controller have nothing shipped to check.
+
+    Raises:
+        PolicyFileError: a weights file missing, malformed or changed since its export; the message names it.
+    """
+    if spec.kind != "registry":
+        return
+    for f in spec.files:
+        if f.role == "weights":
+            load_composite(f.path)
 
 
 def get_controller(name: str, *, config: str | Path | None = None, io: str | Path | None = None) -> ControllerSpec:
