@@ -175,6 +175,9 @@ def test_a_controller_that_hangs_costs_its_own_trial_under_a_trial_time_limit(pl
         hung = by[("hangpkg.hangs:make", i)]
         assert hung.outcome == "controller_error"
         assert f"trial {i}: ran past the trial time limit of 10 s (--trial-time-limit)" in hung.error
+        # judged on what it played before it hung, as a controller that raises is: the 4 ticks at 50 Hz of the 1 s
+        # episode it completed before it hung in its fifth call (it was 0, as if it had never stood)
+        assert hung.ttf == pytest.approx(4 * (1 / 50) / 1.0)
     # an overrun trial is not played again; with two workers the second hung trial may have been beside the first
     # when its worker was ended, and is then played once more in the fresh pool (where it overruns itself)
     assert trials <= len(attempts.read_text()) <= (1 if workers == 1 else 2 * trials - 1)
@@ -190,13 +193,15 @@ def test_the_watchdog_ends_the_worker_only_when_the_trial_overruns(tmp_path):
         pass
     dog._thread.join(timeout=60)
     assert not dog._thread.is_alive() and exits == [] and not flag.exists()
-    # the clock runs out first: the flag is left, naming the limit, and the process ended with its own status
+    # the clock runs out first: the flag is left, naming the limit and how far the trial got (no episode begun: not
+    # known), and the process ended with its own status
+    executors.forget_played()
     waited = []
     dog = executors._Watchdog(5.0, str(flag), wait=lambda event, timeout: waited.append(timeout) or False,
                               exit_=exits.append)
     with dog:
         dog._thread.join(timeout=60)
-    assert waited == [5.0] and exits == [executors.OVERRUN_EXIT] and flag.read_text() == "5.0\n"
+    assert waited == [5.0] and exits == [executors.OVERRUN_EXIT] and flag.read_text() == "5.0\nNone\n"
     flag.unlink()
     # the clock runs out as the trial ends: the trial's end, taken first, stands
     exits.clear()

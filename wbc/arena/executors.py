@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import dataclasses
 import hashlib
 import itertools
 import math
@@ -34,7 +35,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 
 from wbc.arena.episode import EpisodeBuffer
-from wbc.arena.runner import TickObserver
+from wbc.arena.runner import TickObserver, forget_played, played_s
 from wbc.arena.sim_trial import run_trial, simulated_robot
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.spec import ControllerSpec
@@ -149,7 +150,9 @@ class _Watchdog:
                 return
             try:
                 with open(self._flag, "w", encoding="utf-8") as f:
-                    f.write(f"{self._limit_s!r}\n")
+                    # the limit, then how far the trial got: its record's time to fall, as a controller that raises
+                    # gets the time it raised at
+                    f.write(f"{self._limit_s!r}\n{played_s()!r}\n")
             except OSError:
                 pass  # ended all the same (the parent then sees a worker that died): a hung trial must not hold it
             self._exit(OVERRUN_EXIT)
@@ -159,6 +162,7 @@ def _run_limited(task: TrialTask, flag: str) -> TrialRecord:
     """`run_task` in a worker, under `task`'s time limit (`_Watchdog`); `flag` is the file an overrun leaves."""
     if task.time_limit_s is None:
         return run_task(task)
+    forget_played()  # a worker plays trial after trial: until this one's episode begins, it has played nothing
     with _Watchdog(task.time_limit_s, flag):
         return run_task(task)
 
@@ -169,10 +173,30 @@ def _flag_name(task: TrialTask) -> str:
     return hashlib.sha256(f"{trial.band}-s{trial.seed}-t{trial.index}-{task.controller.name}".encode()).hexdigest()[:32]
 
 
-def overran(task: TrialTask) -> TrialRecord:
-    """The record of `task`, whose worker was ended when the trial ran past its time limit: a controller error."""
-    return _no_tick_record(task, f"ran past the trial time limit of {task.time_limit_s:g} s (--trial-time-limit), and "
-                                 "its worker process was ended")
+def overran(task: TrialTask, flag: str | None = None) -> TrialRecord:
+    """The record of `task`, whose worker was ended when the trial ran past its time limit: a controller error.
+
+    Its time to fall is the share of the episode played before the worker was ended, as `flag` (the file the worker's
+    watchdog left) says, as a controller that raises is judged on what it played before it raised; 0 when the flag
+    does not say (the trial had not begun its episode). Its other metrics are NaN: the episode went with the worker.
+    """
+    record = _no_tick_record(task, f"ran past the trial time limit of {task.time_limit_s:g} s (--trial-time-limit), "
+                                   "and its worker process was ended")
+    played = _played_in(flag) if flag is not None else None
+    if played is None:
+        return record
+    return dataclasses.replace(record, ttf=min(1.0, played / task.trial.duration_s))
+
+
+def _played_in(flag: str) -> float | None:
+    """The simulated seconds an overrun trial played, from its flag (`_Watchdog`); None when it does not say."""
+    try:
+        with open(flag, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+        played = float(lines[1])
+    except (OSError, IndexError, ValueError):
+        return None  # a flag of the limit alone, or none readable: how far it got is not known
+    return played if math.isfinite(played) and played >= 0.0 else None
 
 
 _PR_SET_PDEATHSIG = 1
@@ -290,7 +314,7 @@ class LocalExecutor:
                 return
             late = [task for task in suspects if os.path.exists(self._flag(task))]
             for task in late:
-                yield overran(task)
+                yield overran(task, self._flag(task))
             others = [task for task in suspects if task not in late]
             if late:
                 # an overrun explains the break: the trials beside it are innocent, and go back to the fresh pool
@@ -351,7 +375,7 @@ def _alone(task: TrialTask, flag: str) -> TrialRecord:
         return pool.submit(_run_limited, task, flag).result()
     except BrokenProcessPool:
         if os.path.exists(flag):
-            return overran(task)
+            return overran(task, flag)
         return worker_died(task, "died again when the trial was played alone; the trials beside it were played again")
     finally:
         _shut_down(pool, broken=True)  # its one task is done, or its worker dead: nothing left to wait for

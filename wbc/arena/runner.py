@@ -44,7 +44,26 @@ from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, MotorCommand, VelocityCommand
 
-__all__ = ["PreparingObserver", "TickObserver", "run_episode"]
+__all__ = ["PreparingObserver", "TickObserver", "forget_played", "played_s", "run_episode"]
+
+_playing: list[tuple[EpisodeBuffer, float] | None] = [None]
+"""The log of the episode this process plays, and its control period: what `played_s` reads."""
+
+
+def played_s() -> float | None:
+    """The simulated time the episode in progress in this process has logged [s]: its whole control ticks played.
+
+    For a thread that watches the trial from beside it (the arena's trial time limit, `wbc.arena.executors`), which
+    records how far a trial got when it has to end the process. None before an episode begins in this process, or
+    after `forget_played`.
+    """
+    playing = _playing[0]
+    return None if playing is None else playing[0].rows * playing[1]
+
+
+def forget_played() -> None:
+    """Forget the episode `played_s` reads (called before a trial starts, so that the last one is not read for it)."""
+    _playing[0] = None
 
 TickObserver = Callable[[float, Robot, Controller, VelocityCommand], None]
 """Called after every control tick with (time after the tick [s], robot, controller, command); for viewers, benches
@@ -126,6 +145,7 @@ def run_episode(
                           f"rate of at least {1.0 / duration_s:g} Hz")
     arm = slice(ARM_JOINTS.start, ARM_JOINTS.stop) if robot.num_joints == 15 else None
     buf = EpisodeBuffer(nq=7 + robot.num_joints, arm=arm)
+    _playing[0] = (buf, dt)  # once an episode: nothing is added to a tick
     safety = robot if isinstance(robot, HasSafetyEvents) else None
     events_before = len(safety.safety_events()) if safety is not None else 0
     bounds = command_bounds(robot.limits, *robot.gain_limits)
