@@ -127,3 +127,35 @@ def test_a_robot_error_that_means_a_request_to_end_ends_the_episode_as_an_interr
     with pytest.raises(RobotLinkError) as failed:
         _play(observer=_interrupting_at(14, died), stopped_by=(IoProcessStopped,))
     assert failed.value is died
+
+
+def test_the_interruption_is_handed_over_before_the_episode_is_built(monkeypatch: pytest.MonkeyPatch) -> None:
+    """`on_interrupt` (a hardware trial's damping) comes first: building a long episode takes tens of milliseconds,
+    during which a robot would keep its controller's last command. What it raises goes on, the interruption its
+    context."""
+    order: list[str] = []
+    finish = EpisodeBuffer.finish
+
+    def finishing(self: EpisodeBuffer, **kwargs: object) -> Episode:
+        order.append("built")
+        return finish(self, **kwargs)
+
+    monkeypatch.setattr(EpisodeBuffer, "finish", finishing)
+    pressed = KeyboardInterrupt()
+    handed: list[BaseException] = []
+
+    def damp(exc: BaseException) -> None:
+        handed.append(exc)
+        order.append("damped")
+
+    with pytest.raises(EpisodeInterrupted) as stopped:
+        _play(observer=_interrupting_at(9, pressed), on_interrupt=damp)
+    assert handed == [pressed] and order == ["damped", "built"] and stopped.value.tick == 10
+    died = RobotLinkError("the I/O process died")
+
+    def dead(exc: BaseException) -> None:
+        raise died
+
+    with pytest.raises(RobotLinkError) as failed:
+        _play(observer=_interrupting_at(9, pressed), on_interrupt=dead)
+    assert failed.value is died and failed.value.__context__ is pressed

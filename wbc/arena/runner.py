@@ -117,6 +117,7 @@ def run_episode(
     duration_option: str | None = None,
     clock: Callable[[], float] = time.perf_counter,
     stopped_by: tuple[type[Exception], ...] = (),
+    on_interrupt: Callable[[BaseException], None] | None = None,
 ) -> Episode:
     """Play one episode.
 
@@ -139,6 +140,9 @@ def run_episode(
         stopped_by: errors of the robot that mean the command was asked to end, not that the robot failed (a
             hardware trial's `wbc.errors.IoProcessStopped`: its devices' process stopped by SIGTERM, closing the robot
             into damping): they end the episode as an interruption does (`EpisodeInterrupted`, which carries them).
+        on_interrupt: called with the interruption (the `KeyboardInterrupt`, or the error of `stopped_by`) as soon as
+            it comes, before the partial episode is built (tens of milliseconds for a long episode): a hardware trial
+            latches its robot's damping there. What it raises goes on instead of `EpisodeInterrupted`.
 
     Returns:
         The episode log (no pushes: whoever applied them adds them, see `wbc.arena.sim_trial.run_trial`), with the
@@ -193,8 +197,10 @@ def run_episode(
                             safety_events=events, clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
         return SimulationDiverged(reason, tick=tick, time_s=buf.rows * dt, episode=played)
 
-    def interrupted() -> EpisodeInterrupted | None:
-        # what was played, built from memory alone (the robot waits for its damping); None where it cannot be
+    def interrupted(exc: BaseException) -> EpisodeInterrupted | None:
+        if on_interrupt is not None:
+            on_interrupt(exc)  # first: a robot's damping must not wait for the episode to be built
+        # what was played, built from memory alone; None where it cannot be
         try:
             events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
             played = buf.finish(duration_s=duration_s, control_dt=dt, fell=False, fall_time_s=math.nan,
@@ -253,12 +259,12 @@ def run_episode(
                 fell, fall_time = True, n * dt
     except KeyboardInterrupt as exc:
         # a subclass is an interruption that means something else: it goes on as it is
-        stop = interrupted() if type(exc) is KeyboardInterrupt else None
+        stop = interrupted(exc) if type(exc) is KeyboardInterrupt else None
         if stop is None:
             raise
         raise stop from exc
     except stopped_by as exc:
-        stop = interrupted()
+        stop = interrupted(exc)
         if stop is None:
             raise
         raise stop from exc
