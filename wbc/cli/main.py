@@ -59,6 +59,7 @@ from wbc.hardware.safety import SafetyConfig
 from wbc.hardware.serial_port_policy import is_emulated_port, why_not_emulated
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS, check_target, is_loopback
 from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS
+from wbc.interrupts import signal_label
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.shipped import distilled_weights
 from wbc.learned.train.adaptation_config import AdaptationConfig
@@ -548,8 +549,12 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         sent since may not have reached the robot: check it and power it down by hand); a fault of the arm's bus is
         a trip like any other, printed as the arm's (0); 130 when interrupted (Ctrl-C, SIGTERM,
         SIGHUP: the robot is closed into damping first), SIGTERM to the command's group or to its I/O process
-        included (`IoProcessStopped`, the robot closed by the I/O process); interrupted before the robot was
-        connected, the line says that nothing was sent to it (`ConnectInterrupted`).
+        included (`IoProcessStopped`, the robot closed by the I/O process). Interrupted during the trial, the
+        safety layer damps the robot at once, the results hold the episode up to the interruption (the record's
+        outcome ``operator_stop``, its ``error`` saying when), and the last line says so and where
+        (`ResultsInterrupted.during`); after it, the results are written whole; before the robot was connected, the
+        line says that nothing was sent to it (`ConnectInterrupted`); during the stand-up, that no results were
+        written (nothing was played).
     """
     _view_options(args)
     if args.sim == (args.target is not None):
@@ -623,11 +628,13 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                                     before_connect=confirm, build=build)
     except ResultsInterrupted as stopped:
         if stopped.complete:
-            said = f"its results are complete in {stopped.out_dir}"
+            said = (f"the results up to the interruption are complete in {stopped.out_dir}" if stopped.during
+                    else f"its results are complete in {stopped.out_dir}")
         else:
             said = (f"the writing of its results was stopped: {stopped.out_dir} holds what was written until then, "
                     "and a hardware trial is played once (no --resume)")
-        _say(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}")
+        when = stopped.during if stopped.during is not None else "after the trial"
+        _say(f"wbc hw run: interrupted {when}; the robot was closed into damping; {said}")
         return 130
     except ConnectInterrupted as stopped:
         if stopped.opening:
@@ -638,6 +645,9 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         _say(f"wbc hw run: interrupted {said}; no results were written")
         return 130
     except (KeyboardInterrupt, IoProcessStopped):
+        # during the stand-up, before anything was played (an interruption during the trial writes what was played:
+        # `ResultsInterrupted`); a second one that came before the played episode's results began to be written; or
+        # an I/O process stopped by a SIGTERM of its own after the trial, with no request to end.
         # SIGTERM to the command's whole group reaches its I/O process too, which closes the robot itself; it is
         # raised only once the I/O process has said that the robot is closed, and reads as the stop it is
         _say("wbc hw run: interrupted; the robot was closed into damping; no results were written")
@@ -1513,7 +1523,7 @@ def _terminate_interrupts() -> Iterator[None]:
         return
 
     def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
+        raise KeyboardInterrupt(signal_label(signum))  # named: a hardware trial's record says what stopped it
 
     wanted = (signal.SIGTERM,) + (() if signal.getsignal(signal.SIGHUP) is signal.SIG_IGN else (signal.SIGHUP,))
     previous = {signum: signal.signal(signum, interrupt) for signum in wanted}
