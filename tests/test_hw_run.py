@@ -673,11 +673,13 @@ def test_sigterm_to_the_commands_group_during_the_settle_after_a_trip_keeps_the_
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
-def test_sigterm_to_the_commands_group_during_the_trial_writes_the_episode_played_and_the_robot_ends_damped(
-        go1: UnitreeEmulator, tmp_path: Path) -> None:
-    """SIGTERM to the process group of ``wbc hw run`` 1 s into its trial (a service manager's stop): the command and
-    its I/O process both take it, the robot ends damped, and the results hold the episode played up to the stop,
-    recorded as interrupted (exit 130). It exited with "no results were written", the trial's second lost.
+@pytest.mark.parametrize("whom", ["group", "io-process"])
+def test_sigterm_during_the_trial_writes_the_episode_played_and_the_robot_ends_damped(
+        go1: UnitreeEmulator, tmp_path: Path, whom: str) -> None:
+    """SIGTERM 1 s into the trial of ``wbc hw run``, to its process group (a service manager's stop: the command and
+    its I/O process both take it) or to its I/O process alone (which closes the robot and says so at the command's
+    next call): the robot ends damped, and the results hold the episode played up to the stop, recorded as
+    interrupted (exit 130). It exited with "no results were written", the trial's second lost.
 
     The command runs on the real clock: a machine busy enough to hold the emulator's thread off for 0.1 s trips the
     stand-up's ramp on a stale state (exit 2, nothing played), as it should. That start is made again, up to three
@@ -702,7 +704,10 @@ def test_sigterm_to_the_commands_group_during_the_trial_writes_the_episode_playe
             if proc.poll() is None:
                 time.sleep(1.0)  # well into the trial (its --seconds are 20)
                 sent = len(go1.commands())
-                os.killpg(proc.pid, signal.SIGTERM)
+                if whom == "group":
+                    os.killpg(proc.pid, signal.SIGTERM)
+                else:
+                    os.kill(io_process, signal.SIGTERM)
             proc.wait(timeout=60)
         finally:
             if proc.poll() is None:
@@ -714,17 +719,20 @@ def test_sigterm_to_the_commands_group_during_the_trial_writes_the_episode_playe
             break
     assert proc.returncode == 130 and sent is not None, err
     (results,) = [d for d in out.iterdir() if (d / "trials.csv").exists()] or [err]
-    # SIGTERM reaches this process first, or (a rare order) its I/O process's report that SIGTERM stopped it does
-    assert re.fullmatch(r"wbc hw run: interrupted at \d+\.\d{3} s of the 20 s trial \((SIGTERM|its I/O process "
-                        r"stopped by SIGTERM)\); the robot was closed into damping; the results up to the "
-                        f"interruption are complete in {re.escape(str(results))}", err.strip().splitlines()[-1]), err
+    # to the group, SIGTERM reaches the command first, or (a rare order) its I/O process's report that SIGTERM stopped
+    # it does; to the I/O process alone, only that report comes
+    by = r"(SIGTERM|its I/O process stopped by SIGTERM)" if whom == "group" else r"its I/O process stopped by SIGTERM"
+    assert re.fullmatch(rf"wbc hw run: interrupted at \d+\.\d{{3}} s of the 20 s trial \({by}\); the robot was closed "
+                        "into damping; the results up to the interruption are complete in "
+                        f"{re.escape(str(results))}", err.strip().splitlines()[-1]), err
     (record,) = TrialRecord.read_csv(results / "trials.csv")
     assert record.outcome == "operator_stop" and not record.success and record.error.startswith("interrupted at ")
     (path,) = (results / "episodes" / "stand-noarm").glob("*.npz")
     episode = Episode.load(str(path))
     hardware = json.loads((results / "hardware.json").read_text())
     assert 0 < len(episode.t) == record.ticks == hardware["interrupted"]["tick"] < 1000  # played, not to its end
-    assert record.fall_time_s == pytest.approx(hardware["interrupted"]["time_s"]) == pytest.approx(episode.t[-1])
+    assert record.fall_time_s == pytest.approx(episode.t[-1]) and hardware["interrupted"]["time_s"] == pytest.approx(
+        episode.t[-1])  # where it was interrupted: the end of its last whole tick
     for _ in range(500):  # bounded (5 s)
         if not _running(io_process):
             break
