@@ -749,9 +749,10 @@ def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> No
 
     before = signal.signal(signal.SIGHUP, signal.SIG_DFL)
     try:
-        with _terminate_interrupts(), pytest.raises(KeyboardInterrupt):  # as Ctrl-C: the robot is closed into damping
+        with _terminate_interrupts(), pytest.raises(KeyboardInterrupt) as hung:  # as Ctrl-C: the robot is damped
             os.kill(os.getpid(), signal.SIGHUP)
             time.sleep(1.0)  # the handler raises at once; this is only a bound
+        assert hung.value.args == ("SIGHUP",)  # named: a hardware trial interrupted while it plays records it
         assert signal.getsignal(signal.SIGHUP) is signal.SIG_DFL  # the handler before is back
         signal.signal(signal.SIGHUP, signal.SIG_IGN)  # nohup: the user asked the command to outlive its terminal
         with _terminate_interrupts():

@@ -5,7 +5,8 @@ calls the tool the command names and hands its result to a printer (`wbc.cli.pri
 command with its message and exit status 2; anything else is a bug and keeps its traceback. A ``run`` or
 ``compare`` in which a controller failed on some trials (`wbc.arena.error_guard`) finishes, then exits with status 1
 after one line per failing controller. Ctrl-C, SIGTERM and SIGHUP (the terminal closed) interrupt a command alike:
-status 130, and one line that says what a run stored and how to finish it (or that a robot was closed into damping).
+status 130, and one line that says what a run stored and how to finish it (or that a robot was closed into damping,
+and what of its trial was written).
 """
 
 from __future__ import annotations
@@ -1517,6 +1518,9 @@ def _terminate_interrupts() -> Iterator[None]:
     hardware command closes its robot into damping, where it ended without a word (status -15, -1) and left the legs
     holding their last command. A SIGHUP ignored when the command starts (``nohup``) stays ignored. Signals reach the
     main thread only: a command run from another thread keeps the handlers it has.
+
+    The `KeyboardInterrupt` names its signal (``SIGTERM``, ``SIGHUP``), so that a hardware trial interrupted while it
+    plays records what stopped it; Ctrl-C's, raised by Python's own handler, names none.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
