@@ -591,9 +591,10 @@ def test_ctrl_c_at_any_step_before_the_connect_says_that_nothing_was_sent(
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
 def test_sigterm_to_the_commands_group_is_an_interruption_and_the_robot_ends_damped(go1: UnitreeEmulator,
                                                                                      tmp_path: Path) -> None:
-    """SIGTERM to the process group of ``wbc hw run`` (a service manager's stop): the command and its I/O process both
-    take it. The command closes the robot as on Ctrl-C and exits 130 with the same last line. It exited 2: the I/O
-    process's report that SIGTERM stopped it, taken for a failure of the close."""
+    """SIGTERM to the process group of ``wbc hw run`` (a service manager's stop) during the stand-up, before the
+    trial: the command and its I/O process both take it. The command closes the robot as on Ctrl-C and exits 130 with
+    the same last line: nothing was played, and no results were written. It exited 2: the I/O process's report that
+    SIGTERM stopped it, taken for a failure of the close."""
     proc = _standing_hw_run(go1, tmp_path)
     try:
         (io_process,) = _children(proc.pid)
@@ -671,14 +672,87 @@ def test_sigterm_to_the_commands_group_during_the_settle_after_a_trip_keeps_the_
     assert record.outcome == "safety_trip" and (results / "hardware.json").is_file()
 
 
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads /proc")
+@pytest.mark.parametrize("whom", ["group", "io-process"])
+def test_sigterm_during_the_trial_writes_the_episode_played_and_the_robot_ends_damped(
+        go1: UnitreeEmulator, tmp_path: Path, whom: str) -> None:
+    """SIGTERM 1 s into the trial of ``wbc hw run``, to its process group (a service manager's stop: the command and
+    its I/O process both take it) or to its I/O process alone (which closes the robot and says so at the command's
+    next call): the robot ends damped, and the results hold the episode played up to the stop, recorded as
+    interrupted (exit 130). It exited with "no results were written", the trial's second lost.
+
+    The command runs on the real clock: a machine busy enough to hold the emulator's thread off for 0.1 s trips the
+    stand-up's ramp on a stale state (exit 2, nothing played), as it should. That start is made again, up to three
+    times: what is checked begins once the trial has started."""
+    for attempt in range(3):
+        out = tmp_path / f"try-{attempt}"
+        out.mkdir()
+        if attempt:
+            go1.reset()  # the tripped start left the robot damped, collapsed: stand it again, held, for the next
+        proc = _standing_hw_run(go1, out)
+        (io_process,) = _children(proc.pid)
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda p=proc, ls=lines: ls.extend(line.decode() for line in p.stderr),
+                                  daemon=True)
+        reader.start()
+        sent = None
+        try:
+            for _ in range(6000):  # bounded (60 s): until the stand-up is done and the trial begins
+                if proc.poll() is not None or any("-> run (ramp_done)" in line for line in list(lines)):
+                    break
+                time.sleep(0.01)
+            if proc.poll() is None:
+                time.sleep(1.0)  # well into the trial (its --seconds are 20)
+                sent = len(go1.commands())
+                if whom == "group":
+                    os.killpg(proc.pid, signal.SIGTERM)
+                else:
+                    os.kill(io_process, signal.SIGTERM)
+            proc.wait(timeout=60)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        reader.join(timeout=10)
+        err = "".join(lines)
+        if not (proc.returncode == 2 and "nothing was played" in err and attempt < 2):
+            break
+    assert proc.returncode == 130 and sent is not None, err
+    (results,) = [d for d in out.iterdir() if (d / "trials.csv").exists()] or [err]
+    # to the group, SIGTERM reaches the command first, or (a rare order) its I/O process's report that SIGTERM stopped
+    # it does; to the I/O process alone, only that report comes
+    by = r"(SIGTERM|its I/O process stopped by SIGTERM)" if whom == "group" else r"its I/O process stopped by SIGTERM"
+    assert re.fullmatch(rf"wbc hw run: interrupted at \d+\.\d{{3}} s of the 20 s trial \({by}\); the robot was closed "
+                        "into damping; the results up to the interruption are complete in "
+                        f"{re.escape(str(results))}", err.strip().splitlines()[-1]), err
+    (record,) = TrialRecord.read_csv(results / "trials.csv")
+    assert record.outcome == "operator_stop" and not record.success and record.error.startswith("interrupted at ")
+    (path,) = (results / "episodes" / "stand-noarm").glob("*.npz")
+    episode = Episode.load(str(path))
+    hardware = json.loads((results / "hardware.json").read_text())
+    assert 0 < len(episode.t) == record.ticks == hardware["interrupted"]["tick"] < 1000  # played, not to its end
+    assert record.fall_time_s == pytest.approx(episode.t[-1]) and hardware["interrupted"]["time_s"] == pytest.approx(
+        episode.t[-1])  # where it was interrupted: the end of its last whole tick
+    for _ in range(500):  # bounded (5 s)
+        if not _running(io_process):
+            break
+        time.sleep(0.01)
+    assert not _running(io_process)
+    frames = go1.commands()[sent:]
+    first = next((k for k, c in enumerate(frames) if c.damping), None)
+    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
+    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
 def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> None:
     from wbc.cli.main import _terminate_interrupts
 
     before = signal.signal(signal.SIGHUP, signal.SIG_DFL)
     try:
-        with _terminate_interrupts(), pytest.raises(KeyboardInterrupt):  # as Ctrl-C: the robot is closed into damping
+        with _terminate_interrupts(), pytest.raises(KeyboardInterrupt) as hung:  # as Ctrl-C: the robot is damped
             os.kill(os.getpid(), signal.SIGHUP)
             time.sleep(1.0)  # the handler raises at once; this is only a bound
+        assert hung.value.args == ("SIGHUP",)  # named: a hardware trial interrupted while it plays records it
         assert signal.getsignal(signal.SIGHUP) is signal.SIG_DFL  # the handler before is back
         signal.signal(signal.SIGHUP, signal.SIG_IGN)  # nohup: the user asked the command to outlive its terminal
         with _terminate_interrupts():
@@ -756,6 +830,104 @@ def test_a_request_to_end_during_the_settle_after_an_estop_keeps_the_trials_resu
     assert after and all(c.damping for c in after)  # damping to the end, and the end came soon after the signal
     assert after[-1].time < sent[0] + 0.1
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def _interrupted_at_tick(tick: int, pressed: list[float], clock: ManualClock):
+    """`arm_variant` whose controller is interrupted (Ctrl-C) as it computes tick `tick` (0-based): `tick` ticks were
+    played whole. The clock's time then is appended to `pressed`."""
+    def variant(named: ControllerSpec, arm_mode: str) -> ControllerSpec:
+        spec = arm_variant(named, arm_mode)
+
+        def make(desc: object) -> object:
+            ctrl = spec.make(desc)
+            act, calls = ctrl.act, [0]
+
+            def act_until(state: RobotState, command: VelocityCommand) -> MotorCommand:
+                calls[0] += 1
+                if calls[0] > tick:
+                    pressed.append(clock.now())
+                    raise KeyboardInterrupt  # as Python's own Ctrl-C handler raises it
+                return act(state, command)
+
+            ctrl.act = act_until
+            return ctrl
+
+        return dataclasses.replace(spec, make=make)
+
+    return variant
+
+
+@pytest.mark.usefixtures("terminal_signals")
+@pytest.mark.parametrize("again", [0, 1, 2], ids=["once", "again-while-written", "twice-while-written"])
+def test_ctrl_c_during_the_trial_damps_the_robot_at_once_and_writes_the_episode_played(
+        stepped_go1: Stepped, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
+        again: int) -> None:
+    """Ctrl-C 1 s into a 3 s trial (as the controller computes tick 50): the safety layer damps the robot from the
+    next link period on, nothing but damping reaches the wire until the close and nothing after it, and the results
+    hold the 50 ticks played, recorded as interrupted (exit 130). It closed the robot and wrote no results, throwing
+    away what the operator who stopped the trial needs. A further Ctrl-C while the results are written waits for them;
+    a second stops the writing, as after a trial."""
+    import wbc.arena.hw_trial as hw_trial
+
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    pressed: list[float] = []
+    monkeypatch.setattr(hw_trial, "arm_variant", _interrupted_at_tick(50, pressed, clock))
+    write = hw_trial.write_text
+
+    def interrupted(path, text):  # hardware.json, written after the trial's row and episode
+        for _ in range(again):
+            signal.raise_signal(signal.SIGINT)
+        return write(path, text)
+
+    monkeypatch.setattr(hw_trial, "write_text", interrupted)
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--out", str(out),
+                                      "--no-io-process"])
+    try:
+        code = hw_run(args, build=stepped_go1.build)
+    except KeyboardInterrupt:
+        pytest.fail("the interruption escaped the command, unsaid")
+    err = capsys.readouterr().err
+    assert code == 130, err
+    when = "interrupted at 1.000 s of the 3 s trial (Ctrl-C)"
+    if again < 2:
+        assert err.strip().splitlines()[-1] == (f"wbc hw run: {when}; the robot was closed into damping; the results "
+                                                f"up to the interruption are complete in {out}")
+        assert all((out / name).is_file() for name in ("hardware.json", "summary.json", "report.md", "run.json"))
+    else:
+        assert err.strip().splitlines()[-1] == (f"wbc hw run: {when}; the robot was closed into damping; the writing "
+                                                f"of its results was stopped: {out} holds what was written until "
+                                                "then, and a hardware trial is played once (no --resume)")
+        assert not (out / "hardware.json").exists() and not (out / "summary.json").exists()
+    if again:
+        assert "the robot is closed into damping; the trial's results are being written to" in err
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    # the record: stopped, not a success, when and how said; the episode: the 50 ticks played, nothing else
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.outcome == "operator_stop" and not record.success
+    assert record.error == (f"{when}: the robot was closed into damping, and the episode up to the interruption is "
+                            "recorded")
+    assert record.ticks == 50 and record.fall_time_s == pytest.approx(1.0) and record.ttf == pytest.approx(1 / 3)
+    (path,) = (out / "episodes" / "stand-noarm").glob("*.npz")
+    episode = Episode.load(str(path))
+    assert len(episode.t) == 50 and episode.t[-1] == pytest.approx(1.0) and not episode.fell
+    if again < 2:
+        hardware = json.loads((out / "hardware.json").read_text())
+        assert hardware["interrupted"] == {"time_s": pytest.approx(1.0), "tick": 50, "by": "Ctrl-C"}
+        assert hardware["safety_events"][-1]["detail"] == "the command was interrupted during the trial (Ctrl-C)"
+        report = (out / "report.md").read_text()
+        assert "## Interrupted" in report and f"{when[0].upper()}{when[1:]}" in report
+    # the wire: the stand hold up to the interruption, then damping (kp 0) until the close, and nothing after it
+    frames = emu.commands()
+    before = [c for c in frames if c.time <= pressed[0] + TIME_EPS]
+    after = [c for c in frames if c.time > pressed[0] + TIME_EPS]
+    assert not before[-1].damping and np.allclose(before[-1].wire.kp, 60.0)  # the controller drove it until then
+    assert after and after[0].time <= pressed[0] + LINK_PERIOD + TIME_EPS  # damped from the next link period on
+    assert all(c.damping and (c.wire.kp == 0).all() for c in after)
+    sent = len(frames)
+    clock.advance(0.5)
+    assert len(emu.commands()) == sent  # closed: the link sends nothing more
 
 
 BROKEN_ON_HARDWARE = '''

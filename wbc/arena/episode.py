@@ -505,8 +505,8 @@ class EpisodeBuffer:
 
     @property
     def rows(self) -> int:
-        """Ticks stored."""
-        return len(self._rows)
+        """Ticks stored whole (`add` returned)."""
+        return min(len(self._rows), len(self._scalars))
 
     def measured(self, state: RobotState) -> np.ndarray:
         """A tick's row with the robot's frame (q, tau_est, dq) copied in; `add` fills in the rest.
@@ -536,8 +536,11 @@ class EpisodeBuffer:
     def _stacked(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """t, command, act_s, qpos, base_vel, tau_dq of the rows so far."""
         nq, nj = self.nq, self.nq - 7
-        rows = np.array(self._rows, dtype=np.float64).reshape(len(self._rows), nq + 6 + 2 * nj)
-        scalars = np.array(self._scalars, dtype=np.float64).reshape(len(self._scalars), 5)
+        # the ticks stored whole: an interruption inside `add` (Ctrl-C lands between any two bytecodes) may have left
+        # a row without its scalars, which belongs to no complete tick
+        k = min(len(self._rows), len(self._scalars))
+        rows = np.array(self._rows[:k], dtype=np.float64).reshape(k, nq + 6 + 2 * nj)
+        scalars = np.array(self._scalars[:k], dtype=np.float64).reshape(k, 5)
         tau_dq = rows[:, nq + 6:].reshape(-1, 2, nj)
         return scalars[:, 0], scalars[:, 1:4], scalars[:, 4], rows[:, :nq], rows[:, nq:nq + 6], tau_dq
 

@@ -26,6 +26,10 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
   torque policy it applied), not as a lost link while the legs answer: the trial's outcome, as any trip;
 - a controller that raises, or returns a command the robot refuses, ends the episode too: the layer is tripped into
   damping (a software e-stop), and the trial is recorded with the outcome ``controller_error`` and what failed;
+- so does an interruption while the trial plays (Ctrl-C, SIGTERM, a hangup, the I/O process stopped by SIGTERM): the
+  layer is tripped into damping at once, the robot is closed without the settle, and the episode up to the
+  interruption is recorded with the outcome ``operator_stop`` and when (`Interruption`); the trial's caller gets
+  `ResultsInterrupted`, as for an interruption after the trial;
 - deadline misses (``controller.act`` longer than the period), the link's late advances and the process's CPU time
   go into the record and the report beside the safety layer's transitions and the operator's actions.
 
@@ -65,7 +69,7 @@ from wbc.arena.identity import MAX_SEED, MAX_TRIALS, HardwareRunIdentity, Scenar
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
 from wbc.arena.report import md_table, summarize
 from wbc.arena.results import ResultsStore, episode_path, hold_results_dir, holds_results, unwritable
-from wbc.arena.runner import PreparingObserver, TickObserver, run_episode
+from wbc.arena.runner import EpisodeInterrupted, PreparingObserver, TickObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.control.stand import stand_command
@@ -81,7 +85,7 @@ from wbc.hardware.io_process import ProcessRobot, build_process_robot
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.realtime import RealtimeGrant, RealtimeRequest, controller_realtime
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
-from wbc.interrupts import DeferredInterrupts
+from wbc.interrupts import ASKS_TO_END, DeferredInterrupts, signal_label
 from wbc.output_files import DirectoryLock, write_text
 from wbc.scenario import load_scenario, warn_if_unpublished
 from wbc.scenario.scenario import fallback_note
@@ -90,8 +94,8 @@ from wbc.types import MotorCommand
 
 _T = TypeVar("_T")
 
-__all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "LinkLost", "ResultsInterrupted",
-           "run_hardware_trial"]
+__all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "Interruption", "LinkLost",
+           "ResultsInterrupted", "run_hardware_trial"]
 
 _STAND_UP_DT = 0.02  # [s] period of the stand hold that precedes a trial (the stand controller's 50 Hz)
 
@@ -206,6 +210,44 @@ class LinkLost:
 
 
 @dataclass(frozen=True)
+class Interruption:
+    """The command was interrupted while the trial played: Ctrl-C, SIGTERM, a hangup, or its I/O process stopped.
+
+    The safety layer then latched its damping at once, the robot was closed into damping, and the episode played up to
+    the interruption is the trial's: its record's outcome is ``operator_stop`` (not a success), its ``error`` says when
+    (`describe`), and ``hardware.json`` holds this (``interrupted``).
+
+    Attributes:
+        time_s: the trial's time at the end of its last complete tick [s].
+        tick: the ticks played whole.
+        by: what interrupted it: ``Ctrl-C``, ``SIGTERM``, ``SIGHUP``, or ``its I/O process stopped by SIGTERM`` (the
+            I/O process then closed the robot itself).
+    """
+
+    time_s: float
+    tick: int
+    by: str
+
+    @classmethod
+    def of(cls, stopped: EpisodeInterrupted) -> Interruption:
+        """The interruption that ended the episode, named by its cause."""
+        return cls(time_s=stopped.time_s, tick=stopped.tick, by=_interrupted_by(stopped.__cause__))
+
+    def when(self, duration_s: float) -> str:
+        """``at 1.240 s of the 3 s trial (Ctrl-C)``."""
+        return f"at {self.time_s:.3f} s of the {duration_s:g} s trial ({self.by})"
+
+    def describe(self, duration_s: float) -> str:
+        """The trial record's ``error``: when, and what became of the robot and the episode."""
+        return (f"interrupted {self.when(duration_s)}: the robot was closed into damping, and the episode up to the "
+                "interruption is recorded")
+
+    def to_dict(self) -> dict[str, float | int | str]:
+        """Its JSON form (``hardware.json``'s ``interrupted``)."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
 class HardwareTrialResult:
     """What a hardware trial produced.
 
@@ -232,6 +274,9 @@ class HardwareTrialResult:
             answering, its hardware error, the port lost), oldest first, as of the close; each says which joints its
             torque policy damped and which it left limp. An arm's fault ends the trial through the safety layer (the
             servo's mode, or its frozen state); it is not a lost link while the legs still answer.
+        interrupted: the command was interrupted while the trial played (`Interruption`): the episode is the part
+            played up to it; None when it was not. A trial's caller does not get the result then, but its results
+            directory holds it (`ResultsInterrupted`).
     """
 
     record: TrialRecord
@@ -249,6 +294,7 @@ class HardwareTrialResult:
     controller_realtime: RealtimeGrant | None = None
     link_lost: LinkLost | None = None
     arm_faults: tuple[ArmFault, ...] = ()
+    interrupted: Interruption | None = None
 
 
 def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
@@ -283,6 +329,10 @@ def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = Non
             during the trial is a trip of the safety layer and a `LinkLost` in the result instead.
         StandUpError: the safety layer tripped while standing the robot up, before the trial (nothing was played).
         ConnectInterrupted: interrupted before the robot was connected (nothing was sent to it).
+        ResultsInterrupted: interrupted during the trial (its robot closed into damping, the episode up to the
+            interruption written, `ResultsInterrupted.during`) or after it (its results written whole, or what a
+            second interruption left of them). Interrupted during the stand-up, the robot is closed into damping and
+            the `KeyboardInterrupt` goes on: nothing was played.
     """
     out = Path(cfg.out_dir)
     with contextlib.ExitStack() as holding:
@@ -387,16 +437,35 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
             io_cpu0 = io_robot.link_stats().io["cpu_s"] if io_robot is not None else 0.0
             cpu0, wall0 = time.process_time(), time.perf_counter()
             error = ""
+            interruption: Interruption | None = None
+
+            def damp_at_once(stopped: BaseException) -> None:
+                # the robot first, before the episode played is built: the layer latches its damping and sends it now
+                # (the close sends it again), as soon as the unwinding to the close used to
+                try:
+                    safe.estop(f"the command was interrupted during the trial ({_interrupted_by(stopped)})")
+                except IoProcessStopped as exc:  # stopped by the same SIGTERM: it closed the robot itself
+                    io_stopped.append(exc)
+
             try:
+                # the I/O process stopped by SIGTERM (to the whole command, or to it alone) closed the robot itself:
+                # a request to end, as Ctrl-C is, which keeps what was played
                 episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
-                                      fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console)
+                                      fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console,
+                                      stopped_by=(IoProcessStopped,), on_interrupt=damp_at_once)
             except ControllerFailure as failure:
                 episode, error = failure.episode, failure.record_error(spec.name, trial)
                 if safe.safety_state is not SafetyState.DAMPED:
                     safe.estop()  # the robot must not keep the broken controller's last command
+            except EpisodeInterrupted as interrupted:  # the robot is damped already (`damp_at_once`)
+                interruption = Interruption.of(interrupted)
+                if isinstance(interrupted.__cause__, IoProcessStopped) and not io_stopped:
+                    io_stopped.append(interrupted.__cause__)
+                episode = interrupted.episode
             cpu_s, episode_wall_s = time.process_time() - cpu0, time.perf_counter() - wall0
             # the trial is over: from here a request to end keeps its record; the settle after a trip (its robot
-            # already damped by the latched layer) is cut short, and the robot closed into damping
+            # already damped by the latched layer) is cut short, and the robot closed into damping. An interruption
+            # during the trial was such a request already: a further one waits for the results, a second stops them
             deferred.enter_context(after_the_trial)
 
             def unless_stopped(read: Callable[[], _T], otherwise: _T) -> _T:
@@ -407,7 +476,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 try:
                     return read()
                 except IoProcessStopped as exc:
-                    if after_the_trial.requested is None:
+                    if after_the_trial.requested is None and interruption is None:
                         raise
                     io_stopped.append(exc)
                     return otherwise
@@ -416,7 +485,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 link = unless_stopped(hardware.robot.link_stats, None)
             io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
             arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), ())
-            if safe.safety_state is SafetyState.DAMPED:
+            # no settle after an interruption: it is a request to end, which cuts any settle short; the robot is
+            # damped by the latched layer already, and its close leaves it damped
+            if safe.safety_state is SafetyState.DAMPED and interruption is None:
                 settling[0] = True
                 unless_stopped(lambda: _settle(robot, dt, cfg.settle_s,
                                                until=lambda: after_the_trial.requested is not None), None)
@@ -427,17 +498,20 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
         counters, error = read_counters(ctrl, spec.name, trial, episode, error)
         record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
                                       counters=counters, wall_s=episode_wall_s,
-                                      backend=hardware.backend, domain_applied=False, link=link, error=error)
+                                      backend=hardware.backend, domain_applied=False, link=link, error=error,
+                                      interrupted=interruption.describe(trial.duration_s) if interruption else "")
         result = HardwareTrialResult(record=record, episode=episode, out_dir=out, controller=spec, robot=hardware,
                                      notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
                                      safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
-                                     controller_realtime=grant, link_lost=link_lost, arm_faults=arm_faults)
+                                     controller_realtime=grant, link_lost=link_lost, arm_faults=arm_faults,
+                                     interrupted=interruption)
+        during = interruption.when(trial.duration_s) if interruption is not None else None
         try:
             _write_results(cfg, result, trial, lock, published=scenario_published)
         except KeyboardInterrupt:
-            raise ResultsInterrupted(out) from None
-    if after_the_trial.requested:
-        raise ResultsInterrupted(out, complete=True)
+            raise ResultsInterrupted(out, during=during) from None
+    if after_the_trial.requested or interruption is not None:
+        raise ResultsInterrupted(out, complete=True, during=during)
     return result
 
 
@@ -458,18 +532,34 @@ class ConnectInterrupted(KeyboardInterrupt):
 
 
 class ResultsInterrupted(KeyboardInterrupt):
-    """A hardware trial interrupted once its robot was closed, while or after its results were written.
+    """A hardware trial interrupted during or after its play, its robot closed into damping and its results written.
+
+    Interrupted during the trial, the robot was closed into damping at once, and the results hold the episode up to the
+    interruption (`during` says when); after the trial (its end, a trip, an e-stop), the results hold all of it.
 
     Attributes:
         out_dir: the results directory.
         complete: whether the results were written whole (the interruption waited for them) or the writing was
             stopped (a second interruption): then the directory holds what was written until then.
+        during: when the trial was interrupted, ``at 1.240 s of the 3 s trial (Ctrl-C)`` (`Interruption.when`);
+            None when it was interrupted after it.
     """
 
-    def __init__(self, out_dir: Path, *, complete: bool = False) -> None:
+    def __init__(self, out_dir: Path, *, complete: bool = False, during: str | None = None) -> None:
         super().__init__(str(out_dir))
         self.out_dir = out_dir
         self.complete = complete
+        self.during = during
+
+
+def _interrupted_by(stopped: BaseException | None) -> str:
+    """What interrupted the trial (`Interruption.by`), from the interruption: ``Ctrl-C``, ``SIGTERM`` ..."""
+    if isinstance(stopped, IoProcessStopped):
+        return f"its I/O process stopped by {stopped.signal_name}"
+    # the command's SIGTERM and SIGHUP raise `KeyboardInterrupt` with their name (`_terminate_interrupts`); Python's own
+    # Ctrl-C handler raises it bare
+    named = stopped.args[0] if stopped is not None and stopped.args else None
+    return named if isinstance(named, str) and named in {signal_label(s) for s in ASKS_TO_END} else "Ctrl-C"
 
 
 def _simulated(robot: str, arm_mode: str) -> HardwareRobot:
@@ -625,6 +715,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             "safety_events": [e.to_dict() for e in result.safety_events],
             "link_lost": result.link_lost.to_dict() if result.link_lost is not None else None,
             "arm_faults": [dataclasses.asdict(fault) for fault in result.arm_faults],
+            "interrupted": result.interrupted.to_dict() if result.interrupted is not None else None,
             "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
         }
         try:
@@ -696,6 +787,10 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
                                         *(f"- {fault}" for fault in result.arm_faults)]))
     if result.link_lost is not None:
         sections.append(("Link lost", [result.link_lost.sentence()]))
+    if result.interrupted is not None:
+        said = result.interrupted.describe(episode.duration_s)
+        sections.append(("Interrupted", [f"{said[0].upper()}{said[1:]} ({len(episode.t)} ticks); the trial counts "
+                                         "as stopped (operator_stop), not as a success."]))
     actions = episode.operator_events.rows()
     sections.append(("Operator actions", md_table(["trial time [s]", "key", "action"],
                                                   [(f"{t:.3f}", repr(k), a) for t, k, a in actions])

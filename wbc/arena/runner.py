@@ -18,8 +18,12 @@ command the robot refuses, ends the episode with a `ControllerFailure` that says
 of another arm mode, how to declare that mode: `wbc.control.arm_mode_hint`) and carries the episode so far. Given a
 `DivergenceCheck` (a simulated trial's), the loop checks the joints the robot reports before each ``act``, the trunk's
 truth and the simulator's own warnings (`SimulatorHealth`) after each step, and ends an episode whose simulation blew up
-with `SimulationDiverged` (its own outcome, never numbers in the means). A controller whose period is longer than the
-episode would never be asked to act: that is refused before the episode starts.
+with `SimulationDiverged` (its own outcome, never numbers in the means). An interruption while the episode plays
+(Ctrl-C, or SIGTERM and SIGHUP where the command raises `KeyboardInterrupt` for them) ends it with
+`EpisodeInterrupted`, a `KeyboardInterrupt` that carries the episode played up to the last complete tick: a caller
+that catches `KeyboardInterrupt` stops as before, and a hardware trial damps its robot and keeps what was played. A
+controller whose period is longer than the episode would never be asked to act: that is refused before the episode
+starts.
 """
 
 from __future__ import annotations
@@ -44,7 +48,7 @@ from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import BaseTruth, MotorCommand, VelocityCommand
 
-__all__ = ["PreparingObserver", "TickObserver", "forget_played", "played_s", "run_episode"]
+__all__ = ["EpisodeInterrupted", "PreparingObserver", "TickObserver", "forget_played", "played_s", "run_episode"]
 
 _playing: list[tuple[EpisodeBuffer, float] | None] = [None]
 """The log of the episode this process plays, and its control period: what `played_s` reads."""
@@ -85,6 +89,40 @@ class PreparingObserver(Protocol):
         """Set up for the next episode, played on `robot` (not necessarily connected yet)."""
 
 
+class EpisodeInterrupted(KeyboardInterrupt):
+    """An episode interrupted while it played, with the part played (`run_episode`).
+
+    A `KeyboardInterrupt`, so that whoever catches one (a simulated run, an arena's worker) stops as before; a
+    hardware trial catches this one to damp its robot and record the episode up to the interruption.
+
+    Args:
+        episode: the episode up to the last complete tick (not a fall: ``fell`` False).
+        tick: the ticks complete: the index of the tick that was interrupted.
+        time_s: the episode time at the end of the last complete tick [s].
+        duration_s: the episode's whole length [s].
+
+    Attributes:
+        episode, tick, time_s, duration_s: as given.
+    """
+
+    def __init__(self, *, episode: Episode, tick: int, time_s: float, duration_s: float) -> None:
+        super().__init__(f"interrupted at tick {tick}, {time_s:.3f} s of the {duration_s:g} s episode")
+        self.episode = episode
+        self.tick = tick
+        self.time_s = time_s
+        self.duration_s = duration_s
+
+    def __reduce__(self) -> tuple[object, ...]:
+        """Rebuild without calling the constructor (its arguments are keywords): an arena's worker may carry it."""
+        return _rebuild_interrupted, (type(self), self.args), self.__dict__
+
+
+def _rebuild_interrupted(cls: type[EpisodeInterrupted], args: tuple[object, ...]) -> EpisodeInterrupted:
+    err = cls.__new__(cls, *args)
+    err.args = args
+    return err
+
+
 def run_episode(
     robot: Robot,
     controller: Controller,
@@ -97,6 +135,8 @@ def run_episode(
     divergence: DivergenceCheck | None = None,
     duration_option: str | None = None,
     clock: Callable[[], float] = time.perf_counter,
+    stopped_by: tuple[type[Exception], ...] = (),
+    on_interrupt: Callable[[BaseException], None] | None = None,
 ) -> Episode:
     """Play one episode.
 
@@ -116,6 +156,12 @@ def run_episode(
         duration_option: the caller's option that set `duration_s` (``--duration``): an episode shorter than the
             controller's period is then blamed on it, not on the controller's rate.
         clock: what times each ``act`` call (the episode's ``act_s``) [s]: the wall clock, or a clock a test moves.
+        stopped_by: errors of the robot that mean the command was asked to end, not that the robot failed (a
+            hardware trial's `wbc.errors.IoProcessStopped`: its devices' process stopped by SIGTERM, closing the robot
+            into damping): they end the episode as an interruption does (`EpisodeInterrupted`, which carries them).
+        on_interrupt: called with the interruption (the `KeyboardInterrupt`, or the error of `stopped_by`) as soon as
+            it comes, before the partial episode is built (tens of milliseconds for a long episode): a hardware trial
+            latches its robot's damping there. What it raises goes on instead of `EpisodeInterrupted`.
 
     Returns:
         The episode log (no pushes: whoever applied them adds them, see `wbc.arena.sim_trial.run_trial`), with the
@@ -129,6 +175,11 @@ def run_episode(
             last command it accepted.
         SimulationDiverged: `divergence` found an impossible state; it carries the episode played up to that tick
             (the tick that stepped into it included).
+        EpisodeInterrupted: a `KeyboardInterrupt` came while the episode played (the robot, the controller, the
+            observer ...), or one of `stopped_by`; it carries the episode up to the last complete tick, and the
+            interruption as its ``__cause__``. Should the partial episode fail to be built (an interruption that cut
+            a tick's row in half), the interruption itself is raised, unchanged; a subclass of `KeyboardInterrupt`
+            (an interruption that means something else) always is.
     """
     truth = _truth_of(robot) if truth is None else truth
     fallen = _fall_detector_of(robot) if fallen is None else fallen
@@ -166,52 +217,77 @@ def run_episode(
                             safety_events=events, clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
         return SimulationDiverged(reason, tick=tick, time_s=buf.rows * dt, episode=played)
 
+    def interrupted(exc: BaseException) -> EpisodeInterrupted | None:
+        if on_interrupt is not None:
+            on_interrupt(exc)  # first: a robot's damping must not wait for the episode to be built
+        # what was played, built from memory alone; None where it cannot be
+        try:
+            events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
+            played = buf.finish(duration_s=duration_s, control_dt=dt, fell=False, fall_time_s=math.nan,
+                                safety_events=events, clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
+            ticks = len(played.t)
+            return EpisodeInterrupted(episode=played, tick=ticks, time_s=ticks * dt, duration_s=duration_s)
+        except Exception:  # any: the interruption must go on as itself, never masked by a failure to keep its episode
+            return None
+
     try:
-        controller.reset()
-    except CONTROLLER_ERRORS as exc:  # any: the controller's code is not ours, and the trial must still be recorded
-        raise failure("reset", 0, exc) from exc
-    fell, fall_time = False, math.nan
-    for k in range(n):
-        t = k * dt
-        state = robot.read()
-        if divergence is not None and (reason := divergence.state(state)) is not None:
-            raise diverged(reason, k)
-        cmd = schedule.at(t)
-        measured = buf.measured(state)  # before the controller, which could change the arrays it is given
-        started = clock()
         try:
-            out = controller.act(state, cmd)
-        except CONTROLLER_ERRORS as exc:
-            raise failure("act", k, exc) from exc
-        act_s = clock() - started
-        try:
-            robot.write(out)
-        except CommandError as exc:  # refused before reaching a motor: NaN, wrong length, not a MotorCommand
-            hint = arm_mode_hint(out.num_joints, robot.num_joints) if isinstance(out, MotorCommand) else None
-            raise failure("command", k, exc, hint) from exc
-        if not within_bounds(out.rows, lower, upper):  # one compiled pass; the rows are told apart only when needed
-            over = exceeded_rows(out, bounds)
-            if over.any():
-                clamped += 1
-                clamped_rows += over
-        robot.advance(dt)
-        # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
-        now = truth()
-        buf.add((k + 1) * dt, cmd, act_s, now, measured)
-        if health is not None and (reason := health.instability()) is not None:
-            raise diverged(reason, k)
-        if divergence is not None and (reason := divergence.truth(now)) is not None:
-            raise diverged(reason, k)
-        if observer is not None:
-            observer((k + 1) * dt, robot, controller, cmd)
-        if fallen():
-            fell, fall_time = True, (k + 1) * dt
-            break
-    else:
-        # a trunk upside down at the end has not survived, touching the ground or not (flung into the air by a push,
-        # the trial ended before it landed): a fall at the last tick
-        if upside_down(now.base_quat):
-            fell, fall_time = True, n * dt
+            controller.reset()
+        except CONTROLLER_ERRORS as exc:  # any: the controller's code is not ours, and the trial must still be recorded
+            raise failure("reset", 0, exc) from exc
+        fell, fall_time = False, math.nan
+        for k in range(n):
+            t = k * dt
+            state = robot.read()
+            if divergence is not None and (reason := divergence.state(state)) is not None:
+                raise diverged(reason, k)
+            cmd = schedule.at(t)
+            measured = buf.measured(state)  # before the controller, which could change the arrays it is given
+            started = clock()
+            try:
+                out = controller.act(state, cmd)
+            except CONTROLLER_ERRORS as exc:
+                raise failure("act", k, exc) from exc
+            act_s = clock() - started
+            try:
+                robot.write(out)
+            except CommandError as exc:  # refused before reaching a motor: NaN, wrong length, not a MotorCommand
+                hint = arm_mode_hint(out.num_joints, robot.num_joints) if isinstance(out, MotorCommand) else None
+                raise failure("command", k, exc, hint) from exc
+            if not within_bounds(out.rows, lower, upper):  # one compiled pass; the rows are told apart only when needed
+                over = exceeded_rows(out, bounds)
+                if over.any():
+                    clamped += 1
+                    clamped_rows += over
+            robot.advance(dt)
+            # the raw row only: the metrics derived from it are computed for all ticks at the end (`finish`)
+            now = truth()
+            buf.add((k + 1) * dt, cmd, act_s, now, measured)
+            if health is not None and (reason := health.instability()) is not None:
+                raise diverged(reason, k)
+            if divergence is not None and (reason := divergence.truth(now)) is not None:
+                raise diverged(reason, k)
+            if observer is not None:
+                observer((k + 1) * dt, robot, controller, cmd)
+            if fallen():
+                fell, fall_time = True, (k + 1) * dt
+                break
+        else:
+            # a trunk upside down at the end has not survived, touching the ground or not (flung into the air by a push,
+            # the trial ended before it landed): a fall at the last tick
+            if upside_down(now.base_quat):
+                fell, fall_time = True, n * dt
+    except KeyboardInterrupt as exc:
+        # a subclass is an interruption that means something else: it goes on as it is
+        stop = interrupted(exc) if type(exc) is KeyboardInterrupt else None
+        if stop is None:
+            raise
+        raise stop from exc
+    except stopped_by as exc:
+        stop = interrupted(exc)
+        if stop is None:
+            raise
+        raise stop from exc
     events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
     return buf.finish(duration_s=duration_s, control_dt=dt, fell=fell, fall_time_s=fall_time, safety_events=events,
                       clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))

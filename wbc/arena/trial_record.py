@@ -51,7 +51,8 @@ SAFETY_TRIP = "safety_trip"
 CONTROLLER_ERROR = "controller_error"
 """The controller raised in ``reset`` or ``act``, or returned a command the robot refused (``error`` says which)."""
 OPERATOR_STOP = "operator_stop"
-"""An operator stopped the robot (the console's e-stop key, the remote's e-stop)."""
+"""An operator stopped the robot (the console's e-stop key, the remote's e-stop), or interrupted the hardware trial's
+command while it played (Ctrl-C, SIGTERM, a hangup; ``error`` then says when)."""
 DIVERGED = "diverged"
 """The simulation blew up (a non-finite state, an impossible speed, the trunk far below the ground;
 `wbc.arena.divergence`): no controller's result, so the metrics that would be absurd are NaN."""
@@ -79,9 +80,10 @@ class TrialRecord:
         success: the episode reached its end without a fall (`wbc.arena.metrics.success`), a trip or an error.
         outcome: how the trial ended, one of `OUTCOMES`: ``success``, ``fall``, ``safety_trip``,
             ``controller_error``, ``operator_stop`` or ``diverged``.
-        ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error or a
-            divergence, the fraction played before it, in [0, 1].
-        fall_time_s: when the robot fell, NaN if it did not (after a controller error too) [s].
+        ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error, a divergence
+            or an interruption, the fraction played before it, in [0, 1].
+        fall_time_s: when the robot fell, NaN if it did not (after a controller error too); for an interrupted
+            hardware trial, when it was interrupted [s].
         vlin_err: mean horizontal velocity tracking error [m/s]; this and the other episode metrics down to
             `arm_travel_rad`, `power_w` and the per-second profiles are NaN (empty) for a diverged trial.
         vang_err: mean yaw-rate tracking error [rad/s].
@@ -117,7 +119,8 @@ class TrialRecord:
             robot, do `late_advances` and `worst_lateness_ms`).
         error: for a ``controller_error``, what failed: the controller, band, seed, trial, tick and time, the
             exception's type and message, and the controller's own ``file:line``; for a ``diverged`` trial, what
-            diverged, at which tick; empty otherwise.
+            diverged, at which tick; for an ``operator_stop`` that interrupted a hardware trial's command, when
+            (``interrupted at 1.240 s of the 3 s trial ...``); empty otherwise.
         ticks: control ticks played.
         clamped_ticks: ticks whose command lay outside the motors' limits (position range, speed, gains, torque)
             and was clamped by the robot before it was sent.
@@ -203,7 +206,8 @@ class TrialRecord:
     @classmethod
     def of_trial(cls, trial: Trial, *, controller: str, episode: Episode, counters: Mapping[str, int],
                  wall_s: float, debug_truth: bool = False, backend: str = "sim", domain_applied: bool = True,
-                 link: LinkStatsLike | None = None, error: str = "", diverged: str = "") -> TrialRecord:
+                 link: LinkStatsLike | None = None, error: str = "", diverged: str = "",
+                 interrupted: str = "") -> TrialRecord:
         """The record of `trial` played by `controller`.
 
         Args:
@@ -227,6 +231,10 @@ class TrialRecord:
                 for the record's `error`; the outcome is then ``diverged``, `episode` the part played up to the tick
                 that diverged, and the metrics computed from the robot's motion are NaN, so that no absurd number
                 reaches a mean. A controller error found first wins.
+            interrupted: the hardware trial's command was interrupted while it played (Ctrl-C, SIGTERM, a hangup;
+                `wbc.arena.runner.EpisodeInterrupted`): when, for the record's `error`; the outcome is then
+                ``operator_stop``, `episode` the part played up to the interruption, which is the record's
+                `fall_time_s` (its `ttf` the fraction played). Not a success, though the robot did not fall.
         """
         metrics = compute_metrics(episode)
         counts = check_counters(counters)
@@ -237,6 +245,10 @@ class TrialRecord:
             if not error:
                 metrics.update({name: math.nan for name in _MOTION_METRICS}, vlin_err_by_s="", vang_err_by_s="")
                 error = diverged
+        elif interrupted:
+            played = float(episode.t[-1]) if len(episode.t) else 0.0
+            metrics.update(success=False, ttf=min(1.0, played / episode.duration_s), fall_time_s=played)
+            outcome, error = OPERATOR_STOP, interrupted
         else:
             outcome = _outcome(episode)
         return cls(

@@ -5,7 +5,8 @@ calls the tool the command names and hands its result to a printer (`wbc.cli.pri
 command with its message and exit status 2; anything else is a bug and keeps its traceback. A ``run`` or
 ``compare`` in which a controller failed on some trials (`wbc.arena.error_guard`) finishes, then exits with status 1
 after one line per failing controller. Ctrl-C, SIGTERM and SIGHUP (the terminal closed) interrupt a command alike:
-status 130, and one line that says what a run stored and how to finish it (or that a robot was closed into damping).
+status 130, and one line that says what a run stored and how to finish it (or that a robot was closed into damping,
+and what of its trial was written).
 """
 
 from __future__ import annotations
@@ -59,6 +60,7 @@ from wbc.hardware.safety import SafetyConfig
 from wbc.hardware.serial_port_policy import is_emulated_port, why_not_emulated
 from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS, check_target, is_loopback
 from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS
+from wbc.interrupts import signal_label
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.shipped import distilled_weights
 from wbc.learned.train.adaptation_config import AdaptationConfig
@@ -548,8 +550,12 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         sent since may not have reached the robot: check it and power it down by hand); a fault of the arm's bus is
         a trip like any other, printed as the arm's (0); 130 when interrupted (Ctrl-C, SIGTERM,
         SIGHUP: the robot is closed into damping first), SIGTERM to the command's group or to its I/O process
-        included (`IoProcessStopped`, the robot closed by the I/O process); interrupted before the robot was
-        connected, the line says that nothing was sent to it (`ConnectInterrupted`).
+        included (`IoProcessStopped`, the robot closed by the I/O process). Interrupted during the trial, the
+        safety layer damps the robot at once, the results hold the episode up to the interruption (the record's
+        outcome ``operator_stop``, its ``error`` saying when), and the last line says so and where
+        (`ResultsInterrupted.during`); after it, the results are written whole; before the robot was connected, the
+        line says that nothing was sent to it (`ConnectInterrupted`); during the stand-up, that no results were
+        written (nothing was played).
     """
     _view_options(args)
     if args.sim == (args.target is not None):
@@ -623,11 +629,13 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
                                     before_connect=confirm, build=build)
     except ResultsInterrupted as stopped:
         if stopped.complete:
-            said = f"its results are complete in {stopped.out_dir}"
+            said = (f"the results up to the interruption are complete in {stopped.out_dir}" if stopped.during
+                    else f"its results are complete in {stopped.out_dir}")
         else:
             said = (f"the writing of its results was stopped: {stopped.out_dir} holds what was written until then, "
                     "and a hardware trial is played once (no --resume)")
-        _say(f"wbc hw run: interrupted after the trial; the robot was closed into damping; {said}")
+        when = stopped.during if stopped.during is not None else "after the trial"
+        _say(f"wbc hw run: interrupted {when}; the robot was closed into damping; {said}")
         return 130
     except ConnectInterrupted as stopped:
         if stopped.opening:
@@ -638,6 +646,9 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         _say(f"wbc hw run: interrupted {said}; no results were written")
         return 130
     except (KeyboardInterrupt, IoProcessStopped):
+        # during the stand-up, before anything was played (an interruption during the trial writes what was played:
+        # `ResultsInterrupted`); a second one that came before the played episode's results began to be written; or
+        # an I/O process stopped by a SIGTERM of its own after the trial, with no request to end.
         # SIGTERM to the command's whole group reaches its I/O process too, which closes the robot itself; it is
         # raised only once the I/O process has said that the robot is closed, and reads as the stop it is
         _say("wbc hw run: interrupted; the robot was closed into damping; no results were written")
@@ -1507,13 +1518,16 @@ def _terminate_interrupts() -> Iterator[None]:
     hardware command closes its robot into damping, where it ended without a word (status -15, -1) and left the legs
     holding their last command. A SIGHUP ignored when the command starts (``nohup``) stays ignored. Signals reach the
     main thread only: a command run from another thread keeps the handlers it has.
+
+    The `KeyboardInterrupt` names its signal (``SIGTERM``, ``SIGHUP``), so that a hardware trial interrupted while it
+    plays records what stopped it; Ctrl-C's, raised by Python's own handler, names none.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def interrupt(signum: int, frame: object) -> None:
-        raise KeyboardInterrupt
+        raise KeyboardInterrupt(signal_label(signum))  # named: a hardware trial's record says what stopped it
 
     wanted = (signal.SIGTERM,) + (() if signal.getsignal(signal.SIGHUP) is signal.SIG_IGN else (signal.SIGHUP,))
     previous = {signum: signal.signal(signum, interrupt) for signum in wanted}

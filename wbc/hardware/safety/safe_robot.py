@@ -131,9 +131,12 @@ class SafeRobot(Robot):
         return self._last_fresh_time
 
     # -- operator actions -----------------------------------------------------------------------------------------
-    def estop(self) -> None:
-        """Software e-stop: go to ``damped`` (latched) and send damping now, if connected."""
-        self._trip("software_estop", "estop() called")
+    def estop(self, detail: str = "estop() called") -> None:
+        """Software e-stop: go to ``damped`` (latched) and send damping now, if connected.
+
+        `detail` says who stopped it, in the event (a hardware trial's interrupted command says so).
+        """
+        self._trip("software_estop", detail)
 
     def reset(self) -> None:
         """Release a latched ``damped`` state into a new ramp from the measured pose; nothing to do otherwise.
