@@ -434,3 +434,29 @@ def test_a_scenario_for_a_robot_the_controller_does_not_drive_is_refused_naming_
         main(["check-controller", "stand", "--seconds", "-1"])
     err = capsys.readouterr().err
     assert exit_.value.code == 2 and "--seconds: must be a finite number in (0, 600] s, got '-1'" in err
+
+
+def test_a_controller_that_cannot_be_built_from_its_files_is_a_failed_build_in_the_json(tmp_path, capsys):
+    pytest.importorskip("onnxruntime")
+    import json
+
+    from fuzz.cases import ONNX_FRAME, ONNX_IO, onnx_linear_model
+
+    model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
+    model.write_bytes(onnx_linear_model(np.zeros((ONNX_FRAME - 3, 12))))  # an input too small for the I/O file
+    io.write_text(ONNX_IO)
+    for broken in ("model", "io"):
+        if broken == "io":
+            io.write_text(ONNX_IO.replace('arm_mode = "none"', 'arm_mode = "folded"'))
+        assert main(["check-controller", f"onnx:{model}", "--json"]) == 2  # the status without --json
+        captured = capsys.readouterr()
+        found = json.loads(captured.out)
+        message = captured.err.removeprefix("wbc: error: ").rstrip("\n")
+        assert found == {"controller": f"onnx:{model}", "passed": False, "timings": [],
+                         "outcomes": [{"check": "build", "robot": None, "arm_mode": None, "passed": False,
+                                       "detail": message}]}, broken
+        assert str(io) in message
+    # a usage error stays one: a line on stderr and nothing on stdout
+    assert main(["check-controller", "no-such-controller", "--json"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and "unknown controller 'no-such-controller'" in captured.err

@@ -147,15 +147,16 @@ class CheckOutcome:
 
     Attributes:
         check: one of `CHECKS`.
-        robot: robot name.
-        arm_mode: arm mode.
+        robot: robot name; None for the ``build`` of a controller whose name could not be resolved into one
+            (`ControllerCheck.unbuilt`), for which no robot is known.
+        arm_mode: arm mode; None where `robot` is.
         passed: True, False, or None when it could not be run.
         detail: what was measured, or what is wrong and how to fix it.
     """
 
     check: str
-    robot: str
-    arm_mode: str
+    robot: str | None
+    arm_mode: str | None
     passed: bool | None
     detail: str
 
@@ -198,6 +199,17 @@ class ControllerCheck:
     controller: str
     outcomes: tuple[CheckOutcome, ...]
     timings: tuple[ActTiming, ...]
+
+    @classmethod
+    def unbuilt(cls, controller: str, detail: str) -> ControllerCheck:
+        """The check of a controller whose name could not be resolved into one: a failed ``build``, for no robot.
+
+        Its model, I/O file or policy file is invalid, or its plug-in's module cannot be imported, so neither the
+        controller nor the robots it claims are known; ``wbc check-controller --json`` prints this, so that a script
+        reads every controller that cannot be built as a failed build, whatever failed.
+        """
+        return cls(controller=controller, outcomes=(CheckOutcome(check="build", robot=None, arm_mode=None,
+                                                                 passed=False, detail=detail),), timings=())
 
     @property
     def passed(self) -> bool:
