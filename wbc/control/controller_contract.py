@@ -6,7 +6,10 @@ For every robot and arm mode the controller claims (`ControllerSpec.claims`), on
 - ``rate``: ``rate_hz`` is a finite positive number whose period is a whole number of physics steps (as the arena
   requires), and it stays the same after `reset` and `act`;
 - ``output``: every `act` returns a `MotorCommand` with one entry per joint of the robot, finite, gains >= 0, and
-  `counters` returns ``dict[str, int]``;
+  `counters` returns ``dict[str, int]``; the closed loop's commands beyond the robot's motor limits (positions,
+  velocities, gains, torques: the bounds the robot clamps to, whose ticks the arena counts as clamped) are reported,
+  each row's joints and by how much, and fail the check where more than half the ticks lie beyond a limit by more
+  than the whole interval it limits (`CLAMPED_SHARE`: a target past a stop may be meant; that far, it is not);
 - ``reset``: determinism. The states of a closed-loop run are fed again, open loop: after `reset` twice (the
   commands must be equal to the last bit) and to a freshly built controller (reset must forget the run before it);
 - ``truth``: it never reads simulator truth. No truth accessor of the simulator (`sim_truth`, `base_truth`,
@@ -66,8 +69,8 @@ from wbc.types import MotorCommand, RobotState, VelocityCommand
 if TYPE_CHECKING:
     from wbc.learned.policy.replay_file import Replay
 
-__all__ = ["CHECKS", "DEFAULT_SECONDS", "EXTRA_CHECKS", "ActTiming", "CheckConfig", "CheckOutcome", "ControllerCheck",
-           "EstimatesTerms", "ObservesTerms", "check_controller"]
+__all__ = ["CHECKS", "CLAMPED_SHARE", "DEFAULT_SECONDS", "EXTRA_CHECKS", "ActTiming", "CheckConfig", "CheckOutcome",
+           "ControllerCheck", "EstimatesTerms", "ObservesTerms", "check_controller"]
 
 CHECKS = ("build", "rate", "output", "reset", "truth", "timing")
 """The checks, in the order they are run and reported."""
@@ -416,6 +419,68 @@ def _output_problem(out: object, n: int) -> str | None:
     return None
 
 
+CLAMPED_SHARE = 0.5
+"""The ``output`` check fails when more than this share of the closed loop's ticks command far beyond the motors'
+limits: beyond a bound by more than the width of the interval it bounds (`_clamped`).
+
+A controller may command past a limit, and the robot clamps it: a PD policy's target past a joint's stop presses the
+joint against it (the shipped pi3 asks its calves for up to 0.27 rad past their stop on most ticks of a walk), a
+torque peaks at a push. The arena counts those ticks (`Episode.clamped_ticks`) and the check reports them, each row's
+joints and by how much, and passes. A command beyond by more than the whole interval (a target further past a stop
+than the joint's range, a speed or a torque more than twice the motor's) is not one the controller can mean: a
+network that answers far outside its range, an action scale or a default pose off. On most ticks, as a median
+``act`` beyond its period fails ``timing``, it fails ``output``: the robot does not play what the controller
+commands."""
+
+
+def _clamped(outputs: list[np.ndarray], bounds: tuple[np.ndarray, np.ndarray], joints: tuple[str, ...]
+             ) -> tuple[bool, str] | None:
+    """The commands beyond the robot's motor limits (`bounds`, as the arena counts clamped ticks), or None if none.
+
+    Returns whether that fails the ``output`` check (more than `CLAMPED_SHARE` of the ticks far beyond: by more
+    than the width of a bound's interval) and what was found: per row, the joints beyond their limit, on how many
+    ticks and by how much at most.
+    """
+    from wbc.hardware.robot import COMMAND_ROWS  # the hardware package loads only when a check runs
+
+    rows = np.asarray(outputs)  # (ticks, 5, n)
+    lower, upper = bounds
+    excess = np.maximum(lower - rows, rows - upper)  # > 0 beyond a bound, by that much
+    beyond = excess > 0
+    ticks = beyond.any(axis=(1, 2))
+    if not ticks.any():
+        return None
+    far = (excess > upper - lower).any(axis=(1, 2))
+    units = {"q": "rad", "dq": "rad/s", "kp": "N m/rad", "kd": "N m s/rad", "tau": "N m"}
+    parts = []
+    for r, row in enumerate(COMMAND_ROWS):
+        hit = np.flatnonzero(beyond[:, r, :].any(axis=0))
+        if not hit.size:
+            continue
+        worst = sorted(hit, key=lambda j: -excess[:, r, j].max())
+        named = []
+        for j in worst[:3]:
+            k = int(np.argmax(excess[:, r, j]))
+            above = rows[k, r, j] > upper[r, j]
+            side, limit = ("above its upper", upper[r, j]) if above else ("below its lower", lower[r, j])
+            on = int(beyond[:, r, j].sum())
+            named.append(f"{joints[j]} {rows[k, r, j]:.3g} {side} limit {limit:.3g} (by {excess[k, r, j]:.3g} "
+                         f"{units[row]}) on {on} tick{'s' if on != 1 else ''}")
+        more = f" and {len(worst) - 3} more joints" if len(worst) > 3 else ""
+        parts.append(f"MotorCommand.{row}: {', '.join(named)}{more}")
+    count, total = int(ticks.sum()), len(outputs)
+    fails = int(far.sum()) > CLAMPED_SHARE * total
+    text = (f"{count} of {total} closed-loop ticks command beyond the robot's motor limits, which the robot clamps "
+            f"before sending (the arena counts them as clamped ticks): {'; '.join(parts)}")
+    if fails:
+        text += (f"; on {int(far.sum())} of them a command lies further beyond its limit than the whole interval it "
+                 "limits (a target further past a stop than the joint's range), so the robot does not play what the "
+                 "controller commands: keep the targets near the joints' range and the velocities, gains and "
+                 "torques within the motors' limits (an ONNX policy: its action scale, default pose and the "
+                 "network's outputs)")
+    return fails, text
+
+
 def _counters_problem(ctrl: Controller) -> str | None:
     try:
         counts = ctrl.counters()
@@ -596,10 +661,16 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         v.set("reset", False, reset_failure)
     failure = next((p.failure for p in (b1, b2, d, c) if p is not None and p.failure is not None), None)
     problem = _counters_problem(ctrl)
+    from wbc.hardware.robot import command_bounds
+
+    clamped = _clamped(a.outputs, command_bounds(sim.limits, *sim.gain_limits), desc.joint_names)
     if failure is not None or problem is not None:
         v.set("output", False, failure or problem)
+    elif clamped is not None and clamped[0]:
+        v.set("output", False, clamped[1])
     elif reset_failure is None:  # else a replay did not run: the output over every pass was not seen
-        v.set("output", True, f"{len(states)} ticks x 5 passes: {n} joints, finite, gains >= 0; counters "
+        limits = clamped[1] if clamped is not None else "within the motor limits on every tick"
+        v.set("output", True, f"{len(states)} ticks x 5 passes: {n} joints, finite, gains >= 0, {limits}; counters "
               f"{ctrl.counters()}")
     if failure is None and reset_failure is None and d is not None:
         same = _difference(b1, b2)
