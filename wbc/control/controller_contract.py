@@ -37,9 +37,10 @@ something else than its author thinks:
   reset, to a freshly built controller. A controller that says what it observes (`ObservesTerms`: the learned
   policies and ONNX policies do) has its observation frame compared with the recorded one, entry by entry, and every
   term whose entries differ is named, with the term the controller puts there (two terms swapped in an I/O file show
-  as each in the other's place). Its actions, read from the motor targets through the recording's motor law
-  (``action = (q* - default_q) / action_scale``), are compared with the recorded actions. Within
-  `CheckConfig.replay_atol` it passes.
+  as each in the other's place; per-joint terms that equal the recording in another joint order show as that order,
+  whose fix is the joint list, an ONNX policy's ``[policy] joints``). Its actions, read from the motor targets
+  through the recording's motor law (``action = (q* - default_q) / action_scale``), are compared with the recorded
+  actions. Within `CheckConfig.replay_atol` it passes.
 """
 
 from __future__ import annotations
@@ -811,6 +812,57 @@ def _observation_findings(frames: np.ndarray, layout: tuple[tuple[str, int], ...
     return found, None, float(diff.max())
 
 
+_JOINT_TERMS = ("joint_pos_rel", "joint_vel")
+"""The per-joint terms read from the states alone, which a joint order permutes (``last_action`` is the controller's
+own, and differs once an action does)."""
+
+
+def _joint_permutation(frames: np.ndarray, replay: Replay, found: list[_TermFinding], atol: float
+                       ) -> list[int] | None:
+    """The joint order that explains every per-joint term found to differ, or None.
+
+    For each such term (`_JOINT_TERMS`, one entry per joint), each recorded entry is matched with the controller's
+    entry of the same term that it equals on every tick (within `atol`); where every differing term's entries are
+    the controller's in one other order, the same for all, that order is returned: ``order[k]`` is the controller's
+    entry that the recording's entry k holds.
+    """
+    n = len(replay.action_joints)
+    terms = [f.name for f in found if f.name in _JOINT_TERMS]
+    if not terms:
+        return None
+    order: list[int] | None = None
+    for name in terms:
+        a, b = replay.obs_slices[replay.obs_terms.index(name)]
+        if b - a != n:
+            return None
+        mine, theirs = frames[:, a:b], replay.obs[:, a:b]
+        gap = np.abs(theirs[:, :, None] - mine[:, None, :]).max(axis=0)  # [recorded entry, controller's entry]
+        match = [int(j) for j in gap.argmin(axis=1)]
+        if sorted(match) != list(range(n)) or gap[np.arange(n), match].max() > atol:
+            return None
+        if order is not None and match != order:
+            return None
+        order = match
+    return order
+
+
+def _joint_order_hint(order: list[int], terms: list[str], ctrl: Controller) -> str:
+    """What a joint order that explains the differing joint terms says, with the joints named where known."""
+    io = getattr(ctrl, "io", None)  # an ONNX policy: its frame's joints are its I/O file's [policy] joints
+    joints = getattr(io, "joints", None)
+    where = "[policy] joints"
+    if joints is not None and len(joints) == len(order):
+        mine = ", ".join(joints)
+        trained = ", ".join(joints[j] for j in order)
+        where = f"{getattr(io, 'path', 'the I/O file')} [policy] joints"
+        text = (f"the recording holds the joints in the order {trained}; the controller's frame in the order {mine}")
+    else:
+        text = f"the recording's joint entries are the controller's entries {', '.join(map(str, order))}"
+    return (f"{', '.join(terms)} equal the recording with the joints in another order: {text}. The network was "
+            f"trained in another joint order than the controller uses: list the network's joints in its training "
+            f"order (an ONNX policy's I/O file: {where})")
+
+
 def _estimate_text(frames: np.ndarray, replay: Replay, fed: set[str]) -> str:
     """What the replay says of the estimated terms: fed the recorded values, and how far the estimate lies from them."""
     parts = []
@@ -941,6 +993,15 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
                        f"differs{follows}, but {act_text}: the network, its action scale or its default pose are "
                        "not the recorded policy's")
     text = "; ".join(f.text for f in causes) + follows
-    names = sorted({f.name for f in causes})
-    return False, (f"{label}: the observation differs from the recording: {text}; {act_text}. Check the order, "
-                   f"scales and sources of {', '.join(names)} (an ONNX policy's I/O file: [[observation.terms]])")
+    # a joint order that is not the trainer's permutes the per-joint terms alone: the fix is the joint list, not
+    # the terms' order, scales or sources
+    order = _joint_permutation(np.asarray(frames), replay, causes, atol)
+    joint_terms = [f.name for f in causes if f.name in _JOINT_TERMS]
+    names = sorted({f.name for f in causes if order is None or f.name not in _JOINT_TERMS})
+    hints = [_joint_order_hint(order, joint_terms, ctrl)] if order is not None else []
+    if names:
+        first = "the joint order (an ONNX policy's I/O file: [policy] joints), then " if (
+            order is None and joint_terms and set(names) <= set(_JOINT_TERMS)) else ""
+        hints.append(f"Check {first}the order, scales and sources of {', '.join(names)} (an ONNX policy's I/O "
+                     "file: [[observation.terms]])")
+    return False, f"{label}: the observation differs from the recording: {text}; {act_text}. {'; '.join(hints)}"
