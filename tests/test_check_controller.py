@@ -157,6 +157,46 @@ class WithArm(Stand):
         return MotorCommand.hold(np.zeros(15), 60.0, 2.0)  # the legs and the arm, on a robot without an arm
 
 
+class FarBeyond(Stand):
+    """Every target 12.5 rad past the nominal pose (a network that answers +50 at an action scale of 0.25)."""
+
+    def act(self, state, command):
+        return MotorCommand.hold(self.command.q + 12.5, self.command.kp, self.command.kd)
+
+
+class Pressing(Stand):
+    """Presses the front right calf 0.2 rad past its stop on every tick (as a PD policy asks for torque there)."""
+
+    def __init__(self, desc):
+        super().__init__(desc)
+        q = self.command.q.copy()
+        q[2] = -0.7163  # FR_calf_joint: its upper limit is -0.9163 rad
+        self.command = MotorCommand.hold(q, self.command.kp, self.command.kd)
+
+
+def test_commands_far_beyond_the_motor_limits_fail_the_output_check_and_commands_past_a_stop_are_reported():
+    spec = ControllerSpec("far", "none", FarBeyond, "targets far outside the joints' range", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    assert {o.check for o in result.failed()} == {"output"}, [(o.check, o.detail) for o in result.failed()]
+    detail = result.failed("output")[0].detail
+    for phrase in ("10 of 10 closed-loop ticks command beyond the robot's motor limits, which the robot clamps",
+                   "MotorCommand.q: FR_calf_joint", "above its upper limit -0.916 (by 11.", "rad) on 10 ticks",
+                   "and 9 more joints", "on 10 of them a command lies further beyond its limit than the whole "
+                   "interval it limits", "the robot does not play what the controller commands"):
+        assert phrase in detail, detail
+    # a target past a stop, on every tick, is the controller's to command: reported, and the check passes
+    spec = ControllerSpec("pressing", "none", Pressing, "presses a joint past its stop", robots=("a1-wx200",))
+    result = check_controller(spec, CheckConfig(seconds=0.2))
+    result.raise_if_failed()
+    (output,) = [o for o in result.outcomes if o.check == "output"]
+    assert ("10 of 10 closed-loop ticks command beyond the robot's motor limits, which the robot clamps before "
+            "sending (the arena counts them as clamped ticks): MotorCommand.q: FR_calf_joint -0.716 above its upper "
+            "limit -0.916 (by 0.2 rad) on 10 ticks;") in output.detail, output.detail
+    assert "within the motor limits on every tick" in check_controller(
+        ControllerSpec("stand-a1", "none", Stand, "a stand", robots=("a1-wx200",)),
+        CheckConfig(seconds=0.2)).outcomes[2].detail
+
+
 def test_a_command_of_the_legs_and_the_arm_on_a_robot_without_an_arm_says_to_declare_actuated():
     spec = ControllerSpec("with-arm", "none", WithArm, "commands the arm too", robots=("a1-wx200",))
     result = check_controller(spec, CheckConfig(seconds=0.2))
@@ -434,3 +474,29 @@ def test_a_scenario_for_a_robot_the_controller_does_not_drive_is_refused_naming_
         main(["check-controller", "stand", "--seconds", "-1"])
     err = capsys.readouterr().err
     assert exit_.value.code == 2 and "--seconds: must be a finite number in (0, 600] s, got '-1'" in err
+
+
+def test_a_controller_that_cannot_be_built_from_its_files_is_a_failed_build_in_the_json(tmp_path, capsys):
+    pytest.importorskip("onnxruntime")
+    import json
+
+    from fuzz.cases import ONNX_FRAME, ONNX_IO, onnx_linear_model
+
+    model, io = tmp_path / "m.onnx", tmp_path / "m.toml"
+    model.write_bytes(onnx_linear_model(np.zeros((ONNX_FRAME - 3, 12))))  # an input too small for the I/O file
+    io.write_text(ONNX_IO)
+    for broken in ("model", "io"):
+        if broken == "io":
+            io.write_text(ONNX_IO.replace('arm_mode = "none"', 'arm_mode = "folded"'))
+        assert main(["check-controller", f"onnx:{model}", "--json"]) == 2  # the status without --json
+        captured = capsys.readouterr()
+        found = json.loads(captured.out)
+        message = captured.err.removeprefix("wbc: error: ").rstrip("\n")
+        assert found == {"controller": f"onnx:{model}", "passed": False, "timings": [],
+                         "outcomes": [{"check": "build", "robot": None, "arm_mode": None, "passed": False,
+                                       "detail": message}]}, broken
+        assert str(io) in message
+    # a usage error stays one: a line on stderr and nothing on stdout
+    assert main(["check-controller", "no-such-controller", "--json"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and "unknown controller 'no-such-controller'" in captured.err

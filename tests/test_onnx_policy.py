@@ -420,6 +420,63 @@ def test_a_float64_model_with_an_operator_onnxruntime_lacks_in_double_is_named_v
     assert "damaged" not in text and "export it again" not in text
 
 
+def _graph_model(path: Path, inputs, outputs, nodes, weights) -> None:
+    """An ONNX model of float tensors: `inputs` and `outputs` as (name, shape, element type), `weights` by name."""
+    from onnx import helper, numpy_helper
+
+    graph = helper.make_graph(nodes, "graph", [helper.make_tensor_value_info(*i) for i in inputs],
+                              [helper.make_tensor_value_info(*o) for o in outputs],
+                              [numpy_helper.from_array(w, name) for name, w in weights.items()])
+    proto = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    proto.ir_version = 8
+    path.write_bytes(proto.SerializeToString())
+
+
+def test_a_recurrent_model_is_refused_as_unsupported_and_pointed_to_observation_history(tmp_path):
+    from onnx import TensorProto, helper
+
+    model, io = tmp_path / "gru.onnx", tmp_path / "gru.toml"
+    io.write_text(_io())
+    f = TensorProto.FLOAT
+    nodes = [helper.make_node("MatMul", ["obs", "w"], ["actions"]),
+             helper.make_node("MatMul", ["h_in", "u"], ["h_out"])]
+    weights = {"w": np.zeros((ONNX_FRAME, 12), np.float32), "u": np.eye(16, dtype=np.float32)}
+    _graph_model(model, [("obs", f, [1, ONNX_FRAME]), ("h_in", f, [1, 16])],
+                 [("actions", f, [1, 12]), ("h_out", f, [1, 16])], nodes, weights)
+    with pytest.raises(OnnxModelError) as caught:
+        get_controller(f"onnx:{model}")
+    text = str(caught.value)
+    for phrase in ("input 'h_in' and output 'h_out' carry a state from one call to the next",
+                   "recurrent policies are not supported", f"observation history instead (history, or a term's own "
+                   f"history, in {io} [observation])"):
+        assert phrase in text, text
+    assert "export the network with the observation as its only input" not in text  # impossible for a GRU
+    # with the observation named, too
+    io.write_text(_io().replace("[observation]", '[onnx]\ninput = "obs"\noutput = "actions"\n\n[observation]'))
+    with pytest.raises(OnnxModelError, match=r"input 'h_in' and output 'h_out' carry a state .* not supported"):
+        get_controller(f"onnx:{model}")
+    # an input with no state output beside it is an input left unfed, as before
+    _graph_model(model, [("obs", f, [1, ONNX_FRAME]), ("h_in", f, [1, 16])], [("actions", f, [1, 12])], nodes[:1],
+                 weights)
+    with pytest.raises(OnnxModelError, match=r"input 'h_in' .* would be left unfed; .* as its only input$"):
+        get_controller(f"onnx:{model}")
+
+
+def test_a_float16_model_is_asked_in_float32(tmp_path):
+    from onnx import TensorProto, helper
+
+    model, io = tmp_path / "f16.onnx", tmp_path / "f16.toml"
+    io.write_text(_io())
+    h = TensorProto.FLOAT16
+    _graph_model(model, [("obs", h, [1, ONNX_FRAME])], [("actions", h, [1, 12])],
+                 [helper.make_node("MatMul", ["obs", "w"], ["actions"])], {"w": np.zeros((ONNX_FRAME, 12), np.float16)})
+    with pytest.raises(OnnxModelError) as caught:
+        get_controller(f"onnx:{model}")
+    assert str(caught.value) == (f"{model}: input 'obs' is a tensor(float16); the controller feeds tensor(float) or "
+                                 "tensor(double): export the network in float32 (torch: model.float() and a float32 "
+                                 "example input)")
+
+
 def _sqrt_model(path: Path, weight: np.ndarray, bias: np.ndarray) -> None:
     """An ONNX network ``actions = sqrt(obs @ weight + bias)``: NaN where the sum is negative."""
     from onnx import TensorProto, helper, numpy_helper

@@ -351,6 +351,27 @@ def test_an_entry_point_name_two_distributions_declare_is_ambiguous(plugins, sma
     assert "is ambiguous" in err and "Traceback" not in err
 
 
+def test_an_entry_point_named_in_a_form_resolved_before_entry_points_is_listed_as_not_usable(plugins, capsys):
+    names = {"onnx:evil": "has the form onnx:PATH, which names an ONNX policy ('evil'), never an entry point",
+             "policy:mine": "has the form policy:PATH, which names a policy file ('mine'), never an entry point",
+             "plugpkg.good:make": "has the form package.module:factory, which imports the module 'plugpkg.good', "
+                                  "never an entry point"}
+    _declare(plugins, "plugdist", "1.0", [f"{name} = plugpkg.good:make" for name in names]
+             + ["test-hold = plugpkg.good:make"])
+    rows = {r.name: r for r in list_controllers()}
+    for name, reason in names.items():
+        assert not rows[name].loaded and rows[name].kind == "entry point", rows[name]
+        assert rows[name].summary == f"not usable: {name!r} {reason}; declare it under a name without a colon"
+    assert rows["test-hold"].loaded
+    assert main(["controllers"]) == 0
+    out = capsys.readouterr().out
+    line = next(line for line in out.splitlines() if "onnx:evil" in line)
+    assert "not usable" in line and "never an entry point" in line
+    with pytest.raises(UnknownNameError) as caught:  # nor offered among the valid names
+        get_controller("walker")
+    assert not set(names) & set(caught.value.valid) and "test-hold" in caught.value.valid
+
+
 def test_an_entry_point_with_no_factory_says_so_and_how_to_write_it(plugins, capsys):
     _declare(plugins, "plugdist", "1.0", ["no-attr = plugpkg.good", "test-hold = plugpkg.good:make"])
     phrases = ("entry point 'no-attr' of the 'wbc.controllers' group in plugdist 1.0 points at module plugpkg.good "

@@ -187,3 +187,64 @@ def test_a_training_run_leaves_a_replay_its_policy_reproduces(tmp_path):
     outcome = _replay_outcome(check_controller(f"policy:{result['policy']}", CheckConfig(seconds=0.1,
                                                                                          replay=replay)))
     assert outcome.passed, outcome.detail
+
+
+def _onnx_recording(tmp_path, name: str, permute: list[int] | None, pos_scale: float = 1.0):
+    """An ONNX policy (a linear network, Isaac Lab's joint order) and a replay recorded from it on moving joints,
+    its joint_pos_rel columns taken in the order `permute` (the controller's entry each recorded entry holds), or
+    scaled by `pos_scale`: the recording of a trainer whose joint order or scale differs from the I/O file's."""
+    import dataclasses
+
+    from fuzz.cases import ONNX_FRAME, ONNX_IO, ONNX_JOINTS, onnx_linear_model
+
+    rng = np.random.default_rng(3)
+    model, io = tmp_path / f"{name}.onnx", tmp_path / f"{name}.toml"
+    model.write_bytes(onnx_linear_model(rng.normal(0.0, 0.1, (ONNX_FRAME, 12))))
+    io.write_text(ONNX_IO)
+    desc = get_robot("a1-wx200", "none")
+    index = [desc.joint_names.index(j) for j in ONNX_JOINTS]
+    ticks = 30
+    states = {"q": desc.nominal_q + rng.normal(0.0, 0.1, (ticks, 12)), "dq": np.zeros((ticks, 12)),
+              "imu_quat": np.tile([1.0, 0.0, 0.0, 0.0], (ticks, 1)), "gyro_in_body": rng.normal(0.0, 0.5, (ticks, 3))}
+    blank = Replay(path="", robot="a1-wx200", arm_mode="none", rate_hz=50.0, source="by hand", states=states,
+                   command=np.tile([0.3, 0.0, 0.0], (ticks, 1)), obs=np.zeros((ticks, ONNX_FRAME)),
+                   obs_terms=("base_ang_vel", "velocity_commands", "joint_pos_rel", "last_action"),
+                   obs_slices=((0, 3), (3, 6), (6, 18), (18, 30)), actions=np.zeros((ticks, 12)),
+                   action_joints=tuple(ONNX_JOINTS), default_q=desc.nominal_q[index], action_scale=np.full(12, 0.5))
+    written = save_replay(tmp_path / f"{name}-blank.npz", blank)  # the optional state fields filled in
+    blank = load_replay(written)
+    ctrl = get_controller(f"onnx:{model}").make(desc)
+    ctrl.reset()
+    obs, actions = [], []
+    for k in range(ticks):
+        state, cmd = blank.state(k), blank.velocity_command(k)
+        obs.append(np.concatenate([v for _, v in ctrl.observation_terms(state, cmd)]))
+        actions.append((ctrl.act(state, cmd).q[index] - blank.default_q) / 0.5)
+    obs = np.asarray(obs)
+    if permute is not None:
+        obs[:, 6:18] = obs[:, 6:18][:, permute]
+    obs[:, 6:18] *= pos_scale
+    recorded = dataclasses.replace(blank, obs=obs, actions=np.asarray(actions))
+    return model, io, save_replay(tmp_path / f"{name}.npz", recorded)
+
+
+def test_a_joint_order_not_the_trainers_is_traced_to_the_io_files_joint_list(tmp_path):
+    # the trainer's legs FR, FL, RR, RL where the I/O file lists FL, FR, RL, RR (Isaac Lab's order, by joint type)
+    swap = [i ^ 1 for i in range(12)]
+    model, io, path = _onnx_recording(tmp_path, "order", swap)
+    result = check_controller(f"onnx:{model}", CheckConfig(seconds=0.1, replay=path))
+    assert {o.check for o in result.failed()} == {"replay"}
+    detail = _replay_outcome(result).detail
+    trained = ", ".join(f"{leg}_{part}_joint" for part in ("hip", "thigh", "calf") for leg in ("FR", "FL", "RR", "RL"))
+    for phrase in ("joint_pos_rel equal the recording with the joints in another order: the recording holds the "
+                   f"joints in the order {trained}; the controller's frame in the order FL_hip_joint, FR_hip_joint, ",
+                   f"list the network's joints in its training order (an ONNX policy's I/O file: {io} [policy] "
+                   "joints)"):
+        assert phrase in detail, detail
+    assert "[[observation.terms]]" not in detail  # the terms' order, scales and sources are not the fix
+    # a joint term that no joint order explains (its scale) keeps the terms' hint, the joint order named first
+    model, io, path = _onnx_recording(tmp_path, "scale", None, pos_scale=2.0)
+    detail = _replay_outcome(check_controller(f"onnx:{model}", CheckConfig(seconds=0.1, replay=path))).detail
+    assert ("Check the joint order (an ONNX policy's I/O file: [policy] joints), then the order, scales and sources "
+            "of joint_pos_rel (an ONNX policy's I/O file: [[observation.terms]])") in detail, detail
+    assert "in another order" not in detail

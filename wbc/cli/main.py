@@ -32,7 +32,8 @@ from wbc.cli import printers
 from wbc.cli.parser import build_parser
 from wbc.cli.robot_names import robot_name, wire_name
 from wbc.cli.terminal_keys import TerminalKeys
-from wbc.control.controller_contract import CheckConfig, check_controller
+from wbc.control.controller_contract import CheckConfig, ControllerCheck, check_controller
+from wbc.control.errors import OnnxIoError, OnnxModelError, PluginAttributeError, PluginImportError
 from wbc.control.onnx_policy import ONNX_PREFIX
 from wbc.control.registry import (
     CONTROLLERS,
@@ -62,6 +63,7 @@ from wbc.hardware.unitree import DESCRIPTIONS, TRANSPORTS, check_target, is_loop
 from wbc.hardware.unitree.sdk_transport import SDK_ROBOTS
 from wbc.interrupts import signal_label
 from wbc.learned.env.env_config import EnvConfig
+from wbc.learned.policy.policy_file import PolicyFileError
 from wbc.learned.policy.shipped import distilled_weights
 from wbc.learned.train.adaptation_config import AdaptationConfig
 from wbc.learned.train.stages import TASKS, fine_tune_config, stage_config
@@ -1461,11 +1463,22 @@ def _controllers(args: argparse.Namespace) -> int:
     return 0
 
 
+_UNBUILT = (OnnxIoError, OnnxModelError, PolicyFileError, PluginImportError, PluginAttributeError)
+"""What resolving a name raises when the controller it names cannot be built: its model, I/O file or policy file is
+invalid, or its plug-in's module does not import or lacks its factory (not an unknown or malformed name, nor an option
+given to the wrong controller, which are the command line's errors)."""
+
+
 def _check_controller(args: argparse.Namespace) -> int:
     if args.seconds is not None and not args.seconds > 0:
         raise ConfigError(f"--seconds must be > 0, got {args.seconds}")
     robots = tuple(dict.fromkeys(robot_name(r) for r in args.robot)) if args.robot else None  # a1 and a1-wx200: once
-    spec = get_controller(args.name, config=args.controller_config, io=args.io)
+    try:
+        spec = get_controller(args.name, config=args.controller_config, io=args.io)
+    except _UNBUILT as exc:  # the name's files or module: a failed build, which --json prints as one
+        if args.json:
+            printers.print_json(ControllerCheck.unbuilt(args.name, str(exc)).as_dict())
+        raise  # the same line and status as without --json: nothing was checked
     if args.scenario is not None:
         _scenario_played(args.scenario)  # checked on an edited copy of a published file: said so
     result = check_controller(spec, CheckConfig(seconds=args.seconds, strict_timing=args.strict_timing,

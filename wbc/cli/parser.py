@@ -838,11 +838,12 @@ def _add_check_controller_parser(sub: _Commands) -> None:
     """``wbc check-controller``: check a controller against the contract."""
     chk = sub.add_parser("check-controller", help="check a controller against the controller contract",
                          description="Build the controller for every robot and arm mode it claims and check its "
-                         "rate, its outputs (shape, finiteness), reset determinism, that it never reads simulator "
-                         "truth, and act()'s time against its period (p50 / p99). With --scenario the closed loop "
-                         "plays that scenario's first trial (its terrain, command and pushes) and must stay up; with "
-                         "--replay the recorded robot states are fed to the controller and its observation (term by "
-                         "term) and actions compared with the recorded ones. Exit status 1 if a check fails.")
+                         "rate, its outputs (shape, finiteness, within the motors' limits on most ticks), reset "
+                         "determinism, that it never reads simulator truth, and act()'s time against its period "
+                         "(p50 / p99). With --scenario the closed loop plays that scenario's first trial (its "
+                         "terrain, command and pushes) and must stay up; with --replay the recorded robot states are "
+                         "fed to the controller and its observation (term by term) and actions compared with the "
+                         "recorded ones. Exit status 1 if a check fails.")
     chk.add_argument("name", help=f"the controller: {_NAMES_HELP}")
     add_controller_file_options(chk, repeatable=False)
     chk.add_argument("--robot", action=_AppendOnce, default=None, help=f"check on this robot only (repeatable; one of: "

@@ -6,7 +6,10 @@ For every robot and arm mode the controller claims (`ControllerSpec.claims`), on
 - ``rate``: ``rate_hz`` is a finite positive number whose period is a whole number of physics steps (as the arena
   requires), and it stays the same after `reset` and `act`;
 - ``output``: every `act` returns a `MotorCommand` with one entry per joint of the robot, finite, gains >= 0, and
-  `counters` returns ``dict[str, int]``;
+  `counters` returns ``dict[str, int]``; the closed loop's commands beyond the robot's motor limits (positions,
+  velocities, gains, torques: the bounds the robot clamps to, whose ticks the arena counts as clamped) are reported,
+  each row's joints and by how much, and fail the check where more than half the ticks lie beyond a limit by more
+  than the whole interval it limits (`CLAMPED_SHARE`: a target past a stop may be meant; that far, it is not);
 - ``reset``: determinism. The states of a closed-loop run are fed again, open loop: after `reset` twice (the
   commands must be equal to the last bit) and to a freshly built controller (reset must forget the run before it);
 - ``truth``: it never reads simulator truth. No truth accessor of the simulator (`sim_truth`, `base_truth`,
@@ -34,9 +37,10 @@ something else than its author thinks:
   reset, to a freshly built controller. A controller that says what it observes (`ObservesTerms`: the learned
   policies and ONNX policies do) has its observation frame compared with the recorded one, entry by entry, and every
   term whose entries differ is named, with the term the controller puts there (two terms swapped in an I/O file show
-  as each in the other's place). Its actions, read from the motor targets through the recording's motor law
-  (``action = (q* - default_q) / action_scale``), are compared with the recorded actions. Within
-  `CheckConfig.replay_atol` it passes.
+  as each in the other's place; per-joint terms that equal the recording in another joint order show as that order,
+  whose fix is the joint list, an ONNX policy's ``[policy] joints``). Its actions, read from the motor targets
+  through the recording's motor law (``action = (q* - default_q) / action_scale``), are compared with the recorded
+  actions. Within `CheckConfig.replay_atol` it passes.
 """
 
 from __future__ import annotations
@@ -66,8 +70,8 @@ from wbc.types import MotorCommand, RobotState, VelocityCommand
 if TYPE_CHECKING:
     from wbc.learned.policy.replay_file import Replay
 
-__all__ = ["CHECKS", "DEFAULT_SECONDS", "EXTRA_CHECKS", "ActTiming", "CheckConfig", "CheckOutcome", "ControllerCheck",
-           "EstimatesTerms", "ObservesTerms", "check_controller"]
+__all__ = ["CHECKS", "CLAMPED_SHARE", "DEFAULT_SECONDS", "EXTRA_CHECKS", "ActTiming", "CheckConfig", "CheckOutcome",
+           "ControllerCheck", "EstimatesTerms", "ObservesTerms", "check_controller"]
 
 CHECKS = ("build", "rate", "output", "reset", "truth", "timing")
 """The checks, in the order they are run and reported."""
@@ -147,15 +151,16 @@ class CheckOutcome:
 
     Attributes:
         check: one of `CHECKS`.
-        robot: robot name.
-        arm_mode: arm mode.
+        robot: robot name; None for the ``build`` of a controller whose name could not be resolved into one
+            (`ControllerCheck.unbuilt`), for which no robot is known.
+        arm_mode: arm mode; None where `robot` is.
         passed: True, False, or None when it could not be run.
         detail: what was measured, or what is wrong and how to fix it.
     """
 
     check: str
-    robot: str
-    arm_mode: str
+    robot: str | None
+    arm_mode: str | None
     passed: bool | None
     detail: str
 
@@ -198,6 +203,17 @@ class ControllerCheck:
     controller: str
     outcomes: tuple[CheckOutcome, ...]
     timings: tuple[ActTiming, ...]
+
+    @classmethod
+    def unbuilt(cls, controller: str, detail: str) -> ControllerCheck:
+        """The check of a controller whose name could not be resolved into one: a failed ``build``, for no robot.
+
+        Its model, I/O file or policy file is invalid, or its plug-in's module cannot be imported, so neither the
+        controller nor the robots it claims are known; ``wbc check-controller --json`` prints this, so that a script
+        reads every controller that cannot be built as a failed build, whatever failed.
+        """
+        return cls(controller=controller, outcomes=(CheckOutcome(check="build", robot=None, arm_mode=None,
+                                                                 passed=False, detail=detail),), timings=())
 
     @property
     def passed(self) -> bool:
@@ -404,6 +420,68 @@ def _output_problem(out: object, n: int) -> str | None:
     return None
 
 
+CLAMPED_SHARE = 0.5
+"""The ``output`` check fails when more than this share of the closed loop's ticks command far beyond the motors'
+limits: beyond a bound by more than the width of the interval it bounds (`_clamped`).
+
+A controller may command past a limit, and the robot clamps it: a PD policy's target past a joint's stop presses the
+joint against it (the shipped pi3 asks its calves for up to 0.27 rad past their stop on most ticks of a walk), a
+torque peaks at a push. The arena counts those ticks (`Episode.clamped_ticks`) and the check reports them, each row's
+joints and by how much, and passes. A command beyond by more than the whole interval (a target further past a stop
+than the joint's range, a speed or a torque more than twice the motor's) is not one the controller can mean: a
+network that answers far outside its range, an action scale or a default pose off. On most ticks, as a median
+``act`` beyond its period fails ``timing``, it fails ``output``: the robot does not play what the controller
+commands."""
+
+
+def _clamped(outputs: list[np.ndarray], bounds: tuple[np.ndarray, np.ndarray], joints: tuple[str, ...]
+             ) -> tuple[bool, str] | None:
+    """The commands beyond the robot's motor limits (`bounds`, as the arena counts clamped ticks), or None if none.
+
+    Returns whether that fails the ``output`` check (more than `CLAMPED_SHARE` of the ticks far beyond: by more
+    than the width of a bound's interval) and what was found: per row, the joints beyond their limit, on how many
+    ticks and by how much at most.
+    """
+    from wbc.hardware.robot import COMMAND_ROWS  # the hardware package loads only when a check runs
+
+    rows = np.asarray(outputs)  # (ticks, 5, n)
+    lower, upper = bounds
+    excess = np.maximum(lower - rows, rows - upper)  # > 0 beyond a bound, by that much
+    beyond = excess > 0
+    ticks = beyond.any(axis=(1, 2))
+    if not ticks.any():
+        return None
+    far = (excess > upper - lower).any(axis=(1, 2))
+    units = {"q": "rad", "dq": "rad/s", "kp": "N m/rad", "kd": "N m s/rad", "tau": "N m"}
+    parts = []
+    for r, row in enumerate(COMMAND_ROWS):
+        hit = np.flatnonzero(beyond[:, r, :].any(axis=0))
+        if not hit.size:
+            continue
+        worst = sorted(hit, key=lambda j: -excess[:, r, j].max())
+        named = []
+        for j in worst[:3]:
+            k = int(np.argmax(excess[:, r, j]))
+            above = rows[k, r, j] > upper[r, j]
+            side, limit = ("above its upper", upper[r, j]) if above else ("below its lower", lower[r, j])
+            on = int(beyond[:, r, j].sum())
+            named.append(f"{joints[j]} {rows[k, r, j]:.3g} {side} limit {limit:.3g} (by {excess[k, r, j]:.3g} "
+                         f"{units[row]}) on {on} tick{'s' if on != 1 else ''}")
+        more = f" and {len(worst) - 3} more joints" if len(worst) > 3 else ""
+        parts.append(f"MotorCommand.{row}: {', '.join(named)}{more}")
+    count, total = int(ticks.sum()), len(outputs)
+    fails = int(far.sum()) > CLAMPED_SHARE * total
+    text = (f"{count} of {total} closed-loop ticks command beyond the robot's motor limits, which the robot clamps "
+            f"before sending (the arena counts them as clamped ticks): {'; '.join(parts)}")
+    if fails:
+        text += (f"; on {int(far.sum())} of them a command lies further beyond its limit than the whole interval it "
+                 "limits (a target further past a stop than the joint's range), so the robot does not play what the "
+                 "controller commands: keep the targets near the joints' range and the velocities, gains and "
+                 "torques within the motors' limits (an ONNX policy: its action scale, default pose and the "
+                 "network's outputs)")
+    return fails, text
+
+
 def _counters_problem(ctrl: Controller) -> str | None:
     try:
         counts = ctrl.counters()
@@ -584,10 +662,16 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         v.set("reset", False, reset_failure)
     failure = next((p.failure for p in (b1, b2, d, c) if p is not None and p.failure is not None), None)
     problem = _counters_problem(ctrl)
+    from wbc.hardware.robot import command_bounds
+
+    clamped = _clamped(a.outputs, command_bounds(sim.limits, *sim.gain_limits), desc.joint_names)
     if failure is not None or problem is not None:
         v.set("output", False, failure or problem)
+    elif clamped is not None and clamped[0]:
+        v.set("output", False, clamped[1])
     elif reset_failure is None:  # else a replay did not run: the output over every pass was not seen
-        v.set("output", True, f"{len(states)} ticks x 5 passes: {n} joints, finite, gains >= 0; counters "
+        limits = clamped[1] if clamped is not None else "within the motor limits on every tick"
+        v.set("output", True, f"{len(states)} ticks x 5 passes: {n} joints, finite, gains >= 0, {limits}; counters "
               f"{ctrl.counters()}")
     if failure is None and reset_failure is None and d is not None:
         same = _difference(b1, b2)
@@ -728,6 +812,57 @@ def _observation_findings(frames: np.ndarray, layout: tuple[tuple[str, int], ...
     return found, None, float(diff.max())
 
 
+_JOINT_TERMS = ("joint_pos_rel", "joint_vel")
+"""The per-joint terms read from the states alone, which a joint order permutes (``last_action`` is the controller's
+own, and differs once an action does)."""
+
+
+def _joint_permutation(frames: np.ndarray, replay: Replay, found: list[_TermFinding], atol: float
+                       ) -> list[int] | None:
+    """The joint order that explains every per-joint term found to differ, or None.
+
+    For each such term (`_JOINT_TERMS`, one entry per joint), each recorded entry is matched with the controller's
+    entry of the same term that it equals on every tick (within `atol`); where every differing term's entries are
+    the controller's in one other order, the same for all, that order is returned: ``order[k]`` is the controller's
+    entry that the recording's entry k holds.
+    """
+    n = len(replay.action_joints)
+    terms = [f.name for f in found if f.name in _JOINT_TERMS]
+    if not terms:
+        return None
+    order: list[int] | None = None
+    for name in terms:
+        a, b = replay.obs_slices[replay.obs_terms.index(name)]
+        if b - a != n:
+            return None
+        mine, theirs = frames[:, a:b], replay.obs[:, a:b]
+        gap = np.abs(theirs[:, :, None] - mine[:, None, :]).max(axis=0)  # [recorded entry, controller's entry]
+        match = [int(j) for j in gap.argmin(axis=1)]
+        if sorted(match) != list(range(n)) or gap[np.arange(n), match].max() > atol:
+            return None
+        if order is not None and match != order:
+            return None
+        order = match
+    return order
+
+
+def _joint_order_hint(order: list[int], terms: list[str], ctrl: Controller) -> str:
+    """What a joint order that explains the differing joint terms says, with the joints named where known."""
+    io = getattr(ctrl, "io", None)  # an ONNX policy: its frame's joints are its I/O file's [policy] joints
+    joints = getattr(io, "joints", None)
+    where = "[policy] joints"
+    if joints is not None and len(joints) == len(order):
+        mine = ", ".join(joints)
+        trained = ", ".join(joints[j] for j in order)
+        where = f"{getattr(io, 'path', 'the I/O file')} [policy] joints"
+        text = (f"the recording holds the joints in the order {trained}; the controller's frame in the order {mine}")
+    else:
+        text = f"the recording's joint entries are the controller's entries {', '.join(map(str, order))}"
+    return (f"{', '.join(terms)} equal the recording with the joints in another order: {text}. The network was "
+            f"trained in another joint order than the controller uses: list the network's joints in its training "
+            f"order (an ONNX policy's I/O file: {where})")
+
+
 def _estimate_text(frames: np.ndarray, replay: Replay, fed: set[str]) -> str:
     """What the replay says of the estimated terms: fed the recorded values, and how far the estimate lies from them."""
     parts = []
@@ -858,6 +993,15 @@ def _check_replay(spec: ControllerSpec, desc, replay: Replay, atol: float) -> tu
                        f"differs{follows}, but {act_text}: the network, its action scale or its default pose are "
                        "not the recorded policy's")
     text = "; ".join(f.text for f in causes) + follows
-    names = sorted({f.name for f in causes})
-    return False, (f"{label}: the observation differs from the recording: {text}; {act_text}. Check the order, "
-                   f"scales and sources of {', '.join(names)} (an ONNX policy's I/O file: [[observation.terms]])")
+    # a joint order that is not the trainer's permutes the per-joint terms alone: the fix is the joint list, not
+    # the terms' order, scales or sources
+    order = _joint_permutation(np.asarray(frames), replay, causes, atol)
+    joint_terms = [f.name for f in causes if f.name in _JOINT_TERMS]
+    names = sorted({f.name for f in causes if order is None or f.name not in _JOINT_TERMS})
+    hints = [_joint_order_hint(order, joint_terms, ctrl)] if order is not None else []
+    if names:
+        first = "the joint order (an ONNX policy's I/O file: [policy] joints), then " if (
+            order is None and joint_terms and set(names) <= set(_JOINT_TERMS)) else ""
+        hints.append(f"Check {first}the order, scales and sources of {', '.join(names)} (an ONNX policy's I/O "
+                     "file: [[observation.terms]])")
+    return False, f"{label}: the observation differs from the recording: {text}; {act_text}. {'; '.join(hints)}"

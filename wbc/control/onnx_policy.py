@@ -263,6 +263,23 @@ def _size(shape: list) -> int | None:
     return last if isinstance(last, int) else None
 
 
+def _carried_state(inputs: list, outputs: list, extra: list[str], actions: str | None) -> tuple[str, str] | None:
+    """An input in `extra` and an output of the same shape and type (``h_in``, ``h_out``), or None.
+
+    The actions' output (`actions`, the I/O file's ``[onnx] output``, or else the first) is not such an output.
+
+    Such a pair is a recurrent network's state, which its caller feeds back at the next call: the controller feeds
+    the observation only, so no export without it runs the same policy, and the message says so.
+    """
+    for port in inputs:
+        if port.name not in extra:
+            continue
+        for out in outputs if actions is not None else outputs[1:]:
+            if out.name != actions and list(out.shape) == list(port.shape) and out.type == port.type:
+                return port.name, out.name
+    return None
+
+
 def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
     """Check the network against its I/O file and against what the controller feeds it, then run it once.
 
@@ -283,6 +300,15 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
     if io.input_name is not None and io.input_name not in names:
         raise OnnxModelError(f"{io.path}: [onnx] input: {model} has no input {io.input_name!r}; its inputs: "
                              f"{', '.join(names)}")
+    others = [name for name in names if name != io.input_name] if len(inputs) > 1 else []
+    state = _carried_state(inputs, outputs, others, io.output_name)
+    if state is not None:
+        raise OnnxModelError(f"{model}: input {state[0]!r} and output {state[1]!r} carry a state from one call to the "
+                             f"next (a recurrent policy: a GRU's or an LSTM's hidden state); recurrent policies are "
+                             "not supported: the controller calls the network on the observation alone and keeps "
+                             "no state between calls. Give the network its past as observation history instead "
+                             f"(history, or a term's own history, in {io.path} [observation]) and train and export "
+                             "a network whose only input is the observation")
     if io.input_name is None and len(inputs) != 1:
         raise OnnxModelError(f"{model}: the network has {len(inputs)} inputs ({', '.join(names) or 'none'}); the "
                              "controller feeds one, the observation: export the network with the observation as its "
@@ -295,7 +321,8 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
                              "export the network with the observation as its only input")
     if port.type not in _DTYPES:
         raise OnnxModelError(f"{model}: input {port.name!r} is a {port.type}; the controller feeds tensor(float) "
-                             "or tensor(double)")
+                             "or tensor(double): export the network in float32 (torch: model.float() and a float32 "
+                             "example input)")
     shape = list(port.shape)
     if len(shape) not in (1, 2) or (len(shape) == 2 and isinstance(shape[0], int) and shape[0] != 1):
         raise OnnxModelError(f"{model}: input {port.name!r} has shape {shape}; expected [size] or [batch, size] "
@@ -314,7 +341,8 @@ def check_model(session: Any, io: OnnxIo, model: str | Path) -> NetworkPorts:
     out = outputs[0] if io.output_name is None else outputs[out_names.index(io.output_name)]
     if out.type not in _DTYPES:
         raise OnnxModelError(f"{model}: output {out.name!r} is a {out.type}; the actions must be tensor(float) or "
-                             "tensor(double)")
+                             "tensor(double): export the network in float32 (torch: model.float() and a float32 "
+                             "example input)")
     out_size = _size(list(out.shape))
     if out_size is not None and out_size != io.num_joints and io.output_name is None and len(outputs) > 1:
         _unnamed_output(io, model, [(o.name, _size(list(o.shape))) for o in outputs])

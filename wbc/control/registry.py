@@ -209,7 +209,8 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
             raise PluginAmbiguousError(ambiguity(name, installed[name]))
         (ep,) = installed[name]
         return plugin_spec(name, entry_point_target(ep), kind="entry point", config_file=config, entry_point=ep)
-    usable = [n for n, eps in installed.items() if len(eps) == 1 and n not in CONTROLLERS]  # not shadowed, ambiguous
+    usable = [n for n, eps in installed.items()  # not shadowed by the registry or a name form, not ambiguous
+              if len(eps) == 1 and n not in CONTROLLERS and _reserved_form(n) is None]
     if Path(name).suffix.lower() == ".toml":
         raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS),
                                where="a TOML file is not a controller (a scenario goes after --scenario, a plug-in's "
@@ -222,6 +223,22 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
                                                              n=1, cutoff=0.85):
         raise PluginNotFoundError(problem)
     raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS))  # a typo of a name suggests it
+
+
+def _reserved_form(name: str) -> str | None:
+    """Why an entry point's `name` can never name it, or None: a form `get_controller` resolves before entry points.
+
+    A name that starts with ``policy:`` or ``onnx:`` names a file, and one of the form ``package.module:factory`` a
+    plug-in imported by that path; such an entry point is never reached, as one with a registry name is not.
+    """
+    for prefix, form in ((POLICY_PREFIX, "a policy file"), (ONNX_PREFIX, "an ONNX policy")):
+        if name.startswith(prefix):
+            return (f"{name!r} has the form {prefix}PATH, which names {form} ({name[len(prefix):]!r}), never an "
+                    "entry point; declare it under a name without a colon")
+    if is_plugin_name(name):
+        return (f"{name!r} has the form package.module:factory, which imports the module {name.partition(':')[0]!r}, "
+                "never an entry point; declare it under a name without a colon")
+    return None
 
 
 def _policy_spec(name: str) -> ControllerSpec:
@@ -293,6 +310,8 @@ class ControllerListing:
 def list_controllers() -> list[ControllerListing]:
     """The registry's controllers, then every installed ``wbc.controllers`` entry point.
 
+    An entry point that a registry name or a name form (`_reserved_form`) shadows is listed as not usable, with why.
+
     Each entry point is imported to read its summary; one that fails to load is listed with its error instead of
     stopping the listing, and a name several distributions declare is listed once, with who declares it.
     """
@@ -304,6 +323,11 @@ def list_controllers() -> list[ControllerListing]:
         if name in CONTROLLERS:
             rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=target,
                                           summary=f"not usable: the registry's {name!r} has this name", loaded=False))
+            continue
+        reserved = _reserved_form(name)
+        if reserved is not None:
+            rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=target,
+                                          summary=f"not usable: {reserved}", loaded=False))
             continue
         if len(eps) > 1:
             rows.append(ControllerListing(name=name, kind="entry point", arm_modes=(), robots=None, target=None,
