@@ -8,6 +8,7 @@ import time
 
 import numpy as np
 import pytest
+from conftest import STAND_PLUGIN
 
 from wbc.cli.main import main
 from wbc.cli.printers import print_controller_check
@@ -500,3 +501,32 @@ def test_a_controller_that_cannot_be_built_from_its_files_is_a_failed_build_in_t
     assert main(["check-controller", "no-such-controller", "--json"]) == 2
     captured = capsys.readouterr()
     assert captured.out == "" and "unknown controller 'no-such-controller'" in captured.err
+
+
+ENDS_ITS_PROCESS = STAND_PLUGIN.format(doc="The stand hold that ends its process, status 0, on its fifth tick.",
+                                       reset="pass", counters="return {}",
+                                       act="if self.ticks == 5:\n                __import__('os')._exit(0)")
+HANGS = STAND_PLUGIN.format(doc="The stand hold that hangs on its fifth tick.", reset="pass",
+                            act="if self.ticks == 5:\n                __import__('threading').Event().wait()",
+                            counters="return {}")
+
+
+def test_a_controller_that_ends_its_process_or_hangs_fails_the_check_in_its_worker(plugin_package, capsys):
+    """Checked in the command's own process, a controller that called os._exit(0) ended the command with status 0
+    and no word: a CI job read a pass. The checks run in a worker process of their own; its end fails them, and so,
+    under --time-limit, does a controller that hangs (which stalled the command for ever)."""
+    import json
+
+    plugin_package("endingpkg", {"ends": ENDS_ITS_PROCESS, "hangs": HANGS})
+    assert main(["check-controller", "endingpkg.ends:make", "--robot", "a1-wx200", "--json"]) == 1
+    result = json.loads(capsys.readouterr().out)
+    (outcome,) = result["outcomes"]
+    assert not result["passed"] and (outcome["check"], outcome["passed"]) == ("process", False)
+    assert "ended before they finished (exit status 0)" in outcome["detail"]
+    # the limit is far above what the check of a stand hold takes; the hung one never finishes
+    assert main(["check-controller", "endingpkg.hangs:make", "--robot", "a1-wx200", "--time-limit", "60"]) == 1
+    out = capsys.readouterr().out
+    assert "FAIL process" in out and "had not finished after 60 s (--time-limit)" in out
+    # in this process on request (a debugger's), where a limit cannot end anything
+    assert main(["check-controller", "stand", "--in-process", "--time-limit", "60"]) == 2
+    assert "--in-process" in capsys.readouterr().err

@@ -60,7 +60,8 @@ COMMANDS = {
                  lambda a, k: a[0].robot, "registry"),
     "hw run": (["hw", "run", "stand", "--robot", "ROBOT", "--scenario", SCENARIO, "--trial", "0", "--target",
                 "127.0.0.1:9"], "run_hardware_trial", lambda a, k: a[0].robot, "registry"),
-    "check-controller": (["check-controller", "stand", "--robot", "ROBOT"], "check_controller",
+    # the checks run in a worker process (`_check_apart`), which is handed the robots as `check_controller` is
+    "check-controller": (["check-controller", "stand", "--robot", "ROBOT"], "_check_apart",
                          lambda a, k: a[1].robots, "registries"),
 }
 

@@ -45,7 +45,7 @@ from wbc.optional import require
 from wbc.scenario.trial import Trial
 
 __all__ = ["EXECUTORS", "VIEWED_TIME_LIMIT", "LocalExecutor", "RayExecutor", "TrialTask", "run_task",
-           "spawn_pool", "worker_environment"]
+           "shut_down_pool", "spawn_pool", "worker_environment"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -408,6 +408,14 @@ _RAY_RETRIES = 1
 _LINGER_S = 5.0
 """How long a worker may take to exit once its pool is shut down [s]: one that a controller's thread keeps alive is
 stopped after this."""
+
+
+def shut_down_pool(pool: ProcessPoolExecutor, *, broken: bool = False) -> None:
+    """Shut down a pool from `spawn_pool` (`_shut_down`).
+
+    A worker that a controller's thread keeps alive is stopped; a `broken` pool's workers (or a hung one's) at once.
+    """
+    _shut_down(pool, broken=broken)
 
 
 def _shut_down(pool: ProcessPoolExecutor, *, broken: bool = False) -> None:

@@ -21,11 +21,14 @@ import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import TimeoutError as FuturesTimeout
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from wbc.arena.compare import VIEWED_TIME_LIMIT, ArenaConfig, run_arena
+from wbc.arena.executors import shut_down_pool, spawn_pool
 from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
@@ -1481,14 +1484,50 @@ def _check_controller(args: argparse.Namespace) -> int:
         raise  # the same line and status as without --json: nothing was checked
     if args.scenario is not None:
         _scenario_played(args.scenario)  # checked on an edited copy of a published file: said so
-    result = check_controller(spec, CheckConfig(seconds=args.seconds, strict_timing=args.strict_timing,
-                                                robots=robots,
-                                                scenario=args.scenario, replay=args.replay))
+    cfg = CheckConfig(seconds=args.seconds, strict_timing=args.strict_timing, robots=robots, scenario=args.scenario,
+                      replay=args.replay)
+    if args.in_process:
+        if args.time_limit is not None:
+            raise ConfigError("--time-limit ends the checks' worker process, which --in-process does not start: "
+                              "leave one of them out")
+        result = check_controller(spec, cfg)
+    else:
+        result = _check_apart(spec, cfg, args.time_limit)
     if args.json:
         printers.print_json(result.as_dict())
     else:
         printers.print_controller_check(result)
     return 0 if result.passed else 1
+
+
+def _check_apart(spec: ControllerSpec, cfg: CheckConfig, time_limit_s: float | None) -> ControllerCheck:
+    """`check_controller` in a worker process of its own, as the arena plays trials.
+
+    A controller that ends its process (``os._exit``, a crash in native code) ended the command with its own status,
+    0 included, and printed nothing: a CI job read a pass. In a worker, that ends the worker only, and the check
+    fails, saying so; with `time_limit_s`, so does a controller that hangs. The checks' own errors (a scenario or a
+    replay file refused) come back as they are raised.
+    """
+    pool = spawn_pool(1)
+    try:
+        future = pool.submit(check_controller, spec, cfg)
+        worker = list((getattr(pool, "_processes", None) or {}).values())  # started by the submit
+        try:
+            return future.result(timeout=time_limit_s)
+        except BrokenProcessPool:
+            for process in worker:
+                process.join(timeout=5.0)  # ended already: reaped for its status
+            codes = [process.exitcode for process in worker]
+            status = f" (exit status {codes[0]})" if len(codes) == 1 and codes[0] is not None else ""
+            return ControllerCheck.ended(spec.name, f"the checks' worker process ended before they finished{status}: "
+                                                    "the controller ended its process (os._exit, a crash in native "
+                                                    "code), which on a robot ends the control loop")
+        except FuturesTimeout:
+            return ControllerCheck.ended(spec.name, f"the checks had not finished after {time_limit_s:g} s "
+                                                    "(--time-limit): the controller hangs, or is far too slow; its "
+                                                    "worker process was ended")
+    finally:
+        shut_down_pool(pool, broken=True)  # its one task is done, or its worker dead or hung: nothing to wait for
 
 
 HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {

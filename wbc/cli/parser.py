@@ -857,5 +857,13 @@ def _add_check_controller_parser(sub: _Commands) -> None:
                      "and robot states recorded by the trainer: wbc train writes policy.replay.npz); the 'replay' "
                      "check compares the controller's observation, term by term, and actions with the recording")
     chk.add_argument("--strict-timing", action="store_true", help="also fail when act's p99 exceeds the period")
+    chk.add_argument("--in-process", action="store_true",
+                     help="run the checks in this process (for a debugger or a profiler), where a controller that "
+                          "ends its process ends the command with its status; by default they run in a worker "
+                          "process of their own, and such a controller fails the check")
+    chk.add_argument("--time-limit", type=bounded_float(MIN_TRIAL_TIME_LIMIT_S, MAX_TRIAL_TIME_LIMIT_S),
+                     default=None, metavar="S",
+                     help="fail the check of a controller that has not finished after S seconds of wall time (one "
+                          "that hangs), ending its worker process (default: no limit; not with --in-process)")
     chk.add_argument("--json", action="store_true", help="print JSON")
     chk.set_defaults(handler="check-controller")

@@ -215,6 +215,17 @@ class ControllerCheck:
         return cls(controller=controller, outcomes=(CheckOutcome(check="build", robot=None, arm_mode=None,
                                                                  passed=False, detail=detail),), timings=())
 
+    @classmethod
+    def ended(cls, controller: str, detail: str) -> ControllerCheck:
+        """The check of a controller whose checks did not finish: its worker process ended, or ran past its time.
+
+        A failed ``process`` check, for no robot: what the checks had found went with the process
+        (``wbc check-controller`` runs them in a worker process of their own, so that a controller that ends its
+        process, or hangs, fails its check instead of ending or stalling the command).
+        """
+        return cls(controller=controller, outcomes=(CheckOutcome(check="process", robot=None, arm_mode=None,
+                                                                 passed=False, detail=detail),), timings=())
+
     @property
     def passed(self) -> bool:
         """Some check ran, and every check ran and passed (nothing checked is not a pass)."""
