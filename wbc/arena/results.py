@@ -6,7 +6,9 @@ the store is reopened. Every row carries a checksum of its cells, and a row that
 impossible value, belongs to another scenario file or repeats a trial is refused on reopening with its file and line
 (`wbc.arena.trial_record.scan_csv`), unless the run asks for such rows to be dropped and played again
 (``--drop-bad-rows``). ``run.json`` holds the run's identity (`wbc.arena.identity.RunIdentity`: the resolved
-configuration and scenario hash), package versions, git revision and what each controller is (its kind, a plug-in's
+configuration and scenario hash), the environment the run began under (package versions, CPU, git revision ...:
+`wbc.provenance.provenance`; kept on a resume, which is compared with it: `wbc.arena.run_environment`) and what each
+controller is (its kind, a plug-in's
 target and distribution version, the sha256 of every file it was built from: weights, an ONNX model and its external
 data, an I/O or configuration file); it is read back as strictly as a scenario (`RunIdentity.from_json`: every
 field known and of its type), and reopening a directory for another run is refused, naming the fields that differ.
