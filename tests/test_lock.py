@@ -5,16 +5,26 @@ and requirements/lock.in by uv (`make lock`), pins one version of every package 
 packages installed without their dependencies (no-deps.in). Three ways the lock can fall out of step, each a failure
 here: a requirement it does not satisfy (a range moved, a dependency was added), a package it holds for a requirement
 that is gone (a dependency was removed), and a package pinned without hashes (a hand edit).
+
+The environment the tests run in is held to the lock too: a package that changes results (`wbc.provenance.
+RESULT_PACKAGES`) installed at another version than its pin fails here, naming each, since results then do not
+reproduce to the bit; the golden tests compare only the trials they play and can pass all the same. Outside the locked
+environment (a venv of one's own), this is the failure to read: `make test` runs the suite in the locked one.
 """
 
 from __future__ import annotations
 
 import re
 import tomllib
+from collections.abc import Callable
+from importlib import metadata
 from pathlib import Path
 
 from packaging.requirements import Requirement
 from packaging.utils import canonicalize_name
+from packaging.version import InvalidVersion, Version
+
+from wbc.provenance import RESULT_PACKAGES
 
 ROOT = Path(__file__).resolve().parent.parent
 LOCK = ROOT / "requirements" / "wbc.lock"
@@ -126,3 +136,57 @@ def test_every_pin_carries_hashes():
     no_deps, _, no_deps_hashes = _lock(NO_DEPS)
     unhashed = [name for name in pins if hashes[name] == 0] + [n for n in no_deps if no_deps_hashes[n] == 0]
     assert not unhashed, f"requirements/wbc.lock pins {unhashed} without a hash: the lock is written by `make lock`"
+
+
+def _installed_differences(pins: dict[str, str], version: Callable[[str], str] = metadata.version) -> list[str]:
+    """The packages that change results (`wbc.provenance.RESULT_PACKAGES`) installed at another version than pinned.
+
+    A package not installed is not compared: nothing played here used it (a run that needs it cannot start).
+    """
+    out = []
+    for name in RESULT_PACKAGES:
+        try:
+            installed = version(name)
+        except metadata.PackageNotFoundError:
+            continue
+        locked = pins[canonicalize_name(name)]
+        try:
+            same = Version(installed) == Version(locked)
+        except InvalidVersion:
+            same = installed == locked
+        if not same:
+            out.append(f"{name} {installed} (locked {locked})")
+    return out
+
+
+def _not_locked_message(differences: list[str]) -> str:
+    return ("the installed versions of packages that change results are not requirements/wbc.lock's: "
+            + "; ".join(differences) + ". Results will not reproduce to the bit: those played here (the golden "
+            "tests' rows, a run's trials) can differ in their last bits from the locked environment's, in which "
+            "the goldens were recorded and results are published, and the golden tests compare only the few "
+            "trials they play, so they can pass all the same. Run the tests in the locked environment: `make test` "
+            "installs requirements/wbc.lock into .venv and runs them there.")
+
+
+def test_every_package_that_changes_results_is_locked():
+    pins, _, _ = _lock()
+    missing = [name for name in RESULT_PACKAGES if canonicalize_name(name) not in pins]
+    assert not missing, f"requirements/wbc.lock pins no version of {missing}, which change results"
+
+
+def test_the_installed_packages_that_change_results_are_the_locked_versions():
+    differences = _installed_differences(_lock()[0])
+    assert not differences, _not_locked_message(differences)
+
+
+def test_a_version_other_than_the_lock_is_named_with_why_it_matters():
+    pins, _, _ = _lock()
+
+    def faked(name: str) -> str:  # numpy's metadata edited, torch not installed
+        if name == "torch":
+            raise metadata.PackageNotFoundError(name)
+        return "9.9.9" if name == "numpy" else pins[canonicalize_name(name)]
+    differences = _installed_differences(pins, faked)
+    assert differences == [f"numpy 9.9.9 (locked {pins['numpy']})"]
+    message = _not_locked_message(differences)
+    assert "will not reproduce to the bit" in message and "`make test`" in message

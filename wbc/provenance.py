@@ -1,22 +1,54 @@
-"""`provenance()`: what produced a result (package versions, Python, platform, git revision), saved beside it.
+"""`provenance()`: what produced a result (package versions, Python, platform, CPU, git revision), saved beside it.
 
 The results store (``run.json``) and a training run (``config.json``) both write this one record, so every output of
 the toolkit names the code that made it the same way; a revision with uncommitted changes to tracked files is marked
-``-dirty``, since those changes are not in the revision it names.
+``-dirty``, since those changes are not in the revision it names, and the changes themselves are named by the sha256
+of ``git diff HEAD`` (untracked files are not covered: a new file nothing tracks is not in the hash). Beside the
+versions it records what else moves the last bits of a result: the CPU's model and the instruction-set flags its
+numerical kernels pick by (AVX2 or AVX-512 ...), and the sha256 of ``requirements/wbc.lock`` when the package runs
+from a checkout that has it.
+
+`RESULT_PACKAGES` are the packages whose version changes a result's bits: a resumed run compares them with those it
+began under (`wbc.arena.results`), and the test suite compares them with the lock's pins (``tests/test_lock.py``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import platform
+import re
 import subprocess
 from importlib import metadata
 from pathlib import Path
 
-__all__ = ["PACKAGES", "git_revision", "provenance"]
+__all__ = ["CHECKOUT", "CPU_FLAGS", "LOCK_FILE", "PACKAGES", "RESULT_PACKAGES", "cpu", "git_diff_sha256",
+           "git_revision", "lock_sha256", "provenance"]
 
-PACKAGES = ("wbc", "numpy", "mujoco", "pin", "placo", "casadi", "daqp", "meshcat", "example-robot-data",
-            "threadpoolctl", "ray", "torch", "rsl-rl-lib", "onnxruntime")
-"""Packages whose versions are recorded (those installed)."""
+RESULT_PACKAGES = ("numpy", "scipy", "mujoco", "numba", "llvmlite", "proxsuite", "pin", "placo", "casadi", "daqp",
+                   "example-robot-data", "torch", "rsl-rl-lib", "onnxruntime")
+"""Packages whose version changes the bits of a result: the physics (MuJoCo), the linear algebra (NumPy), the MPC's
+compiled tick (numba, llvmlite), its QP backends (ProxSuite, DAQP), the whole-body models and solvers (Pinocchio,
+placo, CasADi), the robot models (example-robot-data), the policies' runtimes (torch, rsl-rl, ONNX Runtime), and the
+statistics' p-values and intervals (SciPy)."""
+
+PACKAGES = ("wbc", *RESULT_PACKAGES, "meshcat", "threadpoolctl", "ray")
+"""Packages whose versions are recorded (those installed): `RESULT_PACKAGES`, the toolkit itself, and those that
+change no result (the viewer, the thread-pool control, an executor)."""
+
+CPU_FLAGS = re.compile(r"^(avx.*|fma4?|f16c|sse4_[12]|sse4a|amx.*|asimd.*|sve.*|neon)$")
+"""The instruction-set flags recorded: those by which OpenBLAS, numpy's SIMD dispatch, LLVM and MuJoCo pick a kernel
+(x86: SSE4, AVX, AVX2, FMA, AVX-512, AMX; Arm: NEON/ASIMD, SVE)."""
+
+LOCK_FILE = Path(__file__).resolve().parent.parent / "requirements" / "wbc.lock"
+"""The lock of a checkout (absent from an installed wheel)."""
+
+
+CHECKOUT = Path(__file__).resolve().parent
+"""Where git is asked for the revision: this package's directory (a checkout's, or an install's outside any)."""
+
+
+def _git(*args: str) -> subprocess.CompletedProcess[bytes]:
+    return subprocess.run(["git", *args], cwd=CHECKOUT, capture_output=True, timeout=10)
 
 
 def git_revision() -> str:
@@ -24,25 +56,81 @@ def git_revision() -> str:
 
     Returns ``unknown`` outside a git checkout (an installed wheel) or without git.
     """
-    cwd = Path(__file__).resolve().parent
     try:
-        rev = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True, timeout=5)
+        rev = _git("rev-parse", "HEAD")
         if rev.returncode != 0:
             return "unknown"
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
-                               capture_output=True, text=True, timeout=5)
-        return rev.stdout.strip() + ("-dirty" if dirty.stdout.strip() else "")
+        dirty = _git("status", "--porcelain", "--untracked-files=no")
+        return rev.stdout.decode().strip() + ("-dirty" if dirty.stdout.strip() else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
 
 
+def git_diff_sha256() -> str | None:
+    """The sha256 of ``git diff HEAD --binary`` (the uncommitted changes to tracked files, binary files included).
+
+    Untracked files are not covered. Returns None outside a git checkout or without git.
+    """
+    try:
+        diff = _git("-c", "core.quotePath=false", "diff", "HEAD", "--binary", "--no-color", "--no-ext-diff")
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return hashlib.sha256(diff.stdout).hexdigest() if diff.returncode == 0 else None
+
+
+def lock_sha256(path: Path = LOCK_FILE) -> str | None:
+    """The sha256 of the checkout's ``requirements/wbc.lock``, None where there is none (an installed wheel)."""
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return None
+
+
+def cpu(cpuinfo: Path = Path("/proc/cpuinfo")) -> dict[str, object]:
+    """The CPU's model and the instruction-set flags that pick numerical kernels (`CPU_FLAGS`), sorted.
+
+    Read from `cpuinfo` (Linux; its first processor); elsewhere the model is `platform.processor` (or the machine)
+    and the flags are None: not known, which is not the same as none.
+    """
+    model, flags = None, None
+    try:
+        text = cpuinfo.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        text = ""
+    for line in text.splitlines():
+        key, _, value = line.partition(":")
+        key = key.strip().lower()
+        if model is None and key in ("model name", "hardware", "cpu model"):
+            model = value.strip()
+        elif flags is None and key in ("flags", "features"):
+            flags = sorted({f for f in value.split() if CPU_FLAGS.match(f)})
+        elif not line.strip() and model is not None and flags is not None:
+            break  # the first processor's block: the others are the same chip
+    return {"model": model or platform.processor() or platform.machine() or "unknown", "flags": flags}
+
+
 def provenance() -> dict[str, object]:
-    """Package versions, Python, platform and git revision."""
+    """Package versions, Python, platform, CPU, git revision, and where known the lock's and the changes' hashes.
+
+    Returns:
+        ``python``, ``platform``, ``packages`` (name -> version, those of `PACKAGES` installed), ``git_revision``,
+        ``cpu`` (`cpu`), ``lock_sha256`` (only from a checkout with the lock) and ``git_diff_sha256`` (only for a
+        ``-dirty`` revision: `git_diff_sha256`, untracked files not covered).
+    """
     versions = {}
     for pkg in PACKAGES:
         try:
             versions[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
             continue
-    return {"python": platform.python_version(), "platform": platform.platform(), "packages": versions,
-            "git_revision": git_revision()}
+    revision = git_revision()
+    out: dict[str, object] = {"python": platform.python_version(), "platform": platform.platform(),
+                              "packages": versions, "git_revision": revision, "cpu": cpu()}
+    lock = lock_sha256()
+    if lock is not None:
+        out["lock_sha256"] = lock
+    if revision.endswith("-dirty"):
+        diff = git_diff_sha256()
+        if diff is not None:
+            out["git_diff_sha256"] = diff
+    return out

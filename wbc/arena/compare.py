@@ -50,6 +50,7 @@ from wbc.arena.identity import (
 from wbc.arena.progress import progress
 from wbc.arena.report import summarize
 from wbc.arena.results import ResultsStore, check_out_dir, episode_path, unwritable
+from wbc.arena.run_environment import report_lines
 from wbc.arena.runner import TickObserver
 from wbc.arena.sequential import SequentialComparison
 from wbc.arena.sim_trial import check_rate
@@ -520,8 +521,7 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             **({} if cfg.trial_time_limit_s is None else {
                 "trial time limit": f"{cfg.trial_time_limit_s:g} s (--trial-time-limit: a trial past it is its "
                                     "controller's error, kept on --resume)"}),
-            **{k: v for k, v in store.environment.items() if k != "packages"},
-            "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
+            **report_lines(store.environment),
         }
         finish_results(store.dir, summary, records, meta, failures=failures, curve=curve)
         expected = ({(c, *t.key) for t in trials for c in cfg.controllers} if rounds is None else

@@ -69,6 +69,7 @@ from wbc.arena.identity import MAX_SEED, MAX_TRIALS, HardwareRunIdentity, Scenar
 from wbc.arena.operator import OPERATOR_ACTIONS, KeySource, OperatorConsole
 from wbc.arena.report import md_table, summarize
 from wbc.arena.results import ResultsStore, episode_path, hold_results_dir, holds_results, unwritable
+from wbc.arena.run_environment import report_lines
 from wbc.arena.runner import EpisodeInterrupted, PreparingObserver, TickObserver, run_episode
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
@@ -733,8 +734,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             "published scenario": "yes" if published else "NO (results are not comparable with published ones)",
             "trial": f"band {trial.band}, seed {trial.seed}, trial {trial.index}, {trial.duration_s:g} s",
             "metrics source": "the state estimator (IMU and leg kinematics): a robot has no simulator truth",
-            **{k: v for k, v in store.environment.items() if k != "packages"},
-            "packages": ", ".join(f"{k} {v}" for k, v in store.environment["packages"].items()),
+            **report_lines(store.environment),
         }
         finish_results(store.dir, summary, [record], meta, sections=_hardware_sections(result), resumable=False)
     finally:

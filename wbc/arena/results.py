@@ -6,7 +6,9 @@ the store is reopened. Every row carries a checksum of its cells, and a row that
 impossible value, belongs to another scenario file or repeats a trial is refused on reopening with its file and line
 (`wbc.arena.trial_record.scan_csv`), unless the run asks for such rows to be dropped and played again
 (``--drop-bad-rows``). ``run.json`` holds the run's identity (`wbc.arena.identity.RunIdentity`: the resolved
-configuration and scenario hash), package versions, git revision and what each controller is (its kind, a plug-in's
+configuration and scenario hash), the environment the run began under (package versions, CPU, git revision ...:
+`wbc.provenance.provenance`; kept on a resume, which is compared with it: `wbc.arena.run_environment`) and what each
+controller is (its kind, a plug-in's
 target and distribution version, the sha256 of every file it was built from: weights, an ONNX model and its external
 data, an I/O or configuration file); it is read back as strictly as a scenario (`RunIdentity.from_json`: every
 field known and of its type), and reopening a directory for another run is refused, naming the fields that differ.
@@ -32,6 +34,7 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from wbc.arena import run_environment
 from wbc.arena.identity import RunIdentity, compared, moved_files, publication_change
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
@@ -357,12 +360,17 @@ class ResultsStore:
             stored trials; or a file of it cannot be written (a full disk, no permission: `unwritable`).
         RecordError: its ``run.json`` is malformed (the message names the field), its ``trials.csv`` has other
             columns, or holds a refused row and `drop_bad_rows` is off (the message names the file and line).
+        ResultsDirError: a resume, with trials stored, under other versions of packages that change results than the
+            run began under (`wbc.arena.run_environment.refusal`); a resume under another environment otherwise is
+            a warning on stderr, recorded in ``run.json`` (`wbc.arena.run_environment`).
         ValueError: `lock` is given back already, or is another directory's (a caller's mistake, not the user's).
 
     Attributes:
         dir: the directory.
         identity: the run's identity, as given.
-        environment: the package versions and git revision ``run.json`` records (`wbc.provenance.provenance`).
+        environment: what ``run.json`` records of the environment (`wbc.provenance.provenance`): the one the run
+            began under, kept on every resume, with ``resumes`` listing each resume under another one (what changed,
+            the trials stored before it: `wbc.arena.run_environment`).
         records: the trials stored, in the order they finished.
         dropped: the rows of ``trials.csv`` dropped on opening (with `drop_bad_rows`), in file order.
         resumable: as given.
@@ -412,6 +420,7 @@ class ResultsStore:
                                       f"{', '.join(diff)}): {_differences(before, now)}; rerun with the original "
                                       "options or another --out")
             moved = list(moved_files(stored, config))
+            start = self._stored_environment
             changed = _changed_code(self._stored_controllers, controllers or {})
             if changed:
                 raise ResultsDirError(f"{self.run_path}: --resume with {changed} changed since the run began: its "
@@ -425,7 +434,8 @@ class ResultsStore:
                 self.identity = dataclasses.replace(self.identity, scenario=scenario)
                 config = self.identity.as_json()
         else:
-            moved, at_start, republished = [], None, False
+            moved, at_start, republished, start = [], None, False, None
+        environment = provenance()  # taken once: what run.json records and the report shows
         self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
             rows = scan_csv(self.trials_path, scenario_hash=self.identity.scenario_hash,
@@ -437,6 +447,7 @@ class ResultsStore:
             if rows.refused and not drop_bad_rows:
                 raise RecordError(rows.refusal(self.trials_path, "pass --drop-bad-rows to play those trials again, "
                                                                  "or restore the file"))
+            found = self._environment_changes(start, environment, len(rows.records))
             for bad in rows.refused:
                 print(f"wbc: warning: {self.trials_path}:{bad.line}: {bad.reason}; row dropped (--drop-bad-rows), "
                       "its trial is played again", file=sys.stderr)
@@ -446,6 +457,7 @@ class ResultsStore:
             with self._writing(self.trials_path):
                 self._rewrite()
         else:
+            found = []
             with self._writing(self.trials_path):
                 try:  # created, never overwritten: a file that appeared since is another run's
                     f = self.trials_path.open("x", encoding="utf-8", newline="")
@@ -465,7 +477,12 @@ class ResultsStore:
                     f"scenario.published_at_start {str(at_start).lower()})" if at_start is not None else
                     "as when the run began, not as at its last call: the same content, so the run resumes")
             print(f"wbc: note: {self.run_path}: the scenario is {now}, {said}", file=sys.stderr)
-        self.environment = provenance()  # what `run.json` records; the report shows the same, taken once
+        if found:
+            print(run_environment.warning(self.run_path, found, len(self.records)), file=sys.stderr)
+        # what `run.json` records, and the report shows: the environment the run began under, kept on every resume
+        # with the resumes under another one; a run with no trial stored yet begins under this one
+        self.environment = (run_environment.record(start, found, len(self.records)) if start and self.records else
+                            environment)
         run = {"config": config, "environment": self.environment}
         if controllers:
             run["controllers"] = controllers
@@ -482,6 +499,22 @@ class ResultsStore:
             yield
         except OSError as exc:
             raise unwritable(path, exc, self.dir, stored=len(self.records), resumable=self.resumable) from exc
+
+    def _environment_changes(self, start: dict | None, now: dict, stored: int) -> list[run_environment.Change]:
+        """What differs from the environment the stored trials began under; refused for a result's package.
+
+        Nothing is compared for a fresh run, or with no trial stored (none was played under the earlier one).
+
+        Raises:
+            ResultsDirError: another version of a package that changes results (`run_environment.refusal`).
+        """
+        if not start or not stored:
+            return []
+        found = run_environment.changes(start, now)
+        refused = run_environment.refusal(self.run_path, found, stored)
+        if refused is not None:
+            raise ResultsDirError(refused)
+        return found
 
     def _stored_config(self) -> dict:
         """The ``config`` of the stored ``run.json``, checked to be a run identity this version reads.
@@ -509,6 +542,8 @@ class ResultsStore:
                                   "file, or start afresh with another --out")
         RunIdentity.from_json(run["config"], source=self.run_path)
         self._stored_controllers = run.get("controllers") or {}
+        self._stored_environment = run.get("environment") or {}
+        run_environment.check_stored(self._stored_environment, self.run_path)
         return run["config"]
 
     def _rewrite(self) -> None:
