@@ -124,6 +124,9 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
     assert "V_lin err, common [m/s]" in printed and "over the seconds both survived" in " ".join(printed.split())
     assert {c["controller"] for c in saved["contenders"]} == {"learned", "learned-locked", "learned-noarm", "mpc",
                                                               "mpc-tail", "mpc-locked", "mpc-noarm"}
+    # our rows too, as summary.json holds them: what the table prints beside the paper's (it held the paper's only)
+    assert saved["ours"] == json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert set(saved["ours"]["controllers"]) == {c["controller"] for c in saved["contenders"]}
     # resuming the finished run plays nothing and prints the same table but for the run line
     assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
                  "--workers", "1", "--quiet", "--resume"]) == 0

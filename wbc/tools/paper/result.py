@@ -141,4 +141,7 @@ class PaperTableResult:
             "workers": self.workers, "paper_protocol_cpu_h": self.paper_protocol_cpu_h,
             "paper": {row: {m: [{"mean": v.mean, "std": v.std} for v in values] for m, values in cells.items()}
                       for row, cells in self.spec.paper.items()},
+            # our rows, by controller (the contenders map their keys to it): summary.json's form, the table's cells,
+            # the failing controllers (``controller_errors``) among them, so that a script reads what the table shows
+            "ours": self.summary.to_json(),
         }
