@@ -566,7 +566,7 @@ def test_an_edited_copy_of_a_published_scenario_is_warned_about_by_every_command
     def stop(*args, **kwargs):
         raise ScenarioError(edited, "stopped by the test before any trial")
 
-    for name in ("arm_momentum_study", "bench_act", "bench_latency", "check_controller"):
+    for name in ("arm_momentum_study", "bench_act", "bench_latency", "check_controller", "_check_apart"):
         monkeypatch.setattr(cli, name, stop)
     monkeypatch.setattr(view, "view_trial", stop)
     commands = (["analyze", "arm-momentum", "--trials", "1"], ["bench", "act", "stand"],

@@ -74,13 +74,22 @@ def check_stored(environment: Mapping[str, Any], source: Path) -> None:
     """Refuse a stored ``environment`` whose compared fields are not of their types (it was edited).
 
     Raises:
-        RecordError: ``packages`` or ``cpu`` not an object, ``resumes`` not a list of objects; the message names the
-            file and the field.
+        RecordError: ``packages`` or ``cpu`` not an object, the CPU's ``flags`` not a list of strings or its
+            ``model`` not a string, ``resumes`` not a list of objects; the message names the file and the field.
     """
     for key in ("packages", "cpu"):
         if key in environment and not isinstance(environment[key], dict):
             raise RecordError(f"{source}: field environment.{key}: expected an object, got {environment[key]!r}; "
                               "restore the file, or start afresh with another --out")
+    cpu = environment.get("cpu") or {}
+    flags = cpu.get("flags")
+    if flags is not None and (not isinstance(flags, list) or not all(isinstance(f, str) for f in flags)):
+        raise RecordError(f"{source}: field environment.cpu.flags: expected a list of strings, got {flags!r}; "
+                          "restore the file, or start afresh with another --out")
+    model = cpu.get("model")
+    if model is not None and not isinstance(model, str):
+        raise RecordError(f"{source}: field environment.cpu.model: expected a string, got {model!r}; "
+                          "restore the file, or start afresh with another --out")
     resumes = environment.get("resumes", [])
     if not isinstance(resumes, list) or not all(isinstance(r, dict) for r in resumes):
         raise RecordError(f"{source}: field environment.resumes: expected a list of objects, got {resumes!r}; "
