@@ -71,8 +71,12 @@ def test_a_resume_that_reaches_no_further_trains_nothing_and_exports_its_checkpo
     assert json.loads((run / "policy.json").read_text())["training"]["iteration"] == 0
     assert not (run / "model_1.pt").exists()
     after = _snapshot(run)
-    for name in ("config.json", "model_0.pt"):  # the run itself untouched; its policy exported again
-        assert after[name] == before[name]
+    assert after["model_0.pt"] == before["model_0.pt"]  # the run itself untouched; its policy exported again
+    # its config.json the same but for the segment this resume adds, which changed nothing
+    config, began = json.loads(after["config.json"]), json.loads(before["config.json"])
+    segments = config.pop("segments")
+    assert segments[:-1] == began.pop("segments") and config == began
+    assert segments[-1]["resumed"] and segments[-1]["changed"] == {} and segments[-1]["to_iteration"] == 0
 
 
 @pytest.mark.parametrize(("damage", "said"), [
@@ -382,3 +386,25 @@ def test_a_stage_refuses_the_export_of_a_previous_stage_that_still_trains(tmp_pa
             assert f"(pid {os.getpid()})" in err and not (tmp_path / "push-stage2").exists()
     finally:
         held.release()
+
+
+def test_a_resume_records_the_settings_it_changed_and_a_later_plain_resume_takes_them(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    began = json.loads((run / "config.json").read_text())
+    assert [s["resumed"] for s in began["segments"]] == [False] and began["segments"][0]["to_iteration"] == 0
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", "--iterations", "2", "--run-root", str(root),
+                 "--resume"]) == 0
+    config = json.loads((run / "config.json").read_text())
+    assert config["train_config"]["max_iterations"] == 2  # the current settings, not the ones the run began with
+    assert config["provenance"] == began["provenance"] and config["inputs"] == began["inputs"]
+    segment = config["segments"][-1]
+    assert segment["resumed"] and segment["changed"]["max_iterations"] == [1, 2]
+    assert (segment["from_iteration"], segment["to_iteration"]) == (1, 1)
+    assert segment["provenance"]["git_revision"] == began["provenance"]["git_revision"]
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", "--run-root", str(root), "--resume"]) == 0
+    captured = capsys.readouterr()
+    assert "--iterations 2" in captured.err and "nothing new trained" in captured.out
+    assert json.loads((run / "config.json").read_text())["segments"][-1]["changed"] == {}

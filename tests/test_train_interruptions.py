@@ -307,3 +307,42 @@ def test_a_torn_newest_checkpoint_is_refused_naming_the_one_before_and_nothing_i
     (run / "model_1.pt").rename(tmp_path / "model_1.pt")
     assert train(_tiny(tmp_path / "runs", max_iterations=3), resume=True)["iterations"] == 3
     assert sorted(p.name for p in run.glob("model_*")) == ["model_0.pt", "model_1.pt", "model_2.pt"]
+
+
+def _rma(rounds: int):
+    from wbc.learned.train.adaptation_config import AdaptationConfig
+
+    return AdaptationConfig(iterations=rounds, steps_per_iteration=4, history=3, hidden_dims=(8,), minibatch=64)
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_ctrl_c_in_the_adaptation_phase_keeps_the_export_before_it_and_resume_fits_it_again(tmp_path, monkeypatch):
+    """An interrupted phase 2 leaves the export it found (its module too), never the checkpoint's without a module."""
+    import wbc.learned.train.train as train_module
+    from wbc.learned.policy.policy_file import load_policy
+
+    train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(1)))
+    run = tmp_path / "push-stage1"
+    kept = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json", "progress.json")}
+    real = train_module.train_adaptation
+
+    def ctrl_c_in_round_2(policy, env, config):
+        def log(line: str) -> None:
+            if line.startswith("RMA phase 2 iteration 2/"):
+                signal.raise_signal(signal.SIGINT)
+
+        return real(policy, env, config, log=log)
+
+    monkeypatch.setattr(train_module, "train_adaptation", ctrl_c_in_round_2)
+    with pytest.raises(KeyboardInterrupt):
+        train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(3)), resume=True)
+    assert {n: (run / n).read_bytes() for n in kept} == kept
+    assert load_policy(run / "policy").meta["adaptation"]["iterations"] == 1  # still playable
+    monkeypatch.undo()
+    result = train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(3)), resume=True)
+    assert result["adaptation"] == "fitted" and load_policy(run / "policy").meta["adaptation"]["iterations"] == 3
+    assert len(json.loads((run / "rma.json").read_text())["losses"]) == 3
+    # resumed again with the same phase 2, the finished run keeps its module: neither fitted again nor replaced
+    fitted = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json")}
+    result = train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(3)), resume=True)
+    assert result["adaptation"] == "kept" and {n: (run / n).read_bytes() for n in fitted} == fitted
