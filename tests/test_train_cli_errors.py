@@ -166,7 +166,8 @@ def test_resume_compares_the_run_directory_and_the_inputs_as_paths_not_text(tmp_
     same = stage_config("push", 2, run_root=str(tmp_path / "runs"), teacher=str(tmp_path / "teachers/pi1/policy.npz"))
     assert check_run_dir(same, resume=True).done == 1
     other = stage_config("push", 2, run_root="runs", teacher="teachers/pi0/policy")
-    with pytest.raises(ConfigError, match=r"differs from this run's config in \['teacher'\]"):
+    # a run begun before its inputs' hashes were recorded: compared by path
+    with pytest.raises(ConfigError, match=r"teacher: this run reads .*pi0/policy, whose path is not the one"):
         check_run_dir(other, resume=True)
 
 
@@ -408,3 +409,30 @@ def test_a_resume_records_the_settings_it_changed_and_a_later_plain_resume_takes
     captured = capsys.readouterr()
     assert "--iterations 2" in captured.err and "nothing new trained" in captured.out
     assert json.loads((run / "config.json").read_text())["segments"][-1]["changed"] == {}
+
+
+def test_a_moved_run_root_resumes_a_later_stage_whose_inputs_are_compared_by_content(stage1_run, tmp_path,
+                                                                                     monkeypatch):
+    from wbc.learned.train.preflight import check_run_dir, input_files
+    from wbc.learned.train.stages import stage_config
+
+    monkeypatch.chdir(tmp_path)
+    shutil.copytree(stage1_run / "push-stage1", tmp_path / "R1" / "push-stage1")
+    cfg = stage_config("push", 2, run_root="R1")  # its teacher: R1/push-stage1/policy
+    run = tmp_path / "R1" / "push-stage2"
+    run.mkdir()
+    (run / "model_0.pt").write_bytes(b"")
+    saved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
+    (run / "config.json").write_text(json.dumps({"train_config": saved, "inputs": input_files(cfg)}))
+    (tmp_path / "R1").rename(tmp_path / "R2")
+    # the previous stage's export moved with it: the same teacher, by default or given
+    assert check_run_dir(stage_config("push", 2, run_root="R2"), resume=True).done == 1
+    given = stage_config("push", 2, run_root="R2", teacher=str(tmp_path / "R2" / "push-stage1" / "policy.npz"))
+    assert check_run_dir(given, resume=True).done == 1
+    # another teacher, wherever it lies, is refused, naming the file read and the one recorded
+    other = tmp_path / "other"
+    shutil.copytree(tmp_path / "R2" / "push-stage1", other)
+    (other / "policy.npz").write_bytes((other / "policy.npz").read_bytes() + b"\0")
+    with pytest.raises(ConfigError, match=r"teacher: this run reads .*other/policy, whose content is not the one "
+                                          r".*R1/push-stage1/policy"):
+        check_run_dir(stage_config("push", 2, run_root="R2", teacher=str(other / "policy")), resume=True)
