@@ -436,3 +436,18 @@ def test_a_moved_run_root_resumes_a_later_stage_whose_inputs_are_compared_by_con
     with pytest.raises(ConfigError, match=r"teacher: this run reads .*other/policy, whose content is not the one "
                                           r".*R1/push-stage1/policy"):
         check_run_dir(stage_config("push", 2, run_root="R2", teacher=str(other / "policy")), resume=True)
+
+
+def test_the_curves_tool_draws_a_ppo_run_and_labels_runs_of_one_name_by_their_roots(stage1_run, tmp_path):
+    pytest.importorskip("matplotlib")
+    from wbc.learned.train.curves import is_dagger_run, run_labels
+    from wbc.learned.train.curves import main as curves
+
+    assert (stage1_run / "push-stage1" / "progress.json").is_file()  # a PPO run writes one too: not a DAgger run's
+    assert not is_dagger_run(stage1_run / "push-stage1")
+    other = tmp_path / "other" / "push-stage1"
+    shutil.copytree(stage1_run / "push-stage1", other)
+    runs = [str(stage1_run / "push-stage1"), str(other)]
+    assert curves([*runs, "-o", str(tmp_path / "c.png")]) == 0 and (tmp_path / "c.png").stat().st_size > 1000
+    assert run_labels(runs) == [f"{stage1_run.name}/push-stage1", "other/push-stage1"]
+    assert run_labels(runs[:1]) == ["push-stage1"]
