@@ -104,6 +104,11 @@ def test_a_fine_tune_trains_the_critic_first_then_the_student_and_exports_a_poli
     assert exported.meta["adaptation"] == {**student.meta["adaptation"]}
     training = exported.meta["training"]
     assert training["student"] == STUDENT and training["student_training"] == student.meta["training"]
+    # how the fine-tune was made, as its config.json records it: its inputs (the student's sha256) and provenance
+    config = json.loads((Path(first["run_dir"]) / "config.json").read_text())
+    assert training["inputs"] == config["inputs"] and "student" in training["inputs"]
+    assert training["provenance"] == config["provenance"] and training["seed"] == config["seed"]
+    assert training["scenario"] == config["scenario"] and len(training["scenario"]["sha256"]) == 64
     from wbc.learned.train.curves import read_scalars
 
     steps, bc = read_scalars(first["run_dir"])["Loss/bc"]

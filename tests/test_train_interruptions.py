@@ -346,3 +346,14 @@ def test_ctrl_c_in_the_adaptation_phase_keeps_the_export_before_it_and_resume_fi
     fitted = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json")}
     result = train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(3)), resume=True)
     assert result["adaptation"] == "kept" and {n: (run / n).read_bytes() for n in fitted} == fitted
+
+
+def test_the_export_carries_the_runs_provenance_from_its_config(two_iterations):
+    """A shipped copy of policy.json says how it was made: the inputs, seed, scenario, command and versions."""
+    run = two_iterations / "push-stage1"
+    config = json.loads((run / "config.json").read_text())
+    training = json.loads((run / "policy.json").read_text())["training"]
+    for key in ("seed", "command", "scenario", "inputs", "provenance", "started"):
+        assert training[key] == config[key], key
+    assert training["scenario"]["path"] == str(Path(SCENARIO).resolve()) and len(training["scenario"]["sha256"]) == 64
+    assert "git_revision" in training["provenance"] and training["segments"][0]["from_iteration"] == 0

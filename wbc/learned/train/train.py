@@ -62,6 +62,7 @@ from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
 from wbc.output_files import replacing, temporary_name
 from wbc.provenance import provenance
+from wbc.scenario.scenario import resolve_scenario_path
 
 torch = require("torch")
 _runners = require("rsl_rl.runners")
@@ -402,7 +403,7 @@ def _adapted(run_dir: Path, cfg: TrainConfig, iteration: int) -> bool:
 
 def _scenario(cfg: TrainConfig) -> dict[str, Any]:
     """The scenario file the run trains on and its sha256 (None where it cannot be read)."""
-    path = Path(cfg.env.scenario).resolve()
+    path = resolve_scenario_path(cfg.env.scenario).resolve()
     try:
         digest: str | None = hashlib.sha256(path.read_bytes()).hexdigest()
     except OSError:
