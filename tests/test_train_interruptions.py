@@ -357,3 +357,25 @@ def test_the_export_carries_the_runs_provenance_from_its_config(two_iterations):
         assert training[key] == config[key], key
     assert training["scenario"]["path"] == str(Path(SCENARIO).resolve()) and len(training["scenario"]["sha256"]) == 64
     assert "git_revision" in training["provenance"] and training["segments"][0]["from_iteration"] == 0
+
+
+def test_the_physics_threads_change_no_checkpoint_so_a_resume_may_change_them(two_iterations, tmp_path):
+    """A run on 2 threads saves the checkpoint a run on 1 does, bit for bit: its resume may take other threads."""
+    from wbc.learned.train.train import train
+
+    other = Path(train(_threads(tmp_path / "two", 2, max_iterations=2))["run_dir"])
+    assert _same(_state(other / "model_1.pt"), _state(two_iterations / "push-stage1" / "model_1.pt"))
+    shutil.copytree(two_iterations, tmp_path / "runs")
+    result = train(_threads(tmp_path / "runs", 2, max_iterations=3), resume=True)
+    assert result["iterations"] == 3
+    config = json.loads((tmp_path / "runs" / "push-stage1" / "config.json").read_text())
+    assert config["train_config"]["env"]["nthread"] == 2
+    assert config["segments"][-1]["changed"]["env.nthread"] == [1, 2]
+
+
+def _threads(root: Path, nthread: int, **kw):
+    """`_tiny` on `nthread` physics threads."""
+    import dataclasses
+
+    cfg = _tiny(root, **kw)
+    return dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, nthread=nthread))

@@ -36,7 +36,7 @@ from wbc.optional import require
 from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory_holder, lock_directory
 from wbc.robots.registry import get_robot
 
-__all__ = ["INPUTS", "LOCK_FILE", "RESUMABLE", "ResumePoint", "check_checkpoint", "check_inputs",
+__all__ = ["INPUTS", "LOCK_FILE", "RESUMABLE", "RESUMABLE_ENV", "ResumePoint", "check_checkpoint", "check_inputs",
            "check_run", "check_run_dir", "check_run_root", "check_unlocked", "checkpoint_iteration", "config_diff",
            "env_meta", "input_files", "input_path", "latest_checkpoint", "load_input_policy", "lock_run_dir",
            "locked_run_dir", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
@@ -46,6 +46,11 @@ T = TypeVar("T")
 
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
+
+RESUMABLE_ENV = ("env.nthread",)
+"""EnvConfig fields (dotted, as `config_diff` names them) a resumed run may change: the physics threads, which
+split the robots between threads without changing any robot's result (a run on 1 or 2 threads saves the same
+checkpoint, bit for bit)."""
 
 INPUTS = ("teacher", "init_from", "frozen_legs", "student", "expert_data")
 """TrainConfig fields that name a file the run reads; a resumed run compares their content (sha256), not the path."""
@@ -569,7 +574,7 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
     resolved = json.loads(json.dumps(asdict(cfg), default=list))
     # where the run lies is not part of its config (a run directory may move), and an input is the file it names
     diff = [field for key in sorted(resolved) if key not in (*RESUMABLE, "run_dir", *INPUTS)
-            for field in config_diff(saved.get(key), resolved[key], key)]
+            for field in config_diff(saved.get(key), resolved[key], key) if field not in RESUMABLE_ENV]
     inputs = data.get("inputs")
     recorded = inputs if isinstance(inputs, dict) else {}
     if diff:
