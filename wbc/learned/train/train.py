@@ -235,6 +235,11 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
     log = runner.logger.log
 
     def log_then_stop(*args: Any, **kwargs: Any) -> None:
+        weight = getattr(runner.alg, "bc_weight", None)
+        if weight is not None:
+            # the BC weight as what it is, TensorBoard tag Train/bc_weight, printed beside the episode figures:
+            # rsl-rl logs the update's values as losses (Loss/<name>, "Mean <name> loss")
+            runner.logger.ep_extras.append({"Train/bc_weight": torch.tensor(float(weight))})
         log(*args, **kwargs)
         if interrupt.requested:
             raise _StopAfterIteration
