@@ -278,8 +278,10 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
     Returns:
         ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
         ``trained``: in this call, 0 when a resumed run had already reached `max_iterations`: its newest checkpoint is
-        then exported as it is, and the adaptation phase runs), and ``"replay"`` (the replay file of the exported
-        policy) unless the policy observes RMA extrinsics without an adaptation module to estimate them.
+        then exported as it is, and the adaptation phase runs), ``"adaptation"`` (``"fitted"``; ``"kept"`` where the
+        export already held the module this phase 2 fits on that checkpoint, `_adapted`; ``"none"``), and
+        ``"replay"`` (the replay file of the exported policy) unless the policy observes RMA extrinsics without an
+        adaptation module to estimate them.
 
     The run holds its directory's lock (`wbc.learned.train.preflight.locked_run_dir`) from before it reads it to its
     end: a second run on the directory (a training, a DAgger run, a fine-tune) is refused while this one lives.
@@ -289,7 +291,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
             that holds a run; no checkpoint to resume from, a damaged run directory (config.json, progress.json, the
             newest checkpoint) or a resumed config that differs; or the teacher is missing/mismatched.
         KeyboardInterrupt: Ctrl-C; during PPO, once the iteration in progress has ended and its checkpoint is saved
-            (`_learn`).
+            (`_learn`); during the adaptation phase at once, the export before it kept (`_adapt`).
     """
     def check() -> ResumePoint | None:  # the checks `wbc train --dry-run` makes, under the lock
         point = check_run(cfg, resume=resume, options=options)
