@@ -360,6 +360,37 @@ def test_an_interrupted_run_says_which_checkpoint_it_keeps_and_that_resume_conti
     assert "holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh" in capsys.readouterr().err
 
 
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_ctrl_c_in_the_adaptation_phase_says_the_export_keeps_the_module_it_had(stage1_run, tmp_path, capsys,
+                                                                                 monkeypatch):
+    import signal
+
+    import wbc.learned.train.train as train_module
+    from wbc.learned.policy.policy_file import load_policy
+
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    argv = ["train", "--task", "push", "--stage", "1", "--run-root", str(root), "--resume"]
+    assert main([*argv, "--rma-iterations", "1"]) == 0  # the module added without training PPO further
+    kept = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json")}
+    real = train_module.train_adaptation
+
+    def ctrl_c_in_round_2(policy, env, config):
+        def log(line: str) -> None:
+            if line.startswith("RMA phase 2 iteration 2/"):
+                signal.raise_signal(signal.SIGINT)
+
+        return real(policy, env, config, log=log)
+
+    monkeypatch.setattr(train_module, "train_adaptation", ctrl_c_in_round_2)
+    capsys.readouterr()
+    assert main([*argv, "--rma-iterations", "3"]) == 130
+    err = capsys.readouterr().err
+    assert "keeps its newest checkpoint, model_0.pt, and its export the adaptation module it had (1 round" in err
+    assert {n: (run / n).read_bytes() for n in kept} == kept
+    assert load_policy(run / "policy").meta["adaptation"]["iterations"] == 1
+
 def test_the_help_names_every_run_directory_and_when_stage_is_not_needed(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["train", "--help"])

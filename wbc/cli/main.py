@@ -783,6 +783,15 @@ def _inherit_saved(args: argparse.Namespace, run_dir: str, env: dict[str, Any], 
     return bool(taken)
 
 
+def _exported_rounds(run_dir: Path) -> int | None:
+    """The rounds of the adaptation module in a run's export (``policy.json`` adaptation.iterations), or None."""
+    try:
+        rounds = json.loads((run_dir / "policy.json").read_text())["adaptation"]["iterations"]
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+        return None
+    return rounds if isinstance(rounds, int) and not isinstance(rounds, bool) and rounds > 0 else None
+
+
 def _adapted_rounds(run_dir: Path) -> int | None:
     """The rounds of the adaptation module in the export of a run begun before config.json recorded resumes, or None.
 
@@ -793,10 +802,9 @@ def _adapted_rounds(run_dir: Path) -> int | None:
     try:
         if "segments" in json.loads((run_dir / "config.json").read_text()):
             return None
-        rounds = json.loads((run_dir / "policy.json").read_text())["adaptation"]["iterations"]
-    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+    except (OSError, UnicodeDecodeError, ValueError, TypeError):
         return None
-    return rounds if isinstance(rounds, int) and not isinstance(rounds, bool) and rounds > 0 else None
+    return _exported_rounds(run_dir)
 
 
 _DAGGER_OPTIONS = {"rounds": "--rounds", "episodes": "--episodes", "episode_s": "--episode-s", "seed": "--seed",
@@ -1038,7 +1046,12 @@ def _interrupted_training(args: argparse.Namespace) -> str:
         checkpoint = latest_checkpoint(run_dir)
         if checkpoint is None:
             return f"; {run_dir} holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh"
-        return (f"; {run_dir} keeps its newest checkpoint, {checkpoint.name}: the same command with --resume "
+        rounds = _exported_rounds(Path(run_dir))
+        # an interrupted adaptation phase writes nothing: the export keeps the module it had, which a user who
+        # stopped a longer phase 2 would otherwise take for lost
+        module = (f", and its export the adaptation module it had ({rounds} round{'s' if rounds > 1 else ''}, "
+                  "policy.json)") if rounds else ""
+        return (f"; {run_dir} keeps its newest checkpoint, {checkpoint.name}{module}: the same command with --resume "
                 "continues from it")
     if kind == "dagger":
         try:
