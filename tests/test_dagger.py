@@ -269,6 +269,11 @@ def test_wbc_train_with_mpc_as_teacher_runs_dagger_and_exports_a_policy_the_aren
     assert meta["training"]["method"] == "dagger" and meta["training"]["expert"] == "mpc"
     training = meta["training"]  # the run's recipe travels with its student
     assert (training["rounds"], training["episodes"], training["episode_s"]) == (2, 2, 0.6)
+    # and how it was made, as its config.json records it: the command, scenario, versions and git revision
+    config = json.loads((run / "config.json").read_text())
+    assert training["provenance"] == config["provenance"] and "git_revision" in training["provenance"]
+    assert training["command"] == config["command"] and training["scenario"]["path"].endswith("push.toml")
+    assert len(training["scenario"]["sha256"]) == 64
     # the student reads the last 25 observations through the file's adaptation module; its latent is declared as
     # extrinsics of no privileged parts and no encoder, with a note that it comes from the history
     assert meta["adaptation"]["history"] == 25 and meta["extrinsics"]["privileged_parts"] == []

@@ -159,3 +159,49 @@ def test_site_builds_strict(tmp_path):
                            str(tmp_path / "site")], cwd=ROOT, capture_output=True, text=True,
                           env={**os.environ, "NO_MKDOCS_2_WARNING": "1"}, timeout=300)
     assert done.returncode == 0, f"mkdocs build --strict failed:\n{done.stdout[-4000:]}\n{done.stderr[-4000:]}"
+
+
+def _shipped_files_section() -> str:
+    text = (DOCS / "guides" / "learned.md").read_text()
+    return text[text.index("## The shipped files"):text.index("## The turn task on go1-arm")]
+
+
+def _expand(pattern: str) -> list[str]:
+    """A file pattern as the guide writes it: ``a1-wx200-{none,locked}`` and ``go1-arm-*-crouched``."""
+    m = re.search(r"\{([^}]*)\}", pattern)
+    if m is None:
+        return [pattern]
+    return [name for part in m.group(1).split(",") for name in _expand(pattern[:m.start()] + part + pattern[m.end():])]
+
+
+def test_the_learned_guide_says_which_scenario_trained_every_shipped_file():
+    """Each shipped weight file is in the guide's table, whose row names its scenario (push v1 or v2, turn file)."""
+    section = _shipped_files_section()
+    rows = [line for line in section.splitlines() if line.startswith("| `")]
+    named: dict[str, str] = {}
+    for row in rows:
+        files, _, scenario = row.strip("|").split(" | ")[:3]
+        for pattern in re.findall(r"`([^`]+)`", files):
+            for name in _expand(pattern):
+                named[name] = scenario
+    shipped = sorted(p.stem for p in (ROOT / "wbc" / "learned" / "weights").glob("*.json"))
+    from fnmatch import fnmatch
+
+    for stem in shipped:
+        scenarios = [scenario for pattern, scenario in named.items() if fnmatch(stem, pattern)]
+        assert scenarios, f"{stem}: not in the guide's table of shipped files"
+    # the crouched push set met push v1's pushes, the upright chain push v2's
+    assert "version 1" in named["a1-wx200-actuated-crouched"] and "version 2" in named["a1-wx200-actuated"]
+    assert "was trained on push version 1" not in (DOCS / "guides" / "learned.md").read_text()
+
+
+def test_the_learned_guide_quotes_the_bc_weight_the_schedule_gives_at_each_runs_last_iteration():
+    from wbc.learned.train.bc_schedule import BCSchedule
+
+    schedule = BCSchedule(hold_iterations=50, anneal_iterations=150)  # the stages' schedule
+    text = " ".join((DOCS / "guides" / "learned.md").read_text().split())
+    # the crouched pi2 ran 127 iterations (its last, 126), pi3 125 (124); the turn runs 100 (99)
+    assert f"{schedule.weight(126):.2f} (pi2, iteration 126)" in text
+    assert f"{schedule.weight(124):.2f} (pi3, iteration 124" in text
+    assert f"lambda had reached {schedule.weight(99):.2f} at the runs' last iteration, 99" in text
+    assert "annealed only to 0.67 (pi2)" not in text

@@ -104,10 +104,23 @@ def test_a_fine_tune_trains_the_critic_first_then_the_student_and_exports_a_poli
     assert exported.meta["adaptation"] == {**student.meta["adaptation"]}
     training = exported.meta["training"]
     assert training["student"] == STUDENT and training["student_training"] == student.meta["training"]
+    # how the fine-tune was made, as its config.json records it: its inputs (the student's sha256) and provenance
+    config = json.loads((Path(first["run_dir"]) / "config.json").read_text())
+    assert training["inputs"] == config["inputs"] and "student" in training["inputs"]
+    assert training["provenance"] == config["provenance"] and training["seed"] == config["seed"]
+    assert training["scenario"] == config["scenario"] and len(training["scenario"]["sha256"]) == 64
     from wbc.learned.train.curves import read_scalars
 
     steps, bc = read_scalars(first["run_dir"])["Loss/bc"]
     assert steps.tolist() == [0, 1] and bc.tolist() == [0.0, 0.0]  # the actor was the student, untouched
+    # the BC weight is logged as what it is, not as a loss
+    scalars = read_scalars(first["run_dir"])
+    assert "Loss/bc_weight" not in scalars and scalars["Train/bc_weight"][0].tolist() == [0, 1]
+    from wbc.learned.train.bc_schedule import BCSchedule
+    from wbc.learned.train.train import rsl_rl_config
+
+    schedule = BCSchedule(**rsl_rl_config(_tiny(tmp_path, max_iterations=2))["algorithm"]["bc_schedule"])
+    np.testing.assert_allclose(scalars["Train/bc_weight"][1], [schedule.weight(0), schedule.weight(1)], rtol=1e-6)
     # one more iteration, now the actor's: PPO + BC move the student
     more = train(_tiny(tmp_path, max_iterations=3, actor_frozen_iterations=2), resume=True)
     assert more["iterations"] == 3

@@ -71,8 +71,12 @@ def test_a_resume_that_reaches_no_further_trains_nothing_and_exports_its_checkpo
     assert json.loads((run / "policy.json").read_text())["training"]["iteration"] == 0
     assert not (run / "model_1.pt").exists()
     after = _snapshot(run)
-    for name in ("config.json", "model_0.pt"):  # the run itself untouched; its policy exported again
-        assert after[name] == before[name]
+    assert after["model_0.pt"] == before["model_0.pt"]  # the run itself untouched; its policy exported again
+    # its config.json the same but for the segment this resume adds, which changed nothing
+    config, began = json.loads(after["config.json"]), json.loads(before["config.json"])
+    segments = config.pop("segments")
+    assert segments[:-1] == began.pop("segments") and config == began
+    assert segments[-1]["resumed"] and segments[-1]["changed"] == {} and segments[-1]["to_iteration"] == 0
 
 
 @pytest.mark.parametrize(("damage", "said"), [
@@ -162,7 +166,8 @@ def test_resume_compares_the_run_directory_and_the_inputs_as_paths_not_text(tmp_
     same = stage_config("push", 2, run_root=str(tmp_path / "runs"), teacher=str(tmp_path / "teachers/pi1/policy.npz"))
     assert check_run_dir(same, resume=True).done == 1
     other = stage_config("push", 2, run_root="runs", teacher="teachers/pi0/policy")
-    with pytest.raises(ConfigError, match=r"differs from this run's config in \['teacher'\]"):
+    # a run begun before its inputs' hashes were recorded: compared by path
+    with pytest.raises(ConfigError, match=r"teacher: this run reads .*pi0/policy, whose path is not the one"):
         check_run_dir(other, resume=True)
 
 
@@ -355,6 +360,37 @@ def test_an_interrupted_run_says_which_checkpoint_it_keeps_and_that_resume_conti
     assert "holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh" in capsys.readouterr().err
 
 
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_ctrl_c_in_the_adaptation_phase_says_the_export_keeps_the_module_it_had(stage1_run, tmp_path, capsys,
+                                                                                 monkeypatch):
+    import signal
+
+    import wbc.learned.train.train as train_module
+    from wbc.learned.policy.policy_file import load_policy
+
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    argv = ["train", "--task", "push", "--stage", "1", "--run-root", str(root), "--resume"]
+    assert main([*argv, "--rma-iterations", "1"]) == 0  # the module added without training PPO further
+    kept = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json")}
+    real = train_module.train_adaptation
+
+    def ctrl_c_in_round_2(policy, env, config):
+        def log(line: str) -> None:
+            if line.startswith("RMA phase 2 iteration 2/"):
+                signal.raise_signal(signal.SIGINT)
+
+        return real(policy, env, config, log=log)
+
+    monkeypatch.setattr(train_module, "train_adaptation", ctrl_c_in_round_2)
+    capsys.readouterr()
+    assert main([*argv, "--rma-iterations", "3"]) == 130
+    err = capsys.readouterr().err
+    assert "keeps its newest checkpoint, model_0.pt, and its export the adaptation module it had (1 round" in err
+    assert {n: (run / n).read_bytes() for n in kept} == kept
+    assert load_policy(run / "policy").meta["adaptation"]["iterations"] == 1
+
 def test_the_help_names_every_run_directory_and_when_stage_is_not_needed(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["train", "--help"])
@@ -382,3 +418,67 @@ def test_a_stage_refuses_the_export_of_a_previous_stage_that_still_trains(tmp_pa
             assert f"(pid {os.getpid()})" in err and not (tmp_path / "push-stage2").exists()
     finally:
         held.release()
+
+
+def test_a_resume_records_the_settings_it_changed_and_a_later_plain_resume_takes_them(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    began = json.loads((run / "config.json").read_text())
+    assert [s["resumed"] for s in began["segments"]] == [False] and began["segments"][0]["to_iteration"] == 0
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", "--iterations", "2", "--run-root", str(root),
+                 "--resume"]) == 0
+    config = json.loads((run / "config.json").read_text())
+    assert config["train_config"]["max_iterations"] == 2  # the current settings, not the ones the run began with
+    assert config["provenance"] == began["provenance"] and config["inputs"] == began["inputs"]
+    segment = config["segments"][-1]
+    assert segment["resumed"] and segment["changed"]["max_iterations"] == [1, 2]
+    assert (segment["from_iteration"], segment["to_iteration"]) == (1, 1)
+    assert segment["provenance"]["git_revision"] == began["provenance"]["git_revision"]
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", "--run-root", str(root), "--resume"]) == 0
+    captured = capsys.readouterr()
+    assert "--iterations 2" in captured.err and "nothing new trained" in captured.out
+    assert json.loads((run / "config.json").read_text())["segments"][-1]["changed"] == {}
+
+
+def test_a_moved_run_root_resumes_a_later_stage_whose_inputs_are_compared_by_content(stage1_run, tmp_path,
+                                                                                     monkeypatch):
+    from wbc.learned.train.preflight import check_run_dir, input_files
+    from wbc.learned.train.stages import stage_config
+
+    monkeypatch.chdir(tmp_path)
+    shutil.copytree(stage1_run / "push-stage1", tmp_path / "R1" / "push-stage1")
+    cfg = stage_config("push", 2, run_root="R1")  # its teacher: R1/push-stage1/policy
+    run = tmp_path / "R1" / "push-stage2"
+    run.mkdir()
+    (run / "model_0.pt").write_bytes(b"")
+    saved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
+    (run / "config.json").write_text(json.dumps({"train_config": saved, "inputs": input_files(cfg)}))
+    (tmp_path / "R1").rename(tmp_path / "R2")
+    # the previous stage's export moved with it: the same teacher, by default or given
+    assert check_run_dir(stage_config("push", 2, run_root="R2"), resume=True).done == 1
+    given = stage_config("push", 2, run_root="R2", teacher=str(tmp_path / "R2" / "push-stage1" / "policy.npz"))
+    assert check_run_dir(given, resume=True).done == 1
+    # another teacher, wherever it lies, is refused, naming the file read and the one recorded
+    other = tmp_path / "other"
+    shutil.copytree(tmp_path / "R2" / "push-stage1", other)
+    (other / "policy.npz").write_bytes((other / "policy.npz").read_bytes() + b"\0")
+    with pytest.raises(ConfigError, match=r"teacher: this run reads .*other/policy, whose content is not the one "
+                                          r".*R1/push-stage1/policy"):
+        check_run_dir(stage_config("push", 2, run_root="R2", teacher=str(other / "policy")), resume=True)
+
+
+def test_the_curves_tool_draws_a_ppo_run_and_labels_runs_of_one_name_by_their_roots(stage1_run, tmp_path):
+    pytest.importorskip("matplotlib")
+    from wbc.learned.train.curves import is_dagger_run, run_labels
+    from wbc.learned.train.curves import main as curves
+
+    assert (stage1_run / "push-stage1" / "progress.json").is_file()  # a PPO run writes one too: not a DAgger run's
+    assert not is_dagger_run(stage1_run / "push-stage1")
+    other = tmp_path / "other" / "push-stage1"
+    shutil.copytree(stage1_run / "push-stage1", other)
+    runs = [str(stage1_run / "push-stage1"), str(other)]
+    assert curves([*runs, "-o", str(tmp_path / "c.png")]) == 0 and (tmp_path / "c.png").stat().st_size > 1000
+    assert run_labels(runs) == [f"{stage1_run.name}/push-stage1", "other/push-stage1"]
+    assert run_labels(runs[:1]) == ["push-stage1"]

@@ -307,3 +307,75 @@ def test_a_torn_newest_checkpoint_is_refused_naming_the_one_before_and_nothing_i
     (run / "model_1.pt").rename(tmp_path / "model_1.pt")
     assert train(_tiny(tmp_path / "runs", max_iterations=3), resume=True)["iterations"] == 3
     assert sorted(p.name for p in run.glob("model_*")) == ["model_0.pt", "model_1.pt", "model_2.pt"]
+
+
+def _rma(rounds: int):
+    from wbc.learned.train.adaptation_config import AdaptationConfig
+
+    return AdaptationConfig(iterations=rounds, steps_per_iteration=4, history=3, hidden_dims=(8,), minibatch=64)
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_ctrl_c_in_the_adaptation_phase_keeps_the_export_before_it_and_resume_fits_it_again(tmp_path, monkeypatch):
+    """An interrupted phase 2 leaves the export it found (its module too), never the checkpoint's without a module."""
+    import wbc.learned.train.train as train_module
+    from wbc.learned.policy.policy_file import load_policy
+
+    train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(1)))
+    run = tmp_path / "push-stage1"
+    kept = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json", "progress.json")}
+    real = train_module.train_adaptation
+
+    def ctrl_c_in_round_2(policy, env, config):
+        def log(line: str) -> None:
+            if line.startswith("RMA phase 2 iteration 2/"):
+                signal.raise_signal(signal.SIGINT)
+
+        return real(policy, env, config, log=log)
+
+    monkeypatch.setattr(train_module, "train_adaptation", ctrl_c_in_round_2)
+    with pytest.raises(KeyboardInterrupt):
+        train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(3)), resume=True)
+    assert {n: (run / n).read_bytes() for n in kept} == kept
+    assert load_policy(run / "policy").meta["adaptation"]["iterations"] == 1  # still playable
+    monkeypatch.undo()
+    result = train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(3)), resume=True)
+    assert result["adaptation"] == "fitted" and load_policy(run / "policy").meta["adaptation"]["iterations"] == 3
+    assert len(json.loads((run / "rma.json").read_text())["losses"]) == 3
+    # resumed again with the same phase 2, the finished run keeps its module: neither fitted again nor replaced
+    fitted = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json")}
+    result = train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(3)), resume=True)
+    assert result["adaptation"] == "kept" and {n: (run / n).read_bytes() for n in fitted} == fitted
+
+
+def test_the_export_carries_the_runs_provenance_from_its_config(two_iterations):
+    """A shipped copy of policy.json says how it was made: the inputs, seed, scenario, command and versions."""
+    run = two_iterations / "push-stage1"
+    config = json.loads((run / "config.json").read_text())
+    training = json.loads((run / "policy.json").read_text())["training"]
+    for key in ("seed", "command", "scenario", "inputs", "provenance", "started"):
+        assert training[key] == config[key], key
+    assert training["scenario"]["path"] == str(Path(SCENARIO).resolve()) and len(training["scenario"]["sha256"]) == 64
+    assert "git_revision" in training["provenance"] and training["segments"][0]["from_iteration"] == 0
+
+
+def test_the_physics_threads_change_no_checkpoint_so_a_resume_may_change_them(two_iterations, tmp_path):
+    """A run on 2 threads saves the checkpoint a run on 1 does, bit for bit: its resume may take other threads."""
+    from wbc.learned.train.train import train
+
+    other = Path(train(_threads(tmp_path / "two", 2, max_iterations=2))["run_dir"])
+    assert _same(_state(other / "model_1.pt"), _state(two_iterations / "push-stage1" / "model_1.pt"))
+    shutil.copytree(two_iterations, tmp_path / "runs")
+    result = train(_threads(tmp_path / "runs", 2, max_iterations=3), resume=True)
+    assert result["iterations"] == 3
+    config = json.loads((tmp_path / "runs" / "push-stage1" / "config.json").read_text())
+    assert config["train_config"]["env"]["nthread"] == 2
+    assert config["segments"][-1]["changed"]["env.nthread"] == [1, 2]
+
+
+def _threads(root: Path, nthread: int, **kw):
+    """`_tiny` on `nthread` physics threads."""
+    import dataclasses
+
+    cfg = _tiny(root, **kw)
+    return dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, nthread=nthread))

@@ -786,11 +786,41 @@ def _inherit_saved(args: argparse.Namespace, run_dir: str, env: dict[str, Any], 
         except (TypeError, ValueError, WbcError):
             pass  # a damaged entry: the run's default phase, as before
         else:
-            taken["--rma-iterations"] = overrides["rma"].iterations
+            rounds = _adapted_rounds(Path(run_dir))
+            if rounds is not None and rounds != overrides["rma"].iterations:
+                # a run resumed before config.json recorded a resume's settings: its export's module is the newest
+                overrides["rma"] = dataclasses.replace(overrides["rma"], iterations=rounds)
+                taken["--rma-iterations"] = f"{rounds} (policy.json adaptation.iterations)"
+            else:
+                taken["--rma-iterations"] = overrides["rma"].iterations
     if taken:
         given = ", ".join(f"{option} {value}" for option, value in taken.items())
         args.resume_note = f"--resume: {Path(run_dir) / 'config.json'} gave the options not given: {given}"
     return bool(taken)
+
+
+def _exported_rounds(run_dir: Path) -> int | None:
+    """The rounds of the adaptation module in a run's export (``policy.json`` adaptation.iterations), or None."""
+    try:
+        rounds = json.loads((run_dir / "policy.json").read_text())["adaptation"]["iterations"]
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+        return None
+    return rounds if isinstance(rounds, int) and not isinstance(rounds, bool) and rounds > 0 else None
+
+
+def _adapted_rounds(run_dir: Path) -> int | None:
+    """The rounds of the adaptation module in the export of a run begun before config.json recorded resumes, or None.
+
+    Such a run's config.json kept the settings it began with, however a resume changed them: its export's module
+    (``policy.json`` adaptation.iterations) is the newest phase 2. A later run's config.json holds its current
+    settings (its ``segments``), which a resume takes as they are.
+    """
+    try:
+        if "segments" in json.loads((run_dir / "config.json").read_text()):
+            return None
+    except (OSError, UnicodeDecodeError, ValueError, TypeError):
+        return None
+    return _exported_rounds(run_dir)
 
 
 _DAGGER_OPTIONS = {"rounds": "--rounds", "episodes": "--episodes", "episode_s": "--episode-s", "seed": "--seed",
@@ -893,9 +923,10 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
 
     result = train(cfg, resume=args.resume, options=options, checked=lambda: _print_resume_note(args))
     if result.get("trained", 1) == 0:
+        kept = ("its export, whose adaptation module this phase 2 already fitted on it, is kept (rma.json)"
+                if result.get("adaptation") == "kept" else "its newest checkpoint is exported as it is")
         print(f"{result['run_dir']} already holds {result['iterations']} iterations, no fewer than --iterations "
-              f"{cfg.max_iterations}: nothing new trained; its newest checkpoint is exported as it is (pass a larger "
-              "--iterations to train on)")
+              f"{cfg.max_iterations}: nothing new trained; {kept} (pass a larger --iterations to train on)")
     printers.print_trained(result, task=args.task, stage=stage, baseline=baseline)
     if cfg.extrinsics_dim > 0 and cfg.rma.iterations == 0:
         print(f"wbc: note: --rma-iterations 0: {result['policy']} observes extrinsics (RMA's z) and has no adaptation "
@@ -1031,7 +1062,12 @@ def _interrupted_training(args: argparse.Namespace) -> str:
         checkpoint = latest_checkpoint(run_dir)
         if checkpoint is None:
             return f"; {run_dir} holds no checkpoint yet (model_<it>.pt): the same command starts the run afresh"
-        return (f"; {run_dir} keeps its newest checkpoint, {checkpoint.name}: the same command with --resume "
+        rounds = _exported_rounds(Path(run_dir))
+        # an interrupted adaptation phase writes nothing: the export keeps the module it had, which a user who
+        # stopped a longer phase 2 would otherwise take for lost
+        module = (f", and its export the adaptation module it had ({rounds} round{'s' if rounds > 1 else ''}, "
+                  "policy.json)") if rounds else ""
+        return (f"; {run_dir} keeps its newest checkpoint, {checkpoint.name}{module}: the same command with --resume "
                 "continues from it")
     if kind == "dagger":
         try:

@@ -29,8 +29,11 @@ it recovers from the small errors a student makes, from round 0 on.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
+import shlex
+import sys
 import time
 import zipfile
 import zlib
@@ -66,7 +69,7 @@ from wbc.output_files import replacing as _replacing  # a name of this module: t
 from wbc.provenance import provenance
 from wbc.robots.description import RobotDescription
 from wbc.robots.registry import get_robot
-from wbc.scenario import load_scenario
+from wbc.scenario import load_scenario, resolve_scenario_path
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
 __all__ = ["DaggerConfig", "DaggerController", "DaggerStart", "check_dagger_run", "run_dagger"]
@@ -316,6 +319,30 @@ def dagger_expert(cfg: DaggerConfig) -> tuple[ControllerSpec, Callable[[RobotDes
 _DAMAGED = "the run directory is damaged: start a new run under another --run-root"
 
 
+def _scenario_file(path: str | Path) -> dict[str, Any]:
+    """The scenario file a run plays and its sha256 (None where it cannot be read)."""
+    resolved = resolve_scenario_path(path).resolve()
+    try:
+        digest: str | None = hashlib.sha256(resolved.read_bytes()).hexdigest()
+    except OSError:
+        digest = None
+    return {"path": str(resolved), "sha256": digest}
+
+
+def _made(run_dir: Path) -> dict[str, Any]:
+    """How the run was made, from its ``config.json``, for its exports' ``training`` block: a shipped copy says it.
+
+    The command, the scenario file and its sha256, the package versions and git revision, and when it began (those
+    it records: a run begun before some were recorded has fewer).
+    """
+    try:
+        data = json.loads((run_dir / "config.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return {}
+    keys = ("command", "scenario", "provenance", "started")
+    return {k: data[k] for k in keys if isinstance(data, dict) and k in data}
+
+
 def _round_student(run_dir: Path, k: int) -> Path:
     """Where round `k` keeps its fitted student (``rounds/student-<k>.pt``)."""
     return run_dir / "rounds" / f"student-{k}.pt"
@@ -500,8 +527,9 @@ def _run_rounds(cfg: DaggerConfig, start: DaggerStart, *, resume: bool, log: Any
         make_run_dir(run_dir)
         resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
         (run_dir / "config.json").write_text(json.dumps(
-            {"dagger_config": resolved, "provenance": provenance(),
-             "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
+            {"dagger_config": resolved, "command": shlex.join(sys.argv), "scenario": _scenario_file(spec.scenario),
+             "provenance": provenance(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
+    made = _made(run_dir)
     student_path = run_dir / "policy"
     start_round = len(progress["rounds"])
     if start_round:  # a run stopped after a round wrote its student and before its progress: that round plays again
@@ -566,7 +594,7 @@ def _run_rounds(cfg: DaggerConfig, start: DaggerStart, *, resume: bool, log: Any
                  "expert_follows": cfg.expert_follows, "takeover": cfg.takeover, "beta": cfg.beta,
                  "seed": cfg.seed,
                  "samples": int(obs.shape[0]), "wall_s": wall_before + sum(r["wall_s"] for r in progress["rounds"][
-                     start_round:])}
+                     start_round:]), **made}
         # each file replaced whole: a run stopped while writing keeps the previous round's. The round's own files
         # first, then its progress (the round is finished once that is written), then the run's current student:
         # a resumed run starts from the student of its last finished round, whatever the next round wrote

@@ -2,9 +2,11 @@
 
 ``python -m wbc.learned.train.curves RUN_DIR [RUN_DIR ...] -o docs/training-push.png`` draws, against environment steps,
 the mean episode reward, the fall rate, the velocity-tracking reward, (for BC stages) the BC loss and the value loss,
-one line per run, labelled with the run directory's name.
+one line per run, labelled with the run directory's name (and the folders above it that tell apart runs of the same
+name from different run roots, `run_labels`).
 
-Given DAgger runs (``wbc train --teacher CONTROLLER``, whose rounds are in ``progress.json``), it draws per round the
+Given DAgger runs (``wbc train --teacher CONTROLLER``, whose rounds are in ``progress.json``; a PPO run's
+``progress.json`` counts iterations instead), it draws per round the
 fit's loss, how long the students drove their episodes before the expert took over (or they fell) and the share of
 their episodes taken over or fallen (`plot_dagger_curves`).
 """
@@ -21,7 +23,8 @@ import numpy as np
 from wbc.errors import ConfigError
 from wbc.optional import require
 
-__all__ = ["PANELS", "dagger_rounds", "plot_dagger_curves", "plot_training_curves", "read_scalars"]
+__all__ = ["PANELS", "dagger_rounds", "is_dagger_run", "plot_dagger_curves", "plot_training_curves", "read_scalars",
+           "run_labels"]
 
 PANELS = (("Train/mean_reward", "mean episode reward"), ("episode/fall_rate", "fall rate"),
           ("rew/tracking_lin_vel", "velocity tracking reward [1/s]"), ("Loss/bc", "BC loss"),
@@ -54,11 +57,11 @@ def plot_training_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     runs = []
-    for d in run_dirs:
+    for d, label in zip(run_dirs, run_labels(run_dirs), strict=True):
         scalars = read_scalars(d)
         config = json.loads((Path(d) / "config.json").read_text())["train_config"]
         steps_per_it = config["num_steps_per_env"] * config["env"]["num_envs"]
-        runs.append((Path(d).name, scalars, steps_per_it))
+        runs.append((label, scalars, steps_per_it))
     panels = [(tag, title) for tag, title in PANELS if any(tag in s for _, s, _ in runs)]
     if not panels:
         raise ConfigError(f"none of {[t for t, _ in PANELS]} is logged in {[str(d) for d in run_dirs]}; pass run "
@@ -101,6 +104,30 @@ def _save(fig: Any, axes: Any, out: str | Path, plt: Any) -> Path:
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path
+
+
+def is_dagger_run(run_dir: str | Path) -> bool:
+    """Whether `run_dir` holds a DAgger run: its ``progress.json`` lists ``rounds`` (a PPO run's counts iterations)."""
+    try:
+        progress = json.loads((Path(run_dir) / "progress.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return False
+    return isinstance(progress, dict) and "rounds" in progress
+
+
+def run_labels(run_dirs: list[str | Path]) -> list[str]:
+    """One legend label per run: its directory's name, with as many folders above it as tell the runs apart.
+
+    Runs of one task and stage in different run roots share the directory's name (``push-stage1``): each is then
+    labelled ``<root>/push-stage1``, going up until the labels differ (or the path ends).
+    """
+    paths = [Path(d).resolve() for d in run_dirs]
+    depth = 1
+    while True:
+        labels = ["/".join(p.parts[-depth:]) for p in paths]
+        if len(set(labels)) == len(labels) or all(depth >= len(p.parts) for p in paths):
+            return labels
+        depth += 1
 
 
 def dagger_rounds(run_dir: str | Path) -> dict[str, np.ndarray]:
@@ -153,7 +180,7 @@ def plot_dagger_curves(run_dirs: list[str | Path], out: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     # every DAgger run of a task has the same directory name (<task>-dagger-<expert>): the run root tells them apart
-    runs = [(Path(d).parent.name if "-dagger-" in Path(d).name else Path(d).name, dagger_rounds(d)) for d in run_dirs]
+    runs = [(label, dagger_rounds(d)) for d, label in zip(run_dirs, run_labels(run_dirs), strict=True)]
     panels = (("fit_loss", "fit loss (mean squared error)"),
               ("driven_s", "median seconds a student drove"),
               ("stopped", "students' episodes taken over or fallen"))
@@ -173,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("runs", nargs="+", help="run directories (runs/train/<task>-stage<k>..., or DAgger runs)")
     p.add_argument("-o", "--out", required=True, help="PNG to write (e.g. docs/training-push.png)")
     args = p.parse_args(argv)
-    dagger = [(Path(d) / "progress.json").is_file() for d in args.runs]
+    dagger = [is_dagger_run(d) for d in args.runs]
     if any(dagger) and not all(dagger):
         raise SystemExit("python -m wbc.learned.train.curves: pass DAgger runs or PPO runs, not both")
     print(plot_dagger_curves(args.runs, args.out) if all(dagger) else plot_training_curves(args.runs, args.out))

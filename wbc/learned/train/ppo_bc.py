@@ -152,6 +152,8 @@ class PPOWithBC(_ppo.PPO):
         self.history_group = history_group
         self.actor_frozen_iterations = int(actor_frozen_iterations)
         self.bc_iteration = 0
+        self.bc_weight: float | None = None
+        """The BC weight (lambda) of the last update: logged as ``Train/bc_weight``, not among the losses."""
 
     def teacher_actions(self, obs):
         """The teacher's actions for an observation TensorDict."""
@@ -221,9 +223,9 @@ class PPOWithBC(_ppo.PPO):
         self.critic.update_normalization(obs)
         self.storage.clear()
         self.bc_iteration += 1
-        out = {k: v / max(n, 1) for k, v in sums.items()}
-        out["bc_weight"] = lam
-        return out
+        # the losses only: lambda is a weight, not a loss; the runner logs it as Train/bc_weight (`bc_weight`)
+        self.bc_weight = lam
+        return {k: v / max(n, 1) for k, v in sums.items()}
 
     def save(self) -> dict:
         """PPO's checkpoint dict plus the BC schedule's position."""

@@ -36,7 +36,7 @@ from wbc.optional import require
 from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory_holder, lock_directory
 from wbc.robots.registry import get_robot
 
-__all__ = ["INPUTS", "LOCK_FILE", "RESUMABLE", "ResumePoint", "check_checkpoint", "check_inputs",
+__all__ = ["INPUTS", "LOCK_FILE", "RESUMABLE", "RESUMABLE_ENV", "ResumePoint", "check_checkpoint", "check_inputs",
            "check_run", "check_run_dir", "check_run_root", "check_unlocked", "checkpoint_iteration", "config_diff",
            "env_meta", "input_files", "input_path", "latest_checkpoint", "load_input_policy", "lock_run_dir",
            "locked_run_dir", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
@@ -47,8 +47,13 @@ T = TypeVar("T")
 RESUMABLE = ("max_iterations", "save_interval", "device", "torch_threads", "rma")
 """TrainConfig fields a resumed run may change; any other difference is refused."""
 
+RESUMABLE_ENV = ("env.nthread",)
+"""EnvConfig fields (dotted, as `config_diff` names them) a resumed run may change: the physics threads, which
+split the robots between threads without changing any robot's result (a run on 1 or 2 threads saves the same
+checkpoint, bit for bit)."""
+
 INPUTS = ("teacher", "init_from", "frozen_legs", "student", "expert_data")
-"""TrainConfig fields that name a file the run reads; a resumed run compares them as paths, not as text."""
+"""TrainConfig fields that name a file the run reads; a resumed run compares their content (sha256), not the path."""
 
 _POLICY_INPUTS = ("teacher", "init_from", "frozen_legs", "student")
 """Of `INPUTS`, those that name a policy (either file of its ``.npz``/``.json`` pair, or their common stem)."""
@@ -134,9 +139,31 @@ def saved_train_config(run_dir: str | Path) -> dict[str, Any] | None:
     return saved if isinstance(saved, dict) else None
 
 
+def _input_hashes(field: str, value: str | Path) -> dict[str, str]:
+    """The sha256 of the files an input names, by kind (``.npz``/``.json`` for a policy, ``file`` otherwise)."""
+    path = input_path(field, value)
+    files = {".npz": Path(f"{path}.npz"), ".json": Path(f"{path}.json")} if field in _POLICY_INPUTS else {"file": path}
+    return {kind: _sha256(f) for kind, f in files.items() if f.is_file()}
+
+
+def _recorded_hashes(field: str, recorded: dict[str, Any]) -> dict[str, str]:
+    """`_input_hashes` of an input as ``config.json`` recorded it (`input_files`): its files' sha256 by kind."""
+    hashes = recorded.get("sha256")
+    if not isinstance(hashes, dict):
+        return {}
+    return {(Path(name).suffix if field in _POLICY_INPUTS else "file"): str(h) for name, h in hashes.items()}
+
+
 def _same_input(field: str, saved: Any, given: Any, recorded: Any) -> bool:
+    """Whether a resumed run reads the input it began with: the same content (sha256), wherever it now lies.
+
+    A run directory may move, with the previous stage's export beside it: the input is the file's content, its path
+    only reported. A run begun before the hashes were recorded compares the paths.
+    """
     if saved is None or given is None:
         return saved is given
+    if isinstance(recorded, dict) and _recorded_hashes(field, recorded):
+        return _input_hashes(field, given) == _recorded_hashes(field, recorded)
     if isinstance(recorded, dict) and isinstance(recorded.get("path"), str):  # where it was, resolved at the start
         return Path(recorded["path"]) == input_path(field, given)
     return isinstance(saved, str) and input_path(field, saved) == input_path(field, given)
@@ -168,19 +195,31 @@ def input_files(cfg: TrainConfig) -> dict[str, dict[str, Any]]:
     return found
 
 
-def _check_unchanged(inputs: Any, config: Path) -> None:
-    """Refuse a resume whose input files (`input_files`, as ``config.json`` recorded them) changed since it began."""
-    if not isinstance(inputs, dict):
-        return  # a run begun before the inputs were recorded
-    for field, recorded in inputs.items():
-        hashes = recorded.get("sha256") if isinstance(recorded, dict) else None
-        for name, before in (hashes.items() if isinstance(hashes, dict) else ()):
-            path = Path(name)
-            if path.is_file() and _sha256(path) != before:
-                raise ConfigError(f"--resume: {path} ({field}) changed since the run began: {config} inputs.{field} "
-                                  f"records sha256 {str(before)[:16]}..., the file's is now {_sha256(path)[:16]}...; "
-                                  "the checkpoints learnt from the earlier file: restore it, or start a new run under "
-                                  "another --run-root")
+def _other_input(field: str, saved: Any, given: Any, recorded: Any, config: Path) -> ConfigError:
+    """The refusal of a resume whose input `field` is not the one the run began with (`_same_input`).
+
+    It names the file the run reads now and the one ``config.json`` recorded; a file of the same path whose content
+    changed is said as such (the previous stage trained again).
+    """
+    if saved is None or given is None:
+        return ConfigError(f"--resume: {config} differs from this run's config in ['{field}'] (the run began "
+                           f"{'without' if saved is None else 'with'} one, this run has "
+                           f"{'none' if given is None else given}): give the run's own options, or leave them out")
+    now = input_path(field, given)
+    was = recorded.get("path") if isinstance(recorded, dict) else saved
+    hashes = _recorded_hashes(field, recorded) if isinstance(recorded, dict) else {}
+    if hashes and was is not None and Path(str(was)) == now:
+        kind, before = next((k, h) for k, h in hashes.items() if _input_hashes(field, given).get(k) != h)
+        name = Path(f"{now}{kind}") if kind != "file" else now
+        found = _input_hashes(field, given).get(kind)
+        return ConfigError(f"--resume: {name} ({field}) changed since the run began: {config} inputs.{field} "
+                           f"records sha256 {before[:16]}..., the file's is now "
+                           f"{found[:16] + '...' if found else 'missing'}; the checkpoints learnt from the earlier "
+                           "file: restore it, or start a new run under another --run-root")
+    how = "sha256" if hashes else "path"
+    return ConfigError(f"--resume: {field}: this run reads {now}, whose {'content' if hashes else 'path'} is not the "
+                       f"one {config} records ({was}, compared by {how}): give the file the run began with (moved or "
+                       "copied, its content is the same), or start a new run under another --run-root")
 
 
 def check_run_root(run_dir: str | Path) -> None:
@@ -535,14 +574,15 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
     resolved = json.loads(json.dumps(asdict(cfg), default=list))
     # where the run lies is not part of its config (a run directory may move), and an input is the file it names
     diff = [field for key in sorted(resolved) if key not in (*RESUMABLE, "run_dir", *INPUTS)
-            for field in config_diff(saved.get(key), resolved[key], key)]
+            for field in config_diff(saved.get(key), resolved[key], key) if field not in RESUMABLE_ENV]
     inputs = data.get("inputs")
     recorded = inputs if isinstance(inputs, dict) else {}
-    diff += [k for k in INPUTS if not _same_input(k, saved.get(k), resolved[k], recorded.get(k))]
     if diff:
         raise ConfigError(f"--resume: {config} differs from this run's config in {diff}: give the run's own options, "
                           "or leave them out (a resumed run takes the ones not given from its config.json)")
-    _check_unchanged(inputs, config)
+    for field in INPUTS:
+        if not _same_input(field, saved.get(field), resolved[field], recorded.get(field)):
+            raise _other_input(field, saved.get(field), resolved[field], recorded.get(field), config)
     done = checkpoint_iteration(checkpoint) + 1
     progress: dict[str, Any] = {"iteration": done - 1, "env_steps": 0, "wall_s": 0.0}
     path = run_dir / "progress.json"

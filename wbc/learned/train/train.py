@@ -1,12 +1,14 @@
 """`train`: one stage (or baseline) trained with rsl-rl-lib's `OnPolicyRunner` on the batched env.
 
-A run directory holds: ``config.json`` (the resolved `TrainConfig`, seed, the sha256 of each file it reads, package
-versions, git revision),
+A run directory holds: ``config.json`` (the resolved `TrainConfig` as the newest session set it, seed, the command,
+the scenario file and its sha256, the sha256 of each file it reads, package versions, git revision, and the run's
+sessions, ``segments``: `_run_config`),
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
 torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
 so far, summed over resumed sessions). Each of these files is replaced whole (`wbc.output_files`): a run killed while
 it writes one keeps the one before. ``resume`` continues from the newest checkpoint up to `max_iterations`; Ctrl-C
-stops a run at the end of the iteration in progress, whose checkpoint it saves first (`_learn`).
+stops a run at the end of the iteration in progress, whose checkpoint it saves first (`_learn`); in the adaptation
+phase (RMA phase 2) it stops at once, and the run keeps the export it had before the phase (`_adapt`).
 When the run ends, ``policy.replay.npz`` records a short rollout of the exported policy (robot states, commands,
 observation frames and actions, `wbc.learned.policy.replay_recorder`): ``wbc check-controller NAME --replay
 policy.replay.npz`` then checks that a controller built from these weights (an ONNX export, an I/O file written by
@@ -19,8 +21,11 @@ the arm only, and ``policy.npz``/``policy.json`` is a composite file holding the
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import os
+import shlex
+import sys
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -42,6 +47,7 @@ from wbc.learned.train.preflight import (
     ResumePoint,
     check_run,
     checkpoint_iteration,
+    config_diff,
     input_files,
     latest_checkpoint,
     load_input_policy,
@@ -56,6 +62,7 @@ from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
 from wbc.output_files import replacing, temporary_name
 from wbc.provenance import provenance
+from wbc.scenario.scenario import resolve_scenario_path
 
 torch = require("torch")
 _runners = require("rsl_rl.runners")
@@ -139,29 +146,56 @@ class _Runner(_runners.OnPolicyRunner):
             raise
         self.export()
 
-    def export(self) -> None:
+    def policy_file(self) -> tuple[Any, dict[str, Any]]:
+        """The export of the runner's networks as they are (a policy file, or a composite one), and its progress.
+
+        Its ``training`` block holds the run's provenance as ``config.json`` records it (`_provenance`): the inputs
+        and their sha256, the seed, the scenario file and its hash, the command and the package versions and git
+        revision, so that a shipped copy of the file says how it was made.
+        """
         cfg = self.wbc_cfg
         wall = self._wall_before + time.perf_counter() - self._t0
         progress = {"iteration": int(self.current_learning_iteration),
                     "env_steps": self._steps_before + int(self.env.env.total_steps), "wall_s": wall}
         actor = self.alg.get_policy()
-        extra = {"baseline": cfg.baseline, **({"variant": cfg.variant} if cfg.variant else {}), **progress}
+        extra = {"baseline": cfg.baseline, **({"variant": cfg.variant} if cfg.variant else {}), **progress,
+                 **_provenance(Path(cfg.run_dir))}
         if isinstance(actor, HistoryActor):
             pf = student_policy_file(actor, cfg.env, task=cfg.task, extra={**self._student_meta, **extra})
             pf.meta["extrinsics"]["note"] = (
                 "z is a latent learned from the observation history by the adaptation module, fitted with the actor "
                 "on an expert's actions, then fine-tuned with it by PPO + BC; it observes nothing privileged")
-            save_policy(Path(cfg.run_dir) / "policy", pf)
-        elif isinstance(self.env, FrozenLegsVecEnv):
+            return pf, progress
+        if isinstance(self.env, FrozenLegsVecEnv):
             extra["frozen_legs"] = cfg.frozen_legs
-            save_composite(Path(cfg.run_dir) / "policy", decoupled_policy(
-                actor, self.env.legs.file, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra))
+            return decoupled_policy(actor, self.env.legs.file, cfg.env, task=cfg.task, stage=cfg.stage,
+                                    extra=extra), progress
+        return policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra), progress
+
+    def export(self) -> None:
+        """Write ``policy.npz``/``policy.json`` of the runner's networks, then ``progress.json``."""
+        pf, progress = self.policy_file()
+        path = Path(self.wbc_cfg.run_dir) / "policy"
+        if isinstance(self.env, FrozenLegsVecEnv):
+            save_composite(path, pf)
         else:
-            pf = policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra)
-            save_policy(Path(cfg.run_dir) / "policy", pf)
+            save_policy(path, pf)
         # after the policy files: a kill in between leaves a progress of the checkpoint before, which --resume
         # reconciles (`wbc.learned.train.preflight.check_run_dir`)
-        _write_json(Path(cfg.run_dir) / "progress.json", progress)
+        _write_json(Path(self.wbc_cfg.run_dir) / "progress.json", progress)
+
+
+_PROVENANCE_KEYS = ("seed", "command", "scenario", "inputs", "provenance", "started", "segments")
+"""What the ``training`` block of an export copies from the run's ``config.json``."""
+
+
+def _provenance(run_dir: Path) -> dict[str, Any]:
+    """The `_PROVENANCE_KEYS` of the run's ``config.json`` (those it has: a run begun before they were recorded)."""
+    try:
+        data = json.loads((run_dir / "config.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return {}
+    return {k: data[k] for k in _PROVENANCE_KEYS if isinstance(data, dict) and k in data}
 
 
 def _write_json(path: Path, data: dict[str, Any]) -> None:
@@ -201,6 +235,11 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
     log = runner.logger.log
 
     def log_then_stop(*args: Any, **kwargs: Any) -> None:
+        weight = getattr(runner.alg, "bc_weight", None)
+        if weight is not None:
+            # the BC weight as what it is, TensorBoard tag Train/bc_weight, printed beside the episode figures:
+            # rsl-rl logs the update's values as losses (Loss/<name>, "Mean <name> loss")
+            runner.logger.ep_extras.append({"Train/bc_weight": torch.tensor(float(weight))})
         log(*args, **kwargs)
         if interrupt.requested:
             raise _StopAfterIteration
@@ -239,8 +278,10 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
     Returns:
         ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
         ``trained``: in this call, 0 when a resumed run had already reached `max_iterations`: its newest checkpoint is
-        then exported as it is, and the adaptation phase runs), and ``"replay"`` (the replay file of the exported
-        policy) unless the policy observes RMA extrinsics without an adaptation module to estimate them.
+        then exported as it is, and the adaptation phase runs), ``"adaptation"`` (``"fitted"``; ``"kept"`` where the
+        export already held the module this phase 2 fits on that checkpoint, `_adapted`; ``"none"``), and
+        ``"replay"`` (the replay file of the exported policy) unless the policy observes RMA extrinsics without an
+        adaptation module to estimate them.
 
     The run holds its directory's lock (`wbc.learned.train.preflight.locked_run_dir`) from before it reads it to its
     end: a second run on the directory (a training, a DAgger run, a fine-tune) is refused while this one lives.
@@ -250,7 +291,7 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
             that holds a run; no checkpoint to resume from, a damaged run directory (config.json, progress.json, the
             newest checkpoint) or a resumed config that differs; or the teacher is missing/mismatched.
         KeyboardInterrupt: Ctrl-C; during PPO, once the iteration in progress has ended and its checkpoint is saved
-            (`_learn`).
+            (`_learn`); during the adaptation phase at once, the export before it kept (`_adapt`).
     """
     def check() -> ResumePoint | None:  # the checks `wbc train --dry-run` makes, under the lock
         point = check_run(cfg, resume=resume, options=options)
@@ -277,6 +318,8 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
         history = student_layout(load_policy(cfg.student))[1] if cfg.student is not None else 0
         vec = RslVecEnv(env, device=cfg.device, history=history)
     done = 0
+    adapts = cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0
+    kept = False
     try:
         runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
         if point is None and cfg.init_from is not None:
@@ -291,11 +334,7 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
                                   f"({type(exc).__name__}); start a new run under another --run-root") from None
             done = runner.current_learning_iteration + 1
             runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
-        else:
-            _write_json(run_dir / "config.json", {
-                "train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
-                "inputs": input_files(cfg), "provenance": provenance(),
-                "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+        _write_json(run_dir / "config.json", _run_config(cfg, resolved, point))
         remaining = cfg.max_iterations - done
         if remaining > 0:
             _learn(runner, remaining, init_at_random_ep_len=point is None)
@@ -303,17 +342,118 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
             # nothing left to train: the newest checkpoint is exported as it is (how an interrupted run is finished,
             # phase 2 included), under its own iteration, not the next one
             runner.current_learning_iteration = done - 1
-        runner.export()
+            kept = adapts and _adapted(run_dir, cfg, done - 1)
+        if kept:  # its export already holds this checkpoint's module of this phase 2: neither redone nor replaced
+            phase1, final = None, json.loads((run_dir / "progress.json").read_text())
+        elif adapts:
+            # the export is replaced once phase 2 has fitted its module (`_adapt`): an interruption before leaves
+            # the export as it was, a module included, never this checkpoint's without one
+            phase1, final = runner.policy_file()
+        else:
+            runner.export()
+            phase1, final = None, json.loads((run_dir / "progress.json").read_text())
     finally:
         vec.close()
-    final = json.loads((run_dir / "progress.json").read_text())
     result = {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
               "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz"), "trained": max(remaining, 0)}
-    if cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0:
-        policy, summary = train_adaptation(load_policy(run_dir / "policy"), cfg.env, cfg.rma)
-        save_policy(run_dir / "policy", policy)
-        _write_json(run_dir / "rma.json", summary)
-        result["rma_wall_s"] = summary["wall_s"]
+    if phase1 is not None:
+        result["rma_wall_s"] = _adapt(run_dir, cfg, phase1, final)
+    result["adaptation"] = "kept" if kept else "fitted" if adapts else "none"
+    _end_segment(run_dir, {"to_iteration": final["iteration"], "adaptation": result["adaptation"]})
     if cfg.extrinsics_dim == 0 or cfg.rma.iterations > 0:  # else it observes extrinsics a robot cannot give it
         result["replay"] = str(record_replay(run_dir / "policy", replay_path_for(run_dir / "policy")))
     return result
+
+
+def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any]) -> float:
+    """RMA phase 2 on `phase1` (the newest checkpoint's export, in memory), then its export written; returns its wall.
+
+    Ctrl-C (or SIGTERM) during the fit stops it at once, and nothing of it is written: the run directory keeps the
+    export, ``rma.json`` and ``progress.json`` it had before phase 2 (a previous module included), and ``--resume``
+    fits the module again from the newest checkpoint. The files are then written with Ctrl-C deferred to their end,
+    the policy first: an interruption never leaves a pair torn between two exports.
+    """
+    policy, summary = train_adaptation(phase1, cfg.env, cfg.rma)
+    # what `_adapted` compares: a plain --resume of the finished run keeps this module instead of fitting it again
+    summary = {**summary, "iteration": progress["iteration"],
+               "config": json.loads(json.dumps(dataclasses.asdict(cfg.rma), default=list))}
+    interrupt = DeferredInterrupts(lambda what: f"wbc: {what}: the run stops once its export is written")
+    with interrupt:
+        save_policy(run_dir / "policy", policy)
+        _write_json(run_dir / "rma.json", summary)
+        _write_json(run_dir / "progress.json", progress)
+    if interrupt.requested:
+        raise KeyboardInterrupt
+    return summary["wall_s"]
+
+
+def _adapted(run_dir: Path, cfg: TrainConfig, iteration: int) -> bool:
+    """Whether the run's export already holds the module that phase 2 with `cfg.rma` fits on checkpoint `iteration`.
+
+    Its ``rma.json`` records that config and iteration (a run begun before they were recorded: the export's
+    ``adaptation`` block its rounds, window and layers), and its ``policy.json`` is that iteration's, with a module.
+    """
+    try:
+        meta = json.loads((run_dir / "policy.json").read_text())
+        summary = json.loads((run_dir / "rma.json").read_text())
+        module, training = meta["adaptation"], meta["training"]
+    except (OSError, UnicodeDecodeError, ValueError, KeyError, TypeError):
+        return False
+    if not isinstance(module, dict) or not isinstance(training, dict) or training.get("iteration") != iteration:
+        return False
+    rma = json.loads(json.dumps(dataclasses.asdict(cfg.rma), default=list))
+    if isinstance(summary, dict) and "config" in summary:
+        return summary["config"] == rma and summary.get("iteration") == iteration
+    return {k: module.get(k) for k in ("history", "hidden_dims", "iterations")} == {
+        k: rma[k] for k in ("history", "hidden_dims", "iterations")}
+
+
+def _scenario(cfg: TrainConfig) -> dict[str, Any]:
+    """The scenario file the run trains on and its sha256 (None where it cannot be read)."""
+    path = resolve_scenario_path(cfg.env.scenario).resolve()
+    try:
+        digest: str | None = hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        digest = None
+    return {"path": str(path), "sha256": digest}
+
+
+def _run_config(cfg: TrainConfig, resolved: dict[str, Any], point: ResumePoint | None) -> dict[str, Any]:
+    """The run's ``config.json``: its current settings, what it began with, and a history of its segments.
+
+    A new run records its settings, inputs, provenance and its first segment. A resumed one keeps what the run began
+    with (seed, inputs, provenance, start) and takes this segment's settings as the current ones: a later plain
+    ``--resume`` takes the options left out from them (``--iterations``, ``--rma-iterations``, ``--threads``).
+    Each segment says where it began and which settings it changed (``{field: [before, now]}``), and the command,
+    package versions and git revision it ran under; its end (`_end_segment`) the iteration it reached.
+    """
+    segment = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "command": shlex.join(sys.argv),
+               "from_iteration": 0 if point is None else point.done, "max_iterations": cfg.max_iterations,
+               "provenance": provenance()}
+    if point is None:
+        return {"train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg), "seed": cfg.seed,
+                "command": segment["command"], "scenario": _scenario(cfg), "inputs": input_files(cfg),
+                "provenance": segment["provenance"], "started": segment["started"],
+                "segments": [{**segment, "resumed": False, "changed": {}}]}
+    data = json.loads((Path(cfg.run_dir) / "config.json").read_text())  # checked by check_run_dir
+    changed = {field: [_at(point.saved, field), _at(resolved, field)] for field in config_diff(point.saved, resolved)}
+    # a run begun before segments were recorded: its earlier segments are not known
+    segments = data.get("segments") if isinstance(data.get("segments"), list) else []
+    return {**data, "train_config": resolved, "rsl_rl_config": rsl_rl_config(cfg),
+            "segments": [*segments, {**segment, "resumed": True, "changed": changed}]}
+
+
+def _at(config: dict[str, Any], field: str) -> Any:
+    """The value of a dotted field (`config_diff`'s ``env.nthread``) of a resolved config, or None."""
+    for key in field.split("."):
+        config = config.get(key) if isinstance(config, dict) else None
+    return config
+
+
+def _end_segment(run_dir: Path, fields: dict[str, Any]) -> None:
+    """Record in ``config.json`` how this segment ended (the iteration it reached, its adaptation phase)."""
+    path = run_dir / "config.json"
+    data = json.loads(path.read_text())
+    if isinstance(data.get("segments"), list) and data["segments"]:
+        data["segments"][-1].update(fields)
+        _write_json(path, data)
