@@ -1583,7 +1583,8 @@ def main(argv: list[str] | None = None) -> int:
         return 130
     try:
         with _terminate_interrupts():
-            code = int(HANDLERS[args.handler](args) or 0)
+            with printers.json_alone(bool(getattr(args, "json", False))):
+                code = int(HANDLERS[args.handler](args) or 0)
             sys.stdout.flush()  # here, where a reader that closed the output is told apart; not at the exit
             return code
     except WbcError as exc:

@@ -13,7 +13,8 @@ import shlex
 import shutil
 import sys
 import textwrap
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager, redirect_stdout
 from pathlib import Path
 
 import numpy as np
@@ -66,9 +67,33 @@ def print_json(value: object) -> None:
     """`value` as indented, strict JSON.
 
     Sequences of any kind are lists, and a number that is not finite (a figure that could not be measured, nan) is
-    ``null``, which every JSON reader takes (``NaN`` is Python's, not JSON's).
+    ``null``, which every JSON reader takes (``NaN`` is Python's, not JSON's). Inside `json_alone`, it goes to the
+    standard output the command was given, where everything else printed goes to standard error.
     """
-    print(json.dumps(strict_json(value), indent=2, allow_nan=False))
+    print(json.dumps(strict_json(value), indent=2, allow_nan=False), file=_JSON_OUT[-1] if _JSON_OUT else sys.stdout)
+
+
+_JSON_OUT: list = []
+"""The standard output `print_json` writes to inside `json_alone` (innermost last)."""
+
+
+@contextmanager
+def json_alone(active: bool = True) -> Iterator[None]:
+    """With --json (`active`), standard output carries the JSON alone: whatever else is printed goes to standard error.
+
+    A plug-in controller that prints (``print("building")`` in its factory or ``reset``) wrote into the JSON a script
+    parses. Python-level writes only: the arena's worker processes send their own standard output, C-level writes
+    included, to standard error as they start (`wbc.arena.executors`).
+    """
+    if not active:
+        yield
+        return
+    _JSON_OUT.append(sys.stdout)
+    try:
+        with redirect_stdout(sys.stderr):
+            yield
+    finally:
+        _JSON_OUT.pop()
 
 
 def strict_json(value: object) -> object:
