@@ -68,13 +68,13 @@ def check_out_dir(out_dir: Path) -> None:
     if out.exists() and not out.is_dir():
         raise ResultsDirError(f"{out}: --out is an existing file, not a directory; choose another --out, or move the "
                               "file away")
-    if out.is_dir():
-        _check_results_or_empty(out)
     for name in OUTPUT_FILES:
         path = out / name
         if path.exists() and not path.is_file():
             raise ResultsDirError(f"{path}: the run writes this file, but it is a directory (or not a regular file); "
                                   "move it away, or choose another --out")
+    if out.is_dir():
+        _check_results_or_empty(out)
 
 
 def _check_results_or_empty(out: Path) -> None:
