@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.compare import VIEWED_TIME_LIMIT, ArenaConfig, run_arena
+from wbc.arena.controller_failure import printed_error
 from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
 from wbc.cli import printers
@@ -651,7 +652,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
     printers.print_hw_run(result)
     failed = False
     if result.record.error:  # played and stored, but its controller broke in it
-        print(f"wbc: {result.record.error}", file=sys.stderr)
+        print(f"wbc: {printed_error(result.record.error)}", file=sys.stderr)
         failed = True
     if result.link_lost is not None:  # last: what the operator must do now, by the robot
         _say(f"wbc hw run: {result.link_lost.describe()}")

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from wbc.arena.compare import ArenaConfig, ArenaResult
+from wbc.arena.controller_failure import printed_error
 from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.report import format_table, format_verdict, resumed_note
 from wbc.arena.summary import Summary
@@ -551,7 +552,8 @@ def print_trained(result: Mapping[str, object], *, task: str, stage: int, baseli
 
 def print_viewed_trial(what: str, record: TrialRecord) -> None:
     """How a trial watched in the viewer ended."""
-    print(f"{what}: " + ("survived" if record.success else f"ENDED by a controller error: {record.error}"
+    print(f"{what}: " + ("survived" if record.success else f"ENDED by a controller error: "
+                         f"{printed_error(record.error, kept_in=None)}"
                          if record.error else f"fell at {record.fall_time_s:.2f} s"))
 
 
@@ -904,7 +906,7 @@ def print_hw_run(result: HardwareTrialResult) -> None:
     """``wbc hw run``: the trial's outcome, what it skipped, its timing and where its results are."""
     r, ep = result.record, result.episode
     robot = result.robot
-    outcome = ("completed" if r.success else f"ENDED by a controller error: {r.error}" if r.error else
+    outcome = ("completed" if r.success else f"ENDED by a controller error: {printed_error(r.error)}" if r.error else
                f"ENDED at {r.fall_time_s:.2f} s by the safety layer ({ep.safety_events.reason[-1]})"
                if r.safety_trips else f"ENDED at {r.fall_time_s:.2f} s")
     print(f"{r.controller} on {robot.description.name} (arm {robot.description.arm_mode}, {robot.backend}, "
