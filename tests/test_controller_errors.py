@@ -434,3 +434,61 @@ def test_until_significant_with_a_controller_stopped_for_its_errors(broken, scen
     assert result.summary.sequential["rounds"] == 2 and not result.summary.sequential["settled"]
     table = format_table(result.summary)
     assert "NOT every difference settled after 2 rounds" in table and "STOPPED after 2 consecutive errors" in table
+
+
+WEIRD = STAND_PLUGIN.format(
+    doc="A stand controller whose act raises at its third tick with control characters and a long message.",
+    reset="pass", counters="return {}",
+    act=('if self.ticks == 3:\n'
+         '                raise RuntimeError(\'line1, "q"\\nline2\\r\\n\\x00 \\x1b[31m naive \\u2713 \' + "x" * 5000)'))
+
+
+def test_a_controllers_error_text_is_stored_escaped_and_printed_short(plugin_package, tmp_path, capsys) -> None:
+    """A controller's exception text went into trials.csv raw (NUL bytes in a text file) and was printed whole on one
+    line of stderr (5,000 characters, a NUL and a terminal escape in it). Its control characters are escaped in both;
+    the printed line is cut and says where the whole text is, and trials.csv keeps it all, its rows trusted."""
+    plugin_package("weirdplug", {"weird": WEIRD})
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SHORT_SCENARIO)
+    out = tmp_path / "out"
+    assert main(["run", "weirdplug.weird:make", "--scenario", str(scenario), "--trials", "1", "--workers", "1",
+                 "--quiet", "--out", str(out)]) == 1
+    (line,) = [ln for ln in capsys.readouterr().err.splitlines() if "failed with a controller error" in ln]
+    assert len(line) < 1500 and "\x00" not in line and "\x1b" not in line
+    assert "\\x00 \\x1b[31m naive \u2713 " in line and "characters left out: the whole error is in trials.csv" in line
+    assert re.search(r"weird\.py:[0-9]+\]$", line)  # the controller's own file:line, at the error's end, is kept
+    data = (out / "trials.csv").read_bytes()
+    assert b"\x00" not in data and b"\x1b" not in data
+    (record,) = TrialRecord.read_csv(out / "trials.csv")  # every row's checksum holds
+    assert record.outcome == "controller_error"
+    assert 'line1, "q" / line2 / \\x00 \\x1b[31m naive \u2713 ' + "x" * 5000 in record.error
+
+
+def test_a_trials_csv_written_before_with_raw_control_characters_still_loads(tmp_path) -> None:
+    """Rows stored before errors were escaped hold them raw: they load as they were written, checksums and all."""
+    import csv
+
+    old = _a_record(error="controller c, band b, seed 0, trial 0: act raised RuntimeError: a\x00b\x1bc \u2713")
+    path = tmp_path / "trials.csv"
+    with path.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.writer(f)
+        writer.writerow(TrialRecord.header())
+        writer.writerow(old.to_row())
+    assert b"\x00" in path.read_bytes()
+    assert TrialRecord.read_csv(path) == [old]
+    assert TrialRecord.read_csv(path)[0].error == old.error
+
+
+def _a_record(**changes) -> TrialRecord:
+    """A record of a controller error, its fields those of a real row read back."""
+    from wbc.arena.trial_record import FIELDS
+
+    kinds = {f.name: f.type for f in dataclasses.fields(TrialRecord)}
+    values = {}
+    for name in FIELDS:
+        kind = kinds[name]
+        values[name] = {"str": "", "int": 0, "float": 0.0, "bool": False}.get(kind if isinstance(kind, str) else
+                                                                            kind.__name__, "")
+    values.update(controller="c", scenario="s", scenario_hash="0" * 64, band="b", outcome="controller_error", ttf=0.5)
+    values.update(changes)
+    return TrialRecord(**values)

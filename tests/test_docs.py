@@ -205,3 +205,33 @@ def test_the_learned_guide_quotes_the_bc_weight_the_schedule_gives_at_each_runs_
     assert f"{schedule.weight(124):.2f} (pi3, iteration 124" in text
     assert f"lambda had reached {schedule.weight(99):.2f} at the runs' last iteration, 99" in text
     assert "annealed only to 0.67 (pi2)" not in text
+
+
+def _flat(text: str) -> str:
+    """`text` with its line breaks as spaces: a sentence of the docs, wherever it wraps."""
+    return " ".join(text.split())
+
+
+def test_the_exit_statuses_name_hw_emulate_as_the_exception_to_130() -> None:
+    """The commands page said that any command exits 130 when interrupted; ``wbc hw emulate`` stops on Ctrl-C by
+    design and exits 0 once it serves."""
+    text = _flat((DOCS / "commands.md").read_text(encoding="utf-8"))
+    assert ("`wbc hw emulate` is the exception: once it serves, a Ctrl-C, SIGTERM or SIGHUP is how it stops, and it "
+            "prints its counts and exits 0") in text
+
+
+def test_the_results_directory_gives_summary_units_and_trials_csv_line_endings() -> None:
+    """summary.json's success is a fraction where the tables print percent, and trials.csv's rows end in CRLF (the csv
+    module's default, which the results store keeps): the guide says both."""
+    import csv
+    import inspect
+
+    from wbc.arena import results
+
+    assert csv.excel.lineterminator == "\r\n"  # the dialect csv.writer takes by default
+    assert "lineterminator" not in inspect.getsource(results)
+    text = _flat(_section((DOCS / "guides" / "arena.md").read_text(encoding="utf-8"), "## The results directory"))
+    assert "`success_rate` and `ttf`, and a paired difference of `success`" in text
+    assert "are fractions from 0 to 1, where the tables and the report print success in percent" in text
+    assert "`vlin_err` and `vlin_err_common` are m/s, `vang_err` and `vang_err_common` rad/s" in text
+    assert "each row ends in CRLF (`\\r\\n`)" in text

@@ -7,6 +7,7 @@ import json
 import math
 
 import pytest
+from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena.divergence import DivergenceCheck
 from wbc.cli.main import main
@@ -104,3 +105,24 @@ def test_a_duration_shorter_than_a_control_period_is_blamed_on_the_duration(caps
     assert ("--duration 0.001 s is shorter than one control period of controller StandController (1/50.0 Hz = "
             "0.02 s), so it would never be asked to act; give --duration of at least 0.02 s") in err
     assert "rate of at least" not in err
+
+
+RAISES = STAND_PLUGIN.format(doc="A stand controller whose act raises at its fourth tick.", reset="pass",
+                             act='if self.ticks == 4:\n                raise RuntimeError("boom")',
+                             counters="return {}")
+
+
+def test_a_controller_that_fails_is_named(plugin_package, capsys) -> None:
+    """``analyze posture`` and ``analyze arm-momentum`` said "act raised RuntimeError at tick 3 ..." without which
+    controller raised (``bench act`` names it); they name it, and the episode or trial."""
+    plugin_package("failingplug", {"raises": RAISES})
+    assert main(["analyze", "posture", "stand", "failingplug.raises:make", "--duration", "0.5", "--json"]) == 2
+    err = capsys.readouterr().err
+    assert "wbc: error: posture: controller 'failingplug.raises:make' failed standing: act raised RuntimeError" in err
+    scenario = plugin_package("failingscenario", {})
+    (scenario / "short.toml").write_text(SHORT_SCENARIO)
+    assert main(["analyze", "arm-momentum", "--controller", "failingplug.raises:make", "--scenario",
+                 str(scenario / "short.toml"), "--band", "soft", "--trials", "1", "--json"]) == 2
+    err = capsys.readouterr().err
+    assert ("wbc: error: arm-momentum: controller 'failingplug.raises:make' failed in band soft, seed 0, trial 0: act "
+            "raised RuntimeError") in err

@@ -401,3 +401,59 @@ def test_an_episode_that_cannot_be_saved_stops_the_run_in_one_line(short, tmp_pa
     assert _last_line(capsys) == (f"wbc: error: {out / 'episodes' / 'stand' / 'soft-s0-t0.npz'}: cannot be written (No "
                                   f"space left on device); no trial was stored yet: the same command with --resume "
                                   f"--out {out} finishes the run once there is room")
+
+
+def _not_results(tmp_path: Path) -> Path:
+    """A directory of someone's files, two of them named as a run's: its summary.json and report.md."""
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "summary.json").write_text('{"mine": 1}\n')
+    (out / "report.md").write_text("notes\n")
+    return out
+
+
+@pytest.mark.parametrize("command", ["run", "compare", "paper", "demo"])
+def test_a_directory_of_other_files_is_refused_before_anything_plays(command, short, tmp_path, capsys) -> None:
+    """An existing --out that held no trials.csv was taken as the run's: ``wbc run stand --out DIR`` replaced the
+    summary.json and report.md it held without a word. Every command that writes a results directory refuses it
+    now, before it plays, naming it and what it holds, and leaves it as it was."""
+    out = _not_results(tmp_path)
+    before = _snapshot(out)
+    argv = {"run": _run(short, out),
+            "compare": ["compare", "stand", "stand-noarm", "--scenario", str(short), "--trials", "1", "--workers", "1",
+                        "--quiet", "--out", str(out)],
+            "paper": ["paper", "table1", "--trials", "1", "--workers", "1", "--quiet", "--out", str(out)],
+            "demo": ["demo", "--trials", "1", "--workers", "1", "--quiet", "--out", str(out)]}[command]
+    assert main(argv) == 2
+    line = _last_line(capsys)
+    assert line.startswith(f"wbc: error: {out}: --out is an existing directory that is not a wbc results directory")
+    assert "it holds report.md, summary.json; the run would overwrite report.md, summary.json" in line
+    assert _snapshot(out) == before and sorted(p.name for p in out.iterdir()) == ["report.md", "summary.json"]
+
+
+def test_hw_run_refuses_a_directory_of_other_files_before_it_connects(short, tmp_path) -> None:
+    from conftest import hw_run_arm_in_lockstep
+
+    out = _not_results(tmp_path)
+    before = _snapshot(out)
+    with pytest.raises(ResultsDirError, match="not a wbc results directory"):
+        hw_run_arm_in_lockstep(str(short), str(out), 0.1)
+    assert _snapshot(out) == before
+
+
+def test_an_empty_directory_or_a_results_directory_is_a_runs(tmp_path) -> None:
+    """Empty (a lock file aside), or holding run.json or trials.csv (resumed or refused as that run decides): taken."""
+    for held in ((), (LOCK_FILE,), ("run.json",), ("trials.csv", "notes.txt")):
+        out = tmp_path / f"d{len(list(tmp_path.iterdir()))}"
+        out.mkdir()
+        for name in held:
+            (out / name).write_text("")
+        results_module.check_out_dir(out)
+    with pytest.raises(ResultsDirError, match=r"it holds notes\.txt; choose another --out"):
+        results_module.check_out_dir(_holding(tmp_path / "other", "notes.txt"))
+
+
+def _holding(out: Path, name: str) -> Path:
+    out.mkdir()
+    (out / name).write_text("")
+    return out

@@ -12,13 +12,48 @@ innermost frame of the exception's traceback in the controller's code, or where 
 from __future__ import annotations
 
 import math
+import unicodedata
 
 from wbc.arena.episode import Episode
 from wbc.control.failure_site import failure_site, own_frame
 from wbc.errors import CONTROLLER_ERRORS, WbcError
 from wbc.scenario.trial import Trial
 
-__all__ = ["CONTROLLER_ERRORS", "ControllerFailure", "read_counters"]
+__all__ = ["CONTROLLER_ERRORS", "PRINTED_ERROR_CHARS", "ControllerFailure", "escape_controls", "printed_error",
+           "read_counters"]
+
+PRINTED_ERROR_CHARS = 1000
+"""The most characters of a controller's error a printed line shows (`printed_error`); trials.csv keeps them all."""
+
+_PRINTED_TAIL_CHARS = 200
+"""Of those, how many come from the error's end, where the controller's own ``[file:line]`` is."""
+
+
+def escape_controls(text: str) -> str:
+    """`text` with every control character (NUL, ESC, DEL, tab ...) written as its escape (backslash, x, hex).
+
+    A controller's exception text is its own: a NUL in it was stored raw in trials.csv, where tools that read text
+    stop or fail, and printed raw on the terminal (an escape sequence acts there). Line breaks never reach a record:
+    `ControllerFailure.record_error` joins the lines first.
+    """
+    return "".join(ch.encode("unicode_escape").decode("ascii") if unicodedata.category(ch) == "Cc" else ch
+                   for ch in text)
+
+
+def printed_error(text: str, most: int = PRINTED_ERROR_CHARS, *, kept_in: str | None = "trials.csv") -> str:
+    """A recorded error as a printed line shows it: its control characters escaped, cut to `most` characters.
+
+    A controller whose message runs to thousands of characters printed a line as long. The cut keeps the error's
+    beginning (the controller, the trial, the tick, the exception) and its end (the controller's own ``[file:line]``),
+    and says how much it leaves out between them and where the whole text is kept (`kept_in`; None: nowhere, a trial
+    watched in the viewer).
+    """
+    text = escape_controls(text)
+    if len(text) <= most:
+        return text
+    tail = min(_PRINTED_TAIL_CHARS, most // 2)
+    where = f": the whole error is in {kept_in}" if kept_in else ""
+    return f"{text[:most - tail]} ... ({len(text) - most} characters left out{where}) ... {text[-tail:]}"
 
 
 class ControllerFailure(WbcError, RuntimeError):
@@ -74,13 +109,15 @@ class ControllerFailure(WbcError, RuntimeError):
     def record_error(self, controller: str, trial: Trial) -> str:
         """The trial record's ``error``, on one line: the controller, the trial (band, seed, index) and `describe`.
 
+        Its lines are joined with `` / `` and its other control characters escaped (`escape_controls`).
+
         Args:
             controller: the controller's name as the arena knows it.
             trial: the trial it failed in.
         """
         text = (f"controller {controller}, band {trial.band}, seed {trial.seed}, trial {trial.index}: "
                 f"{self.describe()}")
-        return " / ".join(line.strip() for line in text.splitlines() if line.strip())
+        return escape_controls(" / ".join(line.strip() for line in text.splitlines() if line.strip()))
 
 
 def read_counters(controller: object, name: str, trial: Trial, episode: Episode,

@@ -21,6 +21,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
+from wbc.arena.controller_failure import printed_error
 from wbc.arena.trial_record import CONTROLLER_ERROR, OUTCOMES, TrialRecord
 from wbc.errors import ConfigError
 
@@ -56,13 +57,16 @@ class ControllerErrors:
     beyond: int = 0
 
     def line(self) -> str:
-        """One line for the end of the command: the controller, how many trials failed, the first message."""
+        """One line for the end of the command: the controller, how many trials failed, the first message.
+
+        The message's control characters are escaped, and it is cut (`wbc.arena.controller_failure.printed_error`).
+        """
         under_way = (f" ({self.beyond} of them under way then: played, stored in trials.csv and not counted)"
                      if self.beyond else "")
         stop = (f"; STOPPED after {self.limit} consecutive errors, {self.not_played} trial(s) not played{under_way}"
                 if self.stopped else "")
         return (f"controller {self.controller}: {self.errored} of {self.recorded} trial(s) failed with a controller "
-                f"error{stop}; first: {self.first}")
+                f"error{stop}; first: {printed_error(self.first)}")
 
     def as_dict(self) -> dict[str, object]:
         """The JSON form (``summary.json``'s ``controller_errors``)."""

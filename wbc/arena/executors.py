@@ -207,9 +207,32 @@ _PARENT_POLL_S = 0.5
 
 
 def spawn_pool(workers: int) -> ProcessPoolExecutor:
-    """A pool of `workers` spawned processes, each ended when this process ends (`_die_with_parent`)."""
+    """A pool of `workers` spawned processes, each ended when this process ends, none writing to standard output."""
     return ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_die_with_parent, initargs=(os.getpid(),))
+                               initializer=_start_worker, initargs=(os.getpid(),))
+
+
+def _start_worker(parent: int) -> None:
+    """A pool's worker, as it starts: its standard output to standard error; ended when `parent` ends."""
+    _stdout_to_stderr()
+    _die_with_parent(parent)
+
+
+def _stdout_to_stderr() -> None:
+    """Send this process's standard output to its standard error, at the file descriptor: C-level writes too.
+
+    A worker inherits the command's standard output, and what a controller prints there (in its factory, ``reset``,
+    ``act``, or a C extension's ``printf``) landed in the middle of the command's output, in the JSON of ``--json``.
+    Nothing a worker does is meant for standard output: its records go back to the command through the pool.
+    """
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError, AttributeError):  # closed, or none
+        pass
+    try:
+        os.dup2(sys.stderr.fileno(), 1)
+    except (OSError, ValueError, AttributeError):  # no standard error to send it to: it stays as it was
+        pass
 
 
 def _die_with_parent(parent: int) -> None:

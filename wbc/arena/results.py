@@ -57,8 +57,14 @@ _RUN_KEYS = ("config", "environment", "controllers")
 def check_out_dir(out_dir: Path) -> None:
     """Refuse an output directory the run could not complete, before any trial is played.
 
+    An existing directory is a run's only if it is empty (its lock file aside) or a results directory, one that holds
+    ``run.json`` or ``trials.csv`` (whose run is then resumed, or refused, as `ResultsStore` decides): any other
+    directory holds someone's files, which the run's own (``summary.json``, ``report.md`` ...) would replace without a
+    word.
+
     Raises:
-        ResultsDirError: `out_dir` exists and is not a directory (a file), or one of the files it will write
+        ResultsDirError: `out_dir` exists and is not a directory (a file), or is a directory that is neither empty nor
+            a results directory (the message names what it holds), or one of the files it will write
             (`OUTPUT_FILES`) exists as something else than a file (a directory); the message says what to move.
     """
     out = Path(out_dir)
@@ -70,6 +76,24 @@ def check_out_dir(out_dir: Path) -> None:
         if path.exists() and not path.is_file():
             raise ResultsDirError(f"{path}: the run writes this file, but it is a directory (or not a regular file); "
                                   "move it away, or choose another --out")
+    if out.is_dir():
+        _check_results_or_empty(out)
+
+
+def _check_results_or_empty(out: Path) -> None:
+    """Refuse `out`, an existing directory, if it holds files and is not a results directory (`check_out_dir`)."""
+    try:
+        held = sorted(entry.name for entry in out.iterdir() if entry.name != LOCK_FILE)
+    except OSError as exc:
+        raise ResultsDirError(f"{out}: --out cannot be read ({exc.strerror or exc}); choose another --out") from None
+    if not held or {"run.json", "trials.csv"} & set(held):
+        return
+    shown = ", ".join(held[:5]) + (f" and {len(held) - 5} more" if len(held) > 5 else "")
+    replaced = [name for name in held if name in OUTPUT_FILES]
+    what = f"; the run would overwrite {', '.join(replaced)}" if replaced else ""
+    raise ResultsDirError(f"{out}: --out is an existing directory that is not a wbc results directory (no run.json "
+                          f"or trials.csv) and is not empty: it holds {shown}{what}; choose another --out, or an "
+                          "empty or new directory")
 
 
 def unwritable(path: str | Path, exc: OSError, out_dir: Path, *, stored: int,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import sys
 import threading
+import traceback
 
 from wbc.starting import requests_to_end_interrupt, say_interrupted_while_starting
 
@@ -21,6 +22,9 @@ else:
 
 __all__ = ["main"]
 
+INTERNAL_ERROR = 70
+"""The exit status of a command that an unexpected exception (a bug) ended: ``EX_SOFTWARE`` of sysexits.h."""
+
 LINGER_S = 2.0
 """How long the command waits at its end for threads it did not start to finish [s]."""
 
@@ -30,11 +34,19 @@ def main(argv: list[str] | None = None) -> int:
 
     Run from the shell (`argv` None), a thread that a controller or plug-in started and never ended would keep the
     process alive after its results are written: the command waits `LINGER_S` for such threads, then names them and
-    exits without them. Called with an `argv` (a test, a script), it returns as `wbc.cli.main.main` does.
+    exits without them; an unexpected exception (a bug) prints its traceback and exits `INTERNAL_ERROR`. Called with
+    an `argv` (a test, a script), it returns, or raises, as `wbc.cli.main.main` does.
     """
-    code = _run(argv)
-    if argv is None:
-        exit_past_stray_threads(code)
+    if argv is not None:
+        return _run(argv)
+    try:
+        code = _run(argv)
+    except Exception:  # a bug: its traceback, and a status of its own, not 1 (a controller errored) nor 2 (an error)
+        traceback.print_exc()
+        print("wbc: internal error: the traceback above is a bug in wbc; please report it with the command that "
+              f"gave it (exit status {INTERNAL_ERROR})", file=sys.stderr)
+        return INTERNAL_ERROR
+    exit_past_stray_threads(code)
     return code
 
 

@@ -23,11 +23,12 @@ import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import TimeoutError as FuturesTimeout
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import contextmanager
+from contextlib import contextmanager, redirect_stdout
 from pathlib import Path
 from typing import Any
 
 from wbc.arena.compare import VIEWED_TIME_LIMIT, ArenaConfig, run_arena
+from wbc.arena.controller_failure import printed_error
 from wbc.arena.executors import shut_down_pool, spawn_pool
 from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
@@ -667,7 +668,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
     printers.print_hw_run(result)
     failed = False
     if result.record.error:  # played and stored, but its controller broke in it
-        print(f"wbc: {result.record.error}", file=sys.stderr)
+        print(f"wbc: {printed_error(result.record.error)}", file=sys.stderr)
         failed = True
     if result.link_lost is not None:  # last: what the operator must do now, by the robot
         _say(f"wbc hw run: {result.link_lost.describe()}")
@@ -1648,6 +1649,51 @@ def _stdout_reader_gone() -> bool:
         return False
 
 
+class StdoutUnwritable(Exception):
+    """Standard output refused a write or a flush (a full disk, ``/dev/full``, an I/O error): its `__cause__` says how.
+
+    Told apart from any other OSError, which is the command's own (a file it reads or writes) or a bug's.
+    """
+
+
+class _CheckedStdout:
+    """A command's standard output whose failures, other than a reader that closed it, raise `StdoutUnwritable`.
+
+    A full disk under ``wbc ... > FILE`` printed an OSError traceback and exited 1, the status that says a controller
+    errored. A closed reader's BrokenPipeError goes on as it is (status 141, `main`).
+    """
+
+    def __init__(self, stream: Any) -> None:
+        self._stream = stream
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise StdoutUnwritable from exc
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            raise
+        except OSError as exc:
+            raise StdoutUnwritable from exc
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._stream, name)
+
+
+def _stored_run(args: argparse.Namespace) -> str:
+    """The end of the message for a run whose output could not be written: where its results are, if it wrote any."""
+    out = getattr(args, "results_dir", None) or (Path(args.out) if getattr(args, "out", None) else None)
+    if out is None or not Path(out).is_dir():
+        return ""
+    return f"; the run's results are stored in {out}"
+
+
 def _to_the_null_device(*streams: Any) -> None:
     """`streams` to the null device: what is left in their buffers, and the flush at exit, then go nowhere."""
     devnull = os.open(os.devnull, os.O_WRONLY)
@@ -1675,19 +1721,31 @@ def main(argv: list[str] | None = None) -> int:
         stderr), 130 when interrupted (Ctrl-C, SIGTERM, or SIGHUP when its terminal is closed; a run's
         finished trials are stored, and the message says how to finish it; a training run's says which checkpoint,
         or which DAgger rounds, its run directory keeps), 141 without a word when the reader of its standard output
-        closed it (``| head``), as for a command that SIGPIPE ends. A usage error exits with status 2 from the
-        parser, after its usage message.
+        closed it (``| head``), as for a command that SIGPIPE ends. A standard output that cannot be written (closed,
+        ``>&-``: refused before anything runs; a full disk, an I/O error) exits 2, in one line that says so, and for
+        a run where its results are stored. A usage error exits with status 2 from the parser, after its usage
+        message. An unexpected exception propagates (the console script, `wbc.cli.main`, exits 70 on it).
     """
     try:
         args = build_parser().parse_args(argv)
     except KeyboardInterrupt:
         _say("wbc: interrupted while starting: nothing was done")
         return 130
+    if sys.stdout is None:  # started with its standard output closed (``>&-``): what it prints would go nowhere
+        _say("wbc: error: standard output cannot be written: it is closed; give the command one (> FILE, "
+             "> /dev/null): nothing was done")
+        return 2
     try:
-        with _terminate_interrupts():
-            code = int(HANDLERS[args.handler](args) or 0)
+        with _terminate_interrupts(), redirect_stdout(_CheckedStdout(sys.stdout)):
+            with printers.json_alone(bool(getattr(args, "json", False))):
+                code = int(HANDLERS[args.handler](args) or 0)
             sys.stdout.flush()  # here, where a reader that closed the output is told apart; not at the exit
             return code
+    except StdoutUnwritable as exc:
+        _to_the_null_device(sys.stdout)  # what is left in its buffer would fail again at the exit
+        _say(f"wbc: error: standard output cannot be written: {exc.__cause__}"
+             + (_stored_run(args) if args.handler in _RESUMABLE or args.handler == "hw run" else ""))
+        return 2
     except WbcError as exc:
         _say(f"wbc: error: {exc}")
         return 2

@@ -13,12 +13,14 @@ import shlex
 import shutil
 import sys
 import textwrap
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager, redirect_stdout
 from pathlib import Path
 
 import numpy as np
 
 from wbc.arena.compare import ArenaConfig, ArenaResult
+from wbc.arena.controller_failure import printed_error
 from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.report import format_table, format_verdict, resumed_note
 from wbc.arena.summary import Summary
@@ -66,9 +68,33 @@ def print_json(value: object) -> None:
     """`value` as indented, strict JSON.
 
     Sequences of any kind are lists, and a number that is not finite (a figure that could not be measured, nan) is
-    ``null``, which every JSON reader takes (``NaN`` is Python's, not JSON's).
+    ``null``, which every JSON reader takes (``NaN`` is Python's, not JSON's). Inside `json_alone`, it goes to the
+    standard output the command was given, where everything else printed goes to standard error.
     """
-    print(json.dumps(strict_json(value), indent=2, allow_nan=False))
+    print(json.dumps(strict_json(value), indent=2, allow_nan=False), file=_JSON_OUT[-1] if _JSON_OUT else sys.stdout)
+
+
+_JSON_OUT: list = []
+"""The standard output `print_json` writes to inside `json_alone` (innermost last)."""
+
+
+@contextmanager
+def json_alone(active: bool = True) -> Iterator[None]:
+    """With --json (`active`), standard output carries the JSON alone: whatever else is printed goes to standard error.
+
+    A plug-in controller that prints (``print("building")`` in its factory or ``reset``) wrote into the JSON a script
+    parses. Python-level writes only: the arena's worker processes send their own standard output, C-level writes
+    included, to standard error as they start (`wbc.arena.executors`).
+    """
+    if not active:
+        yield
+        return
+    _JSON_OUT.append(sys.stdout)
+    try:
+        with redirect_stdout(sys.stderr):
+            yield
+    finally:
+        _JSON_OUT.pop()
 
 
 def strict_json(value: object) -> object:
@@ -526,7 +552,8 @@ def print_trained(result: Mapping[str, object], *, task: str, stage: int, baseli
 
 def print_viewed_trial(what: str, record: TrialRecord) -> None:
     """How a trial watched in the viewer ended."""
-    print(f"{what}: " + ("survived" if record.success else f"ENDED by a controller error: {record.error}"
+    print(f"{what}: " + ("survived" if record.success else f"ENDED by a controller error: "
+                         f"{printed_error(record.error, kept_in=None)}"
                          if record.error else f"fell at {record.fall_time_s:.2f} s"))
 
 
@@ -879,7 +906,7 @@ def print_hw_run(result: HardwareTrialResult) -> None:
     """``wbc hw run``: the trial's outcome, what it skipped, its timing and where its results are."""
     r, ep = result.record, result.episode
     robot = result.robot
-    outcome = ("completed" if r.success else f"ENDED by a controller error: {r.error}" if r.error else
+    outcome = ("completed" if r.success else f"ENDED by a controller error: {printed_error(r.error)}" if r.error else
                f"ENDED at {r.fall_time_s:.2f} s by the safety layer ({ep.safety_events.reason[-1]})"
                if r.safety_trips else f"ENDED at {r.fall_time_s:.2f} s")
     print(f"{r.controller} on {robot.description.name} (arm {robot.description.arm_mode}, {robot.backend}, "

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pinocchio as pin
 
+from wbc.arena.controller_failure import ControllerFailure
 from wbc.arena.identity import MAX_RUN_TRIALS
 from wbc.arena.sim_trial import run_trial
 from wbc.control.protocol import Controller
@@ -184,6 +185,8 @@ def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds:
     Raises:
         ScenarioError, UnknownNameError: bad scenario, band or controller.
         ConfigError: more trials than one run plays (`wbc.arena.identity.MAX_RUN_TRIALS`), as the arena refuses.
+        AnalysisError: the controller failed in a trial (its factory, ``reset`` or ``act`` raised, or ``act``
+            returned a command the robot refuses); the message names it and the trial.
     """
     if len(seeds) * trials > MAX_RUN_TRIALS:
         raise ConfigError(f"{len(seeds)} seeds x {trials} trials = {len(seeds) * trials:,} trials, more than the "
@@ -202,7 +205,11 @@ def _study_trial(trial: Trial, controller: str) -> ArmMomentumTrial:
     spec = get_controller(controller)
     watched = dataclasses.replace(spec, make=lambda desc: WatchedController(spec.make(desc)))
     log = ArmMomentumLog()
-    _, episode = run_trial(trial, watched, observer=log, record_errors=False)
+    try:
+        _, episode = run_trial(trial, watched, observer=log, record_errors=False)
+    except ControllerFailure as exc:  # the line names which controller failed, and in which trial
+        raise AnalysisError(f"arm-momentum: controller {controller!r} failed in band {trial.band}, seed {trial.seed}, "
+                            f"trial {trial.index}: {exc}") from exc
     dt, played = episode.control_dt, len(log.h_arm)
     h_arm = np.asarray(log.h_arm)
     impulses, peaks, bounds, fractions, cosines = [], [], [], [], []

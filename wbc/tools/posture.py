@@ -20,11 +20,12 @@ from dataclasses import dataclass
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from wbc.arena.controller_failure import ControllerFailure
 from wbc.arena.divergence import DivergenceCheck, SimulationDiverged
 from wbc.arena.runner import run_episode
 from wbc.control.registry import get_controller
 from wbc.control.spec import ControllerSpec
-from wbc.errors import ConfigError, UnknownNameError
+from wbc.errors import CONTROLLER_ERRORS, AnalysisError, ConfigError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.robots.registry import ROBOTS
 from wbc.scenario.trial import CommandSchedule
@@ -85,6 +86,8 @@ def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_v
     Raises:
         ConfigError: a non-positive duration or one shorter than a controller's period, a ramp longer than half the
             episode, or a controller that cannot drive `robot`.
+        AnalysisError: a controller failed (its factory, ``reset`` or ``act`` raised, or ``act`` returned a command
+            the robot refuses); the message names it.
         UnknownNameError: an unknown controller or robot name.
     """
     if not duration_s > 0:
@@ -117,11 +120,18 @@ def posture_study(controllers: Sequence[str], *, robot: str = "a1-wx200", walk_v
 
 def _play(sim: MujocoRobot, spec: ControllerSpec, name: str, schedule: CommandSchedule, *, duration_s: float,
           duration_option: str) -> PostureRow:
-    controller = spec.make(sim.desc)
+    try:
+        controller = spec.make(sim.desc)
+    except CONTROLLER_ERRORS as exc:  # the controller's code, not ours: named, as a failure in the episode is
+        raise AnalysisError(f"posture: controller {spec.name!r}: building it raised {type(exc).__name__}: {exc}") \
+            from exc
     sim.reset()  # a reset's seed draws the terrain and the sensor noise, and here there are neither
     try:
         episode = run_episode(sim, controller, schedule, duration_s, divergence=DivergenceCheck(),
                               duration_option=duration_option)
+    except ControllerFailure as exc:  # the line names which controller failed, and in which episode
+        raise AnalysisError(f"posture: controller {spec.name!r} failed {'standing' if name == 'stand' else 'walking'}"
+                            f": {exc}") from exc
     except SimulationDiverged as exc:  # only this row's numbers are lost: nan, and what diverged
         return PostureRow(controller=spec.name, robot=sim.config.robot, arm_mode=spec.arm_mode, command=name,
                           vx=schedule.vx, height_m=math.nan, height_std_m=math.nan, speed_m_s=math.nan, fell=False,
