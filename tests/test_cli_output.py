@@ -47,9 +47,10 @@ def test_json_output_holds_the_json_alone_when_a_controller_prints(chatty, tmp_p
         assert "chatty: fd reset" in captured.err
 
 
-def test_check_controller_json_holds_the_json_alone(chatty, capsys) -> None:
+def test_check_controller_json_holds_the_json_alone(chatty, capfd) -> None:
+    # the checks run in a worker process, whose prints reach the command's standard error at the file descriptor
     code = main(["check-controller", "chattyplug.chatty:make", "--seconds", "0.2", "--json"])
-    captured = capsys.readouterr()
+    captured = capfd.readouterr()
     assert isinstance(json.loads(captured.out), dict), captured.out
     assert "chatty: building" in captured.err and code in (0, 1)
 
