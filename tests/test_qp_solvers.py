@@ -217,7 +217,9 @@ def test_a_solution_that_breaks_the_rows_is_not_solved_though_the_backend_calls_
     sane = mpc.build(x, *args)
     result = make_qp_solver(solver).solve(sane)
     assert result.solved and constraint_violation(sane, result.z) < 1e-9
-    cfg = MpcConfig(qp_solver=solver, weight_rpy=(1e20, 1e20, 1e20))
+    cfg = MpcConfig(qp_solver=solver)
+    # the settings refuse such weights (MAX_WEIGHT); set behind their back, the solve's own check is what is left
+    object.__setattr__(cfg, "weight_rpy", (1e20, 1e20, 1e20))
     absurd = CentroidalMpc(cfg, mpc._arm_lower - cfg.arm_margin, mpc._arm_upper + cfg.arm_margin, mpc._arm_vmax)
     problem = absurd.build(x, *args)
     result = absurd.qp_solver.solve(problem)
@@ -245,3 +247,13 @@ def test_daqps_optimum_outside_the_rows_is_refused_after_its_cold_start_too(monk
     assert constraint_violation(qp, np.zeros(2)) == 1.0
     assert constraint_violation(qp, np.array([0.5, 0.5])) == 0.0
     assert constraint_violation(qp, np.array([np.nan, 0.5])) == np.inf
+
+
+def test_an_absurd_weight_is_refused_naming_the_field():
+    with pytest.raises(ConfigError, match=re.escape("MpcConfig.weight_rpy must be")):
+        MpcConfig(weight_rpy=(1e20, 1e20, 1e20))
+    with pytest.raises(ConfigError, match=re.escape("MpcConfig.weight_force must be")):
+        MpcConfig(weight_force=1e13)
+    MpcConfig(weight_rpy=(1e12, 1e12, 1e12))  # the bound itself is allowed
+    with pytest.raises(ConfigError, match=re.escape("weight_rpy")):
+        mpc_config_from_table({"mpc": {"weight_rpy": [1e30, 1e30, 1e30]}})

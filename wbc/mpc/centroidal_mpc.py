@@ -84,8 +84,9 @@ class MpcConfig:
 
     Raises:
         ConfigError: an unknown `qp_solver` (the message lists the valid names), a `horizon` below one step, a
-            number that is not finite, a step, force or scale that is not positive, a negative weight or margin,
-            `fz_max` not above `fz_min`, or a `standstill_weight_factor` outside [0, 1].
+            number that is not finite, a step, force or scale that is not positive, a weight negative or above
+            `MAX_WEIGHT` (1e12), a negative margin, `fz_max` not above `fz_min`, or a `standstill_weight_factor`
+            outside [0, 1].
     """
 
     horizon: int = 10
@@ -111,7 +112,7 @@ class MpcConfig:
         check_qp_solver(self.qp_solver, "MpcConfig.qp_solver")
         friction_per_axis(self.mu, self.pyramid, "MpcConfig")
         check_force_terms(self, "MpcConfig")
-        check_number("MpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0)
+        check_number("MpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0, at_most=MAX_WEIGHT)
 
     @property
     def mu_axis(self) -> float:
@@ -140,6 +141,11 @@ MAX_HORIZON = 100
 """The most steps an MPC horizon may have: its dense QP grows with the square of the steps (100 steps of the default
 0.032 s, 3.2 s, is ten times the default and beyond any horizon a push or a turn needs)."""
 
+MAX_WEIGHT = 1e12
+"""The largest cost weight an MPC setting may have: the shipped ones are at most 400. Weights near 1e20 make the QP so
+ill-conditioned that DAQP returned an "optimal" solution breaking the friction pyramids by 95 N (the solve's
+constraint check, `wbc.mpc.qp_solvers.RESIDUAL_TOLERANCE`, now refuses such solutions too)."""
+
 
 def arm_box(lower: np.ndarray, upper: np.ndarray, margin: float, where: str) -> tuple[np.ndarray, np.ndarray]:
     """The arm joints' limits, `margin` inside `lower` and `upper` (all in rad).
@@ -165,7 +171,8 @@ def check_force_terms(config: Any, where: str) -> None:
 
     Raises:
         ConfigError: `horizon` not an integer in [1, `MAX_HORIZON`], `dt`, `force_scale` not positive, `fz_min`
-            negative, `fz_max` not above it, a negative `weight_force`, `arm_margin` or `full_weight_speed`,
+            negative, `fz_max` not above it, a weight negative or above `MAX_WEIGHT`, a negative `arm_margin` or
+            `full_weight_speed`,
             `standstill_weight_factor` outside [0, 1], or any of them not finite (named in `where`).
     """
     check_number(f"{where}.horizon", config.horizon, at_least=1, at_most=MAX_HORIZON, integer=True)
@@ -176,8 +183,9 @@ def check_force_terms(config: Any, where: str) -> None:
         raise ConfigError(f"{where}.fz_max must be above fz_min ({config.fz_min}), got {config.fz_max}")
     check_number(f"{where}.force_scale", config.force_scale, above=0.0)
     for name in ("weight_com", "weight_vel", "weight_rpy", "weight_momentum", "weight_arm_q"):
-        check_number(f"{where}.{name}", getattr(config, name), at_least=0.0, size=3)
-    for name in ("weight_force", "arm_margin", "full_weight_speed"):
+        check_number(f"{where}.{name}", getattr(config, name), at_least=0.0, at_most=MAX_WEIGHT, size=3)
+    check_number(f"{where}.weight_force", config.weight_force, at_least=0.0, at_most=MAX_WEIGHT)
+    for name in ("arm_margin", "full_weight_speed"):
         check_number(f"{where}.{name}", getattr(config, name), at_least=0.0)
     check_number(f"{where}.standstill_weight_factor", config.standstill_weight_factor, at_least=0.0, at_most=1.0)
 

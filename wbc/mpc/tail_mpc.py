@@ -37,7 +37,7 @@ import daqp
 import numpy as np
 
 from wbc.config_checks import check_number
-from wbc.mpc.centroidal_mpc import MpcProblem, MpcSolveError, arm_box, check_force_terms, friction_per_axis
+from wbc.mpc.centroidal_mpc import MAX_WEIGHT, MpcProblem, MpcSolveError, arm_box, check_force_terms, friction_per_axis
 from wbc.mpc.qp_solvers import RESIDUAL_TOLERANCE, constraint_violation
 from wbc.mpc.tail_compiled import tail_qp
 from wbc.mpc.tail_model import ArmTail, ArmTailPath
@@ -81,7 +81,7 @@ class TailMpcConfig:
 
     Raises:
         ConfigError: what `MpcConfig` refuses in the settings they share (`wbc.mpc.centroidal_mpc.check_force_terms`),
-            or a negative or non-finite arm weight.
+            or a negative, non-finite or above `MAX_WEIGHT` (1e12) arm weight.
     """
 
     horizon: int = 10
@@ -107,8 +107,8 @@ class TailMpcConfig:
     def __post_init__(self) -> None:
         friction_per_axis(self.mu, self.pyramid, "TailMpcConfig")
         check_force_terms(self, "TailMpcConfig")
-        check_number("TailMpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0, size=3)
-        check_number("TailMpcConfig.weight_arm_acc", self.weight_arm_acc, at_least=0.0)
+        check_number("TailMpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0, at_most=MAX_WEIGHT, size=3)
+        check_number("TailMpcConfig.weight_arm_acc", self.weight_arm_acc, at_least=0.0, at_most=MAX_WEIGHT)
 
     @property
     def mu_axis(self) -> float:
