@@ -29,7 +29,8 @@ A warm-started solve that fails is followed by a cold start; the iterations of b
 both. A solution counts as solved only if the backend reports an optimum, it is finite, and it keeps every bound and
 row to `RESIDUAL_TOLERANCE` (`constraint_violation`): on absurdly weighted problems (weights near 1e20) DAQP reports
 an optimum whose friction rows are broken by ~1 (95 N), where sane problems' solutions keep them to round-off
-(~1e-15), so the check is never what decides a normal solve.
+(~1e-15), so the check is never what decides a normal solve. It is one product C z and four reductions, ~10 us on a
+trot's QP (a DAQP solve takes ~0.1 ms).
 """
 
 from __future__ import annotations
@@ -62,9 +63,9 @@ def constraint_violation(qp: DenseQp, z: np.ndarray) -> float:
     Not finite when `z` is not.
     """
     cz = qp.C @ z
-    worst = max(float(np.max(qp.l_box - z, initial=0.0)), float(np.max(z - qp.u_box, initial=0.0)),
-                float(np.max(qp.l - cz, initial=0.0)), float(np.max(cz - qp.u, initial=0.0)))
-    return worst if np.all(np.isfinite(z)) else math.inf
+    # a NaN in z makes the first term NaN, which Python's max keeps (no comparison with it is true)
+    worst = float(max((qp.l_box - z).max(), (z - qp.u_box).max(), (qp.l - cz).max(), (cz - qp.u).max(), 0.0))
+    return worst if math.isfinite(worst) else math.inf
 
 
 def _kept(qp: DenseQp, z: np.ndarray | None) -> bool:
