@@ -43,7 +43,13 @@ from typing import Any, TypeVar
 
 from wbc.errors import ConfigError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
-from wbc.mpc.tail_controller import OVERRIDDEN, TailControllerConfig, TailMpcController, check_not_overridden
+from wbc.mpc.tail_controller import (
+    OVERRIDDEN,
+    OverriddenSettingError,
+    TailControllerConfig,
+    TailMpcController,
+    check_not_overridden,
+)
 from wbc.robots.description import RobotDescription
 
 __all__ = ["make", "make_tail", "mpc_config_from_table", "tail_config_from_table"]
@@ -77,12 +83,24 @@ def tail_config_from_table(table: Mapping[str, Any]) -> TailControllerConfig:
             settings their own validation refuses.
     """
     base = table.get("base") if isinstance(table, Mapping) else None
-    if isinstance(base, Mapping):  # before the base's own checks, whose advice does not apply here
+    overridden: list[str] = []
+    if isinstance(base, Mapping):
         mpc = base.get("mpc")
         given = [f"base.{key}" for key in base] + ([f"base.mpc.{key}" for key in mpc] if isinstance(mpc, Mapping)
                                                    else [])
-        check_not_overridden([name for name in given if name in OVERRIDDEN])
-    return _replaced(TailControllerConfig(), table, "TailControllerConfig")
+        overridden = [name for name in given if name in OVERRIDDEN]
+    try:
+        config = _replaced(TailControllerConfig(), table, "TailControllerConfig")
+    except ConfigError as error:  # the base's own message (its advice may not apply here), then why it is moot
+        if not overridden or isinstance(error, OverriddenSettingError):
+            raise
+        try:
+            check_not_overridden(overridden)
+        except ConfigError as moot:
+            raise ConfigError(f"{error}; besides, {moot}") from None
+        raise
+    check_not_overridden(overridden)
+    return config
 
 
 def make_tail(desc: RobotDescription, config: Mapping[str, Any] | None = None) -> TailMpcController:

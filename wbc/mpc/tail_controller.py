@@ -35,8 +35,8 @@ from wbc.robots.euler import rpy_of
 from wbc.robots.joint_table import joint_table
 from wbc.types import RobotState, VelocityCommand
 
-__all__ = ["OVERRIDDEN", "TAIL_YAW_LEASH_RAD", "TailControllerConfig", "TailMpcController", "check_not_overridden",
-           "ready_pose"]
+__all__ = ["OVERRIDDEN", "TAIL_YAW_LEASH_RAD", "OverriddenSettingError", "TailControllerConfig", "TailMpcController",
+           "check_not_overridden", "ready_pose"]
 
 
 TAIL_YAW_LEASH_RAD = 0.1
@@ -117,15 +117,20 @@ OVERRIDDEN = {
 equivalents are; `TailControllerConfig` refuses any of them that is not at its default."""
 
 
+class OverriddenSettingError(ConfigError):
+    """Base settings given that the tail controller sets itself (`check_not_overridden`)."""
+
+
 def check_not_overridden(names: list[str]) -> None:
     """Refuse the base settings `names` (keys of `OVERRIDDEN`), naming each and where its tail equivalent is.
 
     Raises:
-        ConfigError: `names` is not empty.
+        OverriddenSettingError: `names` is not empty.
     """
     if names:
-        raise ConfigError("TailControllerConfig: the tail MPC controller sets these base settings itself, so they "
-                          "would be ignored: " + "; ".join(f"{name} ({OVERRIDDEN[name]})" for name in names))
+        raise OverriddenSettingError("TailControllerConfig: the tail MPC controller sets these base settings itself, "
+                                     "so they would be ignored: "
+                                     + "; ".join(f"{name} ({OVERRIDDEN[name]})" for name in names))
 
 
 def _given(base: MpcControllerConfig, name: str) -> bool:
