@@ -5,6 +5,7 @@ come from a file; PlaCo's whole-body QP is a registered variant that plays in th
 import json
 import re
 
+import daqp
 import numpy as np
 import pytest
 from conftest import SHORT_SCENARIO
@@ -18,6 +19,7 @@ from wbc.errors import ConfigError
 from wbc.mpc import QP_SOLVERS, CentroidalMpc, DenseQp, MpcConfig, MpcSolveError, ProxsuiteSolver, make_qp_solver
 from wbc.mpc.config_table import mpc_config_from_table
 from wbc.mpc.controller import MpcController
+from wbc.mpc.qp_solvers import DaqpSolver, constraint_violation
 from wbc.robots.registry import get_robot
 
 TROT = np.array([[1, 0, 0, 1]] * 5 + [[0, 1, 1, 0]] * 5, bool)
@@ -205,3 +207,53 @@ def test_the_octagonal_pyramid_keeps_every_planned_force_inside_the_friction_con
     assert ratios["outer"] > 1.2 * mpc.config.mu  # the square around the cone, past it along the diagonal
     with pytest.raises(ConfigError, match="pyramid"):
         MpcConfig(pyramid="cone")
+
+
+@pytest.mark.parametrize("solver", ["daqp", "proxsuite"])
+def test_a_solution_that_breaks_the_rows_is_not_solved_though_the_backend_calls_it_optimal(solver):
+    # weights of 1e20 on the orientation make the kicked robot's QP so ill-conditioned that DAQP reports an optimum
+    # breaking friction rows by ~89 (8,900 N); a sane weight's solution keeps every constraint to round-off
+    mpc, x, args = _standing_qp("pushed")
+    sane = mpc.build(x, *args)
+    result = make_qp_solver(solver).solve(sane)
+    assert result.solved and constraint_violation(sane, result.z) < 1e-9
+    cfg = MpcConfig(qp_solver=solver)
+    # the settings refuse such weights (MAX_WEIGHT); set behind their back, the solve's own check is what is left
+    object.__setattr__(cfg, "weight_rpy", (1e20, 1e20, 1e20))
+    absurd = CentroidalMpc(cfg, mpc._arm_lower - cfg.arm_margin, mpc._arm_upper + cfg.arm_margin, mpc._arm_vmax)
+    problem = absurd.build(x, *args)
+    result = absurd.qp_solver.solve(problem)
+    assert not result.solved
+    if solver == "daqp":
+        assert "exit flag 1 (optimal), its solution breaking a constraint by" in result.status
+    with pytest.raises(MpcSolveError) as caught:
+        absurd.solve(problem, np.zeros(problem.horizon * 15))
+    assert caught.value.problem is problem
+
+
+def test_daqps_optimum_outside_the_rows_is_refused_after_its_cold_start_too(monkeypatch):
+    qp = DenseQp(H=np.eye(2), g=np.zeros(2), C=np.array([[1.0, 1.0]]), l=np.array([1.0]), u=np.array([np.inf]),
+                 l_box=-np.ones(2), u_box=np.ones(2))
+    calls = []
+
+    def broken(*args, **kwargs):  # "optimal", at a point 1 short of the row
+        calls.append(kwargs)
+        return np.zeros(2), 0.0, 1, {"iterations": 1}
+
+    monkeypatch.setattr(daqp, "solve", broken)
+    result = DaqpSolver().solve(qp, np.zeros(2))
+    assert not result.solved and not result.warm
+    assert len(calls) == 2  # the warm attempt's broken optimum was followed by a cold start
+    assert constraint_violation(qp, np.zeros(2)) == 1.0
+    assert constraint_violation(qp, np.array([0.5, 0.5])) == 0.0
+    assert constraint_violation(qp, np.array([np.nan, 0.5])) == np.inf
+
+
+def test_an_absurd_weight_is_refused_naming_the_field():
+    with pytest.raises(ConfigError, match=re.escape("MpcConfig.weight_rpy must be")):
+        MpcConfig(weight_rpy=(1e20, 1e20, 1e20))
+    with pytest.raises(ConfigError, match=re.escape("MpcConfig.weight_force must be")):
+        MpcConfig(weight_force=1e13)
+    MpcConfig(weight_rpy=(1e12, 1e12, 1e12))  # the bound itself is allowed
+    with pytest.raises(ConfigError, match=re.escape("weight_rpy")):
+        mpc_config_from_table({"mpc": {"weight_rpy": [1e30, 1e30, 1e30]}})

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import replace
 
+import daqp
 import numpy as np
 import pytest
 
 from wbc.estimation.kinematics import RobotKinematics
 from wbc.mpc.centroidal_model import zoh_integral
+from wbc.mpc.centroidal_mpc import MpcProblem, MpcSolveError
 from wbc.mpc.tail_model import ArmTailPath, arm_tail, arm_tail_path, servo_torque_bounds
 from wbc.mpc.tail_mpc import ARM_DQ, ARM_Q, TNU, TNX, TailMpc, TailMpcConfig, TailStep, tail_dynamics
 from wbc.robots.conventions import GRAVITY
@@ -196,3 +199,37 @@ def test_the_arm_path_rows_are_the_numpy_expressions_bit_for_bit_and_tell_a_non_
     assert not arm_path_rows(rows, ARM_JOINTS.start, start, acc, tau, torque)
     rows[2, ARM_JOINTS.start + 1] = 0.0
     assert not arm_path_rows(rows, ARM_JOINTS.start, start, acc, tau, np.array([0.0, np.inf, 0.0]))
+
+
+def _tail_mpc(table, config=None):
+    return TailMpc(config or TailMpcConfig(), table.lower[ARM_JOINTS], table.upper[ARM_JOINTS],
+                   table.velocity_limit[ARM_JOINTS], table.torque_limit[ARM_JOINTS])
+
+
+def test_a_failed_tail_solve_carries_its_problem_which_replays_to_the_same_failure(robot, tmp_path):
+    kin, table = robot
+    mpc = _tail_mpc(table)
+    x0, x_ref, contact, feet, path = _case(kin, np.random.default_rng(11), mpc.config.horizon)
+    qp = mpc.build(x0, x_ref, contact, feet, path)
+    plan = mpc.solve(MpcProblem(**qp))  # a feasible QP: the replay entry solves it as `plan` does
+    np.testing.assert_array_equal(plan.z, mpc.plan(x0, x_ref, contact, feet, path).z)
+    qp["l"] = qp["l"].copy()
+    qp["l"][0] = 1e3  # a friction row beyond every force the boxes allow
+    with pytest.raises(MpcSolveError, match="error.problem.save") as caught:
+        mpc.solve(MpcProblem(**qp))
+    problem = caught.value.problem
+    assert problem is not None
+    problem.save(str(tmp_path / "tail.npz"))
+    with pytest.raises(MpcSolveError, match=re.escape("DAQP exit flag -1")):
+        mpc.solve(MpcProblem.load(str(tmp_path / "tail.npz")))
+
+
+def test_a_tail_optimum_that_breaks_its_rows_is_a_failed_solve(robot, monkeypatch):
+    kin, table = robot
+    mpc = _tail_mpc(table)
+    x0, x_ref, contact, feet, path = _case(kin, np.random.default_rng(11), mpc.config.horizon)
+    n = mpc.build(x0, x_ref, contact, feet, path)["H"].shape[0]
+    # DAQP calling a point optimal that lies far outside the boxes (as it does on absurdly weighted QPs)
+    monkeypatch.setattr(daqp, "solve", lambda *args, **kwargs: (np.full(n, 1e3), 0.0, 1, {"iterations": 1}))
+    with pytest.raises(MpcSolveError, match="exit flag 1, its solution breaking a constraint by"):
+        mpc.plan(x0, x_ref, contact, feet, path, np.zeros(mpc.config.horizon * TNU))

@@ -3,6 +3,8 @@ torque forward."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -11,6 +13,7 @@ from wbc.control.registry import get_controller
 from wbc.errors import ConfigError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.mpc.config_table import tail_config_from_table
+from wbc.mpc.controller import MpcControllerConfig
 from wbc.mpc.tail_controller import TailControllerConfig, TailMpcController, ready_pose
 from wbc.mpc.tail_mpc import TailMpcConfig, TailPlan
 from wbc.robots.description import ARM_JOINTS
@@ -111,6 +114,33 @@ def test_a_settings_file_runs_the_tail_mpc_with_the_arm_held_and_refuses_a_bad_p
         tail_config_from_table({"ready_q": "up"})
     with pytest.raises(ConfigError, match=r"TailControllerConfig.tail: unknown key 'arm_move'; valid keys: .*"):
         tail_config_from_table({"tail": {"arm_move": False}})
+
+
+@pytest.mark.parametrize(("table", "named"), [
+    ({"base": {"mpc": {"mu": 0.1, "qp_solver": "proxsuite"}}},
+     ["base.mpc.mu (use tail.mu)", "base.mpc.qp_solver (the tail MPC solves with DAQP)"]),
+    ({"base": {"mpc": {"weight_rpy": [1.0, 1.0, 1.0], "pyramid": "outer"}}},
+     ["base.mpc.weight_rpy (use tail.weight_rpy)", "base.mpc.pyramid (use tail.pyramid)"]),
+    ({"base": {"arm_kp": 200.0, "arm_kd": 5.0}}, ["base.arm_kp (use arm_kp)", "base.arm_kd (use arm_kd)"]),
+    ({"base": {"replan_every": 8, "mpc": {"dt": 0.016}}}, ["base.replan_every (", "use tail.dt", "base.mpc.dt"]),
+])
+def test_base_settings_the_tail_controller_sets_itself_are_refused_naming_their_tail_equivalent(table, named):
+    with pytest.raises(ConfigError, match="sets these base settings itself") as caught:
+        tail_config_from_table(table)
+    for text in named:
+        assert text in str(caught.value)
+    with pytest.raises(ConfigError, match=re.escape("base.arm_kp (use arm_kp)")):  # the Python API too
+        TailControllerConfig(base=MpcControllerConfig(arm_kp=200.0))
+    # settings the tail controller keeps, and the tail's own, are taken
+    assert tail_config_from_table({"base": {"velocity_ki": 2.0}, "tail": {"mu": 0.1}}).tail.mu == 0.1
+
+
+def test_a_tail_step_that_is_not_whole_control_ticks_is_refused_with_advice_that_applies():
+    with pytest.raises(ConfigError, match=re.escape("TailControllerConfig.tail.dt must be a whole number of control "
+                                                    "ticks")) as caught:
+        tail_config_from_table({"tail": {"dt": 0.033}})
+    assert "e.g. 0.032" in str(caught.value) and "replan_every" not in str(caught.value)
+    assert tail_config_from_table({"tail": {"dt": 0.03}}).tail.dt == 0.03
 
 
 _COMPILE_PROBE = """

@@ -6,15 +6,17 @@ state and the gravity-compensating reference input (`CentroidalModel.discretize`
 the horizon with the planned footholds and the reference CoM. States are condensed out: X = Phi x0 + Gamma U + delta,
 so the QP is dense in U only.
 
-Constraints: friction pyramids (|f_x|, |f_y| <= mu / sqrt(2) f_z, inside the cone of the controller's friction setting
-`MpcConfig.mu`, never the simulator's; `MpcConfig.pyramid`) and f_min <= f_z <= f_max on stance feet; swing feet carry
+Constraints: friction pyramids inside the cone of the controller's friction setting `MpcConfig.mu`, never the
+simulator's (`MpcConfig.pyramid`: by default the inscribed octagon, |f_x|, |f_y| and |f_x +- f_y| / sqrt(2) <=
+0.924 mu f_z, eight rows a stance foot) and f_min <= f_z <= f_max on stance feet; swing feet carry
 no force (their variables are dropped); arm joint velocity limits (box) and arm joint position limits along the horizon
 (rows of the condensed dynamics). A frozen arm (locked, absent, or momentum terms off) has no variables.
 
 Solver: the backend `MpcConfig.qp_solver` names (`wbc.mpc.qp_solvers`): DAQP by default, a dual active-set method
 for small dense QPs (its Python package; a plain C library, so a solve does not depend on where its buffers were
-allocated), or ProxSuite's ProxQP. On this problem (80-90 variables, ~100 rows) DAQP solves in a fifth of the time
-ProxSuite takes, to the same optimum (``wbc bench mpc`` solves the closed loop's QPs with both; docs/mpc-notes.md).
+allocated), or ProxSuite's ProxQP. On this problem (a trot's: 90 variables, 190 rows; standing: 150 and 350) DAQP
+solves in about 0.4 of the time ProxSuite takes (median 0.105-0.108 ms against 0.256-0.263 ms), to the same optimum
+(``wbc bench mpc`` solves the closed loop's QPs with both; docs/mpc-notes.md).
 The solve is a function of the problem and the warm start alone (the previous plan shifted by one step, which seeds
 DAQP's active set or starts ProxQP's iterations); if a warm-started solve fails a cold start follows, and a solve that
 still fails raises `MpcSolveError` naming the backend and its status and carrying the problem, so the controller can
@@ -84,8 +86,9 @@ class MpcConfig:
 
     Raises:
         ConfigError: an unknown `qp_solver` (the message lists the valid names), a `horizon` below one step, a
-            number that is not finite, a step, force or scale that is not positive, a negative weight or margin,
-            `fz_max` not above `fz_min`, or a `standstill_weight_factor` outside [0, 1].
+            number that is not finite, a step, force or scale that is not positive, a weight negative or above
+            `MAX_WEIGHT` (1e12), a negative margin, `fz_max` not above `fz_min`, or a `standstill_weight_factor`
+            outside [0, 1].
     """
 
     horizon: int = 10
@@ -111,7 +114,7 @@ class MpcConfig:
         check_qp_solver(self.qp_solver, "MpcConfig.qp_solver")
         friction_per_axis(self.mu, self.pyramid, "MpcConfig")
         check_force_terms(self, "MpcConfig")
-        check_number("MpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0)
+        check_number("MpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0, at_most=MAX_WEIGHT)
 
     @property
     def mu_axis(self) -> float:
@@ -140,6 +143,11 @@ MAX_HORIZON = 100
 """The most steps an MPC horizon may have: its dense QP grows with the square of the steps (100 steps of the default
 0.032 s, 3.2 s, is ten times the default and beyond any horizon a push or a turn needs)."""
 
+MAX_WEIGHT = 1e12
+"""The largest cost weight an MPC setting may have: the shipped ones are at most 400. Weights near 1e20 make the QP so
+ill-conditioned that DAQP returned an "optimal" solution breaking the friction pyramids by 95 N (the solve's
+constraint check, `wbc.mpc.qp_solvers.RESIDUAL_TOLERANCE`, now refuses such solutions too)."""
+
 
 def arm_box(lower: np.ndarray, upper: np.ndarray, margin: float, where: str) -> tuple[np.ndarray, np.ndarray]:
     """The arm joints' limits, `margin` inside `lower` and `upper` (all in rad).
@@ -165,7 +173,8 @@ def check_force_terms(config: Any, where: str) -> None:
 
     Raises:
         ConfigError: `horizon` not an integer in [1, `MAX_HORIZON`], `dt`, `force_scale` not positive, `fz_min`
-            negative, `fz_max` not above it, a negative `weight_force`, `arm_margin` or `full_weight_speed`,
+            negative, `fz_max` not above it, a weight negative or above `MAX_WEIGHT`, a negative `arm_margin` or
+            `full_weight_speed`,
             `standstill_weight_factor` outside [0, 1], or any of them not finite (named in `where`).
     """
     check_number(f"{where}.horizon", config.horizon, at_least=1, at_most=MAX_HORIZON, integer=True)
@@ -176,8 +185,9 @@ def check_force_terms(config: Any, where: str) -> None:
         raise ConfigError(f"{where}.fz_max must be above fz_min ({config.fz_min}), got {config.fz_max}")
     check_number(f"{where}.force_scale", config.force_scale, above=0.0)
     for name in ("weight_com", "weight_vel", "weight_rpy", "weight_momentum", "weight_arm_q"):
-        check_number(f"{where}.{name}", getattr(config, name), at_least=0.0, size=3)
-    for name in ("weight_force", "arm_margin", "full_weight_speed"):
+        check_number(f"{where}.{name}", getattr(config, name), at_least=0.0, at_most=MAX_WEIGHT, size=3)
+    check_number(f"{where}.weight_force", config.weight_force, at_least=0.0, at_most=MAX_WEIGHT)
+    for name in ("arm_margin", "full_weight_speed"):
         check_number(f"{where}.{name}", getattr(config, name), at_least=0.0)
     check_number(f"{where}.standstill_weight_factor", config.standstill_weight_factor, at_least=0.0, at_most=1.0)
 
@@ -441,7 +451,8 @@ class CentroidalMpc:
 
         Returns:
             idx (positions of the variables in the full input vector), s (their units), l_box, u_box, and the
-            friction rows (4 per stance foot and step, in the scaled variables).
+            friction rows (per stance foot and step, 8 for the octagon and 4 for the other pyramids; in the scaled
+            variables).
         """
         key = contact.tobytes()
         cached = self._patterns.get(key)

@@ -20,6 +20,13 @@ with ``held.toml`` the ablation that keeps all of it but the arm's motion::
     [tail]
     arm_moves = false
 
+The tail controller sets some of the base controller's settings itself, so `make_tail` refuses them, naming each and
+where its tail equivalent is: every key of ``[base.mpc]`` (the tail MPC's own are ``[tail]``'s: ``mu``, ``pyramid``,
+the weights, ``horizon``, ``dt``; it solves with DAQP, so ``qp_solver`` has none), ``[base]`` ``arm_kp`` and
+``arm_kd`` (the top-level ``arm_kp``, ``arm_kd``), ``replan_every`` (one MPC step of ``[tail] dt``, which must be a
+whole number of control ticks) and ``use_arm_momentum`` (``[tail] arm_moves``). ``[base]`` edits the tail's default
+base settings, whose yaw leash is the tail's 0.1 rad (``[base] velocity_ki = 2`` keeps it).
+
 The table's keys are the fields of `MpcControllerConfig` (or `TailControllerConfig`); a field that is itself a
 settings dataclass (``mpc``, ``gait``, ``footholds``, ``estimator``, ``wbc``, ``base``, ``tail``, ``observer``) takes
 a sub-table of its own fields, a tuple a TOML array, an optional pose (``ready_q``) an array of numbers. Fields left
@@ -36,7 +43,13 @@ from typing import Any, TypeVar
 
 from wbc.errors import ConfigError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
-from wbc.mpc.tail_controller import TailControllerConfig, TailMpcController
+from wbc.mpc.tail_controller import (
+    OVERRIDDEN,
+    OverriddenSettingError,
+    TailControllerConfig,
+    TailMpcController,
+    check_not_overridden,
+)
 from wbc.robots.description import RobotDescription
 
 __all__ = ["make", "make_tail", "mpc_config_from_table", "tail_config_from_table"]
@@ -65,9 +78,29 @@ def tail_config_from_table(table: Mapping[str, Any]) -> TailControllerConfig:
     """The tail MPC controller's settings: the defaults, with the table's values in place of theirs.
 
     Raises:
-        ConfigError: an unknown key, a value of the wrong kind, or settings their own validation refuses.
+        ConfigError: an unknown key, a value of the wrong kind, a ``base`` setting the tail controller sets itself
+            (`wbc.mpc.tail_controller.OVERRIDDEN`: the message names each and where its tail equivalent is), or
+            settings their own validation refuses.
     """
-    return _replaced(TailControllerConfig(), table, "TailControllerConfig")
+    base = table.get("base") if isinstance(table, Mapping) else None
+    overridden: list[str] = []
+    if isinstance(base, Mapping):
+        mpc = base.get("mpc")
+        given = [f"base.{key}" for key in base] + ([f"base.mpc.{key}" for key in mpc] if isinstance(mpc, Mapping)
+                                                   else [])
+        overridden = [name for name in given if name in OVERRIDDEN]
+    try:
+        config = _replaced(TailControllerConfig(), table, "TailControllerConfig")
+    except ConfigError as error:  # the base's own message (its advice may not apply here), then why it is moot
+        if not overridden or isinstance(error, OverriddenSettingError):
+            raise
+        try:
+            check_not_overridden(overridden)
+        except ConfigError as moot:
+            raise ConfigError(f"{error}; besides, {moot}") from None
+        raise
+    check_not_overridden(overridden)
+    return config
 
 
 def make_tail(desc: RobotDescription, config: Mapping[str, Any] | None = None) -> TailMpcController:

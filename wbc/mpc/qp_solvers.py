@@ -8,8 +8,9 @@ problem's own ``scale``. Each solve is a function of the problem and the warm st
 a call, so no scaling, factorisation or active set of an earlier QP leaks into a later one.
 
 - ``daqp`` (`DaqpSolver`, the default): a dual active-set method for small dense QPs; the warm start seeds its active
-  set. On the MPC's QPs (80-90 variables, ~100 rows) most solves take one or two iterations, and the C library gives
-  the same bits whatever its buffers' addresses (the arena's reproducibility rests on that).
+  set. On the MPC's QPs (a trot's: 90 variables, 190 rows; standing: 150 and 350) most solves take one or two
+  iterations, and the C library gives the same bits whatever its buffers' addresses (the arena's reproducibility
+  rests on that).
 - ``proxsuite`` (`ProxsuiteSolver`): ProxQP's dense proximal augmented Lagrangian method (the solver the design
   card names). The warm start is handed in explicitly (``InitialGuess.WARM_START``), never taken from the solver's
   previous result, which was wrong when the contact set changed between updates. No Ruiz equilibration: the problem
@@ -25,12 +26,17 @@ a call, so no scaling, factorisation or active set of an earlier QP leaks into a
   DAQP only.
 
 A warm-started solve that fails is followed by a cold start; the iterations of both are counted and the time covers
-both.
+both. A solution counts as solved only if the backend reports an optimum, it is finite, and it keeps every bound and
+row to `RESIDUAL_TOLERANCE` (`constraint_violation`): on absurdly weighted problems (weights near 1e20) DAQP reports
+an optimum whose friction rows are broken by ~1 (95 N), where sane problems' solutions keep them to round-off
+(~1e-15), so the check is never what decides a normal solve. It is one product C z and four reductions, ~10 us on a
+trot's QP (a DAQP solve takes ~0.1 ms).
 """
 
 from __future__ import annotations
 
 import importlib.metadata
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -43,7 +49,28 @@ from proxsuite import proxqp
 from wbc.errors import ConfigError
 from wbc.mpc.dense_qp import DenseQp
 
-__all__ = ["QP_SOLVERS", "DaqpSolver", "ProxsuiteSolver", "QpResult", "QpSolver", "check_qp_solver", "make_qp_solver"]
+__all__ = ["QP_SOLVERS", "RESIDUAL_TOLERANCE", "DaqpSolver", "ProxsuiteSolver", "QpResult", "QpSolver",
+           "check_qp_solver", "constraint_violation", "make_qp_solver"]
+
+RESIDUAL_TOLERANCE = 1e-4
+"""The most a solution may break a bound or row by (in the problem's scaled units: 0.01 N on a force) and still count
+as solved; a hundred times DAQP's primal tolerance, far above the round-off (~1e-15) of sane problems' solutions."""
+
+
+def constraint_violation(qp: DenseQp, z: np.ndarray) -> float:
+    """How far `z` breaks the problem's boxes and rows: the largest of l_box - z, z - u_box, l - C z, C z - u, or 0.
+
+    Not finite when `z` is not.
+    """
+    cz = qp.C @ z
+    # a NaN in z makes the first term NaN, which Python's max keeps (no comparison with it is true)
+    worst = float(max((qp.l_box - z).max(), (z - qp.u_box).max(), (qp.l - cz).max(), (cz - qp.u).max(), 0.0))
+    return worst if math.isfinite(worst) else math.inf
+
+
+def _kept(qp: DenseQp, z: np.ndarray | None) -> bool:
+    """Whether `z` is finite and keeps `qp`'s boxes and rows to `RESIDUAL_TOLERANCE`."""
+    return z is not None and constraint_violation(qp, z) <= RESIDUAL_TOLERANCE
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -52,7 +79,8 @@ class QpResult:
 
     Attributes:
         z: the solution (n,), in the problem's own (scaled) variables; meaningful only when `solved`.
-        solved: whether the backend reports an optimum and every entry of `z` is finite.
+        solved: whether the backend reports an optimum, every entry of `z` is finite and `z` keeps the boxes and rows
+            to `RESIDUAL_TOLERANCE`.
         status: the backend's own verdict, as it spells it (``exit flag 1``, ``PROXQP_SOLVED`` ...).
         iterations: the backend's iterations, warm and cold attempt together.
         solve_s: wall time of the call, warm and cold attempt together [s].
@@ -103,7 +131,7 @@ class DaqpSolver:
         return importlib.metadata.version("daqp")
 
     def solve(self, qp: DenseQp, warm_start: np.ndarray | None = None) -> QpResult:
-        """Solve `qp` (see `QpSolver.solve`); only DAQP's exit flag 1 (optimal) counts as solved.
+        """Solve `qp` (see `QpSolver.solve`); only DAQP's exit flag 1 (optimal) with the constraints kept is solved.
 
         Args:
             qp: the problem.
@@ -118,14 +146,16 @@ class DaqpSolver:
         if warm_start is not None:
             z, _, flag, info = daqp.solve(qp.H, qp.g, qp.C, upper, lower, sense, primal_start=warm_start)
             iterations = int(info["iterations"])
-        if flag != 1 or not np.all(np.isfinite(z)):  # no warm start, or one that went astray: a cold start
+        if flag != 1 or not _kept(qp, z):  # no warm start, or one that went astray: a cold start
             warm = False
             sense[:] = 0
             z, _, flag, info = daqp.solve(qp.H, qp.g, qp.C, upper, lower, sense)
             iterations += int(info["iterations"])
-        solved = flag == 1 and bool(np.all(np.isfinite(z)))
-        return QpResult(z=np.asarray(z, dtype=np.float64), solved=solved,
-                        status=f"exit flag {flag} ({_DAQP_FLAGS.get(flag, 'unknown')})", iterations=iterations,
+        solved = flag == 1 and _kept(qp, z)
+        status = f"exit flag {flag} ({_DAQP_FLAGS.get(flag, 'unknown')})"
+        if flag == 1 and not solved:
+            status += f", its solution breaking a constraint by {constraint_violation(qp, z):.3g}"
+        return QpResult(z=np.asarray(z, dtype=np.float64), solved=solved, status=status, iterations=iterations,
                         solve_s=time.perf_counter() - t0, warm=warm)
 
 
@@ -163,7 +193,7 @@ class ProxsuiteSolver:
         return importlib.metadata.version("proxsuite")
 
     def solve(self, qp: DenseQp, warm_start: np.ndarray | None = None) -> QpResult:
-        """Solve `qp` (see `QpSolver.solve`); only ``PROXQP_SOLVED`` counts as solved.
+        """Solve `qp` (see `QpSolver.solve`); only ``PROXQP_SOLVED`` with the constraints kept counts as solved.
 
         Args:
             qp: the problem.
@@ -176,12 +206,15 @@ class ProxsuiteSolver:
         if warm_start is not None:
             x, status, its = self._attempt(qp, warm_start)
             iterations += its
-        if status != proxqp.PROXQP_SOLVED or not np.all(np.isfinite(x)):
+        if status != proxqp.PROXQP_SOLVED or not _kept(qp, x):
             warm = False
             x, status, its = self._attempt(qp, None)
             iterations += its
-        solved = status == proxqp.PROXQP_SOLVED and bool(np.all(np.isfinite(x)))
-        return QpResult(z=x, solved=solved, status=status.name, iterations=iterations,
+        solved = status == proxqp.PROXQP_SOLVED and _kept(qp, x)
+        name = status.name
+        if status == proxqp.PROXQP_SOLVED and not solved:
+            name += f", its solution breaking a constraint by {constraint_violation(qp, x):.3g}"
+        return QpResult(z=x, solved=solved, status=name, iterations=iterations,
                         solve_s=time.perf_counter() - t0, warm=warm)
 
     def _attempt(self, qp: DenseQp, x0: np.ndarray | None) -> tuple[np.ndarray, proxqp.QPSolverOutput, int]:

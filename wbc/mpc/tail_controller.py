@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 import pinocchio as pin
@@ -23,7 +23,7 @@ import pinocchio as pin
 from wbc.config_checks import check_number
 from wbc.errors import ConfigError
 from wbc.estimation.kinematics import RobotKinematics
-from wbc.mpc.centroidal_mpc import MpcSolveError
+from wbc.mpc.centroidal_mpc import MpcConfig, MpcSolveError
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.mpc.footholds import ground_height
 from wbc.mpc.observer import MomentumObserver, ObserverConfig
@@ -35,7 +35,8 @@ from wbc.robots.euler import rpy_of
 from wbc.robots.joint_table import joint_table
 from wbc.types import RobotState, VelocityCommand
 
-__all__ = ["TAIL_YAW_LEASH_RAD", "TailControllerConfig", "TailMpcController", "ready_pose"]
+__all__ = ["OVERRIDDEN", "TAIL_YAW_LEASH_RAD", "OverriddenSettingError", "TailControllerConfig", "TailMpcController",
+           "check_not_overridden", "ready_pose"]
 
 
 TAIL_YAW_LEASH_RAD = 0.1
@@ -54,8 +55,14 @@ class TailControllerConfig:
     """Settings of `TailMpcController`.
 
     Attributes:
-        base: the MPC controller's settings (estimator, gait, footholds, leg layer); its ``mpc`` horizon and step
-            are taken from `tail`; its yaw leash is `TAIL_YAW_LEASH_RAD` unless given.
+        base: the MPC controller's settings (estimator, gait, footholds, leg layer, leashes). The tail controller
+            sets the rest itself, so these are refused unless at their defaults (`OVERRIDDEN`): every field of
+            ``base.mpc`` (the tail MPC's own are `tail`'s: ``tail.mu``, ``tail.horizon`` ...), ``base.arm_kp`` and
+            ``base.arm_kd`` (this class's `arm_kp`, `arm_kd`), ``base.replan_every`` (one MPC step of ``tail.dt``)
+            and ``base.use_arm_momentum`` (``tail.arm_moves``). The default base's yaw leash is
+            `TAIL_YAW_LEASH_RAD`; a settings table's ``base`` edits that default base, but a `MpcControllerConfig`
+            given here replaces it whole, so its yaw leash is the base MPC's 0.3 rad unless it sets ``yaw_leash``
+            (``MpcControllerConfig(velocity_ki=2.0, yaw_leash=TAIL_YAW_LEASH_RAD)`` keeps the tail's).
         tail: the tail MPC's settings.
         ready_q: the arm's ready pose (waist, shoulder, elbow) [rad]; None: chosen for its leverage (`ready_pose`).
         observer: the push detector's settings.
@@ -64,8 +71,10 @@ class TailControllerConfig:
         arm_kd: arm joint damping around the planned speed [N m s/rad].
 
     Raises:
-        ConfigError: a `ready_q` that is not 3 finite angles, or an arm gain that is negative or not finite (the
-            nested settings check their own fields).
+        ConfigError: a `ready_q` that is not 3 finite angles, an arm gain that is negative or not finite, a ``base``
+            setting the tail controller overrides that is not at its default (the message names each and where its
+            tail equivalent is), or a ``tail.dt`` that is not a whole number of control ticks (the nested settings
+            check their own fields).
     """
 
     base: MpcControllerConfig = field(default_factory=lambda: MpcControllerConfig(yaw_leash=TAIL_YAW_LEASH_RAD))
@@ -85,6 +94,52 @@ class TailControllerConfig:
                                   f"[rad], got {self.ready_q!r}") from None
         check_number("TailControllerConfig.arm_kp", self.arm_kp, at_least=0.0)
         check_number("TailControllerConfig.arm_kd", self.arm_kd, at_least=0.0)
+        check_not_overridden([name for name in OVERRIDDEN if _given(self.base, name)])
+        rate = self.base.rate_hz
+        if abs(round(self.tail.dt * rate) / rate - self.tail.dt) > 1e-9:
+            raise ConfigError(f"TailControllerConfig.tail.dt must be a whole number of control ticks (1 / base.rate_hz"
+                              f" = {1.0 / rate:g} s: the MPC updates every tail.dt * base.rate_hz ticks), got "
+                              f"{self.tail.dt}; set tail.dt to a multiple of {1.0 / rate:g} s, e.g. "
+                              f"{max(1, round(self.tail.dt * rate)) / rate:g}")
+
+
+_BASE = MpcControllerConfig()
+OVERRIDDEN = {
+    **{f"base.mpc.{f.name}": (f"use tail.{f.name}" if f.name in {g.name for g in fields(TailMpcConfig)}
+                              else "the tail MPC solves with DAQP" if f.name == "qp_solver"
+                              else "the tail MPC has no such setting")
+       for f in fields(MpcConfig)},
+    "base.arm_kp": "use arm_kp", "base.arm_kd": "use arm_kd",
+    "base.replan_every": "the MPC updates every tail.dt * base.rate_hz ticks: use tail.dt",
+    "base.use_arm_momentum": "use tail.arm_moves",
+}
+"""The `MpcControllerConfig` settings (``base.``...) that `TailMpcController` sets itself, and where their tail
+equivalents are; `TailControllerConfig` refuses any of them that is not at its default."""
+
+
+class OverriddenSettingError(ConfigError):
+    """Base settings given that the tail controller sets itself (`check_not_overridden`)."""
+
+
+def check_not_overridden(names: list[str]) -> None:
+    """Refuse the base settings `names` (keys of `OVERRIDDEN`), naming each and where its tail equivalent is.
+
+    Raises:
+        OverriddenSettingError: `names` is not empty.
+    """
+    if names:
+        raise OverriddenSettingError("TailControllerConfig: the tail MPC controller sets these base settings itself, "
+                                     "so they would be ignored: "
+                                     + "; ".join(f"{name} ({OVERRIDDEN[name]})" for name in names))
+
+
+def _given(base: MpcControllerConfig, name: str) -> bool:
+    """Whether the setting `name` (``base.mpc.mu``, ``base.arm_kp`` ...) of `base` differs from its default."""
+    path = name.split(".")[1:]
+    value, default = base, _BASE
+    for part in path:
+        value, default = getattr(value, part), getattr(default, part)
+    return value != default
 
 
 @functools.lru_cache(maxsize=4)

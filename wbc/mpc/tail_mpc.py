@@ -37,7 +37,8 @@ import daqp
 import numpy as np
 
 from wbc.config_checks import check_number
-from wbc.mpc.centroidal_mpc import MpcSolveError, arm_box, check_force_terms, friction_per_axis
+from wbc.mpc.centroidal_mpc import MAX_WEIGHT, MpcProblem, MpcSolveError, arm_box, check_force_terms, friction_per_axis
+from wbc.mpc.qp_solvers import RESIDUAL_TOLERANCE, constraint_violation
 from wbc.mpc.tail_compiled import tail_qp
 from wbc.mpc.tail_model import ArmTail, ArmTailPath
 from wbc.robots.conventions import GRAVITY
@@ -80,7 +81,7 @@ class TailMpcConfig:
 
     Raises:
         ConfigError: what `MpcConfig` refuses in the settings they share (`wbc.mpc.centroidal_mpc.check_force_terms`),
-            or a negative or non-finite arm weight.
+            or a negative, non-finite or above `MAX_WEIGHT` (1e12) arm weight.
     """
 
     horizon: int = 10
@@ -106,8 +107,8 @@ class TailMpcConfig:
     def __post_init__(self) -> None:
         friction_per_axis(self.mu, self.pyramid, "TailMpcConfig")
         check_force_terms(self, "TailMpcConfig")
-        check_number("TailMpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0, size=3)
-        check_number("TailMpcConfig.weight_arm_acc", self.weight_arm_acc, at_least=0.0)
+        check_number("TailMpcConfig.weight_arm_dq", self.weight_arm_dq, at_least=0.0, at_most=MAX_WEIGHT, size=3)
+        check_number("TailMpcConfig.weight_arm_acc", self.weight_arm_acc, at_least=0.0, at_most=MAX_WEIGHT)
 
     @property
     def mu_axis(self) -> float:
@@ -298,8 +299,22 @@ class TailMpc:
                          cfg.weight_force, cfg.weight_arm_acc, cfg.arm_moves)
         return dict(zip(names, arrays, strict=True))
 
+    def solve(self, problem: MpcProblem, warm_start: np.ndarray | None = None) -> TailPlan:
+        """Solve a saved update's QP again (the problem a `MpcSolveError` carries, ``MpcProblem.load(path)``).
+
+        Args:
+            problem: the QP, its arrays as `build` returns them.
+            warm_start: the full scaled input vector (N TNU,) to start from, or None (cold start only).
+
+        Raises:
+            MpcSolveError: the QP did not solve (the problem is attached).
+        """
+        names = ("H", "g", "C", "l", "u", "l_box", "u_box", "scale", "index", "free", "gamma_z")
+        return self._solve({name: getattr(problem, name) for name in names}, warm_start)
+
     def _solve(self, qp: dict[str, np.ndarray], warm_start: np.ndarray | None) -> TailPlan:
         t1 = time.perf_counter()
+        problem = MpcProblem(**qp)  # the same arrays, for the constraint check and a failure's replay
         n, idx = self.config.horizon, qp["index"]
         upper = np.concatenate([qp["u_box"], qp["u"]])
         lower = np.concatenate([qp["l_box"], qp["l"]])
@@ -309,14 +324,17 @@ class TailMpc:
             z, _, status, info = daqp.solve(qp["H"], qp["g"], qp["C"], upper, lower, sense,
                                             primal_start=np.clip(warm_start[idx], qp["l_box"], qp["u_box"]))
             iterations = int(info["iterations"])
-        if status != 1 or not np.all(np.isfinite(z)):
+        if status != 1 or not self._kept(problem, z):
             sense[:] = 0
             z, _, status, info = daqp.solve(qp["H"], qp["g"], qp["C"], upper, lower, sense)
             iterations += int(info["iterations"])
         solve = time.perf_counter() - t1
-        if status != 1 or not np.all(np.isfinite(z)):
-            raise MpcSolveError(f"tail MPC QP not solved (DAQP exit flag {status}) from a warm nor a cold start",
-                                None)
+        if status != 1 or not self._kept(problem, z):
+            broken = f", its solution breaking a constraint by {constraint_violation(problem, z):.3g}" \
+                if status == 1 else ""
+            raise MpcSolveError(f"tail MPC QP not solved (DAQP exit flag {status}{broken}) from a warm nor a cold "
+                                "start; to investigate, save it (error.problem.save(path)) and replay it with "
+                                "TailMpc.solve(MpcProblem.load(path))", problem)
         full = np.zeros(n * TNU)
         full[idx] = z
         u = np.zeros(n * TNU)
@@ -325,3 +343,8 @@ class TailMpc:
         states = (qp["free"] + qp["gamma_z"] @ z).reshape(n, TNX)
         return TailPlan(states=states, forces=steps[:, :12].reshape(n, 4, 3), arm_acceleration=steps[:, 12:].copy(),
                         iterations=iterations, setup_s=0.0, solve_s=solve, z=z, variables=full)
+
+    @staticmethod
+    def _kept(problem: MpcProblem, z: np.ndarray) -> bool:
+        """Whether `z` is finite and keeps the boxes and rows to `wbc.mpc.qp_solvers.RESIDUAL_TOLERANCE`."""
+        return constraint_violation(problem, z) <= RESIDUAL_TOLERANCE

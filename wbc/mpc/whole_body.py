@@ -42,7 +42,9 @@ class WholeBodyConfig:
     """Gains and weights of the whole-body QP (gains at acceleration level).
 
     Attributes:
-        friction: friction coefficient of the contact pyramids (below the scenarios' lowest, for margin).
+        friction: friction coefficient of the contact pyramids: 0.6, below the lowest ground friction of most
+            scenarios (0.8) but above push-low-friction's 0.4-0.5, where the QP may ask for forces the ground cannot
+            hold (the MPC's own pyramids, `MpcConfig.mu` 0.4, stay inside it).
         com_kp: CoM stiffness [1/s^2].
         com_kd: CoM damping [1/s].
         trunk_kp: trunk orientation stiffness [1/s^2].
