@@ -309,3 +309,19 @@ def terminal_signals_in_child() -> None:
     """A child process's Ctrl-C, SIGTERM and hangup as a terminal's command has them (``Popen(preexec_fn=...)``)."""
     for signum in _TERMINAL_DISPOSITIONS:
         signal.signal(signum, signal.SIG_DFL)  # Python installs its own SIGINT handler over the default at start
+
+
+def ctrl_c_in_adaptation_round(train_module, monkeypatch, round_: int) -> None:
+    """Have `train_module.train_adaptation` (RMA's phase 2) be interrupted by SIGINT as it logs round `round_`."""
+    import signal
+
+    real = train_module.train_adaptation
+
+    def interrupted(policy, env, config):
+        def log(line: str) -> None:
+            if line.startswith(f"RMA phase 2 iteration {round_}/"):
+                signal.raise_signal(signal.SIGINT)
+
+        return real(policy, env, config, log=log)
+
+    monkeypatch.setattr(train_module, "train_adaptation", interrupted)

@@ -260,6 +260,19 @@ def _running(pid: int) -> bool:
         return False
 
 
+def _io_process_ended_and_legs_damped(go1: UnitreeEmulator, sent: int, io_process: int) -> None:
+    """The I/O process `io_process` ended (within 5 s), and the frames after the first `sent` end in damping alone."""
+    for _ in range(500):  # bounded (5 s)
+        if not _running(io_process):
+            break
+        time.sleep(0.01)
+    assert not _running(io_process)
+    frames = go1.commands()[sent:]
+    first = next((k for k, c in enumerate(frames) if c.damping), None)
+    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
+    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+
+
 def _standing_hw_run(go1: UnitreeEmulator, out: Path, *options: str) -> subprocess.Popen:
     """``wbc hw run stand`` in a process group of its own, once its safety layer drives the emulator's legs.
 
@@ -314,15 +327,7 @@ def test_a_closed_terminal_closes_the_robot_into_damping_and_ends_the_io_process
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
     assert code == 130  # interrupted, its last words dropped: neither a lost line nor the flush at exit failed it
-    for _ in range(500):  # bounded (5 s)
-        if not _running(io_process[0]):
-            break
-        time.sleep(0.01)
-    assert not _running(io_process[0])
-    frames = go1.commands()[sent:]
-    first = next((k for k, c in enumerate(frames) if c.damping), None)
-    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
-    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+    _io_process_ended_and_legs_damped(go1, sent, io_process[0])
 
 
 def test_a_link_lost_in_the_trial_exits_1_and_says_the_damping_may_not_have_reached_the_robot(
@@ -609,15 +614,7 @@ def test_sigterm_to_the_commands_group_is_an_interruption_and_the_robot_ends_dam
     assert proc.returncode == 130, err
     assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted; the robot was closed into damping; no results "
                                             "were written")
-    for _ in range(500):  # bounded (5 s)
-        if not _running(io_process):
-            break
-        time.sleep(0.01)
-    assert not _running(io_process)
-    frames = go1.commands()[sent:]
-    first = next((k for k, c in enumerate(frames) if c.damping), None)
-    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
-    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+    _io_process_ended_and_legs_damped(go1, sent, io_process)
 
 
 def test_sigterm_to_the_commands_group_during_the_settle_after_a_trip_keeps_the_trials_results(
@@ -733,15 +730,7 @@ def test_sigterm_during_the_trial_writes_the_episode_played_and_the_robot_ends_d
     assert 0 < len(episode.t) == record.ticks == hardware["interrupted"]["tick"] < 1000  # played, not to its end
     assert record.fall_time_s == pytest.approx(episode.t[-1]) and hardware["interrupted"]["time_s"] == pytest.approx(
         episode.t[-1])  # where it was interrupted: the end of its last whole tick
-    for _ in range(500):  # bounded (5 s)
-        if not _running(io_process):
-            break
-        time.sleep(0.01)
-    assert not _running(io_process)
-    frames = go1.commands()[sent:]
-    first = next((k for k, c in enumerate(frames) if c.damping), None)
-    assert first is not None, [f"kp {c.wire.kp.max():g}" for c in frames]
-    assert all(c.damping for c in frames[first:])  # damping, and nothing else after it: the legs end damped
+    _io_process_ended_and_legs_damped(go1, sent, io_process)
 
 
 def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> None:

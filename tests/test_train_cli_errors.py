@@ -9,6 +9,7 @@ import shutil
 from pathlib import Path
 
 import pytest
+from conftest import ctrl_c_in_adaptation_round
 
 from wbc.cli.main import main
 from wbc.errors import ConfigError
@@ -364,7 +365,6 @@ def test_an_interrupted_run_says_which_checkpoint_it_keeps_and_that_resume_conti
 @pytest.mark.usefixtures("terminal_signals")
 def test_ctrl_c_in_the_adaptation_phase_says_the_export_keeps_the_module_it_had(stage1_run, tmp_path, capsys,
                                                                                  monkeypatch):
-    import signal
 
     import wbc.learned.train.train as train_module
     from wbc.learned.policy.policy_file import load_policy
@@ -374,16 +374,7 @@ def test_ctrl_c_in_the_adaptation_phase_says_the_export_keeps_the_module_it_had(
     argv = ["train", "--task", "push", "--stage", "1", "--run-root", str(root), "--resume"]
     assert main([*argv, "--rma-iterations", "1"]) == 0  # the module added without training PPO further
     kept = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json")}
-    real = train_module.train_adaptation
-
-    def ctrl_c_in_round_2(policy, env, config):
-        def log(line: str) -> None:
-            if line.startswith("RMA phase 2 iteration 2/"):
-                signal.raise_signal(signal.SIGINT)
-
-        return real(policy, env, config, log=log)
-
-    monkeypatch.setattr(train_module, "train_adaptation", ctrl_c_in_round_2)
+    ctrl_c_in_adaptation_round(train_module, monkeypatch, 2)
     capsys.readouterr()
     assert main([*argv, "--rma-iterations", "3"]) == 130
     err = capsys.readouterr().err

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ctrl_c_in_adaptation_round
 
 from wbc.learned.env.env_config import DomainRandomisation
 
@@ -324,16 +325,7 @@ def test_ctrl_c_in_the_adaptation_phase_keeps_the_export_before_it_and_resume_fi
     train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(1)))
     run = tmp_path / "push-stage1"
     kept = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json", "rma.json", "progress.json")}
-    real = train_module.train_adaptation
-
-    def ctrl_c_in_round_2(policy, env, config):
-        def log(line: str) -> None:
-            if line.startswith("RMA phase 2 iteration 2/"):
-                signal.raise_signal(signal.SIGINT)
-
-        return real(policy, env, config, log=log)
-
-    monkeypatch.setattr(train_module, "train_adaptation", ctrl_c_in_round_2)
+    ctrl_c_in_adaptation_round(train_module, monkeypatch, 2)
     with pytest.raises(KeyboardInterrupt):
         train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(3)), resume=True)
     assert {n: (run / n).read_bytes() for n in kept} == kept
