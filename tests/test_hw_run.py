@@ -260,6 +260,20 @@ def _running(pid: int) -> bool:
         return False
 
 
+def _ctrl_c_while_writing_hardware_json(monkeypatch: pytest.MonkeyPatch, times: int) -> None:
+    """Ctrl-C `times` times as a hardware trial writes hardware.json (after the trial's row and episode)."""
+    import wbc.arena.hw_trial as hw_trial
+
+    write = hw_trial.write_text
+
+    def interrupted(path, text):
+        for _ in range(times):
+            signal.raise_signal(signal.SIGINT)
+        return write(path, text)
+
+    monkeypatch.setattr(hw_trial, "write_text", interrupted)
+
+
 def _io_process_ended_and_legs_damped(go1: UnitreeEmulator, sent: int, io_process: int) -> None:
     """The I/O process `io_process` ended (within 5 s), and the frames after the first `sent` end in damping alone."""
     for _ in range(500):  # bounded (5 s)
@@ -861,14 +875,7 @@ def test_ctrl_c_during_the_trial_damps_the_robot_at_once_and_writes_the_episode_
     emu, clock = stepped_go1.emu, stepped_go1.clock
     pressed: list[float] = []
     monkeypatch.setattr(hw_trial, "arm_variant", _interrupted_at_tick(50, pressed, clock))
-    write = hw_trial.write_text
-
-    def interrupted(path, text):  # hardware.json, written after the trial's row and episode
-        for _ in range(again):
-            signal.raise_signal(signal.SIGINT)
-        return write(path, text)
-
-    monkeypatch.setattr(hw_trial, "write_text", interrupted)
+    _ctrl_c_while_writing_hardware_json(monkeypatch, again)
     out = tmp_path / "hw"
     args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
                                       "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--out", str(out),
@@ -1119,16 +1126,8 @@ def test_ctrl_c_while_the_results_are_written_waits_for_them_and_twice_says_what
     the writing, and the line says what the directory then holds."""
     import signal
 
-    import wbc.arena.hw_trial as hw_trial
 
-    write = hw_trial.write_text
-
-    def interrupted(path, text):  # hardware.json, written after the trial's row and episode
-        for _ in range(times):
-            signal.raise_signal(signal.SIGINT)
-        return write(path, text)
-
-    monkeypatch.setattr(hw_trial, "write_text", interrupted)
+    _ctrl_c_while_writing_hardware_json(monkeypatch, times)
     out = tmp_path / "sim"
     assert main(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH, "--trial", "0",
                  "--sim", "--seconds", "0.5", "--out", str(out)]) == 130
