@@ -14,6 +14,7 @@ by its ``--seconds``. What reached the robot is read from the emulator's log of 
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import dataclasses
 import gc
@@ -258,6 +259,17 @@ def _running(pid: int) -> bool:
         return Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[0] != "Z"
     except OSError:
         return False
+
+
+def _interrupted_hw_run(args: argparse.Namespace, stepped: Stepped, capsys: pytest.CaptureFixture[str]) -> str:
+    """``hw run`` with `args` on the lockstep emulator, which an interruption ends with status 130: its stderr."""
+    try:
+        code = hw_run(args, build=stepped.build)
+    except KeyboardInterrupt:
+        pytest.fail("the interruption escaped the command, unsaid")
+    err = capsys.readouterr().err
+    assert code == 130, err
+    return err
 
 
 def _ctrl_c_while_writing_hardware_json(monkeypatch: pytest.MonkeyPatch, times: int) -> None:
@@ -595,12 +607,7 @@ def test_ctrl_c_at_any_step_before_the_connect_says_that_nothing_was_sent(
     args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
                                       "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "1", "--out", str(out),
                                       "--no-io-process", *(["--view"] if "viewer" in step else [])])
-    try:
-        code = hw_run(args, build=stepped_go1.build)
-    except KeyboardInterrupt:
-        pytest.fail("the interruption escaped the command, unsaid")
-    err = capsys.readouterr().err
-    assert code == 130, err
+    err = _interrupted_hw_run(args, stepped_go1, capsys)
     assert err.strip().splitlines()[-1] == ("wbc hw run: interrupted before the robot was connected: nothing was "
                                             "sent to it; no results were written")
     assert not stepped_go1.emu.commands()  # not one frame
@@ -880,12 +887,7 @@ def test_ctrl_c_during_the_trial_damps_the_robot_at_once_and_writes_the_episode_
     args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
                                       "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--out", str(out),
                                       "--no-io-process"])
-    try:
-        code = hw_run(args, build=stepped_go1.build)
-    except KeyboardInterrupt:
-        pytest.fail("the interruption escaped the command, unsaid")
-    err = capsys.readouterr().err
-    assert code == 130, err
+    err = _interrupted_hw_run(args, stepped_go1, capsys)
     when = "interrupted at 1.000 s of the 3 s trial (Ctrl-C)"
     if again < 2:
         assert err.strip().splitlines()[-1] == (f"wbc hw run: {when}; the robot was closed into damping; the results "
