@@ -565,3 +565,20 @@ def test_the_safety_layer_prints_each_transition_by_default(capsys):
     err = capsys.readouterr().err.splitlines()
     assert [line for line in err if line.startswith("safety t=")] == [str(e) for e in safe.events]
     assert [e.reason for e in safe.events] == ["fresh_state", "software_estop"]
+
+
+def test_a_trip_sends_its_damping_before_it_reports_the_trip():
+    """The layer printed a trip's event (or called `on_event`) before it wrote the damping: a reader of standard error
+    that stalled (a paused pager) held the damping back. The damping goes out first, then the word of it."""
+    seen = []
+    faulty = Faulty(MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none")))
+
+    def on_event(event):  # what had reached the robot when the layer told of the event
+        seen.append((event.to_state, len(faulty.sent), faulty.sent[-1] if faulty.sent else None))
+
+    safe = SafeRobot(faulty, SafetyConfig(on_event=on_event, **FAST))
+    with safe:
+        _drive(safe, stand_command(faulty.inner.desc), 200, until=SafetyState.RUN)
+        safe.estop()
+    (damped,) = [s for s in seen if s[0] is SafetyState.DAMPED]
+    assert damped[2] is not None and _is_damping(damped[2], safe.config)

@@ -3,8 +3,8 @@
 The results store (``run.json``) and a training run (``config.json``) both write this one record, so every output of
 the toolkit names the code that made it the same way; a revision with uncommitted changes to tracked files is marked
 ``-dirty``, since those changes are not in the revision it names, and the changes themselves are named by the sha256
-of ``git diff HEAD`` (untracked files are not covered: a new file nothing tracks is not in the hash). Beside the
-versions it records what else moves the last bits of a result: the CPU's model and the instruction-set flags its
+of ``git diff-index -p HEAD`` (untracked files are not covered: a new file nothing tracks is not in the hash). Beside
+the versions it records what else moves the last bits of a result: the CPU's model and the instruction-set flags its
 numerical kernels pick by (AVX2 or AVX-512 ...), and the sha256 of ``requirements/wbc.lock`` when the package runs
 from a checkout that has it.
 
@@ -67,12 +67,16 @@ def git_revision() -> str:
 
 
 def git_diff_sha256() -> str | None:
-    """The sha256 of ``git diff HEAD --binary`` (the uncommitted changes to tracked files, binary files included).
+    """The sha256 of ``git diff-index -p --binary HEAD``: the uncommitted changes to tracked files, binary ones too.
 
     Untracked files are not covered. Returns None outside a git checkout or without git.
     """
     try:
-        diff = _git("-c", "core.quotePath=false", "diff", "HEAD", "--binary", "--no-color", "--no-ext-diff")
+        # the plumbing command, whose output no user setting of `git diff` (prefixes, algorithm, context, textconv)
+        # changes: the same tree hashes the same for every user; the index's file times refreshed first, as `git diff`
+        # does, so that a file touched but not changed is not a change
+        _git("update-index", "-q", "--refresh")
+        diff = _git("diff-index", "-p", "--binary", "--no-textconv", "--no-ext-diff", "HEAD")
     except (OSError, subprocess.SubprocessError):
         return None
     return hashlib.sha256(diff.stdout).hexdigest() if diff.returncode == 0 else None

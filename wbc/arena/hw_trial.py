@@ -447,6 +447,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                     safe.estop(f"the command was interrupted during the trial ({_interrupted_by(stopped)})")
                 except IoProcessStopped as exc:  # stopped by the same SIGTERM: it closed the robot itself
                     io_stopped.append(exc)
+                except Exception:  # noqa: BLE001 (a link failing, an event callback raising: the interruption goes
+                    # on as what it is, and the robot's close sends the damping again; its results are still written)
+                    pass
 
             try:
                 # the I/O process stopped by SIGTERM (to the whole command, or to it alone) closed the robot itself:

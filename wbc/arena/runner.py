@@ -223,8 +223,11 @@ def run_episode(
         # what was played, built from memory alone; None where it cannot be
         try:
             events = SafetyLog.of(safety.safety_events()[events_before:]) if safety is not None else None
+            # a tick cut between its clamp count and its row is not held: it is not counted either
+            rows = buf.rows
             played = buf.finish(duration_s=duration_s, control_dt=dt, fell=False, fall_time_s=math.nan,
-                                safety_events=events, clamped_ticks=clamped, clamped_rows=tuple(clamped_rows))
+                                safety_events=events, clamped_ticks=min(clamped, rows),
+                                clamped_rows=tuple(min(int(c), rows) for c in clamped_rows))
             ticks = len(played.t)
             return EpisodeInterrupted(episode=played, tick=ticks, time_s=ticks * dt, duration_s=duration_s)
         except Exception:  # any: the interruption must go on as itself, never masked by a failure to keep its episode

@@ -1556,9 +1556,10 @@ def _check_apart(spec: ControllerSpec, cfg: CheckConfig, time_limit_s: float | N
                 process.join(timeout=5.0)  # ended already: reaped for its status
             codes = [process.exitcode for process in worker]
             status = f" (exit status {codes[0]})" if len(codes) == 1 and codes[0] is not None else ""
-            return ControllerCheck.ended(spec.name, f"the checks' worker process ended before they finished{status}: "
-                                                    "the controller ended its process (os._exit, a crash in native "
-                                                    "code), which on a robot ends the control loop")
+            return ControllerCheck.ended(spec.name, f"the checks' worker process ended before they finished{status}, "
+                                                    "or could not hand back what they found: the controller ended its "
+                                                    "process (os._exit, a crash in native code), which on a robot ends "
+                                                    "the control loop, or made a result that cannot be sent back")
         except FuturesTimeout:
             return ControllerCheck.ended(spec.name, f"the checks had not finished after {time_limit_s:g} s "
                                                     "(--time-limit): the controller hangs, or is far too slow; its "

@@ -864,6 +864,8 @@ def _add_check_controller_parser(sub: _Commands) -> None:
     chk.add_argument("--time-limit", type=bounded_float(MIN_TRIAL_TIME_LIMIT_S, MAX_TRIAL_TIME_LIMIT_S),
                      default=None, metavar="S",
                      help="fail the check of a controller that has not finished after S seconds of wall time (one "
-                          "that hangs), ending its worker process (default: no limit; not with --in-process)")
+                          "that hangs), ending its worker process; the seconds count from the worker's start, its "
+                          "imports and compiling included: give a first run minutes (default: no limit; not with "
+                          "--in-process)")
     chk.add_argument("--json", action="store_true", help="print JSON")
     chk.set_defaults(handler="check-controller")

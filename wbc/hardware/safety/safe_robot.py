@@ -356,15 +356,26 @@ class SafeRobot(Robot):
             return
         self._ramp = None
         self._over_power_frames = 0
-        self._transition(SafetyState.DAMPED, reason, detail)
-        self._damp_held()
-        if self.is_connected and self.robot.is_connected and self._damping is not None:
-            self._sent = self.robot.write(self._damping)
+        # the damping first, then the word of it: a print to a stderr whose reader stalled (a paused pager) or a
+        # caller's callback must not hold the damping back
+        event = self._transition(SafetyState.DAMPED, reason, detail, announce=False)
+        try:
+            self._damp_held()
+            if self.is_connected and self.robot.is_connected and self._damping is not None:
+                self._sent = self.robot.write(self._damping)
+        finally:
+            self._announce(event)
 
-    def _transition(self, to: SafetyState, reason: str, detail: str) -> None:
+    def _transition(self, to: SafetyState, reason: str, detail: str, *, announce: bool = True) -> SafetyEvent:
         event = SafetyEvent(time=self.now(), from_state=self._state, to_state=to, reason=reason, detail=detail)
         self._state = to
         self._events.append(event)
+        if announce:
+            self._announce(event)
+        return event
+
+    def _announce(self, event: SafetyEvent) -> None:
+        """Tell `config.on_event` of `event`, or print it on stderr."""
         if self.config.on_event is not None:
             self.config.on_event(event)
         else:
