@@ -38,6 +38,10 @@ class RobotState:
         accel_in_body: specific force measured by the accelerometer in the body frame, shape (3,) [m/s^2]
             (reads +9.81 on z when standing still).
         foot_force: contact force estimates at the feet FR, FL, RR, RL, shape (4,) [N].
+
+    The fields need not be of one instant: a real robot's IMU and foot sensors have latencies of their own, and in
+    `MujocoRobot` ``tau_est``, the IMU fields and ``foot_force`` are MuJoCo's values at the start of the last physics
+    step, one step (2 ms) older than ``q`` and ``dq``.
     """
 
     tick: int

@@ -18,6 +18,13 @@ of `wbc.hardware.mujoco.physics`, which the training env applies too.
 What `read` returns is what the real robot's sensors give (joint encoders, motor torque estimate, IMU, foot force
 sensors, optionally noisy); simulator truth (base pose and velocity, contacts, applied force) is only reachable
 through `sim_truth()`, for metrics.
+
+Within one frame the readings are not all of one instant: ``q`` and ``dq`` are the state after the last physics step,
+while ``tau_est``, the IMU (``imu_quat``, ``gyro_in_body``, ``accel_in_body``) and ``foot_force`` are what MuJoCo
+computed at the start of that step (its actuator forces and sensors, evaluated before integrating), one physics step
+(2 ms at the default step) older than the joints. This holds with or without a sensing delay (the delay shifts the
+whole frame). A real IMU has a latency of its own; this one is a property of the simulation, kept because every
+published result was computed with it.
 """
 
 from __future__ import annotations
@@ -224,6 +231,8 @@ class MujocoRobot(Robot):
         self.data = None
 
     def _read(self) -> RobotState:
+        # tau_est and sensordata (IMU, foot forces) are MuJoCo's values from the start of the last mj_step, one
+        # physics step older than q and dq (see the module docstring); kept as is: changing it moves every result
         noise = self.config.noise
         n = self.num_joints
         if self._history is None:
