@@ -203,7 +203,8 @@ class Episode:
         roll: base roll, shape (k,) [rad].
         pitch: base pitch, shape (k,) [rad].
         power: sum over joints of |tau_est * dq|, measured, shape (k,) [W].
-        arm_q: measured arm joint positions, shape (k, 3) (zero columns without an actuated arm) [rad].
+        arm_q: measured arm joint positions, shape (k, 3) [rad]; zeros where the arm is not actuated (arm mode
+            ``none`` or ``locked``).
         qpos: configuration for replay (base pose from `base_source`, joints measured), shape (k, nq).
         act_s: wall time of each tick's ``controller.act`` call, shape (k,) [s]; a tick whose value exceeds
             `control_dt` missed its deadline on a real robot.
