@@ -122,3 +122,11 @@ def test_apply_push_refuses_a_push_that_starts_in_the_past_and_takes_one_startin
 def test_a_bad_arm_mass_scale_is_refused_in_the_config_naming_the_field(scale):
     with pytest.raises(ConfigError, match="MujocoRobotConfig.arm_mass_scale must be a finite positive number"):
         MujocoRobotConfig(robot="a1-wx200", arm_mode="actuated", arm_mass_scale=scale)
+
+
+def test_the_unitree_emulator_refuses_a_control_period_that_is_not_whole_physics_steps():
+    from wbc.hardware.emulators.unitree import UnitreeEmulator, UnitreeEmulatorConfig
+
+    with pytest.raises(ConfigError, match=r"UnitreeEmulatorConfig.control_period: .*dt 0.003 s is not a whole number"):
+        UnitreeEmulator(UnitreeEmulatorConfig(control_period=0.003))
+    UnitreeEmulator(UnitreeEmulatorConfig(control_period=0.004))  # two steps: taken
