@@ -3,10 +3,12 @@ first read, the same command in every way as one built field by field."""
 
 import copy
 import pickle
+import warnings
 
 import numpy as np
 import pytest
 
+from wbc.errors import CommandError
 from wbc.types import MotorCommand
 
 
@@ -47,3 +49,30 @@ def test_a_command_stored_as_rows_copies_and_pickles_whole():
         np.testing.assert_array_equal(other.tau, cmd.tau)
     with pytest.raises(AttributeError, match="no attribute 'speed'"):
         cmd.speed  # noqa: B018
+
+
+def _hold(q):
+    return MotorCommand.hold(np.asarray(q, dtype=float), 20.0, 0.5)
+
+
+def test_commands_compare_by_value():
+    # the dataclass's comparison asked an array for its truth value and raised
+    a, b = _hold([0.1, 0.2, 0.3]), _hold([0.1, 0.2, 0.3])
+    assert a == b and not a != b
+    assert a != _hold([0.1, 0.2, 0.4])
+    assert a != _hold([0.1, 0.2])
+    assert a != "not a command"
+    assert a in [_hold([0.0, 0.0, 0.0]), b]
+    assert MotorCommand.from_rows(a.stacked()) == a
+
+
+@pytest.mark.parametrize("name", ["q", "dq", "kp", "kd", "tau"])
+def test_a_complex_field_is_refused_naming_it(name):
+    fields = {f: np.zeros(3) for f in ("q", "dq", "kp", "kd", "tau")}
+    fields[name] = np.zeros(3, dtype=complex)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no ComplexWarning on the way: refused before any cast
+        with pytest.raises(CommandError, match=rf"MotorCommand.{name}: complex values"):
+            MotorCommand(**fields)
+        with pytest.raises(CommandError, match=r"MotorCommand\.\w+: complex values"):  # the rows: all complex
+            MotorCommand.from_rows(np.stack([fields[f] for f in ("q", "dq", "kp", "kd", "tau")]))

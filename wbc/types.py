@@ -38,6 +38,10 @@ class RobotState:
         accel_in_body: specific force measured by the accelerometer in the body frame, shape (3,) [m/s^2]
             (reads +9.81 on z when standing still).
         foot_force: contact force estimates at the feet FR, FL, RR, RL, shape (4,) [N].
+
+    The fields need not be of one instant: a real robot's IMU and foot sensors have latencies of their own, and in
+    `MujocoRobot` ``tau_est``, the IMU fields and ``foot_force`` are MuJoCo's values at the start of the last physics
+    step, one step (2 ms) older than ``q`` and ``dq``.
     """
 
     tick: int
@@ -110,7 +114,9 @@ class MotorCommand:
         # which names the fault.
         q, dq, kp, kd, tau = self.q, self.dq, self.kp, self.kd, self.tau
         nd = np.ndarray
-        if type(q) is nd and type(dq) is nd and type(kp) is nd and type(kd) is nd and type(tau) is nd:
+        if (type(q) is nd and type(dq) is nd and type(kp) is nd and type(kd) is nd and type(tau) is nd
+                and not (q.dtype.kind == "c" or dq.dtype.kind == "c" or kp.dtype.kind == "c" or kd.dtype.kind == "c"
+                         or tau.dtype.kind == "c")):  # complex: the cast would drop the imaginary part (slow path)
             try:
                 stacked = np.array((q, dq, kp, kd, tau), dtype=np.float64)
             except (TypeError, ValueError):
@@ -122,6 +128,8 @@ class MotorCommand:
         n = None
         for name in _COMMAND_FIELDS:
             raw = getattr(self, name)
+            if np.iscomplexobj(raw):  # a float cast would drop the imaginary part with a mere warning
+                raise CommandError(f"MotorCommand.{name}: complex values; a command holds real numbers")
             try:
                 a = np.array(raw, dtype=np.float64)
             except (TypeError, ValueError) as exc:
@@ -144,6 +152,15 @@ class MotorCommand:
                     f"MotorCommand.{name}: negative gain at joint index {int(np.flatnonzero(a < 0)[0])}"
                 )
             object.__setattr__(self, name, _readonly(a))
+
+    def __eq__(self, other: object) -> bool:
+        """Equal when every field holds the same values, of the same length (NaN, in a trusted command, equals nothing).
+
+        The dataclass's own comparison compared the fields' arrays as a tuple, asking an array for its truth value.
+        """
+        if not isinstance(other, MotorCommand):
+            return NotImplemented
+        return bool(np.array_equal(self.rows, other.rows))
 
     def __getattr__(self, name: str) -> np.ndarray:
         """A field of a command stored as rows (see `_adopt_rows`), made when first read: a view of its row."""

@@ -12,6 +12,7 @@ a hardware trial (`OperatorLog`).
 from __future__ import annotations
 
 import math
+import os
 import zipfile
 import zlib
 from collections.abc import Callable, Iterable
@@ -202,7 +203,8 @@ class Episode:
         roll: base roll, shape (k,) [rad].
         pitch: base pitch, shape (k,) [rad].
         power: sum over joints of |tau_est * dq|, measured, shape (k,) [W].
-        arm_q: measured arm joint positions, shape (k, 3) (zero columns without an actuated arm) [rad].
+        arm_q: measured arm joint positions, shape (k, 3) [rad]; zeros where the arm is not actuated (arm mode
+            ``none`` or ``locked``).
         qpos: configuration for replay (base pose from `base_source`, joints measured), shape (k, nq).
         act_s: wall time of each tick's ``controller.act`` call, shape (k,) [s]; a tick whose value exceeds
             `control_dt` missed its deadline on a real robot.
@@ -278,8 +280,19 @@ class Episode:
         """Write the episode to a NumPy ``.npz`` file (no pickle).
 
         The pushes go in as arrays ``push_<field>``, the safety events as ``safety_<field>``, the operator's actions
-        as ``operator_<field>`` (text as unicode), and the base quantities' source as ``base_source``.
+        as ``operator_<field>`` (text as unicode), and the base quantities' source as ``base_source``. As NumPy does,
+        ``.npz`` is added to a `path` without it; `load` takes the same `path`.
+
+        Raises:
+            EpisodeError: ``duration_s`` or ``control_dt`` is outside what `load` reads back (``duration_s`` in
+                (0, 600] s, ``control_dt`` in (0, 1] s): refused before anything is written, rather than written
+                as a file `load` would call damaged.
         """
+        for name, hi in (("duration_s", MAX_DURATION_S), ("control_dt", 1.0)):
+            value = getattr(self, name)
+            if not 0.0 < value <= hi:  # NaN too
+                raise EpisodeError(f"Episode.save: {name} {value:g} s is outside (0, {hi:g}] s, "
+                                   f"which Episode.load reads back; save a shorter episode (or its parts)")
         np.savez_compressed(
             path, **{k: getattr(self, k) for k in (*_SCALARS, *_ARRAYS)},
             **{f"push_{k}": getattr(self.pushes, k) for k in _PUSH_KEYS},
@@ -292,6 +305,8 @@ class Episode:
     @classmethod
     def load(cls, path: str) -> Episode:
         """Read an episode written by `save`, every field checked before the episode is made.
+
+        `path` is the one `save` was given: without ``.npz``, and no such file, the ``.npz`` NumPy wrote is read.
 
         The archive is opened through `wbc.input_files.open_npz` (a regular file, at most 1 GiB uncompressed, plain
         arrays, no pickles), then checked in depth: the scalars are single numbers (``duration_s`` in
@@ -306,6 +321,7 @@ class Episode:
                 instance), misshapen, of the wrong type, not finite or out of range; the message names the file and
                 the field.
         """
+        path = _saved_as(path)
         try:
             archive = open_npz(path)
         except InputFileError as exc:
@@ -357,6 +373,17 @@ def _clamped_rows(fields: _EpisodeFields, clamped_ticks: float) -> np.ndarray:
         fields.fail("clamped_rows", f"{rows.tolist()}: each row's count of clamped ticks is a whole number from 0 to "
                                     f"clamped_ticks ({clamped_ticks:g})")
     return rows
+
+
+def _saved_as(path: str | os.PathLike) -> str | os.PathLike:
+    """The file `Episode.save(path)` wrote: `path` itself if it exists or ends with ``.npz``, else ``path.npz``.
+
+    NumPy adds the suffix to a name without it: `load` takes the path `save` was given.
+    """
+    name = path if isinstance(path, str) else os.fspath(path) if isinstance(path, os.PathLike) else None
+    if not isinstance(name, str) or name.endswith(".npz") or os.path.lexists(name):
+        return path
+    return f"{name}.npz" if os.path.lexists(f"{name}.npz") else path
 
 
 def _cut(text: str, limit: int = 300) -> str:

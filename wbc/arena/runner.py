@@ -43,6 +43,7 @@ from wbc.control.protocol import Controller
 from wbc.errors import CONTROLLER_ERRORS, CommandError, ConfigError, MissingCapabilityError
 from wbc.hardware.capabilities import FallDetector, HasSafetyEvents, SimulatorHealth, TruthSource
 from wbc.hardware.robot import Robot, command_bounds, exceeded_rows, within_bounds
+from wbc.physics_steps import nearest_rates
 from wbc.robots.conventions import upside_down
 from wbc.robots.description import ARM_JOINTS
 from wbc.scenario.trial import CommandSchedule
@@ -123,6 +124,25 @@ def _rebuild_interrupted(cls: type[EpisodeInterrupted], args: tuple[object, ...]
     return err
 
 
+def _check_arguments(schedule: object, duration_s: object) -> None:
+    """Refuse a `duration_s` that is not a finite positive number and a `schedule` without ``at``, naming them.
+
+    Raises:
+        ConfigError: either is unusable (caught here, before the robot or the controller is touched, rather than
+            as a bare ValueError or AttributeError from inside the loop).
+    """
+    if (isinstance(duration_s, bool) or not isinstance(duration_s, int | float | np.integer | np.floating)
+            or not math.isfinite(duration_s) or duration_s <= 0):
+        raise ConfigError(f"run_episode: duration_s must be a finite positive number of seconds, got {duration_s!r}")
+    if not callable(getattr(schedule, "at", None)):
+        hint = ""
+        if isinstance(schedule, VelocityCommand):
+            hint = (f"; for a constant command, pass CommandSchedule(vx={schedule.vx:g}, vy={schedule.vy:g}, "
+                    f"yaw_rate={schedule.yaw_rate:g}) (wbc.scenario)")
+        raise ConfigError(f"run_episode: schedule must be a CommandSchedule (anything with at(t) -> VelocityCommand), "
+                          f"got a {type(schedule).__name__}{hint}")
+
+
 def run_episode(
     robot: Robot,
     controller: Controller,
@@ -169,7 +189,9 @@ def run_episode(
 
     Raises:
         MissingCapabilityError: no `truth` or `fallen` given and the robot does not offer it.
-        ConfigError: the controller's period is longer than the episode: it would never be asked to act.
+        ConfigError: `duration_s` is not a finite positive number, `schedule` has no ``at``, the controller's period
+            is longer than the episode (it would never be asked to act), or, on a robot that advances whole
+            physics steps (``physics_steps``: `MujocoRobot`), not a whole number of them.
         ControllerFailure: the controller's ``reset`` or ``act`` raised, or ``act`` returned a command the robot
             refused (`wbc.errors.CommandError`); it carries the episode played up to that tick. The robot keeps the
             last command it accepted.
@@ -181,10 +203,21 @@ def run_episode(
             a tick's row in half), the interruption itself is raised, unchanged; a subclass of `KeyboardInterrupt`
             (an interruption that means something else) always is.
     """
+    _check_arguments(schedule, duration_s)
     truth = _truth_of(robot) if truth is None else truth
     fallen = _fall_detector_of(robot) if fallen is None else fallen
     health = robot if divergence is not None and isinstance(robot, SimulatorHealth) else None
     dt = 1.0 / controller.rate_hz
+    steps_of = getattr(robot, "physics_steps", None)  # a simulator's: it advances whole physics steps only
+    if callable(steps_of):
+        try:
+            steps_of(dt)
+        except ConfigError as e:
+            step = getattr(getattr(robot, "config", None), "timestep", None)
+            rates = f": {nearest_rates(controller.rate_hz, step)}" if isinstance(step, float) else ""
+            raise ConfigError(f"controller {type(controller).__name__}: its period 1/{controller.rate_hz:g} Hz cannot "
+                              f"be played ({e}); give it a rate whose period is a whole number of physics "
+                              f"steps{rates}") from None
     n = int(round(duration_s / dt))
     if n < 1 and duration_option is not None:
         raise ConfigError(f"{duration_option} {duration_s:g} s is shorter than one control period of controller "

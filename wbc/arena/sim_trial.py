@@ -75,6 +75,10 @@ def run_trial(trial: Trial, controller: ControllerSpec | str, *, debug_truth: bo
     With `debug_truth` the controller's ground-truth debug switch is thrown (it reads the simulator's base state
     instead of estimating it) and the record says so.
 
+    Not thread-safe: the trial plays on the process's cached robot for its (robot, arm mode, terrain)
+    (`simulated_robot`), which two threads would reset and step at once. Play trials at once in processes of their
+    own (the arena's workers), or with a `MujocoRobot` each and `wbc.arena.runner.run_episode`.
+
     Args:
         trial: the trial.
         controller: the resolved controller (`wbc.control.registry.get_controller`), or its name, resolved here.

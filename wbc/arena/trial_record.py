@@ -91,8 +91,10 @@ class TrialRecord:
         max_pitch_deg: largest |pitch| [deg].
         energy_j: mechanical work of the motors [J].
         arm_travel_rad: total arm joint travel [rad].
-        push_force_n: largest push magnitude of the trial (0 without pushes) [N].
-        n_pushes: number of pushes in the trial (played or not, if the robot fell first).
+        push_force_n: largest magnitude of the trial's pushes that start within the episode's duration (0 without
+            any) [N].
+        n_pushes: number of the trial's pushes that start within the episode's duration (played or not, if the robot
+            fell first); those after the end of a shortened episode are not counted.
         vx_cmd: commanded forward velocity after the ramp [m/s]: the command the trial starts with, held until the
             scenario's first ``[[commands.changes]]`` if it has any (the changes are the scenario's, not a column).
         vy_cmd: commanded lateral velocity after the ramp [m/s], likewise the starting command.
@@ -238,6 +240,8 @@ class TrialRecord:
         """
         metrics = compute_metrics(episode)
         counts = check_counters(counters)
+        # the pushes of the episode's length: a trial cut short (`duration_s` replaced) never plays those after it
+        pushes = [p for p in trial.pushes if p.start < episode.duration_s]
         if error or diverged:
             played = float(episode.t[-1]) if len(episode.t) else 0.0
             metrics.update(success=False, ttf=min(1.0, played / episode.duration_s), fall_time_s=math.nan)
@@ -254,8 +258,8 @@ class TrialRecord:
         return cls(
             controller=controller, scenario=trial.scenario, scenario_hash=trial.scenario_hash, band=trial.band,
             seed=trial.seed, trial=trial.index, **metrics, outcome=outcome, error=error,
-            push_force_n=trial.push_force_n,
-            n_pushes=len(trial.pushes), vx_cmd=trial.command.vx, vy_cmd=trial.command.vy,
+            push_force_n=max((float(np.linalg.norm(p.force_in_world)) for p in pushes), default=0.0),
+            n_pushes=len(pushes), vx_cmd=trial.command.vx, vy_cmd=trial.command.vy,
             yaw_rate_cmd=trial.command.yaw_rate,
             friction=trial.domain.friction if domain_applied else math.nan,
             payload_kg=trial.domain.payload_mass if domain_applied else math.nan,

@@ -610,6 +610,9 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
     if rate is None:
         return v.outcomes("no usable control rate"), None
     period = 1.0 / rate
+    # the robot advances whole physics steps: a rate the `rate` check refused still runs, as the nearest whole number
+    # of them (at least one), so the other checks report too
+    step_dt = max(1, round(period / sim.config.timestep)) * sim.config.timestep
     seconds = cfg.seconds if cfg.seconds is not None else trial.duration_s if trial is not None else DEFAULT_SECONDS
     ticks = max(2, int(round(seconds * rate)))
     # A: the closed loop, whose states and commands the replays feed again
@@ -637,7 +640,7 @@ def _exercise(spec: ControllerSpec, ctrl: Controller, desc, sim, cfg: CheckConfi
         states.append(state)
         cmds.append(cmd)
         sim.write(out)
-        sim.advance(period)
+        sim.advance(step_dt)
         if trial is not None and sim.fallen():  # as in the arena, the trial ends at a fall
             fell_at = (k + 1) * period
             break

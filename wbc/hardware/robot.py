@@ -228,7 +228,13 @@ class Robot(ABC):
         return applied
 
     def advance(self, dt: float) -> None:
-        """Let `dt` seconds of robot time pass under the last command [s]."""
+        """Let `dt` seconds of robot time pass under the last command [s].
+
+        Raises:
+            ConfigError: `dt` is not positive, or not a period the backend can run (`MujocoRobot`: a whole number of
+                physics steps).
+            RobotNotConnectedError: not connected.
+        """
         self._require_connected("advance")
         if not dt > 0:
             raise ConfigError(f"advance: dt must be a positive number of seconds, got {dt}")

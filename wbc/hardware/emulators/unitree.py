@@ -149,6 +149,14 @@ class UnitreeEmulator:
         if self.sim.num_joints != 12:
             raise ConfigError(f"UnitreeEmulator: the sim must drive the 12 legs only (arm mode none or locked), it has "
                               f"{self.sim.num_joints} joints")
+        # a simulator advances whole physics steps (`MujocoRobot.physics_steps`): a period that is not one would run
+        # more or less time than it says; a plant of another kind (`PlantLegs`) has no such bound
+        steps_of = getattr(self.sim, "physics_steps", None)
+        if callable(steps_of):
+            try:
+                steps_of(self.config.control_period)
+            except ConfigError as e:
+                raise ConfigError(f"UnitreeEmulatorConfig.control_period: {e}") from None
         self.stats = DecodeStats()
         self.last_reject = ""  # the latest rejected LowCmd's reason, empty until one is rejected
         self.refused = 0  # valid frames whose gains a motor cannot apply (negative): the motors got no torque

@@ -18,10 +18,18 @@ of `wbc.hardware.mujoco.physics`, which the training env applies too.
 What `read` returns is what the real robot's sensors give (joint encoders, motor torque estimate, IMU, foot force
 sensors, optionally noisy); simulator truth (base pose and velocity, contacts, applied force) is only reachable
 through `sim_truth()`, for metrics.
+
+Within one frame the readings are not all of one instant: ``q`` and ``dq`` are the state after the last physics step,
+while ``tau_est``, the IMU (``imu_quat``, ``gyro_in_body``, ``accel_in_body``) and ``foot_force`` are what MuJoCo
+computed at the start of that step (its actuator forces and sensors, evaluated before integrating), one physics step
+(2 ms at the default step) older than the joints. This holds with or without a sensing delay (the delay shifts the
+whole frame). A real IMU has a latency of its own; this one is a property of the simulation, kept because every
+published result was computed with it.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import mujoco
@@ -41,6 +49,7 @@ from wbc.hardware.mujoco.physics import (
     foot_touch_adr,
     initial_qpos,
     motor_ctrl,
+    push_steps,
     push_wrench,
     sensor_slices,
     set_motor_gains,
@@ -70,7 +79,7 @@ class MujocoRobotConfig:
     Attributes:
         robot: registry name (``a1-wx200``, ``go1-arm``).
         arm_mode: ``none``, ``locked`` or ``actuated``.
-        arm_mass_scale: scales the arm's mass and inertia.
+        arm_mass_scale: scales the arm's mass and inertia (finite, positive).
         terrain: ground shape.
         timestep: physics step [s].
         noise: sensor noise added by `read`.
@@ -89,6 +98,10 @@ class MujocoRobotConfig:
     def __post_init__(self) -> None:
         if not 0 < self.timestep <= 0.01:
             raise ConfigError(f"MujocoRobotConfig.timestep must be in (0, 0.01] s, got {self.timestep}")
+        scale = self.arm_mass_scale
+        # here, not at connect, where MuJoCo's compiler would refuse the arm's masses without naming the field
+        if isinstance(scale, bool) or not isinstance(scale, int | float) or not math.isfinite(scale) or scale <= 0:
+            raise ConfigError(f"MujocoRobotConfig.arm_mass_scale must be a finite positive number, got {scale!r}")
 
     def description(self) -> RobotDescription:
         """The robot description this config names."""
@@ -224,6 +237,8 @@ class MujocoRobot(Robot):
         self.data = None
 
     def _read(self) -> RobotState:
+        # tau_est and sensordata (IMU, foot forces) are MuJoCo's values from the start of the last mj_step, one
+        # physics step older than q and dq (see the module docstring); kept as is: changing it moves every result
         noise = self.config.noise
         n = self.num_joints
         if self._history is None:
@@ -268,7 +283,7 @@ class MujocoRobot(Robot):
         self.data.ctrl[:] = ctrl
 
     def _advance(self, dt: float) -> None:
-        n = max(1, int(round(dt / self.config.timestep)))
+        n = self.physics_steps(dt)
         m, d = self.model, self.data
         end = self._steps + n
         queue, history = self._queue, self._history
@@ -327,15 +342,59 @@ class MujocoRobot(Robot):
             self._quiet_until = _NEVER if nxt is None else nxt
 
     # -- simulation-only API --------------------------------------------------------------------------------------
+    def physics_steps(self, dt: float) -> int:
+        """The number of physics steps `dt` seconds span; `advance` takes only a whole, positive number of them.
+
+        A period that is not one (a 300 Hz loop's 1/300 s over 2 ms steps) would otherwise run more or less robot
+        time than the caller counts, unseen: refused, with the nearest valid periods. A relative tolerance of 1e-9
+        takes the floating-point error of periods such as ``1 / 50``.
+
+        Raises:
+            ConfigError: `dt` is not a finite number, or not a whole number (at least 1) of physics steps.
+        """
+        step = self.config.timestep
+        if (isinstance(dt, bool) or not isinstance(dt, int | float | np.integer | np.floating)
+                or not math.isfinite(dt) or dt <= 0):
+            raise ConfigError(f"MujocoRobot.advance: dt must be a finite positive number of seconds, got {dt!r}")
+        ratio = dt / step
+        n = round(ratio)
+        if n < 1 or abs(ratio - n) > 1e-9 * n:
+            below, above = max(1, math.floor(ratio)) * step, max(1, math.ceil(ratio)) * step
+            nearest = f"{below:g} s" if below == above else f"{below:g} s or {above:g} s"
+            raise ConfigError(f"MujocoRobot.advance: dt {dt:g} s is not a whole number of physics steps of {step:g} s "
+                              f"(MujocoRobotConfig.timestep); the nearest valid dt: {nearest}")
+        return int(n)
+
     def reset(self, seed: int = 0, *, domain: DomainParams | None = None, qpos: np.ndarray | None = None) -> None:
         """Put the robot back at its standing pose, with the terrain and randomisation of `seed`.
 
         Args:
-            seed: seeds the terrain (fractal), the sensor noise and nothing else.
+            seed: seeds the terrain (fractal), the sensor noise and nothing else (an integer).
             domain: physical parameters (default: the config's, nominal unless set there).
-            qpos: initial configuration (defaults: standing at the nominal pose above the terrain).
+            qpos: initial configuration, shape (``model.nq``,), finite (defaults: standing at the nominal pose above
+                the terrain).
+
+        Raises:
+            ConfigError: `seed` is not an integer, or `qpos` is not a finite array of the model's ``nq`` numbers
+                (checked before anything is reset).
+            RobotNotConnectedError: not connected.
         """
         self._require_connected("reset")
+        if isinstance(seed, bool) or not isinstance(seed, int | np.integer):
+            raise ConfigError(f"MujocoRobot.reset: seed must be an integer, got {seed!r}")
+        if qpos is not None:
+            nq = self.model.nq
+            try:
+                qpos = np.asarray(qpos, dtype=float)
+            except (TypeError, ValueError):
+                raise ConfigError(f"MujocoRobot.reset: qpos must be an array of {nq} numbers, got "
+                                  f"{type(qpos).__name__}") from None
+            if qpos.shape != (nq,):
+                raise ConfigError(f"MujocoRobot.reset: qpos must have shape ({nq},) (base position, quaternion, "
+                                  f"joints), got {qpos.shape}")
+            if not np.all(np.isfinite(qpos)):
+                raise ConfigError(f"MujocoRobot.reset: qpos holds a non-finite value at index "
+                                  f"{int(np.argmin(np.isfinite(qpos)))}")
         self._reset(seed, domain, qpos)
 
     def _reset(self, seed: int, domain: DomainParams | None, qpos: np.ndarray | None) -> None:
@@ -386,8 +445,18 @@ class MujocoRobot(Robot):
         return 0 if self._history is None else self._history.lag
 
     def apply_push(self, push: Push) -> None:
-        """Schedule a push; it acts from ``push.start`` (simulation time) for ``push.duration``."""
+        """Schedule a push; it acts from ``push.start`` (simulation time) for ``push.duration``.
+
+        Raises:
+            ConfigError: the push starts before the current physics step (it would never act in full: refused
+                rather than dropped); one at the current time is taken.
+            RobotNotConnectedError: not connected.
+        """
         self._require_connected("apply_push")
+        start, _ = push_steps(push.start, push.duration, self.config.timestep)
+        if start < self._steps:
+            raise ConfigError(f"MujocoRobot.apply_push: the push starts at {push.start:g} s, before the robot's time "
+                              f"{self.time:g} s; schedule it at or after the current time")
         self._pushes.add(0, push)
         self._quiet_until = -1  # the next advance takes the full path and finds the next push again
 
@@ -419,11 +488,13 @@ class MujocoRobot(Robot):
 
     def base_truth(self) -> BaseTruth:
         """Truth: the trunk's pose and velocity (for metrics; never hand this to a controller)."""
+        self._require_connected("base_truth")  # the views of a closed robot's buffers would read stale
         qpos, qvel = self._qpos, self._qvel
         return BaseTruth(qpos[:3].copy(), qpos[3:7].copy(), qvel[:3].copy(), qvel[3:6].copy())
 
     def fallen(self) -> bool:
         """Truth: the trunk or a non-foot link touches the ground (the paper's termination rule, `fall_rule`)."""
+        self._require_connected("fallen")
         d = self.data
         if d.ncon == 0:
             return False
@@ -438,6 +509,7 @@ class MujocoRobot(Robot):
         warning, resets its state to the model's initial one and carries on; the warning's count, which the reset
         keeps, is all that shows it happened. Three integer reads: cheap enough for every tick.
         """
+        self._require_connected("instability")
         counts = self._warning_counts
         if not (counts[_BAD_QPOS] or counts[_BAD_QVEL] or counts[_BAD_QACC]):
             return None
@@ -450,6 +522,7 @@ class MujocoRobot(Robot):
 
     def base_rotation(self) -> np.ndarray:
         """Truth: trunk rotation matrix (body to world)."""
+        self._require_connected("base_rotation")
         return quat_to_matrix(self.data.qpos[3:7])
 
     # -- internals ------------------------------------------------------------------------------------------------

@@ -412,6 +412,8 @@ def physics_realtime_factors(sim: MujocoRobot, seconds: float = 1.0) -> tuple[fl
     sim.reset(seed=0)
     sim.write(stand_command(sim.desc))
     sim.advance(0.2)
+    # whole physics steps: advance takes no part of one
+    seconds = max(1, round(seconds / sim.config.timestep)) * sim.config.timestep
     c0, t0 = time.thread_time(), time.perf_counter()
     sim.advance(seconds)
     wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
