@@ -59,6 +59,18 @@ def test_advance_refuses_a_dt_that_is_not_whole_physics_steps(dt):
         assert robot.time == 0.0  # refused before any step
 
 
+def test_a_period_checked_once_does_not_let_another_one_through():
+    """`advance` checks a period once and reuses its step count while the period repeats (the closed loop's hot
+    path): a different period, after a valid one, is still checked."""
+    with MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none")) as robot:
+        robot.advance(0.02)
+        robot.advance(0.02)
+        with pytest.raises(ConfigError, match="not a whole number of physics steps"):
+            robot.advance(0.003)
+        robot.advance(0.004)
+        assert robot.time == pytest.approx(0.044)
+
+
 @pytest.mark.parametrize("dt", [math.inf, -math.inf, math.nan, 0.0, -0.002])
 def test_advance_refuses_a_non_finite_or_non_positive_dt(dt):
     with MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none")) as robot:
