@@ -64,7 +64,7 @@ TRAIN_REFERENCE_KEYS = ["reference_physics_limit_control_steps_per_s", "control_
 MPC_KEYS = ["robot", "controller", "horizon", "mpc_solve_ms_median", "mpc_solve_ms_p99", "mpc_setup_ms_median",
             "wbc_tick_us_median", "control_tick_us_median", "realtime_factor", "cpu_realtime_factor",
             "walk_physics_realtime_factor", "walk_physics_share", "warmup_episode_s", "fell", "blas",
-            "qp_solver", "machine", "load_1min", "rounds", "qp_comparison_skipped"]
+            "qp_solver", "machine", "load_1min", "rounds", "qp_comparison_skipped", "controller_config"]
 MPC_REFERENCE_KEYS = ["reference_placo_tick_us", "reference_steps_per_s", "physics_realtime_factor",
                       "control_tick_over_reference_tick", "closed_loop_over_physics_rtf", "scaled_target_wbc_tick_us",
                       "scaled_target_realtime_factor", "physics_cpu_realtime_factor", "closed_loop_over_physics_cpu",

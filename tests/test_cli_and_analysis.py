@@ -283,6 +283,41 @@ def test_bench_mpc_of_the_tail_mpc_says_why_it_compares_no_qp_backends(capsys):
     assert out["qp_comparison_skipped"].startswith("mpc-tail solves its tail MPC's QP with DAQP directly")
 
 
+def test_bench_mpc_times_a_variant_built_from_its_settings_file(tmp_path, capsys):
+    """--controller-config: a variant of the MPC's settings is timed as `wbc compare` plays it, and said."""
+    settings = tmp_path / "h12.toml"
+    settings.write_text("[mpc]\nhorizon = 12\n")
+    argv = ["bench", "mpc", "--controller", "wbc.mpc.config_table:make", "--controller-config", str(settings),
+            "--seconds", "0.1", "--rounds", "1", "--no-reference", "--threaded-blas"]
+    assert main([*argv, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["horizon"] == 12 and out["controller_config"] == str(settings)
+    assert main(argv) == 0
+    assert f"wbc.mpc.config_table:make (settings {settings}) on a1-wx200" in capsys.readouterr().out
+
+
+def test_bench_mpc_refuses_a_settings_file_for_a_registered_controller_before_it_spawns(tmp_path, no_worker, capsys):
+    settings = tmp_path / "h12.toml"
+    settings.write_text("[mpc]\nhorizon = 12\n")
+    assert main(["bench", "mpc", "--controller-config", str(settings), "--seconds", "0.1", "--no-reference"]) == 2
+    assert f"--controller-config {settings}: mpc takes no configuration table" in capsys.readouterr().err
+
+
+def test_arm_momentum_plays_a_variant_built_from_its_settings_file(tmp_path, capsys):
+    """--controller-config reaches the plug-in that plays the trials: its settings are the ones measured."""
+    settings = tmp_path / "held.toml"
+    settings.write_text("use_arm_momentum = false\n")
+    argv = ["analyze", "arm-momentum", "--controller", "wbc.mpc.config_table:make", "--controller-config",
+            str(settings), "--trials", "1"]
+    assert main(argv) == 0
+    assert f"wbc.mpc.config_table:make (settings {settings}), scenarios/push.toml band ood" in capsys.readouterr().out
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[mpc]\nhorizn = 12\n")
+    assert main(["analyze", "arm-momentum", "--controller", "wbc.mpc.config_table:make", "--controller-config",
+                 str(bad), "--trials", "1"]) == 2
+    assert "horizn" in capsys.readouterr().err
+
+
 def test_every_command_of_the_parser_has_a_handler():
     import argparse
 

@@ -116,11 +116,12 @@ def _scenario_played(path: str) -> None:
 def _analyze_arm_momentum(args: argparse.Namespace) -> int:
     _scenario_played(args.scenario)
     rows = arm_momentum_study(args.scenario, args.controller, band=args.band, seeds=tuple(range(args.seeds)),
-                              trials=args.trials)
+                              trials=args.trials, config=args.controller_config, io=args.io)
     if args.json:
         printers.print_json([dataclasses.asdict(r) for r in rows])
     else:
-        printers.print_arm_momentum(rows, controller=args.controller, scenario=args.scenario, band=args.band)
+        printers.print_arm_momentum(rows, controller=args.controller, scenario=args.scenario, band=args.band,
+                                    settings=args.controller_config)
     return 0
 
 
@@ -149,7 +150,7 @@ def _bench_sim(args: argparse.Namespace) -> int:
 def _bench_mpc(args: argparse.Namespace) -> int:
     result = bench_mpc(robot_name(args.robot), args.controller, seconds=args.seconds,
                        single_thread=not args.threaded_blas, reference=not args.no_reference,
-                       qp_solver=args.qp_solver, rounds=args.rounds)
+                       qp_solver=args.qp_solver, rounds=args.rounds, config=args.controller_config)
     if args.json:
         printers.print_json(result.as_dict())
     else:

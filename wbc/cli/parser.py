@@ -307,6 +307,7 @@ def _add_analyze_arm_momentum_parser(analyze: _Commands) -> None:
     arm.add_argument("--trials", type=_TRIALS, default=5, help=f"trials per seed, 1..{MAX_TRIALS} (default 5)")
     arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS} (default 1)")
     arm.add_argument("--json", action="store_true", help="print JSON (a list, one object per trial)")
+    add_controller_file_options(arm, repeatable=False)
     arm.set_defaults(handler="analyze arm-momentum")
 
 
@@ -365,6 +366,9 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
     mpc.add_argument("--qp-solver", default="daqp", choices=tuple(QP_SOLVERS),
                      help="the closed loop's QP backend (default daqp; mpc-tail solves its own QP with daqp only); "
                           "the walk's QPs are then solved by every backend and compared")
+    mpc.add_argument("--controller-config", default=None, metavar="FILE.toml",
+                     help="a TOML file whose table a plug-in's factory is called with (e.g. wbc.mpc.config_table:make "
+                          "with an MPC's settings)")
     mpc.set_defaults(handler="bench mpc")
 
 

@@ -153,13 +153,15 @@ def _metres(row: PostureRow) -> str:
     return "fell" if math.isnan(row.height_m) else f"{row.height_m:.3f} ± {row.height_std_m:.3f}"
 
 
-def print_arm_momentum(rows: Sequence[ArmMomentumTrial], *, controller: str, scenario: str, band: str) -> None:
+def print_arm_momentum(rows: Sequence[ArmMomentumTrial], *, controller: str, scenario: str, band: str,
+                       settings: str | None = None) -> None:
     """One line per trial of the arm-momentum study, then the means over the trials that reached a push.
 
     What cannot be measured is said in words, never as nan or 0 %: a band with no push, a controller with no arm
     that moves on its own, the trials left out of the means because they fell before their first push.
     """
-    print(f"arm momentum during push recovery: {controller}, {scenario} band {band}")
+    built = "" if settings is None else f" (settings {settings})"
+    print(f"arm momentum during push recovery: {controller}{built}, {scenario} band {band}")
     print("  seed trial survived  arm travel [rad]  push |r x F| T [N m s]  arm |h| peak [N m s]  arm |h| mean  "
           "bound [N m s]  peak/bound  cos(h, r x F)")
     for r in rows:
@@ -288,8 +290,9 @@ def print_bench_mpc(result: MpcBenchResult) -> None:
     """`bench_mpc`'s figures, and the targets scaled to this machine when the references were measured."""
     ticks = result.ticks
     one_core = result.blas == "single-threaded"  # the spawned worker's; --threaded-blas runs with the default threads
-    print(f"MPC speed: {result.controller} on {result.robot} walking at 0.3 m/s, N = {result.horizon}, QP solver "
-          f"{result.qp_solver}, BLAS {result.blas}")
+    settings = "" if result.controller_config is None else f" (settings {result.controller_config})"
+    print(f"MPC speed: {result.controller}{settings} on {result.robot} walking at 0.3 m/s, N = {result.horizon}, QP "
+          f"solver {result.qp_solver}, BLAS {result.blas}")
     print(_machine_line(result.machine, result.load_1min))
     print(f"  MPC QP solve   : median {ticks.mpc_solve_ms_median:.2f} ms, p99 {ticks.mpc_solve_ms_p99:.2f} ms "
           f"(setup median {ticks.mpc_setup_ms_median:.2f} ms)")

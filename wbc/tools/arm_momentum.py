@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -32,6 +33,7 @@ from wbc.arena.identity import MAX_RUN_TRIALS
 from wbc.arena.sim_trial import run_trial
 from wbc.control.protocol import Controller
 from wbc.control.registry import get_controller
+from wbc.control.spec import ControllerSpec
 from wbc.errors import AnalysisError, ConfigError
 from wbc.hardware.capabilities import TruthSource
 from wbc.hardware.robot import Robot
@@ -168,7 +170,8 @@ class ArmMomentumLog:
 
 
 def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds: tuple[int, ...] = (0,),
-                       trials: int = 5, duration_s: float | None = None) -> list[ArmMomentumTrial]:
+                       trials: int = 5, duration_s: float | None = None, config: str | Path | None = None,
+                       io: str | Path | None = None) -> list[ArmMomentumTrial]:
     """Play `trials` trials per seed of `band` with `controller` and measure the arm's momentum against the pushes.
 
     Args:
@@ -178,6 +181,8 @@ def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds:
         seeds: seeds to play.
         trials: trials per seed.
         duration_s: shortens every trial (default: the scenario's length) [s].
+        config: a plug-in's ``--controller-config`` TOML file (as `get_controller` takes it), read once.
+        io: an ``onnx:PATH`` policy's I/O file (default: beside the model).
 
     Returns:
         One row per trial, in the scenario's trial order.
@@ -192,17 +197,18 @@ def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds:
         raise ConfigError(f"{len(seeds)} seeds x {trials} trials = {len(seeds) * trials:,} trials, more than the "
                           f"{MAX_RUN_TRIALS:,} one run plays; pass fewer --seeds or --trials")
     scenario = load_scenario(scenario_path)
-    get_controller(controller)  # an unknown name fails before the first trial is played
+    # resolved once, before the first trial is played: an unknown name or a bad file fails at once, and a plug-in's
+    # settings table is read once for every trial
+    spec = get_controller(controller, config=config, io=io)
     out = []
     for trial in scenario.trials([band], list(seeds), trials):
         if duration_s is not None:
             trial = dataclasses.replace(trial, duration_s=duration_s)
-        out.append(_study_trial(trial, controller))
+        out.append(_study_trial(trial, controller, spec))
     return out
 
 
-def _study_trial(trial: Trial, controller: str) -> ArmMomentumTrial:
-    spec = get_controller(controller)
+def _study_trial(trial: Trial, controller: str, spec: ControllerSpec) -> ArmMomentumTrial:
     watched = dataclasses.replace(spec, make=lambda desc: WatchedController(spec.make(desc)))
     log = ArmMomentumLog()
     try:

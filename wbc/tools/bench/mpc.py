@@ -13,6 +13,7 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
 
@@ -233,6 +234,7 @@ class MpcBenchResult:
         qp_comparison_skipped: why `qp_solvers` is empty (the tail MPC solves a QP of its own, or the walk made no
             MPC update), or None when the backends were compared.
         rounds: each timed walk with the references around it, in order (`MpcRound`).
+        controller_config: the ``--controller-config`` file the controller was built with, as given, or None.
     """
 
     robot: str
@@ -253,6 +255,7 @@ class MpcBenchResult:
     qp_solvers: tuple[QpSolverFigures, ...] = ()
     rounds: tuple[MpcRound, ...] = ()
     qp_comparison_skipped: str | None = None
+    controller_config: str | None = None
 
     def as_dict(self) -> dict[str, float | str | int | bool | None]:
         """Plain flat dict (the JSON output of ``wbc bench mpc``).
@@ -267,7 +270,7 @@ class MpcBenchResult:
             "walk_physics_share": self.walk_physics_share, "warmup_episode_s": self.warmup_episode_s,
             "fell": self.fell, "blas": self.blas, "qp_solver": self.qp_solver, "machine": self.machine,
             "load_1min": self.load_1min, "rounds": len(self.rounds),
-            "qp_comparison_skipped": self.qp_comparison_skipped}
+            "qp_comparison_skipped": self.qp_comparison_skipped, "controller_config": self.controller_config}
         if self.reference is not None:
             out.update(self.reference.as_dict())
         for figures in self.qp_solvers:
@@ -451,7 +454,7 @@ def _check_tail_qp_solver(factory: object, controller: str, qp_solver: str) -> N
 
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
               single_thread: bool = True, reference: bool = True, qp_solver: str = "daqp",
-              rounds: int = DEFAULT_ROUNDS) -> MpcBenchResult:
+              rounds: int = DEFAULT_ROUNDS, config: str | Path | None = None) -> MpcBenchResult:
     """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
 
     With `single_thread` (the default) it runs in a spawned process whose BLAS is single-threaded, as every arena
@@ -500,12 +503,15 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
             A tail controller (``mpc-tail``) solves its own QP with DAQP: it takes ``daqp`` only, and its result
             holds no comparison (``qp_comparison_skipped`` says why).
         rounds: how many times the timed walk is played (1 to `MAX_ROUNDS`).
+        config: a plug-in's ``--controller-config`` TOML file (e.g. `wbc.mpc.config_table`'s settings of a variant),
+            as `get_controller` takes it.
 
     Returns:
         The figures above with the horizon, whether the robot fell, the BLAS threading and the machine.
 
     Raises:
         UnknownNameError: unknown robot or controller.
+        PluginConfigError: `config` for a controller that is not a plug-in.
         SimulationDiverged: the simulation blew up during the walk (no figure of a blown-up walk is reported).
         BenchError: the controller is not an MPC controller, or a reference failed.
         ConfigError: `qp_solver` is not a QP backend (the message lists them), or is not ``daqp`` for the tail MPC
@@ -517,13 +523,14 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         raise ConfigError(f"--rounds must be a whole number of timed walks from 1 to {MAX_ROUNDS}, got {rounds!r}")
     # the names are checked here, before the worker is spawned: a mistyped name is refused at once, and its message
     # does not depend on the error travelling back from the worker
-    spec = get_controller(controller)
+    spec = get_controller(controller, config=config)
     get_robot(robot, spec.arm_mode)
     _check_tail_qp_solver(getattr(spec.make, "func", spec.make), controller, qp_solver)
     if single_thread:
         with worker_environment(), spawn_pool(1) as pool:
             result = pool.submit(bench_mpc, robot, controller, seconds=seconds, vx=vx, single_thread=False,
-                                 reference=reference, qp_solver=qp_solver, rounds=rounds).result()
+                                 reference=reference, qp_solver=qp_solver, rounds=rounds,
+                                 config=config).result()
         return replace(result, blas="single-threaded")
     sim = PhysicsTimedRobot(MujocoRobotConfig(robot=robot, arm_mode=spec.arm_mode))
     ctrl = spec.make(sim.desc)
@@ -613,6 +620,7 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     elif not qps.qps:
         skipped = "the walk made no MPC update whose QP could be kept"
     return MpcBenchResult(robot=robot, controller=controller, horizon=int(ctrl.config.mpc.horizon), ticks=figures,
+                          controller_config=None if config is None else str(config),
                           realtime_factor=realtime,
                           cpu_realtime_factor=median([r.cpu_realtime_factor for r in timed_rounds]),
                           walk_physics_realtime_factor=median([r.walk_physics_realtime_factor for r in timed_rounds]),
