@@ -8,6 +8,7 @@ the run time are printed, and ``paper.txt`` holds exactly what was printed. The 
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import json
 import os
@@ -20,6 +21,7 @@ import pytest
 
 from wbc.arena.results import LOCK_FILE
 from wbc.arena.summary import PairSummary
+from wbc.arena.verdict import p_clause
 from wbc.cli.main import main
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
@@ -315,8 +317,8 @@ def test_verdicts_name_the_better_side_only_when_the_test_says_so():
                            n=10, mean_a=None, mean_b=None, test="exact McNemar", p=p, n80=n80, a_only=None,
                            b_only=None)
 
-    assert verdict(pair("success_rate", 0.2, 0.01)) == "Success: pi3 better (+20.00 points, p = 0.01)"
-    assert verdict(pair("vlin_err", 0.02, 0.001)) == "V_lin err: pi2 better (+0.020, p = 0.001)"
+    assert verdict(pair("success_rate", 0.2, 0.01)) == "Success: pi3 better (pi3 - pi2 = +20.00 points, p = 0.01)"
+    assert verdict(pair("vlin_err", 0.02, 0.001)) == "V_lin err: pi2 better (pi2 - pi3 = -0.020 m/s, p = 0.001)"
     assert verdict(pair("success_rate", 0.05, 0.5)) == (
         "Success: no significant difference (p = 0.5; 42 pairs would detect the observed difference)")
     assert verdict(pair("ttf", 0.0, 1.0, n80=None)) == "TTF: no significant difference (p = 1)"
@@ -346,6 +348,53 @@ def test_the_paired_tests_of_tracking_use_the_common_window():
     assert TABLES["table2"].paired_metrics == ("success_rate", "vang_err_common", "vlin_err_common")
     assert TABLES["table3"].paired_metrics == ("success_rate", "ttf", "vlin_err_common")
     assert TABLES["table1"].metrics == ("success_rate", "ttf", "vlin_err")  # the cells: the paper's own time
+
+
+def _pair(metric, diff, p, *, a="mpc", b="pi3"):
+    test = "exact McNemar" if metric == "success_rate" else "Wilcoxon signed-rank"
+    return PairSummary(a=a, b=b, band="in", metric=metric, diff=diff, ci95=(None, None), interval=None, n=40,
+                       mean_a=None, mean_b=None, test=test, p=p, n80=None, a_only=None, b_only=None)
+
+
+def _said_difference(text):
+    """The side a verdict names better, and the difference it writes: (better, minuend, subtrahend, signed value)."""
+    found = re.fullmatch(r"[^:]+: (\S+) better \((\S+) - (\S+) = ([+-][\d.e+-]+)(?: points| m/s)?, p [=<] .+\)", text)
+    assert found, text
+    return found.group(1), found.group(2), found.group(3), float(found.group(4))
+
+
+@pytest.mark.parametrize("diff", [-0.175, 0.175])
+def test_a_success_verdicts_sign_agrees_with_the_side_it_calls_better(diff):
+    # B - A = -17.5 points with A = mpc: mpc survives more, and its lead is written as a positive mpc - pi3
+    said = verdict(_pair("success_rate", diff, 0.02))
+    better, first, second, value = _said_difference(said)
+    assert better == first == ("pi3" if diff > 0 else "mpc") and second == ("mpc" if diff > 0 else "pi3")
+    assert value == pytest.approx(17.5)
+    assert said == f"Success: {better} better ({better} - {second} = +17.50 points, p = 0.02)"
+
+
+@pytest.mark.parametrize("diff", [-0.027, 0.027])
+def test_an_error_verdicts_sign_agrees_with_the_side_it_calls_better(diff):
+    # a smaller error is better: the better side's error minus the other's is negative
+    said = verdict(_pair("vlin_err_common", diff, 3e-5))
+    better, first, second, value = _said_difference(said)
+    assert better == first == ("mpc" if diff > 0 else "pi3") and second == ("pi3" if diff > 0 else "mpc")
+    assert value == pytest.approx(-0.027)
+    assert said == f"V_lin err, common: {better} better ({better} - {second} = -0.027 m/s, p < 1e-4)"
+
+
+def test_a_split_verdict_names_the_sides_of_its_mean_difference():
+    entry = dataclasses.replace(_pair("ttf", 0.036, 0.0002, a="pi2", b="pi3"), rank_biserial=-0.82, shift=-0.01)
+    assert verdict(entry) == ("TTF: neither called better (p = 0.0002; the pairs' ranks favour pi2, the mean "
+                              "difference (pi3 - pi2 = +0.036) favours pi3)")
+
+
+def test_a_verdict_writes_its_p_value_as_the_arenas_verdicts_do():
+    assert [p_clause(p) for p in (3e-5, 1e-4, 0.0156, None)] == ["p < 1e-4", "p = 0.0001", "p = 0.0156", "p = n/a"]
+    for entry in (_pair("vlin_err_common", 0.027, 3e-5), _pair("success_rate", 0.0, 3e-5)):
+        said = verdict(entry)
+        assert "p < 1e-4" in said and "p = <" not in said and "<1e-04" not in said
+    assert "(p = 0.5;" in verdict(_pair("success_rate", 0.05, 0.5))
 
 
 def test_a_verdict_from_one_pair_says_that_one_pair_cannot_size_the_test():
