@@ -397,6 +397,28 @@ def test_a_verdict_writes_its_p_value_as_the_arenas_verdicts_do():
     assert "(p = 0.5;" in verdict(_pair("success_rate", 0.05, 0.5))
 
 
+def test_the_papers_numbers_are_printed_with_the_papers_own_digits():
+    def paper_row(name, metric, row):
+        spec = TABLES[name]
+        result = SimpleNamespace(spec=spec, contenders=(), bands=spec.paper_columns,
+                                 band_columns=tuple(range(len(spec.paper_columns))),
+                                 summary=SimpleNamespace(cell=lambda controller, band: None))
+        lines = [[cell.strip() for cell in line.split("  ") if cell.strip()] for line in _metric_block(result, metric)]
+        return next(line[2:] for line in lines if line[:2] == [row, "paper"])
+
+    # the paper gives TTF and Table I's errors a std of two decimals: no third digit it never gave
+    assert paper_row("table1", "ttf", "No arm") == ["0.975 ± 0.00", "0.809 ± 0.01"]
+    assert paper_row("table1", "vlin_err", "Actuated") == ["0.027 ± 0.00", "0.120 ± 0.02"]
+    assert paper_row("table1", "success_rate", "Actuated") == ["96.11 ± 0.37", "78.20 ± 1.77"]
+    assert paper_row("table2", "vang_err", "Locked") == ["0.234 ± 0.012", "0.228 ± 0.010", "0.226 ± 0.008"]
+    assert paper_row("table3", "ttf", "Ours") == ["0.975", "0.916"]
+    # the values behind the digits, in the arena's units (success as a fraction)
+    actuated = TABLE_I["Actuated"]
+    assert (actuated["ttf"][0].mean, actuated["ttf"][0].std) == (0.982, 0.0)
+    assert (actuated["success_rate"][1].mean, actuated["success_rate"][1].std) == (0.782, 0.0177)
+    assert TABLES["table3"].paper["Ours"]["ttf"][1].std is None
+
+
 def test_a_verdict_from_one_pair_says_that_one_pair_cannot_size_the_test():
     one = PairSummary(a="pi2", b="pi3", band="in", metric="ttf", diff=1.5, ci95=(None, None), interval=None, n=1,
                       mean_a=None, mean_b=None, test="Wilcoxon signed-rank", p=1.0, n80=None, a_only=None, b_only=None)

@@ -25,7 +25,7 @@ import textwrap
 from collections.abc import Sequence
 
 from wbc.arena.breakdown import breakdown_tables
-from wbc.arena.report import LABELS, cell_text, n80_text, number_text, p_text, resumed_note, signed_text
+from wbc.arena.report import LABELS, cell_text, n80_text, p_text, resumed_note, signed_text
 from wbc.arena.summary import PairSummary
 from wbc.arena.verdict import LOWER_IS_BETTER, called_better, leans, p_clause, split
 from wbc.tools.paper.paper_numbers import PaperValue
@@ -52,11 +52,9 @@ def _wrap(text: str, indent: str = "") -> list[str]:
     return textwrap.wrap(text, width=_WIDTH, initial_indent=indent, subsequent_indent=indent + "  ")
 
 
-def _paper_cell(value: PaperValue | None, metric: str) -> str:
-    if value is None:
-        return "-"
-    mean = number_text(value.mean, metric)
-    return mean if value.std is None else f"{mean} ± {number_text(value.std, metric)}"
+def _paper_cell(value: PaperValue | None) -> str:
+    # the paper's digits, not ours: its precision is its own (0.975 ± 0.00, not ± 0.000)
+    return "-" if value is None else value.text
 
 
 def _difference(entry: PairSummary, first: str, metric: str) -> str:
@@ -114,7 +112,7 @@ def _metric_block(result: PaperTableResult, metric: str) -> list[str]:
     extra = [c.row for c in result.contenders if c.row not in spec.paper]
     for paper_row in (*spec.paper, *dict.fromkeys(extra)):
         cells = spec.paper[paper_row].get(metric, ()) if paper_row in spec.paper else ()
-        rows.append([paper_row, "paper", *(_paper_cell(cells[i] if i is not None and i < len(cells) else None, metric)
+        rows.append([paper_row, "paper", *(_paper_cell(cells[i] if i is not None and i < len(cells) else None)
                                            for i in result.band_columns)])
         for contender in (c for c in result.contenders if c.row == paper_row):
             name = display_name(contender)
