@@ -30,7 +30,7 @@ from wbc.scenario import check_published, load_scenario
 from wbc.tools.paper import TABLE_I, TABLES, PaperRunConfig, resolve_contenders, run_paper_table, verdict
 from wbc.tools.paper.format import _metric_block
 from wbc.tools.paper.paper_table import PAPER_TRIALS_PER_BAND
-from wbc.tools.paper.result import warm_trial_wall_s
+from wbc.tools.paper.result import PaperTableResult, warm_trial_wall_s
 from wbc.tools.paper.tables import paper_column
 
 paper_table = importlib.import_module("wbc.tools.paper.paper_table")  # the module (the package re-exports names)
@@ -129,6 +129,11 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
     # our rows too, as summary.json holds them: what the table prints beside the paper's (it held the paper's only)
     assert saved["ours"] == json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert set(saved["ours"]["controllers"]) == {c["controller"] for c in saved["contenders"]}
+    # the n behind each side's figures: the paper's protocol beside its numbers, each of our cells' trials and seeds
+    assert saved["paper_protocol"] == {"seeds": 5, "trials": 2000, "trials_per_seed": 400, "duration_s": 20.0,
+                                       "note": ""}
+    cell = saved["ours"]["controllers"]["learned"]["bands"]["in"]
+    assert (cell["trials"], cell["seeds"], saved["trials"], saved["seeds"]) == (1, 1, 1, [0])
     # resuming the finished run plays nothing and prints the same table but for the run line
     assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
                  "--workers", "1", "--quiet", "--resume"]) == 0
@@ -417,6 +422,31 @@ def test_the_papers_numbers_are_printed_with_the_papers_own_digits():
     assert (actuated["ttf"][0].mean, actuated["ttf"][0].std) == (0.982, 0.0)
     assert (actuated["success_rate"][1].mean, actuated["success_rate"][1].std) == (0.782, 0.0177)
     assert TABLES["table3"].paper["Ours"]["ttf"][1].std is None
+
+
+def _result(name):
+    spec = TABLES[name]
+    return PaperTableResult(spec=spec, contenders=spec.contenders, scenario={}, bands=("in", "ood"),
+                            band_columns=(0, 1), trials=4, seeds=(0, 1), summary=SimpleNamespace(to_json=dict),
+                            comparisons=(), failures={}, curve={}, trial_wall_s={}, warm_wall_s={},
+                            out_dir=Path("runs/x"), played=0, wall_s=0.0, workers=1)
+
+
+def test_paper_json_holds_the_papers_n_beside_its_numbers():
+    saved = json.loads(json.dumps(_result("table1").as_dict()))
+    assert saved["paper_protocol"] == {"seeds": 5, "trials": 2000, "trials_per_seed": 400, "duration_s": 20.0,
+                                       "note": ""}
+    assert saved["paper"]["No arm"]["ttf"][0] == {"mean": 0.975, "std": 0.0, "printed": "0.975 ± 0.00"}
+    assert saved["paper"]["No arm"]["success_rate"][0] == {"mean": 0.9502, "std": 0.0062, "printed": "95.02 ± 0.62"}
+    table3 = json.loads(json.dumps(_result("table3").as_dict()))
+    assert table3["paper_protocol"] == {"seeds": None, "trials": 2000, "trials_per_seed": None, "duration_s": 20.0,
+                                        "note": "half standing, half at 0.3 m/s"}
+    assert table3["paper"]["Ours"]["success_rate"][1] == {"mean": 0.8473, "std": None, "printed": "84.73"}
+    # the header says the same protocol as before
+    assert [TABLES[t].paper_protocol.text for t in ("table1", "table2", "table3")] == [
+        "5 seeds, 2000 trials, 20 s each",
+        "5 seeds, 2000 trials, 20 s each; yaw rate 0.5 rad/s in half the trials, 2 rad/s in the rest",
+        "2000 trials, 20 s each; half standing, half at 0.3 m/s"]
 
 
 def test_a_verdict_from_one_pair_says_that_one_pair_cannot_size_the_test():

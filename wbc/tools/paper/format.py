@@ -216,7 +216,7 @@ def format_paper_table(result: PaperTableResult) -> str:
                    + ("mean [95 % interval over trials: Wilson for success, bootstrap otherwise]" if one_seed else
                       "mean ± std over seeds (each seed's trials averaged first: the spread of the seeds' means, "
                       "not the mean's uncertainty), success with its Wilson 95 % interval over all the trials")
-                   + f". Paper: {spec.paper_protocol}; cells: mean ± std over seeds where it gives one.")
+                   + f". Paper: {spec.paper_protocol.text}; cells: mean ± std over seeds where it gives one.")
     for c in result.contenders:
         if c.controller is None:
             lines += _wrap(f"missing: {c.row} ({c.key}): {c.note}")

@@ -14,8 +14,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from decimal import Decimal
+from typing import Any
 
-__all__ = ["PaperValue", "TABLE_I", "TABLE_II", "TABLE_III"]
+__all__ = ["PROTOCOL_I", "PROTOCOL_II", "PROTOCOL_III", "PaperProtocol", "PaperValue", "TABLE_I", "TABLE_II",
+           "TABLE_III"]
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -55,6 +57,39 @@ class PaperValue:
         return self.mean_text if self.std_text is None else f"{self.mean_text} ± {self.std_text}"
 
 
+@dataclass(frozen=True, kw_only=True)
+class PaperProtocol:
+    """How the paper evaluated a table: the n behind its numbers.
+
+    Attributes:
+        trials: trials per column (band) and contender, over all its seeds.
+        seeds: the seeds they were spread over; None where the paper does not say (Table III).
+        duration_s: each trial's length [s].
+        note: what else the paper says of the trials ("" for nothing).
+    """
+
+    trials: int
+    seeds: int | None
+    duration_s: float
+    note: str = ""
+
+    @property
+    def trials_per_seed(self) -> int | None:
+        """Trials per column, contender and seed (``--trials`` for the paper's protocol); None without seeds."""
+        return None if self.seeds is None else self.trials // self.seeds
+
+    @property
+    def text(self) -> str:
+        """As the printed header says it: ``5 seeds, 2000 trials, 20 s each``, then the note."""
+        seeds = f"{self.seeds} seeds, " if self.seeds is not None else ""
+        return f"{seeds}{self.trials} trials, {self.duration_s:g} s each" + (f"; {self.note}" if self.note else "")
+
+    def to_json(self) -> dict[str, Any]:
+        """``paper.json``'s ``paper_protocol``: ``{"seeds", "trials", "trials_per_seed", "duration_s", "note"}``."""
+        return {"seeds": self.seeds, "trials": self.trials, "trials_per_seed": self.trials_per_seed,
+                "duration_s": self.duration_s, "note": self.note}
+
+
 def _row(**cells: tuple[tuple[str, str | None], ...]) -> dict[str, tuple[PaperValue, ...]]:
     # success is printed in percent, as the paper prints it
     return {metric: tuple(PaperValue(mean_text=m, std_text=s, percent=metric == "success_rate") for m, s in values)
@@ -71,6 +106,9 @@ TABLE_I: dict[str, dict[str, tuple[PaperValue, ...]]] = {
 }
 """Table I, locomotion under pushes (A1 + WX200): arm setting -> metric -> (200-300, 300-400)."""
 
+PROTOCOL_I = PaperProtocol(seeds=5, trials=2000, duration_s=20.0)
+"""Table I's protocol."""
+
 TABLE_II: dict[str, dict[str, tuple[PaperValue, ...]]] = {
     "No arm": _row(success_rate=(("90.29", "0.46"), ("89.14", "0.70"), ("86.48", "0.85")),
                    vang_err=(("0.332", "0.023"), ("0.300", "0.019"), ("0.291", "0.017")),
@@ -83,6 +121,10 @@ TABLE_II: dict[str, dict[str, tuple[PaperValue, ...]]] = {
                      vlin_err=(("0.010", "0.001"), ("0.015", "0.001"), ("0.024", "0.001"))),
 }
 """Table II, high-speed turns (Go1 + arm): arm setting -> metric -> (1, 1.25, 1.5 m/s)."""
+
+PROTOCOL_II = PaperProtocol(seeds=5, trials=2000, duration_s=20.0,
+                            note="yaw rate 0.5 rad/s in half the trials, 2 rad/s in the rest")
+"""Table II's protocol."""
 
 TABLE_III: dict[str, dict[str, tuple[PaperValue, ...]]] = {
     "PPO": _row(success_rate=(("64.43", None), ("23.10", None)), ttf=(("0.770", None), ("0.405", None)),
@@ -100,3 +142,6 @@ TABLE_III: dict[str, dict[str, tuple[PaperValue, ...]]] = {
                  vlin_err=(("0.021", None), ("0.081", None))),
 }
 """Table III, the staged method against its baselines under pushes: policy -> metric -> (200-300, 300-400)."""
+
+PROTOCOL_III = PaperProtocol(seeds=None, trials=2000, duration_s=20.0, note="half standing, half at 0.3 m/s")
+"""Table III's protocol: the paper gives no seeds for it, and means only."""
