@@ -449,6 +449,18 @@ def test_paper_json_holds_the_papers_n_beside_its_numbers():
         "2000 trials, 20 s each; half standing, half at 0.3 m/s"]
 
 
+def test_the_table_headings_hold_for_the_papers_rows_and_ours():
+    spec = TABLES["table1"]
+    contenders = tuple(c for c in spec.contenders if c.key in ("learned", "mpc"))
+    result = SimpleNamespace(spec=spec, contenders=contenders, bands=("in", "ood"), band_columns=(0, 1),
+                             summary=SimpleNamespace(cell=lambda controller, band: None))
+    lines = [[cell.strip() for cell in line.split("  ") if cell.strip()] for line in _metric_block(result, "ttf")]
+    assert lines[1] == ["row", "paper / ours", "in (paper 200-300)", "ood (paper 300-400)"]
+    actuated = lines.index(["Actuated", "paper", "0.982 ± 0.00", "0.875 ± 0.01"])
+    # under "paper / ours": the paper's line says paper, ours name their controller
+    assert lines[actuated + 1] == ["learned (pi3)", "n/a", "n/a"] and lines[actuated + 2] == ["mpc", "n/a", "n/a"]
+
+
 def test_a_verdict_from_one_pair_says_that_one_pair_cannot_size_the_test():
     one = PairSummary(a="pi2", b="pi3", band="in", metric="ttf", diff=1.5, ci95=(None, None), interval=None, n=1,
                       mean_a=None, mean_b=None, test="Wilcoxon signed-rank", p=1.0, n80=None, a_only=None, b_only=None)
@@ -541,8 +553,8 @@ def test_a_band_stands_beside_the_paper_column_that_commands_what_it_does():
         return [[cell.strip() for cell in line if cell.strip()] for line in lines]
 
     both = cells(block(("stand", "1.0", "1.5", "2.0"), columns["scenarios/turn-both-ways.toml"]))
-    assert both[1] == ["paper row", "ours", "stand", "1.0 (paper 1)", "1.5 (paper 1.5)", "2.0"]
+    assert both[1] == ["row", "paper / ours", "stand", "1.0 (paper 1)", "1.5 (paper 1.5)", "2.0"]
     assert both[3] == ["No arm", "paper", "-", "90.29 ± 0.46", "86.48 ± 0.85", "-"]
     turn = cells(block(("1.0", "1.25", "1.5"), columns["scenarios/turn.toml"]))
-    assert turn[1] == ["paper row", "ours", "1.0 (paper 1)", "1.25 (paper 1.25)", "1.5 (paper 1.5)"]
+    assert turn[1] == ["row", "paper / ours", "1.0 (paper 1)", "1.25 (paper 1.25)", "1.5 (paper 1.5)"]
     assert turn[3] == ["No arm", "paper", "90.29 ± 0.46", "89.14 ± 0.70", "86.48 ± 0.85"]

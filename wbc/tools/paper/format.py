@@ -105,8 +105,9 @@ def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
 
 def _metric_block(result: PaperTableResult, metric: str) -> list[str]:
     spec, summary = result.spec, result.summary
-    header = ["paper row", "ours", *(f"{band} (paper {col})" if col else band
-                                     for band, col in _band_columns(result))]
+    # the first column names the paper's row (ours stand beneath it), the second whose figures a line holds
+    header = ["row", "paper / ours", *(f"{band} (paper {col})" if col else band
+                                       for band, col in _band_columns(result))]
     rows: list[list[str]] = []
     # the paper's rows in its order, then rows of ours the paper does not have (its cells: "-")
     extra = [c.row for c in result.contenders if c.row not in spec.paper]
