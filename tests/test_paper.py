@@ -8,6 +8,7 @@ the run time are printed, and ``paper.txt`` holds exactly what was printed. The 
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 import json
 import os
@@ -20,6 +21,7 @@ import pytest
 
 from wbc.arena.results import LOCK_FILE
 from wbc.arena.summary import PairSummary
+from wbc.arena.verdict import p_clause
 from wbc.cli.main import main
 from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
@@ -28,7 +30,7 @@ from wbc.scenario import check_published, load_scenario
 from wbc.tools.paper import TABLE_I, TABLES, PaperRunConfig, resolve_contenders, run_paper_table, verdict
 from wbc.tools.paper.format import _metric_block
 from wbc.tools.paper.paper_table import PAPER_TRIALS_PER_BAND
-from wbc.tools.paper.result import warm_trial_wall_s
+from wbc.tools.paper.result import PaperTableResult, warm_trial_wall_s
 from wbc.tools.paper.tables import paper_column
 
 paper_table = importlib.import_module("wbc.tools.paper.paper_table")  # the module (the package re-exports names)
@@ -127,6 +129,11 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
     # our rows too, as summary.json holds them: what the table prints beside the paper's (it held the paper's only)
     assert saved["ours"] == json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert set(saved["ours"]["controllers"]) == {c["controller"] for c in saved["contenders"]}
+    # the n behind each side's figures: the paper's protocol beside its numbers, each of our cells' trials and seeds
+    assert saved["paper_protocol"] == {"seeds": 5, "trials": 2000, "trials_per_seed": 400, "duration_s": 20.0,
+                                       "note": ""}
+    cell = saved["ours"]["controllers"]["learned"]["bands"]["in"]
+    assert (cell["trials"], cell["seeds"], saved["trials"], saved["seeds"]) == (1, 1, 1, [0])
     # resuming the finished run plays nothing and prints the same table but for the run line
     assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
                  "--workers", "1", "--quiet", "--resume"]) == 0
@@ -315,8 +322,8 @@ def test_verdicts_name_the_better_side_only_when_the_test_says_so():
                            n=10, mean_a=None, mean_b=None, test="exact McNemar", p=p, n80=n80, a_only=None,
                            b_only=None)
 
-    assert verdict(pair("success_rate", 0.2, 0.01)) == "Success: pi3 better (+20.00 points, p = 0.01)"
-    assert verdict(pair("vlin_err", 0.02, 0.001)) == "V_lin err: pi2 better (+0.020, p = 0.001)"
+    assert verdict(pair("success_rate", 0.2, 0.01)) == "Success: pi3 better (pi3 - pi2 = +20.00 points, p = 0.01)"
+    assert verdict(pair("vlin_err", 0.02, 0.001)) == "V_lin err: pi2 better (pi2 - pi3 = -0.020 m/s, p = 0.001)"
     assert verdict(pair("success_rate", 0.05, 0.5)) == (
         "Success: no significant difference (p = 0.5; 42 pairs would detect the observed difference)")
     assert verdict(pair("ttf", 0.0, 1.0, n80=None)) == "TTF: no significant difference (p = 1)"
@@ -346,6 +353,112 @@ def test_the_paired_tests_of_tracking_use_the_common_window():
     assert TABLES["table2"].paired_metrics == ("success_rate", "vang_err_common", "vlin_err_common")
     assert TABLES["table3"].paired_metrics == ("success_rate", "ttf", "vlin_err_common")
     assert TABLES["table1"].metrics == ("success_rate", "ttf", "vlin_err")  # the cells: the paper's own time
+
+
+def _pair(metric, diff, p, *, a="mpc", b="pi3"):
+    test = "exact McNemar" if metric == "success_rate" else "Wilcoxon signed-rank"
+    return PairSummary(a=a, b=b, band="in", metric=metric, diff=diff, ci95=(None, None), interval=None, n=40,
+                       mean_a=None, mean_b=None, test=test, p=p, n80=None, a_only=None, b_only=None)
+
+
+def _said_difference(text):
+    """The side a verdict names better, and the difference it writes: (better, minuend, subtrahend, signed value)."""
+    found = re.fullmatch(r"[^:]+: (\S+) better \((\S+) - (\S+) = ([+-][\d.e+-]+)(?: points| m/s)?, p [=<] .+\)", text)
+    assert found, text
+    return found.group(1), found.group(2), found.group(3), float(found.group(4))
+
+
+@pytest.mark.parametrize("diff", [-0.175, 0.175])
+def test_a_success_verdicts_sign_agrees_with_the_side_it_calls_better(diff):
+    # B - A = -17.5 points with A = mpc: mpc survives more, and its lead is written as a positive mpc - pi3
+    said = verdict(_pair("success_rate", diff, 0.02))
+    better, first, second, value = _said_difference(said)
+    assert better == first == ("pi3" if diff > 0 else "mpc") and second == ("mpc" if diff > 0 else "pi3")
+    assert value == pytest.approx(17.5)
+    assert said == f"Success: {better} better ({better} - {second} = +17.50 points, p = 0.02)"
+
+
+@pytest.mark.parametrize("diff", [-0.027, 0.027])
+def test_an_error_verdicts_sign_agrees_with_the_side_it_calls_better(diff):
+    # a smaller error is better: the better side's error minus the other's is negative
+    said = verdict(_pair("vlin_err_common", diff, 3e-5))
+    better, first, second, value = _said_difference(said)
+    assert better == first == ("mpc" if diff > 0 else "pi3") and second == ("pi3" if diff > 0 else "mpc")
+    assert value == pytest.approx(-0.027)
+    assert said == f"V_lin err, common: {better} better ({better} - {second} = -0.027 m/s, p < 1e-4)"
+
+
+def test_a_split_verdict_names_the_sides_of_its_mean_difference():
+    entry = dataclasses.replace(_pair("ttf", 0.036, 0.0002, a="pi2", b="pi3"), rank_biserial=-0.82, shift=-0.01)
+    assert verdict(entry) == ("TTF: neither called better (p = 0.0002; the pairs' ranks favour pi2, the mean "
+                              "difference (pi3 - pi2 = +0.036) favours pi3)")
+
+
+def test_a_verdict_writes_its_p_value_as_the_arenas_verdicts_do():
+    assert [p_clause(p) for p in (3e-5, 1e-4, 0.0156, None)] == ["p < 1e-4", "p = 0.0001", "p = 0.0156", "p = n/a"]
+    for entry in (_pair("vlin_err_common", 0.027, 3e-5), _pair("success_rate", 0.0, 3e-5)):
+        said = verdict(entry)
+        assert "p < 1e-4" in said and "p = <" not in said and "<1e-04" not in said
+    assert "(p = 0.5;" in verdict(_pair("success_rate", 0.05, 0.5))
+
+
+def test_the_papers_numbers_are_printed_with_the_papers_own_digits():
+    def paper_row(name, metric, row):
+        spec = TABLES[name]
+        result = SimpleNamespace(spec=spec, contenders=(), bands=spec.paper_columns,
+                                 band_columns=tuple(range(len(spec.paper_columns))),
+                                 summary=SimpleNamespace(cell=lambda controller, band: None))
+        lines = [[cell.strip() for cell in line.split("  ") if cell.strip()] for line in _metric_block(result, metric)]
+        return next(line[2:] for line in lines if line[:2] == [row, "paper"])
+
+    # the paper gives TTF and Table I's errors a std of two decimals: no third digit it never gave
+    assert paper_row("table1", "ttf", "No arm") == ["0.975 ± 0.00", "0.809 ± 0.01"]
+    assert paper_row("table1", "vlin_err", "Actuated") == ["0.027 ± 0.00", "0.120 ± 0.02"]
+    assert paper_row("table1", "success_rate", "Actuated") == ["96.11 ± 0.37", "78.20 ± 1.77"]
+    assert paper_row("table2", "vang_err", "Locked") == ["0.234 ± 0.012", "0.228 ± 0.010", "0.226 ± 0.008"]
+    assert paper_row("table3", "ttf", "Ours") == ["0.975", "0.916"]
+    # the values behind the digits, in the arena's units (success as a fraction)
+    actuated = TABLE_I["Actuated"]
+    assert (actuated["ttf"][0].mean, actuated["ttf"][0].std) == (0.982, 0.0)
+    assert (actuated["success_rate"][1].mean, actuated["success_rate"][1].std) == (0.782, 0.0177)
+    assert TABLES["table3"].paper["Ours"]["ttf"][1].std is None
+
+
+def _result(name):
+    spec = TABLES[name]
+    return PaperTableResult(spec=spec, contenders=spec.contenders, scenario={}, bands=("in", "ood"),
+                            band_columns=(0, 1), trials=4, seeds=(0, 1), summary=SimpleNamespace(to_json=dict),
+                            comparisons=(), failures={}, curve={}, trial_wall_s={}, warm_wall_s={},
+                            out_dir=Path("runs/x"), played=0, wall_s=0.0, workers=1)
+
+
+def test_paper_json_holds_the_papers_n_beside_its_numbers():
+    saved = json.loads(json.dumps(_result("table1").as_dict()))
+    assert saved["paper_protocol"] == {"seeds": 5, "trials": 2000, "trials_per_seed": 400, "duration_s": 20.0,
+                                       "note": ""}
+    assert saved["paper"]["No arm"]["ttf"][0] == {"mean": 0.975, "std": 0.0, "printed": "0.975 ± 0.00"}
+    assert saved["paper"]["No arm"]["success_rate"][0] == {"mean": 0.9502, "std": 0.0062, "printed": "95.02 ± 0.62"}
+    table3 = json.loads(json.dumps(_result("table3").as_dict()))
+    assert table3["paper_protocol"] == {"seeds": None, "trials": 2000, "trials_per_seed": None, "duration_s": 20.0,
+                                        "note": "half standing, half at 0.3 m/s"}
+    assert table3["paper"]["Ours"]["success_rate"][1] == {"mean": 0.8473, "std": None, "printed": "84.73"}
+    # the header says the same protocol as before
+    assert [TABLES[t].paper_protocol.text for t in ("table1", "table2", "table3")] == [
+        "5 seeds, 2000 trials, 20 s each",
+        "5 seeds, 2000 trials, 20 s each; yaw rate 0.5 rad/s in half the trials, 2 rad/s in the rest",
+        "2000 trials, 20 s each; half standing, half at 0.3 m/s"]
+
+
+def test_the_table_headings_hold_for_the_papers_rows_and_ours():
+    spec = TABLES["table1"]
+    contenders = tuple(c for c in spec.contenders if c.key in ("learned", "mpc"))
+    result = SimpleNamespace(spec=spec, contenders=contenders, bands=("in", "ood"), band_columns=(0, 1),
+                             summary=SimpleNamespace(cell=lambda controller, band: None))
+    lines = [[cell.strip() for cell in line.split("  ") if cell.strip()] for line in _metric_block(result, "ttf")]
+    assert lines[1] == ["row", "paper / ours", "in (paper 200-300)", "ood (paper 300-400)"]
+    actuated = lines.index(["Actuated", "paper", "0.982 ± 0.00", "0.875 ± 0.01"])
+    # under "paper / ours": the paper's line says paper, ours name their controller
+    assert lines[actuated + 1] == ["learned (pi3)", "n/a", "n/a"] and lines[actuated + 2] == ["mpc", "n/a", "n/a"]
 
 
 def test_a_verdict_from_one_pair_says_that_one_pair_cannot_size_the_test():
@@ -440,8 +553,8 @@ def test_a_band_stands_beside_the_paper_column_that_commands_what_it_does():
         return [[cell.strip() for cell in line if cell.strip()] for line in lines]
 
     both = cells(block(("stand", "1.0", "1.5", "2.0"), columns["scenarios/turn-both-ways.toml"]))
-    assert both[1] == ["paper row", "ours", "stand", "1.0 (paper 1)", "1.5 (paper 1.5)", "2.0"]
+    assert both[1] == ["row", "paper / ours", "stand", "1.0 (paper 1)", "1.5 (paper 1.5)", "2.0"]
     assert both[3] == ["No arm", "paper", "-", "90.29 ± 0.46", "86.48 ± 0.85", "-"]
     turn = cells(block(("1.0", "1.25", "1.5"), columns["scenarios/turn.toml"]))
-    assert turn[1] == ["paper row", "ours", "1.0 (paper 1)", "1.25 (paper 1.25)", "1.5 (paper 1.5)"]
+    assert turn[1] == ["row", "paper / ours", "1.0 (paper 1)", "1.25 (paper 1.25)", "1.5 (paper 1.5)"]
     assert turn[3] == ["No arm", "paper", "90.29 ± 0.46", "89.14 ± 0.70", "86.48 ± 0.85"]

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from wbc.arena.summary import SIGNIFICANCE, PairSummary, Summary, p_digits
 
-__all__ = ["ALPHA", "LOWER_IS_BETTER", "called_better", "leans", "signed", "split", "verdicts"]
+__all__ = ["ALPHA", "LOWER_IS_BETTER", "called_better", "leans", "p_clause", "signed", "split", "verdicts"]
 
 ALPHA = SIGNIFICANCE
 """The level a difference is called significant at."""
@@ -37,6 +37,14 @@ def _p(p: float | None) -> str:
     if p is None:
         return "n/a"
     return "< 1e-4" if p < 1e-4 else p_digits(p)
+
+
+def p_clause(p: float | None) -> str:
+    """A p-value as a sentence says it: ``p < 1e-4`` below 1e-4, else ``p = 0.0156`` (`p_digits`) or ``p = n/a``.
+
+    The verdicts of the arena and of ``wbc paper`` write it so; a table's p column writes `wbc.arena.report.p_text`.
+    """
+    return f"p {_p(p)}" if p is not None and p < 1e-4 else f"p = {_p(p)}"
 
 
 def _settle(entry: PairSummary, what: str) -> str:
@@ -98,7 +106,7 @@ def called_better(entry: PairSummary, *, higher_is_better: bool, alpha: float = 
 
 def _significance(entry: PairSummary, test: str) -> str:
     p = entry.p
-    said = f"p {_p(p)}" if p is not None and p < 1e-4 else f"p = {_p(p)}"
+    said = p_clause(p)
     if p is not None and p < ALPHA:
         return f"significant ({test} {said})"
     return f"not significant ({test} {said})"

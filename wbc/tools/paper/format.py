@@ -25,9 +25,9 @@ import textwrap
 from collections.abc import Sequence
 
 from wbc.arena.breakdown import breakdown_tables
-from wbc.arena.report import LABELS, cell_text, n80_text, number_text, p_text, resumed_note, signed_text
+from wbc.arena.report import LABELS, cell_text, n80_text, p_text, resumed_note, signed_text
 from wbc.arena.summary import PairSummary
-from wbc.arena.verdict import LOWER_IS_BETTER, called_better, leans, split
+from wbc.arena.verdict import LOWER_IS_BETTER, called_better, leans, p_clause, split
 from wbc.tools.paper.paper_numbers import PaperValue
 from wbc.tools.paper.result import PaperComparison, PaperTableResult
 from wbc.tools.paper.tables import Contender
@@ -52,11 +52,21 @@ def _wrap(text: str, indent: str = "") -> list[str]:
     return textwrap.wrap(text, width=_WIDTH, initial_indent=indent, subsequent_indent=indent + "  ")
 
 
-def _paper_cell(value: PaperValue | None, metric: str) -> str:
-    if value is None:
-        return "-"
-    mean = number_text(value.mean, metric)
-    return mean if value.std is None else f"{mean} ± {number_text(value.std, metric)}"
+def _paper_cell(value: PaperValue | None) -> str:
+    # the paper's digits, not ours: its precision is its own (0.975 ± 0.00, not ± 0.000)
+    return "-" if value is None else value.text
+
+
+def _difference(entry: PairSummary, first: str, metric: str) -> str:
+    """The mean difference as `first` minus the other side, named, in the metric's unit.
+
+    Written from the side a verdict names, so that its sign reads with the word beside it: the side called better
+    on success or TTF is ahead by a positive difference, on a tracking error by a negative one (a smaller error).
+    """
+    other, diff = (entry.a, entry.diff) if first == entry.b else (entry.b, -entry.diff)
+    unit = " points" if metric == "success_rate" else (f" {LABELS[metric].split(' [')[1].rstrip(']')}"
+                                                        if " [" in LABELS[metric] else "")
+    return f"{first} - {other} = {signed_text(diff, metric)}{unit}"
 
 
 def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
@@ -64,43 +74,46 @@ def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
 
     Success and TTF: larger is better; tracking errors: smaller is better. A side is "better" by the arena's rule
     (`wbc.arena.verdict.called_better`): the paired test's p-value is below `alpha` and the test leans to that side,
-    the mean difference not on the other. A significant test whose lean and mean difference disagree calls neither
-    better. Otherwise "no significant difference", with n80 (the pairs that would detect the observed difference with
-    80 % power), or, from one pair of a continuous metric, that one pair cannot tell.
+    the mean difference not on the other. The difference is written as the better side minus the other, both named
+    (``mpc better (mpc - pi3 = +17.50 points, p = 0.02)``; on an error ``mpc - pi3 = -0.027 m/s``), and the p-value
+    as the arena's verdicts write it (`wbc.arena.verdict.p_clause`: ``p < 1e-4`` below 1e-4). A significant test
+    whose lean and mean difference disagree calls neither better. Otherwise "no significant difference", with n80
+    (the pairs that would detect the observed difference with 80 % power), or, from one pair of a continuous metric,
+    that one pair cannot tell.
     """
     metric, p, diff = entry.metric, entry.p, entry.diff
     what = LABELS[metric].split(" [")[0].removesuffix(" %")
     if p is None or diff is None:
         return f"{what}: no pairs"
-    unit = " points" if metric == "success_rate" else ""
     higher_is_better = metric not in LOWER_IS_BETTER
     winner = called_better(entry, higher_is_better=higher_is_better, alpha=alpha)
     if winner is not None:
-        return f"{what}: {winner} better ({signed_text(diff, metric)}{unit}, p = {p_text(p)})"
+        return f"{what}: {winner} better ({_difference(entry, winner, metric)}, {p_clause(p)})"
     if split(entry, alpha=alpha):
         side = leans(entry)
         ranks = ("lean to neither" if not side else
                  f"favour {entry.b if (side > 0) == higher_is_better else entry.a}")
         by_mean = entry.b if (diff > 0) == higher_is_better else entry.a
-        return (f"{what}: neither called better (p = {p_text(p)}; the pairs' ranks {ranks}, the mean difference "
-                f"({signed_text(diff, metric)}{unit}) favours {by_mean})")
+        return (f"{what}: neither called better ({p_clause(p)}; the pairs' ranks {ranks}, the mean difference "
+                f"({_difference(entry, by_mean, metric)}) favours {by_mean})")
     n80 = n80_text(entry)
     need = ("" if n80 == "-" else
             "; one pair shows no spread to tell how many pairs would detect the observed difference" if n80 == "n/a"
             else f"; {n80} pairs would detect the observed difference")
-    return f"{what}: no significant difference (p = {p_text(p)}{need})"
+    return f"{what}: no significant difference ({p_clause(p)}{need})"
 
 
 def _metric_block(result: PaperTableResult, metric: str) -> list[str]:
     spec, summary = result.spec, result.summary
-    header = ["paper row", "ours", *(f"{band} (paper {col})" if col else band
-                                     for band, col in _band_columns(result))]
+    # the first column names the paper's row (ours stand beneath it), the second whose figures a line holds
+    header = ["row", "paper / ours", *(f"{band} (paper {col})" if col else band
+                                       for band, col in _band_columns(result))]
     rows: list[list[str]] = []
     # the paper's rows in its order, then rows of ours the paper does not have (its cells: "-")
     extra = [c.row for c in result.contenders if c.row not in spec.paper]
     for paper_row in (*spec.paper, *dict.fromkeys(extra)):
         cells = spec.paper[paper_row].get(metric, ()) if paper_row in spec.paper else ()
-        rows.append([paper_row, "paper", *(_paper_cell(cells[i] if i is not None and i < len(cells) else None, metric)
+        rows.append([paper_row, "paper", *(_paper_cell(cells[i] if i is not None and i < len(cells) else None)
                                            for i in result.band_columns)])
         for contender in (c for c in result.contenders if c.row == paper_row):
             name = display_name(contender)
@@ -204,7 +217,7 @@ def format_paper_table(result: PaperTableResult) -> str:
                    + ("mean [95 % interval over trials: Wilson for success, bootstrap otherwise]" if one_seed else
                       "mean ± std over seeds (each seed's trials averaged first: the spread of the seeds' means, "
                       "not the mean's uncertainty), success with its Wilson 95 % interval over all the trials")
-                   + f". Paper: {spec.paper_protocol}; cells: mean ± std over seeds where it gives one.")
+                   + f". Paper: {spec.paper_protocol.text}; cells: mean ± std over seeds where it gives one.")
     for c in result.contenders:
         if c.controller is None:
             lines += _wrap(f"missing: {c.row} ({c.key}): {c.note}")

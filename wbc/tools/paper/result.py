@@ -139,9 +139,13 @@ class PaperTableResult:
             "trial_wall_s": self.trial_wall_s, "warm_wall_s": self.warm_wall_s, "wall_s": self.wall_s,
             "played": self.played, "stored": self.stored,
             "workers": self.workers, "paper_protocol_cpu_h": self.paper_protocol_cpu_h,
-            "paper": {row: {m: [{"mean": v.mean, "std": v.std} for v in values] for m, values in cells.items()}
+            # the paper's n beside its figures, and each figure as the paper prints it (its precision; success in %)
+            "paper_protocol": self.spec.paper_protocol.to_json(),
+            "paper": {row: {m: [{"mean": v.mean, "std": v.std, "printed": v.text} for v in values]
+                            for m, values in cells.items()}
                       for row, cells in self.spec.paper.items()},
-            # our rows, by controller (the contenders map their keys to it): summary.json's form, the table's cells,
-            # the failing controllers (``controller_errors``) among them, so that a script reads what the table shows
+            # our rows, by controller (the contenders map their keys to it): summary.json's form, the table's cells
+            # with each cell's n (``trials``, ``seeds``), the failing controllers (``controller_errors``) among them,
+            # so that a script reads what the table shows
             "ours": self.summary.to_json(),
         }

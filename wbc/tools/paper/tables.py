@@ -33,7 +33,16 @@ from typing import Any
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.stages import BASELINES
-from wbc.tools.paper.paper_numbers import TABLE_I, TABLE_II, TABLE_III, PaperValue
+from wbc.tools.paper.paper_numbers import (
+    PROTOCOL_I,
+    PROTOCOL_II,
+    PROTOCOL_III,
+    TABLE_I,
+    TABLE_II,
+    TABLE_III,
+    PaperProtocol,
+    PaperValue,
+)
 
 __all__ = ["PAIRED_TRACKING", "Contender", "Contrast", "PaperTableSpec", "TABLES", "paper_column", "resolve_contenders"]
 
@@ -97,7 +106,7 @@ class PaperTableSpec:
         crouched_contenders: the same rows with the learned ones' crouched posture variants (``--crouched``: as first
             trained, without the posture term).
         contrasts: the paired comparisons printed under the table, on `paired_metrics`.
-        paper_protocol: how the paper evaluated it (seeds, trials, episode length).
+        paper_protocol: how the paper evaluated it (seeds, trials, episode length): the n behind `paper`.
     """
 
     name: str
@@ -111,7 +120,7 @@ class PaperTableSpec:
     contenders: tuple[Contender, ...]
     crouched_contenders: tuple[Contender, ...]
     contrasts: tuple[Contrast, ...]
-    paper_protocol: str
+    paper_protocol: PaperProtocol
 
     @property
     def paired_metrics(self) -> tuple[str, ...]:
@@ -215,7 +224,7 @@ TABLES: dict[str, PaperTableSpec] = {
         paper_columns=("200-300", "300-400"), paper_bands=_PUSH_BANDS, paper=TABLE_I, contenders=_arm_rows(),
         crouched_contenders=_arm_rows(crouched=True),
         contrasts=_ARM_CONTRASTS,
-        paper_protocol="5 seeds, 2000 trials, 20 s each"),
+        paper_protocol=PROTOCOL_I),
     "table2": PaperTableSpec(
         name="table2", title="Table II: high-speed turns, arm actuated / locked / absent",
         scenario="scenarios/turn.toml", robot="go1-arm", metrics=("success_rate", "vang_err", "vlin_err"),
@@ -223,7 +232,7 @@ TABLES: dict[str, PaperTableSpec] = {
         paper=TABLE_II, contenders=_arm_rows(),
         crouched_contenders=_arm_rows(crouched=True),
         contrasts=_ARM_CONTRASTS,
-        paper_protocol="5 seeds, 2000 trials, 20 s each; yaw rate 0.5 rad/s in half the trials, 2 rad/s in the rest"),
+        paper_protocol=PROTOCOL_II),
     "table3": PaperTableSpec(
         name="table3", title="Table III: the staged method against its baselines, under pushes",
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
@@ -232,7 +241,7 @@ TABLES: dict[str, PaperTableSpec] = {
         contrasts=(*(Contrast(a=key, b="ours", question=f"Ours vs {row}") for key, row in _BASELINE_ROWS.items()),
                    Contrast(a="mpc-distilled", b="ours", question="Ours vs MPC distilled"),
                    Contrast(a="mpc", b="mpc-distilled", question="MPC distilled vs its expert, mpc")),
-        paper_protocol="2000 trials, 20 s each; half standing, half at 0.3 m/s"),
+        paper_protocol=PROTOCOL_III),
 }
 """The three tables, by the name ``wbc paper`` takes."""
 
