@@ -81,15 +81,30 @@ def tiny(tmp_path):
     return path
 
 
-def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path, capsys):
+@pytest.fixture
+def tiny_protocol(tmp_path):
+    """The tiny scenario under the push table's own name, published by a lock beside it: the paper's figures stand
+    beside the bands of a published version of the table's scenario only."""
+    from wbc.scenario import load_scenario as load
+
+    folder = tmp_path / "protocol"
+    folder.mkdir()
+    path = folder / "push-tiny.toml"
+    path.write_text(TINY_PUSH.replace('name = "tinypush"\nversion = 1', 'name = "push"\nversion = 99'))
+    (folder / "published.toml").write_text(f'[push]\n"99" = "{load(path).hash}"\n')
+    return path
+
+
+def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny_protocol, tmp_path, capsys):
     out = tmp_path / "t1"
-    assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
-                 "--workers", "1", "--quiet"]) == 0
+    assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny_protocol), "--out",
+                 str(out), "--workers", "1", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert (out / "paper.txt").read_text(encoding="utf-8") == printed
     lines = printed.splitlines()
     assert lines[0] == "Table I: locomotion under pushes, arm actuated / locked / absent"
-    assert "scenario tinypush v1" in printed and "NOT published" in printed and "robot a1-wx200" in printed
+    assert "scenario push v99" in printed and "NOT published" not in printed and "robot a1-wx200" in printed
+    assert "no paper figures" not in printed
     assert "1 trials x 1 seed per band" in printed and "mean [95 % interval over trials" in printed
     # one block per metric; each paper row, then our learned and model-based rows beside it
     for label in ("Success %", "TTF", "V_lin err [m/s]"):
@@ -128,6 +143,7 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
                                                               "mpc-tail", "mpc-locked", "mpc-noarm"}
     # our rows too, as summary.json holds them: what the table prints beside the paper's (it held the paper's only)
     assert saved["ours"] == json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    assert saved["columns_note"] is None and saved["band_columns"] == {"in": "200-300", "ood": "300-400"}
     assert set(saved["ours"]["controllers"]) == {c["controller"] for c in saved["contenders"]}
     # the n behind each side's figures: the paper's protocol beside its numbers, each of our cells' trials and seeds
     assert saved["paper_protocol"] == {"seeds": 5, "trials": 2000, "trials_per_seed": 400, "duration_s": 20.0,
@@ -135,8 +151,8 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
     cell = saved["ours"]["controllers"]["learned"]["bands"]["in"]
     assert (cell["trials"], cell["seeds"], saved["trials"], saved["seeds"]) == (1, 1, 1, [0])
     # resuming the finished run plays nothing and prints the same table but for the run line
-    assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
-                 "--workers", "1", "--quiet", "--resume"]) == 0
+    assert main(["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny_protocol), "--out",
+                 str(out), "--workers", "1", "--quiet", "--resume"]) == 0
     again = capsys.readouterr().out
     assert again.split("\nrun: ")[0] == printed.split("\nrun: ")[0] and "run: 0 trials played" in again
     assert "(and 14 stored before, resumed: 14 in all)" in again and "resumed" not in printed.split("\nrun: ")[1]
@@ -146,8 +162,8 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
     row = lines[3].rstrip("\n")
     lines[3] = row[:-1] + ("0" if row[-1] != "0" else "1") + "\n"  # its checksum no longer matches its cells
     (out / "trials.csv").write_text("".join(lines), encoding="utf-8")
-    again_argv = ["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny), "--out", str(out),
-                  "--workers", "1", "--quiet", "--resume"]
+    again_argv = ["paper", "table1", "--trials", "1", "--seeds", "1", "--scenario", str(tiny_protocol), "--out",
+                  str(out), "--workers", "1", "--quiet", "--resume"]
     assert main(again_argv) == 2
     assert f"{out / 'trials.csv'}:4:" in capsys.readouterr().err
     assert main([*again_argv, "--drop-bad-rows"]) == 0
@@ -156,9 +172,9 @@ def test_table1_end_to_end_prints_both_families_beside_the_paper(tiny, tmp_path,
     assert "run: 1 trials played" in captured.out
 
 
-def test_table3_lists_its_baselines_and_says_which_are_missing(tiny, tmp_path):
-    result = run_paper_table(PaperRunConfig(table="table3", trials=1, seeds=1, scenario=tiny, out_dir=tmp_path / "t3",
-                                            workers=1, progress=False))
+def test_table3_lists_its_baselines_and_says_which_are_missing(tiny_protocol, tmp_path):
+    result = run_paper_table(PaperRunConfig(table="table3", trials=1, seeds=1, scenario=tiny_protocol,
+                                            out_dir=tmp_path / "t3", workers=1, progress=False))
     shipped = {p.stem.removeprefix("a1-wx200-actuated-") for p in WEIGHTS_DIR.glob("a1-wx200-actuated-*.npz")
                if not p.stem.endswith("crouched")}  # the crouched variants play with --crouched
     rows = {c.key: c for c in result.contenders}
@@ -529,6 +545,31 @@ def test_a_contender_that_fails_costs_its_trials_and_the_command_exits_1(tiny, t
     assert len(lines) == 1 and lines[0].startswith("wbc: controller paperbroken:make: 2 of 2 trial(s) failed with a "
                                                    "controller error; first: ")
     assert "Table I" in captured.out  # the table is printed all the same, the other contenders' rows included
+    # a scenario of another name than the table's: the paper's figures stand beside none of its bands, and it says why
+    assert ("no paper figures beside our bands: the paper's task is that of scenario 'push' (its published "
+            "versions), and 'tinypush' plays another.") in " ".join(captured.out.split())
+
+
+def test_the_paper_figures_stand_only_beside_a_published_version_of_the_tables_own_scenario(tmp_path):
+    """A band's settings alone do not make the paper's task: turn-both-ways' 1.0 band turns right or runs straight,
+    push-strong's pushes last longer, push-low-friction is slippery; an edited copy of turn.toml plays what it was
+    edited to. None of them has the paper's figures beside it, and the reason is said."""
+    from wbc.tools.paper.tables import paper_columns_of
+
+    turn, push = TABLES["table2"], TABLES["table1"]
+    assert paper_columns_of(turn, load_scenario("scenarios/turn.toml"), published=True) == ((0, 1, 2), None)
+    for table in (push, TABLES["table3"]):
+        for path in ("scenarios/push.toml", "scenarios/push-v1.toml"):
+            assert paper_columns_of(table, load_scenario(path), published=True) == ((0, 1), None)
+    for table, path in ((turn, "scenarios/turn-both-ways.toml"), (push, "scenarios/push-strong.toml"),
+                        (push, "scenarios/push-low-friction.toml"), (TABLES["table3"], "scenarios/push-strong.toml")):
+        scenario = load_scenario(path)
+        columns, why = paper_columns_of(table, scenario, published=True)
+        assert columns == (None,) * len(scenario.bands)
+        assert why == (f"no paper figures beside our bands: the paper's task is that of scenario "
+                       f"{table.protocol_scenario!r} (its published versions), and {scenario.name!r} plays another")
+    columns, why = paper_columns_of(turn, load_scenario("scenarios/turn.toml"), published=False)
+    assert columns == (None, None, None) and "this copy of scenario 'turn' is not published" in why
 
 
 def test_a_band_stands_beside_the_paper_column_that_commands_what_it_does():

@@ -218,6 +218,8 @@ def format_paper_table(result: PaperTableResult) -> str:
                       "mean ± std over seeds (each seed's trials averaged first: the spread of the seeds' means, "
                       "not the mean's uncertainty), success with its Wilson 95 % interval over all the trials")
                    + f". Paper: {spec.paper_protocol.text}; cells: mean ± std over seeds where it gives one.")
+    if result.columns_note is not None:
+        lines += _wrap(f"{result.columns_note}.")
     for c in result.contenders:
         if c.controller is None:
             lines += _wrap(f"missing: {c.row} ({c.key}): {c.note}")

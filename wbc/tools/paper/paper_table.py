@@ -36,7 +36,7 @@ from wbc.output_files import write_text
 from wbc.scenario import ScenarioError, check_published, load_scenario
 from wbc.tools.paper.format import format_paper_table
 from wbc.tools.paper.result import PAPER_TRIALS_PER_BAND, PaperComparison, PaperTableResult, warm_trial_wall_s
-from wbc.tools.paper.tables import TABLES, paper_column, resolve_contenders
+from wbc.tools.paper.tables import TABLES, paper_columns_of, resolve_contenders
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_TRIALS", "PAPER_TRIALS_PER_BAND", "PaperRunConfig", "PaperTableResult",
            "default_out_dir", "run_paper_table"]
@@ -163,12 +163,13 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
         workers = cfg.workers or os.cpu_count() or 1  # the local pool's size (`wbc.arena.executors.LocalExecutor`)
         warm_by = {c: w for c, rs in by_controller.items()
                    if (w := warm_trial_wall_s([r.wall_s for r in rs], workers)) is not None}
+        band_columns, columns_note = paper_columns_of(spec, scenario, published=published)
         result = PaperTableResult(
             spec=spec, contenders=contenders,
             scenario={"name": scenario.name, "version": scenario.version, "path": scenario.path,
                       "hash": scenario.hash, "published": published, "duration_s": scenario.duration_s},
             bands=scenario.bands,
-            band_columns=tuple(paper_column(spec, scenario.band_settings(band)) for band in scenario.bands),
+            band_columns=band_columns, columns_note=columns_note,
             trials=cfg.trials, seeds=tuple(range(cfg.seeds)), summary=arena.summary,
             comparisons=tuple(comparisons), failures=arena.failures, curve=arena.curve,
             trial_wall_s=wall_by, warm_wall_s=warm_by, out_dir=arena.out_dir, played=arena.played, stored=len(records),

@@ -68,7 +68,9 @@ class PaperTableResult:
         scenario: name, version, path, hash and whether it is published.
         bands: the scenario's bands, in file order.
         band_columns: each band's column of the paper's table (an index into ``spec.paper_columns``,
-            `wbc.tools.paper.tables.paper_column`), None for a band the paper has no figure for.
+            `wbc.tools.paper.tables.paper_columns_of`), None for a band the paper has no figure for.
+        columns_note: why no band stands in a paper column (another scenario than the table's, or an unpublished
+            copy of it), or None.
         trials: trials per band and seed.
         seeds: the seeds.
         summary: the arena's summary.
@@ -106,6 +108,7 @@ class PaperTableResult:
     stored: int = 0
     workers: int | None
     controller_errors: tuple[ControllerErrors, ...] = ()
+    columns_note: str | None = None
 
     @property
     def paper_protocol_cpu_h(self) -> float:
@@ -134,6 +137,7 @@ class PaperTableResult:
             "scenario": self.scenario, "bands": list(self.bands), "paper_columns": list(self.spec.paper_columns),
             "band_columns": {band: None if col is None else self.spec.paper_columns[col]
                              for band, col in zip(self.bands, self.band_columns, strict=True)},
+            "columns_note": self.columns_note,
             "trials": self.trials, "seeds": list(self.seeds),
             "comparisons": [c.to_json() for c in self.comparisons],
             "trial_wall_s": self.trial_wall_s, "warm_wall_s": self.warm_wall_s, "wall_s": self.wall_s,

@@ -33,6 +33,7 @@ from typing import Any
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.learned.policy.shipped import WEIGHTS_DIR
 from wbc.learned.train.stages import BASELINES
+from wbc.scenario import Scenario
 from wbc.tools.paper.paper_numbers import (
     PROTOCOL_I,
     PROTOCOL_II,
@@ -107,6 +108,8 @@ class PaperTableSpec:
             trained, without the posture term).
         contrasts: the paired comparisons printed under the table, on `paired_metrics`.
         paper_protocol: how the paper evaluated it (seeds, trials, episode length): the n behind `paper`.
+        protocol_scenario: the name of our scenario whose published versions play the paper's task (``push``,
+            ``turn``); the paper's figures stand beside no band of another scenario (`paper_columns_of`).
     """
 
     name: str
@@ -121,6 +124,7 @@ class PaperTableSpec:
     crouched_contenders: tuple[Contender, ...]
     contrasts: tuple[Contrast, ...]
     paper_protocol: PaperProtocol
+    protocol_scenario: str
 
     @property
     def paired_metrics(self) -> tuple[str, ...]:
@@ -202,12 +206,36 @@ _PUSH_BANDS: tuple[Mapping[str, Any], ...] = ({"push_force_n": (200.0, 300.0)}, 
 """The push tables' columns: the paper's push forces in and out of distribution [N]."""
 
 
+def paper_columns_of(spec: PaperTableSpec, scenario: Scenario, *, published: bool) -> tuple[tuple[int | None, ...],
+                                                                                               str | None]:
+    """The paper's column each band of `scenario` stands in (`paper_column`), and why none does, or None.
+
+    The paper's figures stand beside a band only of a published version of the table's own scenario
+    (`PaperTableSpec.protocol_scenario`), whose trials play the paper's task: a band of another scenario may set the
+    same speed or forces and still play another task (right turns, straight runs, longer pushes, slippery ground),
+    and an edited copy of the table's scenario plays whatever it was edited to.
+
+    Returns:
+        One column index or None per band, in the scenario's order; and, when no band stands in a column for that
+        reason, a sentence saying why (None otherwise).
+    """
+    none = (None,) * len(scenario.bands)
+    if scenario.name != spec.protocol_scenario:
+        return none, (f"no paper figures beside our bands: the paper's task is that of scenario "
+                      f"{spec.protocol_scenario!r} (its published versions), and {scenario.name!r} plays another")
+    if not published:
+        return none, (f"no paper figures beside our bands: this copy of scenario {scenario.name!r} is not published, "
+                      "so its trials need not play the paper's task")
+    return tuple(paper_column(spec, scenario.band_settings(band)) for band in scenario.bands), None
+
+
 def paper_column(spec: PaperTableSpec, settings: Mapping[str, Any]) -> int | None:
     """The paper's column (an index into `spec.paper_columns`) that a band of these settings stands in, or None.
 
     A band stands in a column when it sets exactly what the column commands (``vx = 1.25`` for Table II's "1.25",
     ``push_force_n = [200, 300]`` for Table I's "200-300") and nothing else; any other band (a speed or a force the
-    paper did not play, a band that also fixes the yaw rate) has no paper figure beside it.
+    paper did not play, a band that also fixes the yaw rate) has no paper figure beside it. This reads the band
+    alone: `paper_columns_of` also requires the scenario to play the paper's task.
 
     Args:
         spec: the table.
@@ -224,7 +252,7 @@ TABLES: dict[str, PaperTableSpec] = {
         paper_columns=("200-300", "300-400"), paper_bands=_PUSH_BANDS, paper=TABLE_I, contenders=_arm_rows(),
         crouched_contenders=_arm_rows(crouched=True),
         contrasts=_ARM_CONTRASTS,
-        paper_protocol=PROTOCOL_I),
+        paper_protocol=PROTOCOL_I, protocol_scenario="push"),
     "table2": PaperTableSpec(
         name="table2", title="Table II: high-speed turns, arm actuated / locked / absent",
         scenario="scenarios/turn.toml", robot="go1-arm", metrics=("success_rate", "vang_err", "vlin_err"),
@@ -232,7 +260,7 @@ TABLES: dict[str, PaperTableSpec] = {
         paper=TABLE_II, contenders=_arm_rows(),
         crouched_contenders=_arm_rows(crouched=True),
         contrasts=_ARM_CONTRASTS,
-        paper_protocol=PROTOCOL_II),
+        paper_protocol=PROTOCOL_II, protocol_scenario="turn"),
     "table3": PaperTableSpec(
         name="table3", title="Table III: the staged method against its baselines, under pushes",
         scenario="scenarios/push.toml", robot="a1-wx200", metrics=("success_rate", "ttf", "vlin_err"),
@@ -241,7 +269,7 @@ TABLES: dict[str, PaperTableSpec] = {
         contrasts=(*(Contrast(a=key, b="ours", question=f"Ours vs {row}") for key, row in _BASELINE_ROWS.items()),
                    Contrast(a="mpc-distilled", b="ours", question="Ours vs MPC distilled"),
                    Contrast(a="mpc", b="mpc-distilled", question="MPC distilled vs its expert, mpc")),
-        paper_protocol=PROTOCOL_III),
+        paper_protocol=PROTOCOL_III, protocol_scenario="push"),
 }
 """The three tables, by the name ``wbc paper`` takes."""
 
