@@ -69,7 +69,8 @@ def _played(scenario: str, records: Sequence[TrialRecord], bands: Sequence[str])
         per_seed[(r.band, r.seed)].add(r.trial)
     counts = {len(trials) for trials in per_seed.values()}
     if len(counts) == 1:
-        trials = f"{counts.pop()} trials per band and seed"
+        n = counts.pop()
+        trials = f"{n} trial{'s' if n != 1 else ''} per band and seed"
     else:
         per_band = {b: len({(r.seed, r.trial) for r in records if r.band == b}) for b in bands}
         trials = "trials per band: " + ", ".join(f"{b} {n}" for b, n in per_band.items())
