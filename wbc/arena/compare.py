@@ -523,7 +523,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                                     "controller's error, kept on --resume)"}),
             **report_lines(store.environment),
         }
-        finish_results(store.dir, summary, records, meta, failures=failures, curve=curve)
+        finish_results(store.dir, summary, records, meta, failures=failures, curve=curve,
+                       scenario=f"{scenario.name} v{scenario.version}")
         expected = ({(c, *t.key) for t in trials for c in cfg.controllers} if rounds is None else
                     {key for i in rounds.begun for key in rounds.keys(i)})
         missing = expected - {r.run_key for r in records}

@@ -26,7 +26,8 @@ __all__ = ["finish_results"]
 
 def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[TrialRecord], meta: Mapping[str, Any],
                    *, sections: Sequence[tuple[str, Sequence[str]]] = (), failures: Mapping[str, Any] | None = None,
-                   curve: Mapping[str, Any] | None = None, resumable: bool = True) -> list[Path]:
+                   curve: Mapping[str, Any] | None = None, scenario: str | None = None,
+                   resumable: bool = True) -> list[Path]:
     """Write ``summary.json``, ``failures.json`` (when `failures` is given) and the report into `out_dir`.
 
     Args:
@@ -37,6 +38,8 @@ def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[Tria
         sections: more report sections (a hardware trial's timing, safety events and operator actions).
         failures: where each controller fails (`wbc.arena.breakdown.breakdown`), None for none.
         curve: the push-recovery curve (`wbc.arena.breakdown.recovery_curve`), None for none.
+        scenario: the scenario with its version (``push v2``), as the plots' titles name it; None: the summary's
+            scenario name.
         resumable: the run can be resumed (``--resume``), as the message of a file that cannot be written then says;
             off: a hardware trial.
 
@@ -55,6 +58,6 @@ def finish_results(out_dir: str | Path, summary: Summary, records: Sequence[Tria
             written.append(out / "failures.json")
             write_text(written[-1], json.dumps({"breakdown": failures, "push_recovery": curve}, indent=2))
         return [*written, *write_report(out, summary, records, meta, sections=sections, failures=failures,
-                                        curve=curve)]
+                                        curve=curve, scenario=scenario)]
     except OSError as exc:
         raise unwritable(exc.filename or out, exc, out, stored=len(records), resumable=resumable) from exc

@@ -705,7 +705,7 @@ def _md_meta(meta: Mapping[str, Any]) -> list[str]:
 def write_report(
     out_dir: str | Path, summary: Summary, records: Iterable[TrialRecord], meta: Mapping[str, Any],
     sections: Sequence[tuple[str, Sequence[str]]] = (), failures: Mapping[str, Any] | None = None,
-    curve: Mapping[str, Any] | None = None,
+    curve: Mapping[str, Any] | None = None, scenario: str | None = None,
 ) -> list[Path]:
     """Write ``report.md`` and its PNG plots (`wbc.arena.plots.write_plots`) into `out_dir` (created if missing).
 
@@ -724,6 +724,8 @@ def write_report(
             timing, safety events and operator actions).
         failures: the `wbc.arena.breakdown.breakdown` of the records (None: no such section).
         curve: their `wbc.arena.breakdown.recovery_curve`, drawn as ``push_recovery.png`` when it has pushes.
+        scenario: the scenario with its version (``push v2``), as the plots' titles name it; None: the summary's
+            scenario name.
 
     Returns:
         The paths written: ``report.md`` first, then the plots.
@@ -732,7 +734,7 @@ def write_report(
     out.mkdir(parents=True, exist_ok=True)
     controllers, bands = summary.controllers, summary.bands
     plots = write_plots(out, summary, in_canonical_order(records, controllers, bands), controllers=controllers,
-                        bands=bands, labels=LABELS, curve=curve)
+                        bands=bands, labels=LABELS, curve=curve, scenario=scenario)
 
     name = summary.scenario_name
     lines = [f"# Arena report: {name}", "", f"Scenario `{name}`, hash `{summary.scenario_hash}`."]
