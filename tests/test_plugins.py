@@ -565,3 +565,23 @@ def test_a_plugin_named_twice_is_told_to_label_each_setting(plugins, small, caps
             "--controller-config plugpkg.good:make@B=b.toml") in err
     assert main(["compare", "stand", "stand", "--scenario", str(small)]) == 2
     assert "label" not in capsys.readouterr().err  # the registry's controllers take none
+
+
+def test_a_labelled_plugin_is_checked_and_played_on_the_robot_protocol_by_its_name(plugins, small, tmp_path,
+                                                                                  monkeypatch, capsys):
+    import json
+
+    config = tmp_path / "gains.toml"
+    config.write_text("leg_kp = 50.0\n")
+    assert main(["check-controller", SOFT, "--controller-config", str(config), "--robot", "a1-wx200",
+                 "--seconds", "0.2", "--json"]) == 0
+    check = json.loads(capsys.readouterr().out)
+    assert check["controller"] == SOFT and check["passed"]
+    monkeypatch.chdir(tmp_path)  # hw run's default results directory is under runs/ here
+    assert main(["hw", "run", SOFT, "--controller-config", str(config), "--scenario", str(small), "--trial", "0",
+                 "--sim", "--seconds", "0.5"]) == 0
+    (out,) = (tmp_path / "runs").iterdir()
+    assert out.name.startswith("hw-small-plugpkg.good_make@soft-")
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.controller == SOFT
+    assert json.loads((out / "run.json").read_text())["controllers"][SOFT]["plugin"]["target"] == "plugpkg.good:make"
