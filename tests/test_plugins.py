@@ -585,3 +585,11 @@ def test_a_labelled_plugin_is_checked_and_played_on_the_robot_protocol_by_its_na
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.controller == SOFT
     assert json.loads((out / "run.json").read_text())["controllers"][SOFT]["plugin"]["target"] == "plugpkg.good:make"
+
+
+def test_two_names_whose_episodes_would_share_a_folder_are_refused_before_anything_plays(small, tmp_path):
+    # '@' and ':' are both written '_' in a folder's name
+    with pytest.raises(WbcError, match=r"would store their episodes in one folder, episodes/pkg.mod_make_x "):
+        ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o",
+                    save_episodes=True)
+    ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o")
