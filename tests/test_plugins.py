@@ -526,6 +526,7 @@ LABEL_ERRORS = [
     ("stand@x", ["stand is the registry's", "a label means nothing there: name it 'stand', once"]),
     ("nothing@x", ["'nothing' is not a plug-in's package.module:factory",
                    "the registry's controllers, policy:PATH and onnx:PATH take no label"]),
+    ("plugpkg.good.make@x", ["did you mean 'plugpkg.good:make'?"]),  # what is wrong before the label too
 ]
 
 

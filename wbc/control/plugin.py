@@ -182,8 +182,9 @@ def label_problem(name: str, *, registry: Collection[str] = (), entry_points: Ma
     if target is not None:
         return (f"controller {name!r}: {base} is an entry point, and {what}; an entry point's name takes no label: "
                 f"label the plug-in it declares, {target}@{label or 'LABEL'}")
+    flaw = plugin_name_problem(base)  # a plug-in meant, but written wrong: what is wrong with it
     return (f"controller {name!r}: {base!r} is not a plug-in's package.module:factory, and {what} ({LABEL_RULE}); "
-            "the registry's controllers, policy:PATH and onnx:PATH take no label")
+            "the registry's controllers, policy:PATH and onnx:PATH take no label" + (f". {flaw}" if flaw else ""))
 
 
 _IDENT_ONLY = re.compile(_IDENT)
