@@ -594,3 +594,15 @@ def test_two_names_whose_episodes_would_share_a_folder_are_refused_before_anythi
         ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o",
                     save_episodes=True)
     ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o")
+
+
+def test_two_labels_of_one_plugin_are_viewed_side_by_side(plugins, small, tmp_path, monkeypatch, capsys):
+    soft, stiff = tmp_path / "soft.toml", tmp_path / "stiff.toml"
+    soft.write_text("leg_kp = 30.0\n")
+    stiff.write_text("leg_kp = 80.0\n")
+    monkeypatch.chdir(tmp_path)  # the page's default name, in the working directory
+    assert main(["view", SOFT, STIFF, "--scenario", str(small), "--trial", "0", "--controller-config",
+                 f"{SOFT}={soft}", "--controller-config", f"{STIFF}={stiff}"]) == 0
+    (page,) = tmp_path.glob("ab-*.html")
+    assert page.name == "ab-plugpkg.good_make_soft-plugpkg.good_make_stiff-small-soft-s0-t0.html"
+    assert f"{SOFT} vs {STIFF} (ghost)" in capsys.readouterr().out
