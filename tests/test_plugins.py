@@ -447,3 +447,162 @@ def test_an_entry_point_records_the_distribution_that_declares_it(plugins, tmp_p
     # the same module named as module:factory is credited to the distribution whose RECORD lists its file
     assert get_controller("plugpkg.good:make").provenance()["plugin"]["distribution"] == {"name": "plugdist",
                                                                                          "version": "1.0"}
+
+
+# -- labels: two settings of one plug-in in one run ------------------------------------------------------------------
+SOFT, STIFF = "plugpkg.good:make@soft", "plugpkg.good:make@stiff"
+
+
+def _labelled_compare(small, out, soft, stiff, *more):
+    return main(["compare", SOFT, STIFF, "--scenario", str(small), "--trials", "1", "--band", "soft",
+                 "--controller-config", f"{SOFT}={soft}", "--controller-config", f"{STIFF}={stiff}",
+                 "--out", str(out), "--quiet", "--workers", "1", *more])
+
+
+def test_one_plugin_plays_under_two_labels_with_a_config_each_resumes_and_replays(plugins, small, tmp_path, capsys):
+    import json
+
+    soft, stiff = tmp_path / "soft.toml", tmp_path / "stiff.toml"
+    soft.write_text("leg_kp = 30.0\n")
+    stiff.write_text("leg_kp = 80.0\n")
+    out = tmp_path / "labels"
+    assert _labelled_compare(small, out, soft, stiff, "--save-episodes") == 0
+    records = TrialRecord.read_csv(out / "trials.csv")
+    assert [r.controller for r in records] == [SOFT, STIFF]
+    # each label played its own file: the two gains hold the pose differently
+    assert _metrics(records, SOFT) != _metrics(records, STIFF)
+    assert set(json.loads((out / "summary.json").read_text())["controllers"]) == {SOFT, STIFF}
+    run = json.loads((out / "run.json").read_text())
+    assert run["config"]["controllers"] == [SOFT, STIFF]
+    assert {name: f["path"] for name, f in run["config"]["controller_files"].items()} == {SOFT: str(soft),
+                                                                                           STIFF: str(stiff)}
+    for name in (SOFT, STIFF):  # known by the labelled name, the code it runs recorded apart from it
+        assert run["controllers"][name]["name"] == name
+        assert run["controllers"][name]["plugin"]["target"] == "plugpkg.good:make"
+    assert SOFT in (out / "report.md").read_text()
+    episodes = sorted(p.name for p in (out / "episodes").iterdir())
+    assert episodes == ["plugpkg.good_make_soft", "plugpkg.good_make_stiff"]
+    # resumed with the same labels and files: nothing to play again
+    csv = (out / "trials.csv").read_text()
+    assert _labelled_compare(small, out, soft, stiff, "--resume") == 0
+    assert (out / "trials.csv").read_text() == csv
+    # a label given the other's file is a change of configuration, refused as any plug-in's changed file is
+    capsys.readouterr()
+    assert _labelled_compare(small, out, stiff, soft, "--resume") == 2
+    err = capsys.readouterr().err
+    assert "--resume with a different configuration (differs in: controller_files)" in err
+    assert f"controller_files.{SOFT}.sha256" in err and (out / "trials.csv").read_text() == csv
+    # a labelled controller's stored episode replays by its name
+    page = tmp_path / "soft.html"
+    assert main(["view", "--episode", str(out), "--trial", "0", "--controller", SOFT, "--record", str(page)]) == 0
+    assert "plugpkg.good_make_soft" in capsys.readouterr().out and page.stat().st_size > 100_000
+
+
+def test_the_mpc_settings_table_plays_arm_momentum_on_and_off_under_two_labels(tmp_path):
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SMALL.replace("duration_s = 2.0", "duration_s = 0.6").replace("[0.5, 0.8]", "[0.2, 0.3]"))
+    configs = {}
+    for label, value in (("arm", "true"), ("noarm", "false")):
+        configs[label] = tmp_path / f"{label}.toml"
+        configs[label].write_text(f"use_arm_momentum = {value}\n")
+    names = [f"wbc.mpc.config_table:make@{label}" for label in configs]
+    out = tmp_path / "mpc"
+    assert main(["compare", *names, "--scenario", str(scenario), "--trials", "1", "--band", "hard",
+                 *[arg for label, name in zip(configs, names, strict=True)
+                   for arg in ("--controller-config", f"{name}={configs[label]}")],
+                 "--out", str(out), "--quiet", "--in-process"]) == 0
+    records = TrialRecord.read_csv(out / "trials.csv")
+    assert [r.controller for r in records] == names
+    assert _metrics(records, names[0]) != _metrics(records, names[1])
+
+
+RULE = "a label is a letter or digit, then letters, digits, '_', '.' or '-', at most 40 characters"
+LABEL_ERRORS = [
+    ("plugpkg.good:make@", ["nothing follows the '@'", RULE]),
+    ("plugpkg.good:make@_x", ["its label '_x' is not one", RULE]),
+    ("plugpkg.good:make@a/b", ["its label 'a/b' is not one", RULE]),
+    ("plugpkg.good:make@a@b", ["it has 2 '@'", RULE]),
+    ("plugpkg.good:make@" + "x" * 41, ["has 41 characters", RULE]),
+    ("stand@x", ["stand is the registry's", "a label means nothing there: name it 'stand', once"]),
+    ("nothing@x", ["'nothing' is not a plug-in's package.module:factory",
+                   "the registry's controllers, policy:PATH and onnx:PATH take no label"]),
+    ("plugpkg.good.make@x", ["did you mean 'plugpkg.good:make'?"]),  # what is wrong before the label too
+]
+
+
+@pytest.mark.parametrize(("name", "phrases"), LABEL_ERRORS, ids=[e[1][0][:24] for e in LABEL_ERRORS])
+def test_a_malformed_or_misplaced_label_says_what_a_label_is_and_where_it_goes(plugins, small, tmp_path, capsys,
+                                                                              name, phrases):
+    with pytest.raises(PluginNotFoundError) as caught:
+        get_controller(name)
+    for phrase in (*phrases, "package.module:factory@"):  # each says where a label goes
+        assert phrase in str(caught.value)
+    assert main(["run", name, "--scenario", str(small), "--trials", "1", "--out", str(tmp_path / "o"),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert phrases[0] in err and "Traceback" not in err and not (tmp_path / "o" / "trials.csv").exists()
+
+
+def test_an_entry_point_or_a_policy_file_takes_no_label(plugins, tmp_path):
+    _declare(plugins, "plugdist", "1.0", ["test-hold = plugpkg.good:make"])
+    with pytest.raises(PluginNotFoundError, match="test-hold is an entry point.*label the plug-in it declares, "
+                                                  "plugpkg.good:make@x"):
+        get_controller("test-hold@x")
+    model = tmp_path / "model.onnx"
+    model.write_bytes(b"not read: the label is refused first")
+    with pytest.raises(WbcError, match=f"a label means nothing there: name it onnx:{model}$"):
+        get_controller(f"onnx:{model}@x")
+    policy = tmp_path / "policy"
+    policy.with_suffix(".npz").write_bytes(b"")
+    with pytest.raises(WbcError, match=f"a policy file takes no settings.*name it policy:{policy}$"):
+        get_controller(f"policy:{policy}@x")
+
+
+def test_a_plugin_named_twice_is_told_to_label_each_setting(plugins, small, capsys):
+    assert main(["compare", "plugpkg.good:make", "plugpkg.good:make", "--scenario", str(small)]) == 2
+    err = capsys.readouterr().err
+    assert "plugpkg.good:make named more than once" in err
+    assert ("wbc compare plugpkg.good:make@A plugpkg.good:make@B --controller-config plugpkg.good:make@A=a.toml "
+            "--controller-config plugpkg.good:make@B=b.toml") in err
+    assert main(["compare", "stand", "stand", "--scenario", str(small)]) == 2
+    assert "label" not in capsys.readouterr().err  # the registry's controllers take none
+
+
+def test_a_labelled_plugin_is_checked_and_played_on_the_robot_protocol_by_its_name(plugins, small, tmp_path,
+                                                                                  monkeypatch, capsys):
+    import json
+
+    config = tmp_path / "gains.toml"
+    config.write_text("leg_kp = 50.0\n")
+    assert main(["check-controller", SOFT, "--controller-config", str(config), "--robot", "a1-wx200",
+                 "--seconds", "0.2", "--json"]) == 0
+    check = json.loads(capsys.readouterr().out)
+    assert check["controller"] == SOFT and check["passed"]
+    monkeypatch.chdir(tmp_path)  # hw run's default results directory is under runs/ here
+    assert main(["hw", "run", SOFT, "--controller-config", str(config), "--scenario", str(small), "--trial", "0",
+                 "--sim", "--seconds", "0.5"]) == 0
+    (out,) = (tmp_path / "runs").iterdir()
+    assert out.name.startswith("hw-small-plugpkg.good_make@soft-")
+    (record,) = TrialRecord.read_csv(out / "trials.csv")
+    assert record.controller == SOFT
+    assert json.loads((out / "run.json").read_text())["controllers"][SOFT]["plugin"]["target"] == "plugpkg.good:make"
+
+
+def test_two_names_whose_episodes_would_share_a_folder_are_refused_before_anything_plays(small, tmp_path):
+    # '@' and ':' are both written '_' in a folder's name
+    with pytest.raises(WbcError, match=r"would store their episodes in one folder, episodes/pkg.mod_make_x "):
+        ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o",
+                    save_episodes=True)
+    ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o")
+
+
+def test_two_labels_of_one_plugin_are_viewed_side_by_side(plugins, small, tmp_path, monkeypatch, capsys):
+    soft, stiff = tmp_path / "soft.toml", tmp_path / "stiff.toml"
+    soft.write_text("leg_kp = 30.0\n")
+    stiff.write_text("leg_kp = 80.0\n")
+    monkeypatch.chdir(tmp_path)  # the page's default name, in the working directory
+    assert main(["view", SOFT, STIFF, "--scenario", str(small), "--trial", "0", "--controller-config",
+                 f"{SOFT}={soft}", "--controller-config", f"{STIFF}={stiff}"]) == 0
+    (page,) = tmp_path.glob("ab-*.html")
+    assert page.name == "ab-plugpkg.good_make_soft-plugpkg.good_make_stiff-small-soft-s0-t0.html"
+    assert f"{SOFT} vs {STIFF} (ghost)" in capsys.readouterr().out

@@ -49,7 +49,7 @@ from wbc.arena.identity import (
 )
 from wbc.arena.progress import progress
 from wbc.arena.report import summarize
-from wbc.arena.results import ResultsStore, check_out_dir, episode_path, unwritable
+from wbc.arena.results import ResultsStore, check_out_dir, episode_path, file_name_part, unwritable
 from wbc.arena.run_environment import report_lines
 from wbc.arena.runner import TickObserver
 from wbc.arena.sequential import SequentialComparison
@@ -148,6 +148,16 @@ class ArenaConfig:
                               "learned)")
         if len(set(self.controllers)) != len(self.controllers):
             raise ConfigError(f"controllers repeat: {', '.join(self.controllers)}; name each controller once")
+        if self.save_episodes:
+            folders: dict[str, str] = {}
+            for name in self.controllers:
+                other = folders.setdefault(file_name_part(name), name)
+                if other != name:  # one would overwrite the other's episodes
+                    raise ConfigError(
+                        f"{other} and {name} would store their episodes in one folder, "
+                        f"episodes/{file_name_part(name)} (a character other than a letter, a digit, '.', '_' or '-' "
+                        "is written '_'): name a plug-in apart with a label (package.module:factory@LABEL), or save "
+                        "the episodes of one of them in a run of its own")
         if self.executor not in EXECUTORS:
             raise UnknownNameError("executor", self.executor, EXECUTORS)
         # the bounds run.json's reader takes (`wbc.arena.identity`): a run it could not resume is refused unplayed

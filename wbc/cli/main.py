@@ -39,6 +39,7 @@ from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.controller_contract import CheckConfig, ControllerCheck, check_controller
 from wbc.control.errors import OnnxIoError, OnnxModelError, PluginAttributeError, PluginImportError
 from wbc.control.onnx_policy import ONNX_PREFIX
+from wbc.control.plugin import LABEL_MAX, plugin_target
 from wbc.control.registry import (
     CONTROLLERS,
     ControllerSpec,
@@ -1223,8 +1224,9 @@ def _run(args: argparse.Namespace) -> int:
 def _compare(args: argparse.Namespace) -> int:
     named = list(dict.fromkeys(args.controllers))
     if len(named) < len(args.controllers):
-        raise ConfigError(f"wbc compare: {', '.join(c for c in named if args.controllers.count(c) > 1)} named "
-                          "more than once; name each controller once")
+        twice = [c for c in named if args.controllers.count(c) > 1]
+        raise ConfigError(f"wbc compare: {', '.join(twice)} named more than once; name each controller once"
+                          + _label_hint(twice))
     if len(named) < 2:
         raise ConfigError(f"wbc compare needs two or more controllers to compare, got {named[0]}; to play one "
                           "controller, use wbc run")
@@ -1234,6 +1236,16 @@ def _compare(args: argparse.Namespace) -> int:
                           "--until-significant, or leave --alpha out")
     return _arena(args, tuple(args.controllers), until_significant=args.until_significant,
                   alpha=0.05 if args.alpha is None else args.alpha)
+
+
+def _label_hint(names: list[str]) -> str:
+    """How to play two settings of the first plug-in among `names` in one run (labels), or '' when none is one."""
+    plugin = next((target for target in map(plugin_target, names) if target is not None), None)
+    if plugin is None:
+        return ""
+    return (f"; to compare two settings of the plug-in {plugin}, give each a label (a letter or digit, then letters, "
+            f"digits, '_', '.' or '-', at most {LABEL_MAX} characters) and its own file: wbc compare {plugin}@A "
+            f"{plugin}@B --controller-config {plugin}@A=a.toml --controller-config {plugin}@B=b.toml ...")
 
 
 def _check_in_process(args: argparse.Namespace) -> None:

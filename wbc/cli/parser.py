@@ -239,7 +239,8 @@ _Commands = argparse._SubParsersAction
 its parser to one."""
 
 _NAMES_HELP = (f"{', '.join(CONTROLLERS)}; policy:PATH (an exported policy file), onnx:PATH (an ONNX policy), "
-               "package.module:factory (a plug-in), or an installed plug-in's name (`wbc controllers` lists them)")
+               "package.module:factory (a plug-in; package.module:factory@LABEL names it again, for a second setting), "
+               "or an installed plug-in's name (`wbc controllers` lists them)")
 
 
 def add_realtime_options(p: argparse.ArgumentParser, *, who: str, cpu: str) -> None:

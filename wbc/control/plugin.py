@@ -35,7 +35,7 @@ import os
 import re
 import sys
 import traceback
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -57,6 +57,8 @@ from wbc.robots.registry import ROBOTS
 from wbc.scenario.toml_fields import read_toml
 
 __all__ = [
+    "LABEL_MAX",
+    "LABEL_RULE",
     "PLUGIN_GROUP",
     "ControllerPlugin",
     "PluginFactory",
@@ -67,9 +69,11 @@ __all__ = [
     "entry_point_target",
     "entry_points",
     "is_plugin_name",
+    "label_problem",
     "load_plugin",
     "plugin_name_problem",
     "plugin_spec",
+    "plugin_target",
     "read_controller_config",
 ]
 
@@ -79,6 +83,15 @@ PLUGIN_GROUP = "wbc.controllers"
 _IDENT = r"[A-Za-z_][A-Za-z0-9_]*"
 _TARGET = re.compile(rf"^({_IDENT}(?:\.{_IDENT})*):({_IDENT}(?:\.{_IDENT})*)$")
 _MEMBERS = ("rate_hz", "reset", "act", "counters")
+
+LABEL_MAX = 40
+"""The most characters a plug-in name's label (``package.module:factory@LABEL``) may have."""
+
+LABEL_RULE = (f"a label is a letter or digit, then letters, digits, '_', '.' or '-', at most {LABEL_MAX} characters "
+              "in all, e.g. package.module:factory@h12")
+"""What a label may be, as the errors say it."""
+
+_LABEL = re.compile(rf"[A-Za-z0-9][A-Za-z0-9_.-]{{0,{LABEL_MAX - 1}}}")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -116,8 +129,62 @@ class ControllerPlugin:
 
 
 def is_plugin_name(name: str) -> bool:
-    """Whether `name` has the form ``package.module:factory``."""
+    """Whether `name` has the form ``package.module:factory`` (no label: see `plugin_target`)."""
     return _TARGET.match(name) is not None
+
+
+def plugin_target(name: str) -> str | None:
+    """The ``package.module:factory`` a plug-in name imports, or None when `name` is not a plug-in name.
+
+    A plug-in name is ``package.module:factory``, or that with a label, ``package.module:factory@LABEL``: the label
+    distinguishes two settings of one plug-in in one run (``wbc compare pkg.mod:make@a pkg.mod:make@b``, each with
+    its own ``--controller-config``); it is not imported, and the controller is known everywhere by the whole name.
+    A label is a letter or digit, then letters, digits, ``_``, ``.`` or ``-``, at most `LABEL_MAX` characters.
+    """
+    target, at, label = name.partition("@")
+    if not is_plugin_name(target) or (at and _LABEL.fullmatch(label) is None):
+        return None
+    return target
+
+
+def label_problem(name: str, *, registry: Collection[str] = (), entry_points: Mapping[str, str] | None = None
+                  ) -> str | None:
+    """Why `name`, which holds an ``@``, is no controller name, or None when it holds none.
+
+    Only a plug-in named by its ``package.module:factory`` takes a label; the registry's controllers and policy
+    files have no settings to tell apart, so a label means nothing there, and an entry point is labelled through
+    the ``package.module:factory`` it declares.
+
+    Args:
+        name: the name as given.
+        registry: the registry's names.
+        entry_points: the installed entry points' targets by name (None: none looked up).
+    """
+    if "@" not in name:
+        return None
+    base, _, label = name.partition("@")
+    what = ("a label (NAME@LABEL) tells apart two settings of one plug-in, named package.module:factory@LABEL, "
+            "each with its own --controller-config")
+    if is_plugin_name(base):
+        if "@" in label:
+            flaw = f"it has {name.count('@')} '@'; one separates the plug-in from its label"
+        elif not label:
+            flaw = "nothing follows the '@'"
+        elif len(label) > LABEL_MAX:
+            flaw = f"its label {label!r} has {len(label)} characters"
+        else:
+            flaw = f"its label {label!r} is not one"
+        return f"controller {name!r}: {flaw}; {LABEL_RULE}"
+    if base in registry:
+        return (f"controller {name!r}: {base} is the registry's, and {what}; the registry's controllers take no "
+                f"settings, so a label means nothing there: name it {base!r}, once")
+    target = (entry_points or {}).get(base)
+    if target is not None:
+        return (f"controller {name!r}: {base} is an entry point, and {what}; an entry point's name takes no label: "
+                f"label the plug-in it declares, {target}@{label or 'LABEL'}")
+    flaw = plugin_name_problem(base)  # a plug-in meant, but written wrong: what is wrong with it
+    return (f"controller {name!r}: {base!r} is not a plug-in's package.module:factory, and {what} ({LABEL_RULE}); "
+            "the registry's controllers, policy:PATH and onnx:PATH take no label" + (f". {flaw}" if flaw else ""))
 
 
 _IDENT_ONLY = re.compile(_IDENT)

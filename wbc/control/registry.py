@@ -11,7 +11,9 @@ Besides the registry's names, `get_controller` resolves:
   on the same trials: ``wbc compare learned policy:runs/train/push-stage3-ppo/policy``.
 - ``onnx:PATH``: a policy exported to ONNX by another trainer, with the I/O file beside it
   (`wbc.control.onnx_policy`).
-- ``package.module:factory``: a plug-in, imported at the moment it is named (`wbc.control.plugin`).
+- ``package.module:factory``: a plug-in, imported at the moment it is named (`wbc.control.plugin`);
+  ``package.module:factory@LABEL`` is the same plug-in under a name of its own, so that one run can play two settings
+  of it (each with its own ``--controller-config``). Only such a name takes a label.
 - the name of an installed ``wbc.controllers`` entry point (a plug-in a package declares).
 """
 
@@ -30,10 +32,11 @@ from wbc.control.plugin import (
     ambiguity,
     declared_entry_points,
     entry_point_target,
-    is_plugin_name,
+    label_problem,
     load_plugin,
     plugin_name_problem,
     plugin_spec,
+    plugin_target,
 )
 from wbc.control.spec import ControllerSpec, SourceFile
 from wbc.control.stand import StandController
@@ -177,13 +180,15 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
     Raises:
         UnknownNameError: an unknown name (the message lists the registry's names, the entry points and the forms).
         PluginNotFoundError: a name with a colon, a dot or a path separator that is none of those and not a valid
-            ``package.module:factory`` (the message says what is wrong with it, and the name it likely meant).
+            ``package.module:factory`` (the message says what is wrong with it, and the name it likely meant); a
+            name with an ``@`` that is not ``package.module:factory@LABEL`` with a valid label (`label_problem`).
         PolicyFileError: a ``policy:`` file that is missing or malformed (the message names the file and field).
         OnnxIoError, OnnxModelError: an ``onnx:`` policy's I/O file or model is missing, malformed or mismatched.
         PluginError: a plug-in that cannot be imported or whose factory does not fit (each kind its own subclass).
         PluginAmbiguousError: an entry point's name that several installed distributions declare.
         PluginConfigError: `config` for a controller that is not a plug-in.
-        ConfigError: `io` for a controller that is not an ONNX policy; ``policy:`` or ``onnx:`` with no path after it.
+        ConfigError: `io` for a controller that is not an ONNX policy; ``policy:`` or ``onnx:`` with no path after it,
+            or with a label after an existing file's path.
     """
     if io is not None and not name.startswith(ONNX_PREFIX):
         raise ConfigError(f"--io {io}: an I/O file describes an onnx:PATH policy, and {name} is not one")
@@ -195,20 +200,25 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
         if name.startswith(prefix) and not Path(name[len(prefix):]).name:
             raise ConfigError(f"controller {name!r}: {prefix} needs the path of {what} after it, e.g. "
                               f"{prefix}runs/my-policy{'.onnx' if prefix == ONNX_PREFIX else ''}")
+    _refuse_file_label(name)
     if name.startswith(POLICY_PREFIX):
         return _policy_spec(name)
     if name.startswith(ONNX_PREFIX):
         return onnx_spec(name, name[len(ONNX_PREFIX):], io)
     if name in CONTROLLERS:
         return CONTROLLERS[name]
-    if is_plugin_name(name):
-        return plugin_spec(name, name, config_file=config)
+    target = plugin_target(name)  # package.module:factory, labelled or not
+    if target is not None:
+        return plugin_spec(name, target, config_file=config)
     installed = declared_entry_points()
     if name in installed:
         if len(installed[name]) > 1:
             raise PluginAmbiguousError(ambiguity(name, installed[name]))
         (ep,) = installed[name]
         return plugin_spec(name, entry_point_target(ep), kind="entry point", config_file=config, entry_point=ep)
+    if "@" in name:
+        raise PluginNotFoundError(label_problem(name, registry=CONTROLLERS, entry_points={
+            n: eps[0].value.partition("[")[0].strip() for n, eps in installed.items() if len(eps) == 1}))
     usable = [n for n, eps in installed.items()  # not shadowed by the registry or a name form, not ambiguous
               if len(eps) == 1 and n not in CONTROLLERS and _reserved_form(n) is None]
     if Path(name).suffix.lower() == ".toml":
@@ -225,6 +235,32 @@ def get_controller(name: str, *, config: str | Path | None = None, io: str | Pat
     raise UnknownNameError("controller", name, (*CONTROLLERS, *usable, *NAME_FORMS))  # a typo of a name suggests it
 
 
+def _refuse_file_label(name: str) -> None:
+    """Refuse ``policy:PATH@LABEL`` / ``onnx:PATH@LABEL``: a file that exists, with a label after it.
+
+    The text after ``policy:`` or ``onnx:`` is a path, ``@`` and all (a file may be named with one); it is read as
+    a label only when no file has the whole name and one has the name before its last ``@``.
+
+    Raises:
+        ConfigError: `name` is such a name; the message says where a label goes and names the file alone.
+    """
+    for prefix, suffixes in ((POLICY_PREFIX, ("", ".npz")), (ONNX_PREFIX, ("",))):
+        if not name.startswith(prefix):
+            continue
+        path = name[len(prefix):]
+        head, at, _ = path.rpartition("@")
+        if at and _is_file(head, suffixes) and not _is_file(path, suffixes):
+            raise ConfigError(
+                f"controller {name!r}: {prefix}PATH names a file, and a label (NAME@LABEL) tells apart two settings "
+                "of one plug-in, named package.module:factory@LABEL, each with its own --controller-config; a "
+                f"policy file takes no settings, so a label means nothing there: name it {prefix}{head}")
+
+
+def _is_file(path: str, suffixes: tuple[str, ...]) -> bool:
+    """Whether `path`, with one of `suffixes` added, is a file."""
+    return bool(path) and any(Path(path + suffix).is_file() for suffix in suffixes)
+
+
 def _reserved_form(name: str) -> str | None:
     """Why an entry point's `name` can never name it, or None: a form `get_controller` resolves before entry points.
 
@@ -235,7 +271,7 @@ def _reserved_form(name: str) -> str | None:
         if name.startswith(prefix):
             return (f"{name!r} has the form {prefix}PATH, which names {form} ({name[len(prefix):]!r}), never an "
                     "entry point; declare it under a name without a colon")
-    if is_plugin_name(name):
+    if plugin_target(name) is not None:
         return (f"{name!r} has the form package.module:factory, which imports the module {name.partition(':')[0]!r}, "
                 "never an entry point; declare it under a name without a colon")
     return None
