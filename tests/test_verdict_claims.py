@@ -203,3 +203,19 @@ def test_controllers_on_different_robots_carry_the_note_in_report_md_and_summary
     assert same["same_robot"] is True and same["robots_note"] is None
     assert "same_robot" not in _summary(records).to_json()  # records alone: the robots are not known
 
+
+def test_a_paper_tables_better_side_says_whether_it_holds_after_holms_correction_over_the_tables_tests():
+    from wbc.arena.summary import PairSummary
+    from wbc.tools.paper.format import verdict as paper_verdict
+
+    def pair(p, p_holm):
+        return PairSummary(a="pi2", b="pi3", band="in", metric="success_rate", diff=0.2, ci95=(None, None),
+                           interval=None, n=10, mean_a=None, mean_b=None, test="exact McNemar", p=p, n80=42,
+                           a_only=None, b_only=None, p_holm=p_holm)
+
+    assert paper_verdict(pair(0.01, 0.37), family=37) == (
+        "Success: pi3 better (+20.00 points, p = 0.01; on its own test only: not after Holm's correction over the "
+        "table's 37 tests, adjusted p = 0.37)")
+    assert paper_verdict(pair(0.001, 0.037), family=37) == (
+        "Success: pi3 better (+20.00 points, p = 0.001; holds after Holm's correction over the table's 37 tests, "
+        "adjusted p = 0.037)")
