@@ -8,8 +8,10 @@ The input is one `wbc.arena.trial_record.TrialRecord` per (controller, trial). T
   ordered pair of controllers the paired difference B - A with its 95 % interval (exact for success,
   `wbc.arena.paired_tests.paired_success_interval`; bootstrap otherwise), its paired test's p-value (exact McNemar for
   success, Wilcoxon signed-rank otherwise; `wbc.arena.paired_tests`) and the pairs a test needs for 80 % power at the
-  observed difference (`wbc.arena.statistical_power`). Its JSON form (``summary.json``) is `Summary.to_json`: NaN
-  becomes ``None``.
+  observed difference (`wbc.arena.statistical_power`), and its p-value after Holm's correction over every paired test
+  of the run (`wbc.arena.multiplicity`). A bootstrap interval needs 2 values or more, and values all equal are
+  marked as such (`wbc.arena.stats.all_equal`), not given a zero-width interval. Its JSON form (``summary.json``)
+  is `Summary.to_json`: NaN becomes ``None``.
 - `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table: mean
   ± std across seeds, or, from one seed (which has no spread across seeds), the mean and its interval over trials.
 - `write_report`: ``report.md`` plus the PNG plots (drawn by `wbc.arena.plots`) in an output folder.
