@@ -433,12 +433,22 @@ def test_controllers_on_different_arms_are_said_to_play_different_robots(small, 
     report = (out / "report.md").read_text()
     assert (f"- **robots**: stand-noarm: a1-wx200 with no arm ({said[1]} kg); stand-locked: a1-wx200 with its arm "
             f"locked ({said[2]} kg) (NOT the same robot for every controller)") in report
+    # the verdict in report.md carries the note as the printed one does, and summary.json says it
+    verdict = report.split("## Verdict")[1].split("## Results")[0]
+    assert "**Note:** the controllers play different robots" in verdict and "play them in one arm mode" in verdict
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["same_robot"] is False and summary["robots_note"].startswith("the controllers play different")
+    assert summary["robots"] == {"stand-noarm": f"a1-wx200 with no arm ({said[1]} kg)",
+                                 "stand-locked": f"a1-wx200 with its arm locked ({said[2]} kg)"}
+    assert after.count("note: the controllers play different robots") == 1  # once, under the verdict
     # the same arm mode: one robot, nothing to say
     assert main(["compare", "stand", "mpc", "--scenario", str(small), "--trials", "1", "--band", "soft",
                  "--out", str(tmp_path / "same"), "--quiet", "--workers", "1"]) == 0
     printed = capsys.readouterr()
     assert "different robots" not in printed.out + printed.err
     assert "(NOT the same robot" not in (tmp_path / "same" / "report.md").read_text()
+    same = json.loads((tmp_path / "same" / "summary.json").read_text())
+    assert same["same_robot"] is True and same["robots_note"] is None
 
 
 def test_damaged_shipped_weights_are_refused_before_the_run_not_in_each_trial(tmp_path, monkeypatch, capsys):

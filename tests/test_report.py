@@ -326,7 +326,7 @@ def test_summary_has_exactly_the_required_shape():
             for metric in COMMON_METRICS:  # these records keep no per-second profile: no common window
                 assert cell[metric] == {"mean": None, "std": None, "ci95": [None, None], "trials": 0}
             for metric in (*METRICS, *EXTRA_METRICS):
-                assert set(cell[metric]) == {"mean", "std", "ci95"}
+                assert set(cell[metric]) - {"all_equal"} == {"mean", "std", "ci95"}  # all_equal: when they are
                 lo, hi = cell[metric]["ci95"]
                 assert lo <= cell[metric]["mean"] <= hi
     cell = summary["controllers"]["mpc"]["bands"]["push"]
@@ -340,7 +340,7 @@ def test_summary_has_exactly_the_required_shape():
     assert pairs == expected
     for p in summary["paired"]:
         assert set(p) == {"a", "b", "band", "metric", "diff", "ci95", "interval", "n", "mean_a", "mean_b", "test",
-                          "p", "n80", "a_only", "b_only", "shift", "rank_biserial"}
+                          "p", "n80", "a_only", "b_only", "shift", "rank_biserial", "p_holm", "all_equal"}
         assert len(p["ci95"]) == 2
         if p["metric"] in COMMON_METRICS:
             assert p["n"] == 0 and p["test"] is None

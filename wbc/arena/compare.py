@@ -509,7 +509,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
         errors = guard.report(mine, per_controller)
         summary = summarize(records, scenario_name=scenario.name, scenario_hash=scenario.hash,
                             controllers=list(cfg.controllers), bands=list(bands), errors=errors,
-                            sequential=rounds.comparison.as_dict() if rounds is not None else None)
+                            sequential=rounds.comparison.as_dict() if rounds is not None else None,
+                            robots=plan.arms, robots_note=plan.arms_differ)
         outcomes = push_outcomes(records, scenario.trial)
         failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands, trial_of=scenario.trial)
         curve = recovery_curve(outcomes, controllers=cfg.controllers)

@@ -8,8 +8,10 @@ The input is one `wbc.arena.trial_record.TrialRecord` per (controller, trial). T
   ordered pair of controllers the paired difference B - A with its 95 % interval (exact for success,
   `wbc.arena.paired_tests.paired_success_interval`; bootstrap otherwise), its paired test's p-value (exact McNemar for
   success, Wilcoxon signed-rank otherwise; `wbc.arena.paired_tests`) and the pairs a test needs for 80 % power at the
-  observed difference (`wbc.arena.statistical_power`). Its JSON form (``summary.json``) is `Summary.to_json`: NaN
-  becomes ``None``.
+  observed difference (`wbc.arena.statistical_power`), and its p-value after Holm's correction over every paired test
+  of the run (`wbc.arena.multiplicity`). A bootstrap interval needs 2 values or more, and values all equal are
+  marked as such (`wbc.arena.stats.all_equal`), not given a zero-width interval. Its JSON form (``summary.json``)
+  is `Summary.to_json`: NaN becomes ``None``.
 - `format_table`: that summary as plain text, one block per band, in the shape of the paper's results table: mean
   ± std across seeds, or, from one seed (which has no spread across seeds), the mean and its interval over trials.
 - `write_report`: ``report.md`` plus the PNG plots (drawn by `wbc.arena.plots`) in an output folder.
@@ -20,6 +22,7 @@ put `in_canonical_order` before any statistic).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import textwrap
@@ -31,6 +34,7 @@ import numpy as np
 
 from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.error_guard import ControllerErrors, outcome_counts
+from wbc.arena.multiplicity import holm_adjusted
 from wbc.arena.paired_tests import (
     BINARY_FIELDS,
     hodges_lehmann,
@@ -43,6 +47,7 @@ from wbc.arena.paired_tests import (
 from wbc.arena.plots import PLOTS, write_plots
 from wbc.arena.statistical_power import N_MAX, pairs_for_mcnemar, pairs_for_mean_difference
 from wbc.arena.stats import (
+    all_equal,
     bootstrap_mean_ci,
     in_canonical_order,
     mean_std_of_seed_values,
@@ -51,7 +56,7 @@ from wbc.arena.stats import (
 )
 from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning, p_digits
 from wbc.arena.trial_record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
-from wbc.arena.verdict import ALPHA, signed, verdicts
+from wbc.arena.verdict import ALPHA, count_line, robots_caveat, signed, verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
 from wbc.output_files import write_text
@@ -131,7 +136,8 @@ _SPREAD_LEGEND = {
              "means, batches of independent trials, not the mean's uncertainty: 8 of 8 in each seed gives ± 0.00); "
              "success adds its Wilson 95 % interval over all the trials [lo, hi].",
     "trials": "cells: from one seed, the mean and its 95 % interval over trials [lo, hi] (Wilson for success, "
-              "percentile bootstrap otherwise).",
+              "percentile bootstrap otherwise); [n/a]: one trial, which gives no interval; (all n equal): every one "
+              "of the n trials had this value, which a bootstrap cannot turn into an interval.",
 }
 _TRACKING_LEGEND = ("V_lin / V_ang err: over each trial's own survived time, as the paper reports them (a controller "
                     "that falls early is judged on fewer, often calmer, seconds); 'common': over the leading whole "
@@ -174,15 +180,21 @@ def trial_interval(records: Sequence[TrialRecord], field: str) -> tuple[float, f
     """95 % interval of a metric's mean over trials: Wilson for a binary field, percentile bootstrap otherwise.
 
     The interval a one-seed run can quote (it has no spread across seeds): trials as independent draws of the
-    scenario. NaN values are left out; ``(nan, nan)`` without values.
+    scenario. NaN values are left out; ``(nan, nan)`` without values, and from one value of a non-binary field
+    (`wbc.arena.stats.bootstrap_mean_ci`: one value has no spread to resample).
     """
-    values = np.array([float(r[field]) for r in records], dtype=float)
-    values = values[~np.isnan(values)]
+    values = _values(records, field)
     if values.size == 0:
         return math.nan, math.nan
     if field in BINARY_FIELDS:
         return wilson_interval(int(values.sum()), int(values.size))
     return bootstrap_mean_ci(values)
+
+
+def _values(records: Sequence[TrialRecord], field: str) -> np.ndarray:
+    """The records' values of `field`, NaN left out."""
+    values = np.array([float(r[field]) for r in records], dtype=float)
+    return values[~np.isnan(values)]
 
 
 def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord], field: str,
@@ -206,11 +218,13 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
 
     Returns:
         ``{"diff", "ci95", "interval", "n", "mean_a", "mean_b", "test", "p", "n80", "a_only", "b_only", "shift",
-        "rank_biserial"}``:
+        "rank_biserial", "all_equal"}``:
         ``interval`` names how ``ci95`` was made (``exact`` or ``bootstrap``), ``mean_a`` / ``mean_b`` are each
         controller's mean over the pairs used, ``a_only`` / ``b_only`` the discordant pair counts of a binary field
         (None otherwise), ``shift`` the Hodges-Lehmann estimate of B - A and ``rank_biserial`` the side and strength
-        of the Wilcoxon test's lean (both None for a binary field); NaN where undefined.
+        of the Wilcoxon test's lean (both None for a binary field), ``all_equal`` the number of pairs when every
+        difference of a bootstrapped metric is the same (`wbc.arena.stats.all_equal`; None otherwise); NaN where
+        undefined. From one pair a bootstrap interval is NaN: one difference has no spread to resample.
 
     Raises:
         RecordError: one controller's records repeat a trial.
@@ -221,7 +235,7 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
         a, b = paired_values(records_a, records_b, field)
     out: dict[str, Any] = {"diff": math.nan, "ci95": [math.nan, math.nan], "interval": None, "n": int(a.size),
                            "mean_a": math.nan, "mean_b": math.nan, "test": None, "p": math.nan, "n80": None,
-                           "a_only": None, "b_only": None, "shift": None, "rank_biserial": None}
+                           "a_only": None, "b_only": None, "shift": None, "rank_biserial": None, "all_equal": None}
     if a.size == 0:
         return out
     d = b - a
@@ -234,7 +248,7 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
     else:
         test = wilcoxon_signed_rank(d)
         out.update(test="Wilcoxon signed-rank", p=test.p_value, ci95=list(bootstrap_mean_ci(d)), interval="bootstrap",
-                   shift=hodges_lehmann(d), rank_biserial=rank_biserial(test))
+                   shift=hodges_lehmann(d), rank_biserial=rank_biserial(test), all_equal=all_equal(d))
         if d.size >= 2:
             out["n80"] = pairs_for_mean_difference(float(d.mean()), float(d.std(ddof=1)), alpha=alpha)
     return out
@@ -280,6 +294,8 @@ def summarize(
     bands: Sequence[str],
     errors: Sequence[ControllerErrors] | None = None,
     sequential: Mapping[str, Any] | None = None,
+    robots: Mapping[str, str] | None = None,
+    robots_note: str | None = None,
 ) -> Summary:
     """Summarise arena records per controller and band, and compare controllers pairwise.
 
@@ -289,8 +305,9 @@ def summarize(
     trial's common window (`wbc.arena.windows`); ticks, deadline misses and clamped ticks; every counter; and, with
     `errors` given (the arena), the trials per outcome. For every ordered pair (a, b) with a listed before b in
     `controllers`, every band and every metric in `PAIRED_METRICS` (`PairSummary`): the paired difference b - a, its
-    95 % interval, its paired test and n80 (`paired_comparison`). Warnings for deadline misses or clamped ticks past
-    `WARN_FRACTION` of a cell's ticks.
+    95 % interval, its paired test and n80 (`paired_comparison`), and its p-value after Holm's correction over every
+    paired test of the run (`wbc.arena.multiplicity.holm_adjusted`: the family the verdict weighs). Warnings for
+    deadline misses or clamped ticks past `WARN_FRACTION` of a cell's ticks.
 
     Records of controllers or bands not listed are ignored. A listed controller or band without records gets
     0 trials and ``None`` statistics. The records are put `in_canonical_order` first, so the summary does not
@@ -305,6 +322,9 @@ def summarize(
         errors: the controllers that failed on a trial (`wbc.arena.error_guard.ErrorGuard.report`); given, the
             summary counts outcomes and lists them; None: a summary of records alone.
         sequential: the sequential test's verdict, when the run had one.
+        robots: controller -> the robot it played, in words (`wbc.arena.compare.arms_played`); None: not known.
+        robots_note: the note for controllers that played different robots (`wbc.arena.compare.arms_note`), else
+            None.
 
     Returns:
         The summary; ``summary.json`` is its `Summary.to_json`.
@@ -332,7 +352,9 @@ def summarize(
             for metric in (*METRICS, *EXTRA_METRICS):
                 field = METRIC_KEYS.get(metric, metric)
                 stats = mean_std_over_seeds(cell, field)
-                metrics[metric] = MetricSummary(stats["mean"], stats["std"], trial_interval(cell, field))
+                metrics[metric] = MetricSummary(stats["mean"], stats["std"], trial_interval(cell, field),
+                                                all_equal=None if field in BINARY_FIELDS else
+                                                all_equal(_values(cell, field)))
             for metric in COMMON_METRICS:
                 metrics[metric] = _common_stat(cell, common.get(metric, {}).get(controller, {}))
             summary_cell = CellSummary(trials=len(cell), seeds=len({r.seed for r in cell}), metrics=metrics,
@@ -345,10 +367,12 @@ def summarize(
         for band in bands:
             for metric in PAIRED_METRICS:
                 paired.append(compare_pair(cells[a][band], cells[b][band], a=a, b=b, band=band, metric=metric))
+    holm = holm_adjusted([entry.p for entry in paired])
+    paired = [dataclasses.replace(entry, p_holm=p) for entry, p in zip(paired, holm, strict=True)]
     return Summary(scenario_name=scenario_name, scenario_hash=scenario_hash, cells=per_controller,
                    paired=tuple(paired), warnings=tuple(warnings),
                    controller_errors=None if errors is None else {e.controller: e for e in errors},
-                   sequential=sequential)
+                   sequential=sequential, robots=None if robots is None else dict(robots), robots_note=robots_note)
 
 
 def _common_stat(cell: Sequence[TrialRecord], values: Mapping[tuple, float]) -> MetricSummary:
@@ -356,8 +380,8 @@ def _common_stat(cell: Sequence[TrialRecord], values: Mapping[tuple, float]) -> 
     pairs = [(r.seed, values.get(r.pair_key, math.nan)) for r in cell]
     stats = mean_std_of_seed_values(pairs)
     finite = np.array([v for _, v in pairs if not math.isnan(v)], dtype=float)
-    ci = bootstrap_mean_ci(finite) if finite.size else (math.nan, math.nan)
-    return MetricSummary(stats["mean"], stats["std"], ci, trials=int(finite.size))
+    return MetricSummary(stats["mean"], stats["std"], bootstrap_mean_ci(finite), trials=int(finite.size),
+                         all_equal=all_equal(finite))
 
 
 def _tick_counts(cell: Sequence[TrialRecord]) -> dict[str, Any]:
@@ -430,7 +454,9 @@ def cell_text(stat: MetricSummary, metric: str, seeds: int | None) -> str:
     """A table cell: "mean ± std" across seeds, or from one seed "mean [lo, hi]" (its 95 % interval over trials).
 
     A single seed has no spread across seeds to quote (its std would print as ± 0.00); its interval over trials
-    says how far the mean could be off. A cell without an interval (no value to draw it from) keeps ± std.
+    says how far the mean could be off. Where the trials give no interval, none is printed: "mean [n/a]" from one
+    trial (one value has no spread to resample), "mean (all n equal)" where every one of its n trials had the same
+    value (the bootstrap's [mean, mean] would measure nothing). A cell of several seeds without a mean keeps n/a.
 
     Several seeds are batches of independent trials (each trial draws its own scenario sample): their std is the
     spread of the batch means, the paper's convention, which says nothing of the mean's uncertainty and is 0 whenever
@@ -443,8 +469,12 @@ def cell_text(stat: MetricSummary, metric: str, seeds: int | None) -> str:
         seeds: the seeds behind the cell (None: unknown).
     """
     ci = stat.ci95
+    if seeds == 1 and stat.mean is not None and stat.all_equal is not None:
+        return f"{_number(stat.mean, metric)} (all {stat.all_equal} equal)"
     if seeds == 1 and stat.mean is not None and None not in ci:
         return f"{_number(stat.mean, metric)} [{_number(ci[0], metric)}, {_number(ci[1], metric)}]"
+    if seeds == 1 and stat.mean is not None:
+        return f"{_number(stat.mean, metric)} [n/a]"
     if metric == "success_rate" and stat.mean is not None and None not in ci:
         return f"{_mean_std(stat, metric)} [{_number(ci[0], metric)}, {_number(ci[1], metric)}]"
     return _mean_std(stat, metric)
@@ -488,10 +518,17 @@ def number_text(value: float | None, metric: str) -> str:
     return _number(value, metric)
 
 
-def _ci(ci95: Sequence[float | None], metric: str) -> str:
-    if ci95[0] is None or ci95[1] is None:
+def _ci(pair: PairSummary) -> str:
+    """A paired difference's interval as printed.
+
+    ``all n equal`` where every one of the n differences was the same (no uncertainty measured), ``n/a`` without an
+    interval (no pair, or one pair of a bootstrapped metric).
+    """
+    if pair.all_equal is not None:
+        return f"all {pair.all_equal} equal"
+    if pair.ci95[0] is None or pair.ci95[1] is None:
         return "n/a"
-    return f"[{signed_text(ci95[0], metric)}, {signed_text(ci95[1], metric)}]"
+    return f"[{signed_text(pair.ci95[0], pair.metric)}, {signed_text(pair.ci95[1], pair.metric)}]"
 
 
 def _result_rows(summary: Summary, band: str, metrics: Sequence[str]) -> list[list[str]]:
@@ -549,14 +586,17 @@ PAIRED_LEGEND = ("95% CI: for success the exact interval built from the discorda
                  "otherwise, two-sided; n80: paired trials that test needs to detect the observed difference with "
                  "80 % power at alpha = 0.05 (- when no difference was observed). On a few pairs a bootstrap "
                  "interval is narrower than the test allows (it may exclude 0 where no test could reject on so few "
-                 "pairs): the verdict follows the test. Each p is its own comparison's, not corrected for the "
-                 "others in this table: where nothing differs, about 1 test in 20 has p < 0.05 by chance.")
+                 "pairs): the verdict follows the test. 'all n equal': every one of the n pairs had this "
+                 "difference, which a bootstrap cannot turn into an interval; n/a from one pair. Each p is its own "
+                 "comparison's, not corrected for the others in this table: where nothing differs, about 1 test in "
+                 "20 has p < 0.05 by chance. The verdict says which hold after Holm's correction over every test of "
+                 "this table (summary.json: p_holm).")
 """What the p and n80 columns of the paired differences mean, printed under them."""
 
 
 def _paired_rows(summary: Summary) -> list[list[str]]:
     return [
-        [p.band, p.a, p.b, LABELS[p.metric], signed_text(p.diff, p.metric), _ci(p.ci95, p.metric), p_text(p.p),
+        [p.band, p.a, p.b, LABELS[p.metric], signed_text(p.diff, p.metric), _ci(p), p_text(p.p),
          n80_text(p)]
         for p in summary.paired
     ]
@@ -657,13 +697,23 @@ def verdict_basis(summary: Summary, *, where: str) -> str:
 
 
 def format_verdict(summary: Summary) -> str:
-    """The verdict sentences of a summary (`wbc.arena.verdict.verdicts`) under a heading, wrapped; empty without."""
+    """The verdict of a summary under a heading, wrapped; empty without sentences.
+
+    Its first line says how many tests it weighs and how many hold after Holm's correction
+    (`wbc.arena.verdict.count_line`), then come the sentences (`wbc.arena.verdict.verdicts`), then, where the
+    controllers played different robots, that note (`wbc.arena.verdict.robots_caveat`): report.md's Verdict section
+    says the same.
+    """
     sentences = verdicts(summary)
     if not sentences:
         return ""
     lines = [f"verdict ({verdict_basis(summary, where='above')}):"]
-    for sentence in sentences:
-        lines += textwrap.wrap(sentence, width=118, initial_indent="  ", subsequent_indent="    ")
+    for said in (count_line(summary), *sentences):
+        if said is not None:
+            lines += textwrap.wrap(said, width=118, initial_indent="  ", subsequent_indent="    ")
+    caveat = robots_caveat(summary)
+    if caveat is not None:
+        lines += textwrap.wrap(f"note: {caveat}", width=118, initial_indent="  ", subsequent_indent="    ")
     return "\n".join(lines) + "\n"
 
 
@@ -744,9 +794,12 @@ def write_report(
         lines += ["", f"## {title}", "", *body]
     sentences = verdicts(summary)
     if sentences:
-        lines += ["", "## Verdict", "", f"Per band and pair of controllers, on the same trials "
-                  f"({verdict_basis(summary, where='in the section Sequential test')}).", "",
+        lines += ["", "## Verdict", "", count_line(summary) or "", "", "Per band and pair of controllers, on the same "
+                  f"trials ({verdict_basis(summary, where='in the section Sequential test')}).", "",
                   *(f"- {sentence}" for sentence in sentences)]
+        caveat = robots_caveat(summary)
+        if caveat is not None:
+            lines += ["", f"**Note:** {caveat}"]
     legend = cell_legend(summary)
     lines += ["", "## Results", "", legend[0].upper() + legend[1:] + " Success in %."]
     metrics = (*METRICS, *_common_of(summary), *EXTRA_METRICS)

@@ -40,6 +40,7 @@ __all__ = [
     "group_by",
     "mean_std_over_seeds",
     "mean_std_of_seed_values",
+    "all_equal",
     "bootstrap_mean_ci",
     "paired_difference",
     "wilson_interval",
@@ -148,16 +149,18 @@ def bootstrap_mean_ci(
 
     Draws `n_boot` resamples of the n values with replacement from ``np.random.default_rng(seed)``, takes each
     resample's mean, and returns the (1 - level) / 2 and (1 + level) / 2 quantiles of those means. Deterministic for a
-    given (values, n_boot, seed). When all values are equal the interval is [value, value] exactly.
+    given (values, n_boot, seed). When all values are equal the interval is [value, value] exactly: every resample
+    is the same, and the interval says nothing of the mean's uncertainty (`all_equal` tells that case, which the
+    tables print as the value and "all n equal"). One value has no spread to resample: no interval.
 
     Args:
-        values: 1-D array of finite values, n >= 1.
+        values: 1-D array of finite values.
         n_boot: number of resamples, >= 1.
         seed: seed of the resampling generator.
         level: coverage of the interval, in (0, 1).
 
     Returns:
-        ``(lo, hi)``; ``(nan, nan)`` when `values` is empty.
+        ``(lo, hi)``; ``(nan, nan)`` from fewer than 2 values.
 
     Raises:
         ConfigError: `n_boot` < 1 or `level` outside (0, 1).
@@ -169,7 +172,7 @@ def bootstrap_mean_ci(
         raise ConfigError(f"bootstrap_mean_ci: level must be in (0, 1), got {level}; pass a coverage such as 0.95")
     values = np.asarray(values, dtype=float).ravel()
     n = values.size
-    if n == 0:
+    if n < 2:
         return math.nan, math.nan
     if np.all(values == values[0]):
         return float(values[0]), float(values[0])
@@ -183,6 +186,18 @@ def bootstrap_mean_ci(
     alpha = (1.0 - level) / 2.0
     lo, hi = np.quantile(boot_means, [alpha, 1.0 - alpha])
     return float(lo), float(hi)
+
+
+def all_equal(values: np.ndarray) -> int | None:
+    """The number of values when there are 2 or more and every one is the same, else None.
+
+    Such values give a bootstrap interval [value, value] (`bootstrap_mean_ci`) that measures no uncertainty: the
+    reports print the value and "all n equal" instead of an interval.
+    """
+    values = np.asarray(values, dtype=float).ravel()
+    if values.size < 2 or not np.all(values == values[0]):
+        return None
+    return int(values.size)
 
 
 def _index_by_key(records: Iterable[TrialRecord], which: str) -> dict[PairKey, TrialRecord]:
@@ -206,7 +221,8 @@ def paired_difference(
     Records are paired by ``(band, seed, trial)``; trials present for only one controller are left out. For each pair
     d_i = metric(B_i) - metric(A_i) (booleans as 0/1); pairs where either value is NaN are left out. Then
     diff = mean_i d_i, and ci95 is the percentile bootstrap over pairs (`bootstrap_mean_ci` with
-    ``np.random.default_rng(seed)``), [diff, diff] when all d_i are equal.
+    ``np.random.default_rng(seed)``), [diff, diff] when all d_i are equal (`all_equal`: no uncertainty measured),
+    [nan, nan] from one pair.
 
     A positive diff means B has the larger value: for ``success`` or ``ttf`` B is better, for tracking errors
     (``vlin_err``, ``vang_err``) B is worse.
@@ -237,10 +253,7 @@ def paired_difference(
         return {"diff": math.nan, "ci95": [math.nan, math.nan], "n": 0}
     d_arr = np.array(diffs)
     diff = float(d_arr.mean())
-    if np.all(d_arr == d_arr[0]):
-        lo = hi = diff
-    else:
-        lo, hi = bootstrap_mean_ci(d_arr, n_boot=n_boot, seed=seed)
+    lo, hi = bootstrap_mean_ci(d_arr, n_boot=n_boot, seed=seed)
     return {"diff": diff, "ci95": [lo, hi], "n": int(d_arr.size)}
 
 

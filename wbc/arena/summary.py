@@ -52,12 +52,16 @@ class MetricSummary:
         ci95: the 95 % interval of the mean over trials (Wilson for success, percentile bootstrap otherwise).
         trials: the trials that had a value (given for the common-window metrics, whose window may be empty; None
             for the others, whose count is the cell's `CellSummary.trials`).
+        all_equal: the number of values (2 or more) when every one of them is the same, else None. `ci95` is then
+            [value, value], which measures no uncertainty: the tables print the value and "all n equal" instead.
+            A bootstrap interval needs 2 values or more: from one, `ci95` is (None, None).
     """
 
     mean: float | None
     std: float | None
     ci95: tuple[float | None, float | None] = (None, None)
     trials: int | None = None
+    all_equal: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mean", json_float(self.mean))
@@ -65,17 +69,20 @@ class MetricSummary:
         object.__setattr__(self, "ci95", (json_float(self.ci95[0]), json_float(self.ci95[1])))
 
     def to_json(self) -> dict[str, Any]:
-        """``{"mean", "std", "ci95": [lo, hi]}``, and ``"trials"`` when counted."""
+        """``{"mean", "std", "ci95": [lo, hi]}``, ``"trials"`` when counted, ``"all_equal"`` when all values are."""
         out: dict[str, Any] = {"mean": self.mean, "std": self.std, "ci95": list(self.ci95)}
         if self.trials is not None:
             out["trials"] = self.trials
+        if self.all_equal is not None:
+            out["all_equal"] = self.all_equal
         return out
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> MetricSummary:
-        """Read back `to_json` (``trials`` absent: not counted)."""
+        """Read back `to_json` (``trials`` absent: not counted; ``all_equal`` absent: not all equal)."""
         ci = data["ci95"]
-        return cls(mean=data["mean"], std=data["std"], ci95=(ci[0], ci[1]), trials=data.get("trials"))
+        return cls(mean=data["mean"], std=data["std"], ci95=(ci[0], ci[1]), trials=data.get("trials"),
+                   all_equal=data.get("all_equal"))
 
 
 @dataclass(frozen=True)
@@ -196,6 +203,10 @@ class PairSummary:
         rank_biserial: the Wilcoxon test's matched-pairs rank-biserial correlation, (R+ - R-) / (R+ + R-): its sign
             is the side the test leans to (positive: B - A tends to be positive), which the mean's may not be. None
             for success and in a ``summary.json`` written before it was recorded.
+        p_holm: `p` after Holm's correction over every paired test of the run (`wbc.arena.multiplicity`): the
+            family the verdict weighs. None without a test, and in a ``summary.json`` written before it was recorded.
+        all_equal: for a bootstrap interval, the number of pairs (2 or more) when every difference is the same, else
+            None: `ci95` is then [diff, diff], which measures no uncertainty. From one pair `ci95` is (None, None).
     """
 
     a: str
@@ -215,9 +226,11 @@ class PairSummary:
     b_only: int | None
     shift: float | None = None
     rank_biserial: float | None = None
+    p_holm: float | None = None
+    all_equal: int | None = None
 
     def __post_init__(self) -> None:
-        for name in ("diff", "mean_a", "mean_b", "p", "shift", "rank_biserial"):
+        for name in ("diff", "mean_a", "mean_b", "p", "shift", "rank_biserial", "p_holm"):
             object.__setattr__(self, name, json_float(getattr(self, name)))
         object.__setattr__(self, "ci95", (json_float(self.ci95[0]), json_float(self.ci95[1])))
 
@@ -231,7 +244,8 @@ class PairSummary:
         return {"a": self.a, "b": self.b, "band": self.band, "metric": self.metric, "diff": self.diff,
                 "ci95": list(self.ci95), "interval": self.interval, "n": self.n, "mean_a": self.mean_a,
                 "mean_b": self.mean_b, "test": self.test, "p": self.p, "n80": self.n80, "a_only": self.a_only,
-                "b_only": self.b_only, "shift": self.shift, "rank_biserial": self.rank_biserial}
+                "b_only": self.b_only, "shift": self.shift, "rank_biserial": self.rank_biserial,
+                "p_holm": self.p_holm, "all_equal": self.all_equal}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PairSummary:
@@ -240,7 +254,8 @@ class PairSummary:
         return cls(a=data["a"], b=data["b"], band=data["band"], metric=data["metric"], diff=data["diff"],
                    ci95=(ci[0], ci[1]), interval=data["interval"], n=data["n"], mean_a=data["mean_a"],
                    mean_b=data["mean_b"], test=data["test"], p=data["p"], n80=data["n80"], a_only=data["a_only"],
-                   b_only=data["b_only"], shift=data.get("shift"), rank_biserial=data.get("rank_biserial"))
+                   b_only=data["b_only"], shift=data.get("shift"), rank_biserial=data.get("rank_biserial"),
+                   p_holm=data.get("p_holm"), all_equal=data.get("all_equal"))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -283,6 +298,10 @@ class Summary:
             counted (a summary of records alone).
         sequential: the sequential test's verdict (``wbc compare --until-significant``,
             `wbc.arena.sequential.SequentialComparison.as_dict`), None otherwise.
+        robots: controller -> the robot it played (its arm mode, in words), in table order; None when not known (a
+            summary of records alone).
+        robots_note: where the controllers played different robots, what each carried and why that matters
+            (`wbc.arena.compare.arms_note`); None where they played one robot or `robots` is not known.
     """
 
     scenario_name: str
@@ -292,6 +311,13 @@ class Summary:
     warnings: tuple[TickWarning, ...] = ()
     controller_errors: Mapping[str, ControllerErrors] | None = None
     sequential: Mapping[str, Any] | None = None
+    robots: Mapping[str, str] | None = None
+    robots_note: str | None = None
+
+    @property
+    def same_robot(self) -> bool | None:
+        """Whether every controller played the same robot; None when not known."""
+        return None if self.robots is None else self.robots_note is None
 
     @property
     def controllers(self) -> list[str]:
@@ -334,11 +360,13 @@ class Summary:
             out["controller_errors"] = {name: e.as_dict() for name, e in self.controller_errors.items()}
         if self.sequential is not None:
             out["sequential"] = dict(self.sequential)
+        if self.robots is not None:
+            out.update(same_robot=self.same_robot, robots=dict(self.robots), robots_note=self.robots_note)
         return out
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any], *, source: str = "summary") -> Summary:
-        """Read back `to_json` (``summary.json``; ``controller_errors`` and ``sequential`` absent: none).
+        """Read back `to_json` (``summary.json``; ``controller_errors``, ``sequential`` and ``robots`` absent: none).
 
         Raises:
             RecordError: a field is missing or malformed (the message names `source` and the field).
@@ -352,7 +380,8 @@ class Summary:
                        warnings=tuple(TickWarning(**w) for w in data["warnings"]),
                        controller_errors=None if errors is None else
                        {name: ControllerErrors.from_dict(name, e) for name, e in errors.items()},
-                       sequential=data.get("sequential"))
+                       sequential=data.get("sequential"), robots=data.get("robots"),
+                       robots_note=data.get("robots_note"))
         except (KeyError, TypeError, AttributeError) as exc:
             raise RecordError(f"{source}: not a summary this version reads ({type(exc).__name__}: {exc}); write it "
                               "again with wbc compare --resume on its results directory") from None

@@ -16,13 +16,29 @@ entries) and says, for one band and one pair of controllers:
 A side is called better only where its test rejects at 0.05 and leans to it (`called_better`, which ``wbc paper``'s
 verdicts use too); a sentence whose test does not reject opens by saying so. The sentences make no claim the table
 beside them does not show.
+
+A run's verdict weighs many tests at once (every pair of controllers, band and metric of the paired-differences
+table), and among many tests of controllers that do not differ some reject by chance. Each test keeps its own p; the
+verdict also corrects over that family by Holm's method (`wbc.arena.multiplicity`): its first line (`count_line`)
+says how many tests it weighs and how many reject on their own and after the correction, and a sentence whose test
+rejects says whether it holds after the correction; one that holds only on its own test says so in its claim.
+
+Trials that ended in a controller error are not falls. By the arena's documented policy they count as failures in
+the success rate (and the McNemar test on it), and their TTF is the share played before the error; the verdict says
+so beside the survival and TTF sentences where a side had such trials, and where every trial of a side ended so it
+gives no verdict on survival or time to fall for that pair and band.
 """
 
 from __future__ import annotations
 
-from wbc.arena.summary import SIGNIFICANCE, PairSummary, Summary, p_digits
+import dataclasses
 
-__all__ = ["ALPHA", "LOWER_IS_BETTER", "called_better", "leans", "p_clause", "signed", "split", "verdicts"]
+from wbc.arena.multiplicity import holm_adjusted
+from wbc.arena.summary import SIGNIFICANCE, PairSummary, Summary, p_digits
+from wbc.arena.trial_record import CONTROLLER_ERROR
+
+__all__ = ["ALPHA", "LOWER_IS_BETTER", "called_better", "count_line", "holm_family", "leans", "p_clause",
+           "robots_caveat", "signed", "split", "verdicts"]
 
 ALPHA = SIGNIFICANCE
 """The level a difference is called significant at."""
@@ -104,19 +120,37 @@ def called_better(entry: PairSummary, *, higher_is_better: bool, alpha: float = 
     return entry.b if (side > 0) == higher_is_better else entry.a
 
 
-def _significance(entry: PairSummary, test: str) -> str:
+def _tests(m: int) -> str:
+    return f"the {m} tests of this verdict" if m != 1 else "the 1 test of this verdict"
+
+
+def _holds(entry: PairSummary) -> bool:
+    """The test rejects after Holm's correction over the verdict's family (`PairSummary.p_holm`)."""
+    return entry.p_holm is not None and entry.p_holm < ALPHA
+
+
+def _significance(entry: PairSummary, test: str, m: int) -> str:
+    """Whether `entry`'s test rejects, on its own and, where it does, after Holm's correction over the `m` tests."""
     p = entry.p
     said = p_clause(p)
-    if p is not None and p < ALPHA:
-        return f"significant ({test} {said})"
-    return f"not significant ({test} {said})"
+    if p is None or not p < ALPHA:
+        return f"not significant ({test} {said})"
+    adjusted = "Holm-adjusted " + p_clause(entry.p_holm)
+    if _holds(entry):
+        return f"significant ({test} {said}), and after Holm's correction over {_tests(m)} ({adjusted})"
+    return (f"significant on its own ({test} {said}), not significant after Holm's correction over {_tests(m)} "
+            f"({adjusted})")
+
+
+_OWN_TEST_ONLY = " (on its own test only, not after Holm's correction)"
+"""Added to a claim that a side is better where its test rejects alone and not after the correction."""
 
 
 def _pairs(n: int) -> str:
     return f"{n} discordant pair{'' if n == 1 else 's'}"
 
 
-def _survival(entry: PairSummary) -> str:
+def _survival(entry: PairSummary, m: int) -> str:
     a, b, n = entry.a, entry.b, entry.n
     sa, sb = round(entry.mean_a * n), round(entry.mean_b * n)
     a_only, b_only = entry.a_only, entry.b_only
@@ -128,7 +162,7 @@ def _survival(entry: PairSummary) -> str:
             return (f"{head}, with no discordant pair (95 % interval of the difference [{signed(100 * lo, 0)}, "
                     f"{signed(100 * hi, 0)}] points): these trials do not tell them apart")
         return (f"{head}; {_pairs(discordant)} split evenly ({a_only} each); "
-                f"{_significance(entry, 'exact McNemar')}")
+                f"{_significance(entry, 'exact McNemar', m)}")
     more, fewer = (b, a) if b_only > a_only else (a, b)
     won, lost = max(a_only, b_only), min(a_only, b_only)
     s_more, s_fewer = (sb, sa) if more == b else (sa, sb)
@@ -136,9 +170,9 @@ def _survival(entry: PairSummary) -> str:
     lo_m, hi_m = (lo, hi) if more == b else (-hi, -lo)
     figures = (f"{s_more} against {s_fewer} of {n} paired trials ({diff:+.1f} points, 95 % interval "
                f"[{signed(100 * lo_m, 1)}, {signed(100 * hi_m, 1)}]); of {_pairs(discordant)} {more} alone survived "
-               f"{won} and {fewer} alone {lost}; {_significance(entry, 'exact McNemar')}")
+               f"{won} and {fewer} alone {lost}; {_significance(entry, 'exact McNemar', m)}")
     if entry.significant:
-        return f"{more} survives more than {fewer}: {figures}"
+        return f"{more} survives more than {fewer}{'' if _holds(entry) else _OWN_TEST_ONLY}: {figures}"
     return (f"{a} and {b} do not differ significantly in survival: {more} {figures}; "
             f"{_settle(entry, 'difference')}")
 
@@ -157,7 +191,7 @@ def signed(value: float, decimals: int) -> str:
 
 
 def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decimals: int, *,
-                     higher_is_better: bool, subject: str) -> str:
+                     higher_is_better: bool, subject: str, m: int) -> str:
     """The sentence of a difference of means read off `entry`: the side the test calls better first, or none.
 
     `head` is the claim with ``{better}`` and ``{worse}`` in it, said only where the test rejects and leans to that
@@ -172,25 +206,38 @@ def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decima
     not differ significantly in {subject}``, and says what the interval leaves open (`_settle`).
     """
     if split(entry):
-        return _split(entry, leans(entry), subject, unit, decimals, higher_is_better=higher_is_better)
+        return _split(entry, leans(entry), subject, unit, decimals, higher_is_better=higher_is_better, m=m)
     better = called_better(entry, higher_is_better=higher_is_better)
     b_first = better == entry.b if better is not None else (entry.diff > 0) == higher_is_better
     first, second = (entry.b, entry.a) if b_first else (entry.a, entry.b)
     m_first, m_second = (entry.mean_b, entry.mean_a) if b_first else (entry.mean_a, entry.mean_b)
-    lo, hi = entry.ci95
-    lo_f, hi_f = (lo, hi) if b_first else (-hi, -lo)
     unit = f" {unit}" if unit else ""
     figures = (f"{what} {m_first:.{decimals}f} against {m_second:.{decimals}f}{unit} on {entry.n} trials (difference "
-               f"{signed(m_first - m_second, decimals)}, 95 % bootstrap interval [{signed(lo_f, decimals)}, "
-               f"{signed(hi_f, decimals)}]); {_significance(entry, 'Wilcoxon signed-rank')}")
+               f"{signed(m_first - m_second, decimals)}, {_interval(entry, b_first, decimals)}); "
+               f"{_significance(entry, 'Wilcoxon signed-rank', m)}")
     if better is not None:
-        return f"{head.format(better=first, worse=second)}: {figures}"
+        return f"{head.format(better=first, worse=second)}{'' if _holds(entry) else _OWN_TEST_ONLY}: {figures}"
     return (f"{entry.a} and {entry.b} do not differ significantly in {subject}: {first} {figures}; "
             f"{_settle(entry, 'difference')}")
 
 
+def _interval(entry: PairSummary, b_first: bool, decimals: int) -> str:
+    """The bootstrap interval of a difference of means, first side minus second, or why there is none.
+
+    From one pair there is none; where every pair's difference is the same, a bootstrap gives that value as both
+    bounds, which measures nothing: the sentence says the differences are all equal instead.
+    """
+    if entry.all_equal is not None:
+        return f"the same in all {entry.all_equal} pairs: no bootstrap interval"
+    lo, hi = entry.ci95
+    if lo is None or hi is None:
+        return "no interval from one pair" if entry.n == 1 else "no interval"
+    lo_f, hi_f = (lo, hi) if b_first else (-hi, -lo)
+    return f"95 % bootstrap interval [{signed(lo_f, decimals)}, {signed(hi_f, decimals)}]"
+
+
 def _split(entry: PairSummary, side: float, subject: str, unit: str, decimals: int, *,
-           higher_is_better: bool) -> str:
+           higher_is_better: bool, m: int) -> str:
     """A significant Wilcoxon test that leans to `side` (its sign), the mean difference to the other: neither wins."""
     unit = f" {unit}" if unit else ""
     if not side:
@@ -204,32 +251,111 @@ def _split(entry: PairSummary, side: float, subject: str, unit: str, decimals: i
     by_mean = entry.b if (entry.diff > 0) == higher_is_better else entry.a
     return (f"{entry.a} and {entry.b} differ in {subject}, but not one way: {lean}, while the mean difference "
             f"({signed(entry.diff, decimals)}{unit} on {entry.n} trials, B - A with B = {entry.b}) favours {by_mean} "
-            f"through a few large differences; {_significance(entry, 'Wilcoxon signed-rank')}: neither is called "
+            f"through a few large differences; {_significance(entry, 'Wilcoxon signed-rank', m)}: neither is called "
             "better")
 
 
-def _tracking(entry: PairSummary, what: str, unit: str, decimals: int) -> str | None:
+def _tracking(entry: PairSummary, what: str, unit: str, decimals: int, m: int) -> str | None:
     if not entry.n or entry.diff is None:
         return None
     subject = f"how they track the {what} over the seconds both survived"
     if entry.diff == 0.0 and not entry.significant:
         return (f"{entry.a} and {entry.b} have the same mean error in the {what} over the seconds both survived "
-                f"({entry.n} trials); {_significance(entry, 'Wilcoxon signed-rank')}")
+                f"({entry.n} trials); {_significance(entry, 'Wilcoxon signed-rank', m)}")
     return _mean_difference(entry, f"{{better}} tracks the {what} better than {{worse}} over the seconds both survived",
-                            "mean error", unit, decimals, higher_is_better=False, subject=subject)
+                            "mean error", unit, decimals, higher_is_better=False, subject=subject, m=m)
 
 
-def _time_to_fall(entry: PairSummary) -> str | None:
+def _time_to_fall(entry: PairSummary, m: int) -> str | None:
     """Who stays up longer, or None where the mean times are the same and the test does not reject (nothing to say)."""
     if not entry.n or entry.diff is None or (entry.diff == 0.0 and not entry.significant):
         return None
     return _mean_difference(entry, "{better} stays up longer than {worse}",
                             "mean TTF (the share of the episode survived)", "", 3, higher_is_better=True,
-                            subject="how long they stay up (TTF)")
+                            subject="how long they stay up (TTF)", m=m)
+
+
+def holm_family(summary: Summary) -> tuple[PairSummary, ...]:
+    """The summary's paired comparisons with each test's Holm-adjusted p (`PairSummary.p_holm`), in order.
+
+    The family is every paired test of the summary (each pair of controllers, band and metric that has a test):
+    the tests the verdict weighs. The adjusted p is computed here from the tests' own p-values, the same as
+    `wbc.arena.report.summarize` records, so that a summary read back from an older ``summary.json`` gets it too.
+    """
+    adjusted = holm_adjusted([entry.p for entry in summary.paired])
+    return tuple(dataclasses.replace(entry, p_holm=p) for entry, p in zip(summary.paired, adjusted, strict=True))
+
+
+def count_line(summary: Summary) -> str | None:
+    """The verdict's first line: how many tests it weighs, how many reject on their own and after Holm's correction.
+
+    None where the summary has no paired test (a run of one controller).
+    """
+    family = [entry for entry in holm_family(summary) if entry.p is not None]
+    if not family:
+        return None
+    m = len(family)
+    alone = sum(1 for entry in family if entry.p < ALPHA)
+    held = sum(1 for entry in family if _holds(entry))
+    pairs = len({(entry.a, entry.b) for entry in family})
+    bands = len({entry.band for entry in family})
+    metrics = len({entry.metric for entry in family})
+    tests = "1 paired test" if m == 1 else f"{m} paired tests"
+    return (f"This verdict weighs {tests} (every test of the paired differences: {pairs} pair"
+            f"{'' if pairs == 1 else 's'} of controllers, {bands} band{'' if bands == 1 else 's'}, {metrics} "
+            f"metric{'' if metrics == 1 else 's'}). {alone} of them {'has' if alone == 1 else 'have'} p < {ALPHA:g} "
+            f"on {'its' if alone == 1 else 'their'} own test; {held} {'holds' if held == 1 else 'hold'} after Holm's "
+            f"correction over the {m}, which keeps the chance of any false \"better\" in this verdict at most "
+            f"{ALPHA:g}. Where nothing differs, about 1 test in 20 has p < {ALPHA:g} on its own by chance.")
+
+
+def robots_caveat(summary: Summary) -> str | None:
+    """The note that the controllers played different robots (`Summary.robots_note`), which ends the verdict; or None.
+
+    The pairing gives both the same trials, not the same robot: a difference the verdict calls can be the arm's.
+    """
+    if summary.robots_note is None:
+        return None
+    return f"{summary.robots_note}."
+
+
+def _errored(summary: Summary, controller: str, band: str) -> tuple[int, int]:
+    """(trials that ended in a controller error, trials) of `controller` in `band`; (0, 0) where not counted."""
+    cell = summary.cell(controller, band)
+    return (0, 0) if cell is None else (cell.outcome(CONTROLLER_ERROR), cell.trials)
+
+
+def _all_errored(summary: Summary, entry: PairSummary) -> str | None:
+    """The sentence for a pair where every trial of a side ended in a controller error: no verdict on survival."""
+    sides = [c for c in (entry.a, entry.b) if (k := _errored(summary, c, entry.band))[0] and k[0] == k[1]]
+    if not sides:
+        return None
+    said = " and ".join(f"{c}'s {_errored(summary, c, entry.band)[1]} trials" for c in sides)
+    return (f"{said} all ended in controller errors: no verdict on survival or how long they stay up "
+            f"(a controller error is not a fall; the success rate counts each as a failure, and the TTF is the "
+            f"share played before the error)")
+
+
+def _error_note(summary: Summary, entry: PairSummary, what: str) -> str:
+    """A clause for a sentence on survival or TTF where a side had trials that ended in controller errors."""
+    notes = []
+    for c in (entry.a, entry.b):
+        errors, trials = _errored(summary, c, entry.band)
+        if errors:
+            notes.append(f"{c}'s {errors} of {trials} trials that ended in controller errors")
+    if not notes:
+        return ""
+    how = ("count as failures, not falls" if what == "survival" else
+           "enter with the share played before the error, not a time to fall")
+    return f"; {' and '.join(notes)} {how}"
 
 
 def verdicts(summary: Summary) -> list[str]:
     """The verdict sentences of a summary, band by band, pair by pair (none for a run of one controller).
+
+    Each sentence whose test rejects says whether it holds after Holm's correction over every paired test of the
+    summary (`holm_family`; `count_line` says how many). A side whose trials all ended in controller errors gets
+    no verdict on survival or TTF for that pair and band; a side with some gets a clause saying how they count.
 
     Args:
         summary: the output of `wbc.arena.report.summarize` (or `Summary.from_json` of a ``summary.json``).
@@ -238,17 +364,20 @@ def verdicts(summary: Summary) -> list[str]:
         One line per sentence, each starting with its band: ``band in: mpc survives more than stand: ...``.
     """
     lines: list[str] = []
-    for entry in summary.paired:
+    family = holm_family(summary)
+    m = sum(1 for entry in family if entry.p is not None)
+    for entry in family:
         if entry.n == 0 or entry.mean_a is None:
             continue
         prefix = f"band {entry.band}: "
+        errored = _all_errored(summary, entry) if entry.metric in ("success_rate", "ttf") else None
         if entry.metric == "success_rate":
-            lines.append(prefix + _survival(entry))
-        if entry.metric == "ttf" and (sentence := _time_to_fall(entry)) is not None:
-            lines.append(prefix + sentence)
+            lines.append(prefix + (errored or _survival(entry, m) + _error_note(summary, entry, "survival")))
+        if entry.metric == "ttf" and errored is None and (sentence := _time_to_fall(entry, m)) is not None:
+            lines.append(prefix + sentence + _error_note(summary, entry, "ttf"))
         for metric, what, unit, decimals in _TRACKING:
             if entry.metric == metric:
-                sentence = _tracking(entry, what, unit, decimals)
+                sentence = _tracking(entry, what, unit, decimals, m)
                 if sentence is not None:
                     lines.append(prefix + sentence)
     return lines

@@ -368,7 +368,7 @@ def print_arena(result: ArenaResult, *, verdict: bool = True) -> None:
         verdict: end the table with the verdict sentences (``wbc demo`` prints them last, after the report's path).
     """
     print(format_table(result.summary, verdict=verdict))
-    if result.arms_differ is not None:  # under the verdict, which pairs them: the pairing does not make them one robot
+    if result.arms_differ is not None and not format_verdict(result.summary):  # else the verdict ends with it
         print(textwrap.fill(f"note: {result.arms_differ}", width=118, subsequent_indent="  "))
     rate = result.physics_steps / result.wall_s if result.wall_s > 0 else float("nan")
     print(f"\n{result.played} trials played in {result.wall_s:.1f} s ({rate:,.0f} physics steps/s)"

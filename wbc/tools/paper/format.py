@@ -25,6 +25,7 @@ import textwrap
 from collections.abc import Sequence
 
 from wbc.arena.breakdown import breakdown_tables
+from wbc.arena.multiplicity import holm_adjusted
 from wbc.arena.report import LABELS, cell_text, n80_text, p_text, resumed_note, signed_text
 from wbc.arena.summary import PairSummary
 from wbc.arena.verdict import LOWER_IS_BETTER, called_better, leans, p_clause, split
@@ -69,7 +70,7 @@ def _difference(entry: PairSummary, first: str, metric: str) -> str:
     return f"{first} - {other} = {signed_text(diff, metric)}{unit}"
 
 
-def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
+def verdict(entry: PairSummary, *, alpha: float = ALPHA, family: int | None = None) -> str:
     """One comparison in words: which side is better, or that the test finds no difference and what would.
 
     Success and TTF: larger is better; tracking errors: smaller is better. A side is "better" by the arena's rule
@@ -80,6 +81,9 @@ def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
     whose lean and mean difference disagree calls neither better. Otherwise "no significant difference", with n80
     (the pairs that would detect the observed difference with 80 % power), or, from one pair of a continuous metric,
     that one pair cannot tell.
+
+    With `family` (the number of tests of the table) and the entry's Holm-adjusted p (`PairSummary.p_holm`), a side
+    called better on its own test that does not hold after Holm's correction over the table's tests says so.
     """
     metric, p, diff = entry.metric, entry.p, entry.diff
     what = LABELS[metric].split(" [")[0].removesuffix(" %")
@@ -88,7 +92,13 @@ def verdict(entry: PairSummary, *, alpha: float = ALPHA) -> str:
     higher_is_better = metric not in LOWER_IS_BETTER
     winner = called_better(entry, higher_is_better=higher_is_better, alpha=alpha)
     if winner is not None:
-        return f"{what}: {winner} better ({_difference(entry, winner, metric)}, {p_clause(p)})"
+        holm = entry.p_holm
+        after = ("" if family is None or holm is None else
+                 f"; holds after Holm's correction over the table's {family} tests, adjusted {p_clause(holm)}"
+                 if holm < alpha else
+                 f"; on its own test only: not after Holm's correction over the table's {family} tests, adjusted "
+                 f"{p_clause(holm)}")
+        return f"{what}: {winner} better ({_difference(entry, winner, metric)}, {p_clause(p)}{after})"
     if split(entry, alpha=alpha):
         side = leans(entry)
         ranks = ("lean to neither" if not side else
@@ -164,8 +174,17 @@ def _comparison_lines(result: PaperTableResult) -> list[str]:
                   "two-sided, each comparison on its own, not corrected for the table's many; n80: pairs for 80 % "
                   "power at the observed difference)")
     names = {c.key: display_name(c) for c in result.contenders}
+    adjusted = holm_adjusted([c.pair.p for c in result.comparisons])  # as paper.json's p_holm, from any result
+    family = sum(1 for p in adjusted if p is not None)
+    if family:
+        alone = sum(1 for c in result.comparisons if c.pair.p is not None and c.pair.p < ALPHA)
+        held = sum(1 for p in adjusted if p is not None and p < ALPHA)
+        lines += _wrap(f"the verdicts weigh {family} tests: {alone} with p < {ALPHA:g} on their own, {held} after "
+                       f"Holm's correction over the {family} (which keeps the chance of any false 'better' below at "
+                       f"most {ALPHA:g}); a 'better' that holds only on its own test says so")
     questions: dict[tuple[str, str], list[PaperComparison]] = {}
-    for comparison in result.comparisons:
+    for comparison, p_holm in zip(result.comparisons, adjusted, strict=True):
+        comparison = dataclasses.replace(comparison, pair=dataclasses.replace(comparison.pair, p_holm=p_holm))
         questions.setdefault((comparison.pair.a, comparison.pair.b), []).append(comparison)
     if not questions:
         return [*lines, "  (none: a contender of every comparison is missing)"]
@@ -182,7 +201,8 @@ def _comparison_lines(result: PaperTableResult) -> list[str]:
                          n80_text(e)])
         lines += _columns(["band", "metric", "B - A", "95% CI", "p", "A only / B only", "n80"], rows)
         for band in result.bands:
-            said = "; ".join(verdict(dataclasses.replace(c.pair, a=names[a], b=names[b])) for c in entries
+            said = "; ".join(verdict(dataclasses.replace(c.pair, a=names[a], b=names[b]), family=family)
+                             for c in entries
                              if c.pair.band == band)
             lines += _wrap(f"band {band}: {said}", indent="  ")
     return lines

@@ -20,6 +20,7 @@ results pages give measured run times); the paper's protocol is 5 seeds and 2000
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import time
@@ -28,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, plan_arena, play_arena
+from wbc.arena.multiplicity import holm_adjusted
 from wbc.arena.report import compare_pair
 from wbc.arena.results import check_not_held, hold_results_dir, unwritable
 from wbc.arena.trial_record import TrialRecord
@@ -159,6 +161,10 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
                 for metric in spec.paired_metrics:
                     pair = compare_pair(cell_a, cell_b, a=contrast.a, b=contrast.b, band=band, metric=metric)
                     comparisons.append(PaperComparison(question=contrast.question, pair=pair))
+        # Holm over the table's tests, the family its verdicts weigh (paper.json's p_holm)
+        adjusted = holm_adjusted([c.pair.p for c in comparisons])
+        comparisons = [dataclasses.replace(c, pair=dataclasses.replace(c.pair, p_holm=p))
+                       for c, p in zip(comparisons, adjusted, strict=True)]
         wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}
         workers = cfg.workers or os.cpu_count() or 1  # the local pool's size (`wbc.arena.executors.LocalExecutor`)
         warm_by = {c: w for c, rs in by_controller.items()
