@@ -456,3 +456,21 @@ def test_tables_and_summaries_need_no_plotting_library():
             "format_table(s)\nprint('matplotlib' in sys.modules)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False"
+
+
+def test_a_warning_of_clamped_position_targets_alone_says_what_a_target_past_a_stop_means():
+    """A PD target past a joint's stop is clamped to the stop on most ticks of a shipped policy: the warning stays,
+    and says what it means, where clamped torques or gains get no such words."""
+    from types import SimpleNamespace
+
+    from wbc.arena.report import _warnings
+
+    def cell(rows):
+        return SimpleNamespace(ticks=1000, deadline_misses=0, clamped_ticks=935, clamped_rows=rows)
+
+    (only_q,) = _warnings("learned", "1.5", cell({"q": 935}))
+    assert only_q.text.startswith("learned in band 1.5: on 935 of 1000 ticks (93.5 %) the command lay outside")
+    assert "(position targets on 935 ticks); position targets alone: a PD target past a joint's stop presses the " \
+        "joint against it" in only_q.text
+    (torques,) = _warnings("mpc", "2.0", cell({"q": 10, "tau": 935}))
+    assert "position targets alone" not in torques.text and "feed-forward torques on 935 ticks" in torques.text

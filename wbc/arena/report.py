@@ -399,6 +399,11 @@ _ROW_NAMES = {"q": "position targets", "dq": "velocity targets", "kp": "position
               "tau": "feed-forward torques"}
 """A command row -> what it is, in words (the clamped-commands warning)."""
 
+_TARGETS_PAST_A_STOP = ("; position targets alone: a PD target past a joint's stop presses the joint against it, "
+                        "which the robot plays as the stop, and a policy trained under the same limits (as the shipped "
+                        "learned policies are) may mean it (`wbc check-controller` says how far past)")
+"""Added to the clamped-commands warning when only position targets were clamped: what that means, and may not."""
+
 
 def counter_totals(records: Iterable[TrialRecord]) -> dict[str, CounterTotal]:
     """Every event count the controller reported (`TrialRecord.counter_values`), over `records`.
@@ -434,6 +439,8 @@ def _warnings(controller: str, band: str, cell: CellSummary) -> list[TickWarning
                     f"{what}")
             if kind == "clamped_ticks" and cell.clamped_rows:
                 text += " (" + ", ".join(f"{_ROW_NAMES[r]} on {n} ticks" for r, n in cell.clamped_rows.items()) + ")"
+                if set(cell.clamped_rows) == {"q"}:
+                    text += _TARGETS_PAST_A_STOP
             out.append(TickWarning(controller=controller, band=band, kind=kind, count=count, ticks=ticks, text=text))
     return out
 
