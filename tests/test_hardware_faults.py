@@ -12,6 +12,7 @@ milliseconds a real link takes) are printed by ``wbc bench hw`` and checked by t
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import threading
 import time
@@ -31,7 +32,9 @@ from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.hardware.unitree import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig
-from wbc.hardware.unitree.layout import MODE_OVERHEAT, MOTOR_STATE_MODES
+from wbc.hardware.unitree.layout import MODE_OVERHEAT, MOTOR_STATE_MODES, frame_layout
+from wbc.hardware.unitree.state_codec import decode_state, encode_state
+from wbc.hardware.unitree.transport import Transport
 from wbc.types import MotorCommand
 
 ROBOTS = ("go1", "a1")
@@ -54,12 +57,14 @@ class Rig:
 
 
 @contextmanager
-def _rig(robot: str = "go1", *, qpos: np.ndarray | None = None, **safety: object) -> Iterator[Rig]:
-    """An emulator in process (optionally reset to `qpos` first) and a connected SafeRobot(UnitreeRobot) on it."""
+def _rig(robot: str = "go1", *, qpos: np.ndarray | None = None, first_tick: int = 0,
+         wrap: Callable[[Transport], Transport] | None = None, **safety: object) -> Iterator[Rig]:
+    """An emulator in process (optionally reset to `qpos` first, its tick starting at `first_tick`) and a connected
+    SafeRobot(UnitreeRobot) on it, through `wrap(transport)` if given."""
     events: list[SafetyEvent] = []
     clock = ManualClock()
-    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot))
-    transport = emu.transport(clock)
+    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, first_tick=first_tick))
+    transport = emu.transport(clock) if wrap is None else wrap(emu.transport(clock))
     if qpos is not None:
         emu.reset(qpos)
     link = UnitreeRobot(UnitreeRobotConfig(robot=robot, target_host=LOOPBACK, target_port=9), transport, clock=clock)
@@ -263,6 +268,76 @@ def test_a_stream_of_bad_or_dropped_states_damps_as_a_silent_one_does(fault: Fau
         assert refused >= (0 if fault is Fault.DROP else round(timeout / LINK_PERIOD))  # each one seen, and refused
         emu.clear(fault)
         _assert_latched(rig, cmd, first.time, 0.1)
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_a_frozen_state_stream_damps_as_a_silent_one_does(robot: str) -> None:
+    """The robot keeps sending its last state datagram byte for byte (its tick stands still): every frame is valid,
+    none is news, so the layer trips on the stale timeout exactly as on silence, and damping goes out on the wire."""
+    with _rig(robot, **FAST) as rig:
+        emu, safe = rig.emu, rig.safe
+        cmd = _stand(safe)
+        _run_to(safe, cmd, SafetyState.RUN)
+        before, stale_before = safe.robot.link_stats(), safe.robot.stale_frames
+        first = _trips_on_the_stale_timeout(rig, cmd, Fault.FROZEN_STATE)
+        after = safe.robot.link_stats()
+        assert after.valid_states - before.valid_states <= 1  # a state already on its way when the fault came
+        assert after.rejected_states == before.rejected_states  # valid frames, every one: refused for their tick
+        assert safe.robot.stale_frames - stale_before >= round(safe.config.stale_timeout_s / LINK_PERIOD)
+        emu.clear(Fault.FROZEN_STATE)  # the robot's tick moves on again: the latch holds, a reset ramps
+        _assert_latched(rig, cmd, first.time, 0.1)
+        _reset_and_check_ramp(rig, cmd)
+
+
+TICK_US = 2000  # [us] the emulator's tick advances by its control period per state sent
+
+
+def test_the_robots_tick_wrapping_keeps_the_robot_running() -> None:
+    """The robot's u32 tick wraps during the run: the frames after the wrap are news, no trip, no damping."""
+    wrap_at = 0.5  # [s] of states before the counter wraps
+    with _rig("go1", first_tick=2**32 - round(wrap_at / LINK_PERIOD) * TICK_US, **FAST) as rig:
+        cmd = _stand(rig.safe)
+        _run_to(rig.safe, cmd, SafetyState.RUN)
+        running = rig.clock.now()
+        _loop(rig.safe, cmd, wrap_at)
+        assert len(rig.emu.commands()) * LINK_PERIOD > wrap_at + 0.1  # the counter wrapped a while ago
+        assert [e.reason for e in rig.events] == ["fresh_state", "ramp_done"]
+        assert rig.safe.safety_state is SafetyState.RUN and rig.safe.robot.stale_frames == 0
+        assert not any(c.damping for c in _after(rig.emu, running))
+
+
+class _ConstantTick:
+    """A transport that hands the link every state with its tick set to 0: a robot whose tick never moves."""
+
+    def __init__(self, transport: Transport, robot: str) -> None:
+        self._transport, self._layout = transport, frame_layout(robot)
+
+    def send(self, frame: bytes) -> None:
+        self._transport.send(frame)
+
+    def receive(self) -> list[bytes]:
+        out = []
+        for datagram in self._transport.receive():
+            state, extras = decode_state(self._layout, datagram, time=0.0)
+            out.append(encode_state(self._layout, dataclasses.replace(state, tick=0), extras))
+        return out
+
+    def wait_readable(self, timeout: float) -> bool:
+        return self._transport.wait_readable(timeout)
+
+    def close(self) -> None:
+        self._transport.close()
+
+
+def test_a_robot_whose_tick_never_moves_is_never_driven() -> None:
+    """Every state carries tick 0: the stream is never fresh, so the layer never leaves ``waiting``: damping only."""
+    with _rig("go1", wrap=lambda t: _ConstantTick(t, "go1"), **FAST) as rig:
+        cmd = _stand(rig.safe)
+        _loop(rig.safe, cmd, 0.5)
+        assert rig.safe.safety_state is SafetyState.WAITING, rig.safe.events
+        frames = rig.emu.commands()
+        assert len(frames) >= 0.5 / LINK_PERIOD and all(c.damping for c in frames)
+        assert rig.safe.robot.link_stats().valid_states == 1  # the first frame, which alone proves nothing
 
 
 @pytest.mark.parametrize("fault,value", [(Fault.DELAY, 0.05), (Fault.JITTER, 0.004), (Fault.DROP, 0.5)],
