@@ -408,6 +408,37 @@ def test_loop_stall_damps_on_the_wire_and_resumes_without_a_jump(robot: str) -> 
         print(f"\n{robot}: after the stall the ramp starts {np.abs(q0 - cmd.q).max():.3f} rad from the stand target")
 
 
+@pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("stall", [0.06, 0.08, 0.095])
+def test_a_stall_past_the_write_deadline_but_not_the_stale_timeout_ramps_again(robot: str, stall: float) -> None:
+    """The link damps after its write deadline (50 ms); the layer, told of that trip, ramps again from the measured
+    pose when the loop resumes: the wire never carries the controller's command at full gain after the damping."""
+    with _rig(robot, **FAST) as rig:
+        emu, safe, events = rig.emu, rig.safe, rig.events
+        cmd = _stand(safe)
+        _run_to(safe, cmd, SafetyState.RUN)
+        _loop(safe, cmd, 5 * PERIOD)
+        safe.read()
+        safe.write(cmd)
+        stalled_at = rig.clock.now()
+        rig.clock.advance(stall)  # the loop stalls: the link runs on, damps after its deadline; nobody writes
+        resumed_at = rig.clock.now()
+        assert stall < safe.config.stale_timeout_s  # too short for the stale trip
+        assert any(c.damping for c in _after(emu, stalled_at) if c.time <= resumed_at + TIME_EPS)
+        measured = safe.read().q.copy()
+        assert safe.safety_state is SafetyState.RAMP and events[-1].reason == "write_deadline", events[-1]
+        _loop(safe, cmd, 0.05)
+        after = [c for c in _after(emu, resumed_at) if not c.damping]
+        assert after, "nothing but damping after the resume"
+        first = after[0]
+        # the ramp's first command: the measured pose, the ramp's start gains
+        np.testing.assert_allclose(first.wire.kp, safe.config.ramp_kp)
+        assert np.abs(first.wire.q - measured).max() < 1e-3
+        # no frame at the controller's full gain before the ramp's blend is done (0.2 s)
+        assert all((c.wire.kp < cmd.kp).all() for c in after)
+        assert [e.reason for e in events].count("stale_state") == 0
+
+
 # -- 5, 6, 7: state faults ----------------------------------------------------------------------------------------
 STATE_CASES = [
     (Fault.JOINT_OUT_OF_RANGE, (2, 0.5), "joint_range"),  # calf 0 reports +0.5 rad (its range ends below -0.8)

@@ -333,6 +333,43 @@ def test_a_locked_arm_obeys_the_safety_layer_on_the_wire() -> None:
         assert np.abs(dq).max() < 0.5  # resting: damping only takes energy out
 
 
+def test_a_stall_past_the_arms_own_write_deadline_ramps_the_whole_robot_again() -> None:
+    """The arm's bus damps after its write deadline (50 ms) while the legs' (here 90 ms) does not trip: the layer,
+    told of the arm's trip, ramps again from the measured pose, arm included, before the controller's gains return."""
+    events: list[SafetyEvent] = []
+    clock = ManualClock()
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep"), clock=clock) as emu:
+        legs = UnitreeRobot(UnitreeRobotConfig(robot="a1", target_host="127.0.0.1", target_port=9,
+                                               write_deadline=0.09), emu.legs_transport, clock=clock)
+        arm = DynamixelArm(DynamixelArmConfig(robot="a1-wx200", port=emu.port), handlers=emu.arm_handlers(),
+                           clock=clock)
+        safe = SafeRobot(QuadrupedArmRobot(legs, arm, QuadrupedArmConfig(arm_mode="actuated")),
+                         SafetyConfig(position_table="a1", on_event=events.append, ramp_time_s=0.2))
+        with safe:
+            _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+            assert safe.safety_state is SafetyState.RUN
+            _stand(safe, 0.1)
+            asked: list[MotorCommand] = []  # what the joined robot hands the arm's bus thread
+            write = arm.write
+            arm.write = lambda cmd: asked.append(cmd) or write(cmd)
+            stalled_at = clock.now()
+            clock.advance(0.07)  # the loop stalls: past the arm's deadline, not the legs', not the stale timeout
+            resumed_at = clock.now()
+            assert arm.deadline_trips == 1 and legs.deadline_trips == 0
+            assert not any(c.damping for c in emu.legs.commands() if stalled_at < c.time <= resumed_at)
+            ctrl = StandController(get_robot("a1-wx200", "actuated"))
+            full = ctrl.act(safe.read(), None)
+            assert safe.safety_state is SafetyState.RAMP and events[-1].reason == "write_deadline", events[-1]
+            _stand(safe, 0.1)
+            first = next(c for c in asked if c.kp.any())
+            np.testing.assert_allclose(first.kp, safe.config.ramp_kp)  # the ramp's start gain on the arm
+            assert all((c.kp < full.kp[12:]).all() for c in asked)  # never the controller's gain within the blend
+            legs_after = [c for c in emu.legs.commands() if c.time > resumed_at and not c.damping]
+            assert legs_after and all((c.wire.kp < full.kp[:12]).all() for c in legs_after)
+            np.testing.assert_allclose(legs_after[0].wire.kp, safe.config.ramp_kp)
+        assert emu.failure is None, emu.failure
+
+
 def test_each_joint_is_bounded_by_its_own_devices_gains_and_the_layer_says_what_went_out() -> None:
     with _whole_robot("actuated", ramp_time_s=0.2) as (emu, safe, _):
         _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)

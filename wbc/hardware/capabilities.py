@@ -41,7 +41,7 @@ if TYPE_CHECKING:
 __all__ = ["ConfigurationEstimate", "FallDetector", "HasLatchedFaults", "HasLinkStats", "HasRealtimeGrant",
            "HasSafetyEvents", "HasThreadStats", "HeldJoints", "HeldRamp", "LinkStatsLike", "MotorNames", "MotorStatus",
            "MotorStatusSource", "Pushable", "RemoteButtons", "RemoteSource", "SafetyEventLike", "SimulatorHealth",
-           "TruthSource", "WallClock"]
+           "TruthSource", "WallClock", "WriteDeadlineTrips"]
 
 
 @runtime_checkable
@@ -122,6 +122,19 @@ class WallClock(Protocol):
 
     def wall_time(self) -> float:
         """Now, on a monotonic clock [s] (an arbitrary origin; only differences mean anything)."""
+
+
+@runtime_checkable
+class WriteDeadlineTrips(Protocol):
+    """A backend whose device loops damp on their own once `write` has not been called for their write deadline.
+
+    A control loop that stalls past that deadline leaves the robot damped for a while; whoever watches over the
+    motors (`wbc.hardware.safety.SafeRobot`) must not then hand the controller's command straight back at full gain.
+    """
+
+    @property
+    def deadline_trips(self) -> int:
+        """How many times since `connect` a write deadline expired and the device switched to damping."""
 
 
 class LinkStatsLike(Protocol):

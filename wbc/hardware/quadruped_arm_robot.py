@@ -45,6 +45,7 @@ from wbc.hardware.capabilities import (
     RemoteButtons,
     RemoteSource,
     WallClock,
+    WriteDeadlineTrips,
 )
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel.arm_fault import ArmFault
@@ -298,6 +299,11 @@ class QuadrupedArmRobot(Robot):
         threads = {device: robot.thread_stats() for device, robot in (("legs", self.legs), ("arm", self.arm))
                    if isinstance(robot, HasThreadStats)}
         return JoinedLinkStats(legs=legs, arm=bus_stats() if bus_stats is not None else None, threads=threads)
+
+    @property
+    def deadline_trips(self) -> int:
+        """The legs' write-deadline trips plus the arm's (`WriteDeadlineTrips`); a device without one counts none."""
+        return sum(part.deadline_trips for part in (self.legs, self.arm) if isinstance(part, WriteDeadlineTrips))
 
     @property
     def faults(self) -> tuple[ArmFault, ...]:

@@ -401,6 +401,12 @@ class DynamixelArm(Robot):
             bus.close()
         return tuple(readings)
 
+    @property
+    def deadline_trips(self) -> int:
+        """Times since `connect` the write deadline expired and the bus switched to damping (`WriteDeadlineTrips`)."""
+        with self._lock:
+            return self._counts["deadline_trips"]
+
     def bus_stats(self) -> ArmBusStats:
         """A snapshot of the bus thread's counters; its period and busy figures are the bus loop's (`thread_stats`)."""
         thread = self._loop.stats()

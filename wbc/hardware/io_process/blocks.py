@@ -41,13 +41,14 @@ _TORN_RETRY_S = 0.01  # [s] how long a reader retries before it calls the block 
 
 
 def state_dtype(num_joints: int) -> np.dtype:
-    """The record of one state: a `RobotState`, the remote's raw block and the motors' status."""
+    """One state: a `RobotState`, the remote's block, the motors' status, the devices' write-deadline trips so far."""
     n = num_joints
     return np.dtype([
         ("tick", "<i8"), ("time", "<f8"), ("q", "<f8", (n,)), ("dq", "<f8", (n,)), ("tau_est", "<f8", (n,)),
         ("imu_quat", "<f8", (4,)), ("gyro_in_body", "<f8", (3,)), ("accel_in_body", "<f8", (3,)),
         ("foot_force", "<f8", (4,)), ("status_n", "<i8"), ("motor_mode", "<i8", (MAX_STATUS,)),
         ("motor_temperature", "<f8", (MAX_STATUS,)), ("has_remote", "<i8"), ("remote", "u1", (REMOTE_SIZE,)),
+        ("deadline_trips", "<i8"),
     ])
 
 

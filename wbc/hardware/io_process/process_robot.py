@@ -291,6 +291,17 @@ class ProcessRobot(Robot):
         return Remote(raw=record["remote"].tobytes())
 
     @property
+    def deadline_trips(self) -> int:
+        """The devices' write-deadline trips as of the newest published state (`WriteDeadlineTrips`).
+
+        Raises:
+            RobotLinkError: the I/O process failed or died.
+        """
+        self._check()
+        _, record = self._newest()
+        return 0 if record is None else int(record["deadline_trips"])
+
+    @property
     def motor_names(self) -> tuple[str, ...]:
         """One name per entry of `motor_status`, as the robot built in the I/O process names them (`MotorNames`)."""
         return self._motor_names

@@ -48,7 +48,13 @@ from dataclasses import asdict
 import numpy as np
 
 from wbc.errors import IoProcessStopped, RobotLinkError
-from wbc.hardware.capabilities import HasLatchedFaults, HeldJoints, MotorStatusSource, RemoteSource
+from wbc.hardware.capabilities import (
+    HasLatchedFaults,
+    HeldJoints,
+    MotorStatusSource,
+    RemoteSource,
+    WriteDeadlineTrips,
+)
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, MAX_STATUS, IoBlocks
@@ -328,6 +334,7 @@ class _Server:
             rec["motor_temperature"][:modes.size] = np.asarray(status.motor_temperature)
         else:
             rec["status_n"] = -1
+        rec["deadline_trips"] = robot.deadline_trips if isinstance(robot, WriteDeadlineTrips) else 0
         rec["has_remote"] = isinstance(remote, Remote)
         if isinstance(remote, Remote):
             rec["remote"] = np.frombuffer(remote.raw, np.uint8)

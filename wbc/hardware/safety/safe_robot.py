@@ -12,6 +12,11 @@ are a `MotorStatusSource`), a trunk roll or pitch beyond the limit (a fall, from
 runner as `safety_events`, so the episode logs them) and handed to `SafetyConfig.on_event` (by default printed to
 standard error, one line per transition).
 
+A robot whose devices damp on their own when `write` stops for their write deadline (`WriteDeadlineTrips`: the legs'
+link, the arm's bus) tells the layer how often that happened: a control loop that stalled past that deadline but
+not past the stale timeout finds, at its next read or write, the layer back in ``ramp`` (event ``write_deadline``),
+starting again from the measured pose, never its command at full gain after the damping.
+
 The layer's clock is the one the motors live on: a robot that is a `WallClock` (a real robot over its wire, or an
 emulator behind one) is timed on its monotonic clock, which also sees a control loop that stalls between calls; a
 simulator on the robot time that `advance` lets pass, so a simulated run is deterministic. A `clock` handed in
@@ -38,6 +43,7 @@ from wbc.hardware.capabilities import (
     RemoteButtons,
     RemoteSource,
     WallClock,
+    WriteDeadlineTrips,
 )
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.config import SafetyConfig
@@ -87,6 +93,7 @@ class SafeRobot(Robot):
         self._fresh = False
         self._last_fresh_time = -math.inf
         self._over_power_frames = 0
+        self._deadline_trips: int | None = None  # the robot's write-deadline trips as last seen (`WriteDeadlineTrips`)
         self._ramp: CommandRamp | None = None
         self._sent: MotorCommand | None = None
         self._lower = self._upper = np.zeros(0)
@@ -206,6 +213,7 @@ class SafeRobot(Robot):
         self._last_fresh_time = -math.inf
         self._over_power_frames = 0
         self._ramp = None
+        self._deadline_trips = self._robot_deadline_trips()
         if self._state is not SafetyState.DAMPED and self._state is not SafetyState.WAITING:
             self._transition(SafetyState.WAITING, "connect", "connected again: waiting for a live state stream")
 
@@ -222,6 +230,7 @@ class SafeRobot(Robot):
         # left the robot unwatched for that long, and the backend damped it meanwhile; passing the controller's
         # command straight on would be a jump from wherever it sagged to.
         self._check_stale(now)
+        self._check_deadline()
         fresh = self._last_tick is not None and state.tick != self._last_tick
         self._last_tick, self._latest, self._fresh = state.tick, state, fresh
         if fresh:
@@ -246,6 +255,7 @@ class SafeRobot(Robot):
     def _send(self, cmd: MotorCommand) -> None:
         now = self.now()
         self._check_stale(now)
+        self._check_deadline()
         if self._state is SafetyState.RAMP:
             target = self._limit_positions(cmd)
             if self._ramp is None:
@@ -292,6 +302,27 @@ class SafeRobot(Robot):
             tick = None if self._latest is None else self._latest.tick
             self._trip("stale_state", f"tick {tick} unchanged for {age:.3f} s (limit "
                                       f"{self.config.stale_timeout_s} s)")
+
+    def _robot_deadline_trips(self) -> int | None:
+        return self.robot.deadline_trips if isinstance(self.robot, WriteDeadlineTrips) else None
+
+    def _check_deadline(self) -> None:
+        """A device damped on its own since the last look (its write deadline expired: the loop stalled): ramp again.
+
+        The stall was too short for the stale timeout, but the motors were damped meanwhile and the robot sagged;
+        the controller's command at full gain would be a jump from wherever it is now. A new ramp starts from the
+        measured pose at the next write (the ramp's own steps, if one was running, start over too).
+        """
+        trips = self._robot_deadline_trips()
+        seen, self._deadline_trips = self._deadline_trips, trips
+        if trips is None or seen is None or trips <= seen:
+            return
+        if self._state not in (SafetyState.RAMP, SafetyState.RUN):
+            return
+        self._ramp = None
+        self._transition(SafetyState.RAMP, "write_deadline",
+                         f"the robot damped itself {trips - seen} time(s) since the last look: no write within its "
+                         "write deadline (the control loop stalled); ramping again from the measured pose")
 
     def _state_fault(self, state: RobotState) -> tuple[str, str] | None:
         """The first check that fails on `state` (values, motor status, joint range, tilt), as (reason, detail)."""

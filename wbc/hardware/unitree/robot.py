@@ -386,6 +386,12 @@ class UnitreeRobot(Robot):
             return self.clock.now() - self._state_at
 
     @property
+    def deadline_trips(self) -> int:
+        """Times since `connect` the write deadline expired and the link switched to damping (`WriteDeadlineTrips`)."""
+        with self._lock:
+            return self._counts["deadline_trips"]
+
+    @property
     def stale_frames(self) -> int:
         """Valid LowState frames not taken since `connect`: the robot's tick had not advanced past the newest taken."""
         with self._lock:
