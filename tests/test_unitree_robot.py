@@ -466,6 +466,26 @@ def test_write_stall_damps_then_resumes(stepped: Stepped) -> None:
 
 
 # -- fault 4: NaN and out-of-range commands -----------------------------------------------------------------------
+@pytest.mark.parametrize("row", [2, 3], ids=["kp", "kd"])
+def test_a_negative_gain_in_an_unchecked_command_is_refused_never_sent_as_zero(stepped: Stepped, row: int) -> None:
+    """A trusted command with a negative gain is refused by name; the wire goes on with the last command accepted,
+    then the write deadline's damping: never the joint's gain clamped to 0 at a servo target."""
+    with stepped.robot() as robot:
+        held = _hold(robot)
+        robot.write(held)
+        stepped.clock.advance(0.01)
+        rows = held.stacked()
+        rows[row, 4] = -3.0
+        refused_at = stepped.clock.now()
+        with pytest.raises(CommandError, match=rf"negative gain at {COMMAND_ROWS[row]}\[{robot.joint_names[4]}\]"):
+            robot.write(MotorCommand.trusted(rows))
+        stepped.clock.advance(2 * robot.config.write_deadline)
+    after = [c for c in stepped.emu.commands() if c.time > refused_at]
+    servo = [c.wire for c in after if not c.damping]
+    assert servo and all((w.kp == held.kp).all() and (w.kd == held.kd).all() for w in servo)  # the last one accepted
+    assert after[-1].damping  # then the write deadline's damping
+
+
 def test_wild_commands_reach_the_wire_clamped(stepped: Stepped) -> None:
     emulator = stepped.emu
     with stepped.robot() as robot:
