@@ -230,6 +230,21 @@ def test_config_names_what_is_wrong() -> None:
         DynamixelArmConfig(port="/dev/ttyUSB0", held_ticks=(5000, None, None))
 
 
+def test_a_profile_velocity_of_zero_is_refused_it_means_full_speed_on_the_xm430(emu: DynamixelEmulator) -> None:
+    """Profile Velocity 0 is no limit on the XM430: the config refuses it, naming the field and why; the floor, 1,
+    is what reaches the held servos' register at connect."""
+    with pytest.raises(ConfigError, match=r"held_profile_velocity must be at least 1.*0 means no limit"):
+        DynamixelArmConfig(port=emu.port, held_profile_velocity=0)
+    arm = _arm(emu, held_profile_velocity=1)
+    arm.connect()
+    try:
+        profile = [(w.id, w.value) for p in emu.packets() for w in p.writes if w.name == "profile_velocity"]
+    finally:
+        arm.close()
+    held = {s.id for s in arm.config.held_servos}
+    assert profile and {i for i, _ in profile} == held and all(v == 1 for _, v in profile)
+
+
 # -- the law on the wire -----------------------------------------------------------------------------------------
 def test_current_law_units_and_clamps() -> None:
     from wbc.hardware.dynamixel.wx200_bus import WX200_ARM_JOINTS
