@@ -627,7 +627,8 @@ def test_remote_l2_b_damps_and_reset_is_refused_while_held(robot: str) -> None:
         _run_to(safe, cmd, SafetyState.RUN)
         pressed, tripped, first = _inject_until_damped(rig, cmd, Fault.REMOTE_L2_B, reason="remote_estop")
         assert tripped - pressed <= PERIOD + TIME_EPS  # the next state reports it, the next read trips
-        _assert_damping_in_the_next_frame(emu, tripped, first)
+        # the link damped on that state already: in the send after it, before the layer's read
+        assert first.time <= pressed + 2 * LINK_PERIOD + TIME_EPS
         for _ in range(3):  # held: every reset is refused, and nothing but damping goes out
             _loop(safe, cmd, 0.02)
             with pytest.raises(SafetyResetError, match="remote buttons held"):
@@ -637,6 +638,36 @@ def test_remote_l2_b_damps_and_reset_is_refused_while_held(robot: str) -> None:
         emu.clear(Fault.REMOTE_L2_B)  # released: still latched until the explicit reset
         _assert_latched(rig, cmd, first.time, 0.06)
         _reset_and_check_ramp(rig, cmd)
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_remote_l2_b_damps_on_the_next_state_frame_between_two_reads_of_a_slow_loop(robot: str) -> None:
+    """A 50 Hz loop reads every 20 ms; a press of L2 + B shorter than that, between two reads, is damped by the link
+    in the send after the first state that shows it, latched, and the layer latches it at its next read."""
+    slow = 0.02  # [s] the control period of a 50 Hz policy
+    with _rig(robot, **FAST) as rig:
+        emu, safe, events = rig.emu, rig.safe, rig.events
+        cmd = _stand(safe)
+        _run_to(safe, cmd, SafetyState.RUN)
+        safe.read()
+        safe.write(cmd)
+        rig.clock.advance(2 * LINK_PERIOD)  # the loop works on its next tick
+        pressed_at = rig.clock.now()
+        emu.inject(Fault.REMOTE_L2_B)
+        rig.clock.advance(3 * LINK_PERIOD)
+        emu.clear(Fault.REMOTE_L2_B)  # released before the loop reads again
+        rig.clock.advance(slow - 5 * LINK_PERIOD)
+        frames = _after(emu, pressed_at)
+        first = next((c for c in frames if c.damping), None)
+        assert first is not None, "no damping before the loop's next read"
+        # the state that shows the press answers the next send; the send after it is damping
+        assert first.time <= pressed_at + 2 * LINK_PERIOD + TIME_EPS
+        assert all(c.damping for c in frames if c.time >= first.time)  # latched: released buttons do not undo it
+        assert safe.safety_state is SafetyState.RUN  # the layer has not looked yet
+        safe.read()
+        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "remote_estop", events[-1]
+        _assert_latched(rig, cmd, first.time, 0.06)
+        _reset_and_check_ramp(rig, cmd)  # the reset releases the link's latch too: the ramp reaches the wire
 
 
 # -- done means: stand through the whole stack --------------------------------------------------------------------

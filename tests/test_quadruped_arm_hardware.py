@@ -414,6 +414,30 @@ def test_an_estop_damps_the_arm_on_its_bus_as_it_damps_the_legs(arm_mode: str, t
         assert all(c.damping for c in emu.legs.commands() if c.time > t0 + 0.06)
 
 
+def test_the_remote_damps_the_arm_on_its_bus_before_the_control_loop_reads_again() -> None:
+    """L2 + B pressed between two reads of a 50 Hz loop: the legs' link latches damping on the frame that shows it,
+    and the arm's bus damps from its next cycle on (its goal currents drop to the damping's), before the layer looks."""
+    with _whole_robot("actuated", ramp_time_s=0.2) as (emu, safe, events):
+        robot, clock = safe.robot, emu.clock
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        _stand(safe, 0.2)
+        assert safe.safety_state is SafetyState.RUN
+        ctrl = StandController(get_robot("a1-wx200", "actuated"))
+        safe.write(ctrl.act(safe.read(), None))
+        pressed_at = clock.now()
+        damped_before = robot.arm.bus_stats().damping_cycles
+        emu.inject(Fault.REMOTE_L2_B)
+        clock.advance(0.015)  # the loop has not read again
+        assert safe.safety_state is SafetyState.RUN
+        assert robot.legs.remote_estop_latched
+        assert robot.arm.bus_stats().damping_cycles - damped_before >= 2  # the arm's bus damps, cycle after cycle
+        goals = _arm_goals(emu, pressed_at + 0.01)
+        assert goals and all(abs(v) < 0.1 * robot.arm.law.limit_units for g in goals for v in g.values())
+        emu.clear(Fault.REMOTE_L2_B)
+        safe.read()
+        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "remote_estop"
+
+
 def test_hw_emulate_serves_one_robot_on_both_wires(monkeypatch: pytest.MonkeyPatch) -> None:
     # the wires' clients wait up to seconds for an answer: only a hung machine misses that
     monkeypatch.setattr(sdk.port_handler, "LATENCY_TIMER", 500)

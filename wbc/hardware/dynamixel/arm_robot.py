@@ -19,7 +19,8 @@ The bus thread runs at `DynamixelArmConfig.rate_hz`. Each cycle:
    Present Input Voltage with Present Temperature;
 3. one sync write of Goal Current (102) to the primaries. The shadow follows ID 2 through its Secondary ID. The
    command is the one `write` gave. Damping (kp 0, kd `damping_kd`) replaces it before the first write, once
-   `write` has not been called for `write_deadline`, after a latched fault, and while closing.
+   `write` has not been called for `write_deadline`, after a latched fault, while closing, and while the condition
+   handed to `damp_while` holds (the legs' link's latch of the remote's L2 + B, on a quadruped).
 
 Faults: late is not dead. A read that fails (timeout, corrupt answer) is tried again up to `retries` times, after a
 short wait and a flush. A status packet that answers an earlier request (late) is discarded by the bus, never taken for
@@ -205,6 +206,7 @@ class DynamixelArm(Robot):
         self._damping_rows = MotorCommand.damping(3, config.damping_kd).stacked()
         self._lock = threading.Condition()
         self._bus: SdkBus | None = None
+        self._damp_while: Callable[[], bool] | None = None
         self._reset()
 
     def _reset(self) -> None:
@@ -400,6 +402,14 @@ class DynamixelArm(Robot):
         finally:
             bus.close()
         return tuple(readings)
+
+    def damp_while(self, condition: Callable[[], bool] | None) -> None:
+        """Damp (the host's damping, as after the write deadline) on every bus cycle where `condition()` is true.
+
+        The robot the arm rides on hands it its legs' e-stop latch (`DampsWhile`), so that the remote's L2 + B damps
+        the arm within one bus cycle of the legs' link, not at the control loop's next read. None removes it.
+        """
+        self._damp_while = condition
 
     @property
     def deadline_trips(self) -> int:
@@ -751,7 +761,7 @@ class DynamixelArm(Robot):
                 self._counts["deadline_trips"] += 1
             self._tripped = quiet
             damp = (self._faults or self._closing_until is not None or self._state is None or self._rows is None
-                    or quiet)
+                    or quiet or (self._damp_while is not None and self._damp_while()))
             rows = self._damping_rows if damp else self._rows
         q, dq, _ = self._measured
         tau = self.law.torque(rows, q, dq)

@@ -8,9 +8,10 @@ Trips, each into ``damped`` on the spot (damping is sent to the robot at once, n
 state stream, a state with non-finite values or a non-unit quaternion, a measured joint beyond its range plus a
 margin, sustained over-power (Unitree's PowerProtect rule, latched), a hot motor or a motor error mode (robots that
 are a `MotorStatusSource`), a trunk roll or pitch beyond the limit (a fall, from the IMU), the remote's L2 + B
-(robots that are a `RemoteSource`) or `estop`. Every transition is a `SafetyEvent`, kept in `events` (offered to a
-runner as `safety_events`, so the episode logs them) and handed to `SafetyConfig.on_event` (by default printed to
-standard error, one line per transition).
+(robots that are a `RemoteSource`; a robot whose link checks the remote on every state frame, a `RemoteEstopLatch`,
+damps on that frame itself and the layer latches it at its next read, however short the press) or `estop`. Every
+transition is a `SafetyEvent`, kept in `events` (offered to a runner as `safety_events`, so the episode logs them)
+and handed to `SafetyConfig.on_event` (by default printed to standard error, one line per transition).
 
 A robot whose devices damp on their own when `write` stops for their write deadline (`WriteDeadlineTrips`: the legs'
 link, the arm's bus) tells the layer how often that happened: a control loop that stalled past that deadline but
@@ -41,6 +42,7 @@ from wbc.hardware.capabilities import (
     MotorNames,
     MotorStatusSource,
     RemoteButtons,
+    RemoteEstopLatch,
     RemoteSource,
     WallClock,
     WriteDeadlineTrips,
@@ -94,6 +96,7 @@ class SafeRobot(Robot):
         self._last_fresh_time = -math.inf
         self._over_power_frames = 0
         self._deadline_trips: int | None = None  # the robot's write-deadline trips as last seen (`WriteDeadlineTrips`)
+        self._remote_estops = 0  # the robot's own L2 + B latches as last seen (`RemoteEstopLatch`)
         self._ramp: CommandRamp | None = None
         self._sent: MotorCommand | None = None
         self._lower = self._upper = np.zeros(0)
@@ -174,6 +177,8 @@ class SafeRobot(Robot):
             if power > self.config.power_limit_w:
                 why.append(f"over_power: {power:.0f} W measured (limit {self.config.power_limit_w} W); wait until "
                            "the motors are quiet")
+        if not why and isinstance(self.robot, RemoteEstopLatch) and not self.robot.release_remote_estop():
+            why.append("the robot's link still sees L2 + B held; release them")
         if why:
             raise SafetyResetError("SafeRobot.reset refused: " + "; ".join(why))
         self._over_power_frames = 0
@@ -214,6 +219,7 @@ class SafeRobot(Robot):
         self._over_power_frames = 0
         self._ramp = None
         self._deadline_trips = self._robot_deadline_trips()
+        self._remote_estops = 0  # the robot was connected just now: a press its link saw already counts
         if self._state is not SafetyState.DAMPED and self._state is not SafetyState.WAITING:
             self._transition(SafetyState.WAITING, "connect", "connected again: waiting for a live state stream")
 
@@ -235,6 +241,13 @@ class SafeRobot(Robot):
         self._last_tick, self._latest, self._fresh = state.tick, state, fresh
         if fresh:
             self._last_fresh_time = now
+        if isinstance(self.robot, RemoteEstopLatch):
+            presses = self.robot.remote_estops
+            if presses > self._remote_estops:
+                self._remote_estops = presses
+                # the link damped on the very frame that showed the press; the layer latches it
+                self._trip("remote_estop", "L2 + B pressed on the remote (the link damped on the frame that showed "
+                                           "it)")
         if self._state is SafetyState.DAMPED:
             return state
         remote = self._remote()

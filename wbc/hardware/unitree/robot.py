@@ -8,6 +8,9 @@ then sends one LowCmd frame:
 - the latest frame `write` encoded, while `write` is called at least every `write_deadline` seconds;
 - damping again once that deadline passes, until the next `write` (a stalled control loop leaves the robot
   damped, not holding a stale target: the SDK has no watchdog);
+- damping from the first state frame that shows the remote's L2 + B (Unitree's passive), latched until
+  `release_remote_estop` (the safety layer's `reset`): the e-stop reaches the wire in the link's next period, not at
+  the control loop's next read;
 - damping for `close_damping` seconds when the robot is closed, then nothing.
 
 A valid frame is taken only if the robot's own tick (a u32 whose unit is not verified: it serves as a freshness
@@ -218,6 +221,9 @@ class UnitreeRobot(Robot):
         self._state: RobotState | None = None
         self._extras: LowStateExtras | None = None
         self._fresh = 0
+        self._remote_estops = 0  # L2 + B presses the link saw on a state frame (rising edges)
+        self._estop_latched = False  # the link damps until `release_remote_estop`
+        self._l2_b_held = False  # L2 + B held on the newest state taken
         self._wire_tick: int | None = None  # the robot's own tick in the newest state taken
         self._read_fresh = 0  # `_fresh` when the caller last read
         self._state_at = -np.inf
@@ -386,6 +392,30 @@ class UnitreeRobot(Robot):
             return self.clock.now() - self._state_at
 
     @property
+    def remote_estops(self) -> int:
+        """Times since `connect` the link saw L2 + B pressed on a state frame and latched damping (`RemoteEstopLatch`).
+
+        The link checks every state frame it takes, so the damping goes out in its next period whatever the control
+        loop does; the safety layer learns of it from this count at its next read and trips (``remote_estop``).
+        """
+        with self._lock:
+            return self._remote_estops
+
+    @property
+    def remote_estop_latched(self) -> bool:
+        """Whether the link damps now on its L2 + B latch (until `release_remote_estop`)."""
+        with self._lock:
+            return self._estop_latched
+
+    def release_remote_estop(self) -> bool:
+        """Release the link's L2 + B latch (the safety layer's `reset` calls it); False, latch kept, while held."""
+        with self._lock:
+            if self._l2_b_held:
+                return False
+            self._estop_latched = False
+            return True
+
+    @property
     def deadline_trips(self) -> int:
         """Times since `connect` the write deadline expired and the link switched to damping (`WriteDeadlineTrips`)."""
         with self._lock:
@@ -451,7 +481,8 @@ class UnitreeRobot(Robot):
         if quiet and self._frame is not None and not self._tripped:
             counts["deadline_trips"] += 1
         self._tripped = quiet
-        if self._closing_until is not None or self._state is None or self._frame is None or quiet:
+        if (self._closing_until is not None or self._state is None or self._frame is None or quiet
+                or self._estop_latched):
             counts["damping_sent"] += 1
             return self._damping
         return self._frame
@@ -477,6 +508,11 @@ class UnitreeRobot(Robot):
         state, extras = newest
         with self._lock:
             self._wire_tick = state.tick
+            held = extras.remote.l2_b
+            if held and not self._l2_b_held:  # the e-stop: damping from this period's send on, latched
+                self._remote_estops += 1
+                self._estop_latched = True
+            self._l2_b_held = held
             self._fresh += 1
             self._state = dataclasses.replace(state, tick=self._fresh, time=now - self._t0)
             self._extras = extras
