@@ -4,10 +4,12 @@ import pathlib
 import re
 
 import numpy as np
+import pytest
 
 import wbc.hardware
 from wbc.arena import Episode, run_episode
 from wbc.arena.sim_trial import run_trial
+from wbc.errors import CommandError
 from wbc.hardware.mujoco import MujocoRobot, MujocoRobotConfig
 from wbc.scenario import CommandSchedule
 from wbc.types import MotorCommand
@@ -19,15 +21,15 @@ def _text(path):
     return re.sub(r"\s+", " ", (DOCS / path).read_text())
 
 
-def test_the_robots_guide_says_write_clamps_a_trusted_commands_negative_gains():
+def test_the_robots_guide_says_write_refuses_a_trusted_commands_negative_gains():
     with MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none")) as robot:
         rows = np.zeros((5, 12))
         rows[0], rows[2], rows[3] = robot.desc.nominal_q, -50.0, -1.0
-        sent = robot.write(MotorCommand.trusted(rows))
-    assert np.all(sent.kp == 0.0) and np.all(sent.kd == 0.0)
+        with pytest.raises(CommandError, match="negative gain"):
+            robot.write(MotorCommand.trusted(rows))
     guide = _text("guides/robots.md")
-    assert "negative gains or wrong length are rejected" not in guide
-    assert "with negative gains is not refused by `write` but clamped, its gains to 0" in guide
+    assert "with negative gains is not refused by `write` but clamped" not in guide
+    assert "with negative gains is refused by `write` too" in guide
 
 
 def test_the_robots_guide_says_check_robot_takes_a_factory():

@@ -55,6 +55,7 @@ from wbc.hardware.dynamixel.wx200_bus import WX200_SERVOS
 from wbc.hardware.emulators import BusFault, DynamixelEmulator, DynamixelEmulatorConfig, LoggedPacket, SharedPlant
 from wbc.hardware.emulators.dynamixel import TICK_PERIOD
 from wbc.hardware.robot_contract import check_robot
+from wbc.robots.wx200 import WX200_NOMINAL_Q
 from wbc.types import MotorCommand
 
 sdk = pytest.importorskip("dynamixel_sdk")
@@ -228,6 +229,43 @@ def test_config_names_what_is_wrong() -> None:
         DynamixelArmConfig(port="/dev/ttyUSB0", watchdog_s=0.03)
     with pytest.raises(ConfigError, match="held_ticks"):
         DynamixelArmConfig(port="/dev/ttyUSB0", held_ticks=(5000, None, None))
+
+
+def test_a_profile_velocity_of_zero_is_refused_it_means_full_speed_on_the_xm430(emu: DynamixelEmulator) -> None:
+    """Profile Velocity 0 is no limit on the XM430: the config refuses it, naming the field and why; the floor, 1,
+    is what reaches the held servos' register at connect."""
+    with pytest.raises(ConfigError, match=r"held_profile_velocity must be at least 1.*0 means no limit"):
+        DynamixelArmConfig(port=emu.port, held_profile_velocity=0)
+    arm = _arm(emu, held_profile_velocity=1)
+    arm.connect()
+    try:
+        profile = [(w.id, w.value) for p in emu.packets() for w in p.writes if w.name == "profile_velocity"]
+    finally:
+        arm.close()
+    held = {s.id for s in arm.config.held_servos}
+    assert profile and {i for i, _ in profile} == held and all(v == 1 for _, v in profile)
+
+
+def test_connect_warns_naming_the_joints_when_the_arm_is_away_from_its_stowed_pose(
+        plant: SharedPlant, capfd: pytest.CaptureFixture[str]) -> None:
+    """A run that parked the arm raised: connect releases the joints (current mode, goal current 0, damping), so it
+    says which joints are how far from the stowed pose before gravity takes them; at the stowed pose it says nothing."""
+    for raised, said in ((np.array([0.0, 0.8, -0.7]), True), (np.zeros(3), False)):
+        qpos = plant.sim.data.qpos.copy()
+        qpos[-3:] = WX200_NOMINAL_Q + raised
+        plant.reset(qpos=qpos)
+        with DynamixelEmulator(plant, clock=ManualClock(), in_process=True) as emu:
+            capfd.readouterr()
+            arm = _arm(emu)
+            arm.connect()
+            arm.close()
+        err = capfd.readouterr().err
+        assert ("away from its stowed pose" in err) is said, err
+        if said:
+            assert re.search(r"shoulder at -0\.50 rad, 0\.80 rad from stowed", err), err
+            assert re.search(r"elbow at \+0\.80 rad, 0\.70 rad from stowed", err), err
+            assert "waist" not in err.split("away from its stowed pose")[1].split("Connecting")[0]
+    plant.reset()
 
 
 # -- the law on the wire -----------------------------------------------------------------------------------------

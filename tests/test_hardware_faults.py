@@ -12,6 +12,7 @@ milliseconds a real link takes) are printed by ``wbc bench hw`` and checked by t
 
 from __future__ import annotations
 
+import dataclasses
 import gc
 import threading
 import time
@@ -31,7 +32,9 @@ from wbc.hardware.interpreter import freeze_heap
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.hardware.safety import SafeRobot, SafetyConfig, SafetyEvent, SafetyState
 from wbc.hardware.unitree import DESCRIPTIONS, UnitreeRobot, UnitreeRobotConfig
-from wbc.hardware.unitree.layout import MODE_OVERHEAT, MOTOR_STATE_MODES
+from wbc.hardware.unitree.layout import MODE_OVERHEAT, MOTOR_STATE_MODES, frame_layout
+from wbc.hardware.unitree.state_codec import decode_state, encode_state
+from wbc.hardware.unitree.transport import Transport
 from wbc.types import MotorCommand
 
 ROBOTS = ("go1", "a1")
@@ -54,12 +57,14 @@ class Rig:
 
 
 @contextmanager
-def _rig(robot: str = "go1", *, qpos: np.ndarray | None = None, **safety: object) -> Iterator[Rig]:
-    """An emulator in process (optionally reset to `qpos` first) and a connected SafeRobot(UnitreeRobot) on it."""
+def _rig(robot: str = "go1", *, qpos: np.ndarray | None = None, first_tick: int = 0,
+         wrap: Callable[[Transport], Transport] | None = None, **safety: object) -> Iterator[Rig]:
+    """An emulator in process (optionally reset to `qpos` first, its tick starting at `first_tick`) and a connected
+    SafeRobot(UnitreeRobot) on it, through `wrap(transport)` if given."""
     events: list[SafetyEvent] = []
     clock = ManualClock()
-    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot))
-    transport = emu.transport(clock)
+    emu = UnitreeEmulator(UnitreeEmulatorConfig(robot=robot, first_tick=first_tick))
+    transport = emu.transport(clock) if wrap is None else wrap(emu.transport(clock))
     if qpos is not None:
         emu.reset(qpos)
     link = UnitreeRobot(UnitreeRobotConfig(robot=robot, target_host=LOOPBACK, target_port=9), transport, clock=clock)
@@ -265,6 +270,76 @@ def test_a_stream_of_bad_or_dropped_states_damps_as_a_silent_one_does(fault: Fau
         _assert_latched(rig, cmd, first.time, 0.1)
 
 
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_a_frozen_state_stream_damps_as_a_silent_one_does(robot: str) -> None:
+    """The robot keeps sending its last state datagram byte for byte (its tick stands still): every frame is valid,
+    none is news, so the layer trips on the stale timeout exactly as on silence, and damping goes out on the wire."""
+    with _rig(robot, **FAST) as rig:
+        emu, safe = rig.emu, rig.safe
+        cmd = _stand(safe)
+        _run_to(safe, cmd, SafetyState.RUN)
+        before, stale_before = safe.robot.link_stats(), safe.robot.stale_frames
+        first = _trips_on_the_stale_timeout(rig, cmd, Fault.FROZEN_STATE)
+        after = safe.robot.link_stats()
+        assert after.valid_states - before.valid_states <= 1  # a state already on its way when the fault came
+        assert after.rejected_states == before.rejected_states  # valid frames, every one: refused for their tick
+        assert safe.robot.stale_frames - stale_before >= round(safe.config.stale_timeout_s / LINK_PERIOD)
+        emu.clear(Fault.FROZEN_STATE)  # the robot's tick moves on again: the latch holds, a reset ramps
+        _assert_latched(rig, cmd, first.time, 0.1)
+        _reset_and_check_ramp(rig, cmd)
+
+
+TICK_US = 2000  # [us] the emulator's tick advances by its control period per state sent
+
+
+def test_the_robots_tick_wrapping_keeps_the_robot_running() -> None:
+    """The robot's u32 tick wraps during the run: the frames after the wrap are news, no trip, no damping."""
+    wrap_at = 0.5  # [s] of states before the counter wraps
+    with _rig("go1", first_tick=2**32 - round(wrap_at / LINK_PERIOD) * TICK_US, **FAST) as rig:
+        cmd = _stand(rig.safe)
+        _run_to(rig.safe, cmd, SafetyState.RUN)
+        running = rig.clock.now()
+        _loop(rig.safe, cmd, wrap_at)
+        assert len(rig.emu.commands()) * LINK_PERIOD > wrap_at + 0.1  # the counter wrapped a while ago
+        assert [e.reason for e in rig.events] == ["fresh_state", "ramp_done"]
+        assert rig.safe.safety_state is SafetyState.RUN and rig.safe.robot.stale_frames == 0
+        assert not any(c.damping for c in _after(rig.emu, running))
+
+
+class _ConstantTick:
+    """A transport that hands the link every state with its tick set to 0: a robot whose tick never moves."""
+
+    def __init__(self, transport: Transport, robot: str) -> None:
+        self._transport, self._layout = transport, frame_layout(robot)
+
+    def send(self, frame: bytes) -> None:
+        self._transport.send(frame)
+
+    def receive(self) -> list[bytes]:
+        out = []
+        for datagram in self._transport.receive():
+            state, extras = decode_state(self._layout, datagram, time=0.0)
+            out.append(encode_state(self._layout, dataclasses.replace(state, tick=0), extras))
+        return out
+
+    def wait_readable(self, timeout: float) -> bool:
+        return self._transport.wait_readable(timeout)
+
+    def close(self) -> None:
+        self._transport.close()
+
+
+def test_a_robot_whose_tick_never_moves_is_never_driven() -> None:
+    """Every state carries tick 0: the stream is never fresh, so the layer never leaves ``waiting``: damping only."""
+    with _rig("go1", wrap=lambda t: _ConstantTick(t, "go1"), **FAST) as rig:
+        cmd = _stand(rig.safe)
+        _loop(rig.safe, cmd, 0.5)
+        assert rig.safe.safety_state is SafetyState.WAITING, rig.safe.events
+        frames = rig.emu.commands()
+        assert len(frames) >= 0.5 / LINK_PERIOD and all(c.damping for c in frames)
+        assert rig.safe.robot.link_stats().valid_states == 1  # the first frame, which alone proves nothing
+
+
 @pytest.mark.parametrize("fault,value", [(Fault.DELAY, 0.05), (Fault.JITTER, 0.004), (Fault.DROP, 0.5)],
                          ids=lambda v: getattr(v, "value", str(v)))
 def test_late_uneven_or_thinned_states_keep_the_robot_running(fault: Fault, value: float) -> None:
@@ -331,6 +406,37 @@ def test_loop_stall_damps_on_the_wire_and_resumes_without_a_jump(robot: str) -> 
         assert all(c.damping for c in _after(emu, resumed_at))
         q0 = _reset_and_check_ramp(rig, cmd)
         print(f"\n{robot}: after the stall the ramp starts {np.abs(q0 - cmd.q).max():.3f} rad from the stand target")
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+@pytest.mark.parametrize("stall", [0.06, 0.08, 0.095])
+def test_a_stall_past_the_write_deadline_but_not_the_stale_timeout_ramps_again(robot: str, stall: float) -> None:
+    """The link damps after its write deadline (50 ms); the layer, told of that trip, ramps again from the measured
+    pose when the loop resumes: the wire never carries the controller's command at full gain after the damping."""
+    with _rig(robot, **FAST) as rig:
+        emu, safe, events = rig.emu, rig.safe, rig.events
+        cmd = _stand(safe)
+        _run_to(safe, cmd, SafetyState.RUN)
+        _loop(safe, cmd, 5 * PERIOD)
+        safe.read()
+        safe.write(cmd)
+        stalled_at = rig.clock.now()
+        rig.clock.advance(stall)  # the loop stalls: the link runs on, damps after its deadline; nobody writes
+        resumed_at = rig.clock.now()
+        assert stall < safe.config.stale_timeout_s  # too short for the stale trip
+        assert any(c.damping for c in _after(emu, stalled_at) if c.time <= resumed_at + TIME_EPS)
+        measured = safe.read().q.copy()
+        assert safe.safety_state is SafetyState.RAMP and events[-1].reason == "write_deadline", events[-1]
+        _loop(safe, cmd, 0.05)
+        after = [c for c in _after(emu, resumed_at) if not c.damping]
+        assert after, "nothing but damping after the resume"
+        first = after[0]
+        # the ramp's first command: the measured pose, the ramp's start gains
+        np.testing.assert_allclose(first.wire.kp, safe.config.ramp_kp)
+        assert np.abs(first.wire.q - measured).max() < 1e-3
+        # no frame at the controller's full gain before the ramp's blend is done (0.2 s)
+        assert all((c.wire.kp < cmd.kp).all() for c in after)
+        assert [e.reason for e in events].count("stale_state") == 0
 
 
 # -- 5, 6, 7: state faults ----------------------------------------------------------------------------------------
@@ -521,7 +627,8 @@ def test_remote_l2_b_damps_and_reset_is_refused_while_held(robot: str) -> None:
         _run_to(safe, cmd, SafetyState.RUN)
         pressed, tripped, first = _inject_until_damped(rig, cmd, Fault.REMOTE_L2_B, reason="remote_estop")
         assert tripped - pressed <= PERIOD + TIME_EPS  # the next state reports it, the next read trips
-        _assert_damping_in_the_next_frame(emu, tripped, first)
+        # the link damped on that state already: in the send after it, before the layer's read
+        assert first.time <= pressed + 2 * LINK_PERIOD + TIME_EPS
         for _ in range(3):  # held: every reset is refused, and nothing but damping goes out
             _loop(safe, cmd, 0.02)
             with pytest.raises(SafetyResetError, match="remote buttons held"):
@@ -531,6 +638,36 @@ def test_remote_l2_b_damps_and_reset_is_refused_while_held(robot: str) -> None:
         emu.clear(Fault.REMOTE_L2_B)  # released: still latched until the explicit reset
         _assert_latched(rig, cmd, first.time, 0.06)
         _reset_and_check_ramp(rig, cmd)
+
+
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_remote_l2_b_damps_on_the_next_state_frame_between_two_reads_of_a_slow_loop(robot: str) -> None:
+    """A 50 Hz loop reads every 20 ms; a press of L2 + B shorter than that, between two reads, is damped by the link
+    in the send after the first state that shows it, latched, and the layer latches it at its next read."""
+    slow = 0.02  # [s] the control period of a 50 Hz policy
+    with _rig(robot, **FAST) as rig:
+        emu, safe, events = rig.emu, rig.safe, rig.events
+        cmd = _stand(safe)
+        _run_to(safe, cmd, SafetyState.RUN)
+        safe.read()
+        safe.write(cmd)
+        rig.clock.advance(2 * LINK_PERIOD)  # the loop works on its next tick
+        pressed_at = rig.clock.now()
+        emu.inject(Fault.REMOTE_L2_B)
+        rig.clock.advance(3 * LINK_PERIOD)
+        emu.clear(Fault.REMOTE_L2_B)  # released before the loop reads again
+        rig.clock.advance(slow - 5 * LINK_PERIOD)
+        frames = _after(emu, pressed_at)
+        first = next((c for c in frames if c.damping), None)
+        assert first is not None, "no damping before the loop's next read"
+        # the state that shows the press answers the next send; the send after it is damping
+        assert first.time <= pressed_at + 2 * LINK_PERIOD + TIME_EPS
+        assert all(c.damping for c in frames if c.time >= first.time)  # latched: released buttons do not undo it
+        assert safe.safety_state is SafetyState.RUN  # the layer has not looked yet
+        safe.read()
+        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "remote_estop", events[-1]
+        _assert_latched(rig, cmd, first.time, 0.06)
+        _reset_and_check_ramp(rig, cmd)  # the reset releases the link's latch too: the ramp reaches the wire
 
 
 # -- done means: stand through the whole stack --------------------------------------------------------------------

@@ -33,6 +33,7 @@ from wbc.hardware.capabilities import HeldJoints
 from wbc.hardware.dynamixel import DynamixelArm, DynamixelArmConfig
 from wbc.hardware.dynamixel.current_law import CurrentLaw
 from wbc.hardware.emulators import (
+    Fault,
     LoggedCommand,
     LoggedPacket,
     RobotEmulator,
@@ -310,6 +311,46 @@ def test_damping_on_the_wire_when_this_process_stops_writing_even_holding_its_lo
     # where it also kept this process past the deadline between two writes: only the hold and damping, damping last.
     assert frames and all(c.damping or (c.wire.kp == 20.0).all() for c in frames) and frames[-1].damping
     # (that the link sent on during the freeze, at its rate, is what the realtime test below measures)
+
+
+def _until(what: object, tries: int = 1000) -> bool:
+    """Poll `what()` every 5 ms until it is true (at most `tries` times): the I/O process runs in its own time."""
+    for _ in range(tries):
+        if what():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+def test_the_links_estop_latch_and_deadline_trips_cross_the_io_process() -> None:
+    """The link in the I/O process latches damping on L2 + B and counts it; the count reaches this process in the state
+    block, and a release goes back with the next command, before it; its write-deadline trips come over too."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        with ProcessRobot(_legs(emu.address)) as robot:
+            hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+
+            def drive() -> None:
+                robot.write(hold)
+                robot.advance(0.004)
+
+            for _ in range(50):
+                drive()
+            assert robot.remote_estops == 0 and robot.deadline_trips == 0
+            emu.inject(Fault.REMOTE_L2_B)
+            assert _until(lambda: (drive(), robot.remote_estops == 1)[1]) and robot.remote_estop_latched
+            assert _until(lambda: (drive(), emu.commands()[-1].damping)[1])
+            emu.clear(Fault.REMOTE_L2_B)
+            assert _until(lambda: (drive(), not robot.remote().l2_b)[1])
+            latched = len(emu.commands())
+            for _ in range(50):  # released buttons, the hold written on: the latch holds
+                drive()
+            assert all(c.damping for c in emu.commands()[latched:])
+            assert robot.release_remote_estop()
+            assert _until(lambda: (drive(), not emu.commands()[-1].damping)[1])  # the hold goes out again
+            assert _until(lambda: (drive(), not robot.remote_estop_latched)[1])
+            assert robot.remote_estops == 1
+            time.sleep(0.15)  # no write for three write deadlines
+            assert _until(lambda: robot.deadline_trips >= 1)
 
 
 @pytest.mark.realtime

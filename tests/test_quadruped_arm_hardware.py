@@ -333,6 +333,43 @@ def test_a_locked_arm_obeys_the_safety_layer_on_the_wire() -> None:
         assert np.abs(dq).max() < 0.5  # resting: damping only takes energy out
 
 
+def test_a_stall_past_the_arms_own_write_deadline_ramps_the_whole_robot_again() -> None:
+    """The arm's bus damps after its write deadline (50 ms) while the legs' (here 90 ms) does not trip: the layer,
+    told of the arm's trip, ramps again from the measured pose, arm included, before the controller's gains return."""
+    events: list[SafetyEvent] = []
+    clock = ManualClock()
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep"), clock=clock) as emu:
+        legs = UnitreeRobot(UnitreeRobotConfig(robot="a1", target_host="127.0.0.1", target_port=9,
+                                               write_deadline=0.09), emu.legs_transport, clock=clock)
+        arm = DynamixelArm(DynamixelArmConfig(robot="a1-wx200", port=emu.port), handlers=emu.arm_handlers(),
+                           clock=clock)
+        safe = SafeRobot(QuadrupedArmRobot(legs, arm, QuadrupedArmConfig(arm_mode="actuated")),
+                         SafetyConfig(position_table="a1", on_event=events.append, ramp_time_s=0.2))
+        with safe:
+            _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+            assert safe.safety_state is SafetyState.RUN
+            _stand(safe, 0.1)
+            asked: list[MotorCommand] = []  # what the joined robot hands the arm's bus thread
+            write = arm.write
+            arm.write = lambda cmd: asked.append(cmd) or write(cmd)
+            stalled_at = clock.now()
+            clock.advance(0.07)  # the loop stalls: past the arm's deadline, not the legs', not the stale timeout
+            resumed_at = clock.now()
+            assert arm.deadline_trips == 1 and legs.deadline_trips == 0
+            assert not any(c.damping for c in emu.legs.commands() if stalled_at < c.time <= resumed_at)
+            ctrl = StandController(get_robot("a1-wx200", "actuated"))
+            full = ctrl.act(safe.read(), None)
+            assert safe.safety_state is SafetyState.RAMP and events[-1].reason == "write_deadline", events[-1]
+            _stand(safe, 0.1)
+            first = next(c for c in asked if c.kp.any())
+            np.testing.assert_allclose(first.kp, safe.config.ramp_kp)  # the ramp's start gain on the arm
+            assert all((c.kp < full.kp[12:]).all() for c in asked)  # never the controller's gain within the blend
+            legs_after = [c for c in emu.legs.commands() if c.time > resumed_at and not c.damping]
+            assert legs_after and all((c.wire.kp < full.kp[:12]).all() for c in legs_after)
+            np.testing.assert_allclose(legs_after[0].wire.kp, safe.config.ramp_kp)
+        assert emu.failure is None, emu.failure
+
+
 def test_each_joint_is_bounded_by_its_own_devices_gains_and_the_layer_says_what_went_out() -> None:
     with _whole_robot("actuated", ramp_time_s=0.2) as (emu, safe, _):
         _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
@@ -375,6 +412,30 @@ def test_an_estop_damps_the_arm_on_its_bus_as_it_damps_the_legs(arm_mode: str, t
         damped = asked[3:]  # from the next control tick on (the remote's frame takes a link period to arrive)
         assert damped and all((c.kp == 0).all() and np.allclose(c.kd, safe.config.arm_damping_kd) for c in damped)
         assert all(c.damping for c in emu.legs.commands() if c.time > t0 + 0.06)
+
+
+def test_the_remote_damps_the_arm_on_its_bus_before_the_control_loop_reads_again() -> None:
+    """L2 + B pressed between two reads of a 50 Hz loop: the legs' link latches damping on the frame that shows it,
+    and the arm's bus damps from its next cycle on (its goal currents drop to the damping's), before the layer looks."""
+    with _whole_robot("actuated", ramp_time_s=0.2) as (emu, safe, events):
+        robot, clock = safe.robot, emu.clock
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        _stand(safe, 0.2)
+        assert safe.safety_state is SafetyState.RUN
+        ctrl = StandController(get_robot("a1-wx200", "actuated"))
+        safe.write(ctrl.act(safe.read(), None))
+        pressed_at = clock.now()
+        damped_before = robot.arm.bus_stats().damping_cycles
+        emu.inject(Fault.REMOTE_L2_B)
+        clock.advance(0.015)  # the loop has not read again
+        assert safe.safety_state is SafetyState.RUN
+        assert robot.legs.remote_estop_latched
+        assert robot.arm.bus_stats().damping_cycles - damped_before >= 2  # the arm's bus damps, cycle after cycle
+        goals = _arm_goals(emu, pressed_at + 0.01)
+        assert goals and all(abs(v) < 0.1 * robot.arm.law.limit_units for g in goals for v in g.values())
+        emu.clear(Fault.REMOTE_L2_B)
+        safe.read()
+        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "remote_estop"
 
 
 def test_hw_emulate_serves_one_robot_on_both_wires(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -466,6 +466,26 @@ def test_write_stall_damps_then_resumes(stepped: Stepped) -> None:
 
 
 # -- fault 4: NaN and out-of-range commands -----------------------------------------------------------------------
+@pytest.mark.parametrize("row", [2, 3], ids=["kp", "kd"])
+def test_a_negative_gain_in_an_unchecked_command_is_refused_never_sent_as_zero(stepped: Stepped, row: int) -> None:
+    """A trusted command with a negative gain is refused by name; the wire goes on with the last command accepted,
+    then the write deadline's damping: never the joint's gain clamped to 0 at a servo target."""
+    with stepped.robot() as robot:
+        held = _hold(robot)
+        robot.write(held)
+        stepped.clock.advance(0.01)
+        rows = held.stacked()
+        rows[row, 4] = -3.0
+        refused_at = stepped.clock.now()
+        with pytest.raises(CommandError, match=rf"negative gain at {COMMAND_ROWS[row]}\[{robot.joint_names[4]}\]"):
+            robot.write(MotorCommand.trusted(rows))
+        stepped.clock.advance(2 * robot.config.write_deadline)
+    after = [c for c in stepped.emu.commands() if c.time > refused_at]
+    servo = [c.wire for c in after if not c.damping]
+    assert servo and all((w.kp == held.kp).all() and (w.kd == held.kd).all() for w in servo)  # the last one accepted
+    assert after[-1].damping  # then the write deadline's damping
+
+
 def test_wild_commands_reach_the_wire_clamped(stepped: Stepped) -> None:
     emulator = stepped.emu
     with stepped.robot() as robot:
@@ -589,6 +609,9 @@ def test_delay_and_drop(robot_name: str) -> None:
     emu.close()
 
 
+TICK_US = 2000  # the emulator's tick advances by its control period in microseconds per state it sends
+
+
 def test_jitter_spreads_and_reorders_the_replies_and_loses_none() -> None:
     clock = ManualClock()
     emu = UnitreeEmulator(UnitreeEmulatorConfig(robot="go1"))
@@ -601,8 +624,9 @@ def test_jitter_spreads_and_reorders_the_replies_and_loses_none() -> None:
 
     def send() -> None:
         if len(sent) < 50:
+            tick = len(sent) * TICK_US  # the emulator's clock: its k-th reply carries (k - 1) periods [us]
             transport.send(frame)  # a command every 2 ms, as a 500 Hz link sends
-            sent[len(sent) + 1] = clock.now()  # the emulator's k-th step answers with tick k
+            sent[tick] = clock.now()
 
     def look() -> None:
         arrivals.extend((decode_state(emu.layout, d, time=0.0)[0].tick, clock.now()) for d in transport.receive())
@@ -614,7 +638,7 @@ def test_jitter_spreads_and_reorders_the_replies_and_loses_none() -> None:
     late = [at - sent[t] for t, at in arrivals]
     print(f"\njitter 10 ms: replies late by {min(late) * 1e3:.1f}..{max(late) * 1e3:.1f} ms, "
           f"{sum(b < a for a, b in zip(ticks, ticks[1:], strict=False))} of 49 arrived before an older one")
-    assert sorted(ticks) == list(range(1, 51))  # none lost
+    assert sorted(ticks) == [k * TICK_US for k in range(50)]  # none lost
     assert ticks != sorted(ticks)  # out of order
     assert max(late) - min(late) > 0.004 and max(late) <= 0.01 + poll + TIME_EPS
     assert emu.replies == 50
@@ -706,7 +730,7 @@ def test_advance_waits_only_when_nothing_newer_than_the_last_read_has_arrived() 
     fake.deliver(_still_state(robot))
     with robot:
         assert robot.read().tick == 1
-        fake.deliver(_still_state(robot))  # a state arrives while the loop works
+        fake.deliver(_still_state(robot, tick=8))  # a state arrives while the loop works
         clock.advance(1.0 / 200.0)  # the link takes it
         assert robot.link_stats().valid_states == 2
         start = clock.now()
@@ -718,6 +742,35 @@ def test_advance_waits_only_when_nothing_newer_than_the_last_read_has_arrived() 
         waited = clock.now() - start
         assert robot.read().tick == 2
     assert went_on <= 1e-6 + TIME_EPS and grace <= waited <= grace + 1e-6 + TIME_EPS  # its dt alone, or dt + grace
+
+
+@pytest.mark.parametrize(("ticks", "taken"), [
+    ((7, 7, 7), (7,)),  # the very same frame again: a board that keeps sending its last buffer
+    ((7, 9, 8), (7, 9)),  # a datagram overtaken by a newer one, or replayed: older than the newest taken
+    ((2**32 - 2, 2**32 - 1, 0, 3), (2**32 - 2, 2**32 - 1, 0, 3)),  # the u32 counter wraps: still news
+    ((0, 0, 0, 0), (0,)),  # a robot whose tick never moves: nothing after its first frame is news
+    ((100, 2**31 + 100, 200), (100, 200)),  # half the counter's range ahead counts as behind
+], ids=["repeated", "out_of_order", "wraps", "constant_zero", "half_range"])
+def test_a_state_is_taken_only_when_the_robots_tick_advanced(ticks: tuple[int, ...], taken: tuple[int, ...]) -> None:
+    """The link's freshness is the robot's own tick moving on: a repeated, replayed or overtaken frame is no news."""
+    fake = FakeTransport()
+    clock = ManualClock()
+    robot = UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9), transport=fake,
+                         clock=clock)
+    fake.deliver(_still_state(robot, tick=ticks[0]))
+    seen = []
+    with robot:
+        seen.append((robot.read().tick, robot.state_age))
+        for tick in ticks[1:]:
+            fake.deliver(_still_state(robot, tick=tick))
+            clock.advance(LINK_PERIOD)  # one datagram per link period
+            seen.append((robot.read().tick, robot.state_age))
+        assert robot.link_stats().valid_states == len(taken)
+        assert robot.stale_frames == len(ticks) - len(taken)
+    # the freshness counter moved exactly on the frames taken; on the others the state only aged
+    moved = [ticks[0]] + [t for t, (a, b) in zip(ticks[1:], zip(seen, seen[1:], strict=False), strict=True)
+                          if b[0] != a[0]]
+    assert tuple(moved) == taken
 
 
 _SDK_CLIENT = '''
@@ -766,7 +819,8 @@ def test_vendor_sdk_client_talks_to_the_emulator() -> None:
         result = json.loads(line.removeprefix("RESULT "))
         log = emu.commands()
     assert result["recv"] == [0] * 100  # the SDK accepted every state frame the emulator sent
-    assert result["tick"] == 100 and abs(result["q"][1] - nominal[1]) < 0.3
+    # the 100th state carries the emulator's clock 99 periods on [us]
+    assert result["tick"] == 99 * TICK_US and abs(result["q"][1] - nominal[1]) < 0.3
     assert emu.stats.rejected == 0 and emu.stats.accepted == len(log) == 100
     np.testing.assert_array_equal(log[-1].wire.kp, 20.0)
     np.testing.assert_allclose(log[-1].wire.q, np.float32(nominal))
@@ -809,7 +863,7 @@ def test_lockstep_is_deterministic(robot_name: str) -> None:
     assert first == second
     layout = frame_layout(robot_name)
     ticks = [decode_state(layout, r, time=0.0)[0].tick for r in first]
-    assert ticks == list(range(1, 51))  # one physics step per command
+    assert ticks == [k * TICK_US for k in range(50)]  # one state per command, the robot's clock a period on each
 
 
 

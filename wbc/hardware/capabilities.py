@@ -24,7 +24,7 @@ that need them are then skipped.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 import numpy as np
@@ -38,10 +38,10 @@ from wbc.types import BaseTruth, MotorCommand
 if TYPE_CHECKING:
     from wbc.hardware.dynamixel.arm_fault import ArmFault
 
-__all__ = ["ConfigurationEstimate", "FallDetector", "HasLatchedFaults", "HasLinkStats", "HasRealtimeGrant",
-           "HasSafetyEvents", "HasThreadStats", "HeldJoints", "HeldRamp", "LinkStatsLike", "MotorNames", "MotorStatus",
-           "MotorStatusSource", "Pushable", "RemoteButtons", "RemoteSource", "SafetyEventLike", "SimulatorHealth",
-           "TruthSource", "WallClock"]
+__all__ = ["ConfigurationEstimate", "DampsWhile", "FallDetector", "HasLatchedFaults", "HasLinkStats",
+           "HasRealtimeGrant", "HasSafetyEvents", "HasThreadStats", "HeldJoints", "HeldRamp", "LinkStatsLike",
+           "MotorNames", "MotorStatus", "MotorStatusSource", "Pushable", "RemoteButtons", "RemoteEstopLatch",
+           "RemoteSource", "SafetyEventLike", "SimulatorHealth", "TruthSource", "WallClock", "WriteDeadlineTrips"]
 
 
 @runtime_checkable
@@ -122,6 +122,47 @@ class WallClock(Protocol):
 
     def wall_time(self) -> float:
         """Now, on a monotonic clock [s] (an arbitrary origin; only differences mean anything)."""
+
+
+@runtime_checkable
+class RemoteEstopLatch(Protocol):
+    """A backend whose device loop checks the remote's L2 + B on every state frame and damps at once, latched.
+
+    The safety layer trips when `remote_estops` rose since its last look, and releases the device's latch in its
+    `reset` (which it refuses while a button is held).
+    """
+
+    @property
+    def remote_estops(self) -> int:
+        """How many times since `connect` the device saw L2 + B pressed and latched damping."""
+
+    @property
+    def remote_estop_latched(self) -> bool:
+        """Whether the device damps now on its L2 + B latch (until `release_remote_estop`)."""
+
+    def release_remote_estop(self) -> bool:
+        """Release the device's latch; False (the latch kept) while L2 + B is still held."""
+
+
+@runtime_checkable
+class DampsWhile(Protocol):
+    """A device whose loop damps its motors on every cycle where a condition holds (another device's e-stop latch)."""
+
+    def damp_while(self, condition: Callable[[], bool] | None) -> None:
+        """Damp on every cycle where `condition()` is true (called from the device's loop; short, never raising)."""
+
+
+@runtime_checkable
+class WriteDeadlineTrips(Protocol):
+    """A backend whose device loops damp on their own once `write` has not been called for their write deadline.
+
+    A control loop that stalls past that deadline leaves the robot damped for a while; whoever watches over the
+    motors (`wbc.hardware.safety.SafeRobot`) must not then hand the controller's command straight back at full gain.
+    """
+
+    @property
+    def deadline_trips(self) -> int:
+        """How many times since `connect` a write deadline expired and the device switched to damping."""
 
 
 class LinkStatsLike(Protocol):

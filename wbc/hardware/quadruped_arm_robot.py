@@ -35,6 +35,7 @@ import numpy as np
 
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.hardware.capabilities import (
+    DampsWhile,
     HasLatchedFaults,
     HasLinkStats,
     HasThreadStats,
@@ -43,8 +44,10 @@ from wbc.hardware.capabilities import (
     MotorNames,
     MotorStatusSource,
     RemoteButtons,
+    RemoteEstopLatch,
     RemoteSource,
     WallClock,
+    WriteDeadlineTrips,
 )
 from wbc.hardware.device_thread import DeviceThreadStats
 from wbc.hardware.dynamixel.arm_fault import ArmFault
@@ -187,6 +190,9 @@ class QuadrupedArmRobot(Robot):
         # each joint's gains bounded as its own device bounds them (the arm's current loop far below the legs')
         self.gain_limits = tuple(np.concatenate([np.broadcast_to(np.asarray(p.gain_limits[k], dtype=float),
                                                                   (p.num_joints,)) for p in parts]) for k in (0, 1))
+        if isinstance(legs, RemoteEstopLatch) and isinstance(arm, DampsWhile):
+            # the remote's L2 + B, latched by the legs' link on the frame that shows it, damps the arm's bus too
+            arm.damp_while(lambda: legs.remote_estop_latched)
         self._hold = MotorCommand.hold(self.config.stowed_q, self.config.hold_kp, self.config.hold_kd)
         self._held: MotorCommand | HeldRamp = self._hold  # what a locked arm gets: its hold, damping, or a ramp
         self._reset_frames()
@@ -298,6 +304,20 @@ class QuadrupedArmRobot(Robot):
         threads = {device: robot.thread_stats() for device, robot in (("legs", self.legs), ("arm", self.arm))
                    if isinstance(robot, HasThreadStats)}
         return JoinedLinkStats(legs=legs, arm=bus_stats() if bus_stats is not None else None, threads=threads)
+
+    @property
+    def remote_estops(self) -> int:
+        """The legs' link's L2 + B latches (`RemoteEstopLatch`; the remote is the legs'); 0 without one."""
+        return self.legs.remote_estops if isinstance(self.legs, RemoteEstopLatch) else 0
+
+    def release_remote_estop(self) -> bool:
+        """Release the legs' link's L2 + B latch; False while the buttons are still held."""
+        return self.legs.release_remote_estop() if isinstance(self.legs, RemoteEstopLatch) else True
+
+    @property
+    def deadline_trips(self) -> int:
+        """The legs' write-deadline trips plus the arm's (`WriteDeadlineTrips`); a device without one counts none."""
+        return sum(part.deadline_trips for part in (self.legs, self.arm) if isinstance(part, WriteDeadlineTrips))
 
     @property
     def faults(self) -> tuple[ArmFault, ...]:

@@ -104,16 +104,27 @@ def clamp_command(cmd: MotorCommand, limits: JointTable,
     return MotorCommand._trusted(rows)
 
 
-def _refuse_non_finite(robot: str, cmd: MotorCommand, joints: tuple[str, ...]) -> None:
-    """Raise `CommandError` naming the rows and joints of `cmd` that hold a non-finite value, if any."""
+def _refuse_invalid(robot: str, cmd: MotorCommand, joints: tuple[str, ...]) -> None:
+    """Raise `CommandError` naming the rows and joints of `cmd` that hold a non-finite value or a negative gain.
+
+    Clamping would carry either to the motors: a NaN lies within no bounds (it clamps to NaN), and a negative gain
+    clamps to 0, which turns a joint the controller meant to hold limp without a word.
+    """
+    def named(bad: np.ndarray) -> str:
+        rows, cols = np.nonzero(bad)
+        names = [f"{COMMAND_ROWS[r]}[{joints[c] if c < len(joints) else c}]" for r, c in zip(rows, cols, strict=True)]
+        return ", ".join(names[:6]) + (f" and {len(names) - 6} more" if len(names) > 6 else "")
+
     bad = ~np.isfinite(cmd.rows)
-    if not bad.any():
-        return
-    rows, cols = np.nonzero(bad)
-    named = [f"{COMMAND_ROWS[r]}[{joints[c] if c < len(joints) else c}]" for r, c in zip(rows, cols, strict=True)]
-    where = ", ".join(named[:6]) + (f" and {len(named) - 6} more" if len(named) > 6 else "")
-    raise CommandError(f"{robot}.write: the command holds a non-finite value at {where}; refused before it reached "
-                       "a motor")
+    if bad.any():
+        raise CommandError(f"{robot}.write: the command holds a non-finite value at {named(bad)}; refused before it "
+                           "reached a motor")
+    negative = np.zeros_like(bad)
+    negative[2:4] = cmd.rows[2:4] < 0  # kp, kd
+    if negative.any():
+        raise CommandError(f"{robot}.write: the command holds a negative gain at {named(negative)} (gains must be "
+                           ">= 0; a negative one would be sent as 0, the joint limp); refused before it reached a "
+                           "motor")
 
 
 class Robot(ABC):
@@ -194,11 +205,13 @@ class Robot(ABC):
         """Validate, clamp and send a command; return what was sent.
 
         A command built unchecked (`MotorCommand.trusted`) is held to what the constructor checks: a non-finite value
-        is refused here, since clamping would carry it to the motors (a NaN lies within no bounds, and clamps to NaN).
+        or a negative gain is refused here, since clamping would carry it to the motors (a NaN lies within no bounds,
+        and clamps to NaN; a negative kp or kd clamps to 0, a limp joint the controller never asked for).
 
         Raises:
-            CommandError: the command has the wrong number of joints, or holds a non-finite value (nothing is sent;
-                the robot keeps the last command it accepted).
+            CommandError: the command has the wrong number of joints, or holds a non-finite value or a negative gain
+                (nothing is sent; the robot keeps the last command it accepted, and its device's write deadline
+                damps it if no valid command follows).
             RobotNotConnectedError: not connected.
         """
         self._require_connected("write")
@@ -221,7 +234,7 @@ class Robot(ABC):
             if within_bounds(cmd.rows, lower, upper):
                 applied = cmd
             else:
-                _refuse_non_finite(type(self).__name__, cmd, self.joint_names)
+                _refuse_invalid(type(self).__name__, cmd, self.joint_names)
                 applied = clamp_command(cmd, limits, self._bounds[1])
             self._last_written = (cmd, applied)
         self._send(applied)

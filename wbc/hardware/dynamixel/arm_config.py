@@ -51,7 +51,8 @@ class DynamixelArmConfig:
             (the datasheet's stall current by default). The servos' Current Limit must not be lower.
         held_ticks: goal positions of the servos without a model joint (wrist angle, wrist rotate, gripper) [ticks];
             None holds a servo where it is. The default holds the wrist at 0 rad, the pose the model lumps it at.
-        held_profile_velocity: Profile Velocity of the held servos, so that they reach their goal slowly [0.229 rpm].
+        held_profile_velocity: Profile Velocity of the held servos, so that they reach their goal slowly [0.229 rpm];
+            at least 1, since 0 means no limit on the XM430 (full speed).
         connect_retries: how often a start-up or park transfer (`close`) that timed out is tried again.
         connect_timeout: how long `connect` waits for the first state once the bus thread runs [s].
         servos: the servos on the bus (the WX200's, as Interbotix configures them).
@@ -97,8 +98,12 @@ class DynamixelArmConfig:
         _in("park_current_a", self.park_current_a, 0.0, STALL_CURRENT)
         _in("max_current_a", self.max_current_a, CURRENT_UNIT, 1193 * CURRENT_UNIT)
         _in("connect_timeout", self.connect_timeout, 0.01, 10.0)
+        if isinstance(self.held_profile_velocity, int) and self.held_profile_velocity == 0:
+            raise ConfigError("DynamixelArmConfig.held_profile_velocity must be at least 1 (0.229 rpm), got 0: on the "
+                              "XM430 a Profile Velocity of 0 means no limit, so connect would drive the held servos "
+                              "(wrist, gripper) to their goals at full speed; the default is 20")
         for name, low, high in (("status_every", 2, 1000), ("retries", 0, 10), ("connect_retries", 0, 100),
-                                ("held_profile_velocity", 0, 32767)):
+                                ("held_profile_velocity", 1, 32767)):
             value = getattr(self, name)
             if not (isinstance(value, int) and low <= value <= high):
                 raise ConfigError(f"DynamixelArmConfig.{name} must be an integer in [{low}, {high}], got {value!r}")

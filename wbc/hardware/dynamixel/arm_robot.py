@@ -19,7 +19,8 @@ The bus thread runs at `DynamixelArmConfig.rate_hz`. Each cycle:
    Present Input Voltage with Present Temperature;
 3. one sync write of Goal Current (102) to the primaries. The shadow follows ID 2 through its Secondary ID. The
    command is the one `write` gave. Damping (kp 0, kd `damping_kd`) replaces it before the first write, once
-   `write` has not been called for `write_deadline`, after a latched fault, and while closing.
+   `write` has not been called for `write_deadline`, after a latched fault, while closing, and while the condition
+   handed to `damp_while` holds (the legs' link's latch of the remote's L2 + B, on a quadruped).
 
 Faults: late is not dead. A read that fails (timeout, corrupt answer) is tried again up to `retries` times, after a
 short wait and a flush. A status packet that answers an earlier request (late) is discarded by the bus, never taken for
@@ -52,7 +53,9 @@ otherwise, and says which servo is wrong and why. EEPROM is written only where i
 (Operating Mode: 0 for the joints, 3 for the held servos), and only after that servo's torque has been switched off.
 The backend prints a line each time it does. The held servos (wrist angle, wrist rotate, gripper) go to
 `held_ticks` in position mode, at `held_profile_velocity`. The joint servos get goal current 0, torque on, and the
-watchdog armed.
+watchdog armed: from then until a controller's ramp, the host only damps them, so an arm found away from its stowed
+pose (parked raised by an earlier run's `close`) sags under gravity, slowed by the damping alone; `connect` says so
+first, naming each joint and how far it is from the stowed pose.
 
 Time. The bus loop is a `DeviceThread` (`wbc.hardware.device_thread`) whose cycle is one bus cycle. Every time the
 backend reads or waits (the cycle's start, the write deadline, a retry's pause, a fault's time, `wall_time`) comes
@@ -112,6 +115,7 @@ from wbc.hardware.robot import Robot
 from wbc.hardware.serial_port_policy import announce_hardware_port, check_serial_port
 from wbc.robots.joint_table import JointTable, joint_table
 from wbc.robots.registry import get_robot
+from wbc.robots.wx200 import WX200_NOMINAL_Q
 from wbc.types import MotorCommand, RobotState
 
 __all__ = ["ARM_KD_MAX", "ARM_KP_MAX", "HELD_MODEL_NUMBERS", "PING_WAITS", "DynamixelArm", "arm_joint_table"]
@@ -148,6 +152,10 @@ class _Next(enum.Enum):
     GO_ON = "go_on"
     STOP = "stop"  # end without parking (the port is lost)
     PARK = "park"  # the close damping is over: park the arm, then end
+
+
+RAISED_TOLERANCE_RAD = 0.2
+"""[rad] How far a joint may be from the stowed pose at `connect` before it warns that the arm will fall."""
 
 
 def _print(line: str) -> None:
@@ -205,6 +213,7 @@ class DynamixelArm(Robot):
         self._damping_rows = MotorCommand.damping(3, config.damping_kd).stacked()
         self._lock = threading.Condition()
         self._bus: SdkBus | None = None
+        self._damp_while: Callable[[], bool] | None = None
         self._reset()
 
     def _reset(self) -> None:
@@ -401,6 +410,20 @@ class DynamixelArm(Robot):
             bus.close()
         return tuple(readings)
 
+    def damp_while(self, condition: Callable[[], bool] | None) -> None:
+        """Damp (the host's damping, as after the write deadline) on every bus cycle where `condition()` is true.
+
+        The robot the arm rides on hands it its legs' e-stop latch (`DampsWhile`), so that the remote's L2 + B damps
+        the arm within one bus cycle of the legs' link, not at the control loop's next read. None removes it.
+        """
+        self._damp_while = condition
+
+    @property
+    def deadline_trips(self) -> int:
+        """Times since `connect` the write deadline expired and the bus switched to damping (`WriteDeadlineTrips`)."""
+        with self._lock:
+            return self._counts["deadline_trips"]
+
     def bus_stats(self) -> ArmBusStats:
         """A snapshot of the bus thread's counters; its period and busy figures are the bus loop's (`thread_stats`)."""
         thread = self._loop.stats()
@@ -500,6 +523,7 @@ class DynamixelArm(Robot):
                                          f"{cfg.max_current_a:.2f} A: lower max_current_a, or raise the register")
             modes[spec.id] = mode
         self._read_status(bus, "temperature", at_start=True)
+        self._warn_if_raised(bus)
         # EEPROM: written only where it differs, and only with that servo's torque off
         for spec in cfg.servos:
             wanted = OperatingMode.CURRENT if spec.id in joint_ids else OperatingMode.POSITION
@@ -522,6 +546,25 @@ class DynamixelArm(Robot):
             self._write_at_start(bus, servo_id, "torque_enable", 1)
         for servo_id in self._primaries:
             self._write_at_start(bus, servo_id, "bus_watchdog", cfg.watchdog_units)
+
+    def _warn_if_raised(self, bus: SdkBus) -> None:
+        """Say so when a joint is away from the stowed pose: what connect does next lets gravity take it down.
+
+        Connect switches the joint servos' torque off (to write current mode, after a park in mode 5) and on again at
+        goal current 0; from then until a controller's ramp, the host only damps them. An arm left raised (a run
+        that parked it up) falls, slowed by that damping alone.
+        """
+        far = []
+        for joint, stowed in zip(self.config.joints, WX200_NOMINAL_Q, strict=True):
+            ticks = self._read_at_start(bus, joint.servo_id, _ADDR["present_position"], 4).value(0, 4, signed=True)
+            q = joint.to_rad(ticks)
+            if abs(q - stowed) > RAISED_TOLERANCE_RAD:
+                far.append(f"{joint.name} at {q:+.2f} rad, {abs(q - stowed):.2f} rad from stowed ({stowed:+.2f})")
+        if far:
+            self._say(f"the arm is away from its stowed pose: {'; '.join(far)}. Connecting releases the joints (torque "
+                      f"off to write current mode, then goal current 0, damped by the host with kd "
+                      f"{self.config.damping_kd} only) until a controller's ramp holds them: gravity takes the arm "
+                      "down meanwhile. Support it, or lower it to its stowed pose first")
 
     # -- the bus loop: one cycle's body, run by the thread or by the clock --------------------------------------------
     def _loop_died(self, exc: BaseException) -> None:
@@ -745,7 +788,7 @@ class DynamixelArm(Robot):
                 self._counts["deadline_trips"] += 1
             self._tripped = quiet
             damp = (self._faults or self._closing_until is not None or self._state is None or self._rows is None
-                    or quiet)
+                    or quiet or (self._damp_while is not None and self._damp_while()))
             rows = self._damping_rows if damp else self._rows
         q, dq, _ = self._measured
         tau = self.law.torque(rows, q, dq)

@@ -1,10 +1,10 @@
 """`Fault` and `FaultSet`: what an emulator can be told to do wrong, and how each fault bends a reply.
 
 Frame faults change what goes on the wire (nothing, a corrupt, short or long datagram, one from a foreign port, late
-or dropped replies); state faults change what the reported state says (a joint beyond its range, an overheated
-motor, a motor in an error mode, sustained over-power, an IMU reading of a fall, the remote's L2+B). A `FaultSet`
-is shared by the test thread that injects and the emulator thread that applies, so it is locked; the Dynamixel
-emulator keeps one of its own faults (`BusFault`) in the same kind of set.
+or dropped replies, the same datagram again and again); state faults change what the reported state says (a joint
+beyond its range, an overheated motor, a motor in an error mode, sustained over-power, an IMU reading of a fall, the
+remote's L2+B). A `FaultSet` is shared by the test thread that injects and the emulator thread that applies, so it is
+locked; the Dynamixel emulator keeps one of its own faults (`BusFault`) in the same kind of set.
 """
 
 from __future__ import annotations
@@ -33,7 +33,9 @@ class Fault(enum.Enum):
     Frame faults: SILENCE (no replies); CORRUPT (a flipped bit: bad CRC); SHORT (one byte missing); LONG (four bytes
     more); FOREIGN_PORT (replies sent from another port); DELAY [s, default 0.05] (each reply sent that much later);
     JITTER [s, default 0.004] (each reply sent later by a time drawn uniformly in [0, value], so replies arrive
-    unevenly and out of order, as on a busy network); DROP [probability, default 1.0] (each reply dropped with it).
+    unevenly and out of order, as on a busy network); DROP [probability, default 1.0] (each reply dropped with it);
+    FROZEN_STATE (each reply is the very datagram sent before the fault, byte for byte: a robot whose board keeps
+    sending its last buffer, its tick standing still).
     State faults: JOINT_OUT_OF_RANGE [(joint, q) default (2, 0.5)] (calf 0 reports q); OVER_TEMPERATURE [deg C,
     default 95] (every motor); MOTOR_ERROR [mode, default 0x08: overheat, the fault code the vendor documents,
     `unitree.layout.MOTOR_STATE_MODES`] (every motor reports that mode); OVER_POWER [(tau_est N m, dq rad/s),
@@ -51,6 +53,7 @@ class Fault(enum.Enum):
     DELAY = "delay"
     JITTER = "jitter"
     DROP = "drop"
+    FROZEN_STATE = "frozen_state"
     JOINT_OUT_OF_RANGE = "joint_out_of_range"
     OVER_TEMPERATURE = "over_temperature"
     MOTOR_ERROR = "motor_error"
@@ -61,7 +64,7 @@ class Fault(enum.Enum):
 
 
 FRAME_FAULTS = (Fault.SILENCE, Fault.CORRUPT, Fault.SHORT, Fault.LONG, Fault.FOREIGN_PORT, Fault.DELAY, Fault.JITTER,
-                Fault.DROP)
+                Fault.DROP, Fault.FROZEN_STATE)
 STATE_FAULTS = (Fault.JOINT_OUT_OF_RANGE, Fault.OVER_TEMPERATURE, Fault.MOTOR_ERROR, Fault.OVER_POWER, Fault.FALL,
                 Fault.BAD_IMU, Fault.REMOTE_L2_B)
 

@@ -22,6 +22,7 @@ The log then stamps each command with that clock's time, so a test can say in wh
 from __future__ import annotations
 
 import collections
+import dataclasses
 import errno
 import math
 import random
@@ -101,6 +102,9 @@ class UnitreeEmulatorConfig:
             operator or a harness holds a real robot, until the first command that drives a motor (Kp > 0 or a
             torque); `reset` holds it again. Without it, an idle robot with its motors off folds to its joint stops
             within half a second, beyond the range a safety layer accepts for a ramp.
+        first_tick: the tick of the first state sent; each state after it carries the robot's own clock, a
+            control period later in microseconds (the unit the SDK's header comment gives), modulo 2**32 (a test
+            starts it near 2**32 to see the counter wrap).
     """
 
     robot: str = "go1"
@@ -114,6 +118,7 @@ class UnitreeEmulatorConfig:
     seed: int = 0
     receive_buffer: int = 4 << 20
     held_until_driven: bool = False
+    first_tick: int = 0
 
     def __post_init__(self) -> None:
         if self.robot not in DESCRIPTIONS:
@@ -131,6 +136,9 @@ class UnitreeEmulatorConfig:
         if not 0 < self.control_period <= 0.01:
             raise ConfigError(f"UnitreeEmulatorConfig.control_period must be in (0, 0.01] s, got "
                               f"{self.control_period}")
+        if not (isinstance(self.first_tick, int) and 0 <= self.first_tick < 2**32):
+            raise ConfigError(f"UnitreeEmulatorConfig.first_tick must be an integer in [0, 2**32), got "
+                              f"{self.first_tick!r}")
 
 
 class UnitreeEmulator:
@@ -176,6 +184,10 @@ class UnitreeEmulator:
         self.failure: BaseException | None = None
         self.address: tuple[str, int] = (self.config.host, 0)
         self._held = self.config.held_until_driven
+        # the robot's own tick: its clock, which runs whether or not the physics does (a held robot, a damped one)
+        self._tick = self.config.first_tick
+        self._tick_step = max(1, round(self.config.control_period * 1e6))  # [us] per state sent
+        self._last_frame: bytes | None = None  # the latest state frame composed (FROZEN_STATE repeats it)
         self.clock: Clock = MONOTONIC  # what the log's times are read from
         self._in_process: EmulatorTransport | None = None
         self._realtime_task: ScheduledCall | None = None
@@ -304,6 +316,10 @@ class UnitreeEmulator:
                                   f"{np.shape(qpos)}")
             self.sim.reset(self.config.seed, qpos=None if qpos is None else np.asarray(qpos, dtype=np.float64))
             self._held = self.config.held_until_driven
+        # the robot's own tick: its clock, which runs whether or not the physics does (a held robot, a damped one)
+        self._tick = self.config.first_tick
+        self._tick_step = max(1, round(self.config.control_period * 1e6))  # [us] per state sent
+        self._last_frame: bytes | None = None  # the latest state frame composed (FROZEN_STATE repeats it)
 
     @property
     def held(self) -> bool:
@@ -376,6 +392,8 @@ class UnitreeEmulator:
     def compose_reply(self) -> Reply | None:
         """The state datagram the robot sends now, bent by the active faults; None if none goes out (SILENCE, DROP)."""
         active = self.faults.snapshot()
+        tick = self._tick
+        self._tick = (tick + self._tick_step) % 2**32  # the robot's clock runs on, whether a frame leaves or not
         if Fault.SILENCE in active:
             return None
         if Fault.DROP in active and self._coin.random() < float(active[Fault.DROP]):
@@ -389,8 +407,12 @@ class UnitreeEmulator:
         extras = LowStateExtras(motor_mode=np.full(12, MODE_SERVO, dtype=np.uint8),
                                 motor_temperature=np.full(12, self.config.motor_temperature, dtype=np.int8),
                                 imu_rpy=rpy)
-        state, extras = apply_state_faults(active, state, extras)
-        frame = mangle_frame(active, encode_state(self.layout, state, extras))
+        state, extras = apply_state_faults(active, dataclasses.replace(state, tick=tick), extras)
+        if Fault.FROZEN_STATE in active and self._last_frame is not None:
+            frame = self._last_frame  # the very bytes sent last: the robot's tick stands still
+        else:
+            frame = mangle_frame(active, encode_state(self.layout, state, extras))
+            self._last_frame = frame
         delay = float(active.get(Fault.DELAY, 0.0) or 0.0)
         if Fault.JITTER in active:
             delay += self._coin.uniform(0.0, float(active[Fault.JITTER]))

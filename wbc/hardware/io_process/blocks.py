@@ -41,13 +41,14 @@ _TORN_RETRY_S = 0.01  # [s] how long a reader retries before it calls the block 
 
 
 def state_dtype(num_joints: int) -> np.dtype:
-    """The record of one state: a `RobotState`, the remote's raw block and the motors' status."""
+    """One state: a `RobotState`, the remote's block, the motors' status, the devices' deadline trips and e-stops."""
     n = num_joints
     return np.dtype([
         ("tick", "<i8"), ("time", "<f8"), ("q", "<f8", (n,)), ("dq", "<f8", (n,)), ("tau_est", "<f8", (n,)),
         ("imu_quat", "<f8", (4,)), ("gyro_in_body", "<f8", (3,)), ("accel_in_body", "<f8", (3,)),
         ("foot_force", "<f8", (4,)), ("status_n", "<i8"), ("motor_mode", "<i8", (MAX_STATUS,)),
         ("motor_temperature", "<f8", (MAX_STATUS,)), ("has_remote", "<i8"), ("remote", "u1", (REMOTE_SIZE,)),
+        ("deadline_trips", "<i8"), ("remote_estops", "<i8"), ("remote_estop_latched", "<i8"),
     ])
 
 
@@ -59,8 +60,13 @@ HELD_HOLD, HELD_DAMP, HELD_RAMP = 0.0, 1.0, 2.0
 
 
 def command_dtype(num_joints: int) -> np.dtype:
-    """One command: its rows q, dq, kp, kd, tau, shape (5, n), and the held joints' mode (`HELD_FIELDS`)."""
-    return np.dtype([("rows", "<f8", (5, num_joints)), ("held", "<f8", (len(HELD_FIELDS),))])
+    """One command: its rows q, dq, kp, kd, tau (5, n), the held joints' mode, the link's e-stop releases so far.
+
+    ``held`` is `HELD_FIELDS`; ``estop_releases`` counts the safety layer's releases of the link's L2 + B latch
+    (`RemoteEstopLatch`): a new count releases it, before the command it comes with.
+    """
+    return np.dtype([("rows", "<f8", (5, num_joints)), ("held", "<f8", (len(HELD_FIELDS),)),
+                     ("estop_releases", "<i8")])
 
 
 def _round_up(n: int, to: int = 64) -> int:

@@ -147,6 +147,7 @@ class ProcessRobot(Robot):
         self._pacer = WallPacer()
         self._grant: RealtimeGrant | None = None
         self._held = np.zeros(len(HELD_FIELDS))  # generation 0, HELD_HOLD: as a robot with no safety layer above
+        self._estop_releases = 0  # releases of the link's L2 + B latch asked so far (sent with the next command)
 
     # -- Robot ----------------------------------------------------------------------------------------------------
     @property
@@ -238,6 +239,7 @@ class ProcessRobot(Robot):
         record = block.record()
         record["rows"] = (cmd.q, cmd.dq, cmd.kp, cmd.kd, cmd.tau)
         record["held"] = self._held  # with the command it goes with: the I/O process applies both in one period
+        record["estop_releases"] = self._estop_releases
         block.publish()  # the link takes it before its next send
 
     # -- HeldJoints: a locked arm, held in the I/O process --------------------------------------------------------
@@ -289,6 +291,51 @@ class ProcessRobot(Robot):
         if record is None or not record["has_remote"]:
             return None
         return Remote(raw=record["remote"].tobytes())
+
+    @property
+    def remote_estops(self) -> int:
+        """The legs' link's L2 + B latches as of the newest published state (`RemoteEstopLatch`).
+
+        Raises:
+            RobotLinkError: the I/O process failed or died.
+        """
+        self._check()
+        _, record = self._newest()
+        return 0 if record is None else int(record["remote_estops"])
+
+    @property
+    def remote_estop_latched(self) -> bool:
+        """Whether the legs' link damps on its L2 + B latch, as of the newest published state (`RemoteEstopLatch`).
+
+        Raises:
+            RobotLinkError: the I/O process failed or died.
+        """
+        self._check()
+        _, record = self._newest()
+        return record is not None and bool(record["remote_estop_latched"])
+
+    def release_remote_estop(self) -> bool:
+        """Ask the I/O process to release the link's L2 + B latch, with the next command; False while held.
+
+        Raises:
+            RobotLinkError: the I/O process failed or died.
+        """
+        remote = self.remote()
+        if remote is not None and remote.l2_b:
+            return False
+        self._estop_releases += 1
+        return True
+
+    @property
+    def deadline_trips(self) -> int:
+        """The devices' write-deadline trips as of the newest published state (`WriteDeadlineTrips`).
+
+        Raises:
+            RobotLinkError: the I/O process failed or died.
+        """
+        self._check()
+        _, record = self._newest()
+        return 0 if record is None else int(record["deadline_trips"])
 
     @property
     def motor_names(self) -> tuple[str, ...]:

@@ -48,7 +48,14 @@ from dataclasses import asdict
 import numpy as np
 
 from wbc.errors import IoProcessStopped, RobotLinkError
-from wbc.hardware.capabilities import HasLatchedFaults, HeldJoints, MotorStatusSource, RemoteSource
+from wbc.hardware.capabilities import (
+    HasLatchedFaults,
+    HeldJoints,
+    MotorStatusSource,
+    RemoteEstopLatch,
+    RemoteSource,
+    WriteDeadlineTrips,
+)
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
 from wbc.hardware.io_process.blocks import HELD_DAMP, HELD_FIELDS, HELD_RAMP, MAX_STATUS, IoBlocks
@@ -192,6 +199,7 @@ class _Server:
         self.failure: dict | None = None
         self.command_seen = 0
         self.held_seen = 0.0  # the generation of the held joints' mode last applied (`_hold_as_asked`)
+        self.releases_seen = 0  # the safety layer's releases of the link's L2 + B latch applied so far
         self.counts = dict(states_published=0, commands_forwarded=0, bells_missed=0)
         self.started = started
 
@@ -238,6 +246,10 @@ class _Server:
             block = self.blocks.command
             if block.count != self.command_seen:
                 self.command_seen, record = block.read()
+                releases = int(record["estop_releases"])
+                if releases != self.releases_seen and isinstance(self.robot, RemoteEstopLatch):
+                    self.releases_seen = releases
+                    self.robot.release_remote_estop()  # before the command it goes with (the ramp after a reset)
                 self._hold_as_asked(record["held"])
                 self.robot.write(MotorCommand._trusted(np.array(record["rows"])))
                 self.counts["commands_forwarded"] += 1
@@ -328,6 +340,10 @@ class _Server:
             rec["motor_temperature"][:modes.size] = np.asarray(status.motor_temperature)
         else:
             rec["status_n"] = -1
+        rec["deadline_trips"] = robot.deadline_trips if isinstance(robot, WriteDeadlineTrips) else 0
+        latch = isinstance(robot, RemoteEstopLatch)
+        rec["remote_estops"] = robot.remote_estops if latch else 0
+        rec["remote_estop_latched"] = robot.remote_estop_latched if latch else False
         rec["has_remote"] = isinstance(remote, Remote)
         if isinstance(remote, Remote):
             rec["remote"] = np.frombuffer(remote.raw, np.uint8)

@@ -51,9 +51,10 @@ REMEDIES: dict[str, str] = {
 }
 """What the operator does about each trip reason, in words (a trip's `SafetyEvent.remedy`)."""
 
-REASONS = ("fresh_state", "ramp_done", "reset", "connect", *TRIP_REASONS)
+REASONS = ("fresh_state", "ramp_done", "reset", "connect", "write_deadline", *TRIP_REASONS)
 """Every reason an event can carry: a live stream started the ramp, the ramp finished, an explicit reset, a
-reconnection (back to waiting), a trip."""
+reconnection (back to waiting), a device that damped itself when the control loop stalled past its write deadline
+(back to a ramp from the measured pose), a trip."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -8,9 +8,15 @@ Trips, each into ``damped`` on the spot (damping is sent to the robot at once, n
 state stream, a state with non-finite values or a non-unit quaternion, a measured joint beyond its range plus a
 margin, sustained over-power (Unitree's PowerProtect rule, latched), a hot motor or a motor error mode (robots that
 are a `MotorStatusSource`), a trunk roll or pitch beyond the limit (a fall, from the IMU), the remote's L2 + B
-(robots that are a `RemoteSource`) or `estop`. Every transition is a `SafetyEvent`, kept in `events` (offered to a
-runner as `safety_events`, so the episode logs them) and handed to `SafetyConfig.on_event` (by default printed to
-standard error, one line per transition).
+(robots that are a `RemoteSource`; a robot whose link checks the remote on every state frame, a `RemoteEstopLatch`,
+damps on that frame itself and the layer latches it at its next read, however short the press) or `estop`. Every
+transition is a `SafetyEvent`, kept in `events` (offered to a runner as `safety_events`, so the episode logs them)
+and handed to `SafetyConfig.on_event` (by default printed to standard error, one line per transition).
+
+A robot whose devices damp on their own when `write` stops for their write deadline (`WriteDeadlineTrips`: the legs'
+link, the arm's bus) tells the layer how often that happened: a control loop that stalled past that deadline but
+not past the stale timeout finds, at its next read or write, the layer back in ``ramp`` (event ``write_deadline``),
+starting again from the measured pose, never its command at full gain after the damping.
 
 The layer's clock is the one the motors live on: a robot that is a `WallClock` (a real robot over its wire, or an
 emulator behind one) is timed on its monotonic clock, which also sees a control loop that stalls between calls; a
@@ -36,8 +42,10 @@ from wbc.hardware.capabilities import (
     MotorNames,
     MotorStatusSource,
     RemoteButtons,
+    RemoteEstopLatch,
     RemoteSource,
     WallClock,
+    WriteDeadlineTrips,
 )
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.config import SafetyConfig
@@ -87,6 +95,8 @@ class SafeRobot(Robot):
         self._fresh = False
         self._last_fresh_time = -math.inf
         self._over_power_frames = 0
+        self._deadline_trips: int | None = None  # the robot's write-deadline trips as last seen (`WriteDeadlineTrips`)
+        self._remote_estops = 0  # the robot's own L2 + B latches as last seen (`RemoteEstopLatch`)
         self._ramp: CommandRamp | None = None
         self._sent: MotorCommand | None = None
         self._lower = self._upper = np.zeros(0)
@@ -167,6 +177,8 @@ class SafeRobot(Robot):
             if power > self.config.power_limit_w:
                 why.append(f"over_power: {power:.0f} W measured (limit {self.config.power_limit_w} W); wait until "
                            "the motors are quiet")
+        if not why and isinstance(self.robot, RemoteEstopLatch) and not self.robot.release_remote_estop():
+            why.append("the robot's link still sees L2 + B held; release them")
         if why:
             raise SafetyResetError("SafeRobot.reset refused: " + "; ".join(why))
         self._over_power_frames = 0
@@ -206,6 +218,8 @@ class SafeRobot(Robot):
         self._last_fresh_time = -math.inf
         self._over_power_frames = 0
         self._ramp = None
+        self._deadline_trips = self._robot_deadline_trips()
+        self._remote_estops = 0  # the robot was connected just now: a press its link saw already counts
         if self._state is not SafetyState.DAMPED and self._state is not SafetyState.WAITING:
             self._transition(SafetyState.WAITING, "connect", "connected again: waiting for a live state stream")
 
@@ -222,10 +236,18 @@ class SafeRobot(Robot):
         # left the robot unwatched for that long, and the backend damped it meanwhile; passing the controller's
         # command straight on would be a jump from wherever it sagged to.
         self._check_stale(now)
+        self._check_deadline()
         fresh = self._last_tick is not None and state.tick != self._last_tick
         self._last_tick, self._latest, self._fresh = state.tick, state, fresh
         if fresh:
             self._last_fresh_time = now
+        if isinstance(self.robot, RemoteEstopLatch):
+            presses = self.robot.remote_estops
+            if presses > self._remote_estops:
+                self._remote_estops = presses
+                # the link damped on the very frame that showed the press; the layer latches it
+                self._trip("remote_estop", "L2 + B pressed on the remote (the link damped on the frame that showed "
+                                           "it)")
         if self._state is SafetyState.DAMPED:
             return state
         remote = self._remote()
@@ -246,6 +268,7 @@ class SafeRobot(Robot):
     def _send(self, cmd: MotorCommand) -> None:
         now = self.now()
         self._check_stale(now)
+        self._check_deadline()
         if self._state is SafetyState.RAMP:
             target = self._limit_positions(cmd)
             if self._ramp is None:
@@ -292,6 +315,27 @@ class SafeRobot(Robot):
             tick = None if self._latest is None else self._latest.tick
             self._trip("stale_state", f"tick {tick} unchanged for {age:.3f} s (limit "
                                       f"{self.config.stale_timeout_s} s)")
+
+    def _robot_deadline_trips(self) -> int | None:
+        return self.robot.deadline_trips if isinstance(self.robot, WriteDeadlineTrips) else None
+
+    def _check_deadline(self) -> None:
+        """A device damped on its own since the last look (its write deadline expired: the loop stalled): ramp again.
+
+        The stall was too short for the stale timeout, but the motors were damped meanwhile and the robot sagged;
+        the controller's command at full gain would be a jump from wherever it is now. A new ramp starts from the
+        measured pose at the next write (the ramp's own steps, if one was running, start over too).
+        """
+        trips = self._robot_deadline_trips()
+        seen, self._deadline_trips = self._deadline_trips, trips
+        if trips is None or seen is None or trips <= seen:
+            return
+        if self._state not in (SafetyState.RAMP, SafetyState.RUN):
+            return
+        self._ramp = None
+        self._transition(SafetyState.RAMP, "write_deadline",
+                         f"the robot damped itself {trips - seen} time(s) since the last look: no write within its "
+                         "write deadline (the control loop stalled); ramping again from the measured pose")
 
     def _state_fault(self, state: RobotState) -> tuple[str, str] | None:
         """The first check that fails on `state` (values, motor status, joint range, tilt), as (reason, detail)."""

@@ -8,11 +8,19 @@ then sends one LowCmd frame:
 - the latest frame `write` encoded, while `write` is called at least every `write_deadline` seconds;
 - damping again once that deadline passes, until the next `write` (a stalled control loop leaves the robot
   damped, not holding a stale target: the SDK has no watchdog);
+- damping from the first state frame that shows the remote's L2 + B (Unitree's passive), latched until
+  `release_remote_estop` (the safety layer's `reset`): the e-stop reaches the wire in the link's next period, not at
+  the control loop's next read;
 - damping for `close_damping` seconds when the robot is closed, then nothing.
 
-`read` returns the newest valid state; its `tick` counts the valid frames received (a freshness counter: the
-robot's own tick has no verified unit), so a frame whose tick did not advance is stale, and `state_age` says for
-how long; `remote()` and `motor_status()` report that state's remote and motor modes and temperatures (the safety
+A valid frame is taken only if the robot's own tick (a u32 whose unit is not verified: it serves as a freshness
+counter only) is ahead of the newest taken frame's, by 1 to 2**31 - 1 modulo 2**32 (so the counter may wrap): the
+very same frame again (a board that keeps sending its last buffer), a replay or a datagram overtaken by a newer one
+is counted in `stale_frames` and never taken, so the state goes stale as if the robot were silent. A robot whose
+tick never moves (always 0) is stale after its first frame, and a robot that restarts its tick is stale until it
+passes the old value: both end in the safety layer's stale trip, which is the safe side. `read` returns the newest
+state taken; its `tick` counts the frames taken (a frame whose tick did not advance is stale), and `state_age` says
+for how long; `remote()` and `motor_status()` report that state's remote and motor modes and temperatures (the safety
 layer's `RemoteSource` and `MotorStatusSource`). `advance(dt)` paces the caller on the link's clock, counts late
 calls, and then, unless a state newer than the one the caller last read has already arrived, waits (at most two
 link periods) for one: a loop whose work took most of its period goes on at once with the state that came meanwhile,
@@ -213,6 +221,10 @@ class UnitreeRobot(Robot):
         self._state: RobotState | None = None
         self._extras: LowStateExtras | None = None
         self._fresh = 0
+        self._remote_estops = 0  # L2 + B presses the link saw on a state frame (rising edges)
+        self._estop_latched = False  # the link damps until `release_remote_estop`
+        self._l2_b_held = False  # L2 + B held on the newest state taken
+        self._wire_tick: int | None = None  # the robot's own tick in the newest state taken
         self._read_fresh = 0  # `_fresh` when the caller last read
         self._state_at = -np.inf
         self._frame: bytes | None = None
@@ -220,6 +232,7 @@ class UnitreeRobot(Robot):
         self._tripped = True
         self._closing_until: float | None = None
         self._counts = dict(frames_sent=0, damping_sent=0, deadline_trips=0)
+        self._stale_frames = 0
         self._closed_counts = (0, 0)  # the transport's (foreign, unsent) when it was closed: its counts stay readable
         self._link = DeviceThread(f"unitree-{self.config.robot}-link", self._period, self._link_cycle, clock=self.clock,
                                   idle=self._link_idle, condition=self._lock)
@@ -378,6 +391,42 @@ class UnitreeRobot(Robot):
         with self._lock:
             return self.clock.now() - self._state_at
 
+    @property
+    def remote_estops(self) -> int:
+        """Times since `connect` the link saw L2 + B pressed on a state frame and latched damping (`RemoteEstopLatch`).
+
+        The link checks every state frame it takes, so the damping goes out in its next period whatever the control
+        loop does; the safety layer learns of it from this count at its next read and trips (``remote_estop``).
+        """
+        with self._lock:
+            return self._remote_estops
+
+    @property
+    def remote_estop_latched(self) -> bool:
+        """Whether the link damps now on its L2 + B latch (until `release_remote_estop`)."""
+        with self._lock:
+            return self._estop_latched
+
+    def release_remote_estop(self) -> bool:
+        """Release the link's L2 + B latch (the safety layer's `reset` calls it); False, latch kept, while held."""
+        with self._lock:
+            if self._l2_b_held:
+                return False
+            self._estop_latched = False
+            return True
+
+    @property
+    def deadline_trips(self) -> int:
+        """Times since `connect` the write deadline expired and the link switched to damping (`WriteDeadlineTrips`)."""
+        with self._lock:
+            return self._counts["deadline_trips"]
+
+    @property
+    def stale_frames(self) -> int:
+        """Valid LowState frames not taken since `connect`: the robot's tick had not advanced past the newest taken."""
+        with self._lock:
+            return self._stale_frames
+
     def link_stats(self) -> LinkStats:
         """A snapshot of the link's counters; its period figures are the link thread's (`thread_stats`)."""
         thread = self._link.stats()
@@ -432,7 +481,8 @@ class UnitreeRobot(Robot):
         if quiet and self._frame is not None and not self._tripped:
             counts["deadline_trips"] += 1
         self._tripped = quiet
-        if self._closing_until is not None or self._state is None or self._frame is None or quiet:
+        if (self._closing_until is not None or self._state is None or self._frame is None or quiet
+                or self._estop_latched):
             counts["damping_sent"] += 1
             return self._damping
         return self._frame
@@ -441,14 +491,28 @@ class UnitreeRobot(Robot):
         newest = None
         for datagram in transport.receive():
             try:
-                newest = decode_state(self.layout, datagram, time=0.0, stats=self.decode_stats)
+                decoded = decode_state(self.layout, datagram, time=0.0, stats=self.decode_stats)
             except FrameError:
                 continue  # counted in decode_stats; the last good state stays
+            wire_tick = decoded[0].tick
+            last = self._wire_tick if newest is None else newest[0].tick
+            if last is not None and not _tick_advanced(last, wire_tick):
+                # the robot's own tick did not move on: the same frame again (a board that repeats its buffer),
+                # a replay or a datagram overtaken by a newer one; it is no news, and never makes the state fresh
+                self._stale_frames += 1
+                continue
+            newest = decoded
         if newest is None:
             return
         now = self.clock.now()
         state, extras = newest
         with self._lock:
+            self._wire_tick = state.tick
+            held = extras.remote.l2_b
+            if held and not self._l2_b_held:  # the e-stop: damping from this period's send on, latched
+                self._remote_estops += 1
+                self._estop_latched = True
+            self._l2_b_held = held
             self._fresh += 1
             self._state = dataclasses.replace(state, tick=self._fresh, time=now - self._t0)
             self._extras = extras
@@ -456,3 +520,8 @@ class UnitreeRobot(Robot):
             self._lock.notify_all()
         if self._on_state is not None:
             self._on_state()
+
+
+def _tick_advanced(last: int, tick: int) -> bool:
+    """Whether the robot's u32 `tick` is later than `last`: ahead by 1 .. 2**31 - 1, counted modulo 2**32 (a wrap)."""
+    return 0 < (tick - last) % 2**32 < 2**31
