@@ -58,7 +58,7 @@ from wbc.arena.stats import in_canonical_order
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, check_shipped_weights, get_controller
-from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
+from wbc.errors import ClusterError, ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
 from wbc.output_files import DirectoryLock
 from wbc.robots.registry import get_robot
@@ -482,6 +482,9 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                     rounds.advance(store.records, guard.counted)
                 if bar is not None:
                     bar.update(1)
+        except ClusterError as exc:
+            # the cluster's fault, not a controller's: no trial recorded for it, those stored kept for --resume
+            raise ClusterError(f"{exc} ({len(store.records)} trial(s) stored in {store.dir})") from None
         except OSError as exc:
             # an episode's file or folder (--save-episodes) that could not be written: said as trials.csv's would be
             if not exc.filename or not Path(exc.filename).resolve().is_relative_to(store.dir.resolve()):

@@ -38,8 +38,9 @@ from wbc.arena.episode import EpisodeBuffer
 from wbc.arena.runner import TickObserver, forget_played, played_s
 from wbc.arena.sim_trial import run_trial, simulated_robot
 from wbc.arena.trial_record import TrialRecord
+from wbc.arena.worker_check import Expectation, check_worker, expectation, without_colour
 from wbc.control.spec import ControllerSpec
-from wbc.errors import ConfigError
+from wbc.errors import ClusterError, ConfigError
 from wbc.hardware.interpreter import child_process_env
 from wbc.optional import require
 from wbc.scenario.trial import Trial
@@ -483,6 +484,12 @@ def _running(processes: Iterable[multiprocessing.process.BaseProcess]) -> list[m
     return [process for process in processes if not ended(process)]
 
 
+def _run_checked(task: TrialTask, expected: Expectation) -> TrialRecord:
+    """`run_task` on a Ray worker, once the worker is checked to run what the driver recorded (`check_worker`)."""
+    check_worker(expected)
+    return run_task(task)
+
+
 class RayExecutor:
     """Runs tasks on a Ray cluster (or a local Ray started on demand).
 
@@ -503,6 +510,13 @@ class RayExecutor:
         `tasks` is read lazily: twice as many in flight as the cluster has CPUs, a new one when one finishes. A
         task whose worker process dies (a controller that exits it, a kill, Ray's memory monitor, a lost node) is
         played once more; one that dies again is recorded as its controller's error, and the run goes on.
+
+        Each worker checks, before it builds a controller, that it runs the driver's wbc and result-changing packages
+        and the controller's files as recorded (`wbc.arena.worker_check`).
+
+        Raises:
+            ClusterError: a worker runs another wbc or package version, or lacks a controller file or has another
+                one; the run stops there (the records yielded before are the caller's to keep).
         """
         ray = require("ray", "cluster")
         started = False
@@ -514,11 +528,19 @@ class RayExecutor:
             started = True
         try:
             # a task whose worker dies is played once more (a trial on a lost node finishes elsewhere)
-            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(run_task)
+            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(_run_checked)
+            expected: dict[str, Expectation] = {}
+
+            def submit(task: TrialTask) -> object:
+                name = task.controller.name
+                if name not in expected:  # once per controller: its files are hashed once, in the driver
+                    expected[name] = expectation(task.controller)
+                return remote.remote(task, expected[name])
+
             died = (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError)
             ahead = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
             queue = iter(tasks)
-            refs = {remote.remote(task): task for task in itertools.islice(queue, ahead)}
+            refs = {submit(task): task for task in itertools.islice(queue, ahead)}
             while refs:
                 (done,), _ = ray.wait(list(refs), num_returns=1)
                 task = refs.pop(done)
@@ -529,10 +551,14 @@ class RayExecutor:
                     record = ray.get(done)
                 except died:
                     record = worker_died(task, "died again when Ray played it once more")
+                except ray.exceptions.RayTaskError as exc:
+                    if isinstance(exc.cause, ClusterError):  # the worker's refusal: the run stops, said plainly
+                        raise ClusterError(without_colour(str(exc.cause.args[0]))) from None
+                    raise
                 yield record
                 nxt = next(queue, None)
                 if nxt is not None:
-                    refs[remote.remote(nxt)] = nxt
+                    refs[submit(nxt)] = nxt
         finally:
             if started:
                 ray.shutdown()

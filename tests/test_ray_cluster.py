@@ -1,0 +1,104 @@
+"""Ray cluster runs: a worker checks it runs what the driver recorded; the cluster's failures stop the run, plainly.
+
+A worker node with another wbc or package version, or a controller file that differs or is missing there, is the
+cluster's fault, not the controller's: the run stops with a message naming the node, the file or package and both
+values, and no trial is recorded for it (`wbc.arena.worker_check`). The tests with a real Ray start one in this
+process, on the loopback address only, and stop it after.
+"""
+
+import dataclasses
+
+import pytest
+from conftest import SHORT_SCENARIO, STAND_PLUGIN
+
+from wbc.arena import worker_check
+from wbc.arena.compare import ArenaConfig, plan_arena, play_arena
+from wbc.arena.executors import RayExecutor, TrialTask
+from wbc.arena.trial_record import TrialRecord
+from wbc.arena.worker_check import Expectation, check_worker, fingerprint
+from wbc.control.registry import get_controller
+from wbc.control.spec import SourceFile, sha256_file
+from wbc.errors import ClusterError
+from wbc.scenario import load_scenario
+
+STANDS = STAND_PLUGIN.format(doc="The stand hold.", reset="pass", act="pass", counters="return {}")
+
+
+@pytest.fixture
+def scenario(tmp_path):
+    path = tmp_path / "short.toml"
+    path.write_text(SHORT_SCENARIO)
+    return path
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    """A Ray in this process, on 127.0.0.1 with one CPU; its workers see no PYTHONPATH set by a test."""
+    ray = pytest.importorskip("ray")
+    ray.init(num_cpus=1, include_dashboard=False, _node_ip_address="127.0.0.1", log_to_driver=False,
+             configure_logging=False)
+    try:
+        yield ray
+    finally:
+        ray.shutdown()
+
+
+def test_a_worker_refuses_a_controller_file_that_differs_or_is_missing(tmp_path):
+    weights = tmp_path / "pi.onnx"
+    weights.write_bytes(b"the driver's weights")
+    recorded = sha256_file(weights)
+    check_worker(Expectation(environment=fingerprint(), files=((str(weights), recorded),)))  # the same: it plays
+    weights.write_bytes(b"another export")
+    with pytest.raises(ClusterError) as err:
+        check_worker(Expectation(environment=fingerprint(), files=((str(weights), recorded),)))
+    said = str(err.value)
+    assert str(weights) in said and recorded in said and sha256_file(weights) in said
+    assert worker_check.node_name() in said and "--resume" in said
+    weights.unlink()
+    with pytest.raises(ClusterError, match=f"has no controller file {weights}"):
+        check_worker(Expectation(environment=fingerprint(), files=((str(weights), recorded),)))
+
+
+def test_a_worker_refuses_another_wbc_revision_or_package_version():
+    env = dict(fingerprint())
+    for what, other in (("wbc git revision", "0" * 40), ("package mujoco", "0.0.1")):
+        driver = tuple((k, other if k == what else v) for k, v in env.items())
+        with pytest.raises(ClusterError) as err:
+            check_worker(Expectation(environment=driver))
+        said = str(err.value)
+        assert what in said and other in said and str(env[what]) in said and worker_check.node_name() in said
+
+
+def test_a_worker_refuses_a_plugin_module_missing_from_the_drivers_path(tmp_path):
+    missing = tmp_path / "nosuchpkg" / "mod.py"
+    with pytest.raises(ClusterError, match=f"has no plug-in module nosuchpkg.mod file {missing}"):
+        check_worker(Expectation(environment=fingerprint(), module=("nosuchpkg.mod", str(missing), "ab")))
+
+
+def test_on_ray_a_controller_file_that_differs_on_the_worker_stops_the_run(local_ray, scenario, tmp_path):
+    weights = tmp_path / "weights.bin"
+    weights.write_bytes(b"what the worker reads")
+    # the driver recorded another content for the file (it changed on the worker's disk)
+    spec = dataclasses.replace(get_controller("stand"), files=(SourceFile(role="weights", path=str(weights),
+                                                                           sha256="f" * 64),))
+    trial = load_scenario(scenario).trials(["soft"], [0], 1)[0]
+    with pytest.raises(ClusterError) as err:
+        list(RayExecutor().run([TrialTask(trial=trial, controller=spec)]))
+    said = str(err.value)
+    assert str(weights) in said and "f" * 64 in said and sha256_file(weights) in said and "\x1b[" not in said
+
+
+def test_on_ray_a_plugin_missing_on_the_worker_stops_the_run_and_records_no_trial(local_ray, plugin_package,
+                                                                                   scenario, tmp_path):
+    root = plugin_package("hiddenpkg", {"stands": STANDS})
+    config = ArenaConfig(controllers=("hiddenpkg.stands:make",), scenario=scenario, trials=2,
+                         out_dir=tmp_path / "out", executor="ray", progress=False)
+    plan = plan_arena(config)
+    plan.specs["hiddenpkg.stands:make"].provenance()  # as the run's record (run.json) reads it when it begins
+    # then the worker's node lacks the module the driver found (a node with a disk of its own)
+    module = root / "hiddenpkg" / "stands.py"
+    module.rename(tmp_path / "elsewhere.py")
+    with pytest.raises(ClusterError) as err:
+        play_arena(plan)
+    assert f"has no plug-in module hiddenpkg.stands file {module}" in str(err.value)
+    assert TrialRecord.read_csv(tmp_path / "out" / "trials.csv") == []  # not the controller's error: nothing recorded
