@@ -7,11 +7,12 @@ process, on the loopback address only, and stop it after.
 """
 
 import dataclasses
+import types
 
 import pytest
 from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
-from wbc.arena import worker_check
+from wbc.arena import executors, worker_check
 from wbc.arena.compare import ArenaConfig, plan_arena, play_arena
 from wbc.arena.executors import RayExecutor, TrialTask
 from wbc.arena.trial_record import TrialRecord
@@ -22,6 +23,86 @@ from wbc.errors import ClusterError
 from wbc.scenario import load_scenario
 
 STANDS = STAND_PLUGIN.format(doc="The stand hold.", reset="pass", act="pass", counters="return {}")
+
+
+class _Lost(Exception):
+    """A Ray error of the cluster's (the fake's stand-in for ``ray.exceptions.NodeDiedError``)."""
+
+
+class FakeRay:
+    """Enough of the ``ray`` module for `RayExecutor`: a task's result is ``("played", task)``, or the error queued
+    for it (`fail`: a list of exceptions per trial index, raised one per attempt)."""
+
+    def __init__(self, fail=None):
+        self.fail = fail or {}
+        self.attempts = []
+        self.inits = []
+        self.initialized = False
+        names = ("WorkerCrashedError", "OutOfMemoryError", "RayTaskError", "ObjectLostError", "RaySystemError",
+                 "RuntimeEnvSetupError", "LocalRayletDiedError")
+        self.exceptions = types.SimpleNamespace(NodeDiedError=_Lost,
+                                                **{n: type(n, (Exception,), {}) for n in names})
+
+    def is_initialized(self):
+        return self.initialized
+
+    def init(self, **kwargs):
+        self.inits.append(kwargs)
+        self.initialized = True
+
+    def shutdown(self):
+        self.initialized = False
+
+    def cluster_resources(self):
+        return {"CPU": 1.0}
+
+    def remote(self, **options):
+        fake = self
+
+        class Remote:
+            def remote(self, task, *rest):
+                fake.attempts.append(task)
+                return len(fake.attempts) - 1
+
+        return lambda fn: Remote()
+
+    def wait(self, refs, num_returns=1):
+        return refs[:num_returns], refs[num_returns:]
+
+    def get(self, ref):
+        task = self.attempts[ref]
+        queued = self.fail.get(task.trial.index, [])
+        if queued:
+            raise queued.pop(0)
+        return ("played", task)
+
+    def cancel(self, ref, force=False):
+        pass
+
+
+def _tasks(scenario, n):
+    spec = get_controller("stand")
+    return [TrialTask(trial=t, controller=spec) for t in load_scenario(scenario).trials(["soft"], [0], n)]
+
+
+def test_a_node_lost_under_a_trial_plays_it_again_and_keeps_its_record(scenario, monkeypatch):
+    fake = FakeRay(fail={0: [_Lost("node died"), _Lost("node died")]})
+    monkeypatch.setattr(executors, "require", lambda *a: fake)
+    got = list(RayExecutor().run(_tasks(scenario, 2)))
+    assert sorted(t.trial.index for _, t in got) == [0, 1] and all(what == "played" for what, _ in got)
+    assert [t.trial.index for t in fake.attempts].count(0) == 3  # played again twice, and the third time it gave its record
+
+
+def test_a_cluster_that_keeps_failing_a_trial_stops_the_run_without_a_controller_error(scenario, monkeypatch):
+    fake = FakeRay(fail={1: [_Lost("\x1b[31mnode 5e1f died\x1b[0m")] * 3})
+    monkeypatch.setattr(executors, "require", lambda *a: fake)
+    got = []
+    with pytest.raises(ClusterError) as err:
+        got.extend(RayExecutor().run(_tasks(scenario, 2)))
+    said = str(err.value)
+    assert "failed the task of controller stand, band soft, seed 0, trial 1 3 times" in said
+    assert "node 5e1f died" in said and "\x1b[" not in said and "--resume" in said
+    assert [t.trial.index for _, t in got] == [0]  # the trial before it kept; none recorded for the lost one
 
 
 @pytest.fixture

@@ -414,6 +414,12 @@ def worker_died(task: TrialTask, again: str) -> TrialRecord:
                                  f"its memory) and {again}")
 
 
+def _trial_name(task: TrialTask) -> str:
+    """``controller X, band B, seed S, trial I``: a task as messages name it."""
+    trial = task.trial
+    return f"controller {task.controller.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}"
+
+
 def _no_tick_record(task: TrialTask, what: str) -> TrialRecord:
     """A controller-error record of `task` with an empty episode: its worker ended before the trial gave a record."""
     trial, spec = task.trial, task.controller
@@ -428,6 +434,15 @@ def _no_tick_record(task: TrialTask, what: str) -> TrialRecord:
 
 _RAY_RETRIES = 1
 """How many times Ray plays again a task whose worker died, before the trial is recorded as its controller's error."""
+
+_RAY_CLUSTER_RETRIES = 2
+"""How many times a task that Ray's cluster failed (`_CLUSTER_ERRORS`) is handed to it again before the run stops."""
+
+_CLUSTER_ERRORS = ("NodeDiedError", "ObjectLostError", "RaySystemError", "RuntimeEnvSetupError",
+                   "LocalRayletDiedError")
+"""Ray's errors (``ray.exceptions``) that are its cluster's, not a controller's: a node lost, an object lost (its
+subclasses too: an owner died, a fetch timed out), Ray's own failure, a worker environment that could not be set up,
+the local raylet dead. A worker that crashes (``WorkerCrashedError``, ``OutOfMemoryError``) is the controller's."""
 
 _LINGER_S = 5.0
 """How long a worker may take to exit once its pool is shut down [s]: one that a controller's thread keeps alive is
@@ -514,9 +529,13 @@ class RayExecutor:
         Each worker checks, before it builds a controller, that it runs the driver's wbc and result-changing packages
         and the controller's files as recorded (`wbc.arena.worker_check`).
 
+        A task the cluster fails (a node lost, an object lost, Ray's own error: `_CLUSTER_ERRORS`) is handed to it
+        again, `_RAY_CLUSTER_RETRIES` times at most; it is no trial's result.
+
         Raises:
             ClusterError: a worker runs another wbc or package version, or lacks a controller file or has another
-                one; the run stops there (the records yielded before are the caller's to keep).
+                one, or the cluster failed a task more often than it is handed again; the run stops there (the
+                records yielded before are the caller's to keep).
         """
         ray = require("ray", "cluster")
         started = False
@@ -538,6 +557,9 @@ class RayExecutor:
                 return remote.remote(task, expected[name])
 
             died = (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError)
+            cluster = tuple(getattr(ray.exceptions, name) for name in _CLUSTER_ERRORS
+                            if isinstance(getattr(ray.exceptions, name, None), type))
+            failed: dict[int, int] = {}  # times the cluster failed a task, by id(task)
             ahead = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
             queue = iter(tasks)
             refs = {submit(task): task for task in itertools.islice(queue, ahead)}
@@ -551,6 +573,17 @@ class RayExecutor:
                     record = ray.get(done)
                 except died:
                     record = worker_died(task, "died again when Ray played it once more")
+                except cluster as exc:
+                    tries = failed[id(task)] = failed.get(id(task), 0) + 1
+                    if tries > _RAY_CLUSTER_RETRIES:
+                        raise ClusterError(
+                            f"the Ray cluster failed the task of {_trial_name(task)} {tries} times ({type(exc).__name__}: "
+                            f"{without_colour(str(exc)).strip()}); it is the cluster's failure (a node or an object "
+                            "lost, Ray's own error), not the controller's: the run stops here, no trial recorded for "
+                            "it: the trials stored are kept, and --resume finishes the run once the cluster is "
+                            "fixed") from None
+                    refs[submit(task)] = task  # the cluster's failure: the trial is played again
+                    continue
                 except ray.exceptions.RayTaskError as exc:
                     if isinstance(exc.cause, ClusterError):  # the worker's refusal: the run stops, said plainly
                         raise ClusterError(without_colour(str(exc.cause.args[0]))) from None
