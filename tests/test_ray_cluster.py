@@ -7,6 +7,12 @@ process, on the loopback address only, and stop it after.
 """
 
 import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
 import types
 
 import pytest
@@ -90,7 +96,7 @@ def test_a_node_lost_under_a_trial_plays_it_again_and_keeps_its_record(scenario,
     monkeypatch.setattr(executors, "require", lambda *a: fake)
     got = list(RayExecutor().run(_tasks(scenario, 2)))
     assert sorted(t.trial.index for _, t in got) == [0, 1] and all(what == "played" for what, _ in got)
-    assert [t.trial.index for t in fake.attempts].count(0) == 3  # played again twice, and the third time it gave its record
+    assert [t.trial.index for t in fake.attempts].count(0) == 3  # the third time it gave its record
 
 
 def test_a_cluster_that_keeps_failing_a_trial_stops_the_run_without_a_controller_error(scenario, monkeypatch):
@@ -183,3 +189,34 @@ def test_on_ray_a_plugin_missing_on_the_worker_stops_the_run_and_records_no_tria
         play_arena(plan)
     assert f"has no plug-in module hiddenpkg.stands file {module}" in str(err.value)
     assert TrialRecord.read_csv(tmp_path / "out" / "trials.csv") == []  # not the controller's error: nothing recorded
+
+
+HANGS = STAND_PLUGIN.format(doc="The stand hold that hangs in its first tick, once it has left the file $STARTED.",
+                            reset="pass",
+                            act="open(__import__('os').environ['STARTED'], 'w').close()\n"
+                                "            __import__('threading').Event().wait()",
+                            counters="return {}")
+
+
+def test_sigterm_on_ray_interrupts_the_run_as_on_the_local_pool(tmp_path):
+    pytest.importorskip("ray")
+    (tmp_path / "hangs.py").write_text(textwrap.dedent(HANGS).lstrip())
+    (tmp_path / "short.toml").write_text(SHORT_SCENARIO)
+    started = tmp_path / "started"
+    env = dict(os.environ, STARTED=str(started))
+    run = subprocess.Popen([sys.executable, "-m", "wbc.cli", "run", "hangs:make", "--scenario", "short.toml",
+                            "--trials", "1", "--executor", "ray", "--workers", "1", "--out", "out"],
+                           cwd=tmp_path, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        while not started.exists():  # the trial plays in a Ray worker: Ray is started, its handlers installed
+            if run.poll() is not None:
+                pytest.fail(f"the run ended before its trial began: {run.stderr.read()}")
+            time.sleep(0.2)
+        run.send_signal(signal.SIGTERM)
+        _, err = run.communicate(timeout=240)
+    finally:
+        if run.poll() is None:
+            run.kill()
+            run.wait()
+    assert run.returncode == 130, err
+    assert "wbc: interrupted" in err and "--resume" in err

@@ -33,6 +33,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 from wbc.arena.episode import EpisodeBuffer
 from wbc.arena.runner import TickObserver, forget_played, played_s
@@ -518,6 +519,44 @@ class RayExecutor:
     def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
         self.address = address
         self.num_cpus = num_cpus
+        self._ray: Any = None  # the ray module, once connected
+        self._started = False  # this executor started (or connected) Ray, and shuts it down
+        self._handlers: dict[int, Any] = {}  # this process's signal handlers before Ray's start
+
+    def connect(self) -> None:
+        """Start Ray, or connect to the cluster, unless this process already has; this process's handlers kept.
+
+        ``ray.init`` installs its own SIGTERM handler (and SIGINT's), which ended the command with a native dump and
+        no word of what was stored: the handlers this process had are put back as soon as it returns, and again when
+        `close` shuts Ray down.
+        """
+        if self._ray is not None:
+            return
+        ray = require("ray", "cluster")
+        if not ray.is_initialized():
+            kwargs: dict[str, Any] = {"address": self.address} if self.address else {
+                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False,
+                # a Ray of this machine only: nothing else needs to reach it
+                "_node_ip_address": "127.0.0.1"}
+            self._handlers = _signal_handlers()
+            try:
+                ray.init(log_to_driver=False, configure_logging=False,
+                         runtime_env={"env_vars": child_process_env()}, **kwargs)
+            finally:
+                _restore_signal_handlers(self._handlers)
+            self._started = True
+        self._ray = ray
+
+    def close(self) -> None:
+        """Shut down the Ray this executor started (a cluster: disconnect), and put this process's handlers back."""
+        ray, self._ray = self._ray, None
+        if ray is None or not self._started:
+            return
+        self._started = False
+        try:
+            ray.shutdown()
+        finally:
+            _restore_signal_handlers(self._handlers)
 
     def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
         """Yield each task's record as it finishes.
@@ -532,19 +571,15 @@ class RayExecutor:
         A task the cluster fails (a node lost, an object lost, Ray's own error: `_CLUSTER_ERRORS`) is handed to it
         again, `_RAY_CLUSTER_RETRIES` times at most; it is no trial's result.
 
+        Ray is started (`connect`) unless it was, and shut down (`close`) at the end.
+
         Raises:
             ClusterError: a worker runs another wbc or package version, or lacks a controller file or has another
                 one, or the cluster failed a task more often than it is handed again; the run stops there (the
                 records yielded before are the caller's to keep).
         """
-        ray = require("ray", "cluster")
-        started = False
-        if not ray.is_initialized():
-            kwargs = {"address": self.address} if self.address else {
-                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
-            ray.init(log_to_driver=False, configure_logging=False,
-                     runtime_env={"env_vars": child_process_env()}, **kwargs)
-            started = True
+        self.connect()
+        ray = self._ray
         try:
             # a task whose worker dies is played once more (a trial on a lost node finishes elsewhere)
             remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(_run_checked)
@@ -577,11 +612,11 @@ class RayExecutor:
                     tries = failed[id(task)] = failed.get(id(task), 0) + 1
                     if tries > _RAY_CLUSTER_RETRIES:
                         raise ClusterError(
-                            f"the Ray cluster failed the task of {_trial_name(task)} {tries} times ({type(exc).__name__}: "
-                            f"{without_colour(str(exc)).strip()}); it is the cluster's failure (a node or an object "
-                            "lost, Ray's own error), not the controller's: the run stops here, no trial recorded for "
-                            "it: the trials stored are kept, and --resume finishes the run once the cluster is "
-                            "fixed") from None
+                            f"the Ray cluster failed the task of {_trial_name(task)} {tries} times "
+                            f"({type(exc).__name__}: {without_colour(str(exc)).strip()}); it is the cluster's "
+                            "failure (a node or an object lost, Ray's own error), not the controller's: the run stops "
+                            "here, no trial recorded for it: the trials stored are kept, and --resume finishes the "
+                            "run once the cluster is fixed") from None
                     refs[submit(task)] = task  # the cluster's failure: the trial is played again
                     continue
                 except ray.exceptions.RayTaskError as exc:
@@ -593,8 +628,27 @@ class RayExecutor:
                 if nxt is not None:
                     refs[submit(nxt)] = nxt
         finally:
-            if started:
-                ray.shutdown()
+            self.close()
+
+
+_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+"""The signals whose handlers ``ray.init`` replaces and `RayExecutor` puts back."""
+
+
+def _signal_handlers() -> dict[int, Any]:
+    """This process's handlers of `_SIGNALS` (none outside the main thread, where none can be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {signum: signal.getsignal(signum) for signum in _SIGNALS}
+
+
+def _restore_signal_handlers(handlers: dict[int, Any]) -> None:
+    """Put back `handlers` (`_signal_handlers`); one Python did not set (None) is left as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for signum, handler in handlers.items():
+        if handler is not None:
+            signal.signal(signum, handler)
 
 
 EXECUTORS = ("local", "ray")
