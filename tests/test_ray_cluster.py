@@ -25,7 +25,7 @@ from wbc.arena.trial_record import TrialRecord
 from wbc.arena.worker_check import Expectation, check_worker, fingerprint
 from wbc.control.registry import get_controller
 from wbc.control.spec import SourceFile, sha256_file
-from wbc.errors import ClusterError
+from wbc.errors import ClusterError, ConfigError
 from wbc.scenario import load_scenario
 
 STANDS = STAND_PLUGIN.format(doc="The stand hold.", reset="pass", act="pass", counters="return {}")
@@ -109,6 +109,21 @@ def test_a_cluster_that_keeps_failing_a_trial_stops_the_run_without_a_controller
     assert "failed the task of controller stand, band soft, seed 0, trial 1 3 times" in said
     assert "node 5e1f died" in said and "\x1b[" not in said and "--resume" in said
     assert [t.trial.index for _, t in got] == [0]  # the trial before it kept; none recorded for the lost one
+
+
+def test_ray_address_in_the_environment_is_the_cluster_played_on(scenario, monkeypatch, capsys):
+    # as under `ray job submit`: RAY_ADDRESS set, no --address
+    fake = FakeRay()
+    monkeypatch.setattr(executors, "require", lambda *a: fake)
+    monkeypatch.setenv("RAY_ADDRESS", "10.0.0.5:6379")
+    executor = RayExecutor()
+    assert len(list(executor.run(_tasks(scenario, 1)))) == 1
+    assert fake.inits[0]["address"] == "10.0.0.5:6379" and "num_cpus" not in fake.inits[0]
+    assert "cluster at 10.0.0.5:6379 that RAY_ADDRESS names" in capsys.readouterr().err
+    assert executor.describe() == "ray (cluster at 10.0.0.5:6379, from RAY_ADDRESS)"
+    assert RayExecutor("auto").describe() == "ray (cluster at auto, from --address)"
+    with pytest.raises(ConfigError, match="--workers 2 with RAY_ADDRESS=10.0.0.5:6379 set"):
+        RayExecutor(None, 2)
 
 
 @pytest.fixture

@@ -431,6 +431,9 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
     """
     cfg, specs, scenario, published, bands = plan.cfg, plan.specs, plan.scenario, plan.published, plan.bands
     trials = list(plan.trials)
+    # before the results directory: a refused executor leaves none
+    executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
+                LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
     store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
                          controllers={name: spec.provenance() for name, spec in specs.items()},
                          drop_bad_rows=cfg.drop_bad_rows, lock=lock)
@@ -465,8 +468,6 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             keys = [(t, c) for t in trials for c in cfg.controllers if (c, *t.key) not in done]
             tasks = (task(t, c) for t, c in keys if not guard.stopped(c))
             todo = len(keys)
-        executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
-                    LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
         bar = progress(total, total - todo, cfg.progress)
         start = time.perf_counter()
         steps = 0
@@ -520,7 +521,7 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
             "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
             "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
-            "executor": cfg.executor,
+            "executor": executor.describe() if isinstance(executor, RayExecutor) else cfg.executor,
             **({} if cfg.trial_time_limit_s is None else {
                 "trial time limit": f"{cfg.trial_time_limit_s:g} s (--trial-time-limit: a trial past it is its "
                                     "controller's error, kept on --resume)"}),

@@ -28,7 +28,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Generator, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
@@ -510,18 +510,35 @@ class RayExecutor:
     """Runs tasks on a Ray cluster (or a local Ray started on demand).
 
     Args:
-        address: cluster address (``auto``, ``ray://host:10001`` ...); None starts a local Ray on this machine.
+        address: cluster address (``auto``, ``ray://host:10001`` ...); None: the one ``RAY_ADDRESS`` names (as
+            ``ray job submit`` sets it), else a local Ray started on this machine.
         num_cpus: CPUs for a local Ray (default: all cores).
+        environ: the environment ``RAY_ADDRESS`` is read from (default: this process's).
+
+    Raises:
+        ConfigError: `num_cpus` with ``RAY_ADDRESS`` set: a cluster's CPUs are its own.
     """
 
     name = "ray"
 
-    def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
-        self.address = address
+    def __init__(self, address: str | None = None, num_cpus: int | None = None, *,
+                 environ: Mapping[str, str] | None = None) -> None:
+        from_env = (os.environ if environ is None else environ).get("RAY_ADDRESS") or None
+        self.address = address or from_env
+        self.from_env = address is None and from_env is not None  # the address is RAY_ADDRESS's
+        if self.from_env and num_cpus is not None:
+            raise ConfigError(f"--workers {num_cpus} with RAY_ADDRESS={from_env} set: a Ray cluster's CPUs are its "
+                              "own; leave --workers out, or unset RAY_ADDRESS to start a Ray on this machine")
         self.num_cpus = num_cpus
         self._ray: Any = None  # the ray module, once connected
         self._started = False  # this executor started (or connected) Ray, and shuts it down
         self._handlers: dict[int, Any] = {}  # this process's signal handlers before Ray's start
+
+    def describe(self) -> str:
+        """Where the trials play, for a run's report: ``ray (cluster at ADDRESS, from RAY_ADDRESS)`` ..."""
+        if self.address is None:
+            return "ray (a Ray started on this machine)"
+        return f"ray (cluster at {self.address}, from {'RAY_ADDRESS' if self.from_env else '--address'})"
 
     def connect(self) -> None:
         """Start Ray, or connect to the cluster, unless this process already has; this process's handlers kept.
@@ -538,6 +555,9 @@ class RayExecutor:
                 "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False,
                 # a Ray of this machine only: nothing else needs to reach it
                 "_node_ip_address": "127.0.0.1"}
+            if self.from_env:
+                print(f"wbc: note: --executor ray without --address plays on the Ray cluster at {self.address} that "
+                      "RAY_ADDRESS names", file=sys.stderr)
             self._handlers = _signal_handlers()
             try:
                 ray.init(log_to_driver=False, configure_logging=False,
