@@ -9,6 +9,7 @@ process, on the loopback address only, and stop it after.
 import dataclasses
 import os
 import signal
+import socket
 import subprocess
 import sys
 import textwrap
@@ -19,7 +20,7 @@ import pytest
 from conftest import SHORT_SCENARIO, STAND_PLUGIN
 
 from wbc.arena import executors, worker_check
-from wbc.arena.compare import ArenaConfig, plan_arena, play_arena
+from wbc.arena.compare import ArenaConfig, plan_arena, play_arena, run_arena
 from wbc.arena.executors import RayExecutor, TrialTask
 from wbc.arena.trial_record import TrialRecord
 from wbc.arena.worker_check import Expectation, check_worker, fingerprint
@@ -124,6 +125,40 @@ def test_ray_address_in_the_environment_is_the_cluster_played_on(scenario, monke
     assert RayExecutor("auto").describe() == "ray (cluster at auto, from --address)"
     with pytest.raises(ConfigError, match="--workers 2 with RAY_ADDRESS=10.0.0.5:6379 set"):
         RayExecutor(None, 2)
+
+
+def test_an_address_that_cannot_be_reached_is_refused_before_the_results_directory(scenario, tmp_path,
+                                                                                  monkeypatch):
+    fake = FakeRay()
+    monkeypatch.setattr(executors, "require", lambda *a: fake)
+    with socket.socket() as closed:  # a port nothing listens on: bound, never listened to
+        closed.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{closed.getsockname()[1]}"
+        with pytest.raises(ClusterError, match=f"cannot reach the Ray cluster at {address} \\(--address\\)"):
+            run_arena(ArenaConfig(controllers=("stand",), scenario=scenario, trials=1, out_dir=tmp_path / "out",
+                                  executor="ray", address=address, progress=False))
+    assert fake.inits == [] and not (tmp_path / "out").exists()  # the same command runs again once it is fixed
+
+
+class _Refused(Exception):
+    """What ``ray.init`` raises for a cluster that refuses this driver (another authentication token)."""
+
+
+def test_a_cluster_that_refuses_the_connection_is_said_plainly_before_the_results_directory(scenario, tmp_path,
+                                                                                            monkeypatch):
+    fake = FakeRay()
+
+    def refuse(**kwargs):
+        raise _Refused("\x1b[31mauthentication token mismatch\x1b[0m")
+
+    fake.init = refuse
+    monkeypatch.setattr(executors, "require", lambda *a: fake)
+    with pytest.raises(ClusterError) as err:
+        run_arena(ArenaConfig(controllers=("stand",), scenario=scenario, trials=1, out_dir=tmp_path / "out",
+                              executor="ray", address="auto", progress=False))
+    assert str(err.value) == ("cannot connect to the Ray cluster at auto (--address): _Refused: authentication token "
+                              "mismatch; nothing was played")
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.fixture

@@ -425,6 +425,9 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             permission: the message names it, and says that the trials stored are kept for ``--resume``).
         RecordError: a ``trials.csv`` row refused on `ArenaConfig.resume` without `ArenaConfig.drop_bad_rows`, or
             a malformed ``run.json``.
+        ClusterError: on Ray, a cluster that cannot be reached (before the results directory is touched), or a
+            worker that runs another wbc, packages or controller files, or a cluster that keeps failing a task (the
+            trials stored are kept for ``--resume``; `wbc.arena.executors.RayExecutor`).
 
     A controller's failure on a trial is not raised: it is recorded (outcome ``controller_error``) and reported in
     `ArenaResult.controller_errors`.
@@ -434,9 +437,16 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
     # before the results directory: a refused executor leaves none
     executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
                 LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
-    store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
-                         controllers={name: spec.provenance() for name, spec in specs.items()},
-                         drop_bad_rows=cfg.drop_bad_rows, lock=lock)
+    if isinstance(executor, RayExecutor):
+        executor.connect()  # before the results directory: a cluster that cannot be reached leaves none
+    try:
+        store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
+                             controllers={name: spec.provenance() for name, spec in specs.items()},
+                             drop_bad_rows=cfg.drop_bad_rows, lock=lock)
+    except BaseException:
+        if isinstance(executor, RayExecutor):
+            executor.close()
+        raise
     try:  # the directory stays locked until its summary and report are written (and after, with a caller's lock)
         done = store.done()
         rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None
@@ -538,6 +548,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                            played=played, wall_s=wall, physics_steps=steps, budget=total,
                            controller_errors=tuple(errors), arms_differ=plan.arms_differ)
     finally:
+        if isinstance(executor, RayExecutor):
+            executor.close()  # its run closes it too: this covers a run that ended before its first trial
         store.close()
 
 

@@ -13,6 +13,7 @@ name once (reading a ``policy:PATH`` file there), and the spec pickles to spawne
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import dataclasses
@@ -24,6 +25,7 @@ import multiprocessing.connection
 import multiprocessing.process
 import os
 import signal
+import socket
 import sys
 import tempfile
 import threading
@@ -540,12 +542,22 @@ class RayExecutor:
             return "ray (a Ray started on this machine)"
         return f"ray (cluster at {self.address}, from {'RAY_ADDRESS' if self.from_env else '--address'})"
 
+    def _named(self) -> str:
+        return f"{self.address} ({'RAY_ADDRESS' if self.from_env else '--address'})"
+
     def connect(self) -> None:
         """Start Ray, or connect to the cluster, unless this process already has; this process's handlers kept.
+
+        A cluster's address is first reached over TCP within `_CONNECT_TIMEOUT_S` (Ray itself retries an address that
+        does not answer for minutes, with no word but its own log lines).
 
         ``ray.init`` installs its own SIGTERM handler (and SIGINT's), which ended the command with a native dump and
         no word of what was stored: the handlers this process had are put back as soon as it returns, and again when
         `close` shuts Ray down.
+
+        Raises:
+            ClusterError: the address cannot be reached, or Ray refuses to connect (an authentication token that
+                differs, another Ray version) or to start; the message names the address.
         """
         if self._ray is not None:
             return
@@ -558,10 +570,18 @@ class RayExecutor:
             if self.from_env:
                 print(f"wbc: note: --executor ray without --address plays on the Ray cluster at {self.address} that "
                       "RAY_ADDRESS names", file=sys.stderr)
+            if self.address:
+                _reach(self.address, self._named())
             self._handlers = _signal_handlers()
             try:
                 ray.init(log_to_driver=False, configure_logging=False,
                          runtime_env={"env_vars": child_process_env()}, **kwargs)
+            except Exception as exc:  # noqa: BLE001 - whatever Ray raises (a token refused, a version) is said plainly
+                with contextlib.suppress(Exception):
+                    ray.shutdown()
+                where = f"connect to the Ray cluster at {self._named()}" if self.address else "start Ray here"
+                raise ClusterError(f"cannot {where}: {type(exc).__name__}: {without_colour(str(exc)).strip()}; "
+                                   "nothing was played") from None
             finally:
                 _restore_signal_handlers(self._handlers)
             self._started = True
@@ -649,6 +669,30 @@ class RayExecutor:
                     refs[submit(nxt)] = nxt
         finally:
             self.close()
+
+
+_CONNECT_TIMEOUT_S = 10.0
+"""How long a Ray cluster's address may take to accept a TCP connection before the run is refused [s]."""
+
+
+def _reach(address: str, named: str, *, timeout_s: float = _CONNECT_TIMEOUT_S) -> None:
+    """Refuse a ``host:port`` (or ``ray://host:port``) that accepts no TCP connection within `timeout_s`.
+
+    ``auto`` and other addresses without a port are left to Ray.
+
+    Raises:
+        ClusterError: the address cannot be reached; the message names it (`named`) and the error.
+    """
+    target = address.removeprefix("ray://").rstrip("/")
+    host, _, port = target.rpartition(":")
+    if not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        raise ClusterError(f"cannot reach the Ray cluster at {named} within {timeout_s:g} s: "
+                           f"{exc.strerror or exc}; check the head's address and port (`ray status` on the head) "
+                           "and that this machine can reach it; nothing was played") from None
 
 
 _SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
