@@ -15,6 +15,7 @@ import sys
 import textwrap
 import time
 import types
+from pathlib import Path
 
 import pytest
 from conftest import SHORT_SCENARIO, STAND_PLUGIN
@@ -37,7 +38,7 @@ class _Lost(Exception):
 
 
 class FakeRay:
-    """Enough of the ``ray`` module for `RayExecutor`: a task's result is ``("played", task)``, or the error queued
+    """Enough of the ``ray`` module for `RayExecutor`: a task's record is ``("played", task)``, or the error queued
     for it (`fail`: a list of exceptions per trial index, raised one per attempt)."""
 
     def __init__(self, fail=None):
@@ -81,7 +82,7 @@ class FakeRay:
         queued = self.fail.get(task.trial.index, [])
         if queued:
             raise queued.pop(0)
-        return ("played", task)
+        return ("played", task), None  # the record, and no episode to save
 
     def cancel(self, ref, force=False):
         pass
@@ -270,3 +271,13 @@ def test_sigterm_on_ray_interrupts_the_run_as_on_the_local_pool(tmp_path):
             run.wait()
     assert run.returncode == 130, err
     assert "wbc: interrupted" in err and "--resume" in err
+
+
+def test_on_ray_episodes_are_saved_by_the_driver_under_a_relative_out(local_ray, scenario, tmp_path, monkeypatch):
+    # the worker's working directory is not the command's: it once wrote (or failed to write) the file there
+    monkeypatch.chdir(tmp_path)
+    result = run_arena(ArenaConfig(controllers=("stand",), scenario=scenario, trials=2, out_dir=Path("out"),
+                                   executor="ray", save_episodes=True, progress=False))
+    assert len(result.records) == 2
+    saved = sorted(p.name for p in (tmp_path / "out" / "episodes" / "stand").iterdir())
+    assert saved == ["soft-s0-t0.npz", "soft-s0-t1.npz"]

@@ -37,7 +37,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
-from wbc.arena.episode import EpisodeBuffer
+from wbc.arena.episode import Episode, EpisodeBuffer
 from wbc.arena.runner import TickObserver, forget_played, played_s
 from wbc.arena.sim_trial import run_trial, simulated_robot
 from wbc.arena.trial_record import TrialRecord
@@ -106,11 +106,21 @@ def run_task(task: TrialTask, observer: TickObserver | None = None) -> TrialReco
     """
     record, episode = run_trial(task.trial, task.controller, debug_truth=task.debug_truth, observer=observer)
     if task.episode_path is not None:
-        try:
-            episode.save(task.episode_path)
-        except OSError as exc:  # named, for the run's message (a full disk: `wbc.arena.results.unwritable`)
-            raise OSError(exc.errno, exc.strerror or str(exc), task.episode_path) from exc
+        _save_episode(episode, task.episode_path)
     return record
+
+
+def _save_episode(episode: Episode, path: str) -> None:
+    """Save `episode` to `path`.
+
+    Raises:
+        OSError: it could not be saved, with `path` as the filename (for the run's message: a full disk,
+            `wbc.arena.results.unwritable`).
+    """
+    try:
+        episode.save(path)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror or str(exc), path) from exc
 
 
 VIEWED_TIME_LIMIT = ("--trial-time-limit ends the worker process of a trial that overruns, and a viewed run (--view) "
@@ -502,10 +512,15 @@ def _running(processes: Iterable[multiprocessing.process.BaseProcess]) -> list[m
     return [process for process in processes if not ended(process)]
 
 
-def _run_checked(task: TrialTask, expected: Expectation) -> TrialRecord:
-    """`run_task` on a Ray worker, once the worker is checked to run what the driver recorded (`check_worker`)."""
+def _run_checked(task: TrialTask, expected: Expectation) -> tuple[TrialRecord, Episode | None]:
+    """A task on a Ray worker, once the worker is checked to run what the driver recorded (`check_worker`).
+
+    Returns the record, and the episode when the task saves one: the driver saves it (`RayExecutor.run`), where the
+    task's path means what it meant when the driver made it (a relative ``--out``, a disk of its own).
+    """
     check_worker(expected)
-    return run_task(task)
+    record, episode = run_trial(task.trial, task.controller, debug_truth=task.debug_truth)
+    return record, (episode if task.episode_path is not None else None)
 
 
 class RayExecutor:
@@ -645,7 +660,9 @@ class RayExecutor:
                     raise ConfigError("a trial time limit is enforced in the local pool's workers, not on Ray: "
                                       "leave --trial-time-limit out with --executor ray")
                 try:
-                    record = ray.get(done)
+                    record, episode = ray.get(done)
+                    if episode is not None and task.episode_path is not None:
+                        _save_episode(episode, task.episode_path)  # here, before its record is handed on
                 except died:
                     record = worker_died(task, "died again when Ray played it once more")
                 except cluster as exc:
