@@ -162,6 +162,26 @@ def test_a_cluster_that_refuses_the_connection_is_said_plainly_before_the_result
     assert not (tmp_path / "out").exists()
 
 
+def test_a_fault_on_a_ray_worker_is_raised_as_itself_without_colour_codes(scenario, monkeypatch):
+    fake = FakeRay()
+    fault = fake.exceptions.RayTaskError("\x1b[36mray::_run_checked()\x1b[39m (pid=1)\nValueError: a bug")
+    fault.cause = ValueError("a bug")
+    fake.fail = {0: [fault]}
+    monkeypatch.setattr(executors, "require", lambda *a: fake)
+    with pytest.raises(ValueError, match="a bug") as err:
+        list(RayExecutor().run(_tasks(scenario, 1)))
+    assert err.value.__notes__ == ["raised on a Ray worker:\nray::_run_checked() (pid=1)\nValueError: a bug"]
+
+
+def test_a_trial_time_limit_is_refused_on_ray_before_any_task_is_sent(scenario, monkeypatch):
+    fake = FakeRay()
+    monkeypatch.setattr(executors, "require", lambda *a: fake)
+    tasks = [dataclasses.replace(t, time_limit_s=10.0) for t in _tasks(scenario, 1)]
+    with pytest.raises(ConfigError, match="leave --trial-time-limit out with --executor ray"):
+        list(RayExecutor().run(tasks))
+    assert fake.attempts == []
+
+
 @pytest.fixture
 def scenario(tmp_path):
     path = tmp_path / "short.toml"

@@ -641,6 +641,9 @@ class RayExecutor:
             expected: dict[str, Expectation] = {}
 
             def submit(task: TrialTask) -> object:
+                if task.time_limit_s is not None:  # before it is sent (ArenaConfig refuses it before the run)
+                    raise ConfigError("a trial time limit is enforced in the local pool's workers, not on Ray: "
+                                      "leave --trial-time-limit out with --executor ray")
                 name = task.controller.name
                 if name not in expected:  # once per controller: its files are hashed once, in the driver
                     expected[name] = expectation(task.controller)
@@ -656,9 +659,6 @@ class RayExecutor:
             while refs:
                 (done,), _ = ray.wait(list(refs), num_returns=1)
                 task = refs.pop(done)
-                if task.time_limit_s is not None:
-                    raise ConfigError("a trial time limit is enforced in the local pool's workers, not on Ray: "
-                                      "leave --trial-time-limit out with --executor ray")
                 try:
                     record, episode = ray.get(done)
                     if episode is not None and task.episode_path is not None:
@@ -677,9 +677,15 @@ class RayExecutor:
                     refs[submit(task)] = task  # the cluster's failure: the trial is played again
                     continue
                 except ray.exceptions.RayTaskError as exc:
-                    if isinstance(exc.cause, ClusterError):  # the worker's refusal: the run stops, said plainly
-                        raise ClusterError(without_colour(str(exc.cause.args[0]))) from None
-                    raise
+                    cause = exc.cause
+                    if isinstance(cause, ClusterError):  # the worker's refusal: the run stops, said plainly
+                        raise ClusterError(without_colour(str(cause.args[0]))) from None
+                    if not isinstance(cause, BaseException):
+                        raise
+                    # a fault in wbc's own code on the worker: raised as itself, with the worker's traceback as
+                    # a note, without the colour codes Ray writes into it for a terminal
+                    cause.add_note(f"raised on a Ray worker:\n{without_colour(str(exc))}")
+                    raise cause from None
                 yield record
                 nxt = next(queue, None)
                 if nxt is not None:
