@@ -579,9 +579,7 @@ class RayExecutor:
         ray = require("ray", "cluster")
         if not ray.is_initialized():
             kwargs: dict[str, Any] = {"address": self.address} if self.address else {
-                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False,
-                # a Ray of this machine only: nothing else needs to reach it
-                "_node_ip_address": "127.0.0.1"}
+                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
             if self.from_env:
                 print(f"wbc: note: --executor ray without --address plays on the Ray cluster at {self.address} that "
                       "RAY_ADDRESS names", file=sys.stderr)
