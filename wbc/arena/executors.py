@@ -1,5 +1,8 @@
 """Executors: where trials run. A local process pool (default) or a Ray cluster; the results are identical.
 
+On Ray, each worker first checks that it runs the driver's wbc, packages and controller files
+(`wbc.arena.worker_check`): a node that does not would give other results.
+
 Both take `TrialTask`s and yield each finished trial's record as soon as it is done, in completion order; the caller
 stores it at once. Both read the tasks lazily, a bounded number ahead of the finished ones, so that a caller feeding
 a generator can stop handing out tasks during the run (a settled sequential test, a controller stopped for its
