@@ -260,6 +260,10 @@ def test_on_ray_a_plugin_missing_on_the_worker_stops_the_run_and_records_no_tria
         play_arena(plan)
     assert f"has no plug-in module hiddenpkg.stands file {module}" in str(err.value)
     assert TrialRecord.read_csv(tmp_path / "out" / "trials.csv") == []  # not the controller's error: nothing recorded
+    (tmp_path / "elsewhere.py").rename(module)  # the node fixed: --resume plays the run's trials
+    resumed = play_arena(plan_arena(dataclasses.replace(config, resume=True)))
+    assert len(resumed.records) == 2
+    assert not any(r.outcome == "controller_error" for r in resumed.records)
 
 
 HANGS = STAND_PLUGIN.format(doc="The stand hold that hangs in its first tick, once it has left the file $STARTED.",
