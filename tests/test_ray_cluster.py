@@ -3,7 +3,8 @@
 A worker node with another wbc or package version, or a controller file that differs or is missing there, is the
 cluster's fault, not the controller's: the run stops with a message naming the node, the file or package and both
 values, and no trial is recorded for it (`wbc.arena.worker_check`). The tests with a real Ray start one in this
-process, on the loopback address only, and stop it after.
+process (node address 127.0.0.1; Ray 2.60's servers listen on every interface all the same: docs/limitations.md)
+and stop it after; those of Ray's failures that no test can cause at will play against `FakeRay`.
 """
 
 import dataclasses

@@ -618,8 +618,8 @@ class RayExecutor:
         """Yield each task's record as it finishes.
 
         `tasks` is read lazily: twice as many in flight as the cluster has CPUs, a new one when one finishes. A
-        task whose worker process dies (a controller that exits it, a kill, Ray's memory monitor, a lost node) is
-        played once more; one that dies again is recorded as its controller's error, and the run goes on.
+        task whose worker process dies (a controller that exits it, a kill, Ray's memory monitor) is played once
+        more; one that dies again is recorded as its controller's error, and the run goes on.
 
         Each worker checks, before it builds a controller, that it runs the driver's wbc and result-changing packages
         and the controller's files as recorded (`wbc.arena.worker_check`).
