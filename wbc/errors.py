@@ -28,6 +28,7 @@ __all__ = [
     "MpcProblemFileError",
     "RecordError",
     "ResultsDirError",
+    "ClusterError",
     "EpisodeError",
     "EpisodeFileError",
     "MissingCapabilityError",
@@ -219,6 +220,16 @@ class ResultsDirError(WbcError):
 
     It holds another run, or results where none were expected, or fewer trials than the run needs; the message says
     which option fixes it (``--resume``, another ``--out``).
+    """
+
+
+class ClusterError(WbcError, RuntimeError):
+    """The Ray cluster cannot play the run as it is recorded; the run stops, its stored trials kept for ``--resume``.
+
+    A worker node whose wbc or result-changing packages differ from the driver's, a controller file missing there or
+    different, a node or an object Ray lost more often than it is retried, an address that cannot be reached. None of
+    these is the controller's: no trial is recorded for it. The message names the node (or address), what differs and
+    both values.
     """
 
 

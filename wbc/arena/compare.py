@@ -58,7 +58,7 @@ from wbc.arena.stats import in_canonical_order
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
 from wbc.control.registry import ControllerSpec, check_shipped_weights, get_controller
-from wbc.errors import ConfigError, ResultsDirError, UnknownNameError
+from wbc.errors import ClusterError, ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
 from wbc.output_files import DirectoryLock
 from wbc.robots.registry import get_robot
@@ -435,15 +435,28 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             permission: the message names it, and says that the trials stored are kept for ``--resume``).
         RecordError: a ``trials.csv`` row refused on `ArenaConfig.resume` without `ArenaConfig.drop_bad_rows`, or
             a malformed ``run.json``.
+        ClusterError: on Ray, a cluster that cannot be reached (before the results directory is touched), or a
+            worker that runs another wbc, packages or controller files, or a cluster that keeps failing a task (the
+            trials stored are kept for ``--resume``; `wbc.arena.executors.RayExecutor`).
 
     A controller's failure on a trial is not raised: it is recorded (outcome ``controller_error``) and reported in
     `ArenaResult.controller_errors`.
     """
     cfg, specs, scenario, published, bands = plan.cfg, plan.specs, plan.scenario, plan.published, plan.bands
     trials = list(plan.trials)
-    store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
-                         controllers={name: spec.provenance() for name, spec in specs.items()},
-                         drop_bad_rows=cfg.drop_bad_rows, lock=lock)
+    # before the results directory: a refused executor leaves none
+    executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
+                LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
+    if isinstance(executor, RayExecutor):
+        executor.connect()  # before the results directory: a cluster that cannot be reached leaves none
+    try:
+        store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
+                             controllers={name: spec.provenance() for name, spec in specs.items()},
+                             drop_bad_rows=cfg.drop_bad_rows, lock=lock)
+    except BaseException:
+        if isinstance(executor, RayExecutor):
+            executor.close()
+        raise
     try:  # the directory stays locked until its summary and report are written (and after, with a caller's lock)
         done = store.done()
         rounds = _Rounds(trials, cfg, bands) if cfg.until_significant else None
@@ -475,8 +488,6 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             keys = [(t, c) for t in trials for c in cfg.controllers if (c, *t.key) not in done]
             tasks = (task(t, c) for t, c in keys if not guard.stopped(c))
             todo = len(keys)
-        executor = (RayExecutor(cfg.address, cfg.workers) if cfg.executor == "ray" else
-                    LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
         bar = progress(total, total - todo, cfg.progress)
         start = time.perf_counter()
         steps = 0
@@ -492,6 +503,9 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                     rounds.advance(store.records, guard.counted)
                 if bar is not None:
                     bar.update(1)
+        except ClusterError as exc:
+            # the cluster's fault, not a controller's: no trial recorded for it, those stored kept for --resume
+            raise ClusterError(f"{exc} ({len(store.records)} trial(s) stored in {store.dir})") from None
         except OSError as exc:
             # an episode's file or folder (--save-episodes) that could not be written: said as trials.csv's would be
             if not exc.filename or not Path(exc.filename).resolve().is_relative_to(store.dir.resolve()):
@@ -528,7 +542,7 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
             "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
             "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
-            "executor": cfg.executor,
+            "executor": executor.describe() if isinstance(executor, RayExecutor) else cfg.executor,
             **({} if cfg.trial_time_limit_s is None else {
                 "trial time limit": f"{cfg.trial_time_limit_s:g} s (--trial-time-limit: a trial past it is its "
                                     "controller's error, kept on --resume)"}),
@@ -546,6 +560,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                            played=played, wall_s=wall, physics_steps=steps, budget=total,
                            controller_errors=tuple(errors), arms_differ=plan.arms_differ)
     finally:
+        if isinstance(executor, RayExecutor):
+            executor.close()  # its run closes it too: this covers a run that ended before its first trial
         store.close()
 
 

@@ -1,5 +1,8 @@
 """Executors: where trials run. A local process pool (default) or a Ray cluster; the results are identical.
 
+On Ray, each worker first checks that it runs the driver's wbc, packages and controller files
+(`wbc.arena.worker_check`): a node that does not would give other results.
+
 Both take `TrialTask`s and yield each finished trial's record as soon as it is done, in completion order; the caller
 stores it at once. Both read the tasks lazily, a bounded number ahead of the finished ones, so that a caller feeding
 a generator can stop handing out tasks during the run (a settled sequential test, a controller stopped for its
@@ -13,6 +16,7 @@ name once (reading a ``policy:PATH`` file there), and the spec pickles to spawne
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import ctypes.util
 import dataclasses
@@ -24,22 +28,25 @@ import multiprocessing.connection
 import multiprocessing.process
 import os
 import signal
+import socket
 import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Generator, Iterable, Iterator
+from collections.abc import Callable, Generator, Iterable, Iterator, Mapping
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
-from wbc.arena.episode import EpisodeBuffer
+from wbc.arena.episode import Episode, EpisodeBuffer
 from wbc.arena.runner import TickObserver, forget_played, played_s
 from wbc.arena.sim_trial import run_trial, simulated_robot
 from wbc.arena.trial_record import TrialRecord
+from wbc.arena.worker_check import Expectation, check_worker, expectation, without_colour
 from wbc.control.spec import ControllerSpec
-from wbc.errors import ConfigError
+from wbc.errors import ClusterError, ConfigError
 from wbc.hardware.interpreter import child_process_env
 from wbc.optional import require
 from wbc.scenario.trial import Trial
@@ -102,11 +109,21 @@ def run_task(task: TrialTask, observer: TickObserver | None = None) -> TrialReco
     """
     record, episode = run_trial(task.trial, task.controller, debug_truth=task.debug_truth, observer=observer)
     if task.episode_path is not None:
-        try:
-            episode.save(task.episode_path)
-        except OSError as exc:  # named, for the run's message (a full disk: `wbc.arena.results.unwritable`)
-            raise OSError(exc.errno, exc.strerror or str(exc), task.episode_path) from exc
+        _save_episode(episode, task.episode_path)
     return record
+
+
+def _save_episode(episode: Episode, path: str) -> None:
+    """Save `episode` to `path`.
+
+    Raises:
+        OSError: it could not be saved, with `path` as the filename (for the run's message: a full disk,
+            `wbc.arena.results.unwritable`).
+    """
+    try:
+        episode.save(path)
+    except OSError as exc:
+        raise OSError(exc.errno, exc.strerror or str(exc), path) from exc
 
 
 VIEWED_TIME_LIMIT = ("--trial-time-limit ends the worker process of a trial that overruns, and a viewed run (--view) "
@@ -413,6 +430,12 @@ def worker_died(task: TrialTask, again: str) -> TrialRecord:
                                  f"its memory) and {again}")
 
 
+def _trial_name(task: TrialTask) -> str:
+    """``controller X, band B, seed S, trial I``: a task as messages name it."""
+    trial = task.trial
+    return f"controller {task.controller.name}, band {trial.band}, seed {trial.seed}, trial {trial.index}"
+
+
 def _no_tick_record(task: TrialTask, what: str) -> TrialRecord:
     """A controller-error record of `task` with an empty episode: its worker ended before the trial gave a record."""
     trial, spec = task.trial, task.controller
@@ -427,6 +450,15 @@ def _no_tick_record(task: TrialTask, what: str) -> TrialRecord:
 
 _RAY_RETRIES = 1
 """How many times Ray plays again a task whose worker died, before the trial is recorded as its controller's error."""
+
+_RAY_CLUSTER_RETRIES = 2
+"""How many times a task that Ray's cluster failed (`_CLUSTER_ERRORS`) is handed to it again before the run stops."""
+
+_CLUSTER_ERRORS = ("NodeDiedError", "ObjectLostError", "RaySystemError", "RuntimeEnvSetupError",
+                   "LocalRayletDiedError")
+"""Ray's errors (``ray.exceptions``) that are its cluster's, not a controller's: a node lost, an object lost (its
+subclasses too: an owner died, a fetch timed out), Ray's own failure, a worker environment that could not be set up,
+the local raylet dead. A worker that crashes (``WorkerCrashedError``, ``OutOfMemoryError``) is the controller's."""
 
 _LINGER_S = 5.0
 """How long a worker may take to exit once its pool is shut down [s]: one that a controller's thread keeps alive is
@@ -483,59 +515,228 @@ def _running(processes: Iterable[multiprocessing.process.BaseProcess]) -> list[m
     return [process for process in processes if not ended(process)]
 
 
+def _run_checked(task: TrialTask, expected: Expectation) -> tuple[TrialRecord, Episode | None]:
+    """A task on a Ray worker, once the worker is checked to run what the driver recorded (`check_worker`).
+
+    Returns the record, and the episode when the task saves one: the driver saves it (`RayExecutor.run`), where the
+    task's path means what it meant when the driver made it (a relative ``--out``, a disk of its own).
+    """
+    check_worker(expected)
+    record, episode = run_trial(task.trial, task.controller, debug_truth=task.debug_truth)
+    return record, (episode if task.episode_path is not None else None)
+
+
 class RayExecutor:
     """Runs tasks on a Ray cluster (or a local Ray started on demand).
 
     Args:
-        address: cluster address (``auto``, ``ray://host:10001`` ...); None starts a local Ray on this machine.
+        address: cluster address (``auto``, ``ray://host:10001`` ...); None: the one ``RAY_ADDRESS`` names (as
+            ``ray job submit`` sets it), else a local Ray started on this machine.
         num_cpus: CPUs for a local Ray (default: all cores).
+        environ: the environment ``RAY_ADDRESS`` is read from (default: this process's).
+
+    Raises:
+        ConfigError: `num_cpus` with ``RAY_ADDRESS`` set: a cluster's CPUs are its own.
     """
 
     name = "ray"
 
-    def __init__(self, address: str | None = None, num_cpus: int | None = None) -> None:
-        self.address = address
+    def __init__(self, address: str | None = None, num_cpus: int | None = None, *,
+                 environ: Mapping[str, str] | None = None) -> None:
+        from_env = (os.environ if environ is None else environ).get("RAY_ADDRESS") or None
+        self.address = address or from_env
+        self.from_env = address is None and from_env is not None  # the address is RAY_ADDRESS's
+        if self.from_env and num_cpus is not None:
+            raise ConfigError(f"--workers {num_cpus} with RAY_ADDRESS={from_env} set: a Ray cluster's CPUs are its "
+                              "own; leave --workers out, or unset RAY_ADDRESS to start a Ray on this machine")
         self.num_cpus = num_cpus
+        self._ray: Any = None  # the ray module, once connected
+        self._started = False  # this executor started (or connected) Ray, and shuts it down
+        self._handlers: dict[int, Any] = {}  # this process's signal handlers before Ray's start
+
+    def describe(self) -> str:
+        """Where the trials play, for a run's report: ``ray (cluster at ADDRESS, from RAY_ADDRESS)`` ..."""
+        if self.address is None:
+            return "ray (a Ray started on this machine)"
+        return f"ray (cluster at {self.address}, from {'RAY_ADDRESS' if self.from_env else '--address'})"
+
+    def _named(self) -> str:
+        return f"{self.address} ({'RAY_ADDRESS' if self.from_env else '--address'})"
+
+    def connect(self) -> None:
+        """Start Ray, or connect to the cluster, unless this process already has; this process's handlers kept.
+
+        A cluster's address is first reached over TCP within `_CONNECT_TIMEOUT_S` (Ray itself retries an address that
+        does not answer for minutes, with no word but its own log lines).
+
+        ``ray.init`` installs its own SIGTERM handler (and SIGINT's), which ended the command with a native dump and
+        no word of what was stored: the handlers this process had are put back as soon as it returns, and again when
+        `close` shuts Ray down.
+
+        Raises:
+            ClusterError: the address cannot be reached, or Ray refuses to connect (an authentication token that
+                differs, another Ray version) or to start; the message names the address.
+        """
+        if self._ray is not None:
+            return
+        ray = require("ray", "cluster")
+        if not ray.is_initialized():
+            kwargs: dict[str, Any] = {"address": self.address} if self.address else {
+                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
+            if self.from_env:
+                print(f"wbc: note: --executor ray without --address plays on the Ray cluster at {self.address} that "
+                      "RAY_ADDRESS names", file=sys.stderr)
+            if self.address:
+                _reach(self.address, self._named())
+            self._handlers = _signal_handlers()
+            try:
+                ray.init(log_to_driver=False, configure_logging=False,
+                         runtime_env={"env_vars": child_process_env()}, **kwargs)
+            except Exception as exc:  # noqa: BLE001 - whatever Ray raises (a token refused, a version) is said plainly
+                with contextlib.suppress(Exception):
+                    ray.shutdown()
+                where = f"connect to the Ray cluster at {self._named()}" if self.address else "start Ray here"
+                raise ClusterError(f"cannot {where}: {type(exc).__name__}: {without_colour(str(exc)).strip()}; "
+                                   "nothing was played") from None
+            finally:
+                _restore_signal_handlers(self._handlers)
+            self._started = True
+        self._ray = ray
+
+    def close(self) -> None:
+        """Shut down the Ray this executor started (a cluster: disconnect), and put this process's handlers back."""
+        ray, self._ray = self._ray, None
+        if ray is None or not self._started:
+            return
+        self._started = False
+        try:
+            ray.shutdown()
+        finally:
+            _restore_signal_handlers(self._handlers)
 
     def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
         """Yield each task's record as it finishes.
 
         `tasks` is read lazily: twice as many in flight as the cluster has CPUs, a new one when one finishes. A
-        task whose worker process dies (a controller that exits it, a kill, Ray's memory monitor, a lost node) is
-        played once more; one that dies again is recorded as its controller's error, and the run goes on.
+        task whose worker process dies (a controller that exits it, a kill, Ray's memory monitor) is played once
+        more; one that dies again is recorded as its controller's error, and the run goes on.
+
+        Each worker checks, before it builds a controller, that it runs the driver's wbc and result-changing packages
+        and the controller's files as recorded (`wbc.arena.worker_check`).
+
+        A task the cluster fails (a node lost, an object lost, Ray's own error: `_CLUSTER_ERRORS`) is handed to it
+        again, `_RAY_CLUSTER_RETRIES` times at most; it is no trial's result.
+
+        Ray is started (`connect`) unless it was, and shut down (`close`) at the end.
+
+        Raises:
+            ClusterError: a worker runs another wbc or package version, or lacks a controller file or has another
+                one, or the cluster failed a task more often than it is handed again; the run stops there (the
+                records yielded before are the caller's to keep).
         """
-        ray = require("ray", "cluster")
-        started = False
-        if not ray.is_initialized():
-            kwargs = {"address": self.address} if self.address else {
-                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
-            ray.init(log_to_driver=False, configure_logging=False,
-                     runtime_env={"env_vars": child_process_env()}, **kwargs)
-            started = True
+        self.connect()
+        ray = self._ray
         try:
             # a task whose worker dies is played once more (a trial on a lost node finishes elsewhere)
-            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(run_task)
+            remote = ray.remote(num_cpus=1, max_retries=_RAY_RETRIES)(_run_checked)
+            expected: dict[str, Expectation] = {}
+
+            def submit(task: TrialTask) -> object:
+                if task.time_limit_s is not None:  # before it is sent (ArenaConfig refuses it before the run)
+                    raise ConfigError("a trial time limit is enforced in the local pool's workers, not on Ray: "
+                                      "leave --trial-time-limit out with --executor ray")
+                name = task.controller.name
+                if name not in expected:  # once per controller: its files are hashed once, in the driver
+                    expected[name] = expectation(task.controller)
+                return remote.remote(task, expected[name])
+
             died = (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError)
+            cluster = tuple(getattr(ray.exceptions, name) for name in _CLUSTER_ERRORS
+                            if isinstance(getattr(ray.exceptions, name, None), type))
+            failed: dict[int, int] = {}  # times the cluster failed a task, by id(task)
             ahead = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
             queue = iter(tasks)
-            refs = {remote.remote(task): task for task in itertools.islice(queue, ahead)}
+            refs = {submit(task): task for task in itertools.islice(queue, ahead)}
             while refs:
                 (done,), _ = ray.wait(list(refs), num_returns=1)
                 task = refs.pop(done)
-                if task.time_limit_s is not None:
-                    raise ConfigError("a trial time limit is enforced in the local pool's workers, not on Ray: "
-                                      "leave --trial-time-limit out with --executor ray")
                 try:
-                    record = ray.get(done)
+                    record, episode = ray.get(done)
+                    if episode is not None and task.episode_path is not None:
+                        _save_episode(episode, task.episode_path)  # here, before its record is handed on
                 except died:
                     record = worker_died(task, "died again when Ray played it once more")
+                except cluster as exc:
+                    tries = failed[id(task)] = failed.get(id(task), 0) + 1
+                    if tries > _RAY_CLUSTER_RETRIES:
+                        raise ClusterError(
+                            f"the Ray cluster failed the task of {_trial_name(task)} {tries} times "
+                            f"({type(exc).__name__}: {without_colour(str(exc)).strip()}); it is the cluster's "
+                            "failure (a node or an object lost, Ray's own error), not the controller's: the run stops "
+                            "here, no trial recorded for it: the trials stored are kept, and --resume finishes the "
+                            "run once the cluster is fixed") from None
+                    refs[submit(task)] = task  # the cluster's failure: the trial is played again
+                    continue
+                except ray.exceptions.RayTaskError as exc:
+                    cause = exc.cause
+                    if isinstance(cause, ClusterError):  # the worker's refusal: the run stops, said plainly
+                        raise ClusterError(without_colour(str(cause.args[0]))) from None
+                    if not isinstance(cause, BaseException):
+                        raise
+                    # a fault in wbc's own code on the worker: raised as itself, with the worker's traceback as
+                    # a note, without the colour codes Ray writes into it for a terminal
+                    cause.add_note(f"raised on a Ray worker:\n{without_colour(str(exc))}")
+                    raise cause from None
                 yield record
                 nxt = next(queue, None)
                 if nxt is not None:
-                    refs[remote.remote(nxt)] = nxt
+                    refs[submit(nxt)] = nxt
         finally:
-            if started:
-                ray.shutdown()
+            self.close()
+
+
+_CONNECT_TIMEOUT_S = 10.0
+"""How long a Ray cluster's address may take to accept a TCP connection before the run is refused [s]."""
+
+
+def _reach(address: str, named: str, *, timeout_s: float = _CONNECT_TIMEOUT_S) -> None:
+    """Refuse a ``host:port`` (or ``ray://host:port``) that accepts no TCP connection within `timeout_s`.
+
+    ``auto`` and other addresses without a port are left to Ray.
+
+    Raises:
+        ClusterError: the address cannot be reached; the message names it (`named`) and the error.
+    """
+    target = address.removeprefix("ray://").rstrip("/")
+    host, _, port = target.rpartition(":")
+    if not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except OSError as exc:
+        raise ClusterError(f"cannot reach the Ray cluster at {named} within {timeout_s:g} s: "
+                           f"{exc.strerror or exc}; check the head's address and port (`ray status` on the head) "
+                           "and that this machine can reach it; nothing was played") from None
+
+
+_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+"""The signals whose handlers ``ray.init`` replaces and `RayExecutor` puts back."""
+
+
+def _signal_handlers() -> dict[int, Any]:
+    """This process's handlers of `_SIGNALS` (none outside the main thread, where none can be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    return {signum: signal.getsignal(signum) for signum in _SIGNALS}
+
+
+def _restore_signal_handlers(handlers: dict[int, Any]) -> None:
+    """Put back `handlers` (`_signal_handlers`); one Python did not set (None) is left as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for signum, handler in handlers.items():
+        if handler is not None:
+            signal.signal(signum, handler)
 
 
 EXECUTORS = ("local", "ray")
