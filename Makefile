@@ -19,7 +19,7 @@ comma := ,
 UV_COMPILE = $(BIN)/uv pip compile --quiet --generate-hashes --python $(BIN)/python --no-emit-find-links \
 	--custom-compile-command "make lock" $(if $(PIP_FIND_LINKS),--find-links $(PIP_FIND_LINKS))
 
-.PHONY: demo test test-realtime test-all bench lint docs lock lock-upgrade clean
+.PHONY: demo test test-realtime test-all golden bench lint docs lock lock-upgrade clean
 
 # Every package at the version the lock names, each file checked against the lock's hashes (pip refuses any other);
 # the venv is cleared first, so nothing outside the lock stays. The project itself is installed last, editable,
@@ -50,6 +50,11 @@ test-realtime: $(STAMP)
 test-all: $(STAMP)
 	$(BIN)/python -m pytest -q -m ''
 
+# Re-record the goldens (tests/golden/) in one process: under the parallel workers of `make test` they would race for
+# the files, and the suite refuses to record there.
+golden: $(STAMP)
+	WBC_RECORD_GOLDEN=1 $(BIN)/python -m pytest -q -p no:xdist tests/test_golden.py tests/test_mpc_ticks.py
+
 bench: $(STAMP)
 	$(BIN)/wbc bench sim --robot a1-wx200
 	$(BIN)/wbc bench sim --robot go1-arm
@@ -65,7 +70,7 @@ docs: $(STAMP)
 
 # Re-resolve the lock after a change of pyproject.toml or requirements/*.in, keeping every pin that still fits;
 # `make lock-upgrade` takes the newest versions the ranges allow. Re-record the goldens after either
-# (WBC_RECORD_GOLDEN=1 make test): results reproduce to the bit only under the versions they were recorded with.
+# (make golden): results reproduce to the bit only under the versions they were recorded with.
 lock: $(STAMP)
 	$(UV_COMPILE) $(foreach e,$(subst $(comma), ,$(LOCKED_EXTRAS)),--extra $(e)) \
 		--output-file $(LOCK) pyproject.toml requirements/lock.in $(UPGRADE)
