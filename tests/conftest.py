@@ -13,6 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import pytest
+from golden_recording import recording_refusal
 
 import wbc  # noqa: F401  (first: it pins the numeric kernels before numpy loads, wbc/_kernels.py)
 from wbc.hardware.clock import ManualClock
@@ -25,7 +26,12 @@ _CACHE: list[str] = []
 def pytest_configure(config: pytest.Config) -> None:
     """The suite keeps the robots' drawable parts (`wbc.viz.meshes.robot_parts`) in a cache of its own, and the locks
     its links take on the emulators' addresses (`wbc.hardware.unitree.target_lock`, one per port) in a runtime
-    directory of its own, removed at its end; the parallel workers, started after, inherit both."""
+    directory of its own, removed at its end; the parallel workers, started after, inherit both. It refuses to
+    re-record the goldens under parallel workers (`golden_recording.recording_refusal`)."""
+    if os.environ.get("WBC_RECORD_GOLDEN") == "1":
+        problem = recording_refusal(getattr(config.option, "numprocesses", None), os.environ.get("PYTEST_XDIST_WORKER"))
+        if problem is not None:
+            raise pytest.UsageError(problem)
     if not os.environ.get("WBC_CACHE_DIR"):
         _CACHE.append(tempfile.mkdtemp(prefix="wbc-test-cache-"))
         os.environ["WBC_CACHE_DIR"] = _CACHE[-1]

@@ -48,7 +48,12 @@ def imports(path: Path) -> list[Import]:
     """Every import of `path`, in the order of `ast.walk`."""
     name = module_name(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
-    tree = ast.parse(path.read_text(encoding="utf-8"))
+    return imports_of_text(path.read_text(encoding="utf-8"), package)
+
+
+def imports_of_text(text: str, package: str) -> list[Import]:
+    """Every import of a module's source `text`, in the order of `ast.walk`; relative ones resolved in `package`."""
+    tree = ast.parse(text)
     top = set(map(id, tree.body))
     out = []
     for node in ast.walk(tree):

@@ -3,8 +3,9 @@
 The committed CSVs (tests/golden/) hold every column of ``trials.csv`` but those timed on the machine (the wall time,
 the controller's act times and deadline misses) and the row's checksum, which covers them, one row per trial in
 canonical order (controller as named, band, seed, trial). The same command must reproduce them exactly, to the last
-digit: a refactor that changes a result, however slightly, fails here. Set ``WBC_RECORD_GOLDEN=1`` to re-record
-(only for a deliberate change of behaviour, said in the commit message).
+digit: a refactor that changes a result, however slightly, fails here. ``make golden`` re-records them
+(``WBC_RECORD_GOLDEN=1`` in one process, `golden_recording`; only for a deliberate change of behaviour, said in the
+commit message).
 
 Results reproduce to the bit only under the same versions of the numerical packages (MuJoCo, numba, NumPy ...), so
 the goldens are recorded in the environment `make test` installs from the lock (requirements/wbc.lock), and
@@ -17,11 +18,13 @@ import io
 import json
 import os
 import platform
+import subprocess
 import sys
 from importlib import metadata
 from pathlib import Path
 
 import pytest
+from golden_recording import RECORD_COMMAND, recording, recording_refusal
 
 from wbc.arena.trial_record import MACHINE_TIMED
 from wbc.cli.main import main
@@ -68,10 +71,10 @@ def _explain_difference(case: str, index: int, got: str, want: str) -> str:
     if differences:
         why = ("installed versions that differ from those the goldens were recorded with (tests/golden/"
                "versions.json): " + "; ".join(differences) + ". Install the locked versions (make test does) or, for "
-               "a deliberate change of the lock, re-record with WBC_RECORD_GOLDEN=1.")
+               "a deliberate change of the lock, re-record with WBC_RECORD_GOLDEN=1 (`make golden`).")
     else:
         why = ("every installed version is the recording's, so the code changed a result: if that is deliberate, "
-               "re-record with WBC_RECORD_GOLDEN=1 and say why in the commit message.")
+               "re-record with WBC_RECORD_GOLDEN=1 (`make golden`) and say why in the commit message.")
     return f"golden {case}: trial row {index} differs\n  got  {got}\n  want {want}\n{why}"
 
 
@@ -92,7 +95,7 @@ def test_golden_comparison_reproduces_exactly(case, tmp_path):
     assert main(["compare", *CONTROLLERS, *CASES[case], "--out", str(out), "--quiet", "--workers", "2"]) == 0
     got = _canonical(out / "trials.csv")
     path = GOLDEN / f"{case}.csv"
-    if os.environ.get("WBC_RECORD_GOLDEN") == "1":
+    if recording():  # in one process only: each case its own CSV, the same versions.json
         path.write_text(got, encoding="utf-8")
         VERSIONS.write_text(json.dumps(_environment(), indent=1) + "\n", encoding="utf-8")
     want = path.read_text(encoding="utf-8")
@@ -116,3 +119,15 @@ def test_a_version_difference_is_named_in_the_golden_failure(monkeypatch, tmp_pa
     assert f"mujoco {installed} (recorded 0.0.1)" in message
     assert f"{dropped} " in message and "(recorded not installed)" in message
     assert "re-record with WBC_RECORD_GOLDEN=1" in message
+
+
+def test_re_recording_under_parallel_workers_is_refused_with_the_serial_command():
+    """WBC_RECORD_GOLDEN=1 make test recorded under xdist: test_mpc_ticks' first case rewrote the .npz while other
+    workers loaded it, and both cases here wrote versions.json. Collecting only, so nothing is recorded either way."""
+    env = dict(os.environ, WBC_RECORD_GOLDEN="1")
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-n", "2", "--collect-only",
+                          str(Path(__file__))], capture_output=True, text=True, env=env, cwd=ROOT)
+    assert out.returncode == pytest.ExitCode.USAGE_ERROR, out.stdout + out.stderr
+    assert "parallel workers" in out.stderr and RECORD_COMMAND in out.stderr
+    assert recording_refusal(None, None) is None and recording_refusal(0, None) is None
+    assert recording_refusal("auto", None) is not None and recording_refusal(None, "gw1") is not None

@@ -1,19 +1,19 @@
 """The MPC controller's motor commands, tick by tick, on fixed closed-loop episodes, against a committed recording.
 
-`tests/golden/mpc_ticks.npz` holds, for each case below, every tick's command (q, dq, kp, kd, tau) on a sample of
-ticks and a weighted sum of each tick's command on every tick. A change that only moves work around (compiles it,
-fuses it, stops allocating) must give the same commands: the same floating-point operations in the same order give
-the same bits, and a closed loop carries any difference, however small, into every later tick, so the last ticks
-compared are the most sensitive. The tolerance admits rounding alone (`RTOL`). Set ``WBC_RECORD_GOLDEN=1`` to
-re-record (only for a deliberate change of the controller's behaviour, said in the commit message); like the other
-goldens, the recording is exact only under the locked versions of tests/golden/versions.json.
+`tests/golden/mpc_ticks.npz` holds, for each case below, every tick's command (q, dq, kp, kd, tau) on a sample of ticks
+and a weighted sum of each tick's command on every tick. A change that only moves work around (compiles it, fuses it,
+stops allocating) must give the same commands: the same floating-point operations in the same order give the same bits,
+and a closed loop carries any difference, however small, into every later tick, so the last ticks compared are the most
+sensitive. The tolerance admits rounding alone (`RTOL`). ``make golden`` re-records (``WBC_RECORD_GOLDEN=1`` in one
+process, `golden_recording`; only for a deliberate change of the controller's behaviour, said in the commit message);
+like the other goldens, the recording is exact only under the locked versions of tests/golden/versions.json.
 """
 
-import os
 from pathlib import Path
 
 import numpy as np
 import pytest
+from golden_recording import recording
 
 from wbc.arena.divergence import DivergenceCheck
 from wbc.arena.runner import run_episode
@@ -101,10 +101,14 @@ def _record() -> None:
     np.savez_compressed(GOLDEN, **out)
 
 
+_RECORDED: list[object] = []
+
+
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_mpc_commands_match_the_recording(name):
-    if os.environ.get("WBC_RECORD_GOLDEN") == "1" and name == sorted(CASES)[0]:
+    if recording() and not _RECORDED:  # the first case this session runs records every case, once
         _record()
+        _RECORDED.append(GOLDEN)
     golden = np.load(GOLDEN)
     got = _summary(_play(CASES[name]))
     want_sampled, want_checksum = golden[f"{name}/sampled"], golden[f"{name}/checksum"]

@@ -221,6 +221,30 @@ def test_a_lock_beside_a_copy_cannot_publish_other_content_under_the_toolkits_na
     check_published(load_scenario(PUSH))
 
 
+def test_an_unpublished_copy_under_the_toolkits_name_is_told_to_take_a_name_of_its_own(tmp_path):
+    """The unpublished message gave the lines that publish an edited copy of push.toml as push version 2 in a lock
+    beside it, which the next run then refused as the toolkit's name and version; it now gives a name of its own and
+    the lines that publish the file under it, which the next run accepts."""
+    changed = write(tmp_path, edit(PUSH.read_text(), "offset_m = 0.12", "offset_m = 0.1"), "push.toml")
+    scenario = load_scenario(changed)
+    lock = tmp_path / "published.toml"
+    for lock_text in (None, "[other]\n\"1\" = \"00\"\n"):  # no lock beside it, then a lock that does not list it
+        if lock_text is not None:
+            lock.write_text(lock_text)
+        with pytest.raises(ScenarioError) as err:
+            check_published(scenario)
+        text = str(err.value)
+        assert "unpublished" in text and "the toolkit's published scenario" in text
+        assert err.value.field == "[scenario] name"
+        assert 'name = "my-push"' in text and "[push]" not in text
+        lines = text[text.index("[my-push]"):text.index(f"to {lock}")]
+    renamed = load_scenario(write(tmp_path, edit(changed.read_text(), 'name = "push"', 'name = "my-push"'),
+                                  "push.toml"))
+    assert renamed.hash in lines
+    lock.write_text(lines)
+    check_published(renamed)
+
+
 def test_unpublished_version_is_refused_with_the_fix(tmp_path):
     lock = write(tmp_path, (SCENARIOS / "published.toml").read_text(), "lock.toml")
     bumped = load_scenario(write(tmp_path, edit(PUSH.read_text(), "version = 1", "version = 3"), "push.toml"))

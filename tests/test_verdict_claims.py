@@ -214,8 +214,8 @@ def test_a_paper_tables_better_side_says_whether_it_holds_after_holms_correction
                            a_only=None, b_only=None, p_holm=p_holm)
 
     assert paper_verdict(pair(0.01, 0.37), family=37) == (
-        "Success: pi3 better (pi3 - pi2 = +20.00 points, p = 0.01; on its own test only: not after Holm's correction over the "
-        "table's 37 tests, adjusted p = 0.37)")
+        "Success: pi3 better (pi3 - pi2 = +20.00 points, p = 0.01; on its own test only: not after Holm's correction "
+        "over the table's 37 tests, adjusted p = 0.37)")
     assert paper_verdict(pair(0.001, 0.037), family=37) == (
-        "Success: pi3 better (pi3 - pi2 = +20.00 points, p = 0.001; holds after Holm's correction over the table's 37 tests, "
-        "adjusted p = 0.037)")
+        "Success: pi3 better (pi3 - pi2 = +20.00 points, p = 0.001; holds after Holm's correction over the table's 37 "
+        "tests, adjusted p = 0.037)")

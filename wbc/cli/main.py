@@ -75,6 +75,7 @@ from wbc.learned.train.stages import TASKS, fine_tune_config, stage_config
 from wbc.robots.description import ARM_MODES
 from wbc.robots.registry import get_robot
 from wbc.scenario import load_scenario, resolve_scenario_path, warn_if_unpublished
+from wbc.scenario.scenario_check import check_scenario
 from wbc.scenario.trial import Trial
 from wbc.tools.arm_momentum import arm_momentum_study
 from wbc.tools.bench import (
@@ -1507,6 +1508,15 @@ def _demo(args: argparse.Namespace) -> int:
     return 1 if result.controller_errors else 0
 
 
+def _scenario_check(args: argparse.Namespace) -> int:
+    result = check_scenario(args.file, args.lock)
+    if args.json:
+        printers.print_json(dataclasses.asdict(result))
+    else:
+        printers.print_scenario_check(result)
+    return 0 if result.published else 1
+
+
 def _controllers(args: argparse.Namespace) -> int:
     rows = list_controllers()
     if args.json:
@@ -1604,6 +1614,7 @@ HANDLERS: dict[str, Callable[[argparse.Namespace], int]] = {
     "demo": _demo,
     "controllers": _controllers,
     "check-controller": _check_controller,
+    "scenario check": _scenario_check,
 }
 """What each command does, by the ``handler`` name its parser sets."""
 

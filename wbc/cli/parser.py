@@ -286,7 +286,25 @@ def build_parser() -> argparse.ArgumentParser:
     _add_demo_parser(sub)
     _add_controllers_parser(sub)
     _add_check_controller_parser(sub)
+    _add_scenario_parser(sub)
     return p
+
+
+def _add_scenario_parser(sub: _Commands) -> None:
+    """``wbc scenario check``: a scenario file's identity, bands and publication, without playing a trial."""
+    scen = sub.add_parser("scenario", help="scenario files: check one without playing it").add_subparsers(
+        dest="what", required=True)
+    chk = scen.add_parser("check", help="print a scenario's name, version, hash, robot, bands and trial count, and "
+                          "whether its lock publishes it (with the lines that would); plays nothing",
+                          description="Load and validate a scenario file and print what a result records of it (name, "
+                          "version, content hash), its robot and duration, each band and what it sets, how --trials "
+                          "and --seeds count its trials, and whether the lock beside it (or --lock) publishes it; "
+                          "when it does not, the message gives the lines that would. Exit status 1 when unpublished.")
+    chk.add_argument("file", help="the scenario file (TOML)")
+    chk.add_argument("--lock", default=None, metavar="FILE", help="the publish lock (default: published.toml beside "
+                     "the file)")
+    chk.add_argument("--json", action="store_true", help="print JSON")
+    chk.set_defaults(handler="scenario check")
 
 
 def _add_analyze_tail_parser(analyze: _Commands) -> None:

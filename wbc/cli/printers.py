@@ -34,6 +34,7 @@ from wbc.hardware.emulators import BusStats
 from wbc.hardware.pty_registry import registry_dir
 from wbc.hardware.realtime import RealtimeGrant
 from wbc.hardware.unitree import LEG_WIRES, REJECT_REASONS
+from wbc.scenario.scenario_check import ScenarioCheck
 from wbc.tools.arm_momentum import ArmMomentumTrial
 from wbc.tools.bench import (
     MPC_REFERENCE_TARGETS,
@@ -60,7 +61,8 @@ __all__ = ["print_arena", "print_arm_momentum", "print_bench_hw", "print_bench_m
            "print_bench_sweep", "print_bench_train", "print_controller_check", "print_controllers",
            "print_demo_end", "print_demo_header", "print_emulator_counts", "print_emulator_served",
            "print_emulator_serving", "print_emulator_started", "print_hw_check", "print_hw_run", "print_json",
-           "print_paper_table", "print_recording", "print_tail", "print_thread_stats", "print_trained",
+           "print_paper_table", "print_recording", "print_scenario_check", "print_tail", "print_thread_stats",
+           "print_trained",
            "print_viewed_trial", "strict_json"]
 
 
@@ -488,6 +490,29 @@ def print_compare_watch(watch: TrialToWatch | None, *, scenario: str, options: S
         return
     print(f"watch it ({watch.why}; both runs on one page, {watch.other} as the ghost):")
     print(f"  {ab_watch_command(watch, scenario=scenario, options=options)}")
+
+
+def print_scenario_check(result: ScenarioCheck) -> None:
+    """``wbc scenario check``: a scenario's identity, robot, bands, trial count and publication."""
+    print(f"scenario {result.name} version {result.version}  ({result.path})")
+    print(f"  hash      {result.hash}")
+    print(f"  robot     {result.robot}, trials of {result.duration_s:g} s")
+    print("  bands:")
+    width = max(len(name) for name, _ in result.bands)
+    for name, settings in result.bands:
+        sets = ", ".join(f"{k} {_band_value(v)}" for k, v in settings.items()) or "the drawn options only"
+        print(f"    {name:<{width}}  {sets}")
+    print(f"  trials    {result.trial_count}")
+    if result.published:
+        print(f"  published by {result.lock}")
+    else:
+        print(f"  not published: {result.problem}")
+
+
+def _band_value(value: object) -> str:
+    if isinstance(value, tuple | list):
+        return "-".join(f"{v:g}" for v in value)
+    return f"{value:g}" if isinstance(value, int | float) else str(value)
 
 
 def print_controllers(rows: Sequence[ControllerListing]) -> None:

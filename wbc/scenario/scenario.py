@@ -91,7 +91,8 @@ from wbc.scenario.toml_fields import Range, TomlTable, read_toml
 from wbc.scenario.trial import CommandChange, CommandSchedule, Trial
 from wbc.types import VelocityCommand
 
-__all__ = ["MAX_VERSION", "Scenario", "ScenarioError", "fallback_note", "load_scenario", "resolve_scenario_path"]
+__all__ = ["MAX_VERSION", "Scenario", "ScenarioError", "content_hash", "fallback_note", "load_scenario",
+           "resolve_scenario_path"]
 
 _NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_-]*$")
 _BAND_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
@@ -326,7 +327,7 @@ class Scenario:
 # Loading.
 
 
-def _content_hash(data: dict[str, Any]) -> str:
+def content_hash(data: dict[str, Any]) -> str:
     """sha256 (hex) of the canonical JSON of parsed TOML content."""
     return hashlib.sha256(json.dumps(data, sort_keys=True, separators=(",", ":")).encode("utf-8")).hexdigest()
 
@@ -531,7 +532,7 @@ def load_scenario(path: str | Path) -> Scenario:
 
     return Scenario(
         name=name, version=version, description=description, notes=notes, robot=robot, duration_s=duration_s,
-        hash=_content_hash(data), path=shown, bands=tuple(b.name for b in bands), _terrain=terrain, _domain=domain,
+        hash=content_hash(data), path=shown, bands=tuple(b.name for b in bands), _terrain=terrain, _domain=domain,
         _ramp_s=ramp_s, _options=tuple(options), _pushes=pushes, _bands=tuple(bands), _terrain_seed=terrain_seed,
         _changes=tuple(changes), _fixed_pushes=tuple(fixed),
     )
