@@ -115,18 +115,32 @@ def test_a_cluster_that_keeps_failing_a_trial_stops_the_run_without_a_controller
 
 
 def test_ray_address_in_the_environment_is_the_cluster_played_on(scenario, monkeypatch, capsys):
-    # as under `ray job submit`: RAY_ADDRESS set, no --address
+    # as under `ray job submit`: RAY_ADDRESS set, no --address; the head is a socket on this machine that listens
     fake = FakeRay()
     monkeypatch.setattr(executors, "require", lambda *a: fake)
-    monkeypatch.setenv("RAY_ADDRESS", "10.0.0.5:6379")
-    executor = RayExecutor()
-    assert len(list(executor.run(_tasks(scenario, 1)))) == 1
-    assert fake.inits[0]["address"] == "10.0.0.5:6379" and "num_cpus" not in fake.inits[0]
-    assert "cluster at 10.0.0.5:6379 that RAY_ADDRESS names" in capsys.readouterr().err
-    assert executor.describe() == "ray (cluster at 10.0.0.5:6379, from RAY_ADDRESS)"
+    with socket.socket() as head:
+        head.bind(("127.0.0.1", 0))
+        head.listen()
+        address = f"127.0.0.1:{head.getsockname()[1]}"
+        monkeypatch.setenv("RAY_ADDRESS", address)
+        executor = RayExecutor()
+        assert len(list(executor.run(_tasks(scenario, 1)))) == 1
+    assert fake.inits[0]["address"] == address and "num_cpus" not in fake.inits[0]
+    assert f"cluster at {address} that RAY_ADDRESS names" in capsys.readouterr().err
+    assert executor.describe() == f"ray (cluster at {address}, from RAY_ADDRESS)"
     assert RayExecutor("auto").describe() == "ray (cluster at auto, from --address)"
-    with pytest.raises(ConfigError, match="--workers 2 with RAY_ADDRESS=10.0.0.5:6379 set"):
+    with pytest.raises(ConfigError, match=f"--workers 2 with RAY_ADDRESS={address} set"):
         RayExecutor(None, 2)
+
+
+def test_a_ray_started_here_is_a_new_local_one_whatever_cluster_this_machine_runs(scenario, monkeypatch):
+    """Without an address, ``ray.init`` would join the cluster a `ray start` left on this machine
+    (``/tmp/ray/ray_current_cluster``), and then refuse the CPU count it is given: wbc asks for a new local Ray."""
+    fake = FakeRay()
+    monkeypatch.setattr(executors, "require", lambda *a: fake)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    assert len(list(RayExecutor(None, 1).run(_tasks(scenario, 1)))) == 1
+    assert fake.inits[0]["address"] == "local" and fake.inits[0]["num_cpus"] == 1
 
 
 def test_an_address_that_cannot_be_reached_is_refused_before_the_results_directory(scenario, tmp_path,

@@ -581,8 +581,10 @@ class RayExecutor:
             return
         ray = require("ray", "cluster")
         if not ray.is_initialized():
+            # without an address, a new Ray on this machine ("local"): Ray would otherwise join a cluster that
+            # `ray start` left here (its /tmp/ray/ray_current_cluster), and then refuse the CPU count
             kwargs: dict[str, Any] = {"address": self.address} if self.address else {
-                "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
+                "address": "local", "num_cpus": self.num_cpus or os.cpu_count(), "include_dashboard": False}
             if self.from_env:
                 print(f"wbc: note: --executor ray without --address plays on the Ray cluster at {self.address} that "
                       "RAY_ADDRESS names", file=sys.stderr)
