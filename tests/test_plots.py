@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -177,7 +178,8 @@ def test_coinciding_ttf_curves_stay_visible_and_are_named(drawn, tmp_path):
     figs = _draw(drawn, tmp_path, controllers, _records(controllers, standing=("stand", "stand-locked")), curve=False)
     fig = figs["ttf.png"]
     labels = [t.get_text() for ax in fig.axes for t in ax.get_legend().get_texts()]
-    assert labels.count("stand (n=30), same curve as stand-locked") == len(BANDS)
+    # the later of two coinciding curves names the first: one short entry per controller however many coincide
+    assert labels.count("stand (n=30)") == len(BANDS)
     assert labels.count("stand-locked (n=30), same curve as stand") == len(BANDS)
     assert labels.count("mpc (n=30)") == len(BANDS)
     # the two 100 % curves are drawn at 100 % (no offset), each with markers where the other has none
@@ -189,6 +191,26 @@ def test_coinciding_ttf_curves_stay_visible_and_are_named(drawn, tmp_path):
                     (round(float(x), 6), float(y)) for x, y in zip(line.get_xdata(), line.get_ydata(), strict=True))
         full = [points for points in marked.values() if all(y == 100.0 for _, y in points)]
         assert len(full) >= 2 and not set.intersection(*full)
+
+
+def test_eight_long_named_controllers_that_all_stand_keep_their_ttf_legend_off_the_data(drawn, tmp_path):
+    """Eight policy files of long names, every trial standing (a paper table of baselines): each entry names the
+    first curve it coincides with, long ones wrap, and the bands' axes keep their size beside the legends."""
+    controllers = tuple(f"policy:wbc/learned/weights/a1-wx200-actuated-{name}" for name in (
+        "ppo", "curriculum", "finetune-pi2", "decoupled", "one-stage-demo", "mpc-distilled", "pi3", "pi2"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # matplotlib warns when the layout collapses the axes to make room
+        fig = _draw(drawn, tmp_path, controllers, _records(controllers, standing=controllers), curve=False)["ttf.png"]
+    renderer = fig.canvas.get_renderer()
+    for ax in fig.axes:
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert labels[0] == "a1-wx200-actuated-ppo (n=30)" and len(labels) == len(controllers)
+        assert all(label.endswith("same curve as\n  a1-wx200-actuated-ppo") or
+                   label.endswith("same curve as a1-wx200-actuated-ppo") or "\n" in label for label in labels[1:])
+        assert all(len(line) <= 42 for label in labels for line in label.split("\n"))
+        area = ax.get_window_extent(renderer)
+        assert area.height > 150 and area.width > 150
+        assert not ax.get_legend().get_window_extent(renderer).overlaps(area)
 
 
 def test_push_counts_never_overprint(drawn, tmp_path):
@@ -229,3 +251,17 @@ def test_tracking_draws_no_bar_for_an_empty_common_window(drawn, tmp_path):
         # where rl's bar in the push band would stand
         bar_width = bars[0].get_width()
         assert na[0].xy[0] == pytest.approx(1.0 + (1 - 1) * bar_width)
+
+
+def test_the_push_tables_names_and_counts_read_on_white_in_every_controllers_colour(drawn, tmp_path):
+    """Okabe-Ito's yellow is a line's colour but no text's: each name and count keeps a contrast of 3:1 or more."""
+    def contrast(colour):
+        rgb = np.asarray(to_rgb(colour))
+        linear = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+        return 1.05 / (float(linear @ np.array([0.2126, 0.7152, 0.0722])) + 0.05)
+
+    fig = _draw(drawn, tmp_path, MANY, _records(MANY))["push_recovery.png"]
+    table = fig.axes[1]
+    texts = [*table.get_yticklabels(), *(t for t in table.texts if t.get_text() != "0")]
+    assert len(texts) > len(MANY)
+    assert min(contrast(t.get_color()) for t in texts) >= 2.99

@@ -120,7 +120,7 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
                         linestyle=style.linestyle, markersize=5, capsize=3, label=_short(controller))
             for xc, cell in zip(centers, cells, strict=True):
                 table.text(xc, row, str(cell["n"]), ha="center", va="center", fontsize=7,
-                           color=style.color if cell["n"] else "0.55")
+                           color=_text_colour(style.color) if cell["n"] else "0.55")
         for edge in edges:
             ax.axvline(edge, color="0.9", linewidth=0.8, zorder=0)
             table.axvline(edge, color="0.9", linewidth=0.8, zorder=0)
@@ -133,7 +133,7 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
         table.set_ylim(-0.5, n_lines - 0.5)
         table.set_yticks(range(n_lines), [_short(c) for c in reversed(controllers)], fontsize=7)
         for label, controller in zip(table.get_yticklabels(), reversed(controllers), strict=True):
-            label.set_color(styles[controller].color)
+            label.set_color(_text_colour(styles[controller].color))
         table.tick_params(axis="x", which="both", bottom=False, labelbottom=False)
         table.tick_params(axis="y", length=0)
         for spine in table.spines.values():
@@ -144,6 +144,29 @@ def _plot_push_recovery(plt: Any, path: Path, curve: Mapping[str, Any], controll
     finally:
         plt.close(fig)
     return True
+
+
+def _text_colour(colour: str) -> tuple[float, float, float]:
+    """`colour` as text on white: a light one darkened until it reads, the others as they are.
+
+    Okabe-Ito's yellow and sky blue are scaled down in linear light to WCAG's relative luminance 0.3 (a contrast of
+    3:1 and more against white), their hue kept.
+    """
+    from matplotlib.colors import to_rgb
+
+    rgb = np.asarray(to_rgb(colour))
+    linear = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    luminance = float(linear @ np.array([0.2126, 0.7152, 0.0722]))
+    if luminance <= 0.3:
+        return tuple(float(c) for c in rgb)
+    # scale the linear light down to 0.3 and back to sRGB: the hue kept, only darker
+    scaled = linear * (0.3 / luminance)
+    srgb = np.where(scaled <= 0.0031308, 12.92 * scaled, 1.055 * scaled ** (1 / 2.4) - 0.055)
+    return tuple(float(c) for c in srgb)
+
+
+_TTF_LABEL_WIDTH = 40
+"""Characters of a TTF legend entry's line (a band's axes' width at its font): a longer one wraps."""
 
 
 def _ttf_curve(ttf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -168,29 +191,42 @@ def _plot_ttf(plt: Any, path: Path, records: Sequence[TrialRecord], controllers:
 
     n = max(1, len(controllers))
     fig_w = max(5.0, 3.6 * len(bands))
-    fig, axes = plt.subplots(1, max(1, len(bands)), figsize=(fig_w, 4.2 + 0.16 * n), squeeze=False, sharey=True,
-                             layout="constrained")
+    by_band: dict[str, dict[str, tuple[np.ndarray, np.ndarray, int]]] = {}
+    labels: dict[str, dict[str, str]] = {}
+    for band in bands:
+        curves = by_band.setdefault(band, {})
+        for controller in controllers:
+            ttf = np.sort(np.array([r.ttf for r in records if r.controller == controller and r.band == band],
+                                   dtype=float))
+            ttf = ttf[~np.isnan(ttf)]
+            if ttf.size:
+                curves[controller] = (*_ttf_curve(ttf), ttf.size)
+        named = labels.setdefault(band, {})
+        for controller, (x, standing, size) in curves.items():
+            # a curve the same as an earlier controller's names that one (the first of them): the legend stays one
+            # short entry per controller however many coincide
+            first = next((c for c, (x2, s2, _) in curves.items() if c != controller and np.array_equal(x, x2)
+                          and np.array_equal(standing, s2)), None)
+            same = f", same curve as {_short(first)}" if first is not None and \
+                controllers.index(first) < controllers.index(controller) else ""
+            named[controller] = textwrap.fill(f"{_short(controller)} (n={size}){same}", width=_TTF_LABEL_WIDTH,
+                                              subsequent_indent="  ")
+    legend_lines = max((sum(label.count("\n") + 1 for label in named.values()) for named in labels.values()),
+                       default=1)
+    fig, axes = plt.subplots(1, max(1, len(bands)), figsize=(fig_w, 4.2 + 0.17 * max(n, legend_lines)),
+                             squeeze=False, sharey=True, layout="constrained")
     try:
         for ax, band in zip(axes[0], bands, strict=False):
-            curves: dict[str, tuple[np.ndarray, np.ndarray, int]] = {}
-            for controller in controllers:
-                ttf = np.sort(np.array([r.ttf for r in records if r.controller == controller and r.band == band],
-                                       dtype=float))
-                ttf = ttf[~np.isnan(ttf)]
-                if ttf.size:
-                    curves[controller] = (*_ttf_curve(ttf), ttf.size)
+            curves = by_band[band]
             handles = []
-            for controller, (x, standing, size) in curves.items():
+            for controller, (x, standing, _) in curves.items():
                 i, style = controllers.index(controller), styles[controller]
                 ax.step(x, standing, where="post", color=style.color, linestyle=style.linestyle, linewidth=1.6)
                 marks = (np.arange(_TTF_MARKS) + (i + 0.5) / n) / _TTF_MARKS
                 ax.plot(marks, standing[np.searchsorted(x, marks, side="right") - 1], linestyle="none",
                         marker=style.marker, color=style.color, markersize=5)
-                same = [_short(c) for c, (x2, s2, _) in curves.items()
-                        if c != controller and np.array_equal(x, x2) and np.array_equal(standing, s2)]
-                label = f"{_short(controller)} (n={size})" + (f", same curve as {', '.join(same)}" if same else "")
                 handles.append(Line2D([], [], color=style.color, linestyle=style.linestyle, marker=style.marker,
-                                      markersize=5, linewidth=1.6, label=label))
+                                      markersize=5, linewidth=1.6, label=labels[band][controller]))
             ax.set_title(f"band {band}", fontsize=9)
             ax.set_xlabel("fraction of the episode played")
             ax.set_xlim(0.0, 1.0)
