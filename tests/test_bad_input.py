@@ -526,9 +526,18 @@ def test_options_that_would_do_nothing_are_refused_naming_what_they_need(tmp_pat
             made.append((address, num_cpus))
             super().__init__(1, None)
 
+        def connect(self):  # the arena connects a Ray executor before it touches the results directory
+            made.append("connected")
+
+        def describe(self):
+            return "ray (recorded)"
+
+        def close(self):
+            pass
+
     monkeypatch.setattr("wbc.arena.compare.RayExecutor", Recorder)
     assert main(["run", "stand", *base, "--executor", "ray", "--workers", "1", "--band", "in", "--quiet"]) == 0
-    assert made == [(None, 1)]
+    assert made == [(None, 1), "connected"]
 
 
 def test_an_interrupted_command_says_so_in_one_line_and_how_a_run_is_finished(tmp_path, capsys, monkeypatch):
