@@ -232,6 +232,28 @@ def test_a_worker_refuses_a_controller_file_that_differs_or_is_missing(tmp_path)
         check_worker(Expectation(environment=fingerprint(), files=((str(weights), recorded),)))
 
 
+def test_a_worker_finds_the_shipped_weights_in_its_own_wbc_package_wherever_it_is_installed(tmp_path, monkeypatch):
+    """The shipped weights are recorded by their path within the wbc package: a node with the same wbc installed
+    elsewhere (a container's /home/ray/wbc) plays `learned`; its sha256 is still checked there."""
+    import shutil
+
+    expected = worker_check.expectation(get_controller("learned"))
+    shipped = [path for path, _ in expected.files if path.startswith("wbc-package:")]
+    assert shipped and all(path.startswith("wbc-package:learned/weights/") for path in shipped)
+    elsewhere = tmp_path / "home" / "ray" / "wbc"
+    for path in shipped:
+        source = worker_check._PACKAGE / path.split(":", 1)[1]
+        target = elsewhere / path.split(":", 1)[1]
+        target.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(source, target)
+    monkeypatch.setattr(worker_check, "_PACKAGE", elsewhere)
+    check_worker(expected)  # the same files, another install path: it plays
+    damaged = elsewhere / shipped[0].split(":", 1)[1]
+    damaged.write_bytes(damaged.read_bytes() + b"\0")
+    with pytest.raises(ClusterError, match=f"has another controller file {damaged}"):
+        check_worker(expected)
+
+
 def test_a_worker_refuses_another_wbc_revision_or_package_version():
     env = dict(fingerprint())
     for what, other in (("wbc git revision", "0" * 40), ("package mujoco", "0.0.1")):

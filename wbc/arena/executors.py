@@ -655,7 +655,9 @@ class RayExecutor:
             died = (ray.exceptions.WorkerCrashedError, ray.exceptions.OutOfMemoryError)
             cluster = tuple(getattr(ray.exceptions, name) for name in _CLUSTER_ERRORS
                             if isinstance(getattr(ray.exceptions, name, None), type))
-            failed: dict[int, int] = {}  # times the cluster failed a task, by id(task)
+            # times the cluster failed a task, by the trial it plays (a task's id would be reused by a later task once
+            # the first is freed, and the later one then given fewer tries)
+            failed: dict[tuple[str, str, int, int], int] = {}
             ahead = 2 * max(1, int(ray.cluster_resources().get("CPU", 1)))
             queue = iter(tasks)
             refs = {submit(task): task for task in itertools.islice(queue, ahead)}
@@ -669,7 +671,8 @@ class RayExecutor:
                 except died:
                     record = worker_died(task, "died again when Ray played it once more")
                 except cluster as exc:
-                    tries = failed[id(task)] = failed.get(id(task), 0) + 1
+                    key = (task.controller.name, task.trial.band, task.trial.seed, task.trial.index)
+                    tries = failed[key] = failed.get(key, 0) + 1
                     if tries > _RAY_CLUSTER_RETRIES:
                         raise ClusterError(
                             f"the Ray cluster failed the task of {_trial_name(task)} {tries} times "

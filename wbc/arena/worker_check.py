@@ -20,6 +20,7 @@ import os
 import re
 import socket
 from dataclasses import dataclass
+from pathlib import Path
 
 from wbc.control.spec import ControllerSpec, sha256_file
 from wbc.errors import ClusterError
@@ -66,13 +67,35 @@ def fingerprint() -> tuple[tuple[str, str | None], ...]:
 def expectation(spec: ControllerSpec) -> Expectation:
     """What a worker must run to play `spec`, from this (the driver's) process and `spec`'s recorded files."""
     record = spec.provenance()
-    files = tuple((str(f["path"]), str(f["sha256"])) for f in record["files"]  # type: ignore[union-attr]
+    files = tuple((_portable(str(f["path"])), str(f["sha256"])) for f in record["files"]  # type: ignore[union-attr]
                   if f.get("sha256") is not None)
     module = None
     plugin = record.get("plugin")
     if isinstance(plugin, dict):
         module = (str(plugin["target"]).split(":")[0], plugin.get("module_file"), plugin.get("module_sha256"))
     return Expectation(environment=fingerprint(), files=files, module=module)
+
+
+_PACKAGE = Path(__file__).resolve().parents[1]
+"""This process's wbc package directory: the shipped files (weights) lie under it, wherever it is installed."""
+
+_IN_PACKAGE = "wbc-package:"
+"""How `Expectation.files` names a file shipped inside the wbc package: by its path within the package, so that a
+node with the same wbc installed at another path (a container's /home/ray/wbc, the driver's checkout elsewhere) finds
+it; its sha256 is checked all the same."""
+
+
+def _portable(path: str) -> str:
+    """`path` as a worker finds it: a file inside this wbc package by its path within it, any other as it is."""
+    try:
+        return _IN_PACKAGE + Path(path).resolve().relative_to(_PACKAGE).as_posix()
+    except ValueError:
+        return path
+
+
+def _local(path: str) -> str:
+    """A path of `Expectation.files` on this node (`_portable`'s inverse, against this node's wbc package)."""
+    return str(_PACKAGE / path.removeprefix(_IN_PACKAGE)) if path.startswith(_IN_PACKAGE) else path
 
 
 def node_name() -> str:
@@ -101,7 +124,7 @@ def check_worker(expected: Expectation) -> None:
                                f"there, {driver} on the driver (as run.json records it); install the driver's wbc "
                                f"checkout and locked packages on every node; {_RESUME}")
     for path, sha256 in expected.files:
-        _check_file(path, sha256, "controller file")
+        _check_file(_local(path), sha256, "controller file")
     if expected.module is not None:
         _check_module(*expected.module)
 
