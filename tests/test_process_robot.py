@@ -385,6 +385,20 @@ def test_the_whole_robots_estop_latch_reaches_the_layer_and_its_reset_releases_i
             assert [e.reason for e in events].count("remote_estop") == 1
 
 
+def test_the_frames_refused_for_their_tick_are_counted_across_the_io_process() -> None:
+    """A board that keeps sending its last buffer: the link in the I/O process refuses the frames for their tick, and
+    their count reaches this process in the state block (`wbc hw run`'s hardware.json reads it)."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        with ProcessRobot(_legs(emu.address)) as robot:
+            hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+            for _ in range(20):
+                robot.write(hold)
+                robot.advance(0.004)
+            assert robot.stale_frames == 0
+            emu.inject(Fault.FROZEN_STATE)
+            assert _until(lambda: (robot.write(hold), robot.stale_frames > 0)[1])
+
+
 @pytest.mark.realtime
 def test_realtime_damping_when_this_process_holds_its_lock() -> None:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:

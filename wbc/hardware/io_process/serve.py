@@ -299,6 +299,9 @@ class _Server:
                 "threads": {device: asdict(thread) for device, thread in stats.threads.items()},
                 "io": dict(self.counts, cpu_s=time.process_time() - self.started)}})
             return True
+        if op == "stale_frames":  # asked, not published: a frozen board publishes no new state to carry it
+            self._send({"stale_frames": self.legs.stale_frames})
+            return True
         if op == "faults":
             faults = self.robot.faults if isinstance(self.robot, HasLatchedFaults) else ()
             self._send({"faults": [asdict(fault) for fault in faults]})
