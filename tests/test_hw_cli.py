@@ -615,3 +615,23 @@ def test_check_of_a_robot_answering_from_another_port_counts_its_datagrams_on_th
     assert counted is not None and int(counted.group(1)) > 0, first
     (link,) = [line for line in rest if line.startswith("  link: ")]
     assert f"; {counted.group(1)} foreign datagrams" in link, link
+
+
+def test_check_of_a_robot_whose_tick_stands_still_says_that_frames_arrive_and_are_refused(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    """A board that keeps sending its last buffer: the link takes its first frame and refuses the others for their
+    tick. The check counts them and says what the waiting means (not 'nothing came': 0 rejected by the decoder)."""
+    rig = Stepped(ManualClock(), UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="realtime")))
+    try:
+        rig.emu.inject(Fault.FROZEN_STATE)
+        args = build_parser().parse_args(["hw", "check", "--robot", "go1", "--target", "127.0.0.1:9",
+                                          "--seconds", "0.1"])
+        assert hw_check(args, build=rig.build) == 1
+    finally:
+        rig.emu.close()
+    out = capsys.readouterr().out
+    refused = re.search(r"  frames refused for their tick: (\d+) ", out)
+    assert refused is not None and int(refused.group(1)) > 0, out
+    assert "rejected states: 0 " in out
+    (verdict,) = [line for line in out.splitlines() if line.startswith("  safety: ")]
+    assert verdict.startswith("  safety: waiting: no live state stream: frames arrive (") and "reconnect" in verdict

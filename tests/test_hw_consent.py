@@ -390,6 +390,22 @@ def test_the_consent_asks_for_a_real_arm_too(nothing_opened: list, monkeypatch: 
     assert "nobody can confirm" in err and nothing_opened == []
 
 
+def test_the_consent_for_a_real_arm_warns_of_a_raised_arm_before_anything_is_opened(
+        nothing_opened: list, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """The arm's pose is read only by its connect, after the consent: the confirmation itself says what connecting does
+    to an arm parked raised and what to do first, for the check and for a run."""
+    for command in (["hw", "check", "--robot", "a1-wx200"],
+                    ["hw", "run", "stand", "--robot", "a1-wx200", "--arm", "actuated", "--scenario",
+                     "scenarios/push.toml", "--trial", "0", "--seconds", "1"]):
+        monkeypatch.setattr(sys, "stdin", io.StringIO(""))  # nobody at a terminal, and no --yes
+        assert main([*command, "--target", "127.0.0.1:9", "--arm-port", "/dev/ttyUSB0", "--allow-hardware"]) == 2
+        err = capsys.readouterr().err
+        consent = err.split("is a REAL ROBOT", 1)[1]
+        assert "An arm parked raised sags when connecting releases its joints" in consent, err
+        assert "support it, or lower it to its stowed pose, before you confirm" in consent, err
+        assert nothing_opened == []
+
+
 def test_a_pty_arm_port_needs_no_flag(pty_slave: str) -> None:
     config = HardwareRobotConfig(robot="a1-wx200", arm_mode="actuated", legs_host="127.0.0.1", legs_port=9,
                                  arm_port=pty_slave)

@@ -141,6 +141,7 @@ def _check_stand_trial(out: Path, printed: pytest.CaptureFixture, io_process: bo
     assert "SKIPPED" in printed.out and "completed" in printed.out
     hardware = json.loads((out / "hardware.json").read_text())
     assert hardware["backend"] == "unitree" and hardware["link"]["rejected_states"] == 0
+    assert hardware["stale_frames"] == 0  # no leg frame refused for its tick: the emulator's tick moved on each time
     assert (hardware["io_cpu_s"] is not None) == io_process  # the I/O process's CPU, apart
     ramp_done = [e["time"] for e in hardware["safety_events"] if e["reason"] == "ramp_done"]
     assert [e["reason"] for e in hardware["safety_events"]] == ["fresh_state", "ramp_done"]

@@ -353,6 +353,52 @@ def test_the_links_estop_latch_and_deadline_trips_cross_the_io_process() -> None
             assert _until(lambda: robot.deadline_trips >= 1)
 
 
+def test_the_whole_robots_estop_latch_reaches_the_layer_and_its_reset_releases_it_through_the_io_process() -> None:
+    """The a1-wx200 in the I/O process: a press of L2 + B the layer never sees on the remote trips it on the
+    latch count the state block carries, and its reset's release goes back: the legs are driven again, not damped."""
+    events: list[SafetyEvent] = []
+    with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
+        safe = SafeRobot(ProcessRobot(_arm(emu)), SafetyConfig(position_table="a1", on_event=events.append,
+                                                               ramp_time_s=0.2))
+        ctrl = StandController(get_robot("a1-wx200", "actuated"))
+
+        def drive() -> None:
+            safe.write(ctrl.act(safe.read(), None))
+            safe.advance(0.02)
+
+        with safe:
+            assert _until(lambda: (drive(), safe.safety_state is SafetyState.RUN)[1])
+            emu.inject(Fault.REMOTE_L2_B)  # pressed and released while this process does not read
+            assert _until(lambda: safe.robot.remote_estop_latched)
+            emu.clear(Fault.REMOTE_L2_B)
+            assert _until(lambda: not safe.robot.remote().l2_b)
+            drive()
+            assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "remote_estop"
+            safe.reset()
+            assert _until(lambda: (drive(), safe.safety_state is SafetyState.RUN)[1])
+            assert _until(lambda: (drive(), not safe.robot.remote_estop_latched)[1])
+            since = len(emu.legs.commands())
+            for _ in range(20):
+                drive()
+            frames = emu.legs.commands()[since:]
+            assert frames and not any(c.damping for c in frames)
+            assert [e.reason for e in events].count("remote_estop") == 1
+
+
+def test_the_frames_refused_for_their_tick_are_counted_across_the_io_process() -> None:
+    """A board that keeps sending its last buffer: the link in the I/O process refuses the frames for their tick, and
+    their count reaches this process in the state block (`wbc hw run`'s hardware.json reads it)."""
+    with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:
+        with ProcessRobot(_legs(emu.address)) as robot:
+            hold = MotorCommand.hold(robot.read().q, 20.0, 0.5)
+            for _ in range(20):
+                robot.write(hold)
+                robot.advance(0.004)
+            assert robot.stale_frames == 0
+            emu.inject(Fault.FROZEN_STATE)
+            assert _until(lambda: (robot.write(hold), robot.stale_frames > 0)[1])
+
+
 @pytest.mark.realtime
 def test_realtime_damping_when_this_process_holds_its_lock() -> None:
     with UnitreeEmulator(UnitreeEmulatorConfig(robot="go1", mode="lockstep")) as emu:

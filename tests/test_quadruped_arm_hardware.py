@@ -438,6 +438,32 @@ def test_the_remote_damps_the_arm_on_its_bus_before_the_control_loop_reads_again
         assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "remote_estop"
 
 
+def test_a_press_between_two_reads_trips_the_layer_and_its_reset_releases_the_links_latch() -> None:
+    """L2 + B pressed and released between two reads: the layer trips on the legs' link's latch count (the remote
+    shows nothing by then), and its reset releases that latch, so the legs and the arm are driven again, not damped."""
+    with _whole_robot("actuated", ramp_time_s=0.2) as (emu, safe, events):
+        robot, clock = safe.robot, emu.clock
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        assert safe.safety_state is SafetyState.RUN
+        emu.inject(Fault.REMOTE_L2_B)
+        clock.advance(0.015)
+        emu.clear(Fault.REMOTE_L2_B)
+        clock.advance(0.015)
+        assert robot.legs.remote_estop_latched and not robot.remote().l2_b
+        safe.read()
+        assert safe.safety_state is SafetyState.DAMPED and events[-1].reason == "remote_estop"
+        safe.reset()
+        assert not robot.legs.remote_estop_latched
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        assert safe.safety_state is SafetyState.RUN
+        since, damped = clock.now(), robot.arm.bus_stats().damping_cycles
+        _stand(safe, 0.5)
+        frames = [c for c in emu.legs.commands() if c.time > since]
+        assert frames and not any(c.damping for c in frames)  # the controller's commands on the legs' wire
+        assert robot.arm.bus_stats().damping_cycles == damped  # and on the arm's bus
+        assert safe.safety_state is SafetyState.RUN and [e.reason for e in events].count("remote_estop") == 1
+
+
 def test_hw_emulate_serves_one_robot_on_both_wires(monkeypatch: pytest.MonkeyPatch) -> None:
     # the wires' clients wait up to seconds for an answer: only a hung machine misses that
     monkeypatch.setattr(sdk.port_handler, "LATENCY_TIMER", 500)

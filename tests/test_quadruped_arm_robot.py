@@ -250,3 +250,27 @@ def test_link_stats_join_the_legs_pacing_and_the_arm_bus_counters() -> None:
     assert (stats.late_advances, stats.worst_lateness) == (3, 0.004)
     flat = stats.as_dict(prefix="")
     assert flat["frames_sent"] == 500 and flat["arm_bus/frames_sent"] == 200 and flat["late_advances"] == 3
+
+
+@pytest.mark.parametrize(("cls", "protocols"), [
+    ("wbc.hardware.unitree.UnitreeRobot", ("RemoteEstopLatch", "WriteDeadlineTrips", "RemoteSource")),
+    ("wbc.hardware.quadruped_arm_robot.QuadrupedArmRobot", ("RemoteEstopLatch", "WriteDeadlineTrips", "RemoteSource",
+                                                            "HeldJoints")),
+    ("wbc.hardware.io_process.process_robot.ProcessRobot", ("RemoteEstopLatch", "WriteDeadlineTrips", "RemoteSource",
+                                                            "HeldJoints")),
+    ("wbc.hardware.dynamixel.DynamixelArm", ("WriteDeadlineTrips",)),
+])
+def test_each_real_robot_class_has_every_member_of_its_capabilities(cls: str, protocols: tuple[str, ...]) -> None:
+    """A member left out drops the whole capability, silently: the safety layer then neither trips on the link's L2 + B
+    latch nor releases it (a robot class without `remote_estop_latched` did so). Checked on the class, statically."""
+    import importlib
+
+    from wbc.hardware import capabilities
+
+    module, name = cls.rsplit(".", 1)
+    robot_class = getattr(importlib.import_module(module), name)
+    for protocol in protocols:
+        missing = sorted(member for member in capabilities.protocol_members(getattr(capabilities, protocol))
+                         if not hasattr(robot_class, member))
+        assert not missing, f"{name} lacks {missing} of {protocol}"
+        assert capabilities.provides(robot_class, getattr(capabilities, protocol))

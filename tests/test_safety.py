@@ -582,3 +582,43 @@ def test_a_trip_sends_its_damping_before_it_reports_the_trip():
         safe.estop()
     (damped,) = [s for s in seen if s[0] is SafetyState.DAMPED]
     assert damped[2] is not None and _is_damping(damped[2], safe.config)
+
+
+class _CountedLatch(Faulty):
+    """A robot with an L2 + B latch and write-deadline trips whose properties count how often they are read."""
+
+    def __init__(self, inner: Robot) -> None:
+        super().__init__(inner)
+        self.reads = {"remote_estops": 0, "remote_estop_latched": 0, "deadline_trips": 0}
+
+    @property
+    def remote_estops(self) -> int:
+        self.reads["remote_estops"] += 1
+        return 0
+
+    @property
+    def remote_estop_latched(self) -> bool:
+        self.reads["remote_estop_latched"] += 1
+        return False
+
+    def release_remote_estop(self) -> bool:
+        return True
+
+    @property
+    def deadline_trips(self) -> int:
+        self.reads["deadline_trips"] += 1
+        return 0
+
+
+def test_the_layer_looks_its_robots_capabilities_up_once_not_on_every_tick() -> None:
+    """isinstance against a runtime-checkable protocol runs every property of it (a device's lock, the I/O process's
+    state block): the layer reads only what it needs on a tick, and `remote_estop_latched` never."""
+    robot = _CountedLatch(MujocoRobot(MujocoRobotConfig(robot="a1-wx200", arm_mode="none")))
+    safe = SafeRobot(robot, SafetyConfig())
+    assert robot.reads == {"remote_estops": 0, "remote_estop_latched": 0, "deadline_trips": 0}
+    with safe:
+        robot.reads = dict.fromkeys(robot.reads, 0)
+        _drive(safe, MotorCommand.damping(12, 1.0), 50)
+    assert robot.reads["remote_estop_latched"] == 0, robot.reads
+    assert robot.reads["remote_estops"] == 50, robot.reads  # one look per read
+    assert robot.reads["deadline_trips"] == 100, robot.reads  # one per read and one per write

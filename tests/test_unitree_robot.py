@@ -1191,3 +1191,32 @@ def test_a_client_of_another_model_is_told_to_check_the_robot_on_both_sides() ->
     assert rig.emu.stats.length >= 0.05 / LINK_PERIOD and rig.emu.stats.accepted == 0
     assert "610 bytes is an a1 LowCmd, and this side speaks go1; check --robot on both sides" in rig.emu.last_reject
     rig.emu.close()
+
+
+def test_an_l2_b_press_on_any_frame_of_a_receive_batch_latches_damping() -> None:
+    """A press shown on a frame that a newer frame without it follows in the same receive batch (a short press between
+    two link periods) latches like one on the newest; a press held across batches counts once."""
+    import dataclasses
+
+    from wbc.hardware.unitree.remote import Remote
+
+    fake, clock = FakeTransport(), ManualClock()
+    robot = UnitreeRobot(UnitreeRobotConfig(robot="go1", target_host=LOOPBACK, target_port=9), transport=fake,
+                         clock=clock)
+
+    def frame(tick: int, l2_b: bool) -> bytes:
+        state, extras = decode_state(robot.layout, _still_state(robot, tick=tick), time=0.0)
+        if l2_b:
+            extras = dataclasses.replace(extras, remote=Remote.build(buttons=("L2", "B")))
+        return encode_state(robot.layout, state, extras)
+
+    fake.deliver(frame(7, False))
+    with robot:
+        seen = []
+        for batch in ([(8, True), (9, False)], [(10, True)], [(11, True), (12, True)], [(13, False), (14, False)]):
+            for tick, pressed in batch:
+                fake.deliver(frame(tick, pressed))
+            clock.advance(LINK_PERIOD)
+            seen.append((robot.remote_estops, robot.remote_estop_latched))
+        assert seen == [(1, True), (2, True), (2, True), (2, True)]
+        assert robot.release_remote_estop() and not robot.remote_estop_latched

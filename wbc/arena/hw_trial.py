@@ -278,6 +278,8 @@ class HardwareTrialResult:
         interrupted: the command was interrupted while the trial played (`Interruption`): the episode is the part
             played up to it; None when it was not. A trial's caller does not get the result then, but its results
             directory holds it (`ResultsInterrupted`).
+        stale_frames: valid leg frames the link refused for their tick (a board repeating its buffer, a robot that
+            restarted), as of the close; None for a robot without such a link (the simulator).
     """
 
     record: TrialRecord
@@ -296,6 +298,7 @@ class HardwareTrialResult:
     link_lost: LinkLost | None = None
     arm_faults: tuple[ArmFault, ...] = ()
     interrupted: Interruption | None = None
+    stale_frames: int | None = None
 
 
 def run_hardware_trial(cfg: HardwareTrialConfig, *, keys: KeySource | None = None,
@@ -489,6 +492,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 link = unless_stopped(hardware.robot.link_stats, None)
             io_cpu_s = link.io["cpu_s"] - io_cpu0 if io_robot is not None and link is not None else None
             arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), ())
+            stale_frames = unless_stopped(lambda: _stale_frames(hardware.robot), None)
             # no settle after an interruption: it is a request to end, which cuts any settle short; the robot is
             # damped by the latched layer already, and its close leaves it damped
             if safe.safety_state is SafetyState.DAMPED and interruption is None:
@@ -508,7 +512,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                                      notes=notes, link=link, cpu_s=cpu_s, episode_wall_s=episode_wall_s,
                                      safety_events=safe.events, trial_started_s=started_s, io_cpu_s=io_cpu_s,
                                      controller_realtime=grant, link_lost=link_lost, arm_faults=arm_faults,
-                                     interrupted=interruption)
+                                     interrupted=interruption, stale_frames=stale_frames)
         during = interruption.when(trial.duration_s) if interruption is not None else None
         try:
             _write_results(cfg, result, trial, lock, published=scenario_published)
@@ -666,6 +670,12 @@ def _latched_faults(robot: object) -> tuple[ArmFault, ...]:
     return robot.faults if isinstance(getattr(type(robot), "faults", None), property) else ()
 
 
+def _stale_frames(robot: object) -> int | None:
+    """The legs' link's frames refused for their tick (`UnitreeRobot.stale_frames`, `ProcessRobot`'s), or None."""
+    legs = getattr(robot, "legs", robot)  # a QuadrupedArmRobot's legs; any other robot is its own
+    return legs.stale_frames if isinstance(getattr(type(legs), "stale_frames", None), property) else None
+
+
 def _settle(robot: EstimatedRobot, dt: float, seconds: float, *, until: Callable[[], bool] = lambda: False) -> None:
     """Keep reading and pacing the tripped robot for `seconds` while its safety layer sends damping.
 
@@ -712,6 +722,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             "target": hardware.target, "control_rate_hz": 1.0 / episode.control_dt, "notes": list(result.notes),
             "episode_wall_s": result.episode_wall_s, "cpu_s": result.cpu_s, "io_cpu_s": result.io_cpu_s,
             "link": result.link.as_dict(prefix="") if result.link is not None else None,
+            "stale_frames": result.stale_frames,  # leg frames refused for their tick (a frozen or restarted board)
             "trial_started_s": result.trial_started_s,
             "realtime": grant.to_dict() if grant is not None else None,  # the devices' process: asked, granted, refused
             "controller_realtime": (result.controller_realtime.to_dict() if result.controller_realtime is not None

@@ -301,6 +301,12 @@ def _real_devices(host: str, port: int, arm_port: str | None) -> list[tuple[str,
     return real
 
 
+# Said in the confirmation itself: no device is opened before the person at the terminal confirms, so the arm's pose
+# is read (and an arm found raised named, joint by joint) only by `DynamixelArm.connect`, after the confirmation.
+ARM_RAISED_NOTE = ("An arm parked raised sags when connecting releases its joints (torque off, then the host's "
+                   "damping only): support it, or lower it to its stowed pose, before you confirm.")
+
+
 def _confirm_hardware(command: str, robot: str, devices: list[tuple[str, str]], what: str, *, yes: bool) -> None:
     """Show the real robot's devices and what will happen to it; have the person at the terminal type ``yes``.
 
@@ -488,8 +494,8 @@ def hw_check(args: argparse.Namespace, *,
         if arm_port:
             _confirm_hardware("hw check", robot, real, "Only damping will be sent (Kp 0, on the arm too). The arm's "
                               "joint servos are switched to current mode (an EEPROM write, with their torque off) and "
-                              "damped; its wrist and gripper are torqued and held where they are. Hang the robot in "
-                              "its harness first.", yes=args.yes)
+                              "damped; its wrist and gripper are torqued and held where they are. " + ARM_RAISED_NOTE
+                              + " Hang the robot in its harness first.", yes=args.yes)
         else:  # the legs alone: the arm, if the robot carries one, is sent nothing
             _confirm_hardware("hw check", wire_name(robot), real, "Only damping will be sent to its legs (Kp 0); "
                               "no arm is driven (no --arm-port). Hang the robot in its harness first.", yes=args.yes)
@@ -624,7 +630,7 @@ def hw_run(args: argparse.Namespace, *, build: Callable[[HardwareRobotConfig], H
         if real:
             _confirm_hardware("hw run", hardware.description.name, real, f"The controller {spec.name} will MOVE it: "
                               "hang it in its harness first, keep the remote (L2+B) and the power switch within "
-                              "reach.", yes=args.yes)
+                              "reach." + (" " + ARM_RAISED_NOTE if arm_port else ""), yes=args.yes)
 
     live = keys = None
     try:

@@ -864,8 +864,12 @@ def print_hw_check(check: HardwareCheck) -> None:
         _print_check_link(check)
         return
     trips = [e for e in check.safety_events if e.to_state == "damped"]
+    waiting = "waiting: no live state stream"
+    if check.stale_frames:
+        waiting += (f": frames arrive ({check.stale_frames} refused) but their tick does not advance: a frozen board, "
+                    "or a robot that restarted (refused until its tick passes the old one): reconnect")
     verdict = {"ramp": "ready: a ramp would start from this pose",
-               "waiting": "waiting: no live state stream"}.get(check.safety_state, check.safety_state)
+               "waiting": waiting}.get(check.safety_state, check.safety_state)
     print("  safety: " + (f"WOULD REFUSE: {trips[0].reason}: {trips[0].detail}" if trips else verdict)
           + f" (joint margin {check.margin} rad beyond each range: a joint marked margin is beyond its range and "
           "within the margin, which the layer lets pass; one marked OUT is beyond both, which it refuses)")
@@ -920,6 +924,8 @@ def _print_check_link(check: HardwareCheck) -> None:
     print_thread_stats("link thread", check.link_thread)
     print(f"  rejected states: {check.decode.rejected} ("
           + ", ".join(f"{r} {getattr(check.decode, r)}" for r in REJECT_REASONS) + ")")
+    print(f"  frames refused for their tick: {check.stale_frames} (valid frames whose tick did not advance: a board "
+          "repeating its buffer, a replay, or a robot that restarted)")
     if check.arm_bus is not None:
         bus = check.arm_bus
         print(f"  arm bus: {bus.cycles} cycles, {bus.damping_cycles} of them damping (no servo command); "

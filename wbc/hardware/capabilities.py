@@ -20,12 +20,17 @@ reset needs it idle) and the motors' own status (`MotorStatusSource`: temperatur
 `MotorNames`). The Unitree backend's `Remote` and `LowStateExtras` have exactly the attributes asked for
 (`RemoteButtons`, `MotorStatus`), so it offers both by returning them; the simulator offers neither, and the checks
 that need them are then skipped.
+
+A check made on every control tick or link period resolves its capability once with `provides` (at construction),
+never with ``isinstance``: against a runtime-checkable protocol with properties, ``isinstance`` runs each property
+(taking a device's lock, reading the I/O process's state block), and raises where one does (a robot not connected).
 """
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -335,3 +340,21 @@ class HeldJoints(Protocol):
 
         `ramp` is not yet started: the robot starts it at the pose it measures at its next write.
         """
+
+
+_ABSENT = object()
+
+
+def protocol_members(protocol: type) -> frozenset[str]:
+    """The public members (methods and properties) that `protocol` and the protocols it extends declare."""
+    return frozenset(name for base in protocol.__mro__ if base not in (object, Protocol) and base.__name__ != "Generic"
+                     for name in vars(base) if not name.startswith("_"))
+
+
+def provides(obj: Any, protocol: type) -> bool:
+    """Whether `obj` (an instance or a class) has every member of `protocol`, looked up statically.
+
+    Unlike ``isinstance``, no property runs: the answer is the class's, the same before `connect` as after, and cheap
+    enough to take once and keep (the safety layer, the I/O process).
+    """
+    return all(inspect.getattr_static(obj, name, _ABSENT) is not _ABSENT for name in protocol_members(protocol))

@@ -310,6 +310,11 @@ class QuadrupedArmRobot(Robot):
         """The legs' link's L2 + B latches (`RemoteEstopLatch`; the remote is the legs'); 0 without one."""
         return self.legs.remote_estops if isinstance(self.legs, RemoteEstopLatch) else 0
 
+    @property
+    def remote_estop_latched(self) -> bool:
+        """Whether the legs' link damps now on its L2 + B latch (and so the arm's bus with it); False without one."""
+        return self.legs.remote_estop_latched if isinstance(self.legs, RemoteEstopLatch) else False
+
     def release_remote_estop(self) -> bool:
         """Release the legs' link's L2 + B latch; False while the buttons are still held."""
         return self.legs.release_remote_estop() if isinstance(self.legs, RemoteEstopLatch) else True

@@ -87,6 +87,8 @@ class HardwareCheck:
         arm_faults: the arm's latched bus faults.
         arm_bus: the arm's bus counters, or None.
         arm_thread: the arm's bus loop's statistics, or None.
+        stale_frames: valid frames the link refused for their tick (it did not advance past the newest taken: a
+            frozen board repeating its buffer, or a robot that restarted, whose tick starts below the old one).
         no_state: why no live state stream came (the link's message: what came, and what to check), or None when
             states came; the layer then stays ``waiting`` and the limits are empty.
         arm_refused: why the arm's backend refused to drive the arm when it connected (a servo's hardware error, a
@@ -118,6 +120,7 @@ class HardwareCheck:
     no_state: str | None = None
     arm_refused: str | None = None
     arm_servos: tuple[ServoReading, ...] = ()
+    stale_frames: int = 0
 
     @property
     def ready(self) -> bool:
@@ -179,7 +182,8 @@ def _check_built(cfg: HardwareCheckConfig, hardware: HardwareRobot) -> HardwareC
         return HardwareCheck(
             robot=cfg.label, target=cfg.target, joint_names=(), state=None, lower=empty, upper=empty,
             margin=safe.config.joint_margin, extras=None, link=legs.link_stats(), link_thread=legs.thread_stats(),
-            decode=legs.decode_stats, safety_state=safe.safety_state.value, safety_events=tuple(events),
+            decode=legs.decode_stats,
+            stale_frames=legs.stale_frames, safety_state=safe.safety_state.value, safety_events=tuple(events),
             arm_port=cfg.arm_port, no_state=str(exc))
     except ArmRefusedError as refused:  # a servo's state, read at connect: a result of the check, with what answers
         if not isinstance(arm, DynamixelArm):
@@ -191,6 +195,7 @@ def _check_built(cfg: HardwareCheckConfig, hardware: HardwareRobot) -> HardwareC
             robot=cfg.label, target=cfg.target, joint_names=safe.joint_names, state=state,
             lower=safe.position_lower, upper=safe.position_upper, margin=safe.config.joint_margin,
             extras=legs.extras, link=legs.link_stats(), link_thread=legs.thread_stats(), decode=legs.decode_stats,
+            stale_frames=legs.stale_frames,
             safety_state=safe.safety_state.value, safety_events=tuple(events), arm_port=cfg.arm_port,
             arm_status=arm.motor_status() if arm is not None else None,
             arm_faults=arm.faults if arm is not None else (), arm_bus=arm.bus_stats() if arm is not None else None,
@@ -226,7 +231,8 @@ def _legs_beside_a_refused_arm(cfg: HardwareCheckConfig, hardware: HardwareRobot
         return HardwareCheck(
             robot=cfg.label, target=cfg.target, joint_names=(), state=None, lower=empty, upper=empty,
             margin=safe.config.joint_margin, extras=None, link=legs.link_stats(), link_thread=legs.thread_stats(),
-            decode=legs.decode_stats, safety_state=safe.safety_state.value, safety_events=tuple(events),
+            decode=legs.decode_stats,
+            stale_frames=legs.stale_frames, safety_state=safe.safety_state.value, safety_events=tuple(events),
             arm_port=cfg.arm_port, no_state=str(exc), arm_refused=refused, arm_servos=arm.survey())
     with safe:
         state = _read_for(safe, clock, cfg.seconds)
@@ -234,6 +240,7 @@ def _legs_beside_a_refused_arm(cfg: HardwareCheckConfig, hardware: HardwareRobot
             robot=cfg.label, target=cfg.target, joint_names=safe.joint_names, state=state,
             lower=safe.position_lower, upper=safe.position_upper, margin=safe.config.joint_margin,
             extras=legs.extras, link=legs.link_stats(), link_thread=legs.thread_stats(), decode=legs.decode_stats,
+            stale_frames=legs.stale_frames,
             safety_state=safe.safety_state.value, safety_events=tuple(events), arm_port=cfg.arm_port,
             arm_refused=refused)
     return replace(check, arm_servos=arm.survey())

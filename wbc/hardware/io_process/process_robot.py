@@ -327,6 +327,18 @@ class ProcessRobot(Robot):
         return True
 
     @property
+    def stale_frames(self) -> int:
+        """Valid leg frames the link refused for their tick (`UnitreeRobot.stale_frames`), fetched from the I/O process.
+
+        Not in the state block: a board that repeats its buffer sends no new state that would carry the count.
+
+        Raises:
+            RobotNotConnectedError: not connected.
+            RobotLinkError: the I/O process failed or died.
+        """
+        return int(self._ask("stale_frames")["stale_frames"])
+
+    @property
     def deadline_trips(self) -> int:
         """The devices' write-deadline trips as of the newest published state (`WriteDeadlineTrips`).
 

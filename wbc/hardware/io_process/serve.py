@@ -55,6 +55,7 @@ from wbc.hardware.capabilities import (
     RemoteEstopLatch,
     RemoteSource,
     WriteDeadlineTrips,
+    provides,
 )
 from wbc.hardware.hardware_robot import HardwareRobotConfig, build_hardware_robot
 from wbc.hardware.interpreter import freeze_heap, realtime_switch_interval
@@ -202,6 +203,13 @@ class _Server:
         self.releases_seen = 0  # the safety layer's releases of the link's L2 + B latch applied so far
         self.counts = dict(states_published=0, commands_forwarded=0, bells_missed=0)
         self.started = started
+        # the robot's capabilities, resolved once: a runtime-checkable protocol's isinstance runs its properties (and
+        # takes the devices' locks) on every call, too dear for the link thread's every state
+        self.latch = robot if provides(robot, RemoteEstopLatch) else None
+        self.trips = robot if provides(robot, WriteDeadlineTrips) else None
+        self.held = robot if provides(robot, HeldJoints) else None
+        self.remote_of = robot.remote if provides(robot, RemoteSource) else None
+        self.status_of = robot.motor_status if provides(robot, MotorStatusSource) else None
 
     def run(self) -> None:
         self._publish()  # the first state, before the controller's process is told
@@ -247,9 +255,9 @@ class _Server:
             if block.count != self.command_seen:
                 self.command_seen, record = block.read()
                 releases = int(record["estop_releases"])
-                if releases != self.releases_seen and isinstance(self.robot, RemoteEstopLatch):
+                if releases != self.releases_seen and self.latch is not None:
                     self.releases_seen = releases
-                    self.robot.release_remote_estop()  # before the command it goes with (the ramp after a reset)
+                    self.latch.release_remote_estop()  # before the command it goes with (the ramp after a reset)
                 self._hold_as_asked(record["held"])
                 self.robot.write(MotorCommand._trusted(np.array(record["rows"])))
                 self.counts["commands_forwarded"] += 1
@@ -258,14 +266,14 @@ class _Server:
 
     def _hold_as_asked(self, held: np.ndarray) -> None:
         """A new generation of the held joints' mode (the safety layer's damp or ramp) to the robot (`HeldJoints`)."""
-        if held[0] == self.held_seen or not isinstance(self.robot, HeldJoints):
+        if held[0] == self.held_seen or self.held is None:
             return
         self.held_seen = float(held[0])
         values = dict(zip(HELD_FIELDS, (float(v) for v in held), strict=True))
         if values["mode"] == HELD_DAMP:
-            self.robot.damp_held(values["kd"])
+            self.held.damp_held(values["kd"])
         elif values["mode"] == HELD_RAMP:
-            self.robot.ramp_held(CommandRamp(duration_s=values["duration_s"], slew=values["slew"], kp=values["kp"],
+            self.held.ramp_held(CommandRamp(duration_s=values["duration_s"], slew=values["slew"], kp=values["kp"],
                                              kd=values["ramp_kd"], hold_s=values["hold_s"]))
 
     def _on_state(self) -> None:
@@ -290,6 +298,9 @@ class _Server:
                 "legs": asdict(legs) if legs is not None else None, "arm": asdict(arm) if arm is not None else None,
                 "threads": {device: asdict(thread) for device, thread in stats.threads.items()},
                 "io": dict(self.counts, cpu_s=time.process_time() - self.started)}})
+            return True
+        if op == "stale_frames":  # asked, not published: a frozen board publishes no new state to carry it
+            self._send({"stale_frames": self.legs.stale_frames})
             return True
         if op == "faults":
             faults = self.robot.faults if isinstance(self.robot, HasLatchedFaults) else ()
@@ -324,8 +335,8 @@ class _Server:
     def _publish(self) -> None:
         robot = self.robot
         state = robot.read()
-        remote = robot.remote() if isinstance(robot, RemoteSource) else None
-        status = robot.motor_status() if isinstance(robot, MotorStatusSource) else None
+        remote = self.remote_of() if self.remote_of is not None else None
+        status = self.status_of() if self.status_of is not None else None
         block = self.blocks.state
         rec = block.record()
         rec["tick"], rec["time"] = state.tick, state.time
@@ -340,11 +351,11 @@ class _Server:
             rec["motor_temperature"][:modes.size] = np.asarray(status.motor_temperature)
         else:
             rec["status_n"] = -1
-        rec["deadline_trips"] = robot.deadline_trips if isinstance(robot, WriteDeadlineTrips) else 0
-        latch = isinstance(robot, RemoteEstopLatch)
-        rec["remote_estops"] = robot.remote_estops if latch else 0
-        rec["remote_estop_latched"] = robot.remote_estop_latched if latch else False
-        rec["has_remote"] = isinstance(remote, Remote)
+        rec["deadline_trips"] = self.trips.deadline_trips if self.trips is not None else 0
+        latch = self.latch
+        rec["remote_estops"] = latch.remote_estops if latch is not None else 0
+        rec["remote_estop_latched"] = latch.remote_estop_latched if latch is not None else False
+        rec["has_remote"] = isinstance(remote, Remote)  # a class, not a protocol: cheap
         if isinstance(remote, Remote):
             rec["remote"] = np.frombuffer(remote.raw, np.uint8)
         block.publish()

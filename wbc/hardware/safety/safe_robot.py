@@ -46,6 +46,7 @@ from wbc.hardware.capabilities import (
     RemoteSource,
     WallClock,
     WriteDeadlineTrips,
+    provides,
 )
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.config import SafetyConfig
@@ -97,6 +98,12 @@ class SafeRobot(Robot):
         self._over_power_frames = 0
         self._deadline_trips: int | None = None  # the robot's write-deadline trips as last seen (`WriteDeadlineTrips`)
         self._remote_estops = 0  # the robot's own L2 + B latches as last seen (`RemoteEstopLatch`)
+        # The robot's capabilities, resolved once: isinstance against a runtime-checkable protocol runs the protocol's
+        # properties (a device's lock, the I/O process's state block) on every call, too dear for every read and write.
+        self._latch: RemoteEstopLatch | None = robot if provides(robot, RemoteEstopLatch) else None
+        self._trips: WriteDeadlineTrips | None = robot if provides(robot, WriteDeadlineTrips) else None
+        self._held: HeldJoints | None = robot if provides(robot, HeldJoints) else None
+        self._remote_of = robot.remote if provides(robot, RemoteSource) else None
         self._ramp: CommandRamp | None = None
         self._sent: MotorCommand | None = None
         self._lower = self._upper = np.zeros(0)
@@ -177,7 +184,7 @@ class SafeRobot(Robot):
             if power > self.config.power_limit_w:
                 why.append(f"over_power: {power:.0f} W measured (limit {self.config.power_limit_w} W); wait until "
                            "the motors are quiet")
-        if not why and isinstance(self.robot, RemoteEstopLatch) and not self.robot.release_remote_estop():
+        if not why and self._latch is not None and not self._latch.release_remote_estop():
             why.append("the robot's link still sees L2 + B held; release them")
         if why:
             raise SafetyResetError("SafeRobot.reset refused: " + "; ".join(why))
@@ -241,8 +248,8 @@ class SafeRobot(Robot):
         self._last_tick, self._latest, self._fresh = state.tick, state, fresh
         if fresh:
             self._last_fresh_time = now
-        if isinstance(self.robot, RemoteEstopLatch):
-            presses = self.robot.remote_estops
+        if self._latch is not None:
+            presses = self._latch.remote_estops
             if presses > self._remote_estops:
                 self._remote_estops = presses
                 # the link damped on the very frame that showed the press; the layer latches it
@@ -274,8 +281,8 @@ class SafeRobot(Robot):
             if self._ramp is None:
                 self._ramp = self._new_ramp()
                 out = self._ramp.start(np.clip(self._latest.q, self._lower, self._upper), now)
-                if isinstance(self.robot, HeldJoints):  # a locked arm ramps into its hold beside the legs
-                    self.robot.ramp_held(self._new_ramp())
+                if self._held is not None:  # a locked arm ramps into its hold beside the legs
+                    self._held.ramp_held(self._new_ramp())
             else:
                 out, done = self._ramp.step(target, now)
                 out = self._limit_positions(out)  # the controller's target plus the closing gap may leave the table
@@ -296,8 +303,8 @@ class SafeRobot(Robot):
 
     def _damp_held(self) -> None:
         """Damp the joints the wrapped robot drives for no controller (a locked arm; `HeldJoints`), if any."""
-        if isinstance(self.robot, HeldJoints):
-            self.robot.damp_held(self.config.arm_damping_kd)
+        if self._held is not None:
+            self._held.damp_held(self.config.arm_damping_kd)
 
     def _advance(self, dt: float) -> None:
         self.robot.advance(dt)
@@ -305,7 +312,7 @@ class SafeRobot(Robot):
 
     # -- checks ---------------------------------------------------------------------------------------------------
     def _remote(self) -> RemoteButtons | None:
-        return self.robot.remote() if isinstance(self.robot, RemoteSource) else None
+        return self._remote_of() if self._remote_of is not None else None
 
     def _check_stale(self, now: float) -> None:
         if self._state not in (SafetyState.RAMP, SafetyState.RUN):
@@ -317,7 +324,7 @@ class SafeRobot(Robot):
                                       f"{self.config.stale_timeout_s} s)")
 
     def _robot_deadline_trips(self) -> int | None:
-        return self.robot.deadline_trips if isinstance(self.robot, WriteDeadlineTrips) else None
+        return self._trips.deadline_trips if self._trips is not None else None
 
     def _check_deadline(self) -> None:
         """A device damped on its own since the last look (its write deadline expired: the loop stalled): ramp again.

@@ -489,6 +489,9 @@ class UnitreeRobot(Robot):
 
     def _receive(self, transport: Transport) -> None:
         newest = None
+        # L2 + B pressed on any frame taken in this batch, not only on the newest (a short press between two link
+        # periods): a rising edge against the frame before it (only this thread writes `_l2_b_held`)
+        pressed, held = False, self._l2_b_held
         for datagram in transport.receive():
             try:
                 decoded = decode_state(self.layout, datagram, time=0.0, stats=self.decode_stats)
@@ -502,17 +505,18 @@ class UnitreeRobot(Robot):
                 self._stale_frames += 1
                 continue
             newest = decoded
+            pressed = pressed or (decoded[1].remote.l2_b and not held)
+            held = decoded[1].remote.l2_b
         if newest is None:
             return
         now = self.clock.now()
         state, extras = newest
         with self._lock:
             self._wire_tick = state.tick
-            held = extras.remote.l2_b
-            if held and not self._l2_b_held:  # the e-stop: damping from this period's send on, latched
+            if pressed:  # the e-stop: damping from this period's send on, latched
                 self._remote_estops += 1
                 self._estop_latched = True
-            self._l2_b_held = held
+            self._l2_b_held = held  # as the newest frame shows them
             self._fresh += 1
             self._state = dataclasses.replace(state, tick=self._fresh, time=now - self._t0)
             self._extras = extras
