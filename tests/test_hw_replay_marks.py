@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +14,7 @@ from wbc.arena.episode import Episode, OperatorLog, SafetyLog
 from wbc.arena.hw_trial import HardwareTrialConfig, run_hardware_trial
 from wbc.arena.operator import ScriptedKeys
 from wbc.arena.results import episode_path
+from wbc.viz.errors import ViewerError
 from wbc.viz.replay import load_stored_episode
 from wbc.viz.signals import TrialSignals
 
@@ -75,7 +78,6 @@ def test_the_safety_marks_are_at_trial_time_and_the_file_says_each_clock(estoppe
 
 
 def test_an_old_results_directory_is_moved_to_trial_time(estopped: Path, tmp_path: Path) -> None:
-    import shutil
     old = tmp_path / "old"
     shutil.copytree(estopped, old)
     info = json.loads((old / "hardware.json").read_text())
@@ -85,7 +87,6 @@ def test_an_old_results_directory_is_moved_to_trial_time(estopped: Path, tmp_pat
     path = episode_path(old, stored.controller, "soft", 0, 0)
     ep = Episode.load(str(path))
     shifted = ep.safety_events.shifted(info["trial_started_s"])
-    import dataclasses
     dataclasses.replace(ep, safety_events=shifted).save(str(path))
     again = load_stored_episode(old, 0)
     np.testing.assert_allclose(again.episode.safety_events.time, stored.episode.safety_events.time)
@@ -112,11 +113,10 @@ def test_the_end_mark_says_the_outcome() -> None:
                 yaw_rate=np.zeros(500), roll=np.zeros(500), pitch=np.zeros(500), power=np.zeros(500),
                 arm_q=np.zeros((500, 3)), qpos=np.tile([0, 0, 0.3, 1, 0, 0, 0] + [0.0] * 12, (500, 1)),
                 act_s=np.zeros(500))
-    trip = SafetyLog.of([])
     tripped = Episode(**base, fell=True, fall_time_s=0.5, safety_events=SafetyLog(
         time=np.array([0.5]), from_state=np.array(["run"]), to_state=np.array(["damped"]),
         reason=np.array(["tilt"]), detail=np.array([""])), operator_events=OperatorLog())
-    fell = Episode(**base, fell=True, fall_time_s=0.5, safety_events=trip)
+    fell = Episode(**base, fell=True, fall_time_s=0.5, safety_events=SafetyLog.of([]))
     ok = Episode(**base, fell=False, fall_time_s=float("nan"))
 
     def ends(ep: Episode, **kw: str) -> list[str]:
@@ -131,10 +131,6 @@ def test_the_end_mark_says_the_outcome() -> None:
 
 
 def test_the_errors_name_the_file_the_field_and_the_hardware_remedy(estopped: Path, tmp_path: Path) -> None:
-    import shutil
-
-    from wbc.viz.errors import ViewerError
-
     with pytest.raises(ViewerError, match=r"hardware\.json: a file, not a results directory: --episode takes the "
                                           r"directory it is in"):
         load_stored_episode(estopped / "hardware.json", 0)
