@@ -830,3 +830,53 @@ def test_screenshots_refuse_a_missing_folder_before_anything_plays(tmp_path, cap
     with pytest.raises(WbcError, match=f"{afile} is a file, not a folder"):
         screenshots.shoot(afile)
     assert not missing.exists()
+
+
+# -- colour, marks and accessibility ---------------------------------------------------------------------------------
+def _contrast(a: str, b: str) -> float:
+    def lum(h: str) -> float:
+        c = [int(h.lstrip("#")[i:i + 2], 16) / 255 for i in (0, 2, 4)]
+        c = [x / 12.92 if x <= 0.03928 else ((x + 0.055) / 1.055) ** 2.4 for x in c]
+        return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+
+    lo, hi = sorted((lum(a), lum(b)))
+    return (hi + 0.05) / (lo + 0.05)
+
+
+def test_the_page_plots_in_the_arenas_palette_and_tells_its_marks_apart_without_colour():
+    from wbc.arena.plot_style import OKABE_ITO
+    from wbc.viz.page_script import PAGE_SCRIPT
+
+    palette = json.loads(re.search(r"var COLORS = (\[[^\]]*\]);", PAGE_SCRIPT).group(1))
+    assert palette == list(OKABE_ITO)  # the arena's colour-blind-safe palette, taken from plot_style
+    colors = dict(re.findall(r'(\w+): "(#[0-9a-fA-F]{6})"', re.search(r"MARK_COLORS = \{(.*?)\};", PAGE_SCRIPT,
+                                                                        re.S).group(1)))
+    for kind in ("fall", "end", "safety", "operator", "command", "divergence"):
+        assert _contrast(colors[kind], "#f4f4f4") >= 3.0, kind  # the timeline's background
+    styles = re.search(r"MARK_STYLES = \{(.*?)\};", PAGE_SCRIPT, re.S).group(1)
+    letters = re.findall(r'(\w+): \{dash: (\[[^\]]*\]),\s*letter: "(\w)"\}', styles)
+    by_kind = {k: (d, letter) for k, d, letter in letters}
+    assert by_kind["fall"] != by_kind["safety"] and by_kind["fall"][1] != by_kind["safety"][1]
+    assert len({letter for _, _, letter in letters}) == len(letters)
+    legend = re.search(r'var MARKS_LEGEND = (".*?");', PAGE_SCRIPT, re.S).group(1)
+    for word in ("push", "browser push", "fall", "safety", "operator", "command", "divergence"):
+        assert word in legend, word
+
+
+def test_the_page_says_its_language_and_names_its_controls(tmp_path):
+    html = _walking_page(tmp_path / "walk.html").read_text()
+    assert '<html lang="en">' in html
+    from wbc.viz.page_script import PAGE_SCRIPT
+
+    assert re.search(r'id: "wbc-speed", "aria-label": "[^"]+"', PAGE_SCRIPT)
+    assert re.search(r'id: "wbc-slider",[^}]*"aria-label": "[^"]+"', PAGE_SCRIPT, re.S)
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no chromium binary (CI installs Debian's `chromium` package)")
+def test_browser_speed_menu_shows_the_speed_a_url_set_and_stays_within_its_range(tmp_path):
+    path = _walking_page(tmp_path / "walk.html")
+    state = _dump(f"{path.resolve().as_uri()}#t=1&speed=0.3", tmp_path)
+    assert state["speed"] == pytest.approx(0.3)
+    assert re.search(r'<option value="0\.3">x0\.3</option>', state["_dom"])  # the menu has the speed playing
+    fast = _dump(f"{path.resolve().as_uri()}#t=1&speed=8", tmp_path)
+    assert fast["speed"] == 2  # the menu's fastest

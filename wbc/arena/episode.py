@@ -11,6 +11,7 @@ a hardware trial (`OperatorLog`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 import zipfile
@@ -103,8 +104,11 @@ class SafetyLog:
     """Transitions of a safety layer as arrays, one row per transition, oldest first.
 
     Attributes:
-        time: when each happened, on the safety layer's clock, shape (n,) [s] (the robot time since the layer was
-            made, unless it was given a wall clock).
+        time: when each happened, shape (n,) [s]. In an `Episode` it is the episode's own clock (0 at its first
+            tick): the runner stores the layer's clock (robot time since the layer was made, which in simulation is
+            the episode's), and a hardware trial (`wbc hw run`) moves it by the stand-up before the trial
+            (``trial_started_s`` in ``hardware.json``). Results written before that move store the layer's clock;
+            ``hardware.json`` without a ``clocks`` key tells them apart (`wbc.viz.replay` moves them when it reads).
         from_state: the state left, shape (n,) (unicode).
         to_state: the state entered, shape (n,) (unicode).
         reason: why, shape (n,) (unicode; a trip's reason names the check that fired).
@@ -134,6 +138,10 @@ class SafetyLog:
     def __len__(self) -> int:
         """Number of transitions."""
         return len(self.time)
+
+    def shifted(self, by_s: float) -> SafetyLog:
+        """The same transitions with `by_s` [s] added to each time (to move them onto another clock)."""
+        return dataclasses.replace(self, time=np.asarray(self.time, dtype=np.float64) + by_s)
 
     def rows(self) -> list[tuple[float, str, str, str, str]]:
         """The transitions as (time, from_state, to_state, reason, detail), oldest first."""
@@ -210,7 +218,7 @@ class Episode:
             `control_dt` missed its deadline on a real robot.
         pushes: the pushes that began before the episode ended.
         safety_events: the transitions of the robot's safety layer during the episode (empty for a robot that has
-            none, `wbc.hardware.capabilities.HasSafetyEvents`).
+            none, `wbc.hardware.capabilities.HasSafetyEvents`), at trial time as `t` (see `SafetyLog.time`).
         operator_events: the keys an operator pressed during a hardware trial (a marked push, an e-stop).
         base_source: where `v_base_in_yaw`, `yaw_rate`, `roll`, `pitch` and the base pose in `qpos` come from, one
             of `BASE_SOURCES`: ``truth`` (the simulator) or ``estimator`` (the robot's own sensors).

@@ -98,6 +98,15 @@ _T = TypeVar("_T")
 __all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "Interruption", "LinkLost",
            "ResultsInterrupted", "run_hardware_trial"]
 
+HARDWARE_JSON_CLOCKS = {
+    "safety_events": "the safety layer's clock: robot time since the connect; the trial began at trial_started_s",
+    "trial_started_s": "the safety layer's clock",
+    "operator_events": "trial time: 0 at the trial's first tick, as the episode's t",
+    "episode_safety_events": "trial time: the episode file's safety_time is safety_events' time - trial_started_s",
+}
+"""What ``hardware.json``'s ``clocks`` says: the clock each of its times is on (a file without it is older: its
+episode's ``safety_time`` is on the safety layer's clock)."""
+
 _STAND_UP_DT = 0.02  # [s] period of the stand hold that precedes a trial (the stand controller's 50 Hz)
 
 
@@ -502,7 +511,10 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 settling[0] = False
             link_lost = unless_stopped(lambda: _link_lost(safe, started_s), None) if wall else None
             arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), arm_faults)  # the settle's too
-        episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log())
+        # the layer's transitions on the trial's clock, as the episode's other times (the layer counts from the
+        # connect, and the stand-up before the trial took `started_s` of it)
+        episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log(),
+                                      safety_events=episode.safety_events.shifted(-started_s))
         counters, error = read_counters(ctrl, spec.name, trial, episode, error)
         record = TrialRecord.of_trial(trial, controller=spec.name, episode=episode,
                                       counters=counters, wall_s=episode_wall_s,
@@ -732,6 +744,7 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
             "arm_faults": [dataclasses.asdict(fault) for fault in result.arm_faults],
             "interrupted": result.interrupted.to_dict() if result.interrupted is not None else None,
             "operator_events": [{"time": t, "key": k, "action": a} for t, k, a in episode.operator_events.rows()],
+            "clocks": HARDWARE_JSON_CLOCKS,
         }
         try:
             write_text(store.dir / "hardware.json", json.dumps(hardware_json, indent=2))

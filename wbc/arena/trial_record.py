@@ -40,7 +40,7 @@ from wbc.scenario.trial import Trial
 
 __all__ = ["CHECKSUM", "CONTROLLER_ERROR", "DIVERGED", "FALL", "MACHINE_TIMED", "OPERATOR_STOP", "OUTCOMES",
            "SAFETY_TRIP", "SUCCESS", "RefusedRow", "StoredRows", "TrialRecord", "check_counters", "checksum_of",
-           "decode_counters", "encode_counters", "scan_csv"]
+           "decode_counters", "encode_counters", "episode_outcome", "scan_csv"]
 
 SUCCESS = "success"
 """The episode reached its end."""
@@ -590,6 +590,14 @@ def decode_counters(text: str) -> dict[str, int]:
             raise RecordError(f"counters cell {text!r}: {pair!r} is not name=count; fix or delete that line of "
                               "trials.csv") from None
     return out
+
+
+def episode_outcome(episode: Episode) -> str:
+    """How a played episode ended, as far as the episode says: a fall, a trip, an operator's stop or success.
+
+    A controller's error, an interruption or a divergence is the trial record's to say (its ``outcome``).
+    """
+    return _outcome(episode)
 
 
 def _outcome(episode: Episode) -> str:

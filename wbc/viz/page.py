@@ -66,7 +66,8 @@ def live_page_html(scene: list[str], *, title: str, duration: float, fps: float,
 
 def _html(title: str, data: dict[str, object], commands: list[str]) -> str:
     return (
-        "<!DOCTYPE html>\n<html>\n<head><meta charset=\"utf-8\"><title>" + html_lib.escape(title) + "</title>\n"
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head><meta charset=\"utf-8\"><title>" + html_lib.escape(title)
+        + "</title>\n"
         "<style>" + PAGE_STYLE + "</style>\n</head>\n<body>\n"
         "<div id=\"wbc-main\"><div id=\"meshcat-pane\"></div><div id=\"wbc-plots\"></div></div>\n"
         "<div id=\"wbc-bar\"></div>\n"

@@ -18,6 +18,10 @@ camera. Keys: space play / pause, left / right one frame, ``[`` / ``]`` half / t
 
 from __future__ import annotations
 
+import json
+
+from wbc.arena.plot_style import OKABE_ITO
+
 __all__ = ["PAGE_SCRIPT", "PAGE_STYLE"]
 
 PAGE_STYLE = """
@@ -41,10 +45,19 @@ PAGE_SCRIPT = r"""
 (function () {
   var D = window.wbcData;
   var anim = viewer.animator;
-  var COLORS = ["#1f77b4", "#d62728", "#2ca02c", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf",
-                "#7f7f7f", "#bcbd22", "#393b79", "#637939", "#8c6d31", "#843c39", "#7b4173"];
-  var MARK_COLORS = {push: "rgba(224,32,27,0.18)", fall: "#d00000", safety: "#ff8c00", command: "#2660d9",
-                     browser_push: "rgba(160,0,200,0.25)", divergence: "#7a00b0"};
+  var COLORS = __WBC_COLORS__;
+  // an instant mark is a 2 px line told apart by its dash and its letter as well as its colour (each colour has a
+  // contrast of 3:1 or more against the timeline's #f4f4f4 and the plots' white); a span is a translucent band
+  var MARK_COLORS = {push: "rgba(224,32,27,0.18)", fall: "#d00000", end: "#d00000", safety: "#b35900",
+                     operator: "#000000", command: "#2660d9", browser_push: "rgba(160,0,200,0.25)",
+                     divergence: "#7a00b0"};
+  var MARK_STYLES = {fall: {dash: [], letter: "F"}, end: {dash: [6, 2], letter: "E"}, safety: {dash: [4, 3],
+                     letter: "S"}, operator: {dash: [1, 2], letter: "O"}, command: {dash: [6, 2, 1, 2], letter: "C"},
+                     divergence: {dash: [2, 2], letter: "D"}};
+  var MARKS_LEGEND = "events: push (red band), browser push (purple band), F fall (solid red line), E other end: " +
+    "safety trip, operator stop, controller error (dashed red), S safety transition (dashed orange), O operator " +
+    "key (dotted black), C command change (dash-dot blue), D divergence (dotted purple); the ghost run's letters " +
+    "in lower case";
   var page = window.wbcPage = {t: 0, cursorT: 0, sceneT: null, playing: false, speed: 1, follow: true,
                                plots: {}, robots: D.runs.length, runs: D.runs.map(function (r) { return r.name; }),
                                marks: [], ready: false, duration: D.duration, live: !!D.live};
@@ -124,8 +137,14 @@ PAGE_SCRIPT = r"""
       ctx.fillStyle = ctx.strokeStyle = MARK_COLORS[m.kind] || "#555";
       var x = xOf(m.t, w);
       if (m.d > 0) { ctx.fillRect(x, 0, Math.max(2, xOf(m.t + m.d, w) - x), h); }
-      else { ctx.lineWidth = 2; ctx.setLineDash(m.run === 1 ? [3, 3] : []); ctx.beginPath(); ctx.moveTo(x, 0);
-             ctx.lineTo(x, h); ctx.stroke(); ctx.setLineDash([]); }
+      else {
+        var st = MARK_STYLES[m.kind] || {dash: [], letter: "?"};
+        ctx.lineWidth = 2; ctx.setLineDash(st.dash); ctx.beginPath(); ctx.moveTo(x, 0);
+        ctx.lineTo(x, h); ctx.stroke(); ctx.setLineDash([]);
+        // the letter names the kind; the A / B ghost's (the second run's) is lower case
+        ctx.font = "bold 9px sans-serif";
+        ctx.fillText(m.run === 1 ? st.letter.toLowerCase() : st.letter, x + 2, 9);
+      }
     });
   }
 
@@ -180,15 +199,15 @@ PAGE_SCRIPT = r"""
 
   // -- timeline bar ----------------------------------------------------------------------------------------------
   var bar = document.getElementById("wbc-bar");
-  var marksCanvas = el("canvas", {id: "wbc-marks", title: "events: push (red band), fall (red line), safety " +
-                                  "(orange), divergence (purple)"}, bar);
+  var marksCanvas = el("canvas", {id: "wbc-marks", title: MARKS_LEGEND}, bar);
   var row = el("div", {"class": "row"}, bar);
   var playBtn = el("button", {id: "wbc-play", text: "play"}, row);
-  var speedSel = el("select", {id: "wbc-speed"}, row);
-  [2, 1, 0.5, 0.25, 0.1, 0.05].forEach(function (s) {
+  var speedSel = el("select", {id: "wbc-speed", "aria-label": "playback speed"}, row);
+  var SPEEDS = [2, 1, 0.5, 0.25, 0.1, 0.05];
+  SPEEDS.forEach(function (s) {
     var o = el("option", {value: String(s), text: "x" + s}, speedSel); if (s === 1) { o.selected = true; } });
   var slider = el("input", {id: "wbc-slider", type: "range", min: "0", max: String(D.duration),
-                            step: String(1 / D.fps), value: "0"}, row);
+                            step: String(1 / D.fps), value: "0", "aria-label": "trial time [s]"}, row);
   var label = el("span", {id: "wbc-time", text: "0.000 s"}, row);
   var followLbl = el("label", {}, row);
   var followBox = el("input", {id: "wbc-follow", type: "checkbox"}, followLbl);
@@ -282,7 +301,23 @@ PAGE_SCRIPT = r"""
   }
   page.play = function () { setPlaying(true); };
   page.pause = function () { setPlaying(false); };
-  function setSpeed(s) { page.speed = s; speedSel.value = String(s); publish(); }
+  // the speed within the menu's range (`]` stops at its fastest, `[` at its slowest); a speed between its entries
+  // (``#speed=0.3``) gets an entry of its own, so that the menu shows the speed playing
+  function setSpeed(s) {
+    s = Math.min(SPEEDS[0], Math.max(SPEEDS[SPEEDS.length - 1], s));
+    if (!(s > 0)) { s = 1; }
+    page.speed = s;
+    var v = String(s), known = false;
+    for (var i = 0; i < speedSel.options.length; i++) { if (speedSel.options[i].value === v) { known = true; } }
+    if (!known) {
+      var o = document.createElement("option"); o.value = v; o.textContent = "x" + v;
+      var at = null;
+      for (var j = 0; j < speedSel.options.length; j++) {
+        if (at === null && parseFloat(speedSel.options[j].value) < s) { at = speedSel.options[j]; } }
+      speedSel.insertBefore(o, at);
+    }
+    speedSel.value = v; publish();
+  }
   page.setSpeed = setSpeed;
   function setFollow(on) {
     page.follow = on; followBox.checked = on;
@@ -412,3 +447,4 @@ PAGE_SCRIPT = r"""
   }, 20);
 })();
 """
+PAGE_SCRIPT = PAGE_SCRIPT.replace("__WBC_COLORS__", json.dumps(list(OKABE_ITO)))  # the arena's plots' palette

@@ -83,6 +83,7 @@ class StoredEpisode:
         scenario: the scenario file the trial was drawn from, as loaded: the run's content (its hash is the one
             ``run.json`` records), which a command warns about when it is not the published one
             (`wbc.scenario.warn_if_unpublished`).
+        record: the trial's row of ``trials.csv`` (its outcome and error), None where there is none to read.
     """
 
     path: Path
@@ -91,6 +92,7 @@ class StoredEpisode:
     trial: Trial
     episode: Episode
     scenario: Scenario
+    record: TrialRecord | None = None
 
     def content(self) -> SceneContent:
         """What to draw: the controller's robot (arm mode) on the trial's ground."""
@@ -135,6 +137,10 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
         raise ViewerError(f"{root}: an episode file alone (`wbc view --save-episode`) holds no trial to draw it on; "
                           "--episode takes a results directory (`wbc run --save-episodes --out DIR`). To see a trial "
                           "played live again, write it with --export-scenario FILE.toml and view that scenario")
+    if root.is_file():
+        raise ViewerError(f"{root}: a file, not a results directory: --episode takes the directory it is in "
+                          f"({root.parent}), as `wbc run --save-episodes --out DIR` or `wbc hw run --out DIR` wrote "
+                          "it")
     if not root.is_dir():
         raise ViewerError(f"{root}: no such results directory (give the --out of a `wbc run --save-episodes`)")
     if not run_json.exists():
@@ -155,7 +161,7 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
                           f"{played[0]}..{played[-1]} per band and seed{_so_far(root, controller, band, seed, played)}")
     path = episode_path(root, controller, band, seed, index)
     if not path.exists():
-        raise ViewerError(_no_episode(root, path, controller, band, seed, index))
+        raise ViewerError(_no_episode(root, path, controller, band, seed, index, hardware=played_on is not None))
     try:
         episode = Episode.load(str(path))  # checked in depth: a malformed episode is refused, never drawn
     except EpisodeFileError as exc:  # names the file and the field
@@ -172,7 +178,14 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
                           f"(hash {scenario.hash[:12]} != {scenario_hash[:12]}); restore that version to replay")
     trial = scenario.trial(band, seed, index)
     if played_on is not None:  # on a robot: its own ground (unknown, drawn flat) and none of the scenario's pushes
+        try:
+            get_robot(played_on)
+        except WbcError as exc:
+            raise ViewerError(f"{run_json}: field robot: {exc}") from None
         trial = dataclasses.replace(trial, robot=played_on, terrain=TerrainConfig(kind="flat"), pushes=())
+        episode = _on_trial_clock(root / "hardware.json", episode)
+    if episode.duration_s != trial.duration_s:  # a trial played shorter (`wbc hw run --seconds`): the one played
+        trial = dataclasses.replace(trial, duration_s=float(episode.duration_s))
     arm_mode = _recorded_arm_mode(run_json, identity, controller)
     nq = get_robot(trial.robot, arm_mode).num_joints + 7
     if episode.qpos.ndim != 2 or episode.qpos.shape[1] != nq:
@@ -180,7 +193,35 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
                           f"{trial.robot} driven by {controller}; the file belongs to another run: store it again "
                           "with `wbc run --save-episodes`")
     return StoredEpisode(path=path, controller=controller, arm_mode=arm_mode, trial=trial, episode=episode,
-                         scenario=scenario)
+                         scenario=scenario, record=_record(root, controller, band, seed, index))
+
+
+def _on_trial_clock(hardware_json: Path, episode: Episode) -> Episode:
+    """The hardware episode with its safety transitions at trial time, as `Episode.safety_events` documents.
+
+    A ``wbc hw run`` that wrote ``hardware.json`` without its ``clocks`` key stored them on the safety layer's clock
+    (counted from the connect, the stand-up included): they are moved back by its ``trial_started_s``.
+    """
+    try:
+        info = read_json(hardware_json)
+    except (InputFileError, ValueError):
+        return episode  # nothing to move them by
+    if not isinstance(info, dict) or "clocks" in info:
+        return episode
+    started = info.get("trial_started_s")
+    if not isinstance(started, (int, float)) or isinstance(started, bool):
+        return episode
+    return dataclasses.replace(episode, safety_events=episode.safety_events.shifted(-float(started)))
+
+
+def _record(root: Path, controller: str, band: str, seed: int, index: int) -> TrialRecord | None:
+    """The trial's row of ``trials.csv`` (None: no file to trust, or no row)."""
+    try:
+        records = TrialRecord.read_csv(root / "trials.csv")
+    except (WbcError, OSError):
+        return None
+    return next((r for r in records if (r.controller, r.band, r.seed, r.trial) == (controller, band, seed, index)),
+                None)
 
 
 def _played(root: Path, controller: str, band: str, seed: int) -> list[int] | None:
@@ -203,8 +244,17 @@ def _so_far(root: Path, controller: str, band: str, seed: int, planned: list[int
             "interrupted, and the `wbc run` or `wbc compare` command that wrote it, with --resume, plays the rest")
 
 
-def _no_episode(root: Path, path: Path, controller: str, band: str, seed: int, index: int) -> str:
-    """Why `path` is missing, with the remedy: the trial was not played yet, or was played without its episode."""
+def _no_episode(root: Path, path: Path, controller: str, band: str, seed: int, index: int, *,
+                hardware: bool = False) -> str:
+    """Why `path` is missing, with the remedy: the trial was not played yet, or was played without its episode.
+
+    A hardware trial's directory (`hardware`: ``wbc hw run``) always stores its episode: one without it was damaged
+    or cut short, and only playing the trial again on the robot brings it back.
+    """
+    if hardware:
+        return (f"{path}: missing; a `wbc hw run` stores its trial's episode there ({root} is such a results "
+                "directory, so its episodes/ was moved, deleted or never finished): play the trial again with "
+                f"`wbc hw run ... --out DIR`")
     done = _played(root, controller, band, seed)
     if done is not None and index not in done:
         return (f"{path}: trial {index} of controller {controller}, band {band}, seed {seed} was not played: the run "

@@ -26,6 +26,15 @@ import mujoco
 import numpy as np
 
 from wbc.arena.episode import Episode
+from wbc.arena.trial_record import (
+    CONTROLLER_ERROR,
+    DIVERGED,
+    FALL,
+    OPERATOR_STOP,
+    SAFETY_TRIP,
+    SUCCESS,
+    episode_outcome,
+)
 from wbc.hardware.mujoco.physics import base_body_id
 from wbc.viz.frame import VizFrame
 from wbc.viz.sim_frames import SimulatedWorld
@@ -54,13 +63,32 @@ _ARM_KEYS = [("arm_momentum", f"arm L{a}") for a in "xyz"] + [("arm_momentum", f
 _PLAN_KEYS = [("mpc_com", "plan z"), ("mpc_com", "CoM z"), ("mpc_com", "plan x-CoM x")]
 
 
+_END_WORDS = {FALL: "fell", SAFETY_TRIP: "safety trip", OPERATOR_STOP: "operator stop",
+              CONTROLLER_ERROR: "controller error", DIVERGED: "simulation diverged"}
+
+
+def _end_mark(name: str, episode: Episode, outcome: str, error: str) -> Mark | None:
+    """The mark of how `episode` ended (None: it played to its end)."""
+    if outcome == SUCCESS:
+        return None
+    t = float(episode.fall_time_s) if episode.fell and math.isfinite(episode.fall_time_s) else (
+        float(episode.t[-1]) if len(episode.t) else 0.0)
+    tripped = episode.safety_events.reason[episode.safety_events.to_state == "damped"]
+    why = f": {tripped[0]}" if outcome in (SAFETY_TRIP, OPERATOR_STOP) and len(tripped) else (
+        f": {error.splitlines()[0][:160]}" if error else "")
+    if outcome == FALL:
+        return Mark(t, "fall", f"{name} fell")
+    return Mark(t, "end", f"{name}: {_END_WORDS.get(outcome, outcome.replace('_', ' '))}{why}")
+
+
 @dataclass(frozen=True)
 class Mark:
     """An event on the timeline.
 
     Attributes:
         t: when [s].
-        kind: ``push``, ``fall``, ``safety``, ``command``, ``browser_push`` or ``divergence``.
+        kind: ``push``, ``fall``, ``end`` (a trial ended otherwise: a trip, a stop, an error), ``safety``,
+            ``operator`` (a hardware trial's operator key), ``command``, ``browser_push`` or ``divergence``.
         label: what it was, for a person.
         duration: how long it lasted [s] (0 for an instant).
     """
@@ -258,8 +286,16 @@ class TrialSignals:
             values += [float(plan_com[2]), com[2], float(plan_com[0]) - com[0]]
         self._put_row(groups, values)
 
-    def mark_episode(self, episode: Episode, *, pushes: bool = True) -> None:
-        """Add the episode's events: its pushes, its fall and its safety layer's transitions.
+    def mark_episode(self, episode: Episode, *, pushes: bool = True, outcome: str | None = None,
+                     error: str = "") -> None:
+        """Add the episode's events: its pushes, its end, its safety layer's transitions and its operator's keys.
+
+        The operator's keys are a hardware trial's ``p`` (a push by hand) and ``e`` (the e-stop); an episode that
+        played to its end gets no end mark.
+
+        The end's mark says how it ended: `outcome` (a trial record's, one of `wbc.arena.trial_record.OUTCOMES`;
+        default: what the episode tells, `wbc.arena.trial_record.episode_outcome`), with the record's `error` for a
+        controller's error. An e-stop is an ``operator stop``, the layer's own trip a ``safety trip``, never a fall.
 
         The push's angular impulse (``arm_momentum``'s ``push H*`` lines) is integrated again over each push's own
         time span, from its start and duration: summed per sample over whole sample intervals, the same 90 ms push
@@ -273,10 +309,13 @@ class TrialSignals:
                 f = p.force_in_world[j]
                 self.marks.append(Mark(float(p.start[j]), "push", f"push {np.linalg.norm(f):.0f} N "
                                        f"({f[0]:.0f}, {f[1]:.0f}, {f[2]:.0f})", float(p.duration[j])))
-        if episode.fell:
-            self.marks.append(Mark(float(episode.fall_time_s), "fall", f"{self.name} fell"))
+        end = _end_mark(self.name, episode, episode_outcome(episode) if outcome is None else outcome, error)
+        if end is not None:
+            self.marks.append(end)
         for t, a, b, reason, _ in episode.safety_events.rows():
             self.marks.append(Mark(t, "safety", f"safety {a} -> {b}: {reason}"))
+        for t, key, action in episode.operator_events.rows():
+            self.marks.append(Mark(t, "operator", f"operator key {key}: {action}"))
         self.marks.sort(key=lambda mk: mk.t)
 
     def _integrate_push_impulse(self, episode: Episode) -> None:
@@ -309,8 +348,12 @@ class TrialSignals:
             prev_t, prev_torque = t, torque
 
     @classmethod
-    def of_episode(cls, name: str, episode: Episode, frames: list[VizFrame] | None = None) -> TrialSignals:
-        """The signals a stored episode holds: attitude, height, velocity and yaw rate against the command."""
+    def of_episode(cls, name: str, episode: Episode, frames: list[VizFrame] | None = None, *,
+                   outcome: str | None = None, error: str = "") -> TrialSignals:
+        """The signals a stored episode holds: attitude, height, velocity and yaw rate against the command.
+
+        Its marks are `mark_episode`'s (`outcome` and `error`: its trial record's, when there is one).
+        """
         out = cls(name)
         for i in range(len(episode.t)):
             q = episode.qpos[i]
@@ -318,7 +361,7 @@ class TrialSignals:
             out._put("velocity", "vx", float(episode.v_base_in_yaw[i, 0]))
             out._put("velocity", "vy", float(episode.v_base_in_yaw[i, 1]))
             out._put("yaw_rate", "yaw rate", float(episode.yaw_rate[i]))
-        out.mark_episode(episode)
+        out.mark_episode(episode, outcome=outcome, error=error)
         return out
 
     def thinned(self, fps: float) -> TrialSignals:

@@ -326,7 +326,10 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
         rec = Recording(stored.content(), fps=cfg.record_fps, tick_s=stored.episode.control_dt)
         for frame in stored.frames():
             rec.add(frame)
-        signals = TrialSignals.of_episode(stored.controller, stored.episode).thinned(cfg.record_fps)
+        record = stored.record
+        signals = TrialSignals.of_episode(stored.controller, stored.episode,
+                                          outcome=record.outcome if record is not None else None,
+                                          error=record.error if record is not None else "").thinned(cfg.record_fps)
         written = save_trial_page(cfg.record, rec, [signals], duration=stored.trial.duration_s,
                                   title=f"{stored.controller}: {_trial_name(stored.trial)} (replay)")
         _open_recorded(cfg, written)
