@@ -15,25 +15,13 @@ import re
 
 import numpy as np
 import pytest
+from test_significance import make_record
 
 from wbc.arena import verdict
 from wbc.arena.report import cell_text, format_table, format_verdict, summarize, write_report
 from wbc.arena.stats import bootstrap_mean_ci, paired_difference
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
-
-
-def make_record(controller: str, band: str, seed: int, trial: int, **overrides) -> TrialRecord:
-    """A record with plain values (no per-second profile: no common window, so tracking is not compared)."""
-    fields = {"controller": controller, "scenario": "flat_push", "scenario_hash": "abc123", "band": band,
-              "seed": seed, "trial": trial, "success": True, "ttf": 1.0, "fall_time_s": math.nan, "vlin_err": 0.1,
-              "vang_err": 0.2, "max_roll_deg": 5.0, "max_pitch_deg": 3.0, "energy_j": 100.0, "arm_travel_rad": 0.5,
-              "push_force_n": 0.0, "n_pushes": 0, "vx_cmd": 0.0, "vy_cmd": 0.0, "yaw_rate_cmd": 0.0,
-              "friction": 0.8, "payload_kg": 0.0, "fallbacks": 0, "wbc_failures": 0, "debug_truth": False,
-              "wall_s": 1.0}
-    fields |= overrides
-    fields.setdefault("outcome", "success" if fields["success"] else "fall")
-    return TrialRecord(**fields)
 
 
 def _summary(records, *, controllers=("a", "b"), bands=("in", "ood"), **kwargs) -> Summary:
