@@ -382,9 +382,10 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
                      help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
     mpc.add_argument("--json", action="store_true", help="print JSON")
     mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
-    mpc.add_argument("--qp-solver", default="daqp", choices=tuple(QP_SOLVERS),
-                     help="the closed loop's QP backend (default daqp; mpc-tail solves its own QP with daqp only); "
-                          "the walk's QPs are then solved by every backend and compared")
+    mpc.add_argument("--qp-solver", default=None, choices=tuple(QP_SOLVERS),
+                     help="the closed loop's QP backend (default: the controller's own, the --controller-config "
+                          "file's [mpc] qp_solver or daqp; a file that sets another is refused; mpc-tail solves its "
+                          "own QP with daqp only); the walk's QPs are then solved by every backend and compared")
     mpc.add_argument("--controller-config", default=None, metavar="FILE.toml",
                      help="a TOML file whose table a plug-in's factory is called with (e.g. wbc.mpc.config_table:make "
                           "with an MPC's settings)")
