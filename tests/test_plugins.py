@@ -516,6 +516,43 @@ def test_the_mpc_settings_table_plays_arm_momentum_on_and_off_under_two_labels(t
     assert _metrics(records, names[0]) != _metrics(records, names[1])
 
 
+def test_a_run_records_each_variants_table_and_the_settings_it_played_with_and_resumes_a_run_without_them(tmp_path):
+    """run.json holds each settings file's table and the settings resolved from it (the tail MPC's ready pose,
+    computed when the file leaves it out); the report lists each file with the keys it sets."""
+    import json
+
+    from wbc.mpc.tail_controller import ready_pose
+
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SMALL.replace("duration_s = 2.0", "duration_s = 0.3").replace("[0.5, 0.8]", "[0.1, 0.2]"))
+    h8, held = tmp_path / "h8.toml", tmp_path / "held.toml"
+    h8.write_text("[mpc]\nhorizon = 8\n")
+    held.write_text("[tail]\narm_moves = false\n")
+    mpc, tail = "wbc.mpc.config_table:make@h8", "wbc.mpc.config_table:make_tail@ready"
+    out = tmp_path / "run"
+    argv = ["compare", mpc, tail, "--scenario", str(scenario), "--trials", "1", "--band", "hard",
+            "--controller-config", f"{mpc}={h8}", "--controller-config", f"{tail}={held}", "--out", str(out),
+            "--quiet", "--in-process"]
+    assert main(argv) == 0
+    run = json.loads((out / "run.json").read_text())
+    mine = run["controllers"][mpc]["settings"]
+    assert mine["table"] == {"mpc": {"horizon": 8}} and mine["resolved"]["mpc"]["horizon"] == 8
+    theirs = run["controllers"][tail]["settings"]
+    assert theirs["table"] == {"tail": {"arm_moves": False}} and theirs["resolved"]["tail"]["arm_moves"] is False
+    assert theirs["resolved"]["ready_q"] == list(ready_pose("a1-wx200"))
+    report = (out / "report.md").read_text()
+    assert f"{mpc}: `{h8}: sets [mpc] horizon`" in report and f"{tail}: `{held}: sets [tail] arm_moves`" in report
+    # a directory whose run.json predates the settings resumes, and gets them
+    csv = (out / "trials.csv").read_text()
+    for name in (mpc, tail):
+        del run["controllers"][name]["settings"]
+    (out / "run.json").write_text(json.dumps(run, indent=2))
+    assert main([*argv, "--resume"]) == 0
+    assert (out / "trials.csv").read_text() == csv
+    assert json.loads((out / "run.json").read_text())["controllers"][mpc]["settings"] == mine
+    assert main([*argv, "--resume"]) == 0 and (out / "trials.csv").read_text() == csv
+
+
 RULE = "a label is a letter or digit, then letters, digits, '_', '.' or '-', at most 40 characters"
 LABEL_ERRORS = [
     ("plugpkg.good:make@", ["nothing follows the '@'", RULE]),

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.breakdown import breakdown, push_outcomes, recovery_curve
+from wbc.arena.controller_settings import ControllerSettings
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErrors, ErrorGuard
 from wbc.arena.executors import EXECUTORS, VIEWED_TIME_LIMIT, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.finish import finish_results
@@ -282,6 +283,8 @@ class ArenaPlan:
         identity: what the run is (``run.json``'s ``config``).
         arms: what each controller's robot carries (`arms_played`), by name.
         arms_differ: `arms_note` when the controllers play different arm modes, else None.
+        settings: the settings of each plug-in built from a ``--controller-config`` file, by name (recorded in
+            ``run.json``'s ``controllers.NAME.settings`` and listed in the report).
     """
 
     cfg: ArenaConfig
@@ -293,6 +296,7 @@ class ArenaPlan:
     identity: SimulatedRunIdentity
     arms: Mapping[str, str] = field(default_factory=dict)
     arms_differ: str | None = None
+    settings: Mapping[str, ControllerSettings] = field(default_factory=dict)
 
 
 def run_arena(cfg: ArenaConfig, *, lock: DirectoryLock | None = None) -> ArenaResult:
@@ -331,6 +335,7 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
     # each name resolved once, here; the tasks carry the spec to the workers
     specs = _resolve(cfg)
     scenario = load_scenario(cfg.scenario)
+    settings: dict[str, ControllerSettings] = {}
     for name, spec in specs.items():
         if not spec.drives(scenario.robot):
             robots = ", ".join(spec.robots or ())
@@ -344,7 +349,11 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
             # trial, in this process, with its own message
             # and its rate is checked there too: a rate of 0 or a period that is no whole number of physics steps is
             # refused before any trial, not in each one
-            check_rate(spec.make(get_robot(scenario.robot, spec.arm_mode)), name, MujocoRobotConfig().timestep)
+            ctrl = spec.make(get_robot(scenario.robot, spec.arm_mode))
+            check_rate(ctrl, name, MujocoRobotConfig().timestep)
+            recorded = ControllerSettings.of(spec, ctrl)  # what its file set, and what it runs with
+            if recorded is not None:
+                settings[name] = recorded
     bands = cfg.bands or scenario.bands
     for band in bands:
         if band not in scenario.bands:
@@ -379,7 +388,8 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
         max_consecutive_errors=cfg.max_consecutive_errors,
     )
     return ArenaPlan(cfg=cfg, specs=specs, scenario=scenario, published=published, bands=tuple(bands),
-                     trials=tuple(trials), identity=identity, arms=arms, arms_differ=arms_differ)
+                     trials=tuple(trials), identity=identity, arms=arms, arms_differ=arms_differ,
+                     settings=settings)
 
 
 def arms_played(robot: str, arm_mode: str) -> str:
@@ -451,7 +461,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
         executor.connect()  # before the results directory: a cluster that cannot be reached leaves none
     try:
         store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
-                             controllers={name: spec.provenance() for name, spec in specs.items()},
+                             controllers={name: _recorded(spec, plan.settings.get(name))
+                                          for name, spec in specs.items()},
                              drop_bad_rows=cfg.drop_bad_rows, lock=lock)
     except BaseException:
         if isinstance(executor, RayExecutor):
@@ -537,6 +548,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             "published scenario": ("yes" if published else "NO (results are not comparable with published ones)")
             + {None: "", False: "; not when the run began (published at a resume; the same content)",
                True: "; it was when the run began (the same content)"}[store.identity.scenario.published_at_start],
+            **({"settings files": {name: recorded.report_line() for name, recorded in plan.settings.items()}}
+               if plan.settings else {}),
             "bands": ", ".join(bands),
             "seeds": ", ".join(str(s) for s in cfg.seeds),
             "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
@@ -563,6 +576,14 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
         if isinstance(executor, RayExecutor):
             executor.close()  # its run closes it too: this covers a run that ended before its first trial
         store.close()
+
+
+def _recorded(spec: ControllerSpec, settings: ControllerSettings | None) -> dict[str, object]:
+    """What ``run.json`` records of a controller: its provenance, and the settings its file gave it (if any)."""
+    out = spec.provenance()
+    if settings is not None:
+        out["settings"] = settings.as_json()
+    return out
 
 
 def _tested_pairs(cfg: ArenaConfig) -> tuple[tuple[str, str], ...]:
