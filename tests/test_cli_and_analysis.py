@@ -341,6 +341,36 @@ def test_arm_momentum_plays_a_variant_built_from_its_settings_file(tmp_path, cap
     assert "horizn" in capsys.readouterr().err
 
 
+def test_bench_mpc_takes_the_name_equals_file_form_that_compare_prints(tmp_path, capsys):
+    settings, name = tmp_path / "h8.toml", "wbc.mpc.config_table:make@h8"
+    settings.write_text("[mpc]\nhorizon = 8\n")
+    assert main(["bench", "mpc", "--controller", name, "--controller-config", f"{name}={settings}", "--seconds",
+                 "0.1", "--rounds", "1", "--no-reference", "--threaded-blas", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["horizon"] == 8 and out["controller_config"] == str(settings)
+
+
+@pytest.mark.parametrize("command", [["bench", "mpc", "--seconds", "0.1", "--no-reference"],
+                                     ["analyze", "arm-momentum", "--trials", "1"]])
+def test_a_one_controller_command_refuses_a_file_named_for_another_controller(tmp_path, no_worker, capsys, command):
+    settings = tmp_path / "h8.toml"
+    settings.write_text("[mpc]\nhorizon = 8\n")
+    given = f"wbc.mpc.config_table:make@h9={settings}"
+    assert main([*command, "--controller", "wbc.mpc.config_table:make@h8", "--controller-config", given]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"wbc: error: --controller-config {given}: wbc.mpc.config_table:make@h9 is not the "
+                          "controller here (wbc.mpc.config_table:make@h8)"), err
+
+
+def test_arm_momentum_takes_the_name_equals_file_form_and_its_json_names_the_file(tmp_path, capsys):
+    settings, name = tmp_path / "held.toml", "wbc.mpc.config_table:make@held"
+    settings.write_text("use_arm_momentum = false\n")
+    assert main(["analyze", "arm-momentum", "--controller", name, "--controller-config", f"{name}={settings}",
+                 "--trials", "1", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [(r["controller"], r["controller_config"]) for r in rows] == [(name, str(settings))]
+
+
 def test_every_command_of_the_parser_has_a_handler():
     import argparse
 
