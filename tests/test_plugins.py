@@ -633,6 +633,16 @@ def test_two_names_whose_episodes_would_share_a_folder_are_refused_before_anythi
     ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o")
 
 
+def test_two_labels_that_differ_only_in_case_are_refused_with_save_episodes(small, tmp_path):
+    # one folder on a case-insensitive file system (macOS, Windows), where one would overwrite the other's episodes
+    with pytest.raises(WbcError, match=r"^pkg.mod:make@H8 and pkg.mod:make@h8 would store their episodes in one "
+                                       r"folder, episodes/pkg.mod_make_h8 and episodes/pkg.mod_make_H8, one folder "
+                                       r"where case is not told apart"):
+        ArenaConfig(controllers=("pkg.mod:make@H8", "pkg.mod:make@h8"), scenario=small, out_dir=tmp_path / "o",
+                    save_episodes=True)
+    ArenaConfig(controllers=("pkg.mod:make@H8", "pkg.mod:make@h8"), scenario=small, out_dir=tmp_path / "o")
+
+
 def test_two_labels_of_one_plugin_are_viewed_side_by_side(plugins, small, tmp_path, monkeypatch, capsys):
     soft, stiff = tmp_path / "soft.toml", tmp_path / "stiff.toml"
     soft.write_text("leg_kp = 30.0\n")

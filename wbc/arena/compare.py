@@ -152,13 +152,16 @@ class ArenaConfig:
         if self.save_episodes:
             folders: dict[str, str] = {}
             for name in self.controllers:
-                other = folders.setdefault(file_name_part(name), name)
+                # case-folded: on a case-insensitive file system (macOS, Windows) H8 and h8 are one folder
+                other = folders.setdefault(file_name_part(name).casefold(), name)
                 if other != name:  # one would overwrite the other's episodes
+                    same = ("" if file_name_part(other) == file_name_part(name) else
+                            f" and episodes/{file_name_part(other)}, one folder where case is not told apart")
                     raise ConfigError(
                         f"{other} and {name} would store their episodes in one folder, "
-                        f"episodes/{file_name_part(name)} (a character other than a letter, a digit, '.', '_' or '-' "
-                        "is written '_'): name a plug-in apart with a label (package.module:factory@LABEL), or save "
-                        "the episodes of one of them in a run of its own")
+                        f"episodes/{file_name_part(name)}{same} (a character other than a letter, a digit, '.', '_' "
+                        "or '-' is written '_'): name a plug-in apart with a label (package.module:factory@LABEL) "
+                        "that differs in more than case, or save the episodes of one of them in a run of its own")
         if self.executor not in EXECUTORS:
             raise UnknownNameError("executor", self.executor, EXECUTORS)
         # the bounds run.json's reader takes (`wbc.arena.identity`): a run it could not resume is refused unplayed
