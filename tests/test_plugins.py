@@ -553,6 +553,37 @@ def test_a_run_records_each_variants_table_and_the_settings_it_played_with_and_r
     assert main([*argv, "--resume"]) == 0 and (out / "trials.csv").read_text() == csv
 
 
+def test_controllers_that_would_play_with_identical_settings_are_warned_of_before_anything_plays(small, tmp_path,
+                                                                                                 capsys):
+    from wbc.arena.compare import plan_arena
+
+    a, b, h9 = tmp_path / "a.toml", tmp_path / "b.toml", tmp_path / "h9.toml"
+    a.write_text("[mpc]\nhorizon = 8\n")
+    b.write_text("[mpc]\nhorizon = 8\n")
+    h9.write_text("[mpc]\nhorizon = 9\n")
+    names = [f"wbc.mpc.config_table:make@{label}" for label in ("a", "b", "h9", "plain")]
+    files = {names[0]: a, names[1]: b, names[2]: h9}
+    plan = plan_arena(ArenaConfig(controllers=("mpc", *names), scenario=small, out_dir=tmp_path / "o",
+                                  controller_configs=files))
+    # the byte-identical files, and the label with no file beside the registry's mpc it equals; not h9
+    assert plan.identical == (("mpc", names[3]), (names[0], names[1]))
+    err = capsys.readouterr().err
+    assert (f"wbc: warning: {names[0]} and {names[1]} run the same controller with identical settings on the same "
+            "robot: they play bit-identical trials and only add tests to the verdict's family") in err
+    assert f"wbc: warning: mpc and {names[3]} run the same controller with identical settings" in err
+    assert not plan_arena(ArenaConfig(controllers=("mpc", names[2]), scenario=small, out_dir=tmp_path / "o",
+                                      controller_configs={names[2]: h9})).identical
+    assert "identical settings" not in capsys.readouterr().err
+    # and the report's Run section says it
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SMALL.replace("duration_s = 2.0", "duration_s = 0.3").replace("[0.5, 0.8]", "[0.1, 0.2]"))
+    out = tmp_path / "run"
+    assert main(["compare", "mpc", names[3], "--scenario", str(scenario), "--trials", "1", "--band", "hard",
+                 "--out", str(out), "--quiet", "--in-process"]) == 0
+    assert (f"- **identical settings**: mpc and {names[3]} run the same controller with identical settings"
+            in (out / "report.md").read_text())
+
+
 RULE = "a label is a letter or digit, then letters, digits, '_', '.' or '-', at most 40 characters"
 LABEL_ERRORS = [
     ("plugpkg.good:make@", ["nothing follows the '@'", RULE]),
