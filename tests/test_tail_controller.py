@@ -14,7 +14,7 @@ from wbc.errors import ConfigError
 from wbc.hardware.mujoco.robot import MujocoRobot, MujocoRobotConfig
 from wbc.mpc.config_table import tail_config_from_table
 from wbc.mpc.controller import MpcControllerConfig
-from wbc.mpc.tail_controller import TailControllerConfig, TailMpcController, ready_pose
+from wbc.mpc.tail_controller import OverriddenSettingError, TailControllerConfig, TailMpcController, ready_pose
 from wbc.mpc.tail_mpc import TailMpcConfig, TailPlan
 from wbc.robots.description import ARM_JOINTS
 from wbc.robots.registry import get_robot
@@ -133,6 +133,13 @@ def test_base_settings_the_tail_controller_sets_itself_are_refused_naming_their_
         TailControllerConfig(base=MpcControllerConfig(arm_kp=200.0))
     # settings the tail controller keeps, and the tail's own, are taken
     assert tail_config_from_table({"base": {"velocity_ki": 2.0}, "tail": {"mu": 0.1}}).tail.mu == 0.1
+
+
+def test_a_base_setting_the_tail_sets_itself_is_refused_once_in_its_own_class():
+    # the settings' own refusal, reworded to the file's keys, keeps its class: said once, not again as "besides"
+    with pytest.raises(OverriddenSettingError) as caught:
+        tail_config_from_table({"base": {"arm_kp": 200.0}})
+    assert str(caught.value).count("sets these base settings itself") == 1 and "besides" not in str(caught.value)
 
 
 def test_a_tail_step_that_is_not_whole_control_ticks_is_refused_with_advice_that_applies():

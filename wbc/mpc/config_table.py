@@ -78,7 +78,7 @@ def make(desc: RobotDescription, config: Mapping[str, Any] | None = None) -> Mpc
     try:
         return MpcController(desc, settings)
     except ConfigError as error:  # a setting this robot cannot take (a CoM above its straight legs ...)
-        raise ConfigError(in_toml_terms(str(error), settings)) from None
+        raise _reworded(error, in_toml_terms(str(error), settings)) from None
 
 
 def tail_config_from_table(table: Mapping[str, Any]) -> TailControllerConfig:
@@ -116,7 +116,7 @@ def make_tail(desc: RobotDescription, config: Mapping[str, Any] | None = None) -
     try:
         return TailMpcController(desc, settings)
     except ConfigError as error:  # a setting this robot cannot take (a ready pose outside its arm's limits ...)
-        raise ConfigError(in_toml_terms(str(error), settings)) from None
+        raise _reworded(error, in_toml_terms(str(error), settings)) from None
 
 
 def _replaced(default: _Settings, table: Mapping[str, Any], path: tuple[str, ...]) -> _Settings:
@@ -127,8 +127,9 @@ def _replaced(default: _Settings, table: Mapping[str, Any], path: tuple[str, ...
     """
     fields = {f.name: getattr(default, f.name) for f in dataclasses.fields(default) if f.init}  # type: ignore[arg-type]
     if not isinstance(table, Mapping):
-        raise ConfigError(f"{toml_key(path)} must be a table of settings, got {table!r}; valid keys in "
-                          f"[{'.'.join(path)}]: {', '.join(fields)}")
+        name, where = (toml_key(path), f"in [{'.'.join(path)}]") if path else ("the settings", "at the top level")
+        raise ConfigError(f"{name} must be a table of settings, got {table!r}; valid keys {where}: "
+                          f"{', '.join(fields)}")
     changes: dict[str, Any] = {}
     for key, value in table.items():
         if key not in fields:
@@ -138,7 +139,16 @@ def _replaced(default: _Settings, table: Mapping[str, Any], path: tuple[str, ...
     try:
         return dataclasses.replace(default, **changes)  # type: ignore[type-var]
     except ConfigError as error:  # the settings' own validation, which names its fields by their classes
-        raise ConfigError(in_toml_terms(str(error), default, path)) from None
+        raise _reworded(error, in_toml_terms(str(error), default, path)) from None
+
+
+def _reworded(error: ConfigError, message: str) -> ConfigError:
+    """`error` with `message`, of its own class (`OverriddenSettingError` stays one), else a plain `ConfigError`."""
+    try:
+        again = type(error)(message)
+    except TypeError:  # a subclass whose constructor takes other arguments than a message
+        return ConfigError(message)
+    return again if str(again) == message else ConfigError(message)
 
 
 def in_toml_terms(message: str, settings: Any, path: tuple[str, ...] = ()) -> str:
