@@ -296,6 +296,29 @@ def test_bench_mpc_times_a_variant_built_from_its_settings_file(tmp_path, capsys
     assert f"wbc.mpc.config_table:make (settings {settings}) on a1-wx200" in capsys.readouterr().out
 
 
+def test_bench_mpc_times_a_variant_on_the_qp_backend_its_file_sets_and_keeps_the_files_name(tmp_path, capsys):
+    """No --qp-solver: the file's ``[mpc] qp_solver`` is the walk's backend, and the result names the file."""
+    settings = tmp_path / "proxsuite.toml"
+    settings.write_text('[mpc]\nqp_solver = "proxsuite"\n')
+    argv = ["bench", "mpc", "--controller", "wbc.mpc.config_table:make", "--controller-config", str(settings),
+            "--seconds", "0.1", "--rounds", "1", "--no-reference", "--threaded-blas", "--json"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["qp_solver"].startswith("proxsuite ") and out["controller_config"] == str(settings)
+
+
+@pytest.mark.parametrize(("sets", "given"), [("proxsuite", "daqp"), ("daqp", "proxsuite")])
+def test_bench_mpc_refuses_a_qp_backend_other_than_the_one_its_settings_file_sets(tmp_path, no_worker, capsys, sets,
+                                                                                 given):
+    settings = tmp_path / "variant.toml"
+    settings.write_text(f'[mpc]\nqp_solver = "{sets}"\n')
+    assert main(["bench", "mpc", "--controller", "wbc.mpc.config_table:make", "--controller-config", str(settings),
+                 "--qp-solver", given, "--seconds", "0.1", "--rounds", "1", "--no-reference"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"wbc: error: --qp-solver {given}: {settings} sets [mpc] qp_solver = '{sets}'"), err
+    assert "leave --qp-solver out" in err
+
+
 def test_bench_mpc_refuses_a_settings_file_for_a_registered_controller_before_it_spawns(tmp_path, no_worker, capsys):
     settings = tmp_path / "h12.toml"
     settings.write_text("[mpc]\nhorizon = 12\n")
@@ -316,6 +339,36 @@ def test_arm_momentum_plays_a_variant_built_from_its_settings_file(tmp_path, cap
     assert main(["analyze", "arm-momentum", "--controller", "wbc.mpc.config_table:make", "--controller-config",
                  str(bad), "--trials", "1"]) == 2
     assert "horizn" in capsys.readouterr().err
+
+
+def test_bench_mpc_takes_the_name_equals_file_form_that_compare_prints(tmp_path, capsys):
+    settings, name = tmp_path / "h8.toml", "wbc.mpc.config_table:make@h8"
+    settings.write_text("[mpc]\nhorizon = 8\n")
+    assert main(["bench", "mpc", "--controller", name, "--controller-config", f"{name}={settings}", "--seconds",
+                 "0.1", "--rounds", "1", "--no-reference", "--threaded-blas", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["horizon"] == 8 and out["controller_config"] == str(settings)
+
+
+@pytest.mark.parametrize("command", [["bench", "mpc", "--seconds", "0.1", "--no-reference"],
+                                     ["analyze", "arm-momentum", "--trials", "1"]])
+def test_a_one_controller_command_refuses_a_file_named_for_another_controller(tmp_path, no_worker, capsys, command):
+    settings = tmp_path / "h8.toml"
+    settings.write_text("[mpc]\nhorizon = 8\n")
+    given = f"wbc.mpc.config_table:make@h9={settings}"
+    assert main([*command, "--controller", "wbc.mpc.config_table:make@h8", "--controller-config", given]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"wbc: error: --controller-config {given}: wbc.mpc.config_table:make@h9 is not the "
+                          "controller here (wbc.mpc.config_table:make@h8)"), err
+
+
+def test_arm_momentum_takes_the_name_equals_file_form_and_its_json_names_the_file(tmp_path, capsys):
+    settings, name = tmp_path / "held.toml", "wbc.mpc.config_table:make@held"
+    settings.write_text("use_arm_momentum = false\n")
+    assert main(["analyze", "arm-momentum", "--controller", name, "--controller-config", f"{name}={settings}",
+                 "--trials", "1", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert [(r["controller"], r["controller_config"]) for r in rows] == [(name, str(settings))]
 
 
 def test_every_command_of_the_parser_has_a_handler():

@@ -32,24 +32,25 @@ ROOT = Path(__file__).resolve().parents[1]
 PUSH = str(ROOT / "scenarios" / "push.toml")
 
 MPC_SETTINGS = [
-    ("foo = 1\n", "MpcControllerConfig: unknown key 'foo'; valid keys: rate_hz,"),
-    ("[mpc]\nhorizon = 0\n", "MpcConfig.horizon must be an integer in [1, 100], got 0"),
-    ("[mpc]\nhorizon = -3\n", "MpcConfig.horizon must be an integer in [1, 100], got -3"),
-    ("contact_force = 0.0\n", "MpcControllerConfig.contact_force must be a finite number > 0, got 0.0"),
-    ("rate_hz = 0.0\n", "MpcControllerConfig.rate_hz must be a finite number > 0, got 0.0"),
-    ("joint_kd = nan\n", "MpcControllerConfig.joint_kd must be a finite number >= 0, got nan"),
-    ("body_height = nan\n", "MpcControllerConfig.body_height must be a finite number > 0, got nan"),
-    ("swing_kp = -700.0\n", "MpcControllerConfig.swing_kp must be a finite number >= 0, got -700.0"),
+    ("foo = 1\n", "foo: unknown key; valid keys at the top level: rate_hz,"),
+    ("[mpc]\nhorizon = 0\n", "[mpc] horizon must be an integer in [1, 100], got 0"),
+    ("[mpc]\nhorizon = -3\n", "[mpc] horizon must be an integer in [1, 100], got -3"),
+    ("contact_force = 0.0\n", "contact_force must be a finite number > 0, got 0.0"),
+    ("rate_hz = 0.0\n", "rate_hz must be a finite number > 0, got 0.0"),
+    ("joint_kd = nan\n", "joint_kd must be a finite number >= 0, got nan"),
+    ("body_height = nan\n", "body_height must be a finite number > 0, got nan"),
+    ("swing_kp = -700.0\n", "swing_kp must be a finite number >= 0, got -700.0"),
     # values no robot can hold: a horizon whose dense QP would fill the memory, a CoM above the straight legs, an
     # arm box with no room (each ran before, unnoticed, or ran the machine out of memory)
-    ("[mpc]\nhorizon = 100000000\n", "MpcConfig.horizon must be an integer in [1, 100], got 100000000"),
-    ("[mpc]\nhorizon = 99999999999999999999999\n", "MpcConfig.horizon must be an integer in [1, 100], got 9999"),
-    ("body_height = 5.0\n", "MpcControllerConfig.body_height must be below a1-wx200's straight leg (thigh + calf, "
+    ("[mpc]\nhorizon = 100000000\n", "[mpc] horizon must be an integer in [1, 100], got 100000000"),
+    ("[mpc]\nhorizon = 99999999999999999999999\n", "[mpc] horizon must be an integer in [1, 100], got 9999"),
+    ("body_height = 5.0\n", "body_height must be below a1-wx200's straight leg (thigh + calf, "
                             "0.400 m), which cannot hold the CoM higher; got 5.0"),
-    ("[mpc]\narm_margin = 10.0\n", "MpcConfig.arm_margin must be below half the narrowest arm joint's range "
+    ("[mpc]\narm_margin = 10.0\n", "[mpc] arm_margin must be below half the narrowest arm joint's range "
                                     "(1.684 rad), got 10.0"),
 ]
-"""A settings file for ``wbc.mpc.config_table:make`` and what the error says about it (after the file's path)."""
+"""A settings file for ``wbc.mpc.config_table:make`` and what the error says about it, right after the file's path:
+the key as the file writes it (``[mpc] horizon``, a top-level ``contact_force``), then why."""
 
 
 def _settings(tmp_path: Path, text: str) -> Path:
@@ -59,10 +60,10 @@ def _settings(tmp_path: Path, text: str) -> Path:
 
 
 def _refused(capsys, argv: list[str], path: Path, says: str) -> None:
-    """`argv` ends with status 2 and one error line that begins with `path` and says `says`, no traceback."""
+    """`argv` ends with status 2 and one error line that begins with `path`, then `says`, no traceback."""
     assert main(argv) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"wbc: error: {path}: ") and says in err, err
+    assert err.startswith(f"wbc: error: {path}: {says}"), err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1, err
 
 
@@ -75,14 +76,14 @@ def test_wbc_run_names_the_settings_file_and_the_field_it_refuses(tmp_path, caps
 
 
 @pytest.mark.parametrize(("text", "says"), [
-    ("[tail]\nhorizon = 0\n", "TailMpcConfig.horizon must be an integer in [1, 100], got 0"),
-    ("[base]\ncontact_force = 0.0\n", "MpcControllerConfig.contact_force must be a finite number > 0, got 0.0"),
-    ("[base.mpc]\nfz_max = 5.0\n", "MpcConfig.fz_max must be above fz_min (10.0), got 5.0"),
-    ("ready_q = 0.5\n", "TailControllerConfig.ready_q must be 3 finite angles (waist, shoulder, elbow) [rad], got "
+    ("[tail]\nhorizon = 0\n", "[tail] horizon must be an integer in [1, 100], got 0"),
+    ("[base]\ncontact_force = 0.0\n", "[base] contact_force must be a finite number > 0, got 0.0"),
+    ("[base.mpc]\nfz_max = 5.0\n", "[base.mpc] fz_max must be above fz_min (10.0), got 5.0"),
+    ("ready_q = 0.5\n", "ready_q must be 3 finite angles (waist, shoulder, elbow) [rad], got "
                         "0.5"),
-    ("ready_q = [1e9, 0, 0]\n", "TailControllerConfig.ready_q must be within a1-wx200's arm joint limits (waist, "
+    ("ready_q = [1e9, 0, 0]\n", "ready_q must be within a1-wx200's arm joint limits (waist, "
                                 "shoulder, elbow: [-3.14, 3.14], [-1.40, 1.97], [-1.88, 1.62] rad)"),
-    ("[tail]\narm_margin = 10.0\n", "TailMpcConfig.arm_margin must be below half the narrowest arm joint's range"),
+    ("[tail]\narm_margin = 10.0\n", "[tail] arm_margin must be below half the narrowest arm joint's range"),
 ])
 def test_the_tail_mpcs_settings_file_is_named_too(tmp_path, capsys, text, says):
     path = _settings(tmp_path, text)
@@ -94,14 +95,14 @@ def test_wbc_compare_names_the_file_of_the_plugin_it_was_given_for(tmp_path, cap
     path = _settings(tmp_path, "[mpc]\nhorizon = 0\n")
     _refused(capsys, ["compare", "stand", "wbc.mpc.config_table:make", "--controller-config", str(path),
                       "--scenario", PUSH, "--trials", "1", "--out", str(tmp_path / "out"), "--quiet"], path,
-             "MpcConfig.horizon must be an integer in [1, 100], got 0")
+             "[mpc] horizon must be an integer in [1, 100], got 0")
 
 
 def test_wbc_hw_run_names_the_file_before_the_trial(tmp_path, capsys):
     path, out = _settings(tmp_path, "contact_force = 0.0\n"), tmp_path / "out"
     _refused(capsys, ["hw", "run", "wbc.mpc.config_table:make", "--controller-config", str(path), "--sim",
                       "--scenario", PUSH, "--trial", "0", "--out", str(out)], path,
-             "MpcControllerConfig.contact_force must be a finite number > 0, got 0.0")
+             "contact_force must be a finite number > 0, got 0.0")
     assert not (out / "trials.csv").exists()
 
 
@@ -110,7 +111,7 @@ def test_check_controller_reports_the_file_in_its_failed_build(tmp_path, capsys)
     assert main(["check-controller", "wbc.mpc.config_table:make", "--controller-config", str(path),
                  "--robot", "a1-wx200"]) == 1
     out = capsys.readouterr().out
-    assert (f"FAIL build    make raised ConfigError: {path}: MpcConfig.horizon must be an integer in [1, 100], got "
+    assert (f"FAIL build    make raised ConfigError: {path}: [mpc] horizon must be an integer in [1, 100], got "
             "0") in out
 
 
@@ -162,7 +163,7 @@ def test_the_factory_sent_to_workers_carries_the_file_it_names(tmp_path):
     again = pickle.loads(pickle.dumps(factory))
     assert again == factory
     with pytest.raises(ConfigError,
-                       match=rf"^{tmp_path / 'c.toml'}: MpcConfig\.horizon must be an integer in \[1, 100\]"):
+                       match=rf"^{tmp_path / 'c.toml'}: \[mpc\] horizon must be an integer in \[1, 100\]"):
         again(get_robot("a1-wx200"))
 
 
@@ -230,13 +231,17 @@ def test_the_defaults_and_the_zeros_that_switch_a_term_off_stay_valid(cls, value
     assert all(getattr(changed, k) == v for k, v in values.items())
 
 
-def test_the_settings_table_reports_the_nested_settings_field():
-    with pytest.raises(ConfigError, match=r"^GaitConfig\.duty must be a finite number in \(0, 1\], got 1\.5$"):
+def test_the_settings_table_reports_the_nested_settings_field_by_the_key_the_file_writes():
+    with pytest.raises(ConfigError, match=r"^\[gait\] duty must be a finite number in \(0, 1\], got 1\.5$"):
         mpc_config_from_table({"gait": {"duty": 1.5}})
-    with pytest.raises(ConfigError, match=r"^WholeBodyConfig\.friction must be a finite number > 0, got -0\.6$"):
+    with pytest.raises(ConfigError, match=r"^\[wbc\] friction must be a finite number > 0, got -0\.6$"):
         mpc_config_from_table({"wbc": {"friction": -0.6}})
-    with pytest.raises(ConfigError, match=r"^EstimatorConfig\.accel_noise must be a finite number > 0, got 0\.0$"):
+    with pytest.raises(ConfigError, match=r"^\[base\.estimator\] accel_noise must be a finite number > 0, got 0\.0$"):
         tail_config_from_table({"base": {"estimator": {"accel_noise": 0.0}}})
+    with pytest.raises(ConfigError, match=r"^\[base\] yaw_leash must be a finite number >= 0, got -1\.0$"):
+        tail_config_from_table({"base": {"yaw_leash": -1}})
+    with pytest.raises(ConfigError, match=r"^\[mpc\] horizon must be an integer, got 1\.5$"):
+        mpc_config_from_table({"mpc": {"horizon": 1.5}})
     assert mpc_config_from_table({"mpc": {"horizon": 12}}).mpc.horizon == 12
 
 

@@ -516,6 +516,74 @@ def test_the_mpc_settings_table_plays_arm_momentum_on_and_off_under_two_labels(t
     assert _metrics(records, names[0]) != _metrics(records, names[1])
 
 
+def test_a_run_records_each_variants_table_and_the_settings_it_played_with_and_resumes_a_run_without_them(tmp_path):
+    """run.json holds each settings file's table and the settings resolved from it (the tail MPC's ready pose,
+    computed when the file leaves it out); the report lists each file with the keys it sets."""
+    import json
+
+    from wbc.mpc.tail_controller import ready_pose
+
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SMALL.replace("duration_s = 2.0", "duration_s = 0.3").replace("[0.5, 0.8]", "[0.1, 0.2]"))
+    h8, held = tmp_path / "h8.toml", tmp_path / "held.toml"
+    h8.write_text("[mpc]\nhorizon = 8\n")
+    held.write_text("[tail]\narm_moves = false\n")
+    mpc, tail = "wbc.mpc.config_table:make@h8", "wbc.mpc.config_table:make_tail@ready"
+    out = tmp_path / "run"
+    argv = ["compare", mpc, tail, "--scenario", str(scenario), "--trials", "1", "--band", "hard",
+            "--controller-config", f"{mpc}={h8}", "--controller-config", f"{tail}={held}", "--out", str(out),
+            "--quiet", "--in-process"]
+    assert main(argv) == 0
+    run = json.loads((out / "run.json").read_text())
+    mine = run["controllers"][mpc]["settings"]
+    assert mine["table"] == {"mpc": {"horizon": 8}} and mine["resolved"]["mpc"]["horizon"] == 8
+    theirs = run["controllers"][tail]["settings"]
+    assert theirs["table"] == {"tail": {"arm_moves": False}} and theirs["resolved"]["tail"]["arm_moves"] is False
+    assert theirs["resolved"]["ready_q"] == list(ready_pose("a1-wx200"))
+    report = (out / "report.md").read_text()
+    assert f"{mpc}: `{h8}: sets [mpc] horizon`" in report and f"{tail}: `{held}: sets [tail] arm_moves`" in report
+    # a directory whose run.json predates the settings resumes, and gets them
+    csv = (out / "trials.csv").read_text()
+    for name in (mpc, tail):
+        del run["controllers"][name]["settings"]
+    (out / "run.json").write_text(json.dumps(run, indent=2))
+    assert main([*argv, "--resume"]) == 0
+    assert (out / "trials.csv").read_text() == csv
+    assert json.loads((out / "run.json").read_text())["controllers"][mpc]["settings"] == mine
+    assert main([*argv, "--resume"]) == 0 and (out / "trials.csv").read_text() == csv
+
+
+def test_controllers_that_would_play_with_identical_settings_are_warned_of_before_anything_plays(small, tmp_path,
+                                                                                                 capsys):
+    from wbc.arena.compare import plan_arena
+
+    a, b, h9 = tmp_path / "a.toml", tmp_path / "b.toml", tmp_path / "h9.toml"
+    a.write_text("[mpc]\nhorizon = 8\n")
+    b.write_text("[mpc]\nhorizon = 8\n")
+    h9.write_text("[mpc]\nhorizon = 9\n")
+    names = [f"wbc.mpc.config_table:make@{label}" for label in ("a", "b", "h9", "plain")]
+    files = {names[0]: a, names[1]: b, names[2]: h9}
+    plan = plan_arena(ArenaConfig(controllers=("mpc", *names), scenario=small, out_dir=tmp_path / "o",
+                                  controller_configs=files))
+    # the byte-identical files, and the label with no file beside the registry's mpc it equals; not h9
+    assert plan.identical == (("mpc", names[3]), (names[0], names[1]))
+    err = capsys.readouterr().err
+    assert (f"wbc: warning: {names[0]} and {names[1]} run the same controller with identical settings on the same "
+            "robot: they play bit-identical trials and only add tests to the verdict's family") in err
+    assert f"wbc: warning: mpc and {names[3]} run the same controller with identical settings" in err
+    assert not plan_arena(ArenaConfig(controllers=("mpc", names[2]), scenario=small, out_dir=tmp_path / "o",
+                                      controller_configs={names[2]: h9})).identical
+    assert "identical settings" not in capsys.readouterr().err
+    # and the report's Run section says it
+    scenario = tmp_path / "short.toml"
+    scenario.write_text(SMALL.replace("duration_s = 2.0", "duration_s = 0.3").replace("[0.5, 0.8]", "[0.1, 0.2]"))
+    out = tmp_path / "run"
+    assert main(["compare", "mpc", names[3], "--scenario", str(scenario), "--trials", "1", "--band", "hard",
+                 "--out", str(out), "--quiet", "--in-process"]) == 0
+    assert (f"- **identical settings**: mpc and {names[3]} run the same controller with identical settings"
+            in (out / "report.md").read_text())
+
+
 RULE = "a label is a letter or digit, then letters, digits, '_', '.' or '-', at most 40 characters"
 LABEL_ERRORS = [
     ("plugpkg.good:make@", ["nothing follows the '@'", RULE]),
@@ -594,6 +662,16 @@ def test_two_names_whose_episodes_would_share_a_folder_are_refused_before_anythi
         ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o",
                     save_episodes=True)
     ArenaConfig(controllers=("pkg.mod:make@x", "pkg.mod:make_x"), scenario=small, out_dir=tmp_path / "o")
+
+
+def test_two_labels_that_differ_only_in_case_are_refused_with_save_episodes(small, tmp_path):
+    # one folder on a case-insensitive file system (macOS, Windows), where one would overwrite the other's episodes
+    with pytest.raises(WbcError, match=r"^pkg.mod:make@H8 and pkg.mod:make@h8 would store their episodes in one "
+                                       r"folder, episodes/pkg.mod_make_h8 and episodes/pkg.mod_make_H8, one folder "
+                                       r"where case is not told apart"):
+        ArenaConfig(controllers=("pkg.mod:make@H8", "pkg.mod:make@h8"), scenario=small, out_dir=tmp_path / "o",
+                    save_episodes=True)
+    ArenaConfig(controllers=("pkg.mod:make@H8", "pkg.mod:make@h8"), scenario=small, out_dir=tmp_path / "o")
 
 
 def test_two_labels_of_one_plugin_are_viewed_side_by_side(plugins, small, tmp_path, monkeypatch, capsys):

@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import re
 import tomllib
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any
 
-__all__ = ["TableId", "TomlLines", "SyntaxFault", "syntax_fault", "table_label"]
+__all__ = ["TableId", "TomlLines", "SyntaxFault", "syntax_fault", "table_label", "toml_key", "toml_keys"]
 
 _HEADER_RE = re.compile(r"^\s*(\[\[|\[)\s*([^\[\]#]+?)\s*(\]\]|\])\s*(?:#.*)?$")
 _KEY_PART = r"(?:\"[^\"]*\"|'[^']*'|[A-Za-z0-9_-]+)"
@@ -134,6 +136,23 @@ def table_label(table: TableId) -> str:
     if not name:
         return ""
     return f"[[{name}]] #{occurrence}" if occurrence else f"[{name}]"
+
+
+def toml_key(path: Sequence[str]) -> str:
+    """A key by its path of names, as a file writes it: ``[mpc] horizon``, ``[base.mpc] mu``, top-level ``ready_q``."""
+    *table, key = path
+    return f"[{'.'.join(table)}] {key}" if table else key
+
+
+def toml_keys(table: Mapping[str, Any], path: tuple[str, ...] = ()) -> list[str]:
+    """Every key a parsed TOML table sets, in its order, by `toml_key` (a sub-table's keys, not the sub-table)."""
+    out: list[str] = []
+    for key, value in table.items():
+        if isinstance(value, Mapping):
+            out += toml_keys(value, (*path, key))
+        else:
+            out.append(toml_key((*path, key)))
+    return out
 
 
 @dataclass(frozen=True)

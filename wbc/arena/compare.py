@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from wbc.arena.breakdown import breakdown, push_outcomes, recovery_curve
+from wbc.arena.controller_settings import ControllerSettings, identical_settings
 from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS, ControllerErrors, ErrorGuard
 from wbc.arena.executors import EXECUTORS, VIEWED_TIME_LIMIT, LocalExecutor, RayExecutor, TrialTask
 from wbc.arena.finish import finish_results
@@ -57,6 +58,7 @@ from wbc.arena.sim_trial import check_rate
 from wbc.arena.stats import in_canonical_order
 from wbc.arena.summary import Summary
 from wbc.arena.trial_record import TrialRecord
+from wbc.control.protocol import Controller, HasSettings
 from wbc.control.registry import ControllerSpec, check_shipped_weights, get_controller
 from wbc.errors import ClusterError, ConfigError, ResultsDirError, UnknownNameError
 from wbc.hardware.mujoco.robot import MujocoRobotConfig
@@ -151,13 +153,16 @@ class ArenaConfig:
         if self.save_episodes:
             folders: dict[str, str] = {}
             for name in self.controllers:
-                other = folders.setdefault(file_name_part(name), name)
+                # case-folded: on a case-insensitive file system (macOS, Windows) H8 and h8 are one folder
+                other = folders.setdefault(file_name_part(name).casefold(), name)
                 if other != name:  # one would overwrite the other's episodes
+                    same = ("" if file_name_part(other) == file_name_part(name) else
+                            f" and episodes/{file_name_part(other)}, one folder where case is not told apart")
                     raise ConfigError(
                         f"{other} and {name} would store their episodes in one folder, "
-                        f"episodes/{file_name_part(name)} (a character other than a letter, a digit, '.', '_' or '-' "
-                        "is written '_'): name a plug-in apart with a label (package.module:factory@LABEL), or save "
-                        "the episodes of one of them in a run of its own")
+                        f"episodes/{file_name_part(name)}{same} (a character other than a letter, a digit, '.', '_' "
+                        "or '-' is written '_'): name a plug-in apart with a label (package.module:factory@LABEL) "
+                        "that differs in more than case, or save the episodes of one of them in a run of its own")
         if self.executor not in EXECUTORS:
             raise UnknownNameError("executor", self.executor, EXECUTORS)
         # the bounds run.json's reader takes (`wbc.arena.identity`): a run it could not resume is refused unplayed
@@ -282,6 +287,10 @@ class ArenaPlan:
         identity: what the run is (``run.json``'s ``config``).
         arms: what each controller's robot carries (`arms_played`), by name.
         arms_differ: `arms_note` when the controllers play different arm modes, else None.
+        settings: the settings of each plug-in built from a ``--controller-config`` file, by name (recorded in
+            ``run.json``'s ``controllers.NAME.settings`` and listed in the report).
+        identical: the groups of controllers that run one class with identical settings on one robot
+            (`identical_settings`), warned of and listed in the report.
     """
 
     cfg: ArenaConfig
@@ -293,6 +302,8 @@ class ArenaPlan:
     identity: SimulatedRunIdentity
     arms: Mapping[str, str] = field(default_factory=dict)
     arms_differ: str | None = None
+    settings: Mapping[str, ControllerSettings] = field(default_factory=dict)
+    identical: tuple[tuple[str, ...], ...] = ()
 
 
 def run_arena(cfg: ArenaConfig, *, lock: DirectoryLock | None = None) -> ArenaResult:
@@ -331,6 +342,8 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
     # each name resolved once, here; the tasks carry the spec to the workers
     specs = _resolve(cfg)
     scenario = load_scenario(cfg.scenario)
+    settings: dict[str, ControllerSettings] = {}
+    built: dict[str, tuple[str, Controller]] = {}
     for name, spec in specs.items():
         if not spec.drives(scenario.robot):
             robots = ", ".join(spec.robots or ())
@@ -344,7 +357,15 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
             # trial, in this process, with its own message
             # and its rate is checked there too: a rate of 0 or a period that is no whole number of physics steps is
             # refused before any trial, not in each one
-            check_rate(spec.make(get_robot(scenario.robot, spec.arm_mode)), name, MujocoRobotConfig().timestep)
+            ctrl = spec.make(get_robot(scenario.robot, spec.arm_mode))
+            built[name] = (spec.arm_mode, ctrl)
+            check_rate(ctrl, name, MujocoRobotConfig().timestep)
+            recorded = ControllerSettings.of(spec, ctrl)  # what its file set, and what it runs with
+            if recorded is not None:
+                settings[name] = recorded
+    identical = _identical_settings(specs, built, scenario.robot)
+    for names in identical:  # said before anything plays
+        print(f"wbc: warning: {identical_line(names)}", file=sys.stderr)
     bands = cfg.bands or scenario.bands
     for band in bands:
         if band not in scenario.bands:
@@ -379,7 +400,31 @@ def plan_arena(cfg: ArenaConfig) -> ArenaPlan:
         max_consecutive_errors=cfg.max_consecutive_errors,
     )
     return ArenaPlan(cfg=cfg, specs=specs, scenario=scenario, published=published, bands=tuple(bands),
-                     trials=tuple(trials), identity=identity, arms=arms, arms_differ=arms_differ)
+                     trials=tuple(trials), identity=identity, arms=arms, arms_differ=arms_differ,
+                     settings=settings, identical=tuple(identical))
+
+
+def identical_line(names: Sequence[str]) -> str:
+    """What a run says of controllers that play with identical settings (`identical_settings`)."""
+    return (f"{' and '.join(names)} run the same controller with identical settings on the same robot: they play "
+            "bit-identical trials and only add tests to the verdict's family; drop all but one, or give each other "
+            "settings")
+
+
+def _identical_settings(specs: Mapping[str, ControllerSpec], built: dict[str, tuple[str, Controller]],
+                        robot: str) -> list[tuple[str, ...]]:
+    """The groups of `specs` that would play bit-identical trials (`identical_settings`).
+
+    `built` holds the plug-ins built to check them; when one of them says its settings, the registry's controllers
+    that can say theirs are built too (the registry's ``mpc`` beside a variant of it with no file).
+    """
+    if any(isinstance(ctrl, HasSettings) for _, ctrl in built.values()):
+        for name, spec in specs.items():
+            factory = getattr(spec.make, "func", spec.make)
+            if (name not in built and spec.kind == "registry" and isinstance(factory, type)
+                    and issubclass(factory, HasSettings)):
+                built[name] = (spec.arm_mode, spec.make(get_robot(robot, spec.arm_mode)))
+    return identical_settings({name: built[name] for name in specs if name in built})
 
 
 def arms_played(robot: str, arm_mode: str) -> str:
@@ -451,7 +496,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
         executor.connect()  # before the results directory: a cluster that cannot be reached leaves none
     try:
         store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
-                             controllers={name: spec.provenance() for name, spec in specs.items()},
+                             controllers={name: _recorded(spec, plan.settings.get(name))
+                                          for name, spec in specs.items()},
                              drop_bad_rows=cfg.drop_bad_rows, lock=lock)
     except BaseException:
         if isinstance(executor, RayExecutor):
@@ -537,6 +583,10 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             "published scenario": ("yes" if published else "NO (results are not comparable with published ones)")
             + {None: "", False: "; not when the run began (published at a resume; the same content)",
                True: "; it was when the run began (the same content)"}[store.identity.scenario.published_at_start],
+            **({"settings files": {name: recorded.report_line() for name, recorded in plan.settings.items()}}
+               if plan.settings else {}),
+            **({"identical settings": "; ".join(identical_line(names) for names in plan.identical)}
+               if plan.identical else {}),
             "bands": ", ".join(bands),
             "seeds": ", ".join(str(s) for s in cfg.seeds),
             "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
@@ -563,6 +613,14 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
         if isinstance(executor, RayExecutor):
             executor.close()  # its run closes it too: this covers a run that ended before its first trial
         store.close()
+
+
+def _recorded(spec: ControllerSpec, settings: ControllerSettings | None) -> dict[str, object]:
+    """What ``run.json`` records of a controller: its provenance, and the settings its file gave it (if any)."""
+    out = spec.provenance()
+    if settings is not None:
+        out["settings"] = settings.as_json()
+    return out
 
 
 def _tested_pairs(cfg: ArenaConfig) -> tuple[tuple[str, str], ...]:

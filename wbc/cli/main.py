@@ -117,13 +117,15 @@ def _scenario_played(path: str) -> None:
 
 def _analyze_arm_momentum(args: argparse.Namespace) -> int:
     _scenario_played(args.scenario)
+    config = _the_controllers_file(args.controller_config, args.controller, "--controller-config")
+    io = _the_controllers_file(args.io, args.controller, "--io")
     rows = arm_momentum_study(args.scenario, args.controller, band=args.band, seeds=tuple(range(args.seeds)),
-                              trials=args.trials, config=args.controller_config, io=args.io)
+                              trials=args.trials, config=config, io=io)
     if args.json:
         printers.print_json([dataclasses.asdict(r) for r in rows])
     else:
         printers.print_arm_momentum(rows, controller=args.controller, scenario=args.scenario, band=args.band,
-                                    settings=args.controller_config)
+                                    settings=config)
     return 0
 
 
@@ -152,7 +154,8 @@ def _bench_sim(args: argparse.Namespace) -> int:
 def _bench_mpc(args: argparse.Namespace) -> int:
     result = bench_mpc(robot_name(args.robot), args.controller, seconds=args.seconds,
                        single_thread=not args.threaded_blas, reference=not args.no_reference,
-                       qp_solver=args.qp_solver, rounds=args.rounds, config=args.controller_config)
+                       qp_solver=args.qp_solver, rounds=args.rounds,
+                       config=_the_controllers_file(args.controller_config, args.controller, "--controller-config"))
     if args.json:
         printers.print_json(result.as_dict())
     else:
@@ -1133,6 +1136,26 @@ def _controller_files(values: list[str] | None, controllers: tuple[str, ...], op
             raise ConfigError(f"{option}: {name} is given two files ({out[name]}, {file}); give one")
         out[name] = Path(file)
     return out
+
+
+def _the_controllers_file(value: str | None, controller: str, option: str) -> str | None:
+    """A one-controller command's ``--controller-config`` / ``--io`` value (``[NAME=]FILE``): the file.
+
+    ``NAME=FILE`` is taken when NAME is the command's controller, as ``wbc compare`` writes it; a path that exists as
+    given is a file, '=' or not.
+
+    Raises:
+        ConfigError: ``NAME=FILE`` whose NAME is not `controller` (and no such path exists).
+    """
+    if value is None:
+        return None
+    name, sep, file = value.partition("=")
+    if not sep or Path(value).exists():
+        return value
+    if name != controller:
+        raise ConfigError(f"{option} {value}: {name} is not the controller here ({controller}); write {option} "
+                          f"{controller}={file}, or {option} {file}")
+    return file
 
 
 def _check_resumable(args: argparse.Namespace) -> None:

@@ -224,10 +224,16 @@ def add_trial_time_limit_option(p: argparse.ArgumentParser) -> None:
                         "then play in worker processes, even with --workers 1)")
 
 
-def add_controller_file_options(p: argparse.ArgumentParser, *, repeatable: bool) -> None:
-    """``--controller-config`` (a plug-in's table) and ``--io`` (an ONNX policy's I/O file)."""
-    which = " (NAME=FILE names the controller when several could take it; repeatable)" if repeatable else ""
-    kw = {"action": "append", "metavar": "[NAME=]FILE.toml"} if repeatable else {"metavar": "FILE.toml"}
+def add_controller_file_options(p: argparse.ArgumentParser, *, repeatable: bool, named: bool = False) -> None:
+    """``--controller-config`` (a plug-in's table) and ``--io`` (an ONNX policy's I/O file).
+
+    `named`: a one-controller command that takes ``NAME=FILE`` too, NAME its ``--controller``, as ``wbc compare``
+    writes it.
+    """
+    which = (" (NAME=FILE names the controller when several could take it; repeatable)" if repeatable else
+             " (NAME=, as wbc compare takes it, names the --controller)" if named else "")
+    kw = ({"action": "append", "metavar": "[NAME=]FILE.toml"} if repeatable else
+          {"metavar": "[NAME=]FILE.toml" if named else "FILE.toml"})
     p.add_argument("--controller-config", default=None, **kw,
                    help=f"a TOML file whose table a plug-in's factory is called with{which}")
     p.add_argument("--io", default=None, **kw,
@@ -326,7 +332,7 @@ def _add_analyze_arm_momentum_parser(analyze: _Commands) -> None:
     arm.add_argument("--trials", type=_TRIALS, default=5, help=f"trials per seed, 1..{MAX_TRIALS} (default 5)")
     arm.add_argument("--seeds", type=_SEEDS, default=1, help=f"seeds 0 .. S-1, S in 1..{MAX_SEEDS} (default 1)")
     arm.add_argument("--json", action="store_true", help="print JSON (a list, one object per trial)")
-    add_controller_file_options(arm, repeatable=False)
+    add_controller_file_options(arm, repeatable=False, named=True)
     arm.set_defaults(handler="analyze arm-momentum")
 
 
@@ -382,12 +388,13 @@ def _add_bench_mpc_parser(bench: _Commands) -> None:
                      help="run in this process with the BLAS's default threads (default: a single-threaded worker)")
     mpc.add_argument("--json", action="store_true", help="print JSON")
     mpc.add_argument("--no-reference", action="store_true", help="skip the reference measurements")
-    mpc.add_argument("--qp-solver", default="daqp", choices=tuple(QP_SOLVERS),
-                     help="the closed loop's QP backend (default daqp; mpc-tail solves its own QP with daqp only); "
-                          "the walk's QPs are then solved by every backend and compared")
-    mpc.add_argument("--controller-config", default=None, metavar="FILE.toml",
+    mpc.add_argument("--qp-solver", default=None, choices=tuple(QP_SOLVERS),
+                     help="the closed loop's QP backend (default: the controller's own, the --controller-config "
+                          "file's [mpc] qp_solver or daqp; a file that sets another is refused; mpc-tail solves its "
+                          "own QP with daqp only); the walk's QPs are then solved by every backend and compared")
+    mpc.add_argument("--controller-config", default=None, metavar="[NAME=]FILE.toml",
                      help="a TOML file whose table a plug-in's factory is called with (e.g. wbc.mpc.config_table:make "
-                          "with an MPC's settings)")
+                          "with an MPC's settings); NAME=, as wbc compare takes it, names the --controller")
     mpc.set_defaults(handler="bench mpc")
 
 

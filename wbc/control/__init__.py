@@ -12,4 +12,4 @@ from wbc.control.protocol import Controller, HasDebugPlan, HasTickTimings, Truth
 from wbc.control.spec import ControllerSpec
 
 __all__ = ["CheckConfig", "Controller", "ControllerCheck", "ControllerPlugin", "ControllerSpec", "HasDebugPlan",
-           "HasTickTimings", "TruthSwitch", "check_controller"]
+           "HasSettings", "HasTickTimings", "TruthSwitch", "check_controller"]

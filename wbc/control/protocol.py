@@ -15,7 +15,7 @@ import numpy as np
 
 from wbc.types import BaseTruth, MotorCommand, RobotState, VelocityCommand
 
-__all__ = ["Controller", "HasDebugPlan", "HasTickTimings", "TruthSwitch"]
+__all__ = ["Controller", "HasDebugPlan", "HasSettings", "HasTickTimings", "TruthSwitch"]
 
 
 @runtime_checkable
@@ -57,3 +57,11 @@ class HasTickTimings(Protocol):
 
     def tick_timings(self) -> Mapping[str, float]:
         """Seconds spent in named parts of the last `act` call; a part that did not run in that tick is absent."""
+
+
+@runtime_checkable
+class HasSettings(Protocol):
+    """A controller that can say the settings it runs with, as a run records them (``run.json``)."""
+
+    def settings(self) -> dict[str, object]:
+        """Every setting it runs with, resolved (defaults and computed values filled in), JSON-ready."""

@@ -31,8 +31,10 @@ The table's keys are the fields of `MpcControllerConfig` (or `TailControllerConf
 settings dataclass (``mpc``, ``gait``, ``footholds``, ``estimator``, ``wbc``, ``base``, ``tail``, ``observer``) takes
 a sub-table of its own fields, a tuple a TOML array, an optional pose (``ready_q``) an array of numbers. Fields left
 out keep their defaults. An unknown key, or a value of the wrong kind, is a `ConfigError` that names the key and lists
-the valid ones; ranges are checked by the settings' own validation. The plug-ins drive the robot with its arm
-actuated (``use_arm_momentum = false`` holds the MPC's arm still, ``tail.arm_moves = false`` the tail MPC's).
+the valid ones; ranges are checked by the settings' own validation. Every message names the key as the file writes
+it (``[mpc] horizon``, ``[base] yaw_leash``, a top-level ``ready_q``), the settings' own included. The plug-ins
+drive the robot with its arm actuated (``use_arm_momentum = false`` holds the MPC's arm still,
+``tail.arm_moves = false`` the tail MPC's).
 """
 
 from __future__ import annotations
@@ -51,8 +53,9 @@ from wbc.mpc.tail_controller import (
     check_not_overridden,
 )
 from wbc.robots.description import RobotDescription
+from wbc.toml_lines import toml_key
 
-__all__ = ["make", "make_tail", "mpc_config_from_table", "tail_config_from_table"]
+__all__ = ["in_toml_terms", "make", "make_tail", "mpc_config_from_table", "tail_config_from_table"]
 
 _Settings = TypeVar("_Settings")
 
@@ -66,12 +69,16 @@ def mpc_config_from_table(table: Mapping[str, Any]) -> MpcControllerConfig:
     Raises:
         ConfigError: an unknown key, a value of the wrong kind, or settings their own validation refuses.
     """
-    return _replaced(MpcControllerConfig(), table, "MpcControllerConfig")
+    return _replaced(MpcControllerConfig(), table, ())
 
 
 def make(desc: RobotDescription, config: Mapping[str, Any] | None = None) -> MpcController:
     """The centroidal MPC controller with the settings of a ``--controller-config`` table (defaults without one)."""
-    return MpcController(desc, mpc_config_from_table(config or {}))
+    settings = mpc_config_from_table(config or {})
+    try:
+        return MpcController(desc, settings)
+    except ConfigError as error:  # a setting this robot cannot take (a CoM above its straight legs ...)
+        raise _reworded(error, in_toml_terms(str(error), settings)) from None
 
 
 def tail_config_from_table(table: Mapping[str, Any]) -> TailControllerConfig:
@@ -90,7 +97,7 @@ def tail_config_from_table(table: Mapping[str, Any]) -> TailControllerConfig:
                                                    else [])
         overridden = [name for name in given if name in OVERRIDDEN]
     try:
-        config = _replaced(TailControllerConfig(), table, "TailControllerConfig")
+        config = _replaced(TailControllerConfig(), table, ())
     except ConfigError as error:  # the base's own message (its advice may not apply here), then why it is moot
         if not overridden or isinstance(error, OverriddenSettingError):
             raise
@@ -105,30 +112,85 @@ def tail_config_from_table(table: Mapping[str, Any]) -> TailControllerConfig:
 
 def make_tail(desc: RobotDescription, config: Mapping[str, Any] | None = None) -> TailMpcController:
     """The tail MPC controller (``mpc-tail``) with the settings of a ``--controller-config`` table."""
-    return TailMpcController(desc, tail_config_from_table(config or {}))
+    settings = tail_config_from_table(config or {})
+    try:
+        return TailMpcController(desc, settings)
+    except ConfigError as error:  # a setting this robot cannot take (a ready pose outside its arm's limits ...)
+        raise _reworded(error, in_toml_terms(str(error), settings)) from None
 
 
-def _replaced(default: _Settings, table: Mapping[str, Any], where: str) -> _Settings:
-    """`default` with the table's values in place of its own, sub-tables into nested settings."""
+def _replaced(default: _Settings, table: Mapping[str, Any], path: tuple[str, ...]) -> _Settings:
+    """`default` with the table's values in place of its own, sub-tables into nested settings.
+
+    `path` is the table's own in the file (``()`` for the file's top level, ``("base", "mpc")`` for ``[base.mpc]``),
+    by which every message names the key it is about, as the file writes it.
+    """
     fields = {f.name: getattr(default, f.name) for f in dataclasses.fields(default) if f.init}  # type: ignore[arg-type]
     if not isinstance(table, Mapping):
-        raise ConfigError(f"{where} must be a table of settings, got {table!r}; valid keys: {', '.join(fields)}")
+        name, where = (toml_key(path), f"in [{'.'.join(path)}]") if path else ("the settings", "at the top level")
+        raise ConfigError(f"{name} must be a table of settings, got {table!r}; valid keys {where}: "
+                          f"{', '.join(fields)}")
     changes: dict[str, Any] = {}
     for key, value in table.items():
         if key not in fields:
-            raise ConfigError(f"{where}: unknown key {key!r}; valid keys: {', '.join(fields)}")
-        changes[key] = _value(fields[key], value, f"{where}.{key}")
-    return dataclasses.replace(default, **changes)  # type: ignore[type-var]
+            where = f"in [{'.'.join(path)}]" if path else "at the top level"
+            raise ConfigError(f"{toml_key((*path, key))}: unknown key; valid keys {where}: {', '.join(fields)}")
+        changes[key] = _value(fields[key], value, (*path, key))
+    try:
+        return dataclasses.replace(default, **changes)  # type: ignore[type-var]
+    except ConfigError as error:  # the settings' own validation, which names its fields by their classes
+        raise _reworded(error, in_toml_terms(str(error), default, path)) from None
 
 
-def _value(default: Any, value: Any, where: str) -> Any:
+def _reworded(error: ConfigError, message: str) -> ConfigError:
+    """`error` with `message`, of its own class (`OverriddenSettingError` stays one), else a plain `ConfigError`."""
+    try:
+        again = type(error)(message)
+    except TypeError:  # a subclass whose constructor takes other arguments than a message
+        return ConfigError(message)
+    return again if str(again) == message else ConfigError(message)
+
+
+def in_toml_terms(message: str, settings: Any, path: tuple[str, ...] = ()) -> str:
+    """`message` of the settings' own validation with the field it begins with named as a settings file writes it.
+
+    The settings name their fields by class (``MpcConfig.horizon must be ...``); a file names them by table
+    (``[mpc] horizon must be ...``). `settings` is the settings the message is about, at `path` in the file; a
+    message that begins with no field of them or of their nested settings is returned as it is.
+    """
+    for obj, where in _nested(settings, path):
+        name = type(obj).__name__
+        if message.startswith(f"{name}: ") and where:
+            return f"[{'.'.join(where)}]: {message[len(name) + 2:]}"
+        if not message.startswith(f"{name}."):
+            continue
+        head, _, rest = message[len(name) + 1:].partition(" ")
+        keys = tuple(head.rstrip(":").split("."))
+        if keys[0] in {f.name for f in dataclasses.fields(obj)}:
+            return f"{toml_key((*where, *keys))}{':' if head.endswith(':') else ''} {rest}"
+    return message
+
+
+def _nested(settings: Any, path: tuple[str, ...]) -> list[tuple[Any, tuple[str, ...]]]:
+    """`settings` and every settings dataclass nested in it, each with its table's path, outermost first."""
+    out = [(settings, path)]
+    for f in dataclasses.fields(settings):
+        value = getattr(settings, f.name)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            out += _nested(value, (*path, f.name))
+    return out
+
+
+def _value(default: Any, value: Any, path: tuple[str, ...]) -> Any:
     """`value` as the kind of `default` (a table into settings, an array into a tuple, an integer into a float)."""
+    where = toml_key(path)
     if dataclasses.is_dataclass(default):
-        return _replaced(default, value, where)
+        return _replaced(default, value, path)
     if isinstance(default, tuple):
         if not isinstance(value, list | tuple) or len(value) != len(default):
             raise ConfigError(f"{where} must be an array of {len(default)} values like {list(default)}, got {value!r}")
-        return tuple(_value(d, v, f"{where}[{i}]") for i, (d, v) in enumerate(zip(default, value, strict=True)))
+        return tuple(_value(d, v, (*path[:-1], f"{path[-1]}[{i}]"))
+                     for i, (d, v) in enumerate(zip(default, value, strict=True)))
     if default is None:  # an optional setting (e.g. `TailControllerConfig.ready_q`): numbers, or an array of them
         if isinstance(value, list | tuple) and value and all(_is_number(v) for v in value):
             return tuple(float(v) for v in value)

@@ -25,6 +25,7 @@ plan, shifted in time, and is counted (``fallbacks``); a failed whole-body QP fa
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -331,6 +332,10 @@ class MpcController:
     def counters(self) -> dict[str, int]:
         """MPC solves, MPC fallbacks and whole-body QP failures (which fell back to the leg-level layer) so far."""
         return {"fallbacks": self.fallbacks, "mpc_solves": self.solves, "wbc_failures": self.wbc_failures}
+
+    def settings(self) -> dict[str, object]:
+        """Every field of its `MpcControllerConfig`, nested settings as dicts (`HasSettings`)."""
+        return dataclasses.asdict(self.config)
 
     def tick_timings(self) -> Mapping[str, float]:
         """Where the time of the last `act` went [s].

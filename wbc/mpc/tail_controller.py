@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import functools
 import time
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 import pinocchio as pin
@@ -217,6 +217,14 @@ class TailMpcController(MpcController):
     def counters(self) -> dict[str, int]:
         """The MPC's counters, and the pushes the observer detected and the updates they triggered."""
         return {**super().counters(), "pushes_detected": self.pushes_detected, "push_replans": self.push_replans}
+
+    def settings(self) -> dict[str, object]:
+        """Its `TailControllerConfig` as it runs (`HasSettings`).
+
+        ``ready_q`` is the pose it holds (`ready_pose`'s when the settings leave it out), ``base`` the MPC controller's
+        settings with those the tail sets in place.
+        """
+        return {**asdict(self.tail_config), "ready_q": self.ready_q.tolist(), "base": asdict(self.config)}
 
     # -- planning -------------------------------------------------------------------------------------------------
     def _replan_due(self) -> bool:

@@ -90,6 +90,7 @@ class ArmMomentumTrial:
         bound_fraction: mean over pushes of the peak |h_arm| after the push over that bound (nan without an arm).
         alignment: mean over pushes of the cosine between h_arm at its peak and the push's r x F (nan without an
             arm, or where the arm held no momentum).
+        controller_config: the ``--controller-config`` file the controller was built with, as given, or None.
     """
 
     controller: str
@@ -107,6 +108,7 @@ class ArmMomentumTrial:
     arm_momentum_bound: float = 0.0
     bound_fraction: float = float("nan")
     alignment: float = float("nan")
+    controller_config: str | None = None
 
 
 @dataclass
@@ -204,7 +206,8 @@ def arm_momentum_study(scenario_path: str, controller: str, *, band: str, seeds:
     for trial in scenario.trials([band], list(seeds), trials):
         if duration_s is not None:
             trial = dataclasses.replace(trial, duration_s=duration_s)
-        out.append(_study_trial(trial, controller, spec))
+        row = _study_trial(trial, controller, spec)
+        out.append(row if config is None else dataclasses.replace(row, controller_config=str(config)))
     return out
 
 

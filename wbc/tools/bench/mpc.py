@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -21,6 +21,7 @@ from wbc.arena.divergence import DivergenceCheck
 from wbc.arena.episode import Episode
 from wbc.arena.executors import spawn_pool, worker_environment
 from wbc.arena.runner import run_episode
+from wbc.control.plugin import read_controller_config
 from wbc.control.protocol import Controller, HasTickTimings
 from wbc.control.registry import CONTROLLERS, get_controller
 from wbc.control.stand import stand_command
@@ -437,7 +438,7 @@ class PhysicsTimedRobot(MujocoRobot):
         self.physics_s += time.perf_counter() - t0
 
 
-def _check_tail_qp_solver(factory: object, controller: str, qp_solver: str) -> None:
+def _check_tail_qp_solver(factory: object, controller: str, qp_solver: str | None) -> None:
     """Refuse a QP backend other than DAQP for a tail MPC controller (`factory`: its class, or any factory).
 
     The tail controller plans with `wbc.mpc.tail_mpc.TailMpc`, whose QP (the arm's accelerations and the servos'
@@ -446,14 +447,31 @@ def _check_tail_qp_solver(factory: object, controller: str, qp_solver: str) -> N
     Raises:
         ConfigError: `factory` is a `TailMpcController` class and `qp_solver` is not ``daqp``.
     """
-    if qp_solver != "daqp" and isinstance(factory, type) and issubclass(factory, TailMpcController):
+    if qp_solver not in (None, "daqp") and isinstance(factory, type) and issubclass(factory, TailMpcController):
         raise ConfigError(f"--qp-solver {qp_solver}: {controller} solves its tail MPC's QP with daqp only (the other "
                           "backends take the centroidal MPC's QP, which it does not build); leave --qp-solver out "
                           "or give daqp")
 
 
+def _check_file_qp_solver(config: str | Path, qp_solver: str) -> None:
+    """Refuse a `qp_solver` other than the one the ``--controller-config`` file `config` sets in ``[mpc] qp_solver``.
+
+    The file's variant is timed as the arena plays it, on its own backend; a file that sets none leaves the
+    backend to ``--qp-solver``.
+
+    Raises:
+        ConfigError: the file sets ``[mpc] qp_solver`` to another backend than `qp_solver`.
+    """
+    mpc = read_controller_config(config).get("mpc")
+    own = mpc.get("qp_solver") if isinstance(mpc, Mapping) else None
+    if own is not None and own != qp_solver:
+        raise ConfigError(f"--qp-solver {qp_solver}: {config} sets [mpc] qp_solver = {own!r}, and bench mpc times "
+                          "the variant as the arena plays it; leave --qp-solver out to time it on "
+                          f"{own}, or set [mpc] qp_solver = {qp_solver!r} in {config}")
+
+
 def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: float = 4.0, vx: float = 0.3,
-              single_thread: bool = True, reference: bool = True, qp_solver: str = "daqp",
+              single_thread: bool = True, reference: bool = True, qp_solver: str | None = None,
               rounds: int = DEFAULT_ROUNDS, config: str | Path | None = None) -> MpcBenchResult:
     """Speed of the MPC controller in closed loop on one core: MPC solves, whole-body ticks, real-time factor.
 
@@ -500,7 +518,10 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         single_thread: run in a spawned process with a single-threaded BLAS.
         reference: also measure the references.
         qp_solver: the closed loop's QP backend (`wbc.mpc.qp_solvers.QP_SOLVERS`); the comparison runs them all.
-            A tail controller (``mpc-tail``) solves its own QP with DAQP: it takes ``daqp`` only, and its result
+            None: the controller's own (the `config` file's ``[mpc] qp_solver``, else DAQP). Given, it replaces
+            the controller's own, except that a `config` file that sets ``[mpc] qp_solver`` to another backend is
+            refused: the variant is timed as the arena plays it. A tail controller (``mpc-tail``) solves its own QP
+            with DAQP: it takes ``daqp`` only, and its result
             holds no comparison (``qp_comparison_skipped`` says why).
         rounds: how many times the timed walk is played (1 to `MAX_ROUNDS`).
         config: a plug-in's ``--controller-config`` TOML file (e.g. `wbc.mpc.config_table`'s settings of a variant),
@@ -515,16 +536,20 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
         SimulationDiverged: the simulation blew up during the walk (no figure of a blown-up walk is reported).
         BenchError: the controller is not an MPC controller, or a reference failed.
         ConfigError: `qp_solver` is not a QP backend (the message lists them), or is not ``daqp`` for the tail MPC
-            controller (``mpc-tail``, which solves its own QP with DAQP), or `rounds` is out of its range, or
+            controller (``mpc-tail``, which solves its own QP with DAQP), or differs from the ``[mpc] qp_solver``
+            that the `config` file sets (the message names the file and the field), or `rounds` is out of its range, or
             `seconds` is shorter than one control tick.
     """
-    check_qp_solver(qp_solver, "--qp-solver")
+    if qp_solver is not None:
+        check_qp_solver(qp_solver, "--qp-solver")
     if isinstance(rounds, bool) or not isinstance(rounds, int) or not 1 <= rounds <= MAX_ROUNDS:
         raise ConfigError(f"--rounds must be a whole number of timed walks from 1 to {MAX_ROUNDS}, got {rounds!r}")
     # the names are checked here, before the worker is spawned: a mistyped name is refused at once, and its message
     # does not depend on the error travelling back from the worker
     spec = get_controller(controller, config=config)
     get_robot(robot, spec.arm_mode)
+    if config is not None and qp_solver is not None:
+        _check_file_qp_solver(config, qp_solver)
     _check_tail_qp_solver(getattr(spec.make, "func", spec.make), controller, qp_solver)
     if single_thread:
         with worker_environment(), spawn_pool(1) as pool:
@@ -544,9 +569,9 @@ def bench_mpc(robot: str = "a1-wx200", controller: str = "mpc", *, seconds: floa
     if int(round(seconds / period)) < 1:  # the runner would refuse the walk, naming the controller's rate
         raise ConfigError(f"--seconds {seconds:g}: the walk must hold at least one control tick of {controller} "
                           f"({period:g} s at {ctrl.rate_hz:g} Hz); give --seconds {period:g} or more")
-    if ctrl.config.mpc.qp_solver != qp_solver:
-        config = replace(ctrl.config, mpc=replace(ctrl.config.mpc, qp_solver=qp_solver))
-        ctrl = type(ctrl)(sim.desc, config)
+    if qp_solver is not None and ctrl.config.mpc.qp_solver != qp_solver:
+        # the file (if any) leaves the backend to its default: the one asked for replaces it
+        ctrl = type(ctrl)(sim.desc, replace(ctrl.config, mpc=replace(ctrl.config.mpc, qp_solver=qp_solver)))
     ref_ticks, ref_rates, physics, physics_cpu = [], [], [], []
 
     def measure_references() -> None:
