@@ -136,6 +136,14 @@ def test_the_first_line_bounds_only_the_claims_that_hold_and_calls_the_others_un
     assert "keeps the chance of any false \"better\" in this verdict" not in line
 
 
+def test_a_verdict_whose_tests_cannot_reach_005_says_none_can_call_a_side_better():
+    records = [_fall(c, "in", t, False) for t in range(10) for c in ("a", "b")]
+    assert verdict.count_line(_summary(records, bands=("in",))) == (
+        "This verdict weighs 2 paired tests (every test of the paired differences: 1 pair of controllers, 1 band, 2 "
+        "metrics); none can reach p < 0.05 on its pairs (too few discordant pairs or nonzero differences), so no test "
+        "is corrected: none can call a side better.")
+
+
 # --- the trials a difference needs under the correction ------------------------------------------------------------
 
 

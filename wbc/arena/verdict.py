@@ -356,7 +356,8 @@ def count_line(summary: Summary) -> str | None:
     bands = len({entry.band for entry in tested})
     metrics = len({entry.metric for entry in tested})
     tests = "1 paired test" if weighed == 1 else f"{weighed} paired tests"
-    family = (f"all {m} can reach p < {ALPHA:g} on their pairs, and Holm's correction runs over the {m}" if not out
+    family = (f"{'both' if m == 2 else f'all {m}'} can reach p < {ALPHA:g} on their pairs, and Holm's correction "
+              f"runs over the {m}" if not out
               else f"{out} of them cannot reach p < {ALPHA:g} on their pairs (too few discordant pairs or nonzero "
                    f"differences) and {'is' if out == 1 else 'are'} left out of Holm's correction, which runs over "
                    f"the other {m} (Tarone's refinement)" if m else
@@ -373,6 +374,10 @@ def count_line(summary: Summary) -> str | None:
                 f"; {'the 1 claim' if rest == 1 else f'the {rest} claims'} marked \"on its own test only\" "
                 f"{'is' if rest == 1 else 'are'} each at {ALPHA:g} on {'its' if rest == 1 else 'their'} own, "
                 "uncorrected, outside that bound")
+    if not m:
+        return (f"This verdict weighs {tests} (every test of the paired differences: {pairs} pair"
+                f"{'' if pairs == 1 else 's'} of controllers, {bands} band{'' if bands == 1 else 's'}, {metrics} "
+                f"metric{'' if metrics == 1 else 's'}); {family}: none can call a side better.")
     return (f"This verdict weighs {tests} (every test of the paired differences: {pairs} pair"
             f"{'' if pairs == 1 else 's'} of controllers, {bands} band{'' if bands == 1 else 's'}, {metrics} "
             f"metric{'' if metrics == 1 else 's'}); {family}. {alone_text}. {bound}{own_only}. Where nothing "
