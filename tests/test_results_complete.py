@@ -198,7 +198,7 @@ def test_the_verdict_says_who_survives_more_on_how_many_pairs_and_what_would_set
     survival = next(line for line in lines if "survival" in line)
     # not significant: the sentence opens with that, never with a side that "survives more"
     assert survival.startswith("band b: mpc and learned do not differ significantly in survival: learned 7 against 3 "
-                               "of 8 paired trials (+50.0 points")
+                               "of 8 paired trials (learned - mpc = +50.0 points")
     assert "of 4 discordant pairs learned alone survived 4 and mpc alone 0" in survival
     assert "not significant (exact McNemar p = 0.125)" in survival and "would settle" in survival
     tracking = next(line for line in lines if "linear velocity" in line)
@@ -208,7 +208,7 @@ def test_the_verdict_says_who_survives_more_on_how_many_pairs_and_what_would_set
     ttf = next(line for line in lines if "TTF" in line)
     assert ttf.startswith("band b: mpc and learned do not differ significantly in how long they stay up (TTF): "
                           "learned mean TTF (the share of the episode survived) 0.938 against 0.688 on 8 trials "
-                          "(difference +0.250"), ttf
+                          "(learned - mpc = +0.250"), ttf
     assert "Wilcoxon signed-rank" in ttf
     entry = next(p for p in summary.paired if p.metric == "success_rate")
     assert entry.interval == "exact" and entry.ci95[0] < 0 < entry.ci95[1]  # agrees with p = 0.125
@@ -229,7 +229,7 @@ def test_the_verdict_says_who_survives_more_on_how_many_pairs_and_what_would_set
                                bands=["b"]))
     assert "of 1 discordant pair d alone survived 1" in next(line for line in lines if "survival" in line)
     tracking = next(line for line in lines if "linear velocity" in line)
-    assert "(difference -4.5e-04, 95 % bootstrap interval [-0.001, -2.9e-04])" in tracking, tracking
+    assert "(c - d = -4.5e-04 m/s, 95 % bootstrap interval [-0.001, -2.9e-04])" in tracking, tracking
     assert "significant (Wilcoxon signed-rank p = 0.00781)" in tracking and "-0.000" not in tracking
     strong = [_record("e", i, vlin=(0.1 + 0.01 * i,)) for i in range(40)]
     weak = [_record("f", i, vlin=(0.3 + 0.01 * i,)) for i in range(40)]

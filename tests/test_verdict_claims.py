@@ -41,6 +41,19 @@ def _a_survives_more(falls_of_b: int, trials: int = 10) -> list[TrialRecord]:
     return records
 
 
+def _b_falls_in_both_bands() -> list[TrialRecord]:
+    """B falls halfway through 7 of band in's 10 trials and A in none; in band ood each falls in 3 of 10, apart."""
+    records = []
+    for band in ("in", "ood"):
+        for t in range(10):
+            falls_a = band == "ood" and t < 3
+            falls_b = (band == "in" and t < 7) or (band == "ood" and 3 <= t < 6)
+            for controller, falls in (("a", falls_a), ("b", falls_b)):
+                records.append(make_record(controller, band, 0, t, success=not falls, ttf=0.5 if falls else 1.0,
+                                           fall_time_s=1.0 if falls else math.nan))
+    return records
+
+
 # --- 1. multiplicity: Holm's correction over the tests the verdict weighs -------------------------------------------
 
 
@@ -60,9 +73,10 @@ def test_holm_adjusted_p_values_agree_with_statsmodels():
 
 def test_summary_json_gives_each_paired_tests_holm_adjusted_p_beside_its_own():
     multipletests = pytest.importorskip("statsmodels.stats.multitest").multipletests
-    summary = _summary(_a_survives_more(7)).to_json()
+    summary = _summary(_b_falls_in_both_bands()).to_json()
     tested = [p for p in summary["paired"] if p["p"] is not None]
     assert len(tested) == 4  # success and TTF in two bands; no common window, so no tracking test
+    # every test can reach p < 0.05 on its pairs (7 and 6 discordant pairs or nonzero differences): plain Holm
     expected = multipletests([p["p"] for p in tested], method="holm")[1]
     assert [p["p_holm"] for p in tested] == pytest.approx(list(expected), abs=1e-15)
     assert all(p["p_holm"] is None for p in summary["paired"] if p["p"] is None)
@@ -70,32 +84,36 @@ def test_summary_json_gives_each_paired_tests_holm_adjusted_p_beside_its_own():
 
 
 def test_the_verdicts_first_line_counts_its_tests_and_those_that_hold_after_correction(tmp_path):
-    summary = _summary(_a_survives_more(7))
+    summary = _summary(_b_falls_in_both_bands())
     line = verdict.count_line(summary)
     assert line.startswith("This verdict weighs 4 paired tests")
-    assert "2 of them have p < 0.05 on their own test; 0 hold after Holm's correction over the 4" in line
+    assert ("all 4 can reach p < 0.05 on their pairs, and Holm's correction runs over the 4. 2 have p < 0.05 on "
+            "their own test; 0 hold after the correction.") in line
     # the terminal and report.md say the same, first
     printed = format_verdict(summary).splitlines()
     assert " ".join(s.strip() for s in printed[1:4]).startswith("This verdict weighs 4 paired tests")
-    write_report(tmp_path, summary, _a_survives_more(7), {})
+    write_report(tmp_path, summary, _b_falls_in_both_bands(), {})
     section = (tmp_path / "report.md").read_text().split("## Verdict\n\n")[1]
     assert section.splitlines()[0] == line
     held = verdict.count_line(_summary(_a_survives_more(10)))
-    assert "2 of them have p < 0.05 on their own test; 2 hold after Holm's correction over the 4" in held
+    assert ("2 of them cannot reach p < 0.05 on their pairs (too few discordant pairs or nonzero differences) and are "
+            "left out of Holm's correction, which runs over the other 2 (Tarone's refinement). 2 have p < 0.05 on "
+            "their own test; 2 hold after the correction.") in held
 
 
 def test_a_better_side_that_does_not_survive_holms_correction_says_so():
     # 7 against 0 discordant pairs: exact McNemar p = 2 / 2^7 = 0.0156; times 4 tests: 0.0625, not below 0.05
-    (survival, ttf, _) = verdict.verdicts(_summary(_a_survives_more(7)))
+    (survival, ttf, *_) = verdict.verdicts(_summary(_b_falls_in_both_bands()))
     assert survival.startswith("band in: a survives more than b (on its own test only, not after Holm's correction)")
     assert ("significant on its own (exact McNemar p = 0.0156), not significant after Holm's correction over the 4 "
-            "tests of this verdict (Holm-adjusted p = 0.0625)") in survival
+            "tests of this verdict that can reach p < 0.05 (Holm-adjusted p = 0.0625)") in survival
     assert ttf.startswith("band in: a stays up longer than b (on its own test only, not after Holm's correction)")
-    # 10 against 0: p = 0.00195, adjusted 0.0078: it holds, and the sentence says so
+    # 10 against 0: p = 0.00195; band ood's two tests cannot reach 0.05 (nothing differs there) and are left out of
+    # the family: adjusted 2 x 0.00195 = 0.0039, it holds, and the sentence says so
     (survival, _, _) = verdict.verdicts(_summary(_a_survives_more(10)))
     assert survival.startswith("band in: a survives more than b: ")
-    assert ("significant (exact McNemar p = 0.00195), and after Holm's correction over the 4 tests of this verdict "
-            "(Holm-adjusted p = 0.00781)") in survival
+    assert ("significant (exact McNemar p = 0.00195), and after Holm's correction over the 2 tests of this verdict "
+            "that can reach p < 0.05 (Holm-adjusted p = 0.00391)") in survival
 
 
 # --- 2. no interval the data cannot give -------------------------------------------------------------------------
@@ -136,7 +154,7 @@ def test_values_all_equal_are_said_to_be_equal_not_given_a_zero_width_interval()
     shifted = [dataclasses.replace(r, ttf=0.5, success=False, outcome="fall", fall_time_s=1.0)
                if r.controller == "b" else r for r in records]
     (sentence,) = [v for v in verdict.verdicts(_summary(shifted, bands=("in",))) if "TTF" in v]
-    assert "difference +0.500, the same in all 6 pairs: no bootstrap interval" in sentence
+    assert "a - b = +0.500, the same in all 6 pairs: no bootstrap interval" in sentence
     assert "bootstrap interval [" not in sentence
 
 
@@ -203,7 +221,7 @@ def test_a_paper_tables_better_side_says_whether_it_holds_after_holms_correction
 
     assert paper_verdict(pair(0.01, 0.37), family=37) == (
         "Success: pi3 better (pi3 - pi2 = +20.00 points, p = 0.01; on its own test only: not after Holm's correction "
-        "over the table's 37 tests, adjusted p = 0.37)")
+        "over the table's 37 tests that can reach p < 0.05, adjusted p = 0.37)")
     assert paper_verdict(pair(0.001, 0.037), family=37) == (
         "Success: pi3 better (pi3 - pi2 = +20.00 points, p = 0.001; holds after Holm's correction over the table's 37 "
-        "tests, adjusted p = 0.037)")
+        "tests that can reach p < 0.05, adjusted p = 0.037)")

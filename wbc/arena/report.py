@@ -34,7 +34,6 @@ import numpy as np
 
 from wbc.arena.breakdown import breakdown_tables
 from wbc.arena.error_guard import ControllerErrors, outcome_counts
-from wbc.arena.multiplicity import holm_adjusted
 from wbc.arena.paired_tests import (
     BINARY_FIELDS,
     hodges_lehmann,
@@ -56,7 +55,7 @@ from wbc.arena.stats import (
 )
 from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning, p_digits
 from wbc.arena.trial_record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
-from wbc.arena.verdict import ALPHA, count_line, robots_caveat, signed, verdicts
+from wbc.arena.verdict import ALPHA, count_line, holm_family, in_family, robots_caveat, signed, verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
 from wbc.output_files import write_text
@@ -218,48 +217,98 @@ def paired_comparison(records_a: Sequence[TrialRecord], records_b: Sequence[Tria
 
     Returns:
         ``{"diff", "ci95", "interval", "n", "mean_a", "mean_b", "test", "p", "n80", "a_only", "b_only", "shift",
-        "rank_biserial", "all_equal"}``:
+        "rank_biserial", "all_equal", "nonzero"}``:
         ``interval`` names how ``ci95`` was made (``exact`` or ``bootstrap``), ``mean_a`` / ``mean_b`` are each
         controller's mean over the pairs used, ``a_only`` / ``b_only`` the discordant pair counts of a binary field
         (None otherwise), ``shift`` the Hodges-Lehmann estimate of B - A and ``rank_biserial`` the side and strength
         of the Wilcoxon test's lean (both None for a binary field), ``all_equal`` the number of pairs when every
-        difference of a bootstrapped metric is the same (`wbc.arena.stats.all_equal`; None otherwise); NaN where
+        difference of a bootstrapped metric is the same (`wbc.arena.stats.all_equal`; None otherwise), ``nonzero``
+        the Wilcoxon test's nonzero differences (None for a binary field); NaN where
         undefined. From one pair a bootstrap interval is NaN: one difference has no spread to resample.
 
     Raises:
         RecordError: one controller's records repeat a trial.
     """
+    out, d = _paired(records_a, records_b, field)
+    out["n80"] = _n80(out, d, alpha)
+    return out
+
+
+def _paired(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord],
+            field: str) -> tuple[dict[str, Any], np.ndarray]:
+    """`paired_comparison` but n80, and the differences B - A it was read off (for `_n80` at other levels)."""
     if field in COMMON_WINDOW:
         a, b = _common_pairs(records_a, records_b, field)
     else:
         a, b = paired_values(records_a, records_b, field)
     out: dict[str, Any] = {"diff": math.nan, "ci95": [math.nan, math.nan], "interval": None, "n": int(a.size),
                            "mean_a": math.nan, "mean_b": math.nan, "test": None, "p": math.nan, "n80": None,
-                           "a_only": None, "b_only": None, "shift": None, "rank_biserial": None, "all_equal": None}
-    if a.size == 0:
-        return out
+                           "a_only": None, "b_only": None, "shift": None, "rank_biserial": None, "all_equal": None,
+                           "nonzero": None}
     d = b - a
+    if a.size == 0:
+        return out, d
     out.update(diff=float(d.mean()), mean_a=float(a.mean()), mean_b=float(b.mean()))
     if field in BINARY_FIELDS:
         test = mcnemar_exact(a, b)
         out.update(test="exact McNemar", p=test.p_value, a_only=test.a_only, b_only=test.b_only,
-                   ci95=list(paired_success_interval(test.a_only, test.b_only, int(a.size))), interval="exact",
-                   n80=pairs_for_mcnemar(test.a_only / a.size, test.b_only / a.size, alpha=alpha))
+                   ci95=list(paired_success_interval(test.a_only, test.b_only, int(a.size))), interval="exact")
     else:
         test = wilcoxon_signed_rank(d)
         out.update(test="Wilcoxon signed-rank", p=test.p_value, ci95=list(bootstrap_mean_ci(d)), interval="bootstrap",
-                   shift=hodges_lehmann(d), rank_biserial=rank_biserial(test), all_equal=all_equal(d))
-        if d.size >= 2:
-            out["n80"] = pairs_for_mean_difference(float(d.mean()), float(d.std(ddof=1)), alpha=alpha)
-    return out
+                   shift=hodges_lehmann(d), rank_biserial=rank_biserial(test), all_equal=all_equal(d),
+                   nonzero=test.nonzero)
+    return out, d
+
+
+def _n80(out: Mapping[str, Any], d: np.ndarray, alpha: float) -> int | None:
+    """The pairs `out`'s test needs for 80 % power at `alpha` at the difference observed (`paired_comparison`)."""
+    if out["test"] == "exact McNemar":
+        return pairs_for_mcnemar(out["a_only"] / d.size, out["b_only"] / d.size, alpha=alpha)
+    if out["test"] is not None and d.size >= 2:
+        return pairs_for_mean_difference(float(d.mean()), float(d.std(ddof=1)), alpha=alpha)
+    return None
 
 
 def compare_pair(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord], *, a: str, b: str, band: str,
                  metric: str) -> PairSummary:
     """`paired_comparison` of a summary metric (`METRIC_KEYS`) as a `PairSummary` named by `a`, `b` and `band`."""
-    result = paired_comparison(records_a, records_b, METRIC_KEYS[metric])
+    return _compare_pair(records_a, records_b, a=a, b=b, band=band, metric=metric)[0]
+
+
+def _compare_pair(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord], *, a: str, b: str, band: str,
+                  metric: str) -> tuple[PairSummary, np.ndarray]:
+    """`compare_pair` and the differences B - A it was read off."""
+    result, d = _paired(records_a, records_b, METRIC_KEYS[metric])
+    result["n80"] = _n80(result, d, ALPHA)
     result["ci95"] = tuple(result["ci95"])
-    return PairSummary(a=a, b=b, band=band, metric=metric, **result)
+    return PairSummary(a=a, b=b, band=band, metric=metric, **result), d
+
+
+def _with_family(pairs: Sequence[tuple[PairSummary, np.ndarray]]) -> list[PairSummary]:
+    """The paired comparisons with their Holm-adjusted p over the verdict's family and their n80 under it.
+
+    The family is the tests that can reach p < 0.05 on their pairs (`wbc.arena.verdict.holm_family`: Holm's
+    correction with Tarone's refinement). ``n80_holm`` is the pairs for 80 % power at 0.05 / m, m the family's
+    tests with this one in it (a test left out of it would join it to hold): the level of Holm's first step.
+
+    Args:
+        pairs: each comparison (`compare_pair`) with the differences B - A it was read off.
+
+    Returns:
+        The comparisons, in order, with ``p_holm`` and ``n80_holm``.
+    """
+    entries = holm_family([entry for entry, _ in pairs])
+    m = sum(1 for entry in entries if in_family(entry))
+    out = []
+    for entry, (_, d) in zip(entries, pairs, strict=True):
+        if entry.n80 is None:
+            out.append(entry)
+            continue
+        m_with = m if in_family(entry) else m + 1
+        n80_holm = entry.n80 if m_with == 1 else _n80(dataclasses.asdict(entry), d, ALPHA / m_with)
+        out.append(dataclasses.replace(entry, n80_holm=n80_holm))
+    return out
 
 
 def _common_pairs(records_a: Sequence[TrialRecord], records_b: Sequence[TrialRecord],
@@ -305,8 +354,9 @@ def summarize(
     trial's common window (`wbc.arena.windows`); ticks, deadline misses and clamped ticks; every counter; and, with
     `errors` given (the arena), the trials per outcome. For every ordered pair (a, b) with a listed before b in
     `controllers`, every band and every metric in `PAIRED_METRICS` (`PairSummary`): the paired difference b - a, its
-    95 % interval, its paired test and n80 (`paired_comparison`), and its p-value after Holm's correction over every
-    paired test of the run (`wbc.arena.multiplicity.holm_adjusted`: the family the verdict weighs). Warnings for
+    95 % interval, its paired test and n80 (`paired_comparison`), and its p-value after Holm's correction over the
+    paired tests of the run that can reach p < 0.05 on their pairs and n80 under that correction (`with_family`: the
+    family the verdict weighs). Warnings for
     deadline misses or clamped ticks past `WARN_FRACTION` of a cell's ticks.
 
     Records of controllers or bands not listed are ignored. A listed controller or band without records gets
@@ -362,13 +412,9 @@ def summarize(
                                        outcomes=outcome_counts(cell) if errors is not None else None)
             per_controller[controller][band] = summary_cell
             warnings += _warnings(controller, band, summary_cell)
-    paired = []
-    for a, b in itertools.combinations(controllers, 2):
-        for band in bands:
-            for metric in PAIRED_METRICS:
-                paired.append(compare_pair(cells[a][band], cells[b][band], a=a, b=b, band=band, metric=metric))
-    holm = holm_adjusted([entry.p for entry in paired])
-    paired = [dataclasses.replace(entry, p_holm=p) for entry, p in zip(paired, holm, strict=True)]
+    paired = _with_family([_compare_pair(cells[a][band], cells[b][band], a=a, b=b, band=band, metric=metric)
+                          for a, b in itertools.combinations(controllers, 2) for band in bands
+                          for metric in PAIRED_METRICS])
     return Summary(scenario_name=scenario_name, scenario_hash=scenario_hash, cells=per_controller,
                    paired=tuple(paired), warnings=tuple(warnings),
                    controller_errors=None if errors is None else {e.controller: e for e in errors},
@@ -591,13 +637,14 @@ PAIRED_LEGEND = ("95% CI: for success the exact interval built from the discorda
                  "errors compare the seconds both controllers survived on each trial (common window). p: exact "
                  "McNemar test for success (its discordant pairs' binomial test), Wilcoxon signed-rank test "
                  "otherwise, two-sided; n80: paired trials that test needs to detect the observed difference with "
-                 "80 % power at alpha = 0.05 (- when no difference was observed). On a few pairs a bootstrap "
-                 "interval is narrower than the test allows (it may exclude 0 where no test could reject on so few "
-                 "pairs): the verdict follows the test. 'all n equal': every one of the n pairs had this "
+                 "80 % power at alpha = 0.05, the test on its own (- when no difference was observed; summary.json's "
+                 "n80_holm: at 0.05 / m, the first step of the verdict's Holm correction over m tests). On a few pairs "
+                 "a bootstrap interval is narrower than the test allows (it may exclude 0 where no test could reject "
+                 "on so few pairs): the verdict follows the test. 'all n equal': every one of the n pairs had this "
                  "difference, which a bootstrap cannot turn into an interval; n/a from one pair. Each p is its own "
                  "comparison's, not corrected for the others in this table: where nothing differs, about 1 test in "
-                 "20 has p < 0.05 by chance. The verdict says which hold after Holm's correction over every test of "
-                 "this table (summary.json: p_holm).")
+                 "20 has p < 0.05 by chance. The verdict says which hold after Holm's correction over the tests of "
+                 "this table that can reach p < 0.05 on their pairs (summary.json: p_holm).")
 """What the p and n80 columns of the paired differences mean, printed under them."""
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from wbc.arena.error_guard import ControllerErrors
+from wbc.arena.multiplicity import smallest_attainable_p
 from wbc.errors import RecordError
 
 __all__ = ["SIGNIFICANCE", "CellSummary", "CounterTotal", "MetricSummary", "PairSummary", "Summary", "TickWarning",
@@ -62,6 +63,8 @@ class MetricSummary:
     ci95: tuple[float | None, float | None] = (None, None)
     trials: int | None = None
     all_equal: int | None = None
+    nonzero: int | None = None
+    n80_holm: int | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "mean", json_float(self.mean))
@@ -193,8 +196,8 @@ class PairSummary:
         mean_b: B's mean over the pairs.
         test: the paired test (``exact McNemar`` or ``Wilcoxon signed-rank``); None without pairs.
         p: its two-sided p-value.
-        n80: pairs the test needs for 80 % power at the observed difference; None when none was observed or
-            beyond the search.
+        n80: pairs the test needs for 80 % power at the observed difference, at alpha = 0.05 (the test on its own);
+            None when none was observed or beyond the search.
         a_only: discordant pairs A alone won (success only).
         b_only: discordant pairs B alone won (success only).
         shift: the Hodges-Lehmann estimate of B - A (the median of the nonzero differences' Walsh averages), the
@@ -203,10 +206,18 @@ class PairSummary:
         rank_biserial: the Wilcoxon test's matched-pairs rank-biserial correlation, (R+ - R-) / (R+ + R-): its sign
             is the side the test leans to (positive: B - A tends to be positive), which the mean's may not be. None
             for success and in a ``summary.json`` written before it was recorded.
-        p_holm: `p` after Holm's correction over every paired test of the run (`wbc.arena.multiplicity`): the
-            family the verdict weighs. None without a test, and in a ``summary.json`` written before it was recorded.
+        p_holm: `p` after Holm's correction over the paired tests of the run that can reach p < 0.05 on their pairs
+            (Tarone's refinement, `wbc.arena.multiplicity.tarone_holm_adjusted`): the family the verdict weighs. A
+            test that cannot (`smallest_p` >= 0.05) is left out of it and has its own `p` here. None without a test,
+            and in a ``summary.json`` written before it was recorded.
         all_equal: for a bootstrap interval, the number of pairs (2 or more) when every difference is the same, else
             None: `ci95` is then [diff, diff], which measures no uncertainty. From one pair `ci95` is (None, None).
+        nonzero: the Wilcoxon test's nonzero differences (the pairs it ranks); None for success, and in a
+            ``summary.json`` written before it was recorded.
+        n80_holm: pairs the test needs for 80 % power at the observed difference at alpha / m, m the tests of the
+            verdict's family with this one in it: the level of Holm's first (strictest) step, which a test that
+            reaches holds after the correction whatever the others show. None where `n80` is, and in a
+            ``summary.json`` written before it was recorded.
     """
 
     a: str
@@ -228,6 +239,8 @@ class PairSummary:
     rank_biserial: float | None = None
     p_holm: float | None = None
     all_equal: int | None = None
+    nonzero: int | None = None
+    n80_holm: int | None = None
 
     def __post_init__(self) -> None:
         for name in ("diff", "mean_a", "mean_b", "p", "shift", "rank_biserial", "p_holm"):
@@ -239,13 +252,32 @@ class PairSummary:
         """The test rejected at `SIGNIFICANCE` (0.05)."""
         return self.p is not None and self.p < SIGNIFICANCE
 
+    @property
+    def smallest_p(self) -> float | None:
+        """The smallest p its exact test could give on these pairs (`wbc.arena.multiplicity.smallest_attainable_p`).
+
+        On the discordant pairs (McNemar) or the nonzero differences (Wilcoxon); from a ``summary.json`` without
+        `nonzero`, on the pairs (an upper bound of the nonzero differences), or none where they are all 0. None
+        without a test.
+        """
+        if self.p is None or self.test is None:
+            return None
+        if self.test == "exact McNemar":
+            informative = (self.a_only or 0) + (self.b_only or 0)
+        elif self.nonzero is not None:
+            informative = self.nonzero
+        else:
+            informative = 0 if self.diff == 0.0 and (self.all_equal is not None or self.n == 1) else self.n
+        return smallest_attainable_p(informative)
+
     def to_json(self) -> dict[str, Any]:
         """The ``summary.json`` form (``paired`` entries)."""
         return {"a": self.a, "b": self.b, "band": self.band, "metric": self.metric, "diff": self.diff,
                 "ci95": list(self.ci95), "interval": self.interval, "n": self.n, "mean_a": self.mean_a,
                 "mean_b": self.mean_b, "test": self.test, "p": self.p, "n80": self.n80, "a_only": self.a_only,
                 "b_only": self.b_only, "shift": self.shift, "rank_biserial": self.rank_biserial,
-                "p_holm": self.p_holm, "all_equal": self.all_equal}
+                "p_holm": self.p_holm, "all_equal": self.all_equal, "nonzero": self.nonzero,
+                "n80_holm": self.n80_holm}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PairSummary:
@@ -255,7 +287,8 @@ class PairSummary:
                    ci95=(ci[0], ci[1]), interval=data["interval"], n=data["n"], mean_a=data["mean_a"],
                    mean_b=data["mean_b"], test=data["test"], p=data["p"], n80=data["n80"], a_only=data["a_only"],
                    b_only=data["b_only"], shift=data.get("shift"), rank_biserial=data.get("rank_biserial"),
-                   p_holm=data.get("p_holm"), all_equal=data.get("all_equal"))
+                   p_holm=data.get("p_holm"), all_equal=data.get("all_equal"), nonzero=data.get("nonzero"),
+                   n80_holm=data.get("n80_holm"))
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -7,21 +7,27 @@ entries) and says, for one band and one pair of controllers:
   agrees with the test), on how many discordant pairs (the only ones that tell the two apart), whether the exact
   McNemar test calls it significant, and, when it does not, that the two do not differ significantly (never that
   they are alike: the interval beside it says what is left open) and how many paired trials would settle a
-  difference that large (80 % power);
+  difference that large (80 % power), on its own test (at 0.05) and after Holm's correction whatever the other tests
+  show (at 0.05 / m, the level of the correction's first step: `PairSummary.n80_holm`);
 - time to fall: where the two fall at different times, who stays up longer (TTF, the fraction of the episode
   survived), by how much, with the Wilcoxon signed-rank test's verdict and the same count of trials;
 - tracking: who tracks the commanded velocity better over the seconds both survived (the common window), by how much,
   with the Wilcoxon signed-rank test's verdict and the same count of trials.
 
 A side is called better only where its test rejects at 0.05 and leans to it (`called_better`, which ``wbc paper``'s
-verdicts use too); a sentence whose test does not reject opens by saying so. The sentences make no claim the table
-beside them does not show.
+verdicts use too); a sentence whose test does not reject opens by saying so. A difference is written with its sides
+named, the first the sentence names minus the other (``h14 - mpc = -0.012 m/s``, its interval in the same
+orientation), as ``wbc paper``'s verdicts write it; the table beside it gives B - A. The sentences make no claim the
+table does not show.
 
 A run's verdict weighs many tests at once (every pair of controllers, band and metric of the paired-differences
 table), and among many tests of controllers that do not differ some reject by chance. Each test keeps its own p; the
-verdict also corrects over that family by Holm's method (`wbc.arena.multiplicity`): its first line (`count_line`)
-says how many tests it weighs and how many reject on their own and after the correction, and a sentence whose test
-rejects says whether it holds after the correction; one that holds only on its own test says so in its claim.
+verdict also corrects by Holm's method over the tests that can reach p < 0.05 on their pairs (Tarone's refinement,
+`wbc.arena.multiplicity`: a test on no or too few discordant pairs or nonzero differences cannot, and is left out).
+Its first line (`count_line`) says how many tests it weighs, how many it leaves out, how many reject on their own
+and after the correction, and that the correction's bound covers the claims that hold after it only; a sentence
+whose test rejects says whether it holds after the correction; one that holds only on its own test says so in its
+claim.
 
 Trials that ended in a controller error are not falls. By the arena's documented policy they count as failures in
 the success rate (and the McNemar test on it), and their TTF is the share played before the error; the verdict says
@@ -32,13 +38,14 @@ gives no verdict on survival or time to fall for that pair and band.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
-from wbc.arena.multiplicity import holm_adjusted
+from wbc.arena.multiplicity import tarone_holm_adjusted
 from wbc.arena.summary import SIGNIFICANCE, PairSummary, Summary, p_digits
 from wbc.arena.trial_record import CONTROLLER_ERROR
 
-__all__ = ["ALPHA", "LOWER_IS_BETTER", "called_better", "count_line", "holm_family", "leans", "p_clause",
-           "robots_caveat", "signed", "split", "verdicts"]
+__all__ = ["ALPHA", "LOWER_IS_BETTER", "called_better", "count_line", "holm_family", "in_family", "leans",
+           "p_clause", "robots_caveat", "signed", "split", "verdicts"]
 
 ALPHA = SIGNIFICANCE
 """The level a difference is called significant at."""
@@ -63,19 +70,41 @@ def p_clause(p: float | None) -> str:
     return f"p {_p(p)}" if p is not None and p < 1e-4 else f"p = {_p(p)}"
 
 
-def _settle(entry: PairSummary, what: str) -> str:
-    """What would settle a difference the test did not: the paired trials for 80 % power.
+def _settle(entry: PairSummary, what: str, m: int) -> str:
+    """What would settle a difference the test did not: the paired trials for 80 % power, alone and under Holm.
 
-    Not rejecting is no evidence that the two are alike: the sentence never says there is no difference, only what
-    the interval beside it allows and how many trials would tell.
+    `n80` is at `ALPHA`, for the test on its own; `n80_holm` at `ALPHA` / m, m the family's tests with this one in
+    it (`_family_size`): the level of Holm's first, strictest step, which a test that reaches holds after the
+    correction whatever the other tests show (where others hold too, fewer may do). Not rejecting is no evidence that
+    the two are alike: the sentence never says there is no difference, only what the interval beside it allows and
+    how many trials would tell.
     """
     if entry.n80 is None and entry.n < 2 and entry.test != "exact McNemar":
         return f"one pair shows nothing of how the differences spread: play more trials to size a {what} this large"
     if entry.n80:
         return (f"the test leaves the difference open (not rejecting is no evidence of none); about {entry.n80} "
-                f"paired trials would settle a {what} this large (80 % power)")
+                f"paired trials would settle a {what} this large on its own test (80 % power at {ALPHA:g})"
+                f"{_under_holm(entry, m)}")
     return ("the test leaves the difference open (not rejecting is no evidence of none); no number of paired "
             f"trials up to the search's limit would settle a {what} this small")
+
+
+def _under_holm(entry: PairSummary, m: int) -> str:
+    """The clause on the trials a difference needs to hold after Holm's correction (`PairSummary.n80_holm`)."""
+    m_with = _family_size(entry, m)
+    if m_with < 2 or entry.n80 is None:
+        return ""
+    level = f"{ALPHA:g}/{m_with}"
+    if entry.n80_holm is None:
+        return (f", and no number up to the search's limit would let it hold after Holm's correction over {m_with} "
+                f"tests at {level}")
+    return (f", and about {entry.n80_holm} would let it hold after Holm's correction over {m_with} tests whatever "
+            f"the others show (80 % power at {level}, the level of the correction's first step)")
+
+
+def _family_size(entry: PairSummary, m: int) -> int:
+    """The family a test would be corrected in: the `m` tests of the verdict's, with this one in it."""
+    return m if in_family(entry) else m + 1
 
 
 def leans(entry: PairSummary) -> float | None:
@@ -121,7 +150,9 @@ def called_better(entry: PairSummary, *, higher_is_better: bool, alpha: float = 
 
 
 def _tests(m: int) -> str:
-    return f"the {m} tests of this verdict" if m != 1 else "the 1 test of this verdict"
+    """The family Holm's correction runs over, as a sentence names it (`count_line` says which tests it leaves out)."""
+    return (f"the {m} tests of this verdict that can reach p < {ALPHA:g}" if m != 1 else
+            f"the 1 test of this verdict that can reach p < {ALPHA:g}")
 
 
 def _holds(entry: PairSummary) -> bool:
@@ -138,8 +169,11 @@ def _significance(entry: PairSummary, test: str, m: int) -> str:
     adjusted = "Holm-adjusted " + p_clause(entry.p_holm)
     if _holds(entry):
         return f"significant ({test} {said}), and after Holm's correction over {_tests(m)} ({adjusted})"
+    need = ("" if entry.n80_holm is None else
+            f"; about {entry.n80_holm} paired trials would let a difference this large hold after it whatever the "
+            f"others show (80 % power at {ALPHA:g}/{_family_size(entry, m)})")
     return (f"significant on its own ({test} {said}), not significant after Holm's correction over {_tests(m)} "
-            f"({adjusted})")
+            f"({adjusted}){need}")
 
 
 _OWN_TEST_ONLY = " (on its own test only, not after Holm's correction)"
@@ -168,13 +202,13 @@ def _survival(entry: PairSummary, m: int) -> str:
     s_more, s_fewer = (sb, sa) if more == b else (sa, sb)
     diff = abs(entry.diff) * 100.0
     lo_m, hi_m = (lo, hi) if more == b else (-hi, -lo)
-    figures = (f"{s_more} against {s_fewer} of {n} paired trials ({diff:+.1f} points, 95 % interval "
+    figures = (f"{s_more} against {s_fewer} of {n} paired trials ({more} - {fewer} = {diff:+.1f} points, 95 % interval "
                f"[{signed(100 * lo_m, 1)}, {signed(100 * hi_m, 1)}]); of {_pairs(discordant)} {more} alone survived "
                f"{won} and {fewer} alone {lost}; {_significance(entry, 'exact McNemar', m)}")
     if entry.significant:
         return f"{more} survives more than {fewer}{'' if _holds(entry) else _OWN_TEST_ONLY}: {figures}"
     return (f"{a} and {b} do not differ significantly in survival: {more} {figures}; "
-            f"{_settle(entry, 'difference')}")
+            f"{_settle(entry, 'difference', m)}")
 
 
 def signed(value: float, decimals: int) -> str:
@@ -212,13 +246,13 @@ def _mean_difference(entry: PairSummary, head: str, what: str, unit: str, decima
     first, second = (entry.b, entry.a) if b_first else (entry.a, entry.b)
     m_first, m_second = (entry.mean_b, entry.mean_a) if b_first else (entry.mean_a, entry.mean_b)
     unit = f" {unit}" if unit else ""
-    figures = (f"{what} {m_first:.{decimals}f} against {m_second:.{decimals}f}{unit} on {entry.n} trials (difference "
-               f"{signed(m_first - m_second, decimals)}, {_interval(entry, b_first, decimals)}); "
+    figures = (f"{what} {m_first:.{decimals}f} against {m_second:.{decimals}f}{unit} on {entry.n} trials ({first} - "
+               f"{second} = {signed(m_first - m_second, decimals)}{unit}, {_interval(entry, b_first, decimals)}); "
                f"{_significance(entry, 'Wilcoxon signed-rank', m)}")
     if better is not None:
         return f"{head.format(better=first, worse=second)}{'' if _holds(entry) else _OWN_TEST_ONLY}: {figures}"
     return (f"{entry.a} and {entry.b} do not differ significantly in {subject}: {first} {figures}; "
-            f"{_settle(entry, 'difference')}")
+            f"{_settle(entry, 'difference', m)}")
 
 
 def _interval(entry: PairSummary, b_first: bool, decimals: int) -> str:
@@ -250,7 +284,7 @@ def _split(entry: PairSummary, side: float, subject: str, unit: str, decimals: i
         lean = f"the pairs' ranks favour {favoured} ({', '.join(figures)})"
     by_mean = entry.b if (entry.diff > 0) == higher_is_better else entry.a
     return (f"{entry.a} and {entry.b} differ in {subject}, but not one way: {lean}, while the mean difference "
-            f"({signed(entry.diff, decimals)}{unit} on {entry.n} trials, B - A with B = {entry.b}) favours {by_mean} "
+            f"({entry.b} - {entry.a} = {signed(entry.diff, decimals)}{unit} on {entry.n} trials) favours {by_mean} "
             f"through a few large differences; {_significance(entry, 'Wilcoxon signed-rank', m)}: neither is called "
             "better")
 
@@ -275,38 +309,79 @@ def _time_to_fall(entry: PairSummary, m: int) -> str | None:
                             subject="how long they stay up (TTF)", m=m)
 
 
-def holm_family(summary: Summary) -> tuple[PairSummary, ...]:
+def in_family(entry: PairSummary) -> bool:
+    """The test is one of the family Holm's correction runs over: it has a p and can reach p < `ALPHA` on its pairs.
+
+    A test whose smallest attainable p (`PairSummary.smallest_p`: no or too few discordant pairs or nonzero
+    differences) is >= `ALPHA` is left out (Tarone's refinement, `wbc.arena.multiplicity.tarone_holm_adjusted`).
+    """
+    return entry.p is not None and (entry.smallest_p is None or entry.smallest_p < ALPHA)
+
+
+def holm_family(summary: Summary | Sequence[PairSummary]) -> tuple[PairSummary, ...]:
     """The summary's paired comparisons with each test's Holm-adjusted p (`PairSummary.p_holm`), in order.
 
-    The family is every paired test of the summary (each pair of controllers, band and metric that has a test):
-    the tests the verdict weighs. The adjusted p is computed here from the tests' own p-values, the same as
-    `wbc.arena.report.summarize` records, so that a summary read back from an older ``summary.json`` gets it too.
+    The family is every paired test of the summary (each pair of controllers, band and metric that has a test) that
+    can reach p < `ALPHA` on its pairs (`in_family`); Holm's correction runs over those (Tarone's refinement,
+    `wbc.arena.multiplicity.tarone_holm_adjusted`), and a test left out keeps its own p as its adjusted one (it is
+    >= `ALPHA`, so it never holds). The adjusted p is computed here from the tests' own p-values, the same as
+    `wbc.arena.report.summarize` records, so that a summary read back from an older ``summary.json`` gets it too
+    (there, without the Wilcoxon tests' nonzero differences, each is taken to have as many as it has pairs).
+
+    Args:
+        summary: a summary, or paired comparisons (``wbc paper``'s table weighs its own).
     """
-    adjusted = holm_adjusted([entry.p for entry in summary.paired])
-    return tuple(dataclasses.replace(entry, p_holm=p) for entry, p in zip(summary.paired, adjusted, strict=True))
+    paired = summary.paired if isinstance(summary, Summary) else tuple(summary)
+    adjusted, _ = tarone_holm_adjusted([entry.p for entry in paired], [entry.smallest_p for entry in paired],
+                                       alpha=ALPHA)
+    return tuple(dataclasses.replace(entry, p_holm=p) for entry, p in zip(paired, adjusted, strict=True))
 
 
 def count_line(summary: Summary) -> str | None:
-    """The verdict's first line: how many tests it weighs, how many reject on their own and after Holm's correction.
+    """The verdict's first line: how many tests it weighs, the family it corrects over, what rejects and what holds.
 
-    None where the summary has no paired test (a run of one controller).
+    It says which claims the correction's bound covers (those that hold after it) and which it does not (those that
+    reject on their own test only, each at `ALPHA` uncorrected). None where the summary has no paired test (a run of
+    one controller).
     """
-    family = [entry for entry in holm_family(summary) if entry.p is not None]
-    if not family:
+    tested = [entry for entry in holm_family(summary) if entry.p is not None]
+    if not tested:
         return None
-    m = len(family)
-    alone = sum(1 for entry in family if entry.p < ALPHA)
-    held = sum(1 for entry in family if _holds(entry))
-    pairs = len({(entry.a, entry.b) for entry in family})
-    bands = len({entry.band for entry in family})
-    metrics = len({entry.metric for entry in family})
-    tests = "1 paired test" if m == 1 else f"{m} paired tests"
+    weighed = len(tested)
+    m = sum(1 for entry in tested if in_family(entry))
+    out = weighed - m
+    alone = sum(1 for entry in tested if entry.p < ALPHA)
+    held = sum(1 for entry in tested if _holds(entry))
+    pairs = len({(entry.a, entry.b) for entry in tested})
+    bands = len({entry.band for entry in tested})
+    metrics = len({entry.metric for entry in tested})
+    tests = "1 paired test" if weighed == 1 else f"{weighed} paired tests"
+    family = (f"{'both' if m == 2 else f'all {m}'} can reach p < {ALPHA:g} on their pairs, and Holm's correction "
+              f"runs over the {m}" if not out
+              else f"{out} of them cannot reach p < {ALPHA:g} on their pairs (too few discordant pairs or nonzero "
+                   f"differences) and {'is' if out == 1 else 'are'} left out of Holm's correction, which runs over "
+                   f"the other {m} (Tarone's refinement)" if m else
+              f"none can reach p < {ALPHA:g} on its pairs (too few discordant pairs or nonzero differences), so no "
+              "test is corrected")
+    if weighed == 1 and not out:
+        family = "Holm's correction over 1 test is the test itself"
+    alone_text = (f"{alone} {'has' if alone == 1 else 'have'} p < {ALPHA:g} on {'its' if alone == 1 else 'their'} "
+                  f"own test; {held} {'holds' if held == 1 else 'hold'} after the correction")
+    bound = (f"The correction keeps the chance that any claim holding after it is a false \"better\" at most "
+             f"{ALPHA:g}{'' if held else ' (none holds here)'}")
+    rest = alone - held
+    own_only = ("" if not rest else
+                f"; {'the 1 claim' if rest == 1 else f'the {rest} claims'} marked \"on its own test only\" "
+                f"{'is' if rest == 1 else 'are'} each at {ALPHA:g} on {'its' if rest == 1 else 'their'} own, "
+                "uncorrected, outside that bound")
+    if not m:
+        return (f"This verdict weighs {tests} (every test of the paired differences: {pairs} pair"
+                f"{'' if pairs == 1 else 's'} of controllers, {bands} band{'' if bands == 1 else 's'}, {metrics} "
+                f"metric{'' if metrics == 1 else 's'}); {family}: none can call a side better.")
     return (f"This verdict weighs {tests} (every test of the paired differences: {pairs} pair"
             f"{'' if pairs == 1 else 's'} of controllers, {bands} band{'' if bands == 1 else 's'}, {metrics} "
-            f"metric{'' if metrics == 1 else 's'}). {alone} of them {'has' if alone == 1 else 'have'} p < {ALPHA:g} "
-            f"on {'its' if alone == 1 else 'their'} own test; {held} {'holds' if held == 1 else 'hold'} after Holm's "
-            f"correction over the {m}, which keeps the chance of any false \"better\" in this verdict at most "
-            f"{ALPHA:g}. Where nothing differs, about 1 test in 20 has p < {ALPHA:g} on its own by chance.")
+            f"metric{'' if metrics == 1 else 's'}); {family}. {alone_text}. {bound}{own_only}. Where nothing "
+            f"differs, about 1 test in 20 has p < {ALPHA:g} on its own by chance.")
 
 
 def robots_caveat(summary: Summary) -> str | None:
@@ -365,7 +440,7 @@ def verdicts(summary: Summary) -> list[str]:
     """
     lines: list[str] = []
     family = holm_family(summary)
-    m = sum(1 for entry in family if entry.p is not None)
+    m = sum(1 for entry in family if in_family(entry))
     for entry in family:
         if entry.n == 0 or entry.mean_a is None:
             continue

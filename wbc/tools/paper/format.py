@@ -25,10 +25,9 @@ import textwrap
 from collections.abc import Sequence
 
 from wbc.arena.breakdown import breakdown_tables
-from wbc.arena.multiplicity import holm_adjusted
 from wbc.arena.report import LABELS, cell_text, n80_text, p_text, resumed_note, signed_text
 from wbc.arena.summary import PairSummary
-from wbc.arena.verdict import LOWER_IS_BETTER, called_better, leans, p_clause, split
+from wbc.arena.verdict import LOWER_IS_BETTER, called_better, holm_family, in_family, leans, p_clause, split
 from wbc.tools.paper.paper_numbers import PaperValue
 from wbc.tools.paper.result import PaperComparison, PaperTableResult
 from wbc.tools.paper.tables import Contender
@@ -82,8 +81,9 @@ def verdict(entry: PairSummary, *, alpha: float = ALPHA, family: int | None = No
     (the pairs that would detect the observed difference with 80 % power), or, from one pair of a continuous metric,
     that one pair cannot tell.
 
-    With `family` (the number of tests of the table) and the entry's Holm-adjusted p (`PairSummary.p_holm`), a side
-    called better on its own test that does not hold after Holm's correction over the table's tests says so.
+    With `family` (the number of tests of the table that can reach `alpha` on their pairs, the family Holm's
+    correction runs over: `wbc.arena.verdict.holm_family`) and the entry's Holm-adjusted p (`PairSummary.p_holm`),
+    a side called better on its own test that does not hold after that correction says so.
     """
     metric, p, diff = entry.metric, entry.p, entry.diff
     what = LABELS[metric].split(" [")[0].removesuffix(" %")
@@ -94,10 +94,11 @@ def verdict(entry: PairSummary, *, alpha: float = ALPHA, family: int | None = No
     if winner is not None:
         holm = entry.p_holm
         after = ("" if family is None or holm is None else
-                 f"; holds after Holm's correction over the table's {family} tests, adjusted {p_clause(holm)}"
+                 f"; holds after Holm's correction over the table's {family} tests that can reach p < {alpha:g}, "
+                 f"adjusted {p_clause(holm)}"
                  if holm < alpha else
-                 f"; on its own test only: not after Holm's correction over the table's {family} tests, adjusted "
-                 f"{p_clause(holm)}")
+                 f"; on its own test only: not after Holm's correction over the table's {family} tests that can "
+                 f"reach p < {alpha:g}, adjusted {p_clause(holm)}")
         return f"{what}: {winner} better ({_difference(entry, winner, metric)}, {p_clause(p)}{after})"
     if split(entry, alpha=alpha):
         side = leans(entry)
@@ -174,17 +175,25 @@ def _comparison_lines(result: PaperTableResult) -> list[str]:
                   "two-sided, each comparison on its own, not corrected for the table's many; n80: pairs for 80 % "
                   "power at the observed difference)")
     names = {c.key: display_name(c) for c in result.contenders}
-    adjusted = holm_adjusted([c.pair.p for c in result.comparisons])  # as paper.json's p_holm, from any result
-    family = sum(1 for p in adjusted if p is not None)
-    if family:
-        alone = sum(1 for c in result.comparisons if c.pair.p is not None and c.pair.p < ALPHA)
-        held = sum(1 for p in adjusted if p is not None and p < ALPHA)
-        lines += _wrap(f"the verdicts weigh {family} tests: {alone} with p < {ALPHA:g} on their own, {held} after "
-                       f"Holm's correction over the {family} (which keeps the chance of any false 'better' below at "
-                       f"most {ALPHA:g}); a 'better' that holds only on its own test says so")
+    # as paper.json's p_holm, from any result: Holm over the tests that can reach alpha (Tarone's refinement)
+    pairs = holm_family([c.pair for c in result.comparisons])
+    tested = sum(1 for pair in pairs if pair.p is not None)
+    family = sum(1 for pair in pairs if in_family(pair))
+    if tested:
+        alone = sum(1 for pair in pairs if pair.p is not None and pair.p < ALPHA)
+        held = sum(1 for pair in pairs if pair.p_holm is not None and pair.p_holm < ALPHA)
+        left_out = ("" if family == tested else
+                    f", {tested - family} of which cannot reach p < {ALPHA:g} on "
+                    f"{'its' if tested - family == 1 else 'their'} pairs (too few discordant pairs or nonzero "
+                    f"differences) and {'is' if tested - family == 1 else 'are'} left out of Holm's correction "
+                    "(Tarone's refinement)")
+        lines += _wrap(f"the verdicts weigh {tested} tests{left_out}: {alone} with p < {ALPHA:g} on their own, "
+                       f"{held} after Holm's correction over the {family} that can reach it. The correction keeps the "
+                       f"chance that any 'better' holding after it is false at most {ALPHA:g}; a 'better' that holds "
+                       f"only on its own test says so, and is at {ALPHA:g} on its own, uncorrected, outside that bound")
     questions: dict[tuple[str, str], list[PaperComparison]] = {}
-    for comparison, p_holm in zip(result.comparisons, adjusted, strict=True):
-        comparison = dataclasses.replace(comparison, pair=dataclasses.replace(comparison.pair, p_holm=p_holm))
+    for comparison, pair in zip(result.comparisons, pairs, strict=True):
+        comparison = dataclasses.replace(comparison, pair=pair)
         questions.setdefault((comparison.pair.a, comparison.pair.b), []).append(comparison)
     if not questions:
         return [*lines, "  (none: a contender of every comparison is missing)"]

@@ -29,10 +29,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, plan_arena, play_arena
-from wbc.arena.multiplicity import holm_adjusted
 from wbc.arena.report import compare_pair
 from wbc.arena.results import check_not_held, hold_results_dir, unwritable
 from wbc.arena.trial_record import TrialRecord
+from wbc.arena.verdict import holm_family
 from wbc.errors import ConfigError, UnknownNameError
 from wbc.output_files import write_text
 from wbc.scenario import ScenarioError, check_published, load_scenario
@@ -161,10 +161,9 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
                 for metric in spec.paired_metrics:
                     pair = compare_pair(cell_a, cell_b, a=contrast.a, b=contrast.b, band=band, metric=metric)
                     comparisons.append(PaperComparison(question=contrast.question, pair=pair))
-        # Holm over the table's tests, the family its verdicts weigh (paper.json's p_holm)
-        adjusted = holm_adjusted([c.pair.p for c in comparisons])
-        comparisons = [dataclasses.replace(c, pair=dataclasses.replace(c.pair, p_holm=p))
-                       for c, p in zip(comparisons, adjusted, strict=True)]
+        # Holm over the table's tests that can reach alpha, the family its verdicts weigh (paper.json's p_holm)
+        comparisons = [dataclasses.replace(c, pair=pair)
+                       for c, pair in zip(comparisons, holm_family([c.pair for c in comparisons]), strict=True)]
         wall_by = {c: sum(r.wall_s for r in rs) / len(rs) for c, rs in by_controller.items() if rs}
         workers = cfg.workers or os.cpu_count() or 1  # the local pool's size (`wbc.arena.executors.LocalExecutor`)
         warm_by = {c: w for c, rs in by_controller.items()
