@@ -904,13 +904,15 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
 
     `options` maps each input file's `TrainConfig` field to the option that set it, named when it is refused.
     """
-    from wbc.learned.train.preflight import check_run, check_run_dir, check_unlocked, unstarted_run
+    from wbc.learned.train.preflight import check_checkpoint, check_run, check_run_dir, check_unlocked, unstarted_run
 
     check_unlocked(cfg.run_dir)  # another run on it: refused before anything is said of it (the run then locks it)
     if unstarted_run(cfg.run_dir):
         print(f"wbc: note: {cfg.run_dir} holds a run interrupted before its first checkpoint (config.json, no "
               "model_<it>.pt): it starts afresh from iteration 0", file=sys.stderr)
     point = check_run_dir(cfg, resume=args.resume)
+    if point is not None:  # a checkpoint the run refuses: refused before its progress is reconciled to it
+        check_checkpoint(point.checkpoint, cfg)
     if point is not None and point.note:
         print(f"wbc: note: --resume: {point.note}", file=sys.stderr)
     if args.dry_run:

@@ -20,8 +20,10 @@ the arm only, and ``policy.npz``/``policy.json`` is a composite file holding the
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
+import io
 import json
 import os
 import shlex
@@ -43,9 +45,11 @@ from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.history_actor import HistoryActor
 from wbc.learned.train.preflight import (
+    CHECKPOINT_KEY,
     RESUMABLE,
     ResumePoint,
     check_run,
+    checkpoint_identity,
     checkpoint_iteration,
     config_diff,
     input_files,
@@ -54,6 +58,7 @@ from wbc.learned.train.preflight import (
     locked_run_dir,
     make_run_dir,
     student_layout,
+    unreadable_fix,
 )
 from wbc.learned.train.rma import train_adaptation
 from wbc.learned.train.train_config import TrainConfig
@@ -136,10 +141,14 @@ class _Runner(_runners.OnPolicyRunner):
         complete (`wbc.output_files`): a kill leaves the previous checkpoints whole and at most that temporary file,
         which the next save of the iteration replaces. (rsl-rl also hands the path to its logger, to upload the
         file; the TensorBoard logger a run uses uploads nothing.)
+
+        Its ``infos`` record what run it is (`wbc.learned.train.preflight.checkpoint_identity`: task, stage, baseline,
+        variant, robot, arm mode and iteration), which ``--resume`` compares with the run's (`check_checkpoint`).
         """
+        identity = checkpoint_identity(self.wbc_cfg, int(self.current_learning_iteration))
         tmp = temporary_name(path)
         try:
-            super().save(str(tmp), infos)
+            super().save(str(tmp), {**(infos or {}), CHECKPOINT_KEY: identity})
             os.replace(tmp, path)
         except BaseException:  # KeyboardInterrupt too: no half-written file stays behind
             tmp.unlink(missing_ok=True)
@@ -321,17 +330,19 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
     adapts = cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0
     kept = False
     try:
-        runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
+        # rsl-rl prints its networks as it builds them: held back until a resumed run's checkpoint fits them, so that
+        # a refusal is the one line that says why
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed):
+            runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
+            if point is not None:
+                _load_checkpoint(runner, point.checkpoint, cfg.device)
+        sys.stdout.write(printed.getvalue())
         if point is None and cfg.init_from is not None:
             start = load_input_policy(cfg.init_from, "the policy this run starts from")
             mask = None if cfg.action_mask is None else list(cfg.action_mask)
             warm_start_actor(runner.alg.get_policy(), start, mask=mask)
         if point is not None:
-            try:
-                runner.load(str(point.checkpoint), map_location=cfg.device)  # a run may resume on another device
-            except (RuntimeError, KeyError, ValueError) as exc:
-                raise ConfigError(f"--resume: {point.checkpoint}: does not fit this run's networks "
-                                  f"({type(exc).__name__}); start a new run under another --run-root") from None
             done = runner.current_learning_iteration + 1
             runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
         _write_json(run_dir / "config.json", _run_config(cfg, resolved, point))
@@ -363,6 +374,23 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
     if cfg.extrinsics_dim == 0 or cfg.rma.iterations > 0:  # else it observes extrinsics a robot cannot give it
         result["replay"] = str(record_replay(run_dir / "policy", replay_path_for(run_dir / "policy")))
     return result
+
+
+def _load_checkpoint(runner: _Runner, checkpoint: Path, device: str) -> None:
+    """Load a resumed run's checkpoint into `runner`, or refuse it in one line naming the first part that differs.
+
+    Raises:
+        ConfigError: the checkpoint's networks are not the run's (another stage's, other layers), naming the file,
+            the state that does not fit and the checkpoint a resume takes once it is moved away.
+    """
+    try:
+        runner.load(str(checkpoint), map_location=device)  # a run may resume on another device
+    except (RuntimeError, KeyError, ValueError) as exc:
+        # torch's message: a header, then one line per parameter that differs ("size mismatch for mlp.0.weight: ...")
+        lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+        detail = lines[1] if len(lines) > 1 else lines[0] if lines else type(exc).__name__
+        raise ConfigError(f"--resume: {checkpoint}: does not fit this run's networks ({detail[:160]}): "
+                          f"{unreadable_fix(checkpoint)}, or start a new run under another --run-root") from None
 
 
 def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any]) -> float:
