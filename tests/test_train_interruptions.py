@@ -371,3 +371,50 @@ def _threads(root: Path, nthread: int, **kw):
 
     cfg = _tiny(root, **kw)
     return dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, nthread=nthread))
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_a_finished_run_extended_then_stopped_keeps_its_playable_export_and_says_how_to_finish(tmp_path, monkeypatch):
+    """A checkpoint's export has no adaptation module: it is written beside a playable export, never over it."""
+    import wbc.learned.train.train as train_module
+    from wbc.learned.policy.policy_file import load_policy
+
+    train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(1)))
+    run = tmp_path / "push-stage1"
+    playable = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json")}
+    _ctrl_c_in_update(monkeypatch, at=1, signum=signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt):
+        train_module.train(_tiny(tmp_path, max_iterations=6, rma=_rma(1)), resume=True)
+    monkeypatch.undo()
+    # every checkpoint since (model_1.pt, model_2.pt) exported beside it: the run's policy plays as it did
+    assert {n: (run / n).read_bytes() for n in playable} == playable
+    assert load_policy(run / "policy").meta["adaptation"] is not None
+    ppo = load_policy(run / "policy_ppo")
+    assert ppo.meta["training"]["iteration"] == 2 and ppo.meta.get("adaptation") is None
+    # finished at that checkpoint: its module fitted, the run's policy replaced, the PPO-phase export gone
+    result = train_module.train(_tiny(tmp_path, max_iterations=3, rma=_rma(1)), resume=True)
+    assert result["trained"] == 0 and result["adaptation"] == "fitted"
+    finished = load_policy(run / "policy")
+    assert finished.meta["training"]["iteration"] == 2 and finished.meta["adaptation"] is not None
+    assert not (run / "policy_ppo.npz").exists() and not (run / "policy_ppo.json").exists()
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_an_interrupted_run_says_whether_its_export_is_playable_and_how_to_finish_it(tmp_path, monkeypatch, capsys):
+    from wbc.cli.main import main
+
+    argv = ["train", "--task", "push", "--stage", "1", "--envs", "1", "--rma-iterations", "1", "--run-root",
+            str(tmp_path)]
+    _ctrl_c_in_update(monkeypatch, at=1, signum=signal.SIGTERM)
+    assert main([*argv, "--iterations", "4"]) == 130  # a first interruption: no module yet
+    err = capsys.readouterr().err
+    assert "its export, policy.json, has no adaptation module yet, so it is not playable: the same command with " \
+        "--resume and --iterations 2 fits the module on model_1.pt without training further" in err
+    monkeypatch.undo()
+    assert main([*argv, "--iterations", "2", "--resume"]) == 0  # finished there, as it says: playable
+    _ctrl_c_in_update(monkeypatch, at=1, signum=signal.SIGTERM)
+    assert main([*argv, "--iterations", "6", "--resume"]) == 130
+    err = capsys.readouterr().err
+    assert "its export, policy.json, is playable and of iteration 1 (model_3.pt's, without the module, is " \
+        "policy_ppo.json): the same command with --resume and --iterations 4 fits the module on model_3.pt" in err
+    assert err.strip().splitlines()[-1].startswith("wbc: interrupted; ")  # all of it in the closing line

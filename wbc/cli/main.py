@@ -809,6 +809,33 @@ def _inherit_saved(args: argparse.Namespace, run_dir: str, env: dict[str, Any], 
     return bool(taken)
 
 
+def _export_state(run_dir: Path, checkpoint: Path) -> str:
+    """Whether an interrupted run's export is playable and how to finish it (the end of its message), or ``""``.
+
+    A policy that observes RMA's extrinsics plays only with its adaptation module, which the run's phase 2 fits after
+    its last iteration: an export of a checkpoint has none (`wbc.learned.train.preflight.PPO_EXPORT`).
+    """
+    from wbc.learned.train.preflight import PPO_EXPORT, checkpoint_iteration, lacks_module
+
+    try:
+        meta = json.loads((run_dir / "policy.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return ""
+    if not isinstance(meta, dict) or meta.get("extrinsics") is None:
+        return ""
+    it = checkpoint_iteration(checkpoint)
+    finish = (f"the same command with --resume and --iterations {it + 1} fits the module on {checkpoint.name} without "
+              "training further (with --resume alone, once it has trained on to its --iterations)")
+    if lacks_module(meta):
+        return f"; its export, policy.json, has no adaptation module yet, so it is not playable: {finish}"
+    training = meta.get("training")
+    exported = training.get("iteration") if isinstance(training, dict) else None
+    if isinstance(exported, int) and exported < it:
+        return (f"; its export, policy.json, is playable and of iteration {exported} ({checkpoint.name}'s, without "
+                f"the module, is {PPO_EXPORT}.json): {finish}")
+    return ""
+
+
 def _exported_rounds(run_dir: Path) -> int | None:
     """The rounds of the adaptation module in a run's export (``policy.json`` adaptation.iterations), or None."""
     try:
@@ -1080,7 +1107,7 @@ def _interrupted_training(args: argparse.Namespace) -> str:
         module = (f", and its export the adaptation module it had ({rounds} round{'s' if rounds > 1 else ''}, "
                   "policy.json)") if rounds else ""
         return (f"; {run_dir} keeps its newest checkpoint, {checkpoint.name}{module}: the same command with --resume "
-                "continues from it")
+                f"continues from it{_export_state(Path(run_dir), checkpoint)}")
     if kind == "dagger":
         try:
             rounds = json.loads((Path(run_dir) / "progress.json").read_text())["rounds"]

@@ -39,7 +39,7 @@ from wbc.robots.registry import get_robot
 __all__ = ["CHECKPOINT_KEY", "INPUTS", "LOCK_FILE", "RESUMABLE", "RESUMABLE_ENV", "ResumePoint", "check_checkpoint",
            "check_inputs", "check_run", "check_run_dir", "check_run_root", "check_unlocked", "checkpoint_identity",
            "checkpoint_iteration", "config_diff", "env_meta", "input_files", "input_path", "latest_checkpoint",
-           "load_input_policy", "lock_run_dir",
+           "PPO_EXPORT", "load_input_policy", "lock_run_dir", "lacks_module", "playable_export",
            "locked_run_dir", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
            "saved_train_config", "student_layout", "unreadable_fix", "unstarted_run"]
 
@@ -61,6 +61,29 @@ _POLICY_INPUTS = ("teacher", "init_from", "frozen_legs", "student")
 
 _RUN_FILES = ("config.json", "progress.json", "policy.npz", "policy.json")
 """Files of a run directory that say it already holds a run (besides ``model_<it>.pt`` checkpoints)."""
+
+
+PPO_EXPORT = "policy_ppo"
+"""The stem of the export a run writes of a checkpoint before its adaptation phase, where its ``policy`` is playable.
+
+A stage whose policy observes RMA's extrinsics is playable only with the adaptation module its phase 2 fits; a
+checkpoint's export (periodic, or an interrupted run's) has none yet, and never replaces a ``policy`` that has one.
+"""
+
+
+def lacks_module(meta: Any) -> bool:
+    """Whether a policy file's JSON (`meta`) observes RMA's extrinsics and has no adaptation module: not playable."""
+    return (isinstance(meta, dict) and meta.get("extrinsics") is not None
+            and not isinstance(meta.get("adaptation"), dict))
+
+
+def playable_export(run_dir: str | Path) -> dict[str, Any] | None:
+    """The JSON of a run's ``policy.json`` where it is playable (no extrinsics, or its adaptation module), else None."""
+    try:
+        meta = json.loads((Path(run_dir) / "policy.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    return meta if isinstance(meta, dict) and not lacks_module(meta) else None
 
 
 @dataclass(frozen=True)

@@ -4,11 +4,13 @@ A run directory holds: ``config.json`` (the resolved `TrainConfig` as the newest
 the scenario file and its sha256, the sha256 of each file it reads, package versions, git revision, and the run's
 sessions, ``segments``: `_run_config`),
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
-torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
-so far, summed over resumed sessions). Each of these files is replaced whole (`wbc.output_files`): a run killed while
-it writes one keeps the one before. ``resume`` continues from the newest checkpoint up to `max_iterations`; Ctrl-C
-stops a run at the end of the iteration in progress, whose checkpoint it saves first (`_learn`); in the adaptation
-phase (RMA phase 2) it stops at once, and the run keeps the export it had before the phase (`_adapt`).
+torch-free export, refreshed at every checkpoint; a checkpoint's export without the adaptation module its stage needs
+goes to ``policy_ppo.npz``/``policy_ppo.json`` where ``policy`` holds one, `_Runner.export`) and ``progress.json``
+(iterations, environment steps and wall time so far, summed over resumed sessions). Each of these files is replaced
+whole (`wbc.output_files`): a run killed while it writes one keeps the one before. ``resume`` continues from the
+newest checkpoint up to `max_iterations`; Ctrl-C stops a run at the end of the iteration in progress, whose
+checkpoint it saves first (`_learn`); in the adaptation phase (RMA phase 2) it stops at once, and the run keeps the
+export it had before the phase (`_adapt`).
 When the run ends, ``policy.replay.npz`` records a short rollout of the exported policy (robot states, commands,
 observation frames and actions, `wbc.learned.policy.replay_recorder`): ``wbc check-controller NAME --replay
 policy.replay.npz`` then checks that a controller built from these weights (an ONNX export, an I/O file written by
@@ -46,6 +48,7 @@ from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.history_actor import HistoryActor
 from wbc.learned.train.preflight import (
     CHECKPOINT_KEY,
+    PPO_EXPORT,
     RESUMABLE,
     ResumePoint,
     check_run,
@@ -53,10 +56,12 @@ from wbc.learned.train.preflight import (
     checkpoint_iteration,
     config_diff,
     input_files,
+    lacks_module,
     latest_checkpoint,
     load_input_policy,
     locked_run_dir,
     make_run_dir,
+    playable_export,
     student_layout,
     unreadable_fix,
 )
@@ -181,17 +186,27 @@ class _Runner(_runners.OnPolicyRunner):
                                     extra=extra), progress
         return policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra), progress
 
-    def export(self) -> None:
-        """Write ``policy.npz``/``policy.json`` of the runner's networks, then ``progress.json``."""
+    def export(self) -> Path:
+        """Write ``policy.npz``/``policy.json`` of the runner's networks, then ``progress.json``; returns the ``.npz``.
+
+        A stage whose policy observes RMA's extrinsics has no adaptation module before its phase 2 (`_adapt`): where
+        the run's ``policy`` is playable (a module fitted on an earlier checkpoint), this export is written beside
+        it, as ``policy_ppo.npz``/``policy_ppo.json`` (`PPO_EXPORT`), and the playable one is kept until phase 2
+        replaces it.
+        """
         pf, progress = self.policy_file()
-        path = Path(self.wbc_cfg.run_dir) / "policy"
+        run_dir = Path(self.wbc_cfg.run_dir)
+        path = run_dir / "policy"
         if isinstance(self.env, FrozenLegsVecEnv):
             save_composite(path, pf)
         else:
+            if lacks_module(pf.meta) and playable_export(run_dir) is not None:
+                path = run_dir / PPO_EXPORT
             save_policy(path, pf)
         # after the policy files: a kill in between leaves a progress of the checkpoint before, which --resume
         # reconciles (`wbc.learned.train.preflight.check_run_dir`)
-        _write_json(Path(self.wbc_cfg.run_dir) / "progress.json", progress)
+        _write_json(run_dir / "progress.json", progress)
+        return path.with_suffix(".npz")
 
 
 _PROVENANCE_KEYS = ("seed", "command", "scenario", "inputs", "provenance", "started", "segments")
@@ -329,6 +344,7 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
     done = 0
     adapts = cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0
     kept = False
+    exported = run_dir / "policy.npz"
     try:
         # rsl-rl prints its networks as it builds them: held back until a resumed run's checkpoint fits them, so that
         # a refusal is the one line that says why
@@ -361,12 +377,12 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
             # the export as it was, a module included, never this checkpoint's without one
             phase1, final = runner.policy_file()
         else:
-            runner.export()
+            exported = runner.export()
             phase1, final = None, json.loads((run_dir / "progress.json").read_text())
     finally:
         vec.close()
     result = {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
-              "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz"), "trained": max(remaining, 0)}
+              "wall_s": final["wall_s"], "policy": str(exported), "trained": max(remaining, 0)}
     if phase1 is not None:
         result["rma_wall_s"] = _adapt(run_dir, cfg, phase1, final)
     result["adaptation"] = "kept" if kept else "fitted" if adapts else "none"
@@ -408,6 +424,8 @@ def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any
     interrupt = DeferredInterrupts(lambda what: f"wbc: {what}: the run stops once its export is written")
     with interrupt:
         save_policy(run_dir / "policy", policy)
+        for stale in (run_dir / f"{PPO_EXPORT}.npz", run_dir / f"{PPO_EXPORT}.json"):  # this export supersedes it
+            stale.unlink(missing_ok=True)
         _write_json(run_dir / "rma.json", summary)
         _write_json(run_dir / "progress.json", progress)
     if interrupt.requested:
