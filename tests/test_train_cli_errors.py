@@ -205,9 +205,9 @@ def test_a_resumed_stage_says_which_options_it_took_before_it_trains(stage1_run,
     said_before: list[str] = []
     real = train_module._train
 
-    def training(cfg, point):
+    def training(cfg, point, *args):
         said_before.append(capsys.readouterr().err)
-        return real(cfg, point)
+        return real(cfg, point, *args)
 
     monkeypatch.setattr(train_module, "_train", training)
     capsys.readouterr()

@@ -960,7 +960,8 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
 
     args.training = ("ppo", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
 
-    result = train(cfg, resume=args.resume, options=options, checked=lambda: _print_resume_note(args))
+    result = train(cfg, resume=args.resume, options=options, checked=lambda: _print_resume_note(args),
+                   command=args.command_line)
     if result.get("trained", 1) == 0:
         kept = ("its export, whose adaptation module this phase 2 already fitted on it, is kept (rma.json)"
                 if result.get("adaptation") == "kept" else "its newest checkpoint is exported as it is")
@@ -1041,7 +1042,8 @@ def _distil(args: argparse.Namespace) -> int:
         return 0
     args.training = ("dagger", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
     # the note is said once the run is checked, before its rounds (which may take hours)
-    result = run_dagger(cfg, resume=args.resume, log=print, checked=lambda: _print_resume_note(args))
+    result = run_dagger(cfg, resume=args.resume, log=print, checked=lambda: _print_resume_note(args),
+                        command=args.command_line)
     if result["trained"] == 0:
         done = result["rounds"]
         print(f"{result['run_dir']} already holds {done} DAgger round{'s' if done != 1 else ''}, no fewer than "
@@ -1788,6 +1790,8 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         args = build_parser().parse_args(argv)
+        # what a run records as its command: pasteable, whichever way wbc was started (`python -m wbc.cli`, a test)
+        args.command_line = ["wbc", *(sys.argv[1:] if argv is None else argv)]
     except KeyboardInterrupt:
         _say("wbc: interrupted while starting: nothing was done")
         return 130

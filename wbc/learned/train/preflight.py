@@ -27,7 +27,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from wbc.errors import ConfigError, NetworkMismatchError
+from wbc.errors import ConfigError, NetworkMismatchError, WbcError
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_policy
 from wbc.learned.train.stages import TASKS
@@ -35,13 +35,14 @@ from wbc.learned.train.train_config import TrainConfig
 from wbc.optional import require
 from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory_holder, lock_directory
 from wbc.robots.registry import get_robot
+from wbc.scenario.scenario import load_scenario, resolve_scenario_path
 
 __all__ = ["CHECKPOINT_KEY", "INPUTS", "LOCK_FILE", "RESUMABLE", "RESUMABLE_ENV", "ResumePoint", "check_checkpoint",
            "check_inputs", "check_run", "check_run_dir", "check_run_root", "check_unlocked", "checkpoint_identity",
            "checkpoint_iteration", "config_diff", "env_meta", "input_files", "input_path", "latest_checkpoint",
            "PPO_EXPORT", "load_input_policy", "lock_run_dir", "lacks_module", "playable_export",
            "locked_run_dir", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
-           "saved_train_config", "student_layout", "unreadable_fix", "unstarted_run"]
+           "saved_train_config", "scenario_record", "student_layout", "unreadable_fix", "unstarted_run"]
 
 T = TypeVar("T")
 
@@ -199,6 +200,28 @@ def _sha256(path: Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def scenario_record(path: str | Path) -> dict[str, Any]:
+    """The scenario file a run plays, as its ``config.json`` and its exports' ``training`` block record it.
+
+    ``path`` (resolved) and ``sha256``, the sha256 of the file's bytes (None where it cannot be read), which a comment
+    or a layout change alters; ``name``, ``version`` and ``content_hash``, the scenario's as the arena names it
+    (`wbc.scenario.scenario.load_scenario`: ``trials.csv``, ``summary.json``, ``wbc scenario check`` and
+    ``scenarios/published.toml`` give its content hash, the sha256 of its parsed content,
+    `wbc.scenario.scenario.content_hash`), None where the file does not load.
+    """
+    resolved = resolve_scenario_path(path).resolve()
+    try:
+        digest: str | None = hashlib.sha256(resolved.read_bytes()).hexdigest()
+    except OSError:
+        digest = None
+    try:
+        scenario = load_scenario(resolved)
+        named = {"name": scenario.name, "version": scenario.version, "content_hash": scenario.hash}
+    except (WbcError, OSError):
+        named = {"name": None, "version": None, "content_hash": None}
+    return {"path": str(resolved), "sha256": digest, **named}
 
 
 def input_files(cfg: TrainConfig) -> dict[str, dict[str, Any]]:

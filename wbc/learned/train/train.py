@@ -24,14 +24,13 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import hashlib
 import io
 import json
 import os
 import shlex
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -62,6 +61,7 @@ from wbc.learned.train.preflight import (
     locked_run_dir,
     make_run_dir,
     playable_export,
+    scenario_record,
     student_layout,
     unreadable_fix,
 )
@@ -72,7 +72,6 @@ from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
 from wbc.output_files import replacing, temporary_name
 from wbc.provenance import provenance
-from wbc.scenario.scenario import resolve_scenario_path
 
 torch = require("torch")
 _runners = require("rsl_rl.runners")
@@ -274,9 +273,14 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
             runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
     except _StopAfterIteration:
         it = runner.current_learning_iteration
-        newest = latest_checkpoint(runner.wbc_cfg.run_dir)
+        run_dir = Path(runner.wbc_cfg.run_dir)
+        # the session's end first, so that the export of its checkpoint carries it
+        _end_segment(run_dir, {"to_iteration": it, "adaptation": "none", "interrupted": True})
+        newest = latest_checkpoint(run_dir)
         if newest is None or checkpoint_iteration(newest) < it:
-            runner.save(str(Path(runner.wbc_cfg.run_dir) / f"model_{it}.pt"))
+            runner.save(str(run_dir / f"model_{it}.pt"))
+        else:  # saved at its periodic checkpoint already: its export again, with the session's end
+            runner.export()
         if hasattr(runner.logger.writer, "flush"):  # the curves up to the checkpoint
             runner.logger.writer.flush()
         raise KeyboardInterrupt from None
@@ -287,7 +291,7 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
 
 
 def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None,
-          checked: Callable[[], object] | None = None) -> dict[str, Any]:
+          checked: Callable[[], object] | None = None, command: Sequence[str] | None = None) -> dict[str, Any]:
     """Train (or resume) one run.
 
     Args:
@@ -298,6 +302,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
             one is refused (`wbc.learned.train.preflight.check_inputs`).
         checked: called once the run's checks have passed, before anything is built or trained (the command's
             resume note).
+        command: the command line the run records (``["wbc", "train", ...]``, as ``wbc train`` gives it), quoted
+            with `shlex.join`; default: the process's ``sys.argv``.
 
     Returns:
         ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
@@ -324,10 +330,10 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
         return point
 
     with locked_run_dir(cfg.run_dir, check) as point:
-        return _train(cfg, point)
+        return _train(cfg, point, shlex.join(sys.argv if command is None else command))
 
 
-def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
+def _train(cfg: TrainConfig, point: ResumePoint | None, command: str) -> dict[str, Any]:
     """`train` once its run directory is checked and locked; `point`: where a resumed run continues from, or None."""
     run_dir = Path(cfg.run_dir)
     resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
@@ -361,7 +367,7 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
         if point is not None:
             done = runner.current_learning_iteration + 1
             runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
-        _write_json(run_dir / "config.json", _run_config(cfg, resolved, point))
+        _write_json(run_dir / "config.json", _run_config(cfg, resolved, point, command))
         remaining = cfg.max_iterations - done
         if remaining > 0:
             _learn(runner, remaining, init_at_random_ep_len=point is None)
@@ -370,13 +376,18 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
             # phase 2 included), under its own iteration, not the next one
             runner.current_learning_iteration = done - 1
             kept = adapts and _adapted(run_dir, cfg, done - 1)
+        # the session's end is recorded before its final export, which carries it in its training block
+        reached = {"to_iteration": int(runner.current_learning_iteration),
+                   "adaptation": "kept" if kept else "fitted" if adapts else "none"}
         if kept:  # its export already holds this checkpoint's module of this phase 2: neither redone nor replaced
+            _end_segment(run_dir, reached)
             phase1, final = None, json.loads((run_dir / "progress.json").read_text())
         elif adapts:
             # the export is replaced once phase 2 has fitted its module (`_adapt`): an interruption before leaves
             # the export as it was, a module included, never this checkpoint's without one
             phase1, final = runner.policy_file()
         else:
+            _end_segment(run_dir, reached)
             exported = runner.export()
             phase1, final = None, json.loads((run_dir / "progress.json").read_text())
     finally:
@@ -384,9 +395,12 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
     result = {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
               "wall_s": final["wall_s"], "policy": str(exported), "trained": max(remaining, 0)}
     if phase1 is not None:
-        result["rma_wall_s"] = _adapt(run_dir, cfg, phase1, final)
-    result["adaptation"] = "kept" if kept else "fitted" if adapts else "none"
-    _end_segment(run_dir, {"to_iteration": final["iteration"], "adaptation": result["adaptation"]})
+        try:
+            result["rma_wall_s"] = _adapt(run_dir, cfg, phase1, final, reached)
+        except KeyboardInterrupt:
+            _end_segment(run_dir, {**reached, "adaptation": "interrupted", "interrupted": True})
+            raise
+    result["adaptation"] = reached["adaptation"]
     if cfg.extrinsics_dim == 0 or cfg.rma.iterations > 0:  # else it observes extrinsics a robot cannot give it
         result["replay"] = str(record_replay(run_dir / "policy", replay_path_for(run_dir / "policy")))
     return result
@@ -409,8 +423,11 @@ def _load_checkpoint(runner: _Runner, checkpoint: Path, device: str) -> None:
                           f"{unreadable_fix(checkpoint)}, or start a new run under another --run-root") from None
 
 
-def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any]) -> float:
+def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any], reached: dict[str, Any]) -> float:
     """RMA phase 2 on `phase1` (the newest checkpoint's export, in memory), then its export written; returns its wall.
+
+    Once the module is fitted, the session's end (`reached`) is recorded in ``config.json`` (`_end_segment`) and the
+    export's ``training`` block takes the run's segments from it.
 
     Ctrl-C (or SIGTERM) during the fit stops it at once, and nothing of it is written: the run directory keeps the
     export, ``rma.json`` and ``progress.json`` it had before phase 2 (a previous module included), and ``--resume``
@@ -418,6 +435,10 @@ def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any
     the policy first: an interruption never leaves a pair torn between two exports.
     """
     policy, summary = train_adaptation(phase1, cfg.env, cfg.rma)
+    _end_segment(run_dir, reached)
+    training = policy.meta.get("training")
+    if isinstance(training, dict):
+        training.update({k: v for k, v in _provenance(run_dir).items() if k == "segments"})
     # what `_adapted` compares: a plain --resume of the finished run keeps this module instead of fitting it again
     summary = {**summary, "iteration": progress["iteration"],
                "config": json.loads(json.dumps(dataclasses.asdict(cfg.rma), default=list))}
@@ -455,16 +476,12 @@ def _adapted(run_dir: Path, cfg: TrainConfig, iteration: int) -> bool:
 
 
 def _scenario(cfg: TrainConfig) -> dict[str, Any]:
-    """The scenario file the run trains on and its sha256 (None where it cannot be read)."""
-    path = resolve_scenario_path(cfg.env.scenario).resolve()
-    try:
-        digest: str | None = hashlib.sha256(path.read_bytes()).hexdigest()
-    except OSError:
-        digest = None
-    return {"path": str(path), "sha256": digest}
+    """The scenario the run trains on (`wbc.learned.train.preflight.scenario_record`)."""
+    return scenario_record(cfg.env.scenario)
 
 
-def _run_config(cfg: TrainConfig, resolved: dict[str, Any], point: ResumePoint | None) -> dict[str, Any]:
+def _run_config(cfg: TrainConfig, resolved: dict[str, Any], point: ResumePoint | None, command: str
+                ) -> dict[str, Any]:
     """The run's ``config.json``: its current settings, what it began with, and a history of its segments.
 
     A new run records its settings, inputs, provenance and its first segment. A resumed one keeps what the run began
@@ -473,7 +490,7 @@ def _run_config(cfg: TrainConfig, resolved: dict[str, Any], point: ResumePoint |
     Each segment says where it began and which settings it changed (``{field: [before, now]}``), and the command,
     package versions and git revision it ran under; its end (`_end_segment`) the iteration it reached.
     """
-    segment = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "command": shlex.join(sys.argv),
+    segment = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "command": command,
                "from_iteration": 0 if point is None else point.done, "max_iterations": cfg.max_iterations,
                "provenance": provenance()}
     if point is None:
