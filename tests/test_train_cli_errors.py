@@ -522,6 +522,11 @@ def test_a_resume_refuses_a_checkpoint_whose_iteration_is_not_its_names(stage1_r
     root = _copy(stage1_run, tmp_path)
     run = root / "push-stage1"
     shutil.copy(run / "model_0.pt", run / "model_3.pt")  # its counter says 0: the progress would be scaled by 4
+    assert main(["train", "--task", "push", "--stage", "1", "--iterations", "5", "--envs", "1", "--rma-iterations",
+                 "0", "--run-root", str(root), "--resume", "--dry-run"]) == 2
+    assert "model_3.pt: a checkpoint of another run: iteration 0 (this run: 3)" in capsys.readouterr().err
+    # one written before checkpoints recorded their run: its counter alone
+    _rewrite_checkpoint(run / "model_0.pt", run / "model_3.pt", lambda saved: saved.update(infos=None))
     capsys.readouterr()
     argv = ["train", "--task", "push", "--stage", "1", "--iterations", "5", "--envs", "1", "--rma-iterations", "0",
             "--run-root", str(root), "--resume"]

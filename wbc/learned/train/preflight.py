@@ -698,20 +698,19 @@ def check_checkpoint(path: Path, cfg: TrainConfig | None = None) -> None:
         raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: {unreadable_fix(path)}, or "
                           "start a new run under another --run-root")
     named = checkpoint_iteration(path)
+    infos = saved.get("infos")
+    recorded = infos.get(CHECKPOINT_KEY) if isinstance(infos, dict) else None
+    if cfg is not None and isinstance(recorded, dict):  # what it says it is, compared first: it names the most
+        expected = checkpoint_identity(cfg, named)
+        differ = [f"{key} {recorded.get(key)!r} (this run: {value!r})" for key, value in expected.items()
+                  if recorded.get(key) != value]
+        if differ:
+            raise ConfigError(f"--resume: {path}: a checkpoint of another run: {', '.join(differ)}: "
+                              f"{unreadable_fix(path)}, or start a new run under another --run-root")
     if saved["iter"] != named:
         raise ConfigError(f"--resume: {path}: iter: {saved['iter']}, not the {named} its name says (a checkpoint "
                           f"renamed or copied from another run): {unreadable_fix(path)}, or start a new run under "
                           "another --run-root")
-    infos = saved.get("infos")
-    recorded = infos.get(CHECKPOINT_KEY) if isinstance(infos, dict) else None
-    if cfg is None or not isinstance(recorded, dict):
-        return
-    expected = checkpoint_identity(cfg, named)
-    differ = [f"{key} {recorded.get(key)!r} (this run: {value!r})" for key, value in expected.items()
-              if recorded.get(key) != value]
-    if differ:
-        raise ConfigError(f"--resume: {path}: a checkpoint of another run: {', '.join(differ)}: "
-                          f"{unreadable_fix(path)}, or start a new run under another --run-root")
 
 
 def unreadable_fix(path: Path) -> str:
