@@ -319,7 +319,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
     Raises:
         ConfigError: another run holds the run directory (naming it and that run's pid); a new run in a directory
             that holds a run; no checkpoint to resume from, a damaged run directory (config.json, progress.json, the
-            newest checkpoint) or a resumed config that differs; or the teacher is missing/mismatched.
+            newest checkpoint, or one of another run or whose networks do not fit) or a resumed config that differs; or
+            the teacher is missing/mismatched.
         KeyboardInterrupt: Ctrl-C; during PPO, once the iteration in progress has ended and its checkpoint is saved
             (`_learn`); during the adaptation phase at once, the export before it kept (`_adapt`).
     """
