@@ -478,6 +478,19 @@ def test_a_resumed_dagger_run_takes_the_options_left_out_from_its_config(tmp_pat
             "--student-layers 16, --memory-layers 4") in err
     progress = json.loads((tmp_path / "runs" / "push-dagger-mpc" / "progress.json").read_text())
     assert len(progress["rounds"]) == 2 and "2 rounds" in out
+    # each session recorded, as a stage's are, and carried by the export
+    run = tmp_path / "runs" / "push-dagger-mpc"
+    segments = json.loads((run / "config.json").read_text())["segments"]
+    assert [(s["from_round"], s["to_round"], s["resumed"]) for s in segments] == [(0, 1, False), (1, 2, True)]
+    assert segments[0]["command"].startswith("wbc train --task push --teacher mpc --rounds 1 ")
+    assert segments[1]["command"] == f"wbc train --task push --teacher mpc --rounds 2 --run-root {root} --resume"
+    assert segments[1]["changed"] == {"rounds": [1, 2]}
+    training = json.loads((run / "policy.json").read_text())["training"]
+    assert training["segments"] == segments
+    from wbc.scenario.scenario import load_scenario  # the scenario named as the arena names it, beside the file's hash
+
+    shipped = load_scenario(training["scenario"]["path"])
+    assert (training["scenario"]["name"], training["scenario"]["content_hash"]) == (shipped.name, shipped.hash)
 
 
 @pytest.fixture(scope="module")

@@ -929,6 +929,21 @@ def test_probe_reports_per_command_velocities(vec, tmp_path):
     assert all(np.isfinite([r["vx"], r["vy"], r["yaw_rate"], r["falls_per_env_s"]]).all() for r in rows)
 
 
+def test_probe_counts_each_fall_under_the_command_its_env_had():
+    from wbc.tools.probe import fall_rates
+
+    # two envs, four steps of 0.02 s: env 0 walks at 0.3 m/s and falls twice, env 1 stands and never falls, then
+    # env 1 is reset onto 0.3 m/s for its last two steps and falls once
+    commands = np.zeros((4, 2, 3))
+    commands[:, 0, 0] = 0.3
+    commands[2:, 1, 0] = 0.3
+    terminated = np.zeros((4, 2), dtype=bool)
+    terminated[[1, 3], 0] = True
+    terminated[3, 1] = True
+    rates = fall_rates(commands, terminated, 0.02)
+    assert rates == {(0.0, 0.0, 0.0): 0.0, (0.3, 0.0, 0.0): pytest.approx(3 / (6 * 0.02))}
+
+
 def test_env_solver_is_configurable_and_checked():
     import mujoco
 

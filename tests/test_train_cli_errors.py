@@ -205,9 +205,9 @@ def test_a_resumed_stage_says_which_options_it_took_before_it_trains(stage1_run,
     said_before: list[str] = []
     real = train_module._train
 
-    def training(cfg, point):
+    def training(cfg, point, *args):
         said_before.append(capsys.readouterr().err)
-        return real(cfg, point)
+        return real(cfg, point, *args)
 
     monkeypatch.setattr(train_module, "_train", training)
     capsys.readouterr()
@@ -473,3 +473,102 @@ def test_the_curves_tool_draws_a_ppo_run_and_labels_runs_of_one_name_by_their_ro
     assert curves([*runs, "-o", str(tmp_path / "c.png")]) == 0 and (tmp_path / "c.png").stat().st_size > 1000
     assert run_labels(runs) == [f"{stage1_run.name}/push-stage1", "other/push-stage1"]
     assert run_labels(runs[:1]) == ["push-stage1"]
+
+
+def _rewrite_checkpoint(source: Path, target: Path, change) -> None:
+    """Save `source`'s checkpoint as `target`, `change` applied to its loaded dict first."""
+    import torch
+
+    saved = torch.load(source, map_location="cpu", weights_only=False)
+    change(saved)
+    torch.save(saved, target)
+
+
+def _identity(saved: dict, **fields) -> None:
+    saved["infos"]["wbc"].update(fields)
+
+
+@pytest.mark.parametrize(("change", "said"), [
+    (lambda saved: _identity(saved, task="turn", robot="go1-arm"),
+     "a checkpoint of another run: task 'turn' (this run: 'push'), robot 'go1-arm' (this run: 'a1-wx200')"),
+    (lambda saved: _identity(saved, stage=2), "a checkpoint of another run: stage 2 (this run: 1)"),
+])
+def test_a_resume_refuses_a_checkpoint_of_another_run_naming_the_field_and_the_checkpoint_before_it(
+        stage1_run, tmp_path, capsys, change, said):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    saved = __import__("torch").load(run / "model_0.pt", map_location="cpu", weights_only=False)
+    assert saved["infos"]["wbc"] == {"task": "push", "stage": 1, "baseline": None, "variant": None,
+                                     "robot": "a1-wx200", "arm_mode": "none", "iteration": 0}
+
+    def stray(saved):  # another run's checkpoint at iteration 3, copied in as this run's model_3.pt
+        saved["iter"] = 3
+        saved["infos"]["wbc"]["iteration"] = 3
+        change(saved)
+
+    _rewrite_checkpoint(run / "model_0.pt", run / "model_3.pt", stray)
+    before = _snapshot(run)
+    capsys.readouterr()
+    argv = ["train", "--task", "push", "--stage", "1", "--iterations", "5", "--envs", "1", "--rma-iterations", "0",
+            "--run-root", str(root), "--resume"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert f"{run / 'model_3.pt'}: {said}" in err and "to resume from model_0.pt" in err
+    assert len(err.strip().splitlines()) == 1 and _snapshot(run) == before
+    assert main([*argv, "--dry-run"]) == 2 and said in capsys.readouterr().err
+
+
+def test_a_resume_refuses_a_checkpoint_whose_iteration_is_not_its_names(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    shutil.copy(run / "model_0.pt", run / "model_3.pt")  # its counter says 0: the progress would be scaled by 4
+    assert main(["train", "--task", "push", "--stage", "1", "--iterations", "5", "--envs", "1", "--rma-iterations",
+                 "0", "--run-root", str(root), "--resume", "--dry-run"]) == 2
+    assert "model_3.pt: a checkpoint of another run: iteration 0 (this run: 3)" in capsys.readouterr().err
+    # one written before checkpoints recorded their run: its counter alone
+    _rewrite_checkpoint(run / "model_0.pt", run / "model_3.pt", lambda saved: saved.update(infos=None))
+    capsys.readouterr()
+    argv = ["train", "--task", "push", "--stage", "1", "--iterations", "5", "--envs", "1", "--rma-iterations", "0",
+            "--run-root", str(root), "--resume"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert "model_3.pt: iter: 0, not the 3 its name says" in err and "to resume from model_0.pt" in err
+    assert json.loads((run / "progress.json").read_text())["iteration"] == 0
+
+
+def test_a_checkpoint_written_before_runs_recorded_their_identity_still_resumes(stage1_run, tmp_path, capsys):
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+    _rewrite_checkpoint(run / "model_0.pt", run / "model_0.pt", lambda saved: saved.update(infos=None))
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", "--iterations", "2", "--envs", "1", "--rma-iterations",
+                 "0", "--run-root", str(root), "--resume"]) == 0
+    assert json.loads((run / "progress.json").read_text())["iteration"] == 1
+
+
+def test_a_checkpoint_that_does_not_fit_the_networks_is_refused_in_one_line_before_they_are_printed(
+        stage1_run, tmp_path, capsys):
+    import torch
+
+    root = _copy(stage1_run, tmp_path)
+    run = root / "push-stage1"
+
+    def wider(saved):  # the same run's identity, other layers (a checkpoint of an edited config)
+        saved["iter"] = 1
+        if saved["infos"] is not None:
+            saved["infos"]["wbc"]["iteration"] = 1
+        state = saved["actor_state_dict"]
+        name = next(k for k, v in state.items() if k.endswith("weight") and v.dim() == 2)
+        state[name] = torch.zeros(state[name].shape[0] + 1, state[name].shape[1])
+
+    _rewrite_checkpoint(run / "model_0.pt", run / "model_1.pt", wider)
+    capsys.readouterr()
+    assert main(["train", "--task", "push", "--stage", "1", "--iterations", "3", "--envs", "1", "--rma-iterations",
+                 "0", "--run-root", str(root), "--resume"]) == 2
+    captured = capsys.readouterr()
+    err = captured.err
+    assert "model_1.pt: does not fit this run's networks (size mismatch for " in err
+    # the refusal is its last line, one line (the note before it: progress.json counts model_0.pt's iterations)
+    refusal = err.strip().splitlines()[-1]
+    assert "does not fit" in refusal and "to resume from model_0.pt" in refusal and "Traceback" not in err
+    assert "Actor Model" not in captured.out

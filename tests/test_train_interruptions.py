@@ -209,6 +209,13 @@ def test_sigterm_stops_a_training_run_as_ctrl_c_does_at_the_end_of_its_iteration
     assert "keeps its newest checkpoint, model_2.pt: the same command with --resume continues from it" in err
     assert json.loads((tmp_path / "push-stage1" / "progress.json").read_text())["iteration"] == 2
     assert signal.getsignal(signal.SIGTERM) == before  # the command's handlers are gone
+    # the session stopped at iteration 2: config.json says so, and so does the export of that checkpoint
+    segment = json.loads((tmp_path / "push-stage1" / "config.json").read_text())["segments"][-1]
+    assert (segment["to_iteration"], segment["interrupted"]) == (2, True)
+    training = json.loads((tmp_path / "push-stage1" / "policy.json").read_text())["training"]
+    assert training["segments"][-1] == segment
+    # a command that can be pasted, not the path of the module that ran it
+    assert segment["command"] == "wbc " + " ".join(argv) == training["command"]
 
 
 _HOLDER = """
@@ -349,6 +356,20 @@ def test_the_export_carries_the_runs_provenance_from_its_config(two_iterations):
         assert training[key] == config[key], key
     assert training["scenario"]["path"] == str(Path(SCENARIO).resolve()) and len(training["scenario"]["sha256"]) == 64
     assert "git_revision" in training["provenance"] and training["segments"][0]["from_iteration"] == 0
+    # the session's end is recorded before the final export, which carries it
+    assert training["segments"] == config["segments"]
+    assert (training["segments"][-1]["to_iteration"], training["segments"][-1]["adaptation"]) == (1, "none")
+
+
+def test_the_training_block_names_the_scenario_by_the_arenas_content_hash_too(two_iterations):
+    """The file's sha256 changes with a comment; trials.csv and published.toml name a scenario by its content hash."""
+    from wbc.scenario.scenario import load_scenario
+
+    scenario = json.loads((two_iterations / "push-stage1" / "policy.json").read_text())["training"]["scenario"]
+    shipped = load_scenario(SCENARIO)
+    assert (scenario["name"], scenario["version"], scenario["content_hash"]) == (shipped.name, shipped.version,
+                                                                                 shipped.hash)
+    assert scenario["content_hash"] != scenario["sha256"]
 
 
 def test_the_physics_threads_change_no_checkpoint_so_a_resume_may_change_them(two_iterations, tmp_path):
@@ -371,3 +392,52 @@ def _threads(root: Path, nthread: int, **kw):
 
     cfg = _tiny(root, **kw)
     return dataclasses.replace(cfg, env=dataclasses.replace(cfg.env, nthread=nthread))
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_a_finished_run_extended_then_stopped_keeps_its_playable_export_and_says_how_to_finish(tmp_path, monkeypatch):
+    """A checkpoint's export has no adaptation module: it is written beside a playable export, never over it."""
+    import wbc.learned.train.train as train_module
+    from wbc.learned.policy.policy_file import load_policy
+
+    train_module.train(_tiny(tmp_path, max_iterations=1, rma=_rma(1)))
+    run = tmp_path / "push-stage1"
+    playable = {n: (run / n).read_bytes() for n in ("policy.npz", "policy.json")}
+    _ctrl_c_in_update(monkeypatch, at=1, signum=signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt):
+        train_module.train(_tiny(tmp_path, max_iterations=6, rma=_rma(1)), resume=True)
+    monkeypatch.undo()
+    # every checkpoint since (model_1.pt, model_2.pt) exported beside it: the run's policy plays as it did
+    assert {n: (run / n).read_bytes() for n in playable} == playable
+    assert load_policy(run / "policy").meta["adaptation"] is not None
+    ppo = load_policy(run / "policy_ppo")
+    assert ppo.meta["training"]["iteration"] == 2 and ppo.meta.get("adaptation") is None
+    # finished at that checkpoint: its module fitted, the run's policy replaced, the PPO-phase export gone
+    result = train_module.train(_tiny(tmp_path, max_iterations=3, rma=_rma(1)), resume=True)
+    assert result["trained"] == 0 and result["adaptation"] == "fitted"
+    finished = load_policy(run / "policy")
+    assert finished.meta["training"]["iteration"] == 2 and finished.meta["adaptation"] is not None
+    last = finished.meta["training"]["segments"][-1]  # the session's end, in the export phase 2 wrote
+    assert (last["from_iteration"], last["to_iteration"], last["adaptation"]) == (3, 2, "fitted")
+    assert not (run / "policy_ppo.npz").exists() and not (run / "policy_ppo.json").exists()
+
+
+@pytest.mark.usefixtures("terminal_signals")
+def test_an_interrupted_run_says_whether_its_export_is_playable_and_how_to_finish_it(tmp_path, monkeypatch, capsys):
+    from wbc.cli.main import main
+
+    argv = ["train", "--task", "push", "--stage", "1", "--envs", "1", "--rma-iterations", "1", "--run-root",
+            str(tmp_path)]
+    _ctrl_c_in_update(monkeypatch, at=1, signum=signal.SIGTERM)
+    assert main([*argv, "--iterations", "4"]) == 130  # a first interruption: no module yet
+    err = capsys.readouterr().err
+    assert "its export, policy.json, has no adaptation module yet, so it is not playable: the same command with " \
+        "--resume and --iterations 2 fits the module on model_1.pt without training further" in err
+    monkeypatch.undo()
+    assert main([*argv, "--iterations", "2", "--resume"]) == 0  # finished there, as it says: playable
+    _ctrl_c_in_update(monkeypatch, at=1, signum=signal.SIGTERM)
+    assert main([*argv, "--iterations", "6", "--resume"]) == 130
+    err = capsys.readouterr().err
+    assert "its export, policy.json, is playable and of iteration 1 (model_3.pt's, without the module, is " \
+        "policy_ppo.json): the same command with --resume and --iterations 4 fits the module on model_3.pt" in err
+    assert err.strip().splitlines()[-1].startswith("wbc: interrupted; ")  # all of it in the closing line

@@ -812,6 +812,33 @@ def _inherit_saved(args: argparse.Namespace, run_dir: str, env: dict[str, Any], 
     return bool(taken)
 
 
+def _export_state(run_dir: Path, checkpoint: Path) -> str:
+    """Whether an interrupted run's export is playable and how to finish it (the end of its message), or ``""``.
+
+    A policy that observes RMA's extrinsics plays only with its adaptation module, which the run's phase 2 fits after
+    its last iteration: an export of a checkpoint has none (`wbc.learned.train.preflight.PPO_EXPORT`).
+    """
+    from wbc.learned.train.preflight import PPO_EXPORT, checkpoint_iteration, lacks_module
+
+    try:
+        meta = json.loads((run_dir / "policy.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return ""
+    if not isinstance(meta, dict) or meta.get("extrinsics") is None:
+        return ""
+    it = checkpoint_iteration(checkpoint)
+    finish = (f"the same command with --resume and --iterations {it + 1} fits the module on {checkpoint.name} without "
+              "training further (with --resume alone, once it has trained on to its --iterations)")
+    if lacks_module(meta):
+        return f"; its export, policy.json, has no adaptation module yet, so it is not playable: {finish}"
+    training = meta.get("training")
+    exported = training.get("iteration") if isinstance(training, dict) else None
+    if isinstance(exported, int) and exported < it:
+        return (f"; its export, policy.json, is playable and of iteration {exported} ({checkpoint.name}'s, without "
+                f"the module, is {PPO_EXPORT}.json): {finish}")
+    return ""
+
+
 def _exported_rounds(run_dir: Path) -> int | None:
     """The rounds of the adaptation module in a run's export (``policy.json`` adaptation.iterations), or None."""
     try:
@@ -907,13 +934,15 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
 
     `options` maps each input file's `TrainConfig` field to the option that set it, named when it is refused.
     """
-    from wbc.learned.train.preflight import check_run, check_run_dir, check_unlocked, unstarted_run
+    from wbc.learned.train.preflight import check_checkpoint, check_run, check_run_dir, check_unlocked, unstarted_run
 
     check_unlocked(cfg.run_dir)  # another run on it: refused before anything is said of it (the run then locks it)
     if unstarted_run(cfg.run_dir):
         print(f"wbc: note: {cfg.run_dir} holds a run interrupted before its first checkpoint (config.json, no "
               "model_<it>.pt): it starts afresh from iteration 0", file=sys.stderr)
     point = check_run_dir(cfg, resume=args.resume)
+    if point is not None:  # a checkpoint the run refuses: refused before its progress is reconciled to it
+        check_checkpoint(point.checkpoint, cfg)
     if point is not None and point.note:
         print(f"wbc: note: --resume: {point.note}", file=sys.stderr)
     if args.dry_run:
@@ -934,7 +963,8 @@ def _train_run(args: argparse.Namespace, cfg, *, stage: int, baseline: str | Non
 
     args.training = ("ppo", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
 
-    result = train(cfg, resume=args.resume, options=options, checked=lambda: _print_resume_note(args))
+    result = train(cfg, resume=args.resume, options=options, checked=lambda: _print_resume_note(args),
+                   command=args.command_line)
     if result.get("trained", 1) == 0:
         kept = ("its export, whose adaptation module this phase 2 already fitted on it, is kept (rma.json)"
                 if result.get("adaptation") == "kept" else "its newest checkpoint is exported as it is")
@@ -1015,7 +1045,8 @@ def _distil(args: argparse.Namespace) -> int:
         return 0
     args.training = ("dagger", cfg.run_dir)  # what an interruption keeps (`_interrupted_training`)
     # the note is said once the run is checked, before its rounds (which may take hours)
-    result = run_dagger(cfg, resume=args.resume, log=print, checked=lambda: _print_resume_note(args))
+    result = run_dagger(cfg, resume=args.resume, log=print, checked=lambda: _print_resume_note(args),
+                        command=args.command_line)
     if result["trained"] == 0:
         done = result["rounds"]
         print(f"{result['run_dir']} already holds {done} DAgger round{'s' if done != 1 else ''}, no fewer than "
@@ -1081,7 +1112,7 @@ def _interrupted_training(args: argparse.Namespace) -> str:
         module = (f", and its export the adaptation module it had ({rounds} round{'s' if rounds > 1 else ''}, "
                   "policy.json)") if rounds else ""
         return (f"; {run_dir} keeps its newest checkpoint, {checkpoint.name}{module}: the same command with --resume "
-                "continues from it")
+                f"continues from it{_export_state(Path(run_dir), checkpoint)}")
     if kind == "dagger":
         try:
             rounds = json.loads((Path(run_dir) / "progress.json").read_text())["rounds"]
@@ -1782,6 +1813,8 @@ def main(argv: list[str] | None = None) -> int:
     """
     try:
         args = build_parser().parse_args(argv)
+        # what a run records as its command: pasteable, whichever way wbc was started (`python -m wbc.cli`, a test)
+        args.command_line = ["wbc", *(sys.argv[1:] if argv is None else argv)]
     except KeyboardInterrupt:
         _say("wbc: interrupted while starting: nothing was done")
         return 130

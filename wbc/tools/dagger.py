@@ -29,7 +29,6 @@ it recovers from the small errors a student makes, from round 0 on.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import json
 import math
 import shlex
@@ -37,7 +36,7 @@ import sys
 import time
 import zipfile
 import zlib
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,14 +61,21 @@ from wbc.learned.train.distill import (
     save_student,
     student_policy_file,
 )
-from wbc.learned.train.preflight import check_run_root, config_diff, locked_run_dir, make_run_dir, read_run_json
+from wbc.learned.train.preflight import (
+    check_run_root,
+    config_diff,
+    locked_run_dir,
+    make_run_dir,
+    read_run_json,
+    scenario_record,
+)
 from wbc.learned.train.stages import TASKS
 from wbc.mpc.controller import MpcController, MpcControllerConfig
 from wbc.output_files import replacing as _replacing  # a name of this module: the tests interrupt its writes
 from wbc.provenance import provenance
 from wbc.robots.description import RobotDescription
 from wbc.robots.registry import get_robot
-from wbc.scenario import load_scenario, resolve_scenario_path
+from wbc.scenario import load_scenario
 from wbc.types import MotorCommand, RobotState, VelocityCommand
 
 __all__ = ["DaggerConfig", "DaggerController", "DaggerStart", "check_dagger_run", "run_dagger"]
@@ -319,27 +325,18 @@ def dagger_expert(cfg: DaggerConfig) -> tuple[ControllerSpec, Callable[[RobotDes
 _DAMAGED = "the run directory is damaged: start a new run under another --run-root"
 
 
-def _scenario_file(path: str | Path) -> dict[str, Any]:
-    """The scenario file a run plays and its sha256 (None where it cannot be read)."""
-    resolved = resolve_scenario_path(path).resolve()
-    try:
-        digest: str | None = hashlib.sha256(resolved.read_bytes()).hexdigest()
-    except OSError:
-        digest = None
-    return {"path": str(resolved), "sha256": digest}
-
-
 def _made(run_dir: Path) -> dict[str, Any]:
     """How the run was made, from its ``config.json``, for its exports' ``training`` block: a shipped copy says it.
 
-    The command, the scenario file and its sha256, the package versions and git revision, and when it began (those
-    it records: a run begun before some were recorded has fewer).
+    The command it began with, the scenario file and its sha256, the package versions and git revision, when it
+    began, and its sessions (``segments``, each with its own command; those it records: a run begun before some were
+    recorded has fewer).
     """
     try:
         data = json.loads((run_dir / "config.json").read_text())
     except (OSError, UnicodeDecodeError, ValueError):
         return {}
-    keys = ("command", "scenario", "provenance", "started")
+    keys = ("command", "scenario", "provenance", "started", "segments")
     return {k: data[k] for k in keys if isinstance(data, dict) and k in data}
 
 
@@ -487,7 +484,7 @@ def check_dagger_run(cfg: DaggerConfig, *, resume: bool) -> DaggerStart:
 
 
 def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None,
-               checked: Callable[[], object] | None = None) -> dict[str, Any]:
+               checked: Callable[[], object] | None = None, command: Sequence[str] | None = None) -> dict[str, Any]:
     """Run DAgger rounds and export the student after each.
 
     Args:
@@ -496,6 +493,8 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None,
             ``rounds``).
         log: called with one line of progress per round (e.g. `print`), or None.
         checked: called once the run's checks have passed, before its first round (the command's resume note).
+        command: the command line the run records (``["wbc", "train", ...]``), quoted with `shlex.join`; default:
+            the process's ``sys.argv``.
 
     Returns:
         The run's summary: ``rounds`` (finished in all), ``trained`` (in this call: 0 when a resumed run already held
@@ -512,10 +511,48 @@ def run_dagger(cfg: DaggerConfig, *, resume: bool = False, log: Any = None,
     with locked_run_dir(cfg.run_dir, lambda: check_dagger_run(cfg, resume=resume)) as start:
         if checked is not None:
             checked()
-        return _run_rounds(cfg, start, resume=resume, log=log)
+        return _run_rounds(cfg, start, resume=resume, log=log,
+                           command=shlex.join(sys.argv if command is None else command))
 
 
-def _run_rounds(cfg: DaggerConfig, start: DaggerStart, *, resume: bool, log: Any) -> dict[str, Any]:
+def _session(cfg: DaggerConfig, run_dir: Path, *, resume: bool, done: int, command: str) -> dict[str, Any]:
+    """The run's ``config.json`` with this session added to its ``segments``.
+
+    A new run records its settings, command, scenario, provenance and start, and its first segment. A resumed one
+    keeps what the run began with and takes this session's settings as the current ones (``dagger_config``, so
+    that a later plain ``--resume`` takes its ``rounds``); its segment says when it began, its command, the settings
+    it changed (``{field: [before, now]}``), the round it began at (``from_round``, rounds finished before it) and
+    the package versions and git revision it ran under. Each round records the rounds reached (``to_round``).
+    """
+    resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
+    segment = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "command": command, "from_round": done,
+               "rounds": cfg.rounds, "provenance": provenance()}
+    if not resume:
+        spec = TASKS[cfg.task]
+        return {"dagger_config": resolved, "command": command, "scenario": scenario_record(spec.scenario),
+                "provenance": segment["provenance"], "started": segment["started"],
+                "segments": [{**segment, "resumed": False, "changed": {}}]}
+    data = json.loads((run_dir / "config.json").read_text())  # checked by `_resumed`
+    saved = data.get("dagger_config", {})
+    changed = {key: [saved.get(key), resolved[key]] for key in sorted(resolved)
+               if key != "run_dir" and saved.get(key) != resolved[key]}
+    # a run begun before segments were recorded: its earlier sessions are not known
+    segments = data.get("segments") if isinstance(data.get("segments"), list) else []
+    return {**data, "dagger_config": resolved, "segments": [*segments, {**segment, "resumed": True,
+                                                                        "changed": changed}]}
+
+
+def _end_segment(run_dir: Path, fields: dict[str, Any]) -> None:
+    """Record in ``config.json`` how far this session went (the rounds finished)."""
+    path = run_dir / "config.json"
+    data = json.loads(path.read_text())
+    if isinstance(data.get("segments"), list) and data["segments"]:
+        data["segments"][-1].update(fields)
+        with _replacing(path) as f:
+            f.write((json.dumps(data, indent=2) + "\n").encode())
+
+
+def _run_rounds(cfg: DaggerConfig, start: DaggerStart, *, resume: bool, log: Any, command: str) -> dict[str, Any]:
     """`run_dagger` once its run directory is checked and locked, from `start`."""
     expert_spec, make_expert = start.expert_spec, start.make_expert
     progress, obs_all, act_all, ep_all, net = start.progress, start.obs, start.actions, start.episode, start.net
@@ -525,13 +562,12 @@ def _run_rounds(cfg: DaggerConfig, start: DaggerStart, *, resume: bool, log: Any
     run_dir = Path(cfg.run_dir)
     if not resume:
         make_run_dir(run_dir)
-        resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
-        (run_dir / "config.json").write_text(json.dumps(
-            {"dagger_config": resolved, "command": shlex.join(sys.argv), "scenario": _scenario_file(spec.scenario),
-             "provenance": provenance(), "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}, indent=2) + "\n")
-    made = _made(run_dir)
-    student_path = run_dir / "policy"
     start_round = len(progress["rounds"])
+    if start_round < cfg.rounds or not resume:  # a resume with no round to play leaves the run as it was
+        config = _session(cfg, run_dir, resume=resume, done=start_round, command=command)
+        with _replacing(run_dir / "config.json") as f:
+            f.write((json.dumps(config, indent=2) + "\n").encode())
+    student_path = run_dir / "policy"
     if start_round:  # a run stopped after a round wrote its student and before its progress: that round plays again
         _current_from_round(run_dir, start_round - 1)
     wall_before = sum(r["wall_s"] for r in progress["rounds"])
@@ -587,6 +623,8 @@ def _run_rounds(cfg: DaggerConfig, start: DaggerStart, *, resume: bool, log: Any
                    "fit_loss_first": losses[0] if losses else math.nan, "fit_loss_last": losses[-1] if losses
                    else math.nan, "wall_s": wall}
         progress["rounds"].append(summary)
+        _end_segment(run_dir, {"to_round": k + 1})  # before the round's export, whose training block carries it
+        made = _made(run_dir)
         extra = {"baseline": None, "method": "dagger", "expert": cfg.expert, "rounds": k + 1,
                  "episodes": cfg.episodes, "episode_s": cfg.episode_s, "history": cfg.fit.history,
                  "expert_noise": cfg.expert_noise,

@@ -20,7 +20,27 @@ from wbc.learned.policy.numpy_policy import NumpyPolicy
 from wbc.learned.policy.policy_file import load_policy
 from wbc.learned.train.stages import stage_config
 
-__all__ = ["probe_policy"]
+__all__ = ["fall_rates", "probe_policy"]
+
+
+def fall_rates(commands: np.ndarray, terminated: np.ndarray, dt: float) -> dict[tuple[float, float, float], float]:
+    """Falls per environment-second under each command: an env's steps and falls count for the command it had.
+
+    Args:
+        commands: (T, N, 3) each env's commanded (vx, vy, yaw rate) during each policy step.
+        terminated: (T, N) whether the env fell (terminated) at that step, under that step's command.
+        dt: policy step [s].
+
+    Returns:
+        ``{(vx, vy, yaw_rate): falls / (env-steps under it * dt)}`` for each command held at some step.
+    """
+    flat = np.asarray(commands, dtype=float).reshape(-1, 3)
+    fell = np.asarray(terminated, dtype=bool).reshape(-1)
+    rates = {}
+    for c in np.unique(flat, axis=0):
+        held = np.all(flat == c, axis=1)
+        rates[tuple(float(x) for x in c)] = float(fell[held].sum() / (held.sum() * dt))
+    return rates
 
 
 def probe_policy(policy_path: str | Path, env: EnvConfig, *, steps: int = 500, settle: int = 100
@@ -34,21 +54,23 @@ def probe_policy(policy_path: str | Path, env: EnvConfig, *, steps: int = 500, s
         settle: steps before the velocities are averaged (ramp and start transient).
 
     Returns:
-        One row per distinct commanded (vx, vy, yaw rate): the command, the mean body-frame forward and lateral
-        velocity and yaw rate after `settle`, and the falls per environment-second.
+        One row per distinct commanded (vx, vy, yaw rate) after `settle`: the command, the mean body-frame forward
+        and lateral velocity and yaw rate after `settle`, and the falls per environment-second under that command
+        over all `steps` (`fall_rates`: a fall counts for the command its env had when it fell).
     """
     policy = NumpyPolicy(load_policy(policy_path))
     cfg = dataclasses.replace(env, noise=ObsNoise(dof_pos=0.0, dof_vel=0.0, ang_vel=0.0, gravity=0.0),
                               teacher_arm_mode=None)
     e = BatchedEnv(cfg)
     obs, priv, _ = e.reset()
-    cmds, vel, falls = [], [], np.zeros(e.num_envs)
+    cmds, vel, held, fell = [], [], [], []
     try:
         for k in range(steps):
             z = policy.extrinsics(priv) if policy.uses_extrinsics else None
+            held.append(e._command_target.copy())  # an env that falls is reset, with its next command, in the step
             r = e.step(policy(obs, z))
             obs, priv = r.obs, r.privileged
-            falls += r.terminated
+            fell.append(np.asarray(r.terminated, dtype=bool).copy())
             if k >= settle:
                 cmds.append(e._command_target.copy())
                 qvel = e.state[:, 1 + e.nq:1 + e.nq + 6]
@@ -56,13 +78,14 @@ def probe_policy(policy_path: str | Path, env: EnvConfig, *, steps: int = 500, s
     finally:
         e.close()
     cmds_a, vel_a = np.concatenate(cmds), np.concatenate(vel)
+    falls = fall_rates(np.stack(held), np.stack(fell), cfg.policy_dt)
     rows = []
     for c in np.unique(cmds_a, axis=0):
         m = np.all(cmds_a == c, axis=1)
         v = vel_a[m].mean(axis=0)
         rows.append({"vx_cmd": float(c[0]), "vy_cmd": float(c[1]), "yaw_rate_cmd": float(c[2]), "vx": float(v[0]),
                      "vy": float(v[1]), "yaw_rate": float(v[2]),
-                     "falls_per_env_s": float(falls.sum() / (e.num_envs * steps * cfg.policy_dt))})
+                     "falls_per_env_s": falls[tuple(float(x) for x in c)]})
     return rows
 
 

@@ -27,7 +27,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-from wbc.errors import ConfigError, NetworkMismatchError
+from wbc.errors import ConfigError, NetworkMismatchError, WbcError
 from wbc.learned.env.env_config import EnvConfig
 from wbc.learned.policy.policy_file import PolicyFile, PolicyFileError, load_policy
 from wbc.learned.train.stages import TASKS
@@ -35,12 +35,14 @@ from wbc.learned.train.train_config import TrainConfig
 from wbc.optional import require
 from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory_holder, lock_directory
 from wbc.robots.registry import get_robot
+from wbc.scenario.scenario import load_scenario, resolve_scenario_path
 
-__all__ = ["INPUTS", "LOCK_FILE", "RESUMABLE", "RESUMABLE_ENV", "ResumePoint", "check_checkpoint", "check_inputs",
-           "check_run", "check_run_dir", "check_run_root", "check_unlocked", "checkpoint_iteration", "config_diff",
-           "env_meta", "input_files", "input_path", "latest_checkpoint", "load_input_policy", "lock_run_dir",
+__all__ = ["CHECKPOINT_KEY", "INPUTS", "LOCK_FILE", "RESUMABLE", "RESUMABLE_ENV", "ResumePoint", "check_checkpoint",
+           "check_inputs", "check_run", "check_run_dir", "check_run_root", "check_unlocked", "checkpoint_identity",
+           "checkpoint_iteration", "config_diff", "env_meta", "input_files", "input_path", "latest_checkpoint",
+           "PPO_EXPORT", "load_input_policy", "lock_run_dir", "lacks_module", "playable_export",
            "locked_run_dir", "make_run_dir", "names_a_file", "read_expert_samples", "read_run_json",
-           "saved_train_config", "student_layout", "unstarted_run"]
+           "saved_train_config", "scenario_record", "student_layout", "unreadable_fix", "unstarted_run"]
 
 T = TypeVar("T")
 
@@ -60,6 +62,29 @@ _POLICY_INPUTS = ("teacher", "init_from", "frozen_legs", "student")
 
 _RUN_FILES = ("config.json", "progress.json", "policy.npz", "policy.json")
 """Files of a run directory that say it already holds a run (besides ``model_<it>.pt`` checkpoints)."""
+
+
+PPO_EXPORT = "policy_ppo"
+"""The stem of the export a run writes of a checkpoint before its adaptation phase, where its ``policy`` is playable.
+
+A stage whose policy observes RMA's extrinsics is playable only with the adaptation module its phase 2 fits; a
+checkpoint's export (periodic, or an interrupted run's) has none yet, and never replaces a ``policy`` that has one.
+"""
+
+
+def lacks_module(meta: Any) -> bool:
+    """Whether a policy file's JSON (`meta`) observes RMA's extrinsics and has no adaptation module: not playable."""
+    return (isinstance(meta, dict) and meta.get("extrinsics") is not None
+            and not isinstance(meta.get("adaptation"), dict))
+
+
+def playable_export(run_dir: str | Path) -> dict[str, Any] | None:
+    """The JSON of a run's ``policy.json`` where it is playable (no extrinsics, or its adaptation module), else None."""
+    try:
+        meta = json.loads((Path(run_dir) / "policy.json").read_text())
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    return meta if isinstance(meta, dict) and not lacks_module(meta) else None
 
 
 @dataclass(frozen=True)
@@ -175,6 +200,28 @@ def _sha256(path: Path) -> str:
         for block in iter(lambda: f.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def scenario_record(path: str | Path) -> dict[str, Any]:
+    """The scenario file a run plays, as its ``config.json`` and its exports' ``training`` block record it.
+
+    ``path`` (resolved) and ``sha256``, the sha256 of the file's bytes (None where it cannot be read), which a comment
+    or a layout change alters; ``name``, ``version`` and ``content_hash``, the scenario's as the arena names it
+    (`wbc.scenario.scenario.load_scenario`: ``trials.csv``, ``summary.json``, ``wbc scenario check`` and
+    ``scenarios/published.toml`` give its content hash, the sha256 of its parsed content,
+    `wbc.scenario.scenario.content_hash`), None where the file does not load.
+    """
+    resolved = resolve_scenario_path(path).resolve()
+    try:
+        digest: str | None = hashlib.sha256(resolved.read_bytes()).hexdigest()
+    except OSError:
+        digest = None
+    try:
+        scenario = load_scenario(resolved)
+        named = {"name": scenario.name, "version": scenario.version, "content_hash": scenario.hash}
+    except (WbcError, OSError):
+        named = {"name": None, "version": None, "content_hash": None}
+    return {"path": str(resolved), "sha256": digest, **named}
 
 
 def input_files(cfg: TrainConfig) -> dict[str, dict[str, Any]]:
@@ -609,8 +656,22 @@ def check_run_dir(cfg: TrainConfig, *, resume: bool) -> ResumePoint | None:
     return ResumePoint(checkpoint=checkpoint, done=done, saved=saved, progress=progress)
 
 
-def check_checkpoint(path: Path) -> None:
-    """Refuse a checkpoint rsl-rl cannot load (a truncated one, another program's), before the env is built.
+CHECKPOINT_KEY = "wbc"
+"""The key of a checkpoint's rsl-rl ``infos`` under which a run records what it is (`checkpoint_identity`)."""
+
+
+def checkpoint_identity(cfg: TrainConfig, iteration: int) -> dict[str, Any]:
+    """What a checkpoint of `cfg`'s run at `iteration` is: the run it belongs to, which ``--resume`` compares.
+
+    Its task, stage, baseline and variant, the robot and arm mode it trains, and its iteration (the ``<it>`` of its
+    ``model_<it>.pt``). A checkpoint copied from another run, or renamed, then says so (`check_checkpoint`).
+    """
+    return {"task": cfg.task, "stage": cfg.stage, "baseline": cfg.baseline, "variant": cfg.variant,
+            "robot": cfg.env.robot, "arm_mode": cfg.env.arm_mode, "iteration": iteration}
+
+
+def check_checkpoint(path: Path, cfg: TrainConfig | None = None) -> None:
+    """Refuse a checkpoint rsl-rl cannot load (a truncated one, another program's), or another run's, before training.
 
     It needs torch (the ``train`` extra), as the run does.
 
@@ -618,22 +679,41 @@ def check_checkpoint(path: Path) -> None:
     (pickled by another version), and the resumed run would write over it when it reached its iteration again. The
     message names the checkpoint before it, from which a resume continues once the file is moved away.
 
+    A checkpoint's own iteration (rsl-rl's ``iter``) must be its name's ``<it>``, and what it records of its run
+    (`checkpoint_identity`, written since runs record it) must be `cfg`'s: a checkpoint of another task, stage,
+    baseline, robot or arm mode copied into the run directory is refused, naming the fields that differ. A checkpoint
+    written before runs recorded it is taken on its iteration alone.
+
     Raises:
-        ConfigError: naming the file, and what to do.
+        ConfigError: naming the file (and the field), and what to do.
     """
     torch = require("torch")
     try:
         saved = torch.load(path, map_location="cpu", weights_only=False)
     except Exception as exc:  # noqa: BLE001 - torch raises anything from a damaged pickle
         raise ConfigError(f"--resume: {path}: not a readable checkpoint ({type(exc).__name__}: "
-                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); {_unreadable_fix(path)}, or "
+                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'}); {unreadable_fix(path)}, or "
                           "start a new run under another --run-root") from None
     if not isinstance(saved, dict) or not isinstance(saved.get("iter"), int):
-        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: {_unreadable_fix(path)}, or "
+        raise ConfigError(f"--resume: {path}: iter: missing; not an rsl-rl checkpoint: {unreadable_fix(path)}, or "
                           "start a new run under another --run-root")
+    named = checkpoint_iteration(path)
+    infos = saved.get("infos")
+    recorded = infos.get(CHECKPOINT_KEY) if isinstance(infos, dict) else None
+    if cfg is not None and isinstance(recorded, dict):  # what it says it is, compared first: it names the most
+        expected = checkpoint_identity(cfg, named)
+        differ = [f"{key} {recorded.get(key)!r} (this run: {value!r})" for key, value in expected.items()
+                  if recorded.get(key) != value]
+        if differ:
+            raise ConfigError(f"--resume: {path}: a checkpoint of another run: {', '.join(differ)}: "
+                              f"{unreadable_fix(path)}, or start a new run under another --run-root")
+    if saved["iter"] != named:
+        raise ConfigError(f"--resume: {path}: iter: {saved['iter']}, not the {named} its name says (a checkpoint "
+                          f"renamed or copied from another run): {unreadable_fix(path)}, or start a new run under "
+                          "another --run-root")
 
 
-def _unreadable_fix(path: Path) -> str:
+def unreadable_fix(path: Path) -> str:
     """What to do with a newest checkpoint `check_checkpoint` refuses: the checkpoint before it, or none."""
     before = [(checkpoint_iteration(p), p) for p in path.parent.glob("model_*.pt")
               if re.fullmatch(r"model_(\d+)\.pt", p.name) and checkpoint_iteration(p) < checkpoint_iteration(path)]
@@ -696,5 +776,5 @@ def check_run(cfg: TrainConfig, *, resume: bool, options: Mapping[str, str] | No
             raise
         default_input_missing(exc)
     if point is not None:
-        check_checkpoint(point.checkpoint)
+        check_checkpoint(point.checkpoint, cfg)
     return point

@@ -4,11 +4,13 @@ A run directory holds: ``config.json`` (the resolved `TrainConfig` as the newest
 the scenario file and its sha256, the sha256 of each file it reads, package versions, git revision, and the run's
 sessions, ``segments``: `_run_config`),
 TensorBoard event files and ``model_<it>.pt`` checkpoints (rsl-rl's), ``policy.npz``/``policy.json`` (the
-torch-free export, refreshed at every checkpoint) and ``progress.json`` (iterations, environment steps and wall time
-so far, summed over resumed sessions). Each of these files is replaced whole (`wbc.output_files`): a run killed while
-it writes one keeps the one before. ``resume`` continues from the newest checkpoint up to `max_iterations`; Ctrl-C
-stops a run at the end of the iteration in progress, whose checkpoint it saves first (`_learn`); in the adaptation
-phase (RMA phase 2) it stops at once, and the run keeps the export it had before the phase (`_adapt`).
+torch-free export, refreshed at every checkpoint; a checkpoint's export without the adaptation module its stage needs
+goes to ``policy_ppo.npz``/``policy_ppo.json`` where ``policy`` holds one, `_Runner.export`) and ``progress.json``
+(iterations, environment steps and wall time so far, summed over resumed sessions). Each of these files is replaced
+whole (`wbc.output_files`): a run killed while it writes one keeps the one before. ``resume`` continues from the
+newest checkpoint up to `max_iterations`; Ctrl-C stops a run at the end of the iteration in progress, whose
+checkpoint it saves first (`_learn`); in the adaptation phase (RMA phase 2) it stops at once, and the run keeps the
+export it had before the phase (`_adapt`).
 When the run ends, ``policy.replay.npz`` records a short rollout of the exported policy (robot states, commands,
 observation frames and actions, `wbc.learned.policy.replay_recorder`): ``wbc check-controller NAME --replay
 policy.replay.npz`` then checks that a controller built from these weights (an ONNX export, an I/O file written by
@@ -20,14 +22,15 @@ the arm only, and ``policy.npz``/``policy.json`` is a composite file holding the
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
-import hashlib
+import io
 import json
 import os
 import shlex
 import sys
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,17 +46,24 @@ from wbc.learned.train.export import decoupled_policy, policy_file_from_actor
 from wbc.learned.train.frozen_legs_vec_env import FrozenLegsVecEnv
 from wbc.learned.train.history_actor import HistoryActor
 from wbc.learned.train.preflight import (
+    CHECKPOINT_KEY,
+    PPO_EXPORT,
     RESUMABLE,
     ResumePoint,
     check_run,
+    checkpoint_identity,
     checkpoint_iteration,
     config_diff,
     input_files,
+    lacks_module,
     latest_checkpoint,
     load_input_policy,
     locked_run_dir,
     make_run_dir,
+    playable_export,
+    scenario_record,
     student_layout,
+    unreadable_fix,
 )
 from wbc.learned.train.rma import train_adaptation
 from wbc.learned.train.train_config import TrainConfig
@@ -62,7 +72,6 @@ from wbc.learned.train.warm_start import warm_start_actor
 from wbc.optional import require
 from wbc.output_files import replacing, temporary_name
 from wbc.provenance import provenance
-from wbc.scenario.scenario import resolve_scenario_path
 
 torch = require("torch")
 _runners = require("rsl_rl.runners")
@@ -136,10 +145,14 @@ class _Runner(_runners.OnPolicyRunner):
         complete (`wbc.output_files`): a kill leaves the previous checkpoints whole and at most that temporary file,
         which the next save of the iteration replaces. (rsl-rl also hands the path to its logger, to upload the
         file; the TensorBoard logger a run uses uploads nothing.)
+
+        Its ``infos`` record what run it is (`wbc.learned.train.preflight.checkpoint_identity`: task, stage, baseline,
+        variant, robot, arm mode and iteration), which ``--resume`` compares with the run's (`check_checkpoint`).
         """
+        identity = checkpoint_identity(self.wbc_cfg, int(self.current_learning_iteration))
         tmp = temporary_name(path)
         try:
-            super().save(str(tmp), infos)
+            super().save(str(tmp), {**(infos or {}), CHECKPOINT_KEY: identity})
             os.replace(tmp, path)
         except BaseException:  # KeyboardInterrupt too: no half-written file stays behind
             tmp.unlink(missing_ok=True)
@@ -172,17 +185,27 @@ class _Runner(_runners.OnPolicyRunner):
                                     extra=extra), progress
         return policy_file_from_actor(actor, cfg.env, task=cfg.task, stage=cfg.stage, extra=extra), progress
 
-    def export(self) -> None:
-        """Write ``policy.npz``/``policy.json`` of the runner's networks, then ``progress.json``."""
+    def export(self) -> Path:
+        """Write ``policy.npz``/``policy.json`` of the runner's networks, then ``progress.json``; returns the ``.npz``.
+
+        A stage whose policy observes RMA's extrinsics has no adaptation module before its phase 2 (`_adapt`): where
+        the run's ``policy`` is playable (a module fitted on an earlier checkpoint), this export is written beside
+        it, as ``policy_ppo.npz``/``policy_ppo.json`` (`PPO_EXPORT`), and the playable one is kept until phase 2
+        replaces it.
+        """
         pf, progress = self.policy_file()
-        path = Path(self.wbc_cfg.run_dir) / "policy"
+        run_dir = Path(self.wbc_cfg.run_dir)
+        path = run_dir / "policy"
         if isinstance(self.env, FrozenLegsVecEnv):
             save_composite(path, pf)
         else:
+            if lacks_module(pf.meta) and playable_export(run_dir) is not None:
+                path = run_dir / PPO_EXPORT
             save_policy(path, pf)
         # after the policy files: a kill in between leaves a progress of the checkpoint before, which --resume
         # reconciles (`wbc.learned.train.preflight.check_run_dir`)
-        _write_json(Path(self.wbc_cfg.run_dir) / "progress.json", progress)
+        _write_json(run_dir / "progress.json", progress)
+        return path.with_suffix(".npz")
 
 
 _PROVENANCE_KEYS = ("seed", "command", "scenario", "inputs", "provenance", "started", "segments")
@@ -250,9 +273,14 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
             runner.learn(iterations, init_at_random_ep_len=init_at_random_ep_len)
     except _StopAfterIteration:
         it = runner.current_learning_iteration
-        newest = latest_checkpoint(runner.wbc_cfg.run_dir)
+        run_dir = Path(runner.wbc_cfg.run_dir)
+        # the session's end first, so that the export of its checkpoint carries it
+        _end_segment(run_dir, {"to_iteration": it, "adaptation": "none", "interrupted": True})
+        newest = latest_checkpoint(run_dir)
         if newest is None or checkpoint_iteration(newest) < it:
-            runner.save(str(Path(runner.wbc_cfg.run_dir) / f"model_{it}.pt"))
+            runner.save(str(run_dir / f"model_{it}.pt"))
+        else:  # saved at its periodic checkpoint already: its export again, with the session's end
+            runner.export()
         if hasattr(runner.logger.writer, "flush"):  # the curves up to the checkpoint
             runner.logger.writer.flush()
         raise KeyboardInterrupt from None
@@ -263,7 +291,7 @@ def _learn(runner: _Runner, iterations: int, *, init_at_random_ep_len: bool) -> 
 
 
 def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] | None = None,
-          checked: Callable[[], object] | None = None) -> dict[str, Any]:
+          checked: Callable[[], object] | None = None, command: Sequence[str] | None = None) -> dict[str, Any]:
     """Train (or resume) one run.
 
     Args:
@@ -274,6 +302,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
             one is refused (`wbc.learned.train.preflight.check_inputs`).
         checked: called once the run's checks have passed, before anything is built or trained (the command's
             resume note).
+        command: the command line the run records (``["wbc", "train", ...]``, as ``wbc train`` gives it), quoted
+            with `shlex.join`; default: the process's ``sys.argv``.
 
     Returns:
         ``{"run_dir", "iterations", "env_steps", "wall_s", "policy", "trained"}`` (``iterations``: trained in all,
@@ -289,7 +319,8 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
     Raises:
         ConfigError: another run holds the run directory (naming it and that run's pid); a new run in a directory
             that holds a run; no checkpoint to resume from, a damaged run directory (config.json, progress.json, the
-            newest checkpoint) or a resumed config that differs; or the teacher is missing/mismatched.
+            newest checkpoint, or one of another run or whose networks do not fit) or a resumed config that differs; or
+            the teacher is missing/mismatched.
         KeyboardInterrupt: Ctrl-C; during PPO, once the iteration in progress has ended and its checkpoint is saved
             (`_learn`); during the adaptation phase at once, the export before it kept (`_adapt`).
     """
@@ -300,10 +331,10 @@ def train(cfg: TrainConfig, *, resume: bool = False, options: Mapping[str, str] 
         return point
 
     with locked_run_dir(cfg.run_dir, check) as point:
-        return _train(cfg, point)
+        return _train(cfg, point, shlex.join(sys.argv if command is None else command))
 
 
-def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
+def _train(cfg: TrainConfig, point: ResumePoint | None, command: str) -> dict[str, Any]:
     """`train` once its run directory is checked and locked; `point`: where a resumed run continues from, or None."""
     run_dir = Path(cfg.run_dir)
     resolved = json.loads(json.dumps(dataclasses.asdict(cfg), default=list))
@@ -320,21 +351,24 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
     done = 0
     adapts = cfg.extrinsics_dim > 0 and cfg.rma.iterations > 0
     kept = False
+    exported = run_dir / "policy.npz"
     try:
-        runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
+        # rsl-rl prints its networks as it builds them: held back until a resumed run's checkpoint fits them, so that
+        # a refusal is the one line that says why
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed):
+            runner = _Runner(vec, rsl_rl_config(cfg), cfg, progress)
+            if point is not None:
+                _load_checkpoint(runner, point.checkpoint, cfg.device)
+        sys.stdout.write(printed.getvalue())
         if point is None and cfg.init_from is not None:
             start = load_input_policy(cfg.init_from, "the policy this run starts from")
             mask = None if cfg.action_mask is None else list(cfg.action_mask)
             warm_start_actor(runner.alg.get_policy(), start, mask=mask)
         if point is not None:
-            try:
-                runner.load(str(point.checkpoint), map_location=cfg.device)  # a run may resume on another device
-            except (RuntimeError, KeyError, ValueError) as exc:
-                raise ConfigError(f"--resume: {point.checkpoint}: does not fit this run's networks "
-                                  f"({type(exc).__name__}); start a new run under another --run-root") from None
             done = runner.current_learning_iteration + 1
             runner.current_learning_iteration = done  # rsl-rl would repeat the checkpoint's iteration number
-        _write_json(run_dir / "config.json", _run_config(cfg, resolved, point))
+        _write_json(run_dir / "config.json", _run_config(cfg, resolved, point, command))
         remaining = cfg.max_iterations - done
         if remaining > 0:
             _learn(runner, remaining, init_at_random_ep_len=point is None)
@@ -343,30 +377,58 @@ def _train(cfg: TrainConfig, point: ResumePoint | None) -> dict[str, Any]:
             # phase 2 included), under its own iteration, not the next one
             runner.current_learning_iteration = done - 1
             kept = adapts and _adapted(run_dir, cfg, done - 1)
+        # the session's end is recorded before its final export, which carries it in its training block
+        reached = {"to_iteration": int(runner.current_learning_iteration),
+                   "adaptation": "kept" if kept else "fitted" if adapts else "none"}
         if kept:  # its export already holds this checkpoint's module of this phase 2: neither redone nor replaced
+            _end_segment(run_dir, reached)
             phase1, final = None, json.loads((run_dir / "progress.json").read_text())
         elif adapts:
             # the export is replaced once phase 2 has fitted its module (`_adapt`): an interruption before leaves
             # the export as it was, a module included, never this checkpoint's without one
             phase1, final = runner.policy_file()
         else:
-            runner.export()
+            _end_segment(run_dir, reached)
+            exported = runner.export()
             phase1, final = None, json.loads((run_dir / "progress.json").read_text())
     finally:
         vec.close()
     result = {"run_dir": str(run_dir), "iterations": final["iteration"] + 1, "env_steps": final["env_steps"],
-              "wall_s": final["wall_s"], "policy": str(run_dir / "policy.npz"), "trained": max(remaining, 0)}
+              "wall_s": final["wall_s"], "policy": str(exported), "trained": max(remaining, 0)}
     if phase1 is not None:
-        result["rma_wall_s"] = _adapt(run_dir, cfg, phase1, final)
-    result["adaptation"] = "kept" if kept else "fitted" if adapts else "none"
-    _end_segment(run_dir, {"to_iteration": final["iteration"], "adaptation": result["adaptation"]})
+        try:
+            result["rma_wall_s"] = _adapt(run_dir, cfg, phase1, final, reached)
+        except KeyboardInterrupt:
+            _end_segment(run_dir, {**reached, "adaptation": "interrupted", "interrupted": True})
+            raise
+    result["adaptation"] = reached["adaptation"]
     if cfg.extrinsics_dim == 0 or cfg.rma.iterations > 0:  # else it observes extrinsics a robot cannot give it
         result["replay"] = str(record_replay(run_dir / "policy", replay_path_for(run_dir / "policy")))
     return result
 
 
-def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any]) -> float:
+def _load_checkpoint(runner: _Runner, checkpoint: Path, device: str) -> None:
+    """Load a resumed run's checkpoint into `runner`, or refuse it in one line naming the first part that differs.
+
+    Raises:
+        ConfigError: the checkpoint's networks are not the run's (another stage's, other layers), naming the file,
+            the state that does not fit and the checkpoint a resume takes once it is moved away.
+    """
+    try:
+        runner.load(str(checkpoint), map_location=device)  # a run may resume on another device
+    except (RuntimeError, KeyError, ValueError) as exc:
+        # torch's message: a header, then one line per parameter that differs ("size mismatch for mlp.0.weight: ...")
+        lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+        detail = lines[1] if len(lines) > 1 else lines[0] if lines else type(exc).__name__
+        raise ConfigError(f"--resume: {checkpoint}: does not fit this run's networks ({detail[:160]}): "
+                          f"{unreadable_fix(checkpoint)}, or start a new run under another --run-root") from None
+
+
+def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any], reached: dict[str, Any]) -> float:
     """RMA phase 2 on `phase1` (the newest checkpoint's export, in memory), then its export written; returns its wall.
+
+    Once the module is fitted, the session's end (`reached`) is recorded in ``config.json`` (`_end_segment`) and the
+    export's ``training`` block takes the run's segments from it.
 
     Ctrl-C (or SIGTERM) during the fit stops it at once, and nothing of it is written: the run directory keeps the
     export, ``rma.json`` and ``progress.json`` it had before phase 2 (a previous module included), and ``--resume``
@@ -374,12 +436,18 @@ def _adapt(run_dir: Path, cfg: TrainConfig, phase1: Any, progress: dict[str, Any
     the policy first: an interruption never leaves a pair torn between two exports.
     """
     policy, summary = train_adaptation(phase1, cfg.env, cfg.rma)
+    _end_segment(run_dir, reached)
+    training = policy.meta.get("training")
+    if isinstance(training, dict):
+        training.update({k: v for k, v in _provenance(run_dir).items() if k == "segments"})
     # what `_adapted` compares: a plain --resume of the finished run keeps this module instead of fitting it again
     summary = {**summary, "iteration": progress["iteration"],
                "config": json.loads(json.dumps(dataclasses.asdict(cfg.rma), default=list))}
     interrupt = DeferredInterrupts(lambda what: f"wbc: {what}: the run stops once its export is written")
     with interrupt:
         save_policy(run_dir / "policy", policy)
+        for stale in (run_dir / f"{PPO_EXPORT}.npz", run_dir / f"{PPO_EXPORT}.json"):  # this export supersedes it
+            stale.unlink(missing_ok=True)
         _write_json(run_dir / "rma.json", summary)
         _write_json(run_dir / "progress.json", progress)
     if interrupt.requested:
@@ -409,16 +477,12 @@ def _adapted(run_dir: Path, cfg: TrainConfig, iteration: int) -> bool:
 
 
 def _scenario(cfg: TrainConfig) -> dict[str, Any]:
-    """The scenario file the run trains on and its sha256 (None where it cannot be read)."""
-    path = resolve_scenario_path(cfg.env.scenario).resolve()
-    try:
-        digest: str | None = hashlib.sha256(path.read_bytes()).hexdigest()
-    except OSError:
-        digest = None
-    return {"path": str(path), "sha256": digest}
+    """The scenario the run trains on (`wbc.learned.train.preflight.scenario_record`)."""
+    return scenario_record(cfg.env.scenario)
 
 
-def _run_config(cfg: TrainConfig, resolved: dict[str, Any], point: ResumePoint | None) -> dict[str, Any]:
+def _run_config(cfg: TrainConfig, resolved: dict[str, Any], point: ResumePoint | None, command: str
+                ) -> dict[str, Any]:
     """The run's ``config.json``: its current settings, what it began with, and a history of its segments.
 
     A new run records its settings, inputs, provenance and its first segment. A resumed one keeps what the run began
@@ -427,7 +491,7 @@ def _run_config(cfg: TrainConfig, resolved: dict[str, Any], point: ResumePoint |
     Each segment says where it began and which settings it changed (``{field: [before, now]}``), and the command,
     package versions and git revision it ran under; its end (`_end_segment`) the iteration it reached.
     """
-    segment = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "command": shlex.join(sys.argv),
+    segment = {"started": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "command": command,
                "from_iteration": 0 if point is None else point.done, "max_iterations": cfg.max_iterations,
                "provenance": provenance()}
     if point is None:
