@@ -750,8 +750,9 @@ def test_sigterm_during_the_trial_writes_the_episode_played_and_the_robot_ends_d
     episode = Episode.load(str(path))
     hardware = json.loads((results / "hardware.json").read_text())
     assert 0 < len(episode.t) == record.ticks == hardware["interrupted"]["tick"] < 1000  # played, not to its end
-    assert record.fall_time_s == pytest.approx(episode.t[-1]) and hardware["interrupted"]["time_s"] == pytest.approx(
-        episode.t[-1])  # where it was interrupted: the end of its last whole tick
+    # an interruption is no fall: no fall time; where it was interrupted is the end of its last whole tick
+    assert math.isnan(record.fall_time_s) and record.ttf == pytest.approx(episode.t[-1] / 20.0)
+    assert hardware["interrupted"]["time_s"] == pytest.approx(episode.t[-1])
     _io_process_ended_and_legs_damped(go1, sent, io_process)
 
 
@@ -786,7 +787,12 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert record.safety_trips == 1 and not record.success and record.outcome == "operator_stop"
     # the trial's own play time, as a simulated trial's: not the build, the connect, the stand-up and the settle
     assert record.wall_s == result.episode_wall_s
-    assert 1.6 <= record.fall_time_s <= 1.6 + TICK + TIME_EPS  # ended at the tick that handled the key
+    # ended at the tick that handled the key, which is no fall: the robot stood (fell False, no fall time), and the
+    # trial counts as one that did not complete, its TTF the share played
+    assert 1.6 <= episode.t[-1] <= 1.6 + TICK + TIME_EPS and record.ttf == pytest.approx(episode.t[-1] / 3.0)
+    assert not episode.fell and math.isnan(episode.fall_time_s) and math.isnan(record.fall_time_s)
+    saved = Episode.load(str(next((tmp_path / "hw" / "episodes").rglob("*.npz"))))
+    assert not saved.fell and math.isnan(saved.fall_time_s) and saved.ended_early
     assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
     assert episode.safety_events.reason[-1] == "software_estop"
     pressed = dict(keys.delivered)["e"]
@@ -834,7 +840,8 @@ def test_a_request_to_end_during_the_settle_after_an_estop_keeps_the_trials_resu
     said = capsys.readouterr().err
     assert "the settle after the trip or e-stop is cut short and the robot is closed into damping" in said
     (record,) = TrialRecord.read_csv(out / "trials.csv")
-    assert record.outcome == "operator_stop" and 1.0 <= record.fall_time_s <= 1.0 + TICK + TIME_EPS
+    assert record.outcome == "operator_stop" and math.isnan(record.fall_time_s)
+    assert 1.0 <= record.ttf * 3.0 <= 1.0 + TICK + TIME_EPS
     assert all((out / name).is_file() for name in ("hardware.json", "summary.json", "report.md"))
     pressed = dict(keys.delivered)["e"]
     after = [c for c in emu.commands() if c.time > pressed + LINK_PERIOD + TIME_EPS]
@@ -907,7 +914,7 @@ def test_ctrl_c_during_the_trial_damps_the_robot_at_once_and_writes_the_episode_
     assert record.outcome == "operator_stop" and not record.success
     assert record.error == (f"{when}: the robot was closed into damping, and the episode up to the interruption is "
                             "recorded")
-    assert record.ticks == 50 and record.fall_time_s == pytest.approx(1.0) and record.ttf == pytest.approx(1 / 3)
+    assert record.ticks == 50 and math.isnan(record.fall_time_s) and record.ttf == pytest.approx(1 / 3)
     (path,) = (out / "episodes" / "stand-noarm").glob("*.npz")
     episode = Episode.load(str(path))
     assert len(episode.t) == 50 and episode.t[-1] == pytest.approx(1.0) and not episode.fell
@@ -1195,6 +1202,11 @@ def test_an_arm_fault_in_the_trial_is_its_outcome_and_not_a_lost_link(
     assert "the link to the robot was lost" not in err
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.outcome == "safety_trip" and record.safety_trips == 1
+    # a trip is no fall: the robot stood in its harness; the trial counts the share it played
+    (path,) = (out / "episodes" / "stand").glob("*.npz")
+    episode = Episode.load(str(path))
+    assert not episode.fell and math.isnan(episode.fall_time_s) and math.isnan(record.fall_time_s)
+    assert record.ttf == pytest.approx(episode.t[-1] / 2.0) and record.ttf < 1.0
     hardware = json.loads((out / "hardware.json").read_text())
     assert hardware["link_lost"] is None
     last = hardware["safety_events"][-1]

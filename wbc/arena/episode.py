@@ -200,10 +200,12 @@ class Episode:
     Attributes:
         duration_s: the trial's planned length [s].
         control_dt: control period [s].
-        fell: the episode ended early: the trunk or a non-foot link touched the ground (simulation), or the robot's
-            safety layer latched its damping (a real robot: the layer's tilt check is its fall rule, and a fault or
-            an e-stop ends the trial as well; `safety_events` says which).
-        fall_time_s: when (nan if it did not fall) [s].
+        fell: the robot fell: the trunk or a non-foot link touched the ground (the simulator's fall rule), or the
+            truth's trunk was upside down at the last tick. A robot's safety layer that latched its damping (a trip,
+            an e-stop) ends the episode too, but that is no fall: ``fell`` is False, the episode holds the ticks
+            played up to it (`ended_early`), and `safety_events` says why.
+        fall_time_s: when it fell (nan if it did not fall: a trip, an e-stop, an interruption or a controller's
+            error is not a fall) [s].
         t: time of each tick (after the tick's physics) [s].
         command: commanded (vx, vy, yaw_rate) [m/s, m/s, rad/s], shape (k, 3).
         v_base_in_yaw: base horizontal velocity in the yaw-aligned frame (from `base_source`), shape (k, 2) [m/s].
@@ -255,9 +257,27 @@ class Episode:
                               f"{', '.join(BASE_SOURCES)}")
 
     @property
+    def ended_early(self) -> bool:
+        """The episode was ended without a fall: fewer ticks were played than it has, or the robot's safety layer
+        latched its damping during it (a trip or an e-stop at its last tick ends it too).
+
+        A robot's safety layer latched its damping (a trip, an e-stop), the command was interrupted, the controller
+        failed or the simulation diverged; which one, the trial's record says (its ``outcome``).
+        """
+        if self.fell:
+            return False
+        return (len(self.t) < int(round(self.duration_s / self.control_dt))
+                or bool(np.any(self.safety_events.to_state == "damped")))
+
+    @property
     def survived_s(self) -> float:
-        """Time survived [s]: the fall time, or the whole episode."""
-        return float(self.fall_time_s) if self.fell else float(self.duration_s)
+        """Time survived [s]: the fall time, the time played when it ended early without a fall (`ended_early`: as
+        the arena counts a trial that did not complete), or the whole episode."""
+        if self.fell:
+            return float(self.fall_time_s)
+        if self.ended_early:
+            return float(self.t[-1]) if len(self.t) else 0.0
+        return float(self.duration_s)
 
     def deadline_misses(self, budget_s: float | None = None) -> int:
         """Ticks whose ``controller.act`` took longer than `budget_s` [s] (default: the control period)."""

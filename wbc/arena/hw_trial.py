@@ -14,10 +14,13 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
   nominal pose (`wbc.control.stand.stand_command`) and is in ``run``: the controller then starts, as in simulation,
   from a robot standing at its nominal pose, and its commands pass without a ramp (a ramp's slew would hold back a
   walking controller's swing legs);
-- the episode ends at the safety layer's first trip (its tilt check is the fall rule on a robot; a fault or an
-  e-stop ends the trial too); the robot is then held in the layer's damping for ``settle_s`` while it comes to rest,
-  before the link is closed. The record's outcome tells them apart: ``safety_trip`` for the layer's own checks,
-  ``operator_stop`` for an e-stop (the console's key, the remote);
+- the episode ends at the safety layer's first trip (its tilt check, a fault, an e-stop); the robot is then held in
+  the layer's damping for ``settle_s`` while it comes to rest, before the link is closed. The record's outcome tells
+  them apart: ``safety_trip`` for the layer's own checks (a tilt trip among them: the event's detail says so),
+  ``operator_stop`` for an e-stop (the console's key, the remote). Neither is recorded as a fall: the episode's
+  ``fell`` is False and its ``fall_time_s`` NaN, and the trial counts as the arena counts one that did not complete
+  (a controller's error): not a success, its TTF the share of the trial played before the trip (the episode's last
+  tick);
 - a robot that stopped answering (its own link's state stream stale, the legs' on a quadruped, and still so when
   the link is closed) is a lost link (`LinkLost`, in the result, ``hardware.json`` and the report): nothing then shows
   that the layer's damping reached the robot, which must be checked and powered down by hand;
@@ -467,7 +470,8 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 # the I/O process stopped by SIGTERM (to the whole command, or to it alone) closed the robot itself:
                 # a request to end, as Ctrl-C is, which keeps what was played
                 episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
-                                      fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console,
+                                      fallen=lambda: False, observer=console,
+                                      stopped=lambda: safe.safety_state is SafetyState.DAMPED,
                                       stopped_by=(IoProcessStopped,), on_interrupt=damp_at_once)
             except ControllerFailure as failure:
                 episode, error = failure.episode, failure.record_error(spec.name, trial)

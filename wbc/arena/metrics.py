@@ -1,7 +1,10 @@
 """Episode metrics: named pure functions of an `Episode` (definitions follow the paper where it gives one).
 
-- ``success``: the episode reached its end without the trunk or a non-foot link touching the ground.
-- ``ttf`` (time to fall): fraction of the episode survived, survived time / episode length.
+- ``success``: the episode reached its end without the trunk or a non-foot link touching the ground, and was not
+  ended early otherwise (a robot's safety layer tripped or was e-stopped, the command was interrupted).
+- ``ttf`` (time to fall): fraction of the episode survived, survived time / episode length; an episode that ended
+  early without a fall (a trip, an e-stop, an interruption, as a controller's error) counts the time it played
+  (`Episode.survived_s`), and has no fall time (``fall_time_s`` NaN).
 - ``vlin_err``: mean over the survived ticks of the L2 distance between the base's horizontal velocity (in the
   yaw-aligned frame) and the commanded (vx, vy) [m/s].
 - ``vang_err``: mean over the survived ticks of |base yaw rate - commanded yaw rate| [rad/s].
@@ -60,8 +63,8 @@ __all__ = [
 
 
 def success(ep: Episode) -> bool:
-    """Survived the whole episode."""
-    return not ep.fell
+    """Played the whole episode: no fall, and not ended early otherwise (`Episode.ended_early`)."""
+    return not ep.fell and not ep.ended_early
 
 
 def ttf(ep: Episode) -> float:

@@ -24,7 +24,7 @@ from wbc.arena.controller_failure import printed_error
 from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.report import format_table, format_verdict, resumed_note
 from wbc.arena.summary import Summary
-from wbc.arena.trial_record import TrialRecord
+from wbc.arena.trial_record import CONTROLLER_ERROR, FALL, TrialRecord
 from wbc.control.controller_contract import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.capabilities import HasRealtimeGrant
@@ -940,9 +940,13 @@ def print_hw_run(result: HardwareTrialResult) -> None:
     """``wbc hw run``: the trial's outcome, what it skipped, its timing and where its results are."""
     r, ep = result.record, result.episode
     robot = result.robot
-    outcome = ("completed" if r.success else f"ENDED by a controller error: {printed_error(r.error)}" if r.error else
-               f"ENDED at {r.fall_time_s:.2f} s by the safety layer ({ep.safety_events.reason[-1]})"
-               if r.safety_trips else f"ENDED at {r.fall_time_s:.2f} s")
+    ended_s = float(ep.t[-1]) if len(ep.t) else 0.0  # a trip, a stop, an error is no fall: its own time, not one
+    outcome = ("completed" if r.success else
+               f"ENDED by a controller error: {printed_error(r.error)}" if r.outcome == CONTROLLER_ERROR else
+               f"STOPPED: {printed_error(r.error)}" if r.error else
+               f"ENDED at {ended_s:.2f} s by the safety layer ({ep.safety_events.reason[-1]})"
+               if r.safety_trips else f"FELL at {r.fall_time_s:.2f} s" if r.outcome == FALL else
+               f"ENDED at {ended_s:.2f} s ({r.outcome})")
     print(f"{r.controller} on {robot.description.name} (arm {robot.description.arm_mode}, {robot.backend}, "
           f"{robot.target}): {r.scenario} band {r.band} seed {r.seed} trial {r.trial}, {ep.duration_s:g} s: {outcome}")
     for note in result.notes:
