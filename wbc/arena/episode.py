@@ -258,11 +258,11 @@ class Episode:
 
     @property
     def ended_early(self) -> bool:
-        """The episode was ended without a fall: fewer ticks were played than it has, or the robot's safety layer
-        latched its damping during it (a trip or an e-stop at its last tick ends it too).
+        """The episode was ended without a fall: fewer ticks played than it has, or a safety layer's latch in it.
 
-        A robot's safety layer latched its damping (a trip, an e-stop), the command was interrupted, the controller
-        failed or the simulation diverged; which one, the trial's record says (its ``outcome``).
+        A trip or an e-stop at its last tick ends it too. A robot's safety layer latched its damping (a trip, an
+        e-stop), the command was interrupted, the controller failed or the simulation diverged; which one, the trial's
+        record says (its ``outcome``).
         """
         if self.fell:
             return False
@@ -271,8 +271,11 @@ class Episode:
 
     @property
     def survived_s(self) -> float:
-        """Time survived [s]: the fall time, the time played when it ended early without a fall (`ended_early`: as
-        the arena counts a trial that did not complete), or the whole episode."""
+        """Time survived [s]: the fall time, the time played, or the whole episode.
+
+        The time played when it ended early without a fall (`ended_early`), as the arena counts a trial that did not
+        complete.
+        """
         if self.fell:
             return float(self.fall_time_s)
         if self.ended_early:
