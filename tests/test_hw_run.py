@@ -395,6 +395,37 @@ def test_a_link_lost_in_the_trial_exits_1_and_says_the_damping_may_not_have_reac
     assert after and all(c.damping for c in after)
 
 
+def test_a_frozen_board_is_said_to_send_frames_with_a_frozen_tick_and_its_refused_frames_are_printed(
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot's board freezes 1 s into the trial (every reply the datagram before, its tick standing still): the
+    layer trips on the stale stream, and the frames go on arriving, refused for their tick. The last line said that
+    none came (the damping "may not have reached the robot"), and neither the run's summary nor the report gave the
+    refused frames."""
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+
+    def build(config: HardwareRobotConfig) -> HardwareRobot:
+        built = stepped_go1.build(config)
+        clock.call_at(clock.now() + 2.0, lambda: emu.inject(Fault.FROZEN_STATE))
+        return built
+
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--settle", "0.5",
+                                      "--out", str(out), "--no-io-process"])
+    assert hw_run(args, build=build) == 1
+    printed = capsys.readouterr()
+    hardware = json.loads((out / "hardware.json").read_text())
+    refused, lost = hardware["stale_frames"], hardware["link_lost"]
+    assert refused > 0.5 / LINK_PERIOD and lost["refused_frames"] == refused  # the settle's frames among them
+    last = printed.err.strip().splitlines()[-1]
+    assert last.startswith("wbc hw run: the robot's state froze: its last fresh state came ")
+    assert f"frames still arrive, but with a frozen tick ({refused} refused for their tick" in last
+    assert "none came" not in last and "Check it and power it down by hand" in last
+    assert f"{refused} frames refused for their tick" in printed.out
+    report = (out / "report.md").read_text()
+    assert f"| leg frames refused for their tick (stale_frames: a frozen or restarted board) | {refused} |" in report
+
+
 def test_a_link_lost_during_the_stand_up_says_the_damping_may_not_have_reached_the_robot(
         stepped_go1: Stepped, tmp_path: Path) -> None:
     """The robot stops answering half a second into the stand-up: the layer trips on the stale stream, nothing is

@@ -194,20 +194,33 @@ class LinkLost:
     hear it either (a cable pulled, a network down, the robot's board off): nothing shows that the damping reached it.
     The same holds for a stream that stopped during the stand-up, before the trial (`StandUpError` then says so).
 
+    A board that froze (or restarted) still sends frames, but with a tick that does not advance: the link refuses
+    them for their tick (`refused_frames`), so no state counts as come, and the robot is not seen to act on anything
+    either. The sentence then says that frames still arrive with a frozen tick, not that none came.
+
     Attributes:
         last_state_s: when the last state came, on the safety layer's clock (seconds since the robot was connected) [s].
         silent_s: how long no state had come when the link was closed (the trip, then the damped settle) [s].
         trial_started_s: when the trial began on that clock [s]; None: it was lost during the stand-up.
+        refused_frames: valid frames the legs' link refused for their tick since the trial began (to the close); None
+            when not known (the stand-up, a robot without such a link).
     """
 
     last_state_s: float
     silent_s: float
     trial_started_s: float | None
+    refused_frames: int | None = None
 
     def describe(self) -> str:
         """What happened and what to do, in one sentence."""
         when = ("during the stand-up" if self.trial_started_s is None
                 else f"{self.last_state_s - self.trial_started_s:.3f} s into the trial")
+        if self.refused_frames:
+            return (f"the robot's state froze: its last fresh state came {self.last_state_s:.3f} s after it was "
+                    f"connected ({when}); frames still arrive, but with a frozen tick ({self.refused_frames} refused "
+                    f"for their tick since the trial began), and none advanced in the {self.silent_s:.3f} s after: "
+                    "its low-level board froze or restarted, and may not act on the damping frames sent since. Check "
+                    "it and power it down by hand")
         return (f"the link to the robot was lost: its last state came {self.last_state_s:.3f} s after it was connected "
                 f"({when}) and none came in the {self.silent_s:.3f} s after: the damping frames sent since may not "
                 "have reached the robot. Check it and power it down by hand")
@@ -217,7 +230,7 @@ class LinkLost:
         said = self.describe()
         return f"{said[0].upper()}{said[1:]}."
 
-    def to_dict(self) -> dict[str, float]:
+    def to_dict(self) -> dict[str, float | int | None]:
         """Its JSON form (``hardware.json``'s ``link_lost``)."""
         return dataclasses.asdict(self)
 
@@ -448,6 +461,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
             except (KeyboardInterrupt, IoProcessStopped) as stopped:
                 raise ConnectInterrupted(opening=opening) from stopped
             _stand_up(robot, safe, console, cfg.settle_s, on_wall_clock=wall)
+            stale_frames_before = _stale_frames(hardware.robot)  # before the trial's clock starts
             started_s = safe.now()
             io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
             io_cpu0 = io_robot.link_stats().io["cpu_s"] if io_robot is not None else 0.0
@@ -513,7 +527,10 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 unless_stopped(lambda: _settle(robot, dt, cfg.settle_s,
                                                until=lambda: after_the_trial.requested is not None), None)
                 settling[0] = False
-            link_lost = unless_stopped(lambda: _link_lost(safe, started_s), None) if wall else None
+            stale_frames = unless_stopped(lambda: _stale_frames(hardware.robot), stale_frames)  # the settle's too
+            refused = (stale_frames - stale_frames_before if stale_frames is not None
+                       and stale_frames_before is not None else None)
+            link_lost = unless_stopped(lambda: _link_lost(safe, started_s, refused), None) if wall else None
             arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), arm_faults)  # the settle's too
         # the layer's transitions on the trial's clock, as the episode's other times (the layer counts from the
         # connect, and the stand-up before the trial took `started_s` of it)
@@ -660,10 +677,11 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, 
                        f"{safe.safety_state}); nothing was played")
 
 
-def _link_lost(safe: SafeRobot, started_s: float | None) -> LinkLost | None:
+def _link_lost(safe: SafeRobot, started_s: float | None, refused_frames: int | None = None) -> LinkLost | None:
     """A `LinkLost` when the robot's own link brought no state for longer than the layer's stale timeout, now.
 
-    `started_s` is when the trial began on the layer's clock; None during the stand-up.
+    `started_s` is when the trial began on the layer's clock; None during the stand-up. `refused_frames`: the frames
+    the legs' link refused for their tick since then (a frozen board's), None when not known.
 
     The robot's own link is the one its link counters name (`LinkStatsLike.state_age`: a quadruped's legs'), not the
     layer's fresh frames: a robot with an arm joins the arm's bus into every frame, so an arm that stopped answering, or
@@ -677,7 +695,7 @@ def _link_lost(safe: SafeRobot, started_s: float | None) -> LinkLost | None:
     last = now - age if age is not None else safe.last_fresh_time
     if now - last <= safe.config.stale_timeout_s:
         return None
-    return LinkLost(last_state_s=last, silent_s=now - last, trial_started_s=started_s)
+    return LinkLost(last_state_s=last, silent_s=now - last, trial_started_s=started_s, refused_frames=refused_frames)
 
 
 def _latched_faults(robot: object) -> tuple[ArmFault, ...]:
@@ -789,6 +807,8 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
          f"{record.act_ms_p50:.3f} / {record.act_ms_p99:.3f} / {act.max() if len(act) else math.nan:.3f} "
          f"(period {period_ms:g} ms)"),
         ("deadline misses (act longer than the period)", f"{record.deadline_misses} of {len(episode.t)}"),
+        *([("leg frames refused for their tick (stale_frames: a frozen or restarted board)", str(result.stale_frames))]
+          if result.stale_frames is not None else []),
         ("late advances (the loop reached the robot's clock after its deadline)",
          f"{record.late_advances}, worst {record.worst_lateness_ms:.2f} ms"),
         ("process CPU during the episode", f"{result.cpu_s:.2f} s over {result.episode_wall_s:.2f} s wall "

@@ -966,7 +966,9 @@ def print_hw_run(result: HardwareTrialResult) -> None:
         link = result.link.as_dict(prefix="")
         print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} of them the link's own "
               "damping (before the first state, past the write deadline, closing; not the safety layer's), "
-              f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states")
+              f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states"
+              + (f", {result.stale_frames} frames refused for their tick (a frozen or restarted board)"
+                 if result.stale_frames is not None else ""))
         if "io/states_published" in link:
             print(f"  I/O process: {link['io/states_published']} states published, "
                   f"{link['io/commands_forwarded']} commands forwarded, {link['io/bells_missed']} doorbells missed")
