@@ -447,8 +447,8 @@ def test_a_link_lost_during_the_stand_up_says_the_damping_may_not_have_reached_t
     assert said.startswith("the safety layer tripped while standing the robot up, before the trial: stale_state")
     assert re.search(r"nothing was played\. The link to the robot was lost: its last state came [0-9.]+ s after it "
                      r"was connected \(during the stand-up\) and none came in the [0-9.]+ s after: the damping frames "
-                     r"sent since may not have reached the robot\. Check it and power it down by hand\. The robot "
-                     r"stopped answering", said), said
+                     r"sent since may not have reached the robot\. Check it and power it down by hand\. The state "
+                     r"went stale, and the detail says whose: the legs' stream", said), said
     assert said.endswith("Then run again")
     assert not (tmp_path / "hw" / "trials.csv").exists()
     frames = emu.commands()
