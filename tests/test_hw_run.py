@@ -47,6 +47,7 @@ from wbc.arena.trial_record import TrialRecord
 from wbc.cli import main
 from wbc.cli.main import hw_run, unpowered_arm_warning
 from wbc.cli.parser import build_parser
+from wbc.cli.printers import print_hw_run
 from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.errors import ConfigError, ResultsDirError, StandUpError
@@ -839,6 +840,39 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert "software_estop" in report and "| push |" in report and "| estop |" in report
 
 
+def test_a_stall_past_the_write_deadline_in_the_trial_is_counted_in_the_record_and_the_summary(
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The control loop stalls 70 ms at 1 s into the trial: the legs' link damps on its 50 ms write deadline, and the
+    layer ramps the robot again from Kp 5, as documented. The trial goes on to its end, a success; trials.csv and the
+    run's summary line count the damping. They said 0 trips, 0 deadline misses and nothing else."""
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    stalled: list[float] = []
+
+    def stall(t: float, *args: object) -> None:
+        if not stalled and t >= 1.0:
+            stalled.append(clock.now())
+            clock.advance(0.07)
+
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=2.0, target=("127.0.0.1", 9), out_dir=tmp_path / "hw", settle_s=0.5,
+                              io_process=False)
+    result = run_hardware_trial(cfg, observer=stall, before_connect=lambda hardware, spec: emu.reset(),
+                                build=stepped_go1.build)
+    (record,) = TrialRecord.read_csv(tmp_path / "hw" / "trials.csv")
+    assert record.success and record.safety_trips == 0 and record.write_deadline_ramps == 1
+    assert "write_deadline" in list(result.episode.safety_events.reason)
+    # on the wire: the link's damping in the stall, then a new ramp from the ramp's gain
+    frames = [c for c in emu.commands() if c.time > stalled[0]]
+    first = next(k for k, c in enumerate(frames) if c.damping)
+    ramp = next(c for c in frames[first:] if not c.damping)
+    np.testing.assert_allclose(ramp.wire.kp.max(), SafetyConfig().ramp_kp)
+    print_hw_run(result)
+    out = capsys.readouterr().out
+    assert "safety: 0 trip(s) in the trial, 1 write-deadline damping(s) ramped again;" in out
+    report = (tmp_path / "hw" / "report.md").read_text()
+    assert "| write-deadline dampings ramped again (the loop stalled past a device's write deadline) | 1 |" in report
+
+
 @pytest.mark.usefixtures("terminal_signals")
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
 def test_a_request_to_end_during_the_settle_after_an_estop_keeps_the_trials_results(
@@ -1228,7 +1262,8 @@ def test_an_arm_fault_in_the_trial_is_its_outcome_and_not_a_lost_link(
     pytest.importorskip("dynamixel_sdk")
     out = tmp_path / "hw"
     code, emu = hw_run_arm_in_lockstep(PUSH, str(out), 2, inject=lambda e: e.inject(fault), inject_at=2.0)
-    err = capsys.readouterr().err
+    printed = capsys.readouterr()
+    err = printed.err
     assert code == 0, err
     assert "the link to the robot was lost" not in err
     (record,) = TrialRecord.read_csv(out / "trials.csv")
@@ -1244,8 +1279,14 @@ def test_an_arm_fault_in_the_trial_is_its_outcome_and_not_a_lost_link(
     assert last["reason"] == trip and last["to_state"] == "damped"
     (arm_fault,) = hardware["arm_faults"]
     assert (arm_fault["kind"], arm_fault["ids"]) == (kind, [4]) and "LIMP" in arm_fault["policy"]
+    # on the trial's clock, as the layer's trip it caused (it was the host's monotonic clock, which nothing else is on)
+    assert hardware["clocks"]["arm_faults"].startswith("trial time")
+    tripped = last["time"] - hardware["trial_started_s"]
+    assert 0.0 < arm_fault["time"] < 2.0 and abs(arm_fault["time"] - tripped) < 0.3
     report = (out / "report.md").read_text()
     assert "## Arm faults" in report and "## Link lost" not in report
+    assert f"- at {arm_fault['time']:.3f} s: DynamixelArm: FAULT LATCHED ({kind}, IDs [4])" in report
+    assert f"arm bus, at {arm_fault['time']:.2f} s of the trial: DynamixelArm: FAULT LATCHED" in printed.out
     # the legs heard the layer's damping from the trip to the close: nothing lost on their wire
     frames = emu.legs.commands()
     after = [c for c in frames if c.time > last["time"] + LINK_PERIOD + TIME_EPS]

@@ -106,6 +106,9 @@ HARDWARE_JSON_CLOCKS = {
     "trial_started_s": "the safety layer's clock",
     "operator_events": "trial time: 0 at the trial's first tick, as the episode's t",
     "episode_safety_events": "trial time: the episode file's safety_time is safety_events' time - trial_started_s",
+    "arm_faults": "trial time: 0 at the trial's first tick, as the episode's t (negative: latched during the "
+                  "stand-up); without this entry the file is older and stored the arm bus's clock, the host's "
+                  "monotonic clock, which no other time here is on",
 }
 """What ``hardware.json``'s ``clocks`` says: the clock each of its times is on (a file without it is older: its
 episode's ``safety_time`` is on the safety layer's clock)."""
@@ -297,7 +300,9 @@ class HardwareTrialResult:
         link_lost: the robot's state stream had stopped and not come back when the link was closed (`LinkLost`);
             None when it was live to the end (or the robot has no link: the simulator).
         arm_faults: the faults the arm's bus latched (`wbc.hardware.dynamixel.ArmFault`: a servo that stopped
-            answering, its hardware error, the port lost), oldest first, as of the close; each says which joints its
+            answering, its hardware error, the port lost), oldest first, as of the close, each latched at its `time`
+            on the trial's clock (0 at the trial's first tick, as the episode's; negative during the stand-up, moved
+            from the bus's own clock); each says which joints its
             torque policy damped and which it left limp. An arm's fault ends the trial through the safety layer (the
             servo's mode, or its frozen state); it is not a lost link while the legs still answer.
         interrupted: the command was interrupted while the trial played (`Interruption`): the episode is the part
@@ -532,6 +537,9 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                        and stale_frames_before is not None else None)
             link_lost = unless_stopped(lambda: _link_lost(safe, started_s, refused), None) if wall else None
             arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), arm_faults)  # the settle's too
+            # from the bus's clock (the robot's wall clock, as the layer's) to the trial's, as the episode's times
+            trial_zero = connected_at[0] + started_s if wall else 0.0
+            arm_faults = tuple(dataclasses.replace(f, time=f.time - trial_zero) for f in arm_faults)
         # the layer's transitions on the trial's clock, as the episode's other times (the layer counts from the
         # connect, and the stand-up before the trial took `started_s` of it)
         episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log(),
@@ -793,7 +801,6 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
 def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]]]:
     record, episode, link, events = result.record, result.episode, result.link, result.safety_events
     period_ms = episode.control_dt * 1e3
-    act = episode.act_s * 1e3
     grant = result.robot.robot.realtime_grant if isinstance(result.robot.robot, HasRealtimeGrant) else None
     rows = [
         ("devices' scheduling (I/O process)",
@@ -804,9 +811,11 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
         ("ticks played", f"{len(episode.t)} of {int(round(episode.duration_s / episode.control_dt))} at "
                          f"{1.0 / episode.control_dt:g} Hz"),
         ("controller act p50 / p99 / max [ms]",
-         f"{record.act_ms_p50:.3f} / {record.act_ms_p99:.3f} / {act.max() if len(act) else math.nan:.3f} "
+         f"{record.act_ms_p50:.3f} / {record.act_ms_p99:.3f} / {record.act_ms_max:.3f} "
          f"(period {period_ms:g} ms)"),
         ("deadline misses (act longer than the period)", f"{record.deadline_misses} of {len(episode.t)}"),
+        ("write-deadline dampings ramped again (the loop stalled past a device's write deadline)",
+         str(record.write_deadline_ramps)),
         *([("leg frames refused for their tick (stale_frames: a frozen or restarted board)", str(result.stale_frames))]
           if result.stale_frames is not None else []),
         ("late advances (the loop reached the robot's clock after its deadline)",
@@ -833,9 +842,10 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
     else:
         sections.append(("Safety events", ["None recorded."]))
     if result.arm_faults:
-        sections.append(("Arm faults", ["The arm's bus latched these faults (times on the bus's clock, not the "
-                                        "layer's), each with the torque policy it applied:", "",
-                                        *(f"- {fault}" for fault in result.arm_faults)]))
+        sections.append(("Arm faults", ["The arm's bus latched these faults (times on the trial's clock, as the "
+                                        "operator's actions; negative: during the stand-up), each with the torque "
+                                        "policy it applied:", "",
+                                        *(f"- at {fault.time:.3f} s: {fault}" for fault in result.arm_faults)]))
     if result.link_lost is not None:
         sections.append(("Link lost", [result.link_lost.sentence()]))
     if result.interrupted is not None:

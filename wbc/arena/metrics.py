@@ -23,9 +23,12 @@
 - ``arm_travel_rad``: total arm joint travel, sum over ticks and arm joints of |delta q| [rad].
 - ``safety_trips``: times the robot's safety layer latched its damping (0 without a safety layer).
 - ``deadline_misses``: control ticks whose ``controller.act`` took longer than the control period (wall time).
-- ``act_ms_p50`` / ``act_ms_p99``: median and 99th percentile of the ``controller.act`` wall time [ms].
+- ``act_ms_p50`` / ``act_ms_p99`` / ``act_ms_max``: median, 99th percentile and largest ``controller.act`` wall
+  time [ms].
+- ``write_deadline_ramps``: times a robot's device damped itself on its write deadline during the episode and its
+  safety layer ramped it again (the layer's ``write_deadline`` events; 0 without one).
 
-The last three depend on the machine that played the episode, as its wall time does.
+The last five depend on the machine that played the episode, as its wall time does.
 """
 
 from __future__ import annotations
@@ -50,6 +53,8 @@ __all__ = [
     "deadline_misses",
     "act_ms_p50",
     "act_ms_p99",
+    "act_ms_max",
+    "write_deadline_ramps",
     "power_w",
     "vlin_err_by_s",
     "vang_err_by_s",
@@ -128,6 +133,16 @@ def act_ms_p99(ep: Episode) -> float:
     return float(np.percentile(ep.act_s, 99) * 1e3) if len(ep.act_s) else float("nan")
 
 
+def act_ms_max(ep: Episode) -> float:
+    """Largest ``controller.act`` wall time [ms]."""
+    return float(np.max(ep.act_s) * 1e3) if len(ep.act_s) else float("nan")
+
+
+def write_deadline_ramps(ep: Episode) -> int:
+    """Times a device damped itself on its write deadline and the safety layer ramped the robot again."""
+    return int(np.count_nonzero(ep.safety_events.reason == "write_deadline"))
+
+
 def power_w(ep: Episode) -> float:
     """Mean mechanical power of the motors over the time played [W]; NaN when nothing was played."""
     return float(np.mean(ep.power)) if len(ep.t) else float("nan")
@@ -191,6 +206,8 @@ METRICS: dict[str, Callable[[Episode], float | bool | int | str]] = {
     "deadline_misses": deadline_misses,
     "act_ms_p50": act_ms_p50,
     "act_ms_p99": act_ms_p99,
+    "act_ms_max": act_ms_max,
+    "write_deadline_ramps": write_deadline_ramps,
     "power_w": power_w,
     "vlin_err_by_s": vlin_err_by_s,
     "vang_err_by_s": vang_err_by_s,

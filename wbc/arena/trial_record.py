@@ -116,10 +116,16 @@ class TrialRecord:
         deadline_misses: control ticks whose ``controller.act`` took longer than the control period.
         act_ms_p50: median ``controller.act`` wall time [ms].
         act_ms_p99: its 99th percentile [ms].
+        act_ms_max: its largest [ms].
+        write_deadline_ramps: times during the trial a robot's device damped itself on its write deadline (the
+            control loop stalled past it, not past the stale timeout) and the safety layer ramped the robot again from
+            its measured pose (its ``write_deadline`` events); not a trip, and the trial goes on (0 without a
+            safety layer). Timed by the wall clock, as the deadline misses are.
         wall_s: wall time the trial took to play [s]: in simulation from its robot's and controller's build to its
             last tick; on a robot (``wbc hw run``) its episode alone, from its first tick to its last, without the
             controller's build, the connect, the stand-up and the settle (``hardware.json``'s ``episode_wall_s``).
-            This field, `deadline_misses`, `act_ms_p50` and `act_ms_p99` depend on the machine (and so, on a real
+            This field, `deadline_misses`, `act_ms_p50`, `act_ms_p99`, `act_ms_max` and `write_deadline_ramps`
+            depend on the machine (and so, on a real
             robot, do `late_advances` and `worst_lateness_ms`).
         error: for a ``controller_error``, what failed: the controller, band, seed, trial, tick and time, the
             exception's type and message, and the controller's own ``file:line``; for a ``diverged`` trial, what
@@ -178,6 +184,8 @@ class TrialRecord:
     deadline_misses: int = 0
     act_ms_p50: float = float("nan")
     act_ms_p99: float = float("nan")
+    act_ms_max: float = float("nan")
+    write_deadline_ramps: int = 0
     wall_s: float
     error: str = ""
     ticks: int = 0
@@ -628,7 +636,8 @@ _REPORTED = ("fallbacks", "wbc_failures")
 _MOTION_METRICS = ("vlin_err", "vang_err", "max_roll_deg", "max_pitch_deg", "energy_j", "arm_travel_rad", "power_w")
 """The metrics computed from the robot's motion: NaN for a diverged trial, whose motion is the simulator's blow-up."""
 
-MACHINE_TIMED = ("deadline_misses", "act_ms_p50", "act_ms_p99", "wall_s", CHECKSUM)
+MACHINE_TIMED = ("deadline_misses", "act_ms_p50", "act_ms_p99", "act_ms_max", "write_deadline_ramps", "wall_s",
+                 CHECKSUM)
 """The ``trials.csv`` columns that depend on the machine's clock: two plays of the same simulated trial agree on every
 other column, to the last bit, and differ in these (the checksum covers the timed fields, so it differs with them)."""
 

@@ -957,7 +957,8 @@ def print_hw_run(result: HardwareTrialResult) -> None:
         print_realtime_grant("controller loop", result.controller_realtime)
     print(f"  metrics ({r.metrics_source}): V_lin err {r.vlin_err:.3f} m/s, V_ang err {r.vang_err:.3f} rad/s, max "
           f"roll {r.max_roll_deg:.2f} deg, max pitch {r.max_pitch_deg:.2f} deg, energy {r.energy_j:.1f} J")
-    print(f"  timing: act p50 {r.act_ms_p50:.3f} ms, p99 {r.act_ms_p99:.3f} ms (period {ep.control_dt * 1e3:g} ms); "
+    print(f"  timing: act p50 {r.act_ms_p50:.3f} ms, p99 {r.act_ms_p99:.3f} ms, max {r.act_ms_max:.3f} ms (period "
+          f"{ep.control_dt * 1e3:g} ms); "
           f"deadline misses {r.deadline_misses} of {len(ep.t)}; late advances {r.late_advances} (worst "
           f"{r.worst_lateness_ms:.2f} ms); CPU {result.cpu_s:.2f} s"
           + (f" + I/O process {result.io_cpu_s:.2f} s" if result.io_cpu_s is not None else "")
@@ -973,11 +974,12 @@ def print_hw_run(result: HardwareTrialResult) -> None:
             print(f"  I/O process: {link['io/states_published']} states published, "
                   f"{link['io/commands_forwarded']} commands forwarded, {link['io/bells_missed']} doorbells missed")
     clock = "robot seconds" if robot.backend == "sim" else "wall seconds since connected"
-    print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions ({clock}, the trial "
+    print(f"  safety: {r.safety_trips} trip(s) in the trial, {r.write_deadline_ramps} write-deadline damping(s) "
+          f"ramped again; transitions ({clock}, the trial "
           f"began at {result.trial_started_s:.2f} s): "
           + ", ".join(f"{e.time:.2f} s {e.to_state} ({e.reason})" for e in result.safety_events))
     for fault in result.arm_faults:  # the arm's own, apart from the layer's trip it caused
-        print(f"  arm bus: {fault}")
+        print(f"  arm bus, at {fault.time:.2f} s of the trial: {fault}")
     if len(ep.operator_events):
         print("  operator: " + ", ".join(f"{t:.2f} s {a}" for t, _, a in ep.operator_events.rows()))
     print(f"  results: {result.out_dir} (trials.csv, report.md, hardware.json, episodes/)")
