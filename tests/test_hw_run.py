@@ -807,7 +807,8 @@ def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> No
         signal.signal(signal.SIGHUP, before)
 
 
-def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: Stepped, tmp_path: Path) -> None:
+def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: Stepped, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     emu, clock = stepped_go1.emu, stepped_go1.clock
     keys = ScriptedKeys([(0.8, "p"), (1.6, "e")], clock=clock.now)  # an operator's push by hand, then the e-stop
     cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
@@ -827,6 +828,14 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert not saved.fell and math.isnan(saved.fall_time_s) and saved.ended_early
     assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
     assert episode.safety_events.reason[-1] == "software_estop"
+    # who stopped it, and when: the key (it said "estop() called"); the marked push acknowledged on the console
+    assert re.fullmatch(r"operator key 'e' at 1\.6\d s of the trial", episode.safety_events.detail[-1])
+    assert "operator: key 'p': a push by hand marked at 0.8" in capsys.readouterr().err
+    # the summary and the report say what to do about the trip that ended the trial (they said nothing)
+    print_hw_run(result)
+    remedy = "The e-stop was pressed on this computer: make sure the robot is safe, and start again."
+    assert f"  what to do: {remedy}" in capsys.readouterr().out.splitlines()
+    assert f"What to do: {remedy}" in (tmp_path / "hw" / "report.md").read_text()
     pressed = dict(keys.delivered)["e"]
     frames = emu.commands()
     before = [c for c in frames if c.time <= pressed + TIME_EPS]

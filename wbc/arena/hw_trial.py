@@ -102,7 +102,8 @@ __all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "
            "ResultsInterrupted", "run_hardware_trial"]
 
 HARDWARE_JSON_CLOCKS = {
-    "safety_events": "the safety layer's clock: robot time since the connect; the trial began at trial_started_s",
+    "safety_events": "the safety layer's clock: wall-clock seconds since the robot was connected (the robot's "
+                     "monotonic clock; the simulator's time with --sim); the trial began at trial_started_s",
     "trial_started_s": "the safety layer's clock",
     "operator_events": "trial time: 0 at the trial's first tick, as the episode's t",
     "episode_safety_events": "trial time: the episode file's safety_time is safety_events' time - trial_started_s",
@@ -834,7 +835,9 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
         body = md_table(["time [s]", "from", "to", "reason", "detail"],
                         [(f"{e.time:.3f}", str(e.from_state), str(e.to_state), e.reason, e.detail) for e in events])
         trips = sum(1 for e in events if e.to_state is SafetyState.DAMPED)
-        lead = (f"The safety layer tripped {trips} time(s); the episode ended at the first trip." if trips else
+        first = next((e for e in events if e.to_state is SafetyState.DAMPED), None)
+        lead = (f"The safety layer tripped {trips} time(s); the episode ended at the first trip"
+                f" ({first.reason}). What to do: {first.remedy}" if first is not None else
                 "The safety layer did not trip.")
         sections.append(("Safety events", [f"{lead} Times are wall-clock seconds since the robot was connected; the "
                                            "robot was stood up first, and the trial began at "

@@ -33,6 +33,7 @@ from wbc.hardware.dynamixel.control_table import HARDWARE_ERROR_BITS, OperatingM
 from wbc.hardware.emulators import BusStats
 from wbc.hardware.pty_registry import registry_dir
 from wbc.hardware.realtime import RealtimeGrant
+from wbc.hardware.safety import SafetyState
 from wbc.hardware.unitree import LEG_WIRES, REJECT_REASONS
 from wbc.scenario.scenario_check import ScenarioCheck
 from wbc.tools.arm_momentum import ArmMomentumTrial
@@ -978,6 +979,11 @@ def print_hw_run(result: HardwareTrialResult) -> None:
           f"ramped again; transitions ({clock}, the trial "
           f"began at {result.trial_started_s:.2f} s): "
           + ", ".join(f"{e.time:.2f} s {e.to_state} ({e.reason})" for e in result.safety_events))
+    trips = [e for e in result.safety_events if e.to_state is SafetyState.DAMPED and e.time >= result.trial_started_s]
+    if trips:  # the trip that ended the trial: what it was and what to do about it
+        print(f"  {trips[0].reason}: {trips[0].detail}")
+        if trips[0].remedy:
+            print(f"  what to do: {trips[0].remedy}")
     for fault in result.arm_faults:  # the arm's own, apart from the layer's trip it caused
         print(f"  arm bus, at {fault.time:.2f} s of the trial: {fault}")
     if len(ep.operator_events):

@@ -49,12 +49,15 @@ from wbc.hardware.capabilities import (
     WriteDeadlineTrips,
     provides,
 )
+from wbc.hardware.dynamixel.arm_fault import MODE_CORRUPT, MODE_HARDWARE_ERROR, MODE_NO_ANSWER, MODE_PORT_LOST
+from wbc.hardware.dynamixel.control_table import HARDWARE_ERROR_BITS
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.config import SafetyConfig
 from wbc.hardware.safety.events import SafetyEvent
 from wbc.hardware.safety.limits import position_range
 from wbc.hardware.safety.ramp import CommandRamp
 from wbc.hardware.safety.state import SafetyState
+from wbc.hardware.unitree.layout import MOTOR_STATE_MODES
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.euler import rpy_of
 from wbc.robots.joint_table import JointTable
@@ -391,7 +394,8 @@ class SafeRobot(Robot):
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
                 ok = ", ".join(f"{m:#04x}" for m in cfg.ok_motor_modes)
-                return "motor_mode", f"{self._motor_label(i)} reports mode {modes[i]:#04x} (ok: {ok})"
+                return "motor_mode", (f"{self._motor_label(i)} reports mode {modes[i]:#04x}"
+                                      f"{_mode_name(int(modes[i]), arm=i >= _ARM_START)} (ok: {ok})")
             temps = np.asarray(status.motor_temperature, dtype=np.float64)
             if temps.size and temps.max() > cfg.max_motor_temperature_c:
                 i = int(np.argmax(temps))
@@ -465,6 +469,22 @@ class SafeRobot(Robot):
                 print(event, file=sys.stderr)
             except OSError:
                 pass  # the terminal was closed (SIGHUP): the event is kept in `events`, and the trip must go on
+
+
+_ARM_MODES = {MODE_NO_ANSWER: "no answer", MODE_CORRUPT: "corrupt answers", MODE_PORT_LOST: "serial port lost"}
+"""The arm's status codes (`wbc.hardware.dynamixel.arm_fault`), by name; 0x80 + bits is its Hardware Error Status."""
+
+
+def _mode_name(mode: int, *, arm: bool) -> str:
+    """``: overheat`` for a mode the motor's documentation names (a leg motor's, an arm servo's), else empty."""
+    if not arm:
+        name = MOTOR_STATE_MODES.get(mode)
+    elif mode & MODE_HARDWARE_ERROR:
+        bits = [text for bit, text in HARDWARE_ERROR_BITS.items() if mode & bit]
+        name = f"hardware error: {', '.join(bits)}" if bits else "hardware error"
+    else:
+        name = _ARM_MODES.get(mode)
+    return f" ({name})" if name else ""
 
 
 def _who_damped(by_device: dict[str, int], total: int) -> str:
