@@ -243,7 +243,8 @@ def breakdown(records: Sequence[TrialRecord], outcomes: Sequence[PushOutcome], *
                                 sum(1 for o in pushes if o.offset_axis == a)) for a in axes}
             charged = [o for o in pushes if not o.survived]
             errors = sum(r.outcome == CONTROLLER_ERROR for r in mine)
-            falls = sum(not r.success for r in mine) - errors
+            # a safety layer's trip and an operator's stop are no falls either (a hardware trial's)
+            falls = sum(not r.success for r in mine) - errors - sum(r.outcome in _NOT_FALLS[1:] for r in mine)
             per_band[band] = {
                 "by_command": by_command, "by_sector": by_sector, "by_offset_axis": by_axis,
                 "falls": {"trials": len(mine), "falls": falls, "controller_errors": errors,
