@@ -1296,6 +1296,8 @@ def test_an_arm_fault_in_the_trial_is_its_outcome_and_not_a_lost_link(
     assert "## Arm faults" in report and "## Link lost" not in report
     assert f"- at {arm_fault['time']:.3f} s: DynamixelArm: FAULT LATCHED ({kind}, IDs [4])" in report
     assert f"arm bus, at {arm_fault['time']:.2f} s of the trial: DynamixelArm: FAULT LATCHED" in printed.out
+    # the replay reads it at trial time, to mark it beside the trip
+    assert load_stored_episode(out, 0).arm_faults == ((arm_fault["time"], f"arm fault: {kind} (IDs [4])"),)
     # the legs heard the layer's damping from the trip to the close: nothing lost on their wire
     frames = emu.legs.commands()
     after = [c for c in frames if c.time > last["time"] + LINK_PERIOD + TIME_EPS]
