@@ -825,7 +825,7 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert 1.6 <= episode.t[-1] <= 1.6 + TICK + TIME_EPS and record.ttf == pytest.approx(episode.t[-1] / 3.0)
     assert not episode.fell and math.isnan(episode.fall_time_s) and math.isnan(record.fall_time_s)
     saved = Episode.load(str(next((tmp_path / "hw" / "episodes").rglob("*.npz"))))
-    assert not saved.fell and math.isnan(saved.fall_time_s) and saved.ended_early
+    assert not saved.fell and math.isnan(saved.fall_time_s) and saved.stopped
     assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
     assert episode.safety_events.reason[-1] == "software_estop"
     # who stopped it, and when: the key (it said "estop() called"); the marked push acknowledged on the console

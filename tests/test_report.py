@@ -177,7 +177,8 @@ def test_a_header_of_other_columns_is_refused_naming_the_columns_that_differ(tmp
                           (swapped, f"(out of place 'seed' (column {trial + 1}, this version's {seed + 1}))"),
                           ([*header, "seed"], "(repeated 'seed')"),
                           ([c for c in header if c != "wall_s"] + ["pull_ms", "wall_s"],
-                           "(extra 'pull_ms'; out of place 'wall_s' (column 45, this version's 35))")):
+                           f"(extra 'pull_ms'; out of place 'wall_s' (column {len(header) + 1}, this version's "
+                           f"{header.index('wall_s') + 1}))")):
         old.write_text(",".join(columns) + "\n")
         with pytest.raises(RecordError) as refused:
             TrialRecord.read_csv(old)

@@ -203,7 +203,7 @@ class Episode:
         fell: the robot fell: the trunk or a non-foot link touched the ground (the simulator's fall rule), or the
             truth's trunk was upside down at the last tick. A robot's safety layer that latched its damping (a trip,
             an e-stop) ends the episode too, but that is no fall: ``fell`` is False, the episode holds the ticks
-            played up to it (`ended_early`), and `safety_events` says why.
+            played up to it (`stopped`), and `safety_events` says why.
         fall_time_s: when it fell (nan if it did not fall: a trip, an e-stop, an interruption or a controller's
             error is not a fall) [s].
         t: time of each tick (after the tick's physics) [s].
@@ -257,28 +257,23 @@ class Episode:
                               f"{', '.join(BASE_SOURCES)}")
 
     @property
-    def ended_early(self) -> bool:
-        """The episode was ended without a fall: fewer ticks played than it has, or a safety layer's latch in it.
+    def stopped(self) -> bool:
+        """The robot's safety layer latched its damping during the episode (a trip, an e-stop), which ended it.
 
-        A trip or an e-stop at its last tick ends it too. A robot's safety layer latched its damping (a trip, an
-        e-stop), the command was interrupted, the controller failed or the simulation diverged; which one, the trial's
-        record says (its ``outcome``).
+        That is no fall (``fell`` False): the episode holds the ticks played up to it. The runner ends a hardware
+        trial's episode there (`wbc.arena.runner.run_episode`'s ``stopped``).
         """
-        if self.fell:
-            return False
-        return (len(self.t) < int(round(self.duration_s / self.control_dt))
-                or bool(np.any(self.safety_events.to_state == "damped")))
+        return not self.fell and bool(np.any(self.safety_events.to_state == "damped"))
 
     @property
     def survived_s(self) -> float:
-        """Time survived [s]: the fall time, the time played, or the whole episode.
+        """Time survived [s]: the fall time, the time played when its safety layer stopped it, or the whole episode.
 
-        The time played when it ended early without a fall (`ended_early`), as the arena counts a trial that did not
-        complete.
+        A stopped episode (`stopped`) counts the time it played, as the arena counts a trial that did not complete.
         """
         if self.fell:
             return float(self.fall_time_s)
-        if self.ended_early:
+        if self.stopped:
             return float(self.t[-1]) if len(self.t) else 0.0
         return float(self.duration_s)
 

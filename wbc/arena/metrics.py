@@ -1,10 +1,11 @@
 """Episode metrics: named pure functions of an `Episode` (definitions follow the paper where it gives one).
 
-- ``success``: the episode reached its end without the trunk or a non-foot link touching the ground, and was not
-  ended early otherwise (a robot's safety layer tripped or was e-stopped, the command was interrupted).
+- ``success``: the episode reached its end without the trunk or a non-foot link touching the ground, and its robot's
+  safety layer did not stop it (a trip, an e-stop).
 - ``ttf`` (time to fall): fraction of the episode survived, survived time / episode length; an episode that ended
-  early without a fall (a trip, an e-stop, an interruption, as a controller's error) counts the time it played
-  (`Episode.survived_s`), and has no fall time (``fall_time_s`` NaN).
+  early without a fall (a safety layer's trip or e-stop, `Episode.stopped`) counts the time it played
+  (`Episode.survived_s`), as the record counts an interruption or a controller's error, and has no fall time
+  (``fall_time_s`` NaN).
 - ``vlin_err``: mean over the survived ticks of the L2 distance between the base's horizontal velocity (in the
   yaw-aligned frame) and the commanded (vx, vy) [m/s].
 - ``vang_err``: mean over the survived ticks of |base yaw rate - commanded yaw rate| [rad/s].
@@ -68,8 +69,8 @@ __all__ = [
 
 
 def success(ep: Episode) -> bool:
-    """Played the whole episode: no fall, and not ended early otherwise (`Episode.ended_early`)."""
-    return not ep.fell and not ep.ended_early
+    """Played the whole episode: no fall, and no safety layer's stop (`Episode.stopped`)."""
+    return not ep.fell and not ep.stopped
 
 
 def ttf(ep: Episode) -> float:

@@ -172,7 +172,7 @@ def run_episode(
             is a `FallDetector`. (The truth's trunk upside down at the last tick is a fall there too.)
         stopped: returns True when the robot was stopped without a fall (a hardware trial's safety layer latched its
             damping: a trip or an e-stop); checked after `fallen`, it ends the episode at that tick, which is not a
-            fall (``fell`` False, the ticks played kept: `Episode.ended_early`). None: never.
+            fall (``fell`` False, the ticks played kept: `Episode.stopped`). None: never.
         observer: called after every tick (e.g. a viewer); None costs nothing.
         divergence: check every tick that the simulation has not blown up (a few NumPy reductions per tick), and,
             if the robot is a `SimulatorHealth`, that the simulator did not reset itself after a failed step;

@@ -613,7 +613,7 @@ def episode_outcome(episode: Episode) -> str:
 def _outcome(episode: Episode) -> str:
     """How a played episode ended: success, a fall, or the safety layer's trip (an operator's, or its own).
 
-    A trip ends a hardware trial's episode without a fall (`Episode.ended_early`); an episode written before that was
+    A trip ends a hardware trial's episode without a fall (`Episode.stopped`); an episode written before that was
     so stored the trip as a fall (``fell`` True), which its trip still tells apart.
     """
     tripped = episode.safety_events.reason[episode.safety_events.to_state == "damped"]
