@@ -836,9 +836,10 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
                         [(f"{e.time:.3f}", str(e.from_state), str(e.to_state), e.reason, e.detail) for e in events])
         trips = sum(1 for e in events if e.to_state is SafetyState.DAMPED)
         first = next((e for e in events if e.to_state is SafetyState.DAMPED), None)
+        # an interruption's own trip is the command's (its section says so), not a key pressed on this computer
+        remedy = f" What to do: {first.remedy}" if first is not None and result.interrupted is None else ""
         lead = (f"The safety layer tripped {trips} time(s); the episode ended at the first trip"
-                f" ({first.reason}). What to do: {first.remedy}" if first is not None else
-                "The safety layer did not trip.")
+                f" ({first.reason}).{remedy}" if first is not None else "The safety layer did not trip.")
         sections.append(("Safety events", [f"{lead} Times are wall-clock seconds since the robot was connected; the "
                                            "robot was stood up first, and the trial began at "
                                            f"{result.trial_started_s:.3f} s.", "", *body]))
