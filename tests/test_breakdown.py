@@ -151,6 +151,18 @@ def test_a_controller_error_is_neither_a_fall_nor_a_push_failed():
     assert cell["by_command"]["standing"]["k"] == 1  # it counts against success
 
 
+@pytest.mark.parametrize("outcome", ["safety_trip", "operator_stop"])
+def test_a_trip_or_a_stop_is_neither_a_fall_nor_a_push_failed(outcome: str):
+    # steady's trial 0 ended by a hardware trial's trip or stop at 3 s, no fall time: no push is charged with it, and
+    # it is not counted as a fall (its NaN fall time charged every push of the trial, and the falls counted it)
+    stopped = _record("steady", 0, success=False, outcome=outcome, ttf=0.15)
+    records = [stopped, *RECORDS[1:4]]
+    outcomes = push_outcomes(records, _trial)
+    assert not [o for o in outcomes if o.trial == 0]
+    cell = breakdown(records, outcomes, controllers=("steady",), bands=["in"])["controllers"]["steady"]["in"]
+    assert cell["falls"]["falls"] == 1 and cell["falls"]["before_first_push"] == 1
+
+
 def test_recovery_curve_bins_every_push_met():
     outcomes = push_outcomes(RECORDS, _trial)
     curve = recovery_curve(outcomes, controllers=CONTROLLERS, n_bins=2)

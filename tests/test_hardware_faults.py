@@ -482,7 +482,8 @@ def test_the_default_motor_error_is_the_vendors_overheat_code_and_damps_on_the_w
         injected, tripped, first = _inject_until_damped(rig, cmd, Fault.MOTOR_ERROR, reason="motor_mode")
         assert (rig.safe.robot.extras.motor_mode == MODE_OVERHEAT).all()
         event = rig.events[-1]
-        assert event.detail.startswith("FR_hip_joint (motor 0) reports mode 0x08"), event.detail
+        # the mode by its name, as the vendor's documentation gives it (it said only "mode 0x08")
+        assert event.detail.startswith("FR_hip_joint (motor 0) reports mode 0x08 (overheat) (ok: "), event.detail
         assert "0x08 is overheat" in event.remedy
         _assert_damping_in_the_next_frame(rig.emu, tripped, first)
         assert all(c.damping for c in _after(rig.emu, injected) if c.time >= first.time)

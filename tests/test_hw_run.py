@@ -47,6 +47,7 @@ from wbc.arena.trial_record import TrialRecord
 from wbc.cli import main
 from wbc.cli.main import hw_run, unpowered_arm_warning
 from wbc.cli.parser import build_parser
+from wbc.cli.printers import print_hw_run
 from wbc.cli.terminal_keys import TerminalKeys
 from wbc.control.registry import ControllerSpec, arm_variant, get_controller
 from wbc.errors import ConfigError, ResultsDirError, StandUpError
@@ -395,6 +396,37 @@ def test_a_link_lost_in_the_trial_exits_1_and_says_the_damping_may_not_have_reac
     assert after and all(c.damping for c in after)
 
 
+def test_a_frozen_board_is_said_to_send_frames_with_a_frozen_tick_and_its_refused_frames_are_printed(
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The robot's board freezes 1 s into the trial (every reply the datagram before, its tick standing still): the
+    layer trips on the stale stream, and the frames go on arriving, refused for their tick. The last line said that
+    none came (the damping "may not have reached the robot"), and neither the run's summary nor the report gave the
+    refused frames."""
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+
+    def build(config: HardwareRobotConfig) -> HardwareRobot:
+        built = stepped_go1.build(config)
+        clock.call_at(clock.now() + 2.0, lambda: emu.inject(Fault.FROZEN_STATE))
+        return built
+
+    out = tmp_path / "hw"
+    args = build_parser().parse_args(["hw", "run", "stand", "--robot", "go1-arm", "--arm", "none", "--scenario", PUSH,
+                                      "--trial", "0", "--target", "127.0.0.1:9", "--seconds", "3", "--settle", "0.5",
+                                      "--out", str(out), "--no-io-process"])
+    assert hw_run(args, build=build) == 1
+    printed = capsys.readouterr()
+    hardware = json.loads((out / "hardware.json").read_text())
+    refused, lost = hardware["stale_frames"], hardware["link_lost"]
+    assert refused > 0.5 / LINK_PERIOD and lost["refused_frames"] == refused  # the settle's frames among them
+    last = printed.err.strip().splitlines()[-1]
+    assert last.startswith("wbc hw run: the robot's state froze: its last fresh state came ")
+    assert f"frames still arrive, but with a frozen tick ({refused} refused for their tick" in last
+    assert "none came" not in last and "Check it and power it down by hand" in last
+    assert f"{refused} frames refused for their tick" in printed.out
+    report = (out / "report.md").read_text()
+    assert f"| leg frames refused for their tick (stale_frames: a frozen or restarted board) | {refused} |" in report
+
+
 def test_a_link_lost_during_the_stand_up_says_the_damping_may_not_have_reached_the_robot(
         stepped_go1: Stepped, tmp_path: Path) -> None:
     """The robot stops answering half a second into the stand-up: the layer trips on the stale stream, nothing is
@@ -416,8 +448,8 @@ def test_a_link_lost_during_the_stand_up_says_the_damping_may_not_have_reached_t
     assert said.startswith("the safety layer tripped while standing the robot up, before the trial: stale_state")
     assert re.search(r"nothing was played\. The link to the robot was lost: its last state came [0-9.]+ s after it "
                      r"was connected \(during the stand-up\) and none came in the [0-9.]+ s after: the damping frames "
-                     r"sent since may not have reached the robot\. Check it and power it down by hand\. The robot "
-                     r"stopped answering", said), said
+                     r"sent since may not have reached the robot\. Check it and power it down by hand\. The state "
+                     r"went stale, and the detail says whose: the legs' stream", said), said
     assert said.endswith("Then run again")
     assert not (tmp_path / "hw" / "trials.csv").exists()
     frames = emu.commands()
@@ -750,8 +782,9 @@ def test_sigterm_during_the_trial_writes_the_episode_played_and_the_robot_ends_d
     episode = Episode.load(str(path))
     hardware = json.loads((results / "hardware.json").read_text())
     assert 0 < len(episode.t) == record.ticks == hardware["interrupted"]["tick"] < 1000  # played, not to its end
-    assert record.fall_time_s == pytest.approx(episode.t[-1]) and hardware["interrupted"]["time_s"] == pytest.approx(
-        episode.t[-1])  # where it was interrupted: the end of its last whole tick
+    # an interruption is no fall: no fall time; where it was interrupted is the end of its last whole tick
+    assert math.isnan(record.fall_time_s) and record.ttf == pytest.approx(episode.t[-1] / 20.0)
+    assert hardware["interrupted"]["time_s"] == pytest.approx(episode.t[-1])
     _io_process_ended_and_legs_damped(go1, sent, io_process)
 
 
@@ -774,7 +807,8 @@ def test_a_hangup_interrupts_a_command_unless_it_was_started_under_nohup() -> No
         signal.signal(signal.SIGHUP, before)
 
 
-def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: Stepped, tmp_path: Path) -> None:
+def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: Stepped, tmp_path: Path,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     emu, clock = stepped_go1.emu, stepped_go1.clock
     keys = ScriptedKeys([(0.8, "p"), (1.6, "e")], clock=clock.now)  # an operator's push by hand, then the e-stop
     cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
@@ -786,9 +820,22 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert record.safety_trips == 1 and not record.success and record.outcome == "operator_stop"
     # the trial's own play time, as a simulated trial's: not the build, the connect, the stand-up and the settle
     assert record.wall_s == result.episode_wall_s
-    assert 1.6 <= record.fall_time_s <= 1.6 + TICK + TIME_EPS  # ended at the tick that handled the key
+    # ended at the tick that handled the key, which is no fall: the robot stood (fell False, no fall time), and the
+    # trial counts as one that did not complete, its TTF the share played
+    assert 1.6 <= episode.t[-1] <= 1.6 + TICK + TIME_EPS and record.ttf == pytest.approx(episode.t[-1] / 3.0)
+    assert not episode.fell and math.isnan(episode.fall_time_s) and math.isnan(record.fall_time_s)
+    saved = Episode.load(str(next((tmp_path / "hw" / "episodes").rglob("*.npz"))))
+    assert not saved.fell and math.isnan(saved.fall_time_s) and saved.stopped
     assert [a for _, _, a in episode.operator_events.rows()] == ["push", "estop"]
     assert episode.safety_events.reason[-1] == "software_estop"
+    # who stopped it, and when: the key (it said "estop() called"); the marked push acknowledged on the console
+    assert re.fullmatch(r"operator key 'e' at 1\.6\d s of the trial", episode.safety_events.detail[-1])
+    assert "operator: key 'p': a push by hand marked at 0.8" in capsys.readouterr().err
+    # the summary and the report say what to do about the trip that ended the trial (they said nothing)
+    print_hw_run(result)
+    remedy = "The e-stop was pressed on this computer: make sure the robot is safe, and start again."
+    assert f"  what to do: {remedy}" in capsys.readouterr().out.splitlines()
+    assert f"What to do: {remedy}" in (tmp_path / "hw" / "report.md").read_text()
     pressed = dict(keys.delivered)["e"]
     frames = emu.commands()
     before = [c for c in frames if c.time <= pressed + TIME_EPS]
@@ -800,6 +847,39 @@ def test_estop_key_latches_damping_on_the_wire_and_ends_the_trial(stepped_go1: S
     assert all(c.damping for c in after) and len(after) >= 0.5 / LINK_PERIOD
     report = (tmp_path / "hw" / "report.md").read_text()
     assert "software_estop" in report and "| push |" in report and "| estop |" in report
+
+
+def test_a_stall_past_the_write_deadline_in_the_trial_is_counted_in_the_record_and_the_summary(
+        stepped_go1: Stepped, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The control loop stalls 70 ms at 1 s into the trial: the legs' link damps on its 50 ms write deadline, and the
+    layer ramps the robot again from Kp 5, as documented. The trial goes on to its end, a success; trials.csv and the
+    run's summary line count the damping. They said 0 trips, 0 deadline misses and nothing else."""
+    emu, clock = stepped_go1.emu, stepped_go1.clock
+    stalled: list[float] = []
+
+    def stall(t: float, *args: object) -> None:
+        if not stalled and t >= 1.0:
+            stalled.append(clock.now())
+            clock.advance(0.07)
+
+    cfg = HardwareTrialConfig(controller="stand", scenario=Path(PUSH), trial=0, robot="go1-arm", arm_mode="none",
+                              seconds=2.0, target=("127.0.0.1", 9), out_dir=tmp_path / "hw", settle_s=0.5,
+                              io_process=False)
+    result = run_hardware_trial(cfg, observer=stall, before_connect=lambda hardware, spec: emu.reset(),
+                                build=stepped_go1.build)
+    (record,) = TrialRecord.read_csv(tmp_path / "hw" / "trials.csv")
+    assert record.success and record.safety_trips == 0 and record.write_deadline_ramps == 1
+    assert "write_deadline" in list(result.episode.safety_events.reason)
+    # on the wire: the link's damping in the stall, then a new ramp from the ramp's gain
+    frames = [c for c in emu.commands() if c.time > stalled[0]]
+    first = next(k for k, c in enumerate(frames) if c.damping)
+    ramp = next(c for c in frames[first:] if not c.damping)
+    np.testing.assert_allclose(ramp.wire.kp.max(), SafetyConfig().ramp_kp)
+    print_hw_run(result)
+    out = capsys.readouterr().out
+    assert "safety: 0 trip(s) in the trial, 1 write-deadline damping(s) ramped again;" in out
+    report = (tmp_path / "hw" / "report.md").read_text()
+    assert "| write-deadline dampings ramped again (the loop stalled past a device's write deadline) | 1 |" in report
 
 
 @pytest.mark.usefixtures("terminal_signals")
@@ -834,7 +914,8 @@ def test_a_request_to_end_during_the_settle_after_an_estop_keeps_the_trials_resu
     said = capsys.readouterr().err
     assert "the settle after the trip or e-stop is cut short and the robot is closed into damping" in said
     (record,) = TrialRecord.read_csv(out / "trials.csv")
-    assert record.outcome == "operator_stop" and 1.0 <= record.fall_time_s <= 1.0 + TICK + TIME_EPS
+    assert record.outcome == "operator_stop" and math.isnan(record.fall_time_s)
+    assert 1.0 <= record.ttf * 3.0 <= 1.0 + TICK + TIME_EPS
     assert all((out / name).is_file() for name in ("hardware.json", "summary.json", "report.md"))
     pressed = dict(keys.delivered)["e"]
     after = [c for c in emu.commands() if c.time > pressed + LINK_PERIOD + TIME_EPS]
@@ -907,7 +988,7 @@ def test_ctrl_c_during_the_trial_damps_the_robot_at_once_and_writes_the_episode_
     assert record.outcome == "operator_stop" and not record.success
     assert record.error == (f"{when}: the robot was closed into damping, and the episode up to the interruption is "
                             "recorded")
-    assert record.ticks == 50 and record.fall_time_s == pytest.approx(1.0) and record.ttf == pytest.approx(1 / 3)
+    assert record.ticks == 50 and math.isnan(record.fall_time_s) and record.ttf == pytest.approx(1 / 3)
     (path,) = (out / "episodes" / "stand-noarm").glob("*.npz")
     episode = Episode.load(str(path))
     assert len(episode.t) == 50 and episode.t[-1] == pytest.approx(1.0) and not episode.fell
@@ -1190,19 +1271,33 @@ def test_an_arm_fault_in_the_trial_is_its_outcome_and_not_a_lost_link(
     pytest.importorskip("dynamixel_sdk")
     out = tmp_path / "hw"
     code, emu = hw_run_arm_in_lockstep(PUSH, str(out), 2, inject=lambda e: e.inject(fault), inject_at=2.0)
-    err = capsys.readouterr().err
+    printed = capsys.readouterr()
+    err = printed.err
     assert code == 0, err
     assert "the link to the robot was lost" not in err
     (record,) = TrialRecord.read_csv(out / "trials.csv")
     assert record.outcome == "safety_trip" and record.safety_trips == 1
+    # a trip is no fall: the robot stood in its harness; the trial counts the share it played
+    (path,) = (out / "episodes" / "stand").glob("*.npz")
+    episode = Episode.load(str(path))
+    assert not episode.fell and math.isnan(episode.fall_time_s) and math.isnan(record.fall_time_s)
+    assert record.ttf == pytest.approx(episode.t[-1] / 2.0) and record.ttf < 1.0
     hardware = json.loads((out / "hardware.json").read_text())
     assert hardware["link_lost"] is None
     last = hardware["safety_events"][-1]
     assert last["reason"] == trip and last["to_state"] == "damped"
     (arm_fault,) = hardware["arm_faults"]
     assert (arm_fault["kind"], arm_fault["ids"]) == (kind, [4]) and "LIMP" in arm_fault["policy"]
+    # on the trial's clock, as the layer's trip it caused (it was the host's monotonic clock, which nothing else is on)
+    assert hardware["clocks"]["arm_faults"].startswith("trial time")
+    tripped = last["time"] - hardware["trial_started_s"]
+    assert 0.0 < arm_fault["time"] < 2.0 and abs(arm_fault["time"] - tripped) < 0.3
     report = (out / "report.md").read_text()
     assert "## Arm faults" in report and "## Link lost" not in report
+    assert f"- at {arm_fault['time']:.3f} s: DynamixelArm: FAULT LATCHED ({kind}, IDs [4])" in report
+    assert f"arm bus, at {arm_fault['time']:.2f} s of the trial: DynamixelArm: FAULT LATCHED" in printed.out
+    # the replay reads it at trial time, to mark it beside the trip
+    assert load_stored_episode(out, 0).arm_faults == ((arm_fault["time"], f"arm fault: {kind} (IDs [4])"),)
     # the legs heard the layer's damping from the trip to the close: nothing lost on their wire
     frames = emu.legs.commands()
     after = [c for c in frames if c.time > last["time"] + LINK_PERIOD + TIME_EPS]

@@ -114,6 +114,10 @@ def test_contract_legs_and_arm_actuated_and_the_same_robot_as_in_process() -> No
             # both devices' loop statistics come across from the I/O process
             assert stats.as_dict()["link/legs_thread/cycles"] > 0 and stats.as_dict()["link/arm_thread/cycles"] > 0
             assert stats.io["states_published"] > 0
+            # each device's state age and write-deadline trips come across too, for the safety layer's words
+            ages, trips = robot.state_ages(), robot.deadline_trips_by_device()
+            assert set(ages) == {"legs", "arm"} and all(age >= 0.0 for age in ages.values())
+            assert set(trips) == {"legs", "arm"} and sum(trips.values()) == robot.deadline_trips
             pid = robot.pid
             grant = robot.realtime_grant  # asked by default; granted, or refused with its reason
             assert grant is not None and grant.pid == pid and grant.asked.startswith("SCHED_FIFO 50")

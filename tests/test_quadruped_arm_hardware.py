@@ -686,3 +686,51 @@ def test_hw_emulate_serves_one_robot_to_the_backends_in_real_time() -> None:
     assert proc.returncode == 0, err
     packets = re.search(r"arm bus: packets decoded (\d+)", out)
     assert packets and int(packets[1]) > 50 and "Traceback" not in err
+
+
+def test_a_stall_past_both_write_deadlines_says_the_legs_and_the_arm_each_damped_once() -> None:
+    """A 70 ms stall: the legs' link and the arm's bus each damp once on their 50 ms write deadline. The layer's event
+    counted them together as "damped itself 2 time(s)", as if the robot had stalled twice."""
+    with _whole_robot(ramp_time_s=0.2) as (emu, safe, events):
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        assert safe.safety_state is SafetyState.RUN
+        emu.clock.advance(0.07)  # the loop stalls past both deadlines, not the stale timeout
+        _stand(safe, 0.02)
+        assert events[-1].reason == "write_deadline", events[-1]
+        assert events[-1].detail.startswith("the legs and the arm each damped once since the last look: "), events[-1]
+
+
+def test_a_silent_arm_servo_is_named_as_the_stale_source_while_the_legs_answer() -> None:
+    """The elbow stops answering: the joined frame goes stale, and the layer's trip says it is the arm's state, the
+    legs' stream fresh. It said "tick N unchanged" as if the robot's stream had stopped."""
+    with _whole_robot(ramp_time_s=0.2) as (emu, safe, events):
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        emu.inject(BusFault.SILENT_ID, 4)
+        _stand(safe, 1.0, until=lambda: safe.safety_state is SafetyState.DAMPED)
+        assert events[-1].reason == "stale_state", events[-1]
+        assert re.fullmatch(r"the arm's state: 0\.\d{3} s old, its bus's servos not answering \(the legs' state "
+                            r"stream fresh, \d+ ms old; limit 0\.1 s\)", events[-1].detail), events[-1]
+        assert "stopped answering" in events[-1].remedy and "arm's cable" in events[-1].remedy
+
+
+def test_a_stalled_host_loop_is_named_as_the_stale_source_while_the_robot_answers() -> None:
+    """The control loop stops for 300 ms (a SIGSTOP) while both devices answer: the layer trips at its next read and
+    says that the host's loop was late since its last read. It said that the robot's tick stood still."""
+    with _whole_robot(ramp_time_s=0.2) as (emu, safe, events):
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        emu.clock.advance(0.3)
+        _stand(safe, 0.02)
+        assert events[-1].reason == "stale_state", events[-1]
+        assert events[-1].detail.startswith("the host's control loop was late: 3"), events[-1]
+        assert events[-1].detail.endswith("ms since its last read (limit 100 ms), while the robot's state stream "
+                                          "went on"), events[-1]
+
+
+def test_silent_legs_are_named_as_the_stale_source() -> None:
+    with _whole_robot(ramp_time_s=0.2) as (emu, safe, events):
+        _stand(safe, 3.0, until=lambda: safe.safety_state is SafetyState.RUN)
+        emu.inject(Fault.SILENCE)
+        _stand(safe, 1.0, until=lambda: safe.safety_state is SafetyState.DAMPED)
+        assert events[-1].reason == "stale_state", events[-1]
+        assert re.fullmatch(r"the legs' state stream: tick \d+ unchanged for 0\.1\d\d s \(limit 0\.1 s\)",
+                            events[-1].detail), events[-1]

@@ -145,7 +145,7 @@ def test_the_trials_csv_columns_are_the_stored_format_and_any_other_is_another_v
         "controller,scenario,scenario_hash,band,seed,trial,success,outcome,ttf,fall_time_s,vlin_err,vang_err,"
         "max_roll_deg,max_pitch_deg,energy_j,arm_travel_rad,push_force_n,n_pushes,vx_cmd,vy_cmd,yaw_rate_cmd,friction,"
         "payload_kg,fallbacks,wbc_failures,debug_truth,backend,metrics_source,safety_trips,late_advances,"
-        "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,wall_s,error,ticks,clamped_ticks,clamped_rows,"
+        "worst_lateness_ms,deadline_misses,act_ms_p50,act_ms_p99,act_ms_max,write_deadline_ramps,wall_s,error,ticks,clamped_ticks,clamped_rows,"
         "power_w,vlin_err_by_s,vang_err_by_s,counters,checksum")
     # a file of any other columns is another version's, refused with what to do: fewer columns (before hardware
     # trials, before outcomes, before the checksum, before ticks and counters), or the same in another order
@@ -177,7 +177,8 @@ def test_a_header_of_other_columns_is_refused_naming_the_columns_that_differ(tmp
                           (swapped, f"(out of place 'seed' (column {trial + 1}, this version's {seed + 1}))"),
                           ([*header, "seed"], "(repeated 'seed')"),
                           ([c for c in header if c != "wall_s"] + ["pull_ms", "wall_s"],
-                           "(extra 'pull_ms'; out of place 'wall_s' (column 45, this version's 35))")):
+                           f"(extra 'pull_ms'; out of place 'wall_s' (column {len(header) + 1}, this version's "
+                           f"{header.index('wall_s') + 1}))")):
         old.write_text(",".join(columns) + "\n")
         with pytest.raises(RecordError) as refused:
             TrialRecord.read_csv(old)

@@ -30,6 +30,7 @@ from wbc.hardware.safety import (
     position_range,
 )
 from wbc.hardware.unitree import LowStateExtras, Remote
+from wbc.hardware.unitree.layout import MOTOR_STATE_MODES
 from wbc.scenario import Push
 from wbc.scenario.trial import CommandSchedule
 from wbc.types import MotorCommand
@@ -311,7 +312,8 @@ def test_motor_modes_the_vendor_documents(mode, trips):
         _drive(safe, cmd, 10, until=SafetyState.DAMPED)
         assert (safe.safety_state is SafetyState.DAMPED) == trips
         if trips:
-            assert events[-1].detail == f"FR_hip_joint (motor 0) reports mode {mode:#04x} (ok: 0x00, 0x0a)"
+            named = f" ({MOTOR_STATE_MODES[mode]})" if mode in MOTOR_STATE_MODES else ""  # 0x08 (overheat)
+            assert events[-1].detail == f"FR_hip_joint (motor 0) reports mode {mode:#04x}{named} (ok: 0x00, 0x0a)"
 
 
 @pytest.mark.parametrize("reason", list(TRIPS))

@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 
 from wbc.arena.stats import wilson_interval
-from wbc.arena.trial_record import CONTROLLER_ERROR, TrialRecord
+from wbc.arena.trial_record import CONTROLLER_ERROR, OPERATOR_STOP, SAFETY_TRIP, TrialRecord
 from wbc.errors import ConfigError, RecordError
 from wbc.scenario.trial import Trial
 
@@ -141,6 +141,10 @@ def _offset_axis(offset: np.ndarray) -> str:
     return AXES[0] if x > y else AXES[1]
 
 
+_NOT_FALLS = (CONTROLLER_ERROR, SAFETY_TRIP, OPERATOR_STOP)
+"""Outcomes that end a trial early without a fall (no ``fall_time_s``): no push is charged with them."""
+
+
 def push_outcomes(records: Iterable[TrialRecord], trial_of: Callable[[str, int, int], Trial]) -> list[PushOutcome]:
     """Every push each record's trial met, with its outcome (module docstring).
 
@@ -151,7 +155,8 @@ def push_outcomes(records: Iterable[TrialRecord], trial_of: Callable[[str, int, 
     Returns:
         The outcomes, record by record in the order given, pushes in time order. A record played without its
         pushes (``--no-push``: ``n_pushes`` 0 where the trial has some) contributes none, nor does a trial ended by
-        its controller's error (the robot did not fall: no push is charged with it).
+        its controller's error, a safety layer's trip or an operator's stop (the robot did not fall: no push is
+        charged with it; they have no fall time).
 
     Raises:
         RecordError: a record's scenario hash, push count or largest push differ from the trial re-drawn.
@@ -162,7 +167,7 @@ def push_outcomes(records: Iterable[TrialRecord], trial_of: Callable[[str, int, 
         if record.scenario_hash and trial.scenario_hash and record.scenario_hash != trial.scenario_hash:
             raise RecordError(f"record {record.run_key} was played on scenario hash {record.scenario_hash}, not "
                               f"{trial.scenario_hash}; break down records with the scenario they were played on")
-        if record.n_pushes == 0 or record.outcome == CONTROLLER_ERROR:
+        if record.n_pushes == 0 or record.outcome in _NOT_FALLS:
             continue
         if record.n_pushes != len(trial.pushes) or not math.isclose(record.push_force_n, trial.push_force_n,
                                                                     rel_tol=1e-9, abs_tol=1e-9):
@@ -238,7 +243,8 @@ def breakdown(records: Sequence[TrialRecord], outcomes: Sequence[PushOutcome], *
                                 sum(1 for o in pushes if o.offset_axis == a)) for a in axes}
             charged = [o for o in pushes if not o.survived]
             errors = sum(r.outcome == CONTROLLER_ERROR for r in mine)
-            falls = sum(not r.success for r in mine) - errors
+            # a safety layer's trip and an operator's stop are no falls either (a hardware trial's)
+            falls = sum(not r.success for r in mine) - errors - sum(r.outcome in _NOT_FALLS[1:] for r in mine)
             per_band[band] = {
                 "by_command": by_command, "by_sector": by_sector, "by_offset_axis": by_axis,
                 "falls": {"trials": len(mine), "falls": falls, "controller_errors": errors,

@@ -200,10 +200,12 @@ class Episode:
     Attributes:
         duration_s: the trial's planned length [s].
         control_dt: control period [s].
-        fell: the episode ended early: the trunk or a non-foot link touched the ground (simulation), or the robot's
-            safety layer latched its damping (a real robot: the layer's tilt check is its fall rule, and a fault or
-            an e-stop ends the trial as well; `safety_events` says which).
-        fall_time_s: when (nan if it did not fall) [s].
+        fell: the robot fell: the trunk or a non-foot link touched the ground (the simulator's fall rule), or the
+            truth's trunk was upside down at the last tick. A robot's safety layer that latched its damping (a trip,
+            an e-stop) ends the episode too, but that is no fall: ``fell`` is False, the episode holds the ticks
+            played up to it (`stopped`), and `safety_events` says why.
+        fall_time_s: when it fell (nan if it did not fall: a trip, an e-stop, an interruption or a controller's
+            error is not a fall) [s].
         t: time of each tick (after the tick's physics) [s].
         command: commanded (vx, vy, yaw_rate) [m/s, m/s, rad/s], shape (k, 3).
         v_base_in_yaw: base horizontal velocity in the yaw-aligned frame (from `base_source`), shape (k, 2) [m/s].
@@ -255,9 +257,25 @@ class Episode:
                               f"{', '.join(BASE_SOURCES)}")
 
     @property
+    def stopped(self) -> bool:
+        """The robot's safety layer latched its damping during the episode (a trip, an e-stop), which ended it.
+
+        That is no fall (``fell`` False): the episode holds the ticks played up to it. The runner ends a hardware
+        trial's episode there (`wbc.arena.runner.run_episode`'s ``stopped``).
+        """
+        return not self.fell and bool(np.any(self.safety_events.to_state == "damped"))
+
+    @property
     def survived_s(self) -> float:
-        """Time survived [s]: the fall time, or the whole episode."""
-        return float(self.fall_time_s) if self.fell else float(self.duration_s)
+        """Time survived [s]: the fall time, the time played when its safety layer stopped it, or the whole episode.
+
+        A stopped episode (`stopped`) counts the time it played, as the arena counts a trial that did not complete.
+        """
+        if self.fell:
+            return float(self.fall_time_s)
+        if self.stopped:
+            return float(self.t[-1]) if len(self.t) else 0.0
+        return float(self.duration_s)
 
     def deadline_misses(self, budget_s: float | None = None) -> int:
         """Ticks whose ``controller.act`` took longer than `budget_s` [s] (default: the control period)."""

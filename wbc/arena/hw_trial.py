@@ -14,10 +14,13 @@ layer (`wbc.hardware.safety.SafeRobot`, on the wall clock) and is seen through i
   nominal pose (`wbc.control.stand.stand_command`) and is in ``run``: the controller then starts, as in simulation,
   from a robot standing at its nominal pose, and its commands pass without a ramp (a ramp's slew would hold back a
   walking controller's swing legs);
-- the episode ends at the safety layer's first trip (its tilt check is the fall rule on a robot; a fault or an
-  e-stop ends the trial too); the robot is then held in the layer's damping for ``settle_s`` while it comes to rest,
-  before the link is closed. The record's outcome tells them apart: ``safety_trip`` for the layer's own checks,
-  ``operator_stop`` for an e-stop (the console's key, the remote);
+- the episode ends at the safety layer's first trip (its tilt check, a fault, an e-stop); the robot is then held in
+  the layer's damping for ``settle_s`` while it comes to rest, before the link is closed. The record's outcome tells
+  them apart: ``safety_trip`` for the layer's own checks (a tilt trip among them: the event's detail says so),
+  ``operator_stop`` for an e-stop (the console's key, the remote). Neither is recorded as a fall: the episode's
+  ``fell`` is False and its ``fall_time_s`` NaN, and the trial counts as the arena counts one that did not complete
+  (a controller's error): not a success, its TTF the share of the trial played before the trip (the episode's last
+  tick);
 - a robot that stopped answering (its own link's state stream stale, the legs' on a quadruped, and still so when
   the link is closed) is a lost link (`LinkLost`, in the result, ``hardware.json`` and the report): nothing then shows
   that the layer's damping reached the robot, which must be checked and powered down by hand;
@@ -99,10 +102,14 @@ __all__ = ["ConnectInterrupted", "HardwareTrialConfig", "HardwareTrialResult", "
            "ResultsInterrupted", "run_hardware_trial"]
 
 HARDWARE_JSON_CLOCKS = {
-    "safety_events": "the safety layer's clock: robot time since the connect; the trial began at trial_started_s",
+    "safety_events": "the safety layer's clock: wall-clock seconds since the robot was connected (the robot's "
+                     "monotonic clock; the simulator's time with --sim); the trial began at trial_started_s",
     "trial_started_s": "the safety layer's clock",
     "operator_events": "trial time: 0 at the trial's first tick, as the episode's t",
     "episode_safety_events": "trial time: the episode file's safety_time is safety_events' time - trial_started_s",
+    "arm_faults": "trial time: 0 at the trial's first tick, as the episode's t (negative: latched during the "
+                  "stand-up); without this entry the file is older and stored the arm bus's clock, the host's "
+                  "monotonic clock, which no other time here is on",
 }
 """What ``hardware.json``'s ``clocks`` says: the clock each of its times is on (a file without it is older: its
 episode's ``safety_time`` is on the safety layer's clock)."""
@@ -191,20 +198,33 @@ class LinkLost:
     hear it either (a cable pulled, a network down, the robot's board off): nothing shows that the damping reached it.
     The same holds for a stream that stopped during the stand-up, before the trial (`StandUpError` then says so).
 
+    A board that froze (or restarted) still sends frames, but with a tick that does not advance: the link refuses
+    them for their tick (`refused_frames`), so no state counts as come, and the robot is not seen to act on anything
+    either. The sentence then says that frames still arrive with a frozen tick, not that none came.
+
     Attributes:
         last_state_s: when the last state came, on the safety layer's clock (seconds since the robot was connected) [s].
         silent_s: how long no state had come when the link was closed (the trip, then the damped settle) [s].
         trial_started_s: when the trial began on that clock [s]; None: it was lost during the stand-up.
+        refused_frames: valid frames the legs' link refused for their tick since the trial began (to the close); None
+            when not known (the stand-up, a robot without such a link).
     """
 
     last_state_s: float
     silent_s: float
     trial_started_s: float | None
+    refused_frames: int | None = None
 
     def describe(self) -> str:
         """What happened and what to do, in one sentence."""
         when = ("during the stand-up" if self.trial_started_s is None
                 else f"{self.last_state_s - self.trial_started_s:.3f} s into the trial")
+        if self.refused_frames:
+            return (f"the robot's state froze: its last fresh state came {self.last_state_s:.3f} s after it was "
+                    f"connected ({when}); frames still arrive, but with a frozen tick ({self.refused_frames} refused "
+                    f"for their tick since the trial began), and none advanced in the {self.silent_s:.3f} s after: "
+                    "its low-level board froze or restarted, and may not act on the damping frames sent since. Check "
+                    "it and power it down by hand")
         return (f"the link to the robot was lost: its last state came {self.last_state_s:.3f} s after it was connected "
                 f"({when}) and none came in the {self.silent_s:.3f} s after: the damping frames sent since may not "
                 "have reached the robot. Check it and power it down by hand")
@@ -214,7 +234,7 @@ class LinkLost:
         said = self.describe()
         return f"{said[0].upper()}{said[1:]}."
 
-    def to_dict(self) -> dict[str, float]:
+    def to_dict(self) -> dict[str, float | int | None]:
         """Its JSON form (``hardware.json``'s ``link_lost``)."""
         return dataclasses.asdict(self)
 
@@ -281,7 +301,9 @@ class HardwareTrialResult:
         link_lost: the robot's state stream had stopped and not come back when the link was closed (`LinkLost`);
             None when it was live to the end (or the robot has no link: the simulator).
         arm_faults: the faults the arm's bus latched (`wbc.hardware.dynamixel.ArmFault`: a servo that stopped
-            answering, its hardware error, the port lost), oldest first, as of the close; each says which joints its
+            answering, its hardware error, the port lost), oldest first, as of the close, each latched at its `time`
+            on the trial's clock (0 at the trial's first tick, as the episode's; negative during the stand-up, moved
+            from the bus's own clock); each says which joints its
             torque policy damped and which it left limp. An arm's fault ends the trial through the safety layer (the
             servo's mode, or its frozen state); it is not a lost link while the legs still answer.
         interrupted: the command was interrupted while the trial played (`Interruption`): the episode is the part
@@ -445,6 +467,7 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
             except (KeyboardInterrupt, IoProcessStopped) as stopped:
                 raise ConnectInterrupted(opening=opening) from stopped
             _stand_up(robot, safe, console, cfg.settle_s, on_wall_clock=wall)
+            stale_frames_before = _stale_frames(hardware.robot)  # before the trial's clock starts
             started_s = safe.now()
             io_robot = hardware.robot if isinstance(hardware.robot, ProcessRobot) else None
             io_cpu0 = io_robot.link_stats().io["cpu_s"] if io_robot is not None else 0.0
@@ -467,7 +490,8 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 # the I/O process stopped by SIGTERM (to the whole command, or to it alone) closed the robot itself:
                 # a request to end, as Ctrl-C is, which keeps what was played
                 episode = run_episode(robot, ctrl, trial.command, trial.duration_s, truth=robot.base_estimate,
-                                      fallen=lambda: safe.safety_state is SafetyState.DAMPED, observer=console,
+                                      fallen=lambda: False, observer=console,
+                                      stopped=lambda: safe.safety_state is SafetyState.DAMPED,
                                       stopped_by=(IoProcessStopped,), on_interrupt=damp_at_once)
             except ControllerFailure as failure:
                 episode, error = failure.episode, failure.record_error(spec.name, trial)
@@ -509,8 +533,14 @@ def _play(cfg: HardwareTrialConfig, *, scenario_published: bool, trial: Trial, s
                 unless_stopped(lambda: _settle(robot, dt, cfg.settle_s,
                                                until=lambda: after_the_trial.requested is not None), None)
                 settling[0] = False
-            link_lost = unless_stopped(lambda: _link_lost(safe, started_s), None) if wall else None
+            stale_frames = unless_stopped(lambda: _stale_frames(hardware.robot), stale_frames)  # the settle's too
+            refused = (stale_frames - stale_frames_before if stale_frames is not None
+                       and stale_frames_before is not None else None)
+            link_lost = unless_stopped(lambda: _link_lost(safe, started_s, refused), None) if wall else None
             arm_faults = unless_stopped(lambda: _latched_faults(hardware.robot), arm_faults)  # the settle's too
+            # from the bus's clock (the robot's wall clock, as the layer's) to the trial's, as the episode's times
+            trial_zero = connected_at[0] + started_s if wall else 0.0
+            arm_faults = tuple(dataclasses.replace(f, time=f.time - trial_zero) for f in arm_faults)
         # the layer's transitions on the trial's clock, as the episode's other times (the layer counts from the
         # connect, and the stand-up before the trial took `started_s` of it)
         episode = dataclasses.replace(episode, base_source="estimator", operator_events=console.log(),
@@ -656,10 +686,11 @@ def _stand_up(robot: EstimatedRobot, safe: SafeRobot, console: OperatorConsole, 
                        f"{safe.safety_state}); nothing was played")
 
 
-def _link_lost(safe: SafeRobot, started_s: float | None) -> LinkLost | None:
+def _link_lost(safe: SafeRobot, started_s: float | None, refused_frames: int | None = None) -> LinkLost | None:
     """A `LinkLost` when the robot's own link brought no state for longer than the layer's stale timeout, now.
 
-    `started_s` is when the trial began on the layer's clock; None during the stand-up.
+    `started_s` is when the trial began on the layer's clock; None during the stand-up. `refused_frames`: the frames
+    the legs' link refused for their tick since then (a frozen board's), None when not known.
 
     The robot's own link is the one its link counters name (`LinkStatsLike.state_age`: a quadruped's legs'), not the
     layer's fresh frames: a robot with an arm joins the arm's bus into every frame, so an arm that stopped answering, or
@@ -673,7 +704,7 @@ def _link_lost(safe: SafeRobot, started_s: float | None) -> LinkLost | None:
     last = now - age if age is not None else safe.last_fresh_time
     if now - last <= safe.config.stale_timeout_s:
         return None
-    return LinkLost(last_state_s=last, silent_s=now - last, trial_started_s=started_s)
+    return LinkLost(last_state_s=last, silent_s=now - last, trial_started_s=started_s, refused_frames=refused_frames)
 
 
 def _latched_faults(robot: object) -> tuple[ArmFault, ...]:
@@ -771,7 +802,6 @@ def _write_results(cfg: HardwareTrialConfig, result: HardwareTrialResult, trial:
 def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]]]:
     record, episode, link, events = result.record, result.episode, result.link, result.safety_events
     period_ms = episode.control_dt * 1e3
-    act = episode.act_s * 1e3
     grant = result.robot.robot.realtime_grant if isinstance(result.robot.robot, HasRealtimeGrant) else None
     rows = [
         ("devices' scheduling (I/O process)",
@@ -782,9 +812,13 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
         ("ticks played", f"{len(episode.t)} of {int(round(episode.duration_s / episode.control_dt))} at "
                          f"{1.0 / episode.control_dt:g} Hz"),
         ("controller act p50 / p99 / max [ms]",
-         f"{record.act_ms_p50:.3f} / {record.act_ms_p99:.3f} / {act.max() if len(act) else math.nan:.3f} "
+         f"{record.act_ms_p50:.3f} / {record.act_ms_p99:.3f} / {record.act_ms_max:.3f} "
          f"(period {period_ms:g} ms)"),
         ("deadline misses (act longer than the period)", f"{record.deadline_misses} of {len(episode.t)}"),
+        ("write-deadline dampings ramped again (the loop stalled past a device's write deadline)",
+         str(record.write_deadline_ramps)),
+        *([("leg frames refused for their tick (stale_frames: a frozen or restarted board)", str(result.stale_frames))]
+          if result.stale_frames is not None else []),
         ("late advances (the loop reached the robot's clock after its deadline)",
          f"{record.late_advances}, worst {record.worst_lateness_ms:.2f} ms"),
         ("process CPU during the episode", f"{result.cpu_s:.2f} s over {result.episode_wall_s:.2f} s wall "
@@ -801,17 +835,21 @@ def _hardware_sections(result: HardwareTrialResult) -> list[tuple[str, list[str]
         body = md_table(["time [s]", "from", "to", "reason", "detail"],
                         [(f"{e.time:.3f}", str(e.from_state), str(e.to_state), e.reason, e.detail) for e in events])
         trips = sum(1 for e in events if e.to_state is SafetyState.DAMPED)
-        lead = (f"The safety layer tripped {trips} time(s); the episode ended at the first trip." if trips else
-                "The safety layer did not trip.")
+        first = next((e for e in events if e.to_state is SafetyState.DAMPED), None)
+        # an interruption's own trip is the command's (its section says so), not a key pressed on this computer
+        remedy = f" What to do: {first.remedy}" if first is not None and result.interrupted is None else ""
+        lead = (f"The safety layer tripped {trips} time(s); the episode ended at the first trip"
+                f" ({first.reason}).{remedy}" if first is not None else "The safety layer did not trip.")
         sections.append(("Safety events", [f"{lead} Times are wall-clock seconds since the robot was connected; the "
                                            "robot was stood up first, and the trial began at "
                                            f"{result.trial_started_s:.3f} s.", "", *body]))
     else:
         sections.append(("Safety events", ["None recorded."]))
     if result.arm_faults:
-        sections.append(("Arm faults", ["The arm's bus latched these faults (times on the bus's clock, not the "
-                                        "layer's), each with the torque policy it applied:", "",
-                                        *(f"- {fault}" for fault in result.arm_faults)]))
+        sections.append(("Arm faults", ["The arm's bus latched these faults (times on the trial's clock, as the "
+                                        "operator's actions; negative: during the stand-up), each with the torque "
+                                        "policy it applied:", "",
+                                        *(f"- at {fault.time:.3f} s: {fault}" for fault in result.arm_faults)]))
     if result.link_lost is not None:
         sections.append(("Link lost", [result.link_lost.sentence()]))
     if result.interrupted is not None:

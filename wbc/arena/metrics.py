@@ -1,7 +1,11 @@
 """Episode metrics: named pure functions of an `Episode` (definitions follow the paper where it gives one).
 
-- ``success``: the episode reached its end without the trunk or a non-foot link touching the ground.
-- ``ttf`` (time to fall): fraction of the episode survived, survived time / episode length.
+- ``success``: the episode reached its end without the trunk or a non-foot link touching the ground, and its robot's
+  safety layer did not stop it (a trip, an e-stop).
+- ``ttf`` (time to fall): fraction of the episode survived, survived time / episode length; an episode that ended
+  early without a fall (a safety layer's trip or e-stop, `Episode.stopped`) counts the time it played
+  (`Episode.survived_s`), as the record counts an interruption or a controller's error, and has no fall time
+  (``fall_time_s`` NaN).
 - ``vlin_err``: mean over the survived ticks of the L2 distance between the base's horizontal velocity (in the
   yaw-aligned frame) and the commanded (vx, vy) [m/s].
 - ``vang_err``: mean over the survived ticks of |base yaw rate - commanded yaw rate| [rad/s].
@@ -20,9 +24,12 @@
 - ``arm_travel_rad``: total arm joint travel, sum over ticks and arm joints of |delta q| [rad].
 - ``safety_trips``: times the robot's safety layer latched its damping (0 without a safety layer).
 - ``deadline_misses``: control ticks whose ``controller.act`` took longer than the control period (wall time).
-- ``act_ms_p50`` / ``act_ms_p99``: median and 99th percentile of the ``controller.act`` wall time [ms].
+- ``act_ms_p50`` / ``act_ms_p99`` / ``act_ms_max``: median, 99th percentile and largest ``controller.act`` wall
+  time [ms].
+- ``write_deadline_ramps``: times a robot's device damped itself on its write deadline during the episode and its
+  safety layer ramped it again (the layer's ``write_deadline`` events; 0 without one).
 
-The last three depend on the machine that played the episode, as its wall time does.
+The last five depend on the machine that played the episode, as its wall time does.
 """
 
 from __future__ import annotations
@@ -47,6 +54,8 @@ __all__ = [
     "deadline_misses",
     "act_ms_p50",
     "act_ms_p99",
+    "act_ms_max",
+    "write_deadline_ramps",
     "power_w",
     "vlin_err_by_s",
     "vang_err_by_s",
@@ -60,8 +69,8 @@ __all__ = [
 
 
 def success(ep: Episode) -> bool:
-    """Survived the whole episode."""
-    return not ep.fell
+    """Played the whole episode: no fall, and no safety layer's stop (`Episode.stopped`)."""
+    return not ep.fell and not ep.stopped
 
 
 def ttf(ep: Episode) -> float:
@@ -123,6 +132,16 @@ def act_ms_p50(ep: Episode) -> float:
 def act_ms_p99(ep: Episode) -> float:
     """99th percentile of the ``controller.act`` wall time [ms]."""
     return float(np.percentile(ep.act_s, 99) * 1e3) if len(ep.act_s) else float("nan")
+
+
+def act_ms_max(ep: Episode) -> float:
+    """Largest ``controller.act`` wall time [ms]."""
+    return float(np.max(ep.act_s) * 1e3) if len(ep.act_s) else float("nan")
+
+
+def write_deadline_ramps(ep: Episode) -> int:
+    """Times a device damped itself on its write deadline and the safety layer ramped the robot again."""
+    return int(np.count_nonzero(ep.safety_events.reason == "write_deadline"))
 
 
 def power_w(ep: Episode) -> float:
@@ -188,6 +207,8 @@ METRICS: dict[str, Callable[[Episode], float | bool | int | str]] = {
     "deadline_misses": deadline_misses,
     "act_ms_p50": act_ms_p50,
     "act_ms_p99": act_ms_p99,
+    "act_ms_max": act_ms_max,
+    "write_deadline_ramps": write_deadline_ramps,
     "power_w": power_w,
     "vlin_err_by_s": vlin_err_by_s,
     "vang_err_by_s": vang_err_by_s,

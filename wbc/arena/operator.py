@@ -9,6 +9,7 @@ does what they mean (`OPERATOR_ACTIONS`) and logs each action with the tick's ti
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import Protocol, runtime_checkable
@@ -74,14 +75,19 @@ class OperatorConsole:
 
     Args:
         keys: the key source (None: nobody at the keys; the console only passes ticks on).
-        estop: the software e-stop to call on an ``estop`` key (`SafeRobot.estop`).
+        estop: the software e-stop to call on an ``estop`` key (`SafeRobot.estop`), with who stopped it (``operator
+            key 'e'``) for its event.
         then: the next observer (a viewer), called after the keys are handled; None: none.
+        say: where the acknowledgement of a marked push goes, one line (default: standard error); an e-stop is
+            acknowledged by the safety layer's own line.
     """
 
-    def __init__(self, keys: KeySource | None, estop: Callable[[], None], then: TickObserver | None = None) -> None:
+    def __init__(self, keys: KeySource | None, estop: Callable[[str], None], then: TickObserver | None = None, *,
+                 say: Callable[[str], None] | None = None) -> None:
         self.keys = keys
         self.estop = estop
         self.then = then
+        self.say = say if say is not None else _to_stderr
         self._log: list[tuple[float, str, str]] = []
 
     def before_trial(self, t: float) -> None:
@@ -93,7 +99,7 @@ class OperatorConsole:
         if self.keys is not None:
             for key in self.keys.poll(t):
                 if OPERATOR_ACTIONS.get(key.lower()) == "estop":
-                    self.estop()
+                    self.estop(f"operator key {key!r}, before the trial")
 
     def __call__(self, t: float, robot: Robot, controller: Controller, command: VelocityCommand) -> None:
         """One tick (the `wbc.arena.runner.TickObserver` signature)."""
@@ -103,11 +109,20 @@ class OperatorConsole:
                 if action is None:
                     continue
                 if action == "estop":
-                    self.estop()
+                    self.estop(f"operator key {key!r} at {t:.2f} s of the trial")
                 self._log.append((t, key, action))
+                if action == "push":
+                    self.say(f"operator: key {key!r}: a push by hand marked at {t:.2f} s of the trial")
         if self.then is not None:
             self.then(t, robot, controller, command)
 
     def log(self) -> OperatorLog:
         """Every action taken so far."""
         return OperatorLog.of(self._log)
+
+
+def _to_stderr(line: str) -> None:
+    try:
+        print(line, file=sys.stderr)
+    except OSError:
+        pass  # the terminal was closed (SIGHUP): the action is logged all the same

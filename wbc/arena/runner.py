@@ -151,6 +151,7 @@ def run_episode(
     *,
     truth: Callable[[], BaseTruth] | None = None,
     fallen: Callable[[], bool] | None = None,
+    stopped: Callable[[], bool] | None = None,
     observer: TickObserver | None = None,
     divergence: DivergenceCheck | None = None,
     duration_option: str | None = None,
@@ -169,6 +170,9 @@ def run_episode(
             `TruthSource`.
         fallen: returns True when the trunk or a non-foot link touches the ground; default: the robot's own, if it
             is a `FallDetector`. (The truth's trunk upside down at the last tick is a fall there too.)
+        stopped: returns True when the robot was stopped without a fall (a hardware trial's safety layer latched its
+            damping: a trip or an e-stop); checked after `fallen`, it ends the episode at that tick, which is not a
+            fall (``fell`` False, the ticks played kept: `Episode.stopped`). None: never.
         observer: called after every tick (e.g. a viewer); None costs nothing.
         divergence: check every tick that the simulation has not blown up (a few NumPy reductions per tick), and,
             if the robot is a `SimulatorHealth`, that the simulator did not reset itself after a failed step;
@@ -307,6 +311,8 @@ def run_episode(
                 observer((k + 1) * dt, robot, controller, cmd)
             if fallen():
                 fell, fall_time = True, (k + 1) * dt
+                break
+            if stopped is not None and stopped():
                 break
         else:
             # a trunk upside down at the end has not survived, touching the ground or not (flung into the air by a push,

@@ -80,10 +80,12 @@ class TrialRecord:
         success: the episode reached its end without a fall (`wbc.arena.metrics.success`), a trip or an error.
         outcome: how the trial ended, one of `OUTCOMES`: ``success``, ``fall``, ``safety_trip``,
             ``controller_error``, ``operator_stop`` or ``diverged``.
-        ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error, a divergence
-            or an interruption, the fraction played before it, in [0, 1].
-        fall_time_s: when the robot fell, NaN if it did not (after a controller error too); for an interrupted
-            hardware trial, when it was interrupted [s].
+        ttf: time to fall, the fraction of the episode survived, in (0, 1]; after a controller error, a divergence,
+            a safety layer's trip, an e-stop or an interruption, none of them a fall, the fraction played before it,
+            in [0, 1].
+        fall_time_s: when the robot fell (outcome ``fall``), NaN if it did not: a controller error, a divergence, a
+            safety trip, an operator's stop and an interruption are not falls (when they came is `ttf` times the
+            trial's length, and the episode's last tick) [s].
         vlin_err: mean horizontal velocity tracking error [m/s]; this and the other episode metrics down to
             `arm_travel_rad`, `power_w` and the per-second profiles are NaN (empty) for a diverged trial.
         vang_err: mean yaw-rate tracking error [rad/s].
@@ -114,10 +116,16 @@ class TrialRecord:
         deadline_misses: control ticks whose ``controller.act`` took longer than the control period.
         act_ms_p50: median ``controller.act`` wall time [ms].
         act_ms_p99: its 99th percentile [ms].
+        act_ms_max: its largest [ms].
+        write_deadline_ramps: times during the trial a robot's device damped itself on its write deadline (the
+            control loop stalled past it, not past the stale timeout) and the safety layer ramped the robot again from
+            its measured pose (its ``write_deadline`` events); not a trip, and the trial goes on (0 without a
+            safety layer). Timed by the wall clock, as the deadline misses are.
         wall_s: wall time the trial took to play [s]: in simulation from its robot's and controller's build to its
             last tick; on a robot (``wbc hw run``) its episode alone, from its first tick to its last, without the
             controller's build, the connect, the stand-up and the settle (``hardware.json``'s ``episode_wall_s``).
-            This field, `deadline_misses`, `act_ms_p50` and `act_ms_p99` depend on the machine (and so, on a real
+            This field, `deadline_misses`, `act_ms_p50`, `act_ms_p99`, `act_ms_max` and `write_deadline_ramps`
+            depend on the machine (and so, on a real
             robot, do `late_advances` and `worst_lateness_ms`).
         error: for a ``controller_error``, what failed: the controller, band, seed, trial, tick and time, the
             exception's type and message, and the controller's own ``file:line``; for a ``diverged`` trial, what
@@ -176,6 +184,8 @@ class TrialRecord:
     deadline_misses: int = 0
     act_ms_p50: float = float("nan")
     act_ms_p99: float = float("nan")
+    act_ms_max: float = float("nan")
+    write_deadline_ramps: int = 0
     wall_s: float
     error: str = ""
     ticks: int = 0
@@ -235,8 +245,8 @@ class TrialRecord:
                 reaches a mean. A controller error found first wins.
             interrupted: the hardware trial's command was interrupted while it played (Ctrl-C, SIGTERM, a hangup;
                 `wbc.arena.runner.EpisodeInterrupted`): when, for the record's `error`; the outcome is then
-                ``operator_stop``, `episode` the part played up to the interruption, which is the record's
-                `fall_time_s` (its `ttf` the fraction played). Not a success, though the robot did not fall.
+                ``operator_stop``, `episode` the part played up to the interruption (its `ttf` the fraction
+                played; `fall_time_s` NaN). Not a success, though the robot did not fall.
         """
         metrics = compute_metrics(episode)
         counts = check_counters(counters)
@@ -251,7 +261,7 @@ class TrialRecord:
                 error = diverged
         elif interrupted:
             played = float(episode.t[-1]) if len(episode.t) else 0.0
-            metrics.update(success=False, ttf=min(1.0, played / episode.duration_s), fall_time_s=played)
+            metrics.update(success=False, ttf=min(1.0, played / episode.duration_s), fall_time_s=math.nan)
             outcome, error = OPERATOR_STOP, interrupted
         else:
             outcome = _outcome(episode)
@@ -601,13 +611,15 @@ def episode_outcome(episode: Episode) -> str:
 
 
 def _outcome(episode: Episode) -> str:
-    """How a played episode ended: success, a fall, or the safety layer's trip (an operator's, or its own)."""
-    if not episode.fell:
-        return SUCCESS
+    """How a played episode ended: success, a fall, or the safety layer's trip (an operator's, or its own).
+
+    A trip ends a hardware trial's episode without a fall (`Episode.stopped`); an episode written before that was
+    so stored the trip as a fall (``fell`` True), which its trip still tells apart.
+    """
     tripped = episode.safety_events.reason[episode.safety_events.to_state == "damped"]
     if len(tripped):
         return OPERATOR_STOP if str(tripped[0]) in _OPERATOR_REASONS else SAFETY_TRIP
-    return FALL
+    return FALL if episode.fell else SUCCESS
 
 
 _KINDS: dict[str, type] = {f.name: typing.get_type_hints(TrialRecord)[f.name] for f in dataclasses.fields(TrialRecord)}
@@ -624,7 +636,8 @@ _REPORTED = ("fallbacks", "wbc_failures")
 _MOTION_METRICS = ("vlin_err", "vang_err", "max_roll_deg", "max_pitch_deg", "energy_j", "arm_travel_rad", "power_w")
 """The metrics computed from the robot's motion: NaN for a diverged trial, whose motion is the simulator's blow-up."""
 
-MACHINE_TIMED = ("deadline_misses", "act_ms_p50", "act_ms_p99", "wall_s", CHECKSUM)
+MACHINE_TIMED = ("deadline_misses", "act_ms_p50", "act_ms_p99", "act_ms_max", "write_deadline_ramps", "wall_s",
+                 CHECKSUM)
 """The ``trials.csv`` columns that depend on the machine's clock: two plays of the same simulated trial agree on every
 other column, to the last bit, and differ in these (the checksum covers the timed fields, so it differs with them)."""
 

@@ -24,7 +24,7 @@ from wbc.arena.controller_failure import printed_error
 from wbc.arena.hw_trial import HardwareTrialResult
 from wbc.arena.report import format_table, format_verdict, resumed_note
 from wbc.arena.summary import Summary
-from wbc.arena.trial_record import TrialRecord
+from wbc.arena.trial_record import CONTROLLER_ERROR, FALL, TrialRecord
 from wbc.control.controller_contract import ControllerCheck
 from wbc.control.registry import NAME_FORMS, ControllerListing
 from wbc.hardware.capabilities import HasRealtimeGrant
@@ -33,6 +33,7 @@ from wbc.hardware.dynamixel.control_table import HARDWARE_ERROR_BITS, OperatingM
 from wbc.hardware.emulators import BusStats
 from wbc.hardware.pty_registry import registry_dir
 from wbc.hardware.realtime import RealtimeGrant
+from wbc.hardware.safety import SafetyState
 from wbc.hardware.unitree import LEG_WIRES, REJECT_REASONS
 from wbc.scenario.scenario_check import ScenarioCheck
 from wbc.tools.arm_momentum import ArmMomentumTrial
@@ -940,9 +941,13 @@ def print_hw_run(result: HardwareTrialResult) -> None:
     """``wbc hw run``: the trial's outcome, what it skipped, its timing and where its results are."""
     r, ep = result.record, result.episode
     robot = result.robot
-    outcome = ("completed" if r.success else f"ENDED by a controller error: {printed_error(r.error)}" if r.error else
-               f"ENDED at {r.fall_time_s:.2f} s by the safety layer ({ep.safety_events.reason[-1]})"
-               if r.safety_trips else f"ENDED at {r.fall_time_s:.2f} s")
+    ended_s = float(ep.t[-1]) if len(ep.t) else 0.0  # a trip, a stop, an error is no fall: its own time, not one
+    outcome = ("completed" if r.success else
+               f"ENDED by a controller error: {printed_error(r.error)}" if r.outcome == CONTROLLER_ERROR else
+               f"STOPPED: {printed_error(r.error)}" if r.error else
+               f"ENDED at {ended_s:.2f} s by the safety layer ({ep.safety_events.reason[-1]})"
+               if r.safety_trips else f"FELL at {r.fall_time_s:.2f} s" if r.outcome == FALL else
+               f"ENDED at {ended_s:.2f} s ({r.outcome})")
     print(f"{r.controller} on {robot.description.name} (arm {robot.description.arm_mode}, {robot.backend}, "
           f"{robot.target}): {r.scenario} band {r.band} seed {r.seed} trial {r.trial}, {ep.duration_s:g} s: {outcome}")
     for note in result.notes:
@@ -953,7 +958,8 @@ def print_hw_run(result: HardwareTrialResult) -> None:
         print_realtime_grant("controller loop", result.controller_realtime)
     print(f"  metrics ({r.metrics_source}): V_lin err {r.vlin_err:.3f} m/s, V_ang err {r.vang_err:.3f} rad/s, max "
           f"roll {r.max_roll_deg:.2f} deg, max pitch {r.max_pitch_deg:.2f} deg, energy {r.energy_j:.1f} J")
-    print(f"  timing: act p50 {r.act_ms_p50:.3f} ms, p99 {r.act_ms_p99:.3f} ms (period {ep.control_dt * 1e3:g} ms); "
+    print(f"  timing: act p50 {r.act_ms_p50:.3f} ms, p99 {r.act_ms_p99:.3f} ms, max {r.act_ms_max:.3f} ms (period "
+          f"{ep.control_dt * 1e3:g} ms); "
           f"deadline misses {r.deadline_misses} of {len(ep.t)}; late advances {r.late_advances} (worst "
           f"{r.worst_lateness_ms:.2f} ms); CPU {result.cpu_s:.2f} s"
           + (f" + I/O process {result.io_cpu_s:.2f} s" if result.io_cpu_s is not None else "")
@@ -962,16 +968,24 @@ def print_hw_run(result: HardwareTrialResult) -> None:
         link = result.link.as_dict(prefix="")
         print(f"  link: {link.get('frames_sent', 0)} frames sent, {link.get('damping_sent', 0)} of them the link's own "
               "damping (before the first state, past the write deadline, closing; not the safety layer's), "
-              f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states")
+              f"{link.get('deadline_trips', 0)} write-deadline trips, {link.get('rejected_states', 0)} rejected states"
+              + (f", {result.stale_frames} frames refused for their tick (a frozen or restarted board)"
+                 if result.stale_frames is not None else ""))
         if "io/states_published" in link:
             print(f"  I/O process: {link['io/states_published']} states published, "
                   f"{link['io/commands_forwarded']} commands forwarded, {link['io/bells_missed']} doorbells missed")
     clock = "robot seconds" if robot.backend == "sim" else "wall seconds since connected"
-    print(f"  safety: {r.safety_trips} trip(s) in the trial; transitions ({clock}, the trial "
+    print(f"  safety: {r.safety_trips} trip(s) in the trial, {r.write_deadline_ramps} write-deadline damping(s) "
+          f"ramped again; transitions ({clock}, the trial "
           f"began at {result.trial_started_s:.2f} s): "
           + ", ".join(f"{e.time:.2f} s {e.to_state} ({e.reason})" for e in result.safety_events))
+    trips = [e for e in result.safety_events if e.to_state is SafetyState.DAMPED and e.time >= result.trial_started_s]
+    if trips:  # the trip that ended the trial: what it was and what to do about it
+        print(f"  {trips[0].reason}: {trips[0].detail}")
+        if trips[0].remedy:
+            print(f"  what to do: {trips[0].remedy}")
     for fault in result.arm_faults:  # the arm's own, apart from the layer's trip it caused
-        print(f"  arm bus: {fault}")
+        print(f"  arm bus, at {fault.time:.2f} s of the trial: {fault}")
     if len(ep.operator_events):
         print("  operator: " + ", ".join(f"{t:.2f} s {a}" for t, _, a in ep.operator_events.rows()))
     print(f"  results: {result.out_dir} (trials.csv, report.md, hardware.json, episodes/)")

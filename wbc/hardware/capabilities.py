@@ -44,9 +44,10 @@ if TYPE_CHECKING:
     from wbc.hardware.dynamixel.arm_fault import ArmFault
 
 __all__ = ["ConfigurationEstimate", "DampsWhile", "FallDetector", "HasLatchedFaults", "HasLinkStats",
-           "HasRealtimeGrant", "HasSafetyEvents", "HasThreadStats", "HeldJoints", "HeldRamp", "LinkStatsLike",
-           "MotorNames", "MotorStatus", "MotorStatusSource", "Pushable", "RemoteButtons", "RemoteEstopLatch",
-           "RemoteSource", "SafetyEventLike", "SimulatorHealth", "TruthSource", "WallClock", "WriteDeadlineTrips"]
+           "HasRealtimeGrant", "HasSafetyEvents", "HasThreadStats", "HeldJoints", "HeldRamp", "JoinedDevices",
+           "LinkStatsLike", "MotorNames", "MotorStatus", "MotorStatusSource", "Pushable", "RemoteButtons",
+           "RemoteEstopLatch", "RemoteSource", "SafetyEventLike", "SimulatorHealth", "TruthSource", "WallClock",
+           "WriteDeadlineTrips"]
 
 
 @runtime_checkable
@@ -168,6 +169,21 @@ class WriteDeadlineTrips(Protocol):
     @property
     def deadline_trips(self) -> int:
         """How many times since `connect` a write deadline expired and the device switched to damping."""
+
+
+@runtime_checkable
+class JoinedDevices(Protocol):
+    """A robot whose frame joins several devices' states (the legs' link, the arm's bus), each told apart.
+
+    The joined frame goes stale when any device's state does, and each device damps on its own write deadline; whoever
+    watches over the motors (`wbc.hardware.safety.SafeRobot`) names which one in what it reports.
+    """
+
+    def state_ages(self) -> dict[str, float]:
+        """By device (``legs``, ``arm``): how long its state's tick had stood still at the last `read` [s]."""
+
+    def deadline_trips_by_device(self) -> dict[str, int]:
+        """By device (``legs``, ``arm``): its write-deadline trips since `connect` (their sum is `deadline_trips`)."""
 
 
 class LinkStatsLike(Protocol):

@@ -201,7 +201,8 @@ class QuadrupedArmRobot(Robot):
         self._tick = 0
         self._legs_tick: int | None = None
         self._arm_tick: int | None = None
-        self._arm_fresh_at = -np.inf
+        self._legs_fresh_at = self._arm_fresh_at = -np.inf
+        self._read_at = -np.inf  # when `read` last ran, on `wall_time` [s]
         self._arm_state: RobotState | None = None
 
     # -- Robot ----------------------------------------------------------------------------------------------------
@@ -238,9 +239,11 @@ class QuadrupedArmRobot(Robot):
         legs = self.legs.read()
         fresh = self._legs_tick is not None and legs.tick != self._legs_tick
         self._legs_tick = legs.tick
+        now = self._read_at = self.wall_time()
+        if fresh:
+            self._legs_fresh_at = now
         if self.arm is not None:
             arm = self.arm.read()
-            now = self.wall_time()
             if arm.tick != self._arm_tick:
                 self._arm_tick, self._arm_fresh_at = arm.tick, now
             self._arm_state = arm
@@ -323,6 +326,19 @@ class QuadrupedArmRobot(Robot):
     def deadline_trips(self) -> int:
         """The legs' write-deadline trips plus the arm's (`WriteDeadlineTrips`); a device without one counts none."""
         return sum(part.deadline_trips for part in (self.legs, self.arm) if isinstance(part, WriteDeadlineTrips))
+
+    # -- JoinedDevices --------------------------------------------------------------------------------------------
+    def state_ages(self) -> dict[str, float]:
+        """How long the legs' tick, and the arm's, had stood still at the last `read` [s] (`JoinedDevices`)."""
+        ages = {"legs": self._read_at - self._legs_fresh_at}
+        if self.arm is not None:
+            ages["arm"] = self._read_at - self._arm_fresh_at
+        return ages
+
+    def deadline_trips_by_device(self) -> dict[str, int]:
+        """The legs' write-deadline trips and the arm's, apart (`JoinedDevices`); a device without one is left out."""
+        return {name: part.deadline_trips for name, part in (("legs", self.legs), ("arm", self.arm))
+                if isinstance(part, WriteDeadlineTrips)}
 
     @property
     def faults(self) -> tuple[ArmFault, ...]:

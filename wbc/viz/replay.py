@@ -11,6 +11,7 @@ Every problem names the file and the field at fault.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -84,6 +85,9 @@ class StoredEpisode:
             ``run.json`` records), which a command warns about when it is not the published one
             (`wbc.scenario.warn_if_unpublished`).
         record: the trial's row of ``trials.csv`` (its outcome and error), None where there is none to read.
+        arm_faults: a hardware trial's arm faults (``hardware.json``), as (trial time [s], what), where the file
+            stores them at trial time (its ``clocks`` names ``arm_faults``; an older file's are on another clock and
+            are not drawn).
     """
 
     path: Path
@@ -93,6 +97,7 @@ class StoredEpisode:
     episode: Episode
     scenario: Scenario
     record: TrialRecord | None = None
+    arm_faults: tuple[tuple[float, str], ...] = ()
 
     def content(self) -> SceneContent:
         """What to draw: the controller's robot (arm mode) on the trial's ground."""
@@ -177,6 +182,7 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
         raise ViewerError(f"{run_json}: field scenario.hash: {scenario_path} has changed since the run "
                           f"(hash {scenario.hash[:12]} != {scenario_hash[:12]}); restore that version to replay")
     trial = scenario.trial(band, seed, index)
+    arm_faults: tuple[tuple[float, str], ...] = ()
     if played_on is not None:  # on a robot: its own ground (unknown, drawn flat) and none of the scenario's pushes
         try:
             get_robot(played_on)
@@ -184,6 +190,7 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
             raise ViewerError(f"{run_json}: field robot: {exc}") from None
         trial = dataclasses.replace(trial, robot=played_on, terrain=TerrainConfig(kind="flat"), pushes=())
         episode = _on_trial_clock(root / "hardware.json", episode)
+        arm_faults = _arm_faults(root / "hardware.json")
     if episode.duration_s != trial.duration_s:  # a trial played shorter (`wbc hw run --seconds`): the one played
         trial = dataclasses.replace(trial, duration_s=float(episode.duration_s))
     arm_mode = _recorded_arm_mode(run_json, identity, controller)
@@ -193,7 +200,8 @@ def load_stored_episode(results_dir: str | Path, index: int, *, controller: str 
                           f"{trial.robot} driven by {controller}; the file belongs to another run: store it again "
                           "with `wbc run --save-episodes`")
     return StoredEpisode(path=path, controller=controller, arm_mode=arm_mode, trial=trial, episode=episode,
-                         scenario=scenario, record=_record(root, controller, band, seed, index))
+                         scenario=scenario, record=_record(root, controller, band, seed, index),
+                         arm_faults=arm_faults)
 
 
 def _on_trial_clock(hardware_json: Path, episode: Episode) -> Episode:
@@ -212,6 +220,22 @@ def _on_trial_clock(hardware_json: Path, episode: Episode) -> Episode:
     if not isinstance(started, (int, float)) or isinstance(started, bool):
         return episode
     return dataclasses.replace(episode, safety_events=episode.safety_events.shifted(-float(started)))
+
+
+def _arm_faults(hardware_json: Path) -> tuple[tuple[float, str], ...]:
+    """The arm faults of a ``hardware.json`` that stores them at trial time, as (time [s], what); else none."""
+    try:
+        info = read_json(hardware_json)
+    except (InputFileError, ValueError):
+        return ()
+    if not isinstance(info, dict) or "arm_faults" not in (info.get("clocks") or {}):
+        return ()
+    faults = []
+    for fault in info.get("arm_faults") or ():
+        t = fault.get("time") if isinstance(fault, dict) else None
+        if isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t):
+            faults.append((float(t), f"arm fault: {fault.get('kind')} (IDs {fault.get('ids')})"))
+    return tuple(faults)
 
 
 def _record(root: Path, controller: str, band: str, seed: int, index: int) -> TrialRecord | None:

@@ -41,7 +41,7 @@ from wbc.viz.player import KeyboardControls, Player, PlayerConfig
 from wbc.viz.recording import Recording, frame_key
 from wbc.viz.replay import StoredEpisode
 from wbc.viz.server import MeshcatServer, ServerConfig
-from wbc.viz.signals import TrialSignals
+from wbc.viz.signals import Mark, TrialSignals
 from wbc.viz.trial_export import ExportedScenario, export_trial
 
 __all__ = ["ABResult", "RecordingTime", "ViewConfig", "ViewResult", "replay_ab", "replay_episode", "view_ab",
@@ -330,6 +330,9 @@ def replay_episode(stored: StoredEpisode, cfg: ViewConfig) -> ViewResult:
         signals = TrialSignals.of_episode(stored.controller, stored.episode,
                                           outcome=record.outcome if record is not None else None,
                                           error=record.error if record is not None else "").thinned(cfg.record_fps)
+        # a hardware trial's arm faults, beside the safety layer's trip they caused
+        signals.marks = sorted(signals.marks + [Mark(t, "safety", what) for t, what in stored.arm_faults],
+                               key=lambda m: m.t)
         written = save_trial_page(cfg.record, rec, [signals], duration=stored.trial.duration_s,
                                   title=f"{stored.controller}: {_trial_name(stored.trial)} (replay)")
         _open_recorded(cfg, written)

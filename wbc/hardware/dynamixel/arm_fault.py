@@ -58,7 +58,8 @@ class ArmFault:
     """A bus fault the backend latched (until `close`; a new `connect` starts afresh).
 
     Attributes:
-        time: when it was latched, on the backend's clock (the monotonic clock on a robot) [s].
+        time: when it was latched, on the backend's clock (the monotonic clock on a robot) [s]; a hardware trial
+            records it on the trial's clock instead (`wbc.arena.hw_trial.HardwareTrialResult.arm_faults`).
         kind: one of `FAULT_KINDS`.
         ids: the servos at fault (every servo for ``port_lost``).
         detail: what was seen (the SDK's result, the hardware error bits, the exception).

@@ -49,6 +49,8 @@ def state_dtype(num_joints: int) -> np.dtype:
         ("foot_force", "<f8", (4,)), ("status_n", "<i8"), ("motor_mode", "<i8", (MAX_STATUS,)),
         ("motor_temperature", "<f8", (MAX_STATUS,)), ("has_remote", "<i8"), ("remote", "u1", (REMOTE_SIZE,)),
         ("deadline_trips", "<i8"), ("remote_estops", "<i8"), ("remote_estop_latched", "<i8"),
+        # `JoinedDevices`: the legs' and the arm's state ages [s] (NaN: no such device) and deadline trips (-1: none)
+        ("legs_age", "<f8"), ("arm_age", "<f8"), ("legs_deadline_trips", "<i8"), ("arm_deadline_trips", "<i8"),
     ])
 
 

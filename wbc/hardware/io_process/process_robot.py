@@ -349,6 +349,34 @@ class ProcessRobot(Robot):
         _, record = self._newest()
         return 0 if record is None else int(record["deadline_trips"])
 
+    def state_ages(self) -> dict[str, float]:
+        """By device, how long its state's tick had stood still as of the newest published state (`JoinedDevices`).
+
+        Empty for a robot in the I/O process that does not tell its devices apart (a bare quadruped).
+
+        Raises:
+            RobotLinkError: the I/O process failed or died.
+        """
+        self._check()
+        _, record = self._newest()
+        if record is None:
+            return {}
+        return {device: float(record[f"{device}_age"]) for device in ("legs", "arm")
+                if not np.isnan(record[f"{device}_age"])}
+
+    def deadline_trips_by_device(self) -> dict[str, int]:
+        """By device, its write-deadline trips as of the newest published state (`JoinedDevices`).
+
+        Raises:
+            RobotLinkError: the I/O process failed or died.
+        """
+        self._check()
+        _, record = self._newest()
+        if record is None:
+            return {}
+        return {device: int(record[f"{device}_deadline_trips"]) for device in ("legs", "arm")
+                if record[f"{device}_deadline_trips"] >= 0}
+
     @property
     def motor_names(self) -> tuple[str, ...]:
         """One name per entry of `motor_status`, as the robot built in the I/O process names them (`MotorNames`)."""

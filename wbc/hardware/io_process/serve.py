@@ -35,6 +35,7 @@ blocked from the process's start (`HELD_AT_START`) until they are set so.
 from __future__ import annotations
 
 import base64
+import math
 import os
 import pickle
 import select
@@ -51,6 +52,7 @@ from wbc.errors import IoProcessStopped, RobotLinkError
 from wbc.hardware.capabilities import (
     HasLatchedFaults,
     HeldJoints,
+    JoinedDevices,
     MotorStatusSource,
     RemoteEstopLatch,
     RemoteSource,
@@ -207,6 +209,7 @@ class _Server:
         # takes the devices' locks) on every call, too dear for the link thread's every state
         self.latch = robot if provides(robot, RemoteEstopLatch) else None
         self.trips = robot if provides(robot, WriteDeadlineTrips) else None
+        self.joined = robot if provides(robot, JoinedDevices) else None
         self.held = robot if provides(robot, HeldJoints) else None
         self.remote_of = robot.remote if provides(robot, RemoteSource) else None
         self.status_of = robot.motor_status if provides(robot, MotorStatusSource) else None
@@ -352,6 +355,11 @@ class _Server:
         else:
             rec["status_n"] = -1
         rec["deadline_trips"] = self.trips.deadline_trips if self.trips is not None else 0
+        ages = self.joined.state_ages() if self.joined is not None else {}
+        trips = self.joined.deadline_trips_by_device() if self.joined is not None else {}
+        for device in ("legs", "arm"):
+            rec[f"{device}_age"] = ages.get(device, math.nan)
+            rec[f"{device}_deadline_trips"] = trips.get(device, -1)
         latch = self.latch
         rec["remote_estops"] = latch.remote_estops if latch is not None else 0
         rec["remote_estop_latched"] = latch.remote_estop_latched if latch is not None else False

@@ -30,9 +30,12 @@ REMEDIES: dict[str, str] = {
     "bad_state": "The robot reported a state that is not a state (NaN, or an IMU quaternion off unit length): check "
                  "that --robot names this robot and that the link's rejected-frame counts are 0 (`wbc hw check`), "
                  "then power-cycle the robot's low-level board if it persists.",
-    "stale_state": "The robot stopped answering, or the control loop stalled: check the cable or network and the "
-                   "link's counters (`wbc hw check`), close other programs on this computer, and keep the I/O process "
-                   "on (the default).",
+    "stale_state": "The state went stale, and the detail says whose: the legs' stream (the robot stopped answering "
+                   "or its board froze: check the cable or network, the robot's power and the link's counters with "
+                   "`wbc hw check`), the arm's state (a servo stopped answering: check the arm's cable and power, "
+                   "then its servos with `wbc hw check`), or the host's control loop (this computer stalled the "
+                   "controller: close other programs, keep the I/O process on, the default, and ask for real-time "
+                   "scheduling).",
     "joint_range": "Put the robot in a pose inside its joint ranges (hung in its harness) and check it with "
                    "`wbc hw check`.",
     "over_power": "The motors drew more power than the limit: let the robot come to rest, look for a joint that "

@@ -39,6 +39,7 @@ import numpy as np
 from wbc.errors import SafetyResetError
 from wbc.hardware.capabilities import (
     HeldJoints,
+    JoinedDevices,
     MotorNames,
     MotorStatusSource,
     RemoteButtons,
@@ -48,12 +49,15 @@ from wbc.hardware.capabilities import (
     WriteDeadlineTrips,
     provides,
 )
+from wbc.hardware.dynamixel.arm_fault import MODE_CORRUPT, MODE_HARDWARE_ERROR, MODE_NO_ANSWER, MODE_PORT_LOST
+from wbc.hardware.dynamixel.control_table import HARDWARE_ERROR_BITS
 from wbc.hardware.robot import Robot
 from wbc.hardware.safety.config import SafetyConfig
 from wbc.hardware.safety.events import SafetyEvent
 from wbc.hardware.safety.limits import position_range
 from wbc.hardware.safety.ramp import CommandRamp
 from wbc.hardware.safety.state import SafetyState
+from wbc.hardware.unitree.layout import MOTOR_STATE_MODES
 from wbc.robots.conventions import quat_to_matrix
 from wbc.robots.euler import rpy_of
 from wbc.robots.joint_table import JointTable
@@ -97,11 +101,14 @@ class SafeRobot(Robot):
         self._last_fresh_time = -math.inf
         self._over_power_frames = 0
         self._deadline_trips: int | None = None  # the robot's write-deadline trips as last seen (`WriteDeadlineTrips`)
+        self._device_trips: dict[str, int] = {}  # the same by device, as last seen (`JoinedDevices`)
+        self._last_read_time = -math.inf  # when `read` last ran, on the layer's clock [s]
         self._remote_estops = 0  # the robot's own L2 + B latches as last seen (`RemoteEstopLatch`)
         # The robot's capabilities, resolved once: isinstance against a runtime-checkable protocol runs the protocol's
         # properties (a device's lock, the I/O process's state block) on every call, too dear for every read and write.
         self._latch: RemoteEstopLatch | None = robot if provides(robot, RemoteEstopLatch) else None
         self._trips: WriteDeadlineTrips | None = robot if provides(robot, WriteDeadlineTrips) else None
+        self._joined: JoinedDevices | None = robot if provides(robot, JoinedDevices) else None
         self._held: HeldJoints | None = robot if provides(robot, HeldJoints) else None
         self._remote_of = robot.remote if provides(robot, RemoteSource) else None
         self._ramp: CommandRamp | None = None
@@ -226,6 +233,8 @@ class SafeRobot(Robot):
         self._over_power_frames = 0
         self._ramp = None
         self._deadline_trips = self._robot_deadline_trips()
+        self._device_trips = self._joined.deadline_trips_by_device() if self._joined is not None else {}
+        self._last_read_time = self.now()
         self._remote_estops = 0  # the robot was connected just now: a press its link saw already counts
         if self._state is not SafetyState.DAMPED and self._state is not SafetyState.WAITING:
             self._transition(SafetyState.WAITING, "connect", "connected again: waiting for a live state stream")
@@ -242,10 +251,11 @@ class SafeRobot(Robot):
         # Before this frame counts as news: a control loop that stalled between two reads (seen with a wall clock)
         # left the robot unwatched for that long, and the backend damped it meanwhile; passing the controller's
         # command straight on would be a jump from wherever it sagged to.
-        self._check_stale(now)
+        self._check_stale(now, state)
         self._check_deadline()
         fresh = self._last_tick is not None and state.tick != self._last_tick
         self._last_tick, self._latest, self._fresh = state.tick, state, fresh
+        self._last_read_time = now
         if fresh:
             self._last_fresh_time = now
         if self._latch is not None:
@@ -314,14 +324,35 @@ class SafeRobot(Robot):
     def _remote(self) -> RemoteButtons | None:
         return self._remote_of() if self._remote_of is not None else None
 
-    def _check_stale(self, now: float) -> None:
+    def _check_stale(self, now: float, state: RobotState | None = None) -> None:
+        """Trip when no fresh state was taken for the stale timeout; `state`: the frame `read` just got, if any."""
         if self._state not in (SafetyState.RAMP, SafetyState.RUN):
             return
         age = now - self._last_fresh_time
         if age > self.config.stale_timeout_s:
-            tick = None if self._latest is None else self._latest.tick
-            self._trip("stale_state", f"tick {tick} unchanged for {age:.3f} s (limit "
-                                      f"{self.config.stale_timeout_s} s)")
+            self._trip("stale_state", self._stale_source(now, age, state))
+
+    def _stale_source(self, now: float, age: float, state: RobotState | None) -> str:
+        """What went stale, in words: the host's loop (late since its last read), the arm's state, or the legs'.
+
+        The host loop when the layer was not called for longer than the timeout and the robot answered meanwhile (the
+        frame just read advanced, or a write came late after its read); the arm's state when the robot tells its
+        devices apart (`JoinedDevices`) and the legs' stream was fresh; else the legs' (the robot's) stream.
+        """
+        limit = self.config.stale_timeout_s
+        gap = now - self._last_read_time
+        answered = state is None or (self._last_tick is not None and state.tick != self._last_tick)
+        if gap > limit and answered:
+            return (f"the host's control loop was late: {gap * 1e3:.0f} ms since its last read (limit "
+                    f"{limit * 1e3:g} ms), while the robot's state stream went on")
+        ages = self._joined.state_ages() if self._joined is not None else {}
+        legs, arm = ages.get("legs"), ages.get("arm")
+        if arm is not None and legs is not None and legs <= limit < arm:
+            return (f"the arm's state: {arm:.3f} s old, its bus's servos not answering (the legs' state stream fresh, "
+                    f"{legs * 1e3:.0f} ms old; limit {limit} s)")
+        tick = None if self._latest is None else self._latest.tick
+        stream = "the legs' state stream" if "legs" in ages else "the robot's state stream"
+        return f"{stream}: tick {tick} unchanged for {age:.3f} s (limit {limit} s)"
 
     def _robot_deadline_trips(self) -> int | None:
         return self._trips.deadline_trips if self._trips is not None else None
@@ -337,12 +368,15 @@ class SafeRobot(Robot):
         seen, self._deadline_trips = self._deadline_trips, trips
         if trips is None or seen is None or trips <= seen:
             return
+        by_device = self._joined.deadline_trips_by_device() if self._joined is not None else {}
+        seen_by_device, self._device_trips = self._device_trips, by_device
         if self._state not in (SafetyState.RAMP, SafetyState.RUN):
             return
         self._ramp = None
+        damped = {d: n - seen_by_device.get(d, 0) for d, n in by_device.items() if n > seen_by_device.get(d, 0)}
         self._transition(SafetyState.RAMP, "write_deadline",
-                         f"the robot damped itself {trips - seen} time(s) since the last look: no write within its "
-                         "write deadline (the control loop stalled); ramping again from the measured pose")
+                         f"{_who_damped(damped, trips - seen)} since the last look: no write within the write "
+                         "deadline (the control loop stalled); ramping again from the measured pose")
 
     def _state_fault(self, state: RobotState) -> tuple[str, str] | None:
         """The first check that fails on `state` (values, motor status, joint range, tilt), as (reason, detail)."""
@@ -360,7 +394,8 @@ class SafeRobot(Robot):
             if bad.any():
                 i = int(np.flatnonzero(bad)[0])
                 ok = ", ".join(f"{m:#04x}" for m in cfg.ok_motor_modes)
-                return "motor_mode", f"{self._motor_label(i)} reports mode {modes[i]:#04x} (ok: {ok})"
+                return "motor_mode", (f"{self._motor_label(i)} reports mode {modes[i]:#04x}"
+                                      f"{_mode_name(int(modes[i]), arm=i >= _ARM_START)} (ok: {ok})")
             temps = np.asarray(status.motor_temperature, dtype=np.float64)
             if temps.size and temps.max() > cfg.max_motor_temperature_c:
                 i = int(np.argmax(temps))
@@ -434,6 +469,36 @@ class SafeRobot(Robot):
                 print(event, file=sys.stderr)
             except OSError:
                 pass  # the terminal was closed (SIGHUP): the event is kept in `events`, and the trip must go on
+
+
+_ARM_MODES = {MODE_NO_ANSWER: "no answer", MODE_CORRUPT: "corrupt answers", MODE_PORT_LOST: "serial port lost"}
+"""The arm's status codes (`wbc.hardware.dynamixel.arm_fault`), by name; 0x80 + bits is its Hardware Error Status."""
+
+
+def _mode_name(mode: int, *, arm: bool) -> str:
+    """``: overheat`` for a mode the motor's documentation names (a leg motor's, an arm servo's), else empty."""
+    if not arm:
+        name = MOTOR_STATE_MODES.get(mode)
+    elif mode & MODE_HARDWARE_ERROR:
+        bits = [text for bit, text in HARDWARE_ERROR_BITS.items() if mode & bit]
+        name = f"hardware error: {', '.join(bits)}" if bits else "hardware error"
+    else:
+        name = _ARM_MODES.get(mode)
+    return f" ({name})" if name else ""
+
+
+def _who_damped(by_device: dict[str, int], total: int) -> str:
+    """``the legs and the arm each damped once``, ``the legs damped twice``; ``the robot damped itself 3 times``."""
+    def times(n: int) -> str:
+        return {1: "once", 2: "twice"}.get(n, f"{n} times")
+
+    if not by_device:
+        return f"the robot damped itself {times(total)}"
+    names = [f"the {device}" for device in by_device]
+    counts = set(by_device.values())
+    if len(by_device) > 1 and len(counts) == 1:
+        return f"{' and '.join(names)} each damped {times(counts.pop())}"
+    return " and ".join(f"{name} damped {times(n)}" for name, n in zip(names, by_device.values(), strict=True))
 
 
 def _power(state: RobotState) -> float:
