@@ -584,9 +584,9 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
 
 def _described(executor: LocalExecutor | RayExecutor, cfg: ArenaConfig) -> str:
     """Where the trials play (`LocalExecutor.describe`, `RayExecutor.describe`), as the report and run.json say it."""
-    if isinstance(executor, LocalExecutor):
-        return executor.describe(time_limit=cfg.trial_time_limit_s is not None)
-    return executor.describe()
+    if isinstance(executor, RayExecutor):
+        return executor.describe()
+    return executor.describe(time_limit=cfg.trial_time_limit_s is not None)
 
 
 def _workers(executor: LocalExecutor | RayExecutor) -> int | None:
