@@ -80,7 +80,8 @@ def test_a_resume_under_another_revision_warns_records_it_and_keeps_the_start(co
     assert "--resume under another environment than the run began under" in err
     assert f"cpu.model {start['cpu']['model']} -> Other CPU" in err and "cpu.flags gained avx512_zz" in err
     assert f"git_diff_sha256 {start.get('git_diff_sha256', 'none')} -> {'ab' * 32}" in err
-    assert "the 1 stored trial(s) were played under the earlier one" in err
+    assert "the run now mixes trials played by two codes (the 1 stored ones by the earlier)" in err
+    assert "summary.json marks the run (mixed_environments)" in err
     env = _environment(out)
     assert {k: v for k, v in env.items() if k != "resumes"} == start  # the environment the run began under, kept
     [resume] = env["resumes"]

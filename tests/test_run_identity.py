@@ -332,7 +332,8 @@ def test_the_store_resumes_an_old_directory_and_names_the_differing_fields(tmp_p
     other = SimulatedRunIdentity(controllers=("stand",), scenario=SCENARIO, bands=("soft", "hard"), seeds=(0,),
                                  trials=2, no_push=False, debug_truth=False, max_consecutive_errors=0)
     with pytest.raises(ResultsDirError, match=r'differs in: bands, max_consecutive_errors\): bands stored \["soft"\], '
-                                              r'given \["soft", "hard"\]; max_consecutive_errors stored none, given 0'):
+                                              r'given \["soft", "hard"\]; max_consecutive_errors stored the default '
+                                              r'\(3\), given 0'):
         ResultsStore(out, other, resume=True)
     # a hardware run's directory is another run, not a malformed one
     _write_config(out, HARDWARE.as_json())

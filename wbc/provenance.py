@@ -3,7 +3,10 @@
 The results store (``run.json``) and a training run (``config.json``) both write this one record, so every output of
 the toolkit names the code that made it the same way; a revision with uncommitted changes to tracked files is marked
 ``-dirty``, since those changes are not in the revision it names, and the changes themselves are named by the sha256
-of ``git diff-index -p HEAD`` (untracked files are not covered: a new file nothing tracks is not in the hash). Beside
+of ``git diff-index -p HEAD`` (untracked files are not covered: a new file nothing tracks is not in the hash; the text
+itself is `git_diff`, which a results directory keeps). Outside a git checkout (an installed wheel, a copied tree, a
+Ray node) git knows nothing of the code, so the record also holds `package_sha256`: one hash over every file of the
+``wbc`` package (its modules and shipped data and weights), which changes with any edit wherever it runs. Beside
 the versions it records what else moves the last bits of a result: the CPU's model and the instruction-set flags its
 numerical kernels pick by (AVX2 or AVX-512 ...), and the sha256 of ``requirements/wbc.lock`` when the package runs
 from a checkout that has it.
@@ -14,7 +17,9 @@ began under (`wbc.arena.results`), and the test suite compares them with the loc
 
 from __future__ import annotations
 
+import functools
 import hashlib
+import os
 import platform
 import re
 import subprocess
@@ -22,7 +27,7 @@ from importlib import metadata
 from pathlib import Path
 
 __all__ = ["CHECKOUT", "CPU_FLAGS", "LOCK_FILE", "PACKAGES", "RESULT_PACKAGES", "cpu", "git_diff_sha256",
-           "git_revision", "lock_sha256", "provenance"]
+           "git_diff", "git_revision", "lock_sha256", "package_sha256", "provenance"]
 
 RESULT_PACKAGES = ("numpy", "scipy", "mujoco", "numba", "llvmlite", "proxsuite", "pin", "placo", "casadi", "daqp",
                    "example-robot-data", "torch", "rsl-rl-lib", "onnxruntime")
@@ -67,9 +72,18 @@ def git_revision() -> str:
 
 
 def git_diff_sha256() -> str | None:
-    """The sha256 of ``git diff-index -p --binary HEAD``: the uncommitted changes to tracked files, binary ones too.
+    """The sha256 of ``git diff-index -p --binary HEAD`` (`git_diff`): the uncommitted changes to tracked files.
 
     Untracked files are not covered. Returns None outside a git checkout or without git.
+    """
+    diff = git_diff()
+    return None if diff is None else hashlib.sha256(diff).hexdigest()
+
+
+def git_diff() -> bytes | None:
+    """The uncommitted changes to tracked files, as `git_diff_sha256` hashes them (binary ones too).
+
+    Returns None outside a git checkout or without git; empty bytes for a clean checkout.
     """
     try:
         # the plumbing command, whose output no user setting of `git diff` (prefixes, algorithm, context, textconv)
@@ -79,7 +93,51 @@ def git_diff_sha256() -> str | None:
         diff = _git("diff-index", "-p", "--binary", "--no-textconv", "--no-ext-diff", "HEAD")
     except (OSError, subprocess.SubprocessError):
         return None
-    return hashlib.sha256(diff.stdout).hexdigest() if diff.returncode == 0 else None
+    return diff.stdout if diff.returncode == 0 else None
+
+
+_CACHES = ("__pycache__",)
+"""Directories of the package that hold caches, not code (Python's bytecode; numba's cache lives there too)."""
+
+_CACHE_SUFFIXES = (".pyc", ".pyo", ".nbi", ".nbc")
+"""Files that are caches: bytecode, and numba's index and compiled functions."""
+
+
+def package_files(root: Path = CHECKOUT) -> list[tuple[str, Path]]:
+    """The files of the package at `root` that `package_sha256` covers, as (path relative to `root`, path), sorted.
+
+    Every file but caches (`_CACHES` directories, `_CACHE_SUFFIXES` files): the modules and the shipped data and
+    weights.
+    """
+    found = []
+    for folder, dirs, names in os.walk(root):
+        dirs[:] = [d for d in dirs if d not in _CACHES]
+        for name in names:
+            if not name.endswith(_CACHE_SUFFIXES):
+                path = Path(folder) / name
+                found.append((path.relative_to(root).as_posix(), path))
+    return sorted(found)
+
+
+def package_files_sha256(root: Path) -> str:
+    """The sha256 over `package_files` of `root`: each file's relative path and the sha256 of its bytes, in order."""
+    total = hashlib.sha256()
+    for relative, path in package_files(root):
+        total.update(relative.encode() + b"\0" + hashlib.sha256(path.read_bytes()).digest())
+    return total.hexdigest()
+
+
+@functools.cache
+def package_sha256() -> str | None:
+    """The sha256 of this ``wbc`` package's files (`package_files_sha256`), read once per process.
+
+    It names the code that ran wherever it runs: from a checkout, an installed wheel, a copied tree, a Ray node.
+    A few tens of milliseconds (the shipped weights are most of its bytes). None where a file cannot be read.
+    """
+    try:
+        return package_files_sha256(CHECKOUT)
+    except OSError:
+        return None
 
 
 def lock_sha256(path: Path = LOCK_FILE) -> str | None:
@@ -118,8 +176,9 @@ def provenance() -> dict[str, object]:
 
     Returns:
         ``python``, ``platform``, ``packages`` (name -> version, those of `PACKAGES` installed), ``git_revision``,
-        ``cpu`` (`cpu`), ``lock_sha256`` (only from a checkout with the lock) and ``git_diff_sha256`` (only for a
-        ``-dirty`` revision: `git_diff_sha256`, untracked files not covered).
+        ``cpu`` (`cpu`), ``lock_sha256`` (only from a checkout with the lock), ``git_diff_sha256`` (only for a
+        ``-dirty`` revision: `git_diff_sha256`, untracked files not covered) and ``wbc_sha256`` (`package_sha256`,
+        where its files could be read).
     """
     versions = {}
     for pkg in PACKAGES:
@@ -137,4 +196,7 @@ def provenance() -> dict[str, object]:
         diff = git_diff_sha256()
         if diff is not None:
             out["git_diff_sha256"] = diff
+    files = package_sha256()
+    if files is not None:
+        out["wbc_sha256"] = files
     return out

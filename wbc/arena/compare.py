@@ -24,6 +24,7 @@ import dataclasses
 import functools
 import hashlib
 import itertools
+import os
 import sys
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -50,8 +51,8 @@ from wbc.arena.identity import (
 )
 from wbc.arena.progress import progress
 from wbc.arena.report import summarize
-from wbc.arena.results import ResultsStore, check_out_dir, episode_path, file_name_part, unwritable
-from wbc.arena.run_environment import report_lines
+from wbc.arena.results import ResultsStore, check_out_dir, episode_path, file_name_part, mark_complete, unwritable
+from wbc.arena.run_environment import mixed, report_lines
 from wbc.arena.runner import TickObserver
 from wbc.arena.sequential import SequentialComparison
 from wbc.arena.sim_trial import check_rate
@@ -117,6 +118,9 @@ class ArenaConfig:
             (``os._exit``, a crash in native code) then costs only its own trial. False plays them in this process,
             where such a controller ends the run (the trials recorded before it are kept for ``resume``). Ignored with
             an observer, whose trials play in this process.
+        command: the wbc command that plays the run (``compare``, ``paper table1`` ...), recorded in ``run.json``:
+            a resume by another is refused (None: not recorded, nothing compared).
+        command_line: the command line, as ``run.json``'s ``sessions`` record it (``wbc compare ...``).
     """
 
     controllers: tuple[str, ...]
@@ -143,6 +147,8 @@ class ArenaConfig:
     max_consecutive_errors: int = DEFAULT_MAX_CONSECUTIVE_ERRORS
     trial_time_limit_s: float | None = None
     isolated: bool = False
+    command: str | None = None
+    command_line: str | None = None
 
     def __post_init__(self) -> None:
         if not self.controllers:
@@ -470,8 +476,9 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
     Args:
         plan: the run, checked and resolved.
         lock: `ArenaConfig.out_dir`'s lock, already held by the caller (`wbc.arena.results.hold_results_dir`), who
-            writes files of its own there after the run and then gives it back; None: the run takes the lock and
-            gives it back once its files are written.
+            writes files of its own there after the run, marks it complete (`wbc.arena.results.mark_complete`) and
+            then gives it back; None: the run takes the lock, marks the run complete once its files are written
+            (``run.json``'s ``complete``, written last) and gives the lock back.
 
     Raises:
         ResultsDirError: a results directory that belongs to another run, or that misses trials at the end (other
@@ -494,11 +501,16 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                 LocalExecutor(cfg.workers, cfg.observer, isolated=cfg.isolated))
     if isinstance(executor, RayExecutor):
         executor.connect()  # before the results directory: a cluster that cannot be reached leaves none
+    session = {"command": cfg.command, "command_line": cfg.command_line, "cwd": os.getcwd(),
+               "executor": _described(executor, cfg), "workers": _workers(executor),
+               "trial_time_limit_s": cfg.trial_time_limit_s}
+    inputs = {"scenario": Path(scenario.path), **{f"controller-config {name}": path
+                                           for name, path in cfg.controller_configs.items()}}
     try:
         store = ResultsStore(cfg.out_dir, plan.identity, resume=cfg.resume,
                              controllers={name: _recorded(spec, plan.settings.get(name))
                                           for name, spec in specs.items()},
-                             drop_bad_rows=cfg.drop_bad_rows, lock=lock)
+                             drop_bad_rows=cfg.drop_bad_rows, lock=lock, session=session, inputs=inputs)
     except BaseException:
         if isinstance(executor, RayExecutor):
             executor.close()
@@ -571,6 +583,9 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
                             controllers=list(cfg.controllers), bands=list(bands), errors=errors,
                             sequential=rounds.comparison.as_dict() if rounds is not None else None,
                             robots=plan.arms, robots_note=plan.arms_differ)
+        changed = mixed(store.environment)
+        if changed is not None:
+            summary = dataclasses.replace(summary, mixed_environments=tuple(changed))
         outcomes = push_outcomes(records, scenario.trial)
         failures = breakdown(records, outcomes, controllers=cfg.controllers, bands=bands, trial_of=scenario.trial)
         curve = recovery_curve(outcomes, controllers=cfg.controllers)
@@ -592,7 +607,7 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
             "trials per band and seed": cfg.trials if rounds is None else rounds.trials_text(cfg.trials, cfg.seeds),
             "pushes": "REMOVED (--no-push)" if cfg.no_push else "as in the scenario",
             "state estimate": "GROUND TRUTH (--debug-truth)" if cfg.debug_truth else "estimator (as on hardware)",
-            "executor": executor.describe() if isinstance(executor, RayExecutor) else cfg.executor,
+            "executor": _described(executor, cfg),
             **({} if cfg.trial_time_limit_s is None else {
                 "trial time limit": f"{cfg.trial_time_limit_s:g} s (--trial-time-limit: a trial past it is its "
                                     "controller's error, kept on --resume)"}),
@@ -606,6 +621,8 @@ def play_arena(plan: ArenaPlan, *, lock: DirectoryLock | None = None) -> ArenaRe
         if any(not guard.stopped(key[0]) for key in missing):
             raise ResultsDirError(f"{store.dir}: {len(expected) - len(missing)} of {len(expected)} trials stored; "
                                   "rerun with --resume to play the rest")
+        if lock is None:  # a caller holding the lock writes files of its own after, and marks the run then
+            mark_complete(store.dir, len(store.records))
         return ArenaResult(summary=summary, records=tuple(records), failures=failures, curve=curve, out_dir=store.dir,
                            played=played, wall_s=wall, physics_steps=steps, budget=total,
                            controller_errors=tuple(errors), arms_differ=plan.arms_differ)
@@ -621,6 +638,18 @@ def _recorded(spec: ControllerSpec, settings: ControllerSettings | None) -> dict
     if settings is not None:
         out["settings"] = settings.as_json()
     return out
+
+
+def _described(executor: LocalExecutor | RayExecutor, cfg: ArenaConfig) -> str:
+    """Where the trials play (`LocalExecutor.describe`, `RayExecutor.describe`), as the report and run.json say it."""
+    if isinstance(executor, RayExecutor):
+        return executor.describe()
+    return executor.describe(time_limit=cfg.trial_time_limit_s is not None)
+
+
+def _workers(executor: LocalExecutor | RayExecutor) -> int | None:
+    """The trials a run plays at once: the local executor's workers, the CPUs of a Ray it starts (None: a cluster's)."""
+    return executor.workers if isinstance(executor, LocalExecutor) else executor.num_cpus
 
 
 def _tested_pairs(cfg: ArenaConfig) -> tuple[tuple[str, str], ...]:

@@ -305,6 +305,18 @@ class LocalExecutor:
         self.isolated = isolated and observer is None
         self._flags: str | None = None  # the directory of the overrun flags, while a pool runs
 
+    def describe(self, time_limit: bool = False) -> str:
+        """Where the trials play, for a run's report and ``run.json``.
+
+        ``local, in this process`` (one worker, not isolated), ``local, 1 worker process`` (isolated, or with a trial
+        time limit: `time_limit`), ``local pool of N worker processes``.
+        """
+        if self.workers <= 1 and not self.isolated and not time_limit:
+            return "local, in this process" + (" (live view)" if self.observer is not None else "")
+        if self.workers <= 1:
+            return "local, 1 worker process"
+        return f"local pool of {self.workers} worker processes"
+
     def run(self, tasks: Iterable[TrialTask]) -> Iterator[TrialRecord]:
         """Yield each task's record as it finishes.
 

@@ -18,6 +18,16 @@ locked (`LOCK_FILE`) from before it reads anything there until it is done: a sec
 run's (``wbc paper``: ``paper.txt``, ``paper.json``) takes the lock first (`hold_results_dir`) and hands it to the
 store, so that the directory stays held until those files are written too; refused or interrupted before the run
 stored anything there, it leaves no directory it created.
+
+Everything else a results directory holds is derived from ``trials.csv`` (`DERIVED_FILES`: ``summary.json``,
+``failures.json``, ``report.md``, the plots, a paper's ``paper.json`` and ``paper.txt``), and ``run.json``'s
+``complete`` (`mark_complete`), written last, says the run ended with them: a resume removes them all, and that mark,
+before it touches ``trials.csv`` or plays a trial, so that a directory never shows a summary of other trials than it
+holds; they are computed again from ``trials.csv`` at its end. ``run.json`` also records how each call ran
+(``sessions``: the command line, working directory, executor, workers, time limit, UTC start and end), the command
+that wrote the directory (``command``: a resume by another is refused), the trial time limit (``trial_time_limit_s``:
+a resume with another is refused), and copies of the input files (``inputs``, under ``inputs/``); a checkout's
+uncommitted changes are kept as ``wbc.diff`` (and ``wbc-resume-N.diff`` for a resume under other ones).
 """
 
 from __future__ import annotations
@@ -26,32 +36,94 @@ import contextlib
 import csv
 import dataclasses
 import errno
+import hashlib
 import json
 import os
 import re
+import shutil
 import sys
+import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from wbc.arena import run_environment
+from wbc.arena.error_guard import DEFAULT_MAX_CONSECUTIVE_ERRORS
 from wbc.arena.identity import RunIdentity, compared, moved_files, publication_change
 from wbc.arena.trial_record import RefusedRow, TrialRecord, scan_csv
 from wbc.errors import InputFileError, RecordError, ResultsDirError
 from wbc.input_files import read_json
 from wbc.output_files import LOCK_FILE, DirectoryInUse, DirectoryLock, directory_holder, lock_directory, write_text
-from wbc.provenance import provenance
+from wbc.provenance import git_diff, provenance
 
-__all__ = ["LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_not_held", "check_out_dir", "episode_path",
-           "file_name_part", "hold_results_dir", "holds_results", "unwritable"]
+__all__ = ["DERIVED_FILES", "INPUTS_DIR", "LOCK_FILE", "OUTPUT_FILES", "ResultsStore", "check_not_held",
+           "check_out_dir", "derived_files_present", "episode_path", "file_name_part", "hold_results_dir",
+           "holds_results", "is_complete", "mark_complete", "unwritable", "utc_now"]
 
 OUTPUT_FILES = ("trials.csv", "run.json", "summary.json", "failures.json", "report.md", "push_recovery.png",
                 "ttf.png", "tracking.png")
 """The files a results directory holds (`ResultsStore`, `wbc.arena.finish.finish_results`)."""
 
 
-_RUN_KEYS = ("config", "environment", "controllers")
+DERIVED_FILES = ("summary.json", "failures.json", "report.md", "push_recovery.png", "ttf.png", "tracking.png",
+                 "paper.json", "paper.txt")
+"""The files of a results directory computed from its ``trials.csv`` at a run's end (``paper.*``: ``wbc paper``'s):
+a resume removes them before any trial plays, and its end writes them again."""
+
+INPUTS_DIR = "inputs"
+"""Where a results directory keeps copies of its input files (the scenario, each ``--controller-config``)."""
+
+DIFF_FILE = "wbc.diff"
+"""Where a results directory keeps the uncommitted changes of the checkout the run began in."""
+
+_RUN_KEYS = ("config", "environment", "controllers", "command", "trial_time_limit_s", "sessions", "inputs",
+             "complete")
 """The top-level fields of ``run.json``."""
+
+_SAME_COMMAND = {"run": "arena", "compare": "arena"}
+"""Commands that write the same kind of directory (``wbc run`` is ``wbc compare`` of one controller)."""
+
+
+def utc_now() -> str:
+    """The time now, UTC, as ``run.json`` records it (ISO 8601, seconds)."""
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+
+
+def derived_files_present(out_dir: Path) -> list[str]:
+    """The `DERIVED_FILES` `out_dir` holds, in that order."""
+    return [name for name in DERIVED_FILES if (Path(out_dir) / name).is_file()]
+
+
+def is_complete(out_dir: Path) -> bool:
+    """Whether `out_dir`'s ``run.json`` carries the mark of a run ended with its derived files (`mark_complete`)."""
+    try:
+        run = json.loads((Path(out_dir) / "run.json").read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(run, dict) and isinstance(run.get("complete"), dict)
+
+
+def mark_complete(out_dir: Path, trials: int) -> None:
+    """Mark `out_dir`'s run complete: ``run.json``'s ``complete`` (its trials, when) and its last session's end.
+
+    Written last, once every file of the directory is written (a caller that writes files of its own beside the
+    run's, ``wbc paper``, marks it after them); a resume removes the mark before it touches anything.
+
+    Raises:
+        ResultsDirError: ``run.json`` cannot be read or written.
+    """
+    path = Path(out_dir) / "run.json"
+    try:
+        run = json.loads(path.read_text(encoding="utf-8"))
+        now = utc_now()
+        sessions = run.get("sessions")
+        if isinstance(sessions, list) and sessions and isinstance(sessions[-1], dict):
+            sessions[-1]["ended_utc"] = now
+        run["complete"] = {"trials": trials, "ended_utc": now}
+        write_text(path, json.dumps(run, indent=2))
+    except (OSError, ValueError) as exc:
+        raise ResultsDirError(f"{path}: cannot mark the run complete ({exc}); the same command with --resume writes "
+                              "its files again") from exc
 
 
 def check_out_dir(out_dir: Path) -> None:
@@ -267,6 +339,10 @@ def _holds_only_its_lock(out_dir: Path) -> bool:
 
 _MISSING = object()
 
+_DEFAULTS = {"max_consecutive_errors": DEFAULT_MAX_CONSECUTIVE_ERRORS}
+"""The options ``run.json``'s ``config`` leaves out at their default (`wbc.arena.identity`), with that default: a
+message names an absent one by it."""
+
 
 def _differences(stored: Mapping[str, Any], given: Mapping[str, Any], *, most: int = 4) -> str:
     """The first `most` fields in which two run configurations differ, each with its stored and its given value.
@@ -281,21 +357,22 @@ def _differences(stored: Mapping[str, Any], given: Mapping[str, Any], *, most: i
             for key in sorted(set(a) | set(b)):
                 walk(a.get(key, _MISSING), b.get(key, _MISSING), f"{name}.{key}" if name else str(key))
         elif a != b:
-            found.append(f"{name} stored {_shown(a)}, given {_shown(b)}")
+            found.append(f"{name} stored {_shown(a, default=_DEFAULTS.get(name))}, given "
+                         f"{_shown(b, default=_DEFAULTS.get(name))}")
 
     walk(stored, given, "")
     more = f" (and {len(found) - most} more)" if len(found) > most else ""
     return "; ".join(found[:most]) + more
 
 
-def _shown(value: object, width: int = 80) -> str:
-    """A configuration value as a message shows it: its JSON; "none" when absent.
+def _shown(value: object, width: int = 80, *, default: object = None) -> str:
+    """A configuration value as a message shows it: its JSON; "none" when absent ("the default (D)": at `default`).
 
     A string (a path, a hash) is shown whole up to 200 characters, and beyond by its two ends, where paths differ;
     anything else up to `width` characters, then its beginning.
     """
     if value is _MISSING:
-        return "none"
+        return "none" if default is None else f"the default ({json.dumps(default)})"
     text = json.dumps(value, sort_keys=True)
     if isinstance(value, str):
         return text if len(text) <= 200 else f"{text[:97]}...{text[-100:]}"
@@ -333,6 +410,11 @@ def _outside(identity: RunIdentity) -> Callable[[TrialRecord], str | None]:
         return None
 
     return why
+
+
+def _file_sha256(path: str | Path) -> str:
+    """The sha256 of a file's bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def _changed_code(stored: Mapping[str, Any], current: Mapping[str, Any]) -> str | None:
@@ -376,6 +458,14 @@ class ResultsStore:
         resumable: the run can be resumed (``--resume``), as its messages then say; off: a hardware trial.
         lock: the directory's lock, already held by the caller (`hold_results_dir`), who gives it back after `close`;
             None: the store takes the lock and gives it back on `close`.
+        session: how this call runs, recorded in ``run.json``'s ``sessions`` (one entry per call, with its UTC start,
+            and its end once `mark_complete` marks the run): ``command`` (the wbc command: ``compare``, ``paper
+            table1`` ..., recorded as ``run.json``'s ``command``; a resume by another is refused), ``command_line``,
+            ``cwd``, ``executor``, ``workers`` and ``trial_time_limit_s`` (recorded as ``run.json``'s
+            ``trial_time_limit_s``; a resume with another is refused). None: nothing recorded or compared.
+        inputs: the input files to keep a copy of, by role (``scenario``, ``controller-config NAME``): copied under
+            `INPUTS_DIR` and recorded with their sha256 in ``run.json``'s ``inputs``; a resume checks the files given
+            against the copies' hashes.
 
     Raises:
         ResultsDirError: `out_dir` is a file, or a file the run writes is a directory (`check_out_dir`); another
@@ -402,7 +492,8 @@ class ResultsStore:
 
     def __init__(self, out_dir: Path, identity: RunIdentity, *, resume: bool,
                  controllers: dict[str, object] | None = None, drop_bad_rows: bool = False,
-                 resumable: bool = True, lock: DirectoryLock | None = None) -> None:
+                 resumable: bool = True, lock: DirectoryLock | None = None,
+                 session: Mapping[str, Any] | None = None, inputs: Mapping[str, Path] | None = None) -> None:
         self.dir = Path(out_dir)
         self.resumable = resumable
         self.identity = identity
@@ -423,16 +514,18 @@ class ResultsStore:
         self._failed = False  # a write of trials.csv failed: closing it does not try again
         self.records: list[TrialRecord] = []
         try:
-            self._open(identity.as_json(), resume=resume, controllers=controllers, drop_bad_rows=drop_bad_rows)
+            self._open(identity.as_json(), resume=resume, controllers=controllers, drop_bad_rows=drop_bad_rows,
+                       session=dict(session) if session is not None else None, inputs=dict(inputs or {}))
         except BaseException:
             self.close()
             raise
 
     def _open(self, config: dict, *, resume: bool, controllers: dict[str, object] | None,
-              drop_bad_rows: bool) -> None:
+              drop_bad_rows: bool, session: dict[str, Any] | None, inputs: dict[str, Path]) -> None:
         """Check the directory against this run, read its trials and write ``run.json`` (the lock held)."""
         if self.trials_path.exists() and not resume:
             raise holds_results(self.dir, resumable=self.resumable)
+        self._stored_run: dict[str, Any] = {}
         if resume and self.run_path.exists():
             # validated as a RunIdentity (every field known and typed), then compared as JSON: a stored run of
             # another kind or with other options is named field by field as differing
@@ -443,6 +536,8 @@ class ResultsStore:
                 raise ResultsDirError(f"{self.dir}: --resume with a different configuration (differs in: "
                                       f"{', '.join(diff)}): {_differences(before, now)}; rerun with the original "
                                       "options or another --out")
+            self._check_session(session)
+            self._check_inputs(inputs)
             moved = list(moved_files(stored, config))
             start = self._stored_environment
             changed = _changed_code(self._stored_controllers, controllers or {})
@@ -459,7 +554,7 @@ class ResultsStore:
                 config = self.identity.as_json()
         else:
             moved, at_start, republished, start = [], None, False, None
-        environment = provenance()  # taken once: what run.json records and the report shows
+        environment = dict(provenance())  # taken once: what run.json records and the report shows
         self.dropped: tuple[RefusedRow, ...] = ()
         if self.trials_path.exists():
             rows = scan_csv(self.trials_path, scenario_hash=self.identity.scenario_hash,
@@ -476,6 +571,8 @@ class ResultsStore:
                 print(f"wbc: warning: {self.trials_path}:{bad.line}: {bad.reason}; row dropped (--drop-bad-rows), "
                       "its trial is played again", file=sys.stderr)
             self.records, self.dropped = list(rows.records), rows.refused
+            if resume:
+                self._invalidate()
             # rewrite without a torn last line (so appends start on a fresh line) and without the rows dropped, with
             # this version's columns
             with self._writing(self.trials_path):
@@ -501,20 +598,155 @@ class ResultsStore:
                     f"scenario.published_at_start {str(at_start).lower()})" if at_start is not None else
                     "as when the run began, not as at its last call: the same content, so the run resumes")
             print(f"wbc: note: {self.run_path}: the scenario is {now}, {said}", file=sys.stderr)
+        begins = not (start and self.records)  # a run with no trial stored yet begins under this environment
+        diff_file = self._keep_diff(environment, start, found, begins=begins)
+        if begins and diff_file is not None:
+            environment["git_diff_file"] = diff_file
         if found:
-            print(run_environment.warning(self.run_path, found, len(self.records)), file=sys.stderr)
+            print(run_environment.warning(self.run_path, found, len(self.records), diff_file=diff_file),
+                  file=sys.stderr)
         # what `run.json` records, and the report shows: the environment the run began under, kept on every resume
         # with the resumes under another one; a run with no trial stored yet begins under this one
-        self.environment = (run_environment.record(start, found, len(self.records)) if start and self.records else
-                            environment)
-        run = {"config": config, "environment": self.environment}
+        self.environment = (environment if begins else
+                            run_environment.record(start, found, len(self.records), diff_file=diff_file))
+        run: dict[str, Any] = {"config": config, "environment": self.environment}
         if controllers:
             run["controllers"] = controllers
+        run.update(self._execution(session, inputs))
         with self._writing(self.run_path):
             write_text(self.run_path, json.dumps(run, indent=2))  # whole or not at all: the stored trials need it
         with self._writing(self.trials_path):
             self._file = self.trials_path.open("a", encoding="utf-8", newline="")
         self._writer = csv.writer(self._file)
+
+    def _check_session(self, session: dict[str, Any] | None) -> None:
+        """Refuse a resume by another command, or with another trial time limit, than ``run.json`` records.
+
+        A directory written before these were recorded (no ``command``, no ``trial_time_limit_s``) takes any.
+        """
+        stored = self._stored_run
+        if session is None:
+            return
+        was, now = stored.get("command"), session.get("command")
+        if was is not None and now is not None and _SAME_COMMAND.get(was, was) != _SAME_COMMAND.get(now, now):
+            raise ResultsDirError(f"{self.run_path}: field command: the run was written by wbc {was}, and a resume "
+                                  f"by wbc {now} would not write its files (wbc {was}'s own); finish it with wbc "
+                                  f"{was} ... --resume, or choose another --out")
+        if "trial_time_limit_s" in stored and stored["trial_time_limit_s"] != session.get("trial_time_limit_s"):
+            def said(limit: object) -> str:
+                return "none (no --trial-time-limit)" if limit is None else f"{limit:g} s"
+            raise ResultsDirError(f"{self.run_path}: field trial_time_limit_s: --resume with another trial time limit "
+                                  f"(stored {said(stored['trial_time_limit_s'])}, given "
+                                  f"{said(session.get('trial_time_limit_s'))}): a trial past it is its controller's "
+                                  "error, so the run's trials would be judged by two limits; rerun with the stored "
+                                  "--trial-time-limit (or none), or start afresh with another --out")
+
+    def _check_inputs(self, inputs: dict[str, Path]) -> None:
+        """Refuse a resume whose input files differ from the copies the run kept (``run.json``'s ``inputs``).
+
+        Each file's bytes are compared with its copy's, and the copy with the hash recorded: a scenario whose content
+        is the run's (its hash in ``config``, compared before) but whose bytes are not (comments, layout) is a note.
+        A role the run kept no copy of (a directory written before copies were kept, or copied without ``inputs/``)
+        is not compared: its file given is kept then, its content already compared by its hash in ``config``.
+        """
+        kept = self._stored_run.get("inputs") or {}
+        for role, path in inputs.items():
+            entry = kept.get(role)
+            if not isinstance(entry, Mapping):
+                continue
+            copy = self.dir / str(entry.get("copy"))
+            if not copy.is_file():  # a directory copied without it: kept again from the file given (`_execution`)
+                continue
+            try:
+                given, copied = _file_sha256(path), _file_sha256(copy)
+            except OSError as exc:
+                raise ResultsDirError(f"{self.run_path}: field inputs.{role}: cannot read {exc.filename} "
+                                      f"({exc.strerror or exc}); restore {copy} (the copy of the run's {role} file), "
+                                      "or start afresh with another --out") from None
+            if copied != entry.get("sha256"):
+                raise ResultsDirError(f"{copy}: the run's copy of its {role} file was changed (sha256 {copied}, "
+                                      f"run.json field inputs.{role}.sha256 {entry.get('sha256')}); restore it, or "
+                                      "start afresh with another --out")
+            if given != copied and role == "scenario":  # its content is compared by its hash (config.scenario)
+                print(f"wbc: note: {path}: the scenario's content is the run's (its hash), its bytes (comments, "
+                      f"layout) are not; {copy} keeps the file the run began with", file=sys.stderr)
+            elif given != copied:
+                raise ResultsDirError(f"{path}: --resume with another {role} file than the run was played with "
+                                      f"(sha256 {given}; the run's copy {copy}: {copied}); give the run's file "
+                                      f"(--resume reads {copy} as it was), or start afresh with another --out")
+
+    def _invalidate(self) -> None:
+        """Remove what a finished run derived from ``trials.csv`` (`DERIVED_FILES`) and its ``complete`` mark.
+
+        Done by a resume before it touches ``trials.csv`` or plays a trial: an interrupted resume then leaves no
+        summary, report or plot of other trials than the directory holds. Its end writes them all again.
+        """
+        if "complete" in self._stored_run:  # the mark first: a directory is never marked without its files
+            run = {k: v for k, v in self._stored_run.items() if k != "complete"}
+            with self._writing(self.run_path):
+                write_text(self.run_path, json.dumps(run, indent=2))
+        for name in DERIVED_FILES:
+            path = self.dir / name
+            with self._writing(path):
+                if path.is_file():
+                    path.unlink()
+
+    def _keep_diff(self, environment: dict[str, Any], start: dict | None, found: list[run_environment.Change], *,
+                   begins: bool) -> str | None:
+        """Write this checkout's uncommitted changes into the directory where the run needs them; their file's name.
+
+        At the run's start (`begins`) to `DIFF_FILE`, for a checkout with uncommitted changes; on a resume whose
+        changes differ from the start's (``git_diff_sha256`` among `found`), to ``wbc-resume-N.diff`` (N: the
+        resume's number among those recorded). None where nothing is written.
+        """
+        if not str(environment.get("git_revision", "")).endswith("-dirty"):
+            return None
+        if begins:
+            name = DIFF_FILE
+        elif any(c.field == "git_diff_sha256" for c in found):
+            name = f"wbc-resume-{len((start or {}).get('resumes') or []) + 1}.diff"
+        else:
+            return None
+        diff = git_diff()
+        if diff is None:
+            return None
+        path = self.dir / name
+        with self._writing(path):
+            path.write_bytes(diff)
+        return name
+
+    def _execution(self, session: dict[str, Any] | None, inputs: dict[str, Path]) -> dict[str, Any]:
+        """``run.json``'s fields of how the run is executed, those of the stored run kept.
+
+        ``command``, ``trial_time_limit_s``, ``sessions`` (this call's appended) and ``inputs`` (copied here where the
+        run has no copy yet).
+        """
+        stored = self._stored_run
+        out: dict[str, Any] = {}
+        sessions = list(stored.get("sessions") or [])
+        if session is not None:
+            command = stored.get("command", session.get("command"))
+            if command is not None:
+                out["command"] = command
+            out["trial_time_limit_s"] = stored.get("trial_time_limit_s", session.get("trial_time_limit_s"))
+            sessions.append({**{k: v for k, v in session.items() if k != "command"},
+                             "started_utc": utc_now(), "ended_utc": None, "stored_trials": len(self.records)})
+        else:
+            out.update({k: stored[k] for k in ("command", "trial_time_limit_s") if k in stored})
+        if sessions:
+            out["sessions"] = sessions
+        kept = dict(stored.get("inputs") or {})
+        for role, path in inputs.items():
+            if role in kept and (self.dir / str(kept[role].get("copy"))).is_file():
+                continue
+            copy = Path(INPUTS_DIR) / f"{file_name_part(role)}-{Path(path).name}"
+            with self._writing(self.dir / copy):
+                (self.dir / INPUTS_DIR).mkdir(exist_ok=True)
+                shutil.copyfile(path, self.dir / copy)
+            kept[role] = {"source": str(path), "copy": copy.as_posix(), "sha256": _file_sha256(self.dir / copy)}
+        if kept:
+            out["inputs"] = kept
+        return out
 
     @contextlib.contextmanager
     def _writing(self, path: Path) -> Iterator[None]:
@@ -564,7 +796,12 @@ class ResultsStore:
             if key in run and not isinstance(run[key], dict):
                 raise RecordError(f"{self.run_path}: field {key}: expected an object, got {run[key]!r}; restore the "
                                   "file, or start afresh with another --out")
+        for key, kind in (("sessions", list), ("inputs", dict)):
+            if key in run and not isinstance(run[key], kind):
+                raise RecordError(f"{self.run_path}: field {key}: expected {'a list' if kind is list else 'an object'}"
+                                  f", got {run[key]!r}; restore the file, or start afresh with another --out")
         RunIdentity.from_json(run["config"], source=self.run_path)
+        self._stored_run = run
         self._stored_controllers = run.get("controllers") or {}
         self._stored_environment = run.get("environment") or {}
         run_environment.check_stored(self._stored_environment, self.run_path)

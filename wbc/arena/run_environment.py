@@ -7,9 +7,11 @@
   installed both times, is refused (`refusal`): those versions are documented to change the last bits of a trial, the
   stored trials were played under the earlier one, and the earlier environment can always be installed again (the
   lock of the run's revision);
-- anything else (the git revision or its uncommitted changes, the Python, the platform, the CPU, the lock's hash, a
-  package installed or removed since) is a warning that names each change, old -> new (`warning`), and ``run.json``
-  records the resume under ``environment.resumes`` (`record`): the trials stored before it, what changed. Code
+- anything else (the git revision or its uncommitted changes, the hash of the wbc package's files, the Python, the
+  platform, the CPU, the lock's hash, a package installed or removed since) is a warning that names each change, old
+  -> new (`warning`), and ``run.json`` records the resume under ``environment.resumes`` (`record`): the trials stored
+  before it, what changed. A change of the code (`CODE_FIELDS`) makes the run one of two codes: the warning says so,
+  and ``summary.json`` marks it (``mixed_environments``, `mixed`). Code
   cannot be told apart from a change that plays no part in a trial (a docs commit mid-study), so a study must stay
   resumable across both; the record and the report (`report_lines`) keep what a reader needs to judge it.
 
@@ -27,10 +29,16 @@ from typing import Any
 from wbc.errors import RecordError
 from wbc.provenance import PACKAGES, RESULT_PACKAGES
 
-__all__ = ["Change", "changes", "check_stored", "record", "refusal", "report_lines", "warning"]
+__all__ = ["CODE_FIELDS", "Change", "changes", "check_stored", "mixed", "record", "refusal", "report_lines", "warning"]
 
 _FIELDS = ("git_revision", "git_diff_sha256", "lock_sha256", "python", "platform")
 """The environment's single-valued fields compared, beside the packages and the CPU."""
+
+_IF_RECORDED = ("wbc_sha256",)
+"""Fields compared only where the stored environment holds them: a run begun before they were recorded does not."""
+
+CODE_FIELDS = ("git_revision", "git_diff_sha256", "wbc_sha256")
+"""The fields that name the code: a resume that changes one plays the rest of the run under another code."""
 
 _NEWER = "cpu"
 """A field every environment this version writes holds: a stored one with it lists every package of `PACKAGES`
@@ -119,6 +127,9 @@ def changes(start: Mapping[str, Any], now: Mapping[str, Any]) -> list[Change]:
     for key in _FIELDS:
         if (key in start or (complete and key in now)) and start.get(key) != now.get(key):
             out.append(Change(key, start.get(key), now.get(key)))
+    for key in _IF_RECORDED:
+        if key in start and start.get(key) != now.get(key):
+            out.append(Change(key, start.get(key), now.get(key)))
     return out
 
 
@@ -134,20 +145,50 @@ def refusal(run_json: Path, found: Sequence[Change], stored: int) -> str | None:
             "make test and make demo install requirements/wbc.lock into .venv), or start afresh with another --out")
 
 
-def warning(run_json: Path, found: Sequence[Change], stored: int) -> str:
-    """The warning of a resume under another environment than the run began under, naming each change."""
+def warning(run_json: Path, found: Sequence[Change], stored: int, *, diff_file: str | None = None) -> str:
+    """The warning of a resume under another environment than the run began under, naming each change.
+
+    Where the code changed (`CODE_FIELDS`) it says that the run now mixes two codes, and where that is recorded;
+    `diff_file` is the file of the results directory that keeps this resume's uncommitted changes, if any.
+    """
+    code = any(c.field in CODE_FIELDS for c in found)
+    kept = f"; {diff_file} keeps this resume's uncommitted changes" if diff_file else ""
+    mixes = (f": the run now mixes trials played by two codes (the {stored} stored ones by the earlier), so its "
+             "results hold for neither alone" if code else
+             f": the {stored} stored trial(s) were played under the earlier one, so the results may not reproduce to "
+             "the bit from either")
     return (f"wbc: warning: {run_json}: --resume under another environment than the run began under ("
             + "; ".join(c.text() for c in found)
-            + f"): the {stored} stored trial(s) were played under the earlier one, so the results may not reproduce "
-            "to the bit from either; run.json records this resume (environment.resumes) and report.md says so")
+            + f"){mixes}; run.json records this resume (environment.resumes), summary.json marks the run "
+            f"(mixed_environments) and report.md says so{kept}")
 
 
-def record(start: Mapping[str, Any], found: Sequence[Change], stored: int) -> dict[str, Any]:
-    """The environment ``run.json`` keeps: `start`, with this resume appended to its ``resumes`` when `found`."""
+def mixed(environment: Mapping[str, Any]) -> list[str] | None:
+    """What changed at each resume under another environment, as ``summary.json``'s ``mixed_environments`` lists it.
+
+    One line per resume (``after N trial(s): field old -> new; ...``); None for a run played under one environment.
+    """
+    resumes = environment.get("resumes") or []
+    if not resumes:
+        return None
+    return [f"after {r.get('stored_trials')} trial(s): "
+            + "; ".join(Change(f, c.get("was"), c.get("now")).text() for f, c in (r.get("changed") or {}).items()
+                        if isinstance(c, Mapping)) for r in resumes]
+
+
+def record(start: Mapping[str, Any], found: Sequence[Change], stored: int, *,
+           diff_file: str | None = None) -> dict[str, Any]:
+    """The environment ``run.json`` keeps: `start`, with this resume appended to its ``resumes`` when `found`.
+
+    `diff_file`: the results directory's file that keeps this resume's uncommitted changes (``diff_file``), if any.
+    """
     out = dict(start)
     if found:
-        out["resumes"] = [*start.get("resumes", []), {
-            "stored_trials": stored, "changed": {c.field: {"was": c.was, "now": c.now} for c in found}}]
+        entry: dict[str, Any] = {"stored_trials": stored,
+                                 "changed": {c.field: {"was": c.was, "now": c.now} for c in found}}
+        if diff_file is not None:
+            entry["diff_file"] = diff_file
+        out["resumes"] = [*start.get("resumes", []), entry]
     return out
 
 

@@ -15,9 +15,12 @@ recorded with the outcome ``diverged`` and NaN for the metrics of its motion.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import math
+import random
 import time
 
+import numpy as np
 from threadpoolctl import threadpool_limits
 
 from wbc.arena.controller_failure import ControllerFailure, read_counters
@@ -34,7 +37,7 @@ from wbc.input_files import short
 from wbc.physics_steps import nearest_rates
 from wbc.scenario.trial import Trial
 
-__all__ = ["check_rate", "run_trial", "simulated_robot"]
+__all__ = ["check_rate", "run_trial", "seed_global_rngs", "simulated_robot", "trial_rng_seed"]
 
 _ROBOTS: dict[tuple, MujocoRobot] = {}
 """Per-process cache of simulated robots: building a model costs ~50 ms, resetting one ~0.1 ms."""
@@ -101,10 +104,34 @@ def run_trial(trial: Trial, controller: ControllerSpec | str, *, debug_truth: bo
         ConfigError: the controller's period is longer than the trial, and `record_errors` is False.
     """
     spec = get_controller(controller) if isinstance(controller, str) else controller
+    seed_global_rngs(trial, spec.name)
     # one BLAS thread: a multi-threaded product splits its sums differently, and the same trial would differ in its
     # last bits between an in-process run and a pool worker (which starts single-threaded)
     with threadpool_limits(limits=1, user_api="blas"):
         return _run_trial(trial, spec, debug_truth=debug_truth, observer=observer, record_errors=record_errors)
+
+
+def trial_rng_seed(trial: Trial, controller: str) -> int:
+    """The seed of the global random generators for `controller` playing `trial` (`seed_global_rngs`).
+
+    Derived from the trial's identity: the scenario's content hash, the band, the seed, the trial index and the
+    controller's name (a 32-bit integer: what numpy's legacy ``np.random.seed`` takes).
+    """
+    key = f"{trial.scenario_hash}\0{trial.band}\0{trial.seed}\0{trial.index}\0{controller}".encode()
+    return int.from_bytes(hashlib.sha256(key).digest()[:4], "little")
+
+
+def seed_global_rngs(trial: Trial, controller: str) -> None:
+    """Seed numpy's legacy global generator (``np.random.normal`` ...) and Python's `random` for this trial.
+
+    The controllers of the toolkit draw from generators of their own, but a plug-in may draw from the global ones;
+    seeded here from the trial's identity (`trial_rng_seed`) before the controller is built, in every executor (the
+    local pool, this process, a Ray worker), such a controller plays a trial the same whatever worker plays it, and
+    after whichever trials that worker played before.
+    """
+    value = trial_rng_seed(trial, controller)
+    np.random.seed(value)  # the legacy global generator: the one a plug-in may use
+    random.seed(value)
 
 
 def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observer: TickObserver | None,

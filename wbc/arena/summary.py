@@ -335,6 +335,9 @@ class Summary:
             summary of records alone).
         robots_note: where the controllers played different robots, what each carried and why that matters
             (`wbc.arena.compare.arms_note`); None where they played one robot or `robots` is not known.
+        mixed_environments: for a run resumed under another environment than it began under (another code among
+            them), what each resume changed (`wbc.arena.run_environment.mixed`); ``summary.json`` then holds
+            ``mixed_environments: true`` and these lines (``environment_changes``). None: one environment.
     """
 
     scenario_name: str
@@ -346,6 +349,7 @@ class Summary:
     sequential: Mapping[str, Any] | None = None
     robots: Mapping[str, str] | None = None
     robots_note: str | None = None
+    mixed_environments: tuple[str, ...] | None = None
 
     @property
     def same_robot(self) -> bool | None:
@@ -395,6 +399,8 @@ class Summary:
             out["sequential"] = dict(self.sequential)
         if self.robots is not None:
             out.update(same_robot=self.same_robot, robots=dict(self.robots), robots_note=self.robots_note)
+        if self.mixed_environments is not None:
+            out.update(mixed_environments=True, environment_changes=list(self.mixed_environments))
         return out
 
     @classmethod
@@ -414,7 +420,9 @@ class Summary:
                        controller_errors=None if errors is None else
                        {name: ControllerErrors.from_dict(name, e) for name, e in errors.items()},
                        sequential=data.get("sequential"), robots=data.get("robots"),
-                       robots_note=data.get("robots_note"))
+                       robots_note=data.get("robots_note"),
+                       mixed_environments=(tuple(data["environment_changes"]) if data.get("mixed_environments")
+                                           else None))
         except (KeyError, TypeError, AttributeError) as exc:
             raise RecordError(f"{source}: not a summary this version reads ({type(exc).__name__}: {exc}); write it "
                               "again with wbc compare --resume on its results directory") from None

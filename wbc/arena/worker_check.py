@@ -1,7 +1,8 @@
 """A Ray worker's check, before it plays a trial, that it runs what the driver recorded.
 
 A Ray worker imports wbc and opens a controller's files (an ONNX model, policy weights, a plug-in's module) from its
-own node's disk. A node with another wbc commit, other versions of the packages that change results, or a changed or
+own node's disk. A node with another wbc commit or other wbc files (outside a git checkout too: the hash of the
+package's files), other versions of the packages that change results, or a changed or
 missing controller file would play other trials than the driver's ``run.json`` says, and did so silently; a file
 missing there was recorded as the controller's error. The driver sends each task what it recorded
 (`Expectation`: its own `fingerprint` and the controller's files with their sha256), and the worker compares it with
@@ -51,16 +52,20 @@ class Expectation:
 
 @functools.cache
 def fingerprint() -> tuple[tuple[str, str | None], ...]:
-    """This process's wbc (version, git revision, uncommitted changes) and result-changing packages' versions.
+    """This process's wbc (version, revision, uncommitted changes, files' hash) and result-changing packages' versions.
+
+    The files' hash (`wbc.provenance.package_sha256`) tells apart two installs that git cannot: a wheel, a copied
+    tree, a node's own copy edited in place.
 
     Read once per process (`wbc.provenance.provenance`); a package not installed is None.
     """
     env = provenance()
     packages = env.get("packages")
     packages = packages if isinstance(packages, dict) else {}
-    diff = env.get("git_diff_sha256")
+    diff, files = env.get("git_diff_sha256"), env.get("wbc_sha256")
     return (("wbc version", packages.get("wbc")), ("wbc git revision", str(env.get("git_revision"))),
             ("wbc uncommitted changes (sha256)", None if diff is None else str(diff)),
+            ("wbc package files (sha256)", None if files is None else str(files)),
             *((f"package {name}", packages.get(name)) for name in RESULT_PACKAGES))
 
 

@@ -16,6 +16,7 @@ import dataclasses
 import json
 import os
 import select
+import shlex
 import signal
 import sys
 import threading
@@ -32,6 +33,7 @@ from wbc.arena.controller_failure import printed_error
 from wbc.arena.executors import shut_down_pool, spawn_pool
 from wbc.arena.hw_trial import ConnectInterrupted, HardwareTrialConfig, ResultsInterrupted, run_hardware_trial
 from wbc.arena.operator import OPERATOR_ACTIONS
+from wbc.arena.results import derived_files_present
 from wbc.cli import printers
 from wbc.cli.parser import build_parser
 from wbc.cli.robot_names import robot_name, wire_name
@@ -1071,8 +1073,11 @@ def _interrupted_run(args: argparse.Namespace) -> str:
     again = "--resume" if getattr(args, "out", None) else f"--resume --out {out}"
     stored = _stored_trials(Path(out))
     if stored == "all":
-        return (f"; every trial is stored in {out}, its summary and report are not yet written: the same command with "
-                f"{again} writes them")
+        written = derived_files_present(Path(out))
+        which = ("its summary and report are not yet written" if not written else
+                 f"of the files derived from them only {', '.join(written)} {'is' if len(written) == 1 else 'are'} "
+                 "written (run.json holds no complete mark)")
+        return f"; every trial is stored in {out}, {which}: the same command with {again} writes them"
     if stored == "none":
         return f"; no trial had finished ({out} holds the run's plan only): the same command with {again} plays it"
     return f"; the trials finished are stored in {out}: the same command with {again} plays the rest"
@@ -1252,7 +1257,8 @@ def _arena(args: argparse.Namespace, controllers: tuple[str, ...], *, until_sign
                       io_files=_controller_files(args.io, controllers, "--io", _is_onnx, "an onnx:PATH policy"),
                       until_significant=until_significant, alpha=alpha,
                       max_consecutive_errors=args.max_consecutive_errors,
-                      trial_time_limit_s=args.trial_time_limit, isolated=not args.in_process)
+                      trial_time_limit_s=args.trial_time_limit, isolated=not args.in_process,
+                      command=args.command, command_line=_command_line())
     try:
         return _play_arena(cfg, as_json=args.json)
     finally:
@@ -1309,6 +1315,11 @@ def _label_hint(names: list[str]) -> str:
             f"{plugin}@B --controller-config {plugin}@A=a.toml --controller-config {plugin}@B=b.toml ...")
 
 
+def _command_line() -> str:
+    """This process's command line as ``run.json`` records it: ``wbc`` and its arguments, quoted for a shell."""
+    return shlex.join(["wbc", *sys.argv[1:]])
+
+
 def _check_in_process(args: argparse.Namespace) -> None:
     """``--in-process`` needs trials played here: one local worker, and no time limit (which ends a worker)."""
     if not args.in_process:
@@ -1342,7 +1353,8 @@ def _paper(args: argparse.Namespace) -> int:
         scenario=Path(args.scenario) if args.scenario else None, out_dir=args.results_dir,
         workers=args.workers, resume=args.resume, drop_bad_rows=args.drop_bad_rows,
         progress=not (args.quiet or args.json), contenders=overrides,
-        crouched=args.crouched, trial_time_limit_s=args.trial_time_limit, isolated=not args.in_process))
+        crouched=args.crouched, trial_time_limit_s=args.trial_time_limit, isolated=not args.in_process,
+        command_line=_command_line()))
     if args.json:
         printers.print_json(result.as_dict())
     else:
@@ -1558,7 +1570,7 @@ def _demo(args: argparse.Namespace) -> int:
     cfg = ArenaConfig(controllers=DEMO_CONTROLLERS, scenario=Path(args.scenario), seeds=tuple(range(args.seeds)),
                       trials=args.trials, out_dir=args.results_dir,
                       workers=args.workers, progress=not args.quiet, resume=args.resume,
-                      drop_bad_rows=args.drop_bad_rows)
+                      drop_bad_rows=args.drop_bad_rows, command="demo", command_line=_command_line())
     result = run_arena(cfg)
     printers.print_arena(result, verdict=False)
     printers.print_demo_end(result.out_dir, trial_to_watch(result.records, DEMO_CONTROLLERS), scenario=args.scenario,

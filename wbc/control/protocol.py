@@ -20,7 +20,11 @@ __all__ = ["Controller", "HasDebugPlan", "HasSettings", "HasTickTimings", "Truth
 
 @runtime_checkable
 class Controller(Protocol):
-    """What the runner drives at `rate_hz`."""
+    """What the runner drives at `rate_hz`.
+
+    A controller that draws from numpy's global generator or Python's `random` finds them seeded before each trial
+    from the trial's identity (`wbc.arena.sim_trial.seed_global_rngs`); a generator of its own is better still.
+    """
 
     rate_hz: float
     """Control rate [Hz]; the runner calls `act` every 1 / rate_hz seconds of robot time."""

@@ -30,7 +30,7 @@ from pathlib import Path
 
 from wbc.arena.compare import ArenaConfig, plan_arena, play_arena
 from wbc.arena.report import compare_pair
-from wbc.arena.results import check_not_held, hold_results_dir, unwritable
+from wbc.arena.results import check_not_held, hold_results_dir, mark_complete, unwritable
 from wbc.arena.trial_record import TrialRecord
 from wbc.arena.verdict import holm_family
 from wbc.errors import ConfigError, UnknownNameError
@@ -75,6 +75,7 @@ class PaperRunConfig:
         trial_time_limit_s: the wall time a trial may take (`wbc.arena.compare.ArenaConfig.trial_time_limit_s`;
             None: no limit).
         isolated: with one worker, play in a worker process all the same (`wbc.arena.compare.ArenaConfig.isolated`).
+        command_line: the command line, as ``run.json`` records it (`wbc.arena.compare.ArenaConfig.command_line`).
     """
 
     table: str
@@ -90,6 +91,7 @@ class PaperRunConfig:
     crouched: bool = False
     trial_time_limit_s: float | None = None
     isolated: bool = False
+    command_line: str | None = None
 
     def __post_init__(self) -> None:
         if self.table not in TABLES:
@@ -129,7 +131,8 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
     arena_cfg = ArenaConfig(controllers=tuple(c.controller for c in played_rows), scenario=scenario_path,
                             seeds=tuple(range(cfg.seeds)), trials=cfg.trials, out_dir=out, workers=cfg.workers,
                             resume=cfg.resume, drop_bad_rows=cfg.drop_bad_rows, progress=cfg.progress,
-                            trial_time_limit_s=cfg.trial_time_limit_s, isolated=cfg.isolated)
+                            trial_time_limit_s=cfg.trial_time_limit_s, isolated=cfg.isolated,
+                            command=f"paper {spec.name}", command_line=cfg.command_line)
     check_not_held(out)  # before any controller is built
     # checked before the directory is created or taken: a run refused for its input leaves none behind
     plan = plan_arena(arena_cfg)
@@ -185,4 +188,5 @@ def run_paper_table(cfg: PaperRunConfig) -> PaperTableResult:
             write_text(arena.out_dir / "paper.json", json.dumps(result.as_dict(), indent=2))
         except OSError as exc:
             raise unwritable(exc.filename or arena.out_dir, exc, arena.out_dir, stored=len(records)) from exc
+        mark_complete(arena.out_dir, len(records))  # last: the paper's files are the run's too
     return result
