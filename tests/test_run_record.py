@@ -270,3 +270,24 @@ def test_a_plugin_drawing_from_the_global_generators_plays_the_same_whatever_ran
     second, _ = run_trial(trial, "noisypkg.noisy:make")
     assert [c for i, c in enumerate(first.to_row()) if i not in skip] == [
         c for i, c in enumerate(second.to_row()) if i not in skip]
+
+
+def test_a_plugin_drawing_from_torchs_global_generator_plays_the_same_whatever_ran_before(plugin_package,
+                                                                                          tmp_path) -> None:
+    import torch
+    plugin_package("torchnoisypkg", {"noisy": STAND_PLUGIN.format(
+        doc="The stand hold with noise from torch's global generator, torch imported at its first reset.",
+        reset="import torch\n            torch.randn(3)",
+        act="import dataclasses, torch\n            out = dataclasses.replace(out, q=out.q + 0.02 * torch.randn("
+            "out.q.shape, dtype=torch.float64).numpy())",
+        counters="return {}")})
+    path = tmp_path / "short.toml"
+    path.write_text(SHORT_SCENARIO)
+    trial = load_scenario(path).trial("soft", 0, 0)
+    skip = {TrialRecord.header().index(n) for n in MACHINE_TIMED}
+    first, _ = run_trial(trial, "torchnoisypkg.noisy:make")
+    torch.manual_seed(12345)  # other trials played before on this worker, which drew from torch's generator
+    torch.randn(7)
+    second, _ = run_trial(trial, "torchnoisypkg.noisy:make")
+    assert [c for i, c in enumerate(first.to_row()) if i not in skip] == [
+        c for i, c in enumerate(second.to_row()) if i not in skip]

@@ -18,6 +18,7 @@ import dataclasses
 import hashlib
 import math
 import random
+import sys
 import time
 
 import numpy as np
@@ -122,16 +123,21 @@ def trial_rng_seed(trial: Trial, controller: str) -> int:
 
 
 def seed_global_rngs(trial: Trial, controller: str) -> None:
-    """Seed numpy's legacy global generator (``np.random.normal`` ...) and Python's `random` for this trial.
+    """Seed the global random generators a plug-in may draw from for this trial: numpy's, Python's and torch's.
 
-    The controllers of the toolkit draw from generators of their own, but a plug-in may draw from the global ones;
-    seeded here from the trial's identity (`trial_rng_seed`) before the controller is built, in every executor (the
-    local pool, this process, a Ray worker), such a controller plays a trial the same whatever worker plays it, and
-    after whichever trials that worker played before.
+    Numpy's is its legacy global generator (``np.random.normal`` ...), Python's is `random`, torch's is seeded where
+    torch is loaded (``torch.randn`` ...). The controllers of the toolkit draw from generators of their own, but a
+    plug-in may draw from the global ones; seeded here from the trial's identity (`trial_rng_seed`) before the
+    controller is built and again once it is built (`run_trial`), in every executor (the local pool, this process, a
+    Ray worker), such a controller plays a trial the same whatever worker plays it, and after whichever trials that
+    worker played before.
     """
     value = trial_rng_seed(trial, controller)
     np.random.seed(value)  # the legacy global generator: the one a plug-in may use
     random.seed(value)
+    torch = sys.modules.get("torch")  # seeded where loaded: importing it here would cost every trial a second
+    if torch is not None:
+        torch.manual_seed(value)
 
 
 def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observer: TickObserver | None,
@@ -155,6 +161,9 @@ def _run_trial(trial: Trial, spec: ControllerSpec, *, debug_truth: bool, observe
                                       error=failure.record_error(spec.name, trial))
         return record, empty
     check_rate(ctrl, spec.name, robot.config.timestep)
+    # again once it is built: its acts draw the same whatever its constructor drew, and a torch its constructor
+    # imported (a policy's first trial on this worker) is seeded too
+    seed_global_rngs(trial, spec.name)
     if debug_truth:
         if not isinstance(ctrl, TruthSwitch):
             raise MissingCapabilityError(
