@@ -339,7 +339,10 @@ def test_the_links_estop_latch_and_deadline_trips_cross_the_io_process() -> None
 
             for _ in range(50):
                 drive()
-            assert robot.remote_estops == 0 and robot.deadline_trips == 0
+            # a loaded machine may keep this process from writing past the link's 50 ms write deadline (a trip, and
+            # damping, the link's own): counted from here on rather than assumed none
+            assert robot.remote_estops == 0
+            trips = robot.deadline_trips
             emu.inject(Fault.REMOTE_L2_B)
             assert _until(lambda: (drive(), robot.remote_estops == 1)[1]) and robot.remote_estop_latched
             assert _until(lambda: (drive(), emu.commands()[-1].damping)[1])
@@ -353,8 +356,10 @@ def test_the_links_estop_latch_and_deadline_trips_cross_the_io_process() -> None
             assert _until(lambda: (drive(), not emu.commands()[-1].damping)[1])  # the hold goes out again
             assert _until(lambda: (drive(), not robot.remote_estop_latched)[1])
             assert robot.remote_estops == 1
+            before = robot.deadline_trips
+            assert before >= trips
             time.sleep(0.15)  # no write for three write deadlines
-            assert _until(lambda: robot.deadline_trips >= 1)
+            assert _until(lambda: robot.deadline_trips > before)
 
 
 def test_the_whole_robots_estop_latch_reaches_the_layer_and_its_reset_releases_it_through_the_io_process() -> None:
@@ -362,8 +367,9 @@ def test_the_whole_robots_estop_latch_reaches_the_layer_and_its_reset_releases_i
     latch count the state block carries, and its reset's release goes back: the legs are driven again, not damped."""
     events: list[SafetyEvent] = []
     with RobotEmulator(RobotEmulatorConfig(robot="a1-wx200", mode="lockstep")) as emu:
+        # the stale timeout long: what is tested is the latch, not how late a loaded machine runs this process
         safe = SafeRobot(ProcessRobot(_arm(emu)), SafetyConfig(position_table="a1", on_event=events.append,
-                                                               ramp_time_s=0.2))
+                                                               ramp_time_s=0.2, stale_timeout_s=5.0))
         ctrl = StandController(get_robot("a1-wx200", "actuated"))
 
         def drive() -> None:
@@ -381,11 +387,15 @@ def test_the_whole_robots_estop_latch_reaches_the_layer_and_its_reset_releases_i
             safe.reset()
             assert _until(lambda: (drive(), safe.safety_state is SafetyState.RUN)[1])
             assert _until(lambda: (drive(), not safe.robot.remote_estop_latched)[1])
+            trips = safe.robot.deadline_trips
             since = len(emu.legs.commands())
             for _ in range(20):
                 drive()
             frames = emu.legs.commands()[since:]
-            assert frames and not any(c.damping for c in frames)
+            # driven, not damped: a damping frame here could only be a write deadline's, which a loaded machine
+            # may let pass between two drives, and is then counted
+            assert frames and (not any(c.damping for c in frames) or safe.robot.deadline_trips > trips)
+            assert not safe.robot.remote_estop_latched
             assert [e.reason for e in events].count("remote_estop") == 1
 
 
