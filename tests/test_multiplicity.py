@@ -242,3 +242,18 @@ def test_a_paper_tables_count_line_leaves_out_the_tests_that_cannot_reach_005():
             "any 'better' holding after it is false at most 0.05; a 'better' that holds only on its own test says "
             "so, and is at 0.05 on its own, uncorrected, outside that bound") in text
     assert "holds after Holm's correction over the table's 2 tests that can reach p < 0.05, adjusted p = 0.0156" in text
+
+
+def test_a_summary_written_before_n80_holm_was_recorded_makes_no_claim_about_it():
+    # the same run as above, read back from a summary.json of before n80_holm: its None is no search's result
+    records = [_fall(c, band, t, (c == "b" and t < (5 if band == "in" else 8))
+                     or (c == "a" and band == "in" and t == 9)) for band in ("in", "ood") for t in range(10)
+               for c in ("a", "b")]
+    data = _summary(records).to_json()
+    for entry in data["paired"]:
+        del entry["n80_holm"]
+    old = Summary.from_json(data)
+    (sentence,) = [v for v in verdict.verdicts(old) if v.startswith("band in: a and b do not differ "
+                                                                      "significantly in survival")]
+    assert "paired trials would settle a difference this large on its own test" in sentence
+    assert "Holm's correction over" not in sentence and "search's limit" not in sentence

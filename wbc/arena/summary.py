@@ -216,8 +216,10 @@ class PairSummary:
             ``summary.json`` written before it was recorded.
         n80_holm: pairs the test needs for 80 % power at the observed difference at alpha / m, m the tests of the
             verdict's family with this one in it: the level of Holm's first (strictest) step, which a test that
-            reaches holds after the correction whatever the others show. None where `n80` is, and in a
-            ``summary.json`` written before it was recorded.
+            reaches holds after the correction whatever the others show. None where `n80` is, beyond the search,
+            and in a ``summary.json`` written before it was recorded.
+        n80_holm_recorded: False for an entry read from a ``summary.json`` written before `n80_holm` was recorded:
+            its None then says nothing of the search (not part of the JSON form, nor of equality).
     """
 
     a: str
@@ -241,6 +243,7 @@ class PairSummary:
     all_equal: int | None = None
     nonzero: int | None = None
     n80_holm: int | None = None
+    n80_holm_recorded: bool = field(default=True, compare=False, repr=False)
 
     def __post_init__(self) -> None:
         for name in ("diff", "mean_a", "mean_b", "p", "shift", "rank_biserial", "p_holm"):
@@ -288,7 +291,7 @@ class PairSummary:
                    mean_b=data["mean_b"], test=data["test"], p=data["p"], n80=data["n80"], a_only=data["a_only"],
                    b_only=data["b_only"], shift=data.get("shift"), rank_biserial=data.get("rank_biserial"),
                    p_holm=data.get("p_holm"), all_equal=data.get("all_equal"), nonzero=data.get("nonzero"),
-                   n80_holm=data.get("n80_holm"))
+                   n80_holm=data.get("n80_holm"), n80_holm_recorded="n80_holm" in data)
 
 
 @dataclass(frozen=True, kw_only=True)

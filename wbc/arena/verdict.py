@@ -92,7 +92,7 @@ def _settle(entry: PairSummary, what: str, m: int) -> str:
 def _under_holm(entry: PairSummary, m: int) -> str:
     """The clause on the trials a difference needs to hold after Holm's correction (`PairSummary.n80_holm`)."""
     m_with = _family_size(entry, m)
-    if m_with < 2 or entry.n80 is None:
+    if m_with < 2 or entry.n80 is None or not entry.n80_holm_recorded:  # not recorded: nothing to say of it
         return ""
     level = f"{ALPHA:g}/{m_with}"
     if entry.n80_holm is None:
