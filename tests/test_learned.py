@@ -929,6 +929,19 @@ def test_probe_reports_per_command_velocities(vec, tmp_path):
     assert all(np.isfinite([r["vx"], r["vy"], r["yaw_rate"], r["falls_per_env_s"]]).all() for r in rows)
 
 
+def test_probe_measures_each_command_held_and_an_episode_ending_on_its_last_step(vec, tmp_path):
+    from wbc.learned.train.export import policy_file_from_actor
+    from wbc.tools.probe import probe_policy
+
+    save_policy(tmp_path / "p", policy_file_from_actor(_actor(vec, True), vec.cfg, task="push", stage=3))
+    # commands drawn at random at each reset: the episodes end on the probe's last step, reset onto commands no env
+    # held (they were keyed by the command after the step, and the fall rates by the command held in it)
+    cfg = small_config(num_envs=4, episode_s=0.1, command_ranges=((0.0, 1.0), (-0.3, 0.3), (-1.0, 1.0)))
+    steps = round(cfg.episode_s / cfg.policy_dt)
+    rows = probe_policy(tmp_path / "p", cfg, steps=steps, settle=1)
+    assert rows and all(np.isfinite([r["vx"], r["vy"], r["yaw_rate"], r["falls_per_env_s"]]).all() for r in rows)
+
+
 def test_probe_counts_each_fall_under_the_command_its_env_had():
     from wbc.tools.probe import fall_rates
 

@@ -54,8 +54,10 @@ def probe_policy(policy_path: str | Path, env: EnvConfig, *, steps: int = 500, s
         settle: steps before the velocities are averaged (ramp and start transient).
 
     Returns:
-        One row per distinct commanded (vx, vy, yaw rate) after `settle`: the command, the mean body-frame forward
-        and lateral velocity and yaw rate after `settle`, and the falls per environment-second under that command
+        One row per distinct commanded (vx, vy, yaw rate) held after `settle`: the command, the mean body-frame
+        forward and lateral velocity and yaw rate after `settle` of the envs that held it through a step (an env reset
+        in a step, by a fall or its time limit, is left out of that step's), and the falls per environment-second
+        under that command
         over all `steps` (`fall_rates`: a fall counts for the command its env had when it fell).
     """
     policy = NumpyPolicy(load_policy(policy_path))
@@ -72,9 +74,12 @@ def probe_policy(policy_path: str | Path, env: EnvConfig, *, steps: int = 500, s
             obs, priv = r.obs, r.privileged
             fell.append(np.asarray(r.terminated, dtype=bool).copy())
             if k >= settle:
-                cmds.append(e._command_target.copy())
+                # under the command the env held in this step; an env reset in it (a fall or its time limit) has a
+                # new command and a fresh state, which are no measure of the old one's
+                kept = ~(np.asarray(r.terminated, dtype=bool) | np.asarray(r.time_out, dtype=bool))
+                cmds.append(held[-1][kept])
                 qvel = e.state[:, 1 + e.nq:1 + e.nq + 6]
-                vel.append(np.c_[priv[:, 3:5], qvel[:, 5]])
+                vel.append(np.c_[priv[:, 3:5], qvel[:, 5]][kept])
     finally:
         e.close()
     cmds_a, vel_a = np.concatenate(cmds), np.concatenate(vel)
