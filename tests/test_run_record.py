@@ -108,6 +108,14 @@ def test_the_package_hash_covers_every_file_but_caches(tmp_path: Path) -> None:
     (root / "__pycache__" / "x.cpython-311.pyc").write_bytes(b"cache")
     (root / "control" / "stand.nbi").write_bytes(b"numba")
     assert package_files_sha256(root) == first
+    # strays no install holds: a desktop's folder file, an editor's swap file and backup, a patch's leftovers
+    (root / ".DS_Store").write_bytes(b"finder")
+    (root / "control" / ".stand.py.swp").write_bytes(b"vim")
+    (root / "control" / "stand.py~").write_text("KP = 0.5\n")
+    (root / "control" / "stand.py.orig").write_text("KP = 0.5\n")
+    (root / ".idea").mkdir()
+    (root / ".idea" / "workspace.xml").write_text("<x/>")
+    assert package_files_sha256(root) == first
     (root / "control" / "stand.py").write_text("KP = 2.0\n")
     assert package_files_sha256(root) != first
 

@@ -102,18 +102,22 @@ _CACHES = ("__pycache__",)
 _CACHE_SUFFIXES = (".pyc", ".pyo", ".nbi", ".nbc")
 """Files that are caches: bytecode, and numba's index and compiled functions."""
 
+_STRAY_SUFFIXES = ("~", ".orig", ".rej", ".bak", ".swp", ".swo")
+"""Files no install holds and no code reads: an editor's backups and swap files, a patch's leftovers."""
+
 
 def package_files(root: Path = CHECKOUT) -> list[tuple[str, Path]]:
     """The files of the package at `root` that `package_sha256` covers, as (path relative to `root`, path), sorted.
 
-    Every file but caches (`_CACHES` directories, `_CACHE_SUFFIXES` files): the modules and the shipped data and
+    Every file but caches (`_CACHES` directories, `_CACHE_SUFFIXES` files) and strays (hidden files and folders such
+    as ``.DS_Store``, `_STRAY_SUFFIXES` files such as an editor's backups): the modules and the shipped data and
     weights.
     """
     found = []
     for folder, dirs, names in os.walk(root):
-        dirs[:] = [d for d in dirs if d not in _CACHES]
+        dirs[:] = [d for d in dirs if d not in _CACHES and not d.startswith(".")]
         for name in names:
-            if not name.endswith(_CACHE_SUFFIXES):
+            if not name.endswith(_CACHE_SUFFIXES + _STRAY_SUFFIXES) and not name.startswith("."):
                 path = Path(folder) / name
                 found.append((path.relative_to(root).as_posix(), path))
     return sorted(found)
