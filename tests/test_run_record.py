@@ -203,7 +203,9 @@ def test_a_resume_with_another_trial_time_limit_is_refused_naming_both(copy_of) 
     del run["trial_time_limit_s"]  # a directory written before the limit was recorded takes any
     (out / "run.json").write_text(json.dumps(run))
     ResultsStore(out, identity, resume=True, session=_session(limit=30.0)).close()
-    assert _run(out)["trial_time_limit_s"] == 30.0
+    # its trials were played under a limit never recorded: the run's stays unknown, the session's is this call's
+    run = _run(out)
+    assert "trial_time_limit_s" not in run and run["sessions"][-1]["trial_time_limit_s"] == 30.0
 
 
 def test_a_resume_by_another_command_is_refused_naming_the_one_to_use(copy_of) -> None:
@@ -218,6 +220,21 @@ def test_a_resume_by_another_command_is_refused_naming_the_one_to_use(copy_of) -
     run["command"] = "run"  # wbc run is wbc compare of one controller: the same directory
     (out / "run.json").write_text(json.dumps(run))
     ResultsStore(out, identity, resume=True, session=_session("compare")).close()
+
+
+def test_a_paper_directory_written_before_the_command_was_recorded_takes_only_wbc_paper(copy_of) -> None:
+    _, out = copy_of
+    identity = RunIdentity.load(out / "run.json")
+    run = _run(out)
+    del run["command"]
+    (out / "run.json").write_text(json.dumps(run))
+    (out / "paper.json").write_text("{}")
+    (out / "paper.txt").write_text("Table I")
+    with pytest.raises(ResultsDirError, match=r"field command: the run was written by wbc paper \(its paper.json says "
+                                              r"so\).*finish it with wbc paper TABLE \.\.\. --resume"):
+        ResultsStore(out, identity, resume=True, session=_session("compare"))
+    assert (out / "paper.json").is_file() and (out / "paper.txt").is_file()  # nothing removed
+    ResultsStore(out, identity, resume=True, session=_session("paper table1")).close()
 
 
 def test_a_missing_option_at_its_default_is_named_as_the_default(copy_of, capsys) -> None:

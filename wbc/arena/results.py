@@ -622,12 +622,19 @@ class ResultsStore:
     def _check_session(self, session: dict[str, Any] | None) -> None:
         """Refuse a resume by another command, or with another trial time limit, than ``run.json`` records.
 
-        A directory written before these were recorded (no ``command``, no ``trial_time_limit_s``) takes any.
+        A directory written before these were recorded (no ``command``, no ``trial_time_limit_s``) takes any, but
+        one holding a ``paper.json`` takes only ``wbc paper``.
         """
         stored = self._stored_run
         if session is None:
             return
         was, now = stored.get("command"), session.get("command")
+        if was is None and now is not None and not now.startswith("paper") and (self.dir / "paper.json").is_file():
+            # written before the command was recorded: its paper.json says wbc paper wrote it, whose files a resume
+            # by another command would remove and not write again
+            raise ResultsDirError(f"{self.run_path}: field command: the run was written by wbc paper (its paper.json "
+                                  f"says so), and a resume by wbc {now} would remove its paper files and not write "
+                                  "them again; finish it with wbc paper TABLE ... --resume, or choose another --out")
         if was is not None and now is not None and _SAME_COMMAND.get(was, was) != _SAME_COMMAND.get(now, now):
             raise ResultsDirError(f"{self.run_path}: field command: the run was written by wbc {was}, and a resume "
                                   f"by wbc {now} would not write its files (wbc {was}'s own); finish it with wbc "
@@ -728,7 +735,9 @@ class ResultsStore:
             command = stored.get("command", session.get("command"))
             if command is not None:
                 out["command"] = command
-            out["trial_time_limit_s"] = stored.get("trial_time_limit_s", session.get("trial_time_limit_s"))
+            if "trial_time_limit_s" in stored or not self.records:
+                out["trial_time_limit_s"] = stored.get("trial_time_limit_s", session.get("trial_time_limit_s"))
+            # else: trials were stored under a limit never recorded; the run's is unknown (each session has its own)
             sessions.append({**{k: v for k, v in session.items() if k != "command"},
                              "started_utc": utc_now(), "ended_utc": None, "stored_trials": len(self.records)})
         else:
