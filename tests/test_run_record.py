@@ -277,6 +277,21 @@ def test_the_inputs_are_copied_and_a_resume_checks_them_against_the_copies(copy_
         run_arena(_config(scenario, out, resume=True))
 
 
+def test_the_copies_of_two_inputs_differing_only_in_case_are_two_files_on_any_file_system(copy_of, tmp_path) -> None:
+    _, out = copy_of
+    identity = RunIdentity.load(out / "run.json")
+    (tmp_path / "h8.toml").write_text("[mpc]\nhorizon = 8\n")
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "h8.toml").write_text("[mpc]\nhorizon = 9\n")
+    roles = {"controller-config:make@H8": tmp_path / "h8.toml",
+             "controller-config:make@h8": tmp_path / "other" / "h8.toml"}
+    ResultsStore(out, identity, resume=True, session=_session(), inputs=roles).close()
+    kept = _run(out)["inputs"]
+    copies = [kept[role]["copy"] for role in roles]
+    assert len({c.casefold() for c in copies}) == 2
+    assert [(out / c).read_text() for c in copies] == [p.read_text() for p in roles.values()]
+
+
 # -- 7. the global random generators -----------------------------------------------------------------------------------
 def test_a_plugin_drawing_from_the_global_generators_plays_the_same_whatever_ran_before(plugin_package,
                                                                                            tmp_path) -> None:

@@ -745,10 +745,16 @@ class ResultsStore:
         if sessions:
             out["sessions"] = sessions
         kept = dict(stored.get("inputs") or {})
+        # the copies' names told apart case-folded: two roles that differ only in case (labels H8 and h8), or that
+        # one name stands for, would be one file on a case-insensitive file system
+        taken = {str(entry.get("copy")).casefold() for entry in kept.values() if isinstance(entry, Mapping)}
         for role, path in inputs.items():
             if role in kept and (self.dir / str(kept[role].get("copy"))).is_file():
                 continue
-            copy = Path(INPUTS_DIR) / f"{file_name_part(role)}-{Path(path).name}"
+            copy, k = Path(INPUTS_DIR) / f"{file_name_part(role)}-{Path(path).name}", 2
+            while copy.as_posix().casefold() in taken:
+                copy, k = Path(INPUTS_DIR) / f"{file_name_part(role)}-{k}-{Path(path).name}", k + 1
+            taken.add(copy.as_posix().casefold())
             with self._writing(self.dir / copy):
                 (self.dir / INPUTS_DIR).mkdir(exist_ok=True)
                 shutil.copyfile(path, self.dir / copy)
