@@ -9,6 +9,7 @@ the better side's minus the other's, unnamed, beside a table of B - A.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -242,6 +243,12 @@ def test_a_paper_tables_count_line_leaves_out_the_tests_that_cannot_reach_005():
             "any 'better' holding after it is false at most 0.05; a 'better' that holds only on its own test says "
             "so, and is at 0.05 on its own, uncorrected, outside that bound") in text
     assert "holds after Holm's correction over the table's 2 tests that can reach p < 0.05, adjusted p = 0.0156" in text
+    # a table none of whose tests can reach 0.05 says so, rather than counting a correction over none
+    few = dataclasses.replace(result, comparisons=tuple(PaperComparison(question="q", pair=p) for p in (
+        success("in", 0, 0, 1.0), success("ood", 1, 3, 0.625))))
+    text = " ".join(" ".join(_comparison_lines(few)).split())
+    assert "none can reach p < 0.05 on its pairs, so none can call a side better" in text
+    assert "over the 0" not in text
 
 
 def test_a_summary_written_before_n80_holm_was_recorded_makes_no_claim_about_it():

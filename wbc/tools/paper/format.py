@@ -187,10 +187,15 @@ def _comparison_lines(result: PaperTableResult) -> list[str]:
                     f"{'its' if tested - family == 1 else 'their'} pairs (too few discordant pairs or nonzero "
                     f"differences) and {'is' if tested - family == 1 else 'are'} left out of Holm's correction "
                     "(Tarone's refinement)")
-        lines += _wrap(f"the verdicts weigh {tested} tests{left_out}: {alone} with p < {ALPHA:g} on their own, "
-                       f"{held} after Holm's correction over the {family} that can reach it. The correction keeps the "
-                       f"chance that any 'better' holding after it is false at most {ALPHA:g}; a 'better' that holds "
-                       f"only on its own test says so, and is at {ALPHA:g} on its own, uncorrected, outside that bound")
+        if family:
+            lines += _wrap(f"the verdicts weigh {tested} tests{left_out}: {alone} with p < {ALPHA:g} on their own, "
+                           f"{held} after Holm's correction over the {family} that can reach it. The correction keeps "
+                           f"the chance that any 'better' holding after it is false at most {ALPHA:g}; a 'better' that "
+                           f"holds only on its own test says so, and is at {ALPHA:g} on its own, uncorrected, outside "
+                           "that bound")
+        else:
+            lines += _wrap(f"the verdicts weigh {tested} tests{left_out}: none can reach p < {ALPHA:g} on its pairs, "
+                           "so none can call a side better; more trials could")
     questions: dict[tuple[str, str], list[PaperComparison]] = {}
     for comparison, pair in zip(result.comparisons, pairs, strict=True):
         comparison = dataclasses.replace(comparison, pair=pair)
