@@ -171,8 +171,9 @@ def test_a_difference_left_open_gives_the_trials_it_needs_alone_and_under_the_co
     (sentence,) = [v for v in verdict.verdicts(summary) if v.startswith("band in: a and b do not differ "
                                                                           "significantly in survival")]
     assert (f"about {survival.n80} paired trials would settle a difference this large on its own test (80 % power at "
-            f"0.05), and about {survival.n80_holm} would let it hold after Holm's correction over 4 tests whatever "
-            f"the others show (80 % power at 0.05/4, the level of the correction's first step)") in sentence
+            f"0.05), and about {survival.n80_holm} would let it hold after Holm's correction whatever the others show "
+            f"(80 % power at 0.05/4, 4 the tests this verdict weighs: at most the level of the correction's first "
+            f"step)") in sentence
     assert summary.to_json()["paired"][0]["n80_holm"] == survival.n80_holm
     # the table keeps n80 at 0.05 and says so
     assert "n80: paired trials that test needs to detect the observed difference with 80 % power at alpha = 0.05" \
@@ -264,3 +265,20 @@ def test_a_summary_written_before_n80_holm_was_recorded_makes_no_claim_about_it(
                                                                       "significantly in survival")]
     assert "paired trials would settle a difference this large on its own test" in sentence
     assert "Holm's correction over" not in sentence and "search's limit" not in sentence
+
+
+def test_the_trials_to_hold_after_the_correction_count_the_tests_left_out_of_it_which_more_trials_bring_in():
+    # band in: B falls in 5 of 10, A in another (6 discordant pairs: in the family); band ood: no one falls, so its
+    # survival and TTF tests cannot reach 0.05 and are left out. With more trials they may join it: the level that
+    # holds whatever the others show is 0.05 / 4, not 0.05 / 2
+    records = [_fall(c, band, t, band == "in" and ((c == "b" and t < 5) or (c == "a" and t == 9)))
+               for band in ("in", "ood") for t in range(10) for c in ("a", "b")]
+    summary = _summary(records)
+    survival = next(p for p in summary.paired if p.band == "in" and p.metric == "success_rate")
+    assert sum(1 for p in verdict.holm_family(summary) if verdict.in_family(p)) == 2
+    assert survival.n80_holm == pairs_for_mcnemar(0.1, 0.5, alpha=0.05 / 4) and survival.n80_holm_tests == 4
+    (sentence,) = [v for v in verdict.verdicts(summary) if v.startswith("band in: a and b do not differ "
+                                                                          "significantly in survival")]
+    assert (f"about {survival.n80_holm} would let it hold after Holm's correction whatever the others show (80 % "
+            "power at 0.05/4, 4 the tests this verdict weighs") in " ".join(sentence.split())
+    assert Summary.from_json(summary.to_json()).paired == summary.paired

@@ -342,7 +342,7 @@ def test_summary_has_exactly_the_required_shape():
     for p in summary["paired"]:
         assert set(p) == {"a", "b", "band", "metric", "diff", "ci95", "interval", "n", "mean_a", "mean_b", "test",
                           "p", "n80", "a_only", "b_only", "shift", "rank_biserial", "p_holm", "all_equal",
-                          "nonzero", "n80_holm"}
+                          "nonzero", "n80_holm", "n80_holm_tests"}
         assert len(p["ci95"]) == 2
         if p["metric"] in COMMON_METRICS:
             assert p["n"] == 0 and p["test"] is None

@@ -55,7 +55,7 @@ from wbc.arena.stats import (
 )
 from wbc.arena.summary import CellSummary, CounterTotal, MetricSummary, PairSummary, Summary, TickWarning, p_digits
 from wbc.arena.trial_record import CONTROLLER_ERROR, DIVERGED, OPERATOR_STOP, SAFETY_TRIP, TrialRecord, decode_counters
-from wbc.arena.verdict import ALPHA, count_line, holm_family, in_family, robots_caveat, signed, verdicts
+from wbc.arena.verdict import ALPHA, count_line, holm_family, robots_caveat, signed, verdicts
 from wbc.arena.windows import COMMON_WINDOW, common_window_values
 from wbc.errors import RecordError
 from wbc.output_files import write_text
@@ -289,8 +289,9 @@ def _with_family(pairs: Sequence[tuple[PairSummary, np.ndarray]]) -> list[PairSu
     """The paired comparisons with their Holm-adjusted p over the verdict's family and their n80 under it.
 
     The family is the tests that can reach p < 0.05 on their pairs (`wbc.arena.verdict.holm_family`: Holm's
-    correction with Tarone's refinement). ``n80_holm`` is the pairs for 80 % power at 0.05 / m, m the family's
-    tests with this one in it (a test left out of it would join it to hold): the level of Holm's first step.
+    correction with Tarone's refinement). ``n80_holm`` is the pairs for 80 % power at 0.05 / m, m every test with
+    a p (``n80_holm_tests``): the family's tests and those left out of it, which more trials may bring in, so a
+    test that reaches the level holds after the correction whatever the others show.
 
     Args:
         pairs: each comparison (`compare_pair`) with the differences B - A it was read off.
@@ -299,15 +300,14 @@ def _with_family(pairs: Sequence[tuple[PairSummary, np.ndarray]]) -> list[PairSu
         The comparisons, in order, with ``p_holm`` and ``n80_holm``.
     """
     entries = holm_family([entry for entry, _ in pairs])
-    m = sum(1 for entry in entries if in_family(entry))
+    m = sum(1 for entry in entries if entry.p is not None)
     out = []
     for entry, (_, d) in zip(entries, pairs, strict=True):
         if entry.n80 is None:
             out.append(entry)
             continue
-        m_with = m if in_family(entry) else m + 1
-        n80_holm = entry.n80 if m_with == 1 else _n80(dataclasses.asdict(entry), d, ALPHA / m_with)
-        out.append(dataclasses.replace(entry, n80_holm=n80_holm))
+        n80_holm = entry.n80 if m == 1 else _n80(dataclasses.asdict(entry), d, ALPHA / m)
+        out.append(dataclasses.replace(entry, n80_holm=n80_holm, n80_holm_tests=None if n80_holm is None else m))
     return out
 
 

@@ -214,10 +214,13 @@ class PairSummary:
             None: `ci95` is then [diff, diff], which measures no uncertainty. From one pair `ci95` is (None, None).
         nonzero: the Wilcoxon test's nonzero differences (the pairs it ranks); None for success, and in a
             ``summary.json`` written before it was recorded.
-        n80_holm: pairs the test needs for 80 % power at the observed difference at alpha / m, m the tests of the
-            verdict's family with this one in it: the level of Holm's first (strictest) step, which a test that
-            reaches holds after the correction whatever the others show. None where `n80` is, beyond the search,
-            and in a ``summary.json`` written before it was recorded.
+        n80_holm: pairs the test needs for 80 % power at the observed difference at alpha / m, m = `n80_holm_tests`
+            (every test the verdict weighs, those left out of its correction included: with more trials they may
+            join it): at most the level of Holm's first (strictest) step, so a test that reaches it holds after the
+            correction whatever the others show. None where `n80` is, beyond the search, and in a ``summary.json``
+            written before it was recorded.
+        n80_holm_tests: the m of `n80_holm`'s level; None where it is None, and in a ``summary.json`` written
+            before it was recorded.
         n80_holm_recorded: False for an entry read from a ``summary.json`` written before `n80_holm` was recorded:
             its None then says nothing of the search (not part of the JSON form, nor of equality).
     """
@@ -243,6 +246,7 @@ class PairSummary:
     all_equal: int | None = None
     nonzero: int | None = None
     n80_holm: int | None = None
+    n80_holm_tests: int | None = None
     n80_holm_recorded: bool = field(default=True, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -280,7 +284,7 @@ class PairSummary:
                 "mean_b": self.mean_b, "test": self.test, "p": self.p, "n80": self.n80, "a_only": self.a_only,
                 "b_only": self.b_only, "shift": self.shift, "rank_biserial": self.rank_biserial,
                 "p_holm": self.p_holm, "all_equal": self.all_equal, "nonzero": self.nonzero,
-                "n80_holm": self.n80_holm}
+                "n80_holm": self.n80_holm, "n80_holm_tests": self.n80_holm_tests}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> PairSummary:
@@ -291,7 +295,8 @@ class PairSummary:
                    mean_b=data["mean_b"], test=data["test"], p=data["p"], n80=data["n80"], a_only=data["a_only"],
                    b_only=data["b_only"], shift=data.get("shift"), rank_biserial=data.get("rank_biserial"),
                    p_holm=data.get("p_holm"), all_equal=data.get("all_equal"), nonzero=data.get("nonzero"),
-                   n80_holm=data.get("n80_holm"), n80_holm_recorded="n80_holm" in data)
+                   n80_holm=data.get("n80_holm"), n80_holm_tests=data.get("n80_holm_tests"),
+                   n80_holm_recorded="n80_holm" in data)
 
 
 @dataclass(frozen=True, kw_only=True)

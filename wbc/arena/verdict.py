@@ -73,9 +73,9 @@ def p_clause(p: float | None) -> str:
 def _settle(entry: PairSummary, what: str, m: int) -> str:
     """What would settle a difference the test did not: the paired trials for 80 % power, alone and under Holm.
 
-    `n80` is at `ALPHA`, for the test on its own; `n80_holm` at `ALPHA` / m, m the family's tests with this one in
-    it (`_family_size`): the level of Holm's first, strictest step, which a test that reaches holds after the
-    correction whatever the other tests show (where others hold too, fewer may do). Not rejecting is no evidence that
+    `n80` is at `ALPHA`, for the test on its own; `n80_holm` at `ALPHA` / m, m every test weighed (`_holm_tests`):
+    at most the level of Holm's first, strictest step, which a test that reaches holds after the correction whatever
+    the other tests show (where others hold too, fewer may do). Not rejecting is no evidence that
     the two are alike: the sentence never says there is no difference, only what the interval beside it allows and
     how many trials would tell.
     """
@@ -91,19 +91,26 @@ def _settle(entry: PairSummary, what: str, m: int) -> str:
 
 def _under_holm(entry: PairSummary, m: int) -> str:
     """The clause on the trials a difference needs to hold after Holm's correction (`PairSummary.n80_holm`)."""
-    m_with = _family_size(entry, m)
+    m_with = _holm_tests(entry, m)
     if m_with < 2 or entry.n80 is None or not entry.n80_holm_recorded:  # not recorded: nothing to say of it
         return ""
-    level = f"{ALPHA:g}/{m_with}"
+    level = (f"{ALPHA:g}/{m_with}, {m_with} the tests this verdict weighs: at most the level of the correction's "
+             "first step")
     if entry.n80_holm is None:
-        return (f", and no number up to the search's limit would let it hold after Holm's correction over {m_with} "
-                f"tests at {level}")
-    return (f", and about {entry.n80_holm} would let it hold after Holm's correction over {m_with} tests whatever "
-            f"the others show (80 % power at {level}, the level of the correction's first step)")
+        return (", and no number up to the search's limit would let it hold after Holm's correction whatever the "
+                f"others show (at {level})")
+    return (f", and about {entry.n80_holm} would let it hold after Holm's correction whatever the others show (80 % "
+            f"power at {level})")
 
 
-def _family_size(entry: PairSummary, m: int) -> int:
-    """The family a test would be corrected in: the `m` tests of the verdict's, with this one in it."""
+def _holm_tests(entry: PairSummary, m: int) -> int:
+    """The m of `entry`'s ``n80_holm`` level: `PairSummary.n80_holm_tests`, every test weighed.
+
+    From a ``summary.json`` written before it was recorded, the family a test would be corrected in: the `m` tests of
+    the verdict's, with this one in it.
+    """
+    if entry.n80_holm_tests is not None:
+        return entry.n80_holm_tests
     return m if in_family(entry) else m + 1
 
 
@@ -171,7 +178,7 @@ def _significance(entry: PairSummary, test: str, m: int) -> str:
         return f"significant ({test} {said}), and after Holm's correction over {_tests(m)} ({adjusted})"
     need = ("" if entry.n80_holm is None else
             f"; about {entry.n80_holm} paired trials would let a difference this large hold after it whatever the "
-            f"others show (80 % power at {ALPHA:g}/{_family_size(entry, m)})")
+            f"others show (80 % power at {ALPHA:g}/{_holm_tests(entry, m)})")
     return (f"significant on its own ({test} {said}), not significant after Holm's correction over {_tests(m)} "
             f"({adjusted}){need}")
 
