@@ -274,3 +274,37 @@ def test_each_real_robot_class_has_every_member_of_its_capabilities(cls: str, pr
                          if not hasattr(robot_class, member))
         assert not missing, f"{name} lacks {missing} of {protocol}"
         assert capabilities.provides(robot_class, getattr(capabilities, protocol))
+
+
+class CountingLegs(Legs):
+    """Legs that count their write-deadline trips, and how often the count is read."""
+
+    reads_of_trips = 0
+
+    @property
+    def deadline_trips(self) -> int:
+        self.reads_of_trips += 1
+        return 2
+
+
+class CountingArm(Arm):
+    reads_of_trips = 0
+
+    @property
+    def deadline_trips(self) -> int:
+        self.reads_of_trips += 1
+        return 1
+
+
+def test_the_trip_counters_are_read_once_a_call_the_devices_that_count_them_resolved_once() -> None:
+    # the I/O process publishes both with every state: a check against the runtime-checkable protocol per call read
+    # each counter (under its device's lock) once more to see that it is there
+    clock = Clock()
+    legs, arm = CountingLegs(12, clock, prefix="leg"), CountingArm(3, clock, prefix="arm", q0=-0.3)
+    robot = QuadrupedArmRobot(legs, arm, QuadrupedArmConfig(arm_mode="actuated"))
+    legs.reads_of_trips = arm.reads_of_trips = 0
+    assert robot.deadline_trips == 3 and robot.deadline_trips_by_device() == {"legs": 2, "arm": 1}
+    assert (legs.reads_of_trips, arm.reads_of_trips) == (2, 2)
+    plain = QuadrupedArmRobot(Legs(12, clock, prefix="leg"), Arm(3, clock, prefix="arm", q0=-0.3),
+                              QuadrupedArmConfig(arm_mode="actuated"))
+    assert plain.deadline_trips == 0 and plain.deadline_trips_by_device() == {}

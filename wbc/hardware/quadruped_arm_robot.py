@@ -190,6 +190,10 @@ class QuadrupedArmRobot(Robot):
         # each joint's gains bounded as its own device bounds them (the arm's current loop far below the legs')
         self.gain_limits = tuple(np.concatenate([np.broadcast_to(np.asarray(p.gain_limits[k], dtype=float),
                                                                   (p.num_joints,)) for p in parts]) for k in (0, 1))
+        # the devices that count write-deadline trips, resolved once: a check against the runtime-checkable protocol
+        # reads its properties, under the device's lock, which the I/O process's every published state would pay
+        self._trip_counters: tuple[tuple[str, Robot], ...] = tuple(
+            (name, part) for name, part in (("legs", legs), ("arm", arm)) if isinstance(part, WriteDeadlineTrips))
         if isinstance(legs, RemoteEstopLatch) and isinstance(arm, DampsWhile):
             # the remote's L2 + B, latched by the legs' link on the frame that shows it, damps the arm's bus too
             arm.damp_while(lambda: legs.remote_estop_latched)
@@ -325,7 +329,7 @@ class QuadrupedArmRobot(Robot):
     @property
     def deadline_trips(self) -> int:
         """The legs' write-deadline trips plus the arm's (`WriteDeadlineTrips`); a device without one counts none."""
-        return sum(part.deadline_trips for part in (self.legs, self.arm) if isinstance(part, WriteDeadlineTrips))
+        return sum(part.deadline_trips for _, part in self._trip_counters)
 
     # -- JoinedDevices --------------------------------------------------------------------------------------------
     def state_ages(self) -> dict[str, float]:
@@ -337,8 +341,7 @@ class QuadrupedArmRobot(Robot):
 
     def deadline_trips_by_device(self) -> dict[str, int]:
         """The legs' write-deadline trips and the arm's, apart (`JoinedDevices`); a device without one is left out."""
-        return {name: part.deadline_trips for name, part in (("legs", self.legs), ("arm", self.arm))
-                if isinstance(part, WriteDeadlineTrips)}
+        return {name: part.deadline_trips for name, part in self._trip_counters}
 
     @property
     def faults(self) -> tuple[ArmFault, ...]:
