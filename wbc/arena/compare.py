@@ -648,7 +648,10 @@ def _described(executor: LocalExecutor | RayExecutor, cfg: ArenaConfig) -> str:
 
 
 def _workers(executor: LocalExecutor | RayExecutor) -> int | None:
-    """The trials a run plays at once: the local executor's workers, the CPUs of a Ray it starts (None: a cluster's)."""
+    """The trials a run plays at once: the local executor's workers, the CPUs given a Ray it starts.
+
+    None where Ray chose them: a cluster's, or a Ray started here without ``--workers`` (every CPU).
+    """
     return executor.workers if isinstance(executor, LocalExecutor) else executor.num_cpus
 
 
