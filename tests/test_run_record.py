@@ -11,7 +11,11 @@ from __future__ import annotations
 
 import argparse
 import copy
+import csv
+import dataclasses
+import io
 import json
+import math
 import random
 import shutil
 from pathlib import Path
@@ -26,9 +30,16 @@ from wbc.arena.compare import ArenaConfig, run_arena
 from wbc.arena.identity import RunIdentity
 from wbc.arena.results import DERIVED_FILES, ResultsStore, is_complete
 from wbc.arena.sim_trial import run_trial
-from wbc.arena.trial_record import MACHINE_TIMED, TrialRecord
+from wbc.arena.trial_record import (
+    ADDED_COLUMNS,
+    COLUMNS,
+    MACHINE_TIMED,
+    PREVIOUS_COLUMNS,
+    TrialRecord,
+    checksum_of,
+)
 from wbc.cli.main import _interrupted_run
-from wbc.errors import ResultsDirError
+from wbc.errors import RecordError, ResultsDirError
 from wbc.provenance import package_files_sha256, package_sha256, provenance
 from wbc.scenario import load_scenario
 
@@ -290,6 +301,49 @@ def test_the_copies_of_two_inputs_differing_only_in_case_are_two_files_on_any_fi
     copies = [kept[role]["copy"] for role in roles]
     assert len({c.casefold() for c in copies}) == 2
     assert [(out / c).read_text() for c in copies] == [p.read_text() for p in roles.values()]
+
+
+def _as_previous_version(out: Path) -> list[list[str]]:
+    """Rewrite ``trials.csv`` as the version before the last columns wrote it; its rows as they were, in this form."""
+    path = out / "trials.csv"
+    rows = list(csv.reader(io.StringIO(path.read_text(encoding="utf-8"), newline="")))
+    keep = [i for i, name in enumerate(COLUMNS[:-1]) if name not in ADDED_COLUMNS]
+    old = [[row[i] for i in keep] for row in rows[1:]]
+    buffer = io.StringIO()
+    writer = csv.writer(buffer)
+    writer.writerow(PREVIOUS_COLUMNS)
+    for cells in old:
+        writer.writerow([*cells, checksum_of(cells)])
+    path.write_text(buffer.getvalue(), encoding="utf-8")
+    return rows
+
+
+def test_a_run_of_the_version_before_the_last_columns_resumes_its_rows_kept_in_this_versions_form(copy_of) -> None:
+    scenario, out = copy_of
+    rows = _as_previous_version(out)
+    lines = (out / "trials.csv").read_text(encoding="utf-8").splitlines(keepends=True)
+    (out / "trials.csv").write_text("".join(lines[:-1]), encoding="utf-8")  # its last trial still to play
+    run_arena(_config(scenario, out, resume=True))
+    again = list(csv.reader(io.StringIO((out / "trials.csv").read_text(encoding="utf-8"), newline="")))
+    assert tuple(again[0]) == COLUMNS
+    kept = TrialRecord.from_row(again[1])  # the row of before, with the columns it lacked filled and checked
+    first = TrialRecord.from_row(rows[1])
+    assert math.isnan(kept.act_ms_max) and kept.write_deadline_ramps == 0
+    assert dataclasses.replace(kept, act_ms_max=first.act_ms_max) == first
+    assert len(again) == len(rows)  # and the trial it lacked played
+
+
+def test_an_edited_row_of_the_version_before_is_refused_as_edited(copy_of) -> None:
+    scenario, out = copy_of
+    _as_previous_version(out)
+    text = (out / "trials.csv").read_text(encoding="utf-8").splitlines(keepends=True)
+    cells = next(csv.reader([text[1]]))
+    cells[PREVIOUS_COLUMNS.index("ttf")] = "0.5"
+    buffer = io.StringIO()
+    csv.writer(buffer).writerow(cells)
+    (out / "trials.csv").write_text(text[0] + buffer.getvalue() + "".join(text[2:]), encoding="utf-8")
+    with pytest.raises(RecordError, match=r"checksum .* does not match the row's cells"):
+        run_arena(_config(scenario, out, resume=True))
 
 
 # -- 7. the global random generators -----------------------------------------------------------------------------------

@@ -462,6 +462,9 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None,
     if not rows:
         return StoredRows(records=(), lines=(), refused=())
     columns = tuple(rows[0][1])
+    if columns == PREVIOUS_COLUMNS:  # the version before the last columns: its rows checked on their own, then filled
+        rows = [rows[0], *[(line, _upgraded(row)) for line, row in rows[1:]]]
+        columns = COLUMNS
     if columns != COLUMNS:
         raise RecordError(f"{path}: columns not this version's ({_column_changes(columns)}); "
                           "the directory was written by another version of wbc: resume it with that version, "
@@ -504,6 +507,19 @@ def scan_csv(path: str | Path, *, scenario_hash: str | None = None,
     refused.sort(key=lambda r: r.line)
     kept = [(line, r) for line, r in good if r.run_key not in repeated]
     return StoredRows(records=tuple(r for _, r in kept), lines=tuple(line for line, _ in kept), refused=tuple(refused))
+
+
+def _upgraded(row: list[str]) -> list[str]:
+    """A row of `PREVIOUS_COLUMNS` in this version's `COLUMNS`, its checksum verified first and written anew.
+
+    A row of another length is left as it is, and one whose cells do not match its checksum keeps that checksum, for
+    the row checks to refuse them as they refuse any damaged or edited row.
+    """
+    if len(row) != len(PREVIOUS_COLUMNS):
+        return row
+    cells = dict(zip(PREVIOUS_COLUMNS[:-1], row[:-1], strict=True))
+    new = [cells.get(name, ADDED_COLUMNS.get(name, "")) for name in FIELDS]
+    return [*new, checksum_of(new) if checksum_of(row[:-1]) == row[-1] else row[-1]]
 
 
 def _column_changes(columns: Sequence[str], *, most: int = 8) -> str:
@@ -629,6 +645,15 @@ CHECKSUM = "checksum"
 """The last ``trials.csv`` column: `checksum_of` the row's other cells."""
 COLUMNS: tuple[str, ...] = (*FIELDS, CHECKSUM)
 """The ``trials.csv`` columns."""
+
+ADDED_COLUMNS: dict[str, str] = {"act_ms_max": "nan", "write_deadline_ramps": "0"}
+"""The columns this version added to ``trials.csv``, with the cell a row of the version before takes for each: no
+act time's maximum was kept (NaN, as for a trial that never acted), and no trial of it counted a write deadline's
+damping (a simulated trial has none; a hardware trial is never resumed)."""
+
+PREVIOUS_COLUMNS: tuple[str, ...] = tuple(c for c in COLUMNS if c not in ADDED_COLUMNS)
+"""The ``trials.csv`` columns of the version before (`ADDED_COLUMNS`): a resume reads its rows and writes them in
+this version's."""
 
 _REPORTED = ("fallbacks", "wbc_failures")
 """Integer fields whose values the controller reports (`Controller.counters`): any whole number, not checked here."""
