@@ -18,6 +18,7 @@ import json
 import math
 import random
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -347,6 +348,20 @@ def test_an_edited_row_of_the_version_before_is_refused_as_edited(copy_of) -> No
 
 
 # -- 7. the global random generators -----------------------------------------------------------------------------------
+def _plays_the_same_after(tmp_path: Path, target: str, disturb: Callable[[], object]) -> None:
+    """`target` plays the short scenario's first soft trial the same before and after `disturb` (standing for other
+    trials played before on this worker, which drew from the global generators), machine-timed cells left out."""
+    path = tmp_path / "short.toml"
+    path.write_text(SHORT_SCENARIO)
+    trial = load_scenario(path).trial("soft", 0, 0)
+    skip = {TrialRecord.header().index(n) for n in MACHINE_TIMED}
+    first, _ = run_trial(trial, target)
+    disturb()
+    second, _ = run_trial(trial, target)
+    assert [c for i, c in enumerate(first.to_row()) if i not in skip] == [
+        c for i, c in enumerate(second.to_row()) if i not in skip]
+
+
 def test_a_plugin_drawing_from_the_global_generators_plays_the_same_whatever_ran_before(plugin_package,
                                                                                            tmp_path) -> None:
     plugin_package("noisypkg", {"noisy": STAND_PLUGIN.format(
@@ -354,16 +369,7 @@ def test_a_plugin_drawing_from_the_global_generators_plays_the_same_whatever_ran
         act="import dataclasses, random\n            out = dataclasses.replace(out, q=out.q + np.random.normal("
             "0.0, 0.02, out.q.shape) + random.gauss(0.0, 0.01))",
         counters="return {}")})
-    path = tmp_path / "short.toml"
-    path.write_text(SHORT_SCENARIO)
-    trial = load_scenario(path).trial("soft", 0, 0)
-    skip = {TrialRecord.header().index(n) for n in MACHINE_TIMED}
-    first, _ = run_trial(trial, "noisypkg.noisy:make")
-    np.random.seed(12345)  # other trials played before on this worker, which drew from the generators
-    random.seed(6789)
-    second, _ = run_trial(trial, "noisypkg.noisy:make")
-    assert [c for i, c in enumerate(first.to_row()) if i not in skip] == [
-        c for i, c in enumerate(second.to_row()) if i not in skip]
+    _plays_the_same_after(tmp_path, "noisypkg.noisy:make", lambda: (np.random.seed(12345), random.seed(6789)))
 
 
 def test_a_plugin_drawing_from_torchs_global_generator_plays_the_same_whatever_ran_before(plugin_package,
@@ -375,13 +381,4 @@ def test_a_plugin_drawing_from_torchs_global_generator_plays_the_same_whatever_r
         act="import dataclasses, torch\n            out = dataclasses.replace(out, q=out.q + 0.02 * torch.randn("
             "out.q.shape, dtype=torch.float64).numpy())",
         counters="return {}")})
-    path = tmp_path / "short.toml"
-    path.write_text(SHORT_SCENARIO)
-    trial = load_scenario(path).trial("soft", 0, 0)
-    skip = {TrialRecord.header().index(n) for n in MACHINE_TIMED}
-    first, _ = run_trial(trial, "torchnoisypkg.noisy:make")
-    torch.manual_seed(12345)  # other trials played before on this worker, which drew from torch's generator
-    torch.randn(7)
-    second, _ = run_trial(trial, "torchnoisypkg.noisy:make")
-    assert [c for i, c in enumerate(first.to_row()) if i not in skip] == [
-        c for i, c in enumerate(second.to_row()) if i not in skip]
+    _plays_the_same_after(tmp_path, "torchnoisypkg.noisy:make", lambda: (torch.manual_seed(12345), torch.randn(7)))
