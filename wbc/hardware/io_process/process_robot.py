@@ -357,15 +357,18 @@ class ProcessRobot(Robot):
         Raises:
             RobotLinkError: the I/O process failed or died.
         """
-        self._check()
-        _, record = self._newest()
-        if record is None:
-            return {}
-        return {device: float(record[f"{device}_age"]) for device in ("legs", "arm")
-                if not np.isnan(record[f"{device}_age"])}
+        return {device: float(value) for device, value in self._by_device("age").items() if not np.isnan(value)}
 
     def deadline_trips_by_device(self) -> dict[str, int]:
         """By device, its write-deadline trips as of the newest published state (`JoinedDevices`).
+
+        Raises:
+            RobotLinkError: the I/O process failed or died.
+        """
+        return {device: int(value) for device, value in self._by_device("deadline_trips").items() if value >= 0}
+
+    def _by_device(self, field: str) -> dict[str, object]:
+        """Each device's `field` (``legs_<field>``, ``arm_<field>``) in the newest published state; empty before one.
 
         Raises:
             RobotLinkError: the I/O process failed or died.
@@ -374,8 +377,7 @@ class ProcessRobot(Robot):
         _, record = self._newest()
         if record is None:
             return {}
-        return {device: int(record[f"{device}_deadline_trips"]) for device in ("legs", "arm")
-                if record[f"{device}_deadline_trips"] >= 0}
+        return {device: record[f"{device}_{field}"] for device in ("legs", "arm")}
 
     @property
     def motor_names(self) -> tuple[str, ...]:
